@@ -1,0 +1,240 @@
+//! The assembled lumped circuit: capacitive nodes (pressure unknowns) and series
+//! R–L(–stenosis) branches (flow unknowns), written as one DAE
+//!
+//!   E ẏ + F y + c(y) = f(t)
+//!
+//! with E diagonal (node capacitance or branch inertance; zero rows are algebraic),
+//! F the constant incidence/resistance matrix and c the stenosis term S|Q|Q.
+//! Unknown i < n_nodes is the pressure of node i, unknown n_nodes + b the flow of branch b.
+
+use crate::error::{Error, Result};
+use crate::waveform::Waveform;
+
+#[derive(Debug, Clone)]
+pub struct Node {
+    pub name: String,
+    pub capacitance: f64,
+    /// Lumen volume lumped into this node at the reference pressure (m³); 0 for BC-internal nodes.
+    pub volume: f64,
+    /// svZeroDSolver's steady initialisation removes Windkessel capacitances.
+    pub windkessel: bool,
+}
+
+#[derive(Debug, Clone)]
+pub struct Branch {
+    pub name: String,
+    pub from: usize,
+    pub to: usize,
+    pub resistance: f64,
+    pub inductance: f64,
+    pub stenosis: f64,
+}
+
+/// Compressed sparse rows.
+#[derive(Debug, Clone, Default)]
+pub struct Csr {
+    pub ptr: Vec<usize>,
+    pub col: Vec<usize>,
+    pub val: Vec<f64>,
+}
+
+impl Csr {
+    #[inline]
+    pub fn row_dot(&self, i: usize, y: &[f64]) -> f64 {
+        let mut s = 0.0;
+        for k in self.ptr[i]..self.ptr[i + 1] {
+            s += self.val[k] * y[self.col[k]];
+        }
+        s
+    }
+    pub fn nrows(&self) -> usize {
+        self.ptr.len() - 1
+    }
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct Circuit {
+    pub nodes: Vec<Node>,
+    pub branches: Vec<Branch>,
+    /// Prescribed inflow into a node (m³/s), e.g. an inlet flow boundary condition.
+    pub sources: Vec<(usize, Waveform)>,
+    /// Prescribed node pressures (Pa): pressure BCs and the distal pressure of outlets.
+    pub fixed_pressures: Vec<(usize, Waveform)>,
+}
+
+/// Which forcing and capacitances to use: the real ones, or the steady (mean) ones.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Regime {
+    Transient,
+    /// Mean boundary values; Windkessel capacitances removed (svZeroDSolver's `to_steady`).
+    SteadyNoWindkessel,
+    /// Mean boundary values, all capacitances kept.
+    Steady,
+}
+
+impl Circuit {
+    pub fn add_node(&mut self, name: impl Into<String>, capacitance: f64, volume: f64) -> usize {
+        self.nodes.push(Node { name: name.into(), capacitance, volume, windkessel: false });
+        self.nodes.len() - 1
+    }
+    pub fn add_branch(
+        &mut self,
+        name: impl Into<String>,
+        from: usize,
+        to: usize,
+        resistance: f64,
+        inductance: f64,
+        stenosis: f64,
+    ) -> usize {
+        self.branches.push(Branch { name: name.into(), from, to, resistance, inductance, stenosis });
+        self.branches.len() - 1
+    }
+    pub fn n_unknowns(&self) -> usize {
+        self.nodes.len() + self.branches.len()
+    }
+    pub fn unknown_name(&self, i: usize) -> String {
+        if i < self.nodes.len() {
+            format!("pressure at {}", self.nodes[i].name)
+        } else {
+            format!("flow in {}", self.branches[i - self.nodes.len()].name)
+        }
+    }
+
+    /// Assemble the DAE (linear in the network size).
+    pub fn assemble(&self) -> Result<Dae> {
+        let nn = self.nodes.len();
+        let n = self.n_unknowns();
+        let mut fixed = vec![None; nn];
+        for (k, (node, _)) in self.fixed_pressures.iter().enumerate() {
+            if fixed[*node].is_some() {
+                return Err(Error::model(&self.nodes[*node].name, "has two pressure conditions"));
+            }
+            fixed[*node] = Some(k);
+        }
+        // Incidence lists, built by counting so that assembly stays O(n).
+        let mut deg = vec![0usize; nn + 1];
+        for b in &self.branches {
+            deg[b.from] += 1;
+            deg[b.to] += 1;
+        }
+        let mut start = vec![0usize; nn + 1];
+        for i in 0..nn {
+            start[i + 1] = start[i] + deg[i];
+        }
+        let mut inc: Vec<(usize, f64)> = vec![(0, 0.0); start[nn]];
+        let mut fill = start.clone();
+        for (bi, b) in self.branches.iter().enumerate() {
+            inc[fill[b.from]] = (nn + bi, 1.0); // flow leaves `from`
+            fill[b.from] += 1;
+            inc[fill[b.to]] = (nn + bi, -1.0);
+            fill[b.to] += 1;
+        }
+        let mut f = Csr { ptr: Vec::with_capacity(n + 1), col: Vec::new(), val: Vec::new() };
+        f.ptr.push(0);
+        for i in 0..nn {
+            if fixed[i].is_some() {
+                f.col.push(i);
+                f.val.push(1.0);
+            } else {
+                for &(c, s) in &inc[start[i]..start[i + 1]] {
+                    f.col.push(c);
+                    f.val.push(s);
+                }
+            }
+            f.ptr.push(f.col.len());
+        }
+        for (bi, b) in self.branches.iter().enumerate() {
+            f.col.extend([b.from, b.to, nn + bi]);
+            f.val.extend([-1.0, 1.0, b.resistance]);
+            f.ptr.push(f.col.len());
+        }
+        let mut e = vec![0.0; n];
+        let mut windkessel = vec![false; n];
+        for (i, node) in self.nodes.iter().enumerate() {
+            if fixed[i].is_none() {
+                e[i] = node.capacitance;
+                windkessel[i] = node.windkessel;
+            }
+        }
+        for (bi, b) in self.branches.iter().enumerate() {
+            e[nn + bi] = b.inductance;
+        }
+        let stenosis: Vec<(usize, f64)> = self
+            .branches
+            .iter()
+            .enumerate()
+            .filter(|(_, b)| b.stenosis != 0.0)
+            .map(|(bi, b)| (nn + bi, b.stenosis))
+            .collect();
+        let mut forcing = Vec::new();
+        for (node, w) in &self.sources {
+            if fixed[*node].is_none() {
+                forcing.push((*node, w.clone()));
+            }
+        }
+        for (node, w) in &self.fixed_pressures {
+            forcing.push((*node, w.clone()));
+        }
+        Ok(Dae { n, n_nodes: nn, e, windkessel, f, stenosis, forcing, names: self.unknown_names() })
+    }
+
+    fn unknown_names(&self) -> Vec<String> {
+        (0..self.n_unknowns()).map(|i| self.unknown_name(i)).collect()
+    }
+}
+
+/// E ẏ + F y + c(y) = f(t), ready for the integrators.
+#[derive(Debug, Clone)]
+pub struct Dae {
+    pub n: usize,
+    pub n_nodes: usize,
+    pub e: Vec<f64>,
+    pub windkessel: Vec<bool>,
+    pub f: Csr,
+    /// (unknown, S): c_i = S |y_i| y_i.
+    pub stenosis: Vec<(usize, f64)>,
+    /// (row, waveform): f_row(t) = w(t).
+    pub forcing: Vec<(usize, Waveform)>,
+    pub names: Vec<String>,
+}
+
+impl Dae {
+    pub fn mass(&self, regime: Regime) -> Vec<f64> {
+        let mut e = self.e.clone();
+        if regime == Regime::SteadyNoWindkessel {
+            for (ei, &w) in e.iter_mut().zip(&self.windkessel) {
+                if w {
+                    *ei = 0.0;
+                }
+            }
+        }
+        e
+    }
+
+    pub fn is_linear(&self) -> bool {
+        self.stenosis.is_empty()
+    }
+
+    /// Write f(t) into `out` (zeroed first).
+    pub fn forcing_into(&self, t: f64, regime: Regime, out: &mut [f64]) {
+        out.iter_mut().for_each(|x| *x = 0.0);
+        for (row, w) in &self.forcing {
+            out[*row] += if regime == Regime::Transient { w.eval(t) } else { w.mean() };
+        }
+    }
+
+    /// r = f − F y − c(y)  (the E ẏ term is added by the caller).
+    pub fn static_residual(&self, y: &[f64], f: &[f64], r: &mut [f64]) {
+        for i in 0..self.n {
+            r[i] = f[i] - self.f.row_dot(i, y);
+        }
+        for &(i, s) in &self.stenosis {
+            r[i] -= s * y[i].abs() * y[i];
+        }
+    }
+
+    /// Period implied by the time-varying boundary conditions, checked for consistency.
+    pub fn period(&self) -> Option<f64> {
+        self.forcing.iter().filter_map(|(_, w)| w.period()).reduce(f64::max)
+    }
+}

@@ -1,0 +1,19 @@
+//! oxyline-core: arterial networks as lumped R–L–C circuits, assembled in linear time and
+//! integrated with RK4 or generalized-α. Pure Rust; the Python binding lives in `oxyline-py`.
+
+pub mod circuit;
+pub mod error;
+pub mod frequency;
+pub mod genalpha;
+pub mod network;
+pub mod rk4;
+pub mod segment;
+pub mod simulate;
+pub mod sparse;
+pub mod stability;
+pub mod waveform;
+
+pub use circuit::{Circuit, Dae, Regime};
+pub use error::{Error, Result};
+pub use network::{Assembled, NetworkSpec, Probes, Summary};
+pub use simulate::{Method, Outcome, RunSettings, Start, simulate};

@@ -1,0 +1,203 @@
+//! Classical fixed-step RK4 on the differential unknowns (E_ii > 0); the algebraic unknowns
+//! (capacitance-free nodes, inductance-free branches, prescribed pressures) are eliminated at
+//! every stage by a sparse solve whose matrix is factorised once for linear circuits.
+
+use crate::circuit::{Dae, Regime};
+use crate::error::{Error, Result};
+use crate::sparse::SparseLu;
+
+pub struct Rk4<'a> {
+    dae: &'a Dae,
+    regime: Regime,
+    pub dt: f64,
+    e: Vec<f64>,
+    pub diff: Vec<usize>,
+    alg: Vec<usize>,
+    /// For each algebraic row, its F entries that fall on algebraic columns: (value index, local col).
+    alg_stamps_src: Vec<usize>,
+    alg_lu: Option<SparseLu>,
+    alg_vals: Vec<f64>,
+    alg_stenosis: Vec<(usize, usize, f64)>, // (local row, global unknown, S)
+    f: Vec<f64>,
+    ra: Vec<f64>,
+    k: [Vec<f64>; 4],
+    stage: Vec<f64>,
+}
+
+impl<'a> Rk4<'a> {
+    pub fn new(dae: &'a Dae, regime: Regime, dt: f64) -> Result<Self> {
+        let e = dae.mass(regime);
+        let n = dae.n;
+        let diff: Vec<usize> = (0..n).filter(|&i| e[i] > 0.0).collect();
+        let alg: Vec<usize> = (0..n).filter(|&i| e[i] <= 0.0).collect();
+        let mut local = vec![usize::MAX; n];
+        for (l, &g) in alg.iter().enumerate() {
+            local[g] = l;
+        }
+        let mut stamps = Vec::new();
+        let mut src = Vec::new();
+        for (l, &g) in alg.iter().enumerate() {
+            for k in dae.f.ptr[g]..dae.f.ptr[g + 1] {
+                let c = dae.f.col[k];
+                if local[c] != usize::MAX {
+                    stamps.push((l, local[c]));
+                    src.push(k);
+                }
+            }
+        }
+        let alg_stenosis: Vec<(usize, usize, f64)> = dae
+            .stenosis
+            .iter()
+            .filter(|(g, _)| local[*g] != usize::MAX)
+            .map(|&(g, s)| (local[g], g, s))
+            .collect();
+        for &(l, _, _) in &alg_stenosis {
+            stamps.push((l, l));
+        }
+        let mut me = Rk4 {
+            dae,
+            regime,
+            dt,
+            e,
+            diff,
+            alg_stamps_src: src,
+            alg_lu: None,
+            alg_vals: vec![0.0; stamps.len()],
+            alg_stenosis,
+            f: vec![0.0; n],
+            ra: vec![0.0; alg.len()],
+            k: [vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]],
+            stage: vec![0.0; n],
+            alg,
+        };
+        if !me.alg.is_empty() {
+            me.alg_lu = Some(SparseLu::analyse(me.alg.len(), &stamps)?);
+            let y0 = vec![0.0; n];
+            let ok = me.factor_algebraic(&y0).is_ok() && {
+                let mut probe: Vec<f64> = (0..me.alg.len()).map(|i| 1.0 + (i % 7) as f64).collect();
+                me.alg_lu.as_ref().unwrap().solve_in_place(&mut probe)
+            };
+            if !ok {
+                return Err(Error::model(
+                    "circuit",
+                    "rk4 cannot integrate this circuit: its algebraic part is singular (an inductor whose flow is fixed by a flow condition or by other inductors through a capacitance-free node, i.e. an index-2 DAE); use method 'generalized-alpha'",
+                ));
+            }
+        }
+        Ok(me)
+    }
+
+    fn factor_algebraic(&mut self, y: &[f64]) -> std::result::Result<(), String> {
+        let nf = self.alg_stamps_src.len();
+        for (v, &k) in self.alg_vals[..nf].iter_mut().zip(&self.alg_stamps_src) {
+            *v = self.dae.f.val[k];
+        }
+        for (j, &(_, g, s)) in self.alg_stenosis.iter().enumerate() {
+            self.alg_vals[nf + j] = 2.0 * s * y[g].abs();
+        }
+        self.alg_lu.as_mut().unwrap().factor(&self.alg_vals)
+    }
+
+    /// Make the algebraic unknowns of `y` consistent with its differential ones at forcing `f`.
+    fn solve_algebraic(&mut self, y: &mut [f64], time: f64) -> Result<()> {
+        if self.alg.is_empty() {
+            return Ok(());
+        }
+        let nonlinear = !self.alg_stenosis.is_empty();
+        for it in 0..30 {
+            let mut rmax = 0.0f64;
+            for (l, &g) in self.alg.iter().enumerate() {
+                self.ra[l] = self.f[g] - self.dae.f.row_dot(g, y);
+            }
+            for &(l, g, s) in &self.alg_stenosis {
+                self.ra[l] -= s * y[g].abs() * y[g];
+            }
+            if nonlinear {
+                self.factor_algebraic(y).map_err(|m| crate::genalpha::singular(time, &m))?;
+            }
+            if !self.alg_lu.as_ref().unwrap().solve_in_place(&mut self.ra) {
+                return Err(crate::genalpha::singular(time, "algebraic elimination"));
+            }
+            let mut ymax = 0.0f64;
+            for (l, &g) in self.alg.iter().enumerate() {
+                y[g] += self.ra[l];
+                rmax = rmax.max(self.ra[l].abs());
+                ymax = ymax.max(y[g].abs());
+            }
+            if !nonlinear || rmax <= 1e-13 * ymax.max(1e-300) || it == 29 {
+                break;
+            }
+        }
+        Ok(())
+    }
+
+    /// ẏ of the differential unknowns at (t, y); algebraic unknowns of `y` are updated.
+    fn rhs(&mut self, time: f64, y: &mut [f64], out: usize) -> Result<()> {
+        self.dae.forcing_into(time, self.regime, &mut self.f);
+        self.solve_algebraic(y, time)?;
+        let k = &mut self.k[out];
+        for &i in &self.diff {
+            k[i] = (self.f[i] - self.dae.f.row_dot(i, y)) / self.e[i];
+        }
+        for &(i, s) in &self.dae.stenosis {
+            if self.e[i] > 0.0 {
+                k[i] -= s * y[i].abs() * y[i] / self.e[i];
+            }
+        }
+        Ok(())
+    }
+
+    /// Bring the algebraic unknowns of an initial state in line with the forcing at `time`.
+    pub fn make_consistent(&mut self, time: f64, y: &mut [f64]) -> Result<()> {
+        self.dae.forcing_into(time, self.regime, &mut self.f);
+        self.solve_algebraic(y, time)
+    }
+
+    pub fn step(&mut self, time: f64, y: &mut [f64]) -> Result<()> {
+        let dt = self.dt;
+        let mut stage = std::mem::take(&mut self.stage);
+        stage.copy_from_slice(y);
+        self.rhs(time, &mut stage, 0)?;
+        let coef = [0.5, 0.5, 1.0];
+        for s in 0..3 {
+            for &i in &self.diff {
+                stage[i] = y[i] + coef[s] * dt * self.k[s][i];
+            }
+            let ts = time + coef[s] * dt;
+            self.rhs(ts, &mut stage, s + 1)?;
+        }
+        for &i in &self.diff {
+            y[i] += dt / 6.0 * (self.k[0][i] + 2.0 * self.k[1][i] + 2.0 * self.k[2][i] + self.k[3][i]);
+        }
+        // algebraic unknowns of the last stage are the best warm start
+        for &g in &self.alg {
+            y[g] = stage[g];
+        }
+        self.stage = stage;
+        self.dae.forcing_into(time + dt, self.regime, &mut self.f);
+        self.solve_algebraic(y, time + dt)
+    }
+
+    /// Apply the linearised ODE operator (zero forcing, stenosis ignored) to a differential vector.
+    pub fn linear_operator(&mut self, x: &[f64], out: &mut [f64]) -> Result<()> {
+        let n = self.dae.n;
+        let mut y = vec![0.0; n];
+        for (j, &i) in self.diff.iter().enumerate() {
+            y[i] = x[j];
+        }
+        self.f.iter_mut().for_each(|v| *v = 0.0);
+        if !self.alg.is_empty() {
+            for (l, &g) in self.alg.iter().enumerate() {
+                self.ra[l] = -self.dae.f.row_dot(g, &y);
+            }
+            self.alg_lu.as_ref().unwrap().solve_in_place(&mut self.ra);
+            for (l, &g) in self.alg.iter().enumerate() {
+                y[g] = self.ra[l];
+            }
+        }
+        for (j, &i) in self.diff.iter().enumerate() {
+            out[j] = -self.dae.f.row_dot(i, &y) / self.e[i];
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,307 @@
+//! The run driver: initial state, time stepping cycle by cycle with either integrator,
+//! periodicity check, decimated output of selected unknowns, progress and cancellation.
+//! A failed or interrupted run still returns everything recorded so far.
+
+use crate::circuit::{Dae, Regime};
+use crate::error::{Error, Result};
+use crate::genalpha::{GenAlpha, NewtonControl, jacobian_stamps, jacobian_values, scaled_increment};
+use crate::rk4::Rk4;
+use crate::sparse::SparseLu;
+use crate::stability::{StabilityLimit, rk4_limit};
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Method {
+    Rk4,
+    GeneralizedAlpha { rho_inf: f64 },
+    /// Implicit when the stable RK4 step is far below the output step, else RK4.
+    Auto { rho_inf: f64 },
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Start {
+    /// Exact steady solution of the mean boundary conditions.
+    Steady,
+    /// svZeroDSolver's: 31 generalized-α steps of T/10 with mean BCs and no Windkessel C.
+    SvZeroDSteady { rho_inf: f64 },
+    Zero,
+}
+
+#[derive(Debug, Clone)]
+pub struct RunSettings {
+    pub method: Method,
+    /// Time step; None = automatic.
+    pub dt: Option<f64>,
+    pub period: f64,
+    /// Cycles to run (the minimum when `until_periodic` is set).
+    pub cycles: usize,
+    /// Stop when the cycle-to-cycle change of the state falls below this (relative).
+    pub until_periodic: Option<f64>,
+    pub max_cycles: usize,
+    /// Output interval in seconds (rounded to a whole number of steps).
+    pub output_every: f64,
+    pub output_all_cycles: bool,
+    pub start: Start,
+    pub newton: NewtonControl,
+    pub probes: Vec<usize>,
+}
+
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    pub times: Vec<f64>,
+    /// Row-major (time, probe).
+    pub data: Vec<f64>,
+    pub n_probes: usize,
+    pub dt: f64,
+    pub method: &'static str,
+    pub cycles_run: usize,
+    pub periodic_error: f64,
+    pub stability: Option<StabilityLimit>,
+    pub final_state: Vec<f64>,
+    /// Set when the run stopped early (error or interruption); the data up to then are kept.
+    pub error: Option<Error>,
+}
+
+enum Stepper<'a> {
+    Rk4(Rk4<'a>),
+    GenAlpha(GenAlpha<'a>),
+}
+
+/// Exact steady state: F y + c(y) = f̄ (Newton when stenoses are present).
+pub fn steady_state(dae: &Dae) -> Result<Vec<f64>> {
+    let n = dae.n;
+    let stamps = jacobian_stamps(dae);
+    let mut lu = SparseLu::analyse(n, &stamps)?;
+    let mut vals = vec![0.0; stamps.len()];
+    let mut f = vec![0.0; n];
+    dae.forcing_into(0.0, Regime::Steady, &mut f);
+    let mut y = vec![0.0; n];
+    let mut r = vec![0.0; n];
+    let zero = vec![0.0; n];
+    let fail = || {
+        Error::model(
+            "network",
+            "has no steady state: some part is not connected through resistances to a pressure, resistance or Windkessel boundary condition",
+        )
+    };
+    for it in 0..50 {
+        dae.static_residual(&y, &f, &mut r);
+        // regularise |Q| at 0 so the first Newton step of a stenosis is defined
+        let ys: Vec<f64> = if it == 0 { y.iter().map(|_| 0.0).collect() } else { y.clone() };
+        jacobian_values(dae, 1.0, &zero, &ys, &mut vals);
+        lu.factor(&vals).map_err(|_| fail())?;
+        if !lu.solve_in_place(&mut r) {
+            return Err(fail());
+        }
+        for i in 0..n {
+            y[i] += r[i];
+        }
+        if dae.is_linear() || scaled_increment(dae, &r, &y) < 1e-13 {
+            return Ok(y);
+        }
+    }
+    Ok(y)
+}
+
+struct Recorder<'p> {
+    probes: &'p [usize],
+    times: Vec<f64>,
+    data: Vec<f64>,
+}
+
+impl Recorder<'_> {
+    fn record(&mut self, t: f64, y: &[f64]) {
+        self.times.push(t);
+        self.data.extend(self.probes.iter().map(|&i| y[i]));
+    }
+    fn clear(&mut self) {
+        self.times.clear();
+        self.data.clear();
+    }
+}
+
+/// Run the circuit. `progress(t, t_end)` is called every few hundred steps; returning false
+/// interrupts the run.
+pub fn simulate(
+    dae: &Dae,
+    s: &RunSettings,
+    progress: &mut dyn FnMut(f64, f64) -> bool,
+) -> Result<Outcome> {
+    if !(s.period.is_finite() && s.period > 0.0) {
+        return Err(Error::model("simulation", format!("period must be > 0, got {}", s.period)));
+    }
+    if s.cycles == 0 {
+        return Err(Error::model("simulation", "cycles must be >= 1"));
+    }
+    if !(s.output_every.is_finite() && s.output_every > 0.0) {
+        return Err(Error::model("simulation", format!("output every must be > 0, got {}", s.output_every)));
+    }
+    if let Some(dt) = s.dt {
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(Error::model("simulation", format!("dt must be > 0, got {dt}")));
+        }
+    }
+    for &p in &s.probes {
+        if p >= dae.n {
+            return Err(Error::model("simulation", format!("output index {p} out of range")));
+        }
+    }
+    // explicit stability limit, needed by rk4 and by auto
+    let rho_of = |m: Method| match m {
+        Method::GeneralizedAlpha { rho_inf } | Method::Auto { rho_inf } => rho_inf,
+        Method::Rk4 => 0.5,
+    };
+    let mut stability = None;
+    let mut use_rk4 = matches!(s.method, Method::Rk4);
+    if matches!(s.method, Method::Rk4 | Method::Auto { .. }) {
+        let mut probe = Rk4::new(dae, Regime::Transient, 1.0);
+        match (&mut probe, s.method) {
+            (Ok(rk), _) => {
+                let lim = rk4_limit(rk, &dae.names)?;
+                if let Method::Auto { .. } = s.method {
+                    use_rk4 = 0.5 * lim.dt_max >= s.output_every / 20.0;
+                }
+                stability = Some(lim);
+            }
+            (Err(e), Method::Rk4) => return Err(e.clone()),
+            (Err(_), _) => use_rk4 = false,
+        }
+    }
+    let out_per_cycle = (s.period / s.output_every).round().max(1.0) as usize;
+    let (dt, method_name) = if use_rk4 {
+        let lim = stability.as_ref().unwrap();
+        let dt = match s.dt {
+            Some(dt) => {
+                if dt > lim.dt_max * (1.0 + 1e-9) {
+                    return Err(Error::Unstable { dt, limit: lim.dt_max, element: lim.element.clone() });
+                }
+                dt
+            }
+            None => (0.5 * lim.dt_max).min(s.output_every),
+        };
+        (dt, "rk4")
+    } else {
+        (s.dt.unwrap_or(s.output_every), "generalized-alpha")
+    };
+    // whole number of steps per cycle and per output interval
+    let substeps = ((s.period / out_per_cycle as f64) / dt * (1.0 - 1e-12)).ceil().max(1.0) as usize;
+    let (steps_per_cycle, stride) = if s.dt.is_some() {
+        let spc = (s.period / dt).round().max(1.0) as usize;
+        let stride = (s.output_every / (s.period / spc as f64)).round().max(1.0) as usize;
+        (spc, stride)
+    } else {
+        (out_per_cycle * substeps, substeps)
+    };
+    let dt = s.period / steps_per_cycle as f64;
+    if use_rk4 {
+        if let Some(lim) = &stability {
+            if dt > lim.dt_max * (1.0 + 1e-9) {
+                return Err(Error::Unstable { dt, limit: lim.dt_max, element: lim.element.clone() });
+            }
+        }
+    }
+
+    // initial state
+    let n = dae.n;
+    let (mut y, mut yd) = match s.start {
+        Start::Zero => (vec![0.0; n], vec![0.0; n]),
+        Start::Steady => {
+            let y = steady_state(dae)?;
+            let mut f = vec![0.0; n];
+            dae.forcing_into(0.0, Regime::Transient, &mut f);
+            let mut r = vec![0.0; n];
+            dae.static_residual(&y, &f, &mut r);
+            let yd = (0..n).map(|i| if dae.e[i] > 0.0 { r[i] / dae.e[i] } else { 0.0 }).collect();
+            (y, yd)
+        }
+        Start::SvZeroDSteady { rho_inf } => {
+            let h = s.period / 10.0;
+            let mut ga = GenAlpha::new(dae, Regime::SteadyNoWindkessel, h, rho_inf, s.newton)?;
+            let (mut y, mut yd) = (vec![0.0; n], vec![0.0; n]);
+            for i in 0..31 {
+                ga.step(h * i as f64, &mut y, &mut yd)?;
+            }
+            (y, yd)
+        }
+    };
+    let mut stepper = if use_rk4 {
+        let mut rk = Rk4::new(dae, Regime::Transient, dt)?;
+        rk.make_consistent(0.0, &mut y)?;
+        Stepper::Rk4(rk)
+    } else {
+        Stepper::GenAlpha(GenAlpha::new(dae, Regime::Transient, dt, rho_of(s.method), s.newton)?)
+    };
+
+    let mut rec = Recorder { probes: &s.probes, times: Vec::new(), data: Vec::new() };
+    let max_cycles = if s.until_periodic.is_some() { s.max_cycles.max(s.cycles) } else { s.cycles };
+    let t_end = max_cycles as f64 * s.period;
+    let mut prev_cycle_end = y.clone();
+    let mut periodic_error = f64::NAN;
+    let mut error = None;
+    let mut cycles_run = 0;
+    let mut step_global: usize = 0;
+    'cycles: for cycle in 0..max_cycles {
+        let t0 = cycle as f64 * s.period;
+        if !s.output_all_cycles {
+            rec.clear();
+        }
+        if s.output_all_cycles {
+            if cycle == 0 {
+                rec.record(0.0, &y);
+            }
+        } else {
+            rec.record(0.0, &y);
+        }
+        for k in 1..=steps_per_cycle {
+            let t = (step_global as f64) * dt;
+            let r = match &mut stepper {
+                Stepper::Rk4(rk) => rk.step(t, &mut y),
+                Stepper::GenAlpha(ga) => ga.step(t, &mut y, &mut yd),
+            };
+            step_global += 1;
+            let t_new = step_global as f64 * dt;
+            if let Err(e) = r {
+                error = Some(e);
+                break 'cycles;
+            }
+            if k % 64 == 0 || k == steps_per_cycle {
+                if let Some(i) = y.iter().position(|v| !v.is_finite()) {
+                    error = Some(Error::solver(t_new, format!("non-finite value of {}", dae.names[i])));
+                    break 'cycles;
+                }
+            }
+            if step_global % stride == 0 {
+                let tr = if s.output_all_cycles { t_new } else { t_new - t0 };
+                rec.record(tr, &y);
+            }
+            if step_global % 256 == 0 && !progress(t_new, t_end) {
+                error = Some(Error::Interrupted { time: t_new });
+                break 'cycles;
+            }
+        }
+        cycles_run = cycle + 1;
+        periodic_error = scaled_increment(
+            dae,
+            &y.iter().zip(&prev_cycle_end).map(|(a, b)| a - b).collect::<Vec<_>>(),
+            &y,
+        );
+        prev_cycle_end.copy_from_slice(&y);
+        if let Some(tol) = s.until_periodic {
+            if cycles_run >= s.cycles && periodic_error < tol {
+                break;
+            }
+        }
+    }
+    progress(cycles_run as f64 * s.period, t_end);
+    Ok(Outcome {
+        times: rec.times,
+        data: rec.data,
+        n_probes: s.probes.len(),
+        dt,
+        method: method_name,
+        cycles_run,
+        periodic_error,
+        stability,
+        final_state: y,
+        error,
+    })
+}

@@ -1,0 +1,274 @@
+//! Time functions for boundary conditions: constants, tabulated (periodic linear or periodic
+//! cubic spline) and Fourier series.
+
+use crate::error::{Error, Result};
+use serde::Deserialize;
+
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Interpolation {
+    /// Periodic piecewise-linear, as svZeroDSolver (`fmod` of the time by the table period).
+    #[default]
+    Linear,
+    /// Periodic C2 cubic spline through the samples (first and last sample must agree).
+    PeriodicCubic,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum WaveformSpec {
+    Constant {
+        value: f64,
+    },
+    Table {
+        time: Vec<f64>,
+        value: Vec<f64>,
+        #[serde(default)]
+        interpolation: Interpolation,
+        /// Value used for the steady initial state; default: exact time mean over one period.
+        #[serde(default)]
+        steady: Option<f64>,
+    },
+    Fourier {
+        period: f64,
+        mean: f64,
+        #[serde(default)]
+        cos: Vec<f64>,
+        #[serde(default)]
+        sin: Vec<f64>,
+    },
+}
+
+/// A validated, ready-to-evaluate time function.
+#[derive(Debug, Clone)]
+pub enum Waveform {
+    Constant(f64),
+    Table { t: Vec<f64>, v: Vec<f64>, m: Option<Vec<f64>>, mean: f64 },
+    Fourier { omega: f64, mean: f64, cos: Vec<f64>, sin: Vec<f64> },
+}
+
+impl Waveform {
+    pub fn constant(value: f64) -> Self {
+        Waveform::Constant(value)
+    }
+
+    pub fn from_spec(spec: &WaveformSpec, element: &str) -> Result<Self> {
+        let bad = |msg: String| Error::model(element, msg);
+        match spec {
+            WaveformSpec::Constant { value } => {
+                if !value.is_finite() {
+                    return Err(bad(format!("value must be finite, got {value}")));
+                }
+                Ok(Waveform::Constant(*value))
+            }
+            WaveformSpec::Fourier { period, mean, cos, sin } => {
+                if !(period.is_finite() && *period > 0.0) {
+                    return Err(bad(format!("Fourier period must be > 0, got {period}")));
+                }
+                if let Some(x) = cos.iter().chain(sin).chain([mean]).find(|x| !x.is_finite()) {
+                    return Err(bad(format!("Fourier coefficients must be finite, got {x}")));
+                }
+                Ok(Waveform::Fourier {
+                    omega: 2.0 * std::f64::consts::PI / period,
+                    mean: *mean,
+                    cos: cos.clone(),
+                    sin: sin.clone(),
+                })
+            }
+            WaveformSpec::Table { time, value, interpolation, steady } => {
+                if time.len() != value.len() {
+                    return Err(bad(format!(
+                        "time table has {} entries but value table has {}",
+                        time.len(),
+                        value.len()
+                    )));
+                }
+                if time.is_empty() {
+                    return Err(bad("empty time table".into()));
+                }
+                if let Some((i, x)) =
+                    time.iter().chain(value).enumerate().find(|(_, x)| !x.is_finite())
+                {
+                    return Err(bad(format!("table entry {i} is not finite ({x})")));
+                }
+                if time.len() == 1 {
+                    return Ok(Waveform::Constant(steady.unwrap_or(value[0])));
+                }
+                if let Some(i) = (1..time.len()).find(|&i| time[i] <= time[i - 1]) {
+                    return Err(bad(format!(
+                        "time table must be strictly increasing, but t[{}] = {} <= t[{}] = {}",
+                        i,
+                        time[i],
+                        i - 1,
+                        time[i - 1]
+                    )));
+                }
+                let m = match interpolation {
+                    Interpolation::Linear => None,
+                    Interpolation::PeriodicCubic => {
+                        let (first, last) = (value[0], value[value.len() - 1]);
+                        if (first - last).abs() > 1e-9 * first.abs().max(last.abs()).max(1e-300) {
+                            return Err(bad(format!(
+                                "periodic-cubic interpolation needs the first and last values equal, got {first} and {last}"
+                            )));
+                        }
+                        Some(periodic_spline_moments(time, value))
+                    }
+                };
+                let mean = table_mean(time, value, m.as_deref());
+                Ok(Waveform::Table { t: time.clone(), v: value.clone(), m, mean: steady.unwrap_or(mean) })
+            }
+        }
+    }
+
+    /// Period of a tabulated waveform (t_last - t_first) or Fourier series.
+    pub fn period(&self) -> Option<f64> {
+        match self {
+            Waveform::Constant(_) => None,
+            Waveform::Table { t, .. } => Some(t[t.len() - 1] - t[0]),
+            Waveform::Fourier { omega, .. } => Some(2.0 * std::f64::consts::PI / omega),
+        }
+    }
+
+    /// Value used for the steady initial state.
+    pub fn mean(&self) -> f64 {
+        match self {
+            Waveform::Constant(v) => *v,
+            Waveform::Table { mean, .. } => *mean,
+            Waveform::Fourier { mean, .. } => *mean,
+        }
+    }
+
+    pub fn eval(&self, time: f64) -> f64 {
+        match self {
+            Waveform::Constant(v) => *v,
+            Waveform::Fourier { omega, mean, cos, sin } => {
+                let mut s = *mean;
+                for (k, a) in cos.iter().enumerate() {
+                    s += a * (omega * (k + 1) as f64 * time).cos();
+                }
+                for (k, b) in sin.iter().enumerate() {
+                    s += b * (omega * (k + 1) as f64 * time).sin();
+                }
+                s
+            }
+            Waveform::Table { t, v, m, .. } => {
+                let n = t.len();
+                let period = t[n - 1] - t[0];
+                let mut rt = (time - t[0]).rem_euclid(period) + t[0];
+                if rt < t[0] {
+                    rt = t[0];
+                }
+                // first index with t[k] >= rt
+                let k = t.partition_point(|&x| x < rt).clamp(1, n - 1);
+                let (t0, t1) = (t[k - 1], t[k]);
+                let h = t1 - t0;
+                let a = (t1 - rt) / h;
+                let b = (rt - t0) / h;
+                match m {
+                    None => a * v[k - 1] + b * v[k],
+                    Some(m) => {
+                        a * v[k - 1]
+                            + b * v[k]
+                            + ((a * a * a - a) * m[k - 1] + (b * b * b - b) * m[k]) * h * h / 6.0
+                    }
+                }
+            }
+        }
+    }
+}
+
+fn table_mean(t: &[f64], v: &[f64], m: Option<&[f64]>) -> f64 {
+    let n = t.len();
+    let mut s = 0.0;
+    for k in 1..n {
+        let h = t[k] - t[k - 1];
+        s += 0.5 * h * (v[k] + v[k - 1]);
+        if let Some(m) = m {
+            s -= h * h * h * (m[k] + m[k - 1]) / 24.0;
+        }
+    }
+    s / (t[n - 1] - t[0])
+}
+
+/// Second derivatives of the periodic cubic spline (cyclic tridiagonal system, dense solve:
+/// tables are short).
+fn periodic_spline_moments(t: &[f64], v: &[f64]) -> Vec<f64> {
+    let n = t.len() - 1; // unknowns m_0..m_{n-1}, m_n = m_0
+    if n < 3 {
+        return vec![0.0; t.len()];
+    }
+    let h = |i: usize| t[i + 1] - t[i];
+    let mut a = nalgebra::DMatrix::<f64>::zeros(n, n);
+    let mut rhs = nalgebra::DVector::<f64>::zeros(n);
+    for i in 0..n {
+        let (hp, hn) = (if i == 0 { h(n - 1) } else { h(i - 1) }, h(i));
+        let vp = if i == 0 { v[n - 1] } else { v[i - 1] };
+        let im = (i + n - 1) % n;
+        let ip = (i + 1) % n;
+        a[(i, im)] += hp / 6.0;
+        a[(i, i)] += (hp + hn) / 3.0;
+        a[(i, ip)] += hn / 6.0;
+        rhs[i] = (v[i + 1] - v[i]) / hn - (v[i] - vp) / hp;
+    }
+    let sol = a.lu().solve(&rhs).unwrap_or_else(|| nalgebra::DVector::zeros(n));
+    let mut m: Vec<f64> = sol.iter().copied().collect();
+    m.push(m[0]);
+    m
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn linear_table_is_periodic_and_mean_is_exact() {
+        let w = Waveform::from_spec(
+            &WaveformSpec::Table {
+                time: vec![0.0, 0.5, 1.0],
+                value: vec![0.0, 2.0, 0.0],
+                interpolation: Interpolation::Linear,
+                steady: None,
+            },
+            "inlet",
+        )
+        .unwrap();
+        assert_eq!(w.eval(0.25), 1.0);
+        assert_eq!(w.eval(1.25), 1.0);
+        assert!((w.mean() - 1.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn cubic_spline_reproduces_a_sine_and_its_mean() {
+        let n = 64;
+        let time: Vec<f64> = (0..=n).map(|i| i as f64 / n as f64).collect();
+        let value: Vec<f64> =
+            time.iter().map(|t| 3.0 + (2.0 * std::f64::consts::PI * t).sin()).collect();
+        let w = Waveform::from_spec(
+            &WaveformSpec::Table { time, value, interpolation: Interpolation::PeriodicCubic, steady: None },
+            "inlet",
+        )
+        .unwrap();
+        for t in [0.013, 0.37, 0.81, 1.5] {
+            let exact = 3.0 + (2.0 * std::f64::consts::PI * t).sin();
+            assert!((w.eval(t) - exact).abs() < 1e-6, "{t}");
+        }
+        assert!((w.mean() - 3.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn non_increasing_time_is_rejected_with_context() {
+        let e = Waveform::from_spec(
+            &WaveformSpec::Table {
+                time: vec![0.0, 0.5, 0.5],
+                value: vec![1.0, 2.0, 3.0],
+                interpolation: Interpolation::Linear,
+                steady: None,
+            },
+            "boundary condition 'inlet'",
+        )
+        .unwrap_err();
+        let msg = e.to_string();
+        assert!(msg.contains("inlet") && msg.contains("t[2] = 0.5"), "{msg}");
+    }
+}
