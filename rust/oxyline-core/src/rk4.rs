@@ -147,6 +147,17 @@ impl<'a> Rk4<'a> {
         Ok(())
     }
 
+    /// Time derivative of the differential unknowns at (t, y) (zero for algebraic ones);
+    /// the algebraic unknowns of `y` are made consistent first.
+    pub fn derivative(&mut self, time: f64, y: &mut [f64]) -> Result<Vec<f64>> {
+        self.rhs(time, y, 0)?;
+        let mut out = vec![0.0; self.dae.n];
+        for &i in &self.diff {
+            out[i] = self.k[0][i];
+        }
+        Ok(out)
+    }
+
     /// Bring the algebraic unknowns of an initial state in line with the forcing at `time`.
     pub fn make_consistent(&mut self, time: f64, y: &mut [f64]) -> Result<()> {
         self.dae.forcing_into(time, self.regime, &mut self.f);

@@ -3,7 +3,7 @@
 
 use crate::error::Result;
 use crate::rk4::Rk4;
-use nalgebra::{Complex, DMatrix, DVector};
+use nalgebra::Complex;
 
 /// RK4 amplification factor R(z) = 1 + z + z²/2 + z³/6 + z⁴/24.
 pub fn rk4_amplification(z: Complex<f64>) -> f64 {
@@ -58,7 +58,7 @@ pub fn rk4_limit(rk: &mut Rk4<'_>, names: &[String]) -> Result<StabilityLimit> {
     }
     let diff = rk.diff.clone();
     if nd <= DENSE_LIMIT {
-        let mut a = DMatrix::<f64>::zeros(nd, nd);
+        let mut a = faer::Mat::<f64>::zeros(nd, nd);
         let mut x = vec![0.0; nd];
         let mut col = vec![0.0; nd];
         for j in 0..nd {
@@ -69,34 +69,26 @@ pub fn rk4_limit(rk: &mut Rk4<'_>, names: &[String]) -> Result<StabilityLimit> {
                 a[(i, j)] = col[i];
             }
         }
-        let eig = a.clone().complex_eigenvalues();
-        let (mut best, mut lam) = (f64::INFINITY, Complex::new(0.0, 0.0));
-        for l in eig.iter() {
-            let h = rk4_step_limit(*l);
+        // faer's dense eigensolver (nalgebra's complex_eigenvalues is unreliable for
+        // non-normal matrices)
+        let evd = a.eigen().map_err(|e| crate::error::Error::solver(0.0, format!("eigenvalues: {e:?}")))?;
+        let (s, u) = (evd.S(), evd.U());
+        let (mut best, mut jbest) = (f64::INFINITY, 0);
+        for j in 0..nd {
+            let l = s[j];
+            let h = rk4_step_limit(Complex::new(l.re, l.im));
             if h < best {
                 best = h;
-                lam = *l;
+                jbest = j;
             }
         }
-        // eigenvector of the limiting mode by inverse iteration with a complex shift
-        let ac: DMatrix<Complex<f64>> = a.map(|v| Complex::new(v, 0.0));
-        let shift = lam * Complex::new(1.0 + 1e-9, 0.0);
-        let m = &ac - DMatrix::<Complex<f64>>::identity(nd, nd) * shift;
-        let lu = m.lu();
-        let mut v = DVector::<Complex<f64>>::from_element(nd, Complex::new(1.0, 0.0));
-        for _ in 0..3 {
-            if let Some(w) = lu.solve(&v) {
-                let nrm = w.norm();
-                if nrm.is_finite() && nrm > 0.0 {
-                    v = w / Complex::new(nrm, 0.0);
-                }
-            }
-        }
-        let j = (0..nd).max_by(|&p, &q| v[p].norm().total_cmp(&v[q].norm())).unwrap_or(0);
+        let v = u.col(jbest);
+        let i = (0..nd).max_by(|&p, &q| v[p].norm().total_cmp(&v[q].norm())).unwrap_or(0);
+        let lam = s[jbest];
         return Ok(StabilityLimit {
             dt_max: best,
             eigenvalue: (lam.re, lam.im),
-            element: names[diff[j]].clone(),
+            element: names[diff[i]].clone(),
             exact: true,
         });
     }

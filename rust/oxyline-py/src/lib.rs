@@ -1,1 +1,292 @@
+//! PyO3 binding of oxyline-core (module `oxyline._core`). Only glue lives here: argument
+//! conversion, error mapping, GIL release with periodic Ctrl-C checks, zero-copy results.
 
+use numpy::IntoPyArray;
+use oxyline_core::genalpha::NewtonControl;
+use oxyline_core::network::parse;
+use oxyline_core::{Assembled, Dae, Error, Method, RunSettings, Start};
+use pyo3::exceptions::{PyKeyboardInterrupt, PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+pyo3::create_exception!(oxyline, ModelError, PyValueError, "The network model or its settings are invalid.");
+pyo3::create_exception!(oxyline, UnstableTimeStep, ModelError, "The requested explicit time step is unstable.");
+pyo3::create_exception!(oxyline, SolverError, PyRuntimeError, "Time integration failed.");
+
+fn to_py(e: Error) -> PyErr {
+    let msg = e.to_string();
+    match e {
+        Error::Model { .. } => ModelError::new_err(msg),
+        Error::Unstable { .. } => UnstableTimeStep::new_err(msg),
+        Error::Solver { .. } => SolverError::new_err(msg),
+        Error::Interrupted { .. } => PyKeyboardInterrupt::new_err(msg),
+    }
+}
+
+fn error_kind(e: &Error) -> &'static str {
+    match e {
+        Error::Model { .. } => "model",
+        Error::Unstable { .. } => "unstable",
+        Error::Solver { .. } => "solver",
+        Error::Interrupted { .. } => "interrupted",
+    }
+}
+
+/// An assembled network: built once from the canonical SI JSON model, run many times.
+#[pyclass(frozen, module = "oxyline._core")]
+struct Network {
+    inner: Arc<(Assembled, Dae)>,
+}
+
+#[pymethods]
+impl Network {
+    #[new]
+    fn new(py: Python<'_>, model_json: &str) -> PyResult<Self> {
+        let json = model_json.to_owned();
+        let built = py.detach(move || -> Result<(Assembled, Dae), Error> {
+            let spec = parse(&json)?;
+            let assembled = spec.assemble()?;
+            let dae = assembled.circuit.assemble()?;
+            Ok((assembled, dae))
+        });
+        let built = built.map_err(to_py)?;
+        Ok(Network { inner: Arc::new(built) })
+    }
+
+    /// Counts and totals for `oxyline validate`.
+    fn summary<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let (a, dae) = &*self.inner;
+        let s = &a.summary;
+        let d = PyDict::new(py);
+        d.set_item("vessels", s.vessels)?;
+        d.set_item("segments", s.segments)?;
+        d.set_item("nodes", s.nodes)?;
+        d.set_item("junctions", s.junctions)?;
+        d.set_item("inlets", s.inlets)?;
+        d.set_item("outlets", s.outlets)?;
+        d.set_item("total_compliance", s.total_compliance)?;
+        d.set_item("total_volume", s.total_volume)?;
+        d.set_item("period", s.period)?;
+        d.set_item("unknowns", dae.n)?;
+        d.set_item("differential_unknowns", dae.e.iter().filter(|e| **e > 0.0).count())?;
+        Ok(d)
+    }
+
+    /// Output layout: vessel names, segment counts and positions.
+    fn layout<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let p = &self.inner.0.probes;
+        let d = PyDict::new(py);
+        d.set_item("vessels", p.vessels.clone())?;
+        d.set_item("segment_count", p.segment_count.clone())?;
+        d.set_item("segment_position", p.segment_position.clone().into_pyarray(py))?;
+        d.set_item("n_vessel_columns", p.vessel_unknowns.len())?;
+        d.set_item("n_segment_columns", p.segment_unknowns.len())?;
+        Ok(d)
+    }
+
+    /// Names of all circuit unknowns (for diagnostics).
+    fn unknown_names(&self) -> Vec<String> {
+        self.inner.1.names.clone()
+    }
+
+    /// The assembled circuit as arrays: unknown names, mass diagonal E (capacitance for node
+    /// unknowns, inductance for branch unknowns), node count, fixed-pressure nodes, branch ends.
+    fn circuit<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let (a, dae) = &*self.inner;
+        let c = &a.circuit;
+        let d = PyDict::new(py);
+        d.set_item("names", dae.names.clone())?;
+        d.set_item("mass", dae.e.clone().into_pyarray(py))?;
+        d.set_item("n_nodes", dae.n_nodes)?;
+        d.set_item("fixed_nodes", c.fixed_pressures.iter().map(|(n, _)| *n).collect::<Vec<_>>())?;
+        d.set_item("source_nodes", c.sources.iter().map(|(n, _)| *n).collect::<Vec<_>>())?;
+        d.set_item("branch_from", c.branches.iter().map(|b| b.from).collect::<Vec<_>>())?;
+        d.set_item("branch_to", c.branches.iter().map(|b| b.to).collect::<Vec<_>>())?;
+        d.set_item("node_volume", c.nodes.iter().map(|n| n.volume).collect::<Vec<_>>())?;
+        Ok(d)
+    }
+
+    /// Source inflows (m³/s) at time t, one per source node (in `circuit()["source_nodes"]` order).
+    fn source_flows(&self, t: f64) -> Vec<f64> {
+        self.inner.0.circuit.sources.iter().map(|(_, w)| w.eval(t)).collect()
+    }
+
+    /// (consistent state, dy/dt) of the transient circuit at (t, state).
+    fn derivative<'py>(
+        &self,
+        py: Python<'py>,
+        t: f64,
+        state: Vec<f64>,
+    ) -> PyResult<(Bound<'py, numpy::PyArray1<f64>>, Bound<'py, numpy::PyArray1<f64>>)> {
+        let dae = &self.inner.1;
+        if state.len() != dae.n {
+            return Err(ModelError::new_err(format!("state has {} entries, expected {}", state.len(), dae.n)));
+        }
+        let mut y = state;
+        let mut rk = oxyline_core::rk4::Rk4::new(dae, oxyline_core::Regime::Transient, 1.0).map_err(to_py)?;
+        let yd = rk.derivative(t, &mut y).map_err(to_py)?;
+        Ok((y.into_pyarray(py), yd.into_pyarray(py)))
+    }
+
+    /// Largest stable RK4 step: (dt_max, element, exact).
+    fn rk4_stability_limit(&self, py: Python<'_>) -> PyResult<(f64, String, bool)> {
+        let inner = self.inner.clone();
+        py.detach(move || {
+            let dae = &inner.1;
+            let mut rk = oxyline_core::rk4::Rk4::new(dae, oxyline_core::Regime::Transient, 1.0)?;
+            let lim = oxyline_core::stability::rk4_limit(&mut rk, &dae.names)?;
+            Ok::<_, Error>((lim.dt_max, lim.element, lim.exact))
+        })
+        .map_err(to_py)
+    }
+
+    /// Input impedance (Pa·s/m³) seen from the graph node `node` at angular frequency `omega`.
+    fn input_impedance(&self, node: &str, omega: f64) -> PyResult<(f64, f64)> {
+        let (a, dae) = &*self.inner;
+        let idx = a
+            .circuit
+            .nodes
+            .iter()
+            .position(|n| n.name == node)
+            .ok_or_else(|| ModelError::new_err(format!("node '{node}': not in the network")))?;
+        let z = oxyline_core::frequency::input_impedance(dae, idx, omega).map_err(to_py)?;
+        Ok((z.re, z.im))
+    }
+
+    /// Run the network. Returns a dict with `times` (n_t,), `data` (n_t, n_columns) and run
+    /// facts; if the run stopped early, `error`/`error_kind` are set and the data so far kept.
+    #[pyo3(signature = (*, period, cycles, output_every, method = "auto", rho_infty = 0.5, dt = None,
+        until_periodic = None, max_cycles = 100, output_all_cycles = false, start = "steady",
+        newton_atol = None, max_iterations = 30, segments = true, all_unknowns = false, progress = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn simulate<'py>(
+        &self,
+        py: Python<'py>,
+        period: f64,
+        cycles: usize,
+        output_every: f64,
+        method: &str,
+        rho_infty: f64,
+        dt: Option<f64>,
+        until_periodic: Option<f64>,
+        max_cycles: usize,
+        output_all_cycles: bool,
+        start: &str,
+        newton_atol: Option<f64>,
+        max_iterations: usize,
+        segments: bool,
+        all_unknowns: bool,
+        progress: Option<Py<PyAny>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let method = match method {
+            "rk4" => Method::Rk4,
+            "generalized-alpha" => Method::GeneralizedAlpha { rho_inf: rho_infty },
+            "auto" => Method::Auto { rho_inf: rho_infty },
+            other => {
+                return Err(ModelError::new_err(format!(
+                    "simulation: unknown method '{other}' (expected rk4, generalized-alpha or auto)"
+                )));
+            }
+        };
+        let start = match start {
+            "steady" => Start::Steady,
+            "svzerod-steady" => Start::SvZeroDSteady { rho_inf: rho_infty },
+            "zero" => Start::Zero,
+            other => {
+                return Err(ModelError::new_err(format!(
+                    "simulation: unknown start '{other}' (expected steady, svzerod-steady or zero)"
+                )));
+            }
+        };
+        let probes = &self.inner.0.probes;
+        let cols = if all_unknowns {
+            (0..self.inner.1.n).collect()
+        } else if segments {
+            probes.all()
+        } else {
+            probes.vessel_unknowns.clone()
+        };
+        let settings = RunSettings {
+            method,
+            dt,
+            period,
+            cycles,
+            until_periodic,
+            max_cycles,
+            output_every,
+            output_all_cycles,
+            start,
+            newton: NewtonControl { atol: newton_atol, max_iter: max_iterations },
+            probes: cols,
+        };
+        let inner = self.inner.clone();
+        let mut pending: Option<PyErr> = None;
+        let outcome = py.detach(|| {
+            let mut last = Instant::now();
+            let mut cb = |t: f64, t_end: f64| -> bool {
+                if last.elapsed() < Duration::from_millis(100) && t < t_end {
+                    return true;
+                }
+                last = Instant::now();
+                Python::attach(|py| {
+                    let r = py.check_signals().and_then(|()| match &progress {
+                        Some(f) => f.call1(py, (t, t_end)).map(drop),
+                        None => Ok(()),
+                    });
+                    match r {
+                        Ok(()) => true,
+                        Err(e) => {
+                            pending = Some(e);
+                            false
+                        }
+                    }
+                })
+            };
+            oxyline_core::simulate(&inner.1, &settings, &mut cb)
+        });
+        let out = outcome.map_err(to_py)?;
+        let d = PyDict::new(py);
+        let nt = out.times.len();
+        let data = numpy::ndarray::Array2::from_shape_vec((nt, out.n_probes), out.data)
+            .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+        d.set_item("times", out.times.into_pyarray(py))?;
+        d.set_item("data", data.into_pyarray(py))?;
+        d.set_item("dt", out.dt)?;
+        d.set_item("method", out.method)?;
+        d.set_item("cycles_run", out.cycles_run)?;
+        d.set_item("periodic_error", out.periodic_error)?;
+        if let Some(lim) = &out.stability {
+            d.set_item("rk4_dt_max", lim.dt_max)?;
+            d.set_item("rk4_limiting_element", lim.element.clone())?;
+        }
+        d.set_item("final_state", out.final_state.into_pyarray(py))?;
+        match (pending, out.error) {
+            (Some(e), _) => {
+                d.set_item("error_kind", "interrupted")?;
+                d.set_item("error", e.value(py).clone())?;
+            }
+            (None, Some(e)) => {
+                d.set_item("error_kind", error_kind(&e))?;
+                d.set_item("error", to_py(e).value(py).clone())?;
+            }
+            (None, None) => {}
+        }
+        Ok(d)
+    }
+}
+
+#[pymodule]
+mod _core {
+    #[pymodule_export]
+    use super::{ModelError, Network, SolverError, UnstableTimeStep};
+
+    use pyo3::types::PyModuleMethods;
+
+    #[pymodule_init]
+    fn init(m: &pyo3::Bound<'_, pyo3::types::PyModule>) -> pyo3::PyResult<()> {
+        m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+        m.add("build_profile", if cfg!(debug_assertions) { "debug" } else { "release" })
+    }
+}

@@ -1,0 +1,39 @@
+"""oxyline: blood flow and oxygen transport in arterial networks, as transmission-line
+circuits integrated by a Rust core.
+
+Quick use::
+
+    import oxyline
+    res = oxyline.simulate("bifurcation")       # built-in example, or a YAML/JSON path or dict
+    ds = res.to_xarray()                         # dims time, vessel (and segment)
+"""
+
+from __future__ import annotations
+
+from oxyline import _core
+from oxyline.errors import (
+    ModelError,
+    SimulationInterrupted,
+    SolverError,
+    UnstableTimeStep,
+    UnsupportedElement,
+)
+from oxyline.model import Model, load_model
+from oxyline.result import Result, VesselResult
+from oxyline.run import simulate
+
+__version__: str = _core.__version__
+
+__all__ = [
+    "Model",
+    "ModelError",
+    "Result",
+    "SimulationInterrupted",
+    "SolverError",
+    "UnstableTimeStep",
+    "UnsupportedElement",
+    "VesselResult",
+    "__version__",
+    "load_model",
+    "simulate",
+]

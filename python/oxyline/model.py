@@ -1,0 +1,363 @@
+"""Network models: reading YAML/JSON/dicts, checking keys and values, converting units, and
+writing the canonical SI description handed to the Rust core.
+
+The user-facing schema (see README) is::
+
+    name: carotid
+    units: SI                          # or cgs (cm, dyn/cm^2, mL/s) as svZeroDSolver files
+    blood: {density: 1050, viscosity: 0.0035}
+    arrangement: inverted-L            # L, pi
+    segmentation: {max_length: 0.0065} # or per-vessel `segments: N`
+    period: 1.0
+    vessels: [...]
+    boundary_conditions: {...}
+    simulation: {cycles: 10, dt: auto, method: auto, output: {cycles: last, every: 1e-3}}
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from oxyline import _core
+from oxyline.errors import ModelError
+from oxyline.units import factor
+
+TOP_KEYS = {
+    "name", "units", "blood", "arrangement", "segmentation", "period", "vessels",
+    "boundary_conditions", "simulation", "wall_model", "inertance_profile", "description",
+    "oxygen", "species",
+}
+VESSEL_KEYS = {
+    "name", "from", "to", "length", "radius", "radius_in", "radius_out", "wall_thickness",
+    "youngs_modulus", "poisson_ratio", "segments", "lumped", "arrangement", "output",
+    "description",
+}
+LUMPED_KEYS = {"resistance", "inductance", "capacitance", "stenosis_coefficient"}
+BC_KEYS = {
+    "flow": {"type", "time", "flow", "value", "fourier", "interpolation", "steady"},
+    "pressure": {"type", "time", "pressure", "value", "fourier", "interpolation", "steady"},
+    "resistance": {"type", "resistance", "pressure"},
+    "rcr": {"type", "proximal_resistance", "capacitance", "distal_resistance", "pressure"},
+}
+SIM_KEYS = {"cycles", "dt", "method", "output", "until_periodic", "max_cycles", "rho_infty", "start"}
+OUTPUT_KEYS = {"cycles", "every", "segments"}
+METHODS = {"auto", "rk4", "generalized-alpha"}
+ARRANGEMENTS = {"inverted-L", "L", "pi", "RCL"}
+
+
+def _err(element: str, message: str) -> ModelError:
+    return ModelError(f"{element}: {message}")
+
+
+def _check_keys(d: Mapping[str, Any], allowed: set[str], element: str) -> None:
+    if not isinstance(d, Mapping):
+        raise _err(element, f"expected a mapping, got {type(d).__name__}")
+    for k in d:
+        if k not in allowed:
+            raise _err(element, f"unknown key '{k}' (allowed: {', '.join(sorted(allowed))})")
+
+
+def _number(value: Any, element: str, key: str) -> float:
+    if isinstance(value, str):  # YAML 1.1 reads 5.0e5 (no exponent sign) as a string
+        try:
+            value = float(value)
+        except ValueError:
+            pass
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise _err(element, f"'{key}' must be a number, got {value!r}")
+    v = float(value)
+    if not math.isfinite(v):
+        raise _err(element, f"'{key}' must be finite, got {v}")
+    return v
+
+
+def _numbers(value: Any, element: str, key: str) -> list[float]:
+    if not isinstance(value, (list, tuple)) and not hasattr(value, "tolist"):
+        raise _err(element, f"'{key}' must be a list of numbers, got {value!r}")
+    values = list(value.tolist() if hasattr(value, "tolist") else value)
+    return [_number(v, element, f"{key}[{i}]") for i, v in enumerate(values)]
+
+
+def _waveform(bc: Mapping[str, Any], key: str, quantity: str, units: str, element: str,
+              required: bool = True) -> dict[str, Any] | None:
+    """Canonical waveform from `value:`, `time:`+`key:` tables, `fourier:` or a scalar `key:`."""
+    f = factor(units, quantity)
+    if "fourier" in bc:
+        fo = bc["fourier"]
+        _check_keys(fo, {"period", "mean", "cos", "sin"}, f"{element} fourier")
+        return {
+            "kind": "fourier",
+            "period": _number(fo.get("period"), element, "fourier.period"),
+            "mean": f * _number(fo.get("mean", 0.0), element, "fourier.mean"),
+            "cos": [f * x for x in _numbers(fo.get("cos", []), element, "fourier.cos")],
+            "sin": [f * x for x in _numbers(fo.get("sin", []), element, "fourier.sin")],
+        }
+    if "time" in bc:
+        if key not in bc:
+            raise _err(element, f"has 'time' but no '{key}' table")
+        t = _numbers(bc["time"], element, "time")
+        v = [f * x for x in _numbers(bc[key], element, key)]
+        if len(t) != len(v):
+            raise _err(element, f"'time' has {len(t)} entries but '{key}' has {len(v)}")
+        for i in range(1, len(t)):
+            if t[i] <= t[i - 1]:
+                raise _err(element, f"'time' must be strictly increasing: t[{i}] = {t[i]} <= "
+                                    f"t[{i - 1}] = {t[i - 1]}")
+        out: dict[str, Any] = {"kind": "table", "time": t, "value": v,
+                               "interpolation": bc.get("interpolation", "linear")}
+        if out["interpolation"] not in ("linear", "periodic-cubic"):
+            raise _err(element, f"interpolation must be 'linear' or 'periodic-cubic', got "
+                                f"{out['interpolation']!r}")
+        if "steady" in bc:
+            out["steady"] = f * _number(bc["steady"], element, "steady")
+        return out
+    for k in ("value", key):
+        if k in bc and bc[k] is not None:
+            if isinstance(bc[k], (list, tuple)):
+                raise _err(element, f"'{k}' is a list but no 'time' table is given")
+            return {"kind": "constant", "value": f * _number(bc[k], element, k)}
+    if required:
+        raise _err(element, f"needs '{key}' (a number, or 'time' + '{key}' tables, or 'fourier')")
+    return None
+
+
+@dataclass
+class Model:
+    """A validated network model in SI units.
+
+    ``canonical`` is the JSON-able description passed to the Rust core; ``simulation`` holds
+    the run settings from the file (overridable in :func:`oxyline.simulate`).
+    """
+
+    name: str
+    canonical: dict[str, Any]
+    simulation: dict[str, Any] = field(default_factory=dict)
+    period: float | None = None
+    source: dict[str, Any] = field(default_factory=dict)
+    _network: Any = field(default=None, repr=False, compare=False)
+
+    @property
+    def network(self) -> _core.Network:
+        """The assembled Rust network (built on first use)."""
+        if self._network is None:
+            self._network = _core.Network(json.dumps(self.canonical))
+        return self._network
+
+    @property
+    def vessel_names(self) -> list[str]:
+        return [v["name"] for v in self.canonical["vessels"]]
+
+    def summary(self) -> dict[str, Any]:
+        """Counts, totals and the RK4 stability limit (for ``oxyline validate``)."""
+        s = dict(self.network.summary())
+        dt_max, element, exact = self.network.rk4_stability_limit()
+        s.update(rk4_dt_max=dt_max, rk4_limiting_element=element, rk4_limit_exact=exact,
+                 period=self.period, name=self.name)
+        return s
+
+    def to_dict(self) -> dict[str, Any]:
+        """The model as a plain dict in the user-facing schema (SI)."""
+        return copy.deepcopy(self.source)
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        state["_network"] = None
+        return state
+
+
+def _read(path: str | os.PathLike[str]) -> dict[str, Any]:
+    p = Path(path)
+    if not p.exists():
+        raise ModelError(f"{p}: file not found")
+    text = p.read_text()
+    try:
+        if p.suffix.lower() in (".yaml", ".yml"):
+            import yaml
+
+            data = yaml.safe_load(text)
+        else:
+            data = json.loads(text)
+    except Exception as exc:  # parse errors carry line numbers
+        raise ModelError(f"{p}: cannot parse: {exc}") from exc
+    if not isinstance(data, dict):
+        raise ModelError(f"{p}: top level must be a mapping")
+    return data
+
+
+def load_model(source: str | os.PathLike[str] | Mapping[str, Any] | Model) -> Model:
+    """Load and validate a network from a YAML/JSON file, a built-in example name, or a dict.
+
+    >>> import oxyline
+    >>> m = oxyline.load_model("bifurcation")
+    >>> m.vessel_names
+    ['parent', 'daughter1', 'daughter2']
+    """
+    if isinstance(source, Model):
+        return source
+    if isinstance(source, Mapping):
+        data = copy.deepcopy(dict(source))
+    else:
+        p = Path(source)
+        if not p.exists() and not p.suffix:
+            from oxyline import examples
+
+            return examples.load(str(source))
+        data = _read(p)
+    if "vessels" not in data and "simulation_parameters" in data:
+        from oxyline import svzerod
+
+        return svzerod.to_model(data)
+    return _build(data)
+
+
+def _build(data: dict[str, Any]) -> Model:
+    _check_keys(data, TOP_KEYS, "model")
+    name = str(data.get("name", "network"))
+    units = str(data.get("units", "SI"))
+    if units.lower() not in ("si", "cgs"):
+        raise _err("model", f"units must be 'SI' or 'cgs', got {units!r}")
+    L = factor(units, "length")
+    blood = data.get("blood", {}) or {}
+    _check_keys(blood, {"density", "viscosity"}, "blood")
+    canon_blood = {
+        "density": factor(units, "density") * _number(blood.get("density", 1050.0 / factor(units, "density")), "blood", "density"),
+        "viscosity": factor(units, "viscosity") * _number(blood.get("viscosity", 3.5e-3 / factor(units, "viscosity")), "blood", "viscosity"),
+    }
+    arrangement = data.get("arrangement", "inverted-L")
+    if arrangement not in ARRANGEMENTS - {"RCL"}:
+        raise _err("model", f"arrangement must be inverted-L, L or pi, got {arrangement!r}")
+    seg = data.get("segmentation", {}) or {}
+    _check_keys(seg, {"max_length"}, "segmentation")
+    canon: dict[str, Any] = {
+        "name": name,
+        "blood": canon_blood,
+        "arrangement": arrangement,
+        "wall_model": data.get("wall_model", "thin"),
+        "inertance_profile": data.get("inertance_profile", "flat"),
+        "vessels": [],
+        "boundary_conditions": {},
+    }
+    if canon["wall_model"] not in ("thin", "thick"):
+        raise _err("model", f"wall_model must be 'thin' or 'thick', got {canon['wall_model']!r}")
+    if canon["inertance_profile"] not in ("flat", "poiseuille"):
+        raise _err("model", f"inertance_profile must be 'flat' or 'poiseuille', got "
+                            f"{canon['inertance_profile']!r}")
+    if "max_length" in seg:
+        canon["max_segment_length"] = L * _number(seg["max_length"], "segmentation", "max_length")
+    vessels = data.get("vessels")
+    if not isinstance(vessels, list) or not vessels:
+        raise _err("model", "'vessels' must be a non-empty list")
+    for i, v in enumerate(vessels):
+        el = f"vessel '{v.get('name', f'#{i}')}'" if isinstance(v, Mapping) else f"vessel #{i}"
+        _check_keys(v, VESSEL_KEYS, el)
+        for k in ("name", "from", "to"):
+            if k not in v:
+                raise _err(el, f"missing '{k}'")
+        cv: dict[str, Any] = {"name": str(v["name"]), "from": str(v["from"]), "to": str(v["to"])}
+        if "segments" in v:
+            n = v["segments"]
+            if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+                raise _err(el, f"'segments' must be an integer >= 1, got {n!r}")
+            cv["segments"] = n
+        if "arrangement" in v:
+            if v["arrangement"] not in ARRANGEMENTS:
+                raise _err(el, f"arrangement must be one of {sorted(ARRANGEMENTS)}, got "
+                               f"{v['arrangement']!r}")
+            cv["arrangement"] = v["arrangement"]
+        if "output" in v:
+            cv["output"] = bool(v["output"])
+        if "lumped" in v:
+            lp = v["lumped"]
+            _check_keys(lp, LUMPED_KEYS, f"{el} lumped")
+            q = {"resistance": "resistance", "inductance": "inductance",
+                 "capacitance": "capacitance", "stenosis_coefficient": "stenosis"}
+            if "resistance" not in lp:
+                raise _err(el, "lumped needs 'resistance'")
+            cv["lumped"] = {k: factor(units, q[k]) * _number(lp[k], el, k) for k in lp}
+        else:
+            if "length" not in v:
+                raise _err(el, "missing 'length' (or give 'lumped' values)")
+            if "radius" in v and ("radius_in" in v or "radius_out" in v):
+                raise _err(el, "give 'radius' or 'radius_in'/'radius_out', not both")
+            if "radius" in v:
+                r_in = r_out = _number(v["radius"], el, "radius")
+            elif "radius_in" in v and "radius_out" in v:
+                r_in, r_out = _number(v["radius_in"], el, "radius_in"), _number(v["radius_out"], el, "radius_out")
+            else:
+                raise _err(el, "missing 'radius' (or 'radius_in' and 'radius_out')")
+            g: dict[str, Any] = {"length": L * _number(v["length"], el, "length"),
+                                 "radius_in": L * r_in, "radius_out": L * r_out}
+            if "wall_thickness" in v:
+                g["wall_thickness"] = L * _number(v["wall_thickness"], el, "wall_thickness")
+            if "youngs_modulus" in v:
+                g["youngs_modulus"] = factor(units, "modulus") * _number(v["youngs_modulus"], el, "youngs_modulus")
+            if "poisson_ratio" in v:
+                g["poisson_ratio"] = _number(v["poisson_ratio"], el, "poisson_ratio")
+            cv["geometry"] = g
+        canon["vessels"].append(cv)
+    bcs = data.get("boundary_conditions", {})
+    if not isinstance(bcs, Mapping):
+        raise _err("model", "'boundary_conditions' must be a mapping from node name to condition")
+    periods: list[tuple[float, str]] = []
+    for node, bc in bcs.items():
+        el = f"boundary condition '{node}'"
+        if not isinstance(bc, Mapping) or "type" not in bc:
+            raise _err(el, "needs a 'type' (flow, pressure, resistance or rcr)")
+        kind = str(bc["type"]).lower()
+        if kind not in BC_KEYS:
+            raise _err(el, f"unknown type '{bc['type']}' (expected flow, pressure, resistance or rcr)")
+        _check_keys(bc, BC_KEYS[kind], el)
+        cb: dict[str, Any] = {"type": kind}
+        if kind == "flow":
+            cb["flow"] = _waveform(bc, "flow", "flow", units, el)
+        elif kind == "pressure":
+            cb["pressure"] = _waveform(bc, "pressure", "pressure", units, el)
+        elif kind == "resistance":
+            cb["resistance"] = factor(units, "resistance") * _number(bc.get("resistance"), el, "resistance")
+            p = bc.get("pressure", 0.0)
+            cb["pressure"] = _waveform({"pressure": p} if not isinstance(p, Mapping) else p,
+                                       "pressure", "pressure", units, el)
+        else:
+            for k, q in (("proximal_resistance", "resistance"), ("capacitance", "capacitance"),
+                         ("distal_resistance", "resistance")):
+                if k not in bc:
+                    raise _err(el, f"rcr needs '{k}'")
+                cb[k] = factor(units, q) * _number(bc[k], el, k)
+            p = bc.get("pressure", 0.0)
+            cb["pressure"] = _waveform({"pressure": p} if not isinstance(p, Mapping) else p,
+                                       "pressure", "pressure", units, el)
+        for key in ("flow", "pressure"):
+            w = cb.get(key)
+            if isinstance(w, dict) and w["kind"] == "table" and len(w["time"]) > 1:
+                periods.append((w["time"][-1] - w["time"][0], el))
+            elif isinstance(w, dict) and w["kind"] == "fourier":
+                periods.append((w["period"], el))
+        canon["boundary_conditions"][str(node)] = cb
+    period = data.get("period")
+    if period is not None:
+        period = _number(period, "model", "period")
+        if period <= 0:
+            raise _err("model", f"period must be > 0, got {period}")
+    for p, el in periods:
+        if period is None:
+            period = p
+        elif abs(p - period) > 1e-9 * period:
+            raise _err(el, f"period mismatch: its waveform repeats every {p} s but the model "
+                           f"period is {period} s")
+    sim = data.get("simulation", {}) or {}
+    _check_keys(sim, SIM_KEYS, "simulation")
+    if "output" in sim:
+        _check_keys(sim["output"], OUTPUT_KEYS, "simulation output")
+    if "method" in sim and sim["method"] not in METHODS:
+        raise _err("simulation", f"method must be one of {sorted(METHODS)}, got {sim['method']!r}")
+    source = copy.deepcopy(data)
+    model = Model(name=name, canonical=canon, simulation=dict(sim), period=period, source=source)
+    model.network  # noqa: B018 - assemble now so that invalid models fail at load time
+    return model

@@ -1,0 +1,151 @@
+"""Simulation results: zero-copy numpy views of the arrays written by the Rust core, with
+xarray/pandas conversions."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+VESSEL_VARIABLES = ("pressure_in", "pressure_out", "flow_in", "flow_out")
+SEGMENT_VARIABLES = ("segment_pressure_in", "segment_pressure_out", "segment_flow")
+UNITS = {
+    "pressure_in": "Pa", "pressure_out": "Pa", "flow_in": "m^3/s", "flow_out": "m^3/s",
+    "segment_pressure_in": "Pa", "segment_pressure_out": "Pa", "segment_flow": "m^3/s",
+    "time": "s", "segment_position": "m",
+}
+
+
+@dataclass
+class VesselResult:
+    """Waveforms of one vessel (SI units); segment arrays have shape (time, segment)."""
+
+    name: str
+    time: np.ndarray
+    pressure_in: np.ndarray
+    pressure_out: np.ndarray
+    flow_in: np.ndarray
+    flow_out: np.ndarray
+    segment_pressure_in: np.ndarray | None = None
+    segment_pressure_out: np.ndarray | None = None
+    segment_flow: np.ndarray | None = None
+    segment_position: np.ndarray | None = None
+
+
+@dataclass
+class Result:
+    """Output of :func:`oxyline.simulate`.
+
+    ``data`` is the (time, column) array produced by the core; the attributes below are views
+    into it (no copies). Times start at 0 for the last-cycle output.
+    """
+
+    model_name: str
+    vessels: list[str]
+    time: np.ndarray
+    data: np.ndarray
+    segment_count: list[int]
+    segment_position: np.ndarray
+    settings: dict[str, Any] = field(default_factory=dict)
+    complete: bool = True
+
+    def __post_init__(self) -> None:
+        nv = len(self.vessels)
+        self._vessel_block = self.data[:, : 4 * nv]
+        self._segment_block = self.data[:, 4 * nv :]
+        self._index = {name: i for i, name in enumerate(self.vessels)}
+        self._seg_start = np.concatenate([[0], np.cumsum(self.segment_count)]).astype(int) \
+            if self.segment_count else np.zeros(1, dtype=int)
+
+    # vessel-level arrays, shape (time, vessel)
+    @property
+    def pressure_in(self) -> np.ndarray:
+        return self._vessel_block[:, 0::4]
+
+    @property
+    def pressure_out(self) -> np.ndarray:
+        return self._vessel_block[:, 1::4]
+
+    @property
+    def flow_in(self) -> np.ndarray:
+        return self._vessel_block[:, 2::4]
+
+    @property
+    def flow_out(self) -> np.ndarray:
+        return self._vessel_block[:, 3::4]
+
+    # segment-level arrays, shape (time, segment)
+    @property
+    def has_segments(self) -> bool:
+        return self._segment_block.shape[1] > 0
+
+    @property
+    def segment_pressure_in(self) -> np.ndarray:
+        return self._segment_block[:, 0::3]
+
+    @property
+    def segment_pressure_out(self) -> np.ndarray:
+        return self._segment_block[:, 1::3]
+
+    @property
+    def segment_flow(self) -> np.ndarray:
+        return self._segment_block[:, 2::3]
+
+    def vessel(self, name: str) -> VesselResult:
+        """All arrays of one vessel."""
+        if name not in self._index:
+            raise KeyError(f"vessel '{name}' has no output (vessels: {', '.join(self.vessels[:10])}"
+                           f"{', ...' if len(self.vessels) > 10 else ''})")
+        i = self._index[name]
+        out = VesselResult(name, self.time, self.pressure_in[:, i], self.pressure_out[:, i],
+                           self.flow_in[:, i], self.flow_out[:, i])
+        if self.has_segments:
+            a, b = self._seg_start[i], self._seg_start[i + 1]
+            out.segment_pressure_in = self.segment_pressure_in[:, a:b]
+            out.segment_pressure_out = self.segment_pressure_out[:, a:b]
+            out.segment_flow = self.segment_flow[:, a:b]
+            out.segment_position = self.segment_position[a:b]
+        return out
+
+    def to_xarray(self) -> Any:
+        """xarray Dataset with dims ``time``, ``vessel`` (and ``segment``), SI units in attrs."""
+        import xarray as xr
+
+        from oxyline import __version__
+
+        coords: dict[str, Any] = {"time": ("time", self.time, {"units": "s"}),
+                                  "vessel": ("vessel", np.array(self.vessels, dtype=object))}
+        data_vars: dict[str, Any] = {
+            name: (("time", "vessel"), getattr(self, name), {"units": UNITS[name]})
+            for name in VESSEL_VARIABLES
+        }
+        if self.has_segments:
+            seg_vessel = np.repeat(np.array(self.vessels, dtype=object), self.segment_count)
+            seg_index = np.concatenate([np.arange(n) for n in self.segment_count]) \
+                if self.segment_count else np.zeros(0, dtype=int)
+            coords["segment_vessel"] = ("segment", seg_vessel)
+            coords["segment_index"] = ("segment", seg_index)
+            coords["segment_position"] = ("segment", self.segment_position, {"units": "m"})
+            for name in SEGMENT_VARIABLES:
+                data_vars[name] = (("time", "segment"), getattr(self, name), {"units": UNITS[name]})
+        attrs = {"model": self.model_name, "oxyline_version": __version__,
+                 "complete": int(self.complete)}
+        attrs.update({f"solver_{k}": (v if isinstance(v, (int, float, str)) else str(v))
+                      for k, v in self.settings.items() if v is not None})
+        return xr.Dataset(data_vars, coords=coords, attrs=attrs)
+
+    def to_pandas(self) -> Any:
+        """Long table with svZeroDSolver's columns: name, time, flow_in, flow_out, pressure_in,
+        pressure_out (SI)."""
+        import pandas as pd
+
+        nt, nv = len(self.time), len(self.vessels)
+        return pd.DataFrame({
+            "name": np.repeat(np.array(self.vessels, dtype=object), nt),
+            "time": np.tile(self.time, nv),
+            "flow_in": self.flow_in.T.reshape(-1),
+            "flow_out": self.flow_out.T.reshape(-1),
+            "pressure_in": self.pressure_in.T.reshape(-1),
+            "pressure_out": self.pressure_out.T.reshape(-1),
+        })
