@@ -111,7 +111,7 @@ def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any], **overri
     )
     if "error" in raw:
         err = raw["error"]
-        if raw["error_kind"] == "interrupted":
+        if raw["error_kind"] == "interrupted" and isinstance(err, KeyboardInterrupt):
             raise SimulationInterrupted(
                 f"run interrupted after {raw['cycles_run']} complete cycle(s); "
                 "the partial result is in exc.result", result) from None

@@ -1,0 +1,48 @@
+"""Type stubs for the Rust extension module ``oxyline._core``."""
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+build_profile: str
+
+class ModelError(ValueError): ...
+class UnstableTimeStep(ModelError): ...
+class SolverError(RuntimeError): ...
+
+class Network:
+    """An assembled network, built from the canonical SI JSON model."""
+
+    def __init__(self, model_json: str) -> None: ...
+    def summary(self) -> dict[str, Any]: ...
+    def layout(self) -> dict[str, Any]: ...
+    def unknown_names(self) -> list[str]: ...
+    def circuit(self) -> dict[str, Any]: ...
+    def source_flows(self, t: float) -> list[float]: ...
+    def derivative(
+        self, t: float, state: list[float] | npt.NDArray[np.float64]
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
+    def rk4_stability_limit(self) -> tuple[float, str, bool]: ...
+    def input_impedance(self, node: str, omega: float) -> tuple[float, float]: ...
+    def simulate(
+        self,
+        *,
+        period: float,
+        cycles: int,
+        output_every: float,
+        method: str = "auto",
+        rho_infty: float = 0.5,
+        dt: float | None = None,
+        until_periodic: float | None = None,
+        max_cycles: int = 100,
+        output_all_cycles: bool = False,
+        start: str = "steady",
+        newton_atol: float | None = None,
+        max_iterations: int = 30,
+        segments: bool = True,
+        all_unknowns: bool = False,
+        progress: Callable[[float, float], None] | None = None,
+    ) -> dict[str, Any]: ...
