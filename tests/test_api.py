@@ -1,0 +1,140 @@
+"""The public Python API: results layout, conversions, run control (periodicity, interruption,
+GIL release), CLI. Physical correctness is tested in test_flow_physics.py."""
+
+from __future__ import annotations
+
+import os
+import pickle
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import oxyline
+
+
+@pytest.fixture(scope="module")
+def result() -> oxyline.Result:
+    return oxyline.simulate("bifurcation", cycles=3)
+
+
+def test_result_arrays_are_views_of_the_core_buffer(result: oxyline.Result) -> None:
+    assert result.pressure_in.shape == (1001, 3)
+    assert np.shares_memory(result.pressure_in, result.data)
+    assert result.time[0] == 0.0 and result.time[-1] == pytest.approx(1.0)
+
+
+def test_conservation_at_the_junction_and_outlets(result: oxyline.Result) -> None:
+    # inverted-L: the junction node stores volume, so parent outflow - daughters' inflow must
+    # average to zero over a periodic cycle (mass conservation), and the inflow mean is the BC's
+    parent, d1, d2 = (result.vessel(n) for n in ("parent", "daughter1", "daughter2"))
+    stored = parent.flow_out - d1.flow_in - d2.flow_in
+    assert abs(np.trapezoid(stored, result.time)) < 1e-6 * np.trapezoid(parent.flow_in, result.time)
+    assert np.trapezoid(parent.flow_in, result.time) == pytest.approx(6.0e-6, rel=1e-4)
+    # pressure continuity at the junction node
+    np.testing.assert_allclose(parent.pressure_out, d1.pressure_in)
+    np.testing.assert_allclose(parent.pressure_out, d2.pressure_in)
+
+
+def test_xarray_dataset_has_dims_units_and_segments(result: oxyline.Result) -> None:
+    ds = result.to_xarray()
+    assert set(ds["pressure_in"].dims) == {"time", "vessel"}
+    assert ds["flow_in"].attrs["units"] == "m^3/s"
+    assert list(ds["vessel"].values) == ["parent", "daughter1", "daughter2"]
+    assert ds.sizes["segment"] == 30
+    v = result.vessel("daughter1")
+    np.testing.assert_array_equal(ds["flow_out"].sel(vessel="daughter1").values, v.flow_out)
+    assert v.segment_flow is not None and v.segment_flow.shape == (1001, 10)
+    # the vessel's outlet flow is its last segment's flow
+    np.testing.assert_array_equal(v.segment_flow[:, -1], v.flow_out)
+
+
+def test_pandas_table_has_svzerod_columns(result: oxyline.Result) -> None:
+    df = result.to_pandas()
+    assert list(df.columns) == ["name", "time", "flow_in", "flow_out", "pressure_in", "pressure_out"]
+    assert len(df) == 3 * 1001
+
+
+def test_until_periodic_stops_early_and_reports_the_change() -> None:
+    res = oxyline.simulate("bifurcation", cycles=1, until_periodic=1e-8, max_cycles=50)
+    assert res.settings["cycles_run"] < 50
+    assert res.settings["periodic_error"] < 1e-8
+
+
+def test_output_every_and_all_cycles() -> None:
+    res = oxyline.simulate("bifurcation", cycles=2, output_every=0.01, output_cycles="all")
+    assert len(res.time) == 201
+    np.testing.assert_allclose(np.diff(res.time), 0.01)
+
+
+def test_model_pickles_and_rebuilds() -> None:
+    m = oxyline.load_model("bifurcation")
+    m2 = pickle.loads(pickle.dumps(m))
+    r1 = oxyline.simulate(m, cycles=1)
+    r2 = oxyline.simulate(m2, cycles=1)
+    np.testing.assert_array_equal(r1.data, r2.data)
+
+
+def test_interruption_keeps_the_partial_result() -> None:
+    calls = []
+
+    def stop(t: float, t_end: float) -> None:
+        calls.append(t)
+        if t > 0.5:
+            raise KeyboardInterrupt
+
+    with pytest.raises(oxyline.SimulationInterrupted) as info:
+        oxyline.simulate("bifurcation", cycles=200, method="rk4", progress=stop,
+                         output_cycles="all")
+    partial = info.value.result
+    assert partial is not None and not partial.complete
+    assert len(partial.time) > 10 and np.isfinite(partial.data).all()
+
+
+def test_callback_errors_propagate_unchanged() -> None:
+    def boom(t: float, t_end: float) -> None:
+        raise ValueError("from callback")
+
+    with pytest.raises(ValueError, match="from callback"):
+        oxyline.simulate("bifurcation", cycles=50, method="rk4", progress=boom)
+
+
+def test_gil_is_released_during_integration() -> None:
+    done = threading.Event()
+    ticks = 0
+
+    def run() -> None:
+        oxyline.simulate("bifurcation", cycles=40, method="rk4", segments=False)
+        done.set()
+
+    th = threading.Thread(target=run)
+    th.start()
+    while not done.is_set():
+        ticks += 1
+        time.sleep(0.001)
+    th.join()
+    assert ticks > 20  # the main thread kept running while Rust integrated
+
+
+@pytest.mark.skipif(os.name != "posix", reason="needs SIGINT")
+def test_ctrl_c_in_the_cli_exits_130_and_writes_the_partial_result(tmp_path: Path) -> None:
+    out = tmp_path / "partial.nc"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "oxyline.cli", "run", "bifurcation", "--cycles", "100000",
+         "--method", "rk4", "--quiet", "-o", str(out)],
+        stderr=subprocess.PIPE, text=True)
+    time.sleep(3.0)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err
+    import xarray as xr
+
+    with xr.open_dataset(out, engine="h5netcdf") as ds:
+        assert ds.attrs["complete"] == 0
+        assert ds.sizes["time"] > 0
