@@ -3,7 +3,9 @@ xarray/pandas conversions."""
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -149,3 +151,36 @@ class Result:
             "pressure_in": self.pressure_in.T.reshape(-1),
             "pressure_out": self.pressure_out.T.reshape(-1),
         })
+
+    # files and summaries (implemented in oxyline.io.results)
+    def to_netcdf(self, path: str | os.PathLike[str]) -> Path:
+        """Write NetCDF-4 (h5netcdf): dims time, vessel, segment; units, model name, solver
+        settings and oxyline version in attrs. See :func:`oxyline.io.results.to_netcdf`."""
+        from oxyline.io import results
+
+        return results.to_netcdf(self, path)
+
+    def to_zarr(self, path: str | os.PathLike[str], time_chunk: int = 1024) -> Path:
+        """Write a Zarr store chunked along time (written after the run; needs ``zarr``).
+        See :func:`oxyline.io.results.to_zarr`."""
+        from oxyline.io import results
+
+        return results.to_zarr(self, path, time_chunk=time_chunk)
+
+    def summary(self) -> Any:
+        """pandas DataFrame per vessel: mean/min/max of every per-vessel variable (SI)."""
+        from oxyline.io import results
+
+        return results.summary(self)
+
+    def to_csv(self, path: str | os.PathLike[str]) -> Path:
+        """Write :meth:`summary` as CSV (TSV for .tsv)."""
+        from oxyline.io import results
+
+        return results.to_csv(self, path)
+
+    def to_parquet(self, path: str | os.PathLike[str]) -> Path:
+        """Write :meth:`summary` as Parquet (needs pyarrow)."""
+        from oxyline.io import results
+
+        return results.to_parquet(self, path)
