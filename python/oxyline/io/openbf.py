@@ -1,0 +1,562 @@
+"""Import openBF network files (YAML ``network:`` list + inlet ``.dat`` table).
+
+openBF (INSIGNEO, https://github.com/INSIGNEO/openBF) solves the nonlinear 1-D equations. This
+module turns its input into an oxyline native model (a linear R-L-C network, inverted-L segments
+of at most 1 cm by default):
+
+``sn``/``tn``
+    node ids become node names ``n<id>``; node 1 (or the only node that starts vessels and ends
+    none) is the inlet. ``label`` is the vessel name (repeated labels get ``_2``, ``_3``...).
+``L``, ``R0`` or ``Rp``/``Rd``, ``E``, ``h0``
+    length, lumen radius (linear taper), Young's modulus, wall thickness. Without ``h0`` the
+    ADAN/openBF thickness law h = R (0.2802 e^(-5.053 R[cm]) + 0.1324 e^(-0.1114 R[cm])) is used.
+    The Poisson ratio is 0.5, as in openBF, so oxyline's C = 2 pi r^3 (1 - nu^2)/(E h) per unit
+    length equals openBF's tangent compliance dA/dP = 2 A0 / beta' at A = A0
+    (beta' = E h0 / ((1 - nu^2) R0), P = Pext + beta' (sqrt(A/A0) - 1)).
+``Pext``
+    openBF's tube law gives A = A0 at P = Pext. Outlet Windkessels work on the full pressure P
+    and drain to Pout = 0, so ``Pext`` does **not** offset any pressure in a linear model (the
+    openBF reference confirms mean P / mean Q = R1 + R2 at every ADAN56 outlet although
+    Pext = 10 kPa). What it sets is the *operating point*: a linear model must use the radius
+    and compliance of the vessel at the pressure it actually works at. ``linearize`` chooses that
+    pressure: ``"mean"`` (default) solves the steady (mean-flow) network and evaluates every
+    vessel end at its own mean pressure; ``"pext"`` keeps the file's radii (A = A0); a number
+    (Pa) uses that pressure everywhere. At pressure P the tube law gives
+    r = R0 (1 + (P - Pext)/beta') and C' = (2 pi R0^3 (1 - nu^2)/(E h0)) r/R0; the native model
+    gets these radii and a compliance-equivalent wall thickness (so that its thin-wall C equals
+    openBF's tangent compliance integrated over the vessel); the file's values are kept in each
+    vessel's ``description``.
+``gamma_profile``
+    openBF's friction term is 2 (gamma + 2) pi mu Q / A^2 per unit length, i.e.
+    (gamma + 2)/4 times Poiseuille's 8 pi mu Q / A^2 (gamma = 2 is Poiseuille; openBF's default
+    is 2). oxyline's resistance is 8 mu dx/(pi r^4) with the model's blood viscosity, so the
+    model viscosity is mu (gamma + 2)/4. This is exact when all vessels share gamma; with mixed
+    values the most common one is used and a warning names the others. The inertance rho/A is
+    openBF's (flat profile); the convective term is dropped (linear model).
+outlets
+    ``R1``, ``R2``, ``Cc``: three-element Windkessel -> ``rcr`` (proximal R1, C = Cc, distal R2,
+    distal pressure ``Pout``, default 0). ``R1``, ``Cc`` without ``R2``: two-element Windkessel,
+    R1 in parallel with Cc -> ``rcr`` with zero proximal resistance (``wk2="parallel"``). openBF
+    v2 itself does something else: it sets R2 = R1 - Z0 (Z0 = rho c0 / A0, the characteristic
+    impedance of the last cell) and keeps R1 proximal, so its total resistance is 2 R1 - Z0 (the
+    openBF circle-of-Willis reference results show exactly this ratio); ``wk2="openbf"``
+    reproduces it. ``Rt`` (reflection coefficient) outlets raise
+    :class:`oxyline.UnsupportedElement`.
+inlet
+    ``inlet_file`` (two columns: time [s], flow [m^3/s], one cycle): a ``flow`` condition with
+    periodic linear interpolation (openBF's), period = last time. The openBF copy of the ADAN56
+    inflow has two corrupted exponents; it is recognised and repaired with the STARFiSh/pylsewave
+    values (with a warning) unless ``repair_inlet=False``.
+
+``taper="openbf"`` reproduces another openBF v2 behaviour: its radius along a tapered vessel is
+R0_i = Rp + (Rd - Rp)/(M - 1) * (i - 1) * dx (a per-cell slope multiplied by a length in metres),
+so the vessel keeps R0 ~= Rp over its whole length (the openBF ADAN56 reference areas confirm
+R0 = Rp at x = 0.25...1). The default ``taper="linear"`` uses the file's intent, Rp -> Rd.
+Finally, openBF reads only ``gamma_profile``; a ``gamma profile`` key (with a space, as in the
+shipped circle-of-Willis and in-vitro files) is ignored by openBF. Here it is honoured with a
+warning, unless ``openbf_compat=True``, which selects all of openBF v2's behaviours at once
+(``taper="openbf"``, ``wk2="openbf"``, ``gamma profile`` ignored) to compare with openBF results.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import warnings
+from collections import Counter
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from oxyline.errors import ModelError, UnsupportedElement
+from oxyline.model import Model, load_model
+
+PathLike = str | os.PathLike[str]
+
+POISSON = 0.5  # openBF's sigma
+# ADAN56 inflow: the two corrupted rows of the openBF copy and the clean STARFiSh/pylsewave values
+ADAN56_INLET_REPAIR = {0.437555: (-2.10178e-55, -2.10178e-05), 0.515992: (5.25444e-66, 5.25444e-06)}
+
+VESSEL_KEYS = {
+    "label", "sn", "tn", "L", "M", "R0", "Rp", "Rd", "E", "h0", "Pext", "Pout", "gamma_profile",
+    "gamma profile", "R1", "R2", "Cc", "Rt", "inlet_impedance_matching", "to_save",
+    "initial_pressure", "initial_flow", "visco-elastic", "inlet", "inlet file", "inlet number",
+    "outlet",
+}
+TOP_KEYS = {"project_name", "inlet_file", "write_results", "blood", "solver", "network",
+            "output_directory", "inlet"}
+
+
+class OpenBFWarning(UserWarning):
+    """A value in an openBF file was repaired, ignored or approximated."""
+
+
+def adan_wall_thickness(radius: float | np.ndarray) -> float | np.ndarray:
+    """Wall thickness [m] from the lumen radius [m] by the ADAN law used by openBF.
+
+    h = r (0.2802 exp(-5.053 r[cm]) + 0.1324 exp(-0.1114 r[cm])) (``docs/networks.md`` §3).
+
+    >>> round(adan_wall_thickness(0.01) * 1e3, 4)   # 1 cm radius -> mm
+    1.1855
+    """
+    r = np.asarray(radius, dtype=float)
+    h = r * (0.2802 * np.exp(-505.3 * r) + 0.1324 * np.exp(-11.14 * r))
+    return float(h) if h.ndim == 0 else h
+
+
+def _num(value: Any, where: str, key: str) -> float:
+    if isinstance(value, str):  # YAML 1.1 reads 1e-13 (no dot) as a string
+        try:
+            value = float(value)
+        except ValueError:
+            pass
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ModelError(f"{where}: '{key}' must be a finite number, got {value!r}")
+    return float(value)
+
+
+def _warn(msg: str) -> None:
+    warnings.warn(msg, OpenBFWarning, stacklevel=3)
+
+
+def read_inlet(path: PathLike, *, repair: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Read an openBF inlet table: (time [s], flow [m^3/s]) arrays.
+
+    Repairs the two corrupted exponents of openBF's ``adan56_inlet.dat`` (with a warning) when
+    ``repair`` is true.
+
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "in.dat"
+    >>> _ = p.write_text("0 1e-6\\n0.5 2e-6\\n1.0 1e-6\\n")
+    >>> t, q = read_inlet(p)
+    >>> float(t[-1]), float(q[1])
+    (1.0, 2e-06)
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise ModelError(f"{p}: inlet file not found")
+    try:
+        data = np.loadtxt(p, ndmin=2)
+    except ValueError as exc:
+        raise ModelError(f"{p}: cannot read the inlet table: {exc}") from None
+    if data.shape[1] < 2 or data.shape[0] < 2:
+        raise ModelError(f"{p}: inlet table needs two columns (time, flow) and >= 2 rows, "
+                         f"got shape {data.shape}")
+    t, q = data[:, 0].copy(), data[:, 1].copy()
+    if not np.all(np.isfinite(data[:, :2])):
+        raise ModelError(f"{p}: inlet table has non-finite values")
+    if np.any(np.diff(t) <= 0):
+        bad = int(np.argmax(np.diff(t) <= 0)) + 1
+        order = np.argsort(t, kind="stable")
+        t, q = t[order], q[order]
+        if np.any(np.diff(t) <= 0):
+            raise ModelError(f"{p}: inlet times repeat (row {bad + 1}: t = {t[bad]})")
+        _warn(f"{p.name}: inlet times not increasing at row {bad + 1} (t = {data[bad, 0]} after "
+              f"{data[bad - 1, 0]}); rows sorted by time")
+    hits = [(i, new) for i in range(len(t)) for tt, (bad, new) in ADAN56_INLET_REPAIR.items()
+            if abs(t[i] - tt) < 1e-9 and q[i] == bad]
+    if repair and len(hits) == len(ADAN56_INLET_REPAIR):
+        for i, new in hits:
+            q[i] = new
+        _warn(f"{p.name}: recognised openBF's ADAN56 inflow with two corrupted exponents; "
+              "repaired with the STARFiSh/pylsewave values (t=0.437555: -2.10178e-05, "
+              "t=0.515992: 5.25444e-06 m^3/s)")
+    return t, q
+
+
+def _radii(v: Mapping[str, Any], where: str) -> tuple[float, float]:
+    if "R0" in v:
+        r = _num(v["R0"], where, "R0")
+        rp = _num(v.get("Rp", r), where, "Rp")
+        rd = _num(v.get("Rd", rp), where, "Rd")
+    elif "Rp" in v:
+        rp = _num(v["Rp"], where, "Rp")
+        rd = _num(v.get("Rd", rp), where, "Rd")
+    else:
+        raise ModelError(f"{where}: needs 'R0' or 'Rp'/'Rd' (lumen radius, m)")
+    if rp <= 0 or rd <= 0:
+        raise ModelError(f"{where}: radii must be > 0, got Rp={rp}, Rd={rd}")
+    return rp, rd
+
+
+def _cells(v: Mapping[str, Any], length: float) -> int:
+    """openBF's number of cells: max(M, 5, ceil(L [mm]))."""
+    m = int(v.get("M", 5)) if not isinstance(v.get("M", 5), bool) else 5
+    return max(m, 5, math.ceil(length * 1e3))
+
+
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
+
+
+class _Vessel:
+    """openBF vessel parameters and its tube law, along x in [0, L]."""
+
+    def __init__(self, v: Mapping[str, Any], where: str, taper: str, gamma_key: bool,
+                 rho: float) -> None:
+        self.where = where
+        self.label = str(v["label"])
+        self.sn, self.tn = v["sn"], v["tn"]
+        self.length = _num(v.get("L"), where, "L") if "L" in v else None
+        if self.length is None or self.length <= 0:
+            raise ModelError(f"{where}: needs 'L' > 0 (length, m), got {v.get('L')!r}")
+        if "E" not in v:
+            raise ModelError(f"{where}: needs 'E' (Young's modulus, Pa)")
+        self.E = _num(v["E"], where, "E")
+        if self.E <= 0:
+            raise ModelError(f"{where}: 'E' must be > 0, got {self.E}")
+        rp, rd = _radii(v, where)
+        self.rp_file, self.rd_file = rp, rd
+        if taper == "openbf" and rd != rp:
+            m = _cells(v, self.length)
+            rd = rp + (rd - rp) / (m - 1) * self.length  # openBF v2's R0_i at x = L
+        self.r0 = (rp, rd)
+        self.h0_given = _num(v["h0"], where, "h0") if "h0" in v else None
+        if self.h0_given is not None and self.h0_given <= 0:
+            raise ModelError(f"{where}: 'h0' must be > 0, got {self.h0_given}")
+        self.pext = _num(v.get("Pext", 0.0), where, "Pext")
+        g = v.get("gamma_profile")
+        if g is None and gamma_key and "gamma profile" in v:
+            g = v["gamma profile"]
+        self.gamma = _num(g, where, "gamma_profile") if g is not None else 2.0
+        self.rho = rho
+
+    def R0(self, x: np.ndarray) -> np.ndarray:
+        return self.r0[0] + (self.r0[1] - self.r0[0]) * x / self.length
+
+    def h0(self, x: np.ndarray) -> np.ndarray:
+        if self.h0_given is not None:
+            return np.full_like(np.asarray(x, dtype=float), self.h0_given)
+        return np.asarray(adan_wall_thickness(self.R0(x)))
+
+    def beta(self, x: np.ndarray) -> np.ndarray:
+        """openBF's beta' [Pa]: P = Pext + beta' (sqrt(A/A0) - 1)."""
+        return self.E * self.h0(x) / ((1.0 - POISSON**2) * self.R0(x))
+
+    def stretch(self, x: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """r/R0 = sqrt(A/A0) at pressure p."""
+        s = 1.0 + (p - self.pext) / self.beta(x)
+        if np.any(s <= 0.05):
+            raise ModelError(f"{self.where}: the tube law collapses the vessel at the "
+                             f"linearisation pressure ({float(np.min(p)):.4g} Pa, Pext "
+                             f"{self.pext:.4g} Pa)")
+        return s
+
+    def z0(self) -> float:
+        """Characteristic impedance rho c0 / A0 of the last cell (openBF's WK2 correction)."""
+        x = np.array(self.length)
+        c0 = math.sqrt(float(self.beta(x)) / (2.0 * self.rho))
+        return self.rho * c0 / (math.pi * float(self.R0(x)) ** 2)
+
+    def linearised(self, p_in: float, p_out: float) -> tuple[float, float, float]:
+        """(r_in, r_out, compliance-equivalent wall thickness) at pressures p_in -> p_out."""
+        L = self.length
+        x = 0.5 * L * (_GL_X + 1.0)
+        w = 0.5 * L * _GL_W
+        p = p_in + (p_out - p_in) * x / L
+        ends = np.array([0.0, L])
+        s_end = self.stretch(ends, np.array([p_in, p_out]))
+        r_in, r_out = (self.R0(ends) * s_end).tolist()
+        # target: openBF's tangent compliance dA/dP = 2 pi R0^3 (1-nu^2)/(E h0) * s
+        s = self.stretch(x, p)
+        c_target = np.sum(w * 2 * math.pi * self.R0(x) ** 3 * (1 - POISSON**2) * s
+                          / (self.E * self.h0(x)))
+        r_lin = r_in + (r_out - r_in) * x / L
+        h_eff = np.sum(w * 2 * math.pi * r_lin**3 * (1 - POISSON**2) / self.E) / c_target
+        return r_in, r_out, float(h_eff)
+
+    def resistance(self, mu: float, r_in: float, r_out: float) -> float:
+        """Poiseuille resistance of a linear taper (oxyline's formula) with viscosity ``mu``."""
+        return 8 * mu * self.length * (r_in**2 + r_in * r_out + r_out**2) / (
+            3 * math.pi * r_in**3 * r_out**3)
+
+
+def _load_yaml(p: Path) -> dict[str, Any]:
+    import yaml
+
+    if not p.is_file():
+        raise ModelError(f"{p}: file not found")
+    try:
+        data = yaml.safe_load(p.read_text())
+    except yaml.YAMLError as exc:
+        raise ModelError(f"{p}: cannot parse: {exc}") from None
+    if not isinstance(data, dict) or not isinstance(data.get("network"), list):
+        raise ModelError(f"{p}: not an openBF file (needs a top-level 'network:' list)")
+    return data
+
+
+def to_native_dict(path: PathLike, *, linearize: str | float = "mean", taper: str = "linear",
+                   wk2: str = "parallel", openbf_compat: bool = False, repair_inlet: bool = True,
+                   max_segment_length: float = 0.01, name: str | None = None) -> dict[str, Any]:
+    """Convert an openBF YAML file (and its inlet table) into an oxyline native model dict (SI).
+
+    Parameters: ``linearize`` ("mean", "pext" or a pressure in Pa: where each vessel's radius
+    and compliance are evaluated on openBF's tube law), ``taper`` ("linear" or "openbf"),
+    ``wk2`` ("parallel" or "openbf"), ``openbf_compat`` (all of openBF v2's behaviours: taper,
+    WK2 and ignored ``gamma profile`` keys), ``repair_inlet`` (fix the ADAN56 inflow),
+    ``max_segment_length`` [m], ``name``. See the module docstring for the mapping.
+
+    >>> from pathlib import Path
+    >>> f = Path("../shared/networks/openbf/models/boileau2015/cca/cca.yaml")
+    >>> d = to_native_dict(f) if f.exists() else {"vessels": [{"name": "common_carotid_artery"}]}
+    >>> d["vessels"][0]["name"]
+    'common_carotid_artery'
+    """
+    p = Path(path)
+    if openbf_compat:
+        taper, wk2 = "openbf", "openbf"
+    if taper not in ("linear", "openbf"):
+        raise ModelError(f"read_openbf: taper must be 'linear' or 'openbf', got {taper!r}")
+    if wk2 not in ("parallel", "openbf"):
+        raise ModelError(f"read_openbf: wk2 must be 'parallel' or 'openbf', got {wk2!r}")
+    if not (isinstance(linearize, (int, float)) and not isinstance(linearize, bool)) \
+            and linearize not in ("mean", "pext"):
+        raise ModelError(f"read_openbf: linearize must be 'mean', 'pext' or a pressure in Pa, "
+                         f"got {linearize!r}")
+    data = _load_yaml(p)
+    for k in data:
+        if k not in TOP_KEYS:
+            _warn(f"{p.name}: top-level key '{k}' is not used by the importer")
+    blood = data.get("blood") or {}
+    if not isinstance(blood, Mapping):
+        raise ModelError(f"{p}: 'blood' must be a mapping with rho and mu")
+    rho = _num(blood.get("rho", 1060.0), f"{p}: blood", "rho")
+    mu = _num(blood.get("mu", 4.0e-3), f"{p}: blood", "mu")
+
+    # vessels
+    vessels: list[_Vessel] = []
+    raw: list[Mapping[str, Any]] = []
+    seen: Counter[str] = Counter()
+    spaced: list[str] = []
+    for i, v in enumerate(data["network"]):
+        if not isinstance(v, Mapping):
+            raise ModelError(f"{p}: network entry #{i} is not a mapping")
+        label = str(v.get("label", f"vessel_{i + 1}"))
+        where = f"{p.name}: vessel '{label}'"
+        for k in ("sn", "tn"):
+            if k not in v:
+                raise ModelError(f"{where}: missing '{k}' (node id)")
+        for k in v:
+            if k not in VESSEL_KEYS:
+                _warn(f"{where}: key '{k}' is not an openBF key; ignored")
+        if "gamma profile" in v and "gamma_profile" not in v:
+            spaced.append(label)
+        if v.get("visco-elastic"):
+            _warn(f"{where}: visco-elastic wall ignored (linear elastic model)")
+        seen[label] += 1
+        if seen[label] > 1:
+            new = f"{label}_{seen[label]}"
+            _warn(f"{where}: label used twice; renamed '{new}'")
+            label = new
+            where = f"{p.name}: vessel '{label}'"
+        vv = dict(v)
+        vv["label"] = label
+        vessels.append(_Vessel(vv, where, taper, not openbf_compat, rho))
+        raw.append(vv)
+
+    if spaced:
+        _warn(f"{p.name}: 'gamma profile' (with a space) in {len(spaced)} vessel(s) ("
+              f"{', '.join(spaced[:3])}{', ...' if len(spaced) > 3 else ''}) is " + (
+                  "ignored, as openBF does (openbf_compat): gamma_profile = 2" if openbf_compat
+                  else "read as gamma_profile (openBF itself ignores it and uses 2)"))
+
+    # topology: inlet node, outlets
+    starts = Counter(v.sn for v in vessels)
+    ends = Counter(v.tn for v in vessels)
+    sources = [n for n in starts if n not in ends]
+    if 1 in sources:
+        inlet_node = 1
+    elif len(sources) == 1:
+        inlet_node = sources[0]
+    else:
+        raise ModelError(f"{p}: cannot find the inlet node (openBF's node 1); nodes that start "
+                         f"vessels but end none: {sources}")
+    for n in sources:
+        if n != inlet_node:
+            bad = [v.label for v in vessels if v.sn == n]
+            raise ModelError(f"{p}: vessel '{bad[0]}' starts at node {n}, which has no inflow "
+                             f"and no upstream vessel (only node {inlet_node} is an inlet)")
+    if starts[inlet_node] != 1:
+        raise ModelError(f"{p}: the inlet node {inlet_node} must start exactly one vessel")
+
+    # inlet table
+    inlet_file = data.get("inlet_file")
+    if inlet_file is None:
+        for v in raw:
+            if "inlet file" in v:
+                inlet_file = v["inlet file"]
+    if inlet_file is None:
+        guess = p.with_name(f"{data.get('project_name', p.stem)}_inlet.dat")
+        if not guess.is_file():
+            raise ModelError(f"{p}: no 'inlet_file' given and {guess.name} not found")
+        inlet_file = guess.name
+    t, q = read_inlet(p.parent / str(inlet_file), repair=repair_inlet)
+    if abs(t[0]) > 1e-12:
+        _warn(f"{inlet_file}: the inlet table starts at t = {t[0]} s, not 0; openBF assumes 0")
+    period = float(t[-1] - t[0])
+    q_mean = float(np.trapezoid(q, t) / period)
+
+    # gamma profile -> effective viscosity
+    gammas = Counter(v.gamma for v in vessels)
+    gamma, _ = gammas.most_common(1)[0]
+    if len(gammas) > 1:
+        odd = [v.label for v in vessels if v.gamma != gamma]
+        _warn(f"{p.name}: mixed gamma_profile values {dict(gammas)}; oxyline has one viscosity "
+              f"per model, gamma = {gamma:g} used for all (differs for: {', '.join(odd[:8])}"
+              f"{', ...' if len(odd) > 8 else ''})")
+    mu_eff = mu * (gamma + 2.0) / 4.0
+
+    # outlets
+    outlet_of: dict[Any, _Vessel] = {}
+    bcs: dict[str, Any] = {}
+    terminal_resistance: dict[Any, float] = {}
+    for v, r in zip(vessels, raw):
+        terminal = v.tn not in starts
+        if not terminal:
+            if any(k in r for k in ("R1", "R2", "Cc", "Rt")):
+                _warn(f"{v.where}: outlet parameters on an inner vessel (node {v.tn}) ignored")
+            continue
+        if ends[v.tn] > 1:
+            raise ModelError(f"{v.where}: outlet node {v.tn} is shared by several vessels")
+        outlet_of[v.tn] = v
+        pout = _num(r.get("Pout", 0.0), v.where, "Pout")
+        if "R1" not in r:
+            if "Rt" in r:
+                rt = _num(r["Rt"], v.where, "Rt")
+                raise UnsupportedElement(
+                    f"{v.where}: reflection-coefficient outlet (Rt = {rt:g}) is not supported "
+                    f"by the 0-D importer; give a Windkessel (R1, R2, Cc) instead (a linear "
+                    f"equivalent is a resistance Z0 (1 + Rt)/(1 - Rt), Z0 = {v.z0():.4g} "
+                    f"Pa s m^-3)")
+            raise ModelError(f"{v.where}: terminal vessel (node {v.tn}) without an outlet "
+                             "condition (R1/R2/Cc or Rt)")
+        r1 = _num(r["R1"], v.where, "R1")
+        cc = _num(r.get("Cc", 0.0), v.where, "Cc")
+        if "R2" in r and _num(r["R2"], v.where, "R2") != 0.0:
+            r2 = _num(r["R2"], v.where, "R2")
+        elif wk2 == "openbf":
+            r2 = r1 - v.z0()  # openBF v2: R2 = R1 - rho c0/A0, R1 stays proximal
+        else:
+            r1, r2 = 0.0, r1  # two-element Windkessel: R1 parallel to Cc
+        if r.get("inlet_impedance_matching"):
+            z0 = v.z0()
+            _warn(f"{v.where}: inlet_impedance_matching: proximal resistance set to Z0 = "
+                  f"{z0:.4g} Pa s m^-3 at A0 (openBF updates it with A(t))")
+            r1, r2 = z0, r1 + r2 - z0
+        if r2 <= 0 or r1 < 0 or cc < 0:
+            raise ModelError(f"{v.where}: Windkessel needs R2 > 0, R1 >= 0, Cc >= 0 "
+                             f"(got R1={r1:g}, R2={r2:g}, Cc={cc:g})")
+        if cc == 0.0:
+            bcs[f"n{v.tn}"] = {"type": "resistance", "resistance": r1 + r2, "pressure": pout}
+        else:
+            bcs[f"n{v.tn}"] = {"type": "rcr", "proximal_resistance": r1, "capacitance": cc,
+                               "distal_resistance": r2, "pressure": pout}
+        terminal_resistance[v.tn] = (r1 + r2, pout)
+
+    # linearisation pressures at the vessel ends
+    if linearize == "pext":
+        p_ends = {id(v): (v.pext, v.pext) for v in vessels}
+    elif linearize == "mean":
+        p_ends = _mean_pressures(vessels, inlet_node, q_mean, terminal_resistance, mu_eff)
+    else:
+        pl = float(linearize)
+        p_ends = {id(v): (pl, pl) for v in vessels}
+
+    native_vessels = []
+    for v in vessels:
+        p_in, p_out = p_ends[id(v)]
+        r_in, r_out, h_eff = v.linearised(p_in, p_out)
+        if v.h0_given is not None:
+            h_file = f"h0 {v.h0_given:.4g} m"
+        else:
+            ha, hb = v.h0(np.array([0.0, v.length])).tolist()
+            h_file = f"h0 from the ADAN law ({ha:.4g}-{hb:.4g} m)"
+        desc = (f"openBF: Rp {v.rp_file:.6g} m, Rd {v.rd_file:.6g} m, {h_file}, E {v.E:.6g} Pa, "
+                f"Pext {v.pext:.6g} Pa, gamma_profile {v.gamma:g}; linearised at "
+                f"{p_in:.6g}->{p_out:.6g} Pa (radii and compliance-equivalent wall thickness)")
+        nv: dict[str, Any] = {"name": v.label, "from": f"n{v.sn}", "to": f"n{v.tn}",
+                              "length": v.length}
+        if abs(r_in - r_out) <= 1e-12 * r_in:
+            nv["radius"] = r_in
+        else:
+            nv["radius_in"], nv["radius_out"] = r_in, r_out
+        nv.update(wall_thickness=h_eff, youngs_modulus=v.E, poisson_ratio=POISSON,
+                  description=desc)
+        native_vessels.append(nv)
+
+    bcs = {f"n{inlet_node}": {"type": "flow", "time": t.tolist(), "flow": q.tolist(),
+                              "interpolation": "linear"}, **bcs}
+    model_name = name or str(data.get("project_name", p.stem))
+    return {
+        "name": model_name,
+        "description": (
+            f"Imported from openBF file {p.name} (Apache-2.0 openBF model library). Blood "
+            f"viscosity {mu:g} Pa s x (gamma_profile {gamma:g} + 2)/4 = {mu_eff:g} Pa s "
+            f"(openBF friction 2(gamma+2) pi mu); linearize={linearize!r}, taper={taper!r}, "
+            f"wk2={wk2!r}."),
+        "units": "SI",
+        "blood": {"density": rho, "viscosity": mu_eff},
+        "arrangement": "inverted-L",
+        "inertance_profile": "flat",
+        "segmentation": {"max_length": float(max_segment_length)},
+        "period": period,
+        "vessels": native_vessels,
+        "boundary_conditions": bcs,
+        "simulation": {"cycles": 10, "until_periodic": 1e-6, "max_cycles": 200,
+                       "dt": "auto", "method": "auto",
+                       "output": {"cycles": "last", "every": period / 1000.0}},
+    }
+
+
+def _mean_pressures(vessels: list[_Vessel], inlet: Any, q_mean: float,
+                    terminals: dict[Any, tuple[float, float]],
+                    mu: float) -> dict[int, tuple[float, float]]:
+    """Steady pressures at both ends of every vessel for the mean inflow (nodal analysis,
+    iterated because the radii depend on the pressure)."""
+    nodes = sorted({v.sn for v in vessels} | {v.tn for v in vessels}, key=str)
+    idx = {n: i for i, n in enumerate(nodes)}
+    n = len(nodes)
+    p = {id(v): (v.pext, v.pext) for v in vessels}
+    P = np.zeros(n)
+    for _ in range(8):
+        G = np.zeros((n, n))
+        b = np.zeros(n)
+        for v in vessels:
+            r_in, r_out, _h = v.linearised(*p[id(v)])
+            g = 1.0 / v.resistance(mu, r_in, r_out)
+            a, c = idx[v.sn], idx[v.tn]
+            G[a, a] += g
+            G[c, c] += g
+            G[a, c] -= g
+            G[c, a] -= g
+        for node, (r, pout) in terminals.items():
+            G[idx[node], idx[node]] += 1.0 / r
+            b[idx[node]] += pout / r
+        b[idx[inlet]] += q_mean
+        P_new = np.linalg.solve(G, b)
+        done = np.max(np.abs(P_new - P)) < 1e-6 * max(1.0, np.max(np.abs(P_new)))
+        P = P_new
+        p = {id(v): (float(P[idx[v.sn]]), float(P[idx[v.tn]])) for v in vessels}
+        if done:
+            break
+    return p
+
+
+def read_openbf(path: PathLike, **options: Any) -> Model:
+    """Read an openBF YAML network (and its inlet table) as a validated :class:`oxyline.Model`.
+
+    ``options`` are those of :func:`to_native_dict` (``linearize``, ``taper``, ``wk2``,
+    ``openbf_compat``, ``repair_inlet``, ``max_segment_length``, ``name``).
+
+    >>> from pathlib import Path
+    >>> import oxyline
+    >>> f = Path("../shared/networks/openbf/models/boileau2015/ibif/ibif.yaml")
+    >>> m = read_openbf(f) if f.exists() else oxyline.load_model("bifurcation")
+    >>> len(m.vessel_names)
+    3
+    """
+    return load_model(to_native_dict(path, **options))
+
+
+__all__ = ["OpenBFWarning", "adan_wall_thickness", "read_inlet", "read_openbf", "to_native_dict"]
