@@ -49,7 +49,7 @@ def to_zarr(result: Result, path: PathLike, time_chunk: int = 1024) -> Path:
     (``pip install 'oxyline[zarr]'``).
     """
     try:
-        import zarr  # noqa: F401
+        import zarr
     except ImportError:
         raise ImportError("writing Zarr needs the zarr package: pip install 'oxyline[zarr]'") \
             from None
@@ -61,7 +61,14 @@ def to_zarr(result: Result, path: PathLike, time_chunk: int = 1024) -> Path:
         chunks = tuple(min(time_chunk, n) if d == "time" else n
                        for d, n in zip(var.dims, var.shape))
         encoding[name] = {"chunks": tuple(max(1, c) for c in chunks)}
-    ds.to_zarr(p, mode="w", encoding=encoding)
+    import warnings
+
+    kwargs: dict[str, Any] = {}
+    if int(zarr.__version__.split(".")[0]) >= 3:
+        kwargs["zarr_format"] = 2  # fixed-width strings have no Zarr v3 spec yet; v2 reads anywhere
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ds.to_zarr(p, mode="w", encoding=encoding, **kwargs)
     return p
 
 

@@ -1,0 +1,524 @@
+"""Figures for papers: waveforms, profiles along a path, and a network map (matplotlib).
+
+``import oxyline`` never imports this module or matplotlib; ``import oxyline.plot`` does not
+import matplotlib either until a function is called. Every function returns the
+:class:`matplotlib.figure.Figure`; axes are labelled with units (pressures in mmHg, flows in
+mL/s, lengths in cm), texts that would overlap are dropped.
+
+>>> import oxyline, oxyline.plot
+>>> res = oxyline.simulate("bifurcation", cycles=2)
+>>> fig = oxyline.plot.waveforms(res, ["parent", "daughter1"])
+>>> fig = oxyline.plot.profile(res, "bifurcation", outlet="ica_out")
+>>> fig = oxyline.plot.network_map("bifurcation", result=res, values="pressure_in")
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from oxyline.model import Model
+    from oxyline.result import Result
+
+MMHG = 133.322368
+# SI units -> (display units, factor)
+DISPLAY = {
+    "Pa": ("mmHg", 1.0 / MMHG),
+    "m^3/s": ("mL/s", 1e6),
+    "m": ("cm", 100.0),
+    "mol/s": ("nmol/s", 1e9),
+}
+LABELS = {
+    "pressure": "pressure", "flow": "flow", "po2": "PO$_2$", "o2_flux": "convective O$_2$ flux",
+    "wall_o2_flux": "wall O$_2$ flux", "o2_concentration": "O$_2$ concentration",
+    "radius": "radius",
+}
+
+
+def _plt() -> Any:
+    import matplotlib
+
+    if os.environ.get("DISPLAY", "") == "" and os.environ.get("MPLBACKEND") is None:
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _model(model: Model | str | os.PathLike[str] | Mapping[str, Any]) -> Model:
+    from oxyline.io._common import as_model
+
+    return as_model(model)
+
+
+def display(units: str) -> tuple[str, float]:
+    """Display units and the factor from SI ``units`` (Pa → mmHg, m³/s → mL/s, …)."""
+    return DISPLAY.get(units, (units, 1.0))
+
+
+def _label(quantity: str) -> str:
+    base = quantity
+    for suffix in ("_in", "_out"):
+        if base.endswith(suffix):
+            base = base[: -len(suffix)]
+    if base.startswith("segment_"):
+        base = base[len("segment_"):]
+    return LABELS.get(base, base.replace("_", " "))
+
+
+def _vessel_variable(ds: Any, quantity: str, end: str = "in") -> str:
+    """Name of the (time, vessel) variable for ``quantity`` ("pressure" → "pressure_in")."""
+    for name in (quantity, f"{quantity}_{end}", f"{quantity}_in"):
+        if name in ds.data_vars and ds[name].dims == ("time", "vessel"):
+            return name
+    have = sorted(n for n, v in ds.data_vars.items() if v.dims == ("time", "vessel"))
+    raise ValueError(f"no per-vessel variable for '{quantity}' in this result (available: "
+                     f"{', '.join(have)})")
+
+
+def _has(ds: Any, quantity: str) -> bool:
+    try:
+        _vessel_variable(ds, quantity)
+        return True
+    except ValueError:
+        return False
+
+
+def _declutter(fig: Any, texts: Sequence[Any]) -> None:
+    """Hide texts (in order) that overlap a text kept before them."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    kept: list[Any] = []
+    for t in texts:
+        if not t.get_visible() or not t.get_text():
+            continue
+        bb = t.get_window_extent(renderer).expanded(1.05, 1.1)
+        if any(bb.overlaps(k) for k in kept):
+            t.set_visible(False)
+        else:
+            kept.append(bb)
+
+
+def waveforms(result: Result, vessels: Sequence[str] | str | None = None,
+              quantities: Sequence[str] = ("pressure", "flow"), end: str = "in") -> Figure:
+    """Waveforms of ``quantities`` (one panel each, e.g. "pressure", "flow", "po2", or a result
+    variable name) at the ``end`` ("in"/"out") of each of ``vessels`` (default: up to 6)."""
+    plt = _plt()
+    ds = result.to_xarray()
+    if isinstance(vessels, str):
+        vessels = [vessels]
+    names = list(vessels) if vessels is not None else list(result.vessels[:6])
+    for n in names:
+        if n not in result.vessels:
+            raise KeyError(f"vessel '{n}' has no output (vessels: {', '.join(result.vessels[:10])}"
+                           f"{', ...' if len(result.vessels) > 10 else ''})")
+    variables = [_vessel_variable(ds, q, end) for q in quantities]
+    fig, axes = plt.subplots(len(variables), 1, sharex=True, squeeze=False,
+                             figsize=(7.0, 2.4 * len(variables) + 0.8), layout="constrained")
+    for ax, var in zip(axes[:, 0], variables):
+        units, k = display(str(ds[var].attrs.get("units", "")))
+        for n in names:
+            ax.plot(result.time, ds[var].sel(vessel=n).values * k, label=n, lw=1.4)
+        end_txt = {"in": "inlet", "out": "outlet"}.get(var.rsplit("_", 1)[-1], "")
+        ylabel = f"{_label(var)}"
+        ax.set_ylabel(f"{ylabel} [{units}]" if units else ylabel)
+        if end_txt:
+            ax.set_title(f"{_label(var)} at the vessel {end_txt}", fontsize=10, loc="left")
+        ax.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("time [s]")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside right upper", fontsize=9, title="vessel")
+    fig.suptitle(f"{result.model_name}: waveforms", fontsize=11)
+    return fig
+
+
+def _graph(model: Model) -> tuple[dict[str, list[tuple[str, str]]], dict[str, dict[str, Any]]]:
+    """Adjacency (node -> [(vessel, next node)]) and vessels by name from the canonical model."""
+    adj: dict[str, list[tuple[str, str]]] = {}
+    vessels = {v["name"]: v for v in model.canonical["vessels"]}
+    for v in model.canonical["vessels"]:
+        adj.setdefault(v["from"], []).append((v["name"], v["to"]))
+        adj.setdefault(v["to"], [])
+    return adj, vessels
+
+
+def inlets(model: Model) -> list[str]:
+    """Nodes with a flow or pressure condition at the start of a vessel."""
+    starts = {v["from"] for v in model.canonical["vessels"]}
+    ends = {v["to"] for v in model.canonical["vessels"]}
+    bcs = model.canonical["boundary_conditions"]
+    found = [n for n, bc in bcs.items() if n in starts and n not in ends
+             and bc["type"] in ("flow", "pressure")]
+    return found or [n for n in starts if n not in ends]
+
+
+def outlets(model: Model) -> list[str]:
+    """Nodes with a boundary condition at the end of a vessel."""
+    ends = {v["to"] for v in model.canonical["vessels"]}
+    starts = {v["from"] for v in model.canonical["vessels"]}
+    return [n for n in model.canonical["boundary_conditions"] if n in ends and n not in starts]
+
+
+def path(model: Model, outlet: str, inlet: str | None = None) -> list[str]:
+    """Vessel names along the (fewest-vessel) path from ``inlet`` (default: the inlet that
+    reaches it) to ``outlet`` (an outlet node or a vessel name), following vessel direction."""
+    adj, vessels = _graph(model)
+    target = vessels[outlet]["to"] if outlet in vessels else outlet
+    if target not in adj:
+        raise KeyError(f"'{outlet}' is neither a node nor a vessel of model '{model.name}'")
+    for start in ([inlet] if inlet else inlets(model)):
+        prev: dict[str, tuple[str, str] | None] = {start: None}
+        queue = [start]
+        while queue:
+            node = queue.pop(0)
+            if node == target:
+                out: list[str] = []
+                while prev[node] is not None:
+                    vessel, node = prev[node]  # type: ignore[misc]
+                    out.append(vessel)
+                return out[::-1]
+            for vessel, nxt in adj.get(node, []):
+                if nxt not in prev:
+                    prev[nxt] = (vessel, node)
+                    queue.append(nxt)
+    raise KeyError(f"no path from {inlet or 'an inlet'} to '{outlet}' along the vessel directions")
+
+
+def _vessel_length(v: Mapping[str, Any]) -> float:
+    return float(v["geometry"]["length"]) if "geometry" in v else 0.0
+
+
+def profile_data(result: Result, model: Model | str, outlet: str, quantity: str = "pressure",
+                 inlet: str | None = None) -> dict[str, np.ndarray]:
+    """Distance [m] from the inlet and time mean/min/max of ``quantity`` (SI) along the path to
+    ``outlet``; uses per-segment output when present, else the vessel ends."""
+    m = _model(model)
+    ds = result.to_xarray()
+    _, vessels = _graph(m)
+    names = path(m, outlet, inlet)
+    seg_in = seg_out = seg_mid = None
+    for cand in (f"segment_{quantity}_in", f"segment_{quantity}"):
+        if cand in ds.data_vars:
+            seg_in = cand
+            break
+    if f"segment_{quantity}_out" in ds.data_vars:
+        seg_out = f"segment_{quantity}_out"
+    if seg_in == f"segment_{quantity}":
+        seg_mid, seg_in = seg_in, None
+    xs: list[float] = []
+    series: list[np.ndarray] = []
+    x0 = 0.0
+    for n in names:
+        length = _vessel_length(vessels[n])
+        v = result.vessel(n)
+        nseg = 0 if v.segment_flow is None else v.segment_flow.shape[1]
+        sel = np.flatnonzero(ds["segment_vessel"].values == n) if "segment_vessel" in ds else []
+        if nseg and (seg_in or seg_mid) and len(sel) == nseg:
+            if seg_mid:
+                pos = np.asarray(v.segment_position, dtype=float)
+                if not np.all(np.isfinite(pos)):
+                    pos = np.full(nseg, length / 2)
+                for j, i in enumerate(sel):
+                    xs.append(x0 + pos[j])
+                    series.append(ds[seg_mid].values[:, i])
+            else:
+                for j, i in enumerate(sel):
+                    xs.append(x0 + length * j / nseg)
+                    series.append(ds[seg_in].values[:, i])
+                last = ds[seg_out].values[:, sel[-1]] if seg_out else None
+                if last is not None:
+                    xs.append(x0 + length)
+                    series.append(last)
+        else:
+            var_in = _vessel_variable(ds, quantity, "in")
+            var_out = var_in[:-3] + "_out" if var_in.endswith("_in") else None
+            if var_out and var_out in ds.data_vars:
+                xs += [x0, x0 + length]
+                series += [ds[var_in].sel(vessel=n).values, ds[var_out].sel(vessel=n).values]
+            else:
+                xs.append(x0 + length / 2)
+                series.append(ds[var_in].sel(vessel=n).values)
+        x0 += length
+    a = np.array(series).T  # (time, point)
+    t = np.asarray(result.time, dtype=float)
+    if len(t) > 1 and t[-1] > t[0]:
+        mean = np.trapezoid(a, t, axis=0) / (t[-1] - t[0])
+    else:
+        mean = a.mean(axis=0)
+    bounds = np.cumsum([0.0] + [_vessel_length(vessels[n]) for n in names])
+    var = seg_in or seg_mid or _vessel_variable(ds, quantity)
+    return {"distance": np.array(xs), "mean": mean, "min": a.min(axis=0), "max": a.max(axis=0),
+            "vessels": np.array(names, dtype=object), "vessel_start": bounds,
+            "units": np.array(str(ds[var].attrs.get("units", "")))}
+
+
+def profile(result: Result, model: Model | str, outlet: str,
+            quantity: str | Sequence[str] = "pressure", inlet: str | None = None) -> Figure:
+    """Time-mean ``quantity`` (with its min–max band over the cycle) against distance along the
+    path from the inlet to ``outlet`` (node or vessel name). ``quantity`` may be a list, one panel
+    each; "pressure", "flow", "po2", "o2_flux" or any result variable. Vessel boundaries are
+    marked and named."""
+    plt = _plt()
+    m = _model(model)
+    quantities = [quantity] if isinstance(quantity, str) else list(quantity)
+    fig, axes = plt.subplots(len(quantities), 1, sharex=True, squeeze=False,
+                             figsize=(7.5, 2.6 * len(quantities) + 1.2), layout="constrained")
+    texts = []
+    for row, q in enumerate(quantities):
+        ax = axes[row, 0]
+        d = profile_data(result, m, outlet, q, inlet)
+        units, k = display(str(d["units"]))
+        x = d["distance"] * 100
+        ax.fill_between(x, d["min"] * k, d["max"] * k, color="C0", alpha=0.2,
+                        label="min–max over the cycle")
+        ax.plot(x, d["mean"] * k, "-", color="C0", marker="." if len(x) < 80 else None,
+                label="time mean")
+        ax.set_ylabel(f"{_label(q)} [{units}]" if units else _label(q))
+        ax.grid(alpha=0.3)
+        for xb in d["vessel_start"][1:-1] * 100:
+            ax.axvline(xb, color="0.6", lw=0.7, ls=":")
+        if row == 0:
+            starts = d["vessel_start"] * 100
+            for i, n in enumerate(d["vessels"]):
+                mid = 0.5 * (starts[i] + starts[i + 1])
+                texts.append(ax.annotate(str(n), (mid, 1.0), xycoords=("data", "axes fraction"),
+                                         xytext=(0, 3), textcoords="offset points", ha="center",
+                                         va="bottom", fontsize=7, rotation=0))
+            ax.legend(loc="best", fontsize=8)
+    axes[-1, 0].set_xlabel("distance from the inlet [cm]")
+    fig.suptitle(f"{m.name}: inlet → {outlet}", fontsize=11)
+    _declutter(fig, texts)
+    return fig
+
+
+def _tree_layout(model: Model) -> dict[str, tuple[float, float]]:
+    """Tidy layered layout: x = number of vessels from the inlet, leaves evenly spaced in y,
+    a parent centred on its children (a BFS spanning tree for networks with loops)."""
+    adj, _ = _graph(model)
+    und: dict[str, list[str]] = {n: [] for n in adj}
+    for a, outs in adj.items():
+        for _, b in outs:
+            und[a].append(b)
+            und[b].append(a)
+    roots = inlets(model) or list(adj)[:1]
+    depth: dict[str, int] = {}
+    children: dict[str, list[str]] = {n: [] for n in adj}
+    order: list[str] = []
+    for r in roots + list(adj):
+        if r in depth:
+            continue
+        depth[r] = 0
+        queue = [r]
+        order.append(r)
+        while queue:
+            n = queue.pop(0)
+            for c in und[n]:
+                if c not in depth:
+                    depth[c] = depth[n] + 1
+                    children[n].append(c)
+                    queue.append(c)
+    pos: dict[str, tuple[float, float]] = {}
+    counter = [0.0]
+
+    def place(n: str) -> float:
+        if not children[n]:
+            y = counter[0]
+            counter[0] += 1.0
+        else:
+            y = float(np.mean([place(c) for c in children[n]]))
+        pos[n] = (float(depth[n]), -y)
+        return y
+
+    import sys
+
+    sys.setrecursionlimit(max(1000, 4 * len(adj) + 100))
+    for r in order:
+        place(r)
+    return pos
+
+
+def _has_loop(model: Model) -> bool:
+    nodes = {v["from"] for v in model.canonical["vessels"]} | {v["to"] for v in
+                                                               model.canonical["vessels"]}
+    # a connected graph is a tree iff edges = nodes - 1 (per component; checked globally)
+    return len(model.canonical["vessels"]) > len(nodes) - 1
+
+
+def _layout(model: Model, layout: str) -> dict[str, tuple[float, float]]:
+    if layout == "tree" or (layout == "auto" and not _has_loop(model)):
+        return _tree_layout(model)
+    try:
+        import networkx as nx
+    except ImportError:
+        return _tree_layout(model)
+    from oxyline.io.graph import to_networkx
+
+    G = nx.Graph(to_networkx(model))
+    if layout in ("auto", "kamada-kawai"):
+        try:
+            p = nx.kamada_kawai_layout(G)
+        except ImportError:  # needs scipy
+            p = nx.spring_layout(G, seed=1)
+    elif layout == "spring":
+        p = nx.spring_layout(G, seed=1)
+    else:
+        raise ValueError(f"layout must be 'auto', 'tree', 'spring' or 'kamada-kawai', got {layout!r}")
+    return {str(k): (float(v[0]), float(v[1])) for k, v in p.items()}
+
+
+def _values(model: Model, values: Any, result: Result | None, label: str | None,
+            units: str | None) -> tuple[np.ndarray, str, str]:
+    names = model.vessel_names
+    if values is None and result is not None:
+        values = "pressure"
+    if values is None:
+        r = []
+        for v in model.canonical["vessels"]:
+            g = v.get("geometry")
+            r.append(0.5 * (g["radius_in"] + g["radius_out"]) if g else math.nan)
+        u, k = display("m")
+        return np.array(r) * 1000, label or "mean radius", units or "mm"
+    if isinstance(values, str):
+        if result is None:
+            raise ValueError(f"values={values!r} names a result variable: pass result=")
+        ds = result.to_xarray()
+        var = _vessel_variable(ds, values)
+        t = np.asarray(result.time, dtype=float)
+        a = ds[var].values
+        both = var == f"{values}_in" and f"{values}_out" in ds.data_vars
+        if both:  # the vessel's mean: average of its two ends
+            a = 0.5 * (a + ds[f"{values}_out"].values)
+        mean = np.trapezoid(a, t, axis=0) / (t[-1] - t[0]) if len(t) > 1 else a.mean(axis=0)
+        u, k = display(str(ds[var].attrs.get("units", "")))
+        by = dict(zip(result.vessels, mean * k))
+        what = f"time-mean {_label(var)}" + (" (average of both ends)" if both else "")
+        return (np.array([by.get(n, math.nan) for n in names]), label or what,
+                units if units is not None else u)
+    if isinstance(values, Mapping) or hasattr(values, "to_dict"):
+        d = dict(values.to_dict() if hasattr(values, "to_dict") else values)
+        arr = np.array([float(d.get(n, math.nan)) for n in names])
+    else:
+        arr = np.asarray(values, dtype=float)
+        if arr.shape != (len(names),):
+            raise ValueError(f"values has {arr.size} entries but the model has {len(names)} "
+                             "vessels")
+    return arr, label or "value", units or ""
+
+
+def network_map(model: Model | str | os.PathLike[str], values: Any = None,
+                label: str | None = None, units: str | None = None, result: Result | None = None,
+                layout: str = "auto", labels: bool | None = None, cmap: str = "viridis") -> Figure:
+    """Draw the network, vessels coloured by a per-vessel quantity, with a colour bar.
+
+    ``values``: a mapping or pandas Series vessel → value, a sequence in model vessel order, the
+    name of a result variable (time mean, display units; needs ``result``), or None (mean
+    pressure when ``result`` is given, else the vessel radius in mm). ``label``/``units`` name
+    the colour bar. ``layout``: "auto" (a tidy tree layout for trees; networkx Kamada-Kawai for
+    networks with loops when networkx is installed), "tree", "spring", "kamada-kawai". Line width
+    follows the radius; lumped vessels are dashed; vessel names are drawn when they fit
+    (``labels=None``: up to 60 vessels), and any that would overlap are dropped.
+    """
+    plt = _plt()
+    from matplotlib import colors as mcolors
+    from matplotlib.collections import LineCollection
+
+    m = _model(model)
+    pos = _layout(m, layout)
+    vals, label, units = _values(m, values, result, label, units)
+    vessels = m.canonical["vessels"]
+    segs = [[pos[v["from"]], pos[v["to"]]] for v in vessels]
+    radii = np.array([0.5 * (v["geometry"]["radius_in"] + v["geometry"]["radius_out"])
+                      if "geometry" in v else math.nan for v in vessels])
+    if np.all(np.isnan(radii)):
+        widths = np.full(len(vessels), 2.0)
+    else:
+        rmax = np.nanmax(radii)
+        widths = np.where(np.isnan(radii), 1.5, 1.0 + 5.0 * np.sqrt(radii / rmax))
+    n_leaves = max(1, len(outlets(m)))
+    height = min(16.0, max(4.0, 0.22 * n_leaves + 1.5))
+    fig, ax = plt.subplots(figsize=(8.0, height), layout="constrained")
+    finite = vals[np.isfinite(vals)]
+    vmin, vmax = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
+    if vmax <= vmin:
+        vmin, vmax = vmin - 0.5 * abs(vmin or 1.0), vmax + 0.5 * abs(vmax or 1.0)
+    norm = mcolors.Normalize(vmin, vmax)
+    cm = plt.get_cmap(cmap)
+    cols = [cm(norm(x)) if np.isfinite(x) else (0.6, 0.6, 0.6, 1.0) for x in vals]
+    styles = ["--" if "lumped" in v else "-" for v in vessels]
+    lc = LineCollection(segs, colors=cols, linewidths=widths, linestyles=styles,
+                        capstyle="round")
+    ax.add_collection(lc)
+    xy = np.array(list(pos.values()))
+    ax.scatter(xy[:, 0], xy[:, 1], s=6, color="0.25", zorder=3)
+    bcs = m.canonical["boundary_conditions"]
+    for node, bc in bcs.items():
+        if node in pos:
+            marker = ">" if node in inlets(m) else "s"
+            ax.scatter(*pos[node], marker=marker, s=28, color="k", zorder=4)
+    pad = 0.05 * max(1e-9, float(np.ptp(xy[:, 0])) or 1.0)
+    ax.set_xlim(xy[:, 0].min() - pad, xy[:, 0].max() + pad)
+    ypad = 0.05 * max(1e-9, float(np.ptp(xy[:, 1])) or 1.0)
+    ax.set_ylim(xy[:, 1].min() - ypad, xy[:, 1].max() + ypad)
+    ax.set_axis_off()
+    sm = plt.cm.ScalarMappable(norm=norm, cmap=cm)
+    cb = fig.colorbar(sm, ax=ax, shrink=0.8, pad=0.02)
+    cb.set_label(f"{label} [{units}]" if units else label)
+    texts = []
+    if labels or (labels is None and len(vessels) <= 60):
+        for v, s in zip(vessels, segs):
+            (x0, y0), (x1, y1) = s
+            texts.append(ax.text(0.5 * (x0 + x1), 0.5 * (y0 + y1), v["name"], fontsize=7,
+                                 ha="center", va="bottom", color="0.1", zorder=5,
+                                 bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none",
+                                       "alpha": 0.7}))
+    ax.set_title(f"{m.name}: {label}", fontsize=11)
+    _declutter(fig, texts)
+    return fig
+
+
+def save_figures(result: Result, model: Model | str | os.PathLike[str],
+                 outdir: str | os.PathLike[str], formats: Sequence[str] = ("png", "svg"),
+                 dpi: int = 150) -> list[Path]:
+    """Write the standard figures as PNG and SVG into ``outdir``: ``waveforms`` (inlet vessel and
+    up to 4 terminal vessels; pressure, flow and PO2 when present), ``profile`` (inlet to the
+    outlet farthest from it; the same quantities) and ``network_map`` (time-mean pressure).
+    Returns the files written."""
+    plt = _plt()
+    m = _model(model)
+    out = Path(outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    ds = result.to_xarray()
+    quantities = [q for q in ("pressure", "flow", "po2") if _has(ds, q)]
+    outs = [o for o in outlets(m)]
+    paths = {}
+    for o in outs:
+        try:
+            paths[o] = path(m, o)
+        except KeyError:
+            continue
+    _, vessels = _graph(m)
+    terminal = [p[-1] for p in paths.values() if p and p[-1] in result.vessels][:4]
+    first = [p[0] for p in paths.values() if p and p[0] in result.vessels][:1]
+    chosen = list(dict.fromkeys(first + terminal)) or list(result.vessels[:5])
+    figures = {"waveforms": waveforms(result, chosen, quantities)}
+    if paths:
+        far = max(paths, key=lambda o: sum(_vessel_length(vessels[n]) for n in paths[o]))
+        figures["profile"] = profile(result, m, far, [q for q in quantities if q != "flow"]
+                                     + (["flow"] if "flow" in quantities else []))
+    figures["network_map"] = network_map(m, result=result)
+    written = []
+    for name, fig in figures.items():
+        for fmt in formats:
+            p = out / f"{name}.{fmt}"
+            fig.savefig(p, dpi=dpi)
+            written.append(p)
+        plt.close(fig)
+    return written
