@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import copy
 import json
+import re
+import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -439,3 +441,19 @@ def test_blood_vessel_junction_branches_are_hidden() -> None:
 def test_load_model_accepts_svzerod_input() -> None:
     model = oxyline.load_model(config("steadyFlow_R_R"))
     assert model.vessel_names == ["branch0_seg0"]
+
+
+def _python_blocks(text: str) -> list[str]:
+    return re.findall(r"```python\n(.*?)```", text, flags=re.DOTALL)
+
+
+def test_docs_and_docstring_examples_run() -> None:
+    docs = Path(__file__).resolve().parents[1] / "docs" / "svzerod.md"
+    blocks = _python_blocks(docs.read_text())
+    doc = svz.__doc__ or ""
+    example = doc.split("Example::", 1)[1]
+    blocks.append(textwrap.dedent("\n".join(
+        line for line in example.splitlines() if line.strip() and not line.strip().startswith("#"))))
+    assert len(blocks) == 2
+    for code in blocks:
+        exec(compile(code, str(docs), "exec"), {"__name__": "__docs__"})  # noqa: S102

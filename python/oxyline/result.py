@@ -137,6 +137,39 @@ class Result:
                       for k, v in self.settings.items() if v is not None})
         return xr.Dataset(data_vars, coords=coords, attrs=attrs)
 
+    # files and summaries (implemented in oxyline.io.results)
+    def to_netcdf(self, path: str | os.PathLike[str]) -> Path:
+        """Write NetCDF-4 (h5netcdf): dims time, vessel, segment; units, model name, solver
+        settings and oxyline version in attrs. See :func:`oxyline.io.results.to_netcdf`."""
+        from oxyline.io import results
+
+        return results.to_netcdf(self, path)
+
+    def to_zarr(self, path: str | os.PathLike[str], time_chunk: int = 1024) -> Path:
+        """Write a Zarr store chunked along time (written after the run; needs ``zarr``).
+        See :func:`oxyline.io.results.to_zarr`."""
+        from oxyline.io import results
+
+        return results.to_zarr(self, path, time_chunk=time_chunk)
+
+    def summary(self) -> Any:
+        """pandas DataFrame per vessel: mean/min/max of every per-vessel variable (SI)."""
+        from oxyline.io import results
+
+        return results.summary(self)
+
+    def to_csv(self, path: str | os.PathLike[str]) -> Path:
+        """Write :meth:`summary` as CSV (TSV for .tsv)."""
+        from oxyline.io import results
+
+        return results.to_csv(self, path)
+
+    def to_parquet(self, path: str | os.PathLike[str]) -> Path:
+        """Write :meth:`summary` as Parquet (needs pyarrow)."""
+        from oxyline.io import results
+
+        return results.to_parquet(self, path)
+
     def to_pandas(self) -> Any:
         """Long table with svZeroDSolver's columns: name, time, flow_in, flow_out, pressure_in,
         pressure_out (SI)."""
@@ -186,36 +219,3 @@ def long_table(vessels: list[str], time: np.ndarray, block: np.ndarray) -> Any:
     return pd.DataFrame({"name": name_col, "time": time_col, "flow_in": values[:, 2],
                          "flow_out": values[:, 3], "pressure_in": values[:, 0],
                          "pressure_out": values[:, 1]}, columns=columns)
-
-    # files and summaries (implemented in oxyline.io.results)
-    def to_netcdf(self, path: str | os.PathLike[str]) -> Path:
-        """Write NetCDF-4 (h5netcdf): dims time, vessel, segment; units, model name, solver
-        settings and oxyline version in attrs. See :func:`oxyline.io.results.to_netcdf`."""
-        from oxyline.io import results
-
-        return results.to_netcdf(self, path)
-
-    def to_zarr(self, path: str | os.PathLike[str], time_chunk: int = 1024) -> Path:
-        """Write a Zarr store chunked along time (written after the run; needs ``zarr``).
-        See :func:`oxyline.io.results.to_zarr`."""
-        from oxyline.io import results
-
-        return results.to_zarr(self, path, time_chunk=time_chunk)
-
-    def summary(self) -> Any:
-        """pandas DataFrame per vessel: mean/min/max of every per-vessel variable (SI)."""
-        from oxyline.io import results
-
-        return results.summary(self)
-
-    def to_csv(self, path: str | os.PathLike[str]) -> Path:
-        """Write :meth:`summary` as CSV (TSV for .tsv)."""
-        from oxyline.io import results
-
-        return results.to_csv(self, path)
-
-    def to_parquet(self, path: str | os.PathLike[str]) -> Path:
-        """Write :meth:`summary` as Parquet (needs pyarrow)."""
-        from oxyline.io import results
-
-        return results.to_parquet(self, path)

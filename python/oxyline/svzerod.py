@@ -32,9 +32,10 @@ Example::
         ],
     }
     df = svz.simulate(config)                 # same frame as svzerod.simulate(config)
-    print(df.iloc[0].to_dict())
+    print(df.round(6).iloc[0].to_dict())
     # {'name': 'aorta', 'time': 0.0, 'flow_in': 5.0, 'flow_out': 5.0,
     #  'pressure_in': 1100.0, 'pressure_out': 600.0}
+    df_rk4 = svz.simulate(config, method="rk4")   # explicit RK4, same output times
     model = svz.to_model(config)              # an oxyline.Model, for oxyline.simulate etc.
 """
 
