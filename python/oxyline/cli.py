@@ -1,20 +1,41 @@
-"""The ``oxyline`` command line: run, validate, models, info.
+"""The ``oxyline`` command line: run, validate, convert, models, info.
 
-Exit codes: 0 ok, 2 bad input, 130 interrupted.
+Exit codes: 0 ok, 2 bad input (the message names the file, vessel or node, and key),
+130 interrupted (a partial result is still written), 1 solver failure.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
+
+MMHG = 133.322368
+RESULT_SUFFIXES = (".nc", ".zarr", ".csv")
+SUMMARY_SUFFIXES = (".csv", ".tsv", ".parquet")
+
+
+class InputError(Exception):
+    """Bad command-line input (exit code 2)."""
+
+
+def _load(source: str) -> Any:
+    from oxyline.io import read_model
+
+    return read_model(source)
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
     import oxyline
 
-    model = oxyline.load_model(args.model)
+    if args.output and Path(args.output).suffix.lower() not in RESULT_SUFFIXES:
+        raise InputError(f"{args.output}: output must end in .nc, .zarr or .csv")
+    if args.summary and Path(args.summary).suffix.lower() not in SUMMARY_SUFFIXES:
+        raise InputError(f"{args.summary}: summary must end in .csv, .tsv or .parquet")
+    model = _load(args.model)
     overrides: dict[str, object] = {"progress": not args.quiet}
     if args.cycles is not None:
         overrides["cycles"] = args.cycles
@@ -33,6 +54,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
         return 130
     if args.output:
         _write(res, args.output)
+    if args.summary:
+        _write_summary(res, args.summary)
+    figures = []
+    if args.plot:
+        from oxyline import plot
+
+        figures = plot.save_figures(res, model, args.plot)
     if not args.quiet:
         s = res.settings
         print(f"{model.name}: {len(res.vessels)} vessels, method {s['method']}, dt {s['dt']:.3e} s, "
@@ -40,30 +68,39 @@ def _cmd_run(args: argparse.Namespace) -> int:
         print(f"{'vessel':<24}{'mean P_in [mmHg]':>18}{'mean Q_in [mL/s]':>18}")
         for name in res.vessels[:20]:
             v = res.vessel(name)
-            print(f"{name:<24}{v.pressure_in.mean() / 133.322368:>18.3f}{v.flow_in.mean() * 1e6:>18.4f}")
+            print(f"{name:<24}{v.pressure_in.mean() / MMHG:>18.3f}{v.flow_in.mean() * 1e6:>18.4f}")
         if len(res.vessels) > 20:
             print(f"... {len(res.vessels) - 20} more vessels")
         if args.output:
             print(f"results written to {args.output}")
+        if args.summary:
+            print(f"summary written to {args.summary}")
+        if figures:
+            print(f"{len(figures)} figures written to {args.plot}")
     return 0
 
 
-def _write(res: object, path: str) -> None:
-    ds = res.to_xarray()  # type: ignore[attr-defined]
+def _write(res: Any, path: str) -> None:
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    if p.suffix == ".zarr":
-        ds.to_zarr(p, mode="w")
-    elif p.suffix == ".csv":
-        res.to_pandas().to_csv(p, index=False)  # type: ignore[attr-defined]
+    suffix = p.suffix.lower()
+    if suffix == ".zarr":
+        res.to_zarr(p)
+    elif suffix == ".csv":
+        p.parent.mkdir(parents=True, exist_ok=True)
+        res.to_pandas().to_csv(p, index=False)
     else:
-        ds.to_netcdf(p, engine="h5netcdf")
+        res.to_netcdf(p)
+
+
+def _write_summary(res: Any, path: str) -> None:
+    if Path(path).suffix.lower() == ".parquet":
+        res.to_parquet(path)
+    else:
+        res.to_csv(path)
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    import oxyline
-
-    s = oxyline.load_model(args.model).summary()
+    s = _load(args.model).summary()
     print(f"model            {s['name']}")
     for key in ("vessels", "segments", "nodes", "junctions", "inlets", "outlets", "unknowns"):
         print(f"{key:<17}{s[key]}")
@@ -75,11 +112,52 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_models(args: argparse.Namespace) -> int:
-    from oxyline import examples
+def _cmd_convert(args: argparse.Namespace) -> int:
+    from oxyline.io import read_model, write_model
 
-    for name in examples.names():
-        print(name)
+    model = read_model(args.input, format=args.from_format)
+    out = Path(args.output)
+    fmt = args.to_format
+    if fmt is None:
+        suffix = out.suffix.lower()
+        if suffix in (".csv", ".tsv"):
+            fmt = "tables"
+        elif suffix in (".yaml", ".yml", ".json"):
+            fmt = "native"
+        else:
+            raise InputError(f"{out}: cannot tell the output format from the suffix "
+                             "(use .yaml/.json, .csv/.tsv, or --to)")
+    if fmt == "svzerod":
+        from oxyline.io import dump_native, to_svzerod
+
+        written = [dump_native(to_svzerod(model, units=args.units), out)]
+    else:
+        written = write_model(model, out, format=fmt)
+    print(f"{args.input} -> {fmt}: " + ", ".join(str(p) for p in written))
+    return 0
+
+
+def _cmd_models(args: argparse.Namespace) -> int:
+    try:
+        from oxyline import models
+    except ImportError:
+        models = None
+    entries: list[Any] = []
+    if models is not None and hasattr(models, "list"):
+        entries = list(models.list())
+    if not entries:
+        from oxyline import examples
+
+        entries = examples.names()
+    for e in entries:
+        if isinstance(e, str):
+            print(e)
+        elif isinstance(e, Mapping):
+            print(f"{e.get('name', '?'):<24}{e.get('description', '')}")
+        elif isinstance(e, (tuple, list)) and e:
+            print(f"{e[0]!s:<24}{' '.join(str(x) for x in e[1:])}")
+        else:
+            print(getattr(e, "name", str(e)))
     return 0
 
 
@@ -93,12 +171,17 @@ def _cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="oxyline", description=__doc__)
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="oxyline", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("run", help="run a model file or built-in example")
-    p.add_argument("model")
-    p.add_argument("-o", "--output", help="result file (.nc, .zarr or .csv)")
+    p = sub.add_parser("run", help="run a model file or built-in model")
+    p.add_argument("model", help="built-in name, or a .yaml/.json/.csv model (native, "
+                                 "svZeroDSolver, openBF, tables)")
+    p.add_argument("-o", "--output", help="result file: .nc (NetCDF), .zarr, or .csv (waveforms)")
+    p.add_argument("--summary", help="per-vessel mean/min/max table: .csv, .tsv or .parquet")
+    p.add_argument("--plot", metavar="DIR", help="write waveform, profile and map figures "
+                                                 "(PNG + SVG) into DIR")
     p.add_argument("--cycles", type=int)
     p.add_argument("--dt", type=float)
     p.add_argument("--method", choices=["auto", "rk4", "generalized-alpha"])
@@ -108,16 +191,44 @@ def main(argv: Sequence[str] | None = None) -> int:
     p = sub.add_parser("validate", help="check a model and print a summary")
     p.add_argument("model")
     p.set_defaults(func=_cmd_validate)
+    p = sub.add_parser("convert", help="convert a model between formats",
+                       description="Convert IN to OUT. Formats: native (.yaml/.yml/.json), "
+                       "svzerod (svZeroDSolver JSON; read when detected, write with --to "
+                       "svzerod), tables (.csv/.tsv vessel table + <stem>_bcs table), openbf "
+                       "(read only).")
+    p.add_argument("input", metavar="IN")
+    p.add_argument("output", metavar="OUT")
+    p.add_argument("--from", dest="from_format", choices=["native", "svzerod", "tables", "openbf"],
+                   help="input format (default: detected)")
+    p.add_argument("--to", dest="to_format", choices=["native", "svzerod", "tables"],
+                   help="output format (default: from the suffix)")
+    p.add_argument("--units", choices=["cgs", "SI"], default="cgs",
+                   help="units of an svZeroDSolver output file (default cgs: cm, dyn/cm^2, mL/s)")
+    p.set_defaults(func=_cmd_convert)
     sub.add_parser("models", help="list built-in models").set_defaults(func=_cmd_models)
     sub.add_parser("info", help="version and build").set_defaults(func=_cmd_info)
-    args = parser.parse_args(argv)
-    from oxyline.errors import ModelError
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    from oxyline.errors import ModelError, SolverError
 
     try:
         return int(args.func(args))
-    except ModelError as exc:
+    except (ModelError, InputError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # output piped into e.g. `head`
+        sys.stdout = open(os.devnull, "w")  # noqa: SIM115
+        return 0
+    except (KeyError, ValueError, ImportError, OSError) as exc:
+        msg = exc.args[0] if isinstance(exc, KeyError) and exc.args else exc
+        print(f"error: {msg}", file=sys.stderr)
+        return 2
+    except SolverError as exc:
+        print(f"error: solver failed: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130

@@ -65,12 +65,7 @@ def display(units: str) -> tuple[str, float]:
 
 
 def _label(quantity: str) -> str:
-    base = quantity
-    for suffix in ("_in", "_out"):
-        if base.endswith(suffix):
-            base = base[: -len(suffix)]
-    if base.startswith("segment_"):
-        base = base[len("segment_"):]
+    base = quantity.removesuffix("_in").removesuffix("_out").removeprefix("segment_")
     return LABELS.get(base, base.replace("_", " "))
 
 
@@ -459,9 +454,10 @@ def network_map(model: Model | str | os.PathLike[str], values: Any = None,
     xy = np.array(list(pos.values()))
     ax.scatter(xy[:, 0], xy[:, 1], s=6, color="0.25", zorder=3)
     bcs = m.canonical["boundary_conditions"]
-    for node, bc in bcs.items():
+    starts = inlets(m)
+    for node in bcs:
         if node in pos:
-            marker = ">" if node in inlets(m) else "s"
+            marker = ">" if node in starts else "s"
             ax.scatter(*pos[node], marker=marker, s=28, color="k", zorder=4)
     pad = 0.05 * max(1e-9, float(np.ptp(xy[:, 0])) or 1.0)
     ax.set_xlim(xy[:, 0].min() - pad, xy[:, 0].max() + pad)

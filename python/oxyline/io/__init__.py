@@ -5,12 +5,13 @@ export, and the format dispatch of ``oxyline convert``. The openBF importer live
 from __future__ import annotations
 
 from oxyline.io.graph import from_networkx, to_networkx
-from oxyline.io.native import detect_format, read_model, save_model, write_model
+from oxyline.io.native import detect_format, dump_native, read_model, save_model, write_model
 from oxyline.io.svzerod_export import to_svzerod
 from oxyline.io.tables import from_tables, read_tables, to_tables, write_tables
 
 __all__ = [
     "detect_format",
+    "dump_native",
     "from_networkx",
     "from_tables",
     "read_model",

@@ -84,7 +84,7 @@ def detect_format(path: PathLike) -> str:
     if data is None:
         raise ModelError(f"{p}: unknown model file type '{suffix}' (expected .yaml, .yml, .json, "
                          ".csv or .tsv)")
-    if "vessels" not in data and "simulation_parameters" in data:
+    if "simulation_parameters" in data or isinstance(data.get("boundary_conditions"), list):
         return "svzerod"
     if "vessels" not in data and "network" in data:
         return "openbf"

@@ -185,7 +185,7 @@ def to_svzerod(model: Model, units: str = "cgs", samples: int = 201,
                                      "condition cannot be exported to svZeroDSolver")
     sim = model.simulation or {}
     every = (sim.get("output") or {}).get("every", period / 1000)
-    n_pts = points_per_cycle or max(2, int(round(period / float(every))) + 1)
+    n_pts = points_per_cycle or max(2, round(period / float(every)) + 1)
     return {
         "description": {"description of test case":
                         f"{model.name}: exported from oxyline ({units} units)"},
