@@ -292,22 +292,21 @@ def _one_vessel(**changes: Any) -> dict[str, Any]:
     return cfg
 
 
-@pytest.mark.parametrize(("cfg", "match"), [
-    (_one_vessel(vessels__0__zero_d_element_values__K=1.0), "unknown parameter 'K'"),
-    (_one_vessel(simulation_parameters__output_variable_based=True), "output_variable_based"),
-    (_one_vessel(simulation_parameters__foo=1), "unknown key 'foo'"),
-    (_one_vessel(initial_condition={"pressure_all": 0.0}), "'initial_condition'"),
-    (_one_vessel(simulation_parameters__use_cycle_to_cycle_error=True),
+@pytest.mark.parametrize(("changes", "match"), [
+    ({"vessels__0__zero_d_element_values__K": 1.0}, "unknown parameter 'K'"),
+    ({"simulation_parameters__output_variable_based": True}, "output_variable_based"),
+    ({"simulation_parameters__foo": 1}, "unknown key 'foo'"),
+    ({"initial_condition": {"pressure_all": 0.0}}, "'initial_condition'"),
+    ({"simulation_parameters__use_cycle_to_cycle_error": True},
      "'use_cycle_to_cycle_error' without RCR"),
-    (_one_vessel(vessels__0__boundary_conditions={"inlet": "OUT", "outlet": "INFLOW"}),
+    ({"vessels__0__boundary_conditions": {"inlet": "OUT", "outlet": "INFLOW"}},
      "RESISTANCE boundary condition 'OUT' at a vessel inlet"),
-    (_one_vessel(junctions=[{"junction_name": "J0", "junction_type": "resistive_junction",
-                             "inlet_vessels": [0], "outlet_vessels": []}]),
-     "'resistive_junction'"),
+    ({"junctions": [{"junction_name": "J0", "junction_type": "resistive_junction",
+                     "inlet_vessels": [0], "outlet_vessels": []}]}, "'resistive_junction'"),
 ])
-def test_unsupported_inputs_name_the_key(cfg: dict[str, Any], match: str) -> None:
+def test_unsupported_inputs_name_the_key(changes: dict[str, Any], match: str) -> None:
     with pytest.raises(oxyline.UnsupportedElement, match=match):
-        svz.simulate(cfg)
+        svz.simulate(_one_vessel(**changes))
 
 
 def test_invalid_inputs_are_model_errors() -> None:
@@ -353,15 +352,16 @@ def _pulsatile(pts: int, cycles: int, **sim: Any) -> dict[str, Any]:
     return cfg
 
 
-@pytest.mark.parametrize("cfg", [
-    _pulsatile(51, 3, output_interval=3),  # last cycle, (pts - 1) % interval != 0
-    _pulsatile(51, 3, output_interval=5),
-    _pulsatile(51, 1, output_interval=3),
-    _pulsatile(51, 3, output_interval=3, output_all_cycles=True),
-    _pulsatile(51, 3, output_interval=3, output_mean_only=True),
-    _pulsatile(51, 4, steady_initial=False, rho_infty=0.2, output_all_cycles=True),
+@pytest.mark.parametrize(("cycles", "sim"), [
+    (3, {"output_interval": 3}),  # last cycle, (pts - 1) % interval != 0
+    (3, {"output_interval": 5}),
+    (1, {"output_interval": 3}),
+    (3, {"output_interval": 3, "output_all_cycles": True}),
+    (3, {"output_interval": 3, "output_mean_only": True}),
+    (4, {"steady_initial": False, "rho_infty": 0.2, "output_all_cycles": True}),
 ], ids=["last-3", "last-5", "one-cycle-3", "all-3", "mean-3", "zero-start-rho0.2"])
-def test_output_options_match_svzerod(cfg: dict[str, Any]) -> None:
+def test_output_options_match_svzerod(cycles: int, sim: dict[str, Any]) -> None:
+    cfg = _pulsatile(51, cycles, **sim)
     expected = svzerod_run(cfg)
     actual = svz.simulate(cfg)
     assert_same_layout(actual, expected)
