@@ -368,6 +368,8 @@ def test_output_options_match_svzerod(cycles: int, sim: dict[str, Any]) -> None:
     np.testing.assert_array_equal(actual["time"], expected["time"])
     errors = scaled_errors(actual, expected)
     assert max(errors.values()) <= 1e-6, errors
+    # the very same frame: dtypes (str names, float64), RangeIndex
+    pd.testing.assert_frame_equal(actual, expected, check_exact=False, rtol=1e-6, atol=1e-9)
 
 
 def test_time_table_not_starting_at_zero_matches_svzerod() -> None:
