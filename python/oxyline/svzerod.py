@@ -193,6 +193,8 @@ def _int(sim: Mapping[str, Any], key: str, default: int | None, minimum: int) ->
     if key not in sim and default is not None:
         return default
     v = _required(sim, key, "simulation_parameters")
+    if isinstance(v, float) and v.is_integer():  # JSON 10.0, read as an integer by svZeroDSolver
+        v = int(v)
     if isinstance(v, bool) or not isinstance(v, int) or v < minimum:
         raise ModelError(f"simulation_parameters: '{key}' must be an integer >= {minimum}, "
                          f"got {v!r}")
