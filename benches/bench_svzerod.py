@@ -105,6 +105,7 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
         raise ValueError(impl)
     gc.collect()
     rec["base_mb"] = _rss_mb()
+    c0 = time.process_time()
     t0 = time.perf_counter()
     if impl == "native":
         try:
@@ -118,7 +119,8 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
         t1 = time.perf_counter()
         res = oxyline.simulate(model, **NATIVE_OPTIONS)
         t2 = time.perf_counter()
-        rec.update(wall_s=t2 - t0, load_s=t1 - t0, simulate_s=t2 - t1, peak_mb=_peak_mb(),
+        rec.update(wall_s=t2 - t0, cpu_s=time.process_time() - c0, load_s=t1 - t0,
+                   simulate_s=t2 - t1, peak_mb=_peak_mb(),
                    method=res.settings.get("method"), dt=res.settings.get("dt"),
                    cycles_run=res.settings.get("cycles_run"))
         t3 = time.perf_counter()
@@ -133,7 +135,8 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
             np.savez(spec["save"], data=arr, time=np.asarray(res.time))
     else:
         df = run(cfg)
-        rec.update(wall_s=time.perf_counter() - t0, peak_mb=_peak_mb(), rows=len(df))
+        rec.update(wall_s=time.perf_counter() - t0, cpu_s=time.process_time() - c0,
+                   peak_mb=_peak_mb(), rows=len(df))
         if spec.get("save"):
             arr, tt = _frame_to_array(df, names)
             np.savez(spec["save"], data=arr, time=tt)
@@ -190,6 +193,7 @@ def measure(spec: dict[str, Any], repeat: int, timeout: float | None,
     for k in ("peak_mb", "peak_with_pandas_mb"):
         if k in best:
             best[k] = max(r[k] for r in runs)
+    best["cpu_s"] = min(r["cpu_s"] for r in runs)
     best["walls"] = [r["wall_s"] for r in runs]
     return best
 
@@ -254,8 +258,21 @@ def machine() -> dict[str, Any]:
                                 check=False, capture_output=True, text=True).stdout.strip()
     except OSError:
         commit = "?"
+    core = "?"
+    try:
+        import oxyline
+
+        so = next(Path(oxyline.__file__).parent.glob("_core*.so"))
+        core = datetime.datetime.fromtimestamp(so.stat().st_mtime, datetime.timezone.utc) \
+            .strftime("%Y-%m-%d %H:%M UTC")
+        dirty = subprocess.run(["git", "-C", str(HERE), "status", "--porcelain", "--", "../rust",
+                                "../python"], check=False, capture_output=True, text=True).stdout
+        if dirty.strip():
+            commit += " + uncommitted changes in rust/ or python/"
+    except (ImportError, StopIteration, OSError):
+        pass
     return {"nproc": os.cpu_count(), "cpu": cpu, "mem": mem, "python": platform.python_version(),
-            "versions": vers, "commit": commit}
+            "versions": vers, "commit": commit, "core_built": core}
 
 
 def _f(x: Any, fmt: str = ".3g") -> str:
@@ -298,6 +315,20 @@ def tables(results: list[dict[str, Any]]) -> str:
     out = ["### Wall time (end-to-end, best of repeats) and peak RSS", "", *lines, ""]
     out += [("Speed-up and memory ratio = svzerod / oxyline (targets at 1e3 and 1e4: "
              "speed-up >= 20x, memory ratio >= 10x)."), ""]
+    # CPU time: less sensitive than wall time to other processes on a shared machine
+    out += ["### CPU time of the timed call (user + system, s)", "",
+            ("| topology | N | svzerod | oxyline | native | speed-up oxyline | speed-up native "
+             "| load avg |"),
+            "|---|---|---|---|---|---|---|---|"]
+    for r in results:
+        row = [r["topology"], str(r["n"])]
+        row += [_f(get(r, impl, "cpu_s")) for impl in IMPLS]
+        sc = get(r, "svzerod", "cpu_s")
+        row += [_ratio(sc, get(r, "oxyline", "cpu_s")), _ratio(sc, get(r, "native", "cpu_s"))]
+        loads = [get(r, impl, "loadavg") for impl in IMPLS if get(r, impl, "loadavg") is not None]
+        row.append(" / ".join(f"{x:.1f}" for x in loads) or "–")
+        out.append("| " + " | ".join(row) + " |")
+    out.append("")
     # memory above the pre-run baseline
     out += ["### Memory above the pre-run baseline (peak - RSS before the call), MB", "",
             ("| topology | N | svzerod base | svzerod +run | oxyline base | oxyline +run "
@@ -375,6 +406,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="time points per cycle (default 1000)")
     ap.add_argument("--output", default=str(HERE / "results.md"),
                     help="Markdown file to write ('' for none)")
+    ap.add_argument("--append", action="store_true",
+                    help="append to the output file instead of replacing it")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
 
@@ -455,7 +488,7 @@ def main(argv: list[str] | None = None) -> int:
         "",
         f"Machine: {info['nproc']} CPUs ({info['cpu']}), {info['mem']} RAM; Python "
         f"{info['python']}; " + ", ".join(f"{k} {v}" for k, v in info["versions"].items())
-        + f"; oxyline commit {info['commit']}.",
+        + f"; oxyline commit {info['commit']}; core library built {info['core_built']}.",
         (f"Load average (1 min) at start {load0[0]:.2f}, at end {load1[0]:.2f} (other "
          "processes share the machine; see the per-run load in the breakdown table)."),
         f"Models: benches/networks.py, {args.cycles} cycles x {args.pts} points per cycle, "
@@ -467,7 +500,11 @@ def main(argv: list[str] | None = None) -> int:
     text = "\n".join(header) + tables(results)
     print(text)
     if args.output:
-        Path(args.output).write_text("# Benchmark results\n\n" + text)
+        out = Path(args.output)
+        if args.append and out.exists():
+            out.write_text(out.read_text().rstrip("\n") + "\n\n" + text)
+        else:
+            out.write_text("# Benchmark results\n\n" + text)
     return 0
 
 
