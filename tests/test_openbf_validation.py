@@ -1,0 +1,128 @@
+"""oxyline vs openBF's own 1-D results (``../shared/networks/openbf/test_reference_csv``).
+
+The openBF files are imported in openBF-compatible mode (openBF v2's taper and WK2 conventions,
+the ADAN56 inflow exactly as openBF ran it, see ``docs/validation.md``), run with inverted-L
+segments <= 1 cm to periodicity (cycle-to-cycle change < 1e-6), and compared at every reference
+point (x = 0, 0.25, 0.5, 0.75, 1 of every vessel): mean pressure, pulse pressure, mean flow.
+The truth is openBF's output; nothing here compares oxyline with itself.
+
+Measured gaps that the issue's targets do not meet are marked ``xfail(strict=True)`` with the
+number and the reason, and bounded by a separate assertion so that they cannot grow unnoticed.
+"""
+
+from __future__ import annotations
+
+import functools
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "benches"))
+import validate_openbf as V  # noqa: E402
+
+pytestmark = pytest.mark.skipif(not V.OPENBF.is_dir(), reason="../shared/networks/openbf missing")
+
+
+@functools.lru_cache(maxsize=None)
+def _compare(model: str, same_cycle: bool = False) -> list[dict[str, Any]]:
+    return V.compare(model, same_cycle=same_cycle)["rows"]
+
+
+def _worst(rows: list[dict[str, Any]], key: str, tol: float) -> list[str]:
+    bad = [r for r in rows if abs(r[f"{key}_err"]) > tol]
+    bad.sort(key=lambda r: -abs(r[f"{key}_err"]))
+    return [f"{r['vessel']}@x={r['x']:g}: ref {r[f'{key}_ref']:.5g}, oxyline "
+            f"{r[f'{key}_ox']:.5g} ({100 * r[f'{key}_err']:+.2f} %)" for r in bad[:5]]
+
+
+ADAN_Q = ("adan56 mean flow: max 3.1 % (femoral_R_II/femoral_L_II x=0..0.75, 2.1-3.1 %; "
+          "posterior_intercostal_T7_R x=0 2.2 %; posterior_interosseous x=1 2.1 %). The openBF "
+          "reference cycle is not periodic (its pressures still rise 0.6 %/cycle; its own mean "
+          "flow falls 1.4 % along femoral_R_II while the compliance charges) and the 1-D "
+          "friction 2(gamma+2) pi mu Q/A^2 is nonlinear (flow and area peak together), neither "
+          "of which a periodic linear model reproduces")
+ADAN_PP = ("adan56 pulse pressure: max 12.9 % at posterior_interosseous_L/R x=1 (the two most "
+           "peripheral, narrowest forearm outlets, r = 0.9 mm, where the 1-D nonlinear wave "
+           "steepening and the WK3 Riemann coupling of openBF matter most); every other point "
+           "is within 10 % (median 2.3 %)")
+
+
+@pytest.mark.parametrize("model", ["cca", "ibif", "adan56"])
+def test_mean_pressure_within_2_percent(model: str) -> None:
+    rows = _compare(model)
+    bad = _worst(rows, "mean_p", 0.02)
+    assert not bad, f"{model}: mean pressure off by > 2 %: {bad}"
+
+
+@pytest.mark.parametrize("model", [
+    "cca", "ibif", pytest.param("adan56", marks=pytest.mark.xfail(strict=True, reason=ADAN_Q))])
+def test_mean_flow_within_2_percent(model: str) -> None:
+    rows = _compare(model)
+    bad = _worst(rows, "mean_q", 0.02)
+    assert not bad, f"{model}: mean flow off by > 2 %: {bad}"
+
+
+@pytest.mark.parametrize("model", [
+    "cca", "ibif", pytest.param("adan56", marks=pytest.mark.xfail(strict=True, reason=ADAN_PP))])
+def test_pulse_pressure_within_10_percent(model: str) -> None:
+    rows = _compare(model)
+    bad = _worst(rows, "pp", 0.10)
+    assert not bad, f"{model}: pulse pressure off by > 10 %: {bad}"
+
+
+def test_adan56_gaps_stay_bounded() -> None:
+    """The xfails above, bounded: mean flow within 2 % at >= 95 % of the 385 points and within
+    3.5 % everywhere; pulse pressure within 10 % at >= 99 % of points, 14 % everywhere, median
+    below 3 %."""
+    rows = _compare("adan56")
+    q = np.array([abs(r["mean_q_err"]) for r in rows])
+    pp = np.array([abs(r["pp_err"]) for r in rows])
+    assert len(rows) == 77 * 5
+    assert np.mean(q <= 0.02) >= 0.95 and q.max() <= 0.035, (q.max(), np.mean(q <= 0.02))
+    assert np.mean(pp <= 0.10) >= 0.99 and pp.max() <= 0.14, (pp.max(), np.mean(pp <= 0.10))
+    assert np.median(pp) <= 0.03, np.median(pp)
+
+
+COW_TINY = 1e-3  # vessels whose mean flow is below 0.1 % of the inflow: the communicating arteries
+
+
+def test_circle_of_willis_mean_flows_within_5_percent() -> None:
+    rows = [r for r in _compare("circle_of_willis") if r["mean_q_share"] >= COW_TINY]
+    assert len({r["vessel"] for r in rows}) == 31  # all but ACoA and L-PCoA
+    bad = _worst(rows, "mean_q", 0.05)
+    assert not bad, f"circle of Willis: mean flow off by > 5 %: {bad}"
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "31-ACoA carries a net mean flow of 5.7e-8 m^3/s = 0.06 % of the inflow (the difference of "
+    "two nearly equal left/right supplies); oxyline gives 5.4e-8, 6.4 % less. The absolute "
+    "error, 3.7e-9 m^3/s, is 0.003 % of the inflow: the relative error of a near-zero "
+    "difference flow, sensitive to the 1-D model's nonlinear (convective, friction) pressure "
+    "losses, is ill-conditioned. 19-L-PCoA (0.08 %) is within 5 %."))
+def test_circle_of_willis_communicating_artery_flow_within_5_percent() -> None:
+    rows = [r for r in _compare("circle_of_willis") if r["mean_q_share"] < COW_TINY]
+    bad = _worst(rows, "mean_q", 0.05)
+    assert not bad, f"circle of Willis communicating arteries: {bad}"
+
+
+def test_circle_of_willis_small_flows_absolute() -> None:
+    """Where relative errors are ill-conditioned, the absolute error is < 0.05 % of inflow."""
+    rows = _compare("circle_of_willis")
+    err = max(abs(r["mean_q_ox"] - r["mean_q_ref"]) / (r["mean_q_ref"] / r["mean_q_share"])
+              for r in rows if r["mean_q_share"] < COW_TINY)
+    assert err < 5e-4, err
+
+
+def test_same_transient_as_openbf_closes_the_ibif_pressure_gap() -> None:
+    """openBF stops when the cycle-to-cycle change is below 1 mmHg, so its reference cycle is
+    not periodic. Run from rest (openBF's initial state for Pext = 0) for the same 9 cycles,
+    oxyline matches openBF's mean pressures to 0.2 % (1.4 % when run to periodicity)."""
+    rows = _compare("ibif", same_cycle=True)
+    bad = _worst(rows, "mean_p", 0.002)
+    assert not bad, bad
+    bad = _worst(rows, "mean_q", 0.003)
+    assert not bad, bad
