@@ -96,7 +96,7 @@ def reference_cycles(model: str, root: Path = OPENBF) -> int:
     path = root / MODELS[model]
     cfg = yaml.safe_load(path.read_text())
     inlet = path.with_name(cfg.get("inlet_file", f"{cfg['project_name']}_inlet.dat"))
-    return int(round(t[-1] / float(np.loadtxt(inlet)[-1, 0])))
+    return round(t[-1] / float(np.loadtxt(inlet)[-1, 0]))
 
 
 def compare(model: str, root: Path = OPENBF, same_cycle: bool = False,

@@ -22,12 +22,12 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benches"))
-import validate_openbf as V  # noqa: E402
+import validate_openbf as V
 
 pytestmark = pytest.mark.skipif(not V.OPENBF.is_dir(), reason="../shared/networks/openbf missing")
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _compare(model: str, same_cycle: bool = False) -> list[dict[str, Any]]:
     return V.compare(model, same_cycle=same_cycle)["rows"]
 
