@@ -10,7 +10,7 @@ Quick use::
 
 from __future__ import annotations
 
-from oxyline import _core
+from oxyline import _core, models
 from oxyline.errors import (
     ModelError,
     SimulationInterrupted,
@@ -35,5 +35,6 @@ __all__ = [
     "VesselResult",
     "__version__",
     "load_model",
+    "models",
     "simulate",
 ]

@@ -206,9 +206,9 @@ def load_model(source: str | os.PathLike[str] | Mapping[str, Any] | Model) -> Mo
     else:
         p = Path(source)
         if not p.exists() and not p.suffix:
-            from oxyline import examples
+            from oxyline import models  # built-in models, then examples
 
-            return examples.load(str(source))
+            return models.load(str(source))
         data = _read(p)
     if "vessels" not in data and "simulation_parameters" in data:
         from oxyline import svzerod

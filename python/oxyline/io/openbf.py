@@ -99,7 +99,7 @@ def adan_wall_thickness(radius: float | np.ndarray) -> float | np.ndarray:
     h = r (0.2802 exp(-5.053 r[cm]) + 0.1324 exp(-0.1114 r[cm])) (``docs/networks.md`` §3).
 
     >>> round(adan_wall_thickness(0.01) * 1e3, 4)   # 1 cm radius -> mm
-    1.1855
+    1.2023
     """
     r = np.asarray(radius, dtype=float)
     h = r * (0.2802 * np.exp(-505.3 * r) + 0.1324 * np.exp(-11.14 * r))

@@ -1,0 +1,164 @@
+"""Built-in network models, loadable by name.
+
+>>> import oxyline
+>>> "adan56" in oxyline.models.list()
+True
+>>> m = oxyline.models.load("adan56")
+>>> len(m.vessel_names)
+77
+
+Shipped models (converted to oxyline's native YAML in ``oxyline/models_data/``; the openBF model
+library is Apache-2.0, see ``models_data/LICENSE`` and ``models_data/NOTICE`` for citations):
+
+* ``cca`` — common carotid artery, Boileau et al. 2015 benchmark (1 vessel, WK3 outlet);
+* ``aortic-bifurcation`` (alias ``ibif``) — Boileau et al. 2015 aortic bifurcation (3, 2 WK3);
+* ``adan56`` — Boileau et al. 2015 ADAN56 (77 segments, 31 WK3), clean inflow;
+* ``circle-of-willis`` — Alastruey et al. 2007 circle of Willis and main systemic arteries
+  (33 segments with anastomoses, 11 WK2);
+* ``matthys37`` — Matthys et al. 2007 37-artery in-vitro network (16 resistive outlets).
+
+They were converted with :func:`oxyline.io.openbf.to_native_dict` (default options; script
+``benches/make_models_data.py``). Every name listed by :mod:`oxyline.examples` (e.g.
+``bifurcation``) loads as well, and other modules can add models with :func:`register`.
+"""
+
+from __future__ import annotations
+
+import builtins
+from collections.abc import Callable
+from importlib import resources
+from typing import Any
+
+from oxyline.errors import ModelError
+
+_DATA = "oxyline.models_data"
+
+#: name -> (file in models_data, one-line description)
+BUILTIN: dict[str, tuple[str, str]] = {
+    "cca": ("cca.yaml", "Boileau 2015 common carotid artery (openBF), 1 vessel, WK3"),
+    "aortic-bifurcation": ("aortic-bifurcation.yaml",
+                           "Boileau 2015 aortic bifurcation (openBF ibif), 3 vessels, 2 WK3"),
+    "adan56": ("adan56.yaml", "Boileau 2015 ADAN56 (openBF), 77 segments, 31 WK3"),
+    "circle-of-willis": ("circle-of-willis.yaml",
+                         "Alastruey 2007 circle of Willis (openBF), 33 segments, loops, 11 WK2"),
+    "matthys37": ("matthys37.yaml",
+                  "Matthys 2007 37-artery in-vitro network (openBF), 16 resistive outlets"),
+}
+ALIASES: dict[str, str] = {
+    "ibif": "aortic-bifurcation",
+    "circle_of_willis": "circle-of-willis",
+    "cow": "circle-of-willis",
+    "matthys2007": "matthys37",
+    "invitro_model": "matthys37",
+}
+_registered: dict[str, tuple[Callable[[], Any], str]] = {}
+
+
+def register(name: str, loader: Callable[[], Any], description: str = "") -> None:
+    """Add a named model: ``loader()`` returns an :class:`oxyline.Model` or a model dict.
+
+    >>> import oxyline
+    >>> from oxyline import examples
+    >>> oxyline.models.register("tiny", lambda: examples.load("bifurcation"), "demo")
+    >>> oxyline.models.load("tiny").vessel_names[0]
+    'parent'
+    """
+    _registered[name] = (loader, description)
+
+
+def _examples() -> builtins.list[str]:
+    from oxyline import examples
+
+    return builtins.list(examples.names())
+
+
+def list() -> builtins.list[str]:
+    """Names of all built-in models: the shipped networks, the examples and registered ones.
+
+    >>> import oxyline
+    >>> {"cca", "adan56", "bifurcation"} <= set(oxyline.models.list())
+    True
+    """
+    return sorted(set(BUILTIN) | set(_registered) | set(_examples()))
+
+
+def describe() -> dict[str, str]:
+    """Name -> one-line description of every built-in model.
+
+    >>> import oxyline
+    >>> oxyline.models.describe()["adan56"]
+    'Boileau 2015 ADAN56 (openBF), 77 segments, 31 WK3'
+    """
+    out = {name: desc for name, (_f, desc) in BUILTIN.items()}
+    out.update({name: desc for name, (_l, desc) in _registered.items()})
+    for name in _examples():
+        out.setdefault(name, "example (oxyline.examples)")
+    return dict(sorted(out.items()))
+
+
+def _canonical(name: str) -> str:
+    key = name.strip()
+    if key in BUILTIN or key in _registered:
+        return key
+    low = key.lower()
+    if low in ALIASES:
+        return ALIASES[low]
+    hyphen = low.replace("_", "-")
+    if hyphen in BUILTIN:
+        return hyphen
+    return key
+
+
+def path(name: str) -> Any:
+    """Path (importlib resource) of a shipped model file.
+
+    >>> import oxyline
+    >>> oxyline.models.path("cca").name
+    'cca.yaml'
+    """
+    key = _canonical(name)
+    if key not in BUILTIN:
+        raise ModelError(f"'{name}': not a shipped model file (shipped: {', '.join(BUILTIN)})")
+    return resources.files(_DATA) / BUILTIN[key][0]
+
+
+def load_dict(name: str) -> dict[str, Any]:
+    """A shipped model as a native model dict (SI), e.g. to edit before loading.
+
+    >>> import oxyline
+    >>> d = oxyline.models.load_dict("cca")
+    >>> d["vessels"][0]["name"]
+    'common_carotid_artery'
+    """
+    import yaml
+
+    data = yaml.safe_load(path(name).read_text())
+    if not isinstance(data, dict):
+        raise ModelError(f"built-in model '{name}': corrupted file")
+    return data
+
+
+def load(name: str) -> Any:
+    """Load a built-in model (shipped network, registered model or example) by name.
+
+    >>> import oxyline
+    >>> oxyline.models.load("aortic-bifurcation").vessel_names
+    ['parent', 'd1', 'd2']
+    """
+    from oxyline.model import Model, load_model
+
+    key = _canonical(name)
+    if key in _registered:
+        out = _registered[key][0]()
+        return out if isinstance(out, Model) else load_model(out)
+    if key in BUILTIN:
+        return load_model(load_dict(key))
+    if key in _examples():
+        from oxyline import examples
+
+        return examples.load(key)
+    raise ModelError(f"'{name}': neither a file nor a built-in model "
+                     f"(built-ins: {', '.join(list())})")
+
+
+__all__ = ["ALIASES", "BUILTIN", "describe", "list", "load", "load_dict", "path", "register"]

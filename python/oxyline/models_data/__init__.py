@@ -1,0 +1,1 @@
+"""Data files of the built-in models (see oxyline.models and NOTICE)."""
