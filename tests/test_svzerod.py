@@ -437,9 +437,6 @@ def test_blood_vessel_junction_branches_are_hidden() -> None:
     assert svz.run_settings(case("pulsatileFlow_bifurcationR_RCR_cycle_error")).cycles == 33
 
 
-@pytest.mark.xfail(strict=True, reason="oxyline.load_model routes a dict to oxyline.svzerod only "
-                   "when it has no 'vessels' key (python/oxyline/model.py, load_model), but "
-                   "svZeroDSolver inputs have one")
 def test_load_model_accepts_svzerod_input() -> None:
     model = oxyline.load_model(config("steadyFlow_R_R"))
     assert model.vessel_names == ["branch0_seg0"]

@@ -210,7 +210,7 @@ def load_model(source: str | os.PathLike[str] | Mapping[str, Any] | Model) -> Mo
 
             return models.load(str(source))
         data = _read(p)
-    if "vessels" not in data and "simulation_parameters" in data:
+    if "simulation_parameters" in data:  # an svZeroDSolver input
         from oxyline import svzerod
 
         return svzerod.to_model(data)
