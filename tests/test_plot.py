@@ -1,0 +1,196 @@
+"""oxyline.plot rendered headless: valid non-empty PNG/SVG, labelled axes with units, no
+overlapping text, profile values equal to the result's."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from itertools import combinations
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import oxyline
+
+os.environ.setdefault("MPLBACKEND", "Agg")
+matplotlib = pytest.importorskip("matplotlib")
+matplotlib.use("Agg")
+plot = pytest.importorskip("oxyline.plot")
+MMHG = 133.322368
+
+
+@pytest.fixture(scope="module")
+def result() -> oxyline.Result:
+    return oxyline.simulate("bifurcation", cycles=2)
+
+
+@pytest.fixture(scope="module")
+def model() -> oxyline.Model:
+    return oxyline.load_model("bifurcation")
+
+
+def _check_png(p: Path) -> None:
+    data = p.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    width, height = int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+    assert width > 300 and height > 200
+    # not a blank canvas: the decoded image has many distinct colours
+    img = matplotlib.image.imread(p)
+    assert len(np.unique(img.reshape(-1, img.shape[-1]), axis=0)) > 20
+
+
+def _check_svg(p: Path) -> None:
+    root = ET.parse(p).getroot()
+    assert root.tag.endswith("svg")
+    assert len(list(root.iter())) > 50
+
+
+def _save(fig: object, tmp_path: Path, name: str) -> None:
+    for ext, check in (("png", _check_png), ("svg", _check_svg)):
+        p = tmp_path / f"{name}.{ext}"
+        fig.savefig(p, dpi=100)  # type: ignore[attr-defined]
+        check(p)
+
+
+def _drawn_texts(fig: object) -> list[object]:
+    """Texts matplotlib draws: tick labels in view, axis labels, titles, legends, annotations."""
+    out = list(fig.texts)  # type: ignore[attr-defined]
+    if fig._suptitle is not None:  # type: ignore[attr-defined]
+        out.append(fig._suptitle)  # type: ignore[attr-defined]
+    for leg in fig.legends:  # type: ignore[attr-defined]
+        out += [*leg.get_texts(), leg.get_title()]
+    for ax in fig.axes:  # type: ignore[attr-defined]
+        for axis in (ax.xaxis, ax.yaxis):
+            if axis.get_visible() and ax.axison:
+                drawn = axis._update_ticks()  # the ticks inside the view, as draw() uses them
+                out += [lab for tick in drawn for lab in (tick.label1, tick.label2)
+                        if lab.get_visible()]
+                out += [axis.label, axis.get_offset_text()]
+        out += [ax.title, ax._left_title, ax._right_title, *ax.texts]
+        if ax.get_legend() is not None:
+            out += [*ax.get_legend().get_texts(), ax.get_legend().get_title()]
+    return out
+
+
+def _assert_no_text_overlap(fig: object) -> None:
+    fig.canvas.draw()  # type: ignore[attr-defined]
+    renderer = fig.canvas.get_renderer()  # type: ignore[attr-defined]
+    unique = {id(t): t for t in _drawn_texts(fig)}.values()
+    texts = [t for t in unique if t.get_visible() and t.get_text().strip()]
+    boxes = [(t.get_text(), t.get_window_extent(renderer)) for t in texts]
+    for (ta, a), (tb, b) in combinations(boxes, 2):
+        assert not a.overlaps(b), f"texts overlap: {ta!r} and {tb!r}"
+    assert len(boxes) > 5
+
+
+def test_waveforms(result: oxyline.Result, tmp_path: Path) -> None:
+    fig = plot.waveforms(result, ["parent", "daughter1"])
+    ax_p, ax_q = fig.axes[:2]
+    assert ax_p.get_ylabel() == "pressure [mmHg]" and ax_q.get_ylabel() == "flow [mL/s]"
+    assert ax_q.get_xlabel() == "time [s]"
+    np.testing.assert_allclose(ax_p.lines[0].get_ydata(), result.vessel("parent").pressure_in
+                               / MMHG)
+    np.testing.assert_allclose(ax_q.lines[1].get_ydata(), result.vessel("daughter1").flow_in * 1e6)
+    assert [t.get_text() for t in fig.legends[0].get_texts()] == ["parent", "daughter1"]
+    _assert_no_text_overlap(fig)
+    _save(fig, tmp_path, "waveforms")
+    with pytest.raises(ValueError, match="no per-vessel variable for 'po2'"):
+        plot.waveforms(result, "parent", quantities=("po2",))
+    with pytest.raises(KeyError, match="vessel 'nope'"):
+        plot.waveforms(result, ["nope"])
+
+
+def test_profile_follows_the_path(result: oxyline.Result, model: oxyline.Model,
+                                  tmp_path: Path) -> None:
+    assert plot.path(model, "ica_out") == ["parent", "daughter1"]
+    assert plot.path(model, "daughter2") == ["parent", "daughter2"]
+    d = plot.profile_data(result, model, "ica_out", "pressure")
+    # 10 + 10 segments: 11 points on the parent, 11 on daughter1, ending at 12.68 cm
+    assert len(d["distance"]) == 22 and d["distance"][-1] == pytest.approx(0.0645 + 0.0623)
+    t = result.time
+    p0 = np.trapezoid(result.vessel("parent").pressure_in, t) / t[-1]
+    p_end = np.trapezoid(result.vessel("daughter1").pressure_out, t) / t[-1]
+    assert d["mean"][0] == pytest.approx(p0, rel=1e-12)
+    assert d["mean"][-1] == pytest.approx(p_end, rel=1e-12)
+    assert np.all(np.diff(d["mean"]) <= 1e-9)  # mean pressure falls along the path
+    fig = plot.profile(result, model, "ica_out", ["pressure", "flow"])
+    assert fig.axes[0].get_ylabel() == "pressure [mmHg]"
+    assert fig.axes[1].get_xlabel() == "distance from the inlet [cm]"
+    _assert_no_text_overlap(fig)
+    _save(fig, tmp_path, "profile")
+
+
+def test_network_map(result: oxyline.Result, model: oxyline.Model, tmp_path: Path) -> None:
+    fig = plot.network_map(model, result=result, values="pressure")
+    cbar_ax = fig.axes[-1]
+    assert cbar_ax.get_ylabel().endswith("[mmHg]")
+    _assert_no_text_overlap(fig)
+    _save(fig, tmp_path, "map")
+    fig = plot.network_map(model, values={"parent": 1.0, "daughter1": 2.0, "daughter2": 3.0},
+                           label="test value", units="a.u.", layout="tree")
+    assert fig.axes[-1].get_ylabel() == "test value [a.u.]"
+    with pytest.raises(ValueError, match="3 vessels"):
+        plot.network_map(model, values=[1.0, 2.0])
+
+
+def test_network_map_of_a_larger_tree_with_a_loop(tmp_path: Path) -> None:
+    vessels = [{"name": "root", "from": "in", "to": "n", "length": 0.05, "radius": 0.01}]
+    bcs = {"in": {"type": "flow", "value": 1e-5}}
+    frontier = ["n"]
+    for level in range(4):
+        nxt = []
+        for node in frontier:
+            for k in range(2):
+                child = f"{node}{k}"
+                vessels.append({"name": f"v{child}", "from": node, "to": child, "length": 0.03,
+                                "radius": 0.008 * 0.8**level})
+                nxt.append(child)
+        frontier = nxt
+    for node in frontier:
+        bcs[node] = {"type": "resistance", "resistance": 1e9}
+    vessels.append({"name": "bridge", "from": "n00", "to": "n01", "length": 0.02, "radius": 0.002})
+    m = oxyline.load_model({"name": "tree", "vessels": vessels, "boundary_conditions": bcs})
+    for layout in ("auto", "tree"):
+        fig = plot.network_map(m, layout=layout)
+        _assert_no_text_overlap(fig)
+        fig.savefig(tmp_path / f"tree_{layout}.png", dpi=60)
+        _check_png(tmp_path / f"tree_{layout}.png")
+        matplotlib.pyplot.close(fig)
+
+
+def test_po2_is_plotted_when_present(result: oxyline.Result) -> None:
+    class WithPO2(oxyline.Result):
+        def to_xarray(self):  # type: ignore[no-untyped-def]
+            ds = super().to_xarray()
+            ds["po2_in"] = (("time", "vessel"), np.full(ds["pressure_in"].shape, 85.0),
+                            {"units": "mmHg"})
+            ds["po2_out"] = (("time", "vessel"), np.full(ds["pressure_in"].shape, 80.0),
+                             {"units": "mmHg"})
+            return ds
+
+    r = WithPO2(result.model_name, result.vessels, result.time, result.data,
+                result.segment_count, result.segment_position, result.settings)
+    fig = plot.waveforms(r, "parent", quantities=("po2",))
+    assert fig.axes[0].get_ylabel() == "PO$_2$ [mmHg]"
+    d = plot.profile_data(r, "bifurcation", "ica_out", "po2")  # vessel ends only
+    np.testing.assert_allclose(d["mean"], [85.0, 80.0, 85.0, 80.0])
+    assert r.summary().loc["parent", "po2_out_mean"] == pytest.approx(80.0)
+
+
+def test_save_figures_writes_png_and_svg(result: oxyline.Result, model: oxyline.Model,
+                                         tmp_path: Path) -> None:
+    files = plot.save_figures(result, model, tmp_path / "figs", dpi=60)
+    assert sorted(p.name for p in files) == sorted(
+        f"{n}.{e}" for n in ("waveforms", "profile", "network_map") for e in ("png", "svg"))
+    for p in files:
+        (_check_png if p.suffix == ".png" else _check_svg)(p)
+
+
+def test_import_oxyline_does_not_import_matplotlib() -> None:
+    code = ("import sys, oxyline, oxyline.io; "
+            "print('matplotlib' in sys.modules, 'oxyline.plot' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["False", "False"]
