@@ -8,8 +8,8 @@ Phases (each timed separately, in one process, after an untimed warm-up import o
 * ``build``: ``oxyline.model._build``: validation, JSON to the core, Rust circuit assembly
   (``core`` is the Rust ``Network`` construction alone, on the same JSON);
 * ``run 1 cycle`` and ``run k cycles``: the Rust run (``Network.simulate`` with the drop-in's
-  settings); their difference gives the cost per step, the rest is setup (steady start, LU
-  analysis, first factorisation);
+  settings); their difference in CPU time gives the cost per step, the rest is setup (steady start,
+  LU analysis, first factorisation);
 * ``frame (drop-in)``: the whole ``oxyline.svzerod.simulate`` minus convert, build and run,
   i.e. the DataFrame construction; ``frame (long_table)`` builds the same table with
   ``oxyline.result.long_table``.
@@ -48,7 +48,8 @@ def main() -> int:
     from oxyline.result import long_table
 
     print("| topology | N | unknowns | convert s | build s | core s | run 1 cycle s "
-          f"| run {args.cycles} cycles s | setup s | ns / (vessel step) | ns / (unknown step) "
+          f"| run {args.cycles} cycles s | setup CPU s | CPU ns / (vessel step) "
+          "| CPU ns / (unknown step) "
           "| frame (drop-in) s | frame (long_table) s | simulate() s |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for n in [int(float(s)) for s in args.sizes.split(",")]:
@@ -66,14 +67,15 @@ def main() -> int:
                   "newton_atol": s.absolute_tolerance, "max_iterations": s.max_iterations,
                   "output_all_cycles": False, "segments": False, "dt": s.dt,
                   "output_every": s.dt * s.output_interval}
-            runs = {}
+            runs, cpu = {}, {}
             for c in (1, args.cycles):
-                ta = time.perf_counter()
+                ta, ca = time.perf_counter(), time.process_time()
                 raw = model.network.simulate(cycles=c, **kw)
-                runs[c] = time.perf_counter() - ta
+                runs[c], cpu[c] = time.perf_counter() - ta, time.process_time() - ca
             steps = s.points_per_cycle - 1
-            per_step = (runs[args.cycles] - runs[1]) / (steps * (args.cycles - 1))
-            setup = runs[1] - per_step * steps
+            # per-step cost and setup from CPU time (robust to other processes on the machine)
+            per_step = (cpu[args.cycles] - cpu[1]) / (steps * (args.cycles - 1))
+            setup = cpu[1] - per_step * steps
             unknowns = model.network.summary()["unknowns"]
             names = [v["name"] for v in native["vessels"] if v.get("output", True)]
             data = np.asarray(raw["data"])
