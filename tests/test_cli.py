@@ -1,0 +1,156 @@
+"""The oxyline command line end to end in a temporary directory: run (-o .nc/.zarr, --summary,
+--plot), validate, convert between formats, models, info, and exit code 2 with messages naming
+the file, vessel and key."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import oxyline
+from oxyline.cli import main
+
+EXAMPLE = Path(oxyline.__file__).parent / "examples" / "bifurcation.yaml"
+
+
+def test_run_end_to_end_writes_netcdf_summary_and_figures(tmp_path: Path) -> None:
+    xr = pytest.importorskip("xarray")
+    pytest.importorskip("matplotlib")
+    env = {**os.environ, "MPLBACKEND": "Agg"}
+    out = subprocess.run(
+        [sys.executable, "-m", "oxyline.cli", "run", "bifurcation", "--cycles", "2", "-o",
+         "out.nc", "--summary", "summary.csv", "--plot", "figs"],
+        cwd=tmp_path, capture_output=True, text=True, env=env, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert "results written to out.nc" in out.stdout and "6 figures written to figs" in out.stdout
+    with xr.open_dataset(tmp_path / "out.nc", engine="h5netcdf") as ds:
+        q = ds["flow_in"].sel(vessel="parent").values
+        t = ds["time"].values
+        assert np.trapezoid(q, t) / t[-1] == pytest.approx(6e-6, rel=1e-4)  # Fourier mean
+        assert ds.attrs["model"] == "bifurcation" and ds.attrs["solver_cycles"] == 2
+    summary = (tmp_path / "summary.csv").read_text()
+    assert summary.startswith("# oxyline summary") and "daughter2," in summary
+    figs = sorted(p.name for p in (tmp_path / "figs").iterdir())
+    assert figs == ["network_map.png", "network_map.svg", "profile.png", "profile.svg",
+                    "waveforms.png", "waveforms.svg"]
+    assert all((tmp_path / "figs" / f).stat().st_size > 1000 for f in figs)
+
+
+def test_run_zarr_and_csv_outputs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("zarr")
+    xr = pytest.importorskip("xarray")
+    assert main(["run", str(EXAMPLE), "--cycles", "1", "-o", str(tmp_path / "r.zarr"),
+                 "--quiet"]) == 0
+    ds = xr.open_zarr(tmp_path / "r.zarr")
+    assert list(ds["vessel"].values) == ["parent", "daughter1", "daughter2"]
+    assert main(["run", "bifurcation", "--cycles", "1", "-o", str(tmp_path / "r.csv"),
+                 "--quiet"]) == 0
+    header = (tmp_path / "r.csv").read_text().splitlines()[0]
+    assert header == "name,time,flow_in,flow_out,pressure_in,pressure_out"
+
+
+def test_validate_prints_the_analytic_compliance(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["validate", str(EXAMPLE)]) == 0
+    out = capsys.readouterr().out
+    lines = dict(line.split(None, 1) for line in out.splitlines() if line.strip())
+    assert lines["vessels"].strip() == "3" and lines["segments"].strip() == "30"
+    # thin-wall compliance 2 pi r^3 (1 - nu^2) L / (E h), summed over the three vessels
+    c = sum(2 * math.pi * r**3 * (1 - 0.49**2) * length / (5e5 * 7e-4)
+            for r, length in ((0.003, 0.0645), (0.0025, 0.0623), (0.002, 0.062)))
+    printed = float(out.split("total compliance")[1].split()[0])
+    assert printed == pytest.approx(c, rel=1e-4)
+
+
+def test_convert_between_all_formats(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    ref = oxyline.load_model(EXAMPLE)
+    steps = [(str(EXAMPLE), "a.json", []), ("a.json", "b.csv", []), ("b.csv", "c.tsv", []),
+             ("c.tsv", "d.yaml", [])]
+    for src, dst, extra in steps:
+        src_path = src if os.path.isabs(src) else str(tmp_path / src)
+        assert main(["convert", src_path, str(tmp_path / dst), *extra]) == 0
+    assert oxyline.load_model(tmp_path / "d.yaml").canonical == ref.canonical
+    assert (tmp_path / "b_bcs.csv").exists() and (tmp_path / "c_bcs.tsv").exists()
+    # svZeroDSolver export (cgs by default) and back through oxyline's svZeroDSolver importer
+    assert main(["convert", str(tmp_path / "d.yaml"), str(tmp_path / "sv.json"), "--to",
+                 "svzerod"]) == 0
+    sv = json.loads((tmp_path / "sv.json").read_text())
+    assert len(sv["vessels"]) == 30 and sv["boundary_conditions"][1]["bc_type"] == "RESISTANCE"
+    assert sv["boundary_conditions"][1]["bc_values"]["R"] == pytest.approx(2.8931e9 / 1e5)
+    assert main(["convert", str(tmp_path / "sv.json"), str(tmp_path / "sv.yaml")]) == 0
+    assert len(oxyline.load_model(tmp_path / "sv.yaml").vessel_names) == 30
+
+
+def test_convert_openbf_input(shared: Path, tmp_path: Path) -> None:
+    pytest.importorskip("oxyline.io.openbf")
+    src = shared / "networks/openbf/models/boileau2015/ibif/ibif.yaml"
+    assert main(["convert", str(src), str(tmp_path / "ibif.yaml")]) == 0
+    m = oxyline.load_model(tmp_path / "ibif.yaml")
+    assert len(m.vessel_names) == 3 and m.period == pytest.approx(1.1)
+    assert main(["run", str(src), "--cycles", "1", "--quiet"]) == 0
+
+
+def test_openbf_without_the_importer_is_a_clear_error(
+        shared: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setitem(sys.modules, "oxyline.io.openbf", None)  # import fails
+    src = shared / "networks/openbf/models/boileau2015/ibif/ibif.yaml"
+    assert main(["convert", str(src), str(tmp_path / "x.yaml")]) == 2
+    assert "openBF importer" in capsys.readouterr().err
+
+
+def test_models_and_info(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["models"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    try:
+        from oxyline import models
+
+        assert len(lines) == len(list(models.list())) > 0  # one line per built-in model
+    except ImportError:
+        assert "bifurcation" in lines
+    assert main(["info"]) == 0
+    assert oxyline.__version__ in capsys.readouterr().out
+
+
+def _bad(tmp_path: Path, old: str, new: str) -> Path:
+    p = tmp_path / "bad.yaml"
+    text = EXAMPLE.read_text()
+    assert old in text
+    p.write_text(text.replace(old, new, 1))
+    return p
+
+
+@pytest.mark.parametrize("cmd", ["run", "validate", "convert"])
+def test_bad_input_exits_2_naming_file_vessel_and_key(
+        cmd: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bad = _bad(tmp_path, "length: 0.0623", "length: -0.0623")
+    args = [cmd, str(bad)] + ([str(tmp_path / "o.json")] if cmd == "convert" else [])
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and str(bad) in err
+    assert "vessel 'daughter1'" in err and "length" in err
+
+
+def test_bad_input_messages(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bad = _bad(tmp_path, "radius: 0.0025,", "radius: 0.0025, colour: red,")
+    assert main(["validate", str(bad)]) == 2
+    assert "vessel 'daughter1': unknown key 'colour'" in capsys.readouterr().err
+    table = tmp_path / "t.csv"
+    table.write_text("name,from,to,length,radius\nA,in,out,0.1,0.003\nB,out,x,1 cm,0.002\n")
+    assert main(["validate", str(table)]) == 2
+    assert "row 2 (vessel 'B'): column 'length'" in capsys.readouterr().err
+    assert main(["validate", str(tmp_path / "missing.yaml")]) == 2
+    assert "missing.yaml: file not found" in capsys.readouterr().err
+    assert main(["run", str(EXAMPLE), "-o", str(tmp_path / "out.xyz")]) == 2
+    assert "out.xyz: output must end in" in capsys.readouterr().err
+    assert main(["convert", str(EXAMPLE), str(tmp_path / "out.xyz")]) == 2
+    assert "cannot tell the output format" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:  # argparse usage errors are exit code 2 as well
+        main(["run"])
+    assert exc.value.code == 2
