@@ -18,6 +18,37 @@ pub struct Node {
     pub volume: f64,
     /// svZeroDSolver's steady initialisation removes Windkessel capacitances.
     pub windkessel: bool,
+    /// Lumen (wall) area lumped into this node (m²), with the same shares as `volume`.
+    pub wall_area: f64,
+    /// Set for nodes that belong to a boundary condition (index into `Circuit::boundaries`):
+    /// they are outside the transport domain.
+    pub boundary: Option<usize>,
+}
+
+/// A boundary condition as seen by species transport.
+#[derive(Debug, Clone)]
+pub struct BoundaryTag {
+    pub name: String,
+    /// At a vessel's inlet end (inflow carries the inlet concentration) or outlet end.
+    pub inlet: bool,
+}
+
+/// Geometry of one flow segment, kept for species transport (wall closures, reporting).
+#[derive(Debug, Clone)]
+pub struct SegmentGeom {
+    /// Index into `Circuit::vessel_names`.
+    pub vessel: usize,
+    /// The branch carrying the segment's flow (its downstream face for inverted-L).
+    pub branch: usize,
+    /// Nodes holding the segment's volume, compliance and wall area, with their shares.
+    pub nodes: [(usize, f64); 2],
+    /// Mean radius (m); 0 for lumped segments (no wall exchange).
+    pub radius: f64,
+    /// Distance of the segment ends from the vessel inlet (m).
+    pub x0: f64,
+    pub x1: f64,
+    pub volume: f64,
+    pub compliance: f64,
 }
 
 #[derive(Debug, Clone)]
@@ -60,6 +91,11 @@ pub struct Circuit {
     pub sources: Vec<(usize, Waveform)>,
     /// Prescribed node pressures (Pa): pressure BCs and the distal pressure of outlets.
     pub fixed_pressures: Vec<(usize, Waveform)>,
+    /// Boundary conditions (transport); `source_boundary[k]` tags `sources[k]`.
+    pub boundaries: Vec<BoundaryTag>,
+    pub source_boundary: Vec<usize>,
+    pub segments: Vec<SegmentGeom>,
+    pub vessel_names: Vec<String>,
 }
 
 /// Which forcing and capacitances to use: the real ones, or the steady (mean) ones.
@@ -74,7 +110,14 @@ pub enum Regime {
 
 impl Circuit {
     pub fn add_node(&mut self, name: impl Into<String>, capacitance: f64, volume: f64) -> usize {
-        self.nodes.push(Node { name: name.into(), capacitance, volume, windkessel: false });
+        self.nodes.push(Node {
+            name: name.into(),
+            capacitance,
+            volume,
+            windkessel: false,
+            wall_area: 0.0,
+            boundary: None,
+        });
         self.nodes.len() - 1
     }
     pub fn add_branch(
@@ -86,7 +129,14 @@ impl Circuit {
         inductance: f64,
         stenosis: f64,
     ) -> usize {
-        self.branches.push(Branch { name: name.into(), from, to, resistance, inductance, stenosis });
+        self.branches.push(Branch {
+            name: name.into(),
+            from,
+            to,
+            resistance,
+            inductance,
+            stenosis,
+        });
         self.branches.len() - 1
     }
     pub fn n_unknowns(&self) -> usize {
@@ -107,7 +157,10 @@ impl Circuit {
         let mut fixed = vec![None; nn];
         for (k, (node, _)) in self.fixed_pressures.iter().enumerate() {
             if fixed[*node].is_some() {
-                return Err(Error::model(&self.nodes[*node].name, "has two pressure conditions"));
+                return Err(Error::model(
+                    &self.nodes[*node].name,
+                    "has two pressure conditions",
+                ));
             }
             fixed[*node] = Some(k);
         }
@@ -129,7 +182,11 @@ impl Circuit {
             inc[fill[b.to]] = (nn + bi, -1.0);
             fill[b.to] += 1;
         }
-        let mut f = Csr { ptr: Vec::with_capacity(n + 1), col: Vec::new(), val: Vec::new() };
+        let mut f = Csr {
+            ptr: Vec::with_capacity(n + 1),
+            col: Vec::new(),
+            val: Vec::new(),
+        };
         f.ptr.push(0);
         for i in 0..nn {
             if fixed[i].is_some() {
@@ -175,11 +232,22 @@ impl Circuit {
         for (node, w) in &self.fixed_pressures {
             forcing.push((*node, w.clone()));
         }
-        Ok(Dae { n, n_nodes: nn, e, windkessel, f, stenosis, forcing, names: self.unknown_names() })
+        Ok(Dae {
+            n,
+            n_nodes: nn,
+            e,
+            windkessel,
+            f,
+            stenosis,
+            forcing,
+            names: self.unknown_names(),
+        })
     }
 
     fn unknown_names(&self) -> Vec<String> {
-        (0..self.n_unknowns()).map(|i| self.unknown_name(i)).collect()
+        (0..self.n_unknowns())
+            .map(|i| self.unknown_name(i))
+            .collect()
     }
 }
 
@@ -219,7 +287,11 @@ impl Dae {
     pub fn forcing_into(&self, t: f64, regime: Regime, out: &mut [f64]) {
         out.iter_mut().for_each(|x| *x = 0.0);
         for (row, w) in &self.forcing {
-            out[*row] += if regime == Regime::Transient { w.eval(t) } else { w.mean() };
+            out[*row] += if regime == Regime::Transient {
+                w.eval(t)
+            } else {
+                w.mean()
+            };
         }
     }
 
@@ -235,6 +307,9 @@ impl Dae {
 
     /// Period implied by the time-varying boundary conditions, checked for consistency.
     pub fn period(&self) -> Option<f64> {
-        self.forcing.iter().filter_map(|(_, w)| w.period()).reduce(f64::max)
+        self.forcing
+            .iter()
+            .filter_map(|(_, w)| w.period())
+            .reduce(f64::max)
     }
 }

@@ -17,7 +17,10 @@ pub struct NewtonControl {
 
 impl Default for NewtonControl {
     fn default() -> Self {
-        NewtonControl { atol: None, max_iter: 30 }
+        NewtonControl {
+            atol: None,
+            max_iter: 30,
+        }
     }
 }
 
@@ -81,7 +84,10 @@ impl<'a> GenAlpha<'a> {
         control: NewtonControl,
     ) -> Result<Self> {
         if !(0.0..=1.0).contains(&rho_inf) {
-            return Err(Error::model("simulation", format!("rho_infty must be in [0, 1], got {rho_inf}")));
+            return Err(Error::model(
+                "simulation",
+                format!("rho_infty must be in [0, 1], got {rho_inf}"),
+            ));
         }
         let am = 0.5 * (3.0 - rho_inf) / (1.0 + rho_inf);
         let af = 1.0 / (1.0 + rho_inf);
@@ -113,12 +119,21 @@ impl<'a> GenAlpha<'a> {
         let c = self.af * self.gamma * self.dt;
         let diag: Vec<f64> = self.e.iter().map(|e| self.am * e).collect();
         jacobian_values(self.dae, c, &diag, &self.y_af, &mut self.kvals);
-        self.lu.factor(&self.kvals).map_err(|m| singular(time, &m))?;
+        self.lu
+            .factor(&self.kvals)
+            .map_err(|m| singular(time, &m))?;
         self.factored = true;
         Ok(())
     }
 
+    /// α_f: the level at which the residual (and so the face flows for transport) is enforced.
+    pub fn alpha_f(&self) -> f64 {
+        self.af
+    }
+
     /// Advance (y, ẏ) from `time` to `time + dt` in place.
+    // index loops over several parallel vectors read more clearly than zipped iterators here
+    #[allow(clippy::needless_range_loop)]
     pub fn step(&mut self, time: f64, y: &mut [f64], yd: &mut [f64]) -> Result<()> {
         let (am, af, gamma, dt) = (self.am, self.af, self.gamma, self.dt);
         let n = self.dae.n;
@@ -173,7 +188,10 @@ impl<'a> GenAlpha<'a> {
         if !converged {
             return Err(Error::solver(
                 t_af,
-                format!("Newton did not converge in {} iterations", self.control.max_iter),
+                format!(
+                    "Newton did not converge in {} iterations",
+                    self.control.max_iter
+                ),
             ));
         }
         y.copy_from_slice(&self.y_new);

@@ -2,18 +2,25 @@
 //! integrated with RK4 or generalized-α. Pure Rust; the Python binding lives in `oxyline-py`.
 
 pub mod circuit;
+pub mod closure;
 pub mod error;
 pub mod frequency;
 pub mod genalpha;
+mod graetz;
+pub mod hemoglobin;
 pub mod network;
 pub mod rk4;
 pub mod segment;
 pub mod simulate;
 pub mod sparse;
 pub mod stability;
+pub mod transport;
 pub mod waveform;
 
 pub use circuit::{Circuit, Dae, Regime};
 pub use error::{Error, Result};
 pub use network::{Assembled, NetworkSpec, Probes, Summary};
-pub use simulate::{Method, Outcome, RunSettings, Start, simulate};
+pub use simulate::{
+    Method, Outcome, RunSettings, Start, TransportOutcome, simulate, simulate_with_transport,
+};
+pub use transport::{Transport, TransportSpec};

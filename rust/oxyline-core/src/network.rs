@@ -2,7 +2,7 @@
 //! ends) and its assembly into a circuit with output probes. Input is the canonical SI JSON
 //! written by the Python layer (or any other front end).
 
-use crate::circuit::Circuit;
+use crate::circuit::{BoundaryTag, Circuit, SegmentGeom};
 use crate::error::{Error, Result};
 use crate::segment::{Blood, InertanceProfile, Wall, WallModel, segment_rlc};
 use crate::waveform::{Waveform, WaveformSpec};
@@ -42,7 +42,10 @@ fn default_viscosity() -> f64 {
 }
 impl Default for BloodSpec {
     fn default() -> Self {
-        BloodSpec { density: default_density(), viscosity: default_viscosity() }
+        BloodSpec {
+            density: default_density(),
+            viscosity: default_viscosity(),
+        }
     }
 }
 
@@ -99,9 +102,17 @@ fn yes() -> bool {
 #[derive(Debug, Clone, Deserialize)]
 #[serde(tag = "type", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum BoundarySpec {
-    Flow { flow: WaveformSpec },
-    Pressure { pressure: WaveformSpec },
-    Resistance { resistance: f64, #[serde(default)] pressure: Option<WaveformSpec> },
+    Flow {
+        flow: WaveformSpec,
+    },
+    Pressure {
+        pressure: WaveformSpec,
+    },
+    Resistance {
+        resistance: f64,
+        #[serde(default)]
+        pressure: Option<WaveformSpec>,
+    },
     Rcr {
         proximal_resistance: f64,
         capacitance: f64,
@@ -130,6 +141,9 @@ pub struct NetworkSpec {
     pub boundary_conditions: BTreeMap<String, BoundarySpec>,
     #[serde(default = "yes")]
     pub output_segments: bool,
+    /// Species transport (oxygen and other solutes); absent for flow-only models.
+    #[serde(default)]
+    pub transport: Option<crate::transport::TransportSpec>,
 }
 
 /// Where each output variable lives in the unknown vector.
@@ -177,13 +191,19 @@ pub struct Assembled {
 
 fn check_positive(element: &str, key: &str, v: f64) -> Result<()> {
     if !(v.is_finite() && v > 0.0) {
-        return Err(Error::model(element, format!("{key} must be a finite number > 0, got {v}")));
+        return Err(Error::model(
+            element,
+            format!("{key} must be a finite number > 0, got {v}"),
+        ));
     }
     Ok(())
 }
 fn check_nonnegative(element: &str, key: &str, v: f64) -> Result<()> {
     if !(v.is_finite() && v >= 0.0) {
-        return Err(Error::model(element, format!("{key} must be a finite number >= 0, got {v}")));
+        return Err(Error::model(
+            element,
+            format!("{key} must be a finite number >= 0, got {v}"),
+        ));
     }
     Ok(())
 }
@@ -209,7 +229,10 @@ pub fn parse(json: &str) -> Result<NetworkSpec> {
 
 impl NetworkSpec {
     pub fn assemble(&self) -> Result<Assembled> {
-        let blood = Blood { density: self.blood.density, viscosity: self.blood.viscosity };
+        let blood = Blood {
+            density: self.blood.density,
+            viscosity: self.blood.viscosity,
+        };
         check_positive("blood", "density", blood.density)?;
         check_positive("blood", "viscosity", blood.viscosity)?;
         if let Some(m) = self.max_segment_length {
@@ -229,10 +252,16 @@ impl NetworkSpec {
                 return Err(Error::model(format!("vessel #{vi}"), "has an empty name"));
             }
             if let Some(prev) = seen_vessel.insert(&v.name, vi) {
-                return Err(Error::model(&el, format!("name used twice (vessels #{prev} and #{vi})")));
+                return Err(Error::model(
+                    &el,
+                    format!("name used twice (vessels #{prev} and #{vi})"),
+                ));
             }
             if v.from == v.to {
-                return Err(Error::model(&el, format!("starts and ends at the same node '{}'", v.from)));
+                return Err(Error::model(
+                    &el,
+                    format!("starts and ends at the same node '{}'", v.from),
+                ));
             }
             for (name, inlet) in [(&v.from, true), (&v.to, false)] {
                 let k = *node_index.entry(name.as_str()).or_insert_with(|| {
@@ -244,7 +273,7 @@ impl NetworkSpec {
             }
         }
         // boundary conditions sit on free vessel ends
-        for (node, _) in &self.boundary_conditions {
+        for node in self.boundary_conditions.keys() {
             let Some(&k) = node_index.get(node.as_str()) else {
                 return Err(Error::model(
                     format!("boundary condition '{node}'"),
@@ -252,10 +281,16 @@ impl NetworkSpec {
                 ));
             };
             if ends[k].len() > 1 {
-                let names: Vec<&str> = ends[k].iter().map(|(v, _)| self.vessels[*v].name.as_str()).collect();
+                let names: Vec<&str> = ends[k]
+                    .iter()
+                    .map(|(v, _)| self.vessels[*v].name.as_str())
+                    .collect();
                 return Err(Error::model(
                     format!("boundary condition '{node}'"),
-                    format!("is on an internal node joining vessels {}", names.join(", ")),
+                    format!(
+                        "is on an internal node joining vessels {}",
+                        names.join(", ")
+                    ),
                 ));
             }
         }
@@ -288,7 +323,11 @@ impl NetworkSpec {
                 ));
             }
         }
-        if !self.boundary_conditions.values().any(|b| !matches!(b, BoundarySpec::Flow { .. })) {
+        if !self
+            .boundary_conditions
+            .values()
+            .any(|b| !matches!(b, BoundarySpec::Flow { .. }))
+        {
             return Err(Error::model(
                 "boundary conditions",
                 "none fixes a pressure level: add a pressure, resistance or rcr outlet",
@@ -300,25 +339,46 @@ impl NetworkSpec {
             circuit.add_node(*name, 0.0, 0.0);
         }
         let mut probes = Probes::default();
-        let mut summary = Summary { vessels: self.vessels.len(), nodes: node_names.len(), ..Default::default() };
+        let mut summary = Summary {
+            vessels: self.vessels.len(),
+            nodes: node_names.len(),
+            ..Default::default()
+        };
         for v in &self.vessels {
             let el = format!("vessel '{}'", v.name);
             let arrangement = v.arrangement.unwrap_or(self.arrangement);
             let p_from = node_index[v.from.as_str()];
             let p_to = node_index[v.to.as_str()];
-            // per-segment (R, L, C, S, V, length)
+            // per-segment (R, L, C, S, V, centre position) and (mean radius, x0, x1) for transport
             let mut segs: Vec<(f64, f64, f64, f64, f64, f64)> = Vec::new();
+            let mut seg_geom: Vec<(f64, f64, f64)> = Vec::new();
             match (&v.geometry, &v.lumped) {
                 (Some(_), Some(_)) => {
-                    return Err(Error::model(&el, "give either geometry or lumped values, not both"));
+                    return Err(Error::model(
+                        &el,
+                        "give either geometry or lumped values, not both",
+                    ));
                 }
                 (None, None) => return Err(Error::model(&el, "needs geometry or lumped values")),
                 (None, Some(l)) => {
                     check_nonnegative(&el, "resistance", l.resistance)?;
                     check_nonnegative(&el, "inductance", l.inductance)?;
                     check_nonnegative(&el, "capacitance", l.capacitance)?;
-                    check_nonnegative(&el, "stenosis_coefficient", l.stenosis_coefficient)?;
-                    let n = if arrangement == Arrangement::Rcl { 1 } else { v.segments.unwrap_or(1) };
+                    // calibrated svZeroDSolver models carry negative coefficients: only finiteness is checked
+                    if !l.stenosis_coefficient.is_finite() {
+                        return Err(Error::model(
+                            &el,
+                            format!(
+                                "stenosis_coefficient must be finite, got {}",
+                                l.stenosis_coefficient
+                            ),
+                        ));
+                    }
+                    let n = if arrangement == Arrangement::Rcl {
+                        1
+                    } else {
+                        v.segments.unwrap_or(1)
+                    };
                     if n == 0 {
                         return Err(Error::model(&el, "segments must be >= 1, got 0"));
                     }
@@ -332,6 +392,7 @@ impl NetworkSpec {
                             0.0,
                             f64::NAN,
                         ));
+                        seg_geom.push((0.0, 0.0, 0.0));
                     }
                 }
                 (Some(g), None) => {
@@ -345,10 +406,15 @@ impl NetworkSpec {
                         (Some(h), Some(e)) => {
                             check_positive(&el, "wall_thickness", h)?;
                             check_positive(&el, "youngs_modulus", e)?;
-                            if !(g.poisson_ratio.is_finite() && (0.0..0.5 + 1e-12).contains(&g.poisson_ratio)) {
+                            if !(g.poisson_ratio.is_finite()
+                                && (0.0..0.5 + 1e-12).contains(&g.poisson_ratio))
+                            {
                                 return Err(Error::model(
                                     &el,
-                                    format!("poisson_ratio must be in [0, 0.5], got {}", g.poisson_ratio),
+                                    format!(
+                                        "poisson_ratio must be in [0, 0.5], got {}",
+                                        g.poisson_ratio
+                                    ),
                                 ));
                             }
                             Some(Wall {
@@ -367,41 +433,92 @@ impl NetworkSpec {
                         }
                     };
                     let n = match (v.segments, self.max_segment_length) {
-                        (Some(0), _) => return Err(Error::model(&el, "segments must be >= 1, got 0")),
+                        (Some(0), _) => {
+                            return Err(Error::model(&el, "segments must be >= 1, got 0"));
+                        }
                         (Some(n), _) => n,
-                        (None, Some(m)) => ((g.length / m) * (1.0 - 1e-12)).ceil().max(1.0) as usize,
+                        (None, Some(m)) => {
+                            ((g.length / m) * (1.0 - 1e-12)).ceil().max(1.0) as usize
+                        }
                         (None, None) => 1,
                     };
                     let dx = g.length / n as f64;
                     for k in 0..n {
                         let r0 = g.radius_in + (g.radius_out - g.radius_in) * k as f64 / n as f64;
-                        let r1 = g.radius_in + (g.radius_out - g.radius_in) * (k + 1) as f64 / n as f64;
+                        let r1 =
+                            g.radius_in + (g.radius_out - g.radius_in) * (k + 1) as f64 / n as f64;
                         let s = segment_rlc(dx, r0, r1, blood, wall, self.inertance_profile);
-                        segs.push((s.resistance, s.inductance, s.compliance, 0.0, s.volume, (k as f64 + 0.5) * dx));
+                        segs.push((
+                            s.resistance,
+                            s.inductance,
+                            s.compliance,
+                            0.0,
+                            s.volume,
+                            (k as f64 + 0.5) * dx,
+                        ));
+                        seg_geom.push((0.5 * (r0 + r1), k as f64 * dx, (k + 1) as f64 * dx));
                     }
                 }
             }
             let n = segs.len();
             summary.segments += n;
+            let vessel_index = circuit.vessel_names.len();
+            circuit.vessel_names.push(v.name.clone());
             // points 0..=n along the vessel; RCL has one interior point
             let mut points = vec![p_from];
-            let interior = if arrangement == Arrangement::Rcl { 1 } else { n - 1 };
+            let interior = if arrangement == Arrangement::Rcl {
+                1
+            } else {
+                n - 1
+            };
             for k in 0..interior {
-                points.push(circuit.add_node(format!("vessel '{}' point {}", v.name, k + 1), 0.0, 0.0));
+                points.push(circuit.add_node(
+                    format!("vessel '{}' point {}", v.name, k + 1),
+                    0.0,
+                    0.0,
+                ));
             }
             points.push(p_to);
             let mut branches = Vec::with_capacity(n);
             if arrangement == Arrangement::Rcl {
                 let (r, l, c, s, vol, _) = segs[0];
-                branches.push(circuit.add_branch(format!("vessel '{}' resistance", v.name), points[0], points[1], r, 0.0, s));
+                branches.push(circuit.add_branch(
+                    format!("vessel '{}' resistance", v.name),
+                    points[0],
+                    points[1],
+                    r,
+                    0.0,
+                    s,
+                ));
                 circuit.nodes[points[1]].capacitance += c;
                 circuit.nodes[points[1]].volume += vol;
-                branches.push(circuit.add_branch(format!("vessel '{}' inductance", v.name), points[1], points[2], 0.0, l, 0.0));
+                branches.push(circuit.add_branch(
+                    format!("vessel '{}' inductance", v.name),
+                    points[1],
+                    points[2],
+                    0.0,
+                    l,
+                    0.0,
+                ));
+                circuit.segments.push(SegmentGeom {
+                    vessel: vessel_index,
+                    branch: branches[1],
+                    nodes: [(points[1], 1.0), (points[1], 0.0)],
+                    radius: 0.0,
+                    x0: 0.0,
+                    x1: 0.0,
+                    volume: vol,
+                    compliance: c,
+                });
                 summary.total_compliance += c;
                 summary.total_volume += vol;
             } else {
                 for (k, &(r, l, c, s, vol, _)) in segs.iter().enumerate() {
-                    let name = if n == 1 { format!("vessel '{}'", v.name) } else { format!("vessel '{}' segment {}", v.name, k + 1) };
+                    let name = if n == 1 {
+                        format!("vessel '{}'", v.name)
+                    } else {
+                        format!("vessel '{}' segment {}", v.name, k + 1)
+                    };
                     branches.push(circuit.add_branch(name, points[k], points[k + 1], r, l, s));
                     let (cp, cd) = match arrangement {
                         Arrangement::InvertedL => (1.0, 0.0),
@@ -412,22 +529,49 @@ impl NetworkSpec {
                     circuit.nodes[points[k + 1]].capacitance += cd * c;
                     circuit.nodes[points[k]].volume += cp * vol;
                     circuit.nodes[points[k + 1]].volume += cd * vol;
+                    let (radius, x0, x1) = seg_geom[k];
+                    let area = 2.0 * std::f64::consts::PI * radius * (x1 - x0);
+                    circuit.nodes[points[k]].wall_area += cp * area;
+                    circuit.nodes[points[k + 1]].wall_area += cd * area;
+                    circuit.segments.push(SegmentGeom {
+                        vessel: vessel_index,
+                        branch: branches[k],
+                        nodes: [(points[k], cp), (points[k + 1], cd)],
+                        radius,
+                        x0,
+                        x1,
+                        volume: vol,
+                        compliance: c,
+                    });
                     summary.total_compliance += c;
                     summary.total_volume += vol;
                 }
             }
             if v.output {
                 probes.vessels.push(v.name.clone());
-                probes.vessel_unknowns.extend([points[0], points[points.len() - 1], branches[0], branches[branches.len() - 1]]);
+                probes.vessel_unknowns.extend([
+                    points[0],
+                    points[points.len() - 1],
+                    branches[0],
+                    branches[branches.len() - 1],
+                ]);
                 if self.output_segments {
-                    let ns = if arrangement == Arrangement::Rcl { 1 } else { n };
+                    let ns = if arrangement == Arrangement::Rcl {
+                        1
+                    } else {
+                        n
+                    };
                     probes.segment_count.push(ns);
                     if arrangement == Arrangement::Rcl {
-                        probes.segment_unknowns.extend([points[0], points[2], branches[0]]);
+                        probes
+                            .segment_unknowns
+                            .extend([points[0], points[2], branches[0]]);
                         probes.segment_position.push(f64::NAN);
                     } else {
                         for k in 0..n {
-                            probes.segment_unknowns.extend([points[k], points[k + 1], branches[k]]);
+                            probes
+                                .segment_unknowns
+                                .extend([points[k], points[k + 1], branches[k]]);
                             probes.segment_position.push(segs[k].5);
                         }
                     }
@@ -439,6 +583,11 @@ impl NetworkSpec {
             let k = node_index[node.as_str()];
             let inlet = ends[k][0].1;
             let el = format!("boundary condition '{node}'");
+            let tag = circuit.boundaries.len();
+            circuit.boundaries.push(BoundaryTag {
+                name: node.clone(),
+                inlet,
+            });
             let wave = |spec: &Option<WaveformSpec>| -> Result<Waveform> {
                 match spec {
                     Some(s) => Waveform::from_spec(s, &el),
@@ -451,6 +600,7 @@ impl NetworkSpec {
                     // positive flow runs along the vessel: into the network at an inlet end
                     let w = if inlet { w } else { negate(w) };
                     circuit.sources.push((k, w));
+                    circuit.source_boundary.push(tag);
                     if inlet {
                         summary.inlets += 1;
                     } else {
@@ -458,36 +608,78 @@ impl NetworkSpec {
                     }
                 }
                 BoundarySpec::Pressure { pressure } => {
-                    circuit.fixed_pressures.push((k, Waveform::from_spec(pressure, &el)?));
+                    circuit
+                        .fixed_pressures
+                        .push((k, Waveform::from_spec(pressure, &el)?));
+                    circuit.nodes[k].boundary = Some(tag);
                     if inlet {
                         summary.inlets += 1;
                     } else {
                         summary.outlets += 1;
                     }
                 }
-                BoundarySpec::Resistance { resistance, pressure } => {
+                BoundarySpec::Resistance {
+                    resistance,
+                    pressure,
+                } => {
                     check_nonnegative(&el, "resistance", *resistance)?;
                     let g = circuit.add_node(format!("{el} distal"), 0.0, 0.0);
+                    circuit.nodes[g].boundary = Some(tag);
                     circuit.fixed_pressures.push((g, wave(pressure)?));
                     let (a, b) = if inlet { (g, k) } else { (k, g) };
                     circuit.add_branch(format!("{el} resistance"), a, b, *resistance, 0.0, 0.0);
                     summary.outlets += usize::from(!inlet);
                     summary.inlets += usize::from(inlet);
                 }
-                BoundarySpec::Rcr { proximal_resistance, capacitance, distal_resistance, pressure } => {
+                BoundarySpec::Rcr {
+                    proximal_resistance,
+                    capacitance,
+                    distal_resistance,
+                    pressure,
+                } => {
                     check_nonnegative(&el, "proximal_resistance", *proximal_resistance)?;
                     check_nonnegative(&el, "capacitance", *capacitance)?;
                     check_positive(&el, "distal_resistance", *distal_resistance)?;
                     let wk = circuit.add_node(format!("{el} capacitor"), *capacitance, 0.0);
                     circuit.nodes[wk].windkessel = true;
+                    circuit.nodes[wk].boundary = Some(tag);
                     let g = circuit.add_node(format!("{el} distal"), 0.0, 0.0);
+                    circuit.nodes[g].boundary = Some(tag);
                     circuit.fixed_pressures.push((g, wave(pressure)?));
                     if inlet {
-                        circuit.add_branch(format!("{el} distal resistance"), g, wk, *distal_resistance, 0.0, 0.0);
-                        circuit.add_branch(format!("{el} proximal resistance"), wk, k, *proximal_resistance, 0.0, 0.0);
+                        circuit.add_branch(
+                            format!("{el} distal resistance"),
+                            g,
+                            wk,
+                            *distal_resistance,
+                            0.0,
+                            0.0,
+                        );
+                        circuit.add_branch(
+                            format!("{el} proximal resistance"),
+                            wk,
+                            k,
+                            *proximal_resistance,
+                            0.0,
+                            0.0,
+                        );
                     } else {
-                        circuit.add_branch(format!("{el} proximal resistance"), k, wk, *proximal_resistance, 0.0, 0.0);
-                        circuit.add_branch(format!("{el} distal resistance"), wk, g, *distal_resistance, 0.0, 0.0);
+                        circuit.add_branch(
+                            format!("{el} proximal resistance"),
+                            k,
+                            wk,
+                            *proximal_resistance,
+                            0.0,
+                            0.0,
+                        );
+                        circuit.add_branch(
+                            format!("{el} distal resistance"),
+                            wk,
+                            g,
+                            *distal_resistance,
+                            0.0,
+                            0.0,
+                        );
                     }
                     summary.total_compliance += capacitance;
                     summary.outlets += usize::from(!inlet);
@@ -514,7 +706,11 @@ impl NetworkSpec {
             .filter_map(|(_, w)| w.period())
             .collect();
         summary.period = periods.first().copied();
-        Ok(Assembled { circuit, probes, summary })
+        Ok(Assembled {
+            circuit,
+            probes,
+            summary,
+        })
     }
 }
 
@@ -527,7 +723,12 @@ fn negate(w: Waveform) -> Waveform {
             m: m.map(|m| m.iter().map(|x| -x).collect()),
             mean: -mean,
         },
-        Waveform::Fourier { omega, mean, cos, sin } => Waveform::Fourier {
+        Waveform::Fourier {
+            omega,
+            mean,
+            cos,
+            sin,
+        } => Waveform::Fourier {
             omega,
             mean: -mean,
             cos: cos.iter().map(|x| -x).collect(),

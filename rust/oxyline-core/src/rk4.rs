@@ -6,6 +6,68 @@ use crate::circuit::{Dae, Regime};
 use crate::error::{Error, Result};
 use crate::sparse::SparseLu;
 
+/// A state integrated together with the flow in the same RK4 step (species amounts): its
+/// derivative is evaluated at every stage from that stage's consistent flow state, so the
+/// coupled system is advanced as one ODE (physics spec §2.5, "monolithic").
+pub trait Coupled {
+    fn derivative(&mut self, time: f64, y: &[f64], z: &[f64], dz: &mut [f64]) -> Result<()>;
+}
+
+/// Flow only.
+pub struct Uncoupled;
+impl Coupled for Uncoupled {
+    #[inline]
+    fn derivative(&mut self, _: f64, _: &[f64], _: &[f64], _: &mut [f64]) -> Result<()> {
+        Ok(())
+    }
+}
+
+/// Stage storage of the coupled state.
+#[derive(Debug, Clone, Default)]
+pub struct CoupledStages {
+    k: [Vec<f64>; 4],
+    stage: Vec<f64>,
+}
+
+impl CoupledStages {
+    pub fn new(n: usize) -> Self {
+        CoupledStages {
+            k: [vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]],
+            stage: vec![0.0; n],
+        }
+    }
+}
+
+/// Right-hand side f(t, z, dz) of a plain ODE.
+pub type OdeRhs<'f> = dyn FnMut(f64, &[f64], &mut [f64]) -> Result<()> + 'f;
+
+/// Classical RK4 step of a plain ODE z' = f(t, z), with the stage storage of a coupled state.
+pub fn rk4_ode(
+    time: f64,
+    dt: f64,
+    z: &mut [f64],
+    st: &mut CoupledStages,
+    f: &mut OdeRhs<'_>,
+) -> Result<()> {
+    if st.stage.len() != z.len() {
+        *st = CoupledStages::new(z.len());
+    }
+    st.stage.copy_from_slice(z);
+    f(time, &st.stage, &mut st.k[0])?;
+    let coef = [0.5, 0.5, 1.0];
+    for s in 0..3 {
+        let (done, next) = st.k.split_at_mut(s + 1);
+        for ((zs, z0), k) in st.stage.iter_mut().zip(z.iter()).zip(&done[s]) {
+            *zs = z0 + coef[s] * dt * k;
+        }
+        f(time + coef[s] * dt, &st.stage, &mut next[0])?;
+    }
+    for (i, zi) in z.iter_mut().enumerate() {
+        *zi += dt / 6.0 * (st.k[0][i] + 2.0 * st.k[1][i] + 2.0 * st.k[2][i] + st.k[3][i]);
+    }
+    Ok(())
+}
+
 pub struct Rk4<'a> {
     dae: &'a Dae,
     regime: Regime,
@@ -113,7 +175,8 @@ impl<'a> Rk4<'a> {
                 self.ra[l] -= s * y[g].abs() * y[g];
             }
             if nonlinear {
-                self.factor_algebraic(y).map_err(|m| crate::genalpha::singular(time, &m))?;
+                self.factor_algebraic(y)
+                    .map_err(|m| crate::genalpha::singular(time, &m))?;
             }
             if !self.alg_lu.as_ref().unwrap().solve_in_place(&mut self.ra) {
                 return Err(crate::genalpha::singular(time, "algebraic elimination"));
@@ -165,10 +228,33 @@ impl<'a> Rk4<'a> {
     }
 
     pub fn step(&mut self, time: f64, y: &mut [f64]) -> Result<()> {
+        self.step_coupled(
+            time,
+            y,
+            &mut [],
+            &mut CoupledStages::default(),
+            &mut Uncoupled,
+        )
+    }
+
+    /// One RK4 step of the flow state `y` and a coupled state `z` (same stages, same weights).
+    pub fn step_coupled<C: Coupled>(
+        &mut self,
+        time: f64,
+        y: &mut [f64],
+        z: &mut [f64],
+        zk: &mut CoupledStages,
+        coupled: &mut C,
+    ) -> Result<()> {
         let dt = self.dt;
+        let nz = z.len();
         let mut stage = std::mem::take(&mut self.stage);
         stage.copy_from_slice(y);
         self.rhs(time, &mut stage, 0)?;
+        if nz > 0 {
+            zk.stage.copy_from_slice(z);
+            coupled.derivative(time, &stage, &zk.stage, &mut zk.k[0])?;
+        }
         let coef = [0.5, 0.5, 1.0];
         for s in 0..3 {
             for &i in &self.diff {
@@ -176,9 +262,20 @@ impl<'a> Rk4<'a> {
             }
             let ts = time + coef[s] * dt;
             self.rhs(ts, &mut stage, s + 1)?;
+            if nz > 0 {
+                let (done, next) = zk.k.split_at_mut(s + 1);
+                for ((zs, z0), k) in zk.stage.iter_mut().zip(z.iter()).zip(&done[s]) {
+                    *zs = z0 + coef[s] * dt * k;
+                }
+                coupled.derivative(ts, &stage, &zk.stage, &mut next[0])?;
+            }
         }
         for &i in &self.diff {
-            y[i] += dt / 6.0 * (self.k[0][i] + 2.0 * self.k[1][i] + 2.0 * self.k[2][i] + self.k[3][i]);
+            y[i] +=
+                dt / 6.0 * (self.k[0][i] + 2.0 * self.k[1][i] + 2.0 * self.k[2][i] + self.k[3][i]);
+        }
+        for (i, zi) in z.iter_mut().enumerate() {
+            *zi += dt / 6.0 * (zk.k[0][i] + 2.0 * zk.k[1][i] + 2.0 * zk.k[2][i] + zk.k[3][i]);
         }
         // algebraic unknowns of the last stage are the best warm start
         for &g in &self.alg {
@@ -187,6 +284,11 @@ impl<'a> Rk4<'a> {
         self.stage = stage;
         self.dae.forcing_into(time + dt, self.regime, &mut self.f);
         self.solve_algebraic(y, time + dt)
+    }
+
+    /// E_ii of the differential unknowns, in `diff` order.
+    pub fn mass_diagonal(&self) -> Vec<f64> {
+        self.diff.iter().map(|&i| self.e[i]).collect()
     }
 
     /// Apply the linearised ODE operator (zero forcing, stenosis ignored) to a differential vector.

@@ -4,17 +4,24 @@
 
 use crate::circuit::{Dae, Regime};
 use crate::error::{Error, Result};
-use crate::genalpha::{GenAlpha, NewtonControl, jacobian_stamps, jacobian_values, scaled_increment};
-use crate::rk4::Rk4;
+use crate::genalpha::{
+    GenAlpha, NewtonControl, jacobian_stamps, jacobian_values, scaled_increment,
+};
+use crate::rk4::{CoupledStages, Rk4};
 use crate::sparse::SparseLu;
 use crate::stability::{StabilityLimit, rk4_limit};
+use crate::transport::{Formulation, Transport};
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Method {
     Rk4,
-    GeneralizedAlpha { rho_inf: f64 },
+    GeneralizedAlpha {
+        rho_inf: f64,
+    },
     /// Implicit when the stable RK4 step is far below the output step, else RK4.
-    Auto { rho_inf: f64 },
+    Auto {
+        rho_inf: f64,
+    },
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -22,7 +29,9 @@ pub enum Start {
     /// Exact steady solution of the mean boundary conditions.
     Steady,
     /// svZeroDSolver's: 31 generalized-α steps of T/10 with mean BCs and no Windkessel C.
-    SvZeroDSteady { rho_inf: f64 },
+    SvZeroDSteady {
+        rho_inf: f64,
+    },
     Zero,
 }
 
@@ -59,6 +68,31 @@ pub struct Outcome {
     pub final_state: Vec<f64>,
     /// Set when the run stopped early (error or interruption); the data up to then are kept.
     pub error: Option<Error>,
+    /// Species transport records (None for flow-only runs).
+    pub transport: Option<TransportOutcome>,
+}
+
+/// Species outputs, recorded at the same times as the flow probes.
+#[derive(Debug, Clone)]
+pub struct TransportOutcome {
+    pub species: Vec<String>,
+    /// Columns per species and output time (see `Transport::observe`).
+    pub columns_per_species: usize,
+    /// Row-major (time, species × columns).
+    pub data: Vec<f64>,
+    /// Σ N of each species at t = 0 (mass balance reference).
+    pub initial_stored: Vec<f64>,
+    pub final_state: Vec<f64>,
+    /// Cycle-mean |Q| of every segment used by the closures (empty if none needed it).
+    pub mean_abs_flow: Vec<f64>,
+}
+
+/// Running mean of |y_i| over the current cycle (for cycle-mean wall shear).
+struct MeanAbs {
+    unknowns: Vec<usize>,
+    sum: Vec<f64>,
+    last: Vec<f64>,
+    count: usize,
 }
 
 enum Stepper<'a> {
@@ -86,7 +120,11 @@ pub fn steady_state(dae: &Dae) -> Result<Vec<f64>> {
     for it in 0..50 {
         dae.static_residual(&y, &f, &mut r);
         // regularise |Q| at 0 so the first Newton step of a stenosis is defined
-        let ys: Vec<f64> = if it == 0 { y.iter().map(|_| 0.0).collect() } else { y.clone() };
+        let ys: Vec<f64> = if it == 0 {
+            y.iter().map(|_| 0.0).collect()
+        } else {
+            y.clone()
+        };
         jacobian_values(dae, 1.0, &zero, &ys, &mut vals);
         lu.factor(&vals).map_err(|_| fail())?;
         if !lu.solve_in_place(&mut r) {
@@ -126,23 +164,90 @@ pub fn simulate(
     s: &RunSettings,
     progress: &mut dyn FnMut(f64, f64) -> bool,
 ) -> Result<Outcome> {
+    run(dae, s, None, None, progress)
+}
+
+/// Run the circuit with species transport. Closures that need the cycle-mean |Q| get it from
+/// a first, flow-only pass over the same cycles (the paper's two-pass procedure, physics §3.1);
+/// the coupled run then starts again from the same initial state.
+pub fn simulate_with_transport(
+    dae: &Dae,
+    transport: Option<&mut Transport>,
+    s: &RunSettings,
+    progress: &mut dyn FnMut(f64, f64) -> bool,
+) -> Result<Outcome> {
+    let Some(tr) = transport else {
+        return run(dae, s, None, None, progress);
+    };
+    let unknowns = tr.mean_flow_unknowns();
+    let mut mean_abs_flow = Vec::new();
+    if !unknowns.is_empty() {
+        let n = unknowns.len();
+        let mut mean = MeanAbs {
+            unknowns,
+            sum: vec![0.0; n],
+            last: vec![0.0; n],
+            count: 0,
+        };
+        let first = run(
+            dae,
+            &RunSettings {
+                probes: Vec::new(),
+                ..s.clone()
+            },
+            None,
+            Some(&mut mean),
+            progress,
+        )?;
+        if let Some(e) = first.error {
+            return Err(e);
+        }
+        tr.set_mean_flow(&mean.last)?;
+        mean_abs_flow = mean.last;
+    }
+    let mut out = run(dae, s, Some(tr), None, progress)?;
+    if let Some(t) = out.transport.as_mut() {
+        t.mean_abs_flow = mean_abs_flow;
+    }
+    Ok(out)
+}
+
+fn run(
+    dae: &Dae,
+    s: &RunSettings,
+    mut transport: Option<&mut Transport>,
+    mut mean: Option<&mut MeanAbs>,
+    progress: &mut dyn FnMut(f64, f64) -> bool,
+) -> Result<Outcome> {
     if !(s.period.is_finite() && s.period > 0.0) {
-        return Err(Error::model("simulation", format!("period must be > 0, got {}", s.period)));
+        return Err(Error::model(
+            "simulation",
+            format!("period must be > 0, got {}", s.period),
+        ));
     }
     if s.cycles == 0 {
         return Err(Error::model("simulation", "cycles must be >= 1"));
     }
     if !(s.output_every.is_finite() && s.output_every > 0.0) {
-        return Err(Error::model("simulation", format!("output every must be > 0, got {}", s.output_every)));
+        return Err(Error::model(
+            "simulation",
+            format!("output every must be > 0, got {}", s.output_every),
+        ));
     }
     if let Some(dt) = s.dt {
         if !(dt.is_finite() && dt > 0.0) {
-            return Err(Error::model("simulation", format!("dt must be > 0, got {dt}")));
+            return Err(Error::model(
+                "simulation",
+                format!("dt must be > 0, got {dt}"),
+            ));
         }
     }
     for &p in &s.probes {
         if p >= dae.n {
-            return Err(Error::model("simulation", format!("output index {p} out of range")));
+            return Err(Error::model(
+                "simulation",
+                format!("output index {p} out of range"),
+            ));
         }
     }
     // explicit stability limit, needed by rk4 and by auto
@@ -172,7 +277,11 @@ pub fn simulate(
         let dt = match s.dt {
             Some(dt) => {
                 if dt > lim.dt_max * (1.0 + 1e-9) {
-                    return Err(Error::Unstable { dt, limit: lim.dt_max, element: lim.element.clone() });
+                    return Err(Error::Unstable {
+                        dt,
+                        limit: lim.dt_max,
+                        element: lim.element.clone(),
+                    });
                 }
                 dt
             }
@@ -183,7 +292,9 @@ pub fn simulate(
         (s.dt.unwrap_or(s.output_every), "generalized-alpha")
     };
     // whole number of steps per cycle and per output interval
-    let substeps = ((s.period / out_per_cycle as f64) / dt * (1.0 - 1e-12)).ceil().max(1.0) as usize;
+    let substeps = ((s.period / out_per_cycle as f64) / dt * (1.0 - 1e-12))
+        .ceil()
+        .max(1.0) as usize;
     let (steps_per_cycle, stride) = if s.dt.is_some() {
         let spc = (s.period / dt).round().max(1.0) as usize;
         let stride = (s.output_every / (s.period / spc as f64)).round().max(1.0) as usize;
@@ -195,7 +306,11 @@ pub fn simulate(
     if use_rk4 {
         if let Some(lim) = &stability {
             if dt > lim.dt_max * (1.0 + 1e-9) {
-                return Err(Error::Unstable { dt, limit: lim.dt_max, element: lim.element.clone() });
+                return Err(Error::Unstable {
+                    dt,
+                    limit: lim.dt_max,
+                    element: lim.element.clone(),
+                });
             }
         }
     }
@@ -210,7 +325,9 @@ pub fn simulate(
             dae.forcing_into(0.0, Regime::Transient, &mut f);
             let mut r = vec![0.0; n];
             dae.static_residual(&y, &f, &mut r);
-            let yd = (0..n).map(|i| if dae.e[i] > 0.0 { r[i] / dae.e[i] } else { 0.0 }).collect();
+            let yd = (0..n)
+                .map(|i| if dae.e[i] > 0.0 { r[i] / dae.e[i] } else { 0.0 })
+                .collect();
             (y, yd)
         }
         Start::SvZeroDSteady { rho_inf } => {
@@ -228,11 +345,76 @@ pub fn simulate(
         rk.make_consistent(0.0, &mut y)?;
         Stepper::Rk4(rk)
     } else {
-        Stepper::GenAlpha(GenAlpha::new(dae, Regime::Transient, dt, rho_of(s.method), s.newton)?)
+        Stepper::GenAlpha(GenAlpha::new(
+            dae,
+            Regime::Transient,
+            dt,
+            rho_of(s.method),
+            s.newton,
+        )?)
     };
 
-    let mut rec = Recorder { probes: &s.probes, times: Vec::new(), data: Vec::new() };
-    let max_cycles = if s.until_periodic.is_some() { s.max_cycles.max(s.cycles) } else { s.cycles };
+    // species state, started uniform in the initial volumes
+    let alpha_f = match &stepper {
+        Stepper::GenAlpha(ga) => ga.alpha_f(),
+        Stepper::Rk4(_) => 1.0,
+    };
+    let mut z = match transport.as_deref_mut() {
+        Some(tr) => tr.initial_state(&y)?,
+        None => Vec::new(),
+    };
+    let initial_stored: Vec<f64> = match transport.as_deref() {
+        Some(tr) => (0..tr.species_names().len())
+            .map(|k| z[k * tr.n_cells()..(k + 1) * tr.n_cells()].iter().sum())
+            .collect(),
+        None => Vec::new(),
+    };
+    let quasi = transport
+        .as_deref()
+        .is_some_and(|t| t.formulation() == Formulation::TlQuasisteady);
+    if quasi {
+        // the quasi-steady field is algebraic in the flow: make the initial one consistent
+        if let Some(tr) = transport.as_deref_mut() {
+            let y0 = y.clone();
+            tr.implicit_step(0.0, dt, 1.0, &y0, &y0, &mut z)?;
+            for a in z.iter_mut().skip(tr.n_cells() * tr.species_names().len()) {
+                *a = 0.0;
+            }
+        }
+    }
+    let explicit_transport = matches!(stepper, Stepper::Rk4(_)) && !quasi;
+    let mut zk = CoupledStages::new(z.len());
+    let mut trec: Vec<f64> = Vec::new();
+    let mut y_prev = vec![0.0; n];
+    let mut prev_cycle_z = z.clone();
+    let observe = |tr: &mut Transport,
+                   stepper: &mut Stepper,
+                   t: f64,
+                   y: &[f64],
+                   yd: &[f64],
+                   z: &[f64],
+                   out: &mut Vec<f64>|
+     -> Result<()> {
+        match stepper {
+            Stepper::Rk4(rk) => {
+                let mut yc = y.to_vec();
+                let ydot = rk.derivative(t, &mut yc)?;
+                tr.observe(t, &yc, Some(&ydot), z, false, out)
+            }
+            Stepper::GenAlpha(_) => tr.observe(t, y, Some(yd), z, !quasi, out),
+        }
+    };
+
+    let mut rec = Recorder {
+        probes: &s.probes,
+        times: Vec::new(),
+        data: Vec::new(),
+    };
+    let max_cycles = if s.until_periodic.is_some() {
+        s.max_cycles.max(s.cycles)
+    } else {
+        s.cycles
+    };
     let t_end = max_cycles as f64 * s.period;
     let mut prev_cycle_end = y.clone();
     let mut periodic_error = f64::NAN;
@@ -243,19 +425,47 @@ pub fn simulate(
         let t0 = cycle as f64 * s.period;
         if !s.output_all_cycles {
             rec.clear();
+            trec.clear();
         }
-        if s.output_all_cycles {
-            if cycle == 0 {
-                rec.record(0.0, &y);
+        if let Some(m) = mean.as_deref_mut() {
+            m.sum.iter_mut().for_each(|v| *v = 0.0);
+            m.count = 0;
+        }
+        if !s.output_all_cycles || cycle == 0 {
+            rec.record(if s.output_all_cycles { t0 } else { 0.0 }, &y);
+            if let Some(tr) = transport.as_deref_mut() {
+                if let Err(e) = observe(tr, &mut stepper, t0, &y, &yd, &z, &mut trec) {
+                    error = Some(e);
+                    break 'cycles;
+                }
             }
-        } else {
-            rec.record(0.0, &y);
         }
         for k in 1..=steps_per_cycle {
             let t = (step_global as f64) * dt;
-            let r = match &mut stepper {
-                Stepper::Rk4(rk) => rk.step(t, &mut y),
-                Stepper::GenAlpha(ga) => ga.step(t, &mut y, &mut yd),
+            let r = match (&mut stepper, transport.as_deref_mut()) {
+                (Stepper::Rk4(rk), Some(tr)) if explicit_transport => {
+                    rk.step_coupled(t, &mut y, &mut z, &mut zk, tr)
+                }
+                (Stepper::Rk4(rk), tr) => rk.step(t, &mut y).and_then(|()| match tr {
+                    Some(tr) => tr.implicit_step(t, dt, 1.0, &y, &y, &mut z),
+                    None => Ok(()),
+                }),
+                (Stepper::GenAlpha(ga), tr) => {
+                    if tr.is_some() {
+                        y_prev.copy_from_slice(&y);
+                    }
+                    ga.step(t, &mut y, &mut yd).and_then(|()| match tr {
+                        Some(tr) => tr.implicit_step(
+                            t,
+                            dt,
+                            if quasi { 1.0 } else { alpha_f },
+                            &y_prev,
+                            &y,
+                            &mut z,
+                        ),
+                        None => Ok(()),
+                    })
+                }
             };
             step_global += 1;
             let t_new = step_global as f64 * dt;
@@ -263,15 +473,34 @@ pub fn simulate(
                 error = Some(e);
                 break 'cycles;
             }
+            if let Some(m) = mean.as_deref_mut() {
+                for (acc, &i) in m.sum.iter_mut().zip(&m.unknowns) {
+                    *acc += y[i].abs();
+                }
+                m.count += 1;
+            }
             if k % 64 == 0 || k == steps_per_cycle {
                 if let Some(i) = y.iter().position(|v| !v.is_finite()) {
-                    error = Some(Error::solver(t_new, format!("non-finite value of {}", dae.names[i])));
+                    error = Some(Error::solver(
+                        t_new,
+                        format!("non-finite value of {}", dae.names[i]),
+                    ));
                     break 'cycles;
                 }
             }
             if step_global % stride == 0 {
-                let tr = if s.output_all_cycles { t_new } else { t_new - t0 };
+                let tr = if s.output_all_cycles {
+                    t_new
+                } else {
+                    t_new - t0
+                };
                 rec.record(tr, &y);
+                if let Some(tp) = transport.as_deref_mut() {
+                    if let Err(e) = observe(tp, &mut stepper, t_new, &y, &yd, &z, &mut trec) {
+                        error = Some(e);
+                        break 'cycles;
+                    }
+                }
             }
             if step_global % 256 == 0 && !progress(t_new, t_end) {
                 error = Some(Error::Interrupted { time: t_new });
@@ -281,10 +510,24 @@ pub fn simulate(
         cycles_run = cycle + 1;
         periodic_error = scaled_increment(
             dae,
-            &y.iter().zip(&prev_cycle_end).map(|(a, b)| a - b).collect::<Vec<_>>(),
+            &y.iter()
+                .zip(&prev_cycle_end)
+                .map(|(a, b)| a - b)
+                .collect::<Vec<_>>(),
             &y,
         );
         prev_cycle_end.copy_from_slice(&y);
+        if let Some(m) = mean.as_deref_mut() {
+            let c = m.count.max(1) as f64;
+            for (l, v) in m.last.iter_mut().zip(&m.sum) {
+                *l = v / c;
+            }
+        }
+        if let Some(tr) = transport.as_deref() {
+            // species need several transit times: include them in the periodicity test
+            periodic_error = periodic_error.max(tr.relative_change(&z, &prev_cycle_z));
+            prev_cycle_z.copy_from_slice(&z);
+        }
         if let Some(tol) = s.until_periodic {
             if cycles_run >= s.cycles && periodic_error < tol {
                 break;
@@ -303,5 +546,13 @@ pub fn simulate(
         stability,
         final_state: y,
         error,
+        transport: transport.map(|tr| TransportOutcome {
+            species: tr.species_names(),
+            columns_per_species: tr.columns_per_species(),
+            data: trec,
+            initial_stored,
+            final_state: z,
+            mean_abs_flow: Vec::new(),
+        }),
     })
 }

@@ -61,17 +61,23 @@ pub fn rk4_limit(rk: &mut Rk4<'_>, names: &[String]) -> Result<StabilityLimit> {
         let mut a = faer::Mat::<f64>::zeros(nd, nd);
         let mut x = vec![0.0; nd];
         let mut col = vec![0.0; nd];
+        // Energy scaling x̃ = √E x (a similarity, eigenvalues unchanged): capacitances ~1e-12
+        // and inertances ~1e5 otherwise spread the entries over ~20 decades, and the dense
+        // eigensolver then returns spurious Re λ > 0 for lightly damped LC modes.
+        let scale: Vec<f64> = rk.mass_diagonal().iter().map(|e| e.sqrt()).collect();
         for j in 0..nd {
             x.iter_mut().for_each(|v| *v = 0.0);
             x[j] = 1.0;
             rk.linear_operator(&x, &mut col)?;
             for i in 0..nd {
-                a[(i, j)] = col[i];
+                a[(i, j)] = col[i] * scale[i] / scale[j];
             }
         }
         // faer's dense eigensolver (nalgebra's complex_eigenvalues is unreliable for
         // non-normal matrices)
-        let evd = a.eigen().map_err(|e| crate::error::Error::solver(0.0, format!("eigenvalues: {e:?}")))?;
+        let evd = a
+            .eigen()
+            .map_err(|e| crate::error::Error::solver(0.0, format!("eigenvalues: {e:?}")))?;
         let (s, u) = (evd.S(), evd.U());
         let (mut best, mut jbest) = (f64::INFINITY, 0);
         for j in 0..nd {
@@ -83,7 +89,9 @@ pub fn rk4_limit(rk: &mut Rk4<'_>, names: &[String]) -> Result<StabilityLimit> {
             }
         }
         let v = u.col(jbest);
-        let i = (0..nd).max_by(|&p, &q| v[p].norm().total_cmp(&v[q].norm())).unwrap_or(0);
+        let i = (0..nd)
+            .max_by(|&p, &q| v[p].norm().total_cmp(&v[q].norm()))
+            .unwrap_or(0);
         let lam = s[jbest];
         return Ok(StabilityLimit {
             dt_max: best,
@@ -94,7 +102,9 @@ pub fn rk4_limit(rk: &mut Rk4<'_>, names: &[String]) -> Result<StabilityLimit> {
     }
     // power iteration: spectral radius estimate; the RK4 region contains the left half-disc of
     // radius 2.78, so h = 2.78/ρ is stable for the passive (Re λ ≤ 0) circuits built here.
-    let mut x: Vec<f64> = (0..nd).map(|i| 1.0 + ((i * 7919) % 13) as f64 / 13.0).collect();
+    let mut x: Vec<f64> = (0..nd)
+        .map(|i| 1.0 + ((i * 7919) % 13) as f64 / 13.0)
+        .collect();
     let mut y = vec![0.0; nd];
     let mut rho = 0.0f64;
     for it in 0..400 {
@@ -112,7 +122,9 @@ pub fn rk4_limit(rk: &mut Rk4<'_>, names: &[String]) -> Result<StabilityLimit> {
         }
     }
     let rho = rho * 1.05;
-    let j = (0..nd).max_by(|&p, &q| x[p].abs().total_cmp(&x[q].abs())).unwrap_or(0);
+    let j = (0..nd)
+        .max_by(|&p, &q| x[p].abs().total_cmp(&x[q].abs()))
+        .unwrap_or(0);
     Ok(StabilityLimit {
         dt_max: if rho > 0.0 { 2.78 / rho } else { f64::INFINITY },
         eigenvalue: (-rho, 0.0),

@@ -1,0 +1,468 @@
+//! Wall-exchange closures (physics spec §3). Every closure is written per flow segment as
+//!
+//!   W = G (c − c_w) + q        (mol/s out of the blood; c = free concentration of the cell)
+//!
+//! with a conductance G (m³/s) and a fixed flux q (mol/s). G is constant (mass transfer,
+//! permeability), depends on a cycle-mean |Q| fixed before the run (Lévêque, Graetz: the
+//! concentration boundary layer adapts over many beats, §3.1 "Pulsatility"), or on the
+//! instantaneous |Q| of the segment's branch (Lévêque, `shear: instantaneous`).
+
+use crate::error::{Error, Result};
+use serde::Deserialize;
+use std::f64::consts::PI;
+
+/// Γ(4/3).
+pub const GAMMA_4_3: f64 = 0.892_979_511_569_249_2;
+/// Fully developed Graetz Sherwood number, constant wall concentration (OEIS A282581).
+pub const SH_GRAETZ: f64 = 3.656_793_457_763_292;
+
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Shear {
+    /// Wall shear from the segment's cycle-mean |Q| of the periodic flow (two-pass run).
+    #[default]
+    CycleMean,
+    /// Quasi-steady: wall shear from the instantaneous |Q| (floored at the Graetz value).
+    Instantaneous,
+}
+
+#[derive(Debug, Clone, Deserialize, PartialEq, Default)]
+#[serde(tag = "model", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum WallSpec {
+    /// C0: no exchange.
+    #[default]
+    None,
+    /// C1: prescribed flux per lumen area (mol m⁻² s⁻¹, positive out of the blood).
+    Flux { flux: f64 },
+    /// C3: constant mass-transfer coefficient k (m/s) against the wall concentration c_w.
+    MassTransfer {
+        k: f64,
+        wall_concentration: f64,
+        #[serde(default)]
+        permeability: Option<f64>,
+    },
+    /// C5s: Lévêque developing boundary layer, integrated over each segment, x from the vessel inlet.
+    Leveque {
+        wall_concentration: f64,
+        #[serde(default)]
+        shear: Shear,
+        /// Multiplier on k (Hb facilitation E_Hb of §3.4, Dean-flow enhancement, ...).
+        #[serde(default = "one")]
+        enhancement: f64,
+        #[serde(default)]
+        permeability: Option<f64>,
+    },
+    /// C6: exact Graetz series (Poiseuille, constant c_w) with the cycle-mean |Q|.
+    Graetz {
+        wall_concentration: f64,
+        #[serde(default = "one")]
+        enhancement: f64,
+        #[serde(default)]
+        permeability: Option<f64>,
+    },
+    /// Wall-limited exchange q = P_w (c − c_t) with a fixed tissue concentration c_t.
+    Permeability {
+        permeability: f64,
+        tissue_concentration: f64,
+    },
+}
+fn one() -> f64 {
+    1.0
+}
+
+/// Geometry of one flow segment as seen by a closure.
+#[derive(Debug, Clone, Copy)]
+pub struct SegmentWall {
+    /// Mean lumen radius (m).
+    pub radius: f64,
+    /// Distance of the segment's ends from the vessel inlet (m).
+    pub x0: f64,
+    pub x1: f64,
+}
+
+impl SegmentWall {
+    pub fn area(&self) -> f64 {
+        2.0 * PI * self.radius * (self.x1 - self.x0)
+    }
+}
+
+/// A closure evaluated for one segment.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SegmentLaw {
+    /// W = g (c − cw) + q.
+    Fixed { g: f64, cw: f64, q: f64 },
+    /// Lévêque with instantaneous shear: g = max(coef |Q|^{1/3}, floor), then in series with
+    /// the wall permeability conductance `gp` (∞ if none).
+    Instantaneous {
+        coef: f64,
+        floor: f64,
+        gp: f64,
+        cw: f64,
+    },
+}
+
+fn series(g_blood: f64, gp: f64) -> f64 {
+    if gp.is_infinite() {
+        g_blood
+    } else if g_blood <= 0.0 {
+        0.0
+    } else {
+        1.0 / (1.0 / g_blood + 1.0 / gp)
+    }
+}
+
+/// Lévêque coefficient: ∫_seg k 2πr dx = coef · |Q|^{1/3} (physics §3.1 C5s), with
+/// a = (γ D²/9)^{1/3}/Γ(4/3), γ = 4|Q|/(π r³).
+pub fn leveque_coef(seg: &SegmentWall, d: f64) -> f64 {
+    let r = seg.radius;
+    let a_per_q = (4.0 / (PI * r.powi(3)) * d * d / 9.0).cbrt() / GAMMA_4_3;
+    2.0 * PI * r * 1.5 * a_per_q * (seg.x1.powf(2.0 / 3.0) - seg.x0.powf(2.0 / 3.0))
+}
+
+/// Graetz mixed-cup θ_m(x*) = 8 Σ G_n/λ_n² exp(−2 λ_n² x*), exact for x* ≥ 2e-5 with the
+/// tabulated 260 terms; below, the Lévêque scaling 1 − θ ∝ x*^{2/3} continues it to θ(0) = 1.
+pub fn graetz_theta(xs: f64) -> f64 {
+    const X_MIN: f64 = 2.0e-5;
+    if xs <= 0.0 {
+        return 1.0;
+    }
+    let series = |x: f64| {
+        8.0 * crate::graetz::GRAETZ
+            .iter()
+            .map(|(l, g)| g / (l * l) * (-2.0 * l * l * x).exp())
+            .sum::<f64>()
+    };
+    if xs >= X_MIN {
+        series(xs)
+    } else {
+        1.0 - (1.0 - series(X_MIN)) * (xs / X_MIN).powf(2.0 / 3.0)
+    }
+}
+
+/// Segment conductance of the Graetz closure for a steady flow |Q|: the 1-D model with the
+/// local k integrated over the segment, ∫ k 2πr dx = |Q| (ln θ(x*_0) − ln θ(x*_1)),
+/// x* = x/(d Pe) = π D x/(4|Q|).
+pub fn graetz_conductance(seg: &SegmentWall, d: f64, q_abs: f64) -> f64 {
+    if q_abs <= 0.0 {
+        // no flow: fully developed transfer
+        return SH_GRAETZ * d / (2.0 * seg.radius) * seg.area();
+    }
+    let xs = |x: f64| PI * d * x / (4.0 * q_abs);
+    q_abs * (graetz_theta(xs(seg.x0)).ln() - graetz_theta(xs(seg.x1)).ln())
+}
+
+fn check(element: &str, key: &str, v: f64, allow_zero: bool) -> Result<()> {
+    let ok = v.is_finite() && (v > 0.0 || (allow_zero && v == 0.0));
+    if ok {
+        Ok(())
+    } else {
+        Err(Error::model(
+            element,
+            format!(
+                "wall {key} must be a finite number {} 0, got {v}",
+                if allow_zero { ">=" } else { ">" }
+            ),
+        ))
+    }
+}
+
+impl WallSpec {
+    pub fn needs_mean_flow(&self) -> bool {
+        matches!(
+            self,
+            WallSpec::Graetz { .. }
+                | WallSpec::Leveque {
+                    shear: Shear::CycleMean,
+                    ..
+                }
+        )
+    }
+
+    pub fn validate(&self, element: &str) -> Result<()> {
+        let perm = |p: &Option<f64>| p.map_or(Ok(()), |p| check(element, "permeability", p, false));
+        match self {
+            WallSpec::None => Ok(()),
+            WallSpec::Flux { flux } => {
+                if flux.is_finite() {
+                    Ok(())
+                } else {
+                    Err(Error::model(
+                        element,
+                        format!("wall flux must be finite, got {flux}"),
+                    ))
+                }
+            }
+            WallSpec::MassTransfer {
+                k,
+                wall_concentration,
+                permeability,
+            } => {
+                check(element, "k", *k, true)?;
+                check(element, "wall_concentration", *wall_concentration, true)?;
+                perm(permeability)
+            }
+            WallSpec::Leveque {
+                wall_concentration,
+                enhancement,
+                permeability,
+                ..
+            }
+            | WallSpec::Graetz {
+                wall_concentration,
+                enhancement,
+                permeability,
+            } => {
+                check(element, "wall_concentration", *wall_concentration, true)?;
+                check(element, "enhancement", *enhancement, true)?;
+                perm(permeability)
+            }
+            WallSpec::Permeability {
+                permeability,
+                tissue_concentration,
+            } => {
+                check(element, "permeability", *permeability, true)?;
+                check(element, "tissue_concentration", *tissue_concentration, true)
+            }
+        }
+    }
+
+    /// The law of one segment. `d` is the species diffusivity, `q_mean` the segment's
+    /// cycle-mean |Q| (only read by closures that need it).
+    pub fn segment_law(
+        &self,
+        seg: &SegmentWall,
+        d: f64,
+        q_mean: f64,
+        element: &str,
+    ) -> Result<SegmentLaw> {
+        let s = seg.area();
+        let gp = |p: &Option<f64>| p.map_or(f64::INFINITY, |p| p * s);
+        let need_d = || {
+            if d.is_finite() && d > 0.0 {
+                Ok(())
+            } else {
+                Err(Error::model(
+                    element,
+                    format!("this wall model needs the species diffusivity > 0, got {d}"),
+                ))
+            }
+        };
+        Ok(match self {
+            WallSpec::None => SegmentLaw::Fixed {
+                g: 0.0,
+                cw: 0.0,
+                q: 0.0,
+            },
+            WallSpec::Flux { flux } => SegmentLaw::Fixed {
+                g: 0.0,
+                cw: 0.0,
+                q: flux * s,
+            },
+            WallSpec::MassTransfer {
+                k,
+                wall_concentration,
+                permeability,
+            } => SegmentLaw::Fixed {
+                g: series(k * s, gp(permeability)),
+                cw: *wall_concentration,
+                q: 0.0,
+            },
+            WallSpec::Permeability {
+                permeability,
+                tissue_concentration,
+            } => SegmentLaw::Fixed {
+                g: permeability * s,
+                cw: *tissue_concentration,
+                q: 0.0,
+            },
+            WallSpec::Leveque {
+                wall_concentration,
+                shear,
+                enhancement,
+                permeability,
+            } => {
+                need_d()?;
+                let coef = enhancement * leveque_coef(seg, d);
+                // C4 floor: Sh = 3.66 (the boundary layer cannot be thicker than the lumen)
+                let floor = enhancement * SH_GRAETZ * d / (2.0 * seg.radius) * s;
+                match shear {
+                    Shear::CycleMean => SegmentLaw::Fixed {
+                        g: series((coef * q_mean.cbrt()).max(floor), gp(permeability)),
+                        cw: *wall_concentration,
+                        q: 0.0,
+                    },
+                    Shear::Instantaneous => SegmentLaw::Instantaneous {
+                        coef,
+                        floor,
+                        gp: gp(permeability),
+                        cw: *wall_concentration,
+                    },
+                }
+            }
+            WallSpec::Graetz {
+                wall_concentration,
+                enhancement,
+                permeability,
+            } => {
+                need_d()?;
+                SegmentLaw::Fixed {
+                    g: series(
+                        enhancement * graetz_conductance(seg, d, q_mean),
+                        gp(permeability),
+                    ),
+                    cw: *wall_concentration,
+                    q: 0.0,
+                }
+            }
+        })
+    }
+}
+
+impl SegmentLaw {
+    /// (g, cw, q) at the current segment flow.
+    #[inline]
+    pub fn eval(&self, q_branch: f64) -> (f64, f64, f64) {
+        match *self {
+            SegmentLaw::Fixed { g, cw, q } => (g, cw, q),
+            SegmentLaw::Instantaneous {
+                coef,
+                floor,
+                gp,
+                cw,
+            } => (
+                series((coef * q_branch.abs().cbrt()).max(floor), gp),
+                cw,
+                0.0,
+            ),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn graetz_mixed_cup_matches_physics_6c() {
+        for (x, th) in [
+            (0.005, 0.8362189),
+            (0.01, 0.7511057),
+            (0.02, 0.6280276),
+            (0.05, 0.3952988),
+            (0.1, 0.1897101),
+            (0.001, 0.9403184),
+            (0.002, 0.9073636),
+        ] {
+            assert!(
+                (graetz_theta(x) - th).abs() < 6e-8,
+                "θ({x}) = {}",
+                graetz_theta(x)
+            );
+        }
+    }
+
+    /// (c1): the C6 closure as the local k of the 1-D model, θ_i = θ_{i−1}/(1 + β_i).
+    #[test]
+    fn graetz_closure_in_the_cell_balance_converges_c1() {
+        let cases = [
+            (
+                0.05,
+                [(10, 0.4131916), (50, 0.3991931), (200, 0.3963061)],
+                0.3952988,
+            ),
+            (
+                0.01,
+                [(10, 0.7546276), (50, 0.7518648), (200, 0.7513019)],
+                0.7511057,
+            ),
+        ];
+        for (xl, rows, exact) in cases {
+            let mut errs = Vec::new();
+            for (n, expected) in rows {
+                let mut theta = 1.0;
+                for i in 0..n {
+                    let (a, b) = (xl * i as f64 / n as f64, xl * (i + 1) as f64 / n as f64);
+                    let beta = graetz_theta(a).ln() - graetz_theta(b).ln();
+                    theta /= 1.0 + beta;
+                }
+                assert!((theta - expected).abs() < 1e-7, "x*={xl} N={n}: {theta}");
+                errs.push((theta - exact, n));
+            }
+            // first order: error × N roughly constant
+            let (e0, n0) = errs[0];
+            let (e2, n2) = errs[2];
+            let ratio = (e0 * n0 as f64) / (e2 * n2 as f64);
+            assert!(
+                (0.8..1.25).contains(&ratio),
+                "first-order constant ratio {ratio}"
+            );
+        }
+    }
+
+    #[test]
+    fn graetz_conductance_uses_x_star() {
+        // segment [0, L] of a tube with x*_L = 0.05: β = −ln θ_m(0.05)
+        let (d, q, r) = (1.2e-9, 1e-6, 1e-3);
+        let l = 0.05 * 4.0 * q / (PI * d);
+        let seg = SegmentWall {
+            radius: r,
+            x0: 0.0,
+            x1: l,
+        };
+        let g = graetz_conductance(&seg, d, q);
+        assert!((g / q - (-(0.3952988f64).ln())).abs() < 1e-6);
+    }
+
+    #[test]
+    fn leveque_segments_sum_to_the_whole_vessel_c4() {
+        let (d, q, r, l, n): (f64, f64, f64, f64, usize) = (1.2e-9, 2e-5, 8e-3, 0.2, 10);
+        let whole = leveque_coef(
+            &SegmentWall {
+                radius: r,
+                x0: 0.0,
+                x1: l,
+            },
+            d,
+        );
+        let sum: f64 = (0..n)
+            .map(|i| {
+                leveque_coef(
+                    &SegmentWall {
+                        radius: r,
+                        x0: l * i as f64 / n as f64,
+                        x1: l * (i + 1) as f64 / n as f64,
+                    },
+                    d,
+                )
+            })
+            .sum();
+        assert!((sum / whole - 1.0).abs() < 1e-14);
+        // physics §3.5: aorta segment-integrated k̄_1 = 1.235e-5 m/s, k̄_10 = 3.89e-6 m/s
+        let dx = l / n as f64;
+        let k1 = leveque_coef(
+            &SegmentWall {
+                radius: r,
+                x0: 0.0,
+                x1: dx,
+            },
+            d,
+        ) * q.cbrt()
+            / (2.0 * PI * r * dx);
+        let k10 = leveque_coef(
+            &SegmentWall {
+                radius: r,
+                x0: l - dx,
+                x1: l,
+            },
+            d,
+        ) * q.cbrt()
+            / (2.0 * PI * r * dx);
+        assert!((k1 / 1.235e-5 - 1.0).abs() < 2e-3, "{k1}");
+        assert!((k10 / 3.89e-6 - 1.0).abs() < 2e-3, "{k10}");
+        // mean Sherwood 1.6150982 (Pe d/L)^{1/3}
+        let pe = q / (PI * r * r) * 2.0 * r / d;
+        let k_mean = whole * q.cbrt() / (2.0 * PI * r * l);
+        let sh = k_mean * 2.0 * r / d;
+        assert!((sh / (1.6150982 * (pe * 2.0 * r / l).cbrt()) - 1.0).abs() < 1e-6);
+    }
+}

@@ -1,0 +1,1377 @@
+//! Species transport on the flow circuit (physics spec §2.5): the conservative finite-volume
+//! form of the paper's oxygen transmission line.
+//!
+//! * Cells are the circuit nodes that hold lumen volume; V_n = V0_n + C_n (P_n − P_ref) is taken
+//!   from the flow state, so dV_n/dt equals the net inflow exactly and a uniform field stays
+//!   uniform (free-stream preservation).
+//! * Faces are the branches (and flow sources); each carries F = Q · C_t,upwind, upwind on the
+//!   sign of Q. The state is the amount N (mol) per cell and species, so every face flux leaves
+//!   one cell and enters another: Σ N + I_out + I_wall + I_decay − I_in is an exact linear
+//!   invariant, which any Runge–Kutta method preserves to round-off.
+//! * Capacitance- and volume-free nodes inside the network (lumped vessels, the inlet node of an
+//!   L arrangement) are pass-through mixing points; nodes of boundary conditions (Windkessel,
+//!   distal and prescribed-pressure nodes) are outside the domain: flow into them is outflow,
+//!   flow out of them carries the inlet or backflow concentration.
+//! * The advected quantity is the total concentration C_t (free + bound); wall exchange acts
+//!   on the free concentration c = binding⁻¹(C_t) (physics §4.3).
+//!
+//! Two integrations share this description: the explicit right-hand side (`rhs`), integrated
+//! monolithically with the flow by RK4, and a backward-Euler step (`implicit_step`) used after
+//! each generalized-α flow step, solved by one sweep in flow order (an M-matrix that is
+//! triangular whenever the directed flow graph is acyclic, e.g. on every tree).
+
+use crate::circuit::{Circuit, Dae};
+use crate::closure::{SegmentLaw, SegmentWall, WallSpec};
+use crate::error::{Error, Result};
+use crate::hemoglobin::{Binding, BindingSpec};
+use crate::network::Probes;
+use crate::waveform::{Waveform, WaveformSpec};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Formulation {
+    /// State = amount per cell, upwind fluxes (physics §2.5).
+    #[default]
+    Conservative,
+    /// The paper taken literally (physics §2.7): J_i = J_{i−1} − W_i along the flow, no storage.
+    TlQuasisteady,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SpeciesSpec {
+    pub name: String,
+    /// Diffusivity in blood (m²/s): used by the Lévêque and Graetz closures.
+    #[serde(default)]
+    pub diffusivity: f64,
+    /// First-order decay rate λ (1/s).
+    #[serde(default)]
+    pub decay: f64,
+    #[serde(default)]
+    pub binding: BindingSpec,
+    /// Free concentration (mol/m³) carried in at every inlet boundary condition.
+    pub inlet: WaveformSpec,
+    /// Per inlet boundary condition overrides of `inlet`.
+    #[serde(default)]
+    pub inlets: BTreeMap<String, WaveformSpec>,
+    /// Free concentration carried in by backflow at the named outlets; others are zero-gradient.
+    #[serde(default)]
+    pub backflow: BTreeMap<String, WaveformSpec>,
+    /// Initial free concentration (default: the inlet value at t = 0).
+    #[serde(default)]
+    pub initial: Option<f64>,
+    #[serde(default)]
+    pub wall: WallSpec,
+    #[serde(default)]
+    pub per_vessel: BTreeMap<String, WallSpec>,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TransportSpec {
+    /// Pressure at which the given radii (and so V0) hold, Pa.
+    #[serde(default)]
+    pub reference_pressure: f64,
+    #[serde(default)]
+    pub formulation: Formulation,
+    /// |v| below which the transmission-line elements L_i, R_i are reported as NaN (m/s).
+    #[serde(default = "default_v_eps")]
+    pub velocity_threshold: f64,
+    pub species: Vec<SpeciesSpec>,
+}
+fn default_v_eps() -> f64 {
+    1e-6
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum End {
+    Node(usize),
+    Boundary(usize),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Cell,
+    Mixing,
+    Exterior,
+}
+
+#[derive(Debug, Clone)]
+struct Face {
+    /// Flow unknown (index into y).
+    unknown: usize,
+    from: End,
+    to: End,
+}
+
+#[derive(Debug, Clone)]
+enum BoundaryValue {
+    Wave(Waveform),
+    ZeroGradient,
+}
+
+#[derive(Debug, Clone)]
+struct Species {
+    name: String,
+    binding: Binding,
+    decay: f64,
+    diffusivity: f64,
+    boundary: Vec<BoundaryValue>,
+    walls: Vec<WallSpec>,
+    laws: Vec<SegmentLaw>,
+    /// Per cell: Σ share·g, Σ share·g·c_w, Σ share·q of its segments' fixed laws.
+    cell_g: Vec<f64>,
+    cell_gcw: Vec<f64>,
+    cell_q: Vec<f64>,
+    /// Segments whose conductance follows the instantaneous flow.
+    dynamic: Vec<usize>,
+    has_wall: bool,
+    initial_free: f64,
+    /// Free concentration per node: warm start of the binding inversion, and reporting.
+    free: Vec<f64>,
+}
+
+#[derive(Debug, Clone)]
+struct Segment {
+    branch_unknown: usize,
+    nodes: [(usize, f64); 2],
+    wall: SegmentWall,
+    dx: f64,
+    volume: f64,
+    compliance: f64,
+}
+
+/// Outputs of one vessel: first and last face (flow unknowns) and its segment range.
+#[derive(Debug, Clone)]
+struct OutVessel {
+    first: usize,
+    last: usize,
+    segs: std::ops::Range<usize>,
+}
+
+pub const VESSEL_COLUMNS: usize = 5;
+pub const SEGMENT_COLUMNS: usize = 5;
+pub const BALANCE_COLUMNS: usize = 5;
+
+/// Runtime transport: topology, closures, scratch. Cloned per run.
+#[derive(Debug, Clone)]
+pub struct Transport {
+    kind: Vec<Kind>,
+    cells: Vec<usize>,
+    node_cell: Vec<usize>,
+    v0: Vec<f64>,
+    cap: Vec<f64>,
+    p_ref: f64,
+    faces: Vec<Face>,
+    face_of_unknown: Vec<usize>,
+    sources: Vec<(usize, Waveform, usize)>,
+    boundary_inlet: Vec<bool>,
+    mixing: Vec<usize>,
+    /// CSR node → incident faces; sources listed separately.
+    node_ptr: Vec<usize>,
+    node_faces: Vec<usize>,
+    node_sources: Vec<Vec<usize>>,
+    segments: Vec<Segment>,
+    species: Vec<Species>,
+    formulation: Formulation,
+    v_eps: f64,
+    out_vessels: Vec<OutVessel>,
+    out_segments: Vec<usize>,
+    segment_vessels: Vec<usize>,
+    node_names: Vec<String>,
+    /// Nodes solved by the implicit sweep (cells and mixing points).
+    domain: Vec<usize>,
+    // scratch
+    vol: Vec<f64>,
+    conc: Vec<f64>,
+    qf: Vec<f64>,
+    qs: Vec<f64>,
+    bval: Vec<Option<f64>>,
+    sweep: Sweep,
+    /// Transport volumes of the implicit path (evolved with the face flows).
+    wvol: Vec<f64>,
+}
+
+fn bad(element: &str, msg: String) -> Error {
+    Error::model(element, msg)
+}
+
+impl Transport {
+    /// Validate the transport section against the assembled circuit.
+    pub fn build(
+        spec: &TransportSpec,
+        circuit: &Circuit,
+        dae: &Dae,
+        probes: &Probes,
+    ) -> Result<Self> {
+        let nn = circuit.nodes.len();
+        if spec.species.is_empty() {
+            return Err(bad("transport", "has no species".into()));
+        }
+        if !spec.reference_pressure.is_finite() {
+            return Err(bad(
+                "transport",
+                format!(
+                    "reference_pressure must be finite, got {}",
+                    spec.reference_pressure
+                ),
+            ));
+        }
+        if !(spec.velocity_threshold.is_finite() && spec.velocity_threshold >= 0.0) {
+            return Err(bad(
+                "transport",
+                format!(
+                    "velocity_threshold must be >= 0, got {}",
+                    spec.velocity_threshold
+                ),
+            ));
+        }
+        if circuit.source_boundary.len() != circuit.sources.len() {
+            return Err(bad(
+                "transport",
+                "the circuit's flow sources are not tagged with boundary conditions".into(),
+            ));
+        }
+        let fixed: Vec<bool> = {
+            let mut f = vec![false; nn];
+            for (n, _) in &circuit.fixed_pressures {
+                f[*n] = true;
+            }
+            f
+        };
+        let mut kind = vec![Kind::Mixing; nn];
+        let mut cells = Vec::new();
+        let mut node_cell = vec![usize::MAX; nn];
+        for (i, node) in circuit.nodes.iter().enumerate() {
+            kind[i] = if node.boundary.is_some() || fixed[i] {
+                Kind::Exterior
+            } else if node.volume > 0.0 {
+                node_cell[i] = cells.len();
+                cells.push(i);
+                Kind::Cell
+            } else {
+                if dae.e[i] > 0.0 {
+                    // a compliant node with no lumen volume would store blood but no solute
+                    return Err(bad(
+                        &node.name,
+                        "has compliance but no lumen volume, so transport cannot conserve mass there; give the vessel geometry instead of lumped values".into(),
+                    ));
+                }
+                Kind::Mixing
+            };
+        }
+        let boundary_of = |n: usize| -> End {
+            match circuit.nodes[n].boundary {
+                Some(b) if kind[n] == Kind::Exterior => End::Boundary(b),
+                _ => End::Node(n),
+            }
+        };
+        let mut faces = Vec::new();
+        let mut face_of_unknown = vec![usize::MAX; dae.n];
+        for (bi, b) in circuit.branches.iter().enumerate() {
+            let (ka, kb) = (kind[b.from], kind[b.to]);
+            if ka == Kind::Exterior && kb == Kind::Exterior {
+                continue;
+            }
+            let (from, to) = (boundary_of(b.from), boundary_of(b.to));
+            // a prescribed-pressure node without a tag cannot happen from network.rs; be explicit
+            for (k, e) in [(ka, from), (kb, to)] {
+                if k == Kind::Exterior && matches!(e, End::Node(_)) {
+                    return Err(bad(
+                        &b.name,
+                        "connects to a prescribed-pressure node without a boundary condition"
+                            .into(),
+                    ));
+                }
+            }
+            face_of_unknown[nn + bi] = faces.len();
+            faces.push(Face {
+                unknown: nn + bi,
+                from,
+                to,
+            });
+        }
+        let sources: Vec<(usize, Waveform, usize)> = circuit
+            .sources
+            .iter()
+            .zip(&circuit.source_boundary)
+            .filter(|((n, _), _)| kind[*n] != Kind::Exterior)
+            .map(|((n, w), b)| (*n, w.clone(), *b))
+            .collect();
+        let mixing: Vec<usize> = (0..nn).filter(|&i| kind[i] == Kind::Mixing).collect();
+        let mut deg = vec![0usize; nn + 1];
+        for f in &faces {
+            for e in [f.from, f.to] {
+                if let End::Node(n) = e {
+                    deg[n] += 1;
+                }
+            }
+        }
+        let mut node_ptr = vec![0usize; nn + 1];
+        for i in 0..nn {
+            node_ptr[i + 1] = node_ptr[i] + deg[i];
+        }
+        let mut node_faces = vec![0usize; node_ptr[nn]];
+        let mut fill = node_ptr.clone();
+        for (fi, f) in faces.iter().enumerate() {
+            for e in [f.from, f.to] {
+                if let End::Node(n) = e {
+                    node_faces[fill[n]] = fi;
+                    fill[n] += 1;
+                }
+            }
+        }
+        let mut node_sources = vec![Vec::new(); nn];
+        for (k, (n, _, _)) in sources.iter().enumerate() {
+            node_sources[*n].push(k);
+        }
+        let segments: Vec<Segment> = circuit
+            .segments
+            .iter()
+            .map(|s| Segment {
+                branch_unknown: nn + s.branch,
+                nodes: s.nodes,
+                wall: SegmentWall {
+                    radius: s.radius,
+                    x0: s.x0,
+                    x1: s.x1,
+                },
+                dx: s.x1 - s.x0,
+                volume: s.volume,
+                compliance: s.compliance,
+            })
+            .collect();
+        let v0: Vec<f64> = cells.iter().map(|&n| circuit.nodes[n].volume).collect();
+        let cap: Vec<f64> = cells.iter().map(|&n| dae.e[n]).collect();
+
+        let boundary_inlet: Vec<bool> = circuit.boundaries.iter().map(|b| b.inlet).collect();
+        let boundary_names: Vec<String> =
+            circuit.boundaries.iter().map(|b| b.name.clone()).collect();
+        let mut species = Vec::new();
+        let mut seen = std::collections::HashSet::new();
+        for sp in &spec.species {
+            let el = format!("species '{}'", sp.name);
+            if sp.name.is_empty() || !seen.insert(sp.name.clone()) {
+                return Err(bad(&el, "needs a unique, non-empty name".into()));
+            }
+            if !(sp.decay.is_finite() && sp.decay >= 0.0) {
+                return Err(bad(
+                    &el,
+                    format!("decay must be a finite number >= 0, got {}", sp.decay),
+                ));
+            }
+            if !(sp.diffusivity.is_finite() && sp.diffusivity >= 0.0) {
+                return Err(bad(
+                    &el,
+                    format!(
+                        "diffusivity must be a finite number >= 0, got {}",
+                        sp.diffusivity
+                    ),
+                ));
+            }
+            let binding = Binding::from_spec(&sp.binding, &el)?;
+            let inlet = Waveform::from_spec(&sp.inlet, &format!("{el} inlet"))?;
+            for name in sp.inlets.keys().chain(sp.backflow.keys()) {
+                if !boundary_names.contains(name) {
+                    return Err(bad(
+                        &el,
+                        format!(
+                            "names boundary condition '{name}', which the network does not have"
+                        ),
+                    ));
+                }
+            }
+            let mut boundary = Vec::new();
+            for (b, name) in boundary_names.iter().enumerate() {
+                let v = if boundary_inlet[b] {
+                    match sp.inlets.get(name) {
+                        Some(w) => BoundaryValue::Wave(Waveform::from_spec(
+                            w,
+                            &format!("{el} inlet '{name}'"),
+                        )?),
+                        None => BoundaryValue::Wave(inlet.clone()),
+                    }
+                } else {
+                    match sp.backflow.get(name) {
+                        Some(w) => BoundaryValue::Wave(Waveform::from_spec(
+                            w,
+                            &format!("{el} backflow '{name}'"),
+                        )?),
+                        None => BoundaryValue::ZeroGradient,
+                    }
+                };
+                boundary.push(v);
+            }
+            sp.wall.validate(&format!("{el} wall"))?;
+            let mut walls = vec![sp.wall.clone(); circuit.vessel_names.len()];
+            for (vname, w) in &sp.per_vessel {
+                let Some(vi) = circuit.vessel_names.iter().position(|n| n == vname) else {
+                    return Err(bad(
+                        &el,
+                        format!(
+                            "per_vessel names vessel '{vname}', which the network does not have"
+                        ),
+                    ));
+                };
+                w.validate(&format!("{el} wall of vessel '{vname}'"))?;
+                walls[vi] = w.clone();
+            }
+            let initial_free = match sp.initial {
+                Some(c) if c.is_finite() && c >= 0.0 => c,
+                Some(c) => {
+                    return Err(bad(
+                        &el,
+                        format!("initial concentration must be >= 0, got {c}"),
+                    ));
+                }
+                None => inlet.eval(0.0),
+            };
+            species.push(Species {
+                name: sp.name.clone(),
+                binding,
+                decay: sp.decay,
+                diffusivity: sp.diffusivity,
+                boundary,
+                walls,
+                laws: Vec::new(),
+                cell_g: vec![0.0; cells.len()],
+                cell_gcw: vec![0.0; cells.len()],
+                cell_q: vec![0.0; cells.len()],
+                dynamic: Vec::new(),
+                has_wall: false,
+                initial_free,
+                free: vec![initial_free; nn],
+            });
+        }
+        // outputs: the output vessels of the flow probes, their segments in order
+        let mut out_vessels = Vec::new();
+        let mut out_segments = Vec::new();
+        for (k, name) in probes.vessels.iter().enumerate() {
+            let vi = circuit
+                .vessel_names
+                .iter()
+                .position(|n| n == name)
+                .unwrap_or(usize::MAX);
+            let start = out_segments.len();
+            out_segments.extend((0..segments.len()).filter(|&j| circuit.segments[j].vessel == vi));
+            out_vessels.push(OutVessel {
+                first: probes.vessel_unknowns[4 * k + 2],
+                last: probes.vessel_unknowns[4 * k + 3],
+                segs: start..out_segments.len(),
+            });
+        }
+        let ncells = cells.len();
+        let mut t = Transport {
+            kind,
+            cells,
+            node_cell,
+            v0,
+            cap,
+            p_ref: spec.reference_pressure,
+            faces,
+            face_of_unknown,
+            sources,
+            boundary_inlet,
+            mixing,
+            node_ptr,
+            node_faces,
+            node_sources,
+            segments,
+            species,
+            formulation: spec.formulation,
+            v_eps: spec.velocity_threshold,
+            out_vessels,
+            out_segments,
+            segment_vessels: circuit.segments.iter().map(|s| s.vessel).collect(),
+            node_names: circuit.nodes.iter().map(|n| n.name.clone()).collect(),
+            domain: Vec::new(),
+            vol: vec![0.0; ncells],
+            conc: vec![0.0; nn],
+            qf: Vec::new(),
+            qs: Vec::new(),
+            bval: Vec::new(),
+            sweep: Sweep::new(nn),
+            wvol: Vec::new(),
+        };
+        t.qf = vec![0.0; t.faces.len()];
+        t.qs = vec![0.0; t.sources.len()];
+        t.bval = vec![None; t.boundary_inlet.len()];
+        t.domain = (0..nn).filter(|&n| t.kind[n] != Kind::Exterior).collect();
+        // laws that do not need the mean flow are final now
+        let zero = vec![0.0; t.segments.len()];
+        t.set_laws(&zero, false)?;
+        Ok(t)
+    }
+
+    pub fn species_names(&self) -> Vec<String> {
+        self.species.iter().map(|s| s.name.clone()).collect()
+    }
+    pub fn n_cells(&self) -> usize {
+        self.cells.len()
+    }
+    /// Length of the coupled state: amounts per cell and species, then 4 accumulators per
+    /// species (I_in, I_out, I_wall, I_decay).
+    pub fn state_len(&self) -> usize {
+        self.species.len() * (self.cells.len() + 4)
+    }
+    pub fn formulation(&self) -> Formulation {
+        self.formulation
+    }
+    /// Columns recorded per species at every output time.
+    pub fn columns_per_species(&self) -> usize {
+        VESSEL_COLUMNS * self.out_vessels.len()
+            + SEGMENT_COLUMNS * self.out_segments.len()
+            + BALANCE_COLUMNS
+    }
+    pub fn out_segment_count(&self) -> usize {
+        self.out_segments.len()
+    }
+
+    /// Flow unknowns whose cycle-mean |Q| the closures need (empty: single pass).
+    pub fn mean_flow_unknowns(&self) -> Vec<usize> {
+        if self
+            .species
+            .iter()
+            .any(|s| s.walls.iter().any(|w| w.needs_mean_flow()))
+        {
+            self.segments.iter().map(|s| s.branch_unknown).collect()
+        } else {
+            Vec::new()
+        }
+    }
+
+    /// Evaluate the segment laws; `mean_abs[j]` is segment j's cycle-mean |Q|.
+    pub fn set_mean_flow(&mut self, mean_abs: &[f64]) -> Result<()> {
+        self.set_laws(mean_abs, true)
+    }
+
+    fn set_laws(&mut self, mean_abs: &[f64], final_pass: bool) -> Result<()> {
+        let nc = self.cells.len();
+        for sp in &mut self.species {
+            sp.laws.clear();
+            sp.dynamic.clear();
+            sp.cell_g = vec![0.0; nc];
+            sp.cell_gcw = vec![0.0; nc];
+            sp.cell_q = vec![0.0; nc];
+            for (j, seg) in self.segments.iter().enumerate() {
+                let vessel_wall = &sp.walls[self.segment_vessels[j]];
+                let law = if seg.wall.radius <= 0.0
+                    || seg.dx <= 0.0
+                    || (vessel_wall.needs_mean_flow() && !final_pass)
+                {
+                    SegmentLaw::Fixed {
+                        g: 0.0,
+                        cw: 0.0,
+                        q: 0.0,
+                    }
+                } else {
+                    vessel_wall.segment_law(
+                        &seg.wall,
+                        sp.diffusivity,
+                        mean_abs[j],
+                        &format!("species '{}' wall", sp.name),
+                    )?
+                };
+                match law {
+                    SegmentLaw::Fixed { g, cw, q } => {
+                        for &(n, share) in &seg.nodes {
+                            let c = self.node_cell[n];
+                            if share > 0.0 && c != usize::MAX {
+                                sp.cell_g[c] += share * g;
+                                sp.cell_gcw[c] += share * g * cw;
+                                sp.cell_q[c] += share * q;
+                            }
+                        }
+                    }
+                    SegmentLaw::Instantaneous { .. } => sp.dynamic.push(j),
+                }
+                sp.laws.push(law);
+            }
+            sp.has_wall = !sp.dynamic.is_empty()
+                || sp.cell_g.iter().any(|&g| g != 0.0)
+                || sp.cell_q.iter().any(|&q| q != 0.0);
+        }
+        Ok(())
+    }
+
+    /// Initial state: uniform initial concentration of every species in V(P0).
+    pub fn initial_state(&mut self, y: &[f64]) -> Result<Vec<f64>> {
+        self.volumes(y, 0.0)?;
+        let nc = self.cells.len();
+        let mut z = vec![0.0; self.state_len()];
+        for (s, sp) in self.species.iter().enumerate() {
+            let ct = sp.binding.total(sp.initial_free);
+            for i in 0..nc {
+                z[s * nc + i] = self.vol[i] * ct;
+            }
+        }
+        self.wvol = self.vol.clone();
+        Ok(z)
+    }
+
+    fn volumes(&mut self, y: &[f64], time: f64) -> Result<()> {
+        for (i, &n) in self.cells.iter().enumerate() {
+            let v = self.v0[i] + self.cap[i] * (y[n] - self.p_ref);
+            if v.is_nan() || v <= 0.0 {
+                return Err(Error::solver(
+                    time,
+                    format!(
+                        "lumen volume of transport cell '{}' is {v:.3e} m³ (V0 {:.3e} m³, pressure {:.1} Pa, reference pressure {:.1} Pa): set oxygen reference_pressure closer to the working pressure",
+                        self.node_name(n),
+                        self.v0[i],
+                        y[n],
+                        self.p_ref
+                    ),
+                ));
+            }
+            self.vol[i] = v;
+        }
+        Ok(())
+    }
+
+    fn node_name(&self, n: usize) -> String {
+        self.node_names
+            .get(n)
+            .cloned()
+            .unwrap_or_else(|| format!("node {n}"))
+    }
+
+    fn load_flows(&mut self, time: f64, y: &[f64]) {
+        for (q, f) in self.qf.iter_mut().zip(&self.faces) {
+            *q = y[f.unknown];
+        }
+        for (q, (_, w, _)) in self.qs.iter_mut().zip(&self.sources) {
+            *q = w.eval(time);
+        }
+    }
+
+    fn load_boundary(&mut self, s: usize, time: f64) {
+        let sp = &self.species[s];
+        for (v, b) in self.bval.iter_mut().zip(&sp.boundary) {
+            *v = match b {
+                BoundaryValue::Wave(w) => Some(sp.binding.total(w.eval(time))),
+                BoundaryValue::ZeroGradient => None,
+            };
+        }
+    }
+
+    /// Total concentration carried by a face from the boundary end `b` next to node `n`:
+    /// prescribed, or zero-gradient (the neighbour's value; for a mixing point the value its
+    /// sweep used, so that the point stays exactly balanced).
+    #[inline]
+    fn boundary_conc(&self, b: usize, n: End) -> f64 {
+        match (self.bval[b], n) {
+            (Some(c), _) => c,
+            (None, End::Node(n)) if self.kind[n] == Kind::Mixing => self.sweep.lag[n],
+            (None, End::Node(n)) => self.conc[n],
+            (None, End::Boundary(_)) => 0.0,
+        }
+    }
+
+    /// Free concentration of every cell of species `s` (binding inversion, warm-started).
+    fn free_of_cells(&mut self, s: usize) {
+        let sp = &mut self.species[s];
+        if sp.binding.is_identity() {
+            for &n in &self.cells {
+                sp.free[n] = self.conc[n];
+            }
+        } else {
+            for &n in &self.cells {
+                sp.free[n] = sp.binding.free(self.conc[n], sp.free[n]);
+            }
+        }
+    }
+
+    /// Wall uptake of every cell for species `s` into `w` (mol/s), from the current free
+    /// concentrations and branch flows `y`.
+    fn wall_uptake(&self, s: usize, y: &[f64], w: &mut [f64]) {
+        let sp = &self.species[s];
+        for (i, &n) in self.cells.iter().enumerate() {
+            w[i] = sp.cell_g[i] * sp.free[n] - sp.cell_gcw[i] + sp.cell_q[i];
+        }
+        for &j in &sp.dynamic {
+            let seg = &self.segments[j];
+            let (g, cw, q) = sp.laws[j].eval(y[seg.branch_unknown]);
+            for &(n, share) in &seg.nodes {
+                let c = self.node_cell[n];
+                if share > 0.0 && c != usize::MAX {
+                    w[c] += share * (g * (sp.free[n] - cw) + q);
+                }
+            }
+        }
+    }
+
+    /// Concentrations of the mixing points from their upwind neighbours (flux-weighted).
+    fn mix(&mut self) -> Result<()> {
+        if self.mixing.is_empty() {
+            return Ok(());
+        }
+        let nn = self.kind.len();
+        let mut d = std::mem::take(&mut self.sweep.d);
+        let mut b = std::mem::take(&mut self.sweep.b);
+        d.resize(nn, 0.0);
+        b.resize(nn, 0.0);
+        for &m in &self.mixing {
+            d[m] = 0.0;
+            b[m] = 0.0;
+        }
+        let mut x = std::mem::take(&mut self.conc);
+        let mixing = std::mem::take(&mut self.mixing);
+        let res = self.sweep_solve(&mixing, &d, &b, &mut x);
+        self.mixing = mixing;
+        self.conc = x;
+        self.sweep.d = d;
+        self.sweep.b = b;
+        res
+    }
+
+    /// Explicit right-hand side dz/dt at (t, y) for the monolithic RK4 step.
+    pub fn rhs(&mut self, time: f64, y: &[f64], z: &[f64], dz: &mut [f64]) -> Result<()> {
+        let nc = self.cells.len();
+        let nsp = self.species.len();
+        self.volumes(y, time)?;
+        self.load_flows(time, y);
+        let mut wbuf = std::mem::take(&mut self.sweep.w);
+        wbuf.resize(nc, 0.0);
+        for s in 0..nsp {
+            let (zs, dzs) = (&z[s * nc..(s + 1) * nc], &mut dz[s * nc..(s + 1) * nc]);
+            for (i, &n) in self.cells.iter().enumerate() {
+                self.conc[n] = zs[i] / self.vol[i];
+            }
+            self.load_boundary(s, time);
+            self.mix()?;
+            dzs.iter_mut().for_each(|v| *v = 0.0);
+            let (mut i_in, mut i_out) = (0.0, 0.0);
+            for (f, &q) in self.faces.iter().zip(&self.qf) {
+                let (up, other) = if q >= 0.0 {
+                    (f.from, f.to)
+                } else {
+                    (f.to, f.from)
+                };
+                let c = match up {
+                    End::Node(n) => self.conc[n],
+                    End::Boundary(b) => self.boundary_conc(b, other),
+                };
+                let flux = q * c;
+                match f.from {
+                    End::Node(n) => {
+                        let k = self.node_cell[n];
+                        if k != usize::MAX {
+                            dzs[k] -= flux;
+                        }
+                    }
+                    End::Boundary(b) => {
+                        account(self.boundary_inlet[b], flux, &mut i_in, &mut i_out)
+                    }
+                }
+                match f.to {
+                    End::Node(n) => {
+                        let k = self.node_cell[n];
+                        if k != usize::MAX {
+                            dzs[k] += flux;
+                        }
+                    }
+                    End::Boundary(b) => {
+                        account(self.boundary_inlet[b], -flux, &mut i_in, &mut i_out)
+                    }
+                }
+            }
+            for ((n, _, b), &q) in self.sources.iter().zip(&self.qs) {
+                let c = if q >= 0.0 {
+                    self.boundary_conc(*b, End::Node(*n))
+                } else {
+                    self.conc[*n]
+                };
+                let flux = q * c;
+                let k = self.node_cell[*n];
+                if k != usize::MAX {
+                    dzs[k] += flux;
+                }
+                account(self.boundary_inlet[*b], flux, &mut i_in, &mut i_out);
+            }
+            let mut i_wall = 0.0;
+            if self.species[s].has_wall {
+                self.free_of_cells(s);
+                self.wall_uptake(s, y, &mut wbuf);
+                for (d, w) in dzs.iter_mut().zip(&wbuf) {
+                    *d -= w;
+                    i_wall += w;
+                }
+            }
+            let lambda = self.species[s].decay;
+            let mut i_decay = 0.0;
+            if lambda != 0.0 {
+                for (d, n) in dzs.iter_mut().zip(zs) {
+                    *d -= lambda * n;
+                    i_decay += lambda * n;
+                }
+            }
+            let acc = &mut dz[nsp * nc + 4 * s..nsp * nc + 4 * s + 4];
+            acc.copy_from_slice(&[i_in, i_out, i_wall, i_decay]);
+        }
+        self.sweep.w = wbuf;
+        Ok(())
+    }
+
+    /// Backward-Euler upwind transport over [t, t + dt] after a generalized-α flow step, with
+    /// the face flows of the step's α_f level, Q = Q_n + α_f (Q_{n+1} − Q_n), and sources at
+    /// t + α_f dt. The transport volumes W evolve with the same face flows, W' = W + dt·(net
+    /// inflow), so a uniform field stays uniform and Σ N changes by exactly dt × (boundary − wall
+    /// − decay fluxes). Generalized-α enforces the capacitor rows at the α levels, which gives
+    /// W_n − V(P_n) = (γ − α_m) dt C (Ṗ_n − Ṗ_0): an O(dt) offset that does not drift.
+    pub fn implicit_step(
+        &mut self,
+        time: f64,
+        dt: f64,
+        alpha_f: f64,
+        y0: &[f64],
+        y1: &[f64],
+        z: &mut [f64],
+    ) -> Result<()> {
+        let nc = self.cells.len();
+        let nsp = self.species.len();
+        let nn = self.kind.len();
+        let t_af = time + alpha_f * dt;
+        let ya: Vec<f64> = y0
+            .iter()
+            .zip(y1)
+            .map(|(a, b)| a + alpha_f * (b - a))
+            .collect();
+        self.load_flows(t_af, &ya);
+        // new transport volumes
+        let w_old = self.wvol.clone();
+        let mut w_new = w_old.clone();
+        for (f, &q) in self.faces.iter().zip(&self.qf) {
+            if let End::Node(n) = f.from {
+                if self.node_cell[n] != usize::MAX {
+                    w_new[self.node_cell[n]] -= dt * q;
+                }
+            }
+            if let End::Node(n) = f.to {
+                if self.node_cell[n] != usize::MAX {
+                    w_new[self.node_cell[n]] += dt * q;
+                }
+            }
+        }
+        for ((n, _, _), &q) in self.sources.iter().zip(&self.qs) {
+            if self.node_cell[*n] != usize::MAX {
+                w_new[self.node_cell[*n]] += dt * q;
+            }
+        }
+        for (i, &w) in w_new.iter().enumerate() {
+            if w.is_nan() || w <= 0.0 {
+                return Err(Error::solver(
+                    t_af,
+                    format!(
+                        "transport volume of cell '{}' became {w:.3e} m³: reduce dt",
+                        self.node_name(self.cells[i])
+                    ),
+                ));
+            }
+        }
+        let unknowns = std::mem::take(&mut self.domain);
+        let mut d = vec![0.0; nn];
+        let mut b = vec![0.0; nn];
+        let mut wconst = vec![0.0; nc];
+        let mut wlin = vec![0.0; nc];
+        let quasi = self.formulation == Formulation::TlQuasisteady;
+        for s in 0..nsp {
+            // old total concentrations (lagged values for mixing points stay in `conc`)
+            for (i, &n) in self.cells.iter().enumerate() {
+                self.conc[n] = z[s * nc + i] / w_old[i];
+            }
+            self.load_boundary(s, t_af);
+            let lambda = self.species[s].decay;
+            // wall uptake linearised about the old state: W = G s x + const (exact for linear binding)
+            if self.species[s].has_wall {
+                self.free_of_cells(s);
+                self.wall_uptake(s, &ya, &mut wconst);
+                let sp = &self.species[s];
+                let mut g = sp.cell_g.clone();
+                for &j in &sp.dynamic {
+                    let seg = &self.segments[j];
+                    let (gj, _, _) = sp.laws[j].eval(ya[seg.branch_unknown]);
+                    for &(n, share) in &seg.nodes {
+                        let c = self.node_cell[n];
+                        if share > 0.0 && c != usize::MAX {
+                            g[c] += share * gj;
+                        }
+                    }
+                }
+                for (i, &n) in self.cells.iter().enumerate() {
+                    let slope = 1.0 / sp.binding.capacity_slope(sp.free[n]);
+                    wlin[i] = g[i] * slope;
+                    wconst[i] -= wlin[i] * self.conc[n];
+                }
+            } else {
+                wlin.iter_mut().for_each(|v| *v = 0.0);
+                wconst.iter_mut().for_each(|v| *v = 0.0);
+            }
+            for &m in &self.mixing {
+                d[m] = 0.0;
+                b[m] = 0.0;
+            }
+            for (i, &n) in self.cells.iter().enumerate() {
+                if quasi {
+                    d[n] = wlin[i];
+                    b[n] = -wconst[i];
+                } else {
+                    d[n] = w_new[i] * (1.0 / dt + lambda) + wlin[i];
+                    b[n] = z[s * nc + i] / dt - wconst[i];
+                }
+            }
+            let mut x = std::mem::take(&mut self.conc);
+            let res = self.sweep_solve(&unknowns, &d, &b, &mut x);
+            self.conc = x;
+            if let Err(e) = res {
+                self.domain = unknowns;
+                return Err(e);
+            }
+            // bookkeeping with the solved field: the same fluxes that entered the solve
+            let (mut i_in, mut i_out) = (0.0, 0.0);
+            for (f, &q) in self.faces.iter().zip(&self.qf) {
+                let (from_b, to_b) = (f.from, f.to);
+                if let End::Boundary(bb) = from_b {
+                    let c = if q >= 0.0 {
+                        self.lagged_boundary(bb, to_b)
+                    } else {
+                        self.end_conc(to_b)
+                    };
+                    account(self.boundary_inlet[bb], q * c, &mut i_in, &mut i_out);
+                }
+                if let End::Boundary(bb) = to_b {
+                    let c = if q < 0.0 {
+                        self.lagged_boundary(bb, from_b)
+                    } else {
+                        self.end_conc(from_b)
+                    };
+                    account(self.boundary_inlet[bb], -q * c, &mut i_in, &mut i_out);
+                }
+            }
+            for ((n, _, bb), &q) in self.sources.iter().zip(&self.qs) {
+                let c = if q >= 0.0 {
+                    self.lagged_boundary(*bb, End::Node(*n))
+                } else {
+                    self.conc[*n]
+                };
+                account(self.boundary_inlet[*bb], q * c, &mut i_in, &mut i_out);
+            }
+            let (mut i_wall, mut i_decay) = (0.0, 0.0);
+            for (i, &n) in self.cells.iter().enumerate() {
+                let x = self.conc[n];
+                i_wall += wlin[i] * x + wconst[i];
+                if !quasi {
+                    i_decay += lambda * w_new[i] * x;
+                }
+                z[s * nc + i] = w_new[i] * x;
+            }
+            let acc = &mut z[nsp * nc + 4 * s..nsp * nc + 4 * s + 4];
+            for (a, v) in acc.iter_mut().zip([i_in, i_out, i_wall, i_decay]) {
+                *a += dt * v;
+            }
+            // free concentrations of the new state for the next linearisation and reporting
+            if self.species[s].has_wall {
+                self.free_of_cells(s);
+            }
+        }
+        self.wvol = w_new;
+        self.domain = unknowns;
+        Ok(())
+    }
+
+    #[inline]
+    fn end_conc(&self, e: End) -> f64 {
+        match e {
+            End::Node(n) => self.conc[n],
+            End::Boundary(_) => 0.0,
+        }
+    }
+
+    /// Inflow value of a boundary in the implicit solve: prescribed, or (zero-gradient) the
+    /// neighbour's lagged value — stored in `lag` during the sweep.
+    #[inline]
+    fn lagged_boundary(&self, b: usize, n: End) -> f64 {
+        match (self.bval[b], n) {
+            (Some(c), _) => c,
+            (None, End::Node(n)) => self.sweep.lag[n],
+            (None, End::Boundary(_)) => 0.0,
+        }
+    }
+
+    /// Solve, for the nodes in `unknowns`,
+    ///   (d_n + Σ_out |Q|) x_n − Σ_in |Q| x_up = b_n + (inflows from known nodes and boundaries),
+    /// visiting the nodes in flow order (Kahn): on an acyclic directed flow graph the system is
+    /// triangular and one pass solves it exactly, O(n). Zero-gradient backflow carries the
+    /// node's previous value, keeping the matrix an M-matrix. Nodes left on directed cycles
+    /// (circulating loop flow) are solved by Gauss–Seidel, which converges for M-matrices.
+    /// Nodes with no outflow and no storage keep their previous value.
+    fn sweep_solve(
+        &mut self,
+        unknowns: &[usize],
+        d: &[f64],
+        b: &[f64],
+        x: &mut [f64],
+    ) -> Result<()> {
+        let sw = &mut self.sweep;
+        for &n in unknowns {
+            sw.mark[n] = true;
+            sw.lag[n] = x[n];
+            sw.pending[n] = 0;
+            sw.num[n] = b[n];
+            sw.den[n] = d[n];
+        }
+        // pass 1: denominators, known inflows, pending counts
+        for &n in unknowns {
+            for &fi in &self.node_faces[self.node_ptr[n]..self.node_ptr[n + 1]] {
+                let f = &self.faces[fi];
+                let q = self.qf[fi];
+                let (up, down) = if q >= 0.0 {
+                    (f.from, f.to)
+                } else {
+                    (f.to, f.from)
+                };
+                let aq = q.abs();
+                if up == End::Node(n) {
+                    sw.den[n] += aq;
+                    continue;
+                }
+                if down != End::Node(n) || aq == 0.0 {
+                    continue;
+                }
+                match up {
+                    End::Node(u) if sw.mark[u] => sw.pending[n] += 1,
+                    End::Node(u) => sw.num[n] += aq * x[u],
+                    End::Boundary(bb) => {
+                        let c = match self.bval[bb] {
+                            Some(c) => c,
+                            None => sw.lag[n],
+                        };
+                        sw.num[n] += aq * c;
+                    }
+                }
+            }
+            for &k in &self.node_sources[n] {
+                let q = self.qs[k];
+                if q >= 0.0 {
+                    let c = match self.bval[self.sources[k].2] {
+                        Some(c) => c,
+                        None => sw.lag[n],
+                    };
+                    sw.num[n] += q * c;
+                } else {
+                    sw.den[n] -= q;
+                }
+            }
+        }
+        sw.queue.clear();
+        for &n in unknowns {
+            if sw.pending[n] == 0 {
+                sw.queue.push(n);
+            }
+        }
+        let mut head = 0;
+        let mut solved = 0;
+        while head < sw.queue.len() {
+            let n = sw.queue[head];
+            head += 1;
+            solved += 1;
+            x[n] = if sw.den[n] > 1e-300 {
+                sw.num[n] / sw.den[n]
+            } else {
+                sw.lag[n]
+            };
+            for &fi in &self.node_faces[self.node_ptr[n]..self.node_ptr[n + 1]] {
+                let f = &self.faces[fi];
+                let q = self.qf[fi];
+                let (up, down) = if q >= 0.0 {
+                    (f.from, f.to)
+                } else {
+                    (f.to, f.from)
+                };
+                if up != End::Node(n) || q == 0.0 {
+                    continue;
+                }
+                if let End::Node(m) = down {
+                    if sw.mark[m] {
+                        sw.num[m] += q.abs() * x[n];
+                        sw.pending[m] -= 1;
+                        if sw.pending[m] == 0 {
+                            sw.queue.push(m);
+                        }
+                    }
+                }
+            }
+        }
+        let mut result = Ok(());
+        if solved < unknowns.len() {
+            // directed cycles: Gauss–Seidel on the remaining nodes
+            let rest: Vec<usize> = unknowns
+                .iter()
+                .copied()
+                .filter(|&n| sw.pending[n] > 0)
+                .collect();
+            let mut converged = false;
+            for _ in 0..10_000 {
+                let mut change = 0.0f64;
+                let mut scale = 0.0f64;
+                for &n in &rest {
+                    let mut num = sw.num[n];
+                    for &fi in &self.node_faces[self.node_ptr[n]..self.node_ptr[n + 1]] {
+                        let f = &self.faces[fi];
+                        let q = self.qf[fi];
+                        let (up, down) = if q >= 0.0 {
+                            (f.from, f.to)
+                        } else {
+                            (f.to, f.from)
+                        };
+                        if down != End::Node(n) {
+                            continue;
+                        }
+                        if let End::Node(u) = up {
+                            if sw.mark[u] && sw.pending[u] > 0 {
+                                num += q.abs() * x[u];
+                            }
+                        }
+                    }
+                    let v = if sw.den[n] > 1e-300 {
+                        num / sw.den[n]
+                    } else {
+                        sw.lag[n]
+                    };
+                    change = change.max((v - x[n]).abs());
+                    scale = scale.max(v.abs());
+                    x[n] = v;
+                }
+                if change <= 1e-15 * scale.max(1e-300) {
+                    converged = true;
+                    break;
+                }
+            }
+            if !converged {
+                result = Err(Error::solver(
+                    0.0,
+                    "transport sweep did not converge on a flow loop".to_string(),
+                ));
+            }
+        }
+        for &n in unknowns {
+            sw.mark[n] = false;
+        }
+        result
+    }
+
+    /// Append the recorded columns of every species at (t, y) to `out`.
+    /// `ydot`: flow derivative (for R_i = dL_i/dt); `implicit`: use the transport volumes.
+    pub fn observe(
+        &mut self,
+        time: f64,
+        y: &[f64],
+        ydot: Option<&[f64]>,
+        z: &[f64],
+        implicit: bool,
+        out: &mut Vec<f64>,
+    ) -> Result<()> {
+        let nc = self.cells.len();
+        let nsp = self.species.len();
+        self.volumes(y, time)?;
+        if implicit && !self.wvol.is_empty() {
+            self.vol.copy_from_slice(&self.wvol);
+        }
+        self.load_flows(time, y);
+        let mut wcell = vec![0.0; nc];
+        for s in 0..nsp {
+            for (i, &n) in self.cells.iter().enumerate() {
+                self.conc[n] = z[s * nc + i] / self.vol[i];
+            }
+            self.load_boundary(s, time);
+            self.mix()?;
+            // free concentration of every non-exterior node
+            {
+                let sp = &mut self.species[s];
+                for n in 0..self.kind.len() {
+                    sp.free[n] = match self.kind[n] {
+                        Kind::Exterior => f64::NAN,
+                        _ => sp.binding.free(
+                            self.conc[n],
+                            if sp.free[n].is_finite() {
+                                sp.free[n]
+                            } else {
+                                0.0
+                            },
+                        ),
+                    };
+                }
+            }
+            self.wall_uptake(s, y, &mut wcell);
+            let sp = &self.species[s];
+            let face_flux = |tr: &Self, unknown: usize| -> (f64, f64) {
+                let fi = tr
+                    .face_of_unknown
+                    .get(unknown)
+                    .copied()
+                    .unwrap_or(usize::MAX);
+                if fi == usize::MAX {
+                    return (f64::NAN, f64::NAN);
+                }
+                let f = &tr.faces[fi];
+                let q = tr.qf[fi];
+                let (up, other) = if q >= 0.0 {
+                    (f.from, f.to)
+                } else {
+                    (f.to, f.from)
+                };
+                let c = match up {
+                    End::Node(n) => tr.conc[n],
+                    End::Boundary(b) => tr.boundary_conc(b, other),
+                };
+                (q * c, sp.binding.free(c, c))
+            };
+            let seg_wall = |j: usize| -> f64 {
+                let seg = &self.segments[j];
+                let (g, cw, q) = sp.laws[j].eval(y[seg.branch_unknown]);
+                seg.nodes
+                    .iter()
+                    .filter(|(n, share)| *share > 0.0 && self.kind[*n] == Kind::Cell)
+                    .map(|&(n, share)| share * (g * (sp.free[n] - cw) + q))
+                    .sum()
+            };
+            for v in &self.out_vessels {
+                let (j_in, c_in) = face_flux(self, v.first);
+                let (j_out, c_out) = face_flux(self, v.last);
+                let wall: f64 = self.out_segments[v.segs.clone()]
+                    .iter()
+                    .map(|&j| seg_wall(j))
+                    .sum();
+                out.extend([c_in, c_out, j_in, j_out, wall]);
+            }
+            for &j in &self.out_segments {
+                let seg = &self.segments[j];
+                let (flux, _) = face_flux(self, seg.branch_unknown);
+                let (mut c, mut wsum, mut vseg, mut dvseg) = (0.0, 0.0, 0.0, 0.0);
+                for &(n, share) in &seg.nodes {
+                    if share > 0.0 {
+                        c += share * sp.free[n];
+                        wsum += share;
+                        vseg += share * (seg.volume + seg.compliance * (y[n] - self.p_ref));
+                        if let Some(yd) = ydot {
+                            dvseg += share * seg.compliance * yd[n];
+                        }
+                    }
+                }
+                let c = if wsum > 0.0 { c / wsum } else { f64::NAN };
+                // transmission-line elements (physics §2.6): v = Q/A, A = V_seg/dx,
+                // L = −dx/v, R = dL/dt = dx v̇/v²
+                let q = y[seg.branch_unknown];
+                let (mut r_tl, mut l_tl) = (f64::NAN, f64::NAN);
+                if seg.dx > 0.0 && vseg > 0.0 {
+                    let a = vseg / seg.dx;
+                    let v = q / a;
+                    if v.abs() >= self.v_eps {
+                        l_tl = -seg.dx / v;
+                        if let Some(yd) = ydot {
+                            let vdot = yd[seg.branch_unknown] / a - q * (dvseg / seg.dx) / (a * a);
+                            r_tl = seg.dx * vdot / (v * v);
+                        }
+                    }
+                }
+                out.extend([c, flux, seg_wall(j), r_tl, l_tl]);
+            }
+            let stored: f64 = z[s * nc..(s + 1) * nc].iter().sum();
+            let acc = &z[nsp * nc + 4 * s..nsp * nc + 4 * s + 4];
+            out.extend([stored, acc[0], acc[1], acc[2], acc[3]]);
+        }
+        Ok(())
+    }
+
+    /// Cell holding most of segment `j`'s volume, as an index into the species block of the state.
+    pub fn segment_cell(&self, j: usize) -> Option<usize> {
+        let seg = self.segments.get(j)?;
+        let (n, _) = seg
+            .nodes
+            .iter()
+            .copied()
+            .fold((usize::MAX, -1.0), |a, b| if b.1 > a.1 { b } else { a });
+        let c = self.node_cell[n];
+        (c != usize::MAX).then_some(c)
+    }
+
+    /// One classical RK4 step of the species state alone, the flow state being prescribed:
+    /// `flow(t, y)` writes the flow unknowns at time t. This is the "prescribed flow" path used
+    /// for rigid tubes, whose flow-driven circuits are index-2 DAEs that RK4 cannot integrate;
+    /// the transport kernel is the same `rhs` as in the monolithic step.
+    pub fn step_prescribed(
+        &mut self,
+        time: f64,
+        dt: f64,
+        flow: &mut dyn FnMut(f64, &mut [f64]),
+        y: &mut [f64],
+        z: &mut [f64],
+        stages: &mut crate::rk4::CoupledStages,
+    ) -> Result<()> {
+        crate::rk4::rk4_ode(time, dt, z, stages, &mut |t, zs, dzs| {
+            flow(t, y);
+            self.rhs(t, y, zs, dzs)
+        })
+    }
+
+    /// Largest relative change of the amounts between two states (periodicity check).
+    pub fn relative_change(&self, a: &[f64], b: &[f64]) -> f64 {
+        let n = self.species.len() * self.cells.len();
+        let scale = a[..n]
+            .iter()
+            .fold(0.0f64, |m, x| m.max(x.abs()))
+            .max(1e-300);
+        a[..n]
+            .iter()
+            .zip(&b[..n])
+            .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
+            / scale
+    }
+}
+
+#[inline]
+fn account(inlet: bool, flux_into_domain: f64, i_in: &mut f64, i_out: &mut f64) {
+    if inlet {
+        *i_in += flux_into_domain;
+    } else {
+        *i_out -= flux_into_domain;
+    }
+}
+
+#[derive(Debug, Clone)]
+struct Sweep {
+    mark: Vec<bool>,
+    pending: Vec<u32>,
+    num: Vec<f64>,
+    den: Vec<f64>,
+    lag: Vec<f64>,
+    queue: Vec<usize>,
+    d: Vec<f64>,
+    b: Vec<f64>,
+    w: Vec<f64>,
+}
+
+impl Sweep {
+    fn new(nn: usize) -> Self {
+        Sweep {
+            mark: vec![false; nn],
+            pending: vec![0; nn],
+            num: vec![0.0; nn],
+            den: vec![0.0; nn],
+            lag: vec![0.0; nn],
+            queue: Vec::with_capacity(nn),
+            d: Vec::new(),
+            b: Vec::new(),
+            w: Vec::new(),
+        }
+    }
+}
+
+impl crate::rk4::Coupled for Transport {
+    #[inline]
+    fn derivative(&mut self, time: f64, y: &[f64], z: &[f64], dz: &mut [f64]) -> Result<()> {
+        self.rhs(time, y, z, dz)
+    }
+}
