@@ -10,7 +10,7 @@ use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
 
 /// Which elimination a matrix pattern gets.
 pub enum SparseLu {
-    Tree(TreeLu),
+    Tree(Box<TreeLu>),
     General(GeneralLu),
 }
 
@@ -19,7 +19,7 @@ impl SparseLu {
     /// duplicates are summed. A forest pattern gets the O(n) tree elimination.
     pub fn analyse(n: usize, stamps: &[(usize, usize)]) -> Result<Self> {
         match TreeLu::analyse(n, stamps) {
-            Some(t) => Ok(SparseLu::Tree(t)),
+            Some(t) => Ok(SparseLu::Tree(Box::new(t))),
             None => Ok(SparseLu::General(GeneralLu::analyse(n, stamps)?)),
         }
     }
@@ -186,7 +186,7 @@ impl TreeLu {
         let mut magnitude: Vec<f64> = self.diag.iter().map(|d| d.abs()).collect();
         for &v in &self.order {
             let d = self.pivot[v];
-            if !(d.abs() > 1e-12 * magnitude[v]) || !d.is_finite() {
+            if d.abs() <= 1e-12 * magnitude[v] || !d.is_finite() {
                 return false;
             }
             let p = self.parent[v];
