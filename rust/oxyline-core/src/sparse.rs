@@ -10,8 +10,8 @@ use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
 
 /// Which elimination a matrix pattern gets.
 pub enum SparseLu {
-    Tree(Box<TreeLu>),
-    General(GeneralLu),
+    Tree(TreeLu),
+    General(Box<GeneralLu>),
 }
 
 impl SparseLu {
@@ -19,8 +19,8 @@ impl SparseLu {
     /// duplicates are summed. A forest pattern gets the O(n) tree elimination.
     pub fn analyse(n: usize, stamps: &[(usize, usize)]) -> Result<Self> {
         match TreeLu::analyse(n, stamps) {
-            Some(t) => Ok(SparseLu::Tree(Box::new(t))),
-            None => Ok(SparseLu::General(GeneralLu::analyse(n, stamps)?)),
+            Some(t) => Ok(SparseLu::Tree(t)),
+            None => Ok(SparseLu::General(Box::new(GeneralLu::analyse(n, stamps)?))),
         }
     }
 
@@ -34,7 +34,7 @@ impl SparseLu {
                 // pivoting LU on the same pattern
                 let mut g = GeneralLu::analyse(t.n, &t.stamps).map_err(|e| e.to_string())?;
                 g.factor(vals)?;
-                *self = SparseLu::General(g);
+                *self = SparseLu::General(Box::new(g));
                 Ok(())
             }
             SparseLu::General(g) => g.factor(vals),
