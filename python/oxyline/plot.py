@@ -289,7 +289,9 @@ def profile(result: Result, model: Model | str, outlet: str,
                                          va="bottom", fontsize=7, rotation=0))
             ax.legend(loc="best", fontsize=8)
     axes[-1, 0].set_xlabel("distance from the inlet [cm]")
-    fig.suptitle(f"{m.name}: inlet → {outlet}", fontsize=11)
+    names = path(m, outlet, inlet)
+    fig.suptitle(f"{m.name}: from the inlet to {names[-1]}"
+                 + (f" (node {outlet})" if outlet != names[-1] else ""), fontsize=11)
     _declutter(fig, texts)
     return fig
 
@@ -370,7 +372,8 @@ def _layout(model: Model, layout: str) -> dict[str, tuple[float, float]]:
 
 
 def _values(model: Model, values: Any, result: Result | None, label: str | None,
-            units: str | None) -> tuple[np.ndarray, str, str]:
+            units: str | None) -> tuple[np.ndarray, str, str, str]:
+    """Per-vessel values in model order, colour-bar label and units, and a title note."""
     names = model.vessel_names
     if values is None and result is not None:
         values = "pressure"
@@ -379,8 +382,7 @@ def _values(model: Model, values: Any, result: Result | None, label: str | None,
         for v in model.canonical["vessels"]:
             g = v.get("geometry")
             r.append(0.5 * (g["radius_in"] + g["radius_out"]) if g else math.nan)
-        u, k = display("m")
-        return np.array(r) * 1000, label or "mean radius", units or "mm"
+        return np.array(r) * 1000, label or "mean radius", units or "mm", ""
     if isinstance(values, str):
         if result is None:
             raise ValueError(f"values={values!r} names a result variable: pass result=")
@@ -394,9 +396,9 @@ def _values(model: Model, values: Any, result: Result | None, label: str | None,
         mean = np.trapezoid(a, t, axis=0) / (t[-1] - t[0]) if len(t) > 1 else a.mean(axis=0)
         u, k = display(str(ds[var].attrs.get("units", "")))
         by = dict(zip(result.vessels, mean * k))
-        what = f"time-mean {_label(var)}" + (" (average of both ends)" if both else "")
-        return (np.array([by.get(n, math.nan) for n in names]), label or what,
-                units if units is not None else u)
+        return (np.array([by.get(n, math.nan) for n in names]),
+                label or f"time-mean {_label(var)}", units if units is not None else u,
+                " (mean of the vessel's two ends)" if both else "")
     if isinstance(values, Mapping) or hasattr(values, "to_dict"):
         d = dict(values.to_dict() if hasattr(values, "to_dict") else values)
         arr = np.array([float(d.get(n, math.nan)) for n in names])
@@ -405,7 +407,7 @@ def _values(model: Model, values: Any, result: Result | None, label: str | None,
         if arr.shape != (len(names),):
             raise ValueError(f"values has {arr.size} entries but the model has {len(names)} "
                              "vessels")
-    return arr, label or "value", units or ""
+    return arr, label or "value", units or "", ""
 
 
 def network_map(model: Model | str | os.PathLike[str], values: Any = None,
@@ -427,7 +429,7 @@ def network_map(model: Model | str | os.PathLike[str], values: Any = None,
 
     m = _model(model)
     pos = _layout(m, layout)
-    vals, label, units = _values(m, values, result, label, units)
+    vals, label, units, note = _values(m, values, result, label, units)
     vessels = m.canonical["vessels"]
     segs = [[pos[v["from"]], pos[v["to"]]] for v in vessels]
     radii = np.array([0.5 * (v["geometry"]["radius_in"] + v["geometry"]["radius_out"])
@@ -438,7 +440,7 @@ def network_map(model: Model | str | os.PathLike[str], values: Any = None,
         rmax = np.nanmax(radii)
         widths = np.where(np.isnan(radii), 1.5, 1.0 + 5.0 * np.sqrt(radii / rmax))
     n_leaves = max(1, len(outlets(m)))
-    height = min(16.0, max(4.0, 0.22 * n_leaves + 1.5))
+    height = min(16.0, max(5.0, 0.22 * n_leaves + 1.5))
     fig, ax = plt.subplots(figsize=(8.0, height), layout="constrained")
     finite = vals[np.isfinite(vals)]
     vmin, vmax = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
@@ -475,7 +477,7 @@ def network_map(model: Model | str | os.PathLike[str], values: Any = None,
                                  ha="center", va="bottom", color="0.1", zorder=5,
                                  bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none",
                                        "alpha": 0.7}))
-    ax.set_title(f"{m.name}: {label}", fontsize=11)
+    ax.set_title(f"{m.name}: {label}{note}", fontsize=11)
     _declutter(fig, texts)
     return fig
 
@@ -485,7 +487,8 @@ def save_figures(result: Result, model: Model | str | os.PathLike[str],
                  dpi: int = 150) -> list[Path]:
     """Write the standard figures as PNG and SVG into ``outdir``: ``waveforms`` (inlet vessel and
     up to 4 terminal vessels; pressure, flow and PO2 when present), ``profile`` (inlet to the
-    outlet farthest from it; the same quantities) and ``network_map`` (time-mean pressure).
+    outlet farthest from it; pressure, PO2, convective and wall O2 flux when present, flow) and
+    ``network_map`` (time-mean pressure).
     Returns the files written."""
     plt = _plt()
     m = _model(model)
@@ -507,8 +510,8 @@ def save_figures(result: Result, model: Model | str | os.PathLike[str],
     figures = {"waveforms": waveforms(result, chosen, quantities)}
     if paths:
         far = max(paths, key=lambda o: sum(_vessel_length(vessels[n]) for n in paths[o]))
-        figures["profile"] = profile(result, m, far, [q for q in quantities if q != "flow"]
-                                     + (["flow"] if "flow" in quantities else []))
+        along = [q for q in ("pressure", "po2", "o2_flux", "wall_o2_flux", "flow") if _has(ds, q)]
+        figures["profile"] = profile(result, m, far, along)
     figures["network_map"] = network_map(m, result=result)
     written = []
     for name, fig in figures.items():
