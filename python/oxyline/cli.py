@@ -145,6 +145,10 @@ def _cmd_models(args: argparse.Namespace) -> int:
     entries: list[Any] = []
     if models is not None and hasattr(models, "list"):
         entries = list(models.list())
+        if hasattr(models, "describe"):
+            desc = models.describe()
+            entries = [{"name": n, "description": desc.get(n, "")} if isinstance(n, str) else n
+                       for n in entries]
     if not entries:
         from oxyline import examples
 
