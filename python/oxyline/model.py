@@ -32,7 +32,7 @@ from oxyline.units import factor
 TOP_KEYS = {
     "name", "units", "blood", "arrangement", "segmentation", "period", "vessels",
     "boundary_conditions", "simulation", "wall_model", "inertance_profile", "description",
-    "oxygen", "species",
+    "oxygen", "species", "transport",
 }
 VESSEL_KEYS = {
     "name", "from", "to", "length", "radius", "radius_in", "radius_out", "wall_thickness",
@@ -141,6 +141,9 @@ class Model:
     simulation: dict[str, Any] = field(default_factory=dict)
     period: float | None = None
     source: dict[str, Any] = field(default_factory=dict)
+    #: species transport facts for results: ``species`` (names), ``oxygen`` (name of the O2
+    #: species or None), ``solubility`` (O2, mol m^-3 mmHg^-1)
+    transport: dict[str, Any] = field(default_factory=dict)
     _network: Any = field(default=None, repr=False, compare=False)
 
     @property
@@ -357,7 +360,15 @@ def _build(data: dict[str, Any]) -> Model:
         _check_keys(sim["output"], OUTPUT_KEYS, "simulation output")
     if "method" in sim and sim["method"] not in METHODS:
         raise _err("simulation", f"method must be one of {sorted(METHODS)}, got {sim['method']!r}")
+    from oxyline import transport as _transport
+
+    cycles = sim.get("max_cycles", 100) if sim.get("until_periodic") else sim.get("cycles", 10)
+    duration = (period or 1.0) * float(cycles) if isinstance(cycles, (int, float)) else None
+    tr, tr_info = _transport.canonical(data, factor(units, "pressure"), period, duration)
+    if tr is not None:
+        canon["transport"] = tr
     source = copy.deepcopy(data)
-    model = Model(name=name, canonical=canon, simulation=dict(sim), period=period, source=source)
+    model = Model(name=name, canonical=canon, simulation=dict(sim), period=period, source=source,
+                  transport=tr_info)
     model.network  # noqa: B018 - assemble now so that invalid models fail at load time
     return model

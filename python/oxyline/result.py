@@ -35,6 +35,48 @@ class VesselResult:
     segment_position: np.ndarray | None = None
 
 
+SPECIES_VESSEL = ("concentration_in", "concentration_out", "flux_in", "flux_out", "wall_flux")
+SPECIES_SEGMENT = ("concentration", "flux", "wall_flux", "tl_resistance", "tl_inductance")
+BALANCE = ("stored", "inflow", "outflow", "wall_uptake", "decay")
+
+
+@dataclass
+class SpeciesResult:
+    """Transport outputs of one species (SI). Concentrations are the free (dissolved) values,
+    fluxes carry the total (free + bound) amount; ``flux_in``/``flux_out`` are the convective
+    fluxes Q·C through the vessel's first/last branch (where ``flow_in``/``flow_out`` are
+    taken), ``wall_flux`` the uptake of the vessel's segments (mol/s, positive out of the blood).
+    Segment ``tl_resistance``/``tl_inductance`` are the paper's R_i = dL_i/dt (s/m... per
+    segment: s) and L_i = −dx/v (s), NaN where |v| < the velocity threshold."""
+
+    name: str
+    vessel_data: np.ndarray  # (time, vessel, 5)
+    segment_data: np.ndarray  # (time, segment, 5)
+    balance_data: np.ndarray  # (time, 5): stored, inflow, outflow, wall, decay (cumulative)
+    initial_stored: float
+    #: mmHg per mol/m^3 (1/solubility) for oxygen, else None
+    po2_per_concentration: float | None = None
+
+    def __getattr__(self, key: str) -> np.ndarray:
+        if key in SPECIES_VESSEL:
+            return self.vessel_data[:, :, SPECIES_VESSEL.index(key)]
+        if key in SPECIES_SEGMENT:
+            return self.segment_data[:, :, SPECIES_SEGMENT.index(key)]
+        raise AttributeError(key)
+
+    @property
+    def mass_balance(self) -> dict[str, np.ndarray]:
+        """Cumulative amounts since t = 0 (mol) at every output time: ``inflow``, ``outflow``,
+        ``wall_uptake``, ``decay``, ``stored`` (change of the amount in the network) and
+        ``residual`` = stored − (inflow − outflow − wall_uptake − decay)."""
+        b = self.balance_data
+        out = {k: b[:, i] for i, k in enumerate(BALANCE)}
+        out["stored"] = out["stored"] - self.initial_stored
+        out["residual"] = out["stored"] - (out["inflow"] - out["outflow"] - out["wall_uptake"]
+                                           - out["decay"])
+        return out
+
+
 @dataclass
 class Result:
     """Output of :func:`oxyline.simulate`.
@@ -51,6 +93,71 @@ class Result:
     segment_position: np.ndarray
     settings: dict[str, Any] = field(default_factory=dict)
     complete: bool = True
+    #: species transport outputs by species name (empty for flow-only models)
+    species: dict[str, SpeciesResult] = field(default_factory=dict)
+    #: name of the oxygen species, if the model has an ``oxygen`` section
+    oxygen: str | None = None
+
+    def __getattr__(self, key: str) -> Any:
+        # species variables: {name}_concentration_in, {name}_flux_out, wall_{name}_flux,
+        # segment_{name}_concentration, ..., {name}_mass_balance; oxygen adds po2_in/po2_out,
+        # segment_po2 (mmHg) and tl_resistance/tl_inductance.
+        species = self.__dict__.get("species") or {}
+        if not species:
+            raise AttributeError(key)
+        ox = self.__dict__.get("oxygen")
+        if ox is not None and ox in species:
+            sp = species[ox]
+            scale = sp.po2_per_concentration or float("nan")
+            if key == "po2_in":
+                return sp.concentration_in * scale
+            if key == "po2_out":
+                return sp.concentration_out * scale
+            if key == "segment_po2":
+                return sp.concentration * scale
+        if key in ("tl_resistance", "tl_inductance"):
+            return getattr(next(iter(species.values())), key)
+        if key == "mass_balance":
+            return {n: s.mass_balance for n, s in species.items()}
+        for name, sp in species.items():
+            if key.startswith(f"segment_wall_{name}_") and key.endswith("flux"):
+                return sp.segment_data[:, :, 2]
+            if key == f"wall_{name}_flux":
+                return sp.wall_flux
+            if key == f"{name}_mass_balance":
+                return sp.mass_balance
+            if key.startswith(f"segment_{name}_"):
+                rest = key[len(f"segment_{name}_"):]
+                if rest in ("concentration", "flux"):
+                    return getattr(sp, rest)
+            if key.startswith(f"{name}_"):
+                rest = key[len(name) + 1:]
+                if rest in ("concentration_in", "concentration_out", "flux_in", "flux_out"):
+                    return getattr(sp, rest)
+        raise AttributeError(key)
+
+    def species_variables(self) -> dict[str, tuple[str, np.ndarray, str]]:
+        """Every species output as name -> (dimension kind 'vessel'|'segment'|'time', array,
+        units)."""
+        out: dict[str, tuple[str, np.ndarray, str]] = {}
+        for name, sp in self.species.items():
+            for v, u in (("concentration_in", "mol/m^3"), ("concentration_out", "mol/m^3"),
+                         ("flux_in", "mol/s"), ("flux_out", "mol/s")):
+                out[f"{name}_{v}"] = ("vessel", getattr(sp, v), u)
+            out[f"wall_{name}_flux"] = ("vessel", sp.wall_flux, "mol/s")
+            out[f"segment_{name}_concentration"] = ("segment", sp.concentration, "mol/m^3")
+            out[f"segment_{name}_flux"] = ("segment", sp.flux, "mol/s")
+            out[f"segment_wall_{name}_flux"] = ("segment", sp.segment_data[:, :, 2], "mol/s")
+            for k, arr in sp.mass_balance.items():
+                out[f"{name}_mass_{k}"] = ("time", arr, "mol")
+            if name == self.oxygen:
+                out["po2_in"] = ("vessel", self.po2_in, "mmHg")
+                out["po2_out"] = ("vessel", self.po2_out, "mmHg")
+                out["segment_po2"] = ("segment", self.segment_po2, "mmHg")
+        if self.species:
+            out["tl_resistance"] = ("segment", self.tl_resistance, "s")
+            out["tl_inductance"] = ("segment", self.tl_inductance, "s")
+        return out
 
     def __post_init__(self) -> None:
         nv = len(self.vessels)
@@ -131,6 +238,16 @@ class Result:
             coords["segment_position"] = ("segment", self.segment_position, {"units": "m"})
             for name in SEGMENT_VARIABLES:
                 data_vars[name] = (("time", "segment"), getattr(self, name), {"units": UNITS[name]})
+        seg_ok = self.has_segments and all(
+            sp.segment_data.shape[1] == self._segment_block.shape[1] // 3
+            for sp in self.species.values())
+        for name, (kind, arr, unit) in self.species_variables().items():
+            if kind == "vessel":
+                data_vars[name] = (("time", "vessel"), arr, {"units": unit})
+            elif kind == "time":
+                data_vars[name] = (("time",), arr, {"units": unit})
+            elif seg_ok:
+                data_vars[name] = (("time", "segment"), arr, {"units": unit})
         attrs = {"model": self.model_name, "oxyline_version": __version__,
                  "complete": int(self.complete)}
         attrs.update({f"solver_{k}": (v if isinstance(v, (int, float, str)) else str(v))

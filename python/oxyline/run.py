@@ -9,7 +9,7 @@ from typing import Any
 
 from oxyline.errors import ModelError, SimulationInterrupted
 from oxyline.model import METHODS, Model, load_model
-from oxyline.result import Result
+from oxyline.result import Result, SpeciesResult
 
 ProgressCallback = Callable[[float, float], None]
 
@@ -19,7 +19,7 @@ def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
     out = dict(sim.get("output", {}) or {})
     unknown = set(overrides) - {"cycles", "dt", "method", "output_every", "output_cycles",
                                 "until_periodic", "max_cycles", "rho_infty", "start", "segments",
-                                "progress", "newton_atol", "max_iterations"}
+                                "progress", "newton_atol", "max_iterations", "transport"}
     if unknown:
         raise ModelError(f"simulate: unknown option(s) {', '.join(sorted(unknown))}")
     period = model.period or 1.0
@@ -52,6 +52,7 @@ def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
         "segments": bool(overrides.get("segments", out.get("segments", True))),
         "newton_atol": overrides.get("newton_atol"),
         "max_iterations": int(overrides.get("max_iterations", 30)),
+        "transport": bool(overrides.get("transport", True)),
     }
 
 
@@ -73,6 +74,32 @@ def _progress_bar(enabled: bool | ProgressCallback | None) -> tuple[Any, Any]:
         bar.refresh()
 
     return update, bar
+
+
+def _species_results(model: Model, raw: Mapping[str, Any]) -> dict[str, SpeciesResult]:
+    tr = raw.get("transport")
+    if tr is None:
+        return {}
+    lay = model.network.transport_layout()
+    nv = len(lay["segment_count"])
+    ns = int(sum(lay["segment_count"]))
+    cols = lay["columns_per_species"]
+    data = tr["data"]
+    nt = data.shape[0]
+    out: dict[str, SpeciesResult] = {}
+    ox = model.transport.get("oxygen")
+    for k, name in enumerate(tr["species"]):
+        block = data[:, k * cols:(k + 1) * cols]
+        vcols, scols = nv * lay["vessel_columns"], ns * lay["segment_columns"]
+        out[name] = SpeciesResult(
+            name=name,
+            vessel_data=block[:, :vcols].reshape(nt, nv, lay["vessel_columns"]),
+            segment_data=block[:, vcols:vcols + scols].reshape(nt, ns, lay["segment_columns"]),
+            balance_data=block[:, vcols + scols:],
+            initial_stored=float(tr["initial_stored"][k]),
+            po2_per_concentration=(1.0 / model.transport["solubility"]) if name == ox else None,
+        )
+    return out
 
 
 def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any], **overrides: Any) -> Result:
@@ -108,6 +135,7 @@ def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any], **overri
         data=raw["data"], segment_count=seg_count,
         segment_position=layout["segment_position"] if s["segments"] else layout["segment_position"][:0],
         settings=settings, complete="error" not in raw,
+        species=_species_results(model, raw), oxygen=model.transport.get("oxygen"),
     )
     if "error" in raw:
         err = raw["error"]

@@ -525,8 +525,9 @@ impl Transport {
             + SEGMENT_COLUMNS * self.out_segments.len()
             + BALANCE_COLUMNS
     }
-    pub fn out_segment_count(&self) -> usize {
-        self.out_segments.len()
+    /// Recorded segments of every output vessel.
+    pub fn out_segment_counts(&self) -> Vec<usize> {
+        self.out_vessels.iter().map(|v| v.segs.len()).collect()
     }
 
     /// Flow unknowns whose cycle-mean |Q| the closures need (empty: single pass).

@@ -4,16 +4,31 @@
 use numpy::IntoPyArray;
 use oxyline_core::genalpha::NewtonControl;
 use oxyline_core::network::parse;
-use oxyline_core::{Assembled, Dae, Error, Method, RunSettings, Start};
+use oxyline_core::{Assembled, Dae, Error, Method, RunSettings, Start, Transport};
 use pyo3::exceptions::{PyKeyboardInterrupt, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-pyo3::create_exception!(oxyline, ModelError, PyValueError, "The network model or its settings are invalid.");
-pyo3::create_exception!(oxyline, UnstableTimeStep, ModelError, "The requested explicit time step is unstable.");
-pyo3::create_exception!(oxyline, SolverError, PyRuntimeError, "Time integration failed.");
+pyo3::create_exception!(
+    oxyline,
+    ModelError,
+    PyValueError,
+    "The network model or its settings are invalid."
+);
+pyo3::create_exception!(
+    oxyline,
+    UnstableTimeStep,
+    ModelError,
+    "The requested explicit time step is unstable."
+);
+pyo3::create_exception!(
+    oxyline,
+    SolverError,
+    PyRuntimeError,
+    "Time integration failed."
+);
 
 fn to_py(e: Error) -> PyErr {
     let msg = e.to_string();
@@ -38,6 +53,8 @@ fn error_kind(e: &Error) -> &'static str {
 #[pyclass(frozen, module = "oxyline._core")]
 struct Network {
     inner: Arc<(Assembled, Dae)>,
+    /// Validated species transport (cloned per run); None for flow-only models.
+    transport: Option<Arc<Transport>>,
 }
 
 #[pymethods]
@@ -45,14 +62,28 @@ impl Network {
     #[new]
     fn new(py: Python<'_>, model_json: &str) -> PyResult<Self> {
         let json = model_json.to_owned();
-        let built = py.detach(move || -> Result<(Assembled, Dae), Error> {
-            let spec = parse(&json)?;
-            let assembled = spec.assemble()?;
-            let dae = assembled.circuit.assemble()?;
-            Ok((assembled, dae))
-        });
-        let built = built.map_err(to_py)?;
-        Ok(Network { inner: Arc::new(built) })
+        let built = py.detach(
+            move || -> Result<((Assembled, Dae), Option<Transport>), Error> {
+                let spec = parse(&json)?;
+                let assembled = spec.assemble()?;
+                let dae = assembled.circuit.assemble()?;
+                let transport = match &spec.transport {
+                    Some(t) => Some(Transport::build(
+                        t,
+                        &assembled.circuit,
+                        &dae,
+                        &assembled.probes,
+                    )?),
+                    None => None,
+                };
+                Ok(((assembled, dae), transport))
+            },
+        );
+        let (built, transport) = built.map_err(to_py)?;
+        Ok(Network {
+            inner: Arc::new(built),
+            transport: transport.map(Arc::new),
+        })
     }
 
     /// Counts and totals for `oxyline validate`.
@@ -70,7 +101,10 @@ impl Network {
         d.set_item("total_volume", s.total_volume)?;
         d.set_item("period", s.period)?;
         d.set_item("unknowns", dae.n)?;
-        d.set_item("differential_unknowns", dae.e.iter().filter(|e| **e > 0.0).count())?;
+        d.set_item(
+            "differential_unknowns",
+            dae.e.iter().filter(|e| **e > 0.0).count(),
+        )?;
         Ok(d)
     }
 
@@ -80,10 +114,29 @@ impl Network {
         let d = PyDict::new(py);
         d.set_item("vessels", p.vessels.clone())?;
         d.set_item("segment_count", p.segment_count.clone())?;
-        d.set_item("segment_position", p.segment_position.clone().into_pyarray(py))?;
+        d.set_item(
+            "segment_position",
+            p.segment_position.clone().into_pyarray(py),
+        )?;
         d.set_item("n_vessel_columns", p.vessel_unknowns.len())?;
         d.set_item("n_segment_columns", p.segment_unknowns.len())?;
         Ok(d)
+    }
+
+    /// Species transport layout: species names, cells, recorded columns, segments per vessel.
+    fn transport_layout<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(t) = &self.transport else {
+            return Ok(None);
+        };
+        let d = PyDict::new(py);
+        d.set_item("species", t.species_names())?;
+        d.set_item("cells", t.n_cells())?;
+        d.set_item("columns_per_species", t.columns_per_species())?;
+        d.set_item("segment_count", t.out_segment_counts())?;
+        d.set_item("vessel_columns", oxyline_core::transport::VESSEL_COLUMNS)?;
+        d.set_item("segment_columns", oxyline_core::transport::SEGMENT_COLUMNS)?;
+        d.set_item("balance_columns", oxyline_core::transport::BALANCE_COLUMNS)?;
+        Ok(Some(d))
     }
 
     /// Names of all circuit unknowns (for diagnostics).
@@ -100,17 +153,45 @@ impl Network {
         d.set_item("names", dae.names.clone())?;
         d.set_item("mass", dae.e.clone().into_pyarray(py))?;
         d.set_item("n_nodes", dae.n_nodes)?;
-        d.set_item("fixed_nodes", c.fixed_pressures.iter().map(|(n, _)| *n).collect::<Vec<_>>())?;
-        d.set_item("source_nodes", c.sources.iter().map(|(n, _)| *n).collect::<Vec<_>>())?;
-        d.set_item("branch_from", c.branches.iter().map(|b| b.from).collect::<Vec<_>>())?;
-        d.set_item("branch_to", c.branches.iter().map(|b| b.to).collect::<Vec<_>>())?;
-        d.set_item("node_volume", c.nodes.iter().map(|n| n.volume).collect::<Vec<_>>())?;
+        d.set_item(
+            "fixed_nodes",
+            c.fixed_pressures
+                .iter()
+                .map(|(n, _)| *n)
+                .collect::<Vec<_>>(),
+        )?;
+        d.set_item(
+            "source_nodes",
+            c.sources.iter().map(|(n, _)| *n).collect::<Vec<_>>(),
+        )?;
+        d.set_item(
+            "branch_from",
+            c.branches.iter().map(|b| b.from).collect::<Vec<_>>(),
+        )?;
+        d.set_item(
+            "branch_to",
+            c.branches.iter().map(|b| b.to).collect::<Vec<_>>(),
+        )?;
+        d.set_item(
+            "node_volume",
+            c.nodes.iter().map(|n| n.volume).collect::<Vec<_>>(),
+        )?;
+        d.set_item(
+            "node_wall_area",
+            c.nodes.iter().map(|n| n.wall_area).collect::<Vec<_>>(),
+        )?;
         Ok(d)
     }
 
     /// Source inflows (m³/s) at time t, one per source node (in `circuit()["source_nodes"]` order).
     fn source_flows(&self, t: f64) -> Vec<f64> {
-        self.inner.0.circuit.sources.iter().map(|(_, w)| w.eval(t)).collect()
+        self.inner
+            .0
+            .circuit
+            .sources
+            .iter()
+            .map(|(_, w)| w.eval(t))
+            .collect()
     }
 
     /// (consistent state, dy/dt) of the transient circuit at (t, state).
@@ -119,13 +200,21 @@ impl Network {
         py: Python<'py>,
         t: f64,
         state: Vec<f64>,
-    ) -> PyResult<(Bound<'py, numpy::PyArray1<f64>>, Bound<'py, numpy::PyArray1<f64>>)> {
+    ) -> PyResult<(
+        Bound<'py, numpy::PyArray1<f64>>,
+        Bound<'py, numpy::PyArray1<f64>>,
+    )> {
         let dae = &self.inner.1;
         if state.len() != dae.n {
-            return Err(ModelError::new_err(format!("state has {} entries, expected {}", state.len(), dae.n)));
+            return Err(ModelError::new_err(format!(
+                "state has {} entries, expected {}",
+                state.len(),
+                dae.n
+            )));
         }
         let mut y = state;
-        let mut rk = oxyline_core::rk4::Rk4::new(dae, oxyline_core::Regime::Transient, 1.0).map_err(to_py)?;
+        let mut rk = oxyline_core::rk4::Rk4::new(dae, oxyline_core::Regime::Transient, 1.0)
+            .map_err(to_py)?;
         let yd = rk.derivative(t, &mut y).map_err(to_py)?;
         Ok((y.into_pyarray(py), yd.into_pyarray(py)))
     }
@@ -159,7 +248,8 @@ impl Network {
     /// facts; if the run stopped early, `error`/`error_kind` are set and the data so far kept.
     #[pyo3(signature = (*, period, cycles, output_every, method = "auto", rho_infty = 0.5, dt = None,
         until_periodic = None, max_cycles = 100, output_all_cycles = false, start = "steady",
-        newton_atol = None, max_iterations = 30, segments = true, all_unknowns = false, progress = None))]
+        newton_atol = None, max_iterations = 30, segments = true, all_unknowns = false, progress = None,
+        transport = true))]
     #[allow(clippy::too_many_arguments)]
     fn simulate<'py>(
         &self,
@@ -179,6 +269,7 @@ impl Network {
         segments: bool,
         all_unknowns: bool,
         progress: Option<Py<PyAny>>,
+        transport: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         let method = match method {
             "rk4" => Method::Rk4,
@@ -218,10 +309,18 @@ impl Network {
             output_every,
             output_all_cycles,
             start,
-            newton: NewtonControl { atol: newton_atol, max_iter: max_iterations },
+            newton: NewtonControl {
+                atol: newton_atol,
+                max_iter: max_iterations,
+            },
             probes: cols,
         };
         let inner = self.inner.clone();
+        let mut species = if transport {
+            self.transport.as_deref().cloned()
+        } else {
+            None
+        };
         let mut pending: Option<PyErr> = None;
         let outcome = py.detach(|| {
             let mut last = Instant::now();
@@ -244,7 +343,7 @@ impl Network {
                     }
                 })
             };
-            oxyline_core::simulate(&inner.1, &settings, &mut cb)
+            oxyline_core::simulate_with_transport(&inner.1, species.as_mut(), &settings, &mut cb)
         });
         let out = outcome.map_err(to_py)?;
         let d = PyDict::new(py);
@@ -262,6 +361,19 @@ impl Network {
             d.set_item("rk4_limiting_element", lim.element.clone())?;
         }
         d.set_item("final_state", out.final_state.into_pyarray(py))?;
+        if let Some(t) = out.transport {
+            let td = PyDict::new(py);
+            let cols = t.columns_per_species * t.species.len();
+            let nt = if cols > 0 { t.data.len() / cols } else { 0 };
+            let data = numpy::ndarray::Array2::from_shape_vec((nt, cols), t.data)
+                .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+            td.set_item("species", t.species)?;
+            td.set_item("data", data.into_pyarray(py))?;
+            td.set_item("initial_stored", t.initial_stored)?;
+            td.set_item("final_state", t.final_state.into_pyarray(py))?;
+            td.set_item("mean_abs_flow", t.mean_abs_flow.into_pyarray(py))?;
+            d.set_item("transport", td)?;
+        }
         match (pending, out.error) {
             (Some(e), _) => {
                 d.set_item("error_kind", "interrupted")?;
@@ -287,6 +399,13 @@ mod _core {
     #[pymodule_init]
     fn init(m: &pyo3::Bound<'_, pyo3::types::PyModule>) -> pyo3::PyResult<()> {
         m.add("__version__", env!("CARGO_PKG_VERSION"))?;
-        m.add("build_profile", if cfg!(debug_assertions) { "debug" } else { "release" })
+        m.add(
+            "build_profile",
+            if cfg!(debug_assertions) {
+                "debug"
+            } else {
+                "release"
+            },
+        )
     }
 }

@@ -1,0 +1,380 @@
+"""The ``oxygen:`` and ``species:`` model sections: checking, unit conversion (mmHg at the file
+boundary for oxygen, SI inside) and the canonical ``transport`` description for the core.
+
+Oxygen (physics spec §2-4)::
+
+    oxygen:
+      inlet: {po2: 85.0}                 # mmHg; or {time: [..], po2: [..]}, or {fourier: {..}} in mmHg
+      inlets: {inlet_bc: {po2: 90}}      # optional per-inlet overrides
+      hemoglobin: none                   # none | hill | linearized
+      hill: {p50: 26.8, n: 2.7, hb: 150, huefner: 1.34}     # mmHg, -, g/L, mL O2/g
+      linearized: {p_low: 60, p_high: 85}                    # secant end points (mmHg)
+      solubility: 1.40e-3                # mol m^-3 mmHg^-1
+      diffusivity: 1.2e-9                # m^2/s
+      wall: {model: leveque, po2: 60.0, shear: cycle-mean}
+      per_vessel: {ICA: {wall: {...}}}
+      outlet_backflow: zero-gradient     # or {outlet_bc: {po2: ..}}
+      formulation: conservative          # or tl-quasisteady (the paper's literal KCL form)
+      reference_pressure: 0              # mmHg: pressure at which the vessel radii hold
+      initial: {po2: 85}                 # default: the inlet value at t = 0
+
+Wall models: ``none``; ``flux`` {flux: mol m^-2 s^-1}; ``mass-transfer`` {k: m/s, po2};
+``leveque`` {po2, shear: cycle-mean | instantaneous, enhancement, hb_facilitation}; ``graetz``
+{po2, enhancement}; ``permeability`` {permeability: m/s, po2}. ``permeability`` in the
+mass-transfer, Lévêque and Graetz models adds a wall resistance in series (physics C8).
+``hb_facilitation: {d_hb: 5.5e-12}`` multiplies the Lévêque/Graetz coefficient by
+E_Hb = (1 + K)^(1/3) (1 + K D_Hb/D)^(2/3), K the Hill secant between the inlet and wall PO2
+(physics §3.4).
+
+Other species (physics §5), all SI (concentrations in mol/m^3)::
+
+    species:
+      - name: ldl
+        diffusivity: 5e-11
+        decay: 0.0                       # 1/s
+        binding: {kind: linear, partition: 2.0}   # none | linear | saturable {b_max, k_d, n}
+        wall: {model: permeability, permeability: 2e-8, concentration: 0.0}
+        inlet: {concentration: 1.0}      # or time/concentration tables, or
+                                         # {bolus: {gamma_variate: {k: .., t0: .., a: .., b: ..}}}
+        backflow: {outlet_bc: {concentration: 0.0}}
+        initial: 0.0
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Mapping
+from typing import Any
+
+from oxyline.errors import ModelError
+from oxyline.units import MMHG
+
+MOLAR_VOLUME_ML = 22.414  # mL O2 (STPD) per mmol
+OXYGEN_KEYS = {
+    "inlet", "inlets", "hemoglobin", "hill", "linearized", "solubility", "diffusivity", "wall",
+    "per_vessel", "outlet_backflow", "formulation", "reference_pressure", "initial", "name",
+}
+WALL_KEYS = {
+    "none": {"model"},
+    "flux": {"model", "flux"},
+    "mass-transfer": {"model", "k", "po2", "concentration", "permeability"},
+    "leveque": {"model", "po2", "concentration", "shear", "enhancement", "permeability",
+                "hb_facilitation"},
+    "graetz": {"model", "po2", "concentration", "enhancement", "permeability", "hb_facilitation"},
+    "permeability": {"model", "permeability", "po2", "concentration"},
+}
+SPECIES_KEYS = {"name", "diffusivity", "decay", "binding", "wall", "inlet", "inlets", "backflow",
+                "initial", "per_vessel", "units"}
+TRANSPORT_KEYS = {"reference_pressure", "formulation", "velocity_threshold"}
+FORMULATIONS = ("conservative", "tl-quasisteady")
+
+
+def _err(element: str, message: str) -> ModelError:
+    return ModelError(f"{element}: {message}")
+
+
+def _check(d: Any, allowed: set[str], element: str) -> Mapping[str, Any]:
+    if not isinstance(d, Mapping):
+        raise _err(element, f"expected a mapping, got {d!r}")
+    for k in d:
+        if k not in allowed:
+            raise _err(element, f"unknown key '{k}' (allowed: {', '.join(sorted(allowed))})")
+    return d
+
+
+def _num(v: Any, element: str, key: str, minimum: float | None = None,
+         positive: bool = False) -> float:
+    if isinstance(v, str):
+        try:
+            v = float(v)
+        except ValueError:
+            pass
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
+        raise _err(element, f"'{key}' must be a finite number, got {v!r}")
+    x = float(v)
+    if positive and x <= 0:
+        raise _err(element, f"'{key}' must be > 0, got {x}")
+    if minimum is not None and x < minimum:
+        raise _err(element, f"'{key}' must be >= {minimum}, got {x}")
+    return x
+
+
+def _wave(spec: Any, key: str, scale: float, element: str, period: float | None,
+          duration: float | None = None) -> dict[str, Any]:
+    """Canonical waveform of a concentration-like quantity given as a number, a
+    {key: x} mapping, {time, key} tables, {fourier: ...} or a gamma-variate bolus."""
+    if not isinstance(spec, Mapping):
+        return {"kind": "constant", "value": scale * _num(spec, element, key, minimum=0.0)}
+    if "bolus" in spec:
+        return _bolus(spec["bolus"], scale, element, duration)
+    if "fourier" in spec:
+        fo = _check(spec["fourier"], {"period", "mean", "cos", "sin"}, f"{element} fourier")
+        return {"kind": "fourier", "period": _num(fo.get("period", period or 1.0), element, "period",
+                                                   positive=True),
+                "mean": scale * _num(fo.get("mean", 0.0), element, "mean"),
+                "cos": [scale * _num(x, element, "cos") for x in fo.get("cos", [])],
+                "sin": [scale * _num(x, element, "sin") for x in fo.get("sin", [])]}
+    if "time" in spec:
+        t = [_num(x, element, "time") for x in spec["time"]]
+        if key not in spec:
+            raise _err(element, f"has 'time' but no '{key}' table")
+        v = [scale * _num(x, element, key, minimum=0.0) for x in spec[key]]
+        if len(t) != len(v) or len(t) < 2:
+            raise _err(element, f"'time' and '{key}' need the same length >= 2")
+        if any(b <= a for a, b in itertools.pairwise(t)):
+            raise _err(element, "'time' must be strictly increasing")
+        return {"kind": "table", "time": t, "value": v,
+                "interpolation": spec.get("interpolation", "linear")}
+    if key in spec:
+        return {"kind": "constant", "value": scale * _num(spec[key], element, key, minimum=0.0)}
+    raise _err(element, f"needs '{key}' (a number, 'time' + '{key}' tables, or 'fourier')")
+
+
+def _bolus(spec: Any, scale: float, element: str, duration: float | None) -> dict[str, Any]:
+    """Gamma-variate bolus c(t) = K (t − t0)^a exp(−(t − t0)/b), t > t0, sampled as a table
+    that spans the whole run (tables repeat with their own length)."""
+    el = f"{element} bolus"
+    g = _check(_check(spec, {"gamma_variate"}, el).get("gamma_variate"), {"k", "t0", "a", "b"},
+               f"{el} gamma_variate")
+    k = _num(g.get("k"), el, "k", minimum=0.0)
+    t0 = _num(g.get("t0", 0.0), el, "t0", minimum=0.0)
+    a = _num(g.get("a"), el, "a", minimum=0.0)
+    b = _num(g.get("b"), el, "b", positive=True)
+    end = max(duration or 0.0, t0 + 40.0 * b * (1.0 + a)) + 1.0
+    n = 4000
+    times = [end * i / (n - 1) for i in range(n)]
+    vals = [scale * (k * (t - t0) ** a * math.exp(-(t - t0) / b) if t > t0 else 0.0)
+            for t in times]
+    return {"kind": "table", "time": times, "value": vals, "interpolation": "linear"}
+
+
+def _hill(ox: Mapping[str, Any], alpha_mmhg: float) -> dict[str, float]:
+    h = _check(ox.get("hill", {}) or {}, {"p50", "n", "hb", "huefner"}, "oxygen hill")
+    p50 = _num(h.get("p50", 26.8), "oxygen hill", "p50", positive=True)
+    n = _num(h.get("n", 2.7), "oxygen hill", "n", positive=True)
+    hb = _num(h.get("hb", 150.0), "oxygen hill", "hb", positive=True)
+    huefner = _num(h.get("huefner", 1.34), "oxygen hill", "huefner", positive=True)
+    # g/L × mL/g = mL O2 per L blood; / 22.414 mL/mmol = mmol/L = mol/m^3
+    capacity = hb * huefner / MOLAR_VOLUME_ML
+    return {"p50": p50, "n": n, "capacity": capacity, "alpha": alpha_mmhg}
+
+
+def hill_saturation(p: float, p50: float, n: float) -> float:
+    return 0.0 if p <= 0 else 1.0 / (1.0 + (p50 / p) ** n)
+
+
+def _facilitation(spec: Any, h: dict[str, float] | None, d: float, p_in: float, p_w: float,
+                  element: str) -> float:
+    """E_Hb = (1 + K)^(1/3) (1 + K D_Hb/D)^(2/3) (physics §3.4)."""
+    if spec in (None, False):
+        return 1.0
+    if h is None:
+        raise _err(element, "hb_facilitation needs hemoglobin: hill or linearized")
+    f = _check(spec if isinstance(spec, Mapping) else {}, {"d_hb"}, f"{element} hb_facilitation")
+    d_hb = _num(f.get("d_hb", 5.5e-12), element, "d_hb", minimum=0.0)
+    ds = hill_saturation(p_in, h["p50"], h["n"]) - hill_saturation(p_w, h["p50"], h["n"])
+    kbar = h["capacity"] * ds / (h["alpha"] * (p_in - p_w)) if p_in != p_w else 0.0
+    return (1.0 + kbar) ** (1.0 / 3.0) * (1.0 + kbar * d_hb / d) ** (2.0 / 3.0)
+
+
+def _wall(spec: Any, element: str, conc_of: Any, conc_key: str, h: dict[str, float] | None,
+          d: float, p_in: float | None) -> dict[str, Any]:
+    """Canonical wall closure. ``conc_of(mapping)`` reads the wall concentration (PO2 for
+    oxygen, concentration for other species)."""
+    if spec is None or spec == "none":
+        return {"model": "none"}
+    if isinstance(spec, str):
+        spec = {"model": spec}
+    if not isinstance(spec, Mapping) or "model" not in spec:
+        raise _err(element, "wall needs a 'model' (none, flux, mass-transfer, leveque, graetz, "
+                            "permeability)")
+    model = str(spec["model"])
+    if model not in WALL_KEYS:
+        raise _err(element, f"unknown wall model '{model}' (expected {', '.join(WALL_KEYS)})")
+    _check(spec, WALL_KEYS[model], f"{element} wall")
+    out: dict[str, Any] = {"model": model}
+    if model == "none":
+        return out
+    if model == "flux":
+        out["flux"] = _num(spec.get("flux"), element, "flux")
+        return out
+    cw = conc_of(spec)
+    if model == "permeability":
+        out.update(permeability=_num(spec.get("permeability"), element, "permeability",
+                                     minimum=0.0), tissue_concentration=cw)
+        return out
+    out["wall_concentration"] = cw
+    if "permeability" in spec:
+        out["permeability"] = _num(spec["permeability"], element, "permeability", positive=True)
+    if model == "mass-transfer":
+        out["k"] = _num(spec.get("k"), element, "k", minimum=0.0)
+        return out
+    enh = _num(spec.get("enhancement", 1.0), element, "enhancement", minimum=0.0)
+    if spec.get("hb_facilitation") not in (None, False):
+        if p_in is None:
+            raise _err(element, "hb_facilitation needs a constant inlet PO2")
+        enh *= _facilitation(spec["hb_facilitation"], h, d, p_in, cw / h["alpha"] if h else 0.0,
+                             element)
+    out["enhancement"] = enh
+    if model == "leveque":
+        shear = spec.get("shear", "cycle-mean")
+        if shear not in ("cycle-mean", "instantaneous"):
+            raise _err(element, f"shear must be 'cycle-mean' or 'instantaneous', got {shear!r}")
+        out["shear"] = shear
+    return out
+
+
+def _oxygen(ox: Mapping[str, Any], period: float | None, duration: float | None) -> dict[str, Any]:
+    _check(ox, OXYGEN_KEYS, "oxygen")
+    el = "oxygen"
+    alpha = _num(ox.get("solubility", 1.40e-3), el, "solubility", positive=True)  # per mmHg
+    d = _num(ox.get("diffusivity", 1.2e-9), el, "diffusivity", positive=True)
+    if "inlet" not in ox:
+        raise _err(el, "needs 'inlet' (e.g. {po2: 85})")
+    inlet = _wave(ox["inlet"], "po2", alpha, f"{el} inlet", period, duration)
+    p_in = inlet["value"] / alpha if inlet["kind"] == "constant" else (
+        inlet["mean"] / alpha if inlet["kind"] == "fourier" else None)
+    mode = str(ox.get("hemoglobin", "none"))
+    h: dict[str, float] | None = None
+    binding: dict[str, Any] = {"kind": "none"}
+    alpha_si = alpha / MMHG
+    if mode in ("hill", "linearized"):
+        h = _hill(ox, alpha)
+        binding = {"kind": "hill", "solubility": alpha_si, "p50": h["p50"] * MMHG, "n": h["n"],
+                   "capacity": h["capacity"]}
+        if mode == "linearized":
+            lin = _check(ox.get("linearized", {}) or {}, {"p_low", "p_high"}, "oxygen linearized")
+            wall = ox.get("wall") if isinstance(ox.get("wall"), Mapping) else {}
+            p_low = _num(lin.get("p_low", (wall or {}).get("po2", 60.0)), el, "p_low", positive=True)
+            p_high = _num(lin.get("p_high", p_in if p_in is not None else 85.0), el, "p_high",
+                          positive=True)
+            binding = dict(binding, kind="linearized", p_low=p_low * MMHG, p_high=p_high * MMHG)
+    elif mode != "none":
+        raise _err(el, f"hemoglobin must be none, hill or linearized, got {mode!r}")
+
+    def po2(spec: Mapping[str, Any]) -> float:
+        if "po2" in spec:
+            return alpha * _num(spec["po2"], el, "po2", minimum=0.0)
+        if "concentration" in spec:
+            return _num(spec["concentration"], el, "concentration", minimum=0.0)
+        raise _err(el, "wall needs 'po2' (mmHg)")
+
+    species: dict[str, Any] = {
+        "name": str(ox.get("name", "o2")), "diffusivity": d, "binding": binding, "inlet": inlet,
+        "wall": _wall(ox.get("wall", "none"), f"{el}", po2, "po2", h, d, p_in),
+    }
+    if "inlets" in ox:
+        species["inlets"] = {str(k): _wave(v, "po2", alpha, f"{el} inlet '{k}'", period, duration)
+                             for k, v in _check(ox["inlets"], set(ox["inlets"]), el).items()}
+    back = ox.get("outlet_backflow", "zero-gradient")
+    if back != "zero-gradient":
+        if not isinstance(back, Mapping):
+            raise _err(el, "outlet_backflow must be 'zero-gradient' or {outlet: {po2: ..}}")
+        species["backflow"] = {str(k): _wave(v, "po2", alpha, f"{el} backflow '{k}'", period,
+                                             duration) for k, v in back.items()}
+    if "initial" in ox:
+        ini = ox["initial"]
+        species["initial"] = alpha * _num(ini.get("po2") if isinstance(ini, Mapping) else ini,
+                                          el, "initial po2", minimum=0.0)
+    if "per_vessel" in ox:
+        pv = {}
+        for name, over in ox["per_vessel"].items():
+            _check(over, {"wall"}, f"{el} per_vessel '{name}'")
+            pv[str(name)] = _wall(over.get("wall"), f"{el} per_vessel '{name}'", po2, "po2", h, d,
+                                  p_in)
+        species["per_vessel"] = pv
+    return species
+
+
+def _species(sp: Mapping[str, Any], i: int, period: float | None,
+             duration: float | None) -> dict[str, Any]:
+    el = f"species '{sp.get('name', f'#{i}')}'" if isinstance(sp, Mapping) else f"species #{i}"
+    _check(sp, SPECIES_KEYS, el)
+    if "name" not in sp:
+        raise _err(el, "needs a 'name'")
+    d = _num(sp.get("diffusivity", 0.0), el, "diffusivity", minimum=0.0)
+    b = sp.get("binding", "none")
+    if b in (None, "none"):
+        binding: dict[str, Any] = {"kind": "none"}
+    else:
+        _check(b, {"kind", "partition", "b_max", "k_d", "n"}, f"{el} binding")
+        kind = b.get("kind")
+        if kind == "linear":
+            binding = {"kind": "linear", "partition": _num(b.get("partition"), el, "partition",
+                                                           minimum=0.0)}
+        elif kind == "saturable":
+            # C_t = c + B_max c^n/(c^n + K_d^n): the Hill law with α = 1
+            binding = {"kind": "hill", "solubility": 1.0,
+                       "p50": _num(b.get("k_d"), el, "k_d", positive=True),
+                       "n": _num(b.get("n", 1.0), el, "n", positive=True),
+                       "capacity": _num(b.get("b_max"), el, "b_max", positive=True)}
+        else:
+            raise _err(el, f"binding kind must be none, linear or saturable, got {kind!r}")
+
+    def conc(spec: Mapping[str, Any]) -> float:
+        return _num(spec.get("concentration", 0.0), el, "concentration", minimum=0.0)
+
+    if "inlet" not in sp:
+        raise _err(el, "needs 'inlet' (e.g. {concentration: 1.0})")
+    out: dict[str, Any] = {
+        "name": str(sp["name"]), "diffusivity": d,
+        "decay": _num(sp.get("decay", 0.0), el, "decay", minimum=0.0), "binding": binding,
+        "inlet": _wave(sp["inlet"], "concentration", 1.0, f"{el} inlet", period, duration),
+        "wall": _wall(sp.get("wall", "none"), el, conc, "concentration", None, d, None),
+    }
+    if "inlets" in sp:
+        out["inlets"] = {str(k): _wave(v, "concentration", 1.0, f"{el} inlet '{k}'", period,
+                                       duration) for k, v in sp["inlets"].items()}
+    if "backflow" in sp:
+        out["backflow"] = {str(k): _wave(v, "concentration", 1.0, f"{el} backflow '{k}'", period,
+                                         duration) for k, v in sp["backflow"].items()}
+    if "initial" in sp:
+        out["initial"] = _num(sp["initial"], el, "initial", minimum=0.0)
+    if "per_vessel" in sp:
+        out["per_vessel"] = {str(n): _wall(o.get("wall"), f"{el} per_vessel '{n}'", conc,
+                                           "concentration", None, d, None)
+                             for n, o in sp["per_vessel"].items()}
+    return out
+
+
+def canonical(data: Mapping[str, Any], pressure_factor: float, period: float | None,
+              duration: float | None) -> tuple[dict[str, Any] | None, dict[str, Any]]:
+    """(canonical transport section or None, info for results: species names and the O2
+    solubility per mmHg)."""
+    ox = data.get("oxygen")
+    sps = data.get("species")
+    if ox is None and not sps:
+        return None, {}
+    tr = _check(data.get("transport", {}) or {}, TRANSPORT_KEYS, "transport")
+    species: list[dict[str, Any]] = []
+    info: dict[str, Any] = {"species": [], "oxygen": None, "solubility": None}
+    formulation = tr.get("formulation", "conservative")
+    p_ref = pressure_factor * _num(tr.get("reference_pressure", 0.0), "transport",
+                                   "reference_pressure")
+    if ox is not None:
+        if not isinstance(ox, Mapping):
+            raise _err("oxygen", f"expected a mapping, got {ox!r}")
+        o2 = _oxygen(ox, period, duration)
+        species.append(o2)
+        info["oxygen"] = o2["name"]
+        info["solubility"] = _num(ox.get("solubility", 1.40e-3), "oxygen", "solubility")
+        formulation = ox.get("formulation", formulation)
+        if "reference_pressure" in ox:
+            p_ref = MMHG * _num(ox["reference_pressure"], "oxygen", "reference_pressure")
+    if sps:
+        if not isinstance(sps, list):
+            raise _err("species", "must be a list")
+        species.extend(_species(s, i, period, duration) for i, s in enumerate(sps))
+    if formulation not in FORMULATIONS:
+        raise _err("oxygen", f"formulation must be one of {FORMULATIONS}, got {formulation!r}")
+    names = [s["name"] for s in species]
+    if len(set(names)) != len(names):
+        raise _err("species", f"names must be unique, got {names}")
+    info["species"] = names
+    out: dict[str, Any] = {"reference_pressure": p_ref, "formulation": formulation,
+                           "species": species}
+    if "velocity_threshold" in tr:
+        out["velocity_threshold"] = _num(tr["velocity_threshold"], "transport",
+                                         "velocity_threshold", minimum=0.0)
+    return out, info
