@@ -144,9 +144,101 @@ def summary(rows: list[dict[str, Any]], min_share: float = 0.0) -> dict[str, tup
     return out
 
 
+def drift(model: str, root: Path = OPENBF) -> float:
+    """Median (P(end) - P(start)) / mean P over the reference cycle: 0 for a periodic cycle."""
+    _, P = reference(model, "P", root)
+    return float(np.median(np.concatenate([(p[-1] - p[0]) / p.mean(axis=0) for p in P.values()])))
+
+
+QUANTITIES = (("mean_p", "mean P"), ("sys", "systolic"), ("dia", "diastolic"),
+              ("pp", "pulse P"), ("mean_q", "mean Q"))
+
+
+def table(results: dict[str, list[dict[str, Any]]]) -> str:
+    """Markdown table: max / median |relative error| per quantity (percent)."""
+    head = "| model | points | " + " | ".join(f"{q} max / median" for _, q in QUANTITIES) + " |"
+    lines = [head, "|---|---:|" + "---:|" * len(QUANTITIES)]
+    for name, rows in results.items():
+        s = summary(rows)
+        cells = " | ".join(f"{100 * s[k][0]:.2f} / {100 * s[k][1]:.2f}" for k, _ in QUANTITIES)
+        lines.append(f"| {name} | {len(rows)} | {cells} |")
+    return "\n".join(lines)
+
+
+FIGURE_SITES = (("aortic_arch_I", 0.0, "ascending aorta (aortic arch I, x = 0)"),
+                ("thoracic_aorta_III", 0.5, "thoracic aorta III (x = 0.5)"),
+                ("common_carotid_L", 1.0, "left common carotid (x = 1)"),
+                ("abdominal_aorta_V", 1.0, "abdominal aorta V (x = 1)"),
+                ("radial_R", 1.0, "right radial (x = 1)"),
+                ("anterior_tibial_R", 1.0, "right anterior tibial (x = 1)"))
+
+
+def figure(c: dict[str, Any], out: Path) -> None:
+    """Pressure waveforms at six ADAN56 sites, oxyline vs openBF."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t, P, res, m = c["t"], c["P"], c["res"], c["model"]
+    phase = t - t[0]
+    fig, axes = plt.subplots(2, 3, figsize=(12, 6.5), sharex=True, constrained_layout=True)
+    for ax, (lab, x, title) in zip(axes.ravel(), FIGURE_SITES):
+        j = POSITIONS.index(x)
+        ox = sample(res, lab, "P", t, m.period)[:, j]
+        ax.plot(phase, P[lab][:, j] / MMHG, "k--", lw=1.6, label="openBF (1-D, nonlinear)")
+        ax.plot(phase, ox / MMHG, "C0", lw=1.6, label="oxyline (0-D, inverted-L, ≤ 1 cm)")
+        ax.set_title(title, fontsize=10)
+        ax.grid(alpha=0.3)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("pressure [mmHg]")
+    for ax in axes[-1]:
+        ax.set_xlabel("time in cycle [s]")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=2, fontsize=9)
+    fig.suptitle("ADAN56: pressure, oxyline vs openBF (last cycle)", fontsize=11)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+
+
+def main() -> None:
+    """Recompute everything in docs/validation.md (between the GENERATED markers) and the
+    figure."""
+    periodic = {name: compare(name) for name in MODELS}
+    out = ["### Run to periodicity (openBF-compatible import)", "",
+           table({k: v["rows"] for k, v in periodic.items()}), ""]
+    same = {name: compare(name, same_cycle=True)["rows"]
+            for name in ("cca", "ibif", "circle_of_willis")}
+    out += [("### Same transient as openBF (from rest, same number of cycles; models with "
+            "Pext = 0)"), "", table(same), ""]
+    out += ["### Reference cycle drift (median (P_end - P_start)/mean P of openBF's cycle)", "",
+            "| model | openBF cycles | drift |", "|---|---:|---:|"]
+    out += [f"| {n} | {reference_cycles(n)} | {100 * drift(n):.2f} % |" for n in MODELS]
+    sens = {
+        "adan56, openBF-compatible (reference setup)": periodic["adan56"]["rows"],
+        "adan56, linearize='pext' (radii at A0)": compare("adan56", linearize="pext")["rows"],
+        "adan56, default import (file's taper, repaired inflow)": compare(
+            "adan56", openbf_compat=False, repair_inlet=True)["rows"],
+        "circle_of_willis, wk2='parallel'": compare(
+            "circle_of_willis", wk2="parallel", openbf_compat=False, taper="openbf")["rows"],
+    }
+    out += ["", "### Sensitivity to the mapping (run to periodicity)", "", table(sens), ""]
+    gen = "\n".join(out)
+    print(gen)
+    figure(periodic["adan56"], REPO / "docs" / "figures" / "adan56_pressure.png")
+    doc = REPO / "docs" / "validation.md"
+    if doc.exists():
+        text = doc.read_text()
+        a, b = "<!-- GENERATED: benches/validate_openbf.py -->", "<!-- END GENERATED -->"
+        if a in text and b in text:
+            text = text[: text.index(a) + len(a)] + "\n" + gen + "\n" + text[text.index(b):]
+            doc.write_text(text)
+
+
 if __name__ == "__main__":
-    for name in (sys.argv[1:] or MODELS):
-        c = compare(name)
-        s = summary(c["rows"])
-        print(name, c["res"].settings["method"], c["res"].settings["cycles_run"],
-              {k: (f"{a * 100:.2f}%", f"{b * 100:.2f}%") for k, (a, b) in s.items()})
+    if sys.argv[1:]:
+        for name in sys.argv[1:]:
+            print(name, summary(compare(name)["rows"]))
+    else:
+        main()
