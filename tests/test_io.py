@@ -354,3 +354,67 @@ def test_summary_table_and_files(tmp_path: Path, result: oxyline.Result) -> None
     pytest.importorskip("pyarrow")
     pq = pd.read_parquet(result.to_parquet(tmp_path / "s.parquet"))
     pd.testing.assert_frame_equal(pq, df)
+
+
+# ---------------------------------------------------------------------------------- built-ins
+
+
+def test_round_trips_of_every_built_in_model(tmp_path: Path) -> None:
+    models = pytest.importorskip("oxyline.models")
+    pytest.importorskip("networkx")
+    for name in models.list():
+        m = models.load(name)
+        assert oio.from_networkx(oio.to_networkx(m)).canonical == m.canonical, name
+        oio.write_tables(m, tmp_path / f"{name}.csv")
+        assert oio.read_tables(tmp_path / f"{name}.csv").canonical == m.canonical, name
+        p = oio.save_model(m, tmp_path / f"{name}.yaml")
+        assert oxyline.load_model(p).canonical == m.canonical, name
+
+
+def _tube_resistance(g: dict, mu: float) -> float:
+    a, b, length = g["radius_in"], g["radius_out"], g["length"]
+    if abs(a - b) < 1e-15 * a:
+        return 8 * mu * length / (math.pi * a**4)
+    return 8 * mu * length / (3 * math.pi * (a - b)) * (1 / b**3 - 1 / a**3)
+
+
+def test_svzerod_export_of_adan56_matches_the_analytic_tree_split() -> None:
+    svzerod = pytest.importorskip("svzerod")
+    models = pytest.importorskip("oxyline.models")
+    src = models.load("adan56").to_dict()
+    inlet = next(n for n, bc in src["boundary_conditions"].items() if bc["type"] == "flow")
+    src["boundary_conditions"][inlet] = {"type": "flow", "value": 1e-4}
+    m = oxyline.load_model(src)
+    canon = m.canonical
+    mu = canon["blood"]["viscosity"]
+    children: dict[str, list[dict]] = {}
+    for v in canon["vessels"]:
+        children.setdefault(v["from"], []).append(v)
+
+    def r_eq(node: str) -> float:  # resistance seen downstream of a node (the tree's steady state)
+        bc = canon["boundary_conditions"].get(node)
+        if bc is not None and node not in children:
+            return bc["proximal_resistance"] + bc["distal_resistance"]
+        return 1.0 / sum(1.0 / (_tube_resistance(v["geometry"], mu) + r_eq(v["to"]))
+                         for v in children[node])
+
+    flows: dict[str, float] = {}
+
+    def split(node: str, q: float) -> None:
+        branches = [(v, _tube_resistance(v["geometry"], mu) + r_eq(v["to"]))
+                    for v in children.get(node, [])]
+        g_total = sum(1 / r for _, r in branches)
+        for v, r in branches:
+            flows[v["name"]] = q / r / g_total
+            split(v["to"], flows[v["name"]])
+
+    split(inlet, 1e-4)
+    assert len(flows) == 77
+    # implicit steps of half a period; 100 periods let every Windkessel charge to steady state
+    d = oio.to_svzerod(m, units="SI", points_per_cycle=3, cycles=100)
+    out = svzerod.simulate(d)
+    last = out.groupby("name").last()
+    for v in canon["vessels"]:
+        n = sum(1 for s in d["vessels"] if s["vessel_name"].startswith(f"{v['name']}_seg"))
+        assert last.loc[f"{v['name']}_seg{n - 1}", "flow_out"] == pytest.approx(
+            flows[v["name"]], rel=1e-7, abs=1e-14), v["name"]

@@ -2,8 +2,9 @@
 
 ``to_networkx`` returns a :class:`networkx.DiGraph` (a :class:`networkx.MultiDiGraph` keyed by
 vessel name when two vessels join the same pair of nodes); node attribute
-``boundary_condition`` holds each boundary condition and ``G.graph`` the other top-level model
-keys, so ``from_networkx(to_networkx(m))`` is ``m`` again. networkx is an optional dependency
+``boundary_condition`` holds each boundary condition, ``G.graph`` the other top-level model
+keys and ``G.graph["vessel_order"]`` the vessel order, so ``from_networkx(to_networkx(m))`` is
+``m`` again. networkx is an optional dependency
 (``pip install oxyline[graph]``).
 """
 
@@ -48,6 +49,7 @@ def to_networkx(model: Model) -> Any:
     multi = len(set(pairs)) < len(pairs)
     G = nx.MultiDiGraph() if multi else nx.DiGraph()
     G.graph.update({k: v for k, v in src.items() if k not in ("vessels", "boundary_conditions")})
+    G.graph["vessel_order"] = [str(v["name"]) for v in src["vessels"]]
     for v in src["vessels"]:
         attrs = {k: val for k, val in v.items() if k not in ("from", "to")}
         if multi:
@@ -110,12 +112,15 @@ def from_networkx(G: Any, boundary_conditions: Mapping[str, Any] | None = None,
         vessels.append(vessel)
     if not vessels:
         raise ModelError("graph: no edges (each edge is a vessel)")
+    order = {n: i for i, n in enumerate(G.graph.get("vessel_order") or [])}
+    if order:  # the model's vessel order (edge iteration follows node order instead)
+        vessels.sort(key=lambda v: order.get(v["name"], len(order)))
     bcs: dict[str, Any] = {}
     for node, nd in G.nodes(data=True):
         if nd.get("boundary_condition") is not None:
             bcs[str(node)] = nd["boundary_condition"]
     bcs.update({str(k): v for k, v in (boundary_conditions or {}).items()})
-    data = dict(G.graph)
+    data = {k: v for k, v in G.graph.items() if k != "vessel_order"}
     data.update(model_keys)
     data["vessels"] = plain(vessels)
     data["boundary_conditions"] = plain(bcs)
