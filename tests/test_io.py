@@ -418,3 +418,31 @@ def test_svzerod_export_of_adan56_matches_the_analytic_tree_split() -> None:
         n = sum(1 for s in d["vessels"] if s["vessel_name"].startswith(f"{v['name']}_seg"))
         assert last.loc[f"{v['name']}_seg{n - 1}", "flow_out"] == pytest.approx(
             flows[v["name"]], rel=1e-7, abs=1e-14), v["name"]
+
+
+# ---------------------------------------------------------------------------------- docs
+
+
+def test_docs_examples_run(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """docs/io.md: every python block runs (in order, one directory), then every CLI line."""
+    import re
+    import shlex
+
+    from oxyline.cli import main
+
+    for mod in ("svzerod", "networkx", "matplotlib", "zarr"):
+        pytest.importorskip(mod)
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+    doc = Path(__file__).resolve().parents[1] / "docs" / "io.md"
+    text = doc.read_text()
+    monkeypatch.chdir(tmp_path)
+    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.DOTALL)
+    assert len(blocks) >= 6
+    for i, code in enumerate(blocks):
+        exec(compile(code, f"{doc}:block{i}", "exec"), {"__name__": "__docs__"})  # noqa: S102
+    lines = [ln for b in re.findall(r"```bash\n(.*?)```", text, flags=re.DOTALL)
+             for ln in b.splitlines() if ln.startswith("oxyline ")]
+    assert len(lines) >= 6
+    for ln in lines:
+        assert main(shlex.split(ln)[1:]) == 0, ln
+    assert (tmp_path / "run_figures" / "network_map.svg").exists()
