@@ -46,7 +46,7 @@ ADAN_Q = ("adan56 mean flow: max 3.1 % (femoral_R_II/femoral_L_II x=0..0.75, 2.1
           "friction 2(gamma+2) pi mu Q/A^2 is nonlinear (flow and area peak together), neither "
           "of which a periodic linear model reproduces")
 ADAN_PP = ("adan56 pulse pressure: max 12.9 % at posterior_interosseous_L/R x=1 (the two most "
-           "peripheral, narrowest forearm outlets, r = 0.9 mm, where the 1-D nonlinear wave "
+           "peripheral, narrowest forearm outlets, r = 0.68 mm, where the 1-D nonlinear wave "
            "steepening and the WK3 Riemann coupling of openBF matter most); every other point "
            "is within 10 % (median 2.3 %)")
 
