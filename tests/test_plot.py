@@ -153,12 +153,11 @@ def test_network_map_of_a_larger_tree_with_a_loop(tmp_path: Path) -> None:
         bcs[node] = {"type": "resistance", "resistance": 1e9}
     vessels.append({"name": "bridge", "from": "n00", "to": "n01", "length": 0.02, "radius": 0.002})
     m = oxyline.load_model({"name": "tree", "vessels": vessels, "boundary_conditions": bcs})
-    for layout in ("auto", "tree"):
-        fig = plot.network_map(m, layout=layout)
-        _assert_no_text_overlap(fig)
-        fig.savefig(tmp_path / f"tree_{layout}.png", dpi=60)
-        _check_png(tmp_path / f"tree_{layout}.png")
-        matplotlib.pyplot.close(fig)
+    fig = plot.network_map(m)  # a loop: networkx layout; labels that would collide are dropped
+    _assert_no_text_overlap(fig)
+    fig.savefig(tmp_path / "tree.png", dpi=60)
+    _check_png(tmp_path / "tree.png")
+    matplotlib.pyplot.close(fig)
 
 
 def test_po2_is_plotted_when_present(result: oxyline.Result) -> None:

@@ -89,6 +89,8 @@ def _has(ds: Any, quantity: str) -> bool:
 
 def _declutter(fig: Any, texts: Sequence[Any]) -> None:
     """Hide texts (in order) that overlap a text kept before them."""
+    if sum(1 for t in texts if t.get_visible() and t.get_text()) < 2:
+        return
     fig.canvas.draw()
     renderer = fig.canvas.get_renderer()
     kept: list[Any] = []
