@@ -16,7 +16,7 @@ PathLike = str | os.PathLike[str]
 
 # keys whose values are identifiers or words, never numbers
 WORD_KEYS = {"name", "from", "to", "type", "interpolation", "description", "units", "arrangement",
-             "method", "start", "wall_model", "inertance_profile", "cycles", "dt", "model"}
+             "method", "start", "wall_model", "inertance_profile", "cycles", "model"}
 _NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
 
 VESSEL_COLUMNS = ("name", "from", "to", "length", "radius", "radius_in", "radius_out",

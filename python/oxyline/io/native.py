@@ -108,15 +108,7 @@ def read_model(path: PathLike | str, format: str | None = None) -> Model:
     """
     p = Path(path)
     if not p.exists():
-        if not p.suffix and format is None:
-            try:
-                from oxyline import models  # built-in whole-body models, when present
-
-                return models.load(str(path))  # type: ignore[attr-defined,no-any-return]
-            except ImportError:
-                pass
-            except ModelError:
-                pass
+        if not p.suffix and format is None:  # a built-in model (oxyline.models) or example
             return load_model(str(path))
         raise ModelError(f"{p}: file not found")
     fmt = format or detect_format(p)
