@@ -252,7 +252,8 @@ def test_openbf_taper_quirk() -> None:
 def test_reflection_outlet_is_a_clear_error() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OpenBFWarning)
-        with pytest.raises(oxyline.UnsupportedElement, match=r"vessel 'v6'.*Rt = 0"):
+        with pytest.raises(oxyline.UnsupportedElement,
+                           match=r"vessel 'v6'.*Rt = 0.*also Rt outlets: v8, v10"):
             read_openbf(OPENBF / "test/network/network.yaml")
     assert issubclass(oxyline.UnsupportedElement, oxyline.ModelError)
 

@@ -424,11 +424,14 @@ def to_native_dict(path: PathLike, *, linearize: str | float = "mean", taper: st
         if "R1" not in r:
             if "Rt" in r:
                 rt = _num(r["Rt"], v.where, "Rt")
+                others = [x.label for x, y in zip(vessels, raw)
+                          if x is not v and "Rt" in y and "R1" not in y and x.tn not in starts]
+                also = f" (also Rt outlets: {', '.join(others)})" if others else ""
                 raise UnsupportedElement(
                     f"{v.where}: reflection-coefficient outlet (Rt = {rt:g}) is not supported "
                     f"by the 0-D importer; give a Windkessel (R1, R2, Cc) instead (a linear "
                     f"equivalent is a resistance Z0 (1 + Rt)/(1 - Rt), Z0 = {v.z0():.4g} "
-                    f"Pa s m^-3)")
+                    f"Pa s m^-3){also}")
             raise ModelError(f"{v.where}: terminal vessel (node {v.tn}) without an outlet "
                              "condition (R1/R2/Cc or Rt)")
         r1 = _num(r["R1"], v.where, "R1")
