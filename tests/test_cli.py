@@ -151,6 +151,9 @@ def test_bad_input_messages(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     assert "out.xyz: output must end in" in capsys.readouterr().err
     assert main(["convert", str(EXAMPLE), str(tmp_path / "out.xyz")]) == 2
     assert "cannot tell the output format" in capsys.readouterr().err
+    assert main(["run", str(EXAMPLE), "--method", "rk4", "--dt", "0.01", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: {EXAMPLE}: time step") and "vessel '" in err
     with pytest.raises(SystemExit) as exc:  # argparse usage errors are exit code 2 as well
         main(["run"])
     assert exc.value.code == 2

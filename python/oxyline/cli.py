@@ -47,6 +47,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
         overrides["method"] = args.method
     try:
         res = oxyline.simulate(model, **overrides)
+    except oxyline.ModelError as exc:  # run settings (e.g. an unstable dt): name the model
+        msg = str(exc)
+        raise type(exc)(msg if msg.startswith(args.model) else f"{args.model}: {msg}") from None
     except oxyline.SimulationInterrupted as exc:
         if args.output and exc.result is not None:
             _write(exc.result, args.output)
