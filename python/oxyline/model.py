@@ -195,7 +195,7 @@ def _read(path: str | os.PathLike[str]) -> dict[str, Any]:
 
 
 def load_model(source: str | os.PathLike[str] | Mapping[str, Any] | Model) -> Model:
-    """Load and validate a network from a YAML/JSON file, a built-in example name, or a dict.
+    """Load and validate a network from a YAML/JSON file, a built-in model name, or a dict.
 
     >>> import oxyline
     >>> m = oxyline.load_model("bifurcation")
