@@ -193,3 +193,26 @@ def test_import_oxyline_does_not_import_matplotlib() -> None:
             "print('matplotlib' in sys.modules, 'oxyline.plot' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["False", "False"]
+
+
+def test_oxygen_profile_of_the_paper_bifurcation(tmp_path: Path) -> None:
+    models = pytest.importorskip("oxyline.models")
+    if "paper-bifurcated" not in models.list():
+        pytest.skip("no paper-bifurcated built-in model")
+    m = models.load("paper-bifurcated")
+    res = oxyline.simulate(m, cycles=1)
+    ds = res.to_xarray()
+    if "segment_po2" not in ds:
+        pytest.skip("this build has no oxygen output")
+    d = plot.profile_data(res, m, "ICA", "po2")
+    sel = np.flatnonzero(ds["segment_vessel"].values == "ICA")
+    t = res.time
+    expected = np.trapezoid(ds["segment_po2"].values[:, sel], t, axis=0) / t[-1]
+    np.testing.assert_allclose(d["mean"][-len(sel):], expected, rtol=1e-12)
+    assert np.all(np.diff(d["distance"]) > 0)  # cell centres in order along CCA then ICA
+    fig = plot.profile(res, m, "ICA", ["pressure", "po2", "o2_flux"])
+    assert [ax.get_ylabel() for ax in fig.axes] == ["pressure [mmHg]", "PO$_2$ [mmHg]",
+                                                     "convective O$_2$ flux [nmol/s]"]
+    _assert_no_text_overlap(fig)
+    fig.savefig(tmp_path / "o2.png", dpi=60)
+    _check_png(tmp_path / "o2.png")
