@@ -266,6 +266,10 @@ def to_tables(model: Model, waveform_dir: PathLike | None = None) -> tuple[Any, 
     src = model_source(model)
     rows = []
     for v in src["vessels"]:
+        extra = set(v) - set(VESSEL_COLUMNS) - {"lumped"}
+        if extra:  # never drop a key silently
+            raise ModelError(f"vessel '{v.get('name')}': key(s) {', '.join(sorted(extra))} "
+                             "cannot be written to a vessel table")
         row = {k: v[k] for k in VESSEL_COLUMNS if k in v}
         for k, val in (v.get("lumped") or {}).items():
             row[k] = val
