@@ -399,9 +399,9 @@ fn run(
             Stepper::Rk4(rk) => {
                 let mut yc = y.to_vec();
                 let ydot = rk.derivative(t, &mut yc)?;
-                tr.observe(t, &yc, Some(&ydot), z, false, out)
+                tr.observe(t, &yc, Some(&ydot), z, !explicit_transport, out)
             }
-            Stepper::GenAlpha(_) => tr.observe(t, y, Some(yd), z, !quasi, out),
+            Stepper::GenAlpha(_) => tr.observe(t, y, Some(yd), z, true, out),
         }
     };
 
@@ -480,6 +480,21 @@ fn run(
                 m.count += 1;
             }
             if k % 64 == 0 || k == steps_per_cycle {
+                if let Some(tr) = transport.as_deref_mut().filter(|_| explicit_transport) {
+                    // explicit upwind transport is stable for Courant numbers up to 1.3926
+                    // (physics §1.5); the flow eigenvalues alone do not bound it
+                    let courant = dt * tr.max_outflow_rate(&y, t_new);
+                    if courant > 0.95 * 1.392_647 {
+                        error = Some(Error::solver(
+                            t_new,
+                            format!(
+                                "transport Courant number {courant:.3} exceeds the RK4 limit 1.39 (dt {dt:.3e} s): reduce dt to {:.3e} s or use method 'generalized-alpha'",
+                                dt * 0.7 / courant
+                            ),
+                        ));
+                        break 'cycles;
+                    }
+                }
                 if let Some(i) = y.iter().position(|v| !v.is_finite()) {
                     error = Some(Error::solver(
                         t_new,
@@ -495,7 +510,9 @@ fn run(
                     t_new - t0
                 };
                 rec.record(tr, &y);
-                if let Some(tp) = transport.as_deref_mut() {
+                // species outputs of cycles that will be discarded are not computed
+                let keep = s.output_all_cycles || s.until_periodic.is_some() || cycle + 1 == max_cycles;
+                if let Some(tp) = transport.as_deref_mut().filter(|_| keep) {
                     if let Err(e) = observe(tp, &mut stepper, t_new, &y, &yd, &z, &mut trec) {
                         error = Some(e);
                         break 'cycles;

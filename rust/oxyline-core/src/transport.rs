@@ -131,6 +131,9 @@ struct Species {
     initial_free: f64,
     /// Free concentration per node: warm start of the binding inversion, and reporting.
     free: Vec<f64>,
+    /// Total concentration of the mixing points: their lagged value (used when a point has
+    /// no outflow, and for zero-gradient backflow into it) is per species.
+    mixing_conc: Vec<f64>,
 }
 
 #[derive(Debug, Clone)]
@@ -443,6 +446,7 @@ impl Transport {
                 has_wall: false,
                 initial_free,
                 free: vec![initial_free; nn],
+                mixing_conc: Vec::new(),
             });
         }
         // outputs: the output vessels of the flow probes, their segments in order
@@ -602,8 +606,10 @@ impl Transport {
         self.volumes(y, 0.0)?;
         let nc = self.cells.len();
         let mut z = vec![0.0; self.state_len()];
-        for (s, sp) in self.species.iter().enumerate() {
+        let nmix = self.mixing.len();
+        for (s, sp) in self.species.iter_mut().enumerate() {
             let ct = sp.binding.total(sp.initial_free);
+            sp.mixing_conc = vec![ct; nmix];
             for i in 0..nc {
                 z[s * nc + i] = self.vol[i] * ct;
             }
@@ -705,10 +711,11 @@ impl Transport {
     }
 
     /// Concentrations of the mixing points from their upwind neighbours (flux-weighted).
-    fn mix(&mut self) -> Result<()> {
+    fn mix(&mut self, s: usize) -> Result<()> {
         if self.mixing.is_empty() {
             return Ok(());
         }
+        self.restore_mixing(s);
         let nn = self.kind.len();
         let mut d = std::mem::take(&mut self.sweep.d);
         let mut b = std::mem::take(&mut self.sweep.b);
@@ -725,7 +732,23 @@ impl Transport {
         self.conc = x;
         self.sweep.d = d;
         self.sweep.b = b;
+        self.save_mixing(s);
         res
+    }
+
+    fn restore_mixing(&mut self, s: usize) {
+        let mc = &self.species[s].mixing_conc;
+        if mc.len() == self.mixing.len() {
+            for (&m, &c) in self.mixing.iter().zip(mc) {
+                self.conc[m] = c;
+            }
+        }
+    }
+
+    fn save_mixing(&mut self, s: usize) {
+        let sp = &mut self.species[s];
+        sp.mixing_conc.clear();
+        sp.mixing_conc.extend(self.mixing.iter().map(|&m| self.conc[m]));
     }
 
     /// Explicit right-hand side dz/dt at (t, y) for the monolithic RK4 step.
@@ -742,7 +765,7 @@ impl Transport {
                 self.conc[n] = zs[i] / self.vol[i];
             }
             self.load_boundary(s, time);
-            self.mix()?;
+            self.mix(s)?;
             dzs.iter_mut().for_each(|v| *v = 0.0);
             let (mut i_in, mut i_out) = (0.0, 0.0);
             for (f, &q) in self.faces.iter().zip(&self.qf) {
@@ -923,9 +946,11 @@ impl Transport {
                     b[n] = z[s * nc + i] / dt - wconst[i];
                 }
             }
+            self.restore_mixing(s);
             let mut x = std::mem::take(&mut self.conc);
             let res = self.sweep_solve(&unknowns, &d, &b, &mut x);
             self.conc = x;
+            self.save_mixing(s);
             if let Err(e) = res {
                 self.domain = unknowns;
                 return Err(e);
@@ -1187,7 +1212,7 @@ impl Transport {
                 self.conc[n] = z[s * nc + i] / self.vol[i];
             }
             self.load_boundary(s, time);
-            self.mix()?;
+            self.mix(s)?;
             // free concentration of every non-exterior node
             {
                 let sp = &mut self.species[s];
@@ -1284,6 +1309,29 @@ impl Transport {
             out.extend([stored, acc[0], acc[1], acc[2], acc[3]]);
         }
         Ok(())
+    }
+
+    /// max over cells of (total outflow rate)/V (1/s): dt × this is the upwind Courant number.
+    pub fn max_outflow_rate(&mut self, y: &[f64], time: f64) -> f64 {
+        if self.volumes(y, time).is_err() {
+            return f64::INFINITY;
+        }
+        self.load_flows(time, y);
+        let mut out = vec![0.0; self.cells.len()];
+        for (f, &q) in self.faces.iter().zip(&self.qf) {
+            let up = if q >= 0.0 { f.from } else { f.to };
+            if let End::Node(n) = up {
+                if self.node_cell[n] != usize::MAX {
+                    out[self.node_cell[n]] += q.abs();
+                }
+            }
+        }
+        for ((n, _, _), &q) in self.sources.iter().zip(&self.qs) {
+            if q < 0.0 && self.node_cell[*n] != usize::MAX {
+                out[self.node_cell[*n]] -= q;
+            }
+        }
+        out.iter().zip(&self.vol).fold(0.0f64, |m, (o, v)| m.max(o / v))
     }
 
     /// Cell holding most of segment `j`'s volume, as an index into the species block of the state.
