@@ -196,7 +196,9 @@ def _vessel_length(v: Mapping[str, Any]) -> float:
 def profile_data(result: Result, model: Model | str, outlet: str, quantity: str = "pressure",
                  inlet: str | None = None) -> dict[str, np.ndarray]:
     """Distance [m] from the inlet and time mean/min/max of ``quantity`` (SI) along the path to
-    ``outlet``; uses per-segment output when present, else the vessel ends."""
+    ``outlet``; uses per-segment output when present, else the vessel ends. Lumped vessels
+    have no length; a path of lumped vessels only counts one unit per vessel
+    (``distance_units`` "vessel" instead of "m")."""
     m = _model(model)
     ds = result.to_xarray()
     _, vessels = _graph(m)
@@ -213,8 +215,10 @@ def profile_data(result: Result, model: Model | str, outlet: str, quantity: str 
     xs: list[float] = []
     series: list[np.ndarray] = []
     x0 = 0.0
+    lumped_path = all(_vessel_length(vessels[n]) == 0.0 for n in names)
     for n in names:
-        length = _vessel_length(vessels[n])
+        # a path of lumped vessels only has no length: one unit per vessel instead
+        length = 1.0 if lumped_path else _vessel_length(vessels[n])
         v = result.vessel(n)
         nseg = 0 if v.segment_flow is None else v.segment_flow.shape[1]
         sel = np.flatnonzero(ds["segment_vessel"].values == n) if "segment_vessel" in ds else []
@@ -250,11 +254,13 @@ def profile_data(result: Result, model: Model | str, outlet: str, quantity: str 
         mean = np.trapezoid(a, t, axis=0) / (t[-1] - t[0])
     else:
         mean = a.mean(axis=0)
-    bounds = np.cumsum([0.0] + [_vessel_length(vessels[n]) for n in names])
+    bounds = np.cumsum([0.0] + [1.0 if lumped_path else _vessel_length(vessels[n])
+                                for n in names])
     var = seg_in or seg_mid or _vessel_variable(ds, quantity)
     return {"distance": np.array(xs), "mean": mean, "min": a.min(axis=0), "max": a.max(axis=0),
             "vessels": np.array(names, dtype=object), "vessel_start": bounds,
-            "units": np.array(str(ds[var].attrs.get("units", "")))}
+            "units": np.array(str(ds[var].attrs.get("units", ""))),
+            "distance_units": np.array("vessel" if lumped_path else "m")}
 
 
 def profile(result: Result, model: Model | str, outlet: str,
@@ -273,24 +279,26 @@ def profile(result: Result, model: Model | str, outlet: str,
         ax = axes[row, 0]
         d = profile_data(result, m, outlet, q, inlet)
         units, k = display(str(d["units"]))
-        x = d["distance"] * 100
+        xk = 1.0 if str(d["distance_units"]) == "vessel" else 100.0
+        x = d["distance"] * xk
         ax.fill_between(x, d["min"] * k, d["max"] * k, color="C0", alpha=0.2,
                         label="min–max over the cycle")
         ax.plot(x, d["mean"] * k, "-", color="C0", marker="." if len(x) < 80 else None,
                 label="time mean")
         ax.set_ylabel(f"{_label(q)} [{units}]" if units else _label(q))
         ax.grid(alpha=0.3)
-        for xb in d["vessel_start"][1:-1] * 100:
+        for xb in d["vessel_start"][1:-1] * xk:
             ax.axvline(xb, color="0.6", lw=0.7, ls=":")
         if row == 0:
-            starts = d["vessel_start"] * 100
+            starts = d["vessel_start"] * xk
             for i, n in enumerate(d["vessels"]):
                 mid = 0.5 * (starts[i] + starts[i + 1])
                 texts.append(ax.annotate(str(n), (mid, 1.0), xycoords=("data", "axes fraction"),
                                          xytext=(0, 3), textcoords="offset points", ha="center",
                                          va="bottom", fontsize=7, rotation=0))
             ax.legend(loc="best", fontsize=8)
-    axes[-1, 0].set_xlabel("distance from the inlet [cm]")
+    axes[-1, 0].set_xlabel("distance from the inlet [cm]" if xk == 100.0 else
+                           "lumped vessels along the path (no length) [vessel]")
     names = path(m, outlet, inlet)
     fig.suptitle(f"{m.name}: from the inlet to {names[-1]}"
                  + (f" (node {outlet})" if outlet != names[-1] else ""), fontsize=11)
