@@ -216,3 +216,17 @@ def test_oxygen_profile_of_the_paper_bifurcation(tmp_path: Path) -> None:
     _assert_no_text_overlap(fig)
     fig.savefig(tmp_path / "o2.png", dpi=60)
     _check_png(tmp_path / "o2.png")
+
+
+def test_profile_of_lumped_vessels_counts_vessels() -> None:
+    m = oxyline.load_model({
+        "name": "lumped",
+        "vessels": [{"name": "a", "from": "in", "to": "j", "lumped": {"resistance": 1e8}},
+                    {"name": "b", "from": "j", "to": "out", "lumped": {"resistance": 3e8}}],
+        "boundary_conditions": {"in": {"type": "flow", "value": 1e-6},
+                                "out": {"type": "pressure", "value": 0.0}}})
+    res = oxyline.simulate(m, cycles=1, method="generalized-alpha")
+    d = plot.profile_data(res, m, "out", "pressure")
+    assert str(d["distance_units"]) == "vessel"
+    np.testing.assert_allclose(d["distance"], [0, 1, 1, 2])
+    np.testing.assert_allclose(d["mean"], [400.0, 300.0, 300.0, 0.0], atol=1e-6)  # Q R drops
