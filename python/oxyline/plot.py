@@ -431,7 +431,7 @@ def network_map(model: Model | str | os.PathLike[str], values: Any = None,
     the colour bar. ``layout``: "auto" (a tidy tree layout for trees; networkx Kamada-Kawai for
     networks with loops when networkx is installed), "tree", "spring", "kamada-kawai". Line width
     follows the radius; lumped vessels are dashed; vessel names are drawn when they fit
-    (``labels=None``: up to 60 vessels), and any that would overlap are dropped.
+    (``labels=None``: up to 150 vessels), and any that would overlap are dropped.
     """
     plt = _plt()
     from matplotlib import colors as mcolors
@@ -480,11 +480,11 @@ def network_map(model: Model | str | os.PathLike[str], values: Any = None,
     cb = fig.colorbar(sm, ax=ax, shrink=0.8, pad=0.02)
     cb.set_label(f"{label} [{units}]" if units else label)
     texts = []
-    if labels or (labels is None and len(vessels) <= 60):
+    if labels or (labels is None and len(vessels) <= 150):
         for v, s in zip(vessels, segs):
             (x0, y0), (x1, y1) = s
             texts.append(ax.text(0.5 * (x0 + x1), 0.5 * (y0 + y1), v["name"], fontsize=7,
-                                 ha="center", va="bottom", color="0.1", zorder=5,
+                                 ha="center", va="bottom", color="0.1", zorder=3.5,
                                  bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none",
                                        "alpha": 0.7}))
     ax.set_title(f"{m.name}: {label}{note}", fontsize=11)
