@@ -103,7 +103,8 @@ def _write_summary(res: Any, path: str) -> None:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    s = _load(args.model).summary()
+    model = _load(args.model)
+    s = model.summary()
     print(f"model            {s['name']}")
     for key in ("vessels", "segments", "nodes", "junctions", "inlets", "outlets", "unknowns"):
         print(f"{key:<17}{s[key]}")
@@ -112,6 +113,12 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     print(f"period           {s['period']} s")
     print(f"rk4 stable dt    {s['rk4_dt_max']:.4e} s ({'exact' if s['rk4_limit_exact'] else 'estimate'},"
           f" set by {s['rk4_limiting_element']})")
+    sim = model.simulation or {}
+    out = sim.get("output") or {}
+    period = s["period"] or 1.0
+    print(f"run settings     method {sim.get('method', 'auto')}, dt {sim.get('dt', 'auto')}, "
+          f"cycles {sim.get('cycles', 10)}, output every {out.get('every', period / 1000):g} s "
+          f"({out.get('cycles', 'last')} cycle{'s' if out.get('cycles') == 'all' else ''})")
     return 0
 
 
