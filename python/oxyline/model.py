@@ -78,6 +78,15 @@ def _number(value: Any, element: str, key: str) -> float:
     return v
 
 
+def _positive(value: Any, element: str, key: str, allow_zero: bool = False) -> float:
+    """A finite number > 0 (>= 0 with ``allow_zero``), named by the user's key."""
+    v = _number(value, element, key)
+    if v < 0 or (v == 0 and not allow_zero):
+        raise _err(element, f"{key} must be a finite number {'>=' if allow_zero else '>'} 0, "
+                            f"got {v:g}")
+    return v
+
+
 def _numbers(value: Any, element: str, key: str) -> list[float]:
     if not isinstance(value, (list, tuple)) and not hasattr(value, "tolist"):
         raise _err(element, f"'{key}' must be a list of numbers, got {value!r}")
@@ -283,24 +292,27 @@ def _build(data: dict[str, Any]) -> Model:
                  "capacitance": "capacitance", "stenosis_coefficient": "stenosis"}
             if "resistance" not in lp:
                 raise _err(el, "lumped needs 'resistance'")
-            cv["lumped"] = {k: factor(units, q[k]) * _number(lp[k], el, k) for k in lp}
+            cv["lumped"] = {k: factor(units, q[k]) * _positive(lp[k], el, k, allow_zero=True)
+                            for k in lp}
         else:
             if "length" not in v:
                 raise _err(el, "missing 'length' (or give 'lumped' values)")
             if "radius" in v and ("radius_in" in v or "radius_out" in v):
                 raise _err(el, "give 'radius' or 'radius_in'/'radius_out', not both")
             if "radius" in v:
-                r_in = r_out = _number(v["radius"], el, "radius")
+                r_in = r_out = _positive(v["radius"], el, "radius")
             elif "radius_in" in v and "radius_out" in v:
-                r_in, r_out = _number(v["radius_in"], el, "radius_in"), _number(v["radius_out"], el, "radius_out")
+                r_in = _positive(v["radius_in"], el, "radius_in")
+                r_out = _positive(v["radius_out"], el, "radius_out")
             else:
                 raise _err(el, "missing 'radius' (or 'radius_in' and 'radius_out')")
-            g: dict[str, Any] = {"length": L * _number(v["length"], el, "length"),
+            g: dict[str, Any] = {"length": L * _positive(v["length"], el, "length"),
                                  "radius_in": L * r_in, "radius_out": L * r_out}
             if "wall_thickness" in v:
-                g["wall_thickness"] = L * _number(v["wall_thickness"], el, "wall_thickness")
+                g["wall_thickness"] = L * _positive(v["wall_thickness"], el, "wall_thickness")
             if "youngs_modulus" in v:
-                g["youngs_modulus"] = factor(units, "modulus") * _number(v["youngs_modulus"], el, "youngs_modulus")
+                g["youngs_modulus"] = factor(units, "modulus") * _positive(
+                    v["youngs_modulus"], el, "youngs_modulus")
             if "poisson_ratio" in v:
                 g["poisson_ratio"] = _number(v["poisson_ratio"], el, "poisson_ratio")
             cv["geometry"] = g
@@ -348,12 +360,13 @@ def _build(data: dict[str, Any]) -> Model:
         period = _number(period, "model", "period")
         if period <= 0:
             raise _err("model", f"period must be > 0, got {period}")
+    period_source = "the model period is"
     for p, el in periods:
         if period is None:
-            period = p
+            period, period_source = p, f"{el} repeats every"
         elif abs(p - period) > 1e-9 * period:
-            raise _err(el, f"period mismatch: its waveform repeats every {p} s but the model "
-                           f"period is {period} s")
+            raise _err(el, f"period mismatch: its waveform repeats every {p:g} s but "
+                           f"{period_source} {period:g} s")
     sim = data.get("simulation", {}) or {}
     _check_keys(sim, SIM_KEYS, "simulation")
     if "output" in sim:
