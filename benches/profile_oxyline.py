@@ -10,9 +10,9 @@ Phases (each timed separately, in one process, after an untimed warm-up import o
 * ``run 1 cycle`` and ``run k cycles``: the Rust run (``Network.simulate`` with the drop-in's
   settings); their difference in CPU time gives the cost per step, the rest is setup (steady start,
   LU analysis, first factorisation);
-* ``frame (drop-in)``: the whole ``oxyline.svzerod.simulate`` minus convert, build and run,
-  i.e. the DataFrame construction; ``frame (long_table)`` builds the same table with
-  ``oxyline.result.long_table``.
+* ``frame (drop-in)``: the DataFrame construction as ``oxyline.svzerod.simulate`` does it
+  (separate column copies, then pandas consolidates); ``frame (long_table)`` builds the same
+  table with ``oxyline.result.long_table``; ``simulate()`` is the whole drop-in call.
 
 For a sampling profile of the Rust core use ``perf`` on the benchmark child, e.g.
 ``perf record -F 999 -g python benches/profile_oxyline.py --sizes 1e4 --topologies chain``
@@ -40,7 +40,7 @@ def main() -> int:
     args = ap.parse_args()
 
     import numpy as np
-    import pandas  # noqa: F401 - warm-up, as in bench_svzerod.py
+    import pandas  # warm-up, as in bench_svzerod.py
 
     import oxyline.svzerod as svz
     from oxyline import _core
@@ -82,10 +82,19 @@ def main() -> int:
             ta = time.perf_counter()
             long_table(names, np.asarray(raw["times"]), data[:, : 4 * len(names)])
             frame_lt = time.perf_counter() - ta
+            nt, blk = data.shape[0], data[:, : 4 * len(names)]
+            ta = time.perf_counter()
+            # the construction in oxyline.svzerod.simulate (column-wise, then consolidated)
+            pandas.DataFrame({
+                "name": np.repeat(np.array(names, dtype=object), nt),
+                "time": np.tile(np.asarray(raw["times"]), len(names)),
+                "flow_in": blk[:, 2::4].T.reshape(-1), "flow_out": blk[:, 3::4].T.reshape(-1),
+                "pressure_in": blk[:, 0::4].T.reshape(-1),
+                "pressure_out": blk[:, 1::4].T.reshape(-1)})
+            frame = time.perf_counter() - ta
             ta = time.perf_counter()
             svz.simulate(cfg)
             total = time.perf_counter() - ta
-            frame = total - (t1 - t0) - (t2 - t1) - runs[args.cycles]
             print(f"| {topo} | {n} | {unknowns} | {t1 - t0:.3g} | {t2 - t1:.3g} | {t3 - t2:.3g} "
                   f"| {runs[1]:.3g} | {runs[args.cycles]:.3g} | {setup:.3g} "
                   f"| {1e9 * per_step / n:.0f} | {1e9 * per_step / unknowns:.0f} "
