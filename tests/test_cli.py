@@ -81,10 +81,10 @@ def test_convert_between_all_formats(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert main(["convert", str(tmp_path / "d.yaml"), str(tmp_path / "sv.json"), "--to",
                  "svzerod"]) == 0
     sv = json.loads((tmp_path / "sv.json").read_text())
-    assert len(sv["vessels"]) == 30 and sv["boundary_conditions"][1]["bc_type"] == "RESISTANCE"
+    assert len(sv["vessels"]) == 33 and sv["boundary_conditions"][1]["bc_type"] == "RESISTANCE"
     assert sv["boundary_conditions"][1]["bc_values"]["R"] == pytest.approx(2.8931e9 / 1e5)
     assert main(["convert", str(tmp_path / "sv.json"), str(tmp_path / "sv.yaml")]) == 0
-    assert len(oxyline.load_model(tmp_path / "sv.yaml").vessel_names) == 30
+    assert len(oxyline.load_model(tmp_path / "sv.yaml").vessel_names) == 33
 
 
 def test_convert_openbf_input(shared: Path, tmp_path: Path) -> None:

@@ -235,13 +235,14 @@ def test_svzerod_export_runs_in_svzerod_with_the_analytic_split() -> None:
            "distal_resistance": 4.3e9, "pressure": 0}
     m = _steady_bifurcation(rcr)
     d = oio.to_svzerod(m, points_per_cycle=11, cycles=2)
-    assert len(d["vessels"]) == 30 and len(d["junctions"]) == 3 * 9 + 1
+    # 10 segments -> 11 BloodVessels per vessel, 10 one-to-one junctions each, plus J1
+    assert len(d["vessels"]) == 33 and len(d["junctions"]) == 3 * 10 + 1
     assert {b["bc_type"] for b in d["boundary_conditions"]} == {"FLOW", "RESISTANCE", "RCR"}
     out = svzerod.simulate(d)
     r1 = _poiseuille(0.0623, 0.0025) + 2.8931e9
     r2 = _poiseuille(0.062, 0.002) + 4e8 + 4.3e9
     q1, q2 = 6e-6 * r2 / (r1 + r2), 6e-6 * r1 / (r1 + r2)
-    for name, q in (("daughter1_seg9", q1), ("daughter2_seg9", q2)):
+    for name, q in (("daughter1_seg10", q1), ("daughter2_seg10", q2)):
         flow = out[out.name == name].flow_out.to_numpy() * 1e-6  # cgs mL/s -> m^3/s
         np.testing.assert_allclose(flow, q, rtol=1e-8)
     # inlet pressure: Poiseuille drops along the path plus the outlet resistance
@@ -263,16 +264,44 @@ def test_svzerod_export_pulsatile_mean_split_and_reimport() -> None:
     r1 = _poiseuille(0.0623, 0.0025) + 2.8931e9
     r2 = _poiseuille(0.062, 0.002) + 4.7063e9
     q1 = 6e-6 * r2 / (r1 + r2)
-    flow = out[out.name == "daughter1_seg9"].flow_out.to_numpy()
-    t = out[out.name == "daughter1_seg9"].time.to_numpy()
+    flow = out[out.name == "daughter1_seg10"].flow_out.to_numpy()
+    t = out[out.name == "daughter1_seg10"].time.to_numpy()
     assert np.trapezoid(flow, t) / (t[-1] - t[0]) == pytest.approx(q1, rel=2e-4)
     # and back through oxyline's svZeroDSolver importer (SI numbers pass through unchanged)
     from oxyline import svzerod as oxy_svzerod
 
     back = oxy_svzerod.to_model(d)
     res = oxyline.simulate(back, cycles=3)
-    v = res.vessel("daughter1_seg9")
+    v = res.vessel("daughter1_seg10")
     assert np.trapezoid(v.flow_out, res.time) / res.time[-1] == pytest.approx(q1, rel=2e-4)
+
+
+@pytest.mark.parametrize("arrangement", ["inverted-L", "L", "pi"])
+def test_svzerod_export_is_the_same_circuit(arrangement: str) -> None:
+    """svZeroDSolver running the export reproduces oxyline's own pulsatile waveforms (same
+    generalized-alpha scheme and step), at both ends of every vessel."""
+    svzerod = pytest.importorskip("svzerod")
+    src = oxyline.load_model("bifurcation").to_dict()
+    src["arrangement"] = arrangement
+    m = oxyline.load_model(src)
+    d = oio.to_svzerod(m, units="SI", points_per_cycle=1001, cycles=5, samples=1001)
+    out = svzerod.simulate(d)
+    res = oxyline.simulate(m, cycles=5, method="generalized-alpha")
+    assert res.settings["dt"] == pytest.approx(1e-3)
+
+    def rel(a: np.ndarray, b: np.ndarray) -> float:
+        return float(np.abs(a - b).max() / np.abs(b).max())
+
+    for name in m.vessel_names:
+        blocks = out[out.name.str.startswith(f"{name}_seg")].name.unique()
+        first, before_last = out[out.name == blocks[0]], out[out.name == blocks[-2]]
+        last = out[out.name == blocks[-1]]
+        v = res.vessel(name)
+        assert rel(first.pressure_in.to_numpy(), v.pressure_in) < 2e-5
+        assert rel(last.pressure_out.to_numpy(), v.pressure_out) < 2e-5
+        # oxyline's vessel flows are its first and last segment branch flows (through L_1, L_n)
+        assert rel(first.flow_out.to_numpy(), v.flow_in) < 2e-5
+        assert rel(before_last.flow_out.to_numpy(), v.flow_out) < 2e-5
 
 
 # ---------------------------------------------------------------------------------- dispatch

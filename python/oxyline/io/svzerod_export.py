@@ -1,14 +1,17 @@
-"""Native model → svZeroDSolver JSON.
+"""Native model → svZeroDSolver JSON, the same circuit element for element.
 
-Each segment of a geometric vessel (and each lumped vessel) becomes one svZeroDSolver
-``BloodVessel`` with its R, C, L (and stenosis coefficient) — the same per-segment values the
-oxyline core assembles (physics spec §1.1, exact over a linear taper); consecutive segments and
-the network's junction nodes become ``NORMAL_JUNCTION`` blocks; boundary conditions become FLOW,
-PRESSURE, RESISTANCE and RCR. svZeroDSolver's BloodVessel puts C between R and L, so the
-exported circuit is oxyline's ``RCL`` arrangement segment by segment: identical at steady state
-and for lumped ``RCL`` vessels; for inverted-L/L/pi vessels the transient differs at the
-discretisation-error level (capacitances moved by half a segment). Fourier and periodic-cubic
-waveforms are sampled (``samples`` points per period, linear interpolation in svZeroDSolver).
+svZeroDSolver's ``BloodVessel`` is R, then C (at the node after R), then L. An oxyline vessel of
+n segments is a chain ``c_0 | R_1 L_1 | c_1 | … | R_n L_n | c_n`` of series branches and node
+capacitances (inverted-L puts each segment's C at its proximal node, L at its distal node, pi half
+at each), with each segment's R, L, C exactly as the core assembles them (physics spec §1.1,
+exact over a linear taper). Because R and L in one branch commute, the chain is exactly the
+n + 1 BloodVessels ``(R=0, C=c_0, L=L_1), (R_1, c_1, L_2), …, (R_n, c_n, L=0)`` joined by
+one-to-one ``NORMAL_JUNCTION``s; junction nodes become ``NORMAL_JUNCTION``s too (each vessel's
+end capacitance sits at the junction pressure, as in the core). Lumped vessels and ``RCL``
+vessels are one BloodVessel. The exported circuit is therefore the model's own circuit, and
+svZeroDSolver's generalized-α run with the same step gives the same waveforms. Boundary
+conditions become FLOW, PRESSURE, RESISTANCE and RCR; Fourier and periodic-cubic waveforms are
+sampled (``samples`` points per period; svZeroDSolver interpolates linearly).
 """
 
 from __future__ import annotations
@@ -86,6 +89,40 @@ def vessel_segments(model: Model) -> dict[str, list[dict[str, float]]]:
     return out
 
 
+_CAPACITANCE_SPLIT = {"inverted-L": (1.0, 0.0), "L": (0.0, 1.0), "pi": (0.5, 0.5)}
+
+
+def vessel_blocks(model: Model) -> dict[str, list[dict[str, float]]]:
+    """Per vessel, the svZeroDSolver BloodVessels (SI ``R``, ``C``, ``L``, ``S``, ``length``)
+    that reproduce its chain of segments exactly (see the module docstring)."""
+    canon = model.canonical
+    default = canon.get("arrangement", "inverted-L")
+    out: dict[str, list[dict[str, float]]] = {}
+    segs_by_vessel = vessel_segments(model)
+    for v in canon["vessels"]:
+        segs = segs_by_vessel[v["name"]]
+        arrangement = v.get("arrangement", default)
+        if "lumped" in v or arrangement == "RCL":
+            s0 = segs[0]
+            out[v["name"]] = [{"R": s0["R"], "C": s0["C"], "L": s0["L"], "S": s0["S"],
+                               "length": sum(s["length"] for s in segs)}]
+            continue
+        cp, cd = _CAPACITANCE_SPLIT[arrangement]
+        n = len(segs)
+        node_c = [0.0] * (n + 1)
+        for k, s in enumerate(segs):
+            node_c[k] += cp * s["C"]
+            node_c[k + 1] += cd * s["C"]
+        chain = [{"R": 0.0, "S": 0.0, "C": node_c[0], "L": segs[0]["L"], "length": 0.0}]
+        for k in range(1, n + 1):
+            chain.append({"R": segs[k - 1]["R"], "S": segs[k - 1]["S"], "C": node_c[k],
+                          "L": segs[k]["L"] if k < n else 0.0, "length": segs[k - 1]["length"]})
+        # drop empty blocks (e.g. no capacitance and no inductance before the first R)
+        kept = [b for b in chain if b["R"] or b["C"] or b["L"] or b["S"]]
+        out[v["name"]] = kept or chain[:1]
+    return out
+
+
 def _sample(w: Mapping[str, Any], period: float, samples: int) -> tuple[list[float], list[float]]:
     """Waveform (canonical, SI) as svZeroDSolver (t, value) lists."""
     kind = w["kind"]
@@ -114,15 +151,16 @@ def to_svzerod(model: Model, units: str = "cgs", samples: int = 201,
                points_per_cycle: int | None = None, cycles: int | None = None) -> dict[str, Any]:
     """svZeroDSolver input dict for ``model`` (see the module docstring for the mapping).
 
-    ``units="cgs"`` (svZeroDSolver's usual cm, dyn/cm², mL/s) or ``"SI"``. Vessel segments are
-    named ``<vessel>_seg<k>`` (k from 0), junctions ``J_<node>`` and ``J_<vessel>_<k>``,
+    ``units="cgs"`` (svZeroDSolver's usual cm, dyn/cm², mL/s) or ``"SI"``. The BloodVessels of
+    a vessel are named ``<vessel>_seg<k>`` (k from 0; ``_seg0`` starts at the vessel's inlet, the
+    last one ends at its outlet), junctions ``J_<node>`` and ``J_<vessel>_<k>``,
     boundary conditions ``BC_<node>``. ``points_per_cycle`` and ``cycles`` default to the
     model's ``simulation`` settings (output every, cycles).
 
     >>> import oxyline, oxyline.io
     >>> d = oxyline.io.to_svzerod(oxyline.load_model("bifurcation"))
-    >>> len(d["vessels"]), d["vessels"][0]["zero_d_element_type"]
-    (30, 'BloodVessel')
+    >>> len(d["vessels"]), d["vessels"][0]["zero_d_element_type"]  # 3 vessels x (10 + 1)
+    (33, 'BloodVessel')
     """
     if units.lower() not in ("cgs", "si"):
         raise ValueError(f"units must be 'cgs' or 'SI', got {units!r}")
@@ -133,7 +171,7 @@ def to_svzerod(model: Model, units: str = "cgs", samples: int = 201,
 
     canon = model.canonical
     period = float(model.period or 1.0)
-    segs = vessel_segments(model)
+    blocks = vessel_blocks(model)
     vessels: list[dict[str, Any]] = []
     junctions: list[dict[str, Any]] = []
     first: dict[str, int] = {}
@@ -141,7 +179,7 @@ def to_svzerod(model: Model, units: str = "cgs", samples: int = 201,
     for v in canon["vessels"]:
         name = v["name"]
         ids = []
-        for k, s in enumerate(segs[name]):
+        for k, s in enumerate(blocks[name]):
             vals = {"R_poiseuille": s["R"] * f("resistance"), "C": s["C"] * f("capacitance"),
                     "L": s["L"] * f("inductance"), "stenosis_coefficient": s["S"] * f("stenosis")}
             vid = len(vessels)
