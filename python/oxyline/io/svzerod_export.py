@@ -7,9 +7,10 @@ at each), with each segment's R, L, C exactly as the core assembles them (physic
 exact over a linear taper). Because R and L in one branch commute, the chain is exactly the
 n + 1 BloodVessels ``(R=0, C=c_0, L=L_1), (R_1, c_1, L_2), …, (R_n, c_n, L=0)`` joined by
 one-to-one ``NORMAL_JUNCTION``s; junction nodes become ``NORMAL_JUNCTION``s too (each vessel's
-end capacitance sits at the junction pressure, as in the core). Lumped vessels and ``RCL``
-vessels are one BloodVessel. The exported circuit is therefore the model's own circuit, and
-svZeroDSolver's generalized-α run with the same step gives the same waveforms. Boundary
+end capacitance sits at the junction pressure, as in the core). ``RCL`` vessels (lumped values)
+are one BloodVessel; other lumped vessels follow the arrangement as a one-segment chain, with
+their stenosis coefficient next to R. The exported circuit is therefore the model's own circuit,
+and svZeroDSolver's generalized-α run with the same step gives the same waveforms. Boundary
 conditions become FLOW, PRESSURE, RESISTANCE and RCR; Fourier and periodic-cubic waveforms are
 sampled (``samples`` points per period; svZeroDSolver interpolates linearly).
 """
@@ -102,7 +103,7 @@ def vessel_blocks(model: Model) -> dict[str, list[dict[str, float]]]:
     for v in canon["vessels"]:
         segs = segs_by_vessel[v["name"]]
         arrangement = v.get("arrangement", default)
-        if "lumped" in v or arrangement == "RCL":
+        if arrangement == "RCL":  # one R-C-L, the BloodVessel itself
             s0 = segs[0]
             out[v["name"]] = [{"R": s0["R"], "C": s0["C"], "L": s0["L"], "S": s0["S"],
                                "length": sum(s["length"] for s in segs)}]
