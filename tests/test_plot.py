@@ -179,15 +179,6 @@ def test_po2_is_plotted_when_present(result: oxyline.Result) -> None:
     assert r.summary().loc["parent", "po2_out_mean"] == pytest.approx(80.0)
 
 
-def test_save_figures_writes_png_and_svg(result: oxyline.Result, model: oxyline.Model,
-                                         tmp_path: Path) -> None:
-    files = plot.save_figures(result, model, tmp_path / "figs", dpi=60)
-    assert sorted(p.name for p in files) == sorted(
-        f"{n}.{e}" for n in ("waveforms", "profile", "network_map") for e in ("png", "svg"))
-    for p in files:
-        (_check_png if p.suffix == ".png" else _check_svg)(p)
-
-
 def test_import_oxyline_does_not_import_matplotlib() -> None:
     code = ("import sys, oxyline, oxyline.io; "
             "print('matplotlib' in sys.modules, 'oxyline.plot' in sys.modules)")
