@@ -75,8 +75,14 @@ def _number(value: Any, where: str, column: str) -> float:
 
 
 def _canonical_column(col: str) -> str:
+    """Column name in the schema: aliases resolved, case-insensitive, '-'/' ' read as '_'."""
     c = col.strip()
-    return ALIASES.get(c.lower(), ALIASES.get(c, c))
+    low = c.lower().replace("-", "_").replace(" ", "_")
+    if c in ALIASES:
+        return ALIASES[c]
+    if low in ALIASES:
+        return ALIASES[low]
+    return low if low in set(VESSEL_COLUMNS) | set(LUMPED_COLUMNS) else c
 
 
 def _vessels_from_frame(df: Any, where: str) -> list[dict[str, Any]]:
