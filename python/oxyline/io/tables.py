@@ -157,6 +157,7 @@ def _coefficients(value: Any, where: str, column: str) -> list[float]:
 
 
 def _bcs_from_frame(df: Any, where: str, base: Path | None) -> dict[str, dict[str, Any]]:
+    df = df.rename(columns=lambda c: str(c).strip().lower().replace("-", "_").replace(" ", "_"))
     for c in df.columns:
         if c not in BC_COLUMNS and c not in ("flow", "time"):
             raise ModelError(f"{where}: unknown column '{c}' (known: {', '.join(BC_COLUMNS)})")
