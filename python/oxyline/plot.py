@@ -523,6 +523,13 @@ def save_figures(result: Result, model: Model | str | os.PathLike[str],
         along = [q for q in ("pressure", "po2", "o2_flux", "wall_o2_flux", "flow") if _has(ds, q)]
         figures["profile"] = profile(result, m, far, along)
     figures["network_map"] = network_map(m, result=result)
+    if getattr(result, "oxygen", None) is not None:
+        # the paper's Fig. 4 (outlet convective O2 flux) and the wall uptake along each vessel
+        from oxyline import plot_oxygen
+
+        figures["o2_outlet_flux"] = plot_oxygen.outlet_flux(result, m)
+        if result.has_segments:
+            figures["o2_wall_uptake"] = plot_oxygen.wall_uptake(result, m)
     written = []
     for name, fig in figures.items():
         for fmt in formats:

@@ -195,23 +195,31 @@ impl Binding {
                 }
                 let (mut lo, mut hi) = (0.0, ct / alpha);
                 let mut p = (guess / alpha).clamp(lo, hi);
-                let tol = 1e-10 * 133.322_368 * 1e-3; // 1e-13 mmHg in Pa: margin below the 1e-10 contract
+                // |ΔP| below 1e-12 mmHg (margin under the 1e-10 mmHg contract), or a few ulps of P
+                // (quadratic convergence stalls there)
+                let tol_abs: f64 = 1e-12 * 133.322_368;
                 for _ in 0..100 {
                     let (s, ds) = hill(p, p50, n);
                     let f = alpha * p + capacity * s - ct;
+                    let dp = -f / (alpha + capacity * ds);
+                    // converged: accept the Newton step without the bracket test (near the root
+                    // it can land exactly on a bracket end, which would trigger a bisection)
+                    if dp.abs() < tol_abs.max(1e-14 * p) {
+                        p += dp;
+                        break;
+                    }
                     if f > 0.0 {
                         hi = p;
                     } else {
                         lo = p;
                     }
-                    let fp = alpha + capacity * ds;
-                    let mut next = p - f / fp;
-                    if !(next > lo && next < hi) {
-                        next = 0.5 * (lo + hi);
-                    }
-                    let step = (next - p).abs();
-                    p = next;
-                    if step < tol || hi - lo < tol {
+                    let next = p + dp;
+                    p = if next > lo && next < hi {
+                        next
+                    } else {
+                        0.5 * (lo + hi)
+                    };
+                    if hi - lo < tol_abs {
                         break;
                     }
                 }

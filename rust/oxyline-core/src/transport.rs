@@ -186,6 +186,13 @@ pub struct Transport {
     node_names: Vec<String>,
     /// Nodes solved by the implicit sweep (cells and mixing points).
     domain: Vec<usize>,
+    /// Faces between two domain nodes as [face, from node, to node], and the other faces.
+    internal: Vec<[u32; 3]>,
+    boundary_faces: Vec<usize>,
+    /// Mixing points with two faces, no source and non-mixing neighbours: evaluated directly.
+    simple_mixing: Vec<usize>,
+    /// The other mixing points (solved by the flow-order sweep).
+    general_mixing: Vec<usize>,
     // scratch
     vol: Vec<f64>,
     conc: Vec<f64>,
@@ -491,6 +498,10 @@ impl Transport {
             segment_vessels: circuit.segments.iter().map(|s| s.vessel).collect(),
             node_names: circuit.nodes.iter().map(|n| n.name.clone()).collect(),
             domain: Vec::new(),
+            internal: Vec::new(),
+            boundary_faces: Vec::new(),
+            simple_mixing: Vec::new(),
+            general_mixing: Vec::new(),
             vol: vec![0.0; ncells],
             conc: vec![0.0; nn],
             qf: Vec::new(),
@@ -503,6 +514,28 @@ impl Transport {
         t.qs = vec![0.0; t.sources.len()];
         t.bval = vec![None; t.boundary_inlet.len()];
         t.domain = (0..nn).filter(|&n| t.kind[n] != Kind::Exterior).collect();
+        if t.faces.len() >= u32::MAX as usize || nn >= u32::MAX as usize {
+            return Err(bad("transport", "network too large".into()));
+        }
+        for (fi, f) in t.faces.iter().enumerate() {
+            match (f.from, f.to) {
+                (End::Node(a), End::Node(b)) => t.internal.push([fi as u32, a as u32, b as u32]),
+                _ => t.boundary_faces.push(fi),
+            }
+        }
+        for &m in &t.mixing {
+            let faces = &t.node_faces[t.node_ptr[m]..t.node_ptr[m + 1]];
+            let neighbours_known = faces.iter().all(|&fi| {
+                let f = &t.faces[fi];
+                let other = if f.from == End::Node(m) { f.to } else { f.from };
+                !matches!(other, End::Node(o) if t.kind[o] == Kind::Mixing)
+            });
+            if faces.len() == 2 && t.node_sources[m].is_empty() && neighbours_known {
+                t.simple_mixing.push(m);
+            } else {
+                t.general_mixing.push(m);
+            }
+        }
         // laws that do not need the mean flow are final now
         let zero = vec![0.0; t.segments.len()];
         t.set_laws(&zero, false)?;
@@ -716,6 +749,35 @@ impl Transport {
             return Ok(());
         }
         self.restore_mixing(s);
+        // two-face pass-through points next to cells or boundaries: c = Σ_in |Q| C_up / Σ_out |Q|
+        for &m in &self.simple_mixing {
+            let lag = self.conc[m];
+            self.sweep.lag[m] = lag;
+            let (mut num, mut den) = (0.0, 0.0);
+            for &fi in &self.node_faces[self.node_ptr[m]..self.node_ptr[m + 1]] {
+                let f = &self.faces[fi];
+                let q = self.qf[fi];
+                let (up, down) = if q >= 0.0 {
+                    (f.from, f.to)
+                } else {
+                    (f.to, f.from)
+                };
+                if up == End::Node(m) {
+                    den += q.abs();
+                } else if down == End::Node(m) {
+                    let c = match up {
+                        End::Node(u) => self.conc[u],
+                        End::Boundary(b) => self.bval[b].unwrap_or(lag),
+                    };
+                    num += q.abs() * c;
+                }
+            }
+            self.conc[m] = if den > 1e-300 { num / den } else { lag };
+        }
+        if self.general_mixing.is_empty() {
+            self.save_mixing(s);
+            return Ok(());
+        }
         let nn = self.kind.len();
         let mut d = std::mem::take(&mut self.sweep.d);
         let mut b = std::mem::take(&mut self.sweep.b);
@@ -726,9 +788,9 @@ impl Transport {
             b[m] = 0.0;
         }
         let mut x = std::mem::take(&mut self.conc);
-        let mixing = std::mem::take(&mut self.mixing);
+        let mixing = std::mem::take(&mut self.general_mixing);
         let res = self.sweep_solve(&mixing, &d, &b, &mut x);
-        self.mixing = mixing;
+        self.general_mixing = mixing;
         self.conc = x;
         self.sweep.d = d;
         self.sweep.b = b;
@@ -748,7 +810,8 @@ impl Transport {
     fn save_mixing(&mut self, s: usize) {
         let sp = &mut self.species[s];
         sp.mixing_conc.clear();
-        sp.mixing_conc.extend(self.mixing.iter().map(|&m| self.conc[m]));
+        sp.mixing_conc
+            .extend(self.mixing.iter().map(|&m| self.conc[m]));
     }
 
     /// Explicit right-hand side dz/dt at (t, y) for the monolithic RK4 step.
@@ -759,16 +822,33 @@ impl Transport {
         self.load_flows(time, y);
         let mut wbuf = std::mem::take(&mut self.sweep.w);
         wbuf.resize(nc, 0.0);
+        let mut dnode = std::mem::take(&mut self.sweep.dnode);
+        dnode.resize(self.kind.len(), 0.0);
         for s in 0..nsp {
             let (zs, dzs) = (&z[s * nc..(s + 1) * nc], &mut dz[s * nc..(s + 1) * nc]);
             for (i, &n) in self.cells.iter().enumerate() {
                 self.conc[n] = zs[i] / self.vol[i];
+                dnode[n] = 0.0;
+            }
+            for &m in &self.mixing {
+                dnode[m] = 0.0;
             }
             self.load_boundary(s, time);
             self.mix(s)?;
-            dzs.iter_mut().for_each(|v| *v = 0.0);
+            // node-to-node faces: the bulk of the work, branch-free apart from the upwind pick;
+            // fluxes into mixing points and out of them cancel there (they hold no amount)
+            let conc = &self.conc;
+            for &[fi, a, b] in &self.internal {
+                let q = self.qf[fi as usize];
+                let (a, b) = (a as usize, b as usize);
+                let flux = q * if q >= 0.0 { conc[a] } else { conc[b] };
+                dnode[a] -= flux;
+                dnode[b] += flux;
+            }
             let (mut i_in, mut i_out) = (0.0, 0.0);
-            for (f, &q) in self.faces.iter().zip(&self.qf) {
+            for &fi in &self.boundary_faces {
+                let f = &self.faces[fi];
+                let q = self.qf[fi];
                 let (up, other) = if q >= 0.0 {
                     (f.from, f.to)
                 } else {
@@ -780,23 +860,13 @@ impl Transport {
                 };
                 let flux = q * c;
                 match f.from {
-                    End::Node(n) => {
-                        let k = self.node_cell[n];
-                        if k != usize::MAX {
-                            dzs[k] -= flux;
-                        }
-                    }
+                    End::Node(n) => dnode[n] -= flux,
                     End::Boundary(b) => {
                         account(self.boundary_inlet[b], flux, &mut i_in, &mut i_out)
                     }
                 }
                 match f.to {
-                    End::Node(n) => {
-                        let k = self.node_cell[n];
-                        if k != usize::MAX {
-                            dzs[k] += flux;
-                        }
-                    }
+                    End::Node(n) => dnode[n] += flux,
                     End::Boundary(b) => {
                         account(self.boundary_inlet[b], -flux, &mut i_in, &mut i_out)
                     }
@@ -809,11 +879,11 @@ impl Transport {
                     self.conc[*n]
                 };
                 let flux = q * c;
-                let k = self.node_cell[*n];
-                if k != usize::MAX {
-                    dzs[k] += flux;
-                }
+                dnode[*n] += flux;
                 account(self.boundary_inlet[*b], flux, &mut i_in, &mut i_out);
+            }
+            for (d, &n) in dzs.iter_mut().zip(&self.cells) {
+                *d = dnode[n];
             }
             let mut i_wall = 0.0;
             if self.species[s].has_wall {
@@ -836,6 +906,7 @@ impl Transport {
             acc.copy_from_slice(&[i_in, i_out, i_wall, i_decay]);
         }
         self.sweep.w = wbuf;
+        self.sweep.dnode = dnode;
         Ok(())
     }
 
@@ -1331,7 +1402,9 @@ impl Transport {
                 out[self.node_cell[*n]] -= q;
             }
         }
-        out.iter().zip(&self.vol).fold(0.0f64, |m, (o, v)| m.max(o / v))
+        out.iter()
+            .zip(&self.vol)
+            .fold(0.0f64, |m, (o, v)| m.max(o / v))
     }
 
     /// Cell holding most of segment `j`'s volume, as an index into the species block of the state.
@@ -1400,6 +1473,7 @@ struct Sweep {
     d: Vec<f64>,
     b: Vec<f64>,
     w: Vec<f64>,
+    dnode: Vec<f64>,
 }
 
 impl Sweep {
@@ -1414,6 +1488,7 @@ impl Sweep {
             d: Vec::new(),
             b: Vec::new(),
             w: Vec::new(),
+            dnode: Vec::new(),
         }
     }
 }

@@ -1,0 +1,96 @@
+"""Oxygen figures: the paper's Fig. 4 (convective O2 flux at the end of each tube against time)
+and the wall uptake along each vessel.
+
+    from oxyline import plot_oxygen
+    plot_oxygen.save_oxygen_figures(result, model, "figs/")
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from oxyline.model import Model
+from oxyline.result import Result
+
+
+def _plt() -> Any:
+    import matplotlib
+
+    if os.environ.get("DISPLAY", "") == "" and os.environ.get("MPLBACKEND") is None:
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _note(model: Model | None) -> str:
+    desc = (model.source.get("description", "") if model is not None else "") or ""
+    return "\n(radii and inflow waveform assumed, not the paper's)" if "assum" in desc else ""
+
+
+def outlet_flux(result: Result, model: Model | None = None) -> Any:
+    """Convective O2 flux Q·C at the end of each vessel against time (the paper's Fig. 4),
+    with each vessel's wall uptake in a second panel (J_in − J_out also contains the change of
+    the O2 stored in the compliant vessel, which dominates it)."""
+    plt = _plt()
+    if result.oxygen is None:
+        raise ValueError("this result has no oxygen section")
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
+    for i, name in enumerate(result.vessels):
+        a1.plot(result.time, result.o2_flux_out[:, i] * 1e9, label=name)
+        a2.plot(result.time, result.wall_o2_flux[:, i] * 1e12, label=name)
+    a1.set_ylabel("J_out (nmol/s)")
+    a2.set_ylabel("wall uptake (pmol/s)")
+    a2.set_xlabel("time in cycle (s)")
+    a1.legend(fontsize=8)
+    a1.set_title(f"{result.model_name}: convective O$_2$ flux at the vessel outlets{_note(model)}",
+                 fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def wall_uptake(result: Result, model: Model | None = None) -> Any:
+    """Cycle-mean wall O2 flux per unit length along each vessel (mol m^-1 s^-1)."""
+    plt = _plt()
+    if result.oxygen is None or not result.has_segments:
+        raise ValueError("needs an oxygen result with segment output")
+    fig, ax = plt.subplots(figsize=(7, 4))
+    w = result.species[result.oxygen].segment_data[:, :, 2].mean(axis=0)
+    pos = result.segment_position
+    start = np.concatenate([[0], np.cumsum(result.segment_count)]).astype(int)
+    for i, name in enumerate(result.vessels):
+        a, b = start[i], start[i + 1]
+        if b - a < 1:
+            continue
+        dx = 2 * pos[a] if b - a == 1 else pos[a + 1] - pos[a]
+        ax.plot(pos[a:b] * 1e3, w[a:b] / dx * 1e9, "o-", label=name)
+    ax.set_xlabel("distance from the vessel inlet (mm)")
+    ax.set_ylabel("wall O$_2$ uptake (nmol m$^{-1}$ s$^{-1}$)")
+    ax.legend(fontsize=8)
+    ax.set_title(f"{result.model_name}: cycle-mean wall uptake along each vessel{_note(model)}",
+                 fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def save_oxygen_figures(result: Result, model: Model | None, outdir: str | os.PathLike[str],
+                        formats: tuple[str, ...] = ("png", "svg")) -> list[Path]:
+    """Write ``o2_outlet_flux`` and ``o2_wall_uptake`` figures; returns the files written."""
+    plt = _plt()
+    out = Path(outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    figs = {"o2_outlet_flux": outlet_flux(result, model)}
+    if result.has_segments:
+        figs["o2_wall_uptake"] = wall_uptake(result, model)
+    written = []
+    for name, fig in figs.items():
+        for fmt in formats:
+            p = out / f"{name}.{fmt}"
+            fig.savefig(p, dpi=150)
+            written.append(p)
+        plt.close(fig)
+    return written
