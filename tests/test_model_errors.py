@@ -158,7 +158,15 @@ CASES: list[tuple[str, Callable[[dict[str, Any]], object], list[str]]] = [
     ("rcr without capacitance", set_bc("out_l", {
         "type": "rcr", "proximal_resistance": 1e8, "distal_resistance": 1e9}),
      ["out_l", "capacitance"]),
-    ("no pressure reference", no_pressure_reference, ["pressure"]),
+    ("no pressure reference", no_pressure_reference, ["pressure", "inlet", "out_l", "out_r"]),
+    ("negative rcr capacitance", set_bc("out_l", {
+        "type": "rcr", "proximal_resistance": 1e8, "capacitance": -1e-12,
+        "distal_resistance": 1e9}), ["out_l", "capacitance", r"-1e-12\b"]),
+    ("zero rcr distal resistance", set_bc("out_l", {
+        "type": "rcr", "proximal_resistance": 1e8, "capacitance": 1e-10,
+        "distal_resistance": 0.0}), ["out_l", "distal_resistance", r"\b0\b"]),
+    ("negative outlet resistance", set_bc("out_l", {"type": "resistance", "resistance": -3e9}),
+     ["out_l", "resistance", r"-3e9\b"]),
     ("bad method in the file", lambda d: d.update(simulation={"method": "euler"}),
      ["method", "euler"]),
     ("unknown simulation key", lambda d: d.update(simulation={"cycle": 3}), ["cycle"]),

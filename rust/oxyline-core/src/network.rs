@@ -189,11 +189,21 @@ pub struct Assembled {
     pub summary: Summary,
 }
 
+/// A value as users write it: plain for ordinary magnitudes, exponent form for tiny or huge
+/// ones (`{}` prints 1e-12 as 0.000000000001).
+fn num(v: f64) -> String {
+    let a = v.abs();
+    if v == 0.0 || !v.is_finite() || (1e-4..1e7).contains(&a) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}
 fn check_positive(element: &str, key: &str, v: f64) -> Result<()> {
     if !(v.is_finite() && v > 0.0) {
         return Err(Error::model(
             element,
-            format!("{key} must be a finite number > 0, got {v}"),
+            format!("{key} must be a finite number > 0, got {}", num(v)),
         ));
     }
     Ok(())
@@ -202,7 +212,7 @@ fn check_nonnegative(element: &str, key: &str, v: f64) -> Result<()> {
     if !(v.is_finite() && v >= 0.0) {
         return Err(Error::model(
             element,
-            format!("{key} must be a finite number >= 0, got {v}"),
+            format!("{key} must be a finite number >= 0, got {}", num(v)),
         ));
     }
     Ok(())
@@ -328,9 +338,17 @@ impl NetworkSpec {
             .values()
             .any(|b| !matches!(b, BoundarySpec::Flow { .. }))
         {
+            let nodes: Vec<String> = self
+                .boundary_conditions
+                .keys()
+                .map(|n| format!("'{n}'"))
+                .collect();
             return Err(Error::model(
                 "boundary conditions",
-                "none fixes a pressure level: add a pressure, resistance or rcr outlet",
+                format!(
+                    "none fixes a pressure level (all of {} are flow conditions): add a pressure, resistance or rcr outlet",
+                    nodes.join(", ")
+                ),
             ));
         }
 
