@@ -92,8 +92,14 @@ struct MeanAbs {
     unknowns: Vec<usize>,
     sum: Vec<f64>,
     last: Vec<f64>,
+    prev: Vec<f64>,
     count: usize,
 }
+
+/// The flow-only first pass stops once the cycle-mean |Q| of every segment changes by less
+/// than this (relative to the largest) between two cycles: the closures need the mean shear,
+/// not a fully settled pressure level.
+const MEAN_FLOW_TOL: f64 = 1e-6;
 
 enum Stepper<'a> {
     Rk4(Rk4<'a>),
@@ -187,6 +193,7 @@ pub fn simulate_with_transport(
             unknowns,
             sum: vec![0.0; n],
             last: vec![0.0; n],
+            prev: vec![f64::INFINITY; n],
             count: 0,
         };
         let first = run(
@@ -511,7 +518,8 @@ fn run(
                 };
                 rec.record(tr, &y);
                 // species outputs of cycles that will be discarded are not computed
-                let keep = s.output_all_cycles || s.until_periodic.is_some() || cycle + 1 == max_cycles;
+                let keep =
+                    s.output_all_cycles || s.until_periodic.is_some() || cycle + 1 == max_cycles;
                 if let Some(tp) = transport.as_deref_mut().filter(|_| keep) {
                     if let Err(e) = observe(tp, &mut stepper, t_new, &y, &yd, &z, &mut trec) {
                         error = Some(e);
@@ -538,6 +546,20 @@ fn run(
             let c = m.count.max(1) as f64;
             for (l, v) in m.last.iter_mut().zip(&m.sum) {
                 *l = v / c;
+            }
+            let scale = m
+                .last
+                .iter()
+                .fold(0.0f64, |a, v| a.max(v.abs()))
+                .max(1e-300);
+            let change = m
+                .last
+                .iter()
+                .zip(&m.prev)
+                .fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
+            m.prev.copy_from_slice(&m.last);
+            if change <= MEAN_FLOW_TOL * scale {
+                break;
             }
         }
         if let Some(tr) = transport.as_deref() {

@@ -310,6 +310,55 @@ impl Transport {
             .filter(|((n, _), _)| kind[*n] != Kind::Exterior)
             .map(|((n, w), b)| (*n, w.clone(), *b))
             .collect();
+        // Contract pass-through points at boundaries: a volume-free node joining one face to a
+        // cell and one face to a boundary (the end node of an inverted-L vessel at a resistance
+        // or Windkessel outlet) carries the same flow on both (KCL), so the cell's face leads
+        // straight to the boundary. Zero-gradient backflow then carries the cell's own value,
+        // and the hot loop has one point less per outlet.
+        {
+            let mut inc: Vec<Vec<usize>> = vec![Vec::new(); nn];
+            for (fi, f) in faces.iter().enumerate() {
+                for e in [f.from, f.to] {
+                    if let End::Node(n) = e {
+                        inc[n].push(fi);
+                    }
+                }
+            }
+            let mut has_source = vec![false; nn];
+            for ((n, _), _) in circuit.sources.iter().zip(&circuit.source_boundary) {
+                has_source[*n] = true;
+            }
+            let other = |f: &Face, m: usize| if f.from == End::Node(m) { f.to } else { f.from };
+            let mut dropped = vec![false; faces.len()];
+            for m in 0..nn {
+                if kind[m] != Kind::Mixing || inc[m].len() != 2 || has_source[m] {
+                    continue;
+                }
+                let (fa, fb) = (inc[m][0], inc[m][1]);
+                let (f_net, f_bnd, b) = match (other(&faces[fa], m), other(&faces[fb], m)) {
+                    (End::Node(n), End::Boundary(b)) if kind[n] == Kind::Cell => (fa, fb, b),
+                    (End::Boundary(b), End::Node(n)) if kind[n] == Kind::Cell => (fb, fa, b),
+                    _ => continue,
+                };
+                let f = &mut faces[f_net];
+                if f.from == End::Node(m) {
+                    f.from = End::Boundary(b);
+                } else {
+                    f.to = End::Boundary(b);
+                }
+                dropped[f_bnd] = true;
+                kind[m] = Kind::Exterior;
+            }
+            let mut k = 0;
+            faces.retain(|_| {
+                k += 1;
+                !dropped[k - 1]
+            });
+            face_of_unknown.iter_mut().for_each(|v| *v = usize::MAX);
+            for (fi, f) in faces.iter().enumerate() {
+                face_of_unknown[f.unknown] = fi;
+            }
+        }
         let mixing: Vec<usize> = (0..nn).filter(|&i| kind[i] == Kind::Mixing).collect();
         let mut deg = vec![0usize; nn + 1];
         for f in &faces {
@@ -728,8 +777,14 @@ impl Transport {
     /// concentrations and branch flows `y`.
     fn wall_uptake(&self, s: usize, y: &[f64], w: &mut [f64]) {
         let sp = &self.species[s];
+        // without binding the free concentration is the total one (no copy)
+        let free = if sp.binding.is_identity() {
+            &self.conc
+        } else {
+            &sp.free
+        };
         for (i, &n) in self.cells.iter().enumerate() {
-            w[i] = sp.cell_g[i] * sp.free[n] - sp.cell_gcw[i] + sp.cell_q[i];
+            w[i] = sp.cell_g[i] * free[n] - sp.cell_gcw[i] + sp.cell_q[i];
         }
         for &j in &sp.dynamic {
             let seg = &self.segments[j];
@@ -737,7 +792,7 @@ impl Transport {
             for &(n, share) in &seg.nodes {
                 let c = self.node_cell[n];
                 if share > 0.0 && c != usize::MAX {
-                    w[c] += share * (g * (sp.free[n] - cw) + q);
+                    w[c] += share * (g * (free[n] - cw) + q);
                 }
             }
         }
@@ -887,7 +942,9 @@ impl Transport {
             }
             let mut i_wall = 0.0;
             if self.species[s].has_wall {
-                self.free_of_cells(s);
+                if !self.species[s].binding.is_identity() {
+                    self.free_of_cells(s);
+                }
                 self.wall_uptake(s, y, &mut wbuf);
                 for (d, w) in dzs.iter_mut().zip(&wbuf) {
                     *d -= w;
