@@ -875,8 +875,6 @@ impl Transport {
         let nsp = self.species.len();
         self.volumes(y, time)?;
         self.load_flows(time, y);
-        let mut wbuf = std::mem::take(&mut self.sweep.w);
-        wbuf.resize(nc, 0.0);
         let mut dnode = std::mem::take(&mut self.sweep.dnode);
         dnode.resize(self.kind.len(), 0.0);
         for s in 0..nsp {
@@ -937,32 +935,46 @@ impl Transport {
                 dnode[*n] += flux;
                 account(self.boundary_inlet[*b], flux, &mut i_in, &mut i_out);
             }
-            for (d, &n) in dzs.iter_mut().zip(&self.cells) {
-                *d = dnode[n];
+            // one pass over the cells: gather the face balance, wall uptake, decay
+            if self.species[s].has_wall && !self.species[s].binding.is_identity() {
+                self.free_of_cells(s);
             }
-            let mut i_wall = 0.0;
-            if self.species[s].has_wall {
-                if !self.species[s].binding.is_identity() {
-                    self.free_of_cells(s);
-                }
-                self.wall_uptake(s, y, &mut wbuf);
-                for (d, w) in dzs.iter_mut().zip(&wbuf) {
-                    *d -= w;
+            let sp = &self.species[s];
+            let free = if sp.binding.is_identity() {
+                &self.conc
+            } else {
+                &sp.free
+            };
+            let (has_wall, lambda) = (sp.has_wall, sp.decay);
+            let (mut i_wall, mut i_decay) = (0.0, 0.0);
+            for (i, (d, &n)) in dzs.iter_mut().zip(&self.cells).enumerate() {
+                let mut v = dnode[n];
+                if has_wall {
+                    let w = sp.cell_g[i] * free[n] - sp.cell_gcw[i] + sp.cell_q[i];
+                    v -= w;
                     i_wall += w;
                 }
+                if lambda != 0.0 {
+                    v -= lambda * zs[i];
+                    i_decay += lambda * zs[i];
+                }
+                *d = v;
             }
-            let lambda = self.species[s].decay;
-            let mut i_decay = 0.0;
-            if lambda != 0.0 {
-                for (d, n) in dzs.iter_mut().zip(zs) {
-                    *d -= lambda * n;
-                    i_decay += lambda * n;
+            for &j in &sp.dynamic {
+                let seg = &self.segments[j];
+                let (g, cw, q) = sp.laws[j].eval(y[seg.branch_unknown]);
+                for &(n, share) in &seg.nodes {
+                    let c = self.node_cell[n];
+                    if share > 0.0 && c != usize::MAX {
+                        let w = share * (g * (free[n] - cw) + q);
+                        dzs[c] -= w;
+                        i_wall += w;
+                    }
                 }
             }
             let acc = &mut dz[nsp * nc + 4 * s..nsp * nc + 4 * s + 4];
             acc.copy_from_slice(&[i_in, i_out, i_wall, i_decay]);
         }
-        self.sweep.w = wbuf;
         self.sweep.dnode = dnode;
         Ok(())
     }
@@ -1529,7 +1541,6 @@ struct Sweep {
     queue: Vec<usize>,
     d: Vec<f64>,
     b: Vec<f64>,
-    w: Vec<f64>,
     dnode: Vec<f64>,
 }
 
@@ -1544,7 +1555,6 @@ impl Sweep {
             queue: Vec::with_capacity(nn),
             d: Vec::new(),
             b: Vec::new(),
-            w: Vec::new(),
             dnode: Vec::new(),
         }
     }
