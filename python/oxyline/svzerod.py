@@ -41,7 +41,6 @@ Example::
 
 from __future__ import annotations
 
-import copy
 import itertools
 import json
 import math
@@ -54,7 +53,7 @@ from typing import Any
 import numpy as np
 
 from oxyline.errors import ModelError, UnsupportedElement
-from oxyline.model import Model, _build
+from oxyline.model import Model, _build, _copy
 
 COLUMNS = ("name", "time", "flow_in", "flow_out", "pressure_in", "pressure_out")
 METHODS = ("generalized-alpha", "rk4")
@@ -128,7 +127,7 @@ class RunSettings:
 
 def _read_config(config: Mapping[str, Any] | str | os.PathLike[str]) -> dict[str, Any]:
     if isinstance(config, Mapping):
-        return copy.deepcopy(dict(config))
+        return _copy(dict(config))
     p = Path(config)
     if not p.exists():
         raise ModelError(f"{p}: file not found")
@@ -411,6 +410,7 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str]
         ends[key] = node
         end_owner[key] = what
 
+    seen_names: set[str] = set()
     for i, v in enumerate(vessels_in):
         v = _mapping(v, f"vessels[{i}]")
         name = str(_required(v, "vessel_name", f"vessels[{i}]"))
@@ -422,8 +422,9 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str]
         if kind not in VESSEL_TYPES:
             raise UnsupportedElement(f"{el}: zero_d_element_type '{kind}' is not supported "
                                      "(supported: BloodVessel)")
-        if any(x["name"] == name for x in vessels):
+        if name in seen_names:
             raise ModelError(f"{el}: vessel_name used twice")
+        seen_names.add(name)
         el = f"BloodVessel '{name}'"
         vals = _check_params(_required(v, "zero_d_element_values", el), BLOOD_VESSEL_PARAMS, el)
         lumped = {
