@@ -1,5 +1,8 @@
 """Regenerate ``python/oxyline/models_data/*.yaml`` from the openBF model library in
-``../shared/networks/openbf`` (Apache-2.0) with :func:`oxyline.io.openbf.to_native_dict`.
+``../shared/networks/openbf`` (Apache-2.0) with :func:`oxyline.io.openbf.to_native_dict`, and
+``whole-body-140`` from circulatory_autogen's FinalModel in ``../shared/networks/circulatory_autogen``
+(Apache-2.0) with :func:`oxyline.io.circulatory_autogen.to_native_dict` (inflow: the Mynard
+template of ``../shared/networks/pwdb``, MIT).
 
     python benches/make_models_data.py
 """
@@ -12,11 +15,14 @@ from pathlib import Path
 
 import yaml
 
+from oxyline.io import circulatory_autogen
 from oxyline.io.openbf import to_native_dict
 
 REPO = Path(__file__).resolve().parents[1]
 OPENBF = REPO.parent / "shared" / "networks" / "openbf"
 OUT = REPO / "python" / "oxyline" / "models_data"
+CA = REPO.parent / "shared" / "networks" / "circulatory_autogen"
+PWDB = REPO.parent / "shared" / "networks" / "pwdb"
 
 SOURCES = {
     "cca": ("models/boileau2015/cca/cca.yaml", "Boileau et al. 2015, common carotid artery"),
@@ -73,6 +79,33 @@ def main() -> None:
         (OUT / f"{name}.yaml").write_text(text)
         print(name, len(d["vessels"]), "vessels")
     shutil.copy(OPENBF / "LICENSE", OUT / "LICENSE")
+    whole_body()
+
+
+def whole_body() -> None:
+    """``whole-body-140``: circulatory_autogen FinalModel arterial tree (commit 8e028f37)."""
+    res = CA / "resources"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        d = circulatory_autogen.to_native_dict(
+            res / "FinalModel_vessel_array.csv", res / "FinalModel_parameters.csv",
+            obs_data_json=res / "FinalModel_obs_data.json",
+            mynard_template=PWDB / "Mynard2015_aortic_flow_template.csv", name="whole-body-140")
+    notes = sorted({str(w.message) for w in caught})
+    header = ["# oxyline built-in model 'whole-body-140': circulatory_autogen FinalModel arterial tree.",
+              "# Converted from FinbarArgus/circulatory_autogen (Apache-2.0, commit 8e028f37),",
+              "# resources/FinalModel_vessel_array.csv + FinalModel_parameters.csv, by",
+              "# oxyline.io.circulatory_autogen.to_native_dict; inflow: Mynard & Smolich 2015 aortic",
+              "# flow template from peterhcharlton/pwdb (MIT) scaled to FinalModel_obs_data.json.",
+              "# Regenerate: benches/make_models_data.py. Licences and citations: NOTICE.",
+              *[f"# importer note: {n}" for n in notes]]
+    text = "\n".join(header) + "\n" + dump(d)
+    if yaml.safe_load(text) != d:
+        raise SystemExit("whole-body-140: YAML round trip changed the model")
+    (OUT / "whole-body-140.yaml").write_text(text)
+    print("whole-body-140", len(d["vessels"]), "vessels")
+    shutil.copy(CA / "LICENSE", OUT / "LICENSE-circulatory_autogen")
+    shutil.copy(PWDB / "LICENSE", OUT / "LICENSE-pwdb")
 
 
 if __name__ == "__main__":

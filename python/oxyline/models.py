@@ -15,7 +15,11 @@ library is Apache-2.0, see ``models_data/LICENSE`` and ``models_data/NOTICE`` fo
 * ``adan56`` — Boileau et al. 2015 ADAN56 (77 segments, 31 WK3), clean inflow;
 * ``circle-of-willis`` — Alastruey et al. 2007 circle of Willis and main systemic arteries
   (33 segments with anastomoses, 11 WK2);
-* ``matthys37`` — Matthys et al. 2007 37-artery in-vitro network (16 resistive outlets).
+* ``matthys37`` — Matthys et al. 2007 37-artery in-vitro network (16 resistive outlets);
+* ``whole-body-140`` — the arterial tree of circulatory_autogen's FinalModel (Apache-2.0,
+  ADAN-86/ADAN-218 parameters): 140 0-D segments and 95 terminal R-C-R compartments, heart and
+  veins replaced by the Mynard & Smolich 2015 aortic flow scaled to the model's 4.18 L/min
+  (converted by :func:`oxyline.io.circulatory_autogen.to_native_dict`; see ``docs/models.md``).
 
 They were converted with :func:`oxyline.io.openbf.to_native_dict` (default options; script
 ``benches/make_models_data.py``). Every name listed by :mod:`oxyline.examples` (e.g.
@@ -43,6 +47,9 @@ BUILTIN: dict[str, tuple[str, str]] = {
                          "Alastruey 2007 circle of Willis (openBF), 33 segments, loops, 11 WK2"),
     "matthys37": ("matthys37.yaml",
                   "Matthys 2007 37-artery in-vitro network (openBF), 16 resistive outlets"),
+    "whole-body-140": ("whole-body-140.yaml",
+                       ("circulatory_autogen FinalModel arterial tree (ADAN-86/218), 140 segments "
+                        "+ 95 terminal R-C-R, Mynard aortic inflow")),
 }
 ALIASES: dict[str, str] = {
     "ibif": "aortic-bifurcation",
@@ -50,6 +57,8 @@ ALIASES: dict[str, str] = {
     "cow": "circle-of-willis",
     "matthys2007": "matthys37",
     "invitro_model": "matthys37",
+    "whole-body": "whole-body-140",
+    "finalmodel": "whole-body-140",
 }
 _registered: dict[str, tuple[Callable[[], Any], str]] = {}
 

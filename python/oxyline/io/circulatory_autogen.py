@@ -1,0 +1,382 @@
+"""Import circulatory_autogen 0-D networks (``<model>_vessel_array.csv`` + ``<model>_parameters.csv``).
+
+circulatory_autogen (F. Argus et al., https://github.com/FinbarArgus/circulatory_autogen,
+Apache-2.0) generates CellML models from a vessel array: each row is a 0-D *module* whose
+equations are fixed by its ``vessel_type`` and ``BC_type`` (``src/generators/resources/
+module_config.json`` and ``BG_modules.cellml`` upstream). Read from those files:
+
+* geometric modules (``arterial``, ``split_junction``, ``merge_junction``, ``2in2out_junction``)
+  compute, from ``r_0_<name>`` [m], ``l_<name>`` [m], ``E_<name>`` [Pa] and the global ``rho``,
+  ``mu`` and wall law h = r (a e^(b r) + c e^(d r)) (globals ``a_vessel`` ... ``d_vessel``),
+  R = 8 mu l/(pi r^4), I = rho l/(pi r^2), C = 2 pi r^3 l/(E h). This is oxyline's geometric
+  segment with Poisson ratio 0 and the flat inertance profile, so they become geometric vessels
+  (``radius``, ``length``, ``wall_thickness`` = h(r), ``youngs_modulus``, ``poisson_ratio: 0``);
+* the ``BC_type`` fixes where C sits: ``pv`` (``pv_type``, ``pv_split_type``): R-I then C at
+  the distal node = oxyline ``L``; ``vp``: C at the proximal node then R-I = ``inverted-L``;
+  ``vv`` (``vv_type``, ``vv_2in2out_type``): C/2 - R-I - C/2 = ``pi``; ``pp`` (``pp_type``):
+  R/2, I/2 - C - R/2, I/2 (a T), which oxyline has no single-segment form for; it becomes ``pi``
+  with 2 segments (R, I exact; C/4 - C/2 - C/4 instead of 0 - C - 0);
+* ``*_simple`` modules take ``R_<name>``, ``C_<name>``, ``I_<name>`` directly: lumped vessels;
+* ``terminal`` with ``BC_type pp`` (``pp_T_fixed_I_type``): R_T/2 - C_T - R_T/2 to the venous
+  pressure (with a fixed I_T = 1e-6 Pa s^2 m^-3 in each half, dropped: time constant I_T/R_T
+  ~ 1e-15 s). Each terminal becomes a lumped vessel named after it (R_T/2, C_T at its distal
+  node, ``L``) closed by a ``resistance`` outlet R_T/2 to ``venous_pressure``, which is the
+  source circuit exactly and keeps every terminal's flow in the results.
+
+Dropped, with the reason: the wall-viscosity resistor R_v = 0.01 s / C in series with every
+capacitor of the stored upstream ``BG_modules.cellml`` (oxyline capacitors have no series
+resistance; R_v does not change mean values), gravity (``beta_g`` = 0 in the source files) and
+``u_ext`` (0 in the FinalModel except 1e-6 Pa at one terminal; larger values warn), the
+reference pressure ``u_0`` (unused by the linear modules).
+
+The heart, veins and pulmonary circulation are not imported: the arterial tree is fed at the
+aortic root (the inlet of the vessel the ``heart`` module feeds) by a flow waveform. The FinalModel
+has no aortic flow data, so the default is the Mynard & Smolich 2015 aortic flow template
+(``../shared/networks/pwdb/Mynard2015_aortic_flow_template.csv``, as processed by PWDB: systole
+starts at t = 0, late-diastolic samples zeroed), diastole padded with zero flow to the model period
+``T`` and scaled to the cardiac output = the sum of the mean terminal-region flows in
+``<model>_obs_data.json`` (FinalModel: 69.66 mL/s = 4.18 L/min).
+
+>>> from oxyline.io.circulatory_autogen import read_circulatory_autogen  # doctest: +SKIP
+>>> m = read_circulatory_autogen("FinalModel_vessel_array.csv", "FinalModel_parameters.csv",
+...                              obs_data_json="FinalModel_obs_data.json")  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from oxyline.errors import ModelError
+from oxyline.model import Model, load_model
+
+PathLike = str | os.PathLike[str]
+
+GEOMETRIC = {"arterial", "split_junction", "merge_junction", "2in2out_junction"}
+SIMPLE = {"arterial_simple", "split_junction_simple", "merge_junction_simple"}
+TERMINAL = {"terminal"}
+#: BC_type -> (oxyline arrangement, segments)
+ARRANGEMENT = {"pv": ("L", 1), "vp": ("inverted-L", 1), "vv": ("pi", 1), "pp": ("pi", 2)}
+#: module types that are not part of the arterial tree (replaced by the inflow / outlet pressure)
+NOT_IMPORTED = {"heart", "venous", "venous_simple"}
+
+# CellML unit names of the parameters we read -> the SI unit they denote
+SI_UNITS = {"metre": "m", "J_per_m3": "Pa", "Js_per_m6": "Pa s m^-3", "m6_per_J": "m^3 Pa^-1",
+            "Js2_per_m6": "Pa s^2 m^-3", "Js_per_m3": "Pa s", "Js2_per_m5": "kg m^-3",
+            "dimensionless": "1", "per_m": "m^-1", "second": "s", "m3_per_s": "m^3 s^-1"}
+
+PWDB_ZERO_HEAD = 52       # PWDB AorticFlowWave.m: samples 1..52 zeroed, rotated to the end
+PWDB_LAST_SYSTOLE = 361   # samples 362..880 (1-based) zeroed
+
+
+class CirculatoryAutogenWarning(UserWarning):
+    """A value of the source that the linear oxyline mapping changes or ignores."""
+
+
+def _split(cell: str) -> list[str]:
+    return [s for s in cell.replace(",", " ").split() if s]
+
+
+def read_vessel_array(path: PathLike) -> list[dict[str, Any]]:
+    """Rows of a ``*_vessel_array.csv`` with whitespace stripped and the input/output lists split."""
+    rows: list[dict[str, Any]] = []
+    with open(path, newline="") as f:
+        reader = csv.reader(f)
+        header = [h.strip() for h in next(reader)]
+        want = ["name", "BC_type", "vessel_type", "inp_vessels", "out_vessels"]
+        if header[:5] != want:
+            raise ModelError(f"{path}: header must start with {', '.join(want)}, got {header}")
+        for line, row in enumerate(reader, start=2):
+            if not row or not "".join(row).strip():
+                continue
+            if len(row) < 5:
+                raise ModelError(f"{path} line {line}: expected 5 fields, got {len(row)}")
+            rows.append({"name": row[0].strip(), "BC_type": row[1].strip(),
+                         "vessel_type": row[2].strip(), "inp": _split(row[3]),
+                         "out": _split(",".join(row[4:]))})
+    return rows
+
+
+def read_parameters(path: PathLike) -> dict[str, tuple[float, str, str]]:
+    """``variable_name -> (value, CellML unit name, data_reference)`` of a ``*_parameters.csv``."""
+    out: dict[str, tuple[float, str, str]] = {}
+    with open(path, newline="") as f:
+        reader = csv.reader(f)
+        next(reader)
+        for line, row in enumerate(reader, start=2):
+            if not row or not row[0].strip():
+                continue
+            try:
+                value = float(row[2])
+            except (IndexError, ValueError) as exc:
+                raise ModelError(f"{path} line {line}: bad value for '{row[0].strip()}'") from exc
+            out[row[0].strip()] = (value, row[1].strip(), row[3].strip() if len(row) > 3 else "")
+    return out
+
+
+def mynard_aortic_flow(template_csv: PathLike, period: float) -> tuple[np.ndarray, np.ndarray]:
+    """The Mynard & Smolich 2015 aortic root flow [m^3/s] as PWDB prepares it (systolic samples
+    53-361 kept, systole moved to t = 0), zero flow from the end of systole to ``period``."""
+    t, q = np.loadtxt(template_csv, delimiter=",", comments="#", skiprows=2, unpack=True)
+    if len(q) < PWDB_LAST_SYSTOLE or not np.allclose(np.diff(t), 1e-3):
+        raise ModelError(f"{template_csv}: expected the 1 kHz Mynard template (880 samples)")
+    systole = q[PWDB_ZERO_HEAD:PWDB_LAST_SYSTOLE] * 1e-6   # mL/s -> m^3/s
+    ts = np.arange(len(systole)) * 1e-3
+    if ts[-1] + 1e-3 >= period:
+        raise ModelError(f"period {period} s is shorter than the template's systole")
+    time = np.concatenate([ts, [ts[-1] + 1e-3, period]])
+    flow = np.concatenate([systole, [0.0, systole[0]]])
+    return time, flow
+
+
+def _cycle_mean(time: np.ndarray, flow: np.ndarray) -> float:
+    return float(np.trapezoid(flow, time) / (time[-1] - time[0]))
+
+
+def cardiac_output_from_obs(obs_data_json: PathLike) -> float:
+    """Sum of the mean terminal-region flows (``*_T/v``, m^3/s) in a circulatory_autogen
+    ``*_obs_data.json``: the systemic flow the model is calibrated to."""
+    data = json.loads(Path(obs_data_json).read_text())
+    total = 0.0
+    for item in data.get("data_items", []):
+        if (str(item.get("variable", "")).endswith("_T/v") and item.get("obs_type") == "mean"
+                and item.get("unit") == "m3_per_s"):
+            total += float(item["value"])
+    if total <= 0:
+        raise ModelError(f"{obs_data_json}: no mean terminal flows (*_T/v, m3_per_s)")
+    return total
+
+
+def _value(params: dict[str, tuple[float, str, str]], key: str, unit: str, where: str) -> float:
+    if key not in params:
+        raise ModelError(f"{where}: parameter '{key}' missing from the parameters file")
+    value, got, _ref = params[key]
+    if got != unit:
+        raise ModelError(f"{where}: '{key}' has unit {got}, expected {unit} ({SI_UNITS[unit]})")
+    return value
+
+
+def wall_thickness(r: float, params: dict[str, tuple[float, str, str]]) -> float:
+    """circulatory_autogen's h(r) = r (a e^(b r) + c e^(d r)) with the file's global constants."""
+    a = _value(params, "a_vessel", "dimensionless", "global")
+    b = _value(params, "b_vessel", "per_m", "global")
+    c = _value(params, "c_vessel", "dimensionless", "global")
+    d = _value(params, "d_vessel", "per_m", "global")
+    return r * (a * math.exp(b * r) + c * math.exp(d * r))
+
+
+def _warn(msg: str) -> None:
+    warnings.warn(msg, CirculatoryAutogenWarning, stacklevel=3)
+
+
+def to_native_dict(vessel_array_csv: PathLike, parameters_csv: PathLike, *,
+                   obs_data_json: PathLike | None = None,
+                   inflow: str | tuple[Any, Any] | PathLike = "mynard2015",
+                   mynard_template: PathLike | None = None,
+                   cardiac_output: float | None = None, venous_pressure: float = 0.0,
+                   terminal_resistance_scale: float = 1.0,
+                   name: str | None = None) -> dict[str, Any]:
+    """The arterial tree of a circulatory_autogen model as a native oxyline model dict (SI).
+
+    ``inflow``: ``"mynard2015"`` (the template of ``mynard_template``, default
+    ``../shared/networks/pwdb/Mynard2015_aortic_flow_template.csv`` next to the repository) or a
+    ``(time [s], flow [m^3/s])`` pair; scaled to ``cardiac_output`` [m^3/s] (default: the sum of
+    the mean terminal flows of ``obs_data_json``; unscaled when neither is given).
+    ``venous_pressure`` [Pa]: the pressure the terminals drain to (the closed loop's veins).
+    ``terminal_resistance_scale``: multiplies every R_T (1 = the source values; the FinalModel
+    needs about 7.7 to reach its observed 12 kPa mean aortic pressure at its observed flow).
+    """
+    if not (terminal_resistance_scale > 0 and math.isfinite(terminal_resistance_scale)):
+        raise ModelError(f"terminal_resistance_scale must be > 0, got {terminal_resistance_scale}")
+    rows = read_vessel_array(vessel_array_csv)
+    params = read_parameters(parameters_csv)
+    by_name = {r["name"]: r for r in rows}
+    if len(by_name) != len(rows):
+        raise ModelError(f"{vessel_array_csv}: duplicate module names")
+    for r in rows:
+        for other in r["inp"] + r["out"]:
+            if other not in by_name:
+                raise ModelError(f"{vessel_array_csv}: module '{r['name']}' refers to unknown "
+                                 f"module '{other}'")
+    tree = [r for r in rows if r["vessel_type"] not in NOT_IMPORTED]
+    for r in tree:
+        vt = r["vessel_type"]
+        if vt not in GEOMETRIC | SIMPLE | TERMINAL:
+            raise ModelError(f"module '{r['name']}': vessel_type '{vt}' is not supported "
+                             f"(supported: {sorted(GEOMETRIC | SIMPLE | TERMINAL)})")
+        if vt in TERMINAL and r["BC_type"] != "pp":
+            raise ModelError(f"terminal '{r['name']}': BC_type '{r['BC_type']}' not supported (pp)")
+        if vt not in TERMINAL and r["BC_type"] not in ARRANGEMENT:
+            raise ModelError(f"module '{r['name']}': BC_type '{r['BC_type']}' not supported")
+    in_tree = {r["name"] for r in tree}
+    hearts = [r for r in rows if r["vessel_type"] == "heart"]
+    roots = [r for r in tree if not any(i in in_tree for i in r["inp"])]
+    if len(roots) != 1:
+        raise ModelError(f"expected one arterial root fed by the heart, found "
+                         f"{[r['name'] for r in roots]}")
+    root = roots[0]
+
+    # union of module ends: (module, "in"/"out")
+    parent: dict[tuple[str, str], tuple[str, str]] = {}
+
+    def find(x: tuple[str, str]) -> tuple[str, str]:
+        parent.setdefault(x, x)
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    for r in tree:
+        find((r["name"], "in"))
+        find((r["name"], "out"))
+        for o in r["out"]:
+            if o in in_tree:
+                parent[find((o, "in"))] = find((r["name"], "out"))
+    members: dict[tuple[str, str], list[tuple[str, str]]] = {}
+    for x in list(parent):
+        members.setdefault(find(x), []).append(x)
+    node_name: dict[tuple[str, str], str] = {}
+    for rep, ends in members.items():
+        outs = sorted(n for n, side in ends if side == "out")
+        ins = sorted(n for n, side in ends if side == "in")
+        if len(outs) == 1:
+            label = f"{outs[0]}.out"
+        elif (root["name"], "in") in ends:
+            label = "aortic_root"
+        else:
+            label = f"{ins[0]}.in"
+        node_name[rep] = label
+
+    def node(module: str, side: str) -> str:
+        return node_name[find((module, side))]
+
+    rho = _value(params, "rho", "Js2_per_m5", "global")
+    mu = _value(params, "mu", "Js_per_m3", "global")
+    period = _value(params, "T", "second", "global") if "T" in params else 1.0
+    if "beta_g" in params and params["beta_g"][0] != 0:
+        _warn(f"beta_g = {params['beta_g'][0]}: gravity is not modelled by oxyline, ignored")
+
+    vessels: list[dict[str, Any]] = []
+    bcs: dict[str, dict[str, Any]] = {}
+    n_geo = n_simple = n_term = 0
+    for r in tree:
+        nm, vt, bc = r["name"], r["vessel_type"], r["BC_type"]
+        u_ext = params.get(f"u_ext_{nm}", (0.0, "J_per_m3", ""))[0]
+        if abs(u_ext) > 1.0:
+            _warn(f"'{nm}': u_ext = {u_ext} Pa ignored (no external pressure on 0-D vessels)")
+        if vt in TERMINAL:
+            R_T = _value(params, f"R_T_{nm}", "Js_per_m6", nm) * terminal_resistance_scale
+            C_T = _value(params, f"C_T_{nm}", "m6_per_J", nm)
+            vessels.append({
+                "name": nm, "from": node(nm, "in"), "to": node(nm, "out"), "arrangement": "L",
+                "lumped": {"resistance": R_T / 2, "inductance": 0.0, "capacitance": C_T},
+                "description": (f"circulatory_autogen terminal (pp_T_fixed_I_type): "
+                                f"R_T {R_T:.6g} Pa s m^-3, C_T {C_T:.6g} m^3/Pa; first half "
+                                f"R_T/2 + C_T here, second half R_T/2 = outlet resistance"),
+            })
+            bcs[node(nm, "out")] = {"type": "resistance", "resistance": R_T / 2,
+                                    "pressure": float(venous_pressure)}
+            n_term += 1
+            continue
+        arrangement, segments = ARRANGEMENT[bc]
+        v: dict[str, Any] = {"name": nm, "from": node(nm, "in"), "to": node(nm, "out"),
+                             "arrangement": arrangement, "segments": segments}
+        if vt in SIMPLE:
+            v["lumped"] = {"resistance": _value(params, f"R_{nm}", "Js_per_m6", nm),
+                           "inductance": _value(params, f"I_{nm}", "Js2_per_m6", nm),
+                           "capacitance": _value(params, f"C_{nm}", "m6_per_J", nm)}
+            v["description"] = f"circulatory_autogen {vt} ({bc})"
+            n_simple += 1
+        else:
+            r0 = _value(params, f"r_0_{nm}", "metre", nm)
+            length = _value(params, f"l_{nm}", "metre", nm)
+            E = _value(params, f"E_{nm}", "J_per_m3", nm)
+            h = wall_thickness(r0, params)
+            refs = sorted({params[k][2] for k in (f"r_0_{nm}", f"l_{nm}", f"E_{nm}")})
+            v.update({"length": length, "radius": r0, "wall_thickness": h, "youngs_modulus": E,
+                      "poisson_ratio": 0.0,
+                      "description": (f"circulatory_autogen {vt} ({bc}); r_0 {r0:.6g} m, "
+                                      f"l {length:.6g} m, E {E:.6g} Pa, h(r_0) {h:.6g} m; "
+                                      f"source: {', '.join(refs)}")})
+            n_geo += 1
+        vessels.append(v)
+
+    # inflow
+    if isinstance(inflow, tuple):
+        t_in, q_in = (np.asarray(x, dtype=float) for x in inflow)
+        source = "user-given inflow table"
+    elif inflow == "mynard2015" or inflow is None:
+        tpl = Path(mynard_template) if mynard_template else (
+            Path(__file__).resolve().parents[4] / "shared" / "networks" / "pwdb"
+            / "Mynard2015_aortic_flow_template.csv")
+        if not tpl.is_file():
+            raise ModelError(f"Mynard aortic flow template not found at {tpl} "
+                             f"(pass mynard_template=...)")
+        t_in, q_in = mynard_aortic_flow(tpl, period)
+        source = ("Mynard & Smolich 2015 aortic root flow template (PWDB "
+                  "Mynard2015_aortic_flow_template.csv, MIT; systole 0-0.309 s, zero flow in "
+                  f"diastole to T = {period:g} s)")
+    else:
+        raise ModelError(f"inflow must be 'mynard2015' or a (time, flow) pair, got {inflow!r}")
+    co_source = "unscaled"
+    if cardiac_output is None and obs_data_json is not None:
+        cardiac_output = cardiac_output_from_obs(obs_data_json)
+        co_source = (f"the sum of the mean terminal-region flows of {Path(obs_data_json).name} "
+                     f"(leg, arm, head, trunk)")
+    elif cardiac_output is not None:
+        co_source = "given"
+    if cardiac_output is not None:
+        q_in = q_in * (float(cardiac_output) / _cycle_mean(t_in, q_in))
+    q_mean = _cycle_mean(t_in, q_in)
+    bcs = {"aortic_root": {"type": "flow", "time": [float(x) for x in t_in],
+                           "flow": [float(x) for x in q_in], "interpolation": "linear"}, **bcs}
+
+    n_heart = len(hearts)
+    skipped = sorted({r["vessel_type"] for r in rows if r["vessel_type"] in NOT_IMPORTED})
+    description = (
+        f"Arterial tree of the circulatory_autogen model {Path(vessel_array_csv).name} "
+        f"(FinbarArgus/circulatory_autogen, Apache-2.0): {n_geo + n_simple} arterial 0-D modules "
+        f"({n_geo} geometric, {n_simple} lumped) and {n_term} terminals. Module equations from "
+        f"upstream module_config.json/BG_modules.cellml: pv = R-I then C (L), vv = C/2-R-I-C/2 "
+        f"(pi), pp = T mapped to pi x 2 segments, terminal = R_T/2-C_T-R_T/2 to "
+        f"{venous_pressure:g} Pa (venous pressure); h(r) from the global a..d_vessel law, "
+        f"Poisson ratio 0 (C = 2 pi r^3 l/(E h)). Not imported: {', '.join(skipped)} modules "
+        f"({n_heart} heart): inflow at the aortic root ({root['name']} inlet) is the {source}, "
+        f"scaled to a mean of {q_mean * 1e6:.2f} mL/s ({q_mean * 6e4:.2f} L/min; {co_source}). "
+        f"Dropped: wall-viscosity R_v = 0.01 s/C, terminal I_T = 1e-6, gravity (beta_g 0)."
+        + ("" if terminal_resistance_scale == 1.0 else
+           f" Terminal resistances R_T scaled by {terminal_resistance_scale:g}."))
+    return {
+        "name": name or Path(vessel_array_csv).name.replace("_vessel_array.csv", ""),
+        "description": description,
+        "units": "SI",
+        "blood": {"density": rho, "viscosity": mu},
+        "arrangement": "L",
+        "inertance_profile": "flat",
+        "period": period,
+        "vessels": vessels,
+        "boundary_conditions": bcs,
+        # stiff (stable RK4 step ~1e-4 s): implicit steps of 1 ms; ~60 cycles to 1e-6
+        "simulation": {"cycles": 10, "until_periodic": 1e-6, "max_cycles": 200, "dt": 0.001,
+                       "method": "generalized-alpha",
+                       "output": {"cycles": "last", "every": 0.001}},
+    }
+
+
+def read_circulatory_autogen(vessel_array_csv: PathLike, parameters_csv: PathLike,
+                             **options: Any) -> Model:
+    """Load a circulatory_autogen model's arterial tree as an :class:`oxyline.Model`; options as
+    :func:`to_native_dict`."""
+    return load_model(to_native_dict(vessel_array_csv, parameters_csv, **options))
+
+
+__all__ = ["CirculatoryAutogenWarning", "cardiac_output_from_obs", "mynard_aortic_flow",
+           "read_circulatory_autogen", "read_parameters", "read_vessel_array", "to_native_dict",
+           "wall_thickness"]
