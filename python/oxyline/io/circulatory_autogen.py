@@ -25,7 +25,8 @@ module_config.json`` and ``BG_modules.cellml`` upstream). Read from those files:
 
 Dropped, with the reason: the wall-viscosity resistor R_v = 0.01 s / C in series with every
 capacitor of the stored upstream ``BG_modules.cellml`` (oxyline capacitors have no series
-resistance; R_v does not change mean values), gravity (``beta_g`` = 0 in the source files) and
+resistance; R_v does not change mean values, but without it the circuit rings at ~50 Hz:
+see ``docs/models.md``), gravity (``beta_g`` = 0 in the source files) and
 ``u_ext`` (0 in the FinalModel except 1e-6 Pa at one terminal; larger values warn), the
 reference pressure ``u_0`` (unused by the linear modules).
 
