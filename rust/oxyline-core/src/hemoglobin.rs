@@ -214,6 +214,13 @@ impl Binding {
                         lo = p;
                     }
                     let next = p + dp;
+                    // Newton's error after this step is ≈ |f''/2f'| dp² ≤ (n/P) dp² for the Hill
+                    // curve: when that is far below the tolerance the step is final, which saves
+                    // the confirming evaluation in the common warm-started case
+                    if next > lo && next < hi && 10.0 * n * dp * dp < tol_abs * p {
+                        p = next;
+                        break;
+                    }
                     p = if next > lo && next < hi {
                         next
                     } else {
@@ -267,7 +274,16 @@ mod tests {
         for i in 0..=2000 {
             let p = 1.0 + 599.0 * i as f64 / 2000.0; // mmHg
             let ct = b.total(alpha * p * MMHG);
-            for guess in [0.0, alpha * 40.0 * MMHG, alpha * 900.0 * MMHG] {
+            // cold starts, and warm starts near the root (the early-exit path)
+            let c = alpha * p * MMHG;
+            for guess in [
+                0.0,
+                alpha * 40.0 * MMHG,
+                alpha * 900.0 * MMHG,
+                c * (1.0 + 1e-2),
+                c * (1.0 - 1e-4),
+                c * (1.0 + 1e-7),
+            ] {
                 let back = b.free(ct, guess) / alpha / MMHG;
                 worst = worst.max((back - p).abs());
             }
