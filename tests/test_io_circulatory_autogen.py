@@ -345,3 +345,29 @@ def test_terminal_resistance_scale_multiplies_both_halves(native: dict[str, Any]
     assert "scaled by 7.7" in scaled["description"]
     with pytest.raises(oxyline.ModelError):
         to_native_dict(ARRAY, PARAMS, mynard_template=MYNARD, terminal_resistance_scale=0)
+
+
+def test_wall_viscosity_option_removes_the_50hz_ringing_and_keeps_the_means(
+        result: oxyline.Result) -> None:
+    """R_v = 0.01 s/C in series with every capacitor (upstream BG_modules.cellml) as dead-end
+    branches: same R, I, C (total compliance), same mean pressures (R_v carries no mean flow),
+    and the diastolic ripple of the plain mapping (its ascending aorta rings at 50 Hz) is gone."""
+    m = read_circulatory_autogen(ARRAY, PARAMS, obs_data_json=OBS, mynard_template=MYNARD,
+                                 wall_viscosity=True)
+    plain = oxyline.models.load("whole-body-140")
+    assert m.summary()["total_compliance"] == pytest.approx(
+        plain.summary()["total_compliance"], rel=1e-12)
+    assert set(plain.vessel_names) <= set(m.vessel_names)
+    res = oxyline.simulate(m, until_periodic=1e-6, max_cycles=200)
+    assert res.settings["periodic_error"] < 1e-6
+    for name in ("ascending_aorta_C0", "aortic_arch_C46", "femoral_L204", "basilar_C4",
+                 "anterior_communicating_C44"):
+        assert _mean(res, res.vessel(name).pressure_in) == pytest.approx(
+            _mean(result, result.vessel(name).pressure_in), rel=1e-3), name
+
+    def ripple(r: oxyline.Result) -> float:
+        q = r.vessel("ascending_aorta_C0").flow_in[r.time > 0.4]   # diastole: zero inflow
+        return float(q.max() - q.min()) / 2
+
+    assert ripple(result) > 50e-6          # plain mapping: +-105 mL/s at 50 Hz
+    assert ripple(res) < 1e-6              # with R_v: +-0.36 mL/s

@@ -182,7 +182,7 @@ def to_native_dict(vessel_array_csv: PathLike, parameters_csv: PathLike, *,
                    inflow: str | tuple[Any, Any] | PathLike = "mynard2015",
                    mynard_template: PathLike | None = None,
                    cardiac_output: float | None = None, venous_pressure: float = 0.0,
-                   terminal_resistance_scale: float = 1.0,
+                   terminal_resistance_scale: float = 1.0, wall_viscosity: bool = False,
                    name: str | None = None) -> dict[str, Any]:
     """The arterial tree of a circulatory_autogen model as a native oxyline model dict (SI).
 
@@ -193,6 +193,10 @@ def to_native_dict(vessel_array_csv: PathLike, parameters_csv: PathLike, *,
     ``venous_pressure`` [Pa]: the pressure the terminals drain to (the closed loop's veins).
     ``terminal_resistance_scale``: multiplies every R_T (1 = the source values; the FinalModel
     needs about 7.7 to reach its observed 12 kPa mean aortic pressure at its observed flow).
+    ``wall_viscosity``: keep the source's R_v = 0.01 s/C in series with every capacitor, as a
+    dead-end branch per capacitor (``<node>.wall...``: R_v, then C, closed by zero flow); vessels
+    become lumped (R, I from the same formulas), ``pp`` modules an exact T (``<name>.distal_half``),
+    and a 1 Pa s m^-3 connector ``aortic_inlet`` carries the inflow. Removes the ~50 Hz ringing.
     """
     if not (terminal_resistance_scale > 0 and math.isfinite(terminal_resistance_scale)):
         raise ModelError(f"terminal_resistance_scale must be > 0, got {terminal_resistance_scale}")
@@ -354,6 +358,10 @@ def to_native_dict(vessel_array_csv: PathLike, parameters_csv: PathLike, *,
         f"Dropped: wall-viscosity R_v = 0.01 s/C, terminal I_T = 1e-6, gravity (beta_g 0)."
         + ("" if terminal_resistance_scale == 1.0 else
            f" Terminal resistances R_T scaled by {terminal_resistance_scale:g}."))
+    if wall_viscosity:
+        vessels, bcs = _with_wall_viscosity(vessels, bcs, rho, mu)
+        description += (" Wall viscosity kept: R_v = 0.01 s/C in series with every capacitor "
+                        "as dead-end '.wall' branches; vessels lumped, pp as an exact T.")
     return {
         "name": name or Path(vessel_array_csv).name.replace("_vessel_array.csv", ""),
         "description": description,
@@ -369,6 +377,60 @@ def to_native_dict(vessel_array_csv: PathLike, parameters_csv: PathLike, *,
                        "method": "generalized-alpha",
                        "output": {"cycles": "last", "every": 0.001}},
     }
+
+
+def _with_wall_viscosity(vessels: list[dict[str, Any]], bcs: dict[str, dict[str, Any]],
+                         rho: float, mu: float) -> tuple[list[dict[str, Any]],
+                                                         dict[str, dict[str, Any]]]:
+    """Re-express every capacitor C as a branch R_v = 0.01 s / C -> C -> zero flow."""
+    out: list[dict[str, Any]] = []
+    new_bcs: dict[str, dict[str, Any]] = {}
+
+    def rl(name: str, a: str, b: str, r: float, ind: float) -> dict[str, Any]:
+        return {"name": name, "from": a, "to": b, "arrangement": "L",
+                "lumped": {"resistance": r, "inductance": ind, "capacitance": 0.0}}
+
+    def wall(node: str, c: float, tag: str = "") -> None:
+        nm = f"{node}.wall{tag}"
+        out.append({"name": nm, "from": node, "to": f"{nm}.end", "arrangement": "L",
+                    "lumped": {"resistance": 0.01 / c, "inductance": 0.0, "capacitance": c},
+                    "description": "wall viscosity R_v = 0.01 s / C in series with C"})
+        new_bcs[f"{nm}.end"] = {"type": "flow", "value": 0.0}
+
+    for node, bc in bcs.items():
+        if bc["type"] == "flow":
+            out.append(rl("aortic_inlet", "aortic_inlet", node, 1.0, 0.0))
+            new_bcs["aortic_inlet"] = bc
+    for v in vessels:
+        desc = {"description": v["description"]} if "description" in v else {}
+        if "lumped" in v:                                  # terminal: R_T/2, C_T, R_T/2
+            half = v["lumped"]["resistance"]
+            mid = v["to"]
+            out.append({**rl(v["name"], v["from"], mid, half, 0.0), **desc})
+            wall(mid, v["lumped"]["capacitance"])
+            out.append(rl(f"{v['name']}.distal_half", mid, f"{mid}.outlet", half, 0.0))
+            new_bcs[f"{mid}.outlet"] = {"type": "pressure", "value": bcs[mid]["pressure"]}
+            continue
+        r, length = v["radius"], v["length"]
+        R = 8 * mu * length / (math.pi * r**4)
+        ind = rho * length / (math.pi * r**2)
+        C = 2 * math.pi * r**3 * length / (v["youngs_modulus"] * v["wall_thickness"])
+        if v["arrangement"] == "L":
+            out.append({**rl(v["name"], v["from"], v["to"], R, ind), **desc})
+            wall(v["to"], C)
+        elif v["arrangement"] == "inverted-L":
+            out.append({**rl(v["name"], v["from"], v["to"], R, ind), **desc})
+            wall(v["from"], C, f"_{v['name']}")
+        elif v.get("segments", 1) == 1:                    # pi: C/2 - R-I - C/2
+            out.append({**rl(v["name"], v["from"], v["to"], R, ind), **desc})
+            wall(v["from"], C / 2, f"_in_{v['name']}")
+            wall(v["to"], C / 2, f"_out_{v['name']}")
+        else:                                              # pp: R/2, I/2 - C - R/2, I/2
+            mid = f"{v['name']}.mid"
+            out.append({**rl(v["name"], v["from"], mid, R / 2, ind / 2), **desc})
+            out.append(rl(f"{v['name']}.distal_half", mid, v["to"], R / 2, ind / 2))
+            wall(mid, C)
+    return out, new_bcs
 
 
 def read_circulatory_autogen(vessel_array_csv: PathLike, parameters_csv: PathLike,
