@@ -49,6 +49,12 @@ fn error_kind(e: &Error) -> &'static str {
     }
 }
 
+/// (state, derivative) as numpy arrays.
+type ArrayPair<'py> = (
+    Bound<'py, numpy::PyArray1<f64>>,
+    Bound<'py, numpy::PyArray1<f64>>,
+);
+
 /// An assembled network: built once from the canonical SI JSON model, run many times.
 #[pyclass(frozen, module = "oxyline._core")]
 struct Network {
@@ -200,10 +206,7 @@ impl Network {
         py: Python<'py>,
         t: f64,
         state: Vec<f64>,
-    ) -> PyResult<(
-        Bound<'py, numpy::PyArray1<f64>>,
-        Bound<'py, numpy::PyArray1<f64>>,
-    )> {
+    ) -> PyResult<ArrayPair<'py>> {
         let dae = &self.inner.1;
         if state.len() != dae.n {
             return Err(ModelError::new_err(format!(
@@ -364,7 +367,7 @@ impl Network {
         if let Some(t) = out.transport {
             let td = PyDict::new(py);
             let cols = t.columns_per_species * t.species.len();
-            let nt = if cols > 0 { t.data.len() / cols } else { 0 };
+            let nt = t.data.len().checked_div(cols).unwrap_or(0);
             let data = numpy::ndarray::Array2::from_shape_vec((nt, cols), t.data)
                 .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
             td.set_item("species", t.species)?;
