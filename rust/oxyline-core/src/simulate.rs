@@ -262,6 +262,22 @@ fn run(
         Method::GeneralizedAlpha { rho_inf } | Method::Auto { rho_inf } => rho_inf,
         Method::Rk4 => 0.5,
     };
+    // Explicit upwind transport is stable for Courant numbers up to 1.3926 (physics §1.5), a
+    // limit the flow eigenvalues do not see. The automatic step keeps the Courant number of the
+    // mean flow below 0.5 × 1.39 / 3 (pulsatile peaks of up to 3× the mean); the run itself
+    // monitors the actual value.
+    let transport_dt = match transport.as_deref_mut() {
+        Some(tr) if tr.formulation() == Formulation::Conservative => {
+            // (no steady state, or a non-positive volume there: left to the run to report)
+            let rate = steady_state(dae).map_or(0.0, |y| tr.max_outflow_rate(&y, 0.0));
+            if rate > 0.0 && rate.is_finite() {
+                0.5 * 1.392_647 / (3.0 * rate)
+            } else {
+                f64::INFINITY
+            }
+        }
+        _ => f64::INFINITY,
+    };
     let mut stability = None;
     let mut use_rk4 = matches!(s.method, Method::Rk4);
     if matches!(s.method, Method::Rk4 | Method::Auto { .. }) {
@@ -270,7 +286,7 @@ fn run(
             (Ok(rk), _) => {
                 let lim = rk4_limit(rk, &dae.names)?;
                 if let Method::Auto { .. } = s.method {
-                    use_rk4 = 0.5 * lim.dt_max >= s.output_every / 20.0;
+                    use_rk4 = (0.5 * lim.dt_max).min(transport_dt) >= s.output_every / 20.0;
                 }
                 stability = Some(lim);
             }
@@ -292,7 +308,7 @@ fn run(
                 }
                 dt
             }
-            None => (0.5 * lim.dt_max).min(s.output_every),
+            None => (0.5 * lim.dt_max).min(s.output_every).min(transport_dt),
         };
         (dt, "rk4")
     } else {
