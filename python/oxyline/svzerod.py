@@ -682,15 +682,9 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
             "pressure_in": p_in.sum(axis=0) / n,
             "pressure_out": p_out.sum(axis=0) / n,
         })
-    nt = rows.shape[0]
-    return pd.DataFrame({
-        "name": np.repeat(np.array(names, dtype=object), nt),
-        "time": np.tile(times, nv),
-        "flow_in": q_in.T.reshape(-1),
-        "flow_out": q_out.T.reshape(-1),
-        "pressure_in": p_in.T.reshape(-1),
-        "pressure_out": p_out.T.reshape(-1),
-    })
+    from oxyline.result import long_table
+
+    return long_table(names, times, rows[:, : 4 * nv])
 
 
 __all__ = ["RunSettings", "run_settings", "simulate", "to_model", "to_oxyline_dict"]
