@@ -570,7 +570,7 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str]
             "dt": dt,
             "method": "generalized-alpha",
             "rho_infty": rho,
-            "start": "svzerod-steady" if settings.steady_initial else "zero",
+            "start": "svzerod-steady" if settings.steady_initial else "svzerod-zero",
             "output": {"cycles": "all" if settings.output_all_cycles else "last",
                        "every": dt * interval, "segments": False},
         },
@@ -641,7 +641,7 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
         stride = 1
     kw: dict[str, Any] = {
         "period": s.period, "cycles": s.cycles, "method": method, "rho_infty": s.rho_infty,
-        "start": "svzerod-steady" if s.steady_initial else "zero",
+        "start": "svzerod-steady" if s.steady_initial else "svzerod-zero",
         "newton_atol": s.absolute_tolerance, "max_iterations": s.max_iterations,
         "output_all_cycles": s.output_all_cycles, "segments": False,
     }

@@ -84,6 +84,9 @@ pub struct Rk4<'a> {
     ra: Vec<f64>,
     k: [Vec<f64>; 4],
     stage: Vec<f64>,
+    /// 2 S |Q| of stenoses on differential unknowns at the linearisation point of
+    /// `linear_operator` (zero: the linear circuit).
+    lin_stenosis: Vec<(usize, f64)>,
 }
 
 impl<'a> Rk4<'a> {
@@ -130,6 +133,7 @@ impl<'a> Rk4<'a> {
             ra: vec![0.0; alg.len()],
             k: [vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]],
             stage: vec![0.0; n],
+            lin_stenosis: Vec::new(),
             alg,
         };
         if !me.alg.is_empty() {
@@ -181,13 +185,21 @@ impl<'a> Rk4<'a> {
             if !self.alg_lu.as_ref().unwrap().solve_in_place(&mut self.ra) {
                 return Err(crate::genalpha::singular(time, "algebraic elimination"));
             }
-            let mut ymax = 0.0f64;
+            // pressures and flows differ by many decades in SI: judge each kind on its own scale
+            let nn = self.dae.n_nodes;
+            let (mut pmax, mut qmax, mut dp, mut dq) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
             for (l, &g) in self.alg.iter().enumerate() {
                 y[g] += self.ra[l];
-                rmax = rmax.max(self.ra[l].abs());
-                ymax = ymax.max(y[g].abs());
+                if g < nn {
+                    dp = dp.max(self.ra[l].abs());
+                    pmax = pmax.max(y[g].abs());
+                } else {
+                    dq = dq.max(self.ra[l].abs());
+                    qmax = qmax.max(y[g].abs());
+                }
             }
-            if !nonlinear || rmax <= 1e-13 * ymax.max(1e-300) || it == 29 {
+            rmax = rmax.max((dp / pmax.max(1e-300)).max(dq / qmax.max(1e-300)));
+            if !nonlinear || rmax <= 1e-13 || it == 29 {
                 break;
             }
         }
@@ -291,6 +303,23 @@ impl<'a> Rk4<'a> {
         self.diff.iter().map(|&i| self.e[i]).collect()
     }
 
+    /// Linearise stenoses (S|Q|Q → 2S|Q| per unit flow) at state `y` for `linear_operator`:
+    /// a stenosis on an inductor adds −2S|Q|/L to that branch's eigenvalue.
+    pub fn set_linearization(&mut self, y: &[f64]) -> Result<()> {
+        self.lin_stenosis = self
+            .dae
+            .stenosis
+            .iter()
+            .filter(|(i, _)| self.e[*i] > 0.0)
+            .map(|&(i, s)| (i, 2.0 * s * y[i].abs()))
+            .collect();
+        if !self.alg_stenosis.is_empty() {
+            self.factor_algebraic(y)
+                .map_err(|m| crate::genalpha::singular(0.0, &m))?;
+        }
+        Ok(())
+    }
+
     /// Apply the linearised ODE operator (zero forcing, stenosis ignored) to a differential vector.
     pub fn linear_operator(&mut self, x: &[f64], out: &mut [f64]) -> Result<()> {
         let n = self.dae.n;
@@ -310,6 +339,13 @@ impl<'a> Rk4<'a> {
         }
         for (j, &i) in self.diff.iter().enumerate() {
             out[j] = -self.dae.f.row_dot(i, &y) / self.e[i];
+        }
+        if !self.lin_stenosis.is_empty() {
+            for (j, &i) in self.diff.iter().enumerate() {
+                if let Ok(k) = self.lin_stenosis.binary_search_by_key(&i, |&(u, _)| u) {
+                    out[j] -= self.lin_stenosis[k].1 * y[i] / self.e[i];
+                }
+            }
         }
         Ok(())
     }

@@ -32,7 +32,10 @@ pub enum Start {
     SvZeroDSteady {
         rho_inf: f64,
     },
+    /// Zero differential state; algebraic unknowns consistent with the forcing at t = 0.
     Zero,
+    /// All-zero y and ẏ, as svZeroDSolver without `steady_initial`.
+    SvZeroDZero,
 }
 
 #[derive(Debug, Clone)]
@@ -284,6 +287,13 @@ fn run(
         let mut probe = Rk4::new(dae, Regime::Transient, 1.0);
         match (&mut probe, s.method) {
             (Ok(rk), _) => {
+                if !dae.is_linear() {
+                    // stenoses stiffen their branches in proportion to the flow: linearise at
+                    // the steady state of the mean boundary conditions
+                    if let Ok(ys) = steady_state(dae) {
+                        rk.set_linearization(&ys)?;
+                    }
+                }
                 let lim = rk4_limit(rk, &dae.names)?;
                 if let Method::Auto { .. } = s.method {
                     use_rk4 = (0.5 * lim.dt_max).min(transport_dt) >= s.output_every / 20.0;
@@ -341,7 +351,7 @@ fn run(
     // initial state
     let n = dae.n;
     let (mut y, mut yd) = match s.start {
-        Start::Zero => (vec![0.0; n], vec![0.0; n]),
+        Start::Zero | Start::SvZeroDZero => (vec![0.0; n], vec![0.0; n]),
         Start::Steady => {
             let y = steady_state(dae)?;
             let mut f = vec![0.0; n];
@@ -363,6 +373,18 @@ fn run(
             (y, yd)
         }
     };
+    if matches!(s.start, Start::Zero | Start::Steady) && !use_rk4 {
+        // the algebraic unknowns (e.g. the pressure before a resistance fed by the inflow) follow
+        // the forcing at t = 0, and ẏ of the differential ones is the circuit's own; an index-2
+        // circuit (RK4 refuses it) keeps the start as given
+        if let Ok(mut rk) = Rk4::new(dae, Regime::Transient, dt) {
+            let mut yc = y.clone();
+            if let Ok(d) = rk.make_consistent(0.0, &mut yc).and_then(|_| rk.derivative(0.0, &mut yc)) {
+                y = yc;
+                yd = d;
+            }
+        }
+    }
     let mut stepper = if use_rk4 {
         let mut rk = Rk4::new(dae, Regime::Transient, dt)?;
         rk.make_consistent(0.0, &mut y)?;
@@ -526,7 +548,10 @@ fn run(
                     break 'cycles;
                 }
             }
-            if step_global % stride == 0 {
+            // last-cycle output counts from the cycle start (svZeroDSolver's convention), so
+            // the output times do not depend on how many cycles ran
+            let due = if s.output_all_cycles { step_global % stride == 0 } else { k % stride == 0 };
+            if due {
                 let tr = if s.output_all_cycles {
                     t_new
                 } else {

@@ -288,9 +288,10 @@ impl Network {
             "steady" => Start::Steady,
             "svzerod-steady" => Start::SvZeroDSteady { rho_inf: rho_infty },
             "zero" => Start::Zero,
+            "svzerod-zero" => Start::SvZeroDZero,
             other => {
                 return Err(ModelError::new_err(format!(
-                    "simulation: unknown start '{other}' (expected steady, svzerod-steady or zero)"
+                    "simulation: unknown start '{other}' (expected steady, zero, svzerod-steady or svzerod-zero)"
                 )));
             }
         };
