@@ -491,13 +491,8 @@ def test_steady_limit_of_the_pulsatile_case_is_poiseuille() -> None:
     assert mean_p == pytest.approx(expected, rel=1e-6)
 
 
-GA_INITIAL = pytest.mark.xfail(
-    strict=True, reason="simulate.rs records generalized-alpha's initial state before solving its "
-                        "algebraic unknowns for the forcing at t = 0")
-
-
 @pytest.mark.parametrize("start", ["zero", "steady"])
-@pytest.mark.parametrize("method", ["rk4", pytest.param("generalized-alpha", marks=GA_INITIAL)])
+@pytest.mark.parametrize("method", ["rk4", "generalized-alpha"])
 def test_recorded_initial_state_is_consistent(method: str, start: str) -> None:
     # a lumped R + C vessel (L arrangement: C at the distal node): the inlet node has no
     # capacitance, so its pressure is algebraic, P_in = R Q_in(t) + P_C, also at t = 0
@@ -519,13 +514,10 @@ def test_recorded_initial_state_is_consistent(method: str, start: str) -> None:
     assert v.pressure_in[0] == pytest.approx(2 * q * r + p_c, rel=1e-12)
 
 
-@pytest.mark.xfail(strict=True, raises=oxyline.SolverError,
-                   reason="the RK4 limit ignores the stenosis stiffness 2 S |Q| / L; the blow-up "
-                          "is reported as a singular algebraic system")
 def test_rk4_with_a_stenosis_on_an_inductor_is_stable_or_refused() -> None:
     # stenosis S |Q| Q in series with an inertance: its linearisation adds -2 S |Q| / L to the
-    # branch eigenvalue (2e3 /s at the mean flow, more in the start-up overshoot), which the
-    # automatic dt = dt_max / 2 of the linear circuit (1.3e-3 s) does not resolve
+    # branch eigenvalue (2e3 /s at the mean flow, more in the start-up overshoot); the automatic
+    # dt must account for it (the linear circuit alone would give 1.3e-3 s and blow up)
     model = oxyline.load_model({
         "name": "stenosis", "period": 1.0,
         "vessels": [
@@ -538,7 +530,7 @@ def test_rk4_with_a_stenosis_on_an_inductor_is_stable_or_refused() -> None:
                                 "out": {"type": "resistance", "resistance": 1e7}},
     })
     try:
-        res = oxyline.simulate(model, method="rk4", cycles=1, output_every=0.05, start="zero")
+        res = oxyline.simulate(model, method="rk4", cycles=4, output_every=0.05, start="zero")
     except oxyline.UnstableTimeStep:
         return  # refusing the step is acceptable
     # otherwise the run must converge to the steady flow, as generalized-alpha does

@@ -12,7 +12,11 @@ pub enum Error {
     #[error(
         "time step {dt:.3e} s is unstable for rk4: the largest stable step is {limit:.3e} s, set by {element}; use dt <= {limit:.3e} or method 'generalized-alpha'"
     )]
-    Unstable { dt: f64, limit: f64, element: String },
+    Unstable {
+        dt: f64,
+        limit: f64,
+        element: String,
+    },
     /// The integration failed (singular system, Newton failure, non-finite state).
     #[error("solver failed at t = {time:.6e} s: {message}")]
     Solver { time: f64, message: String },
@@ -23,10 +27,16 @@ pub enum Error {
 
 impl Error {
     pub fn model(element: impl Into<String>, message: impl Into<String>) -> Self {
-        Error::Model { element: element.into(), message: message.into() }
+        Error::Model {
+            element: element.into(),
+            message: message.into(),
+        }
     }
     pub fn solver(time: f64, message: impl Into<String>) -> Self {
-        Error::Solver { time, message: message.into() }
+        Error::Solver {
+            time,
+            message: message.into(),
+        }
     }
 }
 

@@ -9,7 +9,10 @@ use nalgebra::{Complex, DMatrix, DVector};
 pub fn input_impedance(dae: &Dae, node: usize, omega: f64) -> Result<Complex<f64>> {
     let n = dae.n;
     if n > 5000 {
-        return Err(Error::model("input_impedance", format!("circuit too large for the dense solve ({n} unknowns)")));
+        return Err(Error::model(
+            "input_impedance",
+            format!("circuit too large for the dense solve ({n} unknowns)"),
+        ));
     }
     let mut a = DMatrix::<Complex<f64>>::zeros(n, n);
     for i in 0..n {
@@ -20,6 +23,9 @@ pub fn input_impedance(dae: &Dae, node: usize, omega: f64) -> Result<Complex<f64
     }
     let mut b = DVector::<Complex<f64>>::zeros(n);
     b[node] = Complex::new(1.0, 0.0);
-    let y = a.lu().solve(&b).ok_or_else(|| Error::solver(0.0, "singular frequency-domain system"))?;
+    let y = a
+        .lu()
+        .solve(&b)
+        .ok_or_else(|| Error::solver(0.0, "singular frequency-domain system"))?;
     Ok(y[node])
 }

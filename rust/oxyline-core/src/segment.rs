@@ -106,8 +106,16 @@ mod tests {
             0.02,
             0.008,
             0.008,
-            Blood { density: 1050.0, viscosity: 3.5e-3 },
-            Some(Wall { thickness: 0.002, youngs_modulus: 5.11e6, poisson_ratio: 0.5, model: WallModel::Thin }),
+            Blood {
+                density: 1050.0,
+                viscosity: 3.5e-3,
+            },
+            Some(Wall {
+                thickness: 0.002,
+                youngs_modulus: 5.11e6,
+                poisson_ratio: 0.5,
+                model: WallModel::Thin,
+            }),
             InertanceProfile::Flat,
         );
         assert!((s.resistance / 4.352e4 - 1.0).abs() < 1e-3);
@@ -122,13 +130,20 @@ mod tests {
             dx,
             a,
             b,
-            Blood { density: 1050.0, viscosity: mu },
+            Blood {
+                density: 1050.0,
+                viscosity: mu,
+            },
             None,
             InertanceProfile::Flat,
         );
         // ∫ 8μ/(π r⁴) dx with r linear: 8μ dx/(3π (a − b)) (1/b³ − 1/a³)
-        let exact =
-            8.0 * mu * dx / (3.0 * std::f64::consts::PI * (a - b)) * (1.0 / b.powi(3) - 1.0 / a.powi(3));
-        assert!((s.resistance / exact - 1.0).abs() < 1e-13, "{}", s.resistance / exact);
+        let exact = 8.0 * mu * dx / (3.0 * std::f64::consts::PI * (a - b))
+            * (1.0 / b.powi(3) - 1.0 / a.powi(3));
+        assert!(
+            (s.resistance / exact - 1.0).abs() < 1e-13,
+            "{}",
+            s.resistance / exact
+        );
     }
 }

@@ -29,9 +29,7 @@ pub enum Start {
     /// Exact steady solution of the mean boundary conditions.
     Steady,
     /// svZeroDSolver's: 31 generalized-α steps of T/10 with mean BCs and no Windkessel C.
-    SvZeroDSteady {
-        rho_inf: f64,
-    },
+    SvZeroDSteady { rho_inf: f64 },
     /// Zero differential state; algebraic unknowns consistent with the forcing at t = 0.
     Zero,
     /// All-zero y and ẏ, as svZeroDSolver without `steady_initial`.
@@ -379,7 +377,10 @@ fn run(
         // circuit (RK4 refuses it) keeps the start as given
         if let Ok(mut rk) = Rk4::new(dae, Regime::Transient, dt) {
             let mut yc = y.clone();
-            if let Ok(d) = rk.make_consistent(0.0, &mut yc).and_then(|_| rk.derivative(0.0, &mut yc)) {
+            if let Ok(d) = rk
+                .make_consistent(0.0, &mut yc)
+                .and_then(|_| rk.derivative(0.0, &mut yc))
+            {
                 y = yc;
                 yd = d;
             }
@@ -550,7 +551,11 @@ fn run(
             }
             // last-cycle output counts from the cycle start (svZeroDSolver's convention), so
             // the output times do not depend on how many cycles ran
-            let due = if s.output_all_cycles { step_global % stride == 0 } else { k % stride == 0 };
+            let due = if s.output_all_cycles {
+                step_global % stride == 0
+            } else {
+                k % stride == 0
+            };
             if due {
                 let tr = if s.output_all_cycles {
                     t_new

@@ -43,8 +43,18 @@ pub enum WaveformSpec {
 #[derive(Debug, Clone)]
 pub enum Waveform {
     Constant(f64),
-    Table { t: Vec<f64>, v: Vec<f64>, m: Option<Vec<f64>>, mean: f64 },
-    Fourier { omega: f64, mean: f64, cos: Vec<f64>, sin: Vec<f64> },
+    Table {
+        t: Vec<f64>,
+        v: Vec<f64>,
+        m: Option<Vec<f64>>,
+        mean: f64,
+    },
+    Fourier {
+        omega: f64,
+        mean: f64,
+        cos: Vec<f64>,
+        sin: Vec<f64>,
+    },
 }
 
 impl Waveform {
@@ -61,7 +71,12 @@ impl Waveform {
                 }
                 Ok(Waveform::Constant(*value))
             }
-            WaveformSpec::Fourier { period, mean, cos, sin } => {
+            WaveformSpec::Fourier {
+                period,
+                mean,
+                cos,
+                sin,
+            } => {
                 if !(period.is_finite() && *period > 0.0) {
                     return Err(bad(format!("Fourier period must be > 0, got {period}")));
                 }
@@ -75,7 +90,12 @@ impl Waveform {
                     sin: sin.clone(),
                 })
             }
-            WaveformSpec::Table { time, value, interpolation, steady } => {
+            WaveformSpec::Table {
+                time,
+                value,
+                interpolation,
+                steady,
+            } => {
                 if time.len() != value.len() {
                     return Err(bad(format!(
                         "time table has {} entries but value table has {}",
@@ -86,8 +106,11 @@ impl Waveform {
                 if time.is_empty() {
                     return Err(bad("empty time table".into()));
                 }
-                if let Some((i, x)) =
-                    time.iter().chain(value).enumerate().find(|(_, x)| !x.is_finite())
+                if let Some((i, x)) = time
+                    .iter()
+                    .chain(value)
+                    .enumerate()
+                    .find(|(_, x)| !x.is_finite())
                 {
                     return Err(bad(format!("table entry {i} is not finite ({x})")));
                 }
@@ -116,7 +139,12 @@ impl Waveform {
                     }
                 };
                 let mean = table_mean(time, value, m.as_deref());
-                Ok(Waveform::Table { t: time.clone(), v: value.clone(), m, mean: steady.unwrap_or(mean) })
+                Ok(Waveform::Table {
+                    t: time.clone(),
+                    v: value.clone(),
+                    m,
+                    mean: steady.unwrap_or(mean),
+                })
             }
         }
     }
@@ -142,7 +170,12 @@ impl Waveform {
     pub fn eval(&self, time: f64) -> f64 {
         match self {
             Waveform::Constant(v) => *v,
-            Waveform::Fourier { omega, mean, cos, sin } => {
+            Waveform::Fourier {
+                omega,
+                mean,
+                cos,
+                sin,
+            } => {
                 let mut s = *mean;
                 for (k, a) in cos.iter().enumerate() {
                     s += a * (omega * (k + 1) as f64 * time).cos();
@@ -211,7 +244,10 @@ fn periodic_spline_moments(t: &[f64], v: &[f64]) -> Vec<f64> {
         a[(i, ip)] += hn / 6.0;
         rhs[i] = (v[i + 1] - v[i]) / hn - (v[i] - vp) / hp;
     }
-    let sol = a.lu().solve(&rhs).unwrap_or_else(|| nalgebra::DVector::zeros(n));
+    let sol = a
+        .lu()
+        .solve(&rhs)
+        .unwrap_or_else(|| nalgebra::DVector::zeros(n));
     let mut m: Vec<f64> = sol.iter().copied().collect();
     m.push(m[0]);
     m
@@ -242,10 +278,17 @@ mod tests {
     fn cubic_spline_reproduces_a_sine_and_its_mean() {
         let n = 64;
         let time: Vec<f64> = (0..=n).map(|i| i as f64 / n as f64).collect();
-        let value: Vec<f64> =
-            time.iter().map(|t| 3.0 + (2.0 * std::f64::consts::PI * t).sin()).collect();
+        let value: Vec<f64> = time
+            .iter()
+            .map(|t| 3.0 + (2.0 * std::f64::consts::PI * t).sin())
+            .collect();
         let w = Waveform::from_spec(
-            &WaveformSpec::Table { time, value, interpolation: Interpolation::PeriodicCubic, steady: None },
+            &WaveformSpec::Table {
+                time,
+                value,
+                interpolation: Interpolation::PeriodicCubic,
+                steady: None,
+            },
             "inlet",
         )
         .unwrap();
