@@ -749,6 +749,23 @@ impl Transport {
     /// Total concentration carried by a face from the boundary end `b` next to node `n`:
     /// prescribed, or zero-gradient (the neighbour's value; for a mixing point the value its
     /// sweep used, so that the point stays exactly balanced).
+    /// Flow and upwind (donor) concentration of face `fi`.
+    #[inline]
+    fn upwind(&self, fi: usize) -> (f64, f64) {
+        let f = &self.faces[fi];
+        let q = self.qf[fi];
+        let (up, other) = if q >= 0.0 {
+            (f.from, f.to)
+        } else {
+            (f.to, f.from)
+        };
+        let c = match up {
+            End::Node(n) => self.conc[n],
+            End::Boundary(b) => self.boundary_conc(b, other),
+        };
+        (q, c)
+    }
+
     #[inline]
     fn boundary_conc(&self, b: usize, n: End) -> f64 {
         match (self.bval[b], n) {
@@ -901,16 +918,7 @@ impl Transport {
             let (mut i_in, mut i_out) = (0.0, 0.0);
             for &fi in &self.boundary_faces {
                 let f = &self.faces[fi];
-                let q = self.qf[fi];
-                let (up, other) = if q >= 0.0 {
-                    (f.from, f.to)
-                } else {
-                    (f.to, f.from)
-                };
-                let c = match up {
-                    End::Node(n) => self.conc[n],
-                    End::Boundary(b) => self.boundary_conc(b, other),
-                };
+                let (q, c) = self.upwind(fi);
                 let flux = q * c;
                 match f.from {
                     End::Node(n) => dnode[n] -= flux,
@@ -1381,17 +1389,7 @@ impl Transport {
                 if fi == usize::MAX {
                     return (f64::NAN, f64::NAN);
                 }
-                let f = &tr.faces[fi];
-                let q = tr.qf[fi];
-                let (up, other) = if q >= 0.0 {
-                    (f.from, f.to)
-                } else {
-                    (f.to, f.from)
-                };
-                let c = match up {
-                    End::Node(n) => tr.conc[n],
-                    End::Boundary(b) => tr.boundary_conc(b, other),
-                };
+                let (q, c) = tr.upwind(fi);
                 (q * c, sp.binding.free(c, c))
             };
             let seg_wall = |j: usize| -> f64 {
