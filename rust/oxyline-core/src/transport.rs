@@ -752,13 +752,7 @@ impl Transport {
     /// Flow and upwind (donor) concentration of face `fi`.
     #[inline]
     fn upwind(&self, fi: usize) -> (f64, f64) {
-        let f = &self.faces[fi];
-        let q = self.qf[fi];
-        let (up, other) = if q >= 0.0 {
-            (f.from, f.to)
-        } else {
-            (f.to, f.from)
-        };
+        let (q, up, other) = oriented(&self.faces, &self.qf, fi);
         let c = match up {
             End::Node(n) => self.conc[n],
             End::Boundary(b) => self.boundary_conc(b, other),
@@ -827,13 +821,7 @@ impl Transport {
             self.sweep.lag[m] = lag;
             let (mut num, mut den) = (0.0, 0.0);
             for &fi in &self.node_faces[self.node_ptr[m]..self.node_ptr[m + 1]] {
-                let f = &self.faces[fi];
-                let q = self.qf[fi];
-                let (up, down) = if q >= 0.0 {
-                    (f.from, f.to)
-                } else {
-                    (f.to, f.from)
-                };
+                let (q, up, down) = oriented(&self.faces, &self.qf, fi);
                 if up == End::Node(m) {
                     den += q.abs();
                 } else if down == End::Node(m) {
@@ -1199,13 +1187,7 @@ impl Transport {
         // pass 1: denominators, known inflows, pending counts
         for &n in unknowns {
             for &fi in &self.node_faces[self.node_ptr[n]..self.node_ptr[n + 1]] {
-                let f = &self.faces[fi];
-                let q = self.qf[fi];
-                let (up, down) = if q >= 0.0 {
-                    (f.from, f.to)
-                } else {
-                    (f.to, f.from)
-                };
+                let (q, up, down) = oriented(&self.faces, &self.qf, fi);
                 let aq = q.abs();
                 if up == End::Node(n) {
                     sw.den[n] += aq;
@@ -1257,13 +1239,7 @@ impl Transport {
                 sw.lag[n]
             };
             for &fi in &self.node_faces[self.node_ptr[n]..self.node_ptr[n + 1]] {
-                let f = &self.faces[fi];
-                let q = self.qf[fi];
-                let (up, down) = if q >= 0.0 {
-                    (f.from, f.to)
-                } else {
-                    (f.to, f.from)
-                };
+                let (q, up, down) = oriented(&self.faces, &self.qf, fi);
                 if up != End::Node(n) || q == 0.0 {
                     continue;
                 }
@@ -1293,13 +1269,7 @@ impl Transport {
                 for &n in &rest {
                     let mut num = sw.num[n];
                     for &fi in &self.node_faces[self.node_ptr[n]..self.node_ptr[n + 1]] {
-                        let f = &self.faces[fi];
-                        let q = self.qf[fi];
-                        let (up, down) = if q >= 0.0 {
-                            (f.from, f.to)
-                        } else {
-                            (f.to, f.from)
-                        };
+                        let (q, up, down) = oriented(&self.faces, &self.qf, fi);
                         if down != End::Node(n) {
                             continue;
                         }
@@ -1562,5 +1532,18 @@ impl crate::rk4::Coupled for Transport {
     #[inline]
     fn derivative(&mut self, time: f64, y: &[f64], z: &[f64], dz: &mut [f64]) -> Result<()> {
         self.rhs(time, y, z, dz)
+    }
+}
+
+/// Flow of face `fi` and its ends ordered along the flow (upstream, downstream). A free function so
+/// that callers holding a mutable borrow of other transport fields can use it.
+#[inline]
+fn oriented(faces: &[Face], qf: &[f64], fi: usize) -> (f64, End, End) {
+    let f = &faces[fi];
+    let q = qf[fi];
+    if q >= 0.0 {
+        (q, f.from, f.to)
+    } else {
+        (q, f.to, f.from)
     }
 }
