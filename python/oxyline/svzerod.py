@@ -175,6 +175,23 @@ def _numlist(v: Any, element: str, key: str) -> list[float]:
     return [_num(x, element, f"{key}[{i}]") for i, x in enumerate(v)]
 
 
+def _entry(raw: Any, where: str, name_key: str, label: str, allowed: Any, type_key: str,
+           types: Any) -> tuple[Mapping[str, Any], str, str, str]:
+    """Check one entry of a section list (vessel, junction, boundary condition): a mapping with a
+    name, only known keys and a supported type. Returns (entry, name, type, element label)."""
+    entry = _mapping(raw, where)
+    name = str(_required(entry, name_key, where))
+    el = f"{label} '{name}'"
+    for k in entry:
+        if k not in allowed and not _is_comment(k):
+            raise UnsupportedElement(f"{el}: unknown key '{k}'")
+    kind = _required(entry, type_key, el)
+    if kind not in types:
+        raise UnsupportedElement(f"{el}: {type_key} '{kind}' is not supported (supported: "
+                                 f"{', '.join(sorted(types))})")
+    return entry, name, kind, el
+
+
 def _required(d: Mapping[str, Any], key: str, element: str) -> Any:
     if key not in d:
         raise ModelError(f"{element}: missing '{key}'")
@@ -319,16 +336,8 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str]
     bcs: dict[str, tuple[str, dict[str, Any]]] = {}
     model_period = -1.0
     for i, b in enumerate(bc_list):
-        b = _mapping(b, f"boundary_conditions[{i}]")
-        name = str(_required(b, "bc_name", f"boundary_conditions[{i}]"))
-        el = f"boundary condition '{name}'"
-        for k in b:
-            if k not in BC_ENTRY_KEYS and not _is_comment(k):
-                raise UnsupportedElement(f"{el}: unknown key '{k}'")
-        kind = _required(b, "bc_type", el)
-        if kind not in BC_PARAMS:
-            raise UnsupportedElement(f"{el}: bc_type '{kind}' is not supported (supported: "
-                                     f"{', '.join(BC_PARAMS)})")
+        b, name, kind, el = _entry(b, f"boundary_conditions[{i}]", "bc_name",
+                                   "boundary condition", BC_ENTRY_KEYS, "bc_type", BC_PARAMS)
         el = f"{kind} boundary condition '{name}'"
         vals = _check_params(_required(b, "bc_values", el), BC_PARAMS[kind], el)
         if name in bcs:
@@ -412,16 +421,8 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str]
 
     seen_names: set[str] = set()
     for i, v in enumerate(vessels_in):
-        v = _mapping(v, f"vessels[{i}]")
-        name = str(_required(v, "vessel_name", f"vessels[{i}]"))
-        el = f"vessel '{name}'"
-        for k in v:
-            if k not in VESSEL_KEYS and not _is_comment(k):
-                raise UnsupportedElement(f"{el}: unknown key '{k}'")
-        kind = _required(v, "zero_d_element_type", el)
-        if kind not in VESSEL_TYPES:
-            raise UnsupportedElement(f"{el}: zero_d_element_type '{kind}' is not supported "
-                                     "(supported: BloodVessel)")
+        v, name, kind, el = _entry(v, f"vessels[{i}]", "vessel_name", "vessel", VESSEL_KEYS,
+                                   "zero_d_element_type", VESSEL_TYPES)
         if name in seen_names:
             raise ModelError(f"{el}: vessel_name used twice")
         seen_names.add(name)
@@ -467,16 +468,8 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str]
         raise ModelError("junctions: must be a list")
     hidden: list[dict[str, Any]] = []
     for i, j in enumerate(junctions):
-        j = _mapping(j, f"junctions[{i}]")
-        jname = str(_required(j, "junction_name", f"junctions[{i}]"))
-        el = f"junction '{jname}'"
-        for k in j:
-            if k not in JUNCTION_KEYS and not _is_comment(k):
-                raise UnsupportedElement(f"{el}: unknown key '{k}'")
-        kind = _required(j, "junction_type", el)
-        if kind not in JUNCTION_TYPES:
-            raise UnsupportedElement(f"{el}: junction_type '{kind}' is not supported (supported: "
-                                     f"{', '.join(sorted(JUNCTION_TYPES))})")
+        j, jname, kind, el = _entry(j, f"junctions[{i}]", "junction_name", "junction",
+                                    JUNCTION_KEYS, "junction_type", JUNCTION_TYPES)
         el = f"{kind} '{jname}'"
         if jname in bcs or jname in vessel_names:
             raise ModelError(f"{el}: name already used by another block")
