@@ -2,7 +2,8 @@
 ``../shared/networks/openbf`` (Apache-2.0) with :func:`oxyline.io.openbf.to_native_dict`, and
 ``whole-body-140`` from circulatory_autogen's FinalModel in ``../shared/networks/circulatory_autogen``
 (Apache-2.0) with :func:`oxyline.io.circulatory_autogen.to_native_dict` (inflow: the Mynard
-template of ``../shared/networks/pwdb``, MIT).
+template of ``../shared/networks/pwdb``, MIT; terminal resistances calibrated to the source's
+observed mean aortic pressure, wall viscosity kept: :data:`WHOLE_BODY_OPTIONS`).
 
     python benches/make_models_data.py
 """
@@ -82,28 +83,84 @@ def main() -> None:
     whole_body()
 
 
+#: the built-in's importer options: R_T calibrated to the observed mean aortic pressure, the
+#: source's wall viscosity kept (see docs/models.md, "Calibration")
+WHOLE_BODY_OPTIONS = {"terminal_resistance_scale": "calibrate", "wall_viscosity": True}
+
+
+def high_frequency_fraction(time, p, f_cut: float = 20.0) -> float:
+    """Share of the spectral energy of p - mean(p) (one period, uniform samples) above f_cut."""
+    import numpy as np
+
+    x = np.asarray(p) - np.mean(p)
+    e = np.abs(np.fft.rfft(x))**2
+    f = np.fft.rfftfreq(len(x), float(time[1] - time[0]))
+    return float(e[f > f_cut].sum() / e[1:].sum())
+
+
+def aortic_numbers(d: dict) -> dict[str, float]:
+    """Mean/systolic/diastolic pressure [kPa] at aortic_arch_C46's C node (circulatory_autogen's
+    ``aortic_arch_C46/u``), cardiac output [L/min] and the > 20 Hz energy share, last cycle."""
+    import oxyline
+
+    res = oxyline.simulate(d, until_periodic=1e-6, max_cycles=200)
+    t = res.time[:-1]
+    p = res.vessel("aortic_arch_C46").pressure_out[:-1]
+    q = res.vessel("ascending_aorta_C0").flow_in[:-1]
+    return {"mean": p.mean() / 1e3, "sys": p.max() / 1e3, "dia": p.min() / 1e3,
+            "co": q.mean() * 6e4, "hf": high_frequency_fraction(t, p)}
+
+
 def whole_body() -> None:
-    """``whole-body-140``: circulatory_autogen FinalModel arterial tree (commit 8e028f37)."""
+    """``whole-body-140``: circulatory_autogen FinalModel arterial tree (commit 8e028f37),
+    terminal resistances calibrated to the observed 12.0 kPa mean aortic pressure, wall viscosity
+    kept."""
     res = CA / "resources"
+    files = (res / "FinalModel_vessel_array.csv", res / "FinalModel_parameters.csv")
+    kw = {"obs_data_json": res / "FinalModel_obs_data.json",
+          "mynard_template": PWDB / "Mynard2015_aortic_flow_template.csv"}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        d = circulatory_autogen.to_native_dict(
-            res / "FinalModel_vessel_array.csv", res / "FinalModel_parameters.csv",
-            obs_data_json=res / "FinalModel_obs_data.json",
-            mynard_template=PWDB / "Mynard2015_aortic_flow_template.csv", name="whole-body-140")
+        raw = circulatory_autogen.to_native_dict(*files, **kw, name="whole-body-140")
+        scale, module, target = circulatory_autogen.calibrate_terminal_resistance_scale(
+            raw, kw["obs_data_json"])
+        d = circulatory_autogen.to_native_dict(*files, **kw, **WHOLE_BODY_OPTIONS,
+                                               name="whole-body-140")
     notes = sorted({str(w.message) for w in caught})
+    before, after = aortic_numbers(raw), aortic_numbers(d)
+
+    def lines(n: dict[str, float]) -> list[str]:
+        mmhg = 0.133322
+        return [(f"#   mean {n['mean']:.2f} kPa ({n['mean'] / mmhg:.0f} mmHg), systolic/diastolic "
+                 f"{n['sys']:.2f}/{n['dia']:.2f} kPa ({n['sys'] / mmhg:.0f}/{n['dia'] / mmhg:.0f} "
+                 f"mmHg),"),
+                (f"#   pulse {n['sys'] - n['dia']:.2f} kPa, {n['hf'] * 100:.2g} % of the pressure "
+                 f"energy above 20 Hz")]
+
     header = ["# oxyline built-in model 'whole-body-140': circulatory_autogen FinalModel arterial tree.",
               "# Converted from FinbarArgus/circulatory_autogen (Apache-2.0, commit 8e028f37),",
               "# resources/FinalModel_vessel_array.csv + FinalModel_parameters.csv, by",
               "# oxyline.io.circulatory_autogen.to_native_dict; inflow: Mynard & Smolich 2015 aortic",
-              "# flow template from peterhcharlton/pwdb (MIT) scaled to FinalModel_obs_data.json.",
+              "# flow template from peterhcharlton/pwdb (MIT) scaled to FinalModel_obs_data.json",
+              f"# ({after['co']:.2f} L/min).",
+              f"# Calibration: every terminal resistance R_T x {scale:.6g} (one uniform factor, keeps",
+              "# the source's R_T ratios), found by calibrate_terminal_resistance_scale so that the",
+              f"# cycle-mean pressure at {module} (steady resistive solve, exact for the linear",
+              f"# circuit) equals FinalModel_obs_data.json's {target:g} Pa at the mean inflow. Terminal",
+              "# compliances as in the source (the observations hold no pulse pressure). The source's",
+              "# wall viscosity R_v = 0.01 s/C is kept (wall_viscosity=True: dead-end '.wall' branches,",
+              "# vessels rigid tubes of the source radius and length).",
+              "# Last cycle at aortic_arch_C46 (its C node), this model:",
+              *lines(after),
+              "# the raw source values (scale 1, no R_v) for comparison:",
+              *lines(before),
               "# Regenerate: benches/make_models_data.py. Licences and citations: NOTICE.",
               *[f"# importer note: {n}" for n in notes]]
     text = "\n".join(header) + "\n" + dump(d)
     if yaml.safe_load(text) != d:
         raise SystemExit("whole-body-140: YAML round trip changed the model")
     (OUT / "whole-body-140.yaml").write_text(text)
-    print("whole-body-140", len(d["vessels"]), "vessels")
+    print("whole-body-140", len(d["vessels"]), "vessels, R_T scale", scale)
     shutil.copy(CA / "LICENSE", OUT / "LICENSE-circulatory_autogen")
     shutil.copy(PWDB / "LICENSE", OUT / "LICENSE-pwdb")
 

@@ -182,7 +182,7 @@ def to_native_dict(vessel_array_csv: PathLike, parameters_csv: PathLike, *,
                    inflow: str | tuple[Any, Any] | PathLike = "mynard2015",
                    mynard_template: PathLike | None = None,
                    cardiac_output: float | None = None, venous_pressure: float = 0.0,
-                   terminal_resistance_scale: float = 1.0, wall_viscosity: bool = False,
+                   terminal_resistance_scale: float | str = 1.0, wall_viscosity: bool = False,
                    name: str | None = None) -> dict[str, Any]:
     """The arterial tree of a circulatory_autogen model as a native oxyline model dict (SI).
 
@@ -191,13 +191,30 @@ def to_native_dict(vessel_array_csv: PathLike, parameters_csv: PathLike, *,
     ``(time [s], flow [m^3/s])`` pair; scaled to ``cardiac_output`` [m^3/s] (default: the sum of
     the mean terminal flows of ``obs_data_json``; unscaled when neither is given).
     ``venous_pressure`` [Pa]: the pressure the terminals drain to (the closed loop's veins).
-    ``terminal_resistance_scale``: multiplies every R_T (1 = the source values; the FinalModel
-    needs about 7.7 to reach its observed 12 kPa mean aortic pressure at its observed flow).
+    ``terminal_resistance_scale``: multiplies every R_T (1 = the source values), or
+    ``"calibrate"``: the one uniform factor that makes the cycle-mean pressure at the mean-pressure
+    observation of ``obs_data_json`` equal its value at the mean inflow
+    (:func:`calibrate_terminal_resistance_scale`; FinalModel: 7.71 for 12.0 kPa at
+    ``aortic_arch_C46``, the built-in ``whole-body-140``).
     ``wall_viscosity``: keep the source's R_v = 0.01 s/C in series with every capacitor, as a
     dead-end branch per capacitor (``<node>.wall...``: R_v, then C, closed by zero flow); vessels
-    become lumped (R, I from the same formulas), ``pp`` modules an exact T (``<name>.distal_half``),
-    and a 1 Pa s m^-3 connector ``aortic_inlet`` carries the inflow. Removes the ~50 Hz ringing.
+    become rigid geometric tubes (same radius and length, hence the same R, I and lumen volume;
+    their C moves to the wall branches), ``pp`` modules an exact T (``<name>.distal_half``), and a
+    1 Pa s m^-3 connector ``aortic_inlet`` carries the inflow. Removes the ~50 Hz ringing.
     """
+    calibration = ""
+    if isinstance(terminal_resistance_scale, str):
+        if terminal_resistance_scale != "calibrate" or obs_data_json is None:
+            raise ModelError("terminal_resistance_scale must be a number > 0, or 'calibrate' "
+                             "with obs_data_json")
+        raw = to_native_dict(vessel_array_csv, parameters_csv, obs_data_json=obs_data_json,
+                             inflow=inflow, mynard_template=mynard_template,
+                             cardiac_output=cardiac_output, venous_pressure=venous_pressure)
+        terminal_resistance_scale, node, target = calibrate_terminal_resistance_scale(
+            raw, obs_data_json)
+        calibration = (f" (calibrated: the one factor that makes the steady-solve mean pressure "
+                       f"at {node} equal the observed {target:g} Pa of "
+                       f"{Path(obs_data_json).name} at the mean inflow)")
     if not (terminal_resistance_scale > 0 and math.isfinite(terminal_resistance_scale)):
         raise ModelError(f"terminal_resistance_scale must be > 0, got {terminal_resistance_scale}")
     rows = read_vessel_array(vessel_array_csv)
@@ -355,13 +372,15 @@ def to_native_dict(vessel_array_csv: PathLike, parameters_csv: PathLike, *,
         f"Poisson ratio 0 (C = 2 pi r^3 l/(E h)). Not imported: {', '.join(skipped)} modules "
         f"({n_heart} heart): inflow at the aortic root ({root['name']} inlet) is the {source}, "
         f"scaled to a mean of {q_mean * 1e6:.2f} mL/s ({q_mean * 6e4:.2f} L/min; {co_source}). "
-        f"Dropped: wall-viscosity R_v = 0.01 s/C, terminal I_T = 1e-6, gravity (beta_g 0)."
+        f"Dropped: {'' if wall_viscosity else 'wall-viscosity R_v = 0.01 s/C, '}terminal "
+        f"I_T = 1e-6, gravity (beta_g 0)."
         + ("" if terminal_resistance_scale == 1.0 else
-           f" Terminal resistances R_T scaled by {terminal_resistance_scale:g}."))
+           f" Terminal resistances R_T scaled by {terminal_resistance_scale:.6g}{calibration}."))
     if wall_viscosity:
-        vessels, bcs = _with_wall_viscosity(vessels, bcs, rho, mu)
+        vessels, bcs = _with_wall_viscosity(vessels, bcs)
         description += (" Wall viscosity kept: R_v = 0.01 s/C in series with every capacitor "
-                        "as dead-end '.wall' branches; vessels lumped, pp as an exact T.")
+                        "as dead-end '.wall' branches; vessels rigid tubes of the same radius "
+                        "and length (C in the wall branches), pp as an exact T.")
     return {
         "name": name or Path(vessel_array_csv).name.replace("_vessel_array.csv", ""),
         "description": description,
@@ -379,16 +398,20 @@ def to_native_dict(vessel_array_csv: PathLike, parameters_csv: PathLike, *,
     }
 
 
-def _with_wall_viscosity(vessels: list[dict[str, Any]], bcs: dict[str, dict[str, Any]],
-                         rho: float, mu: float) -> tuple[list[dict[str, Any]],
-                                                         dict[str, dict[str, Any]]]:
-    """Re-express every capacitor C as a branch R_v = 0.01 s / C -> C -> zero flow."""
+def _with_wall_viscosity(vessels: list[dict[str, Any]], bcs: dict[str, dict[str, Any]]
+                         ) -> tuple[list[dict[str, Any]], dict[str, dict[str, Any]]]:
+    """Re-express every capacitor C as a branch R_v = 0.01 s / C -> C -> zero flow; geometric
+    vessels become rigid tubes of the same radius and length (same R, I and lumen volume)."""
     out: list[dict[str, Any]] = []
     new_bcs: dict[str, dict[str, Any]] = {}
 
     def rl(name: str, a: str, b: str, r: float, ind: float) -> dict[str, Any]:
         return {"name": name, "from": a, "to": b, "arrangement": "L",
                 "lumped": {"resistance": r, "inductance": ind, "capacitance": 0.0}}
+
+    def rigid(name: str, a: str, b: str, v: dict[str, Any], fraction: float) -> dict[str, Any]:
+        return {"name": name, "from": a, "to": b, "segments": 1,
+                "length": v["length"] * fraction, "radius": v["radius"]}
 
     def wall(node: str, c: float, tag: str = "") -> None:
         nm = f"{node}.wall{tag}"
@@ -412,25 +435,129 @@ def _with_wall_viscosity(vessels: list[dict[str, Any]], bcs: dict[str, dict[str,
             new_bcs[f"{mid}.outlet"] = {"type": "pressure", "value": bcs[mid]["pressure"]}
             continue
         r, length = v["radius"], v["length"]
-        R = 8 * mu * length / (math.pi * r**4)
-        ind = rho * length / (math.pi * r**2)
         C = 2 * math.pi * r**3 * length / (v["youngs_modulus"] * v["wall_thickness"])
         if v["arrangement"] == "L":
-            out.append({**rl(v["name"], v["from"], v["to"], R, ind), **desc})
+            out.append({**rigid(v["name"], v["from"], v["to"], v, 1.0), **desc})
             wall(v["to"], C)
         elif v["arrangement"] == "inverted-L":
-            out.append({**rl(v["name"], v["from"], v["to"], R, ind), **desc})
+            out.append({**rigid(v["name"], v["from"], v["to"], v, 1.0), **desc})
             wall(v["from"], C, f"_{v['name']}")
         elif v.get("segments", 1) == 1:                    # pi: C/2 - R-I - C/2
-            out.append({**rl(v["name"], v["from"], v["to"], R, ind), **desc})
+            out.append({**rigid(v["name"], v["from"], v["to"], v, 1.0), **desc})
             wall(v["from"], C / 2, f"_in_{v['name']}")
             wall(v["to"], C / 2, f"_out_{v['name']}")
         else:                                              # pp: R/2, I/2 - C - R/2, I/2
             mid = f"{v['name']}.mid"
-            out.append({**rl(v["name"], v["from"], mid, R / 2, ind / 2), **desc})
-            out.append(rl(f"{v['name']}.distal_half", mid, v["to"], R / 2, ind / 2))
+            out.append({**rigid(v["name"], v["from"], mid, v, 0.5), **desc})
+            out.append(rigid(f"{v['name']}.distal_half", mid, v["to"], v, 0.5))
             wall(mid, C)
     return out, new_bcs
+
+
+def steady_pressures(d: dict[str, Any],
+                     terminal_scale: float = 1.0) -> tuple[dict[str, float], float]:
+    """Node pressures [Pa] of the resistor network of a native model dict (capacitors open,
+    inductors shorted) fed by the cycle-mean of each flow boundary: for a linear circuit with a
+    periodic inflow these are exactly the cycle-mean pressures. Geometric vessels count
+    8 mu l/(pi r^4) (flat profile, constant radius), lumped ones their resistance; outlets:
+    ``resistance`` (to its pressure), ``pressure`` and ``flow`` conditions. ``terminal_scale``
+    multiplies the resistance of every ``resistance`` outlet and of the lumped vessel feeding it
+    (the two halves of a circulatory_autogen terminal). Returns (pressures, mean inflow)."""
+    mu = d["blood"]["viscosity"]
+    bcs = d["boundary_conditions"]
+    nodes = sorted({v[k] for v in d["vessels"] for k in ("from", "to")} | set(bcs))
+    ix = {n: i for i, n in enumerate(nodes)}
+    G = np.zeros((len(nodes), len(nodes)))
+    b = np.zeros(len(nodes))
+    fixed: dict[int, float] = {}
+    q_in = 0.0
+    for v in d["vessels"]:
+        if "lumped" in v:
+            R = v["lumped"]["resistance"]
+            if bcs.get(v["to"], {}).get("type") == "resistance":
+                R *= terminal_scale
+        else:
+            R = 8 * mu * v["length"] / (math.pi * v["radius"]**4)
+        i, j = ix[v["from"]], ix[v["to"]]
+        G[i, i] += 1 / R
+        G[j, j] += 1 / R
+        G[i, j] -= 1 / R
+        G[j, i] -= 1 / R
+    for node, bc in bcs.items():
+        i = ix[node]
+        if bc["type"] == "resistance":
+            G[i, i] += 1 / (bc["resistance"] * terminal_scale)
+            b[i] += bc.get("pressure", 0.0) / (bc["resistance"] * terminal_scale)
+        elif bc["type"] == "pressure":
+            fixed[i] = float(bc["value"])
+        elif bc["type"] == "flow":
+            q = (_cycle_mean(np.asarray(bc["time"], float), np.asarray(bc["flow"], float))
+                 if "time" in bc else float(bc["value"]))
+            b[i] += q
+            q_in += q
+        else:
+            raise ModelError(f"steady_pressures: boundary type '{bc['type']}' not supported")
+    for i, value in fixed.items():
+        b -= G[:, i] * value
+        G[:, i] = 0.0
+        G[i, :] = 0.0
+        G[i, i] = 1.0
+        b[i] = value
+    P = np.linalg.solve(G, b)
+    return {n: float(P[i]) for n, i in ix.items()}, q_in
+
+
+def mean_pressure_observations(obs_data_json: PathLike) -> dict[str, float]:
+    """``module -> value [Pa]`` of the mean pressure observations (``<module>/u``, J_per_m3)."""
+    data = json.loads(Path(obs_data_json).read_text())
+    return {str(it["variable"])[:-2]: float(it["value"]) for it in data.get("data_items", [])
+            if str(it.get("variable", "")).endswith("/u") and it.get("obs_type") == "mean"
+            and it.get("unit") == "J_per_m3"}
+
+
+def calibrate_terminal_resistance_scale(d: dict[str, Any], obs_data_json: PathLike
+                                        ) -> tuple[float, str, float]:
+    """The uniform factor s on every terminal resistance R_T of ``d`` (a native dict of
+    :func:`to_native_dict` with scale 1 and without wall viscosity) that makes the cycle-mean
+    pressure at the one mean-pressure observation of ``obs_data_json`` equal its value, at the
+    model's mean inflow. Cycle means of the linear circuit are its steady resistive solution
+    (:func:`steady_pressures`), so s solves P(s) = target, P increasing in s; found by a
+    bracketed secant iteration on log P(log s) to 1e-11. The observed module's ``u`` is the pressure of its C node: the distal node
+    of a ``pv`` (``L``) module. A uniform s keeps the source's ratios between the R_T (its
+    distribution of peripheral resistance). Returns (s, module, target [Pa])."""
+    obs = mean_pressure_observations(obs_data_json)
+    if len(obs) != 1:
+        raise ModelError(f"{obs_data_json}: expected one mean-pressure observation, got "
+                         f"{sorted(obs)}")
+    (module, target), = obs.items()
+    vessel = next((v for v in d["vessels"] if v["name"] == module), None)
+    if vessel is None or vessel.get("arrangement") != "L":
+        raise ModelError(f"observed module '{module}' is not a pv (L) vessel of the model")
+
+    def f(x: float) -> float:                     # log P(e^x) - log target, increasing
+        P, _q = steady_pressures(d, math.exp(x))
+        if P[vessel["to"]] <= 0:
+            return -math.inf
+        return math.log(P[vessel["to"]] / target)
+
+    lo, hi = math.log(1e-3), math.log(1e3)
+    f_hi = f(hi)
+    if not f(lo) < 0 < f_hi:
+        raise ModelError(f"the observed {target} Pa at '{module}' is out of reach of a terminal "
+                         f"resistance scale in [1e-3, 1e3]")
+    x_old, f_old = hi, f_hi
+    x, fx = 0.0, f(0.0)
+    for _ in range(100):                          # secant on the last two points, kept inside
+        if abs(fx) < 1e-11:                       # the bracket (bisection otherwise)
+            break
+        lo, hi = (x, hi) if fx < 0 else (lo, x)
+        step = x - fx * (x - x_old) / (fx - f_old) if fx != f_old else math.nan
+        x_old, f_old = x, fx
+        x = step if lo < step < hi else (lo + hi) / 2
+        fx = f(x)
+    else:
+        raise ModelError("terminal resistance calibration did not converge")
+    return math.exp(x), module, target
 
 
 def read_circulatory_autogen(vessel_array_csv: PathLike, parameters_csv: PathLike,
@@ -440,6 +567,7 @@ def read_circulatory_autogen(vessel_array_csv: PathLike, parameters_csv: PathLik
     return load_model(to_native_dict(vessel_array_csv, parameters_csv, **options))
 
 
-__all__ = ["CirculatoryAutogenWarning", "cardiac_output_from_obs", "mynard_aortic_flow",
-           "read_circulatory_autogen", "read_parameters", "read_vessel_array", "to_native_dict",
-           "wall_thickness"]
+__all__ = ["CirculatoryAutogenWarning", "calibrate_terminal_resistance_scale",
+           "cardiac_output_from_obs", "mean_pressure_observations", "mynard_aortic_flow",
+           "read_circulatory_autogen", "read_parameters", "read_vessel_array", "steady_pressures",
+           "to_native_dict", "wall_thickness"]
