@@ -23,10 +23,11 @@ module_config.json`` and ``BG_modules.cellml`` upstream). Read from those files:
   node, ``L``) closed by a ``resistance`` outlet R_T/2 to ``venous_pressure``, which is the
   source circuit exactly and keeps every terminal's flow in the results.
 
-Dropped, with the reason: the wall-viscosity resistor R_v = 0.01 s / C in series with every
-capacitor of the stored upstream ``BG_modules.cellml`` (oxyline capacitors have no series
+Dropped by default, with the reason: the wall-viscosity resistor R_v = 0.01 s / C in series with
+every capacitor of the stored upstream ``BG_modules.cellml`` (oxyline capacitors have no series
 resistance; R_v does not change mean values, but without it the circuit rings at ~50 Hz:
-see ``docs/models.md``), gravity (``beta_g`` = 0 in the source files) and
+``wall_viscosity=True`` keeps it as one dead-end branch per capacitor, as the built-in
+``whole-body-140`` does; see ``docs/models.md``), gravity (``beta_g`` = 0 in the source files) and
 ``u_ext`` (0 in the FinalModel except 1e-6 Pa at one terminal; larger values warn), the
 reference pressure ``u_0`` (unused by the linear modules).
 
@@ -37,6 +38,12 @@ has no aortic flow data, so the default is the Mynard & Smolich 2015 aortic flow
 starts at t = 0, late-diastolic samples zeroed), diastole padded with zero flow to the model period
 ``T`` and scaled to the cardiac output = the sum of the mean terminal-region flows in
 ``<model>_obs_data.json`` (FinalModel: 69.66 mL/s = 4.18 L/min).
+
+The FinalModel's terminal resistances are uncalibrated (1.73 kPa mean aortic pressure at that flow
+instead of the observed 12.0 kPa): ``terminal_resistance_scale="calibrate"`` multiplies every R_T
+by the one factor (7.67) that makes the mean pressure at the observed module equal the observation
+(:func:`calibrate_terminal_resistance_scale`, on the steady resistive solution
+:func:`steady_pressures`, which equals the cycle means of the linear circuit).
 
 >>> from oxyline.io.circulatory_autogen import read_circulatory_autogen  # doctest: +SKIP
 >>> m = read_circulatory_autogen("FinalModel_vessel_array.csv", "FinalModel_parameters.csv",
