@@ -64,6 +64,50 @@ fn hill(p: f64, p50: f64, n: f64) -> (f64, f64) {
     (s, n * s * (1.0 - s) / p)
 }
 
+/// Taylor model of the Hill curve about an anchor pressure, used to invert C_t without a
+/// `powf` while the solution stays near the anchor (between Runge–Kutta stages and steps the
+/// free concentration of a cell moves by a tiny fraction of itself).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct HillAnchor {
+    /// Anchor pressure P₁ (Pa); 0 = no anchor yet.
+    p: f64,
+    /// S(P₁), S′, S″/2, S‴/6 at the anchor.
+    taylor: [f64; 4],
+    /// |S⁗(P₁)|/24: the leading term of the cubic model's remainder.
+    remainder: f64,
+}
+
+/// The anchor's model is trusted within this fraction of P₁: S⁗ changes by at most ~n·2 % over
+/// the interval, well inside the factor 2 applied to the remainder estimate.
+const ANCHOR_SPAN: f64 = 0.02;
+
+impl HillAnchor {
+    fn new(p: f64, p50: f64, n: f64) -> Self {
+        // P^k dᵏS/dPᵏ = D(D−1)…(D−k+1) S with D = P d/dP, and Dᵏ of the logistic
+        // σ(n ln(P/P50)) are polynomials in σ: exact derivatives from one powf.
+        let xn = (p / p50).powf(n);
+        let s = xn / (1.0 + xn);
+        let q = s * (1.0 - s);
+        let d1 = n * q;
+        let d2 = n * d1 * (1.0 - 2.0 * s);
+        let d3 = n * n * d1 * (1.0 - 6.0 * s + 6.0 * s * s);
+        let d4 = n * n * n * d1 * (1.0 - 2.0 * s) * (1.0 - 12.0 * s + 12.0 * s * s);
+        let ip = 1.0 / p;
+        let s1 = d1 * ip;
+        let s2 = (d2 - d1) * ip * ip;
+        let s3 = (d3 - 3.0 * d2 + 2.0 * d1) * ip * ip * ip;
+        let s4 = (d4 - 6.0 * d3 + 11.0 * d2 - 6.0 * d1) * ip * ip * ip * ip;
+        HillAnchor {
+            p,
+            taylor: [s, s1, 0.5 * s2, s3 / 6.0],
+            remainder: s4.abs() / 24.0,
+        }
+    }
+}
+
+/// |ΔP| below 1e-12 mmHg (margin under the 1e-10 mmHg contract of the inversion).
+const P_TOL: f64 = 1e-12 * 133.322_368;
+
 impl Binding {
     pub fn from_spec(spec: &BindingSpec, element: &str) -> Result<Self> {
         let pos = |k: &str, v: f64| -> Result<()> {
@@ -175,6 +219,51 @@ impl Binding {
         }
     }
 
+    /// `free` for repeated inversions near a previous solution (one cell, one species): the
+    /// Hill curve is replaced by its cubic Taylor model about `anchor` when the model's remainder
+    /// (2·|S⁗|ΔP⁴/24, mapped to pressure) is below the inversion tolerance, so most calls need
+    /// no `powf`; otherwise the exact Newton solve runs and re-anchors at its root.
+    #[inline]
+    pub fn free_anchored(&self, ct: f64, guess: f64, anchor: &mut HillAnchor) -> f64 {
+        let Binding::Hill {
+            alpha,
+            p50,
+            n,
+            capacity,
+        } = *self
+        else {
+            return self.free(ct, guess);
+        };
+        if ct > 0.0 && anchor.p > 0.0 {
+            let [s0, c1, c2, c3] = anchor.taylor;
+            let span = ANCHOR_SPAN * anchor.p;
+            // f(d) = α d + H (c1 d + c2 d² + c3 d³) − rhs, d = P − P₁ (monotone on the span)
+            let rhs = ct - alpha * anchor.p - capacity * s0;
+            let mut d = (guess / alpha - anchor.p).clamp(-span, span);
+            for _ in 0..4 {
+                let f = alpha * d + capacity * d * (c1 + d * (c2 + d * c3)) - rhs;
+                let fp = alpha + capacity * (c1 + d * (2.0 * c2 + 3.0 * d * c3));
+                let step = f / fp;
+                d -= step;
+                // Newton's error after this step is |f″/2f′| step² (f″ of the cubic model): when
+                // that is below the tolerance the step is final — usually the first one
+                let fpp = capacity * (2.0 * c2 + 6.0 * d * c3);
+                if step.abs() < P_TOL || (fpp * step * step).abs() < P_TOL * fp {
+                    let d2 = d * d;
+                    if d.abs() <= span && 2.0 * capacity * anchor.remainder * d2 * d2 < P_TOL * fp {
+                        return alpha * (anchor.p + d);
+                    }
+                    break;
+                }
+            }
+        }
+        let c = self.free(ct, guess);
+        if c > 0.0 {
+            *anchor = HillAnchor::new(c / alpha, p50, n);
+        }
+        c
+    }
+
     /// Free concentration c from the total C_t; `guess` is a warm start (previous value).
     /// Hill: Newton on f(P) = αP + H S(P) − C_t (strictly increasing), kept inside a bisection
     /// bracket [lo, hi] ⊂ [0, C_t/α]; stops when |ΔP| < 1e-10 mmHg.
@@ -195,9 +284,8 @@ impl Binding {
                 }
                 let (mut lo, mut hi) = (0.0, ct / alpha);
                 let mut p = (guess / alpha).clamp(lo, hi);
-                // |ΔP| below 1e-12 mmHg (margin under the 1e-10 mmHg contract), or a few ulps of P
-                // (quadratic convergence stalls there)
-                let tol_abs: f64 = 1e-12 * 133.322_368;
+                // |ΔP| below P_TOL, or a few ulps of P (quadratic convergence stalls there)
+                let tol_abs = P_TOL;
                 for _ in 0..100 {
                     let (s, ds) = hill(p, p50, n);
                     let f = alpha * p + capacity * s - ct;
@@ -289,6 +377,67 @@ mod tests {
             }
         }
         assert!(worst < 1e-10, "worst round-trip error {worst:e} mmHg");
+    }
+
+    #[test]
+    fn anchor_taylor_coefficients_match_finite_differences() {
+        // independent check of the D-operator formulas: central differences of S(P)
+        let (p50, n) = (26.8 * MMHG, 2.7);
+        let s = |p: f64| hill(p, p50, n).0;
+        for p_mmhg in [5.0, 26.8, 60.0, 150.0, 500.0] {
+            let p = p_mmhg * MMHG;
+            let a = HillAnchor::new(p, p50, n);
+            let h = 1e-2 * p;
+            let fd1 = (s(p + h) - s(p - h)) / (2.0 * h);
+            let fd2 = (s(p + h) - 2.0 * s(p) + s(p - h)) / (h * h);
+            let fd3 = (s(p + 2.0 * h) - 2.0 * s(p + h) + 2.0 * s(p - h) - s(p - 2.0 * h))
+                / (2.0 * h * h * h);
+            let fd4 = (s(p + 2.0 * h) - 4.0 * s(p + h) + 6.0 * s(p) - 4.0 * s(p - h)
+                + s(p - 2.0 * h))
+                / (h * h * h * h);
+            // O(h²) differences: relative 1e-3 of each derivative, or of its natural scale S'/Pᵏ⁻¹
+            let check = |what: &str, exact: f64, fd: f64, scale: f64| {
+                assert!(
+                    (exact - fd).abs() < 2e-3 * fd.abs().max(scale),
+                    "{what} at {p_mmhg} mmHg: {exact:e} vs {fd:e}"
+                );
+            };
+            assert_eq!(a.taylor[0], s(p));
+            check("S1", a.taylor[1], fd1, 0.0);
+            check("S2", 2.0 * a.taylor[2], fd2, fd1 / p);
+            check("S3", 6.0 * a.taylor[3], fd3, fd1 / (p * p));
+            check("S4", 24.0 * a.remainder, fd4.abs(), fd1 / (p * p * p));
+        }
+    }
+
+    #[test]
+    fn anchored_inversion_matches_the_exact_one_and_skips_powf_near_the_anchor() {
+        let b = standard();
+        let alpha = 1.40e-3 / MMHG;
+        let (mut worst, mut fast, mut near) = (0.0f64, 0usize, 0usize);
+        for i in 0..=300 {
+            let p1 = 1.0 + 599.0 * i as f64 / 300.0; // mmHg
+            for rel in [
+                -0.05, -1e-2, -1e-3, -1e-5, -1e-8, 0.0, 1e-7, 1e-4, 3e-3, 0.03,
+            ] {
+                let mut anchor = HillAnchor::default();
+                // establish the anchor at p1 (exact solve), then invert a nearby total
+                let c1 = alpha * p1 * MMHG;
+                let c1 = b.free_anchored(b.total(c1), c1, &mut anchor);
+                let p = p1 * (1.0 + rel);
+                let before = anchor.p;
+                let ct = b.total(alpha * p * MMHG);
+                let back = b.free_anchored(ct, c1, &mut anchor) / alpha / MMHG;
+                worst = worst.max((back - p).abs());
+                if rel.abs() <= 1e-4 {
+                    near += 1;
+                    fast += usize::from(anchor.p == before);
+                }
+            }
+        }
+        assert!(worst < 1e-10, "worst anchored error {worst:e} mmHg");
+        // a step's change (|ΔP|/P ≲ 1e-4) must take the Taylor path
+        assert_eq!(fast, near, "Taylor path taken {fast} of {near} times");
     }
 
     #[test]

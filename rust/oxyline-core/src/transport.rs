@@ -23,7 +23,7 @@
 use crate::circuit::{Circuit, Dae};
 use crate::closure::{SegmentLaw, SegmentWall, WallSpec};
 use crate::error::{Error, Result};
-use crate::hemoglobin::{Binding, BindingSpec};
+use crate::hemoglobin::{Binding, BindingSpec, HillAnchor};
 use crate::network::Probes;
 use crate::waveform::{Waveform, WaveformSpec};
 use serde::Deserialize;
@@ -131,6 +131,8 @@ struct Species {
     initial_free: f64,
     /// Free concentration per node: warm start of the binding inversion, and reporting.
     free: Vec<f64>,
+    /// Per node: Taylor anchor of the Hill inversion (cells change little between stages).
+    anchors: Vec<HillAnchor>,
     /// Total concentration of the mixing points: their lagged value (used when a point has
     /// no outflow, and for zero-gradient backflow into it) is per species.
     mixing_conc: Vec<f64>,
@@ -502,6 +504,7 @@ impl Transport {
                 has_wall: false,
                 initial_free,
                 free: vec![initial_free; nn],
+                anchors: vec![HillAnchor::default(); nn],
                 mixing_conc: Vec::new(),
             });
         }
@@ -779,7 +782,9 @@ impl Transport {
             }
         } else {
             for &n in &self.cells {
-                sp.free[n] = sp.binding.free(self.conc[n], sp.free[n]);
+                sp.free[n] = sp
+                    .binding
+                    .free_anchored(self.conc[n], sp.free[n], &mut sp.anchors[n]);
             }
         }
     }
