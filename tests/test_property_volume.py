@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 import oxyline
@@ -136,13 +136,30 @@ def run_all_unknowns(model: oxyline.Model, method: str, start: str) -> dict:
                                   all_unknowns=True)
 
 
+# Found by the search: the only flow passes through zero at t = 0.75 s while a stenosis
+# (K = 1e12) makes the step nonlinear; Newton's increment was once measured against that
+# vanishing flow and could not converge.
+REVERSING_STENOSIS = {
+    "name": "random", "arrangement": "inverted-L", "period": 1.0,
+    "vessels": [{"name": "v0", "from": "in", "to": "n1",
+                 "lumped": {"resistance": 1e6, "capacitance": 1e-12,
+                            "stenosis_coefficient": 1e12}}],
+    "boundary_conditions": {
+        "in": {"type": "flow", "fourier": {"period": 1.0, "mean": 1e-5, "cos": [0.0],
+                                           "sin": [1e-5]}},
+        "n1": {"type": "pressure", "value": 512.0}},
+    "_run": {"method": "rk4", "start": "steady", "scale": 2e-5}}
+
+
 @settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(networks())
+@example(REVERSING_STENOSIS)
 def test_volume_balance_on_random_networks(spec: dict) -> None:
     check_network(spec)
 
 
 def check_network(spec: dict) -> None:
+    spec = dict(spec)
     run = spec.pop("_run")
     model = oxyline.load_model(spec)
     net = model.network

@@ -41,6 +41,11 @@ pub struct GenAlpha<'a> {
     y_new: Vec<f64>,
     yd_new: Vec<f64>,
     y_af: Vec<f64>,
+    /// Largest |pressure| and |flow| met so far in the run: the Newton increments are measured
+    /// against them, not against the current state, whose flows all pass through zero together
+    /// when the inflow reverses in a single path (there round-off alone would exceed a tolerance
+    /// relative to the instantaneous flow).
+    magnitude: [f64; 2],
 }
 
 /// Value positions of the pattern F ∪ diag (F entries in CSR order, then the n diagonal slots).
@@ -69,10 +74,23 @@ pub fn jacobian_values(dae: &Dae, a: f64, diag: &[f64], y: &[f64], vals: &mut [f
 
 /// Relative size of an increment, pressures and flows scaled separately (mixed units).
 pub fn scaled_increment(dae: &Dae, dy: &[f64], y: &[f64]) -> f64 {
+    increment_over(dae, dy, magnitudes(dae, y))
+}
+
+fn amax(s: &[f64]) -> f64 {
+    s.iter().fold(0.0f64, |m, x| m.max(x.abs()))
+}
+
+/// Largest |pressure| and |flow| of a state.
+fn magnitudes(dae: &Dae, y: &[f64]) -> [f64; 2] {
     let nn = dae.n_nodes;
-    let amax = |s: &[f64]| s.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-    let (sp, sq) = (amax(&y[..nn]).max(1e-300), amax(&y[nn..]).max(1e-300));
-    (amax(&dy[..nn]) / sp).max(amax(&dy[nn..]) / sq)
+    [amax(&y[..nn]), amax(&y[nn..])]
+}
+
+/// Largest increment of the pressures and of the flows, each relative to its `scale`.
+fn increment_over(dae: &Dae, dy: &[f64], scale: [f64; 2]) -> f64 {
+    let nn = dae.n_nodes;
+    (amax(&dy[..nn]) / scale[0].max(1e-300)).max(amax(&dy[nn..]) / scale[1].max(1e-300))
 }
 
 impl<'a> GenAlpha<'a> {
@@ -112,6 +130,7 @@ impl<'a> GenAlpha<'a> {
             y_new: vec![0.0; n],
             yd_new: vec![0.0; n],
             y_af: vec![0.0; n],
+            magnitude: [0.0; 2],
         })
     }
 
@@ -148,6 +167,8 @@ impl<'a> GenAlpha<'a> {
         let t_af = time + af * dt;
         self.dae.forcing_into(t_af, self.regime, &mut self.f);
         let linear = self.dae.is_linear();
+        let now = magnitudes(self.dae, y);
+        self.magnitude = [self.magnitude[0].max(now[0]), self.magnitude[1].max(now[1])];
         let mut converged = false;
         for it in 0..self.control.max_iter {
             for i in 0..n {
@@ -182,7 +203,9 @@ impl<'a> GenAlpha<'a> {
                     break;
                 }
                 self.r.iter_mut().for_each(|x| *x *= gamma * dt);
-                if it > 0 && scaled_increment(self.dae, &self.r, &self.y_new) < 1e-12 {
+                let now = magnitudes(self.dae, &self.y_new);
+                let scale = [self.magnitude[0].max(now[0]), self.magnitude[1].max(now[1])];
+                if it > 0 && increment_over(self.dae, &self.r, scale) < 1e-12 {
                     converged = true;
                     break;
                 }
