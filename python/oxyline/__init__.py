@@ -20,7 +20,7 @@ from oxyline.errors import (
 )
 from oxyline.model import Model, load_model
 from oxyline.result import Result, VesselResult
-from oxyline.run import simulate
+from oxyline.run import simulate, simulate_to_zarr
 
 __version__: str = _core.__version__
 
@@ -37,4 +37,5 @@ __all__ = [
     "load_model",
     "models",
     "simulate",
+    "simulate_to_zarr",
 ]

@@ -45,17 +45,24 @@ def _cmd_run(args: argparse.Namespace) -> int:
         overrides["until_periodic"] = args.until_periodic
     if args.method is not None:
         overrides["method"] = args.method
+    # a .zarr output is written during the run (memory bounded by one chunk); the figures need
+    # the whole result in memory, so with --plot the store is written after the run
+    stream = bool(args.output) and Path(args.output).suffix.lower() == ".zarr" and not args.plot
     try:
-        res = oxyline.simulate(model, **overrides)
+        if stream:
+            res = oxyline.simulate_to_zarr(model, args.output, **overrides)
+        else:
+            res = oxyline.simulate(model, **overrides)
     except oxyline.ModelError as exc:  # run settings (e.g. an unstable dt): name the model
         msg = str(exc)
         raise type(exc)(msg if msg.startswith(args.model) else f"{args.model}: {msg}") from None
     except oxyline.SimulationInterrupted as exc:
         if args.output and exc.result is not None:
-            _write(exc.result, args.output)
+            if not stream:
+                _write(exc.result, args.output)
             print(f"interrupted; partial result written to {args.output}", file=sys.stderr)
         return 130
-    if args.output:
+    if args.output and not stream:
         _write(res, args.output)
     if args.summary:
         _write_summary(res, args.summary)
@@ -65,15 +72,22 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
         figures = plot.save_figures(res, model, args.plot)
     if not args.quiet:
-        s = res.settings
-        print(f"{model.name}: {len(res.vessels)} vessels, method {s['method']}, dt {s['dt']:.3e} s, "
+        if stream:  # the store opened lazily: read the run facts and the first vessels only
+            s = {k[len("solver_"):]: v for k, v in res.attrs.items() if k.startswith("solver_")}
+            vessels = [str(v) for v in res["vessel"].values]
+            head = {"vessel": slice(0, 20)}
+            p_in = res["pressure_in"].isel(head).mean("time").values
+            q_in = res["flow_in"].isel(head).mean("time").values
+        else:
+            s, vessels = res.settings, res.vessels
+            p_in, q_in = res.pressure_in[:, :20].mean(axis=0), res.flow_in[:, :20].mean(axis=0)
+        print(f"{model.name}: {len(vessels)} vessels, method {s['method']}, dt {s['dt']:.3e} s, "
               f"{s['cycles_run']} cycles, cycle-to-cycle change {s['periodic_error']:.2e}")
         print(f"{'vessel':<24}{'mean P_in [mmHg]':>18}{'mean Q_in [mL/s]':>18}")
-        for name in res.vessels[:20]:
-            v = res.vessel(name)
-            print(f"{name:<24}{v.pressure_in.mean() / MMHG:>18.3f}{v.flow_in.mean() * 1e6:>18.4f}")
-        if len(res.vessels) > 20:
-            print(f"... {len(res.vessels) - 20} more vessels")
+        for name, p, q in zip(vessels[:20], p_in, q_in):
+            print(f"{name:<24}{p / MMHG:>18.3f}{q * 1e6:>18.4f}")
+        if len(vessels) > 20:
+            print(f"... {len(vessels) - 20} more vessels")
         if args.output:
             print(f"results written to {args.output}")
         if args.summary:
@@ -96,10 +110,13 @@ def _write(res: Any, path: str) -> None:
 
 
 def _write_summary(res: Any, path: str) -> None:
+    """Per-vessel summary of a Result or of a streamed store's dataset."""
+    from oxyline.io import results
+
     if Path(path).suffix.lower() == ".parquet":
-        res.to_parquet(path)
+        results.to_parquet(res, path)
     else:
-        res.to_csv(path)
+        results.to_csv(res, path)
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
@@ -192,7 +209,8 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", help="run a model file or built-in model")
     p.add_argument("model", help="built-in name, or a .yaml/.json/.csv model (native, "
                                  "svZeroDSolver, openBF, tables)")
-    p.add_argument("-o", "--output", help="result file: .nc (NetCDF), .zarr, or .csv (waveforms)")
+    p.add_argument("-o", "--output", help="result file: .nc (NetCDF), .zarr (written during the "
+                   "run, memory bounded), or .csv (waveforms)")
     p.add_argument("--summary", help="per-vessel mean/min/max table: .csv, .tsv or .parquet")
     p.add_argument("--plot", metavar="DIR", help="write waveform, profile and map figures "
                                                  "(PNG + SVG) into DIR")

@@ -102,6 +102,52 @@ def _species_results(model: Model, raw: Mapping[str, Any]) -> dict[str, SpeciesR
     return out
 
 
+def _result(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
+            settings: dict[str, Any], complete: bool) -> Result:
+    """A :class:`Result` of output rows in the core's layout (a whole run, or one chunk)."""
+    layout = model.network.layout()
+    return Result(
+        model_name=model.name, vessels=list(layout["vessels"]), time=raw["times"],
+        data=raw["data"], segment_count=list(layout["segment_count"]) if s["segments"] else [],
+        segment_position=layout["segment_position"] if s["segments"] else layout["segment_position"][:0],
+        settings=settings, complete=complete,
+        species=_species_results(model, raw), oxygen=model.transport.get("oxygen"),
+    )
+
+
+def _run_settings(s: Mapping[str, Any], raw: Mapping[str, Any] | None) -> dict[str, Any]:
+    """The settings recorded with a result: the requested ones and, after the run, its facts."""
+    settings = {k: s[k] for k in ("period", "cycles", "method", "output_every", "rho_infty",
+                                  "until_periodic")}
+    if raw is not None:
+        settings.update(method=raw["method"], dt=raw["dt"], cycles_run=raw["cycles_run"],
+                        periodic_error=raw["periodic_error"], rk4_dt_max=raw.get("rk4_dt_max"))
+    return settings
+
+
+def _run(model: Model, s: Mapping[str, Any], progress: Any, **core: Any) -> dict[str, Any]:
+    """The core's raw output of a run with settings ``s``, with a progress bar if asked for."""
+    callback, bar = _progress_bar(progress)
+    try:
+        return model.network.simulate(progress=callback, **s, **core)
+    finally:
+        if bar is not None:
+            bar.close()
+
+
+def _raise_run_error(raw: Mapping[str, Any], partial: Any) -> None:
+    """Re-raise the error of a run that stopped early, with the partial output attached."""
+    if "error" not in raw:
+        return
+    err = raw["error"]
+    if raw["error_kind"] == "interrupted" and isinstance(err, KeyboardInterrupt):
+        raise SimulationInterrupted(
+            f"run interrupted after {raw['cycles_run']} complete cycle(s); "
+            "the partial result is in exc.result", partial) from None
+    err.result = partial
+    raise err
+
+
 def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any], **overrides: Any) -> Result:
     """Run a network and return its pressure and flow waveforms.
 
@@ -118,31 +164,72 @@ def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any], **overri
     """
     model = load_model(model)
     s = _settings(model, overrides)
-    callback, bar = _progress_bar(overrides.get("progress"))
-    try:
-        raw = model.network.simulate(progress=callback, **s)
-    finally:
-        if bar is not None:
-            bar.close()
-    layout = model.network.layout()
-    seg_count = list(layout["segment_count"]) if s["segments"] else []
-    settings = {k: s[k] for k in ("period", "cycles", "method", "output_every", "rho_infty",
-                                  "until_periodic")}
-    settings.update(method=raw["method"], dt=raw["dt"], cycles_run=raw["cycles_run"],
-                    periodic_error=raw["periodic_error"], rk4_dt_max=raw.get("rk4_dt_max"))
-    result = Result(
-        model_name=model.name, vessels=list(layout["vessels"]), time=raw["times"],
-        data=raw["data"], segment_count=seg_count,
-        segment_position=layout["segment_position"] if s["segments"] else layout["segment_position"][:0],
-        settings=settings, complete="error" not in raw,
-        species=_species_results(model, raw), oxygen=model.transport.get("oxygen"),
-    )
-    if "error" in raw:
-        err = raw["error"]
-        if raw["error_kind"] == "interrupted" and isinstance(err, KeyboardInterrupt):
-            raise SimulationInterrupted(
-                f"run interrupted after {raw['cycles_run']} complete cycle(s); "
-                "the partial result is in exc.result", result) from None
-        err.result = result
-        raise err
+    raw = _run(model, s, overrides.get("progress"))
+    result = _result(model, s, raw, _run_settings(s, raw), complete="error" not in raw)
+    _raise_run_error(raw, result)
     return result
+
+
+def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
+                     path: str | os.PathLike[str], *, time_chunk: int = 1024,
+                     **overrides: Any) -> Any:
+    """Run a network, writing its output to a Zarr store *during* the run, and return the store
+    opened lazily as an ``xarray.Dataset``.
+
+    The store holds exactly what ``simulate(model, **overrides).to_zarr(path)`` writes (same
+    variables, dims, coordinates, units and attributes, Zarr format 2), but the core hands its
+    output over every ``time_chunk`` rows, each chunk is appended along ``time`` at once, and
+    neither the core nor Python keep more than one chunk: memory stays bounded however many
+    cycles are output (``output_cycles="all"``). The store is created before the run starts
+    and is a valid store after every chunk; its attribute ``complete`` is 1 once the run has
+    finished. If the run stops early (Ctrl-C, a solver failure), the rows computed until then
+    are written and the exception is raised with the opened store as ``exc.result``
+    (:class:`~oxyline.SimulationInterrupted` for Ctrl-C). Needs ``zarr`` and ``xarray``.
+
+    >>> import oxyline, tempfile, os
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     ds = oxyline.simulate_to_zarr("bifurcation", os.path.join(d, "run.zarr"),
+    ...                                   cycles=2, output_cycles="all", time_chunk=256)
+    ...     print(ds.sizes["time"], ds.attrs["complete"])
+    2001 1
+    """
+    import xarray as xr
+
+    from oxyline.io.results import ZarrAppender, dataset
+
+    if isinstance(time_chunk, bool) or not isinstance(time_chunk, int) or time_chunk < 1:
+        raise ModelError(f"simulate_to_zarr: time_chunk must be an integer >= 1, got {time_chunk!r}")
+    model = load_model(model)
+    s = _settings(model, overrides)
+    empty = _empty_rows(model, s)
+    store = ZarrAppender(path, dataset(_result(model, s, empty, _run_settings(s, None), False)),
+                         time_chunk)
+
+    def write(rows: dict[str, Any]) -> None:
+        store.append(dataset(_result(model, s, rows, {}, False)))
+
+    try:
+        raw = _run(model, s, overrides.get("progress"), chunk_sink=write, chunk_rows=time_chunk)
+    except Exception:
+        store.remove()  # refused before the first step (e.g. an unstable dt): no output at all
+        raise
+    store.finish(dataset(_result(model, s, empty, _run_settings(s, raw), "error" not in raw)).attrs)
+    opened = xr.open_zarr(store.path)
+    _raise_run_error(raw, opened)
+    return opened
+
+
+def _empty_rows(model: Model, s: Mapping[str, Any]) -> dict[str, Any]:
+    """Zero output rows in the core's layout: the template of a store's variables."""
+    import numpy as np
+
+    lay = model.network.layout()
+    cols = lay["n_vessel_columns"] + (lay["n_segment_columns"] if s["segments"] else 0)
+    raw: dict[str, Any] = {"times": np.zeros(0), "data": np.zeros((0, cols))}
+    tl = model.network.transport_layout() if s["transport"] else None
+    if tl is not None:
+        n = len(tl["species"])
+        raw["transport"] = {"species": list(tl["species"]),
+                            "data": np.zeros((0, n * tl["columns_per_species"])),
+                            "initial_stored": [0.0] * n}
+    return raw

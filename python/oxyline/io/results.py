@@ -40,48 +40,99 @@ def to_netcdf(result: Result, path: PathLike) -> Path:
     return p
 
 
-def to_zarr(result: Result, path: PathLike, time_chunk: int = 1024) -> Path:
-    """Write a Zarr store, chunked along ``time`` (``time_chunk`` rows per chunk).
-
-    The core returns the whole (decimated) output array at the end of a run, so the store is
-    written chunk by chunk after the run, not during it; memory is bounded by the decimated
-    output (only the last cycle by default), not by the number of time steps. Needs ``zarr``
-    (``pip install 'oxyline[zarr]'``).
-    """
+def _zarr() -> Any:
     try:
         import zarr
     except ImportError:
         raise ImportError("writing Zarr needs the zarr package: pip install 'oxyline[zarr]'") \
             from None
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    ds = dataset(result)
+    return zarr
+
+
+def _write_zarr(ds: Any, path: Path, time_chunk: int) -> None:
+    """Write ``ds`` as a new Zarr store with ``time_chunk`` rows per chunk along ``time``."""
+    zarr = _zarr()
     encoding = {}
-    for name, var in ds.data_vars.items():
-        chunks = tuple(min(time_chunk, n) if d == "time" else n
-                       for d, n in zip(var.dims, var.shape))
-        encoding[name] = {"chunks": tuple(max(1, c) for c in chunks)}
+    for name, var in ds.variables.items():
+        if "time" in var.dims:
+            encoding[name] = {"chunks": tuple(max(1, time_chunk if d == "time" else n)
+                                              for d, n in zip(var.dims, var.shape))}
     import warnings
 
     kwargs: dict[str, Any] = {}
     if int(zarr.__version__.split(".")[0]) >= 3:
         kwargs["zarr_format"] = 2  # fixed-width strings have no Zarr v3 spec yet; v2 reads anywhere
+    path.parent.mkdir(parents=True, exist_ok=True)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        ds.to_zarr(p, mode="w", encoding=encoding, **kwargs)
+        ds.to_zarr(path, mode="w", encoding=encoding, **kwargs)
+
+
+def to_zarr(result: Result, path: PathLike, time_chunk: int = 1024) -> Path:
+    """Write a Zarr store (format 2), chunked along ``time`` (``time_chunk`` rows per chunk).
+
+    This writes a finished in-memory result. To write the store *during* the run, with memory
+    bounded by one chunk however long the output, use :func:`oxyline.simulate_to_zarr` (the
+    CLI's ``-o out.zarr`` does). Needs ``zarr`` (``pip install 'oxyline[zarr]'``).
+    """
+    p = Path(path)
+    _write_zarr(dataset(result), p, min(time_chunk, max(1, len(result.time))))
     return p
 
 
-def summary(result: Result) -> Any:
+class ZarrAppender:
+    """A Zarr store created from a zero-row template dataset (the variables, coordinates and
+    attributes of :func:`dataset`) and grown along ``time`` chunk by chunk.
+
+    The consolidated metadata that ``xarray.open_zarr`` reads is rewritten after every chunk,
+    so the store stays valid if the process dies mid-run.
+    """
+
+    def __init__(self, path: PathLike, template: Any, time_chunk: int) -> None:
+        self.path = Path(path)
+        self._zarr = _zarr()
+        _write_zarr(template, self.path, time_chunk)
+        # the metadata of every array as stored, not the consolidated copy (stale once grown)
+        self._group = self._zarr.open_group(self.path, mode="r+", zarr_format=2,
+                                            use_consolidated=False)
+        self._timed = [n for n, v in template.variables.items() if "time" in v.dims]
+
+    def append(self, ds: Any) -> None:
+        """Append the rows of ``ds`` (a dataset with the template's variables) along time."""
+        for name in self._timed:
+            self._group[name].append(ds[name].values, axis=0)
+        self._consolidate()
+
+    def finish(self, attrs: dict[str, Any]) -> None:
+        """Replace the store's attributes (e.g. with the run's facts once it has ended)."""
+        self._group.attrs.put(dict(attrs))
+        self._consolidate()
+
+    def remove(self) -> None:
+        import shutil
+
+        shutil.rmtree(self.path, ignore_errors=True)
+
+    def _consolidate(self) -> None:
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # consolidated metadata is not part of the v2 spec
+            self._zarr.consolidate_metadata(self.path, zarr_format=2)
+
+
+def summary(result: Result | Any) -> Any:
     """pandas DataFrame, one row per vessel (index ``vessel``), columns ``<variable>_<stat>``
     for every per-vessel variable (dims time × vessel) and stat in mean, min, max. Means are
     time averages over the output (trapezoidal rule; equal to the cycle mean for one periodic
-    cycle). SI units, listed per column in ``df.attrs["units"]``."""
+    cycle). SI units, listed per column in ``df.attrs["units"]``. ``result`` may also be the
+    dataset of a result (e.g. a store opened with ``xarray.open_zarr``): variables are read
+    one at a time."""
     import numpy as np
     import pandas as pd
 
-    ds = result.to_xarray()
-    t = np.asarray(result.time, dtype=float)
+    ds = result.to_xarray() if hasattr(result, "to_xarray") else result
+    t = np.asarray(ds["time"].values, dtype=float)
     cols: dict[str, Any] = {}
     units: dict[str, str] = {}
     for name, var in ds.data_vars.items():
@@ -95,27 +146,28 @@ def summary(result: Result) -> Any:
         for stat, val in (("mean", mean), ("min", a.min(axis=0)), ("max", a.max(axis=0))):
             cols[f"{name}_{stat}"] = val
             units[f"{name}_{stat}"] = str(var.attrs.get("units", ""))
-    df = pd.DataFrame(cols, index=pd.Index([str(v) for v in result.vessels], name="vessel"))
+    df = pd.DataFrame(cols, index=pd.Index([str(v) for v in ds["vessel"].values], name="vessel"))
     df.attrs["units"] = units
-    df.attrs["model"] = result.model_name
+    df.attrs["model"] = ds.attrs["model"]
     return df
 
 
-def to_csv(result: Result, path: PathLike) -> Path:
-    """Write :func:`summary` as CSV (TSV for ``.tsv``); a first comment line gives the units."""
+def to_csv(result: Result | Any, path: PathLike) -> Path:
+    """Write :func:`summary` (of a result or its dataset) as CSV (TSV for ``.tsv``); a first
+    comment line gives the units."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     df = summary(result)
     sep = "\t" if p.suffix.lower() == ".tsv" else ","
     with p.open("w") as fh:
-        fh.write("# oxyline summary of model '" + result.model_name + "'; units: "
+        fh.write("# oxyline summary of model '" + df.attrs["model"] + "'; units: "
                  + ", ".join(f"{k} [{u}]" for k, u in df.attrs["units"].items()
                              if k.endswith("_mean")).replace("_mean", "") + "\n")
         df.to_csv(fh, sep=sep)
     return p
 
 
-def to_parquet(result: Result, path: PathLike) -> Path:
+def to_parquet(result: Result | Any, path: PathLike) -> Path:
     """Write :func:`summary` as Parquet (needs pyarrow); units in the file's key-value metadata
     (``df.attrs``, restored by ``pandas.read_parquet``)."""
     try:

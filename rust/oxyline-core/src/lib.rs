@@ -21,6 +21,7 @@ pub use circuit::{Circuit, Dae, Regime};
 pub use error::{Error, Result};
 pub use network::{Assembled, NetworkSpec, Probes, Summary};
 pub use simulate::{
-    Method, Outcome, RunSettings, Start, TransportOutcome, simulate, simulate_with_transport,
+    Chunk, Method, Outcome, OutputSink, RunSettings, Start, TransportOutcome, simulate,
+    simulate_to_sink, simulate_with_transport,
 };
 pub use transport::{Transport, TransportSpec};

@@ -71,6 +71,35 @@ pub struct Outcome {
     pub error: Option<Error>,
     /// Species transport records (None for flow-only runs).
     pub transport: Option<TransportOutcome>,
+    /// Most output rows the driver held at once: all of them without a sink; with one, at most
+    /// the sink's chunk for all-cycles output and one cycle's output for last-cycle output.
+    pub max_buffered_rows: usize,
+}
+
+/// Output rows handed to an [`OutputSink`]: `times.len()` rows of the recorded unknowns
+/// (row-major, time × probe) and, for transport runs, of the species outputs (row-major,
+/// time × species columns as in [`TransportOutcome::data`]; NaN rows where the run stopped
+/// before they were computed).
+pub struct Chunk<'a> {
+    pub times: &'a [f64],
+    pub data: &'a [f64],
+    /// Empty for flow-only runs.
+    pub transport: &'a [f64],
+    /// Σ N of each species at t = 0 (the mass-balance reference; empty for flow-only runs).
+    pub initial_stored: &'a [f64],
+}
+
+/// Streams the output instead of collecting it: the driver hands every `rows` output rows to
+/// `write` as soon as they are certain to be part of the output and then forgets them, so a
+/// long all-cycles run holds at most one chunk. Last-cycle output holds at most one cycle, as
+/// without a sink: the rows of a cycle that may be superseded (with `until_periodic`, or an
+/// interrupted run's partial cycle) are handed over once they are known to be the output.
+/// When the run stops early (error or interruption) the rows recorded so far are handed over
+/// in a last, shorter chunk. `write` returning false stops the run as an interruption and is
+/// not called again.
+pub struct OutputSink<'a> {
+    pub rows: usize,
+    pub write: &'a mut dyn FnMut(Chunk<'_>) -> bool,
 }
 
 /// Species outputs, recorded at the same times as the flow probes.
@@ -147,20 +176,75 @@ pub fn steady_state(dae: &Dae) -> Result<Vec<f64>> {
     Ok(y)
 }
 
-struct Recorder<'p> {
+/// The output table under construction: flow probes and species outputs of the same rows,
+/// optionally streamed to a sink.
+struct Recorder<'p, 's, 'f> {
     probes: &'p [usize],
     times: Vec<f64>,
     data: Vec<f64>,
+    /// Species columns, one row per `observe` call (0 for flow-only runs).
+    transport_cols: usize,
+    transport: Vec<f64>,
+    sink: Option<&'s mut OutputSink<'f>>,
+    max_rows: usize,
 }
 
-impl Recorder<'_> {
+impl Recorder<'_, '_, '_> {
     fn record(&mut self, t: f64, y: &[f64]) {
         self.times.push(t);
         self.data.extend(self.probes.iter().map(|&i| y[i]));
+        self.max_rows = self.max_rows.max(self.times.len());
     }
     fn clear(&mut self) {
         self.times.clear();
         self.data.clear();
+        self.transport.clear();
+    }
+    /// One species row per flow row: rows the run stopped before computing (an error in
+    /// `observe`, or an interruption in a cycle whose species outputs were being skipped)
+    /// become NaN, so the two tables always describe the same times.
+    fn align(&mut self) {
+        if self.transport_cols > 0 {
+            self.transport
+                .resize(self.times.len() * self.transport_cols, f64::NAN);
+        }
+    }
+    /// Hand the buffered rows to the sink in chunks of `rows`: only whole chunks unless `all`.
+    /// Returns false if the sink stopped the run (it is then dropped, the rows kept).
+    fn flush(&mut self, all: bool, initial_stored: &[f64]) -> bool {
+        if self.sink.is_none() {
+            return true;
+        }
+        self.align();
+        let Some(sink) = self.sink.as_deref_mut() else {
+            return true;
+        };
+        let rows = sink.rows.max(1);
+        let n = self.times.len();
+        if !all && n < rows {
+            return true;
+        }
+        let end = if all { n } else { n - n % rows };
+        let (np, nc) = (self.probes.len(), self.transport_cols);
+        let mut done = 0;
+        while done < end {
+            let upto = (done + rows).min(end);
+            let ok = (sink.write)(Chunk {
+                times: &self.times[done..upto],
+                data: &self.data[done * np..upto * np],
+                transport: &self.transport[done * nc..upto * nc],
+                initial_stored,
+            });
+            if !ok {
+                self.sink = None;
+                break;
+            }
+            done = upto;
+        }
+        self.times.drain(..done);
+        self.data.drain(..done * np);
+        self.transport.drain(..done * nc);
+        self.sink.is_some()
     }
 }
 
@@ -171,7 +255,7 @@ pub fn simulate(
     s: &RunSettings,
     progress: &mut dyn FnMut(f64, f64) -> bool,
 ) -> Result<Outcome> {
-    run(dae, s, None, None, progress)
+    run(dae, s, None, None, None, progress)
 }
 
 /// Run the circuit with species transport. Closures that need the cycle-mean |Q| get it from
@@ -183,8 +267,30 @@ pub fn simulate_with_transport(
     s: &RunSettings,
     progress: &mut dyn FnMut(f64, f64) -> bool,
 ) -> Result<Outcome> {
+    run_two_pass(dae, transport, s, None, progress)
+}
+
+/// [`simulate_with_transport`], streaming the output rows to `sink` during the run instead of
+/// returning them (the outcome's `times`/`data` then hold only rows the sink refused).
+pub fn simulate_to_sink(
+    dae: &Dae,
+    transport: Option<&mut Transport>,
+    s: &RunSettings,
+    sink: &mut OutputSink<'_>,
+    progress: &mut dyn FnMut(f64, f64) -> bool,
+) -> Result<Outcome> {
+    run_two_pass(dae, transport, s, Some(sink), progress)
+}
+
+fn run_two_pass(
+    dae: &Dae,
+    transport: Option<&mut Transport>,
+    s: &RunSettings,
+    sink: Option<&mut OutputSink<'_>>,
+    progress: &mut dyn FnMut(f64, f64) -> bool,
+) -> Result<Outcome> {
     let Some(tr) = transport else {
-        return run(dae, s, None, None, progress);
+        return run(dae, s, None, None, sink, progress);
     };
     let unknowns = tr.mean_flow_unknowns();
     let mut mean_abs_flow = Vec::new();
@@ -197,14 +303,22 @@ pub fn simulate_with_transport(
             prev: vec![f64::INFINITY; n],
             count: 0,
         };
-        let first = run(dae, &mean_flow_pass(s), None, Some(&mut mean), progress)?;
+        // the first pass records nothing: no sink
+        let first = run(
+            dae,
+            &mean_flow_pass(s),
+            None,
+            Some(&mut mean),
+            None,
+            progress,
+        )?;
         if let Some(e) = first.error {
             return Err(e);
         }
         tr.set_mean_flow(&mean.last)?;
         mean_abs_flow = mean.last;
     }
-    let mut out = run(dae, s, Some(tr), None, progress)?;
+    let mut out = run(dae, s, Some(tr), None, sink, progress)?;
     if let Some(t) = out.transport.as_mut() {
         t.mean_abs_flow = mean_abs_flow;
     }
@@ -237,6 +351,7 @@ fn run(
     s: &RunSettings,
     mut transport: Option<&mut Transport>,
     mut mean: Option<&mut MeanAbs>,
+    sink: Option<&mut OutputSink<'_>>,
     progress: &mut dyn FnMut(f64, f64) -> bool,
 ) -> Result<Outcome> {
     if !(s.period.is_finite() && s.period > 0.0) {
@@ -442,7 +557,6 @@ fn run(
     }
     let explicit_transport = matches!(stepper, Stepper::Rk4(_)) && !quasi;
     let mut zk = CoupledStages::new(z.len());
-    let mut trec: Vec<f64> = Vec::new();
     let mut y_prev = vec![0.0; n];
     let mut prev_cycle_z = z.clone();
     let observe = |tr: &mut Transport,
@@ -467,6 +581,12 @@ fn run(
         probes: &s.probes,
         times: Vec::new(),
         data: Vec::new(),
+        transport_cols: transport
+            .as_deref()
+            .map_or(0, |t| t.species_names().len() * t.columns_per_species()),
+        transport: Vec::new(),
+        sink,
+        max_rows: 0,
     };
     let max_cycles = if s.until_periodic.is_some() {
         s.max_cycles.max(s.cycles)
@@ -483,8 +603,10 @@ fn run(
         let t0 = cycle as f64 * s.period;
         if !s.output_all_cycles {
             rec.clear();
-            trec.clear();
         }
+        // rows certain to be output can go to the sink as they come; a cycle that may still be
+        // superseded by the next (last-cycle output with `until_periodic`) waits for its end
+        let committed = s.output_all_cycles || cycle + 1 == max_cycles;
         if let Some(m) = mean.as_deref_mut() {
             m.sum.iter_mut().for_each(|v| *v = 0.0);
             m.count = 0;
@@ -492,10 +614,14 @@ fn run(
         if !s.output_all_cycles || cycle == 0 {
             rec.record(if s.output_all_cycles { t0 } else { 0.0 }, &y);
             if let Some(tr) = transport.as_deref_mut() {
-                if let Err(e) = observe(tr, &mut stepper, t0, &y, &yd, &z, &mut trec) {
+                if let Err(e) = observe(tr, &mut stepper, t0, &y, &yd, &z, &mut rec.transport) {
                     error = Some(e);
                     break 'cycles;
                 }
+            }
+            if committed && !rec.flush(false, &initial_stored) {
+                error = Some(Error::Interrupted { time: t0 });
+                break 'cycles;
             }
         }
         for k in 1..=steps_per_cycle {
@@ -579,10 +705,16 @@ fn run(
                 let keep =
                     s.output_all_cycles || s.until_periodic.is_some() || cycle + 1 == max_cycles;
                 if let Some(tp) = transport.as_deref_mut().filter(|_| keep) {
-                    if let Err(e) = observe(tp, &mut stepper, t_new, &y, &yd, &z, &mut trec) {
+                    if let Err(e) =
+                        observe(tp, &mut stepper, t_new, &y, &yd, &z, &mut rec.transport)
+                    {
                         error = Some(e);
                         break 'cycles;
                     }
+                }
+                if committed && !rec.flush(false, &initial_stored) {
+                    error = Some(Error::Interrupted { time: t_new });
+                    break 'cycles;
                 }
             }
             if step_global % 256 == 0 && !progress(t_new, t_end) {
@@ -631,8 +763,17 @@ fn run(
             }
         }
     }
+    // the rest of the output (the partial chunk, or all rows of an interrupted run) goes to the
+    // sink too: a long run keeps everything it computed
+    rec.align();
+    if !rec.flush(true, &initial_stored) && error.is_none() {
+        error = Some(Error::Interrupted {
+            time: step_global as f64 * dt,
+        });
+    }
     progress(cycles_run as f64 * s.period, t_end);
     Ok(Outcome {
+        max_buffered_rows: rec.max_rows,
         times: rec.times,
         data: rec.data,
         n_probes: s.probes.len(),
@@ -646,7 +787,7 @@ fn run(
         transport: transport.map(|tr| TransportOutcome {
             species: tr.species_names(),
             columns_per_species: tr.columns_per_species(),
-            data: trec,
+            data: rec.transport,
             initial_stored,
             final_state: z,
             mean_abs_flow: Vec::new(),

@@ -1,13 +1,16 @@
 //! PyO3 binding of oxyline-core (module `oxyline._core`). Only glue lives here: argument
 //! conversion, error mapping, GIL release with periodic Ctrl-C checks, zero-copy results.
 
-use numpy::IntoPyArray;
+use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyUntypedArrayMethods};
 use oxyline_core::genalpha::NewtonControl;
 use oxyline_core::network::parse;
-use oxyline_core::{Assembled, Dae, Error, Method, RunSettings, Start, Transport};
+use oxyline_core::{
+    Assembled, Chunk, Dae, Error, Method, OutputSink, RunSettings, Start, Transport,
+};
 use pyo3::exceptions::{PyKeyboardInterrupt, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use std::cell::Cell;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -54,6 +57,36 @@ type ArrayPair<'py> = (
     Bound<'py, numpy::PyArray1<f64>>,
     Bound<'py, numpy::PyArray1<f64>>,
 );
+
+/// Species rows for [`put_rows`]: names, rows (flat, row-major) and Σ N at t = 0.
+type SpeciesRows<'a, 'py> = (&'a [String], Bound<'py, PyArray1<f64>>, &'a [f64]);
+
+/// Output rows in the layout of `simulate`'s result: `times` (n,) and `data` (n, n_probes) in
+/// `d`, and for transport runs a `transport` dict with the species names, their rows
+/// `data` (n, species × columns) and `initial_stored`, which is returned for further entries.
+fn put_rows<'py>(
+    d: &Bound<'py, PyDict>,
+    times: Bound<'py, PyArray1<f64>>,
+    data: Bound<'py, PyArray1<f64>>,
+    n_probes: usize,
+    species: Option<SpeciesRows<'_, 'py>>,
+) -> PyResult<Option<Bound<'py, PyDict>>> {
+    let nt = PyUntypedArrayMethods::len(&times);
+    d.set_item("data", data.reshape([nt, n_probes])?)?;
+    d.set_item("times", times)?;
+    let Some((names, rows, initial_stored)) = species else {
+        return Ok(None);
+    };
+    let td = PyDict::new(d.py());
+    let cols = PyUntypedArrayMethods::len(&rows)
+        .checked_div(nt)
+        .unwrap_or(0);
+    td.set_item("species", names.to_vec())?;
+    td.set_item("data", rows.reshape([nt, cols])?)?;
+    td.set_item("initial_stored", initial_stored.to_vec())?;
+    d.set_item("transport", &td)?;
+    Ok(Some(td))
+}
 
 /// An assembled network: built once from the canonical SI JSON model, run many times.
 #[pyclass(frozen, module = "oxyline._core")]
@@ -249,10 +282,16 @@ impl Network {
 
     /// Run the network. Returns a dict with `times` (n_t,), `data` (n_t, n_columns) and run
     /// facts; if the run stopped early, `error`/`error_kind` are set and the data so far kept.
+    ///
+    /// With `chunk_sink`, the output is streamed instead: `chunk_sink(rows)` is called with
+    /// dicts of at most `chunk_rows` rows in the same layout (`times`, `data`, `transport`) as
+    /// soon as they are final, including the rows of a run that stops early; the returned
+    /// `times`/`data` are then empty. An exception raised by `chunk_sink` stops the run and is
+    /// returned as its `error`. `max_buffered_rows` tells the most rows the core held at once.
     #[pyo3(signature = (*, period, cycles, output_every, method = "auto", rho_infty = 0.5, dt = None,
         until_periodic = None, max_cycles = 100, output_all_cycles = false, start = "steady",
         newton_atol = None, max_iterations = 30, segments = true, all_unknowns = false, progress = None,
-        transport = true))]
+        transport = true, chunk_sink = None, chunk_rows = 1024))]
     #[allow(clippy::too_many_arguments)]
     fn simulate<'py>(
         &self,
@@ -273,7 +312,12 @@ impl Network {
         all_unknowns: bool,
         progress: Option<Py<PyAny>>,
         transport: bool,
+        chunk_sink: Option<Py<PyAny>>,
+        chunk_rows: usize,
     ) -> PyResult<Bound<'py, PyDict>> {
+        if chunk_rows == 0 {
+            return Err(ModelError::new_err("simulation: chunk_rows must be >= 1"));
+        }
         let method = match method {
             "rk4" => Method::Rk4,
             "generalized-alpha" => Method::GeneralizedAlpha { rho_inf: rho_infty },
@@ -325,8 +369,15 @@ impl Network {
         } else {
             None
         };
-        let mut pending: Option<PyErr> = None;
-        let outcome = py.detach(|| {
+        let species_names = species
+            .as_ref()
+            .map(|t| t.species_names())
+            .unwrap_or_default();
+        let n_probes = settings.probes.len();
+        let (outcome, pending) = py.detach(|| {
+            // the first Python error of a callback (progress, Ctrl-C or the sink) stops the run
+            // and is reported instead of the core's Interrupted
+            let pending: Cell<Option<PyErr>> = Cell::new(None);
             let mut last = Instant::now();
             let mut cb = |t: f64, t_end: f64| -> bool {
                 if last.elapsed() < Duration::from_millis(100) && t < t_end {
@@ -338,45 +389,87 @@ impl Network {
                         Some(f) => f.call1(py, (t, t_end)).map(drop),
                         None => Ok(()),
                     });
-                    match r {
-                        Ok(()) => true,
-                        Err(e) => {
-                            pending = Some(e);
-                            false
-                        }
-                    }
+                    r.map_err(|e| pending.set(Some(e))).is_ok()
                 })
             };
-            oxyline_core::simulate_with_transport(&inner.1, species.as_mut(), &settings, &mut cb)
+            let mut write = |c: Chunk<'_>| -> bool {
+                let Some(f) = &chunk_sink else {
+                    return true;
+                };
+                Python::attach(|py| {
+                    let d = PyDict::new(py);
+                    let species = (!species_names.is_empty()).then(|| {
+                        (
+                            species_names.as_slice(),
+                            PyArray1::from_slice(py, c.transport),
+                            c.initial_stored,
+                        )
+                    });
+                    let r = put_rows(
+                        &d,
+                        PyArray1::from_slice(py, c.times),
+                        PyArray1::from_slice(py, c.data),
+                        n_probes,
+                        species,
+                    )
+                    .and_then(|_| f.call1(py, (d,)).map(drop));
+                    r.map_err(|e| pending.set(Some(e))).is_ok()
+                })
+            };
+            let mut sink = OutputSink {
+                rows: chunk_rows,
+                write: &mut write,
+            };
+            let out = if chunk_sink.is_some() {
+                oxyline_core::simulate_to_sink(
+                    &inner.1,
+                    species.as_mut(),
+                    &settings,
+                    &mut sink,
+                    &mut cb,
+                )
+            } else {
+                oxyline_core::simulate_with_transport(
+                    &inner.1,
+                    species.as_mut(),
+                    &settings,
+                    &mut cb,
+                )
+            };
+            (out, pending.into_inner())
         });
         let out = outcome.map_err(to_py)?;
         let d = PyDict::new(py);
-        let nt = out.times.len();
-        let data = numpy::ndarray::Array2::from_shape_vec((nt, out.n_probes), out.data)
-            .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
-        d.set_item("times", out.times.into_pyarray(py))?;
-        d.set_item("data", data.into_pyarray(py))?;
+        // the species rows go to numpy without a copy; the other transport facts follow
+        let (species_rows, species_state) = match out.transport {
+            Some(t) => (
+                Some((t.species, t.data.into_pyarray(py), t.initial_stored)),
+                Some((t.final_state, t.mean_abs_flow)),
+            ),
+            None => (None, None),
+        };
+        let td = put_rows(
+            &d,
+            out.times.into_pyarray(py),
+            out.data.into_pyarray(py),
+            out.n_probes,
+            species_rows
+                .as_ref()
+                .map(|(names, rows, init)| (names.as_slice(), rows.clone(), init.as_slice())),
+        )?;
         d.set_item("dt", out.dt)?;
         d.set_item("method", out.method)?;
         d.set_item("cycles_run", out.cycles_run)?;
         d.set_item("periodic_error", out.periodic_error)?;
+        d.set_item("max_buffered_rows", out.max_buffered_rows)?;
         if let Some(lim) = &out.stability {
             d.set_item("rk4_dt_max", lim.dt_max)?;
             d.set_item("rk4_limiting_element", lim.element.clone())?;
         }
         d.set_item("final_state", out.final_state.into_pyarray(py))?;
-        if let Some(t) = out.transport {
-            let td = PyDict::new(py);
-            let cols = t.columns_per_species * t.species.len();
-            let nt = t.data.len().checked_div(cols).unwrap_or(0);
-            let data = numpy::ndarray::Array2::from_shape_vec((nt, cols), t.data)
-                .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
-            td.set_item("species", t.species)?;
-            td.set_item("data", data.into_pyarray(py))?;
-            td.set_item("initial_stored", t.initial_stored)?;
-            td.set_item("final_state", t.final_state.into_pyarray(py))?;
-            td.set_item("mean_abs_flow", t.mean_abs_flow.into_pyarray(py))?;
-            d.set_item("transport", td)?;
+        if let (Some(td), Some((final_state, mean_abs_flow))) = (td, species_state) {
+            td.set_item("final_state", final_state.into_pyarray(py))?;
+            td.set_item("mean_abs_flow", mean_abs_flow.into_pyarray(py))?;
         }
         match (pending, out.error) {
             (Some(e), _) => {
