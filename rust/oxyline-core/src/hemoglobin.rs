@@ -64,44 +64,103 @@ fn hill(p: f64, p50: f64, n: f64) -> (f64, f64) {
     (s, n * s * (1.0 - s) / p)
 }
 
-/// Taylor model of the Hill curve about an anchor pressure, used to invert C_t without a
-/// `powf` while the solution stays near the anchor (between Runge–Kutta stages and steps the
-/// free concentration of a cell moves by a tiny fraction of itself).
-#[derive(Debug, Clone, Copy, Default)]
+/// Local inverse of the Hill law about an anchor pressure P₁, used to invert C_t without a
+/// `powf` or a division while the solution stays near the anchor (between Runge–Kutta stages
+/// and steps the free concentration of a cell moves by a tiny fraction of itself).
+///
+/// With the cubic Taylor model C_t − C_t(P₁) = b d + c d² + e d³ (d = P − P₁) and u = (C_t −
+/// C_t(P₁))/b, series reversion gives d = u − k₂u² + k₃u³ + k₄u⁴ + …, k₂ = c/b,
+/// k₃ = 2k₂² − e/b, k₄ = 5k₂e/b − 5k₂³. The result is accepted when the first neglected terms
+/// — k₄u⁴ and the model's remainder H|S⁗|d⁴/(24b), each doubled — are below the tolerance.
+#[derive(Debug, Clone, Copy)]
 pub struct HillAnchor {
-    /// Anchor pressure P₁ (Pa); 0 = no anchor yet.
+    /// Anchor pressure P₁ (Pa).
     p: f64,
-    /// S(P₁), S′, S″/2, S‴/6 at the anchor.
-    taylor: [f64; 4],
-    /// |S⁗(P₁)|/24: the leading term of the cubic model's remainder.
-    remainder: f64,
+    /// C_t(P₁).
+    total: f64,
+    /// 1/b = 1/(dC_t/dP) at P₁.
+    inv_slope: f64,
+    k2: f64,
+    k3: f64,
+    /// Error bound coefficient: |ΔP error| ≤ bound · u⁴.
+    bound: f64,
+    /// |u| above this leaves the model's trusted span (negative: no anchor yet).
+    span: f64,
+}
+
+impl Default for HillAnchor {
+    fn default() -> Self {
+        HillAnchor {
+            p: 0.0,
+            total: 0.0,
+            inv_slope: 0.0,
+            k2: 0.0,
+            k3: 0.0,
+            bound: f64::INFINITY,
+            span: -1.0,
+        }
+    }
 }
 
 /// The anchor's model is trusted within this fraction of P₁: S⁗ changes by at most ~n·2 % over
 /// the interval, well inside the factor 2 applied to the remainder estimate.
 const ANCHOR_SPAN: f64 = 0.02;
 
+/// P^k dᵏS/dPᵏ for k = 1..4 of the Hill law, and S. With D = P d/dP, P^k dᵏ/dPᵏ =
+/// D(D−1)…(D−k+1), and Dᵏ of the logistic σ(n ln(P/P50)) are polynomials in σ: exact
+/// derivatives from one powf.
+fn hill_derivatives(p: f64, p50: f64, n: f64) -> (f64, [f64; 4]) {
+    let xn = (p / p50).powf(n);
+    let s = xn / (1.0 + xn);
+    let q = s * (1.0 - s);
+    let d1 = n * q;
+    let d2 = n * d1 * (1.0 - 2.0 * s);
+    let d3 = n * n * d1 * (1.0 - 6.0 * s + 6.0 * s * s);
+    let d4 = n * n * n * d1 * (1.0 - 2.0 * s) * (1.0 - 12.0 * s + 12.0 * s * s);
+    (
+        s,
+        [
+            d1,
+            d2 - d1,
+            d3 - 3.0 * d2 + 2.0 * d1,
+            d4 - 6.0 * d3 + 11.0 * d2 - 6.0 * d1,
+        ],
+    )
+}
+
 impl HillAnchor {
-    fn new(p: f64, p50: f64, n: f64) -> Self {
-        // P^k dᵏS/dPᵏ = D(D−1)…(D−k+1) S with D = P d/dP, and Dᵏ of the logistic
-        // σ(n ln(P/P50)) are polynomials in σ: exact derivatives from one powf.
-        let xn = (p / p50).powf(n);
-        let s = xn / (1.0 + xn);
-        let q = s * (1.0 - s);
-        let d1 = n * q;
-        let d2 = n * d1 * (1.0 - 2.0 * s);
-        let d3 = n * n * d1 * (1.0 - 6.0 * s + 6.0 * s * s);
-        let d4 = n * n * n * d1 * (1.0 - 2.0 * s) * (1.0 - 12.0 * s + 12.0 * s * s);
+    fn new(p: f64, alpha: f64, p50: f64, n: f64, capacity: f64) -> Self {
+        let (s, pk) = hill_derivatives(p, p50, n);
         let ip = 1.0 / p;
-        let s1 = d1 * ip;
-        let s2 = (d2 - d1) * ip * ip;
-        let s3 = (d3 - 3.0 * d2 + 2.0 * d1) * ip * ip * ip;
-        let s4 = (d4 - 6.0 * d3 + 11.0 * d2 - 6.0 * d1) * ip * ip * ip * ip;
+        let s1 = pk[0] * ip;
+        let c = capacity * 0.5 * pk[1] * ip * ip;
+        let e = capacity * pk[2] * ip * ip * ip / 6.0;
+        let remainder = capacity * pk[3].abs() * ip * ip * ip * ip / 24.0;
+        let inv_slope = 1.0 / (alpha + capacity * s1);
+        let k2 = c * inv_slope;
+        let e_b = e * inv_slope;
+        let k4 = 5.0 * k2 * e_b - 5.0 * k2 * k2 * k2;
         HillAnchor {
             p,
-            taylor: [s, s1, 0.5 * s2, s3 / 6.0],
-            remainder: s4.abs() / 24.0,
+            total: alpha * p + capacity * s,
+            inv_slope,
+            k2,
+            k3: 2.0 * k2 * k2 - e_b,
+            bound: 2.0 * (k4.abs() + remainder * inv_slope),
+            span: ANCHOR_SPAN * p,
         }
+    }
+
+    /// P from C_t by the series, and whether it is within tolerance (branch-free).
+    #[inline(always)]
+    fn invert(&self, ct: f64) -> (f64, bool) {
+        let u = (ct - self.total) * self.inv_slope;
+        let u2 = u * u;
+        let p = self.p + u * (1.0 + u * (self.k3 * u - self.k2));
+        (
+            p,
+            ct > 0.0 && u.abs() <= self.span && self.bound * u2 * u2 < P_TOL,
+        )
     }
 }
 
@@ -219,47 +278,33 @@ impl Binding {
         }
     }
 
-    /// `free` for repeated inversions near a previous solution (one cell, one species): the
-    /// Hill curve is replaced by its cubic Taylor model about `anchor` when the model's remainder
-    /// (2·|S⁗|ΔP⁴/24, mapped to pressure) is below the inversion tolerance, so most calls need
-    /// no `powf`; otherwise the exact Newton solve runs and re-anchors at its root.
+    /// `free` for repeated inversions near a previous solution (one node): the local series
+    /// inverse about `anchor` when it is within tolerance, so most calls need no `powf`;
+    /// otherwise the exact Newton solve, re-anchored at its root.
     #[inline]
     pub fn free_anchored(&self, ct: f64, guess: f64, anchor: &mut HillAnchor) -> f64 {
-        let Binding::Hill {
+        if let Binding::Hill { alpha, .. } = *self {
+            let (p, ok) = anchor.invert(ct);
+            if ok {
+                return alpha * p;
+            }
+        }
+        self.free_reanchored(ct, guess, anchor)
+    }
+
+    /// Exact inversion, and a new anchor at its root.
+    fn free_reanchored(&self, ct: f64, guess: f64, anchor: &mut HillAnchor) -> f64 {
+        let c = self.free(ct, guess);
+        if let Binding::Hill {
             alpha,
             p50,
             n,
             capacity,
         } = *self
-        else {
-            return self.free(ct, guess);
-        };
-        if ct > 0.0 && anchor.p > 0.0 {
-            let [s0, c1, c2, c3] = anchor.taylor;
-            let span = ANCHOR_SPAN * anchor.p;
-            // f(d) = α d + H (c1 d + c2 d² + c3 d³) − rhs, d = P − P₁ (monotone on the span)
-            let rhs = ct - alpha * anchor.p - capacity * s0;
-            let mut d = (guess / alpha - anchor.p).clamp(-span, span);
-            for _ in 0..4 {
-                let f = alpha * d + capacity * d * (c1 + d * (c2 + d * c3)) - rhs;
-                let fp = alpha + capacity * (c1 + d * (2.0 * c2 + 3.0 * d * c3));
-                let step = f / fp;
-                d -= step;
-                // Newton's error after this step is |f″/2f′| step² (f″ of the cubic model): when
-                // that is below the tolerance the step is final — usually the first one
-                let fpp = capacity * (2.0 * c2 + 6.0 * d * c3);
-                if step.abs() < P_TOL || (fpp * step * step).abs() < P_TOL * fp {
-                    let d2 = d * d;
-                    if d.abs() <= span && 2.0 * capacity * anchor.remainder * d2 * d2 < P_TOL * fp {
-                        return alpha * (anchor.p + d);
-                    }
-                    break;
-                }
+        {
+            if c > 0.0 {
+                *anchor = HillAnchor::new(c / alpha, alpha, p50, n, capacity);
             }
-        }
-        let c = self.free(ct, guess);
-        if c > 0.0 {
-            *anchor = HillAnchor::new(c / alpha, p50, n);
         }
         c
     }
@@ -380,13 +425,13 @@ mod tests {
     }
 
     #[test]
-    fn anchor_taylor_coefficients_match_finite_differences() {
+    fn hill_derivatives_match_finite_differences() {
         // independent check of the D-operator formulas: central differences of S(P)
         let (p50, n) = (26.8 * MMHG, 2.7);
         let s = |p: f64| hill(p, p50, n).0;
         for p_mmhg in [5.0, 26.8, 60.0, 150.0, 500.0] {
             let p = p_mmhg * MMHG;
-            let a = HillAnchor::new(p, p50, n);
+            let (s0, pk) = hill_derivatives(p, p50, n);
             let h = 1e-2 * p;
             let fd1 = (s(p + h) - s(p - h)) / (2.0 * h);
             let fd2 = (s(p + h) - 2.0 * s(p) + s(p - h)) / (h * h);
@@ -402,11 +447,11 @@ mod tests {
                     "{what} at {p_mmhg} mmHg: {exact:e} vs {fd:e}"
                 );
             };
-            assert_eq!(a.taylor[0], s(p));
-            check("S1", a.taylor[1], fd1, 0.0);
-            check("S2", 2.0 * a.taylor[2], fd2, fd1 / p);
-            check("S3", 6.0 * a.taylor[3], fd3, fd1 / (p * p));
-            check("S4", 24.0 * a.remainder, fd4.abs(), fd1 / (p * p * p));
+            assert_eq!(s0, s(p));
+            check("S1", pk[0] / p, fd1, 0.0);
+            check("S2", pk[1] / (p * p), fd2, fd1 / p);
+            check("S3", pk[2] / (p * p * p), fd3, fd1 / (p * p));
+            check("S4", pk[3] / (p * p * p * p), fd4, fd1 / (p * p * p));
         }
     }
 
@@ -415,6 +460,7 @@ mod tests {
         let b = standard();
         let alpha = 1.40e-3 / MMHG;
         let (mut worst, mut fast, mut near) = (0.0f64, 0usize, 0usize);
+        let mut worst_vs_exact = 0.0f64;
         for i in 0..=300 {
             let p1 = 1.0 + 599.0 * i as f64 / 300.0; // mmHg
             for rel in [
@@ -429,6 +475,8 @@ mod tests {
                 let ct = b.total(alpha * p * MMHG);
                 let back = b.free_anchored(ct, c1, &mut anchor) / alpha / MMHG;
                 worst = worst.max((back - p).abs());
+                let exact = b.free(ct, c1) / alpha / MMHG;
+                worst_vs_exact = worst_vs_exact.max((back - exact).abs());
                 if rel.abs() <= 1e-4 {
                     near += 1;
                     fast += usize::from(anchor.p == before);
@@ -436,8 +484,45 @@ mod tests {
             }
         }
         assert!(worst < 1e-10, "worst anchored error {worst:e} mmHg");
-        // a step's change (|ΔP|/P ≲ 1e-4) must take the Taylor path
-        assert_eq!(fast, near, "Taylor path taken {fast} of {near} times");
+        assert!(
+            worst_vs_exact < 3e-12,
+            "anchored vs exact {worst_vs_exact:e} mmHg"
+        );
+        // a step's change (|ΔP|/P ≲ 1e-4) must take the series path
+        assert_eq!(fast, near, "series path taken {fast} of {near} times");
+    }
+
+    #[test]
+    fn anchored_inversion_through_anchor_refreshes() {
+        // nodes whose totals drift by growing relative steps (1e-9 … 3e-2 per call, both
+        // signs), as cells do between stages; includes a zero and a negative total
+        let b = standard();
+        let alpha = 1.40e-3 / MMHG;
+        let n_nodes = 64;
+        let nodes: Vec<usize> = (0..n_nodes).collect();
+        let mut p: Vec<f64> = (0..n_nodes).map(|i| 2.0 + 9.0 * i as f64).collect(); // mmHg
+        let mut free = vec![0.0; n_nodes];
+        let mut anchors = vec![HillAnchor::default(); n_nodes];
+        let mut worst = 0.0f64;
+        for call in 0..200 {
+            let rel = 1e-9 * 10f64.powf((call % 8) as f64);
+            let sign = if call % 3 == 0 { -1.0 } else { 1.0 };
+            let mut total: Vec<f64> = p.iter().map(|&x| b.total(alpha * x * MMHG)).collect();
+            total[5] = 0.0;
+            total[6] = -1e-12;
+            for &n in &nodes {
+                free[n] = b.free_anchored(total[n], free[n], &mut anchors[n]);
+            }
+            for i in 0..n_nodes {
+                let exact = b.free(total[i], 0.0);
+                worst = worst.max((free[i] - exact).abs() / alpha / MMHG);
+            }
+            for x in p.iter_mut() {
+                *x = (*x * (1.0 + sign * rel.min(3e-2))).clamp(0.5, 650.0);
+            }
+        }
+        // both solves are within P_TOL (1e-12 mmHg) of the root
+        assert!(worst < 3e-12, "worst batch error {worst:e} mmHg");
     }
 
     #[test]
