@@ -307,8 +307,6 @@ def long_table(vessels: list[str], time: np.ndarray, block: np.ndarray) -> Any:
     this is about 3x faster, and needs half the transient memory, of building the columns
     separately and letting pandas consolidate them.
     """
-    import pandas as pd
-
     nt, nv = len(time), len(vessels)
     if block.shape != (nt, 4 * nv):
         raise ValueError(f"block has shape {block.shape}, expected {(nt, 4 * nv)}")
@@ -316,6 +314,18 @@ def long_table(vessels: list[str], time: np.ndarray, block: np.ndarray) -> Any:
     if block.dtype != np.float64 or block.strides[1] != 8 or block.strides[0] % 8:
         block = np.ascontiguousarray(block, dtype=np.float64)
     values = np.ascontiguousarray(block.view(rec).T).view(np.float64).reshape(nv * nt, 4)
+    return long_table_vessel_major(vessels, time, values)
+
+
+def long_table_vessel_major(vessels: list[str], time: np.ndarray, values: np.ndarray) -> Any:
+    """svZeroDSolver's long table from a C-contiguous (vessel × time, 4) array of pressure_in,
+    pressure_out, flow_in, flow_out; the array becomes the DataFrame's float block (no copy
+    with pandas >= 3)."""
+    import pandas as pd
+
+    nt, nv = len(time), len(vessels)
+    if values.shape != (nv * nt, 4) or not values.flags.c_contiguous:
+        raise ValueError(f"values must be C-contiguous with shape {(nv * nt, 4)}")
     names = pd.Series(np.array(vessels, dtype=object)).array  # str dtype under pandas >= 3
     name_col = names.take(np.repeat(np.arange(nv), nt))
     if isinstance(name_col, pd.arrays.NumpyExtensionArray):  # object dtype (pandas < 3)
