@@ -21,7 +21,7 @@
 //! triangular whenever the directed flow graph is acyclic, e.g. on every tree).
 
 use crate::circuit::{Circuit, Dae};
-use crate::closure::{SegmentLaw, SegmentWall, WallSpec};
+use crate::closure::{self, SegmentLaw, SegmentWall, WallSpec};
 use crate::error::{Error, Result};
 use crate::hemoglobin::{Binding, BindingSpec};
 use crate::network::Probes;
@@ -179,8 +179,15 @@ struct Species {
     cell_g: Vec<f64>,
     cell_gcw: Vec<f64>,
     cell_q: Vec<f64>,
-    /// Wall pieces whose conductance follows the instantaneous flow.
+    /// Wall pieces whose conductance follows a time-dependent shear.
     dynamic: Vec<usize>,
+    /// Segments with a relaxed Lévêque shear: (segment, τ_BL); their equivalent flows
+    /// Q̃ = π r³ γ̃/4 are state entries `relax_offset + k`.
+    relax: Vec<(usize, f64)>,
+    relax_of_seg: Vec<usize>,
+    relax_offset: usize,
+    /// Per segment: the flow magnitude its dynamic laws see (|Q| or Q̃), see `load_shear`.
+    shear_flow: Vec<f64>,
     has_wall: bool,
     initial_free: f64,
     /// Free concentration per node: warm start of the binding inversion, and reporting.
@@ -243,6 +250,8 @@ pub struct Transport {
     pieces: Vec<Piece>,
     seg_pieces: Vec<std::ops::Range<usize>>,
     species: Vec<Species>,
+    /// Cycle-mean |Q| per segment (set by `set_mean_flow`): the relaxed shears start there.
+    mean_abs: Vec<f64>,
     formulation: Formulation,
     v_eps: f64,
     out_vessels: Vec<OutVessel>,
@@ -716,6 +725,10 @@ impl Transport {
                 cell_gcw: vec![0.0; cells.len()],
                 cell_q: vec![0.0; cells.len()],
                 dynamic: Vec::new(),
+                relax: Vec::new(),
+                relax_of_seg: vec![usize::MAX; segments.len()],
+                relax_offset: 0,
+                shear_flow: vec![0.0; segments.len()],
                 has_wall: false,
                 initial_free,
                 free: vec![initial_free; kind.len()],
@@ -763,6 +776,7 @@ impl Transport {
             pieces,
             seg_pieces,
             species,
+            mean_abs: Vec::new(),
             formulation: spec.formulation,
             v_eps: spec.velocity_threshold,
             out_vessels,
@@ -821,9 +835,10 @@ impl Transport {
         self.cells.len()
     }
     /// Length of the coupled state: amounts per cell and species, then 4 accumulators per
-    /// species (I_in, I_out, I_wall, I_decay).
+    /// species (I_in, I_out, I_wall, I_decay), then the relaxed shears of every species.
     pub fn state_len(&self) -> usize {
         self.species.len() * (self.cells.len() + 4)
+            + self.species.iter().map(|s| s.relax.len()).sum::<usize>()
     }
     pub fn formulation(&self) -> Formulation {
         self.formulation
@@ -854,14 +869,32 @@ impl Transport {
 
     /// Evaluate the segment laws; `mean_abs[j]` is segment j's cycle-mean |Q|.
     pub fn set_mean_flow(&mut self, mean_abs: &[f64]) -> Result<()> {
+        self.mean_abs = mean_abs.to_vec();
         self.set_laws(mean_abs, true)
     }
 
     fn set_laws(&mut self, mean_abs: &[f64], final_pass: bool) -> Result<()> {
         let nc = self.cells.len();
+        let mut offset = self.species.len() * (nc + 4);
         for sp in &mut self.species {
             sp.laws.clear();
             sp.dynamic.clear();
+            sp.relax.clear();
+            sp.relax_of_seg.iter_mut().for_each(|k| *k = usize::MAX);
+            if final_pass {
+                for (j, seg) in self.segments.iter().enumerate() {
+                    if sp.walls[self.segment_vessels[j]].is_relaxed()
+                        && seg.wall.radius > 0.0
+                        && seg.dx > 0.0
+                    {
+                        sp.relax_of_seg[j] = sp.relax.len();
+                        let tau = closure::relaxation_time(&seg.wall, sp.diffusivity, mean_abs[j]);
+                        sp.relax.push((j, tau));
+                    }
+                }
+            }
+            sp.relax_offset = offset;
+            offset += sp.relax.len();
             sp.cell_g = vec![0.0; nc];
             sp.cell_gcw = vec![0.0; nc];
             sp.cell_q = vec![0.0; nc];
@@ -915,6 +948,9 @@ impl Transport {
             sp.mixing_conc = vec![ct; nmix];
             for i in 0..nc {
                 z[s * nc + i] = self.vol[i] * ct;
+            }
+            for (k, &(j, _)) in sp.relax.iter().enumerate() {
+                z[sp.relax_offset + k] = self.mean_abs.get(j).copied().unwrap_or(0.0);
             }
         }
         self.wvol = self.vol.clone();
@@ -1017,7 +1053,7 @@ impl Transport {
 
     /// Wall uptake of every cell for species `s` into `w` (mol/s), from the current free
     /// concentrations and branch flows `y`.
-    fn wall_uptake(&self, s: usize, y: &[f64], w: &mut [f64]) {
+    fn wall_uptake(&self, s: usize, w: &mut [f64]) {
         let sp = &self.species[s];
         // without binding the free concentration is the total one (no copy)
         let free = if sp.binding.is_identity() {
@@ -1030,8 +1066,23 @@ impl Transport {
         }
         for &p in &sp.dynamic {
             let pc = &self.pieces[p];
-            let (g, cw, q) = sp.laws[p].eval(y[self.segments[pc.seg].branch_unknown]);
+            let (g, cw, q) = sp.laws[p].eval(sp.shear_flow[pc.seg]);
             w[pc.cell] += pc.share * (g * (free[pc.node] - cw) + q);
+        }
+    }
+
+    /// Flow magnitude seen by the dynamic laws of species `s`: the branch flow (instantaneous
+    /// shear) or the relaxed equivalent flow Q̃ held in the state `z`.
+    fn load_shear(&mut self, s: usize, y: &[f64], z: &[f64]) {
+        let sp = &mut self.species[s];
+        for &p in &sp.dynamic {
+            let j = self.pieces[p].seg;
+            let k = sp.relax_of_seg[j];
+            sp.shear_flow[j] = if k == usize::MAX {
+                y[self.segments[j].branch_unknown]
+            } else {
+                z[sp.relax_offset + k]
+            };
         }
     }
 
@@ -1119,6 +1170,7 @@ impl Transport {
             }
             self.load_boundary(s, time);
             self.mix(s)?;
+            self.load_shear(s, y, z);
             // node-to-node faces: the bulk of the work, branch-free apart from the upwind pick;
             // fluxes into mixing points and out of them cancel there (they hold no amount)
             let conc = &self.conc;
@@ -1184,13 +1236,18 @@ impl Transport {
             }
             for &p in &sp.dynamic {
                 let pc = &self.pieces[p];
-                let (g, cw, q) = sp.laws[p].eval(y[self.segments[pc.seg].branch_unknown]);
+                let (g, cw, q) = sp.laws[p].eval(sp.shear_flow[pc.seg]);
                 let w = pc.share * (g * (free[pc.node] - cw) + q);
                 dzs[pc.cell] -= w;
                 i_wall += w;
             }
             let acc = &mut dz[nsp * nc + 4 * s..nsp * nc + 4 * s + 4];
             acc.copy_from_slice(&[i_in, i_out, i_wall, i_decay]);
+            // relaxed shears: dQ̃/dt = (|Q| − Q̃)/τ_BL
+            for (k, &(j, tau)) in sp.relax.iter().enumerate() {
+                let i = sp.relax_offset + k;
+                dz[i] = (y[self.segments[j].branch_unknown].abs() - z[i]) / tau;
+            }
         }
         self.sweep.dnode = dnode;
         Ok(())
@@ -1265,15 +1322,26 @@ impl Transport {
             }
             self.load_boundary(s, t_af);
             let lambda = self.species[s].decay;
+            // relaxed shears first (exact for the step's frozen |Q|), so that the wall law
+            // of the solve uses the end-of-step boundary layer, like backward Euler
+            {
+                let sp = &self.species[s];
+                for (k, &(j, tau)) in sp.relax.iter().enumerate() {
+                    let q = ya[self.segments[j].branch_unknown].abs();
+                    let v = &mut z[sp.relax_offset + k];
+                    *v = q + (*v - q) * (-dt / tau).exp();
+                }
+            }
+            self.load_shear(s, &ya, z);
             // wall uptake linearised about the old state: W = G s x + const (exact for linear binding)
             if self.species[s].has_wall {
                 self.free_of_cells(s);
-                self.wall_uptake(s, &ya, &mut wconst);
+                self.wall_uptake(s, &mut wconst);
                 let sp = &self.species[s];
                 let mut g = sp.cell_g.clone();
                 for &p in &sp.dynamic {
                     let pc = &self.pieces[p];
-                    let (gj, _, _) = sp.laws[p].eval(ya[self.segments[pc.seg].branch_unknown]);
+                    let (gj, _, _) = sp.laws[p].eval(sp.shear_flow[pc.seg]);
                     g[pc.cell] += pc.share * gj;
                 }
                 for (i, &n) in self.cells.iter().enumerate() {
@@ -1564,7 +1632,8 @@ impl Transport {
                     };
                 }
             }
-            self.wall_uptake(s, y, &mut wcell);
+            self.load_shear(s, y, z);
+            self.wall_uptake(s, &mut wcell);
             let sp = &self.species[s];
             let face_flux = |tr: &Self, unknown: usize| -> (f64, f64) {
                 let fi = tr
@@ -1579,7 +1648,7 @@ impl Transport {
                 (q * c, sp.binding.free(c, c))
             };
             let seg_wall = |j: usize| -> f64 {
-                let qb = y[self.segments[j].branch_unknown];
+                let qb = sp.shear_flow[j];
                 self.seg_pieces[j]
                     .clone()
                     .map(|p| {

@@ -689,7 +689,7 @@ fn refined_y(wall: &str, cin: &str, m: usize) -> Built {
                               "o1": {{"type": "rcr", "proximal_resistance": 1e7, "capacitance": 1e-9, "distal_resistance": 1e8}},
                               "o2": {{"type": "resistance", "resistance": 2e8}}}},
       "transport": {{"cells_per_segment": {m}, "cells_per_vessel": {{"d2": 2}},
-        "species": [{{"name": "o2", "inlet": {cin}, "initial": {c0}, "wall": {wall}}}]}}}}"#
+        "species": [{{"name": "o2", "diffusivity": 1.2e-9, "inlet": {cin}, "initial": {c0}, "wall": {wall}}}]}}}}"#
     );
     build(&json)
 }
@@ -697,12 +697,24 @@ fn refined_y(wall: &str, cin: &str, m: usize) -> Built {
 #[test]
 fn refined_network_balance_is_exact_and_free_stream_is_preserved() {
     let alpha = 1.4e-3;
-    for method in [Method::Rk4, Method::GeneralizedAlpha { rho_inf: 0.5 }] {
+    let walls = [
+        format!(
+            r#"{{"model": "mass-transfer", "k": 5e-6, "wall_concentration": {}}}"#,
+            60.0 * alpha
+        ),
+        // the boundary-layer shear as extra state (enhanced so that the uptake matters)
+        format!(
+            r#"{{"model": "leveque", "shear": "relaxed", "enhancement": 50, "wall_concentration": {}}}"#,
+            60.0 * alpha
+        ),
+    ];
+    let methods = [Method::Rk4, Method::GeneralizedAlpha { rho_inf: 0.5 }];
+    for (method, wall) in methods
+        .iter()
+        .flat_map(|m| walls.iter().map(move |w| (*m, w)))
+    {
         let mut b = refined_y(
-            &format!(
-                r#"{{"model": "mass-transfer", "k": 5e-6, "wall_concentration": {}}}"#,
-                60.0 * alpha
-            ),
+            wall,
             &format!(
                 r#"{{"kind": "fourier", "period": 1.0, "mean": {}, "sin": [{}]}}"#,
                 85.0 * alpha,
@@ -854,4 +866,132 @@ fn bad_cells_per_segment_is_a_model_error_naming_key_and_value() {
         err.contains("cells_per_vessel") && err.contains("nope"),
         "{err}"
     );
+}
+
+// ---------------------------------------------------------------------------------------------
+// Lévêque with `shear: relaxed` (physics §3.1 "Pulsatility")
+
+/// Rigid coronary tube with the relaxed Lévêque wall; Q(t) = Q0 (1 + a sin ωt), no reversal.
+/// The relaxed equivalent flow solves Q̃' = (Q − Q̃)/τ from Q̃(0) = Q0 (the cycle mean):
+///   Q̃ = Q0 + a Q0 [sin ωt − ωτ cos ωt + ωτ e^{−t/τ}]/(1 + ω²τ²),
+/// τ = δ²/D, δ = Γ(4/3)(9 D x_mid/γ̄)^{1/3}, γ̄ = 4 Q0/(π r³). The reported wall flux is
+/// coef Q̃^{1/3} (c − c_w) with the segment-integrated Lévêque coefficient.
+#[test]
+fn relaxed_shear_follows_the_linear_relaxation_law() {
+    let (r, n, dx, q0, a, d) = (1.5e-3, 9, 3.84e-3, 1.6e-6, 0.5, 1.2e-9);
+    let alpha = 1.4e-3;
+    let (cin, cw) = (85.0 * alpha, 48.0 * alpha);
+    let sp = format!(
+        r#"{{"name": "o2", "diffusivity": {d}, "inlet": {{"kind": "constant", "value": {cin}}},
+            "wall": {{"model": "leveque", "shear": "relaxed", "wall_concentration": {cw}}}}}"#
+    );
+    let flow = format!(r#"{{"kind": "constant", "value": {q0}}}"#);
+    let mut b = build(&tube(r, dx * n as f64, n, "", &flow, 1e7, &sp));
+    b.transport.set_mean_flow(&vec![q0; n]).unwrap();
+    let omega = 2.0 * PI;
+    let q = |t: f64| q0 * (1.0 + a * (omega * t).sin());
+    let gamma43 = 0.892_979_511_569_249_2;
+    let tau: Vec<f64> = (0..n)
+        .map(|j| {
+            let x = (j as f64 + 0.5) * dx;
+            let delta = gamma43 * (9.0 * d * x / (4.0 * q0 / (PI * r.powi(3)))).cbrt();
+            delta * delta / d
+        })
+        .collect();
+    let exact = |j: usize, t: f64| {
+        let wt = omega * tau[j];
+        q0 + a * q0 * ((omega * t).sin() - wt * (omega * t).cos() + wt * (-t / tau[j]).exp())
+            / (1.0 + wt * wt)
+    };
+    let coef = |j: usize| {
+        let (x0, x1) = (j as f64 * dx, (j + 1) as f64 * dx);
+        2.0 * PI * r * 1.5 * (4.0 / (PI * r.powi(3)) * d * d / 9.0).cbrt() / gamma43
+            * (x1.powf(2.0 / 3.0) - x0.powf(2.0 / 3.0))
+    };
+    let nn = b.dae.n_nodes;
+    let mut y = vec![0.0; b.dae.n];
+    y[nn..].iter_mut().for_each(|v| *v = q(0.0));
+    let mut z = b.transport.initial_state(&y).unwrap();
+    let nc = b.transport.n_cells();
+    assert_eq!(z.len(), nc + 4 + n);
+    let mut st = CoupledStages::new(z.len());
+    let mut set_flow = |t: f64, y: &mut [f64]| {
+        for v in &mut y[nn..] {
+            *v = q(t);
+        }
+    };
+    let dt = 1e-3;
+    let (mut worst_state, mut worst_law) = (0.0f64, 0.0f64);
+    let mut spread = 0.0f64;
+    for k in 0..3000 {
+        b.transport
+            .step_prescribed(k as f64 * dt, dt, &mut set_flow, &mut y, &mut z, &mut st)
+            .unwrap();
+        if (k + 1) % 50 != 0 {
+            continue;
+        }
+        let t = (k + 1) as f64 * dt;
+        set_flow(t, &mut y);
+        let mut out = Vec::new();
+        b.transport
+            .observe(t, &y, None, &z, false, &mut out)
+            .unwrap();
+        for j in 0..n {
+            let qe = exact(j, t);
+            worst_state = worst_state.max((z[nc + 4 + j] / qe - 1.0).abs());
+            let base = VESSEL_COLUMNS + SEGMENT_COLUMNS * j;
+            let (c, wall) = (out[base], out[base + 2]);
+            let g = coef(j) * qe.cbrt();
+            worst_law = worst_law.max((wall / (g * (c - cw)) - 1.0).abs());
+            spread = spread.max((qe / q(t) - 1.0).abs());
+        }
+    }
+    eprintln!("relaxed shear: state error {worst_state:e}, law error {worst_law:e}");
+    assert!(worst_state < 1e-10, "Q̃ vs closed form: {worst_state:e}");
+    assert!(worst_law < 1e-10, "wall law vs closed form: {worst_law:e}");
+    // the test discriminates: Q̃ is far from the instantaneous flow
+    assert!(spread > 0.2, "{spread}");
+}
+
+/// Constant flow: relaxed, cycle-mean and instantaneous shear give the same results, with
+/// both integrations.
+#[test]
+fn relaxed_cycle_mean_and_instantaneous_shear_agree_in_constant_flow() {
+    let alpha = 1.4e-3;
+    for method in [Method::Rk4, Method::GeneralizedAlpha { rho_inf: 0.5 }] {
+        let mut rows = Vec::new();
+        for shear in ["cycle-mean", "instantaneous", "relaxed"] {
+            let sp = format!(
+                r#"{{"name": "o2", "diffusivity": 1.2e-9, "inlet": {{"kind": "constant", "value": {cin}}},
+                    "wall": {{"model": "leveque", "shear": "{shear}", "wall_concentration": {cw}}}}}"#,
+                cin = 85.0 * alpha,
+                cw = 48.0 * alpha
+            );
+            let mut b = build(&tube(
+                1.5e-3,
+                0.0346,
+                9,
+                r#", "wall_thickness": 1.8e-4, "youngs_modulus": 7e5"#,
+                r#"{"kind": "constant", "value": 1.6e-6}"#,
+                55.6 * MMHG * 1e6,
+                &sp,
+            ));
+            let out = simulate_with_transport(
+                &b.dae,
+                Some(&mut b.transport),
+                &settings(method, 1e-4, 1, vec![]),
+                &mut |_, _| true,
+            )
+            .unwrap();
+            rows.push(out.transport.unwrap().data);
+        }
+        for other in &rows[1..] {
+            for (a, b) in rows[0].iter().zip(other) {
+                assert!(
+                    (a - b).abs() <= 1e-11 * a.abs().max(1e-300) || (a.is_nan() && b.is_nan()),
+                    "{method:?}: {a} vs {b}"
+                );
+            }
+        }
+    }
 }
