@@ -11,7 +11,10 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from scipy.special import gammainc
+from test_oxygen import networks, tube
 
 import oxyline
 from oxyline import examples
@@ -99,3 +102,50 @@ def test_bad_cells_per_segment_names_key_and_value(bad: object) -> None:
 def test_unknown_vessel_in_cells_per_vessel() -> None:
     with pytest.raises(oxyline.ModelError, match="cells_per_vessel.*'nope'"):
         oxyline.load_model(dye_tube(None, cells_per_vessel={"nope": 2}))
+
+
+# ---------------------------------------------------------------------------------------------
+# random networks (trees, loops, reversal) with refinement and the relaxed Lévêque shear
+
+@st.composite
+def refined_networks(draw: st.DrawFn) -> dict:
+    model = draw(networks())
+    model["oxygen"]["cells_per_segment"] = draw(st.integers(1, 3))
+    if draw(st.booleans()):
+        model["oxygen"]["wall"] = {"model": "leveque", "po2": 40.0, "shear": "relaxed",
+                                   "enhancement": 50.0}
+    if draw(st.booleans()):
+        model["oxygen"]["per_vessel"] = {"v0": {"cells_per_segment": draw(st.integers(1, 4))}}
+    return model
+
+
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(refined_networks())
+def test_property_refined_mass_balance_and_positivity(model: dict) -> None:
+    res = oxyline.simulate(model, output_every=0.01)
+    for name, sp in res.species.items():
+        mb = sp.mass_balance
+        scale = max(abs(mb["inflow"]).max(), sp.initial_stored, 1e-300)
+        assert np.abs(mb["residual"]).max() <= 1e-10 * scale, (name, mb["residual"][-1], scale)
+        c = sp.concentration
+        assert np.nanmin(c) >= -1e-12 * max(np.nanmax(np.abs(c)), 1e-300), name
+
+
+@pytest.mark.parametrize("m", [1, 3])
+def test_relaxed_shear_equals_cycle_mean_in_steady_flow(m: int) -> None:
+    """Constant inflow: the relaxed boundary-layer shear stays at its cycle-mean start."""
+    out = []
+    for shear in ("cycle-mean", "relaxed"):
+        ox = {"inlet": {"po2": 85.0}, "cells_per_segment": m,
+              "wall": {"model": "leveque", "po2": 48.0, "shear": shear, "enhancement": 20.0}}
+        res = oxyline.simulate(tube(9, oxygen=ox, radius=1.5e-3, length=0.0346, flow=1.6e-6,
+                                    cycles=20), output_every=0.1)
+        out.append(res.segment_po2[-1])
+    assert np.allclose(out[0], out[1], rtol=1e-12, atol=0)
+    assert out[0][-1] < 84.0
+
+
+def test_bad_shear_names_the_options() -> None:
+    ox = {"inlet": {"po2": 85.0}, "wall": {"model": "leveque", "po2": 48.0, "shear": "slow"}}
+    with pytest.raises(oxyline.ModelError, match="relaxed.*'slow'"):
+        oxyline.load_model(tube(3, oxygen=ox))

@@ -20,8 +20,8 @@ Oxygen (physics spec §2-4)::
       initial: {po2: 85}                 # default: the inlet value at t = 0
 
 Wall models: ``none``; ``flux`` {flux: mol m^-2 s^-1}; ``mass-transfer`` {k: m/s, po2};
-``leveque`` {po2, shear: cycle-mean | instantaneous, enhancement, hb_facilitation}; ``graetz``
-{po2, enhancement}; ``permeability`` {permeability: m/s, po2}. ``permeability`` in the
+``leveque`` {po2, shear: cycle-mean | instantaneous | relaxed, enhancement, hb_facilitation};
+``graetz`` {po2, enhancement}; ``permeability`` {permeability: m/s, po2}. ``permeability`` in the
 mass-transfer, Lévêque and Graetz models adds a wall resistance in series (physics C8).
 ``hb_facilitation: {d_hb: 5.5e-12}`` multiplies the Lévêque/Graetz coefficient by
 E_Hb = (1 + K)^(1/3) (1 + K D_Hb/D)^(2/3), K the Hill secant between the inlet and wall PO2
@@ -238,8 +238,9 @@ def _wall(spec: Any, element: str, conc_of: Any, conc_key: str, h: dict[str, flo
     out["enhancement"] = enh
     if model == "leveque":
         shear = spec.get("shear", "cycle-mean")
-        if shear not in ("cycle-mean", "instantaneous"):
-            raise _err(element, f"shear must be 'cycle-mean' or 'instantaneous', got {shear!r}")
+        if shear not in ("cycle-mean", "instantaneous", "relaxed"):
+            raise _err(element, "shear must be 'cycle-mean', 'instantaneous' or 'relaxed', "
+                                f"got {shear!r}")
         out["shear"] = shear
     return out
 

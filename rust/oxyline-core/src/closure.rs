@@ -132,7 +132,8 @@ pub fn leveque_coef(seg: &SegmentWall, d: f64) -> f64 {
 pub fn relaxation_time(seg: &SegmentWall, d: f64, q_mean: f64) -> f64 {
     let gamma = 4.0 * q_mean.abs() / (PI * seg.radius.powi(3));
     let x = 0.5 * (seg.x0 + seg.x1);
-    if !(gamma > 0.0) || !(d > 0.0) {
+    let defined = gamma > 0.0 && d > 0.0; // false for NaN too
+    if !defined {
         return f64::INFINITY;
     }
     let delta = GAMMA_4_3 * (9.0 * d * x / gamma).cbrt();
@@ -353,6 +354,13 @@ impl SegmentLaw {
     /// (g, cw, q) at the current segment flow.
     #[inline]
     pub fn eval(&self, q_branch: f64) -> (f64, f64, f64) {
+        self.eval_cbrt(q_branch.abs().cbrt())
+    }
+
+    /// (g, cw, q) given |Q|^{1/3}: the cube root is the costly part, so callers with several
+    /// laws per segment (refined cells) take it once per segment.
+    #[inline]
+    pub fn eval_cbrt(&self, q_cbrt: f64) -> (f64, f64, f64) {
         match *self {
             SegmentLaw::Fixed { g, cw, q } => (g, cw, q),
             SegmentLaw::Instantaneous {
@@ -360,11 +368,7 @@ impl SegmentLaw {
                 floor,
                 gp,
                 cw,
-            } => (
-                series((coef * q_branch.abs().cbrt()).max(floor), gp),
-                cw,
-                0.0,
-            ),
+            } => (series((coef * q_cbrt).max(floor), gp), cw, 0.0),
         }
     }
 }

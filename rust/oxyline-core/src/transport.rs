@@ -186,8 +186,10 @@ struct Species {
     relax: Vec<(usize, f64)>,
     relax_of_seg: Vec<usize>,
     relax_offset: usize,
-    /// Per segment: the flow magnitude its dynamic laws see (|Q| or Q̃), see `load_shear`.
-    shear_flow: Vec<f64>,
+    /// Segments with dynamic pieces, and per segment the cube root of the flow magnitude its
+    /// dynamic laws see (|Q| or Q̃), see `load_shear`.
+    dynamic_segs: Vec<usize>,
+    shear_cbrt: Vec<f64>,
     has_wall: bool,
     initial_free: f64,
     /// Free concentration per node: warm start of the binding inversion, and reporting.
@@ -728,7 +730,8 @@ impl Transport {
                 relax: Vec::new(),
                 relax_of_seg: vec![usize::MAX; segments.len()],
                 relax_offset: 0,
-                shear_flow: vec![0.0; segments.len()],
+                dynamic_segs: Vec::new(),
+                shear_cbrt: vec![0.0; segments.len()],
                 has_wall: false,
                 initial_free,
                 free: vec![initial_free; kind.len()],
@@ -879,6 +882,7 @@ impl Transport {
         for sp in &mut self.species {
             sp.laws.clear();
             sp.dynamic.clear();
+            sp.dynamic_segs.clear();
             sp.relax.clear();
             sp.relax_of_seg.iter_mut().for_each(|k| *k = usize::MAX);
             if final_pass {
@@ -926,7 +930,13 @@ impl Transport {
                         sp.cell_gcw[c] += share * g * cw;
                         sp.cell_q[c] += share * q;
                     }
-                    SegmentLaw::Instantaneous { .. } => sp.dynamic.push(p),
+                    SegmentLaw::Instantaneous { .. } => {
+                        sp.dynamic.push(p);
+                        // pieces are contiguous per segment
+                        if sp.dynamic_segs.last() != Some(&j) {
+                            sp.dynamic_segs.push(j);
+                        }
+                    }
                 }
                 sp.laws.push(law);
             }
@@ -1066,23 +1076,23 @@ impl Transport {
         }
         for &p in &sp.dynamic {
             let pc = &self.pieces[p];
-            let (g, cw, q) = sp.laws[p].eval(sp.shear_flow[pc.seg]);
+            let (g, cw, q) = sp.laws[p].eval_cbrt(sp.shear_cbrt[pc.seg]);
             w[pc.cell] += pc.share * (g * (free[pc.node] - cw) + q);
         }
     }
 
-    /// Flow magnitude seen by the dynamic laws of species `s`: the branch flow (instantaneous
-    /// shear) or the relaxed equivalent flow Q̃ held in the state `z`.
+    /// |Q|^{1/3} seen by the dynamic laws of species `s`, per segment: the branch flow
+    /// (instantaneous shear) or the relaxed equivalent flow Q̃ held in the state `z`.
     fn load_shear(&mut self, s: usize, y: &[f64], z: &[f64]) {
         let sp = &mut self.species[s];
-        for &p in &sp.dynamic {
-            let j = self.pieces[p].seg;
+        for &j in &sp.dynamic_segs {
             let k = sp.relax_of_seg[j];
-            sp.shear_flow[j] = if k == usize::MAX {
+            let q = if k == usize::MAX {
                 y[self.segments[j].branch_unknown]
             } else {
                 z[sp.relax_offset + k]
             };
+            sp.shear_cbrt[j] = q.abs().cbrt();
         }
     }
 
@@ -1236,7 +1246,7 @@ impl Transport {
             }
             for &p in &sp.dynamic {
                 let pc = &self.pieces[p];
-                let (g, cw, q) = sp.laws[p].eval(sp.shear_flow[pc.seg]);
+                let (g, cw, q) = sp.laws[p].eval_cbrt(sp.shear_cbrt[pc.seg]);
                 let w = pc.share * (g * (free[pc.node] - cw) + q);
                 dzs[pc.cell] -= w;
                 i_wall += w;
@@ -1341,7 +1351,7 @@ impl Transport {
                 let mut g = sp.cell_g.clone();
                 for &p in &sp.dynamic {
                     let pc = &self.pieces[p];
-                    let (gj, _, _) = sp.laws[p].eval(sp.shear_flow[pc.seg]);
+                    let (gj, _, _) = sp.laws[p].eval_cbrt(sp.shear_cbrt[pc.seg]);
                     g[pc.cell] += pc.share * gj;
                 }
                 for (i, &n) in self.cells.iter().enumerate() {
@@ -1648,12 +1658,12 @@ impl Transport {
                 (q * c, sp.binding.free(c, c))
             };
             let seg_wall = |j: usize| -> f64 {
-                let qb = sp.shear_flow[j];
+                let qb = sp.shear_cbrt[j];
                 self.seg_pieces[j]
                     .clone()
                     .map(|p| {
                         let pc = &self.pieces[p];
-                        let (g, cw, q) = sp.laws[p].eval(qb);
+                        let (g, cw, q) = sp.laws[p].eval_cbrt(qb);
                         pc.share * (g * (sp.free[pc.node] - cw) + q)
                     })
                     .sum()
