@@ -328,14 +328,10 @@ impl Transport {
             f
         };
         let mut kind = vec![Kind::Mixing; nn];
-        let mut cells = Vec::new();
-        let mut node_cell = vec![usize::MAX; nn];
         for (i, node) in circuit.nodes.iter().enumerate() {
             kind[i] = if node.boundary.is_some() || fixed[i] {
                 Kind::Exterior
             } else if node.volume > 0.0 {
-                node_cell[i] = cells.len();
-                cells.push(i);
                 Kind::Cell
             } else {
                 if dae.e[i] > 0.0 {
