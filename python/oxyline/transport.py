@@ -12,15 +12,16 @@ Oxygen (physics spec §2-4)::
       solubility: 1.40e-3                # mol m^-3 mmHg^-1
       diffusivity: 1.2e-9                # m^2/s
       wall: {model: leveque, po2: 60.0, shear: cycle-mean}
-      per_vessel: {ICA: {wall: {...}}}
+      per_vessel: {ICA: {wall: {...}, cells_per_segment: 4}}
+      cells_per_segment: 1               # transport cells per flow segment (sharper fronts)
       outlet_backflow: zero-gradient     # or {outlet_bc: {po2: ..}}
       formulation: conservative          # or tl-quasisteady (the paper's literal KCL form)
       reference_pressure: 0              # mmHg: pressure at which the vessel radii hold
       initial: {po2: 85}                 # default: the inlet value at t = 0
 
 Wall models: ``none``; ``flux`` {flux: mol m^-2 s^-1}; ``mass-transfer`` {k: m/s, po2};
-``leveque`` {po2, shear: cycle-mean | instantaneous, enhancement, hb_facilitation}; ``graetz``
-{po2, enhancement}; ``permeability`` {permeability: m/s, po2}. ``permeability`` in the
+``leveque`` {po2, shear: cycle-mean | instantaneous | relaxed, enhancement, hb_facilitation};
+``graetz`` {po2, enhancement}; ``permeability`` {permeability: m/s, po2}. ``permeability`` in the
 mass-transfer, Lévêque and Graetz models adds a wall resistance in series (physics C8).
 ``hb_facilitation: {d_hb: 5.5e-12}`` multiplies the Lévêque/Graetz coefficient by
 E_Hb = (1 + K)^(1/3) (1 + K D_Hb/D)^(2/3), K the Hill secant between the inlet and wall PO2
@@ -38,6 +39,11 @@ Other species (physics §5), all SI (concentrations in mol/m^3)::
                                          # {bolus: {gamma_variate: {k: .., t0: .., a: .., b: ..}}}
         backflow: {outlet_bc: {concentration: 0.0}}
         initial: 0.0
+
+All species share one grid of transport cells: ``transport: {cells_per_segment: m,
+cells_per_vessel: {name: m}}`` (or the oxygen section's ``cells_per_segment`` and
+``per_vessel: {name: {cells_per_segment: m}}``, which win) splits every volume node into m
+cells in series (physics §5: a front spreads by sqrt(x dx/m) instead of sqrt(x dx)).
 """
 
 from __future__ import annotations
@@ -54,6 +60,7 @@ MOLAR_VOLUME_ML = 22.414  # mL O2 (STPD) per mmol
 OXYGEN_KEYS = {
     "inlet", "inlets", "hemoglobin", "hill", "linearized", "solubility", "diffusivity", "wall",
     "per_vessel", "outlet_backflow", "formulation", "reference_pressure", "initial", "name",
+    "cells_per_segment",
 }
 WALL_KEYS = {
     "none": {"model"},
@@ -66,7 +73,9 @@ WALL_KEYS = {
 }
 SPECIES_KEYS = {"name", "diffusivity", "decay", "binding", "wall", "inlet", "inlets", "backflow",
                 "initial", "per_vessel", "units"}
-TRANSPORT_KEYS = {"reference_pressure", "formulation", "velocity_threshold"}
+TRANSPORT_KEYS = {"reference_pressure", "formulation", "velocity_threshold", "cells_per_segment",
+                  "cells_per_vessel"}
+MAX_CELLS_PER_SEGMENT = 10_000
 FORMULATIONS = ("conservative", "tl-quasisteady")
 
 
@@ -98,6 +107,16 @@ def _num(v: Any, element: str, key: str, minimum: float | None = None,
     if minimum is not None and x < minimum:
         raise _err(element, f"'{key}' must be >= {minimum}, got {x}")
     return x
+
+
+def _cells(v: Any, element: str) -> int:
+    """``cells_per_segment``: an integer m >= 1 (transport cells per flow segment)."""
+    ok = not isinstance(v, bool) and (
+        isinstance(v, int) or (isinstance(v, float) and v.is_integer()))
+    if not ok or not 1 <= v <= MAX_CELLS_PER_SEGMENT:
+        raise _err(element, f"'cells_per_segment' must be an integer between 1 and "
+                            f"{MAX_CELLS_PER_SEGMENT}, got {v!r}")
+    return int(v)
 
 
 def _wave(spec: Any, key: str, scale: float, element: str, period: float | None,
@@ -219,8 +238,9 @@ def _wall(spec: Any, element: str, conc_of: Any, conc_key: str, h: dict[str, flo
     out["enhancement"] = enh
     if model == "leveque":
         shear = spec.get("shear", "cycle-mean")
-        if shear not in ("cycle-mean", "instantaneous"):
-            raise _err(element, f"shear must be 'cycle-mean' or 'instantaneous', got {shear!r}")
+        if shear not in ("cycle-mean", "instantaneous", "relaxed"):
+            raise _err(element, "shear must be 'cycle-mean', 'instantaneous' or 'relaxed', "
+                                f"got {shear!r}")
         out["shear"] = shear
     return out
 
@@ -280,11 +300,31 @@ def _oxygen(ox: Mapping[str, Any], period: float | None, duration: float | None)
     if "per_vessel" in ox:
         pv = {}
         for name, over in ox["per_vessel"].items():
-            _check(over, {"wall"}, f"{el} per_vessel '{name}'")
-            pv[str(name)] = _wall(over.get("wall"), f"{el} per_vessel '{name}'", po2, "po2", h, d,
-                                  p_in)
-        species["per_vessel"] = pv
+            _check(over, {"wall", "cells_per_segment"}, f"{el} per_vessel '{name}'")
+            # an override with only cells_per_segment keeps the section's wall
+            if "wall" in over or "cells_per_segment" not in over:
+                pv[str(name)] = _wall(over.get("wall"), f"{el} per_vessel '{name}'", po2, "po2", h,
+                                      d, p_in)
+        if pv:
+            species["per_vessel"] = pv
     return species
+
+
+def _refinement(section: Mapping[str, Any], element: str, per_vessel_key: str
+                ) -> tuple[int | None, dict[str, int]]:
+    """(cells_per_segment, per-vessel overrides) of the oxygen or transport section."""
+    m = _cells(section["cells_per_segment"], element) if "cells_per_segment" in section else None
+    over: dict[str, int] = {}
+    pv = section.get(per_vessel_key) or {}
+    if not isinstance(pv, Mapping):
+        raise _err(element, f"'{per_vessel_key}' must be a mapping, got {pv!r}")
+    for name, v in pv.items():
+        if per_vessel_key == "per_vessel":  # oxygen: per_vessel: {name: {cells_per_segment: m}}
+            if not isinstance(v, Mapping) or "cells_per_segment" not in v:
+                continue
+            v = v["cells_per_segment"]
+        over[str(name)] = _cells(v, f"{element} vessel '{name}'")
+    return m, over
 
 
 def _species(sp: Mapping[str, Any], i: int, period: float | None,
@@ -374,6 +414,16 @@ def canonical(data: Mapping[str, Any], pressure_factor: float, period: float | N
     info["species"] = names
     out: dict[str, Any] = {"reference_pressure": p_ref, "formulation": formulation,
                            "species": species}
+    # transport cells per flow segment: one grid for all species (oxygen's keys win)
+    cells, cells_pv = _refinement(tr, "transport", "cells_per_vessel")
+    if isinstance(ox, Mapping):
+        m_ox, pv_ox = _refinement(ox, "oxygen", "per_vessel")
+        cells = m_ox if m_ox is not None else cells
+        cells_pv.update(pv_ox)
+    if cells is not None:
+        out["cells_per_segment"] = cells
+    if cells_pv:
+        out["cells_per_vessel"] = cells_pv
     if "velocity_threshold" in tr:
         out["velocity_threshold"] = _num(tr["velocity_threshold"], "transport",
                                          "velocity_threshold", minimum=0.0)

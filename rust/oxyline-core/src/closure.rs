@@ -5,7 +5,8 @@
 //! with a conductance G (m³/s) and a fixed flux q (mol/s). G is constant (mass transfer,
 //! permeability), depends on a cycle-mean |Q| fixed before the run (Lévêque, Graetz: the
 //! concentration boundary layer adapts over many beats, §3.1 "Pulsatility"), or on the
-//! instantaneous |Q| of the segment's branch (Lévêque, `shear: instantaneous`).
+//! instantaneous |Q| of the segment's branch (Lévêque, `shear: instantaneous`), or on a shear
+//! that relaxes towards it on the boundary layer's time scale (`shear: relaxed`).
 
 use crate::error::{Error, Result};
 use serde::Deserialize;
@@ -24,6 +25,10 @@ pub enum Shear {
     CycleMean,
     /// Quasi-steady: wall shear from the instantaneous |Q| (floored at the Graetz value).
     Instantaneous,
+    /// The boundary layer's shear γ̃ relaxes to the instantaneous |γ_w| on the layer's own
+    /// time scale, dγ̃/dt = (|γ_w| − γ̃)/τ_BL (physics §3.1 "Pulsatility"), from the cycle-mean
+    /// value; see `relaxation_time`.
+    Relaxed,
 }
 
 #[derive(Debug, Clone, Deserialize, PartialEq, Default)]
@@ -91,8 +96,9 @@ impl SegmentWall {
 pub enum SegmentLaw {
     /// W = g (c − cw) + q.
     Fixed { g: f64, cw: f64, q: f64 },
-    /// Lévêque with instantaneous shear: g = max(coef |Q|^{1/3}, floor), then in series with
-    /// the wall permeability conductance `gp` (∞ if none).
+    /// Lévêque with a time-dependent shear: g = max(coef |Q|^{1/3}, floor), then in series
+    /// with the wall permeability conductance `gp` (∞ if none). The transport passes |Q|: the
+    /// instantaneous branch flow, or the relaxed equivalent flow Q̃ = π r³ γ̃/4.
     Instantaneous {
         coef: f64,
         floor: f64,
@@ -117,6 +123,21 @@ pub fn leveque_coef(seg: &SegmentWall, d: f64) -> f64 {
     let r = seg.radius;
     let a_per_q = (4.0 / (PI * r.powi(3)) * d * d / 9.0).cbrt() / GAMMA_4_3;
     2.0 * PI * r * 1.5 * a_per_q * (seg.x1.powf(2.0 / 3.0) - seg.x0.powf(2.0 / 3.0))
+}
+
+/// Boundary-layer relaxation time of a segment, τ_BL = δ²/D with the Lévêque thickness
+/// δ = Γ(4/3) (9 D x/γ̄)^{1/3} (= D/k) at the segment mid-point x, γ̄ = 4 q_mean/(π r³) the
+/// cycle-mean wall shear (physics §3.1 "Pulsatility"). Infinite without mean flow (the layer
+/// then never adapts: γ̃ keeps its initial value).
+pub fn relaxation_time(seg: &SegmentWall, d: f64, q_mean: f64) -> f64 {
+    let gamma = 4.0 * q_mean.abs() / (PI * seg.radius.powi(3));
+    let x = 0.5 * (seg.x0 + seg.x1);
+    let defined = gamma > 0.0 && d > 0.0; // false for NaN too
+    if !defined {
+        return f64::INFINITY;
+    }
+    let delta = GAMMA_4_3 * (9.0 * d * x / gamma).cbrt();
+    delta * delta / d
 }
 
 /// Graetz mixed-cup θ_m(x*) = 8 Σ G_n/λ_n² exp(−2 λ_n² x*), exact for x* ≥ 2e-5 with the
@@ -172,9 +193,20 @@ impl WallSpec {
             self,
             WallSpec::Graetz { .. }
                 | WallSpec::Leveque {
-                    shear: Shear::CycleMean,
+                    shear: Shear::CycleMean | Shear::Relaxed,
                     ..
                 }
+        )
+    }
+
+    /// Lévêque with `shear: relaxed`: the transport carries γ̃ as extra state.
+    pub fn is_relaxed(&self) -> bool {
+        matches!(
+            self,
+            WallSpec::Leveque {
+                shear: Shear::Relaxed,
+                ..
+            }
         )
     }
 
@@ -291,7 +323,7 @@ impl WallSpec {
                         cw: *wall_concentration,
                         q: 0.0,
                     },
-                    Shear::Instantaneous => SegmentLaw::Instantaneous {
+                    Shear::Instantaneous | Shear::Relaxed => SegmentLaw::Instantaneous {
                         coef,
                         floor,
                         gp: gp(permeability),
@@ -322,6 +354,13 @@ impl SegmentLaw {
     /// (g, cw, q) at the current segment flow.
     #[inline]
     pub fn eval(&self, q_branch: f64) -> (f64, f64, f64) {
+        self.eval_cbrt(q_branch.abs().cbrt())
+    }
+
+    /// (g, cw, q) given |Q|^{1/3}: the cube root is the costly part, so callers with several
+    /// laws per segment (refined cells) take it once per segment.
+    #[inline]
+    pub fn eval_cbrt(&self, q_cbrt: f64) -> (f64, f64, f64) {
         match *self {
             SegmentLaw::Fixed { g, cw, q } => (g, cw, q),
             SegmentLaw::Instantaneous {
@@ -329,11 +368,7 @@ impl SegmentLaw {
                 floor,
                 gp,
                 cw,
-            } => (
-                series((coef * q_branch.abs().cbrt()).max(floor), gp),
-                cw,
-                0.0,
-            ),
+            } => (series((coef * q_cbrt).max(floor), gp), cw, 0.0),
         }
     }
 }
@@ -411,6 +446,32 @@ mod tests {
         };
         let g = graetz_conductance(&seg, d, q);
         assert!((g / q - (-(0.3952988f64).ln())).abs() < 1e-6);
+    }
+
+    /// physics §3.5: τ_BL at mid-length ≈ 52 s (aorta), 3.0 s (coronary), 7.6 s (CCA).
+    #[test]
+    fn boundary_layer_relaxation_time_matches_physics_3_5() {
+        let d = 1.2e-9;
+        for (r, l, q, tau) in [
+            (8e-3, 0.2, 2e-5, 52.0),
+            (1.5e-3, 9.0 * 3.84e-3, 1.6e-6, 3.0),
+            (3e-3, 10.0 * 6.45e-3, 6e-6, 7.6),
+        ] {
+            // a segment centred at mid-length
+            let seg = SegmentWall {
+                radius: r,
+                x0: 0.25 * l,
+                x1: 0.75 * l,
+            };
+            let t = relaxation_time(&seg, d, q);
+            assert!((t / tau - 1.0).abs() < 0.03, "τ = {t} vs {tau}");
+        }
+        let seg = SegmentWall {
+            radius: 1e-3,
+            x0: 0.0,
+            x1: 0.01,
+        };
+        assert!(relaxation_time(&seg, d, 0.0).is_infinite());
     }
 
     #[test]

@@ -550,7 +550,9 @@ fn run(
         if let Some(tr) = transport.as_deref_mut() {
             let y0 = y.clone();
             tr.implicit_step(0.0, dt, 1.0, &y0, &y0, &mut z)?;
-            for a in z.iter_mut().skip(tr.n_cells() * tr.species_names().len()) {
+            // reset the accumulators (not the relaxed shears that follow them)
+            let nsp = tr.species_names().len();
+            for a in z.iter_mut().skip(tr.n_cells() * nsp).take(4 * nsp) {
                 *a = 0.0;
             }
         }

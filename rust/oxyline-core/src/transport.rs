@@ -21,7 +21,7 @@
 //! triangular whenever the directed flow graph is acyclic, e.g. on every tree).
 
 use crate::circuit::{Circuit, Dae};
-use crate::closure::{SegmentLaw, SegmentWall, WallSpec};
+use crate::closure::{self, SegmentLaw, SegmentWall, WallSpec};
 use crate::error::{Error, Result};
 use crate::hemoglobin::{Binding, BindingSpec, HillAnchor};
 use crate::network::Probes;
@@ -79,10 +79,37 @@ pub struct TransportSpec {
     /// |v| below which the transmission-line elements L_i, R_i are reported as NaN (m/s).
     #[serde(default = "default_v_eps")]
     pub velocity_threshold: f64,
+    /// Transport cells per flow segment m (integer >= 1; 1 = one cell per volume node). Every
+    /// volume-holding node becomes a chain of m sub-cells, which sharpens upwind fronts
+    /// (σ_x = sqrt(x dx/m)) without refining the flow circuit (physics §5). Given as a number
+    /// so that a bad value gets a message naming it.
+    #[serde(default = "default_cells")]
+    pub cells_per_segment: f64,
+    /// Per vessel overrides of `cells_per_segment`.
+    #[serde(default)]
+    pub cells_per_vessel: BTreeMap<String, f64>,
     pub species: Vec<SpeciesSpec>,
 }
 fn default_v_eps() -> f64 {
     1e-6
+}
+fn default_cells() -> f64 {
+    1.0
+}
+
+/// Largest accepted `cells_per_segment` (a guard against typos that would allocate millions
+/// of cells per segment).
+const MAX_CELLS_PER_SEGMENT: f64 = 10_000.0;
+
+fn cells_per_segment(v: f64, element: &str, key: &str) -> Result<usize> {
+    if v.is_finite() && v >= 1.0 && v.fract() == 0.0 && v <= MAX_CELLS_PER_SEGMENT {
+        Ok(v as usize)
+    } else {
+        Err(Error::model(
+            element,
+            format!("{key} must be an integer between 1 and {MAX_CELLS_PER_SEGMENT}, got {v}"),
+        ))
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -100,10 +127,36 @@ enum Kind {
 
 #[derive(Debug, Clone)]
 struct Face {
-    /// Flow unknown (index into y).
+    /// Flow unknown (index into y); `usize::MAX` for the interior faces of a refined cell,
+    /// whose flows `Chain::flows` derives from the unknowns.
     unknown: usize,
     from: End,
     to: End,
+}
+
+/// A volume node refined into m sub-cells in series (sub-cell 0 = the node itself takes the
+/// faces entering it and its flow sources, sub-cell m−1 the faces leaving it). Sub-cell k holds
+/// V_n/m, so with Q_A = inflow, Q_B = outflow of the node the interior face k (between
+/// sub-cells k−1 and k) carries Q_k = Q_A − (k/m)(Q_A − Q_B): each sub-cell receives
+/// dV_n/dt / m, and a uniform field stays uniform.
+#[derive(Debug, Clone)]
+struct Chain {
+    in_faces: Vec<usize>,
+    out_faces: Vec<usize>,
+    sources: Vec<usize>,
+    /// Index of interior face 1; faces 1..m−1 follow.
+    first_face: usize,
+    m: usize,
+}
+
+/// Part of a flow segment's wall seen by one cell: the cell's uptake is share × law(wall).
+#[derive(Debug, Clone)]
+struct Piece {
+    seg: usize,
+    node: usize,
+    cell: usize,
+    share: f64,
+    wall: SegmentWall,
 }
 
 #[derive(Debug, Clone)]
@@ -120,13 +173,23 @@ struct Species {
     diffusivity: f64,
     boundary: Vec<BoundaryValue>,
     walls: Vec<WallSpec>,
+    /// Law of every wall piece.
     laws: Vec<SegmentLaw>,
     /// Per cell: Σ share·g, Σ share·g·c_w, Σ share·q of its segments' fixed laws.
     cell_g: Vec<f64>,
     cell_gcw: Vec<f64>,
     cell_q: Vec<f64>,
-    /// Segments whose conductance follows the instantaneous flow.
+    /// Wall pieces whose conductance follows a time-dependent shear.
     dynamic: Vec<usize>,
+    /// Segments with a relaxed Lévêque shear: (segment, τ_BL); their equivalent flows
+    /// Q̃ = π r³ γ̃/4 are state entries `relax_offset + k`.
+    relax: Vec<(usize, f64)>,
+    relax_of_seg: Vec<usize>,
+    relax_offset: usize,
+    /// Segments with dynamic pieces, and per segment the cube root of the flow magnitude its
+    /// dynamic laws see (|Q| or Q̃), see `load_shear`.
+    dynamic_segs: Vec<usize>,
+    shear_cbrt: Vec<f64>,
     has_wall: bool,
     initial_free: f64,
     /// Free concentration per node: warm start of the binding inversion, and reporting.
@@ -179,7 +242,20 @@ pub struct Transport {
     node_faces: Vec<usize>,
     node_sources: Vec<Vec<usize>>,
     segments: Vec<Segment>,
+    /// Faces 0..n_flow_faces carry a flow unknown; the rest are interior faces of `chains`.
+    n_flow_faces: usize,
+    chains: Vec<Chain>,
+    /// Per cell: the circuit node whose pressure sets its volume.
+    cell_node: Vec<usize>,
+    /// Per circuit node: its last sub-cell (itself unless refined): the donor of the faces
+    /// leaving the node, and the value reported for its segments.
+    last_sub: Vec<usize>,
+    /// Wall pieces, contiguous per segment (`seg_pieces`).
+    pieces: Vec<Piece>,
+    seg_pieces: Vec<std::ops::Range<usize>>,
     species: Vec<Species>,
+    /// Cycle-mean |Q| per segment (set by `set_mean_flow`): the relaxed shears start there.
+    mean_abs: Vec<f64>,
     formulation: Formulation,
     v_eps: f64,
     out_vessels: Vec<OutVessel>,
@@ -254,14 +330,10 @@ impl Transport {
             f
         };
         let mut kind = vec![Kind::Mixing; nn];
-        let mut cells = Vec::new();
-        let mut node_cell = vec![usize::MAX; nn];
         for (i, node) in circuit.nodes.iter().enumerate() {
             kind[i] = if node.boundary.is_some() || fixed[i] {
                 Kind::Exterior
             } else if node.volume > 0.0 {
-                node_cell[i] = cells.len();
-                cells.push(i);
                 Kind::Cell
             } else {
                 if dae.e[i] > 0.0 {
@@ -361,6 +433,105 @@ impl Transport {
                 face_of_unknown[f.unknown] = fi;
             }
         }
+        // Refinement (physics §5): every volume node becomes a chain of m sub-cells (see
+        // `Chain`). Sub-cell 0 is the node itself; the others are new transport nodes nn.., so
+        // the face, upwind and sweep machinery below works unchanged on the refined graph.
+        let m_default =
+            cells_per_segment(spec.cells_per_segment, "transport", "cells_per_segment")?;
+        let mut m_vessel = vec![m_default; circuit.vessel_names.len()];
+        for (name, &v) in &spec.cells_per_vessel {
+            let Some(vi) = circuit.vessel_names.iter().position(|n| n == name) else {
+                return Err(bad(
+                    "transport",
+                    format!(
+                        "cells_per_vessel names vessel '{name}', which the network does not have"
+                    ),
+                ));
+            };
+            m_vessel[vi] = cells_per_segment(v, &format!("vessel '{name}'"), "cells_per_segment")?;
+        }
+        // a node shared by vessels (a junction cell) takes the finest of their refinements
+        let mut m_node = vec![1usize; nn];
+        for sg in &circuit.segments {
+            for &(n, share) in &sg.nodes {
+                if share > 0.0 && kind[n] == Kind::Cell {
+                    m_node[n] = m_node[n].max(m_vessel[sg.vessel]);
+                }
+            }
+        }
+        let n_flow_faces = faces.len();
+        let mut node_names: Vec<String> = circuit.nodes.iter().map(|n| n.name.clone()).collect();
+        let mut first_extra = vec![usize::MAX; nn];
+        let mut last_sub: Vec<usize> = (0..nn).collect();
+        let mut chains = Vec::new();
+        if m_node.iter().any(|&m| m > 1) {
+            let (mut ins, mut outs) = (vec![Vec::new(); nn], vec![Vec::new(); nn]);
+            for (fi, f) in faces.iter().enumerate() {
+                if let End::Node(n) = f.to {
+                    ins[n].push(fi);
+                }
+                if let End::Node(n) = f.from {
+                    outs[n].push(fi);
+                }
+            }
+            let mut node_src = vec![Vec::new(); nn];
+            for (k, (n, _, _)) in sources.iter().enumerate() {
+                node_src[*n].push(k);
+            }
+            for n in 0..nn {
+                let m = m_node[n];
+                if m == 1 {
+                    continue;
+                }
+                first_extra[n] = kind.len();
+                for k in 1..m {
+                    kind.push(Kind::Cell);
+                    node_names.push(format!("{} (transport cell {}/{m})", node_names[n], k + 1));
+                }
+                let sub = |k: usize| if k == 0 { n } else { first_extra[n] + k - 1 };
+                last_sub[n] = sub(m - 1);
+                for &fi in &outs[n] {
+                    faces[fi].from = End::Node(last_sub[n]);
+                }
+                let first_face = faces.len();
+                for k in 1..m {
+                    faces.push(Face {
+                        unknown: usize::MAX,
+                        from: End::Node(sub(k - 1)),
+                        to: End::Node(sub(k)),
+                    });
+                }
+                chains.push(Chain {
+                    in_faces: std::mem::take(&mut ins[n]),
+                    out_faces: std::mem::take(&mut outs[n]),
+                    sources: std::mem::take(&mut node_src[n]),
+                    first_face,
+                    m,
+                });
+            }
+        }
+        let nt = kind.len();
+        // cells in node order, the sub-cells of a node contiguous (unchanged order when m = 1)
+        let mut cells = Vec::new();
+        let mut node_cell = vec![usize::MAX; nt];
+        let mut cell_node = Vec::new();
+        let mut v0 = Vec::new();
+        let mut cap = Vec::new();
+        for n in 0..nn {
+            if kind[n] != Kind::Cell {
+                continue;
+            }
+            let m = m_node[n];
+            for k in 0..m {
+                let c = if k == 0 { n } else { first_extra[n] + k - 1 };
+                node_cell[c] = cells.len();
+                cells.push(c);
+                cell_node.push(n);
+                v0.push(circuit.nodes[n].volume / m as f64);
+                cap.push(dae.e[n] / m as f64);
+            }
+        }
+        let nn = nt;
         let mixing: Vec<usize> = (0..nn).filter(|&i| kind[i] == Kind::Mixing).collect();
         let mut deg = vec![0usize; nn + 1];
         for f in &faces {
@@ -388,11 +559,12 @@ impl Transport {
         for (k, (n, _, _)) in sources.iter().enumerate() {
             node_sources[*n].push(k);
         }
+        let nc_nodes = circuit.nodes.len();
         let segments: Vec<Segment> = circuit
             .segments
             .iter()
             .map(|s| Segment {
-                branch_unknown: nn + s.branch,
+                branch_unknown: nc_nodes + s.branch,
                 nodes: s.nodes,
                 wall: SegmentWall {
                     radius: s.radius,
@@ -404,8 +576,60 @@ impl Transport {
                 compliance: s.compliance,
             })
             .collect();
-        let v0: Vec<f64> = cells.iter().map(|&n| circuit.nodes[n].volume).collect();
-        let cap: Vec<f64> = cells.iter().map(|&n| dae.e[n]).collect();
+        // wall pieces: a segment's share in each cell; a refined node's share of the segment
+        // (for a node at the segment's start [x0, x0 + share dx], at its end
+        // [x1 − share dx, x1]) is split into m equal sub-intervals in flow order, with the law
+        // integrated over each (exact for Lévêque's x^{-1/3}, by area for constant laws)
+        let mut pieces = Vec::new();
+        let mut seg_pieces = Vec::new();
+        for (j, sg) in segments.iter().enumerate() {
+            let start = pieces.len();
+            for (end, &(n, share)) in sg.nodes.iter().enumerate() {
+                if share <= 0.0 || node_cell[n] == usize::MAX {
+                    continue;
+                }
+                let m = m_node[n];
+                if m == 1 {
+                    // unrefined: the whole segment's law times the share (as before refinement)
+                    pieces.push(Piece {
+                        seg: j,
+                        node: n,
+                        cell: node_cell[n],
+                        share,
+                        wall: sg.wall,
+                    });
+                    continue;
+                }
+                let w = sg.wall;
+                let len = share * (w.x1 - w.x0);
+                let (a, b) = if end == 0 {
+                    (w.x0, w.x0 + len)
+                } else {
+                    (w.x1 - len, w.x1)
+                };
+                for k in 0..m {
+                    let c = if k == 0 { n } else { first_extra[n] + k - 1 };
+                    let xa = a + (b - a) * k as f64 / m as f64;
+                    let xb = if k + 1 == m {
+                        b
+                    } else {
+                        a + (b - a) * (k + 1) as f64 / m as f64
+                    };
+                    pieces.push(Piece {
+                        seg: j,
+                        node: c,
+                        cell: node_cell[c],
+                        share: 1.0,
+                        wall: SegmentWall {
+                            radius: w.radius,
+                            x0: xa,
+                            x1: xb,
+                        },
+                    });
+                }
+            }
+            seg_pieces.push(start..pieces.len());
+        }
 
         let boundary_inlet: Vec<bool> = circuit.boundaries.iter().map(|b| b.inlet).collect();
         let boundary_names: Vec<String> =
@@ -501,10 +725,15 @@ impl Transport {
                 cell_gcw: vec![0.0; cells.len()],
                 cell_q: vec![0.0; cells.len()],
                 dynamic: Vec::new(),
+                relax: Vec::new(),
+                relax_of_seg: vec![usize::MAX; segments.len()],
+                relax_offset: 0,
+                dynamic_segs: Vec::new(),
+                shear_cbrt: vec![0.0; segments.len()],
                 has_wall: false,
                 initial_free,
-                free: vec![initial_free; nn],
-                anchors: vec![HillAnchor::default(); nn],
+                free: vec![initial_free; kind.len()],
+                anchors: vec![HillAnchor::default(); kind.len()],
                 mixing_conc: Vec::new(),
             });
         }
@@ -542,13 +771,20 @@ impl Transport {
             node_faces,
             node_sources,
             segments,
+            n_flow_faces,
+            chains,
+            cell_node,
+            last_sub,
+            pieces,
+            seg_pieces,
             species,
+            mean_abs: Vec::new(),
             formulation: spec.formulation,
             v_eps: spec.velocity_threshold,
             out_vessels,
             out_segments,
             segment_vessels: circuit.segments.iter().map(|s| s.vessel).collect(),
-            node_names: circuit.nodes.iter().map(|n| n.name.clone()).collect(),
+            node_names,
             domain: Vec::new(),
             internal: Vec::new(),
             boundary_faces: Vec::new(),
@@ -601,9 +837,10 @@ impl Transport {
         self.cells.len()
     }
     /// Length of the coupled state: amounts per cell and species, then 4 accumulators per
-    /// species (I_in, I_out, I_wall, I_decay).
+    /// species (I_in, I_out, I_wall, I_decay), then the relaxed shears of every species.
     pub fn state_len(&self) -> usize {
         self.species.len() * (self.cells.len() + 4)
+            + self.species.iter().map(|s| s.relax.len()).sum::<usize>()
     }
     pub fn formulation(&self) -> Formulation {
         self.formulation
@@ -634,18 +871,39 @@ impl Transport {
 
     /// Evaluate the segment laws; `mean_abs[j]` is segment j's cycle-mean |Q|.
     pub fn set_mean_flow(&mut self, mean_abs: &[f64]) -> Result<()> {
+        self.mean_abs = mean_abs.to_vec();
         self.set_laws(mean_abs, true)
     }
 
     fn set_laws(&mut self, mean_abs: &[f64], final_pass: bool) -> Result<()> {
         let nc = self.cells.len();
+        let mut offset = self.species.len() * (nc + 4);
         for sp in &mut self.species {
             sp.laws.clear();
             sp.dynamic.clear();
+            sp.dynamic_segs.clear();
+            sp.relax.clear();
+            sp.relax_of_seg.iter_mut().for_each(|k| *k = usize::MAX);
+            if final_pass {
+                for (j, seg) in self.segments.iter().enumerate() {
+                    if sp.walls[self.segment_vessels[j]].is_relaxed()
+                        && seg.wall.radius > 0.0
+                        && seg.dx > 0.0
+                    {
+                        sp.relax_of_seg[j] = sp.relax.len();
+                        let tau = closure::relaxation_time(&seg.wall, sp.diffusivity, mean_abs[j]);
+                        sp.relax.push((j, tau));
+                    }
+                }
+            }
+            sp.relax_offset = offset;
+            offset += sp.relax.len();
             sp.cell_g = vec![0.0; nc];
             sp.cell_gcw = vec![0.0; nc];
             sp.cell_q = vec![0.0; nc];
-            for (j, seg) in self.segments.iter().enumerate() {
+            for (p, piece) in self.pieces.iter().enumerate() {
+                let j = piece.seg;
+                let seg = &self.segments[j];
                 let vessel_wall = &sp.walls[self.segment_vessels[j]];
                 let law = if seg.wall.radius <= 0.0
                     || seg.dx <= 0.0
@@ -658,7 +916,7 @@ impl Transport {
                     }
                 } else {
                     vessel_wall.segment_law(
-                        &seg.wall,
+                        &piece.wall,
                         sp.diffusivity,
                         mean_abs[j],
                         &format!("species '{}' wall", sp.name),
@@ -666,16 +924,18 @@ impl Transport {
                 };
                 match law {
                     SegmentLaw::Fixed { g, cw, q } => {
-                        for &(n, share) in &seg.nodes {
-                            let c = self.node_cell[n];
-                            if share > 0.0 && c != usize::MAX {
-                                sp.cell_g[c] += share * g;
-                                sp.cell_gcw[c] += share * g * cw;
-                                sp.cell_q[c] += share * q;
-                            }
+                        let (c, share) = (piece.cell, piece.share);
+                        sp.cell_g[c] += share * g;
+                        sp.cell_gcw[c] += share * g * cw;
+                        sp.cell_q[c] += share * q;
+                    }
+                    SegmentLaw::Instantaneous { .. } => {
+                        sp.dynamic.push(p);
+                        // pieces are contiguous per segment
+                        if sp.dynamic_segs.last() != Some(&j) {
+                            sp.dynamic_segs.push(j);
                         }
                     }
-                    SegmentLaw::Instantaneous { .. } => sp.dynamic.push(j),
                 }
                 sp.laws.push(law);
             }
@@ -698,13 +958,16 @@ impl Transport {
             for i in 0..nc {
                 z[s * nc + i] = self.vol[i] * ct;
             }
+            for (k, &(j, _)) in sp.relax.iter().enumerate() {
+                z[sp.relax_offset + k] = self.mean_abs.get(j).copied().unwrap_or(0.0);
+            }
         }
         self.wvol = self.vol.clone();
         Ok(z)
     }
 
     fn volumes(&mut self, y: &[f64], time: f64) -> Result<()> {
-        for (i, &n) in self.cells.iter().enumerate() {
+        for (i, &n) in self.cell_node.iter().enumerate() {
             let v = self.v0[i] + self.cap[i] * (y[n] - self.p_ref);
             if v.is_nan() || v <= 0.0 {
                 return Err(Error::solver(
@@ -731,11 +994,21 @@ impl Transport {
     }
 
     fn load_flows(&mut self, time: f64, y: &[f64]) {
-        for (q, f) in self.qf.iter_mut().zip(&self.faces) {
+        let nf = self.n_flow_faces;
+        for (q, f) in self.qf[..nf].iter_mut().zip(&self.faces) {
             *q = y[f.unknown];
         }
         for (q, (_, w, _)) in self.qs.iter_mut().zip(&self.sources) {
             *q = w.eval(time);
+        }
+        // interior faces of refined cells: Q_k = Q_A − (k/m)(Q_A − Q_B)
+        for ch in &self.chains {
+            let q_a = ch.in_faces.iter().map(|&f| self.qf[f]).sum::<f64>()
+                + ch.sources.iter().map(|&k| self.qs[k]).sum::<f64>();
+            let q_b: f64 = ch.out_faces.iter().map(|&f| self.qf[f]).sum();
+            for k in 1..ch.m {
+                self.qf[ch.first_face + k - 1] = q_a - (k as f64 / ch.m as f64) * (q_a - q_b);
+            }
         }
     }
 
@@ -791,7 +1064,7 @@ impl Transport {
 
     /// Wall uptake of every cell for species `s` into `w` (mol/s), from the current free
     /// concentrations and branch flows `y`.
-    fn wall_uptake(&self, s: usize, y: &[f64], w: &mut [f64]) {
+    fn wall_uptake(&self, s: usize, w: &mut [f64]) {
         let sp = &self.species[s];
         // without binding the free concentration is the total one (no copy)
         let free = if sp.binding.is_identity() {
@@ -802,15 +1075,25 @@ impl Transport {
         for (i, &n) in self.cells.iter().enumerate() {
             w[i] = sp.cell_g[i] * free[n] - sp.cell_gcw[i] + sp.cell_q[i];
         }
-        for &j in &sp.dynamic {
-            let seg = &self.segments[j];
-            let (g, cw, q) = sp.laws[j].eval(y[seg.branch_unknown]);
-            for &(n, share) in &seg.nodes {
-                let c = self.node_cell[n];
-                if share > 0.0 && c != usize::MAX {
-                    w[c] += share * (g * (free[n] - cw) + q);
-                }
-            }
+        for &p in &sp.dynamic {
+            let pc = &self.pieces[p];
+            let (g, cw, q) = sp.laws[p].eval_cbrt(sp.shear_cbrt[pc.seg]);
+            w[pc.cell] += pc.share * (g * (free[pc.node] - cw) + q);
+        }
+    }
+
+    /// |Q|^{1/3} seen by the dynamic laws of species `s`, per segment: the branch flow
+    /// (instantaneous shear) or the relaxed equivalent flow Q̃ held in the state `z`.
+    fn load_shear(&mut self, s: usize, y: &[f64], z: &[f64]) {
+        let sp = &mut self.species[s];
+        for &j in &sp.dynamic_segs {
+            let k = sp.relax_of_seg[j];
+            let q = if k == usize::MAX {
+                y[self.segments[j].branch_unknown]
+            } else {
+                z[sp.relax_offset + k]
+            };
+            sp.shear_cbrt[j] = q.abs().cbrt();
         }
     }
 
@@ -898,6 +1181,7 @@ impl Transport {
             }
             self.load_boundary(s, time);
             self.mix(s)?;
+            self.load_shear(s, y, z);
             // node-to-node faces: the bulk of the work, branch-free apart from the upwind pick;
             // fluxes into mixing points and out of them cancel there (they hold no amount)
             let conc = &self.conc;
@@ -961,20 +1245,20 @@ impl Transport {
                 }
                 *d = v;
             }
-            for &j in &sp.dynamic {
-                let seg = &self.segments[j];
-                let (g, cw, q) = sp.laws[j].eval(y[seg.branch_unknown]);
-                for &(n, share) in &seg.nodes {
-                    let c = self.node_cell[n];
-                    if share > 0.0 && c != usize::MAX {
-                        let w = share * (g * (free[n] - cw) + q);
-                        dzs[c] -= w;
-                        i_wall += w;
-                    }
-                }
+            for &p in &sp.dynamic {
+                let pc = &self.pieces[p];
+                let (g, cw, q) = sp.laws[p].eval_cbrt(sp.shear_cbrt[pc.seg]);
+                let w = pc.share * (g * (free[pc.node] - cw) + q);
+                dzs[pc.cell] -= w;
+                i_wall += w;
             }
             let acc = &mut dz[nsp * nc + 4 * s..nsp * nc + 4 * s + 4];
             acc.copy_from_slice(&[i_in, i_out, i_wall, i_decay]);
+            // relaxed shears: dQ̃/dt = (|Q| − Q̃)/τ_BL
+            for (k, &(j, tau)) in sp.relax.iter().enumerate() {
+                let i = sp.relax_offset + k;
+                dz[i] = (y[self.segments[j].branch_unknown].abs() - z[i]) / tau;
+            }
         }
         self.sweep.dnode = dnode;
         Ok(())
@@ -1049,21 +1333,27 @@ impl Transport {
             }
             self.load_boundary(s, t_af);
             let lambda = self.species[s].decay;
+            // relaxed shears first (exact for the step's frozen |Q|), so that the wall law
+            // of the solve uses the end-of-step boundary layer, like backward Euler
+            {
+                let sp = &self.species[s];
+                for (k, &(j, tau)) in sp.relax.iter().enumerate() {
+                    let q = ya[self.segments[j].branch_unknown].abs();
+                    let v = &mut z[sp.relax_offset + k];
+                    *v = q + (*v - q) * (-dt / tau).exp();
+                }
+            }
+            self.load_shear(s, &ya, z);
             // wall uptake linearised about the old state: W = G s x + const (exact for linear binding)
             if self.species[s].has_wall {
                 self.free_of_cells(s);
-                self.wall_uptake(s, &ya, &mut wconst);
+                self.wall_uptake(s, &mut wconst);
                 let sp = &self.species[s];
                 let mut g = sp.cell_g.clone();
-                for &j in &sp.dynamic {
-                    let seg = &self.segments[j];
-                    let (gj, _, _) = sp.laws[j].eval(ya[seg.branch_unknown]);
-                    for &(n, share) in &seg.nodes {
-                        let c = self.node_cell[n];
-                        if share > 0.0 && c != usize::MAX {
-                            g[c] += share * gj;
-                        }
-                    }
+                for &p in &sp.dynamic {
+                    let pc = &self.pieces[p];
+                    let (gj, _, _) = sp.laws[p].eval_cbrt(sp.shear_cbrt[pc.seg]);
+                    g[pc.cell] += pc.share * gj;
                 }
                 for (i, &n) in self.cells.iter().enumerate() {
                     let slope = 1.0 / sp.binding.capacity_slope(sp.free[n]);
@@ -1353,7 +1643,8 @@ impl Transport {
                     };
                 }
             }
-            self.wall_uptake(s, y, &mut wcell);
+            self.load_shear(s, y, z);
+            self.wall_uptake(s, &mut wcell);
             let sp = &self.species[s];
             let face_flux = |tr: &Self, unknown: usize| -> (f64, f64) {
                 let fi = tr
@@ -1368,12 +1659,14 @@ impl Transport {
                 (q * c, sp.binding.free(c, c))
             };
             let seg_wall = |j: usize| -> f64 {
-                let seg = &self.segments[j];
-                let (g, cw, q) = sp.laws[j].eval(y[seg.branch_unknown]);
-                seg.nodes
-                    .iter()
-                    .filter(|(n, share)| *share > 0.0 && self.kind[*n] == Kind::Cell)
-                    .map(|&(n, share)| share * (g * (sp.free[n] - cw) + q))
+                let qb = sp.shear_cbrt[j];
+                self.seg_pieces[j]
+                    .clone()
+                    .map(|p| {
+                        let pc = &self.pieces[p];
+                        let (g, cw, q) = sp.laws[p].eval_cbrt(qb);
+                        pc.share * (g * (sp.free[pc.node] - cw) + q)
+                    })
                     .sum()
             };
             for v in &self.out_vessels {
@@ -1391,7 +1684,9 @@ impl Transport {
                 let (mut c, mut wsum, mut vseg, mut dvseg) = (0.0, 0.0, 0.0, 0.0);
                 for &(n, share) in &seg.nodes {
                     if share > 0.0 {
-                        c += share * sp.free[n];
+                        // a refined node reports its last sub-cell: the value its
+                        // outgoing faces carry
+                        c += share * sp.free[self.last_sub[n]];
                         wsum += share;
                         vseg += share * (seg.volume + seg.compliance * (y[n] - self.p_ref));
                         if let Some(yd) = ydot {
@@ -1449,7 +1744,8 @@ impl Transport {
             .fold(0.0f64, |m, (o, v)| m.max(o / v))
     }
 
-    /// Cell holding most of segment `j`'s volume, as an index into the species block of the state.
+    /// Cell holding most of segment `j`'s volume (its last sub-cell when refined), as an index
+    /// into the species block of the state.
     pub fn segment_cell(&self, j: usize) -> Option<usize> {
         let seg = self.segments.get(j)?;
         let (n, _) = seg
@@ -1457,8 +1753,21 @@ impl Transport {
             .iter()
             .copied()
             .fold((usize::MAX, -1.0), |a, b| if b.1 > a.1 { b } else { a });
-        let c = self.node_cell[n];
+        let c = self.node_cell[self.last_sub[n]];
         (c != usize::MAX).then_some(c)
+    }
+
+    /// Cells (sub-cells in flow order, contiguous in the state) of the node holding most of
+    /// segment `j`'s volume.
+    pub fn segment_cells(&self, j: usize) -> Option<std::ops::Range<usize>> {
+        let seg = self.segments.get(j)?;
+        let (n, _) = seg
+            .nodes
+            .iter()
+            .copied()
+            .fold((usize::MAX, -1.0), |a, b| if b.1 > a.1 { b } else { a });
+        let (a, b) = (self.node_cell[n], self.node_cell[self.last_sub[n]]);
+        (a != usize::MAX).then_some(a..b + 1)
     }
 
     /// One classical RK4 step of the species state alone, the flow state being prescribed:

@@ -549,3 +549,465 @@ fn implicit_sweep_on_a_circulating_loop() {
         &dz[..nc]
     );
 }
+
+// ---------------------------------------------------------------------------------------------
+// Refinement: m transport cells per flow segment (physics §5)
+
+/// `json` with `"cells_per_segment": m` in its transport section.
+fn refined(json: &str, m: usize) -> String {
+    json.replace(
+        r#""transport": {"#,
+        &format!(r#""transport": {{"cells_per_segment": {m}, "#),
+    )
+}
+
+/// Concentrations of every transport cell of a rigid tube in flow order (sub-cells of segment
+/// 0 first), with V = V0/m.
+fn chain_conc(b: &Built, z: &[f64]) -> Vec<f64> {
+    let nseg = b.assembled.circuit.segments.len();
+    let mut c = Vec::new();
+    for j in 0..nseg {
+        let cells = b.transport.segment_cells(j).unwrap();
+        let v = b.assembled.circuit.segments[j].volume / cells.len() as f64;
+        c.extend(cells.map(|i| z[i] / v));
+    }
+    c
+}
+
+/// (d) with N segments × m cells: a chain of N·m tanks, c_i(t) = P(i, v t m/dx); the
+/// spatial spread of the front is σ_x = sqrt(x dx/m).
+#[test]
+fn d_refined_step_response_is_the_tanks_in_series_law_of_n_times_m_tanks() {
+    // 30 segments: the Poisson tail of the front beyond the tube end is < 1e-13 at t = 1 s
+    let (r, dx, n, v) = (8e-3, 0.02, 30, 0.1);
+    let q = v * PI * r * r;
+    let sp = r#"{"name": "dye", "inlet": {"kind": "constant", "value": 1.0}, "initial": 0.0}"#;
+    let t_end = 1.0;
+    let mut sigmas = Vec::new();
+    for m in [1usize, 2, 4] {
+        let mut b = build(&refined(
+            &tube(
+                r,
+                dx * n as f64,
+                n,
+                "",
+                &format!(r#"{{"kind": "constant", "value": {q}}}"#),
+                1e7,
+                sp,
+            ),
+            m,
+        ));
+        assert_eq!(b.transport.n_cells(), n * m);
+        let rate = v * m as f64 / dx;
+        let dt = 2e-3 / rate; // Courant 2e-3
+        let steps = (t_end / dt).round() as usize;
+        let (_, z) = run_prescribed(&mut b, &|_| q, dt, steps);
+        let t = steps as f64 * dt;
+        let c = chain_conc(&b, &z);
+        let worst = c
+            .iter()
+            .enumerate()
+            .map(|(i, ci)| (ci - gammainc_int(i + 1, rate * t)).abs())
+            .fold(0.0f64, f64::max);
+        eprintln!("(d) m={m}: max |c − P(i, vtm/dx)| = {worst:e}");
+        assert!(worst < 1e-12, "m={m}: max |c − P(i, vtm/dx)| = {worst:e}");
+        // front: cell i holds the mass c_{i−1} − c_i of dc/dx (c_0 = 1 at the inlet)
+        let h = dx / m as f64;
+        let (mut s0, mut s1, mut s2) = (0.0, 0.0, 0.0);
+        let mut prev = 1.0;
+        for (i, &ci) in c.iter().enumerate() {
+            let (w, x) = (prev - ci, i as f64 * h);
+            (s0, s1, s2) = (s0 + w, s1 + w * x, s2 + w * x * x);
+            prev = ci;
+        }
+        let mean = s1 / s0;
+        let sigma = (s2 / s0 - mean * mean).sqrt();
+        assert!(
+            (mean / (v * t) - 1.0).abs() < 1e-6,
+            "m={m}: front at {mean}"
+        );
+        assert!(
+            (sigma / (v * t * dx / m as f64).sqrt() - 1.0).abs() < 1e-6,
+            "m={m}: σ_x = {sigma}"
+        );
+        eprintln!("(d) m={m}: front {mean}, σ_x = {sigma}");
+        sigmas.push(sigma);
+    }
+    for w in sigmas.windows(2) {
+        assert!((w[0] / w[1] - 2f64.sqrt()).abs() < 1e-9, "{sigmas:?}");
+    }
+}
+
+fn constant_k_theta_refined(n: usize, m: usize) -> f64 {
+    let (r, l, q) = (1.5e-3, 9.0 * 3.84e-3, 1.6e-6);
+    let alpha = 1.4e-3;
+    let k = 0.5 * q / (2.0 * PI * r * l);
+    let (cw, cin) = (48.0 * alpha, 85.0 * alpha);
+    let sp = format!(
+        r#"{{"name": "o2", "inlet": {{"kind": "constant", "value": {cin}}},
+            "wall": {{"model": "mass-transfer", "k": {k}, "wall_concentration": {cw}}}}}"#
+    );
+    let flow = r#"{"kind": "constant", "value": 1.6e-6}"#;
+    let mut b = build(&refined(&tube(r, l, n, "", flow, 1e7, &sp), m));
+    let transit = PI * r * r * l / q;
+    let dt = (transit / (n * m) as f64) * 0.2;
+    let steps = (60.0 * transit / dt) as usize;
+    let (_, z) = run_prescribed(&mut b, &|_| q, dt, steps);
+    let c = chain_conc(&b, &z);
+    (c[n * m - 1] - cw) / (cin - cw)
+}
+
+/// (b) with refinement: the discrete law (1 + St/(N m))^{−N m}, first order in m.
+#[test]
+fn b_refined_constant_k_discrete_formula_and_first_order_in_m() {
+    let exact = (-0.5f64).exp();
+    let mut errs = Vec::new();
+    for m in [1usize, 2, 4, 8] {
+        let th = constant_k_theta_refined(9, m);
+        let nm = (9 * m) as i32;
+        let discrete = (1.0 + 0.5 / nm as f64).powi(-nm);
+        assert!(
+            (th - discrete).abs() < 1e-10,
+            "m={m}: θ = {th} vs {discrete}"
+        );
+        eprintln!(
+            "(b) m={m}: θ = {th}, |θ − discrete| = {:e}",
+            (th - discrete).abs()
+        );
+        errs.push(th - exact);
+    }
+    for w in errs.windows(2) {
+        let ratio = w[0] / w[1];
+        eprintln!("(b) error ratio per doubling of m: {ratio}");
+        assert!((ratio - 2.0).abs() < 0.05, "convergence ratio in m {ratio}");
+    }
+}
+
+/// Compliant Y network with a reversing inflow; `cells_per_segment` 3 with a per-vessel 2.
+fn refined_y(wall: &str, cin: &str, m: usize) -> Built {
+    let c0 = 85.0 * 1.4e-3;
+    let geo = r#""wall_thickness": 5e-4, "youngs_modulus": 1e6"#;
+    let json = format!(
+        r#"{{"vessels": [
+        {{"name": "p", "from": "in", "to": "J", "segments": 4, "geometry": {{"length": 0.08, "radius_in": 4e-3, "radius_out": 4e-3, {geo}}}}},
+        {{"name": "d1", "from": "J", "to": "o1", "segments": 3, "geometry": {{"length": 0.05, "radius_in": 3e-3, "radius_out": 3e-3, {geo}}}}},
+        {{"name": "d2", "from": "J", "to": "o2", "segments": 3, "geometry": {{"length": 0.06, "radius_in": 2.5e-3, "radius_out": 2.5e-3, {geo}}}}}],
+      "boundary_conditions": {{"in": {{"type": "flow", "flow": {{"kind": "fourier", "period": 1.0, "mean": 5e-6, "sin": [8e-6]}}}},
+                              "o1": {{"type": "rcr", "proximal_resistance": 1e7, "capacitance": 1e-9, "distal_resistance": 1e8}},
+                              "o2": {{"type": "resistance", "resistance": 2e8}}}},
+      "transport": {{"cells_per_segment": {m}, "cells_per_vessel": {{"d2": 2}},
+        "species": [{{"name": "o2", "diffusivity": 1.2e-9, "inlet": {cin}, "initial": {c0}, "wall": {wall}}}]}}}}"#
+    );
+    build(&json)
+}
+
+#[test]
+fn refined_network_balance_is_exact_and_free_stream_is_preserved() {
+    let alpha = 1.4e-3;
+    let walls = [
+        format!(
+            r#"{{"model": "mass-transfer", "k": 5e-6, "wall_concentration": {}}}"#,
+            60.0 * alpha
+        ),
+        // the boundary-layer shear as extra state (enhanced so that the uptake matters)
+        format!(
+            r#"{{"model": "leveque", "shear": "relaxed", "enhancement": 50, "wall_concentration": {}}}"#,
+            60.0 * alpha
+        ),
+    ];
+    let methods = [Method::Rk4, Method::GeneralizedAlpha { rho_inf: 0.5 }];
+    // RK4 keeps both to ~5e-15; the implicit path rounds each of its 2e4 steps (measured
+    // 6e-13 after 2 s on this network, the same with m = 1)
+    const TOL: f64 = 1e-11;
+    for (method, wall) in methods
+        .iter()
+        .flat_map(|m| walls.iter().map(move |w| (*m, w)))
+    {
+        let mut b = refined_y(
+            wall,
+            &format!(
+                r#"{{"kind": "fourier", "period": 1.0, "mean": {}, "sin": [{}]}}"#,
+                85.0 * alpha,
+                5.0 * alpha
+            ),
+            3,
+        );
+        // inverted-L: p 4 nodes × 3, the junction node (holding d1's and d2's first segments)
+        // takes the finer m = 3, then d1 2 × 3 and d2 2 × 2
+        assert_eq!(b.transport.n_cells(), 12 + 3 + 6 + 4);
+        let out = simulate_with_transport(
+            &b.dae,
+            Some(&mut b.transport),
+            &settings(method, 1e-4, 2, vec![]),
+            &mut |_, _| true,
+        )
+        .unwrap();
+        assert!(out.error.is_none());
+        let (res, i_in) = balance_residual(&out);
+        assert!(
+            res.abs() <= TOL * i_in,
+            "{method:?}: relative residual {:e}",
+            res / i_in
+        );
+        eprintln!(
+            "refined Y {method:?} {}: relative residual {:e}",
+            &wall[..30],
+            res / i_in
+        );
+        // the inflow reverses: the inlet flux column changes sign
+        let t = out.transport.as_ref().unwrap();
+        let cols = t.columns_per_species;
+        assert!(t.data.chunks(cols).any(|row| row[2] < 0.0));
+
+        // free stream: uniform c stays uniform in every (sub-)cell
+        let c0 = 85.0 * alpha;
+        let mut b = refined_y(
+            r#"{"model": "none"}"#,
+            &format!(r#"{{"kind": "constant", "value": {c0}}}"#),
+            3,
+        );
+        let out = simulate_with_transport(
+            &b.dae,
+            Some(&mut b.transport),
+            &settings(method, 1e-4, 2, vec![]),
+            &mut |_, _| true,
+        )
+        .unwrap();
+        let t = out.transport.as_ref().unwrap();
+        let cols = t.columns_per_species;
+        let nseg = b.assembled.circuit.segments.len();
+        let mut worst = 0.0f64;
+        for row in t.data.chunks(cols) {
+            // reported vessel values, then the segments
+            let nv = (cols - BALANCE_COLUMNS - SEGMENT_COLUMNS * nseg) / VESSEL_COLUMNS;
+            for k in 0..nv {
+                for c in [row[VESSEL_COLUMNS * k], row[VESSEL_COLUMNS * k + 1]] {
+                    worst = worst.max((c / c0 - 1.0).abs());
+                }
+            }
+            for j in 0..nseg {
+                let c = row[VESSEL_COLUMNS * nv + SEGMENT_COLUMNS * j];
+                worst = worst.max((c / c0 - 1.0).abs());
+            }
+        }
+        // sub-cells of one node hold equal volumes, so equal amounts
+        let z = &t.final_state;
+        for j in 0..nseg {
+            let cells = b.transport.segment_cells(j).unwrap();
+            let first = z[cells.start];
+            for i in cells {
+                worst = worst.max((z[i] / first - 1.0).abs());
+            }
+        }
+        eprintln!("refined Y {method:?}: free-stream error {worst:e}");
+        assert!(worst <= TOL, "{method:?}: free-stream error {worst:e}");
+    }
+}
+
+/// The Lévêque law integrated over the sub-intervals sums to the segment's law exactly
+/// ((3/2) a (x_b^{2/3} − x_a^{2/3}) telescopes): with a uniform field the reported wall flux
+/// of every segment is the same for m = 1 and m = 4.
+#[test]
+fn refined_leveque_pieces_sum_to_the_segment_law() {
+    let alpha = 1.4e-3;
+    let sp = format!(
+        r#"{{"name": "o2", "diffusivity": 1.2e-9, "inlet": {{"kind": "constant", "value": {}}},
+            "wall": {{"model": "leveque", "wall_concentration": {}}}}}"#,
+        85.0 * alpha,
+        60.0 * alpha
+    );
+    let flow = r#"{"kind": "constant", "value": 2e-5}"#;
+    let walls: Vec<Vec<f64>> = [1usize, 4]
+        .iter()
+        .map(|&m| {
+            let mut b = build(&refined(&tube(8e-3, 0.2, 10, "", flow, 1e7, &sp), m));
+            let mut s = settings(Method::GeneralizedAlpha { rho_inf: 0.5 }, 1e-3, 1, vec![]);
+            s.output_every = 0.5;
+            let out = simulate_with_transport(&b.dae, Some(&mut b.transport), &s, &mut |_, _| true)
+                .unwrap();
+            let t = out.transport.as_ref().unwrap();
+            (0..10)
+                .map(|j| t.data[VESSEL_COLUMNS + SEGMENT_COLUMNS * j + 2])
+                .collect()
+        })
+        .collect();
+    for (a, b) in walls[0].iter().zip(&walls[1]) {
+        assert!(*a > 0.0 && (a / b - 1.0).abs() < 1e-13, "{a} vs {b}");
+    }
+}
+
+#[test]
+fn bad_cells_per_segment_is_a_model_error_naming_key_and_value() {
+    let sp = r#"{"name": "dye", "inlet": {"kind": "constant", "value": 1.0}}"#;
+    let flow = r#"{"kind": "constant", "value": 1e-6}"#;
+    let base = tube(1e-3, 0.01, 2, "", flow, 1e7, sp);
+    for bad in ["0", "-1", "2.5", "1e9"] {
+        let json = base.replace(
+            r#""transport": {"#,
+            &format!(r#""transport": {{"cells_per_segment": {bad}, "#),
+        );
+        let spec = parse(&json).unwrap();
+        let assembled = spec.assemble().unwrap();
+        let dae = assembled.circuit.assemble().unwrap();
+        let err = Transport::build(
+            spec.transport.as_ref().unwrap(),
+            &assembled.circuit,
+            &dae,
+            &assembled.probes,
+        )
+        .unwrap_err()
+        .to_string();
+        let shown = bad.parse::<f64>().unwrap().to_string();
+        assert!(
+            err.contains("cells_per_segment") && err.contains(&shown),
+            "{bad}: {err}"
+        );
+    }
+    let json = base.replace(
+        r#""transport": {"#,
+        r#""transport": {"cells_per_vessel": {"nope": 2}, "#,
+    );
+    let spec = parse(&json).unwrap();
+    let assembled = spec.assemble().unwrap();
+    let dae = assembled.circuit.assemble().unwrap();
+    let err = Transport::build(
+        spec.transport.as_ref().unwrap(),
+        &assembled.circuit,
+        &dae,
+        &assembled.probes,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        err.contains("cells_per_vessel") && err.contains("nope"),
+        "{err}"
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// Lévêque with `shear: relaxed` (physics §3.1 "Pulsatility")
+
+/// Rigid coronary tube with the relaxed Lévêque wall; Q(t) = Q0 (1 + a sin ωt), no reversal.
+/// The relaxed equivalent flow solves Q̃' = (Q − Q̃)/τ from Q̃(0) = Q0 (the cycle mean):
+///   Q̃ = Q0 + a Q0 [sin ωt − ωτ cos ωt + ωτ e^{−t/τ}]/(1 + ω²τ²),
+/// τ = δ²/D, δ = Γ(4/3)(9 D x_mid/γ̄)^{1/3}, γ̄ = 4 Q0/(π r³). The reported wall flux is
+/// coef Q̃^{1/3} (c − c_w) with the segment-integrated Lévêque coefficient.
+#[test]
+fn relaxed_shear_follows_the_linear_relaxation_law() {
+    let (r, n, dx, q0, a, d) = (1.5e-3, 9, 3.84e-3, 1.6e-6, 0.5, 1.2e-9);
+    let alpha = 1.4e-3;
+    let (cin, cw) = (85.0 * alpha, 48.0 * alpha);
+    let sp = format!(
+        r#"{{"name": "o2", "diffusivity": {d}, "inlet": {{"kind": "constant", "value": {cin}}},
+            "wall": {{"model": "leveque", "shear": "relaxed", "wall_concentration": {cw}}}}}"#
+    );
+    let flow = format!(r#"{{"kind": "constant", "value": {q0}}}"#);
+    let mut b = build(&tube(r, dx * n as f64, n, "", &flow, 1e7, &sp));
+    b.transport.set_mean_flow(&vec![q0; n]).unwrap();
+    let omega = 2.0 * PI;
+    let q = |t: f64| q0 * (1.0 + a * (omega * t).sin());
+    let gamma43 = 0.892_979_511_569_249_2;
+    let tau: Vec<f64> = (0..n)
+        .map(|j| {
+            let x = (j as f64 + 0.5) * dx;
+            let delta = gamma43 * (9.0 * d * x / (4.0 * q0 / (PI * r.powi(3)))).cbrt();
+            delta * delta / d
+        })
+        .collect();
+    let exact = |j: usize, t: f64| {
+        let wt = omega * tau[j];
+        q0 + a * q0 * ((omega * t).sin() - wt * (omega * t).cos() + wt * (-t / tau[j]).exp())
+            / (1.0 + wt * wt)
+    };
+    let coef = |j: usize| {
+        let (x0, x1) = (j as f64 * dx, (j + 1) as f64 * dx);
+        2.0 * PI * r * 1.5 * (4.0 / (PI * r.powi(3)) * d * d / 9.0).cbrt() / gamma43
+            * (x1.powf(2.0 / 3.0) - x0.powf(2.0 / 3.0))
+    };
+    let nn = b.dae.n_nodes;
+    let mut y = vec![0.0; b.dae.n];
+    y[nn..].iter_mut().for_each(|v| *v = q(0.0));
+    let mut z = b.transport.initial_state(&y).unwrap();
+    let nc = b.transport.n_cells();
+    assert_eq!(z.len(), nc + 4 + n);
+    let mut st = CoupledStages::new(z.len());
+    let mut set_flow = |t: f64, y: &mut [f64]| {
+        for v in &mut y[nn..] {
+            *v = q(t);
+        }
+    };
+    let dt = 1e-3;
+    let (mut worst_state, mut worst_law) = (0.0f64, 0.0f64);
+    let mut spread = 0.0f64;
+    for k in 0..3000 {
+        b.transport
+            .step_prescribed(k as f64 * dt, dt, &mut set_flow, &mut y, &mut z, &mut st)
+            .unwrap();
+        if (k + 1) % 50 != 0 {
+            continue;
+        }
+        let t = (k + 1) as f64 * dt;
+        set_flow(t, &mut y);
+        let mut out = Vec::new();
+        b.transport
+            .observe(t, &y, None, &z, false, &mut out)
+            .unwrap();
+        for j in 0..n {
+            let qe = exact(j, t);
+            worst_state = worst_state.max((z[nc + 4 + j] / qe - 1.0).abs());
+            let base = VESSEL_COLUMNS + SEGMENT_COLUMNS * j;
+            let (c, wall) = (out[base], out[base + 2]);
+            let g = coef(j) * qe.cbrt();
+            worst_law = worst_law.max((wall / (g * (c - cw)) - 1.0).abs());
+            spread = spread.max((qe / q(t) - 1.0).abs());
+        }
+    }
+    eprintln!("relaxed shear: state error {worst_state:e}, law error {worst_law:e}");
+    assert!(worst_state < 1e-10, "Q̃ vs closed form: {worst_state:e}");
+    assert!(worst_law < 1e-10, "wall law vs closed form: {worst_law:e}");
+    // the test discriminates: Q̃ is far from the instantaneous flow
+    assert!(spread > 0.2, "{spread}");
+}
+
+/// Constant flow: relaxed, cycle-mean and instantaneous shear give the same results, with
+/// both integrations.
+#[test]
+fn relaxed_cycle_mean_and_instantaneous_shear_agree_in_constant_flow() {
+    let alpha = 1.4e-3;
+    for method in [Method::Rk4, Method::GeneralizedAlpha { rho_inf: 0.5 }] {
+        let mut rows = Vec::new();
+        for shear in ["cycle-mean", "instantaneous", "relaxed"] {
+            let sp = format!(
+                r#"{{"name": "o2", "diffusivity": 1.2e-9, "inlet": {{"kind": "constant", "value": {cin}}},
+                    "wall": {{"model": "leveque", "shear": "{shear}", "wall_concentration": {cw}}}}}"#,
+                cin = 85.0 * alpha,
+                cw = 48.0 * alpha
+            );
+            let mut b = build(&tube(
+                1.5e-3,
+                0.0346,
+                9,
+                r#", "wall_thickness": 1.8e-4, "youngs_modulus": 7e5"#,
+                r#"{"kind": "constant", "value": 1.6e-6}"#,
+                55.6 * MMHG * 1e6,
+                &sp,
+            ));
+            let out = simulate_with_transport(
+                &b.dae,
+                Some(&mut b.transport),
+                &settings(method, 1e-4, 1, vec![]),
+                &mut |_, _| true,
+            )
+            .unwrap();
+            rows.push(out.transport.unwrap().data);
+        }
+        for other in &rows[1..] {
+            for (a, b) in rows[0].iter().zip(other) {
+                assert!(
+                    (a - b).abs() <= 1e-11 * a.abs().max(1e-300) || (a.is_nan() && b.is_nan()),
+                    "{method:?}: {a} vs {b}"
+                );
+            }
+        }
+    }
+}
