@@ -49,9 +49,12 @@ class Network:
         transport: bool = True,
         chunk_sink: Callable[[dict[str, Any]], None] | None = None,
         chunk_rows: int = 1024,
+        keep_current_cycle: bool = True,
     ) -> dict[str, Any]:
         """Run the network; with ``chunk_sink``, the output rows are handed to it during the
         run in dicts of at most ``chunk_rows`` rows (``times``, ``data`` and, for transport
         runs, ``transport``: ``species``, ``data``, ``initial_stored``) instead of being
         returned. An exception from ``chunk_sink`` stops the run and is returned as ``error``;
-        ``max_buffered_rows`` is the most output rows the core held at once."""
+        ``max_buffered_rows`` is the most output rows the core held at once. With last-cycle
+        output, ``keep_current_cycle=False`` records nothing before the last cycle (a streaming
+        run then holds at most one chunk; a run stopped earlier returns no rows)."""

@@ -671,7 +671,8 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
         count["out"] = o + n
 
     chunk_rows = max(1, (1 << 20) // max(1, 4 * nv))  # ~8 MB per chunk
-    raw = model.network.simulate(**kw, chunk_sink=take, chunk_rows=chunk_rows)
+    raw = model.network.simulate(**kw, chunk_sink=take, chunk_rows=chunk_rows,
+                                 keep_current_cycle=False)
     if "error" in raw:
         raise raw["error"]
     if count["out"] != wanted.size:

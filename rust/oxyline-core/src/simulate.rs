@@ -50,6 +50,10 @@ pub struct RunSettings {
     /// Output interval in seconds (rounded to a whole number of steps).
     pub output_every: f64,
     pub output_all_cycles: bool,
+    /// With last-cycle output, also record the cycles before the last (each is dropped when the
+    /// next starts), so that a run stopped early returns its current cycle. Off, those cycles
+    /// are not recorded at all: a streaming run then never holds a whole cycle of rows.
+    pub keep_current_cycle: bool,
     pub start: Start,
     pub newton: NewtonControl,
     pub probes: Vec<usize>,
@@ -609,11 +613,12 @@ fn run(
         // rows certain to be output can go to the sink as they come; a cycle that may still be
         // superseded by the next (last-cycle output with `until_periodic`) waits for its end
         let committed = s.output_all_cycles || cycle + 1 == max_cycles;
+        let recorded = committed || s.until_periodic.is_some() || s.keep_current_cycle;
         if let Some(m) = mean.as_deref_mut() {
             m.sum.iter_mut().for_each(|v| *v = 0.0);
             m.count = 0;
         }
-        if !s.output_all_cycles || cycle == 0 {
+        if recorded && (!s.output_all_cycles || cycle == 0) {
             rec.record(if s.output_all_cycles { t0 } else { 0.0 }, &y);
             if let Some(tr) = transport.as_deref_mut() {
                 if let Err(e) = observe(tr, &mut stepper, t0, &y, &yd, &z, &mut rec.transport) {
@@ -696,7 +701,7 @@ fn run(
             } else {
                 k % stride == 0
             };
-            if due {
+            if due && recorded {
                 let tr = if s.output_all_cycles {
                     t_new
                 } else {

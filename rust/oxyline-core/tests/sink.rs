@@ -43,6 +43,7 @@ fn settings(probes: Vec<usize>, all_cycles: bool, until_periodic: Option<f64>) -
         max_cycles: 4,
         output_every: 1e-2,
         output_all_cycles: all_cycles,
+        keep_current_cycle: true,
         start: Start::Steady,
         newton: NewtonControl::default(),
         probes,
@@ -152,16 +153,37 @@ fn a_refusing_sink_stops_the_run_and_is_not_called_again() {
 
 #[test]
 fn interrupted_last_cycle_output_keeps_species_rows_aligned() {
-    // stopped in the first of three cycles of last-cycle output, whose species outputs are not
-    // computed: the flow rows so far come with NaN species rows, one per time
-    let probes = build().2;
+    // in memory, stopped in the first of three cycles of last-cycle output, whose species
+    // outputs are not computed: the flow rows so far come with NaN species rows, one per time
+    let (dae, mut tr, probes) = build();
     let s = settings(probes, false, None);
-    let (out, got) = streamed(&s, 1000, None, 0.5);
+    let mut progress = |t: f64, _: f64| t < 0.5;
+    let out = simulate_with_transport(&dae, Some(&mut tr), &s, &mut progress).unwrap();
     assert!(out.error.is_some());
-    let n = got.times.len();
+    let n = out.times.len();
     assert!(n > 1);
-    let cols = got.transport.len() / n;
-    assert_eq!(got.transport.len(), n * cols);
-    assert!(got.transport[cols..].iter().all(|v| v.is_nan()));
-    assert!(got.transport[..cols].iter().all(|v| v.is_finite()));
+    let species = out.transport.unwrap().data;
+    let cols = species.len() / n;
+    assert_eq!(species.len(), n * cols);
+    assert!(species[cols..].iter().all(|v| v.is_nan()));
+    assert!(species[..cols].iter().all(|v| v.is_finite()));
+}
+
+#[test]
+fn without_keep_current_cycle_nothing_before_the_last_cycle_is_recorded() {
+    // last-cycle output streamed with keep_current_cycle off: the earlier cycles are not
+    // recorded at all, so the driver holds at most one chunk, and a run stopped before the
+    // last cycle hands over nothing
+    let probes = build().2;
+    let s = RunSettings {
+        keep_current_cycle: false,
+        ..settings(probes, false, None)
+    };
+    let (out, got) = streamed(&s, 8, None, f64::INFINITY);
+    assert!(out.error.is_none());
+    assert!(out.max_buffered_rows <= 8, "{}", out.max_buffered_rows);
+    assert_eq!(got.times, in_memory(&s).times);
+    let (out, got) = streamed(&s, 8, None, 1.5);
+    assert!(matches!(out.error, Some(Error::Interrupted { .. })));
+    assert!(got.times.is_empty());
 }

@@ -275,6 +275,7 @@ fn settings(method: Method, dt: f64, cycles: usize, probes: Vec<usize>) -> RunSe
         max_cycles: cycles,
         output_every: 1e-2,
         output_all_cycles: true,
+        keep_current_cycle: true,
         start: Start::Steady,
         newton: NewtonControl::default(),
         probes,

@@ -288,10 +288,13 @@ impl Network {
     /// soon as they are final, including the rows of a run that stops early; the returned
     /// `times`/`data` are then empty. An exception raised by `chunk_sink` stops the run and is
     /// returned as its `error`. `max_buffered_rows` tells the most rows the core held at once.
+    /// With last-cycle output, `keep_current_cycle = false` records nothing before the last
+    /// cycle (a streaming run then holds at most one chunk; a run stopped earlier returns no
+    /// rows).
     #[pyo3(signature = (*, period, cycles, output_every, method = "auto", rho_infty = 0.5, dt = None,
         until_periodic = None, max_cycles = 100, output_all_cycles = false, start = "steady",
         newton_atol = None, max_iterations = 30, segments = true, all_unknowns = false, progress = None,
-        transport = true, chunk_sink = None, chunk_rows = 1024))]
+        transport = true, chunk_sink = None, chunk_rows = 1024, keep_current_cycle = true))]
     #[allow(clippy::too_many_arguments)]
     fn simulate<'py>(
         &self,
@@ -314,6 +317,7 @@ impl Network {
         transport: bool,
         chunk_sink: Option<Py<PyAny>>,
         chunk_rows: usize,
+        keep_current_cycle: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         if chunk_rows == 0 {
             return Err(ModelError::new_err("simulation: chunk_rows must be >= 1"));
@@ -356,6 +360,7 @@ impl Network {
             max_cycles,
             output_every,
             output_all_cycles,
+            keep_current_cycle,
             start,
             newton: NewtonControl {
                 atol: newton_atol,
