@@ -6,6 +6,7 @@ Quick use::
     import oxyline
     res = oxyline.simulate("bifurcation")       # built-in example, or a YAML/JSON path or dict
     ds = res.to_xarray()                         # dims time, vessel (and segment)
+    back = oxyline.open_result("run.nc")         # a saved .nc/.zarr back as a Result
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from oxyline.errors import (
     UnstableTimeStep,
     UnsupportedElement,
 )
+from oxyline.io.results import open_result
 from oxyline.model import Model, load_model
 from oxyline.result import Result, VesselResult
 from oxyline.run import simulate, simulate_to_zarr
@@ -36,6 +38,7 @@ __all__ = [
     "__version__",
     "load_model",
     "models",
+    "open_result",
     "simulate",
     "simulate_to_zarr",
 ]

@@ -248,8 +248,21 @@ class Result:
                 data_vars[name] = (("time",), arr, {"units": unit})
             elif seg_ok:
                 data_vars[name] = (("time", "segment"), arr, {"units": unit})
-        attrs = {"model": self.model_name, "oxyline_version": __version__,
-                 "complete": int(self.complete)}
+        if self.oxygen is not None and self.oxygen in self.species:
+            # the exact mmHg-per-concentration factor, so that oxyline.open_result rebuilds
+            # po2_* bit for bit (a ratio of the stored arrays would only approximate it)
+            scale = self.species[self.oxygen].po2_per_concentration
+            for name in ("po2_in", "po2_out", "segment_po2"):
+                if name in data_vars and scale is not None:
+                    data_vars[name][2]["po2_per_concentration"] = float(scale)
+        attrs: dict[str, Any] = {"model": self.model_name, "oxyline_version": __version__,
+                                 "complete": int(self.complete)}
+        if self.species:
+            # species order (a Zarr store lists its variables alphabetically) and which one is
+            # oxygen: what oxyline.open_result needs to rebuild ``species`` and ``oxygen``
+            attrs["species"] = list(self.species)
+            if self.oxygen is not None:
+                attrs["oxygen_species"] = self.oxygen
         attrs.update({f"solver_{k}": (v if isinstance(v, (int, float, str)) else str(v))
                       for k, v in self.settings.items() if v is not None})
         return xr.Dataset(data_vars, coords=coords, attrs=attrs)

@@ -178,3 +178,192 @@ def to_parquet(result: Result | Any, path: PathLike) -> Path:
     p.parent.mkdir(parents=True, exist_ok=True)
     summary(result).to_parquet(p)
     return p
+
+
+# ---------------------------------------------------------------------------------------------
+# reading a result back: the inverse of Result.to_xarray (and of the files written from it)
+
+#: what every oxyline result holds; anything less is not an oxyline result file
+REQUIRED = ("time", "vessel", "pressure_in", "pressure_out", "flow_in", "flow_out")
+
+
+def _plain(value: Any) -> Any:
+    """A file attribute as a Python scalar (netCDF gives numpy scalars, Zarr plain JSON)."""
+    import numpy as np
+
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return [_plain(v) for v in value.tolist()]
+    return value
+
+
+def _names(value: Any) -> list[str]:
+    """A list-of-names attribute: netCDF stores a one-element list as a plain string."""
+    value = _plain(value)
+    return [value] if isinstance(value, str) else [str(v) for v in value]
+
+
+def _source(source: Any) -> tuple[Any, str, bool]:
+    """(dataset, label for messages, whether we opened it and must close it)."""
+    import os
+
+    if not isinstance(source, (str, os.PathLike)):
+        if not hasattr(source, "data_vars"):
+            raise TypeError("open_result: expected a path to a .nc/.zarr file or an "
+                            f"xarray.Dataset, got {type(source).__name__}")
+        return source, "dataset", False
+    import warnings
+
+    import xarray as xr
+
+    p = Path(source)
+    if not p.exists():
+        raise FileNotFoundError(f"{p}: no such file or directory")
+    if p.suffix.lower() == ".zarr" or (p.is_dir() and (p / ".zgroup").exists()):
+        _zarr()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # consolidated metadata is not part of the v2 spec
+            return xr.open_zarr(p), str(p), True
+    try:
+        return xr.open_dataset(p), str(p), True
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{p}: cannot read as NetCDF or Zarr ({exc})") from None
+
+
+def open_result(source: PathLike | Any) -> Result:
+    """Rebuild a :class:`~oxyline.Result` from a NetCDF file, a Zarr store (also one written
+    during the run by :func:`oxyline.simulate_to_zarr`, finished or interrupted) or the
+    ``xarray.Dataset`` of :meth:`Result.to_xarray`.
+
+    The inverse of :meth:`Result.to_xarray`: the pressure/flow arrays, segment data, species
+    and oxygen outputs, model name, solver settings and ``complete`` flag come back as written,
+    so ``open_result(res.to_xarray())`` has arrays identical to ``res`` (bit for bit) and works
+    with :mod:`oxyline.plot`, :meth:`~Result.summary` and the writers. Derived variables (PO2,
+    mass balance residuals, TL elements) are recomputed from the underlying arrays and equal
+    the stored ones. What a file does not hold stays absent: settings that were ``None``, the
+    species' per-segment arrays of a run without segment output, and the absolute stored
+    amount at t = 0 (the file has the change since then: ``SpeciesResult.initial_stored`` is
+    0 and ``balance_data``'s stored column is that change, so ``mass_balance`` is unchanged).
+    The arrays are read into memory (a Result holds them all).
+
+    Raises ``ValueError`` naming the missing variable when ``source`` is not an oxyline result.
+
+    >>> import oxyline
+    >>> res = oxyline.simulate("bifurcation", cycles=1)
+    >>> back = oxyline.open_result(res.to_xarray())
+    >>> bool((back.pressure_in == res.pressure_in).all()), back.model_name
+    (True, 'bifurcation')
+    """
+    ds, label, opened = _source(source)
+    try:
+        return _result_from_dataset(ds, label)
+    finally:
+        if opened:
+            ds.close()
+
+
+def _result_from_dataset(ds: Any, label: str) -> Result:
+    import numpy as np
+
+    from oxyline.result import SEGMENT_VARIABLES, VESSEL_VARIABLES, Result
+
+    def need(name: str, dims: tuple[str, ...] | None = None) -> Any:
+        if name not in ds.variables:
+            raise ValueError(f"{label} is not an oxyline result: no variable '{name}' "
+                             "(oxyline.open_result reads files written by Result.to_netcdf, "
+                             "Result.to_zarr or oxyline.simulate_to_zarr)")
+        var = ds[name]
+        if dims is not None and var.dims != dims:
+            raise ValueError(f"{label}: variable '{name}' has dims {var.dims}, expected {dims}")
+        return np.asarray(var.values)
+
+    for name in REQUIRED:
+        need(name)
+    time = need("time").astype(np.float64)
+    vessels = [str(v) for v in need("vessel")]
+    nt, nv = len(time), len(vessels)
+    seg = "segment_flow" in ds.variables
+    segment_count: list[int] = []
+    positions = np.zeros(0, dtype=np.float64)
+    ns = 0
+    if seg:
+        seg_vessel = [str(v) for v in need("segment_vessel")]
+        index = {n: i for i, n in enumerate(vessels)}
+        try:
+            owner = np.array([index[n] for n in seg_vessel], dtype=np.int64)
+        except KeyError as exc:
+            raise ValueError(f"{label}: segment of unknown vessel {exc.args[0]!r}") from None
+        # the core numbers segments vessel by vessel; anything else has no Result layout
+        if np.any(np.diff(owner) < 0):
+            raise ValueError(f"{label}: segments are not grouped by vessel in vessel order")
+        segment_count = np.bincount(owner, minlength=nv).tolist()
+        positions = need("segment_position").astype(np.float64)
+        ns = len(seg_vessel)
+
+    # the core's (time, column) layout: 4 columns per vessel, then 3 per segment, interleaved
+    data = np.empty((nt, 4 * nv + 3 * ns), dtype=np.float64)
+    for k, name in enumerate(VESSEL_VARIABLES):
+        data[:, k:4 * nv:4] = need(name, ("time", "vessel"))
+    if seg:
+        for k, name in enumerate(SEGMENT_VARIABLES):
+            data[:, 4 * nv + k::3] = need(name, ("time", "segment"))
+
+    attrs = {k: _plain(v) for k, v in ds.attrs.items()}
+    species = _species_from_dataset(ds, attrs, need, nt, nv, ns, label)
+    oxygen = attrs.get("oxygen_species")
+    if oxygen is None and "po2_in" in ds.variables:  # written before the attribute existed
+        oxygen = next(iter(species), None)
+    if oxygen is not None and oxygen in species:
+        scale = ds["po2_in"].attrs.get("po2_per_concentration") if "po2_in" in ds.variables \
+            else None
+        if scale is None and "po2_in" in ds.variables:
+            # older files: recover the factor from the two stored arrays (to rounding)
+            c, p = species[oxygen].concentration_in, need("po2_in")
+            ok = np.isfinite(c) & np.isfinite(p) & (c != 0)
+            scale = float(np.median(p[ok] / c[ok])) if ok.any() else None
+        species[oxygen].po2_per_concentration = None if scale is None else float(_plain(scale))
+    settings = {k[len("solver_"):]: v for k, v in attrs.items() if k.startswith("solver_")}
+    return Result(model_name=str(attrs.get("model", Path(label).stem)), vessels=vessels,
+                  time=time, data=data, segment_count=segment_count, segment_position=positions,
+                  settings=settings, complete=bool(attrs.get("complete", 1)), species=species,
+                  oxygen=None if oxygen is None else str(oxygen))
+
+
+def _species_from_dataset(ds: Any, attrs: dict[str, Any], need: Any, nt: int, nv: int,
+                          ns: int, label: str) -> dict[str, Any]:
+    """The :class:`~oxyline.result.SpeciesResult` of every species in ``ds``, in run order."""
+    import numpy as np
+
+    from oxyline.result import BALANCE, SpeciesResult
+
+    suffix = "_concentration_in"
+    if "species" in attrs:
+        names = _names(attrs["species"])
+    else:  # files written before the attribute existed: the order the variables are listed in
+        names = [str(n)[:-len(suffix)] for n in ds.data_vars if str(n).endswith(suffix)]
+    has_seg = ns > 0 and all(f"segment_{n}_concentration" in ds.variables for n in names)
+    tl: list[Any] = []
+    if has_seg and names:
+        # the TL elements depend on the flow only: the file holds them once for all species
+        tl = [need("tl_resistance", ("time", "segment")), need("tl_inductance", ("time", "segment"))]
+    out: dict[str, Any] = {}
+    for name in names:
+        vessel = np.empty((nt, nv, 5), dtype=np.float64)
+        for k, v in enumerate((f"{name}_concentration_in", f"{name}_concentration_out",
+                               f"{name}_flux_in", f"{name}_flux_out", f"wall_{name}_flux")):
+            vessel[:, :, k] = need(v, ("time", "vessel"))
+        segment = np.empty((nt, ns if has_seg else 0, 5), dtype=np.float64)
+        if has_seg:
+            for k, v in enumerate((f"segment_{name}_concentration", f"segment_{name}_flux",
+                                   f"segment_wall_{name}_flux")):
+                segment[:, :, k] = need(v, ("time", "segment"))
+            segment[:, :, 3], segment[:, :, 4] = tl
+        balance = np.empty((nt, len(BALANCE)), dtype=np.float64)
+        for k, v in enumerate(BALANCE):
+            # stored is written as the change since t = 0: with initial_stored = 0 the
+            # recomputed mass balance equals the file's bit for bit
+            balance[:, k] = need(f"{name}_mass_{v}", ("time",))
+        out[name] = SpeciesResult(name=name, vessel_data=vessel, segment_data=segment,
+                                  balance_data=balance, initial_stored=0.0)
+    return out
