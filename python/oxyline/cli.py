@@ -1,4 +1,4 @@
-"""The ``oxyline`` command line: run, validate, convert, models, info.
+"""The ``oxyline`` command line: run, plot, validate, convert, models, info.
 
 Exit codes: 0 ok, 2 bad input (the message names the file, vessel or node, and key),
 130 interrupted (a partial result is still written), 1 solver failure.
@@ -45,9 +45,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
         overrides["until_periodic"] = args.until_periodic
     if args.method is not None:
         overrides["method"] = args.method
-    # a .zarr output is written during the run (memory bounded by one chunk); the figures need
-    # the whole result in memory, so with --plot the store is written after the run
-    stream = bool(args.output) and Path(args.output).suffix.lower() == ".zarr" and not args.plot
+    # a .zarr output is written during the run (memory bounded by one chunk); --plot then
+    # reads the finished store back (oxyline.open_result) instead of keeping a second copy
+    stream = bool(args.output) and Path(args.output).suffix.lower() == ".zarr"
     try:
         if stream:
             res = oxyline.simulate_to_zarr(model, args.output, **overrides)
@@ -70,7 +70,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if args.plot:
         from oxyline import plot
 
-        figures = plot.save_figures(res, model, args.plot)
+        figures = plot.save_figures(oxyline.open_result(args.output) if stream else res, model,
+                                    args.plot)
     if not args.quiet:
         if stream:  # the store opened lazily: read the run facts and the first vessels only
             s = {k[len("solver_"):]: v for k, v in res.attrs.items() if k.startswith("solver_")}
@@ -94,6 +95,33 @@ def _cmd_run(args: argparse.Namespace) -> int:
             print(f"summary written to {args.summary}")
         if figures:
             print(f"{len(figures)} figures written to {args.plot}")
+    return 0
+
+
+def _cmd_plot(args: argparse.Namespace) -> int:
+    import oxyline
+    from oxyline import plot
+
+    if not Path(args.result).exists():
+        raise InputError(f"{args.result}: file not found")
+    res = oxyline.open_result(args.result)
+    if args.model is not None:
+        model = _load(args.model)
+    else:
+        # the file names its model; only a built-in one can be found from the name alone
+        try:
+            model = oxyline.models.load(res.model_name)
+        except oxyline.ModelError:
+            raise InputError(f"{args.result}: model '{res.model_name}' is not a built-in model; "
+                             "give the model file it was run from with --model") from None
+    missing = [v for v in res.vessels if v not in set(model.vessel_names)]
+    if missing:
+        raise InputError(f"{args.result}: vessel '{missing[0]}' is not in model "
+                         f"'{model.name}' (is --model the model the result was run from?)")
+    figures = plot.save_figures(res, model, args.plot)
+    if not args.quiet:
+        state = "" if res.complete else " (partial result: the run was interrupted)"
+        print(f"{len(figures)} figures written to {args.plot}{state}")
     return 0
 
 
@@ -220,6 +248,16 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--until-periodic", type=float)
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=_cmd_run)
+    p = sub.add_parser("plot", help="write the figures of a saved result (.nc/.zarr)",
+                       description="Write the figures of `run --plot` (PNG + SVG) from a result "
+                       "file written by `run -o` or Result.to_netcdf/to_zarr.")
+    p.add_argument("result", metavar="RESULT", help="result file: .nc (NetCDF) or .zarr")
+    p.add_argument("--plot", "-o", dest="plot", metavar="DIR", required=True,
+                   help="directory for the figures (PNG + SVG)")
+    p.add_argument("--model", help="the model the result was run from (built-in name or model "
+                                   "file; default: the built-in model the file names)")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=_cmd_plot)
     p = sub.add_parser("validate", help="check a model and print a summary")
     p.add_argument("model")
     p.set_defaults(func=_cmd_validate)
