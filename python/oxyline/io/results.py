@@ -1,4 +1,5 @@
-"""Result files: NetCDF and Zarr (via xarray), and per-vessel summary tables (CSV/Parquet).
+"""Result files: NetCDF and Zarr (via xarray), read back with :func:`open_result`, and
+per-vessel summary tables (CSV/Parquet).
 
 The methods :meth:`oxyline.Result.to_netcdf`, :meth:`~oxyline.Result.to_zarr`,
 :meth:`~oxyline.Result.summary`, :meth:`~oxyline.Result.to_csv` and
