@@ -416,13 +416,45 @@ def test_rk4_stability_limit_l_line(case: str, spec: str) -> None:
     assert dt_max == pytest.approx(independent_limit(geom, r_out, "L"), rel=1e-6)
 
 
-@pytest.mark.xfail(strict=True, raises=oxyline.ModelError,
-                   reason="rk4 rejects an L line with a flow inlet as index-2 (the first "
-                          "branch flow is prescribed; physics §1.2 makes it algebraic)")
 def test_rk4_stability_limit_l_line_with_plain_flow_inlet() -> None:
+    """physics §1.2, L element: the first branch flow is prescribed (algebraic), so RK4
+    integrates the plain model; its limit is the spec table's (the first branch's inertance
+    carries no state)."""
     geom, _, r_out, _, _ = F1_CASES["abdominal"]
     dt_max, _, _ = tube_model(geom, {"value": 1e-6}, r_out, "L").network.rk4_stability_limit()
     assert sig3(dt_max) == "1.53e-04"
+
+
+def test_rk4_l_line_with_flow_inlet_prescribes_the_first_branch() -> None:
+    """L line fed by Q_in(t): RK4 gives the first branch flow = Q_in(t) and the inlet pressure
+    P_0 = P_1 + R_1 Q_in + L_1 dQ_in/dt (physics §1.2), and the rest of the line evolves exactly
+    as in the hand-reduced model (first segment written as a lumped R + C, no index-2 row)."""
+    geom, _, r_out, _, _ = F1_CASES["abdominal"]
+    a, b, w = 1e-5, 8e-6, 2 * math.pi
+    inflow = {"fourier": {"period": 1.0, "mean": 2e-5, "cos": [a], "sin": [b]}}
+    run = {"method": "rk4", "dt": 1e-4, "cycles": 3, "output_every": 1e-3}
+    res = oxyline.simulate(tube_model(geom, inflow, r_out, "L"), **run)
+    t = res.time + 2.0  # last-cycle times count from the cycle start
+    q_in = 2e-5 + a * np.cos(w * t) + b * np.sin(w * t)
+    dq_in = -a * w * np.sin(w * t) + b * w * np.cos(w * t)
+    np.testing.assert_allclose(res.flow_in[:, 0], q_in, rtol=1e-12, atol=0)
+    r1, l1 = seg_r(geom["r"], geom["dx"]), seg_l(geom["r"], geom["dx"])
+    p1 = res.vessel("v").segment_pressure_in[:, 1]
+    np.testing.assert_allclose(res.pressure_in[:, 0], p1 + r1 * q_in + l1 * dq_in, rtol=1e-12)
+    by_hand = oxyline.load_model({
+        "name": "L line", "arrangement": "L", "period": 1.0,
+        "vessels": [
+            {"name": "first", "from": "in", "to": "a",
+             "lumped": {"resistance": r1,
+                        "capacitance": seg_c(geom["r"], geom["dx"], geom["E"], geom["h"], 0.5)}},
+            vessel("v", "a", "out", **dict(geom, n=geom["n"] - 1)),
+        ],
+        "boundary_conditions": {"in": {"type": "flow", **inflow},
+                                "out": {"type": "resistance", "resistance": r_out}},
+    })
+    ref = oxyline.simulate(by_hand, **run)
+    np.testing.assert_allclose(p1, ref.vessel("first").pressure_out, rtol=1e-10)
+    np.testing.assert_allclose(res.flow_out[:, 0], ref.vessel("v").flow_out, rtol=1e-10)
 
 
 def test_rk4_stability_limit_carotid() -> None:

@@ -68,8 +68,65 @@ pub fn rk4_ode(
     Ok(())
 }
 
+/// Index reduction for explicit integration. An algebraic row whose only unknown is one
+/// inductor flow — the KCL of a capacitance-free node between a flow condition and an inductor,
+/// e.g. the inlet node of an L-arrangement line — fixes that flow, a y_j = f_r(t) (physics §1.2,
+/// L element: "first branch flow is prescribed"). Then ẏ_j = f_r′(t)/a, and the inductor's own
+/// row E_jj ẏ_j + F_j y = f_j becomes the algebraic F_j y = f_j − (E_jj/a) f_r′(t), which
+/// determines the node pressure (P_0 = P_1 + R Q_in + L dQ_in/dt). Circuits without such rows
+/// are returned unchanged (borrowed).
+fn reduce_prescribed_inductors(dae: &Dae, regime: Regime) -> CircuitRef<'_> {
+    let e = dae.mass(regime);
+    let with_stenosis: Vec<usize> = dae.stenosis.iter().map(|&(i, _)| i).collect();
+    let mut reduced: Option<Dae> = None;
+    for r in (0..dae.n).filter(|&r| e[r] <= 0.0 && !with_stenosis.contains(&r)) {
+        let entries: Vec<(usize, f64)> = (dae.f.ptr[r]..dae.f.ptr[r + 1])
+            .map(|k| (dae.f.col[k], dae.f.val[k]))
+            .filter(|&(_, v)| v != 0.0)
+            .collect();
+        let [(j, a)] = entries[..] else {
+            continue;
+        };
+        if e[j] <= 0.0 {
+            continue;
+        }
+        let out = reduced.get_or_insert_with(|| dae.clone());
+        if out.e[j] <= 0.0 {
+            continue; // already reduced through another row
+        }
+        let scale = -out.e[j] / a;
+        for (row, w) in &dae.forcing {
+            if *row == r {
+                out.rate_forcing.push((j, scale, w.clone()));
+            }
+        }
+        out.e[j] = 0.0;
+    }
+    match reduced {
+        Some(d) => CircuitRef::Reduced(Box::new(d)),
+        None => CircuitRef::Given(dae),
+    }
+}
+
+/// The circuit an `Rk4` integrates: the caller's, or its boxed index-reduced copy.
+enum CircuitRef<'a> {
+    Given(&'a Dae),
+    Reduced(Box<Dae>),
+}
+
+impl std::ops::Deref for CircuitRef<'_> {
+    type Target = Dae;
+    fn deref(&self) -> &Dae {
+        match self {
+            CircuitRef::Given(d) => d,
+            CircuitRef::Reduced(d) => d,
+        }
+    }
+}
+
 pub struct Rk4<'a> {
-    dae: &'a Dae,
+    /// The circuit, or its index-reduced copy (see `reduce_prescribed_inductors`).
+    dae: CircuitRef<'a>,
     regime: Regime,
     pub dt: f64,
     e: Vec<f64>,
@@ -91,6 +148,7 @@ pub struct Rk4<'a> {
 
 impl<'a> Rk4<'a> {
     pub fn new(dae: &'a Dae, regime: Regime, dt: f64) -> Result<Self> {
+        let dae = reduce_prescribed_inductors(dae, regime);
         let e = dae.mass(regime);
         let n = dae.n;
         let diff: Vec<usize> = (0..n).filter(|&i| e[i] > 0.0).collect();

@@ -167,6 +167,39 @@ impl Waveform {
         }
     }
 
+    /// dw/dt (one-sided within a segment of a linear table: its slope).
+    pub fn slope(&self, time: f64) -> f64 {
+        match self {
+            Waveform::Constant(_) => 0.0,
+            Waveform::Fourier {
+                omega, cos, sin, ..
+            } => {
+                let mut s = 0.0;
+                for (k, a) in cos.iter().enumerate() {
+                    let w = omega * (k + 1) as f64;
+                    s -= a * w * (w * time).sin();
+                }
+                for (k, b) in sin.iter().enumerate() {
+                    let w = omega * (k + 1) as f64;
+                    s += b * w * (w * time).cos();
+                }
+                s
+            }
+            Waveform::Table { t, v, m, .. } => {
+                let (k, a, b, h) = table_locate(t, time);
+                let linear = (v[k] - v[k - 1]) / h;
+                match m {
+                    None => linear,
+                    Some(m) => {
+                        linear
+                            + ((3.0 * b * b - 1.0) * m[k] - (3.0 * a * a - 1.0) * m[k - 1]) * h
+                                / 6.0
+                    }
+                }
+            }
+        }
+    }
+
     pub fn eval(&self, time: f64) -> f64 {
         match self {
             Waveform::Constant(v) => *v,
@@ -186,18 +219,7 @@ impl Waveform {
                 s
             }
             Waveform::Table { t, v, m, .. } => {
-                let n = t.len();
-                let period = t[n - 1] - t[0];
-                let mut rt = (time - t[0]).rem_euclid(period) + t[0];
-                if rt < t[0] {
-                    rt = t[0];
-                }
-                // first index with t[k] >= rt
-                let k = t.partition_point(|&x| x < rt).clamp(1, n - 1);
-                let (t0, t1) = (t[k - 1], t[k]);
-                let h = t1 - t0;
-                let a = (t1 - rt) / h;
-                let b = (rt - t0) / h;
+                let (k, a, b, h) = table_locate(t, time);
                 match m {
                     None => a * v[k - 1] + b * v[k],
                     Some(m) => {
@@ -209,6 +231,21 @@ impl Waveform {
             }
         }
     }
+}
+
+/// Segment k (t[k-1] ≤ τ ≤ t[k]) of the periodic table holding `time`, the interpolation
+/// weights a = (t[k] − τ)/h, b = (τ − t[k-1])/h, and h.
+fn table_locate(t: &[f64], time: f64) -> (usize, f64, f64, f64) {
+    let n = t.len();
+    let period = t[n - 1] - t[0];
+    let mut rt = (time - t[0]).rem_euclid(period) + t[0];
+    if rt < t[0] {
+        rt = t[0];
+    }
+    // first index with t[k] >= rt
+    let k = t.partition_point(|&x| x < rt).clamp(1, n - 1);
+    let h = t[k] - t[k - 1];
+    (k, (t[k] - rt) / h, (rt - t[k - 1]) / h, h)
 }
 
 fn table_mean(t: &[f64], v: &[f64], m: Option<&[f64]>) -> f64 {
@@ -256,6 +293,28 @@ fn periodic_spline_moments(t: &[f64], v: &[f64]) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn slope_matches_central_differences_of_every_kind() {
+        let specs = [
+            r#"{"kind": "fourier", "period": 0.8, "mean": 1.0, "cos": [0.3, -0.1], "sin": [0.5]}"#,
+            r#"{"kind": "table", "time": [0, 0.3, 0.5, 1.0], "value": [1, 4, 2, 1]}"#,
+            r#"{"kind": "table", "time": [0, 0.2, 0.45, 0.7, 1.0], "value": [1, 3, 2, 5, 1],
+                "interpolation": "periodic-cubic"}"#,
+        ];
+        for spec in specs {
+            let w = Waveform::from_spec(&serde_json::from_str(spec).unwrap(), "w").unwrap();
+            for &t in &[0.05, 0.37, 0.61, 0.93, 1.41] {
+                let h = 1e-6;
+                let fd = (w.eval(t + h) - w.eval(t - h)) / (2.0 * h);
+                assert!(
+                    (w.slope(t) - fd).abs() < 1e-6 * (1.0 + fd.abs()),
+                    "{spec} t={t}"
+                );
+            }
+        }
+        assert_eq!(Waveform::constant(2.0).slope(0.3), 0.0);
+    }
 
     #[test]
     fn linear_table_is_periodic_and_mean_is_exact() {
