@@ -218,7 +218,8 @@ class Result:
         return out
 
     def to_xarray(self) -> Any:
-        """xarray Dataset with dims ``time``, ``vessel`` (and ``segment``), SI units in attrs."""
+        """xarray Dataset with dims ``time``, ``vessel`` (and ``segment``), SI units in attrs.
+        :func:`oxyline.open_result` is its inverse (also for the files written from it)."""
         import xarray as xr
 
         from oxyline import __version__
