@@ -90,15 +90,10 @@ STENOSIS_REASON = (
     "discretisation error (2.36e-2 at 501 points, 1.18e-2 / 5.9e-3 / 2.9e-3 at 2x / 4x / 8x)"
 )
 STENOSIS_CASES = SUPPORTED[:2]
-# circuits RK4 cannot integrate (index 2: an inductor or capacitor fixed by algebraic
-# constraints); the core raises ModelError "rk4 cannot integrate ..."
-RK4_INDEX2 = {
-    "steadyFlow_RL_R": "the R-L vessel's inductor flow is fixed by the FLOW condition",
-    "pulsatileFlow_CStenosis_steadyPressure": "C node tied to a PRESSURE outlet through L = 0, "
-                                              "inductor-free stenosis branch fed by FLOW",
-    "pulsatileFlow_CStenosis_steadyPressure_definedPeriod": "as pulsatileFlow_CStenosis_"
-                                                            "steadyPressure",
-}
+# circuits that are index 2 as written (an inductor's flow fixed by a FLOW condition through
+# capacitance-free nodes): RK4 integrates them after making those flows algebraic (rk4.rs)
+RK4_INDEX2 = ("steadyFlow_RL_R", "pulsatileFlow_CStenosis_steadyPressure",
+              "pulsatileFlow_CStenosis_steadyPressure_definedPeriod")
 RK4_REFINE = 20  # svzerod reference for the RK4 comparison: 20x finer time step
 RK4_REFINE_ZERO_START = 320  # ... for steady_initial = false (see test_rk4_matches_svzerod)
 
@@ -238,7 +233,7 @@ def test_stenosis_reference_outlet_flow_converges_to_inflow() -> None:
 # 2. RK4 against a time-step-converged svzerod run
 
 
-@pytest.mark.parametrize("name", [n for n in SUPPORTED if n not in RK4_INDEX2])
+@pytest.mark.parametrize("name", SUPPORTED)
 def test_rk4_matches_svzerod(name: str) -> None:
     """Outputs at svzerod's times within 1e-4 of each column's range. With steady_initial =
     false the peer starts from the inconsistent zero state (its t = 0 row is all zeros, which
@@ -258,12 +253,12 @@ def test_rk4_matches_svzerod(name: str) -> None:
         assert err <= 1e-4, (c, err)
 
 
-@pytest.mark.parametrize("name", sorted(RK4_INDEX2))
-def test_rk4_refuses_index2_circuits(name: str) -> None:
-    with pytest.raises(oxyline.ModelError, match="rk4 cannot integrate"):
-        svz.simulate(case(name), method="rk4")
-
-
+@pytest.mark.parametrize("name", RK4_INDEX2)
+def test_rk4_index2_circuits_have_no_differential_inductor_left(name: str) -> None:
+    """The reduced circuits keep only the capacitors as RK4 states; the run's outputs are
+    checked against svzerod in test_rk4_matches_svzerod."""
+    model = svz.to_model(case(name))
+    assert model.network.rk4_stability_limit()[0] > 0
 # ------------------------------------------------------------------------------------------
 # 3. unsupported elements and period mismatches
 
@@ -325,8 +320,6 @@ def test_invalid_inputs_are_model_errors() -> None:
 @pytest.mark.parametrize("name", sorted(ANALYTIC))
 @pytest.mark.parametrize("method", ["generalized-alpha", "rk4"])
 def test_steady_analytical_solution(name: str, method: str) -> None:
-    if method == "rk4" and name in RK4_INDEX2:
-        pytest.skip(f"rk4: {RK4_INDEX2[name]}")
     df = svz.simulate(case(name), method=method)
     text = json.dumps(config(name)["description"])
     for vessel, (q, p_in, p_out) in ANALYTIC[name].items():

@@ -613,8 +613,9 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
 
     ``method="generalized-alpha"`` (default) reproduces svZeroDSolver's integrator, step and
     Newton tolerance. ``method="rk4"`` uses oxyline's explicit RK4 with a stable sub-step
-    inside each output step (outputs at the same times; not possible for index-2 circuits,
-    e.g. an R-L vessel fed by a FLOW condition, which raise :class:`oxyline.ModelError`).
+    inside each output step (outputs at the same times). Inductor flows a FLOW condition fixes
+    (e.g. an R-L vessel fed by a FLOW condition) are made algebraic first; circuits still
+    singular after that raise :class:`oxyline.ModelError`.
     """
     import pandas as pd
 

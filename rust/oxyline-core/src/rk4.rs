@@ -68,39 +68,72 @@ pub fn rk4_ode(
     Ok(())
 }
 
-/// Index reduction for explicit integration. An algebraic row whose only unknown is one
-/// inductor flow — the KCL of a capacitance-free node between a flow condition and an inductor,
-/// e.g. the inlet node of an L-arrangement line — fixes that flow, a y_j = f_r(t) (physics §1.2,
-/// L element: "first branch flow is prescribed"). Then ẏ_j = f_r′(t)/a, and the inductor's own
-/// row E_jj ẏ_j + F_j y = f_j becomes the algebraic F_j y = f_j − (E_jj/a) f_r′(t), which
-/// determines the node pressure (P_0 = P_1 + R Q_in + L dQ_in/dt). Circuits without such rows
-/// are returned unchanged (borrowed).
+/// Index reduction for explicit integration. A linear algebraic row whose unknowns are all
+/// fixed by the forcing except one fixes that one too: y_j = (Σ f_r − Σ a_rk y_k)/a_rj. Known
+/// values propagate row by row (a worklist, linear in the circuit size). When such a row fixes
+/// an inductor flow — the KCL of a capacitance-free node between a flow condition and an
+/// inductor, e.g. the inlet of an L-arrangement line (physics §1.2: "first branch flow is
+/// prescribed"), or every branch of a rigid tube fed by a flow — then ẏ_j is the same
+/// combination of the forcing slopes, and the inductor's row E_jj ẏ_j + F_j y = f_j becomes
+/// the algebraic F_j y = f_j − E_jj ẏ_j(t), which determines the node pressures
+/// (P_0 = P_1 + R Q_in + L dQ_in/dt). Circuits with no such inductor are returned unchanged.
 fn reduce_prescribed_inductors(dae: &Dae, regime: Regime) -> CircuitRef<'_> {
-    let e = dae.mass(regime);
-    let with_stenosis: Vec<usize> = dae.stenosis.iter().map(|&(i, _)| i).collect();
-    let mut reduced: Option<Dae> = None;
-    for r in (0..dae.n).filter(|&r| e[r] <= 0.0 && !with_stenosis.contains(&r)) {
-        let entries: Vec<(usize, f64)> = (dae.f.ptr[r]..dae.f.ptr[r + 1])
+    let n = dae.n;
+    let mut e = dae.mass(regime);
+    let mut nonlinear = vec![false; n];
+    for &(i, _) in &dae.stenosis {
+        nonlinear[i] = true;
+    }
+    let mut row_forcing: Vec<Vec<usize>> = vec![Vec::new(); n];
+    for (k, (row, _)) in dae.forcing.iter().enumerate() {
+        row_forcing[*row].push(k);
+    }
+    let entries = |r: usize| {
+        (dae.f.ptr[r]..dae.f.ptr[r + 1])
             .map(|k| (dae.f.col[k], dae.f.val[k]))
             .filter(|&(_, v)| v != 0.0)
-            .collect();
-        let [(j, a)] = entries[..] else {
+    };
+    let mut col_rows: Vec<Vec<usize>> = vec![Vec::new(); n];
+    for r in 0..n {
+        for (c, _) in entries(r) {
+            col_rows[c].push(r);
+        }
+    }
+    // known[j]: y_j as Σ coefficient · (forcing entry k)
+    let mut known: Vec<Option<Vec<(usize, f64)>>> = vec![None; n];
+    let mut used = vec![false; n];
+    let mut reduced: Option<Dae> = None;
+    let mut work: Vec<usize> = (0..n).rev().collect();
+    while let Some(r) = work.pop() {
+        if used[r] || e[r] > 0.0 || nonlinear[r] {
+            continue;
+        }
+        let mut free = entries(r).filter(|&(c, _)| known[c].is_none());
+        let (Some((j, a)), None) = (free.next(), free.next()) else {
             continue;
         };
-        if e[j] <= 0.0 {
-            continue;
-        }
-        let out = reduced.get_or_insert_with(|| dae.clone());
-        if out.e[j] <= 0.0 {
-            continue; // already reduced through another row
-        }
-        let scale = -out.e[j] / a;
-        for (row, w) in &dae.forcing {
-            if *row == r {
-                out.rate_forcing.push((j, scale, w.clone()));
+        let mut expr: Vec<(usize, f64)> = row_forcing[r].iter().map(|&k| (k, 1.0 / a)).collect();
+        for (c, v) in entries(r).filter(|&(c, _)| c != j) {
+            for &(k, s) in known[c].as_deref().unwrap_or_default() {
+                match expr.iter_mut().find(|(kk, _)| *kk == k) {
+                    Some(term) => term.1 -= v * s / a,
+                    None => expr.push((k, -v * s / a)),
+                }
             }
         }
-        out.e[j] = 0.0;
+        used[r] = true;
+        if e[j] > 0.0 {
+            let out = reduced.get_or_insert_with(|| dae.clone());
+            for &(k, s) in &expr {
+                out.rate_forcing
+                    .push((j, -e[j] * s, dae.forcing[k].1.clone()));
+            }
+            out.e[j] = 0.0;
+            e[j] = 0.0;
+            work.push(j); // the inductor's row is now algebraic
+        }
+        known[j] = Some(expr);
+        work.extend(col_rows[j].iter().copied());
     }
     match reduced {
         Some(d) => CircuitRef::Reduced(Box::new(d)),
