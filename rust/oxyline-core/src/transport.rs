@@ -1747,14 +1747,7 @@ impl Transport {
     /// Cell holding most of segment `j`'s volume (its last sub-cell when refined), as an index
     /// into the species block of the state.
     pub fn segment_cell(&self, j: usize) -> Option<usize> {
-        let seg = self.segments.get(j)?;
-        let (n, _) = seg
-            .nodes
-            .iter()
-            .copied()
-            .fold((usize::MAX, -1.0), |a, b| if b.1 > a.1 { b } else { a });
-        let c = self.node_cell[self.last_sub[n]];
-        (c != usize::MAX).then_some(c)
+        self.segment_cells(j).map(|cells| cells.end - 1)
     }
 
     /// Cells (sub-cells in flow order, contiguous in the state) of the node holding most of

@@ -36,6 +36,11 @@ struct Built {
 }
 
 fn build(json: &str) -> Built {
+    try_build(json).unwrap()
+}
+
+/// `build`, with the transport's model error (the flow model must be valid).
+fn try_build(json: &str) -> oxyline_core::Result<Built> {
     let spec = parse(json).unwrap();
     let assembled = spec.assemble().unwrap();
     let dae = assembled.circuit.assemble().unwrap();
@@ -44,12 +49,18 @@ fn build(json: &str) -> Built {
         &assembled.circuit,
         &dae,
         &assembled.probes,
-    )
-    .unwrap();
-    Built {
+    )?;
+    Ok(Built {
         assembled,
         dae,
         transport,
+    })
+}
+
+fn build_error(json: &str) -> String {
+    match try_build(json) {
+        Ok(_) => panic!("the model was accepted"),
+        Err(e) => e.to_string(),
     }
 }
 
@@ -847,17 +858,7 @@ fn bad_cells_per_segment_is_a_model_error_naming_key_and_value() {
             r#""transport": {"#,
             &format!(r#""transport": {{"cells_per_segment": {bad}, "#),
         );
-        let spec = parse(&json).unwrap();
-        let assembled = spec.assemble().unwrap();
-        let dae = assembled.circuit.assemble().unwrap();
-        let err = Transport::build(
-            spec.transport.as_ref().unwrap(),
-            &assembled.circuit,
-            &dae,
-            &assembled.probes,
-        )
-        .unwrap_err()
-        .to_string();
+        let err = build_error(&json);
         let shown = bad.parse::<f64>().unwrap().to_string();
         assert!(
             err.contains("cells_per_segment") && err.contains(&shown),
@@ -868,17 +869,7 @@ fn bad_cells_per_segment_is_a_model_error_naming_key_and_value() {
         r#""transport": {"#,
         r#""transport": {"cells_per_vessel": {"nope": 2}, "#,
     );
-    let spec = parse(&json).unwrap();
-    let assembled = spec.assemble().unwrap();
-    let dae = assembled.circuit.assemble().unwrap();
-    let err = Transport::build(
-        spec.transport.as_ref().unwrap(),
-        &assembled.circuit,
-        &dae,
-        &assembled.probes,
-    )
-    .unwrap_err()
-    .to_string();
+    let err = build_error(&json);
     assert!(
         err.contains("cells_per_vessel") && err.contains("nope"),
         "{err}"
