@@ -21,6 +21,17 @@ from oxyline.cli import main
 EXAMPLE = Path(oxyline.__file__).parent / "examples" / "bifurcation.yaml"
 
 
+def assert_valid_image(path: Path) -> None:
+    """A non-trivial PNG (signature) or SVG (parsable, with content)."""
+    data = path.read_bytes()
+    assert len(data) > 5000, path
+    if path.suffix == ".png":
+        assert data[:8] == b"\x89PNG\r\n\x1a\n", path
+    else:
+        root = ET.fromstring(data)
+        assert root.tag.endswith("svg") and len(list(root.iter())) > 50, path
+
+
 def test_run_end_to_end_writes_netcdf_summary_and_figures(tmp_path: Path) -> None:
     xr = pytest.importorskip("xarray")
     pytest.importorskip("matplotlib")
@@ -42,13 +53,7 @@ def test_run_end_to_end_writes_netcdf_summary_and_figures(tmp_path: Path) -> Non
     assert figs == ["network_map.png", "network_map.svg", "profile.png", "profile.svg",
                     "waveforms.png", "waveforms.svg"]
     for f in figs:  # valid, non-trivial images (save_figures output)
-        data = (tmp_path / "figs" / f).read_bytes()
-        assert len(data) > 5000
-        if f.endswith(".png"):
-            assert data[:8] == b"\x89PNG\r\n\x1a\n"
-        else:
-            root = ET.fromstring(data)
-            assert root.tag.endswith("svg") and len(list(root.iter())) > 50
+        assert_valid_image(tmp_path / "figs" / f)
 
 
 def test_run_zarr_and_csv_outputs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -4,12 +4,12 @@ files (``run -o out.zarr --plot``, ``plot RESULT``)."""
 
 from __future__ import annotations
 
-import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from test_cli import assert_valid_image
 
 import oxyline
 from oxyline import examples
@@ -164,13 +164,7 @@ def _check_figures(outdir: Path, names: list[str]) -> None:
     files = sorted(p.name for p in outdir.iterdir())
     assert files == sorted(f"{n}.{ext}" for n in names for ext in ("png", "svg"))
     for f in files:
-        data = (outdir / f).read_bytes()
-        assert len(data) > 5000
-        if f.endswith(".png"):
-            assert data[:8] == b"\x89PNG\r\n\x1a\n"
-        else:
-            root = ET.fromstring(data)
-            assert root.tag.endswith("svg") and len(list(root.iter())) > 50
+        assert_valid_image(outdir / f)
 
 
 FIGURES = ["network_map", "profile", "waveforms"]

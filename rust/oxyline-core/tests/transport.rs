@@ -311,6 +311,13 @@ fn abdominal(wall: &str, cin: &str) -> Built {
     ))
 }
 
+/// Run `b` to the end (flow and transport), which must succeed.
+fn run(b: &mut Built, s: &RunSettings) -> oxyline_core::Outcome {
+    let out = simulate_with_transport(&b.dae, Some(&mut b.transport), s, &mut |_, _| true).unwrap();
+    assert!(out.error.is_none(), "{:?}", out.error);
+    out
+}
+
 fn balance_residual(out: &oxyline_core::Outcome) -> (f64, f64) {
     let t = out.transport.as_ref().unwrap();
     let cols = t.columns_per_species;
@@ -336,14 +343,7 @@ fn e2_e3_compliant_monolithic_rk4_balance_and_free_stream() {
                 5.0 * alpha
             ),
         );
-        let out = simulate_with_transport(
-            &b.dae,
-            Some(&mut b.transport),
-            &settings(method, 1e-4, 2, vec![]),
-            &mut |_, _| true,
-        )
-        .unwrap();
-        assert!(out.error.is_none());
+        let out = run(&mut b, &settings(method, 1e-4, 2, vec![]));
         let (res, i_in) = balance_residual(&out);
         assert!(
             res.abs() <= 1e-12 * i_in,
@@ -747,14 +747,7 @@ fn refined_network_balance_is_exact_and_free_stream_is_preserved() {
         // inverted-L: p 4 nodes × 3, the junction node (holding d1's and d2's first segments)
         // takes the finer m = 3, then d1 2 × 3 and d2 2 × 2
         assert_eq!(b.transport.n_cells(), 12 + 3 + 6 + 4);
-        let out = simulate_with_transport(
-            &b.dae,
-            Some(&mut b.transport),
-            &settings(method, 1e-4, 2, vec![]),
-            &mut |_, _| true,
-        )
-        .unwrap();
-        assert!(out.error.is_none());
+        let out = run(&mut b, &settings(method, 1e-4, 2, vec![]));
         let (res, i_in) = balance_residual(&out);
         assert!(
             res.abs() <= TOL * i_in,
