@@ -1,8 +1,8 @@
 """Regenerate ``python/oxyline/models_data/*.yaml`` from the openBF model library in
-``../shared/networks/openbf`` (Apache-2.0) with :func:`oxyline.io.openbf.to_native_dict`, and
-``whole-body-140`` from circulatory_autogen's FinalModel in ``../shared/networks/circulatory_autogen``
+``tests/data/openbf`` (Apache-2.0) with :func:`oxyline.io.openbf.to_native_dict`, and
+``whole-body-140`` from circulatory_autogen's FinalModel in ``tests/data/circulatory_autogen``
 (Apache-2.0) with :func:`oxyline.io.circulatory_autogen.to_native_dict` (inflow: the Mynard
-template of ``../shared/networks/pwdb``, MIT; terminal resistances calibrated to the source's
+template of ``tests/data/pwdb``, MIT; terminal resistances calibrated to the source's
 observed mean aortic pressure, wall viscosity kept: :data:`WHOLE_BODY_OPTIONS`).
 
     python benches/make_models_data.py
@@ -20,10 +20,11 @@ from oxyline.io import circulatory_autogen
 from oxyline.io.openbf import to_native_dict
 
 REPO = Path(__file__).resolve().parents[1]
-OPENBF = REPO.parent / "shared" / "networks" / "openbf"
+DATA = REPO / "tests" / "data"  # the source files, with their licences (tests/data/README.md)
+OPENBF = DATA / "openbf"
 OUT = REPO / "python" / "oxyline" / "models_data"
-CA = REPO.parent / "shared" / "networks" / "circulatory_autogen"
-PWDB = REPO.parent / "shared" / "networks" / "pwdb"
+CA = DATA / "circulatory_autogen"
+PWDB = DATA / "pwdb"
 
 SOURCES = {
     "cca": ("models/boileau2015/cca/cca.yaml", "Boileau et al. 2015, common carotid artery"),

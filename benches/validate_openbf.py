@@ -1,4 +1,4 @@
-"""Validate oxyline against openBF's 1-D results (``../shared/networks/openbf``).
+"""Validate oxyline against openBF's 1-D results (``tests/data/openbf``).
 
 For each openBF model with a converted reference (``test_reference_csv/``), import the openBF
 file with :func:`oxyline.io.openbf.read_openbf` in openBF-compatible mode, run oxyline
@@ -23,7 +23,7 @@ import oxyline
 from oxyline.io.openbf import read_openbf
 
 REPO = Path(__file__).resolve().parents[1]
-OPENBF = REPO.parent / "shared" / "networks" / "openbf"
+OPENBF = REPO / "tests" / "data" / "openbf"  # openBF models + reference CSVs (Apache-2.0)
 MODELS = {
     "cca": "models/boileau2015/cca/cca.yaml",
     "ibif": "models/boileau2015/ibif/ibif.yaml",
@@ -41,7 +41,10 @@ def reference(model: str, field: str, root: Path = OPENBF) -> tuple[np.ndarray, 
     """openBF reference: times [s] and, per vessel label, a (time, 5) array at ``POSITIONS``."""
     import pandas as pd
 
-    df = pd.read_csv(root / "test_reference_csv" / f"ref_{model}_{field}.csv", comment="#")
+    path = root / "test_reference_csv" / f"ref_{model}_{field}.csv"
+    if not path.exists():  # tests/data stores them gzipped
+        path = path.with_name(path.name + ".gz")
+    df = pd.read_csv(path, comment="#")
     t = df["t_s"].to_numpy()
     labels = list(dict.fromkeys(c.split("@")[0] for c in df.columns[1:]))
     out = {lab: np.column_stack([df[f"{lab}@x={x:g}"].to_numpy() for x in POSITIONS])

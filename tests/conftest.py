@@ -1,7 +1,12 @@
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
+import subprocess
+from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 import pytest
 from hypothesis import settings
@@ -13,14 +18,104 @@ settings.register_profile("explore", derandomize=False, print_blob=True)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 REPO = Path(__file__).resolve().parents[1]
+# Peer reference data shipped with the tests (provenance, licences, citations:
+# tests/data/README.md). The suite needs nothing outside the repository except for the few
+# tests named there, which read licence-restricted files from ../shared and skip without it.
+DATA = REPO / "tests" / "data"
 SHARED = REPO.parent / "shared"
 
 
-@pytest.fixture(scope="session")
-def shared() -> Path:
-    if not SHARED.is_dir():
-        pytest.skip("../shared (reference material) is not present")
-    return SHARED
+def data_path(*parts: str) -> Path:
+    """A file or folder of ``tests/data`` (e.g. ``data_path("openbf", "models")``). Large
+    files are stored gzipped: ``name`` resolves to ``name.gz`` when only that exists, which
+    pandas and numpy readers open transparently (:func:`read_data_text` for the rest)."""
+    path = DATA.joinpath(*parts)
+    packed = path.with_name(path.name + ".gz")
+    if not path.exists() and packed.exists():
+        return packed
+    return path
+
+
+def read_data_text(*parts: str) -> str:
+    """The text of a ``tests/data`` file, gunzipped if it is stored compressed."""
+    path = data_path(*parts)
+    if path.suffix == ".gz":
+        import gzip
+
+        return gzip.decompress(path.read_bytes()).decode()
+    return path.read_text()
+
+
+def shared_path(relative: str, why: str) -> Path:
+    """A file of ``../shared`` that its licence keeps out of the repository; skips the calling
+    test, saying what is missing and why, when ``../shared`` is not beside the repository."""
+    path = SHARED / relative
+    if not path.exists():
+        pytest.skip(f"needs ../shared/{relative} ({why}); not shipped in tests/data because of "
+                    f"its licence")
+    return path
+
+
+def model_differences(actual: Any, expected: Any, rel: float, where: str = "model",
+                      ) -> list[str]:
+    """Where two nested model dicts differ: the same keys, list lengths, strings and integers,
+    and every float within ``rel`` (relative; absolute where the expected value is 0). For models
+    that a calibration or a linear solve produced: those round differently on another CPU or
+    BLAS build, so bit-identity would test the machine, not the code."""
+    if isinstance(expected, dict) and isinstance(actual, dict):
+        if actual.keys() != expected.keys():
+            return [f"{where}: keys {sorted(set(actual) ^ set(expected))} differ"]
+        return [d for k in expected for d in model_differences(actual[k], expected[k], rel,
+                                                               f"{where}.{k}")]
+    if isinstance(expected, list) and isinstance(actual, list):
+        if len(actual) != len(expected):
+            return [f"{where}: {len(actual)} items, expected {len(expected)}"]
+        return [d for i, (a, e) in enumerate(zip(actual, expected))
+                for d in model_differences(a, e, rel, f"{where}[{i}]")]
+    if isinstance(expected, float) and isinstance(actual, (float, int)):
+        tol = rel * abs(expected) if expected else rel
+        return [] if abs(actual - expected) <= tol else [(f"{where}: {actual!r}, expected "
+                                                         f"{expected!r} (rel {rel:g})")]
+    return [] if actual == expected else [f"{where}: {actual!r}, expected {expected!r}"]
+
+
+# ---- child processes ------------------------------------------------------------------------
+# A child inherits ignored signals: started from a shell or CI runner that ignores SIGINT
+# (background job, nohup), a Python child would never see Ctrl-C. Every test that starts a
+# process goes through these helpers, which restore the default SIGINT disposition in the child
+# (Python then installs its KeyboardInterrupt handler) and kill and reap it whatever happens.
+
+def _default_sigint() -> None:  # runs in the child between fork and exec
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+@contextlib.contextmanager
+def child_process(args: Sequence[str], **kwargs: Any) -> Iterator[subprocess.Popen[Any]]:
+    """``subprocess.Popen(args, **kwargs)`` with SIGINT at its default in the child; the child is
+    killed (if still running) and reaped when the block exits, also on failure or timeout."""
+    if os.name == "posix":
+        kwargs.setdefault("preexec_fn", _default_sigint)
+    proc = subprocess.Popen(args, **kwargs)
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+        for stream in (proc.stdin, proc.stdout, proc.stderr):
+            if stream is not None:
+                stream.close()
+
+
+def run_child(args: Sequence[str], *, timeout: float = 300, **kwargs: Any,
+              ) -> subprocess.CompletedProcess[str]:
+    """Run a child to completion (text output captured, like ``subprocess.run(...,
+    capture_output=True, text=True)``); a child that outlives ``timeout`` is killed and the
+    test fails with ``subprocess.TimeoutExpired``."""
+    with child_process(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                       **kwargs) as proc:
+        out, err = proc.communicate(timeout=timeout)
+    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

@@ -7,13 +7,13 @@ from __future__ import annotations
 import json
 import math
 import os
-import subprocess
 import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import data_path, run_child
 
 import oxyline
 from oxyline.cli import main
@@ -36,10 +36,10 @@ def test_run_end_to_end_writes_netcdf_summary_and_figures(tmp_path: Path) -> Non
     xr = pytest.importorskip("xarray")
     pytest.importorskip("matplotlib")
     env = {**os.environ, "MPLBACKEND": "Agg"}
-    out = subprocess.run(
+    out = run_child(
         [sys.executable, "-m", "oxyline.cli", "run", "bifurcation", "--cycles", "2", "-o",
          "out.nc", "--summary", "summary.csv", "--plot", "figs"],
-        cwd=tmp_path, capture_output=True, text=True, env=env, timeout=300, check=False)
+        cwd=tmp_path, env=env, timeout=300)
     assert out.returncode == 0, out.stderr
     assert "results written to out.nc" in out.stdout and "6 figures written to figs" in out.stdout
     with xr.open_dataset(tmp_path / "out.nc", engine="h5netcdf") as ds:
@@ -100,9 +100,9 @@ def test_convert_between_all_formats(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert len(oxyline.load_model(tmp_path / "sv.yaml").vessel_names) == 33
 
 
-def test_convert_openbf_input(shared: Path, tmp_path: Path) -> None:
+def test_convert_openbf_input(tmp_path: Path) -> None:
     pytest.importorskip("oxyline.io.openbf")
-    src = shared / "networks/openbf/models/boileau2015/ibif/ibif.yaml"
+    src = data_path("openbf", "models/boileau2015/ibif/ibif.yaml")
     assert main(["convert", str(src), str(tmp_path / "ibif.yaml")]) == 0
     m = oxyline.load_model(tmp_path / "ibif.yaml")
     assert len(m.vessel_names) == 3 and m.period == pytest.approx(1.1)
@@ -110,10 +110,10 @@ def test_convert_openbf_input(shared: Path, tmp_path: Path) -> None:
 
 
 def test_openbf_without_the_importer_is_a_clear_error(
-        shared: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.setitem(sys.modules, "oxyline.io.openbf", None)  # import fails
-    src = shared / "networks/openbf/models/boileau2015/ibif/ibif.yaml"
+    src = data_path("openbf", "models/boileau2015/ibif/ibif.yaml")
     assert main(["convert", str(src), str(tmp_path / "x.yaml")]) == 2
     assert "openBF importer" in capsys.readouterr().err
 

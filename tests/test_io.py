@@ -1,5 +1,5 @@
 """oxyline.io: native/table/graph round trips, svZeroDSolver export against the analytic
-Poiseuille split and svZeroDSolver itself, importer dispatch on the shared files, result files."""
+Poiseuille split and svZeroDSolver itself, importer dispatch on the peer files, result files."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import data_path
 
 import oxyline
 import oxyline.io as oio
@@ -314,13 +315,13 @@ def test_svzerod_export_is_the_same_circuit(arrangement: str) -> None:
 # ---------------------------------------------------------------------------------- dispatch
 
 
-def test_read_model_dispatches_on_the_shared_files(shared: Path, tmp_path: Path) -> None:
-    ibif = shared / "networks/openbf/models/boileau2015/ibif/ibif.yaml"
+def test_read_model_dispatches_on_the_peer_files(tmp_path: Path) -> None:
+    ibif = data_path("openbf", "models/boileau2015/ibif/ibif.yaml")
     assert oio.detect_format(ibif) == "openbf"
     pytest.importorskip("oxyline.io.openbf")
     m = oio.read_model(ibif)
     assert len(m.vessel_names) == 3 and m.summary()["outlets"] == 2
-    case = shared / "peer-cases/svzerod/cases/steadyFlow_bifurcationR_R1.json"
+    case = data_path("svzerod", "cases/steadyFlow_bifurcationR_R1.json")
     assert oio.detect_format(case) == "svzerod"
     assert len(oio.read_model(case).vessel_names) == 3
     oio.write_model(m, tmp_path / "ibif.csv")

@@ -13,7 +13,6 @@ from __future__ import annotations
 import csv
 import json
 import math
-import subprocess
 import sys
 from pathlib import Path
 from typing import Any
@@ -21,6 +20,7 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
+from conftest import data_path, model_differences, run_child
 
 import oxyline
 from oxyline.io.circulatory_autogen import (
@@ -31,14 +31,11 @@ from oxyline.io.circulatory_autogen import (
     to_native_dict,
 )
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "networks"
-RES = SHARED / "circulatory_autogen" / "resources"
+RES = data_path("circulatory_autogen", "resources")
 ARRAY = RES / "FinalModel_vessel_array.csv"
 PARAMS = RES / "FinalModel_parameters.csv"
 OBS = RES / "FinalModel_obs_data.json"
-MYNARD = SHARED / "pwdb" / "Mynard2015_aortic_flow_template.csv"
-pytestmark = pytest.mark.skipif(not ARRAY.is_file() or not MYNARD.is_file(),
-                                reason="../shared/networks/circulatory_autogen or pwdb missing")
+MYNARD = data_path("pwdb", "Mynard2015_aortic_flow_template.csv")
 ARTERIAL = {"arterial", "split_junction", "2in2out_junction"}
 
 
@@ -242,9 +239,13 @@ def test_inflow_is_the_mynard_template_scaled_to_the_observed_cardiac_output(
 
 
 def test_shipped_file_matches_the_importer(builtin: dict[str, Any]) -> None:
-    assert builtin == to_native_dict(ARRAY, PARAMS, obs_data_json=OBS, mynard_template=MYNARD,
-                                     name="whole-body-140", **BUILTIN), \
-        "regenerate with benches/make_models_data.py"
+    fresh = to_native_dict(ARRAY, PARAMS, obs_data_json=OBS, mynard_template=MYNARD,
+                           name="whole-body-140", **BUILTIN)
+    # Not bit-identical: the terminal resistances come out of a calibration (a secant iteration
+    # stopped at |log(P/target)| < 1e-11 on steady network solves), whose rounding differs by
+    # ~6e-13 between CPUs/BLAS builds. 1e-9 is far above that and far below any real change.
+    diff = model_differences(fresh, builtin, rel=1e-9)
+    assert not diff, f"regenerate with benches/make_models_data.py: {diff[:5]}"
     assert "whole-body-140" in oxyline.models.list()
     assert oxyline.models.path("whole-body") == oxyline.models.path("whole-body-140")
 
@@ -489,9 +490,8 @@ def test_regional_flows_are_within_a_factor_two_of_the_source_observations(
 
 
 def test_cli_validate_knows_the_builtin(tmp_path: Path) -> None:
-    out = subprocess.run([sys.executable, "-m", "oxyline.cli", "validate", "whole-body-140"],
-                         capture_output=True, text=True, cwd=tmp_path, timeout=120,
-                         check=False)
+    out = run_child([sys.executable, "-m", "oxyline.cli", "validate", "whole-body-140"],
+                    cwd=tmp_path, timeout=120)
     assert out.returncode == 0, out.stderr
     assert "585" in out.stdout          # 235 source vessels + 242 wall branches + 107 + 1
 

@@ -6,13 +6,13 @@ from __future__ import annotations
 
 import math
 import os
-import subprocess
 import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from conftest import run_child
 
 import oxyline
 from oxyline import examples
@@ -150,11 +150,10 @@ def test_summary_of_a_store_equals_the_results(tmp_path: Path) -> None:
 
 
 def test_cli_streams_zarr_end_to_end(tmp_path: Path) -> None:
-    out = subprocess.run(
+    out = run_child(
         [sys.executable, "-m", "oxyline.cli", "run", "paper-bifurcated", "--cycles", "2", "-o",
          "out.zarr", "--summary", "s.csv"],
-        cwd=tmp_path, capture_output=True, text=True, env=dict(os.environ), timeout=300,
-        check=False)
+        cwd=tmp_path, env=dict(os.environ), timeout=300)
     assert out.returncode == 0, out.stderr
     assert "results written to out.zarr" in out.stdout and "ICA" in out.stdout
     res = oxyline.simulate("paper-bifurcated", cycles=2)

@@ -7,7 +7,6 @@ from __future__ import annotations
 import copy
 import math
 import re
-import subprocess
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -15,6 +14,7 @@ from typing import Any
 
 import pytest
 import yaml
+from conftest import run_child
 
 import oxyline
 from oxyline import cli
@@ -249,8 +249,7 @@ def test_cli_validate_bad_model_exits_2_with_message(bad_yaml: Path,
 
 
 def test_cli_validate_bad_model_subprocess(bad_yaml: Path) -> None:
-    p = subprocess.run([sys.executable, "-m", "oxyline.cli", "validate", str(bad_yaml)],
-                       capture_output=True, text=True, timeout=120, check=False)
+    p = run_child([sys.executable, "-m", "oxyline.cli", "validate", str(bad_yaml)], timeout=120)
     assert p.returncode == 2
     assert "left" in p.stderr and "-0.001" in p.stderr
     assert "Traceback" not in p.stderr

@@ -1,4 +1,4 @@
-"""oxyline vs openBF's own 1-D results (``../shared/networks/openbf/test_reference_csv``).
+"""oxyline vs openBF's own 1-D results (``tests/data/openbf/test_reference_csv``).
 
 The openBF files are imported in openBF-compatible mode (openBF v2's taper and WK2 conventions,
 the ADAN56 inflow exactly as openBF ran it, see ``docs/validation.md``), run with inverted-L
@@ -23,13 +23,14 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "benches"))
 import validate_openbf as V
+from conftest import data_path
 
-pytestmark = pytest.mark.skipif(not V.OPENBF.is_dir(), reason="../shared/networks/openbf missing")
+OPENBF = data_path("openbf")  # the openBF models and reference CSVs, shipped with the tests
 
 
 @functools.cache
 def _compare(model: str, same_cycle: bool = False) -> list[dict[str, Any]]:
-    return V.compare(model, same_cycle=same_cycle)["rows"]
+    return V.compare(model, root=OPENBF, same_cycle=same_cycle)["rows"]
 
 
 def _worst(rows: list[dict[str, Any]], key: str, tol: float) -> list[str]:

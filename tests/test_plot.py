@@ -4,7 +4,6 @@ overlapping text, profile values equal to the result's."""
 from __future__ import annotations
 
 import os
-import subprocess
 import sys
 import xml.etree.ElementTree as ET
 from itertools import combinations
@@ -12,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import run_child
 
 import oxyline
 
@@ -182,7 +182,8 @@ def test_po2_is_plotted_when_present(result: oxyline.Result) -> None:
 def test_import_oxyline_does_not_import_matplotlib() -> None:
     code = ("import sys, oxyline, oxyline.io; "
             "print('matplotlib' in sys.modules, 'oxyline.plot' in sys.modules)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    out = run_child([sys.executable, "-c", code], timeout=120)
+    assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["False", "False"]
 
 

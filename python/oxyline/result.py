@@ -340,9 +340,11 @@ def long_table_vessel_major(vessels: list[str], time: np.ndarray, values: np.nda
     nt, nv = len(time), len(vessels)
     if values.shape != (nv * nt, 4) or not values.flags.c_contiguous:
         raise ValueError(f"values must be C-contiguous with shape {(nv * nt, 4)}")
-    names = pd.Series(np.array(vessels, dtype=object)).array  # str dtype under pandas >= 3
+    # pandas' default dtype for strings, as svZeroDSolver's own frame: str under pandas >= 3
+    # (a StringArray, or an ArrowStringArray with pyarrow), object under pandas 2
+    names = pd.Series(np.array(vessels, dtype=object)).array
     name_col = names.take(np.repeat(np.arange(nv), nt))
-    if isinstance(name_col, pd.arrays.NumpyExtensionArray):  # object dtype (pandas < 3)
+    if not isinstance(name_col.dtype, pd.StringDtype):  # object: a plain numpy block
         name_col = name_col.to_numpy()
     time_col = np.tile(np.asarray(time, dtype=np.float64), nv)
     columns = pd.Index(LONG_COLUMNS)

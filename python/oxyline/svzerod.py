@@ -688,7 +688,7 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
     if s.output_mean_only:
         mean = values.mean(axis=1)
         return pd.DataFrame({
-            "name": np.array(names, dtype=object),
+            "name": names,  # pandas' default string dtype (str under pandas >= 3), as svzerod
             "time": np.full(nv, np.nan),
             "flow_in": mean[:, 2],
             "flow_out": mean[:, 3],
