@@ -57,7 +57,8 @@ def _read_frame(source: Any, what: str, string_columns: tuple[str, ...]) -> tupl
     p = check_path(source)
     try:
         df = pd.read_csv(p, sep=_sep(p), comment="#", skipinitialspace=True,
-                         dtype={c: str for c in string_columns}, keep_default_na=True)
+                         dtype={c: str for c in string_columns}, keep_default_na=True,
+                         float_precision="round_trip")  # exact: pandas 2's default parser is not
     except Exception as exc:
         raise ModelError(f"{p}: cannot read the {what} table: {exc}") from exc
     df.columns = [str(c).strip() for c in df.columns]
