@@ -28,22 +28,12 @@ SHARED = REPO.parent / "shared"
 def data_path(*parts: str) -> Path:
     """A file or folder of ``tests/data`` (e.g. ``data_path("openbf", "models")``). Large
     files are stored gzipped: ``name`` resolves to ``name.gz`` when only that exists, which
-    pandas and numpy readers open transparently (:func:`read_data_text` for the rest)."""
+    pandas and numpy readers open transparently."""
     path = DATA.joinpath(*parts)
     packed = path.with_name(path.name + ".gz")
     if not path.exists() and packed.exists():
         return packed
     return path
-
-
-def read_data_text(*parts: str) -> str:
-    """The text of a ``tests/data`` file, gunzipped if it is stored compressed."""
-    path = data_path(*parts)
-    if path.suffix == ".gz":
-        import gzip
-
-        return gzip.decompress(path.read_bytes()).decode()
-    return path.read_text()
 
 
 def shared_path(relative: str, why: str) -> Path:
