@@ -185,7 +185,7 @@ def to_parquet(result: Result | Any, path: PathLike) -> Path:
 # reading a result back: the inverse of Result.to_xarray (and of the files written from it)
 
 #: what every oxyline result holds; anything less is not an oxyline result file
-REQUIRED = ("time", "vessel", "pressure_in", "pressure_out", "flow_in", "flow_out")
+REQUIRED = ("time", "vessel")
 
 
 def _plain(value: Any) -> Any:
@@ -284,7 +284,7 @@ def _result_from_dataset(ds: Any, label: str) -> Result:
     time = need("time").astype(np.float64)
     vessels = [str(v) for v in need("vessel")]
     nt, nv = len(time), len(vessels)
-    seg = "segment_flow" in ds.variables
+    seg = "segment_vessel" in ds.variables
     segment_count: list[int] = []
     positions = np.zeros(0, dtype=np.float64)
     ns = 0
@@ -302,13 +302,16 @@ def _result_from_dataset(ds: Any, label: str) -> Result:
         positions = need("segment_position").astype(np.float64)
         ns = len(seg_vessel)
 
-    # the core's (time, column) layout: 4 columns per vessel, then 3 per segment, interleaved
-    data = np.empty((nt, 4 * nv + 3 * ns), dtype=np.float64)
-    for k, name in enumerate(VESSEL_VARIABLES):
-        data[:, k:4 * nv:4] = need(name, ("time", "vessel"))
-    if seg:
-        for k, name in enumerate(SEGMENT_VARIABLES):
-            data[:, 4 * nv + k::3] = need(name, ("time", "segment"))
+    # the core's (time, column) layout: the vessel variables of each vessel, then the segment
+    # variables of each segment, interleaved; an output selection wrote fewer of them
+    vvars = tuple(v for v in VESSEL_VARIABLES if v in ds.variables)
+    svars = tuple(v for v in SEGMENT_VARIABLES if v in ds.variables) if seg else ()
+    kv, ks = len(vvars), len(svars)
+    data = np.empty((nt, kv * nv + ks * ns), dtype=np.float64)
+    for k, name in enumerate(vvars):
+        data[:, k:kv * nv:kv] = need(name, ("time", "vessel"))
+    for k, name in enumerate(svars):
+        data[:, kv * nv + k::ks] = need(name, ("time", "segment"))
 
     attrs = {k: _plain(v) for k, v in ds.attrs.items()}
     species = _species_from_dataset(ds, attrs, need, nt, nv, ns, label)
@@ -328,7 +331,8 @@ def _result_from_dataset(ds: Any, label: str) -> Result:
     return Result(model_name=str(attrs.get("model", Path(label).stem)), vessels=vessels,
                   time=time, data=data, segment_count=segment_count, segment_position=positions,
                   settings=settings, complete=bool(attrs.get("complete", 1)), species=species,
-                  oxygen=None if oxygen is None else str(oxygen))
+                  oxygen=None if oxygen is None else str(oxygen), vessel_variables=vvars,
+                  segment_variables=svars)
 
 
 def _species_from_dataset(ds: Any, attrs: dict[str, Any], need: Any, nt: int, nv: int,
