@@ -26,7 +26,7 @@ def _lumped3() -> dict[str, Any]:
                      "lumped": {"resistance": 3e8, "inductance": 3e6, "capacitance": 3e-10}}],
         "boundary_conditions": {
             "in": {"type": "flow", "time": [0.0, 0.3, 1.0], "flow": [5e-6, 1.5e-5, 5e-6]},
-            "out": {"type": "rcr", "proximal_resistance": 1e8, "capacitance": 1e-9,
+            "out": {"type": "rcr", "proximal_resistance": 1e8, "capacitance": 2e-10,
                     "distal_resistance": 1e9}},
     }
 
@@ -101,7 +101,9 @@ def _one_vessel(stenosis: float) -> dict[str, Any]:
              "bc_values": {"Rp": 100.0, "C": 1e-3, "Rd": 1000.0, "Pd": 0.0}}],
         "vessels": [{"vessel_id": 0, "vessel_name": "branch0_seg0",
                      "zero_d_element_type": "BloodVessel",
-                     "zero_d_element_values": {"R_poiseuille": 100.0, "C": 1e-4, "L": 1.0,
+                     # no C in the stenotic vessel: with one, svzerod's stenosis linearisation
+                     # carries a first-order error in flow_out (README, CStenosis cases)
+                     "zero_d_element_values": {"R_poiseuille": 100.0, "L": 1.0,
                                                "stenosis_coefficient": stenosis},
                      "boundary_conditions": {"inlet": "INFLOW", "outlet": "OUT"}}],
     }
@@ -131,6 +133,7 @@ def test_to_svzerod_writes_every_segment_of_a_lumped_vessel() -> None:
     m = oxyline.load_model(_lumped3())
     d = oio.to_svzerod(m, units="SI", points_per_cycle=101, cycles=4)
     blocks = [v["zero_d_element_values"] for v in d["vessels"]]
+    assert [v["vessel_name"] for v in d["vessels"]] == [f"A_seg{k}" for k in range(4)]
     # inverted-L chain of 3 segments: C/3 | R/3 L/3 | C/3 | ... -> 4 BloodVessels
     assert len(blocks) == 4 == m.summary()["segments"] + 1
     assert sum(b["R_poiseuille"] for b in blocks) == pytest.approx(3e8, rel=1e-15)
@@ -144,16 +147,20 @@ def test_to_svzerod_round_trip_run_matches_the_core_circuit() -> None:
     generalized-alpha step, svZeroDSolver's steady start in both)."""
     svzerod = pytest.importorskip("svzerod")
     m = oxyline.load_model(_lumped3())
-    d = oio.to_svzerod(m, units="SI", points_per_cycle=101, cycles=4)
+    # 12 cycles: the two steady starts differ (svzerod's mean of a table is not the exact
+    # one), and that difference must decay to round-off
+    d = oio.to_svzerod(m, units="SI", points_per_cycle=101, cycles=12)
     ref = svzerod.simulate(d)
-    res = oxyline.simulate(m, cycles=4, method="generalized-alpha", dt=0.01, output_every=0.01,
+    res = oxyline.simulate(m, cycles=12, method="generalized-alpha", dt=0.01, output_every=0.01,
                            start="svzerod-steady")
-    first, last = ref[ref.name == "A_seg0"], ref[ref.name == "A_seg3"]
-    for got, want in ((res.pressure_in[:, 0], first.pressure_in),
-                      (res.flow_in[:, 0], first.flow_in),
-                      (res.pressure_out[:, 0], last.pressure_out),
-                      (res.flow_out[:, 0], last.flow_out)):
+    blocks = {n: ref[ref.name == f"A_seg{n}"] for n in range(4)}
+    # the core's vessel ends: inlet node pressure, first and last segment branch flows, outlet
+    # node pressure (README mapping of the export's blocks)
+    for got, want in ((res.pressure_in[:, 0], blocks[0].pressure_in),
+                      (res.flow_in[:, 0], blocks[0].flow_out),
+                      (res.flow_out[:, 0], blocks[2].flow_out),
+                      (res.pressure_out[:, 0], blocks[3].pressure_out)):
         want = want.to_numpy()
-        # two solvers, same discrete equations: agreement to their Newton tolerance; a
-        # one-segment export differs by ~1e-2 of the range here
+        # two solvers, same discrete equations: agreement to ~1e-9 of the range (measured);
+        # the one-segment export of the bug differs by 4e-2 to 1.3e-1 of the range here
         assert np.max(np.abs(got - want)) <= 1e-7 * np.ptp(want)

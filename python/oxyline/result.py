@@ -132,6 +132,8 @@ class Result:
         # species variables: {name}_concentration_in, {name}_flux_out, wall_{name}_flux,
         # segment_{name}_concentration, ..., {name}_mass_balance; oxygen adds po2_in/po2_out,
         # segment_po2 (mmHg) and tl_resistance/tl_inductance.
+        if key in VESSEL_VARIABLES or key in SEGMENT_VARIABLES:  # a property left out
+            raise _not_selected(key)
         species = self.__dict__.get("species") or {}
         if not species:
             raise AttributeError(key)
@@ -310,6 +312,10 @@ class Result:
                     data_vars[name][2]["po2_per_concentration"] = float(scale)
         attrs: dict[str, Any] = {"model": self.model_name, "oxyline_version": __version__,
                                  "complete": int(self.complete)}
+        if (tuple(self.vessel_variables), tuple(self.segment_variables)) != (
+                VESSEL_VARIABLES, SEGMENT_VARIABLES):
+            # an output selection: what oxyline.open_result must find (all of them otherwise)
+            attrs["output_variables"] = [*self.vessel_variables, *self.segment_variables]
         if self.species:
             # species order (a Zarr store lists its variables alphabetically) and which one is
             # oxygen: what oxyline.open_result needs to rebuild ``species`` and ``oxygen``

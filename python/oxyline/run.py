@@ -10,7 +10,7 @@ from typing import Any
 from oxyline.errors import ModelError, SimulationInterrupted
 from oxyline.loader import load_model
 from oxyline.model import METHODS, Model, output_names, output_vessels
-from oxyline.result import Result, SpeciesResult
+from oxyline.result import SEGMENT_VARIABLES, SPECIES_SEGMENT, Result, SpeciesResult
 
 ProgressCallback = Callable[[float, float], None]
 
@@ -85,8 +85,10 @@ def _progress_bar(enabled: bool | ProgressCallback | None) -> tuple[Any, Any]:
     return update, bar
 
 
-def _species_results(model: Model, raw: Mapping[str, Any],
-                     layout: Mapping[str, Any]) -> dict[str, SpeciesResult]:
+def _species_results(model: Model, raw: Mapping[str, Any], layout: Mapping[str, Any],
+                     empty_segments: bool) -> dict[str, SpeciesResult]:
+    """Species results of output rows; ``empty_segments``: no segment output at all, every
+    variable (the segment arrays exist and are empty)."""
     tr = raw.get("transport")
     lay = layout.get("transport")
     if tr is None or lay is None:
@@ -95,6 +97,9 @@ def _species_results(model: Model, raw: Mapping[str, Any],
     ns = int(sum(lay["segment_count"]))
     kv, ks = len(lay["vessel_variables"]), len(lay["segment_variables"])
     cols = lay["columns_per_species"]
+    seg_vars = tuple(n.removeprefix("segment_") for n in lay["segment_variables"])
+    if empty_segments:
+        seg_vars, ks = SPECIES_SEGMENT, len(SPECIES_SEGMENT)
     data = tr["data"]
     nt = data.shape[0]
     out: dict[str, SpeciesResult] = {}
@@ -110,7 +115,7 @@ def _species_results(model: Model, raw: Mapping[str, Any],
             initial_stored=float(tr["initial_stored"][k]),
             po2_per_concentration=(1.0 / model.transport["solubility"]) if name == ox else None,
             vessel_variables=tuple(lay["vessel_variables"]),
-            segment_variables=tuple(n.removeprefix("segment_") for n in lay["segment_variables"]),
+            segment_variables=seg_vars,
         )
     return out
 
@@ -121,12 +126,17 @@ def _result(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
     layout = model.network.output_layout(**_selection(s))
     if not s["transport"]:
         layout.pop("transport", None)
+    empty_segments = not s["segments"] and s["variables"] is None
+    if empty_segments:
+        # no segments, every variable: the segment arrays exist and are empty, as they were
+        # before output selection
+        layout["segment_variables"] = list(SEGMENT_VARIABLES)
     return Result(
         model_name=model.name, vessels=list(layout["vessels"]), time=raw["times"],
         data=raw["data"], segment_count=list(layout["segment_count"]),
         segment_position=layout["segment_position"],
         settings=settings, complete=complete,
-        species=_species_results(model, raw, layout), oxygen=model.transport.get("oxygen"),
+        species=_species_results(model, raw, layout, empty_segments), oxygen=model.transport.get("oxygen"),
         vessel_variables=tuple(layout["vessel_variables"]),
         segment_variables=tuple(layout["segment_variables"]),
     )

@@ -304,13 +304,17 @@ def _result_from_dataset(ds: Any, label: str) -> Result:
 
     # the core's (time, column) layout: the vessel variables of each vessel, then the segment
     # variables of each segment, interleaved; an output selection wrote fewer of them
-    vvars = tuple(v for v in VESSEL_VARIABLES if v in ds.variables)
-    svars = tuple(v for v in SEGMENT_VARIABLES if v in ds.variables) if seg else ()
+    # the flow variables written: all of them, unless the file records an output selection
+    selected = _names(ds.attrs["output_variables"]) if "output_variables" in ds.attrs else None
+    vvars = tuple(v for v in VESSEL_VARIABLES if selected is None or v in selected)
+    # a file without segments: empty segment arrays of every variable (as it was written)
+    svars = tuple(v for v in SEGMENT_VARIABLES if selected is None or v in selected) \
+        if seg else SEGMENT_VARIABLES
     kv, ks = len(vvars), len(svars)
     data = np.empty((nt, kv * nv + ks * ns), dtype=np.float64)
     for k, name in enumerate(vvars):
         data[:, k:kv * nv:kv] = need(name, ("time", "vessel"))
-    for k, name in enumerate(svars):
+    for k, name in enumerate(svars if seg else ()):
         data[:, kv * nv + k::ks] = need(name, ("time", "segment"))
 
     attrs = {k: _plain(v) for k, v in ds.attrs.items()}
@@ -340,35 +344,43 @@ def _species_from_dataset(ds: Any, attrs: dict[str, Any], need: Any, nt: int, nv
     """The :class:`~oxyline.result.SpeciesResult` of every species in ``ds``, in run order."""
     import numpy as np
 
-    from oxyline.result import BALANCE, SpeciesResult
+    from oxyline.result import BALANCE, SPECIES_SEGMENT, SPECIES_VESSEL, SpeciesResult
 
     suffix = "_concentration_in"
     if "species" in attrs:
         names = _names(attrs["species"])
     else:  # files written before the attribute existed: the order the variables are listed in
         names = [str(n)[:-len(suffix)] for n in ds.data_vars if str(n).endswith(suffix)]
-    has_seg = ns > 0 and all(f"segment_{n}_concentration" in ds.variables for n in names)
-    tl: list[Any] = []
-    if has_seg and names:
-        # the TL elements depend on the flow only: the file holds them once for all species
-        tl = [need("tl_resistance", ("time", "segment")), need("tl_inductance", ("time", "segment"))]
+
+    def vessel_file(name: str, v: str) -> str:
+        return f"wall_{name}_flux" if v == "wall_flux" else f"{name}_{v}"
+
+    def segment_file(name: str, v: str) -> str:
+        if v in ("tl_resistance", "tl_inductance"):  # flow-only: stored once for all species
+            return v
+        return f"segment_wall_{name}_flux" if v == "wall_flux" else f"segment_{name}_{v}"
+
+    first = names[0] if names else ""
+    # the variables an output selection kept (all of them by default), the same for every
+    # species
+    vvars = tuple(v for v in SPECIES_VESSEL if vessel_file(first, v) in ds.variables)
+    svars = tuple(v for v in SPECIES_SEGMENT if segment_file(first, v) in ds.variables) \
+        if ns > 0 else SPECIES_SEGMENT
     out: dict[str, Any] = {}
     for name in names:
-        vessel = np.empty((nt, nv, 5), dtype=np.float64)
-        for k, v in enumerate((f"{name}_concentration_in", f"{name}_concentration_out",
-                               f"{name}_flux_in", f"{name}_flux_out", f"wall_{name}_flux")):
-            vessel[:, :, k] = need(v, ("time", "vessel"))
-        segment = np.empty((nt, ns if has_seg else 0, 5), dtype=np.float64)
-        if has_seg:
-            for k, v in enumerate((f"segment_{name}_concentration", f"segment_{name}_flux",
-                                   f"segment_wall_{name}_flux")):
-                segment[:, :, k] = need(v, ("time", "segment"))
-            segment[:, :, 3], segment[:, :, 4] = tl
+        vessel = np.empty((nt, nv, len(vvars)), dtype=np.float64)
+        for k, v in enumerate(vvars):
+            vessel[:, :, k] = need(vessel_file(name, v), ("time", "vessel"))
+        has_seg = ns > 0 and segment_file(name, svars[0]) in ds.variables if svars else False
+        segment = np.empty((nt, ns if has_seg else 0, len(svars)), dtype=np.float64)
+        for k, v in enumerate(svars if has_seg else ()):
+            segment[:, :, k] = need(segment_file(name, v), ("time", "segment"))
         balance = np.empty((nt, len(BALANCE)), dtype=np.float64)
         for k, v in enumerate(BALANCE):
             # stored is written as the change since t = 0: with initial_stored = 0 the
             # recomputed mass balance equals the file's bit for bit
             balance[:, k] = need(f"{name}_mass_{v}", ("time",))
         out[name] = SpeciesResult(name=name, vessel_data=vessel, segment_data=segment,
-                                  balance_data=balance, initial_stored=0.0)
+                                  balance_data=balance, initial_stored=0.0,
+                                  vessel_variables=vvars, segment_variables=svars)
     return out

@@ -601,7 +601,8 @@ fn run(
     };
 
     let block = transport.as_deref().map_or(0, |t| t.columns_per_species());
-    let species_select = s.species_columns.as_deref();
+    // the flow-only first pass of a transport run has no species to select
+    let species_select = s.species_columns.as_deref().filter(|_| transport.is_some());
     if let Some(&c) = species_select.and_then(|sel| sel.iter().find(|&&c| c >= block)) {
         return Err(Error::model(
             "simulation output",
