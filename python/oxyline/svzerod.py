@@ -1,6 +1,7 @@
-"""svZeroDSolver drop-in (public path ``oxyline.svzerod``): the importer and runner live in
+"""svZeroDSolver drop-in (public path ``oxyline.svzerod``); the importer and runner live in
 :mod:`oxyline.io.svzerod`, beside the exporter :mod:`oxyline.io.svzerod_export`."""
 
+from oxyline.io import svzerod as _impl
 from oxyline.io.svzerod import (
     RunSettings,
     run_settings,
@@ -8,5 +9,9 @@ from oxyline.io.svzerod import (
     to_model,
     to_oxyline_dict,
 )
+
+# the public module documents itself with the implementation's docstring (its example is run
+# by the tests)
+__doc__ = _impl.__doc__
 
 __all__ = ["RunSettings", "run_settings", "simulate", "to_model", "to_oxyline_dict"]
