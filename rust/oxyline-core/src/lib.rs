@@ -14,19 +14,19 @@ pub mod output;
 pub mod rk4;
 pub mod segment;
 pub mod simulate;
-pub mod spec;
 pub mod sparse;
+pub mod spec;
 pub mod stability;
 pub mod transport;
 pub mod waveform;
 
+pub use assemble::{Assembled, SegmentRow, Summary};
 pub use circuit::{Circuit, Dae, Regime};
 pub use error::{Error, Result};
-pub use assemble::{Assembled, SegmentRow, Summary};
 pub use output::{Probes, Selection};
-pub use spec::NetworkSpec;
 pub use simulate::{
     Chunk, Method, Outcome, OutputSink, RunSettings, Start, TransportOutcome, simulate,
     simulate_to_sink, simulate_with_transport,
 };
+pub use spec::NetworkSpec;
 pub use transport::{Transport, TransportSpec};

@@ -132,7 +132,9 @@ impl Selection {
                     None => {
                         return Err(Error::model(
                             ELEMENT,
-                            format!("unknown vessel '{name}' (not in the model, or `output: false`)"),
+                            format!(
+                                "unknown vessel '{name}' (not in the model, or `output: false`)"
+                            ),
                         ));
                     }
                 }
@@ -206,7 +208,11 @@ impl Selection {
     pub fn flow_columns(&self, probes: &Probes) -> Vec<usize> {
         let mut out = Vec::new();
         for &v in &self.vessels {
-            out.extend(self.vessel_variables.iter().map(|&j| probes.vessel_unknowns[4 * v + j]));
+            out.extend(
+                self.vessel_variables
+                    .iter()
+                    .map(|&j| probes.vessel_unknowns[4 * v + j]),
+            );
         }
         if !self.segment_variables.is_empty() {
             let starts = Probes::starts(&probes.segment_count);

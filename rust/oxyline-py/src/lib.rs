@@ -20,8 +20,7 @@ use std::time::{Duration, Instant};
 
 // the schema names the columns `Transport::observe` writes, one name per column
 const _: () = assert!(oxyline_core::transport::VESSEL_COLUMNS == SPECIES_VESSEL_VARIABLES.len());
-const _: () =
-    assert!(oxyline_core::transport::SEGMENT_COLUMNS == SPECIES_SEGMENT_VARIABLES.len());
+const _: () = assert!(oxyline_core::transport::SEGMENT_COLUMNS == SPECIES_SEGMENT_VARIABLES.len());
 const _: () = assert!(oxyline_core::transport::BALANCE_COLUMNS == BALANCE_VARIABLES.len());
 
 pyo3::create_exception!(
@@ -214,10 +213,7 @@ impl Network {
                 .collect::<Vec<_>>(),
         )?;
         d.set_item("segment_count", sel.segment_count(&p.segment_count, false))?;
-        d.set_item(
-            "segment_position",
-            sel.segment_position(p).into_pyarray(py),
-        )?;
+        d.set_item("segment_position", sel.segment_position(p).into_pyarray(py))?;
         d.set_item(
             "vessel_variables",
             names(&VESSEL_VARIABLES, &sel.vessel_variables),
@@ -258,11 +254,17 @@ impl Network {
         d.set_item("vessel_names", a.circuit.vessel_names.clone())?;
         d.set_item(
             "vessel",
-            t.iter().map(|s| s.vessel).collect::<Vec<_>>().into_pyarray(py),
+            t.iter()
+                .map(|s| s.vessel)
+                .collect::<Vec<_>>()
+                .into_pyarray(py),
         )?;
         d.set_item(
             "index",
-            t.iter().map(|s| s.index).collect::<Vec<_>>().into_pyarray(py),
+            t.iter()
+                .map(|s| s.index)
+                .collect::<Vec<_>>()
+                .into_pyarray(py),
         )?;
         d.set_item("resistance", col(|s| s.resistance))?;
         d.set_item("inductance", col(|s| s.inductance))?;
@@ -300,11 +302,7 @@ impl Network {
         d.set_item("node_pressure", y[..graph_nodes].to_vec().into_pyarray(py))?;
         d.set_item("vessels", p.vessels.clone())?;
         for (j, name) in VESSEL_VARIABLES.iter().enumerate() {
-            let v: Vec<f64> = p
-                .vessel_unknowns
-                .chunks(4)
-                .map(|u| y[u[j]])
-                .collect();
+            let v: Vec<f64> = p.vessel_unknowns.chunks(4).map(|u| y[u[j]]).collect();
             d.set_item(*name, v.into_pyarray(py))?;
         }
         d.set_item("state", y.into_pyarray(py))?;
@@ -671,8 +669,14 @@ mod _core {
         // the column schema (`oxyline_core::output`): Python names no column itself
         m.add("VESSEL_VARIABLES", super::VESSEL_VARIABLES.to_vec())?;
         m.add("SEGMENT_VARIABLES", super::SEGMENT_VARIABLES.to_vec())?;
-        m.add("SPECIES_VESSEL_VARIABLES", super::SPECIES_VESSEL_VARIABLES.to_vec())?;
-        m.add("SPECIES_SEGMENT_VARIABLES", super::SPECIES_SEGMENT_VARIABLES.to_vec())?;
+        m.add(
+            "SPECIES_VESSEL_VARIABLES",
+            super::SPECIES_VESSEL_VARIABLES.to_vec(),
+        )?;
+        m.add(
+            "SPECIES_SEGMENT_VARIABLES",
+            super::SPECIES_SEGMENT_VARIABLES.to_vec(),
+        )?;
         m.add("BALANCE_VARIABLES", super::BALANCE_VARIABLES.to_vec())?;
         m.add(
             "build_profile",
