@@ -164,3 +164,25 @@ def test_to_svzerod_round_trip_run_matches_the_core_circuit() -> None:
         # two solvers, same discrete equations: agreement to ~1e-9 of the range (measured);
         # the one-segment export of the bug differs by 4e-2 to 1.3e-1 of the range here
         assert np.max(np.abs(got - want)) <= 1e-7 * np.ptp(want)
+
+
+def test_model_module_is_a_leaf_and_formats_are_sniffed_once() -> None:
+    """``oxyline.model`` imports no reader (files, built-ins and other formats are
+    ``oxyline.loader``'s job); a mapping's format is decided by one function."""
+    import ast
+    from pathlib import Path
+
+    from oxyline import model
+    from oxyline.io.native import sniff_format
+
+    tree = ast.parse(Path(model.__file__).read_text())
+    imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+    imported |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    assert imported <= {"__future__", "copy", "json", "math", "collections.abc", "dataclasses",
+                        "typing", "oxyline", "oxyline.errors", "oxyline.units"}, imported
+    cfg = _one_vessel(0.0)
+    assert sniff_format(cfg) == "svzerod" and sniff_format(_lumped3()) == "native"
+    assert sniff_format({"network": []}) == "openbf"
+    # load_model dispatches on it: an svZeroDSolver dict becomes its RCL model
+    m = oxyline.load_model(cfg)
+    assert m.canonical["vessels"][0]["arrangement"] == "RCL"
