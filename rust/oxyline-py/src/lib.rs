@@ -3,11 +3,11 @@
 
 use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyUntypedArrayMethods};
 use oxyline_core::genalpha::NewtonControl;
-use oxyline_core::network::parse;
 use oxyline_core::output::{
     BALANCE_VARIABLES, SEGMENT_VARIABLES, SPECIES_SEGMENT_VARIABLES, SPECIES_VESSEL_VARIABLES,
     VESSEL_VARIABLES,
 };
+use oxyline_core::spec::parse;
 use oxyline_core::{
     Assembled, Chunk, Dae, Error, Method, OutputSink, RunSettings, Selection, Start, Transport,
 };
