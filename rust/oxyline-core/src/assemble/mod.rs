@@ -106,3 +106,49 @@ impl NetworkSpec {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::spec::parse;
+
+    const MODEL: &str = r#"{
+        "vessels": [
+            {"name": "g", "from": "in", "to": "j", "segments": 4,
+             "geometry": {"length": 0.1, "radius_in": 0.003, "radius_out": 0.002}},
+            {"name": "l", "from": "j", "to": "out", "segments": 3,
+             "lumped": {"resistance": 3e8, "inductance": 3e6, "capacitance": 3e-10,
+                        "stenosis_coefficient": -3e11}},
+            {"name": "r", "from": "j", "to": "out2", "segments": 5, "arrangement": "RCL",
+             "lumped": {"resistance": 1e8, "capacitance": 1e-10}}],
+        "boundary_conditions": {
+            "in": {"type": "flow", "flow": {"kind": "constant", "value": 1e-6}},
+            "out": {"type": "resistance", "resistance": 1e9},
+            "out2": {"type": "rcr", "proximal_resistance": 1e8, "capacitance": 1e-9,
+                     "distal_resistance": 1e9}}
+    }"#;
+
+    #[test]
+    fn the_segment_table_is_the_circuit() {
+        let a = parse(MODEL).unwrap().assemble().unwrap();
+        let counts: Vec<usize> = (0..3)
+            .map(|v| a.segments.iter().filter(|s| s.vessel == v).count())
+            .collect();
+        // RCL is svZeroDSolver's one BloodVessel whatever `segments` says
+        assert_eq!(counts, vec![4, 3, 1]);
+        assert_eq!(a.summary.segments, 8);
+        // every segment's R and S is on a circuit branch, its C on a node
+        let branch_r: f64 = a.circuit.branches.iter().map(|b| b.resistance).sum();
+        let table_r: f64 = a.segments.iter().map(|s| s.resistance).sum();
+        assert!((branch_r - (table_r + 1e9 + 1e8 + 1e9)).abs() <= 1e-12 * branch_r);
+        let s: f64 = a.circuit.branches.iter().map(|b| b.stenosis).sum();
+        assert!((s - -3e11).abs() <= 1e-12 * 3e11);
+        let node_c: f64 = a.circuit.nodes.iter().map(|n| n.capacitance).sum();
+        let table_c: f64 = a.segments.iter().map(|s| s.compliance).sum();
+        assert!((node_c - table_c - 1e-9).abs() <= 1e-12 * node_c);
+        assert!((a.summary.total_compliance - node_c).abs() <= 1e-12 * node_c);
+        assert_eq!(
+            (a.summary.inlets, a.summary.outlets, a.summary.junctions),
+            (1, 2, 1)
+        );
+    }
+}
