@@ -20,7 +20,8 @@ from oxyline.errors import (
     UnsupportedElement,
 )
 from oxyline.io.results import open_result
-from oxyline.model import Model, load_model
+from oxyline.loader import load_model
+from oxyline.model import Model
 from oxyline.result import Result, VesselResult
 from oxyline.run import simulate, simulate_to_zarr
 

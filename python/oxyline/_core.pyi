@@ -8,6 +8,12 @@ import numpy.typing as npt
 
 __version__: str
 build_profile: str
+# the column schema of the output (oxyline_core::output)
+VESSEL_VARIABLES: list[str]
+SEGMENT_VARIABLES: list[str]
+SPECIES_VESSEL_VARIABLES: list[str]
+SPECIES_SEGMENT_VARIABLES: list[str]
+BALANCE_VARIABLES: list[str]
 
 class ModelError(ValueError): ...
 class UnstableTimeStep(ModelError): ...
@@ -20,6 +26,25 @@ class Network:
     def summary(self) -> dict[str, Any]: ...
     def layout(self) -> dict[str, Any]: ...
     def transport_layout(self) -> dict[str, Any] | None: ...
+    def output_layout(
+        self,
+        *,
+        variables: list[str] | None = None,
+        vessels: list[str] | None = None,
+        segments: bool = True,
+    ) -> dict[str, Any]:
+        """Layout of an output selection: ``vessels``, ``segment_count``, ``segment_position``,
+        ``vessel_variables``, ``segment_variables``, ``n_columns`` and, for transport models,
+        ``transport`` (``species``, its selected variables, ``segment_count``,
+        ``columns_per_species``). Unknown names raise ModelError."""
+    def segment_table(self) -> dict[str, Any]:
+        """Per flow segment (model order): ``vessel`` (index into ``vessel_names``), ``index``,
+        ``resistance``, ``inductance``, ``compliance``, ``stenosis``, ``volume``, ``length``,
+        ``radius_in``, ``radius_out``, ``x0``, ``x1``, ``position`` (numpy arrays, SI)."""
+    def steady_state(self) -> dict[str, Any]:
+        """Exact steady state of the mean boundary conditions: ``state``, graph ``nodes`` and
+        their ``node_pressure``, output ``vessels`` and their ``pressure_in``,
+        ``pressure_out``, ``flow_in``, ``flow_out``."""
     def unknown_names(self) -> list[str]: ...
     def circuit(self) -> dict[str, Any]: ...
     def source_flows(self, t: float) -> list[float]: ...
@@ -50,6 +75,8 @@ class Network:
         chunk_sink: Callable[[dict[str, Any]], None] | None = None,
         chunk_rows: int = 1024,
         keep_current_cycle: bool = True,
+        variables: list[str] | None = None,
+        vessels: list[str] | None = None,
     ) -> dict[str, Any]:
         """Run the network; with ``chunk_sink``, the output rows are handed to it during the
         run in dicts of at most ``chunk_rows`` rows (``times``, ``data`` and, for transport

@@ -1,5 +1,6 @@
-"""Network models: reading YAML/JSON/dicts, checking keys and values, converting units, and
-writing the canonical SI description handed to the Rust core.
+"""Network models: checking keys and values of a native model dict, converting units, and
+writing the canonical SI description handed to the Rust core. A leaf module: reading files,
+built-in names and other formats is :func:`oxyline.loader.load_model`'s job.
 
 The user-facing schema (see README) is::
 
@@ -19,10 +20,8 @@ from __future__ import annotations
 import copy
 import json
 import math
-import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 from oxyline import _core
@@ -47,9 +46,30 @@ BC_KEYS = {
     "rcr": {"type", "proximal_resistance", "capacitance", "distal_resistance", "pressure"},
 }
 SIM_KEYS = {"cycles", "dt", "method", "output", "until_periodic", "max_cycles", "rho_infty", "start"}
-OUTPUT_KEYS = {"cycles", "every", "segments"}
+OUTPUT_KEYS = {"cycles", "every", "segments", "variables", "vessels"}
 METHODS = {"auto", "rk4", "generalized-alpha"}
 ARRANGEMENTS = {"inverted-L", "L", "pi", "RCL"}
+
+
+def output_names(value: Any, key: str) -> list[str] | None:
+    """An output selection list of names (None: everything); a single name is a list of one."""
+    if value is None:
+        return None
+    if isinstance(value, str):
+        return [value]
+    if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) for v in value):
+        raise ModelError(f"simulation output: {key} must be a list of names, got {value!r}")
+    return list(value)
+
+
+def output_vessels(value: Any) -> list[str] | None:
+    """Output ``vessels``: ``all`` (None: every vessel with output), ``none`` (no vessel) or a
+    list of vessel names."""
+    if value == "all":
+        return None
+    if value == "none":
+        return []
+    return output_names(value, "vessels")
 
 
 def _copy(data: Any) -> Any:
@@ -193,49 +213,9 @@ class Model:
         return state
 
 
-def _read(path: str | os.PathLike[str]) -> dict[str, Any]:
-    p = Path(path)
-    if not p.exists():
-        raise ModelError(f"{p}: file not found")
-    text = p.read_text()
-    try:
-        if p.suffix.lower() in (".yaml", ".yml"):
-            import yaml
-
-            data = yaml.safe_load(text)
-        else:
-            data = json.loads(text)
-    except Exception as exc:  # parse errors carry line numbers
-        raise ModelError(f"{p}: cannot parse: {exc}") from exc
-    if not isinstance(data, dict):
-        raise ModelError(f"{p}: top level must be a mapping")
-    return data
-
-
-def load_model(source: str | os.PathLike[str] | Mapping[str, Any] | Model) -> Model:
-    """Load and validate a network from a YAML/JSON file, a built-in model name, or a dict.
-
-    >>> import oxyline
-    >>> m = oxyline.load_model("bifurcation")
-    >>> m.vessel_names
-    ['parent', 'daughter1', 'daughter2']
-    """
-    if isinstance(source, Model):
-        return source
-    if isinstance(source, Mapping):
-        data = _copy(dict(source))
-    else:
-        p = Path(source)
-        if not p.exists() and not p.suffix:
-            from oxyline import models  # built-in models, then examples
-
-            return models.load(str(source))
-        data = _read(p)
-    if "simulation_parameters" in data:  # an svZeroDSolver input
-        from oxyline import svzerod
-
-        return svzerod.to_model(data)
-    return _build(data)
+def build_model(data: dict[str, Any]) -> Model:
+    """Validate a native model dict (the README schema) and assemble it."""
+    return _build(_copy(dict(data)))
 
 
 def _build(data: dict[str, Any]) -> Model:
@@ -301,7 +281,11 @@ def _build(data: dict[str, Any]) -> Model:
                  "capacitance": "capacitance", "stenosis_coefficient": "stenosis"}
             if "resistance" not in lp:
                 raise _err(el, "lumped needs 'resistance'")
-            cv["lumped"] = {k: factor(units, q[k]) * _positive(lp[k], el, k, allow_zero=True)
+            # calibrated svZeroDSolver models carry negative stenosis coefficients: the core
+            # accepts any finite one, so only R, L and C must be >= 0
+            cv["lumped"] = {k: factor(units, q[k]) * (_number(lp[k], el, k)
+                                                      if k == "stenosis_coefficient" else
+                                                      _positive(lp[k], el, k, allow_zero=True))
                             for k in lp}
         else:
             if "length" not in v:
@@ -393,4 +377,8 @@ def _build(data: dict[str, Any]) -> Model:
     model = Model(name=name, canonical=canon, simulation=dict(sim), period=period, source=source,
                   transport=tr_info)
     model.network  # noqa: B018 - assemble now so that invalid models fail at load time
+    out = sim.get("output") or {}
+    if "variables" in out or "vessels" in out:  # unknown names fail at load time too
+        model.network.output_layout(variables=output_names(out.get("variables"), "variables"),
+                                    vessels=output_vessels(out.get("vessels", "all")))
     return model

@@ -157,7 +157,8 @@ def load(name: str) -> Any:
     >>> oxyline.models.load("aortic-bifurcation").vessel_names
     ['parent', 'd1', 'd2']
     """
-    from oxyline.model import Model, load_model
+    from oxyline.loader import load_model
+    from oxyline.model import Model
 
     key = _canonical(name)
     if key in _registered:

@@ -59,7 +59,7 @@ def wall_uptake(result: Result, model: Model | None = None) -> Any:
     if result.oxygen is None or not result.has_segments:
         raise ValueError("needs an oxygen result with segment output")
     fig, ax = plt.subplots(figsize=(7, 4))
-    w = result.species[result.oxygen].segment_data[:, :, 2].mean(axis=0)
+    w = result.species[result.oxygen].segment("wall_flux").mean(axis=0)
     pos = result.segment_position
     start = np.concatenate([[0], np.cumsum(result.segment_count)]).astype(int)
     for i, name in enumerate(result.vessels):

@@ -10,8 +10,11 @@ from typing import Any
 
 import numpy as np
 
-VESSEL_VARIABLES = ("pressure_in", "pressure_out", "flow_in", "flow_out")
-SEGMENT_VARIABLES = ("segment_pressure_in", "segment_pressure_out", "segment_flow")
+from oxyline import _core
+
+# the column schema is the core's (oxyline_core::output): no column name is written here
+VESSEL_VARIABLES: tuple[str, ...] = tuple(_core.VESSEL_VARIABLES)
+SEGMENT_VARIABLES: tuple[str, ...] = tuple(_core.SEGMENT_VARIABLES)
 UNITS = {
     "pressure_in": "Pa", "pressure_out": "Pa", "flow_in": "m^3/s", "flow_out": "m^3/s",
     "segment_pressure_in": "Pa", "segment_pressure_out": "Pa", "segment_flow": "m^3/s",
@@ -25,19 +28,28 @@ class VesselResult:
 
     name: str
     time: np.ndarray
-    pressure_in: np.ndarray
-    pressure_out: np.ndarray
-    flow_in: np.ndarray
-    flow_out: np.ndarray
+    # None when the output selection left the variable out
+    pressure_in: np.ndarray | None
+    pressure_out: np.ndarray | None
+    flow_in: np.ndarray | None
+    flow_out: np.ndarray | None
     segment_pressure_in: np.ndarray | None = None
     segment_pressure_out: np.ndarray | None = None
     segment_flow: np.ndarray | None = None
     segment_position: np.ndarray | None = None
 
 
-SPECIES_VESSEL = ("concentration_in", "concentration_out", "flux_in", "flux_out", "wall_flux")
-SPECIES_SEGMENT = ("concentration", "flux", "wall_flux", "tl_resistance", "tl_inductance")
-BALANCE = ("stored", "inflow", "outflow", "wall_uptake", "decay")
+SPECIES_VESSEL: tuple[str, ...] = tuple(_core.SPECIES_VESSEL_VARIABLES)
+#: species segment variables as SpeciesResult attributes (the schema's names without the
+#: ``segment_`` prefix that selects them in ``output.variables``)
+SPECIES_SEGMENT: tuple[str, ...] = tuple(n.removeprefix("segment_")
+                                         for n in _core.SPECIES_SEGMENT_VARIABLES)
+BALANCE: tuple[str, ...] = tuple(_core.BALANCE_VARIABLES)
+
+
+def _not_selected(name: str) -> AttributeError:
+    return AttributeError(f"'{name}' is not in this result's output selection "
+                          "(simulation output: variables)")
 
 
 @dataclass
@@ -50,19 +62,34 @@ class SpeciesResult:
     segment: s) and L_i = −dx/v (s), NaN where |v| < the velocity threshold."""
 
     name: str
-    vessel_data: np.ndarray  # (time, vessel, 5)
-    segment_data: np.ndarray  # (time, segment, 5)
+    vessel_data: np.ndarray  # (time, vessel, selected vessel variables; all 5 by default)
+    segment_data: np.ndarray  # (time, segment, selected segment variables; all 5 by default)
     balance_data: np.ndarray  # (time, 5): stored, inflow, outflow, wall, decay (cumulative)
     initial_stored: float
     #: mmHg per mol/m^3 (1/solubility) for oxygen, else None
     po2_per_concentration: float | None = None
+    #: the recorded variables (the last axis of vessel_data / segment_data)
+    vessel_variables: tuple[str, ...] = SPECIES_VESSEL
+    segment_variables: tuple[str, ...] = SPECIES_SEGMENT
 
     def __getattr__(self, key: str) -> np.ndarray:
+        d = self.__dict__
         if key in SPECIES_VESSEL:
-            return self.vessel_data[:, :, SPECIES_VESSEL.index(key)]
+            if key not in d.get("vessel_variables", SPECIES_VESSEL):
+                raise _not_selected(key)
+            return self.vessel_data[:, :, d["vessel_variables"].index(key)]
         if key in SPECIES_SEGMENT:
-            return self.segment_data[:, :, SPECIES_SEGMENT.index(key)]
+            if key not in d.get("segment_variables", SPECIES_SEGMENT):
+                raise _not_selected(f"segment_{key}")
+            return self.segment_data[:, :, d["segment_variables"].index(key)]
         raise AttributeError(key)
+
+    def segment(self, key: str) -> np.ndarray:
+        """A segment variable by its schema name without ``segment_`` (``wall_flux`` here is
+        the segments' wall flux, where the attribute ``wall_flux`` is the vessels')."""
+        if key not in self.segment_variables:
+            raise _not_selected(f"segment_{key}")
+        return self.segment_data[:, :, self.segment_variables.index(key)]
 
     @property
     def mass_balance(self) -> dict[str, np.ndarray]:
@@ -97,11 +124,16 @@ class Result:
     species: dict[str, SpeciesResult] = field(default_factory=dict)
     #: name of the oxygen species, if the model has an ``oxygen`` section
     oxygen: str | None = None
+    #: the recorded flow variables (an output selection records fewer; all by default)
+    vessel_variables: tuple[str, ...] = VESSEL_VARIABLES
+    segment_variables: tuple[str, ...] = SEGMENT_VARIABLES
 
     def __getattr__(self, key: str) -> Any:
         # species variables: {name}_concentration_in, {name}_flux_out, wall_{name}_flux,
         # segment_{name}_concentration, ..., {name}_mass_balance; oxygen adds po2_in/po2_out,
         # segment_po2 (mmHg) and tl_resistance/tl_inductance.
+        if key in VESSEL_VARIABLES or key in SEGMENT_VARIABLES:  # a property left out
+            raise _not_selected(key)
         species = self.__dict__.get("species") or {}
         if not species:
             raise AttributeError(key)
@@ -121,7 +153,7 @@ class Result:
             return {n: s.mass_balance for n, s in species.items()}
         for name, sp in species.items():
             if key.startswith(f"segment_wall_{name}_") and key.endswith("flux"):
-                return sp.segment_data[:, :, 2]
+                return sp.segment("wall_flux")
             if key == f"wall_{name}_flux":
                 return sp.wall_flux
             if key == f"{name}_mass_balance":
@@ -141,48 +173,70 @@ class Result:
         units)."""
         out: dict[str, tuple[str, np.ndarray, str]] = {}
         for name, sp in self.species.items():
+            vv, sv = sp.vessel_variables, sp.segment_variables
             for v, u in (("concentration_in", "mol/m^3"), ("concentration_out", "mol/m^3"),
                          ("flux_in", "mol/s"), ("flux_out", "mol/s")):
-                out[f"{name}_{v}"] = ("vessel", getattr(sp, v), u)
-            out[f"wall_{name}_flux"] = ("vessel", sp.wall_flux, "mol/s")
-            out[f"segment_{name}_concentration"] = ("segment", sp.concentration, "mol/m^3")
-            out[f"segment_{name}_flux"] = ("segment", sp.flux, "mol/s")
-            out[f"segment_wall_{name}_flux"] = ("segment", sp.segment_data[:, :, 2], "mol/s")
+                if v in vv:
+                    out[f"{name}_{v}"] = ("vessel", getattr(sp, v), u)
+            if "wall_flux" in vv:
+                out[f"wall_{name}_flux"] = ("vessel", sp.wall_flux, "mol/s")
+            if "concentration" in sv:
+                out[f"segment_{name}_concentration"] = ("segment", sp.concentration, "mol/m^3")
+            if "flux" in sv:
+                out[f"segment_{name}_flux"] = ("segment", sp.flux, "mol/s")
+            if "wall_flux" in sv:
+                out[f"segment_wall_{name}_flux"] = ("segment", sp.segment("wall_flux"), "mol/s")
             for k, arr in sp.mass_balance.items():
                 out[f"{name}_mass_{k}"] = ("time", arr, "mol")
             if name == self.oxygen:
-                out["po2_in"] = ("vessel", self.po2_in, "mmHg")
-                out["po2_out"] = ("vessel", self.po2_out, "mmHg")
-                out["segment_po2"] = ("segment", self.segment_po2, "mmHg")
+                if "concentration_in" in vv:
+                    out["po2_in"] = ("vessel", self.po2_in, "mmHg")
+                if "concentration_out" in vv:
+                    out["po2_out"] = ("vessel", self.po2_out, "mmHg")
+                if "concentration" in sv:
+                    out["segment_po2"] = ("segment", self.segment_po2, "mmHg")
         if self.species:
-            out["tl_resistance"] = ("segment", self.tl_resistance, "s")
-            out["tl_inductance"] = ("segment", self.tl_inductance, "s")
+            sv = next(iter(self.species.values())).segment_variables
+            for k in ("tl_resistance", "tl_inductance"):
+                if k in sv:
+                    out[k] = ("segment", getattr(self, k), "s")
         return out
 
     def __post_init__(self) -> None:
         nv = len(self.vessels)
-        self._vessel_block = self.data[:, : 4 * nv]
-        self._segment_block = self.data[:, 4 * nv :]
+        self._kv, self._ks = len(self.vessel_variables), max(1, len(self.segment_variables))
+        self._vessel_block = self.data[:, : self._kv * nv]
+        self._segment_block = self.data[:, self._kv * nv :]
         self._index = {name: i for i, name in enumerate(self.vessels)}
         self._seg_start = np.concatenate([[0], np.cumsum(self.segment_count)]).astype(int) \
             if self.segment_count else np.zeros(1, dtype=int)
 
+    def _vessel_var(self, name: str) -> np.ndarray:
+        if name not in self.vessel_variables:
+            raise _not_selected(name)
+        return self._vessel_block[:, self.vessel_variables.index(name)::self._kv]
+
+    def _segment_var(self, name: str) -> np.ndarray:
+        if name not in self.segment_variables:
+            raise _not_selected(name)
+        return self._segment_block[:, self.segment_variables.index(name)::self._ks]
+
     # vessel-level arrays, shape (time, vessel)
     @property
     def pressure_in(self) -> np.ndarray:
-        return self._vessel_block[:, 0::4]
+        return self._vessel_var("pressure_in")
 
     @property
     def pressure_out(self) -> np.ndarray:
-        return self._vessel_block[:, 1::4]
+        return self._vessel_var("pressure_out")
 
     @property
     def flow_in(self) -> np.ndarray:
-        return self._vessel_block[:, 2::4]
+        return self._vessel_var("flow_in")
 
     @property
     def flow_out(self) -> np.ndarray:
-        return self._vessel_block[:, 3::4]
+        return self._vessel_var("flow_out")
 
     # segment-level arrays, shape (time, segment)
     @property
@@ -191,15 +245,15 @@ class Result:
 
     @property
     def segment_pressure_in(self) -> np.ndarray:
-        return self._segment_block[:, 0::3]
+        return self._segment_var("segment_pressure_in")
 
     @property
     def segment_pressure_out(self) -> np.ndarray:
-        return self._segment_block[:, 1::3]
+        return self._segment_var("segment_pressure_out")
 
     @property
     def segment_flow(self) -> np.ndarray:
-        return self._segment_block[:, 2::3]
+        return self._segment_var("segment_flow")
 
     def vessel(self, name: str) -> VesselResult:
         """All arrays of one vessel."""
@@ -207,13 +261,13 @@ class Result:
             raise KeyError(f"vessel '{name}' has no output (vessels: {', '.join(self.vessels[:10])}"
                            f"{', ...' if len(self.vessels) > 10 else ''})")
         i = self._index[name]
-        out = VesselResult(name, self.time, self.pressure_in[:, i], self.pressure_out[:, i],
-                           self.flow_in[:, i], self.flow_out[:, i])
+        ends = {k: (self._vessel_var(k)[:, i] if k in self.vessel_variables else None)
+                for k in VESSEL_VARIABLES}
+        out = VesselResult(name, self.time, **ends)
         if self.has_segments:
             a, b = self._seg_start[i], self._seg_start[i + 1]
-            out.segment_pressure_in = self.segment_pressure_in[:, a:b]
-            out.segment_pressure_out = self.segment_pressure_out[:, a:b]
-            out.segment_flow = self.segment_flow[:, a:b]
+            for k in self.segment_variables:
+                setattr(out, k, self._segment_var(k)[:, a:b])
             out.segment_position = self.segment_position[a:b]
         return out
 
@@ -228,7 +282,7 @@ class Result:
                                   "vessel": ("vessel", np.array(self.vessels, dtype=object))}
         data_vars: dict[str, Any] = {
             name: (("time", "vessel"), getattr(self, name), {"units": UNITS[name]})
-            for name in VESSEL_VARIABLES
+            for name in self.vessel_variables
         }
         if self.has_segments:
             seg_vessel = np.repeat(np.array(self.vessels, dtype=object), self.segment_count)
@@ -237,11 +291,11 @@ class Result:
             coords["segment_vessel"] = ("segment", seg_vessel)
             coords["segment_index"] = ("segment", seg_index)
             coords["segment_position"] = ("segment", self.segment_position, {"units": "m"})
-            for name in SEGMENT_VARIABLES:
+            for name in self.segment_variables:
                 data_vars[name] = (("time", "segment"), getattr(self, name), {"units": UNITS[name]})
+        n_segments = self._segment_block.shape[1] // self._ks
         seg_ok = self.has_segments and all(
-            sp.segment_data.shape[1] == self._segment_block.shape[1] // 3
-            for sp in self.species.values())
+            sp.segment_data.shape[1] == n_segments for sp in self.species.values())
         for name, (kind, arr, unit) in self.species_variables().items():
             if kind == "vessel":
                 data_vars[name] = (("time", "vessel"), arr, {"units": unit})
@@ -258,6 +312,10 @@ class Result:
                     data_vars[name][2]["po2_per_concentration"] = float(scale)
         attrs: dict[str, Any] = {"model": self.model_name, "oxyline_version": __version__,
                                  "complete": int(self.complete)}
+        if (tuple(self.vessel_variables), tuple(self.segment_variables)) != (
+                VESSEL_VARIABLES, SEGMENT_VARIABLES):
+            # an output selection: what oxyline.open_result must find (all of them otherwise)
+            attrs["output_variables"] = [*self.vessel_variables, *self.segment_variables]
         if self.species:
             # species order (a Zarr store lists its variables alphabetically) and which one is
             # oxygen: what oxyline.open_result needs to rebuild ``species`` and ``oxygen``
@@ -303,7 +361,10 @@ class Result:
 
     def to_pandas(self) -> Any:
         """Long table with svZeroDSolver's columns: name, time, flow_in, flow_out, pressure_in,
-        pressure_out (SI)."""
+        pressure_out (SI). Needs all four vessel variables in the output selection."""
+        if tuple(self.vessel_variables) != VESSEL_VARIABLES:
+            missing = [v for v in VESSEL_VARIABLES if v not in self.vessel_variables]
+            raise _not_selected(", ".join(missing))
         return long_table(self.vessels, self.time, self._vessel_block)
 
 

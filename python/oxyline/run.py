@@ -8,8 +8,9 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from oxyline.errors import ModelError, SimulationInterrupted
-from oxyline.model import METHODS, Model, load_model
-from oxyline.result import Result, SpeciesResult
+from oxyline.loader import load_model
+from oxyline.model import METHODS, Model, output_names, output_vessels
+from oxyline.result import SEGMENT_VARIABLES, SPECIES_SEGMENT, Result, SpeciesResult
 
 ProgressCallback = Callable[[float, float], None]
 
@@ -19,7 +20,8 @@ def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
     out = dict(sim.get("output", {}) or {})
     unknown = set(overrides) - {"cycles", "dt", "method", "output_every", "output_cycles",
                                 "until_periodic", "max_cycles", "rho_infty", "start", "segments",
-                                "progress", "newton_atol", "max_iterations", "transport"}
+                                "progress", "newton_atol", "max_iterations", "transport",
+                                "variables", "vessels"}
     if unknown:
         raise ModelError(f"simulate: unknown option(s) {', '.join(sorted(unknown))}")
     period = model.period or 1.0
@@ -50,10 +52,17 @@ def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
         "rho_infty": float(overrides.get("rho_infty", sim.get("rho_infty", 0.5))),
         "start": overrides.get("start", sim.get("start", "steady")),
         "segments": bool(overrides.get("segments", out.get("segments", True))),
+        "variables": output_names(overrides.get("variables", out.get("variables")), "variables"),
+        "vessels": output_vessels(overrides.get("vessels", out.get("vessels", "all"))),
         "newton_atol": overrides.get("newton_atol"),
         "max_iterations": int(overrides.get("max_iterations", 30)),
         "transport": bool(overrides.get("transport", True)),
     }
+
+
+def _selection(s: Mapping[str, Any]) -> dict[str, Any]:
+    """The core's output-selection keywords of settings ``s``."""
+    return {"variables": s["variables"], "vessels": s["vessels"], "segments": s["segments"]}
 
 
 def _progress_bar(enabled: bool | ProgressCallback | None) -> tuple[Any, Any]:
@@ -76,28 +85,37 @@ def _progress_bar(enabled: bool | ProgressCallback | None) -> tuple[Any, Any]:
     return update, bar
 
 
-def _species_results(model: Model, raw: Mapping[str, Any]) -> dict[str, SpeciesResult]:
+def _species_results(model: Model, raw: Mapping[str, Any], layout: Mapping[str, Any],
+                     empty_segments: bool) -> dict[str, SpeciesResult]:
+    """Species results of output rows; ``empty_segments``: no segment output at all, every
+    variable (the segment arrays exist and are empty)."""
     tr = raw.get("transport")
-    if tr is None:
+    lay = layout.get("transport")
+    if tr is None or lay is None:
         return {}
-    lay = model.network.transport_layout()
-    nv = len(lay["segment_count"])
+    nv = len(layout["vessels"])
     ns = int(sum(lay["segment_count"]))
+    kv, ks = len(lay["vessel_variables"]), len(lay["segment_variables"])
     cols = lay["columns_per_species"]
+    seg_vars = tuple(n.removeprefix("segment_") for n in lay["segment_variables"])
+    if empty_segments:
+        seg_vars, ks = SPECIES_SEGMENT, len(SPECIES_SEGMENT)
     data = tr["data"]
     nt = data.shape[0]
     out: dict[str, SpeciesResult] = {}
     ox = model.transport.get("oxygen")
     for k, name in enumerate(tr["species"]):
         block = data[:, k * cols:(k + 1) * cols]
-        vcols, scols = nv * lay["vessel_columns"], ns * lay["segment_columns"]
+        vcols, scols = nv * kv, ns * ks
         out[name] = SpeciesResult(
             name=name,
-            vessel_data=block[:, :vcols].reshape(nt, nv, lay["vessel_columns"]),
-            segment_data=block[:, vcols:vcols + scols].reshape(nt, ns, lay["segment_columns"]),
+            vessel_data=block[:, :vcols].reshape(nt, nv, kv),
+            segment_data=block[:, vcols:vcols + scols].reshape(nt, ns, ks),
             balance_data=block[:, vcols + scols:],
             initial_stored=float(tr["initial_stored"][k]),
             po2_per_concentration=(1.0 / model.transport["solubility"]) if name == ox else None,
+            vessel_variables=tuple(lay["vessel_variables"]),
+            segment_variables=seg_vars,
         )
     return out
 
@@ -105,13 +123,22 @@ def _species_results(model: Model, raw: Mapping[str, Any]) -> dict[str, SpeciesR
 def _result(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
             settings: dict[str, Any], complete: bool) -> Result:
     """A :class:`Result` of output rows in the core's layout (a whole run, or one chunk)."""
-    layout = model.network.layout()
+    layout = model.network.output_layout(**_selection(s))
+    if not s["transport"]:
+        layout.pop("transport", None)
+    empty_segments = not s["segments"] and s["variables"] is None
+    if empty_segments:
+        # no segments, every variable: the segment arrays exist and are empty, as they were
+        # before output selection
+        layout["segment_variables"] = list(SEGMENT_VARIABLES)
     return Result(
         model_name=model.name, vessels=list(layout["vessels"]), time=raw["times"],
-        data=raw["data"], segment_count=list(layout["segment_count"]) if s["segments"] else [],
-        segment_position=layout["segment_position"] if s["segments"] else layout["segment_position"][:0],
+        data=raw["data"], segment_count=list(layout["segment_count"]),
+        segment_position=layout["segment_position"],
         settings=settings, complete=complete,
-        species=_species_results(model, raw), oxygen=model.transport.get("oxygen"),
+        species=_species_results(model, raw, layout, empty_segments), oxygen=model.transport.get("oxygen"),
+        vessel_variables=tuple(layout["vessel_variables"]),
+        segment_variables=tuple(layout["segment_variables"]),
     )
 
 
@@ -223,10 +250,9 @@ def _empty_rows(model: Model, s: Mapping[str, Any]) -> dict[str, Any]:
     """Zero output rows in the core's layout: the template of a store's variables."""
     import numpy as np
 
-    lay = model.network.layout()
-    cols = lay["n_vessel_columns"] + (lay["n_segment_columns"] if s["segments"] else 0)
-    raw: dict[str, Any] = {"times": np.zeros(0), "data": np.zeros((0, cols))}
-    tl = model.network.transport_layout() if s["transport"] else None
+    lay = model.network.output_layout(**_selection(s))
+    raw: dict[str, Any] = {"times": np.zeros(0), "data": np.zeros((0, lay["n_columns"]))}
+    tl = lay.get("transport") if s["transport"] else None
     if tl is not None:
         n = len(tl["species"])
         raw["transport"] = {"species": list(tl["species"]),

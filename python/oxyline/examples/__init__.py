@@ -28,7 +28,7 @@ def load(name: str) -> Any:
     """Load a built-in example as a validated :class:`oxyline.Model`."""
     import yaml
 
-    from oxyline.model import load_model
+    from oxyline.loader import load_model
 
     data = yaml.safe_load(path(name).read_text())
     return load_model(data)

@@ -10,7 +10,8 @@ from pathlib import Path
 from typing import Any
 
 from oxyline.errors import ModelError
-from oxyline.model import Model, load_model
+from oxyline.loader import load_model
+from oxyline.model import Model
 
 PathLike = str | os.PathLike[str]
 

@@ -63,7 +63,8 @@ from typing import Any
 import numpy as np
 
 from oxyline.errors import ModelError
-from oxyline.model import Model, load_model
+from oxyline.loader import load_model
+from oxyline.model import Model, build_model
 
 PathLike = str | os.PathLike[str]
 
@@ -463,55 +464,26 @@ def _with_wall_viscosity(vessels: list[dict[str, Any]], bcs: dict[str, dict[str,
 
 def steady_pressures(d: dict[str, Any],
                      terminal_scale: float = 1.0) -> tuple[dict[str, float], float]:
-    """Node pressures [Pa] of the resistor network of a native model dict (capacitors open,
+    """Node pressures [Pa] of the steady state of a native model dict (capacitors open,
     inductors shorted) fed by the cycle-mean of each flow boundary: for a linear circuit with a
-    periodic inflow these are exactly the cycle-mean pressures. Geometric vessels count
-    8 mu l/(pi r^4) (flat profile, constant radius), lumped ones their resistance; outlets:
-    ``resistance`` (to its pressure), ``pressure`` and ``flow`` conditions. ``terminal_scale``
-    multiplies the resistance of every ``resistance`` outlet and of the lumped vessel feeding it
-    (the two halves of a circulatory_autogen terminal). Returns (pressures, mean inflow)."""
-    mu = d["blood"]["viscosity"]
-    bcs = d["boundary_conditions"]
-    nodes = sorted({v[k] for v in d["vessels"] for k in ("from", "to")} | set(bcs))
-    ix = {n: i for i, n in enumerate(nodes)}
-    G = np.zeros((len(nodes), len(nodes)))
-    b = np.zeros(len(nodes))
-    fixed: dict[int, float] = {}
+    periodic inflow these are exactly the cycle-mean pressures. The steady state is the core's
+    (``Network.steady_state``), on the circuit it assembles. ``terminal_scale`` multiplies the
+    resistance of every ``resistance`` outlet and of the lumped vessel feeding it (the two
+    halves of a circulatory_autogen terminal). Returns (pressures, mean inflow)."""
+    scaled = json.loads(json.dumps(d))
+    bcs = scaled["boundary_conditions"]
+    for v in scaled["vessels"]:
+        if "lumped" in v and bcs.get(v["to"], {}).get("type") == "resistance":
+            v["lumped"]["resistance"] *= terminal_scale
     q_in = 0.0
-    for v in d["vessels"]:
-        if "lumped" in v:
-            R = v["lumped"]["resistance"]
-            if bcs.get(v["to"], {}).get("type") == "resistance":
-                R *= terminal_scale
-        else:
-            R = 8 * mu * v["length"] / (math.pi * v["radius"]**4)
-        i, j = ix[v["from"]], ix[v["to"]]
-        G[i, i] += 1 / R
-        G[j, j] += 1 / R
-        G[i, j] -= 1 / R
-        G[j, i] -= 1 / R
-    for node, bc in bcs.items():
-        i = ix[node]
+    for bc in bcs.values():
         if bc["type"] == "resistance":
-            G[i, i] += 1 / (bc["resistance"] * terminal_scale)
-            b[i] += bc.get("pressure", 0.0) / (bc["resistance"] * terminal_scale)
-        elif bc["type"] == "pressure":
-            fixed[i] = float(bc["value"])
+            bc["resistance"] *= terminal_scale
         elif bc["type"] == "flow":
-            q = (_cycle_mean(np.asarray(bc["time"], float), np.asarray(bc["flow"], float))
-                 if "time" in bc else float(bc["value"]))
-            b[i] += q
-            q_in += q
-        else:
-            raise ModelError(f"steady_pressures: boundary type '{bc['type']}' not supported")
-    for i, value in fixed.items():
-        b -= G[:, i] * value
-        G[:, i] = 0.0
-        G[i, :] = 0.0
-        G[i, i] = 1.0
-        b[i] = value
-    P = np.linalg.solve(G, b)
-    return {n: float(P[i]) for n, i in ix.items()}, q_in
+            q_in += (_cycle_mean(np.asarray(bc["time"], float), np.asarray(bc["flow"], float))
+                     if "time" in bc else float(bc["value"]))
+    st = build_model(scaled).network.steady_state()
+    return dict(zip(st["nodes"], st["node_pressure"].tolist(), strict=True)), q_in
 
 
 def mean_pressure_observations(obs_data_json: PathLike) -> dict[str, float]:

@@ -18,7 +18,8 @@ from typing import Any
 
 from oxyline.errors import ModelError
 from oxyline.io._common import PathLike, as_model, check_path, load_with_context, plain
-from oxyline.model import Model, load_model
+from oxyline.loader import load_model
+from oxyline.model import Model
 
 FORMATS = ("native", "svzerod", "tables", "openbf")
 
@@ -55,23 +56,42 @@ def save_model(model: Model | Mapping[str, Any], path: PathLike) -> Path:
     return dump_native(data, path)
 
 
-def _read_raw(p: Path) -> dict[str, Any] | None:
-    """Parsed YAML/JSON mapping, or None for other suffixes."""
-    if p.suffix.lower() not in (".yaml", ".yml", ".json"):
-        return None
+def read_mapping(path: PathLike) -> dict[str, Any]:
+    """The top-level mapping of a YAML (``.yaml``/``.yml``) or JSON (any other suffix) file."""
+    p = Path(path)
+    if not p.exists():
+        raise ModelError(f"{p}: file not found")
     text = p.read_text()
     try:
-        if p.suffix.lower() == ".json":
-            data = json.loads(text)
-        else:
+        if p.suffix.lower() in (".yaml", ".yml"):
             import yaml
 
             data = yaml.safe_load(text)
-    except Exception as exc:
+        else:
+            data = json.loads(text)
+    except Exception as exc:  # parse errors carry line numbers
         raise ModelError(f"{p}: cannot parse: {exc}") from exc
     if not isinstance(data, dict):
         raise ModelError(f"{p}: top level must be a mapping")
     return data
+
+
+def _read_raw(p: Path) -> dict[str, Any] | None:
+    """Parsed YAML/JSON mapping, or None for other suffixes."""
+    if p.suffix.lower() not in (".yaml", ".yml", ".json"):
+        return None
+    return read_mapping(p)
+
+
+def sniff_format(data: Mapping[str, Any]) -> str:
+    """The one format rule for a parsed model mapping: ``svzerod`` (svZeroDSolver input: has
+    ``simulation_parameters``, or a list of boundary conditions), ``openbf`` (a ``network:``
+    list and no ``vessels``) or ``native``."""
+    if "simulation_parameters" in data or isinstance(data.get("boundary_conditions"), list):
+        return "svzerod"
+    if "vessels" not in data and "network" in data:
+        return "openbf"
+    return "native"
 
 
 def detect_format(path: PathLike) -> str:
@@ -84,11 +104,7 @@ def detect_format(path: PathLike) -> str:
     if data is None:
         raise ModelError(f"{p}: unknown model file type '{suffix}' (expected .yaml, .yml, .json, "
                          ".csv or .tsv)")
-    if "simulation_parameters" in data or isinstance(data.get("boundary_conditions"), list):
-        return "svzerod"
-    if "vessels" not in data and "network" in data:
-        return "openbf"
-    return "native"
+    return sniff_format(data)
 
 
 def _read_openbf(p: Path) -> Model:
@@ -124,13 +140,10 @@ def read_model(path: PathLike | str, format: str | None = None) -> Model:
     if data is None:
         raise ModelError(f"{p}: a {fmt} model must be a .yaml/.yml/.json file")
     if fmt == "svzerod":
+        from oxyline.io.svzerod import to_model
+
         try:
-            from oxyline import svzerod
-        except ImportError:
-            raise ModelError(f"{p}: svZeroDSolver input files need oxyline.svzerod, which is not "
-                             "available in this version") from None
-        try:
-            return svzerod.to_model(data)  # type: ignore[attr-defined,no-any-return]
+            return to_model(data)
         except ModelError as exc:
             raise type(exc)(f"{p}: {exc}") from None
     return load_with_context(data, str(p))

@@ -71,7 +71,8 @@ from typing import Any
 import numpy as np
 
 from oxyline.errors import ModelError, UnsupportedElement
-from oxyline.model import Model, load_model
+from oxyline.loader import load_model
+from oxyline.model import Model, build_model
 
 PathLike = str | os.PathLike[str]
 
@@ -265,11 +266,6 @@ class _Vessel:
         r_lin = r_in + (r_out - r_in) * x / L
         h_eff = np.sum(w * 2 * math.pi * r_lin**3 * (1 - POISSON**2) / self.E) / c_target
         return r_in, r_out, float(h_eff)
-
-    def resistance(self, mu: float, r_in: float, r_out: float) -> float:
-        """Poiseuille resistance of a linear taper (oxyline's formula) with viscosity ``mu``."""
-        return 8 * mu * self.length * (r_in**2 + r_in * r_out + r_out**2) / (
-            3 * math.pi * r_in**3 * r_out**3)
 
 
 def _load_yaml(p: Path) -> dict[str, Any]:
@@ -515,32 +511,31 @@ def to_native_dict(path: PathLike, *, linearize: str | float = "mean", taper: st
 def _mean_pressures(vessels: list[_Vessel], inlet: Any, q_mean: float,
                     terminals: dict[Any, tuple[float, float]],
                     mu: float) -> dict[int, tuple[float, float]]:
-    """Steady pressures at both ends of every vessel for the mean inflow (nodal analysis,
-    iterated because the radii depend on the pressure)."""
-    nodes = sorted({v.sn for v in vessels} | {v.tn for v in vessels}, key=str)
-    idx = {n: i for i, n in enumerate(nodes)}
-    n = len(nodes)
+    """Steady pressures at both ends of every vessel for the mean inflow, iterated because the
+    radii depend on the pressure. Each iterate is the core's exact steady state of the rigid
+    network at the current radii (one segment per vessel: the same exact taper resistance)."""
     p = {id(v): (v.pext, v.pext) for v in vessels}
-    P = np.zeros(n)
+    P: dict[str, float] = {}
     for _ in range(8):
-        G = np.zeros((n, n))
-        b = np.zeros(n)
-        for v in vessels:
+        native = {
+            "name": "openbf-steady", "units": "SI", "blood": {"viscosity": mu},
+            "vessels": [],
+            "boundary_conditions": {f"n{inlet}": {"type": "flow", "value": q_mean}},
+        }
+        for k, v in enumerate(vessels):
             r_in, r_out, _h = v.linearised(*p[id(v)])
-            g = 1.0 / v.resistance(mu, r_in, r_out)
-            a, c = idx[v.sn], idx[v.tn]
-            G[a, a] += g
-            G[c, c] += g
-            G[a, c] -= g
-            G[c, a] -= g
+            native["vessels"].append({"name": f"v{k}", "from": f"n{v.sn}", "to": f"n{v.tn}",
+                                      "length": v.length, "radius_in": r_in,
+                                      "radius_out": r_out, "output": False})
         for node, (r, pout) in terminals.items():
-            G[idx[node], idx[node]] += 1.0 / r
-            b[idx[node]] += pout / r
-        b[idx[inlet]] += q_mean
-        P_new = np.linalg.solve(G, b)
-        done = np.max(np.abs(P_new - P)) < 1e-6 * max(1.0, np.max(np.abs(P_new)))
+            native["boundary_conditions"][f"n{node}"] = {"type": "resistance",
+                                                         "resistance": r, "pressure": pout}
+        st = build_model(native).network.steady_state()
+        P_new = dict(zip(st["nodes"], st["node_pressure"].tolist(), strict=True))
+        scale = max(1.0, max(abs(x) for x in P_new.values()))
+        done = bool(P) and max(abs(P_new[n] - P[n]) for n in P_new) < 1e-6 * scale
         P = P_new
-        p = {id(v): (float(P[idx[v.sn]]), float(P[idx[v.tn]])) for v in vessels}
+        p = {id(v): (P[f"n{v.sn}"], P[f"n{v.tn}"]) for v in vessels}
         if done:
             break
     return p

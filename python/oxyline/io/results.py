@@ -185,7 +185,7 @@ def to_parquet(result: Result | Any, path: PathLike) -> Path:
 # reading a result back: the inverse of Result.to_xarray (and of the files written from it)
 
 #: what every oxyline result holds; anything less is not an oxyline result file
-REQUIRED = ("time", "vessel", "pressure_in", "pressure_out", "flow_in", "flow_out")
+REQUIRED = ("time", "vessel")
 
 
 def _plain(value: Any) -> Any:
@@ -284,7 +284,7 @@ def _result_from_dataset(ds: Any, label: str) -> Result:
     time = need("time").astype(np.float64)
     vessels = [str(v) for v in need("vessel")]
     nt, nv = len(time), len(vessels)
-    seg = "segment_flow" in ds.variables
+    seg = "segment_vessel" in ds.variables
     segment_count: list[int] = []
     positions = np.zeros(0, dtype=np.float64)
     ns = 0
@@ -302,13 +302,20 @@ def _result_from_dataset(ds: Any, label: str) -> Result:
         positions = need("segment_position").astype(np.float64)
         ns = len(seg_vessel)
 
-    # the core's (time, column) layout: 4 columns per vessel, then 3 per segment, interleaved
-    data = np.empty((nt, 4 * nv + 3 * ns), dtype=np.float64)
-    for k, name in enumerate(VESSEL_VARIABLES):
-        data[:, k:4 * nv:4] = need(name, ("time", "vessel"))
-    if seg:
-        for k, name in enumerate(SEGMENT_VARIABLES):
-            data[:, 4 * nv + k::3] = need(name, ("time", "segment"))
+    # the core's (time, column) layout: the vessel variables of each vessel, then the segment
+    # variables of each segment, interleaved; an output selection wrote fewer of them
+    # the flow variables written: all of them, unless the file records an output selection
+    selected = _names(ds.attrs["output_variables"]) if "output_variables" in ds.attrs else None
+    vvars = tuple(v for v in VESSEL_VARIABLES if selected is None or v in selected)
+    # a file without segments: empty segment arrays of every variable (as it was written)
+    svars = tuple(v for v in SEGMENT_VARIABLES if selected is None or v in selected) \
+        if seg else SEGMENT_VARIABLES
+    kv, ks = len(vvars), len(svars)
+    data = np.empty((nt, kv * nv + ks * ns), dtype=np.float64)
+    for k, name in enumerate(vvars):
+        data[:, k:kv * nv:kv] = need(name, ("time", "vessel"))
+    for k, name in enumerate(svars if seg else ()):
+        data[:, kv * nv + k::ks] = need(name, ("time", "segment"))
 
     attrs = {k: _plain(v) for k, v in ds.attrs.items()}
     species = _species_from_dataset(ds, attrs, need, nt, nv, ns, label)
@@ -328,7 +335,8 @@ def _result_from_dataset(ds: Any, label: str) -> Result:
     return Result(model_name=str(attrs.get("model", Path(label).stem)), vessels=vessels,
                   time=time, data=data, segment_count=segment_count, segment_position=positions,
                   settings=settings, complete=bool(attrs.get("complete", 1)), species=species,
-                  oxygen=None if oxygen is None else str(oxygen))
+                  oxygen=None if oxygen is None else str(oxygen), vessel_variables=vvars,
+                  segment_variables=svars)
 
 
 def _species_from_dataset(ds: Any, attrs: dict[str, Any], need: Any, nt: int, nv: int,
@@ -336,35 +344,43 @@ def _species_from_dataset(ds: Any, attrs: dict[str, Any], need: Any, nt: int, nv
     """The :class:`~oxyline.result.SpeciesResult` of every species in ``ds``, in run order."""
     import numpy as np
 
-    from oxyline.result import BALANCE, SpeciesResult
+    from oxyline.result import BALANCE, SPECIES_SEGMENT, SPECIES_VESSEL, SpeciesResult
 
     suffix = "_concentration_in"
     if "species" in attrs:
         names = _names(attrs["species"])
     else:  # files written before the attribute existed: the order the variables are listed in
         names = [str(n)[:-len(suffix)] for n in ds.data_vars if str(n).endswith(suffix)]
-    has_seg = ns > 0 and all(f"segment_{n}_concentration" in ds.variables for n in names)
-    tl: list[Any] = []
-    if has_seg and names:
-        # the TL elements depend on the flow only: the file holds them once for all species
-        tl = [need("tl_resistance", ("time", "segment")), need("tl_inductance", ("time", "segment"))]
+
+    def vessel_file(name: str, v: str) -> str:
+        return f"wall_{name}_flux" if v == "wall_flux" else f"{name}_{v}"
+
+    def segment_file(name: str, v: str) -> str:
+        if v in ("tl_resistance", "tl_inductance"):  # flow-only: stored once for all species
+            return v
+        return f"segment_wall_{name}_flux" if v == "wall_flux" else f"segment_{name}_{v}"
+
+    first = names[0] if names else ""
+    # the variables an output selection kept (all of them by default), the same for every
+    # species
+    vvars = tuple(v for v in SPECIES_VESSEL if vessel_file(first, v) in ds.variables)
+    svars = tuple(v for v in SPECIES_SEGMENT if segment_file(first, v) in ds.variables) \
+        if ns > 0 else SPECIES_SEGMENT
     out: dict[str, Any] = {}
     for name in names:
-        vessel = np.empty((nt, nv, 5), dtype=np.float64)
-        for k, v in enumerate((f"{name}_concentration_in", f"{name}_concentration_out",
-                               f"{name}_flux_in", f"{name}_flux_out", f"wall_{name}_flux")):
-            vessel[:, :, k] = need(v, ("time", "vessel"))
-        segment = np.empty((nt, ns if has_seg else 0, 5), dtype=np.float64)
-        if has_seg:
-            for k, v in enumerate((f"segment_{name}_concentration", f"segment_{name}_flux",
-                                   f"segment_wall_{name}_flux")):
-                segment[:, :, k] = need(v, ("time", "segment"))
-            segment[:, :, 3], segment[:, :, 4] = tl
+        vessel = np.empty((nt, nv, len(vvars)), dtype=np.float64)
+        for k, v in enumerate(vvars):
+            vessel[:, :, k] = need(vessel_file(name, v), ("time", "vessel"))
+        has_seg = ns > 0 and segment_file(name, svars[0]) in ds.variables if svars else False
+        segment = np.empty((nt, ns if has_seg else 0, len(svars)), dtype=np.float64)
+        for k, v in enumerate(svars if has_seg else ()):
+            segment[:, :, k] = need(segment_file(name, v), ("time", "segment"))
         balance = np.empty((nt, len(BALANCE)), dtype=np.float64)
         for k, v in enumerate(BALANCE):
             # stored is written as the change since t = 0: with initial_stored = 0 the
             # recomputed mass balance equals the file's bit for bit
             balance[:, k] = need(f"{name}_mass_{v}", ("time",))
         out[name] = SpeciesResult(name=name, vessel_data=vessel, segment_data=segment,
-                                  balance_data=balance, initial_stored=0.0)
+                                  balance_data=balance, initial_stored=0.0,
+                                  vessel_variables=vvars, segment_variables=svars)
     return out

@@ -8,8 +8,10 @@ exact over a linear taper). Because R and L in one branch commute, the chain is 
 n + 1 BloodVessels ``(R=0, C=c_0, L=L_1), (R_1, c_1, L_2), …, (R_n, c_n, L=0)`` joined by
 one-to-one ``NORMAL_JUNCTION``s; junction nodes become ``NORMAL_JUNCTION``s too (each vessel's
 end capacitance sits at the junction pressure, as in the core). ``RCL`` vessels (lumped values)
-are one BloodVessel; other lumped vessels follow the arrangement as a one-segment chain, with
-their stenosis coefficient next to R. The exported circuit is therefore the model's own circuit,
+are one BloodVessel; other lumped vessels follow the arrangement as a chain of their
+``segments`` (R, L, C and S split evenly, as the core does), with the stenosis coefficient next
+to R. The segments come from the core's segment table, so the exporter and the core cannot
+disagree on the physics. The exported circuit is therefore the model's own circuit,
 and svZeroDSolver's generalized-α run with the same step gives the same waveforms. Boundary
 conditions become FLOW, PRESSURE, RESISTANCE and RCR; Fourier and periodic-cubic waveforms are
 sampled (``samples`` points per period; svZeroDSolver interpolates linearly).
@@ -17,7 +19,6 @@ sampled (``samples`` points per period; svZeroDSolver interpolates linearly).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -27,66 +28,19 @@ from oxyline.errors import UnsupportedElement
 from oxyline.model import Model
 from oxyline.units import CGS_TO_SI
 
-_GAUSS5 = ((0.0, 0.5688888888888889), (-0.5384693101056831, 0.4786286704993665),
-           (0.5384693101056831, 0.4786286704993665), (-0.906179845938664, 0.2369268850561891),
-           (0.906179845938664, 0.2369268850561891))
-
-
-def segment_rlc(dx: float, r0: float, r1: float, density: float, viscosity: float,
-                wall: Mapping[str, float] | None = None, wall_model: str = "thin",
-                inertance_profile: str = "flat") -> tuple[float, float, float]:
-    """(R, L, C) in SI of a segment of length ``dx`` whose radius goes linearly from ``r0`` to
-    ``r1`` (the core's formulas: closed forms for R and L, 5-point Gauss for C)."""
-    pi = math.pi
-    resistance = 8 * viscosity / pi * dx * (r0 * r0 + r0 * r1 + r1 * r1) / (3 * r0**3 * r1**3)
-    lf = 4.0 / 3.0 if inertance_profile == "poiseuille" else 1.0
-    inductance = lf * density / pi * dx / (r0 * r1)
-    compliance = 0.0
-    if wall is not None and "wall_thickness" in wall and "youngs_modulus" in wall:
-        e, h = wall["youngs_modulus"], wall["wall_thickness"]
-        nu = wall.get("poisson_ratio", 0.5)
-        for xi, w in _GAUSS5:
-            r = r0 + (r1 - r0) * 0.5 * (xi + 1)
-            if wall_model == "thick":
-                a, b = r, r + h
-                c = 2 * pi * a * a * (1 + nu) * ((1 - 2 * nu) * a * a + b * b) / (e * (b * b - a * a))
-            else:
-                c = 2 * pi * r**3 * (1 - nu * nu) / (e * h)
-            compliance += 0.5 * w * dx * c
-    return resistance, inductance, compliance
-
 
 def vessel_segments(model: Model) -> dict[str, list[dict[str, float]]]:
     """Per vessel, the list of segments with SI ``R``, ``L``, ``C``, ``S`` and ``length``
-    (``length`` is 0 for lumped vessels), as the core builds them."""
-    canon = model.canonical
-    blood = canon["blood"]
-    max_len = canon.get("max_segment_length")
-    out: dict[str, list[dict[str, float]]] = {}
-    for v in canon["vessels"]:
-        if "lumped" in v:
-            lp = v["lumped"]
-            out[v["name"]] = [{"R": lp["resistance"], "L": lp.get("inductance", 0.0),
-                               "C": lp.get("capacitance", 0.0),
-                               "S": lp.get("stenosis_coefficient", 0.0), "length": 0.0}]
-            continue
-        g = v["geometry"]
-        if "segments" in v:
-            n = int(v["segments"])
-        elif max_len:
-            n = max(1, math.ceil(g["length"] / max_len * (1 - 1e-12)))
-        else:
-            n = 1
-        dx = g["length"] / n
-        segs = []
-        for k in range(n):
-            r0 = g["radius_in"] + (g["radius_out"] - g["radius_in"]) * k / n
-            r1 = g["radius_in"] + (g["radius_out"] - g["radius_in"]) * (k + 1) / n
-            R, L, C = segment_rlc(dx, r0, r1, blood["density"], blood["viscosity"], g,
-                                  canon.get("wall_model", "thin"),
-                                  canon.get("inertance_profile", "flat"))
-            segs.append({"R": R, "L": L, "C": C, "S": 0.0, "length": dx})
-        out[v["name"]] = segs
+    (``length`` is 0 for lumped vessels), read from the core's segment table
+    (``model.network.segment_table()``): the segments the core assembled, never a copy of its
+    formulas."""
+    t = model.network.segment_table()
+    names = t["vessel_names"]
+    out: dict[str, list[dict[str, float]]] = {name: [] for name in names}
+    cols = [t[k].tolist() for k in ("vessel", "resistance", "inductance", "compliance",
+                                    "stenosis", "length")]
+    for v, R, L, C, S, length in zip(*cols, strict=True):
+        out[names[v]].append({"R": R, "L": L, "C": C, "S": S, "length": length})
     return out
 
 

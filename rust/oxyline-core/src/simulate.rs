@@ -57,6 +57,9 @@ pub struct RunSettings {
     pub start: Start,
     pub newton: NewtonControl,
     pub probes: Vec<usize>,
+    /// Recorded columns of each species block of `Transport::observe` (see
+    /// `crate::output::Selection::species_columns`); None records every column.
+    pub species_columns: Option<Vec<usize>>,
 }
 
 #[derive(Debug, Clone)]
@@ -189,6 +192,9 @@ struct Recorder<'p, 's, 'f> {
     /// Species columns, one row per `observe` call (0 for flow-only runs).
     transport_cols: usize,
     transport: Vec<f64>,
+    /// Selected columns of every species block of `block` columns (None: all).
+    species_select: Option<&'p [usize]>,
+    block: usize,
     sink: Option<&'s mut OutputSink<'f>>,
     max_rows: usize,
 }
@@ -198,6 +204,17 @@ impl Recorder<'_, '_, '_> {
         self.times.push(t);
         self.data.extend(self.probes.iter().map(|&i| y[i]));
         self.max_rows = self.max_rows.max(self.times.len());
+    }
+    /// Keep the selected columns of one `observe` row (all species blocks).
+    fn push_species(&mut self, row: &[f64]) {
+        match self.species_select {
+            None => self.transport.extend_from_slice(row),
+            Some(sel) => {
+                for b in row.chunks(self.block.max(1)) {
+                    self.transport.extend(sel.iter().map(|&c| b[c]));
+                }
+            }
+        }
     }
     fn clear(&mut self) {
         self.times.clear();
@@ -583,17 +600,30 @@ fn run(
         }
     };
 
+    let block = transport.as_deref().map_or(0, |t| t.columns_per_species());
+    // the flow-only first pass of a transport run has no species to select
+    let species_select = s.species_columns.as_deref().filter(|_| transport.is_some());
+    if let Some(&c) = species_select.and_then(|sel| sel.iter().find(|&&c| c >= block)) {
+        return Err(Error::model(
+            "simulation output",
+            format!("species column {c} out of range (0..{block})"),
+        ));
+    }
+    let kept = species_select.map_or(block, <[usize]>::len);
     let mut rec = Recorder {
         probes: &s.probes,
         times: Vec::new(),
         data: Vec::new(),
         transport_cols: transport
             .as_deref()
-            .map_or(0, |t| t.species_names().len() * t.columns_per_species()),
+            .map_or(0, |t| t.species_names().len() * kept),
         transport: Vec::new(),
+        species_select,
+        block,
         sink,
         max_rows: 0,
     };
+    let mut obs_row = Vec::new();
     let max_cycles = if s.until_periodic.is_some() {
         s.max_cycles.max(s.cycles)
     } else {
@@ -621,10 +651,12 @@ fn run(
         if recorded && (!s.output_all_cycles || cycle == 0) {
             rec.record(if s.output_all_cycles { t0 } else { 0.0 }, &y);
             if let Some(tr) = transport.as_deref_mut() {
-                if let Err(e) = observe(tr, &mut stepper, t0, &y, &yd, &z, &mut rec.transport) {
+                obs_row.clear();
+                if let Err(e) = observe(tr, &mut stepper, t0, &y, &yd, &z, &mut obs_row) {
                     error = Some(e);
                     break 'cycles;
                 }
+                rec.push_species(&obs_row);
             }
             if committed && !rec.flush(false, &initial_stored) {
                 error = Some(Error::Interrupted { time: t0 });
@@ -712,12 +744,12 @@ fn run(
                 let keep =
                     s.output_all_cycles || s.until_periodic.is_some() || cycle + 1 == max_cycles;
                 if let Some(tp) = transport.as_deref_mut().filter(|_| keep) {
-                    if let Err(e) =
-                        observe(tp, &mut stepper, t_new, &y, &yd, &z, &mut rec.transport)
-                    {
+                    obs_row.clear();
+                    if let Err(e) = observe(tp, &mut stepper, t_new, &y, &yd, &z, &mut obs_row) {
                         error = Some(e);
                         break 'cycles;
                     }
+                    rec.push_species(&obs_row);
                 }
                 if committed && !rec.flush(false, &initial_stored) {
                     error = Some(Error::Interrupted { time: t_new });
@@ -793,7 +825,7 @@ fn run(
         error,
         transport: transport.map(|tr| TransportOutcome {
             species: tr.species_names(),
-            columns_per_species: tr.columns_per_species(),
+            columns_per_species: kept,
             data: rec.transport,
             initial_stored,
             final_state: z,

@@ -47,6 +47,7 @@ fn settings(probes: Vec<usize>, all_cycles: bool, until_periodic: Option<f64>) -
         start: Start::Steady,
         newton: NewtonControl::default(),
         probes,
+        species_columns: None,
     }
 }
 

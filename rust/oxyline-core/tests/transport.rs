@@ -290,6 +290,7 @@ fn settings(method: Method, dt: f64, cycles: usize, probes: Vec<usize>) -> RunSe
         start: Start::Steady,
         newton: NewtonControl::default(),
         probes,
+        species_columns: None,
     }
 }
 

@@ -3,9 +3,13 @@
 
 use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyUntypedArrayMethods};
 use oxyline_core::genalpha::NewtonControl;
-use oxyline_core::network::parse;
+use oxyline_core::output::{
+    BALANCE_VARIABLES, SEGMENT_VARIABLES, SPECIES_SEGMENT_VARIABLES, SPECIES_VESSEL_VARIABLES,
+    VESSEL_VARIABLES,
+};
+use oxyline_core::spec::parse;
 use oxyline_core::{
-    Assembled, Chunk, Dae, Error, Method, OutputSink, RunSettings, Start, Transport,
+    Assembled, Chunk, Dae, Error, Method, OutputSink, RunSettings, Selection, Start, Transport,
 };
 use pyo3::exceptions::{PyKeyboardInterrupt, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -13,6 +17,11 @@ use pyo3::types::PyDict;
 use std::cell::Cell;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
+
+// the schema names the columns `Transport::observe` writes, one name per column
+const _: () = assert!(oxyline_core::transport::VESSEL_COLUMNS == SPECIES_VESSEL_VARIABLES.len());
+const _: () = assert!(oxyline_core::transport::SEGMENT_COLUMNS == SPECIES_SEGMENT_VARIABLES.len());
+const _: () = assert!(oxyline_core::transport::BALANCE_COLUMNS == BALANCE_VARIABLES.len());
 
 pyo3::create_exception!(
     oxyline,
@@ -96,6 +105,24 @@ struct Network {
     transport: Option<Arc<Transport>>,
 }
 
+impl Network {
+    fn selection(
+        &self,
+        variables: Option<Vec<String>>,
+        vessels: Option<Vec<String>>,
+        segments: bool,
+    ) -> PyResult<Selection> {
+        Selection::resolve(
+            &self.inner.0.probes,
+            variables.as_deref(),
+            vessels.as_deref(),
+            segments,
+            self.transport.is_some(),
+        )
+        .map_err(to_py)
+    }
+}
+
 #[pymethods]
 impl Network {
     #[new]
@@ -159,6 +186,126 @@ impl Network {
         )?;
         d.set_item("n_vessel_columns", p.vessel_unknowns.len())?;
         d.set_item("n_segment_columns", p.segment_unknowns.len())?;
+        Ok(d)
+    }
+
+    /// Layout of the output selection (see `oxyline_core::output`): selected vessels, their
+    /// segment counts and positions, the selected variable names and the column counts.
+    #[pyo3(signature = (*, variables = None, vessels = None, segments = true))]
+    fn output_layout<'py>(
+        &self,
+        py: Python<'py>,
+        variables: Option<Vec<String>>,
+        vessels: Option<Vec<String>>,
+        segments: bool,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let sel = self.selection(variables, vessels, segments)?;
+        let p = &self.inner.0.probes;
+        let names = |list: &[&str], idx: &[usize]| -> Vec<String> {
+            idx.iter().map(|&i| list[i].to_owned()).collect()
+        };
+        let d = PyDict::new(py);
+        d.set_item(
+            "vessels",
+            sel.vessels
+                .iter()
+                .map(|&v| p.vessels[v].clone())
+                .collect::<Vec<_>>(),
+        )?;
+        d.set_item("segment_count", sel.segment_count(&p.segment_count, false))?;
+        d.set_item("segment_position", sel.segment_position(p).into_pyarray(py))?;
+        d.set_item(
+            "vessel_variables",
+            names(&VESSEL_VARIABLES, &sel.vessel_variables),
+        )?;
+        d.set_item(
+            "segment_variables",
+            names(&SEGMENT_VARIABLES, &sel.segment_variables),
+        )?;
+        d.set_item("n_columns", sel.flow_columns(p).len())?;
+        if let Some(t) = &self.transport {
+            let counts = t.out_segment_counts();
+            let td = PyDict::new(py);
+            td.set_item("species", t.species_names())?;
+            td.set_item(
+                "vessel_variables",
+                names(&SPECIES_VESSEL_VARIABLES, &sel.species_vessel_variables),
+            )?;
+            td.set_item(
+                "segment_variables",
+                names(&SPECIES_SEGMENT_VARIABLES, &sel.species_segment_variables),
+            )?;
+            td.set_item("segment_count", sel.segment_count(&counts, true))?;
+            td.set_item("columns_per_species", sel.species_columns(&counts).len())?;
+            d.set_item("transport", td)?;
+        }
+        Ok(d)
+    }
+
+    /// The segment table: one entry per flow segment of every vessel, in model order, with
+    /// the R, L, C, stenosis coefficient and volume the core assembled (SI; physics §1.1).
+    fn segment_table<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let a = &self.inner.0;
+        let t = &a.segments;
+        let col = |f: fn(&oxyline_core::SegmentRow) -> f64| {
+            t.iter().map(f).collect::<Vec<_>>().into_pyarray(py)
+        };
+        let d = PyDict::new(py);
+        d.set_item("vessel_names", a.circuit.vessel_names.clone())?;
+        d.set_item(
+            "vessel",
+            t.iter()
+                .map(|s| s.vessel)
+                .collect::<Vec<_>>()
+                .into_pyarray(py),
+        )?;
+        d.set_item(
+            "index",
+            t.iter()
+                .map(|s| s.index)
+                .collect::<Vec<_>>()
+                .into_pyarray(py),
+        )?;
+        d.set_item("resistance", col(|s| s.resistance))?;
+        d.set_item("inductance", col(|s| s.inductance))?;
+        d.set_item("compliance", col(|s| s.compliance))?;
+        d.set_item("stenosis", col(|s| s.stenosis))?;
+        d.set_item("volume", col(|s| s.volume))?;
+        d.set_item("length", col(|s| s.length))?;
+        d.set_item("radius_in", col(|s| s.radius_in))?;
+        d.set_item("radius_out", col(|s| s.radius_out))?;
+        d.set_item("x0", col(|s| s.x0))?;
+        d.set_item("x1", col(|s| s.x1))?;
+        d.set_item("position", col(|s| s.position))?;
+        Ok(d)
+    }
+
+    /// The exact steady state of the mean boundary conditions (the `start="steady"` state):
+    /// the full unknown vector, the pressure of every graph node by name, and the end
+    /// pressures and flows of every output vessel.
+    fn steady_state<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let inner = self.inner.clone();
+        let y = py
+            .detach(move || oxyline_core::simulate::steady_state(&inner.1))
+            .map_err(to_py)?;
+        let (a, _) = &*self.inner;
+        let p = &a.probes;
+        let d = PyDict::new(py);
+        let graph_nodes = a.summary.nodes;
+        d.set_item(
+            "nodes",
+            a.circuit.nodes[..graph_nodes]
+                .iter()
+                .map(|n| n.name.clone())
+                .collect::<Vec<_>>(),
+        )?;
+        d.set_item("node_pressure", y[..graph_nodes].to_vec().into_pyarray(py))?;
+        d.set_item("vessels", p.vessels.clone())?;
+        for (j, name) in VESSEL_VARIABLES.iter().enumerate() {
+            let v: Vec<f64> = p.vessel_unknowns.chunks(4).map(|u| y[u[j]]).collect();
+            d.set_item(*name, v.into_pyarray(py))?;
+        }
+        d.set_item("state", y.into_pyarray(py))?;
         Ok(d)
     }
 
@@ -294,7 +441,8 @@ impl Network {
     #[pyo3(signature = (*, period, cycles, output_every, method = "auto", rho_infty = 0.5, dt = None,
         until_periodic = None, max_cycles = 100, output_all_cycles = false, start = "steady",
         newton_atol = None, max_iterations = 30, segments = true, all_unknowns = false, progress = None,
-        transport = true, chunk_sink = None, chunk_rows = 1024, keep_current_cycle = true))]
+        transport = true, chunk_sink = None, chunk_rows = 1024, keep_current_cycle = true,
+        variables = None, vessels = None))]
     #[allow(clippy::too_many_arguments)]
     fn simulate<'py>(
         &self,
@@ -318,6 +466,8 @@ impl Network {
         chunk_sink: Option<Py<PyAny>>,
         chunk_rows: usize,
         keep_current_cycle: bool,
+        variables: Option<Vec<String>>,
+        vessels: Option<Vec<String>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         if chunk_rows == 0 {
             return Err(ModelError::new_err("simulation: chunk_rows must be >= 1"));
@@ -344,12 +494,26 @@ impl Network {
             }
         };
         let probes = &self.inner.0.probes;
-        let cols = if all_unknowns {
-            (0..self.inner.1.n).collect()
-        } else if segments {
-            probes.all()
+        // the default selection records every probe and every species column: that path is
+        // kept as it was (bit-identical rows)
+        let selected = variables.is_some() || vessels.is_some();
+        let sel = self.selection(variables, vessels, segments)?;
+        let (cols, species_columns) = if all_unknowns {
+            ((0..self.inner.1.n).collect(), None)
+        } else if !selected && segments {
+            (probes.all(), None)
         } else {
-            probes.vessel_unknowns.clone()
+            let counts = self
+                .transport
+                .as_ref()
+                .map(|t| t.out_segment_counts())
+                .unwrap_or_default();
+            (
+                sel.flow_columns(probes),
+                self.transport
+                    .as_ref()
+                    .map(|_| sel.species_columns(&counts)),
+            )
         };
         let settings = RunSettings {
             method,
@@ -367,6 +531,7 @@ impl Network {
                 max_iter: max_iterations,
             },
             probes: cols,
+            species_columns,
         };
         let inner = self.inner.clone();
         let mut species = if transport {
@@ -501,6 +666,18 @@ mod _core {
     #[pymodule_init]
     fn init(m: &pyo3::Bound<'_, pyo3::types::PyModule>) -> pyo3::PyResult<()> {
         m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+        // the column schema (`oxyline_core::output`): Python names no column itself
+        m.add("VESSEL_VARIABLES", super::VESSEL_VARIABLES.to_vec())?;
+        m.add("SEGMENT_VARIABLES", super::SEGMENT_VARIABLES.to_vec())?;
+        m.add(
+            "SPECIES_VESSEL_VARIABLES",
+            super::SPECIES_VESSEL_VARIABLES.to_vec(),
+        )?;
+        m.add(
+            "SPECIES_SEGMENT_VARIABLES",
+            super::SPECIES_SEGMENT_VARIABLES.to_vec(),
+        )?;
+        m.add("BALANCE_VARIABLES", super::BALANCE_VARIABLES.to_vec())?;
         m.add(
             "build_profile",
             if cfg!(debug_assertions) {

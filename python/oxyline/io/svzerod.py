@@ -1,0 +1,703 @@
+"""svZeroDSolver drop-in: run svZeroDSolver JSON inputs with oxyline's core.
+
+:func:`simulate` takes an svZeroDSolver configuration (a dict or a path to a JSON file) and
+returns the same pandas DataFrame as ``svzerod.simulate`` for vessel-based output: columns
+``name, time, flow_in, flow_out, pressure_in, pressure_out``, rows grouped by vessel in file
+order. Numbers are used in the file's own units (the equations are unit-agnostic; nothing is
+converted). With the default ``method="generalized-alpha"`` the time stepping, the steady
+initialisation and the Newton stopping rule are svZeroDSolver's, so results agree with the
+peer's to round-off.
+
+Supported: ``BloodVessel`` (``R_poiseuille``, ``C``, ``L``, ``stenosis_coefficient``),
+``NORMAL_JUNCTION`` (alias ``internal_junction``), ``BloodVesselJunction``, boundary conditions
+``FLOW``, ``PRESSURE``, ``RESISTANCE`` and ``RCR`` (outlets; FLOW and PRESSURE also at inlets),
+and the simulation parameters listed in ``docs/svzerod.md``. Anything else raises
+:class:`oxyline.UnsupportedElement` naming the element or key.
+
+Example::
+
+    import oxyline.svzerod as svz
+
+    config = {
+        "simulation_parameters": {"number_of_cardiac_cycles": 2,
+                                  "number_of_time_pts_per_cardiac_cycle": 5},
+        "boundary_conditions": [
+            {"bc_name": "INFLOW", "bc_type": "FLOW", "bc_values": {"Q": [5.0, 5.0], "t": [0.0, 1.0]}},
+            {"bc_name": "OUT", "bc_type": "RESISTANCE", "bc_values": {"R": 100.0, "Pd": 100.0}},
+        ],
+        "vessels": [
+            {"vessel_id": 0, "vessel_name": "aorta", "zero_d_element_type": "BloodVessel",
+             "zero_d_element_values": {"R_poiseuille": 100.0, "C": 1e-4},
+             "boundary_conditions": {"inlet": "INFLOW", "outlet": "OUT"}},
+        ],
+    }
+    df = svz.simulate(config)                 # same frame as svzerod.simulate(config)
+    print(df.round(6).iloc[0].to_dict())
+    # {'name': 'aorta', 'time': 0.0, 'flow_in': 5.0, 'flow_out': 5.0,
+    #  'pressure_in': 1100.0, 'pressure_out': 600.0}
+    df_rk4 = svz.simulate(config, method="rk4")   # explicit RK4, same output times
+    model = svz.to_model(config)              # an oxyline.Model, for oxyline.simulate etc.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from oxyline.errors import ModelError, UnsupportedElement
+from oxyline.model import Model, _build, _copy
+
+COLUMNS = ("name", "time", "flow_in", "flow_out", "pressure_in", "pressure_out")
+METHODS = ("generalized-alpha", "rk4")
+
+TOP_KEYS = {"simulation_parameters", "boundary_conditions", "vessels", "junctions"}
+# `description` is free text; the calibrator's observations and settings do not change a forward
+# simulation, and svZeroDSolver ignores them too
+TOP_IGNORED = {"description", "calibration_parameters", "y", "dy"}
+TOP_UNSUPPORTED = {
+    "external_solver_coupling_blocks": "3D-0D coupling blocks",
+    "closed_loop_blocks": "closed-loop blocks",
+    "valves": "valves",
+    "chambers": "heart chambers",
+    "initial_condition": "user initial conditions",
+    "initial_condition_d": "user initial conditions",
+}
+SIM_KEYS = {
+    "number_of_cardiac_cycles", "number_of_time_pts_per_cardiac_cycle", "absolute_tolerance",
+    "maximum_nonlinear_iterations", "steady_initial", "rho_infty", "output_variable_based",
+    "output_mean_only", "output_derivative", "output_all_cycles", "output_interval",
+    "cardiac_period", "use_cycle_to_cycle_error", "sim_cycle_to_cycle_percent_error",
+    "coupled_simulation", "number_of_time_pts", "external_step_size",
+}
+# written by SimVascular's model builders and ignored by svZeroDSolver
+SIM_IGNORED = {"density", "viscosity", "model_name"}
+# boolean options oxyline cannot honour when true
+SIM_UNSUPPORTED_FLAGS = {
+    "output_variable_based": "variable-based output",
+    "output_derivative": "derivative output",
+    "coupled_simulation": "3D-0D coupled simulation",
+}
+VESSEL_KEYS = {"vessel_id", "vessel_name", "zero_d_element_type", "zero_d_element_values",
+               "boundary_conditions", "vessel_length", "calibrate"}
+JUNCTION_KEYS = {"junction_name", "junction_type", "inlet_vessels", "outlet_vessels",
+                 "inlet_blocks", "outlet_blocks", "junction_values", "calibrate"}
+BC_ENTRY_KEYS = {"bc_name", "bc_type", "bc_values"}
+VESSEL_TYPES = {"BloodVessel"}
+NORMAL_JUNCTIONS = {"NORMAL_JUNCTION", "internal_junction"}
+JUNCTION_TYPES = NORMAL_JUNCTIONS | {"BloodVesselJunction"}
+BLOOD_VESSEL_PARAMS = {"R_poiseuille", "C", "L", "stenosis_coefficient"}
+BVJ_PARAMS = ("R_poiseuille", "L", "stenosis_coefficient")
+BC_PARAMS = {
+    "FLOW": {"Q", "t"},
+    "PRESSURE": {"P", "t"},
+    "RESISTANCE": {"R", "Pd"},
+    "RCR": {"Rp", "C", "Rd", "Pd"},
+}
+
+
+@dataclass
+class RunSettings:
+    """svZeroDSolver run settings, resolved (period, cycle count after the cycle-to-cycle
+    rule, step size)."""
+
+    period: float
+    cycles: int
+    points_per_cycle: int
+    dt: float
+    output_interval: int
+    output_all_cycles: bool
+    output_mean_only: bool
+    steady_initial: bool
+    rho_infty: float
+    absolute_tolerance: float
+    max_iterations: int
+
+
+# ------------------------------------------------------------------------------------------
+# reading and checking
+
+
+def _read_config(config: Mapping[str, Any] | str | os.PathLike[str]) -> dict[str, Any]:
+    if isinstance(config, Mapping):
+        return _copy(dict(config))
+    p = Path(config)
+    if not p.exists():
+        raise ModelError(f"{p}: file not found")
+    try:
+        data = json.loads(p.read_text())
+    except json.JSONDecodeError as exc:
+        raise ModelError(f"{p}: cannot parse JSON: {exc}") from exc
+    if not isinstance(data, dict):
+        raise ModelError(f"{p}: top level must be a JSON object")
+    return data
+
+
+def _is_comment(key: str) -> bool:
+    return isinstance(key, str) and key.startswith("_")
+
+
+def _mapping(d: Any, element: str) -> Mapping[str, Any]:
+    if not isinstance(d, Mapping):
+        raise ModelError(f"{element}: expected a JSON object, got {type(d).__name__}")
+    return d
+
+
+def _check_params(d: Any, allowed: set[str] | tuple[str, ...], element: str) -> Mapping[str, Any]:
+    d = _mapping(d, element)
+    for k in d:
+        if not _is_comment(k) and k not in allowed:
+            raise UnsupportedElement(
+                f"{element}: unknown parameter '{k}' (supported: {', '.join(sorted(allowed))})")
+    return d
+
+
+def _num(v: Any, element: str, key: str) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ModelError(f"{element}: '{key}' must be a number, got {v!r}")
+    x = float(v)
+    if not math.isfinite(x):
+        raise ModelError(f"{element}: '{key}' must be finite, got {x}")
+    return x
+
+
+def _numlist(v: Any, element: str, key: str) -> list[float]:
+    if not isinstance(v, (list, tuple)):
+        raise ModelError(f"{element}: '{key}' must be a list of numbers (svZeroDSolver reads "
+                         f"it as an array), got {v!r}")
+    return [_num(x, element, f"{key}[{i}]") for i, x in enumerate(v)]
+
+
+def _entry(raw: Any, where: str, name_key: str, label: str, allowed: Any, type_key: str,
+           types: Any) -> tuple[Mapping[str, Any], str, str, str]:
+    """Check one entry of a section list (vessel, junction, boundary condition): a mapping with a
+    name, only known keys and a supported type. Returns (entry, name, type, element label)."""
+    entry = _mapping(raw, where)
+    name = str(_required(entry, name_key, where))
+    el = f"{label} '{name}'"
+    for k in entry:
+        if k not in allowed and not _is_comment(k):
+            raise UnsupportedElement(f"{el}: unknown key '{k}'")
+    kind = _required(entry, type_key, el)
+    if kind not in types:
+        raise UnsupportedElement(f"{el}: {type_key} '{kind}' is not supported (supported: "
+                                 f"{', '.join(sorted(types))})")
+    return entry, name, kind, el
+
+
+def _required(d: Mapping[str, Any], key: str, element: str) -> Any:
+    if key not in d:
+        raise ModelError(f"{element}: missing '{key}'")
+    return d[key]
+
+
+def _flag(sim: Mapping[str, Any], key: str, default: bool) -> bool:
+    v = sim.get(key, default)
+    if not isinstance(v, bool):
+        raise ModelError(f"simulation_parameters: '{key}' must be true or false, got {v!r}")
+    return v
+
+
+def _int(sim: Mapping[str, Any], key: str, default: int | None, minimum: int) -> int:
+    if key not in sim and default is not None:
+        return default
+    v = _required(sim, key, "simulation_parameters")
+    if isinstance(v, float) and v.is_integer():  # JSON 10.0, read as an integer by svZeroDSolver
+        v = int(v)
+    if isinstance(v, bool) or not isinstance(v, int) or v < minimum:
+        raise ModelError(f"simulation_parameters: '{key}' must be an integer >= {minimum}, "
+                         f"got {v!r}")
+    return v
+
+
+# ------------------------------------------------------------------------------------------
+# time tables
+
+
+def _periodic_table(t: list[float], v: list[float], element: str) -> tuple[list[float], list[float]]:
+    """Time table over [0, P] that reproduces svZeroDSolver's lookup ``fmod(time, P)`` with
+    P = t[-1] - t[0] (linear extrapolation of the first segment below t[0])."""
+    for i in range(1, len(t)):
+        if t[i] <= t[i - 1]:
+            raise ModelError(f"{element}: 't' must be strictly increasing: t[{i}] = {t[i]} <= "
+                             f"t[{i - 1}] = {t[i - 1]}")
+    if t[0] == 0.0:
+        return t, v
+    if t[0] < 0.0:
+        raise UnsupportedElement(f"{element}: a time table starting before 0 (t[0] = {t[0]}) "
+                                 "is not supported")
+    period = t[-1] - t[0]
+
+    def f(r: float) -> float:
+        k = next((i for i, x in enumerate(t) if x >= r), len(t) - 1)
+        m = k - 1 if k else 1
+        return v[m] + (v[k] - v[m]) / (t[k] - t[m]) * (r - t[m])
+
+    times = [0.0] + [x for x in t if x < period] + [period]
+    return times, [f(x) for x in times]
+
+
+# ------------------------------------------------------------------------------------------
+# conversion
+
+
+def _check_period(cfg: Mapping[str, Any], sim: Mapping[str, Any]) -> None:
+    """svZeroDSolver's period consistency rules, checked over every block (also unsupported
+    ones, so that a mismatch is reported as such): each time table of a boundary condition
+    spans t[-1] - t[0], a ClosedLoopHeartAndPulmonary block has its cardiac_cycle_period, and
+    all of these and ``cardiac_period`` must be exactly equal."""
+    found: list[tuple[float, str]] = []
+    for b in cfg.get("boundary_conditions") or []:
+        vals = b.get("bc_values") if isinstance(b, Mapping) else None
+        if not isinstance(vals, Mapping) or not isinstance(vals.get("t"), list):
+            continue
+        t = vals["t"]
+        for k, v in vals.items():
+            if k != "t" and isinstance(v, list) and len(v) > 1 and len(t) > 1 and all(
+                    isinstance(x, (int, float)) for x in (t[0], t[-1])):
+                found.append((float(t[-1]) - float(t[0]),
+                              f"boundary condition '{b.get('bc_name')}' ({k})"))
+    for c in cfg.get("closed_loop_blocks") or []:
+        if isinstance(c, Mapping) and isinstance(c.get("cardiac_cycle_period"), (int, float)):
+            where = f"closed-loop block '{c.get('closed_loop_type')}'"
+            found.append((float(c["cardiac_cycle_period"]), where))
+    ref = None
+    for p, where in found:
+        if ref is None:
+            ref = (p, where)
+        elif p != ref[0]:
+            raise ModelError(f"{where}: Inconsistent cardiac cycle period defined in parameters "
+                             f"({p}, but {ref[1]} has {ref[0]})")
+    sim_period = sim.get("cardiac_period", -1.0)
+    if ref is not None and isinstance(sim_period, (int, float)) and sim_period >= 0 \
+            and sim_period != ref[0]:
+        raise ModelError(f"simulation_parameters: Inconsistent cardiac cycle period defined in "
+                         f"parameters (cardiac_period = {sim_period}, but {ref[1]} has a "
+                         f"period of {ref[0]})")
+
+
+def _convert(config: Mapping[str, Any] | str | os.PathLike[str]
+             ) -> tuple[dict[str, Any], RunSettings]:
+    """svZeroDSolver config -> (oxyline native dict, svZeroDSolver run settings)."""
+    cfg = _read_config(config)
+    if "simulation_parameters" not in cfg:
+        bad = [k for k in ("calibration_parameters", "y", "dy") if k in cfg]
+        if bad:
+            raise UnsupportedElement(f"model: '{bad[0]}' without 'simulation_parameters' is an "
+                                     "svZeroDCalibrator input; calibration is not supported")
+        raise ModelError("model: missing 'simulation_parameters' (Define simulation_parameters)")
+    if "boundary_conditions" not in cfg:
+        raise ModelError("model: missing 'boundary_conditions' (Define at least one boundary "
+                         "condition)")
+    # svZeroDSolver rejects an inconsistent period while loading, before anything else fails
+    _check_period(cfg, _mapping(cfg["simulation_parameters"], "simulation_parameters"))
+    for k in cfg:
+        if k in TOP_KEYS or k in TOP_IGNORED or _is_comment(k):
+            continue
+        if k in TOP_UNSUPPORTED:
+            if k in ("initial_condition", "initial_condition_d") or cfg[k]:
+                raise UnsupportedElement(f"model: '{k}' ({TOP_UNSUPPORTED[k]}) is not supported")
+            continue
+        raise UnsupportedElement(f"model: unknown top-level key '{k}'")
+
+    # ---- simulation parameters
+    sim = _mapping(cfg["simulation_parameters"], "simulation_parameters")
+    for k in sim:
+        if _is_comment(k) or k in SIM_IGNORED:
+            continue
+        if k not in SIM_KEYS:
+            raise UnsupportedElement(f"simulation_parameters: unknown key '{k}'")
+    for k, what in SIM_UNSUPPORTED_FLAGS.items():
+        if _flag(sim, k, False):
+            raise UnsupportedElement(f"simulation_parameters: '{k}' ({what}) is not supported")
+    cycles = _int(sim, "number_of_cardiac_cycles", None, 1)
+    pts = _int(sim, "number_of_time_pts_per_cardiac_cycle", None, 2)
+    interval = _int(sim, "output_interval", 1, 1)
+    max_iter = _int(sim, "maximum_nonlinear_iterations", 30, 1)
+    atol = _num(sim.get("absolute_tolerance", 1e-8), "simulation_parameters", "absolute_tolerance")
+    rho = _num(sim.get("rho_infty", 0.5), "simulation_parameters", "rho_infty")
+    cycle_error = _flag(sim, "use_cycle_to_cycle_error", False)
+    percent = _num(sim.get("sim_cycle_to_cycle_percent_error", 1.0), "simulation_parameters",
+                   "sim_cycle_to_cycle_percent_error")
+    sim_period = _num(sim.get("cardiac_period", -1.0), "simulation_parameters", "cardiac_period")
+
+    # ---- boundary conditions (svZeroDSolver adds their parameters in file order; the first
+    # time table fixes the period and every other must match it exactly)
+    bc_list = cfg["boundary_conditions"]
+    if not isinstance(bc_list, list) or not bc_list:
+        raise ModelError("boundary_conditions: must be a non-empty list")
+    bcs: dict[str, tuple[str, dict[str, Any]]] = {}
+    model_period = -1.0
+    for i, b in enumerate(bc_list):
+        b, name, kind, el = _entry(b, f"boundary_conditions[{i}]", "bc_name",
+                                   "boundary condition", BC_ENTRY_KEYS, "bc_type", BC_PARAMS)
+        el = f"{kind} boundary condition '{name}'"
+        vals = _check_params(_required(b, "bc_values", el), BC_PARAMS[kind], el)
+        if name in bcs:
+            raise ModelError(f"{el}: bc_name used twice")
+        native: dict[str, Any]
+        if kind in ("FLOW", "PRESSURE"):
+            key = "Q" if kind == "FLOW" else "P"
+            y = _numlist(_required(vals, key, el), el, key)
+            t = _numlist(_required(vals, "t", el), el, "t")
+            q = "flow" if kind == "FLOW" else "pressure"
+            if not y:
+                raise ModelError(f"{el}: '{key}' is empty")
+            if len(y) == 1:
+                native = {"type": q, q: y[0]}
+            else:
+                if len(t) != len(y):
+                    raise ModelError(f"{el}: 't' has {len(t)} entries but '{key}' has {len(y)}")
+                p = t[-1] - t[0]
+                if model_period > 0.0 and p != model_period:
+                    raise ModelError(f"{el}: Inconsistent cardiac cycle period defined in "
+                                     f"parameters (its table spans {p}, an earlier one "
+                                     f"{model_period})")
+                model_period = p
+                tt, yy = _periodic_table(t, y, el)
+                # svZeroDSolver's steady start uses the arithmetic mean of the samples
+                native = {"type": q, "time": tt, q: yy, "steady": sum(y) / len(y)}
+        elif kind == "RESISTANCE":
+            native = {"type": "resistance", "resistance": _num(_required(vals, "R", el), el, "R"),
+                      "pressure": _num(_required(vals, "Pd", el), el, "Pd")}
+        else:
+            native = {"type": "rcr",
+                      "proximal_resistance": _num(_required(vals, "Rp", el), el, "Rp"),
+                      "capacitance": _num(_required(vals, "C", el), el, "C"),
+                      "distal_resistance": _num(_required(vals, "Rd", el), el, "Rd"),
+                      "pressure": _num(vals.get("Pd", 0.0), el, "Pd")}
+        bcs[name] = (kind, native)
+
+    if model_period < 0.0 and sim_period < 0.0:
+        period = 1.0
+    elif model_period >= 0.0:
+        if sim_period >= 0.0 and model_period != sim_period:
+            raise ModelError(f"simulation_parameters: Inconsistent cardiac cycle period defined "
+                             f"in parameters (cardiac_period = {sim_period}, boundary "
+                             f"condition tables span {model_period})")
+        period = model_period
+    else:
+        period = sim_period
+    if not period > 0.0:
+        raise ModelError(f"simulation_parameters: the cardiac period must be > 0, got {period}")
+
+    if cycle_error and any(kind == "RCR" for kind, _ in bcs.values()):
+        # Pfaller et al. 2021, eq. 21, as in svZeroDSolver's Solver.cpp
+        tau = max(n["capacitance"] * n["distal_resistance"]
+                  for kind, n in bcs.values() if kind == "RCR")
+        cycles = math.ceil(-tau / period * math.log(percent / 100.0))
+        if cycles < 1:
+            raise ModelError(f"simulation_parameters: use_cycle_to_cycle_error gives {cycles} "
+                             "cycles (largest RCR time constant too small)")
+    elif cycle_error:
+        raise UnsupportedElement("simulation_parameters: 'use_cycle_to_cycle_error' without RCR "
+                                 "boundary conditions (extra cycles until the cap means "
+                                 "converge) is not supported")
+
+    # ---- vessels
+    vessels_in = cfg.get("vessels", [])
+    if not isinstance(vessels_in, list):
+        raise ModelError("vessels: must be a list")
+    vessels: list[dict[str, Any]] = []
+    ids: dict[Any, str] = {}
+    ends: dict[tuple[str, str], str] = {}  # (vessel, "in"/"out") -> node name
+    end_owner: dict[tuple[str, str], str] = {}
+    used_bcs: dict[str, str] = {}
+
+    def attach(vessel: str, end: str, node: str, what: str) -> None:
+        key = (vessel, end)
+        if key in ends:
+            raise ModelError(f"vessel '{vessel}': its {'inlet' if end == 'in' else 'outlet'} is "
+                             f"connected twice ({end_owner[key]} and {what})")
+        ends[key] = node
+        end_owner[key] = what
+
+    seen_names: set[str] = set()
+    for i, v in enumerate(vessels_in):
+        v, name, kind, el = _entry(v, f"vessels[{i}]", "vessel_name", "vessel", VESSEL_KEYS,
+                                   "zero_d_element_type", VESSEL_TYPES)
+        if name in seen_names:
+            raise ModelError(f"{el}: vessel_name used twice")
+        seen_names.add(name)
+        el = f"BloodVessel '{name}'"
+        vals = _check_params(_required(v, "zero_d_element_values", el), BLOOD_VESSEL_PARAMS, el)
+        lumped = {
+            "resistance": _num(_required(vals, "R_poiseuille", el), el, "R_poiseuille"),
+            "capacitance": _num(vals.get("C", 0.0), el, "C"),
+            "inductance": _num(vals.get("L", 0.0), el, "L"),
+            "stenosis_coefficient": _num(vals.get("stenosis_coefficient", 0.0), el,
+                                         "stenosis_coefficient"),
+        }
+        vid = _required(v, "vessel_id", el)
+        if vid in ids:
+            raise ModelError(f"{el}: vessel_id {vid!r} is also used by vessel '{ids[vid]}'")
+        ids[vid] = name
+        vessels.append({"name": name, "arrangement": "RCL", "lumped": lumped})
+        vbc = _mapping(v.get("boundary_conditions", {}), f"{el} boundary_conditions")
+        for side, bc_name in vbc.items():
+            if _is_comment(side):
+                continue
+            if side not in ("inlet", "outlet"):
+                raise UnsupportedElement(f"{el}: unknown boundary_conditions key '{side}'")
+            if bc_name not in bcs:
+                raise ModelError(f"{el}: its {side} boundary condition '{bc_name}' is not defined")
+            kind_bc = bcs[bc_name][0]
+            if side == "inlet" and kind_bc in ("RESISTANCE", "RCR"):
+                raise UnsupportedElement(
+                    f"{el}: {kind_bc} boundary condition '{bc_name}' at a vessel inlet is not "
+                    "supported (svZeroDSolver applies P - Pd = R Q with Q along the vessel, a "
+                    "negative resistance)")
+            if bc_name in used_bcs:
+                raise ModelError(f"boundary condition '{bc_name}': connected to both "
+                                 f"{used_bcs[bc_name]} and {el}")
+            used_bcs[bc_name] = el
+            attach(name, "in" if side == "inlet" else "out", bc_name,
+                   f"boundary condition '{bc_name}'")
+    vessel_names = {x["name"] for x in vessels}
+
+    # ---- junctions
+    junctions = cfg.get("junctions", [])
+    if not isinstance(junctions, list):
+        raise ModelError("junctions: must be a list")
+    hidden: list[dict[str, Any]] = []
+    for i, j in enumerate(junctions):
+        j, jname, kind, el = _entry(j, f"junctions[{i}]", "junction_name", "junction",
+                                    JUNCTION_KEYS, "junction_type", JUNCTION_TYPES)
+        el = f"{kind} '{jname}'"
+        if jname in bcs or jname in vessel_names:
+            raise ModelError(f"{el}: name already used by another block")
+
+        def resolve(key: str, by_id: bool, j: Mapping[str, Any] = j, el: str = el) -> list[str]:
+            items = j[key]
+            if not isinstance(items, list):
+                raise ModelError(f"{el}: '{key}' must be a list")
+            out = []
+            for x in items:
+                if by_id:
+                    if x not in ids:
+                        raise ModelError(f"{el}: '{key}' names vessel_id {x!r}, which no vessel has")
+                    out.append(ids[x])
+                elif x in vessel_names:
+                    out.append(str(x))
+                elif x in bcs:
+                    raise UnsupportedElement(f"{el}: connecting boundary condition '{x}' to a "
+                                             "junction is not supported")
+                else:
+                    raise ModelError(f"{el}: '{key}' names block '{x}', which is not defined")
+            return out
+
+        if "inlet_vessels" in j and "outlet_vessels" in j:
+            inlets, outlets = resolve("inlet_vessels", True), resolve("outlet_vessels", True)
+        elif "inlet_blocks" in j and "outlet_blocks" in j:
+            inlets, outlets = resolve("inlet_blocks", False), resolve("outlet_blocks", False)
+        else:
+            raise ModelError(f"{el}: needs 'inlet_vessels' and 'outlet_vessels' (vessel ids) or "
+                             "'inlet_blocks' and 'outlet_blocks' (names)")
+        what = f"junction '{jname}'"
+        if kind in NORMAL_JUNCTIONS:
+            _check_params(j.get("junction_values", {}), set(), el)
+            for name in inlets:
+                attach(name, "out", jname, what)
+            for name in outlets:
+                attach(name, "in", jname, what)
+            continue
+        # BloodVesselJunction: one inlet, an R(+S)-L branch (no C) to every outlet
+        vals = _check_params(_required(j, "junction_values", el), BVJ_PARAMS, el)
+        if len(inlets) != 1:
+            raise UnsupportedElement(f"{el}: {len(inlets)} inlets; a BloodVesselJunction has "
+                                     "exactly one")
+        lists = {}
+        for key in BVJ_PARAMS:
+            lists[key] = _numlist(_required(vals, key, el), el, key)
+            if len(lists[key]) != len(outlets):
+                raise ModelError(f"{el}: '{key}' has {len(lists[key])} entries for "
+                                 f"{len(outlets)} outlets")
+        attach(inlets[0], "out", jname, what)
+        for k, name in enumerate(outlets):
+            node = f"{jname}:{name}"
+            hidden.append({
+                "name": node, "from": jname, "to": node, "arrangement": "RCL", "output": False,
+                "lumped": {"resistance": lists["R_poiseuille"][k], "capacitance": 0.0,
+                           "inductance": lists["L"][k],
+                           "stenosis_coefficient": lists["stenosis_coefficient"][k]},
+            })
+            attach(name, "in", node, what)
+
+    if not vessels:
+        raise ModelError("model: no vessels")
+    for name in used_bcs.keys() ^ bcs.keys():
+        raise ModelError(f"boundary condition '{name}': not connected to any vessel")
+    for v in vessels:
+        v["from"] = ends.get((v["name"], "in"), f"{v['name']}:inlet")
+        v["to"] = ends.get((v["name"], "out"), f"{v['name']}:outlet")
+        v["description"] = "svZeroDSolver BloodVessel"
+    names = {x["name"] for x in vessels}
+    for h in hidden:
+        if h["name"] in names:
+            raise ModelError(f"junction branch '{h['name']}': name clashes with a vessel")
+
+    dt = period / (float(pts) - 1.0)
+    settings = RunSettings(
+        period=period, cycles=cycles, points_per_cycle=pts, dt=dt, output_interval=interval,
+        output_all_cycles=_flag(sim, "output_all_cycles", False),
+        output_mean_only=_flag(sim, "output_mean_only", False),
+        steady_initial=_flag(sim, "steady_initial", True), rho_infty=rho,
+        absolute_tolerance=atol, max_iterations=max_iter,
+    )
+    native: dict[str, Any] = {
+        "name": "svzerod",
+        "units": "SI",  # numbers pass through unconverted
+        "description": "converted from an svZeroDSolver input by oxyline.svzerod",
+        "period": period,
+        "vessels": vessels + hidden,
+        "boundary_conditions": {name: nat for name, (_, nat) in bcs.items()},
+        "simulation": {
+            "cycles": cycles,
+            "dt": dt,
+            "method": "generalized-alpha",
+            "rho_infty": rho,
+            "start": "svzerod-steady" if settings.steady_initial else "svzerod-zero",
+            "output": {"cycles": "all" if settings.output_all_cycles else "last",
+                       "every": dt * interval, "segments": False},
+        },
+    }
+    return native, settings
+
+
+def to_oxyline_dict(config: Mapping[str, Any] | str | os.PathLike[str]) -> dict[str, Any]:
+    """Translate an svZeroDSolver configuration into oxyline's native model schema.
+
+    Vessels become lumped ``arrangement: RCL`` vessels, junctions become shared nodes (a
+    ``BloodVesselJunction`` adds one hidden ``output: false`` R-L vessel per outlet), the
+    boundary conditions keep their names as node names. ``units`` is ``SI`` so that numbers are
+    used as they are.
+    """
+    return _convert(config)[0]
+
+
+def run_settings(config: Mapping[str, Any] | str | os.PathLike[str]) -> RunSettings:
+    """The resolved svZeroDSolver run settings (period, cycles, dt, output options)."""
+    return _convert(config)[1]
+
+
+def to_model(config: Mapping[str, Any] | str | os.PathLike[str]) -> Model:
+    """An :class:`oxyline.Model` for an svZeroDSolver configuration (see
+    :func:`to_oxyline_dict`); its ``simulation`` settings reproduce the file's."""
+    native, _ = _convert(config)
+    return _build(native)
+
+
+# ------------------------------------------------------------------------------------------
+# running
+
+
+def _table_spacings(native: Mapping[str, Any]) -> list[float]:
+    out = []
+    for bc in native["boundary_conditions"].values():
+        t = bc.get("time")
+        if t and len(t) > 1:
+            out.append(min(b - a for a, b in itertools.pairwise(t)))
+    return out
+
+
+def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
+             method: str = "generalized-alpha") -> Any:
+    """Run an svZeroDSolver configuration and return ``svzerod.simulate``'s DataFrame.
+
+    ``method="generalized-alpha"`` (default) reproduces svZeroDSolver's integrator, step and
+    Newton tolerance. ``method="rk4"`` uses oxyline's explicit RK4 with a stable sub-step
+    inside each output step (outputs at the same times). Inductor flows a FLOW condition fixes
+    (e.g. an R-L vessel fed by a FLOW condition) are made algebraic first; circuits still
+    singular after that raise :class:`oxyline.ModelError`.
+    """
+    import pandas as pd
+
+    if method not in METHODS:
+        raise ModelError(f"simulate: method must be one of {', '.join(METHODS)}, got {method!r}")
+    native, s = _convert(config)
+    model = _build(native)
+    steps = s.points_per_cycle - 1
+    k = s.output_interval
+    # global step indices svZeroDSolver outputs
+    first = 0 if s.output_all_cycles else steps * (s.cycles - 1)
+    wanted = np.arange(first, steps * s.cycles + 1, k)
+    # the core records every `stride`-th global step (and the start of the last cycle)
+    if method == "generalized-alpha" and (s.output_all_cycles or first % k == 0):
+        stride = k
+    else:
+        stride = 1
+    kw: dict[str, Any] = {
+        "period": s.period, "cycles": s.cycles, "method": method, "rho_infty": s.rho_infty,
+        "start": "svzerod-steady" if s.steady_initial else "svzerod-zero",
+        "newton_atol": s.absolute_tolerance, "max_iterations": s.max_iterations,
+        "output_all_cycles": s.output_all_cycles, "segments": False,
+    }
+    if method == "generalized-alpha":
+        kw.update(dt=s.dt, output_every=s.dt * stride)
+    else:
+        # sub-steps per output step: stable (half the RK4 limit) and resolving the time tables
+        dt_max = model.network.rk4_stability_limit()[0]
+        h = min([0.5 * dt_max] + _table_spacings(native))
+        sub = max(1, math.ceil(s.dt / h * (1.0 - 1e-12)))
+        kw.update(dt=s.dt / sub, output_every=s.dt)
+    names = [v["name"] for v in native["vessels"] if v.get("output", True)]
+    nv = len(names)
+    # The core streams its rows in small chunks, each written straight into the vessel-major
+    # (vessel, time, 4) block that becomes the DataFrame's float block: the run never holds a
+    # second, time-major copy of the output (the largest allocation at 10^4 vessels).
+    values = np.empty((nv, wanted.size, 4))
+    core_times: list[np.ndarray] = []
+    count = {"core": 0, "out": 0}
+
+    def take(chunk: Mapping[str, Any]) -> None:
+        t = np.asarray(chunk["times"])
+        data = np.asarray(chunk["data"]).reshape(len(t), -1)
+        first_row = count["core"]
+        count["core"] += len(t)
+        if stride == 1:  # every core row recorded: keep svZeroDSolver's every k-th
+            keep = (first_row + np.arange(len(t))) % k == 0
+            t, data = t[keep], data[keep]
+        o, n = count["out"], len(t)
+        if o + n > wanted.size:
+            raise ModelError(f"internal error: more than {wanted.size} output rows from the core")
+        values[:, o:o + n, :] = data[:, : 4 * nv].reshape(n, nv, 4).transpose(1, 0, 2)
+        core_times.append(t)
+        count["out"] = o + n
+
+    chunk_rows = max(1, (1 << 20) // max(1, 4 * nv))  # ~8 MB per chunk
+    raw = model.network.simulate(**kw, chunk_sink=take, chunk_rows=chunk_rows,
+                                 keep_current_cycle=False)
+    if "error" in raw:
+        raise raw["error"]
+    if count["out"] != wanted.size:
+        raise ModelError(f"internal error: {count['out']} output rows from the core, "
+                         f"expected {wanted.size}")
+    times = s.dt * wanted.astype(float)
+    if not s.output_all_cycles:
+        times = times - s.dt * float(first)
+    got = np.concatenate(core_times) if core_times else np.empty(0)
+    if np.max(np.abs(got - times), initial=0.0) > 1e-9 * s.period * max(1, s.cycles):
+        raise ModelError("internal error: output times of the core do not match svZeroDSolver's")
+    if s.output_mean_only:
+        mean = values.mean(axis=1)
+        return pd.DataFrame({
+            "name": names,  # pandas' default string dtype (str under pandas >= 3), as svzerod
+            "time": np.full(nv, np.nan),
+            "flow_in": mean[:, 2],
+            "flow_out": mean[:, 3],
+            "pressure_in": mean[:, 0],
+            "pressure_out": mean[:, 1],
+        })
+    from oxyline.result import long_table_vessel_major
+
+    return long_table_vessel_major(names, times, values.reshape(nv * wanted.size, 4))
+
+
+__all__ = ["RunSettings", "run_settings", "simulate", "to_model", "to_oxyline_dict"]

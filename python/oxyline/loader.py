@@ -1,0 +1,44 @@
+"""``oxyline.load_model``: one entry point for every model source. It recognises the source
+(a :class:`Model`, a dict, a file, a built-in name), sniffs the format of a mapping with
+:func:`oxyline.io.native.sniff_format` (the one format rule) and hands it to the right reader;
+:mod:`oxyline.model` itself only validates native dicts and imports no reader."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from oxyline.model import Model, _build, _copy
+
+
+def load_model(source: str | os.PathLike[str] | Mapping[str, Any] | Model) -> Model:
+    """Load and validate a network from a YAML/JSON file, a built-in model name, or a dict.
+
+    >>> import oxyline
+    >>> m = oxyline.load_model("bifurcation")
+    >>> m.vessel_names
+    ['parent', 'daughter1', 'daughter2']
+    """
+    from oxyline.io.native import read_mapping, sniff_format
+
+    if isinstance(source, Model):
+        return source
+    if isinstance(source, Mapping):
+        data = _copy(dict(source))
+    else:
+        p = Path(source)
+        if not p.exists() and not p.suffix:
+            from oxyline import models  # built-in models, then examples
+
+            return models.load(str(source))
+        data = read_mapping(p)
+    if sniff_format(data) == "svzerod":
+        from oxyline.io.svzerod import to_model
+
+        return to_model(data)
+    return _build(data)
+
+
+__all__ = ["load_model"]

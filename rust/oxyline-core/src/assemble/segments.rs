@@ -1,0 +1,188 @@
+//! Segment discretisation: a vessel's geometry or lumped values → its segments' R, L, C, S and
+//! volume (physics spec §1.1). This table is the one source of the per-segment physics; the
+//! Python layer reads it through the binding (`Network.segment_table`).
+
+use super::checks::{check_nonnegative, check_positive};
+use crate::error::{Error, Result};
+use crate::segment::{Blood, Wall, segment_rlc};
+use crate::spec::{Arrangement, GeometrySpec, LumpedSpec, NetworkSpec, VesselSpec};
+
+/// One flow segment of a vessel, as assembled (SI).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SegmentRow {
+    /// Vessel index in model order.
+    pub vessel: usize,
+    /// Position of the segment in its vessel, from the inlet (0-based).
+    pub index: usize,
+    pub resistance: f64,
+    pub inductance: f64,
+    pub compliance: f64,
+    /// Stenosis coefficient S of the pressure drop (R + S|Q|)Q.
+    pub stenosis: f64,
+    /// Lumen volume at the reference pressure (0 for lumped vessels).
+    pub volume: f64,
+    /// Segment length (0 for lumped vessels).
+    pub length: f64,
+    /// Radius at the segment's inlet and outlet ends (NaN for lumped vessels).
+    pub radius_in: f64,
+    pub radius_out: f64,
+    /// Distance of the segment ends from the vessel inlet (0 for lumped vessels).
+    pub x0: f64,
+    pub x1: f64,
+    /// Centre of the segment along the vessel (NaN for lumped vessels).
+    pub position: f64,
+}
+
+impl SegmentRow {
+    /// Mean radius (0 for lumped segments: no wall exchange).
+    pub fn mean_radius(&self) -> f64 {
+        if self.length > 0.0 {
+            0.5 * (self.radius_in + self.radius_out)
+        } else {
+            0.0
+        }
+    }
+}
+
+/// The segments of vessel `vi` of `spec`.
+pub(crate) fn discretise(
+    spec: &NetworkSpec,
+    vi: usize,
+    blood: Blood,
+    arrangement: Arrangement,
+) -> Result<Vec<SegmentRow>> {
+    let v = &spec.vessels[vi];
+    let el = format!("vessel '{}'", v.name);
+    match (&v.geometry, &v.lumped) {
+        (Some(_), Some(_)) => Err(Error::model(
+            &el,
+            "give either geometry or lumped values, not both",
+        )),
+        (None, None) => Err(Error::model(&el, "needs geometry or lumped values")),
+        (None, Some(l)) => lumped(v, vi, l, arrangement, &el),
+        (Some(g), None) => geometric(spec, v, vi, g, blood, arrangement, &el),
+    }
+}
+
+/// Lumped values split evenly over `segments` (one for RCL, svZeroDSolver's BloodVessel).
+fn lumped(
+    v: &VesselSpec,
+    vi: usize,
+    l: &LumpedSpec,
+    arrangement: Arrangement,
+    el: &str,
+) -> Result<Vec<SegmentRow>> {
+    check_nonnegative(el, "resistance", l.resistance)?;
+    check_nonnegative(el, "inductance", l.inductance)?;
+    check_nonnegative(el, "capacitance", l.capacitance)?;
+    // calibrated svZeroDSolver models carry negative coefficients: only finiteness is checked
+    if !l.stenosis_coefficient.is_finite() {
+        return Err(Error::model(
+            el,
+            format!(
+                "stenosis_coefficient must be finite, got {}",
+                l.stenosis_coefficient
+            ),
+        ));
+    }
+    let n = if arrangement == Arrangement::Rcl {
+        1
+    } else {
+        v.segments.unwrap_or(1)
+    };
+    if n == 0 {
+        return Err(Error::model(el, "segments must be >= 1, got 0"));
+    }
+    let nf = n as f64;
+    Ok((0..n)
+        .map(|k| SegmentRow {
+            vessel: vi,
+            index: k,
+            resistance: l.resistance / nf,
+            inductance: l.inductance / nf,
+            compliance: l.capacitance / nf,
+            stenosis: l.stenosis_coefficient / nf,
+            volume: 0.0,
+            length: 0.0,
+            radius_in: f64::NAN,
+            radius_out: f64::NAN,
+            x0: 0.0,
+            x1: 0.0,
+            position: f64::NAN,
+        })
+        .collect())
+}
+
+fn wall(spec: &NetworkSpec, g: &GeometrySpec, el: &str) -> Result<Option<Wall>> {
+    match (g.wall_thickness, g.youngs_modulus) {
+        (Some(h), Some(e)) => {
+            check_positive(el, "wall_thickness", h)?;
+            check_positive(el, "youngs_modulus", e)?;
+            if !(g.poisson_ratio.is_finite() && (0.0..0.5 + 1e-12).contains(&g.poisson_ratio)) {
+                return Err(Error::model(
+                    el,
+                    format!("poisson_ratio must be in [0, 0.5], got {}", g.poisson_ratio),
+                ));
+            }
+            Ok(Some(Wall {
+                thickness: h,
+                youngs_modulus: e,
+                poisson_ratio: g.poisson_ratio,
+                model: spec.wall_model,
+            }))
+        }
+        (None, None) => Ok(None),
+        _ => Err(Error::model(
+            el,
+            "give both wall_thickness and youngs_modulus (or neither for a rigid tube)",
+        )),
+    }
+}
+
+/// Equal-length segments along a linear taper, each integrated exactly.
+fn geometric(
+    spec: &NetworkSpec,
+    v: &VesselSpec,
+    vi: usize,
+    g: &GeometrySpec,
+    blood: Blood,
+    arrangement: Arrangement,
+    el: &str,
+) -> Result<Vec<SegmentRow>> {
+    if arrangement == Arrangement::Rcl {
+        return Err(Error::model(el, "the RCL arrangement needs lumped values"));
+    }
+    check_positive(el, "length", g.length)?;
+    check_positive(el, "radius_in", g.radius_in)?;
+    check_positive(el, "radius_out", g.radius_out)?;
+    let wall = wall(spec, g, el)?;
+    let n = match (v.segments, spec.max_segment_length) {
+        (Some(0), _) => return Err(Error::model(el, "segments must be >= 1, got 0")),
+        (Some(n), _) => n,
+        (None, Some(m)) => ((g.length / m) * (1.0 - 1e-12)).ceil().max(1.0) as usize,
+        (None, None) => 1,
+    };
+    let dx = g.length / n as f64;
+    Ok((0..n)
+        .map(|k| {
+            let r0 = g.radius_in + (g.radius_out - g.radius_in) * k as f64 / n as f64;
+            let r1 = g.radius_in + (g.radius_out - g.radius_in) * (k + 1) as f64 / n as f64;
+            let s = segment_rlc(dx, r0, r1, blood, wall, spec.inertance_profile);
+            SegmentRow {
+                vessel: vi,
+                index: k,
+                resistance: s.resistance,
+                inductance: s.inductance,
+                compliance: s.compliance,
+                stenosis: 0.0,
+                volume: s.volume,
+                length: dx,
+                radius_in: r0,
+                radius_out: r1,
+                x0: k as f64 * dx,
+                x1: (k + 1) as f64 * dx,
+                position: (k as f64 + 0.5) * dx,
+            }
+        })
+        .collect())
+}

@@ -1,0 +1,171 @@
+//! Stamp one vessel's segments into the circuit: its chain of interior points and series R–L
+//! branches, each segment's capacitance, volume and wall area shared between the branch's end
+//! nodes as the arrangement says (a junction node collects the shares of every vessel end
+//! meeting there), the segment geometry transport needs, and the vessel's output probes.
+
+use super::segments::SegmentRow;
+use crate::circuit::{Circuit, SegmentGeom};
+use crate::output::Probes;
+use crate::spec::Arrangement;
+
+/// The circuit nodes along a vessel (inlet node, interior points, outlet node) and its branches.
+pub(crate) struct Chain {
+    pub points: Vec<usize>,
+    pub branches: Vec<usize>,
+}
+
+/// Stamp vessel `name` (index `vessel` in `circuit.vessel_names`) between graph nodes
+/// `p_from` and `p_to`.
+pub(crate) fn stamp(
+    circuit: &mut Circuit,
+    name: &str,
+    segs: &[SegmentRow],
+    arrangement: Arrangement,
+    (p_from, p_to): (usize, usize),
+) -> Chain {
+    let vessel = circuit.vessel_names.len();
+    circuit.vessel_names.push(name.to_owned());
+    let n = segs.len();
+    // points 0..=n along the vessel; RCL has one interior point
+    let interior = if arrangement == Arrangement::Rcl {
+        1
+    } else {
+        n - 1
+    };
+    let mut points = Vec::with_capacity(interior + 2);
+    points.push(p_from);
+    for k in 0..interior {
+        points.push(circuit.add_node(format!("vessel '{name}' point {}", k + 1), 0.0, 0.0));
+    }
+    points.push(p_to);
+    let branches = if arrangement == Arrangement::Rcl {
+        stamp_rcl(circuit, name, vessel, &segs[0], &points)
+    } else {
+        stamp_segments(circuit, name, vessel, segs, arrangement, &points)
+    };
+    Chain { points, branches }
+}
+
+/// svZeroDSolver's BloodVessel: R (and stenosis), then C at the interior point, then L.
+fn stamp_rcl(
+    circuit: &mut Circuit,
+    name: &str,
+    vessel: usize,
+    s: &SegmentRow,
+    points: &[usize],
+) -> Vec<usize> {
+    let b0 = circuit.add_branch(
+        format!("vessel '{name}' resistance"),
+        points[0],
+        points[1],
+        s.resistance,
+        0.0,
+        s.stenosis,
+    );
+    circuit.nodes[points[1]].capacitance += s.compliance;
+    circuit.nodes[points[1]].volume += s.volume;
+    let b1 = circuit.add_branch(
+        format!("vessel '{name}' inductance"),
+        points[1],
+        points[2],
+        0.0,
+        s.inductance,
+        0.0,
+    );
+    circuit.segments.push(SegmentGeom {
+        vessel,
+        branch: b1,
+        nodes: [(points[1], 1.0), (points[1], 0.0)],
+        radius: 0.0,
+        x0: 0.0,
+        x1: 0.0,
+        volume: s.volume,
+        compliance: s.compliance,
+    });
+    vec![b0, b1]
+}
+
+/// One R–L branch per segment; C, volume and wall area at the ends by the arrangement.
+fn stamp_segments(
+    circuit: &mut Circuit,
+    name: &str,
+    vessel: usize,
+    segs: &[SegmentRow],
+    arrangement: Arrangement,
+    points: &[usize],
+) -> Vec<usize> {
+    let n = segs.len();
+    let (cp, cd) = match arrangement {
+        Arrangement::InvertedL => (1.0, 0.0),
+        Arrangement::L => (0.0, 1.0),
+        _ => (0.5, 0.5),
+    };
+    let mut branches = Vec::with_capacity(n);
+    for (k, s) in segs.iter().enumerate() {
+        let label = if n == 1 {
+            format!("vessel '{name}'")
+        } else {
+            format!("vessel '{name}' segment {}", k + 1)
+        };
+        let (a, b) = (points[k], points[k + 1]);
+        let branch = circuit.add_branch(label, a, b, s.resistance, s.inductance, s.stenosis);
+        branches.push(branch);
+        circuit.nodes[a].capacitance += cp * s.compliance;
+        circuit.nodes[b].capacitance += cd * s.compliance;
+        circuit.nodes[a].volume += cp * s.volume;
+        circuit.nodes[b].volume += cd * s.volume;
+        let radius = s.mean_radius();
+        let area = 2.0 * std::f64::consts::PI * radius * (s.x1 - s.x0);
+        circuit.nodes[a].wall_area += cp * area;
+        circuit.nodes[b].wall_area += cd * area;
+        circuit.segments.push(SegmentGeom {
+            vessel,
+            branch,
+            nodes: [(a, cp), (b, cd)],
+            radius,
+            x0: s.x0,
+            x1: s.x1,
+            volume: s.volume,
+            compliance: s.compliance,
+        });
+    }
+    branches
+}
+
+/// Record the vessel's probes: its end pressures and flows and, with `segments`, every
+/// segment's end pressures and flow (branch indices; shifted to unknowns once all nodes exist).
+pub(crate) fn record_probes(
+    probes: &mut Probes,
+    name: &str,
+    chain: &Chain,
+    segs: &[SegmentRow],
+    arrangement: Arrangement,
+    segments: bool,
+) {
+    let (points, branches) = (&chain.points, &chain.branches);
+    probes.vessels.push(name.to_owned());
+    probes.vessel_unknowns.extend([
+        points[0],
+        points[points.len() - 1],
+        branches[0],
+        branches[branches.len() - 1],
+    ]);
+    if !segments {
+        return;
+    }
+    if arrangement == Arrangement::Rcl {
+        probes.segment_count.push(1);
+        probes
+            .segment_unknowns
+            .extend([points[0], points[2], branches[0]]);
+        probes.segment_position.push(f64::NAN);
+    } else {
+        probes.segment_count.push(segs.len());
+        for (k, s) in segs.iter().enumerate() {
+            probes
+                .segment_unknowns
+                .extend([points[k], points[k + 1], branches[k]]);
+            probes.segment_position.push(s.position);
+        }
+    }
+}

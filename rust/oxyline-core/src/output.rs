@@ -1,0 +1,321 @@
+//! What a run records: the probes (where each output variable lives in the unknown vector),
+//! the column schema (the names of every result variable, exported to Python so that no
+//! column name is written twice) and the output selection (variables × vessels × segments).
+//!
+//! Row layout of the flow output: for every selected vessel its selected vessel variables, then
+//! for every segment of every selected vessel its selected segment variables. Row layout of one
+//! species block: the same with the species variables, then the mass-balance columns.
+
+use crate::error::{Error, Result};
+use std::collections::HashMap;
+
+/// Flow variables of a vessel, in the order of `Probes::vessel_unknowns`.
+pub const VESSEL_VARIABLES: [&str; 4] = ["pressure_in", "pressure_out", "flow_in", "flow_out"];
+/// Flow variables of a segment, in the order of `Probes::segment_unknowns`.
+pub const SEGMENT_VARIABLES: [&str; 3] = [
+    "segment_pressure_in",
+    "segment_pressure_out",
+    "segment_flow",
+];
+/// Species variables of a vessel, in the order `Transport::observe` writes them.
+pub const SPECIES_VESSEL_VARIABLES: [&str; 5] = [
+    "concentration_in",
+    "concentration_out",
+    "flux_in",
+    "flux_out",
+    "wall_flux",
+];
+/// Species variables of a segment, in the order `Transport::observe` writes them.
+pub const SPECIES_SEGMENT_VARIABLES: [&str; 5] = [
+    "segment_concentration",
+    "segment_flux",
+    "segment_wall_flux",
+    "segment_tl_resistance",
+    "segment_tl_inductance",
+];
+/// Cumulative mass-balance columns of a species (always recorded: five numbers per row).
+pub const BALANCE_VARIABLES: [&str; 5] = ["stored", "inflow", "outflow", "wall_uptake", "decay"];
+
+/// Where each output variable lives in the unknown vector.
+#[derive(Debug, Clone, Default)]
+pub struct Probes {
+    /// Vessels with output, in model order.
+    pub vessels: Vec<String>,
+    /// Unknown indices: for each output vessel [pressure_in, pressure_out, flow_in, flow_out].
+    pub vessel_unknowns: Vec<usize>,
+    /// Per output vessel, the number of segments and its first segment in the segment list.
+    pub segment_count: Vec<usize>,
+    /// For every segment of output vessels: [pressure_in, pressure_out, flow].
+    pub segment_unknowns: Vec<usize>,
+    /// Segment positions (m from the vessel inlet, centre of the segment; NaN for lumped).
+    pub segment_position: Vec<f64>,
+}
+
+impl Probes {
+    pub fn all(&self) -> Vec<usize> {
+        let mut v = self.vessel_unknowns.clone();
+        v.extend(&self.segment_unknowns);
+        v
+    }
+
+    /// Branch (flow) probes were recorded as branch indices: flow unknowns follow the
+    /// `n_nodes` pressure unknowns.
+    pub(crate) fn shift_branches(&mut self, n_nodes: usize) {
+        for (i, x) in self.vessel_unknowns.iter_mut().enumerate() {
+            if i % 4 >= 2 {
+                *x += n_nodes;
+            }
+        }
+        for (i, x) in self.segment_unknowns.iter_mut().enumerate() {
+            if i % 3 == 2 {
+                *x += n_nodes;
+            }
+        }
+    }
+
+    /// First segment of every output vessel, and the total (prefix sums of `counts`).
+    fn starts(counts: &[usize]) -> Vec<usize> {
+        let mut s = Vec::with_capacity(counts.len() + 1);
+        s.push(0);
+        for c in counts {
+            s.push(s[s.len() - 1] + c);
+        }
+        s
+    }
+}
+
+/// A resolved output selection. Indices refer to `Probes::vessels` and to the variable lists.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Selection {
+    pub vessels: Vec<usize>,
+    pub vessel_variables: Vec<usize>,
+    pub segment_variables: Vec<usize>,
+    pub species_vessel_variables: Vec<usize>,
+    pub species_segment_variables: Vec<usize>,
+}
+
+const ELEMENT: &str = "simulation output";
+
+impl Selection {
+    /// Resolve the user's selection. `variables`/`vessels` None select everything (the
+    /// default); `segments` false drops every segment variable. Unknown names are model errors
+    /// naming them; species variables need a model with species.
+    pub fn resolve(
+        probes: &Probes,
+        variables: Option<&[String]>,
+        vessels: Option<&[String]>,
+        segments: bool,
+        has_species: bool,
+    ) -> Result<Selection> {
+        let all = |n: usize| (0..n).collect::<Vec<_>>();
+        let mut sel = Selection {
+            vessels: all(probes.vessels.len()),
+            vessel_variables: all(VESSEL_VARIABLES.len()),
+            segment_variables: all(SEGMENT_VARIABLES.len()),
+            species_vessel_variables: all(SPECIES_VESSEL_VARIABLES.len()),
+            species_segment_variables: all(SPECIES_SEGMENT_VARIABLES.len()),
+        };
+        if let Some(vars) = variables {
+            sel.select_variables(vars, has_species)?;
+        }
+        if let Some(names) = vessels {
+            let index: HashMap<&str, usize> = probes
+                .vessels
+                .iter()
+                .enumerate()
+                .map(|(i, n)| (n.as_str(), i))
+                .collect();
+            let mut chosen = Vec::with_capacity(names.len());
+            for name in names {
+                match index.get(name.as_str()) {
+                    Some(&i) => chosen.push(i),
+                    None => {
+                        return Err(Error::model(
+                            ELEMENT,
+                            format!(
+                                "unknown vessel '{name}' (not in the model, or `output: false`)"
+                            ),
+                        ));
+                    }
+                }
+            }
+            // model order, each once: the columns then follow the full run's order
+            chosen.sort_unstable();
+            chosen.dedup();
+            sel.vessels = chosen;
+        }
+        if !segments {
+            sel.segment_variables.clear();
+            sel.species_segment_variables.clear();
+        }
+        Ok(sel)
+    }
+
+    fn select_variables(&mut self, vars: &[String], has_species: bool) -> Result<()> {
+        let lists: [(&[&str], bool); 4] = [
+            (&VESSEL_VARIABLES, false),
+            (&SEGMENT_VARIABLES, false),
+            (&SPECIES_VESSEL_VARIABLES, true),
+            (&SPECIES_SEGMENT_VARIABLES, true),
+        ];
+        let mut chosen: [Vec<usize>; 4] = Default::default();
+        for v in vars {
+            let hit = lists
+                .iter()
+                .enumerate()
+                .find_map(|(l, (names, _))| names.iter().position(|n| n == v).map(|i| (l, i)));
+            let Some((l, i)) = hit else {
+                let known: Vec<&str> = lists.iter().flat_map(|(n, _)| n.iter().copied()).collect();
+                return Err(Error::model(
+                    ELEMENT,
+                    format!("unknown variable '{v}' (known: {})", known.join(", ")),
+                ));
+            };
+            if lists[l].1 && !has_species {
+                return Err(Error::model(
+                    ELEMENT,
+                    format!("variable '{v}' needs species transport, which the model has not"),
+                ));
+            }
+            chosen[l].push(i);
+        }
+        for c in &mut chosen {
+            c.sort_unstable();
+            c.dedup();
+        }
+        let [a, b, c, d] = chosen;
+        self.vessel_variables = a;
+        self.segment_variables = b;
+        self.species_vessel_variables = c;
+        self.species_segment_variables = d;
+        Ok(())
+    }
+
+    /// Segments recorded per selected vessel (empty when no segment variable is selected).
+    pub fn segment_count(&self, counts: &[usize], species: bool) -> Vec<usize> {
+        let any = if species {
+            !self.species_segment_variables.is_empty()
+        } else {
+            !self.segment_variables.is_empty()
+        };
+        if !any {
+            return Vec::new();
+        }
+        self.vessels.iter().map(|&v| counts[v]).collect()
+    }
+
+    /// Unknown indices of the flow columns, in the row layout of the module docs.
+    pub fn flow_columns(&self, probes: &Probes) -> Vec<usize> {
+        let mut out = Vec::new();
+        for &v in &self.vessels {
+            out.extend(
+                self.vessel_variables
+                    .iter()
+                    .map(|&j| probes.vessel_unknowns[4 * v + j]),
+            );
+        }
+        if !self.segment_variables.is_empty() {
+            let starts = Probes::starts(&probes.segment_count);
+            for &v in &self.vessels {
+                for s in starts[v]..starts[v + 1] {
+                    out.extend(
+                        self.segment_variables
+                            .iter()
+                            .map(|&j| probes.segment_unknowns[3 * s + j]),
+                    );
+                }
+            }
+        }
+        out
+    }
+
+    /// Segment positions of the selected vessels' segments.
+    pub fn segment_position(&self, probes: &Probes) -> Vec<f64> {
+        let starts = Probes::starts(&probes.segment_count);
+        let mut out = Vec::new();
+        if !self.segment_variables.is_empty() {
+            for &v in &self.vessels {
+                out.extend_from_slice(&probes.segment_position[starts[v]..starts[v + 1]]);
+            }
+        }
+        out
+    }
+
+    /// Positions, within one species block of `Transport::observe` (vessels with
+    /// `segment_counts` segments each), of the selected species columns.
+    pub fn species_columns(&self, segment_counts: &[usize]) -> Vec<usize> {
+        let (kv, ks) = (
+            SPECIES_VESSEL_VARIABLES.len(),
+            SPECIES_SEGMENT_VARIABLES.len(),
+        );
+        let starts = Probes::starts(segment_counts);
+        let nv = segment_counts.len();
+        let mut out = Vec::new();
+        for &v in &self.vessels {
+            out.extend(self.species_vessel_variables.iter().map(|&j| kv * v + j));
+        }
+        if !self.species_segment_variables.is_empty() {
+            for &v in &self.vessels {
+                for s in starts[v]..starts[v + 1] {
+                    out.extend(
+                        self.species_segment_variables
+                            .iter()
+                            .map(|&j| kv * nv + ks * s + j),
+                    );
+                }
+            }
+        }
+        let balance = kv * nv + ks * starts[nv];
+        out.extend((0..BALANCE_VARIABLES.len()).map(|j| balance + j));
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn probes() -> Probes {
+        Probes {
+            vessels: vec!["a".into(), "b".into()],
+            vessel_unknowns: (0..8).collect(),
+            segment_count: vec![2, 1],
+            segment_unknowns: (100..109).collect(),
+            segment_position: vec![0.5, 1.5, 0.5],
+        }
+    }
+
+    #[test]
+    fn the_default_selection_is_every_probe_and_every_species_column() {
+        let p = probes();
+        let s = Selection::resolve(&p, None, None, true, true).unwrap();
+        assert_eq!(s.flow_columns(&p), p.all());
+        // 2 vessels × 5 + 3 segments × 5 + 5 balance columns
+        assert_eq!(s.species_columns(&[2, 1]), (0..30).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn a_selection_keeps_the_full_layout_order() {
+        let p = probes();
+        let vars: Vec<String> = ["flow_out", "segment_flow", "wall_flux"]
+            .map(String::from)
+            .to_vec();
+        let s = Selection::resolve(&p, Some(&vars), Some(&["b".into()]), true, true).unwrap();
+        assert_eq!(s.flow_columns(&p), vec![7, 108]);
+        assert_eq!(s.segment_position(&p), vec![0.5]);
+        assert_eq!(s.species_columns(&[2, 1]), vec![9, 25, 26, 27, 28, 29]);
+        let none = Selection::resolve(&p, None, Some(&[]), true, true).unwrap();
+        assert!(none.flow_columns(&p).is_empty());
+    }
+
+    #[test]
+    fn unknown_names_are_model_errors_naming_them() {
+        let p = probes();
+        let e = Selection::resolve(&p, Some(&["flux".into()]), None, true, true).unwrap_err();
+        assert!(e.to_string().contains("unknown variable 'flux'"), "{e}");
+        let e = Selection::resolve(&p, None, Some(&["c".into()]), true, true).unwrap_err();
+        assert!(e.to_string().contains("unknown vessel 'c'"), "{e}");
+        let e = Selection::resolve(&p, Some(&["flux_in".into()]), None, true, false).unwrap_err();
+        assert!(e.to_string().contains("needs species transport"), "{e}");
+    }
+}

@@ -1,0 +1,152 @@
+//! The network model as written by a front end: every serde input type of the canonical SI
+//! JSON (vessels joined at named nodes, boundary conditions at free ends, blood, segmentation,
+//! and the species transport section). Nothing here builds a circuit: see `crate::assemble`.
+
+use crate::segment::{InertanceProfile, WallModel};
+use crate::waveform::WaveformSpec;
+use serde::Deserialize;
+use std::collections::BTreeMap;
+
+use crate::error::{Error, Result};
+
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq, Default)]
+pub enum Arrangement {
+    /// Capacitor at the proximal node, then R–L to the next node (default; flow-in/pressure-out).
+    #[default]
+    #[serde(rename = "inverted-L")]
+    InvertedL,
+    /// R–L, then the capacitor at the distal node.
+    #[serde(rename = "L")]
+    L,
+    /// Half the capacitance at each end of the R–L branch.
+    #[serde(rename = "pi")]
+    Pi,
+    /// svZeroDSolver's BloodVessel: R (and stenosis), then the capacitor, then L.
+    #[serde(rename = "RCL")]
+    Rcl,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BloodSpec {
+    #[serde(default = "default_density")]
+    pub density: f64,
+    #[serde(default = "default_viscosity")]
+    pub viscosity: f64,
+}
+fn default_density() -> f64 {
+    1050.0
+}
+fn default_viscosity() -> f64 {
+    3.5e-3
+}
+impl Default for BloodSpec {
+    fn default() -> Self {
+        BloodSpec {
+            density: default_density(),
+            viscosity: default_viscosity(),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GeometrySpec {
+    pub length: f64,
+    pub radius_in: f64,
+    pub radius_out: f64,
+    #[serde(default)]
+    pub wall_thickness: Option<f64>,
+    #[serde(default)]
+    pub youngs_modulus: Option<f64>,
+    #[serde(default = "default_poisson")]
+    pub poisson_ratio: f64,
+}
+fn default_poisson() -> f64 {
+    0.5
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LumpedSpec {
+    pub resistance: f64,
+    #[serde(default)]
+    pub inductance: f64,
+    #[serde(default)]
+    pub capacitance: f64,
+    #[serde(default)]
+    pub stenosis_coefficient: f64,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VesselSpec {
+    pub name: String,
+    pub from: String,
+    pub to: String,
+    #[serde(default)]
+    pub segments: Option<usize>,
+    #[serde(default)]
+    pub geometry: Option<GeometrySpec>,
+    #[serde(default)]
+    pub lumped: Option<LumpedSpec>,
+    #[serde(default)]
+    pub arrangement: Option<Arrangement>,
+    #[serde(default = "yes")]
+    pub output: bool,
+}
+fn yes() -> bool {
+    true
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(tag = "type", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum BoundarySpec {
+    Flow {
+        flow: WaveformSpec,
+    },
+    Pressure {
+        pressure: WaveformSpec,
+    },
+    Resistance {
+        resistance: f64,
+        #[serde(default)]
+        pressure: Option<WaveformSpec>,
+    },
+    Rcr {
+        proximal_resistance: f64,
+        capacitance: f64,
+        distal_resistance: f64,
+        #[serde(default)]
+        pressure: Option<WaveformSpec>,
+    },
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NetworkSpec {
+    #[serde(default)]
+    pub name: String,
+    #[serde(default)]
+    pub blood: BloodSpec,
+    #[serde(default)]
+    pub arrangement: Arrangement,
+    #[serde(default)]
+    pub wall_model: WallModel,
+    #[serde(default)]
+    pub inertance_profile: InertanceProfile,
+    #[serde(default)]
+    pub max_segment_length: Option<f64>,
+    pub vessels: Vec<VesselSpec>,
+    pub boundary_conditions: BTreeMap<String, BoundarySpec>,
+    #[serde(default = "yes")]
+    pub output_segments: bool,
+    /// Species transport (oxygen and other solutes); absent for flow-only models.
+    #[serde(default)]
+    pub transport: Option<crate::transport::TransportSpec>,
+}
+
+/// Read a canonical SI JSON model.
+pub fn parse(json: &str) -> Result<NetworkSpec> {
+    serde_json::from_str(json).map_err(|e| Error::model("model", e.to_string()))
+}

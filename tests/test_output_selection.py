@@ -1,0 +1,113 @@
+"""Output selection (``simulation: output: {variables, vessels, segments}`` and the
+``simulate()`` keywords): a selected run records exactly the selected columns of the full run
+(same code path and machine, so the values are equal bit for bit) and nothing else, in memory
+and in a streamed Zarr store."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import oxyline
+from oxyline import _core, examples
+
+FLOW_VARS = ["pressure_in", "flow_out", "segment_flow"]
+O2_VARS = ["concentration_out", "wall_flux", "segment_concentration"]
+
+
+@pytest.fixture(scope="module")
+def full() -> oxyline.Result:
+    return oxyline.simulate("paper-bifurcated", cycles=1)
+
+
+def test_the_schema_comes_from_the_core() -> None:
+    from oxyline.result import BALANCE, SEGMENT_VARIABLES, SPECIES_VESSEL, VESSEL_VARIABLES
+
+    assert VESSEL_VARIABLES == tuple(_core.VESSEL_VARIABLES)
+    assert SEGMENT_VARIABLES == tuple(_core.SEGMENT_VARIABLES)
+    assert SPECIES_VESSEL == tuple(_core.SPECIES_VESSEL_VARIABLES)
+    assert BALANCE == tuple(_core.BALANCE_VARIABLES)
+
+
+def test_selected_values_equal_the_full_run_and_memory_follows_the_selection(
+        full: oxyline.Result) -> None:
+    vessel = full.vessels[1]
+    res = oxyline.simulate("paper-bifurcated", cycles=1, variables=FLOW_VARS + O2_VARS,
+                           vessels=[vessel])
+    i = full.vessels.index(vessel)
+    a, b = full._seg_start[i], full._seg_start[i + 1]
+    ns = b - a
+    # memory: 2 vessel columns + 1 per segment of the one vessel, and for O2 2 vessel columns,
+    # 1 per segment and the 5 mass-balance columns
+    assert res.vessels == [vessel]
+    assert res.data.shape == (full.time.size, 2 + ns)
+    sp, fsp = res.species["o2"], full.species["o2"]
+    assert sp.vessel_data.shape == (full.time.size, 1, 2)
+    assert sp.segment_data.shape == (full.time.size, ns, 1)
+    assert np.array_equal(res.time, full.time)
+    assert np.array_equal(res.pressure_in, full.pressure_in[:, i:i + 1])
+    assert np.array_equal(res.flow_out, full.flow_out[:, i:i + 1])
+    assert np.array_equal(res.segment_flow, full.segment_flow[:, a:b])
+    assert np.array_equal(res.segment_position, full.segment_position[a:b])
+    assert np.array_equal(sp.concentration_out, fsp.concentration_out[:, i:i + 1])
+    assert np.array_equal(sp.wall_flux, fsp.wall_flux[:, i:i + 1])
+    assert np.array_equal(sp.concentration, fsp.concentration[:, a:b])
+    assert np.array_equal(res.po2_out, full.po2_out[:, i:i + 1])
+    assert np.array_equal(sp.balance_data, fsp.balance_data)  # whole-network balance kept
+    with pytest.raises(AttributeError, match="flow_in' is not in this result's output"):
+        res.flow_in  # noqa: B018
+    ds = res.to_xarray()
+    assert "flow_in" not in ds and "segment_pressure_in" not in ds
+    assert np.array_equal(ds["o2_concentration_out"].values, sp.concentration_out)
+
+
+def test_segments_false_and_vessels_none(full: oxyline.Result) -> None:
+    res = oxyline.simulate("paper-bifurcated", cycles=1, segments=False)
+    nv = len(full.vessels)
+    assert res.data.shape == (full.time.size, 4 * nv) and not res.has_segments
+    assert np.array_equal(res.data, full.data[:, :4 * nv])
+    assert res.species["o2"].segment_data.shape[1] == 0
+    assert np.array_equal(res.species["o2"].vessel_data, full.species["o2"].vessel_data)
+    none = oxyline.simulate("paper-bifurcated", cycles=1, vessels="none")
+    assert none.data.shape == (full.time.size, 0) and none.vessels == []
+    assert np.array_equal(none.species["o2"].balance_data, full.species["o2"].balance_data)
+
+
+def test_selection_in_the_model_file_and_streamed_to_zarr(full: oxyline.Result,
+                                                          tmp_path: Path) -> None:
+    model = examples.load("paper-bifurcated").to_dict()
+    vessel = full.vessels[0]
+    model["simulation"] = {"output": {"variables": ["flow_in", "concentration_in"],
+                                      "vessels": [vessel], "segments": False}}
+    res = oxyline.simulate(model, cycles=1)
+    assert res.data.shape == (full.time.size, 1)
+    assert np.array_equal(res.flow_in[:, 0], full.flow_in[:, 0])
+    ds = oxyline.simulate_to_zarr(model, tmp_path / "sel.zarr", cycles=1, time_chunk=64)
+    assert {"flow_in", "o2_concentration_in", "po2_in"} <= set(ds.data_vars)
+    assert "pressure_in" not in ds and "segment_flow" not in ds and "flow_out" not in ds
+    assert ds["flow_in"].shape == (full.time.size, 1)
+    assert np.array_equal(ds["flow_in"].values, res.flow_in)
+    assert np.array_equal(ds["o2_concentration_in"].values, res.species["o2"].concentration_in)
+    back = oxyline.open_result(tmp_path / "sel.zarr")
+    assert np.array_equal(back.flow_in, res.flow_in)
+
+
+@pytest.mark.parametrize(("kw", "match"), [
+    ({"variables": ["pressure"]}, "unknown variable 'pressure'"),
+    ({"vessels": ["nope"]}, "unknown vessel 'nope'"),
+    ({"vessels": "some"}, "unknown vessel 'some'"),
+])
+def test_unknown_names_are_model_errors(kw: dict, match: str) -> None:
+    with pytest.raises(oxyline.ModelError, match=match):
+        oxyline.simulate("bifurcation", cycles=1, **kw)
+    model = examples.load("bifurcation").to_dict()
+    model["simulation"] = {"output": kw}
+    with pytest.raises(oxyline.ModelError, match=match):  # at load time too
+        oxyline.load_model(model)
+
+
+def test_species_variables_need_species() -> None:
+    with pytest.raises(oxyline.ModelError, match="'concentration_in' needs species transport"):
+        oxyline.simulate("bifurcation", cycles=1, variables=["concentration_in"])
