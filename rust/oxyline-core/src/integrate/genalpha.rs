@@ -21,6 +21,8 @@ pub struct GenAlpha<'a> {
     control: NewtonControl,
     lu: SparseLu,
     kvals: Vec<f64>,
+    /// α_m E, the mass part of the iteration matrix.
+    am_e: Vec<f64>,
     factored: bool,
     f: Vec<f64>,
     r: Vec<f64>,
@@ -51,9 +53,11 @@ impl<'a> GenAlpha<'a> {
         let stamps = jacobian_stamps(dae);
         let lu = SparseLu::analyse(dae.n, &stamps)?;
         let n = dae.n;
+        let e = dae.mass(regime);
         Ok(GenAlpha {
             dae,
-            e: dae.mass(regime),
+            am_e: e.iter().map(|e| am * e).collect(),
+            e,
             regime,
             dt,
             am,
@@ -74,8 +78,7 @@ impl<'a> GenAlpha<'a> {
 
     fn factor(&mut self, time: f64) -> Result<()> {
         let c = self.af * self.gamma * self.dt;
-        let diag: Vec<f64> = self.e.iter().map(|e| self.am * e).collect();
-        jacobian_values(self.dae, c, &diag, &self.y_af, &mut self.kvals);
+        jacobian_values(self.dae, c, &self.am_e, &self.y_af, &mut self.kvals);
         self.lu
             .factor(&self.kvals)
             .map_err(|m| singular(time, &m))?;
