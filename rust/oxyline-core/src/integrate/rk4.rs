@@ -1,6 +1,9 @@
 //! Classical fixed-step RK4 on the differential unknowns (E_ii > 0); the algebraic unknowns
 //! (capacitance-free nodes, inductance-free branches, prescribed pressures) are eliminated at
-//! every stage by a sparse solve whose matrix is factorised once for linear circuits.
+//! every stage by a sparse solve whose matrix is factorised once for linear circuits (see
+//! `algebraic`, which also holds the index reduction). The RK4 tableau lives here once, as the
+//! stage and combination kernels [`rk4_stage`] and [`rk4_combine`], used by the flow, by the
+//! coupled species state and by plain ODEs ([`rk4_ode`]).
 
 use super::algebraic::{Algebraic, Elimination, Reduction, reduce_prescribed_inductors};
 use super::newton::{self, NewtonControl, singular};
