@@ -6,23 +6,23 @@ pub mod circuit;
 pub mod closure;
 pub mod error;
 pub mod frequency;
-pub mod genalpha;
 mod graetz;
 pub mod hemoglobin;
+pub mod integrate;
 pub mod network;
 pub mod output;
-pub mod rk4;
 pub mod segment;
 pub mod simulate;
 pub mod sparse;
 pub mod spec;
-pub mod stability;
 pub mod transport;
 pub mod waveform;
 
 pub use assemble::{Assembled, SegmentRow, Summary};
 pub use circuit::{Circuit, Dae, Regime};
 pub use error::{Error, Result};
+// the integrators' old module paths (`crate::rk4::Rk4`, `crate::genalpha::GenAlpha`, ...)
+pub use integrate::{genalpha, rk4, stability};
 pub use output::{Probes, Selection};
 pub use simulate::{
     Chunk, Method, Outcome, OutputSink, RunSettings, Start, TransportOutcome, simulate,

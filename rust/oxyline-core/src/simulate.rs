@@ -4,12 +4,13 @@
 
 use crate::circuit::{Dae, Regime};
 use crate::error::{Error, Result};
-use crate::genalpha::{
-    GenAlpha, NewtonControl, jacobian_stamps, jacobian_values, scaled_increment,
-};
-use crate::rk4::{CoupledStages, Rk4};
-use crate::sparse::SparseLu;
-use crate::stability::{StabilityLimit, rk4_limit};
+use crate::integrate::genalpha::GenAlpha;
+use crate::integrate::newton::{NewtonControl, scaled_increment};
+use crate::integrate::rk4::{CoupledStages, Rk4};
+use crate::integrate::stability::{StabilityLimit, rk4_limit};
+use crate::integrate::steady::SteadyCache;
+// moved to `integrate::steady`, kept here for the callers of `crate::simulate::steady_state`
+pub use crate::integrate::steady::steady_state;
 use crate::transport::{Formulation, Transport};
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -141,46 +142,6 @@ const MEAN_FLOW_TOL: f64 = 1e-6;
 enum Stepper<'a> {
     Rk4(Rk4<'a>),
     GenAlpha(GenAlpha<'a>),
-}
-
-/// Exact steady state: F y + c(y) = f̄ (Newton when stenoses are present).
-pub fn steady_state(dae: &Dae) -> Result<Vec<f64>> {
-    let n = dae.n;
-    let stamps = jacobian_stamps(dae);
-    let mut lu = SparseLu::analyse(n, &stamps)?;
-    let mut vals = vec![0.0; stamps.len()];
-    let mut f = vec![0.0; n];
-    dae.forcing_into(0.0, Regime::Steady, &mut f);
-    let mut y = vec![0.0; n];
-    let mut r = vec![0.0; n];
-    let zero = vec![0.0; n];
-    let fail = || {
-        Error::model(
-            "network",
-            "has no steady state: some part is not connected through resistances to a pressure, resistance or Windkessel boundary condition",
-        )
-    };
-    for it in 0..50 {
-        dae.static_residual(&y, &f, &mut r);
-        // regularise |Q| at 0 so the first Newton step of a stenosis is defined
-        let ys: Vec<f64> = if it == 0 {
-            y.iter().map(|_| 0.0).collect()
-        } else {
-            y.clone()
-        };
-        jacobian_values(dae, 1.0, &zero, &ys, &mut vals);
-        lu.factor(&vals).map_err(|_| fail())?;
-        if !lu.solve_in_place(&mut r) {
-            return Err(fail());
-        }
-        for i in 0..n {
-            y[i] += r[i];
-        }
-        if dae.is_linear() || scaled_increment(dae, &r, &y) < 1e-13 {
-            return Ok(y);
-        }
-    }
-    Ok(y)
 }
 
 /// The output table under construction: flow probes and species outputs of the same rows,
@@ -415,10 +376,12 @@ fn run(
     // limit the flow eigenvalues do not see. The automatic step keeps the Courant number of the
     // mean flow below 0.5 × 1.39 / 3 (pulsatile peaks of up to 3× the mean); the run itself
     // monitors the actual value.
+    // the steady state is solved at most once per run, by whichever part needs it first
+    let steady = SteadyCache::new(dae);
     let transport_dt = match transport.as_deref_mut() {
         Some(tr) if tr.formulation() == Formulation::Conservative => {
             // (no steady state, or a non-positive volume there: left to the run to report)
-            let rate = steady_state(dae).map_or(0.0, |y| tr.max_outflow_rate(&y, 0.0));
+            let rate = steady.get().map_or(0.0, |y| tr.max_outflow_rate(y, 0.0));
             if rate > 0.0 && rate.is_finite() {
                 0.5 * 1.392_647 / (3.0 * rate)
             } else {
@@ -429,6 +392,9 @@ fn run(
     };
     let mut stability = None;
     let mut use_rk4 = matches!(s.method, Method::Rk4);
+    // the RK4 integrator built for the stability probe is reused for the run (its step is set
+    // below; the linearisation only affects the probe)
+    let mut rk4_built: Option<Rk4> = None;
     if matches!(s.method, Method::Rk4 | Method::Auto { .. }) {
         let mut probe = Rk4::new(dae, Regime::Transient, 1.0);
         match (&mut probe, s.method) {
@@ -436,8 +402,8 @@ fn run(
                 if !dae.is_linear() {
                     // stenoses stiffen their branches in proportion to the flow: linearise at
                     // the steady state of the mean boundary conditions
-                    if let Ok(ys) = steady_state(dae) {
-                        rk.set_linearization(&ys)?;
+                    if let Ok(ys) = steady.get() {
+                        rk.set_linearization(ys)?;
                     }
                 }
                 let lim = rk4_limit(rk, &dae.names)?;
@@ -449,6 +415,7 @@ fn run(
             (Err(e), Method::Rk4) => return Err(e.clone()),
             (Err(_), _) => use_rk4 = false,
         }
+        rk4_built = probe.ok();
     }
     let out_per_cycle = (s.period / s.output_every).round().max(1.0) as usize;
     let (dt, method_name) = if use_rk4 {
@@ -499,7 +466,7 @@ fn run(
     let (mut y, mut yd) = match s.start {
         Start::Zero | Start::SvZeroDZero => (vec![0.0; n], vec![0.0; n]),
         Start::Steady => {
-            let y = steady_state(dae)?;
+            let y = steady.get()?.to_vec();
             let mut f = vec![0.0; n];
             dae.forcing_into(0.0, Regime::Transient, &mut f);
             let mut r = vec![0.0; n];
@@ -523,7 +490,10 @@ fn run(
         // the algebraic unknowns (e.g. the pressure before a resistance fed by the inflow) follow
         // the forcing at t = 0, and ẏ of the differential ones is the circuit's own; an index-2
         // circuit (RK4 refuses it) keeps the start as given
-        if let Ok(mut rk) = Rk4::new(dae, Regime::Transient, dt) {
+        if rk4_built.is_none() {
+            rk4_built = Rk4::new(dae, Regime::Transient, dt).ok();
+        }
+        if let Some(rk) = rk4_built.as_mut() {
             let mut yc = y.clone();
             if let Ok(d) = rk
                 .make_consistent(0.0, &mut yc)
@@ -535,7 +505,11 @@ fn run(
         }
     }
     let mut stepper = if use_rk4 {
-        let mut rk = Rk4::new(dae, Regime::Transient, dt)?;
+        let mut rk = match rk4_built.take() {
+            Some(rk) => rk,
+            None => Rk4::new(dae, Regime::Transient, dt)?,
+        };
+        rk.dt = dt;
         rk.make_consistent(0.0, &mut y)?;
         Stepper::Rk4(rk)
     } else {

@@ -1,8 +1,8 @@
 //! Largest stable RK4 step of the (linear, time-invariant) flow circuit, and the element
 //! that sets it. Exact from the dense spectrum for small circuits, power iteration otherwise.
 
+use super::rk4::Rk4;
 use crate::error::Result;
-use crate::rk4::Rk4;
 use nalgebra::Complex;
 
 /// RK4 amplification factor R(z) = 1 + z + z²/2 + z³/6 + z⁴/24.
@@ -46,9 +46,10 @@ pub struct StabilityLimit {
 
 const DENSE_LIMIT: usize = 600;
 
+/// Largest stable RK4 step of `rk`'s circuit and the unknown (named by `names`) that sets it:
+/// exact for up to `DENSE_LIMIT` differential unknowns, a power-iteration estimate beyond.
 pub fn rk4_limit(rk: &mut Rk4<'_>, names: &[String]) -> Result<StabilityLimit> {
-    let nd = rk.diff.len();
-    if nd == 0 {
+    if rk.diff.is_empty() {
         return Ok(StabilityLimit {
             dt_max: f64::INFINITY,
             eigenvalue: (0.0, 0.0),
@@ -56,52 +57,69 @@ pub fn rk4_limit(rk: &mut Rk4<'_>, names: &[String]) -> Result<StabilityLimit> {
             exact: true,
         });
     }
-    let diff = rk.diff.clone();
-    if nd <= DENSE_LIMIT {
-        let mut a = faer::Mat::<f64>::zeros(nd, nd);
-        let mut x = vec![0.0; nd];
-        let mut col = vec![0.0; nd];
-        // Energy scaling x̃ = √E x (a similarity, eigenvalues unchanged): capacitances ~1e-12
-        // and inertances ~1e5 otherwise spread the entries over ~20 decades, and the dense
-        // eigensolver then returns spurious Re λ > 0 for lightly damped LC modes.
-        let scale: Vec<f64> = rk.mass_diagonal().iter().map(|e| e.sqrt()).collect();
-        for j in 0..nd {
-            x.iter_mut().for_each(|v| *v = 0.0);
-            x[j] = 1.0;
-            rk.linear_operator(&x, &mut col)?;
-            for i in 0..nd {
-                a[(i, j)] = col[i] * scale[i] / scale[j];
-            }
+    let (limit, at) = if rk.diff.len() <= DENSE_LIMIT {
+        dense_limit(rk)?
+    } else {
+        power_limit(rk)?
+    };
+    Ok(StabilityLimit {
+        element: names[rk.diff[at]].clone(),
+        ..limit
+    })
+}
+
+/// From the dense spectrum; also returns the position (in `diff`) of the unknown with the
+/// largest share of the limiting mode.
+fn dense_limit(rk: &mut Rk4<'_>) -> Result<(StabilityLimit, usize)> {
+    let nd = rk.diff.len();
+    let mut a = faer::Mat::<f64>::zeros(nd, nd);
+    let mut x = vec![0.0; nd];
+    let mut col = vec![0.0; nd];
+    // Energy scaling x̃ = √E x (a similarity, eigenvalues unchanged): capacitances ~1e-12
+    // and inertances ~1e5 otherwise spread the entries over ~20 decades, and the dense
+    // eigensolver then returns spurious Re λ > 0 for lightly damped LC modes.
+    let scale: Vec<f64> = rk.mass_diagonal().iter().map(|e| e.sqrt()).collect();
+    for j in 0..nd {
+        x.iter_mut().for_each(|v| *v = 0.0);
+        x[j] = 1.0;
+        rk.linear_operator(&x, &mut col)?;
+        for i in 0..nd {
+            a[(i, j)] = col[i] * scale[i] / scale[j];
         }
-        // faer's dense eigensolver (nalgebra's complex_eigenvalues is unreliable for
-        // non-normal matrices)
-        let evd = a
-            .eigen()
-            .map_err(|e| crate::error::Error::solver(0.0, format!("eigenvalues: {e:?}")))?;
-        let (s, u) = (evd.S(), evd.U());
-        let (mut best, mut jbest) = (f64::INFINITY, 0);
-        for j in 0..nd {
-            let l = s[j];
-            let h = rk4_step_limit(Complex::new(l.re, l.im));
-            if h < best {
-                best = h;
-                jbest = j;
-            }
-        }
-        let v = u.col(jbest);
-        let i = (0..nd)
-            .max_by(|&p, &q| v[p].norm().total_cmp(&v[q].norm()))
-            .unwrap_or(0);
-        let lam = s[jbest];
-        return Ok(StabilityLimit {
-            dt_max: best,
-            eigenvalue: (lam.re, lam.im),
-            element: names[diff[i]].clone(),
-            exact: true,
-        });
     }
-    // power iteration: spectral radius estimate; the RK4 region contains the left half-disc of
-    // radius 2.78, so h = 2.78/ρ is stable for the passive (Re λ ≤ 0) circuits built here.
+    // faer's dense eigensolver (nalgebra's complex_eigenvalues is unreliable for
+    // non-normal matrices)
+    let evd = a
+        .eigen()
+        .map_err(|e| crate::error::Error::solver(0.0, format!("eigenvalues: {e:?}")))?;
+    let (s, u) = (evd.S(), evd.U());
+    let (mut best, mut jbest) = (f64::INFINITY, 0);
+    for j in 0..nd {
+        let l = s[j];
+        let h = rk4_step_limit(Complex::new(l.re, l.im));
+        if h < best {
+            best = h;
+            jbest = j;
+        }
+    }
+    let v = u.col(jbest);
+    let i = (0..nd)
+        .max_by(|&p, &q| v[p].norm().total_cmp(&v[q].norm()))
+        .unwrap_or(0);
+    let lam = s[jbest];
+    let limit = StabilityLimit {
+        dt_max: best,
+        eigenvalue: (lam.re, lam.im),
+        element: String::new(),
+        exact: true,
+    };
+    Ok((limit, i))
+}
+
+/// Power iteration: spectral radius estimate; the RK4 region contains the left half-disc of
+/// radius 2.78, so h = 2.78/ρ is stable for the passive (Re λ ≤ 0) circuits built here.
+fn power_limit(rk: &mut Rk4<'_>) -> Result<(StabilityLimit, usize)> {
+    let nd = rk.diff.len();
     let mut x: Vec<f64> = (0..nd)
         .map(|i| 1.0 + ((i * 7919) % 13) as f64 / 13.0)
         .collect();
@@ -125,12 +143,13 @@ pub fn rk4_limit(rk: &mut Rk4<'_>, names: &[String]) -> Result<StabilityLimit> {
     let j = (0..nd)
         .max_by(|&p, &q| x[p].abs().total_cmp(&x[q].abs()))
         .unwrap_or(0);
-    Ok(StabilityLimit {
+    let limit = StabilityLimit {
         dt_max: if rho > 0.0 { 2.78 / rho } else { f64::INFINITY },
         eigenvalue: (-rho, 0.0),
-        element: names[diff[j]].clone(),
+        element: String::new(),
         exact: false,
-    })
+    };
+    Ok((limit, j))
 }
 
 #[cfg(test)]

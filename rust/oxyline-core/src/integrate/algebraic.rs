@@ -1,0 +1,225 @@
+//! The algebraic rows of the circuit for explicit integration: the index reduction of
+//! inductors whose flow a flow condition fixes (an overlay over the borrowed DAE, which is never
+//! copied), and the elimination of the algebraic unknowns at fixed differential ones (one sparse
+//! LU, the shared Newton solver when stenoses make the rows nonlinear).
+
+use super::newton::{Magnitude, NewtonProblem, singular};
+use crate::circuit::{Dae, Regime};
+use crate::error::{Error, Result};
+use crate::sparse::SparseLu;
+
+/// The index reduction of a circuit for explicit integration, as an overlay over the borrowed
+/// DAE: the mass diagonal with the reduced inductors' E_jj zeroed, and the forcing-slope terms
+/// added to their rows. The DAE itself is not copied.
+pub(super) struct Reduction {
+    /// E of the circuit in the run's regime, zero on reduced rows.
+    pub(super) e: Vec<f64>,
+    /// (row, scale, forcing entry k): f_row(t) += scale · w_k′(t).
+    pub(super) rate: Vec<(usize, f64, usize)>,
+}
+
+/// Index reduction for explicit integration. A linear algebraic row whose unknowns are all
+/// fixed by the forcing except one fixes that one too: y_j = (Σ f_r − Σ a_rk y_k)/a_rj. Known
+/// values propagate row by row (a worklist, linear in the circuit size). When such a row fixes
+/// an inductor flow — the KCL of a capacitance-free node between a flow condition and an
+/// inductor, e.g. the inlet of an L-arrangement line (physics §1.2: "first branch flow is
+/// prescribed"), or every branch of a rigid tube fed by a flow — then ẏ_j is the same
+/// combination of the forcing slopes, and the inductor's row E_jj ẏ_j + F_j y = f_j becomes
+/// the algebraic F_j y = f_j − E_jj ẏ_j(t), which determines the node pressures
+/// (P_0 = P_1 + R Q_in + L dQ_in/dt). Circuits with no such inductor get no rate terms.
+pub(super) fn reduce_prescribed_inductors(dae: &Dae, regime: Regime) -> Reduction {
+    let n = dae.n;
+    let mut e = dae.mass(regime);
+    let mut nonlinear = vec![false; n];
+    for &(i, _) in &dae.stenosis {
+        nonlinear[i] = true;
+    }
+    let mut row_forcing: Vec<Vec<usize>> = vec![Vec::new(); n];
+    for (k, (row, _)) in dae.forcing.iter().enumerate() {
+        row_forcing[*row].push(k);
+    }
+    let entries = |r: usize| {
+        (dae.f.ptr[r]..dae.f.ptr[r + 1])
+            .map(|k| (dae.f.col[k], dae.f.val[k]))
+            .filter(|&(_, v)| v != 0.0)
+    };
+    let mut col_rows: Vec<Vec<usize>> = vec![Vec::new(); n];
+    for r in 0..n {
+        for (c, _) in entries(r) {
+            col_rows[c].push(r);
+        }
+    }
+    // known[j]: y_j as Σ coefficient · (forcing entry k)
+    let mut known: Vec<Option<Vec<(usize, f64)>>> = vec![None; n];
+    let mut used = vec![false; n];
+    let mut rate = Vec::new();
+    let mut work: Vec<usize> = (0..n).rev().collect();
+    while let Some(r) = work.pop() {
+        if used[r] || e[r] > 0.0 || nonlinear[r] {
+            continue;
+        }
+        let mut free = entries(r).filter(|&(c, _)| known[c].is_none());
+        let (Some((j, a)), None) = (free.next(), free.next()) else {
+            continue;
+        };
+        let mut expr: Vec<(usize, f64)> = row_forcing[r].iter().map(|&k| (k, 1.0 / a)).collect();
+        for (c, v) in entries(r).filter(|&(c, _)| c != j) {
+            for &(k, s) in known[c].as_deref().unwrap_or_default() {
+                match expr.iter_mut().find(|(kk, _)| *kk == k) {
+                    Some(term) => term.1 -= v * s / a,
+                    None => expr.push((k, -v * s / a)),
+                }
+            }
+        }
+        used[r] = true;
+        if e[j] > 0.0 {
+            rate.extend(expr.iter().map(|&(k, s)| (j, -e[j] * s, k)));
+            e[j] = 0.0;
+            work.push(j); // the inductor's row is now algebraic
+        }
+        known[j] = Some(expr);
+        work.extend(col_rows[j].iter().copied());
+    }
+    Reduction { e, rate }
+}
+
+/// The algebraic rows of the circuit and their elimination: a sparse LU of F restricted to the
+/// algebraic rows and columns (plus the stenosis slopes 2S|Q| on their diagonal).
+pub(super) struct Algebraic {
+    /// Global unknown of each algebraic row/column.
+    pub(super) rows: Vec<usize>,
+    /// For each stamp, the index of its value in `F` (the stenosis diagonals follow).
+    stamps_src: Vec<usize>,
+    pub(super) lu: SparseLu,
+    vals: Vec<f64>,
+    /// (local row, global unknown, S) of stenoses on algebraic unknowns.
+    stenosis: Vec<(usize, usize, f64)>,
+    /// Residual and correction of the algebraic rows.
+    pub(super) r: Vec<f64>,
+    /// Running scale of the Newton increments (see `Magnitude`).
+    pub(super) magnitude: Magnitude,
+}
+
+impl Algebraic {
+    /// None for a circuit without algebraic unknowns.
+    pub(super) fn analyse(dae: &Dae, e: &[f64]) -> Result<Option<Self>> {
+        let n = dae.n;
+        let rows: Vec<usize> = (0..n).filter(|&i| e[i] <= 0.0).collect();
+        if rows.is_empty() {
+            return Ok(None);
+        }
+        let mut local = vec![usize::MAX; n];
+        for (l, &g) in rows.iter().enumerate() {
+            local[g] = l;
+        }
+        let mut stamps = Vec::new();
+        let mut stamps_src = Vec::new();
+        for (l, &g) in rows.iter().enumerate() {
+            for k in dae.f.ptr[g]..dae.f.ptr[g + 1] {
+                let c = dae.f.col[k];
+                if local[c] != usize::MAX {
+                    stamps.push((l, local[c]));
+                    stamps_src.push(k);
+                }
+            }
+        }
+        let stenosis: Vec<(usize, usize, f64)> = dae
+            .stenosis
+            .iter()
+            .filter(|(g, _)| local[*g] != usize::MAX)
+            .map(|&(g, s)| (local[g], g, s))
+            .collect();
+        stamps.extend(stenosis.iter().map(|&(l, _, _)| (l, l)));
+        Ok(Some(Algebraic {
+            lu: SparseLu::analyse(rows.len(), &stamps)?,
+            vals: vec![0.0; stamps.len()],
+            r: vec![0.0; rows.len()],
+            magnitude: Magnitude::new(dae),
+            rows,
+            stamps_src,
+            stenosis,
+        }))
+    }
+
+    pub(super) fn is_linear(&self) -> bool {
+        self.stenosis.is_empty()
+    }
+
+    /// Factorise at state `y` (the stenosis slopes depend on it).
+    pub(super) fn factor(&mut self, dae: &Dae, y: &[f64]) -> std::result::Result<(), String> {
+        let nf = self.stamps_src.len();
+        for (v, &k) in self.vals[..nf].iter_mut().zip(&self.stamps_src) {
+            *v = dae.f.val[k];
+        }
+        for (j, &(_, g, s)) in self.stenosis.iter().enumerate() {
+            self.vals[nf + j] = 2.0 * s * y[g].abs();
+        }
+        self.lu.factor(&self.vals)
+    }
+
+    /// Factorise at y = 0 and probe one solve: a singular algebraic part means an index-2 DAE.
+    pub(super) fn check_index1(&mut self, dae: &Dae) -> Result<()> {
+        let ok = self.factor(dae, &vec![0.0; dae.n]).is_ok() && {
+            let mut probe: Vec<f64> = (0..self.rows.len()).map(|i| 1.0 + (i % 7) as f64).collect();
+            self.lu.solve_in_place(&mut probe)
+        };
+        if ok {
+            return Ok(());
+        }
+        Err(Error::model(
+            "circuit",
+            "rk4 cannot integrate this circuit: its algebraic part is singular (an inductor whose flow is fixed by a flow condition or by other inductors through a capacitance-free node, i.e. an index-2 DAE); use method 'generalized-alpha'",
+        ))
+    }
+}
+
+/// The Newton problem of the algebraic rows at fixed differential unknowns: unknowns y_alg,
+/// residual f − F y − c(y) on the algebraic rows.
+pub(super) struct Elimination<'s> {
+    pub(super) dae: &'s Dae,
+    pub(super) alg: &'s mut Algebraic,
+    pub(super) f: &'s [f64],
+    pub(super) y: &'s mut [f64],
+    pub(super) time: f64,
+}
+
+impl NewtonProblem for Elimination<'_> {
+    fn residual(&mut self, r: &mut [f64]) {
+        for (rl, &g) in r.iter_mut().zip(&self.alg.rows) {
+            *rl = self.f[g] - self.dae.f.row_dot(g, self.y);
+        }
+        for &(l, g, s) in &self.alg.stenosis {
+            r[l] -= s * self.y[g].abs() * self.y[g];
+        }
+    }
+    fn factor(&mut self, _: usize) -> Result<()> {
+        // a linear algebraic part was factorised once, in `Rk4::new`
+        if self.alg.is_linear() {
+            return Ok(());
+        }
+        self.alg
+            .factor(self.dae, self.y)
+            .map_err(|m| singular(self.time, &m))
+    }
+    fn solve(&mut self, r: &mut [f64]) -> Result<()> {
+        if self.alg.lu.solve_in_place(r) {
+            Ok(())
+        } else {
+            Err(singular(self.time, "algebraic elimination"))
+        }
+    }
+    fn update(&mut self, dx: &mut [f64]) {
+        for (&g, d) in self.alg.rows.iter().zip(dx.iter()) {
+            self.y[g] += d;
+        }
+    }
+    fn state(&self) -> &[f64] {
+        self.y
+    }
+    fn unknowns(&self) -> Option<&[usize]> {
+        Some(&self.alg.rows)
+    }
+    fn is_linear(&self) -> bool {
+        self.alg.is_linear()
+    }
+}

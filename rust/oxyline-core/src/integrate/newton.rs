@@ -1,0 +1,181 @@
+//! The one Newton solver of the integrators. Generalized-α's implicit step, RK4's elimination of
+//! the algebraic rows with stenoses and the steady state all solve G(x) = 0 for a part of the
+//! circuit state; they differ only in the residual, the iteration matrix and how a correction
+//! maps to the state, which a [`NewtonProblem`] supplies. The stopping rule is shared: either
+//! svZeroDSolver's absolute residual (bit-compatible with it) or one scaled-increment rule.
+
+use crate::circuit::Dae;
+use crate::error::{Error, Result};
+
+/// Newton stopping rule. `atol: Some(a)` reproduces svZeroDSolver (max |residual| < a,
+/// absolute and unscaled); `None` takes one exact solve for linear circuits and iterates on the
+/// scaled increment (see [`Magnitude::increment`]) for nonlinear ones.
+#[derive(Debug, Clone, Copy)]
+pub struct NewtonControl {
+    pub atol: Option<f64>,
+    pub max_iter: usize,
+}
+
+impl Default for NewtonControl {
+    fn default() -> Self {
+        NewtonControl {
+            atol: None,
+            max_iter: 30,
+        }
+    }
+}
+
+/// Converged when the last correction changed every pressure and every flow by less than this,
+/// relative to the largest pressure and flow seen (see [`Magnitude`]). Newton converges
+/// quadratically, so an increment this small leaves an error at round-off level.
+pub const INCREMENT_TOL: f64 = 1e-12;
+
+/// Largest |pressure| and |flow| seen so far. Pressures and flows differ by many decades in SI,
+/// so increments are judged on each kind's own scale. The scale is a running maximum, not the
+/// current state: when the inflow reverses in a single path all flows pass through zero
+/// together, and round-off alone would then exceed a tolerance relative to the instantaneous
+/// flow.
+#[derive(Debug, Clone, Copy)]
+pub struct Magnitude {
+    n_nodes: usize,
+    peak: [f64; 2],
+}
+
+fn amax(s: &[f64]) -> f64 {
+    s.iter().fold(0.0f64, |m, x| m.max(x.abs()))
+}
+
+impl Magnitude {
+    pub fn new(dae: &Dae) -> Self {
+        Magnitude {
+            n_nodes: dae.n_nodes,
+            peak: [0.0; 2],
+        }
+    }
+
+    /// Include a full state `y` (pressures first, then flows) in the running maximum.
+    pub fn observe(&mut self, y: &[f64]) {
+        let nn = self.n_nodes;
+        self.peak[0] = self.peak[0].max(amax(&y[..nn]));
+        self.peak[1] = self.peak[1].max(amax(&y[nn..]));
+    }
+
+    /// The scaled increment: largest change of a pressure and of a flow, each relative to its
+    /// running maximum. `dx[l]` is the change of state unknown `unknowns[l]` (of unknown `l`
+    /// when `unknowns` is None).
+    pub fn increment(&self, unknowns: Option<&[usize]>, dx: &[f64]) -> f64 {
+        let nn = self.n_nodes;
+        let (mut dp, mut dq) = (0.0f64, 0.0f64);
+        for (l, d) in dx.iter().enumerate() {
+            if unknowns.map_or(l, |u| u[l]) < nn {
+                dp = dp.max(d.abs());
+            } else {
+                dq = dq.max(d.abs());
+            }
+        }
+        (dp / self.peak[0].max(1e-300)).max(dq / self.peak[1].max(1e-300))
+    }
+}
+
+/// Relative size of a state change `dy` against the state `y` (the scaled-increment rule with
+/// `y` as the only state seen; also the cycle-to-cycle periodicity measure).
+pub fn scaled_increment(dae: &Dae, dy: &[f64], y: &[f64]) -> f64 {
+    let mut m = Magnitude::new(dae);
+    m.observe(y);
+    m.increment(None, dy)
+}
+
+/// One Newton iteration's ingredients for [`solve`].
+pub trait NewtonProblem {
+    /// Write the residual at the current iterate into `r`.
+    fn residual(&mut self, r: &mut [f64]);
+    /// Factorise the iteration matrix at the current iterate before iteration `it`'s solve (a
+    /// linear problem may keep an earlier factorisation).
+    fn factor(&mut self, it: usize) -> Result<()>;
+    /// Replace `r` by the Newton correction.
+    fn solve(&mut self, r: &mut [f64]) -> Result<()>;
+    /// Apply the correction `dx`, leaving in `dx` the resulting change of the state unknowns.
+    fn update(&mut self, dx: &mut [f64]);
+    /// The full circuit state of the current iterate.
+    fn state(&self) -> &[f64];
+    /// The state unknowns the entries of `dx` belong to (None: all, in order).
+    fn unknowns(&self) -> Option<&[usize]>;
+    /// A linear problem is solved exactly by the first correction.
+    fn is_linear(&self) -> bool;
+}
+
+/// Newton's method on `problem` with the residual buffer `r`. `scale` carries the running
+/// magnitudes of the scaled-increment rule between calls. Not converging in
+/// `control.max_iter` iterations is a solver error at `time`.
+pub fn solve<P: NewtonProblem>(
+    problem: &mut P,
+    r: &mut [f64],
+    control: &NewtonControl,
+    scale: &mut Magnitude,
+    time: f64,
+) -> Result<()> {
+    for it in 0..control.max_iter {
+        problem.residual(r);
+        if let Some(atol) = control.atol {
+            // svZeroDSolver checks the residual before each solve and gives up without a
+            // last correction
+            if amax(r) < atol {
+                return Ok(());
+            }
+            if it + 1 == control.max_iter {
+                break;
+            }
+        }
+        problem.factor(it)?;
+        problem.solve(r)?;
+        problem.update(r);
+        if control.atol.is_none() {
+            if problem.is_linear() {
+                return Ok(());
+            }
+            scale.observe(problem.state());
+            if scale.increment(problem.unknowns(), r) < INCREMENT_TOL {
+                return Ok(());
+            }
+        }
+    }
+    Err(Error::solver(
+        time,
+        format!("Newton did not converge in {} iterations", control.max_iter),
+    ))
+}
+
+/// Value positions of the pattern F ∪ diag (F entries in CSR order, then the n diagonal slots):
+/// the pattern of every iteration matrix a·(F + dc/dy) + diag(d) of the circuit.
+pub fn jacobian_stamps(dae: &Dae) -> Vec<(usize, usize)> {
+    let mut stamps = Vec::with_capacity(dae.f.val.len() + dae.n);
+    for i in 0..dae.n {
+        for k in dae.f.ptr[i]..dae.f.ptr[i + 1] {
+            stamps.push((i, dae.f.col[k]));
+        }
+    }
+    stamps.extend((0..dae.n).map(|i| (i, i)));
+    stamps
+}
+
+/// Fill `vals` (in [`jacobian_stamps`] order) with a·(F + dc/dy(y)) + diag(d).
+pub fn jacobian_values(dae: &Dae, a: f64, diag: &[f64], y: &[f64], vals: &mut [f64]) {
+    let nf = dae.f.val.len();
+    for (v, fv) in vals[..nf].iter_mut().zip(&dae.f.val) {
+        *v = a * fv;
+    }
+    vals[nf..].copy_from_slice(diag);
+    for &(i, s) in &dae.stenosis {
+        vals[nf + i] += a * 2.0 * s * y[i].abs();
+    }
+}
+
+/// The error of a singular iteration matrix at `time`.
+pub fn singular(time: f64, detail: &str) -> Error {
+    Error::solver(
+        time,
+        format!(
+            "singular system ({detail}); check that every part of the network reaches a pressure, resistance or Windkessel boundary condition"
+        ),
+    )
+}

@@ -1,0 +1,326 @@
+//! Classical fixed-step RK4 on the differential unknowns (E_ii > 0); the algebraic unknowns
+//! (capacitance-free nodes, inductance-free branches, prescribed pressures) are eliminated at
+//! every stage by a sparse solve whose matrix is factorised once for linear circuits (see
+//! `algebraic`, which also holds the index reduction). The RK4 tableau lives here once, as the
+//! stage and combination kernels [`rk4_stage`] and [`rk4_combine`], used by the flow, by the
+//! coupled species state and by plain ODEs ([`rk4_ode`]).
+
+use super::algebraic::{Algebraic, Elimination, Reduction, reduce_prescribed_inductors};
+use super::newton::{self, NewtonControl, singular};
+use crate::circuit::{Dae, Regime};
+use crate::error::Result;
+
+/// A state integrated together with the flow in the same RK4 step (species amounts): its
+/// derivative is evaluated at every stage from that stage's consistent flow state, so the
+/// coupled system is advanced as one ODE (physics spec §2.5, "monolithic").
+pub trait Coupled {
+    fn derivative(&mut self, time: f64, y: &[f64], z: &[f64], dz: &mut [f64]) -> Result<()>;
+}
+
+/// Flow only.
+pub struct Uncoupled;
+impl Coupled for Uncoupled {
+    #[inline]
+    fn derivative(&mut self, _: f64, _: &[f64], _: &[f64], _: &mut [f64]) -> Result<()> {
+        Ok(())
+    }
+}
+
+/// Stage storage of an RK4 step: the four stage derivatives and the stage state.
+#[derive(Debug, Clone, Default)]
+pub struct CoupledStages {
+    k: [Vec<f64>; 4],
+    stage: Vec<f64>,
+}
+
+impl CoupledStages {
+    pub fn new(n: usize) -> Self {
+        CoupledStages {
+            k: [vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]],
+            stage: vec![0.0; n],
+        }
+    }
+}
+
+/// Stage times (fractions of the step) of stages 2–4 of the classical RK4 tableau; stage s + 1
+/// is evaluated at base + c_s Δt k_s.
+pub const RK4_STAGE: [f64; 3] = [0.5, 0.5, 1.0];
+
+/// Which entries of a state an RK4 kernel updates.
+#[derive(Debug, Clone, Copy)]
+pub enum Rows<'a> {
+    All,
+    /// Only these (the differential unknowns of a DAE).
+    Only(&'a [usize]),
+}
+
+/// Stage state of the classical RK4: `stage_i = base_i + c·Δt·k_i` for the `rows` (c from
+/// [`RK4_STAGE`], `c_dt` = c·Δt). The RK4 stage kernel of the flow and of the species.
+#[inline]
+pub fn rk4_stage(stage: &mut [f64], base: &[f64], k: &[f64], c_dt: f64, rows: Rows<'_>) {
+    match rows {
+        Rows::All => {
+            for ((s, b), ki) in stage.iter_mut().zip(base).zip(k) {
+                *s = b + c_dt * ki;
+            }
+        }
+        Rows::Only(idx) => {
+            for &i in idx {
+                stage[i] = base[i] + c_dt * k[i];
+            }
+        }
+    }
+}
+
+/// The classical RK4 combination `y_i += Δt/6 (k1 + 2 k2 + 2 k3 + k4)_i` for the `rows`.
+#[inline]
+pub fn rk4_combine(y: &mut [f64], k: &[Vec<f64>; 4], dt: f64, rows: Rows<'_>) {
+    let increment = |i: usize| dt / 6.0 * (k[0][i] + 2.0 * k[1][i] + 2.0 * k[2][i] + k[3][i]);
+    match rows {
+        Rows::All => {
+            for (i, yi) in y.iter_mut().enumerate() {
+                *yi += increment(i);
+            }
+        }
+        Rows::Only(idx) => {
+            for &i in idx {
+                y[i] += increment(i);
+            }
+        }
+    }
+}
+
+/// Right-hand side f(t, z, dz) of a plain ODE.
+pub type OdeRhs<'f> = dyn FnMut(f64, &[f64], &mut [f64]) -> Result<()> + 'f;
+
+/// Classical RK4 step of a plain ODE z' = f(t, z), with the stage storage of a coupled state.
+pub fn rk4_ode(
+    time: f64,
+    dt: f64,
+    z: &mut [f64],
+    st: &mut CoupledStages,
+    f: &mut OdeRhs<'_>,
+) -> Result<()> {
+    if st.stage.len() != z.len() {
+        *st = CoupledStages::new(z.len());
+    }
+    st.stage.copy_from_slice(z);
+    f(time, &st.stage, &mut st.k[0])?;
+    for (s, c) in RK4_STAGE.into_iter().enumerate() {
+        rk4_stage(&mut st.stage, z, &st.k[s], c * dt, Rows::All);
+        f(time + c * dt, &st.stage, &mut st.k[s + 1])?;
+    }
+    rk4_combine(z, &st.k, dt, Rows::All);
+    Ok(())
+}
+
+/// Classical RK4 on the differential unknowns of E ẏ + F y + c(y) = f(t), the algebraic ones
+/// eliminated at every stage (see the module documentation).
+pub struct Rk4<'a> {
+    dae: &'a Dae,
+    regime: Regime,
+    pub dt: f64,
+    /// E of the circuit with the index reduction applied (zero on algebraic rows).
+    e: Vec<f64>,
+    /// Forcing-slope terms of the index reduction (see `Reduction`).
+    rate: Vec<(usize, f64, usize)>,
+    pub diff: Vec<usize>,
+    alg: Option<Algebraic>,
+    f: Vec<f64>,
+    /// Stages of the flow state.
+    st: CoupledStages,
+    /// 2 S |Q| of stenoses on differential unknowns at the linearisation point of
+    /// `linear_operator` (zero: the linear circuit).
+    lin_stenosis: Vec<(usize, f64)>,
+}
+
+impl<'a> Rk4<'a> {
+    /// The integrator of `dae` in `regime` with step `dt`. A circuit whose algebraic part stays
+    /// singular after the index reduction (index 2) is a model error.
+    pub fn new(dae: &'a Dae, regime: Regime, dt: f64) -> Result<Self> {
+        let Reduction { e, rate } = reduce_prescribed_inductors(dae, regime);
+        let n = dae.n;
+        let mut alg = Algebraic::analyse(dae, &e)?;
+        if let Some(a) = alg.as_mut() {
+            a.check_index1(dae)?;
+        }
+        Ok(Rk4 {
+            dae,
+            regime,
+            dt,
+            diff: (0..n).filter(|&i| e[i] > 0.0).collect(),
+            e,
+            rate,
+            alg,
+            f: vec![0.0; n],
+            st: CoupledStages::new(n),
+            lin_stenosis: Vec::new(),
+        })
+    }
+
+    /// The forcing at `time`, with the index reduction's slope terms.
+    fn forcing(&mut self, time: f64) {
+        self.dae.forcing_into(time, self.regime, &mut self.f);
+        // a periodic waveform's mean slope is zero
+        if self.regime == Regime::Transient {
+            for &(row, scale, k) in &self.rate {
+                self.f[row] += scale * self.dae.forcing[k].1.slope(time);
+            }
+        }
+    }
+
+    /// Make the algebraic unknowns of `y` consistent with its differential ones at the forcing
+    /// last set by `forcing`.
+    fn solve_algebraic(&mut self, y: &mut [f64], time: f64) -> Result<()> {
+        let Some(alg) = self.alg.as_mut() else {
+            return Ok(());
+        };
+        let (mut r, mut scale) = (std::mem::take(&mut alg.r), alg.magnitude);
+        let mut p = Elimination {
+            dae: self.dae,
+            alg,
+            f: &self.f,
+            y,
+            time,
+        };
+        let done = newton::solve(&mut p, &mut r, &NewtonControl::default(), &mut scale, time);
+        (alg.r, alg.magnitude) = (r, scale);
+        done
+    }
+
+    /// ẏ of the differential unknowns at (t, y) into stage slot `out`; the algebraic unknowns
+    /// of `y` are updated.
+    fn rhs(&mut self, time: f64, y: &mut [f64], out: usize) -> Result<()> {
+        self.forcing(time);
+        self.solve_algebraic(y, time)?;
+        let k = &mut self.st.k[out];
+        for &i in &self.diff {
+            k[i] = (self.f[i] - self.dae.f.row_dot(i, y)) / self.e[i];
+        }
+        for &(i, s) in &self.dae.stenosis {
+            if self.e[i] > 0.0 {
+                k[i] -= s * y[i].abs() * y[i] / self.e[i];
+            }
+        }
+        Ok(())
+    }
+
+    /// Time derivative of the differential unknowns at (t, y) (zero for algebraic ones);
+    /// the algebraic unknowns of `y` are made consistent first.
+    pub fn derivative(&mut self, time: f64, y: &mut [f64]) -> Result<Vec<f64>> {
+        self.rhs(time, y, 0)?;
+        let mut out = vec![0.0; self.dae.n];
+        for &i in &self.diff {
+            out[i] = self.st.k[0][i];
+        }
+        Ok(out)
+    }
+
+    /// Bring the algebraic unknowns of an initial state in line with the forcing at `time`.
+    pub fn make_consistent(&mut self, time: f64, y: &mut [f64]) -> Result<()> {
+        self.forcing(time);
+        self.solve_algebraic(y, time)
+    }
+
+    pub fn step(&mut self, time: f64, y: &mut [f64]) -> Result<()> {
+        self.step_coupled(
+            time,
+            y,
+            &mut [],
+            &mut CoupledStages::default(),
+            &mut Uncoupled,
+        )
+    }
+
+    /// One RK4 step of the flow state `y` and a coupled state `z` (same stages, same weights).
+    pub fn step_coupled<C: Coupled>(
+        &mut self,
+        time: f64,
+        y: &mut [f64],
+        z: &mut [f64],
+        zk: &mut CoupledStages,
+        coupled: &mut C,
+    ) -> Result<()> {
+        let dt = self.dt;
+        let coupled_on = !z.is_empty();
+        let mut stage = std::mem::take(&mut self.st.stage);
+        stage.copy_from_slice(y);
+        self.rhs(time, &mut stage, 0)?;
+        if coupled_on {
+            zk.stage.copy_from_slice(z);
+            coupled.derivative(time, &stage, &zk.stage, &mut zk.k[0])?;
+        }
+        for (s, c) in RK4_STAGE.into_iter().enumerate() {
+            rk4_stage(&mut stage, y, &self.st.k[s], c * dt, Rows::Only(&self.diff));
+            let ts = time + c * dt;
+            self.rhs(ts, &mut stage, s + 1)?;
+            if coupled_on {
+                rk4_stage(&mut zk.stage, z, &zk.k[s], c * dt, Rows::All);
+                coupled.derivative(ts, &stage, &zk.stage, &mut zk.k[s + 1])?;
+            }
+        }
+        rk4_combine(y, &self.st.k, dt, Rows::Only(&self.diff));
+        if coupled_on {
+            rk4_combine(z, &zk.k, dt, Rows::All);
+        }
+        // algebraic unknowns of the last stage are the best warm start
+        if let Some(alg) = &self.alg {
+            for &g in &alg.rows {
+                y[g] = stage[g];
+            }
+        }
+        self.st.stage = stage;
+        self.forcing(time + dt);
+        self.solve_algebraic(y, time + dt)
+    }
+
+    /// E_ii of the differential unknowns, in `diff` order.
+    pub fn mass_diagonal(&self) -> Vec<f64> {
+        self.diff.iter().map(|&i| self.e[i]).collect()
+    }
+
+    /// Linearise stenoses (S|Q|Q → 2S|Q| per unit flow) at state `y` for `linear_operator`:
+    /// a stenosis on an inductor adds −2S|Q|/L to that branch's eigenvalue.
+    pub fn set_linearization(&mut self, y: &[f64]) -> Result<()> {
+        self.lin_stenosis = self
+            .dae
+            .stenosis
+            .iter()
+            .filter(|(i, _)| self.e[*i] > 0.0)
+            .map(|&(i, s)| (i, 2.0 * s * y[i].abs()))
+            .collect();
+        if let Some(alg) = self.alg.as_mut().filter(|a| !a.is_linear()) {
+            alg.factor(self.dae, y).map_err(|m| singular(0.0, &m))?;
+        }
+        Ok(())
+    }
+
+    /// Apply the linearised ODE operator (zero forcing, stenosis ignored) to a differential vector.
+    pub fn linear_operator(&mut self, x: &[f64], out: &mut [f64]) -> Result<()> {
+        let n = self.dae.n;
+        let mut y = vec![0.0; n];
+        for (j, &i) in self.diff.iter().enumerate() {
+            y[i] = x[j];
+        }
+        if let Some(alg) = self.alg.as_mut() {
+            for (rl, &g) in alg.r.iter_mut().zip(&alg.rows) {
+                *rl = -self.dae.f.row_dot(g, &y);
+            }
+            alg.lu.solve_in_place(&mut alg.r);
+            for (rl, &g) in alg.r.iter().zip(&alg.rows) {
+                y[g] = *rl;
+            }
+        }
+        for (j, &i) in self.diff.iter().enumerate() {
+            out[j] = -self.dae.f.row_dot(i, &y) / self.e[i];
+        }
+        if !self.lin_stenosis.is_empty() {
+            for (j, &i) in self.diff.iter().enumerate() {
+                if let Ok(k) = self.lin_stenosis.binary_search_by_key(&i, |&(u, _)| u) {
+                    out[j] -= self.lin_stenosis[k].1 * y[i] / self.e[i];
+                }
+            }
+        }
+        Ok(())
+    }
+}
