@@ -738,16 +738,26 @@ impl Transport {
             });
         }
         // outputs: the output vessels of the flow probes, their segments in order
+        // (one pass: segments grouped by vessel, names looked up in a map — linear time)
+        let vessel_index: std::collections::HashMap<&str, usize> = circuit
+            .vessel_names
+            .iter()
+            .enumerate()
+            .map(|(i, n)| (n.as_str(), i))
+            .collect();
+        let mut segs_of_vessel: Vec<Vec<usize>> = vec![Vec::new(); circuit.vessel_names.len()];
+        for (j, sg) in circuit.segments.iter().enumerate() {
+            if let Some(v) = segs_of_vessel.get_mut(sg.vessel) {
+                v.push(j);
+            }
+        }
         let mut out_vessels = Vec::new();
         let mut out_segments = Vec::new();
         for (k, name) in probes.vessels.iter().enumerate() {
-            let vi = circuit
-                .vessel_names
-                .iter()
-                .position(|n| n == name)
-                .unwrap_or(usize::MAX);
             let start = out_segments.len();
-            out_segments.extend((0..segments.len()).filter(|&j| circuit.segments[j].vessel == vi));
+            if let Some(&vi) = vessel_index.get(name.as_str()) {
+                out_segments.extend_from_slice(&segs_of_vessel[vi]);
+            }
             out_vessels.push(OutVessel {
                 first: probes.vessel_unknowns[4 * k + 2],
                 last: probes.vessel_unknowns[4 * k + 3],
