@@ -271,6 +271,9 @@ pub struct Transport {
     simple_mixing: Vec<usize>,
     /// The other mixing points (solved by the flow-order sweep).
     general_mixing: Vec<usize>,
+    /// Elimination order of the implicit solve when the domain graph is a forest (always on
+    /// trees): None sends it to the flow-order sweep, which also handles loops.
+    tree: Option<Vec<Link>>,
     // scratch
     vol: Vec<f64>,
     conc: Vec<f64>,
@@ -800,6 +803,7 @@ impl Transport {
             boundary_faces: Vec::new(),
             simple_mixing: Vec::new(),
             general_mixing: Vec::new(),
+            tree: None,
             vol: vec![0.0; ncells],
             conc: vec![0.0; nn],
             qf: Vec::new(),
@@ -834,6 +838,7 @@ impl Transport {
                 t.general_mixing.push(m);
             }
         }
+        t.tree = tree_order(nn, &t.domain, &t.internal);
         // laws that do not need the mean flow are final now
         let zero = vec![0.0; t.segments.len()];
         t.set_laws(&zero, false)?;
@@ -1004,9 +1009,20 @@ impl Transport {
     }
 
     fn load_flows(&mut self, time: f64, y: &[f64]) {
+        self.load_flows_with(time, |u| y[u]);
+    }
+
+    /// Face flows at the α_f level of a step from `y0` to `y1`: Q = Q_0 + α_f (Q_1 − Q_0).
+    fn load_flows_between(&mut self, time: f64, y0: &[f64], y1: &[f64], alpha_f: f64) {
+        self.load_flows_with(time, |u| y0[u] + alpha_f * (y1[u] - y0[u]));
+    }
+
+    /// Face flows from `flow(unknown)`, source flows at `time`, and the interior faces of
+    /// refined cells.
+    fn load_flows_with(&mut self, time: f64, flow: impl Fn(usize) -> f64) {
         let nf = self.n_flow_faces;
         for (q, f) in self.qf[..nf].iter_mut().zip(&self.faces) {
-            *q = y[f.unknown];
+            *q = flow(f.unknown);
         }
         for (q, (_, w, _)) in self.qs.iter_mut().zip(&self.sources) {
             *q = w.eval(time);
@@ -1289,19 +1305,33 @@ impl Transport {
         y1: &[f64],
         z: &mut [f64],
     ) -> Result<()> {
-        let nc = self.cells.len();
-        let nsp = self.species.len();
-        let nn = self.kind.len();
         let t_af = time + alpha_f * dt;
-        let ya: Vec<f64> = y0
+        self.load_flows_between(t_af, y0, y1, alpha_f);
+        // the α_f-level state is only needed by shear-dependent walls (relaxed or instantaneous)
+        let mut ya = std::mem::take(&mut self.sweep.ya);
+        if self
+            .species
             .iter()
-            .zip(y1)
-            .map(|(a, b)| a + alpha_f * (b - a))
-            .collect();
-        self.load_flows(t_af, &ya);
-        // new transport volumes
-        let w_old = self.wvol.clone();
-        let mut w_new = w_old.clone();
+            .any(|sp| !sp.relax.is_empty() || !sp.dynamic_segs.is_empty())
+        {
+            ya.clear();
+            ya.extend(y0.iter().zip(y1).map(|(a, b)| a + alpha_f * (b - a)));
+        }
+        let res = self
+            .transport_volumes(t_af, dt)
+            .and_then(|()| self.implicit_species(t_af, dt, &ya, z));
+        self.sweep.ya = ya;
+        if res.is_ok() {
+            std::mem::swap(&mut self.wvol, &mut self.sweep.wnew);
+        }
+        res
+    }
+
+    /// W' = W + dt (net inflow) of every cell with the loaded face flows, into `sweep.wnew`.
+    fn transport_volumes(&mut self, t_af: f64, dt: f64) -> Result<()> {
+        let mut w_new = std::mem::take(&mut self.sweep.wnew);
+        w_new.clear();
+        w_new.extend_from_slice(&self.wvol);
         for (f, &q) in self.faces.iter().zip(&self.qf) {
             if let End::Node(n) = f.from {
                 if self.node_cell[n] != usize::MAX {
@@ -1319,27 +1349,41 @@ impl Transport {
                 w_new[self.node_cell[*n]] += dt * q;
             }
         }
-        for (i, &w) in w_new.iter().enumerate() {
-            if w.is_nan() || w <= 0.0 {
-                return Err(Error::solver(
-                    t_af,
-                    format!(
-                        "transport volume of cell '{}' became {w:.3e} m³: reduce dt",
-                        self.node_name(self.cells[i])
-                    ),
-                ));
-            }
+        let bad = w_new.iter().position(|&w| w.is_nan() || w <= 0.0);
+        self.sweep.wnew = w_new;
+        match bad {
+            None => Ok(()),
+            Some(i) => Err(Error::solver(
+                t_af,
+                format!(
+                    "transport volume of cell '{}' became {:.3e} m³: reduce dt",
+                    self.node_name(self.cells[i]),
+                    self.sweep.wnew[i]
+                ),
+            )),
         }
-        let unknowns = std::mem::take(&mut self.domain);
-        let mut d = vec![0.0; nn];
-        let mut b = vec![0.0; nn];
-        let mut wconst = vec![0.0; nc];
-        let mut wlin = vec![0.0; nc];
+    }
+
+    /// The backward-Euler solve of every species over the step (see `implicit_step`), with the
+    /// face flows and new volumes loaded; `ya` is the α_f-level state (for shear-dependent walls).
+    fn implicit_species(&mut self, t_af: f64, dt: f64, ya: &[f64], z: &mut [f64]) -> Result<()> {
+        let nc = self.cells.len();
+        let nsp = self.species.len();
+        let nn = self.kind.len();
+        let sc = &mut self.sweep;
+        let (mut d, mut b) = (std::mem::take(&mut sc.d), std::mem::take(&mut sc.b));
+        let (mut wconst, mut wlin) = (std::mem::take(&mut sc.wconst), std::mem::take(&mut sc.wlin));
+        d.resize(nn, 0.0);
+        b.resize(nn, 0.0);
+        wconst.resize(nc, 0.0);
+        wlin.resize(nc, 0.0);
+        let w_new = std::mem::take(&mut self.sweep.wnew);
         let quasi = self.formulation == Formulation::TlQuasisteady;
+        let mut res = Ok(());
         for s in 0..nsp {
             // old total concentrations (lagged values for mixing points stay in `conc`)
             for (i, &n) in self.cells.iter().enumerate() {
-                self.conc[n] = z[s * nc + i] / w_old[i];
+                self.conc[n] = z[s * nc + i] / self.wvol[i];
             }
             self.load_boundary(s, t_af);
             let lambda = self.species[s].decay;
@@ -1353,27 +1397,8 @@ impl Transport {
                     *v = q + (*v - q) * (-dt / tau).exp();
                 }
             }
-            self.load_shear(s, &ya, z);
-            // wall uptake linearised about the old state: W = G s x + const (exact for linear binding)
-            if self.species[s].has_wall {
-                self.free_of_cells(s);
-                self.wall_uptake(s, &mut wconst);
-                let sp = &self.species[s];
-                let mut g = sp.cell_g.clone();
-                for &p in &sp.dynamic {
-                    let pc = &self.pieces[p];
-                    let (gj, _, _) = sp.laws[p].eval_cbrt(sp.shear_cbrt[pc.seg]);
-                    g[pc.cell] += pc.share * gj;
-                }
-                for (i, &n) in self.cells.iter().enumerate() {
-                    let slope = 1.0 / sp.binding.capacity_slope(sp.free[n]);
-                    wlin[i] = g[i] * slope;
-                    wconst[i] -= wlin[i] * self.conc[n];
-                }
-            } else {
-                wlin.iter_mut().for_each(|v| *v = 0.0);
-                wconst.iter_mut().for_each(|v| *v = 0.0);
-            }
+            self.load_shear(s, ya, z);
+            self.linearised_wall(s, &mut wconst, &mut wlin);
             for &m in &self.mixing {
                 d[m] = 0.0;
                 b[m] = 0.0;
@@ -1389,42 +1414,19 @@ impl Transport {
             }
             self.restore_mixing(s);
             let mut x = std::mem::take(&mut self.conc);
-            let res = self.sweep_solve(&unknowns, &d, &b, &mut x);
+            if self.tree.is_some() {
+                self.tree_solve(&d, &b, &mut x);
+            } else {
+                let unknowns = std::mem::take(&mut self.domain);
+                res = self.sweep_solve(&unknowns, &d, &b, &mut x);
+                self.domain = unknowns;
+            }
             self.conc = x;
             self.save_mixing(s);
-            if let Err(e) = res {
-                self.domain = unknowns;
-                return Err(e);
+            if res.is_err() {
+                break;
             }
-            // bookkeeping with the solved field: the same fluxes that entered the solve
-            let (mut i_in, mut i_out) = (0.0, 0.0);
-            for (f, &q) in self.faces.iter().zip(&self.qf) {
-                let (from_b, to_b) = (f.from, f.to);
-                if let End::Boundary(bb) = from_b {
-                    let c = if q >= 0.0 {
-                        self.lagged_boundary(bb, to_b)
-                    } else {
-                        self.end_conc(to_b)
-                    };
-                    account(self.boundary_inlet[bb], q * c, &mut i_in, &mut i_out);
-                }
-                if let End::Boundary(bb) = to_b {
-                    let c = if q < 0.0 {
-                        self.lagged_boundary(bb, from_b)
-                    } else {
-                        self.end_conc(from_b)
-                    };
-                    account(self.boundary_inlet[bb], -q * c, &mut i_in, &mut i_out);
-                }
-            }
-            for ((n, _, bb), &q) in self.sources.iter().zip(&self.qs) {
-                let c = if q >= 0.0 {
-                    self.lagged_boundary(*bb, End::Node(*n))
-                } else {
-                    self.conc[*n]
-                };
-                account(self.boundary_inlet[*bb], q * c, &mut i_in, &mut i_out);
-            }
+            let (i_in, i_out) = self.implicit_boundary_fluxes();
             let (mut i_wall, mut i_decay) = (0.0, 0.0);
             for (i, &n) in self.cells.iter().enumerate() {
                 let x = self.conc[n];
@@ -1443,9 +1445,70 @@ impl Transport {
                 self.free_of_cells(s);
             }
         }
-        self.wvol = w_new;
-        self.domain = unknowns;
-        Ok(())
+        let sc = &mut self.sweep;
+        (sc.d, sc.b, sc.wconst, sc.wlin, sc.wnew) = (d, b, wconst, wlin, w_new);
+        res
+    }
+
+    /// Wall uptake of species `s` linearised about the current state: W = wlin·C_t + wconst
+    /// per cell (exact for linear binding); zero without a wall.
+    fn linearised_wall(&mut self, s: usize, wconst: &mut [f64], wlin: &mut [f64]) {
+        if !self.species[s].has_wall {
+            wlin.iter_mut().for_each(|v| *v = 0.0);
+            wconst.iter_mut().for_each(|v| *v = 0.0);
+            return;
+        }
+        self.free_of_cells(s);
+        self.wall_uptake(s, wconst);
+        let sp = &self.species[s];
+        wlin.copy_from_slice(&sp.cell_g);
+        for &p in &sp.dynamic {
+            let pc = &self.pieces[p];
+            let (gj, _, _) = sp.laws[p].eval_cbrt(sp.shear_cbrt[pc.seg]);
+            wlin[pc.cell] += pc.share * gj;
+        }
+        let identity = sp.binding.is_identity();
+        for (i, &n) in self.cells.iter().enumerate() {
+            if !identity {
+                wlin[i] *= 1.0 / sp.binding.capacity_slope(sp.free[n]);
+            }
+            wconst[i] -= wlin[i] * self.conc[n];
+        }
+    }
+
+    /// Boundary inflow (I_in) and outflow (I_out) rates of the solved implicit field: the same
+    /// fluxes that entered the solve.
+    fn implicit_boundary_fluxes(&self) -> (f64, f64) {
+        let (mut i_in, mut i_out) = (0.0, 0.0);
+        for &fi in &self.boundary_faces {
+            let (f, q) = (&self.faces[fi], self.qf[fi]);
+            let (from_b, to_b) = (f.from, f.to);
+            if let End::Boundary(bb) = from_b {
+                let c = if q >= 0.0 {
+                    self.lagged_boundary(bb, to_b)
+                } else {
+                    self.end_conc(to_b)
+                };
+                account(self.boundary_inlet[bb], q * c, &mut i_in, &mut i_out);
+            }
+            if let End::Boundary(bb) = to_b {
+                let c = if q < 0.0 {
+                    self.lagged_boundary(bb, from_b)
+                } else {
+                    self.end_conc(from_b)
+                };
+                account(self.boundary_inlet[bb], -q * c, &mut i_in, &mut i_out);
+            }
+        }
+        for ((n, _, bb), &q) in self.sources.iter().zip(&self.qs) {
+            let c = if q >= 0.0 {
+                self.lagged_boundary(*bb, End::Node(*n))
+            } else {
+                self.conc[*n]
+            };
+            account(self.boundary_inlet[*bb], q * c, &mut i_in, &mut i_out);
+        }
+        (i_in, i_out)
     }
 
     #[inline]
@@ -1464,6 +1527,69 @@ impl Transport {
             (Some(c), _) => c,
             (None, End::Node(n)) => self.sweep.lag[n],
             (None, End::Boundary(_)) => 0.0,
+        }
+    }
+
+    /// The system of `sweep_solve` on the whole domain when it is a forest (`tree`): eliminated
+    /// leaves first, each row becoming x_n = α_n + β_n x_parent — β_n ≠ 0 only when the parent
+    /// is upwind of n, since an upwind row never references its downstream neighbour — then
+    /// back-substituted parents first. Exact and O(n) for any flow directions, with no queue.
+    fn tree_solve(&mut self, d: &[f64], b: &[f64], x: &mut [f64]) {
+        let Some(tree) = self.tree.as_deref() else {
+            return;
+        };
+        let sw = &mut self.sweep;
+        sw.beta.resize(tree.len(), 0.0);
+        for l in tree {
+            let n = l.node as usize;
+            sw.lag[n] = x[n];
+            sw.num[n] = b[n];
+            sw.den[n] = d[n];
+        }
+        for &fi in &self.boundary_faces {
+            let (q, up, down) = oriented(&self.faces, &self.qf, fi);
+            match (up, down) {
+                (End::Node(n), _) => sw.den[n] += q.abs(),
+                (End::Boundary(bb), End::Node(n)) => {
+                    sw.num[n] += q.abs() * inflow_value(self.bval[bb], sw.lag[n])
+                }
+                _ => {}
+            }
+        }
+        for (&(n, _, bb), &q) in self.sources.iter().zip(&self.qs) {
+            if q >= 0.0 {
+                sw.num[n] += q * inflow_value(self.bval[bb], sw.lag[n]);
+            } else {
+                sw.den[n] -= q;
+            }
+        }
+        for (l, beta) in tree.iter().zip(sw.beta.iter_mut()) {
+            let n = l.node as usize;
+            let (mut aq, mut to_parent) = (0.0, false);
+            if l.parent != u32::MAX {
+                let q = self.qf[l.face as usize];
+                aq = q.abs();
+                to_parent = (q >= 0.0) == l.from_child;
+                if to_parent {
+                    sw.den[n] += aq;
+                } else {
+                    sw.den[l.parent as usize] += aq;
+                }
+            }
+            let den = sw.den[n];
+            let solvable = den > 1e-300;
+            x[n] = if solvable { sw.num[n] / den } else { sw.lag[n] };
+            *beta = 0.0;
+            if to_parent {
+                sw.num[l.parent as usize] += aq * x[n];
+            } else if solvable && aq != 0.0 {
+                *beta = aq / den;
+            }
+        }
+        for (l, &beta) in tree.iter().zip(&sw.beta).rev() {
+            if beta != 0.0 {
+                x[l.node as usize] += beta * x[l.parent as usize];
+            }
         }
     }
 
@@ -1807,6 +1933,13 @@ impl Transport {
     }
 }
 
+/// Concentration carried into the domain by a boundary: its prescribed value, or (zero-gradient
+/// backflow) the lagged value of the node it enters.
+#[inline]
+fn inflow_value(prescribed: Option<f64>, lagged: f64) -> f64 {
+    prescribed.unwrap_or(lagged)
+}
+
 #[inline]
 fn account(inlet: bool, flux_into_domain: f64, i_in: &mut f64, i_out: &mut f64) {
     if inlet {
@@ -1827,6 +1960,13 @@ struct Sweep {
     d: Vec<f64>,
     b: Vec<f64>,
     dnode: Vec<f64>,
+    /// Implicit step: α_f-level state, new transport volumes, linearised wall uptake, and the
+    /// coupling to the parent of every node in the tree elimination.
+    ya: Vec<f64>,
+    wnew: Vec<f64>,
+    wconst: Vec<f64>,
+    wlin: Vec<f64>,
+    beta: Vec<f64>,
 }
 
 impl Sweep {
@@ -1841,6 +1981,11 @@ impl Sweep {
             d: Vec::new(),
             b: Vec::new(),
             dnode: Vec::new(),
+            ya: Vec::new(),
+            wnew: Vec::new(),
+            wconst: Vec::new(),
+            wlin: Vec::new(),
+            beta: Vec::new(),
         }
     }
 }
@@ -1863,4 +2008,85 @@ fn oriented(faces: &[Face], qf: &[f64], fi: usize) -> (f64, End, End) {
     } else {
         (q, f.to, f.from)
     }
+}
+
+/// One domain node in the elimination order of [`tree_order`]: its parent in the spanning
+/// forest (`u32::MAX` for a root) and the face joining them.
+#[derive(Debug, Clone, Copy)]
+struct Link {
+    node: u32,
+    parent: u32,
+    face: u32,
+    /// The face points from this node to its parent (positive flow runs child → parent).
+    from_child: bool,
+}
+
+/// Children-before-parents order of the domain nodes when the undirected graph of the internal
+/// faces is a forest (no loops, no parallel faces): then the upwind system can be eliminated
+/// leaves first for any flow directions (`Transport::tree_solve`). None otherwise. Linear time.
+fn tree_order(nt: usize, domain: &[usize], internal: &[[u32; 3]]) -> Option<Vec<Link>> {
+    let mut ptr = vec![0u32; nt + 1];
+    for &[_, a, b] in internal {
+        ptr[a as usize + 1] += 1;
+        ptr[b as usize + 1] += 1;
+    }
+    for i in 0..nt {
+        ptr[i + 1] += ptr[i];
+    }
+    let mut fill = ptr.clone();
+    let mut adj = vec![(0u32, 0u32); ptr[nt] as usize];
+    for &[f, a, b] in internal {
+        adj[fill[a as usize] as usize] = (f, b);
+        fill[a as usize] += 1;
+        adj[fill[b as usize] as usize] = (f, a);
+        fill[b as usize] += 1;
+    }
+    // nodes outside the domain count as seen: meeting one sends the solve to the general sweep
+    let mut seen = vec![true; nt];
+    for &n in domain {
+        seen[n] = false;
+    }
+    let mut pre: Vec<Link> = Vec::with_capacity(domain.len());
+    let mut stack: Vec<Link> = Vec::new();
+    for &r in domain {
+        if seen[r] {
+            continue;
+        }
+        seen[r] = true;
+        stack.push(Link {
+            node: r as u32,
+            parent: u32::MAX,
+            face: u32::MAX,
+            from_child: false,
+        });
+        while let Some(l) = stack.pop() {
+            let n = l.node as usize;
+            for &(f, o) in &adj[ptr[n] as usize..ptr[n + 1] as usize] {
+                if f == l.face {
+                    continue;
+                }
+                if seen[o as usize] {
+                    return None; // a loop (or two faces between the same nodes)
+                }
+                seen[o as usize] = true;
+                let from_child = internal_from(internal, f) == o;
+                stack.push(Link {
+                    node: o,
+                    parent: l.node,
+                    face: f,
+                    from_child,
+                });
+            }
+            pre.push(l);
+        }
+    }
+    pre.reverse();
+    Some(pre)
+}
+
+/// `from` node of internal face `f` (faces are listed in `internal` in face order, so a binary
+/// search finds it).
+fn internal_from(internal: &[[u32; 3]], f: u32) -> u32 {
+    let k = internal.partition_point(|e| e[0] < f);
+    internal[k][1]
 }
