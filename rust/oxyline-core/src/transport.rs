@@ -1329,26 +1329,35 @@ impl Transport {
 
     /// W' = W + dt (net inflow) of every cell with the loaded face flows, into `sweep.wnew`.
     fn transport_volumes(&mut self, t_af: f64, dt: f64) -> Result<()> {
-        let mut w_new = std::mem::take(&mut self.sweep.wnew);
-        w_new.clear();
-        w_new.extend_from_slice(&self.wvol);
-        for (f, &q) in self.faces.iter().zip(&self.qf) {
+        let mut net = std::mem::take(&mut self.sweep.dnode);
+        net.clear();
+        net.resize(self.kind.len(), 0.0);
+        for &[fi, a, b] in &self.internal {
+            let q = self.qf[fi as usize];
+            net[a as usize] -= q;
+            net[b as usize] += q;
+        }
+        for &fi in &self.boundary_faces {
+            let (f, q) = (&self.faces[fi], self.qf[fi]);
             if let End::Node(n) = f.from {
-                if self.node_cell[n] != usize::MAX {
-                    w_new[self.node_cell[n]] -= dt * q;
-                }
+                net[n] -= q;
             }
             if let End::Node(n) = f.to {
-                if self.node_cell[n] != usize::MAX {
-                    w_new[self.node_cell[n]] += dt * q;
-                }
+                net[n] += q;
             }
         }
         for ((n, _, _), &q) in self.sources.iter().zip(&self.qs) {
-            if self.node_cell[*n] != usize::MAX {
-                w_new[self.node_cell[*n]] += dt * q;
-            }
+            net[*n] += q;
         }
+        let mut w_new = std::mem::take(&mut self.sweep.wnew);
+        w_new.clear();
+        w_new.extend(
+            self.cells
+                .iter()
+                .zip(&self.wvol)
+                .map(|(&n, &w)| w + dt * net[n]),
+        );
+        self.sweep.dnode = net;
         let bad = w_new.iter().position(|&w| w.is_nan() || w <= 0.0);
         self.sweep.wnew = w_new;
         match bad {
@@ -1369,12 +1378,10 @@ impl Transport {
     fn implicit_species(&mut self, t_af: f64, dt: f64, ya: &[f64], z: &mut [f64]) -> Result<()> {
         let nc = self.cells.len();
         let nsp = self.species.len();
-        let nn = self.kind.len();
-        let sc = &mut self.sweep;
-        let (mut d, mut b) = (std::mem::take(&mut sc.d), std::mem::take(&mut sc.b));
-        let (mut wconst, mut wlin) = (std::mem::take(&mut sc.wconst), std::mem::take(&mut sc.wlin));
-        d.resize(nn, 0.0);
-        b.resize(nn, 0.0);
+        let (mut wconst, mut wlin) = (
+            std::mem::take(&mut self.sweep.wconst),
+            std::mem::take(&mut self.sweep.wlin),
+        );
         wconst.resize(nc, 0.0);
         wlin.resize(nc, 0.0);
         let w_new = std::mem::take(&mut self.sweep.wnew);
@@ -1387,37 +1394,32 @@ impl Transport {
             }
             self.load_boundary(s, t_af);
             let lambda = self.species[s].decay;
-            // relaxed shears first (exact for the step's frozen |Q|), so that the wall law
-            // of the solve uses the end-of-step boundary layer, like backward Euler
-            {
-                let sp = &self.species[s];
-                for (k, &(j, tau)) in sp.relax.iter().enumerate() {
-                    let q = ya[self.segments[j].branch_unknown].abs();
-                    let v = &mut z[sp.relax_offset + k];
-                    *v = q + (*v - q) * (-dt / tau).exp();
-                }
-            }
+            self.relax_shears(s, dt, ya, z);
             self.load_shear(s, ya, z);
             self.linearised_wall(s, &mut wconst, &mut wlin);
+            // the rows: (d_n + Σ_out |Q|) x_n − Σ_in |Q| x_up = b_n, d and b into den and num
+            self.restore_mixing(s);
+            let sw = &mut self.sweep;
             for &m in &self.mixing {
-                d[m] = 0.0;
-                b[m] = 0.0;
+                (sw.den[m], sw.num[m], sw.lag[m]) = (0.0, 0.0, self.conc[m]);
             }
             for (i, &n) in self.cells.iter().enumerate() {
-                if quasi {
-                    d[n] = wlin[i];
-                    b[n] = -wconst[i];
+                (sw.den[n], sw.num[n]) = if quasi {
+                    (wlin[i], -wconst[i])
                 } else {
-                    d[n] = w_new[i] * (1.0 / dt + lambda) + wlin[i];
-                    b[n] = z[s * nc + i] / dt - wconst[i];
-                }
+                    (
+                        w_new[i] * (1.0 / dt + lambda) + wlin[i],
+                        z[s * nc + i] / dt - wconst[i],
+                    )
+                };
+                sw.lag[n] = self.conc[n];
             }
-            self.restore_mixing(s);
             let mut x = std::mem::take(&mut self.conc);
             if self.tree.is_some() {
-                self.tree_solve(&d, &b, &mut x);
+                self.tree_solve(&mut x);
             } else {
                 let unknowns = std::mem::take(&mut self.domain);
+                let (d, b) = (self.sweep.den.clone(), self.sweep.num.clone());
                 res = self.sweep_solve(&unknowns, &d, &b, &mut x);
                 self.domain = unknowns;
             }
@@ -1440,14 +1442,26 @@ impl Transport {
             for (a, v) in acc.iter_mut().zip([i_in, i_out, i_wall, i_decay]) {
                 *a += dt * v;
             }
-            // free concentrations of the new state for the next linearisation and reporting
-            if self.species[s].has_wall {
+            // free concentrations of the new state for the next linearisation (with binding)
+            let sp = &self.species[s];
+            if sp.has_wall && !sp.binding.is_identity() {
                 self.free_of_cells(s);
             }
         }
         let sc = &mut self.sweep;
-        (sc.d, sc.b, sc.wconst, sc.wlin, sc.wnew) = (d, b, wconst, wlin, w_new);
+        (sc.wconst, sc.wlin, sc.wnew) = (wconst, wlin, w_new);
         res
+    }
+
+    /// Relaxed shears of species `s` over the step, exactly for the step's frozen |Q|, so that
+    /// the wall law of the solve uses the end-of-step boundary layer, like backward Euler.
+    fn relax_shears(&self, s: usize, dt: f64, ya: &[f64], z: &mut [f64]) {
+        let sp = &self.species[s];
+        for (k, &(j, tau)) in sp.relax.iter().enumerate() {
+            let q = ya[self.segments[j].branch_unknown].abs();
+            let v = &mut z[sp.relax_offset + k];
+            *v = q + (*v - q) * (-dt / tau).exp();
+        }
     }
 
     /// Wall uptake of species `s` linearised about the current state: W = wlin·C_t + wconst
@@ -1458,7 +1472,18 @@ impl Transport {
             wconst.iter_mut().for_each(|v| *v = 0.0);
             return;
         }
-        self.free_of_cells(s);
+        let sp = &self.species[s];
+        if sp.binding.is_identity() && sp.dynamic.is_empty() {
+            // W = g C + (q − g c_w): already linear
+            for (i, (wl, wc)) in wlin.iter_mut().zip(wconst.iter_mut()).enumerate() {
+                *wl = sp.cell_g[i];
+                *wc = sp.cell_q[i] - sp.cell_gcw[i];
+            }
+            return;
+        }
+        if !sp.binding.is_identity() {
+            self.free_of_cells(s);
+        }
         self.wall_uptake(s, wconst);
         let sp = &self.species[s];
         wlin.copy_from_slice(&sp.cell_g);
@@ -1534,18 +1559,13 @@ impl Transport {
     /// leaves first, each row becoming x_n = α_n + β_n x_parent — β_n ≠ 0 only when the parent
     /// is upwind of n, since an upwind row never references its downstream neighbour — then
     /// back-substituted parents first. Exact and O(n) for any flow directions, with no queue.
-    fn tree_solve(&mut self, d: &[f64], b: &[f64], x: &mut [f64]) {
+    /// On entry `sweep.den`, `sweep.num` hold d and b, and `sweep.lag` the previous values.
+    fn tree_solve(&mut self, x: &mut [f64]) {
         let Some(tree) = self.tree.as_deref() else {
             return;
         };
         let sw = &mut self.sweep;
         sw.beta.resize(tree.len(), 0.0);
-        for l in tree {
-            let n = l.node as usize;
-            sw.lag[n] = x[n];
-            sw.num[n] = b[n];
-            sw.den[n] = d[n];
-        }
         for &fi in &self.boundary_faces {
             let (q, up, down) = oriented(&self.faces, &self.qf, fi);
             match (up, down) {
