@@ -76,14 +76,22 @@ def _progress_bar(enabled: bool | ProgressCallback | None) -> tuple[Any, Any]:
     return update, bar
 
 
-def _species_results(model: Model, raw: Mapping[str, Any]) -> dict[str, SpeciesResult]:
+def _species_columns(lay: Mapping[str, Any], segments: bool) -> tuple[int, int, int]:
+    """Vessels, recorded segments and columns per species of a run (the core records the
+    per-segment species columns only with ``segments``)."""
+    nv = len(lay["segment_count"])
+    ns = int(sum(lay["segment_count"])) if segments else 0
+    cols = nv * lay["vessel_columns"] + ns * lay["segment_columns"] + lay["balance_columns"]
+    return nv, ns, cols
+
+
+def _species_results(model: Model, raw: Mapping[str, Any],
+                     segments: bool = True) -> dict[str, SpeciesResult]:
     tr = raw.get("transport")
     if tr is None:
         return {}
     lay = model.network.transport_layout()
-    nv = len(lay["segment_count"])
-    ns = int(sum(lay["segment_count"]))
-    cols = lay["columns_per_species"]
+    nv, ns, cols = _species_columns(lay, segments)
     data = tr["data"]
     nt = data.shape[0]
     out: dict[str, SpeciesResult] = {}
@@ -111,7 +119,7 @@ def _result(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
         data=raw["data"], segment_count=list(layout["segment_count"]) if s["segments"] else [],
         segment_position=layout["segment_position"] if s["segments"] else layout["segment_position"][:0],
         settings=settings, complete=complete,
-        species=_species_results(model, raw), oxygen=model.transport.get("oxygen"),
+        species=_species_results(model, raw, s["segments"]), oxygen=model.transport.get("oxygen"),
     )
 
 
@@ -230,6 +238,6 @@ def _empty_rows(model: Model, s: Mapping[str, Any]) -> dict[str, Any]:
     if tl is not None:
         n = len(tl["species"])
         raw["transport"] = {"species": list(tl["species"]),
-                            "data": np.zeros((0, n * tl["columns_per_species"])),
+                            "data": np.zeros((0, n * _species_columns(tl, s["segments"])[2])),
                             "initial_stored": [0.0] * n}
     return raw

@@ -244,6 +244,8 @@ pub struct Transport {
     segments: Vec<Segment>,
     /// Faces 0..n_flow_faces carry a flow unknown; the rest are interior faces of `chains`.
     n_flow_faces: usize,
+    /// The flow unknown of faces 0..n_flow_faces (a compact copy for the per-step gather).
+    face_unknowns: Vec<usize>,
     chains: Vec<Chain>,
     /// Per cell: the circuit node whose pressure sets its volume.
     cell_node: Vec<usize>,
@@ -260,6 +262,8 @@ pub struct Transport {
     v_eps: f64,
     out_vessels: Vec<OutVessel>,
     out_segments: Vec<usize>,
+    /// Record the per-segment columns (off: vessel and balance columns only).
+    segment_output: bool,
     segment_vessels: Vec<usize>,
     node_names: Vec<String>,
     /// Nodes solved by the implicit sweep (cells and mixing points).
@@ -785,6 +789,7 @@ impl Transport {
             node_sources,
             segments,
             n_flow_faces,
+            face_unknowns: Vec::new(),
             chains,
             cell_node,
             last_sub,
@@ -796,6 +801,7 @@ impl Transport {
             v_eps: spec.velocity_threshold,
             out_vessels,
             out_segments,
+            segment_output: true,
             segment_vessels: circuit.segments.iter().map(|s| s.vessel).collect(),
             node_names,
             domain: Vec::new(),
@@ -839,6 +845,7 @@ impl Transport {
             }
         }
         t.tree = tree_order(nn, &t.domain, &t.internal);
+        t.face_unknowns = t.faces[..t.n_flow_faces].iter().map(|f| f.unknown).collect();
         // laws that do not need the mean flow are final now
         let zero = vec![0.0; t.segments.len()];
         t.set_laws(&zero, false)?;
@@ -862,9 +869,17 @@ impl Transport {
     }
     /// Columns recorded per species at every output time.
     pub fn columns_per_species(&self) -> usize {
-        VESSEL_COLUMNS * self.out_vessels.len()
-            + SEGMENT_COLUMNS * self.out_segments.len()
-            + BALANCE_COLUMNS
+        let segments = if self.segment_output {
+            self.out_segments.len()
+        } else {
+            0
+        };
+        VESSEL_COLUMNS * self.out_vessels.len() + SEGMENT_COLUMNS * segments + BALANCE_COLUMNS
+    }
+    /// Record the per-segment columns (default) or only the vessel and balance columns, which
+    /// keeps the output of large trees small.
+    pub fn set_segment_output(&mut self, on: bool) {
+        self.segment_output = on;
     }
     /// Recorded segments of every output vessel.
     pub fn out_segment_counts(&self) -> Vec<usize> {
@@ -1021,8 +1036,8 @@ impl Transport {
     /// refined cells.
     fn load_flows_with(&mut self, time: f64, flow: impl Fn(usize) -> f64) {
         let nf = self.n_flow_faces;
-        for (q, f) in self.qf[..nf].iter_mut().zip(&self.faces) {
-            *q = flow(f.unknown);
+        for (q, &u) in self.qf[..nf].iter_mut().zip(&self.face_unknowns) {
+            *q = flow(u);
         }
         for (q, (_, w, _)) in self.qs.iter_mut().zip(&self.sources) {
             *q = w.eval(time);
@@ -1388,31 +1403,29 @@ impl Transport {
         let quasi = self.formulation == Formulation::TlQuasisteady;
         let mut res = Ok(());
         for s in 0..nsp {
-            // old total concentrations (lagged values for mixing points stay in `conc`)
-            for (i, &n) in self.cells.iter().enumerate() {
-                self.conc[n] = z[s * nc + i] / self.wvol[i];
-            }
             self.load_boundary(s, t_af);
             let lambda = self.species[s].decay;
             self.relax_shears(s, dt, ya, z);
-            self.load_shear(s, ya, z);
-            self.linearised_wall(s, &mut wconst, &mut wlin);
-            // the rows: (d_n + Σ_out |Q|) x_n − Σ_in |Q| x_up = b_n, d and b into den and num
             self.restore_mixing(s);
-            let sw = &mut self.sweep;
+            let sp = &self.species[s];
+            let (sw, zs) = (&mut self.sweep, &z[s * nc..(s + 1) * nc]);
             for &m in &self.mixing {
                 (sw.den[m], sw.num[m], sw.lag[m]) = (0.0, 0.0, self.conc[m]);
             }
-            for (i, &n) in self.cells.iter().enumerate() {
-                (sw.den[n], sw.num[n]) = if quasi {
-                    (wlin[i], -wconst[i])
-                } else {
-                    (
-                        w_new[i] * (1.0 / dt + lambda) + wlin[i],
-                        z[s * nc + i] / dt - wconst[i],
-                    )
-                };
-                sw.lag[n] = self.conc[n];
+            if !quasi && sp.binding.is_identity() && sp.dynamic.is_empty() {
+                // one fused pass: old concentration, wall W = g C + (q − g c_w) (linear), and
+                // the rows (d_n + Σ_out |Q|) x_n − Σ_in |Q| x_up = b_n into den and num
+                let rate = 1.0 / dt + lambda;
+                for (i, &n) in self.cells.iter().enumerate() {
+                    let c = zs[i] / self.wvol[i];
+                    let (g, wc) = (sp.cell_g[i], sp.cell_q[i] - sp.cell_gcw[i]);
+                    (self.conc[n], sw.lag[n]) = (c, c);
+                    (wlin[i], wconst[i]) = (g, wc);
+                    sw.den[n] = w_new[i] * rate + g;
+                    sw.num[n] = zs[i] / dt - wc;
+                }
+            } else {
+                self.implicit_rows(s, dt, ya, z, &w_new, &mut wconst, &mut wlin);
             }
             let mut x = std::mem::take(&mut self.conc);
             if self.tree.is_some() {
@@ -1451,6 +1464,40 @@ impl Transport {
         let sc = &mut self.sweep;
         (sc.wconst, sc.wlin, sc.wnew) = (wconst, wlin, w_new);
         res
+    }
+
+    /// The rows of species `s` in the general case (binding, shear-dependent walls, or the
+    /// quasi-steady formulation): old concentrations, the wall linearised about them, and
+    /// d, b into `sweep.den`, `sweep.num`.
+    #[allow(clippy::too_many_arguments)]
+    fn implicit_rows(
+        &mut self,
+        s: usize,
+        dt: f64,
+        ya: &[f64],
+        z: &[f64],
+        w_new: &[f64],
+        wconst: &mut [f64],
+        wlin: &mut [f64],
+    ) {
+        let nc = self.cells.len();
+        let zs = &z[s * nc..(s + 1) * nc];
+        for (i, &n) in self.cells.iter().enumerate() {
+            self.conc[n] = zs[i] / self.wvol[i];
+        }
+        self.load_shear(s, ya, z);
+        self.linearised_wall(s, wconst, wlin);
+        let quasi = self.formulation == Formulation::TlQuasisteady;
+        let rate = 1.0 / dt + self.species[s].decay;
+        let sw = &mut self.sweep;
+        for (i, &n) in self.cells.iter().enumerate() {
+            (sw.den[n], sw.num[n]) = if quasi {
+                (wlin[i], -wconst[i])
+            } else {
+                (w_new[i] * rate + wlin[i], zs[i] / dt - wconst[i])
+            };
+            sw.lag[n] = self.conc[n];
+        }
     }
 
     /// Relaxed shears of species `s` over the step, exactly for the step's frozen |Q|, so that
@@ -1834,7 +1881,12 @@ impl Transport {
                     .sum();
                 out.extend([c_in, c_out, j_in, j_out, wall]);
             }
-            for &j in &self.out_segments {
+            let segs: &[usize] = if self.segment_output {
+                &self.out_segments
+            } else {
+                &[]
+            };
+            for &j in segs {
                 let seg = &self.segments[j];
                 let (flux, _) = face_flux(self, seg.branch_unknown);
                 let (mut c, mut wsum, mut vseg, mut dvseg) = (0.0, 0.0, 0.0, 0.0);

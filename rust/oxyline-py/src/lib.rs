@@ -374,6 +374,10 @@ impl Network {
         } else {
             None
         };
+        if let Some(t) = species.as_mut() {
+            // per-segment species columns follow the flow's `segments` switch
+            t.set_segment_output(segments || all_unknowns);
+        }
         let species_names = species
             .as_ref()
             .map(|t| t.species_names())
