@@ -845,7 +845,10 @@ impl Transport {
             }
         }
         t.tree = tree_order(nn, &t.domain, &t.internal);
-        t.face_unknowns = t.faces[..t.n_flow_faces].iter().map(|f| f.unknown).collect();
+        t.face_unknowns = t.faces[..t.n_flow_faces]
+            .iter()
+            .map(|f| f.unknown)
+            .collect();
         // laws that do not need the mean flow are final now
         let zero = vec![0.0; t.segments.len()];
         t.set_laws(&zero, false)?;
