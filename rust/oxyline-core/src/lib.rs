@@ -13,6 +13,7 @@ pub mod rk4;
 pub mod segment;
 pub mod simulate;
 pub mod sparse;
+pub mod spec;
 pub mod stability;
 pub mod transport;
 pub mod waveform;

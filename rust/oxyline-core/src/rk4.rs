@@ -38,6 +38,15 @@ impl CoupledStages {
     }
 }
 
+/// Stage times (fractions of dt) of classical RK4 stages 2–4.
+const STAGE: [f64; 3] = [0.5, 0.5, 1.0];
+
+/// The RK4 increment of entry `i` from the four stage slopes `k`.
+#[inline]
+fn rk4_increment(k: &[Vec<f64>; 4], i: usize, dt: f64) -> f64 {
+    dt / 6.0 * (k[0][i] + 2.0 * k[1][i] + 2.0 * k[2][i] + k[3][i])
+}
+
 /// Right-hand side f(t, z, dz) of a plain ODE.
 pub type OdeRhs<'f> = dyn FnMut(f64, &[f64], &mut [f64]) -> Result<()> + 'f;
 
@@ -54,16 +63,15 @@ pub fn rk4_ode(
     }
     st.stage.copy_from_slice(z);
     f(time, &st.stage, &mut st.k[0])?;
-    let coef = [0.5, 0.5, 1.0];
     for s in 0..3 {
         let (done, next) = st.k.split_at_mut(s + 1);
         for ((zs, z0), k) in st.stage.iter_mut().zip(z.iter()).zip(&done[s]) {
-            *zs = z0 + coef[s] * dt * k;
+            *zs = z0 + STAGE[s] * dt * k;
         }
-        f(time + coef[s] * dt, &st.stage, &mut next[0])?;
+        f(time + STAGE[s] * dt, &st.stage, &mut next[0])?;
     }
     for (i, zi) in z.iter_mut().enumerate() {
-        *zi += dt / 6.0 * (st.k[0][i] + 2.0 * st.k[1][i] + 2.0 * st.k[2][i] + st.k[3][i]);
+        *zi += rk4_increment(&st.k, i, dt);
     }
     Ok(())
 }
@@ -358,27 +366,25 @@ impl<'a> Rk4<'a> {
             zk.stage.copy_from_slice(z);
             coupled.derivative(time, &stage, &zk.stage, &mut zk.k[0])?;
         }
-        let coef = [0.5, 0.5, 1.0];
         for s in 0..3 {
             for &i in &self.diff {
-                stage[i] = y[i] + coef[s] * dt * self.k[s][i];
+                stage[i] = y[i] + STAGE[s] * dt * self.k[s][i];
             }
-            let ts = time + coef[s] * dt;
+            let ts = time + STAGE[s] * dt;
             self.rhs(ts, &mut stage, s + 1)?;
             if nz > 0 {
                 let (done, next) = zk.k.split_at_mut(s + 1);
                 for ((zs, z0), k) in zk.stage.iter_mut().zip(z.iter()).zip(&done[s]) {
-                    *zs = z0 + coef[s] * dt * k;
+                    *zs = z0 + STAGE[s] * dt * k;
                 }
                 coupled.derivative(ts, &stage, &zk.stage, &mut next[0])?;
             }
         }
         for &i in &self.diff {
-            y[i] +=
-                dt / 6.0 * (self.k[0][i] + 2.0 * self.k[1][i] + 2.0 * self.k[2][i] + self.k[3][i]);
+            y[i] += rk4_increment(&self.k, i, dt);
         }
         for (i, zi) in z.iter_mut().enumerate() {
-            *zi += dt / 6.0 * (zk.k[0][i] + 2.0 * zk.k[1][i] + 2.0 * zk.k[2][i] + zk.k[3][i]);
+            *zi += rk4_increment(&zk.k, i, dt);
         }
         // algebraic unknowns of the last stage are the best warm start
         for &g in &self.alg {

@@ -23,79 +23,10 @@
 use crate::circuit::{Circuit, Dae};
 use crate::closure::{self, SegmentLaw, SegmentWall, WallSpec};
 use crate::error::{Error, Result};
-use crate::hemoglobin::{Binding, BindingSpec, HillAnchor};
+use crate::hemoglobin::{Binding, HillAnchor};
 use crate::network::Probes;
-use crate::waveform::{Waveform, WaveformSpec};
-use serde::Deserialize;
-use std::collections::BTreeMap;
-
-#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq, Default)]
-#[serde(rename_all = "kebab-case")]
-pub enum Formulation {
-    /// State = amount per cell, upwind fluxes (physics §2.5).
-    #[default]
-    Conservative,
-    /// The paper taken literally (physics §2.7): J_i = J_{i−1} − W_i along the flow, no storage.
-    TlQuasisteady,
-}
-
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SpeciesSpec {
-    pub name: String,
-    /// Diffusivity in blood (m²/s): used by the Lévêque and Graetz closures.
-    #[serde(default)]
-    pub diffusivity: f64,
-    /// First-order decay rate λ (1/s).
-    #[serde(default)]
-    pub decay: f64,
-    #[serde(default)]
-    pub binding: BindingSpec,
-    /// Free concentration (mol/m³) carried in at every inlet boundary condition.
-    pub inlet: WaveformSpec,
-    /// Per inlet boundary condition overrides of `inlet`.
-    #[serde(default)]
-    pub inlets: BTreeMap<String, WaveformSpec>,
-    /// Free concentration carried in by backflow at the named outlets; others are zero-gradient.
-    #[serde(default)]
-    pub backflow: BTreeMap<String, WaveformSpec>,
-    /// Initial free concentration (default: the inlet value at t = 0).
-    #[serde(default)]
-    pub initial: Option<f64>,
-    #[serde(default)]
-    pub wall: WallSpec,
-    #[serde(default)]
-    pub per_vessel: BTreeMap<String, WallSpec>,
-}
-
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct TransportSpec {
-    /// Pressure at which the given radii (and so V0) hold, Pa.
-    #[serde(default)]
-    pub reference_pressure: f64,
-    #[serde(default)]
-    pub formulation: Formulation,
-    /// |v| below which the transmission-line elements L_i, R_i are reported as NaN (m/s).
-    #[serde(default = "default_v_eps")]
-    pub velocity_threshold: f64,
-    /// Transport cells per flow segment m (integer >= 1; 1 = one cell per volume node). Every
-    /// volume-holding node becomes a chain of m sub-cells, which sharpens upwind fronts
-    /// (σ_x = sqrt(x dx/m)) without refining the flow circuit (physics §5). Given as a number
-    /// so that a bad value gets a message naming it.
-    #[serde(default = "default_cells")]
-    pub cells_per_segment: f64,
-    /// Per vessel overrides of `cells_per_segment`.
-    #[serde(default)]
-    pub cells_per_vessel: BTreeMap<String, f64>,
-    pub species: Vec<SpeciesSpec>,
-}
-fn default_v_eps() -> f64 {
-    1e-6
-}
-fn default_cells() -> f64 {
-    1.0
-}
+pub use crate::spec::transport::{Formulation, SpeciesSpec, TransportSpec};
+use crate::waveform::Waveform;
 
 /// Largest accepted `cells_per_segment` (a guard against typos that would allocate millions
 /// of cells per segment).
@@ -199,6 +130,24 @@ struct Species {
     /// Total concentration of the mixing points: their lagged value (used when a point has
     /// no outflow, and for zero-gradient backflow into it) is per species.
     mixing_conc: Vec<f64>,
+}
+
+impl Species {
+    /// Wall uptake (mol/s) of cell `i` from its fixed laws at free concentration `free`:
+    /// Σ share·(g (c − c_w) + q) = G c − Σ share g c_w + Q (the wall-uptake law, physics §3).
+    #[inline]
+    fn fixed_uptake(&self, i: usize, free: f64) -> f64 {
+        self.cell_g[i] * free - self.cell_gcw[i] + self.cell_q[i]
+    }
+
+    /// Wall uptake (mol/s) of wall piece `p` with its own law (any kind) at the current shear,
+    /// `free` the free concentration per node.
+    #[inline]
+    fn piece_uptake(&self, pieces: &[Piece], p: usize, free: &[f64]) -> f64 {
+        let pc = &pieces[p];
+        let (g, cw, q) = self.laws[p].eval_cbrt(self.shear_cbrt[pc.seg]);
+        pc.share * (g * (free[pc.node] - cw) + q)
+    }
 }
 
 #[derive(Debug, Clone)]
@@ -1082,11 +1031,12 @@ impl Transport {
 
     #[inline]
     fn boundary_conc(&self, b: usize, n: End) -> f64 {
-        match (self.bval[b], n) {
-            (Some(c), _) => c,
-            (None, End::Node(n)) if self.kind[n] == Kind::Mixing => self.sweep.lag[n],
-            (None, End::Node(n)) => self.conc[n],
-            (None, End::Boundary(_)) => 0.0,
+        match n {
+            End::Node(n) if self.kind[n] == Kind::Mixing => {
+                inflow_value(self.bval[b], self.sweep.lag[n])
+            }
+            End::Node(n) => inflow_value(self.bval[b], self.conc[n]),
+            End::Boundary(_) => inflow_value(self.bval[b], 0.0),
         }
     }
 
@@ -1117,12 +1067,10 @@ impl Transport {
             &sp.free
         };
         for (i, &n) in self.cells.iter().enumerate() {
-            w[i] = sp.cell_g[i] * free[n] - sp.cell_gcw[i] + sp.cell_q[i];
+            w[i] = sp.fixed_uptake(i, free[n]);
         }
         for &p in &sp.dynamic {
-            let pc = &self.pieces[p];
-            let (g, cw, q) = sp.laws[p].eval_cbrt(sp.shear_cbrt[pc.seg]);
-            w[pc.cell] += pc.share * (g * (free[pc.node] - cw) + q);
+            w[self.pieces[p].cell] += sp.piece_uptake(&self.pieces, p, free);
         }
     }
 
@@ -1159,7 +1107,7 @@ impl Transport {
                 } else if down == End::Node(m) {
                     let c = match up {
                         End::Node(u) => self.conc[u],
-                        End::Boundary(b) => self.bval[b].unwrap_or(lag),
+                        End::Boundary(b) => inflow_value(self.bval[b], lag),
                     };
                     num += q.abs() * c;
                 }
@@ -1279,7 +1227,7 @@ impl Transport {
             for (i, (d, &n)) in dzs.iter_mut().zip(&self.cells).enumerate() {
                 let mut v = dnode[n];
                 if has_wall {
-                    let w = sp.cell_g[i] * free[n] - sp.cell_gcw[i] + sp.cell_q[i];
+                    let w = sp.fixed_uptake(i, free[n]);
                     v -= w;
                     i_wall += w;
                 }
@@ -1290,10 +1238,8 @@ impl Transport {
                 *d = v;
             }
             for &p in &sp.dynamic {
-                let pc = &self.pieces[p];
-                let (g, cw, q) = sp.laws[p].eval_cbrt(sp.shear_cbrt[pc.seg]);
-                let w = pc.share * (g * (free[pc.node] - cw) + q);
-                dzs[pc.cell] -= w;
+                let w = sp.piece_uptake(&self.pieces, p, free);
+                dzs[self.pieces[p].cell] -= w;
                 i_wall += w;
             }
             let acc = &mut dz[nsp * nc + 4 * s..nsp * nc + 4 * s + 4];
@@ -1598,10 +1544,9 @@ impl Transport {
     /// neighbour's lagged value — stored in `lag` during the sweep.
     #[inline]
     fn lagged_boundary(&self, b: usize, n: End) -> f64 {
-        match (self.bval[b], n) {
-            (Some(c), _) => c,
-            (None, End::Node(n)) => self.sweep.lag[n],
-            (None, End::Boundary(_)) => 0.0,
+        match n {
+            End::Node(n) => inflow_value(self.bval[b], self.sweep.lag[n]),
+            End::Boundary(_) => inflow_value(self.bval[b], 0.0),
         }
     }
 
@@ -1700,23 +1645,13 @@ impl Transport {
                 match up {
                     End::Node(u) if sw.mark[u] => sw.pending[n] += 1,
                     End::Node(u) => sw.num[n] += aq * x[u],
-                    End::Boundary(bb) => {
-                        let c = match self.bval[bb] {
-                            Some(c) => c,
-                            None => sw.lag[n],
-                        };
-                        sw.num[n] += aq * c;
-                    }
+                    End::Boundary(bb) => sw.num[n] += aq * inflow_value(self.bval[bb], sw.lag[n]),
                 }
             }
             for &k in &self.node_sources[n] {
                 let q = self.qs[k];
                 if q >= 0.0 {
-                    let c = match self.bval[self.sources[k].2] {
-                        Some(c) => c,
-                        None => sw.lag[n],
-                    };
-                    sw.num[n] += q * c;
+                    sw.num[n] += q * inflow_value(self.bval[self.sources[k].2], sw.lag[n]);
                 } else {
                     sw.den[n] -= q;
                 }
@@ -1865,14 +1800,9 @@ impl Transport {
                 (q * c, sp.binding.free(c, c))
             };
             let seg_wall = |j: usize| -> f64 {
-                let qb = sp.shear_cbrt[j];
                 self.seg_pieces[j]
                     .clone()
-                    .map(|p| {
-                        let pc = &self.pieces[p];
-                        let (g, cw, q) = sp.laws[p].eval_cbrt(qb);
-                        pc.share * (g * (sp.free[pc.node] - cw) + q)
-                    })
+                    .map(|p| sp.piece_uptake(&self.pieces, p, &sp.free))
                     .sum()
             };
             for v in &self.out_vessels {
