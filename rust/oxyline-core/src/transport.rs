@@ -150,6 +150,113 @@ impl Species {
     }
 }
 
+impl Species {
+    /// Validate one species of the transport section against the circuit: binding, boundary
+    /// values of every boundary condition, walls per vessel, initial value. `sizes` = (cells,
+    /// segments, transport nodes).
+    fn build(
+        sp: &SpeciesSpec,
+        circuit: &Circuit,
+        boundary_names: &[String],
+        boundary_inlet: &[bool],
+        sizes: (usize, usize, usize),
+    ) -> Result<Self> {
+        let (ncells, nsegs, nnodes) = sizes;
+        let el = format!("species '{}'", sp.name);
+        if !(sp.decay.is_finite() && sp.decay >= 0.0) {
+            return Err(bad(
+                &el,
+                format!("decay must be a finite number >= 0, got {}", sp.decay),
+            ));
+        }
+        if !(sp.diffusivity.is_finite() && sp.diffusivity >= 0.0) {
+            return Err(bad(
+                &el,
+                format!(
+                    "diffusivity must be a finite number >= 0, got {}",
+                    sp.diffusivity
+                ),
+            ));
+        }
+        let binding = Binding::from_spec(&sp.binding, &el)?;
+        let inlet = Waveform::from_spec(&sp.inlet, &format!("{el} inlet"))?;
+        for name in sp.inlets.keys().chain(sp.backflow.keys()) {
+            if !boundary_names.contains(name) {
+                return Err(bad(
+                    &el,
+                    format!("names boundary condition '{name}', which the network does not have"),
+                ));
+            }
+        }
+        let mut boundary = Vec::new();
+        for (b, name) in boundary_names.iter().enumerate() {
+            let v = if boundary_inlet[b] {
+                match sp.inlets.get(name) {
+                    Some(w) => BoundaryValue::Wave(Waveform::from_spec(
+                        w,
+                        &format!("{el} inlet '{name}'"),
+                    )?),
+                    None => BoundaryValue::Wave(inlet.clone()),
+                }
+            } else {
+                match sp.backflow.get(name) {
+                    Some(w) => BoundaryValue::Wave(Waveform::from_spec(
+                        w,
+                        &format!("{el} backflow '{name}'"),
+                    )?),
+                    None => BoundaryValue::ZeroGradient,
+                }
+            };
+            boundary.push(v);
+        }
+        sp.wall.validate(&format!("{el} wall"))?;
+        let mut walls = vec![sp.wall.clone(); circuit.vessel_names.len()];
+        for (vname, w) in &sp.per_vessel {
+            let Some(vi) = circuit.vessel_names.iter().position(|n| n == vname) else {
+                return Err(bad(
+                    &el,
+                    format!("per_vessel names vessel '{vname}', which the network does not have"),
+                ));
+            };
+            w.validate(&format!("{el} wall of vessel '{vname}'"))?;
+            walls[vi] = w.clone();
+        }
+        let initial_free = match sp.initial {
+            Some(c) if c.is_finite() && c >= 0.0 => c,
+            Some(c) => {
+                return Err(bad(
+                    &el,
+                    format!("initial concentration must be >= 0, got {c}"),
+                ));
+            }
+            None => inlet.eval(0.0),
+        };
+        Ok(Species {
+            name: sp.name.clone(),
+            binding,
+            decay: sp.decay,
+            diffusivity: sp.diffusivity,
+            boundary,
+            walls,
+            laws: Vec::new(),
+            cell_g: vec![0.0; ncells],
+            cell_gcw: vec![0.0; ncells],
+            cell_q: vec![0.0; ncells],
+            dynamic: Vec::new(),
+            relax: Vec::new(),
+            relax_of_seg: vec![usize::MAX; nsegs],
+            relax_offset: 0,
+            dynamic_segs: Vec::new(),
+            shear_cbrt: vec![0.0; nsegs],
+            has_wall: false,
+            initial_free,
+            free: vec![initial_free; nnodes],
+            anchors: vec![HillAnchor::default(); nnodes],
+            mixing_conc: Vec::new(),
+        })
+    }
+}
+
 #[derive(Debug, Clone)]
 struct Segment {
     branch_unknown: usize,
@@ -532,194 +639,28 @@ impl Transport {
                 compliance: s.compliance,
             })
             .collect();
-        // wall pieces: a segment's share in each cell; a refined node's share of the segment
-        // (for a node at the segment's start [x0, x0 + share dx], at its end
-        // [x1 − share dx, x1]) is split into m equal sub-intervals in flow order, with the law
-        // integrated over each (exact for Lévêque's x^{-1/3}, by area for constant laws)
-        let mut pieces = Vec::new();
-        let mut seg_pieces = Vec::new();
-        for (j, sg) in segments.iter().enumerate() {
-            let start = pieces.len();
-            for (end, &(n, share)) in sg.nodes.iter().enumerate() {
-                if share <= 0.0 || node_cell[n] == usize::MAX {
-                    continue;
-                }
-                let m = m_node[n];
-                if m == 1 {
-                    // unrefined: the whole segment's law times the share (as before refinement)
-                    pieces.push(Piece {
-                        seg: j,
-                        node: n,
-                        cell: node_cell[n],
-                        share,
-                        wall: sg.wall,
-                    });
-                    continue;
-                }
-                let w = sg.wall;
-                let len = share * (w.x1 - w.x0);
-                let (a, b) = if end == 0 {
-                    (w.x0, w.x0 + len)
-                } else {
-                    (w.x1 - len, w.x1)
-                };
-                for k in 0..m {
-                    let c = if k == 0 { n } else { first_extra[n] + k - 1 };
-                    let xa = a + (b - a) * k as f64 / m as f64;
-                    let xb = if k + 1 == m {
-                        b
-                    } else {
-                        a + (b - a) * (k + 1) as f64 / m as f64
-                    };
-                    pieces.push(Piece {
-                        seg: j,
-                        node: c,
-                        cell: node_cell[c],
-                        share: 1.0,
-                        wall: SegmentWall {
-                            radius: w.radius,
-                            x0: xa,
-                            x1: xb,
-                        },
-                    });
-                }
-            }
-            seg_pieces.push(start..pieces.len());
-        }
+        let (pieces, seg_pieces) = wall_pieces(&segments, &m_node, &node_cell, &first_extra);
 
         let boundary_inlet: Vec<bool> = circuit.boundaries.iter().map(|b| b.inlet).collect();
         let boundary_names: Vec<String> =
             circuit.boundaries.iter().map(|b| b.name.clone()).collect();
         let mut species = Vec::new();
         let mut seen = std::collections::HashSet::new();
+        let sizes = (cells.len(), segments.len(), kind.len());
         for sp in &spec.species {
-            let el = format!("species '{}'", sp.name);
             if sp.name.is_empty() || !seen.insert(sp.name.clone()) {
+                let el = format!("species '{}'", sp.name);
                 return Err(bad(&el, "needs a unique, non-empty name".into()));
             }
-            if !(sp.decay.is_finite() && sp.decay >= 0.0) {
-                return Err(bad(
-                    &el,
-                    format!("decay must be a finite number >= 0, got {}", sp.decay),
-                ));
-            }
-            if !(sp.diffusivity.is_finite() && sp.diffusivity >= 0.0) {
-                return Err(bad(
-                    &el,
-                    format!(
-                        "diffusivity must be a finite number >= 0, got {}",
-                        sp.diffusivity
-                    ),
-                ));
-            }
-            let binding = Binding::from_spec(&sp.binding, &el)?;
-            let inlet = Waveform::from_spec(&sp.inlet, &format!("{el} inlet"))?;
-            for name in sp.inlets.keys().chain(sp.backflow.keys()) {
-                if !boundary_names.contains(name) {
-                    return Err(bad(
-                        &el,
-                        format!(
-                            "names boundary condition '{name}', which the network does not have"
-                        ),
-                    ));
-                }
-            }
-            let mut boundary = Vec::new();
-            for (b, name) in boundary_names.iter().enumerate() {
-                let v = if boundary_inlet[b] {
-                    match sp.inlets.get(name) {
-                        Some(w) => BoundaryValue::Wave(Waveform::from_spec(
-                            w,
-                            &format!("{el} inlet '{name}'"),
-                        )?),
-                        None => BoundaryValue::Wave(inlet.clone()),
-                    }
-                } else {
-                    match sp.backflow.get(name) {
-                        Some(w) => BoundaryValue::Wave(Waveform::from_spec(
-                            w,
-                            &format!("{el} backflow '{name}'"),
-                        )?),
-                        None => BoundaryValue::ZeroGradient,
-                    }
-                };
-                boundary.push(v);
-            }
-            sp.wall.validate(&format!("{el} wall"))?;
-            let mut walls = vec![sp.wall.clone(); circuit.vessel_names.len()];
-            for (vname, w) in &sp.per_vessel {
-                let Some(vi) = circuit.vessel_names.iter().position(|n| n == vname) else {
-                    return Err(bad(
-                        &el,
-                        format!(
-                            "per_vessel names vessel '{vname}', which the network does not have"
-                        ),
-                    ));
-                };
-                w.validate(&format!("{el} wall of vessel '{vname}'"))?;
-                walls[vi] = w.clone();
-            }
-            let initial_free = match sp.initial {
-                Some(c) if c.is_finite() && c >= 0.0 => c,
-                Some(c) => {
-                    return Err(bad(
-                        &el,
-                        format!("initial concentration must be >= 0, got {c}"),
-                    ));
-                }
-                None => inlet.eval(0.0),
-            };
-            species.push(Species {
-                name: sp.name.clone(),
-                binding,
-                decay: sp.decay,
-                diffusivity: sp.diffusivity,
-                boundary,
-                walls,
-                laws: Vec::new(),
-                cell_g: vec![0.0; cells.len()],
-                cell_gcw: vec![0.0; cells.len()],
-                cell_q: vec![0.0; cells.len()],
-                dynamic: Vec::new(),
-                relax: Vec::new(),
-                relax_of_seg: vec![usize::MAX; segments.len()],
-                relax_offset: 0,
-                dynamic_segs: Vec::new(),
-                shear_cbrt: vec![0.0; segments.len()],
-                has_wall: false,
-                initial_free,
-                free: vec![initial_free; kind.len()],
-                anchors: vec![HillAnchor::default(); kind.len()],
-                mixing_conc: Vec::new(),
-            });
+            species.push(Species::build(
+                sp,
+                circuit,
+                &boundary_names,
+                &boundary_inlet,
+                sizes,
+            )?);
         }
-        // outputs: the output vessels of the flow probes, their segments in order
-        // (one pass: segments grouped by vessel, names looked up in a map — linear time)
-        let vessel_index: std::collections::HashMap<&str, usize> = circuit
-            .vessel_names
-            .iter()
-            .enumerate()
-            .map(|(i, n)| (n.as_str(), i))
-            .collect();
-        let mut segs_of_vessel: Vec<Vec<usize>> = vec![Vec::new(); circuit.vessel_names.len()];
-        for (j, sg) in circuit.segments.iter().enumerate() {
-            if let Some(v) = segs_of_vessel.get_mut(sg.vessel) {
-                v.push(j);
-            }
-        }
-        let mut out_vessels = Vec::new();
-        let mut out_segments = Vec::new();
-        for (k, name) in probes.vessels.iter().enumerate() {
-            let start = out_segments.len();
-            if let Some(&vi) = vessel_index.get(name.as_str()) {
-                out_segments.extend_from_slice(&segs_of_vessel[vi]);
-            }
-            out_vessels.push(OutVessel {
-                first: probes.vessel_unknowns[4 * k + 2],
-                last: probes.vessel_unknowns[4 * k + 3],
-                segs: start..out_segments.len(),
-            });
-        }
+        let (out_vessels, out_segments) = output_layout(circuit, probes);
         let ncells = cells.len();
         let mut t = Transport {
             kind,
@@ -1760,7 +1701,6 @@ impl Transport {
             self.vol.copy_from_slice(&self.wvol);
         }
         self.load_flows(time, y);
-        let mut wcell = vec![0.0; nc];
         for s in 0..nsp {
             for (i, &n) in self.cells.iter().enumerate() {
                 self.conc[n] = z[s * nc + i] / self.vol[i];
@@ -1785,7 +1725,6 @@ impl Transport {
                 }
             }
             self.load_shear(s, y, z);
-            self.wall_uptake(s, &mut wcell);
             let sp = &self.species[s];
             let face_flux = |tr: &Self, unknown: usize| -> (f64, f64) {
                 let fi = tr
@@ -2094,4 +2033,98 @@ fn tree_order(nt: usize, domain: &[usize], internal: &[[u32; 3]]) -> Option<Vec<
 fn internal_from(internal: &[[u32; 3]], f: u32) -> u32 {
     let k = internal.partition_point(|e| e[0] < f);
     internal[k][1]
+}
+
+/// The output vessels of the flow probes (first and last face, segment range) and their
+/// segments in order. One pass: segments grouped by vessel, names looked up in a map.
+fn output_layout(circuit: &Circuit, probes: &Probes) -> (Vec<OutVessel>, Vec<usize>) {
+    let vessel_index: std::collections::HashMap<&str, usize> = circuit
+        .vessel_names
+        .iter()
+        .enumerate()
+        .map(|(i, n)| (n.as_str(), i))
+        .collect();
+    let mut segs_of_vessel: Vec<Vec<usize>> = vec![Vec::new(); circuit.vessel_names.len()];
+    for (j, sg) in circuit.segments.iter().enumerate() {
+        if let Some(v) = segs_of_vessel.get_mut(sg.vessel) {
+            v.push(j);
+        }
+    }
+    let mut out_vessels = Vec::new();
+    let mut out_segments = Vec::new();
+    for (k, name) in probes.vessels.iter().enumerate() {
+        let start = out_segments.len();
+        if let Some(&vi) = vessel_index.get(name.as_str()) {
+            out_segments.extend_from_slice(&segs_of_vessel[vi]);
+        }
+        out_vessels.push(OutVessel {
+            first: probes.vessel_unknowns[4 * k + 2],
+            last: probes.vessel_unknowns[4 * k + 3],
+            segs: start..out_segments.len(),
+        });
+    }
+    (out_vessels, out_segments)
+}
+
+/// wall pieces: a segment's share in each cell; a refined node's share of the segment
+/// (for a node at the segment's start [x0, x0 + share dx], at its end
+/// [x1 − share dx, x1]) is split into m equal sub-intervals in flow order, with the law
+/// integrated over each (exact for Lévêque's x^{-1/3}, by area for constant laws)
+fn wall_pieces(
+    segments: &[Segment],
+    m_node: &[usize],
+    node_cell: &[usize],
+    first_extra: &[usize],
+) -> (Vec<Piece>, Vec<std::ops::Range<usize>>) {
+    let mut pieces = Vec::new();
+    let mut seg_pieces = Vec::new();
+    for (j, sg) in segments.iter().enumerate() {
+        let start = pieces.len();
+        for (end, &(n, share)) in sg.nodes.iter().enumerate() {
+            if share <= 0.0 || node_cell[n] == usize::MAX {
+                continue;
+            }
+            let m = m_node[n];
+            if m == 1 {
+                // unrefined: the whole segment's law times the share (as before refinement)
+                pieces.push(Piece {
+                    seg: j,
+                    node: n,
+                    cell: node_cell[n],
+                    share,
+                    wall: sg.wall,
+                });
+                continue;
+            }
+            let w = sg.wall;
+            let len = share * (w.x1 - w.x0);
+            let (a, b) = if end == 0 {
+                (w.x0, w.x0 + len)
+            } else {
+                (w.x1 - len, w.x1)
+            };
+            for k in 0..m {
+                let c = if k == 0 { n } else { first_extra[n] + k - 1 };
+                let xa = a + (b - a) * k as f64 / m as f64;
+                let xb = if k + 1 == m {
+                    b
+                } else {
+                    a + (b - a) * (k + 1) as f64 / m as f64
+                };
+                pieces.push(Piece {
+                    seg: j,
+                    node: c,
+                    cell: node_cell[c],
+                    share: 1.0,
+                    wall: SegmentWall {
+                        radius: w.radius,
+                        x0: xa,
+                        x1: xb,
+                    },
+                });
+            }
+        }
+        seg_pieces.push(start..pieces.len());
+    }
+    (pieces, seg_pieces)
 }
