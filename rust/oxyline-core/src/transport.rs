@@ -1345,11 +1345,8 @@ impl Transport {
             for (a, v) in acc.iter_mut().zip([i_in, i_out, i_wall, i_decay]) {
                 *a += dt * v;
             }
-            // free concentrations of the new state for the next linearisation (with binding)
-            let sp = &self.species[s];
-            if sp.has_wall && !sp.binding.is_identity() {
-                self.free_of_cells(s);
-            }
+            // (free concentrations of the new state: the next step's linearisation and
+            // `observe` invert it, warm-started from this step's values)
         }
         let sc = &mut self.sweep;
         (sc.wconst, sc.wlin, sc.wnew) = (wconst, wlin, w_new);
@@ -1418,8 +1415,21 @@ impl Transport {
             }
             return;
         }
+        // free concentrations and 1/(dC_t/dc) there (the slope of W in C_t per unit g)
+        let sp = &mut self.species[s];
+        let mut inv_slope = std::mem::take(&mut self.sweep.inv_slope);
+        inv_slope.clear();
+        inv_slope.resize(self.cells.len(), 1.0);
         if !sp.binding.is_identity() {
-            self.free_of_cells(s);
+            for (&n, v) in self.cells.iter().zip(inv_slope.iter_mut()) {
+                let (f, slope) = sp.binding.free_and_slope_anchored(
+                    self.conc[n],
+                    sp.free[n],
+                    &mut sp.anchors[n],
+                );
+                sp.free[n] = f;
+                *v = 1.0 / slope;
+            }
         }
         self.wall_uptake(s, wconst);
         let sp = &self.species[s];
@@ -1429,11 +1439,11 @@ impl Transport {
             let (gj, _, _) = sp.laws[p].eval_cbrt(sp.shear_cbrt[pc.seg]);
             wlin[pc.cell] += pc.share * gj;
         }
-        let identity = sp.binding.is_identity();
+        if !sp.binding.is_identity() {
+            wlin.iter_mut().zip(&inv_slope).for_each(|(w, v)| *w *= v);
+        }
+        self.sweep.inv_slope = inv_slope;
         for (i, &n) in self.cells.iter().enumerate() {
-            if !identity {
-                wlin[i] *= 1.0 / sp.binding.capacity_slope(sp.free[n]);
-            }
             wconst[i] -= wlin[i] * self.conc[n];
         }
     }
@@ -1910,6 +1920,7 @@ struct Sweep {
     wnew: Vec<f64>,
     wconst: Vec<f64>,
     wlin: Vec<f64>,
+    inv_slope: Vec<f64>,
     beta: Vec<f64>,
 }
 
@@ -1929,6 +1940,7 @@ impl Sweep {
             wnew: Vec::new(),
             wconst: Vec::new(),
             wlin: Vec::new(),
+            inv_slope: Vec::new(),
             beta: Vec::new(),
         }
     }
