@@ -1237,8 +1237,9 @@ impl Transport {
         let mut net = std::mem::take(&mut self.sweep.dnode);
         net.clear();
         net.resize(self.kind.len(), 0.0);
+        let qf = &self.qf[..];
         for &[fi, a, b] in &self.internal {
-            let q = self.qf[fi as usize];
+            let q = qf[fi as usize];
             net[a as usize] -= q;
             net[b as usize] += q;
         }
@@ -1306,13 +1307,19 @@ impl Transport {
                 // one fused pass: old concentration, wall W = g C + (q − g c_w) (linear), and
                 // the rows (d_n + Σ_out |Q|) x_n − Σ_in |Q| x_up = b_n into den and num
                 let rate = 1.0 / dt + lambda;
+                // local slices: the loop keeps its pointers in registers
+                let (conc, lag) = (&mut self.conc[..], &mut sw.lag[..]);
+                let (den, num) = (&mut sw.den[..], &mut sw.num[..]);
+                let (g, q, gcw) = (&sp.cell_g[..nc], &sp.cell_q[..nc], &sp.cell_gcw[..nc]);
+                let (wvol, w_new) = (&self.wvol[..nc], &w_new[..nc]);
+                let (wlin, wconst) = (&mut wlin[..nc], &mut wconst[..nc]);
                 for (i, &n) in self.cells.iter().enumerate() {
-                    let c = zs[i] / self.wvol[i];
-                    let (g, wc) = (sp.cell_g[i], sp.cell_q[i] - sp.cell_gcw[i]);
-                    (self.conc[n], sw.lag[n]) = (c, c);
-                    (wlin[i], wconst[i]) = (g, wc);
-                    sw.den[n] = w_new[i] * rate + g;
-                    sw.num[n] = zs[i] / dt - wc;
+                    let c = zs[i] / wvol[i];
+                    let wc = q[i] - gcw[i];
+                    (conc[n], lag[n]) = (c, c);
+                    (wlin[i], wconst[i]) = (g[i], wc);
+                    den[n] = w_new[i] * rate + g[i];
+                    num[n] = zs[i] / dt - wc;
                 }
             } else {
                 self.implicit_rows(s, dt, ya, z, &w_new, &mut wconst, &mut wlin);
@@ -1333,13 +1340,15 @@ impl Transport {
             }
             let (i_in, i_out) = self.implicit_boundary_fluxes();
             let (mut i_wall, mut i_decay) = (0.0, 0.0);
+            let (conc, zs) = (&self.conc[..], &mut z[s * nc..(s + 1) * nc]);
+            let (wlin, wconst, w_new) = (&wlin[..nc], &wconst[..nc], &w_new[..nc]);
             for (i, &n) in self.cells.iter().enumerate() {
-                let x = self.conc[n];
+                let x = conc[n];
                 i_wall += wlin[i] * x + wconst[i];
                 if !quasi {
                     i_decay += lambda * w_new[i] * x;
                 }
-                z[s * nc + i] = w_new[i] * x;
+                zs[i] = w_new[i] * x;
             }
             let acc = &mut z[nsp * nc + 4 * s..nsp * nc + 4 * s + 4];
             for (a, v) in acc.iter_mut().zip([i_in, i_out, i_wall, i_decay]) {
@@ -1529,27 +1538,30 @@ impl Transport {
                 sw.den[n] -= q;
             }
         }
+        // local slices: the loops keep their pointers in registers
+        let (num, den, lag, qf) = (&mut sw.num[..], &mut sw.den[..], &sw.lag[..], &self.qf[..]);
         for (l, beta) in tree.iter().zip(sw.beta.iter_mut()) {
             let n = l.node as usize;
             let (mut aq, mut to_parent) = (0.0, false);
             if l.parent != u32::MAX {
-                let q = self.qf[l.face as usize];
+                let q = qf[l.face as usize];
                 aq = q.abs();
                 to_parent = (q >= 0.0) == l.from_child;
                 if to_parent {
-                    sw.den[n] += aq;
+                    den[n] += aq;
                 } else {
-                    sw.den[l.parent as usize] += aq;
+                    den[l.parent as usize] += aq;
                 }
             }
-            let den = sw.den[n];
-            let solvable = den > 1e-300;
-            x[n] = if solvable { sw.num[n] / den } else { sw.lag[n] };
+            let d = den[n];
+            let solvable = d > 1e-300;
+            let xn = if solvable { num[n] / d } else { lag[n] };
+            x[n] = xn;
             *beta = 0.0;
             if to_parent {
-                sw.num[l.parent as usize] += aq * x[n];
+                num[l.parent as usize] += aq * xn;
             } else if solvable && aq != 0.0 {
-                *beta = aq / den;
+                *beta = aq / d;
             }
         }
         for (l, &beta) in tree.iter().zip(&sw.beta).rev() {
