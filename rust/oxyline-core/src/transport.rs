@@ -2090,7 +2090,7 @@ fn output_layout(circuit: &Circuit, probes: &Probes) -> (Vec<OutVessel>, Vec<usi
     (out_vessels, out_segments)
 }
 
-/// wall pieces: a segment's share in each cell; a refined node's share of the segment
+/// Wall pieces: a segment's share in each cell; a refined node's share of the segment
 /// (for a node at the segment's start [x0, x0 + share dx], at its end
 /// [x1 − share dx, x1]) is split into m equal sub-intervals in flow order, with the law
 /// integrated over each (exact for Lévêque's x^{-1/3}, by area for constant laws)
