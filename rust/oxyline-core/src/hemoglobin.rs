@@ -292,6 +292,28 @@ impl Binding {
         self.free_reanchored(ct, guess, anchor)
     }
 
+    /// `free_anchored` and the capacity slope dC_t/dc there (for linearising the wall uptake
+    /// of an implicit step): with an accepted anchor the slope comes from the same series,
+    /// dP/dC_t = (1 − 2k₂u + 3k₃u²)/b, so neither needs a `powf`.
+    #[inline]
+    pub fn free_and_slope_anchored(
+        &self,
+        ct: f64,
+        guess: f64,
+        anchor: &mut HillAnchor,
+    ) -> (f64, f64) {
+        if let Binding::Hill { alpha, .. } = *self {
+            let (p, ok) = anchor.invert(ct);
+            if ok {
+                let u = (ct - anchor.total) * anchor.inv_slope;
+                let dp_dct = anchor.inv_slope * (1.0 + u * (3.0 * anchor.k3 * u - 2.0 * anchor.k2));
+                return (alpha * p, 1.0 / (alpha * dp_dct));
+            }
+        }
+        let c = self.free_reanchored(ct, guess, anchor);
+        (c, self.capacity_slope(c))
+    }
+
     /// Exact inversion, and a new anchor at its root.
     fn free_reanchored(&self, ct: f64, guess: f64, anchor: &mut HillAnchor) -> f64 {
         let c = self.free(ct, guess);

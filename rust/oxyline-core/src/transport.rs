@@ -23,79 +23,10 @@
 use crate::circuit::{Circuit, Dae};
 use crate::closure::{self, SegmentLaw, SegmentWall, WallSpec};
 use crate::error::{Error, Result};
-use crate::hemoglobin::{Binding, BindingSpec, HillAnchor};
-use crate::network::Probes;
-use crate::waveform::{Waveform, WaveformSpec};
-use serde::Deserialize;
-use std::collections::BTreeMap;
-
-#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq, Default)]
-#[serde(rename_all = "kebab-case")]
-pub enum Formulation {
-    /// State = amount per cell, upwind fluxes (physics §2.5).
-    #[default]
-    Conservative,
-    /// The paper taken literally (physics §2.7): J_i = J_{i−1} − W_i along the flow, no storage.
-    TlQuasisteady,
-}
-
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SpeciesSpec {
-    pub name: String,
-    /// Diffusivity in blood (m²/s): used by the Lévêque and Graetz closures.
-    #[serde(default)]
-    pub diffusivity: f64,
-    /// First-order decay rate λ (1/s).
-    #[serde(default)]
-    pub decay: f64,
-    #[serde(default)]
-    pub binding: BindingSpec,
-    /// Free concentration (mol/m³) carried in at every inlet boundary condition.
-    pub inlet: WaveformSpec,
-    /// Per inlet boundary condition overrides of `inlet`.
-    #[serde(default)]
-    pub inlets: BTreeMap<String, WaveformSpec>,
-    /// Free concentration carried in by backflow at the named outlets; others are zero-gradient.
-    #[serde(default)]
-    pub backflow: BTreeMap<String, WaveformSpec>,
-    /// Initial free concentration (default: the inlet value at t = 0).
-    #[serde(default)]
-    pub initial: Option<f64>,
-    #[serde(default)]
-    pub wall: WallSpec,
-    #[serde(default)]
-    pub per_vessel: BTreeMap<String, WallSpec>,
-}
-
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct TransportSpec {
-    /// Pressure at which the given radii (and so V0) hold, Pa.
-    #[serde(default)]
-    pub reference_pressure: f64,
-    #[serde(default)]
-    pub formulation: Formulation,
-    /// |v| below which the transmission-line elements L_i, R_i are reported as NaN (m/s).
-    #[serde(default = "default_v_eps")]
-    pub velocity_threshold: f64,
-    /// Transport cells per flow segment m (integer >= 1; 1 = one cell per volume node). Every
-    /// volume-holding node becomes a chain of m sub-cells, which sharpens upwind fronts
-    /// (σ_x = sqrt(x dx/m)) without refining the flow circuit (physics §5). Given as a number
-    /// so that a bad value gets a message naming it.
-    #[serde(default = "default_cells")]
-    pub cells_per_segment: f64,
-    /// Per vessel overrides of `cells_per_segment`.
-    #[serde(default)]
-    pub cells_per_vessel: BTreeMap<String, f64>,
-    pub species: Vec<SpeciesSpec>,
-}
-fn default_v_eps() -> f64 {
-    1e-6
-}
-fn default_cells() -> f64 {
-    1.0
-}
+use crate::hemoglobin::{Binding, HillAnchor};
+use crate::output::Probes;
+pub use crate::spec::transport::{Formulation, SpeciesSpec, TransportSpec};
+use crate::waveform::Waveform;
 
 /// Largest accepted `cells_per_segment` (a guard against typos that would allocate millions
 /// of cells per segment).
@@ -201,6 +132,131 @@ struct Species {
     mixing_conc: Vec<f64>,
 }
 
+impl Species {
+    /// Wall uptake (mol/s) of cell `i` from its fixed laws at free concentration `free`:
+    /// Σ share·(g (c − c_w) + q) = G c − Σ share g c_w + Q (the wall-uptake law, physics §3).
+    #[inline]
+    fn fixed_uptake(&self, i: usize, free: f64) -> f64 {
+        self.cell_g[i] * free - self.cell_gcw[i] + self.cell_q[i]
+    }
+
+    /// Wall uptake (mol/s) of wall piece `p` with its own law (any kind) at the current shear,
+    /// `free` the free concentration per node.
+    #[inline]
+    fn piece_uptake(&self, pieces: &[Piece], p: usize, free: &[f64]) -> f64 {
+        let pc = &pieces[p];
+        let (g, cw, q) = self.laws[p].eval_cbrt(self.shear_cbrt[pc.seg]);
+        pc.share * (g * (free[pc.node] - cw) + q)
+    }
+}
+
+impl Species {
+    /// Validate one species of the transport section against the circuit: binding, boundary
+    /// values of every boundary condition, walls per vessel, initial value. `sizes` = (cells,
+    /// segments, transport nodes).
+    fn build(
+        sp: &SpeciesSpec,
+        circuit: &Circuit,
+        boundary_names: &[String],
+        boundary_inlet: &[bool],
+        sizes: (usize, usize, usize),
+    ) -> Result<Self> {
+        let (ncells, nsegs, nnodes) = sizes;
+        let el = format!("species '{}'", sp.name);
+        if !(sp.decay.is_finite() && sp.decay >= 0.0) {
+            return Err(bad(
+                &el,
+                format!("decay must be a finite number >= 0, got {}", sp.decay),
+            ));
+        }
+        if !(sp.diffusivity.is_finite() && sp.diffusivity >= 0.0) {
+            return Err(bad(
+                &el,
+                format!(
+                    "diffusivity must be a finite number >= 0, got {}",
+                    sp.diffusivity
+                ),
+            ));
+        }
+        let binding = Binding::from_spec(&sp.binding, &el)?;
+        let inlet = Waveform::from_spec(&sp.inlet, &format!("{el} inlet"))?;
+        for name in sp.inlets.keys().chain(sp.backflow.keys()) {
+            if !boundary_names.contains(name) {
+                return Err(bad(
+                    &el,
+                    format!("names boundary condition '{name}', which the network does not have"),
+                ));
+            }
+        }
+        let mut boundary = Vec::new();
+        for (b, name) in boundary_names.iter().enumerate() {
+            let v = if boundary_inlet[b] {
+                match sp.inlets.get(name) {
+                    Some(w) => BoundaryValue::Wave(Waveform::from_spec(
+                        w,
+                        &format!("{el} inlet '{name}'"),
+                    )?),
+                    None => BoundaryValue::Wave(inlet.clone()),
+                }
+            } else {
+                match sp.backflow.get(name) {
+                    Some(w) => BoundaryValue::Wave(Waveform::from_spec(
+                        w,
+                        &format!("{el} backflow '{name}'"),
+                    )?),
+                    None => BoundaryValue::ZeroGradient,
+                }
+            };
+            boundary.push(v);
+        }
+        sp.wall.validate(&format!("{el} wall"))?;
+        let mut walls = vec![sp.wall.clone(); circuit.vessel_names.len()];
+        for (vname, w) in &sp.per_vessel {
+            let Some(vi) = circuit.vessel_names.iter().position(|n| n == vname) else {
+                return Err(bad(
+                    &el,
+                    format!("per_vessel names vessel '{vname}', which the network does not have"),
+                ));
+            };
+            w.validate(&format!("{el} wall of vessel '{vname}'"))?;
+            walls[vi] = w.clone();
+        }
+        let initial_free = match sp.initial {
+            Some(c) if c.is_finite() && c >= 0.0 => c,
+            Some(c) => {
+                return Err(bad(
+                    &el,
+                    format!("initial concentration must be >= 0, got {c}"),
+                ));
+            }
+            None => inlet.eval(0.0),
+        };
+        Ok(Species {
+            name: sp.name.clone(),
+            binding,
+            decay: sp.decay,
+            diffusivity: sp.diffusivity,
+            boundary,
+            walls,
+            laws: Vec::new(),
+            cell_g: vec![0.0; ncells],
+            cell_gcw: vec![0.0; ncells],
+            cell_q: vec![0.0; ncells],
+            dynamic: Vec::new(),
+            relax: Vec::new(),
+            relax_of_seg: vec![usize::MAX; nsegs],
+            relax_offset: 0,
+            dynamic_segs: Vec::new(),
+            shear_cbrt: vec![0.0; nsegs],
+            has_wall: false,
+            initial_free,
+            free: vec![initial_free; nnodes],
+            anchors: vec![HillAnchor::default(); nnodes],
+            mixing_conc: Vec::new(),
+        })
+    }
+}
+
 #[derive(Debug, Clone)]
 struct Segment {
     branch_unknown: usize,
@@ -244,6 +300,8 @@ pub struct Transport {
     segments: Vec<Segment>,
     /// Faces 0..n_flow_faces carry a flow unknown; the rest are interior faces of `chains`.
     n_flow_faces: usize,
+    /// The flow unknown of faces 0..n_flow_faces (a compact copy for the per-step gather).
+    face_unknowns: Vec<usize>,
     chains: Vec<Chain>,
     /// Per cell: the circuit node whose pressure sets its volume.
     cell_node: Vec<usize>,
@@ -260,6 +318,8 @@ pub struct Transport {
     v_eps: f64,
     out_vessels: Vec<OutVessel>,
     out_segments: Vec<usize>,
+    /// Record the per-segment columns (off: vessel and balance columns only).
+    segment_output: bool,
     segment_vessels: Vec<usize>,
     node_names: Vec<String>,
     /// Nodes solved by the implicit sweep (cells and mixing points).
@@ -271,6 +331,9 @@ pub struct Transport {
     simple_mixing: Vec<usize>,
     /// The other mixing points (solved by the flow-order sweep).
     general_mixing: Vec<usize>,
+    /// Elimination order of the implicit solve when the domain graph is a forest (always on
+    /// trees): None sends it to the flow-order sweep, which also handles loops.
+    tree: Option<Vec<Link>>,
     // scratch
     vol: Vec<f64>,
     conc: Vec<f64>,
@@ -576,184 +639,28 @@ impl Transport {
                 compliance: s.compliance,
             })
             .collect();
-        // wall pieces: a segment's share in each cell; a refined node's share of the segment
-        // (for a node at the segment's start [x0, x0 + share dx], at its end
-        // [x1 − share dx, x1]) is split into m equal sub-intervals in flow order, with the law
-        // integrated over each (exact for Lévêque's x^{-1/3}, by area for constant laws)
-        let mut pieces = Vec::new();
-        let mut seg_pieces = Vec::new();
-        for (j, sg) in segments.iter().enumerate() {
-            let start = pieces.len();
-            for (end, &(n, share)) in sg.nodes.iter().enumerate() {
-                if share <= 0.0 || node_cell[n] == usize::MAX {
-                    continue;
-                }
-                let m = m_node[n];
-                if m == 1 {
-                    // unrefined: the whole segment's law times the share (as before refinement)
-                    pieces.push(Piece {
-                        seg: j,
-                        node: n,
-                        cell: node_cell[n],
-                        share,
-                        wall: sg.wall,
-                    });
-                    continue;
-                }
-                let w = sg.wall;
-                let len = share * (w.x1 - w.x0);
-                let (a, b) = if end == 0 {
-                    (w.x0, w.x0 + len)
-                } else {
-                    (w.x1 - len, w.x1)
-                };
-                for k in 0..m {
-                    let c = if k == 0 { n } else { first_extra[n] + k - 1 };
-                    let xa = a + (b - a) * k as f64 / m as f64;
-                    let xb = if k + 1 == m {
-                        b
-                    } else {
-                        a + (b - a) * (k + 1) as f64 / m as f64
-                    };
-                    pieces.push(Piece {
-                        seg: j,
-                        node: c,
-                        cell: node_cell[c],
-                        share: 1.0,
-                        wall: SegmentWall {
-                            radius: w.radius,
-                            x0: xa,
-                            x1: xb,
-                        },
-                    });
-                }
-            }
-            seg_pieces.push(start..pieces.len());
-        }
+        let (pieces, seg_pieces) = wall_pieces(&segments, &m_node, &node_cell, &first_extra);
 
         let boundary_inlet: Vec<bool> = circuit.boundaries.iter().map(|b| b.inlet).collect();
         let boundary_names: Vec<String> =
             circuit.boundaries.iter().map(|b| b.name.clone()).collect();
         let mut species = Vec::new();
         let mut seen = std::collections::HashSet::new();
+        let sizes = (cells.len(), segments.len(), kind.len());
         for sp in &spec.species {
-            let el = format!("species '{}'", sp.name);
             if sp.name.is_empty() || !seen.insert(sp.name.clone()) {
+                let el = format!("species '{}'", sp.name);
                 return Err(bad(&el, "needs a unique, non-empty name".into()));
             }
-            if !(sp.decay.is_finite() && sp.decay >= 0.0) {
-                return Err(bad(
-                    &el,
-                    format!("decay must be a finite number >= 0, got {}", sp.decay),
-                ));
-            }
-            if !(sp.diffusivity.is_finite() && sp.diffusivity >= 0.0) {
-                return Err(bad(
-                    &el,
-                    format!(
-                        "diffusivity must be a finite number >= 0, got {}",
-                        sp.diffusivity
-                    ),
-                ));
-            }
-            let binding = Binding::from_spec(&sp.binding, &el)?;
-            let inlet = Waveform::from_spec(&sp.inlet, &format!("{el} inlet"))?;
-            for name in sp.inlets.keys().chain(sp.backflow.keys()) {
-                if !boundary_names.contains(name) {
-                    return Err(bad(
-                        &el,
-                        format!(
-                            "names boundary condition '{name}', which the network does not have"
-                        ),
-                    ));
-                }
-            }
-            let mut boundary = Vec::new();
-            for (b, name) in boundary_names.iter().enumerate() {
-                let v = if boundary_inlet[b] {
-                    match sp.inlets.get(name) {
-                        Some(w) => BoundaryValue::Wave(Waveform::from_spec(
-                            w,
-                            &format!("{el} inlet '{name}'"),
-                        )?),
-                        None => BoundaryValue::Wave(inlet.clone()),
-                    }
-                } else {
-                    match sp.backflow.get(name) {
-                        Some(w) => BoundaryValue::Wave(Waveform::from_spec(
-                            w,
-                            &format!("{el} backflow '{name}'"),
-                        )?),
-                        None => BoundaryValue::ZeroGradient,
-                    }
-                };
-                boundary.push(v);
-            }
-            sp.wall.validate(&format!("{el} wall"))?;
-            let mut walls = vec![sp.wall.clone(); circuit.vessel_names.len()];
-            for (vname, w) in &sp.per_vessel {
-                let Some(vi) = circuit.vessel_names.iter().position(|n| n == vname) else {
-                    return Err(bad(
-                        &el,
-                        format!(
-                            "per_vessel names vessel '{vname}', which the network does not have"
-                        ),
-                    ));
-                };
-                w.validate(&format!("{el} wall of vessel '{vname}'"))?;
-                walls[vi] = w.clone();
-            }
-            let initial_free = match sp.initial {
-                Some(c) if c.is_finite() && c >= 0.0 => c,
-                Some(c) => {
-                    return Err(bad(
-                        &el,
-                        format!("initial concentration must be >= 0, got {c}"),
-                    ));
-                }
-                None => inlet.eval(0.0),
-            };
-            species.push(Species {
-                name: sp.name.clone(),
-                binding,
-                decay: sp.decay,
-                diffusivity: sp.diffusivity,
-                boundary,
-                walls,
-                laws: Vec::new(),
-                cell_g: vec![0.0; cells.len()],
-                cell_gcw: vec![0.0; cells.len()],
-                cell_q: vec![0.0; cells.len()],
-                dynamic: Vec::new(),
-                relax: Vec::new(),
-                relax_of_seg: vec![usize::MAX; segments.len()],
-                relax_offset: 0,
-                dynamic_segs: Vec::new(),
-                shear_cbrt: vec![0.0; segments.len()],
-                has_wall: false,
-                initial_free,
-                free: vec![initial_free; kind.len()],
-                anchors: vec![HillAnchor::default(); kind.len()],
-                mixing_conc: Vec::new(),
-            });
+            species.push(Species::build(
+                sp,
+                circuit,
+                &boundary_names,
+                &boundary_inlet,
+                sizes,
+            )?);
         }
-        // outputs: the output vessels of the flow probes, their segments in order
-        let mut out_vessels = Vec::new();
-        let mut out_segments = Vec::new();
-        for (k, name) in probes.vessels.iter().enumerate() {
-            let vi = circuit
-                .vessel_names
-                .iter()
-                .position(|n| n == name)
-                .unwrap_or(usize::MAX);
-            let start = out_segments.len();
-            out_segments.extend((0..segments.len()).filter(|&j| circuit.segments[j].vessel == vi));
-            out_vessels.push(OutVessel {
-                first: probes.vessel_unknowns[4 * k + 2],
-                last: probes.vessel_unknowns[4 * k + 3],
-                segs: start..out_segments.len(),
-            });
-        }
+        let (out_vessels, out_segments) = output_layout(circuit, probes);
         let ncells = cells.len();
         let mut t = Transport {
             kind,
@@ -772,6 +679,7 @@ impl Transport {
             node_sources,
             segments,
             n_flow_faces,
+            face_unknowns: Vec::new(),
             chains,
             cell_node,
             last_sub,
@@ -783,6 +691,7 @@ impl Transport {
             v_eps: spec.velocity_threshold,
             out_vessels,
             out_segments,
+            segment_output: true,
             segment_vessels: circuit.segments.iter().map(|s| s.vessel).collect(),
             node_names,
             domain: Vec::new(),
@@ -790,6 +699,7 @@ impl Transport {
             boundary_faces: Vec::new(),
             simple_mixing: Vec::new(),
             general_mixing: Vec::new(),
+            tree: None,
             vol: vec![0.0; ncells],
             conc: vec![0.0; nn],
             qf: Vec::new(),
@@ -824,6 +734,11 @@ impl Transport {
                 t.general_mixing.push(m);
             }
         }
+        t.tree = tree_order(nn, &t.domain, &t.internal);
+        t.face_unknowns = t.faces[..t.n_flow_faces]
+            .iter()
+            .map(|f| f.unknown)
+            .collect();
         // laws that do not need the mean flow are final now
         let zero = vec![0.0; t.segments.len()];
         t.set_laws(&zero, false)?;
@@ -847,9 +762,17 @@ impl Transport {
     }
     /// Columns recorded per species at every output time.
     pub fn columns_per_species(&self) -> usize {
-        VESSEL_COLUMNS * self.out_vessels.len()
-            + SEGMENT_COLUMNS * self.out_segments.len()
-            + BALANCE_COLUMNS
+        let segments = if self.segment_output {
+            self.out_segments.len()
+        } else {
+            0
+        };
+        VESSEL_COLUMNS * self.out_vessels.len() + SEGMENT_COLUMNS * segments + BALANCE_COLUMNS
+    }
+    /// Record the per-segment columns (default) or only the vessel and balance columns, which
+    /// keeps the output of large trees small.
+    pub fn set_segment_output(&mut self, on: bool) {
+        self.segment_output = on;
     }
     /// Recorded segments of every output vessel.
     pub fn out_segment_counts(&self) -> Vec<usize> {
@@ -994,9 +917,20 @@ impl Transport {
     }
 
     fn load_flows(&mut self, time: f64, y: &[f64]) {
+        self.load_flows_with(time, |u| y[u]);
+    }
+
+    /// Face flows at the α_f level of a step from `y0` to `y1`: Q = Q_0 + α_f (Q_1 − Q_0).
+    fn load_flows_between(&mut self, time: f64, y0: &[f64], y1: &[f64], alpha_f: f64) {
+        self.load_flows_with(time, |u| y0[u] + alpha_f * (y1[u] - y0[u]));
+    }
+
+    /// Face flows from `flow(unknown)`, source flows at `time`, and the interior faces of
+    /// refined cells.
+    fn load_flows_with(&mut self, time: f64, flow: impl Fn(usize) -> f64) {
         let nf = self.n_flow_faces;
-        for (q, f) in self.qf[..nf].iter_mut().zip(&self.faces) {
-            *q = y[f.unknown];
+        for (q, &u) in self.qf[..nf].iter_mut().zip(&self.face_unknowns) {
+            *q = flow(u);
         }
         for (q, (_, w, _)) in self.qs.iter_mut().zip(&self.sources) {
             *q = w.eval(time);
@@ -1038,11 +972,12 @@ impl Transport {
 
     #[inline]
     fn boundary_conc(&self, b: usize, n: End) -> f64 {
-        match (self.bval[b], n) {
-            (Some(c), _) => c,
-            (None, End::Node(n)) if self.kind[n] == Kind::Mixing => self.sweep.lag[n],
-            (None, End::Node(n)) => self.conc[n],
-            (None, End::Boundary(_)) => 0.0,
+        match n {
+            End::Node(n) if self.kind[n] == Kind::Mixing => {
+                inflow_value(self.bval[b], self.sweep.lag[n])
+            }
+            End::Node(n) => inflow_value(self.bval[b], self.conc[n]),
+            End::Boundary(_) => inflow_value(self.bval[b], 0.0),
         }
     }
 
@@ -1073,12 +1008,10 @@ impl Transport {
             &sp.free
         };
         for (i, &n) in self.cells.iter().enumerate() {
-            w[i] = sp.cell_g[i] * free[n] - sp.cell_gcw[i] + sp.cell_q[i];
+            w[i] = sp.fixed_uptake(i, free[n]);
         }
         for &p in &sp.dynamic {
-            let pc = &self.pieces[p];
-            let (g, cw, q) = sp.laws[p].eval_cbrt(sp.shear_cbrt[pc.seg]);
-            w[pc.cell] += pc.share * (g * (free[pc.node] - cw) + q);
+            w[self.pieces[p].cell] += sp.piece_uptake(&self.pieces, p, free);
         }
     }
 
@@ -1115,7 +1048,7 @@ impl Transport {
                 } else if down == End::Node(m) {
                     let c = match up {
                         End::Node(u) => self.conc[u],
-                        End::Boundary(b) => self.bval[b].unwrap_or(lag),
+                        End::Boundary(b) => inflow_value(self.bval[b], lag),
                     };
                     num += q.abs() * c;
                 }
@@ -1235,7 +1168,7 @@ impl Transport {
             for (i, (d, &n)) in dzs.iter_mut().zip(&self.cells).enumerate() {
                 let mut v = dnode[n];
                 if has_wall {
-                    let w = sp.cell_g[i] * free[n] - sp.cell_gcw[i] + sp.cell_q[i];
+                    let w = sp.fixed_uptake(i, free[n]);
                     v -= w;
                     i_wall += w;
                 }
@@ -1246,10 +1179,8 @@ impl Transport {
                 *d = v;
             }
             for &p in &sp.dynamic {
-                let pc = &self.pieces[p];
-                let (g, cw, q) = sp.laws[p].eval_cbrt(sp.shear_cbrt[pc.seg]);
-                let w = pc.share * (g * (free[pc.node] - cw) + q);
-                dzs[pc.cell] -= w;
+                let w = sp.piece_uptake(&self.pieces, p, free);
+                dzs[self.pieces[p].cell] -= w;
                 i_wall += w;
             }
             let acc = &mut dz[nsp * nc + 4 * s..nsp * nc + 4 * s + 4];
@@ -1279,163 +1210,286 @@ impl Transport {
         y1: &[f64],
         z: &mut [f64],
     ) -> Result<()> {
-        let nc = self.cells.len();
-        let nsp = self.species.len();
-        let nn = self.kind.len();
         let t_af = time + alpha_f * dt;
-        let ya: Vec<f64> = y0
+        self.load_flows_between(t_af, y0, y1, alpha_f);
+        // the α_f-level state is only needed by shear-dependent walls (relaxed or instantaneous)
+        let mut ya = std::mem::take(&mut self.sweep.ya);
+        if self
+            .species
             .iter()
-            .zip(y1)
-            .map(|(a, b)| a + alpha_f * (b - a))
-            .collect();
-        self.load_flows(t_af, &ya);
-        // new transport volumes
-        let w_old = self.wvol.clone();
-        let mut w_new = w_old.clone();
-        for (f, &q) in self.faces.iter().zip(&self.qf) {
+            .any(|sp| !sp.relax.is_empty() || !sp.dynamic_segs.is_empty())
+        {
+            ya.clear();
+            ya.extend(y0.iter().zip(y1).map(|(a, b)| a + alpha_f * (b - a)));
+        }
+        let res = self
+            .transport_volumes(t_af, dt)
+            .and_then(|()| self.implicit_species(t_af, dt, &ya, z));
+        self.sweep.ya = ya;
+        if res.is_ok() {
+            std::mem::swap(&mut self.wvol, &mut self.sweep.wnew);
+        }
+        res
+    }
+
+    /// W' = W + dt (net inflow) of every cell with the loaded face flows, into `sweep.wnew`.
+    fn transport_volumes(&mut self, t_af: f64, dt: f64) -> Result<()> {
+        let mut net = std::mem::take(&mut self.sweep.dnode);
+        net.clear();
+        net.resize(self.kind.len(), 0.0);
+        let qf = &self.qf[..];
+        for &[fi, a, b] in &self.internal {
+            let q = qf[fi as usize];
+            net[a as usize] -= q;
+            net[b as usize] += q;
+        }
+        for &fi in &self.boundary_faces {
+            let (f, q) = (&self.faces[fi], self.qf[fi]);
             if let End::Node(n) = f.from {
-                if self.node_cell[n] != usize::MAX {
-                    w_new[self.node_cell[n]] -= dt * q;
-                }
+                net[n] -= q;
             }
             if let End::Node(n) = f.to {
-                if self.node_cell[n] != usize::MAX {
-                    w_new[self.node_cell[n]] += dt * q;
-                }
+                net[n] += q;
             }
         }
         for ((n, _, _), &q) in self.sources.iter().zip(&self.qs) {
-            if self.node_cell[*n] != usize::MAX {
-                w_new[self.node_cell[*n]] += dt * q;
-            }
+            net[*n] += q;
         }
-        for (i, &w) in w_new.iter().enumerate() {
-            if w.is_nan() || w <= 0.0 {
-                return Err(Error::solver(
-                    t_af,
-                    format!(
-                        "transport volume of cell '{}' became {w:.3e} m³: reduce dt",
-                        self.node_name(self.cells[i])
-                    ),
-                ));
-            }
+        let mut w_new = std::mem::take(&mut self.sweep.wnew);
+        w_new.clear();
+        w_new.extend(
+            self.cells
+                .iter()
+                .zip(&self.wvol)
+                .map(|(&n, &w)| w + dt * net[n]),
+        );
+        self.sweep.dnode = net;
+        let bad = w_new.iter().position(|&w| w.is_nan() || w <= 0.0);
+        self.sweep.wnew = w_new;
+        match bad {
+            None => Ok(()),
+            Some(i) => Err(Error::solver(
+                t_af,
+                format!(
+                    "transport volume of cell '{}' became {:.3e} m³: reduce dt",
+                    self.node_name(self.cells[i]),
+                    self.sweep.wnew[i]
+                ),
+            )),
         }
-        let unknowns = std::mem::take(&mut self.domain);
-        let mut d = vec![0.0; nn];
-        let mut b = vec![0.0; nn];
-        let mut wconst = vec![0.0; nc];
-        let mut wlin = vec![0.0; nc];
+    }
+
+    /// The backward-Euler solve of every species over the step (see `implicit_step`), with the
+    /// face flows and new volumes loaded; `ya` is the α_f-level state (for shear-dependent walls).
+    fn implicit_species(&mut self, t_af: f64, dt: f64, ya: &[f64], z: &mut [f64]) -> Result<()> {
+        let nc = self.cells.len();
+        let nsp = self.species.len();
+        let (mut wconst, mut wlin) = (
+            std::mem::take(&mut self.sweep.wconst),
+            std::mem::take(&mut self.sweep.wlin),
+        );
+        wconst.resize(nc, 0.0);
+        wlin.resize(nc, 0.0);
+        let w_new = std::mem::take(&mut self.sweep.wnew);
         let quasi = self.formulation == Formulation::TlQuasisteady;
+        let mut res = Ok(());
         for s in 0..nsp {
-            // old total concentrations (lagged values for mixing points stay in `conc`)
-            for (i, &n) in self.cells.iter().enumerate() {
-                self.conc[n] = z[s * nc + i] / w_old[i];
-            }
             self.load_boundary(s, t_af);
             let lambda = self.species[s].decay;
-            // relaxed shears first (exact for the step's frozen |Q|), so that the wall law
-            // of the solve uses the end-of-step boundary layer, like backward Euler
-            {
-                let sp = &self.species[s];
-                for (k, &(j, tau)) in sp.relax.iter().enumerate() {
-                    let q = ya[self.segments[j].branch_unknown].abs();
-                    let v = &mut z[sp.relax_offset + k];
-                    *v = q + (*v - q) * (-dt / tau).exp();
-                }
+            self.relax_shears(s, dt, ya, z);
+            self.restore_mixing(s);
+            let sp = &self.species[s];
+            let (sw, zs) = (&mut self.sweep, &z[s * nc..(s + 1) * nc]);
+            for &m in &self.mixing {
+                (sw.den[m], sw.num[m], sw.lag[m]) = (0.0, 0.0, self.conc[m]);
             }
-            self.load_shear(s, &ya, z);
-            // wall uptake linearised about the old state: W = G s x + const (exact for linear binding)
-            if self.species[s].has_wall {
-                self.free_of_cells(s);
-                self.wall_uptake(s, &mut wconst);
-                let sp = &self.species[s];
-                let mut g = sp.cell_g.clone();
-                for &p in &sp.dynamic {
-                    let pc = &self.pieces[p];
-                    let (gj, _, _) = sp.laws[p].eval_cbrt(sp.shear_cbrt[pc.seg]);
-                    g[pc.cell] += pc.share * gj;
-                }
+            if !quasi && sp.binding.is_identity() && sp.dynamic.is_empty() {
+                // one fused pass: old concentration, wall W = g C + (q − g c_w) (linear), and
+                // the rows (d_n + Σ_out |Q|) x_n − Σ_in |Q| x_up = b_n into den and num
+                let rate = 1.0 / dt + lambda;
+                // local slices: the loop keeps its pointers in registers
+                let (conc, lag) = (&mut self.conc[..], &mut sw.lag[..]);
+                let (den, num) = (&mut sw.den[..], &mut sw.num[..]);
+                let (g, q, gcw) = (&sp.cell_g[..nc], &sp.cell_q[..nc], &sp.cell_gcw[..nc]);
+                let (wvol, w_new) = (&self.wvol[..nc], &w_new[..nc]);
+                let (wlin, wconst) = (&mut wlin[..nc], &mut wconst[..nc]);
                 for (i, &n) in self.cells.iter().enumerate() {
-                    let slope = 1.0 / sp.binding.capacity_slope(sp.free[n]);
-                    wlin[i] = g[i] * slope;
-                    wconst[i] -= wlin[i] * self.conc[n];
+                    let c = zs[i] / wvol[i];
+                    let wc = q[i] - gcw[i];
+                    (conc[n], lag[n]) = (c, c);
+                    (wlin[i], wconst[i]) = (g[i], wc);
+                    den[n] = w_new[i] * rate + g[i];
+                    num[n] = zs[i] / dt - wc;
                 }
             } else {
-                wlin.iter_mut().for_each(|v| *v = 0.0);
-                wconst.iter_mut().for_each(|v| *v = 0.0);
+                self.implicit_rows(s, dt, ya, z, &w_new, &mut wconst, &mut wlin);
             }
-            for &m in &self.mixing {
-                d[m] = 0.0;
-                b[m] = 0.0;
-            }
-            for (i, &n) in self.cells.iter().enumerate() {
-                if quasi {
-                    d[n] = wlin[i];
-                    b[n] = -wconst[i];
-                } else {
-                    d[n] = w_new[i] * (1.0 / dt + lambda) + wlin[i];
-                    b[n] = z[s * nc + i] / dt - wconst[i];
-                }
-            }
-            self.restore_mixing(s);
             let mut x = std::mem::take(&mut self.conc);
-            let res = self.sweep_solve(&unknowns, &d, &b, &mut x);
+            if self.tree.is_some() {
+                self.tree_solve(&mut x);
+            } else {
+                let unknowns = std::mem::take(&mut self.domain);
+                let (d, b) = (self.sweep.den.clone(), self.sweep.num.clone());
+                res = self.sweep_solve(&unknowns, &d, &b, &mut x);
+                self.domain = unknowns;
+            }
             self.conc = x;
             self.save_mixing(s);
-            if let Err(e) = res {
-                self.domain = unknowns;
-                return Err(e);
+            if res.is_err() {
+                break;
             }
-            // bookkeeping with the solved field: the same fluxes that entered the solve
-            let (mut i_in, mut i_out) = (0.0, 0.0);
-            for (f, &q) in self.faces.iter().zip(&self.qf) {
-                let (from_b, to_b) = (f.from, f.to);
-                if let End::Boundary(bb) = from_b {
-                    let c = if q >= 0.0 {
-                        self.lagged_boundary(bb, to_b)
-                    } else {
-                        self.end_conc(to_b)
-                    };
-                    account(self.boundary_inlet[bb], q * c, &mut i_in, &mut i_out);
-                }
-                if let End::Boundary(bb) = to_b {
-                    let c = if q < 0.0 {
-                        self.lagged_boundary(bb, from_b)
-                    } else {
-                        self.end_conc(from_b)
-                    };
-                    account(self.boundary_inlet[bb], -q * c, &mut i_in, &mut i_out);
-                }
-            }
-            for ((n, _, bb), &q) in self.sources.iter().zip(&self.qs) {
-                let c = if q >= 0.0 {
-                    self.lagged_boundary(*bb, End::Node(*n))
-                } else {
-                    self.conc[*n]
-                };
-                account(self.boundary_inlet[*bb], q * c, &mut i_in, &mut i_out);
-            }
+            let (i_in, i_out) = self.implicit_boundary_fluxes();
             let (mut i_wall, mut i_decay) = (0.0, 0.0);
+            let (conc, zs) = (&self.conc[..], &mut z[s * nc..(s + 1) * nc]);
+            let (wlin, wconst, w_new) = (&wlin[..nc], &wconst[..nc], &w_new[..nc]);
             for (i, &n) in self.cells.iter().enumerate() {
-                let x = self.conc[n];
+                let x = conc[n];
                 i_wall += wlin[i] * x + wconst[i];
                 if !quasi {
                     i_decay += lambda * w_new[i] * x;
                 }
-                z[s * nc + i] = w_new[i] * x;
+                zs[i] = w_new[i] * x;
             }
             let acc = &mut z[nsp * nc + 4 * s..nsp * nc + 4 * s + 4];
             for (a, v) in acc.iter_mut().zip([i_in, i_out, i_wall, i_decay]) {
                 *a += dt * v;
             }
-            // free concentrations of the new state for the next linearisation and reporting
-            if self.species[s].has_wall {
-                self.free_of_cells(s);
+            // (free concentrations of the new state: the next step's linearisation and
+            // `observe` invert it, warm-started from this step's values)
+        }
+        let sc = &mut self.sweep;
+        (sc.wconst, sc.wlin, sc.wnew) = (wconst, wlin, w_new);
+        res
+    }
+
+    /// The rows of species `s` in the general case (binding, shear-dependent walls, or the
+    /// quasi-steady formulation): old concentrations, the wall linearised about them, and
+    /// d, b into `sweep.den`, `sweep.num`.
+    #[allow(clippy::too_many_arguments)]
+    fn implicit_rows(
+        &mut self,
+        s: usize,
+        dt: f64,
+        ya: &[f64],
+        z: &[f64],
+        w_new: &[f64],
+        wconst: &mut [f64],
+        wlin: &mut [f64],
+    ) {
+        let nc = self.cells.len();
+        let zs = &z[s * nc..(s + 1) * nc];
+        for (i, &n) in self.cells.iter().enumerate() {
+            self.conc[n] = zs[i] / self.wvol[i];
+        }
+        self.load_shear(s, ya, z);
+        self.linearised_wall(s, wconst, wlin);
+        let quasi = self.formulation == Formulation::TlQuasisteady;
+        let rate = 1.0 / dt + self.species[s].decay;
+        let sw = &mut self.sweep;
+        for (i, &n) in self.cells.iter().enumerate() {
+            (sw.den[n], sw.num[n]) = if quasi {
+                (wlin[i], -wconst[i])
+            } else {
+                (w_new[i] * rate + wlin[i], zs[i] / dt - wconst[i])
+            };
+            sw.lag[n] = self.conc[n];
+        }
+    }
+
+    /// Relaxed shears of species `s` over the step, exactly for the step's frozen |Q|, so that
+    /// the wall law of the solve uses the end-of-step boundary layer, like backward Euler.
+    fn relax_shears(&self, s: usize, dt: f64, ya: &[f64], z: &mut [f64]) {
+        let sp = &self.species[s];
+        for (k, &(j, tau)) in sp.relax.iter().enumerate() {
+            let q = ya[self.segments[j].branch_unknown].abs();
+            let v = &mut z[sp.relax_offset + k];
+            *v = q + (*v - q) * (-dt / tau).exp();
+        }
+    }
+
+    /// Wall uptake of species `s` linearised about the current state: W = wlin·C_t + wconst
+    /// per cell (exact for linear binding); zero without a wall.
+    fn linearised_wall(&mut self, s: usize, wconst: &mut [f64], wlin: &mut [f64]) {
+        if !self.species[s].has_wall {
+            wlin.iter_mut().for_each(|v| *v = 0.0);
+            wconst.iter_mut().for_each(|v| *v = 0.0);
+            return;
+        }
+        let sp = &self.species[s];
+        if sp.binding.is_identity() && sp.dynamic.is_empty() {
+            // W = g C + (q − g c_w): already linear
+            for (i, (wl, wc)) in wlin.iter_mut().zip(wconst.iter_mut()).enumerate() {
+                *wl = sp.cell_g[i];
+                *wc = sp.cell_q[i] - sp.cell_gcw[i];
+            }
+            return;
+        }
+        // free concentrations and 1/(dC_t/dc) there (the slope of W in C_t per unit g)
+        let sp = &mut self.species[s];
+        let mut inv_slope = std::mem::take(&mut self.sweep.inv_slope);
+        inv_slope.clear();
+        inv_slope.resize(self.cells.len(), 1.0);
+        if !sp.binding.is_identity() {
+            for (&n, v) in self.cells.iter().zip(inv_slope.iter_mut()) {
+                let (f, slope) = sp.binding.free_and_slope_anchored(
+                    self.conc[n],
+                    sp.free[n],
+                    &mut sp.anchors[n],
+                );
+                sp.free[n] = f;
+                *v = 1.0 / slope;
             }
         }
-        self.wvol = w_new;
-        self.domain = unknowns;
-        Ok(())
+        self.wall_uptake(s, wconst);
+        let sp = &self.species[s];
+        wlin.copy_from_slice(&sp.cell_g);
+        for &p in &sp.dynamic {
+            let pc = &self.pieces[p];
+            let (gj, _, _) = sp.laws[p].eval_cbrt(sp.shear_cbrt[pc.seg]);
+            wlin[pc.cell] += pc.share * gj;
+        }
+        if !sp.binding.is_identity() {
+            wlin.iter_mut().zip(&inv_slope).for_each(|(w, v)| *w *= v);
+        }
+        self.sweep.inv_slope = inv_slope;
+        for (i, &n) in self.cells.iter().enumerate() {
+            wconst[i] -= wlin[i] * self.conc[n];
+        }
+    }
+
+    /// Boundary inflow (I_in) and outflow (I_out) rates of the solved implicit field: the same
+    /// fluxes that entered the solve.
+    fn implicit_boundary_fluxes(&self) -> (f64, f64) {
+        let (mut i_in, mut i_out) = (0.0, 0.0);
+        for &fi in &self.boundary_faces {
+            let (f, q) = (&self.faces[fi], self.qf[fi]);
+            let (from_b, to_b) = (f.from, f.to);
+            if let End::Boundary(bb) = from_b {
+                let c = if q >= 0.0 {
+                    self.lagged_boundary(bb, to_b)
+                } else {
+                    self.end_conc(to_b)
+                };
+                account(self.boundary_inlet[bb], q * c, &mut i_in, &mut i_out);
+            }
+            if let End::Boundary(bb) = to_b {
+                let c = if q < 0.0 {
+                    self.lagged_boundary(bb, from_b)
+                } else {
+                    self.end_conc(from_b)
+                };
+                account(self.boundary_inlet[bb], -q * c, &mut i_in, &mut i_out);
+            }
+        }
+        for ((n, _, bb), &q) in self.sources.iter().zip(&self.qs) {
+            let c = if q >= 0.0 {
+                self.lagged_boundary(*bb, End::Node(*n))
+            } else {
+                self.conc[*n]
+            };
+            account(self.boundary_inlet[*bb], q * c, &mut i_in, &mut i_out);
+        }
+        (i_in, i_out)
     }
 
     #[inline]
@@ -1450,10 +1504,70 @@ impl Transport {
     /// neighbour's lagged value — stored in `lag` during the sweep.
     #[inline]
     fn lagged_boundary(&self, b: usize, n: End) -> f64 {
-        match (self.bval[b], n) {
-            (Some(c), _) => c,
-            (None, End::Node(n)) => self.sweep.lag[n],
-            (None, End::Boundary(_)) => 0.0,
+        match n {
+            End::Node(n) => inflow_value(self.bval[b], self.sweep.lag[n]),
+            End::Boundary(_) => inflow_value(self.bval[b], 0.0),
+        }
+    }
+
+    /// The system of `sweep_solve` on the whole domain when it is a forest (`tree`): eliminated
+    /// leaves first, each row becoming x_n = α_n + β_n x_parent — β_n ≠ 0 only when the parent
+    /// is upwind of n, since an upwind row never references its downstream neighbour — then
+    /// back-substituted parents first. Exact and O(n) for any flow directions, with no queue.
+    /// On entry `sweep.den`, `sweep.num` hold d and b, and `sweep.lag` the previous values.
+    fn tree_solve(&mut self, x: &mut [f64]) {
+        let Some(tree) = self.tree.as_deref() else {
+            return;
+        };
+        let sw = &mut self.sweep;
+        sw.beta.resize(tree.len(), 0.0);
+        for &fi in &self.boundary_faces {
+            let (q, up, down) = oriented(&self.faces, &self.qf, fi);
+            match (up, down) {
+                (End::Node(n), _) => sw.den[n] += q.abs(),
+                (End::Boundary(bb), End::Node(n)) => {
+                    sw.num[n] += q.abs() * inflow_value(self.bval[bb], sw.lag[n])
+                }
+                _ => {}
+            }
+        }
+        for (&(n, _, bb), &q) in self.sources.iter().zip(&self.qs) {
+            if q >= 0.0 {
+                sw.num[n] += q * inflow_value(self.bval[bb], sw.lag[n]);
+            } else {
+                sw.den[n] -= q;
+            }
+        }
+        // local slices: the loops keep their pointers in registers
+        let (num, den, lag, qf) = (&mut sw.num[..], &mut sw.den[..], &sw.lag[..], &self.qf[..]);
+        for (l, beta) in tree.iter().zip(sw.beta.iter_mut()) {
+            let n = l.node as usize;
+            let (mut aq, mut to_parent) = (0.0, false);
+            if l.parent != u32::MAX {
+                let q = qf[l.face as usize];
+                aq = q.abs();
+                to_parent = (q >= 0.0) == l.from_child;
+                if to_parent {
+                    den[n] += aq;
+                } else {
+                    den[l.parent as usize] += aq;
+                }
+            }
+            let d = den[n];
+            let solvable = d > 1e-300;
+            let xn = if solvable { num[n] / d } else { lag[n] };
+            x[n] = xn;
+            *beta = 0.0;
+            if to_parent {
+                num[l.parent as usize] += aq * xn;
+            } else if solvable && aq != 0.0 {
+                *beta = aq / d;
+            }
+        }
+        for (l, &beta) in tree.iter().zip(&sw.beta).rev() {
+            if beta != 0.0 {
+                x[l.node as usize] += beta * x[l.parent as usize];
+            }
         }
     }
 
@@ -1494,23 +1608,13 @@ impl Transport {
                 match up {
                     End::Node(u) if sw.mark[u] => sw.pending[n] += 1,
                     End::Node(u) => sw.num[n] += aq * x[u],
-                    End::Boundary(bb) => {
-                        let c = match self.bval[bb] {
-                            Some(c) => c,
-                            None => sw.lag[n],
-                        };
-                        sw.num[n] += aq * c;
-                    }
+                    End::Boundary(bb) => sw.num[n] += aq * inflow_value(self.bval[bb], sw.lag[n]),
                 }
             }
             for &k in &self.node_sources[n] {
                 let q = self.qs[k];
                 if q >= 0.0 {
-                    let c = match self.bval[self.sources[k].2] {
-                        Some(c) => c,
-                        None => sw.lag[n],
-                    };
-                    sw.num[n] += q * c;
+                    sw.num[n] += q * inflow_value(self.bval[self.sources[k].2], sw.lag[n]);
                 } else {
                     sw.den[n] -= q;
                 }
@@ -1619,7 +1723,6 @@ impl Transport {
             self.vol.copy_from_slice(&self.wvol);
         }
         self.load_flows(time, y);
-        let mut wcell = vec![0.0; nc];
         for s in 0..nsp {
             for (i, &n) in self.cells.iter().enumerate() {
                 self.conc[n] = z[s * nc + i] / self.vol[i];
@@ -1644,7 +1747,6 @@ impl Transport {
                 }
             }
             self.load_shear(s, y, z);
-            self.wall_uptake(s, &mut wcell);
             let sp = &self.species[s];
             let face_flux = |tr: &Self, unknown: usize| -> (f64, f64) {
                 let fi = tr
@@ -1659,14 +1761,9 @@ impl Transport {
                 (q * c, sp.binding.free(c, c))
             };
             let seg_wall = |j: usize| -> f64 {
-                let qb = sp.shear_cbrt[j];
                 self.seg_pieces[j]
                     .clone()
-                    .map(|p| {
-                        let pc = &self.pieces[p];
-                        let (g, cw, q) = sp.laws[p].eval_cbrt(qb);
-                        pc.share * (g * (sp.free[pc.node] - cw) + q)
-                    })
+                    .map(|p| sp.piece_uptake(&self.pieces, p, &sp.free))
                     .sum()
             };
             for v in &self.out_vessels {
@@ -1678,7 +1775,12 @@ impl Transport {
                     .sum();
                 out.extend([c_in, c_out, j_in, j_out, wall]);
             }
-            for &j in &self.out_segments {
+            let segs: &[usize] = if self.segment_output {
+                &self.out_segments
+            } else {
+                &[]
+            };
+            for &j in segs {
                 let seg = &self.segments[j];
                 let (flux, _) = face_flux(self, seg.branch_unknown);
                 let (mut c, mut wsum, mut vseg, mut dvseg) = (0.0, 0.0, 0.0, 0.0);
@@ -1797,6 +1899,13 @@ impl Transport {
     }
 }
 
+/// Concentration carried into the domain by a boundary: its prescribed value, or (zero-gradient
+/// backflow) the lagged value of the node it enters.
+#[inline]
+fn inflow_value(prescribed: Option<f64>, lagged: f64) -> f64 {
+    prescribed.unwrap_or(lagged)
+}
+
 #[inline]
 fn account(inlet: bool, flux_into_domain: f64, i_in: &mut f64, i_out: &mut f64) {
     if inlet {
@@ -1817,6 +1926,14 @@ struct Sweep {
     d: Vec<f64>,
     b: Vec<f64>,
     dnode: Vec<f64>,
+    /// Implicit step: α_f-level state, new transport volumes, linearised wall uptake, and the
+    /// coupling to the parent of every node in the tree elimination.
+    ya: Vec<f64>,
+    wnew: Vec<f64>,
+    wconst: Vec<f64>,
+    wlin: Vec<f64>,
+    inv_slope: Vec<f64>,
+    beta: Vec<f64>,
 }
 
 impl Sweep {
@@ -1831,6 +1948,12 @@ impl Sweep {
             d: Vec::new(),
             b: Vec::new(),
             dnode: Vec::new(),
+            ya: Vec::new(),
+            wnew: Vec::new(),
+            wconst: Vec::new(),
+            wlin: Vec::new(),
+            inv_slope: Vec::new(),
+            beta: Vec::new(),
         }
     }
 }
@@ -1853,4 +1976,179 @@ fn oriented(faces: &[Face], qf: &[f64], fi: usize) -> (f64, End, End) {
     } else {
         (q, f.to, f.from)
     }
+}
+
+/// One domain node in the elimination order of [`tree_order`]: its parent in the spanning
+/// forest (`u32::MAX` for a root) and the face joining them.
+#[derive(Debug, Clone, Copy)]
+struct Link {
+    node: u32,
+    parent: u32,
+    face: u32,
+    /// The face points from this node to its parent (positive flow runs child → parent).
+    from_child: bool,
+}
+
+/// Children-before-parents order of the domain nodes when the undirected graph of the internal
+/// faces is a forest (no loops, no parallel faces): then the upwind system can be eliminated
+/// leaves first for any flow directions (`Transport::tree_solve`). None otherwise. Linear time.
+fn tree_order(nt: usize, domain: &[usize], internal: &[[u32; 3]]) -> Option<Vec<Link>> {
+    let mut ptr = vec![0u32; nt + 1];
+    for &[_, a, b] in internal {
+        ptr[a as usize + 1] += 1;
+        ptr[b as usize + 1] += 1;
+    }
+    for i in 0..nt {
+        ptr[i + 1] += ptr[i];
+    }
+    let mut fill = ptr.clone();
+    let mut adj = vec![(0u32, 0u32); ptr[nt] as usize];
+    for &[f, a, b] in internal {
+        adj[fill[a as usize] as usize] = (f, b);
+        fill[a as usize] += 1;
+        adj[fill[b as usize] as usize] = (f, a);
+        fill[b as usize] += 1;
+    }
+    // nodes outside the domain count as seen: meeting one sends the solve to the general sweep
+    let mut seen = vec![true; nt];
+    for &n in domain {
+        seen[n] = false;
+    }
+    let mut pre: Vec<Link> = Vec::with_capacity(domain.len());
+    let mut stack: Vec<Link> = Vec::new();
+    for &r in domain {
+        if seen[r] {
+            continue;
+        }
+        seen[r] = true;
+        stack.push(Link {
+            node: r as u32,
+            parent: u32::MAX,
+            face: u32::MAX,
+            from_child: false,
+        });
+        while let Some(l) = stack.pop() {
+            let n = l.node as usize;
+            for &(f, o) in &adj[ptr[n] as usize..ptr[n + 1] as usize] {
+                if f == l.face {
+                    continue;
+                }
+                if seen[o as usize] {
+                    return None; // a loop (or two faces between the same nodes)
+                }
+                seen[o as usize] = true;
+                let from_child = internal_from(internal, f) == o;
+                stack.push(Link {
+                    node: o,
+                    parent: l.node,
+                    face: f,
+                    from_child,
+                });
+            }
+            pre.push(l);
+        }
+    }
+    pre.reverse();
+    Some(pre)
+}
+
+/// `from` node of internal face `f` (faces are listed in `internal` in face order, so a binary
+/// search finds it).
+fn internal_from(internal: &[[u32; 3]], f: u32) -> u32 {
+    let k = internal.partition_point(|e| e[0] < f);
+    internal[k][1]
+}
+
+/// The output vessels of the flow probes (first and last face, segment range) and their
+/// segments in order. One pass: segments grouped by vessel, names looked up in a map.
+fn output_layout(circuit: &Circuit, probes: &Probes) -> (Vec<OutVessel>, Vec<usize>) {
+    let vessel_index: std::collections::HashMap<&str, usize> = circuit
+        .vessel_names
+        .iter()
+        .enumerate()
+        .map(|(i, n)| (n.as_str(), i))
+        .collect();
+    let mut segs_of_vessel: Vec<Vec<usize>> = vec![Vec::new(); circuit.vessel_names.len()];
+    for (j, sg) in circuit.segments.iter().enumerate() {
+        if let Some(v) = segs_of_vessel.get_mut(sg.vessel) {
+            v.push(j);
+        }
+    }
+    let mut out_vessels = Vec::new();
+    let mut out_segments = Vec::new();
+    for (k, name) in probes.vessels.iter().enumerate() {
+        let start = out_segments.len();
+        if let Some(&vi) = vessel_index.get(name.as_str()) {
+            out_segments.extend_from_slice(&segs_of_vessel[vi]);
+        }
+        out_vessels.push(OutVessel {
+            first: probes.vessel_unknowns[4 * k + 2],
+            last: probes.vessel_unknowns[4 * k + 3],
+            segs: start..out_segments.len(),
+        });
+    }
+    (out_vessels, out_segments)
+}
+
+/// Wall pieces: a segment's share in each cell; a refined node's share of the segment
+/// (for a node at the segment's start [x0, x0 + share dx], at its end
+/// [x1 − share dx, x1]) is split into m equal sub-intervals in flow order, with the law
+/// integrated over each (exact for Lévêque's x^{-1/3}, by area for constant laws)
+fn wall_pieces(
+    segments: &[Segment],
+    m_node: &[usize],
+    node_cell: &[usize],
+    first_extra: &[usize],
+) -> (Vec<Piece>, Vec<std::ops::Range<usize>>) {
+    let mut pieces = Vec::new();
+    let mut seg_pieces = Vec::new();
+    for (j, sg) in segments.iter().enumerate() {
+        let start = pieces.len();
+        for (end, &(n, share)) in sg.nodes.iter().enumerate() {
+            if share <= 0.0 || node_cell[n] == usize::MAX {
+                continue;
+            }
+            let m = m_node[n];
+            if m == 1 {
+                // unrefined: the whole segment's law times the share (as before refinement)
+                pieces.push(Piece {
+                    seg: j,
+                    node: n,
+                    cell: node_cell[n],
+                    share,
+                    wall: sg.wall,
+                });
+                continue;
+            }
+            let w = sg.wall;
+            let len = share * (w.x1 - w.x0);
+            let (a, b) = if end == 0 {
+                (w.x0, w.x0 + len)
+            } else {
+                (w.x1 - len, w.x1)
+            };
+            for k in 0..m {
+                let c = if k == 0 { n } else { first_extra[n] + k - 1 };
+                let xa = a + (b - a) * k as f64 / m as f64;
+                let xb = if k + 1 == m {
+                    b
+                } else {
+                    a + (b - a) * (k + 1) as f64 / m as f64
+                };
+                pieces.push(Piece {
+                    seg: j,
+                    node: c,
+                    cell: node_cell[c],
+                    share: 1.0,
+                    wall: SegmentWall {
+                        radius: w.radius,
+                        x0: xa,
+                        x1: xb,
+                    },
+                });
+            }
+        }
+        seg_pieces.push(start..pieces.len());
+    }
+    (pieces, seg_pieces)
 }

@@ -9,6 +9,8 @@ use std::collections::BTreeMap;
 
 use crate::error::{Error, Result};
 
+pub mod transport;
+
 #[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq, Default)]
 pub enum Arrangement {
     /// Capacitor at the proximal node, then R–L to the next node (default; flow-in/pressure-out).
@@ -143,7 +145,7 @@ pub struct NetworkSpec {
     pub output_segments: bool,
     /// Species transport (oxygen and other solutes); absent for flow-only models.
     #[serde(default)]
-    pub transport: Option<crate::transport::TransportSpec>,
+    pub transport: Option<transport::TransportSpec>,
 }
 
 /// Read a canonical SI JSON model.
