@@ -3,9 +3,9 @@
 //! pass has settled), interrupted, or failed.
 
 use super::coupling::State;
+use super::mean_flow::MeanAbs;
 use super::recorder::Recorder;
 use super::settings::RunSettings;
-use super::two_pass::MeanAbs;
 use crate::error::{Error, Result};
 use crate::integrate::newton::scaled_increment;
 

@@ -7,14 +7,18 @@
 //! * `coupling` — the state a run advances (flow and species) and one step of it;
 //! * `cycle` — the cycle loop: output rows, checks, progress, periodicity;
 //! * `recorder` — the output table, optionally streamed to an [`OutputSink`];
-//! * `two_pass` — the flow-only first pass that measures the cycle-mean |Q| for the closures;
+//! * `pass` — one pass: settings → plan → initial state → cycle loop → outcome;
+//! * `two_pass` — the flow-only first pass that measures the cycle-mean |Q| for the closures
+//!   (accumulated by `mean_flow`), then the coupled pass;
 //! * `outcome` — what the run returns ([`Outcome`]).
 //!
 //! A failed or interrupted run still returns everything recorded so far.
 
 mod coupling;
 mod cycle;
+mod mean_flow;
 mod outcome;
+mod pass;
 mod plan;
 mod recorder;
 mod settings;
@@ -27,12 +31,8 @@ pub use settings::{Method, RunSettings, Start};
 use crate::circuit::Dae;
 use crate::error::Result;
 use crate::integrate::steady::SteadyCache;
-use crate::transport::{Formulation, Transport};
-use coupling::{Species, State};
-use cycle::Cycles;
-use plan::Plan;
-use recorder::Recorder;
-use two_pass::{MeanAbs, run_two_pass};
+use crate::transport::Transport;
+use two_pass::run_two_pass;
 
 /// Run the circuit. `progress(t, t_end)` is called every few hundred steps; returning false
 /// interrupts the run.
@@ -41,7 +41,7 @@ pub fn simulate(
     s: &RunSettings,
     progress: &mut dyn FnMut(f64, f64) -> bool,
 ) -> Result<Outcome> {
-    run(dae, &SteadyCache::new(dae), s, None, None, None, progress)
+    pass::run(dae, &SteadyCache::new(dae), s, None, None, None, progress)
 }
 
 /// Run the circuit with species transport. Closures that need the cycle-mean |Q| get it from
@@ -66,50 +66,4 @@ pub fn simulate_to_sink(
     progress: &mut dyn FnMut(f64, f64) -> bool,
 ) -> Result<Outcome> {
     run_two_pass(dae, transport, s, Some(sink), progress)
-}
-
-/// One pass: settings → plan → initial state → cycle loop → outcome. `mean` collects the
-/// cycle-mean |Q| of a flow-only first pass.
-fn run(
-    dae: &Dae,
-    steady: &SteadyCache<'_>,
-    s: &RunSettings,
-    mut transport: Option<&mut Transport>,
-    mean: Option<&mut MeanAbs>,
-    sink: Option<&mut OutputSink<'_>>,
-    progress: &mut dyn FnMut(f64, f64) -> bool,
-) -> Result<Outcome> {
-    s.validate(dae)?;
-    let mut plan = Plan::new(dae, steady, s, transport.as_deref_mut())?;
-    let (mut y, yd) = plan.initial_state(steady, s)?;
-    let quasi = transport
-        .as_deref()
-        .is_some_and(|t| t.formulation() == Formulation::TlQuasisteady);
-    // explicit (RK4) transport in the flow's own stages; implicit transport after each step
-    let mut flow = plan.flow(s, &mut y, transport.is_some() && !quasi)?;
-    let (species, initial_stored) = match transport {
-        Some(tr) => {
-            let level = flow.integrator().alpha_f();
-            let (sp, stored) = Species::start(tr, &y, plan.dt, level, !plan.use_rk4)?;
-            (Some(sp), stored)
-        }
-        None => (None, Vec::new()),
-    };
-    let layout = species
-        .as_ref()
-        .map(|sp| (sp.tr.species_names().len(), sp.tr.columns_per_species()));
-    let columns = s.species_columns.as_deref();
-    let rec = Recorder::new(&s.probes, layout, columns, initial_stored, sink)?;
-    let state = State {
-        dae,
-        flow,
-        species,
-        y,
-        yd,
-        dt: plan.dt,
-    };
-    let method = plan.method_name();
-    let mut cycles = Cycles::new(s, state, rec, mean, plan.steps_per_cycle, plan.stride);
-    let error = cycles.run(progress);
-    Ok(Outcome::of(cycles, method, plan.stability, error))
 }

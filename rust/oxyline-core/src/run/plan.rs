@@ -250,3 +250,76 @@ fn svzerod_steady_start(dae: &Dae, s: &RunSettings, rho_inf: f64) -> Result<(Vec
     }
     Ok((y, yd))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::integrate::newton::NewtonControl;
+
+    fn settings(dt: Option<f64>, output_every: f64) -> RunSettings {
+        RunSettings {
+            method: Method::GeneralizedAlpha { rho_inf: 0.5 },
+            dt,
+            period: 1.0,
+            cycles: 1,
+            until_periodic: None,
+            max_cycles: 1,
+            output_every,
+            output_all_cycles: false,
+            keep_current_cycle: false,
+            start: Start::Zero,
+            newton: NewtonControl::default(),
+            probes: Vec::new(),
+            species_columns: None,
+        }
+    }
+
+    fn limit(dt_max: f64) -> StabilityLimit {
+        StabilityLimit {
+            dt_max,
+            eigenvalue: (-1.0, 0.0),
+            element: "branch a".into(),
+            exact: true,
+        }
+    }
+
+    #[test]
+    fn steps_divide_the_period_and_the_output_interval() {
+        // implicit, automatic step: the output step, 100 per cycle, every step output
+        assert_eq!(
+            schedule(&settings(None, 0.01), None, f64::INFINITY).unwrap(),
+            (0.01, 100, 1)
+        );
+        // a given 3 ms becomes 1/333 s (333 steps per cycle), output every 3 steps (≈ 10 ms)
+        let (dt, spc, stride) = schedule(&settings(Some(3e-3), 0.01), None, f64::INFINITY).unwrap();
+        assert_eq!((spc, stride), (333, 3));
+        assert_eq!(dt, 1.0 / 333.0); // the period over the steps: the same one division
+
+        // RK4, automatic: at most half the stability limit (4 ms), so ceil(10 / 4) = 3 steps
+        // per 10 ms output interval, 1/300 s
+        let (dt, spc, stride) =
+            schedule(&settings(None, 0.01), Some(&limit(8e-3)), f64::INFINITY).unwrap();
+        assert_eq!((spc, stride), (300, 3));
+        assert_eq!(dt, 1.0 / 300.0);
+        // the transport Courant limit (1 ms) wins over the flow's
+        let (_, spc, stride) = schedule(&settings(None, 0.01), Some(&limit(8e-3)), 1e-3).unwrap();
+        assert_eq!((spc, stride), (1000, 10));
+    }
+
+    #[test]
+    fn an_rk4_step_above_the_limit_is_refused_naming_the_element() {
+        let e = schedule(
+            &settings(Some(2e-3), 0.01),
+            Some(&limit(1e-3)),
+            f64::INFINITY,
+        );
+        assert_eq!(
+            e.unwrap_err(),
+            Error::Unstable {
+                dt: 2e-3,
+                limit: 1e-3,
+                element: "branch a".into()
+            }
+        );
+    }
+}

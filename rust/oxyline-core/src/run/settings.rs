@@ -99,3 +99,62 @@ impl RunSettings {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::circuit::Circuit;
+    use crate::waveform::Waveform;
+
+    #[test]
+    fn bad_settings_are_model_errors_naming_the_value() {
+        let mut k = Circuit::default();
+        let p = k.add_node("p", 1e-9, 0.0);
+        let out = k.add_node("out", 0.0, 0.0);
+        k.add_branch("drain", p, out, 1e8, 0.0, 0.0);
+        k.fixed_pressures.push((out, Waveform::constant(0.0)));
+        let dae = k.assemble().unwrap();
+        let ok = RunSettings {
+            method: Method::Rk4,
+            dt: None,
+            period: 1.0,
+            cycles: 1,
+            until_periodic: None,
+            max_cycles: 1,
+            output_every: 0.01,
+            output_all_cycles: false,
+            keep_current_cycle: false,
+            start: Start::Zero,
+            newton: NewtonControl::default(),
+            probes: vec![0],
+            species_columns: None,
+        };
+        assert!(ok.validate(&dae).is_ok());
+        let message = |s: RunSettings| match s.validate(&dae) {
+            Err(Error::Model { element, message }) => format!("{element}: {message}"),
+            other => panic!("{other:?}"),
+        };
+        let bad = |f: fn(&mut RunSettings)| {
+            let mut s = ok.clone();
+            f(&mut s);
+            message(s)
+        };
+        assert_eq!(
+            bad(|s| s.period = -1.0),
+            "simulation: period must be > 0, got -1"
+        );
+        assert_eq!(bad(|s| s.cycles = 0), "simulation: cycles must be >= 1");
+        assert_eq!(
+            bad(|s| s.output_every = f64::NAN),
+            "simulation: output every must be > 0, got NaN"
+        );
+        assert_eq!(
+            bad(|s| s.dt = Some(0.0)),
+            "simulation: dt must be > 0, got 0"
+        );
+        assert_eq!(
+            bad(|s| s.probes = vec![0, 7]),
+            "simulation: output index 7 out of range"
+        );
+    }
+}
