@@ -240,7 +240,6 @@ impl Circuit {
             f,
             stenosis,
             forcing,
-            rate_forcing: Vec::new(),
             names: self.unknown_names(),
         })
     }
@@ -264,8 +263,6 @@ pub struct Dae {
     pub stenosis: Vec<(usize, f64)>,
     /// (row, waveform): f_row(t) = w(t).
     pub forcing: Vec<(usize, Waveform)>,
-    /// (row, scale, waveform): f_row(t) += scale · w′(t) (terms of an index reduction).
-    pub rate_forcing: Vec<(usize, f64, Waveform)>,
     pub names: Vec<String>,
 }
 
@@ -295,12 +292,6 @@ impl Dae {
             } else {
                 w.mean()
             };
-        }
-        // a periodic waveform's mean slope is zero
-        if regime == Regime::Transient {
-            for (row, scale, w) in &self.rate_forcing {
-                out[*row] += scale * w.slope(t);
-            }
         }
     }
 

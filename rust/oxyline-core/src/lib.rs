@@ -11,6 +11,7 @@ pub mod hemoglobin;
 pub mod integrate;
 pub mod network;
 pub mod output;
+pub mod run;
 pub mod segment;
 pub mod simulate;
 pub mod sparse;
@@ -24,7 +25,7 @@ pub use error::{Error, Result};
 // the integrators' old module paths (`crate::rk4::Rk4`, `crate::genalpha::GenAlpha`, ...)
 pub use integrate::{genalpha, rk4, stability};
 pub use output::{Probes, Selection};
-pub use simulate::{
+pub use run::{
     Chunk, Method, Outcome, OutputSink, RunSettings, Start, TransportOutcome, simulate,
     simulate_to_sink, simulate_with_transport,
 };

@@ -1,0 +1,186 @@
+//! The state a run advances: the flow (y, ẏ) with its integrator, and the species amounts
+//! with their transport model. One step, the health checks between steps and the observation
+//! of the species outputs live here, so the cycle loop sees neither integrator nor coupling.
+
+use crate::circuit::Dae;
+use crate::error::{Error, Result};
+use crate::integrate::Integrator;
+use crate::integrate::rk4::{CoupledStages, Rk4};
+use crate::transport::{Formulation, Transport};
+
+/// Explicit upwind transport is stable for Courant numbers up to this (physics §1.5).
+pub(super) const RK4_UPWIND_COURANT: f64 = 1.392_647;
+
+/// How the flow advances, and with it the species.
+pub(super) enum Flow<'d> {
+    /// Any integrator; species (if any) follow each flow step with a backward-Euler transport
+    /// step (generalized-α, and the quasi-steady formulation with RK4).
+    Split(Box<dyn Integrator + 'd>),
+    /// RK4 advancing flow and species as one ODE in the same stages (physics §2.5,
+    /// "monolithic"). It stays a special case: the coupled step evaluates the species
+    /// derivative at every RK4 stage's consistent flow state, which [`Integrator`] (one whole
+    /// step at a time) does not expose.
+    Monolithic(Box<Rk4<'d>>),
+}
+
+impl<'d> Flow<'d> {
+    pub fn integrator(&mut self) -> &mut (dyn Integrator + 'd) {
+        match self {
+            Flow::Split(ig) => ig.as_mut(),
+            Flow::Monolithic(rk) => rk.as_mut(),
+        }
+    }
+}
+
+/// The species side of a run.
+pub(super) struct Species<'t> {
+    pub tr: &'t mut Transport,
+    /// Amounts per cell and species, then the transport model's accumulators.
+    pub z: Vec<f64>,
+    /// The level within a step of the face flows of a split transport step (α_f, or 1 for the
+    /// quasi-steady field, which is algebraic in the flow).
+    level: f64,
+    /// The flow state at the start of the step, when a split transport step interpolates its
+    /// face flows between the step's start and end (generalized-α); None when it takes the
+    /// end-of-step flows (RK4, whose end state is consistent).
+    step_start: Option<Vec<f64>>,
+    /// Stages of the monolithic RK4 step.
+    zk: CoupledStages,
+    /// z at the end of the previous cycle (periodicity).
+    prev_cycle_z: Vec<f64>,
+    /// Scratch of `observe`: the flow state and its rate as the integrator reports them.
+    y_obs: Vec<f64>,
+    yd_obs: Vec<f64>,
+}
+
+impl<'t> Species<'t> {
+    /// The species state started uniform in the initial volumes of the flow state `y`, and
+    /// Σ N of each species then. `level` is the integrator's α_f; `interpolate` whether its
+    /// step's flows lie between the step's start and end (see `step_start`).
+    pub fn start(
+        tr: &'t mut Transport,
+        y: &[f64],
+        dt: f64,
+        level: f64,
+        interpolate: bool,
+    ) -> Result<(Self, Vec<f64>)> {
+        let mut z = tr.initial_state(y)?;
+        let cells = tr.n_cells();
+        let nsp = tr.species_names().len();
+        let initial_stored: Vec<f64> = (0..nsp)
+            .map(|k| z[k * cells..(k + 1) * cells].iter().sum())
+            .collect();
+        let quasi = tr.formulation() == Formulation::TlQuasisteady;
+        if quasi {
+            // the quasi-steady field is algebraic in the flow: make the initial one consistent
+            tr.implicit_step(0.0, dt, 1.0, y, y, &mut z)?;
+            // reset the accumulators (not the relaxed shears that follow them)
+            for a in z.iter_mut().skip(cells * nsp).take(4 * nsp) {
+                *a = 0.0;
+            }
+        }
+        let species = Species {
+            tr,
+            zk: CoupledStages::new(z.len()),
+            prev_cycle_z: z.clone(),
+            z,
+            level: if quasi { 1.0 } else { level },
+            step_start: interpolate.then(|| vec![0.0; y.len()]),
+            y_obs: vec![0.0; y.len()],
+            yd_obs: vec![0.0; y.len()],
+        };
+        Ok((species, initial_stored))
+    }
+
+    /// The backward-Euler transport step over [t, t + dt] after the flow step that ended in `y`.
+    fn implicit_step(&mut self, t: f64, dt: f64, y: &[f64]) -> Result<()> {
+        let y0 = self.step_start.as_deref().unwrap_or(y);
+        self.tr.implicit_step(t, dt, self.level, y0, y, &mut self.z)
+    }
+
+    /// The relative change of the species state over the cycle just ended (species need
+    /// several transit times, so the periodicity test includes them).
+    pub fn cycle_change(&mut self) -> f64 {
+        let change = self.tr.relative_change(&self.z, &self.prev_cycle_z);
+        self.prev_cycle_z.copy_from_slice(&self.z);
+        change
+    }
+}
+
+/// The state a run advances.
+pub(super) struct State<'d, 't> {
+    pub dae: &'d Dae,
+    pub flow: Flow<'d>,
+    pub species: Option<Species<'t>>,
+    pub y: Vec<f64>,
+    /// ẏ: generalized-α's carried rate; RK4 leaves it at the start's.
+    pub yd: Vec<f64>,
+    pub dt: f64,
+}
+
+impl State<'_, '_> {
+    /// One step from `t` to `t + dt`, flow and species.
+    pub fn advance(&mut self, t: f64) -> Result<()> {
+        let (y, yd) = (&mut self.y, &mut self.yd);
+        match (&mut self.flow, self.species.as_mut()) {
+            (Flow::Monolithic(rk), Some(sp)) => {
+                rk.step_coupled(t, y, &mut sp.z, &mut sp.zk, &mut *sp.tr)
+            }
+            (flow, mut species) => {
+                if let Some(start) = species.as_mut().and_then(|s| s.step_start.as_mut()) {
+                    start.copy_from_slice(y);
+                }
+                flow.integrator().step(t, y, yd)?;
+                match species {
+                    Some(sp) => sp.implicit_step(t, self.dt, y),
+                    None => Ok(()),
+                }
+            }
+        }
+    }
+
+    /// The checks run every few steps: the explicit transport's Courant number and a finite
+    /// flow state.
+    pub fn check(&mut self, t: f64) -> Result<()> {
+        if let (Flow::Monolithic(_), Some(sp)) = (&self.flow, self.species.as_mut()) {
+            // explicit upwind transport is stable for Courant numbers up to 1.3926
+            // (physics §1.5); the flow eigenvalues alone do not bound it
+            let dt = self.dt;
+            let courant = dt * sp.tr.max_outflow_rate(&self.y, t);
+            if courant > 0.95 * RK4_UPWIND_COURANT {
+                return Err(Error::solver(
+                    t,
+                    format!(
+                        "transport Courant number {courant:.3} exceeds the RK4 limit 1.39 (dt {dt:.3e} s): reduce dt to {:.3e} s or use method 'generalized-alpha'",
+                        dt * 0.7 / courant
+                    ),
+                ));
+            }
+        }
+        if let Some(i) = self.y.iter().position(|v| !v.is_finite()) {
+            return Err(Error::solver(
+                t,
+                format!("non-finite value of {}", self.dae.names[i]),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The species outputs at `t` into `out` (cleared first; nothing for a flow-only run).
+    /// They see the flow state with the rate the integrator reports for it (RK4 derives ẏ
+    /// with its algebraic unknowns made consistent).
+    pub fn observe(&mut self, t: f64, out: &mut Vec<f64>) -> Result<()> {
+        out.clear();
+        let Some(sp) = self.species.as_mut() else {
+            return Ok(());
+        };
+        sp.y_obs.copy_from_slice(&self.y);
+        sp.yd_obs.copy_from_slice(&self.yd);
+        let monolithic = matches!(self.flow, Flow::Monolithic(_));
+        self.flow
+            .integrator()
+            .rate(t, &mut sp.y_obs, &mut sp.yd_obs)?;
+        sp.tr
+            .observe(t, &sp.y_obs, Some(&sp.yd_obs), &sp.z, !monolithic, out)
+    }
+}

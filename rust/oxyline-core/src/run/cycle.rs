@@ -1,0 +1,198 @@
+//! The cycle loop: steps cycle by cycle, records the output rows that are due, checks the
+//! state, reports progress, and stops when the run is periodic (or the mean flow of a first
+//! pass has settled), interrupted, or failed.
+
+use super::coupling::State;
+use super::mean_flow::MeanAbs;
+use super::recorder::Recorder;
+use super::settings::RunSettings;
+use crate::error::{Error, Result};
+use crate::integrate::newton::scaled_increment;
+
+/// The running loop. A failed or interrupted run keeps everything recorded so far.
+pub(super) struct Cycles<'r, 'f> {
+    s: &'r RunSettings,
+    pub state: State<'r, 'r>,
+    pub rec: Recorder<'r, 'r, 'f>,
+    /// The first pass's running mean of |Q|.
+    mean: Option<&'r mut MeanAbs>,
+    steps_per_cycle: usize,
+    /// Steps per output row.
+    stride: usize,
+    max_cycles: usize,
+    /// Steps taken.
+    steps: usize,
+    pub cycles_run: usize,
+    /// Cycle-to-cycle change of the state at the end of the last cycle run (relative).
+    pub periodic_error: f64,
+    prev_cycle_end: Vec<f64>,
+    obs_row: Vec<f64>,
+}
+
+/// What the rows of one cycle are for.
+struct CycleRows {
+    t0: f64,
+    /// Certain to be part of the output: they may go to the sink as they come.
+    committed: bool,
+    /// Recorded at all.
+    recorded: bool,
+    /// With their species outputs (those of cycles that will be discarded are not computed).
+    species: bool,
+}
+
+impl<'r, 'f> Cycles<'r, 'f> {
+    pub fn new(
+        s: &'r RunSettings,
+        state: State<'r, 'r>,
+        rec: Recorder<'r, 'r, 'f>,
+        mean: Option<&'r mut MeanAbs>,
+        steps_per_cycle: usize,
+        stride: usize,
+    ) -> Self {
+        Cycles {
+            s,
+            prev_cycle_end: state.y.clone(),
+            state,
+            rec,
+            mean,
+            steps_per_cycle,
+            stride,
+            max_cycles: s.max_cycles(),
+            steps: 0,
+            cycles_run: 0,
+            periodic_error: f64::NAN,
+            obs_row: Vec::new(),
+        }
+    }
+
+    fn t_end(&self) -> f64 {
+        self.max_cycles as f64 * self.s.period
+    }
+
+    /// Run the cycles; the error that stopped the run early, if any. The rest of the output
+    /// (the partial chunk, or all rows of an interrupted run) goes to the sink too: a long run
+    /// keeps everything it computed.
+    pub fn run(&mut self, progress: &mut dyn FnMut(f64, f64) -> bool) -> Option<Error> {
+        let mut error = None;
+        for cycle in 0..self.max_cycles {
+            match self.cycle(cycle, progress) {
+                Ok(true) => {}
+                Ok(false) => break,
+                Err(e) => {
+                    error = Some(e);
+                    break;
+                }
+            }
+        }
+        self.rec.align();
+        if !self.rec.flush(true) && error.is_none() {
+            error = Some(Error::Interrupted {
+                time: self.steps as f64 * self.state.dt,
+            });
+        }
+        progress(self.cycles_run as f64 * self.s.period, self.t_end());
+        error
+    }
+
+    /// One cycle; Ok(false) when the run is complete.
+    fn cycle(&mut self, cycle: usize, progress: &mut dyn FnMut(f64, f64) -> bool) -> Result<bool> {
+        let s = self.s;
+        let last = cycle + 1 == self.max_cycles;
+        // rows certain to be output can go to the sink as they come; a cycle that may still be
+        // superseded by the next (last-cycle output with `until_periodic`) waits for its end
+        let committed = s.output_all_cycles || last;
+        let rows = CycleRows {
+            t0: cycle as f64 * s.period,
+            committed,
+            recorded: committed || s.until_periodic.is_some() || s.keep_current_cycle,
+            species: s.output_all_cycles || s.until_periodic.is_some() || last,
+        };
+        if !s.output_all_cycles {
+            self.rec.clear();
+        }
+        if let Some(m) = self.mean.as_deref_mut() {
+            m.start_cycle();
+        }
+        if rows.recorded && (!s.output_all_cycles || cycle == 0) {
+            let t = if s.output_all_cycles { rows.t0 } else { 0.0 };
+            self.output_row(t, rows.t0, true, committed)?;
+        }
+        for k in 1..=self.steps_per_cycle {
+            self.step(k, &rows, progress)?;
+        }
+        self.cycles_run = cycle + 1;
+        Ok(self.end_cycle())
+    }
+
+    /// Step `k` of the cycle, and its output row when due.
+    fn step(
+        &mut self,
+        k: usize,
+        rows: &CycleRows,
+        progress: &mut dyn FnMut(f64, f64) -> bool,
+    ) -> Result<()> {
+        let dt = self.state.dt;
+        let done = self.state.advance(self.steps as f64 * dt);
+        self.steps += 1;
+        let t_new = self.steps as f64 * dt;
+        done?;
+        if let Some(m) = self.mean.as_deref_mut() {
+            m.accumulate(&self.state.y);
+        }
+        if k % 64 == 0 || k == self.steps_per_cycle {
+            self.state.check(t_new)?;
+        }
+        // last-cycle output counts from the cycle start (svZeroDSolver's convention), so the
+        // output times do not depend on how many cycles ran
+        let all = self.s.output_all_cycles;
+        let due = if all { self.steps } else { k } % self.stride == 0;
+        if due && rows.recorded {
+            let t = if all { t_new } else { t_new - rows.t0 };
+            self.output_row(t, t_new, rows.species, rows.committed)?;
+        }
+        if self.steps % 256 == 0 && !progress(t_new, self.t_end()) {
+            return Err(Error::Interrupted { time: t_new });
+        }
+        Ok(())
+    }
+
+    /// Record the state at `time` as the row at output time `t`, with its species outputs when
+    /// `species`; a `committed` row goes on to the sink once a chunk is full.
+    fn output_row(&mut self, t: f64, time: f64, species: bool, committed: bool) -> Result<()> {
+        self.rec.record(t, &self.state.y);
+        if species && self.state.species.is_some() {
+            self.state.observe(time, &mut self.obs_row)?;
+            self.rec.push_species(&self.obs_row);
+        }
+        if committed && !self.rec.flush(false) {
+            return Err(Error::Interrupted { time });
+        }
+        Ok(())
+    }
+
+    /// Close a cycle: the periodicity error and the first pass's mean flow. False when the run
+    /// is complete (mean flow settled, or periodic after the minimum cycles).
+    fn end_cycle(&mut self) -> bool {
+        let y = &self.state.y;
+        self.periodic_error = scaled_increment(
+            self.state.dae,
+            &y.iter()
+                .zip(&self.prev_cycle_end)
+                .map(|(a, b)| a - b)
+                .collect::<Vec<_>>(),
+            y,
+        );
+        self.prev_cycle_end.copy_from_slice(y);
+        if self.mean.as_deref_mut().is_some_and(MeanAbs::end_cycle) {
+            return false;
+        }
+        if let Some(sp) = self.state.species.as_mut() {
+            // species need several transit times: include them in the periodicity test
+            self.periodic_error = self.periodic_error.max(sp.cycle_change());
+        }
+        match self.s.until_periodic {
+            Some(tol) => !(self.cycles_run >= self.s.cycles && self.periodic_error < tol),
+            None => true,
+        }
+    }
+}

@@ -1,0 +1,62 @@
+//! The cycle-mean |Q| of the segments, accumulated during the flow-only first pass of a
+//! transport run (see `two_pass`).
+
+/// Running mean of |y_i| over the current cycle (for cycle-mean wall shear).
+pub(super) struct MeanAbs {
+    unknowns: Vec<usize>,
+    sum: Vec<f64>,
+    /// The mean of the last cycle completed.
+    pub last: Vec<f64>,
+    prev: Vec<f64>,
+    count: usize,
+}
+
+/// The flow-only first pass stops once the cycle-mean |Q| of every segment changes by less
+/// than this (relative to the largest) between two cycles: the closures need the mean shear,
+/// not a fully settled pressure level.
+const MEAN_FLOW_TOL: f64 = 1e-6;
+
+impl MeanAbs {
+    pub fn new(unknowns: Vec<usize>) -> Self {
+        let n = unknowns.len();
+        MeanAbs {
+            unknowns,
+            sum: vec![0.0; n],
+            last: vec![0.0; n],
+            prev: vec![f64::INFINITY; n],
+            count: 0,
+        }
+    }
+
+    pub fn start_cycle(&mut self) {
+        self.sum.iter_mut().for_each(|v| *v = 0.0);
+        self.count = 0;
+    }
+
+    pub fn accumulate(&mut self, y: &[f64]) {
+        for (acc, &i) in self.sum.iter_mut().zip(&self.unknowns) {
+            *acc += y[i].abs();
+        }
+        self.count += 1;
+    }
+
+    /// Close the cycle's mean; true once it has settled (see [`MEAN_FLOW_TOL`]).
+    pub fn end_cycle(&mut self) -> bool {
+        let c = self.count.max(1) as f64;
+        for (l, v) in self.last.iter_mut().zip(&self.sum) {
+            *l = v / c;
+        }
+        let scale = self
+            .last
+            .iter()
+            .fold(0.0f64, |a, v| a.max(v.abs()))
+            .max(1e-300);
+        let change = self
+            .last
+            .iter()
+            .zip(&self.prev)
+            .fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
+        self.prev.copy_from_slice(&self.last);
+        change <= MEAN_FLOW_TOL * scale
+    }
+}

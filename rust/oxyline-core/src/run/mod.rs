@@ -1,0 +1,69 @@
+//! The run driver: settings → plan → cycle loop → outcome.
+//!
+//! * `settings` — what the caller asks ([`RunSettings`], [`Method`], [`Start`]) and its checks;
+//! * `plan` — the integrator, the step, the output stride and the initial state, decided before
+//!   the first step (the steady state is solved at most once per call, shared by both passes of
+//!   a transport run);
+//! * `coupling` — the state a run advances (flow and species) and one step of it;
+//! * `cycle` — the cycle loop: output rows, checks, progress, periodicity;
+//! * `recorder` — the output table, optionally streamed to an [`OutputSink`];
+//! * `pass` — one pass: settings → plan → initial state → cycle loop → outcome;
+//! * `two_pass` — the flow-only first pass that measures the cycle-mean |Q| for the closures
+//!   (accumulated by `mean_flow`), then the coupled pass;
+//! * `outcome` — what the run returns ([`Outcome`]).
+//!
+//! A failed or interrupted run still returns everything recorded so far.
+
+mod coupling;
+mod cycle;
+mod mean_flow;
+mod outcome;
+mod pass;
+mod plan;
+mod recorder;
+mod settings;
+mod two_pass;
+
+pub use outcome::{Outcome, TransportOutcome};
+pub use recorder::{Chunk, OutputSink};
+pub use settings::{Method, RunSettings, Start};
+
+use crate::circuit::Dae;
+use crate::error::Result;
+use crate::integrate::steady::SteadyCache;
+use crate::transport::Transport;
+use two_pass::run_two_pass;
+
+/// Run the circuit. `progress(t, t_end)` is called every few hundred steps; returning false
+/// interrupts the run.
+pub fn simulate(
+    dae: &Dae,
+    s: &RunSettings,
+    progress: &mut dyn FnMut(f64, f64) -> bool,
+) -> Result<Outcome> {
+    pass::run(dae, &SteadyCache::new(dae), s, None, None, None, progress)
+}
+
+/// Run the circuit with species transport. Closures that need the cycle-mean |Q| get it from
+/// a first, flow-only pass over the same cycles (the paper's two-pass procedure, physics §3.1);
+/// the coupled run then starts again from the same initial state.
+pub fn simulate_with_transport(
+    dae: &Dae,
+    transport: Option<&mut Transport>,
+    s: &RunSettings,
+    progress: &mut dyn FnMut(f64, f64) -> bool,
+) -> Result<Outcome> {
+    run_two_pass(dae, transport, s, None, progress)
+}
+
+/// [`simulate_with_transport`], streaming the output rows to `sink` during the run instead of
+/// returning them (the outcome's `times`/`data` then hold only rows the sink refused).
+pub fn simulate_to_sink(
+    dae: &Dae,
+    transport: Option<&mut Transport>,
+    s: &RunSettings,
+    sink: &mut OutputSink<'_>,
+    progress: &mut dyn FnMut(f64, f64) -> bool,
+) -> Result<Outcome> {
+    run_two_pass(dae, transport, s, Some(sink), progress)
+}

@@ -1,0 +1,76 @@
+//! What a run returns: the recorded table, the final state, how the run went.
+
+use super::cycle::Cycles;
+use crate::error::Error;
+use crate::integrate::stability::StabilityLimit;
+
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    pub times: Vec<f64>,
+    /// Row-major (time, probe).
+    pub data: Vec<f64>,
+    pub n_probes: usize,
+    pub dt: f64,
+    pub method: &'static str,
+    pub cycles_run: usize,
+    pub periodic_error: f64,
+    pub stability: Option<StabilityLimit>,
+    pub final_state: Vec<f64>,
+    /// Set when the run stopped early (error or interruption); the data up to then are kept.
+    pub error: Option<Error>,
+    /// Species transport records (None for flow-only runs).
+    pub transport: Option<TransportOutcome>,
+    /// Most output rows the driver held at once: all of them without a sink; with one, at most
+    /// the sink's chunk for all-cycles output and one cycle's output for last-cycle output.
+    pub max_buffered_rows: usize,
+}
+
+/// Species outputs, recorded at the same times as the flow probes.
+#[derive(Debug, Clone)]
+pub struct TransportOutcome {
+    pub species: Vec<String>,
+    /// Columns per species and output time (see `Transport::observe`).
+    pub columns_per_species: usize,
+    /// Row-major (time, species × columns).
+    pub data: Vec<f64>,
+    /// Σ N of each species at t = 0 (mass balance reference).
+    pub initial_stored: Vec<f64>,
+    pub final_state: Vec<f64>,
+    /// Cycle-mean |Q| of every segment used by the closures (empty if none needed it).
+    pub mean_abs_flow: Vec<f64>,
+}
+
+impl Outcome {
+    /// The outcome of the finished (or stopped) cycle loop.
+    pub(super) fn of(
+        cycles: Cycles<'_, '_>,
+        method: &'static str,
+        stability: Option<StabilityLimit>,
+        error: Option<Error>,
+    ) -> Outcome {
+        let (cycles_run, periodic_error) = (cycles.cycles_run, cycles.periodic_error);
+        let (state, rec) = (cycles.state, cycles.rec);
+        let (n_probes, columns_per_species) = (rec.n_probes(), rec.columns_per_species());
+        Outcome {
+            max_buffered_rows: rec.max_rows,
+            times: rec.times,
+            data: rec.data,
+            n_probes,
+            dt: state.dt,
+            method,
+            cycles_run,
+            periodic_error,
+            stability,
+            final_state: state.y,
+            error,
+            transport: state.species.map(|sp| TransportOutcome {
+                species: sp.tr.species_names(),
+                columns_per_species,
+                data: rec.transport,
+                initial_stored: rec.initial_stored,
+                final_state: sp.z,
+                mean_abs_flow: Vec::new(),
+            }),
+        }
+    }
+}

@@ -1,0 +1,59 @@
+//! One pass of a run: settings → plan → initial state → cycle loop → outcome.
+
+use super::coupling::{Species, State};
+use super::cycle::Cycles;
+use super::mean_flow::MeanAbs;
+use super::outcome::Outcome;
+use super::plan::Plan;
+use super::recorder::{OutputSink, Recorder};
+use super::settings::RunSettings;
+use crate::circuit::Dae;
+use crate::error::Result;
+use crate::integrate::steady::SteadyCache;
+use crate::transport::{Formulation, Transport};
+
+/// One pass: settings → plan → initial state → cycle loop → outcome. `mean` collects the
+/// cycle-mean |Q| of a flow-only first pass.
+pub(super) fn run(
+    dae: &Dae,
+    steady: &SteadyCache<'_>,
+    s: &RunSettings,
+    mut transport: Option<&mut Transport>,
+    mean: Option<&mut MeanAbs>,
+    sink: Option<&mut OutputSink<'_>>,
+    progress: &mut dyn FnMut(f64, f64) -> bool,
+) -> Result<Outcome> {
+    s.validate(dae)?;
+    let mut plan = Plan::new(dae, steady, s, transport.as_deref_mut())?;
+    let (mut y, yd) = plan.initial_state(steady, s)?;
+    let quasi = transport
+        .as_deref()
+        .is_some_and(|t| t.formulation() == Formulation::TlQuasisteady);
+    // explicit (RK4) transport in the flow's own stages; implicit transport after each step
+    let mut flow = plan.flow(s, &mut y, transport.is_some() && !quasi)?;
+    let (species, initial_stored) = match transport {
+        Some(tr) => {
+            let level = flow.integrator().alpha_f();
+            let (sp, stored) = Species::start(tr, &y, plan.dt, level, !plan.use_rk4)?;
+            (Some(sp), stored)
+        }
+        None => (None, Vec::new()),
+    };
+    let layout = species
+        .as_ref()
+        .map(|sp| (sp.tr.species_names().len(), sp.tr.columns_per_species()));
+    let columns = s.species_columns.as_deref();
+    let rec = Recorder::new(&s.probes, layout, columns, initial_stored, sink)?;
+    let state = State {
+        dae,
+        flow,
+        species,
+        y,
+        yd,
+        dt: plan.dt,
+    };
+    let method = plan.method_name();
+    let mut cycles = Cycles::new(s, state, rec, mean, plan.steps_per_cycle, plan.stride);
+    let error = cycles.run(progress);
+    Ok(Outcome::of(cycles, method, plan.stability, error))
+}

@@ -1,0 +1,165 @@
+//! The output table under construction, and the sink that streams it during the run.
+
+use crate::error::{Error, Result};
+
+/// Output rows handed to an [`OutputSink`]: `times.len()` rows of the recorded unknowns
+/// (row-major, time × probe) and, for transport runs, of the species outputs (row-major,
+/// time × species columns as in [`super::TransportOutcome::data`]; NaN rows where the run
+/// stopped before they were computed).
+pub struct Chunk<'a> {
+    pub times: &'a [f64],
+    pub data: &'a [f64],
+    /// Empty for flow-only runs.
+    pub transport: &'a [f64],
+    /// Σ N of each species at t = 0 (the mass-balance reference; empty for flow-only runs).
+    pub initial_stored: &'a [f64],
+}
+
+/// Streams the output instead of collecting it: the driver hands every `rows` output rows to
+/// `write` as soon as they are certain to be part of the output and then forgets them, so a
+/// long all-cycles run holds at most one chunk. Last-cycle output holds at most one cycle, as
+/// without a sink: the rows of a cycle that may be superseded (with `until_periodic`, or an
+/// interrupted run's partial cycle) are handed over once they are known to be the output.
+/// When the run stops early (error or interruption) the rows recorded so far are handed over
+/// in a last, shorter chunk. `write` returning false stops the run as an interruption and is
+/// not called again.
+pub struct OutputSink<'a> {
+    pub rows: usize,
+    pub write: &'a mut dyn FnMut(Chunk<'_>) -> bool,
+}
+
+/// The output table under construction: flow probes and species outputs of the same rows,
+/// optionally streamed to a sink.
+pub(super) struct Recorder<'p, 's, 'f> {
+    probes: &'p [usize],
+    pub times: Vec<f64>,
+    pub data: Vec<f64>,
+    /// Species columns, one row per `observe` call (0 for flow-only runs).
+    transport_cols: usize,
+    pub transport: Vec<f64>,
+    /// Selected columns of every species block of `block` columns (None: all).
+    species_select: Option<&'p [usize]>,
+    block: usize,
+    /// Σ N of each species at t = 0, handed to the sink with every chunk.
+    pub initial_stored: Vec<f64>,
+    sink: Option<&'s mut OutputSink<'f>>,
+    /// Most rows held at once.
+    pub max_rows: usize,
+}
+
+impl<'p, 's, 'f> Recorder<'p, 's, 'f> {
+    /// A recorder of the `probes` and, for a transport run with `species` (number of species,
+    /// columns per species of `Transport::observe`), of the `species_columns` of each species
+    /// block (all when None).
+    pub fn new(
+        probes: &'p [usize],
+        species: Option<(usize, usize)>,
+        species_columns: Option<&'p [usize]>,
+        initial_stored: Vec<f64>,
+        sink: Option<&'s mut OutputSink<'f>>,
+    ) -> Result<Self> {
+        let (n_species, block) = species.unwrap_or((0, 0));
+        // the flow-only first pass of a transport run has no species to select
+        let species_select = species_columns.filter(|_| species.is_some());
+        if let Some(&c) = species_select.and_then(|sel| sel.iter().find(|&&c| c >= block)) {
+            return Err(Error::model(
+                "simulation output",
+                format!("species column {c} out of range (0..{block})"),
+            ));
+        }
+        let kept = species_select.map_or(block, <[usize]>::len);
+        Ok(Recorder {
+            probes,
+            times: Vec::new(),
+            data: Vec::new(),
+            transport_cols: n_species * kept,
+            transport: Vec::new(),
+            species_select,
+            block,
+            initial_stored,
+            sink,
+            max_rows: 0,
+        })
+    }
+
+    pub fn n_probes(&self) -> usize {
+        self.probes.len()
+    }
+
+    /// Recorded columns per species.
+    pub fn columns_per_species(&self) -> usize {
+        self.species_select.map_or(self.block, <[usize]>::len)
+    }
+
+    pub fn record(&mut self, t: f64, y: &[f64]) {
+        self.times.push(t);
+        self.data.extend(self.probes.iter().map(|&i| y[i]));
+        self.max_rows = self.max_rows.max(self.times.len());
+    }
+
+    /// Keep the selected columns of one `observe` row (all species blocks).
+    pub fn push_species(&mut self, row: &[f64]) {
+        match self.species_select {
+            None => self.transport.extend_from_slice(row),
+            Some(sel) => {
+                for b in row.chunks(self.block.max(1)) {
+                    self.transport.extend(sel.iter().map(|&c| b[c]));
+                }
+            }
+        }
+    }
+
+    pub fn clear(&mut self) {
+        self.times.clear();
+        self.data.clear();
+        self.transport.clear();
+    }
+
+    /// One species row per flow row: rows the run stopped before computing (an error in
+    /// `observe`, or an interruption in a cycle whose species outputs were being skipped)
+    /// become NaN, so the two tables always describe the same times.
+    pub fn align(&mut self) {
+        if self.transport_cols > 0 {
+            self.transport
+                .resize(self.times.len() * self.transport_cols, f64::NAN);
+        }
+    }
+
+    /// Hand the buffered rows to the sink in chunks of `rows`: only whole chunks unless `all`.
+    /// Returns false if the sink stopped the run (it is then dropped, the rows kept).
+    pub fn flush(&mut self, all: bool) -> bool {
+        if self.sink.is_none() {
+            return true;
+        }
+        self.align();
+        let Some(sink) = self.sink.as_deref_mut() else {
+            return true;
+        };
+        let rows = sink.rows.max(1);
+        let n = self.times.len();
+        if !all && n < rows {
+            return true;
+        }
+        let end = if all { n } else { n - n % rows };
+        let (np, nc) = (self.probes.len(), self.transport_cols);
+        let mut done = 0;
+        while done < end {
+            let upto = (done + rows).min(end);
+            let ok = (sink.write)(Chunk {
+                times: &self.times[done..upto],
+                data: &self.data[done * np..upto * np],
+                transport: &self.transport[done * nc..upto * nc],
+                initial_stored: &self.initial_stored,
+            });
+            if !ok {
+                self.sink = None;
+                break;
+            }
+            done = upto;
+        }
+        self.times.drain(..done);
+        self.data.drain(..done * np);
+        self.transport.drain(..done * nc);
+        self.sink.is_some()
+    }
+}

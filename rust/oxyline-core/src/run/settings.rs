@@ -1,0 +1,160 @@
+//! What the caller asks of a run, and the checks that make a bad request a typed error.
+
+use crate::circuit::Dae;
+use crate::error::{Error, Result};
+use crate::integrate::newton::NewtonControl;
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Method {
+    Rk4,
+    GeneralizedAlpha {
+        rho_inf: f64,
+    },
+    /// Implicit when the stable RK4 step is far below the output step, else RK4.
+    Auto {
+        rho_inf: f64,
+    },
+}
+
+impl Method {
+    /// ρ∞ of generalized-α when this method runs implicitly.
+    pub(super) fn rho_inf(self) -> f64 {
+        match self {
+            Method::GeneralizedAlpha { rho_inf } | Method::Auto { rho_inf } => rho_inf,
+            Method::Rk4 => 0.5,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Start {
+    /// Exact steady solution of the mean boundary conditions.
+    Steady,
+    /// svZeroDSolver's: 31 generalized-α steps of T/10 with mean BCs and no Windkessel C.
+    SvZeroDSteady { rho_inf: f64 },
+    /// Zero differential state; algebraic unknowns consistent with the forcing at t = 0.
+    Zero,
+    /// All-zero y and ẏ, as svZeroDSolver without `steady_initial`.
+    SvZeroDZero,
+}
+
+#[derive(Debug, Clone)]
+pub struct RunSettings {
+    pub method: Method,
+    /// Time step; None = automatic.
+    pub dt: Option<f64>,
+    pub period: f64,
+    /// Cycles to run (the minimum when `until_periodic` is set).
+    pub cycles: usize,
+    /// Stop when the cycle-to-cycle change of the state falls below this (relative).
+    pub until_periodic: Option<f64>,
+    pub max_cycles: usize,
+    /// Output interval in seconds (rounded to a whole number of steps).
+    pub output_every: f64,
+    pub output_all_cycles: bool,
+    /// With last-cycle output, also record the cycles before the last (each is dropped when the
+    /// next starts), so that a run stopped early returns its current cycle. Off, those cycles
+    /// are not recorded at all: a streaming run then never holds a whole cycle of rows.
+    pub keep_current_cycle: bool,
+    pub start: Start,
+    pub newton: NewtonControl,
+    pub probes: Vec<usize>,
+    /// Recorded columns of each species block of `Transport::observe` (see
+    /// `crate::output::Selection::species_columns`); None records every column.
+    pub species_columns: Option<Vec<usize>>,
+}
+
+impl RunSettings {
+    /// Refuse settings no run can honour, naming the offending value.
+    pub(super) fn validate(&self, dae: &Dae) -> Result<()> {
+        let bad = |what: String| Err(Error::model("simulation", what));
+        if !(self.period.is_finite() && self.period > 0.0) {
+            return bad(format!("period must be > 0, got {}", self.period));
+        }
+        if self.cycles == 0 {
+            return bad("cycles must be >= 1".into());
+        }
+        if !(self.output_every.is_finite() && self.output_every > 0.0) {
+            return bad(format!(
+                "output every must be > 0, got {}",
+                self.output_every
+            ));
+        }
+        if let Some(dt) = self.dt.filter(|dt| !(dt.is_finite() && *dt > 0.0)) {
+            return bad(format!("dt must be > 0, got {dt}"));
+        }
+        if let Some(p) = self.probes.iter().find(|&&p| p >= dae.n) {
+            return bad(format!("output index {p} out of range"));
+        }
+        Ok(())
+    }
+
+    /// The most cycles the run may take: `cycles`, or up to `max_cycles` while waiting for
+    /// periodicity.
+    pub(super) fn max_cycles(&self) -> usize {
+        if self.until_periodic.is_some() {
+            self.max_cycles.max(self.cycles)
+        } else {
+            self.cycles
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::circuit::Circuit;
+    use crate::waveform::Waveform;
+
+    #[test]
+    fn bad_settings_are_model_errors_naming_the_value() {
+        let mut k = Circuit::default();
+        let p = k.add_node("p", 1e-9, 0.0);
+        let out = k.add_node("out", 0.0, 0.0);
+        k.add_branch("drain", p, out, 1e8, 0.0, 0.0);
+        k.fixed_pressures.push((out, Waveform::constant(0.0)));
+        let dae = k.assemble().unwrap();
+        let ok = RunSettings {
+            method: Method::Rk4,
+            dt: None,
+            period: 1.0,
+            cycles: 1,
+            until_periodic: None,
+            max_cycles: 1,
+            output_every: 0.01,
+            output_all_cycles: false,
+            keep_current_cycle: false,
+            start: Start::Zero,
+            newton: NewtonControl::default(),
+            probes: vec![0],
+            species_columns: None,
+        };
+        assert!(ok.validate(&dae).is_ok());
+        let message = |s: RunSettings| match s.validate(&dae) {
+            Err(Error::Model { element, message }) => format!("{element}: {message}"),
+            other => panic!("{other:?}"),
+        };
+        let bad = |f: fn(&mut RunSettings)| {
+            let mut s = ok.clone();
+            f(&mut s);
+            message(s)
+        };
+        assert_eq!(
+            bad(|s| s.period = -1.0),
+            "simulation: period must be > 0, got -1"
+        );
+        assert_eq!(bad(|s| s.cycles = 0), "simulation: cycles must be >= 1");
+        assert_eq!(
+            bad(|s| s.output_every = f64::NAN),
+            "simulation: output every must be > 0, got NaN"
+        );
+        assert_eq!(
+            bad(|s| s.dt = Some(0.0)),
+            "simulation: dt must be > 0, got 0"
+        );
+        assert_eq!(
+            bad(|s| s.probes = vec![0, 7]),
+            "simulation: output index 7 out of range"
+        );
+    }
+}
