@@ -1,0 +1,46 @@
+"""The load fast path (plain geometric vessels, one structural copy of the user's dict) gives the
+same canonical model as the full per-key check, and the loaded model owns its description."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+import oxyline
+from oxyline.model import _fast_vessel, _vessel
+
+VESSELS: list[dict[str, Any]] = [
+    {"name": "a", "from": "in", "to": "j", "length": 0.05, "radius": 0.003},
+    {"name": "b", "from": "j", "to": "o", "length": 1, "radius_in": 0.003, "radius_out": 0.002,
+     "wall_thickness": 3e-4, "youngs_modulus": 400000, "poisson_ratio": 0.5, "segments": 3,
+     "arrangement": "pi", "output": 0, "description": "tapered"},
+]
+
+
+@pytest.mark.parametrize("v", VESSELS, ids=["uniform", "tapered"])
+def test_fast_vessel_equals_the_full_check(v: dict[str, Any]) -> None:
+    fast = _fast_vessel(v, 1.0, 1.0)
+    assert fast is not None
+    assert fast == _vessel(v, 0, "SI")
+    assert all(type(x) is float for x in fast["geometry"].values())  # ints become floats
+
+
+@pytest.mark.parametrize("edit", [
+    {"radius": float("nan")}, {"length": "1"}, {"segments": 2.0}, {"segments": True},
+    {"radius_in": 0.001}, {"wall_thickness": None}, {"poisson_ratio": float("inf")},
+    {"lumped": {"resistance": 1.0}}, {"radiuss": 1.0}, {"youngs_modulus": -1.0},
+])
+def test_fast_vessel_leaves_anything_doubtful_to_the_full_check(edit: dict[str, Any]) -> None:
+    assert _fast_vessel({**VESSELS[0], **edit}, 1.0, 1.0) is None
+
+
+def test_the_model_owns_its_description() -> None:
+    d = {"name": "t", "period": 1.0, "vessels": [dict(v) for v in VESSELS],
+         "boundary_conditions": {"in": {"type": "flow", "value": 1e-6},
+                                 "o": {"type": "resistance", "resistance": 1e9}}}
+    m = oxyline.load_model(d)
+    d["vessels"][0]["radius"] = 1.0
+    d["boundary_conditions"]["o"]["resistance"] = 2.0
+    assert m.to_dict()["vessels"][0]["radius"] == 0.003
+    assert m.to_dict()["boundary_conditions"]["o"]["resistance"] == 1e9
