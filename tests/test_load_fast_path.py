@@ -8,7 +8,8 @@ from typing import Any
 import pytest
 
 import oxyline
-from oxyline.model import _fast_vessel, _vessel
+from oxyline.model import _boundary_condition, _fast_outlet, _fast_vessel, _vessel
+from oxyline.units import factor
 
 VESSELS: list[dict[str, Any]] = [
     {"name": "a", "from": "in", "to": "j", "length": 0.05, "radius": 0.003},
@@ -44,3 +45,27 @@ def test_the_model_owns_its_description() -> None:
     d["boundary_conditions"]["o"]["resistance"] = 2.0
     assert m.to_dict()["vessels"][0]["radius"] == 0.003
     assert m.to_dict()["boundary_conditions"]["o"]["resistance"] == 1e9
+
+
+OUTLETS: list[dict[str, Any]] = [
+    {"type": "rcr", "proximal_resistance": 1e8, "capacitance": 1e-10, "distal_resistance": 9e8},
+    {"type": "rcr", "proximal_resistance": 1, "capacitance": 1e-10, "distal_resistance": 9,
+     "pressure": 1000},
+    {"type": "resistance", "resistance": 3e9},
+    {"type": "resistance", "resistance": 3e9, "pressure": 0},
+]
+
+
+@pytest.mark.parametrize("bc", OUTLETS, ids=["rcr", "rcr-pressure", "resistance", "resistance-p"])
+@pytest.mark.parametrize("units", ["SI", "cgs"])
+def test_fast_outlet_equals_the_full_check(bc: dict[str, Any], units: str) -> None:
+    R, C, P = (factor(units, q) for q in ("resistance", "capacitance", "pressure"))
+    assert _fast_outlet(bc, R, C, P) == _boundary_condition(bc, units, "x")
+
+
+@pytest.mark.parametrize("edit", [
+    {"capacitance": float("nan")}, {"pressure": {"time": [0, 1], "pressure": [0, 1]}},
+    {"pressure": None}, {"type": "RCR"}, {"distal_resistance": "9"}, {"resistence": 1.0},
+])
+def test_fast_outlet_leaves_anything_doubtful_to_the_full_check(edit: dict[str, Any]) -> None:
+    assert _fast_outlet({**OUTLETS[0], **edit}, 1.0, 1.0, 1.0) is None

@@ -298,6 +298,92 @@ def _vessel(v: Any, i: int, units: str) -> dict[str, Any]:
     return cv
 
 
+def _boundary_conditions(bcs: Mapping[str, Any], units: str
+                         ) -> tuple[dict[str, Any], list[tuple[float, str]]]:
+    """Canonical boundary conditions and the periods of their waveforms (with the element).
+    Plain resistance and RCR outlets (one per leaf of a large tree) take a fast path; anything
+    else goes through :func:`_boundary_condition`, which gives the precise error."""
+    R, C, P = factor(units, "resistance"), factor(units, "capacitance"), factor(units, "pressure")
+    out: dict[str, Any] = {}
+    periods: list[tuple[float, str]] = []
+    for node, bc in bcs.items():
+        cb = _fast_outlet(bc, R, C, P)
+        if cb is None:
+            el = f"boundary condition '{node}'"
+            cb = _boundary_condition(bc, units, el)
+            for key in ("flow", "pressure"):
+                w = cb.get(key)
+                if isinstance(w, dict) and w["kind"] == "table" and len(w["time"]) > 1:
+                    periods.append((w["time"][-1] - w["time"][0], el))
+                elif isinstance(w, dict) and w["kind"] == "fourier":
+                    periods.append((w["period"], el))
+        out[str(node)] = cb
+    return out, periods
+
+
+def _finite(x: Any) -> bool:
+    """A plain finite number (bool, str and None are not: they take the full check)."""
+    return type(x) in _REAL and -math.inf < x < math.inf
+
+
+def _fast_outlet(bc: Any, R: float, C: float, P: float) -> dict[str, Any] | None:
+    """The canonical form of a resistance or RCR condition with plain finite values and a
+    constant (or no) pressure, or None (the caller then runs the full check). Same result as
+    :func:`_boundary_condition` for the conditions it takes; signs are the core's check."""
+    if type(bc) is not dict:
+        return None
+    kind = bc.get("type")
+    if kind not in ("rcr", "resistance") or not bc.keys() <= BC_KEYS[kind]:
+        return None
+    p = bc.get("pressure", 0.0)
+    if not _finite(p):
+        return None
+    if kind == "resistance":
+        r = bc.get("resistance")
+        if not _finite(r):
+            return None
+        cb: dict[str, Any] = {"type": kind, "resistance": R * r}
+    else:
+        rp, c, rd = (bc.get(k) for k in ("proximal_resistance", "capacitance",
+                                          "distal_resistance"))
+        if not (_finite(rp) and _finite(c) and _finite(rd)):
+            return None
+        cb = {"type": kind, "proximal_resistance": R * rp, "capacitance": C * c,
+              "distal_resistance": R * rd}
+    cb["pressure"] = {"kind": "constant", "value": P * p}
+    return cb
+
+
+def _boundary_condition(bc: Any, units: str, el: str) -> dict[str, Any]:
+    """The canonical form of one boundary condition, checking every key and value."""
+    if not isinstance(bc, Mapping) or "type" not in bc:
+        raise _err(el, "needs a 'type' (flow, pressure, resistance or rcr)")
+    kind = str(bc["type"]).lower()
+    if kind not in BC_KEYS:
+        raise _err(el, f"unknown type '{bc['type']}' (expected flow, pressure, resistance or rcr)")
+    _check_keys(bc, BC_KEYS[kind], el)
+    cb: dict[str, Any] = {"type": kind}
+    if kind == "flow":
+        cb["flow"] = _waveform(bc, "flow", "flow", units, el)
+    elif kind == "pressure":
+        cb["pressure"] = _waveform(bc, "pressure", "pressure", units, el)
+    elif kind == "resistance":
+        cb["resistance"] = factor(units, "resistance") * _number(bc.get("resistance"), el, "resistance")
+        p = bc.get("pressure", 0.0)
+        cb["pressure"] = _waveform({"pressure": p} if not isinstance(p, Mapping) else p,
+                                   "pressure", "pressure", units, el)
+    else:
+        for k, q in (("proximal_resistance", "resistance"), ("capacitance", "capacitance"),
+                     ("distal_resistance", "resistance")):
+            if k not in bc:
+                raise _err(el, f"rcr needs '{k}'")
+            cb[k] = factor(units, q) * _number(bc[k], el, k)
+        p = bc.get("pressure", 0.0)
+        cb["pressure"] = _waveform({"pressure": p} if not isinstance(p, Mapping) else p,
+                                   "pressure", "pressure", units, el)
+    return cb
+
+
 @dataclass
 class Model:
     """A validated network model in SI units.
@@ -393,41 +479,7 @@ def _build(data: dict[str, Any]) -> Model:
     bcs = data.get("boundary_conditions", {})
     if not isinstance(bcs, Mapping):
         raise _err("model", "'boundary_conditions' must be a mapping from node name to condition")
-    periods: list[tuple[float, str]] = []
-    for node, bc in bcs.items():
-        el = f"boundary condition '{node}'"
-        if not isinstance(bc, Mapping) or "type" not in bc:
-            raise _err(el, "needs a 'type' (flow, pressure, resistance or rcr)")
-        kind = str(bc["type"]).lower()
-        if kind not in BC_KEYS:
-            raise _err(el, f"unknown type '{bc['type']}' (expected flow, pressure, resistance or rcr)")
-        _check_keys(bc, BC_KEYS[kind], el)
-        cb: dict[str, Any] = {"type": kind}
-        if kind == "flow":
-            cb["flow"] = _waveform(bc, "flow", "flow", units, el)
-        elif kind == "pressure":
-            cb["pressure"] = _waveform(bc, "pressure", "pressure", units, el)
-        elif kind == "resistance":
-            cb["resistance"] = factor(units, "resistance") * _number(bc.get("resistance"), el, "resistance")
-            p = bc.get("pressure", 0.0)
-            cb["pressure"] = _waveform({"pressure": p} if not isinstance(p, Mapping) else p,
-                                       "pressure", "pressure", units, el)
-        else:
-            for k, q in (("proximal_resistance", "resistance"), ("capacitance", "capacitance"),
-                         ("distal_resistance", "resistance")):
-                if k not in bc:
-                    raise _err(el, f"rcr needs '{k}'")
-                cb[k] = factor(units, q) * _number(bc[k], el, k)
-            p = bc.get("pressure", 0.0)
-            cb["pressure"] = _waveform({"pressure": p} if not isinstance(p, Mapping) else p,
-                                       "pressure", "pressure", units, el)
-        for key in ("flow", "pressure"):
-            w = cb.get(key)
-            if isinstance(w, dict) and w["kind"] == "table" and len(w["time"]) > 1:
-                periods.append((w["time"][-1] - w["time"][0], el))
-            elif isinstance(w, dict) and w["kind"] == "fourier":
-                periods.append((w["period"], el))
-        canon["boundary_conditions"][str(node)] = cb
+    canon["boundary_conditions"], periods = _boundary_conditions(bcs, units)
     period = data.get("period")
     if period is not None:
         period = _number(period, "model", "period")
