@@ -10,7 +10,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from oxyline.model import Model, _build, _copy
+from oxyline.model import Model, _build, _copy, gc_paused
 
 
 def load_model(source: str | os.PathLike[str] | Mapping[str, Any] | Model) -> Model:
@@ -26,7 +26,8 @@ def load_model(source: str | os.PathLike[str] | Mapping[str, Any] | Model) -> Mo
     if isinstance(source, Model):
         return source
     if isinstance(source, Mapping):
-        data = _copy(dict(source))
+        with gc_paused():
+            data = _copy(dict(source))
     else:
         p = Path(source)
         if not p.exists() and not p.suffix:
@@ -38,7 +39,8 @@ def load_model(source: str | os.PathLike[str] | Mapping[str, Any] | Model) -> Mo
         from oxyline.io.svzerod import to_model
 
         return to_model(data)
-    return _build(data)
+    with gc_paused():
+        return _build(data)
 
 
 __all__ = ["load_model"]
