@@ -17,12 +17,10 @@ The user-facing schema (see README) is::
 
 from __future__ import annotations
 
-import contextlib
 import copy
-import gc
 import json
 import math
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -91,20 +89,6 @@ def _copy(data: Any) -> Any:
     if isinstance(data, Mapping):
         return {k: _copy(v) for k, v in data.items()}
     return copy.deepcopy(data)
-
-
-@contextlib.contextmanager
-def gc_paused() -> Iterator[None]:
-    """Pause the cyclic garbage collector while a model is copied and checked: a 1e6-segment
-    model allocates millions of small dicts (none of them cyclic), and every full collection
-    walks all live objects again, which makes loading grow faster than linearly."""
-    enabled = gc.isenabled()
-    gc.disable()
-    try:
-        yield
-    finally:
-        if enabled:
-            gc.enable()
 
 
 def _err(element: str, message: str) -> ModelError:
@@ -450,8 +434,7 @@ class Model:
 
 def build_model(data: dict[str, Any]) -> Model:
     """Validate a native model dict (the README schema) and assemble it."""
-    with gc_paused():
-        return _build(_copy(dict(data)))
+    return _build(_copy(dict(data)))
 
 
 def _build(data: dict[str, Any]) -> Model:
