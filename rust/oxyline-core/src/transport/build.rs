@@ -439,7 +439,7 @@ impl Transport {
         }
         let (out_vessels, out_segments) = output_layout(circuit, probes);
         let ncells = cells.len();
-        let mut t = Transport {
+        let mut p = Plan {
             kind,
             cells,
             node_cell,
@@ -462,13 +462,10 @@ impl Transport {
             last_sub,
             pieces,
             seg_pieces,
-            species,
-            mean_abs: Vec::new(),
             formulation: spec.formulation,
             v_eps: spec.velocity_threshold,
             out_vessels,
             out_segments,
-            segment_output: true,
             segment_vessels: circuit.segments.iter().map(|s| s.vessel).collect(),
             node_names,
             domain: Vec::new(),
@@ -477,47 +474,50 @@ impl Transport {
             simple_mixing: Vec::new(),
             general_mixing: Vec::new(),
             tree: None,
-            vol: vec![0.0; ncells],
-            conc: vec![0.0; nn],
-            qf: Vec::new(),
-            qs: Vec::new(),
-            bval: Vec::new(),
-            sweep: Sweep::new(nn),
-            wvol: Vec::new(),
         };
-        t.qf = vec![0.0; t.faces.len()];
-        t.qs = vec![0.0; t.sources.len()];
-        t.bval = vec![None; t.boundary_inlet.len()];
-        t.domain = (0..nn).filter(|&n| t.kind[n] != Kind::Exterior).collect();
-        if t.faces.len() >= u32::MAX as usize || nn >= u32::MAX as usize {
+        p.domain = (0..nn).filter(|&n| p.kind[n] != Kind::Exterior).collect();
+        if p.faces.len() >= u32::MAX as usize || nn >= u32::MAX as usize {
             return Err(bad("transport", "network too large".into()));
         }
-        for (fi, f) in t.faces.iter().enumerate() {
+        for (fi, f) in p.faces.iter().enumerate() {
             match (f.from, f.to) {
-                (End::Node(a), End::Node(b)) => t.internal.push([fi as u32, a as u32, b as u32]),
-                _ => t.boundary_faces.push(fi),
+                (End::Node(a), End::Node(b)) => p.internal.push([fi as u32, a as u32, b as u32]),
+                _ => p.boundary_faces.push(fi),
             }
         }
-        for &m in &t.mixing {
-            let faces = &t.node_faces[t.node_ptr[m]..t.node_ptr[m + 1]];
+        for &m in &p.mixing {
+            let faces = &p.node_faces[p.node_ptr[m]..p.node_ptr[m + 1]];
             let neighbours_known = faces.iter().all(|&fi| {
-                let f = &t.faces[fi];
+                let f = &p.faces[fi];
                 let other = if f.from == End::Node(m) { f.to } else { f.from };
-                !matches!(other, End::Node(o) if t.kind[o] == Kind::Mixing)
+                !matches!(other, End::Node(o) if p.kind[o] == Kind::Mixing)
             });
-            if faces.len() == 2 && t.node_sources[m].is_empty() && neighbours_known {
-                t.simple_mixing.push(m);
+            if faces.len() == 2 && p.node_sources[m].is_empty() && neighbours_known {
+                p.simple_mixing.push(m);
             } else {
-                t.general_mixing.push(m);
+                p.general_mixing.push(m);
             }
         }
-        t.tree = tree_order(nn, &t.domain, &t.internal);
-        t.face_unknowns = t.faces[..t.n_flow_faces]
+        p.tree = tree_order(nn, &p.domain, &p.internal);
+        p.face_unknowns = p.faces[..p.n_flow_faces]
             .iter()
             .map(|f| f.unknown)
             .collect();
+        let mut t = Transport {
+            species,
+            mean_abs: Vec::new(),
+            segment_output: true,
+            vol: vec![0.0; ncells],
+            conc: vec![0.0; nn],
+            qf: vec![0.0; p.faces.len()],
+            qs: vec![0.0; p.sources.len()],
+            bval: vec![None; p.boundary_inlet.len()],
+            sweep: Sweep::new(nn),
+            wvol: Vec::new(),
+            plan: Arc::new(p),
+        };
         // laws that do not need the mean flow are final now
-        let zero = vec![0.0; t.segments.len()];
+        let zero = vec![0.0; t.plan.segments.len()];
         t.set_laws(&zero, false)?;
         Ok(t)
     }

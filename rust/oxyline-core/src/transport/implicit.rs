@@ -46,15 +46,15 @@ impl Transport {
     pub(super) fn transport_volumes(&mut self, t_af: f64, dt: f64) -> Result<()> {
         let mut net = std::mem::take(&mut self.sweep.dnode);
         net.clear();
-        net.resize(self.kind.len(), 0.0);
+        net.resize(self.plan.kind.len(), 0.0);
         let qf = &self.qf[..];
-        for &[fi, a, b] in &self.internal {
+        for &[fi, a, b] in &self.plan.internal {
             let q = qf[fi as usize];
             net[a as usize] -= q;
             net[b as usize] += q;
         }
-        for &fi in &self.boundary_faces {
-            let (f, q) = (&self.faces[fi], self.qf[fi]);
+        for &fi in &self.plan.boundary_faces {
+            let (f, q) = (&self.plan.faces[fi], self.qf[fi]);
             if let End::Node(n) = f.from {
                 net[n] -= q;
             }
@@ -62,13 +62,14 @@ impl Transport {
                 net[n] += q;
             }
         }
-        for ((n, _, _), &q) in self.sources.iter().zip(&self.qs) {
+        for ((n, _, _), &q) in self.plan.sources.iter().zip(&self.qs) {
             net[*n] += q;
         }
         let mut w_new = std::mem::take(&mut self.sweep.wnew);
         w_new.clear();
         w_new.extend(
-            self.cells
+            self.plan
+                .cells
                 .iter()
                 .zip(&self.wvol)
                 .map(|(&n, &w)| w + dt * net[n]),
@@ -82,7 +83,7 @@ impl Transport {
                 t_af,
                 format!(
                     "transport volume of cell '{}' became {:.3e} m³: reduce dt",
-                    self.node_name(self.cells[i]),
+                    self.node_name(self.plan.cells[i]),
                     self.sweep.wnew[i]
                 ),
             )),
@@ -98,7 +99,7 @@ impl Transport {
         ya: &[f64],
         z: &mut [f64],
     ) -> Result<()> {
-        let nc = self.cells.len();
+        let nc = self.plan.cells.len();
         let nsp = self.species.len();
         let (mut wconst, mut wlin) = (
             std::mem::take(&mut self.sweep.wconst),
@@ -107,7 +108,7 @@ impl Transport {
         wconst.resize(nc, 0.0);
         wlin.resize(nc, 0.0);
         let w_new = std::mem::take(&mut self.sweep.wnew);
-        let quasi = self.formulation == Formulation::TlQuasisteady;
+        let quasi = self.plan.formulation == Formulation::TlQuasisteady;
         let mut res = Ok(());
         for s in 0..nsp {
             self.load_boundary(s, t_af);
@@ -116,7 +117,7 @@ impl Transport {
             self.restore_mixing(s);
             let sp = &self.species[s];
             let (sw, zs) = (&mut self.sweep, &z[s * nc..(s + 1) * nc]);
-            for &m in &self.mixing {
+            for &m in &self.plan.mixing {
                 (sw.den[m], sw.num[m], sw.lag[m]) = (0.0, 0.0, self.conc[m]);
             }
             if !quasi && sp.binding.is_identity() && sp.dynamic.is_empty() {
@@ -129,7 +130,7 @@ impl Transport {
                 let (g, q, gcw) = (&sp.cell_g[..nc], &sp.cell_q[..nc], &sp.cell_gcw[..nc]);
                 let (wvol, w_new) = (&self.wvol[..nc], &w_new[..nc]);
                 let (wlin, wconst) = (&mut wlin[..nc], &mut wconst[..nc]);
-                for (i, &n) in self.cells.iter().enumerate() {
+                for (i, &n) in self.plan.cells.iter().enumerate() {
                     let c = zs[i] / wvol[i];
                     let wc = q[i] - gcw[i];
                     (conc[n], lag[n]) = (c, c);
@@ -141,13 +142,13 @@ impl Transport {
                 self.implicit_rows(s, dt, ya, z, &w_new, &mut wconst, &mut wlin);
             }
             let mut x = std::mem::take(&mut self.conc);
-            if self.tree.is_some() {
+            if self.plan.tree.is_some() {
                 self.tree_solve(&mut x);
             } else {
-                let unknowns = std::mem::take(&mut self.domain);
+                // the plan is shared, so hold it by its own handle while `self` is mutated
+                let plan = Arc::clone(&self.plan);
                 let (d, b) = (self.sweep.den.clone(), self.sweep.num.clone());
-                res = self.sweep_solve(&unknowns, &d, &b, &mut x);
-                self.domain = unknowns;
+                res = self.sweep_solve(&plan.domain, &d, &b, &mut x);
             }
             self.conc = x;
             self.save_mixing(s);
@@ -158,7 +159,7 @@ impl Transport {
             let (mut i_wall, mut i_decay) = (0.0, 0.0);
             let (conc, zs) = (&self.conc[..], &mut z[s * nc..(s + 1) * nc]);
             let (wlin, wconst, w_new) = (&wlin[..nc], &wconst[..nc], &w_new[..nc]);
-            for (i, &n) in self.cells.iter().enumerate() {
+            for (i, &n) in self.plan.cells.iter().enumerate() {
                 let x = conc[n];
                 i_wall += wlin[i] * x + wconst[i];
                 if !quasi {
@@ -192,17 +193,17 @@ impl Transport {
         wconst: &mut [f64],
         wlin: &mut [f64],
     ) {
-        let nc = self.cells.len();
+        let nc = self.plan.cells.len();
         let zs = &z[s * nc..(s + 1) * nc];
-        for (i, &n) in self.cells.iter().enumerate() {
+        for (i, &n) in self.plan.cells.iter().enumerate() {
             self.conc[n] = zs[i] / self.wvol[i];
         }
         self.load_shear(s, ya, z);
         self.linearised_wall(s, wconst, wlin);
-        let quasi = self.formulation == Formulation::TlQuasisteady;
+        let quasi = self.plan.formulation == Formulation::TlQuasisteady;
         let rate = 1.0 / dt + self.species[s].decay;
         let sw = &mut self.sweep;
-        for (i, &n) in self.cells.iter().enumerate() {
+        for (i, &n) in self.plan.cells.iter().enumerate() {
             (sw.den[n], sw.num[n]) = if quasi {
                 (wlin[i], -wconst[i])
             } else {
@@ -217,7 +218,7 @@ impl Transport {
     pub(super) fn relax_shears(&self, s: usize, dt: f64, ya: &[f64], z: &mut [f64]) {
         let sp = &self.species[s];
         for (k, &(j, tau)) in sp.relax.iter().enumerate() {
-            let q = ya[self.segments[j].branch_unknown].abs();
+            let q = ya[self.plan.segments[j].branch_unknown].abs();
             let v = &mut z[sp.relax_offset + k];
             *v = q + (*v - q) * (-dt / tau).exp();
         }
@@ -244,9 +245,9 @@ impl Transport {
         let sp = &mut self.species[s];
         let mut inv_slope = std::mem::take(&mut self.sweep.inv_slope);
         inv_slope.clear();
-        inv_slope.resize(self.cells.len(), 1.0);
+        inv_slope.resize(self.plan.cells.len(), 1.0);
         if !sp.binding.is_identity() {
-            for (&n, v) in self.cells.iter().zip(inv_slope.iter_mut()) {
+            for (&n, v) in self.plan.cells.iter().zip(inv_slope.iter_mut()) {
                 let (f, slope) = sp.binding.free_and_slope_anchored(
                     self.conc[n],
                     sp.free[n],
@@ -260,7 +261,7 @@ impl Transport {
         let sp = &self.species[s];
         wlin.copy_from_slice(&sp.cell_g);
         for &p in &sp.dynamic {
-            let pc = &self.pieces[p];
+            let pc = &self.plan.pieces[p];
             let (gj, _, _) = sp.laws[p].eval_cbrt(sp.shear_cbrt[pc.seg]);
             wlin[pc.cell] += pc.share * gj;
         }
@@ -268,7 +269,7 @@ impl Transport {
             wlin.iter_mut().zip(&inv_slope).for_each(|(w, v)| *w *= v);
         }
         self.sweep.inv_slope = inv_slope;
-        for (i, &n) in self.cells.iter().enumerate() {
+        for (i, &n) in self.plan.cells.iter().enumerate() {
             wconst[i] -= wlin[i] * self.conc[n];
         }
     }
@@ -277,8 +278,8 @@ impl Transport {
     /// fluxes that entered the solve.
     pub(super) fn implicit_boundary_fluxes(&self) -> (f64, f64) {
         let (mut i_in, mut i_out) = (0.0, 0.0);
-        for &fi in &self.boundary_faces {
-            let (f, q) = (&self.faces[fi], self.qf[fi]);
+        for &fi in &self.plan.boundary_faces {
+            let (f, q) = (&self.plan.faces[fi], self.qf[fi]);
             let (from_b, to_b) = (f.from, f.to);
             if let End::Boundary(bb) = from_b {
                 let c = if q >= 0.0 {
@@ -286,7 +287,7 @@ impl Transport {
                 } else {
                     self.end_conc(to_b)
                 };
-                account(self.boundary_inlet[bb], q * c, &mut i_in, &mut i_out);
+                account(self.plan.boundary_inlet[bb], q * c, &mut i_in, &mut i_out);
             }
             if let End::Boundary(bb) = to_b {
                 let c = if q < 0.0 {
@@ -294,16 +295,16 @@ impl Transport {
                 } else {
                     self.end_conc(from_b)
                 };
-                account(self.boundary_inlet[bb], -q * c, &mut i_in, &mut i_out);
+                account(self.plan.boundary_inlet[bb], -q * c, &mut i_in, &mut i_out);
             }
         }
-        for ((n, _, bb), &q) in self.sources.iter().zip(&self.qs) {
+        for ((n, _, bb), &q) in self.plan.sources.iter().zip(&self.qs) {
             let c = if q >= 0.0 {
                 self.lagged_boundary(*bb, End::Node(*n))
             } else {
                 self.conc[*n]
             };
-            account(self.boundary_inlet[*bb], q * c, &mut i_in, &mut i_out);
+            account(self.plan.boundary_inlet[*bb], q * c, &mut i_in, &mut i_out);
         }
         (i_in, i_out)
     }
@@ -332,13 +333,13 @@ impl Transport {
     /// back-substituted parents first. Exact and O(n) for any flow directions, with no queue.
     /// On entry `sweep.den`, `sweep.num` hold d and b, and `sweep.lag` the previous values.
     pub(super) fn tree_solve(&mut self, x: &mut [f64]) {
-        let Some(tree) = self.tree.as_deref() else {
+        let Some(tree) = self.plan.tree.as_deref() else {
             return;
         };
         let sw = &mut self.sweep;
         sw.beta.resize(tree.len(), 0.0);
-        for &fi in &self.boundary_faces {
-            let (q, up, down) = oriented(&self.faces, &self.qf, fi);
+        for &fi in &self.plan.boundary_faces {
+            let (q, up, down) = oriented(&self.plan.faces, &self.qf, fi);
             match (up, down) {
                 (End::Node(n), _) => sw.den[n] += q.abs(),
                 (End::Boundary(bb), End::Node(n)) => {
@@ -347,7 +348,7 @@ impl Transport {
                 _ => {}
             }
         }
-        for (&(n, _, bb), &q) in self.sources.iter().zip(&self.qs) {
+        for (&(n, _, bb), &q) in self.plan.sources.iter().zip(&self.qs) {
             if q >= 0.0 {
                 sw.num[n] += q * inflow_value(self.bval[bb], sw.lag[n]);
             } else {
@@ -411,8 +412,8 @@ impl Transport {
         }
         // pass 1: denominators, known inflows, pending counts
         for &n in unknowns {
-            for &fi in &self.node_faces[self.node_ptr[n]..self.node_ptr[n + 1]] {
-                let (q, up, down) = oriented(&self.faces, &self.qf, fi);
+            for &fi in &self.plan.node_faces[self.plan.node_ptr[n]..self.plan.node_ptr[n + 1]] {
+                let (q, up, down) = oriented(&self.plan.faces, &self.qf, fi);
                 let aq = q.abs();
                 if up == End::Node(n) {
                     sw.den[n] += aq;
@@ -427,10 +428,10 @@ impl Transport {
                     End::Boundary(bb) => sw.num[n] += aq * inflow_value(self.bval[bb], sw.lag[n]),
                 }
             }
-            for &k in &self.node_sources[n] {
+            for &k in &self.plan.node_sources[n] {
                 let q = self.qs[k];
                 if q >= 0.0 {
-                    sw.num[n] += q * inflow_value(self.bval[self.sources[k].2], sw.lag[n]);
+                    sw.num[n] += q * inflow_value(self.bval[self.plan.sources[k].2], sw.lag[n]);
                 } else {
                     sw.den[n] -= q;
                 }
@@ -453,8 +454,8 @@ impl Transport {
             } else {
                 sw.lag[n]
             };
-            for &fi in &self.node_faces[self.node_ptr[n]..self.node_ptr[n + 1]] {
-                let (q, up, down) = oriented(&self.faces, &self.qf, fi);
+            for &fi in &self.plan.node_faces[self.plan.node_ptr[n]..self.plan.node_ptr[n + 1]] {
+                let (q, up, down) = oriented(&self.plan.faces, &self.qf, fi);
                 if up != End::Node(n) || q == 0.0 {
                     continue;
                 }
@@ -483,8 +484,10 @@ impl Transport {
                 let mut scale = 0.0f64;
                 for &n in &rest {
                     let mut num = sw.num[n];
-                    for &fi in &self.node_faces[self.node_ptr[n]..self.node_ptr[n + 1]] {
-                        let (q, up, down) = oriented(&self.faces, &self.qf, fi);
+                    for &fi in
+                        &self.plan.node_faces[self.plan.node_ptr[n]..self.plan.node_ptr[n + 1]]
+                    {
+                        let (q, up, down) = oriented(&self.plan.faces, &self.qf, fi);
                         if down != End::Node(n) {
                             continue;
                         }

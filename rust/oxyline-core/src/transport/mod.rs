@@ -27,6 +27,7 @@ use crate::hemoglobin::{Binding, HillAnchor};
 use crate::output::Probes;
 pub use crate::spec::transport::{Formulation, SpeciesSpec, TransportSpec};
 use crate::waveform::Waveform;
+use std::sync::Arc;
 
 mod build;
 mod implicit;
@@ -35,8 +36,11 @@ mod plan;
 mod rhs;
 mod state;
 
+pub use plan::Plan;
 #[allow(unused_imports)]
-use {build::*, implicit::*, observe::*, plan::*, rhs::*, state::*};
+use plan::*;
+#[allow(unused_imports)]
+use {build::*, implicit::*, observe::*, rhs::*, state::*};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum End {
@@ -149,61 +153,18 @@ pub const VESSEL_COLUMNS: usize = 5;
 pub const SEGMENT_COLUMNS: usize = 5;
 pub const BALANCE_COLUMNS: usize = 5;
 
-/// Runtime transport: topology, closures, scratch. Cloned per run.
+/// Per-run transport: the shared immutable [`Plan`] and this run's state (amounts live in
+/// the integrator's vector; here: per-species laws and free concentrations, the cycle-mean
+/// |Q|, scratch). Cloning shares the plan and copies only the state.
 #[derive(Debug, Clone)]
 pub struct Transport {
-    kind: Vec<Kind>,
-    cells: Vec<usize>,
-    node_cell: Vec<usize>,
-    v0: Vec<f64>,
-    cap: Vec<f64>,
-    p_ref: f64,
-    faces: Vec<Face>,
-    face_of_unknown: Vec<usize>,
-    sources: Vec<(usize, Waveform, usize)>,
-    boundary_inlet: Vec<bool>,
-    mixing: Vec<usize>,
-    /// CSR node → incident faces; sources listed separately.
-    node_ptr: Vec<usize>,
-    node_faces: Vec<usize>,
-    node_sources: Vec<Vec<usize>>,
-    segments: Vec<Segment>,
-    /// Faces 0..n_flow_faces carry a flow unknown; the rest are interior faces of `chains`.
-    n_flow_faces: usize,
-    /// The flow unknown of faces 0..n_flow_faces (a compact copy for the per-step gather).
-    face_unknowns: Vec<usize>,
-    chains: Vec<Chain>,
-    /// Per cell: the circuit node whose pressure sets its volume.
-    cell_node: Vec<usize>,
-    /// Per circuit node: its last sub-cell (itself unless refined): the donor of the faces
-    /// leaving the node, and the value reported for its segments.
-    last_sub: Vec<usize>,
-    /// Wall pieces, contiguous per segment (`seg_pieces`).
-    pieces: Vec<Piece>,
-    seg_pieces: Vec<std::ops::Range<usize>>,
+    /// Immutable topology, shared between runs (and threads).
+    plan: Arc<Plan>,
     species: Vec<Species>,
     /// Cycle-mean |Q| per segment (set by `set_mean_flow`): the relaxed shears start there.
     mean_abs: Vec<f64>,
-    formulation: Formulation,
-    v_eps: f64,
-    out_vessels: Vec<OutVessel>,
-    out_segments: Vec<usize>,
     /// Record the per-segment columns (off: vessel and balance columns only).
     segment_output: bool,
-    segment_vessels: Vec<usize>,
-    node_names: Vec<String>,
-    /// Nodes solved by the implicit sweep (cells and mixing points).
-    domain: Vec<usize>,
-    /// Faces between two domain nodes as [face, from node, to node], and the other faces.
-    internal: Vec<[u32; 3]>,
-    boundary_faces: Vec<usize>,
-    /// Mixing points with two faces, no source and non-mixing neighbours: evaluated directly.
-    simple_mixing: Vec<usize>,
-    /// The other mixing points (solved by the flow-order sweep).
-    general_mixing: Vec<usize>,
-    /// Elimination order of the implicit solve when the domain graph is a forest (always on
-    /// trees): None sends it to the flow-order sweep, which also handles loops.
-    tree: Option<Vec<Link>>,
     // scratch
     vol: Vec<f64>,
     conc: Vec<f64>,
@@ -220,29 +181,41 @@ fn bad(element: &str, msg: String) -> Error {
 }
 
 impl Transport {
+    /// The immutable plan this run shares with every other run of the model.
+    pub fn plan(&self) -> &Arc<Plan> {
+        &self.plan
+    }
+
+    /// A new run of the model: shares the plan (no copy of the topology) and copies only the
+    /// per-run state of `self`, which is the state `build` left (callers keep an unrun
+    /// prototype).
+    pub fn new_run(&self) -> Transport {
+        self.clone()
+    }
+
     pub fn species_names(&self) -> Vec<String> {
         self.species.iter().map(|s| s.name.clone()).collect()
     }
     pub fn n_cells(&self) -> usize {
-        self.cells.len()
+        self.plan.cells.len()
     }
     /// Length of the coupled state: amounts per cell and species, then 4 accumulators per
     /// species (I_in, I_out, I_wall, I_decay), then the relaxed shears of every species.
     pub fn state_len(&self) -> usize {
-        self.species.len() * (self.cells.len() + 4)
+        self.species.len() * (self.plan.cells.len() + 4)
             + self.species.iter().map(|s| s.relax.len()).sum::<usize>()
     }
     pub fn formulation(&self) -> Formulation {
-        self.formulation
+        self.plan.formulation
     }
     /// Columns recorded per species at every output time.
     pub fn columns_per_species(&self) -> usize {
         let segments = if self.segment_output {
-            self.out_segments.len()
+            self.plan.out_segments.len()
         } else {
             0
         };
-        VESSEL_COLUMNS * self.out_vessels.len() + SEGMENT_COLUMNS * segments + BALANCE_COLUMNS
+        VESSEL_COLUMNS * self.plan.out_vessels.len() + SEGMENT_COLUMNS * segments + BALANCE_COLUMNS
     }
     /// Record the per-segment columns (default) or only the vessel and balance columns, which
     /// keeps the output of large trees small.
@@ -251,7 +224,7 @@ impl Transport {
     }
     /// Recorded segments of every output vessel.
     pub fn out_segment_counts(&self) -> Vec<usize> {
-        self.out_vessels.iter().map(|v| v.segs.len()).collect()
+        self.plan.out_vessels.iter().map(|v| v.segs.len()).collect()
     }
 
     /// Flow unknowns whose cycle-mean |Q| the closures need (empty: single pass).
@@ -261,7 +234,11 @@ impl Transport {
             .iter()
             .any(|s| s.walls.iter().any(|w| w.needs_mean_flow()))
         {
-            self.segments.iter().map(|s| s.branch_unknown).collect()
+            self.plan
+                .segments
+                .iter()
+                .map(|s| s.branch_unknown)
+                .collect()
         } else {
             Vec::new()
         }
@@ -279,18 +256,18 @@ impl Transport {
             return f64::INFINITY;
         }
         self.load_flows(time, y);
-        let mut out = vec![0.0; self.cells.len()];
-        for (f, &q) in self.faces.iter().zip(&self.qf) {
+        let mut out = vec![0.0; self.plan.cells.len()];
+        for (f, &q) in self.plan.faces.iter().zip(&self.qf) {
             let up = if q >= 0.0 { f.from } else { f.to };
             if let End::Node(n) = up {
-                if self.node_cell[n] != usize::MAX {
-                    out[self.node_cell[n]] += q.abs();
+                if self.plan.node_cell[n] != usize::MAX {
+                    out[self.plan.node_cell[n]] += q.abs();
                 }
             }
         }
-        for ((n, _, _), &q) in self.sources.iter().zip(&self.qs) {
-            if q < 0.0 && self.node_cell[*n] != usize::MAX {
-                out[self.node_cell[*n]] -= q;
+        for ((n, _, _), &q) in self.plan.sources.iter().zip(&self.qs) {
+            if q < 0.0 && self.plan.node_cell[*n] != usize::MAX {
+                out[self.plan.node_cell[*n]] -= q;
             }
         }
         out.iter()
@@ -307,13 +284,16 @@ impl Transport {
     /// Cells (sub-cells in flow order, contiguous in the state) of the node holding most of
     /// segment `j`'s volume.
     pub fn segment_cells(&self, j: usize) -> Option<std::ops::Range<usize>> {
-        let seg = self.segments.get(j)?;
+        let seg = self.plan.segments.get(j)?;
         let (n, _) = seg
             .nodes
             .iter()
             .copied()
             .fold((usize::MAX, -1.0), |a, b| if b.1 > a.1 { b } else { a });
-        let (a, b) = (self.node_cell[n], self.node_cell[self.last_sub[n]]);
+        let (a, b) = (
+            self.plan.node_cell[n],
+            self.plan.node_cell[self.plan.last_sub[n]],
+        );
         (a != usize::MAX).then_some(a..b + 1)
     }
 
@@ -338,7 +318,7 @@ impl Transport {
 
     /// Largest relative change of the amounts between two states (periodicity check).
     pub fn relative_change(&self, a: &[f64], b: &[f64]) -> f64 {
-        let n = self.species.len() * self.cells.len();
+        let n = self.species.len() * self.plan.cells.len();
         let scale = a[..n]
             .iter()
             .fold(0.0f64, |m, x| m.max(x.abs()))

@@ -15,7 +15,7 @@ impl Transport {
         implicit: bool,
         out: &mut Vec<f64>,
     ) -> Result<()> {
-        let nc = self.cells.len();
+        let nc = self.plan.cells.len();
         let nsp = self.species.len();
         self.volumes(y, time)?;
         if implicit && !self.wvol.is_empty() {
@@ -23,7 +23,7 @@ impl Transport {
         }
         self.load_flows(time, y);
         for s in 0..nsp {
-            for (i, &n) in self.cells.iter().enumerate() {
+            for (i, &n) in self.plan.cells.iter().enumerate() {
                 self.conc[n] = z[s * nc + i] / self.vol[i];
             }
             self.load_boundary(s, time);
@@ -31,8 +31,8 @@ impl Transport {
             // free concentration of every non-exterior node
             {
                 let sp = &mut self.species[s];
-                for n in 0..self.kind.len() {
-                    sp.free[n] = match self.kind[n] {
+                for n in 0..self.plan.kind.len() {
+                    sp.free[n] = match self.plan.kind[n] {
                         Kind::Exterior => f64::NAN,
                         _ => sp.binding.free(
                             self.conc[n],
@@ -49,6 +49,7 @@ impl Transport {
             let sp = &self.species[s];
             let face_flux = |tr: &Self, unknown: usize| -> (f64, f64) {
                 let fi = tr
+                    .plan
                     .face_of_unknown
                     .get(unknown)
                     .copied()
@@ -60,36 +61,36 @@ impl Transport {
                 (q * c, sp.binding.free(c, c))
             };
             let seg_wall = |j: usize| -> f64 {
-                self.seg_pieces[j]
+                self.plan.seg_pieces[j]
                     .clone()
-                    .map(|p| sp.piece_uptake(&self.pieces, p, &sp.free))
+                    .map(|p| sp.piece_uptake(&self.plan.pieces, p, &sp.free))
                     .sum()
             };
-            for v in &self.out_vessels {
+            for v in &self.plan.out_vessels {
                 let (j_in, c_in) = face_flux(self, v.first);
                 let (j_out, c_out) = face_flux(self, v.last);
-                let wall: f64 = self.out_segments[v.segs.clone()]
+                let wall: f64 = self.plan.out_segments[v.segs.clone()]
                     .iter()
                     .map(|&j| seg_wall(j))
                     .sum();
                 out.extend([c_in, c_out, j_in, j_out, wall]);
             }
             let segs: &[usize] = if self.segment_output {
-                &self.out_segments
+                &self.plan.out_segments
             } else {
                 &[]
             };
             for &j in segs {
-                let seg = &self.segments[j];
+                let seg = &self.plan.segments[j];
                 let (flux, _) = face_flux(self, seg.branch_unknown);
                 let (mut c, mut wsum, mut vseg, mut dvseg) = (0.0, 0.0, 0.0, 0.0);
                 for &(n, share) in &seg.nodes {
                     if share > 0.0 {
                         // a refined node reports its last sub-cell: the value its
                         // outgoing faces carry
-                        c += share * sp.free[self.last_sub[n]];
+                        c += share * sp.free[self.plan.last_sub[n]];
                         wsum += share;
-                        vseg += share * (seg.volume + seg.compliance * (y[n] - self.p_ref));
+                        vseg += share * (seg.volume + seg.compliance * (y[n] - self.plan.p_ref));
                         if let Some(yd) = ydot {
                             dvseg += share * seg.compliance * yd[n];
                         }
@@ -103,7 +104,7 @@ impl Transport {
                 if seg.dx > 0.0 && vseg > 0.0 {
                     let a = vseg / seg.dx;
                     let v = q / a;
-                    if v.abs() >= self.v_eps {
+                    if v.abs() >= self.plan.v_eps {
                         l_tl = -seg.dx / v;
                         if let Some(yd) = ydot {
                             let vdot = yd[seg.branch_unknown] / a - q * (dvseg / seg.dx) / (a * a);

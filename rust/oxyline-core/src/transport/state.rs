@@ -5,7 +5,7 @@ use super::*;
 
 impl Transport {
     pub(super) fn set_laws(&mut self, mean_abs: &[f64], final_pass: bool) -> Result<()> {
-        let nc = self.cells.len();
+        let nc = self.plan.cells.len();
         let mut offset = self.species.len() * (nc + 4);
         for sp in &mut self.species {
             sp.laws.clear();
@@ -14,8 +14,8 @@ impl Transport {
             sp.relax.clear();
             sp.relax_of_seg.iter_mut().for_each(|k| *k = usize::MAX);
             if final_pass {
-                for (j, seg) in self.segments.iter().enumerate() {
-                    if sp.walls[self.segment_vessels[j]].is_relaxed()
+                for (j, seg) in self.plan.segments.iter().enumerate() {
+                    if sp.walls[self.plan.segment_vessels[j]].is_relaxed()
                         && seg.wall.radius > 0.0
                         && seg.dx > 0.0
                     {
@@ -30,10 +30,10 @@ impl Transport {
             sp.cell_g = vec![0.0; nc];
             sp.cell_gcw = vec![0.0; nc];
             sp.cell_q = vec![0.0; nc];
-            for (p, piece) in self.pieces.iter().enumerate() {
+            for (p, piece) in self.plan.pieces.iter().enumerate() {
                 let j = piece.seg;
-                let seg = &self.segments[j];
-                let vessel_wall = &sp.walls[self.segment_vessels[j]];
+                let seg = &self.plan.segments[j];
+                let vessel_wall = &sp.walls[self.plan.segment_vessels[j]];
                 let law = if seg.wall.radius <= 0.0
                     || seg.dx <= 0.0
                     || (vessel_wall.needs_mean_flow() && !final_pass)
@@ -78,9 +78,9 @@ impl Transport {
     /// Initial state: uniform initial concentration of every species in V(P0).
     pub fn initial_state(&mut self, y: &[f64]) -> Result<Vec<f64>> {
         self.volumes(y, 0.0)?;
-        let nc = self.cells.len();
+        let nc = self.plan.cells.len();
         let mut z = vec![0.0; self.state_len()];
-        let nmix = self.mixing.len();
+        let nmix = self.plan.mixing.len();
         for (s, sp) in self.species.iter_mut().enumerate() {
             let ct = sp.binding.total(sp.initial_free);
             sp.mixing_conc = vec![ct; nmix];
@@ -96,17 +96,17 @@ impl Transport {
     }
 
     pub(super) fn volumes(&mut self, y: &[f64], time: f64) -> Result<()> {
-        for (i, &n) in self.cell_node.iter().enumerate() {
-            let v = self.v0[i] + self.cap[i] * (y[n] - self.p_ref);
+        for (i, &n) in self.plan.cell_node.iter().enumerate() {
+            let v = self.plan.v0[i] + self.plan.cap[i] * (y[n] - self.plan.p_ref);
             if v.is_nan() || v <= 0.0 {
                 return Err(Error::solver(
                     time,
                     format!(
                         "lumen volume of transport cell '{}' is {v:.3e} m³ (V0 {:.3e} m³, pressure {:.1} Pa, reference pressure {:.1} Pa): set oxygen reference_pressure closer to the working pressure",
                         self.node_name(n),
-                        self.v0[i],
+                        self.plan.v0[i],
                         y[n],
-                        self.p_ref
+                        self.plan.p_ref
                     ),
                 ));
             }
@@ -116,7 +116,8 @@ impl Transport {
     }
 
     pub(super) fn node_name(&self, n: usize) -> String {
-        self.node_names
+        self.plan
+            .node_names
             .get(n)
             .cloned()
             .unwrap_or_else(|| format!("node {n}"))
@@ -134,15 +135,15 @@ impl Transport {
     /// Face flows from `flow(unknown)`, source flows at `time`, and the interior faces of
     /// refined cells.
     pub(super) fn load_flows_with(&mut self, time: f64, flow: impl Fn(usize) -> f64) {
-        let nf = self.n_flow_faces;
-        for (q, &u) in self.qf[..nf].iter_mut().zip(&self.face_unknowns) {
+        let nf = self.plan.n_flow_faces;
+        for (q, &u) in self.qf[..nf].iter_mut().zip(&self.plan.face_unknowns) {
             *q = flow(u);
         }
-        for (q, (_, w, _)) in self.qs.iter_mut().zip(&self.sources) {
+        for (q, (_, w, _)) in self.qs.iter_mut().zip(&self.plan.sources) {
             *q = w.eval(time);
         }
         // interior faces of refined cells: Q_k = Q_A − (k/m)(Q_A − Q_B)
-        for ch in &self.chains {
+        for ch in &self.plan.chains {
             let q_a = ch.in_faces.iter().map(|&f| self.qf[f]).sum::<f64>()
                 + ch.sources.iter().map(|&k| self.qs[k]).sum::<f64>();
             let q_b: f64 = ch.out_faces.iter().map(|&f| self.qf[f]).sum();
@@ -168,7 +169,7 @@ impl Transport {
     /// Flow and upwind (donor) concentration of face `fi`.
     #[inline]
     pub(super) fn upwind(&self, fi: usize) -> (f64, f64) {
-        let (q, up, other) = oriented(&self.faces, &self.qf, fi);
+        let (q, up, other) = oriented(&self.plan.faces, &self.qf, fi);
         let c = match up {
             End::Node(n) => self.conc[n],
             End::Boundary(b) => self.boundary_conc(b, other),
@@ -179,7 +180,7 @@ impl Transport {
     #[inline]
     pub(super) fn boundary_conc(&self, b: usize, n: End) -> f64 {
         match n {
-            End::Node(n) if self.kind[n] == Kind::Mixing => {
+            End::Node(n) if self.plan.kind[n] == Kind::Mixing => {
                 inflow_value(self.bval[b], self.sweep.lag[n])
             }
             End::Node(n) => inflow_value(self.bval[b], self.conc[n]),
@@ -191,11 +192,11 @@ impl Transport {
     pub(super) fn free_of_cells(&mut self, s: usize) {
         let sp = &mut self.species[s];
         if sp.binding.is_identity() {
-            for &n in &self.cells {
+            for &n in &self.plan.cells {
                 sp.free[n] = self.conc[n];
             }
         } else {
-            for &n in &self.cells {
+            for &n in &self.plan.cells {
                 sp.free[n] = sp
                     .binding
                     .free_anchored(self.conc[n], sp.free[n], &mut sp.anchors[n]);
@@ -213,11 +214,11 @@ impl Transport {
         } else {
             &sp.free
         };
-        for (i, &n) in self.cells.iter().enumerate() {
+        for (i, &n) in self.plan.cells.iter().enumerate() {
             w[i] = sp.fixed_uptake(i, free[n]);
         }
         for &p in &sp.dynamic {
-            w[self.pieces[p].cell] += sp.piece_uptake(&self.pieces, p, free);
+            w[self.plan.pieces[p].cell] += sp.piece_uptake(&self.plan.pieces, p, free);
         }
     }
 
@@ -228,7 +229,7 @@ impl Transport {
         for &j in &sp.dynamic_segs {
             let k = sp.relax_of_seg[j];
             let q = if k == usize::MAX {
-                y[self.segments[j].branch_unknown]
+                y[self.plan.segments[j].branch_unknown]
             } else {
                 z[sp.relax_offset + k]
             };
@@ -238,17 +239,17 @@ impl Transport {
 
     /// Concentrations of the mixing points from their upwind neighbours (flux-weighted).
     pub(super) fn mix(&mut self, s: usize) -> Result<()> {
-        if self.mixing.is_empty() {
+        if self.plan.mixing.is_empty() {
             return Ok(());
         }
         self.restore_mixing(s);
         // two-face pass-through points next to cells or boundaries: c = Σ_in |Q| C_up / Σ_out |Q|
-        for &m in &self.simple_mixing {
+        for &m in &self.plan.simple_mixing {
             let lag = self.conc[m];
             self.sweep.lag[m] = lag;
             let (mut num, mut den) = (0.0, 0.0);
-            for &fi in &self.node_faces[self.node_ptr[m]..self.node_ptr[m + 1]] {
-                let (q, up, down) = oriented(&self.faces, &self.qf, fi);
+            for &fi in &self.plan.node_faces[self.plan.node_ptr[m]..self.plan.node_ptr[m + 1]] {
+                let (q, up, down) = oriented(&self.plan.faces, &self.qf, fi);
                 if up == End::Node(m) {
                     den += q.abs();
                 } else if down == End::Node(m) {
@@ -261,23 +262,22 @@ impl Transport {
             }
             self.conc[m] = if den > 1e-300 { num / den } else { lag };
         }
-        if self.general_mixing.is_empty() {
+        if self.plan.general_mixing.is_empty() {
             self.save_mixing(s);
             return Ok(());
         }
-        let nn = self.kind.len();
+        let nn = self.plan.kind.len();
         let mut d = std::mem::take(&mut self.sweep.d);
         let mut b = std::mem::take(&mut self.sweep.b);
         d.resize(nn, 0.0);
         b.resize(nn, 0.0);
-        for &m in &self.mixing {
+        for &m in &self.plan.mixing {
             d[m] = 0.0;
             b[m] = 0.0;
         }
         let mut x = std::mem::take(&mut self.conc);
-        let mixing = std::mem::take(&mut self.general_mixing);
-        let res = self.sweep_solve(&mixing, &d, &b, &mut x);
-        self.general_mixing = mixing;
+        let plan = Arc::clone(&self.plan);
+        let res = self.sweep_solve(&plan.general_mixing, &d, &b, &mut x);
         self.conc = x;
         self.sweep.d = d;
         self.sweep.b = b;
@@ -287,8 +287,8 @@ impl Transport {
 
     pub(super) fn restore_mixing(&mut self, s: usize) {
         let mc = &self.species[s].mixing_conc;
-        if mc.len() == self.mixing.len() {
-            for (&m, &c) in self.mixing.iter().zip(mc) {
+        if mc.len() == self.plan.mixing.len() {
+            for (&m, &c) in self.plan.mixing.iter().zip(mc) {
                 self.conc[m] = c;
             }
         }
@@ -298,6 +298,6 @@ impl Transport {
         let sp = &mut self.species[s];
         sp.mixing_conc.clear();
         sp.mixing_conc
-            .extend(self.mixing.iter().map(|&m| self.conc[m]));
+            .extend(self.plan.mixing.iter().map(|&m| self.conc[m]));
     }
 }
