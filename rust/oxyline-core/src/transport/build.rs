@@ -135,33 +135,7 @@ impl Transport {
         probes: &Probes,
     ) -> Result<Self> {
         let nn = circuit.nodes.len();
-        if spec.species.is_empty() {
-            return Err(bad("transport", "has no species".into()));
-        }
-        if !spec.reference_pressure.is_finite() {
-            return Err(bad(
-                "transport",
-                format!(
-                    "reference_pressure must be finite, got {}",
-                    spec.reference_pressure
-                ),
-            ));
-        }
-        if !(spec.velocity_threshold.is_finite() && spec.velocity_threshold >= 0.0) {
-            return Err(bad(
-                "transport",
-                format!(
-                    "velocity_threshold must be >= 0, got {}",
-                    spec.velocity_threshold
-                ),
-            ));
-        }
-        if circuit.source_boundary.len() != circuit.sources.len() {
-            return Err(bad(
-                "transport",
-                "the circuit's flow sources are not tagged with boundary conditions".into(),
-            ));
-        }
+        check_settings(spec, circuit)?;
         let fixed: Vec<bool> = {
             let mut f = vec![false; nn];
             for (n, _) in &circuit.fixed_pressures {
@@ -373,32 +347,7 @@ impl Transport {
         }
         let nn = nt;
         let mixing: Vec<usize> = (0..nn).filter(|&i| kind[i] == Kind::Mixing).collect();
-        let mut deg = vec![0usize; nn + 1];
-        for f in &faces {
-            for e in [f.from, f.to] {
-                if let End::Node(n) = e {
-                    deg[n] += 1;
-                }
-            }
-        }
-        let mut node_ptr = vec![0usize; nn + 1];
-        for i in 0..nn {
-            node_ptr[i + 1] = node_ptr[i] + deg[i];
-        }
-        let mut node_faces = vec![0usize; node_ptr[nn]];
-        let mut fill = node_ptr.clone();
-        for (fi, f) in faces.iter().enumerate() {
-            for e in [f.from, f.to] {
-                if let End::Node(n) = e {
-                    node_faces[fill[n]] = fi;
-                    fill[n] += 1;
-                }
-            }
-        }
-        let mut node_sources = vec![Vec::new(); nn];
-        for (k, (n, _, _)) in sources.iter().enumerate() {
-            node_sources[*n].push(k);
-        }
+        let (node_ptr, node_faces, node_sources) = incidence(nn, &faces, &sources);
         let nc_nodes = circuit.nodes.len();
         let segments: Vec<Segment> = circuit
             .segments
@@ -475,34 +424,7 @@ impl Transport {
             general_mixing: Vec::new(),
             tree: None,
         };
-        p.domain = (0..nn).filter(|&n| p.kind[n] != Kind::Exterior).collect();
-        if p.faces.len() >= u32::MAX as usize || nn >= u32::MAX as usize {
-            return Err(bad("transport", "network too large".into()));
-        }
-        for (fi, f) in p.faces.iter().enumerate() {
-            match (f.from, f.to) {
-                (End::Node(a), End::Node(b)) => p.internal.push([fi as u32, a as u32, b as u32]),
-                _ => p.boundary_faces.push(fi),
-            }
-        }
-        for &m in &p.mixing {
-            let faces = &p.node_faces[p.node_ptr[m]..p.node_ptr[m + 1]];
-            let neighbours_known = faces.iter().all(|&fi| {
-                let f = &p.faces[fi];
-                let other = if f.from == End::Node(m) { f.to } else { f.from };
-                !matches!(other, End::Node(o) if p.kind[o] == Kind::Mixing)
-            });
-            if faces.len() == 2 && p.node_sources[m].is_empty() && neighbours_known {
-                p.simple_mixing.push(m);
-            } else {
-                p.general_mixing.push(m);
-            }
-        }
-        p.tree = tree_order(nn, &p.domain, &p.internal);
-        p.face_unknowns = p.faces[..p.n_flow_faces]
-            .iter()
-            .map(|f| f.unknown)
-            .collect();
+        p.finish()?;
         let mut t = Transport {
             species,
             mean_abs: Vec::new(),
@@ -615,4 +537,111 @@ pub(super) fn wall_pieces(
         seg_pieces.push(start..pieces.len());
     }
     (pieces, seg_pieces)
+}
+
+/// Section-wide settings: at least one species, a finite reference pressure, a valid velocity
+/// threshold, flow sources tagged with their boundary conditions.
+fn check_settings(spec: &TransportSpec, circuit: &Circuit) -> Result<()> {
+    if spec.species.is_empty() {
+        return Err(bad("transport", "has no species".into()));
+    }
+    if !spec.reference_pressure.is_finite() {
+        return Err(bad(
+            "transport",
+            format!(
+                "reference_pressure must be finite, got {}",
+                spec.reference_pressure
+            ),
+        ));
+    }
+    if !(spec.velocity_threshold.is_finite() && spec.velocity_threshold >= 0.0) {
+        return Err(bad(
+            "transport",
+            format!(
+                "velocity_threshold must be >= 0, got {}",
+                spec.velocity_threshold
+            ),
+        ));
+    }
+    if circuit.source_boundary.len() != circuit.sources.len() {
+        return Err(bad(
+            "transport",
+            "the circuit's flow sources are not tagged with boundary conditions".into(),
+        ));
+    }
+    Ok(())
+}
+
+/// CSR node → incident faces, and the flow sources of every node. Linear time.
+fn incidence(
+    nn: usize,
+    faces: &[Face],
+    sources: &[(usize, Waveform, usize)],
+) -> (Vec<usize>, Vec<usize>, Vec<Vec<usize>>) {
+    let mut deg = vec![0usize; nn + 1];
+    for f in faces {
+        for e in [f.from, f.to] {
+            if let End::Node(n) = e {
+                deg[n] += 1;
+            }
+        }
+    }
+    let mut node_ptr = vec![0usize; nn + 1];
+    for i in 0..nn {
+        node_ptr[i + 1] = node_ptr[i] + deg[i];
+    }
+    let mut node_faces = vec![0usize; node_ptr[nn]];
+    let mut fill = node_ptr.clone();
+    for (fi, f) in faces.iter().enumerate() {
+        for e in [f.from, f.to] {
+            if let End::Node(n) = e {
+                node_faces[fill[n]] = fi;
+                fill[n] += 1;
+            }
+        }
+    }
+    let mut node_sources = vec![Vec::new(); nn];
+    for (k, (n, _, _)) in sources.iter().enumerate() {
+        node_sources[*n].push(k);
+    }
+    (node_ptr, node_faces, node_sources)
+}
+
+impl Plan {
+    /// The solver lists derived from the grid: domain nodes, internal and boundary faces,
+    /// simple and general mixing points, the tree elimination order, the face unknowns.
+    fn finish(&mut self) -> Result<()> {
+        let nn = self.kind.len();
+        self.domain = (0..nn)
+            .filter(|&n| self.kind[n] != Kind::Exterior)
+            .collect();
+        if self.faces.len() >= u32::MAX as usize || nn >= u32::MAX as usize {
+            return Err(bad("transport", "network too large".into()));
+        }
+        for (fi, f) in self.faces.iter().enumerate() {
+            match (f.from, f.to) {
+                (End::Node(a), End::Node(b)) => self.internal.push([fi as u32, a as u32, b as u32]),
+                _ => self.boundary_faces.push(fi),
+            }
+        }
+        for &m in &self.mixing {
+            let faces = &self.node_faces[self.node_ptr[m]..self.node_ptr[m + 1]];
+            let neighbours_known = faces.iter().all(|&fi| {
+                let f = &self.faces[fi];
+                let other = if f.from == End::Node(m) { f.to } else { f.from };
+                !matches!(other, End::Node(o) if self.kind[o] == Kind::Mixing)
+            });
+            if faces.len() == 2 && self.node_sources[m].is_empty() && neighbours_known {
+                self.simple_mixing.push(m);
+            } else {
+                self.general_mixing.push(m);
+            }
+        }
+        self.tree = tree_order(nn, &self.domain, &self.internal);
+        self.face_unknowns = self.faces[..self.n_flow_faces]
+            .iter()
+            .map(|f| f.unknown)
+            .collect();
+        Ok(())
+    }
 }
