@@ -101,7 +101,8 @@ fn put_rows<'py>(
 #[pyclass(frozen, module = "oxyline._core")]
 struct Network {
     inner: Arc<(Assembled, Dae)>,
-    /// Validated species transport (cloned per run); None for flow-only models.
+    /// Validated species transport, never run: each run takes `new_run` (the shared plan and a
+    /// fresh state); None for flow-only models.
     transport: Option<Arc<Transport>>,
 }
 
@@ -535,7 +536,7 @@ impl Network {
         };
         let inner = self.inner.clone();
         let mut species = if transport {
-            self.transport.as_deref().cloned()
+            self.transport.as_deref().map(Transport::new_run)
         } else {
             None
         };

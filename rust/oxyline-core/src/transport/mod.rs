@@ -1,0 +1,361 @@
+//! Species transport on the flow circuit (physics spec §2.5): the conservative finite-volume
+//! form of the paper's oxygen transmission line.
+//!
+//! * Cells are the circuit nodes that hold lumen volume; V_n = V0_n + C_n (P_n − P_ref) is taken
+//!   from the flow state, so dV_n/dt equals the net inflow exactly and a uniform field stays
+//!   uniform (free-stream preservation).
+//! * Faces are the branches (and flow sources); each carries F = Q · C_t,upwind, upwind on the
+//!   sign of Q. The state is the amount N (mol) per cell and species, so every face flux leaves
+//!   one cell and enters another: Σ N + I_out + I_wall + I_decay − I_in is an exact linear
+//!   invariant, which any Runge–Kutta method preserves to round-off.
+//! * Capacitance- and volume-free nodes inside the network (lumped vessels, the inlet node of an
+//!   L arrangement) are pass-through mixing points; nodes of boundary conditions (Windkessel,
+//!   distal and prescribed-pressure nodes) are outside the domain: flow into them is outflow,
+//!   flow out of them carries the inlet or backflow concentration.
+//! * The advected quantity is the total concentration C_t (free + bound); wall exchange acts
+//!   on the free concentration c = binding⁻¹(C_t) (physics §4.3).
+//!
+//! Two integrations share this description: the explicit right-hand side (`rhs`), integrated
+//! monolithically with the flow by RK4, and a backward-Euler step (`implicit_step`) used after
+//! each generalized-α flow step, solved by one sweep in flow order (an M-matrix that is
+//! triangular whenever the directed flow graph is acyclic, e.g. on every tree).
+
+use crate::circuit::{Circuit, Dae};
+use crate::closure::{self, SegmentLaw, SegmentWall, WallSpec};
+use crate::error::{Error, Result};
+use crate::hemoglobin::{Binding, HillAnchor};
+use crate::output::Probes;
+pub use crate::spec::transport::{Formulation, SpeciesSpec, TransportSpec};
+use crate::waveform::Waveform;
+use std::sync::Arc;
+
+mod build;
+mod implicit;
+mod observe;
+mod plan;
+mod rhs;
+mod state;
+
+pub use plan::Plan;
+#[allow(unused_imports)]
+use plan::*;
+#[allow(unused_imports)]
+use {build::*, implicit::*, observe::*, rhs::*, state::*};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum End {
+    Node(usize),
+    Boundary(usize),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Cell,
+    Mixing,
+    Exterior,
+}
+
+#[derive(Debug, Clone)]
+struct Face {
+    /// Flow unknown (index into y); `usize::MAX` for the interior faces of a refined cell,
+    /// whose flows `Chain::flows` derives from the unknowns.
+    unknown: usize,
+    from: End,
+    to: End,
+}
+
+/// A volume node refined into m sub-cells in series (sub-cell 0 = the node itself takes the
+/// faces entering it and its flow sources, sub-cell m−1 the faces leaving it). Sub-cell k holds
+/// V_n/m, so with Q_A = inflow, Q_B = outflow of the node the interior face k (between
+/// sub-cells k−1 and k) carries Q_k = Q_A − (k/m)(Q_A − Q_B): each sub-cell receives
+/// dV_n/dt / m, and a uniform field stays uniform.
+#[derive(Debug, Clone)]
+struct Chain {
+    in_faces: Vec<usize>,
+    out_faces: Vec<usize>,
+    sources: Vec<usize>,
+    /// Index of interior face 1; faces 1..m−1 follow.
+    first_face: usize,
+    m: usize,
+}
+
+/// Part of a flow segment's wall seen by one cell: the cell's uptake is share × law(wall).
+#[derive(Debug, Clone)]
+struct Piece {
+    seg: usize,
+    node: usize,
+    cell: usize,
+    share: f64,
+    wall: SegmentWall,
+}
+
+#[derive(Debug, Clone)]
+enum BoundaryValue {
+    Wave(Waveform),
+    ZeroGradient,
+}
+
+#[derive(Debug, Clone)]
+struct Species {
+    name: String,
+    binding: Binding,
+    decay: f64,
+    diffusivity: f64,
+    boundary: Vec<BoundaryValue>,
+    walls: Vec<WallSpec>,
+    /// Law of every wall piece.
+    laws: Vec<SegmentLaw>,
+    /// Per cell: Σ share·g, Σ share·g·c_w, Σ share·q of its segments' fixed laws.
+    cell_g: Vec<f64>,
+    cell_gcw: Vec<f64>,
+    cell_q: Vec<f64>,
+    /// Wall pieces whose conductance follows a time-dependent shear.
+    dynamic: Vec<usize>,
+    /// Segments with a relaxed Lévêque shear: (segment, τ_BL); their equivalent flows
+    /// Q̃ = π r³ γ̃/4 are state entries `relax_offset + k`.
+    relax: Vec<(usize, f64)>,
+    relax_of_seg: Vec<usize>,
+    relax_offset: usize,
+    /// Segments with dynamic pieces, and per segment the cube root of the flow magnitude its
+    /// dynamic laws see (|Q| or Q̃), see `load_shear`.
+    dynamic_segs: Vec<usize>,
+    shear_cbrt: Vec<f64>,
+    has_wall: bool,
+    initial_free: f64,
+    /// Free concentration per node: warm start of the binding inversion, and reporting.
+    free: Vec<f64>,
+    /// Per node: Taylor anchor of the Hill inversion (cells change little between stages).
+    anchors: Vec<HillAnchor>,
+    /// Total concentration of the mixing points: their lagged value (used when a point has
+    /// no outflow, and for zero-gradient backflow into it) is per species.
+    mixing_conc: Vec<f64>,
+}
+
+#[derive(Debug, Clone)]
+struct Segment {
+    branch_unknown: usize,
+    nodes: [(usize, f64); 2],
+    wall: SegmentWall,
+    dx: f64,
+    volume: f64,
+    compliance: f64,
+}
+
+/// Outputs of one vessel: first and last face (flow unknowns) and its segment range.
+#[derive(Debug, Clone)]
+struct OutVessel {
+    first: usize,
+    last: usize,
+    segs: std::ops::Range<usize>,
+}
+
+pub const VESSEL_COLUMNS: usize = 5;
+pub const SEGMENT_COLUMNS: usize = 5;
+pub const BALANCE_COLUMNS: usize = 5;
+
+/// Per-run transport: the shared immutable [`Plan`] and this run's state (amounts live in
+/// the integrator's vector; here: per-species laws and free concentrations, the cycle-mean
+/// |Q|, scratch). Cloning shares the plan and copies only the state.
+#[derive(Debug, Clone)]
+pub struct Transport {
+    /// Immutable topology, shared between runs (and threads).
+    plan: Arc<Plan>,
+    species: Vec<Species>,
+    /// Cycle-mean |Q| per segment (set by `set_mean_flow`): the relaxed shears start there.
+    mean_abs: Vec<f64>,
+    /// Record the per-segment columns (off: vessel and balance columns only).
+    segment_output: bool,
+    // scratch
+    vol: Vec<f64>,
+    conc: Vec<f64>,
+    qf: Vec<f64>,
+    qs: Vec<f64>,
+    bval: Vec<Option<f64>>,
+    sweep: Sweep,
+    /// Transport volumes of the implicit path (evolved with the face flows).
+    wvol: Vec<f64>,
+}
+
+fn bad(element: &str, msg: String) -> Error {
+    Error::model(element, msg)
+}
+
+impl Transport {
+    /// The immutable plan this run shares with every other run of the model.
+    pub fn plan(&self) -> &Arc<Plan> {
+        &self.plan
+    }
+
+    /// A new run of the model: shares the plan (no copy of the topology) and copies only the
+    /// per-run state of `self`, which is the state `build` left (callers keep an unrun
+    /// prototype).
+    pub fn new_run(&self) -> Transport {
+        self.clone()
+    }
+
+    pub fn species_names(&self) -> Vec<String> {
+        self.species.iter().map(|s| s.name.clone()).collect()
+    }
+    pub fn n_cells(&self) -> usize {
+        self.plan.cells.len()
+    }
+    /// Length of the coupled state: amounts per cell and species, then 4 accumulators per
+    /// species (I_in, I_out, I_wall, I_decay), then the relaxed shears of every species.
+    pub fn state_len(&self) -> usize {
+        self.species.len() * (self.plan.cells.len() + 4)
+            + self.species.iter().map(|s| s.relax.len()).sum::<usize>()
+    }
+    pub fn formulation(&self) -> Formulation {
+        self.plan.formulation
+    }
+    /// Columns recorded per species at every output time.
+    pub fn columns_per_species(&self) -> usize {
+        let segments = if self.segment_output {
+            self.plan.out_segments.len()
+        } else {
+            0
+        };
+        VESSEL_COLUMNS * self.plan.out_vessels.len() + SEGMENT_COLUMNS * segments + BALANCE_COLUMNS
+    }
+    /// Record the per-segment columns (default) or only the vessel and balance columns, which
+    /// keeps the output of large trees small.
+    pub fn set_segment_output(&mut self, on: bool) {
+        self.segment_output = on;
+    }
+    /// Recorded segments of every output vessel.
+    pub fn out_segment_counts(&self) -> Vec<usize> {
+        self.plan.out_vessels.iter().map(|v| v.segs.len()).collect()
+    }
+
+    /// Flow unknowns whose cycle-mean |Q| the closures need (empty: single pass).
+    pub fn mean_flow_unknowns(&self) -> Vec<usize> {
+        if self
+            .species
+            .iter()
+            .any(|s| s.walls.iter().any(|w| w.needs_mean_flow()))
+        {
+            self.plan
+                .segments
+                .iter()
+                .map(|s| s.branch_unknown)
+                .collect()
+        } else {
+            Vec::new()
+        }
+    }
+
+    /// Evaluate the segment laws; `mean_abs[j]` is segment j's cycle-mean |Q|.
+    pub fn set_mean_flow(&mut self, mean_abs: &[f64]) -> Result<()> {
+        self.mean_abs = mean_abs.to_vec();
+        self.set_laws(mean_abs, true)
+    }
+
+    /// max over cells of (total outflow rate)/V (1/s): dt × this is the upwind Courant number.
+    pub fn max_outflow_rate(&mut self, y: &[f64], time: f64) -> f64 {
+        if self.volumes(y, time).is_err() {
+            return f64::INFINITY;
+        }
+        self.load_flows(time, y);
+        let mut out = vec![0.0; self.plan.cells.len()];
+        for (f, &q) in self.plan.faces.iter().zip(&self.qf) {
+            let up = if q >= 0.0 { f.from } else { f.to };
+            if let End::Node(n) = up {
+                if self.plan.node_cell[n] != usize::MAX {
+                    out[self.plan.node_cell[n]] += q.abs();
+                }
+            }
+        }
+        for ((n, _, _), &q) in self.plan.sources.iter().zip(&self.qs) {
+            if q < 0.0 && self.plan.node_cell[*n] != usize::MAX {
+                out[self.plan.node_cell[*n]] -= q;
+            }
+        }
+        out.iter()
+            .zip(&self.vol)
+            .fold(0.0f64, |m, (o, v)| m.max(o / v))
+    }
+
+    /// Cell holding most of segment `j`'s volume (its last sub-cell when refined), as an index
+    /// into the species block of the state.
+    pub fn segment_cell(&self, j: usize) -> Option<usize> {
+        self.segment_cells(j).map(|cells| cells.end - 1)
+    }
+
+    /// Cells (sub-cells in flow order, contiguous in the state) of the node holding most of
+    /// segment `j`'s volume.
+    pub fn segment_cells(&self, j: usize) -> Option<std::ops::Range<usize>> {
+        let seg = self.plan.segments.get(j)?;
+        let (n, _) = seg
+            .nodes
+            .iter()
+            .copied()
+            .fold((usize::MAX, -1.0), |a, b| if b.1 > a.1 { b } else { a });
+        let (a, b) = (
+            self.plan.node_cell[n],
+            self.plan.node_cell[self.plan.last_sub[n]],
+        );
+        (a != usize::MAX).then_some(a..b + 1)
+    }
+
+    /// One classical RK4 step of the species state alone, the flow state being prescribed:
+    /// `flow(t, y)` writes the flow unknowns at time t. This is the "prescribed flow" path used
+    /// for rigid tubes, whose flow-driven circuits are index-2 DAEs that RK4 cannot integrate;
+    /// the transport kernel is the same `rhs` as in the monolithic step.
+    pub fn step_prescribed(
+        &mut self,
+        time: f64,
+        dt: f64,
+        flow: &mut dyn FnMut(f64, &mut [f64]),
+        y: &mut [f64],
+        z: &mut [f64],
+        stages: &mut crate::rk4::CoupledStages,
+    ) -> Result<()> {
+        crate::rk4::rk4_ode(time, dt, z, stages, &mut |t, zs, dzs| {
+            flow(t, y);
+            self.rhs(t, y, zs, dzs)
+        })
+    }
+
+    /// Largest relative change of the amounts between two states (periodicity check).
+    pub fn relative_change(&self, a: &[f64], b: &[f64]) -> f64 {
+        let n = self.species.len() * self.plan.cells.len();
+        let scale = a[..n]
+            .iter()
+            .fold(0.0f64, |m, x| m.max(x.abs()))
+            .max(1e-300);
+        a[..n]
+            .iter()
+            .zip(&b[..n])
+            .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
+            / scale
+    }
+}
+
+/// Concentration carried into the domain by a boundary: its prescribed value, or (zero-gradient
+/// backflow) the lagged value of the node it enters.
+#[inline]
+fn inflow_value(prescribed: Option<f64>, lagged: f64) -> f64 {
+    prescribed.unwrap_or(lagged)
+}
+
+#[inline]
+fn account(inlet: bool, flux_into_domain: f64, i_in: &mut f64, i_out: &mut f64) {
+    if inlet {
+        *i_in += flux_into_domain;
+    } else {
+        *i_out -= flux_into_domain;
+    }
+}
+
+/// Flow of face `fi` and its ends ordered along the flow (upstream, downstream). A free function so
+/// that callers holding a mutable borrow of other transport fields can use it.
+#[inline]
+fn oriented(faces: &[Face], qf: &[f64], fi: usize) -> (f64, End, End) {
+    let f = &faces[fi];
+    let q = qf[fi];
+    if q >= 0.0 {
+        (q, f.from, f.to)
+    } else {
+        (q, f.to, f.from)
+    }
+}

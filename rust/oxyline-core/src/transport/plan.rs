@@ -1,0 +1,145 @@
+//! The immutable transport plan: grid (cells, mixing points, exterior nodes), faces,
+//! refinement chains, wall pieces, the implicit elimination order and the output layout.
+//! Built once per model in linear time (`build.rs`); many runs share it through an `Arc`.
+
+#[allow(unused_imports)]
+use super::*;
+
+/// One domain node in the elimination order of [`tree_order`]: its parent in the spanning
+/// forest (`u32::MAX` for a root) and the face joining them.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Link {
+    pub(super) node: u32,
+    pub(super) parent: u32,
+    pub(super) face: u32,
+    /// The face points from this node to its parent (positive flow runs child → parent).
+    pub(super) from_child: bool,
+}
+
+/// Children-before-parents order of the domain nodes when the undirected graph of the internal
+/// faces is a forest (no loops, no parallel faces): then the upwind system can be eliminated
+/// leaves first for any flow directions (`Transport::tree_solve`). None otherwise. Linear time.
+pub(super) fn tree_order(nt: usize, domain: &[usize], internal: &[[u32; 3]]) -> Option<Vec<Link>> {
+    let mut ptr = vec![0u32; nt + 1];
+    for &[_, a, b] in internal {
+        ptr[a as usize + 1] += 1;
+        ptr[b as usize + 1] += 1;
+    }
+    for i in 0..nt {
+        ptr[i + 1] += ptr[i];
+    }
+    let mut fill = ptr.clone();
+    let mut adj = vec![(0u32, 0u32); ptr[nt] as usize];
+    for &[f, a, b] in internal {
+        adj[fill[a as usize] as usize] = (f, b);
+        fill[a as usize] += 1;
+        adj[fill[b as usize] as usize] = (f, a);
+        fill[b as usize] += 1;
+    }
+    // nodes outside the domain count as seen: meeting one sends the solve to the general sweep
+    let mut seen = vec![true; nt];
+    for &n in domain {
+        seen[n] = false;
+    }
+    let mut pre: Vec<Link> = Vec::with_capacity(domain.len());
+    let mut stack: Vec<Link> = Vec::new();
+    for &r in domain {
+        if seen[r] {
+            continue;
+        }
+        seen[r] = true;
+        stack.push(Link {
+            node: r as u32,
+            parent: u32::MAX,
+            face: u32::MAX,
+            from_child: false,
+        });
+        while let Some(l) = stack.pop() {
+            let n = l.node as usize;
+            for &(f, o) in &adj[ptr[n] as usize..ptr[n + 1] as usize] {
+                if f == l.face {
+                    continue;
+                }
+                if seen[o as usize] {
+                    return None; // a loop (or two faces between the same nodes)
+                }
+                seen[o as usize] = true;
+                let from_child = internal_from(internal, f) == o;
+                stack.push(Link {
+                    node: o,
+                    parent: l.node,
+                    face: f,
+                    from_child,
+                });
+            }
+            pre.push(l);
+        }
+    }
+    pre.reverse();
+    Some(pre)
+}
+
+/// `from` node of internal face `f` (faces are listed in `internal` in face order, so a binary
+/// search finds it).
+pub(super) fn internal_from(internal: &[[u32; 3]], f: u32) -> u32 {
+    let k = internal.partition_point(|e| e[0] < f);
+    internal[k][1]
+}
+
+/// Topology and layout of a transport model; never changed after `Transport::build`.
+#[derive(Debug)]
+pub struct Plan {
+    pub(super) kind: Vec<Kind>,
+    pub(super) cells: Vec<usize>,
+    pub(super) node_cell: Vec<usize>,
+    pub(super) v0: Vec<f64>,
+    pub(super) cap: Vec<f64>,
+    pub(super) p_ref: f64,
+    pub(super) faces: Vec<Face>,
+    pub(super) face_of_unknown: Vec<usize>,
+    pub(super) sources: Vec<(usize, Waveform, usize)>,
+    pub(super) boundary_inlet: Vec<bool>,
+    pub(super) mixing: Vec<usize>,
+    /// CSR node → incident faces; sources listed separately.
+    pub(super) node_ptr: Vec<usize>,
+    pub(super) node_faces: Vec<usize>,
+    pub(super) node_sources: Vec<Vec<usize>>,
+    pub(super) segments: Vec<Segment>,
+    /// Faces 0..n_flow_faces carry a flow unknown; the rest are interior faces of `chains`.
+    pub(super) n_flow_faces: usize,
+    /// The flow unknown of faces 0..n_flow_faces (a compact copy for the per-step gather).
+    pub(super) face_unknowns: Vec<usize>,
+    pub(super) chains: Vec<Chain>,
+    /// Per cell: the circuit node whose pressure sets its volume.
+    pub(super) cell_node: Vec<usize>,
+    /// Per circuit node: its last sub-cell (itself unless refined): the donor of the faces
+    /// leaving the node, and the value reported for its segments.
+    pub(super) last_sub: Vec<usize>,
+    /// Wall pieces, contiguous per segment (`seg_pieces`).
+    pub(super) pieces: Vec<Piece>,
+    pub(super) seg_pieces: Vec<std::ops::Range<usize>>,
+    pub(super) formulation: Formulation,
+    pub(super) v_eps: f64,
+    pub(super) out_vessels: Vec<OutVessel>,
+    pub(super) out_segments: Vec<usize>,
+    pub(super) segment_vessels: Vec<usize>,
+    pub(super) node_names: Vec<String>,
+    /// Nodes solved by the implicit sweep (cells and mixing points).
+    pub(super) domain: Vec<usize>,
+    /// Faces between two domain nodes as [face, from node, to node], and the other faces.
+    pub(super) internal: Vec<[u32; 3]>,
+    pub(super) boundary_faces: Vec<usize>,
+    /// Mixing points with two faces, no source and non-mixing neighbours: evaluated directly.
+    pub(super) simple_mixing: Vec<usize>,
+    /// The other mixing points (solved by the flow-order sweep).
+    pub(super) general_mixing: Vec<usize>,
+    /// Elimination order of the implicit solve when the domain graph is a forest (always on
+    /// trees): None sends it to the flow-order sweep, which also handles loops.
+    pub(super) tree: Option<Vec<Link>>,
+}
+
+// runs on other threads share one plan
+const _: fn() = || {
+    fn shared<T: Send + Sync>() {}
+    shared::<Plan>();
+};

@@ -1,0 +1,303 @@
+//! Per-run state updates: wall laws, volumes, face flows, boundary values, mixing points.
+
+#[allow(unused_imports)]
+use super::*;
+
+impl Transport {
+    pub(super) fn set_laws(&mut self, mean_abs: &[f64], final_pass: bool) -> Result<()> {
+        let nc = self.plan.cells.len();
+        let mut offset = self.species.len() * (nc + 4);
+        for sp in &mut self.species {
+            sp.laws.clear();
+            sp.dynamic.clear();
+            sp.dynamic_segs.clear();
+            sp.relax.clear();
+            sp.relax_of_seg.iter_mut().for_each(|k| *k = usize::MAX);
+            if final_pass {
+                for (j, seg) in self.plan.segments.iter().enumerate() {
+                    if sp.walls[self.plan.segment_vessels[j]].is_relaxed()
+                        && seg.wall.radius > 0.0
+                        && seg.dx > 0.0
+                    {
+                        sp.relax_of_seg[j] = sp.relax.len();
+                        let tau = closure::relaxation_time(&seg.wall, sp.diffusivity, mean_abs[j]);
+                        sp.relax.push((j, tau));
+                    }
+                }
+            }
+            sp.relax_offset = offset;
+            offset += sp.relax.len();
+            sp.cell_g = vec![0.0; nc];
+            sp.cell_gcw = vec![0.0; nc];
+            sp.cell_q = vec![0.0; nc];
+            for (p, piece) in self.plan.pieces.iter().enumerate() {
+                let j = piece.seg;
+                let seg = &self.plan.segments[j];
+                let vessel_wall = &sp.walls[self.plan.segment_vessels[j]];
+                let law = if seg.wall.radius <= 0.0
+                    || seg.dx <= 0.0
+                    || (vessel_wall.needs_mean_flow() && !final_pass)
+                {
+                    SegmentLaw::Fixed {
+                        g: 0.0,
+                        cw: 0.0,
+                        q: 0.0,
+                    }
+                } else {
+                    vessel_wall.segment_law(
+                        &piece.wall,
+                        sp.diffusivity,
+                        mean_abs[j],
+                        &format!("species '{}' wall", sp.name),
+                    )?
+                };
+                match law {
+                    SegmentLaw::Fixed { g, cw, q } => {
+                        let (c, share) = (piece.cell, piece.share);
+                        sp.cell_g[c] += share * g;
+                        sp.cell_gcw[c] += share * g * cw;
+                        sp.cell_q[c] += share * q;
+                    }
+                    SegmentLaw::Instantaneous { .. } => {
+                        sp.dynamic.push(p);
+                        // pieces are contiguous per segment
+                        if sp.dynamic_segs.last() != Some(&j) {
+                            sp.dynamic_segs.push(j);
+                        }
+                    }
+                }
+                sp.laws.push(law);
+            }
+            sp.has_wall = !sp.dynamic.is_empty()
+                || sp.cell_g.iter().any(|&g| g != 0.0)
+                || sp.cell_q.iter().any(|&q| q != 0.0);
+        }
+        Ok(())
+    }
+
+    /// Initial state: uniform initial concentration of every species in V(P0).
+    pub fn initial_state(&mut self, y: &[f64]) -> Result<Vec<f64>> {
+        self.volumes(y, 0.0)?;
+        let nc = self.plan.cells.len();
+        let mut z = vec![0.0; self.state_len()];
+        let nmix = self.plan.mixing.len();
+        for (s, sp) in self.species.iter_mut().enumerate() {
+            let ct = sp.binding.total(sp.initial_free);
+            sp.mixing_conc = vec![ct; nmix];
+            for i in 0..nc {
+                z[s * nc + i] = self.vol[i] * ct;
+            }
+            for (k, &(j, _)) in sp.relax.iter().enumerate() {
+                z[sp.relax_offset + k] = self.mean_abs.get(j).copied().unwrap_or(0.0);
+            }
+        }
+        self.wvol = self.vol.clone();
+        Ok(z)
+    }
+
+    pub(super) fn volumes(&mut self, y: &[f64], time: f64) -> Result<()> {
+        for (i, &n) in self.plan.cell_node.iter().enumerate() {
+            let v = self.plan.v0[i] + self.plan.cap[i] * (y[n] - self.plan.p_ref);
+            if v.is_nan() || v <= 0.0 {
+                return Err(Error::solver(
+                    time,
+                    format!(
+                        "lumen volume of transport cell '{}' is {v:.3e} m³ (V0 {:.3e} m³, pressure {:.1} Pa, reference pressure {:.1} Pa): set oxygen reference_pressure closer to the working pressure",
+                        self.node_name(n),
+                        self.plan.v0[i],
+                        y[n],
+                        self.plan.p_ref
+                    ),
+                ));
+            }
+            self.vol[i] = v;
+        }
+        Ok(())
+    }
+
+    pub(super) fn node_name(&self, n: usize) -> String {
+        self.plan
+            .node_names
+            .get(n)
+            .cloned()
+            .unwrap_or_else(|| format!("node {n}"))
+    }
+
+    pub(super) fn load_flows(&mut self, time: f64, y: &[f64]) {
+        self.load_flows_with(time, |u| y[u]);
+    }
+
+    /// Face flows at the α_f level of a step from `y0` to `y1`: Q = Q_0 + α_f (Q_1 − Q_0).
+    pub(super) fn load_flows_between(&mut self, time: f64, y0: &[f64], y1: &[f64], alpha_f: f64) {
+        self.load_flows_with(time, |u| y0[u] + alpha_f * (y1[u] - y0[u]));
+    }
+
+    /// Face flows from `flow(unknown)`, source flows at `time`, and the interior faces of
+    /// refined cells.
+    pub(super) fn load_flows_with(&mut self, time: f64, flow: impl Fn(usize) -> f64) {
+        let nf = self.plan.n_flow_faces;
+        for (q, &u) in self.qf[..nf].iter_mut().zip(&self.plan.face_unknowns) {
+            *q = flow(u);
+        }
+        for (q, (_, w, _)) in self.qs.iter_mut().zip(&self.plan.sources) {
+            *q = w.eval(time);
+        }
+        // interior faces of refined cells: Q_k = Q_A − (k/m)(Q_A − Q_B)
+        for ch in &self.plan.chains {
+            let q_a = ch.in_faces.iter().map(|&f| self.qf[f]).sum::<f64>()
+                + ch.sources.iter().map(|&k| self.qs[k]).sum::<f64>();
+            let q_b: f64 = ch.out_faces.iter().map(|&f| self.qf[f]).sum();
+            for k in 1..ch.m {
+                self.qf[ch.first_face + k - 1] = q_a - (k as f64 / ch.m as f64) * (q_a - q_b);
+            }
+        }
+    }
+
+    pub(super) fn load_boundary(&mut self, s: usize, time: f64) {
+        let sp = &self.species[s];
+        for (v, b) in self.bval.iter_mut().zip(&sp.boundary) {
+            *v = match b {
+                BoundaryValue::Wave(w) => Some(sp.binding.total(w.eval(time))),
+                BoundaryValue::ZeroGradient => None,
+            };
+        }
+    }
+
+    /// Total concentration carried by a face from the boundary end `b` next to node `n`:
+    /// prescribed, or zero-gradient (the neighbour's value; for a mixing point the value its
+    /// sweep used, so that the point stays exactly balanced).
+    /// Flow and upwind (donor) concentration of face `fi`.
+    #[inline]
+    pub(super) fn upwind(&self, fi: usize) -> (f64, f64) {
+        let (q, up, other) = oriented(&self.plan.faces, &self.qf, fi);
+        let c = match up {
+            End::Node(n) => self.conc[n],
+            End::Boundary(b) => self.boundary_conc(b, other),
+        };
+        (q, c)
+    }
+
+    #[inline]
+    pub(super) fn boundary_conc(&self, b: usize, n: End) -> f64 {
+        match n {
+            End::Node(n) if self.plan.kind[n] == Kind::Mixing => {
+                inflow_value(self.bval[b], self.sweep.lag[n])
+            }
+            End::Node(n) => inflow_value(self.bval[b], self.conc[n]),
+            End::Boundary(_) => inflow_value(self.bval[b], 0.0),
+        }
+    }
+
+    /// Free concentration of every cell of species `s` (binding inversion, warm-started).
+    pub(super) fn free_of_cells(&mut self, s: usize) {
+        let sp = &mut self.species[s];
+        if sp.binding.is_identity() {
+            for &n in &self.plan.cells {
+                sp.free[n] = self.conc[n];
+            }
+        } else {
+            for &n in &self.plan.cells {
+                sp.free[n] = sp
+                    .binding
+                    .free_anchored(self.conc[n], sp.free[n], &mut sp.anchors[n]);
+            }
+        }
+    }
+
+    /// Wall uptake of every cell for species `s` into `w` (mol/s), from the current free
+    /// concentrations and branch flows `y`.
+    pub(super) fn wall_uptake(&self, s: usize, w: &mut [f64]) {
+        let sp = &self.species[s];
+        // without binding the free concentration is the total one (no copy)
+        let free = if sp.binding.is_identity() {
+            &self.conc
+        } else {
+            &sp.free
+        };
+        for (i, &n) in self.plan.cells.iter().enumerate() {
+            w[i] = sp.fixed_uptake(i, free[n]);
+        }
+        for &p in &sp.dynamic {
+            w[self.plan.pieces[p].cell] += sp.piece_uptake(&self.plan.pieces, p, free);
+        }
+    }
+
+    /// |Q|^{1/3} seen by the dynamic laws of species `s`, per segment: the branch flow
+    /// (instantaneous shear) or the relaxed equivalent flow Q̃ held in the state `z`.
+    pub(super) fn load_shear(&mut self, s: usize, y: &[f64], z: &[f64]) {
+        let sp = &mut self.species[s];
+        for &j in &sp.dynamic_segs {
+            let k = sp.relax_of_seg[j];
+            let q = if k == usize::MAX {
+                y[self.plan.segments[j].branch_unknown]
+            } else {
+                z[sp.relax_offset + k]
+            };
+            sp.shear_cbrt[j] = q.abs().cbrt();
+        }
+    }
+
+    /// Concentrations of the mixing points from their upwind neighbours (flux-weighted).
+    pub(super) fn mix(&mut self, s: usize) -> Result<()> {
+        if self.plan.mixing.is_empty() {
+            return Ok(());
+        }
+        self.restore_mixing(s);
+        // two-face pass-through points next to cells or boundaries: c = Σ_in |Q| C_up / Σ_out |Q|
+        for &m in &self.plan.simple_mixing {
+            let lag = self.conc[m];
+            self.sweep.lag[m] = lag;
+            let (mut num, mut den) = (0.0, 0.0);
+            for &fi in &self.plan.node_faces[self.plan.node_ptr[m]..self.plan.node_ptr[m + 1]] {
+                let (q, up, down) = oriented(&self.plan.faces, &self.qf, fi);
+                if up == End::Node(m) {
+                    den += q.abs();
+                } else if down == End::Node(m) {
+                    let c = match up {
+                        End::Node(u) => self.conc[u],
+                        End::Boundary(b) => inflow_value(self.bval[b], lag),
+                    };
+                    num += q.abs() * c;
+                }
+            }
+            self.conc[m] = if den > 1e-300 { num / den } else { lag };
+        }
+        if self.plan.general_mixing.is_empty() {
+            self.save_mixing(s);
+            return Ok(());
+        }
+        let nn = self.plan.kind.len();
+        let mut d = std::mem::take(&mut self.sweep.d);
+        let mut b = std::mem::take(&mut self.sweep.b);
+        d.resize(nn, 0.0);
+        b.resize(nn, 0.0);
+        for &m in &self.plan.mixing {
+            d[m] = 0.0;
+            b[m] = 0.0;
+        }
+        let mut x = std::mem::take(&mut self.conc);
+        let plan = Arc::clone(&self.plan);
+        let res = self.sweep_solve(&plan.general_mixing, &d, &b, &mut x);
+        self.conc = x;
+        self.sweep.d = d;
+        self.sweep.b = b;
+        self.save_mixing(s);
+        res
+    }
+
+    pub(super) fn restore_mixing(&mut self, s: usize) {
+        let mc = &self.species[s].mixing_conc;
+        if mc.len() == self.plan.mixing.len() {
+            for (&m, &c) in self.plan.mixing.iter().zip(mc) {
+                self.conc[m] = c;
+            }
+        }
+    }
+
+    pub(super) fn save_mixing(&mut self, s: usize) {
+        let sp = &mut self.species[s];
+        sp.mixing_conc.clear();
+        sp.mixing_conc
+            .extend(self.plan.mixing.iter().map(|&m| self.conc[m]));
+    }
+}
