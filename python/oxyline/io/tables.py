@@ -45,6 +45,14 @@ _STRING_VESSEL = {"name", "from", "to", "arrangement", "description"}
 _INT_VESSEL = {"segments"}
 
 
+def _exact_float_option() -> dict[str, str]:
+    """read_csv's option for floats read back exactly as written: pandas 2's default parser
+    rounds the last digit, pandas >= 3's is exact and deprecates the option."""
+    import pandas as pd
+
+    return {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
+
+
 def _sep(path: Path) -> str:
     return "\t" if path.suffix.lower() in (".tsv", ".txt") else ","
 
@@ -58,7 +66,7 @@ def _read_frame(source: Any, what: str, string_columns: tuple[str, ...]) -> tupl
     try:
         df = pd.read_csv(p, sep=_sep(p), comment="#", skipinitialspace=True,
                          dtype={c: str for c in string_columns}, keep_default_na=True,
-                         float_precision="round_trip")  # exact: pandas 2's default parser is not
+                         **_exact_float_option())
     except Exception as exc:
         raise ModelError(f"{p}: cannot read the {what} table: {exc}") from exc
     df.columns = [str(c).strip() for c in df.columns]
