@@ -42,12 +42,10 @@ Example::
 from __future__ import annotations
 
 import itertools
-import json
 import math
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -128,16 +126,9 @@ class RunSettings:
 def _read_config(config: Mapping[str, Any] | str | os.PathLike[str]) -> dict[str, Any]:
     if isinstance(config, Mapping):
         return _copy(dict(config))
-    p = Path(config)
-    if not p.exists():
-        raise ModelError(f"{p}: file not found")
-    try:
-        data = json.loads(p.read_text())
-    except json.JSONDecodeError as exc:
-        raise ModelError(f"{p}: cannot parse JSON: {exc}") from exc
-    if not isinstance(data, dict):
-        raise ModelError(f"{p}: top level must be a JSON object")
-    return data
+    from oxyline.io.native import read_mapping
+
+    return read_mapping(config)
 
 
 def _is_comment(key: str) -> bool:
