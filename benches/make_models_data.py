@@ -3,9 +3,12 @@
 ``whole-body-140`` from circulatory_autogen's FinalModel in ``tests/data/circulatory_autogen``
 (Apache-2.0) with :func:`oxyline.io.circulatory_autogen.to_native_dict` (inflow: the Mynard
 template of ``tests/data/pwdb``, MIT; terminal resistances calibrated to the source's
-observed mean aortic pressure, wall viscosity kept: :data:`WHOLE_BODY_OPTIONS`).
+observed mean aortic pressure, wall viscosity kept: :data:`WHOLE_BODY_OPTIONS`), and ``pwdb-116``
+from PWDB's ``116_artery_model.txt`` with :func:`oxyline.populations.model_dict` (the file is
+not in the repository, see docs/populations.md: pass its path, or it is read from a ``shared/``
+reference folder beside the repository; skipped when absent).
 
-    python benches/make_models_data.py
+    python benches/make_models_data.py [--pwdb-geometry PATH/116_artery_model.txt]
 """
 
 from __future__ import annotations
@@ -82,6 +85,7 @@ def main() -> None:
         print(name, len(d["vessels"]), "vessels")
     shutil.copy(OPENBF / "LICENSE", OUT / "LICENSE")
     whole_body()
+    pwdb_116()
 
 
 #: the built-in's importer options: R_T calibrated to the observed mean aortic pressure, the
@@ -166,5 +170,60 @@ def whole_body() -> None:
     shutil.copy(PWDB / "LICENSE", OUT / "LICENSE-pwdb")
 
 
+PWDB_GEOMETRY = REPO.parent / "shared" / "networks" / "pwdb" / "116_artery_model.txt"
+
+
+def pwdb_116(geometry: Path | None = None) -> None:
+    """``pwdb-116``: PWDB's 116-artery network for its 25-y baseline subject, terminal
+    Windkessels calibrated to the subject's mean aortic root pressure."""
+    import argparse
+
+    import numpy as np
+
+    import oxyline
+    from oxyline import pwdb, populations
+
+    if geometry is None:
+        ap = argparse.ArgumentParser()
+        ap.add_argument("--pwdb-geometry", type=Path, default=PWDB_GEOMETRY)
+        geometry = ap.parse_args().pwdb_geometry
+    if not geometry.exists():
+        print(f"pwdb-116: {geometry} not found, skipped")
+        return
+    geo = pwdb.read_geometry(geometry)
+    row = populations.baseline_row()
+    d = populations.model_dict(geo, row)
+    res = oxyline.simulate(d)
+    p = res.vessel(geo[0]["name"]).pressure_in[:-1] / pwdb.MMHG
+    mmhg = [f"#   aortic root: mean {p.mean():.2f} mmHg (target {row['mbp']:.2f}), systolic/diastolic "
+            f"{p.max():.1f}/{p.min():.1f} mmHg, {res.settings['cycles_run']} cycles to "
+            f"periodicity {res.settings['periodic_error']:.1e}"]
+    header = ["# oxyline built-in model 'pwdb-116': the Pulse Wave DataBase 116-artery network",
+              "# (Charlton et al. 2019, Am J Physiol Heart Circ Physiol 317:H1062), baseline subject.",
+              "# Geometry: peterhcharlton/pwdb commit 5a0d472, pwdb_v0.1/Input Data/116_artery_model.txt",
+              "# (values adapted by PWDB from Mynard & Smolich 2015, Ann Biomed Eng 43:1443; the file is",
+              "# excluded from PWDB's MIT grant: literature data, cited, see NOTICE). Wall law, vascular",
+              "# beds, outflow pressure, age-specific parameters: PWDB (MIT), recomputed by",
+              "# oxyline.populations (docs/populations.md). Inflow: Mynard & Smolich 2015 template",
+              "# (PWDB, MIT) scaled to HR/SV/LVET. Terminal R x one factor per subject so that the",
+              "# steady (= cycle-mean) aortic root pressure is the subject's mean pressure.",
+              *mmhg,
+              "# Regenerate: benches/make_models_data.py --pwdb-geometry PATH. Citations: NOTICE."]
+    text = "\n".join(header) + "\n" + dump(d)
+    if yaml.safe_load(text) != d:
+        raise SystemExit("pwdb-116: YAML round trip changed the model")
+    (OUT / "pwdb-116.yaml").write_text(text)
+    shutil.copy(PWDB / "Mynard2015_aortic_flow_template.csv",
+                OUT / "mynard2015_aortic_flow_template.csv")
+    print("pwdb-116", len(d["vessels"]), "vessels;", mmhg[0][2:], np.isfinite(p).all())
+
+
 if __name__ == "__main__":
-    main()
+    import sys
+
+    if "--pwdb-geometry" in sys.argv or "--pwdb-only" in sys.argv:
+        if "--pwdb-only" in sys.argv:
+            sys.argv.remove("--pwdb-only")
+        pwdb_116()
+    else:
+        main()

@@ -21,7 +21,12 @@ library is Apache-2.0, see ``models_data/LICENSE`` and ``models_data/NOTICE`` fo
   veins replaced by the Mynard & Smolich 2015 aortic flow scaled to the model's 4.18 L/min,
   terminal resistances calibrated (x 7.67) to the source's observed 12.0 kPa mean aortic
   pressure, the source's wall viscosity kept (113/62 mmHg, no ringing; converted by
-  :func:`oxyline.io.circulatory_autogen.to_native_dict`; see ``docs/models.md``).
+  :func:`oxyline.io.circulatory_autogen.to_native_dict`; see ``docs/models.md``);
+* ``pwdb-116`` — the Pulse Wave DataBase 116-artery network (Charlton et al. 2019; geometry of
+  Mynard & Smolich 2015) for PWDB's 25-year baseline subject: PWDB's wall law, its 16 vascular
+  beds as 46 RCR outlets calibrated to the subject's mean aortic root pressure, the Mynard
+  aortic inflow scaled to its heart rate, stroke volume and ejection time; the base of the
+  virtual populations of :mod:`oxyline.populations` (``docs/populations.md``).
 
 They were converted with :func:`oxyline.io.openbf.to_native_dict` (default options; script
 ``benches/make_models_data.py``). Every name listed by :mod:`oxyline.examples` (e.g.
@@ -52,6 +57,9 @@ BUILTIN: dict[str, tuple[str, str]] = {
     "whole-body-140": ("whole-body-140.yaml",
                        ("circulatory_autogen FinalModel arterial tree (ADAN-86/218), 140 segments "
                         "+ 95 terminal R-C-R (calibrated to 12 kPa mean), Mynard aortic inflow")),
+    "pwdb-116": ("pwdb-116.yaml",
+                 ("PWDB 116-artery network (Charlton 2019), 25-y baseline subject, 46 RCR "
+                  "calibrated to its mean pressure, Mynard aortic inflow")),
 }
 ALIASES: dict[str, str] = {
     "ibif": "aortic-bifurcation",
@@ -61,6 +69,8 @@ ALIASES: dict[str, str] = {
     "invitro_model": "matthys37",
     "whole-body": "whole-body-140",
     "finalmodel": "whole-body-140",
+    "pwdb": "pwdb-116",
+    "pwdb116": "pwdb-116",
 }
 _registered: dict[str, tuple[Callable[[], Any], str]] = {}
 
