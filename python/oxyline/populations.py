@@ -183,6 +183,7 @@ def _extend(v: Sequence[float]) -> np.ndarray:
     return np.concatenate([low, v, high])
 
 
+@lru_cache(maxsize=4096)
 def cf_pwv(age: float, mbp: float, z: float) -> float:
     """PWDB's target carotid-femoral PWV [m/s] at ``age``, mean pressure ``mbp`` [mmHg] and
     ``z`` SDs (asymmetric SDs from the 10th/90th percentiles; ages between decades interpolate
@@ -239,8 +240,8 @@ def parameters(ages: Sequence[float] = (25, 35, 45, 55, 65, 75), levels: int = 3
             d[p] = st[p][0] + d[f"{p}_sd"] * st[p][1]
         d["lvet"] = lvet_values(d["hr"], d["sv"], d["lvet_sd"])
         d["dia"] = (st["dia"][0] + d["dia_sd"] * st["dia"][1]) / 100
-        d["pwv"] = np.array([cf_pwv(age, m, s) for m, s in zip(d["mbp"], d["pwv_sd"],
-                                                                strict=True)])
+        d["pwv"] = np.array([cf_pwv(float(age), float(m), float(s))
+                             for m, s in zip(d["mbp"], d["pwv_sd"], strict=True)])
         d["length"] = np.full(len(block), st["len"][0])
         d["pvc"] = np.full(len(block), st["pvc"][0])
         rows.append(pd.DataFrame(d))
@@ -394,3 +395,90 @@ def _describe(row: Mapping[str, float]) -> str:
             f"{row['sv']:.2f} mL, LVET {row['lvet']:.1f} ms, target cf-PWV {row['pwv']:.3f} m/s, "
             f"mean aortic root pressure {row['mbp']:.2f} mmHg (terminal resistances calibrated "
             f"to it), Mynard 2015 aortic inflow template; see docs/populations.md.")
+
+
+# ------------------------------------------------------------- per-subject summary
+
+
+def foot_time(time: Any, pressure: Any) -> float:
+    """Foot of a periodic pressure wave by the intersecting-tangent method: the intersection of
+    the tangent at the steepest upstroke (largest forward difference, taken at the midpoint of
+    its two samples) with the horizontal through the diastolic minimum (the lowest sample in
+    the half period before the upstroke). ``time``/``pressure``: one cycle, uniform samples; a
+    last sample that repeats the first (t = T) is dropped. Returns the foot time in [0, T)."""
+    t, p = np.asarray(time, float), np.asarray(pressure, float)
+    dt = t[1] - t[0]
+    period = t[-1] - t[0] + dt
+    if len(t) > 2 and abs(p[-1] - p[0]) <= 1e-9 * max(1.0, abs(p[0])) and \
+            abs((t[-1] - t[0]) - (len(t) - 1) * dt) < 1e-9 * period:
+        t, p, period = t[:-1], p[:-1], t[-1] - t[0]
+    n = len(p)
+    slope = (np.roll(p, -1) - p) / dt
+    k = int(np.argmax(slope))
+    window = (k - np.arange(n // 2)) % n
+    p_min = float(p[window].min())
+    t_mid, p_mid = t[k] + dt / 2, (p[k] + p[(k + 1) % n]) / 2
+    return float((t_mid - (p_mid - p_min) / slope[k] - t[0]) % period + t[0])
+
+
+def transit_time(time: Any, proximal: Any, distal: Any) -> float:
+    """Foot-to-foot transit time [s] from ``proximal`` to ``distal`` (one periodic cycle each),
+    in [0, T)."""
+    t = np.asarray(time, float)
+    period = t[-1] - t[0] if len(t) > 2 else t[1] - t[0]
+    return float((foot_time(t, distal) - foot_time(t, proximal)) % period)
+
+
+def _site(result: Any, seg: int, frac: float) -> tuple[np.ndarray, float]:
+    """Pressure at a measurement site and its distance [m] from the segment's inlet: the inlet
+    or outlet pressure, or (mid-vessel) the inlet pressure of the segment that starts nearest
+    to frac x length (needs segment output)."""
+    g = _base()[0][seg - 1]
+    r = result.vessel(g["name"])
+    if frac <= 0 or frac >= 1 or not result.has_segments:
+        if 0 < frac < 1:
+            raise ModelError(f"subject_summary: the site at {frac:g} of '{g['name']}' needs the "
+                             f"segment output (segments=True)")
+        return (r.pressure_out, g["length"]) if frac >= 1 else (r.pressure_in, 0.0)
+    pos = np.asarray(r.segment_position)
+    starts = pos - pos[0]                 # uniform segments: start = midpoint - dx/2
+    j = int(np.argmin(np.abs(starts - frac * g["length"])))
+    return r.segment_pressure_in[:, j], float(starts[j])
+
+
+def _path_length(segments: Sequence[int]) -> float:
+    return sum(_base()[0][s - 1]["length"] for s in segments)
+
+
+def summary_vessels() -> list[str]:
+    """Names of the vessels :func:`subject_summary` reads (sites and the ICA)."""
+    geo = _base()[0]
+    return [geo[s - 1]["name"] for s in sorted({s for s, _f in pwdb.SITES.values()}
+                                                | {pwdb.ICA_SEGMENT})]
+
+
+def subject_summary(result: Any) -> dict[str, float]:
+    """Per-subject summary of a ``pwdb-116`` result (last cycle): ``<site>_sbp``, ``_dbp``,
+    ``_map`` [mmHg] at the aortic root, carotid (mid left common carotid), brachial (end of
+    the left brachial), radial (mid left radial) and femoral (mid left femoral) sites;
+    ``cf_pwv`` [m/s] = carotid-to-femoral path length / foot-to-foot transit time
+    (:func:`foot_time`, intersecting tangents), the path along PWDB's aorta-femoral and
+    aorta-carotid segments; ``ica_po2`` [mmHg], the cycle-mean PO2 at the left internal carotid
+    outlet, when the result has oxygen. The callable ``simulate_ensemble(..., output=...)``
+    takes."""
+    out: dict[str, float] = {}
+    waves = {}
+    for name, (seg, frac) in pwdb.SITES.items():
+        p, x = _site(result, seg, frac)
+        waves[name] = (p, x)
+        cyc = np.asarray(p[:-1], float) / pwdb.MMHG     # last cycle, t = T dropped
+        out[f"{name}_sbp"] = float(cyc.max())
+        out[f"{name}_dbp"] = float(cyc.min())
+        out[f"{name}_map"] = float(cyc.mean())
+    (pc, xc), (pf, xf) = waves["carotid"], waves["femoral"]
+    dist = (_path_length(pwdb.AORTA_FEMORAL) + xf) - (_path_length(pwdb.AORTA_CAROTID) + xc)
+    out["cf_pwv"] = dist / transit_time(result.time, pc, pf)
+    if getattr(result, "oxygen", None):
+        ica = _base()[0][pwdb.ICA_SEGMENT - 1]["name"]
+        out["ica_po2"] = float(np.mean(result.vessel(ica).po2_out[:-1]))
+    return out

@@ -12,7 +12,8 @@ Sources, each value's provenance in ``docs/populations.md``:
   with wave speed c^2 = (2/3) (Eh/r0) / rho, which oxyline's thin-wall compliance with
   Poisson ratio 0.5 reproduces exactly: c^2 = Eh / (2 rho r (1 - nu^2));
 * 16 vascular beds (R, C) shared among their terminal segments by outlet area, R1 = the
-  terminal segment's characteristic impedance, outflow pressure 33.2 mmHg;
+  terminal segment's characteristic impedance, R2 = the bed's share x one factor calibrated to
+  the mean aortic root pressure, outflow pressure 33.2 mmHg;
 * age-specific means and SDs: the literature data and fits of PWDB's
   ``calculate_pwdb_input_parameters.m`` (MIT), recomputed here (``docs/populations.md``).
 
@@ -49,7 +50,7 @@ AORTA_FEMORAL = (1, 2, 14, 18, 27, 28, 35, 37, 39, 41, 42, 44)
 AORTA_CAROTID = (1, 2)
 CAROTID_SEGMENT, FEMORAL_SEGMENT = 15, 46
 #: measurement sites of the summary: name -> (segment, fraction of its length)
-SITES = {"aortic_root": (1, 0.0), "carotid": (15, 0.5), "brachial": (21, 0.5),
+SITES = {"aortic_root": (1, 0.0), "carotid": (15, 0.5), "brachial": (21, 1.0),
          "radial": (22, 1.0), "femoral": (46, 0.5)}
 ICA_SEGMENT = 16              # left internal carotid: its outlet is the "ICA outlet"
 
@@ -245,13 +246,13 @@ def check_terminals(geo: list[dict[str, Any]]) -> None:
 def windkessels(geo: list[dict[str, Any]], k3_cgs: float, pvc: float = 1.0
                 ) -> dict[int, dict[str, float]]:
     """PWDB's terminal Windkessels before calibration: for each terminal segment R1 = Z =
-    rho c(r_out) / (pi r_out^2), R_total = Z + R_bed / area share, C = pvc C_bed x area share.
-    Returns segment -> {z, r_total, capacitance}."""
+    rho c(r_out) / (pi r_out^2), the bed's resistance share R_bed / (area share), C = pvc C_bed x
+    area share. Returns segment -> {z, r_bed, capacitance}."""
     out = {}
     for s, (_bed, share, r_bed, c_bed) in _outlets(geo).items():
         r = geo[s - 1]["radius_out"]
         z = RHO * float(wave_speed(r, k3_cgs)) / (math.pi * r * r)
-        out[s] = {"z": z, "r_total": z + r_bed / share, "capacitance": pvc * c_bed * share}
+        out[s] = {"z": z, "r_bed": r_bed / share, "capacitance": pvc * c_bed * share}
     return out
 
 
@@ -263,41 +264,73 @@ def poiseuille_resistance(length: float, r_in: float, r_out: float, mu: float = 
     return 8 * mu / (math.pi * 3 * k) * (r_in ** -3 - r_out ** -3)
 
 
+@lru_cache(maxsize=256)
+def _ports(key: tuple[tuple[float, ...], ...], terminals: tuple[int, ...], mu: float
+           ) -> tuple[np.ndarray, dict[int, int]]:
+    """Conductance matrix of the vessels (Poiseuille resistors) reduced by Schur complement
+    onto the ports: node 1 (the inlet) and the terminal nodes. Reducing the 109-node matrix
+    to 47 ports once per geometry keeps every later solve small (below OpenBLAS's threading
+    threshold, which makes a 109 x 109 solve 40x slower on a loaded machine)."""
+    nodes = sorted({int(k[0]) for k in key} | {int(k[1]) for k in key})
+    idx = {n: i for i, n in enumerate(nodes)}
+    G = np.zeros((len(nodes), len(nodes)))
+    for a, b, length, r_in, r_out in key:
+        c = 1.0 / poiseuille_resistance(length, r_in, r_out, mu)
+        i, j = idx[int(a)], idx[int(b)]
+        G[i, i] += c
+        G[j, j] += c
+        G[i, j] -= c
+        G[j, i] -= c
+    ports = [1, *terminals]
+    p = [idx[n] for n in ports]
+    inner = [i for i in range(len(nodes)) if i not in set(p)]
+    S = G[np.ix_(p, p)] - G[np.ix_(p, inner)] @ np.linalg.solve(G[np.ix_(inner, inner)],
+                                                                G[np.ix_(inner, p)])
+    return S, {n: i for i, n in enumerate(ports)}
+
+
+def _port_system(geo: list[dict[str, Any]], segs: Sequence[int], mu: float
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    key = tuple((g["inlet"], g["outlet"], g["length"], g["radius_in"], g["radius_out"])
+                for g in geo)
+    outlets = [geo[s - 1]["outlet"] for s in segs]
+    S, port = _ports(key, tuple(sorted(outlets)), mu)
+    return S, np.array([port[n] for n in outlets])
+
+
+def _root_pressure(S: np.ndarray, j: np.ndarray, r: np.ndarray, q_mean: float) -> float:
+    A = S.copy()
+    A[j, j] += 1.0 / r
+    b = np.zeros(len(S))
+    b[0] = q_mean
+    b[j] += P_OUT / r
+    return float(np.linalg.solve(A, b)[0])
+
+
 def root_mean_pressure(geo: list[dict[str, Any]], r_total: dict[int, float], q_mean: float,
                        mu: float = MU) -> float:
     """Mean pressure [Pa] at the aortic root (node 1) of the steady resistive circuit: vessels
-    as Poiseuille resistors, terminal i as r_total[i] to P_OUT, inflow q_mean (a dense nodal
-    solve; the cycle mean of the linear circuit)."""
-    nodes = sorted({g["inlet"] for g in geo} | {g["outlet"] for g in geo})
-    idx = {n: i for i, n in enumerate(nodes)}
-    n = len(nodes)
-    G = np.zeros((n, n))
-    b = np.zeros(n)
-    for g in geo:
-        cond = 1.0 / poiseuille_resistance(g["length"], g["radius_in"], g["radius_out"], mu)
-        i, j = idx[g["inlet"]], idx[g["outlet"]]
-        G[i, i] += cond
-        G[j, j] += cond
-        G[i, j] -= cond
-        G[j, i] -= cond
-    for s, r in r_total.items():
-        j = idx[geo[s - 1]["outlet"]]
-        G[j, j] += 1.0 / r
-        b[j] += P_OUT / r
-    b[idx[1]] += q_mean
-    return float(np.linalg.solve(G, b)[idx[1]])
+    as Poiseuille resistors, terminal segment i as r_total[i] to P_OUT, inflow q_mean (the
+    cycle mean of the linear circuit)."""
+    segs = sorted(r_total)
+    S, j = _port_system(geo, segs, mu)
+    return _root_pressure(S, j, np.array([r_total[s] for s in segs]), q_mean)
 
 
-def calibrate_scale(geo: list[dict[str, Any]], r_total: dict[int, float], q_mean: float,
-                    target: float) -> float:
-    """The uniform factor s on every terminal R_total that makes the steady (= cycle-mean)
-    aortic root pressure equal ``target`` [Pa] at inflow ``q_mean``; secant iteration on
-    P(s), which is increasing and nearly linear in s, to 1e-10 Pa relative."""
+def calibrate_scale(geo: list[dict[str, Any]], fixed: dict[int, float], scaled: dict[int, float],
+                    q_mean: float, target: float) -> float:
+    """The factor s such that terminal resistances fixed[i] + s scaled[i] make the steady
+    (= cycle-mean) aortic root pressure equal ``target`` [Pa] at inflow ``q_mean``: secant
+    iteration on P(s), increasing and nearly linear, to 1e-10 relative."""
+    segs = sorted(scaled)
+    S, j = _port_system(geo, segs, MU)
+    r0 = np.array([fixed[k] for k in segs])
+    r1 = np.array([scaled[k] for k in segs])
+
     def f(s: float) -> float:
-        return root_mean_pressure(geo, {k: s * v for k, v in r_total.items()}, q_mean) - target
+        return _root_pressure(S, j, r0 + s * r1, q_mean) - target
 
-    r_par = 1.0 / sum(1.0 / v for v in r_total.values())
-    s0 = (target - P_OUT) / q_mean / r_par          # PWDB's choice: network resistance ignored
+    s0 = (target - P_OUT) / q_mean * float(np.sum(1.0 / r1))   # PWDB: arteries ignored
     s1, f0 = 0.95 * s0, f(s0)
     f1 = f(s1)
     for _ in range(50):
@@ -308,8 +341,8 @@ def calibrate_scale(geo: list[dict[str, Any]], r_total: dict[int, float], q_mean
     else:
         raise ModelError(f"terminal resistance calibration to {target:g} Pa did not converge")
     if s1 <= 0:
-        raise ModelError(f"mean pressure {target / MMHG:g} mmHg is below the outflow pressure "
-                         f"plus the arterial pressure drop")
+        raise ModelError(f"mean pressure {target / MMHG:g} mmHg is out of reach: below the "
+                         f"outflow pressure plus the drop across the arteries and R1")
     return s1
 
 
@@ -360,16 +393,14 @@ def vessel_properties(base: list[dict[str, Any]], geo: list[dict[str, Any]], k3_
 def outlet_conditions(geo: list[dict[str, Any]], k3_cgs: float, pvc: float, q_mean: float,
                       mbp: float) -> tuple[dict[str, dict[str, Any]], float]:
     """RCR outlets calibrated to the mean aortic root pressure ``mbp`` [Pa] at inflow
-    ``q_mean``: R1 = Z, R2 = s R_total - Z, C (see :func:`windkessels`). Returns
-    (node -> condition, s)."""
+    ``q_mean``: R1 = Z, R2 = s x the bed's resistance share, C (see :func:`windkessels`; PWDB
+    scales Z + share, which can make R2 < 0 at small s). Returns (node -> condition, s)."""
     wk = windkessels(geo, k3_cgs, pvc)
-    s = calibrate_scale(geo, {k: v["r_total"] for k, v in wk.items()}, q_mean, mbp)
+    s = calibrate_scale(geo, {k: v["z"] for k, v in wk.items()},
+                        {k: v["r_bed"] for k, v in wk.items()}, q_mean, mbp)
     out = {}
     for seg, w in sorted(wk.items()):
-        r2 = s * w["r_total"] - w["z"]
-        if r2 <= 0:
-            raise ModelError(f"segment {seg}: distal resistance {r2:g} <= 0 after calibration")
         out[node(geo[seg - 1]["outlet"])] = {
             "type": "rcr", "proximal_resistance": w["z"], "capacitance": w["capacitance"],
-            "distal_resistance": r2, "pressure": P_OUT}
+            "distal_resistance": s * w["r_bed"], "pressure": P_OUT}
     return out, s
