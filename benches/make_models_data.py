@@ -181,7 +181,7 @@ def pwdb_116(geometry: Path | None = None) -> None:
     import numpy as np
 
     import oxyline
-    from oxyline import pwdb, populations
+    from oxyline import populations, pwdb
 
     if geometry is None:
         ap = argparse.ArgumentParser()
@@ -195,9 +195,9 @@ def pwdb_116(geometry: Path | None = None) -> None:
     d = populations.model_dict(geo, row)
     res = oxyline.simulate(d)
     p = res.vessel(geo[0]["name"]).pressure_in[:-1] / pwdb.MMHG
-    mmhg = [f"#   aortic root: mean {p.mean():.2f} mmHg (target {row['mbp']:.2f}), systolic/diastolic "
+    mmhg = [(f"#   aortic root: mean {p.mean():.2f} mmHg (target {row['mbp']:.2f}), systolic/diastolic "
             f"{p.max():.1f}/{p.min():.1f} mmHg, {res.settings['cycles_run']} cycles to "
-            f"periodicity {res.settings['periodic_error']:.1e}"]
+            f"periodicity {res.settings['periodic_error']:.1e}")]
     header = ["# oxyline built-in model 'pwdb-116': the Pulse Wave DataBase 116-artery network",
               "# (Charlton et al. 2019, Am J Physiol Heart Circ Physiol 317:H1062), baseline subject.",
               "# Geometry: peterhcharlton/pwdb commit 5a0d472, pwdb_v0.1/Input Data/116_artery_model.txt",

@@ -120,7 +120,7 @@ def age_statistics(age: float) -> dict[str, tuple[float, float]]:
     yashin = 66 + 12 * (np.array([80, 95, 97.5, 96, 94, 93, 90, 84, 76, 66, 57, 51, 51]) - 5) / 94
     mce_ages = np.arange(15.5, 86, 10)                                  # McEniery 2005, men
     length = (90, 100, 100, 108, 118, 128)                              # Hickson 2010 [mm]
-    pvc = lambda a: 0.113 - 0.001 * a                                   # noqa: E731 McVeigh 1999
+    pvc = (0.113 - 0.001 * age) / (0.113 - 0.001 * BASELINE_AGE)       # McVeigh 1999
     dia = _dia_percent(age)
     return {
         "hr": (float(pchip(np.arange(32.5, 93, 5), yashin, age)),
@@ -131,7 +131,7 @@ def age_statistics(age: float) -> dict[str, tuple[float, float]]:
         "dia": (dia, _DIA_SD_RATIO * dia),
         "len": (_poly1(_HICKSON_AGES, length, age) / _poly1(_HICKSON_AGES, length, BASELINE_AGE),
                 0.0),
-        "pvc": (pvc(age) / pvc(BASELINE_AGE), 0.0),
+        "pvc": (pvc, 0.0),
     }
 
 
