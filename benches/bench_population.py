@@ -1,0 +1,105 @@
+"""The 4,374-subject PWDB-like population on pwdb-116, each subject run to periodicity (1e-4)
+with the per-subject summary as output. Target (issue 10): < 10 min on the 2-core machine.
+
+    python benches/bench_population.py              # simulate_ensemble if oxyline has it
+    python benches/bench_population.py --serial     # loop simulate() over a subset, extrapolate
+    python benches/bench_population.py --serial --subset 60
+
+The serial path times ``oxyline.simulate(patched model) + subject_summary`` for ``--subset``
+subjects spread evenly over the population (every age and level), recording only the summary's
+vessels and variables, and projects the total for 4,374 subjects on 1 core and, assuming
+perfect scaling, on 2. Prints the load average: the machine is shared, report ratios.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import time
+
+import numpy as np
+
+import oxyline
+from oxyline import populations as P
+
+TARGET_S = 600.0
+VARIABLES = ["pressure_in", "pressure_out", "segment_pressure_in"]
+
+
+def serial(patches: list[dict], table, subset: int, max_length: float | None
+           ) -> dict[str, float]:
+    picks = np.linspace(0, len(patches) - 1, subset).round().astype(int)
+    base = oxyline.models.load_dict(P.MODEL)
+    if max_length:
+        base["segmentation"] = {"max_length": max_length}
+    times, cycles, sims, cpu = [], [], [], []
+    for i in picks:
+        t0, c0 = time.perf_counter(), time.process_time()
+        model = P.patched(base, patches[i])
+        t1 = time.perf_counter()
+        res = oxyline.simulate(model, until_periodic=1e-4, vessels=P.summary_vessels(),
+                               variables=VARIABLES, progress=False)
+        s = P.subject_summary(res)
+        t2, c2 = time.perf_counter(), time.process_time()
+        times.append(t2 - t0)
+        sims.append(t2 - t1)
+        cpu.append(c2 - c0)
+        cycles.append(res.settings["cycles_run"])
+        row = table.iloc[i]
+        print(f"  subject {i:4d} age {row.age:2.0f} HR {row.hr:5.1f} SV {row.sv:5.1f} "
+              f"MBP {row.mbp:5.1f}: {t2 - t0:6.3f} s ({c2 - c0:5.3f} CPU), "
+              f"{res.settings['cycles_run']:2d} cycles, "
+              f"aortic {s['aortic_root_sbp']:5.1f}/{s['aortic_root_dbp']:5.1f} mmHg, "
+              f"cf-PWV {s['cf_pwv']:5.2f} m/s (target {row.pwv:5.2f})")
+    # the machine is shared: the process CPU time is the cost of a subject, the wall time
+    # includes waiting for the cores
+    per = statistics.mean(cpu)
+    return {"per_subject_s": per, "wall_s": statistics.mean(times),
+            "median_s": statistics.median(cpu), "simulate_s": statistics.mean(sims),
+            "cycles": statistics.mean(cycles),
+            "projected_1core_s": per * len(patches), "projected_2core_s": per * len(patches) / 2}
+
+
+def ensemble(patches: list[dict], table) -> dict[str, float]:
+    t0 = time.perf_counter()
+    ds = oxyline.simulate_ensemble(P.MODEL, patches, output=P.subject_summary,
+                                   until_periodic=1e-4, progress=False)
+    total = time.perf_counter() - t0
+    failed = int((ds["status"] != 0).sum()) if "status" in ds else 0
+    return {"total_s": total, "per_subject_s": total / len(patches), "failed": failed}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--serial", action="store_true", help="loop simulate() over a subset")
+    ap.add_argument("--subset", type=int, default=36)
+    ap.add_argument("--max-length", type=float, default=None,
+                    help="override the built-in's segmentation max_length [m] (default 0.02)")
+    args = ap.parse_args()
+    print(f"load average {os.getloadavg()}, {os.cpu_count()} cores")
+    t0 = time.perf_counter()
+    table = P.parameters()
+    patches = P.pwdb_like()
+    gen = time.perf_counter() - t0
+    print(f"generated {len(patches)} subjects in {gen:.1f} s")
+    if args.serial or not hasattr(oxyline, "simulate_ensemble"):
+        out = serial(patches, table, args.subset, args.max_length)
+        print(f"\nserial, {args.subset} subjects: {out['per_subject_s']:.3f} s CPU per subject "
+              f"(median {out['median_s']:.3f}; wall {out['wall_s']:.3f}, of which simulate "
+              f"{out['simulate_s']:.3f}), "
+              f"{out['cycles']:.1f} cycles on average")
+        print(f"projected for {len(patches)}: {out['projected_1core_s'] / 60:.1f} min on 1 core, "
+              f"{out['projected_2core_s'] / 60:.1f} min on 2 (ideal scaling); target "
+              f"{TARGET_S / 60:.0f} min: {'met' if out['projected_2core_s'] < TARGET_S else 'NOT met'}"
+              f" (+ {gen:.0f} s generation)")
+    else:
+        out = ensemble(patches, table)
+        print(f"\nsimulate_ensemble: {out['total_s']:.1f} s for {len(patches)} "
+              f"({out['per_subject_s'] * 1e3:.1f} ms each), {out['failed']} failed; target "
+              f"{TARGET_S:.0f} s: {'met' if out['total_s'] < TARGET_S else 'NOT met'}")
+    print(f"load average {os.getloadavg()}")
+
+
+if __name__ == "__main__":
+    main()
