@@ -189,6 +189,15 @@ def test_pwdb_116_pressures_are_physiological(run) -> None:
     assert "ica_po2" not in s                                   # the model has no oxygen
 
 
+def test_ica_po2_with_an_oxygen_patch() -> None:
+    res = oxyline.simulate(P.patched("pwdb-116", {"oxygen": P.OXYGEN}), cycles=3,
+                           until_periodic=None)
+    s = P.subject_summary(res)
+    # dissolved O2 only, wall at 55.5 mmHg: the ICA outlet lies between the wall and the inlet
+    # (85.3 mmHg) and close to the inlet (mm-scale vessels, ms transit): 80-85.3 mmHg
+    assert 80 < s["ica_po2"] < 85.3
+
+
 def test_cf_pwv_against_moens_korteweg_of_the_model_file(run, baseline) -> None:
     # independent: the local Moens-Korteweg speed of each vessel's stored wall, c(x) =
     # sqrt(E h / (2 rho r(x) (1 - nu^2))) on its linear taper r(x), integrated as the transit
@@ -256,10 +265,13 @@ def test_subject_summary_on_a_synthetic_result(baseline) -> None:
         n = 4
         pos = (np.arange(n) + 0.5) * seg["length"] / n
         return SimpleNamespace(pressure_in=p, pressure_out=p + 5 * MMHG, segment_position=pos,
-                               segment_pressure_in=np.column_stack([p] * n),
-                               po2_out=np.full_like(t, 93.5))
+                               segment_pressure_in=np.column_stack([p] * n))
 
-    res = SimpleNamespace(time=t, has_segments=True, oxygen="O2", vessel=vessel)
+    names = [g["name"] for g in geo]
+    po2 = np.full((len(t), len(names)), 90.0)
+    po2[:, names.index("left_internal_carotid_artery")] = 93.5
+    res = SimpleNamespace(time=t, has_segments=True, oxygen="O2", vessel=vessel, vessels=names,
+                          po2_out=po2)
     s = P.subject_summary(res)
     cyc = _wave(t[:-1], 0.1, period)
     assert s["aortic_root_sbp"] == pytest.approx(cyc.max(), rel=1e-12)

@@ -14,10 +14,11 @@ Each subject is a patch in the native model format for ``oxyline.simulate_ensemb
 
 >>> import oxyline
 >>> from oxyline import populations
->>> patches = populations.pwdb_like(ages=(25,), levels=3)
->>> len(patches)
-729
->>> res = oxyline.simulate(populations.patched("pwdb-116", patches[0]), cycles=2)
+>>> table = populations.parameters()            # 4,374 subjects; pwdb_like() gives the patches
+>>> len(table)
+4374
+>>> patch = populations.subject_patch(table.loc[0])
+>>> res = oxyline.simulate(populations.patched("pwdb-116", patch), cycles=2)
 >>> summary = populations.subject_summary(res)
 >>> 60 < summary["aortic_root_dbp"] < summary["aortic_root_sbp"] < 160
 True
@@ -347,6 +348,13 @@ def patched(model: Any, patch: Mapping[str, Any]) -> dict[str, Any]:
     return d
 
 
+#: an oxygen section for ``patched(model, {"oxygen": OXYGEN})`` (the transmission-line paper's
+#: carotid set-up: dissolved O2, Leveque wall at 55.5 mmHg, inlet 85.3 mmHg); makes
+#: :func:`subject_summary` report ``ica_po2`` (about 3x the CPU time of the flow-only run)
+OXYGEN = {"inlet": {"po2": 85.3}, "hemoglobin": "none", "solubility": 1.40e-3,
+          "diffusivity": 1.2e-9, "wall": {"model": "leveque", "po2": 55.5, "shear": "cycle-mean"},
+          "reference_pressure": 80.0}
+
 #: the built-in's spatial and time resolution and run settings (docs/populations.md)
 MAX_SEGMENT_LENGTH = 0.02
 SIMULATION = {"until_periodic": 1e-4, "max_cycles": 60, "method": "generalized-alpha",
@@ -404,14 +412,12 @@ def foot_time(time: Any, pressure: Any) -> float:
     """Foot of a periodic pressure wave by the intersecting-tangent method: the intersection of
     the tangent at the steepest upstroke (largest forward difference, taken at the midpoint of
     its two samples) with the horizontal through the diastolic minimum (the lowest sample in
-    the half period before the upstroke). ``time``/``pressure``: one cycle, uniform samples; a
-    last sample that repeats the first (t = T) is dropped. Returns the foot time in [0, T)."""
-    t, p = np.asarray(time, float), np.asarray(pressure, float)
+    the half period before the upstroke). ``time``/``pressure``: one cycle of uniform samples
+    with both ends (t = 0 and t = T, as a result's last cycle; the t = T sample is dropped and
+    the cycle is treated as periodic). Returns the foot time in [0, T)."""
+    t, p = np.asarray(time, float)[:-1], np.asarray(pressure, float)[:-1]
     dt = t[1] - t[0]
-    period = t[-1] - t[0] + dt
-    if len(t) > 2 and abs(p[-1] - p[0]) <= 1e-9 * max(1.0, abs(p[0])) and \
-            abs((t[-1] - t[0]) - (len(t) - 1) * dt) < 1e-9 * period:
-        t, p, period = t[:-1], p[:-1], t[-1] - t[0]
+    period = len(t) * dt
     n = len(p)
     slope = (np.roll(p, -1) - p) / dt
     k = int(np.argmax(slope))
@@ -425,8 +431,7 @@ def transit_time(time: Any, proximal: Any, distal: Any) -> float:
     """Foot-to-foot transit time [s] from ``proximal`` to ``distal`` (one periodic cycle each),
     in [0, T)."""
     t = np.asarray(time, float)
-    period = t[-1] - t[0] if len(t) > 2 else t[1] - t[0]
-    return float((foot_time(t, distal) - foot_time(t, proximal)) % period)
+    return float((foot_time(t, distal) - foot_time(t, proximal)) % (t[-1] - t[0]))
 
 
 def _site(result: Any, seg: int, frac: float) -> tuple[np.ndarray, float]:
@@ -477,8 +482,9 @@ def subject_summary(result: Any) -> dict[str, float]:
         out[f"{name}_map"] = float(cyc.mean())
     (pc, xc), (pf, xf) = waves["carotid"], waves["femoral"]
     dist = (_path_length(pwdb.AORTA_FEMORAL) + xf) - (_path_length(pwdb.AORTA_CAROTID) + xc)
-    out["cf_pwv"] = dist / transit_time(result.time, pc, pf)
+    tt = transit_time(result.time, pc, pf)
+    out["cf_pwv"] = dist / tt if tt > 0 else math.nan   # feet at the same sample: no estimate
     if getattr(result, "oxygen", None):
         ica = _base()[0][pwdb.ICA_SEGMENT - 1]["name"]
-        out["ica_po2"] = float(np.mean(result.vessel(ica).po2_out[:-1]))
+        out["ica_po2"] = float(np.mean(result.po2_out[:-1, list(result.vessels).index(ica)]))
     return out
