@@ -415,15 +415,18 @@ def foot_time(time: Any, pressure: Any) -> float:
     the half period before the upstroke). ``time``/``pressure``: one cycle of uniform samples
     with both ends (t = 0 and t = T, as a result's last cycle; the t = T sample is dropped and
     the cycle is treated as periodic). Returns the foot time in [0, T)."""
-    t, p = np.asarray(time, float)[:-1], np.asarray(pressure, float)[:-1]
+    t_all, p_all = np.asarray(time, float), np.asarray(pressure, float)
+    t, p = t_all[:-1], p_all[:-1]
     dt = t[1] - t[0]
     period = len(t) * dt
     n = len(p)
-    slope = (np.roll(p, -1) - p) / dt
+    # differences to the genuine next sample (the t = T one for the last): no artificial jump
+    # at the wrap when the cycle is not yet periodic
+    slope = np.diff(p_all) / dt
     k = int(np.argmax(slope))
     window = (k - np.arange(n // 2)) % n
     p_min = float(p[window].min())
-    t_mid, p_mid = t[k] + dt / 2, (p[k] + p[(k + 1) % n]) / 2
+    t_mid, p_mid = t[k] + dt / 2, (p_all[k] + p_all[k + 1]) / 2
     return float((t_mid - (p_mid - p_min) / slope[k] - t[0]) % period + t[0])
 
 
