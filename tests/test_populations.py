@@ -134,6 +134,7 @@ def test_patches_hit_each_subjects_mean_pressure_in_the_core(table, baseline) ->
 
 
 def test_patch_frame_and_errors() -> None:
+    assert P.pwdb_like(ages=(75,), levels=1, oxygen=True)[0]["oxygen"] == P.OXYGEN
     frame = P.pwdb_like(ages=(75,), levels=1, frame=True)
     assert frame.shape[0] == 1 and frame.index.names[0] == "age"
     assert "vessels.ascending_aorta.youngs_modulus" in frame.columns

@@ -48,6 +48,13 @@ LVET_MEAN, LVET_SD = 282.0, 282.0 * 24.43 / 295.29   # ms: Mynard 2015 mean, Ger
 T_ONE_SD_19 = 1.0270403026558605
 Z90, Z80 = 1.6448536269514722, 1.2815515655446004   # norminv(0.95), norminv(0.9)
 
+#: an oxygen section for ``patched(model, {"oxygen": OXYGEN})`` (the transmission-line paper's
+#: carotid set-up: dissolved O2, Leveque wall at 55.5 mmHg, inlet 85.3 mmHg); makes
+#: :func:`subject_summary` report ``ica_po2`` (about 3x the CPU time of the flow-only run)
+OXYGEN = {"inlet": {"po2": 85.3}, "hemoglobin": "none", "solubility": 1.40e-3,
+          "diffusivity": 1.2e-9, "wall": {"model": "leveque", "po2": 55.5, "shear": "cycle-mean"},
+          "reference_pressure": 80.0}
+
 
 # ------------------------------------------------------------- fits of the literature data
 
@@ -253,12 +260,11 @@ def parameters(ages: Sequence[float] = (25, 35, 45, 55, 65, 75), levels: int = 3
 
 
 @lru_cache(maxsize=1)
-def _base() -> tuple[list[dict[str, Any]], dict[str, Any]]:
+def _base() -> tuple[list[dict[str, Any]]]:
+    """The built-in's segment table (cached; callers copy before changing it)."""
     from oxyline import models
 
-    d = models.load_dict(MODEL)
-    geo = pwdb.geometry_of(d)
-    return geo, d
+    return (pwdb.geometry_of(models.load_dict(MODEL)),)
 
 
 @lru_cache(maxsize=4096)
@@ -300,20 +306,27 @@ def subject_patch(row: Mapping[str, float], base: list[dict[str, Any]] | None = 
 
 
 def pwdb_like(ages: Sequence[float] = (25, 35, 45, 55, 65, 75), levels: int = 3, *,
-              frame: bool = False) -> Any:
+              frame: bool = False, oxygen: bool = False) -> Any:
     """PWDB-like virtual subjects of ``pwdb-116``: a list of native-format patches (one per
     row of :func:`parameters`, same order), or with ``frame=True`` a pandas DataFrame with one
     dotted-path column per patched value (``vessels.<name>.youngs_modulus``,
     ``boundary_conditions.<node>.distal_resistance``, ...; the inflow columns hold the
-    tables) indexed by the subject's ``age`` and SD levels."""
+    tables) indexed by the subject's ``age`` and SD levels. ``oxygen=True`` adds the
+    :data:`OXYGEN` section to every patch (``oxygen.<key>`` columns in the frame)."""
     table = parameters(ages, levels)
     patches = [subject_patch(r) for r in table.to_dict("records")]
+    if oxygen:
+        for p in patches:
+            p["oxygen"] = copy.deepcopy(OXYGEN)
     if not frame:
         return patches
     import pandas as pd
 
     flat = [{f"{grp}.{name}.{k}": v for grp in ("vessels", "boundary_conditions")
              for name, props in p[grp].items() for k, v in props.items()} for p in patches]
+    if oxygen:
+        for f in flat:
+            f.update({f"oxygen.{k}": v for k, v in OXYGEN.items()})
     index = pd.MultiIndex.from_frame(table[["age", *[f"{p}_sd" for p in VARIED]]])
     return pd.DataFrame(flat, index=index)
 
@@ -347,13 +360,6 @@ def patched(model: Any, patch: Mapping[str, Any]) -> dict[str, Any]:
             d.setdefault(key, {}).update(patch[key])
     return d
 
-
-#: an oxygen section for ``patched(model, {"oxygen": OXYGEN})`` (the transmission-line paper's
-#: carotid set-up: dissolved O2, Leveque wall at 55.5 mmHg, inlet 85.3 mmHg); makes
-#: :func:`subject_summary` report ``ica_po2`` (about 3x the CPU time of the flow-only run)
-OXYGEN = {"inlet": {"po2": 85.3}, "hemoglobin": "none", "solubility": 1.40e-3,
-          "diffusivity": 1.2e-9, "wall": {"model": "leveque", "po2": 55.5, "shear": "cycle-mean"},
-          "reference_pressure": 80.0}
 
 #: the built-in's spatial and time resolution and run settings (docs/populations.md)
 MAX_SEGMENT_LENGTH = 0.02
