@@ -133,6 +133,22 @@ def test_patches_hit_each_subjects_mean_pressure_in_the_core(table, baseline) ->
             assert e > 0 and math.isfinite(e)
 
 
+def test_built_in_file_is_the_generators_baseline_subject(baseline) -> None:
+    # the shipped YAML against the code that wrote it: the baseline subject's patch merged into
+    # the file changes nothing (to YAML's exact float round trip), so a change of the formulas
+    # without regenerating pwdb-116.yaml (benches/make_models_data.py) fails here
+    merged = P.patched(baseline, P.subject_patch(P.baseline_row()))
+    for a, b in zip(baseline["vessels"], merged["vessels"], strict=True):
+        for k in ("youngs_modulus", "radius_in", "radius_out", "length"):
+            assert b[k] == pytest.approx(a[k], rel=1e-12), (a["name"], k)
+    for n, bc in baseline["boundary_conditions"].items():
+        for k, v in bc.items():
+            if isinstance(v, (int, float)):
+                assert merged["boundary_conditions"][n][k] == pytest.approx(v, rel=1e-12), (n, k)
+            elif isinstance(v, list):
+                assert np.allclose(merged["boundary_conditions"][n][k], v, rtol=1e-12), (n, k)
+
+
 def test_patch_frame_and_errors() -> None:
     assert P.pwdb_like(ages=(75,), levels=1, oxygen=True)[0]["oxygen"] == P.OXYGEN
     frame = P.pwdb_like(ages=(75,), levels=1, frame=True)
