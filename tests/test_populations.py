@@ -159,6 +159,8 @@ def test_patch_frame_and_errors() -> None:
                for c in frame.columns)
     with pytest.raises(oxyline.ModelError, match="no_such_vessel"):
         P.patched("pwdb-116", {"vessels": {"no_such_vessel": {"radius": 1}}})
+    with pytest.raises(oxyline.ModelError, match="scale"):
+        P.patched("pwdb-116", {"scale": {"resistance": 1.2}})
     with pytest.raises(oxyline.ModelError, match="n999"):
         P.patched("pwdb-116", {"boundary_conditions": {"n999": {"resistance": 1}}})
 

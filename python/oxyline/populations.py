@@ -331,6 +331,14 @@ def pwdb_like(ages: Sequence[float] = (25, 35, 45, 55, 65, 75), levels: int = 3,
     return pd.DataFrame(flat, index=index)
 
 
+def _merge(target: dict[str, Any], patch: Mapping[str, Any]) -> None:
+    for k, v in patch.items():
+        if isinstance(v, Mapping) and isinstance(target.get(k), dict):
+            _merge(target[k], v)
+        else:
+            target[k] = copy.deepcopy(v)
+
+
 def patched(model: Any, patch: Mapping[str, Any]) -> dict[str, Any]:
     """A native model dict with ``patch`` deep-merged (vessels by name, boundary conditions by
     node; a given waveform replaces the whole table): the serial stand-in for
@@ -339,6 +347,10 @@ def patched(model: Any, patch: Mapping[str, Any]) -> dict[str, Any]:
     from oxyline import models
     from oxyline.model import Model
 
+    unknown = set(patch) - {"vessels", "boundary_conditions", "blood", "oxygen"}
+    if unknown:
+        raise ModelError(f"patch: unsupported section(s) {sorted(unknown)} (this serial "
+                         f"stand-in merges vessels, boundary_conditions, blood, oxygen)")
     d = (model.to_dict() if isinstance(model, Model) else models.load_dict(model)
          if isinstance(model, str) else copy.deepcopy(dict(model)))
     by_name = {v["name"]: v for v in d["vessels"]}
@@ -357,7 +369,7 @@ def patched(model: Any, patch: Mapping[str, Any]) -> dict[str, Any]:
         bcs[n].update(props)
     for key in ("blood", "oxygen"):
         if key in patch:
-            d.setdefault(key, {}).update(patch[key])
+            _merge(d.setdefault(key, {}), patch[key])
     return d
 
 
