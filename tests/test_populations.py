@@ -298,7 +298,7 @@ def test_subject_summary_on_a_synthetic_result(baseline) -> None:
     assert s["aortic_root_sbp"] == pytest.approx(cyc.max(), rel=1e-12)
     assert s["aortic_root_dbp"] == pytest.approx(cyc.min(), rel=1e-12)
     assert s["aortic_root_map"] == pytest.approx(cyc.mean(), rel=1e-12)
-    assert s["radial_sbp"] == pytest.approx(cyc.max() + 5, rel=1e-12)   # site at the outlet
+    assert s["brachial_sbp"] == pytest.approx(cyc.max() + 5, rel=1e-12)  # site at the outlet
     # path: femoral site = start of segment 3 of 4 of the left femoral (x = L/2), carotid
     # likewise; the distance between them along the aorta-femoral path
     lf = sum(geo[k - 1]["length"] for k in pwdb.AORTA_FEMORAL) + geo[45]["length"] / 2

@@ -51,7 +51,7 @@ AORTA_CAROTID = (1, 2)
 CAROTID_SEGMENT, FEMORAL_SEGMENT = 15, 46
 #: measurement sites of the summary: name -> (segment, fraction of its length)
 SITES = {"aortic_root": (1, 0.0), "carotid": (15, 0.5), "brachial": (21, 1.0),
-         "radial": (22, 1.0), "femoral": (46, 0.5)}
+         "radial": (22, 0.5), "femoral": (46, 0.5)}
 ICA_SEGMENT = 16              # left internal carotid: its outlet is the "ICA outlet"
 
 #: PWDB's 16 vascular beds: name, terminal segments, R [mmHg s/mL], C [mL/mmHg]
