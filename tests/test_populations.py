@@ -306,3 +306,19 @@ def test_subject_summary_on_a_synthetic_result(baseline) -> None:
     assert s["cf_pwv"] == pytest.approx((lf - lc) / tau, rel=1e-6)
     assert s["ica_po2"] == pytest.approx(93.5)
     assert sites[46] == 0.5
+
+
+@pytest.mark.slow
+def test_all_4374_patches_are_valid(table) -> None:
+    # ~20 s: every subject's patch, finite and positive, the inflow periods 60/HR
+    patches = P.pwdb_like()
+    assert len(patches) == len(table) == 4374
+    for p, hr in zip(patches, table.hr, strict=True):
+        assert p["boundary_conditions"]["n1"]["time"][-1] == pytest.approx(60 / hr, rel=1e-12)
+        for props in [*p["vessels"].values(), *p["boundary_conditions"].values()]:
+            for v in props.values():
+                vals = v if isinstance(v, list) else [v]
+                assert all(math.isfinite(x) for x in vals)
+        for n, bc in p["boundary_conditions"].items():
+            if n != "n1":
+                assert min(bc.values()) > 0, n
