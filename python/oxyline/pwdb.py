@@ -7,7 +7,7 @@ Sources, each value's provenance in ``docs/populations.md``:
 * geometry (lengths, inlet/outlet radii, connectivity of 116 segments): PWDB's
   ``116_artery_model.txt`` (Mynard & Smolich 2015 values, radii x sqrt(1.5)); it is stored in
   the built-in model file ``models_data/pwdb-116.yaml``, whose vessels are in the source's
-  segment order (vessel i = segment i + 1);
+  segment order (the i-th vessel, counting from 1, is segment i);
 * wall law Eh/r0 = k1 exp(k2 r0) + k3 (Mynard & Smolich 2015 eq. 3; PWDB's k2 = 1.5 x Mynard's)
   with wave speed c^2 = (2/3) (Eh/r0) / rho, which oxyline's thin-wall compliance with
   Poisson ratio 0.5 reproduces exactly: c^2 = Eh / (2 rho r (1 - nu^2));
@@ -39,7 +39,9 @@ MU = 2.5e-3                   # blood viscosity [Pa s] (PWDB)
 P_OUT = 33.2 * MMHG           # Windkessel outflow pressure [Pa] (PWDB, Parazynski 1993)
 K1_CGS, K2_CGS, K3_CGS = 3.0e6, -9 * 1.5, 3.37e5   # wall law [g s^-2 cm^-1, cm^-1, g s^-2 cm^-1]
 POISSON = 0.5                 # makes oxyline's c^2 = Eh/(2 rho r (1-nu^2)) PWDB's (2/3)(Eh/r)/rho
-#: wall thickness h = r (a e^(b r) + c e^(d r)), r in cm (the README of the PWDB network)
+#: wall thickness h = r (a e^(b r) + c e^(d r)), r in cm: not PWDB's (its 1-D model takes Eh),
+#: the law of circulatory_autogen's a..d_vessel (whole-body-140's source); only E h enters the
+#: thin-wall compliance, so h is a labelling choice and E carries the stiffness
 THICKNESS = (0.2802, -5.053, 0.1324, -0.1114)
 #: the segments whose diameter PWDB's "large-artery diameter" scales: mean radius >= this
 LARGE_ARTERY_RADIUS = 0.003462 * math.sqrt(1.5)
@@ -110,7 +112,7 @@ def read_geometry(path: Any) -> list[dict[str, Any]]:
 
 
 def geometry_of(model: dict[str, Any]) -> list[dict[str, Any]]:
-    """The segment table of a ``pwdb-116``-like native dict (vessel i = segment i + 1)."""
+    """The segment table of a ``pwdb-116``-like native dict (the i-th vessel is segment i)."""
     out = []
     for i, v in enumerate(model["vessels"], start=1):
         out.append({"seg": i, "inlet": int(v["from"][1:]), "outlet": int(v["to"][1:]),
