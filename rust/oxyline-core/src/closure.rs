@@ -140,24 +140,10 @@ pub fn relaxation_time(seg: &SegmentWall, d: f64, q_mean: f64) -> f64 {
     delta * delta / d
 }
 
-/// Graetz mixed-cup θ_m(x*) = 8 Σ G_n/λ_n² exp(−2 λ_n² x*), exact for x* ≥ 2e-5 with the
-/// tabulated 260 terms; below, the Lévêque scaling 1 − θ ∝ x*^{2/3} continues it to θ(0) = 1.
+/// Graetz mixed-cup θ_m(x*) (Poiseuille, constant c_w), exact at every x* (≤ 1e-7 of the
+/// deficit; `crate::graetz`).
 pub fn graetz_theta(xs: f64) -> f64 {
-    const X_MIN: f64 = 2.0e-5;
-    if xs <= 0.0 {
-        return 1.0;
-    }
-    let series = |x: f64| {
-        8.0 * crate::graetz::GRAETZ
-            .iter()
-            .map(|(l, g)| g / (l * l) * (-2.0 * l * l * x).exp())
-            .sum::<f64>()
-    };
-    if xs >= X_MIN {
-        series(xs)
-    } else {
-        1.0 - (1.0 - series(X_MIN)) * (xs / X_MIN).powf(2.0 / 3.0)
-    }
+    crate::graetz::mixed_cup(xs)
 }
 
 /// Segment conductance of the Graetz closure for a steady flow |Q|: the 1-D model with the
