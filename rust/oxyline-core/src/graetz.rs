@@ -1,5 +1,5 @@
 //! Graetz problem (fully developed Poiseuille flow, constant wall concentration from x = 0):
-//! the mixed-cup deficit 1 − θ_m(x*) at every x* = x/(d Pe) (docs/physics.md §3.3).
+//! the mixed-cup deficit 1 − θ_m(x*) at every x* = x/(d Pe) (docs/physics.md §3.2).
 //!
 //! Two exact representations, each used where it converges fast:
 //! * x* ≥ `SERIES_BELOW`: the eigenfunction series θ_m = 8 Σ G_n/λ_n² e^{−2λ_n² x*} with the 260
@@ -57,7 +57,7 @@ fn eigen_series(xs: f64) -> f64 {
 
 /// Graetz eigenvalues λ_n and coefficients G_n (Poiseuille, constant wall concentration), from
 /// φ = e^{-λr²/2} M(1/2 − λ/4, 1, λr²), φ(1) = 0 and G_n = φ_n'(1)/(λ_n ∂φ/∂λ|_{r=1}), computed
-/// with mpmath at 40 digits (the first six are those of docs/physics.md §3.3).
+/// with mpmath at 40 digits (the first three are quoted in docs/physics.md §3.2).
 pub const GRAETZ: [(f64, f64); 260] = [
     (2.7043644198825323, 0.7487745550840844),
     (6.679031449346628, 0.5438279562122988),
