@@ -12,7 +12,7 @@ import pytest
 
 pytest.importorskip("scipy")
 
-from oxyline.reference.axisymmetric import (  # noqa: E402
+from oxyline.reference.axisymmetric import (
     AxisymmetricSolver,
     ConstantPO2,
     Grid,

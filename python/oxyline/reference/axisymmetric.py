@@ -29,6 +29,7 @@ Everything is SI except PO2 (mmHg).
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -41,9 +42,18 @@ except ImportError as exc:  # pragma: no cover - exercised only without scipy
     raise ImportError("oxyline.reference needs scipy (pip install 'oxyline[reference]')") from exc
 
 __all__ = [
-    "PeriodicFlow", "Tube", "ConstantPO2", "MassTransfer", "WallLayer", "Grid",
-    "womersley_shape", "AxisymmetricSolver", "PeriodicResult", "steady_march", "SteadyResult",
+    "AxisymmetricSolver",
+    "ConstantPO2",
+    "Grid",
+    "MassTransfer",
+    "PeriodicFlow",
+    "PeriodicResult",
+    "SteadyResult",
+    "Tube",
+    "WallLayer",
     "richardson",
+    "steady_march",
+    "womersley_shape",
 ]
 
 LEVEQUE_SH_LOCAL = (8.0 / 9.0) ** (1.0 / 3.0) / math.gamma(4.0 / 3.0)  # Sh_x (x*)^{1/3}, 1.0767...
@@ -479,6 +489,9 @@ class AxisymmetricSolver:
             op = LinearOperator((f0.size, f0.size), matvec=matvec)
             x0 = self.initial_state().ravel()
             x, info = gmres(op, f0.ravel(), x0=x0, rtol=tol, restart=60, maxiter=maxiter)
+            if info != 0:
+                warnings.warn(f"periodic state: GMRES stopped after {count} periods without "
+                              f"reaching rtol {tol}", RuntimeWarning, stacklevel=2)
             P = x.reshape(shape)
         else:
             P = self.initial_state()

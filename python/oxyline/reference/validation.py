@@ -151,8 +151,9 @@ def period_for_womersley(case: Case, alpha: float) -> float:
 
 def scenarios(case: Case) -> list[tuple[str, PeriodicFlow]]:
     """The example's own waveform, Womersley 2–15 (10 % reversal), reversal 0–30 % (1 s)."""
-    out = [(f"example waveform (α {case.womersley():.1f}, reversal "
-            f"{100 * case.flow.reversal_fraction():.0f} %)", case.flow)]
+    label = (f"example waveform (α {case.womersley():.1f}, reversal "
+             f"{100 * case.flow.reversal_fraction():.0f} %)")
+    out = [(label, case.flow)]
     for a in (2.0, 5.0, 10.0, 15.0):
         out.append((f"α {a:g}, reversal 10 %",
                     PeriodicFlow.sinusoid(case.flow.mean, period_for_womersley(case, a), 0.1)))
