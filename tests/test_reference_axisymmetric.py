@@ -129,3 +129,18 @@ def test_wall_layer_equals_its_series_mass_transfer_coefficient() -> None:
                            g).periodic()
     # the finite-volume shell conductance is second order in the wall cells: 16 cells ~1e-4
     assert a.uptake == pytest.approx(b.uptake, rel=2e-3)
+
+
+@pytest.mark.slow
+def test_validation_study_quick_run(capsys: pytest.CaptureFixture[str]) -> None:
+    """`python -m oxyline.reference.validation --quick` end to end on one example (coarse
+    grids): every table row is there and the Graetz closure is within 5 % of the 2-D uptake
+    for the example waveform (measured on the fine grid: +0.1 %)."""
+    from oxyline.reference import validation
+
+    assert validation.main(["--quick", "--only", "curved", "--skip-convergence"]) == 0
+    out = capsys.readouterr().out
+    rows = [r for r in out.splitlines() if r.startswith("| example waveform")]
+    assert len(rows) == 2  # dissolved O2 and Hb
+    graetz = float(rows[0].split("|")[7].strip().rstrip("%").strip())
+    assert abs(graetz) < 5.0
