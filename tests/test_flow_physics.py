@@ -1,9 +1,9 @@
-"""Verification of the flow engine against closed-form truths (physics spec §1.5 and §6 (f),
+"""Verification of the flow engine against closed-form truths (docs/physics.md §1.5 and §6 (f),
 (g)): steady Poiseuille pressures, the steady carotid split, the input impedance of a uniform
 line against the exact transmission-line formula, RK4's temporal order, the RK4 stability
 limits and the agreement of the two independent integrators.
 
-Every expected value is computed here from the segment formulas of physics §1.1 (or taken from
+Every expected value is computed here from the segment formulas of docs/physics.md §1.1 (or taken from
 the spec's printed numbers), never from an earlier oxyline run.
 """
 
@@ -23,7 +23,7 @@ MMHG = 133.322368  # Pa
 MMHG_S_PER_CM3 = MMHG * 1e6  # Pa s/m^3
 RHO, MU = 1050.0, 3.5e-3
 
-# vessels of physics §1.5 / §1.6: radius, segment length, segments, E, h
+# vessels of docs/physics.md §1.5 / §1.6: radius, segment length, segments, E, h
 ABDOMINAL = {"r": 0.008, "dx": 0.020, "n": 10, "E": 5.11e6, "h": 0.002}
 CORONARY = {"r": 0.0015, "dx": 0.00384, "n": 9, "E": 0.7e6, "h": 0.00018}
 R_OUT_ABDOMINAL = 0.0865 * MMHG_S_PER_CM3
@@ -63,7 +63,7 @@ def tube_model(geom: dict, inflow: dict, r_out: float, arrangement: str = "inver
 
 def carotid_model(arrangement: str = "inverted-L", nu: float = 0.5, q: float = 6e-6,
                   split_first_segment: bool = False) -> oxyline.Model:
-    """CCA -> ICA + ECA of physics §1.6 (E 0.5 MPa, h 0.7 mm). With ``split_first_segment``
+    """CCA -> ICA + ECA of docs/physics.md §1.6 (E 0.5 MPa, h 0.7 mm). With ``split_first_segment``
     the CCA's first segment is given as a lumped R + C (no inertance, see the L tests)."""
     wall = {"E": 0.5e6, "h": 0.0007, "nu": nu}
     cca = {"r": 0.003, "dx": 0.00645, "n": 10}
@@ -194,7 +194,7 @@ def line_impedance_errors(arrangement: str, omega: float, z_load: float) -> list
     return errors
 
 
-# physics §6 F3: Z_L = R_out, f = 5 Hz
+# docs/physics.md §6 F3: Z_L = R_out, f = 5 Hz
 F3_SPEC = {
     "inverted-L": ([2.93e-3, 1.45e-3, 7.19e-4, 3.59e-4], 2.0),
     "L": ([2.79e-3, 1.41e-3, 7.11e-4, 3.56e-4], 2.0),
@@ -212,7 +212,7 @@ def test_f3_input_impedance_convergence(arrangement: str) -> None:
     assert np.all(np.abs(ratios / ratio - 1.0) < 0.05), ratios
 
 
-# physics §6 F3 "matched load Z_L = Z_c", f = 10 Hz: the spec's numbers are reproduced with the
+# docs/physics.md §6 F3 "matched load Z_L = Z_c", f = 10 Hz: the spec's numbers are reproduced with the
 # real (lossless) characteristic impedance sqrt(L'/C') as the load resistance
 F3_SPEC_MATCHED = {
     "inverted-L": ([1.90e-2, 9.45e-3, 4.71e-3, 2.35e-3], 2.0),
@@ -294,7 +294,7 @@ def test_g_rk4_reference_value() -> None:
 
 
 def test_g_rk4_temporal_order() -> None:
-    # physics §6 (g): order in [3.7, 4.3] for dt <= dt_max/4 (dt_max = 2.19e-4 s here); the
+    # docs/physics.md §6 (g): order in [3.7, 4.3] for dt <= dt_max/4 (dt_max = 2.19e-4 s here); the
     # truth is the closed-form solution. (dt = 1e-4 = dt_max/2.2 is pre-asymptotic: the stiff
     # (R + R_out)/L mode has lambda dt = -1.27 there; measured order 3.4 from 1e-4 to 5e-5.)
     model = coronary_pulsatile()
@@ -312,7 +312,7 @@ def test_g_rk4_temporal_order() -> None:
 
 
 # --------------------------------------------------------------------------------------------
-# RK4 stability limits (physics §1.5, exact table)
+# RK4 stability limits (docs/physics.md §1.5, exact table)
 # --------------------------------------------------------------------------------------------
 
 def rk4_step_limit(lam: complex) -> float:
@@ -332,7 +332,7 @@ def rk4_step_limit(lam: complex) -> float:
 
 def line_ode_matrix(geom: dict, r_out: float, arrangement: str, nu: float = 0.5) -> np.ndarray:
     """State matrix of a uniform line with a flow inlet and a resistance outlet, written from
-    physics §1.2: inverted-L (P_k, Q_k; R_out in series with the last branch) or L with the
+    docs/physics.md §1.2: inverted-L (P_k, Q_k; R_out in series with the last branch) or L with the
     first branch flow prescribed (P_1..P_N, Q_2..Q_N; R_out loads C_N)."""
     n = geom["n"]
     r, l_, c = (seg_r(geom["r"], geom["dx"]), seg_l(geom["r"], geom["dx"]),
@@ -417,7 +417,7 @@ def test_rk4_stability_limit_l_line(case: str, spec: str) -> None:
 
 
 def test_rk4_stability_limit_l_line_with_plain_flow_inlet() -> None:
-    """physics §1.2, L element: the first branch flow is prescribed (algebraic), so RK4
+    """docs/physics.md §1.2, L element: the first branch flow is prescribed (algebraic), so RK4
     integrates the plain model; its limit is the spec table's (the first branch's inertance
     carries no state)."""
     geom, _, r_out, _, _ = F1_CASES["abdominal"]
@@ -427,7 +427,7 @@ def test_rk4_stability_limit_l_line_with_plain_flow_inlet() -> None:
 
 def test_rk4_l_line_with_flow_inlet_prescribes_the_first_branch() -> None:
     """L line fed by Q_in(t): RK4 gives the first branch flow = Q_in(t) and the inlet pressure
-    P_0 = P_1 + R_1 Q_in + L_1 dQ_in/dt (physics §1.2), and the rest of the line evolves exactly
+    P_0 = P_1 + R_1 Q_in + L_1 dQ_in/dt (docs/physics.md §1.2), and the rest of the line evolves exactly
     as in the hand-reduced model (first segment written as a lumped R + C, no index-2 row)."""
     geom, _, r_out, _, _ = F1_CASES["abdominal"]
     a, b, w = 1e-5, 8e-6, 2 * math.pi

@@ -1,4 +1,4 @@
-"""Oxygen and solute transport through the Python API (physics spec §2.5, §4, §5, §6).
+"""Oxygen and solute transport through the Python API (docs/physics.md §2.5, §4, §5, §6).
 
 Expected values are closed forms of the discrete upwind scheme, continuous solutions, spec
 numbers or conservation laws; none is an earlier output of oxyline.
@@ -65,7 +65,7 @@ def test_decay_in_steady_plug_flow_converges_to_the_exponential(method: str) -> 
 
 def test_linearized_hemoglobin_slows_the_decay_by_the_capacity_ratio() -> None:
     """Linear binding C_t = (1 + K)c + b: the steady cell balance gives
-    θ_N = (1 + St/(N (1 + K)))^-N (physics §4.4 with E_Hb = 1, discrete form)."""
+    θ_N = (1 + St/(N (1 + K)))^-N (docs/physics.md §4.4 with E_Hb = 1, discrete form)."""
     n, r, length, q, k = 9, 1.5e-3, 0.03456, 1.6e-6, 2.456094800800854e-3
     st_number = k * 2 * math.pi * r * length / q  # 0.5
     ox = {"inlet": {"po2": 85.0}, "hemoglobin": "linearized",
@@ -78,10 +78,10 @@ def test_linearized_hemoglobin_slows_the_decay_by_the_capacity_ratio() -> None:
         return p**2.7 / (p**2.7 + 26.8**2.7)
 
     kbar = h * (s(85.0) - s(48.0)) / (ALPHA * (85.0 - 48.0))
-    assert kbar == pytest.approx(22.4, abs=0.05)  # physics §3.4
+    assert kbar == pytest.approx(22.4, abs=0.05)  # docs/physics.md §3.4
     theta = (res.po2_out[-1, 0] - 48.0) / (85.0 - 48.0)
     assert theta == pytest.approx((1 + st_number / (n * (1 + kbar))) ** -n, rel=1e-9)
-    # without haemoglobin the same tube gives physics §6(b)'s discrete value
+    # without haemoglobin the same tube gives docs/physics.md §6(b)'s discrete value
     ox["hemoglobin"] = "none"
     res = oxyline.simulate(tube(n, oxygen=ox, radius=r, length=length, flow=q), output_every=0.1)
     theta = (res.po2_out[-1, 0] - 48.0) / (85.0 - 48.0)
@@ -130,7 +130,7 @@ def test_paper_examples_run_with_exact_mass_balance(name: str) -> None:
 
 
 def test_straight_vessel_bulk_drop_matches_the_leveque_estimate() -> None:
-    """physics §3.5: with the cycle-mean flow of 20 mL/s, the aortic bulk PO2 drop is 0.072 mmHg
+    """docs/physics.md §3.5: with the cycle-mean flow of 20 mL/s, the aortic bulk PO2 drop is 0.072 mmHg
     (no-Hb Lévêque, 85 → 60 mmHg wall)."""
     res = oxyline.simulate(examples.load("paper-straight"))
     drop = 85.0 - res.po2_out[:, 0].mean()
@@ -138,7 +138,7 @@ def test_straight_vessel_bulk_drop_matches_the_leveque_estimate() -> None:
 
 
 def test_tl_elements_follow_the_paper_definitions() -> None:
-    """L_i = −dx/v and the identity L_i J_i = −N_i for forward flow (physics §2.6)."""
+    """L_i = −dx/v and the identity L_i J_i = −N_i for forward flow (docs/physics.md §2.6)."""
     m = tube(10, oxygen={"inlet": {"po2": 85}}, compliant=True,
              flow={"fourier": {"period": 1, "mean": 2e-6, "sin": [1e-6]}}, cycles=4)
     res = oxyline.simulate(m, method="rk4", output_every=2e-3)
@@ -331,7 +331,7 @@ def test_cycle_mean_shear_uses_the_exact_mean_absolute_flow() -> None:
 
 
 def test_step_response_of_a_rigid_tube_with_rk4_on_the_full_model() -> None:
-    """physics §6(d) through the whole model: a rigid tube fed by a flow condition is index 2
+    """docs/physics.md §6(d) through the whole model: a rigid tube fed by a flow condition is index 2
     as written (the inflow fixes every inductor flow); RK4 makes those flows algebraic and
     integrates the species alone. Outlet = regularised incomplete gamma P(10, v t/dx) to 1e-12
     with dt = 1e-3 s."""

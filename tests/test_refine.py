@@ -1,4 +1,4 @@
-"""Transport refinement: ``cells_per_segment`` m transport cells per flow segment (physics §5).
+"""Transport refinement: ``cells_per_segment`` m transport cells per flow segment (docs/physics.md §5).
 
 Truths: the tanks-in-series law of N·m tanks (scipy's regularised incomplete gamma), the
 discrete constant-k law, exact identities (m = 1 is the unrefined model), conservation.

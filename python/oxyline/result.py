@@ -58,8 +58,8 @@ class SpeciesResult:
     fluxes carry the total (free + bound) amount; ``flux_in``/``flux_out`` are the convective
     fluxes Q·C through the vessel's first/last branch (where ``flow_in``/``flow_out`` are
     taken), ``wall_flux`` the uptake of the vessel's segments (mol/s, positive out of the blood).
-    Segment ``tl_resistance``/``tl_inductance`` are the paper's R_i = dL_i/dt (s/m... per
-    segment: s) and L_i = −dx/v (s), NaN where |v| < the velocity threshold."""
+    Segment ``tl_resistance``/``tl_inductance`` are the paper's R_i = dL_i/dt (dimensionless)
+    and L_i = −dx/v (s), NaN where |v| < the velocity threshold."""
 
     name: str
     vessel_data: np.ndarray  # (time, vessel, selected vessel variables; all 5 by default)
@@ -197,9 +197,10 @@ class Result:
                     out["segment_po2"] = ("segment", self.segment_po2, "mmHg")
         if self.species:
             sv = next(iter(self.species.values())).segment_variables
-            for k in ("tl_resistance", "tl_inductance"):
+            # R_i = dL_i/dt of L_i = -dx/v (s) is dimensionless (docs/physics.md §5)
+            for k, unit in (("tl_resistance", "1"), ("tl_inductance", "s")):
                 if k in sv:
-                    out[k] = ("segment", getattr(self, k), "s")
+                    out[k] = ("segment", getattr(self, k), unit)
         return out
 
     def __post_init__(self) -> None:

@@ -1,7 +1,7 @@
 """The ``oxygen:`` and ``species:`` model sections: checking, unit conversion (mmHg at the file
 boundary for oxygen, SI inside) and the canonical ``transport`` description for the core.
 
-Oxygen (physics spec §2-4)::
+Oxygen (docs/physics.md §2-4)::
 
     oxygen:
       inlet: {po2: 85.0}                 # mmHg; or {time: [..], po2: [..]}, or {fourier: {..}} in mmHg
@@ -25,9 +25,9 @@ Wall models: ``none``; ``flux`` {flux: mol m^-2 s^-1}; ``mass-transfer`` {k: m/s
 mass-transfer, Lévêque and Graetz models adds a wall resistance in series (physics C8).
 ``hb_facilitation: {d_hb: 5.5e-12}`` multiplies the Lévêque/Graetz coefficient by
 E_Hb = (1 + K)^(1/3) (1 + K D_Hb/D)^(2/3), K the Hill secant between the inlet and wall PO2
-(physics §3.4).
+(docs/physics.md §3.4).
 
-Other species (physics §5), all SI (concentrations in mol/m^3)::
+Other species (docs/physics.md §5), all SI (concentrations in mol/m^3)::
 
     species:
       - name: ldl
@@ -43,7 +43,7 @@ Other species (physics §5), all SI (concentrations in mol/m^3)::
 All species share one grid of transport cells: ``transport: {cells_per_segment: m,
 cells_per_vessel: {name: m}}`` (or the oxygen section's ``cells_per_segment`` and
 ``per_vessel: {name: {cells_per_segment: m}}``, which win) splits every volume node into m
-cells in series (physics §5: a front spreads by sqrt(x dx/m) instead of sqrt(x dx)).
+cells in series (docs/physics.md §5: a front spreads by sqrt(x dx/m) instead of sqrt(x dx)).
 """
 
 from __future__ import annotations
@@ -185,7 +185,7 @@ def hill_saturation(p: float, p50: float, n: float) -> float:
 
 def _facilitation(spec: Any, h: dict[str, float] | None, d: float, p_in: float, p_w: float,
                   element: str) -> float:
-    """E_Hb = (1 + K)^(1/3) (1 + K D_Hb/D)^(2/3) (physics §3.4)."""
+    """E_Hb = (1 + K)^(1/3) (1 + K D_Hb/D)^(2/3) (docs/physics.md §3.4)."""
     if spec in (None, False):
         return 1.0
     if h is None:

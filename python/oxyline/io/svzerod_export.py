@@ -3,7 +3,7 @@
 svZeroDSolver's ``BloodVessel`` is R, then C (at the node after R), then L. An oxyline vessel of
 n segments is a chain ``c_0 | R_1 L_1 | c_1 | … | R_n L_n | c_n`` of series branches and node
 capacitances (inverted-L puts each segment's C at its proximal node, L at its distal node, pi half
-at each), with each segment's R, L, C exactly as the core assembles them (physics spec §1.1,
+at each), with each segment's R, L, C exactly as the core assembles them (docs/physics.md §1.1,
 exact over a linear taper). Because R and L in one branch commute, the chain is exactly the
 n + 1 BloodVessels ``(R=0, C=c_0, L=L_1), (R_1, c_1, L_2), …, (R_n, c_n, L=0)`` joined by
 one-to-one ``NORMAL_JUNCTION``s; junction nodes become ``NORMAL_JUNCTION``s too (each vessel's

@@ -1,4 +1,4 @@
-//! Wall-exchange closures (physics spec §3). Every closure is written per flow segment as
+//! Wall-exchange closures (docs/physics.md §3). Every closure is written per flow segment as
 //!
 //!   W = G (c − c_w) + q        (mol/s out of the blood; c = free concentration of the cell)
 //!
@@ -26,7 +26,7 @@ pub enum Shear {
     /// Quasi-steady: wall shear from the instantaneous |Q| (floored at the Graetz value).
     Instantaneous,
     /// The boundary layer's shear γ̃ relaxes to the instantaneous |γ_w| on the layer's own
-    /// time scale, dγ̃/dt = (|γ_w| − γ̃)/τ_BL (physics §3.1 "Pulsatility"), from the cycle-mean
+    /// time scale, dγ̃/dt = (|γ_w| − γ̃)/τ_BL (docs/physics.md §3.1 "Pulsatility"), from the cycle-mean
     /// value; see `relaxation_time`.
     Relaxed,
 }
@@ -117,7 +117,7 @@ fn series(g_blood: f64, gp: f64) -> f64 {
     }
 }
 
-/// Lévêque coefficient: ∫_seg k 2πr dx = coef · |Q|^{1/3} (physics §3.1 C5s), with
+/// Lévêque coefficient: ∫_seg k 2πr dx = coef · |Q|^{1/3} (docs/physics.md §3.1 C5s), with
 /// a = (γ D²/9)^{1/3}/Γ(4/3), γ = 4|Q|/(π r³).
 pub fn leveque_coef(seg: &SegmentWall, d: f64) -> f64 {
     let r = seg.radius;
@@ -127,7 +127,7 @@ pub fn leveque_coef(seg: &SegmentWall, d: f64) -> f64 {
 
 /// Boundary-layer relaxation time of a segment, τ_BL = δ²/D with the Lévêque thickness
 /// δ = Γ(4/3) (9 D x/γ̄)^{1/3} (= D/k) at the segment mid-point x, γ̄ = 4 q_mean/(π r³) the
-/// cycle-mean wall shear (physics §3.1 "Pulsatility"). Infinite without mean flow (the layer
+/// cycle-mean wall shear (docs/physics.md §3.1 "Pulsatility"). Infinite without mean flow (the layer
 /// then never adapts: γ̃ keeps its initial value).
 pub fn relaxation_time(seg: &SegmentWall, d: f64, q_mean: f64) -> f64 {
     let gamma = 4.0 * q_mean.abs() / (PI * seg.radius.powi(3));
@@ -140,24 +140,10 @@ pub fn relaxation_time(seg: &SegmentWall, d: f64, q_mean: f64) -> f64 {
     delta * delta / d
 }
 
-/// Graetz mixed-cup θ_m(x*) = 8 Σ G_n/λ_n² exp(−2 λ_n² x*), exact for x* ≥ 2e-5 with the
-/// tabulated 260 terms; below, the Lévêque scaling 1 − θ ∝ x*^{2/3} continues it to θ(0) = 1.
+/// Graetz mixed-cup θ_m(x*) (Poiseuille, constant c_w), exact at every x* (≤ 1e-7 of the
+/// deficit; `crate::graetz`).
 pub fn graetz_theta(xs: f64) -> f64 {
-    const X_MIN: f64 = 2.0e-5;
-    if xs <= 0.0 {
-        return 1.0;
-    }
-    let series = |x: f64| {
-        8.0 * crate::graetz::GRAETZ
-            .iter()
-            .map(|(l, g)| g / (l * l) * (-2.0 * l * l * x).exp())
-            .sum::<f64>()
-    };
-    if xs >= X_MIN {
-        series(xs)
-    } else {
-        1.0 - (1.0 - series(X_MIN)) * (xs / X_MIN).powf(2.0 / 3.0)
-    }
+    crate::graetz::mixed_cup(xs)
 }
 
 /// Segment conductance of the Graetz closure for a steady flow |Q|: the 1-D model with the
@@ -448,7 +434,7 @@ mod tests {
         assert!((g / q - (-(0.3952988f64).ln())).abs() < 1e-6);
     }
 
-    /// physics §3.5: τ_BL at mid-length ≈ 52 s (aorta), 3.0 s (coronary), 7.6 s (CCA).
+    /// docs/physics.md §3.5: τ_BL at mid-length ≈ 52 s (aorta), 3.0 s (coronary), 7.6 s (CCA).
     #[test]
     fn boundary_layer_relaxation_time_matches_physics_3_5() {
         let d = 1.2e-9;
@@ -498,7 +484,7 @@ mod tests {
             })
             .sum();
         assert!((sum / whole - 1.0).abs() < 1e-14);
-        // physics §3.5: aorta segment-integrated k̄_1 = 1.235e-5 m/s, k̄_10 = 3.89e-6 m/s
+        // docs/physics.md §3.5: aorta segment-integrated k̄_1 = 1.235e-5 m/s, k̄_10 = 3.89e-6 m/s
         let dx = l / n as f64;
         let k1 = leveque_coef(
             &SegmentWall {

@@ -1,4 +1,4 @@
-//! Binding of a transported species (physics spec §4, §5): the transported state is the *total*
+//! Binding of a transported species (docs/physics.md §4, §5): the transported state is the *total*
 //! amount (free + bound, both carried by the blood), while wall exchange acts on the free
 //! (dissolved) concentration. Every binding law is a strictly increasing map c ↦ C_t(c), so the
 //! free concentration is recovered from the total by a safeguarded Newton solve.
@@ -24,7 +24,7 @@ pub enum BindingSpec {
         n: f64,
         capacity: f64,
     },
-    /// The paper's "approximately linear relationship" (physics §4.4):
+    /// The paper's "approximately linear relationship" (docs/physics.md §4.4):
     /// C_t = C_t,Hill(P_ref) + α (1 + K̄)(P − P_ref), K̄ the Hill secant between `p_low` and `p_high`.
     Linearized {
         solubility: f64,
@@ -411,7 +411,7 @@ mod tests {
     const MMHG: f64 = 133.322_368;
 
     fn standard() -> Binding {
-        // physics §4.1: α = 1.40e-3 mol m⁻³ mmHg⁻¹, P50 26.8 mmHg, n 2.7, H = 1.34 mL/g × 150 g/L
+        // docs/physics.md §4.1: α = 1.40e-3 mol m⁻³ mmHg⁻¹, P50 26.8 mmHg, n 2.7, H = 1.34 mL/g × 150 g/L
         let h = 1.34 * 150.0 * 1e-3 / 22.414e-3; // mL O2/L → mol/m³ (1 mL/L = 1e-3 L/L; 22.414 L/mol)
         Binding::Hill {
             alpha: 1.40e-3 / MMHG,

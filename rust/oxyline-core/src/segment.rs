@@ -1,5 +1,5 @@
 //! Per-segment resistance, inertance, compliance and volume from vessel geometry
-//! (physics spec §1.1), integrated exactly over a linear taper by Gauss–Legendre quadrature.
+//! (docs/physics.md §1.1), integrated exactly over a linear taper by Gauss–Legendre quadrature.
 
 use serde::Deserialize;
 
@@ -101,7 +101,7 @@ mod tests {
 
     #[test]
     fn physics_table_values_for_the_abdominal_segment() {
-        // physics §1.5 table: r = 8 mm, dx = 20 mm, E 5.11 MPa, h 2 mm, ν = 0.5
+        // docs/physics.md §1.5 table: r = 8 mm, dx = 20 mm, E 5.11 MPa, h 2 mm, ν = 0.5
         let s = segment_rlc(
             0.02,
             0.008,

@@ -1,4 +1,4 @@
-//! Species transport verification (physics spec §6 (a)–(e), (h)): every expected value is a
+//! Species transport verification (docs/physics.md §6 (a)–(e), (h)): every expected value is a
 //! closed form, a number of the spec, or a conservation law.
 
 use oxyline_core::genalpha::NewtonControl;
@@ -564,7 +564,7 @@ fn implicit_sweep_on_a_circulating_loop() {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Refinement: m transport cells per flow segment (physics §5)
+// Refinement: m transport cells per flow segment (docs/physics.md §5)
 
 /// `json` with `"cells_per_segment": m` in its transport section.
 fn refined(json: &str, m: usize) -> String {
@@ -871,7 +871,7 @@ fn bad_cells_per_segment_is_a_model_error_naming_key_and_value() {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Lévêque with `shear: relaxed` (physics §3.1 "Pulsatility")
+// Lévêque with `shear: relaxed` (docs/physics.md §3.1 "Pulsatility")
 
 /// Rigid coronary tube with the relaxed Lévêque wall; Q(t) = Q0 (1 + a sin ωt), no reversal.
 /// The relaxed equivalent flow solves Q̃' = (Q − Q̃)/τ from Q̃(0) = Q0 (the cycle mean):

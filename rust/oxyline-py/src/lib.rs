@@ -244,7 +244,7 @@ impl Network {
     }
 
     /// The segment table: one entry per flow segment of every vessel, in model order, with
-    /// the R, L, C, stenosis coefficient and volume the core assembled (SI; physics §1.1).
+    /// the R, L, C, stenosis coefficient and volume the core assembled (SI; docs/physics.md §1.1).
     fn segment_table<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let a = &self.inner.0;
         let t = &a.segments;

@@ -1,5 +1,5 @@
 //! Segment discretisation: a vessel's geometry or lumped values → its segments' R, L, C, S and
-//! volume (physics spec §1.1). This table is the one source of the per-segment physics; the
+//! volume (docs/physics.md §1.1). This table is the one source of the per-segment physics; the
 //! Python layer reads it through the binding (`Network.segment_table`).
 
 use super::checks::{check_nonnegative, check_positive};

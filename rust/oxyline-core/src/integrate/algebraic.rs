@@ -22,7 +22,7 @@ pub(super) struct Reduction {
 /// fixed by the forcing except one fixes that one too: y_j = (Σ f_r − Σ a_rk y_k)/a_rj. Known
 /// values propagate row by row (a worklist, linear in the circuit size). When such a row fixes
 /// an inductor flow — the KCL of a capacitance-free node between a flow condition and an
-/// inductor, e.g. the inlet of an L-arrangement line (physics §1.2: "first branch flow is
+/// inductor, e.g. the inlet of an L-arrangement line (docs/physics.md §1.2: "first branch flow is
 /// prescribed"), or every branch of a rigid tube fed by a flow — then ẏ_j is the same
 /// combination of the forcing slopes, and the inductor's row E_jj ẏ_j + F_j y = f_j becomes
 /// the algebraic F_j y = f_j − E_jj ẏ_j(t), which determines the node pressures

@@ -12,7 +12,7 @@ use crate::error::Result;
 
 /// A state integrated together with the flow in the same RK4 step (species amounts): its
 /// derivative is evaluated at every stage from that stage's consistent flow state, so the
-/// coupled system is advanced as one ODE (physics spec §2.5, "monolithic").
+/// coupled system is advanced as one ODE (docs/physics.md §2.5, "monolithic").
 pub trait Coupled {
     fn derivative(&mut self, time: f64, y: &[f64], z: &[f64], dz: &mut [f64]) -> Result<()>;
 }

@@ -8,7 +8,7 @@ use crate::integrate::Integrator;
 use crate::integrate::rk4::{CoupledStages, Rk4};
 use crate::transport::{Formulation, Transport};
 
-/// Explicit upwind transport is stable for Courant numbers up to this (physics §1.5).
+/// Explicit upwind transport is stable for Courant numbers up to this (docs/physics.md §1.5).
 pub(super) const RK4_UPWIND_COURANT: f64 = 1.392_647;
 
 /// How the flow advances, and with it the species.
@@ -16,7 +16,7 @@ pub(super) enum Flow<'d> {
     /// Any integrator; species (if any) follow each flow step with a backward-Euler transport
     /// step (generalized-α, and the quasi-steady formulation with RK4).
     Split(Box<dyn Integrator + 'd>),
-    /// RK4 advancing flow and species as one ODE in the same stages (physics §2.5,
+    /// RK4 advancing flow and species as one ODE in the same stages (docs/physics.md §2.5,
     /// "monolithic"). It stays a special case: the coupled step evaluates the species
     /// derivative at every RK4 stage's consistent flow state, which [`Integrator`] (one whole
     /// step at a time) does not expose.
@@ -144,7 +144,7 @@ impl State<'_, '_> {
     pub fn check(&mut self, t: f64) -> Result<()> {
         if let (Flow::Monolithic(_), Some(sp)) = (&self.flow, self.species.as_mut()) {
             // explicit upwind transport is stable for Courant numbers up to 1.3926
-            // (physics §1.5); the flow eigenvalues alone do not bound it
+            // (docs/physics.md §1.5); the flow eigenvalues alone do not bound it
             let dt = self.dt;
             let courant = dt * sp.tr.max_outflow_rate(&self.y, t);
             if courant > 0.95 * RK4_UPWIND_COURANT {

@@ -45,7 +45,7 @@ pub fn simulate(
 }
 
 /// Run the circuit with species transport. Closures that need the cycle-mean |Q| get it from
-/// a first, flow-only pass over the same cycles (the paper's two-pass procedure, physics §3.1);
+/// a first, flow-only pass over the same cycles (the paper's two-pass procedure, docs/physics.md §3.1);
 /// the coupled run then starts again from the same initial state.
 pub fn simulate_with_transport(
     dae: &Dae,

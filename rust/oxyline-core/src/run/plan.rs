@@ -126,7 +126,7 @@ impl<'d> Plan<'d> {
     }
 }
 
-/// Explicit upwind transport is stable for Courant numbers up to 1.3926 (physics §1.5), a
+/// Explicit upwind transport is stable for Courant numbers up to 1.3926 (docs/physics.md §1.5), a
 /// limit the flow eigenvalues do not see. The automatic step keeps the Courant number of the
 /// mean flow below 0.5 × 1.39 / 3 (pulsatile peaks of up to 3× the mean); the run itself
 /// monitors the actual value. Infinite without conservative transport, without a steady state,

@@ -1,4 +1,4 @@
-//! The paper's two-pass procedure (physics §3.1): closures that need the cycle-mean |Q| get
+//! The paper's two-pass procedure (docs/physics.md §3.1): closures that need the cycle-mean |Q| get
 //! it from a first, flow-only pass over the same cycles; the coupled run then starts again
 //! from the same initial state. Both passes share one steady state.
 
@@ -58,7 +58,7 @@ const MEAN_FLOW_STEPS_PER_CYCLE: f64 = 2000.0;
 /// period/`MEAN_FLOW_COARSE_STEPS`: the pass then costs a quarter of the coupled run's flow
 /// instead of all of it. The rectangle rule of the mean over 250 steps is accurate to ~2e-5 of
 /// <|Q|> for a reversing sinusoid, so k ∝ <|Q|>^{1/3} to ~7e-6 — far inside the closures' own
-/// uncertainty (physics §3.1). Finer implicit runs keep their own step (an exact mean).
+/// uncertainty (docs/physics.md §3.1). Finer implicit runs keep their own step (an exact mean).
 const MEAN_FLOW_COARSE_STEPS: f64 = 250.0;
 const MEAN_FLOW_FINE_STEPS: f64 = 1000.0;
 

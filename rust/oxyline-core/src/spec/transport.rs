@@ -10,10 +10,10 @@ use std::collections::BTreeMap;
 #[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum Formulation {
-    /// State = amount per cell, upwind fluxes (physics §2.5).
+    /// State = amount per cell, upwind fluxes (docs/physics.md §2.5).
     #[default]
     Conservative,
-    /// The paper taken literally (physics §2.7): J_i = J_{i−1} − W_i along the flow, no storage.
+    /// The paper taken literally (docs/physics.md §2.7): J_i = J_{i−1} − W_i along the flow, no storage.
     TlQuasisteady,
 }
 
@@ -59,7 +59,7 @@ pub struct TransportSpec {
     pub velocity_threshold: f64,
     /// Transport cells per flow segment m (integer >= 1; 1 = one cell per volume node). Every
     /// volume-holding node becomes a chain of m sub-cells, which sharpens upwind fronts
-    /// (σ_x = sqrt(x dx/m)) without refining the flow circuit (physics §5). Given as a number
+    /// (σ_x = sqrt(x dx/m)) without refining the flow circuit (docs/physics.md §5). Given as a number
     /// so that a bad value gets a message naming it.
     #[serde(default = "default_cells")]
     pub cells_per_segment: f64,

@@ -247,7 +247,7 @@ impl Transport {
                 face_of_unknown[f.unknown] = fi;
             }
         }
-        // Refinement (physics §5): every volume node becomes a chain of m sub-cells (see
+        // Refinement (docs/physics.md §5): every volume node becomes a chain of m sub-cells (see
         // `Chain`). Sub-cell 0 is the node itself; the others are new transport nodes nn.., so
         // the face, upwind and sweep machinery below works unchanged on the refined graph.
         let m_default =

@@ -1,4 +1,4 @@
-//! Species transport on the flow circuit (physics spec §2.5): the conservative finite-volume
+//! Species transport on the flow circuit (docs/physics.md §2.5): the conservative finite-volume
 //! form of the paper's oxygen transmission line.
 //!
 //! * Cells are the circuit nodes that hold lumen volume; V_n = V0_n + C_n (P_n − P_ref) is taken
@@ -13,7 +13,7 @@
 //!   distal and prescribed-pressure nodes) are outside the domain: flow into them is outflow,
 //!   flow out of them carries the inlet or backflow concentration.
 //! * The advected quantity is the total concentration C_t (free + bound); wall exchange acts
-//!   on the free concentration c = binding⁻¹(C_t) (physics §4.3).
+//!   on the free concentration c = binding⁻¹(C_t) (docs/physics.md §4.3).
 //!
 //! Two integrations share this description: the explicit right-hand side (`rhs`), integrated
 //! monolithically with the flow by RK4, and a backward-Euler step (`implicit_step`) used after

@@ -97,7 +97,7 @@ impl Transport {
                     }
                 }
                 let c = if wsum > 0.0 { c / wsum } else { f64::NAN };
-                // transmission-line elements (physics §2.6): v = Q/A, A = V_seg/dx,
+                // transmission-line elements (docs/physics.md §2.6): v = Q/A, A = V_seg/dx,
                 // L = −dx/v, R = dL/dt = dx v̇/v²
                 let q = y[seg.branch_unknown];
                 let (mut r_tl, mut l_tl) = (f64::NAN, f64::NAN);

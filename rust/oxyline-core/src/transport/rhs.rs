@@ -5,7 +5,7 @@ use super::*;
 
 impl Species {
     /// Wall uptake (mol/s) of cell `i` from its fixed laws at free concentration `free`:
-    /// Σ share·(g (c − c_w) + q) = G c − Σ share g c_w + Q (the wall-uptake law, physics §3).
+    /// Σ share·(g (c − c_w) + q) = G c − Σ share g c_w + Q (the wall-uptake law, docs/physics.md §3).
     #[inline]
     pub(super) fn fixed_uptake(&self, i: usize, free: f64) -> f64 {
         self.cell_g[i] * free - self.cell_gcw[i] + self.cell_q[i]
