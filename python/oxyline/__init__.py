@@ -19,6 +19,7 @@ from oxyline.errors import (
     UnstableTimeStep,
     UnsupportedElement,
 )
+from oxyline.ensemble import simulate_ensemble
 from oxyline.io.results import open_result
 from oxyline.loader import load_model
 from oxyline.model import Model
@@ -41,5 +42,6 @@ __all__ = [
     "models",
     "open_result",
     "simulate",
+    "simulate_ensemble",
     "simulate_to_zarr",
 ]
