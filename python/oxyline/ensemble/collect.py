@@ -126,7 +126,8 @@ class Collector:
         if index is not None:
             coords["variant_label"] = ("variant", np.asarray(index))
         for path, vals in patch_coords(patches).items():
-            coords[path] = ("variant", vals)
+            if path != "period":  # the ``period`` variable holds every variant's period
+                coords[path] = ("variant", vals)
         data: dict[str, Any] = {
             "status": ("variant", self.status),
             "error": ("variant", self.error.astype(str)),

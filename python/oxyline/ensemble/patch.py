@@ -116,6 +116,14 @@ def _patch_condition(bc: Mapping[str, Any], props: Any, k: int, path: str) -> di
     return _merge(base, props)
 
 
+def _value(x: Any, k: int, path: str) -> float:
+    """A number of the model to scale (YAML 1.1 reads 5.0e5 as a string)."""
+    try:
+        return float(x)
+    except (TypeError, ValueError):
+        raise ModelError(f"{_where(k, path)}: cannot scale {x!r}, not a number") from None
+
+
 def _scaled(data: dict[str, Any], scale: Any, k: int) -> None:
     """Apply the ``scale`` section to ``data`` (the merged model, containers already copied
     where written)."""
@@ -153,18 +161,23 @@ def _scaled(data: dict[str, Any], scale: Any, k: int) -> None:
             lp = v["lumped"] = dict(v["lumped"])
             for key, prop in (("resistance", "resistance"), ("compliance", "capacitance")):
                 if key in factors and prop in lp:
-                    lp[prop] = lp[prop] * factors[key]
+                    lp[prop] = _value(lp[prop], k, f"vessels.{v['name']}.lumped.{prop}") \
+                        * factors[key]
         elif "compliance" in factors and "youngs_modulus" in v:
-            v["youngs_modulus"] = v["youngs_modulus"] / factors["compliance"]
+            v["youngs_modulus"] = _value(v["youngs_modulus"], k,
+                                         f"vessels.{v['name']}.youngs_modulus") \
+                / factors["compliance"]
     bcs = data["boundary_conditions"] = dict(data.get("boundary_conditions", {}))
     for node in [n for n in bcs if n in nodes]:
         bc = bcs[node] = dict(bcs[node])
         kind = str(bc.get("type", "")).lower()
+        where = f"boundary_conditions.{node}"
         if "resistance" in factors:
             for prop in RESISTANCES.get(kind, ()):
-                bc[prop] = bc[prop] * factors["resistance"]
+                bc[prop] = _value(bc.get(prop), k, f"{where}.{prop}") * factors["resistance"]
         if "compliance" in factors and kind == "rcr":
-            bc["capacitance"] = bc["capacitance"] * factors["compliance"]
+            bc["capacitance"] = _value(bc.get("capacitance"), k, f"{where}.capacitance") \
+                * factors["compliance"]
 
 
 def merge_patch(source: Mapping[str, Any], patch: Mapping[str, Any], k: int = 0,
