@@ -304,3 +304,34 @@ def test_a_killed_ensemble_keeps_its_finished_variants(tmp_path: Path) -> None:
         assert ds.p_max.values[k] == float(res.pressure_in.max())
     assert np.isnan(ds.p_max.values[3:]).all()
     json.dumps(ds.attrs)  # plain attributes
+
+
+# ---- Dask ----------------------------------------------------------------------------------
+
+def _peak(res: oxyline.Result) -> dict[str, float]:
+    return {"p_max": float(res.pressure_in.max())}
+
+
+def test_a_local_dask_cluster_gives_the_local_dataset(tmp_path: Path) -> None:
+    distributed = pytest.importorskip("distributed")
+    variants = [{"vessels": {"aorta": {"radius": r}}} for r in np.linspace(0.006, 0.01, 7)]
+    variants.insert(3, {"vessels": {"aorta": {"radius": -1.0}}})
+    local = oxyline.simulate_ensemble(STRAIGHT, variants, **FAST)
+    local_peak = oxyline.simulate_ensemble(STRAIGHT, variants, output=_peak, **FAST)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        # chunks run on two worker processes, merged in completion order
+        xr.testing.assert_identical(
+            oxyline.simulate_ensemble(STRAIGHT, variants, client=client, **FAST), local)
+        xr.testing.assert_identical(
+            oxyline.simulate_ensemble(STRAIGHT, variants, client=client, output=_peak, **FAST),
+            local_peak)
+        if sys.version_info >= (3, 11):
+            stored = oxyline.simulate_ensemble(STRAIGHT, variants, client=client,
+                                               store=tmp_path / "d.zarr", **FAST)
+            np.testing.assert_array_equal(stored.pressure_in_max.values,
+                                          local.pressure_in_max.values)
+        with pytest.raises(oxyline.ModelError, match="variant 2: vessels.nope"):
+            oxyline.simulate_ensemble(STRAIGHT, [{}, {}, {"vessels": {"nope": {}}}],
+                                      client=client, **FAST)

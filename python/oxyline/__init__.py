@@ -12,6 +12,7 @@ Quick use::
 from __future__ import annotations
 
 from oxyline import _core, models
+from oxyline.ensemble import simulate_ensemble
 from oxyline.errors import (
     ModelError,
     SimulationInterrupted,
@@ -19,7 +20,6 @@ from oxyline.errors import (
     UnstableTimeStep,
     UnsupportedElement,
 )
-from oxyline.ensemble import simulate_ensemble
 from oxyline.io.results import open_result
 from oxyline.loader import load_model
 from oxyline.model import Model

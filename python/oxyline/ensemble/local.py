@@ -29,20 +29,22 @@ def run_settings(model: Model, output: Output, overrides: Mapping[str, Any]) -> 
 
 
 def prepare(patcher: Patcher, patches: Sequence[Mapping[str, Any]], output: Output,
-            overrides: Mapping[str, Any], collector: Collector
+            overrides: Mapping[str, Any], collector: Collector, first: int = 0,
             ) -> tuple[list[Variant | None], list[dict[str, Any] | None]]:
     """Every variant and its settings; a variant whose values the model refuses is recorded
-    as failed (None). Unknown names raise."""
+    as failed (None). Unknown names raise. ``first``: the number of the first variant in the
+    whole ensemble (a chunk of it runs on a cluster worker)."""
     variants: list[Variant | None] = []
     settings: list[dict[str, Any] | None] = []
-    for k, patch in enumerate(patches):
+    for i, patch in enumerate(patches):
+        k = first + i
         try:
             v = patcher.variant(patch, k)
             s = run_settings(v.model, output, overrides)
         except ModelError as e:
             if str(e).startswith(f"variant {k}: "):
                 raise  # an unknown vessel, node or property: a mistake in the patches
-            collector.fail(k, "model", f"variant {k}: {e}"[:ERROR_CHARS])
+            collector.fail(i, "model", f"variant {k}: {e}"[:ERROR_CHARS])
             variants.append(None)
             settings.append(None)
             continue
@@ -54,11 +56,11 @@ def prepare(patcher: Patcher, patches: Sequence[Mapping[str, Any]], output: Outp
 def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Collector, *,
               workers: int | None, output: Output, progress: Any,
               overrides: Mapping[str, Any],
-              on_variant: Callable[[int], None] | None = None) -> bool:
+              on_variant: Callable[[int], None] | None = None, first: int = 0) -> bool:
     """Run every variant into ``collector``; ``on_variant(i)`` after each one is recorded.
-    Returns False if Ctrl-C stopped the ensemble."""
+    Returns False if Ctrl-C stopped the ensemble. ``first``: see :func:`prepare`."""
     base_settings = run_settings(model, output, overrides)
-    variants, settings = prepare(Patcher(model), patches, output, overrides, collector)
+    variants, settings = prepare(Patcher(model), patches, output, overrides, collector, first)
     runnable = [i for i, v in enumerate(variants) if v is not None]
     for i, v in enumerate(variants):
         if v is None and on_variant is not None:
@@ -75,14 +77,14 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
         collector.facts(i, s["period"], raw)
         if kind is not None:
             if kind != "interrupted":
-                collector.fail(i, kind, f"variant {i}: {message}"[:ERROR_CHARS])
+                collector.fail(i, kind, f"variant {first + i}: {message}"[:ERROR_CHARS])
         else:
             try:
                 assert raw is not None and layout is not None
                 result = _result(v.model, s, raw, _run_settings(s, raw), True, layout)
                 collector.put(i, collector.outputs(result))
-            except Exception as e:  # the user's output function: fails this variant only
-                collector.fail(i, "output", f"variant {i}: {type(e).__name__}: {e}"
+            except Exception as e:  # noqa: BLE001 - a user's output function fails its variant
+                collector.fail(i, "output", f"variant {first + i}: {type(e).__name__}: {e}"
                                [:ERROR_CHARS])
         if on_variant is not None:
             on_variant(i)
