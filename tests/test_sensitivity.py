@@ -20,7 +20,7 @@ import pytest
 import oxyline
 
 pytest.importorskip("SALib")
-from oxyline import sensitivity  # noqa: E402
+from oxyline import sensitivity
 
 OHM = {"name": "ohm", "period": 1.0,
        "vessels": [{"name": "v", "from": "in", "to": "out", "lumped": {"resistance": 1e8}}],
@@ -34,8 +34,8 @@ BOUNDS = {"boundary_conditions.in.value": (0.5e-6, 1.5e-6),
 
 def _closed_form() -> tuple[np.ndarray, np.ndarray]:
     (q0, q1), (a0, a1), (b0, b1) = list(BOUNDS.values())[:3]
-    mean = lambda lo, hi: (lo + hi) / 2  # noqa: E731
-    var = lambda lo, hi: (hi - lo) ** 2 / 12  # noqa: E731
+    mean = lambda lo, hi: (lo + hi) / 2
+    var = lambda lo, hi: (hi - lo) ** 2 / 12
     eq, vq = mean(q0, q1), var(q0, q1)
     es, v1, v2 = mean(a0, a1) + mean(b0, b1), var(a0, a1), var(b0, b1)
     eq2, es2 = vq + eq**2, v1 + v2 + es**2
