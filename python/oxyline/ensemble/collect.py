@@ -39,11 +39,20 @@ def check_output(output: Any) -> None:
 
 
 def summary_values(result: Result) -> dict[str, np.ndarray]:
-    """``<var>_<stat>`` per vessel of a result: :func:`oxyline.io.results.summary`'s values."""
-    from oxyline.io.results import summary
+    """``<var>_<stat>`` per vessel of a result: the values of :meth:`oxyline.Result.summary`
+    (same variables, order and statistics), read from the result's arrays without building
+    its dataset (a hundredth of the time: this runs once per variant)."""
+    from oxyline.io.results import STATS, stats
 
-    df = summary(result)
-    return {c: df[c].to_numpy(dtype=float) for c in df.columns}
+    t = np.asarray(result.time, dtype=float)
+    arrays = [(name, getattr(result, name)) for name in result.vessel_variables]
+    arrays += [(name, arr) for name, (kind, arr, _) in result.species_variables().items()
+               if kind == "vessel"]
+    out = {}
+    for name, arr in arrays:
+        for stat, val in zip(STATS, stats(np.asarray(arr, dtype=float), t)):
+            out[f"{name}_{stat}"] = val
+    return out
 
 
 def callable_values(output: Callable[[Result], Mapping[str, float]], result: Result
