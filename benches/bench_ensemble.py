@@ -39,10 +39,10 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-import networks  # noqa: E402
+import networks
 
-import oxyline  # noqa: E402
-from oxyline import svzerod as dropin  # noqa: E402
+import oxyline
+from oxyline import svzerod as dropin
 
 
 def factors(n: int) -> np.ndarray:
@@ -114,14 +114,14 @@ def versus_svzerod(cfg: dict[str, Any], model: Any, patches: list[dict[str, Any]
     diff = float(np.max(np.abs(ox_mean / sv_mean - 1)))
     return ["| solver | wall (s) | CPU (s) | variants/s | throughput ratio | load |",
             "|---|---:|---:|---:|---:|---:|",
-            f"| svzerod loop | {sv_wall:.2f} | {sv_cpu:.2f} | {len(configs) / sv_wall:.2f} | 1 | "
-            f"{load()} |",
-            f"| oxyline ensemble | {ox_wall:.2f} | {ox_cpu:.2f} | {len(patches) / ox_wall:.2f} | "
-            f"{sv_wall / ox_wall:.1f} | {load()} |",
+            (f"| svzerod loop | {sv_wall:.2f} | {sv_cpu:.2f} | {len(configs) / sv_wall:.2f} | 1 | "
+            f"{load()} |"),
+            (f"| oxyline ensemble | {ox_wall:.2f} | {ox_cpu:.2f} | {len(patches) / ox_wall:.2f} | "
+            f"{sv_wall / ox_wall:.1f} | {load()} |"),
             "",
-            f"Root-vessel mean inlet pressure, oxyline vs svzerod: max relative difference "
+            (f"Root-vessel mean inlet pressure, oxyline vs svzerod: max relative difference "
             f"{diff:.1e} over the variants (svzerod's mean of its output rows, oxyline's time "
-            f"average)."]
+            f"average).")]
 
 
 def versus_cluster(model: Any, patches: list[dict[str, Any]], repeat: int) -> list[str]:
@@ -141,11 +141,11 @@ def versus_cluster(model: Any, patches: list[dict[str, Any]], repeat: int) -> li
     same = bool((local.pressure_in_mean.values == remote.pressure_in_mean.values).all())
     return ["| run | wall (s) | overhead | load |", "|---|---:|---:|---:|",
             f"| local threads (workers=2) | {local_wall:.2f} | - | {load()} |",
-            f"| LocalCluster, 2 workers x 1 thread | {dask_wall:.2f} | "
-            f"{100 * (dask_wall / local_wall - 1):+.0f} % | {load()} |",
+            (f"| LocalCluster, 2 workers x 1 thread | {dask_wall:.2f} | "
+            f"{100 * (dask_wall / local_wall - 1):+.0f} % | {load()} |"),
             "",
-            f"Cluster start {start:.1f} s and first (warm-up) ensemble {warm:.1f} s, not "
-            f"included. Results bit-identical to the local run: {same}."]
+            (f"Cluster start {start:.1f} s and first (warm-up) ensemble {warm:.1f} s, not "
+            f"included. Results bit-identical to the local run: {same}.")]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -166,11 +166,11 @@ def main(argv: list[str] | None = None) -> int:
     oxyline.simulate_ensemble(model, patches[:2], progress=False)
     now = datetime.datetime.now(datetime.timezone.utc)
     lines = [f"## Ensembles (bench_ensemble.py), {now:%Y-%m-%d %H:%M} UTC", "",
-             f"{os.cpu_count()} x {platform.processor() or platform.machine()}, oxyline "
+             (f"{os.cpu_count()} x {platform.processor() or platform.machine()}, oxyline "
              f"{oxyline.__version__}; svzerod tree of {args.vessels} vessels, {args.cycles} "
              f"cycles x {args.pts} points, {args.variants} variants (resistances x 0.8-1.2), "
              f"summary output; best of {args.repeat}. Load = 1-min load average after the row "
-             "(the machine is shared: compare rows of one table).", ""]
+             "(the machine is shared: compare rows of one table)."), ""]
     parts = {"scaling": ("Thread scaling", scaling),
              "svzerod": ("Throughput against a loop of svzerod runs", None),
              "dask": ("Dask LocalCluster against local threads", versus_cluster)}
