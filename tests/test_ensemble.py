@@ -335,3 +335,42 @@ def test_a_local_dask_cluster_gives_the_local_dataset(tmp_path: Path) -> None:
         with pytest.raises(oxyline.ModelError, match="variant 2: vessels.nope"):
             oxyline.simulate_ensemble(STRAIGHT, [{}, {}, {"vessels": {"nope": {}}}],
                                       client=client, **FAST)
+
+
+SIGINT_CHILD = """
+import sys
+import oxyline
+
+def progress(done, total):
+    if done == 2:
+        print("running", flush=True)  # the parent's cue: two variants are in the dataset
+
+try:
+    oxyline.simulate_ensemble("paper-straight", [{}] * 2000, workers=2, cycles=2,
+                              progress=progress)
+except oxyline.SimulationInterrupted as e:
+    st = e.result.status.values
+    print("interrupted", (st == 0).sum(), (st == -1).sum(), flush=True)
+    sys.exit(130)
+"""
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="needs SIGINT")
+def test_sigint_stops_the_threads_and_returns_the_finished_variants() -> None:
+    import signal
+    import subprocess
+
+    from tests.conftest import child_process
+
+    with child_process([sys.executable, "-c", SIGINT_CHILD], stdout=subprocess.PIPE,
+                       stderr=subprocess.PIPE, text=True) as proc:
+        assert proc.stdout is not None
+        line = proc.stdout.readline()  # "" if the child died before its cue
+        assert line.strip() == "running", proc.stderr.read() if proc.stderr else ""
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=600)
+    assert proc.returncode == 130, err
+    words = out.split()
+    assert words[0] == "interrupted", out
+    finished, never = int(words[1]), int(words[2])
+    assert finished >= 2 and never > 1000  # Ctrl-C lands within a few variants
