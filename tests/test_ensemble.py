@@ -29,7 +29,8 @@ TUBE: dict[str, Any] = {
     "vessels": [
         {"name": "a.b", "from": "in", "to": "j", "length": 0.1, "radius": 0.004,
          "wall_thickness": 5e-4, "youngs_modulus": 4e5},
-        {"name": "c", "from": "j", "to": "out1", "lumped": {"resistance": 1e7, "capacitance": 1e-9}},
+        {"name": "c", "from": "j", "to": "out1",
+         "lumped": {"resistance": 1e7, "capacitance": 1e-9}},
         {"name": "d", "from": "j", "to": "out2", "length": 0.05, "radius_in": 0.003,
          "radius_out": 0.002}],
     "boundary_conditions": {
@@ -66,7 +67,8 @@ def test_each_path_kind_merges_as_documented() -> None:
                                                 "capacitance": 2e-9, "distal_resistance": 3.0}
     assert m["blood"] == {"viscosity": 4e-3}
     # the base model is untouched
-    assert TUBE["vessels"][0]["radius"] == 0.004 and "fourier" not in TUBE["boundary_conditions"]["in"]
+    assert TUBE["vessels"][0]["radius"] == 0.004
+    assert "fourier" not in TUBE["boundary_conditions"]["in"]
 
 
 def test_scale_multiplies_resistances_and_compliances_of_the_selected_vessels() -> None:
@@ -89,9 +91,11 @@ def test_dataframe_rows_are_dotted_path_patches() -> None:
                        "blood.viscosity": [3e-3, 4e-3]})
     a = oxyline.simulate_ensemble(TUBE, df, **FAST)
     b = oxyline.simulate_ensemble(TUBE, [
-        {"vessels": {"a.b": {"radius": 0.003}}, "boundary_conditions": {"out2": {"resistance": 1e9}},
+        {"vessels": {"a.b": {"radius": 0.003}},
+         "boundary_conditions": {"out2": {"resistance": 1e9}},
          "blood": {"viscosity": 3e-3}},
-        {"vessels": {"a.b": {"radius": 0.005}}, "boundary_conditions": {"out2": {"resistance": 3e9}},
+        {"vessels": {"a.b": {"radius": 0.005}},
+         "boundary_conditions": {"out2": {"resistance": 3e9}},
          "blood": {"viscosity": 4e-3}}], **FAST)
     xr.testing.assert_identical(a.drop_vars("variant_label"), b)
     assert a["vessels.a.b.radius"].values.tolist() == [0.003, 0.005]
