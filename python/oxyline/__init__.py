@@ -11,7 +11,7 @@ Quick use::
 
 from __future__ import annotations
 
-from oxyline import _core, models
+from oxyline import _core, models, sensitivity
 from oxyline.ensemble import simulate_ensemble
 from oxyline.errors import (
     ModelError,
@@ -40,6 +40,7 @@ __all__ = [
     "__version__",
     "load_model",
     "models",
+    "sensitivity",
     "open_result",
     "simulate",
     "simulate_ensemble",
