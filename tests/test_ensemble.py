@@ -354,7 +354,8 @@ try:
                               progress=progress)
 except oxyline.SimulationInterrupted as e:
     st = e.result.status.values
-    print("interrupted", (st == 0).sum(), (st == -1).sum(), flush=True)
+    other = (~((st == 0) | (st == -1) | (st == 5))).sum()
+    print("interrupted", (st == 0).sum(), (st == -1).sum(), other, flush=True)
     sys.exit(130)
 """
 
@@ -376,5 +377,6 @@ def test_sigint_stops_the_threads_and_returns_the_finished_variants() -> None:
     assert proc.returncode == 130, err
     words = out.split()
     assert words[0] == "interrupted", out
-    finished, never = int(words[1]), int(words[2])
+    finished, never, other = int(words[1]), int(words[2]), int(words[3])
+    assert other == 0  # only finished (0), stopped while running (5) and never started (-1)
     assert finished >= 2 and never > 1000  # Ctrl-C lands within a few variants

@@ -75,9 +75,8 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
         v, s = variants[i], settings[i]
         assert v is not None and s is not None
         collector.facts(i, s["period"], raw)
-        if kind is not None:
-            if kind != "interrupted":
-                collector.fail(i, kind, f"variant {first + i}: {message}"[:ERROR_CHARS])
+        if kind is not None:  # "interrupted": stopped by Ctrl-C while it ran
+            collector.fail(i, kind, f"variant {first + i}: {message}"[:ERROR_CHARS])
         else:
             try:
                 assert raw is not None and layout is not None
