@@ -99,6 +99,14 @@ def test_dataframe_rows_are_dotted_path_patches() -> None:
          "blood": {"viscosity": 4e-3}}], **FAST)
     xr.testing.assert_identical(a.drop_vars("variant_label"), b)
     assert a["vessels.a.b.radius"].values.tolist() == [0.003, 0.005]
+    # an empty cell leaves the base value
+    sparse = pd.DataFrame({"vessels.a.b.radius": [np.nan, 0.005]})
+    c = oxyline.simulate_ensemble(TUBE, sparse, **FAST)
+    base = oxyline.simulate(TUBE, cycles=2).summary()
+    np.testing.assert_array_equal(c.pressure_in_mean.values[0], base["pressure_in_mean"].values)
+    wide = oxyline.simulate(apply_patch(TUBE, {"vessels": {"a.b": {"radius": 0.005}}}),
+                            cycles=2).summary()
+    np.testing.assert_array_equal(c.pressure_in_mean.values[1], wide["pressure_in_mean"].values)
 
 
 @pytest.mark.parametrize(("patch", "path"), [

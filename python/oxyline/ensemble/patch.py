@@ -258,10 +258,13 @@ def dotted_patch(row: Mapping[str, Any], vessel_names: Iterable[str], nodes: Ite
                  k: int = 0) -> dict[str, Any]:
     """The patch of one row of dotted-path columns (``vessels.CCA.radius``,
     ``boundary_conditions.ica_out.resistance``, ``blood.viscosity``, ``scale.resistance``).
-    A vessel or node name may itself contain dots: the longest known name wins."""
+    A vessel or node name may itself contain dots: the longest known name wins. An empty
+    (NaN) cell leaves the base model's value."""
     names = {"vessels": set(vessel_names), "boundary_conditions": set(nodes)}
     patch: dict[str, Any] = {}
     for column, value in row.items():
+        if isinstance(value, float) and math.isnan(value):
+            continue  # an empty cell leaves the base value
         parts = str(column).split(".")
         section, rest = parts[0], parts[1:]
         if section in names:
