@@ -124,9 +124,10 @@ def _value(x: Any, k: int, path: str) -> float:
         raise ModelError(f"{_where(k, path)}: cannot scale {x!r}, not a number") from None
 
 
-def _scaled(data: dict[str, Any], scale: Any, k: int) -> None:
-    """Apply the ``scale`` section to ``data`` (the merged model, containers already copied
-    where written)."""
+def _scaled(data: dict[str, Any], scale: Any, k: int) -> tuple[set[int], set[str]]:
+    """Apply the ``scale`` section to ``data`` (the merged model; every element written is a
+    new container) and return the indices of the vessels and the nodes of the conditions it
+    changed."""
     scale = _mapping(scale, k, "scale")
     for key in scale:
         if key not in SCALE_KEYS:
@@ -154,30 +155,39 @@ def _scaled(data: dict[str, Any], scale: Any, k: int) -> None:
             factors[key] = float(f)
     vessels = data["vessels"] = list(data["vessels"])
     nodes: set[str] = set()
+    changed: set[int] = set()
     for i in sorted(selected):
-        v = vessels[i] = dict(vessels[i])
+        v = vessels[i]
         nodes.update((str(v.get("from")), str(v.get("to"))))
         if "lumped" in v:
-            lp = v["lumped"] = dict(v["lumped"])
+            lp = dict(v["lumped"])
             for key, prop in (("resistance", "resistance"), ("compliance", "capacitance")):
                 if key in factors and prop in lp:
                     lp[prop] = _value(lp[prop], k, f"vessels.{v['name']}.lumped.{prop}") \
                         * factors[key]
+            vessels[i] = {**v, "lumped": lp}
+            changed.add(i)
         elif "compliance" in factors and "youngs_modulus" in v:
-            v["youngs_modulus"] = _value(v["youngs_modulus"], k,
-                                         f"vessels.{v['name']}.youngs_modulus") \
-                / factors["compliance"]
+            e = _value(v["youngs_modulus"], k, f"vessels.{v['name']}.youngs_modulus")
+            vessels[i] = {**v, "youngs_modulus": e / factors["compliance"]}
+            changed.add(i)
     bcs = data["boundary_conditions"] = dict(data.get("boundary_conditions", {}))
+    changed_nodes: set[str] = set()
     for node in [n for n in bcs if n in nodes]:
-        bc = bcs[node] = dict(bcs[node])
+        bc = dict(bcs[node])
         kind = str(bc.get("type", "")).lower()
         where = f"boundary_conditions.{node}"
-        if "resistance" in factors:
-            for prop in RESISTANCES.get(kind, ()):
-                bc[prop] = _value(bc.get(prop), k, f"{where}.{prop}") * factors["resistance"]
+        props = RESISTANCES.get(kind, ()) if "resistance" in factors else ()
+        for prop in props:
+            bc[prop] = _value(bc.get(prop), k, f"{where}.{prop}") * factors["resistance"]
         if "compliance" in factors and kind == "rcr":
             bc["capacitance"] = _value(bc.get("capacitance"), k, f"{where}.capacitance") \
                 * factors["compliance"]
+            props = (*props, "capacitance")
+        if props:  # only the conditions whose values change (an inflow stays as it is)
+            bcs[node] = bc
+            changed_nodes.add(node)
+    return changed, changed_nodes
 
 
 def merge_patch(source: Mapping[str, Any], patch: Mapping[str, Any], k: int = 0,
@@ -226,13 +236,9 @@ def merge_patch(source: Mapping[str, Any], patch: Mapping[str, Any], k: int = 0,
     if "period" in patch:
         data["period"] = patch["period"]
     if "scale" in patch:
-        _scaled(data, patch["scale"], k)
-        names = {v["name"] for v in data["vessels"]}
-        chosen = patch["scale"].get("vessels", "all")
-        sel = names if chosen == "all" else set(chosen)
-        ends = {str(v.get(e)) for v in data["vessels"] if v["name"] in sel for e in ("from", "to")}
-        touched_vessels.update(i for i, v in enumerate(data["vessels"]) if v["name"] in sel)
-        touched_nodes.update(n for n in data["boundary_conditions"] if n in ends)
+        scaled_vessels, scaled_nodes = _scaled(data, patch["scale"], k)
+        touched_vessels |= scaled_vessels
+        touched_nodes |= scaled_nodes
     return data, touched_vessels, touched_nodes
 
 
