@@ -9,7 +9,7 @@ from typing import Any
 
 from oxyline import _core
 from oxyline.ensemble.collect import ERROR_CHARS, Collector, Output
-from oxyline.ensemble.patch import Patcher, Variant
+from oxyline.ensemble.patch import Patcher, Variant, merge_patch
 from oxyline.errors import ModelError
 from oxyline.model import Model
 from oxyline.run import _result, _run_settings, _settings
@@ -28,29 +28,41 @@ def run_settings(model: Model, output: Output, overrides: Mapping[str, Any]) -> 
     return _settings(model, overrides)
 
 
-def prepare(patcher: Patcher, patches: Sequence[Mapping[str, Any]], output: Output,
-            overrides: Mapping[str, Any], collector: Collector, first: int = 0,
-            ) -> tuple[list[Variant | None], list[dict[str, Any] | None]]:
-    """Every variant and its settings; a variant whose values the model refuses is recorded
-    as failed (None). Unknown names raise. ``first``: the number of the first variant in the
-    whole ensemble (a chunk of it runs on a cluster worker)."""
-    variants: list[Variant | None] = []
-    settings: list[dict[str, Any] | None] = []
-    for i, patch in enumerate(patches):
-        k = first + i
-        try:
-            v = patcher.variant(patch, k)
-            s = run_settings(v.model, output, overrides)
-        except ModelError as e:
-            if str(e).startswith(f"variant {k}: "):
-                raise  # an unknown vessel, node or property: a mistake in the patches
-            collector.fail(i, "model", f"variant {k}: {e}"[:ERROR_CHARS])
-            variants.append(None)
-            settings.append(None)
-            continue
-        variants.append(v)
-        settings.append(s)
-    return variants, settings
+class Feed:
+    """The variants of one ``run_local`` call, prepared one at a time as the core's workers
+    need them (:meth:`next`, called on this thread while the others run): the patched
+    elements converted to canonical form, and the run settings. A variant whose values the
+    model refuses is recorded as failed and skipped. ``first``: the number of the first
+    variant in the whole ensemble (a chunk of it runs on a cluster worker)."""
+
+    def __init__(self, model: Model, patches: Sequence[Mapping[str, Any]], output: Output,
+                 overrides: Mapping[str, Any], collector: Collector, first: int,
+                 on_skip: Callable[[int], None]) -> None:
+        for i, patch in enumerate(patches):  # unknown names raise before anything runs
+            merge_patch(model.source, patch, first + i)
+        self.patcher = Patcher(model)
+        self.patches, self.output, self.overrides = patches, output, overrides
+        self.collector, self.first, self.on_skip = collector, first, on_skip
+        self.prepared: dict[int, tuple[Variant, dict[str, Any]]] = {}
+        self._next = 0
+
+    def next(self) -> tuple[int, str | None, float, float] | None:
+        while self._next < len(self.patches):
+            i = self._next
+            self._next += 1
+            k = self.first + i
+            try:
+                v = self.patcher.variant(self.patches[i], k)
+                s = run_settings(v.model, self.output, self.overrides)
+            except ModelError as e:
+                if str(e).startswith(f"variant {k}: "):
+                    raise  # a mistake in the patches (e.g. a text where a number is scaled)
+                self.collector.fail(i, "model", f"variant {k}: {e}"[:ERROR_CHARS])
+                self.on_skip(i)
+                continue
+            self.prepared[i] = (v, s)
+            return i, v.patch_json, s["period"], s["output_every"]
+        return None
 
 
 def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Collector, *,
@@ -58,22 +70,20 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
               overrides: Mapping[str, Any],
               on_variant: Callable[[int], None] | None = None, first: int = 0) -> bool:
     """Run every variant into ``collector``; ``on_variant(i)`` after each one is recorded.
-    Returns False if Ctrl-C stopped the ensemble. ``first``: see :func:`prepare`."""
+    Returns False if Ctrl-C stopped the ensemble. ``first``: see :class:`Feed`."""
     base_settings = run_settings(model, output, overrides)
-    variants, settings = prepare(Patcher(model), patches, output, overrides, collector, first)
-    runnable = [i for i, v in enumerate(variants) if v is not None]
-    for i, v in enumerate(variants):
-        if v is None and on_variant is not None:
-            on_variant(i)
     tick, close = _progress(progress, len(patches))
-    for _ in range(len(patches) - len(runnable)):
+
+    def recorded(i: int) -> None:
+        if on_variant is not None:
+            on_variant(i)
         tick()
 
-    def done(j: int, raw: dict[str, Any] | None, layout: dict[str, Any] | None,
+    feed = Feed(model, patches, output, overrides, collector, first, recorded)
+
+    def done(i: int, raw: dict[str, Any] | None, layout: dict[str, Any] | None,
              kind: str | None, message: str | None) -> None:
-        i = runnable[j]
-        v, s = variants[i], settings[i]
-        assert v is not None and s is not None
+        v, s = feed.prepared.pop(i)
         collector.facts(i, s["period"], raw)
         if kind is not None:  # "interrupted": stopped by Ctrl-C while it ran
             collector.fail(i, kind, f"variant {first + i}: {message}"[:ERROR_CHARS])
@@ -85,18 +95,12 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
             except Exception as e:  # noqa: BLE001 - a user's output function fails its variant
                 collector.fail(i, "output", f"variant {first + i}: {type(e).__name__}: {e}"
                                [:ERROR_CHARS])
-        if on_variant is not None:
-            on_variant(i)
-        tick()
+        recorded(i)
 
     core = {k: base_settings[k] for k in SHARED}
     ensemble = _core.Ensemble(json.dumps(model.canonical, separators=(",", ":")))
     try:
-        return ensemble.run(
-            [variants[i].patch_json for i in runnable],  # type: ignore[union-attr]
-            [settings[i]["period"] for i in runnable],  # type: ignore[index]
-            [settings[i]["output_every"] for i in runnable],  # type: ignore[index]
-            on_done=done, workers=workers, **core)
+        return ensemble.run(feed.next, on_done=done, workers=workers, **core)
     finally:
         close()
 

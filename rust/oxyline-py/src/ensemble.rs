@@ -3,10 +3,9 @@
 //! callback on the calling thread, in completion order, while the others keep running.
 
 use crate::{
-    ModelError, error_kind, layout_dict, outcome_dict, parse_method, parse_start, recorded_columns,
-    to_py,
+    error_kind, layout_dict, outcome_dict, parse_method, parse_start, recorded_columns, to_py,
 };
-use oxyline_core::ensemble::{Member, run_parallel, worker_count};
+use oxyline_core::ensemble::{Member, run_fed, worker_count};
 use oxyline_core::genalpha::NewtonControl;
 use oxyline_core::spec::{NetworkSpec, parse};
 use oxyline_core::{Error, Outcome, RunSettings, Selection, Transport};
@@ -20,6 +19,13 @@ use std::sync::atomic::{AtomicBool, Ordering};
 struct Finished {
     member: Option<(Member, Selection)>,
     outcome: Result<Outcome, Error>,
+}
+
+/// What the calling thread hands a worker: a variant's patch and its own settings.
+struct Input {
+    patch: Option<String>,
+    period: f64,
+    output_every: f64,
 }
 
 /// The output selection of a run (the names `Network.simulate` takes).
@@ -140,24 +146,24 @@ impl Ensemble {
         })
     }
 
-    /// Run every variant: `patches[i]` is the canonical JSON patch of variant i (None: the
-    /// base model), `periods[i]`/`output_every[i]` its period and output step; the other
-    /// settings are those of `Network.simulate` and shared. `on_done(i, raw, layout,
-    /// error_kind, error)` is called on this thread as each variant finishes; a failed variant
-    /// has `error_kind` set ("model", "unstable", "solver", "interrupted") and never stops the
-    /// others. Returns False if Ctrl-C stopped the ensemble (the variants finished until then
-    /// were handed over; running ones are handed over as "interrupted", the rest never run).
-    #[pyo3(signature = (patches, periods, output_every, *, on_done, workers = None, cycles = 10,
-        method = "auto", rho_infty = 0.5, dt = None, until_periodic = None, max_cycles = 100,
+    /// Run variants as `feed()` hands them over: it returns `(i, patch, period,
+    /// output_every)` for the next variant (`patch` its canonical JSON, None for the base
+    /// model) or None when there are no more, and is called on this thread while the workers
+    /// run (so preparing a variant overlaps the runs). The other settings are those of
+    /// `Network.simulate` and shared. `on_done(i, raw, layout, error_kind, error)` is called
+    /// on this thread as each variant finishes; a failed variant has `error_kind` set
+    /// ("model", "unstable", "solver", "interrupted") and never stops the others. Returns
+    /// False if Ctrl-C stopped the ensemble (the variants finished until then were handed
+    /// over, running ones as "interrupted"; the rest were never fed).
+    #[pyo3(signature = (feed, *, on_done, workers = None, cycles = 10, method = "auto",
+        rho_infty = 0.5, dt = None, until_periodic = None, max_cycles = 100,
         output_all_cycles = false, start = "steady", newton_atol = None, max_iterations = 30,
         segments = true, transport = true, variables = None, vessels = None))]
     #[allow(clippy::too_many_arguments)]
     fn run(
         &self,
         py: Python<'_>,
-        patches: Vec<Option<String>>,
-        periods: Vec<f64>,
-        output_every: Vec<f64>,
+        feed: Py<PyAny>,
         on_done: Py<PyAny>,
         workers: Option<usize>,
         cycles: usize,
@@ -175,14 +181,6 @@ impl Ensemble {
         variables: Option<Vec<String>>,
         vessels: Option<Vec<String>>,
     ) -> PyResult<bool> {
-        let n = patches.len();
-        if periods.len() != n || output_every.len() != n {
-            return Err(ModelError::new_err(format!(
-                "ensemble: {n} patches but {} periods and {} output steps",
-                periods.len(),
-                output_every.len()
-            )));
-        }
         let workers = worker_count(workers).map_err(to_py)?;
         let template = RunSettings {
             method: parse_method(method, rho_infty)?,
@@ -209,32 +207,58 @@ impl Ensemble {
             transport,
         };
         let base = self.base.clone();
-        let job = |i: usize, cancelled: &AtomicBool| {
+        let job = |_: usize, input: Input, cancelled: &AtomicBool| {
             let s = RunSettings {
-                period: periods[i],
-                output_every: output_every[i],
+                period: input.period,
+                output_every: input.output_every,
                 ..template.clone()
             };
-            run_variant(&base, patches[i].as_deref(), &s, &output, cancelled)
+            run_variant(&base, input.patch.as_deref(), &s, &output, cancelled)
         };
         py.detach(|| {
-            // the first Python error (Ctrl-C, or one raised by `on_done`) cancels the ensemble
+            // the first Python error (Ctrl-C, or one raised by `feed` or `on_done`) cancels
+            // the ensemble
             let mut pending: Option<PyErr> = None;
+            let mut next = || -> Option<(usize, Input)> {
+                if pending.is_some() {
+                    return None;
+                }
+                Python::attach(|py| {
+                    let item = feed
+                        .call0(py)
+                        .and_then(|v| v.extract::<Option<(usize, Option<String>, f64, f64)>>(py));
+                    match item {
+                        Ok(item) => item.map(|(i, patch, period, output_every)| {
+                            let input = Input {
+                                patch,
+                                period,
+                                output_every,
+                            };
+                            (i, input)
+                        }),
+                        Err(e) => {
+                            pending = Some(e);
+                            None
+                        }
+                    }
+                })
+            };
+            let mut failed: Option<PyErr> = None;
             let mut done = |item: Option<(usize, Finished)>| -> bool {
                 Python::attach(|py| {
                     if let Err(e) = py.check_signals() {
-                        pending.get_or_insert(e);
+                        failed.get_or_insert(e);
                     }
                     if let Some((i, f)) = item {
                         if let Err(e) = deliver(py, &on_done, i, f) {
-                            pending.get_or_insert(e);
+                            failed.get_or_insert(e);
                         }
                     }
-                    pending.is_none()
+                    failed.is_none()
                 })
             };
-            run_parallel(n, workers, &job, &mut done).map_err(to_py)?;
-            match pending {
+            run_fed(workers, &job, &mut next, &mut done).map_err(to_py)?;
+            match failed.or(pending) {
                 None => Ok(true),
                 Some(e) if Python::attach(|py| e.is_instance_of::<PyKeyboardInterrupt>(py)) => {
                     Ok(false)

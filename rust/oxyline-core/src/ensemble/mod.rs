@@ -7,9 +7,9 @@
 //! own), gets its own state and runs exactly as a plain run of the patched model would: the
 //! results of a variant do not depend on the thread that runs it or on the other variants.
 //!
-//! [`run_parallel`] is the driver: jobs run on a pool of `workers` threads while the calling
-//! thread receives each finished job in completion order (to convert, store or report it) and
-//! may cancel the rest.
+//! [`run_fed`] is the driver: jobs run on a pool of `workers` rayon threads while the calling
+//! thread prepares the next inputs, receives each finished job in completion order (to
+//! convert, store or report it) and may cancel the rest.
 
 use crate::assemble::Assembled;
 use crate::circuit::Dae;
@@ -17,11 +17,11 @@ use crate::error::{Error, Result};
 use crate::spec::transport::TransportSpec;
 use crate::spec::{BloodSpec, BoundarySpec, NetworkSpec, VesselSpec};
 use crate::transport::Transport;
-use rayon::prelude::*;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
+use std::sync::{Mutex, PoisonError};
 use std::time::Duration;
 
 /// The elements a variant replaces in the base model (canonical SI form).
@@ -149,15 +149,21 @@ pub fn worker_count(workers: Option<usize>) -> Result<usize> {
 /// How often the calling thread wakes up without a finished job (to check for Ctrl-C).
 const POLL: Duration = Duration::from_millis(100);
 
-/// Run `job(i, cancelled)` for every `i` in `0..n` on a pool of `workers` threads. The calling
-/// thread calls `done(Some((i, out)))` as each job finishes (completion order) and `done(None)`
-/// whenever it has waited [`POLL`] without one; `done` returning false cancels the ensemble:
-/// jobs not started are skipped (they return nothing) and running ones see `cancelled` set.
-/// Returns once every started job has finished and been handed to `done`.
-pub fn run_parallel<T: Send>(
-    n: usize,
+/// Inputs queued ahead of each worker: enough that no worker waits for the calling thread,
+/// few enough that a cancellation skips the rest at once.
+const AHEAD_PER_WORKER: usize = 2;
+
+/// Run jobs on a pool of `workers` threads, fed by the calling thread. The calling thread
+/// takes inputs from `feed` (None: no more) as the workers need them, so that preparing an
+/// input overlaps the jobs that run; it calls `done(Some((i, out)))` as each job finishes
+/// (completion order) and `done(None)` whenever it has waited [`POLL`] without one. `done`
+/// returning false cancels: nothing more is fed, queued jobs are skipped (they return
+/// nothing) and running ones see `cancelled` set. With one worker the jobs run in the order
+/// fed. Returns once every started job has finished and been handed to `done`.
+pub fn run_fed<I: Send, T: Send>(
     workers: usize,
-    job: &(dyn Fn(usize, &AtomicBool) -> T + Sync),
+    job: &(dyn Fn(usize, I, &AtomicBool) -> T + Sync),
+    feed: &mut dyn FnMut() -> Option<(usize, I)>,
     done: &mut dyn FnMut(Option<(usize, T)>) -> bool,
 ) -> Result<()> {
     let pool = rayon::ThreadPoolBuilder::new()
@@ -166,35 +172,68 @@ pub fn run_parallel<T: Send>(
         .build()
         .map_err(|e| Error::model("ensemble", format!("cannot start worker threads: {e}")))?;
     let cancelled = AtomicBool::new(false);
-    let (tx, rx) = mpsc::channel::<(usize, T)>();
+    let (input_tx, input_rx) = mpsc::channel::<(usize, I)>();
+    let input_rx = Mutex::new(input_rx);
+    let (output_tx, output_rx) = mpsc::channel::<(usize, T)>();
     std::thread::scope(|s| {
-        let cancelled = &cancelled;
+        let (cancelled, input_rx) = (&cancelled, &input_rx);
         s.spawn(move || {
-            pool.install(|| {
-                // one variant per task: variants differ in cost, idle threads steal the rest
-                (0..n)
-                    .into_par_iter()
-                    .with_max_len(1)
-                    .for_each_with(tx, |tx, i| {
-                        if !cancelled.load(Ordering::Relaxed) {
-                            // the receiver only goes away once every sender is dropped
-                            let _ = tx.send((i, job(i, cancelled)));
-                        }
-                    });
+            pool.scope(|scope| {
+                for _ in 0..workers {
+                    let tx = output_tx.clone();
+                    scope.spawn(move |_| work(job, input_rx, &tx, cancelled));
+                }
             });
+            drop(output_tx); // the last sender: the calling thread's loop ends with the workers
         });
+        let mut input_tx = Some(input_tx);
+        let mut in_flight = 0usize;
         loop {
-            let next = match rx.recv_timeout(POLL) {
-                Ok(item) => Some(item),
+            while in_flight < AHEAD_PER_WORKER * workers {
+                let Some(tx) = &input_tx else { break };
+                match feed() {
+                    // the workers only stop receiving once the sender is dropped
+                    Some(item) => {
+                        let _ = tx.send(item);
+                        in_flight += 1;
+                    }
+                    None => input_tx = None, // no more: the workers end once the queue is empty
+                }
+            }
+            let next = match output_rx.recv_timeout(POLL) {
+                Ok(item) => {
+                    in_flight -= 1;
+                    Some(item)
+                }
                 Err(mpsc::RecvTimeoutError::Timeout) => None,
                 Err(mpsc::RecvTimeoutError::Disconnected) => break,
             };
             if !done(next) {
                 cancelled.store(true, Ordering::Relaxed);
+                input_tx = None;
             }
         }
     });
     Ok(())
+}
+
+/// One worker: run the queued inputs until the queue is closed and empty (skipping them once
+/// the ensemble is cancelled).
+fn work<I, T>(
+    job: &(dyn Fn(usize, I, &AtomicBool) -> T + Sync),
+    inputs: &Mutex<mpsc::Receiver<(usize, I)>>,
+    outputs: &mpsc::Sender<(usize, T)>,
+    cancelled: &AtomicBool,
+) {
+    loop {
+        // a worker that panicked while holding the lock left the queue itself intact
+        let next = inputs.lock().unwrap_or_else(PoisonError::into_inner).recv();
+        let Ok((i, input)) = next else { return };
+        if !cancelled.load(Ordering::Relaxed) {
+            // the receiver lives until every sender is gone
+            let _ = outputs.send((i, job(i, input, cancelled)));
+        }
+    }
 }
 
 #[cfg(test)]

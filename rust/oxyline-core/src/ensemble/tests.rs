@@ -54,27 +54,46 @@ fn a_patch_cannot_change_the_topology() {
     assert!(err(neg).contains("vessel 'v'"), "{}", err(neg));
 }
 
+/// A feed of `0..n` (input i for job i).
+fn counter(n: usize) -> impl FnMut() -> Option<(usize, usize)> {
+    let mut next = 0;
+    move || {
+        (next < n).then(|| {
+            next += 1;
+            (next - 1, next - 1)
+        })
+    }
+}
+
 #[test]
 fn every_job_is_handed_over_once_whatever_the_workers() {
     for workers in [1, 2, 3] {
         let mut seen = vec![0usize; 50];
-        let job = |i: usize, _: &AtomicBool| i * i;
-        run_parallel(50, workers, &job, &mut |item| {
-            if let Some((i, sq)) = item {
-                assert_eq!(sq, i * i);
+        let mut order = Vec::new();
+        let job = |i: usize, input: usize, _: &AtomicBool| (i, input * input);
+        run_fed(workers, &job, &mut counter(50), &mut |item| {
+            if let Some((i, (j, sq))) = item {
+                assert_eq!((j, sq), (i, i * i));
                 seen[i] += 1;
+                order.push(i);
             }
             true
         })
         .unwrap();
         assert!(seen.iter().all(|&n| n == 1), "{workers}: {seen:?}");
+        if workers == 1 {
+            assert!(
+                order.windows(2).all(|w| w[0] < w[1]),
+                "one worker: in feed order"
+            );
+        }
     }
 }
 
 #[test]
-fn cancelling_skips_the_jobs_not_started() {
+fn cancelling_stops_the_feed_and_skips_the_queued_jobs() {
     let started = AtomicUsize::new(0);
-    let job = |_: usize, cancelled: &AtomicBool| {
+    let job = |_: usize, _: usize, cancelled: &AtomicBool| {
         started.fetch_add(1, Ordering::SeqCst);
         // a running job sees the cancellation (a run's progress callback checks it)
         while !cancelled.load(Ordering::Relaxed) {
@@ -82,18 +101,29 @@ fn cancelling_skips_the_jobs_not_started() {
         }
         true
     };
+    let mut fed = 0;
+    let mut feed = counter(1000);
     let mut finished = 0;
-    run_parallel(1000, 2, &job, &mut |item| {
-        finished += usize::from(item.is_some());
-        false // cancel at the first wake-up
-    })
+    run_fed(
+        2,
+        &job,
+        &mut || {
+            fed += 1;
+            feed()
+        },
+        &mut |item| {
+            finished += usize::from(item.is_some());
+            false // cancel at the first wake-up
+        },
+    )
     .unwrap();
     let started = started.load(Ordering::SeqCst);
     assert_eq!(finished, started);
     assert!(
-        started <= 4,
+        started <= 2,
         "{started} jobs started after the cancellation"
     );
+    assert!(fed <= 2 * AHEAD_PER_WORKER, "{fed} inputs fed");
 }
 
 #[test]
