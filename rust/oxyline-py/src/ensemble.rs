@@ -11,6 +11,7 @@ use oxyline_core::spec::{NetworkSpec, parse};
 use oxyline_core::{Error, Outcome, RunSettings, Selection, Transport};
 use pyo3::exceptions::PyKeyboardInterrupt;
 use pyo3::prelude::*;
+use std::cell::RefCell;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -217,10 +218,15 @@ impl Ensemble {
         };
         py.detach(|| {
             // the first Python error (Ctrl-C, or one raised by `feed` or `on_done`) cancels
-            // the ensemble
-            let mut pending: Option<PyErr> = None;
+            // the ensemble: nothing more is fed and the running variants stop
+            let first_error: RefCell<Option<PyErr>> = RefCell::new(None);
+            let keep = |r: PyResult<()>| {
+                if let Err(e) = r {
+                    first_error.borrow_mut().get_or_insert(e);
+                }
+            };
             let mut next = || -> Option<(usize, Input)> {
-                if pending.is_some() {
+                if first_error.borrow().is_some() {
                     return None;
                 }
                 Python::attach(|py| {
@@ -237,28 +243,23 @@ impl Ensemble {
                             (i, input)
                         }),
                         Err(e) => {
-                            pending = Some(e);
+                            keep(Err(e));
                             None
                         }
                     }
                 })
             };
-            let mut failed: Option<PyErr> = None;
             let mut done = |item: Option<(usize, Finished)>| -> bool {
                 Python::attach(|py| {
-                    if let Err(e) = py.check_signals() {
-                        failed.get_or_insert(e);
-                    }
+                    keep(py.check_signals());
                     if let Some((i, f)) = item {
-                        if let Err(e) = deliver(py, &on_done, i, f) {
-                            failed.get_or_insert(e);
-                        }
+                        keep(deliver(py, &on_done, i, f));
                     }
-                    failed.is_none()
+                    first_error.borrow().is_none()
                 })
             };
             run_fed(workers, &job, &mut next, &mut done).map_err(to_py)?;
-            match failed.or(pending) {
+            match first_error.into_inner() {
                 None => Ok(true),
                 Some(e) if Python::attach(|py| e.is_instance_of::<PyKeyboardInterrupt>(py)) => {
                     Ok(false)
