@@ -11,7 +11,8 @@ Quick use::
 
 from __future__ import annotations
 
-from oxyline import _core, models
+from oxyline import _core, models, sensitivity
+from oxyline.ensemble import simulate_ensemble
 from oxyline.errors import (
     ModelError,
     SimulationInterrupted,
@@ -40,6 +41,8 @@ __all__ = [
     "load_model",
     "models",
     "open_result",
+    "sensitivity",
     "simulate",
+    "simulate_ensemble",
     "simulate_to_zarr",
 ]

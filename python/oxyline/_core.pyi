@@ -85,3 +85,36 @@ class Network:
         ``max_buffered_rows`` is the most output rows the core held at once. With last-cycle
         output, ``keep_current_cycle=False`` records nothing before the last cycle (a streaming
         run then holds at most one chunk; a run stopped earlier returns no rows)."""
+
+class Ensemble:
+    """A parsed base model whose variants run in parallel on the core's threads."""
+
+    def __init__(self, model_json: str) -> None: ...
+    def run(
+        self,
+        feed: Callable[[], tuple[int, str | None, float, float] | None],
+        *,
+        on_done: Callable[
+            [int, dict[str, Any] | None, dict[str, Any] | None, str | None, str | None], None
+        ],
+        workers: int | None = None,
+        cycles: int = 10,
+        method: str = "auto",
+        rho_infty: float = 0.5,
+        dt: float | None = None,
+        until_periodic: float | None = None,
+        max_cycles: int = 100,
+        output_all_cycles: bool = False,
+        start: str = "steady",
+        newton_atol: float | None = None,
+        max_iterations: int = 30,
+        segments: bool = True,
+        transport: bool = True,
+        variables: list[str] | None = None,
+        vessels: list[str] | None = None,
+    ) -> bool:
+        """Run the variants ``feed()`` hands over (``(i, canonical patch JSON or None,
+        period, output_every)``, None when there are no more) on ``workers`` threads (default
+        ``OXYLINE_NUM_THREADS`` or every core), the GIL released; ``on_done(i, raw, layout,
+        error_kind, error)`` is called on this thread as each finishes. False if Ctrl-C
+        stopped it."""

@@ -20,7 +20,7 @@ from __future__ import annotations
 import copy
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -440,6 +440,22 @@ def build_model(data: dict[str, Any]) -> Model:
 def _build(data: dict[str, Any]) -> Model:
     """The model of ``data``, which becomes the model's ``source``: callers pass a dict they
     own (a copy of the user's, or one they built)."""
+    model = _unassembled(data)
+    model.network  # noqa: B018 - assemble now so that invalid models fail at load time
+    sim = model.simulation
+    out = sim.get("output") or {}
+    if "variables" in out or "vessels" in out:  # unknown names fail at load time too
+        model.network.output_layout(variables=output_names(out.get("variables"), "variables"),
+                                    vessels=output_vessels(out.get("vessels", "all")))
+    return model
+
+
+def _unassembled(data: dict[str, Any], convert_vessels: Callable[..., Any] | None = None,
+                 convert_boundary_conditions: Callable[..., Any] | None = None) -> Model:
+    """The model of ``data`` with its canonical description, not yet assembled.
+    ``convert_vessels`` and ``convert_boundary_conditions`` stand in for :func:`_vessels` and
+    :func:`_boundary_conditions` (an ensemble reuses the base model's canonical elements that
+    a variant leaves as they are)."""
     _check_keys(data, TOP_KEYS, "model")
     name = str(data.get("name", "network"))
     units = str(data.get("units", "SI"))
@@ -476,11 +492,12 @@ def _build(data: dict[str, Any]) -> Model:
     vessels = data.get("vessels")
     if not isinstance(vessels, list) or not vessels:
         raise _err("model", "'vessels' must be a non-empty list")
-    canon["vessels"] = _vessels(vessels, units)
+    canon["vessels"] = (convert_vessels or _vessels)(vessels, units)
     bcs = data.get("boundary_conditions", {})
     if not isinstance(bcs, Mapping):
         raise _err("model", "'boundary_conditions' must be a mapping from node name to condition")
-    canon["boundary_conditions"], periods = _boundary_conditions(bcs, units)
+    canon["boundary_conditions"], periods = (convert_boundary_conditions
+                                             or _boundary_conditions)(bcs, units)
     period = data.get("period")
     if period is not None:
         period = _number(period, "model", "period")
@@ -507,11 +524,5 @@ def _build(data: dict[str, Any]) -> Model:
     if tr is not None:
         canon["transport"] = tr
     # ``data`` is the caller's private copy (load_model, build_model) and is only read here
-    model = Model(name=name, canonical=canon, simulation=dict(sim), period=period, source=data,
-                  transport=tr_info)
-    model.network  # noqa: B018 - assemble now so that invalid models fail at load time
-    out = sim.get("output") or {}
-    if "variables" in out or "vessels" in out:  # unknown names fail at load time too
-        model.network.output_layout(variables=output_names(out.get("variables"), "variables"),
-                                    vessels=output_vessels(out.get("vessels", "all")))
-    return model
+    return Model(name=name, canonical=canon, simulation=dict(sim), period=period, source=data,
+                 transport=tr_info)

@@ -121,9 +121,12 @@ def _species_results(model: Model, raw: Mapping[str, Any], layout: Mapping[str, 
 
 
 def _result(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
-            settings: dict[str, Any], complete: bool) -> Result:
-    """A :class:`Result` of output rows in the core's layout (a whole run, or one chunk)."""
-    layout = model.network.output_layout(**_selection(s))
+            settings: dict[str, Any], complete: bool,
+            layout: dict[str, Any] | None = None) -> Result:
+    """A :class:`Result` of output rows in the core's layout (a whole run, or one chunk);
+    ``layout``: the run's output layout if not the model network's (an ensemble variant)."""
+    if layout is None:
+        layout = model.network.output_layout(**_selection(s))
     if not s["transport"]:
         layout.pop("transport", None)
     empty_segments = not s["segments"] and s["variables"] is None

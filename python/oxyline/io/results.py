@@ -122,6 +122,18 @@ class ZarrAppender:
             self._zarr.consolidate_metadata(self.path, zarr_format=2)
 
 
+def stats(a: Any, t: Any) -> tuple[Any, Any, Any]:
+    """Mean, min and max over time (axis 0) of ``a`` sampled at times ``t``; the mean is the
+    time average (trapezoidal rule), the plain mean for a single time."""
+    import numpy as np
+
+    if len(t) > 1 and t[-1] > t[0]:
+        mean = np.trapezoid(a, t, axis=0) / (t[-1] - t[0])
+    else:
+        mean = a.mean(axis=0)
+    return mean, a.min(axis=0), a.max(axis=0)
+
+
 def summary(result: Result | Any) -> Any:
     """pandas DataFrame, one row per vessel (index ``vessel``), columns ``<variable>_<stat>``
     for every per-vessel variable (dims time × vessel) and stat in mean, min, max. Means are
@@ -139,12 +151,7 @@ def summary(result: Result | Any) -> Any:
     for name, var in ds.data_vars.items():
         if var.dims != ("time", "vessel"):
             continue
-        a = np.asarray(var.values, dtype=float)
-        if len(t) > 1 and t[-1] > t[0]:
-            mean = np.trapezoid(a, t, axis=0) / (t[-1] - t[0])
-        else:
-            mean = a.mean(axis=0)
-        for stat, val in (("mean", mean), ("min", a.min(axis=0)), ("max", a.max(axis=0))):
+        for stat, val in zip(STATS, stats(np.asarray(var.values, dtype=float), t)):
             cols[f"{name}_{stat}"] = val
             units[f"{name}_{stat}"] = str(var.attrs.get("units", ""))
     df = pd.DataFrame(cols, index=pd.Index([str(v) for v in ds["vessel"].values], name="vessel"))

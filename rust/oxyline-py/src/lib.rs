@@ -9,7 +9,8 @@ use oxyline_core::output::{
 };
 use oxyline_core::spec::parse;
 use oxyline_core::{
-    Assembled, Chunk, Dae, Error, Method, OutputSink, RunSettings, Selection, Start, Transport,
+    Assembled, Chunk, Dae, Error, Method, Outcome, OutputSink, RunSettings, Selection, Start,
+    Transport,
 };
 use pyo3::exceptions::{PyKeyboardInterrupt, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -17,6 +18,8 @@ use pyo3::types::PyDict;
 use std::cell::Cell;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
+
+mod ensemble;
 
 // the schema names the columns `Transport::observe` writes, one name per column
 const _: () = assert!(oxyline_core::transport::VESSEL_COLUMNS == SPECIES_VESSEL_VARIABLES.len());
@@ -95,6 +98,142 @@ fn put_rows<'py>(
     td.set_item("initial_stored", initial_stored.to_vec())?;
     d.set_item("transport", &td)?;
     Ok(Some(td))
+}
+
+fn parse_method(method: &str, rho_infty: f64) -> PyResult<Method> {
+    Ok(match method {
+        "rk4" => Method::Rk4,
+        "generalized-alpha" => Method::GeneralizedAlpha { rho_inf: rho_infty },
+        "auto" => Method::Auto { rho_inf: rho_infty },
+        other => {
+            return Err(ModelError::new_err(format!(
+                "simulation: unknown method '{other}' (expected rk4, generalized-alpha or auto)"
+            )));
+        }
+    })
+}
+
+fn parse_start(start: &str, rho_infty: f64) -> PyResult<Start> {
+    Ok(match start {
+        "steady" => Start::Steady,
+        "svzerod-steady" => Start::SvZeroDSteady { rho_inf: rho_infty },
+        "zero" => Start::Zero,
+        "svzerod-zero" => Start::SvZeroDZero,
+        other => {
+            return Err(ModelError::new_err(format!(
+                "simulation: unknown start '{other}' (expected steady, zero, svzerod-steady or svzerod-zero)"
+            )));
+        }
+    })
+}
+
+/// The recorded flow columns and species columns of an output selection. The default
+/// selection (`selected` false, segments on) records every probe and every species column:
+/// that path is kept as it was (bit-identical rows).
+fn recorded_columns(
+    probes: &oxyline_core::Probes,
+    transport: Option<&Transport>,
+    sel: &Selection,
+    selected: bool,
+    segments: bool,
+) -> (Vec<usize>, Option<Vec<usize>>) {
+    if !selected && segments {
+        return (probes.all(), None);
+    }
+    let counts = transport
+        .map(|t| t.out_segment_counts())
+        .unwrap_or_default();
+    (
+        sel.flow_columns(probes),
+        transport.map(|_| sel.species_columns(&counts)),
+    )
+}
+
+/// Layout of the output selection `sel` of a network (see `oxyline_core::output`): selected
+/// vessels, their segment counts and positions, the selected variable names, column counts.
+fn layout_dict<'py>(
+    py: Python<'py>,
+    p: &oxyline_core::Probes,
+    transport: Option<&Transport>,
+    sel: &Selection,
+) -> PyResult<Bound<'py, PyDict>> {
+    let names = |list: &[&str], idx: &[usize]| -> Vec<String> {
+        idx.iter().map(|&i| list[i].to_owned()).collect()
+    };
+    let d = PyDict::new(py);
+    d.set_item(
+        "vessels",
+        sel.vessels
+            .iter()
+            .map(|&v| p.vessels[v].clone())
+            .collect::<Vec<_>>(),
+    )?;
+    d.set_item("segment_count", sel.segment_count(&p.segment_count, false))?;
+    d.set_item("segment_position", sel.segment_position(p).into_pyarray(py))?;
+    d.set_item(
+        "vessel_variables",
+        names(&VESSEL_VARIABLES, &sel.vessel_variables),
+    )?;
+    d.set_item(
+        "segment_variables",
+        names(&SEGMENT_VARIABLES, &sel.segment_variables),
+    )?;
+    d.set_item("n_columns", sel.flow_columns(p).len())?;
+    if let Some(t) = transport {
+        let counts = t.out_segment_counts();
+        let td = PyDict::new(py);
+        td.set_item("species", t.species_names())?;
+        td.set_item(
+            "vessel_variables",
+            names(&SPECIES_VESSEL_VARIABLES, &sel.species_vessel_variables),
+        )?;
+        td.set_item(
+            "segment_variables",
+            names(&SPECIES_SEGMENT_VARIABLES, &sel.species_segment_variables),
+        )?;
+        td.set_item("segment_count", sel.segment_count(&counts, true))?;
+        td.set_item("columns_per_species", sel.species_columns(&counts).len())?;
+        d.set_item("transport", td)?;
+    }
+    Ok(d)
+}
+
+/// A run's outcome as the dict `Network.simulate` returns, without its error: `times`, `data`
+/// (and `transport`) without a copy, and the run facts.
+fn outcome_dict(py: Python<'_>, out: Outcome) -> PyResult<Bound<'_, PyDict>> {
+    let d = PyDict::new(py);
+    // the species rows go to numpy without a copy; the other transport facts follow
+    let (species_rows, species_state) = match out.transport {
+        Some(t) => (
+            Some((t.species, t.data.into_pyarray(py), t.initial_stored)),
+            Some((t.final_state, t.mean_abs_flow)),
+        ),
+        None => (None, None),
+    };
+    let td = put_rows(
+        &d,
+        out.times.into_pyarray(py),
+        out.data.into_pyarray(py),
+        out.n_probes,
+        species_rows
+            .as_ref()
+            .map(|(names, rows, init)| (names.as_slice(), rows.clone(), init.as_slice())),
+    )?;
+    d.set_item("dt", out.dt)?;
+    d.set_item("method", out.method)?;
+    d.set_item("cycles_run", out.cycles_run)?;
+    d.set_item("periodic_error", out.periodic_error)?;
+    d.set_item("max_buffered_rows", out.max_buffered_rows)?;
+    if let Some(lim) = &out.stability {
+        d.set_item("rk4_dt_max", lim.dt_max)?;
+        d.set_item("rk4_limiting_element", lim.element.clone())?;
+    }
+    d.set_item("final_state", out.final_state.into_pyarray(py))?;
+    if let (Some(td), Some((final_state, mean_abs_flow))) = (td, species_state) {
+        td.set_item("final_state", final_state.into_pyarray(py))?;
+        td.set_item("mean_abs_flow", mean_abs_flow.into_pyarray(py))?;
+    }
+    Ok(d)
 }
 
 /// An assembled network: built once from the canonical SI JSON model, run many times.
@@ -201,46 +340,7 @@ impl Network {
         segments: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         let sel = self.selection(variables, vessels, segments)?;
-        let p = &self.inner.0.probes;
-        let names = |list: &[&str], idx: &[usize]| -> Vec<String> {
-            idx.iter().map(|&i| list[i].to_owned()).collect()
-        };
-        let d = PyDict::new(py);
-        d.set_item(
-            "vessels",
-            sel.vessels
-                .iter()
-                .map(|&v| p.vessels[v].clone())
-                .collect::<Vec<_>>(),
-        )?;
-        d.set_item("segment_count", sel.segment_count(&p.segment_count, false))?;
-        d.set_item("segment_position", sel.segment_position(p).into_pyarray(py))?;
-        d.set_item(
-            "vessel_variables",
-            names(&VESSEL_VARIABLES, &sel.vessel_variables),
-        )?;
-        d.set_item(
-            "segment_variables",
-            names(&SEGMENT_VARIABLES, &sel.segment_variables),
-        )?;
-        d.set_item("n_columns", sel.flow_columns(p).len())?;
-        if let Some(t) = &self.transport {
-            let counts = t.out_segment_counts();
-            let td = PyDict::new(py);
-            td.set_item("species", t.species_names())?;
-            td.set_item(
-                "vessel_variables",
-                names(&SPECIES_VESSEL_VARIABLES, &sel.species_vessel_variables),
-            )?;
-            td.set_item(
-                "segment_variables",
-                names(&SPECIES_SEGMENT_VARIABLES, &sel.species_segment_variables),
-            )?;
-            td.set_item("segment_count", sel.segment_count(&counts, true))?;
-            td.set_item("columns_per_species", sel.species_columns(&counts).len())?;
-            d.set_item("transport", td)?;
-        }
-        Ok(d)
+        layout_dict(py, &self.inner.0.probes, self.transport.as_deref(), &sel)
     }
 
     /// The segment table: one entry per flow segment of every vessel, in model order, with
@@ -473,47 +573,19 @@ impl Network {
         if chunk_rows == 0 {
             return Err(ModelError::new_err("simulation: chunk_rows must be >= 1"));
         }
-        let method = match method {
-            "rk4" => Method::Rk4,
-            "generalized-alpha" => Method::GeneralizedAlpha { rho_inf: rho_infty },
-            "auto" => Method::Auto { rho_inf: rho_infty },
-            other => {
-                return Err(ModelError::new_err(format!(
-                    "simulation: unknown method '{other}' (expected rk4, generalized-alpha or auto)"
-                )));
-            }
-        };
-        let start = match start {
-            "steady" => Start::Steady,
-            "svzerod-steady" => Start::SvZeroDSteady { rho_inf: rho_infty },
-            "zero" => Start::Zero,
-            "svzerod-zero" => Start::SvZeroDZero,
-            other => {
-                return Err(ModelError::new_err(format!(
-                    "simulation: unknown start '{other}' (expected steady, zero, svzerod-steady or svzerod-zero)"
-                )));
-            }
-        };
-        let probes = &self.inner.0.probes;
-        // the default selection records every probe and every species column: that path is
-        // kept as it was (bit-identical rows)
+        let method = parse_method(method, rho_infty)?;
+        let start = parse_start(start, rho_infty)?;
         let selected = variables.is_some() || vessels.is_some();
         let sel = self.selection(variables, vessels, segments)?;
         let (cols, species_columns) = if all_unknowns {
             ((0..self.inner.1.n).collect(), None)
-        } else if !selected && segments {
-            (probes.all(), None)
         } else {
-            let counts = self
-                .transport
-                .as_ref()
-                .map(|t| t.out_segment_counts())
-                .unwrap_or_default();
-            (
-                sel.flow_columns(probes),
-                self.transport
-                    .as_ref()
-                    .map(|_| sel.species_columns(&counts)),
+            recorded_columns(
+                &self.inner.0.probes,
+                self.transport.as_deref(),
+                &sel,
+                selected,
+                segments,
             )
         };
         let settings = RunSettings {
@@ -609,40 +681,10 @@ impl Network {
             };
             (out, pending.into_inner())
         });
-        let out = outcome.map_err(to_py)?;
-        let d = PyDict::new(py);
-        // the species rows go to numpy without a copy; the other transport facts follow
-        let (species_rows, species_state) = match out.transport {
-            Some(t) => (
-                Some((t.species, t.data.into_pyarray(py), t.initial_stored)),
-                Some((t.final_state, t.mean_abs_flow)),
-            ),
-            None => (None, None),
-        };
-        let td = put_rows(
-            &d,
-            out.times.into_pyarray(py),
-            out.data.into_pyarray(py),
-            out.n_probes,
-            species_rows
-                .as_ref()
-                .map(|(names, rows, init)| (names.as_slice(), rows.clone(), init.as_slice())),
-        )?;
-        d.set_item("dt", out.dt)?;
-        d.set_item("method", out.method)?;
-        d.set_item("cycles_run", out.cycles_run)?;
-        d.set_item("periodic_error", out.periodic_error)?;
-        d.set_item("max_buffered_rows", out.max_buffered_rows)?;
-        if let Some(lim) = &out.stability {
-            d.set_item("rk4_dt_max", lim.dt_max)?;
-            d.set_item("rk4_limiting_element", lim.element.clone())?;
-        }
-        d.set_item("final_state", out.final_state.into_pyarray(py))?;
-        if let (Some(td), Some((final_state, mean_abs_flow))) = (td, species_state) {
-            td.set_item("final_state", final_state.into_pyarray(py))?;
-            td.set_item("mean_abs_flow", mean_abs_flow.into_pyarray(py))?;
-        }
-        match (pending, out.error) {
+        let mut out = outcome.map_err(to_py)?;
+        let error = out.error.take();
+        let d = outcome_dict(py, out)?;
+        match (pending, error) {
             (Some(e), _) => {
                 d.set_item("error_kind", "interrupted")?;
                 d.set_item("error", e.value(py).clone())?;
@@ -660,7 +702,7 @@ impl Network {
 #[pymodule]
 mod _core {
     #[pymodule_export]
-    use super::{ModelError, Network, SolverError, UnstableTimeStep};
+    use super::{ModelError, Network, SolverError, UnstableTimeStep, ensemble::Ensemble};
 
     use pyo3::types::PyModuleMethods;
 

@@ -1,0 +1,110 @@
+"""``simulate_ensemble(..., client=...)``: the variants in chunks on a Dask cluster.
+
+Each chunk is one Dask task that runs the local ensemble (every core of its worker, the
+GIL released) and returns what it collected; this process merges the chunks as they finish
+into the same dataset a local run builds (or writes them to the store). Dask does the
+scheduling, transfer and fault handling: there is no pool or RPC of oxyline's own.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from oxyline.ensemble.collect import Collector, Output
+from oxyline.ensemble.patch import merge_patch
+from oxyline.errors import SimulationInterrupted
+from oxyline.model import Model
+
+#: tasks per worker thread: enough to balance chunks of unequal cost, few enough that the
+#: per-task overhead (a model transfer, a thread pool) stays small
+TASKS_PER_THREAD = 4
+
+
+def run_chunk(model: Model, patches: Sequence[Mapping[str, Any]], first: int, output: Output,
+              workers: int | None, overrides: Mapping[str, Any]) -> Collector:
+    """One task: variants ``first``, ``first + 1``, ... on this worker's threads (``workers``,
+    default the Dask worker's thread count)."""
+    from oxyline.ensemble.local import run_local
+
+    if workers is None:
+        try:
+            from distributed import get_worker
+
+            workers = get_worker().state.nthreads
+        except (ImportError, ValueError):
+            workers = None
+    collector = Collector(len(patches), output, model.vessel_names)
+    run_local(model, patches, collector, workers=workers, output=output, progress=False,
+              overrides=overrides, first=first)
+    return collector
+
+
+def _chunks(n: int, threads: int) -> list[range]:
+    size = max(1, math.ceil(n / max(1, threads * TASKS_PER_THREAD)))
+    return [range(a, min(a + size, n)) for a in range(0, n, size)]
+
+
+def _merge(into: Collector, part: Collector, rows: range) -> None:
+    """Copy the rows of a finished chunk into the ensemble's collector."""
+    for j, i in enumerate(rows):
+        for name in ("status", "error", "period", "cycles_run", "periodic_error"):
+            getattr(into, name)[i] = getattr(part, name)[j]
+        if j in part.datasets:
+            into.datasets[i] = part.datasets[j]
+    for name, arr in part.values.items():
+        dest = into.values.get(name)
+        if dest is None:
+            import numpy as np
+
+            dest = into.values[name] = np.full((into.n, *arr.shape[1:]), np.nan)
+        dest[rows.start:rows.stop] = arr
+
+
+def run_on_client(client: Any, model: Model, patches: list[dict[str, Any]], index: Any, *,
+                  output: Output, store: Any, progress: Any, workers: int | None,
+                  overrides: Mapping[str, Any]) -> Any:
+    from distributed import as_completed
+
+    from oxyline.ensemble import _attrs
+    from oxyline.ensemble.local import _progress, run_settings
+
+    for k, patch in enumerate(patches):  # unknown names fail here, before any task starts
+        merge_patch(model.source, patch, k)
+    run_settings(model, output, overrides)  # so do unknown settings
+    collector = Collector(len(patches), output, model.vessel_names)
+    writer = None
+    if store is not None:
+        from oxyline.ensemble.store import StoreWriter
+
+        writer = StoreWriter(store, collector, patches, _attrs(model, output), index)
+    threads = sum(client.nthreads().values()) or 1
+    chunks = _chunks(len(patches), threads)
+    [shared] = client.scatter([model], broadcast=True)
+    futures = {client.submit(run_chunk, shared, patches[c.start:c.stop], c.start, output,
+                             workers, dict(overrides), pure=False): c for c in chunks}
+    tick, close = _progress(progress, len(patches))
+    finished = True
+    try:
+        for fut in as_completed(futures):
+            rows = futures[fut]
+            _merge(collector, fut.result(), rows)
+            for i in rows:
+                if writer is not None:
+                    writer.write(i)
+                tick()
+    except KeyboardInterrupt:
+        finished = False
+        client.cancel(list(futures))
+    finally:
+        close()
+    if writer is not None:
+        writer.close(complete=finished)
+        ds = writer.open()
+    else:
+        ds = collector.dataset(patches, _attrs(model, output), index)
+    if not finished:
+        raise SimulationInterrupted("ensemble interrupted; the finished chunks are in "
+                                    "exc.result (status -1: not run)", ds)
+    return ds

@@ -1,0 +1,194 @@
+"""What an ensemble keeps of each finished variant (``output=``) and the dataset it returns.
+
+* ``"summary"``: per (variant, vessel) ``<var>_mean``, ``_min`` and ``_max`` of the output
+  (the last cycle by default), exactly :meth:`oxyline.Result.summary`; memory O(variants ×
+  vessels);
+* ``"full"``: the variables of :meth:`oxyline.Result.to_xarray` with a leading ``variant``
+  dim (``time`` and ``segment`` padded with NaN where variants differ in length);
+* a callable ``f(result) -> {name: float}``: those scalars along ``variant``.
+
+Every dataset has ``status`` (0 finished, see :data:`STATUS`), ``error`` (the message of a
+failed variant), ``period``, ``cycles_run`` and ``periodic_error`` per variant, and the
+patch values as coordinates along ``variant`` (their dotted paths).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from oxyline.ensemble.patch import flatten
+from oxyline.errors import ModelError
+from oxyline.result import Result
+
+#: ``status`` of a variant: 0 finished; the others say why it has no output
+STATUS = {"ok": 0, "model": 1, "unstable": 2, "solver": 3, "output": 4, "interrupted": 5,
+          "not run": -1}
+STATS = ("mean", "min", "max")
+ERROR_CHARS = 400  # stored error messages are cut to this length (fixed-width strings)
+
+Output = str | Callable[[Result], Mapping[str, float]]
+
+
+def check_output(output: Any) -> None:
+    if not (callable(output) or output in ("summary", "full")):
+        raise ModelError(f"simulate_ensemble: output must be 'summary', 'full' or a callable "
+                         f"f(result) -> {{name: float}}, got {output!r}")
+
+
+def summary_values(result: Result) -> dict[str, np.ndarray]:
+    """``<var>_<stat>`` per vessel of a result: the values of :meth:`oxyline.Result.summary`
+    (same variables, order and statistics), read from the result's arrays without building
+    its dataset (a hundredth of the time: this runs once per variant)."""
+    from oxyline.io.results import STATS, stats
+
+    t = np.asarray(result.time, dtype=float)
+    arrays = [(name, getattr(result, name)) for name in result.vessel_variables]
+    arrays += [(name, arr) for name, (kind, arr, _) in result.species_variables().items()
+               if kind == "vessel"]
+    out = {}
+    for name, arr in arrays:
+        for stat, val in zip(STATS, stats(np.asarray(arr, dtype=float), t)):
+            out[f"{name}_{stat}"] = val
+    return out
+
+
+def callable_values(output: Callable[[Result], Mapping[str, float]], result: Result
+                    ) -> dict[str, float]:
+    values = output(result)
+    if not isinstance(values, Mapping):
+        raise TypeError(f"output callable must return a mapping {{name: float}}, got "
+                        f"{type(values).__name__}")
+    return {str(k): float(v) for k, v in values.items()}
+
+
+def patch_coords(patches: Sequence[Mapping[str, Any]]) -> dict[str, np.ndarray]:
+    """The scalar patch values by dotted path, one entry per variant (NaN/'' where a variant
+    does not set it)."""
+    flat = [flatten(p) for p in patches]
+    paths = sorted({k for f in flat for k in f})
+    coords = {}
+    for path in paths:
+        vals = [f.get(path) for f in flat]
+        if all(v is None or (isinstance(v, (int, float)) and not isinstance(v, bool))
+               for v in vals):
+            coords[path] = np.array([np.nan if v is None else float(v) for v in vals])
+        else:
+            coords[path] = np.array(["" if v is None else str(v) for v in vals])
+    return coords
+
+
+class Collector:
+    """Per-variant facts and outputs of an ensemble of ``n`` variants, filled as variants
+    finish (in any order); :meth:`dataset` builds the result."""
+
+    def __init__(self, n: int, output: Output, vessels: list[str]) -> None:
+        self.n, self.output, self.vessels = n, output, vessels
+        self.status = np.full(n, STATUS["not run"], dtype=np.int64)
+        self.error = np.full(n, "", dtype=object)
+        self.period = np.full(n, np.nan)
+        self.cycles_run = np.zeros(n, dtype=np.int64)
+        self.periodic_error = np.full(n, np.nan)
+        self.values: dict[str, np.ndarray] = {}  # summary/callable outputs by name
+        self.datasets: dict[int, Any] = {}  # full output
+
+    def fail(self, i: int, kind: str, message: str) -> None:
+        self.status[i] = STATUS[kind]
+        self.error[i] = message
+
+    def facts(self, i: int, period: float, raw: Mapping[str, Any] | None) -> None:
+        self.period[i] = period
+        if raw is not None:
+            self.cycles_run[i] = raw["cycles_run"]
+            self.periodic_error[i] = raw["periodic_error"]
+
+    def outputs(self, result: Result) -> dict[str, Any]:
+        """What variant ``result`` contributes (may raise: the variant then fails)."""
+        if self.output == "summary":
+            return summary_values(result)
+        if self.output == "full":
+            from oxyline.io.results import dataset
+
+            return {"": dataset(result)}
+        return callable_values(self.output, result)  # type: ignore[arg-type]
+
+    def put(self, i: int, values: Mapping[str, Any]) -> None:
+        """Store the outputs of finished variant ``i``."""
+        if self.output == "full":
+            self.datasets[i] = values[""]
+        else:
+            for name, v in values.items():
+                arr = self.values.get(name)
+                if arr is None:
+                    shape = (self.n, len(self.vessels)) if np.ndim(v) else (self.n,)
+                    arr = self.values[name] = np.full(shape, np.nan)
+                arr[i] = v
+        self.status[i] = STATUS["ok"]
+
+    def dataset(self, patches: Sequence[Mapping[str, Any]], attrs: Mapping[str, Any],
+                index: Any = None) -> Any:
+        import xarray as xr
+
+        coords: dict[str, Any] = {"variant": np.arange(self.n)}
+        if index is not None:
+            coords["variant_label"] = ("variant", np.asarray(index))
+        for path, vals in patch_coords(patches).items():
+            if path != "period":  # the ``period`` variable holds every variant's period
+                coords[path] = ("variant", vals)
+        data: dict[str, Any] = {
+            "status": ("variant", self.status),
+            "error": ("variant", self.error.astype(str)),
+            "period": ("variant", self.period, {"units": "s"}),
+            "cycles_run": ("variant", self.cycles_run),
+            "periodic_error": ("variant", self.periodic_error),
+        }
+        if self.output == "full":
+            ds = _stack_full(self.datasets, self.n)
+            for name, var in data.items():
+                ds[name] = var
+            ds = ds.assign_coords({k: v for k, v in coords.items() if k != "variant"})
+            ds.attrs.update(attrs)
+            return ds
+        if self.values and any(v.ndim == 2 for v in self.values.values()):
+            coords["vessel"] = ("vessel", np.array(self.vessels, dtype=str))
+        for name, arr in self.values.items():
+            data[name] = (("variant", "vessel") if arr.ndim == 2 else ("variant",), arr)
+        return xr.Dataset(data, coords=coords, attrs=dict(attrs))
+
+
+def _stack_full(datasets: Mapping[int, Any], n: int) -> Any:
+    """The per-variant datasets of ``output="full"`` stacked along a leading ``variant`` dim,
+    ``time`` and ``segment`` padded with NaN to the longest variant (a variant of another
+    period or segmentation); failed variants are all NaN."""
+    import xarray as xr
+
+    if not datasets:
+        return xr.Dataset(coords={"variant": np.arange(n)})
+    first = datasets[min(datasets)]
+    sizes = {d: max(ds.sizes.get(d, 0) for ds in datasets.values()) for d in first.sizes}
+    out: dict[str, Any] = {}
+    for name, var in first.variables.items():
+        if name in first.dims and name != "time":
+            continue  # index coordinates (vessel) go below
+        shape = (n, *(sizes[d] for d in var.dims))
+        dtype = var.dtype if var.dtype.kind in "fc" else None
+        if dtype is None:
+            continue  # string coordinates (segment_vessel): taken from the first variant
+        arr = np.full(shape, np.nan, dtype=np.result_type(dtype, np.float64))
+        for i, ds in datasets.items():
+            v = ds.variables[name]
+            arr[(i, *(slice(0, s) for s in v.shape))] = v.values
+        out[name] = (("variant", *var.dims), arr, dict(var.attrs))
+    time = out.pop("time")
+    ds = xr.Dataset({k: v for k, v in out.items() if k not in first.coords},
+                    coords={"variant": np.arange(n), "vessel": first["vessel"].values})
+    ds["time"] = time  # (variant, time): variants of other periods have other times
+    ds = ds.set_coords("time")
+    for name in first.coords:
+        if name not in ds.variables and name != "vessel" and "segment" in first[name].dims \
+                and sizes.get("segment", 0) == first.sizes.get("segment", 0):
+            ds = ds.assign_coords({name: first[name]})
+    ds.attrs.update({k: v for k, v in first.attrs.items() if not k.startswith("solver_")})
+    return ds

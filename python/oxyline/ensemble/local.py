@@ -1,0 +1,124 @@
+"""``simulate_ensemble`` on this machine: every variant on the core's rayon threads, the GIL
+released; this thread converts and stores each variant as it finishes."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+from oxyline import _core
+from oxyline.ensemble.collect import ERROR_CHARS, Collector, Output
+from oxyline.ensemble.patch import Patcher, Variant, merge_patch
+from oxyline.errors import ModelError
+from oxyline.model import Model
+from oxyline.run import _result, _run_settings, _settings
+
+#: the settings of ``_settings`` that the core's ``Ensemble.run`` takes as they are
+SHARED = ("cycles", "method", "rho_infty", "dt", "until_periodic", "max_cycles",
+          "output_all_cycles", "start", "newton_atol", "max_iterations", "segments",
+          "transport", "variables", "vessels")
+
+
+def run_settings(model: Model, output: Output, overrides: Mapping[str, Any]) -> dict[str, Any]:
+    """The run settings of ``model`` (``simulate``'s) with ``overrides``. A summary needs no
+    segment output: it is not recorded unless asked for (the vessel values do not change)."""
+    if output == "summary" and "segments" not in overrides:
+        overrides = {**overrides, "segments": False}
+    return _settings(model, overrides)
+
+
+class Feed:
+    """The variants of one ``run_local`` call, prepared one at a time as the core's workers
+    need them (:meth:`next`, called on this thread while the others run): the patched
+    elements converted to canonical form, and the run settings. A variant whose values the
+    model refuses is recorded as failed and skipped. ``first``: the number of the first
+    variant in the whole ensemble (a chunk of it runs on a cluster worker)."""
+
+    def __init__(self, model: Model, patches: Sequence[Mapping[str, Any]], output: Output,
+                 overrides: Mapping[str, Any], collector: Collector, first: int,
+                 on_skip: Callable[[int], None]) -> None:
+        for i, patch in enumerate(patches):  # unknown names raise before anything runs
+            merge_patch(model.source, patch, first + i)
+        self.patcher = Patcher(model)
+        self.patches, self.output, self.overrides = patches, output, overrides
+        self.collector, self.first, self.on_skip = collector, first, on_skip
+        self.prepared: dict[int, tuple[Variant, dict[str, Any]]] = {}
+        self._next = 0
+
+    def next(self) -> tuple[int, str | None, float, float] | None:
+        while self._next < len(self.patches):
+            i = self._next
+            self._next += 1
+            k = self.first + i
+            try:
+                v = self.patcher.variant(self.patches[i], k)
+                s = run_settings(v.model, self.output, self.overrides)
+            except ModelError as e:
+                if str(e).startswith(f"variant {k}: "):
+                    raise  # a mistake in the patches (e.g. a text where a number is scaled)
+                self.collector.fail(i, "model", f"variant {k}: {e}"[:ERROR_CHARS])
+                self.on_skip(i)
+                continue
+            self.prepared[i] = (v, s)
+            return i, v.patch_json, s["period"], s["output_every"]
+        return None
+
+
+def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Collector, *,
+              workers: int | None, output: Output, progress: Any,
+              overrides: Mapping[str, Any],
+              on_variant: Callable[[int], None] | None = None, first: int = 0) -> bool:
+    """Run every variant into ``collector``; ``on_variant(i)`` after each one is recorded.
+    Returns False if Ctrl-C stopped the ensemble. ``first``: see :class:`Feed`."""
+    base_settings = run_settings(model, output, overrides)
+    tick, close = _progress(progress, len(patches))
+
+    def recorded(i: int) -> None:
+        if on_variant is not None:
+            on_variant(i)
+        tick()
+
+    feed = Feed(model, patches, output, overrides, collector, first, recorded)
+
+    def done(i: int, raw: dict[str, Any] | None, layout: dict[str, Any] | None,
+             kind: str | None, message: str | None) -> None:
+        v, s = feed.prepared.pop(i)
+        collector.facts(i, s["period"], raw)
+        if kind is not None:  # "interrupted": stopped by Ctrl-C while it ran
+            collector.fail(i, kind, f"variant {first + i}: {message}"[:ERROR_CHARS])
+        else:
+            try:
+                assert raw is not None and layout is not None
+                result = _result(v.model, s, raw, _run_settings(s, raw), True, layout)
+                collector.put(i, collector.outputs(result))
+            except Exception as e:  # noqa: BLE001 - a user's output function fails its variant
+                collector.fail(i, "output", f"variant {first + i}: {type(e).__name__}: {e}"
+                               [:ERROR_CHARS])
+        recorded(i)
+
+    core = {k: base_settings[k] for k in SHARED}
+    ensemble = _core.Ensemble(json.dumps(model.canonical, separators=(",", ":")))
+    try:
+        return ensemble.run(feed.next, on_done=done, workers=workers, **core)
+    finally:
+        close()
+
+
+def _progress(enabled: Any, total: int) -> tuple[Callable[[], None], Callable[[], None]]:
+    """(tick, close): one tick per finished variant; ``enabled`` may be a callback
+    ``f(done, total)``."""
+    count = [0]
+    if callable(enabled):
+        def tick() -> None:
+            count[0] += 1
+            enabled(count[0], total)
+        return tick, lambda: None
+    if not enabled:
+        return (lambda: None), (lambda: None)
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:
+        return (lambda: None), (lambda: None)
+    bar = tqdm(total=total, unit="variant", delay=1.0)
+    return (lambda: bar.update(1)), bar.close

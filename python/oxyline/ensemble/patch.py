@@ -1,0 +1,380 @@
+"""Variant patches: what one member of an ensemble changes in the base model.
+
+A patch is a dict in the native model format, deep-merged into the model::
+
+    {"vessels": {"CCA": {"radius": 3.1e-3}},              # vessels by name
+     "boundary_conditions": {"ica_out": {"resistance": 2e9}},   # conditions by node
+     "blood": {"viscosity": 4e-3}, "oxygen": {"wall": {"k": 5e-6}},
+     "period": 0.8,
+     "scale": {"resistance": 1.2, "compliance": 0.8, "vessels": ["CCA", "ICA"] | "all"}}
+
+Values are in the model's units. A waveform property (``time``, ``flow``, ``pressure``,
+``value``, ``fourier``) replaces the condition's whole waveform; ``radius`` replaces
+``radius_in``/``radius_out`` and the other way round; a new ``type`` replaces the whole
+condition. ``scale`` multiplies, after the explicit values: ``resistance`` scales the
+resistance of lumped vessels and of the resistance and RCR conditions at the ends of the
+selected vessels, ``compliance`` the capacitance of lumped vessels and RCR conditions and
+divides the Young's modulus of the geometric vessels (their compliance is proportional to
+1/E). A DataFrame row with dotted-path columns (``vessels.CCA.radius``) is the same patch.
+
+An unknown vessel, node, section or property raises :class:`~oxyline.ModelError` naming the
+variant and the path; a value the model refuses (a negative radius) fails only its variant.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from oxyline.errors import ModelError
+from oxyline.model import (
+    BC_KEYS,
+    LUMPED_KEYS,
+    VESSEL_KEYS,
+    Model,
+    _boundary_conditions,
+    _copy,
+    _unassembled,
+    _vessels,
+)
+
+SECTIONS = ("vessels", "boundary_conditions", "blood", "oxygen", "transport", "period", "scale")
+VESSEL_PROPERTIES = VESSEL_KEYS - {"name", "from", "to"}
+BLOOD_KEYS = {"density", "viscosity"}
+SCALE_KEYS = {"resistance", "compliance", "vessels"}
+#: the keys of a condition's waveform: patching one replaces the whole waveform
+WAVEFORM_KEYS = {"time", "flow", "pressure", "value", "fourier", "interpolation", "steady"}
+RESISTANCES = {"resistance": ("resistance",), "rcr": ("proximal_resistance", "distal_resistance")}
+
+
+def _where(k: int, path: str) -> str:
+    return f"variant {k}: {path}"
+
+
+def _unknown(k: int, path: str, what: str, allowed: Iterable[str]) -> ModelError:
+    return ModelError(f"{_where(k, path)}: unknown {what} (allowed: {', '.join(sorted(allowed))})")
+
+
+def _mapping(value: Any, k: int, path: str) -> Mapping[str, Any]:
+    if not isinstance(value, Mapping):
+        raise ModelError(f"{_where(k, path)}: expected a mapping, got {value!r}")
+    return value
+
+
+def _merge(base: Any, patch: Any) -> Any:
+    """``patch`` deep-merged into ``base`` (new containers; mappings merge, anything else
+    replaces)."""
+    if not isinstance(base, Mapping) or not isinstance(patch, Mapping):
+        return _copy(patch)
+    out = dict(base)
+    for key, value in patch.items():
+        out[key] = _merge(base.get(key), value) if isinstance(value, Mapping) else _copy(value)
+    return out
+
+
+def _patch_vessel(vessel: Mapping[str, Any], props: Any, k: int, path: str) -> dict[str, Any]:
+    props = _mapping(props, k, path)
+    for key in props:
+        if key not in VESSEL_PROPERTIES:
+            if key in ("name", "from", "to"):
+                raise ModelError(f"{_where(k, f'{path}.{key}')}: a variant cannot change the "
+                                 "network's topology")
+            raise _unknown(k, f"{path}.{key}", "vessel property", VESSEL_PROPERTIES)
+    if "lumped" in props:
+        for key in _mapping(props["lumped"], k, f"{path}.lumped"):
+            if key not in LUMPED_KEYS:
+                raise _unknown(k, f"{path}.lumped.{key}", "lumped property", LUMPED_KEYS)
+    base = dict(vessel)
+    if "radius" in props:
+        base.pop("radius_in", None)
+        base.pop("radius_out", None)
+    elif ("radius_in" in props or "radius_out" in props) and "radius" in base:
+        r = base.pop("radius")
+        base["radius_in"] = base["radius_out"] = r
+    return _merge(base, props)
+
+
+def _patch_condition(bc: Mapping[str, Any], props: Any, k: int, path: str) -> dict[str, Any]:
+    props = _mapping(props, k, path)
+    kind = str(props.get("type", bc.get("type", ""))).lower()
+    allowed = BC_KEYS.get(kind, set())
+    for key in props:
+        if key not in allowed:
+            raise _unknown(k, f"{path}.{key}", f"property of a {kind} condition", allowed)
+    if "type" in props and str(props["type"]).lower() != str(bc.get("type", "")).lower():
+        return _copy(dict(props))  # another kind of condition: nothing of the old one holds
+    base = dict(bc)
+    if kind in ("flow", "pressure") and props.keys() & (WAVEFORM_KEYS - {"interpolation",
+                                                                         "steady"}):
+        for key in WAVEFORM_KEYS:
+            base.pop(key, None)
+    if "pressure" in props:  # a resistance/RCR outlet pressure: a number or a waveform
+        base.pop("pressure", None)
+    return _merge(base, props)
+
+
+def _value(x: Any, k: int, path: str) -> float:
+    """A number of the model to scale (YAML 1.1 reads 5.0e5 as a string)."""
+    try:
+        return float(x)
+    except (TypeError, ValueError):
+        raise ModelError(f"{_where(k, path)}: cannot scale {x!r}, not a number") from None
+
+
+def _scaled(data: dict[str, Any], scale: Any, k: int) -> tuple[set[int], set[str]]:
+    """Apply the ``scale`` section to ``data`` (the merged model; every element written is a
+    new container) and return the indices of the vessels and the nodes of the conditions it
+    changed."""
+    scale = _mapping(scale, k, "scale")
+    for key in scale:
+        if key not in SCALE_KEYS:
+            raise _unknown(k, f"scale.{key}", "scale key", SCALE_KEYS)
+    names = [v["name"] for v in data["vessels"]]
+    chosen = scale.get("vessels", "all")
+    if chosen == "all":
+        selected = set(range(len(names)))
+    else:
+        if isinstance(chosen, str) or not isinstance(chosen, Sequence):
+            raise ModelError(f"{_where(k, 'scale.vessels')}: expected 'all' or a list of vessel "
+                             f"names, got {chosen!r}")
+        index = {n: i for i, n in enumerate(names)}
+        for name in chosen:
+            if name not in index:
+                raise ModelError(f"{_where(k, f'scale.vessels.{name}')}: no vessel named "
+                                 f"{name!r} in the model")
+        selected = {index[n] for n in chosen}
+    factors = {}
+    for key in ("resistance", "compliance"):
+        if key in scale:
+            f = scale[key]
+            if isinstance(f, bool) or not isinstance(f, (int, float)) or not math.isfinite(f):
+                raise ModelError(f"{_where(k, f'scale.{key}')}: expected a number, got {f!r}")
+            factors[key] = float(f)
+    vessels = data["vessels"] = list(data["vessels"])
+    nodes: set[str] = set()
+    changed: set[int] = set()
+    for i in sorted(selected):
+        v = vessels[i]
+        nodes.update((str(v.get("from")), str(v.get("to"))))
+        if "lumped" in v:
+            lp = dict(v["lumped"])
+            for key, prop in (("resistance", "resistance"), ("compliance", "capacitance")):
+                if key in factors and prop in lp:
+                    lp[prop] = _value(lp[prop], k, f"vessels.{v['name']}.lumped.{prop}") \
+                        * factors[key]
+            vessels[i] = {**v, "lumped": lp}
+            changed.add(i)
+        elif "compliance" in factors and "youngs_modulus" in v:
+            e = _value(v["youngs_modulus"], k, f"vessels.{v['name']}.youngs_modulus")
+            vessels[i] = {**v, "youngs_modulus": e / factors["compliance"]}
+            changed.add(i)
+    bcs = data["boundary_conditions"] = dict(data.get("boundary_conditions", {}))
+    changed_nodes: set[str] = set()
+    for node in [n for n in bcs if n in nodes]:
+        bc = dict(bcs[node])
+        kind = str(bc.get("type", "")).lower()
+        where = f"boundary_conditions.{node}"
+        props = RESISTANCES.get(kind, ()) if "resistance" in factors else ()
+        for prop in props:
+            bc[prop] = _value(bc.get(prop), k, f"{where}.{prop}") * factors["resistance"]
+        if "compliance" in factors and kind == "rcr":
+            bc["capacitance"] = _value(bc.get("capacitance"), k, f"{where}.capacitance") \
+                * factors["compliance"]
+            props = (*props, "capacitance")
+        if props:  # only the conditions whose values change (an inflow stays as it is)
+            bcs[node] = bc
+            changed_nodes.add(node)
+    return changed, changed_nodes
+
+
+def merge_patch(source: Mapping[str, Any], patch: Mapping[str, Any], k: int = 0,
+                ) -> tuple[dict[str, Any], set[int], set[str]]:
+    """The native model ``source`` with ``patch`` (variant ``k``) merged in, sharing every
+    element the patch leaves alone, and the indices of the vessels and the nodes of the
+    conditions it changed. Raises :class:`ModelError` for unknown names."""
+    patch = _mapping(patch, k, "patch")
+    for key in patch:
+        if key not in SECTIONS:
+            raise _unknown(k, key, "patch section", SECTIONS)
+    data = dict(source)
+    touched_vessels: set[int] = set()
+    touched_nodes: set[str] = set()
+    if "vessels" in patch:
+        vessels = data["vessels"] = list(source["vessels"])
+        index = {v.get("name"): i for i, v in enumerate(vessels)}
+        for name, props in _mapping(patch["vessels"], k, "vessels").items():
+            if name not in index:
+                raise ModelError(f"{_where(k, f'vessels.{name}')}: no vessel named {name!r} in "
+                                 f"model '{source.get('name', 'network')}'")
+            i = index[name]
+            vessels[i] = _patch_vessel(vessels[i], props, k, f"vessels.{name}")
+            touched_vessels.add(i)
+    if "boundary_conditions" in patch:
+        bcs = data["boundary_conditions"] = dict(source.get("boundary_conditions", {}))
+        for node, props in _mapping(patch["boundary_conditions"], k,
+                                    "boundary_conditions").items():
+            if node not in bcs:
+                raise ModelError(f"{_where(k, f'boundary_conditions.{node}')}: no boundary "
+                                 f"condition at node {node!r} in model "
+                                 f"'{source.get('name', 'network')}'")
+            bcs[node] = _patch_condition(bcs[node], props, k, f"boundary_conditions.{node}")
+            touched_nodes.add(node)
+    if "blood" in patch:
+        for key in _mapping(patch["blood"], k, "blood"):
+            if key not in BLOOD_KEYS:
+                raise _unknown(k, f"blood.{key}", "blood property", BLOOD_KEYS)
+        data["blood"] = _merge(source.get("blood") or {}, patch["blood"])
+    for section in ("oxygen", "transport"):
+        if section in patch:
+            if section not in source:
+                raise ModelError(f"{_where(k, section)}: the model has no '{section}' section "
+                                 "to patch")
+            data[section] = _merge(source[section], _mapping(patch[section], k, section))
+    if "period" in patch:
+        data["period"] = patch["period"]
+    if "scale" in patch:
+        scaled_vessels, scaled_nodes = _scaled(data, patch["scale"], k)
+        touched_vessels |= scaled_vessels
+        touched_nodes |= scaled_nodes
+    return data, touched_vessels, touched_nodes
+
+
+def apply_patch(model: Model | Mapping[str, Any] | str, patch: Mapping[str, Any]
+                ) -> dict[str, Any]:
+    """The native model dict of one variant: ``patch`` deep-merged into ``model`` (a
+    :class:`~oxyline.Model`, a native dict or anything :func:`oxyline.load_model` reads).
+    ``oxyline.simulate(apply_patch(model, patch))`` is that variant run on its own.
+
+    >>> import oxyline
+    >>> from oxyline.ensemble import apply_patch
+    >>> m = apply_patch("bifurcation", {"vessels": {"parent": {"radius": 0.004}}})
+    >>> m["vessels"][0]["radius"]
+    0.004
+    """
+    from oxyline.loader import load_model
+
+    base = load_model(model)
+    return _copy(merge_patch(base.source, patch)[0])
+
+
+def dotted_patch(row: Mapping[str, Any], vessel_names: Iterable[str], nodes: Iterable[str],
+                 k: int = 0) -> dict[str, Any]:
+    """The patch of one row of dotted-path columns (``vessels.CCA.radius``,
+    ``boundary_conditions.ica_out.resistance``, ``blood.viscosity``, ``scale.resistance``).
+    A vessel or node name may itself contain dots: the longest known name wins. An empty
+    (NaN) cell leaves the base model's value."""
+    names = {"vessels": set(vessel_names), "boundary_conditions": set(nodes)}
+    patch: dict[str, Any] = {}
+    for column, value in row.items():
+        if isinstance(value, float) and math.isnan(value):
+            continue  # an empty cell leaves the base value
+        parts = str(column).split(".")
+        section, rest = parts[0], parts[1:]
+        if section in names:
+            for cut in range(len(rest) - 1, 0, -1):
+                if ".".join(rest[:cut]) in names[section]:
+                    rest = [".".join(rest[:cut]), *rest[cut:]]
+                    break
+            else:
+                raise ModelError(f"{_where(k, str(column))}: no vessel or node of the model "
+                                 "starts this path" if len(rest) > 1 else
+                                 f"{_where(k, str(column))}: expected {section}.NAME.PROPERTY")
+        node: dict[str, Any] = patch
+        path = [section, *rest]
+        for key in path[:-1]:
+            node = node.setdefault(key, {})
+        node[path[-1]] = value.item() if hasattr(value, "item") else value
+    return patch
+
+
+def as_patches(variants: Any, model: Model) -> tuple[list[dict[str, Any]], Any]:
+    """The patches of ``variants`` (a sequence of patch dicts or a pandas DataFrame with
+    dotted-path columns) and the DataFrame's index (None for a sequence)."""
+    if hasattr(variants, "to_dict") and hasattr(variants, "columns"):
+        nodes = list(model.source.get("boundary_conditions", {}))
+        rows = variants.to_dict(orient="records")
+        return [dotted_patch(r, model.vessel_names, nodes, k) for k, r in enumerate(rows)], \
+            variants.index
+    if isinstance(variants, (str, bytes)) or not isinstance(variants, Iterable):
+        raise ModelError("simulate_ensemble: variants must be a sequence of patch dicts or a "
+                         f"DataFrame, got {type(variants).__name__}")
+    patches = [dict(_mapping(p, k, "patch")) for k, p in enumerate(variants)]
+    return patches, None
+
+
+def flatten(patch: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """The scalar leaves of a patch by dotted path (tables and lists are left out)."""
+    out: dict[str, Any] = {}
+    for key, value in patch.items():
+        path = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            out.update(flatten(value, path + "."))
+        elif isinstance(value, (bool, int, float, str)):
+            out[path] = value
+    return out
+
+
+@dataclass
+class Variant:
+    """A variant ready to run: its canonical patch for the core (None: the base model), its
+    model (canonical description, period and transport facts; never assembled here)."""
+
+    patch_json: str | None
+    model: Model
+
+
+class Patcher:
+    """Turns patches into :class:`Variant` s. The canonical form of the base model's elements
+    is computed once; a variant converts only the vessels and conditions its patch changed."""
+
+    def __init__(self, base: Model) -> None:
+        self.base = base
+        canon = base.canonical
+        self._vessels = canon["vessels"]
+        self._bcs = canon["boundary_conditions"]
+        units = str(base.source.get("units", "SI"))
+        bcs = base.source.get("boundary_conditions", {})
+        # each condition's waveform periods, to check a variant's period as a model load does
+        self._periods = {node: _boundary_conditions({node: bc}, units)[1]
+                         for node, bc in bcs.items()}
+
+    def variant(self, patch: Mapping[str, Any], k: int) -> Variant:
+        """Variant ``k``. Unknown names raise :class:`ModelError`; a value the model refuses
+        raises it too, which the caller records as that variant's failure."""
+        if not patch:
+            return Variant(None, self.base)
+        data, vessels, nodes = merge_patch(self.base.source, patch, k)
+
+        def convert_vessels(items: list[Any], units: str) -> list[Any]:
+            out = list(self._vessels)
+            for i in sorted(vessels):
+                out[i] = _vessels([items[i]], units)[0]
+            return out
+
+        def convert_conditions(items: Mapping[str, Any], units: str
+                               ) -> tuple[dict[str, Any], list[Any]]:
+            out, periods = dict(self._bcs), []
+            for node, bc in items.items():
+                if node in nodes:
+                    canon, p = _boundary_conditions({node: bc}, units)
+                    out[node] = canon[node]
+                    periods += p
+                else:
+                    periods += self._periods[node]
+            return out, periods
+
+        model = _unassembled(data, convert_vessels, convert_conditions)
+        canon, base = model.canonical, self.base.canonical
+        core: dict[str, Any] = {}
+        if vessels:
+            core["vessels"] = {str(i): canon["vessels"][i] for i in sorted(vessels)}
+        if nodes:
+            core["boundary_conditions"] = {n: canon["boundary_conditions"][n] for n in nodes}
+        if canon["blood"] != base["blood"]:
+            core["blood"] = canon["blood"]
+        if canon.get("transport") != base.get("transport"):
+            core["transport"] = canon["transport"]
+        return Variant(json.dumps(core, separators=(",", ":")), model)

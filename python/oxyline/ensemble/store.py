@@ -1,0 +1,83 @@
+"""An ensemble's Zarr store, written variant by variant as they finish.
+
+The store is created before the first variant runs with every per-variant variable sized for
+the whole ensemble (``status`` -1: not run) and one chunk per variant, so that writing a
+variant is a region write of its own chunks and never rewrites another variant's: a killed
+ensemble keeps every variant that finished (``status`` is written last, so a variant with
+``status`` 0 is whole). Output variables appear when the first variant that has them
+finishes. Zarr format 2, as :meth:`oxyline.Result.to_zarr`.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from oxyline.ensemble.collect import ERROR_CHARS, Collector
+from oxyline.errors import ModelError
+from oxyline.io.results import _zarr
+
+FACTS = ("period", "cycles_run", "periodic_error", "error")
+
+
+class StoreWriter:
+    def __init__(self, path: str | Any, collector: Collector,
+                 patches: Sequence[Mapping[str, Any]], attrs: Mapping[str, Any],
+                 index: Any = None) -> None:
+        if collector.output == "full":
+            raise ModelError("simulate_ensemble: store= keeps summaries or the values of an "
+                             "output callable; write a full run with oxyline.simulate_to_zarr")
+        self.path = Path(path)
+        self.collector = collector
+        self._zarr = _zarr()
+        template = collector.dataset(patches, {**attrs, "complete": 0}, index)
+        template["error"] = template["error"].astype(f"<U{ERROR_CHARS}")
+        template = template.assign_coords(vessel=("vessel", np.array(collector.vessels, dtype=str)))
+        encoding = {name: {"chunks": (1,) * template[name].ndim}
+                    for name in template.data_vars}
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # fixed-width strings: Zarr format 2 only
+            template.to_zarr(self.path, mode="w", encoding=encoding, zarr_format=2)
+        self._group = self._zarr.open_group(self.path, mode="r+", zarr_format=2,
+                                            use_consolidated=False)
+        self._written: set[str] = set()
+
+    def _array(self, name: str, value: Any) -> Any:
+        if name not in self._group:
+            dims = ["variant", "vessel"] if np.ndim(value) else ["variant"]
+            shape = (self.collector.n, len(self.collector.vessels))[:len(dims)]
+            self._group.create_array(name, shape=shape, dtype="f8", chunks=(1,) * len(dims),
+                                     fill_value=np.nan,
+                                     attributes={"_ARRAY_DIMENSIONS": dims})
+            self._consolidate()
+        return self._group[name]
+
+    def write(self, i: int) -> None:
+        """Write variant ``i`` as the collector holds it (its status last)."""
+        c = self.collector
+        if c.status[i] == 0:
+            for name, arr in c.values.items():
+                self._array(name, arr[i])[i] = arr[i]
+        for name in FACTS:
+            value = getattr(c, name)[i]
+            self._group[name][i] = str(value)[:ERROR_CHARS] if name == "error" else value
+        self._group["status"][i] = c.status[i]
+
+    def close(self, complete: bool) -> None:
+        self._group.attrs["complete"] = int(complete)
+        self._consolidate()
+
+    def open(self) -> Any:
+        import xarray as xr
+
+        return xr.open_zarr(self.path)
+
+    def _consolidate(self) -> None:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # consolidated metadata is not part of the v2 spec
+            self._zarr.consolidate_metadata(self.path, zarr_format=2)

@@ -1,0 +1,271 @@
+//! `oxyline._core.Ensemble`: variants of one network run on rayon threads with the GIL
+//! released (see `oxyline_core::ensemble`). Each finished variant is handed to a Python
+//! callback on the calling thread, in completion order, while the others keep running.
+
+use crate::{
+    error_kind, layout_dict, outcome_dict, parse_method, parse_start, recorded_columns, to_py,
+};
+use oxyline_core::ensemble::{Member, run_fed, worker_count};
+use oxyline_core::genalpha::NewtonControl;
+use oxyline_core::spec::{NetworkSpec, parse};
+use oxyline_core::{Error, Outcome, RunSettings, Selection, Transport};
+use pyo3::exceptions::PyKeyboardInterrupt;
+use pyo3::prelude::*;
+use std::cell::RefCell;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// What a worker hands back: the assembled variant and its selection (None if it could not
+/// be assembled) and the run's outcome.
+struct Finished {
+    member: Option<(Member, Selection)>,
+    outcome: Result<Outcome, Error>,
+}
+
+/// What the calling thread hands a worker: a variant's patch and its own settings.
+struct Input {
+    patch: Option<String>,
+    period: f64,
+    output_every: f64,
+}
+
+/// The output selection of a run (the names `Network.simulate` takes).
+struct Output {
+    variables: Option<Vec<String>>,
+    vessels: Option<Vec<String>>,
+    segments: bool,
+    transport: bool,
+}
+
+/// One variant: patch, assemble, select, run; `template` holds the shared settings.
+fn run_variant(
+    base: &NetworkSpec,
+    patch: Option<&str>,
+    template: &RunSettings,
+    output: &Output,
+    cancelled: &AtomicBool,
+) -> Finished {
+    let member = match Member::of_patch(base, patch) {
+        Ok(m) => m,
+        Err(e) => {
+            return Finished {
+                member: None,
+                outcome: Err(e),
+            };
+        }
+    };
+    let sel = Selection::resolve(
+        &member.assembled.probes,
+        output.variables.as_deref(),
+        output.vessels.as_deref(),
+        output.segments,
+        member.transport.is_some(),
+    );
+    let sel = match sel {
+        Ok(s) => s,
+        Err(e) => {
+            return Finished {
+                member: None,
+                outcome: Err(e),
+            };
+        }
+    };
+    let selected = output.variables.is_some() || output.vessels.is_some();
+    let (probes, species_columns) = recorded_columns(
+        &member.assembled.probes,
+        member.transport.as_ref(),
+        &sel,
+        selected,
+        output.segments,
+    );
+    let settings = RunSettings {
+        probes,
+        species_columns,
+        ..template.clone()
+    };
+    let mut species = if output.transport {
+        member.transport.as_ref().map(Transport::new_run)
+    } else {
+        None
+    };
+    // a cancelled ensemble stops its running variants at their next progress check
+    let mut keep_going = |_: f64, _: f64| !cancelled.load(Ordering::Relaxed);
+    let outcome = oxyline_core::simulate_with_transport(
+        &member.dae,
+        species.as_mut(),
+        &settings,
+        &mut keep_going,
+    );
+    Finished {
+        member: Some((member, sel)),
+        outcome,
+    }
+}
+
+/// Hand a finished variant to `on_done(index, raw, layout, error_kind, error)`: `raw` is the
+/// dict of `Network.simulate` (None if the variant never ran), `layout` its `output_layout`.
+fn deliver(py: Python<'_>, on_done: &Py<PyAny>, i: usize, f: Finished) -> PyResult<()> {
+    let layout = match &f.member {
+        Some((m, sel)) => Some(layout_dict(
+            py,
+            &m.assembled.probes,
+            m.transport.as_ref(),
+            sel,
+        )?),
+        None => None,
+    };
+    let (raw, error) = match f.outcome {
+        Ok(mut out) => {
+            let error = out.error.take();
+            (Some(outcome_dict(py, out)?), error)
+        }
+        Err(e) => (None, Some(e)),
+    };
+    let (kind, message) = match &error {
+        Some(e) => (Some(error_kind(e)), Some(e.to_string())),
+        None => (None, None),
+    };
+    on_done.call1(py, (i, raw, layout, kind, message))?;
+    Ok(())
+}
+
+/// A parsed base model whose variants run in parallel.
+#[pyclass(frozen, module = "oxyline._core")]
+pub struct Ensemble {
+    base: Arc<NetworkSpec>,
+}
+
+#[pymethods]
+impl Ensemble {
+    /// Parse the canonical SI JSON of the base model (once for every variant).
+    #[new]
+    fn new(py: Python<'_>, model_json: &str) -> PyResult<Self> {
+        let json = model_json.to_owned();
+        let spec = py.detach(move || parse(&json)).map_err(to_py)?;
+        Ok(Ensemble {
+            base: Arc::new(spec),
+        })
+    }
+
+    /// Run variants as `feed()` hands them over: it returns `(i, patch, period,
+    /// output_every)` for the next variant (`patch` its canonical JSON, None for the base
+    /// model) or None when there are no more, and is called on this thread while the workers
+    /// run (so preparing a variant overlaps the runs). The other settings are those of
+    /// `Network.simulate` and shared. `on_done(i, raw, layout, error_kind, error)` is called
+    /// on this thread as each variant finishes; a failed variant has `error_kind` set
+    /// ("model", "unstable", "solver", "interrupted") and never stops the others. Returns
+    /// False if Ctrl-C stopped the ensemble (the variants finished until then were handed
+    /// over, running ones as "interrupted"; the rest were never fed).
+    #[pyo3(signature = (feed, *, on_done, workers = None, cycles = 10, method = "auto",
+        rho_infty = 0.5, dt = None, until_periodic = None, max_cycles = 100,
+        output_all_cycles = false, start = "steady", newton_atol = None, max_iterations = 30,
+        segments = true, transport = true, variables = None, vessels = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn run(
+        &self,
+        py: Python<'_>,
+        feed: Py<PyAny>,
+        on_done: Py<PyAny>,
+        workers: Option<usize>,
+        cycles: usize,
+        method: &str,
+        rho_infty: f64,
+        dt: Option<f64>,
+        until_periodic: Option<f64>,
+        max_cycles: usize,
+        output_all_cycles: bool,
+        start: &str,
+        newton_atol: Option<f64>,
+        max_iterations: usize,
+        segments: bool,
+        transport: bool,
+        variables: Option<Vec<String>>,
+        vessels: Option<Vec<String>>,
+    ) -> PyResult<bool> {
+        let workers = worker_count(workers).map_err(to_py)?;
+        let template = RunSettings {
+            method: parse_method(method, rho_infty)?,
+            dt,
+            period: 1.0,
+            cycles,
+            until_periodic,
+            max_cycles,
+            output_every: 1.0,
+            output_all_cycles,
+            keep_current_cycle: true,
+            start: parse_start(start, rho_infty)?,
+            newton: NewtonControl {
+                atol: newton_atol,
+                max_iter: max_iterations,
+            },
+            probes: Vec::new(),
+            species_columns: None,
+        };
+        let output = Output {
+            variables,
+            vessels,
+            segments,
+            transport,
+        };
+        let base = self.base.clone();
+        let job = |_: usize, input: Input, cancelled: &AtomicBool| {
+            let s = RunSettings {
+                period: input.period,
+                output_every: input.output_every,
+                ..template.clone()
+            };
+            run_variant(&base, input.patch.as_deref(), &s, &output, cancelled)
+        };
+        py.detach(|| {
+            // the first Python error (Ctrl-C, or one raised by `feed` or `on_done`) cancels
+            // the ensemble: nothing more is fed and the running variants stop
+            let first_error: RefCell<Option<PyErr>> = RefCell::new(None);
+            let keep = |r: PyResult<()>| {
+                if let Err(e) = r {
+                    first_error.borrow_mut().get_or_insert(e);
+                }
+            };
+            let mut next = || -> Option<(usize, Input)> {
+                if first_error.borrow().is_some() {
+                    return None;
+                }
+                Python::attach(|py| {
+                    let item = feed
+                        .call0(py)
+                        .and_then(|v| v.extract::<Option<(usize, Option<String>, f64, f64)>>(py));
+                    match item {
+                        Ok(item) => item.map(|(i, patch, period, output_every)| {
+                            let input = Input {
+                                patch,
+                                period,
+                                output_every,
+                            };
+                            (i, input)
+                        }),
+                        Err(e) => {
+                            keep(Err(e));
+                            None
+                        }
+                    }
+                })
+            };
+            let mut done = |item: Option<(usize, Finished)>| -> bool {
+                Python::attach(|py| {
+                    keep(py.check_signals());
+                    if let Some((i, f)) = item {
+                        keep(deliver(py, &on_done, i, f));
+                    }
+                    first_error.borrow().is_none()
+                })
+            };
+            run_fed(workers, &job, &mut next, &mut done).map_err(to_py)?;
+            match first_error.into_inner() {
+                None => Ok(true),
+                Some(e) if Python::attach(|py| e.is_instance_of::<PyKeyboardInterrupt>(py)) => {
+                    Ok(false)
+                }
+                Some(e) => Err(e),
+            }
+        })
+    }
+}

@@ -1,0 +1,390 @@
+"""Ensembles (``oxyline.simulate_ensemble``): patch semantics and errors, identity with
+``oxyline.simulate`` of the patched model, independence of the thread count, isolation of
+failing variants, the Zarr store of a killed ensemble, Ctrl-C."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pytest
+import xarray as xr
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import oxyline
+from oxyline.ensemble import apply_patch
+from tests.conftest import run_child
+
+# A one-vessel aorta with oxygen transport (fast: one RK4 vessel, 2 cycles in ~0.05 s)
+STRAIGHT = "paper-straight"
+FAST = {"cycles": 2, "progress": False}
+
+TUBE: dict[str, Any] = {
+    "name": "tube", "units": "SI", "period": 1.0,
+    "vessels": [
+        {"name": "a.b", "from": "in", "to": "j", "length": 0.1, "radius": 0.004,
+         "wall_thickness": 5e-4, "youngs_modulus": 4e5},
+        {"name": "c", "from": "j", "to": "out1",
+         "lumped": {"resistance": 1e7, "capacitance": 1e-9}},
+        {"name": "d", "from": "j", "to": "out2", "length": 0.05, "radius_in": 0.003,
+         "radius_out": 0.002}],
+    "boundary_conditions": {
+        "in": {"type": "flow", "time": [0.0, 0.5, 1.0], "flow": [1e-6, 3e-6, 1e-6]},
+        "out1": {"type": "rcr", "proximal_resistance": 1e8, "capacitance": 1e-9,
+                 "distal_resistance": 1e9},
+        "out2": {"type": "resistance", "resistance": 2e9, "pressure": 0.0}},
+}
+
+
+# ---- patch semantics ---------------------------------------------------------------------
+
+def test_each_path_kind_merges_as_documented() -> None:
+    m = apply_patch(TUBE, {
+        "vessels": {"a.b": {"radius_in": 0.005}, "c": {"lumped": {"resistance": 2e7}},
+                    "d": {"radius": 0.0025}},
+        "boundary_conditions": {"in": {"fourier": {"period": 1.0, "mean": 2e-6}},
+                                "out1": {"distal_resistance": 5e8},
+                                "out2": {"type": "rcr", "proximal_resistance": 1.0,
+                                         "capacitance": 2e-9, "distal_resistance": 3.0}},
+        "blood": {"viscosity": 4e-3}, "period": 1.0})
+    a, c, d = m["vessels"]
+    # radius_in alone: the other end keeps the old radius; radius replaces both ends
+    assert (a["radius_in"], a["radius_out"]) == (0.005, 0.004) and "radius" not in a
+    assert d["radius"] == 0.0025 and "radius_in" not in d and "radius_out" not in d
+    assert c["lumped"] == {"resistance": 2e7, "capacitance": 1e-9}  # deep merge
+    # a waveform property replaces the whole table
+    assert m["boundary_conditions"]["in"] == {"type": "flow", "fourier": {"period": 1.0,
+                                                                          "mean": 2e-6}}
+    assert m["boundary_conditions"]["out1"]["distal_resistance"] == 5e8
+    assert m["boundary_conditions"]["out1"]["proximal_resistance"] == 1e8
+    # another type replaces the whole condition
+    assert m["boundary_conditions"]["out2"] == {"type": "rcr", "proximal_resistance": 1.0,
+                                                "capacitance": 2e-9, "distal_resistance": 3.0}
+    assert m["blood"] == {"viscosity": 4e-3}
+    # the base model is untouched
+    assert TUBE["vessels"][0]["radius"] == 0.004
+    assert "fourier" not in TUBE["boundary_conditions"]["in"]
+
+
+def test_scale_multiplies_resistances_and_compliances_of_the_selected_vessels() -> None:
+    m = apply_patch(TUBE, {"scale": {"resistance": 2.0, "compliance": 0.5, "vessels": ["c"]}})
+    c = m["vessels"][1]["lumped"]
+    assert c == {"resistance": 2e7, "capacitance": 5e-10}
+    out1 = m["boundary_conditions"]["out1"]  # the RCR at the free end of c
+    assert (out1["proximal_resistance"], out1["distal_resistance"], out1["capacitance"]) == (
+        2e8, 2e9, 5e-10)
+    assert m["boundary_conditions"]["out2"]["resistance"] == 2e9  # not at the end of c
+    assert m["vessels"][0]["youngs_modulus"] == 4e5
+    m = apply_patch(TUBE, {"scale": {"compliance": 0.5}})  # all vessels: C ∝ 1/E
+    assert m["vessels"][0]["youngs_modulus"] == 8e5
+    assert m["boundary_conditions"]["out2"]["resistance"] == 2e9
+
+
+def test_dataframe_rows_are_dotted_path_patches() -> None:
+    df = pd.DataFrame({"vessels.a.b.radius": [0.003, 0.005],
+                       "boundary_conditions.out2.resistance": [1e9, 3e9],
+                       "blood.viscosity": [3e-3, 4e-3]})
+    a = oxyline.simulate_ensemble(TUBE, df, **FAST)
+    b = oxyline.simulate_ensemble(TUBE, [
+        {"vessels": {"a.b": {"radius": 0.003}},
+         "boundary_conditions": {"out2": {"resistance": 1e9}},
+         "blood": {"viscosity": 3e-3}},
+        {"vessels": {"a.b": {"radius": 0.005}},
+         "boundary_conditions": {"out2": {"resistance": 3e9}},
+         "blood": {"viscosity": 4e-3}}], **FAST)
+    xr.testing.assert_identical(a.drop_vars("variant_label"), b)
+    assert a["vessels.a.b.radius"].values.tolist() == [0.003, 0.005]
+    # an empty cell leaves the base value
+    sparse = pd.DataFrame({"vessels.a.b.radius": [np.nan, 0.005]})
+    c = oxyline.simulate_ensemble(TUBE, sparse, **FAST)
+    base = oxyline.simulate(TUBE, cycles=2).summary()
+    np.testing.assert_array_equal(c.pressure_in_mean.values[0], base["pressure_in_mean"].values)
+    wide = oxyline.simulate(apply_patch(TUBE, {"vessels": {"a.b": {"radius": 0.005}}}),
+                            cycles=2).summary()
+    np.testing.assert_array_equal(c.pressure_in_mean.values[1], wide["pressure_in_mean"].values)
+
+
+@pytest.mark.parametrize(("patch", "path"), [
+    ({"vessels": {"nope": {"radius": 1.0}}}, "vessels.nope"),
+    ({"vessels": {"c": {"radiuss": 1.0}}}, "vessels.c.radiuss"),
+    ({"vessels": {"c": {"lumped": {"inductanse": 1.0}}}}, "vessels.c.lumped.inductanse"),
+    ({"vessels": {"c": {"to": "elsewhere"}}}, "vessels.c.to"),
+    ({"boundary_conditions": {"nowhere": {"resistance": 1.0}}}, "boundary_conditions.nowhere"),
+    ({"boundary_conditions": {"out1": {"resistance": 1.0}}}, "boundary_conditions.out1.resistance"),
+    ({"blood": {"colour": "red"}}, "blood.colour"),
+    ({"oxygen": {"inlet": {"po2": 80}}}, "oxygen"),
+    ({"scale": {"stiffness": 2.0}}, "scale.stiffness"),
+    ({"scale": {"resistance": 2.0, "vessels": ["c", "zz"]}}, "scale.vessels.zz"),
+    ({"simulation": {"cycles": 3}}, "simulation"),
+])
+def test_unknown_names_raise_naming_the_variant_and_the_path(patch: dict[str, Any],
+                                                             path: str) -> None:
+    with pytest.raises(oxyline.ModelError, match=f"variant 1: {path}"):
+        oxyline.simulate_ensemble(TUBE, [{}, patch], **FAST)
+
+
+def test_unknown_dotted_columns_raise() -> None:
+    with pytest.raises(oxyline.ModelError, match=r"variant 0: vessels\.zz\.radius"):
+        oxyline.simulate_ensemble(TUBE, pd.DataFrame({"vessels.zz.radius": [1.0]}), **FAST)
+
+
+# ---- identity with simulate() ------------------------------------------------------------
+
+def _summary(res: oxyline.Result) -> dict[str, np.ndarray]:
+    df = res.summary()
+    return {c: df[c].to_numpy() for c in df.columns}
+
+
+patches = st.fixed_dictionaries({}, optional={
+    "vessels": st.fixed_dictionaries({"aorta": st.fixed_dictionaries({}, optional={
+        "radius": st.floats(0.006, 0.010), "youngs_modulus": st.floats(2e6, 8e6),
+        "length": st.floats(0.15, 0.25)})}),
+    "boundary_conditions": st.fixed_dictionaries({}, optional={
+        "outlet": st.fixed_dictionaries({"resistance": st.floats(0.8e7, 1.5e7)}),
+        "inlet": st.fixed_dictionaries({"fourier": st.fixed_dictionaries({
+            "period": st.just(1.0), "mean": st.floats(1e-5, 3e-5),
+            "sin": st.lists(st.floats(-1e-5, 3e-5), min_size=1, max_size=2)})})}),
+    "blood": st.fixed_dictionaries({"viscosity": st.floats(3e-3, 4.5e-3)}),
+    "oxygen": st.fixed_dictionaries({"wall": st.fixed_dictionaries({"po2": st.floats(40, 70)})}),
+    "scale": st.fixed_dictionaries({"resistance": st.floats(0.7, 1.4),
+                                    "compliance": st.floats(0.7, 1.4)}),
+})
+
+
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(patches, min_size=1, max_size=4))
+def test_every_variant_is_the_plain_run_of_its_patched_model(drawn: list[dict[str, Any]]
+                                                             ) -> None:
+    ds = oxyline.simulate_ensemble(STRAIGHT, drawn, workers=2, **FAST)
+    assert (ds.status.values == 0).all(), ds.error.values
+    for k, patch in enumerate(drawn):
+        expected = _summary(oxyline.simulate(apply_patch(STRAIGHT, patch), cycles=2))
+        # the same code path (canonical patch -> assembly -> run): bit-identical
+        for name, values in expected.items():
+            np.testing.assert_array_equal(ds[name].values[k], values, err_msg=f"{k} {name}")
+
+
+def test_results_do_not_depend_on_the_number_of_workers() -> None:
+    variants = [{"vessels": {"aorta": {"radius": r}}} for r in np.linspace(0.006, 0.01, 6)]
+    one = oxyline.simulate_ensemble(STRAIGHT, variants, workers=1, **FAST)
+    two = oxyline.simulate_ensemble(STRAIGHT, variants, workers=2, **FAST)
+    xr.testing.assert_identical(one, two)
+    full1 = oxyline.simulate_ensemble(STRAIGHT, variants[:3], workers=1, output="full", **FAST)
+    full3 = oxyline.simulate_ensemble(STRAIGHT, variants[:3], workers=3, output="full", **FAST)
+    xr.testing.assert_identical(full1, full3)
+
+
+def test_full_output_is_the_plain_result_along_variant() -> None:
+    variants = [{}, {"period": 0.8, "boundary_conditions": {"inlet": {"fourier": {
+        "period": 0.8, "mean": 2e-5, "sin": [3e-5]}}}}]
+    ds = oxyline.simulate_ensemble(STRAIGHT, variants, output="full", **FAST)
+    for k, patch in enumerate(variants):
+        plain = oxyline.simulate(apply_patch(STRAIGHT, patch), cycles=2).to_xarray()
+        n = plain.sizes["time"]
+        np.testing.assert_array_equal(ds["time"].values[k, :n], plain["time"].values)
+        for name in ("pressure_in", "po2_out", "segment_flow"):
+            np.testing.assert_array_equal(ds[name].values[k, :n], plain[name].values)
+    # a shorter period: as many samples per cycle, so the same length here; the times differ
+    assert ds.period.values.tolist() == [1.0, 0.8]
+
+
+def test_a_callable_output_gives_its_scalars_along_variant() -> None:
+    def pulse(res: oxyline.Result) -> dict[str, float]:
+        p = res.vessel("aorta").pressure_in
+        return {"pulse_pressure": float(p.max() - p.min()), "po2_out": float(res.po2_out[-1, 0])}
+
+    radii = [0.007, 0.009]
+    ds = oxyline.simulate_ensemble(STRAIGHT, [{"vessels": {"aorta": {"radius": r}}} for r in radii],
+                                   output=pulse, **FAST)
+    for k, r in enumerate(radii):
+        res = oxyline.simulate(apply_patch(STRAIGHT, {"vessels": {"aorta": {"radius": r}}}),
+                               cycles=2)
+        assert ds.pulse_pressure.values[k] == pulse(res)["pulse_pressure"]
+    # a stiffer (narrower) aorta has the larger pulse pressure
+    assert ds.pulse_pressure.values[0] > ds.pulse_pressure.values[1]
+    assert ds.pulse_pressure.dims == ("variant",)
+
+
+# ---- failures ----------------------------------------------------------------------------
+
+def test_a_failing_variant_never_stops_the_others() -> None:
+    def out(res: oxyline.Result) -> dict[str, float]:
+        if res.vessel("aorta").flow_in.mean() > 2.5e-5:
+            raise RuntimeError("too high")
+        return {"p": float(res.vessel("aorta").pressure_in.max())}
+
+    variants = [
+        {},
+        {"vessels": {"aorta": {"radius": -1.0}}},  # refused by the model
+        # 100x stiffer: the fixed RK4 step is far beyond its stability limit
+        {"vessels": {"aorta": {"youngs_modulus": 5e8}}},
+        # the output callable raises for a mean inflow above 25 mL/s
+        {"boundary_conditions": {"inlet": {"fourier": {"period": 1.0, "mean": 3e-5}}}},
+        {},
+    ]
+    ds = oxyline.simulate_ensemble(STRAIGHT, variants, output=out, method="rk4", dt=5e-4,
+                                   **FAST)
+    assert ds.status.values.tolist() == [0, 1, 2, 4, 0]
+    assert "radius" in ds.error.values[1] and "variant 1" in ds.error.values[1]
+    assert "unstable" in ds.error.values[2]
+    assert "too high" in ds.error.values[3]
+    assert np.isnan(ds.p.values[1:4]).all()
+    plain = oxyline.simulate(STRAIGHT, cycles=2, method="rk4", dt=5e-4)
+    assert ds.p.values[0] == ds.p.values[4] == out(plain)["p"]
+
+
+def test_solver_failures_are_recorded() -> None:
+    # 1000x the inflow: the oxygen front crosses more than a cell per RK4 step (Courant limit)
+    fast = {"boundary_conditions": {"inlet": {"fourier": {"period": 1.0, "mean": 2e-2}}}}
+    ds = oxyline.simulate_ensemble(STRAIGHT, [fast, {}], method="rk4", dt=5e-4, **FAST)
+    assert ds.status.values.tolist() == [3, 0], ds.error.values
+    assert "solver failed" in ds.error.values[0] and "Courant" in ds.error.values[0]
+    assert ds.cycles_run.values[0] == 0
+
+
+def test_ctrl_c_returns_the_finished_variants() -> None:
+    def stop(done: int, total: int) -> None:
+        if done == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(oxyline.SimulationInterrupted) as info:
+        oxyline.simulate_ensemble(STRAIGHT, [{}] * 40, workers=1, cycles=2, progress=stop)
+    ds = info.value.result
+    assert (ds.status.values == 0).sum() >= 2
+    assert (ds.status.values == -1).sum() >= 30  # never started
+    ok = ds.status.values == 0
+    assert np.isfinite(ds.pressure_in_mean.values[ok]).all()
+
+
+def test_the_thread_count_comes_from_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("OXYLINE_NUM_THREADS", "many")
+    with pytest.raises(oxyline.ModelError, match="OXYLINE_NUM_THREADS"):
+        oxyline.simulate_ensemble(STRAIGHT, [{}], **FAST)
+    monkeypatch.setenv("OXYLINE_NUM_THREADS", "1")
+    assert oxyline.simulate_ensemble(STRAIGHT, [{}], **FAST).status.values.tolist() == [0]
+
+
+# ---- Zarr store --------------------------------------------------------------------------
+
+zarr = pytest.importorskip("zarr") if sys.version_info >= (3, 11) else None
+
+
+@pytest.mark.skipif(zarr is None, reason="needs zarr (Python >= 3.11)")
+def test_the_store_holds_the_in_memory_dataset(tmp_path: Path) -> None:
+    variants = [{"vessels": {"aorta": {"radius": r}}} for r in (0.007, -1.0, 0.009)]
+    mem = oxyline.simulate_ensemble(STRAIGHT, variants, **FAST)
+    ds = oxyline.simulate_ensemble(STRAIGHT, variants, store=tmp_path / "e.zarr", **FAST)
+    assert ds.attrs["complete"] == 1
+    for name in mem.data_vars:
+        np.testing.assert_array_equal(ds[name].values, mem[name].values, err_msg=name)
+
+
+CHILD = """
+import os, sys
+import oxyline
+
+def out(res):
+    out.calls += 1
+    if out.calls == 4:  # killed while the 4th variant is being stored
+        os._exit(3)
+    return {"p_max": float(res.pressure_in.max())}
+out.calls = 0
+variants = [{"vessels": {"aorta": {"radius": 0.006 + 0.0005 * k}}} for k in range(8)]
+oxyline.simulate_ensemble("paper-straight", variants, workers=1, output=out, store=sys.argv[1],
+                          cycles=2, progress=False)
+"""
+
+
+@pytest.mark.skipif(zarr is None, reason="needs zarr (Python >= 3.11)")
+def test_a_killed_ensemble_keeps_its_finished_variants(tmp_path: Path) -> None:
+    store = tmp_path / "killed.zarr"
+    proc = run_child([sys.executable, "-c", CHILD, str(store)], timeout=300)
+    assert proc.returncode == 3, proc.stderr
+    ds = xr.open_zarr(store)
+    # one worker runs the variants in order: 0-2 were stored, 3 died while being stored
+    assert ds.status.values.tolist() == [0, 0, 0] + [-1] * 5
+    assert ds.attrs["complete"] == 0
+    for k in range(3):
+        r = 0.006 + 0.0005 * k
+        res = oxyline.simulate(apply_patch(STRAIGHT, {"vessels": {"aorta": {"radius": r}}}),
+                               cycles=2)
+        assert ds.p_max.values[k] == float(res.pressure_in.max())
+    assert np.isnan(ds.p_max.values[3:]).all()
+    json.dumps(ds.attrs)  # plain attributes
+
+
+# ---- Dask ----------------------------------------------------------------------------------
+
+def _peak(res: oxyline.Result) -> dict[str, float]:
+    return {"p_max": float(res.pressure_in.max())}
+
+
+def test_a_local_dask_cluster_gives_the_local_dataset(tmp_path: Path) -> None:
+    distributed = pytest.importorskip("distributed")
+    variants = [{"vessels": {"aorta": {"radius": r}}} for r in np.linspace(0.006, 0.01, 7)]
+    variants.insert(3, {"vessels": {"aorta": {"radius": -1.0}}})
+    local = oxyline.simulate_ensemble(STRAIGHT, variants, **FAST)
+    local_peak = oxyline.simulate_ensemble(STRAIGHT, variants, output=_peak, **FAST)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        # chunks run on two worker processes, merged in completion order
+        xr.testing.assert_identical(
+            oxyline.simulate_ensemble(STRAIGHT, variants, client=client, **FAST), local)
+        xr.testing.assert_identical(
+            oxyline.simulate_ensemble(STRAIGHT, variants, client=client, output=_peak, **FAST),
+            local_peak)
+        if sys.version_info >= (3, 11):
+            stored = oxyline.simulate_ensemble(STRAIGHT, variants, client=client,
+                                               store=tmp_path / "d.zarr", **FAST)
+            np.testing.assert_array_equal(stored.pressure_in_max.values,
+                                          local.pressure_in_max.values)
+        with pytest.raises(oxyline.ModelError, match="variant 2: vessels.nope"):
+            oxyline.simulate_ensemble(STRAIGHT, [{}, {}, {"vessels": {"nope": {}}}],
+                                      client=client, **FAST)
+
+
+SIGINT_CHILD = """
+import sys
+import oxyline
+
+def progress(done, total):
+    if done == 2:
+        print("running", flush=True)  # the parent's cue: two variants are in the dataset
+
+try:
+    oxyline.simulate_ensemble("paper-straight", [{}] * 2000, workers=2, cycles=2,
+                              progress=progress)
+except oxyline.SimulationInterrupted as e:
+    st = e.result.status.values
+    other = (~((st == 0) | (st == -1) | (st == 5))).sum()
+    print("interrupted", (st == 0).sum(), (st == -1).sum(), other, flush=True)
+    sys.exit(130)
+"""
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="needs SIGINT")
+def test_sigint_stops_the_threads_and_returns_the_finished_variants() -> None:
+    import signal
+    import subprocess
+
+    from tests.conftest import child_process
+
+    with child_process([sys.executable, "-c", SIGINT_CHILD], stdout=subprocess.PIPE,
+                       stderr=subprocess.PIPE, text=True) as proc:
+        assert proc.stdout is not None
+        line = proc.stdout.readline()  # "" if the child died before its cue
+        assert line.strip() == "running", proc.stderr.read() if proc.stderr else ""
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=600)
+    assert proc.returncode == 130, err
+    words = out.split()
+    assert words[0] == "interrupted", out
+    finished, never, other = int(words[1]), int(words[2]), int(words[3])
+    assert other == 0  # only finished (0), stopped while running (5) and never started (-1)
+    assert finished >= 2 and never > 1000  # Ctrl-C lands within a few variants
