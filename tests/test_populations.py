@@ -150,7 +150,7 @@ def test_built_in_file_is_the_generators_baseline_subject(baseline) -> None:
 
 
 def test_patch_frame_and_errors() -> None:
-    assert P.pwdb_like(ages=(75,), levels=1, oxygen=True)[0]["oxygen"] == P.OXYGEN
+    assert P.base_model(oxygen=True)["oxygen"] == P.OXYGEN and "oxygen" not in P.base_model()
     frame = P.pwdb_like(ages=(75,), levels=1, frame=True)
     assert frame.shape[0] == 1 and frame.index.names[0] == "age"
     assert "vessels.ascending_aorta.youngs_modulus" in frame.columns
@@ -159,8 +159,6 @@ def test_patch_frame_and_errors() -> None:
                for c in frame.columns)
     with pytest.raises(oxyline.ModelError, match="no_such_vessel"):
         P.patched("pwdb-116", {"vessels": {"no_such_vessel": {"radius": 1}}})
-    with pytest.raises(oxyline.ModelError, match="scale"):
-        P.patched("pwdb-116", {"scale": {"resistance": 1.2}})
     with pytest.raises(oxyline.ModelError, match="n999"):
         P.patched("pwdb-116", {"boundary_conditions": {"n999": {"resistance": 1}}})
 
@@ -209,7 +207,7 @@ def test_pwdb_116_pressures_are_physiological(run) -> None:
 
 
 def test_ica_po2_with_an_oxygen_patch() -> None:
-    res = oxyline.simulate(P.patched("pwdb-116", {"oxygen": P.OXYGEN}), cycles=3,
+    res = oxyline.simulate(P.base_model(oxygen=True), cycles=3,
                            until_periodic=None)
     s = P.subject_summary(res)
     # dissolved O2 only, wall at 55.5 mmHg: the ICA outlet lies between the wall and the inlet

@@ -48,7 +48,7 @@ LVET_MEAN, LVET_SD = 282.0, 282.0 * 24.43 / 295.29   # ms: Mynard 2015 mean, Ger
 T_ONE_SD_19 = 1.0270403026558605
 Z90, Z80 = 1.6448536269514722, 1.2815515655446004   # norminv(0.95), norminv(0.9)
 
-#: an oxygen section for ``patched(model, {"oxygen": OXYGEN})`` (the transmission-line paper's
+#: the oxygen section of ``base_model(oxygen=True)`` (the transmission-line paper's
 #: carotid set-up: dissolved O2, Leveque wall at 55.5 mmHg, inlet 85.3 mmHg); makes
 #: :func:`subject_summary` report ``ica_po2`` (about 3x the CPU time of the flow-only run)
 OXYGEN = {"inlet": {"po2": 85.3}, "hemoglobin": "none", "solubility": 1.40e-3,
@@ -305,72 +305,45 @@ def subject_patch(row: Mapping[str, float], base: list[dict[str, Any]] | None = 
     return {"vessels": vessels, "boundary_conditions": bcs}
 
 
+def base_model(oxygen: bool = False) -> dict[str, Any]:
+    """The native dict of ``pwdb-116`` (the population's base model), with the :data:`OXYGEN`
+    section when ``oxygen`` (then :func:`subject_summary` reports ``ica_po2``)."""
+    from oxyline import models
+
+    data = models.load_dict(MODEL)
+    if oxygen:
+        data["oxygen"] = copy.deepcopy(OXYGEN)
+    return data
+
+
 def pwdb_like(ages: Sequence[float] = (25, 35, 45, 55, 65, 75), levels: int = 3, *,
-              frame: bool = False, oxygen: bool = False) -> Any:
+              frame: bool = False) -> Any:
     """PWDB-like virtual subjects of ``pwdb-116``: a list of native-format patches (one per
     row of :func:`parameters`, same order), or with ``frame=True`` a pandas DataFrame with one
     dotted-path column per patched value (``vessels.<name>.youngs_modulus``,
     ``boundary_conditions.<node>.distal_resistance``, ...; the inflow columns hold the
-    tables) indexed by the subject's ``age`` and SD levels. ``oxygen=True`` adds the
-    :data:`OXYGEN` section to every patch (``oxygen.<key>`` columns in the frame)."""
+    tables) indexed by the subject's ``age`` and SD levels. For oxygen, run the patches on
+    :func:`base_model` ``(oxygen=True)``: a patch changes a model's values, it does not add
+    sections (the ensemble shares one transport plan between variants)."""
     table = parameters(ages, levels)
     patches = [subject_patch(r) for r in table.to_dict("records")]
-    if oxygen:
-        for p in patches:
-            p["oxygen"] = copy.deepcopy(OXYGEN)
     if not frame:
         return patches
     import pandas as pd
 
     flat = [{f"{grp}.{name}.{k}": v for grp in ("vessels", "boundary_conditions")
              for name, props in p[grp].items() for k, v in props.items()} for p in patches]
-    if oxygen:
-        for f in flat:
-            f.update({f"oxygen.{k}": v for k, v in OXYGEN.items()})
     index = pd.MultiIndex.from_frame(table[["age", *[f"{p}_sd" for p in VARIED]]])
     return pd.DataFrame(flat, index=index)
 
 
-def _merge(target: dict[str, Any], patch: Mapping[str, Any]) -> None:
-    for k, v in patch.items():
-        if isinstance(v, Mapping) and isinstance(target.get(k), dict):
-            _merge(target[k], v)
-        else:
-            target[k] = copy.deepcopy(v)
-
-
 def patched(model: Any, patch: Mapping[str, Any]) -> dict[str, Any]:
-    """A native model dict with ``patch`` deep-merged (vessels by name, boundary conditions by
-    node; a given waveform replaces the whole table): the serial stand-in for
-    ``oxyline.simulate_ensemble``'s patch semantics. Unknown vessels or nodes raise
-    :class:`~oxyline.ModelError` naming them."""
-    from oxyline import models
-    from oxyline.model import Model
+    """A native model dict with ``patch`` deep-merged: :func:`oxyline.ensemble.apply_patch`
+    (the patch semantics of :func:`oxyline.simulate_ensemble`, kept here under the name the
+    population examples use)."""
+    from oxyline.ensemble import apply_patch
 
-    unknown = set(patch) - {"vessels", "boundary_conditions", "blood", "oxygen"}
-    if unknown:
-        raise ModelError(f"patch: unsupported section(s) {sorted(unknown)} (this serial "
-                         f"stand-in merges vessels, boundary_conditions, blood, oxygen)")
-    d = (model.to_dict() if isinstance(model, Model) else models.load_dict(model)
-         if isinstance(model, str) else copy.deepcopy(dict(model)))
-    by_name = {v["name"]: v for v in d["vessels"]}
-    for name, props in (patch.get("vessels") or {}).items():
-        if name not in by_name:
-            raise ModelError(f"patch: unknown vessel '{name}'")
-        by_name[name].update(props)
-    bcs = d["boundary_conditions"]
-    for n, props in (patch.get("boundary_conditions") or {}).items():
-        if n not in bcs:
-            raise ModelError(f"patch: unknown boundary condition node '{n}'")
-        if {"time", "value", "fourier"} & set(props):       # a waveform replaces the table
-            for k in ("time", "flow", "pressure", "value", "fourier"):
-                if k != "pressure" or bcs[n].get("type") in ("flow", "pressure"):
-                    bcs[n].pop(k, None)
-        bcs[n].update(props)
-    for key in ("blood", "oxygen"):
-        if key in patch:
-            _merge(d.setdefault(key, {}), patch[key])
-    return d
+    return apply_patch(model, patch)
 
 
 #: the built-in's spatial and time resolution and run settings (docs/populations.md)
