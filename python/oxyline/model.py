@@ -242,11 +242,14 @@ def _fast_vessel(v: Any, L: float, E: float) -> dict[str, Any] | None:
 def _vessel(v: Any, i: int, units: str) -> dict[str, Any]:
     """The canonical form of vessel ``i``, checking every key and value."""
     L = factor(units, "length")
-    el = f"vessel '{v.get('name', f'#{i}')}'" if isinstance(v, Mapping) else f"vessel #{i}"
+    el = (f"vessel '{v['name']}'" if isinstance(v, Mapping) and v.get("name") is not None
+          else f"vessel #{i}")
     _check_keys(v, VESSEL_KEYS, el)
     for k in ("name", "from", "to"):
         if k not in v:
             raise _err(el, f"missing '{k}'")
+        if not isinstance(v[k], (str, int)) or isinstance(v[k], bool):  # `name: null` is no name
+            raise _err(el, f"'{k}' must be a name, got {v[k]!r}")
     cv: dict[str, Any] = {"name": str(v["name"]), "from": str(v["from"]), "to": str(v["to"])}
     if "segments" in v:
         n = v["segments"]
@@ -441,7 +444,10 @@ def _build(data: dict[str, Any]) -> Model:
     """The model of ``data``, which becomes the model's ``source``: callers pass a dict they
     own (a copy of the user's, or one they built)."""
     _check_keys(data, TOP_KEYS, "model")
-    name = str(data.get("name", "network"))
+    name = data.get("name", "network")
+    if not isinstance(name, (str, int)) or isinstance(name, bool):
+        raise _err("model", f"'name' must be a name, got {name!r}")
+    name = str(name)
     units = str(data.get("units", "SI"))
     if units.lower() not in ("si", "cgs"):
         raise _err("model", f"units must be 'SI' or 'cgs', got {units!r}")
