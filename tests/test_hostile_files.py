@@ -14,6 +14,7 @@ from conftest import data_path, run_child
 
 import oxyline
 from oxyline.io import read_model, save_model
+from oxyline.io.native import read_mapping
 
 EXAMPLE = Path(oxyline.__file__).parent / "examples" / "bifurcation.yaml"
 
@@ -94,6 +95,9 @@ def test_duplicate_keys_are_errors_naming_the_key(tmp_path: Path) -> None:
     j.write_text(data.replace('"name": "parent"', '"name": "parent", "length": 1.0', 1))
     with pytest.raises(oxyline.ModelError, match=r"dup\.json.*duplicate key 'length'"):
         oxyline.load_model(j)
+    # keys starting with "_" are comments; svZeroDSolver's own files repeat "_comment_"
+    j.write_text('{"_comment_": "a", "_comment_": "b", "x": 1}')
+    assert read_mapping(j) == {"_comment_": "b", "x": 1}
 
 
 def test_null_names_are_errors_not_the_string_none(tmp_path: Path) -> None:
@@ -111,6 +115,9 @@ def test_yaml_12_numbers_and_words(tmp_path: Path) -> None:
     save_model writes reads back as the same model, also for names that look like numbers."""
     m = oxyline.load_model(EXAMPLE)
     assert m.to_dict()["vessels"][0]["youngs_modulus"] == 5.0e5
+    # shipped models too (read with libyaml plus YAML 1.2's number rule)
+    bcs = oxyline.load_model("bifurcation").to_dict()["boundary_conditions"]
+    assert bcs["ica_out"]["resistance"] == 2.8931e9
     src = m.to_dict()
     src["vessels"][0]["name"] = "1e5"
     src["vessels"][1]["name"] = "yes"

@@ -156,9 +156,11 @@ def _parse_yaml(text: str, p: Path) -> Any:
 
 
 def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object whose keys are unique. Keys starting with ``_`` are comments (JSON has none;
+    svZeroDSolver's files repeat ``"_comment_"``): a repeated one keeps its last value."""
     out: dict[str, Any] = {}
     for k, v in pairs:
-        if k in out:
+        if k in out and not k.startswith("_"):
             raise ValueError(f"duplicate key {k!r}")
         out[k] = v
     return out
