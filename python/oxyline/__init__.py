@@ -14,6 +14,7 @@ from __future__ import annotations
 from oxyline import _core, models
 from oxyline.errors import (
     ModelError,
+    OutputError,
     SimulationInterrupted,
     SolverError,
     UnstableTimeStep,
@@ -30,6 +31,7 @@ __version__: str = _core.__version__
 __all__ = [
     "Model",
     "ModelError",
+    "OutputError",
     "Result",
     "SimulationInterrupted",
     "SolverError",

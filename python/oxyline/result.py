@@ -334,12 +334,14 @@ class Result:
 
         return results.to_netcdf(self, path)
 
-    def to_zarr(self, path: str | os.PathLike[str], time_chunk: int = 1024) -> Path:
-        """Write a Zarr store chunked along time (written after the run; needs ``zarr``).
+    def to_zarr(self, path: str | os.PathLike[str], time_chunk: int = 1024,
+                overwrite: bool = False) -> Path:
+        """Write a Zarr store chunked along time (written after the run; needs ``zarr``); an
+        existing store is replaced only with ``overwrite=True``.
         See :func:`oxyline.io.results.to_zarr`."""
         from oxyline.io import results
 
-        return results.to_zarr(self, path, time_chunk=time_chunk)
+        return results.to_zarr(self, path, time_chunk=time_chunk, overwrite=overwrite)
 
     def summary(self) -> Any:
         """pandas DataFrame per vessel: mean/min/max of every per-vessel variable (SI)."""

@@ -7,7 +7,7 @@ import os
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from oxyline.errors import ModelError, SimulationInterrupted
+from oxyline.errors import ModelError, OutputError, SimulationInterrupted
 from oxyline.loader import load_model
 from oxyline.model import METHODS, Model, output_names, output_vessels
 from oxyline.result import SEGMENT_VARIABLES, SPECIES_SEGMENT, Result, SpeciesResult
@@ -199,7 +199,7 @@ def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any], **overri
 
 def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
                      path: str | os.PathLike[str], *, time_chunk: int = 1024,
-                     **overrides: Any) -> Any:
+                     overwrite: bool = False, **overrides: Any) -> Any:
     """Run a network, writing its output to a Zarr store *during* the run, and return the store
     opened lazily as an ``xarray.Dataset``.
 
@@ -211,7 +211,10 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     and is a valid store after every chunk; its attribute ``complete`` is 1 once the run has
     finished. If the run stops early (Ctrl-C, a solver failure), the rows computed until then
     are written and the exception is raised with the opened store as ``exc.result``
-    (:class:`~oxyline.SimulationInterrupted` for Ctrl-C). Needs ``zarr`` and ``xarray``.
+    (:class:`~oxyline.SimulationInterrupted` for Ctrl-C). A chunk that cannot be written (disk
+    full) stops the run with :class:`~oxyline.OutputError`, whose ``result`` is the store with
+    the rows written before it. An existing store at ``path`` is replaced only with
+    ``overwrite=True``. Needs ``zarr`` and ``xarray``.
 
     >>> import oxyline, tempfile, os
     >>> with tempfile.TemporaryDirectory() as d:
@@ -230,7 +233,7 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     s = _settings(model, overrides)
     empty = _empty_rows(model, s)
     store = ZarrAppender(path, dataset(_result(model, s, empty, _run_settings(s, None), False)),
-                         time_chunk)
+                         time_chunk, overwrite=overwrite)
 
     def write(rows: dict[str, Any]) -> None:
         store.append(dataset(_result(model, s, rows, {}, False)))
@@ -240,8 +243,21 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     except Exception:
         store.remove()  # refused before the first step (e.g. an unstable dt): no output at all
         raise
-    store.finish(dataset(_result(model, s, empty, _run_settings(s, raw), "error" not in raw)).attrs)
-    opened = xr.open_zarr(store.path)
+    try:
+        store.finish(dataset(_result(model, s, empty, _run_settings(s, raw),
+                                     "error" not in raw)).attrs)
+    except (OSError, RuntimeError, ValueError) as exc:  # e.g. the disk just filled up
+        if "error" not in raw:
+            raw = {**raw, "error": OutputError(f"{store.path}: cannot write the run's final "
+                                               f"attributes: {exc}; the store keeps every row "
+                                               "(attribute complete = 0)"),
+                   "error_kind": "output"}
+    try:
+        opened = xr.open_zarr(store.path)
+    except Exception:  # a store the failing disk left unreadable: the error says what happened
+        if "error" not in raw:
+            raise
+        opened = None
     _raise_run_error(raw, opened)
     return opened
 
