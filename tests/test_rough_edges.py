@@ -54,3 +54,74 @@ def test_pickled_result_is_its_data_once(name: str) -> None:
     assert back.settings == res.settings and back.vessels == res.vessels
     if res.species:
         assert np.array_equal(back.po2_out, res.po2_out, equal_nan=True)
+
+
+class _Bar:
+    """A stand-in for tqdm that records what the progress bar would show."""
+
+    def __init__(self, total: float | None = None, **kwargs: object) -> None:
+        self.total, self.n, self.shown = total, 0.0, []
+        self.format = str(kwargs.get("bar_format", ""))
+
+    def refresh(self) -> None:
+        self.shown.append((self.n, self.total))
+
+    def close(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize(("model", "options"), [
+    ("paper-bifurcated", {}),  # oxygen: the core restarts its time after a flow pre-run
+    ("bifurcation", {"until_periodic": 1e-6, "max_cycles": 200}),
+])
+def test_progress_counts_cycles_and_never_goes_back(monkeypatch: pytest.MonkeyPatch,
+                                                    model: str, options: dict) -> None:
+    import tqdm.auto
+
+    bars: list[_Bar] = []
+
+    def make(**kwargs: object) -> _Bar:
+        bars.append(_Bar(**kwargs))
+        return bars[-1]
+
+    monkeypatch.setattr(tqdm.auto, "tqdm", make)
+    res = oxyline.simulate(model, progress=True, **options)
+    shown = bars[0].shown
+    counts = [n for n, _ in shown]
+    assert counts == sorted(counts)  # before: the oxygen run's bar jumped from 3.0 s back to 0.3 s
+    assert counts[-1] >= res.settings["cycles_run"] - 1e-9
+    if "until_periodic" in options:  # before: a percentage of max_cycles, stuck at a few %
+        assert all(total is None for _, total in shown)
+        assert "until the cycle-to-cycle change < 1e-06" in bars[0].format
+    else:
+        assert "cycles" in bars[0].format
+
+
+CEREBRAL = ("MCA", "ACA", "PCA", "Basilar", "int-carotid", "cerebral")
+
+
+def test_default_figures_show_arteries_of_several_regions() -> None:
+    pytest.importorskip("matplotlib")
+    from oxyline import plot
+
+    m = oxyline.load_model("circle-of-willis")
+    chosen = plot.representative_vessels(oxyline.simulate(m, cycles=1), m)
+    # before: the inlet and the first 4 outlets (aorta, arms), no cerebral vessel
+    assert chosen[0] == "1-Ascendingaorta" and len(chosen) == 5
+    assert any(any(c in v for c in CEREBRAL) for v in chosen), chosen
+    wb = oxyline.load_model("whole-body-140")
+    res = oxyline.simulate(wb, cycles=1, until_periodic=None, method="generalized-alpha")
+    internal = plot.internal_vessels(wb)
+    assert len(internal) == 242 and all(".wall" in v for v in internal)
+    chosen = plot.representative_vessels(res, wb)
+    assert not set(chosen) & internal and len(set(chosen)) == 5
+    assert any(any(c in v for c in CEREBRAL) for v in chosen), chosen
+
+
+def test_console_table_leaves_out_internal_branches(capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["run", "whole-body-140", "--cycles", "1"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    rows = out[2:22]
+    assert len(rows) == 20 and not any(".wall" in r for r in rows)  # before: 9 of 20
+    assert out[22] == "... 323 more vessels and 242 internal branches (e.g. wall viscosity) " \
+                      "not shown"

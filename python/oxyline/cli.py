@@ -108,22 +108,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         figures = plot.save_figures(oxyline.open_result(args.output) if stream else res, model,
                                     args.plot)
     if not args.quiet:
-        if stream:  # the store opened lazily: read the run facts and the first vessels only
-            s = {k[len("solver_"):]: v for k, v in res.attrs.items() if k.startswith("solver_")}
-            vessels = [str(v) for v in res["vessel"].values]
-            head = {"vessel": slice(0, 20)}
-            p_in = res["pressure_in"].isel(head).mean("time").values
-            q_in = res["flow_in"].isel(head).mean("time").values
-        else:
-            s, vessels = res.settings, res.vessels
-            p_in, q_in = res.pressure_in[:, :20].mean(axis=0), res.flow_in[:, :20].mean(axis=0)
-        print(f"{model.name}: {len(vessels)} vessels, method {s['method']}, dt {s['dt']:.3e} s, "
-              f"{s['cycles_run']} cycles, cycle-to-cycle change {s['periodic_error']:.2e}")
-        print(f"{'vessel':<24}{'mean P_in [mmHg]':>18}{'mean Q_in [mL/s]':>18}")
-        for name, p, q in zip(vessels[:20], p_in, q_in):
-            print(f"{name:<24}{p / MMHG:>18.3f}{q * 1e6:>18.4f}")
-        if len(vessels) > 20:
-            print(f"... {len(vessels) - 20} more vessels")
+        _print_table(model, res, stream)
         if args.output:
             print(f"results written to {args.output}")
         if args.summary:
@@ -131,6 +116,37 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if figures:
             print(f"{len(figures)} figures written to {args.plot}")
     return 0
+
+
+def _print_table(model: Any, res: Any, stream: bool, rows: int = 20) -> None:
+    """The run's facts and the mean inlet pressure and flow of the first ``rows`` vessels that
+    are arteries (internal branches, e.g. whole-body-140's '.wall' branches, are left out)."""
+    from oxyline.plot import internal_vessels
+
+    if stream:  # the store opened lazily: read the run facts and the vessels shown only
+        s = {k[len("solver_"):]: v for k, v in res.attrs.items() if k.startswith("solver_")}
+        vessels = [str(v) for v in res["vessel"].values]
+    else:
+        s, vessels = res.settings, res.vessels
+    internal = internal_vessels(model)
+    shown = [i for i, v in enumerate(vessels) if v not in internal][:rows]
+    if stream:
+        p_in = res["pressure_in"].isel(vessel=shown).mean("time").values
+        q_in = res["flow_in"].isel(vessel=shown).mean("time").values
+    else:
+        p_in = res.pressure_in[:, shown].mean(axis=0)
+        q_in = res.flow_in[:, shown].mean(axis=0)
+    print(f"{model.name}: {len(vessels)} vessels, method {s['method']}, dt {s['dt']:.3e} s, "
+          f"{s['cycles_run']} cycles, cycle-to-cycle change {s['periodic_error']:.2e}")
+    width = max([24] + [len(vessels[i]) + 2 for i in shown])
+    print(f"{'vessel':<{width}}{'mean P_in [mmHg]':>18}{'mean Q_in [mL/s]':>18}")
+    for i, p, q in zip(shown, p_in, q_in):
+        print(f"{vessels[i]:<{width}}{p / MMHG:>18.3f}{q * 1e6:>18.4f}")
+    hidden = sum(v in internal for v in vessels)
+    more = len(vessels) - len(shown) - hidden
+    if more > 0 or hidden:
+        print(f"... {more} more vessels" + (f" and {hidden} internal branches (e.g. wall "
+                                             "viscosity) not shown" if hidden else ""))
 
 
 def _cmd_plot(args: argparse.Namespace) -> int:

@@ -137,7 +137,37 @@ def _selection(s: Mapping[str, Any]) -> dict[str, Any]:
     return {"variables": s["variables"], "vessels": s["vessels"], "segments": s["segments"]}
 
 
-def _progress_bar(enabled: bool | ProgressCallback | None) -> tuple[Any, Any]:
+class _CycleProgress:
+    """Progress in cardiac cycles, never backwards. The core reports (t, t_end) of its current
+    pass; a pass that starts again from t = 0 (e.g. the flow pre-run of a transport model) adds
+    the time done so far, so the count only grows. A run ``until_periodic`` has no known end:
+    it shows the cycles done and its stopping rule instead of a percentage that would stop at
+    a few percent of ``max_cycles``."""
+
+    def __init__(self, bar: Any, period: float, open_ended: bool) -> None:
+        self.bar, self.period, self.open_ended = bar, period, open_ended
+        self.done = 0.0  # time of the passes that ended
+        self.last = 0.0
+
+    def __call__(self, t: float, t_end: float) -> None:
+        if t < self.last:  # a new pass from 0
+            self.done += self.last
+        self.last = t
+        if not self.open_ended:
+            self.bar.total = round((self.done + t_end) / self.period, 2)
+        self.bar.n = round((self.done + min(t, t_end)) / self.period, 2)
+        self.bar.refresh()
+
+    def finish(self, cycles_run: int) -> None:
+        """The count at the end of the run (the core reports every few hundred steps)."""
+        self.bar.n = round(self.done / self.period + cycles_run, 2)
+        if not self.open_ended:
+            self.bar.total = self.bar.n
+        self.bar.refresh()
+
+
+def _progress_bar(enabled: bool | ProgressCallback | None,
+                  s: Mapping[str, Any] | None = None) -> tuple[Any, Any]:
     if callable(enabled):
         return enabled, None
     if not enabled:
@@ -146,15 +176,16 @@ def _progress_bar(enabled: bool | ProgressCallback | None) -> tuple[Any, Any]:
         from tqdm.auto import tqdm
     except ImportError:
         return None, None
-    bar = tqdm(total=1.0, unit="s", delay=1.0, bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} s "
-               "simulated [{elapsed}<{remaining}]")
-
-    def update(t: float, t_end: float) -> None:
-        bar.total = t_end
-        bar.n = min(t, t_end)
-        bar.refresh()
-
-    return update, bar
+    period = float(s["period"]) if s else 1.0
+    until = s.get("until_periodic") if s else None
+    if until is not None:
+        fmt = ("{desc}: {n:.2f} cycles [{elapsed}, {rate_fmt}] until the cycle-to-cycle change "
+               f"< {until:g} (at least {s['cycles']}, at most {s['max_cycles']} cycles)")
+    else:
+        fmt = "{desc}: {percentage:3.0f}%|{bar}| {n:.2f}/{total:.2f} cycles [{elapsed}<{remaining}]"
+    bar = tqdm(total=None if until is not None else 1.0, unit="cycle", delay=1.0, desc="run",
+               bar_format=fmt)
+    return _CycleProgress(bar, period, until is not None), bar
 
 
 def _species_results(model: Model, raw: Mapping[str, Any], layout: Mapping[str, Any],
@@ -226,9 +257,12 @@ def _run_settings(s: Mapping[str, Any], raw: Mapping[str, Any] | None) -> dict[s
 
 def _run(model: Model, s: Mapping[str, Any], progress: Any, **core: Any) -> dict[str, Any]:
     """The core's raw output of a run with settings ``s``, with a progress bar if asked for."""
-    callback, bar = _progress_bar(progress)
+    callback, bar = _progress_bar(progress, s)
     try:
-        return model.network.simulate(progress=callback, **s, **core)
+        raw = model.network.simulate(progress=callback, **s, **core)
+        if isinstance(callback, _CycleProgress) and "error" not in raw:
+            callback.finish(int(raw["cycles_run"]))
+        return raw
     finally:
         if bar is not None:
             bar.close()
