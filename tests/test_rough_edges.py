@@ -125,3 +125,26 @@ def test_console_table_leaves_out_internal_branches(capsys: pytest.CaptureFixtur
     assert len(rows) == 20 and not any(".wall" in r for r in rows)  # before: 9 of 20
     assert out[22] == "... 323 more vessels and 242 internal branches (e.g. wall viscosity) " \
                       "not shown"
+
+
+def test_oxygen_figure_one_unit_full_tick_values_distinct_styles() -> None:
+    pytest.importorskip("matplotlib")
+    import matplotlib.pyplot as plt
+
+    from oxyline import plot_oxygen
+
+    res = oxyline.simulate("paper-bifurcated", cycles=1)
+    fig = plot_oxygen.outlet_flux(res)
+    a1, a2 = fig.axes[:2]
+    # before: nmol/s above, pmol/s below; the wall-uptake axis hid a +2.1e3 offset
+    assert "(nmol/s)" in a1.get_ylabel() and "(nmol/s)" in a2.get_ylabel()
+    for ax in (a1, a2):
+        assert not ax.yaxis.get_major_formatter().get_useOffset()
+    styles = [line.get_linestyle() for line in a1.get_lines()]
+    assert len(set(styles)) == len(styles) == len(res.vessels)  # coinciding daughters visible
+    wall = res.wall_o2_flux * 1e9
+    level, plotted = np.max(np.abs(wall)), np.concatenate([ln.get_ydata() for ln in a2.get_lines()])
+    assert np.allclose(np.sort(plotted), np.sort(wall.T.ravel()))  # the values, no rescaling
+    if np.ptp(wall) < 0.01 * level:  # a flat uptake says how flat it is
+        assert any("varies by" in t.get_text() for t in a2.texts)
+    plt.close(fig)
