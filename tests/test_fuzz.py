@@ -24,7 +24,7 @@ from typing import Any
 
 import pytest
 from conftest import data_path, run_child
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 import oxyline
@@ -164,6 +164,23 @@ def mutants(draw: st.DrawFn) -> tuple[str, str]:
     return suffix, text
 
 
+def _known(mutate: dict[str, Any]) -> tuple[str, str]:
+    """The bifurcation with ``mutate`` merged into its ``simulation`` section, as JSON: the
+    mutants the fuzzer found before issue 13's fixes (settings that raised a raw ValueError)."""
+    data = copy.deepcopy(BASES[0])
+    sim = data.setdefault("simulation", {})
+    for k, v in mutate.items():
+        if isinstance(v, dict):
+            sim.setdefault(k, {}).update(v)
+        else:
+            sim[k] = v
+    return ".json", json.dumps(data)
+
+
+KNOWN = [_known({"output": {"every": "x"}}), _known({"rho_infty": "fast"}),
+         _known({"max_cycles": "x", "until_periodic": 1e-3}), _known({"until_periodic": "x"})]
+
+
 def _limits() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
     resource.setrlimit(resource.RLIMIT_AS, (MEMORY_CAP, MEMORY_CAP))
@@ -200,6 +217,7 @@ def _run_batch(cases: list[tuple[str, str]], where: Path) -> None:
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large,
                                  HealthCheck.function_scoped_fixture])
 @given(batch=st.lists(mutants(), min_size=BATCH, max_size=BATCH))
+@example(batch=KNOWN)
 def test_mutated_models_give_typed_errors_or_finite_runs(batch: list[tuple[str, str]],
                                                          tmp_path: Path) -> None:
     _run_batch(batch, tmp_path / f"batch{abs(hash(tuple(batch))) % 10**8}")
