@@ -179,10 +179,12 @@ def _progress_bar(enabled: bool | ProgressCallback | None,
     period = float(s["period"]) if s else 1.0
     until = s.get("until_periodic") if s else None
     if until is not None:
-        fmt = ("{desc}: {n:.2f} cycles [{elapsed}, {rate_fmt}] until the cycle-to-cycle change "
-               f"< {until:g} (at least {s['cycles']}, at most {s['max_cycles']} cycles)")
+        fmt = ("{desc}: {n:.2f} cycles simulated [{elapsed}, {rate_fmt}] until the "
+               f"cycle-to-cycle change < {until:g} (at least {s['cycles']}, at most "
+               f"{s['max_cycles']} cycles)")
     else:
-        fmt = "{desc}: {percentage:3.0f}%|{bar}| {n:.2f}/{total:.2f} cycles [{elapsed}<{remaining}]"
+        fmt = ("{desc}: {percentage:3.0f}%|{bar}| {n:.2f}/{total:.2f} cycles simulated "
+               "[{elapsed}<{remaining}]")
     bar = tqdm(total=None if until is not None else 1.0, unit="cycle", delay=1.0, desc="run",
                bar_format=fmt)
     return _CycleProgress(bar, period, until is not None), bar
