@@ -116,6 +116,16 @@ def test_default_figures_show_arteries_of_several_regions() -> None:
     chosen = plot.representative_vessels(res, wb)
     assert not set(chosen) & internal and len(set(chosen)) == 5
     assert any(any(c in v for c in CEREBRAL) for v in chosen), chosen
+    import matplotlib.pyplot as plt
+
+    fig = plot.waveforms(res, chosen)
+    fig.canvas.draw()
+    r = fig.canvas.get_renderer()
+    legend = fig.legends[0].get_window_extent(r)
+    # before: the legend of the long names covered the title and squeezed the panels
+    assert not legend.overlaps(fig._suptitle.get_window_extent(r))
+    assert not any(legend.overlaps(ax.get_window_extent(r)) for ax in fig.axes)
+    plt.close(fig)
 
 
 def test_console_table_leaves_out_internal_branches(capsys: pytest.CaptureFixture[str]) -> None:

@@ -132,7 +132,11 @@ def waveforms(result: Result, vessels: Sequence[str] | str | None = None,
         ax.grid(alpha=0.3)
     axes[-1, 0].set_xlabel("time [s]")
     handles, labels = axes[0, 0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="outside right upper", fontsize=9, title="vessel")
+    # below the panels: long vessel names (whole-body-140) beside them squeezed the axes and
+    # covered the title
+    longest = max((len(x) for x in labels), default=0)
+    fig.legend(handles, labels, loc="outside lower center", fontsize=8, title="vessel",
+               ncols=1 if longest > 40 else min(3, max(1, len(labels))))
     fig.suptitle(f"{result.model_name}: waveforms", fontsize=11)
     return fig
 
