@@ -177,8 +177,28 @@ def _known(mutate: dict[str, Any]) -> tuple[str, str]:
     return ".json", json.dumps(data)
 
 
+def _known_edit(base: int, edit: Any) -> tuple[str, str]:
+    """A base model changed by ``edit(data)``, as JSON."""
+    data = copy.deepcopy(BASES[base])
+    edit(data)
+    return ".json", json.dumps(data)
+
+
+def _set(path: tuple[Any, ...], value: Any) -> Any:
+    def edit(data: Any) -> None:
+        _parent(data, path)[path[-1]] = value
+    return edit
+
+
 KNOWN = [_known({"output": {"every": "x"}}), _known({"rho_infty": "fast"}),
-         _known({"max_cycles": "x", "until_periodic": 1e-3}), _known({"until_periodic": "x"})]
+         _known({"max_cycles": "x", "until_periodic": 1e-3}), _known({"until_periodic": "x"}),
+         # found by this test: unhashable values where a name or keyword is looked up
+         _known({"method": []}), _known_edit(0, _set(("arrangement",), {})),
+         _known_edit(0, _set(("vessels", 0, "arrangement"), [])),
+         _known_edit(2, _set(("vessels", 0, "vessel_id"), [])),
+         _known_edit(2, _set(("vessels", 0, "zero_d_element_type"), [])),
+         _known_edit(2, _set(("junctions", 0, "inlet_vessels"), [[0]])),
+         _known_edit(2, _set(("boundary_conditions",), 1.5))]
 
 
 def _limits() -> None:

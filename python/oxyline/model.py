@@ -230,7 +230,7 @@ def _fast_vessel(v: Any, L: float, E: float) -> dict[str, Any] | None:
             return None
         cv["segments"] = n
     if "arrangement" in v:
-        if v["arrangement"] not in ARRANGEMENTS:
+        if type(v["arrangement"]) is not str or v["arrangement"] not in ARRANGEMENTS:
             return None
         cv["arrangement"] = v["arrangement"]
     if "output" in v:
@@ -257,7 +257,7 @@ def _vessel(v: Any, i: int, units: str) -> dict[str, Any]:
             raise _err(el, f"'segments' must be an integer >= 1, got {n!r}")
         cv["segments"] = n
     if "arrangement" in v:
-        if v["arrangement"] not in ARRANGEMENTS:
+        if not isinstance(v["arrangement"], str) or v["arrangement"] not in ARRANGEMENTS:
             raise _err(el, f"arrangement must be one of {sorted(ARRANGEMENTS)}, got "
                            f"{v['arrangement']!r}")
         cv["arrangement"] = v["arrangement"]
@@ -459,7 +459,7 @@ def _build(data: dict[str, Any]) -> Model:
         "viscosity": factor(units, "viscosity") * _number(blood.get("viscosity", 3.5e-3 / factor(units, "viscosity")), "blood", "viscosity"),
     }
     arrangement = data.get("arrangement", "inverted-L")
-    if arrangement not in ARRANGEMENTS - {"RCL"}:
+    if not isinstance(arrangement, str) or arrangement not in ARRANGEMENTS - {"RCL"}:
         raise _err("model", f"arrangement must be inverted-L, L or pi, got {arrangement!r}")
     seg = data.get("segmentation", {}) or {}
     _check_keys(seg, {"max_length"}, "segmentation")
@@ -503,7 +503,7 @@ def _build(data: dict[str, Any]) -> Model:
     _check_keys(sim, SIM_KEYS, "simulation")
     if "output" in sim:
         _check_keys(sim["output"], OUTPUT_KEYS, "simulation output")
-    if "method" in sim and sim["method"] not in METHODS:
+    if "method" in sim and (not isinstance(sim["method"], str) or sim["method"] not in METHODS):
         raise _err("simulation", f"method must be one of {sorted(METHODS)}, got {sim['method']!r}")
     from oxyline import transport as _transport
 

@@ -194,7 +194,7 @@ def _entry(raw: Any, where: str, name_key: str, label: str, allowed: Any, type_k
         if k not in allowed and not _is_comment(k):
             raise UnsupportedElement(f"{el}: unknown key '{k}'")
     kind = _required(entry, type_key, el)
-    if kind not in types:
+    if not isinstance(kind, str) or kind not in types:
         raise UnsupportedElement(f"{el}: {type_key} '{kind}' is not supported (supported: "
                                  f"{', '.join(sorted(types))})")
     return entry, name, kind, el
@@ -262,7 +262,8 @@ def _check_period(cfg: Mapping[str, Any], sim: Mapping[str, Any]) -> None:
     spans t[-1] - t[0], a ClosedLoopHeartAndPulmonary block has its cardiac_cycle_period, and
     all of these and ``cardiac_period`` must be exactly equal."""
     found: list[tuple[float, str]] = []
-    for b in cfg.get("boundary_conditions") or []:
+    bc_list = cfg.get("boundary_conditions")
+    for b in bc_list if isinstance(bc_list, list) else []:
         vals = b.get("bc_values") if isinstance(b, Mapping) else None
         if not isinstance(vals, Mapping) or not isinstance(vals.get("t"), list):
             continue
@@ -272,7 +273,8 @@ def _check_period(cfg: Mapping[str, Any], sim: Mapping[str, Any]) -> None:
                     isinstance(x, (int, float)) for x in (t[0], t[-1])):
                 found.append((float(t[-1]) - float(t[0]),
                               f"boundary condition '{b.get('bc_name')}' ({k})"))
-    for c in cfg.get("closed_loop_blocks") or []:
+    blocks = cfg.get("closed_loop_blocks")
+    for c in blocks if isinstance(blocks, list) else []:
         if isinstance(c, Mapping) and isinstance(c.get("cardiac_cycle_period"), (int, float)):
             where = f"closed-loop block '{c.get('closed_loop_type')}'"
             found.append((float(c["cardiac_cycle_period"]), where))
@@ -456,6 +458,8 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
                                          "stenosis_coefficient"),
         }
         vid = _required(v, "vessel_id", el)
+        if isinstance(vid, bool) or not isinstance(vid, (int, str)):
+            raise ModelError(f"{el}: vessel_id must be an integer or a name, got {vid!r}")
         if vid in ids:
             raise ModelError(f"{el}: vessel_id {vid!r} is also used by vessel '{ids[vid]}'")
         ids[vid] = name
@@ -466,7 +470,7 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
                 continue
             if side not in ("inlet", "outlet"):
                 raise UnsupportedElement(f"{el}: unknown boundary_conditions key '{side}'")
-            if bc_name not in bcs:
+            if not isinstance(bc_name, str) or bc_name not in bcs:
                 raise ModelError(f"{el}: its {side} boundary condition '{bc_name}' is not defined")
             kind_bc = bcs[bc_name][0]
             if side == "inlet" and kind_bc in ("RESISTANCE", "RCR"):
@@ -500,6 +504,8 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
                 raise ModelError(f"{el}: '{key}' must be a list")
             out = []
             for x in items:
+                if isinstance(x, bool) or not isinstance(x, (int, str)):
+                    raise ModelError(f"{el}: '{key}' must list vessel ids or names, got {x!r}")
                 if by_id:
                     if x not in ids:
                         raise ModelError(f"{el}: '{key}' names vessel_id {x!r}, which no vessel has")
