@@ -102,7 +102,7 @@ def _parent(data: Any, path: tuple[Any, ...]) -> Any:
 
 
 @st.composite
-def mutants(draw: st.DrawFn) -> tuple[str, str]:
+def mutants(draw: Any) -> tuple[str, str]:  # st.DrawFn (hypothesis >= 6.x)
     """(suffix, file text) of a valid model with 1 to 3 mutations."""
     base = draw(st.sampled_from(range(len(BASES))))
     data = copy.deepcopy(BASES[base])
