@@ -130,8 +130,13 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
         del df
         if spec.get("save"):
             idx = [res.vessels.index(v) for v in names]
-            # the drop-in passes the file's numbers through unconverted: CGS like svzerod
-            arr = np.stack([getattr(res, c)[:, idx].T for c in COLUMNS])
+            # the native model is SI; svzerod's frame has the file's (cgs) numbers
+            import oxyline.svzerod
+
+            to_file = {"pressure": 10.0, "flow": 1e6} \
+                if oxyline.svzerod.file_units(cfg) == "cgs" else {"pressure": 1.0, "flow": 1.0}
+            arr = np.stack([getattr(res, c)[:, idx].T * to_file[c.split("_")[0]]
+                            for c in COLUMNS])
             np.savez(spec["save"], data=arr, time=np.asarray(res.time))
     else:
         df = run(cfg)

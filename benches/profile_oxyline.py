@@ -58,7 +58,7 @@ def main() -> int:
             t0 = time.perf_counter()
             native, s = svz._convert(cfg)
             t1 = time.perf_counter()
-            model = _build(native)
+            model = _build({**native, "units": "SI"})  # the file's units, as the drop-in runs
             t2 = time.perf_counter()
             _core.Network(json.dumps(model.canonical))
             t3 = time.perf_counter()

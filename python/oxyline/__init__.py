@@ -15,6 +15,7 @@ from oxyline import _core, models, sensitivity
 from oxyline.ensemble import simulate_ensemble
 from oxyline.errors import (
     ModelError,
+    OutputError,
     SimulationInterrupted,
     SolverError,
     UnstableTimeStep,
@@ -31,6 +32,7 @@ __version__: str = _core.__version__
 __all__ = [
     "Model",
     "ModelError",
+    "OutputError",
     "Result",
     "SimulationInterrupted",
     "SolverError",

@@ -1,7 +1,8 @@
 """The ``oxyline`` command line: run, plot, validate, convert, models, info.
 
 Exit codes: 0 ok, 2 bad input (the message names the file, vessel or node, and key),
-130 interrupted (a partial result is still written), 1 solver failure.
+130 interrupted (a partial result is still written), 1 solver failure, 3 the output could not
+be written (disk full, permission; the message says what was kept).
 """
 
 from __future__ import annotations
@@ -28,13 +29,46 @@ def _load(source: str) -> Any:
     return read_model(source)
 
 
+def _check_writable_dir(path: str, parent: Path) -> None:
+    """``parent`` exists and a file can be created in it (also true for root on a read-only
+    file system, which ``os.access`` would not tell)."""
+    import tempfile
+
+    if not parent.is_dir():
+        raise InputError(f"{path}: directory '{parent}' does not exist (create it first)")
+    try:
+        with tempfile.TemporaryFile(dir=parent):
+            pass
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write into '{parent}': {exc.strerror or exc}") from None
+
+
+def _check_outputs(args: argparse.Namespace) -> None:
+    """Check every output path before the run, so that a bad one fails in a second, not after
+    the run: suffix, an existing directory that can be written, and no existing Zarr store
+    unless --overwrite (a .nc/.csv file is replaced only once the new one is complete)."""
+    if args.output:
+        out = Path(args.output)
+        if out.suffix.lower() not in RESULT_SUFFIXES:
+            raise InputError(f"{args.output}: output must end in .nc, .zarr or .csv")
+        _check_writable_dir(args.output, out.parent)
+        if out.suffix.lower() == ".zarr" and out.exists() and not args.overwrite:
+            raise InputError(f"{args.output}: already exists; use --overwrite to replace it")
+        if out.is_dir() and out.suffix.lower() != ".zarr":
+            raise InputError(f"{args.output}: is a directory")
+    if args.summary:
+        if Path(args.summary).suffix.lower() not in SUMMARY_SUFFIXES:
+            raise InputError(f"{args.summary}: summary must end in .csv, .tsv or .parquet")
+        _check_writable_dir(args.summary, Path(args.summary).parent)
+    if args.plot:  # the figure directory itself may be new, its parent must exist
+        plot_dir = Path(args.plot)
+        _check_writable_dir(args.plot, plot_dir if plot_dir.is_dir() else plot_dir.parent)
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     import oxyline
 
-    if args.output and Path(args.output).suffix.lower() not in RESULT_SUFFIXES:
-        raise InputError(f"{args.output}: output must end in .nc, .zarr or .csv")
-    if args.summary and Path(args.summary).suffix.lower() not in SUMMARY_SUFFIXES:
-        raise InputError(f"{args.summary}: summary must end in .csv, .tsv or .parquet")
+    _check_outputs(args)
     model = _load(args.model)
     overrides: dict[str, object] = {"progress": not args.quiet}
     if args.cycles is not None:
@@ -50,7 +84,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     stream = bool(args.output) and Path(args.output).suffix.lower() == ".zarr"
     try:
         if stream:
-            res = oxyline.simulate_to_zarr(model, args.output, **overrides)
+            res = oxyline.simulate_to_zarr(model, args.output, overwrite=args.overwrite,
+                                           **overrides)
         else:
             res = oxyline.simulate(model, **overrides)
     except oxyline.ModelError as exc:  # run settings (e.g. an unstable dt): name the model
@@ -59,11 +94,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
     except oxyline.SimulationInterrupted as exc:
         if args.output and exc.result is not None:
             if not stream:
-                _write(exc.result, args.output)
+                _write(exc.result, args.output, args.overwrite)
             print(f"interrupted; partial result written to {args.output}", file=sys.stderr)
         return 130
     if args.output and not stream:
-        _write(res, args.output)
+        _write(res, args.output, args.overwrite)
     if args.summary:
         _write_summary(res, args.summary)
     figures = []
@@ -73,22 +108,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         figures = plot.save_figures(oxyline.open_result(args.output) if stream else res, model,
                                     args.plot)
     if not args.quiet:
-        if stream:  # the store opened lazily: read the run facts and the first vessels only
-            s = {k[len("solver_"):]: v for k, v in res.attrs.items() if k.startswith("solver_")}
-            vessels = [str(v) for v in res["vessel"].values]
-            head = {"vessel": slice(0, 20)}
-            p_in = res["pressure_in"].isel(head).mean("time").values
-            q_in = res["flow_in"].isel(head).mean("time").values
-        else:
-            s, vessels = res.settings, res.vessels
-            p_in, q_in = res.pressure_in[:, :20].mean(axis=0), res.flow_in[:, :20].mean(axis=0)
-        print(f"{model.name}: {len(vessels)} vessels, method {s['method']}, dt {s['dt']:.3e} s, "
-              f"{s['cycles_run']} cycles, cycle-to-cycle change {s['periodic_error']:.2e}")
-        print(f"{'vessel':<24}{'mean P_in [mmHg]':>18}{'mean Q_in [mL/s]':>18}")
-        for name, p, q in zip(vessels[:20], p_in, q_in):
-            print(f"{name:<24}{p / MMHG:>18.3f}{q * 1e6:>18.4f}")
-        if len(vessels) > 20:
-            print(f"... {len(vessels) - 20} more vessels")
+        _print_table(model, res, stream)
         if args.output:
             print(f"results written to {args.output}")
         if args.summary:
@@ -96,6 +116,37 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if figures:
             print(f"{len(figures)} figures written to {args.plot}")
     return 0
+
+
+def _print_table(model: Any, res: Any, stream: bool, rows: int = 20) -> None:
+    """The run's facts and the mean inlet pressure and flow of the first ``rows`` vessels that
+    are arteries (internal branches, e.g. whole-body-140's '.wall' branches, are left out)."""
+    from oxyline.plot import internal_vessels
+
+    if stream:  # the store opened lazily: read the run facts and the vessels shown only
+        s = {k[len("solver_"):]: v for k, v in res.attrs.items() if k.startswith("solver_")}
+        vessels = [str(v) for v in res["vessel"].values]
+    else:
+        s, vessels = res.settings, res.vessels
+    internal = internal_vessels(model)
+    shown = [i for i, v in enumerate(vessels) if v not in internal][:rows]
+    if stream:
+        p_in = res["pressure_in"].isel(vessel=shown).mean("time").values
+        q_in = res["flow_in"].isel(vessel=shown).mean("time").values
+    else:
+        p_in = res.pressure_in[:, shown].mean(axis=0)
+        q_in = res.flow_in[:, shown].mean(axis=0)
+    print(f"{model.name}: {len(vessels)} vessels, method {s['method']}, dt {s['dt']:.3e} s, "
+          f"{s['cycles_run']} cycles, cycle-to-cycle change {s['periodic_error']:.2e}")
+    width = max([24] + [len(vessels[i]) + 2 for i in shown])
+    print(f"{'vessel':<{width}}{'mean P_in [mmHg]':>18}{'mean Q_in [mL/s]':>18}")
+    for i, p, q in zip(shown, p_in, q_in):
+        print(f"{vessels[i]:<{width}}{p / MMHG:>18.3f}{q * 1e6:>18.4f}")
+    hidden = sum(v in internal for v in vessels)
+    more = len(vessels) - len(shown) - hidden
+    if more > 0 or hidden:
+        print(f"... {more} more vessels" + (f" and {hidden} internal branches (e.g. wall "
+                                             "viscosity) not shown" if hidden else ""))
 
 
 def _cmd_plot(args: argparse.Namespace) -> int:
@@ -125,14 +176,22 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
-def _write(res: Any, path: str) -> None:
+def _write(res: Any, path: str, overwrite: bool = False) -> None:
     p = Path(path)
     suffix = p.suffix.lower()
     if suffix == ".zarr":
-        res.to_zarr(p)
+        res.to_zarr(p, overwrite=overwrite)
     elif suffix == ".csv":
-        p.parent.mkdir(parents=True, exist_ok=True)
-        res.to_pandas().to_csv(p, index=False)
+        from oxyline.errors import OutputError
+
+        tmp = p.with_name(f".{p.name}.{os.getpid()}.partial")
+        try:  # written whole, then renamed: a full disk leaves no half table
+            res.to_pandas().to_csv(tmp, index=False)
+            os.replace(tmp, p)
+        except OSError as exc:
+            tmp.unlink(missing_ok=True)
+            raise OutputError(f"{p}: cannot write the table: {exc.strerror or exc}; nothing "
+                              "was written", res) from exc
     else:
         res.to_netcdf(p)
 
@@ -242,11 +301,18 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--summary", help="per-vessel mean/min/max table: .csv, .tsv or .parquet")
     p.add_argument("--plot", metavar="DIR", help="write waveform, profile and map figures "
                                                  "(PNG + SVG) into DIR")
-    p.add_argument("--cycles", type=int)
-    p.add_argument("--dt", type=float)
-    p.add_argument("--method", choices=["auto", "rk4", "generalized-alpha"])
-    p.add_argument("--until-periodic", type=float)
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an existing .zarr store (a .nc/.csv file is always replaced, "
+                        "once the new one is complete)")
+    p.add_argument("--cycles", type=int, help="cardiac cycles to run (default: the model's "
+                                              "simulation.cycles, else 10)")
+    p.add_argument("--dt", type=float, help="time step in s (default: auto)")
+    p.add_argument("--method", choices=["auto", "rk4", "generalized-alpha"],
+                   help="time integrator (default: the model's, else auto)")
+    p.add_argument("--until-periodic", type=float, metavar="TOL",
+                   help="run until the cycle-to-cycle change is below TOL (relative), at most "
+                        "max_cycles")
+    p.add_argument("--quiet", action="store_true", help="no progress bar and no table")
     p.set_defaults(func=_cmd_run)
     p = sub.add_parser("plot", help="write the figures of a saved result (.nc/.zarr)",
                        description="Write the figures of `run --plot` (PNG + SVG) from a result "
@@ -256,18 +322,18 @@ def _parser() -> argparse.ArgumentParser:
                    help="directory for the figures (PNG + SVG)")
     p.add_argument("--model", help="the model the result was run from (built-in name or model "
                                    "file; default: the built-in model the file names)")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--quiet", action="store_true", help="print nothing")
     p.set_defaults(func=_cmd_plot)
     p = sub.add_parser("validate", help="check a model and print a summary")
-    p.add_argument("model")
+    p.add_argument("model", help="built-in name, or a model file (any supported format)")
     p.set_defaults(func=_cmd_validate)
     p = sub.add_parser("convert", help="convert a model between formats",
                        description="Convert IN to OUT. Formats: native (.yaml/.yml/.json), "
                        "svzerod (svZeroDSolver JSON; read when detected, write with --to "
                        "svzerod), tables (.csv/.tsv vessel table + <stem>_bcs table), openbf "
                        "(read only).")
-    p.add_argument("input", metavar="IN")
-    p.add_argument("output", metavar="OUT")
+    p.add_argument("input", metavar="IN", help="model file or built-in name")
+    p.add_argument("output", metavar="OUT", help="file to write")
     p.add_argument("--from", dest="from_format", choices=["native", "svzerod", "tables", "openbf"],
                    help="input format (default: detected)")
     p.add_argument("--to", dest="to_format", choices=["native", "svzerod", "tables"],
@@ -282,10 +348,13 @@ def _parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    from oxyline.errors import ModelError, SolverError
+    from oxyline.errors import ModelError, OutputError, SolverError
 
     try:
         return int(args.func(args))
+    except OutputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 3
     except (ModelError, InputError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -297,7 +366,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {msg}", file=sys.stderr)
         return 2
     except SolverError as exc:
-        print(f"error: solver failed: {exc}", file=sys.stderr)
+        msg = str(exc)
+        print(f"error: {msg if msg.lower().startswith('solver failed') else 'solver failed: ' + msg}",
+              file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)

@@ -9,6 +9,20 @@ class UnsupportedElement(ModelError):
     """An svZeroDSolver element (block, BC or option) that oxyline does not implement."""
 
 
+class OutputError(OSError):
+    """A result file could not be written (disk full, no permission, an existing store, ...).
+    The message names the file and what happened; ``result`` holds what was to be written (the
+    in-memory :class:`~oxyline.Result`, or a streamed store opened with the rows written so
+    far), so nothing computed is lost."""
+
+    def __init__(self, message: str, result: object | None = None) -> None:
+        super().__init__(message)
+        self.result = result
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""
+
+
 class SimulationInterrupted(KeyboardInterrupt):
     """Ctrl-C during a run. ``result`` holds everything computed up to the interruption."""
 
@@ -19,6 +33,7 @@ class SimulationInterrupted(KeyboardInterrupt):
 
 __all__ = [
     "ModelError",
+    "OutputError",
     "SimulationInterrupted",
     "SolverError",
     "UnstableTimeStep",

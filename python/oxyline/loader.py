@@ -12,6 +12,7 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
+from oxyline.errors import ModelError
 from oxyline.model import Model, _build, _copy
 
 
@@ -41,6 +42,9 @@ def load_model(source: str | os.PathLike[str] | Mapping[str, Any] | Model) -> Mo
 
     if isinstance(source, Model):
         return source
+    if not isinstance(source, (Mapping, str, os.PathLike)):
+        raise ModelError(f"load_model: expected a model dict, a file path or a built-in model "
+                         f"name, got {type(source).__name__} {source!r:.80}")
     if isinstance(source, Mapping):
         with gc_paused():
             data = _copy(dict(source))

@@ -230,7 +230,7 @@ def _fast_vessel(v: Any, L: float, E: float) -> dict[str, Any] | None:
             return None
         cv["segments"] = n
     if "arrangement" in v:
-        if v["arrangement"] not in ARRANGEMENTS:
+        if type(v["arrangement"]) is not str or v["arrangement"] not in ARRANGEMENTS:
             return None
         cv["arrangement"] = v["arrangement"]
     if "output" in v:
@@ -242,11 +242,14 @@ def _fast_vessel(v: Any, L: float, E: float) -> dict[str, Any] | None:
 def _vessel(v: Any, i: int, units: str) -> dict[str, Any]:
     """The canonical form of vessel ``i``, checking every key and value."""
     L = factor(units, "length")
-    el = f"vessel '{v.get('name', f'#{i}')}'" if isinstance(v, Mapping) else f"vessel #{i}"
+    el = (f"vessel '{v['name']}'" if isinstance(v, Mapping) and v.get("name") is not None
+          else f"vessel #{i}")
     _check_keys(v, VESSEL_KEYS, el)
     for k in ("name", "from", "to"):
         if k not in v:
             raise _err(el, f"missing '{k}'")
+        if not isinstance(v[k], (str, int)) or isinstance(v[k], bool):  # `name: null` is no name
+            raise _err(el, f"'{k}' must be a name, got {v[k]!r}")
     cv: dict[str, Any] = {"name": str(v["name"]), "from": str(v["from"]), "to": str(v["to"])}
     if "segments" in v:
         n = v["segments"]
@@ -254,7 +257,7 @@ def _vessel(v: Any, i: int, units: str) -> dict[str, Any]:
             raise _err(el, f"'segments' must be an integer >= 1, got {n!r}")
         cv["segments"] = n
     if "arrangement" in v:
-        if v["arrangement"] not in ARRANGEMENTS:
+        if not isinstance(v["arrangement"], str) or v["arrangement"] not in ARRANGEMENTS:
             raise _err(el, f"arrangement must be one of {sorted(ARRANGEMENTS)}, got "
                            f"{v['arrangement']!r}")
         cv["arrangement"] = v["arrangement"]
@@ -457,7 +460,10 @@ def _unassembled(data: dict[str, Any], convert_vessels: Callable[..., Any] | Non
     :func:`_boundary_conditions` (an ensemble reuses the base model's canonical elements that
     a variant leaves as they are)."""
     _check_keys(data, TOP_KEYS, "model")
-    name = str(data.get("name", "network"))
+    name = data.get("name", "network")
+    if not isinstance(name, (str, int)) or isinstance(name, bool):
+        raise _err("model", f"'name' must be a name, got {name!r}")
+    name = str(name)
     units = str(data.get("units", "SI"))
     if units.lower() not in ("si", "cgs"):
         raise _err("model", f"units must be 'SI' or 'cgs', got {units!r}")
@@ -469,7 +475,7 @@ def _unassembled(data: dict[str, Any], convert_vessels: Callable[..., Any] | Non
         "viscosity": factor(units, "viscosity") * _number(blood.get("viscosity", 3.5e-3 / factor(units, "viscosity")), "blood", "viscosity"),
     }
     arrangement = data.get("arrangement", "inverted-L")
-    if arrangement not in ARRANGEMENTS - {"RCL"}:
+    if not isinstance(arrangement, str) or arrangement not in ARRANGEMENTS - {"RCL"}:
         raise _err("model", f"arrangement must be inverted-L, L or pi, got {arrangement!r}")
     seg = data.get("segmentation", {}) or {}
     _check_keys(seg, {"max_length"}, "segmentation")
@@ -514,7 +520,7 @@ def _unassembled(data: dict[str, Any], convert_vessels: Callable[..., Any] | Non
     _check_keys(sim, SIM_KEYS, "simulation")
     if "output" in sim:
         _check_keys(sim["output"], OUTPUT_KEYS, "simulation output")
-    if "method" in sim and sim["method"] not in METHODS:
+    if "method" in sim and (not isinstance(sim["method"], str) or sim["method"] not in METHODS):
         raise _err("simulation", f"method must be one of {sorted(METHODS)}, got {sim['method']!r}")
     from oxyline import transport as _transport
 

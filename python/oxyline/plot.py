@@ -132,7 +132,11 @@ def waveforms(result: Result, vessels: Sequence[str] | str | None = None,
         ax.grid(alpha=0.3)
     axes[-1, 0].set_xlabel("time [s]")
     handles, labels = axes[0, 0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="outside right upper", fontsize=9, title="vessel")
+    # below the panels: long vessel names (whole-body-140) beside them squeezed the axes and
+    # covered the title
+    longest = max((len(x) for x in labels), default=0)
+    fig.legend(handles, labels, loc="outside lower center", fontsize=8, title="vessel",
+               ncols=1 if longest > 40 else min(3, max(1, len(labels))))
     fig.suptitle(f"{result.model_name}: waveforms", fontsize=11)
     return fig
 
@@ -187,6 +191,64 @@ def path(model: Model, outlet: str, inlet: str | None = None) -> list[str]:
                     prev[nxt] = (vessel, node)
                     queue.append(nxt)
     raise KeyError(f"no path from {inlet or 'an inlet'} to '{outlet}' along the vessel directions")
+
+
+def internal_vessels(model: Model) -> set[str]:
+    """Vessels that are internal branches of a model, not arteries: dead ends (one end touches
+    no other vessel and has no boundary condition), e.g. the '.wall' branches that put a wall
+    viscosity in series with a capacitance (whole-body-140)."""
+    count: dict[str, int] = {}
+    for v in model.canonical["vessels"]:
+        for end in (v["from"], v["to"]):
+            count[end] = count.get(end, 0) + 1
+    bcs = model.canonical["boundary_conditions"]
+
+    def closed(node: str) -> bool:  # no condition, or a zero inflow: nothing passes there
+        bc = bcs.get(node)
+        return bc is None or (bc["type"] == "flow" and bc["flow"].get("kind") == "constant"
+                              and bc["flow"].get("value") == 0.0)
+
+    return {v["name"] for v in model.canonical["vessels"]
+            if any(count[end] == 1 and closed(end) for end in (v["from"], v["to"]))}
+
+
+def representative_vessels(result: Result, model: Model, n: int = 5) -> list[str]:
+    """Up to ``n`` vessels that show a network: the inlet vessel, then outlet vessels, each the
+    one whose path from the inlet overlaps least with the paths already chosen (largest mean
+    flow first among equals), so that the figure spans the regions of the network (e.g. the
+    brain, an arm and the legs) rather than one of them; never an internal branch
+    (:func:`internal_vessels`). Falls back to the first vessels that are not internal."""
+    skip = internal_vessels(model)
+    named = [v for v in result.vessels if v not in skip]
+    paths: dict[str, set[str]] = {}
+    for o in outlets(model):
+        try:
+            p = [v for v in path(model, o) if v not in skip]
+        except KeyError:
+            continue
+        if p and p[-1] in result.vessels and p[-1] not in skip:
+            paths.setdefault(p[-1], set(p))
+            first = p[0]
+    if not paths:
+        return named[:n] or list(result.vessels[:n])
+    flow = {v: 0.0 for v in paths}
+    if "flow_in" in result.vessel_variables:
+        flow = {v: abs(float(np.mean(result.flow_in[:, result.vessels.index(v)])))
+                for v in paths}
+    chosen = [first] if first in result.vessels else []
+    taken = [paths[first]] if first in paths else [{first}]
+
+    def overlap(v: str) -> float:  # the largest Jaccard index with a chosen path
+        return max(len(paths[v] & t) / len(paths[v] | t) for t in taken)
+
+    while len(chosen) < n and len(chosen) < len(paths) + 1:
+        left = [v for v in paths if v not in chosen]
+        if not left:
+            break
+        best = min(left, key=lambda v: (round(overlap(v), 6), -flow[v], v))
+        chosen.append(best)
+        taken.append(paths[best])
+    return chosen
 
 
 def _vessel_length(v: Mapping[str, Any]) -> float:
@@ -514,10 +576,7 @@ def save_figures(result: Result, model: Model | str | os.PathLike[str],
         except KeyError:
             continue
     _, vessels = _graph(m)
-    terminal = [p[-1] for p in paths.values() if p and p[-1] in result.vessels][:4]
-    first = [p[0] for p in paths.values() if p and p[0] in result.vessels][:1]
-    chosen = list(dict.fromkeys(first + terminal)) or list(result.vessels[:5])
-    figures = {"waveforms": waveforms(result, chosen, quantities)}
+    figures = {"waveforms": waveforms(result, representative_vessels(result, m), quantities)}
     if paths:
         far = max(paths, key=lambda o: sum(_vessel_length(vessels[n]) for n in paths[o]))
         along = [q for q in ("pressure", "po2", "o2_flux", "wall_o2_flux", "flow") if _has(ds, q)]

@@ -32,19 +32,42 @@ def _note(model: Model | None) -> str:
     return "\n(radii and inflow waveform assumed, not the paper's)" if "assum" in desc else ""
 
 
+# vessels whose curves coincide (the daughters of a symmetric bifurcation) stay visible: each
+# vessel gets its own line style on top of its colour
+STYLES = ("-", "--", ":", "-.")
+
+
+def _honest_axis(ax: Any, values: np.ndarray, unit: str) -> None:
+    """Tick labels with the full values (no hidden '+2.1e3' offset), and a note when the curves
+    only vary by a small fraction of their level, so that a flat flux does not look like a
+    large swing."""
+    ax.ticklabel_format(axis="y", useOffset=False, style="plain")
+    finite = values[np.isfinite(values)]
+    if finite.size == 0:
+        return
+    level, span = float(np.max(np.abs(finite))), float(np.ptp(finite))
+    if level > 0 and span < 0.01 * level:
+        ax.text(0.01, 0.97, f"varies by {100 * span / level:.2g} % of {level:.4g} {unit}",
+                transform=ax.transAxes, va="top", fontsize=8)
+
+
 def outlet_flux(result: Result, model: Model | None = None) -> Any:
     """Convective O2 flux Q·C at the end of each vessel against time (the paper's Fig. 4),
     with each vessel's wall uptake in a second panel (J_in − J_out also contains the change of
-    the O2 stored in the compliant vessel, which dominates it)."""
+    the O2 stored in the compliant vessel, which dominates it). Both panels in nmol/s."""
     plt = _plt()
     if result.oxygen is None:
         raise ValueError("this result has no oxygen section")
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
+    j_out, wall = result.o2_flux_out * 1e9, result.wall_o2_flux * 1e9
     for i, name in enumerate(result.vessels):
-        a1.plot(result.time, result.o2_flux_out[:, i] * 1e9, label=name)
-        a2.plot(result.time, result.wall_o2_flux[:, i] * 1e12, label=name)
+        style = STYLES[i % len(STYLES)]
+        a1.plot(result.time, j_out[:, i], style, label=name)
+        a2.plot(result.time, wall[:, i], style, label=name)
     a1.set_ylabel("J_out (nmol/s)")
-    a2.set_ylabel("wall uptake (pmol/s)")
+    a2.set_ylabel("wall uptake (nmol/s)")
+    _honest_axis(a1, j_out, "nmol/s")
+    _honest_axis(a2, wall, "nmol/s")
     a2.set_xlabel("time in cycle (s)")
     a1.legend(fontsize=8)
     a1.set_title(f"{result.model_name}: convective O$_2$ flux at the vessel outlets{_note(model)}",
@@ -67,7 +90,7 @@ def wall_uptake(result: Result, model: Model | None = None) -> Any:
         if b - a < 1:
             continue
         dx = 2 * pos[a] if b - a == 1 else pos[a + 1] - pos[a]
-        ax.plot(pos[a:b] * 1e3, w[a:b] / dx * 1e9, "o-", label=name)
+        ax.plot(pos[a:b] * 1e3, w[a:b] / dx * 1e9, "o" + STYLES[i % len(STYLES)], label=name)
     ax.set_xlabel("distance from the vessel inlet (mm)")
     ax.set_ylabel("wall O$_2$ uptake (nmol m$^{-1}$ s$^{-1}$)")
     ax.legend(fontsize=8)

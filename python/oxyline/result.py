@@ -4,7 +4,7 @@ xarray/pandas conversions."""
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -203,6 +203,11 @@ class Result:
                     out[k] = ("segment", getattr(self, k), unit)
         return out
 
+    def __reduce__(self) -> tuple[Any, tuple[dict[str, Any]]]:
+        """Pickle the fields only: the vessel and segment blocks are views of ``data`` and are
+        rebuilt on loading (pickled as they are, each view would be a second copy of it)."""
+        return _unpickle_result, ({f.name: getattr(self, f.name) for f in fields(self)},)
+
     def __post_init__(self) -> None:
         nv = len(self.vessels)
         self._kv, self._ks = len(self.vessel_variables), max(1, len(self.segment_variables))
@@ -335,12 +340,14 @@ class Result:
 
         return results.to_netcdf(self, path)
 
-    def to_zarr(self, path: str | os.PathLike[str], time_chunk: int = 1024) -> Path:
-        """Write a Zarr store chunked along time (written after the run; needs ``zarr``).
+    def to_zarr(self, path: str | os.PathLike[str], time_chunk: int = 1024,
+                overwrite: bool = False) -> Path:
+        """Write a Zarr store chunked along time (written after the run; needs ``zarr``); an
+        existing store is replaced only with ``overwrite=True``.
         See :func:`oxyline.io.results.to_zarr`."""
         from oxyline.io import results
 
-        return results.to_zarr(self, path, time_chunk=time_chunk)
+        return results.to_zarr(self, path, time_chunk=time_chunk, overwrite=overwrite)
 
     def summary(self) -> Any:
         """pandas DataFrame per vessel: mean/min/max of every per-vessel variable (SI)."""
@@ -367,6 +374,10 @@ class Result:
             missing = [v for v in VESSEL_VARIABLES if v not in self.vessel_variables]
             raise _not_selected(", ".join(missing))
         return long_table(self.vessels, self.time, self._vessel_block)
+
+
+def _unpickle_result(state: dict[str, Any]) -> Result:
+    return Result(**state)
 
 
 LONG_COLUMNS = ("name", "time", "flow_in", "flow_out", "pressure_in", "pressure_out")

@@ -3,11 +3,15 @@ arrays in a :class:`~oxyline.result.Result`."""
 
 from __future__ import annotations
 
+import math
+import numbers
 import os
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from oxyline.errors import ModelError, SimulationInterrupted
+import numpy as np
+
+from oxyline.errors import ModelError, OutputError, SimulationInterrupted
 from oxyline.loader import load_model
 from oxyline.model import METHODS, Model, output_names, output_vessels
 from oxyline.result import SEGMENT_VARIABLES, SPECIES_SEGMENT, Result, SpeciesResult
@@ -15,48 +19,116 @@ from oxyline.result import SEGMENT_VARIABLES, SPECIES_SEGMENT, Result, SpeciesRe
 ProgressCallback = Callable[[float, float], None]
 
 
+def _where(key: str, overrides: Mapping[str, Any]) -> str:
+    """Where a setting came from, for error messages: the simulate() keyword or the model's
+    ``simulation`` (``output``) section."""
+    if key in overrides:
+        return f"simulate: {key}"
+    section = "simulation output" if key in ("output_every", "output_cycles", "segments") \
+        else "simulation"
+    return f"{section}: {key.removeprefix('output_') if section.endswith('output') else key}"
+
+
+def _integer(value: Any, where: str, minimum: int) -> int:
+    """An integer >= minimum: Python and numpy integers (and floats that are whole numbers);
+    bools and strings are refused."""
+    if isinstance(value, numbers.Real) and not isinstance(value, numbers.Integral) \
+            and not isinstance(value, (bool, np.bool_)) and float(value).is_integer():
+        value = int(value)
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) \
+            or value < minimum:
+        raise ModelError(f"{where} must be an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
+def _real(value: Any, where: str, low: float = 0.0, high: float = math.inf,
+          low_open: bool = True) -> float:
+    """A finite number in (low, high] (or [low, high] with ``low_open=False``): Python and
+    numpy numbers; bools, strings, NaN and infinities are refused."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise ModelError(f"{where} must be a number, got {value!r}")
+    x = float(value)
+    inside = (x > low if low_open else x >= low) and x <= high
+    if not math.isfinite(x) or not inside:
+        bound = f"{'>' if low_open else '>='} {low:g}" + (f" and <= {high:g}"
+                                                           if high < math.inf else "")
+        raise ModelError(f"{where} must be a finite number {bound}, got {value!r}")
+    return x
+
+
+def _flag(value: Any, where: str) -> bool:
+    """A true/false setting: ``segments="no"`` is an error, not True."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ModelError(f"{where} must be true or false, got {value!r}")
+    return bool(value)
+
+
+OPTIONS = frozenset({"cycles", "dt", "method", "output_every", "output_cycles", "until_periodic",
+                     "max_cycles", "rho_infty", "start", "segments", "progress", "newton_atol",
+                     "max_iterations", "transport", "variables", "vessels"})
+STARTS = ("steady", "zero", "svzerod-steady", "svzerod-zero")
+
+
 def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
+    """The run settings of ``model`` with ``overrides``, each checked like the model itself:
+    a :class:`ModelError` names the setting, where it came from and the value."""
     sim = dict(model.simulation)
     out = dict(sim.get("output", {}) or {})
-    unknown = set(overrides) - {"cycles", "dt", "method", "output_every", "output_cycles",
-                                "until_periodic", "max_cycles", "rho_infty", "start", "segments",
-                                "progress", "newton_atol", "max_iterations", "transport",
-                                "variables", "vessels"}
+    unknown = set(overrides) - OPTIONS
     if unknown:
         raise ModelError(f"simulate: unknown option(s) {', '.join(sorted(unknown))}")
+
+    def get(key: str, section: Mapping[str, Any], file_key: str, default: Any) -> tuple[Any, str]:
+        return overrides.get(key, section.get(file_key, default)), _where(key, overrides)
+
     period = model.period or 1.0
-    cycles = overrides.get("cycles", sim.get("cycles", 10))
-    dt = overrides.get("dt", sim.get("dt", "auto"))
-    method = overrides.get("method", sim.get("method", "auto"))
-    every = overrides.get("output_every", out.get("every", period / 1000.0))
-    out_cycles = overrides.get("output_cycles", out.get("cycles", "last"))
-    if method not in METHODS:
-        raise ModelError(f"simulation: method must be one of {sorted(METHODS)}, got {method!r}")
-    if out_cycles not in ("last", "all"):
-        raise ModelError(f"simulation output: cycles must be 'last' or 'all', got {out_cycles!r}")
-    if isinstance(cycles, bool) or not isinstance(cycles, int) or cycles < 1:
-        raise ModelError(f"simulation: cycles must be an integer >= 1, got {cycles!r}")
-    if dt in (None, "auto"):
-        dt = None
-    elif isinstance(dt, bool) or not isinstance(dt, (int, float)) or not dt > 0:
-        raise ModelError(f"simulation: dt must be 'auto' or a number > 0, got {dt!r}")
+    cycles = _integer(*get("cycles", sim, "cycles", 10), 1)
+    dt, where = get("dt", sim, "dt", "auto")
+    if isinstance(dt, str) and dt != "auto":
+        raise ModelError(f"{where} must be 'auto' or a number > 0, got {dt!r}")
+    dt = None if dt is None or dt == "auto" else _real(dt, where)
+    method, where = get("method", sim, "method", "auto")
+    if not isinstance(method, str) or method not in METHODS:
+        raise ModelError(f"{where} must be one of {sorted(METHODS)}, got {method!r}")
+    every = _real(*get("output_every", out, "every", period / 1000.0))
+    out_cycles, where = get("output_cycles", out, "cycles", "last")
+    if not isinstance(out_cycles, str) or out_cycles not in ("last", "all"):
+        raise ModelError(f"{where} must be 'last' or 'all', got {out_cycles!r}")
+    until, where = get("until_periodic", sim, "until_periodic", None)
+    until = None if until is None else _real(until, where)
+    max_cycles, where = get("max_cycles", sim, "max_cycles", None)
+    if max_cycles is not None:
+        max_cycles = _integer(max_cycles, where, 1)
+        if until is not None and max_cycles < cycles:
+            raise ModelError(f"{where} ({max_cycles}) is less than cycles ({cycles}), the "
+                             "least number of cycles a run until_periodic takes")
+    start, where = get("start", sim, "start", "steady")
+    if not isinstance(start, str) or start not in STARTS:
+        raise ModelError(f"{where} must be one of {', '.join(STARTS)}, got {start!r}")
+    atol, where = get("newton_atol", {}, "", None)
+    progress = overrides.get("progress")
+    if progress is not None and not isinstance(progress, (bool, np.bool_)) \
+            and not callable(progress):
+        raise ModelError(f"simulate: progress must be true, false or a callback f(t, t_end), "
+                         f"got {progress!r}")
     return {
         "period": float(period),
-        "cycles": int(cycles),
-        "dt": None if dt is None else float(dt),
+        "cycles": cycles,
+        "dt": dt,
         "method": method,
-        "output_every": float(every),
+        "output_every": every,
         "output_all_cycles": out_cycles == "all",
-        "until_periodic": overrides.get("until_periodic", sim.get("until_periodic")),
-        "max_cycles": int(overrides.get("max_cycles", sim.get("max_cycles", 100))),
-        "rho_infty": float(overrides.get("rho_infty", sim.get("rho_infty", 0.5))),
-        "start": overrides.get("start", sim.get("start", "steady")),
-        "segments": bool(overrides.get("segments", out.get("segments", True))),
+        "until_periodic": until,
+        "max_cycles": max(cycles, 100) if max_cycles is None else max_cycles,
+        "rho_infty": _real(*get("rho_infty", sim, "rho_infty", 0.5), low=0.0, high=1.0,
+                           low_open=False),
+        "start": start,
+        "segments": _flag(*get("segments", out, "segments", True)),
         "variables": output_names(overrides.get("variables", out.get("variables")), "variables"),
         "vessels": output_vessels(overrides.get("vessels", out.get("vessels", "all"))),
-        "newton_atol": overrides.get("newton_atol"),
-        "max_iterations": int(overrides.get("max_iterations", 30)),
-        "transport": bool(overrides.get("transport", True)),
+        "newton_atol": None if atol is None else _real(atol, where),
+        "max_iterations": _integer(*get("max_iterations", {}, "", 30), 1),
+        "transport": _flag(*get("transport", {}, "", True)),
     }
 
 
@@ -65,7 +137,37 @@ def _selection(s: Mapping[str, Any]) -> dict[str, Any]:
     return {"variables": s["variables"], "vessels": s["vessels"], "segments": s["segments"]}
 
 
-def _progress_bar(enabled: bool | ProgressCallback | None) -> tuple[Any, Any]:
+class _CycleProgress:
+    """Progress in cardiac cycles, never backwards. The core reports (t, t_end) of its current
+    pass; a pass that starts again from t = 0 (e.g. the flow pre-run of a transport model) adds
+    the time done so far, so the count only grows. A run ``until_periodic`` has no known end:
+    it shows the cycles done and its stopping rule instead of a percentage that would stop at
+    a few percent of ``max_cycles``."""
+
+    def __init__(self, bar: Any, period: float, open_ended: bool) -> None:
+        self.bar, self.period, self.open_ended = bar, period, open_ended
+        self.done = 0.0  # time of the passes that ended
+        self.last = 0.0
+
+    def __call__(self, t: float, t_end: float) -> None:
+        if t < self.last:  # a new pass from 0
+            self.done += self.last
+        self.last = t
+        if not self.open_ended:
+            self.bar.total = round((self.done + t_end) / self.period, 2)
+        self.bar.n = round((self.done + min(t, t_end)) / self.period, 2)
+        self.bar.refresh()
+
+    def finish(self, cycles_run: int) -> None:
+        """The count at the end of the run (the core reports every few hundred steps)."""
+        self.bar.n = round(self.done / self.period + cycles_run, 2)
+        if not self.open_ended:
+            self.bar.total = self.bar.n
+        self.bar.refresh()
+
+
+def _progress_bar(enabled: bool | ProgressCallback | None,
+                  s: Mapping[str, Any] | None = None) -> tuple[Any, Any]:
     if callable(enabled):
         return enabled, None
     if not enabled:
@@ -74,15 +176,18 @@ def _progress_bar(enabled: bool | ProgressCallback | None) -> tuple[Any, Any]:
         from tqdm.auto import tqdm
     except ImportError:
         return None, None
-    bar = tqdm(total=1.0, unit="s", delay=1.0, bar_format="{l_bar}{bar}| {n:.2f}/{total:.2f} s "
-               "simulated [{elapsed}<{remaining}]")
-
-    def update(t: float, t_end: float) -> None:
-        bar.total = t_end
-        bar.n = min(t, t_end)
-        bar.refresh()
-
-    return update, bar
+    period = float(s["period"]) if s else 1.0
+    until = s.get("until_periodic") if s else None
+    if until is not None:
+        fmt = ("{desc}: {n:.2f} cycles simulated [{elapsed}, {rate_fmt}] until the "
+               f"cycle-to-cycle change < {until:g} (at least {s['cycles']}, at most "
+               f"{s['max_cycles']} cycles)")
+    else:
+        fmt = ("{desc}: {percentage:3.0f}%|{bar}| {n:.2f}/{total:.2f} cycles simulated "
+               "[{elapsed}<{remaining}]")
+    bar = tqdm(total=None if until is not None else 1.0, unit="cycle", delay=1.0, desc="run",
+               bar_format=fmt)
+    return _CycleProgress(bar, period, until is not None), bar
 
 
 def _species_results(model: Model, raw: Mapping[str, Any], layout: Mapping[str, Any],
@@ -157,9 +262,12 @@ def _run_settings(s: Mapping[str, Any], raw: Mapping[str, Any] | None) -> dict[s
 
 def _run(model: Model, s: Mapping[str, Any], progress: Any, **core: Any) -> dict[str, Any]:
     """The core's raw output of a run with settings ``s``, with a progress bar if asked for."""
-    callback, bar = _progress_bar(progress)
+    callback, bar = _progress_bar(progress, s)
     try:
-        return model.network.simulate(progress=callback, **s, **core)
+        raw = model.network.simulate(progress=callback, **s, **core)
+        if isinstance(callback, _CycleProgress) and "error" not in raw:
+            callback.finish(int(raw["cycles_run"]))
+        return raw
     finally:
         if bar is not None:
             bar.close()
@@ -202,7 +310,7 @@ def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any], **overri
 
 def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
                      path: str | os.PathLike[str], *, time_chunk: int = 1024,
-                     **overrides: Any) -> Any:
+                     overwrite: bool = False, **overrides: Any) -> Any:
     """Run a network, writing its output to a Zarr store *during* the run, and return the store
     opened lazily as an ``xarray.Dataset``.
 
@@ -214,7 +322,10 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     and is a valid store after every chunk; its attribute ``complete`` is 1 once the run has
     finished. If the run stops early (Ctrl-C, a solver failure), the rows computed until then
     are written and the exception is raised with the opened store as ``exc.result``
-    (:class:`~oxyline.SimulationInterrupted` for Ctrl-C). Needs ``zarr`` and ``xarray``.
+    (:class:`~oxyline.SimulationInterrupted` for Ctrl-C). A chunk that cannot be written (disk
+    full) stops the run with :class:`~oxyline.OutputError`, whose ``result`` is the store with
+    the rows written before it. An existing store at ``path`` is replaced only with
+    ``overwrite=True``. Needs ``zarr`` and ``xarray``.
 
     >>> import oxyline, tempfile, os
     >>> with tempfile.TemporaryDirectory() as d:
@@ -233,7 +344,7 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     s = _settings(model, overrides)
     empty = _empty_rows(model, s)
     store = ZarrAppender(path, dataset(_result(model, s, empty, _run_settings(s, None), False)),
-                         time_chunk)
+                         time_chunk, overwrite=overwrite)
 
     def write(rows: dict[str, Any]) -> None:
         store.append(dataset(_result(model, s, rows, {}, False)))
@@ -243,8 +354,21 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     except Exception:
         store.remove()  # refused before the first step (e.g. an unstable dt): no output at all
         raise
-    store.finish(dataset(_result(model, s, empty, _run_settings(s, raw), "error" not in raw)).attrs)
-    opened = xr.open_zarr(store.path)
+    try:
+        store.finish(dataset(_result(model, s, empty, _run_settings(s, raw),
+                                     "error" not in raw)).attrs)
+    except (OSError, RuntimeError, ValueError) as exc:  # e.g. the disk just filled up
+        if "error" not in raw:
+            raw = {**raw, "error": OutputError(f"{store.path}: cannot write the run's final "
+                                               f"attributes: {exc}; the store keeps every row "
+                                               "(attribute complete = 0)"),
+                   "error_kind": "output"}
+    try:
+        opened = xr.open_zarr(store.path)
+    except Exception:  # a store the failing disk left unreadable: the error says what happened
+        if "error" not in raw:
+            raise
+        opened = None
     _raise_run_error(raw, opened)
     return opened
 

@@ -4,6 +4,7 @@
 from oxyline.io import svzerod as _impl
 from oxyline.io.svzerod import (
     RunSettings,
+    file_units,
     run_settings,
     simulate,
     to_model,
@@ -14,4 +15,5 @@ from oxyline.io.svzerod import (
 # by the tests)
 __doc__ = _impl.__doc__
 
-__all__ = ["RunSettings", "run_settings", "simulate", "to_model", "to_oxyline_dict"]
+__all__ = ["RunSettings", "file_units", "run_settings", "simulate", "to_model",
+           "to_oxyline_dict"]

@@ -26,9 +26,7 @@ def path(name: str) -> Any:
 
 def load(name: str) -> Any:
     """Load a built-in example as a validated :class:`oxyline.Model`."""
-    import yaml
-
     from oxyline.loader import load_model
+    from oxyline.models import _shipped_yaml
 
-    data = yaml.safe_load(path(name).read_text())
-    return load_model(data)
+    return load_model(_shipped_yaml(path(name).read_text()))

@@ -269,15 +269,10 @@ class _Vessel:
 
 
 def _load_yaml(p: Path) -> dict[str, Any]:
-    import yaml
+    from oxyline.io.native import read_mapping  # YAML 1.2, duplicate keys and bombs refused
 
-    if not p.is_file():
-        raise ModelError(f"{p}: file not found")
-    try:
-        data = yaml.safe_load(p.read_text())
-    except yaml.YAMLError as exc:
-        raise ModelError(f"{p}: cannot parse: {exc}") from None
-    if not isinstance(data, dict) or not isinstance(data.get("network"), list):
+    data = read_mapping(p)
+    if not isinstance(data.get("network"), list):
         raise ModelError(f"{p}: not an openBF file (needs a top-level 'network:' list)")
     return data
 
@@ -315,6 +310,8 @@ def to_native_dict(path: PathLike, *, linearize: str | float = "mean", taper: st
         if k not in TOP_KEYS:
             _warn(f"{p.name}: top-level key '{k}' is not used by the importer")
     blood = data.get("blood") or {}
+    if not blood:
+        _warn(f"{p.name}: no 'blood:' section; using rho = 1060 kg/m^3 and mu = 4.0e-3 Pa s")
     if not isinstance(blood, Mapping):
         raise ModelError(f"{p}: 'blood' must be a mapping with rho and mu")
     rho = _num(blood.get("rho", 1060.0), f"{p}: blood", "rho")

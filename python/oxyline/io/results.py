@@ -8,9 +8,14 @@ The methods :meth:`oxyline.Result.to_netcdf`, :meth:`~oxyline.Result.to_zarr`,
 
 from __future__ import annotations
 
+import contextlib
+import io
+import os
+import shutil
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from oxyline.errors import OutputError
 from oxyline.io._common import PathLike
 
 if TYPE_CHECKING:
@@ -31,13 +36,55 @@ def dataset(result: Result) -> Any:
     return ds
 
 
+# NetCDF files up to this size are encoded in memory and written with one plain file write:
+# h5py crashes the process (SIGSEGV) when the disk fills during its own writes, a plain write
+# raises OSError. Larger files are written by h5py directly after a free-space check.
+NETCDF_IN_MEMORY_BYTES = 512 << 20
+
+
+def _tmp_sibling(p: Path) -> Path:
+    """A temporary name beside ``p`` (same file system, so that the final rename is atomic)."""
+    return p.with_name(f".{p.name}.{os.getpid()}.partial")
+
+
+def check_free_space(p: Path, need: int, result: Any = None) -> None:
+    """Refuse to start writing ``need`` bytes into ``p``'s directory when it has less free."""
+    free = shutil.disk_usage(p.parent).free
+    if free < need + (16 << 20):
+        raise OutputError(f"{p}: needs about {need / 2**20:.0f} MiB but its file system has "
+                          f"{free / 2**20:.0f} MiB free; nothing was written", result)
+
+
 def to_netcdf(result: Result, path: PathLike) -> Path:
     """Write NetCDF-4 (h5netcdf engine): dims ``time``, ``vessel``, ``segment``; coordinates
     vessel names and segment positions; attrs with units, model name, solver settings and the
-    oxyline version. Opens with ``xarray.open_dataset``, MATLAB ``ncread`` and ParaView."""
+    oxyline version. Opens with ``xarray.open_dataset``, MATLAB ``ncread`` and ParaView.
+
+    The file is written under a temporary name beside ``path`` and renamed when complete, so
+    ``path`` is either the whole new file or left as it was. A failed write (disk full, no
+    permission) raises :class:`oxyline.OutputError` naming the file, with the result attached
+    (``exc.result``)."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    dataset(result).to_netcdf(p, engine="h5netcdf")
+    ds = dataset(result)
+    tmp = _tmp_sibling(p)
+    try:
+        if ds.nbytes <= NETCDF_IN_MEMORY_BYTES:
+            buf = io.BytesIO()
+            ds.to_netcdf(buf, engine="h5netcdf")
+            with open(tmp, "wb") as fh:
+                fh.write(buf.getbuffer())
+        else:
+            check_free_space(p, int(ds.nbytes), result)
+            ds.to_netcdf(tmp, engine="h5netcdf")
+        os.replace(tmp, p)
+    except OutputError:
+        raise
+    except (OSError, RuntimeError) as exc:
+        tmp.unlink(missing_ok=True)
+        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        raise OutputError(f"{p}: cannot write the NetCDF file: {why}; nothing was written (the "
+                          "result is still in memory: exc.result)", result) from exc
     return p
 
 
@@ -69,15 +116,44 @@ def _write_zarr(ds: Any, path: Path, time_chunk: int) -> None:
         ds.to_zarr(path, mode="w", encoding=encoding, **kwargs)
 
 
-def to_zarr(result: Result, path: PathLike, time_chunk: int = 1024) -> Path:
+def _why(exc: BaseException) -> str:
+    return exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc) or repr(exc)
+
+
+def _refuse_existing(p: Path, overwrite: bool) -> None:
+    if p.exists() and not overwrite:
+        raise OutputError(f"{p}: already exists; pass overwrite=True (CLI: --overwrite) to "
+                          "replace it")
+
+
+def to_zarr(result: Result, path: PathLike, time_chunk: int = 1024,
+            overwrite: bool = False) -> Path:
     """Write a Zarr store (format 2), chunked along ``time`` (``time_chunk`` rows per chunk).
 
     This writes a finished in-memory result. To write the store *during* the run, with memory
     bounded by one chunk however long the output, use :func:`oxyline.simulate_to_zarr` (the
     CLI's ``-o out.zarr`` does). Needs ``zarr`` (``pip install 'oxyline[zarr]'``).
+
+    The store is written under a temporary name and renamed when complete: an existing store at
+    ``path`` is replaced only with ``overwrite=True`` and only once the new one is whole. A
+    failed write raises :class:`oxyline.OutputError` with the result attached.
     """
     p = Path(path)
-    _write_zarr(dataset(result), p, min(time_chunk, max(1, len(result.time))))
+    _refuse_existing(p, overwrite)
+    tmp = _tmp_sibling(p)
+    try:
+        _write_zarr(dataset(result), tmp, min(time_chunk, max(1, len(result.time))))
+        if p.exists():  # overwrite: the old store goes only once the new one is complete
+            old = p.with_name(f".{p.name}.{os.getpid()}.old")
+            os.replace(p, old)
+            os.replace(tmp, p)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, p)
+    except (OSError, RuntimeError, ValueError) as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise OutputError(f"{p}: cannot write the Zarr store: {_why(exc)}; nothing was written "
+                          "(the result is still in memory: exc.result)", result) from exc
     return p
 
 
@@ -86,23 +162,52 @@ class ZarrAppender:
     attributes of :func:`dataset`) and grown along ``time`` chunk by chunk.
 
     The consolidated metadata that ``xarray.open_zarr`` reads is rewritten after every chunk,
-    so the store stays valid if the process dies mid-run.
+    so the store stays valid if the process dies mid-run. A chunk that cannot be written
+    (disk full) is rolled back, so the store keeps exactly the rows of the chunks before it,
+    and :class:`oxyline.OutputError` says so.
     """
 
-    def __init__(self, path: PathLike, template: Any, time_chunk: int) -> None:
+    def __init__(self, path: PathLike, template: Any, time_chunk: int,
+                 overwrite: bool = False) -> None:
         self.path = Path(path)
+        self.rows = 0
         self._zarr = _zarr()
-        _write_zarr(template, self.path, time_chunk)
-        # the metadata of every array as stored, not the consolidated copy (stale once grown)
-        self._group = self._zarr.open_group(self.path, mode="r+", zarr_format=2,
-                                            use_consolidated=False)
+        _refuse_existing(self.path, overwrite)
+        try:
+            _write_zarr(template, self.path, time_chunk)
+            # the metadata of every array as stored, not the consolidated copy (stale once grown)
+            self._group = self._zarr.open_group(self.path, mode="r+", zarr_format=2,
+                                                use_consolidated=False)
+        except (OSError, RuntimeError, ValueError) as exc:
+            self.remove()
+            raise OutputError(f"{self.path}: cannot create the Zarr store: {_why(exc)}") from exc
         self._timed = [n for n, v in template.variables.items() if "time" in v.dims]
 
     def append(self, ds: Any) -> None:
         """Append the rows of ``ds`` (a dataset with the template's variables) along time."""
-        for name in self._timed:
-            self._group[name].append(ds[name].values, axis=0)
-        self._consolidate()
+        n = int(ds.sizes["time"])
+        try:
+            for name in self._timed:
+                self._group[name].append(ds[name].values, axis=0)
+            self._consolidate()
+        except Exception as exc:
+            self._roll_back()
+            raise OutputError(
+                f"{self.path}: writing output rows {self.rows}-{self.rows + n - 1} failed: "
+                f"{_why(exc)}; the store keeps the {self.rows} rows written before (readable "
+                "with oxyline.open_result)") from exc
+        self.rows += n
+
+    def _roll_back(self) -> None:
+        """Cut every time-dependent array back to the rows written before a failed chunk (each
+        array's metadata is a small file; if even that cannot be written, the consolidated
+        metadata of the last good chunk still describes the store)."""
+        with contextlib.suppress(OSError, RuntimeError, ValueError):  # a failing disk
+            for name in self._timed:
+                arr = self._group[name]
+                if arr.shape[0] != self.rows:
+                    arr.resize((self.rows, *arr.shape[1:]))
+            self._consolidate()
 
     def finish(self, attrs: dict[str, Any]) -> None:
         """Replace the store's attributes (e.g. with the run's facts once it has ended)."""
@@ -110,8 +215,6 @@ class ZarrAppender:
         self._consolidate()
 
     def remove(self) -> None:
-        import shutil
-
         shutil.rmtree(self.path, ignore_errors=True)
 
     def _consolidate(self) -> None:

@@ -3,8 +3,12 @@
 :func:`simulate` takes an svZeroDSolver configuration (a dict or a path to a JSON file) and
 returns the same pandas DataFrame as ``svzerod.simulate`` for vessel-based output: columns
 ``name, time, flow_in, flow_out, pressure_in, pressure_out``, rows grouped by vessel in file
-order. Numbers are used in the file's own units (the equations are unit-agnostic; nothing is
-converted). With the default ``method="generalized-alpha"`` the time stepping, the steady
+order. The frame holds the file's own numbers, as svZeroDSolver's does (the equations are
+unit-agnostic), and names their units in ``df.attrs["units"]``: cgs (cm, dyn/cm², mL/s), the
+svZeroDSolver convention, unless the file has a top-level ``"units": "SI"`` (oxyline's exporter
+writes it; svZeroDSolver ignores it) or ``units="SI"`` is passed. :func:`to_model` (and
+``oxyline.load_model``/``oxyline run`` on such a file) converts to SI like any oxyline model,
+so results, files, the console table and plots are in the units they say. With the default ``method="generalized-alpha"`` the time stepping, the steady
 initialisation and the Newton stopping rule are svZeroDSolver's, so results agree with the
 peer's to round-off.
 
@@ -56,7 +60,18 @@ from oxyline.model import Model, _build, _copy
 COLUMNS = ("name", "time", "flow_in", "flow_out", "pressure_in", "pressure_out")
 METHODS = ("generalized-alpha", "rk4")
 
-TOP_KEYS = {"simulation_parameters", "boundary_conditions", "vessels", "junctions"}
+TOP_KEYS = {"simulation_parameters", "boundary_conditions", "vessels", "junctions", "units"}
+# svZeroDSolver's equations do not depend on units and its files do not say which they use; by
+# its convention (and SimVascular's) they are cgs. oxyline's exporter writes a top-level
+# ``units`` ("cgs" or "SI"), which svZeroDSolver ignores and this importer reads.
+DEFAULT_UNITS = "cgs"
+#: units of the drop-in's DataFrame columns, per unit system of the file
+FRAME_UNITS = {
+    "cgs": {"time": "s", "flow_in": "mL/s", "flow_out": "mL/s", "pressure_in": "dyn/cm^2",
+            "pressure_out": "dyn/cm^2"},
+    "SI": {"time": "s", "flow_in": "m^3/s", "flow_out": "m^3/s", "pressure_in": "Pa",
+           "pressure_out": "Pa"},
+}
 # `description` is free text; the calibrator's observations and settings do not change a forward
 # simulation, and svZeroDSolver ignores them too
 TOP_IGNORED = {"description", "calibration_parameters", "y", "dy"}
@@ -117,6 +132,8 @@ class RunSettings:
     rho_infty: float
     absolute_tolerance: float
     max_iterations: int
+    #: the file's unit system, "cgs" or "SI" (its numbers are kept as they are here)
+    units: str = DEFAULT_UNITS
 
 
 # ------------------------------------------------------------------------------------------
@@ -177,7 +194,7 @@ def _entry(raw: Any, where: str, name_key: str, label: str, allowed: Any, type_k
         if k not in allowed and not _is_comment(k):
             raise UnsupportedElement(f"{el}: unknown key '{k}'")
     kind = _required(entry, type_key, el)
-    if kind not in types:
+    if not isinstance(kind, str) or kind not in types:
         raise UnsupportedElement(f"{el}: {type_key} '{kind}' is not supported (supported: "
                                  f"{', '.join(sorted(types))})")
     return entry, name, kind, el
@@ -245,7 +262,8 @@ def _check_period(cfg: Mapping[str, Any], sim: Mapping[str, Any]) -> None:
     spans t[-1] - t[0], a ClosedLoopHeartAndPulmonary block has its cardiac_cycle_period, and
     all of these and ``cardiac_period`` must be exactly equal."""
     found: list[tuple[float, str]] = []
-    for b in cfg.get("boundary_conditions") or []:
+    bc_list = cfg.get("boundary_conditions")
+    for b in bc_list if isinstance(bc_list, list) else []:
         vals = b.get("bc_values") if isinstance(b, Mapping) else None
         if not isinstance(vals, Mapping) or not isinstance(vals.get("t"), list):
             continue
@@ -255,7 +273,8 @@ def _check_period(cfg: Mapping[str, Any], sim: Mapping[str, Any]) -> None:
                     isinstance(x, (int, float)) for x in (t[0], t[-1])):
                 found.append((float(t[-1]) - float(t[0]),
                               f"boundary condition '{b.get('bc_name')}' ({k})"))
-    for c in cfg.get("closed_loop_blocks") or []:
+    blocks = cfg.get("closed_loop_blocks")
+    for c in blocks if isinstance(blocks, list) else []:
         if isinstance(c, Mapping) and isinstance(c.get("cardiac_cycle_period"), (int, float)):
             where = f"closed-loop block '{c.get('closed_loop_type')}'"
             found.append((float(c["cardiac_cycle_period"]), where))
@@ -274,10 +293,22 @@ def _check_period(cfg: Mapping[str, Any], sim: Mapping[str, Any]) -> None:
                          f"period of {ref[0]})")
 
 
-def _convert(config: Mapping[str, Any] | str | os.PathLike[str]
+def file_units(cfg: Mapping[str, Any], units: str | None = None) -> str:
+    """The unit system of an svZeroDSolver config: ``units`` if given, else the file's own
+    top-level ``units`` key (written by oxyline's exporter), else cgs (svZeroDSolver's
+    convention)."""
+    value = units if units is not None else cfg.get("units", DEFAULT_UNITS)
+    if not isinstance(value, str) or value.lower() not in ("cgs", "si"):
+        raise ModelError(f"model: units must be 'cgs' or 'SI', got {value!r}")
+    return "cgs" if value.lower() == "cgs" else "SI"
+
+
+def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | None = None
              ) -> tuple[dict[str, Any], RunSettings]:
-    """svZeroDSolver config -> (oxyline native dict, svZeroDSolver run settings)."""
+    """svZeroDSolver config -> (oxyline native dict, svZeroDSolver run settings). The dict
+    keeps the file's numbers and says their ``units`` (so a model built from it is in SI)."""
     cfg = _read_config(config)
+    system = file_units(cfg, units)
     if "simulation_parameters" not in cfg:
         bad = [k for k in ("calibration_parameters", "y", "dy") if k in cfg]
         if bad:
@@ -427,6 +458,8 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str]
                                          "stenosis_coefficient"),
         }
         vid = _required(v, "vessel_id", el)
+        if isinstance(vid, bool) or not isinstance(vid, (int, str)):
+            raise ModelError(f"{el}: vessel_id must be an integer or a name, got {vid!r}")
         if vid in ids:
             raise ModelError(f"{el}: vessel_id {vid!r} is also used by vessel '{ids[vid]}'")
         ids[vid] = name
@@ -437,7 +470,7 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str]
                 continue
             if side not in ("inlet", "outlet"):
                 raise UnsupportedElement(f"{el}: unknown boundary_conditions key '{side}'")
-            if bc_name not in bcs:
+            if not isinstance(bc_name, str) or bc_name not in bcs:
                 raise ModelError(f"{el}: its {side} boundary condition '{bc_name}' is not defined")
             kind_bc = bcs[bc_name][0]
             if side == "inlet" and kind_bc in ("RESISTANCE", "RCR"):
@@ -471,6 +504,8 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str]
                 raise ModelError(f"{el}: '{key}' must be a list")
             out = []
             for x in items:
+                if isinstance(x, bool) or not isinstance(x, (int, str)):
+                    raise ModelError(f"{el}: '{key}' must list vessel ids or names, got {x!r}")
                 if by_id:
                     if x not in ids:
                         raise ModelError(f"{el}: '{key}' names vessel_id {x!r}, which no vessel has")
@@ -540,11 +575,11 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str]
         output_all_cycles=_flag(sim, "output_all_cycles", False),
         output_mean_only=_flag(sim, "output_mean_only", False),
         steady_initial=_flag(sim, "steady_initial", True), rho_infty=rho,
-        absolute_tolerance=atol, max_iterations=max_iter,
+        absolute_tolerance=atol, max_iterations=max_iter, units=system,
     )
     native: dict[str, Any] = {
         "name": "svzerod",
-        "units": "SI",  # numbers pass through unconverted
+        "units": system,  # the model converts the file's numbers to SI
         "description": "converted from an svZeroDSolver input by oxyline.svzerod",
         "period": period,
         "vessels": vessels + hidden,
@@ -562,26 +597,31 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str]
     return native, settings
 
 
-def to_oxyline_dict(config: Mapping[str, Any] | str | os.PathLike[str]) -> dict[str, Any]:
+def to_oxyline_dict(config: Mapping[str, Any] | str | os.PathLike[str],
+                    units: str | None = None) -> dict[str, Any]:
     """Translate an svZeroDSolver configuration into oxyline's native model schema.
 
     Vessels become lumped ``arrangement: RCL`` vessels, junctions become shared nodes (a
     ``BloodVesselJunction`` adds one hidden ``output: false`` R-L vessel per outlet), the
-    boundary conditions keep their names as node names. ``units`` is ``SI`` so that numbers are
-    used as they are.
+    boundary conditions keep their names as node names. Numbers are the file's; the dict's
+    ``units`` says which system they are in (see :func:`file_units`: ``units`` given here, else
+    the file's ``units`` key, else cgs), so the model built from it, and its results, are SI.
     """
-    return _convert(config)[0]
+    return _convert(config, units)[0]
 
 
-def run_settings(config: Mapping[str, Any] | str | os.PathLike[str]) -> RunSettings:
-    """The resolved svZeroDSolver run settings (period, cycles, dt, output options)."""
-    return _convert(config)[1]
+def run_settings(config: Mapping[str, Any] | str | os.PathLike[str],
+                 units: str | None = None) -> RunSettings:
+    """The resolved svZeroDSolver run settings (period, cycles, dt, output options, units)."""
+    return _convert(config, units)[1]
 
 
-def to_model(config: Mapping[str, Any] | str | os.PathLike[str]) -> Model:
-    """An :class:`oxyline.Model` for an svZeroDSolver configuration (see
-    :func:`to_oxyline_dict`); its ``simulation`` settings reproduce the file's."""
-    native, _ = _convert(config)
+def to_model(config: Mapping[str, Any] | str | os.PathLike[str],
+             units: str | None = None) -> Model:
+    """An :class:`oxyline.Model` (SI) for an svZeroDSolver configuration (see
+    :func:`to_oxyline_dict`; ``units`` as there); its ``simulation`` settings reproduce the
+    file's."""
+    native, _ = _convert(config, units)
     return _build(native)
 
 
@@ -599,8 +639,12 @@ def _table_spacings(native: Mapping[str, Any]) -> list[float]:
 
 
 def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
-             method: str = "generalized-alpha") -> Any:
+             method: str = "generalized-alpha", units: str | None = None) -> Any:
     """Run an svZeroDSolver configuration and return ``svzerod.simulate``'s DataFrame.
+
+    The frame holds the file's own numbers, as svZeroDSolver's does; ``df.attrs["units"]``
+    names each column's units and ``df.attrs["units_system"]`` the system (``units`` given
+    here, else the file's ``units`` key, else cgs: see :func:`file_units`).
 
     ``method="generalized-alpha"`` (default) reproduces svZeroDSolver's integrator, step and
     Newton tolerance. ``method="rk4"`` uses oxyline's explicit RK4 with a stable sub-step
@@ -612,8 +656,10 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
 
     if method not in METHODS:
         raise ModelError(f"simulate: method must be one of {', '.join(METHODS)}, got {method!r}")
-    native, s = _convert(config)
-    model = _build(native)
+    native, s = _convert(config, units)
+    # the drop-in runs in the file's own units, as svZeroDSolver does (same numbers, same
+    # Newton tolerance): the equations do not depend on them
+    model = _build({**native, "units": "SI"})
     steps = s.points_per_cycle - 1
     k = s.output_interval
     # global step indices svZeroDSolver outputs
@@ -678,7 +724,7 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
         raise ModelError("internal error: output times of the core do not match svZeroDSolver's")
     if s.output_mean_only:
         mean = values.mean(axis=1)
-        return pd.DataFrame({
+        frame = pd.DataFrame({
             "name": names,  # pandas' default string dtype (str under pandas >= 3), as svzerod
             "time": np.full(nv, np.nan),
             "flow_in": mean[:, 2],
@@ -686,9 +732,14 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
             "pressure_in": mean[:, 0],
             "pressure_out": mean[:, 1],
         })
-    from oxyline.result import long_table_vessel_major
+    else:
+        from oxyline.result import long_table_vessel_major
 
-    return long_table_vessel_major(names, times, values.reshape(nv * wanted.size, 4))
+        frame = long_table_vessel_major(names, times, values.reshape(nv * wanted.size, 4))
+    frame.attrs["units"] = dict(FRAME_UNITS[s.units])
+    frame.attrs["units_system"] = s.units
+    return frame
 
 
-__all__ = ["RunSettings", "run_settings", "simulate", "to_model", "to_oxyline_dict"]
+__all__ = ["RunSettings", "file_units", "run_settings", "simulate", "to_model",
+           "to_oxyline_dict"]

@@ -182,6 +182,8 @@ def to_svzerod(model: Model, units: str = "cgs", samples: int = 201,
     return {
         "description": {"description of test case":
                         f"{model.name}: exported from oxyline ({units} units)"},
+        # read by oxyline's importer (svZeroDSolver ignores it): the numbers' unit system
+        "units": "cgs" if cgs else "SI",
         "simulation_parameters": {
             "number_of_cardiac_cycles": int(cycles or sim.get("cycles", 10)),
             "number_of_time_pts_per_cardiac_cycle": int(n_pts),

@@ -380,11 +380,9 @@ def read_tables(path: PathLike, bcs: PathLike | None = None, **model_keys: Any) 
     keys: dict[str, Any] = {}
     meta = p.with_name(f"{p.stem}_model.yaml")
     if meta.exists():
-        import yaml
+        from oxyline.io.native import read_mapping
 
-        keys = yaml.safe_load(meta.read_text()) or {}
-        if not isinstance(keys, dict):
-            raise ModelError(f"{meta}: top level must be a mapping")
+        keys = read_mapping(meta)
     keys.update(model_keys)
     if bcs is not None or b.exists():
         return from_tables(p, b, **keys)
