@@ -19,11 +19,13 @@ from oxyline.errors import (
     UnstableTimeStep,
     UnsupportedElement,
 )
+from oxyline.frequency import impedance
 from oxyline.io.results import open_result
 from oxyline.loader import load_model
 from oxyline.model import Model
 from oxyline.result import Result, VesselResult
 from oxyline.run import simulate, simulate_to_zarr
+from oxyline.structured_tree import structured_tree
 
 __version__: str = _core.__version__
 
@@ -37,9 +39,11 @@ __all__ = [
     "UnsupportedElement",
     "VesselResult",
     "__version__",
+    "impedance",
     "load_model",
     "models",
     "open_result",
     "simulate",
     "simulate_to_zarr",
+    "structured_tree",
 ]

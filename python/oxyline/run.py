@@ -53,11 +53,19 @@ def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
         "start": overrides.get("start", sim.get("start", "steady")),
         "segments": bool(overrides.get("segments", out.get("segments", True))),
         "variables": output_names(overrides.get("variables", out.get("variables")), "variables"),
-        "vessels": output_vessels(overrides.get("vessels", out.get("vessels", "all"))),
+        "vessels": _vessels(model, overrides.get("vessels", out.get("vessels"))),
         "newton_atol": overrides.get("newton_atol"),
         "max_iterations": int(overrides.get("max_iterations", 30)),
         "transport": bool(overrides.get("transport", True)),
     }
+
+
+def _vessels(model: Model, selection: Any) -> list[str] | None:
+    """The output vessels: the model's default (every vessel but structured-tree ones) when
+    none are selected, else the selection (``all`` really selects all)."""
+    if selection is None:
+        return model.default_output_vessels
+    return output_vessels(selection)
 
 
 def _selection(s: Mapping[str, Any]) -> dict[str, Any]:
