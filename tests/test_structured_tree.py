@@ -221,3 +221,26 @@ def test_impedance_rejects_bad_frequencies_and_nodes() -> None:
         oxyline.impedance(m, "out", [1.0, -1.0])
     with pytest.raises(oxyline.ModelError, match="nowhere"):
         oxyline.impedance(m, "nowhere", [1.0])
+
+
+def test_cli_impedance_writes_csv_and_figure(tmp_path, capsys) -> None:
+    import json
+
+    from oxyline.cli import main
+
+    path = tmp_path / "m.json"
+    path.write_text(json.dumps({
+        "name": "st", "period": 1.0, "vessels": [dict(FEED, segments=2)],
+        "boundary_conditions": {"in": {"type": "flow", "value": 1e-7},
+                                "out": {"type": "structured-tree", "min_radius": 4e-4,
+                                        "stiffness": STIFF, "segments": 2}}}))
+    assert main(["impedance", str(path), "--node", "in", "--fmax", "2", "--df", "1",
+                 "--plot", str(tmp_path / "z"), "--quiet"]) == 0
+    rows = (tmp_path / "z" / "impedance.csv").read_text().split()
+    assert rows[0].startswith("frequency_Hz,modulus") and len(rows) == 4
+    f0 = [float(x) for x in rows[1].split(",")]
+    exact = tree_resistance(ROOT, 4e-4) + poiseuille(ROOT, FEED["length"])
+    assert f0[0] == 0.0 and abs(f0[1] / exact - 1.0) < 1e-9  # 11 printed digits
+    assert (tmp_path / "z" / "impedance.png").stat().st_size > 0
+    assert main(["impedance", str(path), "--node", "nowhere"]) == 2
+    assert "nowhere" in capsys.readouterr().err
