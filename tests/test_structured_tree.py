@@ -244,3 +244,52 @@ def test_cli_impedance_writes_csv_and_figure(tmp_path, capsys) -> None:
     assert (tmp_path / "z" / "impedance.png").stat().st_size > 0
     assert main(["impedance", str(path), "--node", "nowhere"]) == 2
     assert "nowhere" in capsys.readouterr().err
+
+
+def test_time_domain_periodic_state_agrees_with_the_impedance() -> None:
+    """Under Q = Q0 + Q1 sin(ωt) the periodic steady state's first harmonic of the inlet
+    pressure over that of the inflow is Z(ω); the mean pressure over the mean flow is Z(0)."""
+    period, q0, q1 = 0.2, 1e-7, 5e-8
+    data = tree_model(4e-4, segments=2, arrangement="pi").to_dict()
+    data["boundary_conditions"]["in"] = {
+        "type": "flow", "fourier": {"period": period, "mean": q0, "cos": [], "sin": [q1]}}
+    data["period"] = period
+    m = oxyline.load_model(data)
+    res = oxyline.simulate(m, cycles=4, dt=period / 2000, method="generalized-alpha",
+                           output_every=period / 400)
+    feed = res.vessel("feed")
+    t = np.asarray(feed.time)
+    keep = t < t[0] + period * (1 - 1e-9)  # one period of samples, the end not repeated
+    t, p, q = t[keep], np.asarray(feed.pressure_in)[keep], np.asarray(feed.flow_in)[keep]
+    assert len(t) == 400
+    w = 2 * math.pi / period
+    harmonic = np.exp(-1j * w * t)
+    z_td = np.sum(p * harmonic) / np.sum(q * harmonic)
+    z0, zw = oxyline.impedance(m, "in", [0.0, 1.0 / period])
+    # generalized-alpha with 2000 steps per period: (ω dt)^2 ~ 1e-5; the transient of the
+    # tree (RC ~ ms) has decayed after 3 periods of 0.2 s
+    assert abs(z_td / zw - 1.0) < 1e-3, (z_td, zw)
+    assert abs(p.mean() / q.mean() / z0.real - 1.0) < 1e-3
+
+
+def test_windkessels_replaced_by_trees_keep_the_steady_pressures() -> None:
+    """adan56 with each RCR outlet replaced by a structured tree of the same steady resistance
+    (here grown only to 0.5 mm to stay small): the exact steady states of the two models agree
+    at every named node. Mean pressures of the periodic state of a linear circuit are its
+    steady state, so this is the issue's 2 % criterion on the means, met to rounding."""
+    from oxyline.structured_tree import replace_windkessels
+
+    base = oxyline.models.load_dict("adan56")
+    st = replace_windkessels(base, min_radius=5e-4)
+    trees = [bc for bc in st["boundary_conditions"].values() if bc["type"] == "structured-tree"]
+    assert len(trees) == 31
+    p_wk = oxyline.load_model(base).network.steady_state()
+    p_st = oxyline.load_model(st).network.steady_state()
+    wk = dict(zip(p_wk["nodes"], p_wk["node_pressure"]))
+    tree = dict(zip(p_st["nodes"], p_st["node_pressure"]))
+    common = set(wk) & set(tree)
+    assert len(common) >= 70  # every node of the named arteries (Windkessels add their own)
+    for node in common:
+        p = wk[node]
+        # terminal resistances bisected to 1e-15; two sparse solves of different circuits
+        assert abs(tree[node] / p - 1.0) < 1e-8, node

@@ -1,6 +1,7 @@
 """``oxyline.impedance``: the input impedance Z(ω) of a network seen from a node, from the
 core's frequency-domain solve of the linear circuit (boundary pressures held at zero, inflows
-open); see docs/structured-tree.md."""
+open) by the time stepping's O(n) tree elimination (faer sparse LU where there are loops); see
+docs/structured-tree.md."""
 
 from __future__ import annotations
 
@@ -34,12 +35,9 @@ def impedance(model: Model | str | os.PathLike[str] | Mapping[str, Any], node: s
     if bad.any():
         raise ModelError(f"impedance: frequencies must be finite and >= 0 Hz, got "
                          f"{f[bad].ravel()[0]:g}")
-    net = m.network
-    z = np.empty(f.shape, dtype=complex)
-    for i, fi in np.ndenumerate(f):
-        re, im = net.input_impedance(str(node), 2.0 * math.pi * float(fi))
-        z[i] = complex(re, im)
-    return z
+    # one symbolic analysis, then O(n) per frequency in the core with the GIL released
+    re, im = m.network.input_impedances(str(node), (2.0 * math.pi * f).ravel().tolist())
+    return (re + 1j * im).reshape(f.shape)
 
 
 __all__ = ["impedance"]

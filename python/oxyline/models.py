@@ -75,6 +75,24 @@ ALIASES: dict[str, str] = {
 _registered: dict[str, tuple[Callable[[], Any], str]] = {}
 
 
+def _with_structured_trees(base: str) -> Callable[[], Any]:
+    def build() -> Any:
+        from oxyline.structured_tree import replace_windkessels
+
+        data = replace_windkessels(load_dict(base))
+        data["name"] = f"{base}-st"
+        return data
+
+    return build
+
+
+#: whole trees: every terminal Windkessel replaced by a structured tree of the same steady
+#: resistance (rule: :func:`oxyline.structured_tree.replace_windkessels`, docs/structured-tree.md)
+_registered["adan56-st"] = (_with_structured_trees("adan56"),
+                            ("ADAN56 with 31 structured trees (min radius 0.1 mm) instead of "
+                             "WK3: 262,512 vessels, 314,489 segments"))
+
+
 def register(name: str, loader: Callable[[], Any], description: str = "") -> None:
     """Add a named model: ``loader()`` returns an :class:`oxyline.Model` or a model dict.
 

@@ -234,3 +234,58 @@ def build_with_trees(data: dict[str, Any], build_native: Callable[[dict[str, Any
 
 
 __all__ = ["structured_tree", "tree_size"]
+
+
+def _dc_resistance(r0: float, a: float, b: float, lrr: float, rmin: float, mu: float,
+                   r_leaf: float) -> float:
+    """Steady resistance below a node of radius r0 with every leaf ending at ``r_leaf``
+    (Poiseuille, as the core's segment resistance of docs/physics.md §1.1). A subtree depends
+    only on its root radius alpha^i beta^j r0, so it is computed once per (i, j)."""
+    memo: dict[tuple[int, int], float] = {}
+
+    def below(i: int, j: int) -> float:  # resistance from node (i, j) to the leaves
+        if (i, j) not in memo:
+            g = 0.0
+            for di, dj in ((1, 0), (0, 1)):
+                r = a ** (i + di) * b ** (j + dj) * r0
+                if r >= rmin:
+                    g += 1.0 / (8.0 * mu * lrr / (math.pi * r**3) + below(i + di, j + dj))
+            memo[(i, j)] = r_leaf if g == 0.0 else 1.0 / g
+        return memo[(i, j)]
+
+    return below(0, 0)
+
+
+def replace_windkessels(data: Mapping[str, Any], min_radius: float = 1.0e-4,
+                        tree_fraction: float = 0.9, **tree: Any) -> dict[str, Any]:
+    """``data`` (a native SI model) with every RCR outlet replaced by a structured tree of the
+    same steady resistance R_p + R_d: the tree grows to ``min_radius``, raised per outlet (by
+    factors of 1.05) until the tree alone has at most ``tree_fraction`` of that resistance,
+    and every leaf ends at one terminal resistance that supplies the rest (solved by
+    bisection). ``tree`` overrides the other structured-tree parameters."""
+    mu = float((data.get("blood") or {}).get("viscosity", 3.5e-3))
+    out = dict(data)
+    bcs = dict(out["boundary_conditions"])
+    a, b, lrr = tree.get("alpha", 0.9), tree.get("beta", 0.6), tree.get("length_ratio", 50.0)
+    for node, bc in bcs.items():
+        if not (isinstance(bc, Mapping) and bc.get("type") == "rcr"):
+            continue
+        total = float(bc["proximal_resistance"]) + float(bc["distal_resistance"])
+        r0 = float(_root_radius(data, node))
+        rmin = min_radius
+        while _dc_resistance(r0, a, b, lrr, rmin, mu, 0.0) > tree_fraction * total:
+            rmin *= 1.05
+        lo, hi = 0.0, total * 2.0 ** 20
+        for _ in range(200):  # R(leaf) is increasing: bisection to rounding
+            mid = 0.5 * (lo + hi)
+            if _dc_resistance(r0, a, b, lrr, rmin, mu, mid) < total:
+                lo = mid
+            else:
+                hi = mid
+            if hi - lo <= 1e-15 * hi:
+                break
+        bcs[node] = {"type": TYPE, **tree, "min_radius": rmin,
+                     "terminal": {"type": "resistance", "resistance": 0.5 * (lo + hi),
+                                  "pressure": bc.get("pressure", 0.0)}}
+    out["boundary_conditions"] = bcs
+    return out
