@@ -86,6 +86,8 @@ def _with_structured_trees(base: str) -> Callable[[], Any]:
     return build
 
 
+#: built-in whole trees (1e5-1e6 segments: seconds to a minute to load)
+WHOLE_TREES = ("adan56-st",)
 #: whole trees: every terminal Windkessel replaced by a structured tree of the same steady
 #: resistance (rule: :func:`oxyline.structured_tree.replace_windkessels`, docs/structured-tree.md)
 _registered["adan56-st"] = (_with_structured_trees("adan56"),
@@ -202,4 +204,4 @@ def load(name: str) -> Any:
                      f"(built-ins: {', '.join(list())})")
 
 
-__all__ = ["ALIASES", "BUILTIN", "describe", "list", "load", "load_dict", "path", "register"]
+__all__ = ["ALIASES", "BUILTIN", "WHOLE_TREES", "describe", "list", "load", "load_dict", "path", "register"]
