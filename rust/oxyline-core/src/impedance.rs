@@ -33,7 +33,13 @@ pub fn input_impedances(dae: &Dae, node: usize, omegas: &[f64]) -> Result<Vec<c6
         }
     }
     stamps.extend((0..n).map(|i| (i, i)));
-    let mut lu = SparseLu::<c64>::analyse(n, &stamps)?;
+    // at ω = 0 capacitor rows have no pivot and the elimination falls back to faer's LU for
+    // good, so zero frequency gets its own solver and the others keep the O(n) one
+    let mut lu_ac = SparseLu::<c64>::analyse(n, &stamps)?;
+    let mut lu_dc = match omegas.contains(&0.0) {
+        true => Some(SparseLu::<c64>::analyse(n, &stamps)?),
+        false => None,
+    };
     let mut vals: Vec<c64> = dae.f.val[..nnz].iter().map(|&v| c64::new(v, 0.0)).collect();
     vals.resize(nnz + n, c64::new(0.0, 0.0));
     let mut rhs = vec![c64::new(0.0, 0.0); n];
@@ -48,6 +54,10 @@ pub fn input_impedances(dae: &Dae, node: usize, omegas: &[f64]) -> Result<Vec<c6
                     0.0,
                     format!("frequency-domain system at ω = {omega}: {why}"),
                 )
+            };
+            let lu = match lu_dc.as_mut() {
+                Some(dc) if omega == 0.0 => dc,
+                _ => &mut lu_ac,
             };
             lu.factor(&vals).map_err(singular)?;
             rhs.iter_mut().for_each(|x| *x = c64::new(0.0, 0.0));
