@@ -21,11 +21,13 @@ from oxyline.errors import (
     UnstableTimeStep,
     UnsupportedElement,
 )
+from oxyline.frequency import impedance
 from oxyline.io.results import open_result
 from oxyline.loader import load_model
 from oxyline.model import Model
 from oxyline.result import Result, VesselResult
 from oxyline.run import simulate, simulate_to_zarr
+from oxyline.structured_tree import structured_tree
 
 __version__: str = _core.__version__
 
@@ -40,6 +42,7 @@ __all__ = [
     "UnsupportedElement",
     "VesselResult",
     "__version__",
+    "impedance",
     "load_model",
     "models",
     "open_result",
@@ -47,4 +50,5 @@ __all__ = [
     "simulate",
     "simulate_ensemble",
     "simulate_to_zarr",
+    "structured_tree",
 ]

@@ -1,4 +1,4 @@
-"""The ``oxyline`` command line: run, plot, validate, convert, models, info.
+"""The ``oxyline`` command line: run, plot, validate, impedance, convert, models, info.
 
 Exit codes: 0 ok, 2 bad input (the message names the file, vessel or node, and key),
 130 interrupted (a partial result is still written), 1 solver failure, 3 the output could not
@@ -226,6 +226,35 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_impedance(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    import oxyline
+
+    if not args.fmax > 0 or not args.df > 0:
+        raise InputError(f"--fmax and --df must be > 0, got {args.fmax:g} and {args.df:g}")
+    model = _load(args.model)
+    f = np.arange(0.0, args.fmax + 0.5 * args.df, args.df)
+    z = oxyline.impedance(model, args.node, f)
+    rows = ["frequency_Hz,modulus_Pa_s_m3,phase_rad,real_Pa_s_m3,imag_Pa_s_m3"]
+    rows += [f"{fi:.6g},{abs(zi):.10e},{np.angle(zi):.10e},{zi.real:.10e},{zi.imag:.10e}"
+             for fi, zi in zip(f, z)]
+    if args.plot is None:
+        print("\n".join(rows))
+        return 0
+    out = Path(args.plot)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "impedance.csv").write_text("\n".join(rows) + "\n")
+    from oxyline import plot
+
+    fig = plot.impedance(f, z, label=f"{model.name}: {args.node}")
+    for suffix in (".png", ".svg"):
+        fig.savefig(out / f"impedance{suffix}")
+    if not args.quiet:
+        print(f"impedance.csv and impedance.png/.svg written to {out}")
+    return 0
+
+
 def _cmd_convert(args: argparse.Namespace) -> int:
     from oxyline.io import read_model, write_model
 
@@ -327,6 +356,17 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser("validate", help="check a model and print a summary")
     p.add_argument("model", help="built-in name, or a model file (any supported format)")
     p.set_defaults(func=_cmd_validate)
+    p = sub.add_parser("impedance", help="input impedance Z(f) seen from a node",
+                       description="Write Z(f) = P/Q (Pa s/m^3) seen from NODE into the network "
+                       "downstream of it, for f = 0, df, ..., fmax: a CSV on stdout, or with "
+                       "--plot a CSV and a modulus/phase figure in DIR.")
+    p.add_argument("model")
+    p.add_argument("--node", required=True, help="graph node (e.g. the inlet)")
+    p.add_argument("--fmax", type=float, default=20.0, help="highest frequency, Hz (20)")
+    p.add_argument("--df", type=float, default=0.25, help="frequency step, Hz (0.25)")
+    p.add_argument("--plot", metavar="DIR", help="write impedance.csv and impedance.png/.svg")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=_cmd_impedance)
     p = sub.add_parser("convert", help="convert a model between formats",
                        description="Convert IN to OUT. Formats: native (.yaml/.yml/.json), "
                        "svzerod (svZeroDSolver JSON; read when detected, write with --to "

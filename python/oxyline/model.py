@@ -403,6 +403,9 @@ class Model:
     #: species transport facts for results: ``species`` (names), ``oxygen`` (name of the O2
     #: species or None), ``solubility`` (O2, mol m^-3 mmHg^-1)
     transport: dict[str, Any] = field(default_factory=dict)
+    #: the vessels output when the run selects none (None: all; structured-tree vessels are
+    #: left out, see :mod:`oxyline.structured_tree`)
+    default_output_vessels: list[str] | None = None
     _network: Any = field(default=None, repr=False, compare=False)
 
     @property
@@ -443,6 +446,10 @@ def build_model(data: dict[str, Any]) -> Model:
 def _build(data: dict[str, Any]) -> Model:
     """The model of ``data``, which becomes the model's ``source``: callers pass a dict they
     own (a copy of the user's, or one they built)."""
+    from oxyline.structured_tree import build_with_trees, has_trees
+
+    if has_trees(data):  # a model-to-model step, like an importer
+        return build_with_trees(data, _build)
     model = _unassembled(data)
     model.network  # noqa: B018 - assemble now so that invalid models fail at load time
     sim = model.simulation

@@ -76,6 +76,26 @@ ALIASES: dict[str, str] = {
 _registered: dict[str, tuple[Callable[[], Any], str]] = {}
 
 
+def _with_structured_trees(base: str) -> Callable[[], Any]:
+    def build() -> Any:
+        from oxyline.structured_tree import replace_windkessels
+
+        data = replace_windkessels(load_dict(base))
+        data["name"] = f"{base}-st"
+        return data
+
+    return build
+
+
+#: built-in whole trees (1e5-1e6 segments: seconds to a minute to load)
+WHOLE_TREES = ("adan56-st",)
+#: whole trees: every terminal Windkessel replaced by a structured tree of the same steady
+#: resistance (rule: :func:`oxyline.structured_tree.replace_windkessels`, docs/structured-tree.md)
+_registered["adan56-st"] = (_with_structured_trees("adan56"),
+                            ("ADAN56 with 31 structured trees (min radius 0.1 mm) instead of "
+                             "WK3: 262,512 vessels, 314,489 segments"))
+
+
 def register(name: str, loader: Callable[[], Any], description: str = "") -> None:
     """Add a named model: ``loader()`` returns an :class:`oxyline.Model` or a model dict.
 
@@ -203,4 +223,4 @@ def load(name: str) -> Any:
                      f"(built-ins: {', '.join(list())})")
 
 
-__all__ = ["ALIASES", "BUILTIN", "describe", "list", "load", "load_dict", "path", "register"]
+__all__ = ["ALIASES", "BUILTIN", "WHOLE_TREES", "describe", "list", "load", "load_dict", "path", "register"]

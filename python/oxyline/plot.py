@@ -597,3 +597,25 @@ def save_figures(result: Result, model: Model | str | os.PathLike[str],
             written.append(p)
         plt.close(fig)
     return written
+
+
+def impedance(frequencies: Any, z: Any, label: str | None = None,
+              ax: Sequence[Any] | None = None) -> Figure:
+    """Modulus (Pa·s/m³, log scale) and phase (rad) of input impedances ``z`` (complex, from
+    :func:`oxyline.impedance`) against frequency (Hz). Curves go on the axes ``ax`` (modulus,
+    phase) of an earlier call when given, to compare networks."""
+    plt = _plt()
+    if ax is None:
+        fig, ax = plt.subplots(2, 1, sharex=True, figsize=(6.0, 5.0), layout="constrained")
+        ax[0].set_ylabel("|Z| (Pa s/m$^3$)")
+        ax[0].set_yscale("log")
+        ax[1].set_ylabel("phase (rad)")
+        ax[1].set_xlabel("frequency (Hz)")
+        ax[1].axhline(0.0, color="0.6", lw=0.8)
+    fig = ax[0].figure
+    f, zz = np.asarray(frequencies, dtype=float), np.asarray(z, dtype=complex)
+    ax[0].plot(f, np.abs(zz), label=label)
+    ax[1].plot(f, np.angle(zz), label=label)
+    if label:
+        ax[0].legend()
+    return fig

@@ -125,11 +125,19 @@ def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
         "start": start,
         "segments": _flag(*get("segments", out, "segments", True)),
         "variables": output_names(overrides.get("variables", out.get("variables")), "variables"),
-        "vessels": output_vessels(overrides.get("vessels", out.get("vessels", "all"))),
+        "vessels": _vessels(model, overrides.get("vessels", out.get("vessels"))),
         "newton_atol": None if atol is None else _real(atol, where),
         "max_iterations": _integer(*get("max_iterations", {}, "", 30), 1),
         "transport": _flag(*get("transport", {}, "", True)),
     }
+
+
+def _vessels(model: Model, selection: Any) -> list[str] | None:
+    """The output vessels: the model's default (every vessel but structured-tree ones) when
+    none are selected, else the selection (``all`` really selects all)."""
+    if selection is None:
+        return model.default_output_vessels
+    return output_vessels(selection)
 
 
 def _selection(s: Mapping[str, Any]) -> dict[str, Any]:

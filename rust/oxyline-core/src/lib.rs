@@ -9,6 +9,7 @@ pub mod error;
 pub mod frequency;
 mod graetz;
 pub mod hemoglobin;
+pub mod impedance;
 pub mod integrate;
 pub mod network;
 pub mod output;

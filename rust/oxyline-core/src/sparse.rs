@@ -7,14 +7,55 @@ use crate::error::{Error, Result};
 use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::solvers::{Lu, SymbolicLu};
 use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
+use std::ops::{AddAssign, Div, Mul, MulAssign, Sub, SubAssign};
 
-/// Which elimination a matrix pattern gets.
-pub enum SparseLu {
-    Tree(TreeLu),
-    General(Box<GeneralLu>),
+/// Entries of the matrices solved here: real for the time stepping, complex for the frequency
+/// domain (iωE + F, docs/structured-tree.md). The same elimination serves both.
+pub trait Scalar:
+    faer::traits::ComplexField
+    + Copy
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Sub<Output = Self>
+    + AddAssign
+    + SubAssign
+    + MulAssign
+{
+    const ZERO: Self;
+    const ONE: Self;
+    fn modulus(self) -> f64;
+    fn finite(self) -> bool;
 }
 
-impl SparseLu {
+impl Scalar for f64 {
+    const ZERO: f64 = 0.0;
+    const ONE: f64 = 1.0;
+    fn modulus(self) -> f64 {
+        self.abs()
+    }
+    fn finite(self) -> bool {
+        self.is_finite()
+    }
+}
+
+impl Scalar for faer::c64 {
+    const ZERO: faer::c64 = faer::c64::new(0.0, 0.0);
+    const ONE: faer::c64 = faer::c64::new(1.0, 0.0);
+    fn modulus(self) -> f64 {
+        self.norm()
+    }
+    fn finite(self) -> bool {
+        self.re.is_finite() && self.im.is_finite()
+    }
+}
+
+/// Which elimination a matrix pattern gets.
+pub enum SparseLu<T: Scalar = f64> {
+    Tree(TreeLu<T>),
+    General(Box<GeneralLu<T>>),
+}
+
+impl<T: Scalar> SparseLu<T> {
     /// `stamps` are the (row, col) positions of the values later passed to `factor`, in order;
     /// duplicates are summed. A forest pattern gets the O(n) tree elimination.
     pub fn analyse(n: usize, stamps: &[(usize, usize)]) -> Result<Self> {
@@ -24,7 +65,7 @@ impl SparseLu {
         }
     }
 
-    pub fn factor(&mut self, vals: &[f64]) -> std::result::Result<(), String> {
+    pub fn factor(&mut self, vals: &[T]) -> std::result::Result<(), String> {
         match self {
             SparseLu::Tree(t) => {
                 if t.factor(vals) {
@@ -42,7 +83,7 @@ impl SparseLu {
     }
 
     /// Solve in place; returns false if the solution is not finite (singular matrix).
-    pub fn solve_in_place(&self, rhs: &mut [f64]) -> bool {
+    pub fn solve_in_place(&self, rhs: &mut [T]) -> bool {
         match self {
             SparseLu::Tree(t) => t.solve_in_place(rhs),
             SparseLu::General(g) => g.solve_in_place(rhs),
@@ -67,23 +108,23 @@ enum Slot {
 /// Gaussian elimination without pivoting in post-order of a spanning forest of the matrix graph.
 /// Stable here because the circuit matrices are diagonal-positive with skew-symmetric couplings
 /// (node–branch incidence), so every Schur update adds c²/d > 0 to the parent's pivot.
-pub struct TreeLu {
+pub struct TreeLu<T: Scalar = f64> {
     n: usize,
     stamps: Vec<(usize, usize)>,
     slots: Vec<Slot>,
     order: Vec<usize>,
     parent: Vec<usize>,
-    diag: Vec<f64>,
-    up: Vec<f64>,
+    diag: Vec<T>,
+    up: Vec<T>,
     /// K[parent(v), v], divided by the pivot after `factor`
-    down: Vec<f64>,
+    down: Vec<T>,
     /// pivots, stored as reciprocals after `factor`
-    pivot: Vec<f64>,
+    pivot: Vec<T>,
 }
 
 const NONE: usize = usize::MAX;
 
-impl TreeLu {
+impl<T: Scalar> TreeLu<T> {
     fn analyse(n: usize, stamps: &[(usize, usize)]) -> Option<Self> {
         // undirected adjacency of the off-diagonal pattern (deduplicated)
         let mut edges: Vec<(usize, usize)> = stamps
@@ -162,17 +203,17 @@ impl TreeLu {
             slots,
             order,
             parent,
-            diag: vec![0.0; n],
-            up: vec![0.0; n],
-            down: vec![0.0; n],
-            pivot: vec![0.0; n],
+            diag: vec![T::ZERO; n],
+            up: vec![T::ZERO; n],
+            down: vec![T::ZERO; n],
+            pivot: vec![T::ZERO; n],
         })
     }
 
-    fn factor(&mut self, vals: &[f64]) -> bool {
-        self.diag.iter_mut().for_each(|x| *x = 0.0);
-        self.up.iter_mut().for_each(|x| *x = 0.0);
-        self.down.iter_mut().for_each(|x| *x = 0.0);
+    fn factor(&mut self, vals: &[T]) -> bool {
+        self.diag.iter_mut().for_each(|x| *x = T::ZERO);
+        self.up.iter_mut().for_each(|x| *x = T::ZERO);
+        self.down.iter_mut().for_each(|x| *x = T::ZERO);
         for (slot, &v) in self.slots.iter().zip(vals) {
             match *slot {
                 Slot::Diag(i) => self.diag[i] += v,
@@ -183,28 +224,28 @@ impl TreeLu {
         self.pivot.copy_from_slice(&self.diag);
         // per-vertex magnitude: the units of pressure and flow rows differ by many decades, so a
         // pivot is judged against the terms that formed it, not a global scale
-        let mut magnitude: Vec<f64> = self.diag.iter().map(|d| d.abs()).collect();
+        let mut magnitude: Vec<f64> = self.diag.iter().map(|d| d.modulus()).collect();
         for &v in &self.order {
             let d = self.pivot[v];
-            if d.abs() <= 1e-12 * magnitude[v] || !d.is_finite() {
+            if d.modulus() <= 1e-12 * magnitude[v] || !d.finite() {
                 return false;
             }
             let p = self.parent[v];
             if p != NONE {
                 let update = self.down[v] * self.up[v] / d;
                 self.pivot[p] -= update;
-                magnitude[p] += update.abs();
+                magnitude[p] += update.modulus();
             }
         }
         // store the multipliers and reciprocal pivots so that solves only multiply
         for &v in &self.order {
-            self.pivot[v] = 1.0 / self.pivot[v];
+            self.pivot[v] = T::ONE / self.pivot[v];
             self.down[v] *= self.pivot[v];
         }
         true
     }
 
-    fn solve_in_place(&self, b: &mut [f64]) -> bool {
+    fn solve_in_place(&self, b: &mut [T]) -> bool {
         for &v in &self.order {
             let p = self.parent[v];
             if p != NONE {
@@ -214,23 +255,27 @@ impl TreeLu {
         let mut finite = true;
         for &v in self.order.iter().rev() {
             let p = self.parent[v];
-            let up = if p != NONE { self.up[v] * b[p] } else { 0.0 };
+            let up = if p != NONE {
+                self.up[v] * b[p]
+            } else {
+                T::ZERO
+            };
             b[v] = (b[v] - up) * self.pivot[v];
-            finite &= b[v].is_finite();
+            finite &= b[v].finite();
         }
         finite
     }
 }
 
-pub struct GeneralLu {
+pub struct GeneralLu<T: Scalar = f64> {
     n: usize,
     sym: SymbolicSparseColMat<usize>,
     order: Argsort<usize>,
     sym_lu: SymbolicLu<usize>,
-    lu: Option<Lu<usize, f64>>,
+    lu: Option<Lu<usize, T>>,
 }
 
-impl GeneralLu {
+impl<T: Scalar> GeneralLu<T> {
     pub fn analyse(n: usize, stamps: &[(usize, usize)]) -> Result<Self> {
         let pairs: Vec<Pair<usize, usize>> = stamps.iter().map(|&(r, c)| Pair::new(r, c)).collect();
         let (sym, order) = SymbolicSparseColMat::try_new_from_indices(n, n, &pairs)
@@ -246,7 +291,7 @@ impl GeneralLu {
         })
     }
 
-    pub fn factor(&mut self, vals: &[f64]) -> std::result::Result<(), String> {
+    pub fn factor(&mut self, vals: &[T]) -> std::result::Result<(), String> {
         let a = SparseColMat::new_from_argsort(self.sym.clone(), &self.order, vals)
             .map_err(|e| format!("{e:?}"))?;
         let lu = Lu::try_new_with_symbolic(self.sym_lu.clone(), a.as_ref())
@@ -255,11 +300,11 @@ impl GeneralLu {
         Ok(())
     }
 
-    pub fn solve_in_place(&self, rhs: &mut [f64]) -> bool {
+    pub fn solve_in_place(&self, rhs: &mut [T]) -> bool {
         debug_assert_eq!(rhs.len(), self.n);
         let lu = self.lu.as_ref().expect("factor before solve");
         lu.solve_in_place(faer::ColMut::from_slice_mut(rhs));
-        rhs.iter().all(|x| x.is_finite())
+        rhs.iter().all(|x| x.finite())
     }
 }
 
@@ -312,7 +357,7 @@ mod tests {
         // closing a loop switches to the general solver
         let mut looped = stamps.clone();
         looped.extend([(0, n - 1), (n - 1, 0)]);
-        assert!(!SparseLu::analyse(n, &looped).unwrap().is_tree());
+        assert!(!SparseLu::<f64>::analyse(n, &looped).unwrap().is_tree());
     }
 
     #[test]

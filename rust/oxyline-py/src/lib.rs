@@ -528,6 +528,32 @@ impl Network {
         Ok((z.re, z.im))
     }
 
+    /// Input impedances (Pa·s/m³) seen from graph node `node` at each angular frequency of
+    /// `omegas` (rad/s): (real parts, imaginary parts). O(n) per frequency by the time
+    /// stepping's elimination, with the GIL released.
+    fn input_impedances<'py>(
+        &self,
+        py: Python<'py>,
+        node: &str,
+        omegas: Vec<f64>,
+    ) -> PyResult<ArrayPair<'py>> {
+        let idx = self
+            .inner
+            .0
+            .circuit
+            .nodes
+            .iter()
+            .position(|n| n.name == node)
+            .ok_or_else(|| ModelError::new_err(format!("node '{node}': not in the network")))?;
+        let inner = self.inner.clone();
+        let z = py
+            .detach(move || oxyline_core::impedance::input_impedances(&inner.1, idx, &omegas))
+            .map_err(to_py)?;
+        let re: Vec<f64> = z.iter().map(|z| z.re).collect();
+        let im: Vec<f64> = z.iter().map(|z| z.im).collect();
+        Ok((re.into_pyarray(py), im.into_pyarray(py)))
+    }
+
     /// Run the network. Returns a dict with `times` (n_t,), `data` (n_t, n_columns) and run
     /// facts; if the run stopped early, `error`/`error_kind` are set and the data so far kept.
     ///
