@@ -44,12 +44,16 @@ impl SpeciesPlan {
             }
             None => inlet.eval(0.0),
         };
+        let boundary = boundary_values(sp, circuit, &inlet, &el)?;
         Ok(SpeciesPlan {
             name: sp.name.clone(),
             binding,
             decay: sp.decay,
             diffusivity: sp.diffusivity,
-            boundary: boundary_values(sp, circuit, &inlet, &el)?,
+            waves: (0..boundary.len())
+                .filter(|&k| matches!(boundary[k], BoundaryValue::Wave(_)))
+                .collect(),
+            boundary,
             walls: vessel_walls(sp, circuit, &el)?,
             initial_free,
         })
@@ -79,12 +83,14 @@ fn boundary_values(
     circuit
         .boundaries
         .iter()
-        .map(|b| match (b.inlet, sp.inlets.get(&b.name), sp.backflow.get(&b.name)) {
-            (true, Some(w), _) => wave(w, "inlet", &b.name),
-            (true, None, _) => Ok(BoundaryValue::Wave(inlet.clone())),
-            (false, _, Some(w)) => wave(w, "backflow", &b.name),
-            (false, _, None) => Ok(BoundaryValue::ZeroGradient),
-        })
+        .map(
+            |b| match (b.inlet, sp.inlets.get(&b.name), sp.backflow.get(&b.name)) {
+                (true, Some(w), _) => wave(w, "inlet", &b.name),
+                (true, None, _) => Ok(BoundaryValue::Wave(inlet.clone())),
+                (false, _, Some(w)) => wave(w, "backflow", &b.name),
+                (false, _, None) => Ok(BoundaryValue::ZeroGradient),
+            },
+        )
         .collect()
 }
 
@@ -152,6 +158,12 @@ impl Transport {
         drop(face_of_unknown);
         let nn = kind.len();
         let (node_ptr, node_faces, source_ptr, source_list) = incidence(nn, &faces, &sources);
+        // the identity without refinement: left empty (see `Plan::last_sub`)
+        let last_sub = if refined.chains.is_empty() {
+            Vec::new()
+        } else {
+            refined.last_sub
+        };
         let mut p = Plan {
             mixing: (0..nn).filter(|&i| kind[i] == Kind::Mixing).collect(),
             kind,
@@ -172,7 +184,7 @@ impl Transport {
             face_unknowns: Vec::new(),
             chains: refined.chains,
             cell_node: layout.cell_node,
-            last_sub: refined.last_sub,
+            last_sub,
             pieces,
             seg_pieces,
             formulation: spec.formulation,
@@ -563,6 +575,7 @@ fn wall_pieces(
         }
         seg_pieces.push(pieces.len() as u32);
     }
+    pieces.shrink_to_fit();
     (pieces, seg_pieces)
 }
 

@@ -4,14 +4,16 @@
 #[allow(unused_imports)]
 use super::*;
 
-/// How the rows of a species were built: which wall linearisation the update after the solve
-/// reads (W = wlin·C_t + wconst per cell).
+/// How the rows of a species are built, and so which wall linearisation the update after the
+/// solve reads (W = wlin·C_t + wconst per cell).
 #[derive(Clone, Copy, PartialEq, Eq)]
-enum WallRows {
-    /// The fixed linear laws themselves: wlin = `cell_g`, wconst = `cell_wc`.
+enum Rows {
+    /// A wall linear in C_t (`fixed_rows`): wlin = `cell_g`, wconst = `cell_wc`.
     Fixed,
-    /// Linearised into `sweep.wlin`, `sweep.wconst`.
-    Linearised,
+    /// A binding with fixed laws (`binding_rows`), linearised into `sweep.wlin`, `wconst`.
+    Binding,
+    /// Shear-dependent walls (`general_rows`), linearised likewise.
+    General,
 }
 
 impl Transport {
@@ -43,9 +45,14 @@ impl Transport {
             ya.clear();
             ya.extend(y0.iter().zip(y1).map(|(a, b)| a + alpha_f * (b - a)));
         }
+        // one species with fixed linear rows (the common oxygen case): its rows are built in
+        // the volumes' pass over the cells
+        let fused = self.species.len() == 1
+            && self.rows_kind(0) == Rows::Fixed
+            && self.plan.formulation == Formulation::Conservative;
         let res = self
-            .transport_volumes(t_af, dt)
-            .and_then(|()| self.implicit_species(t_af, dt, &ya, z));
+            .transport_volumes(t_af, dt, fused.then_some(&*z))
+            .and_then(|()| self.implicit_species(t_af, dt, &ya, z, fused));
         self.sweep.ya = ya;
         if res.is_ok() {
             std::mem::swap(&mut self.wvol, &mut self.sweep.wnew);
@@ -53,8 +60,67 @@ impl Transport {
         res
     }
 
-    /// W' = W + dt (net inflow) of every cell with the loaded face flows, into `sweep.wnew`.
-    pub(super) fn transport_volumes(&mut self, t_af: f64, dt: f64) -> Result<()> {
+    /// W' = W + dt (net inflow) of every cell with the loaded face flows, into `sweep.wnew`;
+    /// with `rows_of_first` (the amounts) also the fixed rows of species 0 (`fixed_rows`).
+    pub(super) fn transport_volumes(
+        &mut self,
+        t_af: f64,
+        dt: f64,
+        rows_of_first: Option<&[f64]>,
+    ) -> Result<()> {
+        let net = self.net_inflow();
+        let mut w_new = std::mem::take(&mut self.sweep.wnew);
+        w_new.clear();
+        w_new.resize(self.plan.cells.len(), 0.0);
+        // (NaN fails the test too)
+        let mut positive = true;
+        let (cells, wvol) = (&self.plan.cells[..], &self.wvol[..]);
+        match rows_of_first {
+            None => {
+                for ((w, &n), &w0) in w_new.iter_mut().zip(cells).zip(wvol) {
+                    *w = w0 + dt * net[n];
+                    positive &= *w > 0.0;
+                }
+            }
+            Some(z) => {
+                let rate = 1.0 / dt + self.plan.species[0].decay;
+                let laws = &self.species[0].laws;
+                let zs = &z[..cells.len()];
+                let conc = &mut self.conc[..];
+                let (den, num) = (&mut self.sweep.den[..], &mut self.sweep.num[..]);
+                let (g, wc) = (&laws.cell_g[..], &laws.cell_wc[..]);
+                for (i, &n) in cells.iter().enumerate() {
+                    let w = wvol[i] + dt * net[n];
+                    positive &= w > 0.0;
+                    w_new[i] = w;
+                    conc[n] = zs[i] / wvol[i];
+                    den[n] = w * rate + g[i];
+                    num[n] = zs[i] / dt - wc[i];
+                }
+            }
+        }
+        self.sweep.dnode = net;
+        let bad = if positive {
+            None
+        } else {
+            w_new.iter().position(|&w| !(w > 0.0))
+        };
+        self.sweep.wnew = w_new;
+        match bad {
+            None => Ok(()),
+            Some(i) => Err(Error::solver(
+                t_af,
+                format!(
+                    "transport volume of cell '{}' became {:.3e} m³: reduce dt",
+                    self.plan.node_name(self.plan.cells[i]),
+                    self.sweep.wnew[i]
+                ),
+            )),
+        }
+    }
+
+    /// Net inflow of every node with the loaded face flows (in `sweep.dnode`'s storage).
+    fn net_inflow(&mut self) -> Vec<f64> {
         let mut net = std::mem::take(&mut self.sweep.dnode);
         net.clear();
         net.resize(self.plan.kind.len(), 0.0);
@@ -76,33 +142,7 @@ impl Transport {
         for ((n, _, _), &q) in self.plan.sources.iter().zip(&self.qs) {
             net[*n] += q;
         }
-        let mut w_new = std::mem::take(&mut self.sweep.wnew);
-        w_new.clear();
-        // (NaN fails the test too)
-        let mut positive = true;
-        w_new.extend(self.plan.cells.iter().zip(&self.wvol).map(|(&n, &w)| {
-            let v = w + dt * net[n];
-            positive &= v > 0.0;
-            v
-        }));
-        self.sweep.dnode = net;
-        let bad = if positive {
-            None
-        } else {
-            w_new.iter().position(|&w| !(w > 0.0))
-        };
-        self.sweep.wnew = w_new;
-        match bad {
-            None => Ok(()),
-            Some(i) => Err(Error::solver(
-                t_af,
-                format!(
-                    "transport volume of cell '{}' became {:.3e} m³: reduce dt",
-                    self.plan.node_name(self.plan.cells[i]),
-                    self.sweep.wnew[i]
-                ),
-            )),
-        }
+        net
     }
 
     /// The backward-Euler solve of every species over the step (see `implicit_step`), with the
@@ -113,6 +153,7 @@ impl Transport {
         dt: f64,
         ya: &[f64],
         z: &mut [f64],
+        first_rows_built: bool,
     ) -> Result<()> {
         let nc = self.plan.cells.len();
         let (mut wconst, mut wlin) = (
@@ -131,7 +172,11 @@ impl Transport {
             for &m in &self.plan.mixing {
                 (sw.den[m], sw.num[m], sw.lag[m]) = (0.0, 0.0, self.conc[m]);
             }
-            let rows = self.implicit_rows(s, dt, ya, z, &w_new, &mut wconst, &mut wlin);
+            let rows = if s == 0 && first_rows_built {
+                Rows::Fixed
+            } else {
+                self.implicit_rows(s, dt, ya, z, &w_new, &mut wconst, &mut wlin)
+            };
             let mut x = std::mem::take(&mut self.conc);
             if self.plan.tree.is_some() {
                 self.tree_solve(&mut x);
@@ -148,8 +193,8 @@ impl Transport {
             }
             let laws = Arc::clone(&self.species[s].laws);
             let (wl, wc) = match rows {
-                WallRows::Fixed => (&laws.cell_g[..], &laws.cell_wc[..]),
-                WallRows::Linearised => (&wlin[..], &wconst[..]),
+                Rows::Fixed => (&laws.cell_g[..], &laws.cell_wc[..]),
+                Rows::Binding | Rows::General => (&wlin[..], &wconst[..]),
             };
             self.implicit_update(s, dt, &w_new, wl, wc, z);
         }
@@ -206,19 +251,26 @@ impl Transport {
         w_new: &[f64],
         wconst: &mut [f64],
         wlin: &mut [f64],
-    ) -> WallRows {
+    ) -> Rows {
+        let rows = self.rows_kind(s);
+        match rows {
+            Rows::Fixed => self.fixed_rows(s, dt, z, w_new),
+            Rows::Binding => self.binding_rows(s, dt, z, w_new, wconst, wlin),
+            Rows::General => self.general_rows(s, dt, ya, z, w_new, wconst, wlin),
+        }
+        rows
+    }
+
+    /// Which rows species `s` takes (see [`Rows`]).
+    fn rows_kind(&self, s: usize) -> Rows {
         let laws = &self.species[s].laws;
-        let binding = self.plan.species[s].binding;
         if !laws.dynamic.is_empty() {
-            self.general_rows(s, dt, ya, z, w_new, wconst, wlin);
-            return WallRows::Linearised;
+            Rows::General
+        } else if self.plan.species[s].binding.is_identity() || !laws.has_wall {
+            Rows::Fixed
+        } else {
+            Rows::Binding
         }
-        if binding.is_identity() || !laws.has_wall {
-            self.fixed_rows(s, dt, z, w_new);
-            return WallRows::Fixed;
-        }
-        self.binding_rows(s, dt, z, w_new, wconst, wlin);
-        WallRows::Linearised
     }
 
     /// Rows with a wall linear in C_t (fixed laws, no binding, or no wall): W = g C + (q − g
@@ -276,11 +328,10 @@ impl Transport {
             let (wl, wc) = if has_wall {
                 let (f, slope) = match anchors.get_mut(n) {
                     Some(a) => set.binding.free_and_slope_anchored(c, free[n], a),
-                    None => set.binding.free_and_slope_anchored(
-                        c,
-                        free[n],
-                        &mut HillAnchor::default(),
-                    ),
+                    None => {
+                        set.binding
+                            .free_and_slope_anchored(c, free[n], &mut HillAnchor::default())
+                    }
                 };
                 free[n] = f;
                 let wl = laws.cell_g[i] * (1.0 / slope);

@@ -78,7 +78,12 @@ impl Laws {
                 l.relax_of_seg[j] = k as u32;
             }
         }
-        l.cell_wc = l.cell_q.iter().zip(&l.cell_gcw).map(|(q, gcw)| q - gcw).collect();
+        l.cell_wc = l
+            .cell_q
+            .iter()
+            .zip(&l.cell_gcw)
+            .map(|(q, gcw)| q - gcw)
+            .collect();
         l.has_wall = !l.dynamic.is_empty()
             || l.cell_g.iter().any(|&g| g != 0.0)
             || l.cell_q.iter().any(|&q| q != 0.0);

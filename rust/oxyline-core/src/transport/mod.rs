@@ -32,6 +32,7 @@ use std::sync::Arc;
 mod build;
 mod implicit;
 mod laws;
+mod memory;
 mod observe;
 mod plan;
 mod rhs;
@@ -104,6 +105,8 @@ struct SpeciesPlan {
     decay: f64,
     diffusivity: f64,
     boundary: Vec<BoundaryValue>,
+    /// The boundaries with a prescribed value (`BoundaryValue::Wave`).
+    waves: Vec<usize>,
     walls: Vec<WallSpec>,
     initial_free: f64,
 }
@@ -211,6 +214,8 @@ pub struct Transport {
     qf: Vec<f64>,
     qs: Vec<f64>,
     bval: Vec<Option<f64>>,
+    /// The species whose values `bval` holds (`usize::MAX`: none).
+    bval_species: usize,
     sweep: Sweep,
     /// Transport volumes of the implicit path (evolved with the face flows).
     wvol: Vec<f64>,
@@ -248,6 +253,7 @@ impl Transport {
             qf: Vec::new(),
             qs: Vec::new(),
             bval: Vec::new(),
+            bval_species: usize::MAX,
             sweep: Sweep::default(),
             wvol: Vec::new(),
         }
@@ -276,6 +282,7 @@ impl Transport {
         self.qf = vec![0.0; p.faces.len()];
         self.qs = vec![0.0; p.sources.len()];
         self.bval = vec![None; p.boundary_inlet.len()];
+        self.bval_species = usize::MAX;
         self.sweep = Sweep::new(nn);
         for (sp, set) in self.species.iter_mut().zip(&p.species) {
             let binding = !set.binding.is_identity();
@@ -406,7 +413,7 @@ impl Transport {
             .fold((usize::MAX, -1.0), |a, b| if b.1 > a.1 { b } else { a });
         let (a, b) = (
             self.plan.node_cell[n],
-            self.plan.node_cell[self.plan.last_sub[n]],
+            self.plan.node_cell[self.plan.last_sub(n)],
         );
         (a != usize::MAX).then_some(a..b + 1)
     }

@@ -46,9 +46,10 @@ impl Transport {
         Ok(())
     }
 
-    /// Free concentration of every non-exterior node of species `s` (exact inversion,
-    /// warm-started; NaN outside the domain). Without binding it is the total one, read from
-    /// `conc` where needed (`free_at`).
+    /// Free concentration of every non-exterior node of species `s` (NaN outside the
+    /// domain): Hill's by the anchored series where it is within its tolerance (1e-12 mmHg,
+    /// the cells' anchors of the steps), else the exact inversion, warm-started. Without
+    /// binding it is the total one, read from `conc` where needed (`free_at`).
     fn free_of_nodes(&mut self, s: usize) {
         let binding = self.plan.species[s].binding;
         if binding.is_identity() {
@@ -59,8 +60,15 @@ impl Transport {
             sp.free[n] = match kind {
                 Kind::Exterior => f64::NAN,
                 _ => {
-                    let guess = if sp.free[n].is_finite() { sp.free[n] } else { 0.0 };
-                    binding.free(self.conc[n], guess)
+                    let guess = if sp.free[n].is_finite() {
+                        sp.free[n]
+                    } else {
+                        0.0
+                    };
+                    match sp.anchors.get_mut(n) {
+                        Some(a) => binding.free_anchored(self.conc[n], guess, a),
+                        None => binding.free(self.conc[n], guess),
+                    }
                 }
             };
         }
@@ -122,7 +130,7 @@ impl Transport {
                 if share > 0.0 {
                     // a refined node reports its last sub-cell: the value its outgoing faces
                     // carry
-                    c += share * self.free_at(s, self.plan.last_sub[n]);
+                    c += share * self.free_at(s, self.plan.last_sub(n));
                     wsum += share;
                     vseg += share * (seg.volume + seg.compliance * (y[n] - self.plan.p_ref));
                     if let Some(yd) = ydot {

@@ -113,8 +113,8 @@ pub struct Plan {
     pub(super) chains: Vec<Chain>,
     /// Per cell: the circuit node whose pressure sets its volume.
     pub(super) cell_node: Vec<usize>,
-    /// Per circuit node: its last sub-cell (itself unless refined): the donor of the faces
-    /// leaving the node, and the value reported for its segments.
+    /// Per circuit node: its last sub-cell (itself unless refined; empty without
+    /// refinement, see `last_sub`).
     pub(super) last_sub: Vec<usize>,
     /// Wall pieces, contiguous per segment (`seg_pieces[j]..seg_pieces[j + 1]`).
     pub(super) pieces: Vec<Piece>,
@@ -145,6 +145,13 @@ pub struct Plan {
 }
 
 impl Plan {
+    /// The last sub-cell of circuit node `n` (itself unless refined): the donor of the faces
+    /// leaving the node, and the value reported for its segments.
+    #[inline]
+    pub(super) fn last_sub(&self, n: usize) -> usize {
+        self.last_sub.get(n).copied().unwrap_or(n)
+    }
+
     /// Flow sources of node `n`.
     #[inline]
     pub(super) fn node_sources(&self, n: usize) -> &[u32] {
@@ -164,12 +171,15 @@ impl Plan {
             return format!("node {n}");
         };
         if n < self.node_names.len() || i == usize::MAX {
-            return self.node_names.get(n).unwrap_or_else(|| format!("node {n}"));
+            return self
+                .node_names
+                .get(n)
+                .unwrap_or_else(|| format!("node {n}"));
         }
         // sub-cells of a node are contiguous, sub-cell 0 being the node itself
         let parent = self.cell_node[i];
         let first = self.node_cell[parent];
-        let m = self.node_cell[self.last_sub[parent]] - first + 1;
+        let m = self.node_cell[self.last_sub(parent)] - first + 1;
         let name = self.node_names.get(parent).unwrap_or_default();
         format!("{name} (transport cell {}/{m})", i - first + 1)
     }
@@ -179,8 +189,8 @@ impl Plan {
 /// blocks at a million nodes).
 #[derive(Debug, Default)]
 pub(super) struct Names {
-    text: String,
-    ends: Vec<u32>,
+    pub(super) text: String,
+    pub(super) ends: Vec<u32>,
 }
 
 impl Names {

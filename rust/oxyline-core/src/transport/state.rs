@@ -76,13 +76,24 @@ impl Transport {
         }
     }
 
+    /// The values the boundaries carry into the domain for species `s` at `time` into `bval`
+    /// (None: zero gradient). When `bval` already holds species `s`, only the prescribed
+    /// values change (a tree has thousands of zero-gradient outlets).
     pub(super) fn load_boundary(&mut self, s: usize, time: f64) {
         let sp = &self.plan.species[s];
-        for (v, b) in self.bval.iter_mut().zip(&sp.boundary) {
-            *v = match b {
-                BoundaryValue::Wave(w) => Some(sp.binding.total(w.eval(time))),
-                BoundaryValue::ZeroGradient => None,
-            };
+        let value = |b: &BoundaryValue| match b {
+            BoundaryValue::Wave(w) => Some(sp.binding.total(w.eval(time))),
+            BoundaryValue::ZeroGradient => None,
+        };
+        if self.bval_species == s {
+            for &k in &sp.waves {
+                self.bval[k] = value(&sp.boundary[k]);
+            }
+        } else {
+            for (v, b) in self.bval.iter_mut().zip(&sp.boundary) {
+                *v = value(b);
+            }
+            self.bval_species = s;
         }
     }
 
