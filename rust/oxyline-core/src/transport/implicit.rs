@@ -103,7 +103,7 @@ impl Transport {
         let bad = if positive {
             None
         } else {
-            w_new.iter().position(|&w| !(w > 0.0))
+            w_new.iter().position(|&w| w.is_nan() || w <= 0.0)
         };
         self.sweep.wnew = w_new;
         match bad {
