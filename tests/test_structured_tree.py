@@ -143,7 +143,7 @@ def test_zero_frequency_impedance_is_the_poiseuille_resistance() -> None:
 
 
 def line(r: float, length: float, E: float, h: float, omega: float, z_load: complex) -> complex:
-    """Exact input impedance of a uniform line (physics §1.1 per-length R', L', C')."""
+    """Exact input impedance of a uniform line (docs/physics.md §1.1 per-length R', L', C')."""
     z = 8.0 * MU / (math.pi * r**4) + 1j * omega * RHO / (math.pi * r**2)
     y = 1j * omega * 2.0 * math.pi * r**3 * (1.0 - NU**2) / (E * h)
     gamma, zc = cmath.sqrt(z * y), cmath.sqrt(z / y)
@@ -188,7 +188,7 @@ def test_impedance_converges_to_the_transmission_line_tree(arrangement: str,
     errs = [impedance_errors(arrangement, n) for n in (4, 8, 16)]
     mod = np.array([e[0] for e in errs])
     phase = np.array([e[1] for e in errs])
-    # the spatial order of the arrangement (physics §6 F3: first for inverted-L, second for
+    # the spatial order of the arrangement (docs/physics.md §6 F3: first for inverted-L, second for
     # pi): each halving of the segment length divides the error by ~2^order
     for e in (mod, phase):
         rates = np.log2(e[:-1] / e[1:])
@@ -210,7 +210,7 @@ def test_single_line_closed_form_through_the_public_function() -> None:
         z = oxyline.impedance(m, "in", f)
         exact = np.array([line(r, length, E, h, 2 * math.pi * fi, r_out) for fi in f])
         errors.append(np.max(np.abs(z - exact) / np.abs(exact)))
-    # physics §6 F3 at 5 Hz, pi: 1.93e-5 at 20 segments, second order
+    # docs/physics.md §6 F3 at 5 Hz, pi: 1.93e-5 at 20 segments, second order
     assert errors[0] < 1e-4
     assert 3.5 < errors[0] / errors[1] < 4.5
 

@@ -300,22 +300,8 @@ impl WallSpec {
                 permeability,
             } => {
                 need_d()?;
-                let coef = enhancement * leveque_coef(seg, d);
-                // C4 floor: Sh = 3.66 (the boundary layer cannot be thicker than the lumen)
-                let floor = enhancement * SH_GRAETZ * d / (2.0 * seg.radius) * s;
-                match shear {
-                    Shear::CycleMean => SegmentLaw::Fixed {
-                        g: series((coef * q_mean.cbrt()).max(floor), gp(permeability)),
-                        cw: *wall_concentration,
-                        q: 0.0,
-                    },
-                    Shear::Instantaneous | Shear::Relaxed => SegmentLaw::Instantaneous {
-                        coef,
-                        floor,
-                        gp: gp(permeability),
-                        cw: *wall_concentration,
-                    },
-                }
+                let (gp, cw) = (gp(permeability), *wall_concentration);
+                leveque_law(seg, d, q_mean, *shear, *enhancement, gp, cw)
             }
             WallSpec::Graetz {
                 wall_concentration,
@@ -333,6 +319,35 @@ impl WallSpec {
                 }
             }
         })
+    }
+}
+
+/// The Lévêque law of one segment (C5s): cycle-mean shear gives a fixed conductance, the
+/// time-dependent shears the coefficient of |Q|^{1/3} and the Graetz floor.
+fn leveque_law(
+    seg: &SegmentWall,
+    d: f64,
+    q_mean: f64,
+    shear: Shear,
+    enhancement: f64,
+    gp: f64,
+    cw: f64,
+) -> SegmentLaw {
+    let coef = enhancement * leveque_coef(seg, d);
+    // C4 floor: Sh = 3.66 (the boundary layer cannot be thicker than the lumen)
+    let floor = enhancement * SH_GRAETZ * d / (2.0 * seg.radius) * seg.area();
+    match shear {
+        Shear::CycleMean => SegmentLaw::Fixed {
+            g: series((coef * q_mean.cbrt()).max(floor), gp),
+            cw,
+            q: 0.0,
+        },
+        Shear::Instantaneous | Shear::Relaxed => SegmentLaw::Instantaneous {
+            coef,
+            floor,
+            gp,
+            cw,
+        },
     }
 }
 

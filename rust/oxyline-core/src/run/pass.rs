@@ -33,6 +33,8 @@ pub(super) fn run(
     let mut flow = plan.flow(s, &mut y, transport.is_some() && !quasi)?;
     let (species, initial_stored) = match transport {
         Some(tr) => {
+            // per-segment species columns nobody records are not computed
+            tr.set_recorded_columns(s.species_columns.as_deref());
             let level = flow.integrator().alpha_f();
             let (sp, stored) = Species::start(tr, &y, plan.dt, level, !plan.use_rk4)?;
             (Some(sp), stored)

@@ -19,77 +19,21 @@ pub(super) fn cells_per_segment(v: f64, element: &str, key: &str) -> Result<usiz
     }
 }
 
-impl Species {
+impl SpeciesPlan {
     /// Validate one species of the transport section against the circuit: binding, boundary
-    /// values of every boundary condition, walls per vessel, initial value. `sizes` = (cells,
-    /// segments, transport nodes).
-    pub(super) fn build(
-        sp: &SpeciesSpec,
-        circuit: &Circuit,
-        boundary_names: &[String],
-        boundary_inlet: &[bool],
-        sizes: (usize, usize, usize),
-    ) -> Result<Self> {
-        let (ncells, nsegs, nnodes) = sizes;
+    /// values of every boundary condition, walls per vessel, initial value.
+    pub(super) fn build(sp: &SpeciesSpec, circuit: &Circuit) -> Result<Self> {
         let el = format!("species '{}'", sp.name);
-        if !(sp.decay.is_finite() && sp.decay >= 0.0) {
-            return Err(bad(
-                &el,
-                format!("decay must be a finite number >= 0, got {}", sp.decay),
-            ));
-        }
-        if !(sp.diffusivity.is_finite() && sp.diffusivity >= 0.0) {
-            return Err(bad(
-                &el,
-                format!(
-                    "diffusivity must be a finite number >= 0, got {}",
-                    sp.diffusivity
-                ),
-            ));
-        }
-        let binding = Binding::from_spec(&sp.binding, &el)?;
-        let inlet = Waveform::from_spec(&sp.inlet, &format!("{el} inlet"))?;
-        for name in sp.inlets.keys().chain(sp.backflow.keys()) {
-            if !boundary_names.contains(name) {
+        for (key, v) in [("decay", sp.decay), ("diffusivity", sp.diffusivity)] {
+            if !(v.is_finite() && v >= 0.0) {
                 return Err(bad(
                     &el,
-                    format!("names boundary condition '{name}', which the network does not have"),
+                    format!("{key} must be a finite number >= 0, got {v}"),
                 ));
             }
         }
-        let mut boundary = Vec::new();
-        for (b, name) in boundary_names.iter().enumerate() {
-            let v = if boundary_inlet[b] {
-                match sp.inlets.get(name) {
-                    Some(w) => BoundaryValue::Wave(Waveform::from_spec(
-                        w,
-                        &format!("{el} inlet '{name}'"),
-                    )?),
-                    None => BoundaryValue::Wave(inlet.clone()),
-                }
-            } else {
-                match sp.backflow.get(name) {
-                    Some(w) => BoundaryValue::Wave(Waveform::from_spec(
-                        w,
-                        &format!("{el} backflow '{name}'"),
-                    )?),
-                    None => BoundaryValue::ZeroGradient,
-                }
-            };
-            boundary.push(v);
-        }
-        sp.wall.validate(&format!("{el} wall"))?;
-        let mut walls = vec![sp.wall.clone(); circuit.vessel_names.len()];
-        for (vname, w) in &sp.per_vessel {
-            let Some(vi) = circuit.vessel_names.iter().position(|n| n == vname) else {
-                return Err(bad(
-                    &el,
-                    format!("per_vessel names vessel '{vname}', which the network does not have"),
-                ));
-            };
-            w.validate(&format!("{el} wall of vessel '{vname}'"))?;
-            walls[vi] = w.clone();
-        }
+        let binding = Binding::from_spec(&sp.binding, &el)?;
+        let inlet = Waveform::from_spec(&sp.inlet, &format!("{el} inlet"))?;
         let initial_free = match sp.initial {
             Some(c) if c.is_finite() && c >= 0.0 => c,
             Some(c) => {
@@ -100,314 +44,146 @@ impl Species {
             }
             None => inlet.eval(0.0),
         };
-        Ok(Species {
+        let boundary = boundary_values(sp, circuit, &inlet, &el)?;
+        Ok(SpeciesPlan {
             name: sp.name.clone(),
             binding,
             decay: sp.decay,
             diffusivity: sp.diffusivity,
+            waves: (0..boundary.len())
+                .filter(|&k| matches!(boundary[k], BoundaryValue::Wave(_)))
+                .collect(),
             boundary,
-            walls,
-            laws: Vec::new(),
-            cell_g: vec![0.0; ncells],
-            cell_gcw: vec![0.0; ncells],
-            cell_q: vec![0.0; ncells],
-            dynamic: Vec::new(),
-            relax: Vec::new(),
-            relax_of_seg: vec![usize::MAX; nsegs],
-            relax_offset: 0,
-            dynamic_segs: Vec::new(),
-            shear_cbrt: vec![0.0; nsegs],
-            has_wall: false,
+            walls: vessel_walls(sp, circuit, &el)?,
             initial_free,
-            free: vec![initial_free; nnodes],
-            anchors: vec![HillAnchor::default(); nnodes],
-            mixing_conc: Vec::new(),
         })
     }
 }
 
+/// The value every boundary condition carries into the domain for species `sp`: its inlet
+/// waveform (the species' default inlet unless named), or at outlets the prescribed backflow
+/// value or zero gradient.
+fn boundary_values(
+    sp: &SpeciesSpec,
+    circuit: &Circuit,
+    inlet: &Waveform,
+    el: &str,
+) -> Result<Vec<BoundaryValue>> {
+    for name in sp.inlets.keys().chain(sp.backflow.keys()) {
+        if !circuit.boundaries.iter().any(|b| &b.name == name) {
+            return Err(bad(
+                el,
+                format!("names boundary condition '{name}', which the network does not have"),
+            ));
+        }
+    }
+    let wave = |w, what: &str, name: &str| {
+        Waveform::from_spec(w, &format!("{el} {what} '{name}'")).map(BoundaryValue::Wave)
+    };
+    circuit
+        .boundaries
+        .iter()
+        .map(
+            |b| match (b.inlet, sp.inlets.get(&b.name), sp.backflow.get(&b.name)) {
+                (true, Some(w), _) => wave(w, "inlet", &b.name),
+                (true, None, _) => Ok(BoundaryValue::Wave(inlet.clone())),
+                (false, _, Some(w)) => wave(w, "backflow", &b.name),
+                (false, _, None) => Ok(BoundaryValue::ZeroGradient),
+            },
+        )
+        .collect()
+}
+
+/// The wall of every vessel for species `sp`: its `wall`, or the vessel's `per_vessel` entry.
+fn vessel_walls(sp: &SpeciesSpec, circuit: &Circuit, el: &str) -> Result<Vec<WallSpec>> {
+    sp.wall.validate(&format!("{el} wall"))?;
+    let mut walls = vec![sp.wall.clone(); circuit.vessel_names.len()];
+    for (vname, w) in &sp.per_vessel {
+        let Some(vi) = circuit.vessel_names.iter().position(|n| n == vname) else {
+            return Err(bad(
+                el,
+                format!("per_vessel names vessel '{vname}', which the network does not have"),
+            ));
+        };
+        w.validate(&format!("{el} wall of vessel '{vname}'"))?;
+        walls[vi] = w.clone();
+    }
+    Ok(walls)
+}
+
+/// The species of the section, with unique non-empty names.
+fn species_plans(spec: &TransportSpec, circuit: &Circuit) -> Result<Vec<SpeciesPlan>> {
+    let mut seen = std::collections::HashSet::new();
+    spec.species
+        .iter()
+        .map(|sp| {
+            if sp.name.is_empty() || !seen.insert(sp.name.as_str()) {
+                let el = format!("species '{}'", sp.name);
+                return Err(bad(&el, "needs a unique, non-empty name".into()));
+            }
+            SpeciesPlan::build(sp, circuit)
+        })
+        .collect()
+}
+
 impl Transport {
-    /// Validate the transport section against the assembled circuit.
+    /// Validate the transport section against the assembled circuit and build its plan
+    /// (linear time); the result is an unrun transport of that plan.
     pub fn build(
         spec: &TransportSpec,
         circuit: &Circuit,
         dae: &Dae,
         probes: &Probes,
     ) -> Result<Self> {
-        let nn = circuit.nodes.len();
         check_settings(spec, circuit)?;
-        let fixed: Vec<bool> = {
-            let mut f = vec![false; nn];
-            for (n, _) in &circuit.fixed_pressures {
-                f[*n] = true;
-            }
-            f
-        };
-        let mut kind = vec![Kind::Mixing; nn];
-        for (i, node) in circuit.nodes.iter().enumerate() {
-            kind[i] = if node.boundary.is_some() || fixed[i] {
-                Kind::Exterior
-            } else if node.volume > 0.0 {
-                Kind::Cell
-            } else {
-                if dae.e[i] > 0.0 {
-                    // a compliant node with no lumen volume would store blood but no solute
-                    return Err(bad(
-                        &node.name,
-                        "has compliance but no lumen volume, so transport cannot conserve mass there; give the vessel geometry instead of lumped values".into(),
-                    ));
-                }
-                Kind::Mixing
-            };
+        if dae.n >= u32::MAX as usize {
+            return Err(bad("transport", "network too large".into()));
         }
-        let boundary_of = |n: usize| -> End {
-            match circuit.nodes[n].boundary {
-                Some(b) if kind[n] == Kind::Exterior => End::Boundary(b),
-                _ => End::Node(n),
-            }
-        };
-        let mut faces = Vec::new();
-        let mut face_of_unknown = vec![usize::MAX; dae.n];
-        for (bi, b) in circuit.branches.iter().enumerate() {
-            let (ka, kb) = (kind[b.from], kind[b.to]);
-            if ka == Kind::Exterior && kb == Kind::Exterior {
-                continue;
-            }
-            let (from, to) = (boundary_of(b.from), boundary_of(b.to));
-            // a prescribed-pressure node without a tag cannot happen from network.rs; be explicit
-            for (k, e) in [(ka, from), (kb, to)] {
-                if k == Kind::Exterior && matches!(e, End::Node(_)) {
-                    return Err(bad(
-                        &b.name,
-                        "connects to a prescribed-pressure node without a boundary condition"
-                            .into(),
-                    ));
-                }
-            }
-            face_of_unknown[nn + bi] = faces.len();
-            faces.push(Face {
-                unknown: nn + bi,
-                from,
-                to,
-            });
+        let mut kind = classify_nodes(circuit, dae)?;
+        let (mut faces, sources) = flow_faces(circuit, &kind)?;
+        contract_boundary_points(circuit, &mut kind, &mut faces);
+        let mut face_of_unknown = vec![u32::MAX; dae.n];
+        for (fi, f) in faces.iter().enumerate() {
+            face_of_unknown[f.unknown] = fi as u32;
         }
-        let sources: Vec<(usize, Waveform, usize)> = circuit
-            .sources
-            .iter()
-            .zip(&circuit.source_boundary)
-            .filter(|((n, _), _)| kind[*n] != Kind::Exterior)
-            .map(|((n, w), b)| (*n, w.clone(), *b))
-            .collect();
-        // Contract pass-through points at boundaries: a volume-free node joining one face to a
-        // cell and one face to a boundary (the end node of an inverted-L vessel at a resistance
-        // or Windkessel outlet) carries the same flow on both (KCL), so the cell's face leads
-        // straight to the boundary. Zero-gradient backflow then carries the cell's own value,
-        // and the hot loop has one point less per outlet.
-        {
-            let mut inc: Vec<Vec<usize>> = vec![Vec::new(); nn];
-            for (fi, f) in faces.iter().enumerate() {
-                for e in [f.from, f.to] {
-                    if let End::Node(n) = e {
-                        inc[n].push(fi);
-                    }
-                }
-            }
-            let mut has_source = vec![false; nn];
-            for ((n, _), _) in circuit.sources.iter().zip(&circuit.source_boundary) {
-                has_source[*n] = true;
-            }
-            let other = |f: &Face, m: usize| if f.from == End::Node(m) { f.to } else { f.from };
-            let mut dropped = vec![false; faces.len()];
-            for m in 0..nn {
-                if kind[m] != Kind::Mixing || inc[m].len() != 2 || has_source[m] {
-                    continue;
-                }
-                let (fa, fb) = (inc[m][0], inc[m][1]);
-                let (f_net, f_bnd, b) = match (other(&faces[fa], m), other(&faces[fb], m)) {
-                    (End::Node(n), End::Boundary(b)) if kind[n] == Kind::Cell => (fa, fb, b),
-                    (End::Boundary(b), End::Node(n)) if kind[n] == Kind::Cell => (fb, fa, b),
-                    _ => continue,
-                };
-                let f = &mut faces[f_net];
-                if f.from == End::Node(m) {
-                    f.from = End::Boundary(b);
-                } else {
-                    f.to = End::Boundary(b);
-                }
-                dropped[f_bnd] = true;
-                kind[m] = Kind::Exterior;
-            }
-            let mut k = 0;
-            faces.retain(|_| {
-                k += 1;
-                !dropped[k - 1]
-            });
-            face_of_unknown.iter_mut().for_each(|v| *v = usize::MAX);
-            for (fi, f) in faces.iter().enumerate() {
-                face_of_unknown[f.unknown] = fi;
-            }
-        }
-        // Refinement (docs/physics.md §5): every volume node becomes a chain of m sub-cells (see
-        // `Chain`). Sub-cell 0 is the node itself; the others are new transport nodes nn.., so
-        // the face, upwind and sweep machinery below works unchanged on the refined graph.
-        let m_default =
-            cells_per_segment(spec.cells_per_segment, "transport", "cells_per_segment")?;
-        let mut m_vessel = vec![m_default; circuit.vessel_names.len()];
-        for (name, &v) in &spec.cells_per_vessel {
-            let Some(vi) = circuit.vessel_names.iter().position(|n| n == name) else {
-                return Err(bad(
-                    "transport",
-                    format!(
-                        "cells_per_vessel names vessel '{name}', which the network does not have"
-                    ),
-                ));
-            };
-            m_vessel[vi] = cells_per_segment(v, &format!("vessel '{name}'"), "cells_per_segment")?;
-        }
-        // a node shared by vessels (a junction cell) takes the finest of their refinements
-        let mut m_node = vec![1usize; nn];
-        for sg in &circuit.segments {
-            for &(n, share) in &sg.nodes {
-                if share > 0.0 && kind[n] == Kind::Cell {
-                    m_node[n] = m_node[n].max(m_vessel[sg.vessel]);
-                }
-            }
-        }
+        let m_node = refinement(spec, circuit, &kind)?;
         let n_flow_faces = faces.len();
-        let mut node_names: Vec<String> = circuit.nodes.iter().map(|n| n.name.clone()).collect();
-        let mut first_extra = vec![usize::MAX; nn];
-        let mut last_sub: Vec<usize> = (0..nn).collect();
-        let mut chains = Vec::new();
-        if m_node.iter().any(|&m| m > 1) {
-            let (mut ins, mut outs) = (vec![Vec::new(); nn], vec![Vec::new(); nn]);
-            for (fi, f) in faces.iter().enumerate() {
-                if let End::Node(n) = f.to {
-                    ins[n].push(fi);
-                }
-                if let End::Node(n) = f.from {
-                    outs[n].push(fi);
-                }
-            }
-            let mut node_src = vec![Vec::new(); nn];
-            for (k, (n, _, _)) in sources.iter().enumerate() {
-                node_src[*n].push(k);
-            }
-            for n in 0..nn {
-                let m = m_node[n];
-                if m == 1 {
-                    continue;
-                }
-                first_extra[n] = kind.len();
-                for k in 1..m {
-                    kind.push(Kind::Cell);
-                    node_names.push(format!("{} (transport cell {}/{m})", node_names[n], k + 1));
-                }
-                let sub = |k: usize| if k == 0 { n } else { first_extra[n] + k - 1 };
-                last_sub[n] = sub(m - 1);
-                for &fi in &outs[n] {
-                    faces[fi].from = End::Node(last_sub[n]);
-                }
-                let first_face = faces.len();
-                for k in 1..m {
-                    faces.push(Face {
-                        unknown: usize::MAX,
-                        from: End::Node(sub(k - 1)),
-                        to: End::Node(sub(k)),
-                    });
-                }
-                chains.push(Chain {
-                    in_faces: std::mem::take(&mut ins[n]),
-                    out_faces: std::mem::take(&mut outs[n]),
-                    sources: std::mem::take(&mut node_src[n]),
-                    first_face,
-                    m,
-                });
-            }
-        }
-        let nt = kind.len();
-        // cells in node order, the sub-cells of a node contiguous (unchanged order when m = 1)
-        let mut cells = Vec::new();
-        let mut node_cell = vec![usize::MAX; nt];
-        let mut cell_node = Vec::new();
-        let mut v0 = Vec::new();
-        let mut cap = Vec::new();
-        for n in 0..nn {
-            if kind[n] != Kind::Cell {
-                continue;
-            }
-            let m = m_node[n];
-            for k in 0..m {
-                let c = if k == 0 { n } else { first_extra[n] + k - 1 };
-                node_cell[c] = cells.len();
-                cells.push(c);
-                cell_node.push(n);
-                v0.push(circuit.nodes[n].volume / m as f64);
-                cap.push(dae.e[n] / m as f64);
-            }
-        }
-        let nn = nt;
-        let mixing: Vec<usize> = (0..nn).filter(|&i| kind[i] == Kind::Mixing).collect();
-        let (node_ptr, node_faces, node_sources) = incidence(nn, &faces, &sources);
-        let nc_nodes = circuit.nodes.len();
-        let segments: Vec<Segment> = circuit
-            .segments
-            .iter()
-            .map(|s| Segment {
-                branch_unknown: nc_nodes + s.branch,
-                nodes: s.nodes,
-                wall: SegmentWall {
-                    radius: s.radius,
-                    x0: s.x0,
-                    x1: s.x1,
-                },
-                dx: s.x1 - s.x0,
-                volume: s.volume,
-                compliance: s.compliance,
-            })
-            .collect();
-        let (pieces, seg_pieces) = wall_pieces(&segments, &m_node, &node_cell, &first_extra);
-
-        let boundary_inlet: Vec<bool> = circuit.boundaries.iter().map(|b| b.inlet).collect();
-        let boundary_names: Vec<String> =
-            circuit.boundaries.iter().map(|b| b.name.clone()).collect();
-        let mut species = Vec::new();
-        let mut seen = std::collections::HashSet::new();
-        let sizes = (cells.len(), segments.len(), kind.len());
-        for sp in &spec.species {
-            if sp.name.is_empty() || !seen.insert(sp.name.clone()) {
-                let el = format!("species '{}'", sp.name);
-                return Err(bad(&el, "needs a unique, non-empty name".into()));
-            }
-            species.push(Species::build(
-                sp,
-                circuit,
-                &boundary_names,
-                &boundary_inlet,
-                sizes,
-            )?);
-        }
-        let (out_vessels, out_segments) = output_layout(circuit, probes);
-        let ncells = cells.len();
+        let refined = Refined::new(&mut kind, &mut faces, &sources, &m_node);
+        let layout = CellLayout::new(circuit, dae, &kind, &m_node, &refined.first_extra);
+        let segments = segments(circuit, &face_of_unknown);
+        let (pieces, seg_pieces) =
+            wall_pieces(&segments, &m_node, &layout.node_cell, &refined.first_extra);
+        let species = species_plans(spec, circuit)?;
+        let (out_vessels, out_segments) = output_layout(circuit, probes, &face_of_unknown);
+        drop(face_of_unknown);
+        let nn = kind.len();
+        let (node_ptr, node_faces, source_ptr, source_list) = incidence(nn, &faces, &sources);
+        // the identity without refinement: left empty (see `Plan::last_sub`)
+        let last_sub = if refined.chains.is_empty() {
+            Vec::new()
+        } else {
+            refined.last_sub
+        };
         let mut p = Plan {
+            mixing: (0..nn).filter(|&i| kind[i] == Kind::Mixing).collect(),
             kind,
-            cells,
-            node_cell,
-            v0,
-            cap,
+            cells: layout.cells,
+            node_cell: layout.node_cell,
+            v0: layout.v0,
+            cap: layout.cap,
             p_ref: spec.reference_pressure,
             faces,
-            face_of_unknown,
             sources,
-            boundary_inlet,
-            mixing,
+            boundary_inlet: circuit.boundaries.iter().map(|b| b.inlet).collect(),
             node_ptr,
             node_faces,
-            node_sources,
+            source_ptr,
+            source_list,
             segments,
             n_flow_faces,
             face_unknowns: Vec::new(),
-            chains,
-            cell_node,
+            chains: refined.chains,
+            cell_node: layout.cell_node,
             last_sub,
             pieces,
             seg_pieces,
@@ -415,39 +191,301 @@ impl Transport {
             v_eps: spec.velocity_threshold,
             out_vessels,
             out_segments,
-            segment_vessels: circuit.segments.iter().map(|s| s.vessel).collect(),
-            node_names,
+            segment_vessels: circuit.segments.iter().map(|s| s.vessel as u32).collect(),
+            node_names: Names::new(circuit.nodes.iter().map(|n| n.name.as_str()))?,
             domain: Vec::new(),
             internal: Vec::new(),
             boundary_faces: Vec::new(),
             simple_mixing: Vec::new(),
             general_mixing: Vec::new(),
             tree: None,
+            species,
+            base_laws: Vec::new(),
         };
         p.finish()?;
-        let mut t = Transport {
-            species,
-            mean_abs: Vec::new(),
-            segment_output: true,
-            vol: vec![0.0; ncells],
-            conc: vec![0.0; nn],
-            qf: vec![0.0; p.faces.len()],
-            qs: vec![0.0; p.sources.len()],
-            bval: vec![None; p.boundary_inlet.len()],
-            sweep: Sweep::new(nn),
-            wvol: Vec::new(),
-            plan: Arc::new(p),
-        };
-        // laws that do not need the mean flow are final now
-        let zero = vec![0.0; t.plan.segments.len()];
-        t.set_laws(&zero, false)?;
-        Ok(t)
+        Ok(Transport::from_plan(Arc::new(p)))
     }
+}
+
+/// Cell, mixing point or exterior node, per circuit node. A compliant node without lumen
+/// volume is an error (it would store blood but no solute).
+fn classify_nodes(circuit: &Circuit, dae: &Dae) -> Result<Vec<Kind>> {
+    let mut kind = vec![Kind::Mixing; circuit.nodes.len()];
+    for (n, _) in &circuit.fixed_pressures {
+        kind[*n] = Kind::Exterior;
+    }
+    for (i, node) in circuit.nodes.iter().enumerate() {
+        if node.boundary.is_some() || kind[i] == Kind::Exterior {
+            kind[i] = Kind::Exterior;
+        } else if node.volume > 0.0 {
+            kind[i] = Kind::Cell;
+        } else if dae.e[i] > 0.0 {
+            return Err(bad(
+                &node.name,
+                "has compliance but no lumen volume, so transport cannot conserve mass there; give the vessel geometry instead of lumped values".into(),
+            ));
+        }
+    }
+    Ok(kind)
+}
+
+/// One face per branch with a domain end (its ends: domain nodes or boundary conditions),
+/// and the flow sources into the domain.
+#[allow(clippy::type_complexity)]
+fn flow_faces(
+    circuit: &Circuit,
+    kind: &[Kind],
+) -> Result<(Vec<Face>, Vec<(usize, Waveform, usize)>)> {
+    let nn = circuit.nodes.len();
+    let end = |n: usize| -> End {
+        match circuit.nodes[n].boundary {
+            Some(b) if kind[n] == Kind::Exterior => End::Boundary(b),
+            _ => End::Node(n),
+        }
+    };
+    let mut faces = Vec::with_capacity(circuit.branches.len());
+    for (bi, b) in circuit.branches.iter().enumerate() {
+        let (ka, kb) = (kind[b.from], kind[b.to]);
+        if ka == Kind::Exterior && kb == Kind::Exterior {
+            continue;
+        }
+        let (from, to) = (end(b.from), end(b.to));
+        // a prescribed-pressure node without a tag cannot happen from network.rs; be explicit
+        for (k, e) in [(ka, from), (kb, to)] {
+            if k == Kind::Exterior && matches!(e, End::Node(_)) {
+                return Err(bad(
+                    &b.name,
+                    "connects to a prescribed-pressure node without a boundary condition".into(),
+                ));
+            }
+        }
+        faces.push(Face {
+            unknown: nn + bi,
+            from,
+            to,
+        });
+    }
+    let sources = circuit
+        .sources
+        .iter()
+        .zip(&circuit.source_boundary)
+        .filter(|((n, _), _)| kind[*n] != Kind::Exterior)
+        .map(|((n, w), b)| (*n, w.clone(), *b))
+        .collect();
+    Ok((faces, sources))
+}
+
+/// Contract pass-through points at boundaries: a volume-free node joining one face to a cell
+/// and one face to a boundary (the end node of an inverted-L vessel at a resistance or
+/// Windkessel outlet) carries the same flow on both (KCL), so the cell's face leads straight
+/// to the boundary. Zero-gradient backflow then carries the cell's own value, and the hot
+/// loop has one point less per outlet.
+fn contract_boundary_points(circuit: &Circuit, kind: &mut [Kind], faces: &mut Vec<Face>) {
+    let nn = circuit.nodes.len();
+    // incident faces per node: up to two are needed (more disqualifies the node)
+    let mut inc = vec![[u32::MAX; 2]; nn];
+    let mut deg = vec![0u8; nn];
+    for (fi, f) in faces.iter().enumerate() {
+        for e in [f.from, f.to] {
+            if let End::Node(n) = e {
+                if deg[n] < 2 {
+                    inc[n][deg[n] as usize] = fi as u32;
+                }
+                deg[n] = deg[n].saturating_add(1);
+            }
+        }
+    }
+    for ((n, _), _) in circuit.sources.iter().zip(&circuit.source_boundary) {
+        deg[*n] = u8::MAX; // a node with a source stays
+    }
+    let other = |f: &Face, m: usize| if f.from == End::Node(m) { f.to } else { f.from };
+    let mut dropped = vec![false; faces.len()];
+    for m in 0..nn {
+        if kind[m] != Kind::Mixing || deg[m] != 2 {
+            continue;
+        }
+        let (fa, fb) = (inc[m][0] as usize, inc[m][1] as usize);
+        let (f_net, f_bnd, b) = match (other(&faces[fa], m), other(&faces[fb], m)) {
+            (End::Node(n), End::Boundary(b)) if kind[n] == Kind::Cell => (fa, fb, b),
+            (End::Boundary(b), End::Node(n)) if kind[n] == Kind::Cell => (fb, fa, b),
+            _ => continue,
+        };
+        let f = &mut faces[f_net];
+        if f.from == End::Node(m) {
+            f.from = End::Boundary(b);
+        } else {
+            f.to = End::Boundary(b);
+        }
+        dropped[f_bnd] = true;
+        kind[m] = Kind::Exterior;
+    }
+    let mut k = 0;
+    faces.retain(|_| {
+        k += 1;
+        !dropped[k - 1]
+    });
+}
+
+/// Sub-cells per circuit node (docs/physics.md §5): `cells_per_segment`, per vessel
+/// `cells_per_vessel`; a node shared by vessels (a junction cell) takes the finest.
+fn refinement(spec: &TransportSpec, circuit: &Circuit, kind: &[Kind]) -> Result<Vec<usize>> {
+    let m_default = cells_per_segment(spec.cells_per_segment, "transport", "cells_per_segment")?;
+    let mut m_vessel = vec![m_default; circuit.vessel_names.len()];
+    for (name, &v) in &spec.cells_per_vessel {
+        let Some(vi) = circuit.vessel_names.iter().position(|n| n == name) else {
+            return Err(bad(
+                "transport",
+                format!("cells_per_vessel names vessel '{name}', which the network does not have"),
+            ));
+        };
+        m_vessel[vi] = cells_per_segment(v, &format!("vessel '{name}'"), "cells_per_segment")?;
+    }
+    let mut m_node = vec![1usize; circuit.nodes.len()];
+    for sg in &circuit.segments {
+        for &(n, share) in &sg.nodes {
+            if share > 0.0 && kind[n] == Kind::Cell {
+                m_node[n] = m_node[n].max(m_vessel[sg.vessel]);
+            }
+        }
+    }
+    Ok(m_node)
+}
+
+/// The refined graph (see `Chain`): every volume node with m > 1 becomes a chain of m
+/// sub-cells. Sub-cell 0 is the node itself; the others are new transport nodes nn.., so the
+/// face, upwind and sweep machinery works unchanged on the refined graph.
+struct Refined {
+    /// Per circuit node: its first extra sub-cell (`usize::MAX`: not refined).
+    first_extra: Vec<usize>,
+    last_sub: Vec<usize>,
+    chains: Vec<Chain>,
+}
+
+impl Refined {
+    fn new(
+        kind: &mut Vec<Kind>,
+        faces: &mut Vec<Face>,
+        sources: &[(usize, Waveform, usize)],
+        m_node: &[usize],
+    ) -> Refined {
+        let nn = kind.len();
+        let mut r = Refined {
+            first_extra: vec![usize::MAX; nn],
+            last_sub: (0..nn).collect(),
+            chains: Vec::new(),
+        };
+        if m_node.iter().all(|&m| m == 1) {
+            return r;
+        }
+        let (mut ins, mut outs) = (vec![Vec::new(); nn], vec![Vec::new(); nn]);
+        for (fi, f) in faces.iter().enumerate() {
+            if let End::Node(n) = f.to {
+                ins[n].push(fi);
+            }
+            if let End::Node(n) = f.from {
+                outs[n].push(fi);
+            }
+        }
+        let mut node_src = vec![Vec::new(); nn];
+        for (k, (n, _, _)) in sources.iter().enumerate() {
+            node_src[*n].push(k);
+        }
+        for n in (0..nn).filter(|&n| m_node[n] > 1) {
+            let m = m_node[n];
+            r.first_extra[n] = kind.len();
+            kind.extend(std::iter::repeat_n(Kind::Cell, m - 1));
+            let sub = |k: usize| if k == 0 { n } else { r.first_extra[n] + k - 1 };
+            r.last_sub[n] = sub(m - 1);
+            for &fi in &outs[n] {
+                faces[fi].from = End::Node(r.last_sub[n]);
+            }
+            let first_face = faces.len();
+            faces.extend((1..m).map(|k| Face {
+                unknown: usize::MAX,
+                from: End::Node(sub(k - 1)),
+                to: End::Node(sub(k)),
+            }));
+            r.chains.push(Chain {
+                in_faces: std::mem::take(&mut ins[n]),
+                out_faces: std::mem::take(&mut outs[n]),
+                sources: std::mem::take(&mut node_src[n]),
+                first_face,
+                m,
+            });
+        }
+        r
+    }
+}
+
+/// Cells in node order, the sub-cells of a node contiguous (unchanged order when m = 1), with
+/// their circuit node, reference volume and compliance (V_n/m, C_n/m).
+struct CellLayout {
+    cells: Vec<usize>,
+    node_cell: Vec<usize>,
+    cell_node: Vec<usize>,
+    v0: Vec<f64>,
+    cap: Vec<f64>,
+}
+
+impl CellLayout {
+    fn new(
+        circuit: &Circuit,
+        dae: &Dae,
+        kind: &[Kind],
+        m_node: &[usize],
+        first_extra: &[usize],
+    ) -> CellLayout {
+        let mut l = CellLayout {
+            cells: Vec::new(),
+            node_cell: vec![usize::MAX; kind.len()],
+            cell_node: Vec::new(),
+            v0: Vec::new(),
+            cap: Vec::new(),
+        };
+        for n in (0..circuit.nodes.len()).filter(|&n| kind[n] == Kind::Cell) {
+            let m = m_node[n];
+            for k in 0..m {
+                let c = if k == 0 { n } else { first_extra[n] + k - 1 };
+                l.node_cell[c] = l.cells.len();
+                l.cells.push(c);
+                l.cell_node.push(n);
+                l.v0.push(circuit.nodes[n].volume / m as f64);
+                l.cap.push(dae.e[n] / m as f64);
+            }
+        }
+        l
+    }
+}
+
+/// The flow segments as the transport sees them (branch unknown and face, nodes, wall).
+fn segments(circuit: &Circuit, face_of_unknown: &[u32]) -> Vec<Segment> {
+    let nc_nodes = circuit.nodes.len();
+    circuit
+        .segments
+        .iter()
+        .map(|s| Segment {
+            branch_unknown: (nc_nodes + s.branch) as u32,
+            face: face_of_unknown[nc_nodes + s.branch],
+            nodes: s.nodes.map(|(n, _)| n as u32),
+            shares: s.nodes.map(|(_, share)| share),
+            wall: SegmentWall {
+                radius: s.radius,
+                x0: s.x0,
+                x1: s.x1,
+            },
+            volume: s.volume,
+            compliance: s.compliance,
+        })
+        .collect()
 }
 
 /// The output vessels of the flow probes (first and last face, segment range) and their
 /// segments in order. One pass: segments grouped by vessel, names looked up in a map.
-pub(super) fn output_layout(circuit: &Circuit, probes: &Probes) -> (Vec<OutVessel>, Vec<usize>) {
+fn output_layout(
+    circuit: &Circuit,
+    probes: &Probes,
+    face_of_unknown: &[u32],
+) -> (Vec<OutVessel>, Vec<usize>) {
     let vessel_index: std::collections::HashMap<&str, usize> = circuit
         .vessel_names
         .iter()
@@ -460,6 +498,10 @@ pub(super) fn output_layout(circuit: &Circuit, probes: &Probes) -> (Vec<OutVesse
             v.push(j);
         }
     }
+    let face = |u: usize| match face_of_unknown.get(u) {
+        Some(&f) if f != u32::MAX => f as usize,
+        _ => usize::MAX,
+    };
     let mut out_vessels = Vec::new();
     let mut out_segments = Vec::new();
     for (k, name) in probes.vessels.iter().enumerate() {
@@ -468,8 +510,8 @@ pub(super) fn output_layout(circuit: &Circuit, probes: &Probes) -> (Vec<OutVesse
             out_segments.extend_from_slice(&segs_of_vessel[vi]);
         }
         out_vessels.push(OutVessel {
-            first: probes.vessel_unknowns[4 * k + 2],
-            last: probes.vessel_unknowns[4 * k + 3],
+            first: face(probes.vessel_unknowns[4 * k + 2]),
+            last: face(probes.vessel_unknowns[4 * k + 3]),
             segs: start..out_segments.len(),
         });
     }
@@ -479,31 +521,33 @@ pub(super) fn output_layout(circuit: &Circuit, probes: &Probes) -> (Vec<OutVesse
 /// Wall pieces: a segment's share in each cell; a refined node's share of the segment
 /// (for a node at the segment's start [x0, x0 + share dx], at its end
 /// [x1 − share dx, x1]) is split into m equal sub-intervals in flow order, with the law
-/// integrated over each (exact for Lévêque's x^{-1/3}, by area for constant laws)
-pub(super) fn wall_pieces(
+/// integrated over each (exact for Lévêque's x^{-1/3}, by area for constant laws). Returns
+/// the pieces, contiguous per segment, and the CSR offsets of every segment's pieces.
+fn wall_pieces(
     segments: &[Segment],
     m_node: &[usize],
     node_cell: &[usize],
     first_extra: &[usize],
-) -> (Vec<Piece>, Vec<std::ops::Range<usize>>) {
-    let mut pieces = Vec::new();
-    let mut seg_pieces = Vec::new();
+) -> (Vec<Piece>, Vec<u32>) {
+    let mut pieces = Vec::with_capacity(2 * segments.len());
+    let mut seg_pieces = Vec::with_capacity(segments.len() + 1);
+    seg_pieces.push(0);
     for (j, sg) in segments.iter().enumerate() {
-        let start = pieces.len();
-        for (end, &(n, share)) in sg.nodes.iter().enumerate() {
+        for (end, (n, share)) in sg.node_shares().into_iter().enumerate() {
             if share <= 0.0 || node_cell[n] == usize::MAX {
                 continue;
             }
             let m = m_node[n];
+            let piece = |c: usize, share: f64, wall: SegmentWall| Piece {
+                seg: j as u32,
+                node: c as u32,
+                cell: node_cell[c] as u32,
+                share,
+                wall,
+            };
             if m == 1 {
                 // unrefined: the whole segment's law times the share (as before refinement)
-                pieces.push(Piece {
-                    seg: j,
-                    node: n,
-                    cell: node_cell[n],
-                    share,
-                    wall: sg.wall,
-                });
+                pieces.push(piece(n, share, sg.wall));
                 continue;
             }
             let w = sg.wall;
@@ -521,21 +565,17 @@ pub(super) fn wall_pieces(
                 } else {
                     a + (b - a) * (k + 1) as f64 / m as f64
                 };
-                pieces.push(Piece {
-                    seg: j,
-                    node: c,
-                    cell: node_cell[c],
-                    share: 1.0,
-                    wall: SegmentWall {
-                        radius: w.radius,
-                        x0: xa,
-                        x1: xb,
-                    },
-                });
+                let wall = SegmentWall {
+                    radius: w.radius,
+                    x0: xa,
+                    x1: xb,
+                };
+                pieces.push(piece(c, 1.0, wall));
             }
         }
-        seg_pieces.push(start..pieces.len());
+        seg_pieces.push(pieces.len() as u32);
     }
+    pieces.shrink_to_fit();
     (pieces, seg_pieces)
 }
 
@@ -572,23 +612,23 @@ fn check_settings(spec: &TransportSpec, circuit: &Circuit) -> Result<()> {
     Ok(())
 }
 
-/// CSR node → incident faces, and the flow sources of every node. Linear time.
+/// CSR node → incident faces, and CSR node → flow sources. Linear time.
+#[allow(clippy::type_complexity)]
 fn incidence(
     nn: usize,
     faces: &[Face],
     sources: &[(usize, Waveform, usize)],
-) -> (Vec<usize>, Vec<usize>, Vec<Vec<usize>>) {
-    let mut deg = vec![0usize; nn + 1];
+) -> (Vec<usize>, Vec<usize>, Vec<u32>, Vec<u32>) {
+    let mut node_ptr = vec![0usize; nn + 1];
     for f in faces {
         for e in [f.from, f.to] {
             if let End::Node(n) = e {
-                deg[n] += 1;
+                node_ptr[n + 1] += 1;
             }
         }
     }
-    let mut node_ptr = vec![0usize; nn + 1];
     for i in 0..nn {
-        node_ptr[i + 1] = node_ptr[i] + deg[i];
+        node_ptr[i + 1] += node_ptr[i];
     }
     let mut node_faces = vec![0usize; node_ptr[nn]];
     let mut fill = node_ptr.clone();
@@ -600,22 +640,32 @@ fn incidence(
             }
         }
     }
-    let mut node_sources = vec![Vec::new(); nn];
-    for (k, (n, _, _)) in sources.iter().enumerate() {
-        node_sources[*n].push(k);
+    let mut source_ptr = vec![0u32; nn + 1];
+    for (n, _, _) in sources {
+        source_ptr[n + 1] += 1;
     }
-    (node_ptr, node_faces, node_sources)
+    for i in 0..nn {
+        source_ptr[i + 1] += source_ptr[i];
+    }
+    let mut source_list = vec![0u32; sources.len()];
+    let mut fill = source_ptr.clone();
+    for (k, (n, _, _)) in sources.iter().enumerate() {
+        source_list[fill[*n] as usize] = k as u32;
+        fill[*n] += 1;
+    }
+    (node_ptr, node_faces, source_ptr, source_list)
 }
 
 impl Plan {
     /// The solver lists derived from the grid: domain nodes, internal and boundary faces,
-    /// simple and general mixing points, the tree elimination order, the face unknowns.
+    /// simple and general mixing points, the tree elimination order, the face unknowns, and
+    /// the build's wall laws.
     fn finish(&mut self) -> Result<()> {
         let nn = self.kind.len();
         self.domain = (0..nn)
             .filter(|&n| self.kind[n] != Kind::Exterior)
             .collect();
-        if self.faces.len() >= u32::MAX as usize || nn >= u32::MAX as usize {
+        if self.faces.len().max(nn).max(self.pieces.len()) >= u32::MAX as usize {
             return Err(bad("transport", "network too large".into()));
         }
         for (fi, f) in self.faces.iter().enumerate() {
@@ -631,7 +681,7 @@ impl Plan {
                 let other = if f.from == End::Node(m) { f.to } else { f.from };
                 !matches!(other, End::Node(o) if self.kind[o] == Kind::Mixing)
             });
-            if faces.len() == 2 && self.node_sources[m].is_empty() && neighbours_known {
+            if faces.len() == 2 && self.node_sources(m).is_empty() && neighbours_known {
                 self.simple_mixing.push(m);
             } else {
                 self.general_mixing.push(m);
@@ -640,8 +690,12 @@ impl Plan {
         self.tree = tree_order(nn, &self.domain, &self.internal);
         self.face_unknowns = self.faces[..self.n_flow_faces]
             .iter()
-            .map(|f| f.unknown)
+            .map(|f| f.unknown as u32)
             .collect();
+        // laws that do not need the mean flow are final now
+        let zero = vec![0.0; self.segments.len()];
+        let laws = Laws::evaluate_all(self, &zero, false)?;
+        self.base_laws = laws.into_iter().map(Arc::new).collect();
         Ok(())
     }
 }

@@ -4,6 +4,18 @@
 #[allow(unused_imports)]
 use super::*;
 
+/// How the rows of a species are built, and so which wall linearisation the update after the
+/// solve reads (W = wlin·C_t + wconst per cell).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Rows {
+    /// A wall linear in C_t (`fixed_rows`): wlin = `cell_g`, wconst = `cell_wc`.
+    Fixed,
+    /// A binding with fixed laws (`binding_rows`), linearised into `sweep.wlin`, `wconst`.
+    Binding,
+    /// Shear-dependent walls (`general_rows`), linearised likewise.
+    General,
+}
+
 impl Transport {
     /// Backward-Euler upwind transport over [t, t + dt] after a generalized-α flow step, with
     /// the face flows of the step's α_f level, Q = Q_n + α_f (Q_{n+1} − Q_n), and sources at
@@ -20,6 +32,7 @@ impl Transport {
         y1: &[f64],
         z: &mut [f64],
     ) -> Result<()> {
+        self.ensure_scratch();
         let t_af = time + alpha_f * dt;
         self.load_flows_between(t_af, y0, y1, alpha_f);
         // the α_f-level state is only needed by shear-dependent walls (relaxed or instantaneous)
@@ -27,14 +40,19 @@ impl Transport {
         if self
             .species
             .iter()
-            .any(|sp| !sp.relax.is_empty() || !sp.dynamic_segs.is_empty())
+            .any(|sp| !sp.laws.relax.is_empty() || !sp.laws.dynamic_segs.is_empty())
         {
             ya.clear();
             ya.extend(y0.iter().zip(y1).map(|(a, b)| a + alpha_f * (b - a)));
         }
+        // one species with fixed linear rows (the common oxygen case): its rows are built in
+        // the volumes' pass over the cells
+        let fused = self.species.len() == 1
+            && self.rows_kind(0) == Rows::Fixed
+            && self.plan.formulation == Formulation::Conservative;
         let res = self
-            .transport_volumes(t_af, dt)
-            .and_then(|()| self.implicit_species(t_af, dt, &ya, z));
+            .transport_volumes(t_af, dt, fused.then_some(&*z))
+            .and_then(|()| self.implicit_species(t_af, dt, &ya, z, fused));
         self.sweep.ya = ya;
         if res.is_ok() {
             std::mem::swap(&mut self.wvol, &mut self.sweep.wnew);
@@ -42,8 +60,67 @@ impl Transport {
         res
     }
 
-    /// W' = W + dt (net inflow) of every cell with the loaded face flows, into `sweep.wnew`.
-    pub(super) fn transport_volumes(&mut self, t_af: f64, dt: f64) -> Result<()> {
+    /// W' = W + dt (net inflow) of every cell with the loaded face flows, into `sweep.wnew`;
+    /// with `rows_of_first` (the amounts) also the fixed rows of species 0 (`fixed_rows`).
+    pub(super) fn transport_volumes(
+        &mut self,
+        t_af: f64,
+        dt: f64,
+        rows_of_first: Option<&[f64]>,
+    ) -> Result<()> {
+        let net = self.net_inflow();
+        let mut w_new = std::mem::take(&mut self.sweep.wnew);
+        w_new.clear();
+        w_new.resize(self.plan.cells.len(), 0.0);
+        // (NaN fails the test too)
+        let mut positive = true;
+        let (cells, wvol) = (&self.plan.cells[..], &self.wvol[..]);
+        match rows_of_first {
+            None => {
+                for ((w, &n), &w0) in w_new.iter_mut().zip(cells).zip(wvol) {
+                    *w = w0 + dt * net[n];
+                    positive &= *w > 0.0;
+                }
+            }
+            Some(z) => {
+                let rate = 1.0 / dt + self.plan.species[0].decay;
+                let laws = &self.species[0].laws;
+                let zs = &z[..cells.len()];
+                let conc = &mut self.conc[..];
+                let (den, num) = (&mut self.sweep.den[..], &mut self.sweep.num[..]);
+                let (g, wc) = (&laws.cell_g[..], &laws.cell_wc[..]);
+                for (i, &n) in cells.iter().enumerate() {
+                    let w = wvol[i] + dt * net[n];
+                    positive &= w > 0.0;
+                    w_new[i] = w;
+                    conc[n] = zs[i] / wvol[i];
+                    den[n] = w * rate + g[i];
+                    num[n] = zs[i] / dt - wc[i];
+                }
+            }
+        }
+        self.sweep.dnode = net;
+        let bad = if positive {
+            None
+        } else {
+            w_new.iter().position(|&w| w.is_nan() || w <= 0.0)
+        };
+        self.sweep.wnew = w_new;
+        match bad {
+            None => Ok(()),
+            Some(i) => Err(Error::solver(
+                t_af,
+                format!(
+                    "transport volume of cell '{}' became {:.3e} m³: reduce dt",
+                    self.plan.node_name(self.plan.cells[i]),
+                    self.sweep.wnew[i]
+                ),
+            )),
+        }
+    }
+
+    /// Net inflow of every node with the loaded face flows (in `sweep.dnode`'s storage).
+    fn net_inflow(&mut self) -> Vec<f64> {
         let mut net = std::mem::take(&mut self.sweep.dnode);
         net.clear();
         net.resize(self.plan.kind.len(), 0.0);
@@ -65,29 +142,7 @@ impl Transport {
         for ((n, _, _), &q) in self.plan.sources.iter().zip(&self.qs) {
             net[*n] += q;
         }
-        let mut w_new = std::mem::take(&mut self.sweep.wnew);
-        w_new.clear();
-        w_new.extend(
-            self.plan
-                .cells
-                .iter()
-                .zip(&self.wvol)
-                .map(|(&n, &w)| w + dt * net[n]),
-        );
-        self.sweep.dnode = net;
-        let bad = w_new.iter().position(|&w| w.is_nan() || w <= 0.0);
-        self.sweep.wnew = w_new;
-        match bad {
-            None => Ok(()),
-            Some(i) => Err(Error::solver(
-                t_af,
-                format!(
-                    "transport volume of cell '{}' became {:.3e} m³: reduce dt",
-                    self.node_name(self.plan.cells[i]),
-                    self.sweep.wnew[i]
-                ),
-            )),
-        }
+        net
     }
 
     /// The backward-Euler solve of every species over the step (see `implicit_step`), with the
@@ -98,9 +153,9 @@ impl Transport {
         dt: f64,
         ya: &[f64],
         z: &mut [f64],
+        first_rows_built: bool,
     ) -> Result<()> {
         let nc = self.plan.cells.len();
-        let nsp = self.species.len();
         let (mut wconst, mut wlin) = (
             std::mem::take(&mut self.sweep.wconst),
             std::mem::take(&mut self.sweep.wlin),
@@ -108,39 +163,20 @@ impl Transport {
         wconst.resize(nc, 0.0);
         wlin.resize(nc, 0.0);
         let w_new = std::mem::take(&mut self.sweep.wnew);
-        let quasi = self.plan.formulation == Formulation::TlQuasisteady;
         let mut res = Ok(());
-        for s in 0..nsp {
+        for s in 0..self.species.len() {
             self.load_boundary(s, t_af);
-            let lambda = self.species[s].decay;
             self.relax_shears(s, dt, ya, z);
             self.restore_mixing(s);
-            let sp = &self.species[s];
-            let (sw, zs) = (&mut self.sweep, &z[s * nc..(s + 1) * nc]);
+            let sw = &mut self.sweep;
             for &m in &self.plan.mixing {
                 (sw.den[m], sw.num[m], sw.lag[m]) = (0.0, 0.0, self.conc[m]);
             }
-            if !quasi && sp.binding.is_identity() && sp.dynamic.is_empty() {
-                // one fused pass: old concentration, wall W = g C + (q − g c_w) (linear), and
-                // the rows (d_n + Σ_out |Q|) x_n − Σ_in |Q| x_up = b_n into den and num
-                let rate = 1.0 / dt + lambda;
-                // local slices: the loop keeps its pointers in registers
-                let (conc, lag) = (&mut self.conc[..], &mut sw.lag[..]);
-                let (den, num) = (&mut sw.den[..], &mut sw.num[..]);
-                let (g, q, gcw) = (&sp.cell_g[..nc], &sp.cell_q[..nc], &sp.cell_gcw[..nc]);
-                let (wvol, w_new) = (&self.wvol[..nc], &w_new[..nc]);
-                let (wlin, wconst) = (&mut wlin[..nc], &mut wconst[..nc]);
-                for (i, &n) in self.plan.cells.iter().enumerate() {
-                    let c = zs[i] / wvol[i];
-                    let wc = q[i] - gcw[i];
-                    (conc[n], lag[n]) = (c, c);
-                    (wlin[i], wconst[i]) = (g[i], wc);
-                    den[n] = w_new[i] * rate + g[i];
-                    num[n] = zs[i] / dt - wc;
-                }
+            let rows = if s == 0 && first_rows_built {
+                Rows::Fixed
             } else {
-                self.implicit_rows(s, dt, ya, z, &w_new, &mut wconst, &mut wlin);
-            }
+                self.implicit_rows(s, dt, ya, z, &w_new, &mut wconst, &mut wlin)
+            };
             let mut x = std::mem::take(&mut self.conc);
             if self.plan.tree.is_some() {
                 self.tree_solve(&mut x);
@@ -155,35 +191,168 @@ impl Transport {
             if res.is_err() {
                 break;
             }
-            let (i_in, i_out) = self.implicit_boundary_fluxes();
-            let (mut i_wall, mut i_decay) = (0.0, 0.0);
-            let (conc, zs) = (&self.conc[..], &mut z[s * nc..(s + 1) * nc]);
-            let (wlin, wconst, w_new) = (&wlin[..nc], &wconst[..nc], &w_new[..nc]);
-            for (i, &n) in self.plan.cells.iter().enumerate() {
-                let x = conc[n];
-                i_wall += wlin[i] * x + wconst[i];
-                if !quasi {
-                    i_decay += lambda * w_new[i] * x;
-                }
-                zs[i] = w_new[i] * x;
-            }
-            let acc = &mut z[nsp * nc + 4 * s..nsp * nc + 4 * s + 4];
-            for (a, v) in acc.iter_mut().zip([i_in, i_out, i_wall, i_decay]) {
-                *a += dt * v;
-            }
-            // (free concentrations of the new state: the next step's linearisation and
-            // `observe` invert it, warm-started from this step's values)
+            let laws = Arc::clone(&self.species[s].laws);
+            let (wl, wc) = match rows {
+                Rows::Fixed => (&laws.cell_g[..], &laws.cell_wc[..]),
+                Rows::Binding | Rows::General => (&wlin[..], &wconst[..]),
+            };
+            self.implicit_update(s, dt, &w_new, wl, wc, z);
         }
         let sc = &mut self.sweep;
         (sc.wconst, sc.wlin, sc.wnew) = (wconst, wlin, w_new);
         res
     }
 
-    /// The rows of species `s` in the general case (binding, shear-dependent walls, or the
-    /// quasi-steady formulation): old concentrations, the wall linearised about them, and
-    /// d, b into `sweep.den`, `sweep.num`.
+    /// After the solve of species `s`: the new amounts N = W' x, and the step's boundary, wall
+    /// (W = wl·x + wc per cell) and decay fluxes into the accumulators.
+    fn implicit_update(
+        &mut self,
+        s: usize,
+        dt: f64,
+        w_new: &[f64],
+        wl: &[f64],
+        wc: &[f64],
+        z: &mut [f64],
+    ) {
+        let (nc, nsp) = (self.plan.cells.len(), self.species.len());
+        let quasi = self.plan.formulation == Formulation::TlQuasisteady;
+        let lambda = self.plan.species[s].decay;
+        let (i_in, i_out) = self.implicit_boundary_fluxes();
+        let (mut i_wall, mut i_decay) = (0.0, 0.0);
+        let (conc, zs) = (&self.conc[..], &mut z[s * nc..(s + 1) * nc]);
+        let (wl, wc, w_new) = (&wl[..nc], &wc[..nc], &w_new[..nc]);
+        for (i, &n) in self.plan.cells.iter().enumerate() {
+            let x = conc[n];
+            i_wall += wl[i] * x + wc[i];
+            if !quasi {
+                i_decay += lambda * w_new[i] * x;
+            }
+            zs[i] = w_new[i] * x;
+        }
+        let acc = &mut z[nsp * nc + 4 * s..nsp * nc + 4 * s + 4];
+        for (a, v) in acc.iter_mut().zip([i_in, i_out, i_wall, i_decay]) {
+            *a += dt * v;
+        }
+        // (free concentrations of the new state: the next step's linearisation and
+        // `observe` invert it, warm-started from this step's values)
+    }
+
+    /// The rows (d_n + Σ_out |Q|) x_n − Σ_in |Q| x_up = b_n of species `s` into `sweep.den`
+    /// (d) and `sweep.num` (b), and the old concentrations into `conc`: one fused pass over
+    /// the cells for fixed laws (with a binding, the wall linearised about the old state),
+    /// the general path for shear-dependent walls.
     #[allow(clippy::too_many_arguments)]
-    pub(super) fn implicit_rows(
+    fn implicit_rows(
+        &mut self,
+        s: usize,
+        dt: f64,
+        ya: &[f64],
+        z: &[f64],
+        w_new: &[f64],
+        wconst: &mut [f64],
+        wlin: &mut [f64],
+    ) -> Rows {
+        let rows = self.rows_kind(s);
+        match rows {
+            Rows::Fixed => self.fixed_rows(s, dt, z, w_new),
+            Rows::Binding => self.binding_rows(s, dt, z, w_new, wconst, wlin),
+            Rows::General => self.general_rows(s, dt, ya, z, w_new, wconst, wlin),
+        }
+        rows
+    }
+
+    /// Which rows species `s` takes (see [`Rows`]).
+    fn rows_kind(&self, s: usize) -> Rows {
+        let laws = &self.species[s].laws;
+        if !laws.dynamic.is_empty() {
+            Rows::General
+        } else if self.plan.species[s].binding.is_identity() || !laws.has_wall {
+            Rows::Fixed
+        } else {
+            Rows::Binding
+        }
+    }
+
+    /// Rows with a wall linear in C_t (fixed laws, no binding, or no wall): W = g C + (q − g
+    /// c_w), so d = W'(1/dt + λ) + g, b = N/dt − (q − g c_w) (quasi-steady: d = g,
+    /// b = −(q − g c_w)). The lagged values the solve needs are the old concentrations it
+    /// reads from `conc`.
+    fn fixed_rows(&mut self, s: usize, dt: f64, z: &[f64], w_new: &[f64]) {
+        let nc = self.plan.cells.len();
+        if self.plan.formulation == Formulation::TlQuasisteady {
+            let (zs, laws) = (&z[s * nc..(s + 1) * nc], &self.species[s].laws);
+            for (i, &n) in self.plan.cells.iter().enumerate() {
+                self.conc[n] = zs[i] / self.wvol[i];
+                (self.sweep.den[n], self.sweep.num[n]) = (laws.cell_g[i], -laws.cell_wc[i]);
+            }
+            return;
+        }
+        let rate = 1.0 / dt + self.plan.species[s].decay;
+        let laws = &self.species[s].laws;
+        // local slices: the loop keeps its pointers in registers
+        let zs = &z[s * nc..(s + 1) * nc];
+        let conc = &mut self.conc[..];
+        let (den, num) = (&mut self.sweep.den[..], &mut self.sweep.num[..]);
+        let (g, wc) = (&laws.cell_g[..nc], &laws.cell_wc[..nc]);
+        let (wvol, w_new) = (&self.wvol[..nc], &w_new[..nc]);
+        for (i, &n) in self.plan.cells.iter().enumerate() {
+            conc[n] = zs[i] / wvol[i];
+            den[n] = w_new[i] * rate + g[i];
+            num[n] = zs[i] / dt - wc[i];
+        }
+    }
+
+    /// Rows with a binding and fixed laws, in one pass: free concentration and capacity slope
+    /// at the old state (anchored inversion), W = g (c − c_w) + q linearised in C_t about it.
+    fn binding_rows(
+        &mut self,
+        s: usize,
+        dt: f64,
+        z: &[f64],
+        w_new: &[f64],
+        wconst: &mut [f64],
+        wlin: &mut [f64],
+    ) {
+        let nc = self.plan.cells.len();
+        let quasi = self.plan.formulation == Formulation::TlQuasisteady;
+        let set = &self.plan.species[s];
+        let rate = 1.0 / dt + set.decay;
+        let sp = &mut self.species[s];
+        let (laws, free, anchors) = (&sp.laws, &mut sp.free, &mut sp.anchors);
+        let has_wall = laws.has_wall;
+        let zs = &z[s * nc..(s + 1) * nc];
+        let sw = &mut self.sweep;
+        for (i, &n) in self.plan.cells.iter().enumerate() {
+            let c = zs[i] / self.wvol[i];
+            self.conc[n] = c;
+            let (wl, wc) = if has_wall {
+                let (f, slope) = match anchors.get_mut(n) {
+                    Some(a) => set.binding.free_and_slope_anchored(c, free[n], a),
+                    None => {
+                        set.binding
+                            .free_and_slope_anchored(c, free[n], &mut HillAnchor::default())
+                    }
+                };
+                free[n] = f;
+                let wl = laws.cell_g[i] * (1.0 / slope);
+                (wl, laws.fixed_uptake(i, f) - wl * c)
+            } else {
+                (0.0, 0.0)
+            };
+            (wlin[i], wconst[i]) = (wl, wc);
+            (sw.den[n], sw.num[n]) = if quasi {
+                (wl, -wc)
+            } else {
+                (w_new[i] * rate + wl, zs[i] / dt - wc)
+            };
+            sw.lag[n] = c;
+        }
+    }
+
+    /// Rows with shear-dependent walls (or the quasi-steady formulation with them): old
+    /// concentrations, the shears, the wall linearised about the old state, then d and b.
+    #[allow(clippy::too_many_arguments)]
+    fn general_rows(
         &mut self,
         s: usize,
         dt: f64,
@@ -201,7 +370,7 @@ impl Transport {
         self.load_shear(s, ya, z);
         self.linearised_wall(s, wconst, wlin);
         let quasi = self.plan.formulation == Formulation::TlQuasisteady;
-        let rate = 1.0 / dt + self.species[s].decay;
+        let rate = 1.0 / dt + self.plan.species[s].decay;
         let sw = &mut self.sweep;
         for (i, &n) in self.plan.cells.iter().enumerate() {
             (sw.den[n], sw.num[n]) = if quasi {
@@ -216,10 +385,10 @@ impl Transport {
     /// Relaxed shears of species `s` over the step, exactly for the step's frozen |Q|, so that
     /// the wall law of the solve uses the end-of-step boundary layer, like backward Euler.
     pub(super) fn relax_shears(&self, s: usize, dt: f64, ya: &[f64], z: &mut [f64]) {
-        let sp = &self.species[s];
-        for (k, &(j, tau)) in sp.relax.iter().enumerate() {
-            let q = ya[self.plan.segments[j].branch_unknown].abs();
-            let v = &mut z[sp.relax_offset + k];
+        let laws = &self.species[s].laws;
+        for (k, &(j, tau, _)) in laws.relax.iter().enumerate() {
+            let q = ya[self.plan.segments[j].branch_unknown as usize].abs();
+            let v = &mut z[laws.relax_offset + k];
             *v = q + (*v - q) * (-dt / tau).exp();
         }
     }
@@ -227,45 +396,36 @@ impl Transport {
     /// Wall uptake of species `s` linearised about the current state: W = wlin·C_t + wconst
     /// per cell (exact for linear binding); zero without a wall.
     pub(super) fn linearised_wall(&mut self, s: usize, wconst: &mut [f64], wlin: &mut [f64]) {
-        if !self.species[s].has_wall {
+        let laws = Arc::clone(&self.species[s].laws);
+        if !laws.has_wall {
             wlin.iter_mut().for_each(|v| *v = 0.0);
             wconst.iter_mut().for_each(|v| *v = 0.0);
             return;
         }
-        let sp = &self.species[s];
-        if sp.binding.is_identity() && sp.dynamic.is_empty() {
-            // W = g C + (q − g c_w): already linear
-            for (i, (wl, wc)) in wlin.iter_mut().zip(wconst.iter_mut()).enumerate() {
-                *wl = sp.cell_g[i];
-                *wc = sp.cell_q[i] - sp.cell_gcw[i];
-            }
-            return;
-        }
+        let binding = self.plan.species[s].binding;
         // free concentrations and 1/(dC_t/dc) there (the slope of W in C_t per unit g)
-        let sp = &mut self.species[s];
         let mut inv_slope = std::mem::take(&mut self.sweep.inv_slope);
         inv_slope.clear();
         inv_slope.resize(self.plan.cells.len(), 1.0);
-        if !sp.binding.is_identity() {
+        if !binding.is_identity() {
+            let sp = &mut self.species[s];
             for (&n, v) in self.plan.cells.iter().zip(inv_slope.iter_mut()) {
-                let (f, slope) = sp.binding.free_and_slope_anchored(
-                    self.conc[n],
-                    sp.free[n],
-                    &mut sp.anchors[n],
-                );
+                let mut scratch = HillAnchor::default();
+                let anchor = sp.anchors.get_mut(n).unwrap_or(&mut scratch);
+                let (f, slope) = binding.free_and_slope_anchored(self.conc[n], sp.free[n], anchor);
                 sp.free[n] = f;
                 *v = 1.0 / slope;
             }
         }
         self.wall_uptake(s, wconst);
-        let sp = &self.species[s];
-        wlin.copy_from_slice(&sp.cell_g);
-        for &p in &sp.dynamic {
+        wlin.copy_from_slice(&laws.cell_g);
+        let shear = &self.species[s].shear_cbrt;
+        for &p in &laws.dynamic {
             let pc = &self.plan.pieces[p];
-            let (gj, _, _) = sp.laws[p].eval_cbrt(sp.shear_cbrt[pc.seg]);
-            wlin[pc.cell] += pc.share * gj;
+            let (gj, _, _) = laws.laws[p].eval_cbrt(shear[pc.seg as usize]);
+            wlin[pc.cell as usize] += pc.share * gj;
         }
-        if !sp.binding.is_identity() {
+        if !binding.is_identity() {
             wlin.iter_mut().zip(&inv_slope).for_each(|(w, v)| *w *= v);
         }
         self.sweep.inv_slope = inv_slope;
@@ -318,7 +478,8 @@ impl Transport {
     }
 
     /// Inflow value of a boundary in the implicit solve: prescribed, or (zero-gradient) the
-    /// neighbour's lagged value — stored in `lag` during the sweep.
+    /// neighbour's lagged value — stored in `lag` by the solve for every node a boundary
+    /// flows into.
     #[inline]
     pub(super) fn lagged_boundary(&self, b: usize, n: End) -> f64 {
         match n {
@@ -331,32 +492,20 @@ impl Transport {
     /// leaves first, each row becoming x_n = α_n + β_n x_parent — β_n ≠ 0 only when the parent
     /// is upwind of n, since an upwind row never references its downstream neighbour — then
     /// back-substituted parents first. Exact and O(n) for any flow directions, with no queue.
-    /// On entry `sweep.den`, `sweep.num` hold d and b, and `sweep.lag` the previous values.
+    /// On entry `sweep.den`, `sweep.num` hold d and b, and `x` the previous values (the lagged
+    /// values of the rows: `lag` is written only for the nodes boundaries flow into).
     pub(super) fn tree_solve(&mut self, x: &mut [f64]) {
+        if self.plan.tree.is_none() {
+            return;
+        }
+        self.boundary_rows(x);
         let Some(tree) = self.plan.tree.as_deref() else {
             return;
         };
         let sw = &mut self.sweep;
         sw.beta.resize(tree.len(), 0.0);
-        for &fi in &self.plan.boundary_faces {
-            let (q, up, down) = oriented(&self.plan.faces, &self.qf, fi);
-            match (up, down) {
-                (End::Node(n), _) => sw.den[n] += q.abs(),
-                (End::Boundary(bb), End::Node(n)) => {
-                    sw.num[n] += q.abs() * inflow_value(self.bval[bb], sw.lag[n])
-                }
-                _ => {}
-            }
-        }
-        for (&(n, _, bb), &q) in self.plan.sources.iter().zip(&self.qs) {
-            if q >= 0.0 {
-                sw.num[n] += q * inflow_value(self.bval[bb], sw.lag[n]);
-            } else {
-                sw.den[n] -= q;
-            }
-        }
         // local slices: the loops keep their pointers in registers
-        let (num, den, lag, qf) = (&mut sw.num[..], &mut sw.den[..], &sw.lag[..], &self.qf[..]);
+        let (num, den, qf) = (&mut sw.num[..], &mut sw.den[..], &self.qf[..]);
         for (l, beta) in tree.iter().zip(sw.beta.iter_mut()) {
             let n = l.node as usize;
             let (mut aq, mut to_parent) = (0.0, false);
@@ -372,7 +521,7 @@ impl Transport {
             }
             let d = den[n];
             let solvable = d > 1e-300;
-            let xn = if solvable { num[n] / d } else { lag[n] };
+            let xn = if solvable { num[n] / d } else { x[n] };
             x[n] = xn;
             *beta = 0.0;
             if to_parent {
@@ -384,6 +533,31 @@ impl Transport {
         for (l, &beta) in tree.iter().zip(&sw.beta).rev() {
             if beta != 0.0 {
                 x[l.node as usize] += beta * x[l.parent as usize];
+            }
+        }
+    }
+
+    /// The boundary faces' and sources' terms of the tree solve's rows: outflow into d, inflow
+    /// (prescribed or the node's lagged value `x`, recorded in `lag`) into b.
+    fn boundary_rows(&mut self, x: &[f64]) {
+        let sw = &mut self.sweep;
+        for &fi in &self.plan.boundary_faces {
+            let (q, up, down) = oriented(&self.plan.faces, &self.qf, fi);
+            match (up, down) {
+                (End::Node(n), _) => sw.den[n] += q.abs(),
+                (End::Boundary(bb), End::Node(n)) => {
+                    sw.lag[n] = x[n];
+                    sw.num[n] += q.abs() * inflow_value(self.bval[bb], sw.lag[n])
+                }
+                _ => {}
+            }
+        }
+        for (&(n, _, bb), &q) in self.plan.sources.iter().zip(&self.qs) {
+            if q >= 0.0 {
+                sw.lag[n] = x[n];
+                sw.num[n] += q * inflow_value(self.bval[bb], sw.lag[n]);
+            } else {
+                sw.den[n] -= q;
             }
         }
     }
@@ -402,7 +576,27 @@ impl Transport {
         b: &[f64],
         x: &mut [f64],
     ) -> Result<()> {
+        self.sweep_rows(unknowns, d, b, x);
+        let solved = self.kahn(unknowns, x);
+        let result = if solved < unknowns.len() {
+            self.gauss_seidel(unknowns, x)
+        } else {
+            Ok(())
+        };
+        for &n in unknowns {
+            self.sweep.mark[n] = false;
+        }
+        result
+    }
+
+    /// The rows of `sweep_solve`: marks, lagged values, pending upwind counts, denominators,
+    /// and the inflows from known nodes, boundaries and sources.
+    fn sweep_rows(&mut self, unknowns: &[usize], d: &[f64], b: &[f64], x: &[f64]) {
+        let nn = self.plan.kind.len();
         let sw = &mut self.sweep;
+        if sw.mark.len() != nn {
+            (sw.mark, sw.pending) = (vec![false; nn], vec![0; nn]);
+        }
         for &n in unknowns {
             sw.mark[n] = true;
             sw.lag[n] = x[n];
@@ -410,10 +604,10 @@ impl Transport {
             sw.num[n] = b[n];
             sw.den[n] = d[n];
         }
-        // pass 1: denominators, known inflows, pending counts
+        let plan = &*self.plan;
         for &n in unknowns {
-            for &fi in &self.plan.node_faces[self.plan.node_ptr[n]..self.plan.node_ptr[n + 1]] {
-                let (q, up, down) = oriented(&self.plan.faces, &self.qf, fi);
+            for &fi in &plan.node_faces[plan.node_ptr[n]..plan.node_ptr[n + 1]] {
+                let (q, up, down) = oriented(&plan.faces, &self.qf, fi);
                 let aq = q.abs();
                 if up == End::Node(n) {
                     sw.den[n] += aq;
@@ -428,34 +622,36 @@ impl Transport {
                     End::Boundary(bb) => sw.num[n] += aq * inflow_value(self.bval[bb], sw.lag[n]),
                 }
             }
-            for &k in &self.plan.node_sources[n] {
-                let q = self.qs[k];
+            for &k in plan.node_sources(n) {
+                let (q, bb) = (self.qs[k as usize], plan.sources[k as usize].2);
                 if q >= 0.0 {
-                    sw.num[n] += q * inflow_value(self.bval[self.plan.sources[k].2], sw.lag[n]);
+                    sw.num[n] += q * inflow_value(self.bval[bb], sw.lag[n]);
                 } else {
                     sw.den[n] -= q;
                 }
             }
         }
+    }
+
+    /// Kahn's flow-order pass of `sweep_solve`: every node whose upwind unknowns are solved is
+    /// solved in turn. Returns the number of nodes solved (all, unless flow circulates).
+    fn kahn(&mut self, unknowns: &[usize], x: &mut [f64]) -> usize {
+        let sw = &mut self.sweep;
+        let plan = &*self.plan;
         sw.queue.clear();
-        for &n in unknowns {
-            if sw.pending[n] == 0 {
-                sw.queue.push(n);
-            }
-        }
+        sw.queue
+            .extend(unknowns.iter().copied().filter(|&n| sw.pending[n] == 0));
         let mut head = 0;
-        let mut solved = 0;
         while head < sw.queue.len() {
             let n = sw.queue[head];
             head += 1;
-            solved += 1;
             x[n] = if sw.den[n] > 1e-300 {
                 sw.num[n] / sw.den[n]
             } else {
                 sw.lag[n]
             };
-            for &fi in &self.plan.node_faces[self.plan.node_ptr[n]..self.plan.node_ptr[n + 1]] {
-                let (q, up, down) = oriented(&self.plan.faces, &self.qf, fi);
+            for &fi in &plan.node_faces[plan.node_ptr[n]..plan.node_ptr[n + 1]] {
+                let (q, up, down) = oriented(&plan.faces, &self.qf, fi);
                 if up != End::Node(n) || q == 0.0 {
                     continue;
                 }
@@ -470,63 +666,59 @@ impl Transport {
                 }
             }
         }
-        let mut result = Ok(());
-        if solved < unknowns.len() {
-            // directed cycles: Gauss–Seidel on the remaining nodes
-            let rest: Vec<usize> = unknowns
-                .iter()
-                .copied()
-                .filter(|&n| sw.pending[n] > 0)
-                .collect();
-            let mut converged = false;
-            for _ in 0..10_000 {
-                let mut change = 0.0f64;
-                let mut scale = 0.0f64;
-                for &n in &rest {
-                    let mut num = sw.num[n];
-                    for &fi in
-                        &self.plan.node_faces[self.plan.node_ptr[n]..self.plan.node_ptr[n + 1]]
-                    {
-                        let (q, up, down) = oriented(&self.plan.faces, &self.qf, fi);
-                        if down != End::Node(n) {
-                            continue;
-                        }
-                        if let End::Node(u) = up {
-                            if sw.mark[u] && sw.pending[u] > 0 {
-                                num += q.abs() * x[u];
-                            }
+        head
+    }
+
+    /// The nodes Kahn's pass left (directed flow cycles): Gauss–Seidel, which converges for
+    /// the M-matrix of the upwind rows.
+    fn gauss_seidel(&mut self, unknowns: &[usize], x: &mut [f64]) -> Result<()> {
+        let sw = &self.sweep;
+        let plan = &*self.plan;
+        let rest: Vec<usize> = unknowns
+            .iter()
+            .copied()
+            .filter(|&n| sw.pending[n] > 0)
+            .collect();
+        for _ in 0..10_000 {
+            let mut change = 0.0f64;
+            let mut scale = 0.0f64;
+            for &n in &rest {
+                let mut num = sw.num[n];
+                for &fi in &plan.node_faces[plan.node_ptr[n]..plan.node_ptr[n + 1]] {
+                    let (q, up, down) = oriented(&plan.faces, &self.qf, fi);
+                    if down != End::Node(n) {
+                        continue;
+                    }
+                    if let End::Node(u) = up {
+                        if sw.mark[u] && sw.pending[u] > 0 {
+                            num += q.abs() * x[u];
                         }
                     }
-                    let v = if sw.den[n] > 1e-300 {
-                        num / sw.den[n]
-                    } else {
-                        sw.lag[n]
-                    };
-                    change = change.max((v - x[n]).abs());
-                    scale = scale.max(v.abs());
-                    x[n] = v;
                 }
-                if change <= 1e-15 * scale.max(1e-300) {
-                    converged = true;
-                    break;
-                }
+                let v = if sw.den[n] > 1e-300 {
+                    num / sw.den[n]
+                } else {
+                    sw.lag[n]
+                };
+                change = change.max((v - x[n]).abs());
+                scale = scale.max(v.abs());
+                x[n] = v;
             }
-            if !converged {
-                result = Err(Error::solver(
-                    0.0,
-                    "transport sweep did not converge on a flow loop".to_string(),
-                ));
+            if change <= 1e-15 * scale.max(1e-300) {
+                return Ok(());
             }
         }
-        for &n in unknowns {
-            sw.mark[n] = false;
-        }
-        result
+        Err(Error::solver(
+            0.0,
+            "transport sweep did not converge on a flow loop".to_string(),
+        ))
     }
 }
 
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub(super) struct Sweep {
+    /// Flow-order sweep only (sized on first use): unknowns of the current solve, and their
+    /// upwind unknowns not yet solved.
     pub(super) mark: Vec<bool>,
     pub(super) pending: Vec<u32>,
     pub(super) num: Vec<f64>,
@@ -549,21 +741,10 @@ pub(super) struct Sweep {
 impl Sweep {
     pub(super) fn new(nn: usize) -> Self {
         Sweep {
-            mark: vec![false; nn],
-            pending: vec![0; nn],
             num: vec![0.0; nn],
             den: vec![0.0; nn],
             lag: vec![0.0; nn],
-            queue: Vec::with_capacity(nn),
-            d: Vec::new(),
-            b: Vec::new(),
-            dnode: Vec::new(),
-            ya: Vec::new(),
-            wnew: Vec::new(),
-            wconst: Vec::new(),
-            wlin: Vec::new(),
-            inv_slope: Vec::new(),
-            beta: Vec::new(),
+            ..Sweep::default()
         }
     }
 }

@@ -31,6 +31,8 @@ use std::sync::Arc;
 
 mod build;
 mod implicit;
+mod laws;
+mod memory;
 mod observe;
 mod plan;
 mod rhs;
@@ -40,7 +42,7 @@ pub use plan::Plan;
 #[allow(unused_imports)]
 use plan::*;
 #[allow(unused_imports)]
-use {build::*, implicit::*, observe::*, rhs::*, state::*};
+use {build::*, implicit::*, laws::*, observe::*, rhs::*, state::*};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum End {
@@ -82,9 +84,9 @@ struct Chain {
 /// Part of a flow segment's wall seen by one cell: the cell's uptake is share × law(wall).
 #[derive(Debug, Clone)]
 struct Piece {
-    seg: usize,
-    node: usize,
-    cell: usize,
+    seg: u32,
+    node: u32,
+    cell: u32,
     share: f64,
     wall: SegmentWall,
 }
@@ -95,36 +97,59 @@ enum BoundaryValue {
     ZeroGradient,
 }
 
+/// Immutable settings of one species (part of the [`Plan`]).
 #[derive(Debug, Clone)]
-struct Species {
+struct SpeciesPlan {
     name: String,
     binding: Binding,
     decay: f64,
     diffusivity: f64,
     boundary: Vec<BoundaryValue>,
+    /// The boundaries with a prescribed value (`BoundaryValue::Wave`).
+    waves: Vec<usize>,
     walls: Vec<WallSpec>,
+    initial_free: f64,
+}
+
+/// The wall laws of one species for one cycle-mean flow. The plan holds those of the build
+/// (final unless a closure needs the mean flow); a run that sets its mean flow gets its own.
+/// Runs share them through an `Arc`.
+#[derive(Debug, Clone, Default)]
+struct Laws {
     /// Law of every wall piece.
     laws: Vec<SegmentLaw>,
-    /// Per cell: Σ share·g, Σ share·g·c_w, Σ share·q of its segments' fixed laws.
+    /// Per cell: Σ share·g, Σ share·g·c_w, Σ share·q of its segments' fixed laws, and
+    /// Σ share·q − Σ share·g·c_w (the constant part of the implicit step's wall uptake).
     cell_g: Vec<f64>,
     cell_gcw: Vec<f64>,
     cell_q: Vec<f64>,
+    cell_wc: Vec<f64>,
     /// Wall pieces whose conductance follows a time-dependent shear.
     dynamic: Vec<usize>,
-    /// Segments with a relaxed Lévêque shear: (segment, τ_BL); their equivalent flows
-    /// Q̃ = π r³ γ̃/4 are state entries `relax_offset + k`.
-    relax: Vec<(usize, f64)>,
-    relax_of_seg: Vec<usize>,
+    /// Segments with a relaxed Lévêque shear: (segment, τ_BL, cycle-mean |Q|); their
+    /// equivalent flows Q̃ = π r³ γ̃/4 are state entries `relax_offset + k`, starting at the
+    /// cycle mean.
+    relax: Vec<(usize, f64, f64)>,
+    /// Per segment: its index in `relax` (`u32::MAX`: none); empty without dynamic pieces.
+    relax_of_seg: Vec<u32>,
     relax_offset: usize,
-    /// Segments with dynamic pieces, and per segment the cube root of the flow magnitude its
-    /// dynamic laws see (|Q| or Q̃), see `load_shear`.
+    /// Segments with dynamic pieces (their shear is loaded by `load_shear`).
     dynamic_segs: Vec<usize>,
-    shear_cbrt: Vec<f64>,
     has_wall: bool,
-    initial_free: f64,
-    /// Free concentration per node: warm start of the binding inversion, and reporting.
+}
+
+/// Per-run state of one species.
+#[derive(Debug, Clone)]
+struct Species {
+    laws: Arc<Laws>,
+    /// Per segment with dynamic pieces: the cube root of the flow magnitude its dynamic laws
+    /// see (|Q| or Q̃), see `load_shear`; empty without dynamic pieces.
+    shear_cbrt: Vec<f64>,
+    /// Free concentration per node: warm start of the binding inversion, and reporting
+    /// (empty until the run starts, and without binding).
     free: Vec<f64>,
-    /// Per node: Taylor anchor of the Hill inversion (cells change little between stages).
+    /// Per node: Taylor anchor of the Hill inversion (cells change little between stages);
+    /// empty unless the binding is Hill's.
     anchors: Vec<HillAnchor>,
     /// Total concentration of the mixing points: their lagged value (used when a point has
     /// no outflow, and for zero-gradient backflow into it) is per species.
@@ -133,15 +158,33 @@ struct Species {
 
 #[derive(Debug, Clone)]
 struct Segment {
-    branch_unknown: usize,
-    nodes: [(usize, f64); 2],
+    /// Flow unknown of the segment's branch, and its face (`u32::MAX`: none).
+    branch_unknown: u32,
+    face: u32,
+    /// The segment's circuit nodes and the share of its volume each holds.
+    nodes: [u32; 2],
+    shares: [f64; 2],
     wall: SegmentWall,
-    dx: f64,
     volume: f64,
     compliance: f64,
 }
 
-/// Outputs of one vessel: first and last face (flow unknowns) and its segment range.
+impl Segment {
+    #[inline]
+    fn dx(&self) -> f64 {
+        self.wall.x1 - self.wall.x0
+    }
+    /// (node, share) of both ends.
+    #[inline]
+    fn node_shares(&self) -> [(usize, f64); 2] {
+        [
+            (self.nodes[0] as usize, self.shares[0]),
+            (self.nodes[1] as usize, self.shares[1]),
+        ]
+    }
+}
+
+/// Outputs of one vessel: its first and last face (`usize::MAX`: none) and its segment range.
 #[derive(Debug, Clone)]
 struct OutVessel {
     first: usize,
@@ -154,23 +197,25 @@ pub const SEGMENT_COLUMNS: usize = 5;
 pub const BALANCE_COLUMNS: usize = 5;
 
 /// Per-run transport: the shared immutable [`Plan`] and this run's state (amounts live in
-/// the integrator's vector; here: per-species laws and free concentrations, the cycle-mean
-/// |Q|, scratch). Cloning shares the plan and copies only the state.
+/// the integrator's vector; here: per-species laws (shared until a run sets its own mean
+/// flow) and free concentrations, scratch). The scratch is allocated when the run starts
+/// (`initial_state`), so an unrun prototype holds little beyond the plan.
 #[derive(Debug, Clone)]
 pub struct Transport {
-    /// Immutable topology, shared between runs (and threads).
+    /// Immutable topology and species settings, shared between runs (and threads).
     plan: Arc<Plan>,
     species: Vec<Species>,
-    /// Cycle-mean |Q| per segment (set by `set_mean_flow`): the relaxed shears start there.
-    mean_abs: Vec<f64>,
-    /// Record the per-segment columns (off: vessel and balance columns only).
+    /// Compute the per-segment columns in `observe` (off: they are NaN, see
+    /// `set_recorded_columns`).
     segment_output: bool,
-    // scratch
+    // scratch, sized by `ensure_scratch` when the run starts
     vol: Vec<f64>,
     conc: Vec<f64>,
     qf: Vec<f64>,
     qs: Vec<f64>,
     bval: Vec<Option<f64>>,
+    /// The species whose values `bval` holds (`usize::MAX`: none).
+    bval_species: usize,
     sweep: Sweep,
     /// Transport volumes of the implicit path (evolved with the face flows).
     wvol: Vec<f64>,
@@ -186,15 +231,79 @@ impl Transport {
         &self.plan
     }
 
-    /// A new run of the model: shares the plan (no copy of the topology) and copies only the
-    /// per-run state of `self`, which is the state `build` left (callers keep an unrun
-    /// prototype).
+    /// A run of `plan` with a fresh state: the build's wall laws (shared), no scratch yet.
+    fn from_plan(plan: Arc<Plan>) -> Transport {
+        let species = plan
+            .base_laws
+            .iter()
+            .map(|laws| Species {
+                laws: Arc::clone(laws),
+                shear_cbrt: Vec::new(),
+                free: Vec::new(),
+                anchors: Vec::new(),
+                mixing_conc: Vec::new(),
+            })
+            .collect();
+        Transport {
+            plan,
+            species,
+            segment_output: true,
+            vol: Vec::new(),
+            conc: Vec::new(),
+            qf: Vec::new(),
+            qs: Vec::new(),
+            bval: Vec::new(),
+            bval_species: usize::MAX,
+            sweep: Sweep::default(),
+            wvol: Vec::new(),
+        }
+    }
+
+    /// A new run of the model: shares the plan and the build's wall laws (no copy of either)
+    /// with a fresh state. Callers keep an unrun prototype and start every run here.
     pub fn new_run(&self) -> Transport {
-        self.clone()
+        Transport::from_plan(Arc::clone(&self.plan))
+    }
+
+    /// Size the per-run scratch and per-species state (once per run; cheap afterwards).
+    #[inline]
+    fn ensure_scratch(&mut self) {
+        if self.conc.len() != self.plan.kind.len() {
+            self.allocate_scratch();
+        }
+    }
+
+    #[cold]
+    fn allocate_scratch(&mut self) {
+        let p = &self.plan;
+        let (nn, nc) = (p.kind.len(), p.cells.len());
+        self.vol = vec![0.0; nc];
+        self.conc = vec![0.0; nn];
+        self.qf = vec![0.0; p.faces.len()];
+        self.qs = vec![0.0; p.sources.len()];
+        self.bval = vec![None; p.boundary_inlet.len()];
+        self.bval_species = usize::MAX;
+        self.sweep = Sweep::new(nn);
+        for (sp, set) in self.species.iter_mut().zip(&p.species) {
+            let binding = !set.binding.is_identity();
+            sp.free = if binding {
+                vec![set.initial_free; nn]
+            } else {
+                Vec::new()
+            };
+            sp.anchors = if matches!(set.binding, Binding::Hill { .. }) {
+                vec![HillAnchor::default(); nn]
+            } else {
+                Vec::new()
+            };
+            if !sp.laws.dynamic_segs.is_empty() {
+                sp.shear_cbrt = vec![0.0; p.segments.len()];
+            }
+        }
     }
 
     pub fn species_names(&self) -> Vec<String> {
-        self.species.iter().map(|s| s.name.clone()).collect()
+        self.plan.species.iter().map(|s| s.name.clone()).collect()
     }
     pub fn n_cells(&self) -> usize {
         self.plan.cells.len()
@@ -203,24 +312,28 @@ impl Transport {
     /// species (I_in, I_out, I_wall, I_decay), then the relaxed shears of every species.
     pub fn state_len(&self) -> usize {
         self.species.len() * (self.plan.cells.len() + 4)
-            + self.species.iter().map(|s| s.relax.len()).sum::<usize>()
+            + self
+                .species
+                .iter()
+                .map(|s| s.laws.relax.len())
+                .sum::<usize>()
     }
     pub fn formulation(&self) -> Formulation {
         self.plan.formulation
     }
-    /// Columns recorded per species at every output time.
+    /// Columns of every species block of `observe` at every output time.
     pub fn columns_per_species(&self) -> usize {
-        let segments = if self.segment_output {
-            self.plan.out_segments.len()
-        } else {
-            0
-        };
-        VESSEL_COLUMNS * self.plan.out_vessels.len() + SEGMENT_COLUMNS * segments + BALANCE_COLUMNS
+        VESSEL_COLUMNS * self.plan.out_vessels.len()
+            + SEGMENT_COLUMNS * self.plan.out_segments.len()
+            + BALANCE_COLUMNS
     }
-    /// Record the per-segment columns (default) or only the vessel and balance columns, which
-    /// keeps the output of large trees small.
-    pub fn set_segment_output(&mut self, on: bool) {
-        self.segment_output = on;
+    /// The columns of each species block a run records (None: all). When none of them is a
+    /// per-segment column, `observe` skips computing those (they are NaN in its rows), which
+    /// keeps the observation of large trees cheap.
+    pub fn set_recorded_columns(&mut self, columns: Option<&[usize]>) {
+        let seg = VESSEL_COLUMNS * self.plan.out_vessels.len();
+        let seg_end = seg + SEGMENT_COLUMNS * self.plan.out_segments.len();
+        self.segment_output = columns.is_none_or(|c| c.iter().any(|&k| k >= seg && k < seg_end));
     }
     /// Recorded segments of every output vessel.
     pub fn out_segment_counts(&self) -> Vec<usize> {
@@ -230,6 +343,7 @@ impl Transport {
     /// Flow unknowns whose cycle-mean |Q| the closures need (empty: single pass).
     pub fn mean_flow_unknowns(&self) -> Vec<usize> {
         if self
+            .plan
             .species
             .iter()
             .any(|s| s.walls.iter().any(|w| w.needs_mean_flow()))
@@ -237,21 +351,29 @@ impl Transport {
             self.plan
                 .segments
                 .iter()
-                .map(|s| s.branch_unknown)
+                .map(|s| s.branch_unknown as usize)
                 .collect()
         } else {
             Vec::new()
         }
     }
 
-    /// Evaluate the segment laws; `mean_abs[j]` is segment j's cycle-mean |Q|.
+    /// Evaluate the segment laws of this run; `mean_abs[j]` is segment j's cycle-mean |Q|.
     pub fn set_mean_flow(&mut self, mean_abs: &[f64]) -> Result<()> {
-        self.mean_abs = mean_abs.to_vec();
-        self.set_laws(mean_abs, true)
+        let laws = Laws::evaluate_all(&self.plan, mean_abs, true)?;
+        let nsegs = self.plan.segments.len();
+        for (sp, l) in self.species.iter_mut().zip(laws) {
+            if !l.dynamic_segs.is_empty() && sp.shear_cbrt.len() != nsegs {
+                sp.shear_cbrt = vec![0.0; nsegs];
+            }
+            sp.laws = Arc::new(l);
+        }
+        Ok(())
     }
 
     /// max over cells of (total outflow rate)/V (1/s): dt × this is the upwind Courant number.
     pub fn max_outflow_rate(&mut self, y: &[f64], time: f64) -> f64 {
+        self.ensure_scratch();
         if self.volumes(y, time).is_err() {
             return f64::INFINITY;
         }
@@ -286,13 +408,12 @@ impl Transport {
     pub fn segment_cells(&self, j: usize) -> Option<std::ops::Range<usize>> {
         let seg = self.plan.segments.get(j)?;
         let (n, _) = seg
-            .nodes
-            .iter()
-            .copied()
+            .node_shares()
+            .into_iter()
             .fold((usize::MAX, -1.0), |a, b| if b.1 > a.1 { b } else { a });
         let (a, b) = (
             self.plan.node_cell[n],
-            self.plan.node_cell[self.plan.last_sub[n]],
+            self.plan.node_cell[self.plan.last_sub(n)],
         );
         (a != usize::MAX).then_some(a..b + 1)
     }

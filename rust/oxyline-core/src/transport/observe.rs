@@ -15,6 +15,7 @@ impl Transport {
         implicit: bool,
         out: &mut Vec<f64>,
     ) -> Result<()> {
+        self.ensure_scratch();
         let nc = self.plan.cells.len();
         let nsp = self.species.len();
         self.volumes(y, time)?;
@@ -28,96 +29,145 @@ impl Transport {
             }
             self.load_boundary(s, time);
             self.mix(s)?;
-            // free concentration of every non-exterior node
-            {
-                let sp = &mut self.species[s];
-                for n in 0..self.plan.kind.len() {
-                    sp.free[n] = match self.plan.kind[n] {
-                        Kind::Exterior => f64::NAN,
-                        _ => sp.binding.free(
-                            self.conc[n],
-                            if sp.free[n].is_finite() {
-                                sp.free[n]
-                            } else {
-                                0.0
-                            },
-                        ),
-                    };
-                }
-            }
+            self.free_of_nodes(s);
             self.load_shear(s, y, z);
-            let sp = &self.species[s];
-            let face_flux = |tr: &Self, unknown: usize| -> (f64, f64) {
-                let fi = tr
-                    .plan
-                    .face_of_unknown
-                    .get(unknown)
-                    .copied()
-                    .unwrap_or(usize::MAX);
-                if fi == usize::MAX {
-                    return (f64::NAN, f64::NAN);
-                }
-                let (q, c) = tr.upwind(fi);
-                (q * c, sp.binding.free(c, c))
-            };
-            let seg_wall = |j: usize| -> f64 {
-                self.plan.seg_pieces[j]
-                    .clone()
-                    .map(|p| sp.piece_uptake(&self.plan.pieces, p, &sp.free))
-                    .sum()
-            };
-            for v in &self.plan.out_vessels {
-                let (j_in, c_in) = face_flux(self, v.first);
-                let (j_out, c_out) = face_flux(self, v.last);
-                let wall: f64 = self.plan.out_segments[v.segs.clone()]
-                    .iter()
-                    .map(|&j| seg_wall(j))
-                    .sum();
-                out.extend([c_in, c_out, j_in, j_out, wall]);
-            }
-            let segs: &[usize] = if self.segment_output {
-                &self.plan.out_segments
+            self.observe_vessels(s, out);
+            if self.segment_output {
+                self.observe_segments(s, y, ydot, out);
             } else {
-                &[]
-            };
-            for &j in segs {
-                let seg = &self.plan.segments[j];
-                let (flux, _) = face_flux(self, seg.branch_unknown);
-                let (mut c, mut wsum, mut vseg, mut dvseg) = (0.0, 0.0, 0.0, 0.0);
-                for &(n, share) in &seg.nodes {
-                    if share > 0.0 {
-                        // a refined node reports its last sub-cell: the value its
-                        // outgoing faces carry
-                        c += share * sp.free[self.plan.last_sub[n]];
-                        wsum += share;
-                        vseg += share * (seg.volume + seg.compliance * (y[n] - self.plan.p_ref));
-                        if let Some(yd) = ydot {
-                            dvseg += share * seg.compliance * yd[n];
-                        }
-                    }
-                }
-                let c = if wsum > 0.0 { c / wsum } else { f64::NAN };
-                // transmission-line elements (docs/physics.md §2.6): v = Q/A, A = V_seg/dx,
-                // L = −dx/v, R = dL/dt = dx v̇/v²
-                let q = y[seg.branch_unknown];
-                let (mut r_tl, mut l_tl) = (f64::NAN, f64::NAN);
-                if seg.dx > 0.0 && vseg > 0.0 {
-                    let a = vseg / seg.dx;
-                    let v = q / a;
-                    if v.abs() >= self.plan.v_eps {
-                        l_tl = -seg.dx / v;
-                        if let Some(yd) = ydot {
-                            let vdot = yd[seg.branch_unknown] / a - q * (dvseg / seg.dx) / (a * a);
-                            r_tl = seg.dx * vdot / (v * v);
-                        }
-                    }
-                }
-                out.extend([c, flux, seg_wall(j), r_tl, l_tl]);
+                // not recorded (see `set_recorded_columns`): not computed
+                let n = SEGMENT_COLUMNS * self.plan.out_segments.len();
+                out.extend(std::iter::repeat_n(f64::NAN, n));
             }
             let stored: f64 = z[s * nc..(s + 1) * nc].iter().sum();
             let acc = &z[nsp * nc + 4 * s..nsp * nc + 4 * s + 4];
             out.extend([stored, acc[0], acc[1], acc[2], acc[3]]);
         }
         Ok(())
+    }
+
+    /// Free concentration of every non-exterior node of species `s` (NaN outside the
+    /// domain): Hill's by the anchored series where it is within its tolerance (1e-12 mmHg,
+    /// the cells' anchors of the steps), else the exact inversion, warm-started. Without
+    /// binding it is the total one, read from `conc` where needed (`free_at`).
+    fn free_of_nodes(&mut self, s: usize) {
+        let binding = self.plan.species[s].binding;
+        if binding.is_identity() {
+            return;
+        }
+        let sp = &mut self.species[s];
+        for (n, kind) in self.plan.kind.iter().enumerate() {
+            sp.free[n] = match kind {
+                Kind::Exterior => f64::NAN,
+                _ => {
+                    let guess = if sp.free[n].is_finite() {
+                        sp.free[n]
+                    } else {
+                        0.0
+                    };
+                    match sp.anchors.get_mut(n) {
+                        Some(a) => binding.free_anchored(self.conc[n], guess, a),
+                        None => binding.free(self.conc[n], guess),
+                    }
+                }
+            };
+        }
+    }
+
+    /// Free concentration of node `n` for species `s` after `free_of_nodes` (NaN outside the
+    /// domain).
+    #[inline]
+    fn free_at(&self, s: usize, n: usize) -> f64 {
+        match self.plan.kind[n] {
+            Kind::Exterior => f64::NAN,
+            _ => self.free_of(s)[n],
+        }
+    }
+
+    /// Advective flux and upwind free concentration of face `fi` (NaN without a face).
+    fn face_flux(&self, s: usize, fi: usize) -> (f64, f64) {
+        if fi >= self.plan.faces.len() {
+            return (f64::NAN, f64::NAN);
+        }
+        let (q, c) = self.upwind(fi);
+        (q * c, self.plan.species[s].binding.free(c, c))
+    }
+
+    /// Wall uptake of segment `j` for species `s` (mol/s).
+    fn segment_wall(&self, s: usize, j: usize) -> f64 {
+        let sp = &self.species[s];
+        let free = self.free_of(s);
+        self.plan
+            .seg_pieces(j)
+            .map(|p| {
+                sp.laws
+                    .piece_uptake(&self.plan.pieces, p, free, &sp.shear_cbrt)
+            })
+            .sum()
+    }
+
+    /// Per output vessel: inlet and outlet concentration and flux, wall uptake.
+    fn observe_vessels(&self, s: usize, out: &mut Vec<f64>) {
+        for v in &self.plan.out_vessels {
+            let (j_in, c_in) = self.face_flux(s, v.first);
+            let (j_out, c_out) = self.face_flux(s, v.last);
+            let wall: f64 = self.plan.out_segments[v.segs.clone()]
+                .iter()
+                .map(|&j| self.segment_wall(s, j))
+                .sum();
+            out.extend([c_in, c_out, j_in, j_out, wall]);
+        }
+    }
+
+    /// Per output segment: concentration, flux, wall uptake and the transmission-line
+    /// elements R_i, L_i.
+    fn observe_segments(&self, s: usize, y: &[f64], ydot: Option<&[f64]>, out: &mut Vec<f64>) {
+        for &j in &self.plan.out_segments {
+            let seg = &self.plan.segments[j];
+            let (flux, _) = self.face_flux(s, seg.face as usize);
+            let (mut c, mut wsum, mut vseg, mut dvseg) = (0.0, 0.0, 0.0, 0.0);
+            for (n, share) in seg.node_shares() {
+                if share > 0.0 {
+                    // a refined node reports its last sub-cell: the value its outgoing faces
+                    // carry
+                    c += share * self.free_at(s, self.plan.last_sub(n));
+                    wsum += share;
+                    vseg += share * (seg.volume + seg.compliance * (y[n] - self.plan.p_ref));
+                    if let Some(yd) = ydot {
+                        dvseg += share * seg.compliance * yd[n];
+                    }
+                }
+            }
+            let c = if wsum > 0.0 { c / wsum } else { f64::NAN };
+            let (r_tl, l_tl) = self.line_elements(seg, y, ydot, vseg, dvseg);
+            out.extend([c, flux, self.segment_wall(s, j), r_tl, l_tl]);
+        }
+    }
+
+    /// Transmission-line elements of a segment (docs/physics.md §2.6): v = Q/A, A = V_seg/dx,
+    /// L = −dx/v, R = dL/dt = dx v̇/v²; NaN below the velocity threshold.
+    fn line_elements(
+        &self,
+        seg: &Segment,
+        y: &[f64],
+        ydot: Option<&[f64]>,
+        vseg: f64,
+        dvseg: f64,
+    ) -> (f64, f64) {
+        let (dx, u) = (seg.dx(), seg.branch_unknown as usize);
+        let q = y[u];
+        let (mut r_tl, mut l_tl) = (f64::NAN, f64::NAN);
+        if dx > 0.0 && vseg > 0.0 {
+            let a = vseg / dx;
+            let v = q / a;
+            if v.abs() >= self.plan.v_eps {
+                l_tl = -dx / v;
+                if let Some(yd) = ydot {
+                    let vdot = yd[u] / a - q * (dvseg / dx) / (a * a);
+                    r_tl = dx * vdot / (v * v);
+                }
+            }
+        }
+        (r_tl, l_tl)
     }
 }

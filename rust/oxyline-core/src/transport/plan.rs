@@ -86,7 +86,8 @@ pub(super) fn internal_from(internal: &[[u32; 3]], f: u32) -> u32 {
     internal[k][1]
 }
 
-/// Topology and layout of a transport model; never changed after `Transport::build`.
+/// Topology, layout and species settings of a transport model; never changed after
+/// `Transport::build`.
 #[derive(Debug)]
 pub struct Plan {
     pub(super) kind: Vec<Kind>,
@@ -96,34 +97,35 @@ pub struct Plan {
     pub(super) cap: Vec<f64>,
     pub(super) p_ref: f64,
     pub(super) faces: Vec<Face>,
-    pub(super) face_of_unknown: Vec<usize>,
     pub(super) sources: Vec<(usize, Waveform, usize)>,
     pub(super) boundary_inlet: Vec<bool>,
     pub(super) mixing: Vec<usize>,
-    /// CSR node → incident faces; sources listed separately.
+    /// CSR node → incident faces, and node → flow sources.
     pub(super) node_ptr: Vec<usize>,
     pub(super) node_faces: Vec<usize>,
-    pub(super) node_sources: Vec<Vec<usize>>,
+    pub(super) source_ptr: Vec<u32>,
+    pub(super) source_list: Vec<u32>,
     pub(super) segments: Vec<Segment>,
     /// Faces 0..n_flow_faces carry a flow unknown; the rest are interior faces of `chains`.
     pub(super) n_flow_faces: usize,
     /// The flow unknown of faces 0..n_flow_faces (a compact copy for the per-step gather).
-    pub(super) face_unknowns: Vec<usize>,
+    pub(super) face_unknowns: Vec<u32>,
     pub(super) chains: Vec<Chain>,
     /// Per cell: the circuit node whose pressure sets its volume.
     pub(super) cell_node: Vec<usize>,
-    /// Per circuit node: its last sub-cell (itself unless refined): the donor of the faces
-    /// leaving the node, and the value reported for its segments.
+    /// Per circuit node: its last sub-cell (itself unless refined; empty without
+    /// refinement, see `last_sub`).
     pub(super) last_sub: Vec<usize>,
-    /// Wall pieces, contiguous per segment (`seg_pieces`).
+    /// Wall pieces, contiguous per segment (`seg_pieces[j]..seg_pieces[j + 1]`).
     pub(super) pieces: Vec<Piece>,
-    pub(super) seg_pieces: Vec<std::ops::Range<usize>>,
+    pub(super) seg_pieces: Vec<u32>,
     pub(super) formulation: Formulation,
     pub(super) v_eps: f64,
     pub(super) out_vessels: Vec<OutVessel>,
     pub(super) out_segments: Vec<usize>,
-    pub(super) segment_vessels: Vec<usize>,
-    pub(super) node_names: Vec<String>,
+    pub(super) segment_vessels: Vec<u32>,
+    /// Names of the circuit nodes (error messages; refined sub-cells are named after them).
+    pub(super) node_names: Names,
     /// Nodes solved by the implicit sweep (cells and mixing points).
     pub(super) domain: Vec<usize>,
     /// Faces between two domain nodes as [face, from node, to node], and the other faces.
@@ -136,6 +138,80 @@ pub struct Plan {
     /// Elimination order of the implicit solve when the domain graph is a forest (always on
     /// trees): None sends it to the flow-order sweep, which also handles loops.
     pub(super) tree: Option<Vec<Link>>,
+    /// Species settings, and their wall laws as built (final unless a closure needs the
+    /// cycle-mean flow, which a run then sets with `set_mean_flow`).
+    pub(super) species: Vec<SpeciesPlan>,
+    pub(super) base_laws: Vec<Arc<Laws>>,
+}
+
+impl Plan {
+    /// The last sub-cell of circuit node `n` (itself unless refined): the donor of the faces
+    /// leaving the node, and the value reported for its segments.
+    #[inline]
+    pub(super) fn last_sub(&self, n: usize) -> usize {
+        self.last_sub.get(n).copied().unwrap_or(n)
+    }
+
+    /// Flow sources of node `n`.
+    #[inline]
+    pub(super) fn node_sources(&self, n: usize) -> &[u32] {
+        &self.source_list[self.source_ptr[n] as usize..self.source_ptr[n + 1] as usize]
+    }
+
+    /// Wall pieces of segment `j`.
+    #[inline]
+    pub(super) fn seg_pieces(&self, j: usize) -> std::ops::Range<usize> {
+        self.seg_pieces[j] as usize..self.seg_pieces[j + 1] as usize
+    }
+
+    /// Name of transport node `n`: its circuit node's, or for a sub-cell of a refined node
+    /// that node's name and the sub-cell's position.
+    pub(super) fn node_name(&self, n: usize) -> String {
+        let Some(&i) = self.node_cell.get(n) else {
+            return format!("node {n}");
+        };
+        if n < self.node_names.len() || i == usize::MAX {
+            return self
+                .node_names
+                .get(n)
+                .unwrap_or_else(|| format!("node {n}"));
+        }
+        // sub-cells of a node are contiguous, sub-cell 0 being the node itself
+        let parent = self.cell_node[i];
+        let first = self.node_cell[parent];
+        let m = self.node_cell[self.last_sub(parent)] - first + 1;
+        let name = self.node_names.get(parent).unwrap_or_default();
+        format!("{name} (transport cell {}/{m})", i - first + 1)
+    }
+}
+
+/// Many short names in one buffer (a `Vec<String>` costs ~3× the text in headers and heap
+/// blocks at a million nodes).
+#[derive(Debug, Default)]
+pub(super) struct Names {
+    pub(super) text: String,
+    pub(super) ends: Vec<u32>,
+}
+
+impl Names {
+    pub(super) fn new<'a>(names: impl Iterator<Item = &'a str>) -> Result<Names> {
+        let mut n = Names::default();
+        for s in names {
+            n.text.push_str(s);
+            let end = u32::try_from(n.text.len())
+                .map_err(|_| bad("transport", "node names too long".into()))?;
+            n.ends.push(end);
+        }
+        Ok(n)
+    }
+    pub(super) fn len(&self) -> usize {
+        self.ends.len()
+    }
+    pub(super) fn get(&self, i: usize) -> Option<String> {
+        let end = *self.ends.get(i)? as usize;
+        let start = if i == 0 { 0 } else { self.ends[i - 1] as usize };
+        Some(self.text[start..end].to_string())
+    }
 }
 
 // runs on other threads share one plan

@@ -4,91 +4,22 @@
 use super::*;
 
 impl Transport {
-    pub(super) fn set_laws(&mut self, mean_abs: &[f64], final_pass: bool) -> Result<()> {
-        let nc = self.plan.cells.len();
-        let mut offset = self.species.len() * (nc + 4);
-        for sp in &mut self.species {
-            sp.laws.clear();
-            sp.dynamic.clear();
-            sp.dynamic_segs.clear();
-            sp.relax.clear();
-            sp.relax_of_seg.iter_mut().for_each(|k| *k = usize::MAX);
-            if final_pass {
-                for (j, seg) in self.plan.segments.iter().enumerate() {
-                    if sp.walls[self.plan.segment_vessels[j]].is_relaxed()
-                        && seg.wall.radius > 0.0
-                        && seg.dx > 0.0
-                    {
-                        sp.relax_of_seg[j] = sp.relax.len();
-                        let tau = closure::relaxation_time(&seg.wall, sp.diffusivity, mean_abs[j]);
-                        sp.relax.push((j, tau));
-                    }
-                }
-            }
-            sp.relax_offset = offset;
-            offset += sp.relax.len();
-            sp.cell_g = vec![0.0; nc];
-            sp.cell_gcw = vec![0.0; nc];
-            sp.cell_q = vec![0.0; nc];
-            for (p, piece) in self.plan.pieces.iter().enumerate() {
-                let j = piece.seg;
-                let seg = &self.plan.segments[j];
-                let vessel_wall = &sp.walls[self.plan.segment_vessels[j]];
-                let law = if seg.wall.radius <= 0.0
-                    || seg.dx <= 0.0
-                    || (vessel_wall.needs_mean_flow() && !final_pass)
-                {
-                    SegmentLaw::Fixed {
-                        g: 0.0,
-                        cw: 0.0,
-                        q: 0.0,
-                    }
-                } else {
-                    vessel_wall.segment_law(
-                        &piece.wall,
-                        sp.diffusivity,
-                        mean_abs[j],
-                        &format!("species '{}' wall", sp.name),
-                    )?
-                };
-                match law {
-                    SegmentLaw::Fixed { g, cw, q } => {
-                        let (c, share) = (piece.cell, piece.share);
-                        sp.cell_g[c] += share * g;
-                        sp.cell_gcw[c] += share * g * cw;
-                        sp.cell_q[c] += share * q;
-                    }
-                    SegmentLaw::Instantaneous { .. } => {
-                        sp.dynamic.push(p);
-                        // pieces are contiguous per segment
-                        if sp.dynamic_segs.last() != Some(&j) {
-                            sp.dynamic_segs.push(j);
-                        }
-                    }
-                }
-                sp.laws.push(law);
-            }
-            sp.has_wall = !sp.dynamic.is_empty()
-                || sp.cell_g.iter().any(|&g| g != 0.0)
-                || sp.cell_q.iter().any(|&q| q != 0.0);
-        }
-        Ok(())
-    }
-
     /// Initial state: uniform initial concentration of every species in V(P0).
     pub fn initial_state(&mut self, y: &[f64]) -> Result<Vec<f64>> {
+        self.ensure_scratch();
         self.volumes(y, 0.0)?;
         let nc = self.plan.cells.len();
         let mut z = vec![0.0; self.state_len()];
         let nmix = self.plan.mixing.len();
-        for (s, sp) in self.species.iter_mut().enumerate() {
-            let ct = sp.binding.total(sp.initial_free);
+        for (s, (sp, set)) in self.species.iter_mut().zip(&self.plan.species).enumerate() {
+            let ct = set.binding.total(set.initial_free);
             sp.mixing_conc = vec![ct; nmix];
             for i in 0..nc {
                 z[s * nc + i] = self.vol[i] * ct;
             }
-            for (k, &(j, _)) in sp.relax.iter().enumerate() {
-                z[sp.relax_offset + k] = self.mean_abs.get(j).copied().unwrap_or(0.0);
+            let laws = &sp.laws;
+            for (k, &(_, _, q_mean)) in laws.relax.iter().enumerate() {
+                z[laws.relax_offset + k] = q_mean;
             }
         }
         self.wvol = self.vol.clone();
@@ -103,7 +34,7 @@ impl Transport {
                     time,
                     format!(
                         "lumen volume of transport cell '{}' is {v:.3e} m³ (V0 {:.3e} m³, pressure {:.1} Pa, reference pressure {:.1} Pa): set oxygen reference_pressure closer to the working pressure",
-                        self.node_name(n),
+                        self.plan.node_name(n),
                         self.plan.v0[i],
                         y[n],
                         self.plan.p_ref
@@ -113,14 +44,6 @@ impl Transport {
             self.vol[i] = v;
         }
         Ok(())
-    }
-
-    pub(super) fn node_name(&self, n: usize) -> String {
-        self.plan
-            .node_names
-            .get(n)
-            .cloned()
-            .unwrap_or_else(|| format!("node {n}"))
     }
 
     pub(super) fn load_flows(&mut self, time: f64, y: &[f64]) {
@@ -137,7 +60,7 @@ impl Transport {
     pub(super) fn load_flows_with(&mut self, time: f64, flow: impl Fn(usize) -> f64) {
         let nf = self.plan.n_flow_faces;
         for (q, &u) in self.qf[..nf].iter_mut().zip(&self.plan.face_unknowns) {
-            *q = flow(u);
+            *q = flow(u as usize);
         }
         for (q, (_, w, _)) in self.qs.iter_mut().zip(&self.plan.sources) {
             *q = w.eval(time);
@@ -153,13 +76,24 @@ impl Transport {
         }
     }
 
+    /// The values the boundaries carry into the domain for species `s` at `time` into `bval`
+    /// (None: zero gradient). When `bval` already holds species `s`, only the prescribed
+    /// values change (a tree has thousands of zero-gradient outlets).
     pub(super) fn load_boundary(&mut self, s: usize, time: f64) {
-        let sp = &self.species[s];
-        for (v, b) in self.bval.iter_mut().zip(&sp.boundary) {
-            *v = match b {
-                BoundaryValue::Wave(w) => Some(sp.binding.total(w.eval(time))),
-                BoundaryValue::ZeroGradient => None,
-            };
+        let sp = &self.plan.species[s];
+        let value = |b: &BoundaryValue| match b {
+            BoundaryValue::Wave(w) => Some(sp.binding.total(w.eval(time))),
+            BoundaryValue::ZeroGradient => None,
+        };
+        if self.bval_species == s {
+            for &k in &sp.waves {
+                self.bval[k] = value(&sp.boundary[k]);
+            }
+        } else {
+            for (v, b) in self.bval.iter_mut().zip(&sp.boundary) {
+                *v = value(b);
+            }
+            self.bval_species = s;
         }
     }
 
@@ -189,17 +123,20 @@ impl Transport {
     }
 
     /// Free concentration of every cell of species `s` (binding inversion, warm-started).
+    /// (Without binding the free concentration is the total one: nothing to do.)
     pub(super) fn free_of_cells(&mut self, s: usize) {
         let sp = &mut self.species[s];
-        if sp.binding.is_identity() {
+        let binding = self.plan.species[s].binding;
+        if binding.is_identity() {
+            return;
+        }
+        if sp.anchors.is_empty() {
             for &n in &self.plan.cells {
-                sp.free[n] = self.conc[n];
+                sp.free[n] = binding.free(self.conc[n], sp.free[n]);
             }
         } else {
             for &n in &self.plan.cells {
-                sp.free[n] = sp
-                    .binding
-                    .free_anchored(self.conc[n], sp.free[n], &mut sp.anchors[n]);
+                sp.free[n] = binding.free_anchored(self.conc[n], sp.free[n], &mut sp.anchors[n]);
             }
         }
     }
@@ -208,17 +145,14 @@ impl Transport {
     /// concentrations and branch flows `y`.
     pub(super) fn wall_uptake(&self, s: usize, w: &mut [f64]) {
         let sp = &self.species[s];
-        // without binding the free concentration is the total one (no copy)
-        let free = if sp.binding.is_identity() {
-            &self.conc
-        } else {
-            &sp.free
-        };
+        let free = self.free_of(s);
+        let laws = &sp.laws;
         for (i, &n) in self.plan.cells.iter().enumerate() {
-            w[i] = sp.fixed_uptake(i, free[n]);
+            w[i] = laws.fixed_uptake(i, free[n]);
         }
-        for &p in &sp.dynamic {
-            w[self.plan.pieces[p].cell] += sp.piece_uptake(&self.plan.pieces, p, free);
+        for &p in &laws.dynamic {
+            w[self.plan.pieces[p].cell as usize] +=
+                laws.piece_uptake(&self.plan.pieces, p, free, &sp.shear_cbrt);
         }
     }
 
@@ -226,14 +160,23 @@ impl Transport {
     /// (instantaneous shear) or the relaxed equivalent flow Q̃ held in the state `z`.
     pub(super) fn load_shear(&mut self, s: usize, y: &[f64], z: &[f64]) {
         let sp = &mut self.species[s];
-        for &j in &sp.dynamic_segs {
-            let k = sp.relax_of_seg[j];
-            let q = if k == usize::MAX {
-                y[self.plan.segments[j].branch_unknown]
-            } else {
-                z[sp.relax_offset + k]
+        let laws = &sp.laws;
+        for &j in &laws.dynamic_segs {
+            let q = match laws.relax_of_seg.get(j) {
+                Some(&k) if k != u32::MAX => z[laws.relax_offset + k as usize],
+                _ => y[self.plan.segments[j].branch_unknown as usize],
             };
             sp.shear_cbrt[j] = q.abs().cbrt();
+        }
+    }
+
+    /// Free concentration per node of species `s`: without binding the total one (no copy).
+    #[inline]
+    pub(super) fn free_of(&self, s: usize) -> &[f64] {
+        if self.plan.species[s].binding.is_identity() {
+            &self.conc
+        } else {
+            &self.species[s].free
         }
     }
 

@@ -1,0 +1,73 @@
+//! Same-process timing of a flow-only and a flow + species run of one model (canonical SI
+//! JSON, see `transport_memory`): one cycle of generalized-α at dt = 1 ms, vessel-level output
+//! every 10 ms (no per-segment columns), alternating the two `reps` times; prints the best CPU
+//! time (Linux /proc, 10 ms ticks) of each and their ratio (a quieter measure of the O2 step's cost than separate
+//! processes on a shared machine).
+//!
+//!     cargo run --release -p oxyline-core --example o2_step_ratio -- model.json [reps]
+
+use oxyline_core::genalpha::NewtonControl;
+use oxyline_core::network::parse;
+use oxyline_core::transport::{BALANCE_COLUMNS, VESSEL_COLUMNS};
+use oxyline_core::{Method, RunSettings, Start, Transport, simulate_with_transport};
+
+/// CPU seconds of this process (user + system, from /proc: robust on a shared machine).
+fn cpu() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").expect("/proc/self/stat");
+    // the fields after the parenthesised command name; utime and stime are fields 14, 15
+    let rest = &stat[stat.rfind(')').expect("stat format") + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks: f64 = f[11].parse::<f64>().expect("utime") + f[12].parse::<f64>().expect("stime");
+    ticks / 100.0
+}
+
+fn main() {
+    let mut args = std::env::args().skip(1);
+    let path = args.next().expect("usage: o2_step_ratio MODEL.json [reps]");
+    let reps: usize = args.next().map_or(3, |r| r.parse().expect("reps"));
+    let method = match args.next().as_deref() {
+        Some("rk4") => Method::Rk4,
+        _ => Method::GeneralizedAlpha { rho_inf: 0.5 },
+    };
+    let json = std::fs::read_to_string(&path).expect("readable model file");
+    let spec = parse(&json).expect("valid model");
+    let assembled = spec.assemble().expect("valid network");
+    let dae = assembled.circuit.assemble().expect("valid circuit");
+    let spec_tr = spec.transport.as_ref().expect("a transport section");
+    let prototype =
+        Transport::build(spec_tr, &assembled.circuit, &dae, &assembled.probes).expect("valid");
+    let nv = assembled.probes.vessels.len();
+    let mut columns: Vec<usize> = (0..VESSEL_COLUMNS * nv).collect();
+    let balance = prototype.columns_per_species() - BALANCE_COLUMNS;
+    columns.extend(balance..balance + BALANCE_COLUMNS);
+    let s = RunSettings {
+        method,
+        dt: matches!(method, Method::GeneralizedAlpha { .. }).then_some(1e-3),
+        period: 1.0, // the bench trees (`benches/bench_scale.py`) beat once a second
+        cycles: 1,
+        until_periodic: None,
+        max_cycles: 1,
+        output_every: 1e-2,
+        output_all_cycles: false,
+        keep_current_cycle: true,
+        start: Start::Steady,
+        newton: NewtonControl::default(),
+        probes: assembled.probes.vessel_unknowns.clone(),
+        species_columns: Some(columns),
+    };
+    let (mut best_flow, mut best_o2) = (f64::INFINITY, f64::INFINITY);
+    for _ in 0..reps {
+        let t0 = cpu();
+        simulate_with_transport(&dae, None, &s, &mut |_, _| true).expect("flow run");
+        best_flow = best_flow.min(cpu() - t0);
+        let mut run = prototype.new_run();
+        let t0 = cpu();
+        simulate_with_transport(&dae, Some(&mut run), &s, &mut |_, _| true).expect("o2 run");
+        best_o2 = best_o2.min(cpu() - t0);
+    }
+    println!(
+        "segments {}: flow {best_flow:.3} s, with species {best_o2:.3} s, ratio {:.3}",
+        assembled.circuit.segments.len(),
+        best_o2 / best_flow
+    );
+}

@@ -1,0 +1,118 @@
+//! The wall laws of every species, evaluated per wall piece and summed per cell.
+
+#[allow(unused_imports)]
+use super::*;
+
+impl Laws {
+    /// The laws of every species of `plan` for the cycle-mean |Q| `mean_abs` (per segment).
+    /// Before the final pass (`final_pass` false: at build, before the mean flow is known)
+    /// the closures that need the mean flow get a zero wall and no relaxed shear.
+    pub(super) fn evaluate_all(
+        plan: &Plan,
+        mean_abs: &[f64],
+        final_pass: bool,
+    ) -> Result<Vec<Laws>> {
+        let mut offset = plan.species.len() * (plan.cells.len() + 4);
+        let mut all = Vec::with_capacity(plan.species.len());
+        for sp in &plan.species {
+            let mut laws = Laws::evaluate(plan, sp, mean_abs, final_pass)?;
+            laws.relax_offset = offset;
+            offset += laws.relax.len();
+            all.push(laws);
+        }
+        Ok(all)
+    }
+
+    fn evaluate(plan: &Plan, sp: &SpeciesPlan, mean_abs: &[f64], final_pass: bool) -> Result<Laws> {
+        let nc = plan.cells.len();
+        let mut l = Laws {
+            cell_g: vec![0.0; nc],
+            cell_gcw: vec![0.0; nc],
+            cell_q: vec![0.0; nc],
+            ..Laws::default()
+        };
+        let has_area = |seg: &Segment| seg.wall.radius > 0.0 && seg.dx() > 0.0;
+        if final_pass {
+            for (j, seg) in plan.segments.iter().enumerate() {
+                if sp.walls[plan.segment_vessels[j] as usize].is_relaxed() && has_area(seg) {
+                    let tau = closure::relaxation_time(&seg.wall, sp.diffusivity, mean_abs[j]);
+                    l.relax.push((j, tau, mean_abs[j]));
+                }
+            }
+        }
+        let element = format!("species '{}' wall", sp.name);
+        l.laws.reserve_exact(plan.pieces.len());
+        for (p, piece) in plan.pieces.iter().enumerate() {
+            let j = piece.seg as usize;
+            let seg = &plan.segments[j];
+            let vessel_wall = &sp.walls[plan.segment_vessels[j] as usize];
+            let law = if !has_area(seg) || (vessel_wall.needs_mean_flow() && !final_pass) {
+                SegmentLaw::Fixed {
+                    g: 0.0,
+                    cw: 0.0,
+                    q: 0.0,
+                }
+            } else {
+                vessel_wall.segment_law(&piece.wall, sp.diffusivity, mean_abs[j], &element)?
+            };
+            match law {
+                SegmentLaw::Fixed { g, cw, q } => {
+                    let (c, share) = (piece.cell as usize, piece.share);
+                    l.cell_g[c] += share * g;
+                    l.cell_gcw[c] += share * g * cw;
+                    l.cell_q[c] += share * q;
+                }
+                SegmentLaw::Instantaneous { .. } => {
+                    l.dynamic.push(p);
+                    // pieces are contiguous per segment
+                    if l.dynamic_segs.last() != Some(&j) {
+                        l.dynamic_segs.push(j);
+                    }
+                }
+            }
+            l.laws.push(law);
+        }
+        if !l.relax.is_empty() {
+            l.relax_of_seg = vec![u32::MAX; plan.segments.len()];
+            for (k, &(j, _, _)) in l.relax.iter().enumerate() {
+                l.relax_of_seg[j] = k as u32;
+            }
+        }
+        l.cell_wc = l
+            .cell_q
+            .iter()
+            .zip(&l.cell_gcw)
+            .map(|(q, gcw)| q - gcw)
+            .collect();
+        l.has_wall = !l.dynamic.is_empty()
+            || l.cell_g.iter().any(|&g| g != 0.0)
+            || l.cell_q.iter().any(|&q| q != 0.0);
+        Ok(l)
+    }
+
+    /// Wall uptake (mol/s) of cell `i` from its fixed laws at free concentration `free`:
+    /// Σ share·(g (c − c_w) + q) = G c − Σ share g c_w + Q (the wall-uptake law, docs/physics.md §3).
+    #[inline]
+    pub(super) fn fixed_uptake(&self, i: usize, free: f64) -> f64 {
+        self.cell_g[i] * free - self.cell_gcw[i] + self.cell_q[i]
+    }
+
+    /// Wall uptake (mol/s) of wall piece `p` with its own law (any kind) at the current shear
+    /// (`shear_cbrt` per segment, read by dynamic laws only), `free` the free concentration
+    /// per node.
+    #[inline]
+    pub(super) fn piece_uptake(
+        &self,
+        pieces: &[Piece],
+        p: usize,
+        free: &[f64],
+        shear_cbrt: &[f64],
+    ) -> f64 {
+        let pc = &pieces[p];
+        let (g, cw, q) = match self.laws[p] {
+            SegmentLaw::Fixed { g, cw, q } => (g, cw, q),
+            law => law.eval_cbrt(shear_cbrt[pc.seg as usize]),
+        };
+        pc.share * (g * (free[pc.node as usize] - cw) + q)
+    }
+}
