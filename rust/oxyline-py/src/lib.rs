@@ -128,10 +128,11 @@ impl Network {
 impl Network {
     #[new]
     fn new(py: Python<'_>, model_json: &str) -> PyResult<Self> {
-        let json = model_json.to_owned();
+        // the text is parsed where Python holds it (no copy); the spec is dropped once the
+        // circuit and the transport plan are built from it
         let built = py.detach(
             move || -> Result<((Assembled, Dae), Option<Transport>), Error> {
-                let spec = parse(&json)?;
+                let spec = parse(model_json)?;
                 let assembled = spec.assemble()?;
                 let dae = assembled.circuit.assemble()?;
                 let transport = match &spec.transport {
@@ -295,9 +296,8 @@ impl Network {
         let graph_nodes = a.summary.nodes;
         d.set_item(
             "nodes",
-            a.circuit.nodes[..graph_nodes]
-                .iter()
-                .map(|n| n.name.clone())
+            (0..graph_nodes)
+                .map(|i| a.circuit.names.node(i))
                 .collect::<Vec<_>>(),
         )?;
         d.set_item("node_pressure", y[..graph_nodes].to_vec().into_pyarray(py))?;
@@ -328,7 +328,7 @@ impl Network {
 
     /// Names of all circuit unknowns (for diagnostics).
     fn unknown_names(&self) -> Vec<String> {
-        self.inner.1.names.clone()
+        self.inner.1.names.unknowns()
     }
 
     /// The assembled circuit as arrays: unknown names, mass diagonal E (capacitance for node
@@ -337,7 +337,7 @@ impl Network {
         let (a, dae) = &*self.inner;
         let c = &a.circuit;
         let d = PyDict::new(py);
-        d.set_item("names", dae.names.clone())?;
+        d.set_item("names", dae.names.unknowns())?;
         d.set_item("mass", dae.e.clone().into_pyarray(py))?;
         d.set_item("n_nodes", dae.n_nodes)?;
         d.set_item(
@@ -422,7 +422,8 @@ impl Network {
             .circuit
             .nodes
             .iter()
-            .position(|n| n.name == node)
+            .enumerate()
+            .position(|(i, _)| a.circuit.names.node(i) == node)
             .ok_or_else(|| ModelError::new_err(format!("node '{node}': not in the network")))?;
         let z = oxyline_core::frequency::input_impedance(dae, idx, omega).map_err(to_py)?;
         Ok((z.re, z.im))

@@ -153,7 +153,7 @@ impl Transport {
                 if dae.e[i] > 0.0 {
                     // a compliant node with no lumen volume would store blood but no solute
                     return Err(bad(
-                        &node.name,
+                        &circuit.names.node(i),
                         "has compliance but no lumen volume, so transport cannot conserve mass there; give the vessel geometry instead of lumped values".into(),
                     ));
                 }
@@ -178,7 +178,7 @@ impl Transport {
             for (k, e) in [(ka, from), (kb, to)] {
                 if k == Kind::Exterior && matches!(e, End::Node(_)) {
                     return Err(bad(
-                        &b.name,
+                        &circuit.names.branch(bi),
                         "connects to a prescribed-pressure node without a boundary condition"
                             .into(),
                     ));
@@ -274,7 +274,7 @@ impl Transport {
             }
         }
         let n_flow_faces = faces.len();
-        let mut node_names: Vec<String> = circuit.nodes.iter().map(|n| n.name.clone()).collect();
+        let mut node_names: Vec<String> = (0..nn).map(|i| circuit.names.node(i)).collect();
         let mut first_extra = vec![usize::MAX; nn];
         let mut last_sub: Vec<usize> = (0..nn).collect();
         let mut chains = Vec::new();
