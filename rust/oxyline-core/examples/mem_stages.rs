@@ -20,6 +20,19 @@ fn rss() -> (f64, f64) {
     (get("VmRSS:"), get("VmHWM:"))
 }
 
+/// CPU seconds of this process (user + system, from /proc/self/stat; 10 ms ticks).
+fn cpu() -> f64 {
+    let s = std::fs::read_to_string("/proc/self/stat").unwrap();
+    let rest = &s[s.rfind(')').unwrap() + 2..];
+    let f: Vec<f64> = rest
+        .split_whitespace()
+        .skip(11)
+        .take(2)
+        .map(|x| x.parse().unwrap())
+        .collect();
+    (f[0] + f[1]) / 100.0
+}
+
 fn main() {
     let path = std::env::args().nth(1).expect("model.json");
     let run = std::env::args().nth(2).is_none_or(|a| a != "--no-run");
@@ -27,8 +40,9 @@ fn main() {
     let mark = |stage: &str, segs: f64| {
         let (now, peak) = rss();
         println!(
-            "| {stage} | {:.2} | {:.0} | {:.0} | {:.0} | {:.0} |",
+            "| {stage} | {:.2} | {:.2} | {:.0} | {:.0} | {:.0} | {:.0} |",
             t0.elapsed().as_secs_f64(),
+            cpu(),
             now / 1e6,
             now / segs,
             peak / 1e6,
@@ -37,7 +51,7 @@ fn main() {
     };
     let json = std::fs::read_to_string(&path).unwrap();
     println!(
-        "| stage | s | rss MB | B/seg | peak MB | peak B/seg |\n|---|---:|---:|---:|---:|---:|"
+        "| stage | wall s | CPU s | rss MB | B/seg | peak MB | peak B/seg |\n|---|---:|---:|---:|---:|---:|---:|"
     );
     let spec = parse(&json).unwrap();
     let segs = spec

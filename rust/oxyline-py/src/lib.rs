@@ -13,7 +13,9 @@ use oxyline_core::{
 };
 use pyo3::exceptions::{PyKeyboardInterrupt, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyList};
+
+mod extract;
 use std::cell::Cell;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -126,13 +128,43 @@ impl Network {
 
 #[pymethods]
 impl Network {
+    /// `vessels` (the canonical vessel dicts) and `outlets` (node -> canonical resistance or
+    /// RCR condition with a constant pressure) may be handed over as Python objects instead of
+    /// inside `model_json` (see `extract`): a large tree then needs no text for its bulk.
     #[new]
-    fn new(py: Python<'_>, model_json: &str) -> PyResult<Self> {
+    #[pyo3(signature = (model_json, vessels = None, outlets = None))]
+    fn new(
+        py: Python<'_>,
+        model_json: &str,
+        vessels: Option<Bound<'_, PyList>>,
+        outlets: Option<Bound<'_, PyDict>>,
+    ) -> PyResult<Self> {
+        let vessels = vessels
+            .map(|v| extract::vessels(&v))
+            .transpose()
+            .map_err(to_py)?;
+        let mut bcs = Vec::new();
+        for (node, bc) in outlets.iter().flat_map(|d| d.iter()) {
+            let node: String = node.extract()?;
+            let spec = extract::outlet(&node, &bc).map_err(to_py)?;
+            bcs.push((node, spec));
+        }
         // the text is parsed where Python holds it (no copy); the spec is dropped once the
         // circuit and the transport plan are built from it
         let built = py.detach(
             move || -> Result<((Assembled, Dae), Option<Transport>), Error> {
-                let spec = parse(model_json)?;
+                let mut spec = parse(model_json)?;
+                if let Some(v) = vessels {
+                    spec.vessels.extend(v);
+                }
+                for (node, bc) in bcs {
+                    if spec.boundary_conditions.insert(node.clone(), bc).is_some() {
+                        return Err(Error::model(
+                            format!("boundary condition '{node}'"),
+                            "given twice",
+                        ));
+                    }
+                }
                 let assembled = spec.assemble()?;
                 let dae = assembled.circuit.assemble()?;
                 let transport = match &spec.transport {

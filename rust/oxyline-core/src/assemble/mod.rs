@@ -82,7 +82,7 @@ impl NetworkSpec {
         for (vi, v) in self.vessels.iter().enumerate() {
             let arrangement = v.arrangement.unwrap_or(self.arrangement);
             let segs = segments::discretise(self, vi, blood, arrangement)?;
-            let ends = (graph.index[v.from.as_str()], graph.index[v.to.as_str()]);
+            let ends = graph.vessel_ends[vi];
             let chain = vessel::stamp(&mut circuit, &v.name, &segs, arrangement, ends);
             if v.output {
                 vessel::record_probes(
