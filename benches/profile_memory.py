@@ -35,8 +35,9 @@ def main() -> None:
     ap.add_argument("--no-run", action="store_true")
     a = ap.parse_args()
 
-    import oxyline
     from bench_scale import tree
+
+    import oxyline
 
     segments = (2 ** a.depth - 1) * 4
     rows: list[tuple[str, float, float, float]] = []

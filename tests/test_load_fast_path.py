@@ -77,8 +77,8 @@ def _handover_model() -> oxyline.Model:
              {"name": "c", "from": "j", "to": "o2", "segments": 2, "arrangement": "RCL",
               "lumped": {"resistance": 1e8, "capacitance": 1e-10, "inductance": 1e5,
                          "stenosis_coefficient": -3e11}}],
-         "boundary_conditions": {"in": {"type": "flow", "value": 1e-6}, **{
-             "o": OUTLETS[1], "o2": OUTLETS[3]}}}
+         "boundary_conditions": {"in": {"type": "flow", "value": 1e-6}, 
+             "o": OUTLETS[1], "o2": OUTLETS[3]}}
     return oxyline.load_model(d)
 
 
