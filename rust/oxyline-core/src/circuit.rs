@@ -203,11 +203,13 @@ pub struct Branch {
     pub stenosis: f64,
 }
 
-/// Compressed sparse rows.
+/// Compressed sparse rows. Column indices are u32 (a circuit of more than 2^32 unknowns is
+/// refused at assembly): the per-step residual pass reads every entry, so 4-byte indices cut
+/// its memory traffic and the matrix's size by a sixth.
 #[derive(Debug, Clone, Default)]
 pub struct Csr {
     pub ptr: Vec<usize>,
-    pub col: Vec<usize>,
+    pub col: Vec<u32>,
     pub val: Vec<f64>,
 }
 
@@ -216,7 +218,7 @@ impl Csr {
     pub fn row_dot(&self, i: usize, y: &[f64]) -> f64 {
         let mut s = 0.0;
         for k in self.ptr[i]..self.ptr[i + 1] {
-            s += self.val[k] * y[self.col[k]];
+            s += self.val[k] * y[self.col[k] as usize];
         }
         s
     }
@@ -323,6 +325,12 @@ impl Circuit {
     pub fn assemble(&self) -> Result<Dae> {
         let nn = self.nodes.len();
         let n = self.n_unknowns();
+        if u32::try_from(n).is_err() {
+            return Err(Error::model(
+                "circuit",
+                format!("has {n} unknowns, more than 2^32"),
+            ));
+        }
         let mut fixed = vec![None; nn];
         for (k, (node, _)) in self.fixed_pressures.iter().enumerate() {
             if fixed[*node].is_some() {
@@ -359,18 +367,18 @@ impl Circuit {
         f.ptr.push(0);
         for i in 0..nn {
             if fixed[i].is_some() {
-                f.col.push(i);
+                f.col.push(i as u32);
                 f.val.push(1.0);
             } else {
                 for &(c, s) in &inc[start[i]..start[i + 1]] {
-                    f.col.push(c);
+                    f.col.push(c as u32);
                     f.val.push(s);
                 }
             }
             f.ptr.push(f.col.len());
         }
         for (bi, b) in self.branches.iter().enumerate() {
-            f.col.extend([b.from, b.to, nn + bi]);
+            f.col.extend([b.from as u32, b.to as u32, (nn + bi) as u32]);
             f.val.extend([-1.0, 1.0, b.resistance]);
             f.ptr.push(f.col.len());
         }

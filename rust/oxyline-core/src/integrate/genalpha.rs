@@ -210,7 +210,7 @@ impl GenAlpha<'_> {
         for (i, r) in self.r.iter_mut().enumerate() {
             let mut v = self.f[i] - self.e[i] * yd[i] * c_am;
             for k in f.ptr[i]..f.ptr[i + 1] {
-                v -= f.val[k] * y[f.col[k]];
+                v -= f.val[k] * y[f.col[k] as usize];
             }
             rmax = rmax.max(v.abs());
             *r = v;
