@@ -9,10 +9,153 @@
 
 use crate::error::{Error, Result};
 use crate::waveform::Waveform;
+use std::sync::Arc;
+
+/// A part of a vessel or boundary condition that a circuit element stands for (its name).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Part {
+    /// Interior point k of a vessel.
+    Point,
+    /// Segment k of a vessel of several segments.
+    Segment,
+    /// The one branch of a single-segment vessel.
+    Whole,
+    Resistance,
+    Inductance,
+    Capacitor,
+    Distal,
+    ProximalResistance,
+    DistalResistance,
+}
+
+impl Part {
+    fn suffix(self) -> &'static str {
+        match self {
+            Part::Point => "point",
+            Part::Segment => "segment",
+            Part::Whole => "",
+            Part::Resistance => "resistance",
+            Part::Inductance => "inductance",
+            Part::Capacitor => "capacitor",
+            Part::Distal => "distal",
+            Part::ProximalResistance => "proximal resistance",
+            Part::DistalResistance => "distal resistance",
+        }
+    }
+}
+
+/// What a node or branch is, from which its name is written on demand: a million-segment
+/// circuit would otherwise hold two million strings that only an error message or a
+/// diagnostic ever reads (12 bytes each instead of ~70).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Label {
+    /// Free text (index into the name table's texts).
+    Text(u32),
+    /// A part of vessel `vessel` (index into `Names::vessels`); `k` numbers points and
+    /// segments from 1.
+    Vessel { vessel: u32, part: Part, k: u32 },
+    /// A part of boundary condition `tag` (index into `Names::boundaries`).
+    Boundary { tag: u32, part: Part },
+}
+
+/// The names of a circuit's nodes and branches, shared by the circuit and its DAE.
+#[derive(Debug, Clone, Default)]
+pub struct Names {
+    nodes: Vec<Label>,
+    branches: Vec<Label>,
+    texts: Vec<String>,
+    /// Vessel names, as `Circuit::vessel_names`.
+    vessels: Vec<String>,
+    /// Boundary condition names (graph node names).
+    boundaries: Vec<String>,
+}
+
+fn index32(i: usize) -> u32 {
+    u32::try_from(i).expect("more than 2^32 circuit elements")
+}
+
+impl Names {
+    /// A free-text label.
+    pub fn text(&mut self, s: impl Into<String>) -> Label {
+        self.texts.push(s.into());
+        Label::Text(index32(self.texts.len() - 1))
+    }
+    /// Register vessel `name`; returns its index.
+    pub fn add_vessel(&mut self, name: &str) -> u32 {
+        self.vessels.push(name.to_owned());
+        index32(self.vessels.len() - 1)
+    }
+    /// Register boundary condition `name` (its graph node); returns its tag.
+    pub fn add_boundary(&mut self, name: &str) -> u32 {
+        self.boundaries.push(name.to_owned());
+        index32(self.boundaries.len() - 1)
+    }
+    fn write(&self, l: Label) -> String {
+        match l {
+            Label::Text(i) => self.texts[i as usize].clone(),
+            Label::Vessel { vessel, part, k } => {
+                let v = &self.vessels[vessel as usize];
+                match part {
+                    Part::Whole => format!("vessel '{v}'"),
+                    Part::Point | Part::Segment => format!("vessel '{v}' {} {k}", part.suffix()),
+                    _ => format!("vessel '{v}' {}", part.suffix()),
+                }
+            }
+            Label::Boundary { tag, part } => format!(
+                "boundary condition '{}' {}",
+                self.boundaries[tag as usize],
+                part.suffix()
+            ),
+        }
+    }
+    /// Name of node `i`.
+    pub fn node(&self, i: usize) -> String {
+        self.write(self.nodes[i])
+    }
+    /// Name of branch `b`.
+    pub fn branch(&self, b: usize) -> String {
+        self.write(self.branches[b])
+    }
+    /// Name of unknown `i` of the DAE (node pressures first, then branch flows).
+    pub fn unknown(&self, i: usize) -> String {
+        let nn = self.nodes.len();
+        if i < nn {
+            format!("pressure at {}", self.node(i))
+        } else {
+            format!("flow in {}", self.branch(i - nn))
+        }
+    }
+    /// Names of all unknowns.
+    pub fn unknowns(&self) -> Vec<String> {
+        (0..self.nodes.len() + self.branches.len())
+            .map(|i| self.unknown(i))
+            .collect()
+    }
+}
+
+/// A node's or branch's name: free text or a [`Label`].
+pub enum NameOf {
+    Text(String),
+    Label(Label),
+}
+impl From<&str> for NameOf {
+    fn from(s: &str) -> Self {
+        NameOf::Text(s.to_owned())
+    }
+}
+impl From<String> for NameOf {
+    fn from(s: String) -> Self {
+        NameOf::Text(s)
+    }
+}
+impl From<Label> for NameOf {
+    fn from(l: Label) -> Self {
+        NameOf::Label(l)
+    }
+}
 
 #[derive(Debug, Clone)]
 pub struct Node {
-    pub name: String,
     pub capacitance: f64,
     /// Lumen volume lumped into this node at the reference pressure (m³); 0 for BC-internal nodes.
     pub volume: f64,
@@ -53,7 +196,6 @@ pub struct SegmentGeom {
 
 #[derive(Debug, Clone)]
 pub struct Branch {
-    pub name: String,
     pub from: usize,
     pub to: usize,
     pub resistance: f64,
@@ -61,11 +203,13 @@ pub struct Branch {
     pub stenosis: f64,
 }
 
-/// Compressed sparse rows.
+/// Compressed sparse rows. Column indices are u32 (a circuit of more than 2^32 unknowns is
+/// refused at assembly): the per-step residual pass reads every entry, so 4-byte indices cut
+/// its memory traffic and the matrix's size by a sixth.
 #[derive(Debug, Clone, Default)]
 pub struct Csr {
     pub ptr: Vec<usize>,
-    pub col: Vec<usize>,
+    pub col: Vec<u32>,
     pub val: Vec<f64>,
 }
 
@@ -74,7 +218,7 @@ impl Csr {
     pub fn row_dot(&self, i: usize, y: &[f64]) -> f64 {
         let mut s = 0.0;
         for k in self.ptr[i]..self.ptr[i + 1] {
-            s += self.val[k] * y[self.col[k]];
+            s += self.val[k] * y[self.col[k] as usize];
         }
         s
     }
@@ -96,6 +240,8 @@ pub struct Circuit {
     pub source_boundary: Vec<usize>,
     pub segments: Vec<SegmentGeom>,
     pub vessel_names: Vec<String>,
+    /// Node and branch names (shared with the assembled DAE).
+    pub names: Arc<Names>,
 }
 
 /// Which forcing and capacitances to use: the real ones, or the steady (mean) ones.
@@ -109,9 +255,32 @@ pub enum Regime {
 }
 
 impl Circuit {
-    pub fn add_node(&mut self, name: impl Into<String>, capacitance: f64, volume: f64) -> usize {
+    /// An empty circuit with room for `nodes` nodes, `branches` branches and `segments`
+    /// segments (large circuits are then allocated once, not grown by doubling).
+    pub fn with_capacity(nodes: usize, branches: usize, segments: usize) -> Self {
+        let names = Names {
+            nodes: Vec::with_capacity(nodes),
+            branches: Vec::with_capacity(branches),
+            ..Default::default()
+        };
+        Circuit {
+            nodes: Vec::with_capacity(nodes),
+            branches: Vec::with_capacity(branches),
+            segments: Vec::with_capacity(segments),
+            names: Arc::new(names),
+            ..Default::default()
+        }
+    }
+    fn label(&mut self, name: NameOf) -> Label {
+        match name {
+            NameOf::Label(l) => l,
+            NameOf::Text(s) => Arc::make_mut(&mut self.names).text(s),
+        }
+    }
+    pub fn add_node(&mut self, name: impl Into<NameOf>, capacitance: f64, volume: f64) -> usize {
+        let label = self.label(name.into());
+        Arc::make_mut(&mut self.names).nodes.push(label);
         self.nodes.push(Node {
-            name: name.into(),
             capacitance,
             volume,
             windkessel: false,
@@ -122,15 +291,16 @@ impl Circuit {
     }
     pub fn add_branch(
         &mut self,
-        name: impl Into<String>,
+        name: impl Into<NameOf>,
         from: usize,
         to: usize,
         resistance: f64,
         inductance: f64,
         stenosis: f64,
     ) -> usize {
+        let label = self.label(name.into());
+        Arc::make_mut(&mut self.names).branches.push(label);
         self.branches.push(Branch {
-            name: name.into(),
             from,
             to,
             resistance,
@@ -143,22 +313,29 @@ impl Circuit {
         self.nodes.len() + self.branches.len()
     }
     pub fn unknown_name(&self, i: usize) -> String {
-        if i < self.nodes.len() {
-            format!("pressure at {}", self.nodes[i].name)
-        } else {
-            format!("flow in {}", self.branches[i - self.nodes.len()].name)
-        }
+        self.names.unknown(i)
+    }
+    /// Register vessel `name` (in `vessel_names` and the name table); returns its index.
+    pub fn add_vessel(&mut self, name: &str) -> usize {
+        self.vessel_names.push(name.to_owned());
+        Arc::make_mut(&mut self.names).add_vessel(name) as usize
     }
 
     /// Assemble the DAE (linear in the network size).
     pub fn assemble(&self) -> Result<Dae> {
         let nn = self.nodes.len();
         let n = self.n_unknowns();
+        if u32::try_from(n).is_err() {
+            return Err(Error::model(
+                "circuit",
+                format!("has {n} unknowns, more than 2^32"),
+            ));
+        }
         let mut fixed = vec![None; nn];
         for (k, (node, _)) in self.fixed_pressures.iter().enumerate() {
             if fixed[*node].is_some() {
                 return Err(Error::model(
-                    &self.nodes[*node].name,
+                    self.names.node(*node),
                     "has two pressure conditions",
                 ));
             }
@@ -190,18 +367,18 @@ impl Circuit {
         f.ptr.push(0);
         for i in 0..nn {
             if fixed[i].is_some() {
-                f.col.push(i);
+                f.col.push(i as u32);
                 f.val.push(1.0);
             } else {
                 for &(c, s) in &inc[start[i]..start[i + 1]] {
-                    f.col.push(c);
+                    f.col.push(c as u32);
                     f.val.push(s);
                 }
             }
             f.ptr.push(f.col.len());
         }
         for (bi, b) in self.branches.iter().enumerate() {
-            f.col.extend([b.from, b.to, nn + bi]);
+            f.col.extend([b.from as u32, b.to as u32, (nn + bi) as u32]);
             f.val.extend([-1.0, 1.0, b.resistance]);
             f.ptr.push(f.col.len());
         }
@@ -240,14 +417,8 @@ impl Circuit {
             f,
             stenosis,
             forcing,
-            names: self.unknown_names(),
+            names: self.names.clone(),
         })
-    }
-
-    fn unknown_names(&self) -> Vec<String> {
-        (0..self.n_unknowns())
-            .map(|i| self.unknown_name(i))
-            .collect()
     }
 }
 
@@ -263,7 +434,8 @@ pub struct Dae {
     pub stenosis: Vec<(usize, f64)>,
     /// (row, waveform): f_row(t) = w(t).
     pub forcing: Vec<(usize, Waveform)>,
-    pub names: Vec<String>,
+    /// Names of the unknowns ([`Names::unknown`]), shared with the circuit.
+    pub names: Arc<Names>,
 }
 
 impl Dae {

@@ -73,7 +73,7 @@ impl<T: Scalar> SparseLu<T> {
                 }
                 // a (near-)zero pivot, e.g. an ideal wire eliminated first: fall back to
                 // pivoting LU on the same pattern
-                let mut g = GeneralLu::analyse(t.n, &t.stamps).map_err(|e| e.to_string())?;
+                let mut g = GeneralLu::analyse(t.n, &t.stamps()).map_err(|e| e.to_string())?;
                 g.factor(vals)?;
                 *self = SparseLu::General(Box::new(g));
                 Ok(())
@@ -95,25 +95,25 @@ impl<T: Scalar> SparseLu<T> {
     }
 }
 
-/// Where a stamped value goes in the tree factorisation.
-#[derive(Clone, Copy)]
-enum Slot {
-    Diag(usize),
-    /// K[v, parent(v)]
-    Up(usize),
-    /// K[parent(v), v]
-    Down(usize),
-}
+/// Where a stamped value goes in the tree factorisation, packed into 32 bits (a million-
+/// segment circuit has ~7 million stamps): the vertex v times 4 plus the kind.
+const DIAG: u32 = 0;
+/// K[v, parent(v)]
+const UP: u32 = 1;
+/// K[parent(v), v]
+const DOWN: u32 = 2;
 
 /// Gaussian elimination without pivoting in post-order of a spanning forest of the matrix graph.
 /// Stable here because the circuit matrices are diagonal-positive with skew-symmetric couplings
 /// (node–branch incidence), so every Schur update adds c²/d > 0 to the parent's pivot.
 pub struct TreeLu<T: Scalar = f64> {
     n: usize,
-    stamps: Vec<(usize, usize)>,
-    slots: Vec<Slot>,
-    order: Vec<usize>,
-    parent: Vec<usize>,
+    /// Packed slot (`v << 2 | kind`) of every stamp; the stamps themselves follow from the
+    /// slots and `parent` (see `stamps`).
+    slots: Vec<u32>,
+    /// Elimination order (every vertex after all of its children).
+    order: Vec<u32>,
+    parent: Vec<u32>,
     diag: Vec<T>,
     up: Vec<T>,
     /// K[parent(v), v], divided by the pivot after `factor`
@@ -122,10 +122,14 @@ pub struct TreeLu<T: Scalar = f64> {
     pivot: Vec<T>,
 }
 
-const NONE: usize = usize::MAX;
+const NONE: u32 = u32::MAX;
 
 impl<T: Scalar> TreeLu<T> {
     fn analyse(n: usize, stamps: &[(usize, usize)]) -> Option<Self> {
+        // vertices are packed with two tag bits into u32 slots
+        if n >= (1 << 30) {
+            return None;
+        }
         // undirected adjacency of the off-diagonal pattern (deduplicated)
         let mut edges: Vec<(usize, usize)> = stamps
             .iter()
@@ -157,7 +161,7 @@ impl<T: Scalar> TreeLu<T> {
         // BFS from every unvisited vertex; a non-tree edge means a loop
         let mut parent = vec![NONE; n];
         let mut seen = vec![false; n];
-        let mut bfs = Vec::with_capacity(n);
+        let mut bfs: Vec<u32> = Vec::with_capacity(n);
         let mut tree_edges = 0usize;
         for root in 0..n {
             if seen[root] {
@@ -165,17 +169,17 @@ impl<T: Scalar> TreeLu<T> {
             }
             seen[root] = true;
             let first = bfs.len();
-            bfs.push(root);
+            bfs.push(root as u32);
             let mut head = first;
             while head < bfs.len() {
-                let v = bfs[head];
+                let v = bfs[head] as usize;
                 head += 1;
                 for &w in &adj[start[v]..start[v + 1]] {
                     if !seen[w] {
                         seen[w] = true;
-                        parent[w] = v;
+                        parent[w] = v as u32;
                         tree_edges += 1;
-                        bfs.push(w);
+                        bfs.push(w as u32);
                     }
                 }
             }
@@ -184,22 +188,21 @@ impl<T: Scalar> TreeLu<T> {
             return None;
         }
         // reverse BFS order eliminates every vertex after all of its children
-        let order: Vec<usize> = bfs.into_iter().rev().collect();
+        let order: Vec<u32> = bfs.into_iter().rev().collect();
         let slots = stamps
             .iter()
             .map(|&(r, c)| {
                 if r == c {
-                    Slot::Diag(r)
-                } else if parent[r] == c {
-                    Slot::Up(r)
+                    (r as u32) << 2 | DIAG
+                } else if parent[r] == c as u32 {
+                    (r as u32) << 2 | UP
                 } else {
-                    Slot::Down(c)
+                    (c as u32) << 2 | DOWN
                 }
             })
             .collect();
         Some(TreeLu {
             n,
-            stamps: stamps.to_vec(),
             slots,
             order,
             parent,
@@ -214,11 +217,12 @@ impl<T: Scalar> TreeLu<T> {
         self.diag.iter_mut().for_each(|x| *x = T::ZERO);
         self.up.iter_mut().for_each(|x| *x = T::ZERO);
         self.down.iter_mut().for_each(|x| *x = T::ZERO);
-        for (slot, &v) in self.slots.iter().zip(vals) {
-            match *slot {
-                Slot::Diag(i) => self.diag[i] += v,
-                Slot::Up(i) => self.up[i] += v,
-                Slot::Down(i) => self.down[i] += v,
+        for (&slot, &v) in self.slots.iter().zip(vals) {
+            let i = (slot >> 2) as usize;
+            match slot & 3 {
+                DIAG => self.diag[i] += v,
+                UP => self.up[i] += v,
+                _ => self.down[i] += v,
             }
         }
         self.pivot.copy_from_slice(&self.diag);
@@ -226,12 +230,14 @@ impl<T: Scalar> TreeLu<T> {
         // pivot is judged against the terms that formed it, not a global scale
         let mut magnitude: Vec<f64> = self.diag.iter().map(|d| d.modulus()).collect();
         for &v in &self.order {
+            let v = v as usize;
             let d = self.pivot[v];
             if d.modulus() <= 1e-12 * magnitude[v] || !d.finite() {
                 return false;
             }
             let p = self.parent[v];
             if p != NONE {
+                let p = p as usize;
                 let update = self.down[v] * self.up[v] / d;
                 self.pivot[p] -= update;
                 magnitude[p] += update.modulus();
@@ -239,6 +245,7 @@ impl<T: Scalar> TreeLu<T> {
         }
         // store the multipliers and reciprocal pivots so that solves only multiply
         for &v in &self.order {
+            let v = v as usize;
             self.pivot[v] = T::ONE / self.pivot[v];
             self.down[v] *= self.pivot[v];
         }
@@ -247,16 +254,16 @@ impl<T: Scalar> TreeLu<T> {
 
     fn solve_in_place(&self, b: &mut [T]) -> bool {
         for &v in &self.order {
-            let p = self.parent[v];
+            let (v, p) = (v as usize, self.parent[v as usize]);
             if p != NONE {
-                b[p] -= self.down[v] * b[v];
+                b[p as usize] -= self.down[v] * b[v];
             }
         }
         let mut finite = true;
         for &v in self.order.iter().rev() {
-            let p = self.parent[v];
+            let (v, p) = (v as usize, self.parent[v as usize]);
             let up = if p != NONE {
-                self.up[v] * b[p]
+                self.up[v] * b[p as usize]
             } else {
                 T::ZERO
             };
@@ -264,6 +271,22 @@ impl<T: Scalar> TreeLu<T> {
             finite &= b[v].finite();
         }
         finite
+    }
+
+    /// The (row, col) stamps the slots were made from, in order (for the pivoting fallback).
+    fn stamps(&self) -> Vec<(usize, usize)> {
+        self.slots
+            .iter()
+            .map(|&slot| {
+                let v = (slot >> 2) as usize;
+                let p = self.parent[v] as usize;
+                match slot & 3 {
+                    DIAG => (v, v),
+                    UP => (v, p),
+                    _ => (p, v),
+                }
+            })
+            .collect()
     }
 }
 

@@ -525,8 +525,9 @@ fn implicit_sweep_on_a_circulating_loop() {
     let (q, r) = (1e-6, 3e-6);
     let nn = b.dae.n_nodes;
     let mut y = vec![0.0; b.dae.n];
-    for (bi, br) in b.assembled.circuit.branches.iter().enumerate() {
-        let v = br.name.split('\'').nth(1).unwrap_or("");
+    for bi in 0..b.assembled.circuit.branches.len() {
+        let name = b.assembled.circuit.names.branch(bi);
+        let v = name.split('\'').nth(1).unwrap_or("");
         y[nn + bi] = match v {
             "v0" | "v4" => q,
             "v1" | "v2" => q + r,

@@ -14,7 +14,9 @@ use oxyline_core::{
 };
 use pyo3::exceptions::{PyKeyboardInterrupt, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyList};
+
+mod extract;
 use std::cell::Cell;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -265,12 +267,43 @@ impl Network {
 
 #[pymethods]
 impl Network {
+    /// `vessels` (the canonical vessel dicts) and `outlets` (node -> canonical resistance or
+    /// RCR condition with a constant pressure) may be handed over as Python objects instead of
+    /// inside `model_json` (see `extract`): a large tree then needs no text for its bulk.
     #[new]
-    fn new(py: Python<'_>, model_json: &str) -> PyResult<Self> {
-        let json = model_json.to_owned();
+    #[pyo3(signature = (model_json, vessels = None, outlets = None))]
+    fn new(
+        py: Python<'_>,
+        model_json: &str,
+        vessels: Option<Bound<'_, PyList>>,
+        outlets: Option<Bound<'_, PyDict>>,
+    ) -> PyResult<Self> {
+        let vessels = vessels
+            .map(|v| extract::vessels(&v))
+            .transpose()
+            .map_err(to_py)?;
+        let mut bcs = Vec::new();
+        for (node, bc) in outlets.iter().flat_map(|d| d.iter()) {
+            let node: String = node.extract()?;
+            let spec = extract::outlet(&node, &bc).map_err(to_py)?;
+            bcs.push((node, spec));
+        }
+        // the text is parsed where Python holds it (no copy); the spec is dropped once the
+        // circuit and the transport plan are built from it
         let built = py.detach(
             move || -> Result<((Assembled, Dae), Option<Transport>), Error> {
-                let spec = parse(&json)?;
+                let mut spec = parse(model_json)?;
+                if let Some(v) = vessels {
+                    spec.vessels.extend(v);
+                }
+                for (node, bc) in bcs {
+                    if spec.boundary_conditions.insert(node.clone(), bc).is_some() {
+                        return Err(Error::model(
+                            format!("boundary condition '{node}'"),
+                            "given twice",
+                        ));
+                    }
+                }
                 let assembled = spec.assemble()?;
                 let dae = assembled.circuit.assemble()?;
                 let transport = match &spec.transport {
@@ -395,9 +428,8 @@ impl Network {
         let graph_nodes = a.summary.nodes;
         d.set_item(
             "nodes",
-            a.circuit.nodes[..graph_nodes]
-                .iter()
-                .map(|n| n.name.clone())
+            (0..graph_nodes)
+                .map(|i| a.circuit.names.node(i))
                 .collect::<Vec<_>>(),
         )?;
         d.set_item("node_pressure", y[..graph_nodes].to_vec().into_pyarray(py))?;
@@ -428,7 +460,7 @@ impl Network {
 
     /// Names of all circuit unknowns (for diagnostics).
     fn unknown_names(&self) -> Vec<String> {
-        self.inner.1.names.clone()
+        self.inner.1.names.unknowns()
     }
 
     /// The assembled circuit as arrays: unknown names, mass diagonal E (capacitance for node
@@ -437,7 +469,7 @@ impl Network {
         let (a, dae) = &*self.inner;
         let c = &a.circuit;
         let d = PyDict::new(py);
-        d.set_item("names", dae.names.clone())?;
+        d.set_item("names", dae.names.unknowns())?;
         d.set_item("mass", dae.e.clone().into_pyarray(py))?;
         d.set_item("n_nodes", dae.n_nodes)?;
         d.set_item(
@@ -522,7 +554,8 @@ impl Network {
             .circuit
             .nodes
             .iter()
-            .position(|n| n.name == node)
+            .enumerate()
+            .position(|(i, _)| a.circuit.names.node(i) == node)
             .ok_or_else(|| ModelError::new_err(format!("node '{node}': not in the network")))?;
         let z = oxyline_core::frequency::input_impedance(dae, idx, omega).map_err(to_py)?;
         Ok((z.re, z.im))

@@ -15,6 +15,8 @@ pub(crate) struct Graph<'a> {
     pub names: Vec<&'a str>,
     /// Per node: (vessel, is the vessel's inlet end).
     pub ends: Vec<Vec<(usize, bool)>>,
+    /// Per vessel: its (from, to) nodes (looked up once).
+    pub vessel_ends: Vec<(usize, usize)>,
 }
 
 impl Graph<'_> {
@@ -37,37 +39,42 @@ pub(crate) fn build(spec: &NetworkSpec) -> Result<Graph<'_>> {
 }
 
 fn collect_nodes(spec: &NetworkSpec) -> Result<Graph<'_>> {
+    let nv = spec.vessels.len();
     let mut g = Graph {
-        index: HashMap::new(),
-        names: Vec::new(),
-        ends: Vec::new(),
+        index: HashMap::with_capacity(nv + 1),
+        names: Vec::with_capacity(nv + 1),
+        ends: Vec::with_capacity(nv + 1),
+        vessel_ends: Vec::with_capacity(nv),
     };
-    let mut seen_vessel: HashMap<&str, usize> = HashMap::new();
+    let mut seen_vessel: HashMap<&str, usize> = HashMap::with_capacity(nv);
     for (vi, v) in spec.vessels.iter().enumerate() {
-        let el = format!("vessel '{}'", v.name);
+        let el = || format!("vessel '{}'", v.name);
         if v.name.is_empty() {
             return Err(Error::model(format!("vessel #{vi}"), "has an empty name"));
         }
         if let Some(prev) = seen_vessel.insert(&v.name, vi) {
             return Err(Error::model(
-                &el,
+                el(),
                 format!("name used twice (vessels #{prev} and #{vi})"),
             ));
         }
         if v.from == v.to {
             return Err(Error::model(
-                &el,
+                el(),
                 format!("starts and ends at the same node '{}'", v.from),
             ));
         }
-        for (name, inlet) in [(&v.from, true), (&v.to, false)] {
+        let mut ends = [0; 2];
+        for (e, (name, inlet)) in [(&v.from, true), (&v.to, false)].into_iter().enumerate() {
             let k = *g.index.entry(name.as_str()).or_insert_with(|| {
                 g.names.push(name.as_str());
                 g.ends.push(Vec::new());
                 g.names.len() - 1
             });
             g.ends[k].push((vi, inlet));
+            ends[e] = k;
         }
+        g.vessel_ends.push((ends[0], ends[1]));
     }
     Ok(g)
 }
@@ -128,12 +135,12 @@ impl Dsu {
 
 fn check_connected(spec: &NetworkSpec, g: &Graph<'_>) -> Result<()> {
     let mut dsu = Dsu((0..g.names.len()).collect());
-    for v in &spec.vessels {
-        dsu.union(g.index[v.from.as_str()], g.index[v.to.as_str()]);
+    for &(a, b) in &g.vessel_ends {
+        dsu.union(a, b);
     }
-    let root = dsu.find(g.index[spec.vessels[0].from.as_str()]);
-    for v in &spec.vessels {
-        if dsu.find(g.index[v.from.as_str()]) != root {
+    let root = dsu.find(g.vessel_ends[0].0);
+    for (v, &(a, _)) in spec.vessels.iter().zip(&g.vessel_ends) {
+        if dsu.find(a) != root {
             return Err(Error::model(
                 format!("vessel '{}'", v.name),
                 format!(

@@ -51,22 +51,38 @@ impl NetworkSpec {
             checks::check_positive("segmentation", "max_length", m)?;
         }
         let graph = graph::build(self)?;
-        let mut circuit = Circuit::default();
+        let segments: usize = self.vessels.iter().map(|v| segments::count(self, v)).sum();
+        // a segment adds one branch and (but for the last of its vessel) one node; a boundary
+        // condition at most two nodes and two branches
+        let bcs = self.boundary_conditions.len();
+        let mut circuit = Circuit::with_capacity(
+            graph.names.len() + segments + 2 * bcs,
+            segments + 2 * bcs,
+            segments,
+        );
         for name in &graph.names {
             circuit.add_node(*name, 0.0, 0.0);
         }
         let mut probes = Probes::default();
+        let with_output = self.vessels.iter().filter(|v| v.output).count();
+        probes.vessels.reserve(with_output);
+        probes.vessel_unknowns.reserve(4 * with_output);
+        if self.output_segments {
+            probes.segment_count.reserve(with_output);
+            probes.segment_unknowns.reserve(3 * segments);
+            probes.segment_position.reserve(segments);
+        }
         let mut summary = Summary {
             vessels: self.vessels.len(),
             nodes: graph.names.len(),
             junctions: graph.junctions(),
             ..Default::default()
         };
-        let mut table = Vec::new();
+        let mut table = Vec::with_capacity(segments);
         for (vi, v) in self.vessels.iter().enumerate() {
             let arrangement = v.arrangement.unwrap_or(self.arrangement);
             let segs = segments::discretise(self, vi, blood, arrangement)?;
-            let ends = (graph.index[v.from.as_str()], graph.index[v.to.as_str()]);
+            let ends = graph.vessel_ends[vi];
             let chain = vessel::stamp(&mut circuit, &v.name, &segs, arrangement, ends);
             if v.output {
                 vessel::record_probes(

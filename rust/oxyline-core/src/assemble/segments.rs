@@ -44,6 +44,24 @@ impl SegmentRow {
     }
 }
 
+/// How many segments vessel `v` gets (as [`discretise`] decides, for a valid vessel): used to
+/// size the circuit's tables before stamping, so that they are allocated once.
+pub(crate) fn count(spec: &NetworkSpec, v: &VesselSpec) -> usize {
+    let arrangement = v.arrangement.unwrap_or(spec.arrangement);
+    match (&v.geometry, arrangement) {
+        (_, Arrangement::Rcl) => 1,
+        (Some(g), _) => match (v.segments, spec.max_segment_length) {
+            (Some(n), _) => n,
+            (None, Some(m)) if m > 0.0 && g.length.is_finite() => {
+                ((g.length / m) * (1.0 - 1e-12)).ceil().max(1.0) as usize
+            }
+            _ => 1,
+        },
+        (None, _) => v.segments.unwrap_or(1),
+    }
+    .max(1)
+}
+
 /// The segments of vessel `vi` of `spec`.
 pub(crate) fn discretise(
     spec: &NetworkSpec,

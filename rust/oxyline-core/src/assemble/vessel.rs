@@ -4,7 +4,7 @@
 //! meeting there), the segment geometry transport needs, and the vessel's output probes.
 
 use super::segments::SegmentRow;
-use crate::circuit::{Circuit, SegmentGeom};
+use crate::circuit::{Circuit, Label, Part, SegmentGeom};
 use crate::output::Probes;
 use crate::spec::Arrangement;
 
@@ -23,8 +23,7 @@ pub(crate) fn stamp(
     arrangement: Arrangement,
     (p_from, p_to): (usize, usize),
 ) -> Chain {
-    let vessel = circuit.vessel_names.len();
-    circuit.vessel_names.push(name.to_owned());
+    let vessel = circuit.add_vessel(name);
     let n = segs.len();
     // points 0..=n along the vessel; RCL has one interior point
     let interior = if arrangement == Arrangement::Rcl {
@@ -35,27 +34,30 @@ pub(crate) fn stamp(
     let mut points = Vec::with_capacity(interior + 2);
     points.push(p_from);
     for k in 0..interior {
-        points.push(circuit.add_node(format!("vessel '{name}' point {}", k + 1), 0.0, 0.0));
+        let label = label(vessel, Part::Point, k + 1);
+        points.push(circuit.add_node(label, 0.0, 0.0));
     }
     points.push(p_to);
     let branches = if arrangement == Arrangement::Rcl {
-        stamp_rcl(circuit, name, vessel, &segs[0], &points)
+        stamp_rcl(circuit, vessel, &segs[0], &points)
     } else {
-        stamp_segments(circuit, name, vessel, segs, arrangement, &points)
+        stamp_segments(circuit, vessel, segs, arrangement, &points)
     };
     Chain { points, branches }
 }
 
+fn label(vessel: usize, part: Part, k: usize) -> Label {
+    Label::Vessel {
+        vessel: vessel as u32,
+        part,
+        k: k as u32,
+    }
+}
+
 /// svZeroDSolver's BloodVessel: R (and stenosis), then C at the interior point, then L.
-fn stamp_rcl(
-    circuit: &mut Circuit,
-    name: &str,
-    vessel: usize,
-    s: &SegmentRow,
-    points: &[usize],
-) -> Vec<usize> {
+fn stamp_rcl(circuit: &mut Circuit, vessel: usize, s: &SegmentRow, points: &[usize]) -> Vec<usize> {
     let b0 = circuit.add_branch(
-        format!("vessel '{name}' resistance"),
+        label(vessel, Part::Resistance, 0),
         points[0],
         points[1],
         s.resistance,
@@ -65,7 +67,7 @@ fn stamp_rcl(
     circuit.nodes[points[1]].capacitance += s.compliance;
     circuit.nodes[points[1]].volume += s.volume;
     let b1 = circuit.add_branch(
-        format!("vessel '{name}' inductance"),
+        label(vessel, Part::Inductance, 0),
         points[1],
         points[2],
         0.0,
@@ -88,7 +90,6 @@ fn stamp_rcl(
 /// One R–L branch per segment; C, volume and wall area at the ends by the arrangement.
 fn stamp_segments(
     circuit: &mut Circuit,
-    name: &str,
     vessel: usize,
     segs: &[SegmentRow],
     arrangement: Arrangement,
@@ -103,9 +104,9 @@ fn stamp_segments(
     let mut branches = Vec::with_capacity(n);
     for (k, s) in segs.iter().enumerate() {
         let label = if n == 1 {
-            format!("vessel '{name}'")
+            label(vessel, Part::Whole, 0)
         } else {
-            format!("vessel '{name}' segment {}", k + 1)
+            label(vessel, Part::Segment, k + 1)
         };
         let (a, b) = (points[k], points[k + 1]);
         let branch = circuit.add_branch(label, a, b, s.resistance, s.inductance, s.stenosis);

@@ -40,7 +40,7 @@ pub(super) fn reduce_prescribed_inductors(dae: &Dae, regime: Regime) -> Reductio
     }
     let entries = |r: usize| {
         (dae.f.ptr[r]..dae.f.ptr[r + 1])
-            .map(|k| (dae.f.col[k], dae.f.val[k]))
+            .map(|k| (dae.f.col[k] as usize, dae.f.val[k]))
             .filter(|&(_, v)| v != 0.0)
     };
     let mut col_rows: Vec<Vec<usize>> = vec![Vec::new(); n];
@@ -116,7 +116,7 @@ impl Algebraic {
         let mut stamps_src = Vec::new();
         for (l, &g) in rows.iter().enumerate() {
             for k in dae.f.ptr[g]..dae.f.ptr[g + 1] {
-                let c = dae.f.col[k];
+                let c = dae.f.col[k] as usize;
                 if local[c] != usize::MAX {
                     stamps.push((l, local[c]));
                     stamps_src.push(k);

@@ -6,13 +6,15 @@ use super::newton::{self, Magnitude, NewtonProblem, jacobian_stamps, jacobian_va
 use crate::circuit::{Dae, Regime};
 use crate::error::{Error, Result};
 use crate::sparse::SparseLu;
+use std::borrow::Cow;
 
 // moved to `newton`, kept here for the callers of `crate::genalpha::...`
 pub use super::newton::{NewtonControl, scaled_increment, singular};
 
 pub struct GenAlpha<'a> {
     dae: &'a Dae,
-    e: Vec<f64>,
+    /// The mass diagonal of the regime (the DAE's own for the transient one: not copied).
+    e: Cow<'a, [f64]>,
     regime: Regime,
     pub dt: f64,
     am: f64,
@@ -20,12 +22,13 @@ pub struct GenAlpha<'a> {
     gamma: f64,
     control: NewtonControl,
     lu: SparseLu,
-    kvals: Vec<f64>,
-    /// α_m E, the mass part of the iteration matrix.
-    am_e: Vec<f64>,
+    /// Number of values of the iteration matrix (the stamps of `jacobian_stamps`).
+    n_stamps: usize,
     factored: bool,
     f: Vec<f64>,
     r: Vec<f64>,
+    /// Newton iterate and α_f level of a nonlinear step (empty for linear circuits, whose
+    /// step needs neither: a million-segment tree saves three state vectors).
     y_new: Vec<f64>,
     yd_new: Vec<f64>,
     y_af: Vec<f64>,
@@ -53,10 +56,13 @@ impl<'a> GenAlpha<'a> {
         let stamps = jacobian_stamps(dae);
         let lu = SparseLu::analyse(dae.n, &stamps)?;
         let n = dae.n;
-        let e = dae.mass(regime);
+        let e = match regime {
+            Regime::Transient => Cow::Borrowed(dae.e.as_slice()),
+            _ => Cow::Owned(dae.mass(regime)),
+        };
+        let nonlinear = if dae.is_linear() { 0 } else { n };
         Ok(GenAlpha {
             dae,
-            am_e: e.iter().map(|e| am * e).collect(),
             e,
             regime,
             dt,
@@ -65,23 +71,25 @@ impl<'a> GenAlpha<'a> {
             gamma,
             control,
             lu,
-            kvals: vec![0.0; stamps.len()],
+            n_stamps: stamps.len(),
             factored: false,
             f: vec![0.0; n],
             r: vec![0.0; n],
-            y_new: vec![0.0; n],
-            yd_new: vec![0.0; n],
-            y_af: vec![0.0; n],
+            y_new: vec![0.0; nonlinear],
+            yd_new: vec![0.0; nonlinear],
+            y_af: vec![0.0; nonlinear],
             magnitude: Magnitude::new(dae),
         })
     }
 
-    fn factor(&mut self, time: f64) -> Result<()> {
+    /// Factorise the iteration matrix at the α_f level `y_af` (read for the stenosis slopes
+    /// only). Its values are built here and dropped: a linear circuit factorises once.
+    fn factor(&mut self, time: f64, y_af: &[f64]) -> Result<()> {
         let c = self.af * self.gamma * self.dt;
-        jacobian_values(self.dae, c, &self.am_e, &self.y_af, &mut self.kvals);
-        self.lu
-            .factor(&self.kvals)
-            .map_err(|m| singular(time, &m))?;
+        let am_e: Vec<f64> = self.e.iter().map(|e| self.am * e).collect();
+        let mut kvals = vec![0.0; self.n_stamps];
+        jacobian_values(self.dae, c, &am_e, y_af, &mut kvals);
+        self.lu.factor(&kvals).map_err(|m| singular(time, &m))?;
         self.factored = true;
         Ok(())
     }
@@ -150,7 +158,10 @@ impl NewtonProblem for Iterate<'_, '_> {
     }
     fn factor(&mut self, _: usize) -> Result<()> {
         // stenoses make the iteration matrix depend on the iterate
-        self.ga.factor(self.t_af)
+        let y_af = std::mem::take(&mut self.ga.y_af);
+        let done = self.ga.factor(self.t_af, &y_af);
+        self.ga.y_af = y_af;
+        done
     }
     fn solve(&mut self, r: &mut [f64]) -> Result<()> {
         if self.ga.lu.solve_in_place(r) {
@@ -190,8 +201,7 @@ impl GenAlpha<'_> {
         let t_af = time + af * dt;
         self.dae.forcing_into(t_af, self.regime, &mut self.f);
         if !self.factored {
-            self.y_af.copy_from_slice(y);
-            self.factor(t_af)?;
+            self.factor(t_af, y)?;
         }
         // with y_new = y and ẏ_new = pred·ẏ: y_αf = y, ẏ_αm = ẏ (1 + αm (pred − 1))
         let c_am = 1.0 + am * (pred - 1.0);
@@ -200,7 +210,7 @@ impl GenAlpha<'_> {
         for (i, r) in self.r.iter_mut().enumerate() {
             let mut v = self.f[i] - self.e[i] * yd[i] * c_am;
             for k in f.ptr[i]..f.ptr[i + 1] {
-                v -= f.val[k] * y[f.col[k]];
+                v -= f.val[k] * y[f.col[k] as usize];
             }
             rmax = rmax.max(v.abs());
             *r = v;

@@ -151,7 +151,7 @@ pub fn jacobian_stamps(dae: &Dae) -> Vec<(usize, usize)> {
     let mut stamps = Vec::with_capacity(dae.f.val.len() + dae.n);
     for i in 0..dae.n {
         for k in dae.f.ptr[i]..dae.f.ptr[i + 1] {
-            stamps.push((i, dae.f.col[k]));
+            stamps.push((i, dae.f.col[k] as usize));
         }
     }
     stamps.extend((0..dae.n).map(|i| (i, i)));

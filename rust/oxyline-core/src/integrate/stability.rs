@@ -2,6 +2,7 @@
 //! that sets it. Exact from the dense spectrum for small circuits, power iteration otherwise.
 
 use super::rk4::Rk4;
+use crate::circuit::Names;
 use crate::error::Result;
 use nalgebra::Complex;
 
@@ -48,7 +49,7 @@ const DENSE_LIMIT: usize = 600;
 
 /// Largest stable RK4 step of `rk`'s circuit and the unknown (named by `names`) that sets it:
 /// exact for up to `DENSE_LIMIT` differential unknowns, a power-iteration estimate beyond.
-pub fn rk4_limit(rk: &mut Rk4<'_>, names: &[String]) -> Result<StabilityLimit> {
+pub fn rk4_limit(rk: &mut Rk4<'_>, names: &Names) -> Result<StabilityLimit> {
     if rk.diff.is_empty() {
         return Ok(StabilityLimit {
             dt_max: f64::INFINITY,
@@ -63,7 +64,7 @@ pub fn rk4_limit(rk: &mut Rk4<'_>, names: &[String]) -> Result<StabilityLimit> {
         power_limit(rk)?
     };
     Ok(StabilityLimit {
-        element: names[rk.diff[at]].clone(),
+        element: names.unknown(rk.diff[at]),
         ..limit
     })
 }

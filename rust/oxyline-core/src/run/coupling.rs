@@ -160,7 +160,7 @@ impl State<'_, '_> {
         if let Some(i) = self.y.iter().position(|v| !v.is_finite()) {
             return Err(Error::solver(
                 t,
-                format!("non-finite value of {}", self.dae.names[i]),
+                format!("non-finite value of {}", self.dae.names.unknown(i)),
             ));
         }
         Ok(())

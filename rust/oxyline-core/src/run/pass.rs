@@ -45,7 +45,11 @@ pub(super) fn run(
         .as_ref()
         .map(|sp| (sp.tr.species_names().len(), sp.tr.columns_per_species()));
     let columns = s.species_columns.as_deref();
-    let rec = Recorder::new(&s.probes, layout, columns, initial_stored, sink)?;
+    let mut rec = Recorder::new(&s.probes, layout, columns, initial_stored, sink)?;
+    if !s.output_all_cycles && mean.is_none() {
+        // last-cycle output: one cycle's rows and the row at its start
+        rec.reserve_rows(plan.steps_per_cycle / plan.stride + 1);
+    }
     let state = State {
         dae,
         flow,

@@ -103,6 +103,9 @@ impl<'d> Plan<'d> {
     /// With `monolithic`, RK4 carries the species in its own stages (see [`Flow`]).
     pub fn flow(&mut self, s: &RunSettings, y: &mut [f64], monolithic: bool) -> Result<Flow<'d>> {
         if !self.use_rk4 {
+            // the RK4 integrator of the consistent start (or of the stability probe) is not
+            // needed again: drop it before the run's own integrator is built
+            self.rk4 = None;
             let ga = GenAlpha::new(
                 self.dae,
                 Regime::Transient,

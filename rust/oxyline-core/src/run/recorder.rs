@@ -82,6 +82,16 @@ impl<'p, 's, 'f> Recorder<'p, 's, 'f> {
         })
     }
 
+    /// Make room for `rows` rows at once (the whole table is then one allocation of its final
+    /// size, not grown by doubling). Nothing with a sink, which holds at most a chunk.
+    pub fn reserve_rows(&mut self, rows: usize) {
+        if self.sink.is_none() {
+            self.times.reserve_exact(rows);
+            self.data.reserve_exact(rows * self.probes.len());
+            self.transport.reserve_exact(rows * self.transport_cols);
+        }
+    }
+
     pub fn n_probes(&self) -> usize {
         self.probes.len()
     }

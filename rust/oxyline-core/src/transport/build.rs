@@ -192,7 +192,7 @@ impl Transport {
             out_vessels,
             out_segments,
             segment_vessels: circuit.segments.iter().map(|s| s.vessel as u32).collect(),
-            node_names: Names::new(circuit.nodes.iter().map(|n| n.name.as_str()))?,
+            node_names: Names::new((0..circuit.nodes.len()).map(|i| circuit.names.node(i)))?,
             domain: Vec::new(),
             internal: Vec::new(),
             boundary_faces: Vec::new(),
@@ -221,7 +221,7 @@ fn classify_nodes(circuit: &Circuit, dae: &Dae) -> Result<Vec<Kind>> {
             kind[i] = Kind::Cell;
         } else if dae.e[i] > 0.0 {
             return Err(bad(
-                &node.name,
+                &circuit.names.node(i),
                 "has compliance but no lumen volume, so transport cannot conserve mass there; give the vessel geometry instead of lumped values".into(),
             ));
         }
@@ -254,7 +254,7 @@ fn flow_faces(
         for (k, e) in [(ka, from), (kb, to)] {
             if k == Kind::Exterior && matches!(e, End::Node(_)) {
                 return Err(bad(
-                    &b.name,
+                    &circuit.names.branch(bi),
                     "connects to a prescribed-pressure node without a boundary condition".into(),
                 ));
             }

@@ -194,10 +194,10 @@ pub(super) struct Names {
 }
 
 impl Names {
-    pub(super) fn new<'a>(names: impl Iterator<Item = &'a str>) -> Result<Names> {
+    pub(super) fn new<S: AsRef<str>>(names: impl Iterator<Item = S>) -> Result<Names> {
         let mut n = Names::default();
         for s in names {
-            n.text.push_str(s);
+            n.text.push_str(s.as_ref());
             let end = u32::try_from(n.text.len())
                 .map_err(|_| bad("transport", "node names too long".into()))?;
             n.ends.push(end);

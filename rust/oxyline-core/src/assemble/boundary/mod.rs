@@ -6,7 +6,7 @@ mod pressure;
 mod rcr;
 mod resistance;
 
-use crate::circuit::{BoundaryTag, Circuit};
+use crate::circuit::{BoundaryTag, Circuit, Label, Part};
 use crate::error::Result;
 use crate::spec::BoundarySpec;
 use crate::waveform::{Waveform, WaveformSpec};
@@ -18,11 +18,19 @@ pub(crate) struct Site {
     /// At a vessel's inlet end (else its outlet end).
     pub inlet: bool,
     pub tag: usize,
-    /// `boundary condition '<node>'`, for error messages and element names.
+    /// `boundary condition '<node>'`, for error messages.
     pub element: String,
 }
 
 impl Site {
+    /// The name of the condition's element `part`.
+    pub fn label(&self, part: Part) -> Label {
+        Label::Boundary {
+            tag: self.tag as u32,
+            part,
+        }
+    }
+
     /// An optional distal pressure waveform (0 when absent).
     fn waveform(&self, spec: &Option<WaveformSpec>) -> Result<Waveform> {
         match spec {
@@ -41,6 +49,7 @@ pub(crate) fn stamp(
     bc: &BoundarySpec,
 ) -> Result<f64> {
     let tag = circuit.boundaries.len();
+    std::sync::Arc::make_mut(&mut circuit.names).add_boundary(name);
     circuit.boundaries.push(BoundaryTag {
         name: name.to_owned(),
         inlet,

@@ -3,7 +3,7 @@
 
 use super::Site;
 use crate::assemble::checks::{check_nonnegative, check_positive};
-use crate::circuit::Circuit;
+use crate::circuit::{Circuit, Part};
 use crate::error::Result;
 use crate::waveform::WaveformSpec;
 
@@ -24,15 +24,15 @@ pub(super) fn stamp(
     check_nonnegative(el, "proximal_resistance", rcr.proximal)?;
     check_nonnegative(el, "capacitance", rcr.capacitance)?;
     check_positive(el, "distal_resistance", rcr.distal)?;
-    let wk = circuit.add_node(format!("{el} capacitor"), rcr.capacitance, 0.0);
+    let wk = circuit.add_node(site.label(Part::Capacitor), rcr.capacitance, 0.0);
     circuit.nodes[wk].windkessel = true;
     circuit.nodes[wk].boundary = Some(site.tag);
-    let g = circuit.add_node(format!("{el} distal"), 0.0, 0.0);
+    let g = circuit.add_node(site.label(Part::Distal), 0.0, 0.0);
     circuit.nodes[g].boundary = Some(site.tag);
     circuit.fixed_pressures.push((g, site.waveform(pressure)?));
     let (proximal, distal) = (
-        format!("{el} proximal resistance"),
-        format!("{el} distal resistance"),
+        site.label(Part::ProximalResistance),
+        site.label(Part::DistalResistance),
     );
     // branches keep the order and direction of the flow path from the network outwards
     if site.inlet {

@@ -2,7 +2,7 @@
 
 use super::Site;
 use crate::assemble::checks::check_nonnegative;
-use crate::circuit::Circuit;
+use crate::circuit::{Circuit, Part};
 use crate::error::Result;
 use crate::waveform::WaveformSpec;
 
@@ -14,7 +14,7 @@ pub(super) fn stamp(
 ) -> Result<()> {
     let el = &site.element;
     check_nonnegative(el, "resistance", resistance)?;
-    let g = circuit.add_node(format!("{el} distal"), 0.0, 0.0);
+    let g = circuit.add_node(site.label(Part::Distal), 0.0, 0.0);
     circuit.nodes[g].boundary = Some(site.tag);
     circuit.fixed_pressures.push((g, site.waveform(pressure)?));
     let (a, b) = if site.inlet {
@@ -22,6 +22,6 @@ pub(super) fn stamp(
     } else {
         (site.node, g)
     };
-    circuit.add_branch(format!("{el} resistance"), a, b, resistance, 0.0, 0.0);
+    circuit.add_branch(site.label(Part::Resistance), a, b, resistance, 0.0, 0.0);
     Ok(())
 }

@@ -1,0 +1,74 @@
+"""Where does the memory of a whole-tree run go? Resident set size after each stage of loading
+and running one tree of ``bench_scale.py`` (issue 9, item 6), in one fresh process.
+
+    python benches/profile_memory.py --depth 16 --config o2-k
+
+Stages: the user's model dict (``tree``), the Python copy and checks (``_copy`` + canonical),
+the core network (``_core.Network``: parse, assembly, DAE, transport plan; the JSON text is
+built and dropped inside), and ``simulate`` (one cycle of generalized-α at 1 ms, vessel output
+every 10 ms). ``rss`` is the resident set after the stage, ``peak`` the high-water mark so far
+(``VmHWM``), both in MB and in bytes per segment.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import time
+
+
+def rss() -> tuple[float, float]:
+    """(current, peak) resident set in bytes, from /proc/self/status."""
+    out = {}
+    with open("/proc/self/status") as f:
+        for line in f:
+            k, _, v = line.partition(":")
+            if k in ("VmRSS", "VmHWM"):
+                out[k] = float(v.split()[0]) * 1024.0
+    return out["VmRSS"], out["VmHWM"]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--depth", type=int, default=14)
+    ap.add_argument("--config", default="o2-k")
+    ap.add_argument("--no-run", action="store_true")
+    a = ap.parse_args()
+
+    from bench_scale import tree
+
+    import oxyline
+
+    segments = (2 ** a.depth - 1) * 4
+    rows: list[tuple[str, float, float, float]] = []
+
+    def mark(stage: str, t0: float) -> float:
+        now, peak = rss()
+        rows.append((stage, time.process_time() - t0, now, peak))
+        return time.process_time()
+
+    t = mark("interpreter + oxyline", time.process_time())
+    model = tree(a.depth, 4, a.config)
+    t = mark("user model dict", t)
+    m = oxyline.load_model(model)
+    t = mark("load_model (copy, checks, core network)", t)
+    if not a.no_run:
+        res = oxyline.simulate(m, cycles=1, dt=1e-3, output_every=0.01, segments=False,
+                               method="generalized-alpha")
+        t = mark("simulate (result kept)", t)
+        out = res.data.nbytes + sum(sp.vessel_data.base.nbytes if sp.vessel_data.base is not None
+                                    else sp.vessel_data.nbytes for sp in res.species.values())
+        del res
+        gc.collect()
+        t = mark("result dropped", t)
+        print(f"output arrays: {out / 1e6:.0f} MB ({out / segments:.0f} B/segment)")
+    print(f"# depth {a.depth}, {segments} segments, config {a.config}")
+    print("| stage | CPU s | rss MB | B/seg | peak MB | peak B/seg |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for stage, cpu, now, peak in rows:
+        print(f"| {stage} | {cpu:.2f} | {now / 1e6:.0f} | {now / segments:.0f} "
+              f"| {peak / 1e6:.0f} | {peak / segments:.0f} |")
+
+
+if __name__ == "__main__":
+    main()
