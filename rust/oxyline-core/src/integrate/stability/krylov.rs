@@ -13,6 +13,9 @@ use crate::error::{Error, Result};
 use faer::Mat;
 use nalgebra::Complex;
 
+/// y = A x of the operator whose eigenvalues are sought.
+pub type Operator<'a> = dyn FnMut(&[f64], &mut [f64]) -> Result<()> + 'a;
+
 /// A Ritz value θ (≈ eigenvalue), its residual ‖A x − θ x‖ (x = V y, ‖x‖ = 1) and the Ritz
 /// vector's component magnitudes |x_i|.
 pub struct Ritz {
@@ -85,7 +88,7 @@ fn orthogonalise(basis: &[Vec<f64>], w: &mut [f64], coef: &mut [f64]) {
 /// the largest `weight`, by restarted Arnoldi from a fixed pseudo-random start vector.
 pub fn largest_by(
     n: usize,
-    op: &mut dyn FnMut(&[f64], &mut [f64]) -> Result<()>,
+    op: &mut Operator<'_>,
     weight: &dyn Fn(Complex<f64>) -> f64,
     control: &KrylovControl,
 ) -> Result<KrylovResult> {
