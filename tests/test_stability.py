@@ -84,7 +84,7 @@ def refined(name: str, max_length: float) -> dict[str, Any]:
 
 
 def check(model_dict: dict[str, Any]) -> tuple[float, float, int]:
-    model = oxyline.load_model(model_dict)
+    model = oxyline.load_model(copy.deepcopy(model_dict))
     exact, n = dense_limit(model)
     krylov, _, is_exact = model.network.rk4_stability_limit(method="krylov")
     assert not is_exact
@@ -100,8 +100,10 @@ def check(model_dict: dict[str, Any]) -> tuple[float, float, int]:
     pytest.param(lambda: chain(30), id="chain-120"),
     pytest.param(lambda: chain(150), id="chain-600"),
     pytest.param(lambda: tree(6), id="tree-221"),
-    pytest.param(lambda: refined("circle-of-willis", 0.01), id="circle-of-willis"),
-    pytest.param(lambda: refined("matthys37", 0.01), id="matthys37"),
+    # the built-ins as shipped: the power iteration reported 2.18e-5 s and 6.5e-6 s for them
+    pytest.param(lambda: oxyline.models.load_dict("circle-of-willis"), id="circle-of-willis"),
+    pytest.param(lambda: oxyline.models.load_dict("matthys37"), id="matthys37"),
+    pytest.param(lambda: refined("circle-of-willis", 0.01), id="circle-of-willis-10mm"),
 ])
 def test_krylov_limit_matches_dense_eigenvalues(case: Any) -> None:
     check(case())
