@@ -80,7 +80,7 @@ def main() -> None:
                 dense = float(rk4_step_limits(np.linalg.eigvals(flat.reshape(nd, nd))).min())
             del flat
         old = old_limit(d, args.old_pythonpath) if args.old_pythonpath else float("nan")
-        print(f"| {name} | {nd if nd != '?' else f'~{n // 2}'} | {old:.3e} | {new:.3e} |"
+        print(f"| {name} | {nd if nd != '?' else f'({n} in all)'} | {old:.3e} | {new:.3e} |"
               f" {dense:.3e} | {new / dense:.4f} | {old / dense:.4f} | {t_new:.2f} |",
               flush=True)
 
