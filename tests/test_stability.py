@@ -170,3 +170,21 @@ def test_stiff_oxygen_wall_exchange_stays_finite_under_rk4() -> None:
     po2 = np.asarray(res.segment_po2)
     assert np.isfinite(po2).all()
     assert 55 * 0.99 < po2.min() and po2.max() < 85 * 1.01  # between wall and inlet PO2
+
+
+def test_non_finite_species_is_a_typed_error_with_the_partial_result() -> None:
+    """A user step stable for the flow but not for the O2 wall exchange (7.7e-4 s vs 7e-5 s):
+    the run stops with a SolverError naming the species, the cell (by its circuit node) and the
+    time, with the
+    partial result attached, instead of NaN columns."""
+    model = oxyline.load_model({
+        "name": "stiff", "period": 1.0,
+        "vessels": [{"name": "tube", "from": "in", "to": "out", "segments": 10, "length": 0.1,
+                     "radius": 3e-3, "wall_thickness": 1e-3, "youngs_modulus": 4e5}],
+        "boundary_conditions": {"in": {"type": "flow", "value": 5e-6},
+                                "out": {"type": "resistance", "resistance": 1e8}},
+        "oxygen": {"inlet": {"po2": 85.0},
+                   "wall": {"model": "mass-transfer", "k": 30.0, "po2": 55}}})
+    with pytest.raises(oxyline.SolverError, match=r"species 'o2': amount NaN in the cell of node '.+' \(t = ") as info:
+        oxyline.simulate(model, method="rk4", dt=1 / 1300, cycles=1, output_every=0.01)
+    assert info.value.result is not None

@@ -40,3 +40,28 @@ impl Transport {
         best
     }
 }
+
+impl Transport {
+    /// A cheap check of the species amounts `z` (once per output row): the first non-finite
+    /// one is a solver error naming the species, the place (the cell's node: vessel and
+    /// segment) and the time, so a step too large for a stiff exchange, decay or binding stops
+    /// the run with its partial result instead of writing NaN.
+    pub fn check_finite(&self, z: &[f64], time: f64) -> Result<()> {
+        let nc = self.plan.cells.len();
+        for (s, sp) in self.species.iter().enumerate() {
+            let block = &z[s * nc..(s + 1) * nc];
+            if let Some(i) = block.iter().position(|v| !v.is_finite()) {
+                return Err(Error::solver(
+                    time,
+                    format!(
+                        "species '{}': amount {} in the cell of node '{}' (t = {time:.6} s): the step is too large \
+                         for its wall exchange, decay or binding; lower dt or use \
+                         generalized-alpha",
+                        sp.name, block[i], self.plan.node_names[self.plan.cell_node[i]]
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
