@@ -215,7 +215,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     print(f"total compliance {s['total_compliance']:.4e} m^3/Pa")
     print(f"total volume     {s['total_volume'] * 1e6:.4f} mL")
     print(f"period           {s['period']} s")
-    print(f"rk4 stable dt    {s['rk4_dt_max']:.4e} s ({'exact' if s['rk4_limit_exact'] else 'estimate'},"
+    print(f"rk4 stable dt    {s['rk4_dt_max']:.4e} s ({'exact' if s['rk4_limit_exact'] else 'Krylov, conservative'},"
           f" set by {s['rk4_limiting_element']})")
     sim = model.simulation or {}
     out = sim.get("output") or {}

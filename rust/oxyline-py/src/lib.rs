@@ -535,16 +535,48 @@ impl Network {
         Ok((y.into_pyarray(py), yd.into_pyarray(py)))
     }
 
-    /// Largest stable RK4 step: (dt_max, element, exact).
-    fn rk4_stability_limit(&self, py: Python<'_>) -> PyResult<(f64, String, bool)> {
+    /// Largest stable RK4 step: (dt_max, element, exact). `method`: "auto" (dense spectrum up
+    /// to 600 differential unknowns, Krylov beyond), "dense" or "krylov".
+    #[pyo3(signature = (method = "auto"))]
+    fn rk4_stability_limit(&self, py: Python<'_>, method: &str) -> PyResult<(f64, String, bool)> {
+        use oxyline_core::stability::SpectrumMethod;
+        let method = match method {
+            "auto" => SpectrumMethod::Auto,
+            "dense" => SpectrumMethod::Dense,
+            "krylov" => SpectrumMethod::Krylov,
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "method '{other}': expected 'auto', 'dense' or 'krylov'"
+                )));
+            }
+        };
         let inner = self.inner.clone();
         py.detach(move || {
             let dae = &inner.1;
             let mut rk = oxyline_core::rk4::Rk4::new(dae, oxyline_core::Regime::Transient, 1.0)?;
-            let lim = oxyline_core::stability::rk4_limit(&mut rk, &dae.names)?;
+            let lim = oxyline_core::stability::rk4_limit_by(&mut rk, &dae.names, method)?;
             Ok::<_, Error>((lim.dt_max, lim.element, lim.exact))
         })
         .map_err(to_py)
+    }
+
+    /// The RK4 iteration operator of the differential unknowns (algebraic unknowns eliminated)
+    /// in energy-scaled coordinates, dense, row-major, with its size: for checking the stability
+    /// bound against an independent eigensolver.
+    fn rk4_operator<'py>(&self, py: Python<'py>) -> PyResult<(Bound<'py, PyArray1<f64>>, usize)> {
+        let inner = self.inner.clone();
+        let (flat, n) = py
+            .detach(move || {
+                let dae = &inner.1;
+                let mut rk =
+                    oxyline_core::rk4::Rk4::new(dae, oxyline_core::Regime::Transient, 1.0)?;
+                let a = oxyline_core::stability::scaled_operator(&mut rk)?;
+                let n = a.nrows();
+                let flat: Vec<f64> = (0..n * n).map(|k| a[(k / n, k % n)]).collect();
+                Ok::<_, Error>((flat, n))
+            })
+            .map_err(to_py)?;
+        Ok((flat.into_pyarray(py), n))
     }
 
     /// Input impedance (Pa·s/m³) seen from the graph node `node` at angular frequency `omega`.

@@ -177,6 +177,7 @@ impl State<'_, '_> {
         sp.y_obs.copy_from_slice(&self.y);
         sp.yd_obs.copy_from_slice(&self.yd);
         let monolithic = matches!(self.flow, Flow::Monolithic(_));
+        sp.tr.check_finite(&sp.z, t)?;
         self.flow
             .integrator()
             .rate(t, &mut sp.y_obs, &mut sp.yd_obs)?;

@@ -132,21 +132,29 @@ impl<'d> Plan<'d> {
 /// Explicit upwind transport is stable for Courant numbers up to 1.3926 (docs/physics.md §1.5), a
 /// limit the flow eigenvalues do not see. The automatic step keeps the Courant number of the
 /// mean flow below 0.5 × 1.39 / 3 (pulsatile peaks of up to 3× the mean); the run itself
-/// monitors the actual value. Infinite without conservative transport, without a steady state,
-/// or with a non-positive volume there (left to the run to report).
+/// monitors the actual value. The species' own stiffness (wall exchange, decay: real negative
+/// rates, RK4's real-axis limit 2.785) is kept at half its limit too (issue 13 item 6; see
+/// `Transport::max_reaction_rate`). Infinite without transport, without a steady state, or with
+/// a non-positive volume there (left to the run to report).
 fn transport_step_limit(steady: &SteadyCache<'_>, transport: Option<&mut Transport>) -> f64 {
-    match transport {
-        Some(tr) if tr.formulation() == Formulation::Conservative => {
-            let rate = steady.get().map_or(0.0, |y| tr.max_outflow_rate(y, 0.0));
-            if rate > 0.0 && rate.is_finite() {
-                0.5 * RK4_UPWIND_COURANT / (3.0 * rate)
-            } else {
-                f64::INFINITY
-            }
+    let (Some(tr), Ok(y)) = (transport, steady.get()) else {
+        return f64::INFINITY;
+    };
+    let mut limit = f64::INFINITY;
+    if tr.formulation() == Formulation::Conservative {
+        let rate = tr.max_outflow_rate(y, 0.0);
+        if rate > 0.0 && rate.is_finite() {
+            limit = 0.5 * RK4_UPWIND_COURANT / (3.0 * rate);
         }
-        _ => f64::INFINITY,
     }
+    if let Some(r) = tr.max_reaction_rate(y, 0.0).filter(|r| r.rate.is_finite()) {
+        limit = limit.min(0.5 * RK4_REAL_AXIS / r.rate);
+    }
+    limit
 }
+
+/// RK4's stability limit on the negative real axis: |R(−2.785)| = 1.
+const RK4_REAL_AXIS: f64 = 2.785;
 
 /// RK4 or generalized-α, RK4's stability limit (probed for `rk4` and `auto`) and the RK4
 /// integrator built for the probe. `auto` takes RK4 when its stable step is at least 1/20 of

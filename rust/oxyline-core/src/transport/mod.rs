@@ -37,6 +37,8 @@ mod observe;
 mod plan;
 mod rhs;
 mod state;
+mod stiffness;
+pub use stiffness::ReactionRate;
 
 pub use plan::Plan;
 #[allow(unused_imports)]

@@ -1,0 +1,67 @@
+//! The species' own stiffness (wall exchange, decay) for the explicit RK4 step: the advection
+//! Courant bound (`max_outflow_rate`) does not see it (issue 13 item 6).
+
+#[allow(unused_imports)]
+use super::*;
+
+/// The largest reaction rate of a run's species and where it sits.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReactionRate {
+    /// Rate (1/s): RK4 on that cell alone needs dt ≤ 2.785 / rate.
+    pub rate: f64,
+    pub species: String,
+    /// Cell index in the species block of the state.
+    pub cell: usize,
+}
+
+impl Transport {
+    /// max over species and cells of decay + G_i / V_i (1/s), at flow state `y`: G_i is the
+    /// cell's summed wall conductance of its fixed wall laws (uptake G c − …, linear in the free
+    /// concentration). Binding only lowers the free share of the amount (d free / d total ≤ 1),
+    /// so the bound holds with it too. Shear-dependent (dynamic) wall pieces are evaluated at
+    /// the run's shear and are not included. None when no species has a rate or the volumes
+    /// are not positive (left to the run to report).
+    pub fn max_reaction_rate(&mut self, y: &[f64], time: f64) -> Option<ReactionRate> {
+        self.volumes(y, time).ok()?;
+        let mut best: Option<ReactionRate> = None;
+        for sp in &self.species {
+            for (i, v) in self.vol.iter().enumerate() {
+                let wall = if sp.has_wall { sp.cell_g[i] / v } else { 0.0 };
+                let rate = sp.decay + wall;
+                if rate > best.as_ref().map_or(0.0, |b| b.rate) {
+                    best = Some(ReactionRate {
+                        rate,
+                        species: sp.name.clone(),
+                        cell: i,
+                    });
+                }
+            }
+        }
+        best
+    }
+}
+
+impl Transport {
+    /// A cheap check of the species amounts `z` (once per output row): the first non-finite
+    /// one is a solver error naming the species, the place (the cell's node: vessel and
+    /// segment) and the time, so a step too large for a stiff exchange, decay or binding stops
+    /// the run with its partial result instead of writing NaN.
+    pub fn check_finite(&self, z: &[f64], time: f64) -> Result<()> {
+        let nc = self.plan.cells.len();
+        for (s, sp) in self.species.iter().enumerate() {
+            let block = &z[s * nc..(s + 1) * nc];
+            if let Some(i) = block.iter().position(|v| !v.is_finite()) {
+                return Err(Error::solver(
+                    time,
+                    format!(
+                        "species '{}': amount {} in the cell of node '{}' (t = {time:.6} s): the step is too large \
+                         for its wall exchange, decay or binding; lower dt or use \
+                         generalized-alpha",
+                        sp.name, block[i], self.plan.node_names[self.plan.cell_node[i]]
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
