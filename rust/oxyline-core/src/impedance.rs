@@ -26,10 +26,10 @@ pub fn input_impedances(dae: &Dae, node: usize, omegas: &[f64]) -> Result<Vec<c6
     }
     // F's entries, then one diagonal stamp per row for iωE (duplicates are summed)
     let nnz = dae.f.ptr[n];
-    let mut stamps = Vec::with_capacity(nnz + n);
+    let mut stamps: Vec<(usize, usize)> = Vec::with_capacity(nnz + n);
     for i in 0..n {
         for k in dae.f.ptr[i]..dae.f.ptr[i + 1] {
-            stamps.push((i, dae.f.col[k]));
+            stamps.push((i, dae.f.col[k] as usize));
         }
     }
     stamps.extend((0..n).map(|i| (i, i)));
@@ -107,11 +107,9 @@ mod tests {
             );
             let assembled = parse(&json).unwrap().assemble().unwrap();
             let dae = assembled.circuit.assemble().unwrap();
-            let node = assembled
-                .circuit
-                .nodes
-                .iter()
-                .position(|n| n.name == "in")
+            let circuit = &assembled.circuit;
+            let node = (0..circuit.nodes.len())
+                .position(|i| circuit.names.node(i) == "in")
                 .unwrap();
             let omegas = [0.0, 2.0, 30.0, 120.0];
             let z = input_impedances(&dae, node, &omegas).unwrap();

@@ -602,13 +602,9 @@ impl Network {
         node: &str,
         omegas: Vec<f64>,
     ) -> PyResult<ArrayPair<'py>> {
-        let idx = self
-            .inner
-            .0
-            .circuit
-            .nodes
-            .iter()
-            .position(|n| n.name == node)
+        let circuit = &self.inner.0.circuit;
+        let idx = (0..circuit.nodes.len())
+            .position(|i| circuit.names.node(i) == node)
             .ok_or_else(|| ModelError::new_err(format!("node '{node}': not in the network")))?;
         let inner = self.inner.clone();
         let z = py

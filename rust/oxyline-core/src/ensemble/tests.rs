@@ -13,12 +13,9 @@ const MODEL: &str = r#"{
 
 fn inlet_pressure(m: &Member) -> f64 {
     let y = crate::simulate::steady_state(&m.dae).unwrap();
-    let idx = m
-        .assembled
-        .circuit
-        .nodes
-        .iter()
-        .position(|n| n.name == "in")
+    let circuit = &m.assembled.circuit;
+    let idx = (0..circuit.nodes.len())
+        .position(|i| circuit.names.node(i) == "in")
         .unwrap();
     y[idx]
 }

@@ -22,16 +22,22 @@ impl Transport {
     /// the run's shear and are not included. None when no species has a rate or the volumes
     /// are not positive (left to the run to report).
     pub fn max_reaction_rate(&mut self, y: &[f64], time: f64) -> Option<ReactionRate> {
+        self.ensure_scratch();
         self.volumes(y, time).ok()?;
         let mut best: Option<ReactionRate> = None;
-        for sp in &self.species {
+        for (sp, settings) in self.species.iter().zip(&self.plan.species) {
+            let laws = &sp.laws;
             for (i, v) in self.vol.iter().enumerate() {
-                let wall = if sp.has_wall { sp.cell_g[i] / v } else { 0.0 };
-                let rate = sp.decay + wall;
+                let wall = if laws.has_wall {
+                    laws.cell_g[i] / v
+                } else {
+                    0.0
+                };
+                let rate = settings.decay + wall;
                 if rate > best.as_ref().map_or(0.0, |b| b.rate) {
                     best = Some(ReactionRate {
                         rate,
-                        species: sp.name.clone(),
+                        species: settings.name.clone(),
                         cell: i,
                     });
                 }
@@ -48,7 +54,7 @@ impl Transport {
     /// the run with its partial result instead of writing NaN.
     pub fn check_finite(&self, z: &[f64], time: f64) -> Result<()> {
         let nc = self.plan.cells.len();
-        for (s, sp) in self.species.iter().enumerate() {
+        for (s, sp) in self.plan.species.iter().enumerate() {
             let block = &z[s * nc..(s + 1) * nc];
             if let Some(i) = block.iter().position(|v| !v.is_finite()) {
                 return Err(Error::solver(
@@ -57,7 +63,12 @@ impl Transport {
                         "species '{}': amount {} in the cell of node '{}' (t = {time:.6} s): the step is too large \
                          for its wall exchange, decay or binding; lower dt or use \
                          generalized-alpha",
-                        sp.name, block[i], self.plan.node_names[self.plan.cell_node[i]]
+                        sp.name,
+                        block[i],
+                        self.plan
+                            .node_names
+                            .get(self.plan.cell_node[i])
+                            .unwrap_or_default()
                     ),
                 ));
             }
