@@ -179,7 +179,13 @@ def test_model_module_is_a_leaf_and_formats_are_sniffed_once() -> None:
     imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
     imported |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
     assert imported <= {"__future__", "copy", "json", "math", "collections.abc", "dataclasses",
-                        "typing", "oxyline", "oxyline.errors", "oxyline.units"}, imported
+                        "typing", "oxyline", "oxyline.errors", "oxyline.units",
+                        # structured-tree growth: a model-to-model step that imports only
+                        # errors and units itself (checked below), not an importer
+                        "oxyline.structured_tree"}, imported
+    tree_module = ast.parse(Path(model.__file__).with_name("structured_tree.py").read_text())
+    assert {n.module for n in ast.walk(tree_module) if isinstance(n, ast.ImportFrom)} <= {
+        "__future__", "math", "collections.abc", "typing", "oxyline.errors", "oxyline.units"}
     cfg = _one_vessel(0.0)
     assert sniff_format(cfg) == "svzerod" and sniff_format(_lumped3()) == "native"
     assert sniff_format({"network": []}) == "openbf"

@@ -360,12 +360,12 @@ def _parser() -> argparse.ArgumentParser:
                        description="Write Z(f) = P/Q (Pa s/m^3) seen from NODE into the network "
                        "downstream of it, for f = 0, df, ..., fmax: a CSV on stdout, or with "
                        "--plot a CSV and a modulus/phase figure in DIR.")
-    p.add_argument("model")
+    p.add_argument("model", help="built-in name, or a model file (any supported format)")
     p.add_argument("--node", required=True, help="graph node (e.g. the inlet)")
     p.add_argument("--fmax", type=float, default=20.0, help="highest frequency, Hz (20)")
     p.add_argument("--df", type=float, default=0.25, help="frequency step, Hz (0.25)")
     p.add_argument("--plot", metavar="DIR", help="write impedance.csv and impedance.png/.svg")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(func=_cmd_impedance)
     p = sub.add_parser("convert", help="convert a model between formats",
                        description="Convert IN to OUT. Formats: native (.yaml/.yml/.json), "
