@@ -304,18 +304,9 @@ impl Network {
                         ));
                     }
                 }
-                let assembled = spec.assemble()?;
-                let dae = assembled.circuit.assemble()?;
-                let transport = match &spec.transport {
-                    Some(t) => Some(Transport::build(
-                        t,
-                        &assembled.circuit,
-                        &dae,
-                        &assembled.probes,
-                    )?),
-                    None => None,
-                };
-                Ok(((assembled, dae), transport))
+                // the same assembly as every ensemble member: spec → circuit → DAE → transport
+                let m = oxyline_core::ensemble::Member::build(&spec)?;
+                Ok(((m.assembled, m.dae), m.transport))
             },
         );
         let (built, transport) = built.map_err(to_py)?;
