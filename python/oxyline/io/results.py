@@ -9,6 +9,7 @@ The methods :meth:`oxyline.Result.to_netcdf`, :meth:`~oxyline.Result.to_zarr`,
 from __future__ import annotations
 
 import contextlib
+import functools
 import io
 import os
 import shutil
@@ -55,6 +56,42 @@ def check_free_space(p: Path, need: int, result: Any = None) -> None:
                           f"{free / 2**20:.0f} MiB free; nothing was written", result)
 
 
+class _Buffer(io.BytesIO):
+    """An in-memory file that stays readable after xarray closes it."""
+
+    def close(self) -> None:
+        pass
+
+
+HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
+def _encode_in_memory(ds: Any) -> memoryview | None:
+    buf = _Buffer()
+    ds.to_netcdf(buf, engine="h5netcdf", format="NETCDF4")  # never netCDF-3 via scipy
+    data = buf.getbuffer()
+    return data if bytes(data[:8]) == HDF5_SIGNATURE else None
+
+
+@functools.cache
+def netcdf4_in_memory() -> bool:
+    """Whether the installed xarray encodes NetCDF-4 into a file object (older releases fall
+    back to netCDF-3 through scipy there); probed once on a tiny numeric dataset."""
+    import xarray as xr
+
+    try:
+        return _encode_in_memory(xr.Dataset({"probe": ("n", [0.0])})) is not None
+    except Exception:  # noqa: BLE001 - no scipy, or a writer refusing file objects: not supported
+        return False
+
+
+def _netcdf4_bytes(ds: Any) -> memoryview | None:
+    """``ds`` encoded as NetCDF-4 in memory (h5py cannot fail half-way through a full disk
+    there), or None where the installed xarray cannot do that: the caller then writes the
+    file directly, after a free-space check."""
+    return _encode_in_memory(ds) if netcdf4_in_memory() else None
+
+
 def to_netcdf(result: Result, path: PathLike) -> Path:
     """Write NetCDF-4 (h5netcdf engine): dims ``time``, ``vessel``, ``segment``; coordinates
     vessel names and segment positions; attrs with units, model name, solver settings and the
@@ -69,11 +106,10 @@ def to_netcdf(result: Result, path: PathLike) -> Path:
     ds = dataset(result)
     tmp = _tmp_sibling(p)
     try:
-        if ds.nbytes <= NETCDF_IN_MEMORY_BYTES:
-            buf = io.BytesIO()
-            ds.to_netcdf(buf, engine="h5netcdf")
+        data = _netcdf4_bytes(ds) if ds.nbytes <= NETCDF_IN_MEMORY_BYTES else None
+        if data is not None:
             with open(tmp, "wb") as fh:
-                fh.write(buf.getbuffer())
+                fh.write(data)
         else:
             check_free_space(p, int(ds.nbytes), result)
             ds.to_netcdf(tmp, engine="h5netcdf")
