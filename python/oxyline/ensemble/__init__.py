@@ -76,6 +76,14 @@ def _local(model: Model, patches: list[dict[str, Any]], index: Any, *, workers: 
         on_variant = writer.write
     finished = run_local(model, patches, collector, workers=workers, output=output,
                          progress=progress, overrides=overrides, on_variant=on_variant)
+    return _finish(model, patches, index, collector, output, writer, finished)
+
+
+def _finish(model: Model, patches: list[dict[str, Any]], index: Any, collector: Collector,
+            output: Output, writer: Any, finished: bool) -> Any:
+    """The ensemble's dataset (the closed store, or the collected variants); an interrupted
+    ensemble raises :class:`SimulationInterrupted` carrying it. Shared by the local and the
+    Dask paths."""
     if writer is not None:
         writer.close(complete=finished)
         ds = writer.open()

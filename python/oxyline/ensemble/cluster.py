@@ -14,7 +14,6 @@ from typing import Any
 
 from oxyline.ensemble.collect import Collector, Output
 from oxyline.ensemble.patch import merge_patch
-from oxyline.errors import SimulationInterrupted
 from oxyline.model import Model
 
 #: tasks per worker thread: enough to balance chunks of unequal cost, few enough that the
@@ -67,7 +66,7 @@ def run_on_client(client: Any, model: Model, patches: list[dict[str, Any]], inde
                   overrides: Mapping[str, Any]) -> Any:
     from distributed import as_completed
 
-    from oxyline.ensemble import _attrs
+    from oxyline.ensemble import _attrs, _finish
     from oxyline.ensemble.local import _progress, run_settings
 
     for k, patch in enumerate(patches):  # unknown names fail here, before any task starts
@@ -99,12 +98,4 @@ def run_on_client(client: Any, model: Model, patches: list[dict[str, Any]], inde
         client.cancel(list(futures))
     finally:
         close()
-    if writer is not None:
-        writer.close(complete=finished)
-        ds = writer.open()
-    else:
-        ds = collector.dataset(patches, _attrs(model, output), index)
-    if not finished:
-        raise SimulationInterrupted("ensemble interrupted; the finished chunks are in "
-                                    "exc.result (status -1: not run)", ds)
-    return ds
+    return _finish(model, patches, index, collector, output, writer, finished)
