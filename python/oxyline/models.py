@@ -82,18 +82,61 @@ def _with_structured_trees(base: str) -> Callable[[], Any]:
 
         data = replace_windkessels(load_dict(base))
         data["name"] = f"{base}-st"
+        data["simulation"] = dict(WHOLE_TREE_SIMULATION)
         return data
 
     return build
 
 
+def terminal_compartments(data: dict[str, Any]) -> builtins.list[str]:
+    """The first lumped vessel of each lumped terminal compartment of ``data``: from every
+    pressure outlet, up through lumped vessels to the one that starts where a geometric vessel
+    ends (whole-body-140: the 95 ``*_T`` terminals; not the ``.wall`` dead ends)."""
+    arriving = {v["to"]: v for v in data["vessels"]}
+    out = []
+    for node, bc in data["boundary_conditions"].items():
+        if not (isinstance(bc, dict) and bc.get("type") == "pressure" and node in arriving):
+            continue
+        v = arriving[node]
+        while "lumped" in v and "lumped" in arriving.get(v["from"], {}):
+            v = arriving[v["from"]]
+        if "lumped" in v:
+            out.append(v["name"])
+    return out
+
+
+def _whole_body_trees(min_radius: float = 1.0e-4) -> dict[str, Any]:
+    """whole-body-140 with each lumped terminal compartment (R_T/2, C_T with its wall
+    viscosity, R_T/2) replaced by a structured tree of steady resistance R_T, rooted in a
+    vessel whose radius follows Murray's law from the base model's steady flows; tree vessels
+    cut at 1 cm like adan56's (docs/structured-tree.md)."""
+    from oxyline.loader import load_model
+    from oxyline.structured_tree import murray_root_radii, replace_terminal_vessels
+
+    base = load_dict("whole-body-140")
+    terminals = terminal_compartments(base)
+    radii = murray_root_radii(base, load_model(base).network.steady_state(), terminals)
+    data = replace_terminal_vessels(base, radii, min_radius=min_radius, max_length=0.01)
+    data["name"] = "whole-body-140-st"
+    data["simulation"] = dict(WHOLE_TREE_SIMULATION)
+    return data
+
+
 #: built-in whole trees (1e5-1e6 segments: seconds to a minute to load)
-WHOLE_TREES = ("adan56-st",)
+WHOLE_TREES = ("adan56-st", "whole-body-140-st")
+#: their run settings: the issue-9 budget run (one cycle of generalized-alpha at 1 ms, vessel
+#: output every 10 ms); more cycles with ``cycles=``/``--cycles`` or ``until_periodic``
+WHOLE_TREE_SIMULATION = {"cycles": 1, "dt": 1.0e-3, "method": "generalized-alpha",
+                         "output": {"cycles": "last", "every": 0.01}}
 #: whole trees: every terminal Windkessel replaced by a structured tree of the same steady
 #: resistance (rule: :func:`oxyline.structured_tree.replace_windkessels`, docs/structured-tree.md)
 _registered["adan56-st"] = (_with_structured_trees("adan56"),
                             ("ADAN56 with 31 structured trees (min radius 0.1 mm) instead of "
                              "WK3: 262,512 vessels, 314,489 segments"))
+_registered["whole-body-140-st"] = (_whole_body_trees,
+                                    ("whole-body-140 with 95 structured trees (min radius 0.1 mm, "
+                                     "Murray root radii) instead of its terminal R-C-R: "
+                                     "256,527 vessels, 306,096 segments"))
 
 
 def register(name: str, loader: Callable[[], Any], description: str = "") -> None:
@@ -186,13 +229,16 @@ def _shipped_yaml(text: str) -> Any:
 
 
 def load_dict(name: str) -> dict[str, Any]:
-    """A shipped model as a native model dict (SI), e.g. to edit before loading.
+    """A shipped model as a native model dict (SI), e.g. to edit before loading; for a whole
+    tree, the compact dict with its ``structured-tree`` conditions (grown on load).
 
     >>> import oxyline
     >>> d = oxyline.models.load_dict("cca")
     >>> d["vessels"][0]["name"]
     'common_carotid_artery'
     """
+    if _canonical(name) in WHOLE_TREES:
+        return _registered[_canonical(name)][0]()
     data = _shipped_yaml(path(name).read_text())
     if not isinstance(data, dict):
         raise ModelError(f"built-in model '{name}': corrupted file")

@@ -256,6 +256,36 @@ def _dc_resistance(r0: float, a: float, b: float, lrr: float, rmin: float, mu: f
     return below(0, 0)
 
 
+def _tree_condition(node: str, r0: float, total: float, mu: float, min_radius: float,
+                    tree_fraction: float, pressure: float, tree: Mapping[str, Any]) -> dict[str, Any]:
+    """The structured-tree condition at ``node`` (root radius ``r0``) whose steady resistance
+    is ``total`` (SI): the tree grows to ``min_radius`` (at most alpha·r0), raised by factors of 1.05 until the
+    tree alone (leaves at the outlet pressure) has at most ``tree_fraction`` of ``total``, and
+    every leaf ends at one terminal resistance that supplies the rest (bisection)."""
+    a, b = tree.get("alpha", 0.9), tree.get("beta", 0.6)
+    lrr = tree.get("length_ratio", 50.0)
+    if not total > 0:
+        raise _err(node, f"the resistance to match is {total:g} Pa s/m^3, not > 0")
+    rmin = min(min_radius, a * r0)  # at least the a-daughter (binds only for coarse trees)
+    while _dc_resistance(r0, a, b, lrr, rmin, mu, 0.0) > tree_fraction * total:
+        rmin *= 1.05
+        if rmin > a * r0:  # no tree vessel left: the root alone is above the fraction
+            raise _err(node, f"no tree below root radius {r0:g} m has at most "
+                             f"{tree_fraction:g} of the resistance {total:g} Pa s/m^3")
+    lo, hi = 0.0, total * 2.0 ** 20
+    for _ in range(200):  # R(leaf) is increasing: bisection to rounding
+        mid = 0.5 * (lo + hi)
+        if _dc_resistance(r0, a, b, lrr, rmin, mu, mid) < total:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo <= 1e-15 * hi:
+            break
+    return {"type": TYPE, **tree, "min_radius": rmin,
+            "terminal": {"type": "resistance", "resistance": 0.5 * (lo + hi),
+                         "pressure": pressure}}
+
+
 def replace_windkessels(data: Mapping[str, Any], min_radius: float = 1.0e-4,
                         tree_fraction: float = 0.9, **tree: Any) -> dict[str, Any]:
     """``data`` (a native SI model) with every RCR outlet replaced by a structured tree of the
@@ -266,26 +296,122 @@ def replace_windkessels(data: Mapping[str, Any], min_radius: float = 1.0e-4,
     mu = float((data.get("blood") or {}).get("viscosity", 3.5e-3))
     out = dict(data)
     bcs = dict(out["boundary_conditions"])
-    a, b, lrr = tree.get("alpha", 0.9), tree.get("beta", 0.6), tree.get("length_ratio", 50.0)
     for node, bc in bcs.items():
         if not (isinstance(bc, Mapping) and bc.get("type") == "rcr"):
             continue
         total = float(bc["proximal_resistance"]) + float(bc["distal_resistance"])
-        r0 = float(_root_radius(data, node))
-        rmin = min_radius
-        while _dc_resistance(r0, a, b, lrr, rmin, mu, 0.0) > tree_fraction * total:
-            rmin *= 1.05
-        lo, hi = 0.0, total * 2.0 ** 20
-        for _ in range(200):  # R(leaf) is increasing: bisection to rounding
-            mid = 0.5 * (lo + hi)
-            if _dc_resistance(r0, a, b, lrr, rmin, mu, mid) < total:
-                lo = mid
-            else:
-                hi = mid
-            if hi - lo <= 1e-15 * hi:
-                break
-        bcs[node] = {"type": TYPE, **tree, "min_radius": rmin,
-                     "terminal": {"type": "resistance", "resistance": 0.5 * (lo + hi),
-                                  "pressure": bc.get("pressure", 0.0)}}
+        bcs[node] = _tree_condition(str(node), float(_root_radius(data, node)), total, mu,
+                                    min_radius, tree_fraction, bc.get("pressure", 0.0), tree)
     out["boundary_conditions"] = bcs
+    return out
+
+
+def _compartment(data: Mapping[str, Any], vessel: Mapping[str, Any]
+                 ) -> tuple[set[str], set[str], float, float]:
+    """The lumped terminal compartment that starts with ``vessel`` (every vessel downstream of
+    it): its vessel names, its end nodes, its steady resistance to its pressure outlets and
+    their pressure. Dead ends held at zero flow (wall branches) carry no steady flow."""
+    name = str(vessel["name"])
+    bcs = data["boundary_conditions"]
+    leaving: dict[str, list[Mapping[str, Any]]] = {}
+    for v in data["vessels"]:
+        leaving.setdefault(v["from"], []).append(v)
+    names: set[str] = set()
+    nodes: set[str] = set()
+    pressures: set[float] = set()
+
+    def below(v: Mapping[str, Any]) -> float:  # steady resistance from v's inlet (inf: none)
+        lumped = v.get("lumped")
+        if not isinstance(lumped, Mapping) or v["name"] in names:
+            raise _err(name, f"terminal compartment vessel '{v['name']}' is not a lumped "
+                             f"element of a tree")
+        names.add(str(v["name"]))
+        end = v["to"]
+        nodes.add(str(end))
+        bc = bcs.get(end)
+        if isinstance(bc, Mapping) and bc.get("type") == "flow" and bc.get("value") == 0.0:
+            return math.inf
+        if isinstance(bc, Mapping) and bc.get("type") == "pressure":
+            pressures.add(float(bc.get("value", 0.0)))
+            rest = 0.0
+        elif bc is None and end in leaving:
+            g = sum(1.0 / below(w) for w in leaving[end])
+            rest = math.inf if g == 0.0 else 1.0 / g
+        else:
+            raise _err(name, f"terminal compartment node '{end}' has condition {bc!r} "
+                             f"(only pressure outlets and zero-flow dead ends are replaced)")
+        return float(lumped.get("resistance", 0.0)) + rest
+
+    total = below(vessel)
+    if len(pressures) != 1 or not math.isfinite(total):
+        raise _err(name, f"terminal compartment has outlet pressures {sorted(pressures)}")
+    return names, nodes, total, pressures.pop()
+
+
+def replace_terminal_vessels(data: Mapping[str, Any], root_radii: Mapping[str, float],
+                             min_radius: float = 1.0e-4, tree_fraction: float = 0.9,
+                             **tree: Any) -> dict[str, Any]:
+    """``data`` (a native SI model) with each lumped terminal compartment (a lumped vessel
+    named in ``root_radii`` and every vessel downstream of it, ending at a pressure outlet,
+    e.g. an R-C-R made of lumped vessels with a dead-end wall branch) replaced by a structured
+    tree of the same steady resistance. The tree's root vessel keeps the terminal vessel's
+    name and nodes, with radius ``root_radii[name]`` (m) and length ``length_ratio`` times
+    it (Olufsen's root vessel); below its end node the tree follows the rule of
+    :func:`replace_windkessels` for the resistance the root vessel leaves. ``tree``
+    overrides the other structured-tree parameters."""
+    mu = float((data.get("blood") or {}).get("viscosity", 3.5e-3))
+    lrr = float(tree.get("length_ratio", 50.0))
+    vessels = {str(v["name"]): v for v in data["vessels"]}
+    out = dict(data)
+    bcs = dict(out["boundary_conditions"])
+    drop: set[str] = set()
+    roots: dict[str, dict[str, Any]] = {}
+    for name, r0 in root_radii.items():
+        if name not in vessels:
+            raise _err(name, "no such terminal vessel")
+        names, nodes, total, pressure = _compartment(data, vessels[name])
+        drop |= names
+        for node in nodes:
+            bcs.pop(node, None)
+        r0 = _num(name, "root radius", r0)
+        e, h = _wall(name, tree.get("stiffness"), 1.0, 1.0)(r0)
+        node = str(vessels[name]["to"])
+        root = {"name": name, "from": vessels[name]["from"], "to": node,
+                "length": lrr * r0, "radius": r0, "wall_thickness": h, "youngs_modulus": e,
+                "description": f"structured-tree root vessel replacing the terminal "
+                               f"compartment (steady resistance {total:.6e} Pa s/m^3)"}
+        if "segments" in tree:  # the tree vessels' segmentation (see _grow)
+            root["segments"] = tree["segments"]
+        elif "max_length" in tree:
+            root["segments"] = max(1, math.ceil(lrr * r0 / float(tree["max_length"]) - 1e-9))
+        roots[name] = root
+        r_root = 8.0 * mu * lrr / (math.pi * r0**3)  # Poiseuille, docs/physics.md §1.1
+        bcs[node] = _tree_condition(node, r0, total - r_root, mu, min_radius, tree_fraction,
+                                    pressure, tree)
+    out["vessels"] = [roots.get(v["name"], v) for v in data["vessels"]
+                      if v["name"] not in drop or v["name"] in roots]
+    out["boundary_conditions"] = bcs
+    return out
+
+
+def murray_root_radii(data: Mapping[str, Any], steady: Mapping[str, Any],
+                      terminals: list[str]) -> dict[str, float]:
+    """Root radius of each terminal vessel by Murray's law (flow ∝ r³) from its share of the
+    steady flow of the one vessel with a radius that ends where it starts (its parent):
+    r0 = r_parent · (Q_terminal / Q_parent)^(1/3). ``steady`` is a steady state
+    (``Network.steady_state()``: ``vessels`` and ``flow_in``)."""
+    flow = dict(zip(steady["vessels"], steady["flow_in"]))
+    vessels = {str(v["name"]): v for v in data["vessels"]}
+    out: dict[str, float] = {}
+    for name in terminals:
+        start = vessels[name]["from"]
+        parents = [v for v in data["vessels"] if v["to"] == start
+                   and ("radius" in v or "radius_out" in v)]
+        if len(parents) != 1:
+            raise _err(name, f"{len(parents)} vessels with a radius end at '{start}' (need one)")
+        parent = parents[0]
+        share = flow[name] / flow[parent["name"]]
+        if not 0.0 < share <= 1.0:
+            raise _err(name, f"steady flow share {share:g} of parent '{parent['name']}'")
+        out[name] = float(parent.get("radius_out", parent.get("radius"))) * share ** (1.0 / 3.0)
     return out
