@@ -36,6 +36,7 @@ They were converted with :func:`oxyline.io.openbf.to_native_dict` (default optio
 from __future__ import annotations
 
 import builtins
+import math
 import re
 from collections.abc import Callable
 from importlib import resources
@@ -105,18 +106,77 @@ def terminal_compartments(data: dict[str, Any]) -> builtins.list[str]:
     return out
 
 
+#: E and h(r_0) in a whole-body-140 vessel description (io.circulatory_autogen writes them)
+_WALL_LAW = re.compile(r"E ([-+.\deE]+) Pa, h\(r_0\) ([-+.\deE]+) m")
+
+
+def _wall_branch_owner(name: str, ends: dict[str, dict[str, Any]]) -> tuple[str, str]:
+    """(vessel, arrangement) whose capacitor the dead-end wall branch ``name`` holds, by the
+    naming of io.circulatory_autogen's wall-viscosity form: ``<node>.wall_in_<v>`` and
+    ``.wall_out_<v>`` (pi), ``<node>.wall_<v>`` (inverted-L), ``<v>.mid.wall`` (the pi x 2 of
+    a T), ``<node>.wall`` (L: the vessel ending at node)."""
+    node, _, tag = name.rpartition(".wall")
+    for prefix, arrangement in (("_in_", "pi"), ("_out_", "pi"), ("_", "inverted-L")):
+        if tag.startswith(prefix):
+            return tag[len(prefix):], arrangement
+    if node.endswith(".mid"):
+        return node[:-len(".mid")], "pi x 2"
+    return ends[node]["name"], "L"
+
+
+def _compliant_arteries(data: dict[str, Any]) -> dict[str, Any]:
+    """``data`` (whole-body-140) with each dead-end wall branch (R_v = 0.01 s/C in series
+    with C, to a zero-flow end: the source's wall viscosity) folded back into the vessel whose
+    capacitor it is: the vessel gets the source's E and h(r_0) (Poisson ratio 0) and
+    arrangement, so that every compliance holds lumen volume, which transport needs (a
+    capacitor without volume stores blood but no solute). The wall viscosity is dropped; the
+    steady state is unchanged (wall branches carry no steady flow)."""
+    bcs = dict(data["boundary_conditions"])
+    vessels = {v["name"]: dict(v) for v in data["vessels"]}
+    ends = {v["to"]: v for v in data["vessels"] if "lumped" not in v}
+    walls: dict[str, tuple[str, float]] = {}  # vessel -> (arrangement, its capacitance)
+    for v in data["vessels"]:
+        if ".wall" in v["name"] and bcs.get(v["to"]) == {"type": "flow", "value": 0.0}:
+            owner, arrangement = _wall_branch_owner(v["name"], ends)
+            walls[owner] = (arrangement, walls.get(owner, ("", 0.0))[1]
+                            + v["lumped"]["capacitance"])
+            del vessels[v["name"]], bcs[v["to"]]
+    for name, (arrangement, c) in walls.items():
+        v = vessels[name]
+        law = _WALL_LAW.search(v.get("description", ""))
+        if law is None:
+            raise ModelError(f"whole-body-140 vessel '{name}': no E and h(r_0) in its "
+                             f"description")
+        e, h = float(law.group(1)), float(law.group(2))
+        if arrangement == "pi x 2":  # the two rigid halves around the T's capacitor
+            half = vessels.pop(f"{name}.distal_half")
+            v.update({"to": half["to"], "segments": 2, "length": v["length"] + half["length"]})
+            arrangement = "pi"
+        # the branches hold the source's C = 2 pi r^3 l / (E h) (Poisson ratio 0): E from C
+        # keeps C exact; the description's E (6 digits) only checks that it is this vessel's
+        exact = 2 * math.pi * v["radius"] ** 3 * v["length"] / (c * h)
+        if abs(exact / e - 1.0) > 1e-5:
+            raise ModelError(f"whole-body-140 vessel '{name}': its wall branches give "
+                             f"E = {exact:g} Pa, its description {e:g} Pa")
+        v.update({"arrangement": arrangement, "youngs_modulus": exact, "wall_thickness": h,
+                  "poisson_ratio": 0.0})
+    return {**data, "vessels": builtins.list(vessels.values()), "boundary_conditions": bcs}
+
+
 def _whole_body_trees(min_radius: float = 1.0e-4) -> dict[str, Any]:
     """whole-body-140 with each lumped terminal compartment (R_T/2, C_T with its wall
     viscosity, R_T/2) replaced by a structured tree of steady resistance R_T, rooted in a
     vessel whose radius follows Murray's law from the base model's steady flows; tree vessels
-    cut at 1 cm like adan56's (docs/structured-tree.md)."""
+    cut at 1 cm like adan56's; the named arteries compliant again (their wall branches folded
+    back, so oxygen can run; docs/structured-tree.md)."""
     from oxyline.loader import load_model
     from oxyline.structured_tree import murray_root_radii, replace_terminal_vessels
 
     base = load_dict("whole-body-140")
     terminals = terminal_compartments(base)
     radii = murray_root_radii(base, load_model(base).network.steady_state(), terminals)
-    data = replace_terminal_vessels(base, radii, min_radius=min_radius, max_length=0.01)
+    data = _compliant_arteries(
+        replace_terminal_vessels(base, radii, min_radius=min_radius, max_length=0.01))
     data["name"] = "whole-body-140-st"
     data["simulation"] = dict(WHOLE_TREE_SIMULATION)
     return data
