@@ -113,7 +113,7 @@ def test_whole_body_140_st_keeps_the_steady_pressures(base) -> None:
     assert_named_pressures_agree(base, p_wk, p_st)
 
 
-def assert_named_pressures_agree(base: dict, p_wk: dict, p_st: dict) -> None:
+def assert_named_pressures_agree(base: dict, p_wk: dict, p_st: dict) -> float:
     wk = dict(zip(p_wk["nodes"], p_wk["node_pressure"]))
     tree = dict(zip(p_st["nodes"], p_st["node_pressure"]))
     named = {n for v in base["vessels"] if "lumped" not in v for n in (v["from"], v["to"])
@@ -123,6 +123,7 @@ def assert_named_pressures_agree(base: dict, p_wk: dict, p_st: dict) -> None:
         # terminal resistances bisected to 1e-15; two sparse solves of different circuits
         # (measured 1e-14); the issue asks for 2 %
         assert abs(tree[node] / wk[node] - 1.0) < 1e-8, node
+    return max(abs(tree[n] / wk[n] - 1.0) for n in named)  # printed by pytest -s
 
 
 @pytest.mark.slow
@@ -131,9 +132,10 @@ def test_whole_body_140_st_full_size(base) -> None:
     named arteries (load + steady solve ~10-30 s on the shared machine)."""
     m = models.load("whole-body-140-st")
     s = m.network.summary()
-    assert (s["vessels"], s["segments"]) == (256_527, 306_096)
-    assert_named_pressures_agree(base, oxyline.load_model(base).network.steady_state(),
-                                 m.network.steady_state())
+    assert (s["vessels"], s["segments"]) == (256_368, 305_949)
+    worst = assert_named_pressures_agree(
+        base, oxyline.load_model(base).network.steady_state(), m.network.steady_state())
+    print(f"whole-body-140-st: steady pressures of the named arteries within {worst:.2e}")
 
 
 def test_murray_root_radius_from_the_steady_flow_share() -> None:

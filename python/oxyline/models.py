@@ -196,7 +196,7 @@ _registered["adan56-st"] = (_with_structured_trees("adan56"),
 _registered["whole-body-140-st"] = (_whole_body_trees,
                                     ("whole-body-140 with 95 structured trees (min radius 0.1 mm, "
                                      "Murray root radii) instead of its terminal R-C-R: "
-                                     "256,527 vessels, 306,096 segments"))
+                                     "256,368 vessels, 305,949 segments"))
 
 
 def register(name: str, loader: Callable[[], Any], description: str = "") -> None:
