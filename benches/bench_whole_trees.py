@@ -73,8 +73,8 @@ def main() -> None:
                         f"{f['cpu']:.1f} | {f['peak_mb']:.0f} | {o['wall']:.1f} | {o['cpu']:.1f} | "
                         f"{o['peak_mb']:.0f} | {o['cpu'] / f['cpu']:.2f} |")
     print(f"\nload average {os.getloadavg()[0]:.1f} (1 min) at the end\n")
-    print("| model | segments | load CPU s | flow wall s | flow CPU s | flow peak MB | O2 wall s | O2 CPU s "
-          "| O2 peak MB | O2/flow CPU |")
+    print("| model | segments | load CPU s | flow wall s | flow CPU s | flow peak MB | O2 wall s "
+          "| O2 CPU s | O2 peak MB | O2/flow CPU |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     print("\n".join(rows))
 

@@ -257,11 +257,13 @@ def _dc_resistance(r0: float, a: float, b: float, lrr: float, rmin: float, mu: f
 
 
 def _tree_condition(node: str, r0: float, total: float, mu: float, min_radius: float,
-                    tree_fraction: float, pressure: float, tree: Mapping[str, Any]) -> dict[str, Any]:
+                    tree_fraction: float, pressure: float,
+                    tree: Mapping[str, Any]) -> dict[str, Any]:
     """The structured-tree condition at ``node`` (root radius ``r0``) whose steady resistance
-    is ``total`` (SI): the tree grows to ``min_radius`` (at most alpha·r0), raised by factors of 1.05 until the
-    tree alone (leaves at the outlet pressure) has at most ``tree_fraction`` of ``total``, and
-    every leaf ends at one terminal resistance that supplies the rest (bisection)."""
+    is ``total`` (SI): the tree grows to ``min_radius`` (at most alpha·r0), raised by factors
+    of 1.05 until the tree alone (leaves at the outlet pressure) has at most ``tree_fraction``
+    of ``total``, and every leaf ends at one terminal resistance that supplies the rest
+    (bisection)."""
     a, b = tree.get("alpha", 0.9), tree.get("beta", 0.6)
     lrr = tree.get("length_ratio", 50.0)
     if not total > 0:
