@@ -42,6 +42,9 @@ impl Transport {
             let stored: f64 = z[s * nc..(s + 1) * nc].iter().sum();
             let acc = &z[nsp * nc + 4 * s..nsp * nc + 4 * s + 4];
             out.extend([stored, acc[0], acc[1], acc[2], acc[3]]);
+            if !self.plan.tissue.is_empty() {
+                self.observe_tissue(s, z, out); // tissue hook
+            }
         }
         Ok(())
     }
