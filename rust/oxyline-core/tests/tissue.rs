@@ -8,6 +8,7 @@ use oxyline_core::rk4::CoupledStages;
 use oxyline_core::transport::{
     BALANCE_COLUMNS, SEGMENT_COLUMNS, TISSUE_SEGMENT_COLUMNS, TISSUE_VESSEL_COLUMNS, VESSEL_COLUMNS,
 };
+use std::f64::consts::PI;
 
 // test wall: r 5 mm, h 0.1 mm, D 1.5e-9 m²/s, 16 radial cells, partition 0.8
 const R: f64 = 5e-3;
@@ -205,6 +206,16 @@ fn steady_wall_matches_the_closed_form_and_balances_exactly_in_both_schemes() {
             // whole profile is above it
             let hyp = tail[3];
             assert!((0.0..=1.0).contains(&hyp), "{hyp}");
+            // the observed wall flux of the vessel is the flux into the wall: at the steady
+            // state with a no-flux outer face, the consumption rate × wall volume
+            if uo.is_none() {
+                let consumed = rate * PI * ((R + H) * (R + H) - R * R) * 0.05;
+                let wall = block[4];
+                assert!(
+                    (wall / consumed - 1.0).abs() < 1e-6,
+                    "{name}: {wall:e} vs {consumed:e}"
+                );
+            }
         }
     }
 }

@@ -453,11 +453,16 @@ impl Transport {
             .iter()
             .fold(0.0f64, |m, x| m.max(x.abs()))
             .max(1e-300);
-        a[..n]
+        let lumen = a[..n]
             .iter()
             .zip(&b[..n])
             .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
-            / scale
+            / scale;
+        if self.plan.tissue.is_empty() {
+            lumen
+        } else {
+            lumen.max(self.tissue_relative_change(a, b)) // tissue hook: the wall's own change
+        }
     }
 }
 

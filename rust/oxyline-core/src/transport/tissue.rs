@@ -121,6 +121,9 @@ pub(super) struct TissueScratch {
     b: Vec<f64>,
     lin: Vec<[f64; 3]>,
     diag: Vec<f64>,
+    /// Observation: per segment, the flux into its wall minus the closure's g c (empty for a
+    /// species without tissue wall).
+    pub(super) seg_corr: Vec<f64>,
 }
 
 fn bad_value(element: &str, key: &str, v: f64, rule: &str) -> Error {
@@ -417,6 +420,29 @@ impl Transport {
             .sum::<usize>()
     }
 
+    /// Largest relative change of the wall amounts between two states (the periodicity check:
+    /// the wall's time scale h²/D_t can be much longer than the lumen's).
+    pub(super) fn tissue_relative_change(&self, a: &[f64], b: &[f64]) -> f64 {
+        let mut worst = 0.0f64;
+        for s in 0..self.plan.tissue.len() {
+            let Some(tp) = self.tissue_of(s) else {
+                continue;
+            };
+            let start = self.tissue_offset(s);
+            let r = start..start + tp.n_cells();
+            let scale = a[r.clone()]
+                .iter()
+                .fold(0.0f64, |m, x| m.max(x.abs()))
+                .max(1e-300);
+            let change = a[r.clone()]
+                .iter()
+                .zip(&b[r])
+                .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+            worst = worst.max(change / scale);
+        }
+        worst
+    }
+
     /// Columns the tissue adds to every species block of `observe` (0 without tissue).
     pub fn tissue_columns(&self) -> usize {
         if self.plan.tissue.is_empty() {
@@ -614,6 +640,31 @@ impl Transport {
         }
     }
 
+    /// Observation hook (before species `s`'s wall fluxes are observed): per segment, the flux
+    /// into its tissue wall W = G (c − u_0/φ) minus the closure's g c, which the observed wall
+    /// flux adds (empty for a species without tissue wall).
+    pub(super) fn tissue_wall_fluxes(&mut self, s: usize, z: &[f64]) {
+        let mut corr = std::mem::take(&mut self.tissue.seg_corr);
+        corr.clear();
+        if let Some(tp) = self.tissue_of(s) {
+            let off = self.tissue_offset(s);
+            let (laws, free) = (&*self.species[s].laws, self.free_of(s));
+            corr.resize(self.plan.segments.len(), 0.0);
+            for (j, c) in corr.iter_mut().enumerate() {
+                for col in &tp.columns[tp.seg_cols[j] as usize..tp.seg_cols[j + 1] as usize] {
+                    let p = col.piece as usize;
+                    let kind = &tp.kinds[col.kind as usize];
+                    let g = piece_g(laws, &self.plan.pieces, p);
+                    let geff = coupling(g, kind.phi * col.g_half);
+                    let cl = free[self.plan.pieces[p].node as usize];
+                    let u0 = z[off + col.start as usize] / tp.vol[col.start as usize];
+                    *c += geff * (cl - u0 / kind.phi) - g * cl;
+                }
+            }
+        }
+        self.tissue.seg_corr = corr;
+    }
+
     /// Observation hook (after species `s`'s balance columns): per output vessel and segment
     /// the innermost, outermost and minimum wall value (u/φ, lumen-equivalent free
     /// concentration) and the hypoxic volume fraction, then the wall balance. NaN where there
@@ -800,11 +851,11 @@ mod tests {
         };
         for _ in 0..50 {
             eliminate(tp, col, kind, geff, 1e9, &z, &mut sc, 0..n);
-            for k in 0..n {
-                z[k] = (sc.a[k] + sc.b[k] * ui) * tp.vol[k];
+            for (k, zk) in z.iter_mut().enumerate() {
+                *zk = (sc.a[k] + sc.b[k] * ui) * tp.vol[k];
             }
         }
-        (0..n).map(|k| z[k] / tp.vol[k]).collect()
+        z.iter().zip(&tp.vol).map(|(z, v)| z / v).collect()
     }
 
     /// Closed-form steady profile of zero-order consumption R in a cylindrical shell,
