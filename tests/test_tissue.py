@@ -159,3 +159,18 @@ def test_straight_tube_against_the_2d_reference_with_a_wall_layer() -> None:
     assert uptake > consumed
     assert wall["consumed"][-1] > 0.0
     assert res.wall_po2_min[-1, 0] > 20.0 - 1e-9
+
+
+def test_tissue_outputs_survive_a_selection_and_a_file_round_trip(tmp_path) -> None:
+    model = tube_model(TISSUE, method="generalized-alpha", cycles=1)
+    # an output selection records the tissue columns whole
+    sel = oxyline.simulate(model, variables=["concentration_out", "segment_concentration"])
+    full = oxyline.simulate(model)
+    np.testing.assert_array_equal(sel.wall_po2_min, full.wall_po2_min)
+    np.testing.assert_array_equal(sel.segment_hypoxic_fraction.shape, (len(sel.time), 12))
+    back = oxyline.open_result(full.to_netcdf(tmp_path / "t.nc"))
+    for key in ("wall_po2_inner", "wall_po2_min", "hypoxic_fraction", "segment_wall_po2_outer"):
+        np.testing.assert_array_equal(getattr(back, key), getattr(full, key))
+    a = full.species[full.oxygen].tissue.mass_balance
+    b = back.species[back.oxygen].tissue.mass_balance
+    np.testing.assert_array_equal(a["residual"], b["residual"])

@@ -261,8 +261,9 @@ class Result:
             if tr is None or any(v not in tr.vessels for v in self.vessels):
                 continue
             idx = [tr.vessels.index(v) for v in self.vessels]
-            seg_ok = (tr.vessels == self.vessels and self.has_segments
-                      and list(tr.segment_count) == list(self.segment_count))
+            # (a selection without flow segment variables lists no segment counts)
+            seg_ok = (tr.vessels == self.vessels and tr.segment_data.shape[1] > 0
+                      and list(self.segment_count) in ([], list(tr.segment_count)))
             scale = sp.po2_per_concentration if name == self.oxygen else None
             for kind, keys, data in (("vessel", TISSUE_VESSEL, tr.vessel_data[:, idx]),
                                      ("segment", TISSUE_SEGMENT, tr.segment_data)):
