@@ -14,6 +14,9 @@ SEGMENT_VARIABLES: list[str]
 SPECIES_VESSEL_VARIABLES: list[str]
 SPECIES_SEGMENT_VARIABLES: list[str]
 BALANCE_VARIABLES: list[str]
+TISSUE_VESSEL_VARIABLES: list[str]
+TISSUE_SEGMENT_VARIABLES: list[str]
+TISSUE_BALANCE_VARIABLES: list[str]
 
 class ModelError(ValueError): ...
 class UnstableTimeStep(ModelError): ...

@@ -45,11 +45,51 @@ SPECIES_VESSEL: tuple[str, ...] = tuple(_core.SPECIES_VESSEL_VARIABLES)
 SPECIES_SEGMENT: tuple[str, ...] = tuple(n.removeprefix("segment_")
                                          for n in _core.SPECIES_SEGMENT_VARIABLES)
 BALANCE: tuple[str, ...] = tuple(_core.BALANCE_VARIABLES)
+#: tissue-wall variables (docs/physics.md §3.7): per vessel, per segment, wall balance
+TISSUE_VESSEL: tuple[str, ...] = tuple(getattr(_core, "TISSUE_VESSEL_VARIABLES", ()))
+TISSUE_SEGMENT: tuple[str, ...] = tuple(getattr(_core, "TISSUE_SEGMENT_VARIABLES", ()))
+TISSUE_BALANCE: tuple[str, ...] = tuple(getattr(_core, "TISSUE_BALANCE_VARIABLES", ()))
 
 
 def _not_selected(name: str) -> AttributeError:
     return AttributeError(f"'{name}' is not in this result's output selection "
                           "(simulation output: variables)")
+
+
+@dataclass
+class TissueResult:
+    """Wall/tissue compartment of one species (docs/physics.md §3.7), for every output vessel
+    and segment of the network: ``vessel_data`` (time, vessel, 4) and ``segment_data`` (time,
+    segment, 4) hold the innermost, outermost and minimum wall value as the lumen-equivalent
+    free concentration (mol/m^3; × 1/solubility = PO2 for oxygen) and the hypoxic volume
+    fraction; ``balance_data`` (time, 4) the wall amount and the cumulative lumen → wall,
+    consumed and outer-inflow amounts (mol)."""
+
+    vessels: list[str]
+    segment_count: list[int]
+    vessel_data: np.ndarray
+    segment_data: np.ndarray
+    balance_data: np.ndarray
+
+    def vessel(self, key: str) -> np.ndarray:
+        """(time, vessel) array of a TISSUE_VESSEL variable."""
+        return self.vessel_data[:, :, TISSUE_VESSEL.index(key)]
+
+    def segment(self, key: str) -> np.ndarray:
+        """(time, segment) array of a TISSUE_SEGMENT variable (with or without ``segment_``)."""
+        return self.segment_data[:, :, TISSUE_SEGMENT.index(
+            key if key.startswith("segment_") else f"segment_{key}")]
+
+    @property
+    def mass_balance(self) -> dict[str, np.ndarray]:
+        """The wall's balance over the recorded rows (mol, changes since the first row):
+        ``stored``, ``influx`` (from the lumen), ``consumed``, ``outer_inflow`` and
+        ``residual`` = stored − (influx − consumed + outer_inflow)."""
+        b = self.balance_data
+        b = b - b[:1]
+        out = {k.removeprefix("wall_"): b[:, i] for i, k in enumerate(TISSUE_BALANCE)}
+        out["residual"] = out["stored"] - (out["influx"] - out["consumed"] + out["outer_inflow"])
+        return out
 
 
 @dataclass
@@ -71,6 +111,8 @@ class SpeciesResult:
     #: the recorded variables (the last axis of vessel_data / segment_data)
     vessel_variables: tuple[str, ...] = SPECIES_VESSEL
     segment_variables: tuple[str, ...] = SPECIES_SEGMENT
+    #: the wall/tissue compartment's outputs (None without a tissue wall)
+    tissue: TissueResult | None = None
 
     def __getattr__(self, key: str) -> np.ndarray:
         d = self.__dict__
@@ -149,6 +191,10 @@ class Result:
                 return sp.concentration * scale
         if key in ("tl_resistance", "tl_inductance"):
             return getattr(next(iter(species.values())), key)
+        if "wall_" in key or "hypoxic" in key:  # tissue-wall variables (species_variables)
+            tissue = self._tissue_variables()
+            if key in tissue:
+                return tissue[key][1]
         if key == "mass_balance":
             return {n: s.mass_balance for n, s in species.items()}
         for name, sp in species.items():
@@ -195,12 +241,45 @@ class Result:
                     out["po2_out"] = ("vessel", self.po2_out, "mmHg")
                 if "concentration" in sv:
                     out["segment_po2"] = ("segment", self.segment_po2, "mmHg")
+        out.update(self._tissue_variables())
         if self.species:
             sv = next(iter(self.species.values())).segment_variables
             # R_i = dL_i/dt of L_i = -dx/v (s) is dimensionless (docs/physics.md §5)
             for k, unit in (("tl_resistance", "1"), ("tl_inductance", "s")):
                 if k in sv:
                     out[k] = ("segment", getattr(self, k), unit)
+        return out
+
+    def _tissue_variables(self) -> dict[str, tuple[str, np.ndarray, str]]:
+        """Tissue-wall outputs (docs/physics.md §3.7) of every species with a tissue wall:
+        ``{name}_wall_concentration_inner|outer|min`` and ``{name}_hypoxic_fraction`` per vessel
+        (``segment_`` prefixed per segment), ``{name}_wall_mass_*`` per time; oxygen adds
+        ``wall_po2_inner|outer|min``, ``hypoxic_fraction`` (and the ``segment_`` ones) in mmHg."""
+        out: dict[str, tuple[str, np.ndarray, str]] = {}
+        for name, sp in self.species.items():
+            tr = sp.tissue
+            if tr is None or any(v not in tr.vessels for v in self.vessels):
+                continue
+            idx = [tr.vessels.index(v) for v in self.vessels]
+            # (a selection without flow segment variables lists no segment counts)
+            seg_ok = (tr.vessels == self.vessels and tr.segment_data.shape[1] > 0
+                      and list(self.segment_count) in ([], list(tr.segment_count)))
+            scale = sp.po2_per_concentration if name == self.oxygen else None
+            for kind, keys, data in (("vessel", TISSUE_VESSEL, tr.vessel_data[:, idx]),
+                                     ("segment", TISSUE_SEGMENT, tr.segment_data)):
+                if kind == "segment" and not seg_ok:
+                    continue
+                pre = "segment_" if kind == "segment" else ""
+                for i, k in enumerate(keys):
+                    base = k.removeprefix("segment_")
+                    frac = base == "hypoxic_fraction"
+                    out[f"{pre}{name}_{base}"] = (kind, data[:, :, i], "1" if frac else "mol/m^3")
+                    if scale is not None:
+                        po2 = base.replace("concentration", "po2")
+                        out[f"{pre}{po2}"] = (kind, data[:, :, i] if frac else data[:, :, i]
+                                              * scale, "1" if frac else "mmHg")
+            for k, arr in tr.mass_balance.items():
+                out[f"{name}_wall_mass_{k}"] = ("time", arr, "mol")
         return out
 
     def __reduce__(self) -> tuple[Any, tuple[dict[str, Any]]]:

@@ -14,7 +14,14 @@ import numpy as np
 from oxyline.errors import ModelError, OutputError, SimulationInterrupted
 from oxyline.loader import load_model
 from oxyline.model import METHODS, Model, output_names, output_vessels
-from oxyline.result import SEGMENT_VARIABLES, SPECIES_SEGMENT, Result, SpeciesResult
+from oxyline.result import (
+    BALANCE,
+    SEGMENT_VARIABLES,
+    SPECIES_SEGMENT,
+    Result,
+    SpeciesResult,
+    TissueResult,
+)
 
 ProgressCallback = Callable[[float, float], None]
 
@@ -224,13 +231,29 @@ def _species_results(model: Model, raw: Mapping[str, Any], layout: Mapping[str, 
             name=name,
             vessel_data=block[:, :vcols].reshape(nt, nv, kv),
             segment_data=block[:, vcols:vcols + scols].reshape(nt, ns, ks),
-            balance_data=block[:, vcols + scols:],
+            balance_data=block[:, vcols + scols:vcols + scols + len(BALANCE)],
+            tissue=_tissue_views(block[:, vcols + scols + len(BALANCE):], lay),
             initial_stored=float(tr["initial_stored"][k]),
             po2_per_concentration=(1.0 / model.transport["solubility"]) if name == ox else None,
             vessel_variables=tuple(lay["vessel_variables"]),
             segment_variables=seg_vars,
         )
     return out
+
+
+def _tissue_views(tail: np.ndarray, lay: Mapping[str, Any]) -> TissueResult | None:
+    """The tissue-wall columns of one species block (views), or None without a tissue wall
+    (or for a species without one: its columns are NaN)."""
+    if not lay.get("tissue_columns") or np.isnan(tail[:, -4:]).all():
+        return None
+    nt, nv = tail.shape[0], len(lay["tissue_vessels"])
+    ns = int(sum(lay["tissue_segment_count"]))
+    kv, ks = 4, 4
+    return TissueResult(
+        vessels=list(lay["tissue_vessels"]), segment_count=list(lay["tissue_segment_count"]),
+        vessel_data=tail[:, :nv * kv].reshape(nt, nv, kv),
+        segment_data=tail[:, nv * kv:nv * kv + ns * ks].reshape(nt, ns, ks),
+        balance_data=tail[:, nv * kv + ns * ks:])
 
 
 def _result(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],

@@ -20,6 +20,8 @@ Oxygen (docs/physics.md §2-4)::
       initial: {po2: 85}                 # default: the inlet value at t = 0
 
 Wall models: ``none``; ``flux`` {flux: mol m^-2 s^-1}; ``mass-transfer`` {k: m/s, po2};
+``tissue`` (oxygen only: a consuming wall layer behind a luminal closure, docs/oxygen.md
+"Wall/tissue compartment");
 ``leveque`` {po2, shear: cycle-mean | instantaneous | relaxed, enhancement, hb_facilitation};
 ``graetz`` {po2, enhancement}; ``permeability`` {permeability: m/s, po2}. ``permeability`` in the
 mass-transfer, Lévêque and Graetz models adds a wall resistance in series (physics C8).
@@ -76,6 +78,14 @@ SPECIES_KEYS = {"name", "diffusivity", "decay", "binding", "wall", "inlet", "inl
 TRANSPORT_KEYS = {"reference_pressure", "formulation", "velocity_threshold", "cells_per_segment",
                   "cells_per_vessel"}
 MAX_CELLS_PER_SEGMENT = 10_000
+TISSUE_KEYS = {"model", "thickness", "diffusivity", "solubility", "consumption", "outer",
+               "radial_cells", "hypoxic_po2", "boundary_layer"}
+#: luminal closures a tissue wall accepts (a conductance against the wall's own innermost PO2)
+TISSUE_BOUNDARY_LAYERS = ("leveque", "graetz", "mass-transfer", "permeability")
+#: default hypoxia threshold (mmHg): hypoxia markers (pimonidazole adducts) form below ~10 mmHg,
+#: the usual histological definition of hypoxic tissue (docs/physics.md §3.7)
+HYPOXIC_PO2 = 10.0
+TISSUE_RADIAL_CELLS = 4
 FORMULATIONS = ("conservative", "tl-quasisteady")
 
 
@@ -245,6 +255,73 @@ def _wall(spec: Any, element: str, conc_of: Any, conc_key: str, h: dict[str, flo
     return out
 
 
+def _is_tissue(spec: Any) -> bool:
+    return spec == "tissue" or (isinstance(spec, Mapping) and spec.get("model") == "tissue")
+
+
+def _tissue(spec: Any, element: str, alpha: float, h: dict[str, float] | None, d: float,
+            p_in: float | None) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(canonical luminal closure, canonical tissue layer) of ``wall: {model: tissue}``.
+
+    SI except PO2 (mmHg): thickness m, diffusivity m^2/s, solubility mol m^-3 mmHg^-1 (default:
+    the blood's), consumption {vmax: mol m^-3 s^-1, km: mmHg} (Michaelis–Menten) or
+    {rate: mol m^-3 s^-1} (zero order), outer {po2: mmHg} or no-flux, hypoxic_po2 mmHg. The
+    core works in wall concentrations u = α_t P and the partition φ = α_t/α."""
+    el = f"{element} wall (tissue)"
+    t = _check({"model": "tissue"} if spec == "tissue" else spec, TISSUE_KEYS, el)
+    for key in ("thickness", "diffusivity", "consumption"):
+        if key not in t:
+            raise _err(el, f"needs '{key}'")
+    alpha_t = _num(t.get("solubility", alpha), el, "solubility", positive=True)
+    cons = t["consumption"]
+    if isinstance(cons, Mapping) and "rate" in cons:
+        _check(cons, {"rate"}, f"{el} consumption")
+        consumption = {"kind": "zero-order", "rate": _num(cons["rate"], el, "rate", minimum=0.0)}
+    elif isinstance(cons, Mapping) and "vmax" in cons:
+        _check(cons, {"vmax", "km"}, f"{el} consumption")
+        consumption = {"kind": "michaelis-menten",
+                       "vmax": _num(cons["vmax"], el, "vmax", minimum=0.0),
+                       "km": alpha_t * _num(cons.get("km"), el, "km (mmHg)", minimum=0.0)}
+    else:
+        raise _err(el, "consumption must be {vmax, km} (Michaelis–Menten) or {rate} (zero "
+                       f"order), got {cons!r}")
+    outer = t.get("outer", "no-flux")
+    if outer == "no-flux":
+        outer_c: dict[str, Any] = {"kind": "no-flux"}
+    elif isinstance(outer, Mapping) and set(outer) == {"po2"}:
+        outer_c = {"kind": "concentration",
+                   "value": alpha_t * _num(outer["po2"], el, "outer po2", minimum=0.0)}
+    else:
+        raise _err(el, f"outer must be 'no-flux' or {{po2: mmHg}}, got {outer!r}")
+    cells = t.get("radial_cells", TISSUE_RADIAL_CELLS)
+    if isinstance(cells, bool) or not isinstance(cells, (int, float)) or cells != int(cells) \
+            or not 1 <= cells <= 1000:
+        raise _err(el, f"'radial_cells' must be an integer between 1 and 1000, got {cells!r}")
+    tissue = {
+        "thickness": _num(t["thickness"], el, "thickness", positive=True),
+        "diffusivity": _num(t["diffusivity"], el, "diffusivity", positive=True),
+        "partition": alpha_t / alpha, "consumption": consumption, "outer": outer_c,
+        "radial_cells": int(cells),
+        "hypoxic_threshold": alpha_t * _num(t.get("hypoxic_po2", HYPOXIC_PO2), el,
+                                            "hypoxic_po2", minimum=0.0),
+    }
+    bl = t.get("boundary_layer", {"model": "leveque"})
+    if isinstance(bl, str):
+        bl = {"model": bl}
+    if not isinstance(bl, Mapping) or bl.get("model") not in TISSUE_BOUNDARY_LAYERS:
+        raise _err(el, f"boundary_layer must be one of {', '.join(TISSUE_BOUNDARY_LAYERS)}, "
+                       f"got {bl!r}")
+    for key in ("po2", "concentration", "hb_facilitation"):
+        if key in bl:
+            raise _err(el, f"boundary_layer takes no '{key}' (the wall's innermost PO2 is the "
+                           "wall value; give the enhancement directly)")
+    if bl.get("shear", "cycle-mean") != "cycle-mean":
+        raise _err(el, "boundary_layer shear must be cycle-mean with a tissue wall")
+    lumen = _wall({**bl, "po2": 0.0}, el, lambda s: alpha * _num(s["po2"], el, "po2"), "po2", h,
+                  d, p_in)
+    return lumen, tissue
+
+
 def _oxygen(ox: Mapping[str, Any], period: float | None, duration: float | None) -> dict[str, Any]:
     _check(ox, OXYGEN_KEYS, "oxygen")
     el = "oxygen"
@@ -282,8 +359,11 @@ def _oxygen(ox: Mapping[str, Any], period: float | None, duration: float | None)
 
     species: dict[str, Any] = {
         "name": str(ox.get("name", "o2")), "diffusivity": d, "binding": binding, "inlet": inlet,
-        "wall": _wall(ox.get("wall", "none"), f"{el}", po2, "po2", h, d, p_in),
     }
+    if _is_tissue(ox.get("wall")):
+        species["wall"], species["tissue"] = _tissue(ox["wall"], el, alpha, h, d, p_in)
+    else:
+        species["wall"] = _wall(ox.get("wall", "none"), f"{el}", po2, "po2", h, d, p_in)
     if "inlets" in ox:
         species["inlets"] = {str(k): _wave(v, "po2", alpha, f"{el} inlet '{k}'", period, duration)
                              for k, v in _check(ox["inlets"], set(ox["inlets"]), el).items()}
@@ -298,15 +378,21 @@ def _oxygen(ox: Mapping[str, Any], period: float | None, duration: float | None)
         species["initial"] = alpha * _num(ini.get("po2") if isinstance(ini, Mapping) else ini,
                                           el, "initial po2", minimum=0.0)
     if "per_vessel" in ox:
-        pv = {}
+        pv, pvt = {}, {}
         for name, over in ox["per_vessel"].items():
             _check(over, {"wall", "cells_per_segment"}, f"{el} per_vessel '{name}'")
             # an override with only cells_per_segment keeps the section's wall
             if "wall" in over or "cells_per_segment" not in over:
-                pv[str(name)] = _wall(over.get("wall"), f"{el} per_vessel '{name}'", po2, "po2", h,
-                                      d, p_in)
+                vel = f"{el} per_vessel '{name}'"
+                if _is_tissue(over.get("wall")):
+                    pv[str(name)], pvt[str(name)] = _tissue(over["wall"], vel, alpha, h, d, p_in)
+                else:
+                    pv[str(name)] = _wall(over.get("wall"), vel, po2, "po2", h, d, p_in)
+                    pvt[str(name)] = None  # no tissue wall on this vessel
         if pv:
             species["per_vessel"] = pv
+        if any(v is not None for v in pvt.values()) or "tissue" in species:
+            species["per_vessel_tissue"] = pvt
     return species
 
 

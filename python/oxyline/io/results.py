@@ -528,5 +528,33 @@ def _species_from_dataset(ds: Any, attrs: dict[str, Any], need: Any, nt: int, nv
             balance[:, k] = need(f"{name}_mass_{v}", ("time",))
         out[name] = SpeciesResult(name=name, vessel_data=vessel, segment_data=segment,
                                   balance_data=balance, initial_stored=0.0,
-                                  vessel_variables=vvars, segment_variables=svars)
+                                  vessel_variables=vvars, segment_variables=svars,
+                                  tissue=_tissue_from_dataset(ds, name, need, nt, nv, ns,
+                                                              has_seg))
     return out
+
+
+def _tissue_from_dataset(ds: Any, name: str, need: Any, nt: int, nv: int, ns: int,
+                         has_seg: bool) -> Any:
+    """The tissue-wall result of species ``name`` written by ``Result.to_xarray`` (None
+    without one). Its segment block needs the file's segments; the balance is stored as
+    changes since the first row, which ``TissueResult.mass_balance`` reproduces."""
+    import numpy as np
+
+    from oxyline.result import TISSUE_BALANCE, TISSUE_SEGMENT, TISSUE_VESSEL, TissueResult
+
+    if f"{name}_wall_concentration_inner" not in ds.variables:
+        return None
+    vessel = np.stack([need(f"{name}_{k}", ("time", "vessel")) for k in TISSUE_VESSEL], axis=-1)
+    seg_names = [f"segment_{name}_{k.removeprefix('segment_')}" for k in TISSUE_SEGMENT]
+    seg_ok = has_seg and all(k in ds.variables for k in seg_names)
+    segment = (np.stack([need(k, ("time", "segment")) for k in seg_names], axis=-1) if seg_ok
+               else np.empty((nt, 0, len(TISSUE_SEGMENT))))
+    balance = np.stack([need(f"{name}_wall_mass_{k.removeprefix('wall_')}", ("time",))
+                        for k in TISSUE_BALANCE], axis=-1)
+    vessels = [str(v) for v in ds["vessel"].values]
+    counts = [int(c) for c in np.bincount(
+        [vessels.index(str(v)) for v in ds["segment_vessel"].values], minlength=nv)] \
+        if seg_ok else [0] * nv
+    return TissueResult(vessels=vessels, segment_count=counts, vessel_data=vessel,
+                        segment_data=segment, balance_data=balance)

@@ -35,6 +35,28 @@ pub const SPECIES_SEGMENT_VARIABLES: [&str; 5] = [
 ];
 /// Cumulative mass-balance columns of a species (always recorded: five numbers per row).
 pub const BALANCE_VARIABLES: [&str; 5] = ["stored", "inflow", "outflow", "wall_uptake", "decay"];
+/// Tissue-wall variables (docs/physics.md §3.7), written after the balance columns of every
+/// species block when a species has a tissue wall: per output vessel, per output segment
+/// (lumen-equivalent free concentrations, mol/m³; hypoxic volume fraction, 1), then the wall's
+/// cumulative balance (mol).
+pub const TISSUE_VESSEL_VARIABLES: [&str; 4] = [
+    "wall_concentration_inner",
+    "wall_concentration_outer",
+    "wall_concentration_min",
+    "hypoxic_fraction",
+];
+pub const TISSUE_SEGMENT_VARIABLES: [&str; 4] = [
+    "segment_wall_concentration_inner",
+    "segment_wall_concentration_outer",
+    "segment_wall_concentration_min",
+    "segment_hypoxic_fraction",
+];
+pub const TISSUE_BALANCE_VARIABLES: [&str; 4] = [
+    "wall_stored",
+    "wall_influx",
+    "wall_consumed",
+    "wall_outer_inflow",
+];
 
 /// Where each output variable lives in the unknown vector.
 #[derive(Debug, Clone, Default)]

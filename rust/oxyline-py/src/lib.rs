@@ -5,7 +5,7 @@ use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyUntypedArrayMethods};
 use oxyline_core::genalpha::NewtonControl;
 use oxyline_core::output::{
     BALANCE_VARIABLES, SEGMENT_VARIABLES, SPECIES_SEGMENT_VARIABLES, SPECIES_VESSEL_VARIABLES,
-    VESSEL_VARIABLES,
+    TISSUE_BALANCE_VARIABLES, TISSUE_SEGMENT_VARIABLES, TISSUE_VESSEL_VARIABLES, VESSEL_VARIABLES,
 };
 use oxyline_core::spec::parse;
 use oxyline_core::{
@@ -27,6 +27,11 @@ mod ensemble;
 const _: () = assert!(oxyline_core::transport::VESSEL_COLUMNS == SPECIES_VESSEL_VARIABLES.len());
 const _: () = assert!(oxyline_core::transport::SEGMENT_COLUMNS == SPECIES_SEGMENT_VARIABLES.len());
 const _: () = assert!(oxyline_core::transport::BALANCE_COLUMNS == BALANCE_VARIABLES.len());
+const _: () = assert!(
+    oxyline_core::transport::TISSUE_VESSEL_COLUMNS == TISSUE_VESSEL_VARIABLES.len()
+        && oxyline_core::transport::TISSUE_SEGMENT_COLUMNS == TISSUE_SEGMENT_VARIABLES.len()
+        && oxyline_core::transport::TISSUE_BALANCE_COLUMNS == TISSUE_BALANCE_VARIABLES.len()
+);
 
 pyo3::create_exception!(
     oxyline,
@@ -147,8 +152,17 @@ fn recorded_columns(
         .unwrap_or_default();
     (
         sel.flow_columns(probes),
-        transport.map(|_| sel.species_columns(&counts)),
+        transport.map(|t| with_tissue_tail(t, sel.species_columns(&counts))),
     )
+}
+
+/// A species-column selection plus the tissue columns, which are always recorded whole (the
+/// last `tissue_columns` of every block; none without a tissue wall).
+fn with_tissue_tail(t: &Transport, mut columns: Vec<usize>) -> Vec<usize> {
+    let tail = t.tissue_columns();
+    let base = t.columns_per_species() - tail;
+    columns.extend(base..base + tail);
+    columns
 }
 
 /// Layout of the output selection `sel` of a network (see `oxyline_core::output`): selected
@@ -194,7 +208,15 @@ fn layout_dict<'py>(
             names(&SPECIES_SEGMENT_VARIABLES, &sel.species_segment_variables),
         )?;
         td.set_item("segment_count", sel.segment_count(&counts, true))?;
-        td.set_item("columns_per_species", sel.species_columns(&counts).len())?;
+        td.set_item(
+            "columns_per_species",
+            sel.species_columns(&counts).len() + t.tissue_columns(),
+        )?;
+        // tissue wall columns: every output vessel and segment of the network (see
+        // `with_tissue_tail`)
+        td.set_item("tissue_columns", t.tissue_columns())?;
+        td.set_item("tissue_vessels", p.vessels.clone())?;
+        td.set_item("tissue_segment_count", counts.clone())?;
         d.set_item("transport", td)?;
     }
     Ok(d)
@@ -799,6 +821,18 @@ mod _core {
             super::SPECIES_SEGMENT_VARIABLES.to_vec(),
         )?;
         m.add("BALANCE_VARIABLES", super::BALANCE_VARIABLES.to_vec())?;
+        m.add(
+            "TISSUE_VESSEL_VARIABLES",
+            super::TISSUE_VESSEL_VARIABLES.to_vec(),
+        )?;
+        m.add(
+            "TISSUE_SEGMENT_VARIABLES",
+            super::TISSUE_SEGMENT_VARIABLES.to_vec(),
+        )?;
+        m.add(
+            "TISSUE_BALANCE_VARIABLES",
+            super::TISSUE_BALANCE_VARIABLES.to_vec(),
+        )?;
         m.add(
             "build_profile",
             if cfg!(debug_assertions) {

@@ -44,6 +44,12 @@ pub struct SpeciesSpec {
     pub wall: WallSpec,
     #[serde(default)]
     pub per_vessel: BTreeMap<String, WallSpec>,
+    /// Wall/tissue compartment behind the luminal closure `wall` (docs/physics.md §3.7).
+    #[serde(default)]
+    pub tissue: Option<TissueSpec>,
+    /// Per vessel overrides of `tissue` (null: no tissue wall on that vessel).
+    #[serde(default)]
+    pub per_vessel_tissue: BTreeMap<String, Option<TissueSpec>>,
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -73,4 +79,55 @@ fn default_v_eps() -> f64 {
 }
 fn default_cells() -> f64 {
     1.0
+}
+
+/// A radial wall/tissue layer behind the luminal closure (docs/physics.md §3.7). SI; wall
+/// concentrations are per wall volume (mol/m³).
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TissueSpec {
+    /// Wall thickness h (m).
+    pub thickness: f64,
+    /// Diffusivity in the wall D_t (m²/s).
+    pub diffusivity: f64,
+    /// φ = u/c in equilibrium: wall concentration per lumen free concentration (for O2 the
+    /// ratio of the wall's to the blood's solubility).
+    #[serde(default = "one")]
+    pub partition: f64,
+    pub consumption: ConsumptionSpec,
+    #[serde(default)]
+    pub outer: OuterSpec,
+    /// Finite volumes across the wall (an integer >= 1).
+    #[serde(default = "default_radial_cells")]
+    pub radial_cells: f64,
+    /// Wall concentration (mol/m³ of wall) below which a wall cell counts as hypoxic.
+    #[serde(default)]
+    pub hypoxic_threshold: f64,
+}
+
+/// Consumption per wall volume: Michaelis–Menten vmax u/(km + u) or zero order (mol m⁻³ s⁻¹;
+/// km in wall concentration).
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum ConsumptionSpec {
+    MichaelisMenten { vmax: f64, km: f64 },
+    ZeroOrder { rate: f64 },
+}
+
+/// Outer face of the wall: no flux, or a fixed wall concentration (e.g. vasa vasorum).
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Default)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum OuterSpec {
+    #[default]
+    NoFlux,
+    Concentration {
+        value: f64,
+    },
+}
+
+fn one() -> f64 {
+    1.0
+}
+fn default_radial_cells() -> f64 {
+    4.0
 }

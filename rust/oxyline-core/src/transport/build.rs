@@ -154,6 +154,17 @@ impl Transport {
         let (pieces, seg_pieces) =
             wall_pieces(&segments, &m_node, &layout.node_cell, &refined.first_extra);
         let species = species_plans(spec, circuit)?;
+        let segment_vessels: Vec<u32> = circuit.segments.iter().map(|s| s.vessel as u32).collect();
+        // tissue hook: a radial wall column behind every wall piece of a tissue wall
+        let tissue = tissue::plans(
+            spec,
+            &species,
+            &circuit.vessel_names,
+            &segments,
+            &segment_vessels,
+            &pieces,
+            &seg_pieces,
+        )?;
         let (out_vessels, out_segments) = output_layout(circuit, probes, &face_of_unknown);
         drop(face_of_unknown);
         let nn = kind.len();
@@ -191,7 +202,7 @@ impl Transport {
             v_eps: spec.velocity_threshold,
             out_vessels,
             out_segments,
-            segment_vessels: circuit.segments.iter().map(|s| s.vessel as u32).collect(),
+            segment_vessels,
             node_names: Names::new((0..circuit.nodes.len()).map(|i| circuit.names.node(i)))?,
             domain: Vec::new(),
             internal: Vec::new(),
@@ -201,6 +212,7 @@ impl Transport {
             tree: None,
             species,
             base_laws: Vec::new(),
+            tissue,
         };
         p.finish()?;
         Ok(Transport::from_plan(Arc::new(p)))

@@ -197,6 +197,7 @@ impl Transport {
                 Rows::Binding | Rows::General => (&wlin[..], &wconst[..]),
             };
             self.implicit_update(s, dt, &w_new, wl, wc, z);
+            self.tissue_update(s, dt, z); // tissue hook: back-substitute the wall columns
         }
         let sc = &mut self.sweep;
         (sc.wconst, sc.wlin, sc.wnew) = (wconst, wlin, w_new);
@@ -264,7 +265,8 @@ impl Transport {
     /// Which rows species `s` takes (see [`Rows`]).
     fn rows_kind(&self, s: usize) -> Rows {
         let laws = &self.species[s].laws;
-        if !laws.dynamic.is_empty() {
+        // tissue hook: a tissue wall's law is linearised per step (`tissue_rows`)
+        if !laws.dynamic.is_empty() || self.tissue_of(s).is_some() {
             Rows::General
         } else if self.plan.species[s].binding.is_identity() || !laws.has_wall {
             Rows::Fixed
@@ -369,6 +371,7 @@ impl Transport {
         }
         self.load_shear(s, ya, z);
         self.linearised_wall(s, wconst, wlin);
+        self.tissue_rows(s, dt, z, wconst, wlin); // tissue hook: eliminate the wall columns
         let quasi = self.plan.formulation == Formulation::TlQuasisteady;
         let rate = 1.0 / dt + self.plan.species[s].decay;
         let sw = &mut self.sweep;

@@ -38,7 +38,9 @@ mod plan;
 mod rhs;
 mod state;
 mod stiffness;
+mod tissue; // wall/tissue compartment (issue 12 item 6)
 pub use stiffness::ReactionRate;
+pub use tissue::{TISSUE_BALANCE_COLUMNS, TISSUE_SEGMENT_COLUMNS, TISSUE_VESSEL_COLUMNS};
 
 pub use plan::Plan;
 #[allow(unused_imports)]
@@ -221,6 +223,8 @@ pub struct Transport {
     sweep: Sweep,
     /// Transport volumes of the implicit path (evolved with the face flows).
     wvol: Vec<f64>,
+    /// Tissue hook: scratch of the implicit wall elimination (empty without tissue).
+    tissue: tissue::TissueScratch,
 }
 
 fn bad(element: &str, msg: String) -> Error {
@@ -258,6 +262,7 @@ impl Transport {
             bval_species: usize::MAX,
             sweep: Sweep::default(),
             wvol: Vec::new(),
+            tissue: tissue::TissueScratch::default(),
         }
     }
 
@@ -319,6 +324,7 @@ impl Transport {
                 .iter()
                 .map(|s| s.laws.relax.len())
                 .sum::<usize>()
+            + self.tissue_len() // tissue hook: wall cells and their accumulators
     }
     pub fn formulation(&self) -> Formulation {
         self.plan.formulation
@@ -328,6 +334,7 @@ impl Transport {
         VESSEL_COLUMNS * self.plan.out_vessels.len()
             + SEGMENT_COLUMNS * self.plan.out_segments.len()
             + BALANCE_COLUMNS
+            + self.tissue_columns() // tissue hook (0 without tissue)
     }
     /// The columns of each species block a run records (None: all). When none of them is a
     /// per-segment column, `observe` skips computing those (they are NaN in its rows), which
@@ -446,11 +453,16 @@ impl Transport {
             .iter()
             .fold(0.0f64, |m, x| m.max(x.abs()))
             .max(1e-300);
-        a[..n]
+        let lumen = a[..n]
             .iter()
             .zip(&b[..n])
             .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
-            / scale
+            / scale;
+        if self.plan.tissue.is_empty() {
+            lumen
+        } else {
+            lumen.max(self.tissue_relative_change(a, b)) // tissue hook: the wall's own change
+        }
     }
 }
 

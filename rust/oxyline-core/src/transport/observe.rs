@@ -31,6 +31,9 @@ impl Transport {
             self.mix(s)?;
             self.free_of_nodes(s);
             self.load_shear(s, y, z);
+            if !self.plan.tissue.is_empty() {
+                self.tissue_wall_fluxes(s, z); // tissue hook: W − g c per segment
+            }
             self.observe_vessels(s, out);
             if self.segment_output {
                 self.observe_segments(s, y, ydot, out);
@@ -42,6 +45,9 @@ impl Transport {
             let stored: f64 = z[s * nc..(s + 1) * nc].iter().sum();
             let acc = &z[nsp * nc + 4 * s..nsp * nc + 4 * s + 4];
             out.extend([stored, acc[0], acc[1], acc[2], acc[3]]);
+            if !self.plan.tissue.is_empty() {
+                self.observe_tissue(s, z, out); // tissue hook
+            }
         }
         Ok(())
     }
@@ -97,13 +103,19 @@ impl Transport {
     fn segment_wall(&self, s: usize, j: usize) -> f64 {
         let sp = &self.species[s];
         let free = self.free_of(s);
-        self.plan
+        let w: f64 = self
+            .plan
             .seg_pieces(j)
             .map(|p| {
                 sp.laws
                     .piece_uptake(&self.plan.pieces, p, free, &sp.shear_cbrt)
             })
-            .sum()
+            .sum();
+        // tissue hook: the closure's g c corrected to the flux into the wall
+        match self.tissue.seg_corr.get(j) {
+            Some(corr) => w + corr,
+            None => w,
+        }
     }
 
     /// Per output vessel: inlet and outlet concentration and flux, wall uptake.

@@ -142,6 +142,8 @@ pub struct Plan {
     /// cycle-mean flow, which a run then sets with `set_mean_flow`).
     pub(super) species: Vec<SpeciesPlan>,
     pub(super) base_laws: Vec<Arc<Laws>>,
+    /// Tissue walls per species (empty when no species has one).
+    pub(super) tissue: Vec<Option<tissue::TissuePlan>>,
 }
 
 impl Plan {

@@ -30,6 +30,7 @@ impl Transport {
             self.load_shear(s, y, z);
             let (i_in, i_out) = self.face_fluxes(&mut dnode);
             self.cell_rates(s, y, z, &dnode, dz, i_in, i_out);
+            self.tissue_rhs(s, z, dz); // tissue hook (nothing without tissue)
         }
         self.sweep.dnode = dnode;
         res

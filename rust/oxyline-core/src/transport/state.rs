@@ -23,6 +23,7 @@ impl Transport {
             }
         }
         self.wvol = self.vol.clone();
+        self.tissue_initial(&mut z); // tissue hook
         Ok(z)
     }
 

@@ -43,6 +43,7 @@ impl Transport {
                 }
             }
         }
+        self.tissue_max_rate(&mut best); // tissue hook: radial diffusion and consumption
         best
     }
 }
