@@ -20,9 +20,9 @@ use super::*;
 /// How the fused step builds a cell's row (a binding also records the wall linearisation it
 /// used in `sweep.wlin`, `wconst`, which the backward pass reads).
 trait CellRows {
-    /// d and b of cell `i` (node `n`) before the face terms, from its old concentration
-    /// `c`, old amount `zi` and new transport volume `w`.
-    fn row(&mut self, i: usize, n: usize, c: f64, zi: f64, w: f64) -> (f64, f64);
+    /// d and b of cell `i` (node `n`) before the face terms, from its old amount `zi`, old
+    /// and new transport volumes `v` and `w` (the old concentration zi/v only where needed).
+    fn row(&mut self, i: usize, n: usize, zi: f64, v: f64, w: f64) -> (f64, f64);
 }
 
 /// A wall linear in C_t (see `fixed_rows`): d = W'(1/dt + λ) + g, b = N/dt − (q − g c_w).
@@ -30,13 +30,13 @@ struct FixedRows<'a> {
     g: &'a [f64],
     wc: &'a [f64],
     rate: f64,
-    dt: f64,
+    inv_dt: f64,
 }
 
 impl CellRows for FixedRows<'_> {
     #[inline(always)]
-    fn row(&mut self, i: usize, _n: usize, _c: f64, zi: f64, w: f64) -> (f64, f64) {
-        (w * self.rate + self.g[i], zi / self.dt - self.wc[i])
+    fn row(&mut self, i: usize, _n: usize, zi: f64, _v: f64, w: f64) -> (f64, f64) {
+        (w * self.rate + self.g[i], zi * self.inv_dt - self.wc[i])
     }
 }
 
@@ -50,12 +50,13 @@ struct BindingRows<'a> {
     wlin: &'a mut [f64],
     wconst: &'a mut [f64],
     rate: f64,
-    dt: f64,
+    inv_dt: f64,
 }
 
 impl CellRows for BindingRows<'_> {
     #[inline(always)]
-    fn row(&mut self, i: usize, n: usize, c: f64, zi: f64, w: f64) -> (f64, f64) {
+    fn row(&mut self, i: usize, n: usize, zi: f64, v: f64, w: f64) -> (f64, f64) {
+        let c = zi / v;
         let (wl, wc) = if self.laws.has_wall {
             let mut scratch = HillAnchor::default();
             let anchor = self.anchors.get_mut(n).unwrap_or(&mut scratch);
@@ -69,7 +70,7 @@ impl CellRows for BindingRows<'_> {
             (0.0, 0.0)
         };
         (self.wlin[i], self.wconst[i]) = (wl, wc);
-        (w * self.rate + wl, zi / self.dt - wc)
+        (w * self.rate + wl, zi * self.inv_dt - wc)
     }
 }
 
@@ -118,38 +119,45 @@ impl Forward<'_> {
                 aq = q.abs();
                 to_parent = (q >= 0.0) == l.from_child;
             }
-            let (mut d, b, x_old);
+            let (mut d, b);
+            let cell = l.cell as usize;
             if l.cell != u32::MAX {
-                let i = l.cell as usize;
                 let w = if first {
-                    let w = wvol[i] + dt * net;
+                    let w = wvol[cell] + dt * net;
                     positive &= w > 0.0;
-                    wnew[i] = w;
+                    wnew[cell] = w;
                     w
                 } else {
-                    wnew[i]
+                    wnew[cell]
                 };
-                let zi = zs[i];
-                x_old = zi / wvol[i];
-                let (d0, b0) = rows.row(i, n, x_old, zi, w);
+                let (d0, b0) = rows.row(cell, n, zs[cell], wvol[cell], w);
                 (d, b) = (d0 + acc_d, b0 + acc_b);
             } else {
-                // a mixing point: no storage, its restored lagged value
-                (d, b, x_old) = (acc_d, acc_b, x[n]);
+                // a mixing point: no storage
+                (d, b) = (acc_d, acc_b);
             }
             if to_parent {
                 d += aq;
             } else if has_parent {
                 acc[l.parent as usize][1] += aq;
             }
-            let solvable = d > 1e-300;
-            let xn = if solvable { b / d } else { x_old };
+            // one division per node (the divider, not the memory, bounds this loop): x and β
+            // use 1/d; without outflow or storage the node keeps its old value (a mixing
+            // point its restored lagged value)
+            let (xn, inv_d) = if d > 1e-300 {
+                let inv_d = 1.0 / d;
+                (b * inv_d, inv_d)
+            } else if l.cell != u32::MAX {
+                (zs[cell] / wvol[cell], 0.0)
+            } else {
+                (x[n], 0.0)
+            };
             x[n] = xn;
             *beta = 0.0;
             if to_parent {
                 acc[l.parent as usize][2] += aq * xn;
-            } else if solvable && aq != 0.0 {
-                *beta = aq / d;
+            } else {
+                *beta = aq * inv_d;
             }
         }
         positive
@@ -249,14 +257,23 @@ impl Transport {
             zs: &z[s * nc..(s + 1) * nc],
             dt,
         };
-        let rate = 1.0 / dt + set.decay;
+        let inv_dt = 1.0 / dt;
+        let rate = inv_dt + set.decay;
         let sp = &mut self.species[s];
         let laws = &*sp.laws;
         if set.binding.is_identity() || !laws.has_wall {
             // (the condition of `fixed_rows_of`, with `self` split into its fields here)
             let g = &laws.cell_g[..nc];
             let wc = &laws.cell_wc[..nc];
-            fwd.run(&mut FixedRows { g, wc, rate, dt }, s == 0)
+            fwd.run(
+                &mut FixedRows {
+                    g,
+                    wc,
+                    rate,
+                    inv_dt,
+                },
+                s == 0,
+            )
         } else {
             let mut rows = BindingRows {
                 binding: set.binding,
@@ -266,7 +283,7 @@ impl Transport {
                 wlin: &mut sw.wlin,
                 wconst: &mut sw.wconst,
                 rate,
-                dt,
+                inv_dt,
             };
             fwd.run(&mut rows, s == 0)
         }
