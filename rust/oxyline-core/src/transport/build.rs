@@ -207,6 +207,7 @@ impl Transport {
             domain: Vec::new(),
             internal: Vec::new(),
             boundary_faces: Vec::new(),
+            boundary_links: Vec::new(),
             simple_mixing: Vec::new(),
             general_mixing: Vec::new(),
             tree: None,
@@ -685,6 +686,18 @@ impl Plan {
                 (End::Node(a), End::Node(b)) => self.internal.push([fi as u32, a as u32, b as u32]),
                 _ => self.boundary_faces.push(fi),
             }
+            match (f.from, f.to) {
+                (End::Boundary(b), End::Node(n)) | (End::Node(n), End::Boundary(b)) => {
+                    self.boundary_links.push(BoundaryLink {
+                        face: fi as u32,
+                        node: n as u32,
+                        boundary: b as u32,
+                        into_node: matches!(f.from, End::Boundary(_)),
+                    })
+                }
+                // (`flow_faces` drops branches between two exterior nodes)
+                _ => {}
+            }
         }
         for &m in &self.mixing {
             let faces = &self.node_faces[self.node_ptr[m]..self.node_ptr[m + 1]];
@@ -700,6 +713,10 @@ impl Plan {
             }
         }
         self.tree = tree_order(nn, &self.domain, &self.internal);
+        for l in self.tree.iter_mut().flatten() {
+            // (cells < nodes < u32::MAX, checked above)
+            l.cell = self.node_cell[l.node as usize] as u32;
+        }
         self.face_unknowns = self.faces[..self.n_flow_faces]
             .iter()
             .map(|f| f.unknown as u32)

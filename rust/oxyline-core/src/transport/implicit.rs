@@ -35,6 +35,9 @@ impl Transport {
         self.ensure_scratch();
         let t_af = time + alpha_f * dt;
         self.load_flows_between(t_af, y0, y1, alpha_f);
+        if self.fused_applies() {
+            return self.fused_tree_step(t_af, dt, z);
+        }
         // the α_f-level state is only needed by shear-dependent walls (relaxed or instantaneous)
         let mut ya = std::mem::take(&mut self.sweep.ya);
         if self
@@ -45,14 +48,9 @@ impl Transport {
             ya.clear();
             ya.extend(y0.iter().zip(y1).map(|(a, b)| a + alpha_f * (b - a)));
         }
-        // one species with fixed linear rows (the common oxygen case): its rows are built in
-        // the volumes' pass over the cells
-        let fused = self.species.len() == 1
-            && self.rows_kind(0) == Rows::Fixed
-            && self.plan.formulation == Formulation::Conservative;
         let res = self
-            .transport_volumes(t_af, dt, fused.then_some(&*z))
-            .and_then(|()| self.implicit_species(t_af, dt, &ya, z, fused));
+            .transport_volumes(t_af, dt)
+            .and_then(|()| self.implicit_species(t_af, dt, &ya, z));
         self.sweep.ya = ya;
         if res.is_ok() {
             std::mem::swap(&mut self.wvol, &mut self.sweep.wnew);
@@ -60,63 +58,40 @@ impl Transport {
         res
     }
 
-    /// W' = W + dt (net inflow) of every cell with the loaded face flows, into `sweep.wnew`;
-    /// with `rows_of_first` (the amounts) also the fixed rows of species 0 (`fixed_rows`).
-    pub(super) fn transport_volumes(
-        &mut self,
-        t_af: f64,
-        dt: f64,
-        rows_of_first: Option<&[f64]>,
-    ) -> Result<()> {
+    /// W' = W + dt (net inflow) of every cell with the loaded face flows, into `sweep.wnew`.
+    pub(super) fn transport_volumes(&mut self, t_af: f64, dt: f64) -> Result<()> {
         let net = self.net_inflow();
         let mut w_new = std::mem::take(&mut self.sweep.wnew);
         w_new.clear();
         w_new.resize(self.plan.cells.len(), 0.0);
         // (NaN fails the test too)
         let mut positive = true;
-        let (cells, wvol) = (&self.plan.cells[..], &self.wvol[..]);
-        match rows_of_first {
-            None => {
-                for ((w, &n), &w0) in w_new.iter_mut().zip(cells).zip(wvol) {
-                    *w = w0 + dt * net[n];
-                    positive &= *w > 0.0;
-                }
-            }
-            Some(z) => {
-                let rate = 1.0 / dt + self.plan.species[0].decay;
-                let laws = &self.species[0].laws;
-                let zs = &z[..cells.len()];
-                let conc = &mut self.conc[..];
-                let (den, num) = (&mut self.sweep.den[..], &mut self.sweep.num[..]);
-                let (g, wc) = (&laws.cell_g[..], &laws.cell_wc[..]);
-                for (i, &n) in cells.iter().enumerate() {
-                    let w = wvol[i] + dt * net[n];
-                    positive &= w > 0.0;
-                    w_new[i] = w;
-                    conc[n] = zs[i] / wvol[i];
-                    den[n] = w * rate + g[i];
-                    num[n] = zs[i] / dt - wc[i];
-                }
-            }
+        for ((w, &n), &w0) in w_new.iter_mut().zip(&self.plan.cells).zip(&self.wvol) {
+            *w = w0 + dt * net[n];
+            positive &= *w > 0.0;
         }
         self.sweep.dnode = net;
-        let bad = if positive {
-            None
-        } else {
-            w_new.iter().position(|&w| w.is_nan() || w <= 0.0)
-        };
         self.sweep.wnew = w_new;
-        match bad {
-            None => Ok(()),
-            Some(i) => Err(Error::solver(
-                t_af,
-                format!(
-                    "transport volume of cell '{}' became {:.3e} m³: reduce dt",
-                    self.plan.node_name(self.plan.cells[i]),
-                    self.sweep.wnew[i]
-                ),
-            )),
+        if positive {
+            Ok(())
+        } else {
+            Err(self.volume_error(t_af))
         }
+    }
+
+    /// The error for the first cell whose new transport volume (`sweep.wnew`) is not positive.
+    #[cold]
+    pub(super) fn volume_error(&self, t_af: f64) -> Error {
+        let w = &self.sweep.wnew;
+        let i = w.iter().position(|&w| w.is_nan() || w <= 0.0).unwrap_or(0);
+        Error::solver(
+            t_af,
+            format!(
+                "transport volume of cell '{}' became {:.3e} m³: reduce dt",
+                self.plan.node_name(self.plan.cells[i]),
+                w.get(i).copied().unwrap_or(f64::NAN)
+            ),
+        )
     }
 
     /// Net inflow of every node with the loaded face flows (in `sweep.dnode`'s storage).
@@ -153,7 +128,6 @@ impl Transport {
         dt: f64,
         ya: &[f64],
         z: &mut [f64],
-        first_rows_built: bool,
     ) -> Result<()> {
         let nc = self.plan.cells.len();
         let (mut wconst, mut wlin) = (
@@ -172,11 +146,7 @@ impl Transport {
             for &m in &self.plan.mixing {
                 (sw.den[m], sw.num[m], sw.lag[m]) = (0.0, 0.0, self.conc[m]);
             }
-            let rows = if s == 0 && first_rows_built {
-                Rows::Fixed
-            } else {
-                self.implicit_rows(s, dt, ya, z, &w_new, &mut wconst, &mut wlin)
-            };
+            let rows = self.implicit_rows(s, dt, ya, z, &w_new, &mut wconst, &mut wlin);
             let mut x = std::mem::take(&mut self.conc);
             if self.plan.tree.is_some() {
                 self.tree_solve(&mut x);
@@ -441,25 +411,22 @@ impl Transport {
     /// fluxes that entered the solve.
     pub(super) fn implicit_boundary_fluxes(&self) -> (f64, f64) {
         let (mut i_in, mut i_out) = (0.0, 0.0);
-        for &fi in &self.plan.boundary_faces {
-            let (f, q) = (&self.plan.faces[fi], self.qf[fi]);
-            let (from_b, to_b) = (f.from, f.to);
-            if let End::Boundary(bb) = from_b {
-                let c = if q >= 0.0 {
-                    self.lagged_boundary(bb, to_b)
-                } else {
-                    self.end_conc(to_b)
-                };
-                account(self.plan.boundary_inlet[bb], q * c, &mut i_in, &mut i_out);
-            }
-            if let End::Boundary(bb) = to_b {
-                let c = if q < 0.0 {
-                    self.lagged_boundary(bb, from_b)
-                } else {
-                    self.end_conc(from_b)
-                };
-                account(self.plan.boundary_inlet[bb], -q * c, &mut i_in, &mut i_out);
-            }
+        let (qf, conc) = (&self.qf[..], &self.conc[..]);
+        for b in &self.plan.boundary_links {
+            let (n, bb, q) = (b.node as usize, b.boundary as usize, qf[b.face as usize]);
+            // the boundary is upwind: it carries its value in; else the node's leaves
+            let c = if (q >= 0.0) == b.into_node {
+                self.lagged_boundary(bb, End::Node(n))
+            } else {
+                conc[n]
+            };
+            let q_in = if b.into_node { q } else { -q };
+            account(
+                self.plan.boundary_inlet[bb],
+                q_in * c,
+                &mut i_in,
+                &mut i_out,
+            );
         }
         for ((n, _, bb), &q) in self.plan.sources.iter().zip(&self.qs) {
             let c = if q >= 0.0 {
@@ -470,14 +437,6 @@ impl Transport {
             account(self.plan.boundary_inlet[*bb], q * c, &mut i_in, &mut i_out);
         }
         (i_in, i_out)
-    }
-
-    #[inline]
-    pub(super) fn end_conc(&self, e: End) -> f64 {
-        match e {
-            End::Node(n) => self.conc[n],
-            End::Boundary(_) => 0.0,
-        }
     }
 
     /// Inflow value of a boundary in the implicit solve: prescribed, or (zero-gradient) the
@@ -739,6 +698,9 @@ pub(super) struct Sweep {
     pub(super) wlin: Vec<f64>,
     pub(super) inv_slope: Vec<f64>,
     pub(super) beta: Vec<f64>,
+    /// Fused tree step (`fused.rs`): per node, its net inflow and the d and b terms of its
+    /// row left by its children and the boundaries; zero between steps.
+    pub(super) acc: Vec<[f64; 3]>,
 }
 
 impl Sweep {

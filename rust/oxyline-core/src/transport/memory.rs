@@ -28,6 +28,8 @@ impl Flat for OutVessel {}
 impl Flat for Link {}
 impl Flat for SegmentLaw {}
 impl Flat for HillAnchor {}
+impl Flat for [f64; 3] {}
+impl Flat for BoundaryLink {}
 impl Flat for Option<f64> {}
 impl Flat for [u32; 3] {}
 impl Flat for (usize, f64, f64) {}
@@ -79,7 +81,7 @@ impl Plan {
             ("domain", self.domain.heap()),
             (
                 "internal",
-                self.internal.heap() + self.boundary_faces.heap(),
+                self.internal.heap() + self.boundary_faces.heap() + self.boundary_links.heap(),
             ),
             (
                 "mixing lists",
@@ -114,7 +116,8 @@ impl Transport {
             + sw.wconst.heap()
             + sw.wlin.heap()
             + sw.inv_slope.heap()
-            + sw.beta.heap();
+            + sw.beta.heap()
+            + sw.acc.heap();
         let scratch = self.vol.heap()
             + self.conc.heap()
             + self.qf.heap()

@@ -30,6 +30,7 @@ use crate::waveform::Waveform;
 use std::sync::Arc;
 
 mod build;
+mod fused;
 mod implicit;
 mod laws;
 mod memory;

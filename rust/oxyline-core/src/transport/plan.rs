@@ -14,6 +14,20 @@ pub(super) struct Link {
     pub(super) face: u32,
     /// The face points from this node to its parent (positive flow runs child → parent).
     pub(super) from_child: bool,
+    /// The node's cell (`u32::MAX`: a mixing point), so the fused step reads the cell arrays
+    /// without a lookup.
+    pub(super) cell: u32,
+}
+
+/// A face between a domain node and a boundary (every boundary face is one), compact for the
+/// per-step passes.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct BoundaryLink {
+    pub(super) face: u32,
+    pub(super) node: u32,
+    pub(super) boundary: u32,
+    /// The face points from the boundary into the node (positive flow enters the domain).
+    pub(super) into_node: bool,
 }
 
 /// Children-before-parents order of the domain nodes when the undirected graph of the internal
@@ -41,20 +55,26 @@ pub(super) fn tree_order(nt: usize, domain: &[usize], internal: &[[u32; 3]]) -> 
     for &n in domain {
         seen[n] = false;
     }
-    let mut pre: Vec<Link> = Vec::with_capacity(domain.len());
-    let mut stack: Vec<Link> = Vec::new();
+    // breadth first, `order` being the queue: reversed, the levels run leaves first and each
+    // level in discovery order, which follows the node numbering of the vessels far more
+    // closely than a depth-first order (the elimination's accesses stay near-sequential)
+    let mut order: Vec<Link> = Vec::with_capacity(domain.len());
     for &r in domain {
         if seen[r] {
             continue;
         }
         seen[r] = true;
-        stack.push(Link {
+        let mut head = order.len();
+        order.push(Link {
             node: r as u32,
             parent: u32::MAX,
             face: u32::MAX,
             from_child: false,
+            cell: u32::MAX,
         });
-        while let Some(l) = stack.pop() {
+        while head < order.len() {
+            let l = order[head];
+            head += 1;
             let n = l.node as usize;
             for &(f, o) in &adj[ptr[n] as usize..ptr[n + 1] as usize] {
                 if f == l.face {
@@ -65,18 +85,18 @@ pub(super) fn tree_order(nt: usize, domain: &[usize], internal: &[[u32; 3]]) -> 
                 }
                 seen[o as usize] = true;
                 let from_child = internal_from(internal, f) == o;
-                stack.push(Link {
+                order.push(Link {
                     node: o,
                     parent: l.node,
                     face: f,
                     from_child,
+                    cell: u32::MAX,
                 });
             }
-            pre.push(l);
         }
     }
-    pre.reverse();
-    Some(pre)
+    order.reverse();
+    Some(order)
 }
 
 /// `from` node of internal face `f` (faces are listed in `internal` in face order, so a binary
@@ -131,6 +151,8 @@ pub struct Plan {
     /// Faces between two domain nodes as [face, from node, to node], and the other faces.
     pub(super) internal: Vec<[u32; 3]>,
     pub(super) boundary_faces: Vec<usize>,
+    /// The boundary faces in the same order, as (face, node, boundary, direction).
+    pub(super) boundary_links: Vec<BoundaryLink>,
     /// Mixing points with two faces, no source and non-mixing neighbours: evaluated directly.
     pub(super) simple_mixing: Vec<usize>,
     /// The other mixing points (solved by the flow-order sweep).

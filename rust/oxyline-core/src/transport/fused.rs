@@ -1,0 +1,341 @@
+//! The backward-Euler transport step of generalized-α on a tree in two passes over the domain
+//! nodes in elimination order (`Plan::tree`), for walls whose rows need no shear: the same
+//! upwind rows as `implicit_step`'s general path (docs/physics.md §2.5), built where they
+//! are eliminated.
+//!
+//! * Forward (children before parents): the node's net inflow and new transport volume, its
+//!   row (volume, wall, and the face terms its children and the boundaries left in the
+//!   node's accumulators), and its elimination x_n = α_n + β_n x_parent.
+//! * Backward (parents first): back-substitution, the new amounts N = W' x and the wall and
+//!   decay fluxes.
+//!
+//! The per-node accumulators (net inflow, d, b) are packed in one entry, read and zeroed by
+//! the forward pass, so each node's row costs one cache line and no pass clears them. The
+//! sums at a junction (a node with several children) add in another order than the general
+//! path's, so results agree with it to round-off.
+
+#[allow(unused_imports)]
+use super::*;
+
+/// How the fused step builds a cell's row (a binding also records the wall linearisation it
+/// used in `sweep.wlin`, `wconst`, which the backward pass reads).
+trait CellRows {
+    /// d and b of cell `i` (node `n`) before the face terms, from its old amount `zi`, old
+    /// and new transport volumes `v` and `w` (the old concentration zi/v only where needed).
+    fn row(&mut self, i: usize, n: usize, zi: f64, v: f64, w: f64) -> (f64, f64);
+}
+
+/// A wall linear in C_t (see `fixed_rows`): d = W'(1/dt + λ) + g, b = N/dt − (q − g c_w).
+struct FixedRows<'a> {
+    g: &'a [f64],
+    wc: &'a [f64],
+    rate: f64,
+    inv_dt: f64,
+}
+
+impl CellRows for FixedRows<'_> {
+    #[inline(always)]
+    fn row(&mut self, i: usize, _n: usize, zi: f64, _v: f64, w: f64) -> (f64, f64) {
+        (w * self.rate + self.g[i], zi * self.inv_dt - self.wc[i])
+    }
+}
+
+/// A binding with fixed laws (see `binding_rows`): free concentration and capacity slope at
+/// the old state (anchored inversion), the wall linearised in C_t about it.
+struct BindingRows<'a> {
+    binding: Binding,
+    laws: &'a Laws,
+    free: &'a mut [f64],
+    anchors: &'a mut [HillAnchor],
+    wlin: &'a mut [f64],
+    wconst: &'a mut [f64],
+    rate: f64,
+    inv_dt: f64,
+}
+
+impl CellRows for BindingRows<'_> {
+    #[inline(always)]
+    fn row(&mut self, i: usize, n: usize, zi: f64, v: f64, w: f64) -> (f64, f64) {
+        let c = zi / v;
+        let (wl, wc) = if self.laws.has_wall {
+            let mut scratch = HillAnchor::default();
+            let anchor = self.anchors.get_mut(n).unwrap_or(&mut scratch);
+            let (f, slope) = self
+                .binding
+                .free_and_slope_anchored(c, self.free[n], anchor);
+            self.free[n] = f;
+            let wl = self.laws.cell_g[i] * (1.0 / slope);
+            (wl, self.laws.fixed_uptake(i, f) - wl * c)
+        } else {
+            (0.0, 0.0)
+        };
+        (self.wlin[i], self.wconst[i]) = (wl, wc);
+        (w * self.rate + wl, zi * self.inv_dt - wc)
+    }
+}
+
+/// The slices the forward pass reads and writes (split from `Transport` so that the row
+/// builder can borrow the species state at the same time).
+struct Forward<'a> {
+    tree: &'a [Link],
+    qf: &'a [f64],
+    acc: &'a mut [[f64; 3]],
+    beta: &'a mut [f64],
+    x: &'a mut [f64],
+    wvol: &'a [f64],
+    wnew: &'a mut [f64],
+    zs: &'a [f64],
+    dt: f64,
+}
+
+impl Forward<'_> {
+    /// The forward pass (see the module doc); with `first` the new volumes W' = W + dt·(net
+    /// inflow) into `wnew` (else read from it). Returns whether every new volume is positive.
+    fn run<R: CellRows>(self, rows: &mut R, first: bool) -> bool {
+        let Forward {
+            tree,
+            qf,
+            acc,
+            beta,
+            x,
+            wvol,
+            wnew,
+            zs,
+            dt,
+        } = self;
+        // (NaN fails the test too)
+        let mut positive = true;
+        for (l, beta) in tree.iter().zip(beta.iter_mut()) {
+            let n = l.node as usize;
+            let [mut net, acc_d, acc_b] = std::mem::take(&mut acc[n]);
+            let (mut aq, mut to_parent) = (0.0, false);
+            let has_parent = l.parent != u32::MAX;
+            if has_parent {
+                let q = qf[l.face as usize];
+                // inflow into n through the face to the parent
+                let q_in = if l.from_child { -q } else { q };
+                net += q_in;
+                acc[l.parent as usize][0] -= q_in;
+                aq = q.abs();
+                to_parent = (q >= 0.0) == l.from_child;
+            }
+            let (mut d, b);
+            let cell = l.cell as usize;
+            if l.cell != u32::MAX {
+                let w = if first {
+                    let w = wvol[cell] + dt * net;
+                    positive &= w > 0.0;
+                    wnew[cell] = w;
+                    w
+                } else {
+                    wnew[cell]
+                };
+                let (d0, b0) = rows.row(cell, n, zs[cell], wvol[cell], w);
+                (d, b) = (d0 + acc_d, b0 + acc_b);
+            } else {
+                // a mixing point: no storage
+                (d, b) = (acc_d, acc_b);
+            }
+            if to_parent {
+                d += aq;
+            } else if has_parent {
+                acc[l.parent as usize][1] += aq;
+            }
+            // one division per node (the divider, not the memory, bounds this loop): x and β
+            // use 1/d; without outflow or storage the node keeps its old value (a mixing
+            // point its restored lagged value)
+            let (xn, inv_d) = if d > 1e-300 {
+                let inv_d = 1.0 / d;
+                (b * inv_d, inv_d)
+            } else if l.cell != u32::MAX {
+                (zs[cell] / wvol[cell], 0.0)
+            } else {
+                (x[n], 0.0)
+            };
+            x[n] = xn;
+            *beta = 0.0;
+            if to_parent {
+                acc[l.parent as usize][2] += aq * xn;
+            } else {
+                *beta = aq * inv_d;
+            }
+        }
+        positive
+    }
+}
+
+impl Transport {
+    /// Whether `implicit_step` takes the fused tree step: a forest, the conservative
+    /// formulation, and no species whose wall follows the shear.
+    pub(super) fn fused_applies(&self) -> bool {
+        self.plan.tree.is_some()
+            && self.plan.formulation == Formulation::Conservative
+            && (0..self.species.len()).all(|s| self.species[s].laws.dynamic.is_empty())
+    }
+
+    /// The implicit step of every species by the fused tree passes (see the module doc), the
+    /// face flows being loaded.
+    pub(super) fn fused_tree_step(&mut self, t_af: f64, dt: f64, z: &mut [f64]) -> Result<()> {
+        let (nn, nc) = (self.plan.kind.len(), self.plan.cells.len());
+        let ntree = self.plan.tree.as_ref().map_or(0, |t| t.len());
+        let sw = &mut self.sweep;
+        if sw.acc.len() != nn {
+            sw.acc = vec![[0.0; 3]; nn];
+        }
+        sw.beta.resize(ntree, 0.0);
+        sw.wnew.resize(nc, 0.0);
+        if self.species.iter().any(|sp| !sp.free.is_empty()) {
+            sw.wlin.resize(nc, 0.0);
+            sw.wconst.resize(nc, 0.0);
+        }
+        for s in 0..self.species.len() {
+            self.load_boundary(s, t_af);
+            self.restore_mixing(s);
+            self.fused_boundary_terms(s, z);
+            if !self.fused_forward(s, dt, z) {
+                return Err(self.volume_error(t_af));
+            }
+            self.fused_backward(s, dt, z);
+            self.save_mixing(s);
+        }
+        std::mem::swap(&mut self.wvol, &mut self.sweep.wnew);
+        Ok(())
+    }
+
+    /// The boundary faces' and sources' terms of species `s` into the accumulators of the
+    /// nodes they touch (outflow into d, inflow — prescribed, or the node's old value,
+    /// recorded in `lag` — into b), and their flows into the net inflow.
+    fn fused_boundary_terms(&mut self, s: usize, z: &[f64]) {
+        let nc = self.plan.cells.len();
+        let zs = &z[s * nc..(s + 1) * nc];
+        let plan = &*self.plan;
+        let (sw, conc, wvol) = (&mut self.sweep, &self.conc, &self.wvol);
+        let old = |n: usize| match plan.node_cell[n] {
+            usize::MAX => conc[n],
+            i => zs[i] / wvol[i],
+        };
+        for b in &plan.boundary_links {
+            let (n, q) = (b.node as usize, self.qf[b.face as usize]);
+            let acc = &mut sw.acc[n];
+            acc[0] += if b.into_node { q } else { -q };
+            if (q >= 0.0) == b.into_node {
+                sw.lag[n] = old(n);
+                acc[2] += q.abs() * inflow_value(self.bval[b.boundary as usize], sw.lag[n]);
+            } else {
+                acc[1] += q.abs();
+            }
+        }
+        for (&(n, _, bb), &q) in plan.sources.iter().zip(&self.qs) {
+            sw.acc[n][0] += q;
+            if q >= 0.0 {
+                sw.lag[n] = old(n);
+                sw.acc[n][2] += q * inflow_value(self.bval[bb], sw.lag[n]);
+            } else {
+                sw.acc[n][1] -= q;
+            }
+        }
+    }
+
+    /// The forward pass of species `s` with its row builder; false if a new volume is not
+    /// positive (species 0 computes the volumes).
+    fn fused_forward(&mut self, s: usize, dt: f64, z: &[f64]) -> bool {
+        let nc = self.plan.cells.len();
+        let plan = &*self.plan;
+        let Some(tree) = plan.tree.as_deref() else {
+            return true;
+        };
+        let set = &plan.species[s];
+        let sw = &mut self.sweep;
+        let fwd = Forward {
+            tree,
+            qf: &self.qf,
+            acc: &mut sw.acc,
+            beta: &mut sw.beta,
+            x: &mut self.conc,
+            wvol: &self.wvol,
+            wnew: &mut sw.wnew,
+            zs: &z[s * nc..(s + 1) * nc],
+            dt,
+        };
+        let inv_dt = 1.0 / dt;
+        let rate = inv_dt + set.decay;
+        let sp = &mut self.species[s];
+        let laws = &*sp.laws;
+        if set.binding.is_identity() || !laws.has_wall {
+            // (the condition of `fixed_rows_of`, with `self` split into its fields here)
+            let g = &laws.cell_g[..nc];
+            let wc = &laws.cell_wc[..nc];
+            fwd.run(
+                &mut FixedRows {
+                    g,
+                    wc,
+                    rate,
+                    inv_dt,
+                },
+                s == 0,
+            )
+        } else {
+            let mut rows = BindingRows {
+                binding: set.binding,
+                laws,
+                free: &mut sp.free,
+                anchors: &mut sp.anchors,
+                wlin: &mut sw.wlin,
+                wconst: &mut sw.wconst,
+                rate,
+                inv_dt,
+            };
+            fwd.run(&mut rows, s == 0)
+        }
+    }
+
+    /// The backward pass of species `s`: back-substitution parents first, the new amounts
+    /// N = W' x, and the step's boundary, wall (W = wl·x + wc, as in the rows) and decay
+    /// fluxes into the accumulators of the state.
+    fn fused_backward(&mut self, s: usize, dt: f64, z: &mut [f64]) {
+        let (nc, nsp) = (self.plan.cells.len(), self.species.len());
+        let plan = &*self.plan;
+        let Some(tree) = plan.tree.as_deref() else {
+            return;
+        };
+        let laws = &*self.species[s].laws;
+        let sw = &self.sweep;
+        let (wl, wc) = if self.fixed_rows_of(s) {
+            (&laws.cell_g[..nc], &laws.cell_wc[..nc])
+        } else {
+            (&sw.wlin[..nc], &sw.wconst[..nc])
+        };
+        let lambda = plan.species[s].decay;
+        let (x, wnew, zs) = (
+            &mut self.conc[..],
+            &sw.wnew[..nc],
+            &mut z[s * nc..(s + 1) * nc],
+        );
+        let (mut i_wall, mut i_decay) = (0.0, 0.0);
+        for (l, &beta) in tree.iter().zip(&sw.beta).rev() {
+            let n = l.node as usize;
+            let mut xn = x[n];
+            if beta != 0.0 {
+                xn += beta * x[l.parent as usize];
+                x[n] = xn;
+            }
+            if l.cell != u32::MAX {
+                let i = l.cell as usize;
+                let w = wnew[i];
+                i_wall += wl[i] * xn + wc[i];
+                i_decay += lambda * w * xn;
+                zs[i] = w * xn;
+            }
+        }
+        let (i_in, i_out) = self.implicit_boundary_fluxes();
+        let acc = &mut z[nsp * nc + 4 * s..nsp * nc + 4 * s + 4];
+        for (a, v) in acc.iter_mut().zip([i_in, i_out, i_wall, i_decay]) {
+            *a += dt * v;
+        }
+    }
+
+    /// Species `s` has rows with a wall linear in C_t (no binding, or no wall).
+    fn fixed_rows_of(&self, s: usize) -> bool {
+        self.plan.species[s].binding.is_identity() || !self.species[s].laws.has_wall
+    }
+}
