@@ -5,11 +5,12 @@
 use crate::{
     error_kind, layout_dict, outcome_dict, parse_method, parse_start, recorded_columns, to_py,
 };
-use oxyline_core::ensemble::{Member, run_fed, worker_count};
+use oxyline_core::ensemble::{ColumnStats, Member, column_stats, run_fed, worker_count};
 use oxyline_core::genalpha::NewtonControl;
 use oxyline_core::spec::{NetworkSpec, parse};
 use oxyline_core::{Error, Outcome, RunSettings, Selection, Transport};
 use pyo3::exceptions::PyKeyboardInterrupt;
+use numpy::IntoPyArray;
 use pyo3::prelude::*;
 use std::cell::RefCell;
 use std::sync::Arc;
@@ -20,6 +21,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 struct Finished {
     member: Option<(Member, Selection)>,
     outcome: Result<Outcome, Error>,
+    /// The per-column statistics of the output rows (summary output only).
+    stats: Option<ColumnStats>,
 }
 
 /// What the calling thread hands a worker: a variant's patch and its own settings.
@@ -35,6 +38,8 @@ struct Output {
     vessels: Option<Vec<String>>,
     segments: bool,
     transport: bool,
+    /// Summary output: compute [`ColumnStats`] here, on the worker thread.
+    summary: bool,
 }
 
 /// One variant: patch, assemble, select, run; `template` holds the shared settings.
@@ -51,6 +56,7 @@ fn run_variant(
             return Finished {
                 member: None,
                 outcome: Err(e),
+                stats: None,
             };
         }
     };
@@ -67,6 +73,7 @@ fn run_variant(
             return Finished {
                 member: None,
                 outcome: Err(e),
+                stats: None,
             };
         }
     };
@@ -96,9 +103,16 @@ fn run_variant(
         &settings,
         &mut keep_going,
     );
+    let stats = match &outcome {
+        Ok(out) if output.summary && out.error.is_none() => {
+            column_stats(&out.times, &out.data, out.n_probes)
+        }
+        _ => None,
+    };
     Finished {
         member: Some((member, sel)),
         outcome,
+        stats,
     }
 }
 
@@ -117,7 +131,16 @@ fn deliver(py: Python<'_>, on_done: &Py<PyAny>, i: usize, f: Finished) -> PyResu
     let (raw, error) = match f.outcome {
         Ok(mut out) => {
             let error = out.error.take();
-            (Some(outcome_dict(py, out)?), error)
+            let raw = outcome_dict(py, out)?;
+            if let Some(s) = f.stats {
+                let arrays = (
+                    s.mean.into_pyarray(py),
+                    s.min.into_pyarray(py),
+                    s.max.into_pyarray(py),
+                );
+                raw.set_item("column_stats", arrays)?;
+            }
+            (Some(raw), error)
         }
         Err(e) => (None, Some(e)),
     };
@@ -155,11 +178,14 @@ impl Ensemble {
     /// on this thread as each variant finishes; a failed variant has `error_kind` set
     /// ("model", "unstable", "solver", "interrupted") and never stops the others. Returns
     /// False if Ctrl-C stopped the ensemble (the variants finished until then were handed
-    /// over, running ones as "interrupted"; the rest were never fed).
+    /// over, running ones as "interrupted"; the rest were never fed). `summary`: each
+    /// finished variant's `raw` also has `column_stats`, the (mean, min, max) arrays of
+    /// `oxyline_core::ensemble::column_stats` over its output columns.
     #[pyo3(signature = (feed, *, on_done, workers = None, cycles = 10, method = "auto",
         rho_infty = 0.5, dt = None, until_periodic = None, max_cycles = 100,
         output_all_cycles = false, start = "steady", newton_atol = None, max_iterations = 30,
-        segments = true, transport = true, variables = None, vessels = None))]
+        segments = true, transport = true, variables = None, vessels = None,
+        summary = false))]
     #[allow(clippy::too_many_arguments)]
     fn run(
         &self,
@@ -181,6 +207,7 @@ impl Ensemble {
         transport: bool,
         variables: Option<Vec<String>>,
         vessels: Option<Vec<String>>,
+        summary: bool,
     ) -> PyResult<bool> {
         let workers = worker_count(workers).map_err(to_py)?;
         let template = RunSettings {
@@ -206,6 +233,7 @@ impl Ensemble {
             vessels,
             segments,
             transport,
+            summary,
         };
         let base = self.base.clone();
         let job = |_: usize, input: Input, cancelled: &AtomicBool| {
