@@ -4,9 +4,9 @@
 //! done once. Both refactorise numerically on demand.
 
 use crate::error::{Error, Result};
-use faer::linalg::solvers::Solve;
 use faer::Par;
 use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::solvers::Solve;
 use faer::perm::PermRef;
 use faer::sparse::linalg::lu::{factorize_symbolic_lu, simplicial};
 use faer::sparse::linalg::solvers::{Lu, SymbolicLu};
@@ -444,7 +444,8 @@ impl<T: Scalar> GeneralLu<T> {
         // supernodal one also holds a transposed copy of the matrix)
         let raw = factorize_symbolic_lu(sym.as_ref(), Default::default())
             .map_err(|e| Error::solver(0.0, format!("symbolic LU: {e:?}")))?;
-        let simplicial_scratch = simplicial::factorize_simplicial_numeric_lu_scratch::<usize, T>(n, n);
+        let simplicial_scratch =
+            simplicial::factorize_simplicial_numeric_lu_scratch::<usize, T>(n, n);
         let factors = if raw.factorize_numeric_lu_scratch::<T>(Par::Seq, Default::default())
             == simplicial_scratch
         {
@@ -509,7 +510,11 @@ impl<T: Scalar> GeneralLu<T> {
             panic!("not simplicial")
         };
         let n = self.n;
-        let mut mem = MemBuffer::new(simplicial::solve_in_place_scratch::<usize, T>(n, 1, Par::Seq));
+        let mut mem = MemBuffer::new(simplicial::solve_in_place_scratch::<usize, T>(
+            n,
+            1,
+            Par::Seq,
+        ));
         s.lu.solve_in_place_with_conj(
             PermRef::new_checked(&s.row_perm_fwd, &s.row_perm_inv, n),
             PermRef::new_checked(&s.col_perm_fwd, &s.col_perm_inv, n),
@@ -589,7 +594,11 @@ mod tests {
         for i in 0..n {
             stamps.push((i, i));
             vals.push(entry(2.0 + rnd(), rnd()));
-            let links = if i > 0 && i % 7 == 0 { 2 } else { usize::from(i > 0) };
+            let links = if i > 0 && i % 7 == 0 {
+                2
+            } else {
+                usize::from(i > 0)
+            };
             for _ in 0..links {
                 let p = (rnd() * i as f64) as usize;
                 let c = entry(0.5 + rnd(), rnd());
@@ -597,7 +606,9 @@ mod tests {
                 vals.extend([c, T::ZERO - c]);
             }
         }
-        let x: Vec<T> = (0..n).map(|i| entry((i as f64).sin(), (i as f64).cos())).collect();
+        let x: Vec<T> = (0..n)
+            .map(|i| entry((i as f64).sin(), (i as f64).cos()))
+            .collect();
         let mut b = vec![T::ZERO; n];
         for (&(r, c), &v) in stamps.iter().zip(&vals) {
             b[r] += v * x[c];

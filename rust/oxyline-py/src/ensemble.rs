@@ -5,12 +5,12 @@
 use crate::{
     error_kind, layout_dict, outcome_dict, parse_method, parse_start, recorded_columns, to_py,
 };
+use numpy::IntoPyArray;
 use oxyline_core::ensemble::{ColumnStats, Member, column_stats, run_fed, worker_count};
 use oxyline_core::genalpha::NewtonControl;
 use oxyline_core::spec::{NetworkSpec, parse};
 use oxyline_core::{Error, Outcome, RunSettings, Selection, Transport};
 use pyo3::exceptions::PyKeyboardInterrupt;
-use numpy::IntoPyArray;
 use pyo3::prelude::*;
 use std::cell::RefCell;
 use std::sync::Arc;

@@ -140,7 +140,10 @@ fn column_stats_against_closed_forms() {
     let s = column_stats(&times, &data, 2).unwrap();
     // mean of 1 + 2t over [0, 2] = 3; tent area 4 over 2 s = 2
     assert!((s.mean[0] - 3.0).abs() < 1e-15 && (s.mean[1] - 2.0).abs() < 1e-15);
-    assert_eq!((s.min.clone(), s.max.clone()), (vec![1.0, 0.0], vec![5.0, 4.0]));
+    assert_eq!(
+        (s.min.clone(), s.max.clone()),
+        (vec![1.0, 0.0], vec![5.0, 4.0])
+    );
     let with_nan = [1.0, 0.0, f64::NAN, 2.0, 3.0, 4.0, 5.0, 0.0];
     let s = column_stats(&times, &with_nan, 2).unwrap();
     assert!(s.mean[0].is_nan() && s.min[0].is_nan() && s.max[0].is_nan());
