@@ -48,7 +48,7 @@ class Feed:
         self.prepared: dict[int, tuple[Variant, dict[str, Any]]] = {}
         self._next = 0
 
-    def next(self) -> tuple[int, str | None, float, float] | None:
+    def next(self) -> tuple[int, str | None, float, float, Any, Any] | None:
         while self._next < len(self.patches):
             i = self._next
             self._next += 1
@@ -63,7 +63,7 @@ class Feed:
                 self.on_skip(i)
                 continue
             self.prepared[i] = (v, s)
-            return i, v.patch_json, s["period"], s["output_every"]
+            return i, v.patch_json, s["period"], s["output_every"], v.vessels, v.outlets
         return None
 
 

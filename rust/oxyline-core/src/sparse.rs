@@ -306,10 +306,12 @@ pub struct GeneralLu<T: Scalar = f64> {
 /// and solved with by [`Simplicial`]; supernodal ones go through faer's solver.
 enum Factors<T: Scalar> {
     Simplicial(Box<Simplicial<T>>),
-    Faer {
-        sym_lu: SymbolicLu<usize>,
-        lu: Option<Lu<usize, T>>,
-    },
+    Faer(Box<FaerLu<T>>),
+}
+
+struct FaerLu<T: Scalar> {
+    sym_lu: SymbolicLu<usize>,
+    lu: Option<Lu<usize, T>>,
 }
 
 /// A simplicial sparse LU (P A Q = L U, faer's numeric factorisation on faer's column
@@ -462,11 +464,11 @@ impl<T: Scalar> GeneralLu<T> {
                 factored: false,
             }))
         } else {
-            Factors::Faer {
+            Factors::Faer(Box::new(FaerLu {
                 sym_lu: SymbolicLu::try_new(sym.as_ref())
                     .map_err(|e| Error::solver(0.0, format!("symbolic LU: {e:?}")))?,
                 lu: None,
-            }
+            }))
         };
         Ok(GeneralLu {
             n,
@@ -481,9 +483,9 @@ impl<T: Scalar> GeneralLu<T> {
             .map_err(|e| format!("{e:?}"))?;
         match &mut self.factors {
             Factors::Simplicial(s) => s.factor(a.as_ref()),
-            Factors::Faer { sym_lu, lu } => {
-                *lu = Some(
-                    Lu::try_new_with_symbolic(sym_lu.clone(), a.as_ref())
+            Factors::Faer(f) => {
+                f.lu = Some(
+                    Lu::try_new_with_symbolic(f.sym_lu.clone(), a.as_ref())
                         .map_err(|e| format!("{e:?}"))?,
                 );
                 Ok(())
@@ -495,8 +497,8 @@ impl<T: Scalar> GeneralLu<T> {
         debug_assert_eq!(rhs.len(), self.n);
         match &self.factors {
             Factors::Simplicial(s) => s.solve_in_place(rhs),
-            Factors::Faer { lu, .. } => {
-                let lu = lu.as_ref().expect("factor before solve");
+            Factors::Faer(f) => {
+                let lu = f.lu.as_ref().expect("factor before solve");
                 lu.solve_in_place(faer::ColMut::from_slice_mut(rhs));
             }
         }
