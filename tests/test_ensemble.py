@@ -169,6 +169,39 @@ def test_every_variant_is_the_plain_run_of_its_patched_model(drawn: list[dict[st
             np.testing.assert_array_equal(ds[name].values[k], values, err_msg=f"{k} {name}")
 
 
+tube_patches = st.fixed_dictionaries({}, optional={
+    "scale": st.fixed_dictionaries({"resistance": st.floats(0.5, 2.0),
+                                    "compliance": st.floats(0.5, 2.0)}),
+    "vessels": st.fixed_dictionaries({"d": st.fixed_dictionaries({
+        "radius_out": st.floats(0.0015, 0.003)})}),
+})
+
+
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(drawn=st.lists(tube_patches, min_size=1, max_size=3),
+       run=st.sampled_from([{"cycles": 2}, {"cycles": 3, "dt": 2e-3},
+                            {"cycles": 2, "dt": 1e-3, "output_every": 7e-3}]))
+def test_summaries_of_several_vessels_are_those_of_the_plain_result(
+        drawn: list[dict[str, Any]], run: dict[str, Any]) -> None:
+    """Several vessels: the core computes the flow statistics on the worker threads; they are
+    Result.summary()'s numpy values bit for bit (and they are really used here)."""
+    from oxyline.ensemble import collect
+
+    used = []
+    flow_stats = collect._flow_stats
+    collect._flow_stats = lambda *a: used.append(flow_stats(*a)) or used[-1]
+    try:
+        ds = oxyline.simulate_ensemble(TUBE, drawn, workers=2, progress=False, **run)
+    finally:
+        collect._flow_stats = flow_stats
+    assert (ds.status.values == 0).all(), ds.error.values
+    assert len(used) == len(drawn) and all(u is not None for u in used)
+    for k, patch in enumerate(drawn):
+        expected = _summary(oxyline.simulate(apply_patch(TUBE, patch), progress=False, **run))
+        for name, values in expected.items():
+            np.testing.assert_array_equal(ds[name].values[k], values, err_msg=f"{k} {name}")
+
+
 def test_results_do_not_depend_on_the_number_of_workers() -> None:
     variants = [{"vessels": {"aorta": {"radius": r}}} for r in np.linspace(0.006, 0.01, 6)]
     one = oxyline.simulate_ensemble(STRAIGHT, variants, workers=1, **FAST)

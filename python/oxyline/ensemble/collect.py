@@ -38,21 +38,41 @@ def check_output(output: Any) -> None:
                          f"f(result) -> {{name: float}}, got {output!r}")
 
 
-def summary_values(result: Result) -> dict[str, np.ndarray]:
+def summary_values(result: Result, column_stats: Sequence[np.ndarray] | None = None
+                   ) -> dict[str, np.ndarray]:
     """``<var>_<stat>`` per vessel of a result: the values of :meth:`oxyline.Result.summary`
     (same variables, order and statistics), read from the result's arrays without building
-    its dataset (a hundredth of the time: this runs once per variant)."""
+    its dataset (a hundredth of the time: this runs once per variant). ``column_stats``: the
+    (mean, min, max) per output column that the core computed on the worker thread, with
+    numpy's arithmetic for arrays of two or more vessels (``column_stats`` in the core's
+    ``ensemble`` module); the flow variables are then taken from them."""
     from oxyline.io.results import STATS, stats
 
     t = np.asarray(result.time, dtype=float)
-    arrays = [(name, getattr(result, name)) for name in result.vessel_variables]
+    flow = _flow_stats(result, column_stats)
+    arrays = [(name, None if flow else getattr(result, name))
+              for name in result.vessel_variables]
     arrays += [(name, arr) for name, (kind, arr, _) in result.species_variables().items()
                if kind == "vessel"]
     out = {}
     for name, arr in arrays:
-        for stat, val in zip(STATS, stats(np.asarray(arr, dtype=float), t)):
+        values = flow[name] if arr is None else stats(np.asarray(arr, dtype=float), t)
+        for stat, val in zip(STATS, values):
             out[f"{name}_{stat}"] = val
     return out
+
+
+def _flow_stats(result: Result, column_stats: Sequence[np.ndarray] | None
+                ) -> dict[str, tuple[np.ndarray, ...]] | None:
+    """The (mean, min, max) per vessel of each flow variable from the core's per-column
+    statistics, or None where numpy would compute them otherwise (one vessel: numpy sums a
+    single column pairwise; one time: plain means) or none were computed."""
+    nv, kv = len(result.vessels), len(result.vessel_variables)
+    if column_stats is None or nv < 2 or len(column_stats[0]) != result.data.shape[1]:
+        return None
+    block = [np.asarray(s)[: kv * nv] for s in column_stats]
+    return {name: tuple(s[k::kv] for s in block)
+            for k, name in enumerate(result.vessel_variables)}
 
 
 def callable_values(output: Callable[[Result], Mapping[str, float]], result: Result
@@ -104,10 +124,12 @@ class Collector:
             self.cycles_run[i] = raw["cycles_run"]
             self.periodic_error[i] = raw["periodic_error"]
 
-    def outputs(self, result: Result) -> dict[str, Any]:
-        """What variant ``result`` contributes (may raise: the variant then fails)."""
+    def outputs(self, result: Result, column_stats: Sequence[np.ndarray] | None = None
+                ) -> dict[str, Any]:
+        """What variant ``result`` contributes (may raise: the variant then fails);
+        ``column_stats``: see :func:`summary_values`."""
         if self.output == "summary":
-            return summary_values(result)
+            return summary_values(result, column_stats)
         if self.output == "full":
             from oxyline.io.results import dataset
 

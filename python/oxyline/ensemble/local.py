@@ -3,8 +3,10 @@ released; this thread converts and stores each variant as it finishes."""
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import json
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Any
 
 from oxyline import _core
@@ -46,7 +48,7 @@ class Feed:
         self.prepared: dict[int, tuple[Variant, dict[str, Any]]] = {}
         self._next = 0
 
-    def next(self) -> tuple[int, str | None, float, float] | None:
+    def next(self) -> tuple[int, str | None, float, float, Any, Any] | None:
         while self._next < len(self.patches):
             i = self._next
             self._next += 1
@@ -61,7 +63,7 @@ class Feed:
                 self.on_skip(i)
                 continue
             self.prepared[i] = (v, s)
-            return i, v.patch_json, s["period"], s["output_every"]
+            return i, v.patch_json, s["period"], s["output_every"], v.vessels, v.outlets
         return None
 
 
@@ -91,7 +93,7 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
             try:
                 assert raw is not None and layout is not None
                 result = _result(v.model, s, raw, _run_settings(s, raw), True, layout)
-                collector.put(i, collector.outputs(result))
+                collector.put(i, collector.outputs(result, raw.get("column_stats")))
             except Exception as e:  # noqa: BLE001 - a user's output function fails its variant
                 collector.fail(i, "output", f"variant {first + i}: {type(e).__name__}: {e}"
                                [:ERROR_CHARS])
@@ -100,9 +102,28 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
     core = {k: base_settings[k] for k in SHARED}
     ensemble = _core.Ensemble(json.dumps(model.canonical, separators=(",", ":")))
     try:
-        return ensemble.run(feed.next, on_done=done, workers=workers, **core)
+        with _old_objects_frozen():
+            # a summary's statistics are computed on the worker threads (see summary_values)
+            return ensemble.run(feed.next, on_done=done, workers=workers,
+                                summary=output == "summary", **core)
     finally:
         close()
+
+
+@contextlib.contextmanager
+def _old_objects_frozen() -> Iterator[None]:
+    """Keep the objects that exist before the run (the model, every patch: a population's
+    patches are millions of small containers) out of the cyclic garbage collector's passes
+    while this thread prepares and collects variants; the objects of each variant are still
+    collected as usual. Left alone when the program freezes objects itself."""
+    if gc.get_freeze_count():
+        yield
+        return
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
 
 
 def _progress(enabled: Any, total: int) -> tuple[Callable[[], None], Callable[[], None]]:

@@ -37,6 +37,7 @@ from oxyline.model import (
     Model,
     _boundary_conditions,
     _copy,
+    _plain_outlet,
     _unassembled,
     _vessels,
 )
@@ -320,10 +321,16 @@ def flatten(patch: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
 @dataclass
 class Variant:
     """A variant ready to run: its canonical patch for the core (None: the base model), its
-    model (canonical description, period and transport facts; never assembled here)."""
+    model (canonical description, period and transport facts; never assembled here). The
+    patch's vessels (by index) and plain outlets (resistance, RCR with a constant pressure)
+    are handed to the core as the canonical dicts themselves (``vessels``, ``outlets``), the
+    rest as JSON text: the text of a variant that rescales every vessel cost the thread that
+    feeds the workers more than the rest of its work (the repr of every float)."""
 
     patch_json: str | None
     model: Model
+    vessels: dict[int, Any] | None = None
+    outlets: dict[str, Any] | None = None
 
 
 class Patcher:
@@ -369,12 +376,16 @@ class Patcher:
         model = _unassembled(data, convert_vessels, convert_conditions)
         canon, base = model.canonical, self.base.canonical
         core: dict[str, Any] = {}
-        if vessels:
-            core["vessels"] = {str(i): canon["vessels"][i] for i in sorted(vessels)}
-        if nodes:
-            core["boundary_conditions"] = {n: canon["boundary_conditions"][n] for n in nodes}
+        handed = {i: canon["vessels"][i] for i in sorted(vessels)}
+        outlets, other = {}, {}
+        for n in nodes:
+            bc = canon["boundary_conditions"][n]
+            (outlets if _plain_outlet(bc) else other)[n] = bc
+        if other:
+            core["boundary_conditions"] = other
         if canon["blood"] != base["blood"]:
             core["blood"] = canon["blood"]
         if canon.get("transport") != base.get("transport"):
             core["transport"] = canon["transport"]
-        return Variant(json.dumps(core, separators=(",", ":")), model)
+        return Variant(json.dumps(core, separators=(",", ":")), model, handed or None,
+                       outlets or None)

@@ -2,15 +2,18 @@
 //! released (see `oxyline_core::ensemble`). Each finished variant is handed to a Python
 //! callback on the calling thread, in completion order, while the others keep running.
 
+use crate::extract;
 use crate::{
     error_kind, layout_dict, outcome_dict, parse_method, parse_start, recorded_columns, to_py,
 };
-use oxyline_core::ensemble::{Member, run_fed, worker_count};
+use numpy::IntoPyArray;
+use oxyline_core::ensemble::{ColumnStats, Member, SpecPatch, column_stats, run_fed, worker_count};
 use oxyline_core::genalpha::NewtonControl;
-use oxyline_core::spec::{NetworkSpec, parse};
+use oxyline_core::spec::{BoundarySpec, NetworkSpec, VesselSpec, parse};
 use oxyline_core::{Error, Outcome, RunSettings, Selection, Transport};
 use pyo3::exceptions::PyKeyboardInterrupt;
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 use std::cell::RefCell;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -20,13 +23,64 @@ use std::sync::atomic::{AtomicBool, Ordering};
 struct Finished {
     member: Option<(Member, Selection)>,
     outcome: Result<Outcome, Error>,
+    /// The per-column statistics of the output rows (summary output only).
+    stats: Option<ColumnStats>,
 }
 
 /// What the calling thread hands a worker: a variant's patch and its own settings.
 struct Input {
     patch: Option<String>,
+    /// The patch's elements handed over as Python objects, read on the calling thread.
+    handed: Result<Handed, Error>,
     period: f64,
     output_every: f64,
+}
+
+/// Vessels (by index) and plain outlets of a patch read from their canonical dicts (see
+/// `extract`) instead of its JSON text.
+#[derive(Default)]
+struct Handed {
+    vessels: Vec<(usize, VesselSpec)>,
+    outlets: Vec<(String, BoundarySpec)>,
+}
+
+fn handed_over(
+    vessels: Option<Bound<'_, PyDict>>,
+    outlets: Option<Bound<'_, PyDict>>,
+) -> Result<Handed, Error> {
+    let mut h = Handed::default();
+    for (k, v) in vessels.iter().flat_map(|d| d.iter()) {
+        let i: usize = k.extract().map_err(|_| {
+            Error::model(
+                "variant patch",
+                format!("vessel index {k} is not an integer"),
+            )
+        })?;
+        h.vessels.push((i, extract::vessel(i, &v)?));
+    }
+    for (k, v) in outlets.iter().flat_map(|d| d.iter()) {
+        let node: String = k
+            .extract()
+            .map_err(|_| Error::model("variant patch", format!("node {k} is not a string")))?;
+        let bc = extract::outlet(&node, &v)?;
+        h.outlets.push((node, bc));
+    }
+    Ok(h)
+}
+
+/// The base model with a variant's patch (JSON text and handed-over elements; neither: the
+/// base itself), assembled.
+fn member_of(base: &NetworkSpec, patch: Option<&str>, handed: Handed) -> Result<Member, Error> {
+    if handed.vessels.is_empty() && handed.outlets.is_empty() {
+        return Member::of_patch(base, patch);
+    }
+    let mut p = match patch {
+        Some(json) => SpecPatch::parse(json)?,
+        None => SpecPatch::default(),
+    };
+    p.vessels.extend(handed.vessels);
+    p.boundary_conditions.extend(handed.outlets);
+    Member::build(&p.apply(base)?)
 }
 
 /// The output selection of a run (the names `Network.simulate` takes).
@@ -35,22 +89,26 @@ struct Output {
     vessels: Option<Vec<String>>,
     segments: bool,
     transport: bool,
+    /// Summary output: compute [`ColumnStats`] here, on the worker thread.
+    summary: bool,
 }
 
 /// One variant: patch, assemble, select, run; `template` holds the shared settings.
 fn run_variant(
     base: &NetworkSpec,
     patch: Option<&str>,
+    handed: Result<Handed, Error>,
     template: &RunSettings,
     output: &Output,
     cancelled: &AtomicBool,
 ) -> Finished {
-    let member = match Member::of_patch(base, patch) {
+    let member = match handed.and_then(|h| member_of(base, patch, h)) {
         Ok(m) => m,
         Err(e) => {
             return Finished {
                 member: None,
                 outcome: Err(e),
+                stats: None,
             };
         }
     };
@@ -67,6 +125,7 @@ fn run_variant(
             return Finished {
                 member: None,
                 outcome: Err(e),
+                stats: None,
             };
         }
     };
@@ -96,9 +155,16 @@ fn run_variant(
         &settings,
         &mut keep_going,
     );
+    let stats = match &outcome {
+        Ok(out) if output.summary && out.error.is_none() => {
+            column_stats(&out.times, &out.data, out.n_probes)
+        }
+        _ => None,
+    };
     Finished {
         member: Some((member, sel)),
         outcome,
+        stats,
     }
 }
 
@@ -117,7 +183,16 @@ fn deliver(py: Python<'_>, on_done: &Py<PyAny>, i: usize, f: Finished) -> PyResu
     let (raw, error) = match f.outcome {
         Ok(mut out) => {
             let error = out.error.take();
-            (Some(outcome_dict(py, out)?), error)
+            let raw = outcome_dict(py, out)?;
+            if let Some(s) = f.stats {
+                let arrays = (
+                    s.mean.into_pyarray(py),
+                    s.min.into_pyarray(py),
+                    s.max.into_pyarray(py),
+                );
+                raw.set_item("column_stats", arrays)?;
+            }
+            (Some(raw), error)
         }
         Err(e) => (None, Some(e)),
     };
@@ -128,6 +203,16 @@ fn deliver(py: Python<'_>, on_done: &Py<PyAny>, i: usize, f: Finished) -> PyResu
     on_done.call1(py, (i, raw, layout, kind, message))?;
     Ok(())
 }
+
+/// What `feed()` returns for a variant (see `Ensemble.run`).
+type Fed<'py> = (
+    usize,
+    Option<String>,
+    f64,
+    f64,
+    Option<Bound<'py, PyDict>>,
+    Option<Bound<'py, PyDict>>,
+);
 
 /// A parsed base model whose variants run in parallel.
 #[pyclass(frozen, module = "oxyline._core")]
@@ -148,18 +233,23 @@ impl Ensemble {
     }
 
     /// Run variants as `feed()` hands them over: it returns `(i, patch, period,
-    /// output_every)` for the next variant (`patch` its canonical JSON, None for the base
-    /// model) or None when there are no more, and is called on this thread while the workers
+    /// output_every, vessels, outlets)` for the next variant (`patch` its canonical JSON, None
+    /// for the base model; `vessels` {index: canonical vessel dict} and `outlets` {node:
+    /// canonical resistance/RCR dict}: elements of the patch handed over as objects, or None)
+    /// or None when there are no more, and is called on this thread while the workers
     /// run (so preparing a variant overlaps the runs). The other settings are those of
     /// `Network.simulate` and shared. `on_done(i, raw, layout, error_kind, error)` is called
     /// on this thread as each variant finishes; a failed variant has `error_kind` set
     /// ("model", "unstable", "solver", "interrupted") and never stops the others. Returns
     /// False if Ctrl-C stopped the ensemble (the variants finished until then were handed
-    /// over, running ones as "interrupted"; the rest were never fed).
+    /// over, running ones as "interrupted"; the rest were never fed). `summary`: each
+    /// finished variant's `raw` also has `column_stats`, the (mean, min, max) arrays of
+    /// `oxyline_core::ensemble::column_stats` over its output columns.
     #[pyo3(signature = (feed, *, on_done, workers = None, cycles = 10, method = "auto",
         rho_infty = 0.5, dt = None, until_periodic = None, max_cycles = 100,
         output_all_cycles = false, start = "steady", newton_atol = None, max_iterations = 30,
-        segments = true, transport = true, variables = None, vessels = None))]
+        segments = true, transport = true, variables = None, vessels = None,
+        summary = false))]
     #[allow(clippy::too_many_arguments)]
     fn run(
         &self,
@@ -181,6 +271,7 @@ impl Ensemble {
         transport: bool,
         variables: Option<Vec<String>>,
         vessels: Option<Vec<String>>,
+        summary: bool,
     ) -> PyResult<bool> {
         let workers = worker_count(workers).map_err(to_py)?;
         let template = RunSettings {
@@ -192,7 +283,10 @@ impl Ensemble {
             max_cycles,
             output_every: 1.0,
             output_all_cycles,
-            keep_current_cycle: true,
+            // the cycles before the last are not recorded: a variant stopped early is
+            // reported as failed, without its rows (the recorder's copies were ~5 % of a
+            // variant of a small tree)
+            keep_current_cycle: false,
             start: parse_start(start, rho_infty)?,
             newton: NewtonControl {
                 atol: newton_atol,
@@ -206,6 +300,7 @@ impl Ensemble {
             vessels,
             segments,
             transport,
+            summary,
         };
         let base = self.base.clone();
         let job = |_: usize, input: Input, cancelled: &AtomicBool| {
@@ -214,7 +309,14 @@ impl Ensemble {
                 output_every: input.output_every,
                 ..template.clone()
             };
-            run_variant(&base, input.patch.as_deref(), &s, &output, cancelled)
+            run_variant(
+                &base,
+                input.patch.as_deref(),
+                input.handed,
+                &s,
+                &output,
+                cancelled,
+            )
         };
         py.detach(|| {
             // the first Python error (Ctrl-C, or one raised by `feed` or `on_done`) cancels
@@ -232,16 +334,19 @@ impl Ensemble {
                 Python::attach(|py| {
                     let item = feed
                         .call0(py)
-                        .and_then(|v| v.extract::<Option<(usize, Option<String>, f64, f64)>>(py));
+                        .and_then(|v| v.extract::<Option<Fed<'_>>>(py));
                     match item {
-                        Ok(item) => item.map(|(i, patch, period, output_every)| {
-                            let input = Input {
-                                patch,
-                                period,
-                                output_every,
-                            };
-                            (i, input)
-                        }),
+                        Ok(item) => {
+                            item.map(|(i, patch, period, output_every, vessels, outlets)| {
+                                let input = Input {
+                                    patch,
+                                    handed: handed_over(vessels, outlets),
+                                    period,
+                                    output_every,
+                                };
+                                (i, input)
+                            })
+                        }
                         Err(e) => {
                             keep(Err(e));
                             None

@@ -113,7 +113,7 @@ fn arrangement(v: &Bound<'_, PyAny>, element: &dyn Fn() -> String) -> Res<Arrang
 }
 
 /// Vessel `i` from its canonical dict (the fields of `VesselSpec`).
-fn vessel(i: usize, item: &Bound<'_, PyAny>) -> Res<VesselSpec> {
+pub fn vessel(i: usize, item: &Bound<'_, PyAny>) -> Res<VesselSpec> {
     let name_of = || match item
         .cast::<PyDict>()
         .ok()

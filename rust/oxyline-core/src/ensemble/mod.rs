@@ -125,6 +125,62 @@ impl Member {
     }
 }
 
+/// Per-column statistics over the output rows of a run: what `oxyline.Result.summary()`
+/// computes per vessel (docs/ensembles.md), here on the worker thread so that the thread
+/// collecting the variants does no per-variant array work.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ColumnStats {
+    /// Time average by the trapezoidal rule over [t_first, t_last].
+    pub mean: Vec<f64>,
+    pub min: Vec<f64>,
+    pub max: Vec<f64>,
+}
+
+/// [`ColumnStats`] of row-major (time, column) `data` sampled at `times`, with numpy's
+/// arithmetic: `np.trapezoid(a, t, axis=0) / (t[-1] - t[0])` on a (time, k ≥ 2 columns) array
+/// adds the terms `(t[i+1] - t[i]) * (a[i+1] + a[i]) / 2.0` of a column one after the other in
+/// time order (numpy reduces a non-innermost axis element by element, starting from the first
+/// term), and min/max propagate NaN. A single column is summed pairwise by numpy instead, so
+/// the caller uses these values only for arrays of two or more columns. None without two
+/// distinct times (the summary then takes plain means).
+pub fn column_stats(times: &[f64], data: &[f64], n_cols: usize) -> Option<ColumnStats> {
+    let nt = times.len();
+    if nt < 2 || times[nt - 1].partial_cmp(&times[0]) != Some(std::cmp::Ordering::Greater) {
+        return None;
+    }
+    if data.len() != nt * n_cols {
+        return None;
+    }
+    let row = |i: usize| &data[i * n_cols..(i + 1) * n_cols];
+    let mut sum: Vec<f64> = Vec::with_capacity(n_cols);
+    let (mut min, mut max) = (row(0).to_vec(), row(0).to_vec());
+    for i in 0..nt - 1 {
+        let d = times[i + 1] - times[i];
+        let (a, b) = (row(i), row(i + 1));
+        for j in 0..n_cols {
+            let term = d * (b[j] + a[j]) / 2.0;
+            if i == 0 {
+                sum.push(term);
+            } else {
+                sum[j] += term;
+            }
+            let x = b[j];
+            if !min[j].is_nan() && (x.is_nan() || x < min[j]) {
+                min[j] = x;
+            }
+            if !max[j].is_nan() && (x.is_nan() || x > max[j]) {
+                max[j] = x;
+            }
+        }
+    }
+    let span = times[nt - 1] - times[0];
+    Some(ColumnStats {
+        mean: sum.into_iter().map(|s| s / span).collect(),
+        min,
+        max,
+    })
+}
+
 /// The number of threads of an ensemble: `workers` if given, else the environment variable
 /// `OXYLINE_NUM_THREADS`, else every core.
 pub fn worker_count(workers: Option<usize>) -> Result<usize> {

@@ -128,3 +128,27 @@ fn worker_count_reads_the_argument_first() {
     assert_eq!(worker_count(Some(3)).unwrap(), 3);
     assert!(worker_count(Some(0)).is_err());
 }
+
+/// Against closed forms: the trapezoidal rule is exact for a piecewise-linear signal (its time
+/// average over [0, T] is the area of the polyline over T), min/max are the extreme samples,
+/// NaN propagates, and there is no time average without two distinct times.
+#[test]
+fn column_stats_against_closed_forms() {
+    // column 0: 1 + 2t on uneven times; column 1: a tent 0 -> 4 -> 0 over [0, 2]
+    let times = [0.0, 0.5, 1.0, 2.0];
+    let data = [1.0, 0.0, 2.0, 2.0, 3.0, 4.0, 5.0, 0.0];
+    let s = column_stats(&times, &data, 2).unwrap();
+    // mean of 1 + 2t over [0, 2] = 3; tent area 4 over 2 s = 2
+    assert!((s.mean[0] - 3.0).abs() < 1e-15 && (s.mean[1] - 2.0).abs() < 1e-15);
+    assert_eq!(
+        (s.min.clone(), s.max.clone()),
+        (vec![1.0, 0.0], vec![5.0, 4.0])
+    );
+    let with_nan = [1.0, 0.0, f64::NAN, 2.0, 3.0, 4.0, 5.0, 0.0];
+    let s = column_stats(&times, &with_nan, 2).unwrap();
+    assert!(s.mean[0].is_nan() && s.min[0].is_nan() && s.max[0].is_nan());
+    assert_eq!(s.max[1], 4.0);
+    assert!(column_stats(&[0.0], &[1.0, 2.0], 2).is_none());
+    assert!(column_stats(&[1.0, 1.0], &[1.0, 2.0, 3.0, 4.0], 2).is_none());
+    assert!(column_stats(&times, &data[..6], 2).is_none());
+}
