@@ -578,3 +578,8 @@ def _empty_rows(model: Model, s: Mapping[str, Any]) -> dict[str, Any]:
                             "data": np.zeros((0, n * tl["columns_per_species"])),
                             "initial_stored": [0.0] * n}
     return raw
+
+
+# installed when oxyline is imported (normally in the main thread): a run started in a worker
+# thread cannot install it itself (signal handlers belong to the main thread)
+_cancel_runs_on_ctrl_c()
