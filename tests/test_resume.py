@@ -224,7 +224,9 @@ def test_cli_checkpoint_and_resume_give_the_uninterrupted_file(tmp_path: Path) -
     with xr.open_dataset("whole.nc") as a, xr.open_dataset("resumed.nc") as b:
         for name in a.data_vars:
             assert np.array_equal(a[name].values, b[name].values, equal_nan=True), name
-    assert cli.main(["run", "bifurcation", "--resume", "run.ckpt", "--quiet"]) == 2
+    with pytest.raises(SystemExit) as usage:  # a model and --resume: a usage error
+        cli.main(["run", "bifurcation", "--resume", "run.ckpt", "--quiet"])
+    assert usage.value.code == 2
     assert cli.main(["run", "--resume", "run.ckpt", "--cycles", "4", "--quiet"]) == 2
     assert cli.main(["run", "bifurcation", "--checkpoint-every", "5", "--quiet"]) == 2
 

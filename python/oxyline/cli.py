@@ -108,8 +108,6 @@ def _cmd_run(args: argparse.Namespace) -> int:
     import oxyline
 
     signal.signal(signal.SIGTERM, _on_sigterm)
-    if (args.model is None) == (args.resume is None):
-        raise InputError("give a model to run, or --resume CHECKPOINT (not both)")
     _check_outputs(args)
     overrides = _run_options(args)
     if args.resume:
@@ -454,7 +452,10 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if args.command == "run" and (args.model is None) == (args.resume is None):
+        parser.error("run: give a model to run, or --resume CHECKPOINT (not both)")
     from oxyline.errors import ModelError, OutputError, SolverError
 
     try:
