@@ -4,8 +4,9 @@
 //! RAM and aborting the process.
 //!
 //! The per-segment figures are peak resident bytes measured for whole runs (load, assembly,
-//! solver factors, run state; `benches/bench_memory.py`), rounded up: an estimate is meant to
-//! be within a small factor of the real peak, never far below it.
+//! solver factors, run state; `benches/bench_memory.py`: ~1.6 kB per flow segment, ~0.5 kB
+//! more per O2 cell), rounded up: an estimate is meant to be within a small factor of the
+//! real peak, never far below it.
 
 use crate::error::{Error, Result};
 
