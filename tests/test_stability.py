@@ -172,19 +172,51 @@ def test_stiff_oxygen_wall_exchange_stays_finite_under_rk4() -> None:
     assert 55 * 0.99 < po2.min() and po2.max() < 85 * 1.01  # between wall and inlet PO2
 
 
-def test_non_finite_species_is_a_typed_error_with_the_partial_result() -> None:
-    """A user step stable for the flow but not for the O2 wall exchange (7.7e-4 s vs 7e-5 s):
-    the run stops with a SolverError naming the species, the cell (by its circuit node) and the
-    time, with the
-    partial result attached, instead of NaN columns."""
-    model = oxyline.load_model({
+def _stiff_tube(k: float = 30.0) -> dict:
+    return {
         "name": "stiff", "period": 1.0,
         "vessels": [{"name": "tube", "from": "in", "to": "out", "segments": 10, "length": 0.1,
                      "radius": 3e-3, "wall_thickness": 1e-3, "youngs_modulus": 4e5}],
         "boundary_conditions": {"in": {"type": "flow", "value": 5e-6},
                                 "out": {"type": "resistance", "resistance": 1e8}},
         "oxygen": {"inlet": {"po2": 85.0},
-                   "wall": {"model": "mass-transfer", "k": 30.0, "po2": 55}}})
-    with pytest.raises(oxyline.SolverError, match=r"species 'o2': amount NaN in the cell of node '.+' \(t = ") as info:
-        oxyline.simulate(model, method="rk4", dt=1 / 1300, cycles=1, output_every=0.01)
-    assert info.value.result is not None
+                   "wall": {"model": "mass-transfer", "k": k, "po2": 55}}}
+
+
+def test_a_user_rk4_step_above_the_species_limit_is_refused_naming_species_and_vessel() -> None:
+    """Issue 13 item 6: a user step stable for the flow (7.7e-4 s) but not for the O2 wall
+    exchange: rate 2k/r = 2e4 /s (1 %: the compliant volume at the steady pressure), RK4's
+    real-axis limit 2.785 / rate = 1.40e-4 s. Before, the run wrote NaN (then stopped with a
+    SolverError); now it is refused before the first step, like the flow's own limit."""
+    with pytest.raises(oxyline.UnstableTimeStep,
+                       match=r"time step 7.692e-4 s is unstable for rk4: the largest stable step "
+                             r"is 1.40\de-4 s, set by species 'o2' in vessel 'tube' \(wall "
+                             r"exchange and decay rate 1.98\d+e4 1/s\)"):
+        oxyline.simulate(_stiff_tube(), method="rk4", dt=1 / 1300, cycles=1, output_every=0.01)
+    # a step inside the limit runs, finite
+    res = oxyline.simulate(_stiff_tube(), method="rk4", dt=1e-4, cycles=1, output_every=0.01)
+    assert np.isfinite(np.asarray(res.segment_po2)).all()
+    # generalized-alpha's implicit transport has no such limit
+    oxyline.simulate(_stiff_tube(), method="generalized-alpha", dt=1 / 1300, cycles=1,
+                     output_every=0.01)
+
+
+def test_non_finite_species_is_a_typed_error_with_the_partial_result(tmp_path) -> None:
+    """A non-finite species amount stops the run with a SolverError naming the species, the
+    vessel (by name), the cell's node and the time, with the partial result attached, instead
+    of NaN columns. Deterministic trigger: a checkpoint whose O2 amount in one cell of the tube
+    is NaN, resumed (any step size now refused up front would have to get there first)."""
+    ck = tmp_path / "run.ckpt"
+    oxyline.simulate(_stiff_tube(1e-4), method="rk4", cycles=2, output_cycles="all",
+                     checkpoint=ck, checkpoint_every="1 cycles")
+    with np.load(ck) as z:
+        arrays = {k: np.array(z[k]) for k in z.files}
+    arrays["z"][5] = np.nan  # the amount of O2 in cell 5 (of the tube's 10 segments)
+    with open(ck, "wb") as f:
+        np.savez(f, **arrays)
+    with pytest.raises(oxyline.SolverError,
+                       match=r"species 'o2': amount NaN in vessel 'tube', the cell of node "
+                             r"'.+' \(t = 1.00\d+ s\)") as info:
+        oxyline.resume(ck)
+    part = info.value.result
+    assert part is not None and not part.complete and part.time.size >= 1001

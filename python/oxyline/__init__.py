@@ -14,9 +14,14 @@ from __future__ import annotations
 from oxyline import _core, models, sensitivity
 from oxyline.ensemble import simulate_ensemble
 from oxyline.errors import (
+    CheckpointError,
     ModelError,
     OutputError,
+    OutputSizeWarning,
+    ResourceError,
+    SimulationCancelled,
     SimulationInterrupted,
+    SimulationTerminated,
     SolverError,
     UnstableTimeStep,
     UnsupportedElement,
@@ -26,17 +31,22 @@ from oxyline.io.results import open_result
 from oxyline.loader import load_model
 from oxyline.model import Model
 from oxyline.result import Result, VesselResult
-from oxyline.run import simulate, simulate_to_zarr
+from oxyline.run import resume, simulate, simulate_to_zarr
 from oxyline.structured_tree import structured_tree
 
 __version__: str = _core.__version__
 
 __all__ = [
+    "CheckpointError",
     "Model",
     "ModelError",
     "OutputError",
+    "OutputSizeWarning",
+    "ResourceError",
     "Result",
+    "SimulationCancelled",
     "SimulationInterrupted",
+    "SimulationTerminated",
     "SolverError",
     "UnstableTimeStep",
     "UnsupportedElement",
@@ -46,6 +56,7 @@ __all__ = [
     "load_model",
     "models",
     "open_result",
+    "resume",
     "sensitivity",
     "simulate",
     "simulate_ensemble",

@@ -1,8 +1,10 @@
 """The ``oxyline`` command line: run, plot, validate, impedance, convert, models, info.
 
-Exit codes: 0 ok, 2 bad input (the message names the file, vessel or node, and key),
-130 interrupted (a partial result is still written), 1 solver failure, 3 the output could not
-be written (disk full, permission; the message says what was kept).
+Exit codes: 0 ok, 2 bad input (the message names the file, vessel or node, and key; also a
+model or output above max_memory), 130 interrupted by Ctrl-C (SIGINT) and 143 stopped by SIGTERM
+(a partial result is still written in both cases), 1 solver failure (the partial result up to
+the failure is written), 3 the output could not be written (disk full, permission; the message
+says what was kept).
 """
 
 from __future__ import annotations
@@ -65,11 +67,16 @@ def _check_outputs(args: argparse.Namespace) -> None:
         _check_writable_dir(args.plot, plot_dir if plot_dir.is_dir() else plot_dir.parent)
 
 
-def _cmd_run(args: argparse.Namespace) -> int:
-    import oxyline
+def _on_sigterm(signum: int, frame: object) -> None:
+    """SIGTERM (a batch scheduler's stop) stops a run like Ctrl-C: the partial result is
+    written, and the exit code is 143 (128 + 15)."""
+    from oxyline.errors import SimulationTerminated
 
-    _check_outputs(args)
-    model = _load(args.model)
+    raise SimulationTerminated("run terminated (SIGTERM)")
+
+
+def _run_options(args: argparse.Namespace) -> dict[str, object]:
+    """The simulate() options of the command line (checkpoints included)."""
     overrides: dict[str, object] = {"progress": not args.quiet}
     if args.cycles is not None:
         overrides["cycles"] = args.cycles
@@ -79,24 +86,72 @@ def _cmd_run(args: argparse.Namespace) -> int:
         overrides["until_periodic"] = args.until_periodic
     if args.method is not None:
         overrides["method"] = args.method
+    if args.resume and len(overrides) > 1:
+        raise InputError(f"{args.resume}: a resumed run keeps its checkpoint's settings (no "
+                         "--cycles, --dt, --until-periodic or --method)")
+    if args.checkpoint:
+        overrides["checkpoint"] = args.checkpoint
+    if args.checkpoint_every is not None:
+        if not (args.checkpoint or args.resume):
+            raise InputError("--checkpoint-every needs --checkpoint FILE")
+        every = args.checkpoint_every.strip()
+        try:
+            overrides["checkpoint_every"] = float(every)
+        except ValueError:
+            overrides["checkpoint_every"] = every
+    return overrides
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    import signal
+
+    import oxyline
+
+    signal.signal(signal.SIGTERM, _on_sigterm)
+    _check_outputs(args)
+    overrides = _run_options(args)
+    if args.resume:
+        from oxyline import checkpoint
+
+        model = oxyline.load_model(checkpoint.read(args.resume)[0]["model"])
+        args.model = args.resume
+    else:
+        model = _load(args.model)
     # a .zarr output is written during the run (memory bounded by one chunk); --plot then
     # reads the finished store back (oxyline.open_result) instead of keeping a second copy
     stream = bool(args.output) and Path(args.output).suffix.lower() == ".zarr"
+    if stream and args.resume:
+        raise InputError(f"{args.output}: a resumed run writes .nc or .csv, not a streamed "
+                         ".zarr store")
     try:
-        if stream:
+        if args.resume:
+            res = oxyline.resume(args.resume, **overrides)
+        elif stream:
             res = oxyline.simulate_to_zarr(model, args.output, overwrite=args.overwrite,
                                            **overrides)
         else:
             res = oxyline.simulate(model, **overrides)
     except oxyline.ModelError as exc:  # run settings (e.g. an unstable dt): name the model
         msg = str(exc)
-        raise type(exc)(msg if msg.startswith(args.model) else f"{args.model}: {msg}") from None
+        if msg.startswith(args.model):
+            raise
+        raise type(exc)(f"{args.model}: {msg}") from None
     except oxyline.SimulationInterrupted as exc:
+        terminated = isinstance(exc, oxyline.SimulationTerminated)
         if args.output and exc.result is not None:
             if not stream:
                 _write(exc.result, args.output, args.overwrite)
-            print(f"interrupted; partial result written to {args.output}", file=sys.stderr)
-        return 130
+            print(f"{'terminated' if terminated else 'interrupted'}; partial result written "
+                  f"to {args.output}", file=sys.stderr)
+        return 143 if terminated else 130
+    except oxyline.SolverError as exc:  # the rows up to the failure are kept too
+        result = getattr(exc, "result", None)
+        if args.output and result is not None:
+            if not stream:
+                _write(result, args.output, args.overwrite)
+            print(f"partial result (up to the failure) written to {args.output}",
+                  file=sys.stderr)
+        raise
     if args.output and not stream:
         _write(res, args.output, args.overwrite)
     if args.summary:
@@ -323,8 +378,8 @@ def _parser() -> argparse.ArgumentParser:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("run", help="run a model file or built-in model")
-    p.add_argument("model", help="built-in name, or a .yaml/.json/.csv model (native, "
-                                 "svZeroDSolver, openBF, tables)")
+    p.add_argument("model", nargs="?", help="built-in name, or a .yaml/.json/.csv model "
+                   "(native, svZeroDSolver, openBF, tables); omitted with --resume")
     p.add_argument("-o", "--output", help="result file: .nc (NetCDF), .zarr (written during the "
                    "run, memory bounded), or .csv (waveforms)")
     p.add_argument("--summary", help="per-vessel mean/min/max table: .csv, .tsv or .parquet")
@@ -341,6 +396,16 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--until-periodic", type=float, metavar="TOL",
                    help="run until the cycle-to-cycle change is below TOL (relative), at most "
                         "max_cycles")
+    p.add_argument("--checkpoint", metavar="FILE",
+                   help="write the run's state to FILE at cycle ends (atomically), to continue "
+                        "it later with --resume FILE")
+    p.add_argument("--checkpoint-every", metavar="EVERY",
+                   help="how often to checkpoint: seconds of wall time (e.g. 600) or 'N cycles' "
+                        "(default 300 s)")
+    p.add_argument("--resume", metavar="FILE",
+                   help="continue the run of checkpoint FILE (its model and settings; results "
+                        "bit-identical to an uninterrupted run); it goes on checkpointing into "
+                        "FILE")
     p.add_argument("--quiet", action="store_true", help="no progress bar and no table")
     p.set_defaults(func=_cmd_run)
     p = sub.add_parser("plot", help="write the figures of a saved result (.nc/.zarr)",
@@ -387,7 +452,10 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if args.command == "run" and (args.model is None) == (args.resume is None):
+        parser.error("run: give a model to run, or --resume CHECKPOINT (not both)")
     from oxyline.errors import ModelError, OutputError, SolverError
 
     try:
@@ -410,9 +478,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {msg if msg.lower().startswith('solver failed') else 'solver failed: ' + msg}",
               file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        from oxyline.errors import SimulationTerminated
+
+        terminated = isinstance(exc, SimulationTerminated)
+        print("terminated" if terminated else "interrupted", file=sys.stderr)
+        return 143 if terminated else 130
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from oxyline._core import ModelError, SolverError, UnstableTimeStep
+from oxyline._core import ModelError, ResourceError, SolverError, UnstableTimeStep
 
 
 class UnsupportedElement(ModelError):
@@ -31,10 +31,34 @@ class SimulationInterrupted(KeyboardInterrupt):
         self.result = result
 
 
+class SimulationCancelled(SimulationInterrupted):
+    """The run's ``cancel`` event was set (e.g. by another thread), or Ctrl-C reached the main
+    thread while the run went on in a worker thread. ``result`` holds the partial result."""
+
+
+class SimulationTerminated(SimulationInterrupted):
+    """SIGTERM (a batch scheduler's stop) during a run of the ``oxyline`` command; ``result``
+    holds the partial result."""
+
+
+class CheckpointError(ModelError):
+    """A checkpoint file that cannot be resumed: not a checkpoint, another format version, or
+    written for another model or settings. The message names the file and what differs."""
+
+
+class OutputSizeWarning(UserWarning):
+    """The requested output is large (many GB): said before it is computed and written."""
+
+
 __all__ = [
+    "CheckpointError",
     "ModelError",
     "OutputError",
+    "OutputSizeWarning",
+    "ResourceError",
+    "SimulationCancelled",
     "SimulationInterrupted",
+    "SimulationTerminated",
     "SolverError",
     "UnstableTimeStep",
     "UnsupportedElement",

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from oxyline import _core
+from oxyline import memory as _memory  # a leaf too: imports only _core and errors
 from oxyline.errors import ModelError
 from oxyline.units import factor
 
@@ -45,7 +46,8 @@ BC_KEYS = {
     "resistance": {"type", "resistance", "pressure"},
     "rcr": {"type", "proximal_resistance", "capacitance", "distal_resistance", "pressure"},
 }
-SIM_KEYS = {"cycles", "dt", "method", "output", "until_periodic", "max_cycles", "rho_infty", "start"}
+SIM_KEYS = {"cycles", "dt", "method", "output", "until_periodic", "max_cycles", "rho_infty", "start",
+            "max_memory"}
 OUTPUT_KEYS = {"cycles", "every", "segments", "variables", "vessels"}
 METHODS = {"auto", "rk4", "generalized-alpha"}
 ARRANGEMENTS = {"inverted-L", "L", "pi", "RCL"}
@@ -412,7 +414,7 @@ class Model:
     def network(self) -> _core.Network:
         """The assembled Rust network (built on first use)."""
         if self._network is None:
-            self._network = _network(self.canonical)
+            self._network = _network(self.canonical, self.simulation.get("max_memory"))
         return self._network
 
     @property
@@ -446,11 +448,12 @@ def _plain_outlet(bc: Any) -> bool:
     return p is None or (type(p) is dict and p.get("kind") == "constant")
 
 
-def _network(canonical: dict[str, Any]) -> _core.Network:
+def _network(canonical: dict[str, Any], max_memory: Any = None) -> _core.Network:
     """The core network of a canonical model. The vessels and the plain outlets (the bulk of a
     large tree) are handed over as the dicts themselves, read key by key by the binding; the
     rest as JSON text. Writing the whole model as text cost ~2 µs per segment (the repr of
-    every float, then the parse)."""
+    every float, then the parse). The core refuses a model whose memory estimate exceeds
+    ``max_memory`` (see :mod:`oxyline.memory`) before it allocates for it."""
     bcs = canonical.get("boundary_conditions")
     outlets, other = {}, {}
     if isinstance(bcs, dict):
@@ -460,6 +463,7 @@ def _network(canonical: dict[str, Any]) -> _core.Network:
         other = bcs
     rest = {k: v for k, v in canonical.items() if k not in ("vessels", "boundary_conditions")}
     rest["vessels"], rest["boundary_conditions"] = [], other
+    rest["max_memory"] = _memory.limit(max_memory, "simulation: max_memory")
     vessels = canonical.get("vessels")
     if type(vessels) is not list:  # not a canonical model: the JSON parse reports it
         rest["vessels"], vessels = vessels, None

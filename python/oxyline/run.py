@@ -6,12 +6,25 @@ from __future__ import annotations
 import math
 import numbers
 import os
+import signal
+import threading
+import warnings
 from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
 
-from oxyline.errors import ModelError, OutputError, SimulationInterrupted
+from oxyline import checkpoint as _checkpoint
+from oxyline import memory as _memory
+from oxyline.errors import (
+    CheckpointError,
+    ModelError,
+    OutputError,
+    OutputSizeWarning,
+    ResourceError,
+    SimulationCancelled,
+    SimulationInterrupted,
+)
 from oxyline.loader import load_model
 from oxyline.model import METHODS, Model, output_names, output_vessels
 from oxyline.result import (
@@ -72,7 +85,9 @@ def _flag(value: Any, where: str) -> bool:
 
 OPTIONS = frozenset({"cycles", "dt", "method", "output_every", "output_cycles", "until_periodic",
                      "max_cycles", "rho_infty", "start", "segments", "progress", "newton_atol",
-                     "max_iterations", "transport", "variables", "vessels"})
+                     "max_iterations", "transport", "variables", "vessels", "max_memory",
+                     "checkpoint", "checkpoint_every", "cancel"})
+
 STARTS = ("steady", "zero", "svzerod-steady", "svzerod-zero")
 
 
@@ -291,15 +306,57 @@ def _run_settings(s: Mapping[str, Any], raw: Mapping[str, Any] | None) -> dict[s
     return settings
 
 
-def _run(model: Model, s: Mapping[str, Any], progress: Any, **core: Any) -> dict[str, Any]:
-    """The core's raw output of a run with settings ``s``, with a progress bar if asked for."""
+# The cancel events of the runs in progress (any thread): Ctrl-C sets them all (see
+# `_cancel_runs_on_ctrl_c`). A list, not a set: one event may be shared by several runs.
+_ACTIVE: list[Any] = []
+_ACTIVE_LOCK = threading.Lock()
+
+
+def _cancel_runs_on_ctrl_c() -> None:
+    """From the main thread, once: wrap Python's default SIGINT handler so that Ctrl-C also
+    sets the cancel event of every run in progress, so runs in worker threads (which never
+    see the KeyboardInterrupt) stop too, each with its partial result. The main thread gets
+    its KeyboardInterrupt as before. A handler of the user's own is left alone."""
+    if threading.current_thread() is not threading.main_thread() \
+            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        return
+
+    def cancel_runs_then_interrupt(signum: int, frame: Any) -> None:
+        with _ACTIVE_LOCK:
+            events = list(_ACTIVE)
+        for event in events:
+            event.set()
+        signal.default_int_handler(signum, frame)
+
+    signal.signal(signal.SIGINT, cancel_runs_then_interrupt)
+
+
+def _run(model: Model, s: Mapping[str, Any], progress: Any, cancel: Any = None,
+         **core: Any) -> dict[str, Any]:
+    """The core's raw output of a run with settings ``s``, with a progress bar if asked for.
+    The run stops with :class:`SimulationCancelled` once ``cancel`` (a ``threading.Event``)
+    is set; it is checked with the progress, every few hundred steps and at most every 0.1 s
+    (at once after a progress callback that set it)."""
     callback, bar = _progress_bar(progress, s)
+    event = threading.Event() if cancel is None else cancel
+
+    def check(t: float, t_end: float) -> None:
+        if callback is not None:
+            callback(t, t_end)
+        if event.is_set():
+            raise SimulationCancelled("run cancelled")
+
+    _cancel_runs_on_ctrl_c()
+    with _ACTIVE_LOCK:
+        _ACTIVE.append(event)
     try:
-        raw = model.network.simulate(progress=callback, **s, **core)
+        raw = model.network.simulate(progress=check, **s, **core)
         if isinstance(callback, _CycleProgress) and "error" not in raw:
             callback.finish(int(raw["cycles_run"]))
         return raw
     finally:
+        with _ACTIVE_LOCK:
+            _ACTIVE.remove(event)
         if bar is not None:
             bar.close()
 
@@ -310,9 +367,11 @@ def _raise_run_error(raw: Mapping[str, Any], partial: Any) -> None:
         return
     err = raw["error"]
     if raw["error_kind"] == "interrupted" and isinstance(err, KeyboardInterrupt):
-        raise SimulationInterrupted(
-            f"run interrupted after {raw['cycles_run']} complete cycle(s); "
-            "the partial result is in exc.result", partial) from None
+        # Ctrl-C, a cancel event, SIGTERM (the CLI): the same class, with the partial result
+        cls = type(err) if isinstance(err, SimulationInterrupted) else SimulationInterrupted
+        what = str(err) if isinstance(err, SimulationInterrupted) else "run interrupted"
+        raise cls(f"{what} after {raw['cycles_run']} complete cycle(s); the partial result is "
+                  "in exc.result", partial) from None
     err.result = partial
     raise err
 
@@ -326,17 +385,133 @@ def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any], **overri
     ``max_cycles``, ``rho_infty``, ``start`` (``"steady"``, ``"zero"``), ``segments`` (bool),
     ``progress`` (bool or callback ``f(t, t_end)``).
 
+    Run control: ``max_memory`` (bytes or e.g. ``"8 GB"``; default 80 % of the available
+    memory, see :mod:`oxyline.memory`): an output estimated above it is refused with
+    :class:`~oxyline.ResourceError` before the run. ``checkpoint`` (a file) and
+    ``checkpoint_every`` (seconds of wall time, or ``"N cycles"``; default 300 s): the run's
+    state is written there at cycle ends, and :func:`oxyline.resume` continues it with
+    bit-identical results (see :mod:`oxyline.checkpoint`). ``cancel`` (a
+    ``threading.Event``): setting it, e.g. from another thread, stops the run with
+    :class:`~oxyline.SimulationCancelled` carrying the partial result in ``exc.result``, as
+    Ctrl-C does with :class:`~oxyline.SimulationInterrupted`. Ctrl-C also cancels the runs in
+    progress in other threads.
+
     >>> import oxyline
     >>> res = oxyline.simulate("bifurcation", cycles=2)
     >>> res.flow_in.shape[1]
     3
     """
-    model = load_model(model)
+    return _simulate(load_model(model), overrides)
+
+
+def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
+              resume_path: Any = None) -> Result:
+    """`simulate` of a loaded model; ``resume``: the core state of a checkpoint."""
     s = _settings(model, overrides)
-    raw = _run(model, s, overrides.get("progress"))
+    _check_output_memory(model, s, overrides)
+    core = _checkpoints(model, overrides)
+    if resume is not None:
+        core["resume"] = resume
+    try:
+        raw = _run(model, s, overrides.get("progress"), _cancel(overrides), **core)
+    except ModelError as exc:
+        if resume_path is not None and str(exc).startswith("checkpoint:"):
+            raise CheckpointError(f"{resume_path}: {str(exc).removeprefix('checkpoint: ')}") \
+                from None
+        raise
     result = _result(model, s, raw, _run_settings(s, raw), complete="error" not in raw)
     _raise_run_error(raw, result)
     return result
+
+
+def resume(path: str | os.PathLike[str], **overrides: Any) -> Result:
+    """Continue the run of checkpoint ``path`` (written by ``simulate(..., checkpoint=...)``)
+    to its end, and return its whole result: bit-identical to the result of the run that
+    wrote it, had that run not been stopped.
+
+    The run keeps the checkpoint's model and settings; only ``progress``, ``cancel``,
+    ``max_memory``, ``checkpoint`` and ``checkpoint_every`` may be given (by default it goes on
+    checkpointing into ``path`` as often as before). :class:`~oxyline.CheckpointError` if the
+    file is not a checkpoint this version reads.
+    """
+    meta, state = _checkpoint.read(path)
+    changed = set(overrides) - _checkpoint.RUN_CONTROL
+    if changed:
+        raise ModelError(f"resume: {', '.join(sorted(changed))} cannot change in a resumed run "
+                         "(it continues with the checkpoint's model and settings)")
+    try:
+        model = load_model(meta["model"])
+    except ModelError as exc:
+        raise CheckpointError(f"{path}: its model does not load: {exc}") from None
+    control = {"checkpoint": os.fspath(path), "checkpoint_every": meta.get("checkpoint_every")}
+    if "checkpoint" in overrides and overrides["checkpoint"] is None:  # no more checkpoints
+        control = {}
+    return _simulate(model, {**meta["settings"], **control, **overrides}, resume=state,
+                     resume_path=path)
+
+
+def _cancel(overrides: Mapping[str, Any]) -> Any:
+    cancel = overrides.get("cancel")
+    if cancel is not None and not callable(getattr(cancel, "is_set", None)):
+        raise ModelError(f"simulate: cancel must be a threading.Event (anything with is_set()), "
+                         f"got {cancel!r}")
+    return cancel
+
+
+def _checkpoints(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
+    """The core's checkpoint keywords: a sink writing the file, and how often."""
+    path = overrides.get("checkpoint")
+    every = overrides.get("checkpoint_every")
+    if path is None:
+        if every is not None:
+            raise ModelError("simulate: checkpoint_every needs checkpoint (the file to write)")
+        return {}
+    if not isinstance(path, (str, os.PathLike)):
+        raise ModelError(f"simulate: checkpoint must be a file path, got {path!r}")
+    core = _checkpoint.parse_every(every)
+    meta = {"model": model.to_dict(), "settings": _checkpoint.stored_settings(overrides),
+            "checkpoint_every": every, "oxyline": _core_version()}
+
+    def save(state: dict[str, Any]) -> None:
+        _checkpoint.write(path, meta, state)
+
+    return {"checkpoint_sink": save, **core}
+
+
+def _core_version() -> str:
+    from oxyline import _core
+
+    return str(_core.__version__)
+
+
+def _check_output_memory(model: Model, s: Mapping[str, Any],
+                         overrides: Mapping[str, Any]) -> None:
+    """Refuse an output the memory allowed cannot hold (:class:`ResourceError` with the
+    estimate and the settings to change), and announce a large one
+    (:class:`OutputSizeWarning`), before the run starts."""
+    need, rows, cols = _output_size(model, s)
+    where = _where("max_memory", overrides)
+    limit = _memory.limit(overrides.get("max_memory", model.simulation.get("max_memory")), where)
+    if limit is not None and need > limit:
+        raise ResourceError(
+            f"simulate: the output ({rows} rows x {cols} columns) needs about "
+            f"{_memory.human(need)} of memory (estimate), above max_memory = "
+            f"{_memory.human(limit)}; output fewer rows (output_every, output_cycles='last', "
+            "fewer cycles) or columns (variables, vessels, segments=False), stream it to disk "
+            "with simulate_to_zarr, or raise max_memory")
+    if need > _memory.WARN_BYTES:
+        warnings.warn(f"the output ({rows} rows x {cols} columns) takes about "
+                      f"{_memory.human(need)} in memory, and as much when written to a file",
+                      OutputSizeWarning, stacklevel=4)
+
+
+def _output_size(model: Model, s: Mapping[str, Any]) -> tuple[float, int, int]:
+    layout = model.network.output_layout(**_selection(s))
+    if not s["transport"]:
+        layout.pop("transport", None)
+    cycles = s["max_cycles"] if s["until_periodic"] is not None else s["cycles"]
+    return _memory.output_estimate(layout, s["period"], s["output_every"], cycles,
+                                   s["output_all_cycles"])
 
 
 def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
@@ -372,7 +547,15 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     if isinstance(time_chunk, bool) or not isinstance(time_chunk, int) or time_chunk < 1:
         raise ModelError(f"simulate_to_zarr: time_chunk must be an integer >= 1, got {time_chunk!r}")
     model = load_model(model)
+    if "checkpoint" in overrides or "checkpoint_every" in overrides:
+        raise ModelError("simulate_to_zarr: checkpoints are not supported with a streamed "
+                         "store; use simulate(..., checkpoint=...)")
     s = _settings(model, overrides)
+    need, rows, cols = _output_size(model, s)
+    if need > _memory.WARN_BYTES:  # memory stays bounded, the store does not
+        warnings.warn(f"{path}: the output ({rows} rows x {cols} columns) takes about "
+                      f"{_memory.human(need)} on disk (before compression)", OutputSizeWarning,
+                      stacklevel=2)
     empty = _empty_rows(model, s)
     store = ZarrAppender(path, dataset(_result(model, s, empty, _run_settings(s, None), False)),
                          time_chunk, overwrite=overwrite)
@@ -381,7 +564,8 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
         store.append(dataset(_result(model, s, rows, {}, False)))
 
     try:
-        raw = _run(model, s, overrides.get("progress"), chunk_sink=write, chunk_rows=time_chunk)
+        raw = _run(model, s, overrides.get("progress"), _cancel(overrides), chunk_sink=write,
+                   chunk_rows=time_chunk)
     except Exception:
         store.remove()  # refused before the first step (e.g. an unstable dt): no output at all
         raise
@@ -417,3 +601,8 @@ def _empty_rows(model: Model, s: Mapping[str, Any]) -> dict[str, Any]:
                             "data": np.zeros((0, n * tl["columns_per_species"])),
                             "initial_stored": [0.0] * n}
     return raw
+
+
+# installed when oxyline is imported (normally in the main thread): a run started in a worker
+# thread cannot install it itself (signal handlers belong to the main thread)
+_cancel_runs_on_ctrl_c()

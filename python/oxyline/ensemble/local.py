@@ -27,6 +27,10 @@ def run_settings(model: Model, output: Output, overrides: Mapping[str, Any]) -> 
     segment output: it is not recorded unless asked for (the vessel values do not change)."""
     if output == "summary" and "segments" not in overrides:
         overrides = {**overrides, "segments": False}
+    per_run = {"checkpoint", "checkpoint_every", "cancel"} & set(overrides)
+    if per_run:  # options of one simulate() run, not of an ensemble
+        raise ModelError(f"simulate_ensemble: {', '.join(sorted(per_run))} is not an ensemble "
+                         "option (Ctrl-C stops an ensemble with the finished variants)")
     return _settings(model, overrides)
 
 

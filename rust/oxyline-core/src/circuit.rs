@@ -108,6 +108,10 @@ impl Names {
             ),
         }
     }
+    /// Name of vessel `v` (as given in the model).
+    pub fn vessel(&self, v: usize) -> Option<&str> {
+        self.vessels.get(v).map(String::as_str)
+    }
     /// Name of node `i`.
     pub fn node(&self, i: usize) -> String {
         self.write(self.nodes[i])
@@ -270,6 +274,20 @@ impl Circuit {
             names: Arc::new(names),
             ..Default::default()
         }
+    }
+    /// [`Circuit::with_capacity`] with fallible allocation: a circuit too large for the
+    /// memory left is a typed [`Error::Resource`], not an abort.
+    pub fn try_with_capacity(nodes: usize, branches: usize, segments: usize) -> Result<Self> {
+        use crate::error::try_reserve;
+        let mut names = Names::default();
+        try_reserve(&mut names.nodes, nodes, "circuit node names")?;
+        try_reserve(&mut names.branches, branches, "circuit branch names")?;
+        let mut c = Circuit::default();
+        try_reserve(&mut c.nodes, nodes, "circuit nodes")?;
+        try_reserve(&mut c.branches, branches, "circuit branches")?;
+        try_reserve(&mut c.segments, segments, "circuit segments")?;
+        c.names = Arc::new(names);
+        Ok(c)
     }
     fn label(&mut self, name: NameOf) -> Label {
         match name {

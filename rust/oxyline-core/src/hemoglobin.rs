@@ -88,6 +88,37 @@ pub struct HillAnchor {
     span: f64,
 }
 
+impl HillAnchor {
+    /// Values per anchor in a checkpoint.
+    pub const CARRIED: usize = 7;
+
+    /// The anchor as plain numbers (a checkpoint carries it: the inversion is warm-started).
+    pub fn to_array(&self) -> [f64; Self::CARRIED] {
+        [
+            self.p,
+            self.total,
+            self.inv_slope,
+            self.k2,
+            self.k3,
+            self.bound,
+            self.span,
+        ]
+    }
+
+    /// The anchor of [`HillAnchor::to_array`].
+    pub fn from_array(a: &[f64]) -> Self {
+        HillAnchor {
+            p: a[0],
+            total: a[1],
+            inv_slope: a[2],
+            k2: a[3],
+            k3: a[4],
+            bound: a[5],
+            span: a[6],
+        }
+    }
+}
+
 impl Default for HillAnchor {
     fn default() -> Self {
         HillAnchor {

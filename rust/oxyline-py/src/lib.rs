@@ -7,6 +7,7 @@ use oxyline_core::output::{
     BALANCE_VARIABLES, SEGMENT_VARIABLES, SPECIES_SEGMENT_VARIABLES, SPECIES_VESSEL_VARIABLES,
     TISSUE_BALANCE_VARIABLES, TISSUE_SEGMENT_VARIABLES, TISSUE_VESSEL_VARIABLES, VESSEL_VARIABLES,
 };
+use oxyline_core::run::checkpoint::{Checkpoints, Every, Snapshot};
 use oxyline_core::spec::parse;
 use oxyline_core::{
     Assembled, Chunk, Dae, Error, Method, Outcome, OutputSink, RunSettings, Selection, Start,
@@ -21,6 +22,7 @@ use std::cell::Cell;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+mod checkpoint;
 mod ensemble;
 
 // the schema names the columns `Transport::observe` writes, one name per column
@@ -47,6 +49,12 @@ pyo3::create_exception!(
 );
 pyo3::create_exception!(
     oxyline,
+    ResourceError,
+    ModelError,
+    "The model or the requested output needs more memory than allowed (max_memory) or available."
+);
+pyo3::create_exception!(
+    oxyline,
     SolverError,
     PyRuntimeError,
     "Time integration failed."
@@ -59,6 +67,7 @@ fn to_py(e: Error) -> PyErr {
         Error::Unstable { .. } => UnstableTimeStep::new_err(msg),
         Error::Solver { .. } => SolverError::new_err(msg),
         Error::Interrupted { .. } => PyKeyboardInterrupt::new_err(msg),
+        Error::Resource { .. } => ResourceError::new_err(msg),
     }
 }
 
@@ -68,6 +77,7 @@ fn error_kind(e: &Error) -> &'static str {
         Error::Unstable { .. } => "unstable",
         Error::Solver { .. } => "solver",
         Error::Interrupted { .. } => "interrupted",
+        Error::Resource { .. } => "resource",
     }
 }
 
@@ -639,11 +649,19 @@ impl Network {
     /// With last-cycle output, `keep_current_cycle = false` records nothing before the last
     /// cycle (a streaming run then holds at most one chunk; a run stopped earlier returns no
     /// rows).
+    ///
+    /// With `checkpoint_sink`, `checkpoint_sink(state)` is called at the end of every
+    /// `checkpoint_every_cycles`-th cycle, or of the first cycle `checkpoint_every_seconds`
+    /// (wall time) after the last, with the run's state as a dict of numbers and arrays
+    /// (see `checkpoint.rs`); an exception it raises stops the run and is its `error`. With
+    /// `resume` (such a dict), the run continues from that state, bit-identical to the run
+    /// that saved it.
     #[pyo3(signature = (*, period, cycles, output_every, method = "auto", rho_infty = 0.5, dt = None,
         until_periodic = None, max_cycles = 100, output_all_cycles = false, start = "steady",
         newton_atol = None, max_iterations = 30, segments = true, all_unknowns = false, progress = None,
         transport = true, chunk_sink = None, chunk_rows = 1024, keep_current_cycle = true,
-        variables = None, vessels = None))]
+        variables = None, vessels = None, checkpoint_sink = None, checkpoint_every_cycles = None,
+        checkpoint_every_seconds = None, resume = None))]
     #[allow(clippy::too_many_arguments)]
     fn simulate<'py>(
         &self,
@@ -669,10 +687,17 @@ impl Network {
         keep_current_cycle: bool,
         variables: Option<Vec<String>>,
         vessels: Option<Vec<String>>,
+        checkpoint_sink: Option<Py<PyAny>>,
+        checkpoint_every_cycles: Option<usize>,
+        checkpoint_every_seconds: Option<f64>,
+        resume: Option<Bound<'py, PyDict>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         if chunk_rows == 0 {
             return Err(ModelError::new_err("simulation: chunk_rows must be >= 1"));
         }
+        let every = checkpoint_every(checkpoint_every_cycles, checkpoint_every_seconds)?;
+        let resume = resume.map(|d| checkpoint::from_dict(&d)).transpose()?;
+        let checkpointing = checkpoint_sink.is_some() || resume.is_some();
         let method = parse_method(method, rho_infty)?;
         let start = parse_start(start, rho_infty)?;
         let selected = variables.is_some() || vessels.is_some();
@@ -763,7 +788,26 @@ impl Network {
                 rows: chunk_rows,
                 write: &mut write,
             };
-            let out = if chunk_sink.is_some() {
+            let mut save = |snap: &Snapshot| -> bool {
+                let Some(f) = &checkpoint_sink else {
+                    return true;
+                };
+                Python::attach(|py| {
+                    let r = checkpoint::to_dict(py, snap).and_then(|d| f.call1(py, (d,)).map(drop));
+                    r.map_err(|e| pending.set(Some(e))).is_ok()
+                })
+            };
+            let out = if checkpointing {
+                let mut ck = Checkpoints::new(every, &mut save, resume);
+                oxyline_core::run::simulate_checkpointed(
+                    &inner.1,
+                    species.as_mut(),
+                    &settings,
+                    chunk_sink.is_some().then_some(&mut sink),
+                    &mut ck,
+                    &mut cb,
+                )
+            } else if chunk_sink.is_some() {
                 oxyline_core::simulate_to_sink(
                     &inner.1,
                     species.as_mut(),
@@ -799,10 +843,30 @@ impl Network {
     }
 }
 
+/// When to checkpoint: every n cycles, or after a wall time in seconds (never both).
+fn checkpoint_every(cycles: Option<usize>, seconds: Option<f64>) -> PyResult<Every> {
+    match (cycles, seconds) {
+        (Some(_), Some(_)) => Err(ModelError::new_err(
+            "simulation: checkpoint_every: give cycles or seconds, not both",
+        )),
+        (Some(0), _) => Err(ModelError::new_err(
+            "simulation: checkpoint_every must be >= 1 cycle",
+        )),
+        (Some(n), None) => Ok(Every::Cycles(n)),
+        (None, Some(s)) if s.is_finite() && s >= 0.0 => Ok(Every::Wall(Duration::from_secs_f64(s))),
+        (None, Some(s)) => Err(ModelError::new_err(format!(
+            "simulation: checkpoint_every must be a number of seconds >= 0, got {s}"
+        ))),
+        (None, None) => Ok(Every::Wall(Duration::from_secs(300))),
+    }
+}
+
 #[pymodule]
 mod _core {
     #[pymodule_export]
-    use super::{ModelError, Network, SolverError, UnstableTimeStep, ensemble::Ensemble};
+    use super::{
+        ModelError, Network, ResourceError, SolverError, UnstableTimeStep, ensemble::Ensemble,
+    };
 
     use pyo3::types::PyModuleMethods;
 
@@ -821,6 +885,17 @@ mod _core {
             super::SPECIES_SEGMENT_VARIABLES.to_vec(),
         )?;
         m.add("BALANCE_VARIABLES", super::BALANCE_VARIABLES.to_vec())?;
+        // checkpoints and memory estimates (`oxyline_core::run::{checkpoint, memory}`)
+        m.add(
+            "CHECKPOINT_VERSION",
+            oxyline_core::run::checkpoint::CHECKPOINT_VERSION,
+        )?;
+        {
+            use oxyline_core::run::memory as mem;
+            m.add("FLOW_BYTES_PER_SEGMENT", mem::FLOW_BYTES_PER_SEGMENT)?;
+            m.add("TRANSPORT_BYTES_PER_CELL", mem::TRANSPORT_BYTES_PER_CELL)?;
+            m.add("BYTES_PER_ELEMENT", mem::BYTES_PER_ELEMENT)?;
+        }
         m.add(
             "TISSUE_VESSEL_VARIABLES",
             super::TISSUE_VESSEL_VARIABLES.to_vec(),

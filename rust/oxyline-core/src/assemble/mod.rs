@@ -55,11 +55,21 @@ impl NetworkSpec {
         // a segment adds one branch and (but for the last of its vessel) one node; a boundary
         // condition at most two nodes and two branches
         let bcs = self.boundary_conditions.len();
-        let mut circuit = Circuit::with_capacity(
+        // refuse a model too large for the memory allowed before allocating for it
+        crate::run::memory::check_model(
+            &self.name,
+            segments,
+            self.vessels.len() + bcs,
+            self.transport
+                .as_ref()
+                .map(|t| (t.cells_per_segment.max(1.0), t.species.len())),
+            self.max_memory,
+        )?;
+        let mut circuit = Circuit::try_with_capacity(
             graph.names.len() + segments + 2 * bcs,
             segments + 2 * bcs,
             segments,
-        );
+        )?;
         for name in &graph.names {
             circuit.add_node(*name, 0.0, 0.0);
         }

@@ -37,6 +37,15 @@ pub struct GenAlpha<'a> {
 }
 
 impl<'a> GenAlpha<'a> {
+    /// The running scale of the Newton increments (carried by a checkpoint).
+    pub fn newton_scale(&self) -> &Magnitude {
+        &self.magnitude
+    }
+
+    pub fn newton_scale_mut(&mut self) -> &mut Magnitude {
+        &mut self.magnitude
+    }
+
     pub fn new(
         dae: &'a Dae,
         regime: Regime,

@@ -48,6 +48,38 @@ pub trait Integrator {
     /// algebraic unknowns of `y` consistent with the forcing and evaluates ẏ into `yd`;
     /// generalized-α's carried ẏ is already that rate, so (y, ẏ) are left as they are.
     fn rate(&mut self, time: f64, y: &mut [f64], yd: &mut [f64]) -> Result<()>;
+
+    /// What the integrator carries from step to step besides (y, ẏ) and that changes its
+    /// results (e.g. the running scale of its Newton convergence test), for a checkpoint: a run
+    /// resumed with [`Integrator::restore_carried`] continues bit for bit.
+    fn carried(&self) -> Vec<f64> {
+        Vec::new()
+    }
+
+    /// Restore [`Integrator::carried`] of a checkpoint.
+    fn restore_carried(&mut self, carried: &[f64]) -> Result<()> {
+        restore_peaks(carried, None)
+    }
+}
+
+/// Restore the Newton scale `peaks` of a checkpoint into `magnitude` (None: the integrator
+/// carries nothing, and the checkpoint must not either).
+fn restore_peaks(carried: &[f64], magnitude: Option<&mut newton::Magnitude>) -> Result<()> {
+    match (carried, magnitude) {
+        ([], None) => Ok(()),
+        (&[p, q], Some(m)) => {
+            m.set_peaks([p, q]);
+            Ok(())
+        }
+        _ => Err(crate::error::Error::model(
+            "checkpoint",
+            format!(
+                "the integrator state has {} values, expected {}",
+                carried.len(),
+                if carried.is_empty() { 2 } else { 0 }
+            ),
+        )),
+    }
 }
 
 impl Integrator for Rk4<'_> {
@@ -68,6 +100,13 @@ impl Integrator for Rk4<'_> {
         yd.copy_from_slice(&d);
         Ok(())
     }
+    fn carried(&self) -> Vec<f64> {
+        self.newton_scale()
+            .map_or_else(Vec::new, |m| m.peaks().to_vec())
+    }
+    fn restore_carried(&mut self, carried: &[f64]) -> Result<()> {
+        restore_peaks(carried, self.newton_scale_mut())
+    }
 }
 
 impl Integrator for GenAlpha<'_> {
@@ -85,6 +124,12 @@ impl Integrator for GenAlpha<'_> {
     }
     fn rate(&mut self, _time: f64, _y: &mut [f64], _yd: &mut [f64]) -> Result<()> {
         Ok(())
+    }
+    fn carried(&self) -> Vec<f64> {
+        self.newton_scale().peaks().to_vec()
+    }
+    fn restore_carried(&mut self, carried: &[f64]) -> Result<()> {
+        restore_peaks(carried, Some(self.newton_scale_mut()))
     }
 }
 

@@ -53,6 +53,16 @@ impl Magnitude {
         }
     }
 
+    /// The running maxima (pressure, flow): the part of the scale a checkpoint carries.
+    pub fn peaks(&self) -> [f64; 2] {
+        self.peak
+    }
+
+    /// Restore the running maxima of a checkpoint (see [`Magnitude::peaks`]).
+    pub fn set_peaks(&mut self, peak: [f64; 2]) {
+        self.peak = peak;
+    }
+
     /// Include a full state `y` (pressures first, then flows) in the running maximum.
     pub fn observe(&mut self, y: &[f64]) {
         let nn = self.n_nodes;

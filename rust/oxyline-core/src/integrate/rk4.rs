@@ -217,6 +217,16 @@ impl<'a> Rk4<'a> {
     }
 
     /// Bring the algebraic unknowns of an initial state in line with the forcing at `time`.
+    /// The running scale of the algebraic Newton solve (None without algebraic unknowns),
+    /// carried by a checkpoint.
+    pub fn newton_scale(&self) -> Option<&super::newton::Magnitude> {
+        self.alg.as_ref().map(|a| &a.magnitude)
+    }
+
+    pub fn newton_scale_mut(&mut self) -> Option<&mut super::newton::Magnitude> {
+        self.alg.as_mut().map(|a| &mut a.magnitude)
+    }
+
     pub fn make_consistent(&mut self, time: f64, y: &mut [f64]) -> Result<()> {
         self.forcing(time);
         self.solve_algebraic(y, time)

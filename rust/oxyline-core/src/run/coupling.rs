@@ -98,6 +98,29 @@ impl<'t> Species<'t> {
         self.tr.implicit_step(t, dt, self.level, y0, y, &mut self.z)
     }
 
+    /// (z, z at the end of the cycle before, the transport's carried state) for a checkpoint.
+    pub fn carried(&self) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+        (self.z.clone(), self.prev_cycle_z.clone(), self.tr.carried())
+    }
+
+    /// Continue from a checkpoint's species state (see [`Species::carried`]).
+    pub fn restore(&mut self, snap: &super::checkpoint::Snapshot) -> Result<()> {
+        if snap.z.len() != self.z.len() || snap.prev_cycle_z.len() != self.z.len() {
+            return Err(Error::model(
+                "checkpoint",
+                format!(
+                    "the species state has {} values, this run's has {}: the checkpoint is of \
+                     another model",
+                    snap.z.len(),
+                    self.z.len()
+                ),
+            ));
+        }
+        self.z.copy_from_slice(&snap.z);
+        self.prev_cycle_z.copy_from_slice(&snap.prev_cycle_z);
+        self.tr.restore_carried(&snap.transport)
+    }
+
     /// The relative change of the species state over the cycle just ended (species need
     /// several transit times, so the periodicity test includes them).
     pub fn cycle_change(&mut self) -> f64 {
@@ -177,7 +200,9 @@ impl State<'_, '_> {
         sp.y_obs.copy_from_slice(&self.y);
         sp.yd_obs.copy_from_slice(&self.yd);
         let monolithic = matches!(self.flow, Flow::Monolithic(_));
-        sp.tr.check_finite(&sp.z, t)?;
+        let names = &self.dae.names;
+        sp.tr
+            .check_finite(&sp.z, t, &|v| names.vessel(v).map(str::to_owned))?;
         self.flow
             .integrator()
             .rate(t, &mut sp.y_obs, &mut sp.yd_obs)?;

@@ -2,6 +2,7 @@
 //! state, reports progress, and stops when the run is periodic (or the mean flow of a first
 //! pass has settled), interrupted, or failed.
 
+use super::checkpoint::{Checkpoints, Snapshot};
 use super::coupling::State;
 use super::mean_flow::MeanAbs;
 use super::recorder::Recorder;
@@ -72,10 +73,21 @@ impl<'r, 'f> Cycles<'r, 'f> {
     /// Run the cycles; the error that stopped the run early, if any. The rest of the output
     /// (the partial chunk, or all rows of an interrupted run) goes to the sink too: a long run
     /// keeps everything it computed.
-    pub fn run(&mut self, progress: &mut dyn FnMut(f64, f64) -> bool) -> Option<Error> {
+    ///
+    /// With `checkpoints`, a snapshot is saved at the end of every cycle it asks for (not
+    /// after the last); a run restored from one (see [`Cycles::restore`]) starts at its cycle.
+    pub fn run(
+        &mut self,
+        progress: &mut dyn FnMut(f64, f64) -> bool,
+        mut checkpoints: Option<&mut Checkpoints<'_>>,
+    ) -> Option<Error> {
         let mut error = None;
-        for cycle in 0..self.max_cycles {
-            match self.cycle(cycle, progress) {
+        for cycle in self.cycles_run..self.max_cycles {
+            let saved = match (self.cycle(cycle, progress), checkpoints.as_deref_mut()) {
+                (Ok(true), Some(ck)) => self.checkpoint(ck).map(|()| true),
+                (done, _) => done,
+            };
+            match saved {
                 Ok(true) => {}
                 Ok(false) => break,
                 Err(e) => {
@@ -92,6 +104,85 @@ impl<'r, 'f> Cycles<'r, 'f> {
         }
         progress(self.cycles_run as f64 * self.s.period, self.t_end());
         error
+    }
+
+    /// Save a snapshot if one is due after the cycle just run (and the run goes on); a `save`
+    /// that fails stops the run as an interruption (the caller reports its own error).
+    fn checkpoint(&mut self, ck: &mut Checkpoints<'_>) -> Result<()> {
+        if self.cycles_run >= self.max_cycles || !ck.due(self.cycles_run) {
+            return Ok(());
+        }
+        let snap = self.snapshot(ck.mean_abs_flow.clone());
+        if ck.save(&snap) {
+            Ok(())
+        } else {
+            Err(Error::Interrupted {
+                time: self.steps as f64 * self.state.dt,
+            })
+        }
+    }
+
+    /// Everything needed to continue from the end of the current cycle.
+    fn snapshot(&mut self, mean_abs_flow: Vec<f64>) -> Snapshot {
+        let (z, prev_cycle_z, transport) = self
+            .state
+            .species
+            .as_ref()
+            .map(|sp| sp.carried())
+            .unwrap_or_default();
+        Snapshot {
+            cycles_run: self.cycles_run,
+            steps: self.steps,
+            dt: self.state.dt,
+            periodic_error: self.periodic_error,
+            y: self.state.y.clone(),
+            yd: self.state.yd.clone(),
+            prev_cycle_end: self.prev_cycle_end.clone(),
+            integrator: self.state.flow.integrator().carried(),
+            z,
+            prev_cycle_z,
+            transport,
+            initial_stored: self.rec.initial_stored.clone(),
+            mean_abs_flow,
+            times: self.rec.times.clone(),
+            data: self.rec.data.clone(),
+            transport_rows: self.rec.transport.clone(),
+        }
+    }
+
+    /// Continue from `snap` (the state (y, ẏ) was started from it): the integrator's and the
+    /// species' carried state, the cycle count, the periodicity references and the rows.
+    pub fn restore(&mut self, snap: &Snapshot) -> Result<()> {
+        let bad = |what: String| Err(Error::model("checkpoint", what));
+        if snap.prev_cycle_end.len() != self.prev_cycle_end.len() {
+            return bad(format!(
+                "the flow state has {} unknowns, this model's has {}: the checkpoint is of another model",
+                snap.prev_cycle_end.len(),
+                self.prev_cycle_end.len()
+            ));
+        }
+        if snap.cycles_run >= self.max_cycles {
+            return bad(format!(
+                "it was written after cycle {}, but the run has at most {} cycles",
+                snap.cycles_run, self.max_cycles
+            ));
+        }
+        self.state
+            .flow
+            .integrator()
+            .restore_carried(&snap.integrator)?;
+        match self.state.species.as_mut() {
+            Some(sp) => sp.restore(snap)?,
+            None if !snap.z.is_empty() => {
+                return bad("it has species, this run has none".into());
+            }
+            None => {}
+        }
+        self.steps = snap.steps;
+        self.cycles_run = snap.cycles_run;
+        self.periodic_error = snap.periodic_error;
+        self.prev_cycle_end.copy_from_slice(&snap.prev_cycle_end);
+        self.rec.restore(snap)
     }
 
     /// One cycle; Ok(false) when the run is complete.
@@ -159,7 +250,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
     /// Record the state at `time` as the row at output time `t`, with its species outputs when
     /// `species`; a `committed` row goes on to the sink once a chunk is full.
     fn output_row(&mut self, t: f64, time: f64, species: bool, committed: bool) -> Result<()> {
-        self.rec.record(t, &self.state.y);
+        self.rec.record(t, &self.state.y)?;
         if species && self.state.species.is_some() {
             self.state.observe(time, &mut self.obs_row)?;
             self.rec.push_species(&self.obs_row);

@@ -14,9 +14,11 @@
 //!
 //! A failed or interrupted run still returns everything recorded so far.
 
+pub mod checkpoint;
 mod coupling;
 mod cycle;
 mod mean_flow;
+pub mod memory;
 mod outcome;
 mod pass;
 mod plan;
@@ -24,6 +26,7 @@ mod recorder;
 mod settings;
 mod two_pass;
 
+pub use checkpoint::{CHECKPOINT_VERSION, Checkpoints, Every, Snapshot};
 pub use outcome::{Outcome, TransportOutcome};
 pub use recorder::{Chunk, OutputSink};
 pub use settings::{Method, RunSettings, Start};
@@ -41,7 +44,16 @@ pub fn simulate(
     s: &RunSettings,
     progress: &mut dyn FnMut(f64, f64) -> bool,
 ) -> Result<Outcome> {
-    pass::run(dae, &SteadyCache::new(dae), s, None, None, None, progress)
+    pass::run(
+        dae,
+        &SteadyCache::new(dae),
+        s,
+        None,
+        None,
+        None,
+        progress,
+        None,
+    )
 }
 
 /// Run the circuit with species transport. Closures that need the cycle-mean |Q| get it from
@@ -53,7 +65,7 @@ pub fn simulate_with_transport(
     s: &RunSettings,
     progress: &mut dyn FnMut(f64, f64) -> bool,
 ) -> Result<Outcome> {
-    run_two_pass(dae, transport, s, None, progress)
+    run_two_pass(dae, transport, s, None, progress, None)
 }
 
 /// [`simulate_with_transport`], streaming the output rows to `sink` during the run instead of
@@ -65,5 +77,20 @@ pub fn simulate_to_sink(
     sink: &mut OutputSink<'_>,
     progress: &mut dyn FnMut(f64, f64) -> bool,
 ) -> Result<Outcome> {
-    run_two_pass(dae, transport, s, Some(sink), progress)
+    run_two_pass(dae, transport, s, Some(sink), progress, None)
+}
+
+/// [`simulate_with_transport`] (or [`simulate_to_sink`] with `sink`) with checkpoints: a
+/// [`Snapshot`] is handed to `checkpoints.save` at the cycle ends it asks for, and a run with
+/// `checkpoints.resume` continues from that snapshot, bit-identical to the run that wrote it
+/// had it gone on.
+pub fn simulate_checkpointed(
+    dae: &Dae,
+    transport: Option<&mut Transport>,
+    s: &RunSettings,
+    sink: Option<&mut OutputSink<'_>>,
+    checkpoints: &mut Checkpoints<'_>,
+    progress: &mut dyn FnMut(f64, f64) -> bool,
+) -> Result<Outcome> {
+    run_two_pass(dae, transport, s, sink, progress, Some(checkpoints))
 }

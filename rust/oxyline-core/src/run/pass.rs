@@ -1,5 +1,6 @@
 //! One pass of a run: settings → plan → initial state → cycle loop → outcome.
 
+use super::checkpoint::{Checkpoints, Snapshot};
 use super::coupling::{Species, State};
 use super::cycle::Cycles;
 use super::mean_flow::MeanAbs;
@@ -13,7 +14,9 @@ use crate::integrate::steady::SteadyCache;
 use crate::transport::{Formulation, Transport};
 
 /// One pass: settings → plan → initial state → cycle loop → outcome. `mean` collects the
-/// cycle-mean |Q| of a flow-only first pass.
+/// cycle-mean |Q| of a flow-only first pass. `checkpoints` saves snapshots at cycle ends and,
+/// with a snapshot to resume from, starts there instead of at the initial state.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn run(
     dae: &Dae,
     steady: &SteadyCache<'_>,
@@ -22,15 +25,23 @@ pub(super) fn run(
     mean: Option<&mut MeanAbs>,
     sink: Option<&mut OutputSink<'_>>,
     progress: &mut dyn FnMut(f64, f64) -> bool,
+    mut checkpoints: Option<&mut Checkpoints<'_>>,
 ) -> Result<Outcome> {
     s.validate(dae)?;
     let mut plan = Plan::new(dae, steady, s, transport.as_deref_mut())?;
-    let (mut y, yd) = plan.initial_state(steady, s)?;
+    let resume = checkpoints.as_deref_mut().and_then(|c| c.resume.take());
+    let (mut y, yd) = match &resume {
+        Some(r) => resume_state(r, dae, plan.dt)?,
+        None => plan.initial_state(steady, s)?,
+    };
     let quasi = transport
         .as_deref()
         .is_some_and(|t| t.formulation() == Formulation::TlQuasisteady);
-    // explicit (RK4) transport in the flow's own stages; implicit transport after each step
-    let mut flow = plan.flow(s, &mut y, transport.is_some() && !quasi)?;
+    // explicit (RK4) transport in the flow's own stages; implicit transport after each step.
+    // A resumed run's state is not made consistent again (it is the state the run had).
+    let mut start = y.clone();
+    let y_start = if resume.is_some() { &mut start } else { &mut y };
+    let mut flow = plan.flow(s, y_start, transport.is_some() && !quasi)?;
     let (species, initial_stored) = match transport {
         Some(tr) => {
             // per-segment species columns nobody records are not computed
@@ -48,7 +59,7 @@ pub(super) fn run(
     let mut rec = Recorder::new(&s.probes, layout, columns, initial_stored, sink)?;
     if !s.output_all_cycles && mean.is_none() {
         // last-cycle output: one cycle's rows and the row at its start
-        rec.reserve_rows(plan.steps_per_cycle / plan.stride + 1);
+        rec.reserve_rows(plan.steps_per_cycle / plan.stride + 1)?;
     }
     let state = State {
         dae,
@@ -60,6 +71,29 @@ pub(super) fn run(
     };
     let method = plan.method_name();
     let mut cycles = Cycles::new(s, state, rec, mean, plan.steps_per_cycle, plan.stride);
-    let error = cycles.run(progress);
+    if let Some(r) = &resume {
+        cycles.restore(r)?;
+    }
+    let error = cycles.run(progress, checkpoints);
     Ok(Outcome::of(cycles, method, plan.stability, error))
+}
+
+/// The (y, ẏ) of a snapshot, checked against the model and the planned step.
+fn resume_state(r: &Snapshot, dae: &Dae, dt: f64) -> Result<(Vec<f64>, Vec<f64>)> {
+    let bad = |what: String| Err(crate::error::Error::model("checkpoint", what));
+    if r.y.len() != dae.n || r.yd.len() != dae.n {
+        return bad(format!(
+            "the flow state has {} unknowns, this model's has {}: the checkpoint is of another model",
+            r.y.len(),
+            dae.n
+        ));
+    }
+    if r.dt.to_bits() != dt.to_bits() {
+        return bad(format!(
+            "it was written with the time step {:e} s, this run's is {dt:e} s: the model or the \
+             settings changed",
+            r.dt
+        ));
+    }
+    Ok((r.y.clone(), r.yd.clone()))
 }

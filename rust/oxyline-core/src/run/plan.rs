@@ -37,10 +37,15 @@ impl<'d> Plan<'d> {
         s: &RunSettings,
         transport: Option<&mut Transport>,
     ) -> Result<Self> {
-        let transport_dt = transport_step_limit(steady, transport);
+        let (transport_dt, reaction) = transport_step_limit(dae, steady, transport);
         let (use_rk4, stability, rk4) = choose_method(dae, steady, s, transport_dt)?;
         let rk4_limit = stability.as_ref().filter(|_| use_rk4);
         let (dt, steps_per_cycle, stride) = schedule(s, rk4_limit, transport_dt)?;
+        if let Some(lim) = reaction.filter(|_| use_rk4 && s.dt.is_some()) {
+            // a user's step must also keep the species' own stiffness stable, as the flow's
+            // (issue 13 item 6); the automatic step keeps half of it
+            check_stable(dt, &lim)?;
+        }
         Ok(Plan {
             dae,
             use_rk4,
@@ -136,9 +141,17 @@ impl<'d> Plan<'d> {
 /// rates, RK4's real-axis limit 2.785) is kept at half its limit too (issue 13 item 6; see
 /// `Transport::max_reaction_rate`). Infinite without transport, without a steady state, or with
 /// a non-positive volume there (left to the run to report).
-fn transport_step_limit(steady: &SteadyCache<'_>, transport: Option<&mut Transport>) -> f64 {
+///
+/// Also returns the species' stability limit itself (RK4 on the stiffest cell: dt ≤ 2.785 /
+/// rate), naming the species and the vessel, which a user-given RK4 step must respect: only
+/// for explicit transport (the quasi-steady formulation's species step is implicit).
+fn transport_step_limit(
+    dae: &Dae,
+    steady: &SteadyCache<'_>,
+    transport: Option<&mut Transport>,
+) -> (f64, Option<StabilityLimit>) {
     let (Some(tr), Ok(y)) = (transport, steady.get()) else {
-        return f64::INFINITY;
+        return (f64::INFINITY, None);
     };
     let mut limit = f64::INFINITY;
     if tr.formulation() == Formulation::Conservative {
@@ -147,10 +160,24 @@ fn transport_step_limit(steady: &SteadyCache<'_>, transport: Option<&mut Transpo
             limit = 0.5 * RK4_UPWIND_COURANT / (3.0 * rate);
         }
     }
+    let mut species_limit = None;
     if let Some(r) = tr.max_reaction_rate(y, 0.0).filter(|r| r.rate.is_finite()) {
         limit = limit.min(0.5 * RK4_REAL_AXIS / r.rate);
+        let vessel = tr
+            .cell_vessel(r.cell)
+            .and_then(|v| dae.names.vessel(v))
+            .map_or_else(|| "a junction cell".to_owned(), |v| format!("vessel '{v}'"));
+        species_limit = (tr.formulation() != Formulation::TlQuasisteady).then(|| StabilityLimit {
+            dt_max: RK4_REAL_AXIS / r.rate,
+            eigenvalue: (-r.rate, 0.0),
+            element: format!(
+                "species '{}' in {vessel} (wall exchange and decay rate {:.4e} 1/s)",
+                r.species, r.rate
+            ),
+            exact: true,
+        });
     }
-    limit
+    (limit, species_limit)
 }
 
 /// RK4's stability limit on the negative real axis: |R(−2.785)| = 1.

@@ -1,6 +1,6 @@
 //! The output table under construction, and the sink that streams it during the run.
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Result, try_reserve};
 
 /// Output rows handed to an [`OutputSink`]: `times.len()` rows of the recorded unknowns
 /// (row-major, time × probe) and, for transport runs, of the species outputs (row-major,
@@ -84,12 +84,25 @@ impl<'p, 's, 'f> Recorder<'p, 's, 'f> {
 
     /// Make room for `rows` rows at once (the whole table is then one allocation of its final
     /// size, not grown by doubling). Nothing with a sink, which holds at most a chunk.
-    pub fn reserve_rows(&mut self, rows: usize) {
+    /// The allocation is fallible: a table the memory left cannot hold is a typed
+    /// [`Error::Resource`], not an abort.
+    pub fn reserve_rows(&mut self, rows: usize) -> Result<()> {
         if self.sink.is_none() {
-            self.times.reserve_exact(rows);
-            self.data.reserve_exact(rows * self.probes.len());
-            self.transport.reserve_exact(rows * self.transport_cols);
+            self.reserve(rows)?;
         }
+        Ok(())
+    }
+
+    /// Room for `rows` more rows of every table (fallible).
+    fn reserve(&mut self, rows: usize) -> Result<()> {
+        let np = self.probes.len();
+        try_reserve(&mut self.times, rows, "output times")?;
+        try_reserve(&mut self.data, rows.saturating_mul(np), "output rows")?;
+        try_reserve(
+            &mut self.transport,
+            rows.saturating_mul(self.transport_cols),
+            "species output rows",
+        )
     }
 
     pub fn n_probes(&self) -> usize {
@@ -101,10 +114,15 @@ impl<'p, 's, 'f> Recorder<'p, 's, 'f> {
         self.species_select.map_or(self.block, <[usize]>::len)
     }
 
-    pub fn record(&mut self, t: f64, y: &[f64]) {
+    /// Record one row; the tables grow by doubling, with fallible allocation.
+    pub fn record(&mut self, t: f64, y: &[f64]) -> Result<()> {
+        if self.times.len() == self.times.capacity() {
+            self.reserve(self.times.len().max(64))?;
+        }
         self.times.push(t);
         self.data.extend(self.probes.iter().map(|&i| y[i]));
         self.max_rows = self.max_rows.max(self.times.len());
+        Ok(())
     }
 
     /// Keep the selected columns of one `observe` row (all species blocks).
@@ -117,6 +135,33 @@ impl<'p, 's, 'f> Recorder<'p, 's, 'f> {
                 }
             }
         }
+    }
+
+    /// The rows and Σ N(0) of a checkpoint (see `Cycles::restore`).
+    pub fn restore(&mut self, snap: &super::checkpoint::Snapshot) -> Result<()> {
+        let np = self.probes.len();
+        let rows = snap.times.len();
+        // species rows may be fewer (cycles whose species outputs are not computed)
+        let nt = snap.transport_rows.len();
+        let species_ok = match self.transport_cols {
+            0 => nt == 0,
+            c => nt % c == 0 && nt <= rows * c,
+        };
+        if snap.data.len() != rows * np || !species_ok {
+            return Err(Error::model(
+                "checkpoint",
+                "its output rows do not have this run's columns: the checkpoint is of another \
+                 model or output selection",
+            ));
+        }
+        self.clear();
+        self.reserve(rows)?;
+        self.times.extend_from_slice(&snap.times);
+        self.data.extend_from_slice(&snap.data);
+        self.transport.extend_from_slice(&snap.transport_rows);
+        self.initial_stored.clone_from(&snap.initial_stored);
+        self.max_rows = self.max_rows.max(rows);
+        Ok(())
     }
 
     pub fn clear(&mut self) {

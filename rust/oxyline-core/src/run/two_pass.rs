@@ -2,6 +2,7 @@
 //! it from a first, flow-only pass over the same cycles; the coupled run then starts again
 //! from the same initial state. Both passes share one steady state.
 
+use super::checkpoint::Checkpoints;
 use super::mean_flow::MeanAbs;
 use super::outcome::Outcome;
 use super::pass::run;
@@ -18,16 +19,25 @@ pub(super) fn run_two_pass(
     s: &RunSettings,
     sink: Option<&mut OutputSink<'_>>,
     progress: &mut dyn FnMut(f64, f64) -> bool,
+    mut checkpoints: Option<&mut Checkpoints<'_>>,
 ) -> Result<Outcome> {
     // the steady state is solved at most once per call, by whichever part of either pass
     // needs it first
     let steady = SteadyCache::new(dae);
     let Some(tr) = transport else {
-        return run(dae, &steady, s, None, None, sink, progress);
+        return run(dae, &steady, s, None, None, sink, progress, checkpoints);
     };
     let unknowns = tr.mean_flow_unknowns();
     let mut mean_abs_flow = Vec::new();
-    if !unknowns.is_empty() {
+    // a resumed run takes the first pass's mean |Q| from its checkpoint
+    let resumed = checkpoints
+        .as_deref()
+        .and_then(|c| c.resume.as_ref())
+        .map(|r| r.mean_abs_flow.clone());
+    if let Some(m) = resumed.filter(|_| !unknowns.is_empty()) {
+        tr.set_mean_flow(&m)?;
+        mean_abs_flow = m;
+    } else if !unknowns.is_empty() {
         let mut mean = MeanAbs::new(unknowns);
         // the first pass records nothing: no sink
         let first = run(
@@ -38,6 +48,7 @@ pub(super) fn run_two_pass(
             Some(&mut mean),
             None,
             progress,
+            None,
         )?;
         if let Some(e) = first.error {
             return Err(e);
@@ -45,7 +56,10 @@ pub(super) fn run_two_pass(
         tr.set_mean_flow(&mean.last)?;
         mean_abs_flow = mean.last;
     }
-    let mut out = run(dae, &steady, s, Some(tr), None, sink, progress)?;
+    if let Some(c) = checkpoints.as_deref_mut() {
+        c.mean_abs_flow.clone_from(&mean_abs_flow);
+    }
+    let mut out = run(dae, &steady, s, Some(tr), None, sink, progress, checkpoints)?;
     if let Some(t) = out.transport.as_mut() {
         t.mean_abs_flow = mean_abs_flow;
     }

@@ -146,6 +146,10 @@ pub struct NetworkSpec {
     /// Species transport (oxygen and other solutes); absent for flow-only models.
     #[serde(default)]
     pub transport: Option<transport::TransportSpec>,
+    /// Refuse to assemble a model whose memory estimate exceeds this many bytes (see
+    /// `run::memory`); None: no limit.
+    #[serde(default)]
+    pub max_memory: Option<f64>,
 }
 
 /// Read a canonical SI JSON model.

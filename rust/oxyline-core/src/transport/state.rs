@@ -9,7 +9,10 @@ impl Transport {
         self.ensure_scratch();
         self.volumes(y, 0.0)?;
         let nc = self.plan.cells.len();
-        let mut z = vec![0.0; self.state_len()];
+        // the largest per-run buffer: a fallible allocation (a typed error, not an abort)
+        let mut z = Vec::new();
+        crate::error::try_reserve(&mut z, self.state_len(), "transport state")?;
+        z.resize(self.state_len(), 0.0);
         let nmix = self.plan.mixing.len();
         for (s, (sp, set)) in self.species.iter_mut().zip(&self.plan.species).enumerate() {
             let ct = set.binding.total(set.initial_free);
@@ -243,5 +246,62 @@ impl Transport {
         sp.mixing_conc.clear();
         sp.mixing_conc
             .extend(self.plan.mixing.iter().map(|&m| self.conc[m]));
+    }
+}
+
+impl Transport {
+    /// Everything a run carries from step to step outside the amounts `z` that changes its
+    /// results: volumes, concentrations (warm starts and the lagged values of mixing points and
+    /// boundaries), free concentrations and Hill anchors (warm starts of the binding
+    /// inversion). A run restored from it with [`Transport::restore_carried`] continues bit
+    /// for bit (checkpoints, `run::checkpoint`).
+    pub fn carried(&self) -> Vec<f64> {
+        let mut out = Vec::new();
+        out.extend_from_slice(&self.vol);
+        out.extend_from_slice(&self.wvol);
+        out.extend_from_slice(&self.conc);
+        out.extend_from_slice(&self.sweep.lag);
+        for sp in &self.species {
+            out.extend_from_slice(&sp.free);
+            out.extend_from_slice(&sp.mixing_conc);
+            out.extend(sp.anchors.iter().flat_map(|a| a.to_array()));
+        }
+        out
+    }
+
+    /// Restore [`Transport::carried`] into a run started with the same model and settings
+    /// (its buffers then have the lengths the checkpoint's had).
+    pub fn restore_carried(&mut self, carried: &[f64]) -> Result<()> {
+        let expected = self.carried().len();
+        if carried.len() != expected {
+            return Err(Error::model(
+                "checkpoint",
+                format!(
+                    "the transport state has {} values, this model's has {expected}: the \
+                     checkpoint is of another model",
+                    carried.len()
+                ),
+            ));
+        }
+        let mut rest = carried;
+        let mut take = |dst: &mut [f64]| {
+            let (head, tail) = rest.split_at(dst.len());
+            dst.copy_from_slice(head);
+            rest = tail;
+        };
+        take(&mut self.vol);
+        take(&mut self.wvol);
+        take(&mut self.conc);
+        take(&mut self.sweep.lag);
+        for sp in &mut self.species {
+            take(&mut sp.free);
+            take(&mut sp.mixing_conc);
+            let mut flat = vec![0.0; sp.anchors.len() * HillAnchor::CARRIED];
+            take(&mut flat);
+            for (a, v) in sp.anchors.iter_mut().zip(flat.chunks(HillAnchor::CARRIED)) {
+                *a = HillAnchor::from_array(v);
+            }
+        }
+        Ok(())
     }
 }

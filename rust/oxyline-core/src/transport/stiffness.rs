@@ -49,19 +49,46 @@ impl Transport {
 }
 
 impl Transport {
+    /// The vessel (index in the circuit's vessel names) of transport cell `cell`: that of a
+    /// segment whose volume the cell holds (for messages; a linear scan). None for a cell of
+    /// a node without vessel segments.
+    pub fn cell_vessel(&self, cell: usize) -> Option<usize> {
+        (0..self.plan.segments.len())
+            .find(|&j| self.segment_cells(j).is_some_and(|c| c.contains(&cell)))
+            .or_else(|| {
+                // a junction cell holds the end shares of several segments
+                let node = *self.plan.cell_node.get(cell)?;
+                self.plan
+                    .segments
+                    .iter()
+                    .position(|s| s.nodes.contains(&(node as u32)))
+            })
+            .map(|j| self.plan.segment_vessels[j] as usize)
+    }
+
     /// A cheap check of the species amounts `z` (once per output row): the first non-finite
     /// one is a solver error naming the species, the place (the cell's node: vessel and
     /// segment) and the time, so a step too large for a stiff exchange, decay or binding stops
     /// the run with its partial result instead of writing NaN.
-    pub fn check_finite(&self, z: &[f64], time: f64) -> Result<()> {
+    /// `vessel_name` names a vessel index of the circuit (the error names the vessel too).
+    pub fn check_finite(
+        &self,
+        z: &[f64],
+        time: f64,
+        vessel_name: &dyn Fn(usize) -> Option<String>,
+    ) -> Result<()> {
         let nc = self.plan.cells.len();
         for (s, sp) in self.plan.species.iter().enumerate() {
             let block = &z[s * nc..(s + 1) * nc];
             if let Some(i) = block.iter().position(|v| !v.is_finite()) {
+                let vessel = self
+                    .cell_vessel(i)
+                    .and_then(vessel_name)
+                    .map_or_else(String::new, |v| format!("vessel '{v}', "));
                 return Err(Error::solver(
                     time,
                     format!(
-                        "species '{}': amount {} in the cell of node '{}' (t = {time:.6} s): the step is too large \
+                        "species '{}': amount {} in {vessel}the cell of node '{}' (t = {time:.6} s): the step is too large \
                          for its wall exchange, decay or binding; lower dt or use \
                          generalized-alpha",
                         sp.name,

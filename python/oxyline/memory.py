@@ -1,0 +1,150 @@
+"""Memory limits and estimates, checked before anything large is allocated.
+
+A model too large for the memory allowed (``segments: 10**9``, ``max_length: 1e-9``) or a
+requested output too large to hold (every cycle of a long run, ``output_every=1e-7``) is
+refused with :class:`oxyline.ResourceError`, which gives the estimate and the setting to
+change, instead of taking all RAM until the process is killed.
+
+The limit is the setting ``max_memory`` (bytes, or a string such as ``"8 GB"``, ``"512 MiB"``;
+``"none"`` for no limit): ``simulate(max_memory=...)``, or ``simulation: max_memory`` in the
+model file (which also applies when the model is assembled), else the environment variable
+``OXYLINE_MAX_MEMORY``, else 80 % of the memory available when the check runs
+(``MemAvailable`` of ``/proc/meminfo``, else ``os.sysconf``), and at most 80 % of the
+process's address-space limit (``ulimit -v``) if one is set.
+
+The model estimate (`oxyline_core::run::memory`) counts measured peak bytes per segment, per
+transport cell and species, and per vessel; the output estimate counts the rows and columns
+the run will hold (8 bytes each). ``benches/bench_memory.py`` compares both with the measured
+peak resident memory.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from typing import Any
+
+from oxyline import _core
+from oxyline.errors import ModelError
+
+#: share of the available memory a run may take by default
+DEFAULT_FRACTION = 0.8
+#: outputs above this many bytes are announced (OutputSizeWarning) before they are computed
+WARN_BYTES = 2e9
+
+_UNITS = {"": 1.0, "b": 1.0, "kb": 1e3, "mb": 1e6, "gb": 1e9, "tb": 1e12,
+          "kib": 2.0**10, "mib": 2.0**20, "gib": 2.0**30, "tib": 2.0**40}
+
+
+def human(nbytes: float) -> str:
+    """``nbytes`` as "1.234 GB" (decimal units)."""
+    for unit, scale in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if nbytes >= scale:
+            return f"{nbytes / scale:.3f} {unit}"
+    return f"{nbytes:.0f} B"
+
+
+def parse(value: Any, where: str) -> float | None:
+    """A ``max_memory`` value in bytes (None: no limit): a number > 0, or a string with a unit
+    (``"8 GB"``, ``"512MiB"``), or ``"none"``."""
+    import numbers
+
+    if isinstance(value, str):
+        text = value.strip().lower().replace("_", "")
+        if text in ("none", "off", "unlimited"):
+            return None
+        m = re.fullmatch(r"([0-9.]+(?:e[+-]?[0-9]+)?)\s*([a-z]*)", text)
+        if m and m.group(2) in _UNITS:
+            try:
+                value = float(m.group(1)) * _UNITS[m.group(2)]
+            except ValueError:
+                pass
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) \
+            or not math.isfinite(float(value)) or float(value) <= 0:
+        raise ModelError(f"{where} must be a number of bytes > 0 or a size such as '8 GB' "
+                         f"(or 'none'), got {value!r}")
+    return float(value)
+
+
+def available() -> float | None:
+    """Bytes of memory available now (``MemAvailable``; else free pages), None if unknown."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024.0
+    except OSError:
+        pass
+    try:
+        return float(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def default_limit() -> float | None:
+    """The limit when none is set: ``OXYLINE_MAX_MEMORY``, else 80 % of the available memory
+    and of the address-space limit."""
+    env = os.environ.get("OXYLINE_MAX_MEMORY")
+    if env:
+        return parse(env, "OXYLINE_MAX_MEMORY")
+    caps = []
+    avail = available()
+    if avail is not None:
+        caps.append(DEFAULT_FRACTION * avail)
+    try:
+        import resource
+
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+        if soft != resource.RLIM_INFINITY:
+            caps.append(DEFAULT_FRACTION * soft)
+    except (ImportError, ValueError, OSError):
+        pass
+    return min(caps) if caps else None
+
+
+def limit(value: Any, where: str) -> float | None:
+    """The limit of a ``max_memory`` setting (None: the default)."""
+    return default_limit() if value is None else parse(value, where)
+
+
+def segment_count(canonical: dict[str, Any]) -> int:
+    """The flow segments of a canonical model, as the core counts them (a vessel's
+    ``segments``, else its length over ``max_segment_length``, else 1)."""
+    m = canonical.get("max_segment_length")
+    total = 0
+    for v in canonical.get("vessels") or ():
+        n = v.get("segments") if isinstance(v, dict) else None
+        g = v.get("geometry") if isinstance(v, dict) else None
+        if n is None and isinstance(g, dict) and isinstance(m, (int, float)) and m > 0:
+            length = g.get("length")
+            if isinstance(length, (int, float)) and math.isfinite(length):
+                n = max(1, math.ceil(length / m * (1.0 - 1e-12)))
+        total += n if isinstance(n, int) and n >= 1 else 1
+    return total
+
+
+def model_estimate(summary: dict[str, Any], canonical: dict[str, Any]) -> float:
+    """Estimated peak bytes of a model (``Model.summary()`` and its canonical form): the same
+    formula the core applies before it assembles the model."""
+    tr = canonical.get("transport") or {}
+    species = len(tr.get("species") or ())
+    cells = max(1.0, float(tr.get("cells_per_segment", 1.0))) if species else 0.0
+    segments = summary["segments"]
+    elements = summary["vessels"] + len(canonical.get("boundary_conditions") or {})
+    return (segments * _core.FLOW_BYTES_PER_SEGMENT
+            + segments * cells * species * _core.TRANSPORT_BYTES_PER_CELL
+            + elements * _core.BYTES_PER_ELEMENT)
+
+
+def output_estimate(layout: dict[str, Any], period: float, every: float, cycles: int,
+                    all_cycles: bool) -> tuple[float, int, int]:
+    """(bytes, rows, columns) of the output a run holds: rows of time, flow columns and
+    species columns, 8 bytes each."""
+    per_cycle = max(1, round(period / every))
+    rows = per_cycle * cycles + 1 if all_cycles else per_cycle + 1
+    cols = 1 + int(layout["n_columns"])
+    tl = layout.get("transport")
+    if tl:
+        cols += len(tl["species"]) * int(tl["columns_per_species"])
+    return 8.0 * rows * cols, rows, cols

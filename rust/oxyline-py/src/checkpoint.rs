@@ -1,0 +1,96 @@
+//! Checkpoint snapshots (`oxyline_core::run::checkpoint`) as Python dicts of numbers and
+//! float64 arrays: the Python side writes them to a versioned file and reads them back.
+
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1};
+use oxyline_core::run::checkpoint::{CHECKPOINT_VERSION, Snapshot};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::ModelError;
+
+/// The snapshot's arrays and their dict keys, in one place for both directions.
+fn arrays(s: &Snapshot) -> [(&'static str, &Vec<f64>); 12] {
+    [
+        ("y", &s.y),
+        ("yd", &s.yd),
+        ("prev_cycle_end", &s.prev_cycle_end),
+        ("integrator", &s.integrator),
+        ("z", &s.z),
+        ("prev_cycle_z", &s.prev_cycle_z),
+        ("transport", &s.transport),
+        ("initial_stored", &s.initial_stored),
+        ("mean_abs_flow", &s.mean_abs_flow),
+        ("times", &s.times),
+        ("data", &s.data),
+        ("transport_rows", &s.transport_rows),
+    ]
+}
+
+/// The snapshot as a dict (arrays copied: the run goes on).
+pub fn to_dict<'py>(py: Python<'py>, s: &Snapshot) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("version", CHECKPOINT_VERSION)?;
+    d.set_item("cycles_run", s.cycles_run)?;
+    d.set_item("steps", s.steps)?;
+    d.set_item("dt", s.dt)?;
+    d.set_item("periodic_error", s.periodic_error)?;
+    for (key, v) in arrays(s) {
+        d.set_item(key, PyArray1::from_slice(py, v))?;
+    }
+    Ok(d)
+}
+
+fn array(d: &Bound<'_, PyDict>, key: &str) -> PyResult<Vec<f64>> {
+    let item = item(d, key)?;
+    match item.extract::<PyReadonlyArray1<'_, f64>>() {
+        Ok(a) => Ok(a
+            .as_slice()
+            .map_or_else(|_| a.to_vec().unwrap_or_default(), <[f64]>::to_vec)),
+        Err(_) => item.extract::<Vec<f64>>().map_err(|_| {
+            ModelError::new_err(format!("checkpoint: '{key}' must be a float64 array"))
+        }),
+    }
+}
+
+fn item<'py>(d: &Bound<'py, PyDict>, key: &str) -> PyResult<Bound<'py, PyAny>> {
+    d.get_item(key)?
+        .ok_or_else(|| ModelError::new_err(format!("checkpoint: '{key}' is missing")))
+}
+
+fn wrong(key: &str) -> PyErr {
+    ModelError::new_err(format!("checkpoint: '{key}' has the wrong type"))
+}
+
+/// The snapshot of a dict written by [`to_dict`] (its version checked).
+pub fn from_dict(d: &Bound<'_, PyDict>) -> PyResult<Snapshot> {
+    let version: u32 = item(d, "version")?
+        .extract()
+        .map_err(|_| wrong("version"))?;
+    if version != CHECKPOINT_VERSION {
+        return Err(ModelError::new_err(format!(
+            "checkpoint: state layout version {version}, this oxyline reads version {CHECKPOINT_VERSION}"
+        )));
+    }
+    let count = |key: &str| -> PyResult<usize> { item(d, key)?.extract().map_err(|_| wrong(key)) };
+    let real = |key: &str| -> PyResult<f64> { item(d, key)?.extract().map_err(|_| wrong(key)) };
+    let mut s = Snapshot {
+        cycles_run: count("cycles_run")?,
+        steps: count("steps")?,
+        dt: real("dt")?,
+        periodic_error: real("periodic_error")?,
+        ..Snapshot::default()
+    };
+    s.y = array(d, "y")?;
+    s.yd = array(d, "yd")?;
+    s.prev_cycle_end = array(d, "prev_cycle_end")?;
+    s.integrator = array(d, "integrator")?;
+    s.z = array(d, "z")?;
+    s.prev_cycle_z = array(d, "prev_cycle_z")?;
+    s.transport = array(d, "transport")?;
+    s.initial_stored = array(d, "initial_stored")?;
+    s.mean_abs_flow = array(d, "mean_abs_flow")?;
+    s.times = array(d, "times")?;
+    s.data = array(d, "data")?;
+    s.transport_rows = array(d, "transport_rows")?;
+    Ok(s)
+}
