@@ -25,6 +25,7 @@ from oxyline.frequency import impedance
 from oxyline.io.results import open_result
 from oxyline.loader import load_model
 from oxyline.model import Model
+from oxyline.monitor import PhysicalBoundsWarning
 from oxyline.result import Result, VesselResult
 from oxyline.run import simulate, simulate_to_zarr
 from oxyline.structured_tree import structured_tree
@@ -35,6 +36,7 @@ __all__ = [
     "Model",
     "ModelError",
     "OutputError",
+    "PhysicalBoundsWarning",
     "Result",
     "SimulationInterrupted",
     "SolverError",

@@ -14,6 +14,7 @@ import numpy as np
 from oxyline.errors import ModelError, OutputError, SimulationInterrupted
 from oxyline.loader import load_model
 from oxyline.model import METHODS, Model, output_names, output_vessels
+from oxyline.monitor import check_result
 from oxyline.result import SEGMENT_VARIABLES, SPECIES_SEGMENT, Result, SpeciesResult
 
 ProgressCallback = Callable[[float, float], None]
@@ -313,6 +314,8 @@ def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any], **overri
     raw = _run(model, s, overrides.get("progress"))
     result = _result(model, s, raw, _run_settings(s, raw), complete="error" not in raw)
     _raise_run_error(raw, result)
+    # physical bounds and mass balance of the recorded species output (warnings only)
+    check_result(result, model.canonical.get("transport"))
     return result
 
 
