@@ -13,17 +13,17 @@ import pytest
 
 pytest.importorskip("scipy")
 
-import oxyline  # noqa: E402
-from oxyline.facilitation import hill_factor, linear_factor  # noqa: E402
-from oxyline.reference.axisymmetric import (  # noqa: E402
+import oxyline
+from oxyline.facilitation import hill_factor, linear_factor
+from oxyline.reference.axisymmetric import (
     ConstantPO2,
     Grid,
     Tube,
     richardson,
     steady_march,
 )
-from oxyline.reference.hill import HillBlood, hill_uptake  # noqa: E402
-from oxyline.reference.validation import HILL, load_case  # noqa: E402
+from oxyline.reference.hill import HillBlood, hill_uptake
+from oxyline.reference.validation import HILL, load_case
 
 ALPHA, D, D_HB = 1.40e-3, 1.2e-9, 5.5e-12
 H = 150 * 1.34 / 22.414

@@ -26,10 +26,10 @@ from oxyline.io.results import open_result
 from oxyline.loader import load_model
 from oxyline.model import Model
 from oxyline.monitor import PhysicalBoundsWarning
-from oxyline.transport import HemoglobinFacilitationWarning
 from oxyline.result import Result, VesselResult
 from oxyline.run import simulate, simulate_to_zarr
 from oxyline.structured_tree import structured_tree
+from oxyline.transport import HemoglobinFacilitationWarning
 
 __version__: str = _core.__version__
 

@@ -242,7 +242,7 @@ def _flux(spec: Any, element: str, period: float | None, duration: float | None)
     if callable(spec):
         p = period or 1.0
         end = max(duration or p, p) + p
-        n = int(math.ceil(end / p * FLUX_SAMPLES_PER_PERIOD)) + 1
+        n = math.ceil(end / p * FLUX_SAMPLES_PER_PERIOD) + 1
         times = [end * i / (n - 1) for i in range(n)]
         rows = [_flux_row(spec(t), element) for t in times]
         if len({len(r) for r in rows}) != 1:
