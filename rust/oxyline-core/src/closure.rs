@@ -546,6 +546,43 @@ mod tests {
         }
     }
 
+    /// docs/physics.md §3.7: `flux` as one value, per segment, or a time table; bad tables
+    /// are model errors naming the element.
+    #[test]
+    fn flux_spec_forms_and_errors() {
+        let parse = |j: &str| serde_json::from_str::<WallSpec>(j).unwrap();
+        let seg = SegmentWall {
+            radius: 1e-3,
+            x0: 0.0,
+            x1: 0.01,
+        };
+        let q = |w: &WallSpec, k| match w.segment_law(&seg, k, 1e-9, 0.0, "v").unwrap() {
+            SegmentLaw::Fixed { q, .. } => q,
+            _ => f64::NAN,
+        };
+        let uniform = parse(r#"{"model": "flux", "flux": 2.0}"#);
+        let per_seg = parse(r#"{"model": "flux", "flux": [1.0, 3.0]}"#);
+        assert_eq!(q(&uniform, 1), 2.0 * seg.area());
+        assert_eq!(q(&per_seg, 1), 3.0 * seg.area());
+        let table = parse(r#"{"model": "flux", "flux": {"time": [0, 1], "values": [[1], [2]]}}"#);
+        assert_eq!(q(&table, 0), 0.0); // applied by the transport at every step
+        assert!(table.validate("v").is_ok());
+        for bad in [
+            r#"{"model": "flux", "flux": {"time": [0, 0], "values": [[1], [2]]}}"#,
+            r#"{"model": "flux", "flux": {"time": [0, 1], "values": [[1], [2, 3]]}}"#,
+            r#"{"model": "flux", "flux": {"time": [0], "values": [[1]]}}"#,
+            r#"{"model": "flux", "flux": []}"#,
+        ] {
+            let e = parse(bad).validate("vessel 'v'").unwrap_err().to_string();
+            assert!(e.contains("vessel 'v'") && e.contains("flux"), "{e}");
+        }
+        // the Graetz closure reads the forward-flow mean unless told otherwise
+        let g = parse(r#"{"model": "graetz", "wall_concentration": 1.0}"#);
+        assert_eq!(g.mean_flow(), MeanFlow::ForwardMean);
+        let g = parse(r#"{"model": "graetz", "wall_concentration": 1.0, "flow": "cycle-mean"}"#);
+        assert_eq!(g.mean_flow(), MeanFlow::CycleMean);
+    }
+
     #[test]
     fn graetz_conductance_uses_x_star() {
         // segment [0, L] of a tube with x*_L = 0.05: β = −ln θ_m(0.05)
