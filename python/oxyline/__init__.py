@@ -30,18 +30,22 @@ from oxyline.frequency import impedance
 from oxyline.io.results import open_result
 from oxyline.loader import load_model
 from oxyline.model import Model
+from oxyline.monitor import PhysicalBoundsWarning
 from oxyline.result import Result, VesselResult
 from oxyline.run import resume, simulate, simulate_to_zarr
 from oxyline.structured_tree import structured_tree
+from oxyline.transport import HemoglobinFacilitationWarning
 
 __version__: str = _core.__version__
 
 __all__ = [
     "CheckpointError",
+    "HemoglobinFacilitationWarning",
     "Model",
     "ModelError",
     "OutputError",
     "OutputSizeWarning",
+    "PhysicalBoundsWarning",
     "ResourceError",
     "Result",
     "SimulationCancelled",

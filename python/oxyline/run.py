@@ -27,6 +27,7 @@ from oxyline.errors import (
 )
 from oxyline.loader import load_model
 from oxyline.model import METHODS, Model, output_names, output_vessels
+from oxyline.monitor import check_result
 from oxyline.result import (
     BALANCE,
     SEGMENT_VARIABLES,
@@ -421,6 +422,8 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
         raise
     result = _result(model, s, raw, _run_settings(s, raw), complete="error" not in raw)
     _raise_run_error(raw, result)
+    # physical bounds and mass balance of the recorded species output (warnings only)
+    check_result(result, model.canonical.get("transport"))
     return result
 
 

@@ -52,9 +52,11 @@ from __future__ import annotations
 
 import itertools
 import math
+import warnings
 from collections.abc import Mapping
 from typing import Any
 
+from oxyline import facilitation
 from oxyline.errors import ModelError
 from oxyline.units import MMHG
 
@@ -70,7 +72,8 @@ WALL_KEYS = {
     "mass-transfer": {"model", "k", "po2", "concentration", "permeability"},
     "leveque": {"model", "po2", "concentration", "shear", "enhancement", "permeability",
                 "hb_facilitation"},
-    "graetz": {"model", "po2", "concentration", "enhancement", "permeability", "hb_facilitation"},
+    "graetz": {"model", "po2", "concentration", "enhancement", "permeability", "hb_facilitation",
+               "flow"},
     "permeability": {"model", "permeability", "po2", "concentration"},
 }
 SPECIES_KEYS = {"name", "diffusivity", "decay", "binding", "wall", "inlet", "inlets", "backflow",
@@ -87,6 +90,16 @@ TISSUE_BOUNDARY_LAYERS = ("leveque", "graetz", "mass-transfer", "permeability")
 HYPOXIC_PO2 = 10.0
 TISSUE_RADIAL_CELLS = 4
 FORMULATIONS = ("conservative", "tl-quasisteady")
+MEAN_FLOWS = ("forward-mean", "cycle-mean")
+#: samples per period of a wall flux given as a Python callable (linear in between)
+FLUX_SAMPLES_PER_PERIOD = 200
+D_HB_DEFAULT = 5.5e-12  # m^2/s, facilitated diffusivity of HbO2 (docs/physics.md §3.4)
+
+
+class HemoglobinFacilitationWarning(UserWarning):
+    """``hemoglobin: hill`` (or ``linearized``) with a boundary-layer wall closure whose
+    haemoglobin facilitation is switched off: the wall flux then comes from the dissolved O2
+    only and under-predicts the uptake 2.6–3.1× (docs/physics.md §3.4)."""
 
 
 def _err(element: str, message: str) -> ModelError:
@@ -178,6 +191,13 @@ def _bolus(spec: Any, scale: float, element: str, duration: float | None) -> dic
     return {"kind": "table", "time": times, "value": vals, "interpolation": "linear"}
 
 
+def _table_mean(w: Mapping[str, Any]) -> float:
+    """Time mean of a linear table (the Hb facilitation secant of a tabulated inlet PO2)."""
+    t, v = w["time"], w["value"]
+    area = sum(0.5 * (b - a) * (x + y) for a, b, x, y in zip(t, t[1:], v, v[1:], strict=False))
+    return area / (t[-1] - t[0])
+
+
 def _hill(ox: Mapping[str, Any], alpha_mmhg: float) -> dict[str, float]:
     h = _check(ox.get("hill", {}) or {}, {"p50", "n", "hb", "huefner"}, "oxygen hill")
     p50 = _num(h.get("p50", 26.8), "oxygen hill", "p50", positive=True)
@@ -195,20 +215,70 @@ def hill_saturation(p: float, p50: float, n: float) -> float:
 
 def _facilitation(spec: Any, h: dict[str, float] | None, d: float, p_in: float, p_w: float,
                   element: str) -> float:
-    """E_Hb = (1 + K)^(1/3) (1 + K D_Hb/D)^(2/3) (docs/physics.md §3.4)."""
-    if spec in (None, False):
+    """E_Hb (docs/physics.md §3.4): (1 + K̄)^(1/3) (1 + K̄ D_Hb/D)^(2/3) for linearised binding
+    with the Hill secant K̄; for Hill binding the nonlinear Lévêque layer's factor
+    (`oxyline.facilitation`, validated against the 2-D solution with Hill binding)."""
+    if spec is False:
         return 1.0
     if h is None:
         raise _err(element, "hb_facilitation needs hemoglobin: hill or linearized")
     f = _check(spec if isinstance(spec, Mapping) else {}, {"d_hb"}, f"{element} hb_facilitation")
-    d_hb = _num(f.get("d_hb", 5.5e-12), element, "d_hb", minimum=0.0)
+    d_hb = _num(f.get("d_hb", D_HB_DEFAULT), element, "d_hb", minimum=0.0)
+    if not h.get("linearized"):
+        return facilitation.hill_factor(p_in, p_w, h["alpha"], d, d_hb, h["capacity"], h["p50"],
+                                        h["n"])
     ds = hill_saturation(p_in, h["p50"], h["n"]) - hill_saturation(p_w, h["p50"], h["n"])
     kbar = h["capacity"] * ds / (h["alpha"] * (p_in - p_w)) if p_in != p_w else 0.0
-    return (1.0 + kbar) ** (1.0 / 3.0) * (1.0 + kbar * d_hb / d) ** (2.0 / 3.0)
+    return facilitation.linear_factor(kbar, d, d_hb)
+
+
+def _flux_row(v: Any, element: str) -> list[float]:
+    if isinstance(v, (int, float, str)) and not isinstance(v, bool):
+        return [_num(v, element, "flux")]
+    try:
+        vals = list(v)
+    except TypeError:
+        raise _err(element, f"'flux' must be a number or a list of numbers, got {v!r}") from None
+    if not vals:
+        raise _err(element, "'flux' needs at least one value")
+    return [_num(x, element, "flux") for x in vals]
+
+
+def _flux(spec: Any, element: str, period: float | None, duration: float | None) -> Any:
+    """Canonical prescribed wall flux (mol m^-2 s^-1): a number, one value per segment, a
+    {time, flux} table (rows of one value or one per segment; linear in time, repeating with
+    its own length) or a Python callable f(t) -> number or per-segment values, sampled every
+    period/FLUX_SAMPLES_PER_PERIOD over the whole run (docs/physics.md §3.1 C1)."""
+    if callable(spec):
+        p = period or 1.0
+        end = max(duration or p, p) + p
+        n = math.ceil(end / p * FLUX_SAMPLES_PER_PERIOD) + 1
+        times = [end * i / (n - 1) for i in range(n)]
+        rows = [_flux_row(spec(t), element) for t in times]
+        if len({len(r) for r in rows}) != 1:
+            raise _err(element, "the flux callable must return the same number of values at "
+                                "every time")
+        return {"time": times, "values": rows}
+    if isinstance(spec, Mapping):
+        _check(spec, {"time", "flux"}, f"{element} flux")
+        if "time" not in spec or "flux" not in spec:
+            raise _err(element, "a flux table needs 'time' and 'flux'")
+        t = [_num(x, element, "time") for x in spec["time"]]
+        rows = [_flux_row(r, element) for r in spec["flux"]]
+        if len(t) != len(rows) or len(t) < 2:
+            raise _err(element, "flux 'time' and 'flux' need the same length >= 2")
+        if any(b <= a for a, b in itertools.pairwise(t)):
+            raise _err(element, "flux 'time' must be strictly increasing")
+        if len({len(r) for r in rows}) != 1:
+            raise _err(element, "every row of a flux table needs the same number of values")
+        return {"time": t, "values": rows}
+    row = _flux_row(spec, element)
+    return row[0] if not isinstance(spec, (list, tuple)) and len(row) == 1 else row
 
 
 def _wall(spec: Any, element: str, conc_of: Any, conc_key: str, h: dict[str, float] | None,
-          d: float, p_in: float | None) -> dict[str, Any]:
+          d: float, p_in: float | None, period: float | None = None,
+          duration: float | None = None) -> dict[str, Any]:
     """Canonical wall closure. ``conc_of(mapping)`` reads the wall concentration (PO2 for
     oxygen, concentration for other species)."""
     if spec is None or spec == "none":
@@ -226,7 +296,9 @@ def _wall(spec: Any, element: str, conc_of: Any, conc_key: str, h: dict[str, flo
     if model == "none":
         return out
     if model == "flux":
-        out["flux"] = _num(spec.get("flux"), element, "flux")
+        if "flux" not in spec:
+            raise _err(element, "the flux wall model needs 'flux' (mol m^-2 s^-1)")
+        out["flux"] = _flux(spec["flux"], element, period, duration)
         return out
     cw = conc_of(spec)
     if model == "permeability":
@@ -240,12 +312,23 @@ def _wall(spec: Any, element: str, conc_of: Any, conc_key: str, h: dict[str, flo
         out["k"] = _num(spec.get("k"), element, "k", minimum=0.0)
         return out
     enh = _num(spec.get("enhancement", 1.0), element, "enhancement", minimum=0.0)
-    if spec.get("hb_facilitation") not in (None, False):
+    fac = spec.get("hb_facilitation")
+    if fac is None and h is not None:
+        fac = {}  # haemoglobin: facilitated boundary-layer transport by default (§3.4)
+    if fac is False and h is not None:
+        warnings.warn(f"{element}: hb_facilitation is off with haemoglobin: the {model} wall "
+                      "flux comes from the dissolved O2 only and under-predicts the uptake "
+                      "2.6-3.1x (docs/physics.md §3.4)", HemoglobinFacilitationWarning,
+                      stacklevel=2)
+    if fac not in (None, False):
         if p_in is None:
             raise _err(element, "hb_facilitation needs a constant inlet PO2")
-        enh *= _facilitation(spec["hb_facilitation"], h, d, p_in, cw / h["alpha"] if h else 0.0,
-                             element)
+        enh *= _facilitation(fac, h, d, p_in, cw / h["alpha"] if h else 0.0, element)
     out["enhancement"] = enh
+    if model == "graetz" and "flow" in spec:
+        if spec["flow"] not in MEAN_FLOWS:
+            raise _err(element, f"flow must be one of {MEAN_FLOWS}, got {spec['flow']!r}")
+        out["flow"] = spec["flow"]
     if model == "leveque":
         shear = spec.get("shear", "cycle-mean")
         if shear not in ("cycle-mean", "instantaneous", "relaxed"):
@@ -332,6 +415,8 @@ def _oxygen(ox: Mapping[str, Any], period: float | None, duration: float | None)
     inlet = _wave(ox["inlet"], "po2", alpha, f"{el} inlet", period, duration)
     p_in = inlet["value"] / alpha if inlet["kind"] == "constant" else (
         inlet["mean"] / alpha if inlet["kind"] == "fourier" else None)
+    # the Hb facilitation secant's inlet PO2: a tabulated inlet's time mean
+    p_fac = p_in if p_in is not None else _table_mean(inlet) / alpha
     mode = str(ox.get("hemoglobin", "none"))
     h: dict[str, float] | None = None
     binding: dict[str, Any] = {"kind": "none"}
@@ -341,6 +426,7 @@ def _oxygen(ox: Mapping[str, Any], period: float | None, duration: float | None)
         binding = {"kind": "hill", "solubility": alpha_si, "p50": h["p50"] * MMHG, "n": h["n"],
                    "capacity": h["capacity"]}
         if mode == "linearized":
+            h["linearized"] = 1.0
             lin = _check(ox.get("linearized", {}) or {}, {"p_low", "p_high"}, "oxygen linearized")
             wall = ox.get("wall") if isinstance(ox.get("wall"), Mapping) else {}
             p_low = _num(lin.get("p_low", (wall or {}).get("po2", 60.0)), el, "p_low", positive=True)
@@ -363,7 +449,8 @@ def _oxygen(ox: Mapping[str, Any], period: float | None, duration: float | None)
     if _is_tissue(ox.get("wall")):
         species["wall"], species["tissue"] = _tissue(ox["wall"], el, alpha, h, d, p_in)
     else:
-        species["wall"] = _wall(ox.get("wall", "none"), f"{el}", po2, "po2", h, d, p_in)
+        species["wall"] = _wall(ox.get("wall", "none"), f"{el}", po2, "po2", h, d, p_fac,
+                                period, duration)
     if "inlets" in ox:
         species["inlets"] = {str(k): _wave(v, "po2", alpha, f"{el} inlet '{k}'", period, duration)
                              for k, v in _check(ox["inlets"], set(ox["inlets"]), el).items()}
@@ -387,7 +474,8 @@ def _oxygen(ox: Mapping[str, Any], period: float | None, duration: float | None)
                 if _is_tissue(over.get("wall")):
                     pv[str(name)], pvt[str(name)] = _tissue(over["wall"], vel, alpha, h, d, p_in)
                 else:
-                    pv[str(name)] = _wall(over.get("wall"), vel, po2, "po2", h, d, p_in)
+                    pv[str(name)] = _wall(over.get("wall"), vel, po2, "po2", h, d, p_fac, period,
+                                          duration)
                     pvt[str(name)] = None  # no tissue wall on this vessel
         if pv:
             species["per_vessel"] = pv
@@ -447,7 +535,8 @@ def _species(sp: Mapping[str, Any], i: int, period: float | None,
         "name": str(sp["name"]), "diffusivity": d,
         "decay": _num(sp.get("decay", 0.0), el, "decay", minimum=0.0), "binding": binding,
         "inlet": _wave(sp["inlet"], "concentration", 1.0, f"{el} inlet", period, duration),
-        "wall": _wall(sp.get("wall", "none"), el, conc, "concentration", None, d, None),
+        "wall": _wall(sp.get("wall", "none"), el, conc, "concentration", None, d, None, period,
+                      duration),
     }
     if "inlets" in sp:
         out["inlets"] = {str(k): _wave(v, "concentration", 1.0, f"{el} inlet '{k}'", period,
@@ -459,7 +548,7 @@ def _species(sp: Mapping[str, Any], i: int, period: float | None,
         out["initial"] = _num(sp["initial"], el, "initial", minimum=0.0)
     if "per_vessel" in sp:
         out["per_vessel"] = {str(n): _wall(o.get("wall"), f"{el} per_vessel '{n}'", conc,
-                                           "concentration", None, d, None)
+                                           "concentration", None, d, None, period, duration)
                              for n, o in sp["per_vessel"].items()}
     return out
 

@@ -96,13 +96,14 @@ CLOSURES: dict[str, dict] = {
     "Lévêque cycle-mean": {"model": "leveque", "shear": "cycle-mean"},
     "Lévêque instantaneous": {"model": "leveque", "shear": "instantaneous"},
     "Lévêque relaxed": {"model": "leveque", "shear": "relaxed"},
-    "Graetz": {"model": "graetz"},
-    "Graetz, forward-mean shear (candidate)": {"model": "graetz", "forward_mean": True},
+    "Graetz": {"model": "graetz", "flow": "cycle-mean"},
+    "Graetz, forward-mean flow (default)": {"model": "graetz", "flow": "forward-mean"},
 }
 
 
 def forward_mean_factor(flow: PeriodicFlow, samples: int = 20000) -> float:
-    """Candidate closure, emulated: the shear from the cycle mean of the *forward* flow
+    """The session-5 emulation of the forward-mean closure (now `graetz` with `flow:
+    forward-mean`, docs/validation-oxygen.md §6): the shear from the cycle mean of the *forward* flow
     ⟨max(Q, 0)⟩ instead of ⟨|Q|⟩ (backflow returns fluid whose near-wall layer is already
     depleted). In the Lévêque regime k ∝ Q^{1/3}, so the `enhancement` (⟨Q₊⟩/⟨|Q|⟩)^{1/3} on
     the cycle-mean Graetz law reproduces it (x* ≈ 1e-5: the Q-dependence of the Graetz
@@ -244,7 +245,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="coarse grids (smoke run)")
     ap.add_argument("--only", default="straight,curved,bifurcated")
     ap.add_argument("--skip-convergence", action="store_true")
+    ap.add_argument("--closures", default="",
+                    help="comma-separated parts of closure labels to run (default: all)")
     args = ap.parse_args(argv)
+    if args.closures:
+        keep = [k for k in CLOSURES if any(p.strip() in k for p in args.closures.split(","))]
+        for k in [k for k in CLOSURES if k not in keep]:
+            del CLOSURES[k]
     grid = Grid(16, 24, steps_per_period=40) if args.quick else Grid(40, 48, steps_per_period=100)
 
     def log(msg: str) -> None:

@@ -235,7 +235,7 @@ impl Waveform {
 
 /// Segment k (t[k-1] ≤ τ ≤ t[k]) of the periodic table holding `time`, the interpolation
 /// weights a = (t[k] − τ)/h, b = (τ − t[k-1])/h, and h.
-fn table_locate(t: &[f64], time: f64) -> (usize, f64, f64, f64) {
+pub(crate) fn table_locate(t: &[f64], time: f64) -> (usize, f64, f64, f64) {
     let n = t.len();
     let period = t[n - 1] - t[0];
     let mut rt = (time - t[0]).rem_euclid(period) + t[0];

@@ -1,12 +1,15 @@
-//! The cycle-mean |Q| of the segments, accumulated during the flow-only first pass of a
-//! transport run (see `two_pass`).
+//! The cycle-mean |Q| and signed Q of the segments, accumulated during the flow-only first
+//! pass of a transport run (see `two_pass`).
 
-/// Running mean of |y_i| over the current cycle (for cycle-mean wall shear).
+/// Running means of |y_i| and y_i over the current cycle (for cycle-mean wall shear).
 pub(super) struct MeanAbs {
     unknowns: Vec<usize>,
     sum: Vec<f64>,
-    /// The mean of the last cycle completed.
+    sum_signed: Vec<f64>,
+    /// The mean |y_i| of the last cycle completed.
     pub last: Vec<f64>,
+    /// The mean y_i of the last cycle completed.
+    pub last_signed: Vec<f64>,
     prev: Vec<f64>,
     count: usize,
 }
@@ -22,7 +25,9 @@ impl MeanAbs {
         MeanAbs {
             unknowns,
             sum: vec![0.0; n],
+            sum_signed: vec![0.0; n],
             last: vec![0.0; n],
+            last_signed: vec![0.0; n],
             prev: vec![f64::INFINITY; n],
             count: 0,
         }
@@ -30,20 +35,46 @@ impl MeanAbs {
 
     pub fn start_cycle(&mut self) {
         self.sum.iter_mut().for_each(|v| *v = 0.0);
+        self.sum_signed.iter_mut().for_each(|v| *v = 0.0);
         self.count = 0;
     }
 
     pub fn accumulate(&mut self, y: &[f64]) {
-        for (acc, &i) in self.sum.iter_mut().zip(&self.unknowns) {
+        for ((acc, sgn), &i) in self
+            .sum
+            .iter_mut()
+            .zip(&mut self.sum_signed)
+            .zip(&self.unknowns)
+        {
             *acc += y[i].abs();
+            *sgn += y[i];
         }
         self.count += 1;
+    }
+
+    /// The forward-flow mean of the last cycle, ⟨max(±y_i, 0)⟩ in the direction of the net
+    /// flow = (⟨|y_i|⟩ + |⟨y_i⟩|)/2 (equal to ⟨|y_i|⟩ bit for bit when y_i keeps one sign).
+    pub fn forward(&self) -> Vec<f64> {
+        self.last
+            .iter()
+            .zip(&self.last_signed)
+            .map(|(a, s)| {
+                if a == &s.abs() {
+                    *a
+                } else {
+                    0.5 * (a + s.abs())
+                }
+            })
+            .collect()
     }
 
     /// Close the cycle's mean; true once it has settled (see [`MEAN_FLOW_TOL`]).
     pub fn end_cycle(&mut self) -> bool {
         let c = self.count.max(1) as f64;
         for (l, v) in self.last.iter_mut().zip(&self.sum) {
+            *l = v / c;
+        }
+        for (l, v) in self.last_signed.iter_mut().zip(&self.sum_signed) {
             *l = v / c;
         }
         let scale = self

@@ -1,6 +1,7 @@
-//! The paper's two-pass procedure (docs/physics.md §3.1): closures that need the cycle-mean |Q| get
-//! it from a first, flow-only pass over the same cycles; the coupled run then starts again
-//! from the same initial state. Both passes share one steady state.
+//! The paper's two-pass procedure (docs/physics.md §3.1): closures that need the cycle-mean |Q|
+//! (or the forward-flow mean, §3.6) get it from a first, flow-only pass over the same cycles;
+//! the coupled run then starts again from the same initial state. Both passes share one
+//! steady state.
 
 use super::checkpoint::Checkpoints;
 use super::mean_flow::MeanAbs;
@@ -53,7 +54,7 @@ pub(super) fn run_two_pass(
         if let Some(e) = first.error {
             return Err(e);
         }
-        tr.set_mean_flow(&mean.last)?;
+        tr.set_mean_flows(&mean.last, &mean.forward())?;
         mean_abs_flow = mean.last;
     }
     if let Some(c) = checkpoints.as_deref_mut() {

@@ -98,6 +98,10 @@ fn boundary_values(
 fn vessel_walls(sp: &SpeciesSpec, circuit: &Circuit, el: &str) -> Result<Vec<WallSpec>> {
     sp.wall.validate(&format!("{el} wall"))?;
     let mut walls = vec![sp.wall.clone(); circuit.vessel_names.len()];
+    let mut segments = vec![0usize; circuit.vessel_names.len()];
+    for s in &circuit.segments {
+        segments[s.vessel] += 1;
+    }
     for (vname, w) in &sp.per_vessel {
         let Some(vi) = circuit.vessel_names.iter().position(|n| n == vname) else {
             return Err(bad(
@@ -107,6 +111,20 @@ fn vessel_walls(sp: &SpeciesSpec, circuit: &Circuit, el: &str) -> Result<Vec<Wal
         };
         w.validate(&format!("{el} wall of vessel '{vname}'"))?;
         walls[vi] = w.clone();
+    }
+    for ((w, name), &n) in walls.iter().zip(&circuit.vessel_names).zip(&segments) {
+        if let WallSpec::Flux { flux } = w {
+            if flux.width() != 1 && flux.width() != n {
+                return Err(bad(
+                    &format!("{el} wall of vessel '{name}'"),
+                    format!(
+                        "wall flux has {} values per time but the vessel has {n} segments \
+                         (give one value, or one per segment)",
+                        flux.width()
+                    ),
+                ));
+            }
+        }
     }
     Ok(walls)
 }
@@ -723,7 +741,11 @@ impl Plan {
             .collect();
         // laws that do not need the mean flow are final now
         let zero = vec![0.0; self.segments.len()];
-        let laws = Laws::evaluate_all(self, &zero, false)?;
+        let mean = MeanFlows {
+            abs: &zero,
+            forward: &zero,
+        };
+        let laws = Laws::evaluate_all(self, mean, false)?;
         self.base_laws = laws.into_iter().map(Arc::new).collect();
         Ok(())
     }

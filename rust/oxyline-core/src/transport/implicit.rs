@@ -34,6 +34,7 @@ impl Transport {
     ) -> Result<()> {
         self.ensure_scratch();
         let t_af = time + alpha_f * dt;
+        self.update_wall_flux(t_af);
         self.load_flows_between(t_af, y0, y1, alpha_f);
         if self.fused_applies() {
             return self.fused_tree_step(t_af, dt, z);

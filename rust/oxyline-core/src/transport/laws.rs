@@ -3,19 +3,42 @@
 #[allow(unused_imports)]
 use super::*;
 
+/// The cycle means of every segment's flow that the closures read (two-pass run).
+#[derive(Clone, Copy)]
+pub(super) struct MeanFlows<'a> {
+    /// ⟨|Q|⟩.
+    pub abs: &'a [f64],
+    /// ⟨max(±Q, 0)⟩ in the direction of the net flow (= `abs` without reversal).
+    pub forward: &'a [f64],
+}
+
+/// Position of every segment in its vessel, counted in segment order (from the inlet).
+fn segment_index_in_vessel(segment_vessels: &[u32], n_vessels: usize) -> Vec<usize> {
+    let mut count = vec![0usize; n_vessels];
+    segment_vessels
+        .iter()
+        .map(|&v| {
+            let k = count[v as usize];
+            count[v as usize] += 1;
+            k
+        })
+        .collect()
+}
+
 impl Laws {
-    /// The laws of every species of `plan` for the cycle-mean |Q| `mean_abs` (per segment).
-    /// Before the final pass (`final_pass` false: at build, before the mean flow is known)
-    /// the closures that need the mean flow get a zero wall and no relaxed shear.
+    /// The laws of every species of `plan` for the cycle means `mean` (per segment: ⟨|Q|⟩
+    /// and the forward-flow mean, see `closure::MeanFlow`). Before the final pass
+    /// (`final_pass` false: at build, before the mean flow is known) the closures that need
+    /// the mean flow get a zero wall and no relaxed shear.
     pub(super) fn evaluate_all(
         plan: &Plan,
-        mean_abs: &[f64],
+        mean: MeanFlows<'_>,
         final_pass: bool,
     ) -> Result<Vec<Laws>> {
         let mut offset = plan.species.len() * (plan.cells.len() + 4);
         let mut all = Vec::with_capacity(plan.species.len());
         for sp in &plan.species {
-            let mut laws = Laws::evaluate(plan, sp, mean_abs, final_pass)?;
+            let mut laws = Laws::evaluate(plan, sp, mean, final_pass)?;
             laws.relax_offset = offset;
             offset += laws.relax.len();
             all.push(laws);
@@ -23,7 +46,13 @@ impl Laws {
         Ok(all)
     }
 
-    fn evaluate(plan: &Plan, sp: &SpeciesPlan, mean_abs: &[f64], final_pass: bool) -> Result<Laws> {
+    fn evaluate(
+        plan: &Plan,
+        sp: &SpeciesPlan,
+        mean: MeanFlows<'_>,
+        final_pass: bool,
+    ) -> Result<Laws> {
+        let mean_abs = mean.abs;
         let nc = plan.cells.len();
         let mut l = Laws {
             cell_g: vec![0.0; nc],
@@ -42,10 +71,22 @@ impl Laws {
         }
         let element = format!("species '{}' wall", sp.name);
         l.laws.reserve_exact(plan.pieces.len());
+        let index = segment_index_in_vessel(&plan.segment_vessels, sp.walls.len());
+        let mut tables = wall_flux::TableBuilder::new(sp.walls.len());
         for (p, piece) in plan.pieces.iter().enumerate() {
             let j = piece.seg as usize;
             let seg = &plan.segments[j];
-            let vessel_wall = &sp.walls[plan.segment_vessels[j] as usize];
+            let vessel = plan.segment_vessels[j] as usize;
+            let vessel_wall = &sp.walls[vessel];
+            let q_mean = match vessel_wall.mean_flow() {
+                closure::MeanFlow::CycleMean => mean_abs[j],
+                closure::MeanFlow::ForwardMean => mean.forward[j],
+            };
+            if let WallSpec::Flux { flux } = vessel_wall {
+                if has_area(seg) && flux.table().is_some() {
+                    tables.add(vessel, flux, p, piece, index[j]);
+                }
+            }
             let law = if !has_area(seg) || (vessel_wall.needs_mean_flow() && !final_pass) {
                 SegmentLaw::Fixed {
                     g: 0.0,
@@ -53,7 +94,7 @@ impl Laws {
                     q: 0.0,
                 }
             } else {
-                vessel_wall.segment_law(&piece.wall, sp.diffusivity, mean_abs[j], &element)?
+                vessel_wall.segment_law(&piece.wall, index[j], sp.diffusivity, q_mean, &element)?
             };
             match law {
                 SegmentLaw::Fixed { g, cw, q } => {
@@ -84,7 +125,9 @@ impl Laws {
             .zip(&l.cell_gcw)
             .map(|(q, gcw)| q - gcw)
             .collect();
+        l.flux_tables = tables.finish(&l.cell_q);
         l.has_wall = !l.dynamic.is_empty()
+            || l.flux_tables.is_some()
             || l.cell_g.iter().any(|&g| g != 0.0)
             || l.cell_q.iter().any(|&q| q != 0.0);
         Ok(l)

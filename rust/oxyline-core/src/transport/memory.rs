@@ -45,6 +45,7 @@ impl Heap for Laws {
             + self.relax.heap()
             + self.relax_of_seg.heap()
             + self.dynamic_segs.heap()
+            + self.flux_tables.as_ref().map_or(0, |t| t.heap_bytes())
     }
 }
 

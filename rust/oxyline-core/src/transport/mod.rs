@@ -40,6 +40,7 @@ mod rhs;
 mod state;
 mod stiffness;
 mod tissue; // wall/tissue compartment (issue 12 item 6)
+mod wall_flux;
 pub use stiffness::ReactionRate;
 pub use tissue::{TISSUE_BALANCE_COLUMNS, TISSUE_SEGMENT_COLUMNS, TISSUE_VESSEL_COLUMNS};
 
@@ -140,6 +141,9 @@ struct Laws {
     relax_offset: usize,
     /// Segments with dynamic pieces (their shear is loaded by `load_shear`).
     dynamic_segs: Vec<usize>,
+    /// Prescribed wall fluxes given as time tables: `cell_q`/`cell_wc` of their cells are
+    /// set to the current time by `update_wall_flux` (None: no table).
+    flux_tables: Option<Arc<wall_flux::FluxTables>>,
     has_wall: bool,
 }
 
@@ -368,9 +372,21 @@ impl Transport {
         }
     }
 
-    /// Evaluate the segment laws of this run; `mean_abs[j]` is segment j's cycle-mean |Q|.
+    /// Evaluate the segment laws of this run; `mean_abs[j]` is segment j's cycle-mean |Q|
+    /// (taken as its forward-flow mean too: a flow without reversal).
     pub fn set_mean_flow(&mut self, mean_abs: &[f64]) -> Result<()> {
-        let laws = Laws::evaluate_all(&self.plan, mean_abs, true)?;
+        self.set_mean_flows(mean_abs, mean_abs)
+    }
+
+    /// Evaluate the segment laws of this run from segment j's cycle-mean |Q| `mean_abs[j]` and
+    /// its forward-flow mean `mean_forward[j]` = ⟨max(±Q, 0)⟩ in the direction of the net flow
+    /// (docs/physics.md §3.6).
+    pub fn set_mean_flows(&mut self, mean_abs: &[f64], mean_forward: &[f64]) -> Result<()> {
+        let mean = MeanFlows {
+            abs: mean_abs,
+            forward: mean_forward,
+        };
+        let laws = Laws::evaluate_all(&self.plan, mean, true)?;
         let nsegs = self.plan.segments.len();
         for (sp, l) in self.species.iter_mut().zip(laws) {
             if !l.dynamic_segs.is_empty() && sp.shear_cbrt.len() != nsegs {

@@ -16,6 +16,7 @@ impl Transport {
         out: &mut Vec<f64>,
     ) -> Result<()> {
         self.ensure_scratch();
+        self.update_wall_flux(time);
         let nc = self.plan.cells.len();
         let nsp = self.species.len();
         self.volumes(y, time)?;

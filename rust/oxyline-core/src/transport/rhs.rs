@@ -7,6 +7,7 @@ impl Transport {
     /// Explicit right-hand side dz/dt at (t, y) for the monolithic RK4 step.
     pub fn rhs(&mut self, time: f64, y: &[f64], z: &[f64], dz: &mut [f64]) -> Result<()> {
         self.ensure_scratch();
+        self.update_wall_flux(time);
         let nc = self.plan.cells.len();
         self.volumes(y, time)?;
         self.load_flows(time, y);
