@@ -166,10 +166,12 @@ impl Forward<'_> {
 
 impl Transport {
     /// Whether `implicit_step` takes the fused tree step: a forest, the conservative
-    /// formulation, and no species whose wall follows the shear.
+    /// formulation, no species whose wall follows the shear, and no tissue wall (its columns
+    /// are eliminated in the row-by-row sweep, `tissue_rows`).
     pub(super) fn fused_applies(&self) -> bool {
         self.plan.tree.is_some()
             && self.plan.formulation == Formulation::Conservative
+            && self.plan.tissue.is_empty()
             && (0..self.species.len()).all(|s| self.species[s].laws.dynamic.is_empty())
     }
 
