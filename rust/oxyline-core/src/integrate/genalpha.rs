@@ -22,8 +22,10 @@ pub struct GenAlpha<'a> {
     gamma: f64,
     control: NewtonControl,
     lu: SparseLu,
-    /// Number of values of the iteration matrix (the stamps of `jacobian_stamps`).
+    /// Number of values of the iteration matrix (the stamps of `jacobian_stamps`, then two per
+    /// chain-rule capacitor from `chain_base` on).
     n_stamps: usize,
+    chain_base: usize,
     factored: bool,
     f: Vec<f64>,
     r: Vec<f64>,
@@ -53,13 +55,24 @@ impl<'a> GenAlpha<'a> {
         let am = 0.5 * (3.0 - rho_inf) / (1.0 + rho_inf);
         let af = 1.0 / (1.0 + rho_inf);
         let gamma = 0.5 + am - af;
-        let stamps = jacobian_stamps(dae);
+        let mut stamps = jacobian_stamps(dae);
+        let chain_base = stamps.len();
+        for c in &dae.chain_rule {
+            stamps.extend([(c.node, c.inlet), (c.node, c.flow)]);
+        }
         let lu = SparseLu::analyse(dae.n, &stamps)?;
         let n = dae.n;
-        let e = match regime {
+        let mut e = match regime {
             Regime::Transient => Cow::Borrowed(dae.e.as_slice()),
             _ => Cow::Owned(dae.mass(regime)),
         };
+        if !dae.chain_rule.is_empty() {
+            // a chain-rule capacitor's row has its E ẏ term on the inlet pressure and the flow
+            let m = e.to_mut();
+            for c in &dae.chain_rule {
+                m[c.node] = 0.0;
+            }
+        }
         let nonlinear = if dae.is_linear() { 0 } else { n };
         Ok(GenAlpha {
             dae,
@@ -72,6 +85,7 @@ impl<'a> GenAlpha<'a> {
             control,
             lu,
             n_stamps: stamps.len(),
+            chain_base,
             factored: false,
             f: vec![0.0; n],
             r: vec![0.0; n],
@@ -83,12 +97,24 @@ impl<'a> GenAlpha<'a> {
     }
 
     /// Factorise the iteration matrix at the α_f level `y_af` (read for the stenosis slopes
-    /// only). Its values are built here and dropped: a linear circuit factorises once.
-    fn factor(&mut self, time: f64, y_af: &[f64]) -> Result<()> {
+    /// only) and the α_m level `yd_am` (read for chain-rule capacitors only). Its values are
+    /// built here and dropped: a linear circuit factorises once.
+    fn factor(&mut self, time: f64, y_af: &[f64], yd_am: &[f64]) -> Result<()> {
         let c = self.af * self.gamma * self.dt;
         let am_e: Vec<f64> = self.e.iter().map(|e| self.am * e).collect();
         let mut kvals = vec![0.0; self.n_stamps];
-        jacobian_values(self.dae, c, &am_e, y_af, &mut kvals);
+        let (linear, chain) = kvals.split_at_mut(self.chain_base);
+        jacobian_values(self.dae, c, &am_e, y_af, linear);
+        for (k, cr) in self.dae.chain_rule.iter().enumerate() {
+            // derivatives of C ẏ_in − C (R + 2S|Q|) ẏ_Q (at y_αf, ẏ_αm) with respect to the
+            // Newton unknown ẏ_{n+1}: ∂ẏ_αm/∂ẏ = α_m, ∂y_αf/∂ẏ = α_f γ Δt
+            let q = y_af[cr.flow];
+            let sign = f64::from(i8::from(q > 0.0) - i8::from(q < 0.0));
+            let slope = cr.resistance + 2.0 * cr.stenosis * q.abs();
+            chain[2 * k] = self.am * cr.capacitance;
+            chain[2 * k + 1] = -self.am * cr.capacitance * slope
+                - c * 2.0 * cr.capacitance * cr.stenosis * sign * yd_am[cr.flow];
+        }
         self.lu.factor(&kvals).map_err(|m| singular(time, &m))?;
         self.factored = true;
         Ok(())
@@ -155,11 +181,27 @@ impl NewtonProblem for Iterate<'_, '_> {
         for (i, ri) in r.iter_mut().enumerate() {
             *ri -= ga.e[i] * (self.yd[i] + am * (ga.yd_new[i] - self.yd[i]));
         }
+        // svZeroDSolver's capacitor rows: C (ẏ_in − (R + 2S|Q|) ẏ_Q) at (y_αf, ẏ_αm)
+        let yd_am = |i: usize| self.yd[i] + am * (ga.yd_new[i] - self.yd[i]);
+        for cr in &ga.dae.chain_rule {
+            let slope = cr.resistance + 2.0 * cr.stenosis * ga.y_af[cr.flow].abs();
+            r[cr.node] -= cr.capacitance * (yd_am(cr.inlet) - slope * yd_am(cr.flow));
+        }
     }
     fn factor(&mut self, _: usize) -> Result<()> {
         // stenoses make the iteration matrix depend on the iterate
         let y_af = std::mem::take(&mut self.ga.y_af);
-        let done = self.ga.factor(self.t_af, &y_af);
+        let yd_am: Vec<f64> = if self.ga.dae.chain_rule.is_empty() {
+            Vec::new()
+        } else {
+            let am = self.ga.am;
+            let (yd, yd_new) = (self.yd, &self.ga.yd_new);
+            yd.iter()
+                .zip(yd_new)
+                .map(|(&a, &b)| a + am * (b - a))
+                .collect()
+        };
+        let done = self.ga.factor(self.t_af, &y_af, &yd_am);
         self.ga.y_af = y_af;
         done
     }
@@ -201,7 +243,7 @@ impl GenAlpha<'_> {
         let t_af = time + af * dt;
         self.dae.forcing_into(t_af, self.regime, &mut self.f);
         if !self.factored {
-            self.factor(t_af, y)?;
+            self.factor(t_af, y, &[])?;
         }
         // with y_new = y and ẏ_new = pred·ẏ: y_αf = y, ẏ_αm = ẏ (1 + αm (pred − 1))
         let c_am = 1.0 + am * (pred - 1.0);
