@@ -902,7 +902,7 @@ def _run_streamed(model: Model, native: Mapping[str, Any], s: RunSettings, metho
         stride = k
     else:
         stride = 1
-    kw, sub = _core_kwargs(model, native, s, method)
+    kw, _ = _core_kwargs(model, native, s, method)
     kw["output_every"] = s.dt * stride if method == "generalized-alpha" else s.dt
     # The core streams its rows in small chunks, each written straight into the output-major
     # (output, time, width) block that becomes the DataFrame's float block: the run never
