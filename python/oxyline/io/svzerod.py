@@ -380,6 +380,103 @@ def file_units(cfg: Mapping[str, Any], units: str | None = None) -> str:
     return "cgs" if value.lower() == "cgs" else "SI"
 
 
+def _junctions(junctions: Any, ids: Mapping[Any, str], bcs: Mapping[str, Any],
+               vessel_names: set[str], attach: Any, layout: _Layout) -> list[dict[str, Any]]:
+    """svZeroDSolver's junctions: shared nodes (NORMAL_JUNCTION), or hidden vessels around
+    a node (BloodVesselJunction, resistive_junction), attached to the vessels' ends with
+    ``attach``; their svZeroDSolver nodes and internal variables go to ``layout``. Returns the
+    hidden vessels."""
+    if not isinstance(junctions, list):
+        raise ModelError("junctions: must be a list")
+    hidden: list[dict[str, Any]] = []
+    for i, j in enumerate(junctions):
+        j, jname, kind, el = _entry(j, f"junctions[{i}]", "junction_name", "junction",
+                                    JUNCTION_KEYS, "junction_type", JUNCTION_TYPES)
+        el = f"{kind} '{jname}'"
+        if jname in bcs or jname in vessel_names:
+            raise ModelError(f"{el}: name already used by another block")
+
+        def resolve(key: str, by_id: bool, j: Mapping[str, Any] = j, el: str = el) -> list[str]:
+            items = j[key]
+            if not isinstance(items, list):
+                raise ModelError(f"{el}: '{key}' must be a list")
+            out = []
+            for x in items:
+                if isinstance(x, bool) or not isinstance(x, (int, str)):
+                    raise ModelError(f"{el}: '{key}' must list vessel ids or names, got {x!r}")
+                if by_id:
+                    if x not in ids:
+                        raise ModelError(f"{el}: '{key}' names vessel_id {x!r}, which no vessel has")
+                    out.append(ids[x])
+                elif x in vessel_names:
+                    out.append(str(x))
+                elif x in bcs:
+                    raise UnsupportedElement(f"{el}: connecting boundary condition '{x}' to a "
+                                             "junction is not supported")
+                else:
+                    raise ModelError(f"{el}: '{key}' names block '{x}', which is not defined")
+            return out
+
+        if "inlet_vessels" in j and "outlet_vessels" in j:
+            inlets, outlets = resolve("inlet_vessels", True), resolve("outlet_vessels", True)
+        elif "inlet_blocks" in j and "outlet_blocks" in j:
+            inlets, outlets = resolve("inlet_blocks", False), resolve("outlet_blocks", False)
+        else:
+            raise ModelError(f"{el}: needs 'inlet_vessels' and 'outlet_vessels' (vessel ids) or "
+                             "'inlet_blocks' and 'outlet_blocks' (names)")
+        what = f"junction '{jname}'"
+        layout.connections += [(name, jname) for name in inlets]
+        layout.connections += [(jname, name) for name in outlets]
+        if kind in NORMAL_JUNCTIONS:
+            _check_params(j.get("junction_values", {}), set(), el)
+            for name in inlets:
+                attach(name, "out", jname, what)
+            for name in outlets:
+                attach(name, "in", jname, what)
+            continue
+        if kind == "resistive_junction":
+            # P_in,i - P_c = R_i Q_in,i and P_c - P_out,k = R_k Q_out,k around a centre node
+            # (svZeroDSolver's ResistiveJunction): one hidden R vessel per port, R listed for
+            # the inlets, then the outlets
+            vals = _check_params(_required(j, "junction_values", el), {"R"}, el)
+            r = _numlist(_required(vals, "R", el), el, "R")
+            if len(r) != len(inlets) + len(outlets):
+                raise ModelError(f"{el}: 'R' has {len(r)} entries for {len(inlets)} inlets and "
+                                 f"{len(outlets)} outlets")
+            ports = [(name, f"{name}:{jname}", jname) for name in inlets]
+            ports += [(name, jname, f"{jname}:{name}") for name in outlets]
+            for k, (name, a, b) in enumerate(ports):
+                hidden.append({"name": a if k < len(inlets) else b, "from": a, "to": b,
+                               "arrangement": "RCL", "output": False,
+                               "lumped": {"resistance": r[k]}})
+                attach(name, "out" if k < len(inlets) else "in", hidden[-1]["name"], what)
+            # its pressure_c: the centre end of the last port's hidden vessel
+            layout.internal.append(("junction", jname, (hidden[-1]["name"], 0 if outlets else 1)))
+            continue
+        # BloodVesselJunction: one inlet, an R(+S)-L branch (no C) to every outlet
+        vals = _check_params(_required(j, "junction_values", el), BVJ_PARAMS, el)
+        if len(inlets) != 1:
+            raise UnsupportedElement(f"{el}: {len(inlets)} inlets; a BloodVesselJunction has "
+                                     "exactly one")
+        lists = {}
+        for key in BVJ_PARAMS:
+            lists[key] = _numlist(_required(vals, key, el), el, key)
+            if len(lists[key]) != len(outlets):
+                raise ModelError(f"{el}: '{key}' has {len(lists[key])} entries for "
+                                 f"{len(outlets)} outlets")
+        attach(inlets[0], "out", jname, what)
+        for k, name in enumerate(outlets):
+            node = f"{jname}:{name}"
+            hidden.append({
+                "name": node, "from": jname, "to": node, "arrangement": "RCL", "output": False,
+                "lumped": {"resistance": lists["R_poiseuille"][k], "capacitance": 0.0,
+                           "inductance": lists["L"][k],
+                           "stenosis_coefficient": lists["stenosis_coefficient"][k]},
+            })
+            attach(name, "in", node, what)
+
+    return hidden
+
 def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | None = None
              ) -> tuple[dict[str, Any], RunSettings, _Layout]:
     """svZeroDSolver config -> (oxyline native dict, svZeroDSolver run settings, output
@@ -585,95 +682,7 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
     vessel_names = {x["name"] for x in vessels}
 
     # ---- junctions
-    junctions = cfg.get("junctions", [])
-    if not isinstance(junctions, list):
-        raise ModelError("junctions: must be a list")
-    hidden: list[dict[str, Any]] = []
-    for i, j in enumerate(junctions):
-        j, jname, kind, el = _entry(j, f"junctions[{i}]", "junction_name", "junction",
-                                    JUNCTION_KEYS, "junction_type", JUNCTION_TYPES)
-        el = f"{kind} '{jname}'"
-        if jname in bcs or jname in vessel_names:
-            raise ModelError(f"{el}: name already used by another block")
-
-        def resolve(key: str, by_id: bool, j: Mapping[str, Any] = j, el: str = el) -> list[str]:
-            items = j[key]
-            if not isinstance(items, list):
-                raise ModelError(f"{el}: '{key}' must be a list")
-            out = []
-            for x in items:
-                if isinstance(x, bool) or not isinstance(x, (int, str)):
-                    raise ModelError(f"{el}: '{key}' must list vessel ids or names, got {x!r}")
-                if by_id:
-                    if x not in ids:
-                        raise ModelError(f"{el}: '{key}' names vessel_id {x!r}, which no vessel has")
-                    out.append(ids[x])
-                elif x in vessel_names:
-                    out.append(str(x))
-                elif x in bcs:
-                    raise UnsupportedElement(f"{el}: connecting boundary condition '{x}' to a "
-                                             "junction is not supported")
-                else:
-                    raise ModelError(f"{el}: '{key}' names block '{x}', which is not defined")
-            return out
-
-        if "inlet_vessels" in j and "outlet_vessels" in j:
-            inlets, outlets = resolve("inlet_vessels", True), resolve("outlet_vessels", True)
-        elif "inlet_blocks" in j and "outlet_blocks" in j:
-            inlets, outlets = resolve("inlet_blocks", False), resolve("outlet_blocks", False)
-        else:
-            raise ModelError(f"{el}: needs 'inlet_vessels' and 'outlet_vessels' (vessel ids) or "
-                             "'inlet_blocks' and 'outlet_blocks' (names)")
-        what = f"junction '{jname}'"
-        layout.connections += [(name, jname) for name in inlets]
-        layout.connections += [(jname, name) for name in outlets]
-        if kind in NORMAL_JUNCTIONS:
-            _check_params(j.get("junction_values", {}), set(), el)
-            for name in inlets:
-                attach(name, "out", jname, what)
-            for name in outlets:
-                attach(name, "in", jname, what)
-            continue
-        if kind == "resistive_junction":
-            # P_in,i - P_c = R_i Q_in,i and P_c - P_out,k = R_k Q_out,k around a centre node
-            # (svZeroDSolver's ResistiveJunction): one hidden R vessel per port, R listed for
-            # the inlets, then the outlets
-            vals = _check_params(_required(j, "junction_values", el), {"R"}, el)
-            r = _numlist(_required(vals, "R", el), el, "R")
-            if len(r) != len(inlets) + len(outlets):
-                raise ModelError(f"{el}: 'R' has {len(r)} entries for {len(inlets)} inlets and "
-                                 f"{len(outlets)} outlets")
-            ports = [(name, f"{name}:{jname}", jname) for name in inlets]
-            ports += [(name, jname, f"{jname}:{name}") for name in outlets]
-            for k, (name, a, b) in enumerate(ports):
-                hidden.append({"name": a if k < len(inlets) else b, "from": a, "to": b,
-                               "arrangement": "RCL", "output": False,
-                               "lumped": {"resistance": r[k]}})
-                attach(name, "out" if k < len(inlets) else "in", hidden[-1]["name"], what)
-            # its pressure_c: the centre end of the last port's hidden vessel
-            layout.internal.append(("junction", jname, (hidden[-1]["name"], 0 if outlets else 1)))
-            continue
-        # BloodVesselJunction: one inlet, an R(+S)-L branch (no C) to every outlet
-        vals = _check_params(_required(j, "junction_values", el), BVJ_PARAMS, el)
-        if len(inlets) != 1:
-            raise UnsupportedElement(f"{el}: {len(inlets)} inlets; a BloodVesselJunction has "
-                                     "exactly one")
-        lists = {}
-        for key in BVJ_PARAMS:
-            lists[key] = _numlist(_required(vals, key, el), el, key)
-            if len(lists[key]) != len(outlets):
-                raise ModelError(f"{el}: '{key}' has {len(lists[key])} entries for "
-                                 f"{len(outlets)} outlets")
-        attach(inlets[0], "out", jname, what)
-        for k, name in enumerate(outlets):
-            node = f"{jname}:{name}"
-            hidden.append({
-                "name": node, "from": jname, "to": node, "arrangement": "RCL", "output": False,
-                "lumped": {"resistance": lists["R_poiseuille"][k], "capacitance": 0.0,
-                           "inductance": lists["L"][k],
-                           "stenosis_coefficient": lists["stenosis_coefficient"][k]},
-            })
-            attach(name, "in", node, what)
+    hidden = _junctions(cfg.get("junctions", []), ids, bcs, vessel_names, attach, layout)
 
     if not vessels:
         raise ModelError("model: no vessels")
