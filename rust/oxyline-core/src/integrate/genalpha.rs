@@ -22,10 +22,10 @@ pub struct GenAlpha<'a> {
     gamma: f64,
     control: NewtonControl,
     lu: SparseLu,
-    /// Number of values of the iteration matrix (the stamps of `jacobian_stamps`, then two per
-    /// chain-rule capacitor from `chain_base` on).
+    /// Number of values of the iteration matrix (the stamps of `jacobian_stamps`).
     n_stamps: usize,
-    chain_base: usize,
+    /// For each chain-rule capacitor, the value index of its F entry (node row, flow column).
+    chain_flow_entry: Vec<usize>,
     factored: bool,
     f: Vec<f64>,
     r: Vec<f64>,
@@ -55,12 +55,18 @@ impl<'a> GenAlpha<'a> {
         let am = 0.5 * (3.0 - rho_inf) / (1.0 + rho_inf);
         let af = 1.0 / (1.0 + rho_inf);
         let gamma = 0.5 + am - af;
-        let mut stamps = jacobian_stamps(dae);
-        let chain_base = stamps.len();
-        for c in &dae.chain_rule {
-            stamps.extend([(c.node, c.inlet), (c.node, c.flow)]);
-        }
+        let stamps = jacobian_stamps(dae);
         let lu = SparseLu::analyse(dae.n, &stamps)?;
+        // (the node row of a capacitor holds its R branch's flow: the incidence)
+        let chain_flow_entry = dae
+            .chain_rule
+            .iter()
+            .map(|c| {
+                (dae.f.ptr[c.node]..dae.f.ptr[c.node + 1])
+                    .find(|&k| dae.f.col[k] as usize == c.flow)
+                    .expect("a capacitor node's row holds its inflow")
+            })
+            .collect();
         let n = dae.n;
         let mut e = match regime {
             Regime::Transient => Cow::Borrowed(dae.e.as_slice()),
@@ -85,7 +91,7 @@ impl<'a> GenAlpha<'a> {
             control,
             lu,
             n_stamps: stamps.len(),
-            chain_base,
+            chain_flow_entry,
             factored: false,
             f: vec![0.0; n],
             r: vec![0.0; n],
@@ -99,21 +105,24 @@ impl<'a> GenAlpha<'a> {
     /// Factorise the iteration matrix at the α_f level `y_af` (read for the stenosis slopes
     /// only) and the α_m level `yd_am` (read for chain-rule capacitors only). Its values are
     /// built here and dropped: a linear circuit factorises once.
+    ///
+    /// A chain-rule capacitor's row C (ẏ_in − (R + 2S|Q|) ẏ_Q) + Q_out − Q_in couples the node
+    /// to the inlet pressure, which would break the tree pattern of the circuit. Newton solves
+    /// instead with that row plus w = α_m C/(α_f γ Δt) times its R branch's row
+    /// (−P_in + P_c + (R + S|Q|)Q): the same iterates, and the inlet coupling and the
+    /// α_m C (R + 2S|Q|) terms cancel, leaving α_m C on the diagonal and
+    /// −α_f γ Δt (1 + 2CS sgn(Q) ẏ_Q) at the flow (see `Iterate::solve` for the right side).
     fn factor(&mut self, time: f64, y_af: &[f64], yd_am: &[f64]) -> Result<()> {
         let c = self.af * self.gamma * self.dt;
         let am_e: Vec<f64> = self.e.iter().map(|e| self.am * e).collect();
         let mut kvals = vec![0.0; self.n_stamps];
-        let (linear, chain) = kvals.split_at_mut(self.chain_base);
-        jacobian_values(self.dae, c, &am_e, y_af, linear);
-        for (k, cr) in self.dae.chain_rule.iter().enumerate() {
-            // derivatives of C ẏ_in − C (R + 2S|Q|) ẏ_Q (at y_αf, ẏ_αm) with respect to the
-            // Newton unknown ẏ_{n+1}: ∂ẏ_αm/∂ẏ = α_m, ∂y_αf/∂ẏ = α_f γ Δt
+        jacobian_values(self.dae, c, &am_e, y_af, &mut kvals);
+        let nf = self.dae.f.val.len();
+        for (cr, &k) in self.dae.chain_rule.iter().zip(&self.chain_flow_entry) {
             let q = y_af[cr.flow];
             let sign = f64::from(i8::from(q > 0.0) - i8::from(q < 0.0));
-            let slope = cr.resistance + 2.0 * cr.stenosis * q.abs();
-            chain[2 * k] = self.am * cr.capacitance;
-            chain[2 * k + 1] = -self.am * cr.capacitance * slope
-                - c * 2.0 * cr.capacitance * cr.stenosis * sign * yd_am[cr.flow];
+            kvals[nf + cr.node] += self.am * cr.capacitance;
+            kvals[k] -= c * 2.0 * cr.capacitance * cr.stenosis * sign * yd_am[cr.flow];
         }
         self.lu.factor(&kvals).map_err(|m| singular(time, &m))?;
         self.factored = true;
@@ -206,6 +215,12 @@ impl NewtonProblem for Iterate<'_, '_> {
         done
     }
     fn solve(&mut self, r: &mut [f64]) -> Result<()> {
+        // the row combination of `GenAlpha::factor` on the right side
+        let ga = &*self.ga;
+        let w = ga.am / (ga.af * ga.gamma * ga.dt);
+        for cr in &ga.dae.chain_rule {
+            r[cr.node] += w * cr.capacitance * r[cr.flow];
+        }
         if self.ga.lu.solve_in_place(r) {
             Ok(())
         } else {
