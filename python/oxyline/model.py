@@ -39,7 +39,10 @@ VESSEL_KEYS = {
     "youngs_modulus", "poisson_ratio", "segments", "lumped", "arrangement", "output",
     "description",
 }
-LUMPED_KEYS = {"resistance", "inductance", "capacitance", "stenosis_coefficient"}
+LUMPED_KEYS = {"resistance", "inductance", "capacitance", "stenosis_coefficient",
+               "stenosis_form"}
+#: how generalized-α discretises an RCL vessel's stenosis (docs/svzerod.md, "C + stenosis")
+STENOSIS_FORMS = ("branch", "svzerod")
 BC_KEYS = {
     "flow": {"type", "time", "flow", "value", "fourier", "interpolation", "steady"},
     "pressure": {"type", "time", "pressure", "value", "fourier", "interpolation", "steady"},
@@ -277,7 +280,12 @@ def _vessel(v: Any, i: int, units: str) -> dict[str, Any]:
         cv["lumped"] = {k: factor(units, q[k]) * (_number(lp[k], el, k)
                                                   if k == "stenosis_coefficient" else
                                                   _positive(lp[k], el, k, allow_zero=True))
-                        for k in lp}
+                        for k in lp if k != "stenosis_form"}
+        if "stenosis_form" in lp:
+            if lp["stenosis_form"] not in STENOSIS_FORMS:
+                raise _err(el, f"lumped stenosis_form must be one of {list(STENOSIS_FORMS)}, "
+                               f"got {lp['stenosis_form']!r}")
+            cv["lumped"]["stenosis_form"] = lp["stenosis_form"]
     else:
         if "length" not in v:
             raise _err(el, "missing 'length' (or give 'lumped' values)")

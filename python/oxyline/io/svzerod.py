@@ -1,9 +1,10 @@
 """svZeroDSolver drop-in: run svZeroDSolver JSON inputs with oxyline's core.
 
 :func:`simulate` takes an svZeroDSolver configuration (a dict or a path to a JSON file) and
-returns the same pandas DataFrame as ``svzerod.simulate`` for vessel-based output: columns
-``name, time, flow_in, flow_out, pressure_in, pressure_out``, rows grouped by vessel in file
-order. The frame holds the file's own numbers, as svZeroDSolver's does (the equations are
+returns the same pandas DataFrame as ``svzerod.simulate``: for vessel-based output columns
+``name, time, flow_in, flow_out, pressure_in, pressure_out`` (and ``d_*`` with
+``output_derivative``), rows grouped by vessel in file order; with ``output_variable_based``
+columns ``name, time, y`` (and ``ydot``), rows grouped by svZeroDSolver variable. The frame holds the file's own numbers, as svZeroDSolver's does (the equations are
 unit-agnostic), and names their units in ``df.attrs["units"]``: cgs (cm, dyn/cm², mL/s), the
 svZeroDSolver convention, unless the file has a top-level ``"units": "SI"`` (oxyline's exporter
 writes it; svZeroDSolver ignores it) or ``units="SI"`` is passed. :func:`to_model` (and
@@ -12,11 +13,39 @@ so results, files, the console table and plots are in the units they say. With t
 initialisation and the Newton stopping rule are svZeroDSolver's, so results agree with the
 peer's to round-off.
 
-Supported: ``BloodVessel`` (``R_poiseuille``, ``C``, ``L``, ``stenosis_coefficient``),
-``NORMAL_JUNCTION`` (alias ``internal_junction``), ``BloodVesselJunction``, boundary conditions
-``FLOW``, ``PRESSURE``, ``RESISTANCE`` and ``RCR`` (outlets; FLOW and PRESSURE also at inlets),
-and the simulation parameters listed in ``docs/svzerod.md``. Anything else raises
-:class:`oxyline.UnsupportedElement` naming the element or key.
+Every svZeroDSolver element and option (details and measured errors in ``docs/svzerod.md``):
+
+======================================================  ===========  ==========================
+element or option                                       status       how, or why not
+======================================================  ===========  ==========================
+``BloodVessel`` (R, C, L, stenosis, also negative S)    supported    RCL vessel; a stenosis
+                                                                     next to C in
+                                                                     svZeroDSolver's form
+``BloodVesselCRL``                                      supported    two RCL vessels
+``BloodVesselRC``                                       unsupported  its capacitor's flow goes
+                                                                     through to the outlet
+``NORMAL_JUNCTION``, ``internal_junction``              supported    shared node
+``BloodVesselJunction``                                 supported    hidden R(+S)-L branches
+``resistive_junction``                                  supported    centre node, hidden R per
+                                                                     port
+``FLOW``, ``PRESSURE`` (inlet or outlet)                supported    source / fixed pressure
+``RESISTANCE``, ``RCR`` at an outlet                    supported
+``RESISTANCE``, ``RCR`` at an inlet                     unsupported  svZeroDSolver's sign makes
+                                                                     them negative R (and C)
+``CORONARY``, ``CORONARY_VAR_RES``, closed-loop BCs     unsupported  time-varying / closed loop
+``closed_loop_blocks``, ``chambers``, ``valves``        unsupported  time-varying, nonlinear
+``external_solver_coupling_blocks``,                    unsupported  3D-0D coupling
+``coupled_simulation``
+``initial_condition``, ``initial_condition_d``          unsupported  runs start steady or at 0
+``output_variable_based``, ``output_derivative``,       supported    svzerod's tables
+``output_mean_only``, ``output_all_cycles``,
+``output_interval``
+``use_cycle_to_cycle_error``                            RCR only     the cap-mean rule is not
+                                                                     implemented
+calibrator inputs                                       unsupported  not a forward simulation
+======================================================  ===========  ==========================
+
+Anything unsupported raises :class:`oxyline.UnsupportedElement` naming the element or key.
 
 Example::
 
@@ -49,7 +78,7 @@ import itertools
 import math
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -59,6 +88,9 @@ from oxyline.model import Model, _build, _copy
 
 COLUMNS = ("name", "time", "flow_in", "flow_out", "pressure_in", "pressure_out")
 METHODS = ("generalized-alpha", "rk4")
+#: RK4 sub-steps per output step, at least, when time derivatives are output (their error is
+#: then far below that of svZeroDSolver's own first-order ẏ)
+RK4_DERIVATIVE_SUBSTEPS = 20
 
 TOP_KEYS = {"simulation_parameters", "boundary_conditions", "vessels", "junctions", "units"}
 # svZeroDSolver's equations do not depend on units and its files do not say which they use; by
@@ -94,8 +126,6 @@ SIM_KEYS = {
 SIM_IGNORED = {"density", "viscosity", "model_name"}
 # boolean options oxyline cannot honour when true
 SIM_UNSUPPORTED_FLAGS = {
-    "output_variable_based": "variable-based output",
-    "output_derivative": "derivative output",
     "coupled_simulation": "3D-0D coupled simulation",
 }
 VESSEL_KEYS = {"vessel_id", "vessel_name", "zero_d_element_type", "zero_d_element_values",
@@ -103,9 +133,17 @@ VESSEL_KEYS = {"vessel_id", "vessel_name", "zero_d_element_type", "zero_d_elemen
 JUNCTION_KEYS = {"junction_name", "junction_type", "inlet_vessels", "outlet_vessels",
                  "inlet_blocks", "outlet_blocks", "junction_values", "calibrate"}
 BC_ENTRY_KEYS = {"bc_name", "bc_type", "bc_values"}
-VESSEL_TYPES = {"BloodVessel"}
+VESSEL_TYPES = {"BloodVessel", "BloodVesselCRL"}
 NORMAL_JUNCTIONS = {"NORMAL_JUNCTION", "internal_junction"}
-JUNCTION_TYPES = NORMAL_JUNCTIONS | {"BloodVesselJunction"}
+JUNCTION_TYPES = NORMAL_JUNCTIONS | {"BloodVesselJunction", "resistive_junction"}
+# block types this importer knows and cannot translate, with the reason (other unknown types
+# are refused with the list of supported ones)
+UNSUPPORTED_TYPES = {
+    "BloodVesselRC": (
+        "its equations Q_in = Q_out = C dP_in/dt + (P_in - P_out)/R put the capacitor's flow "
+        "C dP_in/dt through to the outlet, which no arrangement of oxyline's R-L branches and "
+        "grounded capacitors gives (a mass matrix entry coupling a flow row to a pressure)"),
+}
 BLOOD_VESSEL_PARAMS = {"R_poiseuille", "C", "L", "stenosis_coefficient"}
 BVJ_PARAMS = ("R_poiseuille", "L", "stenosis_coefficient")
 BC_PARAMS = {
@@ -114,6 +152,20 @@ BC_PARAMS = {
     "RESISTANCE": {"R", "Pd"},
     "RCR": {"Rp", "C", "Rd", "Pd"},
 }
+
+
+@dataclass
+class _Layout:
+    """Where the drop-in's outputs come from: the recorded end values (pressure_in,
+    pressure_out, flow_in, flow_out) of the native vessels."""
+
+    #: svZeroDSolver vessel -> (native vessel of its inlet end, native vessel of its outlet end)
+    vessels: list[tuple[str, str, str]] = field(default_factory=list)
+    #: svZeroDSolver's nodes (upstream block, downstream block) in the order it numbers them
+    connections: list[tuple[str, str]] = field(default_factory=list)
+    #: internal variables in svZeroDSolver's order: ("rcr", name, Rp) or ("junction", name,
+    #: (hidden vessel, 0 or 1: its pressure_in or pressure_out is the junction's centre))
+    internal: list[tuple[str, str, Any]] = field(default_factory=list)
 
 
 @dataclass
@@ -134,6 +186,10 @@ class RunSettings:
     max_iterations: int
     #: the file's unit system, "cgs" or "SI" (its numbers are kept as they are here)
     units: str = DEFAULT_UNITS
+    #: one row per svZeroDSolver variable (name, time, y) instead of per vessel
+    output_variable_based: bool = False
+    #: add the time derivatives (d_* columns, or ydot)
+    output_derivative: bool = False
 
 
 # ------------------------------------------------------------------------------------------
@@ -186,7 +242,8 @@ def _numlist(v: Any, element: str, key: str) -> list[float]:
 def _entry(raw: Any, where: str, name_key: str, label: str, allowed: Any, type_key: str,
            types: Any) -> tuple[Mapping[str, Any], str, str, str]:
     """Check one entry of a section list (vessel, junction, boundary condition): a mapping with a
-    name, only known keys and a supported type. Returns (entry, name, type, element label)."""
+    name, only known keys and a supported type (an unsupported one is refused with the reason
+    from ``UNSUPPORTED_TYPES`` when it has one). Returns (entry, name, type, element label)."""
     entry = _mapping(raw, where)
     name = str(_required(entry, name_key, where))
     el = f"{label} '{name}'"
@@ -194,6 +251,9 @@ def _entry(raw: Any, where: str, name_key: str, label: str, allowed: Any, type_k
         if k not in allowed and not _is_comment(k):
             raise UnsupportedElement(f"{el}: unknown key '{k}'")
     kind = _required(entry, type_key, el)
+    if isinstance(kind, str) and kind in UNSUPPORTED_TYPES:
+        raise UnsupportedElement(f"{el}: {type_key} '{kind}' is not supported: "
+                                 f"{UNSUPPORTED_TYPES[kind]}")
     if not isinstance(kind, str) or kind not in types:
         raise UnsupportedElement(f"{el}: {type_key} '{kind}' is not supported (supported: "
                                  f"{', '.join(sorted(types))})")
@@ -256,6 +316,23 @@ def _periodic_table(t: list[float], v: list[float], element: str) -> tuple[list[
 # conversion
 
 
+def _crl_vessels(name: str, lumped: Mapping[str, float]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """svZeroDSolver's BloodVesselCRL: Q_in - Q_out = C dP_in/dt and
+    P_in - P_out = (R + S|Q_out|) Q_out + L dQ_out/dt, so its capacitor sits at the inlet and
+    its flow_in includes the capacitor's flow. Two RCL vessels give exactly these equations:
+    ``name`` (R = 0 into its capacitor node, L = 0 out of it; its flow_in and pressure_in are
+    the CRL's, also where the inlet pressure is prescribed) and the hidden ``name:RL`` (R,
+    stenosis and L with C = 0; its flow_out and pressure_out are the CRL's)."""
+    what = f"svZeroDSolver BloodVesselCRL '{name}'"
+    front = {"name": name, "arrangement": "RCL", "description": f"{what}: its capacitor",
+             "lumped": {"resistance": 0.0, "capacitance": lumped["capacitance"]}}
+    back = {"name": f"{name}:RL", "arrangement": "RCL", "output": False,
+            "description": f"{what}: its R-L part",
+            "lumped": {"resistance": lumped["resistance"], "inductance": lumped["inductance"],
+                       "stenosis_coefficient": lumped["stenosis_coefficient"]}}
+    return front, back
+
+
 def _check_period(cfg: Mapping[str, Any], sim: Mapping[str, Any]) -> None:
     """svZeroDSolver's period consistency rules, checked over every block (also unsupported
     ones, so that a mismatch is reported as such): each time table of a boundary condition
@@ -303,11 +380,110 @@ def file_units(cfg: Mapping[str, Any], units: str | None = None) -> str:
     return "cgs" if value.lower() == "cgs" else "SI"
 
 
+def _junctions(junctions: Any, ids: Mapping[Any, str], bcs: Mapping[str, Any],
+               vessel_names: set[str], attach: Any, layout: _Layout) -> list[dict[str, Any]]:
+    """svZeroDSolver's junctions: shared nodes (NORMAL_JUNCTION), or hidden vessels around
+    a node (BloodVesselJunction, resistive_junction), attached to the vessels' ends with
+    ``attach``; their svZeroDSolver nodes and internal variables go to ``layout``. Returns the
+    hidden vessels."""
+    if not isinstance(junctions, list):
+        raise ModelError("junctions: must be a list")
+    hidden: list[dict[str, Any]] = []
+    for i, j in enumerate(junctions):
+        j, jname, kind, el = _entry(j, f"junctions[{i}]", "junction_name", "junction",
+                                    JUNCTION_KEYS, "junction_type", JUNCTION_TYPES)
+        el = f"{kind} '{jname}'"
+        if jname in bcs or jname in vessel_names:
+            raise ModelError(f"{el}: name already used by another block")
+
+        def resolve(key: str, by_id: bool, j: Mapping[str, Any] = j, el: str = el) -> list[str]:
+            items = j[key]
+            if not isinstance(items, list):
+                raise ModelError(f"{el}: '{key}' must be a list")
+            out = []
+            for x in items:
+                if isinstance(x, bool) or not isinstance(x, (int, str)):
+                    raise ModelError(f"{el}: '{key}' must list vessel ids or names, got {x!r}")
+                if by_id:
+                    if x not in ids:
+                        raise ModelError(f"{el}: '{key}' names vessel_id {x!r}, which no vessel has")
+                    out.append(ids[x])
+                elif x in vessel_names:
+                    out.append(str(x))
+                elif x in bcs:
+                    raise UnsupportedElement(f"{el}: connecting boundary condition '{x}' to a "
+                                             "junction is not supported")
+                else:
+                    raise ModelError(f"{el}: '{key}' names block '{x}', which is not defined")
+            return out
+
+        if "inlet_vessels" in j and "outlet_vessels" in j:
+            inlets, outlets = resolve("inlet_vessels", True), resolve("outlet_vessels", True)
+        elif "inlet_blocks" in j and "outlet_blocks" in j:
+            inlets, outlets = resolve("inlet_blocks", False), resolve("outlet_blocks", False)
+        else:
+            raise ModelError(f"{el}: needs 'inlet_vessels' and 'outlet_vessels' (vessel ids) or "
+                             "'inlet_blocks' and 'outlet_blocks' (names)")
+        what = f"junction '{jname}'"
+        layout.connections += [(name, jname) for name in inlets]
+        layout.connections += [(jname, name) for name in outlets]
+        if kind in NORMAL_JUNCTIONS:
+            _check_params(j.get("junction_values", {}), set(), el)
+            for name in inlets:
+                attach(name, "out", jname, what)
+            for name in outlets:
+                attach(name, "in", jname, what)
+            continue
+        if kind == "resistive_junction":
+            # P_in,i - P_c = R_i Q_in,i and P_c - P_out,k = R_k Q_out,k around a centre node
+            # (svZeroDSolver's ResistiveJunction): one hidden R vessel per port, R listed for
+            # the inlets, then the outlets
+            vals = _check_params(_required(j, "junction_values", el), {"R"}, el)
+            r = _numlist(_required(vals, "R", el), el, "R")
+            if len(r) != len(inlets) + len(outlets):
+                raise ModelError(f"{el}: 'R' has {len(r)} entries for {len(inlets)} inlets and "
+                                 f"{len(outlets)} outlets")
+            ports = [(name, f"{name}:{jname}", jname) for name in inlets]
+            ports += [(name, jname, f"{jname}:{name}") for name in outlets]
+            for k, (name, a, b) in enumerate(ports):
+                hidden.append({"name": a if k < len(inlets) else b, "from": a, "to": b,
+                               "arrangement": "RCL", "output": False,
+                               "lumped": {"resistance": r[k]}})
+                attach(name, "out" if k < len(inlets) else "in", hidden[-1]["name"], what)
+            # its pressure_c: the centre end of the last port's hidden vessel
+            layout.internal.append(("junction", jname, (hidden[-1]["name"], 0 if outlets else 1)))
+            continue
+        # BloodVesselJunction: one inlet, an R(+S)-L branch (no C) to every outlet
+        vals = _check_params(_required(j, "junction_values", el), BVJ_PARAMS, el)
+        if len(inlets) != 1:
+            raise UnsupportedElement(f"{el}: {len(inlets)} inlets; a BloodVesselJunction has "
+                                     "exactly one")
+        lists = {}
+        for key in BVJ_PARAMS:
+            lists[key] = _numlist(_required(vals, key, el), el, key)
+            if len(lists[key]) != len(outlets):
+                raise ModelError(f"{el}: '{key}' has {len(lists[key])} entries for "
+                                 f"{len(outlets)} outlets")
+        attach(inlets[0], "out", jname, what)
+        for k, name in enumerate(outlets):
+            node = f"{jname}:{name}"
+            hidden.append({
+                "name": node, "from": jname, "to": node, "arrangement": "RCL", "output": False,
+                "lumped": {"resistance": lists["R_poiseuille"][k], "capacitance": 0.0,
+                           "inductance": lists["L"][k],
+                           "stenosis_coefficient": lists["stenosis_coefficient"][k]},
+            })
+            attach(name, "in", node, what)
+
+    return hidden
+
 def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | None = None
-             ) -> tuple[dict[str, Any], RunSettings]:
-    """svZeroDSolver config -> (oxyline native dict, svZeroDSolver run settings). The dict
-    keeps the file's numbers and says their ``units`` (so a model built from it is in SI)."""
+             ) -> tuple[dict[str, Any], RunSettings, _Layout]:
+    """svZeroDSolver config -> (oxyline native dict, svZeroDSolver run settings, output
+    layout). The dict keeps the file's numbers and says their ``units`` (so a model built from
+    it is in SI)."""
     cfg = _read_config(config)
+    layout = _Layout()
     system = file_units(cfg, units)
     if "simulation_parameters" not in cfg:
         bad = [k for k in ("calibration_parameters", "y", "dy") if k in cfg]
@@ -396,6 +572,8 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
                       "distal_resistance": _num(_required(vals, "Rd", el), el, "Rd"),
                       "pressure": _num(vals.get("Pd", 0.0), el, "Pd")}
         bcs[name] = (kind, native)
+        if kind == "RCR":
+            layout.internal.append(("rcr", name, native["proximal_resistance"]))
 
     if model_period < 0.0 and sim_period < 0.0:
         period = 1.0
@@ -442,13 +620,14 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         end_owner[key] = what
 
     seen_names: set[str] = set()
+    crl: list[tuple[dict[str, Any], dict[str, Any]]] = []
     for i, v in enumerate(vessels_in):
         v, name, kind, el = _entry(v, f"vessels[{i}]", "vessel_name", "vessel", VESSEL_KEYS,
                                    "zero_d_element_type", VESSEL_TYPES)
         if name in seen_names:
             raise ModelError(f"{el}: vessel_name used twice")
         seen_names.add(name)
-        el = f"BloodVessel '{name}'"
+        el = f"{kind} '{name}'"
         vals = _check_params(_required(v, "zero_d_element_values", el), BLOOD_VESSEL_PARAMS, el)
         lumped = {
             "resistance": _num(_required(vals, "R_poiseuille", el), el, "R_poiseuille"),
@@ -457,13 +636,26 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
             "stenosis_coefficient": _num(vals.get("stenosis_coefficient", 0.0), el,
                                          "stenosis_coefficient"),
         }
+        if lumped["stenosis_coefficient"] != 0.0 and lumped["capacitance"] != 0.0 \
+                and kind == "BloodVessel":
+            # svZeroDSolver's own discretisation of the stenosis next to the capacitor
+            # (docs/svzerod.md, "C + stenosis"); oxyline's native default is "branch"
+            lumped["stenosis_form"] = "svzerod"
         vid = _required(v, "vessel_id", el)
         if isinstance(vid, bool) or not isinstance(vid, (int, str)):
             raise ModelError(f"{el}: vessel_id must be an integer or a name, got {vid!r}")
         if vid in ids:
             raise ModelError(f"{el}: vessel_id {vid!r} is also used by vessel '{ids[vid]}'")
         ids[vid] = name
-        vessels.append({"name": name, "arrangement": "RCL", "lumped": lumped})
+        if kind == "BloodVesselCRL":
+            front, back = _crl_vessels(name, lumped)
+            vessels.append(front)
+            crl.append((front, back))
+            layout.vessels.append((name, name, back["name"]))
+        else:
+            layout.vessels.append((name, name, name))
+            vessels.append({"name": name, "arrangement": "RCL", "lumped": lumped,
+                            "description": "svZeroDSolver BloodVessel"})
         vbc = _mapping(v.get("boundary_conditions", {}), f"{el} boundary_conditions")
         for side, bc_name in vbc.items():
             if _is_comment(side):
@@ -484,77 +676,13 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
             used_bcs[bc_name] = el
             attach(name, "in" if side == "inlet" else "out", bc_name,
                    f"boundary condition '{bc_name}'")
+        # svZeroDSolver's nodes of this vessel's boundary conditions, inlet first
+        layout.connections += [(vbc["inlet"], name)] if "inlet" in vbc else []
+        layout.connections += [(name, vbc["outlet"])] if "outlet" in vbc else []
     vessel_names = {x["name"] for x in vessels}
 
     # ---- junctions
-    junctions = cfg.get("junctions", [])
-    if not isinstance(junctions, list):
-        raise ModelError("junctions: must be a list")
-    hidden: list[dict[str, Any]] = []
-    for i, j in enumerate(junctions):
-        j, jname, kind, el = _entry(j, f"junctions[{i}]", "junction_name", "junction",
-                                    JUNCTION_KEYS, "junction_type", JUNCTION_TYPES)
-        el = f"{kind} '{jname}'"
-        if jname in bcs or jname in vessel_names:
-            raise ModelError(f"{el}: name already used by another block")
-
-        def resolve(key: str, by_id: bool, j: Mapping[str, Any] = j, el: str = el) -> list[str]:
-            items = j[key]
-            if not isinstance(items, list):
-                raise ModelError(f"{el}: '{key}' must be a list")
-            out = []
-            for x in items:
-                if isinstance(x, bool) or not isinstance(x, (int, str)):
-                    raise ModelError(f"{el}: '{key}' must list vessel ids or names, got {x!r}")
-                if by_id:
-                    if x not in ids:
-                        raise ModelError(f"{el}: '{key}' names vessel_id {x!r}, which no vessel has")
-                    out.append(ids[x])
-                elif x in vessel_names:
-                    out.append(str(x))
-                elif x in bcs:
-                    raise UnsupportedElement(f"{el}: connecting boundary condition '{x}' to a "
-                                             "junction is not supported")
-                else:
-                    raise ModelError(f"{el}: '{key}' names block '{x}', which is not defined")
-            return out
-
-        if "inlet_vessels" in j and "outlet_vessels" in j:
-            inlets, outlets = resolve("inlet_vessels", True), resolve("outlet_vessels", True)
-        elif "inlet_blocks" in j and "outlet_blocks" in j:
-            inlets, outlets = resolve("inlet_blocks", False), resolve("outlet_blocks", False)
-        else:
-            raise ModelError(f"{el}: needs 'inlet_vessels' and 'outlet_vessels' (vessel ids) or "
-                             "'inlet_blocks' and 'outlet_blocks' (names)")
-        what = f"junction '{jname}'"
-        if kind in NORMAL_JUNCTIONS:
-            _check_params(j.get("junction_values", {}), set(), el)
-            for name in inlets:
-                attach(name, "out", jname, what)
-            for name in outlets:
-                attach(name, "in", jname, what)
-            continue
-        # BloodVesselJunction: one inlet, an R(+S)-L branch (no C) to every outlet
-        vals = _check_params(_required(j, "junction_values", el), BVJ_PARAMS, el)
-        if len(inlets) != 1:
-            raise UnsupportedElement(f"{el}: {len(inlets)} inlets; a BloodVesselJunction has "
-                                     "exactly one")
-        lists = {}
-        for key in BVJ_PARAMS:
-            lists[key] = _numlist(_required(vals, key, el), el, key)
-            if len(lists[key]) != len(outlets):
-                raise ModelError(f"{el}: '{key}' has {len(lists[key])} entries for "
-                                 f"{len(outlets)} outlets")
-        attach(inlets[0], "out", jname, what)
-        for k, name in enumerate(outlets):
-            node = f"{jname}:{name}"
-            hidden.append({
-                "name": node, "from": jname, "to": node, "arrangement": "RCL", "output": False,
-                "lumped": {"resistance": lists["R_poiseuille"][k], "capacitance": 0.0,
-                           "inductance": lists["L"][k],
-                           "stenosis_coefficient": lists["stenosis_coefficient"][k]},
-            })
-            attach(name, "in", node, what)
+    hidden = _junctions(cfg.get("junctions", []), ids, bcs, vessel_names, attach, layout)
 
     if not vessels:
         raise ModelError("model: no vessels")
@@ -563,8 +691,15 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
     for v in vessels:
         v["from"] = ends.get((v["name"], "in"), f"{v['name']}:inlet")
         v["to"] = ends.get((v["name"], "out"), f"{v['name']}:outlet")
-        v["description"] = "svZeroDSolver BloodVessel"
+    for front, back in crl:  # the capacitor node between the two parts of a BloodVesselCRL
+        back["to"] = front["to"]
+        back["from"] = front["to"] = f"{front['name']}:C"
+        hidden.append(back)
     names = {x["name"] for x in vessels}
+    for front, _ in crl:
+        if front["to"] in names or front["to"] in bcs:
+            raise ModelError(f"BloodVesselCRL '{front['name']}': its capacitor node name "
+                             f"'{front['to']}' is also used by another block")
     for h in hidden:
         if h["name"] in names:
             raise ModelError(f"junction branch '{h['name']}': name clashes with a vessel")
@@ -576,6 +711,8 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         output_mean_only=_flag(sim, "output_mean_only", False),
         steady_initial=_flag(sim, "steady_initial", True), rho_infty=rho,
         absolute_tolerance=atol, max_iterations=max_iter, units=system,
+        output_variable_based=_flag(sim, "output_variable_based", False),
+        output_derivative=_flag(sim, "output_derivative", False),
     )
     native: dict[str, Any] = {
         "name": "svzerod",
@@ -594,7 +731,7 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
                        "every": dt * interval, "segments": False},
         },
     }
-    return native, settings
+    return native, settings, layout
 
 
 def to_oxyline_dict(config: Mapping[str, Any] | str | os.PathLike[str],
@@ -621,7 +758,7 @@ def to_model(config: Mapping[str, Any] | str | os.PathLike[str],
     """An :class:`oxyline.Model` (SI) for an svZeroDSolver configuration (see
     :func:`to_oxyline_dict`; ``units`` as there); its ``simulation`` settings reproduce the
     file's."""
-    native, _ = _convert(config, units)
+    native, _, _ = _convert(config, units)
     return _build(native)
 
 
@@ -651,25 +788,81 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
     inside each output step (outputs at the same times). Inductor flows a FLOW condition fixes
     (e.g. an R-L vessel fed by a FLOW condition) are made algebraic first; circuits still
     singular after that raise :class:`oxyline.ModelError`.
+
+    ``output_variable_based`` gives svZeroDSolver's variable table (``name, time, y``: the
+    flow and pressure of each of its nodes, then internal variables such as an RCR's
+    ``pressure_c``); ``output_derivative`` adds the time derivatives (``d_*`` columns or
+    ``ydot``), computed from every step of the run (see docs/svzerod.md).
     """
     import pandas as pd
 
     if method not in METHODS:
         raise ModelError(f"simulate: method must be one of {', '.join(METHODS)}, got {method!r}")
-    native, s = _convert(config, units)
-    # the drop-in runs in the file's own units, as svZeroDSolver does (same numbers, same
-    # Newton tolerance): the equations do not depend on them
-    model = _build({**native, "units": "SI"})
-    steps = s.points_per_cycle - 1
-    k = s.output_interval
-    # global step indices svZeroDSolver outputs
-    first = 0 if s.output_all_cycles else steps * (s.cycles - 1)
-    wanted = np.arange(first, steps * s.cycles + 1, k)
-    # the core records every `stride`-th global step (and the start of the last cycle)
-    if method == "generalized-alpha" and (s.output_all_cycles or first % k == 0):
-        stride = k
-    else:
-        stride = 1
+    native, s, layout = _convert(config, units)
+    # record every native vessel an output comes from (the hidden parts of a BloodVesselCRL
+    # and of a resistive junction too); the drop-in runs in the file's own units, as
+    # svZeroDSolver does (same numbers, same Newton tolerance): the equations do not depend
+    # on them
+    needed = {x for _, a, b in layout.vessels for x in (a, b)}
+    needed |= {ref[0] for kind, _, ref in layout.internal if kind == "junction"}
+    vessels = [dict(v, output=True) if v["name"] in needed else v for v in native["vessels"]]
+    model = _build({**native, "vessels": vessels, "units": "SI"})
+    recorded = {v["name"]: 4 * k for k, v in enumerate(x for x in vessels if x.get("output", True))}
+    names, idx, extra = _output_columns(layout, recorded, s.output_variable_based)
+    shape = (len(names), 1 if s.output_variable_based else 4)
+    times, values, derivs = (_run_derivative if s.output_derivative else _run_streamed)(
+        model, native, s, method, (idx, extra), shape)
+    return _frame(pd, names, times, values, derivs, s)
+
+
+def _output_columns(layout: _Layout, recorded: Mapping[str, int], variable_based: bool
+                    ) -> tuple[list[str], np.ndarray, list[tuple[int, int, float]]]:
+    """The output names and columns: column j of the output is recorded column ``idx[j]``
+    plus ``w`` times recorded column ``c`` for each (j, c, w) in ``extra``. Recorded columns
+    are each recorded vessel's pressure_in, pressure_out, flow_in, flow_out (at
+    ``recorded[vessel] + 0 .. 3``)."""
+    ends = {name: (a, b) for name, a, b in layout.vessels}
+    if not variable_based:
+        idx = [recorded[ends[n][0]] + k if k in (0, 2) else recorded[ends[n][1]] + k
+               for n, _, _ in layout.vessels for k in range(4)]
+        return [n for n, _, _ in layout.vessels], np.asarray(idx, dtype=np.intp), []
+    names: list[str] = []
+    idx: list[int] = []
+    extra: list[tuple[int, int, float]] = []
+    outlet_of: dict[str, str] = {}
+    for up, down in layout.connections:
+        # a node's flow and pressure are those of the vessel end it joins
+        if down in ends:
+            base, p, q = recorded[ends[down][0]], 0, 2
+        else:
+            base, p, q = recorded[ends[up][1]], 1, 3
+            outlet_of[down] = up
+        names += [f"flow:{up}:{down}", f"pressure:{up}:{down}"]
+        idx += [base + q, base + p]
+    for kind, name, ref in layout.internal:
+        names.append(f"pressure_c:{name}")
+        if kind == "rcr":  # P_c = P - Rp Q at the Windkessel's inlet
+            base = recorded[ends[outlet_of[name]][1]]
+            idx.append(base + 1)
+            extra.append((len(idx) - 1, base + 3, -float(ref)))
+        else:  # the resistive junction's centre: the end of a port's hidden vessel there
+            vessel, offset = ref
+            idx.append(recorded[vessel] + offset)
+    return names, np.asarray(idx, dtype=np.intp), extra
+
+
+def _apply(data: np.ndarray, columns: tuple[np.ndarray, list[tuple[int, int, float]]]
+           ) -> np.ndarray:
+    idx, extra = columns
+    out = data[:, idx]
+    for j, c, w in extra:
+        out[:, j] += w * data[:, c]
+    return out
+
+
+def _core_kwargs(model: Model, native: Mapping[str, Any], s: RunSettings, method: str
+                 ) -> tuple[dict[str, Any], int]:
+    """The core's run settings for svZeroDSolver's, and the RK4 sub-steps per output step."""
     kw: dict[str, Any] = {
         "period": s.period, "cycles": s.cycles, "method": method, "rho_infty": s.rho_infty,
         "start": "svzerod-steady" if s.steady_initial else "svzerod-zero",
@@ -677,19 +870,53 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
         "output_all_cycles": s.output_all_cycles, "segments": False,
     }
     if method == "generalized-alpha":
-        kw.update(dt=s.dt, output_every=s.dt * stride)
+        kw["dt"] = s.dt
+        return kw, 1
+    # sub-steps per output step: stable (half the RK4 limit) and resolving the time tables
+    dt_max = model.network.rk4_stability_limit()[0]
+    h = min([0.5 * dt_max] + _table_spacings(native))
+    sub = max(1, math.ceil(s.dt / h * (1.0 - 1e-12)))
+    kw["dt"] = s.dt / sub
+    return kw, sub
+
+
+def _wanted(s: RunSettings) -> tuple[np.ndarray, int]:
+    """Global step indices svZeroDSolver outputs, and the first one."""
+    steps = s.points_per_cycle - 1
+    first = 0 if s.output_all_cycles else steps * (s.cycles - 1)
+    return np.arange(first, steps * s.cycles + 1, s.output_interval), first
+
+
+def _output_times(s: RunSettings, wanted: np.ndarray, first: int) -> np.ndarray:
+    times = s.dt * wanted.astype(float)
+    if not s.output_all_cycles:
+        times = times - s.dt * float(first)
+    return times
+
+
+def _check_times(s: RunSettings, got: np.ndarray, times: np.ndarray) -> None:
+    if np.max(np.abs(got - times), initial=0.0) > 1e-9 * s.period * max(1, s.cycles):
+        raise ModelError("internal error: output times of the core do not match svZeroDSolver's")
+
+
+def _run_streamed(model: Model, native: Mapping[str, Any], s: RunSettings, method: str,
+                  columns: tuple[np.ndarray, list[tuple[int, int, float]]],
+                  shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, None]:
+    """Run and keep the output rows only: (times, (output, time, width) values, None) for
+    ``shape`` = (outputs, width: 4 quantities of a vessel or 1 variable)."""
+    k = s.output_interval
+    wanted, first = _wanted(s)
+    # the core records every `stride`-th global step (and the start of the last cycle)
+    if method == "generalized-alpha" and (s.output_all_cycles or first % k == 0):
+        stride = k
     else:
-        # sub-steps per output step: stable (half the RK4 limit) and resolving the time tables
-        dt_max = model.network.rk4_stability_limit()[0]
-        h = min([0.5 * dt_max] + _table_spacings(native))
-        sub = max(1, math.ceil(s.dt / h * (1.0 - 1e-12)))
-        kw.update(dt=s.dt / sub, output_every=s.dt)
-    names = [v["name"] for v in native["vessels"] if v.get("output", True)]
-    nv = len(names)
-    # The core streams its rows in small chunks, each written straight into the vessel-major
-    # (vessel, time, 4) block that becomes the DataFrame's float block: the run never holds a
-    # second, time-major copy of the output (the largest allocation at 10^4 vessels).
-    values = np.empty((nv, wanted.size, 4))
+        stride = 1
+    kw, _ = _core_kwargs(model, native, s, method)
+    kw["output_every"] = s.dt * stride if method == "generalized-alpha" else s.dt
+    # The core streams its rows in small chunks, each written straight into the output-major
+    # (output, time, width) block that becomes the DataFrame's float block: the run never
+    # holds a second, time-major copy of the output (the largest allocation at 10^4 vessels).
+    values = np.empty((shape[0], wanted.size, shape[1]))
     core_times: list[np.ndarray] = []
     count = {"core": 0, "out": 0}
 
@@ -704,11 +931,11 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
         o, n = count["out"], len(t)
         if o + n > wanted.size:
             raise ModelError(f"internal error: more than {wanted.size} output rows from the core")
-        values[:, o:o + n, :] = data[:, : 4 * nv].reshape(n, nv, 4).transpose(1, 0, 2)
+        values[:, o:o + n, :] = _apply(data, columns).reshape(n, *shape).transpose(1, 0, 2)
         core_times.append(t)
         count["out"] = o + n
 
-    chunk_rows = max(1, (1 << 20) // max(1, 4 * nv))  # ~8 MB per chunk
+    chunk_rows = max(1, (1 << 20) // max(1, shape[0] * shape[1]))  # ~8 MB per chunk
     raw = model.network.simulate(**kw, chunk_sink=take, chunk_rows=chunk_rows,
                                  keep_current_cycle=False)
     if "error" in raw:
@@ -716,27 +943,100 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
     if count["out"] != wanted.size:
         raise ModelError(f"internal error: {count['out']} output rows from the core, "
                          f"expected {wanted.size}")
-    times = s.dt * wanted.astype(float)
-    if not s.output_all_cycles:
-        times = times - s.dt * float(first)
-    got = np.concatenate(core_times) if core_times else np.empty(0)
-    if np.max(np.abs(got - times), initial=0.0) > 1e-9 * s.period * max(1, s.cycles):
-        raise ModelError("internal error: output times of the core do not match svZeroDSolver's")
-    if s.output_mean_only:
-        mean = values.mean(axis=1)
-        frame = pd.DataFrame({
-            "name": names,  # pandas' default string dtype (str under pandas >= 3), as svzerod
-            "time": np.full(nv, np.nan),
-            "flow_in": mean[:, 2],
-            "flow_out": mean[:, 3],
-            "pressure_in": mean[:, 0],
-            "pressure_out": mean[:, 1],
-        })
-    else:
-        from oxyline.result import long_table_vessel_major
+    times = _output_times(s, wanted, first)
+    _check_times(s, np.concatenate(core_times) if core_times else np.empty(0), times)
+    return times, values, None
 
-        frame = long_table_vessel_major(names, times, values.reshape(nv * wanted.size, 4))
-    frame.attrs["units"] = dict(FRAME_UNITS[s.units])
+
+def _run_derivative(model: Model, native: Mapping[str, Any], s: RunSettings, method: str,
+                    columns: tuple[np.ndarray, list[tuple[int, int, float]]],
+                    shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Run recording every step of every cycle and return (times, values, time derivatives)
+    at svZeroDSolver's output rows. Generalized-α: svZeroDSolver's own ẏ, from its update
+    ẏ_{n+1} = (1 + ρ∞)(y_{n+1} − y_n)/Δt − ρ∞ ẏ_n from ẏ_0 = 0 (exact for ρ∞ = 0 and for a
+    zero start; after a steady start its ẏ_0, left over from the steady iterations, is taken
+    as 0, an error that decays as ρ∞^n). RK4: second-order backward differences of at least
+    ``RK4_DERIVATIVE_SUBSTEPS`` sub-steps per output step."""
+    wanted, first = _wanted(s)
+    kw, sub = _core_kwargs(model, native, s, method)
+    if method == "rk4" and sub < RK4_DERIVATIVE_SUBSTEPS:
+        # the backward differences see a table's kink only at an output time itself
+        sub = RK4_DERIVATIVE_SUBSTEPS
+        kw["dt"] = s.dt / sub
+    kw.update(output_all_cycles=True, output_every=kw["dt"])
+    raw = model.network.simulate(**kw)
+    if "error" in raw:
+        raise raw["error"]
+    t = np.asarray(raw["times"])
+    y = _apply(np.asarray(raw["data"]).reshape(len(t), -1), columns)
+    if len(t) != (s.points_per_cycle - 1) * s.cycles * sub + 1:
+        raise ModelError(f"internal error: {len(t)} rows from the core")
+    if method == "generalized-alpha":
+        rho = s.rho_infty
+        yd = np.zeros_like(y)
+        for n in range(len(t) - 1):
+            yd[n + 1] = (1.0 + rho) * (y[n + 1] - y[n]) / kw["dt"] - rho * yd[n]
+    else:
+        yd = _backward_derivative(y, kw["dt"])
+    rows = wanted * sub
+    times = _output_times(s, wanted, first)
+    _check_times(s, t[rows] - (0.0 if s.output_all_cycles else s.dt * first), times)
+    def block(a: np.ndarray) -> np.ndarray:  # (time, output x width) -> (output, time, width)
+        return np.ascontiguousarray(a[rows].reshape(len(rows), *shape).transpose(1, 0, 2))
+
+    return times, block(y), block(yd)
+
+
+def _backward_derivative(y: np.ndarray, h: float) -> np.ndarray:
+    """Time derivative of rows `y` spaced `h` apart by second-order backward differences (the
+    left derivative where a time table has a kink, as svZeroDSolver's ẏ there), forward ones
+    at the first two rows."""
+    yd = np.empty_like(y)
+    if len(y) < 3:
+        yd[:] = (y[-1] - y[0]) / (h * max(1, len(y) - 1))
+        return yd
+    yd[2:] = (3.0 * y[2:] - 4.0 * y[1:-1] + y[:-2]) / (2.0 * h)
+    yd[:2] = (-3.0 * y[:2] + 4.0 * y[1:3] - y[2:4]) / (2.0 * h) if len(y) >= 4 else \
+        (y[1:3] - y[:2]) / h
+    return yd
+
+
+def _frame(pd: Any, names: list[str], times: np.ndarray, values: np.ndarray,
+           derivs: np.ndarray | None, s: RunSettings) -> Any:
+    """svzerod.simulate's frame from (output, time, width) values (and derivatives)."""
+    nv, nt = len(names), len(times)
+    if s.output_variable_based:
+        cols = {"y": values[:, :, 0]}
+        if derivs is not None:
+            cols["ydot"] = derivs[:, :, 0]
+    else:
+        if derivs is None and not s.output_mean_only:
+            from oxyline.result import long_table_vessel_major
+
+            frame = long_table_vessel_major(names, times, values.reshape(nv * nt, 4))
+            return _with_units(frame, s)
+        # values hold pressure_in, pressure_out, flow_in, flow_out; svzerod's column order
+        order = {"flow_in": 2, "flow_out": 3, "pressure_in": 0, "pressure_out": 1}
+        cols = {c: values[:, :, k] for c, k in order.items()}
+        if derivs is not None:
+            cols.update({f"d_{c}": derivs[:, :, k] for c, k in order.items()})
+    if s.output_mean_only:
+        data = {"name": names, "time": np.full(nv, np.nan)}
+        data.update({c: v.mean(axis=1) for c, v in cols.items()})
+    else:
+        data = {"name": np.repeat(np.array(names, dtype=object), nt),
+                "time": np.tile(times, nv)}
+        data.update({c: v.reshape(nv * nt) for c, v in cols.items()})
+    return _with_units(pd.DataFrame(data), s)
+
+
+def _with_units(frame: Any, s: RunSettings) -> Any:
+    units = dict(FRAME_UNITS[s.units])
+    if s.output_variable_based:
+        units = {"time": "s"}
+    elif s.output_derivative:
+        units.update({f"d_{c}": f"{u}/s" for c, u in FRAME_UNITS[s.units].items() if c != "time"})
+    frame.attrs["units"] = units
     frame.attrs["units_system"] = s.units
     return frame
 

@@ -172,6 +172,21 @@ pub struct Node {
     pub boundary: Option<usize>,
 }
 
+/// The capacitor of an svZeroDSolver-form RCL vessel with a stenosis
+/// (`StenosisForm::SvZeroD`, docs/svzerod.md): generalized-α replaces the row C dP_c/dt of
+/// `node` by C (dP_in/dt − (R + 2S|Q|) dQ/dt), with P_in the vessel's inlet pressure and Q the
+/// flow through its R branch. `inlet` and `node` are node indices (= pressure unknowns);
+/// `flow` is the R branch's index in the circuit and its flow unknown in the DAE.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ChainRuleCapacitor {
+    pub node: usize,
+    pub inlet: usize,
+    pub flow: usize,
+    pub capacitance: f64,
+    pub resistance: f64,
+    pub stenosis: f64,
+}
+
 /// A boundary condition as seen by species transport.
 #[derive(Debug, Clone)]
 pub struct BoundaryTag {
@@ -243,6 +258,8 @@ pub struct Circuit {
     pub boundaries: Vec<BoundaryTag>,
     pub source_boundary: Vec<usize>,
     pub segments: Vec<SegmentGeom>,
+    /// Capacitor rows in svZeroDSolver's form (empty unless a vessel asks for it).
+    pub chain_rule: Vec<ChainRuleCapacitor>,
     pub vessel_names: Vec<String>,
     /// Node and branch names (shared with the assembled DAE).
     pub names: Arc<Names>,
@@ -427,6 +444,14 @@ impl Circuit {
         for (node, w) in &self.fixed_pressures {
             forcing.push((*node, w.clone()));
         }
+        let chain_rule = self
+            .chain_rule
+            .iter()
+            .map(|c| ChainRuleCapacitor {
+                flow: nn + c.flow,
+                ..*c
+            })
+            .collect();
         Ok(Dae {
             n,
             n_nodes: nn,
@@ -434,6 +459,7 @@ impl Circuit {
             windkessel,
             f,
             stenosis,
+            chain_rule,
             forcing,
             names: self.names.clone(),
         })
@@ -450,6 +476,9 @@ pub struct Dae {
     pub f: Csr,
     /// (unknown, S): c_i = S |y_i| y_i.
     pub stenosis: Vec<(usize, f64)>,
+    /// Capacitor rows generalized-α writes in svZeroDSolver's form (see
+    /// [`ChainRuleCapacitor`]); every other integrator uses the row E ẏ as it is.
+    pub chain_rule: Vec<ChainRuleCapacitor>,
     /// (row, waveform): f_row(t) = w(t).
     pub forcing: Vec<(usize, Waveform)>,
     /// Names of the unknowns ([`Names::unknown`]), shared with the circuit.

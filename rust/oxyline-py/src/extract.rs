@@ -6,7 +6,9 @@
 //! would give.
 
 use oxyline_core::Error;
-use oxyline_core::spec::{Arrangement, BoundarySpec, GeometrySpec, LumpedSpec, VesselSpec};
+use oxyline_core::spec::{
+    Arrangement, BoundarySpec, GeometrySpec, LumpedSpec, StenosisForm, VesselSpec,
+};
 use oxyline_core::waveform::WaveformSpec;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyString};
@@ -83,9 +85,14 @@ fn lumped(d: &Bound<'_, PyDict>, element: &dyn Fn() -> String) -> Res<LumpedSpec
         inductance: 0.0,
         capacitance: 0.0,
         stenosis_coefficient: 0.0,
+        stenosis_form: StenosisForm::default(),
     };
     for (k, v) in d.iter() {
         let k = key(&k, element)?;
+        if k == "stenosis_form" {
+            l.stenosis_form = stenosis_form(&v, element)?;
+            continue;
+        }
         let x = number(&v, element, k)?;
         match k {
             "resistance" => resistance = Some(x),
@@ -97,6 +104,17 @@ fn lumped(d: &Bound<'_, PyDict>, element: &dyn Fn() -> String) -> Res<LumpedSpec
     }
     l.resistance = resistance.ok_or_else(|| missing(element, "resistance"))?;
     Ok(l)
+}
+
+fn stenosis_form(v: &Bound<'_, PyAny>, element: &dyn Fn() -> String) -> Res<StenosisForm> {
+    match text(v, element, "stenosis_form")?.as_str() {
+        "branch" => Ok(StenosisForm::Branch),
+        "svzerod" => Ok(StenosisForm::SvZeroD),
+        other => Err(Error::model(
+            element(),
+            format!("unknown stenosis_form `{other}` (expected branch or svzerod)"),
+        )),
+    }
 }
 
 fn arrangement(v: &Bound<'_, PyAny>, element: &dyn Fn() -> String) -> Res<Arrangement> {

@@ -93,7 +93,12 @@ impl NetworkSpec {
             let arrangement = v.arrangement.unwrap_or(self.arrangement);
             let segs = segments::discretise(self, vi, blood, arrangement)?;
             let ends = graph.vessel_ends[vi];
-            let chain = vessel::stamp(&mut circuit, &v.name, &segs, arrangement, ends);
+            let form = v
+                .lumped
+                .as_ref()
+                .map(|l| l.stenosis_form)
+                .unwrap_or_default();
+            let chain = vessel::stamp(&mut circuit, &v.name, &segs, (arrangement, form), ends);
             if v.output {
                 vessel::record_probes(
                     &mut probes,

@@ -4,9 +4,9 @@
 //! meeting there), the segment geometry transport needs, and the vessel's output probes.
 
 use super::segments::SegmentRow;
-use crate::circuit::{Circuit, Label, Part, SegmentGeom};
+use crate::circuit::{ChainRuleCapacitor, Circuit, Label, Part, SegmentGeom};
 use crate::output::Probes;
-use crate::spec::Arrangement;
+use crate::spec::{Arrangement, StenosisForm};
 
 /// The circuit nodes along a vessel (inlet node, interior points, outlet node) and its branches.
 pub(crate) struct Chain {
@@ -15,12 +15,12 @@ pub(crate) struct Chain {
 }
 
 /// Stamp vessel `name` (index `vessel` in `circuit.vessel_names`) between graph nodes
-/// `p_from` and `p_to`.
+/// `p_from` and `p_to`; `form` says how generalized-α writes an RCL vessel's stenosis.
 pub(crate) fn stamp(
     circuit: &mut Circuit,
     name: &str,
     segs: &[SegmentRow],
-    arrangement: Arrangement,
+    (arrangement, form): (Arrangement, StenosisForm),
     (p_from, p_to): (usize, usize),
 ) -> Chain {
     let vessel = circuit.add_vessel(name);
@@ -39,7 +39,7 @@ pub(crate) fn stamp(
     }
     points.push(p_to);
     let branches = if arrangement == Arrangement::Rcl {
-        stamp_rcl(circuit, vessel, &segs[0], &points)
+        stamp_rcl(circuit, vessel, &segs[0], &points, form)
     } else {
         stamp_segments(circuit, vessel, segs, arrangement, &points)
     };
@@ -54,8 +54,16 @@ fn label(vessel: usize, part: Part, k: usize) -> Label {
     }
 }
 
-/// svZeroDSolver's BloodVessel: R (and stenosis), then C at the interior point, then L.
-fn stamp_rcl(circuit: &mut Circuit, vessel: usize, s: &SegmentRow, points: &[usize]) -> Vec<usize> {
+/// svZeroDSolver's BloodVessel: R (and stenosis), then C at the interior point, then L. In
+/// svZeroDSolver's form a stenosis with a capacitor also registers the capacitor row for
+/// generalized-α's chain-rule form (docs/svzerod.md, "C + stenosis").
+fn stamp_rcl(
+    circuit: &mut Circuit,
+    vessel: usize,
+    s: &SegmentRow,
+    points: &[usize],
+    form: StenosisForm,
+) -> Vec<usize> {
     let b0 = circuit.add_branch(
         label(vessel, Part::Resistance, 0),
         points[0],
@@ -66,6 +74,16 @@ fn stamp_rcl(circuit: &mut Circuit, vessel: usize, s: &SegmentRow, points: &[usi
     );
     circuit.nodes[points[1]].capacitance += s.compliance;
     circuit.nodes[points[1]].volume += s.volume;
+    if form == StenosisForm::SvZeroD && s.stenosis != 0.0 && s.compliance > 0.0 {
+        circuit.chain_rule.push(ChainRuleCapacitor {
+            node: points[1],
+            inlet: points[0],
+            flow: b0,
+            capacitance: s.compliance,
+            resistance: s.resistance,
+            stenosis: s.stenosis,
+        });
+    }
     let b1 = circuit.add_branch(
         label(vessel, Part::Inductance, 0),
         points[1],

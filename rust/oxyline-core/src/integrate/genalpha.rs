@@ -24,6 +24,8 @@ pub struct GenAlpha<'a> {
     lu: SparseLu,
     /// Number of values of the iteration matrix (the stamps of `jacobian_stamps`).
     n_stamps: usize,
+    /// For each chain-rule capacitor, the value index of its F entry (node row, flow column).
+    chain_flow_entry: Vec<usize>,
     factored: bool,
     f: Vec<f64>,
     r: Vec<f64>,
@@ -64,11 +66,28 @@ impl<'a> GenAlpha<'a> {
         let gamma = 0.5 + am - af;
         let stamps = jacobian_stamps(dae);
         let lu = SparseLu::analyse(dae.n, &stamps)?;
+        // (the node row of a capacitor holds its R branch's flow: the incidence)
+        let chain_flow_entry = dae
+            .chain_rule
+            .iter()
+            .map(|c| {
+                (dae.f.ptr[c.node]..dae.f.ptr[c.node + 1])
+                    .find(|&k| dae.f.col[k] as usize == c.flow)
+                    .expect("a capacitor node's row holds its inflow")
+            })
+            .collect();
         let n = dae.n;
-        let e = match regime {
+        let mut e = match regime {
             Regime::Transient => Cow::Borrowed(dae.e.as_slice()),
             _ => Cow::Owned(dae.mass(regime)),
         };
+        if !dae.chain_rule.is_empty() {
+            // a chain-rule capacitor's row has its E ẏ term on the inlet pressure and the flow
+            let m = e.to_mut();
+            for c in &dae.chain_rule {
+                m[c.node] = 0.0;
+            }
+        }
         let nonlinear = if dae.is_linear() { 0 } else { n };
         Ok(GenAlpha {
             dae,
@@ -81,6 +100,7 @@ impl<'a> GenAlpha<'a> {
             control,
             lu,
             n_stamps: stamps.len(),
+            chain_flow_entry,
             factored: false,
             f: vec![0.0; n],
             r: vec![0.0; n],
@@ -92,12 +112,27 @@ impl<'a> GenAlpha<'a> {
     }
 
     /// Factorise the iteration matrix at the α_f level `y_af` (read for the stenosis slopes
-    /// only). Its values are built here and dropped: a linear circuit factorises once.
-    fn factor(&mut self, time: f64, y_af: &[f64]) -> Result<()> {
+    /// only) and the α_m level `yd_am` (read for chain-rule capacitors only). Its values are
+    /// built here and dropped: a linear circuit factorises once.
+    ///
+    /// A chain-rule capacitor's row C (ẏ_in − (R + 2S|Q|) ẏ_Q) + Q_out − Q_in couples the node
+    /// to the inlet pressure, which would break the tree pattern of the circuit. Newton solves
+    /// instead with that row plus w = α_m C/(α_f γ Δt) times its R branch's row
+    /// (−P_in + P_c + (R + S|Q|)Q): the same iterates, and the inlet coupling and the
+    /// α_m C (R + 2S|Q|) terms cancel, leaving α_m C on the diagonal and
+    /// −α_f γ Δt (1 + 2CS sgn(Q) ẏ_Q) at the flow (see `Iterate::solve` for the right side).
+    fn factor(&mut self, time: f64, y_af: &[f64], yd_am: &[f64]) -> Result<()> {
         let c = self.af * self.gamma * self.dt;
         let am_e: Vec<f64> = self.e.iter().map(|e| self.am * e).collect();
         let mut kvals = vec![0.0; self.n_stamps];
         jacobian_values(self.dae, c, &am_e, y_af, &mut kvals);
+        let nf = self.dae.f.val.len();
+        for (cr, &k) in self.dae.chain_rule.iter().zip(&self.chain_flow_entry) {
+            let q = y_af[cr.flow];
+            let sign = f64::from(i8::from(q > 0.0) - i8::from(q < 0.0));
+            kvals[nf + cr.node] += self.am * cr.capacitance;
+            kvals[k] -= c * 2.0 * cr.capacitance * cr.stenosis * sign * yd_am[cr.flow];
+        }
         self.lu.factor(&kvals).map_err(|m| singular(time, &m))?;
         self.factored = true;
         Ok(())
@@ -164,15 +199,37 @@ impl NewtonProblem for Iterate<'_, '_> {
         for (i, ri) in r.iter_mut().enumerate() {
             *ri -= ga.e[i] * (self.yd[i] + am * (ga.yd_new[i] - self.yd[i]));
         }
+        // svZeroDSolver's capacitor rows: C (ẏ_in − (R + 2S|Q|) ẏ_Q) at (y_αf, ẏ_αm)
+        let yd_am = |i: usize| self.yd[i] + am * (ga.yd_new[i] - self.yd[i]);
+        for cr in &ga.dae.chain_rule {
+            let slope = cr.resistance + 2.0 * cr.stenosis * ga.y_af[cr.flow].abs();
+            r[cr.node] -= cr.capacitance * (yd_am(cr.inlet) - slope * yd_am(cr.flow));
+        }
     }
     fn factor(&mut self, _: usize) -> Result<()> {
         // stenoses make the iteration matrix depend on the iterate
         let y_af = std::mem::take(&mut self.ga.y_af);
-        let done = self.ga.factor(self.t_af, &y_af);
+        let yd_am: Vec<f64> = if self.ga.dae.chain_rule.is_empty() {
+            Vec::new()
+        } else {
+            let am = self.ga.am;
+            let (yd, yd_new) = (self.yd, &self.ga.yd_new);
+            yd.iter()
+                .zip(yd_new)
+                .map(|(&a, &b)| a + am * (b - a))
+                .collect()
+        };
+        let done = self.ga.factor(self.t_af, &y_af, &yd_am);
         self.ga.y_af = y_af;
         done
     }
     fn solve(&mut self, r: &mut [f64]) -> Result<()> {
+        // the row combination of `GenAlpha::factor` on the right side
+        let ga = &*self.ga;
+        let w = ga.am / (ga.af * ga.gamma * ga.dt);
+        for cr in &ga.dae.chain_rule {
+            r[cr.node] += w * cr.capacitance * r[cr.flow];
+        }
         if self.ga.lu.solve_in_place(r) {
             Ok(())
         } else {
@@ -210,7 +267,7 @@ impl GenAlpha<'_> {
         let t_af = time + af * dt;
         self.dae.forcing_into(t_af, self.regime, &mut self.f);
         if !self.factored {
-            self.factor(t_af, y)?;
+            self.factor(t_af, y, &[])?;
         }
         // with y_new = y and ẏ_new = pred·ẏ: y_αf = y, ẏ_αm = ẏ (1 + αm (pred − 1))
         let c_am = 1.0 + am * (pred - 1.0);

@@ -182,6 +182,69 @@ mod tests {
         assert!((y[2] - q).abs() < 1e-12 * q, "{} vs {q}", y[2]);
     }
 
+    /// A sine inflow through a stenosis (R = 0, S = 1) into a capacitor (C = 1) that a wire
+    /// ties to a zero pressure, so Q_out = Q_in exactly. Returns max |Q_out − Q_in| over the
+    /// second period with generalized-α at step `dt`, the capacitor row in the branch form or
+    /// in svZeroDSolver's chain-rule form (docs/svzerod.md, "C + stenosis").
+    fn stenosis_into_tied_capacitor(chain_rule: bool, dt: f64) -> f64 {
+        use crate::circuit::ChainRuleCapacitor;
+        use crate::waveform::WaveformSpec;
+        let mut k = Circuit::default();
+        let (p_in, c, out) = (
+            k.add_node("in", 0.0, 0.0),
+            k.add_node("c", 1.0, 0.0),
+            k.add_node("out", 0.0, 0.0),
+        );
+        let b = k.add_branch("stenosis", p_in, c, 0.0, 0.0, 1.0);
+        k.add_branch("wire", c, out, 0.0, 0.0, 0.0);
+        let sine = WaveformSpec::Fourier {
+            period: 1.0,
+            mean: 0.0,
+            cos: vec![],
+            sin: vec![1.0],
+        };
+        k.sources
+            .push((p_in, Waveform::from_spec(&sine, "inflow").unwrap()));
+        k.fixed_pressures.push((out, Waveform::constant(0.0)));
+        if chain_rule {
+            k.chain_rule.push(ChainRuleCapacitor {
+                node: c,
+                inlet: p_in,
+                flow: b,
+                capacitance: 1.0,
+                resistance: 0.0,
+                stenosis: 1.0,
+            });
+        }
+        let dae = k.assemble().unwrap();
+        let mut ga =
+            GenAlpha::new(&dae, Regime::Transient, dt, 0.5, NewtonControl::default()).unwrap();
+        let (mut y, mut yd) = (vec![0.0; dae.n], vec![0.0; dae.n]);
+        let steps = (1.0 / dt).round() as usize;
+        let mut worst = 0.0f64;
+        for i in 0..2 * steps {
+            ga.step(i as f64 * dt, &mut y, &mut yd).unwrap();
+            if i >= steps {
+                worst = worst.max((y[4] - y[3]).abs());
+            }
+        }
+        worst
+    }
+
+    #[test]
+    fn svzerod_stenosis_form_is_first_order_and_the_branch_form_exact() {
+        // the branch form: Q_out = Q_in up to the Newton tolerance (1e-12 of the flow scale)
+        assert!(stenosis_into_tied_capacitor(false, 1.0 / 200.0) < 1e-10);
+        // the chain-rule form: a first-order error where Q changes sign, halving with Δt
+        let (coarse, fine) = (
+            stenosis_into_tied_capacitor(true, 1.0 / 200.0),
+            stenosis_into_tied_capacitor(true, 1.0 / 400.0),
+        );
+        assert!(coarse > 1e-3, "{coarse}");
+        let ratio = coarse / fine;
+        assert!((1.8..2.2).contains(&ratio), "{coarse} / {fine} = {ratio}");
+    }
+
     /// Discharge of an RC node from P0: P(t) = P0 e^{−t/RC}, by any integrator.
     fn discharge(ig: &mut dyn Integrator, steps: usize) -> f64 {
         let mut y = vec![1e4, 0.0, 0.0];

@@ -78,6 +78,26 @@ pub struct LumpedSpec {
     pub capacitance: f64,
     #[serde(default)]
     pub stenosis_coefficient: f64,
+    /// How generalized-α discretises the stenosis of an RCL vessel with a capacitor.
+    #[serde(default)]
+    pub stenosis_form: StenosisForm,
+}
+
+/// Where the stenosis term of an RCL vessel (R + S|Q|, then C, then L) enters its equations
+/// under generalized-α (docs/svzerod.md, "C + stenosis"). Both forms are the same DAE; they
+/// differ in the discrete derivative of the capacitor pressure, and so in RK4 not at all.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq, Default)]
+pub enum StenosisForm {
+    /// The stenosis sits in the algebraic R branch, P_in − P_c = (R + S|Q|)Q, and the
+    /// capacitor row is C dP_c/dt = Q − Q_out: second order (default).
+    #[default]
+    #[serde(rename = "branch")]
+    Branch,
+    /// svZeroDSolver's BloodVessel: the capacitor row is written on the inlet pressure with the
+    /// chain rule, C (dP_in/dt − (R + 2S|Q|) dQ/dt) = Q − Q_out, evaluated at the
+    /// generalized-α stages; first order where Q changes sign, as svZeroDSolver computes it.
+    #[serde(rename = "svzerod")]
+    SvZeroD,
 }
 
 #[derive(Debug, Clone, Deserialize)]
