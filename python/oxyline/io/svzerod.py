@@ -55,6 +55,7 @@ from typing import Any
 import numpy as np
 
 from oxyline.errors import ModelError, UnsupportedElement
+from oxyline.io import svzerod_heart
 from oxyline.model import Model, _build, _copy
 
 COLUMNS = ("name", "time", "flow_in", "flow_out", "pressure_in", "pressure_out")
@@ -113,6 +114,7 @@ BC_PARAMS = {
     "PRESSURE": {"P", "t"},
     "RESISTANCE": {"R", "Pd"},
     "RCR": {"Rp", "C", "Rd", "Pd"},
+    **svzerod_heart.BC_PARAMS,
 }
 
 
@@ -386,6 +388,14 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
                 tt, yy = _periodic_table(t, y, el)
                 # svZeroDSolver's steady start uses the arithmetic mean of the samples
                 native = {"type": q, "time": tt, q: yy, "steady": sum(y) / len(y)}
+        elif kind in svzerod_heart.BC_PARAMS:
+            native, p = svzerod_heart.boundary_condition(kind, vals, el, _num, _numlist,
+                                                         _periodic_table)
+            if p is not None and model_period > 0.0 and p != model_period:
+                raise ModelError(f"{el}: Inconsistent cardiac cycle period defined in "
+                                 f"parameters (its table spans {p}, an earlier one "
+                                 f"{model_period})")
+            model_period = p if p is not None else model_period
         elif kind == "RESISTANCE":
             native = {"type": "resistance", "resistance": _num(_required(vals, "R", el), el, "R"),
                       "pressure": _num(_required(vals, "Pd", el), el, "Pd")}
@@ -409,6 +419,7 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         period = sim_period
     if not period > 0.0:
         raise ModelError(f"simulation_parameters: the cardiac period must be > 0, got {period}")
+    svzerod_heart.finish(bcs, period)
 
     if cycle_error and any(kind == "RCR" for kind, _ in bcs.values()):
         # Pfaller et al. 2021, eq. 21, as in svZeroDSolver's Solver.cpp
@@ -632,9 +643,10 @@ def to_model(config: Mapping[str, Any] | str | os.PathLike[str],
 def _table_spacings(native: Mapping[str, Any]) -> list[float]:
     out = []
     for bc in native["boundary_conditions"].values():
-        t = bc.get("time")
-        if t and len(t) > 1:
-            out.append(min(b - a for a, b in itertools.pairwise(t)))
+        pim = bc.get("intramyocardial_pressure")
+        for t in (bc.get("time"), pim.get("time") if isinstance(pim, Mapping) else None):
+            if t and len(t) > 1:
+                out.append(min(b - a for a, b in itertools.pairwise(t)))
     return out
 
 
