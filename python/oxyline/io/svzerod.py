@@ -14,7 +14,8 @@ peer's to round-off.
 
 Supported: ``BloodVessel`` (``R_poiseuille``, ``C``, ``L``, ``stenosis_coefficient``),
 ``NORMAL_JUNCTION`` (alias ``internal_junction``), ``BloodVesselJunction``, boundary conditions
-``FLOW``, ``PRESSURE``, ``RESISTANCE`` and ``RCR`` (outlets; FLOW and PRESSURE also at inlets),
+``FLOW``, ``PRESSURE``, ``RESISTANCE``, ``RCR``, ``CORONARY`` and ``CORONARY_VAR_RES`` (outlets;
+FLOW and PRESSURE also at inlets; the coronary ones in :mod:`oxyline.io.svzerod_heart`),
 and the simulation parameters listed in ``docs/svzerod.md``. Anything else raises
 :class:`oxyline.UnsupportedElement` naming the element or key.
 
