@@ -43,7 +43,7 @@ if what in ("chain", "tree"):
     ga = time.perf_counter() - t
     model = oxyline.load_model(cfg)
     t = time.perf_counter()
-    oxyline.simulate(model, method="rk4", segments=False)
+    oxyline.simulate(model, method="rk4", dt="auto", segments=False)
     rk = time.perf_counter() - t
 else:
     cfg = json.load(open({cases!r} + "/" + what + ".json"))

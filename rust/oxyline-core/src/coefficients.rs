@@ -79,7 +79,9 @@ impl ResistanceLaw {
                 } else if tau <= contraction + relaxation {
                     0.5 * (1.0 + (pi * (tau - contraction) / relaxation).cos())
                 } else {
-                    0.0
+                    // at rest exactly R_min (the square of its square root can differ by
+                    // an ulp): the time-varying term then vanishes
+                    return min;
                 };
                 let r = min.sqrt() + (max.sqrt() - min.sqrt()) * e;
                 r * r
