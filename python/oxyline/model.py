@@ -48,7 +48,20 @@ BC_KEYS = {
     "pressure": {"type", "time", "pressure", "value", "fourier", "interpolation", "steady"},
     "resistance": {"type", "resistance", "pressure"},
     "rcr": {"type", "proximal_resistance", "capacitance", "distal_resistance", "pressure"},
+    "coronary": {"type", "arterial_resistance", "arterial_capacitance", "microvascular_resistance",
+                 "intramyocardial_capacitance", "venous_resistance", "intramyocardial_pressure",
+                 "pressure", "microvascular_resistance_max", "contraction_time",
+                 "relaxation_time", "cycle_period"},
 }
+#: a coronary outlet's numbers and their quantities (docs/physics.md §1.7)
+CORONARY_QUANTITIES = {
+    "arterial_resistance": "resistance", "arterial_capacitance": "capacitance",
+    "microvascular_resistance": "resistance", "intramyocardial_capacitance": "capacitance",
+    "venous_resistance": "resistance", "microvascular_resistance_max": "resistance",
+    "contraction_time": "time", "relaxation_time": "time", "cycle_period": "time",
+}
+CORONARY_REQUIRED = ("arterial_resistance", "arterial_capacitance", "microvascular_resistance",
+                     "intramyocardial_capacitance", "venous_resistance", "intramyocardial_pressure")
 SIM_KEYS = {"cycles", "dt", "method", "output", "until_periodic", "max_cycles", "rho_infty", "start",
             "max_memory"}
 OUTPUT_KEYS = {"cycles", "every", "segments", "variables", "vessels"}
@@ -324,7 +337,7 @@ def _boundary_conditions(bcs: Mapping[str, Any], units: str
         if cb is None:
             el = f"boundary condition '{node}'"
             cb = _boundary_condition(bc, units, el)
-            for key in ("flow", "pressure"):
+            for key in ("flow", "pressure", "intramyocardial_pressure"):
                 w = cb.get(key)
                 if isinstance(w, dict) and w["kind"] == "table" and len(w["time"]) > 1:
                     periods.append((w["time"][-1] - w["time"][0], el))
@@ -370,16 +383,19 @@ def _fast_outlet(bc: Any, R: float, C: float, P: float) -> dict[str, Any] | None
 def _boundary_condition(bc: Any, units: str, el: str) -> dict[str, Any]:
     """The canonical form of one boundary condition, checking every key and value."""
     if not isinstance(bc, Mapping) or "type" not in bc:
-        raise _err(el, "needs a 'type' (flow, pressure, resistance or rcr)")
+        raise _err(el, "needs a 'type' (flow, pressure, resistance, rcr or coronary)")
     kind = str(bc["type"]).lower()
     if kind not in BC_KEYS:
-        raise _err(el, f"unknown type '{bc['type']}' (expected flow, pressure, resistance or rcr)")
+        raise _err(el, f"unknown type '{bc['type']}' (expected flow, pressure, resistance, rcr "
+                       "or coronary)")
     _check_keys(bc, BC_KEYS[kind], el)
     cb: dict[str, Any] = {"type": kind}
     if kind == "flow":
         cb["flow"] = _waveform(bc, "flow", "flow", units, el)
     elif kind == "pressure":
         cb["pressure"] = _waveform(bc, "pressure", "pressure", units, el)
+    elif kind == "coronary":
+        return _coronary(bc, units, el)
     elif kind == "resistance":
         cb["resistance"] = factor(units, "resistance") * _number(bc.get("resistance"), el, "resistance")
         p = bc.get("pressure", 0.0)
@@ -394,6 +410,23 @@ def _boundary_condition(bc: Any, units: str, el: str) -> dict[str, Any]:
         p = bc.get("pressure", 0.0)
         cb["pressure"] = _waveform({"pressure": p} if not isinstance(p, Mapping) else p,
                                    "pressure", "pressure", units, el)
+    return cb
+
+
+def _coronary(bc: Mapping[str, Any], units: str, el: str) -> dict[str, Any]:
+    """The canonical form of a ``coronary`` outlet (numbers in SI; pressures as waveforms)."""
+    for k in CORONARY_REQUIRED:
+        if k not in bc:
+            raise _err(el, f"coronary needs '{k}'")
+    cb: dict[str, Any] = {"type": "coronary"}
+    for k, q in CORONARY_QUANTITIES.items():
+        if k in bc and bc[k] is not None:
+            cb[k] = factor(units, q) * _number(bc[k], el, k)
+    for k in ("intramyocardial_pressure", "pressure"):
+        p = bc.get(k, 0.0)
+        w = _waveform({"pressure": p} if not isinstance(p, Mapping) else p, "pressure", "pressure",
+                      units, f"{el} {k}")
+        cb[k] = w
     return cb
 
 

@@ -15,38 +15,7 @@ peer's to round-off.
 
 Every svZeroDSolver element and option (details and measured errors in ``docs/svzerod.md``):
 
-======================================================  ===========  ==========================
-element or option                                       status       how, or why not
-======================================================  ===========  ==========================
-``BloodVessel`` (R, C, L, stenosis, also negative S)    supported    RCL vessel; a stenosis
-                                                                     next to C in
-                                                                     svZeroDSolver's form
-``BloodVesselCRL``                                      supported    two RCL vessels
-``BloodVesselRC``                                       unsupported  its capacitor's flow goes
-                                                                     through to the outlet
-``NORMAL_JUNCTION``, ``internal_junction``              supported    shared node
-``BloodVesselJunction``                                 supported    hidden R(+S)-L branches
-``resistive_junction``                                  supported    centre node, hidden R per
-                                                                     port
-``FLOW``, ``PRESSURE`` (inlet or outlet)                supported    source / fixed pressure
-``RESISTANCE``, ``RCR`` at an outlet                    supported
-``RESISTANCE``, ``RCR`` at an inlet                     unsupported  svZeroDSolver's sign makes
-                                                                     them negative R (and C)
-``CORONARY``, ``CORONARY_VAR_RES``, closed-loop BCs     unsupported  time-varying / closed loop
-``closed_loop_blocks``, ``chambers``, ``valves``        unsupported  time-varying, nonlinear
-``external_solver_coupling_blocks``,                    unsupported  3D-0D coupling
-``coupled_simulation``
-``initial_condition``, ``initial_condition_d``          unsupported  runs start steady or at 0
-``output_variable_based``, ``output_derivative``,       supported    svzerod's tables
-``output_mean_only``, ``output_all_cycles``,
-``output_interval``
-``use_cycle_to_cycle_error``                            RCR only     the cap-mean rule is not
-                                                                     implemented
-calibrator inputs                                       unsupported  not a forward simulation
-======================================================  ===========  ==========================
-
-Anything unsupported raises :class:`oxyline.UnsupportedElement` naming the element or key.
-
+======================================================  ===========  ===================
 Example::
 
     import oxyline.svzerod as svz
@@ -84,6 +53,7 @@ from typing import Any
 import numpy as np
 
 from oxyline.errors import ModelError, UnsupportedElement
+from oxyline.io import svzerod_heart
 from oxyline.model import Model, _build, _copy
 
 COLUMNS = ("name", "time", "flow_in", "flow_out", "pressure_in", "pressure_out")
@@ -151,6 +121,7 @@ BC_PARAMS = {
     "PRESSURE": {"P", "t"},
     "RESISTANCE": {"R", "Pd"},
     "RCR": {"Rp", "C", "Rd", "Pd"},
+    **svzerod_heart.BC_PARAMS,
 }
 
 
@@ -562,6 +533,14 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
                 tt, yy = _periodic_table(t, y, el)
                 # svZeroDSolver's steady start uses the arithmetic mean of the samples
                 native = {"type": q, "time": tt, q: yy, "steady": sum(y) / len(y)}
+        elif kind in svzerod_heart.BC_PARAMS:
+            native, p = svzerod_heart.boundary_condition(kind, vals, el, _num, _numlist,
+                                                         _periodic_table)
+            if p is not None and model_period > 0.0 and p != model_period:
+                raise ModelError(f"{el}: Inconsistent cardiac cycle period defined in "
+                                 f"parameters (its table spans {p}, an earlier one "
+                                 f"{model_period})")
+            model_period = p if p is not None else model_period
         elif kind == "RESISTANCE":
             native = {"type": "resistance", "resistance": _num(_required(vals, "R", el), el, "R"),
                       "pressure": _num(_required(vals, "Pd", el), el, "Pd")}
@@ -587,6 +566,7 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         period = sim_period
     if not period > 0.0:
         raise ModelError(f"simulation_parameters: the cardiac period must be > 0, got {period}")
+    svzerod_heart.finish(bcs, period)
 
     if cycle_error and any(kind == "RCR" for kind, _ in bcs.values()):
         # Pfaller et al. 2021, eq. 21, as in svZeroDSolver's Solver.cpp
@@ -769,9 +749,10 @@ def to_model(config: Mapping[str, Any] | str | os.PathLike[str],
 def _table_spacings(native: Mapping[str, Any]) -> list[float]:
     out = []
     for bc in native["boundary_conditions"].values():
-        t = bc.get("time")
-        if t and len(t) > 1:
-            out.append(min(b - a for a, b in itertools.pairwise(t)))
+        pim = bc.get("intramyocardial_pressure")
+        for t in (bc.get("time"), pim.get("time") if isinstance(pim, Mapping) else None):
+            if t and len(t) > 1:
+                out.append(min(b - a for a, b in itertools.pairwise(t)))
     return out
 
 

@@ -1,12 +1,16 @@
 //! The assembled lumped circuit: capacitive nodes (pressure unknowns) and series
 //! R–L(–stenosis) branches (flow unknowns), written as one DAE
 //!
-//!   E ẏ + F y + c(y) = f(t)
+//!   E ẏ + F y + c(y) + D(t) y = f(t)
 //!
 //! with E diagonal (node capacitance or branch inertance; zero rows are algebraic),
-//! F the constant incidence/resistance matrix and c the stenosis term S|Q|Q.
+//! F the constant incidence/resistance matrix, c the stenosis term S|Q|Q and D(t) the diagonal
+//! time-varying part of branch resistances that follow a law (`crate::coefficients`; empty for
+//! most circuits, which then keep their constant-matrix fast path). f holds the boundary
+//! waveforms: inflows and pressures on node rows, series pressure sources on branch rows.
 //! Unknown i < n_nodes is the pressure of node i, unknown n_nodes + b the flow of branch b.
 
+use crate::coefficients::ResistanceLaw;
 use crate::error::{Error, Result};
 use crate::waveform::Waveform;
 use std::sync::Arc;
@@ -26,6 +30,10 @@ pub enum Part {
     Distal,
     ProximalResistance,
     DistalResistance,
+    /// A coronary bed's microvascular resistance.
+    MicrovascularResistance,
+    /// A coronary bed's intramyocardial compartment.
+    Intramyocardial,
 }
 
 impl Part {
@@ -40,6 +48,8 @@ impl Part {
             Part::Distal => "distal",
             Part::ProximalResistance => "proximal resistance",
             Part::DistalResistance => "distal resistance",
+            Part::MicrovascularResistance => "microvascular resistance",
+            Part::Intramyocardial => "intramyocardial compartment",
         }
     }
 }
@@ -254,6 +264,12 @@ pub struct Circuit {
     pub sources: Vec<(usize, Waveform)>,
     /// Prescribed node pressures (Pa): pressure BCs and the distal pressure of outlets.
     pub fixed_pressures: Vec<(usize, Waveform)>,
+    /// Pressure sources in series with a branch (Pa): the pressure rises by e(t) along the
+    /// branch, P_from + e(t) − R Q − L Q̇ = P_to (e.g. the intramyocardial pressure of a
+    /// coronary bed).
+    pub branch_sources: Vec<(usize, Waveform)>,
+    /// Branch resistances that follow a law R(t); the branch's `resistance` is the law's base.
+    pub resistance_laws: Vec<(usize, ResistanceLaw)>,
     /// Boundary conditions (transport); `source_boundary[k]` tags `sources[k]`.
     pub boundaries: Vec<BoundaryTag>,
     pub source_boundary: Vec<usize>,
@@ -452,6 +468,15 @@ impl Circuit {
                 ..*c
             })
             .collect();
+        // a branch row reads −P_from + P_to + R Q + L Q̇ = e(t)
+        for (b, w) in &self.branch_sources {
+            forcing.push((nn + b, w.clone()));
+        }
+        let varying = self
+            .resistance_laws
+            .iter()
+            .map(|(b, law)| (nn + b, law.clone()))
+            .collect();
         Ok(Dae {
             n,
             n_nodes: nn,
@@ -460,6 +485,7 @@ impl Circuit {
             f,
             stenosis,
             chain_rule,
+            varying,
             forcing,
             names: self.names.clone(),
         })
@@ -479,6 +505,9 @@ pub struct Dae {
     /// Capacitor rows generalized-α writes in svZeroDSolver's form (see
     /// [`ChainRuleCapacitor`]); every other integrator uses the row E ẏ as it is.
     pub chain_rule: Vec<ChainRuleCapacitor>,
+    /// (unknown, law): the time-varying diagonal D_ii(t) = R(t) − R₀ of the transient regime
+    /// (zero in the steady regimes, whose resistance is the base R₀ kept in F).
+    pub varying: Vec<(usize, ResistanceLaw)>,
     /// (row, waveform): f_row(t) = w(t).
     pub forcing: Vec<(usize, Waveform)>,
     /// Names of the unknowns ([`Names::unknown`]), shared with the circuit.
@@ -498,8 +527,32 @@ impl Dae {
         e
     }
 
+    /// No stenosis term: the residual is linear in the state (possibly time-varying).
     pub fn is_linear(&self) -> bool {
         self.stenosis.is_empty()
+    }
+
+    /// The iteration matrix of `regime` is constant in time (no time-varying coefficient acts).
+    pub fn is_constant(&self, regime: Regime) -> bool {
+        self.varying.is_empty() || regime != Regime::Transient
+    }
+
+    /// r −= D(t) y: the time-varying coefficients' term (transient regime only).
+    pub fn varying_residual(&self, t: f64, regime: Regime, y: &[f64], r: &mut [f64]) {
+        if regime == Regime::Transient {
+            for (i, law) in &self.varying {
+                r[*i] -= law.delta(t) * y[*i];
+            }
+        }
+    }
+
+    /// Add a·D(t) to `diag` (the iteration matrix's diagonal slots).
+    pub fn varying_jacobian(&self, a: f64, t: f64, regime: Regime, diag: &mut [f64]) {
+        if regime == Regime::Transient {
+            for (i, law) in &self.varying {
+                diag[*i] += a * law.delta(t);
+            }
+        }
     }
 
     /// Write f(t) into `out` (zeroed first).

@@ -4,6 +4,7 @@
 pub mod assemble;
 pub mod circuit;
 pub mod closure;
+pub mod coefficients;
 pub mod ensemble;
 pub mod error;
 pub mod frequency;

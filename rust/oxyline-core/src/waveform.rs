@@ -149,6 +149,30 @@ impl Waveform {
         }
     }
 
+    /// The waveform with every value negated (−w(t)).
+    pub fn negated(self) -> Self {
+        match self {
+            Waveform::Constant(v) => Waveform::Constant(-v),
+            Waveform::Table { t, v, m, mean } => Waveform::Table {
+                t,
+                v: v.iter().map(|x| -x).collect(),
+                m: m.map(|m| m.iter().map(|x| -x).collect()),
+                mean: -mean,
+            },
+            Waveform::Fourier {
+                omega,
+                mean,
+                cos,
+                sin,
+            } => Waveform::Fourier {
+                omega,
+                mean: -mean,
+                cos: cos.iter().map(|x| -x).collect(),
+                sin: sin.iter().map(|x| -x).collect(),
+            },
+        }
+    }
+
     /// Period of a tabulated waveform (t_last - t_first) or Fourier series.
     pub fn period(&self) -> Option<f64> {
         match self {

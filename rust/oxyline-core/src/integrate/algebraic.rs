@@ -31,7 +31,13 @@ pub(super) fn reduce_prescribed_inductors(dae: &Dae, regime: Regime) -> Reductio
     let n = dae.n;
     let mut e = dae.mass(regime);
     let mut nonlinear = vec![false; n];
-    for &(i, _) in &dae.stenosis {
+    // rows with a stenosis or a time-varying coefficient do not fix a constant combination
+    for i in dae
+        .stenosis
+        .iter()
+        .map(|s| s.0)
+        .chain(dae.varying.iter().map(|v| v.0))
+    {
         nonlinear[i] = true;
     }
     let mut row_forcing: Vec<Vec<usize>> = vec![Vec::new(); n];
@@ -84,7 +90,8 @@ pub(super) fn reduce_prescribed_inductors(dae: &Dae, regime: Regime) -> Reductio
 }
 
 /// The algebraic rows of the circuit and their elimination: a sparse LU of F restricted to the
-/// algebraic rows and columns (plus the stenosis slopes 2S|Q| on their diagonal).
+/// algebraic rows and columns (plus the stenosis slopes 2S|Q| and the time-varying resistances
+/// D(t) on their diagonal).
 pub(super) struct Algebraic {
     /// Global unknown of each algebraic row/column.
     pub(super) rows: Vec<usize>,
@@ -94,6 +101,11 @@ pub(super) struct Algebraic {
     vals: Vec<f64>,
     /// (local row, global unknown, S) of stenoses on algebraic unknowns.
     stenosis: Vec<(usize, usize, f64)>,
+    /// (local row, index into `Dae::varying`) of time-varying coefficients on algebraic rows.
+    varying: Vec<(usize, usize)>,
+    /// Time of the last factorisation of a time-varying, stenosis-free part (its matrix then
+    /// depends on the time only).
+    factored_at: Option<f64>,
     /// Residual and correction of the algebraic rows.
     pub(super) r: Vec<f64>,
     /// Running scale of the Newton increments (see `Magnitude`).
@@ -102,7 +114,7 @@ pub(super) struct Algebraic {
 
 impl Algebraic {
     /// None for a circuit without algebraic unknowns.
-    pub(super) fn analyse(dae: &Dae, e: &[f64]) -> Result<Option<Self>> {
+    pub(super) fn analyse(dae: &Dae, e: &[f64], regime: Regime) -> Result<Option<Self>> {
         let n = dae.n;
         let rows: Vec<usize> = (0..n).filter(|&i| e[i] <= 0.0).collect();
         if rows.is_empty() {
@@ -130,6 +142,16 @@ impl Algebraic {
             .map(|&(g, s)| (local[g], g, s))
             .collect();
         stamps.extend(stenosis.iter().map(|&(l, _, _)| (l, l)));
+        let transient = regime == Regime::Transient;
+        let varying: Vec<(usize, usize)> = if transient {
+            (dae.varying.iter().enumerate())
+                .filter(|(_, (g, _))| local[*g] != usize::MAX)
+                .map(|(k, (g, _))| (local[*g], k))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        stamps.extend(varying.iter().map(|&(l, _)| (l, l)));
         Ok(Some(Algebraic {
             lu: SparseLu::analyse(rows.len(), &stamps)?,
             vals: vec![0.0; stamps.len()],
@@ -138,15 +160,29 @@ impl Algebraic {
             rows,
             stamps_src,
             stenosis,
+            varying,
+            factored_at: None,
         }))
     }
 
+    /// No stenosis on the algebraic rows: they are linear in the state.
     pub(super) fn is_linear(&self) -> bool {
         self.stenosis.is_empty()
     }
 
-    /// Factorise at state `y` (the stenosis slopes depend on it).
-    pub(super) fn factor(&mut self, dae: &Dae, y: &[f64]) -> std::result::Result<(), String> {
+    /// Linear with a constant matrix: factorised once per run.
+    pub(super) fn is_constant(&self) -> bool {
+        self.stenosis.is_empty() && self.varying.is_empty()
+    }
+
+    /// Factorise at state `y` (the stenosis slopes depend on it) and time `t` (the
+    /// time-varying coefficients do).
+    pub(super) fn factor(
+        &mut self,
+        dae: &Dae,
+        y: &[f64],
+        t: f64,
+    ) -> std::result::Result<(), String> {
         let nf = self.stamps_src.len();
         for (v, &k) in self.vals[..nf].iter_mut().zip(&self.stamps_src) {
             *v = dae.f.val[k];
@@ -154,12 +190,17 @@ impl Algebraic {
         for (j, &(_, g, s)) in self.stenosis.iter().enumerate() {
             self.vals[nf + j] = 2.0 * s * y[g].abs();
         }
+        let nv = nf + self.stenosis.len();
+        for (j, &(_, k)) in self.varying.iter().enumerate() {
+            self.vals[nv + j] = dae.varying[k].1.delta(t);
+        }
+        self.factored_at = Some(t);
         self.lu.factor(&self.vals)
     }
 
     /// Factorise at y = 0 and probe one solve: a singular algebraic part means an index-2 DAE.
     pub(super) fn check_index1(&mut self, dae: &Dae) -> Result<()> {
-        let ok = self.factor(dae, &vec![0.0; dae.n]).is_ok() && {
+        let ok = self.factor(dae, &vec![0.0; dae.n], 0.0).is_ok() && {
             let mut probe: Vec<f64> = (0..self.rows.len()).map(|i| 1.0 + (i % 7) as f64).collect();
             self.lu.solve_in_place(&mut probe)
         };
@@ -191,14 +232,21 @@ impl NewtonProblem for Elimination<'_> {
         for &(l, g, s) in &self.alg.stenosis {
             r[l] -= s * self.y[g].abs() * self.y[g];
         }
+        for &(l, k) in &self.alg.varying {
+            let (g, law) = &self.dae.varying[k];
+            r[l] -= law.delta(self.time) * self.y[*g];
+        }
     }
     fn factor(&mut self, _: usize) -> Result<()> {
-        // a linear algebraic part was factorised once, in `Rk4::new`
-        if self.alg.is_linear() {
+        // a constant algebraic part was factorised once, in `Rk4::new`; a linear time-varying
+        // one once per stage time
+        if self.alg.is_constant()
+            || (self.alg.is_linear() && self.alg.factored_at == Some(self.time))
+        {
             return Ok(());
         }
         self.alg
-            .factor(self.dae, self.y)
+            .factor(self.dae, self.y, self.time)
             .map_err(|m| singular(self.time, &m))
     }
     fn solve(&mut self, r: &mut [f64]) -> Result<()> {

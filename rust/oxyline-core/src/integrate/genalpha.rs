@@ -1,6 +1,9 @@
 //! Generalized-α for E ẏ + F y + c(y) = f(t): the scheme and parameters of svZeroDSolver
 //! (Jansen–Whiting–Hulbert 2000, predictor ẏ⁰ = (1 − 1/γ) ẏₙ, Newton on ẏ).
 //! For a linear circuit the iteration matrix is constant, so it is factorised once per run.
+//! Time-varying coefficients (`Dae::varying`) make it change from step to step but not within
+//! a step: it is refactorised once per step, and again per Newton iteration only when stenoses
+//! make it depend on the iterate.
 
 use super::newton::{self, Magnitude, NewtonProblem, jacobian_stamps, jacobian_values};
 use crate::circuit::{Dae, Regime};
@@ -88,7 +91,11 @@ impl<'a> GenAlpha<'a> {
                 m[c.node] = 0.0;
             }
         }
-        let nonlinear = if dae.is_linear() { 0 } else { n };
+        let nonlinear = if dae.is_linear() && dae.is_constant(regime) {
+            0
+        } else {
+            n
+        };
         Ok(GenAlpha {
             dae,
             e,
@@ -133,6 +140,8 @@ impl<'a> GenAlpha<'a> {
             kvals[nf + cr.node] += self.am * cr.capacitance;
             kvals[k] -= c * 2.0 * cr.capacitance * cr.stenosis * sign * yd_am[cr.flow];
         }
+        self.dae
+            .varying_jacobian(c, time, self.regime, &mut kvals[nf..]);
         self.lu.factor(&kvals).map_err(|m| singular(time, &m))?;
         self.factored = true;
         Ok(())
@@ -145,7 +154,7 @@ impl<'a> GenAlpha<'a> {
 
     /// Advance (y, ẏ) from `time` to `time + dt` in place.
     pub fn step(&mut self, time: f64, y: &mut [f64], yd: &mut [f64]) -> Result<()> {
-        if self.dae.is_linear() {
+        if self.dae.is_linear() && self.dae.is_constant(self.regime) {
             return self.step_linear(time, y, yd);
         }
         let pred = (self.gamma - 1.0) / self.gamma;
@@ -196,6 +205,7 @@ impl NewtonProblem for Iterate<'_, '_> {
             *ya = yi + af * (yn - yi);
         }
         ga.dae.static_residual(&ga.y_af, &ga.f, r);
+        ga.dae.varying_residual(self.t_af, ga.regime, &ga.y_af, r);
         for (i, ri) in r.iter_mut().enumerate() {
             *ri -= ga.e[i] * (self.yd[i] + am * (ga.yd_new[i] - self.yd[i]));
         }
@@ -206,8 +216,12 @@ impl NewtonProblem for Iterate<'_, '_> {
             r[cr.node] -= cr.capacitance * (yd_am(cr.inlet) - slope * yd_am(cr.flow));
         }
     }
-    fn factor(&mut self, _: usize) -> Result<()> {
-        // stenoses make the iteration matrix depend on the iterate
+    fn factor(&mut self, it: usize) -> Result<()> {
+        // stenoses make the iteration matrix depend on the iterate; time-varying coefficients
+        // only on the step's time, so without stenoses the step's first factorisation holds
+        if it > 0 && self.ga.dae.is_linear() {
+            return Ok(());
+        }
         let y_af = std::mem::take(&mut self.ga.y_af);
         let yd_am: Vec<f64> = if self.ga.dae.chain_rule.is_empty() {
             Vec::new()

@@ -132,6 +132,10 @@ pub struct Rk4<'a> {
     /// 2 S |Q| of stenoses on differential unknowns at the linearisation point of
     /// `linear_operator` (zero: the linear circuit).
     lin_stenosis: Vec<(usize, f64)>,
+    /// The time at which `linear_operator` freezes time-varying coefficients, and the state at
+    /// which it linearises stenoses (empty: zero).
+    lin_time: f64,
+    lin_state: Vec<f64>,
 }
 
 impl<'a> Rk4<'a> {
@@ -140,7 +144,7 @@ impl<'a> Rk4<'a> {
     pub fn new(dae: &'a Dae, regime: Regime, dt: f64) -> Result<Self> {
         let Reduction { e, rate } = reduce_prescribed_inductors(dae, regime);
         let n = dae.n;
-        let mut alg = Algebraic::analyse(dae, &e)?;
+        let mut alg = Algebraic::analyse(dae, &e, regime)?;
         if let Some(a) = alg.as_mut() {
             a.check_index1(dae)?;
         }
@@ -155,6 +159,8 @@ impl<'a> Rk4<'a> {
             f: vec![0.0; n],
             st: CoupledStages::new(n),
             lin_stenosis: Vec::new(),
+            lin_time: 0.0,
+            lin_state: Vec::new(),
         })
     }
 
@@ -200,6 +206,13 @@ impl<'a> Rk4<'a> {
         for &(i, s) in &self.dae.stenosis {
             if self.e[i] > 0.0 {
                 k[i] -= s * y[i].abs() * y[i] / self.e[i];
+            }
+        }
+        if self.regime == Regime::Transient {
+            for (i, law) in &self.dae.varying {
+                if self.e[*i] > 0.0 {
+                    k[*i] -= law.delta(time) * y[*i] / self.e[*i];
+                }
             }
         }
         Ok(())
@@ -299,8 +312,49 @@ impl<'a> Rk4<'a> {
             .filter(|(i, _)| self.e[*i] > 0.0)
             .map(|&(i, s)| (i, 2.0 * s * y[i].abs()))
             .collect();
-        if let Some(alg) = self.alg.as_mut().filter(|a| !a.is_linear()) {
-            alg.factor(self.dae, y).map_err(|m| singular(0.0, &m))?;
+        self.lin_state = y.to_vec();
+        self.refactor_linearization()
+    }
+
+    /// Whether time-varying coefficients act (the operator of `linear_operator` then depends
+    /// on the time set by [`Rk4::set_operator_time`]).
+    pub fn is_time_varying(&self) -> bool {
+        !self.dae.is_constant(self.regime)
+    }
+
+    /// The times within a period at which the stability limit of a time-varying circuit is
+    /// sampled: `n` evenly spaced, plus every law's breakpoints (its extremes and phase ends).
+    pub fn operator_times(&self, n: usize) -> Vec<f64> {
+        let mut times = Vec::new();
+        for (_, law) in &self.dae.varying {
+            let p = law.period();
+            times.extend((0..n).map(|k| p * k as f64 / n as f64));
+            times.extend(law.breakpoints());
+        }
+        times.sort_by(f64::total_cmp);
+        times.dedup();
+        times
+    }
+
+    /// Freeze time-varying coefficients at `t` for `linear_operator`.
+    pub fn set_operator_time(&mut self, t: f64) -> Result<()> {
+        self.lin_time = t;
+        self.refactor_linearization()
+    }
+
+    /// Refactorise the algebraic part at the linearisation point (state and time) when it is
+    /// not constant.
+    fn refactor_linearization(&mut self) -> Result<()> {
+        if let Some(alg) = self.alg.as_mut().filter(|a| !a.is_constant()) {
+            let zero;
+            let y = if self.lin_state.is_empty() {
+                zero = vec![0.0; self.dae.n];
+                &zero
+            } else {
+                &self.lin_state
+            };
+            alg.factor(self.dae, y, self.lin_time)
+                .map_err(|m| singular(self.lin_time, &m))?;
         }
         Ok(())
     }
@@ -328,6 +382,13 @@ impl<'a> Rk4<'a> {
             for (j, &i) in self.diff.iter().enumerate() {
                 if let Ok(k) = self.lin_stenosis.binary_search_by_key(&i, |&(u, _)| u) {
                     out[j] -= self.lin_stenosis[k].1 * y[i] / self.e[i];
+                }
+            }
+        }
+        if self.is_time_varying() {
+            for (j, &i) in self.diff.iter().enumerate() {
+                if let Some((_, law)) = self.dae.varying.iter().find(|(u, _)| *u == i) {
+                    out[j] -= law.delta(self.lin_time) * y[i] / self.e[i];
                 }
             }
         }

@@ -142,6 +142,35 @@ pub enum BoundarySpec {
         #[serde(default)]
         pressure: Option<WaveformSpec>,
     },
+    /// A coronary bed with intramyocardial pressure (docs/physics.md §1.7).
+    Coronary(Box<CoronarySpec>),
+}
+
+/// The `coronary` outlet: arterial resistance and capacitance, microvascular resistance,
+/// intramyocardial capacitance under the intramyocardial pressure, venous resistance to the
+/// venous pressure `pressure` (svZeroDSolver's `CORONARY`). With `microvascular_resistance_max`
+/// the microvascular resistance follows the contraction law of `crate::coefficients` between
+/// `microvascular_resistance` and that maximum (svZeroDSolver's `CORONARY_VAR_RES`).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CoronarySpec {
+    pub arterial_resistance: f64,
+    pub arterial_capacitance: f64,
+    pub microvascular_resistance: f64,
+    pub intramyocardial_capacitance: f64,
+    pub venous_resistance: f64,
+    pub intramyocardial_pressure: WaveformSpec,
+    #[serde(default)]
+    pub pressure: Option<WaveformSpec>,
+    #[serde(default)]
+    pub microvascular_resistance_max: Option<f64>,
+    #[serde(default)]
+    pub contraction_time: Option<f64>,
+    #[serde(default)]
+    pub relaxation_time: Option<f64>,
+    /// Period of the contraction law (default: that of the intramyocardial pressure table).
+    #[serde(default)]
+    pub cycle_period: Option<f64>,
 }
 
 #[derive(Debug, Clone, Deserialize)]

@@ -1,6 +1,7 @@
 //! Boundary conditions: one stamp function per condition type, each in its own file, so that
 //! a new condition type touches one file (plus its `BoundarySpec` variant in `crate::spec`).
 
+mod coronary;
 mod flow;
 mod pressure;
 mod rcr;
@@ -84,5 +85,6 @@ pub(crate) fn stamp(
             },
             pressure,
         ),
+        BoundarySpec::Coronary(c) => coronary::stamp(circuit, &site, c),
     }
 }

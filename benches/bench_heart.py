@@ -1,0 +1,142 @@
+"""Time-varying coefficients (issue 14): constant-coefficient models keep their fast path, and
+the coronary cases against svzerod.
+
+Every timing runs in a fresh subprocess; ``--baseline DIR`` names a directory holding another
+build of the ``oxyline`` package (e.g. a copy of main's ``python/`` with its ``_core.abi3.so``),
+run alternately with this one in the same session so that the before/after ratio is not skewed
+by the load of a shared machine. Models:
+
+* ``chain N`` / ``tree N``: the constant-coefficient chain and tree of ``networks.py`` through
+  the svZeroDSolver drop-in (generalized-alpha) and natively with RK4, flow only;
+* ``coronary`` / ``coronary_varres``: the peer cases ``pulsatileFlow_R_coronary(_varres)``
+  (oxyline generalized-alpha and RK4 vs ``svzerod.simulate``, with the accuracy of each against
+  the stored reference / a 20x finer svzerod run).
+
+Run ``python benches/bench_heart.py --help``; results are printed as Markdown tables.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+CASES = HERE.parent / "tests" / "data" / "svzerod" / "cases"
+MARK = "@@BENCH@@"
+
+CHILD = r'''
+import json, sys, time
+sys.path.insert(0, {here!r})
+import networks, oxyline
+import oxyline.svzerod as svz
+what, n = {what!r}, {n!r}
+if what in ("chain", "tree"):
+    cfg = networks.build(what, n)
+    t = time.perf_counter()
+    svz.simulate(cfg)
+    ga = time.perf_counter() - t
+    model = oxyline.load_model(cfg)
+    t = time.perf_counter()
+    oxyline.simulate(model, method="rk4", dt="auto", segments=False)
+    rk = time.perf_counter() - t
+else:
+    cfg = json.load(open({cases!r} + "/" + what + ".json"))
+    t = time.perf_counter()
+    svz.simulate(cfg)
+    ga = time.perf_counter() - t
+    t = time.perf_counter()
+    svz.simulate(cfg, method="rk4")
+    rk = time.perf_counter() - t
+print({mark!r} + json.dumps({{"ga": ga, "rk4": rk}}))
+'''
+
+
+def run_child(what: str, n: int | None, pythonpath: str | None) -> dict[str, float]:
+    env = dict(os.environ)
+    if pythonpath:
+        env["PYTHONPATH"] = pythonpath
+    code = CHILD.format(here=str(HERE), what=what, n=n, cases=str(CASES), mark=MARK)
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         check=True).stdout
+    return json.loads(out.split(MARK)[-1])
+
+
+def peer_table() -> None:
+    import time
+
+    import numpy as np
+    import pandas as pd
+    import svzerod
+
+    import oxyline.svzerod as svz
+
+    print("| case | svzerod (s) | oxyline gen-α (s) | gen-α err vs reference | oxyline RK4 (s) "
+          "| RK4 err vs svzerod 20x |")
+    print("|---|---|---|---|---|---|")
+    for name in ("pulsatileFlow_R_coronary", "pulsatileFlow_R_coronary_varres"):
+        cfg = json.loads((CASES / f"{name}.json").read_text())
+        ref = pd.read_json(CASES / "results" / f"result_{name}.json.gz")
+        t = time.perf_counter()
+        svzerod.simulate(cfg)
+        t_peer = time.perf_counter() - t
+        t = time.perf_counter()
+        ga = svz.simulate(cfg)
+        t_ga = time.perf_counter() - t
+        t = time.perf_counter()
+        rk = svz.simulate(cfg, method="rk4")
+        t_rk = time.perf_counter() - t
+        fine = json.loads(json.dumps(cfg))
+        sp = fine["simulation_parameters"]
+        sp["number_of_time_pts_per_cardiac_cycle"] = (sp["number_of_time_pts_per_cardiac_cycle"]
+                                                      - 1) * 20 + 1
+        sp["output_interval"] = 20
+        fine_df = svzerod.simulate(fine)
+        cols = ("flow_in", "flow_out", "pressure_in", "pressure_out")
+        e_ga = max(float(np.max(np.abs(ga[c] - ref[c])) / np.max(np.abs(ref[c]))) for c in cols)
+        e_rk = max(float(np.max(np.abs(rk[c] - fine_df[c])) / np.ptp(fine_df[c])) for c in cols)
+        print(f"| {name} | {t_peer:.3f} | {t_ga:.3f} | {e_ga:.1e} | {t_rk:.3f} | {e_rk:.1e} |")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--baseline", help="directory with another build of the oxyline package")
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--sizes", default="1000", help="comma-separated N of chain/tree")
+    args = ap.parse_args()
+    impls = {"this": None}
+    if args.baseline:
+        impls["baseline"] = str(Path(args.baseline).resolve())
+    load = os.getloadavg()[0]
+    print(f"load average at start: {load:.1f}\n")
+    print("| model | build | gen-α drop-in (s, median) | RK4 native (s, median) |")
+    print("|---|---|---|---|")
+    rows: dict[tuple[str, str], dict[str, list[float]]] = {}
+    models = [(t, int(float(n))) for n in args.sizes.split(",") for t in ("chain", "tree")]
+    for what, n in models:
+        for _ in range(args.repeat):
+            for impl, path in impls.items():  # alternate builds within each repeat
+                r = run_child(what, n, path)
+                d = rows.setdefault((f"{what} {n}", impl), {"ga": [], "rk4": []})
+                d["ga"].append(r["ga"])
+                d["rk4"].append(r["rk4"])
+    for (model, impl), d in rows.items():
+        print(f"| {model} | {impl} | {statistics.median(d['ga']):.3f} | "
+              f"{statistics.median(d['rk4']):.3f} |")
+    if args.baseline:
+        print("\n| model | gen-α this/baseline | RK4 this/baseline |\n|---|---|---|")
+        for what, n in models:
+            a, b = rows[(f"{what} {n}", "this")], rows[(f"{what} {n}", "baseline")]
+            print(f"| {what} {n} | {statistics.median(a['ga']) / statistics.median(b['ga']):.3f}"
+                  f" | {statistics.median(a['rk4']) / statistics.median(b['rk4']):.3f} |")
+    print(f"\nload average at end: {os.getloadavg()[0]:.1f}\n")
+    peer_table()
+
+
+if __name__ == "__main__":
+    main()
