@@ -73,8 +73,9 @@ const TIME_SAMPLES: usize = 48;
 /// The frozen limit is exact only for coefficients that stay put within a step; with R(t)
 /// changing over a cycle (≫ one step) the error of that approximation is O(Δt/T), and between
 /// samples the limit can dip below the sampled values by the limit's change over 1/48 period.
-/// 0.9 covers both with room (measured on the coronary case: the limit varies by < 2 % between
-/// neighbouring samples; tests/test_svzerod_heart.py runs RK4 at the reported limit's half).
+/// 0.9 is a judgement, not a proof: it covers a 10 % dip between samples of a law that is
+/// continuous over the period (tests/test_svzerod_heart.py checks the varying coronary case
+/// against the peer with RK4 at half the reported limit).
 const TIME_VARYING_MARGIN: f64 = 0.9;
 
 /// [`rk4_limit`] with the spectrum method chosen. A circuit with time-varying coefficients
