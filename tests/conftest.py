@@ -4,6 +4,8 @@ import contextlib
 import os
 import signal
 import subprocess
+import sys
+import threading
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
@@ -95,6 +97,37 @@ def child_process(args: Sequence[str], **kwargs: Any) -> Iterator[subprocess.Pop
         for stream in (proc.stdin, proc.stdout, proc.stderr):
             if stream is not None:
                 stream.close()
+
+
+def _collect_until(stream: Any, seen: threading.Event, marker: bytes, into: list[bytes]) -> None:
+    """Read ``stream`` to its end into ``into``; set ``seen`` once ``marker`` has appeared."""
+    while chunk := os.read(stream.fileno(), 4096):
+        into.append(chunk)
+        if marker in b"".join(into):
+            seen.set()
+
+
+def signal_cli_run(out: Any, sig: int) -> tuple[int, str]:
+    """Start ``oxyline run bifurcation`` (RK4, 100,000 cycles, ``-o out``) in a child, send it
+    ``sig`` once it is integrating, and return its exit code and stderr text.
+
+    Deterministic trigger: the progress bar on stderr (shown once the run has lasted 1 s) says
+    the core is integrating, so the signal lands in the run, not in the start-up. The timeouts
+    only bound a hang: on a starved machine (nice 19 under load) the child's imports alone can
+    take minutes of wall time."""
+    err: list[bytes] = []
+    running = threading.Event()
+    with child_process([sys.executable, "-m", "oxyline.cli", "run", "bifurcation", "--cycles",
+                        "100000", "--method", "rk4", "-o", str(out)],
+                       stdout=subprocess.DEVNULL, stderr=subprocess.PIPE) as proc:
+        reader = threading.Thread(target=_collect_until,
+                                  args=(proc.stderr, running, b"simulated", err), daemon=True)
+        reader.start()
+        assert running.wait(timeout=900), b"".join(err).decode()
+        proc.send_signal(sig)
+        proc.wait(timeout=600)
+        reader.join(timeout=60)
+    return proc.returncode, b"".join(err).decode()
 
 
 def run_child(args: Sequence[str], *, timeout: float = 300, **kwargs: Any,

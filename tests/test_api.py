@@ -6,16 +6,13 @@ from __future__ import annotations
 import os
 import pickle
 import signal
-import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
-from conftest import child_process
+from conftest import signal_cli_run
 
 import oxyline
 
@@ -123,37 +120,13 @@ def test_gil_is_released_during_integration() -> None:
     assert ticks > 20  # the main thread kept running while Rust integrated
 
 
-def _collect(stream: Any, seen: threading.Event, marker: bytes, into: list[bytes]) -> None:
-    """Read ``stream`` to its end into ``into``; set ``seen`` once ``marker`` has appeared."""
-    while chunk := os.read(stream.fileno(), 4096):
-        into.append(chunk)
-        if marker in b"".join(into):
-            seen.set()
-
-
 @pytest.mark.skipif(os.name != "posix", reason="needs SIGINT")
 def test_ctrl_c_in_the_cli_exits_130_and_writes_the_partial_result(tmp_path: Path) -> None:
     out = tmp_path / "partial.nc"
-    err: list[bytes] = []
-    running = threading.Event()
     # SIGINT is restored to its default in the child even when this test runs under a process
     # that ignores it (nohup, background job), and the child is killed and reaped on any failure.
-    with child_process([sys.executable, "-m", "oxyline.cli", "run", "bifurcation", "--cycles",
-                        "100000", "--method", "rk4", "-o", str(out)],
-                       stdout=subprocess.DEVNULL, stderr=subprocess.PIPE) as proc:
-        reader = threading.Thread(target=_collect, args=(proc.stderr, running, b"simulated", err),
-                                  daemon=True)
-        reader.start()
-        # deterministic trigger: the progress bar on stderr (shown once the run has lasted 1 s)
-        # says the core is integrating, so Ctrl-C lands in the run, not in the start-up. The
-        # timeouts only bound a hang: on a starved machine (nice 19 under load) the child's
-        # imports alone can take minutes of wall time.
-        assert running.wait(timeout=900), b"".join(err).decode()
-        proc.send_signal(signal.SIGINT)
-        proc.wait(timeout=600)
-        reader.join(timeout=60)
-    text = b"".join(err).decode()
-    assert proc.returncode == 130, text
+    returncode, text = signal_cli_run(out, signal.SIGINT)
+    assert returncode == 130, text
     assert "Traceback" not in text
     import xarray as xr
 

@@ -8,7 +8,6 @@ import copy
 import json
 import os
 import signal
-import subprocess
 import sys
 import textwrap
 import threading
@@ -17,7 +16,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import child_process, run_child
+from conftest import run_child, signal_cli_run
 
 import oxyline
 from oxyline import cli
@@ -257,33 +256,11 @@ def test_cli_solver_failure_writes_the_partial_result(tmp_path: Path,
         assert ds.attrs["complete"] == 0 and ds.sizes["time"] > 0
 
 
-def _collect(stream: Any, running: threading.Event, marker: bytes, err: list[bytes]) -> None:
-    """Read ``stream`` into ``err``; set ``running`` once ``marker`` was seen."""
-    for line in iter(lambda: stream.read1(4096), b""):
-        err.append(line)
-        if marker in b"".join(err):
-            running.set()
-
-
 @pytest.mark.skipif(os.name != "posix", reason="needs SIGTERM")
 def test_sigterm_in_the_cli_exits_143_and_writes_the_partial_result(tmp_path: Path) -> None:
     out = tmp_path / "partial.nc"
-    err: list[bytes] = []
-    running = threading.Event()
-    with child_process([sys.executable, "-m", "oxyline.cli", "run", "bifurcation", "--cycles",
-                        "100000", "--method", "rk4", "-o", str(out)],
-                       stdout=subprocess.DEVNULL, stderr=subprocess.PIPE) as proc:
-        reader = threading.Thread(target=_collect, args=(proc.stderr, running, b"simulated", err),
-                                  daemon=True)
-        reader.start()
-        # deterministic trigger: the progress bar (shown once the run has lasted 1 s) says the
-        # core is integrating; the timeouts only bound a hang on a starved machine
-        assert running.wait(timeout=900), b"".join(err).decode()
-        proc.send_signal(signal.SIGTERM)
-        proc.wait(timeout=600)
-        reader.join(timeout=60)
-    text = b"".join(err).decode()
-    assert proc.returncode == 143, text
+    returncode, text = signal_cli_run(out, signal.SIGTERM)
+    assert returncode == 143, text
     assert "Traceback" not in text
     assert f"terminated; partial result written to {out}" in text
     import xarray as xr
