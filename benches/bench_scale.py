@@ -15,12 +15,15 @@ Configurations: flow only; + O2 with a constant-k wall; + O2 with the default L�
 (constant k).
 
 Every configuration runs in a fresh subprocess, so that its peak RSS (``ru_maxrss``) is its
-own. Times are CPU times of that process (user + system; robust on a shared machine) —
+own. Times are CPU times of that process (user + system; robust on a shared machine), wall
+times in brackets —
 ``load`` = ``load_model`` (validation, assembly, transport plan), ``run`` = ``simulate``.
 
+    python benches/bench_scale.py --quick               # the issue's table, ~10 min quiet
     python benches/bench_scale.py                       # depths 8, 10, 12, 14, 16
     python benches/bench_scale.py --depths 8 10 12 14 16 18 --rk4-max-depth 12
     python benches/bench_scale.py --depths 18 --configs flow o2-k     # the 1e6-segment run
+    python benches/bench_scale.py --depths 18 --configs o2-k --zarr   # ... streamed to Zarr
 """
 
 from __future__ import annotations
@@ -90,7 +93,10 @@ def tree(depth: int, per_vessel: int, config: str) -> dict[str, Any]:
 
 
 def child(spec: dict[str, Any]) -> dict[str, Any]:
-    """One configuration, measured in this (fresh) process."""
+    """One configuration, measured in this (fresh) process. ``spec["zarr"]``: stream the output
+    to a Zarr store (``simulate_to_zarr``, ``time_chunk`` rows at a time) instead of keeping it."""
+    import tempfile
+
     import oxyline
 
     model = tree(spec["depth"], spec["per_vessel"], spec["config"])
@@ -101,15 +107,23 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
     c0, w0 = time.process_time(), time.perf_counter()
     m = oxyline.load_model(model)
     c1, w1 = time.process_time(), time.perf_counter()
-    res = oxyline.simulate(m, **kw)
-    c2, w2 = time.process_time(), time.perf_counter()
-    out = {"load_cpu": c1 - c0, "load_wall": w1 - w0, "run_cpu": c2 - c1, "run_wall": w2 - w1,
-           "segments": int(m.network.summary()["segments"]),
-           "dt": float(res.settings["dt"]),
-           "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
-    if res.species:
-        mb = res.o2_mass_balance
-        out["residual"] = float(mb["residual"][-1] / mb["inflow"][-1])
+    with tempfile.TemporaryDirectory() as d:
+        if spec.get("zarr"):
+            res = oxyline.simulate_to_zarr(m, os.path.join(d, "run.zarr"),
+                                           time_chunk=spec["time_chunk"], **kw)
+            settings = {"dt": res.attrs["solver_dt"]}
+        else:
+            res = oxyline.simulate(m, **kw)
+            settings = res.settings
+        c2, w2 = time.process_time(), time.perf_counter()
+        out = {"load_cpu": c1 - c0, "load_wall": w1 - w0, "run_cpu": c2 - c1,
+               "run_wall": w2 - w1, "segments": int(m.network.summary()["segments"]),
+               "dt": float(settings["dt"]),
+               "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
+        if not spec.get("zarr") and res.species:
+            mb = res.o2_mass_balance
+            out["residual"] = float(mb["residual"][-1] / mb["inflow"][-1])
+        del res
     return out
 
 
@@ -137,9 +151,44 @@ def slope(xs: list[float], ys: list[float]) -> float:
     return sum((a - mx) * (b - my) for a, b in zip(lx, ly)) / den if den > 0 else float("nan")
 
 
+# --quick: what the lead reruns on a quiet machine in <= 10 min; gen-alpha flow, o2-k and
+# o2-leveque reach 1.05 M segments (depth 18), Hill stops at 262 k, RK4 (whose stable dt
+# shrinks with the smallest vessel: ~1e5 steps per cycle at depth 12) at 16 k
+QUICK = {"depths": [10, 12, 14, 16, 18], "max_depth": {"o2-hill-k": 16},
+         "rk4_max_depth": 12}
+
+
+def row(method: str, config: str, r: dict[str, Any], flow: dict[str, Any] | None) -> str:
+    """One table row; ``flow``: the flow-only run of the same tree and method (for O2/flow)."""
+    steps = round(PERIOD / r["dt"])
+    ns = 1e9 * r["run_cpu"] / (r["segments"] * steps)
+    ratio = (f"{r['run_cpu'] / flow['run_cpu']:.2f}" if flow and config != "flow" else "–")
+    res = f"{r['residual']:.1e}" if "residual" in r else "–"
+    return (f"| {method} | {config} | {r['segments']} | {steps} | {r['load_cpu']:.2f} "
+            f"({r['load_wall']:.2f}) | {r['run_cpu']:.2f} ({r['run_wall']:.2f}) | {ns:.1f} | "
+            f"{r['peak_mb']:.0f} | {ratio} | {1e6 * r['load_cpu'] / r['segments']:.2f} | "
+            f"{res} |")
+
+
+def print_slopes(rows: dict[tuple[str, str], list[dict[str, Any]]], min_segments: float) -> None:
+    print(f"\nlog-log slopes against segments (trees of >= {min_segments:.0e} segments, CPU "
+          "time; target <= 1.1):")
+    for (method, config), rs in rows.items():
+        rs = [r for r in rs if r["segments"] >= min_segments]
+        if len(rs) < 2:
+            continue
+        n = [r["segments"] for r in rs]
+        print(f"  {method:<18} {config:<11} load {slope(n, [r['load_cpu'] for r in rs]):.2f}"
+              f"  run {slope(n, [r['run_cpu'] / (PERIOD / r['dt']) for r in rs]):.2f}"
+              f" (per step; {n[0]}-{n[-1]} segments)")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--child", help=argparse.SUPPRESS)
+    ap.add_argument("--quick", action="store_true",
+                    help="depths 10-18 (gen-alpha flow/o2-k/o2-leveque to 1.05 M, Hill to "
+                         "262 k, RK4 to 16 k): ~10 min on a quiet 2-core machine")
     ap.add_argument("--depths", type=int, nargs="+", default=[8, 10, 12, 14, 16])
     ap.add_argument("--per-vessel", type=int, default=4)
     ap.add_argument("--configs", nargs="+", default=CONFIGS, choices=CONFIGS)
@@ -149,49 +198,52 @@ def main() -> None:
                     help="largest tree run with RK4 (its stable dt shrinks with the vessels)")
     ap.add_argument("--fit-min-segments", type=float, default=1e4,
                     help="smallest tree included in the log-log fits")
+    ap.add_argument("--zarr", action="store_true",
+                    help="stream the output to a Zarr store (simulate_to_zarr) instead of "
+                         "keeping it in memory")
+    ap.add_argument("--time-chunk", type=int, default=10,
+                    help="rows per Zarr chunk with --zarr")
     ap.add_argument("--repeat", type=int, default=1)
     a = ap.parse_args()
     if a.child:
         print(json.dumps(child(json.loads(a.child))))
         return
+    max_depth: dict[str, int] = {}
+    if a.quick:
+        a.depths, max_depth, a.rk4_max_depth = QUICK["depths"], QUICK["max_depth"], \
+            QUICK["rk4_max_depth"]
+    out = (f"streamed to Zarr ({a.time_chunk} rows per chunk)" if a.zarr
+           else "kept in memory")
     print(f"# binary trees, {a.per_vessel} segments per vessel, one cycle, vessel output every "
-          f"10 ms; CPU s (best of {a.repeat}), peak RSS of a fresh process; "
+          f"10 ms {out}; CPU s (wall s), best of {a.repeat}; peak RSS of a fresh process; "
           f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}")
-    print("| method | config | segments | load s | run s | ns/seg-step | peak MB | O2/flow "
-          "| load µs/seg | mass residual |")
-    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print("| method | config | segments | steps | load s | run s | ns/seg-step | peak MB "
+          "| O2/flow | load µs/seg | mass residual |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     rows: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    skipped: list[str] = []
     for method in a.methods:
         for depth in a.depths:
-            if method == "rk4" and depth > a.rk4_max_depth:
-                continue
-            flow_run = None
+            flow = None
             for config in a.configs:
+                limit = a.rk4_max_depth if method == "rk4" else max_depth.get(config, 99)
+                if depth > limit:
+                    skipped.append(f"{method} {config} depth {depth}")
+                    continue
                 r = measure({"depth": depth, "per_vessel": a.per_vessel, "config": config,
-                             "method": method, "repeat": a.repeat})
+                             "method": method, "repeat": a.repeat, "zarr": a.zarr,
+                             "time_chunk": a.time_chunk})
                 if "error" in r:
                     print(f"| {method} | {config} | depth {depth} | failed: {r['error']} |")
                     continue
-                steps = round(PERIOD / r["dt"])
-                ns = 1e9 * r["run_cpu"] / (r["segments"] * steps)
-                if config == "flow":
-                    flow_run = r["run_cpu"]
-                ratio = f"{r['run_cpu'] / flow_run:.2f}" if flow_run and config != "flow" else "–"
-                res = f"{r['residual']:.1e}" if "residual" in r else "–"
-                print(f"| {method} | {config} | {r['segments']} | {r['load_cpu']:.3f} | "
-                      f"{r['run_cpu']:.3f} | {ns:.1f} | {r['peak_mb']:.0f} | {ratio} | "
-                      f"{1e6 * r['load_cpu'] / r['segments']:.2f} | {res} |", flush=True)
+                flow = r if config == "flow" else flow
+                print(row(method, config, r, flow), flush=True)
                 rows.setdefault((method, config), []).append(r)
-    print("\nlog-log slopes against segments (trees of >= "
-          f"{a.fit_min_segments:.0e} segments; target <= 1.1):")
-    for (method, config), rs in rows.items():
-        rs = [r for r in rs if r["segments"] >= a.fit_min_segments]
-        if len(rs) < 2:
-            continue
-        n = [r["segments"] for r in rs]
-        print(f"  {method:<18} {config:<11} load {slope(n, [r['load_cpu'] for r in rs]):.2f}"
-              f"  run {slope(n, [r['run_cpu'] / (PERIOD / r['dt']) for r in rs]):.2f}"
-              " (per step)")
+    if skipped:
+        print(f"\nnot run (--rk4-max-depth {a.rk4_max_depth}: RK4's automatic dt makes its step "
+              f"count grow with the tree; --quick also stops Hill at depth 16): "
+              + ", ".join(skipped))
+    print_slopes(rows, a.fit_min_segments)
 
 
 if __name__ == "__main__":

@@ -99,6 +99,11 @@ def species_bounds(sp: Mapping[str, Any]) -> tuple[float, float] | None:
 def _first_outside(values: np.ndarray, lo: float, hi: float, tol: float
                    ) -> tuple[int, int, float] | None:
     """(time index, column, value) of the worst value outside [lo − tol, hi + tol]."""
+    # the extremes first (NaN ignored, no temporary): a 1e6-segment tree's column is ~0.2 GB,
+    # and the excess below makes three temporaries of its size
+    if values.size == 0 or (np.fmax.reduce(values, axis=None, initial=-np.inf) <= hi + tol
+                            and np.fmin.reduce(values, axis=None, initial=np.inf) >= lo - tol):
+        return None
     excess = np.maximum(values - (hi + tol), (lo - tol) - values)
     excess = np.where(np.isnan(excess), -np.inf, excess)
     if excess.size == 0 or not (excess > 0).any():

@@ -8,22 +8,25 @@ use pyo3::types::PyDict;
 
 use crate::ModelError;
 
-/// The snapshot's arrays and their dict keys, in one place for both directions.
-fn arrays(s: &Snapshot) -> [(&'static str, &Vec<f64>); 12] {
-    [
-        ("y", &s.y),
-        ("yd", &s.yd),
-        ("prev_cycle_end", &s.prev_cycle_end),
-        ("integrator", &s.integrator),
-        ("z", &s.z),
-        ("prev_cycle_z", &s.prev_cycle_z),
-        ("transport", &s.transport),
-        ("initial_stored", &s.initial_stored),
-        ("mean_abs_flow", &s.mean_abs_flow),
-        ("times", &s.times),
-        ("data", &s.data),
-        ("transport_rows", &s.transport_rows),
-    ]
+/// The snapshot's arrays and their dict keys, in one place for both directions:
+/// `arrays!(s, &)` borrows them for writing, `arrays!(s, &mut)` for reading into.
+macro_rules! arrays {
+    ($s:ident, $($borrow:tt)+) => {
+        [
+            ("y", $($borrow)+ $s.y),
+            ("yd", $($borrow)+ $s.yd),
+            ("prev_cycle_end", $($borrow)+ $s.prev_cycle_end),
+            ("integrator", $($borrow)+ $s.integrator),
+            ("z", $($borrow)+ $s.z),
+            ("prev_cycle_z", $($borrow)+ $s.prev_cycle_z),
+            ("transport", $($borrow)+ $s.transport),
+            ("initial_stored", $($borrow)+ $s.initial_stored),
+            ("mean_abs_flow", $($borrow)+ $s.mean_abs_flow),
+            ("times", $($borrow)+ $s.times),
+            ("data", $($borrow)+ $s.data),
+            ("transport_rows", $($borrow)+ $s.transport_rows),
+        ]
+    };
 }
 
 /// The snapshot as a dict (arrays copied: the run goes on).
@@ -34,7 +37,7 @@ pub fn to_dict<'py>(py: Python<'py>, s: &Snapshot) -> PyResult<Bound<'py, PyDict
     d.set_item("steps", s.steps)?;
     d.set_item("dt", s.dt)?;
     d.set_item("periodic_error", s.periodic_error)?;
-    for (key, v) in arrays(s) {
+    for (key, v) in arrays!(s, &) {
         d.set_item(key, PyArray1::from_slice(py, v))?;
     }
     Ok(d)
@@ -80,17 +83,8 @@ pub fn from_dict(d: &Bound<'_, PyDict>) -> PyResult<Snapshot> {
         periodic_error: real("periodic_error")?,
         ..Snapshot::default()
     };
-    s.y = array(d, "y")?;
-    s.yd = array(d, "yd")?;
-    s.prev_cycle_end = array(d, "prev_cycle_end")?;
-    s.integrator = array(d, "integrator")?;
-    s.z = array(d, "z")?;
-    s.prev_cycle_z = array(d, "prev_cycle_z")?;
-    s.transport = array(d, "transport")?;
-    s.initial_stored = array(d, "initial_stored")?;
-    s.mean_abs_flow = array(d, "mean_abs_flow")?;
-    s.times = array(d, "times")?;
-    s.data = array(d, "data")?;
-    s.transport_rows = array(d, "transport_rows")?;
+    for (key, v) in arrays!(s, &mut) {
+        *v = array(d, key)?;
+    }
     Ok(s)
 }
