@@ -98,9 +98,15 @@ def _copy(data: Any) -> Any:
     plain values shared, anything else (arrays, ...) deep-copied. A quarter of the cost of a JSON
     round trip on 10^5-vessel models and linear in their size."""
     t = type(data)
+    # a dict or list of plain values only (a vessel, a waveform table) is copied in C: the
+    # type check of its values runs in C too (map + issuperset), 4x faster than rebuilding it
     if t is dict:
+        if _ATOMS.issuperset(map(type, data.values())):
+            return data.copy()
         return {k: v if type(v) in _ATOMS else _copy(v) for k, v in data.items()}
     if t is list or t is tuple:
+        if _ATOMS.issuperset(map(type, data)):
+            return list(data)
         return [v if type(v) in _ATOMS else _copy(v) for v in data]
     if t in _ATOMS:
         return data
@@ -225,17 +231,20 @@ def _fast_vessel(v: Any, L: float, E: float) -> dict[str, Any] | None:
     if not (type(length) in _REAL and type(r_in) in _REAL and type(r_out) in _REAL
             and 0 < length < math.inf and 0 < r_in < math.inf and 0 < r_out < math.inf):
         return None
-    g: dict[str, Any] = {"length": L * length, "radius_in": L * r_in, "radius_out": L * r_out}
+    # in SI, float(x) is 1.0 * x bit for bit and returns a float argument itself: the
+    # canonical geometry shares the source's float objects (24 B each) instead of new ones
+    sl = float if L == 1.0 else L.__mul__
+    g: dict[str, Any] = {"length": sl(length), "radius_in": sl(r_in), "radius_out": sl(r_out)}
     if "wall_thickness" in v:
         h = v["wall_thickness"]
         if type(h) not in _REAL or not 0 < h < math.inf:
             return None
-        g["wall_thickness"] = L * h
+        g["wall_thickness"] = sl(h)
     if "youngs_modulus" in v:
         e = v["youngs_modulus"]
         if type(e) not in _REAL or not 0 < e < math.inf:
             return None
-        g["youngs_modulus"] = E * e
+        g["youngs_modulus"] = float(e) if E == 1.0 else E * e
     if "poisson_ratio" in v:
         nu = v["poisson_ratio"]
         if type(nu) not in _REAL or not -math.inf < nu < math.inf:
