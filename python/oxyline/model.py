@@ -231,20 +231,17 @@ def _fast_vessel(v: Any, L: float, E: float) -> dict[str, Any] | None:
     if not (type(length) in _REAL and type(r_in) in _REAL and type(r_out) in _REAL
             and 0 < length < math.inf and 0 < r_in < math.inf and 0 < r_out < math.inf):
         return None
-    # in SI, float(x) is 1.0 * x bit for bit and returns a float argument itself: the
-    # canonical geometry shares the source's float objects (24 B each) instead of new ones
-    sl = float if L == 1.0 else L.__mul__
-    g: dict[str, Any] = {"length": sl(length), "radius_in": sl(r_in), "radius_out": sl(r_out)}
+    g: dict[str, Any] = {"length": L * length, "radius_in": L * r_in, "radius_out": L * r_out}
     if "wall_thickness" in v:
         h = v["wall_thickness"]
         if type(h) not in _REAL or not 0 < h < math.inf:
             return None
-        g["wall_thickness"] = sl(h)
+        g["wall_thickness"] = L * h
     if "youngs_modulus" in v:
         e = v["youngs_modulus"]
         if type(e) not in _REAL or not 0 < e < math.inf:
             return None
-        g["youngs_modulus"] = float(e) if E == 1.0 else E * e
+        g["youngs_modulus"] = E * e
     if "poisson_ratio" in v:
         nu = v["poisson_ratio"]
         if type(nu) not in _REAL or not -math.inf < nu < math.inf:
