@@ -151,11 +151,13 @@ def slope(xs: list[float], ys: list[float]) -> float:
     return sum((a - mx) * (b - my) for a, b in zip(lx, ly)) / den if den > 0 else float("nan")
 
 
-# --quick: what the lead reruns on a quiet machine in <= 10 min; gen-alpha flow, o2-k and
-# o2-leveque reach 1.05 M segments (depth 18), Hill stops at 262 k, RK4 (whose stable dt
-# shrinks with the smallest vessel: ~1e5 steps per cycle at depth 12) at 16 k
-QUICK = {"depths": [10, 12, 14, 16, 18], "max_depth": {"o2-hill-k": 16},
-         "rk4_max_depth": 12}
+# --quick: what the lead reruns on a quiet machine in <= 10 min (~8.5 min CPU estimated
+# from the loaded-machine runs); gen-alpha flow, o2-k and o2-leveque reach 1.05 M segments
+# (depth 18), Hill stops at 65 k, RK4 at 4 k: its automatic dt follows the smallest vessel,
+# 2 400 / 6 400 / 16 600 steps per cycle at depths 8 / 10 / 12 (~×2.6 per two levels), so a
+# 16 k-segment RK4 cycle costs ~30-80 s CPU per configuration and 1.05 M would take hours
+QUICK = {"depths": [10, 12, 14, 16, 18], "max_depth": {"o2-hill-k": 14},
+         "rk4_max_depth": 10}
 
 
 def row(method: str, config: str, r: dict[str, Any], flow: dict[str, Any] | None) -> str:
@@ -188,7 +190,7 @@ def main() -> None:
     ap.add_argument("--child", help=argparse.SUPPRESS)
     ap.add_argument("--quick", action="store_true",
                     help="depths 10-18 (gen-alpha flow/o2-k/o2-leveque to 1.05 M, Hill to "
-                         "262 k, RK4 to 16 k): ~10 min on a quiet 2-core machine")
+                         "65 k, RK4 to 4 k): < 10 min on a quiet 2-core machine")
     ap.add_argument("--depths", type=int, nargs="+", default=[8, 10, 12, 14, 16])
     ap.add_argument("--per-vessel", type=int, default=4)
     ap.add_argument("--configs", nargs="+", default=CONFIGS, choices=CONFIGS)
@@ -241,7 +243,7 @@ def main() -> None:
                 rows.setdefault((method, config), []).append(r)
     if skipped:
         print(f"\nnot run (--rk4-max-depth {a.rk4_max_depth}: RK4's automatic dt makes its step "
-              f"count grow with the tree; --quick also stops Hill at depth 16): "
+              f"count grow with the tree; --quick also stops Hill at depth 14): "
               + ", ".join(skipped))
     print_slopes(rows, a.fit_min_segments)
 
