@@ -153,10 +153,10 @@ def slope(xs: list[float], ys: list[float]) -> float:
 
 # --quick: what the lead reruns on a quiet machine in <= 10 min (~8.5 min CPU estimated
 # from the loaded-machine runs); gen-alpha flow, o2-k and o2-leveque reach 1.05 M segments
-# (depth 18), Hill stops at 65 k, RK4 at 4 k: its automatic dt follows the smallest vessel,
+# (depth 18), Hill stops at 65 k, RK4 at 1 k and 4 k: its automatic dt follows the smallest vessel,
 # 2 400 / 6 400 / 16 600 steps per cycle at depths 8 / 10 / 12 (~×2.6 per two levels), so a
 # 16 k-segment RK4 cycle costs ~30-80 s CPU per configuration and 1.05 M would take hours
-QUICK = {"depths": [10, 12, 14, 16, 18], "max_depth": {"o2-hill-k": 14},
+QUICK = {"depths": [8, 10, 12, 14, 16, 18], "max_depth": {"o2-hill-k": 14},
          "rk4_max_depth": 10}
 
 
@@ -189,8 +189,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--child", help=argparse.SUPPRESS)
     ap.add_argument("--quick", action="store_true",
-                    help="depths 10-18 (gen-alpha flow/o2-k/o2-leveque to 1.05 M, Hill to "
-                         "65 k, RK4 to 4 k): < 10 min on a quiet 2-core machine")
+                    help="depths 8-18 (gen-alpha flow/o2-k/o2-leveque to 1.05 M, Hill to "
+                         "65 k, RK4 1-4 k): < 10 min on a quiet 2-core machine")
     ap.add_argument("--depths", type=int, nargs="+", default=[8, 10, 12, 14, 16])
     ap.add_argument("--per-vessel", type=int, default=4)
     ap.add_argument("--configs", nargs="+", default=CONFIGS, choices=CONFIGS)
