@@ -376,9 +376,12 @@ def _fast_outlet(bc: Any, R: float, C: float, P: float) -> dict[str, Any] | None
             return None
         cb: dict[str, Any] = {"type": kind, "resistance": R * r}
     else:
-        rp, c, rd = (bc.get(k) for k in ("proximal_resistance", "capacitance",
-                                          "distal_resistance"))
-        if not (_finite(rp) and _finite(c) and _finite(rd)):
+        # one outlet per leaf of a large tree: the three checks inlined (no generator, no calls)
+        rp, c, rd = bc.get("proximal_resistance"), bc.get("capacitance"), \
+            bc.get("distal_resistance")
+        if not (type(rp) in _REAL and type(c) in _REAL and type(rd) in _REAL
+                and -math.inf < rp < math.inf and -math.inf < c < math.inf
+                and -math.inf < rd < math.inf):
             return None
         cb = {"type": kind, "proximal_resistance": R * rp, "capacitance": C * c,
               "distal_resistance": R * rd}
