@@ -3,7 +3,10 @@
 //! and forward-flow mean (rectangle rule over the step ends, as the first pass) against the
 //! finest N; the closures' k ∝ mean^{1/3}, so the k error is a third of the printed one.
 //!
-//!     cargo run --release -p oxyline-core --example mean_flow_accuracy -- model.json [period] [cycles] [N...]
+//!     cargo run --release -p oxyline-core --example mean_flow_accuracy -- \
+//!         model.json [period] [cycles] [N...]
+//!
+//! (`RHO=1.0` runs the passes with ρ∞ = 1, `LINEAR=1` integrates |Q| exactly between steps.)
 
 use oxyline_core::genalpha::NewtonControl;
 use oxyline_core::network::parse;
@@ -18,39 +21,40 @@ fn abs_linear(q0: f64, q1: f64) -> f64 {
     }
 }
 
+/// Per segment: the cycle-mean |Q| and forward-flow mean over the rows (rows 1.. are the step
+/// ends of the last cycle, row 0 its start): the rectangle rule on the step ends, as the first
+/// pass, or with `LINEAR` set in the environment the exact integral of the linear interpolant
+/// between step ends (`abs_linear`).
 fn means(data: &[f64], n: usize, rows: usize) -> (Vec<f64>, Vec<f64>) {
-    if std::env::var("LINEAR").is_ok() {
-        let mut abs = vec![0.0; n];
-        let mut sgn = vec![0.0; n];
-        for r in 1..rows {
-            for j in 0..n {
-                let (q0, q1) = (data[(r - 1) * n + j], data[r * n + j]);
-                abs[j] += abs_linear(q0, q1);
-                sgn[j] += 0.5 * (q0 + q1);
-            }
-        }
-        let c = (rows - 1) as f64;
-        let fwd = abs.iter().zip(&sgn).map(|(a, s)| 0.5 * (a + s.abs()) / c).collect();
-        return (abs.iter().map(|a| a / c).collect(), fwd);
-    }
-    // rows 1..rows are the step ends of the (last) cycle; row 0 is its start
+    let linear = std::env::var("LINEAR").is_ok();
     let mut abs = vec![0.0; n];
     let mut sgn = vec![0.0; n];
     for r in 1..rows {
         for j in 0..n {
-            let q = data[r * n + j];
-            abs[j] += q.abs();
-            sgn[j] += q;
+            let (q0, q1) = (data[(r - 1) * n + j], data[r * n + j]);
+            let (a, s) = if linear {
+                (abs_linear(q0, q1), 0.5 * (q0 + q1))
+            } else {
+                (q1.abs(), q1)
+            };
+            abs[j] += a;
+            sgn[j] += s;
         }
     }
     let c = (rows - 1) as f64;
-    let fwd = abs.iter().zip(&sgn).map(|(a, s)| 0.5 * (a + s.abs()) / c).collect();
+    let fwd = abs
+        .iter()
+        .zip(&sgn)
+        .map(|(a, s)| 0.5 * (a + s.abs()) / c)
+        .collect();
     (abs.iter().map(|a| a / c).collect(), fwd)
 }
 
 fn main() {
     let mut args = std::env::args().skip(1);
-    let path = args.next().expect("usage: mean_flow_accuracy MODEL.json [cycles] [N...]");
+    let path = args
+        .next()
+        .expect("usage: mean_flow_accuracy MODEL.json [cycles] [N...]");
     let period: f64 = args.next().map_or(1.0, |c| c.parse().expect("period"));
     let cycles: usize = args.next().map_or(1, |c| c.parse().expect("cycles"));
     let mut ns: Vec<usize> = args.map(|n| n.parse().expect("N")).collect();
@@ -63,10 +67,11 @@ fn main() {
     let dae = assembled.circuit.assemble().expect("valid circuit");
     let spec_tr = spec.transport.as_ref().expect("a transport section");
     let tr = Transport::build(spec_tr, &assembled.circuit, &dae, &assembled.probes).expect("ok");
-    let mut run = tr.new_run();
-    let unknowns = run.mean_flow_unknowns();
-    assert!(!unknowns.is_empty(), "a wall closure that needs the cycle-mean flow");
-    let _ = &mut run;
+    let unknowns = tr.new_run().mean_flow_unknowns();
+    assert!(
+        !unknowns.is_empty(),
+        "a wall closure that needs the cycle-mean flow"
+    );
     let n = unknowns.len();
     let mut reference: Option<(Vec<f64>, Vec<f64>)> = None;
     for &steps in &ns {
