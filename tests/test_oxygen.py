@@ -104,6 +104,28 @@ def test_hill_oxygen_content_and_po2_reporting() -> None:
     assert round(ct, 4) == 8.7061
 
 
+def test_hill_vessel_end_po2_inverts_the_carried_content() -> None:
+    """With Hill blood losing O2 to the wall, each vessel end's PO2 is the Hill inversion of the
+    total content its face carries, C_t = flux/Q (physics §4.2: C_t = αP + H S(P), checked in
+    numpy). The core reads the upwind node's inversion; the tolerance 1e-10 is that of the
+    inversions (1e-10 mmHg Newton, 1e-12 mmHg anchored series), far below P's 48-85 mmHg."""
+    ox = {"inlet": {"po2": 85.0}, "hemoglobin": "hill",
+          "wall": {"model": "mass-transfer", "k": 2e-3, "po2": 48.0}}
+    res = oxyline.simulate(tube(10, oxygen=ox, cycles=2), method="generalized-alpha",
+                           dt=1e-3, output_every=0.1)
+    h = 1.34 * 150 / 22.414
+
+    def content(p: np.ndarray) -> np.ndarray:
+        return ALPHA * p + h * p**2.7 / (p**2.7 + 26.8**2.7)
+
+    drop = res.po2_in[-1, 0] - res.po2_out[-1, 0]
+    assert drop > 1.0  # the wall takes a visible share: the ends differ
+    for po2, flux, q in ((res.po2_in, res.o2_flux_in, res.flow_in),
+                         (res.po2_out, res.o2_flux_out, res.flow_out)):
+        ct = flux[1:, 0] / q[1:, 0]
+        np.testing.assert_allclose(content(po2[1:, 0]), ct, rtol=1e-10)
+
+
 def test_flow_only_results_are_unchanged_by_transport() -> None:
     m = examples.load("paper-bifurcated")
     with_o2 = oxyline.simulate(m, cycles=2, method="generalized-alpha", dt=1e-3)

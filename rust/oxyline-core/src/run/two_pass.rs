@@ -73,7 +73,11 @@ const MEAN_FLOW_STEPS_PER_CYCLE: f64 = 2000.0;
 /// period/`MEAN_FLOW_COARSE_STEPS`: the pass then costs a quarter of the coupled run's flow
 /// instead of all of it. The rectangle rule of the mean over 250 steps is accurate to ~2e-5 of
 /// <|Q|> for a reversing sinusoid, so k ∝ <|Q|>^{1/3} to ~7e-6 — far inside the closures' own
-/// uncertainty (docs/physics.md §3.1). Finer implicit runs keep their own step (an exact mean).
+/// uncertainty (docs/physics.md §3.1). With a sharper inflow the step's resolution of the flow
+/// dominates: on the half-sine bench tree (`benches/bench_scale.py`) the 250-step mean differs
+/// from a period/2000 pass by ≤ 1.0e-2 (median 1.2e-3), so k by ≤ 3.3e-3, still inside that
+/// uncertainty; 50 steps would give 5.7e-2 (`examples/mean_flow_accuracy.rs`, benches/results.md).
+/// Finer implicit runs keep their own step (an exact mean).
 const MEAN_FLOW_COARSE_STEPS: f64 = 250.0;
 const MEAN_FLOW_FINE_STEPS: f64 = 1000.0;
 

@@ -91,13 +91,23 @@ impl Transport {
         }
     }
 
-    /// Advective flux and upwind free concentration of face `fi` (NaN without a face).
+    /// Advective flux and upwind free concentration of face `fi` (NaN without a face). An
+    /// upwind domain node's free concentration is the one `free_of_nodes` found for its total
+    /// (the same inversion within its tolerance, docs/oxygen.md): re-inverting Hill's law from
+    /// a cold start at every vessel end cost more than the whole observation otherwise.
     fn face_flux(&self, s: usize, fi: usize) -> (f64, f64) {
         if fi >= self.plan.faces.len() {
             return (f64::NAN, f64::NAN);
         }
         let (q, c) = self.upwind(fi);
-        (q * c, self.plan.species[s].binding.free(c, c))
+        let binding = self.plan.species[s].binding;
+        let free = match oriented(&self.plan.faces, &self.qf, fi).1 {
+            End::Node(n) if !binding.is_identity() && self.plan.kind[n] != Kind::Exterior => {
+                self.species[s].free[n]
+            }
+            _ => binding.free(c, c),
+        };
+        (q * c, free)
     }
 
     /// Wall uptake of segment `j` for species `s` (mol/s).
