@@ -88,6 +88,134 @@ impl SpecPatch {
     }
 }
 
+/// A number of the base model that a variant may replace without restating its element (the
+/// resistances and compliances a `scale` patch multiplies, docs/ensembles.md): the front end
+/// hands such a variant one value per target instead of whole vessels and conditions.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Target {
+    /// `lumped.resistance` of vessel i.
+    LumpedResistance(usize),
+    /// `lumped.capacitance` of vessel i.
+    LumpedCapacitance(usize),
+    /// `geometry.youngs_modulus` of vessel i.
+    YoungsModulus(usize),
+    /// A number of the resistance or RCR condition at a node.
+    Condition(String, ConditionValue),
+}
+
+/// The numbers of a resistance or RCR condition that a [`Target`] may name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ConditionValue {
+    Resistance,
+    ProximalResistance,
+    Capacitance,
+    DistalResistance,
+}
+
+impl Target {
+    /// The slot of this target in `spec`, or an error naming the element if it has no such
+    /// number.
+    fn slot<'a>(&self, spec: &'a mut NetworkSpec) -> Result<&'a mut f64> {
+        let missing = |what: String, why: &str| Error::model(what, why.to_owned());
+        match self {
+            Target::LumpedResistance(i)
+            | Target::LumpedCapacitance(i)
+            | Target::YoungsModulus(i) => {
+                let n = spec.vessels.len();
+                let v = spec.vessels.get_mut(*i).ok_or_else(|| {
+                    missing(
+                        format!("vessel #{i}"),
+                        &format!("not in the network ({n} vessels)"),
+                    )
+                })?;
+                let what = format!("vessel '{}'", v.name);
+                match self {
+                    Target::LumpedResistance(_) => v.lumped.as_mut().map(|l| &mut l.resistance),
+                    Target::LumpedCapacitance(_) => v.lumped.as_mut().map(|l| &mut l.capacitance),
+                    _ => v.geometry.as_mut().and_then(|g| g.youngs_modulus.as_mut()),
+                }
+                .ok_or_else(|| missing(what, &format!("has no value for {self:?}")))
+            }
+            Target::Condition(node, value) => {
+                let bc = spec.boundary_conditions.get_mut(node).ok_or_else(|| {
+                    missing(
+                        format!("boundary condition '{node}'"),
+                        "no condition at this node in the base model",
+                    )
+                })?;
+                let slot = match (bc, value) {
+                    (BoundarySpec::Resistance { resistance, .. }, ConditionValue::Resistance) => {
+                        Some(resistance)
+                    }
+                    (
+                        BoundarySpec::Rcr {
+                            proximal_resistance,
+                            ..
+                        },
+                        ConditionValue::ProximalResistance,
+                    ) => Some(proximal_resistance),
+                    (BoundarySpec::Rcr { capacitance, .. }, ConditionValue::Capacitance) => {
+                        Some(capacitance)
+                    }
+                    (
+                        BoundarySpec::Rcr {
+                            distal_resistance, ..
+                        },
+                        ConditionValue::DistalResistance,
+                    ) => Some(distal_resistance),
+                    _ => None,
+                };
+                slot.ok_or_else(|| {
+                    missing(
+                        format!("boundary condition '{node}'"),
+                        &format!("has no {value:?} value"),
+                    )
+                })
+            }
+        }
+    }
+}
+
+/// The [`Target`]s of an ensemble, checked against its base model once.
+#[derive(Debug, Clone, Default)]
+pub struct Targets(Vec<Target>);
+
+impl Targets {
+    /// The targets, each of which must name a number of `base`.
+    pub fn new(base: &NetworkSpec, targets: Vec<Target>) -> Result<Targets> {
+        let mut probe = base.clone();
+        for t in &targets {
+            t.slot(&mut probe)?;
+        }
+        Ok(Targets(targets))
+    }
+
+    pub fn len(&self) -> usize {
+        self.0.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+
+    /// Write `values` (one per target, in SI; NaN leaves the number as it is) into `spec`.
+    /// The values are checked as every model's are, when the variant is assembled.
+    pub fn write(&self, spec: &mut NetworkSpec, values: &[f64]) -> Result<()> {
+        if values.len() != self.0.len() {
+            return Err(Error::model(
+                "variant values",
+                format!("{} values for {} targets", values.len(), self.0.len()),
+            ));
+        }
+        for (t, &x) in self.0.iter().zip(values) {
+            if !x.is_nan() {
+                *t.slot(spec)? = x;
+            }
+        }
+        Ok(())
+    }
+}
+
 /// One assembled variant: its circuit, DAE and (validated, never run) species transport.
 pub struct Member {
     pub assembled: Assembled,
