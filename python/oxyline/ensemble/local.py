@@ -17,11 +17,6 @@ from oxyline.errors import ModelError
 from oxyline.model import Model
 from oxyline.run import _result, _run_settings, _settings
 
-#: the settings of ``_settings`` that the core's ``Ensemble.run`` takes as they are
-SHARED = ("cycles", "method", "rho_infty", "dt", "until_periodic", "max_cycles",
-          "output_all_cycles", "start", "newton_atol", "max_iterations", "segments",
-          "transport", "variables", "vessels")
-
 
 def run_settings(model: Model, output: Output, overrides: Mapping[str, Any]) -> dict[str, Any]:
     """The run settings of ``model`` (``simulate``'s) with ``overrides``. A summary needs no
@@ -140,7 +135,9 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
                                [:ERROR_CHARS])
         recorded(i)
 
-    core = {k: base_settings[k] for k in SHARED}
+    # the settings of ``_settings`` that the core's ``Ensemble.run`` shares with
+    # ``Network.simulate`` (each variant's period and output_every go with the variant)
+    core = {k: base_settings[k] for k in _core.RUN_SETTINGS}
     ensemble = base.ensemble
     try:
         with _old_objects_frozen():

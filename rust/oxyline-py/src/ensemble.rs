@@ -3,15 +3,13 @@
 //! callback on the calling thread, in completion order, while the others keep running.
 
 use crate::extract;
-use crate::{
-    error_kind, layout_dict, outcome_dict, parse_method, parse_start, recorded_columns, to_py,
-};
+use crate::settings::Shared;
+use crate::{error_kind, layout_dict, outcome_dict, recorded_columns, to_py};
 use numpy::{IntoPyArray, PyReadonlyArray1};
 use oxyline_core::ensemble::{
     ColumnStats, ConditionValue, Member, SpecPatch, Target, Targets, column_stats, run_fed,
     worker_count,
 };
-use oxyline_core::genalpha::NewtonControl;
 use oxyline_core::spec::{BoundarySpec, NetworkSpec, VesselSpec, parse};
 use oxyline_core::{Error, Outcome, RunSettings, Selection, Transport};
 use pyo3::exceptions::PyKeyboardInterrupt;
@@ -312,69 +310,35 @@ impl Ensemble {
     /// or None; `values`: a float64 array of one SI value per target, NaN for the base value,
     /// or None)
     /// or None when there are no more, and is called on this thread while the workers
-    /// run (so preparing a variant overlaps the runs). The other settings are those of
-    /// `Network.simulate` and shared. `on_done(i, raw, layout, error_kind, error)` is called
+    /// run (so preparing a variant overlaps the runs). `settings`: the run settings shared
+    /// with `Network.simulate` (`settings::KEYS`), the same for every variant. `on_done(i, raw, layout, error_kind, error)` is called
     /// on this thread as each variant finishes; a failed variant has `error_kind` set
     /// ("model", "unstable", "solver", "interrupted") and never stops the others. Returns
     /// False if Ctrl-C stopped the ensemble (the variants finished until then were handed
     /// over, running ones as "interrupted"; the rest were never fed). `summary`: each
     /// finished variant's `raw` also has `column_stats`, the (mean, min, max) arrays of
     /// `oxyline_core::ensemble::column_stats` over its output columns.
-    #[pyo3(signature = (feed, *, on_done, workers = None, cycles = 10, method = "auto",
-        rho_infty = 0.5, dt = None, until_periodic = None, max_cycles = 100,
-        output_all_cycles = false, start = "steady", newton_atol = None, max_iterations = 30,
-        segments = true, transport = true, variables = None, vessels = None,
-        summary = false))]
-    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (feed, *, on_done, workers = None, summary = false, **settings))]
     fn run(
         &self,
         py: Python<'_>,
         feed: Py<PyAny>,
         on_done: Py<PyAny>,
         workers: Option<usize>,
-        cycles: usize,
-        method: &str,
-        rho_infty: f64,
-        dt: Option<f64>,
-        until_periodic: Option<f64>,
-        max_cycles: usize,
-        output_all_cycles: bool,
-        start: &str,
-        newton_atol: Option<f64>,
-        max_iterations: usize,
-        segments: bool,
-        transport: bool,
-        variables: Option<Vec<String>>,
-        vessels: Option<Vec<String>>,
         summary: bool,
+        settings: Option<Bound<'_, PyDict>>,
     ) -> PyResult<bool> {
+        let shared = Shared::from_kwargs(settings.as_ref())?;
         let workers = worker_count(workers).map_err(to_py)?;
-        let template = RunSettings {
-            method: parse_method(method, rho_infty)?,
-            dt,
-            period: 1.0,
-            cycles,
-            until_periodic,
-            max_cycles,
-            output_every: 1.0,
-            output_all_cycles,
-            // the cycles before the last are not recorded: a variant stopped early is
-            // reported as failed, without its rows (the recorder's copies were ~5 % of a
-            // variant of a small tree)
-            keep_current_cycle: false,
-            start: parse_start(start, rho_infty)?,
-            newton: NewtonControl {
-                atol: newton_atol,
-                max_iter: max_iterations,
-            },
-            probes: Vec::new(),
-            species_columns: None,
-        };
+        // the cycles before the last are not recorded: a variant stopped early is reported
+        // as failed, without its rows (the recorder's copies were ~5 % of a variant of a
+        // small tree); period and output_every are each variant's own
+        let template = shared.run_settings(1.0, 1.0, false)?;
         let output = Output {
-            variables,
-            vessels,
-            segments,
-            transport,
+            variables: shared.variables,
+            vessels: shared.vessels,
+            segments: shared.segments,
+            transport: shared.transport,
             summary,
         };
         let (base, targets) = (self.base.clone(), self.targets.clone());
