@@ -11,7 +11,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Any
 
 from oxyline import _core
-from oxyline.ensemble.collect import ERROR_CHARS, Collector, Output
+from oxyline.ensemble.collect import ERROR_CHARS, Collector, Output, stats_summary
 from oxyline.ensemble.patch import Patcher, Variant
 from oxyline.errors import ModelError
 from oxyline.model import Model
@@ -128,8 +128,11 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
         else:
             try:
                 assert raw is not None and layout is not None
-                result = _result(v.model, s, raw, _run_settings(s, raw), True, layout)
-                collector.put(i, collector.outputs(result, raw.get("column_stats")))
+                values = stats_summary(raw, layout) if output == "summary" else None
+                if values is None:
+                    result = _result(v.model, s, raw, _run_settings(s, raw), True, layout)
+                    values = collector.outputs(result, raw.get("column_stats"))
+                collector.put(i, values)
             except Exception as e:  # noqa: BLE001 - a user's output function fails its variant
                 collector.fail(i, "output", f"variant {first + i}: {type(e).__name__}: {e}"
                                [:ERROR_CHARS])
