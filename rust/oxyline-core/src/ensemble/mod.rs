@@ -280,25 +280,36 @@ pub fn column_stats(times: &[f64], data: &[f64], n_cols: usize) -> Option<Column
         return None;
     }
     let row = |i: usize| &data[i * n_cols..(i + 1) * n_cols];
-    let mut sum: Vec<f64> = Vec::with_capacity(n_cols);
+    // the first term of every column, then the others in time order; the inner loops are
+    // branch-free over the columns (selects, so they vectorise: ~5 % of a worker's time
+    // was this function with a branch per element), each column's arithmetic unchanged
+    let d0 = times[1] - times[0];
+    let mut sum: Vec<f64> = row(0)
+        .iter()
+        .zip(row(1))
+        .map(|(a, b)| d0 * (b + a) / 2.0)
+        .collect();
     let (mut min, mut max) = (row(0).to_vec(), row(0).to_vec());
     for i in 0..nt - 1 {
         let d = times[i + 1] - times[i];
         let (a, b) = (row(i), row(i + 1));
-        for j in 0..n_cols {
-            let term = d * (b[j] + a[j]) / 2.0;
-            if i == 0 {
-                sum.push(term);
+        if i > 0 {
+            for ((s, &x), &y) in sum.iter_mut().zip(b).zip(a) {
+                *s += d * (x + y) / 2.0;
+            }
+        }
+        for ((lo, hi), &x) in min.iter_mut().zip(max.iter_mut()).zip(b) {
+            // NaN propagates: a NaN bound stays, a NaN value replaces the bound
+            *lo = if !lo.is_nan() && (x.is_nan() || x < *lo) {
+                x
             } else {
-                sum[j] += term;
-            }
-            let x = b[j];
-            if !min[j].is_nan() && (x.is_nan() || x < min[j]) {
-                min[j] = x;
-            }
-            if !max[j].is_nan() && (x.is_nan() || x > max[j]) {
-                max[j] = x;
-            }
+                *lo
+            };
+            *hi = if !hi.is_nan() && (x.is_nan() || x > *hi) {
+                x
+            } else {
+                *hi
+            };
         }
     }
     let span = times[nt - 1] - times[0];
