@@ -1,29 +1,39 @@
 """Ensembles (``oxyline.simulate_ensemble``): thread scaling, throughput against a loop of
-svZeroDSolver runs, and the overhead of a Dask LocalCluster.
+svZeroDSolver runs, and the overhead of a Dask LocalCluster, at three sizes in one run.
 
-The network is the svzerod tree of ``benches/networks.py`` (``--vessels`` vessels, svzerod's
-settings: ``--cycles`` cycles of ``--pts`` points, generalized-alpha), read through the
-svZeroDSolver drop-in (``oxyline.svzerod.to_model``). Variant k scales every resistance (the
-vessels' ``R_poiseuille`` and the outlets' ``R``) by a factor in [0.8, 1.2]: in oxyline the
-patch ``{"scale": {"resistance": f}}``, in svzerod the same numbers written into a copy of the
-configuration.
+    python benches/bench_ensemble.py --quick      # the headline table (a few minutes quiet)
+    python benches/bench_ensemble.py              # best of 2, the same table
 
-1. Thread scaling: the ensemble with ``workers=1`` and ``workers=2`` (summary output).
+Sizes (``--sizes``): ``tree-64`` and ``tree-1000``, 64 and 1,000 variants of the svzerod tree
+of ``benches/networks.py`` (``--vessels`` vessels, svzerod's settings: ``--cycles`` cycles of
+``--pts`` points, generalized-alpha) read through the svZeroDSolver drop-in
+(``oxyline.svzerod.to_model``), variant k scaling every resistance (the vessels'
+``R_poiseuille`` and the outlets' ``R``) by a factor in [0.8, 1.2]: in oxyline the patch
+``{"scale": {"resistance": f}}``, in svzerod the same numbers written into a copy of the
+configuration; ``pwdb-200``: 200 subjects of ``oxyline.populations.pwdb_like`` spread evenly
+over the 4,374 (pwdb-116, run to periodicity 1e-4, the population bench's output).
+
+Per size, in one run:
+
+1. thread scaling: the ensemble with ``workers=1`` and ``workers=2`` (summary output);
 2. svzerod: a Python loop of ``svzerod.simulate(config_k)`` (the svzerod PyPI package; each
-   call returns its DataFrame) against one ``simulate_ensemble`` (every core, summary output).
-   The mean inlet pressures of both are compared as a check that the networks are the same.
-3. Dask: ``LocalCluster(n_workers=2, threads_per_worker=1)`` against local threads
-   (``workers=2``), after one warm-up ensemble on the cluster (the workers import oxyline).
+   call returns its DataFrame) against the ``workers=2`` ensemble. At most ``--svzerod-runs``
+   (default 64) configurations spread evenly over the variants are run and the loop's time is
+   extrapolated to all of them (the table says so); the time-averaged root pressures of both
+   are compared as a check that the networks are the same. pwdb-116 has no svzerod form: n/a;
+3. Dask: ``LocalCluster(n_workers=2, threads_per_worker=1)`` against the local ``workers=2``
+   run, after one warm-up ensemble of 2 variants on the cluster (the workers import oxyline).
 
 Wall times are the best of ``--repeat``; CPU time (user + system of this process and its
-threads) is reported beside them because this machine is shared: the 1-min load average is
-printed with every table. Results are printed as Markdown and appended to
-``benches/results.md`` (``--output ''`` for none).
+threads) is given beside them and the 1-min load average after each size, because the machine
+may be shared. Results are printed as Markdown and appended to ``benches/results.md``
+(``--output ''`` for none).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import copy
 import datetime
 import os
@@ -92,39 +102,60 @@ def load() -> str:
     return f"{os.getloadavg()[0]:.2f}"
 
 
-def scaling(model: Any, patches: list[dict[str, Any]], repeat: int) -> list[str]:
-    rows = ["| workers | wall (s) | CPU (s) | variants/s | speed-up | load |",
-            "|---:|---:|---:|---:|---:|---:|"]
-    base = None
-    for w in (1, 2):
-        wall, used, ds = timed(lambda w=w: oxyline.simulate_ensemble(
-            model, patches, workers=w, progress=False), repeat)
+class Size:
+    """One ensemble of the table: its model, patches, run settings and svzerod configs."""
+
+    def __init__(self, name: str, args: argparse.Namespace) -> None:
+        self.name = name
+        kind, n = name.split("-")
+        self.n = int(n)
+        self.settings: dict[str, Any] = {}
+        self.cfg: dict[str, Any] | None = None
+        if kind == "tree":
+            self.cfg = networks.build("tree", args.vessels, args.cycles, args.pts)
+            self.model = dropin.to_model(self.cfg)
+            self.patches = [{"scale": {"resistance": float(f)}} for f in factors(self.n)]
+            self.what = (f"svzerod tree of {args.vessels} vessels, {args.cycles} cycles x "
+                         f"{args.pts} points, resistances x 0.8-1.2, summary output")
+        elif kind == "pwdb":
+            from oxyline import populations as P
+
+            everyone = P.pwdb_like()
+            picks = np.linspace(0, len(everyone) - 1, self.n).round().astype(int)
+            self.model = oxyline.load_model(P.MODEL)
+            self.patches = [everyone[i] for i in picks]
+            self.settings = {"output": P.subject_summary, "until_periodic": 1e-4,
+                             "vessels": P.summary_vessels(),
+                             "variables": ["pressure_in", "pressure_out",
+                                           "segment_pressure_in"]}
+            self.what = (f"{self.n} of the 4,374 pwdb_like subjects of pwdb-116 (spread "
+                         "evenly), to periodicity 1e-4, per-subject summary")
+        else:
+            raise SystemExit(f"unknown size {name!r} (tree-N or pwdb-N)")
+
+    def run(self, **kw: Any) -> Any:
+        ds = oxyline.simulate_ensemble(self.model, self.patches, progress=False,
+                                       **self.settings, **kw)
         assert (ds.status.values == 0).all(), ds.error.values
-        base = base or wall
-        rows.append(f"| {w} | {wall:.2f} | {used:.2f} | {len(patches) / wall:.1f} | "
-                    f"{base / wall:.2f} | {load()} |")
-    return rows
+        return ds
 
 
-def versus_svzerod(cfg: dict[str, Any], model: Any, patches: list[dict[str, Any]],
-                   repeat: int) -> list[str]:
+def versus_svzerod(size: Size, ds: Any, runs: int, repeat: int) -> tuple[float, int, str]:
+    """(svzerod loop time extrapolated to every variant, runs measured, check text)."""
     import svzerod
 
-    configs = [svzerod_config(cfg, f) for f in factors(len(patches))]
-
-    def loop() -> list[Any]:
-        return [svzerod.simulate(c) for c in configs]
-
-    sv_wall, sv_cpu, frames = timed(loop, repeat)
-    ox_wall, ox_cpu, ds = timed(lambda: oxyline.simulate_ensemble(
-        model, patches, progress=False), repeat)
+    assert size.cfg is not None
+    picks = np.linspace(0, size.n - 1, min(runs, size.n)).round().astype(int)
+    fs = factors(size.n)
+    configs = [svzerod_config(size.cfg, fs[i]) for i in picks]
+    wall, _, frames = timed(lambda: [svzerod.simulate(c) for c in configs], repeat)
     # the same networks: the time-averaged inlet pressure of the root vessel, variant by
     # variant, both in Pa (svzerod reports in its file's units, cgs here: dyn/cm^2 = 0.1 Pa)
-    root = model.vessel_names[0]
-    to_si = units.factor(dropin.file_units(cfg), "pressure")
+    root = size.model.vessel_names[0]
+    to_si = units.factor(dropin.file_units(size.cfg), "pressure")
     sv_mean = np.array([time_average(f[f["name"] == root], "pressure_in") * to_si
                         for f in frames])
-    ox_mean = ds.pressure_in_mean.sel(vessel=root).values
+    ox_mean = ds.pressure_in_mean.sel(vessel=root).values[picks]
     diff = float(np.max(np.abs(ox_mean / sv_mean - 1)))
     # both are the same generalized-alpha scheme on the same linear circuit and output times:
     # they differ by round-off (1e-15 measured), far below 1e-6; another network, or a units
@@ -133,79 +164,100 @@ def versus_svzerod(cfg: dict[str, Any], model: Any, patches: list[dict[str, Any]
     if not diff < SAME_NETWORK_RTOL:
         raise SystemExit(f"oxyline and svzerod disagree: root-vessel time-averaged inlet "
                          f"pressure differs by {diff:.1e} (relative) > {SAME_NETWORK_RTOL:g}")
-    return ["| solver | wall (s) | CPU (s) | variants/s | throughput ratio | load |",
-            "|---|---:|---:|---:|---:|---:|",
-            (f"| svzerod loop | {sv_wall:.2f} | {sv_cpu:.2f} | {len(configs) / sv_wall:.2f} | 1 | "
-            f"{load()} |"),
-            (f"| oxyline ensemble | {ox_wall:.2f} | {ox_cpu:.2f} | {len(patches) / ox_wall:.2f} | "
-            f"{sv_wall / ox_wall:.1f} | {load()} |"),
-            "",
-            (f"Root-vessel time-averaged inlet pressure (trapezoidal rule over the last cycle's "
-            f"output rows, in Pa), oxyline vs svzerod: max relative difference {diff:.1e} over "
-            f"the variants (check: < {SAME_NETWORK_RTOL:g}).")]
+    return wall * size.n / len(picks), len(picks), f"{diff:.1e}"
 
 
-def versus_cluster(model: Any, patches: list[dict[str, Any]], repeat: int) -> list[str]:
-    from distributed import Client, LocalCluster
-
-    t0 = time.perf_counter()
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                      dashboard_address=None) as cluster, Client(cluster) as client:
-        start = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        oxyline.simulate_ensemble(model, patches[:4], client=client, progress=False)
-        warm = time.perf_counter() - t0
-        local_wall, _, local = timed(lambda: oxyline.simulate_ensemble(
-            model, patches, workers=2, progress=False), repeat)
-        dask_wall, _, remote = timed(lambda: oxyline.simulate_ensemble(
-            model, patches, client=client, progress=False), repeat)
-    same = bool((local.pressure_in_mean.values == remote.pressure_in_mean.values).all())
-    return ["| run | wall (s) | overhead | load |", "|---|---:|---:|---:|",
-            f"| local threads (workers=2) | {local_wall:.2f} | - | {load()} |",
-            (f"| LocalCluster, 2 workers x 1 thread | {dask_wall:.2f} | "
-            f"{100 * (dask_wall / local_wall - 1):+.0f} % | {load()} |"),
-            "",
-            (f"Cluster start {start:.1f} s and first (warm-up) ensemble {warm:.1f} s, not "
-            f"included. Results bit-identical to the local run: {same}.")]
+def measure(size: Size, client: Any, args: argparse.Namespace) -> tuple[str, list[str]]:
+    """One row of the table and its notes."""
+    print(f"{size.name}: workers=1, 2 ...", file=sys.stderr, flush=True)
+    w1, c1, _ = timed(lambda: size.run(workers=1), args.repeat)
+    w2, c2, local = timed(lambda: size.run(workers=2), args.repeat)
+    notes = []
+    sv = "n/a"
+    if size.cfg is not None and "svzerod" in args.parts:
+        print(f"{size.name}: svzerod loop ...", file=sys.stderr, flush=True)
+        sv_wall, measured, diff = versus_svzerod(size, local, args.svzerod_runs, args.repeat)
+        extra = "" if measured == size.n else f", extrapolated from {measured} runs"
+        sv = f"{sv_wall:.2f}{extra} | **{sv_wall / w2:.1f}x**"
+        notes.append(f"{size.name}: root-vessel time-averaged inlet pressure, oxyline vs "
+                     f"svzerod, max relative difference {diff} over the {measured} variants "
+                     f"run by both (check: < {SAME_NETWORK_RTOL:g}).")
+    else:
+        sv = "n/a | n/a"
+    dask = "- | -"
+    if client is not None:
+        print(f"{size.name}: LocalCluster ...", file=sys.stderr, flush=True)
+        size_warm = oxyline.simulate_ensemble(size.model, size.patches[:2], client=client,
+                                              progress=False, **size.settings)
+        assert (size_warm.status.values == 0).all()
+        wd, _, remote = timed(lambda: size.run(client=client), args.repeat)
+        same = all(bool(np.array_equal(local[v].values, remote[v].values, equal_nan=True))
+                   for v in local.data_vars if local[v].dtype.kind == "f")
+        dask = f"{wd:.2f} | **{100 * (wd / w2 - 1):+.0f} %**"
+        notes.append(f"{size.name}: LocalCluster results bit-identical to the local run: "
+                     f"{same}.")
+    row = (f"| {size.name} | {size.n} | {w1:.2f} | {c1:.2f} | {w2:.2f} | {c2:.2f} | "
+           f"**{w1 / w2:.2f}x** | {sv} | {dask} | {load()} |")
+    return row, notes
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--variants", type=int, default=64)
+    ap.add_argument("--quick", action="store_true",
+                    help="best of 1 (the headline table in a few minutes on a quiet machine)")
+    ap.add_argument("--sizes", default="tree-64,tree-1000,pwdb-200")
     ap.add_argument("--vessels", type=int, default=31, help="vessels of the svzerod tree")
     ap.add_argument("--cycles", type=int, default=networks.CYCLES)
     ap.add_argument("--pts", type=int, default=networks.PTS_PER_CYCLE)
     ap.add_argument("--repeat", type=int, default=2)
-    ap.add_argument("--parts", default="scaling,svzerod,dask")
+    ap.add_argument("--svzerod-runs", type=int, default=64,
+                    help="svzerod runs measured per size (the rest extrapolated)")
+    ap.add_argument("--parts", default="svzerod,dask", help="besides the thread scaling")
     ap.add_argument("--output", default=str(HERE / "results.md"))
     args = ap.parse_args(argv)
+    if args.quick:
+        args.repeat = 1
 
-    cfg = networks.build("tree", args.vessels, args.cycles, args.pts)
-    model = dropin.to_model(cfg)
-    patches = [{"scale": {"resistance": float(f)}} for f in factors(args.variants)]
+    sizes = [Size(name, args) for name in args.sizes.split(",")]
     # warm-up (imports, first assembly), not timed
-    oxyline.simulate_ensemble(model, patches[:2], progress=False)
+    for size in sizes:
+        oxyline.simulate_ensemble(size.model, size.patches[:2], progress=False, **size.settings)
     now = datetime.datetime.now(datetime.timezone.utc)
     lines = [f"## Ensembles (bench_ensemble.py), {now:%Y-%m-%d %H:%M} UTC", "",
              (f"{os.cpu_count()} x {platform.processor() or platform.machine()}, oxyline "
-             f"{oxyline.__version__}; svzerod tree of {args.vessels} vessels, {args.cycles} "
-             f"cycles x {args.pts} points, {args.variants} variants (resistances x 0.8-1.2), "
-             f"summary output; best of {args.repeat}. Load = 1-min load average after the row "
-             "(the machine is shared: compare rows of one table)."), ""]
-    parts = {"scaling": ("Thread scaling", scaling),
-             "svzerod": ("Throughput against a loop of svzerod runs", None),
-             "dask": ("Dask LocalCluster against local threads", versus_cluster)}
-    for part in args.parts.split(","):
-        title, fn = parts[part]
-        print(f"{title} ...", file=sys.stderr, flush=True)
-        rows = (versus_svzerod(cfg, model, patches, args.repeat) if part == "svzerod"
-                else fn(model, patches, args.repeat))
-        lines += [f"### {title}", "", *rows, ""]
+              f"{oxyline.__version__}; best of {args.repeat}; load = 1-min load average after "
+              "the row. Targets (issue 10): 1 -> 2 workers >= 1.8x, >= 50x a loop of svzerod "
+              "runs, LocalCluster (2 worker processes x 1 thread) <= +15 % over local "
+              "threads (workers=2)."), ""]
+    lines += [f"* {s.name}: {s.what}" for s in sizes] + [""]
+    lines += [("| ensemble | variants | 1 worker (s) | CPU (s) | 2 workers (s) | CPU (s) | "
+              "scaling | svzerod loop (s) | vs svzerod | LocalCluster (s) | overhead | load |"),
+              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    notes: list[str] = []
+    t0 = time.perf_counter()
+    with contextlib.ExitStack() as stack:
+        client = None
+        if "dask" in args.parts:
+            from distributed import Client, LocalCluster
+
+            cluster = stack.enter_context(LocalCluster(
+                n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None))
+            client = stack.enter_context(Client(cluster))
+        start = time.perf_counter() - t0
+        for size in sizes:
+            row, more = measure(size, client, args)
+            lines.append(row)
+            notes += more
+            print(row, file=sys.stderr, flush=True)
+    if client is not None:
+        notes.append(f"Cluster start {start:.1f} s and one warm-up ensemble of 2 variants "
+                     "per size, not included.")
+    lines += ["", *[f"* {n}" for n in notes]]
     text = "\n".join(lines)
     print(text)
     if args.output:
         with open(args.output, "a") as f:
-            f.write("\n" + text)
+            f.write("\n" + text + "\n")
     return 0
 
 

@@ -202,6 +202,59 @@ def test_summaries_of_several_vessels_are_those_of_the_plain_result(
             np.testing.assert_array_equal(ds[name].values[k], values, err_msg=f"{k} {name}")
 
 
+# TUBE in cgs units (cm, dyn/cm^2, dyn s/cm^5, cm^5/dyn, cm^3/s): a scale patch's numbers go
+# through a unit factor other than 1, and in the fast path (values per target) they must still
+# be factor * (value * f) as in the patched model
+TUBE_CGS: dict[str, Any] = {
+    "name": "tube-cgs", "units": "cgs", "period": 1.0,
+    "vessels": [
+        {"name": "a.b", "from": "in", "to": "j", "length": 10.0, "radius": 0.4,
+         "wall_thickness": 0.05, "youngs_modulus": 4e6},
+        {"name": "c", "from": "j", "to": "out1",
+         "lumped": {"resistance": 100.0, "capacitance": 1e-4}},
+        {"name": "d", "from": "j", "to": "out2", "lumped": {"resistance": 300.0}}],
+    "boundary_conditions": {
+        "in": {"type": "flow", "time": [0.0, 0.5, 1.0], "flow": [1.0, 3.0, 1.0]},
+        "out1": {"type": "rcr", "proximal_resistance": 1000.0, "capacitance": 1e-4,
+                 "distal_resistance": 10000.0},
+        "out2": {"type": "resistance", "resistance": 20000.0, "pressure": 0.0}},
+}
+
+scale_patches = st.fixed_dictionaries({}, optional={
+    "resistance": st.floats(0.3, 3.0), "compliance": st.floats(0.3, 3.0),
+    "vessels": st.sampled_from(["all", ["c"], ["a.b"], ["d"], ["a.b", "d"]])}).map(
+        lambda s: {"scale": s})
+
+
+@settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(drawn=st.lists(scale_patches, min_size=1, max_size=4))
+def test_scale_patches_take_the_value_path_and_stay_the_plain_run(drawn: list[dict[str, Any]]
+                                                                  ) -> None:
+    """A scale-only patch reaches the core as one number per target (no vessel dicts); the
+    variant is still bit for bit ``simulate()`` of the patched model (same numbers, same
+    assembly and run)."""
+    from oxyline.ensemble.patch import Patcher
+
+    patcher = Patcher(oxyline.load_model(TUBE_CGS))
+    assert patcher.scaler is not None
+    assert all(patcher.variant(p, k).values is not None for k, p in enumerate(drawn))
+    ds = oxyline.simulate_ensemble(TUBE_CGS, drawn, workers=2, **FAST)
+    assert (ds.status.values == 0).all(), ds.error.values
+    for k, patch in enumerate(drawn):
+        expected = _summary(oxyline.simulate(apply_patch(TUBE_CGS, patch), cycles=2))
+        for name, values in expected.items():
+            np.testing.assert_array_equal(ds[name].values[k], values, err_msg=f"{k} {name}")
+
+
+def test_a_scale_patch_out_of_range_fails_its_variant_as_before() -> None:
+    """A negative factor makes a lumped resistance negative: the value path hands the patch
+    to the full path, whose error names the vessel and the value."""
+    ds = oxyline.simulate_ensemble(TUBE_CGS, [{"scale": {"resistance": -1.0}},
+                                              {"scale": {"resistance": 2.0}}], **FAST)
+    assert ds.status.values.tolist() == [1, 0]
+    assert "variant 0" in ds.error.values[0] and "vessel 'c'" in ds.error.values[0]
+
+
 def test_results_do_not_depend_on_the_number_of_workers() -> None:
     variants = [{"vessels": {"aorta": {"radius": r}}} for r in np.linspace(0.006, 0.01, 6)]
     one = oxyline.simulate_ensemble(STRAIGHT, variants, workers=1, **FAST)

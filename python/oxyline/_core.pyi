@@ -1,10 +1,11 @@
 """Type stubs for the Rust extension module ``oxyline._core``."""
 
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 import numpy.typing as npt
+from typing_extensions import Unpack
 
 __version__: str
 build_profile: str
@@ -17,6 +18,26 @@ BALANCE_VARIABLES: list[str]
 TISSUE_VESSEL_VARIABLES: list[str]
 TISSUE_SEGMENT_VARIABLES: list[str]
 TISSUE_BALANCE_VARIABLES: list[str]
+#: the keywords of RunOptions (rust/oxyline-py/src/settings.rs)
+RUN_SETTINGS: list[str]
+
+class RunOptions(TypedDict, total=False):
+    """The run settings ``Network.simulate`` and ``Ensemble.run`` share (``**settings``)."""
+
+    cycles: int  # default 10
+    method: str  # "auto", "rk4" or "generalized-alpha"
+    rho_infty: float  # 0.5
+    dt: float | None
+    until_periodic: float | None
+    max_cycles: int  # 100
+    output_all_cycles: bool
+    start: str  # "steady", "zero", "svzerod-steady" or "svzerod-zero"
+    newton_atol: float | None
+    max_iterations: int  # 30
+    segments: bool  # True
+    transport: bool  # True
+    variables: list[str] | None
+    vessels: list[str] | None
 
 class ModelError(ValueError): ...
 class UnstableTimeStep(ModelError): ...
@@ -64,26 +85,17 @@ class Network:
         self,
         *,
         period: float,
-        cycles: int,
         output_every: float,
-        method: str = "auto",
-        rho_infty: float = 0.5,
-        dt: float | None = None,
-        until_periodic: float | None = None,
-        max_cycles: int = 100,
-        output_all_cycles: bool = False,
-        start: str = "steady",
-        newton_atol: float | None = None,
-        max_iterations: int = 30,
-        segments: bool = True,
         all_unknowns: bool = False,
         progress: Callable[[float, float], None] | None = None,
-        transport: bool = True,
         chunk_sink: Callable[[dict[str, Any]], None] | None = None,
         chunk_rows: int = 1024,
         keep_current_cycle: bool = True,
-        variables: list[str] | None = None,
-        vessels: list[str] | None = None,
+        checkpoint_sink: Callable[[dict[str, Any]], None] | None = None,
+        checkpoint_every_cycles: int | None = None,
+        checkpoint_every_seconds: float | None = None,
+        resume: dict[str, Any] | None = None,
+        **settings: Unpack[RunOptions],
     ) -> dict[str, Any]:
         """Run the network; with ``chunk_sink``, the output rows are handed to it during the
         run in dicts of at most ``chunk_rows`` rows (``times``, ``data`` and, for transport
@@ -96,32 +108,27 @@ class Network:
 class Ensemble:
     """A parsed base model whose variants run in parallel on the core's threads."""
 
-    def __init__(self, model_json: str) -> None: ...
+    def __init__(self, model_json: str,
+                 targets: list[tuple[str, int | str]] | None = None) -> None: ...
     def run(
         self,
-        feed: Callable[[], tuple[int, str | None, float, float] | None],
+        feed: Callable[
+            [],
+            tuple[int, str | None, float, float, dict[int, Any] | None, dict[str, Any] | None,
+                  npt.NDArray[np.float64] | None] | None,
+        ],
         *,
         on_done: Callable[
             [int, dict[str, Any] | None, dict[str, Any] | None, str | None, str | None], None
         ],
         workers: int | None = None,
-        cycles: int = 10,
-        method: str = "auto",
-        rho_infty: float = 0.5,
-        dt: float | None = None,
-        until_periodic: float | None = None,
-        max_cycles: int = 100,
-        output_all_cycles: bool = False,
-        start: str = "steady",
-        newton_atol: float | None = None,
-        max_iterations: int = 30,
-        segments: bool = True,
-        transport: bool = True,
-        variables: list[str] | None = None,
-        vessels: list[str] | None = None,
+        summary: bool = False,
+        **settings: Unpack[RunOptions],
     ) -> bool:
         """Run the variants ``feed()`` hands over (``(i, canonical patch JSON or None,
-        period, output_every)``, None when there are no more) on ``workers`` threads (default
+        period, output_every, vessels, outlets, values)``, ``values`` one SI number per
+        ``targets`` entry (NaN: the base value); None when there are no more) on ``workers``
+        threads (default
         ``OXYLINE_NUM_THREADS`` or every core), the GIL released; ``on_done(i, raw, layout,
         error_kind, error)`` is called on this thread as each finishes. False if Ctrl-C
         stopped it."""

@@ -8,24 +8,27 @@ scheduling, transfer and fault handling: there is no pool or RPC of oxyline's ow
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
+from itertools import pairwise
 from typing import Any
 
 from oxyline.ensemble.collect import Collector, Output
-from oxyline.ensemble.patch import merge_patch
+from oxyline.ensemble.patch import Patcher
 from oxyline.model import Model
 
-#: tasks per worker thread: enough to balance chunks of unequal cost, few enough that the
-#: per-task overhead (a model transfer, a thread pool) stays small
+#: at most this many tasks per worker thread: enough to balance chunks of unequal cost
 TASKS_PER_THREAD = 4
+#: the fewest variants of a task beyond the first per thread: a task costs a round trip to the
+#: scheduler, its patches and results in transit and a thread pool on its worker, so it
+#: should carry seconds of work (256 variants: ~3 s of a 31-vessel tree, ~1 min of pwdb-116)
+MIN_TASK_VARIANTS = 256
 
 
 def run_chunk(model: Model, patches: Sequence[Mapping[str, Any]], first: int, output: Output,
               workers: int | None, overrides: Mapping[str, Any]) -> Collector:
     """One task: variants ``first``, ``first + 1``, ... on this worker's threads (``workers``,
     default the Dask worker's thread count)."""
-    from oxyline.ensemble.local import run_local
+    from oxyline.ensemble.local import cached_base, run_local
 
     if workers is None:
         try:
@@ -35,14 +38,22 @@ def run_chunk(model: Model, patches: Sequence[Mapping[str, Any]], first: int, ou
         except (ImportError, ValueError):
             workers = None
     collector = Collector(len(patches), output, model.vessel_names)
+    # the scattered model is the same object in every task on this worker: its base is
+    # parsed and prepared once per worker, not once per task
     run_local(model, patches, collector, workers=workers, output=output, progress=False,
-              overrides=overrides, first=first)
+              overrides=overrides, first=first, base=cached_base(model))
     return collector
 
 
 def _chunks(n: int, threads: int) -> list[range]:
-    size = max(1, math.ceil(n / max(1, threads * TASKS_PER_THREAD)))
-    return [range(a, min(a + size, n)) for a in range(0, n, size)]
+    """Variant ranges of (nearly) equal length, a whole number of them per worker thread
+    (equal chunks then finish together): one per thread, more only while each still holds
+    :data:`MIN_TASK_VARIANTS`."""
+    threads = max(1, threads)
+    per_thread = max(1, min(TASKS_PER_THREAD, n // (threads * MIN_TASK_VARIANTS)))
+    tasks = max(1, min(n, threads * per_thread))
+    bounds = [round(j * n / tasks) for j in range(tasks + 1)]
+    return [range(a, b) for a, b in pairwise(bounds) if b > a]
 
 
 def _merge(into: Collector, part: Collector, rows: range) -> None:
@@ -69,8 +80,9 @@ def run_on_client(client: Any, model: Model, patches: list[dict[str, Any]], inde
     from oxyline.ensemble import _attrs, _finish
     from oxyline.ensemble.local import _progress, run_settings
 
+    patcher = Patcher(model)
     for k, patch in enumerate(patches):  # unknown names fail here, before any task starts
-        merge_patch(model.source, patch, k)
+        patcher.check(patch, k)
     run_settings(model, output, overrides)  # so do unknown settings
     collector = Collector(len(patches), output, model.vessel_names)
     writer = None

@@ -15,7 +15,7 @@ patch values as coordinates along ``variant`` (their dotted paths).
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -73,6 +73,33 @@ def _flow_stats(result: Result, column_stats: Sequence[np.ndarray] | None
     block = [np.asarray(s)[: kv * nv] for s in column_stats]
     return {name: tuple(s[k::kv] for s in block)
             for k, name in enumerate(result.vessel_variables)}
+
+
+class _Columns(NamedTuple):
+    """What :func:`_flow_stats` reads of a result, taken from a run's layout and rows."""
+
+    vessels: list[str]
+    vessel_variables: tuple[str, ...]
+    data: np.ndarray
+
+
+def stats_summary(raw: Mapping[str, Any], layout: Mapping[str, Any]
+                  ) -> dict[str, np.ndarray] | None:
+    """:func:`summary_values` of a finished variant read straight from the core's per-column
+    statistics and its layout, without building its :class:`~oxyline.Result` (the calling
+    thread's per-variant work), or None where that takes the result: species outputs (their
+    statistics are numpy's, from the result's arrays) or no usable column statistics. The
+    same arrays and names in the same order as :func:`summary_values`."""
+    stats = raw.get("column_stats")
+    data = raw.get("data")
+    if "transport" in raw or stats is None or getattr(data, "ndim", 0) != 2:
+        return None
+    flow = _flow_stats(_Columns(list(layout["vessels"]), tuple(layout["vessel_variables"]),
+                                data), stats)  # type: ignore[arg-type]
+    if flow is None:
+        return None
+    return {f"{name}_{stat}": val for name, values in flow.items()
+            for stat, val in zip(STATS, values)}
 
 
 def callable_values(output: Callable[[Result], Mapping[str, float]], result: Result

@@ -6,20 +6,16 @@ from __future__ import annotations
 import contextlib
 import gc
 import json
+import weakref
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Any
 
 from oxyline import _core
-from oxyline.ensemble.collect import ERROR_CHARS, Collector, Output
-from oxyline.ensemble.patch import Patcher, Variant, merge_patch
+from oxyline.ensemble.collect import ERROR_CHARS, Collector, Output, stats_summary
+from oxyline.ensemble.patch import Patcher, Variant
 from oxyline.errors import ModelError
 from oxyline.model import Model
 from oxyline.run import _result, _run_settings, _settings
-
-#: the settings of ``_settings`` that the core's ``Ensemble.run`` takes as they are
-SHARED = ("cycles", "method", "rho_infty", "dt", "until_periodic", "max_cycles",
-          "output_all_cycles", "start", "newton_atol", "max_iterations", "segments",
-          "transport", "variables", "vessels")
 
 
 def run_settings(model: Model, output: Output, overrides: Mapping[str, Any]) -> dict[str, Any]:
@@ -41,25 +37,29 @@ class Feed:
     model refuses is recorded as failed and skipped. ``first``: the number of the first
     variant in the whole ensemble (a chunk of it runs on a cluster worker)."""
 
-    def __init__(self, model: Model, patches: Sequence[Mapping[str, Any]], output: Output,
+    def __init__(self, patcher: Patcher, patches: Sequence[Mapping[str, Any]], output: Output,
                  overrides: Mapping[str, Any], collector: Collector, first: int,
                  on_skip: Callable[[int], None]) -> None:
+        model = patcher.base
+        self.patcher = patcher
         for i, patch in enumerate(patches):  # unknown names raise before anything runs
-            merge_patch(model.source, patch, first + i)
-        self.patcher = Patcher(model)
+            self.patcher.check(patch, first + i)
         self.patches, self.output, self.overrides = patches, output, overrides
+        #: the run settings of the variants that keep the base model's (most of them)
+        self.base_settings = run_settings(model, output, overrides)
         self.collector, self.first, self.on_skip = collector, first, on_skip
         self.prepared: dict[int, tuple[Variant, dict[str, Any]]] = {}
         self._next = 0
 
-    def next(self) -> tuple[int, str | None, float, float, Any, Any] | None:
+    def next(self) -> tuple[int, str | None, float, float, Any, Any, Any] | None:
         while self._next < len(self.patches):
             i = self._next
             self._next += 1
             k = self.first + i
             try:
                 v = self.patcher.variant(self.patches[i], k)
-                s = run_settings(v.model, self.output, self.overrides)
+                s = (self.base_settings if v.model is self.patcher.base else
+                     run_settings(v.model, self.output, self.overrides))
             except ModelError as e:
                 if str(e).startswith(f"variant {k}: "):
                     raise  # a mistake in the patches (e.g. a text where a number is scaled)
@@ -67,17 +67,48 @@ class Feed:
                 self.on_skip(i)
                 continue
             self.prepared[i] = (v, s)
-            return i, v.patch_json, s["period"], s["output_every"], v.vessels, v.outlets
+            return (i, v.patch_json, s["period"], s["output_every"], v.vessels, v.outlets,
+                    v.values)
         return None
+
+
+class Base:
+    """What every variant of one base model shares: its :class:`Patcher` and the core's
+    parsed :class:`oxyline._core.Ensemble` (with the targets of scale patches)."""
+
+    def __init__(self, model: Model) -> None:
+        self.patcher = Patcher(model)
+        scaler = self.patcher.scaler
+        self.ensemble = _core.Ensemble(json.dumps(model.canonical, separators=(",", ":")),
+                                       targets=scaler.targets if scaler is not None else None)
+
+
+#: the :class:`Base` of the models this process has seen as a cluster worker, by id(model)
+_BASES: dict[int, tuple[Any, Base]] = {}
+
+
+def cached_base(model: Model) -> Base:
+    """The :class:`Base` of ``model``, built once per process for as long as the model lives.
+    Only for models nobody changes in place: the copy a cluster worker holds of the model that
+    was scattered to it (every task of the ensemble gets that same object)."""
+    key = id(model)
+    hit = _BASES.get(key)
+    if hit is not None and hit[0]() is model:
+        return hit[1]
+    base = Base(model)
+    _BASES[key] = (weakref.ref(model, lambda _: _BASES.pop(key, None)), base)
+    return base
 
 
 def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Collector, *,
               workers: int | None, output: Output, progress: Any,
               overrides: Mapping[str, Any],
-              on_variant: Callable[[int], None] | None = None, first: int = 0) -> bool:
+              on_variant: Callable[[int], None] | None = None, first: int = 0,
+              base: Base | None = None) -> bool:
     """Run every variant into ``collector``; ``on_variant(i)`` after each one is recorded.
-    Returns False if Ctrl-C stopped the ensemble. ``first``: see :class:`Feed`."""
-    base_settings = run_settings(model, output, overrides)
+    Returns False if Ctrl-C stopped the ensemble. ``first``: see :class:`Feed`. ``base``: the
+    model's :class:`Base` if already built."""
+    base = base or Base(model)
     tick, close = _progress(progress, len(patches))
 
     def recorded(i: int) -> None:
@@ -85,7 +116,8 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
             on_variant(i)
         tick()
 
-    feed = Feed(model, patches, output, overrides, collector, first, recorded)
+    feed = Feed(base.patcher, patches, output, overrides, collector, first, recorded)
+    base_settings = feed.base_settings
 
     def done(i: int, raw: dict[str, Any] | None, layout: dict[str, Any] | None,
              kind: str | None, message: str | None) -> None:
@@ -96,15 +128,20 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
         else:
             try:
                 assert raw is not None and layout is not None
-                result = _result(v.model, s, raw, _run_settings(s, raw), True, layout)
-                collector.put(i, collector.outputs(result, raw.get("column_stats")))
+                values = stats_summary(raw, layout) if output == "summary" else None
+                if values is None:
+                    result = _result(v.model, s, raw, _run_settings(s, raw), True, layout)
+                    values = collector.outputs(result, raw.get("column_stats"))
+                collector.put(i, values)
             except Exception as e:  # noqa: BLE001 - a user's output function fails its variant
                 collector.fail(i, "output", f"variant {first + i}: {type(e).__name__}: {e}"
                                [:ERROR_CHARS])
         recorded(i)
 
-    core = {k: base_settings[k] for k in SHARED}
-    ensemble = _core.Ensemble(json.dumps(model.canonical, separators=(",", ":")))
+    # the settings of ``_settings`` that the core's ``Ensemble.run`` shares with
+    # ``Network.simulate`` (each variant's period and output_every go with the variant)
+    core = {k: base_settings[k] for k in _core.RUN_SETTINGS}
+    ensemble = base.ensemble
     try:
         with _old_objects_frozen():
             # a summary's statistics are computed on the worker threads (see summary_values)

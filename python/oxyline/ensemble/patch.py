@@ -29,6 +29,8 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from oxyline.errors import ModelError
 from oxyline.model import (
     BC_KEYS,
@@ -41,6 +43,7 @@ from oxyline.model import (
     _unassembled,
     _vessels,
 )
+from oxyline.units import factor
 
 SECTIONS = ("vessels", "boundary_conditions", "blood", "oxygen", "transport", "period", "scale")
 VESSEL_PROPERTIES = VESSEL_KEYS - {"name", "from", "to"}
@@ -125,23 +128,20 @@ def _value(x: Any, k: int, path: str) -> float:
         raise ModelError(f"{_where(k, path)}: cannot scale {x!r}, not a number") from None
 
 
-def _scaled(data: dict[str, Any], scale: Any, k: int) -> tuple[set[int], set[str]]:
-    """Apply the ``scale`` section to ``data`` (the merged model; every element written is a
-    new container) and return the indices of the vessels and the nodes of the conditions it
-    changed."""
+def _scale_terms(scale: Any, index: Mapping[Any, int], k: int
+                 ) -> tuple[set[int] | None, dict[str, float]]:
+    """The vessels (indices; None: all) and the factors of a ``scale`` section, checked.
+    ``index``: the vessel indices by name."""
     scale = _mapping(scale, k, "scale")
     for key in scale:
         if key not in SCALE_KEYS:
             raise _unknown(k, f"scale.{key}", "scale key", SCALE_KEYS)
-    names = [v["name"] for v in data["vessels"]]
     chosen = scale.get("vessels", "all")
-    if chosen == "all":
-        selected = set(range(len(names)))
-    else:
+    selected = None
+    if chosen != "all":
         if isinstance(chosen, str) or not isinstance(chosen, Sequence):
             raise ModelError(f"{_where(k, 'scale.vessels')}: expected 'all' or a list of vessel "
                              f"names, got {chosen!r}")
-        index = {n: i for i, n in enumerate(names)}
         for name in chosen:
             if name not in index:
                 raise ModelError(f"{_where(k, f'scale.vessels.{name}')}: no vessel named "
@@ -154,6 +154,16 @@ def _scaled(data: dict[str, Any], scale: Any, k: int) -> tuple[set[int], set[str
             if isinstance(f, bool) or not isinstance(f, (int, float)) or not math.isfinite(f):
                 raise ModelError(f"{_where(k, f'scale.{key}')}: expected a number, got {f!r}")
             factors[key] = float(f)
+    return selected, factors
+
+
+def _scaled(data: dict[str, Any], scale: Any, k: int) -> tuple[set[int], set[str]]:
+    """Apply the ``scale`` section to ``data`` (the merged model; every element written is a
+    new container) and return the indices of the vessels and the nodes of the conditions it
+    changed."""
+    index = {v["name"]: i for i, v in enumerate(data["vessels"])}
+    chosen, factors = _scale_terms(scale, index, k)
+    selected = set(range(len(data["vessels"]))) if chosen is None else chosen
     vessels = data["vessels"] = list(data["vessels"])
     nodes: set[str] = set()
     changed: set[int] = set()
@@ -331,6 +341,96 @@ class Variant:
     model: Model
     vessels: dict[int, Any] | None = None
     outlets: dict[str, Any] | None = None
+    #: one SI value per :attr:`Scaler.targets` (NaN: the base value), or None
+    values: np.ndarray | None = None
+
+
+def _plain_number(x: Any) -> float | None:
+    """``float(x)`` for a number of the model that a scale patch reads (YAML 1.1 reads 5.0e5
+    as a string), or None where the full patch path must give the error."""
+    if isinstance(x, bool) or not isinstance(x, (int, float, str)):
+        return None
+    try:
+        v = float(x)
+    except ValueError:
+        return None
+    return v if math.isfinite(v) else None
+
+
+class Scaler:
+    """A ``scale`` patch as one number per target of the base model (see
+    ``oxyline_core::ensemble::Target``) instead of rescaled, revalidated vessel and condition
+    dicts: the numbers are those :func:`merge_patch` and the canonical conversion would give
+    (``factor * (value * f)``, in that order, so bit for bit), computed with numpy's
+    elementwise IEEE arithmetic. ``usable`` is False when some number of the base model is
+    not a plain number (the full path then reports it)."""
+
+    def __init__(self, base: Model) -> None:
+        src = base.source
+        units = str(src.get("units", "SI"))
+        vessels = src["vessels"]
+        self.index = {v["name"]: i for i, v in enumerate(vessels)}
+        self.n_vessels = len(vessels)
+        self.targets: list[tuple[str, Any]] = []
+        rows: list[tuple[float | None, float, str, bool, list[int]]] = []
+        touching: dict[str, list[int]] = {}
+        for i, v in enumerate(vessels):
+            for node in (str(v.get("from")), str(v.get("to"))):
+                touching.setdefault(node, []).append(i)
+            if "lumped" in v:
+                for key, prop in (("resistance", "resistance"), ("compliance", "capacitance")):
+                    if prop in v["lumped"]:
+                        self.targets.append((f"lumped.{prop}", i))
+                        rows.append((_plain_number(v["lumped"][prop]), factor(units, prop), key,
+                                     False, [i]))
+            elif "youngs_modulus" in v:  # compliance ∝ 1/E
+                self.targets.append(("youngs_modulus", i))
+                rows.append((_plain_number(v["youngs_modulus"]), factor(units, "modulus"),
+                             "compliance", True, [i]))
+        for node, bc in src.get("boundary_conditions", {}).items():
+            kind = str(bc.get("type", "")).lower() if isinstance(bc, Mapping) else ""
+            if node not in touching or kind not in RESISTANCES:
+                continue
+            props = [(p, "resistance") for p in RESISTANCES[kind]]
+            props += [("capacitance", "compliance")] if kind == "rcr" else []
+            for prop, key in props:
+                self.targets.append((prop, node))
+                q = "capacitance" if key == "compliance" else "resistance"
+                rows.append((_plain_number(bc.get(prop)), factor(units, q), key, False,
+                             touching[node]))
+        self.usable = all(r[0] is not None for r in rows)
+        self.src = np.array([r[0] or 0.0 for r in rows])
+        self.unit = np.array([r[1] for r in rows])
+        self.compliance = np.array([r[2] == "compliance" for r in rows], dtype=bool)
+        self.divide = np.array([r[3] for r in rows], dtype=bool)
+        #: a target must stay >= 0 (lumped values) or > 0 (Young's modulus) to take this path
+        self.lumped = np.array([t[0].startswith("lumped.") for t in self.targets], dtype=bool)
+        pairs = [(t, i) for t, r in enumerate(rows) for i in r[4]]
+        self._owner_target = np.array([t for t, _ in pairs], dtype=np.intp)
+        self._owner_vessel = np.array([i for _, i in pairs], dtype=np.intp)
+
+    def check(self, scale: Any, k: int) -> None:
+        _scale_terms(scale, self.index, k)
+
+    def values(self, scale: Any, k: int) -> np.ndarray | None:
+        """The SI value of every target under ``scale`` (NaN: unchanged), or None if one of
+        them is out of range (the full path then fails the variant with its usual error)."""
+        selected, factors = _scale_terms(scale, self.index, k)
+        nan = math.nan
+        f = np.where(self.compliance, factors.get("compliance", nan),
+                     factors.get("resistance", nan))
+        if selected is not None:
+            chosen = np.zeros(self.n_vessels, dtype=bool)
+            chosen[list(selected)] = True
+            hit = np.zeros(len(f), dtype=bool)
+            hit[self._owner_target[chosen[self._owner_vessel]]] = True
+            f = np.where(hit, f, nan)
+        scaled = np.where(self.divide, self.src / f, self.src * f)  # in the model's units
+        out = self.unit * scaled
+        on = ~np.isnan(f)
+        ok = np.isfinite(scaled[on]).all() and np.isfinite(out[on]).all() \
+            and (scaled[on & self.lumped] >= 0).all() and (scaled[on & self.divide] > 0).all()
+        return out if ok else None
 
 
 class Patcher:
@@ -339,6 +439,9 @@ class Patcher:
 
     def __init__(self, base: Model) -> None:
         self.base = base
+        scaler = Scaler(base)
+        #: the scale-only patches' fast path (None: every patch takes the full path)
+        self.scaler = scaler if scaler.usable and scaler.targets else None
         canon = base.canonical
         self._vessels = canon["vessels"]
         self._bcs = canon["boundary_conditions"]
@@ -348,11 +451,23 @@ class Patcher:
         self._periods = {node: _boundary_conditions({node: bc}, units)[1]
                          for node, bc in bcs.items()}
 
+    def check(self, patch: Any, k: int) -> None:
+        """Raise :class:`ModelError` for unknown names in ``patch`` (variant ``k``), as
+        :meth:`variant` would; a scale-only patch is checked without merging it."""
+        if self.scaler is not None and isinstance(patch, Mapping) and patch.keys() == {"scale"}:
+            self.scaler.check(patch["scale"], k)
+        else:
+            merge_patch(self.base.source, patch, k)
+
     def variant(self, patch: Mapping[str, Any], k: int) -> Variant:
         """Variant ``k``. Unknown names raise :class:`ModelError`; a value the model refuses
         raises it too, which the caller records as that variant's failure."""
         if not patch:
             return Variant(None, self.base)
+        if self.scaler is not None and patch.keys() == {"scale"}:
+            values = self.scaler.values(patch["scale"], k)
+            if values is not None:
+                return Variant(None, self.base, values=values)
         data, vessels, nodes = merge_patch(self.base.source, patch, k)
 
         def convert_vessels(items: list[Any], units: str) -> list[Any]:

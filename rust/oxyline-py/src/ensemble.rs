@@ -3,12 +3,13 @@
 //! callback on the calling thread, in completion order, while the others keep running.
 
 use crate::extract;
-use crate::{
-    error_kind, layout_dict, outcome_dict, parse_method, parse_start, recorded_columns, to_py,
+use crate::settings::Shared;
+use crate::{error_kind, layout_dict, outcome_dict, recorded_columns, to_py};
+use numpy::{IntoPyArray, PyReadonlyArray1};
+use oxyline_core::ensemble::{
+    ColumnStats, ConditionValue, Member, SpecPatch, Target, Targets, column_stats, run_fed,
+    worker_count,
 };
-use numpy::IntoPyArray;
-use oxyline_core::ensemble::{ColumnStats, Member, SpecPatch, column_stats, run_fed, worker_count};
-use oxyline_core::genalpha::NewtonControl;
 use oxyline_core::spec::{BoundarySpec, NetworkSpec, VesselSpec, parse};
 use oxyline_core::{Error, Outcome, RunSettings, Selection, Transport};
 use pyo3::exceptions::PyKeyboardInterrupt;
@@ -34,6 +35,8 @@ struct Input {
     handed: Result<Handed, Error>,
     period: f64,
     output_every: f64,
+    /// One value per target of the ensemble (NaN: the base value), or none.
+    values: Option<Vec<f64>>,
 }
 
 /// Vessels (by index) and plain outlets of a patch read from their canonical dicts (see
@@ -68,10 +71,16 @@ fn handed_over(
     Ok(h)
 }
 
-/// The base model with a variant's patch (JSON text and handed-over elements; neither: the
-/// base itself), assembled.
-fn member_of(base: &NetworkSpec, patch: Option<&str>, handed: Handed) -> Result<Member, Error> {
-    if handed.vessels.is_empty() && handed.outlets.is_empty() {
+/// The base model with a variant's patch (JSON text, handed-over elements and target values;
+/// none of them: the base itself), assembled.
+fn member_of(
+    base: &NetworkSpec,
+    patch: Option<&str>,
+    handed: Handed,
+    targets: &Targets,
+    values: Option<&[f64]>,
+) -> Result<Member, Error> {
+    if handed.vessels.is_empty() && handed.outlets.is_empty() && values.is_none() {
         return Member::of_patch(base, patch);
     }
     let mut p = match patch {
@@ -80,7 +89,45 @@ fn member_of(base: &NetworkSpec, patch: Option<&str>, handed: Handed) -> Result<
     };
     p.vessels.extend(handed.vessels);
     p.boundary_conditions.extend(handed.outlets);
-    Member::build(&p.apply(base)?)
+    let mut spec = p.apply(base)?;
+    if let Some(values) = values {
+        targets.write(&mut spec, values)?;
+    }
+    Member::build(&spec)
+}
+
+/// The targets of `Ensemble(targets=...)`: `(kind, key)` pairs, `kind` one of
+/// `lumped.resistance`, `lumped.capacitance`, `youngs_modulus` (key: the vessel's index) or
+/// `resistance`, `proximal_resistance`, `capacitance`, `distal_resistance` (key: the node of
+/// a resistance or RCR condition).
+fn targets_of(list: &Bound<'_, PyAny>) -> PyResult<Vec<Target>> {
+    let mut out = Vec::new();
+    for item in list.try_iter()? {
+        let (kind, key): (String, Bound<'_, PyAny>) = item?.extract()?;
+        let node = |v: ConditionValue| key.extract::<String>().map(|n| Target::Condition(n, v));
+        let t = match kind.as_str() {
+            "lumped.resistance" => key.extract().map(Target::LumpedResistance),
+            "lumped.capacitance" => key.extract().map(Target::LumpedCapacitance),
+            "youngs_modulus" => key.extract().map(Target::YoungsModulus),
+            "resistance" => node(ConditionValue::Resistance),
+            "proximal_resistance" => node(ConditionValue::ProximalResistance),
+            "capacitance" => node(ConditionValue::Capacitance),
+            "distal_resistance" => node(ConditionValue::DistalResistance),
+            _ => {
+                return Err(to_py(Error::model(
+                    "ensemble targets",
+                    format!("unknown target kind '{kind}'"),
+                )));
+            }
+        };
+        out.push(t.map_err(|_| {
+            to_py(Error::model(
+                "ensemble targets",
+                format!("bad key {key} for a '{kind}' target"),
+            ))
+        })?);
+    }
+    Ok(out)
 }
 
 /// The output selection of a run (the names `Network.simulate` takes).
@@ -96,13 +143,21 @@ struct Output {
 /// One variant: patch, assemble, select, run; `template` holds the shared settings.
 fn run_variant(
     base: &NetworkSpec,
-    patch: Option<&str>,
-    handed: Result<Handed, Error>,
+    targets: &Targets,
+    input: Input,
     template: &RunSettings,
     output: &Output,
     cancelled: &AtomicBool,
 ) -> Finished {
-    let member = match handed.and_then(|h| member_of(base, patch, h)) {
+    let Input {
+        patch,
+        handed,
+        values,
+        ..
+    } = input;
+    let built =
+        handed.and_then(|h| member_of(base, patch.as_deref(), h, targets, values.as_deref()));
+    let member = match built {
         Ok(m) => m,
         Err(e) => {
             return Finished {
@@ -212,111 +267,88 @@ type Fed<'py> = (
     f64,
     Option<Bound<'py, PyDict>>,
     Option<Bound<'py, PyDict>>,
+    Option<PyReadonlyArray1<'py, f64>>,
 );
 
 /// A parsed base model whose variants run in parallel.
 #[pyclass(frozen, module = "oxyline._core")]
 pub struct Ensemble {
     base: Arc<NetworkSpec>,
+    targets: Arc<Targets>,
 }
 
 #[pymethods]
 impl Ensemble {
-    /// Parse the canonical SI JSON of the base model (once for every variant).
+    /// Parse the canonical SI JSON of the base model (once for every variant). `targets`:
+    /// the numbers of the base model that a variant may replace by value (see `targets_of`),
+    /// checked here once.
     #[new]
-    fn new(py: Python<'_>, model_json: &str) -> PyResult<Self> {
+    #[pyo3(signature = (model_json, targets = None))]
+    fn new(py: Python<'_>, model_json: &str, targets: Option<Bound<'_, PyAny>>) -> PyResult<Self> {
+        let targets = match &targets {
+            Some(list) => targets_of(list)?,
+            None => Vec::new(),
+        };
         let json = model_json.to_owned();
-        let spec = py.detach(move || parse(&json)).map_err(to_py)?;
+        let (spec, targets) = py
+            .detach(move || {
+                let spec = parse(&json)?;
+                let targets = Targets::new(&spec, targets)?;
+                Ok::<_, Error>((spec, targets))
+            })
+            .map_err(to_py)?;
         Ok(Ensemble {
             base: Arc::new(spec),
+            targets: Arc::new(targets),
         })
     }
 
     /// Run variants as `feed()` hands them over: it returns `(i, patch, period,
-    /// output_every, vessels, outlets)` for the next variant (`patch` its canonical JSON, None
-    /// for the base model; `vessels` {index: canonical vessel dict} and `outlets` {node:
-    /// canonical resistance/RCR dict}: elements of the patch handed over as objects, or None)
+    /// output_every, vessels, outlets, values)` for the next variant (`patch` its canonical
+    /// JSON, None for the base model; `vessels` {index: canonical vessel dict} and `outlets`
+    /// {node: canonical resistance/RCR dict}: elements of the patch handed over as objects,
+    /// or None; `values`: a float64 array of one SI value per target, NaN for the base value,
+    /// or None)
     /// or None when there are no more, and is called on this thread while the workers
-    /// run (so preparing a variant overlaps the runs). The other settings are those of
-    /// `Network.simulate` and shared. `on_done(i, raw, layout, error_kind, error)` is called
+    /// run (so preparing a variant overlaps the runs). `settings`: the run settings shared
+    /// with `Network.simulate` (`settings::KEYS`), the same for every variant. `on_done(i, raw, layout, error_kind, error)` is called
     /// on this thread as each variant finishes; a failed variant has `error_kind` set
     /// ("model", "unstable", "solver", "interrupted") and never stops the others. Returns
     /// False if Ctrl-C stopped the ensemble (the variants finished until then were handed
     /// over, running ones as "interrupted"; the rest were never fed). `summary`: each
     /// finished variant's `raw` also has `column_stats`, the (mean, min, max) arrays of
     /// `oxyline_core::ensemble::column_stats` over its output columns.
-    #[pyo3(signature = (feed, *, on_done, workers = None, cycles = 10, method = "auto",
-        rho_infty = 0.5, dt = None, until_periodic = None, max_cycles = 100,
-        output_all_cycles = false, start = "steady", newton_atol = None, max_iterations = 30,
-        segments = true, transport = true, variables = None, vessels = None,
-        summary = false))]
-    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (feed, *, on_done, workers = None, summary = false, **settings))]
     fn run(
         &self,
         py: Python<'_>,
         feed: Py<PyAny>,
         on_done: Py<PyAny>,
         workers: Option<usize>,
-        cycles: usize,
-        method: &str,
-        rho_infty: f64,
-        dt: Option<f64>,
-        until_periodic: Option<f64>,
-        max_cycles: usize,
-        output_all_cycles: bool,
-        start: &str,
-        newton_atol: Option<f64>,
-        max_iterations: usize,
-        segments: bool,
-        transport: bool,
-        variables: Option<Vec<String>>,
-        vessels: Option<Vec<String>>,
         summary: bool,
+        settings: Option<Bound<'_, PyDict>>,
     ) -> PyResult<bool> {
+        let shared = Shared::from_kwargs(settings.as_ref())?;
         let workers = worker_count(workers).map_err(to_py)?;
-        let template = RunSettings {
-            method: parse_method(method, rho_infty)?,
-            dt,
-            period: 1.0,
-            cycles,
-            until_periodic,
-            max_cycles,
-            output_every: 1.0,
-            output_all_cycles,
-            // the cycles before the last are not recorded: a variant stopped early is
-            // reported as failed, without its rows (the recorder's copies were ~5 % of a
-            // variant of a small tree)
-            keep_current_cycle: false,
-            start: parse_start(start, rho_infty)?,
-            newton: NewtonControl {
-                atol: newton_atol,
-                max_iter: max_iterations,
-            },
-            probes: Vec::new(),
-            species_columns: None,
-        };
+        // the cycles before the last are not recorded: a variant stopped early is reported
+        // as failed, without its rows (the recorder's copies were ~5 % of a variant of a
+        // small tree); period and output_every are each variant's own
+        let template = shared.run_settings(1.0, 1.0, false)?;
         let output = Output {
-            variables,
-            vessels,
-            segments,
-            transport,
+            variables: shared.variables,
+            vessels: shared.vessels,
+            segments: shared.segments,
+            transport: shared.transport,
             summary,
         };
-        let base = self.base.clone();
+        let (base, targets) = (self.base.clone(), self.targets.clone());
         let job = |_: usize, input: Input, cancelled: &AtomicBool| {
             let s = RunSettings {
                 period: input.period,
                 output_every: input.output_every,
                 ..template.clone()
             };
-            run_variant(
-                &base,
-                input.patch.as_deref(),
-                input.handed,
-                &s,
-                &output,
-                cancelled,
-            )
+            run_variant(&base, &targets, input, &s, &output, cancelled)
         };
         py.detach(|| {
             // the first Python error (Ctrl-C, or one raised by `feed` or `on_done`) cancels
@@ -336,17 +368,18 @@ impl Ensemble {
                         .call0(py)
                         .and_then(|v| v.extract::<Option<Fed<'_>>>(py));
                     match item {
-                        Ok(item) => {
-                            item.map(|(i, patch, period, output_every, vessels, outlets)| {
+                        Ok(item) => item.map(
+                            |(i, patch, period, output_every, vessels, outlets, values)| {
                                 let input = Input {
                                     patch,
                                     handed: handed_over(vessels, outlets),
                                     period,
                                     output_every,
+                                    values: values.map(|a| a.as_array().to_vec()),
                                 };
                                 (i, input)
-                            })
-                        }
+                            },
+                        ),
                         Err(e) => {
                             keep(Err(e));
                             None

@@ -2,7 +2,6 @@
 //! conversion, error mapping, GIL release with periodic Ctrl-C checks, zero-copy results.
 
 use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyUntypedArrayMethods};
-use oxyline_core::genalpha::NewtonControl;
 use oxyline_core::output::{
     BALANCE_VARIABLES, SEGMENT_VARIABLES, SPECIES_SEGMENT_VARIABLES, SPECIES_VESSEL_VARIABLES,
     TISSUE_BALANCE_VARIABLES, TISSUE_SEGMENT_VARIABLES, TISSUE_VESSEL_VARIABLES, VESSEL_VARIABLES,
@@ -10,8 +9,7 @@ use oxyline_core::output::{
 use oxyline_core::run::checkpoint::{Checkpoints, Every, Snapshot};
 use oxyline_core::spec::parse;
 use oxyline_core::{
-    Assembled, Chunk, Dae, Error, Method, Outcome, OutputSink, RunSettings, Selection, Start,
-    Transport,
+    Assembled, Chunk, Dae, Error, Method, Outcome, OutputSink, Selection, Start, Transport,
 };
 use pyo3::exceptions::{PyKeyboardInterrupt, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -24,6 +22,7 @@ use std::time::{Duration, Instant};
 
 mod checkpoint;
 mod ensemble;
+mod settings;
 
 // the schema names the columns `Transport::observe` writes, one name per column
 const _: () = assert!(oxyline_core::transport::VESSEL_COLUMNS == SPECIES_VESSEL_VARIABLES.len());
@@ -656,52 +655,41 @@ impl Network {
     /// (see `checkpoint.rs`); an exception it raises stops the run and is its `error`. With
     /// `resume` (such a dict), the run continues from that state, bit-identical to the run
     /// that saved it.
-    #[pyo3(signature = (*, period, cycles, output_every, method = "auto", rho_infty = 0.5, dt = None,
-        until_periodic = None, max_cycles = 100, output_all_cycles = false, start = "steady",
-        newton_atol = None, max_iterations = 30, segments = true, all_unknowns = false, progress = None,
-        transport = true, chunk_sink = None, chunk_rows = 1024, keep_current_cycle = true,
-        variables = None, vessels = None, checkpoint_sink = None, checkpoint_every_cycles = None,
-        checkpoint_every_seconds = None, resume = None))]
+    ///
+    /// `settings`: the run settings shared with `Ensemble.run` (`settings::KEYS`: cycles,
+    /// method, dt, ..., the output selection).
+    #[pyo3(signature = (*, period, output_every, all_unknowns = false, progress = None,
+        chunk_sink = None, chunk_rows = 1024, keep_current_cycle = true, checkpoint_sink = None,
+        checkpoint_every_cycles = None, checkpoint_every_seconds = None, resume = None,
+        **settings))]
     #[allow(clippy::too_many_arguments)]
     fn simulate<'py>(
         &self,
         py: Python<'py>,
         period: f64,
-        cycles: usize,
         output_every: f64,
-        method: &str,
-        rho_infty: f64,
-        dt: Option<f64>,
-        until_periodic: Option<f64>,
-        max_cycles: usize,
-        output_all_cycles: bool,
-        start: &str,
-        newton_atol: Option<f64>,
-        max_iterations: usize,
-        segments: bool,
         all_unknowns: bool,
         progress: Option<Py<PyAny>>,
-        transport: bool,
         chunk_sink: Option<Py<PyAny>>,
         chunk_rows: usize,
         keep_current_cycle: bool,
-        variables: Option<Vec<String>>,
-        vessels: Option<Vec<String>>,
         checkpoint_sink: Option<Py<PyAny>>,
         checkpoint_every_cycles: Option<usize>,
         checkpoint_every_seconds: Option<f64>,
         resume: Option<Bound<'py, PyDict>>,
+        settings: Option<Bound<'py, PyDict>>,
     ) -> PyResult<Bound<'py, PyDict>> {
+        let shared = settings::Shared::from_kwargs(settings.as_ref())?;
         if chunk_rows == 0 {
             return Err(ModelError::new_err("simulation: chunk_rows must be >= 1"));
         }
         let every = checkpoint_every(checkpoint_every_cycles, checkpoint_every_seconds)?;
         let resume = resume.map(|d| checkpoint::from_dict(&d)).transpose()?;
         let checkpointing = checkpoint_sink.is_some() || resume.is_some();
-        let method = parse_method(method, rho_infty)?;
-        let start = parse_start(start, rho_infty)?;
-        let selected = variables.is_some() || vessels.is_some();
-        let sel = self.selection(variables, vessels, segments)?;
+        let segments = shared.segments;
+        let selected = shared.variables.is_some() || shared.vessels.is_some();
+        let mut settings = shared.run_settings(period, output_every, keep_current_cycle)?;
+        let sel = self.selection(shared.variables, shared.vessels, segments)?;
         let (cols, species_columns) = if all_unknowns {
             ((0..self.inner.1.n).collect(), None)
         } else {
@@ -713,26 +701,10 @@ impl Network {
                 segments,
             )
         };
-        let settings = RunSettings {
-            method,
-            dt,
-            period,
-            cycles,
-            until_periodic,
-            max_cycles,
-            output_every,
-            output_all_cycles,
-            keep_current_cycle,
-            start,
-            newton: NewtonControl {
-                atol: newton_atol,
-                max_iter: max_iterations,
-            },
-            probes: cols,
-            species_columns,
-        };
+        settings.probes = cols;
+        settings.species_columns = species_columns;
         let inner = self.inner.clone();
-        let mut species = if transport {
+        let mut species = if shared.transport {
             self.transport.as_deref().map(Transport::new_run)
         } else {
             None
@@ -885,6 +857,8 @@ mod _core {
             super::SPECIES_SEGMENT_VARIABLES.to_vec(),
         )?;
         m.add("BALANCE_VARIABLES", super::BALANCE_VARIABLES.to_vec())?;
+        // the run settings `Network.simulate` and `Ensemble.run` take as `**settings`
+        m.add("RUN_SETTINGS", super::settings::KEYS.to_vec())?;
         // checkpoints and memory estimates (`oxyline_core::run::{checkpoint, memory}`)
         m.add(
             "CHECKPOINT_VERSION",

@@ -152,3 +152,37 @@ fn column_stats_against_closed_forms() {
     assert!(column_stats(&[1.0, 1.0], &[1.0, 2.0, 3.0, 4.0], 2).is_none());
     assert!(column_stats(&times, &data[..6], 2).is_none());
 }
+
+#[test]
+fn target_values_replace_single_numbers() {
+    let base = parse(MODEL).unwrap();
+    let targets = Targets::new(
+        &base,
+        vec![
+            Target::LumpedResistance(0),
+            Target::Condition("out".into(), ConditionValue::Resistance),
+        ],
+    )
+    .unwrap();
+    let mut spec = base.clone();
+    targets.write(&mut spec, &[5e8, f64::NAN]).unwrap();
+    // NaN leaves the outlet: 1e-6 m³/s through 1.5e9 Pa s/m³ (Ohm's law); one linear solve
+    let p = inlet_pressure(&Member::build(&spec).unwrap());
+    assert!((p - 1.5e3).abs() <= 1e-9 * 1.5e3, "{p}");
+    targets.write(&mut spec, &[f64::NAN, 3e9]).unwrap();
+    let p = inlet_pressure(&Member::build(&spec).unwrap());
+    assert!((p - 3.5e3).abs() <= 1e-9 * 3.5e3, "{p}");
+    // a number the base does not have, a wrong count and a refused value are errors
+    let e = Targets::new(&base, vec![Target::YoungsModulus(0)]).unwrap_err();
+    assert!(e.to_string().contains("vessel 'v'"), "{e}");
+    let e = Targets::new(
+        &base,
+        vec![Target::Condition("in".into(), ConditionValue::Capacitance)],
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("'in'"), "{e}");
+    assert!(targets.write(&mut spec, &[1.0]).is_err());
+    targets.write(&mut spec, &[-1.0, f64::NAN]).unwrap();
+    let e = Member::build(&spec).err().unwrap();
+    assert!(e.to_string().contains("vessel 'v'"), "{e}");
+}

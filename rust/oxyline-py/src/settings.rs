@@ -1,0 +1,140 @@
+//! The run settings that `Network.simulate` and `Ensemble.run` share: one keyword list
+//! ([`KEYS`], exported as `_core.RUN_SETTINGS`), read from their `**settings` by one parser,
+//! and one place that turns them into the core's [`RunSettings`].
+
+use crate::{parse_method, parse_start};
+use oxyline_core::RunSettings;
+use oxyline_core::genalpha::NewtonControl;
+use pyo3::conversion::FromPyObjectOwned;
+use pyo3::exceptions::PyTypeError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+/// The keywords of [`Shared`], in the order of the `_core.pyi` stub's `RunOptions`.
+pub(crate) const KEYS: [&str; 14] = [
+    "cycles",
+    "method",
+    "rho_infty",
+    "dt",
+    "until_periodic",
+    "max_cycles",
+    "output_all_cycles",
+    "start",
+    "newton_atol",
+    "max_iterations",
+    "segments",
+    "transport",
+    "variables",
+    "vessels",
+];
+
+/// The shared settings (defaults: those of `oxyline.simulate`'s documentation).
+pub(crate) struct Shared {
+    pub cycles: usize,
+    method: String,
+    rho_infty: f64,
+    dt: Option<f64>,
+    until_periodic: Option<f64>,
+    max_cycles: usize,
+    output_all_cycles: bool,
+    start: String,
+    newton_atol: Option<f64>,
+    max_iterations: usize,
+    /// Record the segment columns.
+    pub segments: bool,
+    /// Run the species transport (if the model has one).
+    pub transport: bool,
+    /// The output selection (None: every variable / every output vessel).
+    pub variables: Option<Vec<String>>,
+    pub vessels: Option<Vec<String>>,
+}
+
+impl Default for Shared {
+    fn default() -> Self {
+        Shared {
+            cycles: 10,
+            method: "auto".to_owned(),
+            rho_infty: 0.5,
+            dt: None,
+            until_periodic: None,
+            max_cycles: 100,
+            output_all_cycles: false,
+            start: "steady".to_owned(),
+            newton_atol: None,
+            max_iterations: 30,
+            segments: true,
+            transport: true,
+            variables: None,
+            vessels: None,
+        }
+    }
+}
+
+/// `value` as a `T`, a `TypeError` naming the keyword otherwise (as pyo3 names an argument).
+fn arg<'py, T: FromPyObjectOwned<'py>>(key: &str, value: &Bound<'py, PyAny>) -> PyResult<T> {
+    value.extract::<T>().map_err(|e| {
+        let e: PyErr = e.into();
+        PyTypeError::new_err(format!("argument '{key}': {e}"))
+    })
+}
+
+impl Shared {
+    /// The settings of `kwargs` (the `**settings` of the caller); an unknown keyword is a
+    /// `TypeError`, as for any Python function.
+    pub fn from_kwargs(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Shared> {
+        let mut s = Shared::default();
+        for (k, v) in kwargs.into_iter().flat_map(|d| d.iter()) {
+            let key: String = k.extract()?;
+            match key.as_str() {
+                "cycles" => s.cycles = arg(&key, &v)?,
+                "method" => s.method = arg(&key, &v)?,
+                "rho_infty" => s.rho_infty = arg(&key, &v)?,
+                "dt" => s.dt = arg(&key, &v)?,
+                "until_periodic" => s.until_periodic = arg(&key, &v)?,
+                "max_cycles" => s.max_cycles = arg(&key, &v)?,
+                "output_all_cycles" => s.output_all_cycles = arg(&key, &v)?,
+                "start" => s.start = arg(&key, &v)?,
+                "newton_atol" => s.newton_atol = arg(&key, &v)?,
+                "max_iterations" => s.max_iterations = arg(&key, &v)?,
+                "segments" => s.segments = arg(&key, &v)?,
+                "transport" => s.transport = arg(&key, &v)?,
+                "variables" => s.variables = arg(&key, &v)?,
+                "vessels" => s.vessels = arg(&key, &v)?,
+                _ => {
+                    return Err(PyTypeError::new_err(format!(
+                        "unexpected keyword argument '{key}'"
+                    )));
+                }
+            }
+        }
+        Ok(s)
+    }
+
+    /// The core's settings of a run with these settings over `period`, recording every
+    /// `output_every` seconds (`probes` and `species_columns` empty: the caller selects).
+    pub fn run_settings(
+        &self,
+        period: f64,
+        output_every: f64,
+        keep_current_cycle: bool,
+    ) -> PyResult<RunSettings> {
+        Ok(RunSettings {
+            method: parse_method(&self.method, self.rho_infty)?,
+            dt: self.dt,
+            period,
+            cycles: self.cycles,
+            until_periodic: self.until_periodic,
+            max_cycles: self.max_cycles,
+            output_every,
+            output_all_cycles: self.output_all_cycles,
+            keep_current_cycle,
+            start: parse_start(&self.start, self.rho_infty)?,
+            newton: NewtonControl {
+                atol: self.newton_atol,
+                max_iter: self.max_iterations,
+            },
+            probes: Vec::new(),
+            species_columns: None,
+        })
+    }
+}
