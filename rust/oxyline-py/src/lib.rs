@@ -23,6 +23,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 mod checkpoint;
+mod closed_loop;
 mod ensemble;
 
 // the schema names the columns `Transport::observe` writes, one name per column
@@ -863,6 +864,8 @@ fn checkpoint_every(cycles: Option<usize>, seconds: Option<f64>) -> PyResult<Eve
 
 #[pymodule]
 mod _core {
+    #[pymodule_export]
+    use super::closed_loop::closed_loop_o2;
     #[pymodule_export]
     use super::{
         ModelError, Network, ResourceError, SolverError, UnstableTimeStep, ensemble::Ensemble,

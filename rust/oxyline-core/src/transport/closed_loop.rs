@@ -72,6 +72,13 @@ pub struct ClosedLoopSpec {
     pub binding: BindingSpec,
 }
 
+impl ClosedLoopSpec {
+    /// Parses the JSON form (the binding's and Python's); a malformed spec is a model error.
+    pub fn from_json(json: &str) -> Result<Self> {
+        serde_json::from_str(json).map_err(|e| Error::model("closed loop", e.to_string()))
+    }
+}
+
 /// A closed circulation's O2 state.
 pub struct ClosedLoop {
     pub names: Vec<String>,

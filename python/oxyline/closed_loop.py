@@ -1,0 +1,230 @@
+"""Oxygen around a closed circulation (issue 14 item 4; docs/oxygen.md "Oxygen around a closed
+loop"): heart chambers, systemic arteries, organ beds consuming O2, systemic veins and the lungs
+as well-mixed compartments joined by the circulation's flows. The physics (compartments,
+Michaelis–Menten VO2, diffusion-limited lung exchange with Hill binding, the periodic steady
+state) lives in the core (``oxyline_core::transport::closed_loop``); this module holds the
+built-in parameter set ``closed-loop-o2``, converts it to SI, builds the periodic flow table and
+summarises the result.
+
+    from oxyline import closed_loop
+    res = closed_loop.simulate_o2("closed-loop-o2")
+    print(res.summary())     # SaO2, SvO2, PO2s, VO2 per organ, Fick and mass-balance residuals
+
+The flows are prescribed here (a pulsatile ejection of both ventricles, steady organ flows and
+venous return): the closed-loop heart and pulmonary block that will drive them is not merged
+yet (docs/oxygen.md lists what is left).
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from oxyline import _core
+from oxyline.errors import ModelError
+
+MMHG = 133.322368          # Pa per mmHg (docs/physics.md)
+ML_O2 = 1.0 / 22414.0      # mol per mL O2 (STPD; docs/physics.md: 1 mL = 1/22.414 mmol)
+
+# Resting adult, textbook values (cardiac output 5 L/min at 75 /min; organ shares of the cardiac
+# output and organ VO2 as commonly tabulated for a 70 kg adult at rest, e.g. Guyton & Hall,
+# Textbook of Medical Physiology, "blood flow to different organs"; coronary venous saturation
+# ~40 % follows from the heart's high extraction). Units in the dict: L, L/min, mL/min, mmHg.
+STANDARD: dict[str, Any] = {
+    "name": "closed-loop-o2",
+    "period": 0.8,                       # s (75 beats/min)
+    "dt": 1e-3,                          # s
+    "cardiac_output": 5.0,               # L/min
+    "ejection_time": 0.3,                # s, both ventricles (half-sine ejection)
+    "blood": {"solubility": 0.003,       # mL O2 dL⁻¹ mmHg⁻¹
+              "hemoglobin": 150.0,       # g/L
+              "hufner": 1.34,            # mL O2 per g Hb
+              "p50": 26.8, "hill_n": 2.7},
+    "lungs": {"alveolar_po2": 100.0,     # mmHg
+              "diffusing_capacity": 21.0,  # mL O2 min⁻¹ mmHg⁻¹ (resting D_LO2)
+              "shunt_fraction": 0.02},   # bronchial + Thebesian venous admixture
+    # volumes (L) of the mixing pools: left/right heart, systemic arteries and veins,
+    # pulmonary arteries and veins
+    "pools": {"left_heart": 0.15, "arteries": 0.75, "veins": 3.0, "right_heart": 0.15,
+              "pulmonary_arteries": 0.15, "pulmonary_veins": 0.3},
+    # organ beds: share of the cardiac output, resting VO2 (mL/min), exchange volume (L);
+    # Michaelis–Menten km (mmHg) for every organ: nearly zero-order above a few mmHg
+    "km": 1.0,
+    "organs": {
+        "brain": {"flow_fraction": 0.15, "vo2": 50.0, "volume": 0.075},
+        "heart": {"flow_fraction": 0.05, "vo2": 29.0, "volume": 0.02},
+        "kidneys": {"flow_fraction": 0.20, "vo2": 18.0, "volume": 0.05},
+        "splanchnic": {"flow_fraction": 0.25, "vo2": 58.0, "volume": 0.3},
+        "muscle": {"flow_fraction": 0.20, "vo2": 50.0, "volume": 0.2},
+        "skin_other": {"flow_fraction": 0.15, "vo2": 45.0, "volume": 0.1},
+    },
+}
+
+BUILTINS = {"closed-loop-o2": STANDARD}
+
+
+def load(name: str = "closed-loop-o2") -> dict[str, Any]:
+    """A copy of a built-in closed-loop O2 parameter set (edit it and pass it to simulate_o2)."""
+    if name not in BUILTINS:
+        raise ModelError(f"'{name}': not a built-in closed-loop model (built-ins: "
+                         f"{', '.join(BUILTINS)})")
+    return copy.deepcopy(BUILTINS[name])
+
+
+def _layout(p: dict[str, Any]) -> tuple[list[dict], list[dict], dict[str, int]]:
+    """Compartments (flow order) and branches of the loop, with the branch index by role."""
+    pools, organs = p["pools"], p["organs"]
+    comps = [("left_heart", pools["left_heart"]), ("arteries", pools["arteries"])]
+    comps += [(k, o["volume"]) for k, o in organs.items()]
+    comps += [("veins", pools["veins"]), ("right_heart", pools["right_heart"]),
+              ("pulmonary_arteries", pools["pulmonary_arteries"]),
+              ("pulmonary_veins", pools["pulmonary_veins"])]
+    idx = {name: i for i, (name, _) in enumerate(comps)}
+    b = p["blood"]
+    cap = b["hemoglobin"] * b["hufner"] * 1e3 * ML_O2           # mol/m³
+    alpha = b["solubility"] * 10.0 * 1e3 * ML_O2 / MMHG         # mol m⁻³ Pa⁻¹
+    c = []
+    for name, vol in comps:
+        entry: dict[str, Any] = {"name": name, "volume": vol * 1e-3,
+                                 "initial_po2": (95.0 if name in ("left_heart", "arteries",
+                                                                  "pulmonary_veins") else 40.0)
+                                 * MMHG}
+        if name in organs:
+            entry["consumption"] = {"kind": "michaelis-menten",
+                                    "vmax": organs[name]["vo2"] / 60.0 * ML_O2,
+                                    "km": p["km"] * MMHG}
+        c.append(entry)
+    lungs = p["lungs"]
+    br = [("ejection_left", "left_heart", "arteries", None)]
+    br += [(f"{k}_in", "arteries", k, None) for k in organs]
+    br += [(f"{k}_out", k, "veins", None) for k in organs]
+    br += [("venous_return", "veins", "right_heart", None),
+           ("ejection_right", "right_heart", "pulmonary_arteries", None),
+           ("pulmonary_capillaries", "pulmonary_arteries", "pulmonary_veins",
+            {"alveolar_po2": lungs["alveolar_po2"] * MMHG,
+             "diffusing_capacity": lungs["diffusing_capacity"] / 60.0 * ML_O2 / MMHG}),
+           ("shunt", "pulmonary_arteries", "pulmonary_veins", None),
+           ("filling_left", "pulmonary_veins", "left_heart", None)]
+    branches = [{"name": n, "from": idx[f], "to": idx[t], **({"lungs": lg} if lg else {})}
+                for n, f, t, lg in br]
+    spec = {"compartments": c, "branches": branches,
+            "binding": {"kind": "hill", "solubility": alpha, "p50": b["p50"] * MMHG,
+                        "n": b["hill_n"], "capacity": cap}}
+    return spec["compartments"], [spec["binding"], *branches], idx
+
+
+def flow_table(p: dict[str, Any]) -> np.ndarray:
+    """Branch flows (m³/s) for each step of one cycle: half-sine ejections of both ventricles
+    (duration `ejection_time`), steady organ flows, venous return, pulmonary and filling flows.
+    The ejection is scaled so that its discrete cycle mean equals the cardiac output exactly
+    (periodic chamber volumes, which the core checks)."""
+    steps = round(p["period"] / p["dt"])
+    if not math.isclose(steps * p["dt"], p["period"], rel_tol=1e-12):
+        raise ModelError(f"closed loop: period {p['period']} s is not a whole number of "
+                         f"steps dt = {p['dt']} s")
+    q = p["cardiac_output"] * 1e-3 / 60.0
+    t = (np.arange(steps) + 0.5) * p["dt"]
+    shape = np.where(t < p["ejection_time"], np.sin(np.pi * t / p["ejection_time"]), 0.0)
+    ej = q * shape / shape.mean()
+    organs = p["organs"]
+    frac = np.array([o["flow_fraction"] for o in organs.values()])
+    if not math.isclose(frac.sum(), 1.0, rel_tol=1e-9):
+        raise ModelError(f"closed loop: organ flow fractions sum to {frac.sum()}, not 1")
+    shunt = p["lungs"]["shunt_fraction"]
+    cols = [ej, *[np.full(steps, q * f) for f in frac], *[np.full(steps, q * f) for f in frac],
+            np.full(steps, q), ej, np.full(steps, q * (1 - shunt)), np.full(steps, q * shunt),
+            np.full(steps, q)]
+    return np.column_stack(cols)
+
+
+@dataclass
+class ClosedLoopO2Result:
+    """The recorded last (periodic) cycle: arrays [step, compartment] or [step, branch]."""
+
+    compartments: list[str]
+    branches: list[str]
+    time: np.ndarray
+    flow: np.ndarray
+    volume: np.ndarray
+    total: np.ndarray
+    po2: np.ndarray          # mmHg
+    saturation: np.ndarray
+    vo2: np.ndarray          # mol/s per compartment
+    flux: np.ndarray         # mol/s per branch
+    uptake: np.ndarray       # mol/s per branch (lungs)
+    amount: np.ndarray       # mol in the loop at each step end
+    amount_start: float
+    dt: float
+    cycles: int
+    periodic_error: float
+
+    def _c(self, name: str) -> int:
+        return self.compartments.index(name)
+
+    def _b(self, name: str) -> int:
+        return self.branches.index(name)
+
+    def flow_weighted(self, var: np.ndarray, branch: str, compartment: str) -> float:
+        """Cycle mean of a compartment variable weighted by the flow leaving it by `branch`."""
+        q = self.flow[:, self._b(branch)]
+        return float(np.sum(q * var[:, self._c(compartment)]) / np.sum(q))
+
+    def summary(self) -> dict[str, Any]:
+        """Arterial (left-heart ejection) and mixed-venous (right-heart ejection) PO2 and
+        saturation, flow-weighted over the cycle; VO2 per organ and in total (mL/min); cardiac
+        output (L/min); Fick's residual |VO2 − CO (CaO2 − CvO2)| / VO2 and the largest per-step
+        mass-balance residual of the loop relative to its O2 amount."""
+        to_ml_min = 60.0 / ML_O2
+        vo2 = {n: float(self.vo2[:, i].mean()) * to_ml_min
+               for i, n in enumerate(self.compartments) if np.any(self.vo2[:, i])}
+        total_vo2 = float(self.vo2.sum(axis=1).mean())
+        co = float(self.flow[:, self._b("ejection_left")].mean())
+        ca = self.flow_weighted(self.total, "ejection_left", "left_heart")
+        cv = self.flow_weighted(self.total, "ejection_right", "right_heart")
+        fick = abs(total_vo2 - co * (ca - cv)) / total_vo2
+        n = np.concatenate([[self.amount_start], self.amount])
+        rate = self.uptake.sum(axis=1) - self.vo2.sum(axis=1)
+        mass = float(np.max(np.abs(np.diff(n) - self.dt * rate)) / np.max(n))
+        return {
+            "SaO2": self.flow_weighted(self.saturation, "ejection_left", "left_heart"),
+            "SvO2": self.flow_weighted(self.saturation, "ejection_right", "right_heart"),
+            "PaO2": self.flow_weighted(self.po2, "ejection_left", "left_heart"),
+            "PvO2": self.flow_weighted(self.po2, "ejection_right", "right_heart"),
+            "CaO2": ca / ML_O2 * 1e-3, "CvO2": cv / ML_O2 * 1e-3,      # mL O2 per L blood
+            "VO2": total_vo2 * to_ml_min, "VO2_organs": vo2,
+            "lung_uptake": float(self.uptake.sum(axis=1).mean()) * to_ml_min,
+            "cardiac_output": co * 6e4,
+            "fick_residual": fick, "mass_balance_residual": mass,
+            "cycles": self.cycles, "periodic_error": self.periodic_error,
+        }
+
+
+def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int = 200,
+                tol: float = 1e-13) -> ClosedLoopO2Result:
+    """Runs O2 around the closed loop to its periodic steady state (the core's Newton shooting
+    on the cycle map, then plain cycles until the start-of-cycle contents repeat to `tol`)."""
+    p = load(model) if isinstance(model, str) else model
+    comps, (binding, *branches), _ = _layout(p)
+    flows = flow_table(p)
+    spec = {"compartments": comps, "branches": branches, "binding": binding}
+    out = _core.closed_loop_o2(json.dumps(spec), np.ascontiguousarray(flows).ravel(),
+                               float(p["dt"]), int(max_cycles), float(tol))
+    steps, nc, nb = flows.shape[0], len(comps), len(branches)
+    shape_c, shape_b = (steps, nc), (steps, nb)
+    return ClosedLoopO2Result(
+        compartments=[c["name"] for c in comps], branches=[b["name"] for b in branches],
+        time=np.asarray(out["time"]), flow=flows,
+        volume=np.asarray(out["volume"]).reshape(shape_c),
+        total=np.asarray(out["total"]).reshape(shape_c),
+        po2=np.asarray(out["po2"]).reshape(shape_c) / MMHG,
+        saturation=np.asarray(out["saturation"]).reshape(shape_c),
+        vo2=np.asarray(out["vo2"]).reshape(shape_c),
+        flux=np.asarray(out["flux"]).reshape(shape_b),
+        uptake=np.asarray(out["uptake"]).reshape(shape_b),
+        amount=np.asarray(out["amount"]), amount_start=float(out["amount_start"]),
+        dt=float(p["dt"]), cycles=int(out["cycles"]), periodic_error=float(out["periodic_error"]))
