@@ -142,6 +142,21 @@ def flow_table(p: dict[str, Any]) -> np.ndarray:
     return np.column_stack(cols)
 
 
+def balance_flows(flows: np.ndarray, from_: list[int], to: list[int], n: int) -> np.ndarray:
+    """The flow table with the smallest constant per-branch corrections that make every
+    compartment's net inflow over the cycle vanish (least norm: δ = Aᵀ(AAᵀ)⁺(−net), A the
+    compartment–branch incidence). Flows sampled from a flow solution (e.g. the native closed
+    loop on branch `chambers`) close their volumes only to the solver's discretisation and
+    periodicity error; the core needs periodic volumes (docs/oxygen.md)."""
+    a = np.zeros((n, flows.shape[1]))
+    for b, (f, t) in enumerate(zip(from_, to)):
+        a[f, b] -= 1.0
+        a[t, b] += 1.0
+    net = a @ flows.mean(axis=0)
+    delta = a.T @ (np.linalg.pinv(a @ a.T) @ (-net))
+    return flows + delta
+
+
 @dataclass
 class ClosedLoopO2Result:
     """The recorded last (periodic) cycle: arrays [step, compartment] or [step, branch]."""
@@ -205,12 +220,23 @@ class ClosedLoopO2Result:
 
 
 def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int = 200,
-                tol: float = 1e-13) -> ClosedLoopO2Result:
+                tol: float = 1e-13, flows: np.ndarray | None = None) -> ClosedLoopO2Result:
     """Runs O2 around the closed loop to its periodic steady state (the core's Newton shooting
-    on the cycle map, then plain cycles until the start-of-cycle contents repeat to `tol`)."""
+    on the cycle map, then plain cycles until the start-of-cycle contents repeat to `tol`).
+    `flows` (steps × branches, m³/s, one row per step of `dt`, branches in the order of
+    ``result.branches``) replaces the prescribed table, e.g. flows sampled from a flow run; it
+    is balanced by :func:`balance_flows` first."""
     p = load(model) if isinstance(model, str) else model
     comps, (binding, *branches), _ = _layout(p)
-    flows = flow_table(p)
+    if flows is None:
+        flows = flow_table(p)
+    else:
+        flows = np.asarray(flows, dtype=float)
+        if flows.ndim != 2 or flows.shape[1] != len(branches):
+            raise ModelError(f"closed loop: flows must be (steps, {len(branches)}) for the "
+                             f"branches {[b['name'] for b in branches]}, got {flows.shape}")
+        flows = balance_flows(flows, [b["from"] for b in branches], [b["to"] for b in branches],
+                              len(comps))
     spec = {"compartments": comps, "branches": branches, "binding": binding}
     out = _core.closed_loop_o2(json.dumps(spec), np.ascontiguousarray(flows).ravel(),
                                float(p["dt"]), int(max_cycles), float(tol))
