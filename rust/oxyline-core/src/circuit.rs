@@ -637,6 +637,12 @@ pub struct Dae {
 }
 
 impl Dae {
+    /// Some element varies in time by itself (a chamber): the circuit has no steady state of
+    /// its mean boundary conditions.
+    pub fn has_chambers(&self) -> bool {
+        self.elements.iter().any(|e| e.period().is_some())
+    }
+
     /// The zero state with the `initial` values set.
     pub fn initial_state(&self) -> Vec<f64> {
         let mut y = vec![0.0; self.n];

@@ -46,12 +46,8 @@ fn activation(el: &str, spec: &ActivationSpec, period: f64) -> Result<Activation
     })
 }
 
-pub(crate) fn stamp(
-    circuit: &mut Circuit,
-    name: &str,
-    spec: &ChamberSpec,
-    (from, to): (usize, usize),
-) -> Result<Chain> {
+/// The elastance law E(t), V_rest(t) of chamber `name` (checked).
+pub fn chamber_elastance(name: &str, spec: &ChamberSpec) -> Result<Elastance> {
     let el = format!("chamber '{name}'");
     check_positive(&el, "period", spec.period)?;
     check_nonnegative(&el, "inductance", spec.inductance)?;
@@ -85,11 +81,21 @@ pub(crate) fn stamp(
             }
         }
     };
-    let elastance = Elastance {
+    Ok(Elastance {
         law,
         activation: activation(&el, &spec.activation, spec.period)?,
         period: spec.period,
-    };
+    })
+}
+
+pub(crate) fn stamp(
+    circuit: &mut Circuit,
+    name: &str,
+    spec: &ChamberSpec,
+    (from, to): (usize, usize),
+) -> Result<Chain> {
+    let elastance = chamber_elastance(name, spec)?;
+    let el = format!("chamber '{name}'");
     let vessel = circuit.add_vessel(name) as u32;
     let label = |part| Label::Vessel { vessel, part, k: 0 };
     // the chamber's own pressure node behind a wire from the inlet node: the wire carries the

@@ -16,6 +16,7 @@ use crate::error::Result;
 use crate::output::Probes;
 use crate::segment::Blood;
 use crate::spec::{Arrangement, NetworkSpec};
+pub use chamber::chamber_elastance;
 pub use segments::SegmentRow;
 
 /// Summary figures for `oxyline validate`.

@@ -75,6 +75,10 @@ impl<'d> Plan<'d> {
         let (dae, n) = (self.dae, self.dae.n);
         let (mut y, mut yd) = match s.start {
             Start::Zero | Start::SvZeroDZero => (dae.initial_state(), vec![0.0; n]),
+            // a circuit with chambers (a heart, a closed loop) has no steady state of its mean
+            // boundary conditions: its `steady` start is the zero state with the chambers'
+            // initial volumes, made consistent below (docs/physics.md §1.8)
+            Start::Steady if dae.has_chambers() => (dae.initial_state(), vec![0.0; n]),
             Start::Steady => steady_start(dae, steady.get()?),
             Start::SvZeroDSteady { rho_inf } => svzerod_steady_start(dae, s, rho_inf)?,
         };
