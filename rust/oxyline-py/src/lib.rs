@@ -870,10 +870,8 @@ fn chamber_elastance<'py>(
     chamber_json: &str,
     times: Vec<f64>,
 ) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
-    let spec: oxyline_core::spec::ChamberSpec =
-        oxyline_core::spec::from_json(chamber_json).map_err(|e| {
-            to_py(oxyline_core::Error::model(format!("chamber '{name}'"), e))
-        })?;
+    let spec: oxyline_core::spec::ChamberSpec = oxyline_core::spec::from_json(chamber_json)
+        .map_err(|e| to_py(oxyline_core::Error::model(format!("chamber '{name}'"), e)))?;
     let law = oxyline_core::assemble::chamber_elastance(name, &spec).map_err(to_py)?;
     let (e, v): (Vec<f64>, Vec<f64>) = times.iter().map(|&t| law.at(t)).unzip();
     Ok((e.into_pyarray(py), v.into_pyarray(py)))

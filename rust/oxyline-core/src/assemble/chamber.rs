@@ -118,3 +118,73 @@ pub(crate) fn stamp(
         branches: vec![wire, branch],
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::circuit::Regime;
+    use crate::integrate::{GenAlpha, Integrator, NewtonControl, Rk4};
+    use crate::spec::parse;
+
+    /// A left ventricle, two tanh valves, an artery and a vein in a loop: no boundary
+    /// condition (docs/physics.md §1.8).
+    const LOOP: &str = r#"{
+        "vessels": [
+            {"name": "lv", "from": "mi", "to": "lv_out",
+             "chamber": {"law": "linear", "max_elastance": 3.3e8, "passive_elastance": 1.2e7,
+                         "rest_volume": 1e-5, "period": 0.8, "initial_volume": 1.2e-4,
+                         "activation": {"kind": "piecewise-cosine", "contract_start": 0.1,
+                                        "relax_start": 0.35, "contract_duration": 0.25,
+                                        "relax_duration": 0.2}}},
+            {"name": "av", "from": "lv_out", "to": "ao",
+             "valve": {"law": "tanh", "min_resistance": 1e6, "max_resistance": 1e11,
+                       "steepness": 0.05}},
+            {"name": "aorta", "from": "ao", "to": "art", "arrangement": "RCL",
+             "lumped": {"resistance": 1e6, "capacitance": 1.5e-8, "inductance": 1e5}},
+            {"name": "sys", "from": "art", "to": "ven", "arrangement": "RCL",
+             "lumped": {"resistance": 1.3e8}},
+            {"name": "veins", "from": "ven", "to": "mv_in", "arrangement": "RCL",
+             "lumped": {"resistance": 1e6, "capacitance": 7.5e-7}},
+            {"name": "mv", "from": "mv_in", "to": "mi",
+             "valve": {"law": "piecewise", "min_resistance": 1e6, "max_resistance": 1e11}}],
+        "boundary_conditions": {}
+    }"#;
+
+    /// Blood volume: the capacitors' C·P plus the chamber volumes (rows whose E is a
+    /// capacitance or a chamber's dV/dt).
+    fn blood_volume(dae: &crate::circuit::Dae, nb: usize, y: &[f64]) -> f64 {
+        let chambers = dae.n_nodes + nb..dae.n;
+        (0..dae.n_nodes)
+            .chain(chambers)
+            .map(|i| dae.e[i] * y[i])
+            .sum()
+    }
+
+    #[test]
+    fn a_closed_loop_conserves_blood_volume_with_both_integrators() {
+        let a = parse(LOOP).unwrap().assemble().unwrap();
+        let dae = a.circuit.assemble().unwrap();
+        let (v0, nb) = (1.2e-4, a.circuit.branches.len());
+        let steps = 4 * 800; // four cycles of 1 ms
+        let mut ga = GenAlpha::new(&dae, Regime::Transient, 1e-3, 0.5, NewtonControl::default())
+            .unwrap();
+        let (mut y, mut yd) = (dae.initial_state(), vec![0.0; dae.n]);
+        assert_eq!(blood_volume(&dae, nb, &y), v0);
+        for i in 0..steps {
+            ga.step(i as f64 * 1e-3, &mut y, &mut yd).unwrap();
+        }
+        // every flow balance holds to the Newton tolerance (1e-12 of the scales) at every
+        // step: a linear invariant of generalized-α
+        let v = blood_volume(&dae, nb, &y);
+        assert!((v - v0).abs() < 1e-9 * v0, "{v} vs {v0}");
+        // the heart pumps: the arterial capacitor holds more than the venous pressure
+        assert!(y[a.probes.vessel_unknowns[4 * 2]] > 1e3, "{:?}", &y[..4]);
+        let mut rk = Rk4::new(&dae, Regime::Transient, 1e-4).unwrap();
+        let mut y = dae.initial_state();
+        rk.make_consistent(0.0, &mut y).unwrap();
+        for i in 0..4000 {
+            Integrator::step(&mut rk, i as f64 * 1e-4, &mut y, &mut []).unwrap();
+        }
+        let v = blood_volume(&dae, nb, &y);
+        assert!((v - v0).abs() < 1e-9 * v0, "rk4 {v} vs {v0}");
+    }
+}

@@ -162,8 +162,7 @@ fn heart_element(
     ends: (usize, usize),
 ) -> Result<vessel::Chain> {
     let el = format!("vessel '{}'", v.name);
-    if v.geometry.is_some() || v.lumped.is_some() || (v.valve.is_some() && v.chamber.is_some())
-    {
+    if v.geometry.is_some() || v.lumped.is_some() || (v.valve.is_some() && v.chamber.is_some()) {
         return Err(crate::error::Error::model(
             el,
             "give one of geometry, lumped, valve or chamber",

@@ -159,7 +159,10 @@ mod tests {
         for a in &acts {
             let v: Vec<f64> = (0..8000).map(|k| a.eval(k as f64 * 1e-4, period)).collect();
             let max = v.iter().copied().fold(f64::MIN, f64::max);
-            assert!(v.iter().all(|&x| (-1e-12..=1.0 + 1e-12).contains(&x)), "{a:?}");
+            assert!(
+                v.iter().all(|&x| (-1e-12..=1.0 + 1e-12).contains(&x)),
+                "{a:?}"
+            );
             // the 1e-4 s sampling misses the peak by at most O((1e-4/width)²)
             assert!((max - 1.0).abs() < 1e-3, "{a:?}: {max}");
         }

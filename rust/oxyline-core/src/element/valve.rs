@@ -139,7 +139,11 @@ mod tests {
             v.residual(0.0, &a, &mut ca);
             v.residual(0.0, &b, &mut cb);
             let fd = (ca[0] - cb[0]) / (2.0 * h);
-            assert!((fd - j[k]).abs() <= 1e-6 * j[k].abs().max(1e-3), "{k}: {fd} vs {}", j[k]);
+            assert!(
+                (fd - j[k]).abs() <= 1e-6 * j[k].abs().max(1e-3),
+                "{k}: {fd} vs {}",
+                j[k]
+            );
         }
     }
 
