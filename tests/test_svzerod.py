@@ -55,12 +55,12 @@ SUPPORTED = [
 UNSUPPORTED = {
     "chamber_sphere": "'ChamberSphere'",
     "closedLoopHeart_singleVessel": "'closed_loop_blocks'",
-    "closedLoopHeart_singleVessel_decomposed": "'chambers'",
+    "closedLoopHeart_singleVessel_decomposed": "'BloodVesselRC'",
     "closedLoopHeart_withCoronaries": "'closed_loop_blocks'",
-    "closed_loop_two_hill": "initial_condition: 'pressure:",
+    "closed_loop_two_hill": "'initial_condition' entry 'pressure:",
     "coupledBlock_closedLoopHeart_singleVessel": "'external_solver_coupling_blocks'",
     "coupledBlock_closedLoopHeart_withCoronaries": "'external_solver_coupling_blocks'",
-    "piecewise_Chamber_and_Valve": "initial_condition: 'pressure:",
+    "piecewise_Chamber_and_Valve": "'initial_condition' entry 'pressure:",
     "pulsatileFlow_R_coronary_cycle_error": "'use_cycle_to_cycle_error'",
     "steadyFlow_calibration": "'calibration_parameters'",
 }

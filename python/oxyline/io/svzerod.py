@@ -493,8 +493,8 @@ def _heart_elements(cfg: Mapping[str, Any], period: float, vessels: list[dict[st
         layout.connections += [(up, name), (name, down)]
     unknown = [k for k in initial if k not in known_ic and not _is_comment(k)]
     if unknown:
-        raise UnsupportedElement(f"initial_condition: '{unknown[0]}' is not supported (only "
-                                 "chamber volumes Vc:<chamber> are)")
+        raise UnsupportedElement(f"model: 'initial_condition' entry '{unknown[0]}' is not "
+                                 "supported (only chamber volumes Vc:<chamber> are)")
 
 
 def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | None = None
@@ -549,7 +549,8 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
     # ---- boundary conditions (svZeroDSolver adds their parameters in file order; the first
     # time table fixes the period and every other must match it exactly)
     bc_list = cfg["boundary_conditions"]
-    if not isinstance(bc_list, list) or not bc_list:
+    # a closed loop of chambers needs none (the chambers fix the pressure level)
+    if not isinstance(bc_list, list) or not (bc_list or cfg.get("chambers")):
         raise ModelError("boundary_conditions: must be a non-empty list")
     bcs: dict[str, tuple[str, dict[str, Any]]] = {}
     model_period = -1.0
