@@ -121,3 +121,18 @@ def test_external_flow_table_is_balanced_and_used() -> None:
     assert res.summary()["fick_residual"] <= 1e-9
     with pytest.raises(oxyline.ModelError, match="flows must be"):
         closed_loop.simulate_o2(p, flows=base[:, :3])
+
+
+def test_heart_driven_loop_keeps_fick_and_the_physiology() -> None:
+    """Flows from the native closed-loop heart (chambers and valves, docs/physics.md §1.8) instead
+    of the prescribed table: the heart pumps the documented cardiac output (within 2 %), the
+    ventricles eject what they receive over the cycle, and Fick's principle, the loop's mass
+    balance and the resting ranges hold as with the prescribed flows."""
+    res = closed_loop.simulate_o2(_model(), flows="heart")
+    s = res.summary()
+    assert s["cardiac_output"] == pytest.approx(5.0, rel=0.02)
+    assert s["fick_residual"] <= 1e-9 and s["mass_balance_residual"] <= 1e-13
+    assert 0.95 <= s["SaO2"] <= 0.98 and 0.70 <= s["SvO2"] <= 0.75 and 240 <= s["VO2"] <= 260
+    q = res.flow[:, res.branches.index("ejection_left")]
+    assert q.max() > 3 * q.mean()          # pulsatile ejection through the aortic valve
+    assert abs(q.min()) < 0.01 * q.max()   # the valve closes (tanh: a small leak only)
