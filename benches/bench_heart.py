@@ -10,9 +10,13 @@ by the load of a shared machine. Models:
   the svZeroDSolver drop-in (generalized-alpha) and natively with RK4, flow only;
 * ``coronary`` / ``coronary_varres``: the peer cases ``pulsatileFlow_R_coronary(_varres)``
   (oxyline generalized-alpha and RK4 vs ``svzerod.simulate``, with the accuracy of each against
-  the stored reference / a 20x finer svzerod run).
+  the stored reference / a 20x finer svzerod run);
+* chambers and valves: the peer cases ``valve_tanh`` and ``chamber_elastance_inductor`` (time
+  of svzerod and of the drop-in in the same run, CPU seconds too, and the accuracy against the
+  stored reference; RK4 where it runs).
 
-Run ``python benches/bench_heart.py --help``; results are printed as Markdown tables.
+Run ``python benches/bench_heart.py --help``; ``--quick`` (one repeat, N = 200, a few seconds
+on a quiet machine plus the peer tables) is the rerun command. Results print as Markdown.
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ import statistics
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
@@ -103,12 +108,72 @@ def peer_table() -> None:
         print(f"| {name} | {t_peer:.3f} | {t_ga:.3f} | {e_ga:.1e} | {t_rk:.3f} | {e_rk:.1e} |")
 
 
+def _variable_errors(actual: Any, expected: Any) -> float:
+    """max over shared variables of max|a - e| / range(e) (svZeroDSolver's valve_status and
+    chamber volumes are not output by the drop-in)."""
+    import numpy as np
+
+    worst = 0.0
+    for name, e in expected.groupby("name", sort=False):
+        a = actual[actual["name"] == name]
+        if a.empty or name.startswith("valve_status:"):
+            continue
+        ev = e["y"].to_numpy(float)
+        scale = max(float(np.ptp(ev)), 1e-12)
+        worst = max(worst, float(np.max(np.abs(a["y"].to_numpy(float) - ev))) / scale)
+    return worst
+
+
+def chamber_table() -> None:
+    """svzerod and the drop-in on the chamber/valve peer cases: wall and CPU seconds of each in
+    the same run, and the drop-in's accuracy against the stored reference."""
+    import time
+
+    import pandas as pd
+    import svzerod
+
+    import oxyline
+    import oxyline.svzerod as svz
+
+    print("\n| case | svzerod wall (s) | svzerod CPU (s) | gen-α wall (s) | gen-α CPU (s) | "
+          "gen-α err vs reference | RK4 wall (s) | RK4 err vs svzerod 20x |")
+    print("|---|---|---|---|---|---|---|---|")
+    for name in ("valve_tanh", "chamber_elastance_inductor"):
+        cfg = json.loads((CASES / f"{name}.json").read_text())
+        ref = pd.read_json(CASES / "results" / f"result_{name}.json.gz")
+        t, c = time.perf_counter(), time.process_time()
+        svzerod.simulate(cfg)
+        t_peer, c_peer = time.perf_counter() - t, time.process_time() - c
+        t, c = time.perf_counter(), time.process_time()
+        ga = svz.simulate(cfg)
+        t_ga, c_ga = time.perf_counter() - t, time.process_time() - c
+        try:
+            t = time.perf_counter()
+            rk = svz.simulate(cfg, method="rk4")
+            t_rk = f"{time.perf_counter() - t:.3f}"
+            fine = json.loads(json.dumps(cfg))
+            sp = fine["simulation_parameters"]
+            sp["number_of_time_pts_per_cardiac_cycle"] = (
+                sp["number_of_time_pts_per_cardiac_cycle"] - 1) * 20 + 1
+            sp["output_interval"] = 20
+            e_rk = f"{_variable_errors(rk, svzerod.simulate(fine)):.1e}"
+        except oxyline.SolverError:
+            t_rk, e_rk = "–", "refused (valve driven by an inductor: index > 1 in backflow)"
+        print(f"| {name} | {t_peer:.3f} | {c_peer:.3f} | {t_ga:.3f} | {c_ga:.3f} | "
+              f"{_variable_errors(ga, ref):.1e} | {t_rk} | {e_rk} |")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--baseline", help="directory with another build of the oxyline package")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--sizes", default="1000", help="comma-separated N of chain/tree")
+    ap.add_argument("--quick", action="store_true", help="one repeat of N = 200, then the peer "
+                    "tables (the rerun command)")
     args = ap.parse_args()
+    if args.quick:
+        args.repeat, args.sizes = 1, "200"
+
     impls = {"this": None}
     if args.baseline:
         impls["baseline"] = str(Path(args.baseline).resolve())
@@ -136,6 +201,7 @@ def main() -> None:
                   f" | {statistics.median(a['rk4']) / statistics.median(b['rk4']):.3f} |")
     print(f"\nload average at end: {os.getloadavg()[0]:.1f}\n")
     peer_table()
+    chamber_table()
 
 
 if __name__ == "__main__":

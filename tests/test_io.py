@@ -404,6 +404,13 @@ def test_round_trips_of_every_built_in_model(tmp_path: Path) -> None:
             continue                    # trees is round-tripped in test_structured_tree.py
         m = models.load(name)
         assert oio.from_networkx(oio.to_networkx(m)).canonical == m.canonical, name
+        if any(bc.get("type") == "coronary" for bc in m.source["boundary_conditions"].values()):
+            # the table format has no coronary columns: refused by name, not written lossily
+            with pytest.raises(oxyline.ModelError, match="'coronary' condition cannot be"):
+                oio.write_tables(m, tmp_path / f"{name}.csv")
+            assert oxyline.load_model(oio.save_model(m, tmp_path / f"{name}.yaml")).canonical \
+                == m.canonical, name
+            continue
         oio.write_tables(m, tmp_path / f"{name}.csv")
         assert oio.read_tables(tmp_path / f"{name}.csv").canonical == m.canonical, name
         p = oio.save_model(m, tmp_path / f"{name}.yaml")

@@ -132,3 +132,6 @@ class Ensemble:
         ``OXYLINE_NUM_THREADS`` or every core), the GIL released; ``on_done(i, raw, layout,
         error_kind, error)`` is called on this thread as each finishes. False if Ctrl-C
         stopped it."""
+
+def closed_loop_o2(spec_json: str, flows: np.ndarray, dt: float, max_cycles: int,
+                   tol: float) -> dict[str, Any]: ...

@@ -37,7 +37,26 @@ TOP_KEYS = {
 VESSEL_KEYS = {
     "name", "from", "to", "length", "radius", "radius_in", "radius_out", "wall_thickness",
     "youngs_modulus", "poisson_ratio", "segments", "lumped", "arrangement", "output",
-    "description",
+    "description", "valve", "chamber",
+}
+#: heart elements (docs/physics.md §1.8): each law's keys and their quantities ("1/pressure":
+#: a valve's steepness; "elastance": pressure per volume; "volume": the flow factor times 1 s)
+VALVE_KEYS = {
+    "tanh": {"min_resistance": "resistance", "max_resistance": "resistance",
+             "steepness": "1/pressure"},
+    "piecewise": {"min_resistance": "resistance", "max_resistance": "resistance"},
+}
+CHAMBER_KEYS = {
+    "elastance-inductor": {"max_elastance": "elastance", "min_elastance": "elastance",
+                           "rest_volume_diastole": "volume", "rest_volume_systole": "volume"},
+    "linear": {"max_elastance": "elastance", "passive_elastance": "elastance",
+               "rest_volume": "volume"},
+}
+CHAMBER_COMMON = {"period": "time", "inductance": "inductance", "initial_volume": "volume"}
+ACTIVATION_KEYS = {
+    "half-cosine": {"t_active", "t_twitch"},
+    "piecewise-cosine": {"contract_start", "relax_start", "contract_duration", "relax_duration"},
+    "two-hill": {"t_shift", "tau_1", "tau_2", "m1", "m2"},
 }
 LUMPED_KEYS = {"resistance", "inductance", "capacitance", "stenosis_coefficient",
                "stenosis_form"}
@@ -287,6 +306,8 @@ def _vessel(v: Any, i: int, units: str) -> dict[str, Any]:
         cv["arrangement"] = v["arrangement"]
     if "output" in v:
         cv["output"] = bool(v["output"])
+    if "valve" in v or "chamber" in v:
+        return _heart_element(v, cv, el, units)
     if "lumped" in v:
         lp = v["lumped"]
         _check_keys(lp, LUMPED_KEYS, f"{el} lumped")
@@ -327,6 +348,53 @@ def _vessel(v: Any, i: int, units: str) -> dict[str, Any]:
         if "poisson_ratio" in v:
             g["poisson_ratio"] = _number(v["poisson_ratio"], el, "poisson_ratio")
         cv["geometry"] = g
+    return cv
+
+
+def _quantity(units: str, q: str) -> float:
+    if q == "1/pressure":
+        return 1.0 / factor(units, "pressure")
+    if q == "elastance":
+        return 1.0 / factor(units, "capacitance")
+    if q == "volume":
+        return factor(units, "flow")
+    return factor(units, q)
+
+
+def _heart_element(v: Mapping[str, Any], cv: dict[str, Any], el: str, units: str
+                   ) -> dict[str, Any]:
+    """The canonical form of a ``valve`` or ``chamber`` element (docs/physics.md §1.8)."""
+    kinds = [k for k in ("valve", "chamber", "lumped", "length") if k in v]
+    if len(kinds) > 1:
+        raise _err(el, f"give one of valve, chamber, lumped or geometry, not {' and '.join(kinds)}")
+    kind = kinds[0]
+    spec = v[kind]
+    if not isinstance(spec, Mapping):
+        raise _err(el, f"'{kind}' must be a mapping")
+    laws = VALVE_KEYS if kind == "valve" else CHAMBER_KEYS
+    law = spec.get("law")
+    if law not in laws:
+        raise _err(el, f"{kind} law must be one of {sorted(laws)}, got {law!r}")
+    keys = dict(laws[law], **(CHAMBER_COMMON if kind == "chamber" else {}))
+    _check_keys(spec, set(keys) | {"law"} | ({"activation"} if kind == "chamber" else set()),
+                f"{el} {kind}")
+    out: dict[str, Any] = {"law": law}
+    for k, q in keys.items():
+        if k in spec:
+            out[k] = _quantity(units, q) * _number(spec[k], el, k)
+        elif k not in ("inductance", "initial_volume"):
+            raise _err(el, f"{kind} needs '{k}'")
+    if kind == "chamber":
+        act = spec.get("activation")
+        if not isinstance(act, Mapping) or act.get("kind") not in ACTIVATION_KEYS:
+            raise _err(el, f"chamber needs an 'activation' with kind one of "
+                           f"{sorted(ACTIVATION_KEYS)}")
+        _check_keys(act, ACTIVATION_KEYS[act["kind"]] | {"kind"}, f"{el} activation")
+        for k in ACTIVATION_KEYS[act["kind"]]:
+            if k not in act:
+                raise _err(el, f"activation needs '{k}'")
+        out["activation"] = {k: (x if k == "kind" else _number(x, el, k)) for k, x in act.items()}
+    cv[kind] = out
     return cv
 
 

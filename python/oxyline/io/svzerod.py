@@ -62,7 +62,8 @@ METHODS = ("generalized-alpha", "rk4")
 #: then far below that of svZeroDSolver's own first-order ẏ)
 RK4_DERIVATIVE_SUBSTEPS = 20
 
-TOP_KEYS = {"simulation_parameters", "boundary_conditions", "vessels", "junctions", "units"}
+TOP_KEYS = {"simulation_parameters", "boundary_conditions", "vessels", "junctions", "units",
+            "valves", "chambers", "initial_condition"}
 # svZeroDSolver's equations do not depend on units and its files do not say which they use; by
 # its convention (and SimVascular's) they are cgs. oxyline's exporter writes a top-level
 # ``units`` ("cgs" or "SI"), which svZeroDSolver ignores and this importer reads.
@@ -80,10 +81,7 @@ TOP_IGNORED = {"description", "calibration_parameters", "y", "dy"}
 TOP_UNSUPPORTED = {
     "external_solver_coupling_blocks": "3D-0D coupling blocks",
     "closed_loop_blocks": "closed-loop blocks",
-    "valves": "valves",
-    "chambers": "heart chambers",
-    "initial_condition": "user initial conditions",
-    "initial_condition_d": "user initial conditions",
+    "initial_condition_d": "user initial derivatives",
 }
 SIM_KEYS = {
     "number_of_cardiac_cycles", "number_of_time_pts_per_cardiac_cycle", "absolute_tolerance",
@@ -448,6 +446,57 @@ def _junctions(junctions: Any, ids: Mapping[Any, str], bcs: Mapping[str, Any],
 
     return hidden
 
+def _heart_elements(cfg: Mapping[str, Any], period: float, vessels: list[dict[str, Any]],
+                    layout: _Layout, bcs: Mapping[str, Any], used_bcs: dict[str, str],
+                    attach: Any) -> None:
+    """svZeroDSolver's ``chambers`` and ``valves`` as native ``chamber`` and ``valve``
+    elements (appended to ``vessels``), each valve joined to its upstream and downstream
+    blocks (a vessel's free end, a chamber, another valve or a boundary condition)."""
+    initial = _mapping(cfg.get("initial_condition", {}), "initial_condition")
+    names = {v["name"] for v in vessels}
+    known_ic = set()
+    for c in svzerod_heart._entries(cfg.get("chambers", []), "chambers"):
+        if c["name"] in names or c["name"] in bcs:
+            raise ModelError(f"chamber '{c['name']}': name already used by another block")
+        native = svzerod_heart.chamber(c, period, initial, _num)
+        known_ic.add(f"Vc:{c['name']}")
+        vessels.append({"name": c["name"], "chamber": native,
+                        "description": f"svZeroDSolver {c.get('type')}"})
+        layout.vessels.append((c["name"], c["name"], c["name"]))
+        names.add(c["name"])
+    valves = svzerod_heart._entries(cfg.get("valves", []), "valves")
+    for v in valves:
+        if v["name"] in names or v["name"] in bcs:
+            raise ModelError(f"valve '{v['name']}': name already used by another block")
+        names.add(v["name"])
+    for v in valves:
+        native, up, down = svzerod_heart.valve(v, _num)
+        name = v["name"]
+        vessels.append({"name": name, "valve": native,
+                        "description": f"svZeroDSolver {v.get('type')}"})
+        layout.vessels.append((name, name, name))
+        for block, end, other_end in ((up, "in", "out"), (down, "out", "in")):
+            what = f"valve '{name}'"
+            if block in bcs:
+                if block in used_bcs:
+                    raise ModelError(f"boundary condition '{block}': connected to both "
+                                     f"{used_bcs[block]} and {what}")
+                used_bcs[block] = what
+                attach(name, end, block, f"boundary condition '{block}'")
+            elif block in names:
+                node = f"{up}:{name}" if end == "in" else f"{name}:{down}"
+                attach(name, end, node, what)
+                attach(block, other_end, node, what)
+            else:
+                raise ModelError(f"{what}: its {'upstream' if end == 'in' else 'downstream'}_block "
+                                 f"'{block}' is not defined")
+        layout.connections += [(up, name), (name, down)]
+    unknown = [k for k in initial if k not in known_ic and not _is_comment(k)]
+    if unknown:
+        raise UnsupportedElement(f"model: 'initial_condition' entry '{unknown[0]}' is not "
+                                 "supported (only chamber volumes Vc:<chamber> are)")
+
+
 def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | None = None
              ) -> tuple[dict[str, Any], RunSettings, _Layout]:
     """svZeroDSolver config -> (oxyline native dict, svZeroDSolver run settings, output
@@ -471,7 +520,7 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         if k in TOP_KEYS or k in TOP_IGNORED or _is_comment(k):
             continue
         if k in TOP_UNSUPPORTED:
-            if k in ("initial_condition", "initial_condition_d") or cfg[k]:
+            if k == "initial_condition_d" or cfg[k]:
                 raise UnsupportedElement(f"model: '{k}' ({TOP_UNSUPPORTED[k]}) is not supported")
             continue
         raise UnsupportedElement(f"model: unknown top-level key '{k}'")
@@ -500,7 +549,8 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
     # ---- boundary conditions (svZeroDSolver adds their parameters in file order; the first
     # time table fixes the period and every other must match it exactly)
     bc_list = cfg["boundary_conditions"]
-    if not isinstance(bc_list, list) or not bc_list:
+    # a closed loop of chambers needs none (the chambers fix the pressure level)
+    if not isinstance(bc_list, list) or not (bc_list or cfg.get("chambers")):
         raise ModelError("boundary_conditions: must be a non-empty list")
     bcs: dict[str, tuple[str, dict[str, Any]]] = {}
     model_period = -1.0
@@ -659,6 +709,7 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         # svZeroDSolver's nodes of this vessel's boundary conditions, inlet first
         layout.connections += [(vbc["inlet"], name)] if "inlet" in vbc else []
         layout.connections += [(name, vbc["outlet"])] if "outlet" in vbc else []
+    _heart_elements(cfg, period, vessels, layout, bcs, used_bcs, attach)
     vessel_names = {x["name"] for x in vessels}
 
     # ---- junctions

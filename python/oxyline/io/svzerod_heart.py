@@ -69,3 +69,98 @@ def finish(bcs: Mapping[str, tuple[str, dict[str, Any]]], period: float) -> None
     for kind, native in bcs.values():
         if kind == "CORONARY_VAR_RES":
             native["cycle_period"] = period
+
+
+# ------------------------------------------------------------------------------------------
+# chambers and valves (native ``chamber`` and ``valve`` elements, docs/physics.md §1.8)
+
+VALVE_TYPES = {"ValveTanh": "tanh", "PiecewiseValve": "piecewise"}
+VALVE_PARAMS = {"ValveTanh": {"Rmax", "Rmin", "Steepness", "upstream_block", "downstream_block"},
+                "PiecewiseValve": {"Rmax", "Rmin", "upstream_block", "downstream_block"}}
+CHAMBER_TYPES = {"ChamberElastanceInductor", "LinearElastanceChamber"}
+CHAMBER_PARAMS = {"ChamberElastanceInductor": {"Emax", "Emin", "Vrd", "Vrs", "Impedance"},
+                  "LinearElastanceChamber": {"Emax", "Epass", "Vrest"}}
+#: svZeroDSolver activation function -> (native kind, its parameters)
+ACTIVATIONS = {
+    "half_cosine": ("half-cosine", ("t_active", "t_twitch")),
+    "piecewise_cosine": ("piecewise-cosine", ("contract_start", "relax_start",
+                                              "contract_duration", "relax_duration")),
+    "two_hill": ("two-hill", ("t_shift", "tau_1", "tau_2", "m1", "m2")),
+}
+
+
+def _entries(raw: Any, key: str) -> list[Mapping[str, Any]]:
+    if not isinstance(raw, list):
+        raise ModelError(f"{key}: must be a list")
+    for i, e in enumerate(raw):
+        if not isinstance(e, Mapping) or not isinstance(e.get("name"), str):
+            raise ModelError(f"{key}[{i}]: must be a mapping with a 'name'")
+    return raw
+
+
+def chamber(c: Mapping[str, Any], period: float, initial: Mapping[str, Any], num: Num
+            ) -> dict[str, Any]:
+    """The native ``chamber`` element of one svZeroDSolver chamber entry (without its ends)."""
+    from oxyline.errors import UnsupportedElement
+
+    name, kind = c["name"], c.get("type")
+    el = f"{kind} '{name}'"
+    if kind not in CHAMBER_TYPES:
+        raise UnsupportedElement(f"{el}: chamber type '{kind}' is not supported (supported: "
+                                 f"{', '.join(sorted(CHAMBER_TYPES))})")
+    vals = c.get("values", {})
+    if not isinstance(vals, Mapping) or set(vals) - CHAMBER_PARAMS[kind]:
+        raise UnsupportedElement(f"{el}: unknown values {sorted(set(vals) - CHAMBER_PARAMS[kind])}")
+    missing = [k for k in CHAMBER_PARAMS[kind] - {"Impedance"} if k not in vals]
+    if missing:
+        raise ModelError(f"{el}: missing '{missing[0]}'")
+    act = c.get("activation_function")
+    if kind == "ChamberElastanceInductor":
+        # its own half-cosine when no activation function is given
+        act = act or {"type": "half_cosine", **{k: c["values"][k] for k in ("t_active", "t_twitch")
+                                                  if k in c["values"]}}
+        law = {"law": "elastance-inductor", "max_elastance": num(vals["Emax"], el, "Emax"),
+               "min_elastance": num(vals["Emin"], el, "Emin"),
+               "rest_volume_diastole": num(vals["Vrd"], el, "Vrd"),
+               "rest_volume_systole": num(vals["Vrs"], el, "Vrs"),
+               "inductance": num(vals.get("Impedance", 0.0), el, "Impedance")}
+    else:
+        law = {"law": "linear", "max_elastance": num(vals["Emax"], el, "Emax"),
+               "passive_elastance": num(vals["Epass"], el, "Epass"),
+               "rest_volume": num(vals["Vrest"], el, "Vrest")}
+    if not isinstance(act, Mapping) or act.get("type") not in ACTIVATIONS:
+        raise UnsupportedElement(f"{el}: activation_function must be one of "
+                                 f"{sorted(ACTIVATIONS)}, got {act!r}")
+    native_kind, keys = ACTIVATIONS[act["type"]]
+    for k in keys:
+        if k not in act:
+            raise ModelError(f"{el}: activation_function needs '{k}'")
+    law["activation"] = {"kind": native_kind, **{k: num(act[k], el, k) for k in keys}}
+    law["period"] = period
+    v0 = initial.get(f"Vc:{name}")
+    if v0 is not None:
+        law["initial_volume"] = num(v0, el, f"initial_condition Vc:{name}")
+    return law
+
+
+def valve(v: Mapping[str, Any], num: Num) -> tuple[dict[str, Any], str, str]:
+    """The native ``valve`` element of one svZeroDSolver valve entry and its (upstream,
+    downstream) block names."""
+    from oxyline.errors import UnsupportedElement
+
+    name, kind = v["name"], v.get("type")
+    el = f"{kind} '{name}'"
+    if kind not in VALVE_TYPES:
+        raise UnsupportedElement(f"{el}: valve type '{kind}' is not supported (supported: "
+                                 f"{', '.join(sorted(VALVE_TYPES))})")
+    p = v.get("params", {})
+    if not isinstance(p, Mapping) or set(p) - VALVE_PARAMS[kind]:
+        raise UnsupportedElement(f"{el}: unknown params {sorted(set(p) - VALVE_PARAMS[kind])}")
+    for k in VALVE_PARAMS[kind]:
+        if k not in p:
+            raise ModelError(f"{el}: missing '{k}'")
+    native = {"law": VALVE_TYPES[kind], "min_resistance": num(p["Rmin"], el, "Rmin"),
+              "max_resistance": num(p["Rmax"], el, "Rmax")}
+    if kind == "ValveTanh":
+        native["steepness"] = num(p["Steepness"], el, "Steepness")
+    return native, str(p["upstream_block"]), str(p["downstream_block"])

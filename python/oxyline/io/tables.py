@@ -300,6 +300,11 @@ def to_tables(model: Model, waveform_dir: PathLike | None = None) -> tuple[Any, 
         el = f"boundary condition '{node}'"
         kind = str(bc["type"]).lower()
         row = {"node": node, "type": kind}
+        if kind not in ("flow", "pressure", "resistance", "rcr"):
+            # never drop a key silently: the table has no columns for e.g. a coronary bed
+            raise ModelError(f"{el}: a '{kind}' condition cannot be written to a boundary-"
+                             "condition table (flow, pressure, resistance, rcr); save the model "
+                             "as YAML/JSON instead")
         if kind in ("flow", "pressure"):
             if "fourier" in bc:
                 f = bc["fourier"]

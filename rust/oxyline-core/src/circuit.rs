@@ -11,6 +11,9 @@
 //! Unknown i < n_nodes is the pressure of node i, unknown n_nodes + b the flow of branch b.
 
 use crate::coefficients::ResistanceLaw;
+use crate::element::Element;
+use crate::element::chamber::{Chamber, Elastance};
+use crate::element::valve::{Valve, ValveLaw};
 use crate::error::{Error, Result};
 use crate::waveform::Waveform;
 use std::sync::Arc;
@@ -34,6 +37,8 @@ pub enum Part {
     MicrovascularResistance,
     /// A coronary bed's intramyocardial compartment.
     Intramyocardial,
+    /// A chamber's blood volume.
+    Volume,
 }
 
 impl Part {
@@ -50,6 +55,7 @@ impl Part {
             Part::DistalResistance => "distal resistance",
             Part::MicrovascularResistance => "microvascular resistance",
             Part::Intramyocardial => "intramyocardial compartment",
+            Part::Volume => "chamber",
         }
     }
 }
@@ -78,6 +84,8 @@ pub struct Names {
     vessels: Vec<String>,
     /// Boundary condition names (graph node names).
     boundaries: Vec<String>,
+    /// Element unknowns after the flows (a chamber's volume).
+    extras: Vec<Label>,
 }
 
 fn index32(i: usize) -> u32 {
@@ -132,16 +140,18 @@ impl Names {
     }
     /// Name of unknown `i` of the DAE (node pressures first, then branch flows).
     pub fn unknown(&self, i: usize) -> String {
-        let nn = self.nodes.len();
+        let (nn, nb) = (self.nodes.len(), self.branches.len());
         if i < nn {
             format!("pressure at {}", self.node(i))
-        } else {
+        } else if i < nn + nb {
             format!("flow in {}", self.branch(i - nn))
+        } else {
+            format!("volume of {}", self.write(self.extras[i - nn - nb]))
         }
     }
     /// Names of all unknowns.
     pub fn unknowns(&self) -> Vec<String> {
-        (0..self.nodes.len() + self.branches.len())
+        (0..self.nodes.len() + self.branches.len() + self.extras.len())
             .map(|i| self.unknown(i))
             .collect()
     }
@@ -195,6 +205,27 @@ pub struct ChainRuleCapacitor {
     pub capacitance: f64,
     pub resistance: f64,
     pub stenosis: f64,
+}
+
+/// An element of `crate::element` as stamped, with circuit indices (resolved to DAE unknowns by
+/// [`Circuit::assemble`]).
+#[derive(Debug, Clone)]
+pub enum CircuitElement {
+    /// A valve on branch `branch` from node `from` to node `to`.
+    Valve {
+        name: String,
+        law: ValveLaw,
+        branch: usize,
+        from: usize,
+        to: usize,
+    },
+    /// A chamber: its pressure node and its volume (index into `Circuit::extras`).
+    Chamber {
+        name: String,
+        elastance: Elastance,
+        node: usize,
+        volume: usize,
+    },
 }
 
 /// A boundary condition as seen by species transport.
@@ -276,6 +307,16 @@ pub struct Circuit {
     pub segments: Vec<SegmentGeom>,
     /// Capacitor rows in svZeroDSolver's form (empty unless a vessel asks for it).
     pub chain_rule: Vec<ChainRuleCapacitor>,
+    /// Element unknowns after the branch flows (a chamber's volume): their E_ii.
+    pub extras: Vec<f64>,
+    /// (node, extra): the node's flow balance (and any inflow into it) is the row of element
+    /// unknown `extra` (E_ii ẏ_extra + Σ Q_out − Σ Q_in = inflow), and the node's own row holds
+    /// its pressure, P = …, completed by an element (a chamber: P − E(t)(V − V_rest) = 0).
+    pub moved_rows: Vec<(usize, usize)>,
+    /// Nonlinear and time-varying elements (`crate::element`).
+    pub elements: Vec<CircuitElement>,
+    /// (extra, value): element unknowns' values at a zero start (a chamber's initial volume).
+    pub initial_extras: Vec<(usize, f64)>,
     pub vessel_names: Vec<String>,
     /// Node and branch names (shared with the assembled DAE).
     pub names: Arc<Names>,
@@ -361,7 +402,15 @@ impl Circuit {
         self.branches.len() - 1
     }
     pub fn n_unknowns(&self) -> usize {
-        self.nodes.len() + self.branches.len()
+        self.nodes.len() + self.branches.len() + self.extras.len()
+    }
+    /// Add an element unknown (after the flows) with mass-matrix entry `mass`; returns its
+    /// index into `extras`.
+    pub fn add_extra(&mut self, name: impl Into<NameOf>, mass: f64) -> usize {
+        let label = self.label(name.into());
+        Arc::make_mut(&mut self.names).extras.push(label);
+        self.extras.push(mass);
+        self.extras.len() - 1
     }
     pub fn unknown_name(&self, i: usize) -> String {
         self.names.unknown(i)
@@ -410,6 +459,24 @@ impl Circuit {
             inc[fill[b.to]] = (nn + bi, -1.0);
             fill[b.to] += 1;
         }
+        let nb = self.branches.len();
+        // node -> the element unknown whose row takes its flow balance
+        let mut moved = vec![None; nn];
+        for &(node, x) in &self.moved_rows {
+            if self.nodes[node].capacitance != 0.0 {
+                return Err(Error::model(
+                    self.names.node(node),
+                    "a chamber's pressure node cannot also hold a vessel's capacitance (put a valve or a resistance between them)",
+                ));
+            }
+            if fixed[node].is_some() || moved[node].is_some() {
+                return Err(Error::model(
+                    self.names.node(node),
+                    "a chamber's pressure node cannot also have a pressure condition or a second chamber",
+                ));
+            }
+            moved[node] = Some(nn + nb + x);
+        }
         let mut f = Csr {
             ptr: Vec::with_capacity(n + 1),
             col: Vec::new(),
@@ -417,7 +484,7 @@ impl Circuit {
         };
         f.ptr.push(0);
         for i in 0..nn {
-            if fixed[i].is_some() {
+            if fixed[i].is_some() || moved[i].is_some() {
                 f.col.push(i as u32);
                 f.val.push(1.0);
             } else {
@@ -433,6 +500,19 @@ impl Circuit {
             f.val.extend([-1.0, 1.0, b.resistance]);
             f.ptr.push(f.col.len());
         }
+        let mut owner = vec![usize::MAX; self.extras.len()];
+        for &(node, x) in &self.moved_rows {
+            owner[x] = node;
+        }
+        for &node in &owner {
+            if node != usize::MAX {
+                for &(c, s) in &inc[start[node]..start[node + 1]] {
+                    f.col.push(c as u32);
+                    f.val.push(s);
+                }
+            }
+            f.ptr.push(f.col.len());
+        }
         let mut e = vec![0.0; n];
         let mut windkessel = vec![false; n];
         for (i, node) in self.nodes.iter().enumerate() {
@@ -444,6 +524,9 @@ impl Circuit {
         for (bi, b) in self.branches.iter().enumerate() {
             e[nn + bi] = b.inductance;
         }
+        for (x, &m) in self.extras.iter().enumerate() {
+            e[nn + nb + x] = m;
+        }
         let stenosis: Vec<(usize, f64)> = self
             .branches
             .iter()
@@ -454,7 +537,7 @@ impl Circuit {
         let mut forcing = Vec::new();
         for (node, w) in &self.sources {
             if fixed[*node].is_none() {
-                forcing.push((*node, w.clone()));
+                forcing.push((moved[*node].unwrap_or(*node), w.clone()));
             }
         }
         for (node, w) in &self.fixed_pressures {
@@ -477,9 +560,17 @@ impl Circuit {
             .iter()
             .map(|(b, law)| (nn + b, law.clone()))
             .collect();
+        let elements = self.elements.iter().map(|el| resolve(el, nn, nb)).collect();
+        let initial = self
+            .initial_extras
+            .iter()
+            .map(|&(x, v)| (nn + nb + x, v))
+            .collect();
         Ok(Dae {
             n,
             n_nodes: nn,
+            elements,
+            initial,
             e,
             windkessel,
             f,
@@ -489,6 +580,31 @@ impl Circuit {
             forcing,
             names: self.names.clone(),
         })
+    }
+}
+
+/// The element of `el` with DAE unknowns (flows after the `nn` pressures, element unknowns
+/// after the `nb` flows).
+fn resolve(el: &CircuitElement, nn: usize, nb: usize) -> Arc<dyn Element> {
+    match el {
+        CircuitElement::Valve {
+            name,
+            law,
+            branch,
+            from,
+            to,
+        } => Arc::new(Valve::new(name.clone(), *law, *from, *to, nn + branch)),
+        CircuitElement::Chamber {
+            name,
+            elastance,
+            node,
+            volume,
+        } => Arc::new(Chamber::new(
+            name.clone(),
+            elastance.clone(),
+            *node,
+            nn + nb + volume,
+        )),
     }
 }
 
@@ -510,11 +626,32 @@ pub struct Dae {
     pub varying: Vec<(usize, ResistanceLaw)>,
     /// (row, waveform): f_row(t) = w(t).
     pub forcing: Vec<(usize, Waveform)>,
+    /// Nonlinear and time-varying elements, each adding c_el(y, t) to its rows (evaluated at
+    /// the true time in every regime: a chamber's elastance has no mean to stand for it).
+    pub elements: Vec<Arc<dyn Element>>,
+    /// (unknown, value) set at a zero start (svZeroDSolver's `initial_condition`), e.g. a
+    /// chamber's volume: a closed loop has no steady state to start from.
+    pub initial: Vec<(usize, f64)>,
     /// Names of the unknowns ([`Names::unknown`]), shared with the circuit.
     pub names: Arc<Names>,
 }
 
 impl Dae {
+    /// Some element varies in time by itself (a chamber): the circuit has no steady state of
+    /// its mean boundary conditions.
+    pub fn has_chambers(&self) -> bool {
+        self.elements.iter().any(|e| e.period().is_some())
+    }
+
+    /// The zero state with the `initial` values set.
+    pub fn initial_state(&self) -> Vec<f64> {
+        let mut y = vec![0.0; self.n];
+        for &(i, v) in &self.initial {
+            y[i] = v;
+        }
+        y
+    }
+
     pub fn mass(&self, regime: Regime) -> Vec<f64> {
         let mut e = self.e.clone();
         if regime == Regime::SteadyNoWindkessel {
@@ -527,14 +664,78 @@ impl Dae {
         e
     }
 
-    /// No stenosis term: the residual is linear in the state (possibly time-varying).
+    /// No stenosis term and no nonlinear element: the residual is linear in the state
+    /// (possibly time-varying).
     pub fn is_linear(&self) -> bool {
-        self.stenosis.is_empty()
+        self.stenosis.is_empty() && !self.elements.iter().any(|e| e.is_nonlinear())
     }
 
     /// The iteration matrix of `regime` is constant in time (no time-varying coefficient acts).
     pub fn is_constant(&self, regime: Regime) -> bool {
-        self.varying.is_empty() || regime != Regime::Transient
+        (self.varying.is_empty() || regime != Regime::Transient)
+            && !self.elements.iter().any(|e| e.period().is_some())
+    }
+
+    /// r −= c_el(y, t): the elements' term.
+    pub fn element_residual(&self, t: f64, y: &[f64], r: &mut [f64]) {
+        self.element_terms(t, y, |i, c| r[i] -= c);
+    }
+
+    /// Call `visit(row, c)` for every element term c_el(y, t).
+    pub fn element_terms(&self, t: f64, y: &[f64], mut visit: impl FnMut(usize, f64)) {
+        let mut c = Vec::new();
+        for el in &self.elements {
+            let rows = el.rows();
+            c.resize(rows.len(), 0.0);
+            el.residual(t, y, &mut c);
+            for (&i, &ci) in rows.iter().zip(&c) {
+                visit(i, ci);
+            }
+        }
+    }
+
+    /// Call `visit(row, (∂c_el/∂y · x)_row)` entry by entry, the Jacobian at (y, t) (each
+    /// element's stiffest state with `stiffest`).
+    pub fn element_matvec(
+        &self,
+        t: f64,
+        y: &[f64],
+        stiffest: bool,
+        x: &[f64],
+        mut visit: impl FnMut(usize, f64),
+    ) {
+        let pattern = self.element_pattern();
+        let mut j = vec![0.0; pattern.len()];
+        self.element_jacobian(1.0, t, y, &mut j, stiffest);
+        for (&(r, c), v) in pattern.iter().zip(&j) {
+            visit(r, v * x[c]);
+        }
+    }
+
+    /// The elements' Jacobian entries (row, column), in the order of
+    /// [`Dae::element_jacobian`].
+    pub fn element_pattern(&self) -> Vec<(usize, usize)> {
+        self.elements
+            .iter()
+            .flat_map(|e| e.pattern().iter().copied())
+            .collect()
+    }
+
+    /// a·∂c_el/∂y at (y, t) into `vals` ([`Dae::element_pattern`] order); `stiffest` takes
+    /// each element's stiffest state instead (RK4's stability bound).
+    pub fn element_jacobian(&self, a: f64, t: f64, y: &[f64], vals: &mut [f64], stiffest: bool) {
+        let mut k = 0;
+        for el in &self.elements {
+            let m = el.pattern().len();
+            let out = &mut vals[k..k + m];
+            if stiffest {
+                el.stiffest_jacobian(t, y, out);
+            } else {
+                el.jacobian(t, y, out);
+            }
+            out.iter_mut().for_each(|v| *v *= a);
+            k += m;
+        }
     }
 
     /// r −= D(t) y: the time-varying coefficients' term (transient regime only).

@@ -5,6 +5,7 @@ pub mod assemble;
 pub mod circuit;
 pub mod closure;
 pub mod coefficients;
+pub mod element;
 pub mod ensemble;
 pub mod error;
 pub mod frequency;

@@ -152,6 +152,8 @@ pub fn vessel(i: usize, item: &Bound<'_, PyAny>) -> Res<VesselSpec> {
         lumped: None,
         arrangement: None,
         output: true,
+        valve: None,
+        chamber: None,
     };
     for (k, val) in d.iter() {
         let k = key(&k, element)?;
@@ -170,6 +172,9 @@ pub fn vessel(i: usize, item: &Bound<'_, PyAny>) -> Res<VesselSpec> {
             "geometry" => v.geometry = Some(geometry(dict(&val, element, k)?, element)?),
             "lumped" => v.lumped = Some(lumped(dict(&val, element, k)?, element)?),
             "arrangement" => v.arrangement = Some(arrangement(&val, element)?),
+            // heart elements are few: read through their JSON form
+            "valve" => v.valve = Some(via_json(&val, element, k)?),
+            "chamber" => v.chamber = Some(via_json(&val, element, k)?),
             "output" => {
                 v.output = val.extract::<bool>().map_err(|_| {
                     Error::model(element(), format!("'output' must be a bool, got {val}"))
@@ -182,6 +187,22 @@ pub fn vessel(i: usize, item: &Bound<'_, PyAny>) -> Res<VesselSpec> {
     v.from = from.ok_or_else(|| missing(element, "from"))?;
     v.to = to.ok_or_else(|| missing(element, "to"))?;
     Ok(v)
+}
+
+/// A small nested spec read through its JSON text (`json.dumps`, then the core's parser).
+fn via_json<T: oxyline_core::spec::DeserializeOwned>(
+    v: &Bound<'_, PyAny>,
+    element: &dyn Fn() -> String,
+    what: &str,
+) -> Res<T> {
+    let bad = |e: String| Error::model(element(), format!("'{what}': {e}"));
+    let text: String = v
+        .py()
+        .import("json")
+        .and_then(|j| j.call_method1("dumps", (v,)))
+        .and_then(|s| s.extract())
+        .map_err(|e| bad(e.to_string()))?;
+    oxyline_core::spec::from_json(&text).map_err(|e| bad(e.to_string()))
 }
 
 /// Every vessel of the canonical `vessels` list.

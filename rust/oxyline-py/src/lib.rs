@@ -21,6 +21,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 mod checkpoint;
+mod closed_loop;
 mod ensemble;
 mod settings;
 
@@ -833,11 +834,30 @@ fn checkpoint_every(cycles: Option<usize>, seconds: Option<f64>) -> PyResult<Eve
     }
 }
 
+/// (E(t), V_rest(t)) of a canonical chamber spec (JSON text) at `times`: the drop-in rebuilds
+/// a chamber's volume V = V_rest + P/E from its recorded pressure (docs/svzerod.md).
+#[pyfunction]
+fn chamber_elastance<'py>(
+    py: Python<'py>,
+    name: &str,
+    chamber_json: &str,
+    times: Vec<f64>,
+) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
+    let spec: oxyline_core::spec::ChamberSpec = oxyline_core::spec::from_json(chamber_json)
+        .map_err(|e| to_py(oxyline_core::Error::model(format!("chamber '{name}'"), e)))?;
+    let law = oxyline_core::assemble::chamber_elastance(name, &spec).map_err(to_py)?;
+    let (e, v): (Vec<f64>, Vec<f64>) = times.iter().map(|&t| law.at(t)).unzip();
+    Ok((e.into_pyarray(py), v.into_pyarray(py)))
+}
+
 #[pymodule]
 mod _core {
     #[pymodule_export]
+    use super::closed_loop::closed_loop_o2;
+    #[pymodule_export]
     use super::{
-        ModelError, Network, ResourceError, SolverError, UnstableTimeStep, ensemble::Ensemble,
+        ModelError, Network, ResourceError, SolverError, UnstableTimeStep, chamber_elastance,
+        ensemble::Ensemble,
     };
 
     use pyo3::types::PyModuleMethods;

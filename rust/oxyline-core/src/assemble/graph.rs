@@ -153,12 +153,14 @@ fn check_connected(spec: &NetworkSpec, g: &Graph<'_>) -> Result<()> {
     Ok(())
 }
 
-/// Flow conditions alone leave the pressure level undetermined.
+/// Flow conditions alone leave the pressure level undetermined; a chamber's pressure law
+/// P = E(t)(V − V_rest) fixes it (a closed loop needs no boundary condition).
 fn check_pressure_level(spec: &NetworkSpec) -> Result<()> {
     if spec
         .boundary_conditions
         .values()
         .any(|b| !matches!(b, BoundarySpec::Flow { .. }))
+        || spec.vessels.iter().any(|v| v.chamber.is_some())
     {
         return Ok(());
     }

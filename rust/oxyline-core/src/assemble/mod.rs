@@ -4,16 +4,19 @@
 //! Every step is linear in the network size.
 
 pub(crate) mod boundary;
+mod chamber;
 pub(crate) mod checks;
 mod graph;
 pub mod segments;
+mod valve;
 mod vessel;
 
 use crate::circuit::Circuit;
 use crate::error::Result;
 use crate::output::Probes;
 use crate::segment::Blood;
-use crate::spec::NetworkSpec;
+use crate::spec::{Arrangement, NetworkSpec};
+pub use chamber::chamber_elastance;
 pub use segments::SegmentRow;
 
 /// Summary figures for `oxyline validate`.
@@ -90,6 +93,20 @@ impl NetworkSpec {
         };
         let mut table = Vec::with_capacity(segments);
         for (vi, v) in self.vessels.iter().enumerate() {
+            if v.valve.is_some() || v.chamber.is_some() {
+                let chain = heart_element(&mut circuit, v, graph.vessel_ends[vi])?;
+                if v.output {
+                    vessel::record_probes(
+                        &mut probes,
+                        &v.name,
+                        &chain,
+                        &[],
+                        Arrangement::InvertedL,
+                        self.output_segments,
+                    );
+                }
+                continue;
+            }
             let arrangement = v.arrangement.unwrap_or(self.arrangement);
             let segs = segments::discretise(self, vi, blood, arrangement)?;
             let ends = graph.vessel_ends[vi];
@@ -135,6 +152,26 @@ impl NetworkSpec {
             summary,
             segments: table,
         })
+    }
+}
+
+/// Stamp a valve or chamber element (a `vessel` entry with `valve` or `chamber`).
+fn heart_element(
+    circuit: &mut Circuit,
+    v: &crate::spec::VesselSpec,
+    ends: (usize, usize),
+) -> Result<vessel::Chain> {
+    let el = format!("vessel '{}'", v.name);
+    if v.geometry.is_some() || v.lumped.is_some() || (v.valve.is_some() && v.chamber.is_some()) {
+        return Err(crate::error::Error::model(
+            el,
+            "give one of geometry, lumped, valve or chamber",
+        ));
+    }
+    match (&v.valve, &v.chamber) {
+        (Some(s), _) => valve::stamp(circuit, &v.name, s, ends),
+        (_, Some(s)) => chamber::stamp(circuit, &v.name, s, ends),
+        _ => unreachable!("called for valves and chambers only"),
     }
 }
 

@@ -37,6 +37,7 @@ pub(super) fn reduce_prescribed_inductors(dae: &Dae, regime: Regime) -> Reductio
         .iter()
         .map(|s| s.0)
         .chain(dae.varying.iter().map(|v| v.0))
+        .chain(dae.elements.iter().flat_map(|e| e.rows().to_vec()))
     {
         nonlinear[i] = true;
     }
@@ -103,6 +104,12 @@ pub(super) struct Algebraic {
     stenosis: Vec<(usize, usize, f64)>,
     /// (local row, index into `Dae::varying`) of time-varying coefficients on algebraic rows.
     varying: Vec<(usize, usize)>,
+    /// (stamp value index, index into `Dae::element_pattern`) of element Jacobian entries
+    /// whose row and column are both algebraic.
+    elements: Vec<(usize, usize)>,
+    /// Element terms on algebraic rows are nonlinear / time-varying in the matrix.
+    element_nonlinear: bool,
+    element_varying: bool,
     /// Time of the last factorisation of a time-varying, stenosis-free part (its matrix then
     /// depends on the time only).
     factored_at: Option<f64>,
@@ -152,7 +159,23 @@ impl Algebraic {
             Vec::new()
         };
         stamps.extend(varying.iter().map(|&(l, _)| (l, l)));
+        let (mut elements, mut element_nonlinear, mut element_varying) = (Vec::new(), false, false);
+        let mut k = 0;
+        for el in &dae.elements {
+            for &(r, c) in el.pattern() {
+                if local[r] != usize::MAX && local[c] != usize::MAX {
+                    elements.push((stamps.len(), k));
+                    stamps.push((local[r], local[c]));
+                    element_nonlinear |= el.is_nonlinear();
+                    element_varying |= el.period().is_some();
+                }
+                k += 1;
+            }
+        }
         Ok(Some(Algebraic {
+            elements,
+            element_nonlinear,
+            element_varying,
             lu: SparseLu::analyse(rows.len(), &stamps)?,
             vals: vec![0.0; stamps.len()],
             r: vec![0.0; rows.len()],
@@ -165,23 +188,26 @@ impl Algebraic {
         }))
     }
 
-    /// No stenosis on the algebraic rows: they are linear in the state.
+    /// No stenosis and no nonlinear element on the algebraic rows: they are linear in the
+    /// state.
     pub(super) fn is_linear(&self) -> bool {
-        self.stenosis.is_empty()
+        self.stenosis.is_empty() && !self.element_nonlinear
     }
 
     /// Linear with a constant matrix: factorised once per run.
     pub(super) fn is_constant(&self) -> bool {
-        self.stenosis.is_empty() && self.varying.is_empty()
+        self.is_linear() && self.varying.is_empty() && !self.element_varying
     }
 
     /// Factorise at state `y` (the stenosis slopes depend on it) and time `t` (the
-    /// time-varying coefficients do).
+    /// time-varying coefficients do); elements at their stiffest state with `stiffest` (RK4's
+    /// stability operator).
     pub(super) fn factor(
         &mut self,
         dae: &Dae,
         y: &[f64],
         t: f64,
+        stiffest: bool,
     ) -> std::result::Result<(), String> {
         let nf = self.stamps_src.len();
         for (v, &k) in self.vals[..nf].iter_mut().zip(&self.stamps_src) {
@@ -194,13 +220,20 @@ impl Algebraic {
         for (j, &(_, k)) in self.varying.iter().enumerate() {
             self.vals[nv + j] = dae.varying[k].1.delta(t);
         }
+        if !self.elements.is_empty() {
+            let mut j = vec![0.0; dae.element_pattern().len()];
+            dae.element_jacobian(1.0, t, y, &mut j, stiffest);
+            for &(v, k) in &self.elements {
+                self.vals[v] = j[k];
+            }
+        }
         self.factored_at = Some(t);
         self.lu.factor(&self.vals)
     }
 
     /// Factorise at y = 0 and probe one solve: a singular algebraic part means an index-2 DAE.
     pub(super) fn check_index1(&mut self, dae: &Dae) -> Result<()> {
-        let ok = self.factor(dae, &vec![0.0; dae.n], 0.0).is_ok() && {
+        let ok = self.factor(dae, &vec![0.0; dae.n], 0.0, true).is_ok() && {
             let mut probe: Vec<f64> = (0..self.rows.len()).map(|i| 1.0 + (i % 7) as f64).collect();
             self.lu.solve_in_place(&mut probe)
         };
@@ -236,6 +269,17 @@ impl NewtonProblem for Elimination<'_> {
             let (g, law) = &self.dae.varying[k];
             r[l] -= law.delta(self.time) * self.y[*g];
         }
+        if !self.dae.elements.is_empty() {
+            let rows = &self.alg.rows;
+            let mut terms = Vec::new();
+            self.dae
+                .element_terms(self.time, self.y, |i, c| terms.push((i, c)));
+            for (i, c) in terms {
+                if let Ok(l) = rows.binary_search(&i) {
+                    r[l] -= c;
+                }
+            }
+        }
     }
     fn factor(&mut self, _: usize) -> Result<()> {
         // a constant algebraic part was factorised once, in `Rk4::new`; a linear time-varying
@@ -246,7 +290,7 @@ impl NewtonProblem for Elimination<'_> {
             return Ok(());
         }
         self.alg
-            .factor(self.dae, self.y, self.time)
+            .factor(self.dae, self.y, self.time, false)
             .map_err(|m| singular(self.time, &m))
     }
     fn solve(&mut self, r: &mut [f64]) -> Result<()> {

@@ -132,7 +132,7 @@ impl<'a> GenAlpha<'a> {
         let c = self.af * self.gamma * self.dt;
         let am_e: Vec<f64> = self.e.iter().map(|e| self.am * e).collect();
         let mut kvals = vec![0.0; self.n_stamps];
-        jacobian_values(self.dae, c, &am_e, y_af, &mut kvals);
+        jacobian_values(self.dae, c, &am_e, y_af, time, &mut kvals);
         let nf = self.dae.f.val.len();
         for (cr, &k) in self.dae.chain_rule.iter().zip(&self.chain_flow_entry) {
             let q = y_af[cr.flow];
@@ -141,7 +141,7 @@ impl<'a> GenAlpha<'a> {
             kvals[k] -= c * 2.0 * cr.capacitance * cr.stenosis * sign * yd_am[cr.flow];
         }
         self.dae
-            .varying_jacobian(c, time, self.regime, &mut kvals[nf..]);
+            .varying_jacobian(c, time, self.regime, &mut kvals[nf..nf + self.dae.n]);
         self.lu.factor(&kvals).map_err(|m| singular(time, &m))?;
         self.factored = true;
         Ok(())
@@ -206,6 +206,7 @@ impl NewtonProblem for Iterate<'_, '_> {
         }
         ga.dae.static_residual(&ga.y_af, &ga.f, r);
         ga.dae.varying_residual(self.t_af, ga.regime, &ga.y_af, r);
+        ga.dae.element_residual(self.t_af, &ga.y_af, r);
         for (i, ri) in r.iter_mut().enumerate() {
             *ri -= ga.e[i] * (self.yd[i] + am * (ga.yd_new[i] - self.yd[i]));
         }

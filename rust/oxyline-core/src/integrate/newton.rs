@@ -155,8 +155,9 @@ pub fn solve<P: NewtonProblem>(
     ))
 }
 
-/// Value positions of the pattern F ∪ diag (F entries in CSR order, then the n diagonal slots):
-/// the pattern of every iteration matrix a·(F + dc/dy) + diag(d) of the circuit.
+/// Value positions of the pattern F ∪ diag ∪ elements (F entries in CSR order, then the n
+/// diagonal slots, then the elements' Jacobian entries): the pattern of every iteration
+/// matrix a·(F + dc/dy) + diag(d) of the circuit.
 pub fn jacobian_stamps(dae: &Dae) -> Vec<(usize, usize)> {
     let mut stamps = Vec::with_capacity(dae.f.val.len() + dae.n);
     for i in 0..dae.n {
@@ -165,18 +166,22 @@ pub fn jacobian_stamps(dae: &Dae) -> Vec<(usize, usize)> {
         }
     }
     stamps.extend((0..dae.n).map(|i| (i, i)));
+    stamps.extend(dae.element_pattern());
     stamps
 }
 
-/// Fill `vals` (in [`jacobian_stamps`] order) with a·(F + dc/dy(y)) + diag(d).
-pub fn jacobian_values(dae: &Dae, a: f64, diag: &[f64], y: &[f64], vals: &mut [f64]) {
+/// Fill `vals` (in [`jacobian_stamps`] order) with a·(F + dc/dy(y, t)) + diag(d).
+pub fn jacobian_values(dae: &Dae, a: f64, diag: &[f64], y: &[f64], t: f64, vals: &mut [f64]) {
     let nf = dae.f.val.len();
     for (v, fv) in vals[..nf].iter_mut().zip(&dae.f.val) {
         *v = a * fv;
     }
-    vals[nf..].copy_from_slice(diag);
+    vals[nf..nf + dae.n].copy_from_slice(diag);
     for &(i, s) in &dae.stenosis {
         vals[nf + i] += a * 2.0 * s * y[i].abs();
+    }
+    if !dae.elements.is_empty() {
+        dae.element_jacobian(a, t, y, &mut vals[nf + dae.n..], false);
     }
 }
 

@@ -215,6 +215,12 @@ impl<'a> Rk4<'a> {
                 }
             }
         }
+        let e = &self.e;
+        self.dae.element_terms(time, y, |i, c| {
+            if e[i] > 0.0 {
+                k[i] -= c / e[i];
+            }
+        });
         Ok(())
     }
 
@@ -331,6 +337,12 @@ impl<'a> Rk4<'a> {
             times.extend((0..n).map(|k| p * k as f64 / n as f64));
             times.extend(law.breakpoints());
         }
+        for el in &self.dae.elements {
+            if let Some(p) = el.period() {
+                times.extend((0..n).map(|k| p * k as f64 / n as f64));
+                times.extend(el.breakpoints());
+            }
+        }
         times.sort_by(f64::total_cmp);
         times.dedup();
         times
@@ -353,7 +365,7 @@ impl<'a> Rk4<'a> {
             } else {
                 &self.lin_state
             };
-            alg.factor(self.dae, y, self.lin_time)
+            alg.factor(self.dae, y, self.lin_time, true)
                 .map_err(|m| singular(self.lin_time, &m))?;
         }
         Ok(())
@@ -366,17 +378,38 @@ impl<'a> Rk4<'a> {
         for (j, &i) in self.diff.iter().enumerate() {
             y[i] = x[j];
         }
+        // the elements' Jacobian at their stiffest state, at the operator's time and state
+        let lin = if self.lin_state.is_empty() {
+            vec![0.0; n]
+        } else {
+            self.lin_state.clone()
+        };
+        let has_elements = !self.dae.elements.is_empty();
         if let Some(alg) = self.alg.as_mut() {
             for (rl, &g) in alg.r.iter_mut().zip(&alg.rows) {
                 *rl = -self.dae.f.row_dot(g, &y);
+            }
+            if has_elements {
+                let mut jx = vec![0.0; n];
+                self.dae
+                    .element_matvec(self.lin_time, &lin, true, &y, |r, v| jx[r] += v);
+                for (rl, &g) in alg.r.iter_mut().zip(&alg.rows) {
+                    *rl -= jx[g];
+                }
             }
             alg.lu.solve_in_place(&mut alg.r);
             for (rl, &g) in alg.r.iter().zip(&alg.rows) {
                 y[g] = *rl;
             }
         }
+        let mut jy = vec![0.0; if has_elements { n } else { 0 }];
+        if has_elements {
+            self.dae
+                .element_matvec(self.lin_time, &lin, true, &y, |r, v| jy[r] += v);
+        }
         for (j, &i) in self.diff.iter().enumerate() {
-            out[j] = -self.dae.f.row_dot(i, &y) / self.e[i];
+            let el = if has_elements { jy[i] } else { 0.0 };
+            out[j] = -(self.dae.f.row_dot(i, &y) + el) / self.e[i];
         }
         if !self.lin_stenosis.is_empty() {
             for (j, &i) in self.diff.iter().enumerate() {

@@ -33,11 +33,13 @@ fn no_steady_state() -> Error {
 impl NewtonProblem for Steady<'_> {
     fn residual(&mut self, r: &mut [f64]) {
         self.dae.static_residual(&self.y, &self.f, r);
+        // elements at t = 0 (a chamber's elastance has no mean)
+        self.dae.element_residual(0.0, &self.y, r);
     }
     fn factor(&mut self, _: usize) -> Result<()> {
         // (the first iterate is y = 0, where the stenosis term's slope 2S|Q| vanishes: the first
         // step is that of the circuit without stenoses)
-        jacobian_values(self.dae, 1.0, &self.zero, &self.y, &mut self.vals);
+        jacobian_values(self.dae, 1.0, &self.zero, &self.y, 0.0, &mut self.vals);
         self.lu.factor(&self.vals).map_err(|_| no_steady_state())
     }
     fn solve(&mut self, r: &mut [f64]) -> Result<()> {

@@ -74,7 +74,11 @@ impl<'d> Plan<'d> {
     ) -> Result<(Vec<f64>, Vec<f64>)> {
         let (dae, n) = (self.dae, self.dae.n);
         let (mut y, mut yd) = match s.start {
-            Start::Zero | Start::SvZeroDZero => (vec![0.0; n], vec![0.0; n]),
+            Start::Zero | Start::SvZeroDZero => (dae.initial_state(), vec![0.0; n]),
+            // a circuit with chambers (a heart, a closed loop) has no steady state of its mean
+            // boundary conditions: its `steady` start is the zero state with the chambers'
+            // initial volumes, made consistent below (docs/physics.md §1.8)
+            Start::Steady if dae.has_chambers() => (dae.initial_state(), vec![0.0; n]),
             Start::Steady => steady_start(dae, steady.get()?),
             Start::SvZeroDSteady { rho_inf } => svzerod_steady_start(dae, s, rho_inf)?,
         };
@@ -271,6 +275,7 @@ fn steady_start(dae: &Dae, ys: &[f64]) -> (Vec<f64>, Vec<f64>) {
     dae.forcing_into(0.0, Regime::Transient, &mut f);
     let mut r = vec![0.0; n];
     dae.static_residual(&y, &f, &mut r);
+    dae.element_residual(0.0, &y, &mut r);
     let yd = (0..n)
         .map(|i| if dae.e[i] > 0.0 { r[i] / dae.e[i] } else { 0.0 })
         .collect();
@@ -282,7 +287,8 @@ fn steady_start(dae: &Dae, ys: &[f64]) -> (Vec<f64>, Vec<f64>) {
 fn svzerod_steady_start(dae: &Dae, s: &RunSettings, rho_inf: f64) -> Result<(Vec<f64>, Vec<f64>)> {
     let h = s.period / 10.0;
     let mut ga = GenAlpha::new(dae, Regime::SteadyNoWindkessel, h, rho_inf, s.newton)?;
-    let (mut y, mut yd) = (vec![0.0; dae.n], vec![0.0; dae.n]);
+    // svZeroDSolver starts its steady iterations from the user's initial condition
+    let (mut y, mut yd) = (dae.initial_state(), vec![0.0; dae.n]);
     for i in 0..31 {
         ga.step(h * i as f64, &mut y, &mut yd)?;
     }

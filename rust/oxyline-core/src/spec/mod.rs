@@ -116,6 +116,87 @@ pub struct VesselSpec {
     pub arrangement: Option<Arrangement>,
     #[serde(default = "yes")]
     pub output: bool,
+    /// A heart valve instead of a vessel (docs/physics.md §1.8).
+    #[serde(default)]
+    pub valve: Option<ValveSpec>,
+    /// A heart chamber instead of a vessel (docs/physics.md §1.8).
+    #[serde(default)]
+    pub chamber: Option<ChamberSpec>,
+}
+
+/// A valve between the element's `from` and `to` nodes: R(P_to − P_from) (Pa·s/m³).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(tag = "law", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum ValveSpec {
+    /// svZeroDSolver's `ValveTanh`; `steepness` in 1/Pa.
+    Tanh {
+        min_resistance: f64,
+        max_resistance: f64,
+        steepness: f64,
+    },
+    /// svZeroDSolver's `PiecewiseValve`.
+    Piecewise {
+        min_resistance: f64,
+        max_resistance: f64,
+    },
+}
+
+/// A chamber at the element's `from` node, with an optional inductor to its `to` node.
+/// Elastances in Pa/m³, volumes in m³, times in s. (Unknown keys are refused by the Python
+/// layer: serde cannot deny them next to the flattened law.)
+#[derive(Debug, Clone, Deserialize)]
+pub struct ChamberSpec {
+    #[serde(flatten)]
+    pub law: ChamberLawSpec,
+    pub activation: ActivationSpec,
+    /// The cardiac period of the activation (s).
+    pub period: f64,
+    /// Inductance between the chamber and its outlet node (Pa·s²/m³).
+    #[serde(default)]
+    pub inductance: f64,
+    /// The volume at the start of a zero-start run (m³); default 0.
+    #[serde(default)]
+    pub initial_volume: f64,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(tag = "law", rename_all = "kebab-case")]
+pub enum ChamberLawSpec {
+    /// svZeroDSolver's `ChamberElastanceInductor` (with the half-cosine activation).
+    ElastanceInductor {
+        max_elastance: f64,
+        min_elastance: f64,
+        rest_volume_diastole: f64,
+        rest_volume_systole: f64,
+    },
+    /// svZeroDSolver's `LinearElastanceChamber`: E = passive + max · φ(t).
+    Linear {
+        max_elastance: f64,
+        passive_elastance: f64,
+        rest_volume: f64,
+    },
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum ActivationSpec {
+    HalfCosine {
+        t_active: f64,
+        t_twitch: f64,
+    },
+    PiecewiseCosine {
+        contract_start: f64,
+        relax_start: f64,
+        contract_duration: f64,
+        relax_duration: f64,
+    },
+    TwoHill {
+        t_shift: f64,
+        tau_1: f64,
+        tau_2: f64,
+        m1: f64,
+        m2: f64,
+    },
 }
 fn yes() -> bool {
     true
@@ -199,6 +280,13 @@ pub struct NetworkSpec {
     /// `run::memory`); None: no limit.
     #[serde(default)]
     pub max_memory: Option<f64>,
+}
+
+pub use serde::de::DeserializeOwned;
+
+/// Read one part of a canonical model (e.g. a vessel's `valve`) from its JSON text.
+pub fn from_json<T: DeserializeOwned>(json: &str) -> std::result::Result<T, String> {
+    serde_json::from_str(json).map_err(|e| e.to_string())
 }
 
 /// Read a canonical SI JSON model.

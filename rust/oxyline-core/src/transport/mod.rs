@@ -30,9 +30,12 @@ use crate::waveform::Waveform;
 use std::sync::Arc;
 
 mod build;
+pub mod closed_loop; // closed circulation: compartments, lungs (issue 14 item 4)
+pub mod compartment;
 mod fused;
 mod implicit;
 mod laws;
+pub mod lung;
 mod memory;
 mod observe;
 mod plan;

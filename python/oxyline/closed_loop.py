@@ -1,0 +1,331 @@
+"""Oxygen around a closed circulation (issue 14 item 4; docs/oxygen.md "Oxygen around a closed
+loop"): heart chambers, systemic arteries, organ beds consuming O2, systemic veins and the lungs
+as well-mixed compartments joined by the circulation's flows. The physics (compartments,
+Michaelis–Menten VO2, diffusion-limited lung exchange with Hill binding, the periodic steady
+state) lives in the core (``oxyline_core::transport::closed_loop``); this module holds the
+built-in parameter set ``closed-loop-o2``, converts it to SI, builds the periodic flow table and
+summarises the result.
+
+    from oxyline import closed_loop
+    res = closed_loop.simulate_o2("closed-loop-o2")
+    print(res.summary())     # SaO2, SvO2, PO2s, VO2 per organ, Fick and mass-balance residuals
+
+The flows are prescribed here (a pulsatile ejection of both ventricles, steady organ flows and
+venous return): the closed-loop heart and pulmonary block that will drive them is not merged
+yet (docs/oxygen.md lists what is left).
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from oxyline import _core
+from oxyline.errors import ModelError
+
+MMHG = 133.322368          # Pa per mmHg (docs/physics.md)
+ML_O2 = 1.0 / 22414.0      # mol per mL O2 (STPD; docs/physics.md: 1 mL = 1/22.414 mmol)
+
+# Resting adult, textbook values (cardiac output 5 L/min at 75 /min; organ shares of the cardiac
+# output and organ VO2 as commonly tabulated for a 70 kg adult at rest, e.g. Guyton & Hall,
+# Textbook of Medical Physiology, "blood flow to different organs"; coronary venous saturation
+# ~40 % follows from the heart's high extraction). Units in the dict: L, L/min, mL/min, mmHg.
+STANDARD: dict[str, Any] = {
+    "name": "closed-loop-o2",
+    "period": 0.8,                       # s (75 beats/min)
+    "dt": 1e-3,                          # s
+    "cardiac_output": 5.0,               # L/min
+    "ejection_time": 0.3,                # s, both ventricles (half-sine ejection)
+    "blood": {"solubility": 0.003,       # mL O2 dL⁻¹ mmHg⁻¹
+              "hemoglobin": 150.0,       # g/L
+              "hufner": 1.34,            # mL O2 per g Hb
+              "p50": 26.8, "hill_n": 2.7},
+    "lungs": {"alveolar_po2": 100.0,     # mmHg
+              "diffusing_capacity": 21.0,  # mL O2 min⁻¹ mmHg⁻¹ (resting D_LO2)
+              "shunt_fraction": 0.02},   # bronchial + Thebesian venous admixture
+    # volumes (L) of the mixing pools: left/right heart, systemic arteries and veins,
+    # pulmonary arteries and veins
+    "pools": {"left_heart": 0.15, "arteries": 0.75, "veins": 3.0, "right_heart": 0.15,
+              "pulmonary_arteries": 0.15, "pulmonary_veins": 0.3},
+    # organ beds: share of the cardiac output, resting VO2 (mL/min), exchange volume (L);
+    # Michaelis–Menten km (mmHg) for every organ: nearly zero-order above a few mmHg
+    "km": 1.0,
+    "organs": {
+        "brain": {"flow_fraction": 0.15, "vo2": 50.0, "volume": 0.075},
+        "heart": {"flow_fraction": 0.05, "vo2": 29.0, "volume": 0.02},
+        "kidneys": {"flow_fraction": 0.20, "vo2": 18.0, "volume": 0.05},
+        "splanchnic": {"flow_fraction": 0.25, "vo2": 58.0, "volume": 0.3},
+        "muscle": {"flow_fraction": 0.20, "vo2": 50.0, "volume": 0.2},
+        "skin_other": {"flow_fraction": 0.15, "vo2": 45.0, "volume": 0.1},
+    },
+}
+
+BUILTINS = {"closed-loop-o2": STANDARD}
+
+
+def load(name: str = "closed-loop-o2") -> dict[str, Any]:
+    """A copy of a built-in closed-loop O2 parameter set (edit it and pass it to simulate_o2)."""
+    if name not in BUILTINS:
+        raise ModelError(f"'{name}': not a built-in closed-loop model (built-ins: "
+                         f"{', '.join(BUILTINS)})")
+    return copy.deepcopy(BUILTINS[name])
+
+
+def _layout(p: dict[str, Any]) -> tuple[list[dict], list[dict], dict[str, int]]:
+    """Compartments (flow order) and branches of the loop, with the branch index by role."""
+    pools, organs = p["pools"], p["organs"]
+    comps = [("left_heart", pools["left_heart"]), ("arteries", pools["arteries"])]
+    comps += [(k, o["volume"]) for k, o in organs.items()]
+    comps += [("veins", pools["veins"]), ("right_heart", pools["right_heart"]),
+              ("pulmonary_arteries", pools["pulmonary_arteries"]),
+              ("pulmonary_veins", pools["pulmonary_veins"])]
+    idx = {name: i for i, (name, _) in enumerate(comps)}
+    b = p["blood"]
+    cap = b["hemoglobin"] * b["hufner"] * 1e3 * ML_O2           # mol/m³
+    alpha = b["solubility"] * 10.0 * 1e3 * ML_O2 / MMHG         # mol m⁻³ Pa⁻¹
+    c = []
+    for name, vol in comps:
+        entry: dict[str, Any] = {"name": name, "volume": vol * 1e-3,
+                                 "initial_po2": (95.0 if name in ("left_heart", "arteries",
+                                                                  "pulmonary_veins") else 40.0)
+                                 * MMHG}
+        if name in organs:
+            entry["consumption"] = {"kind": "michaelis-menten",
+                                    "vmax": organs[name]["vo2"] / 60.0 * ML_O2,
+                                    "km": p["km"] * MMHG}
+        c.append(entry)
+    lungs = p["lungs"]
+    br = [("ejection_left", "left_heart", "arteries", None)]
+    br += [(f"{k}_in", "arteries", k, None) for k in organs]
+    br += [(f"{k}_out", k, "veins", None) for k in organs]
+    br += [("venous_return", "veins", "right_heart", None),
+           ("ejection_right", "right_heart", "pulmonary_arteries", None),
+           ("pulmonary_capillaries", "pulmonary_arteries", "pulmonary_veins",
+            {"alveolar_po2": lungs["alveolar_po2"] * MMHG,
+             "diffusing_capacity": lungs["diffusing_capacity"] / 60.0 * ML_O2 / MMHG}),
+           ("shunt", "pulmonary_arteries", "pulmonary_veins", None),
+           ("filling_left", "pulmonary_veins", "left_heart", None)]
+    branches = [{"name": n, "from": idx[f], "to": idx[t], **({"lungs": lg} if lg else {})}
+                for n, f, t, lg in br]
+    spec = {"compartments": c, "branches": branches,
+            "binding": {"kind": "hill", "solubility": alpha, "p50": b["p50"] * MMHG,
+                        "n": b["hill_n"], "capacity": cap}}
+    return spec["compartments"], [spec["binding"], *branches], idx
+
+
+def flow_table(p: dict[str, Any]) -> np.ndarray:
+    """Branch flows (m³/s) for each step of one cycle: half-sine ejections of both ventricles
+    (duration `ejection_time`), steady organ flows, venous return, pulmonary and filling flows.
+    The ejection is scaled so that its discrete cycle mean equals the cardiac output exactly
+    (periodic chamber volumes, which the core checks)."""
+    steps = round(p["period"] / p["dt"])
+    if not math.isclose(steps * p["dt"], p["period"], rel_tol=1e-12):
+        raise ModelError(f"closed loop: period {p['period']} s is not a whole number of "
+                         f"steps dt = {p['dt']} s")
+    q = p["cardiac_output"] * 1e-3 / 60.0
+    t = (np.arange(steps) + 0.5) * p["dt"]
+    shape = np.where(t < p["ejection_time"], np.sin(np.pi * t / p["ejection_time"]), 0.0)
+    ej = q * shape / shape.mean()
+    organs = p["organs"]
+    frac = np.array([o["flow_fraction"] for o in organs.values()])
+    if not math.isclose(frac.sum(), 1.0, rel_tol=1e-9):
+        raise ModelError(f"closed loop: organ flow fractions sum to {frac.sum()}, not 1")
+    shunt = p["lungs"]["shunt_fraction"]
+    cols = [ej, *[np.full(steps, q * f) for f in frac], *[np.full(steps, q * f) for f in frac],
+            np.full(steps, q), ej, np.full(steps, q * (1 - shunt)), np.full(steps, q * shunt),
+            np.full(steps, q)]
+    return np.column_stack(cols)
+
+
+def balance_flows(flows: np.ndarray, from_: list[int], to: list[int], n: int) -> np.ndarray:
+    """The flow table with the smallest constant per-branch corrections that make every
+    compartment's net inflow over the cycle vanish (least norm: δ = Aᵀ(AAᵀ)⁺(−net), A the
+    compartment–branch incidence). Flows sampled from a flow solution (e.g. the native closed
+    loop on branch `chambers`) close their volumes only to the solver's discretisation and
+    periodicity error; the core needs periodic volumes (docs/oxygen.md)."""
+    a = np.zeros((n, flows.shape[1]))
+    for b, (f, t) in enumerate(zip(from_, to)):
+        a[f, b] -= 1.0
+        a[t, b] += 1.0
+    net = a @ flows.mean(axis=0)
+    delta = a.T @ (np.linalg.pinv(a @ a.T) @ (-net))
+    return flows + delta
+
+
+def heart_model(p: dict[str, Any]) -> dict[str, Any]:
+    """A native closed-loop circulation (docs/physics.md §1.8: `chamber` and `valve` elements,
+    no boundary condition) whose flows drive the O2 loop: left and right ventricles (linear
+    elastance, piecewise-cosine activation), four tanh valves, systemic arteries (1.5 mL/mmHg),
+    the organs as parallel resistances sharing the cardiac output by `flow_fraction` at a mean
+    arterial pressure of ~93 mmHg, systemic veins (100 mL/mmHg), pulmonary arteries, lungs,
+    pulmonary veins. Chamber parameters are the `chambers` branch's minimal closed loop (LV) and
+    a right ventricle with a fifth of its active elastance; SI units. Measured (30 cycles, 1 ms):
+    cardiac output 4.97 L/min, arterial pressure 86/112 mmHg, pulmonary arterial mean 20 mmHg."""
+    T = p["period"]
+    q = p["cardiac_output"] * 1e-3 / 60.0
+    r_sys = 93.0 * MMHG / q
+    scale = T / 0.8
+
+    def act() -> dict[str, Any]:
+        return {"kind": "piecewise-cosine", "contract_start": 0.0, "relax_start": 0.25 * scale,
+                "contract_duration": 0.25 * scale, "relax_duration": 0.2 * scale}
+
+    def chamber(e_max: float, e_pass: float) -> dict[str, Any]:
+        return {"law": "linear", "max_elastance": e_max, "passive_elastance": e_pass,
+                "rest_volume": 1e-5, "period": T, "initial_volume": 0.6e-3, "activation": act()}
+
+    valve = {"law": "tanh", "min_resistance": 1.0e6, "max_resistance": 1.0e11, "steepness": 0.05}
+
+    def lumped(name: str, a: str, b: str, **values: float) -> dict[str, Any]:
+        return {"name": name, "from": a, "to": b, "arrangement": "RCL", "lumped": values}
+
+    v = [{"name": "lv", "from": "mitral_out", "to": "lv_out", "chamber": chamber(3.3e8, 1.2e7)},
+         {"name": "aortic_valve", "from": "lv_out", "to": "aorta_in", "valve": valve},
+         lumped("arteries", "aorta_in", "arteries_out", resistance=1e6, capacitance=1.5e-8,
+                inductance=1e5)]
+    v += [lumped(k, "arteries_out", "veins_in", resistance=r_sys / o["flow_fraction"])
+          for k, o in p["organs"].items()]
+    v += [lumped("veins", "veins_in", "tric_in", resistance=1e6, capacitance=7.5e-7),
+          {"name": "tricuspid_valve", "from": "tric_in", "to": "rv_in", "valve": valve},
+          {"name": "rv", "from": "rv_in", "to": "rv_out", "chamber": chamber(0.6e8, 0.6e7)},
+          {"name": "pulmonary_valve", "from": "rv_out", "to": "pa_in", "valve": valve},
+          lumped("pulmonary_arteries", "pa_in", "pa_out", resistance=1e6, capacitance=2.25e-8),
+          lumped("lungs", "pa_out", "pv_in", resistance=1.2e7),
+          lumped("pulmonary_veins", "pv_in", "mitral_in", resistance=1e6, capacitance=6e-8),
+          {"name": "mitral_valve", "from": "mitral_in", "to": "mitral_out", "valve": valve}]
+    fdt = p.get("flow_dt", 1e-3)
+    return {"name": "closed-loop-heart", "units": "SI", "period": T, "vessels": v,
+            "boundary_conditions": {},
+            "simulation": {"cycles": 30, "dt": fdt, "method": "generalized-alpha",
+                           "output": {"cycles": "last", "every": fdt}}}
+
+
+def heart_flows(p: dict[str, Any], result: Any = None) -> np.ndarray:
+    """The O2 loop's branch flows from a run of :func:`heart_model` (last cycle): each recorded
+    interval's trapezoidal mean flow, averaged over blocks of dt/flow_dt intervals; the shunt
+    takes `shunt_fraction` of the lungs' flow."""
+    from oxyline.run import simulate
+
+    res = result if result is not None else simulate(heart_model(p))
+    k = round(p["dt"] / p.get("flow_dt", 1e-3))
+
+    def q(name: str) -> np.ndarray:
+        x = np.asarray(res.vessel(name).flow_in)
+        mid = 0.5 * (x[1:] + x[:-1])
+        return mid.reshape(-1, k).mean(axis=1)
+
+    organs = list(p["organs"])
+    lungs, shunt = q("lungs"), p["lungs"]["shunt_fraction"]
+    cols = [q("aortic_valve"), *[q(o) for o in organs], *[q(o) for o in organs],
+            q("tricuspid_valve"), q("pulmonary_valve"), (1 - shunt) * lungs, shunt * lungs,
+            q("mitral_valve")]
+    return np.column_stack(cols)
+
+
+@dataclass
+class ClosedLoopO2Result:
+    """The recorded last (periodic) cycle: arrays [step, compartment] or [step, branch]."""
+
+    compartments: list[str]
+    branches: list[str]
+    time: np.ndarray
+    flow: np.ndarray
+    volume: np.ndarray
+    total: np.ndarray
+    po2: np.ndarray          # mmHg
+    saturation: np.ndarray
+    vo2: np.ndarray          # mol/s per compartment
+    flux: np.ndarray         # mol/s per branch
+    uptake: np.ndarray       # mol/s per branch (lungs)
+    amount: np.ndarray       # mol in the loop at each step end
+    amount_start: float
+    dt: float
+    cycles: int
+    periodic_error: float
+
+    def _c(self, name: str) -> int:
+        return self.compartments.index(name)
+
+    def _b(self, name: str) -> int:
+        return self.branches.index(name)
+
+    def flow_weighted(self, var: np.ndarray, branch: str, compartment: str) -> float:
+        """Cycle mean of a compartment variable weighted by the flow leaving it by `branch`."""
+        q = self.flow[:, self._b(branch)]
+        return float(np.sum(q * var[:, self._c(compartment)]) / np.sum(q))
+
+    def summary(self) -> dict[str, Any]:
+        """Arterial (left-heart ejection) and mixed-venous (right-heart ejection) PO2 and
+        saturation, flow-weighted over the cycle; VO2 per organ and in total (mL/min); cardiac
+        output (L/min); Fick's residual |VO2 − CO (CaO2 − CvO2)| / VO2 and the largest per-step
+        mass-balance residual of the loop relative to its O2 amount."""
+        to_ml_min = 60.0 / ML_O2
+        vo2 = {n: float(self.vo2[:, i].mean()) * to_ml_min
+               for i, n in enumerate(self.compartments) if np.any(self.vo2[:, i])}
+        total_vo2 = float(self.vo2.sum(axis=1).mean())
+        co = float(self.flow[:, self._b("ejection_left")].mean())
+        ca = self.flow_weighted(self.total, "ejection_left", "left_heart")
+        cv = self.flow_weighted(self.total, "ejection_right", "right_heart")
+        fick = abs(total_vo2 - co * (ca - cv)) / total_vo2
+        n = np.concatenate([[self.amount_start], self.amount])
+        rate = self.uptake.sum(axis=1) - self.vo2.sum(axis=1)
+        mass = float(np.max(np.abs(np.diff(n) - self.dt * rate)) / np.max(n))
+        return {
+            "SaO2": self.flow_weighted(self.saturation, "ejection_left", "left_heart"),
+            "SvO2": self.flow_weighted(self.saturation, "ejection_right", "right_heart"),
+            "PaO2": self.flow_weighted(self.po2, "ejection_left", "left_heart"),
+            "PvO2": self.flow_weighted(self.po2, "ejection_right", "right_heart"),
+            "CaO2": ca / ML_O2 * 1e-3, "CvO2": cv / ML_O2 * 1e-3,      # mL O2 per L blood
+            "VO2": total_vo2 * to_ml_min, "VO2_organs": vo2,
+            "lung_uptake": float(self.uptake.sum(axis=1).mean()) * to_ml_min,
+            "cardiac_output": co * 6e4,
+            "fick_residual": fick, "mass_balance_residual": mass,
+            "cycles": self.cycles, "periodic_error": self.periodic_error,
+        }
+
+
+def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int = 200,
+                tol: float = 1e-13, flows: np.ndarray | str | None = None) -> ClosedLoopO2Result:
+    """Runs O2 around the closed loop to its periodic steady state (the core's Newton shooting
+    on the cycle map, then plain cycles until the start-of-cycle contents repeat to `tol`).
+    `flows` (steps × branches, m³/s, one row per step of `dt`, branches in the order of
+    ``result.branches``) replaces the prescribed table, e.g. flows sampled from a flow run; it
+    is balanced by :func:`balance_flows` first. ``flows="heart"`` takes them from a run of the
+    native closed-loop heart (:func:`heart_model`, :func:`heart_flows`)."""
+    p = load(model) if isinstance(model, str) else model
+    comps, (binding, *branches), _ = _layout(p)
+    if flows is None:
+        flows = flow_table(p)
+    else:
+        if isinstance(flows, str):
+            if flows != "heart":
+                raise ModelError(f"closed loop: flows must be a table or 'heart', got {flows!r}")
+            flows = heart_flows(p)
+        flows = np.asarray(flows, dtype=float)
+        if flows.ndim != 2 or flows.shape[1] != len(branches):
+            raise ModelError(f"closed loop: flows must be (steps, {len(branches)}) for the "
+                             f"branches {[b['name'] for b in branches]}, got {flows.shape}")
+        flows = balance_flows(flows, [b["from"] for b in branches], [b["to"] for b in branches],
+                              len(comps))
+    spec = {"compartments": comps, "branches": branches, "binding": binding}
+    out = _core.closed_loop_o2(json.dumps(spec), np.ascontiguousarray(flows).ravel(),
+                               float(p["dt"]), int(max_cycles), float(tol))
+    steps, nc, nb = flows.shape[0], len(comps), len(branches)
+    shape_c, shape_b = (steps, nc), (steps, nb)
+    return ClosedLoopO2Result(
+        compartments=[c["name"] for c in comps], branches=[b["name"] for b in branches],
+        time=np.asarray(out["time"]), flow=flows,
+        volume=np.asarray(out["volume"]).reshape(shape_c),
+        total=np.asarray(out["total"]).reshape(shape_c),
+        po2=np.asarray(out["po2"]).reshape(shape_c) / MMHG,
+        saturation=np.asarray(out["saturation"]).reshape(shape_c),
+        vo2=np.asarray(out["vo2"]).reshape(shape_c),
+        flux=np.asarray(out["flux"]).reshape(shape_b),
+        uptake=np.asarray(out["uptake"]).reshape(shape_b),
+        amount=np.asarray(out["amount"]), amount_start=float(out["amount_start"]),
+        dt=float(p["dt"]), cycles=int(out["cycles"]), periodic_error=float(out["periodic_error"]))

@@ -1,0 +1,170 @@
+//! Activation functions φ(t) ∈ [0, 1] of heart chambers (docs/physics.md §1.8), as
+//! svZeroDSolver defines them (time within the cycle by `fmod`).
+
+use super::in_cycle;
+use crate::error::{Error, Result};
+use std::f64::consts::PI;
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum Activation {
+    /// 0 before `t_active`, then ½(1 − cos(2π (t − t_active)/t_twitch)) for one twitch.
+    HalfCosine { t_active: f64, t_twitch: f64 },
+    /// A half-cosine rise of `contract_duration` from `contract_start`, a half-cosine fall of
+    /// `relax_duration` from `relax_start`, 0 otherwise.
+    PiecewiseCosine {
+        contract_start: f64,
+        relax_start: f64,
+        contract_duration: f64,
+        relax_duration: f64,
+    },
+    /// The two-Hill function g₁/(1 + g₁) · 1/(1 + g₂), g_i = (t_s/τ_i)^{m_i}, t_s the time
+    /// since `t_shift`, normalised to a peak of 1 over the cycle.
+    TwoHill {
+        t_shift: f64,
+        tau_1: f64,
+        tau_2: f64,
+        m1: f64,
+        m2: f64,
+        /// 1 / (the peak), found as svZeroDSolver does (grid of 1e-5 s over the period).
+        norm: f64,
+    },
+}
+
+impl Activation {
+    /// A two-Hill activation normalised over `period`; a non-positive peak is a model error.
+    pub fn two_hill(
+        element: &str,
+        period: f64,
+        [t_shift, tau_1, tau_2, m1, m2]: [f64; 5],
+    ) -> Result<Self> {
+        let raw = |t: f64| {
+            let g1 = (t / tau_1).powf(m1);
+            let g2 = (t / tau_2).powf(m2);
+            g1 / (1.0 + g1) / (1.0 + g2)
+        };
+        // svZeroDSolver's grid: t = 0, 1e-5, ... < period (accumulated as it does)
+        let mut peak = 0.0f64;
+        let mut t = 0.0;
+        while t < period {
+            peak = peak.max(raw(t));
+            t += 1e-5;
+        }
+        if !(peak > 0.0 && peak.is_finite()) {
+            return Err(Error::model(
+                element,
+                format!("two_hill activation has peak {peak}; check tau_1, tau_2 > 0"),
+            ));
+        }
+        Ok(Activation::TwoHill {
+            t_shift,
+            tau_1,
+            tau_2,
+            m1,
+            m2,
+            norm: 1.0 / peak,
+        })
+    }
+
+    /// φ(t) for cardiac period `period`.
+    pub fn eval(&self, t: f64, period: f64) -> f64 {
+        match *self {
+            Activation::HalfCosine { t_active, t_twitch } => {
+                let tc = in_cycle(t, period);
+                let contract = if tc >= t_active { tc - t_active } else { 0.0 };
+                if contract <= t_twitch {
+                    -0.5 * (2.0 * PI * contract / t_twitch).cos() + 0.5
+                } else {
+                    0.0
+                }
+            }
+            Activation::PiecewiseCosine {
+                contract_start,
+                relax_start,
+                contract_duration,
+                relax_duration,
+            } => {
+                let c = (t - contract_start) % period;
+                if (0.0..contract_duration).contains(&c) {
+                    return 0.5 * (1.0 - (PI * c / contract_duration).cos());
+                }
+                let r = (t - relax_start) % period;
+                if (0.0..relax_duration).contains(&r) {
+                    0.5 * (1.0 + (PI * r / relax_duration).cos())
+                } else {
+                    0.0
+                }
+            }
+            Activation::TwoHill {
+                t_shift,
+                tau_1,
+                tau_2,
+                m1,
+                m2,
+                norm,
+            } => {
+                let tc = in_cycle(t, period);
+                let mut ts = (tc - t_shift) % period;
+                if ts < 0.0 {
+                    ts += period;
+                }
+                let g1 = (ts / tau_1).powf(m1);
+                let g2 = (ts / tau_2).powf(m2);
+                norm * g1 / (1.0 + g1) / (1.0 + g2)
+            }
+        }
+    }
+
+    /// Phase ends within the cycle (for RK4's stability sampling).
+    pub fn breakpoints(&self) -> Vec<f64> {
+        match *self {
+            Activation::HalfCosine { t_active, t_twitch } => {
+                vec![t_active, t_active + 0.5 * t_twitch, t_active + t_twitch]
+            }
+            Activation::PiecewiseCosine {
+                contract_start,
+                relax_start,
+                contract_duration,
+                relax_duration,
+            } => vec![
+                contract_start,
+                contract_start + contract_duration,
+                relax_start,
+                relax_start + relax_duration,
+            ],
+            Activation::TwoHill { t_shift, .. } => vec![t_shift],
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn activations_stay_in_unit_range_and_peak_at_one() {
+        let period = 0.8;
+        let acts = [
+            Activation::HalfCosine {
+                t_active: 0.2,
+                t_twitch: 0.3,
+            },
+            Activation::PiecewiseCosine {
+                contract_start: 0.2,
+                relax_start: 0.3,
+                contract_duration: 0.1,
+                relax_duration: 0.3,
+            },
+            Activation::two_hill("a", period, [0.2, 0.18, 0.31, 1.32, 27.4]).unwrap(),
+        ];
+        for a in &acts {
+            let v: Vec<f64> = (0..8000).map(|k| a.eval(k as f64 * 1e-4, period)).collect();
+            let max = v.iter().copied().fold(f64::MIN, f64::max);
+            assert!(
+                v.iter().all(|&x| (-1e-12..=1.0 + 1e-12).contains(&x)),
+                "{a:?}"
+            );
+            // the 1e-4 s sampling misses the peak by at most O((1e-4/width)²)
+            assert!((max - 1.0).abs() < 1e-3, "{a:?}: {max}");
+        }
+    }
+}

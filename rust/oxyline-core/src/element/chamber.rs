@@ -1,0 +1,110 @@
+//! Heart chambers with a time-varying elastance (docs/physics.md §1.8). The chamber's volume V
+//! is an unknown of its own; the chamber pressure P (its inlet node) follows
+//!
+//!   P = E(t) (V − V_rest(t)),   dV/dt = Q_in − Q_out,
+//!
+//! and an optional inductor L between the chamber and its outlet node. The volume row carries
+//! the inlet node's flow balance (so the mass matrix stays diagonal); the node's own row is
+//! P − E(t) V + E(t) V_rest(t) = 0, linear in the state, its coefficient time-varying.
+//!
+//! * `elastance-inductor` (svZeroDSolver's `ChamberElastanceInductor`): E = E_min +
+//!   (E_max − E_min) φ, V_rest = (1 − φ)(V_rd − V_rs) + V_rs, φ the half-cosine activation;
+//! * `linear` (svZeroDSolver's `LinearElastanceChamber`): E = E_pass + E_max φ, V_rest fixed.
+
+use super::Element;
+use super::activation::Activation;
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum ElastanceLaw {
+    ElastanceInductor {
+        e_max: f64,
+        e_min: f64,
+        v_rest_diastole: f64,
+        v_rest_systole: f64,
+    },
+    Linear {
+        e_max: f64,
+        e_pass: f64,
+        v_rest: f64,
+    },
+}
+
+/// E(t) and V_rest(t) of a chamber.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Elastance {
+    pub law: ElastanceLaw,
+    pub activation: Activation,
+    pub period: f64,
+}
+
+impl Elastance {
+    /// (E, V_rest) at time t.
+    pub fn at(&self, t: f64) -> (f64, f64) {
+        let phi = self.activation.eval(t, self.period);
+        match self.law {
+            ElastanceLaw::ElastanceInductor {
+                e_max,
+                e_min,
+                v_rest_diastole,
+                v_rest_systole,
+            } => (
+                (e_max - e_min) * phi + e_min,
+                (1.0 - phi) * (v_rest_diastole - v_rest_systole) + v_rest_systole,
+            ),
+            ElastanceLaw::Linear {
+                e_max,
+                e_pass,
+                v_rest,
+            } => (e_pass + e_max * phi, v_rest),
+        }
+    }
+}
+
+/// The chamber's pressure row: unknowns `pressure` (the chamber node) and `volume`.
+#[derive(Debug, Clone)]
+pub struct Chamber {
+    pub name: String,
+    pub elastance: Elastance,
+    rows: [usize; 1],
+    pattern: [(usize, usize); 1],
+}
+
+impl Chamber {
+    pub fn new(name: String, elastance: Elastance, pressure: usize, volume: usize) -> Self {
+        Chamber {
+            name,
+            elastance,
+            rows: [pressure],
+            pattern: [(pressure, volume)],
+        }
+    }
+}
+
+impl Element for Chamber {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn rows(&self) -> &[usize] {
+        &self.rows
+    }
+    fn pattern(&self) -> &[(usize, usize)] {
+        &self.pattern
+    }
+    fn residual(&self, t: f64, y: &[f64], c: &mut [f64]) {
+        let (e, v_rest) = self.elastance.at(t);
+        // svZeroDSolver's split: −E V in F, E V_rest in C (same sum up to round-off)
+        c[0] = -e * y[self.pattern[0].1] + e * v_rest;
+    }
+    fn jacobian(&self, t: f64, _y: &[f64], j: &mut [f64]) {
+        j[0] = -self.elastance.at(t).0;
+    }
+    fn is_nonlinear(&self) -> bool {
+        false
+    }
+    fn period(&self) -> Option<f64> {
+        Some(self.elastance.period)
+    }
+    fn breakpoints(&self) -> Vec<f64> {
+        self.elastance.activation.breakpoints()
+    }
+}

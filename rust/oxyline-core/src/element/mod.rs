@@ -1,0 +1,51 @@
+//! Smooth nonlinear and time-varying circuit elements with off-diagonal couplings: heart
+//! chambers with a time-varying elastance E(t) and valves with a pressure-dependent resistance
+//! (docs/physics.md §1.8, docs/svzerod.md "Chambers and valves").
+//!
+//! An element adds a residual contribution c(y, t) to some rows of the circuit DAE
+//! E ẏ + F y + c(y) + c_el(y, t) = f(t) and supplies its Jacobian ∂c_el/∂y on a fixed sparsity
+//! pattern, as svZeroDSolver's blocks do with their `C` vector and `dC_dy` matrix (they also
+//! allow ∂c/∂ẏ; no element here needs it: every ẏ term stays on the constant diagonal E).
+//! The integrators treat a circuit without elements exactly as before (generalized-α factorises
+//! once, RK4 eliminates a constant algebraic part): elements only switch on the per-step
+//! (time-varying) or per-iteration (nonlinear) refactorisation.
+
+pub mod activation;
+pub mod chamber;
+pub mod valve;
+
+use std::fmt::Debug;
+
+/// A circuit element that is nonlinear in the state or varies in time. Row and column indices
+/// are unknowns of the assembled DAE.
+pub trait Element: Debug + Send + Sync {
+    /// The element's name (for error messages).
+    fn name(&self) -> &str;
+    /// The rows it contributes to (c has one value per row, in this order).
+    fn rows(&self) -> &[usize];
+    /// The (row, column) entries of ∂c/∂y, in the order of [`Element::jacobian`].
+    fn pattern(&self) -> &[(usize, usize)];
+    /// c(y, t), one value per row of [`Element::rows`].
+    fn residual(&self, t: f64, y: &[f64], c: &mut [f64]);
+    /// ∂c/∂y at (y, t) in [`Element::pattern`] order.
+    fn jacobian(&self, t: f64, y: &[f64], j: &mut [f64]);
+    /// The Jacobian RK4's stability bound uses: the element in its stiffest state at time `t`
+    /// (e.g. a valve fully open). Default: the Jacobian at (y, t).
+    fn stiffest_jacobian(&self, t: f64, y: &[f64], j: &mut [f64]) {
+        self.jacobian(t, y, j);
+    }
+    /// c depends on the state other than linearly (Newton refactorises per iteration).
+    fn is_nonlinear(&self) -> bool;
+    /// The period of c's time dependence (None: c does not depend on time).
+    fn period(&self) -> Option<f64>;
+    /// Times within a period where the time law has a kink or an extreme (sampled by RK4's
+    /// stability bound besides an even grid).
+    fn breakpoints(&self) -> Vec<f64> {
+        Vec::new()
+    }
+}
+
+/// Time within the cycle, as svZeroDSolver's `fmod(t, T)`.
+pub(crate) fn in_cycle(t: f64, period: f64) -> f64 {
+    t % period
+}

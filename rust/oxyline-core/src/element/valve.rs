@@ -1,0 +1,159 @@
+//! Heart valves: a branch whose resistance depends on the pressure across it
+//! (docs/physics.md §1.8). The branch row reads −P_from + P_to + R(P_to − P_from) Q = 0 with
+//!
+//! * `tanh`: R = (R_max + R_min)/2 + (R_max − R_min)/2 · tanh(k (P_to − P_from)), a smooth
+//!   switch of steepness k (1/Pa) — svZeroDSolver's `ValveTanh`;
+//! * `piecewise`: R = R_min while P_to < P_from (open), else R_max — svZeroDSolver's
+//!   `PiecewiseValve`, whose Jacobian keeps only ∂c/∂Q = R (the jump's derivative is dropped,
+//!   as there).
+
+use super::Element;
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ValveLaw {
+    Tanh {
+        r_min: f64,
+        r_max: f64,
+        steepness: f64,
+    },
+    Piecewise {
+        r_min: f64,
+        r_max: f64,
+    },
+}
+
+impl ValveLaw {
+    /// R and ∂R/∂(P_to − P_from) at the pressure difference `dp` = P_to − P_from.
+    pub fn resistance(&self, dp: f64) -> (f64, f64) {
+        match *self {
+            ValveLaw::Tanh {
+                r_min,
+                r_max,
+                steepness,
+            } => {
+                let th = (steepness * dp).tanh();
+                let half = 0.5 * (r_max - r_min);
+                (
+                    0.5 * (r_max + r_min) + half * th,
+                    half * steepness * (1.0 - th * th),
+                )
+            }
+            ValveLaw::Piecewise { r_min, r_max } => (if dp < 0.0 { r_min } else { r_max }, 0.0),
+        }
+    }
+    pub fn r_min(&self) -> f64 {
+        match *self {
+            ValveLaw::Tanh { r_min, .. } | ValveLaw::Piecewise { r_min, .. } => r_min,
+        }
+    }
+}
+
+/// A valve on the branch whose flow is unknown `flow`, between pressure unknowns `from`, `to`.
+#[derive(Debug, Clone)]
+pub struct Valve {
+    pub name: String,
+    pub law: ValveLaw,
+    rows: [usize; 1],
+    /// (flow, flow), (flow, from), (flow, to)
+    pattern: [(usize, usize); 3],
+}
+
+impl Valve {
+    pub fn new(name: String, law: ValveLaw, from: usize, to: usize, flow: usize) -> Self {
+        Valve {
+            name,
+            law,
+            rows: [flow],
+            pattern: [(flow, flow), (flow, from), (flow, to)],
+        }
+    }
+    fn state(&self, y: &[f64]) -> (f64, f64) {
+        let [(q, _), (_, from), (_, to)] = self.pattern;
+        (y[q], y[to] - y[from])
+    }
+}
+
+impl Element for Valve {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn rows(&self) -> &[usize] {
+        &self.rows
+    }
+    fn pattern(&self) -> &[(usize, usize)] {
+        &self.pattern
+    }
+    fn residual(&self, _t: f64, y: &[f64], c: &mut [f64]) {
+        let (q, dp) = self.state(y);
+        c[0] = self.law.resistance(dp).0 * q;
+    }
+    fn jacobian(&self, _t: f64, y: &[f64], j: &mut [f64]) {
+        let (q, dp) = self.state(y);
+        let (r, dr) = self.law.resistance(dp);
+        j[0] = r;
+        j[1] = -q * dr;
+        j[2] = q * dr;
+    }
+    /// Fully open (R = R_min), with no switching term: the smallest resistance gives the
+    /// fastest R–C time constants of the circuit around it.
+    fn stiffest_jacobian(&self, _t: f64, _y: &[f64], j: &mut [f64]) {
+        j[0] = self.law.r_min();
+        j[1] = 0.0;
+        j[2] = 0.0;
+    }
+    fn is_nonlinear(&self) -> bool {
+        true
+    }
+    fn period(&self) -> Option<f64> {
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tanh_jacobian_is_the_derivative_of_the_residual() {
+        // central differences of c = R(ΔP) Q, step 1e-6 of the scale: truncation O(h²)
+        let v = Valve::new(
+            "v".into(),
+            ValveLaw::Tanh {
+                r_min: 1e6,
+                r_max: 1e10,
+                steepness: 1e-2,
+            },
+            0,
+            1,
+            2,
+        );
+        let y = [1.0e4, 1.0e4 + 37.0, 3e-5];
+        let mut j = [0.0; 3];
+        v.jacobian(0.0, &y, &mut j);
+        for (k, (_, col)) in v.pattern().iter().enumerate() {
+            let h = 1e-6 * y[*col].abs().max(1.0);
+            let (mut a, mut b) = (y, y);
+            a[*col] += h;
+            b[*col] -= h;
+            let (mut ca, mut cb) = ([0.0], [0.0]);
+            v.residual(0.0, &a, &mut ca);
+            v.residual(0.0, &b, &mut cb);
+            let fd = (ca[0] - cb[0]) / (2.0 * h);
+            assert!(
+                (fd - j[k]).abs() <= 1e-6 * j[k].abs().max(1e-3),
+                "{k}: {fd} vs {}",
+                j[k]
+            );
+        }
+    }
+
+    #[test]
+    fn piecewise_valve_switches_at_zero_pressure_difference() {
+        let law = ValveLaw::Piecewise {
+            r_min: 1.0,
+            r_max: 1e3,
+        };
+        assert_eq!(law.resistance(-1e-9).0, 1.0);
+        assert_eq!(law.resistance(0.0).0, 1e3);
+    }
+}

@@ -1,0 +1,138 @@
+"""Oxygen around a closed loop (issue 14 item 4; docs/oxygen.md "Oxygen around a closed loop"):
+Fick's principle and the loop's exact mass balance at periodic steady state, the lung's
+complete-equilibration limit against the Hill curve, and resting physiology in documented
+ranges. Coarse steps (4 ms) keep the tests fast; the balances hold for any step."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import oxyline
+from oxyline import closed_loop
+from oxyline.closed_loop import ML_O2
+
+
+def _model(**changes: object) -> dict:
+    p = closed_loop.load("closed-loop-o2")
+    p["dt"] = 4e-3
+    p.update(changes)
+    return p
+
+
+@pytest.fixture(scope="module")
+def rest() -> closed_loop.ClosedLoopO2Result:
+    return closed_loop.simulate_o2(_model())
+
+
+def test_fick_principle_holds_at_periodic_steady_state(rest: closed_loop.ClosedLoopO2Result) -> None:
+    """Σ VO2 = CO (CaO2 − CvO2) with flow-weighted contents: CaO2 of the blood the left heart
+    ejects, CvO2 of the blood the right heart ejects (mixed venous), over the last cycle.
+    Between the two ejections the systemic compartments store nothing over a periodic cycle;
+    the periodic state is reached to ~1e-13, so Fick holds to 1e-9."""
+    r = rest
+    q_l = r.flow[:, r.branches.index("ejection_left")]
+    q_r = r.flow[:, r.branches.index("ejection_right")]
+    c_l = r.total[:, r.compartments.index("left_heart")]
+    c_r = r.total[:, r.compartments.index("right_heart")]
+    co = q_l.mean()
+    assert q_r.mean() == pytest.approx(co, rel=1e-12)
+    ca, cv = np.sum(q_l * c_l) / np.sum(q_l), np.sum(q_r * c_r) / np.sum(q_r)
+    vo2 = r.vo2.sum(axis=1).mean()
+    assert abs(vo2 - co * (ca - cv)) <= 1e-9 * vo2
+    # and the lungs take up what the organs consume
+    assert r.uptake.sum(axis=1).mean() == pytest.approx(vo2, rel=1e-9)
+
+
+def test_loop_mass_balance_is_exact_per_step(rest: closed_loop.ClosedLoopO2Result) -> None:
+    """No inlet: the loop's O2 changes only by lung uptake − organ consumption, each step."""
+    r = rest
+    n = np.concatenate([[r.amount_start], r.amount])
+    rate = r.uptake.sum(axis=1) - r.vo2.sum(axis=1)
+    assert np.max(np.abs(np.diff(n) - r.dt * rate)) <= 1e-13 * n.max()
+    # the amount is what the compartments hold
+    assert np.allclose(r.amount, np.sum(r.volume * r.total, axis=1), rtol=1e-14)
+
+
+def test_resting_physiology_in_documented_ranges(rest: closed_loop.ClosedLoopO2Result) -> None:
+    """Resting adult (docs/oxygen.md): SaO2 95–98 %, SvO2 70–75 %, VO2 ≈ 250 mL/min (240–260),
+    PaO2 85–100 mmHg, PvO2 35–45 mmHg, coronary venous saturation 25–45 % (high extraction)."""
+    s = rest.summary()
+    assert 0.95 <= s["SaO2"] <= 0.98
+    assert 0.70 <= s["SvO2"] <= 0.75
+    assert 240 <= s["VO2"] <= 260
+    assert 85 <= s["PaO2"] <= 100 and 35 <= s["PvO2"] <= 45
+    heart = rest.saturation[:, rest.compartments.index("heart")].mean()
+    assert 0.25 <= heart <= 0.45
+    assert s["cardiac_output"] == pytest.approx(5.0, rel=1e-12)
+    assert sum(s["VO2_organs"].values()) == pytest.approx(s["VO2"], rel=1e-12)
+
+
+def test_complete_equilibration_gives_the_alveolar_hill_saturation() -> None:
+    """With no shunt and a diffusing capacity 1000× resting, end-capillary blood is at the
+    alveolar PO2: SaO2 = P_Aⁿ/(P_Aⁿ + P50ⁿ) (Hill), PaO2 = P_A."""
+    p = _model()
+    p["lungs"].update(shunt_fraction=0.0, diffusing_capacity=21000.0)
+    s = closed_loop.simulate_o2(p).summary()
+    pa, p50, n = p["lungs"]["alveolar_po2"], p["blood"]["p50"], p["blood"]["hill_n"]
+    assert s["SaO2"] == pytest.approx(pa**n / (pa**n + p50**n), rel=1e-9)
+    assert s["PaO2"] == pytest.approx(pa, rel=1e-9)
+
+
+def test_fixed_vo2_is_consumed_exactly() -> None:
+    """Fixed-rate organs (vmax with a vanishing km): the total VO2 tends to Σ vmax."""
+    p = _model(km=1e-6)
+    s = closed_loop.simulate_o2(p).summary()
+    target = sum(o["vo2"] for o in p["organs"].values())
+    assert s["VO2"] == pytest.approx(target, rel=1e-6)
+    assert s["fick_residual"] <= 1e-9
+    assert ML_O2 > 0
+
+
+def test_bad_input_names_the_element() -> None:
+    p = _model()
+    p["organs"]["brain"]["volume"] = -1.0
+    with pytest.raises(oxyline.ModelError, match="compartment 'brain'.*volume"):
+        closed_loop.simulate_o2(p)
+    p = _model()
+    p["organs"]["brain"]["flow_fraction"] = 0.5
+    with pytest.raises(oxyline.ModelError, match="flow fractions"):
+        closed_loop.simulate_o2(p)
+    with pytest.raises(oxyline.ModelError, match="built-in"):
+        closed_loop.load("no-such-loop")
+
+
+def test_external_flow_table_is_balanced_and_used() -> None:
+    """A flow table from elsewhere (e.g. a flow run) with small imbalances: the least-norm
+    constant corrections close every compartment's volume over the cycle, and the run then
+    satisfies Fick's principle as with the built-in table."""
+    p = _model()
+    base = closed_loop.flow_table(p)
+    rng = np.random.default_rng(1)
+    noisy = base * (1 + 1e-4 * rng.standard_normal(base.shape))
+    res = closed_loop.simulate_o2(p, flows=noisy)
+    comps, (_, *branches), _ = closed_loop._layout(p)
+    net = np.zeros(len(comps))
+    for b, br in enumerate(branches):
+        net[br["from"]] -= res.flow[:, b].sum()
+        net[br["to"]] += res.flow[:, b].sum()
+    assert np.max(np.abs(net)) <= 1e-12 * base.sum(axis=0).max()
+    assert np.max(np.abs(res.flow - noisy)) <= 1e-3 * base.max()  # small corrections only
+    assert res.summary()["fick_residual"] <= 1e-9
+    with pytest.raises(oxyline.ModelError, match="flows must be"):
+        closed_loop.simulate_o2(p, flows=base[:, :3])
+
+
+def test_heart_driven_loop_keeps_fick_and_the_physiology() -> None:
+    """Flows from the native closed-loop heart (chambers and valves, docs/physics.md §1.8) instead
+    of the prescribed table: the heart pumps the documented cardiac output (within 2 %), the
+    ventricles eject what they receive over the cycle, and Fick's principle, the loop's mass
+    balance and the resting ranges hold as with the prescribed flows."""
+    res = closed_loop.simulate_o2(_model(), flows="heart")
+    s = res.summary()
+    assert s["cardiac_output"] == pytest.approx(5.0, rel=0.02)
+    assert s["fick_residual"] <= 1e-9 and s["mass_balance_residual"] <= 1e-13
+    assert 0.95 <= s["SaO2"] <= 0.98 and 0.70 <= s["SvO2"] <= 0.75 and 240 <= s["VO2"] <= 260
+    q = res.flow[:, res.branches.index("ejection_left")]
+    assert q.max() > 3 * q.mean()          # pulsatile ejection through the aortic valve
+    assert abs(q.min()) < 0.01 * q.max()   # the valve closes (tanh: a small leak only)

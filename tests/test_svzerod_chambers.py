@@ -1,0 +1,168 @@
+"""svZeroDSolver's chamber and valve cases through the drop-in (issue 14 items 1-2): the
+stored references (generalized-α, svZeroDSolver's own step) and svzerod run 20x finer (RK4),
+plus the element laws against closed forms."""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import oxyline
+from oxyline import svzerod as svz
+from tests.conftest import data_path
+
+#: cases the drop-in runs, with the svZeroDSolver variables it does not output and why
+CHAMBER_CASES = {
+    "valve_tanh": "valve_status (an internal variable of svZeroDSolver's newer ValveTanh "
+                  "whose equation is not in the published sources oxyline follows)",
+    "chamber_elastance_inductor": "valve_status, Vc (the chamber volume is an unknown of the "
+                                  "core but not yet an output column)",
+}
+
+
+def case(name: str) -> Any:
+    return data_path("svzerod", "cases", f"{name}.json")
+
+
+def reference(name: str) -> pd.DataFrame:
+    return pd.read_json(data_path("svzerod", "cases", "results", f"result_{name}.json"))
+
+
+def compare(actual: pd.DataFrame, expected: pd.DataFrame) -> dict[str, float]:
+    """max|a - e| / range(e) per variable present in both (variable-based frames), times
+    matched to 1e-9 s."""
+    out = {}
+    for name, e in expected.groupby("name", sort=False):
+        a = actual[actual["name"] == name]
+        if a.empty or name.startswith("valve_status:"):
+            continue
+        np.testing.assert_allclose(a["time"].to_numpy(), e["time"].to_numpy(), atol=1e-9)
+        ev, av = e["y"].to_numpy(float), a["y"].to_numpy(float)
+        scale = max(np.ptp(ev), 1e-12 * max(np.max(np.abs(ev)), 1.0), 1e-12)
+        out[name] = float(np.max(np.abs(av - ev)) / scale)
+    return out
+
+
+@pytest.mark.parametrize("name", list(CHAMBER_CASES))
+def test_generalized_alpha_matches_reference(name: str) -> None:
+    actual = svz.simulate(str(case(name)))
+    errors = compare(actual, reference(name))
+    missing = set(reference(name)["name"]) - set(errors)
+    # only the variables listed as not output are missing
+    assert all(m.split(":")[0] in ("valve_status", "Vc") for m in missing), missing
+    assert len(errors) >= 4
+    # 1e-6 of each variable's range: svZeroDSolver's Newton tolerance (1e-9 absolute) and the
+    # reference's 10 stored decimals, far below any modelling difference
+    assert max(errors.values()) <= 1e-6, errors
+
+
+def test_rk4_matches_svzerod_20x_finer() -> None:
+    """valve_tanh (chamber_elastance_inductor: see test_rk4_refuses_flow_driven_valve)."""
+    name = "valve_tanh"
+    svzerod = pytest.importorskip("svzerod")
+    cfg = json.loads(case(name).read_text())
+    fine = json.loads(json.dumps(cfg))
+    sp = fine["simulation_parameters"]
+    sp["number_of_time_pts_per_cardiac_cycle"] = (sp["number_of_time_pts_per_cardiac_cycle"] - 1) * 20 + 1
+    sp["output_interval"] = 20
+    errors = compare(svz.simulate(cfg, method="rk4"), svzerod.simulate(fine))
+    assert len(errors) >= 4
+    # discretisation error: 1.8e-4 of the inflow's range (1.6e-4 against svzerod 80x finer),
+    # at the valve's switch (tanh of steepness 100 over pressures of order 1, a width of 0.01):
+    # the drop-in's RK4 sub-step follows the stability bound and the table spacing, not the
+    # switch, which the other peer cases (1e-4) do not have
+    assert max(errors.values()) <= 5e-4, errors
+
+
+def test_rk4_refuses_flow_driven_valve() -> None:
+    """chamber_elastance_inductor: the chamber's outlet inductor drives the flow through valve1,
+    whose row R(ΔP)·Q = ΔP must then be solved for ΔP; in backflow ∂(R(ΔP)Q)/∂ΔP passes
+    through 0 and the algebraic part loses index 1. RK4 reports a solver error naming the time
+    (generalized-α, implicit in every unknown, runs it: test above)."""
+    with pytest.raises(oxyline.SolverError, match="singular"):
+        svz.simulate(str(case("chamber_elastance_inductor")), method="rk4")
+
+
+# ------------------------------------------------------------------------------------------
+# a native closed loop: left ventricle, valves, arteries, veins (no boundary condition)
+
+PERIOD = 0.8
+CLOSED_LOOP = {
+    "name": "minimal-closed-loop",
+    "units": "SI",
+    "period": PERIOD,
+    "vessels": [
+        {"name": "lv", "from": "mitral_out", "to": "lv_out",
+         "chamber": {"law": "linear", "max_elastance": 3.3e8, "passive_elastance": 1.2e7,
+                     "rest_volume": 1.0e-5, "period": PERIOD, "initial_volume": 1.0e-3,
+                     "activation": {"kind": "piecewise-cosine", "contract_start": 0.1,
+                                    "relax_start": 0.35, "contract_duration": 0.25,
+                                    "relax_duration": 0.2}}},
+        {"name": "aortic_valve", "from": "lv_out", "to": "aorta_in",
+         "valve": {"law": "tanh", "min_resistance": 1.0e6, "max_resistance": 1.0e11,
+                   "steepness": 0.05}},
+        {"name": "aorta", "from": "aorta_in", "to": "arteries_out", "arrangement": "RCL",
+         "lumped": {"resistance": 1.0e6, "capacitance": 1.5e-8, "inductance": 1.0e5}},
+        {"name": "systemic", "from": "arteries_out", "to": "veins_in", "arrangement": "RCL",
+         "lumped": {"resistance": 1.3e8}},
+        {"name": "veins", "from": "veins_in", "to": "mitral_in", "arrangement": "RCL",
+         "lumped": {"resistance": 1.0e6, "capacitance": 7.5e-7}},
+        {"name": "mitral_valve", "from": "mitral_in", "to": "mitral_out",
+         "valve": {"law": "tanh", "min_resistance": 1.0e6, "max_resistance": 1.0e11,
+                   "steepness": 0.05}},
+    ],
+    "boundary_conditions": {},
+    "simulation": {"cycles": 12, "output": {"every": 1e-3, "cycles": "all"}},
+}
+
+
+def test_readme_closed_loop_is_this_model() -> None:
+    """The README's minimal closed loop is the model these tests run."""
+    import re
+
+    from ruamel.yaml import YAML
+
+    from tests.conftest import REPO
+
+    text = (REPO / "README.md").read_text()
+    block = re.search(r"```yaml\n(name: minimal-closed-loop.*?)```", text, flags=re.DOTALL)
+    assert block is not None
+    readme = YAML(typ="safe", pure=True).load(block.group(1))  # YAML 1.2: 3.3e8 a number
+    assert readme["vessels"] == CLOSED_LOOP["vessels"]
+    assert readme["boundary_conditions"] == {}
+
+
+@pytest.mark.parametrize("method", ["generalized-alpha", "rk4"])
+def test_native_closed_loop_pumps_forward(method: str) -> None:
+    """No boundary condition: the heart drives the loop from the ventricle's initial volume.
+    Every flow balance is exact in the discrete equations of both integrators (a linear
+    invariant), so the blood volume stays the initial 1 L (core test);
+    the valves keep the flow forward (backflow below 2 % of the stroke's peak)."""
+    model = oxyline.load_model(CLOSED_LOOP)
+    res = oxyline.simulate(model, method=method, dt=1e-3 if method == "generalized-alpha" else None)
+    df = res.to_pandas()
+    assert len(df) > 0
+    aorta = df[df["name"] == "aorta"]
+    veins = df[df["name"] == "veins"]
+    # RCL: the capacitor pressure is P_in - R Q_in (C at the interior point)
+    v_art = 1.5e-8 * (aorta["pressure_in"].to_numpy() - 1.0e6 * aorta["flow_in"].to_numpy())
+    v_ven = 7.5e-7 * (veins["pressure_in"].to_numpy() - 1.0e6 * veins["flow_in"].to_numpy())
+    lv = df[df["name"] == "lv"]
+    # the chamber volume from its law at the recorded pressure is not exact at the output
+    # times for generalized-α (the law holds at the α_f level); use the flow balance instead:
+    # total volume = V_lv(0) + ∫(Q_in - Q_out) dt + ... is what conservation means, so check
+    # the rate: d/dt(V_art + V_ven) = Q_out,lv - Q_in,lv up to the step's time error
+    t = aorta["time"].to_numpy()
+    dv = np.gradient(v_art + v_ven, t)
+    net = lv["flow_out"].to_numpy() - lv["flow_in"].to_numpy()
+    peak = np.max(np.abs(lv["flow_out"].to_numpy()))
+    last = t >= t[-1] - PERIOD
+    # finite differences of 1 ms output: O(h²) of a smooth volume, 1e-2 of the peak flow
+    assert np.max(np.abs(dv - net)[last]) < 2e-2 * peak
+    av = df[df["name"] == "aortic_valve"]["flow_in"].to_numpy()[last]
+    assert av.max() > 1e-5  # m³/s: the heart ejects
+    assert av.min() > -0.02 * av.max()
