@@ -191,19 +191,26 @@ pub fn graetz_conductance(seg: &SegmentWall, d: f64, q_abs: f64) -> f64 {
     q_abs * (graetz_theta(xs(seg.x0)).ln() - graetz_theta(xs(seg.x1)).ln())
 }
 
-fn check(element: &str, key: &str, v: f64, allow_zero: bool) -> Result<()> {
+/// `v` if it is a finite number > 0 (or >= 0 with `allow_zero`), else a model error naming
+/// the element, what the value is (e.g. "wall k", "tissue wall thickness") and the value. The
+/// one check of the wall numbers of every closure and of the tissue wall.
+pub(crate) fn finite_number(element: &str, what: &str, v: f64, allow_zero: bool) -> Result<f64> {
     let ok = v.is_finite() && (v > 0.0 || (allow_zero && v == 0.0));
     if ok {
-        Ok(())
+        Ok(v)
     } else {
         Err(Error::model(
             element,
             format!(
-                "wall {key} must be a finite number {} 0, got {v}",
+                "{what} must be a finite number {} 0, got {v}",
                 if allow_zero { ">=" } else { ">" }
             ),
         ))
     }
+}
+
+fn check(element: &str, key: &str, v: f64, allow_zero: bool) -> Result<()> {
+    finite_number(element, &format!("wall {key}"), v, allow_zero).map(|_| ())
 }
 
 impl WallSpec {

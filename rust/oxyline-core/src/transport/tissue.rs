@@ -23,6 +23,7 @@
 
 #[allow(unused_imports)]
 use super::*;
+use crate::closure::finite_number;
 use crate::spec::transport::{ConsumptionSpec, OuterSpec, TissueSpec};
 use std::f64::consts::PI;
 
@@ -134,19 +135,11 @@ fn bad_value(element: &str, key: &str, v: f64, rule: &str) -> Error {
 }
 
 fn positive(element: &str, key: &str, v: f64) -> Result<f64> {
-    if v.is_finite() && v > 0.0 {
-        Ok(v)
-    } else {
-        Err(bad_value(element, key, v, "a finite number > 0"))
-    }
+    finite_number(element, &format!("tissue wall {key}"), v, false)
 }
 
 fn non_negative(element: &str, key: &str, v: f64) -> Result<f64> {
-    if v.is_finite() && v >= 0.0 {
-        Ok(v)
-    } else {
-        Err(bad_value(element, key, v, "a finite number >= 0"))
-    }
+    finite_number(element, &format!("tissue wall {key}"), v, true)
 }
 
 /// Validated settings of one tissue spec: (kind, thickness, diffusivity, radial cells).
