@@ -150,6 +150,27 @@ fn series(g_blood: f64, gp: f64) -> f64 {
     }
 }
 
+/// Local Sherwood number of the Lévêque layer at a constant wall flux over that at a constant
+/// wall concentration, Γ(4/3)/F(0) with F'' = 3η(F − ηF'), F'(0) = −1, F(∞) = 0 (the
+/// constant-flux similarity solution; `tests/test_tissue.py` re-derives it with scipy).
+pub const LEVEQUE_FLUX_RATIO: f64 = 1.209_199_576;
+
+/// Conjugate correction of a developing-layer conductance `g` (Lévêque, Graetz; derived for a
+/// constant wall concentration) when the wall behind it sets its own interface concentration
+/// through a conductance `g_wall` to a fixed value (docs/physics.md §3.7 "Conjugate closure").
+/// The interface condition lies between the two exact limits of the thin layer: a wall that
+/// conducts much better than the layer holds the interface concentration (g_wall → ∞: the
+/// closure as derived), a wall that conducts much worse fixes the flux whatever the layer does
+/// (g_wall → 0: the constant-flux layer, `LEVEQUE_FLUX_RATIO` × g). In between, the factor is
+/// interpolated with the wall's share of the series resistance, ψ = g/(g + g_wall):
+/// g_conj = g (1 + (LEVEQUE_FLUX_RATIO − 1) ψ). `g_wall` = ∞ leaves `g` unchanged (bit for bit).
+pub fn conjugate_conductance(g: f64, g_wall: f64) -> f64 {
+    if g <= 0.0 || g_wall.is_infinite() {
+        return g;
+    }
+    g * (1.0 + (LEVEQUE_FLUX_RATIO - 1.0) * g / (g + g_wall))
+}
+
 /// Lévêque coefficient: ∫_seg k 2πr dx = coef · |Q|^{1/3} (docs/physics.md §3.1 C5s), with
 /// a = (γ D²/9)^{1/3}/Γ(4/3), γ = 4|Q|/(π r³).
 pub fn leveque_coef(seg: &SegmentWall, d: f64) -> f64 {
