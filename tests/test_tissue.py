@@ -193,8 +193,8 @@ CONJUGATE_CASES = {
 def test_conjugate_closure_against_the_2d_reference(case: str, layer: str) -> None:
     """The conjugate boundary-layer closure (docs/physics.md §3.7) against the 2-D solution
     with the same wall layer, in walls that take from part to all (no-flux) of the series
-    resistance: steady
-    uptake within the issue's 2 % and the innermost wall PO2 within 2 % of the PO2 span.
+    resistance: steady uptake within the issue's 2 % and the innermost wall PO2 within 2 %
+    of the PO2 span.
     Measured (Graetz / Lévêque): no-flux −0.01/−0.01 %, thick-mm +0.16/+0.76 %, flow-x4
     −0.43/−0.05 %, thin −1.17/+0.16 %."""
     pytest.importorskip("scipy")
