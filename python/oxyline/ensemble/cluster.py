@@ -48,7 +48,7 @@ def _chunks(n: int, threads: int) -> list[range]:
 def _merge(into: Collector, part: Collector, rows: range) -> None:
     """Copy the rows of a finished chunk into the ensemble's collector."""
     for j, i in enumerate(rows):
-        for name in ("status", "error", "period", "cycles_run", "periodic_error"):
+        for name in ("status", "error", "warning", "period", "cycles_run", "periodic_error"):
             getattr(into, name)[i] = getattr(part, name)[j]
         if j in part.datasets:
             into.datasets[i] = part.datasets[j]

@@ -14,6 +14,7 @@ from oxyline.ensemble.collect import ERROR_CHARS, Collector, Output
 from oxyline.ensemble.patch import Patcher, Variant, merge_patch
 from oxyline.errors import ModelError
 from oxyline.model import Model
+from oxyline.monitor import Monitor
 from oxyline.run import _result, _run_settings, _settings
 
 #: the settings of ``_settings`` that the core's ``Ensemble.run`` takes as they are
@@ -98,6 +99,7 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
                 assert raw is not None and layout is not None
                 result = _result(v.model, s, raw, _run_settings(s, raw), True, layout)
                 collector.put(i, collector.outputs(result, raw.get("column_stats")))
+                collector.warn(i, bounds_findings(v.model, result))
             except Exception as e:  # noqa: BLE001 - a user's output function fails its variant
                 collector.fail(i, "output", f"variant {first + i}: {type(e).__name__}: {e}"
                                [:ERROR_CHARS])
@@ -112,6 +114,16 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
                                 summary=output == "summary", **core)
     finally:
         close()
+
+
+def bounds_findings(model: Model, result: Any) -> list[str]:
+    """The physical-bounds monitor's findings in a variant's recorded species output
+    (docs/physics.md §2.8): what ``simulate`` of the patched model would warn."""
+    if not result.species:
+        return []
+    monitor = Monitor(model.canonical.get("transport"))
+    monitor.update(result)
+    return monitor.messages()
 
 
 @contextlib.contextmanager
