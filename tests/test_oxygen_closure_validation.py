@@ -39,7 +39,6 @@ def test_the_aortic_example_against_both_outlet_conditions() -> None:
     assert abs(up / row["womersley_profile"] - 1) < 0.02
 
 
-@pytest.mark.slow
 def test_the_default_closure_is_within_2_percent_of_the_reference_except_the_aorta() -> None:
     """Every scenario of docs/validation-oxygen.md §6 (27 rows): the default within 2 % of the
     stored 2-D uptake (mixed backflow), except the aortic example waveform (−2.34 %, §8)."""
@@ -50,3 +49,21 @@ def test_the_default_closure_is_within_2_percent_of_the_reference_except_the_aor
             misses[(case, label)] = err
     assert list(misses) == [("straight", next(k for c, k in STORED
                                               if c == "straight" and k.startswith("example")))]
+
+
+def test_the_end_renewal_candidate_is_within_2_percent_everywhere() -> None:
+    """The emulated end-renewal candidate of docs/validation-oxygen.md §8 (the default law
+    times 1 + 0.035 s, s the Womersley near-wall excursion number; one constant fitted to
+    these rows, so this guards the emulation and the stored data, it is not an independent
+    validation): every row within 2 % of the stored 2-D uptake (measured worst +1.71 %)."""
+    from oxyline.reference.validation import END_RENEWAL_C, end_renewal_number
+
+    worst = 0.0
+    for (case_name, label), row in STORED.items():
+        case = load_case(case_name)
+        flow = dict(scenarios(case))[label]
+        fwd = one_d(case, flow, DEFAULT)[0]
+        s = end_renewal_number(case, flow, fwd)
+        law = {**DEFAULT, "enhancement": 1.0 + END_RENEWAL_C * s}
+        worst = max(worst, abs(one_d(case, flow, law)[0] / row["womersley_mixed"] - 1))
+    assert worst < 0.02

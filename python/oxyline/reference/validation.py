@@ -132,6 +132,27 @@ def wall_shear(case: Case, flow: PeriodicFlow, t: np.ndarray, womersley: bool = 
     return gamma
 
 
+#: the one constant of the end-renewal candidate, fitted to the 27 dissolved-O2 rows of
+#: docs/validation-oxygen.md §8 (any value in 0.02–0.045 keeps them within 2 %)
+END_RENEWAL_C = 0.035
+
+
+def end_renewal_number(case: Case, flow: PeriodicFlow, uptake: float) -> float:
+    """s = (B_W − B_QS) (D/k̄) sqrt(D/(πT)) / (k̄ L): the near-wall excursion that the
+    Womersley profile adds to a quasi-steady one (B, the backward wall strain per period,
+    times the layer thickness D/k̄), times the penetration coefficient of a layer renewed every
+    period over the mean coefficient k̄ of the vessel, per vessel length (docs/validation-
+    oxygen.md §8). ``uptake``: the 1-D uptake that gives k̄ = uptake/(2πrL α ΔP)."""
+    t = np.linspace(0.0, flow.period, 20000, endpoint=False)
+    b_w, b_qs = (float(np.maximum(-wall_shear(case, flow, t, w), 0.0).mean() * flow.period)
+                 for w in (True, False))
+    d = case.diffusivity
+    kbar = uptake / (2.0 * math.pi * case.radius * case.length * case.alpha
+                     * (case.p_in - case.p_wall))
+    return (b_w - b_qs) * (d / kbar) * math.sqrt(d / (math.pi * flow.period)) / (kbar
+                                                                                 * case.length)
+
+
 def net_mean_factor(flow: PeriodicFlow, samples: int = 20000) -> float:
     """`enhancement` (⟨Q⟩/⟨|Q|⟩)^{1/3} that turns the cycle-mean Graetz law into the law of
     the signed net flow ⟨Q⟩ (the frozen-layer limit of small excursions; see
@@ -301,6 +322,25 @@ def hill_pulsatile_table(cases: list[Case], grid: Grid, log) -> list[str]:
     return rows
 
 
+def candidate_table(case: Case, log) -> list[str]:
+    """The end-renewal candidate (emulated): the default law with `enhancement`
+    1 + END_RENEWAL_C · s (`end_renewal_number`), against the stored 2-D uptakes of §8."""
+    import json
+
+    data = Path(__file__).resolve().parents[3] / "tests" / "data" / "oxygen_2d_uptakes.json"
+    stored = {(r["case"], r["scenario"]): r for r in json.loads(data.read_text())["cases"]}
+    rows = ["| scenario | s | default vs 2-D | candidate vs 2-D |", "|---|---|---|---|"]
+    for label, flow in scenarios(case):
+        ref = stored[(case.name, label)]["womersley_mixed"]
+        fwd, _ = one_d(case, flow, {"model": "graetz"})
+        s = end_renewal_number(case, flow, fwd)
+        cand, _ = one_d(case, flow, {"model": "graetz", "enhancement": 1.0 + END_RENEWAL_C * s})
+        log(f"  {case.name} {label}: s {s:.4f}")
+        rows.append(f"| {label} | {s:.4f} | {100 * (fwd / ref - 1):+.2f} % | "
+                    f"{100 * (cand / ref - 1):+.2f} % |")
+    return rows
+
+
 def outlet_table(case: Case, grid: Grid, log) -> list[str]:
     """Outlet PO2 deficit (P_in − P_out) of each closure vs the 2-D one, example waveform."""
     ref = reference(case, case.flow, grid)
@@ -353,6 +393,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="coarse grids (smoke run)")
     ap.add_argument("--only", default="straight,curved,bifurcated")
     ap.add_argument("--skip-convergence", action="store_true")
+    ap.add_argument("--candidate", action="store_true",
+                    help="only the end-renewal candidate against the stored 2-D uptakes (§8)")
     ap.add_argument("--hill", action="store_true",
                     help="only the pulsatile Hill-binding table (docs §9)")
     ap.add_argument("--decompose", action="store_true",
@@ -371,6 +413,11 @@ def main(argv: list[str] | None = None) -> int:
 
     cases = [load_case(n) for n in args.only.split(",")]
     out: list[str] = []
+    if args.candidate:
+        for c in cases:
+            out += [f"#### {c.name}", ""] + candidate_table(c, log) + [""]
+        print("\n".join(out))
+        return 0
     if args.hill:
         out = hill_pulsatile_table(cases, grid, log)
         print("\n".join(out))
