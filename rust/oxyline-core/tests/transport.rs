@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{Built, build, build_error, try_build};
+use common::{Built, build, build_error};
 use oxyline_core::genalpha::NewtonControl;
 use oxyline_core::rk4::CoupledStages;
 use oxyline_core::transport::{BALANCE_COLUMNS, SEGMENT_COLUMNS, VESSEL_COLUMNS};
