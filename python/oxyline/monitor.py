@@ -1,6 +1,9 @@
 """Physical-bounds monitor of species transport (docs/physics.md §2.8).
 
-Checked once per run on the recorded output (never per step or per cell of the integration):
+Checked on the recorded output (never per step or per cell of the integration): once per
+``simulate`` run, on every chunk that ``simulate_to_zarr`` streams (:class:`Monitor` keeps a
+few numbers between chunks, not the output), and on every finished variant of
+``simulate_ensemble`` (recorded in its ``warning`` variable). The checks:
 
 * **Maximum principle.** For a species without sources (no prescribed ``flux`` wall; decay only
   lowers concentrations), every free concentration lies in [min, max] of its inlet, backflow,
