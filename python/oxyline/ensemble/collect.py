@@ -29,6 +29,8 @@ from oxyline.result import Result
 STATUS = {"ok": 0, "model": 1, "unstable": 2, "solver": 3, "output": 4, "interrupted": 5,
           "not run": -1}
 STATS = ("mean", "min", "max")
+#: the per-variant facts every ensemble dataset has besides its outputs
+FACTS = ("status", "error", "warning", "period", "cycles_run", "periodic_error")
 ERROR_CHARS = 400  # stored error messages are cut to this length (fixed-width strings)
 
 Output = str | Callable[[Result], Mapping[str, float]]
