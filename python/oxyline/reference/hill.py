@@ -146,6 +146,57 @@ class HillPeriodic:
     mass_residual: float
 
 
+@dataclass
+class _Column:
+    """The radial finite volumes of `hill_periodic` (blood cells of the dissolved solver)."""
+
+    w: np.ndarray  # ∫ r dr per cell
+    g: np.ndarray  # interior face conductances r_f/Δ
+    g_wall: float
+    phi_w: float  # Φ(P_wall)
+    dx: np.ndarray  # axial cell lengths
+    p_scale: float  # Newton's step tolerance reference (mmHg)
+
+
+def _diffuse(blood: HillBlood, col: _Column, c_old: np.ndarray, p: np.ndarray, h: float
+             ) -> tuple[np.ndarray, float]:
+    """Backward Euler over h of every radial column at once: w (C(P) − C_old) = h Σ g ΔΦ per
+    cell, Newton on P; returns P and the wall uptake (mol) of the step."""
+    w, g, g_wall, phi_w = col.w, col.g, col.g_wall, col.phi_w
+    nb, nx = p.shape
+    for _ in range(50):
+        phi = blood.potential(p)
+        d = phi[1:] - phi[:-1]
+        flux = np.zeros_like(p)
+        flux[:-1] += g[:, None] * d
+        flux[1:] -= g[:, None] * d
+        flux[-1] += g_wall * (phi_w - phi[-1])
+        res = w[:, None] * (blood.content(p) - c_old) - h * flux
+        ds = blood.dsaturation(p)
+        dphi = blood.solubility * blood.diffusivity + blood.d_hb * blood.capacity * ds
+        diag = w[:, None] * (blood.solubility + blood.capacity * ds)
+        diag[:-1] += h * g[:, None] * dphi[:-1]
+        diag[1:] += h * g[:, None] * dphi[1:]
+        diag[-1] += h * g_wall * dphi[-1]
+        # one banded system: the columns (axial cells) one after the other, radius fastest
+        ab = np.zeros((3, nb * nx))
+        sup = np.zeros((nb, nx))
+        sup[1:] = -h * g[:, None] * dphi[1:]
+        sub = np.zeros((nb, nx))
+        sub[:-1] = -h * g[:, None] * dphi[:-1]
+        ab[0] = sup.T.ravel()
+        ab[1] = diag.T.ravel()
+        ab[2] = sub.T.ravel()
+        step = solve_banded((1, 1), ab, -res.T.ravel()).reshape(nx, nb).T
+        p = p + step
+        if np.abs(step).max() < 1e-10 * col.p_scale:
+            break
+    else:  # pragma: no cover - Newton converges in a few iterations here
+        raise RuntimeError("hill_periodic: Newton did not converge")
+    wall = 2.0 * math.pi * h * g_wall * (blood.potential(p[-1]) - phi_w)
+    return p, float(wall @ col.dx)
+
+
 def hill_periodic(blood: HillBlood, tube: Any, flow: Any, p_in: float, p_wall: float,
                   grid: Any, tol: float = 2e-5, max_periods: int = 400) -> HillPeriodic:
     """Periodic O2 uptake of a rigid tube with Womersley flow ``flow`` (PeriodicFlow) and Hill
@@ -171,43 +222,13 @@ def hill_periodic(blood: HillBlood, tube: Any, flow: Any, p_in: float, p_wall: f
     w = 0.5 * (faces[1:] ** 2 - faces[:-1] ** 2)
     g = faces[1:-1] / (centres[1:] - centres[:-1])
     g_wall = faces[-1] / (faces[-1] - centres[-1])
-    phi_w = float(blood.potential(np.array([p_wall]))[0])
+    col = _Column(w, g, g_wall, float(blood.potential(np.array([p_wall]))[0]), base.dx,
+                  max(abs(p_in), 1.0))
     c_in = float(blood.content(np.array([p_in]))[0])
     dx, dt = base.dx, base.dt
 
     def diffuse(c_old: np.ndarray, p: np.ndarray, h: float) -> tuple[np.ndarray, float]:
-        """Backward Euler over h: w (C(P) − C_old) = h Σ g ΔΦ per cell; (P, uptake)."""
-        for _ in range(50):
-            phi = blood.potential(p)
-            d = phi[1:] - phi[:-1]
-            flux = np.zeros_like(p)
-            flux[:-1] += g[:, None] * d
-            flux[1:] -= g[:, None] * d
-            flux[-1] += g_wall * (phi_w - phi[-1])
-            res = w[:, None] * (blood.content(p) - c_old) - h * flux
-            ds = blood.dsaturation(p)
-            dphi = blood.solubility * blood.diffusivity + blood.d_hb * blood.capacity * ds
-            diag = w[:, None] * (blood.solubility + blood.capacity * ds)
-            diag[:-1] += h * g[:, None] * dphi[:-1]
-            diag[1:] += h * g[:, None] * dphi[1:]
-            diag[-1] += h * g_wall * dphi[-1]
-            # one banded system: the columns (axial cells) one after the other, radius fastest
-            ab = np.zeros((3, nb * nx))
-            sup = np.zeros((nb, nx))
-            sup[1:] = -h * g[:, None] * dphi[1:]
-            sub = np.zeros((nb, nx))
-            sub[:-1] = -h * g[:, None] * dphi[:-1]
-            ab[0] = sup.T.ravel()
-            ab[1] = diag.T.ravel()
-            ab[2] = sub.T.ravel()
-            step = solve_banded((1, 1), ab, -res.T.ravel()).reshape(nx, nb).T
-            p = p + step
-            if np.abs(step).max() < 1e-10 * max(abs(p_in), 1.0):
-                break
-        else:  # pragma: no cover - Newton converges in a few iterations here
-            raise RuntimeError("hill_periodic: Newton did not converge")
-        wall = 2.0 * math.pi * h * g_wall * (blood.potential(p[-1]) - phi_w)
-        return p, float(wall @ dx)
+        return _diffuse(blood, col, c_old, p, h)
 
     p = np.full((nb, nx), float(p_in))
     c = blood.content(p)
