@@ -79,3 +79,42 @@ def test_bounds_come_from_inlet_initial_wall_and_backflow_values() -> None:
     assert species_bounds(dict(sp, wall={"model": "flux", "flux": 1e-6})) is None
     # decay pulls towards zero
     assert species_bounds(dict(sp, decay=0.1)) == (0.0, 4.0)
+
+
+def _bounds_messages(run) -> list[str]:
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        run()
+    return [str(w.message) for w in rec if w.category is oxyline.PhysicalBoundsWarning]
+
+
+def test_simulate_to_zarr_checks_the_streamed_chunks_like_simulate(tmp_path) -> None:
+    """The monitor runs on the chunks simulate_to_zarr streams (97 rows each, so the worst
+    value, the largest imbalance and the validity criterion are found across chunks) and
+    reports exactly what simulate reports for the whole in-memory output."""
+    pytest.importorskip("zarr")
+    pytest.importorskip("xarray")
+    model = _with_formulation("paper-curved", "tl-quasisteady")
+    settings = {"cycles": 4, "output_cycles": "all"}
+    whole = _bounds_messages(lambda: oxyline.simulate(model, **settings))
+    streamed = _bounds_messages(lambda: oxyline.simulate_to_zarr(
+        model, tmp_path / "run.zarr", time_chunk=97, **settings))
+    assert len(whole) == 3  # bounds, mass balance, validity
+    assert streamed == whole
+    assert any("vessel 'coronary'" in m and "[48, 85] mmHg" in m for m in streamed)
+
+
+def test_simulate_ensemble_records_the_monitor_per_variant_and_runs_on() -> None:
+    """Per variant: the literal-paper variant records what simulate of that model warns
+    (summary output: no segment columns, as the ensemble runs it), the conservative variant
+    nothing; both finish, and one warning names the variant."""
+    pytest.importorskip("xarray")
+    model = _with_formulation("paper-curved", "tl-quasisteady")
+    variants = [{}, {"oxygen": {"formulation": "conservative"}}]
+    alone = _bounds_messages(lambda: oxyline.simulate(model, cycles=3, segments=False))
+    with pytest.warns(oxyline.PhysicalBoundsWarning, match=r"1 variant\(s\).*variants 0;") as rec:
+        ds = oxyline.simulate_ensemble(model, variants, cycles=3, progress=False)
+    assert len([w for w in rec if w.category is oxyline.PhysicalBoundsWarning]) == 1
+    assert ds.status.values.tolist() == [0, 0]
+    assert alone and str(ds.warning.values[0]) == "; ".join(alone)[:400]
+    assert str(ds.warning.values[1]) == ""

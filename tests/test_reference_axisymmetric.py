@@ -144,3 +144,20 @@ def test_validation_study_quick_run(capsys: pytest.CaptureFixture[str]) -> None:
     assert len(rows) == 2  # dissolved O2 and Hb
     graetz = float(rows[0].split("|")[7].strip().rstrip("%").strip())
     assert abs(graetz) < 5.0
+
+
+def test_profile_backflow_conserves_mass_and_equals_mixed_without_wall_reversal() -> None:
+    """`backflow="profile"` (each radius re-enters with its own last-cell PO2): the period's
+    mass balance closes to round-off with reversal, and where nothing flows backwards at any
+    radius (curved example: Womersley 2.1, no reversal) it is the "mixed" solution."""
+    from oxyline.reference.validation import load_case
+
+    c = load_case("curved")
+    grid = Grid(16, 24, steps_per_period=40)
+    rev = PeriodicFlow.sinusoid(c.flow.mean, c.flow.period, 0.2)
+    prof = AxisymmetricSolver(c.tube(), rev, ConstantPO2(c.p_wall), c.p_in, grid,
+                              backflow="profile").periodic(tol=1e-10)
+    assert prof.mass_residual < 1e-12
+    same = [AxisymmetricSolver(c.tube(), c.flow, ConstantPO2(c.p_wall), c.p_in, grid,
+                               backflow=b).periodic(tol=1e-10).uptake for b in ("mixed", "profile")]
+    assert same[1] == pytest.approx(same[0], rel=1e-9)

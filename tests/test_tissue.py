@@ -142,18 +142,16 @@ def test_straight_tube_against_the_2d_reference_with_a_wall_layer() -> None:
     consumed = 8e-3 * math.pi * ((1.5e-3 + 1e-4) ** 2 - 1.5e-3**2) * 0.03456
     print(f"uptake 1-D {uptake:.6e}, 2-D {ref.uptake:.6e} mol/s "
           f"({uptake / ref.uptake - 1:+.2%}); consumption {consumed:.6e}")
-    # measured: uptake −5.1 %, inner wall PO2 −2.6 mmHg (47.4 vs 50.0). The 2-D solution is
-    # converged (64×96 cells: +0.06 %), the 1-D one too (48 segments: −0.06 %), and the same
-    # Graetz closure against a constant wall PO2 of 50 mmHg is within 0.2 % of the 2-D uptake:
-    # the difference is the closure's, derived for a constant wall PO2 and applied here to an
-    # interface PO2 that follows the wall (a conjugate, Robin-type condition; docs/physics.md
-    # §3.7). The tolerances bound that model error, not round-off.
-    assert uptake == pytest.approx(ref.uptake, rel=0.06)
+    # measured: uptake −0.8 %, inner wall PO2 −0.4 mmHg (49.54 vs 49.96); before the conjugate
+    # correction of the boundary layer (docs/physics.md §3.7) −5.1 % and −2.6 mmHg. The 2-D
+    # solution is converged (64×96 cells: +0.06 %), the 1-D one too (48 segments: −0.06 %).
+    # The tolerances bound the closure's model error (the issue's 2 %), not round-off.
+    assert uptake == pytest.approx(ref.uptake, rel=0.02)
     # the innermost wall cell's PO2, averaged along the tube (both: 8 equal wall cells)
     inner_2d = float(np.average(ref.state[32], weights=np.diff(ref.x_faces)))
     inner_1d = float(res.wall_po2_inner[-1, 0])
     print(f"inner wall PO2 1-D {inner_1d:.3f}, 2-D {inner_2d:.3f} mmHg")
-    assert inner_1d == pytest.approx(inner_2d, abs=0.05 * (85.0 - 20.0))
+    assert inner_1d == pytest.approx(inner_2d, abs=0.02 * (85.0 - 20.0))
     # at the steady state the flux into the wall is its consumption plus what leaves outward
     wall = res.species[res.oxygen].tissue.mass_balance
     assert uptake > consumed
@@ -174,3 +172,66 @@ def test_tissue_outputs_survive_a_selection_and_a_file_round_trip(tmp_path) -> N
     a = full.species[full.oxygen].tissue.mass_balance
     b = back.species[back.oxygen].tissue.mass_balance
     np.testing.assert_array_equal(a["residual"], b["residual"])
+
+
+# (tissue override, WallLayer override, flow factor): no-flux outer face (the zero-order wall
+# then fixes the flux: the constant-flux limit of the conjugate closure), a thick
+# Michaelis–Menten wall, four times the flow (a thinner layer, so the wall's share of the
+# resistance grows), a thin wall against a higher outer PO2
+CONJUGATE_CASES = {
+    "no-flux": ({"outer": "no-flux"}, {"outer_po2": None}, 1.0),
+    "thick-mm": ({"thickness": 3e-4, "consumption": {"vmax": 8e-3, "km": 2.0}},
+                 {"thickness": 3e-4, "rate": 8e-3, "km": 2.0}, 1.0),
+    "flow-x4": ({}, {}, 4.0),
+    "thin": ({"thickness": 3e-5, "consumption": {"rate": 2e-3}, "outer": {"po2": 40.0}},
+             {"thickness": 3e-5, "rate": 2e-3, "outer_po2": 40.0}, 1.0),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CONJUGATE_CASES))
+@pytest.mark.parametrize("layer", ["graetz", "leveque"])
+def test_conjugate_closure_against_the_2d_reference(case: str, layer: str) -> None:
+    """The conjugate boundary-layer closure (docs/physics.md §3.7) against the 2-D solution
+    with the same wall layer, in walls that take from part to all (no-flux) of the series
+    resistance: steady uptake within the issue's 2 % and the innermost wall PO2 within 2 %
+    of the PO2 span.
+    Measured (Graetz / Lévêque): no-flux −0.01/−0.01 %, thick-mm +0.16/+0.76 %, flow-x4
+    −0.43/−0.05 %, thin −1.17/+0.16 %."""
+    pytest.importorskip("scipy")
+    from oxyline.reference.axisymmetric import (
+        AxisymmetricSolver,
+        Grid,
+        PeriodicFlow,
+        Tube,
+        WallLayer,
+    )
+
+    tissue_over, layer_over, qf = CONJUGATE_CASES[case]
+    kw = {"thickness": 1e-4, "diffusivity": 1.5e-9, "solubility": 1.3e-3, "rate": 8e-3,
+          "outer_po2": 20.0, "cells": 8, **layer_over}
+    ref = AxisymmetricSolver(Tube(radius=1.5e-3, length=0.03456), PeriodicFlow(1.0, 1.6e-6 * qf),
+                             WallLayer(**kw), 85.0,
+                             Grid(32, 48, steps_per_period=10)).periodic(tol=1e-9)
+    wall = {**TISSUE, **tissue_over, "boundary_layer": {"model": layer}}
+    model = tube_model(wall, method="generalized-alpha", cycles=60, segments=24)
+    model["boundary_conditions"]["in"]["flow"] = 1.6e-6 * qf
+    res = oxyline.simulate(model)
+    assert res.wall_o2_flux[-1, 0] == pytest.approx(ref.uptake, rel=0.02)
+    inner_2d = float(np.average(ref.state[32], weights=np.diff(ref.x_faces)))
+    assert res.wall_po2_inner[-1, 0] == pytest.approx(inner_2d, abs=0.02 * (85.0 - 20.0))
+
+
+def test_the_constant_flux_leveque_ratio_is_the_similarity_solution() -> None:
+    """The conjugate closure's constant-flux limit (closure.rs LEVEQUE_FLUX_RATIO = 1.2092)
+    re-derived independently: the Lévêque constant-flux similarity problem F'' = 3η(F − ηF'),
+    F'(0) = −1, F(∞) = 0 solved with scipy; the local Sherwood ratio to the constant-wall
+    layer is Γ(4/3)/F(0). Tolerance: the BVP's own (1e-8)."""
+    scipy_integrate = pytest.importorskip("scipy.integrate")
+    x = np.linspace(0.0, 8.0, 2000)
+    y0 = np.vstack([np.exp(-x), -np.exp(-x)])
+    sol = scipy_integrate.solve_bvp(
+        lambda e, y: np.vstack([y[1], 3.0 * e * (y[0] - e * y[1])]),
+        lambda a, b: np.array([a[1] + 1.0, b[0]]), x, y0, tol=1e-10, max_nodes=100000)
+    assert sol.status == 0
+    ratio = math.gamma(4.0 / 3.0) / float(sol.sol(0.0)[0])
+    assert ratio == pytest.approx(1.209199576, abs=1e-8)

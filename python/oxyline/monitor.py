@@ -1,6 +1,9 @@
 """Physical-bounds monitor of species transport (docs/physics.md §2.8).
 
-Checked once per run on the recorded output (never per step or per cell of the integration):
+Checked on the recorded output (never per step or per cell of the integration): once per
+``simulate`` run, on every chunk that ``simulate_to_zarr`` streams (:class:`Monitor` keeps a
+few numbers between chunks, not the output), and on every finished variant of
+``simulate_ensemble`` (recorded in its ``warning`` variable). The checks:
 
 * **Maximum principle.** For a species without sources (no prescribed ``flux`` wall; decay only
   lowers concentrations), every free concentration lies in [min, max] of its inlet, backflow,
@@ -118,56 +121,49 @@ def _segment_vessel(result: Any, k: int) -> str:
     return result.vessels[int(np.searchsorted(edges, k, side="right"))]
 
 
-def check_bounds(result: Any, name: str, spec: Mapping[str, Any]) -> str | None:
-    """Why species ``name`` of ``result`` leaves its maximum-principle range (the worst
-    recorded value), or None."""
-    bounds = species_bounds(spec)
+def _worst_outside(result: Any, name: str, lo: float, hi: float, tol: float
+                   ) -> tuple[float, str, float, float] | None:
+    """(excess, vessel, time, value) of the recorded value of species ``name`` farthest
+    outside [lo, hi] (beyond ``tol``), or None."""
     sp = result.species[name]
-    if bounds is None or len(result.time) == 0:
-        return None
-    lo, hi = bounds
-    tol = BOUNDS_RTOL * max(abs(lo), abs(hi), hi - lo)
-    scale, unit = (sp.po2_per_concentration, "mmHg") if sp.po2_per_concentration else (1.0,
-                                                                                       "mol/m^3")
-    worst: tuple[float, str, int, float] | None = None
-    for key in ("concentration_in", "concentration_out"):
-        if key in sp.vessel_variables:
-            hit = _first_outside(getattr(sp, key), lo, hi, tol)
-            if hit:
-                ex = max(hit[2] - hi, lo - hit[2])
-                if worst is None or ex > worst[0]:
-                    worst = (ex, result.vessels[hit[1]], hit[0], hit[2])
+    worst: tuple[float, str, float, float] | None = None
+    hits = [(getattr(sp, key), lambda k: result.vessels[k])
+            for key in ("concentration_in", "concentration_out") if key in sp.vessel_variables]
     if "concentration" in sp.segment_variables and sp.segment_data.shape[1] > 0:
-        hit = _first_outside(sp.segment("concentration"), lo, hi, tol)
+        hits.append((sp.segment("concentration"), lambda k: _segment_vessel(result, k)))
+    for values, vessel in hits:
+        hit = _first_outside(values, lo, hi, tol)
         if hit:
             ex = max(hit[2] - hi, lo - hit[2])
             if worst is None or ex > worst[0]:
-                worst = (ex, _segment_vessel(result, hit[1]), hit[0], hit[2])
-    if worst is None:
-        return None
-    _, vessel, it, v = worst
-    return (f"species '{name}': vessel '{vessel}' at t = {result.time[it]:.6g} s has "
+                worst = (ex, vessel(hit[1]), float(result.time[hit[0]]), hit[2])
+    return worst
+
+
+def _bounds_message(name: str, sp: Any, lo: float, hi: float,
+                    worst: tuple[float, str, float, float]) -> str:
+    scale, unit = (sp.po2_per_concentration, "mmHg") if sp.po2_per_concentration else (1.0,
+                                                                                       "mol/m^3")
+    _, vessel, t, v = worst
+    return (f"species '{name}': vessel '{vessel}' at t = {t:.6g} s has "
             f"{v * scale:.6g} {unit}, outside the physical range [{lo * scale:.6g}, "
             f"{hi * scale:.6g}] {unit} of its inlet, initial and wall values (maximum "
             f"principle, tolerance {BOUNDS_RTOL:g} of the range)")
 
 
+def check_bounds(result: Any, name: str, spec: Mapping[str, Any]) -> str | None:
+    """Why species ``name`` of ``result`` leaves its maximum-principle range (the worst
+    recorded value), or None."""
+    m = Monitor({"species": [spec]})
+    m.update(result)
+    return m.bounds_messages().get(name)
+
+
 def check_balance(result: Any, name: str) -> str | None:
     """Why species ``name`` breaks its mass balance by more than BALANCE_RTOL, or None."""
-    sp = result.species[name]
-    if len(result.time) < 2:
-        return None
-    # over the recorded window: the cumulative amounts count from the run's start, which the
-    # output may not include
-    mb = {k: v - v[0] for k, v in sp.mass_balance.items()}
-    throughput = max(abs(float(mb["inflow"][-1])), abs(float(mb["outflow"][-1])))
-    rel = np.abs(mb["residual"]) / throughput if throughput > 0.0 else np.zeros(1)
-    if not np.nanmax(rel) > BALANCE_RTOL:
-        return None
-    it = int(np.nanargmax(rel))
-    return (f"species '{name}': the mass balance is off by {rel[it]:.3g} of the throughput "
-            f"({mb['residual'][it]:.6g} mol since t = {result.time[0]:.6g} s) at "
-            f"t = {result.time[it]:.6g} s (network-wide; tolerance {BALANCE_RTOL:g})")
+    m = Monitor({"species": [{"name": name, "inlet": {}}]}, bounds=False)
+    m.update(result)
+    return m.balance_messages().get(name)
 
 
 def quasisteady_validity(result: Any) -> str | None:
@@ -176,51 +172,175 @@ def quasisteady_validity(result: Any) -> str | None:
     (the literal form is singular at v = 0); (2) compliant storage: |Q_in − Q_out| of a vessel
     ≤ QS_STORAGE |Q| (the literal form has no storage term); (3) |R_i| = |dL_i/dt| ≤
     QS_TRANSIT_RATE (the segment transit time changes slowly)."""
-    t = result.time
-    if "flow_in" in result.vessel_variables and "flow_out" in result.vessel_variables:
-        qi, qo = result.flow_in, result.flow_out
-        sign = np.sign(np.mean(qi, axis=0))
-        low = (qi * sign <= 0) | (qo * sign <= 0)
-        if low.any():
-            it, k = np.argwhere(low)[0]
-            return (f"criterion 1 (forward flow): vessel '{result.vessels[k]}' has flow "
-                    f"{qi[it, k]:.4g} → {qo[it, k]:.4g} m^3/s at t = {t[it]:.6g} s (reversal "
-                    "or zero flow, where the literal transmission line is singular)")
-        rel = np.abs(qi - qo) / np.maximum(np.abs(qi), np.abs(qo))
-        if np.nanmax(rel) > QS_STORAGE:
-            it, k = np.unravel_index(int(np.nanargmax(rel)), rel.shape)
-            return (f"criterion 2 (no storage): vessel '{result.vessels[k]}' stores "
-                    f"|Q_in − Q_out|/|Q| = {rel[it, k]:.3g} of its flow at t = {t[it]:.6g} s "
-                    f"(> {QS_STORAGE:g}; the literal form neglects the compliant volume change)")
-    ox = result.oxygen or next(iter(result.species), None)
-    sp = result.species.get(ox) if ox else None
-    if sp is not None and "tl_resistance" in sp.segment_variables and sp.segment_data.shape[1]:
-        r = np.abs(sp.segment("tl_resistance"))
-        if np.nanmax(r, initial=0.0) > QS_TRANSIT_RATE:
-            it, k = np.unravel_index(int(np.nanargmax(r)), r.shape)
-            return (f"criterion 3 (slow transit time): vessel '{_segment_vessel(result, k)}' "
-                    f"has |R_i| = |dL_i/dt| = {r[it, k]:.3g} at t = {t[it]:.6g} s "
-                    f"(> {QS_TRANSIT_RATE:g})")
-    return None
+    m = Monitor({"species": [], "formulation": "tl-quasisteady"})
+    m.update(result)
+    return m.validity_message()
 
 
-def check_result(result: Any, transport: Mapping[str, Any] | None) -> None:
+class Monitor:
+    """The checks of this module over a run's output given in consecutive pieces (a whole
+    ``Result``, or the chunks that :func:`oxyline.simulate_to_zarr` streams), keeping only a
+    few numbers per species and vessel between pieces, so that a streamed run is checked
+    without holding its output. Fed the whole output at once it finds exactly what it finds
+    fed the same rows in chunks. ``transport``: the model's canonical transport section."""
+
+    def __init__(self, transport: Mapping[str, Any] | None, bounds: bool = True) -> None:
+        transport = transport or {}
+        self.specs = {sp["name"]: sp for sp in transport.get("species", [])}
+        self.bounds = {n: species_bounds(sp) for n, sp in self.specs.items()} if bounds else {}
+        self.quasisteady = transport.get("formulation") == "tl-quasisteady"
+        self.worst: dict[str, tuple[float, str, float, float]] = {}
+        self.units: dict[str, Any] = {}
+        # mass balance: the first recorded row, the largest |Δresidual| (value, time), last row
+        self.first: dict[str, dict[str, float]] = {}
+        self.imbalance: dict[str, tuple[float, float, float]] = {}
+        self.last: dict[str, dict[str, float]] = {}
+        self.t0: float | None = None
+        # tl-quasisteady: Σ Q_in per vessel, the first low-flow row per sign of the mean flow,
+        # the largest storage ratio and |R_i|
+        self.q_sum: np.ndarray | None = None
+        self.low: dict[int, dict[int, tuple[float, float, float]]] = {}
+        self.storage: tuple[float, str, float] | None = None
+        self.transit: tuple[float, str, float] | None = None
+        self.vessels: list[str] = []
+
+    # -- feeding -----------------------------------------------------------------------------
+    def update(self, result: Any) -> None:
+        """Take the next rows of the run's output (a ``Result`` holding them)."""
+        if len(result.time) == 0:
+            return
+        if self.t0 is None:
+            self.t0 = float(result.time[0])
+        self.vessels = list(result.vessels)
+        for name in self.specs:
+            if name in result.species:
+                self._update_species(result, name)
+        if self.quasisteady:
+            self._update_validity(result)
+
+    def _update_species(self, result: Any, name: str) -> None:
+        sp = result.species[name]
+        self.units[name] = sp
+        b = self.bounds.get(name)
+        if b is not None:
+            lo, hi = b
+            tol = BOUNDS_RTOL * max(abs(lo), abs(hi), hi - lo)
+            w = _worst_outside(result, name, lo, hi, tol)
+            if w is not None and (name not in self.worst or w[0] > self.worst[name][0]):
+                self.worst[name] = w
+        mb = sp.mass_balance
+        if name not in self.first:
+            self.first[name] = {k: float(v[0]) for k, v in mb.items()}
+        dres = np.abs(np.asarray(mb["residual"]) - self.first[name]["residual"])
+        if np.isfinite(dres).any():
+            it = int(np.nanargmax(dres))
+            if name not in self.imbalance or dres[it] > self.imbalance[name][0]:
+                self.imbalance[name] = (float(dres[it]), float(result.time[it]),
+                                        float(mb["residual"][it] - self.first[name]["residual"]))
+        self.last[name] = {k: float(v[-1]) for k, v in mb.items()}
+
+    def _update_validity(self, result: Any) -> None:
+        t = result.time
+        if "flow_in" in result.vessel_variables and "flow_out" in result.vessel_variables:
+            qi, qo = np.asarray(result.flow_in), np.asarray(result.flow_out)
+            s = qi.sum(axis=0)
+            self.q_sum = s if self.q_sum is None else self.q_sum + s
+            for sign in (1, -1, 0):  # the first low-flow row for each sign of the mean flow
+                low = (qi * sign <= 0) | (qo * sign <= 0)
+                for k in np.flatnonzero(low.any(axis=0)):
+                    entry = self.low.setdefault(int(k), {})
+                    if sign not in entry:
+                        it = int(np.argmax(low[:, k]))
+                        entry[sign] = (float(t[it]), float(qi[it, k]), float(qo[it, k]))
+            rel = np.abs(qi - qo) / np.maximum(np.abs(qi), np.abs(qo))
+            if np.isfinite(rel).any():
+                it, k = np.unravel_index(int(np.nanargmax(rel)), rel.shape)
+                if self.storage is None or rel[it, k] > self.storage[0]:
+                    self.storage = (float(rel[it, k]), result.vessels[k], float(t[it]))
+        ox = result.oxygen or next(iter(result.species), None)
+        sp = result.species.get(ox) if ox else None
+        if sp is not None and "tl_resistance" in sp.segment_variables \
+                and sp.segment_data.shape[1]:
+            r = np.abs(sp.segment("tl_resistance"))
+            if np.isfinite(r).any():
+                it, k = np.unravel_index(int(np.nanargmax(r)), r.shape)
+                if self.transit is None or r[it, k] > self.transit[0]:
+                    self.transit = (float(r[it, k]), _segment_vessel(result, k), float(t[it]))
+
+    # -- findings ----------------------------------------------------------------------------
+    def bounds_messages(self) -> dict[str, str]:
+        out = {}
+        for name, worst in self.worst.items():
+            lo, hi = self.bounds[name]  # type: ignore[misc]
+            out[name] = _bounds_message(name, self.units[name], lo, hi, worst)
+        return out
+
+    def balance_messages(self) -> dict[str, str]:
+        """Over the recorded window: the cumulative amounts count from the run's start, which
+        the output may not include."""
+        out = {}
+        for name, (dres, t, signed) in self.imbalance.items():
+            first, last = self.first[name], self.last[name]
+            throughput = max(abs(last["inflow"] - first["inflow"]),
+                             abs(last["outflow"] - first["outflow"]))
+            rel = dres / throughput if throughput > 0.0 else 0.0
+            if rel > BALANCE_RTOL:
+                out[name] = (f"species '{name}': the mass balance is off by {rel:.3g} of the "
+                             f"throughput ({signed:.6g} mol since t = {self.t0:.6g} s) at "
+                             f"t = {t:.6g} s (network-wide; tolerance {BALANCE_RTOL:g})")
+        return out
+
+    def validity_message(self) -> str | None:
+        if self.q_sum is not None:
+            hits = []
+            for k, entry in self.low.items():
+                if not np.isfinite(self.q_sum[k]):
+                    continue
+                hit = entry.get(int(np.sign(self.q_sum[k])))
+                if hit is not None:
+                    hits.append((hit[0], k, hit))
+            if hits:
+                _, k, (t, qi, qo) = min(hits)
+                return (f"criterion 1 (forward flow): vessel '{self.vessels[k]}' has flow "
+                        f"{qi:.4g} → {qo:.4g} m^3/s at t = {t:.6g} s (reversal or zero flow, "
+                        "where the literal transmission line is singular)")
+        if self.storage is not None and self.storage[0] > QS_STORAGE:
+            rel, vessel, t = self.storage
+            return (f"criterion 2 (no storage): vessel '{vessel}' stores |Q_in − Q_out|/|Q| = "
+                    f"{rel:.3g} of its flow at t = {t:.6g} s (> {QS_STORAGE:g}; the literal "
+                    "form neglects the compliant volume change)")
+        if self.transit is not None and self.transit[0] > QS_TRANSIT_RATE:
+            r, vessel, t = self.transit
+            return (f"criterion 3 (slow transit time): vessel '{vessel}' has |R_i| = "
+                    f"|dL_i/dt| = {r:.3g} at t = {t:.6g} s (> {QS_TRANSIT_RATE:g})")
+        return None
+
+    def messages(self) -> list[str]:
+        """Every finding so far, in the order species by species (bounds, then balance),
+        then the tl-quasisteady validity."""
+        bounds, balance = self.bounds_messages(), self.balance_messages()
+        found = [m for name in self.specs for m in (bounds.get(name), balance.get(name)) if m]
+        if self.quasisteady:
+            why = self.validity_message()
+            if why:
+                found.append(f"formulation tl-quasisteady (the paper read literally) is outside "
+                             f"its validity range: {why}. Use the default conservative "
+                             "formulation for predictions (docs/physics.md §2.7).")
+        return found
+
+
+def check_result(result: Any, transport: Mapping[str, Any] | None, stacklevel: int = 3) -> None:
     """All checks of a run's recorded output against its canonical transport section; each
     finding is a :class:`PhysicalBoundsWarning` pointing at the caller of the caller (the
     user's ``simulate``)."""
     if not transport or not result.species:
         return
-    found: list[str | None] = []
-    for spec in transport.get("species", []):
-        name = spec["name"]
-        if name in result.species:
-            found += [check_bounds(result, name, spec), check_balance(result, name)]
-    if transport.get("formulation") == "tl-quasisteady":
-        why = quasisteady_validity(result)
-        if why:
-            found.append(f"formulation tl-quasisteady (the paper read literally) is outside its "
-                         f"validity range: {why}. Use the default conservative formulation "
-                         "for predictions (docs/physics.md §2.7).")
-    for msg in found:
-        if msg:
-            warnings.warn(msg, PhysicalBoundsWarning, stacklevel=3)
+    m = Monitor(transport)
+    m.update(result)
+    warn(m.messages(), stacklevel=stacklevel + 1)
+
+
+def warn(messages: Iterable[str], stacklevel: int = 2) -> None:
+    """Each message as a :class:`PhysicalBoundsWarning`."""
+    for msg in messages:
+        warnings.warn(msg, PhysicalBoundsWarning, stacklevel=stacklevel + 1)

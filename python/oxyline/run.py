@@ -27,7 +27,8 @@ from oxyline.errors import (
 )
 from oxyline.loader import load_model
 from oxyline.model import METHODS, Model, output_names, output_vessels
-from oxyline.monitor import check_result
+from oxyline.monitor import Monitor, check_result
+from oxyline.monitor import warn as _warn_bounds
 from oxyline.result import (
     BALANCE,
     SEGMENT_VARIABLES,
@@ -563,8 +564,13 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     store = ZarrAppender(path, dataset(_result(model, s, empty, _run_settings(s, None), False)),
                          time_chunk, overwrite=overwrite)
 
+    # the bounds monitor checks each chunk as it passes (docs/physics.md §2.8)
+    monitor = Monitor(model.canonical.get("transport"))
+
     def write(rows: dict[str, Any]) -> None:
-        store.append(dataset(_result(model, s, rows, {}, False)))
+        chunk = _result(model, s, rows, {}, False)
+        monitor.update(chunk)
+        store.append(dataset(chunk))
 
     try:
         raw = _run(model, s, overrides.get("progress"), _cancel(overrides), chunk_sink=write,
@@ -588,6 +594,7 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
             raise
         opened = None
     _raise_run_error(raw, opened)
+    _warn_bounds(monitor.messages())
     return opened
 
 

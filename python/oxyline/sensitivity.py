@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from oxyline.ensemble.collect import FACTS
 from oxyline.errors import ModelError
 from oxyline.loader import load_model
 from oxyline.model import Model
@@ -77,8 +78,7 @@ def _outputs(quantity: Any) -> tuple[Any, Callable[[Any], dict[str, np.ndarray]]
     output.__name__ = getattr(quantity, "__name__", "quantity")
 
     def read_callable(ds: Any) -> dict[str, np.ndarray]:
-        skip = {"status", "error", "period", "cycles_run", "periodic_error"}
-        return {str(n): ds[n].values for n in ds.data_vars if n not in skip}
+        return {str(n): ds[n].values for n in ds.data_vars if n not in FACTS}
     return output, read_callable
 
 

@@ -19,6 +19,7 @@ from oxyline.ensemble.patch import apply_patch, as_patches
 from oxyline.errors import SimulationInterrupted
 from oxyline.loader import load_model
 from oxyline.model import Model
+from oxyline.monitor import warn
 
 __all__ = ["STATUS", "apply_patch", "simulate_ensemble"]
 
@@ -89,12 +90,27 @@ def _finish(model: Model, patches: list[dict[str, Any]], index: Any, collector: 
         ds = writer.open()
     else:
         ds = collector.dataset(patches, _attrs(model, output), index)
+    _warn_bounds(collector)
     if not finished:
         done = int((ds["status"].values == 0).sum())
         raise SimulationInterrupted(
             f"ensemble interrupted after {done} finished variant(s) of {len(patches)}; the "
             "dataset is in exc.result (status -1: not run)", ds)
     return ds
+
+
+def _warn_bounds(collector: Collector) -> None:
+    """One :class:`~oxyline.PhysicalBoundsWarning` for the whole ensemble, naming the
+    variants whose species output left its physical bounds (each variant's findings are in
+    the dataset's ``warning``); the ensemble itself ran on."""
+    hit = [i for i, w in enumerate(collector.warning) if w]
+    if hit:
+        shown = ", ".join(map(str, hit[:20])) + (", ..." if len(hit) > 20 else "")
+        msg = (f"{len(hit)} variant(s) left their physical bounds (variants {shown}; each "
+               f"variant's findings are in the dataset's 'warning'); variant {hit[0]}: "
+               f"{collector.warning[hit[0]]}")
+        # warn → _warn_bounds → _finish → _local / run_on_client → simulate_ensemble → caller
+        warn([msg], stacklevel=5)
 
 
 def _attrs(model: Model, output: Output) -> dict[str, Any]:

@@ -12,7 +12,7 @@ from collections.abc import Mapping, Sequence
 from itertools import pairwise
 from typing import Any
 
-from oxyline.ensemble.collect import Collector, Output
+from oxyline.ensemble.collect import FACTS, Collector, Output
 from oxyline.ensemble.patch import Patcher
 from oxyline.model import Model
 
@@ -59,7 +59,7 @@ def _chunks(n: int, threads: int) -> list[range]:
 def _merge(into: Collector, part: Collector, rows: range) -> None:
     """Copy the rows of a finished chunk into the ensemble's collector."""
     for j, i in enumerate(rows):
-        for name in ("status", "error", "period", "cycles_run", "periodic_error"):
+        for name in FACTS:
             getattr(into, name)[i] = getattr(part, name)[j]
         if j in part.datasets:
             into.datasets[i] = part.datasets[j]

@@ -8,8 +8,10 @@
 * a callable ``f(result) -> {name: float}``: those scalars along ``variant``.
 
 Every dataset has ``status`` (0 finished, see :data:`STATUS`), ``error`` (the message of a
-failed variant), ``period``, ``cycles_run`` and ``periodic_error`` per variant, and the
-patch values as coordinates along ``variant`` (their dotted paths).
+failed variant), ``warning`` (what the physical-bounds monitor found in a finished variant's
+species output, docs/physics.md §2.8; empty if nothing), ``period``, ``cycles_run`` and
+``periodic_error`` per variant, and the patch values as coordinates along ``variant`` (their
+dotted paths).
 """
 
 from __future__ import annotations
@@ -27,6 +29,8 @@ from oxyline.result import Result
 STATUS = {"ok": 0, "model": 1, "unstable": 2, "solver": 3, "output": 4, "interrupted": 5,
           "not run": -1}
 STATS = ("mean", "min", "max")
+#: the per-variant facts every ensemble dataset has besides its outputs
+FACTS = ("status", "error", "warning", "period", "cycles_run", "periodic_error")
 ERROR_CHARS = 400  # stored error messages are cut to this length (fixed-width strings)
 
 Output = str | Callable[[Result], Mapping[str, float]]
@@ -135,6 +139,7 @@ class Collector:
         self.n, self.output, self.vessels = n, output, vessels
         self.status = np.full(n, STATUS["not run"], dtype=np.int64)
         self.error = np.full(n, "", dtype=object)
+        self.warning = np.full(n, "", dtype=object)
         self.period = np.full(n, np.nan)
         self.cycles_run = np.zeros(n, dtype=np.int64)
         self.periodic_error = np.full(n, np.nan)
@@ -144,6 +149,11 @@ class Collector:
     def fail(self, i: int, kind: str, message: str) -> None:
         self.status[i] = STATUS[kind]
         self.error[i] = message
+
+    def warn(self, i: int, messages: Sequence[str]) -> None:
+        """Record the physical-bounds findings of finished variant ``i`` (cut to
+        ERROR_CHARS like the errors)."""
+        self.warning[i] = "; ".join(messages)[:ERROR_CHARS]
 
     def facts(self, i: int, period: float, raw: Mapping[str, Any] | None) -> None:
         self.period[i] = period
@@ -189,6 +199,7 @@ class Collector:
         data: dict[str, Any] = {
             "status": ("variant", self.status),
             "error": ("variant", self.error.astype(str)),
+            "warning": ("variant", self.warning.astype(str)),
             "period": ("variant", self.period, {"units": "s"}),
             "cycles_run": ("variant", self.cycles_run),
             "periodic_error": ("variant", self.periodic_error),

@@ -15,6 +15,7 @@ from oxyline.ensemble.collect import ERROR_CHARS, Collector, Output, stats_summa
 from oxyline.ensemble.patch import Patcher, Variant
 from oxyline.errors import ModelError
 from oxyline.model import Model
+from oxyline.monitor import Monitor
 from oxyline.run import _result, _run_settings, _settings
 
 
@@ -128,11 +129,15 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
         else:
             try:
                 assert raw is not None and layout is not None
+                # a summary without species is read from the core's column statistics; the
+                # bounds monitor only concerns species, so it needs the Result only then
                 values = stats_summary(raw, layout) if output == "summary" else None
                 if values is None:
                     result = _result(v.model, s, raw, _run_settings(s, raw), True, layout)
-                    values = collector.outputs(result, raw.get("column_stats"))
-                collector.put(i, values)
+                    collector.put(i, collector.outputs(result, raw.get("column_stats")))
+                    collector.warn(i, bounds_findings(v.model, result))
+                else:
+                    collector.put(i, values)
             except Exception as e:  # noqa: BLE001 - a user's output function fails its variant
                 collector.fail(i, "output", f"variant {first + i}: {type(e).__name__}: {e}"
                                [:ERROR_CHARS])
@@ -149,6 +154,16 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
                                 summary=output == "summary", **core)
     finally:
         close()
+
+
+def bounds_findings(model: Model, result: Any) -> list[str]:
+    """The physical-bounds monitor's findings in a variant's recorded species output
+    (docs/physics.md §2.8): what ``simulate`` of the patched model would warn."""
+    if not result.species:
+        return []
+    monitor = Monitor(model.canonical.get("transport"))
+    monitor.update(result)
+    return monitor.messages()
 
 
 @contextlib.contextmanager

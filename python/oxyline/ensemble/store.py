@@ -21,7 +21,8 @@ from oxyline.ensemble.collect import ERROR_CHARS, Collector
 from oxyline.errors import ModelError
 from oxyline.io.results import _zarr
 
-FACTS = ("period", "cycles_run", "periodic_error", "error")
+FACTS = ("period", "cycles_run", "periodic_error", "error", "warning")
+TEXTS = ("error", "warning")  # fixed-width strings, cut to ERROR_CHARS
 
 
 class StoreWriter:
@@ -35,7 +36,8 @@ class StoreWriter:
         self.collector = collector
         self._zarr = _zarr()
         template = collector.dataset(patches, {**attrs, "complete": 0}, index)
-        template["error"] = template["error"].astype(f"<U{ERROR_CHARS}")
+        for name in TEXTS:
+            template[name] = template[name].astype(f"<U{ERROR_CHARS}")
         template = template.assign_coords(vessel=("vessel", np.array(collector.vessels, dtype=str)))
         encoding = {name: {"chunks": (1,) * template[name].ndim}
                     for name in template.data_vars}
@@ -65,7 +67,7 @@ class StoreWriter:
                 self._array(name, arr[i])[i] = arr[i]
         for name in FACTS:
             value = getattr(c, name)[i]
-            self._group[name][i] = str(value)[:ERROR_CHARS] if name == "error" else value
+            self._group[name][i] = str(value)[:ERROR_CHARS] if name in TEXTS else value
         self._group["status"][i] = c.status[i]
 
     def close(self, complete: bool) -> None:

@@ -31,6 +31,7 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -353,7 +354,9 @@ class PeriodicResult:
 class AxisymmetricSolver:
     """Periodic O2 field of a rigid tube (see the module doc). ``backflow``: PO2 re-entering
     through the outlet during reversal: "mixed" (the area-mean PO2 of the last axial cell,
-    the 1-D model's zero-gradient value) or a number (mmHg)."""
+    the 1-D model's zero-gradient value, with a flat profile), "profile" (each radius re-enters
+    with its own last-cell PO2: zero axial gradient at every radius, as if the tube went on
+    with its own boundary layer) or a number (mmHg)."""
 
     def __init__(self, tube: Tube, flow: PeriodicFlow, wall: Wall, inlet_po2: float,
                  grid: Grid = Grid(), backflow: str | float = "mixed") -> None:
@@ -426,8 +429,10 @@ class AxisymmetricSolver:
         P[nb:] = new
         return P
 
-    def _ghosts(self, P: np.ndarray) -> tuple[float, float]:
+    def _ghosts(self, P: np.ndarray) -> tuple[float, Any]:
         nb = self.rad.nb
+        if self.backflow == "profile":
+            return self.p_in, P[:nb, -1].copy()
         if self.backflow == "mixed":
             w = self.rad.w[:nb]
             back = float(w @ P[:nb, -1] / w.sum())
@@ -556,6 +561,7 @@ def _advection_rate(P: np.ndarray, u: np.ndarray, cf: np.ndarray, cb: np.ndarray
             continue
         Pl = P[mask][:, ::-1] if flip else P[mask]
         ua = np.abs(u[mask])[:, None]
+        ghost = ghost[mask] if np.ndim(ghost) else ghost  # per-row ghosts ("profile")
         s1, s2 = _shifted(Pl, ghost)
         r = ua * (coef[0] * Pl + coef[1] * s1 + coef[2] * s2)
         s_last = coef[3][-1]

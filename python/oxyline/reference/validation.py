@@ -101,6 +101,66 @@ CLOSURES: dict[str, dict] = {
 }
 
 
+class QuasiSteadyTube(Tube):
+    """The tube with every harmonic of the flow in Poiseuille's shape (Womersley number 0 for
+    the velocity profile only): the wall shear follows Q(t) quasi-steadily. Comparing the
+    reference in this tube with the real one separates what the Womersley profile does to
+    the boundary layer from what the flow waveform does (docs/validation-oxygen.md §8)."""
+
+    def womersley(self, period: float) -> float:
+        return 0.0
+
+
+def wall_shear(case: Case, flow: PeriodicFlow, t: np.ndarray, womersley: bool = True
+               ) -> np.ndarray:
+    """Wall shear rate γ_w(t) (1/s, positive forward) of the fully developed profile: each
+    harmonic's Womersley wall gradient, or Poiseuille's 4 Q/(π r³) with ``womersley=False``."""
+    from scipy import special
+
+    r = case.radius
+    gamma = np.full_like(t, 4.0 * flow.mean / (math.pi * r**3))
+    om = 2.0 * math.pi / flow.period
+    for k, qk in flow.harmonics():
+        a = case.tube().womersley(flow.period / k) if womersley else 0.0
+        if a < 1e-3:
+            slope = 4.0
+        else:  # −d(shape)/dρ at the wall, shape = womersley_shape
+            z = a * np.exp(0.75j * math.pi)
+            j0, j1 = special.jv(0, z), special.jv(1, z)
+            slope = (z * j1 / j0) / (1.0 - 2.0 * j1 / (z * j0))
+        gamma = gamma + np.real(qk / (math.pi * r**3) * slope * np.exp(1j * k * om * t))
+    return gamma
+
+
+#: the one constant of the end-renewal candidate, fitted to the 27 dissolved-O2 rows of
+#: docs/validation-oxygen.md §8 (any value in 0.02–0.045 keeps them within 2 %)
+END_RENEWAL_C = 0.035
+
+
+def end_renewal_number(case: Case, flow: PeriodicFlow, uptake: float) -> float:
+    """s = (B_W − B_QS) (D/k̄) sqrt(D/(πT)) / (k̄ L): the near-wall excursion that the
+    Womersley profile adds to a quasi-steady one (B, the backward wall strain per period,
+    times the layer thickness D/k̄), times the penetration coefficient of a layer renewed every
+    period over the mean coefficient k̄ of the vessel, per vessel length (docs/validation-
+    oxygen.md §8). ``uptake``: the 1-D uptake that gives k̄ = uptake/(2πrL α ΔP)."""
+    t = np.linspace(0.0, flow.period, 20000, endpoint=False)
+    b_w, b_qs = (float(np.maximum(-wall_shear(case, flow, t, w), 0.0).mean() * flow.period)
+                 for w in (True, False))
+    d = case.diffusivity
+    kbar = uptake / (2.0 * math.pi * case.radius * case.length * case.alpha
+                     * (case.p_in - case.p_wall))
+    return (b_w - b_qs) * (d / kbar) * math.sqrt(d / (math.pi * flow.period)) / (kbar
+                                                                                 * case.length)
+
+
+def net_mean_factor(flow: PeriodicFlow, samples: int = 20000) -> float:
+    """`enhancement` (⟨Q⟩/⟨|Q|⟩)^{1/3} that turns the cycle-mean Graetz law into the law of
+    the signed net flow ⟨Q⟩ (the frozen-layer limit of small excursions; see
+    `forward_mean_factor` for why the 1/3 power)."""
+    q = flow(np.linspace(0.0, flow.period, samples, endpoint=False))
+    return float((q.mean() / np.abs(q).mean()) ** (1.0 / 3.0))
+
+
 def forward_mean_factor(flow: PeriodicFlow, samples: int = 20000) -> float:
     """The session-5 emulation of the forward-mean closure (now `graetz` with `flow:
     forward-mean`, docs/validation-oxygen.md §6): the shear from the cycle mean of the *forward* flow
@@ -113,13 +173,17 @@ def forward_mean_factor(flow: PeriodicFlow, samples: int = 20000) -> float:
 
 
 def one_d(case: Case, flow: PeriodicFlow, closure: dict, hb: bool = False,
-          cycles: int = 12) -> tuple[float, float]:
-    """Cycle-mean wall uptake (mol/s) and flow-weighted outlet PO2 (mmHg) of the last cycle."""
+          cycles: int = 12, hill: bool = False) -> tuple[float, float]:
+    """Cycle-mean wall uptake (mol/s) and flow-weighted outlet PO2 (mmHg) of the last cycle.
+    ``hb``: linearised haemoglobin; ``hill``: Hill binding with the default (nonlinear)
+    facilitation (the outlet PO2 is then not returned: NaN)."""
     import oxyline
 
     wall = dict(closure, po2=case.p_wall)
     if wall.pop("forward_mean", False):
         wall["enhancement"] = forward_mean_factor(flow)
+    if wall.pop("net_mean", False):
+        wall["enhancement"] = net_mean_factor(flow)
     if wall["model"] == "mass-transfer":
         wall["k"] = SH_FULLY_DEVELOPED * case.diffusivity / (2.0 * case.radius)
     if hb and wall["model"] in ("leveque", "graetz"):
@@ -127,8 +191,10 @@ def one_d(case: Case, flow: PeriodicFlow, closure: dict, hb: bool = False,
     oxygen = {"inlet": {"po2": case.p_in}, "solubility": case.alpha,
               "diffusivity": case.diffusivity, "wall": wall,
               "hemoglobin": "linearized" if hb else "none"}
-    if hb:
+    if hb or hill:
         oxygen["hill"] = dict(HILL)
+    if hill:
+        oxygen["hemoglobin"] = "hill"
     model = {
         "period": flow.period, "blood": {"density": case.density, "viscosity": case.viscosity},
         "vessels": [{"name": "tube", "from": "in", "to": "out", "length": case.length,
@@ -147,6 +213,8 @@ def one_d(case: Case, flow: PeriodicFlow, closure: dict, hb: bool = False,
     uptake = float(np.mean(np.asarray(res.wall_o2_flux)[last, 0]))
     j_out = float(np.mean(np.asarray(res.o2_flux_out)[last, 0]))
     q_out = float(np.mean(np.asarray(res.flow_out)[last, 0]))
+    if hill:
+        return uptake, math.nan
     cap = case.alpha * (1.0 + hill_secant(case.p_in, case.p_wall, case.alpha)) if hb else case.alpha
     return uptake, j_out / (cap * q_out)
 
@@ -190,6 +258,86 @@ def closure_table(case: Case, grid: Grid, hb: bool, scen: list, log) -> list[str
             up, _ = one_d(case, flow, spec, hb)
             cells.append(f"{100 * (up / ref.uptake - 1):+.1f} %")
         rows.append(f"| {label} | {ref.uptake:.4e} | " + " | ".join(cells) + " |")
+    return rows
+
+
+def decomposition_table(case: Case, grid: Grid, log) -> list[str]:
+    """Why the pulsatile uptake differs from a cycle-mean law: the reference in the real tube
+    (Womersley profile) and in `QuasiSteadyTube` (the same Q(t), Poiseuille-shaped), against
+    the Graetz law of the signed net flow ⟨Q⟩ and of the forward mean ⟨Q₊⟩ (the default),
+    with the backward wall strain per period B = ∫ max(−γ_w, 0) dt of both profiles."""
+    head = ("| scenario | 2-D, Womersley (mol/s) | 2-D, quasi-steady profile | quasi-steady vs "
+            "net-mean law | Womersley vs quasi-steady | default (forward-mean) vs 2-D | "
+            "B Womersley | B quasi-steady |")
+    rows = [head, "|" + "---|" * 8]
+    net_law = {"model": "graetz", "flow": "cycle-mean", "net_mean": True}
+    fwd_law = {"model": "graetz", "flow": "forward-mean"}
+    for label, flow in scenarios(case):
+        t = np.linspace(0.0, flow.period, 20000, endpoint=False)
+        ref = reference(case, flow, grid).uptake
+        qs = AxisymmetricSolver(QuasiSteadyTube(**case.tube().__dict__), flow,
+                                ConstantPO2(case.p_wall), case.p_in, grid).periodic(tol=1e-8)
+        net, _ = one_d(case, flow, net_law)
+        fwd, _ = one_d(case, flow, fwd_law)
+        b = [float(np.maximum(-wall_shear(case, flow, t, w), 0.0).mean() * flow.period)
+             for w in (True, False)]
+        log(f"  {case.name} {label}: 2-D {ref:.5e}, quasi-steady {qs.uptake:.5e}")
+        rows.append(f"| {label} | {ref:.4e} | {qs.uptake:.4e} | "
+                    f"{100 * (qs.uptake / net - 1):+.2f} % | {100 * (ref / qs.uptake - 1):+.2f} % "
+                    f"| {100 * (fwd / ref - 1):+.2f} % | {b[0]:.1f} | {b[1]:.1f} |")
+    return rows
+
+
+#: steady 2-D uptake with Hill binding over dissolved-only (docs/validation-oxygen.md §7)
+STEADY_HILL_RATIO = {"straight": 2.471, "curved": 2.718, "bifurcated": 2.543}
+
+
+def hill_pulsatile_table(cases: list[Case], grid: Grid, log) -> list[str]:
+    """The example waveforms with Hill binding in the fluid (`oxyline.reference.hill.
+    hill_periodic`) against the 1-D model with `hemoglobin: hill` (default facilitation,
+    default closure) — the pulsatile counterpart of §7."""
+    from oxyline.reference.hill import HillBlood, hill_periodic
+
+    head = ("| example | 2-D pulsatile, Hill (mol/s) | 2-D Hill / dissolved, pulsatile | "
+            "(steady, §7) | 1-D Hill, facilitated (default) | 1-D dissolved vs 2-D dissolved "
+            "| periods | mass residual |")
+    rows = [head, "|" + "---|" * 8]
+    capacity = HILL["hb"] * HILL["huefner"] / 22.414
+    for c in cases:
+        t0 = time.process_time()
+        blood = HillBlood(solubility=c.alpha, diffusivity=c.diffusivity, p50=HILL["p50"],
+                          n=HILL["n"], capacity=capacity, d_hb=D_HB)
+        hill = hill_periodic(blood, c.tube(), c.flow, c.p_in, c.p_wall, grid)
+        plain = hill_periodic(replace(blood, capacity=0.0, d_hb=0.0), c.tube(), c.flow, c.p_in,
+                              c.p_wall, grid)
+        law = {"model": "graetz", "flow": "forward-mean"}
+        up_hill, _ = one_d(c, c.flow, law, hill=True)
+        up_plain, _ = one_d(c, c.flow, law)
+        log(f"  Hill {c.name}: 2-D {hill.uptake:.5e} ({hill.periods} periods), dissolved "
+            f"{plain.uptake:.5e}, 1-D {up_hill:.5e}, {time.process_time() - t0:.0f} s")
+        rows.append(f"| {c.name} | {hill.uptake:.4e} | {hill.uptake / plain.uptake:.3f} | "
+                    f"{STEADY_HILL_RATIO[c.name]:.3f} | {100 * (up_hill / hill.uptake - 1):+.2f} % "
+                    f"| {100 * (up_plain / plain.uptake - 1):+.2f} % | {hill.periods} | "
+                    f"{hill.mass_residual:.1e} |")
+    return rows
+
+
+def candidate_table(case: Case, log) -> list[str]:
+    """The end-renewal candidate (emulated): the default law with `enhancement`
+    1 + END_RENEWAL_C · s (`end_renewal_number`), against the stored 2-D uptakes of §8."""
+    import json
+
+    data = Path(__file__).resolve().parents[3] / "tests" / "data" / "oxygen_2d_uptakes.json"
+    stored = {(r["case"], r["scenario"]): r for r in json.loads(data.read_text())["cases"]}
+    rows = ["| scenario | s | default vs 2-D | candidate vs 2-D |", "|---|---|---|---|"]
+    for label, flow in scenarios(case):
+        ref = stored[(case.name, label)]["womersley_mixed"]
+        fwd, _ = one_d(case, flow, {"model": "graetz"})
+        s = end_renewal_number(case, flow, fwd)
+        cand, _ = one_d(case, flow, {"model": "graetz", "enhancement": 1.0 + END_RENEWAL_C * s})
+        log(f"  {case.name} {label}: s {s:.4f}")
+        rows.append(f"| {label} | {s:.4f} | {100 * (fwd / ref - 1):+.2f} % | "
+                    f"{100 * (cand / ref - 1):+.2f} % |")
     return rows
 
 
@@ -245,6 +393,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="coarse grids (smoke run)")
     ap.add_argument("--only", default="straight,curved,bifurcated")
     ap.add_argument("--skip-convergence", action="store_true")
+    ap.add_argument("--candidate", action="store_true",
+                    help="only the end-renewal candidate against the stored 2-D uptakes (§8)")
+    ap.add_argument("--hill", action="store_true",
+                    help="only the pulsatile Hill-binding table (docs §9)")
+    ap.add_argument("--decompose", action="store_true",
+                    help="only the Womersley/quasi-steady decomposition (docs §8)")
     ap.add_argument("--closures", default="",
                     help="comma-separated parts of closure labels to run (default: all)")
     args = ap.parse_args(argv)
@@ -259,6 +413,20 @@ def main(argv: list[str] | None = None) -> int:
 
     cases = [load_case(n) for n in args.only.split(",")]
     out: list[str] = []
+    if args.candidate:
+        for c in cases:
+            out += [f"#### {c.name}", ""] + candidate_table(c, log) + [""]
+        print("\n".join(out))
+        return 0
+    if args.hill:
+        out = hill_pulsatile_table(cases, grid, log)
+        print("\n".join(out))
+        return 0
+    if args.decompose:
+        for c in cases:
+            out += [f"### {c.name}", ""] + decomposition_table(c, grid, log) + [""]
+        print("\n".join(out))
+        return 0
     if not args.skip_convergence:
         c0 = cases[0]
         out += [f"### Grid convergence ({c0.name}, example waveform)", ""]

@@ -150,6 +150,27 @@ fn series(g_blood: f64, gp: f64) -> f64 {
     }
 }
 
+/// Local Sherwood number of the Lévêque layer at a constant wall flux over that at a constant
+/// wall concentration, Γ(4/3)/F(0) with F'' = 3η(F − ηF'), F'(0) = −1, F(∞) = 0 (the
+/// constant-flux similarity solution; `tests/test_tissue.py` re-derives it with scipy).
+pub const LEVEQUE_FLUX_RATIO: f64 = 1.209_199_576;
+
+/// Conjugate correction of a developing-layer conductance `g` (Lévêque, Graetz; derived for a
+/// constant wall concentration) when the wall behind it sets its own interface concentration
+/// through a conductance `g_wall` to a fixed value (docs/physics.md §3.7 "Conjugate closure").
+/// The interface condition lies between the two exact limits of the thin layer: a wall that
+/// conducts much better than the layer holds the interface concentration (g_wall → ∞: the
+/// closure as derived), a wall that conducts much worse fixes the flux whatever the layer does
+/// (g_wall → 0: the constant-flux layer, `LEVEQUE_FLUX_RATIO` × g). In between, the factor is
+/// interpolated with the wall's share of the series resistance, ψ = g/(g + g_wall):
+/// g_conj = g (1 + (LEVEQUE_FLUX_RATIO − 1) ψ). `g_wall` = ∞ leaves `g` unchanged (bit for bit).
+pub fn conjugate_conductance(g: f64, g_wall: f64) -> f64 {
+    if g <= 0.0 || g_wall.is_infinite() {
+        return g;
+    }
+    g * (1.0 + (LEVEQUE_FLUX_RATIO - 1.0) * g / (g + g_wall))
+}
+
 /// Lévêque coefficient: ∫_seg k 2πr dx = coef · |Q|^{1/3} (docs/physics.md §3.1 C5s), with
 /// a = (γ D²/9)^{1/3}/Γ(4/3), γ = 4|Q|/(π r³).
 pub fn leveque_coef(seg: &SegmentWall, d: f64) -> f64 {
@@ -191,19 +212,26 @@ pub fn graetz_conductance(seg: &SegmentWall, d: f64, q_abs: f64) -> f64 {
     q_abs * (graetz_theta(xs(seg.x0)).ln() - graetz_theta(xs(seg.x1)).ln())
 }
 
-fn check(element: &str, key: &str, v: f64, allow_zero: bool) -> Result<()> {
+/// `v` if it is a finite number > 0 (or >= 0 with `allow_zero`), else a model error naming
+/// the element, what the value is (e.g. "wall k", "tissue wall thickness") and the value. The
+/// one check of the wall numbers of every closure and of the tissue wall.
+pub(crate) fn finite_number(element: &str, what: &str, v: f64, allow_zero: bool) -> Result<f64> {
     let ok = v.is_finite() && (v > 0.0 || (allow_zero && v == 0.0));
     if ok {
-        Ok(())
+        Ok(v)
     } else {
         Err(Error::model(
             element,
             format!(
-                "wall {key} must be a finite number {} 0, got {v}",
+                "{what} must be a finite number {} 0, got {v}",
                 if allow_zero { ">=" } else { ">" }
             ),
         ))
     }
+}
+
+fn check(element: &str, key: &str, v: f64, allow_zero: bool) -> Result<()> {
+    finite_number(element, &format!("wall {key}"), v, allow_zero).map(|_| ())
 }
 
 impl WallSpec {

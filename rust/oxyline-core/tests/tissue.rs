@@ -2,8 +2,9 @@
 //! integrations: the steady wall profile against the closed form of zero-order consumption in
 //! a cylindrical shell, exact mass balance (lumen and wall), and typed errors.
 
-use oxyline_core::Transport;
-use oxyline_core::network::parse;
+mod common;
+
+use common::{Built, build_error as error, try_build};
 use oxyline_core::rk4::CoupledStages;
 use oxyline_core::transport::{
     BALANCE_COLUMNS, SEGMENT_COLUMNS, TISSUE_SEGMENT_COLUMNS, TISSUE_VESSEL_COLUMNS, VESSEL_COLUMNS,
@@ -20,20 +21,14 @@ const C_IN: f64 = 0.112;
 const Q: f64 = 1e-5;
 const SEGS: usize = 4;
 
-struct Built {
-    dae: oxyline_core::Dae,
-    transport: Transport,
-}
-
+/// The shared tube fixture (`common::tube`) with this file's wall, tissue and extra keys.
 fn tube(wall: &str, tissue: &str, extra: &str) -> String {
-    format!(
-        r#"{{"vessels": [{{"name": "tube", "from": "in", "to": "out", "segments": {SEGS},
-            "geometry": {{"length": 0.05, "radius_in": {R}, "radius_out": {R}}}}}],
-          "boundary_conditions": {{"in": {{"type": "flow", "flow": {{"kind": "constant", "value": {Q}}}}},
-                                   "out": {{"type": "resistance", "resistance": 1e7}}}},
-          "transport": {{{extra} "species": [{{"name": "o2", "inlet": {{"kind": "constant", "value": {C_IN}}},
-              "wall": {wall}, "tissue": {tissue}}}]}}}}"#
-    )
+    let flow = format!(r#"{{"kind": "constant", "value": {Q}}}"#);
+    let species = format!(
+        r#"{extra} "species": [{{"name": "o2", "inlet": {{"kind": "constant", "value": {C_IN}}},
+              "wall": {wall}, "tissue": {tissue}}}]"#
+    );
+    common::tube(R, 0.05, SEGS, "", &flow, 1e7, &species)
 }
 
 fn tissue(consumption: &str, outer: &str) -> String {
@@ -44,26 +39,6 @@ fn tissue(consumption: &str, outer: &str) -> String {
 }
 
 const LUMEN: &str = r#"{"model": "mass-transfer", "k": 1.0, "wall_concentration": 0.0}"#;
-
-fn try_build(json: &str) -> oxyline_core::Result<Built> {
-    let spec = parse(json).unwrap();
-    let assembled = spec.assemble().unwrap();
-    let dae = assembled.circuit.assemble().unwrap();
-    let transport = Transport::build(
-        spec.transport.as_ref().unwrap(),
-        &assembled.circuit,
-        &dae,
-        &assembled.probes,
-    )?;
-    Ok(Built { dae, transport })
-}
-
-fn error(json: &str) -> String {
-    match try_build(json) {
-        Ok(_) => panic!("the model was accepted"),
-        Err(e) => e.to_string(),
-    }
-}
 
 /// Rigid tube, the flow Q in every branch, pressures at the reference.
 fn flow_state(b: &Built) -> Vec<f64> {

@@ -1,16 +1,19 @@
 //! Species transport verification (docs/physics.md §6 (a)–(e), (h)): every expected value is a
 //! closed form, a number of the spec, or a conservation law.
 
+mod common;
+
+use common::{Built, build, build_error};
 use oxyline_core::genalpha::NewtonControl;
-use oxyline_core::network::parse;
 use oxyline_core::rk4::CoupledStages;
 use oxyline_core::transport::{BALANCE_COLUMNS, SEGMENT_COLUMNS, VESSEL_COLUMNS};
-use oxyline_core::{Method, RunSettings, Start, Transport, simulate_with_transport};
+use oxyline_core::{Method, RunSettings, Start, simulate_with_transport};
 use std::f64::consts::PI;
 
 const MMHG: f64 = 133.322_368;
 
-/// Single tube from `in` to `out`, flow inlet, resistance outlet, with a transport section.
+/// Single tube from `in` to `out`, flow inlet, resistance outlet, with a transport section
+/// of one species (the shared fixture, `common::tube`).
 fn tube(
     radius: f64,
     length: f64,
@@ -20,48 +23,15 @@ fn tube(
     r_out: f64,
     species: &str,
 ) -> String {
-    format!(
-        r#"{{"vessels": [{{"name": "tube", "from": "in", "to": "out", "segments": {n},
-            "geometry": {{"length": {length}, "radius_in": {radius}, "radius_out": {radius} {wall}}}}}],
-          "boundary_conditions": {{"in": {{"type": "flow", "flow": {flow}}},
-                                   "out": {{"type": "resistance", "resistance": {r_out}}}}},
-          "transport": {{"species": [{species}]}}}}"#
+    common::tube(
+        radius,
+        length,
+        n,
+        wall,
+        flow,
+        r_out,
+        &format!(r#""species": [{species}]"#),
     )
-}
-
-struct Built {
-    assembled: oxyline_core::Assembled,
-    dae: oxyline_core::Dae,
-    transport: Transport,
-}
-
-fn build(json: &str) -> Built {
-    try_build(json).unwrap()
-}
-
-/// `build`, with the transport's model error (the flow model must be valid).
-fn try_build(json: &str) -> oxyline_core::Result<Built> {
-    let spec = parse(json).unwrap();
-    let assembled = spec.assemble().unwrap();
-    let dae = assembled.circuit.assemble().unwrap();
-    let transport = Transport::build(
-        spec.transport.as_ref().unwrap(),
-        &assembled.circuit,
-        &dae,
-        &assembled.probes,
-    )?;
-    Ok(Built {
-        assembled,
-        dae,
-        transport,
-    })
-}
-
-fn build_error(json: &str) -> String {
-    match try_build(json) {
-        Ok(_) => panic!("the model was accepted"),
-        Err(e) => e.to_string(),
-    }
 }
 
 /// Drive a rigid tube with a prescribed flow q(t) in every branch (prescribed-flow path).

@@ -23,6 +23,7 @@
 
 #[allow(unused_imports)]
 use super::*;
+use crate::closure::finite_number;
 use crate::spec::transport::{ConsumptionSpec, OuterSpec, TissueSpec};
 use std::f64::consts::PI;
 
@@ -92,6 +93,10 @@ pub(super) struct Column {
     g_half: f64,
     /// Half-cell conductance between the last cell's centre and the outer face (0: no flux).
     g_out: f64,
+    /// The wall's diffusive conductance from the lumen face to a fixed outer concentration
+    /// (lumen units; 0 with a no-flux outer face), which the conjugate correction of a
+    /// developing boundary layer reads; ∞ for the other closures (no correction).
+    g_shell: f64,
 }
 
 /// The tissue walls of one species (part of the immutable [`Plan`]).
@@ -134,19 +139,11 @@ fn bad_value(element: &str, key: &str, v: f64, rule: &str) -> Error {
 }
 
 fn positive(element: &str, key: &str, v: f64) -> Result<f64> {
-    if v.is_finite() && v > 0.0 {
-        Ok(v)
-    } else {
-        Err(bad_value(element, key, v, "a finite number > 0"))
-    }
+    finite_number(element, &format!("tissue wall {key}"), v, false)
 }
 
 fn non_negative(element: &str, key: &str, v: f64) -> Result<f64> {
-    if v.is_finite() && v >= 0.0 {
-        Ok(v)
-    } else {
-        Err(bad_value(element, key, v, "a finite number >= 0"))
-    }
+    finite_number(element, &format!("tissue wall {key}"), v, true)
 }
 
 /// Validated settings of one tissue spec: (kind, thickness, diffusivity, radial cells).
@@ -319,12 +316,17 @@ fn species_plan(
         seg_cols: vec![0],
     };
     for j in 0..geo.segments.len() {
-        let k = of_vessel[geo.segment_vessels[j] as usize];
+        let vi = geo.segment_vessels[j] as usize;
+        let k = of_vessel[vi];
         if k != u32::MAX {
+            let developing = matches!(
+                set.walls[vi],
+                WallSpec::Leveque { .. } | WallSpec::Graetz { .. }
+            );
             let (h, d, n) = geo_of_kind[k as usize];
             let pieces = geo.seg_pieces[j] as usize..geo.seg_pieces[j + 1] as usize;
             for p in pieces {
-                tp.push_column(p, &geo.pieces[p], k, h, d, n);
+                tp.push_column(p, &geo.pieces[p], k, (h, d, n), developing);
             }
         }
         tp.seg_cols.push(tp.columns.len() as u32);
@@ -336,7 +338,16 @@ impl TissuePlan {
     /// The column behind wall piece `p`: n equal radial cells over [r_i, r_i + h] along the
     /// piece's length (share × its wall's length); the wall does not follow the lumen's
     /// pressure (docs/physics.md §3.7).
-    fn push_column(&mut self, p: usize, pc: &Piece, kind: u32, h: f64, d: f64, n: usize) {
+    /// `developing`: the luminal closure is a developing layer (Lévêque, Graetz), which gets
+    /// the conjugate correction (`closure::conjugate_conductance`).
+    fn push_column(
+        &mut self,
+        p: usize,
+        pc: &Piece,
+        kind: u32,
+        (h, d, n): (f64, f64, usize),
+        developing: bool,
+    ) {
         let (ri, len) = (pc.wall.radius, pc.share * (pc.wall.x1 - pc.wall.x0));
         if !(ri > 0.0 && len > 0.0) {
             return;
@@ -354,10 +365,17 @@ impl TissuePlan {
             self.g.push(g);
         }
         let ro = ri + h;
-        let g_out = if self.kinds[kind as usize].outer.is_some() {
+        let wk = &self.kinds[kind as usize];
+        let g_out = if wk.outer.is_some() {
             d * 2.0 * PI * ro * len / (0.5 * dr)
         } else {
             0.0
+        };
+        // steady diffusion through the shell, 2π D ℓ/ln(r_o/r_i), in lumen units (× φ)
+        let g_shell = match (developing, wk.outer) {
+            (false, _) => f64::INFINITY,
+            (true, Some(_)) => wk.phi * d * 2.0 * PI * len / (ro / ri).ln(),
+            (true, None) => 0.0,
         };
         self.columns.push(Column {
             piece: p as u32,
@@ -366,6 +384,7 @@ impl TissuePlan {
             kind,
             g_half: d * 2.0 * PI * ri * len / (0.5 * dr),
             g_out,
+            g_shell,
         });
     }
 }
@@ -379,9 +398,11 @@ fn piece_g(laws: &Laws, pieces: &[Piece], p: usize) -> f64 {
     }
 }
 
-/// The closure's g in series with the half cell φ G_½ (lumen units).
+/// The closure's g (with the conjugate correction of a developing layer, `g_shell`) in
+/// series with the half cell φ G_½ (lumen units).
 #[inline]
-fn coupling(g: f64, phi_g_half: f64) -> f64 {
+fn coupling(g: f64, g_shell: f64, phi_g_half: f64) -> f64 {
+    let g = closure::conjugate_conductance(g, g_shell);
     if g <= 0.0 {
         0.0
     } else {
@@ -494,7 +515,7 @@ impl Transport {
             let pc = &plan.pieces[p];
             let kind = &tp.kinds[col.kind as usize];
             let g = piece_g(laws, &plan.pieces, p);
-            let geff = coupling(g, kind.phi * col.g_half);
+            let geff = coupling(g, col.g_shell, kind.phi * col.g_half);
             let cells = col.start as usize..(col.start + col.n) as usize;
             let u = |k: usize| z[off + k] / tp.vol[k];
             let c = free[pc.node as usize];
@@ -558,7 +579,7 @@ impl Transport {
             };
             sc.lin[ci] = [f, sigma, c_old];
             let g = piece_g(laws, &self.plan.pieces, p);
-            let geff = coupling(g, kind.phi * col.g_half);
+            let geff = coupling(g, col.g_shell, kind.phi * col.g_half);
             let cells = col.start as usize..(col.start + col.n) as usize;
             eliminate(tp, col, kind, geff, dt, &z[off..], &mut sc, cells);
             // W = G (c − u_0/φ) = λ' c + μ with u_0 = a_0 + b_0 c; minus the closure's g c
@@ -586,7 +607,11 @@ impl Transport {
             let kind = &tp.kinds[col.kind as usize];
             let [f, sigma, c_old] = sc.lin[ci];
             let c = f + sigma * (self.conc[self.plan.pieces[p].node as usize] - c_old);
-            let geff = coupling(piece_g(laws, &self.plan.pieces, p), kind.phi * col.g_half);
+            let geff = coupling(
+                piece_g(laws, &self.plan.pieces, p),
+                col.g_shell,
+                kind.phi * col.g_half,
+            );
             let cells = col.start as usize..(col.start + col.n) as usize;
             let mut last = 0.0;
             for k in cells.clone() {
@@ -617,7 +642,7 @@ impl Transport {
             for col in &tp.columns {
                 let kind = &tp.kinds[col.kind as usize];
                 let g = piece_g(laws, &self.plan.pieces, col.piece as usize);
-                let geff = coupling(g, kind.phi * col.g_half);
+                let geff = coupling(g, col.g_shell, kind.phi * col.g_half);
                 let cells = col.start as usize..(col.start + col.n) as usize;
                 let mut g_in = geff / kind.phi;
                 for k in cells.clone() {
@@ -655,7 +680,7 @@ impl Transport {
                     let p = col.piece as usize;
                     let kind = &tp.kinds[col.kind as usize];
                     let g = piece_g(laws, &self.plan.pieces, p);
-                    let geff = coupling(g, kind.phi * col.g_half);
+                    let geff = coupling(g, col.g_shell, kind.phi * col.g_half);
                     let cl = free[self.plan.pieces[p].node as usize];
                     let u0 = z[off + col.start as usize] / tp.vol[col.start as usize];
                     *c += geff * (cl - u0 / kind.phi) - g * cl;
@@ -832,7 +857,7 @@ mod tests {
                 x1: 1.0,
             },
         };
-        tp.push_column(0, &piece, 0, h, d, n);
+        tp.push_column(0, &piece, 0, (h, d, n), false);
         tp
     }
 
@@ -841,7 +866,7 @@ mod tests {
     fn steady(tp: &TissuePlan, ui: f64) -> Vec<f64> {
         let col = &tp.columns[0];
         let kind = &tp.kinds[0];
-        let geff = coupling(f64::INFINITY, kind.phi * col.g_half);
+        let geff = coupling(f64::INFINITY, f64::INFINITY, kind.phi * col.g_half);
         let n = col.n as usize;
         let mut z: Vec<f64> = tp.vol.iter().map(|v| ui * v).collect();
         let mut sc = TissueScratch {
