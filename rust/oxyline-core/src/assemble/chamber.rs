@@ -43,6 +43,18 @@ fn activation(el: &str, spec: &ActivationSpec, period: f64) -> Result<Activation
             check_positive(el, "tau_2", tau_2)?;
             Activation::two_hill(el, period, [t_shift, tau_1, tau_2, m1, m2])?
         }
+        ActivationSpec::WrappingCosine {
+            systole_fraction,
+            p_wave_divisor,
+        } => {
+            check_positive(el, "systole_fraction", systole_fraction)?;
+            check_positive(el, "p_wave_divisor", p_wave_divisor)?;
+            Activation::WrappingCosine {
+                systole_fraction,
+                p_wave_divisor,
+            }
+        }
+        ActivationSpec::Fourier {} => Activation::fourier(period),
     })
 }
 
@@ -78,6 +90,21 @@ pub fn chamber_elastance(name: &str, spec: &ChamberSpec) -> Result<Elastance> {
                 e_max: max_elastance,
                 e_pass: passive_elastance,
                 v_rest: rest_volume,
+            }
+        }
+        ChamberLawSpec::Exponential {
+            max_elastance,
+            passive_pressure,
+            passive_volume_coefficient,
+            rest_volume,
+        } => {
+            check_nonnegative(&el, "max_elastance", max_elastance)?;
+            check_nonnegative(&el, "passive_pressure", passive_pressure)?;
+            ElastanceLaw::Exponential {
+                e_max: max_elastance,
+                k_pressure: passive_pressure,
+                k_volume: passive_volume_coefficient,
+                v_aso: rest_volume,
             }
         }
     };
@@ -165,8 +192,8 @@ mod tests {
         let dae = a.circuit.assemble().unwrap();
         let (v0, nb) = (1.2e-4, a.circuit.branches.len());
         let steps = 4 * 800; // four cycles of 1 ms
-        let mut ga = GenAlpha::new(&dae, Regime::Transient, 1e-3, 0.5, NewtonControl::default())
-            .unwrap();
+        let mut ga =
+            GenAlpha::new(&dae, Regime::Transient, 1e-3, 0.5, NewtonControl::default()).unwrap();
         let (mut y, mut yd) = (dae.initial_state(), vec![0.0; dae.n]);
         assert_eq!(blood_volume(&dae, nb, &y), v0);
         for i in 0..steps {
