@@ -125,3 +125,7 @@ class Ensemble:
         ``OXYLINE_NUM_THREADS`` or every core), the GIL released; ``on_done(i, raw, layout,
         error_kind, error)`` is called on this thread as each finishes. False if Ctrl-C
         stopped it."""
+
+def chamber_elastance(name: str, chamber_json: str, times: list[float]
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """(E(t), V_rest(t)) of a canonical chamber spec (JSON text) at ``times``."""
