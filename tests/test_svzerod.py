@@ -55,7 +55,6 @@ SUPPORTED = [
 UNSUPPORTED = {
     "chamber_sphere": "'ChamberSphere'",
     "closedLoopHeart_singleVessel": "'closed_loop_blocks'",
-    "closedLoopHeart_singleVessel_decomposed": "'BloodVesselRC'",
     "closedLoopHeart_withCoronaries": "'closed_loop_blocks'",
     "closed_loop_two_hill": "'initial_condition' entry 'pressure:",
     "coupledBlock_closedLoopHeart_singleVessel": "'external_solver_coupling_blocks'",
@@ -65,7 +64,7 @@ UNSUPPORTED = {
     "steadyFlow_calibration": "'calibration_parameters'",
 }
 # chamber and valve cases: tested in tests/test_svzerod_chambers.py
-CHAMBERS = ["chamber_elastance_inductor", "valve_tanh"]
+CHAMBERS = ["chamber_elastance_inductor", "closedLoopHeart_singleVessel_decomposed", "valve_tanh"]
 # coronary, heart, valve cases: tested in tests/test_svzerod_heart.py
 HEART = ["pulsatileFlow_R_coronary", "pulsatileFlow_R_coronary_varres", "steadyFlow_R_coronary"]
 MISMATCH_PERIOD = [
@@ -332,7 +331,6 @@ def _one_vessel(**changes: Any) -> dict[str, Any]:
      "'use_cycle_to_cycle_error' without RCR"),
     ({"vessels__0__boundary_conditions": {"inlet": "OUT", "outlet": "INFLOW"}},
      "RESISTANCE boundary condition 'OUT' at a vessel inlet"),
-    ({"vessels__0__zero_d_element_type": "BloodVesselRC"}, "'BloodVesselRC'.*capacitor"),
 ])
 def test_unsupported_inputs_name_the_key(changes: dict[str, Any], match: str) -> None:
     with pytest.raises(oxyline.UnsupportedElement, match=match):

@@ -60,6 +60,23 @@ def test_generalized_alpha_matches_reference(name: str) -> None:
     assert max(errors.values()) <= 1e-6, errors
 
 
+def test_closed_loop_heart_decomposed_matches_reference() -> None:
+    """closedLoopHeart_singleVessel_decomposed: svZeroDSolver's closed-loop heart written as
+    four chambers (exponential atria with the wrapping-cosine activation, ventricles with the
+    Fourier one), four tanh valves, a flow-through RC pulmonary bed (BloodVesselRC) and
+    systemic vessels, no boundary condition, started from the chambers' initial volumes."""
+    name = "closedLoopHeart_singleVessel_decomposed"
+    actual = svz.simulate(str(case(name)))
+    expected = reference(name)
+    assert list(actual["name"]) == list(expected["name"])
+    errors = {}
+    for c in ("flow_in", "flow_out", "pressure_in", "pressure_out"):
+        a, e = actual[c].to_numpy(float), expected[c].to_numpy(float)
+        errors[c] = float(np.max(np.abs(a - e)) / np.max(np.abs(e)))
+    # scaled as tests/test_svzerod.py: svZeroDSolver's Newton tolerance 1e-8 and 10 decimals
+    assert max(errors.values()) <= 1e-6, errors
+
+
 def test_rk4_matches_svzerod_20x_finer() -> None:
     """valve_tanh (chamber_elastance_inductor: see test_rk4_refuses_flow_driven_valve)."""
     name = "valve_tanh"

@@ -135,3 +135,6 @@ class Ensemble:
 
 def closed_loop_o2(spec_json: str, flows: np.ndarray, dt: float, max_cycles: int,
                    tol: float) -> dict[str, Any]: ...
+def chamber_elastance(name: str, chamber_json: str, times: list[float]
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """(E(t), V_rest(t)) of a canonical chamber spec (JSON text) at ``times``."""

@@ -37,7 +37,7 @@ TOP_KEYS = {
 VESSEL_KEYS = {
     "name", "from", "to", "length", "radius", "radius_in", "radius_out", "wall_thickness",
     "youngs_modulus", "poisson_ratio", "segments", "lumped", "arrangement", "output",
-    "description", "valve", "chamber",
+    "description", "valve", "chamber", "through_rc",
 }
 #: heart elements (docs/physics.md §1.8): each law's keys and their quantities ("1/pressure":
 #: a valve's steepness; "elastance": pressure per volume; "volume": the flow factor times 1 s)
@@ -51,12 +51,17 @@ CHAMBER_KEYS = {
                            "rest_volume_diastole": "volume", "rest_volume_systole": "volume"},
     "linear": {"max_elastance": "elastance", "passive_elastance": "elastance",
                "rest_volume": "volume"},
+    "exponential": {"max_elastance": "elastance", "passive_pressure": "pressure",
+                    "passive_volume_coefficient": "1/volume", "rest_volume": "volume"},
 }
+THROUGH_RC_KEYS = {"resistance": "resistance", "capacitance": "capacitance"}
 CHAMBER_COMMON = {"period": "time", "inductance": "inductance", "initial_volume": "volume"}
 ACTIVATION_KEYS = {
     "half-cosine": {"t_active", "t_twitch"},
     "piecewise-cosine": {"contract_start", "relax_start", "contract_duration", "relax_duration"},
     "two-hill": {"t_shift", "tau_1", "tau_2", "m1", "m2"},
+    "wrapping-cosine": {"systole_fraction", "p_wave_divisor"},
+    "fourier": set(),
 }
 LUMPED_KEYS = {"resistance", "inductance", "capacitance", "stenosis_coefficient",
                "stenosis_form"}
@@ -306,7 +311,7 @@ def _vessel(v: Any, i: int, units: str) -> dict[str, Any]:
         cv["arrangement"] = v["arrangement"]
     if "output" in v:
         cv["output"] = bool(v["output"])
-    if "valve" in v or "chamber" in v:
+    if "valve" in v or "chamber" in v or "through_rc" in v:
         return _heart_element(v, cv, el, units)
     if "lumped" in v:
         lp = v["lumped"]
@@ -358,19 +363,30 @@ def _quantity(units: str, q: str) -> float:
         return 1.0 / factor(units, "capacitance")
     if q == "volume":
         return factor(units, "flow")
+    if q == "1/volume":
+        return 1.0 / factor(units, "flow")
     return factor(units, q)
 
 
 def _heart_element(v: Mapping[str, Any], cv: dict[str, Any], el: str, units: str
                    ) -> dict[str, Any]:
     """The canonical form of a ``valve`` or ``chamber`` element (docs/physics.md §1.8)."""
-    kinds = [k for k in ("valve", "chamber", "lumped", "length") if k in v]
+    kinds = [k for k in ("valve", "chamber", "through_rc", "lumped", "length") if k in v]
     if len(kinds) > 1:
-        raise _err(el, f"give one of valve, chamber, lumped or geometry, not {' and '.join(kinds)}")
+        raise _err(el, f"give one of valve, chamber, through_rc, lumped or geometry, not "
+                       f"{' and '.join(kinds)}")
     kind = kinds[0]
     spec = v[kind]
     if not isinstance(spec, Mapping):
         raise _err(el, f"'{kind}' must be a mapping")
+    if kind == "through_rc":
+        _check_keys(spec, set(THROUGH_RC_KEYS), f"{el} through_rc")
+        for k in THROUGH_RC_KEYS:
+            if k not in spec:
+                raise _err(el, f"through_rc needs '{k}'")
+        cv[kind] = {k: _quantity(units, q) * _number(spec[k], el, k)
+                    for k, q in THROUGH_RC_KEYS.items()}
+        return cv
     laws = VALVE_KEYS if kind == "valve" else CHAMBER_KEYS
     law = spec.get("law")
     if law not in laws:

@@ -101,18 +101,15 @@ VESSEL_KEYS = {"vessel_id", "vessel_name", "zero_d_element_type", "zero_d_elemen
 JUNCTION_KEYS = {"junction_name", "junction_type", "inlet_vessels", "outlet_vessels",
                  "inlet_blocks", "outlet_blocks", "junction_values", "calibrate"}
 BC_ENTRY_KEYS = {"bc_name", "bc_type", "bc_values"}
-VESSEL_TYPES = {"BloodVessel", "BloodVesselCRL"}
+VESSEL_TYPES = {"BloodVessel", "BloodVesselCRL", "BloodVesselRC"}
 NORMAL_JUNCTIONS = {"NORMAL_JUNCTION", "internal_junction"}
 JUNCTION_TYPES = NORMAL_JUNCTIONS | {"BloodVesselJunction", "resistive_junction"}
 # block types this importer knows and cannot translate, with the reason (other unknown types
 # are refused with the list of supported ones)
-UNSUPPORTED_TYPES = {
-    "BloodVesselRC": (
-        "its equations Q_in = Q_out = C dP_in/dt + (P_in - P_out)/R put the capacitor's flow "
-        "C dP_in/dt through to the outlet, which no arrangement of oxyline's R-L branches and "
-        "grounded capacitors gives (a mass matrix entry coupling a flow row to a pressure)"),
-}
+UNSUPPORTED_TYPES: dict[str, str] = {}
 BLOOD_VESSEL_PARAMS = {"R_poiseuille", "C", "L", "stenosis_coefficient"}
+#: BloodVesselRC's parameters (a native ``through_rc`` element, docs/physics.md §1.8)
+RC_VESSEL_PARAMS = {"Rpd", "Cp"}
 BVJ_PARAMS = ("R_poiseuille", "L", "stenosis_coefficient")
 BC_PARAMS = {
     "FLOW": {"Q", "t"},
@@ -135,6 +132,9 @@ class _Layout:
     #: internal variables in svZeroDSolver's order: ("rcr", name, Rp) or ("junction", name,
     #: (hidden vessel, 0 or 1: its pressure_in or pressure_out is the junction's centre))
     internal: list[tuple[str, str, Any]] = field(default_factory=list)
+    #: blocks svZeroDSolver leaves out of its vessel-based table (chambers, valves,
+    #: BloodVesselRC): in ``vessels`` only for the variable table's node lookup
+    not_vessels: set[str] = field(default_factory=set)
 
 
 @dataclass
@@ -463,6 +463,7 @@ def _heart_elements(cfg: Mapping[str, Any], period: float, vessels: list[dict[st
         vessels.append({"name": c["name"], "chamber": native,
                         "description": f"svZeroDSolver {c.get('type')}"})
         layout.vessels.append((c["name"], c["name"], c["name"]))
+        layout.not_vessels.add(c["name"])
         names.add(c["name"])
     valves = svzerod_heart._entries(cfg.get("valves", []), "valves")
     for v in valves:
@@ -475,6 +476,7 @@ def _heart_elements(cfg: Mapping[str, Any], period: float, vessels: list[dict[st
         vessels.append({"name": name, "valve": native,
                         "description": f"svZeroDSolver {v.get('type')}"})
         layout.vessels.append((name, name, name))
+        layout.not_vessels.add(name)
         for block, end, other_end in ((up, "in", "out"), (down, "out", "in")):
             what = f"valve '{name}'"
             if block in bcs:
@@ -658,16 +660,17 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
             raise ModelError(f"{el}: vessel_name used twice")
         seen_names.add(name)
         el = f"{kind} '{name}'"
-        vals = _check_params(_required(v, "zero_d_element_values", el), BLOOD_VESSEL_PARAMS, el)
-        lumped = {
+        params = RC_VESSEL_PARAMS if kind == "BloodVesselRC" else BLOOD_VESSEL_PARAMS
+        vals = _check_params(_required(v, "zero_d_element_values", el), params, el)
+        lumped = {} if kind == "BloodVesselRC" else {
             "resistance": _num(_required(vals, "R_poiseuille", el), el, "R_poiseuille"),
             "capacitance": _num(vals.get("C", 0.0), el, "C"),
             "inductance": _num(vals.get("L", 0.0), el, "L"),
             "stenosis_coefficient": _num(vals.get("stenosis_coefficient", 0.0), el,
                                          "stenosis_coefficient"),
         }
-        if lumped["stenosis_coefficient"] != 0.0 and lumped["capacitance"] != 0.0 \
-                and kind == "BloodVessel":
+        if kind == "BloodVessel" and lumped["stenosis_coefficient"] != 0.0 \
+                and lumped["capacitance"] != 0.0:
             # svZeroDSolver's own discretisation of the stenosis next to the capacitor
             # (docs/svzerod.md, "C + stenosis"); oxyline's native default is "branch"
             lumped["stenosis_form"] = "svzerod"
@@ -677,7 +680,15 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         if vid in ids:
             raise ModelError(f"{el}: vessel_id {vid!r} is also used by vessel '{ids[vid]}'")
         ids[vid] = name
-        if kind == "BloodVesselCRL":
+        if kind == "BloodVesselRC":
+            layout.vessels.append((name, name, name))
+            layout.not_vessels.add(name)
+            vessels.append({"name": name, "description": "svZeroDSolver BloodVesselRC",
+                            "through_rc": {"resistance": _num(_required(vals, "Rpd", el), el,
+                                                              "Rpd"),
+                                           "capacitance": _num(_required(vals, "Cp", el), el,
+                                                               "Cp")}})
+        elif kind == "BloodVesselCRL":
             front, back = _crl_vessels(name, lumped)
             vessels.append(front)
             crl.append((front, back))
@@ -855,9 +866,10 @@ def _output_columns(layout: _Layout, recorded: Mapping[str, int], variable_based
     ``recorded[vessel] + 0 .. 3``)."""
     ends = {name: (a, b) for name, a, b in layout.vessels}
     if not variable_based:
+        shown = [n for n, _, _ in layout.vessels if n not in layout.not_vessels]
         idx = [recorded[ends[n][0]] + k if k in (0, 2) else recorded[ends[n][1]] + k
-               for n, _, _ in layout.vessels for k in range(4)]
-        return [n for n, _, _ in layout.vessels], np.asarray(idx, dtype=np.intp), []
+               for n in shown for k in range(4)]
+        return shown, np.asarray(idx, dtype=np.intp), []
     names: list[str] = []
     idx: list[int] = []
     extra: list[tuple[int, int, float]] = []

@@ -77,16 +77,23 @@ def finish(bcs: Mapping[str, tuple[str, dict[str, Any]]], period: float) -> None
 VALVE_TYPES = {"ValveTanh": "tanh", "PiecewiseValve": "piecewise"}
 VALVE_PARAMS = {"ValveTanh": {"Rmax", "Rmin", "Steepness", "upstream_block", "downstream_block"},
                 "PiecewiseValve": {"Rmax", "Rmin", "upstream_block", "downstream_block"}}
-CHAMBER_TYPES = {"ChamberElastanceInductor", "LinearElastanceChamber"}
+CHAMBER_TYPES = {"ChamberElastanceInductor", "LinearElastanceChamber",
+                 "ChamberElastanceInductorExponential"}
 CHAMBER_PARAMS = {"ChamberElastanceInductor": {"Emax", "Emin", "Vrd", "Vrs", "Impedance"},
-                  "LinearElastanceChamber": {"Emax", "Epass", "Vrest"}}
+                  "LinearElastanceChamber": {"Emax", "Epass", "Vrest"},
+                  "ChamberElastanceInductorExponential": {"Emax", "Impedance", "Kxp", "Kxv",
+                                                          "Vaso"}}
 #: svZeroDSolver activation function -> (native kind, its parameters)
 ACTIVATIONS = {
     "half_cosine": ("half-cosine", ("t_active", "t_twitch")),
     "piecewise_cosine": ("piecewise-cosine", ("contract_start", "relax_start",
                                               "contract_duration", "relax_duration")),
     "two_hill": ("two-hill", ("t_shift", "tau_1", "tau_2", "m1", "m2")),
+    "wrapping_cosine": ("wrapping-cosine", ("Tsa", "tpwave")),
+    "fourier": ("fourier", ()),
 }
+#: svZeroDSolver activation parameter -> native key (where they differ)
+ACTIVATION_KEYS = {"Tsa": "systole_fraction", "tpwave": "p_wave_divisor"}
 
 
 def _entries(raw: Any, key: str) -> list[Mapping[str, Any]]:
@@ -124,6 +131,12 @@ def chamber(c: Mapping[str, Any], period: float, initial: Mapping[str, Any], num
                "rest_volume_diastole": num(vals["Vrd"], el, "Vrd"),
                "rest_volume_systole": num(vals["Vrs"], el, "Vrs"),
                "inductance": num(vals.get("Impedance", 0.0), el, "Impedance")}
+    elif kind == "ChamberElastanceInductorExponential":
+        law = {"law": "exponential", "max_elastance": num(vals["Emax"], el, "Emax"),
+               "passive_pressure": num(vals["Kxp"], el, "Kxp"),
+               "passive_volume_coefficient": num(vals["Kxv"], el, "Kxv"),
+               "rest_volume": num(vals["Vaso"], el, "Vaso"),
+               "inductance": num(vals["Impedance"], el, "Impedance")}
     else:
         law = {"law": "linear", "max_elastance": num(vals["Emax"], el, "Emax"),
                "passive_elastance": num(vals["Epass"], el, "Epass"),
@@ -135,7 +148,8 @@ def chamber(c: Mapping[str, Any], period: float, initial: Mapping[str, Any], num
     for k in keys:
         if k not in act:
             raise ModelError(f"{el}: activation_function needs '{k}'")
-    law["activation"] = {"kind": native_kind, **{k: num(act[k], el, k) for k in keys}}
+    law["activation"] = {"kind": native_kind,
+                         **{ACTIVATION_KEYS.get(k, k): num(act[k], el, k) for k in keys}}
     law["period"] = period
     v0 = initial.get(f"Vc:{name}")
     if v0 is not None:

@@ -207,6 +207,17 @@ pub struct ChainRuleCapacitor {
     pub stenosis: f64,
 }
 
+/// A flow-through R–C branch (svZeroDSolver's `BloodVesselRC`): the row of `node` (its
+/// `from` end) reads C dP/dt + (P − P_to)/R − Q = 0 and the branch's row holds the node's flow
+/// balance.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SwappedRow {
+    pub node: usize,
+    pub branch: usize,
+    pub capacitance: f64,
+    pub resistance: f64,
+}
+
 /// An element of `crate::element` as stamped, with circuit indices (resolved to DAE unknowns by
 /// [`Circuit::assemble`]).
 #[derive(Debug, Clone)]
@@ -317,6 +328,8 @@ pub struct Circuit {
     pub elements: Vec<CircuitElement>,
     /// (extra, value): element unknowns' values at a zero start (a chamber's initial volume).
     pub initial_extras: Vec<(usize, f64)>,
+    /// Flow-through R–C branches, whose equation takes their `from` node's row.
+    pub swapped_rows: Vec<SwappedRow>,
     pub vessel_names: Vec<String>,
     /// Node and branch names (shared with the assembled DAE).
     pub names: Arc<Names>,
@@ -460,8 +473,25 @@ impl Circuit {
             fill[b.to] += 1;
         }
         let nb = self.branches.len();
-        // node -> the element unknown whose row takes its flow balance
+        // node -> the element unknown (or branch) whose row takes its flow balance
         let mut moved = vec![None; nn];
+        let mut swapped: Vec<Option<SwappedRow>> = vec![None; nn];
+        let mut balance_of_branch = vec![usize::MAX; nb];
+        for sw in &self.swapped_rows {
+            let node = sw.node;
+            if fixed[node].is_some()
+                || swapped[node].is_some()
+                || self.nodes[node].capacitance != 0.0
+            {
+                return Err(Error::model(
+                    self.names.node(node),
+                    "a through_rc element's inlet node cannot also have a pressure condition, a capacitance or a second such element",
+                ));
+            }
+            swapped[node] = Some(*sw);
+            moved[node] = Some(nn + sw.branch);
+            balance_of_branch[sw.branch] = node;
+        }
         for &(node, x) in &self.moved_rows {
             if self.nodes[node].capacitance != 0.0 {
                 return Err(Error::model(
@@ -484,7 +514,13 @@ impl Circuit {
         };
         f.ptr.push(0);
         for i in 0..nn {
-            if fixed[i].is_some() || moved[i].is_some() {
+            if let Some(sw) = swapped[i] {
+                let b = &self.branches[sw.branch];
+                f.col
+                    .extend([i as u32, b.to as u32, (nn + sw.branch) as u32]);
+                f.val
+                    .extend([1.0 / sw.resistance, -1.0 / sw.resistance, -1.0]);
+            } else if fixed[i].is_some() || moved[i].is_some() {
                 f.col.push(i as u32);
                 f.val.push(1.0);
             } else {
@@ -496,8 +532,16 @@ impl Circuit {
             f.ptr.push(f.col.len());
         }
         for (bi, b) in self.branches.iter().enumerate() {
-            f.col.extend([b.from as u32, b.to as u32, (nn + bi) as u32]);
-            f.val.extend([-1.0, 1.0, b.resistance]);
+            let node = balance_of_branch[bi];
+            if node != usize::MAX {
+                for &(c, s) in &inc[start[node]..start[node + 1]] {
+                    f.col.push(c as u32);
+                    f.val.push(s);
+                }
+            } else {
+                f.col.extend([b.from as u32, b.to as u32, (nn + bi) as u32]);
+                f.val.extend([-1.0, 1.0, b.resistance]);
+            }
             f.ptr.push(f.col.len());
         }
         let mut owner = vec![usize::MAX; self.extras.len()];
@@ -519,6 +563,9 @@ impl Circuit {
             if fixed[i].is_none() {
                 e[i] = node.capacitance;
                 windkessel[i] = node.windkessel;
+            }
+            if let Some(sw) = swapped[i] {
+                e[i] = sw.capacitance;
             }
         }
         for (bi, b) in self.branches.iter().enumerate() {

@@ -154,6 +154,7 @@ pub fn vessel(i: usize, item: &Bound<'_, PyAny>) -> Res<VesselSpec> {
         output: true,
         valve: None,
         chamber: None,
+        through_rc: None,
     };
     for (k, val) in d.iter() {
         let k = key(&k, element)?;
@@ -175,6 +176,7 @@ pub fn vessel(i: usize, item: &Bound<'_, PyAny>) -> Res<VesselSpec> {
             // heart elements are few: read through their JSON form
             "valve" => v.valve = Some(via_json(&val, element, k)?),
             "chamber" => v.chamber = Some(via_json(&val, element, k)?),
+            "through_rc" => v.through_rc = Some(via_json(&val, element, k)?),
             "output" => {
                 v.output = val.extract::<bool>().map_err(|_| {
                     Error::model(element(), format!("'output' must be a bool, got {val}"))

@@ -842,7 +842,7 @@ fn chamber_elastance<'py>(
     name: &str,
     chamber_json: &str,
     times: Vec<f64>,
-) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
+) -> PyResult<ArrayPair<'py>> {
     let spec: oxyline_core::spec::ChamberSpec = oxyline_core::spec::from_json(chamber_json)
         .map_err(|e| to_py(oxyline_core::Error::model(format!("chamber '{name}'"), e)))?;
     let law = oxyline_core::assemble::chamber_elastance(name, &spec).map_err(to_py)?;

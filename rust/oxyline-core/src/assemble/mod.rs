@@ -93,7 +93,7 @@ impl NetworkSpec {
         };
         let mut table = Vec::with_capacity(segments);
         for (vi, v) in self.vessels.iter().enumerate() {
-            if v.valve.is_some() || v.chamber.is_some() {
+            if v.valve.is_some() || v.chamber.is_some() || v.through_rc.is_some() {
                 let chain = heart_element(&mut circuit, v, graph.vessel_ends[vi])?;
                 if v.output {
                     vessel::record_probes(
@@ -162,16 +162,24 @@ fn heart_element(
     ends: (usize, usize),
 ) -> Result<vessel::Chain> {
     let el = format!("vessel '{}'", v.name);
-    if v.geometry.is_some() || v.lumped.is_some() || (v.valve.is_some() && v.chamber.is_some()) {
+    let kinds = [
+        v.geometry.is_some(),
+        v.lumped.is_some(),
+        v.valve.is_some(),
+        v.chamber.is_some(),
+        v.through_rc.is_some(),
+    ];
+    if kinds.iter().filter(|&&k| k).count() != 1 {
         return Err(crate::error::Error::model(
             el,
-            "give one of geometry, lumped, valve or chamber",
+            "give one of geometry, lumped, valve, chamber or through_rc",
         ));
     }
-    match (&v.valve, &v.chamber) {
-        (Some(s), _) => valve::stamp(circuit, &v.name, s, ends),
-        (_, Some(s)) => chamber::stamp(circuit, &v.name, s, ends),
-        _ => unreachable!("called for valves and chambers only"),
+    match (&v.valve, &v.chamber, &v.through_rc) {
+        (Some(s), _, _) => valve::stamp(circuit, &v.name, s, ends),
+        (_, Some(s), _) => chamber::stamp(circuit, &v.name, s, ends),
+        (_, _, Some(s)) => valve::stamp_through_rc(circuit, &v.name, s, ends),
+        _ => unreachable!("called for valves, chambers and through-RC elements only"),
     }
 }
 

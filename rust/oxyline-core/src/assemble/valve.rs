@@ -6,7 +6,7 @@ use super::vessel::Chain;
 use crate::circuit::{Circuit, CircuitElement, Label, Part};
 use crate::element::valve::ValveLaw;
 use crate::error::{Error, Result};
-use crate::spec::ValveSpec;
+use crate::spec::{ThroughRcSpec, ValveSpec};
 
 pub(crate) fn stamp(
     circuit: &mut Circuit,
@@ -62,6 +62,38 @@ pub(crate) fn stamp(
         branch,
         from,
         to,
+    });
+    Ok(Chain {
+        points: vec![from, to],
+        branches: vec![branch],
+    })
+}
+
+/// Stamp a `through_rc` element (svZeroDSolver's `BloodVesselRC`): one branch whose flow Q
+/// obeys C dP_from/dt + (P_from − P_to)/R = Q. That row carries the derivative of the
+/// `from` pressure, so it takes the `from` node's row (E stays diagonal) and the node's flow
+/// balance moves to the branch's row (`Circuit::swapped_rows`).
+pub(crate) fn stamp_through_rc(
+    circuit: &mut Circuit,
+    name: &str,
+    spec: &ThroughRcSpec,
+    (from, to): (usize, usize),
+) -> Result<Chain> {
+    let el = format!("through_rc '{name}'");
+    check_positive(&el, "resistance", spec.resistance)?;
+    check_nonnegative(&el, "capacitance", spec.capacitance)?;
+    let vessel = circuit.add_vessel(name);
+    let label = Label::Vessel {
+        vessel: vessel as u32,
+        part: Part::Whole,
+        k: 0,
+    };
+    let branch = circuit.add_branch(label, from, to, 0.0, 0.0, 0.0);
+    circuit.swapped_rows.push(crate::circuit::SwappedRow {
+        node: from,
+        branch,
+        capacitance: spec.capacitance,
+        resistance: spec.resistance,
     });
     Ok(Chain {
         points: vec![from, to],

@@ -28,6 +28,52 @@ pub enum Activation {
         /// 1 / (the peak), found as svZeroDSolver does (grid of 1e-5 s over the period).
         norm: f64,
     },
+    /// The atrial activation of Sankaran et al. 2012: a cosine of duration T_sa = f·T that
+    /// wraps across the cycle's end and ends at the P-wave time T/d.
+    WrappingCosine {
+        systole_fraction: f64,
+        p_wave_divisor: f64,
+    },
+    /// The 25-mode Fourier series of ventricular elastance used by svZeroDSolver (J. Tran's
+    /// tuning framework), scaled to [0, 1] by its extremes over 10,000 samples of the cycle.
+    Fourier { min: f64, range: f64 },
+}
+
+/// Fourier coefficients (cos, sin) of the ventricular elastance series (svZeroDSolver's
+/// `FourierActivation` table, published with the closed-loop heart model).
+const FOURIER: [[f64; 2]; 25] = [
+    [0.283748803, 0.000000000],
+    [0.031830626, -0.374299825],
+    [-0.209472400, -0.018127770],
+    [0.020520047, 0.073971113],
+    [0.008316883, -0.047249597],
+    [-0.041677660, 0.003212163],
+    [0.000867323, 0.019441411],
+    [-0.001675379, -0.005565534],
+    [-0.011252277, 0.003401432],
+    [-0.000414677, 0.008376795],
+    [0.000253749, -0.000071880],
+    [-0.002584966, 0.001566861],
+    [0.000584752, 0.003143555],
+    [0.000028502, -0.000024787],
+    [0.000022961, -0.000007476],
+    [0.000018735, -0.000001281],
+    [0.000015573, 0.000001781],
+    [0.000013133, 0.000003494],
+    [0.000011199, 0.000004507],
+    [0.000009634, 0.000005117],
+    [0.000008343, 0.000005481],
+    [0.000007265, 0.000005687],
+    [0.000006354, 0.000005789],
+    [0.000005575, 0.000005821],
+    [0.000004903, 0.000005805],
+];
+
+fn fourier_raw(tc: f64, period: f64) -> f64 {
+    FOURIER.iter().enumerate().fold(0.0, |v, (i, [a, b])| {
+        let w = 2.0 * PI * i as f64 * tc / period;
+        v + a * w.cos() - b * w.sin()
+    })
 }
 
 impl Activation {
@@ -63,6 +109,20 @@ impl Activation {
             m2,
             norm: 1.0 / peak,
         })
+    }
+
+    /// The Fourier activation normalised over `period`.
+    pub fn fourier(period: f64) -> Self {
+        let n = 10_000;
+        let dt = period / n as f64;
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for k in 0..n {
+            let v = fourier_raw(k as f64 * dt, period);
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+        let range = if hi - lo > 0.0 { hi - lo } else { 1.0 };
+        Activation::Fourier { min: lo, range }
     }
 
     /// φ(t) for cardiac period `period`.
@@ -111,6 +171,24 @@ impl Activation {
                 let g2 = (ts / tau_2).powf(m2);
                 norm * g1 / (1.0 + g1) / (1.0 + g2)
             }
+            Activation::WrappingCosine {
+                systole_fraction,
+                p_wave_divisor,
+            } => {
+                let tsa = period * systole_fraction;
+                let tp = period / p_wave_divisor;
+                let tc = in_cycle(t, period);
+                if tc <= tp {
+                    0.5 * (1.0 - (2.0 * PI * (tc - tp + tsa) / tsa).cos())
+                } else if tc >= (period - tsa) + tp && tc < period {
+                    0.5 * (1.0 - (2.0 * PI * (tc - tp - (period - tsa)) / tsa).cos())
+                } else {
+                    0.0
+                }
+            }
+            Activation::Fourier { min, range } => {
+                (fourier_raw(in_cycle(t, period), period) - min) / range
+            }
         }
     }
 
@@ -132,6 +210,7 @@ impl Activation {
                 relax_start + relax_duration,
             ],
             Activation::TwoHill { t_shift, .. } => vec![t_shift],
+            Activation::WrappingCosine { .. } | Activation::Fourier { .. } => Vec::new(),
         }
     }
 }

@@ -27,6 +27,15 @@ pub enum ElastanceLaw {
         e_pass: f64,
         v_rest: f64,
     },
+    /// svZeroDSolver's `ChamberElastanceInductorExponential` (the atria of the closed-loop
+    /// heart): P = φ E_max (V − V_aso) + (1 − φ) K_p (e^{K_v (V − V_aso)} − 1), an active
+    /// linear part and a passive exponential one.
+    Exponential {
+        e_max: f64,
+        k_pressure: f64,
+        k_volume: f64,
+        v_aso: f64,
+    },
 }
 
 /// E(t) and V_rest(t) of a chamber.
@@ -56,7 +65,28 @@ impl Elastance {
                 e_pass,
                 v_rest,
             } => (e_pass + e_max * phi, v_rest),
+            ElastanceLaw::Exponential { e_max, v_aso, .. } => (phi * e_max, v_aso),
         }
+    }
+
+    /// The chamber pressure P(V, t) and ∂P/∂V.
+    pub fn pressure(&self, t: f64, v: f64) -> (f64, f64) {
+        if let ElastanceLaw::Exponential {
+            e_max,
+            k_pressure,
+            k_volume,
+            v_aso,
+        } = self.law
+        {
+            let phi = self.activation.eval(t, self.period);
+            let ex = (k_volume * (v - v_aso)).exp();
+            // svZeroDSolver's split: −φE_max V in F, φE_max V_aso + ψ(φ − 1) in C
+            let p = phi * e_max * v - (phi * e_max * v_aso + k_pressure * (ex - 1.0) * (phi - 1.0));
+            let dp = phi * e_max - k_pressure * k_volume * ex * (phi - 1.0);
+            return (p, dp);
+        }
+        let (e, v_rest) = self.at(t);
+        (e * v - e * v_rest, e)
     }
 }
 
@@ -91,15 +121,13 @@ impl Element for Chamber {
         &self.pattern
     }
     fn residual(&self, t: f64, y: &[f64], c: &mut [f64]) {
-        let (e, v_rest) = self.elastance.at(t);
-        // svZeroDSolver's split: −E V in F, E V_rest in C (same sum up to round-off)
-        c[0] = -e * y[self.pattern[0].1] + e * v_rest;
+        c[0] = -self.elastance.pressure(t, y[self.pattern[0].1]).0;
     }
-    fn jacobian(&self, t: f64, _y: &[f64], j: &mut [f64]) {
-        j[0] = -self.elastance.at(t).0;
+    fn jacobian(&self, t: f64, y: &[f64], j: &mut [f64]) {
+        j[0] = -self.elastance.pressure(t, y[self.pattern[0].1]).1;
     }
     fn is_nonlinear(&self) -> bool {
-        false
+        matches!(self.elastance.law, ElastanceLaw::Exponential { .. })
     }
     fn period(&self) -> Option<f64> {
         Some(self.elastance.period)

@@ -379,12 +379,14 @@ impl<'a> Rk4<'a> {
             y[i] = x[j];
         }
         // the elements' Jacobian at their stiffest state, at the operator's time and state
-        let lin = if self.lin_state.is_empty() {
-            vec![0.0; n]
-        } else {
-            self.lin_state.clone()
-        };
+        // (built only for circuits with elements: the probe of a large tree applies this
+        // operator many times)
         let has_elements = !self.dae.elements.is_empty();
+        let lin = match (has_elements, self.lin_state.is_empty()) {
+            (false, _) => Vec::new(),
+            (true, true) => vec![0.0; n],
+            (true, false) => self.lin_state.clone(),
+        };
         if let Some(alg) = self.alg.as_mut() {
             for (rl, &g) in alg.r.iter_mut().zip(&alg.rows) {
                 *rl = -self.dae.f.row_dot(g, &y);

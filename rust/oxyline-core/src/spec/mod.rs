@@ -122,6 +122,9 @@ pub struct VesselSpec {
     /// A heart chamber instead of a vessel (docs/physics.md §1.8).
     #[serde(default)]
     pub chamber: Option<ChamberSpec>,
+    /// A flow-through R–C element instead of a vessel (docs/physics.md §1.8).
+    #[serde(default)]
+    pub through_rc: Option<ThroughRcSpec>,
 }
 
 /// A valve between the element's `from` and `to` nodes: R(P_to − P_from) (Pa·s/m³).
@@ -175,6 +178,14 @@ pub enum ChamberLawSpec {
         passive_elastance: f64,
         rest_volume: f64,
     },
+    /// svZeroDSolver's `ChamberElastanceInductorExponential`: P = φ E_max (V − V_rest)
+    /// + (1 − φ) K_p (e^{K_v (V − V_rest)} − 1).
+    Exponential {
+        max_elastance: f64,
+        passive_pressure: f64,
+        passive_volume_coefficient: f64,
+        rest_volume: f64,
+    },
 }
 
 #[derive(Debug, Clone, Deserialize)]
@@ -197,6 +208,23 @@ pub enum ActivationSpec {
         m1: f64,
         m2: f64,
     },
+    /// Atrial activation wrapping across the cycle end (svZeroDSolver's `wrapping_cosine`:
+    /// `Tsa` = `systole_fraction`, `tpwave` = `p_wave_divisor`).
+    WrappingCosine {
+        systole_fraction: f64,
+        p_wave_divisor: f64,
+    },
+    /// svZeroDSolver's 25-mode ventricular `fourier` activation (no parameters).
+    Fourier {},
+}
+
+/// svZeroDSolver's `BloodVesselRC`: C dP_from/dt + (P_from − P_to)/R = Q, Q the same at both
+/// ends (the capacitor's flow passes through to the outlet: a flow-through Windkessel).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ThroughRcSpec {
+    pub resistance: f64,
+    pub capacitance: f64,
 }
 fn yes() -> bool {
     true
