@@ -720,11 +720,17 @@ impl Network {
             // and is reported instead of the core's Interrupted
             let pending: Cell<Option<PyErr>> = Cell::new(None);
             let mut last = Instant::now();
+            // Python sees at most one call per 100 ms, plus the first call of every new
+            // cycle: a callback that reacts to a cycle-end event (a checkpoint written, a
+            // cancel) then acts within 256 steps however fast the run is
+            let mut last_cycle = 0_i64;
             let mut cb = |t: f64, t_end: f64| -> bool {
-                if last.elapsed() < Duration::from_millis(100) && t < t_end {
+                let cycle = (t / period).floor() as i64;
+                if last.elapsed() < Duration::from_millis(100) && t < t_end && cycle == last_cycle {
                     return true;
                 }
                 last = Instant::now();
+                last_cycle = cycle;
                 Python::attach(|py| {
                     let r = py.check_signals().and_then(|()| match &progress {
                         Some(f) => f.call1(py, (t, t_end)).map(drop),
