@@ -4,7 +4,9 @@
 //! them (or more) through the lungs (`lung.rs`). There is no inlet: the loop's O2 amount
 //! N = Σ V C_t changes only by the lungs' uptake and the organs' consumption,
 //!
-//!     N(t₁) − N(t₀) = ∫ (Σ lung uptake − Σ VO2) dt,
+//! ```text
+//! N(t₁) − N(t₀) = ∫ (Σ lung uptake − Σ VO2) dt,
+//! ```
 //!
 //! exactly per step (every branch flux leaves one compartment and enters another with the same
 //! value). Fick's principle follows at periodic steady state: over a cycle the systemic

@@ -3,7 +3,9 @@
 //! blood volume V(t) of uniform total O2 concentration C_t (dissolved + haemoglobin-bound,
 //! mol/m³) and consumes O2 at a rate VO2 (mol/s) that depends on its free PO2:
 //!
-//!     d(V C_t)/dt = Σ_in F_in − q_out C_t − VO2(P(C_t)),   dV/dt = Σ_in q_in − q_out.
+//! ```text
+//! d(V C_t)/dt = Σ_in F_in − q_out C_t − VO2(P(C_t)),   dV/dt = Σ_in q_in − q_out.
+//! ```
 //!
 //! Since the compartment is well mixed, its PO2 is the organ's venous PO2. One step is backward
 //! Euler in C_t, so the amount changes by exactly dt (inflow − outflow − consumption) with the

@@ -5,7 +5,9 @@
 //! the total concentration obeys (Bohr's integration, quasi-steady: the capillary transit time
 //! ≈ 0.75 s is not resolved, the exchange is evaluated at the instantaneous flow)
 //!
-//!     Q dC_t/ds = D_L (P_A − P),   C_t = α P + H S(P)   (Hill binding),
+//! ```text
+//! Q dC_t/ds = D_L (P_A − P),   C_t = α P + H S(P)   (Hill binding),
+//! ```
 //!
 //! so, for y = P_A − P, d ln|y|/ds = −D_L / (Q dC_t/dP). Without haemoglobin dC_t/dP = α and
 //! the end-capillary PO2 is P_A − (P_A − P_in) exp(−D_L/(α Q)) (the equilibration solution);
