@@ -8,10 +8,10 @@ into oxyline's native ``coronary`` condition (docs/physics.md §1.7, docs/svzero
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from typing import Any
 
-from oxyline.errors import ModelError
+from oxyline.errors import ModelError, UnsupportedElement
 
 #: svZeroDSolver's parameters of each supported condition type
 BC_PARAMS = {
@@ -105,19 +105,26 @@ def _entries(raw: Any, key: str) -> list[Mapping[str, Any]]:
     return raw
 
 
+def _known_entry(entry: Mapping[str, Any], what: str, types: Collection[str],
+                 params: Mapping[str, set[str]], key: str) -> tuple[str, str, Mapping[str, Any]]:
+    """(type, element label, parameters) of a chamber or valve entry whose type and parameter
+    names svZeroDSolver defines; anything else raises ``UnsupportedElement`` naming it."""
+    kind = entry.get("type")
+    el = f"{kind} '{entry['name']}'"
+    if kind not in types:
+        raise UnsupportedElement(f"{el}: {what} type '{kind}' is not supported (supported: "
+                                 f"{', '.join(sorted(types))})")
+    vals = entry.get(key, {})
+    if not isinstance(vals, Mapping) or set(vals) - params[kind]:
+        raise UnsupportedElement(f"{el}: unknown {key} {sorted(set(vals) - params[kind])}")
+    return kind, el, vals
+
+
 def chamber(c: Mapping[str, Any], period: float, initial: Mapping[str, Any], num: Num
             ) -> dict[str, Any]:
     """The native ``chamber`` element of one svZeroDSolver chamber entry (without its ends)."""
-    from oxyline.errors import UnsupportedElement
-
-    name, kind = c["name"], c.get("type")
-    el = f"{kind} '{name}'"
-    if kind not in CHAMBER_TYPES:
-        raise UnsupportedElement(f"{el}: chamber type '{kind}' is not supported (supported: "
-                                 f"{', '.join(sorted(CHAMBER_TYPES))})")
-    vals = c.get("values", {})
-    if not isinstance(vals, Mapping) or set(vals) - CHAMBER_PARAMS[kind]:
-        raise UnsupportedElement(f"{el}: unknown values {sorted(set(vals) - CHAMBER_PARAMS[kind])}")
+    name = c["name"]
+    kind, el, vals = _known_entry(c, "chamber", CHAMBER_TYPES, CHAMBER_PARAMS, "values")
     missing = [k for k in CHAMBER_PARAMS[kind] - {"Impedance"} if k not in vals]
     if missing:
         raise ModelError(f"{el}: missing '{missing[0]}'")
@@ -160,16 +167,7 @@ def chamber(c: Mapping[str, Any], period: float, initial: Mapping[str, Any], num
 def valve(v: Mapping[str, Any], num: Num) -> tuple[dict[str, Any], str, str]:
     """The native ``valve`` element of one svZeroDSolver valve entry and its (upstream,
     downstream) block names."""
-    from oxyline.errors import UnsupportedElement
-
-    name, kind = v["name"], v.get("type")
-    el = f"{kind} '{name}'"
-    if kind not in VALVE_TYPES:
-        raise UnsupportedElement(f"{el}: valve type '{kind}' is not supported (supported: "
-                                 f"{', '.join(sorted(VALVE_TYPES))})")
-    p = v.get("params", {})
-    if not isinstance(p, Mapping) or set(p) - VALVE_PARAMS[kind]:
-        raise UnsupportedElement(f"{el}: unknown params {sorted(set(p) - VALVE_PARAMS[kind])}")
+    kind, el, p = _known_entry(v, "valve", VALVE_TYPES, VALVE_PARAMS, "params")
     for k in VALVE_PARAMS[kind]:
         if k not in p:
             raise ModelError(f"{el}: missing '{k}'")
