@@ -98,6 +98,11 @@ def timed(fn: Any, repeat: int) -> tuple[float, float, Any]:
     return best
 
 
+def cluster_cpu(client: Any) -> float:
+    """User + system CPU time of the cluster's worker processes so far (s)."""
+    return sum(client.run(cpu).values())
+
+
 def load() -> str:
     return f"{os.getloadavg()[0]:.2f}"
 
@@ -190,7 +195,11 @@ def measure(size: Size, client: Any, args: argparse.Namespace) -> tuple[str, lis
         size_warm = oxyline.simulate_ensemble(size.model, size.patches[:2], client=client,
                                               progress=False, **size.settings)
         assert (size_warm.status.values == 0).all()
+        c0 = cluster_cpu(client)
         wd, _, remote = timed(lambda: size.run(client=client), args.repeat)
+        notes.append(f"{size.name}: LocalCluster CPU (its 2 worker processes, all "
+                     f"{args.repeat} runs) {cluster_cpu(client) - c0:.2f} s against "
+                     f"{c2:.2f} s for the local workers=2 run.")
         same = all(bool(np.array_equal(local[v].values, remote[v].values, equal_nan=True))
                    for v in local.data_vars if local[v].dtype.kind == "f")
         dask = f"{wd:.2f} | **{100 * (wd / w2 - 1):+.0f} %**"

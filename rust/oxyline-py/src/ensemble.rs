@@ -7,11 +7,11 @@ use crate::settings::Shared;
 use crate::{error_kind, layout_dict, outcome_dict, recorded_columns, to_py};
 use numpy::{IntoPyArray, PyReadonlyArray1};
 use oxyline_core::ensemble::{
-    ColumnStats, ConditionValue, Member, SpecPatch, Target, Targets, column_stats, run_fed,
-    worker_count,
+    ColumnStats, ConditionValue, Member, SpecPatch, StatsFold, Target, Targets, column_stats,
+    run_fed, worker_count,
 };
 use oxyline_core::spec::{BoundarySpec, NetworkSpec, VesselSpec, parse};
-use oxyline_core::{Error, Outcome, RunSettings, Selection, Transport};
+use oxyline_core::{Chunk, Error, Outcome, OutputSink, RunSettings, Selection, Transport};
 use pyo3::exceptions::PyKeyboardInterrupt;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -197,13 +197,42 @@ fn run_variant(
         species_columns,
         ..template.clone()
     };
-    let mut species = if output.transport {
+    // a cancelled ensemble stops its running variants at their next progress check
+    let mut keep_going = |_: f64, _: f64| !cancelled.load(Ordering::Relaxed);
+    // a summary that the collecting thread reads from the column statistics alone (no
+    // species, two or more vessels: see `stats_summary` in ensemble/collect.py) folds them
+    // as the rows stream by: no output table per variant
+    let species_recorded = output.transport && member.transport.is_some();
+    let streamed = output.summary && !species_recorded && sel.vessels.len() >= 2;
+    if streamed {
+        let mut fold = StatsFold::new(settings.probes.len());
+        let mut write = |c: Chunk<'_>| {
+            fold.push(c.times, c.data);
+            true
+        };
+        let mut sink = OutputSink {
+            rows: STREAM_BYTES / (8 * settings.probes.len().max(1)),
+            write: &mut write,
+        };
+        let outcome =
+            oxyline_core::simulate_to_sink(&member.dae, None, &settings, &mut sink, &mut keep_going);
+        let finished = matches!(&outcome, Ok(out) if out.error.is_none());
+        let stats = if finished { fold.finish() } else { None };
+        // a finished run without two distinct output times (no time average) needs its rows:
+        // it runs again below, as every other output does
+        if !finished || stats.is_some() {
+            return Finished {
+                member: Some((member, sel)),
+                outcome,
+                stats,
+            };
+        }
+    }
+    let mut species = if species_recorded {
         member.transport.as_ref().map(Transport::new_run)
     } else {
         None
     };
-    // a cancelled ensemble stops its running variants at their next progress check
-    let mut keep_going = |_: f64, _: f64| !cancelled.load(Ordering::Relaxed);
     let outcome = oxyline_core::simulate_with_transport(
         &member.dae,
         species.as_mut(),
@@ -222,6 +251,10 @@ fn run_variant(
         stats,
     }
 }
+
+/// The output rows a streamed summary holds at once (see `run_variant`): whole chunks of the
+/// rows a worker has just written, far below the allocator's mmap threshold (128 kB).
+const STREAM_BYTES: usize = 32 * 1024;
 
 /// Hand a finished variant to `on_done(index, raw, layout, error_kind, error)`: `raw` is the
 /// dict of `Network.simulate` (None if the variant never ran), `layout` its `output_layout`.

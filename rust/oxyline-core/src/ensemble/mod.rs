@@ -272,52 +272,104 @@ pub struct ColumnStats {
 /// the caller uses these values only for arrays of two or more columns. None without two
 /// distinct times (the summary then takes plain means).
 pub fn column_stats(times: &[f64], data: &[f64], n_cols: usize) -> Option<ColumnStats> {
-    let nt = times.len();
-    if nt < 2 || times[nt - 1].partial_cmp(&times[0]) != Some(std::cmp::Ordering::Greater) {
+    if data.len() != times.len() * n_cols {
         return None;
     }
-    if data.len() != nt * n_cols {
-        return None;
+    let mut fold = StatsFold::new(n_cols);
+    fold.push(times, data);
+    fold.finish()
+}
+
+/// [`column_stats`] folded over the output rows as a run streams them (an
+/// [`crate::OutputSink`]'s chunks, in time order): the same terms added in the same order, so
+/// the same bits whatever the chunk size, without holding the rows. An ensemble's summary thus
+/// needs no output table per variant (the table of a 31-vessel tree's last cycle is ~1 MB: one
+/// large allocation and its page faults per variant, which a Dask worker's
+/// `MALLOC_TRIM_THRESHOLD_` turns into fresh pages every time).
+#[derive(Debug, Clone)]
+pub struct StatsFold {
+    rows: usize,
+    t_first: f64,
+    t_prev: f64,
+    prev: Vec<f64>,
+    sum: Vec<f64>,
+    min: Vec<f64>,
+    max: Vec<f64>,
+}
+
+impl StatsFold {
+    pub fn new(n_cols: usize) -> StatsFold {
+        StatsFold {
+            rows: 0,
+            t_first: f64::NAN,
+            t_prev: f64::NAN,
+            prev: vec![0.0; n_cols],
+            sum: vec![0.0; n_cols],
+            min: vec![0.0; n_cols],
+            max: vec![0.0; n_cols],
+        }
     }
-    let row = |i: usize| &data[i * n_cols..(i + 1) * n_cols];
-    // the first term of every column, then the others in time order; the inner loops are
-    // branch-free over the columns (selects, so they vectorise: ~5 % of a worker's time
-    // was this function with a branch per element), each column's arithmetic unchanged
-    let d0 = times[1] - times[0];
-    let mut sum: Vec<f64> = row(0)
-        .iter()
-        .zip(row(1))
-        .map(|(a, b)| d0 * (b + a) / 2.0)
-        .collect();
-    let (mut min, mut max) = (row(0).to_vec(), row(0).to_vec());
-    for i in 0..nt - 1 {
-        let d = times[i + 1] - times[i];
-        let (a, b) = (row(i), row(i + 1));
-        if i > 0 {
-            for ((s, &x), &y) in sum.iter_mut().zip(b).zip(a) {
-                *s += d * (x + y) / 2.0;
+
+    /// Add the rows of row-major (time, column) `data` at `times` (the rows after those
+    /// already added); rows beyond `times` are ignored.
+    pub fn push(&mut self, times: &[f64], data: &[f64]) {
+        let n = self.prev.len();
+        for (&t, row) in times.iter().zip(data.chunks_exact(n.max(1))) {
+            self.push_row(t, &row[..n]);
+        }
+    }
+
+    fn push_row(&mut self, t: f64, b: &[f64]) {
+        if self.rows == 0 {
+            self.t_first = t;
+            self.min.copy_from_slice(b);
+            self.max.copy_from_slice(b);
+        } else {
+            // the inner loops are branch-free over the columns (selects, so they vectorise:
+            // ~5 % of a worker's time was this with a branch per element), each column's
+            // arithmetic that of numpy
+            let (d, a) = (t - self.t_prev, &self.prev);
+            if self.rows == 1 {
+                // the first term, as numpy starts the reduction from it (not from 0.0 + term)
+                for ((s, &x), &y) in self.sum.iter_mut().zip(b).zip(a) {
+                    *s = d * (x + y) / 2.0;
+                }
+            } else {
+                for ((s, &x), &y) in self.sum.iter_mut().zip(b).zip(a) {
+                    *s += d * (x + y) / 2.0;
+                }
+            }
+            for ((lo, hi), &x) in self.min.iter_mut().zip(self.max.iter_mut()).zip(b) {
+                // NaN propagates: a NaN bound stays, a NaN value replaces the bound
+                *lo = if !lo.is_nan() && (x.is_nan() || x < *lo) {
+                    x
+                } else {
+                    *lo
+                };
+                *hi = if !hi.is_nan() && (x.is_nan() || x > *hi) {
+                    x
+                } else {
+                    *hi
+                };
             }
         }
-        for ((lo, hi), &x) in min.iter_mut().zip(max.iter_mut()).zip(b) {
-            // NaN propagates: a NaN bound stays, a NaN value replaces the bound
-            *lo = if !lo.is_nan() && (x.is_nan() || x < *lo) {
-                x
-            } else {
-                *lo
-            };
-            *hi = if !hi.is_nan() && (x.is_nan() || x > *hi) {
-                x
-            } else {
-                *hi
-            };
-        }
+        self.prev.copy_from_slice(b);
+        self.t_prev = t;
+        self.rows += 1;
     }
-    let span = times[nt - 1] - times[0];
-    Some(ColumnStats {
-        mean: sum.into_iter().map(|s| s / span).collect(),
-        min,
-        max,
-    })
+
+    /// The statistics of the rows added, or None without two rows and a positive time span.
+    pub fn finish(self) -> Option<ColumnStats> {
+        let span = self.t_prev - self.t_first;
+        if self.rows < 2 || span.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+            return None;
+        }
+        Some(ColumnStats {
+            mean: self.sum.into_iter().map(|s| s / span).collect(),
+            min: self.min,
+            max: self.max,
+        })
+    }
 }
 
 /// The number of threads of an ensemble: `workers` if given, else the environment variable

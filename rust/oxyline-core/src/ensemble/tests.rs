@@ -153,6 +153,46 @@ fn column_stats_against_closed_forms() {
     assert!(column_stats(&times, &data[..6], 2).is_none());
 }
 
+/// The streamed statistics equal the closed forms above and, bit for bit, those of the whole
+/// table, whatever the chunk sizes (the terms are the same and added in the same order).
+#[test]
+fn stats_fold_over_chunks_is_the_whole_table() {
+    let times = [0.0, 0.5, 1.0, 2.0];
+    let data = [1.0, 0.0, 2.0, 2.0, 3.0, 4.0, 5.0, 0.0];
+    let mut fold = StatsFold::new(2);
+    fold.push(&times[..1], &data[..2]);
+    fold.push(&times[1..], &data[2..]);
+    let s = fold.finish().unwrap();
+    assert!((s.mean[0] - 3.0).abs() < 1e-15 && (s.mean[1] - 2.0).abs() < 1e-15);
+    // uneven times and values of mixed magnitude, where a changed order of additions shows
+    let (nt, nc) = (97, 5);
+    let mut x = 0x2545_f491_4f6c_dd1d_u64;
+    let mut next = || {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        (x >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut times = vec![0.0];
+    for _ in 1..nt {
+        let t = times[times.len() - 1] + 1e-3 * (0.5 + next());
+        times.push(t);
+    }
+    let data: Vec<f64> = (0..nt * nc).map(|k| (next() - 0.3) * 10f64.powi(k as i32 % 7)).collect();
+    let whole = column_stats(&times, &data, nc).unwrap();
+    for chunk in [1, 2, 3, 7, 96, 200] {
+        let mut fold = StatsFold::new(nc);
+        for (t, d) in times.chunks(chunk).zip(data.chunks(chunk * nc)) {
+            fold.push(t, d);
+        }
+        let s = fold.finish().unwrap();
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&s.mean), bits(&whole.mean), "chunk {chunk}");
+        assert_eq!((bits(&s.min), bits(&s.max)), (bits(&whole.min), bits(&whole.max)));
+    }
+    assert!(StatsFold::new(2).finish().is_none());
+}
+
 #[test]
 fn target_values_replace_single_numbers() {
     let base = parse(MODEL).unwrap();
