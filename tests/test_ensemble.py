@@ -177,9 +177,12 @@ tube_patches = st.fixed_dictionaries({}, optional={
 })
 
 
+# (RK4 at dt = 2 ms is unstable for some drawn patches, e.g. resistances x 2: the plain
+# simulate() of the patched model refuses it too, so the coarse step runs generalized-alpha)
 @settings(max_examples=6, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(drawn=st.lists(tube_patches, min_size=1, max_size=3),
-       run=st.sampled_from([{"cycles": 2}, {"cycles": 3, "dt": 2e-3},
+       run=st.sampled_from([{"cycles": 2},
+                            {"cycles": 3, "dt": 2e-3, "method": "generalized-alpha"},
                             {"cycles": 2, "dt": 1e-3, "output_every": 7e-3}]))
 def test_summaries_of_several_vessels_are_those_of_the_plain_result(
         drawn: list[dict[str, Any]], run: dict[str, Any]) -> None:
@@ -188,12 +191,14 @@ def test_summaries_of_several_vessels_are_those_of_the_plain_result(
     from oxyline.ensemble import collect
 
     used = []
-    flow_stats = collect._flow_stats
+    flow_stats, add = collect._flow_stats, collect.StatsBatch.add
     collect._flow_stats = lambda *a: used.append(flow_stats(*a)) or used[-1]
+    # the batched route (every variant's statistics at once, at the end) counts as used
+    collect.StatsBatch.add = lambda self, *a: (add(self, *a) and not used.append(True)) or False
     try:
         ds = oxyline.simulate_ensemble(TUBE, drawn, workers=2, progress=False, **run)
     finally:
-        collect._flow_stats = flow_stats
+        collect._flow_stats, collect.StatsBatch.add = flow_stats, add
     assert (ds.status.values == 0).all(), ds.error.values
     assert len(used) == len(drawn) and all(u is not None for u in used)
     for k, patch in enumerate(drawn):

@@ -11,7 +11,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Any
 
 from oxyline import _core
-from oxyline.ensemble.collect import ERROR_CHARS, Collector, Output, stats_summary
+from oxyline.ensemble.collect import ERROR_CHARS, Collector, Output, StatsBatch, stats_summary
 from oxyline.ensemble.patch import Patcher, Variant
 from oxyline.errors import ModelError
 from oxyline.model import Model
@@ -43,8 +43,9 @@ class Feed:
                  on_skip: Callable[[int], None]) -> None:
         model = patcher.base
         self.patcher = patcher
-        for i, patch in enumerate(patches):  # unknown names raise before anything runs
-            self.patcher.check(patch, first + i)
+        # unknown names raise before anything runs; the scale-only patches' target values
+        # come out of the same pass (one numpy table for the whole ensemble)
+        self.values = patcher.check_all(patches, first)
         self.patches, self.output, self.overrides = patches, output, overrides
         #: the run settings of the variants that keep the base model's (most of them)
         self.base_settings = run_settings(model, output, overrides)
@@ -58,7 +59,7 @@ class Feed:
             self._next += 1
             k = self.first + i
             try:
-                v = self.patcher.variant(self.patches[i], k)
+                v = self.patcher.variant(self.patches[i], k, self.values.pop(i, None))
                 s = (self.base_settings if v.model is self.patcher.base else
                      run_settings(v.model, self.output, self.overrides))
             except ModelError as e:
@@ -119,6 +120,9 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
 
     feed = Feed(base.patcher, patches, output, overrides, collector, first, recorded)
     base_settings = feed.base_settings
+    # summaries go to the collector in one pass at the end, unless a store writes each
+    # variant as it finishes (it reads the collector's row)
+    batch = StatsBatch(collector) if output == "summary" and on_variant is None else None
 
     def done(i: int, raw: dict[str, Any] | None, layout: dict[str, Any] | None,
              kind: str | None, message: str | None) -> None:
@@ -129,6 +133,9 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
         else:
             try:
                 assert raw is not None and layout is not None
+                if batch is not None and batch.add(i, raw, layout):
+                    recorded(i)
+                    return
                 # a summary without species is read from the core's column statistics; the
                 # bounds monitor only concerns species, so it needs the Result only then
                 values = stats_summary(raw, layout) if output == "summary" else None
@@ -153,6 +160,8 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
             return ensemble.run(feed.next, on_done=done, workers=workers,
                                 summary=output == "summary", **core)
     finally:
+        if batch is not None:
+            batch.flush()
         close()
 
 
