@@ -8,6 +8,8 @@ scheduling, transfer and fault handling: there is no pool or RPC of oxyline's ow
 
 from __future__ import annotations
 
+import hashlib
+import pickle
 from collections.abc import Mapping, Sequence
 from itertools import pairwise
 from typing import Any
@@ -72,6 +74,26 @@ def _merge(into: Collector, part: Collector, rows: range) -> None:
         dest[rows.start:rows.stop] = arr
 
 
+#: the model last scattered to each client's workers: (its pickle's digest, the future)
+_SCATTERED: dict[int, tuple[str, Any]] = {}
+
+
+def _scattered(client: Any, model: Model) -> Any:
+    """``model`` on every worker of ``client``: scattered once, and again only when another
+    model (other pickled bytes) comes. Later ensembles of the same model skip the transfer,
+    and the workers keep the same object, so its base is parsed and prepared once per worker
+    process for all of them (``cached_base``), not once per ensemble. Holds one model per
+    client on its workers."""
+    digest = hashlib.sha256(pickle.dumps(model, protocol=pickle.HIGHEST_PROTOCOL)).hexdigest()
+    hit = _SCATTERED.get(id(client))
+    if hit is not None and hit[0] == digest and hit[1].client is client \
+            and hit[1].status == "finished":
+        return hit[1]
+    [future] = client.scatter([model], broadcast=True)
+    _SCATTERED[id(client)] = (digest, future)
+    return future
+
+
 def run_on_client(client: Any, model: Model, patches: list[dict[str, Any]], index: Any, *,
                   output: Output, store: Any, progress: Any, workers: int | None,
                   overrides: Mapping[str, Any]) -> Any:
@@ -92,7 +114,7 @@ def run_on_client(client: Any, model: Model, patches: list[dict[str, Any]], inde
         writer = StoreWriter(store, collector, patches, _attrs(model, output), index)
     threads = sum(client.nthreads().values()) or 1
     chunks = _chunks(len(patches), threads)
-    [shared] = client.scatter([model], broadcast=True)
+    shared = _scattered(client, model)
     futures = {client.submit(run_chunk, shared, patches[c.start:c.stop], c.start, output,
                              workers, dict(overrides), pure=False): c for c in chunks}
     tick, close = _progress(progress, len(patches))

@@ -98,7 +98,9 @@ def cached_base(model: Model) -> Base:
     if hit is not None and hit[0]() is model:
         return hit[1]
     base = Base(model)
-    _BASES[key] = (weakref.ref(model, lambda _: _BASES.pop(key, None)), base)
+    # the callback holds the dict itself: a model that lives to the worker's shutdown is
+    # released after the module's globals are gone
+    _BASES[key] = (weakref.ref(model, lambda _, bases=_BASES: bases.pop(key, None)), base)
     return base
 
 
