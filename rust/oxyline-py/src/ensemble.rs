@@ -214,8 +214,13 @@ fn run_variant(
             rows: STREAM_BYTES / (8 * settings.probes.len().max(1)),
             write: &mut write,
         };
-        let outcome =
-            oxyline_core::simulate_to_sink(&member.dae, None, &settings, &mut sink, &mut keep_going);
+        let outcome = oxyline_core::simulate_to_sink(
+            &member.dae,
+            None,
+            &settings,
+            &mut sink,
+            &mut keep_going,
+        );
         let finished = matches!(&outcome, Ok(out) if out.error.is_none());
         let stats = if finished { fold.finish() } else { None };
         // a finished run without two distinct output times (no time average) needs its rows:

@@ -178,7 +178,9 @@ fn stats_fold_over_chunks_is_the_whole_table() {
         let t = times[times.len() - 1] + 1e-3 * (0.5 + next());
         times.push(t);
     }
-    let data: Vec<f64> = (0..nt * nc).map(|k| (next() - 0.3) * 10f64.powi(k as i32 % 7)).collect();
+    let data: Vec<f64> = (0..nt * nc)
+        .map(|k| (next() - 0.3) * 10f64.powi(k as i32 % 7))
+        .collect();
     let whole = column_stats(&times, &data, nc).unwrap();
     for chunk in [1, 2, 3, 7, 96, 200] {
         let mut fold = StatsFold::new(nc);
@@ -188,7 +190,10 @@ fn stats_fold_over_chunks_is_the_whole_table() {
         let s = fold.finish().unwrap();
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&s.mean), bits(&whole.mean), "chunk {chunk}");
-        assert_eq!((bits(&s.min), bits(&s.max)), (bits(&whole.min), bits(&whole.max)));
+        assert_eq!(
+            (bits(&s.min), bits(&s.max)),
+            (bits(&whole.min), bits(&whole.max))
+        );
     }
     assert!(StatsFold::new(2).finish().is_none());
 }
