@@ -172,7 +172,9 @@ def versus_svzerod(size: Size, ds: Any, runs: int, repeat: int
     fs = factors(size.n)
     configs = [svzerod_config(size.cfg, fs[i]) for i in picks]
     if cached is None:
-        wall, _, frames = timed(lambda: [svzerod.simulate(c) for c in configs], repeat)
+        wall, used, frames = timed(lambda: [svzerod.simulate(c) for c in configs], repeat)
+        print(f"{size.name}: svzerod loop of {len(picks)} runs: {wall:.2f} s wall, {used:.2f} s "
+              "CPU", file=sys.stderr, flush=True)
         cached = SVZEROD_PER_RUN[size.key] = (wall / len(picks), len(picks), size.name)
     else:
         frames = [svzerod.simulate(c) for c in configs]
