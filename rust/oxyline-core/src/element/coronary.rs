@@ -6,7 +6,10 @@
 //!
 //!   P_im,node = V_im / C_im + k P_ventricle,
 //!
-//! the compartment's capacitor referenced to k·P_ventricle (k: svZeroDSolver's `iml`/`imr`).
+//! the compartment's capacitor referenced to k·P_ventricle (k: svZeroDSolver's `iml`/`imr`),
+//! written as svZeroDSolver writes it, C_im P_im,node − V_im − C_im k P_ventricle = 0: the node's
+//! row holds P_im,node with coefficient 1, so the element adds (C_im − 1) P_im,node. The row's
+//! scale matters with svZeroDSolver's absolute Newton tolerance (see `jacobian`).
 
 use super::Element;
 
@@ -16,8 +19,8 @@ pub struct ClosedLoopCoronary {
     pub capacitance: f64,
     pub factor: f64,
     rows: [usize; 1],
-    /// (node, volume), (node, ventricle pressure)
-    pattern: [(usize, usize); 2],
+    /// (node, volume), (node, ventricle pressure), (node, node)
+    pattern: [(usize, usize); 3],
 }
 
 impl ClosedLoopCoronary {
@@ -34,7 +37,7 @@ impl ClosedLoopCoronary {
             capacitance,
             factor,
             rows: [node],
-            pattern: [(node, volume), (node, ventricle)],
+            pattern: [(node, volume), (node, ventricle), (node, node)],
         }
     }
 }
@@ -50,12 +53,20 @@ impl Element for ClosedLoopCoronary {
         &self.pattern
     }
     fn residual(&self, _t: f64, y: &[f64], c: &mut [f64]) {
-        let [(_, v), (_, p)] = self.pattern;
-        c[0] = -(y[v] / self.capacitance + self.factor * y[p]);
+        let [(_, v), (_, p), (_, m)] = self.pattern;
+        let cim = self.capacitance;
+        c[0] = (cim - 1.0) * y[m] - y[v] - cim * self.factor * y[p];
     }
+    /// svZeroDSolver gives no ∂c/∂P_ventricle (its `dC_dy` stays empty for this block), so its
+    /// Newton converges linearly on this row and stops by its absolute residual; with the
+    /// heart's on/off valves the iterate it stops at decides the valve timing. The coupling is
+    /// left out of the iteration matrix here too, and the row has svZeroDSolver's scale (the
+    /// residual is exact, so a converged step satisfies the same equations). Measured on
+    /// closedLoopHeart_withCoronaries: the exact Jacobian ends 1.5e-2 off svZeroDSolver.
     fn jacobian(&self, _t: f64, _y: &[f64], j: &mut [f64]) {
-        j[0] = -1.0 / self.capacitance;
-        j[1] = -self.factor;
+        j[0] = -1.0;
+        j[1] = 0.0;
+        j[2] = self.capacitance - 1.0;
     }
     /// Linear with constant coefficients, but its coupling to the ventricle lies outside the
     /// circuit's constant matrix: declared nonlinear so that every integrator evaluates it
