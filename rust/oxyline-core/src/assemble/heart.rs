@@ -28,8 +28,14 @@ fn params(el: &str, s: &HeartPulmonarySpec) -> Result<HeartParams> {
         ("left_ventricle_elastance", s.left_ventricle_elastance),
         ("right_atrium_elastance", s.right_atrium_elastance),
         ("left_atrium_elastance", s.left_atrium_elastance),
-        ("right_atrium_passive_pressure", s.right_atrium_passive_pressure),
-        ("left_atrium_passive_pressure", s.left_atrium_passive_pressure),
+        (
+            "right_atrium_passive_pressure",
+            s.right_atrium_passive_pressure,
+        ),
+        (
+            "left_atrium_passive_pressure",
+            s.left_atrium_passive_pressure,
+        ),
         ("tricuspid_resistance", s.tricuspid_resistance),
         ("pulmonary_valve_resistance", s.pulmonary_valve_resistance),
         ("mitral_resistance", s.mitral_resistance),
@@ -38,8 +44,14 @@ fn params(el: &str, s: &HeartPulmonarySpec) -> Result<HeartParams> {
         check_nonnegative(el, k, v)?;
     }
     for (k, v) in [
-        ("right_atrium_passive_volume_coefficient", s.right_atrium_passive_volume_coefficient),
-        ("left_atrium_passive_volume_coefficient", s.left_atrium_passive_volume_coefficient),
+        (
+            "right_atrium_passive_volume_coefficient",
+            s.right_atrium_passive_volume_coefficient,
+        ),
+        (
+            "left_atrium_passive_volume_coefficient",
+            s.left_atrium_passive_volume_coefficient,
+        ),
         ("right_ventricle_rest_volume", s.right_ventricle_rest_volume),
         ("left_ventricle_rest_volume", s.left_ventricle_rest_volume),
         ("right_atrium_rest_volume", s.right_atrium_rest_volume),
@@ -91,14 +103,18 @@ pub(crate) fn stamp(
     let params = params(&el, spec)?;
     for (k, v) in [
         ("tricuspid_inductance", spec.tricuspid_inductance),
-        ("pulmonary_valve_inductance", spec.pulmonary_valve_inductance),
+        (
+            "pulmonary_valve_inductance",
+            spec.pulmonary_valve_inductance,
+        ),
         ("mitral_inductance", spec.mitral_inductance),
         ("aortic_valve_inductance", spec.aortic_valve_inductance),
     ] {
         check_nonnegative(&el, k, v)?;
     }
     circuit.add_vessel(name);
-    let node = |c: &mut Circuit, part: &str, cap: f64| c.add_node(format!("{name}: {part}"), cap, 0.0);
+    let node =
+        |c: &mut Circuit, part: &str, cap: f64| c.add_node(format!("{name}: {part}"), cap, 0.0);
     let ra = node(circuit, "right atrium", 0.0);
     let rv = node(circuit, "right ventricle", 0.0);
     let la = node(circuit, "left atrium", 0.0);
@@ -125,7 +141,12 @@ pub(crate) fn stamp(
     ];
     for (k, (chamber, part)) in [ra, rv, la, lv]
         .into_iter()
-        .zip(["right atrium", "right ventricle", "left atrium", "left ventricle"])
+        .zip([
+            "right atrium",
+            "right ventricle",
+            "left atrium",
+            "left ventricle",
+        ])
         .enumerate()
     {
         volumes[k] = circuit.add_extra(format!("{name}: {part}"), 1.0);
@@ -168,7 +189,11 @@ pub(crate) fn stamp_coronary(
     ] {
         check_nonnegative(&el, k, v)?;
     }
-    check_positive(&el, "intramyocardial_capacitance", spec.intramyocardial_capacitance)?;
+    check_positive(
+        &el,
+        "intramyocardial_capacitance",
+        spec.intramyocardial_capacitance,
+    )?;
     if !spec.intramyocardial_factor.is_finite() {
         return Err(Error::model(
             &el,
@@ -185,7 +210,12 @@ pub(crate) fn stamp_coronary(
         circuit.add_branch(format!("{name}: {part}"), p, q, r, 0.0, 0.0)
     };
     let ra = branch("arterial resistance", from, a, spec.arterial_resistance);
-    let ram = branch("microvascular resistance", a, m, spec.microvascular_resistance);
+    let ram = branch(
+        "microvascular resistance",
+        a,
+        m,
+        spec.microvascular_resistance,
+    );
     let rv = branch("venous resistance", m, to, spec.venous_resistance);
     let volume = circuit.add_extra(format!("{name}: intramyocardial"), 1.0);
     circuit.moved_rows.push((m, volume));

@@ -44,7 +44,8 @@ impl Atrium {
         let dpsi = self.passive_pressure * self.passive_volume_coefficient * ex;
         // svZeroDSolver's split: A E_max V − [A E_max V_aso + ψ (A − 1)]
         (
-            a * self.max_elastance * v - (a * self.max_elastance * self.rest_volume + psi * (a - 1.0)),
+            a * self.max_elastance * v
+                - (a * self.max_elastance * self.rest_volume + psi * (a - 1.0)),
             a * self.max_elastance - dpsi * (a - 1.0),
         )
     }
@@ -289,8 +290,8 @@ mod tests {
         // (backward pressure, backflow): central differences with the valve states unchanged
         let h = block();
         let y = [
-            1500.0, 900.0, 2000.0, 12000.0, 11000.0, 2e-5, -1e-7, -2e-7, 3e-4, 4e-5, 1.2e-4,
-            3e-5, 1e-4, 1400.0,
+            1500.0, 900.0, 2000.0, 12000.0, 11000.0, 2e-5, -1e-7, -2e-7, 3e-4, 4e-5, 1.2e-4, 3e-5,
+            1e-4, 1400.0,
         ];
         assert_eq!(h.valves(&y), [1.0, 0.0, 0.0, 1.0]);
         let t = 0.95; // inside the atrial contraction
@@ -319,8 +320,8 @@ mod tests {
     fn closed_valve_flows_are_reset_before_a_correction() {
         let h = block();
         let y = [
-            1500.0, 900.0, 2000.0, 12000.0, 11000.0, 2e-5, -1e-7, -2e-7, 3e-4, 4e-5, 1.2e-4,
-            3e-5, 1e-4, 1400.0,
+            1500.0, 900.0, 2000.0, 12000.0, 11000.0, 2e-5, -1e-7, -2e-7, 3e-4, 4e-5, 1.2e-4, 3e-5,
+            1e-4, 1400.0,
         ];
         let mut y_new = y;
         h.after_correction(&y, &mut y_new);
