@@ -16,6 +16,12 @@ by the load of a shared machine. Models:
   of svzerod and of the drop-in in the same run, CPU seconds too, and the accuracy against the
   stored reference; RK4 where it runs).
 
+* closed loop (``--closed-loop``: this table only): svZeroDSolver's closed-loop heart-block
+  cases ``closedLoopHeart_singleVessel`` and ``closedLoopHeart_withCoronaries``, as stored
+  (10 cycles of 100 steps) and lengthened (20 cycles of 1000 steps): svzerod and the drop-in in
+  the same run (median wall and CPU seconds), the drop-in against the stored reference and
+  against svzerod with the same settings, svzerod against the stored reference.
+
 Run ``python benches/bench_heart.py --help``; ``--quick`` (one repeat, N = 200, a few seconds
 on a quiet machine plus the peer tables) is the rerun command. Results print as Markdown.
 """
@@ -169,6 +175,65 @@ def chamber_table() -> None:
               f"{_variable_errors(ga, ref):.1e} | {t_rk} | {e_rk} |")
 
 
+def _frame_error(actual: Any, expected: Any) -> float:
+    """max over the pressure/flow columns of max|a - e| / max|e| (tests/test_svzerod.py)."""
+    import numpy as np
+
+    return max(float(np.max(np.abs(actual[c].to_numpy(float) - expected[c].to_numpy(float)))
+                     / np.max(np.abs(expected[c].to_numpy(float))))
+               for c in ("flow_in", "flow_out", "pressure_in", "pressure_out"))
+
+
+def closed_loop_table(repeat: int) -> None:
+    """svzerod and the drop-in on the closed-loop heart-block cases (time and accuracy)."""
+    import statistics
+    import time
+
+    import pandas as pd
+    import svzerod
+
+    import oxyline
+    import oxyline.svzerod as svz
+
+    def timed(f: Any, cfg: Any) -> tuple[Any, float, float]:
+        walls, cpus, out = [], [], None
+        for _ in range(repeat):
+            t, c = time.perf_counter(), time.process_time()
+            out = f(cfg)
+            walls.append(time.perf_counter() - t)
+            cpus.append(time.process_time() - c)
+        return out, statistics.median(walls), statistics.median(cpus)
+
+    print(f"\nload average at start: {os.getloadavg()[0]:.1f}\n")
+    print("| case | cycles × steps | svzerod wall / CPU (s) | gen-α wall / CPU (s) | "
+          "CPU gen-α/svzerod | gen-α vs svzerod | gen-α vs reference | svzerod vs reference "
+          "| RK4 |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for name in ("closedLoopHeart_singleVessel", "closedLoopHeart_withCoronaries"):
+        base = json.loads((CASES / f"{name}.json").read_text())
+        ref = pd.read_json(CASES / "results" / f"result_{name}.json.gz")
+        for cycles, pts in ((None, None), (20, 1001)):
+            cfg = json.loads(json.dumps(base))
+            sp = cfg["simulation_parameters"]
+            if cycles:
+                sp["number_of_cardiac_cycles"], sp["number_of_time_pts_per_cardiac_cycle"] = \
+                    cycles, pts
+            peer, w_p, c_p = timed(svzerod.simulate, cfg)
+            ga, w_g, c_g = timed(svz.simulate, cfg)
+            try:
+                svz.simulate(cfg, method="rk4")
+                rk = "runs"
+            except oxyline.ModelError:
+                rk = "refused (ModelError: on/off valves)"
+            stored = cycles is None
+            print(f"| {name} | {sp['number_of_cardiac_cycles']} × "
+                  f"{sp['number_of_time_pts_per_cardiac_cycle'] - 1} | {w_p:.3f} / {c_p:.3f} | "
+                  f"{w_g:.3f} / {c_g:.3f} | {c_g / c_p:.2f} | {_frame_error(ga, peer):.1e} | "
+                  f"{f'{_frame_error(ga, ref):.1e}' if stored else '–'} | "
+                  f"{f'{_frame_error(peer, ref):.1e}' if stored else '–'} | {rk} |")
+    print(f"\nload average at end: {os.getloadavg()[0]:.1f}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--baseline", help="directory with another build of the oxyline package")
@@ -176,7 +241,12 @@ def main() -> None:
     ap.add_argument("--sizes", default="1000", help="comma-separated N of chain/tree")
     ap.add_argument("--quick", action="store_true", help="one repeat of N = 200, then the peer "
                     "tables (the rerun command)")
+    ap.add_argument("--closed-loop", action="store_true", help="only the closed-loop heart-block "
+                    "cases against svzerod (time and accuracy)")
     args = ap.parse_args()
+    if args.closed_loop:
+        closed_loop_table(args.repeat)
+        return
     if args.quick:
         args.repeat, args.sizes = 1, "200"
 

@@ -54,8 +54,6 @@ SUPPORTED = [
 # case -> text the UnsupportedElement message must contain (the element or key it names)
 UNSUPPORTED = {
     "chamber_sphere": "'ChamberSphere'",
-    "closedLoopHeart_singleVessel": "'closed_loop_blocks'",
-    "closedLoopHeart_withCoronaries": "'closed_loop_blocks'",
     "closed_loop_two_hill": "'initial_condition' entry 'pressure:",
     "coupledBlock_closedLoopHeart_singleVessel": "'external_solver_coupling_blocks'",
     "coupledBlock_closedLoopHeart_withCoronaries": "'external_solver_coupling_blocks'",
@@ -65,6 +63,8 @@ UNSUPPORTED = {
 }
 # chamber and valve cases: tested in tests/test_svzerod_chambers.py
 CHAMBERS = ["chamber_elastance_inductor", "closedLoopHeart_singleVessel_decomposed", "valve_tanh"]
+# closed-loop heart block cases: tested in tests/test_svzerod_closed_loop.py
+CLOSED_LOOP = ["closedLoopHeart_singleVessel", "closedLoopHeart_withCoronaries"]
 # coronary, heart, valve cases: tested in tests/test_svzerod_heart.py
 HEART = ["pulsatileFlow_R_coronary", "pulsatileFlow_R_coronary_varres", "steadyFlow_R_coronary"]
 MISMATCH_PERIOD = [
@@ -182,10 +182,11 @@ def svzerod_run(cfg: dict[str, Any], refine: int = 1) -> pd.DataFrame:
 
 def test_every_case_is_classified() -> None:
     files = {p.stem for p in CASES.glob("*.json")}
-    listed = set(SUPPORTED) | set(UNSUPPORTED) | set(MISMATCH_PERIOD) | set(HEART) | set(CHAMBERS)
+    listed = (set(SUPPORTED) | set(UNSUPPORTED) | set(MISMATCH_PERIOD) | set(HEART)
+              | set(CHAMBERS) | set(CLOSED_LOOP))
     assert files == listed
     assert len(listed) == (len(SUPPORTED) + len(UNSUPPORTED) + len(MISMATCH_PERIOD) + len(HEART)
-                           + len(CHAMBERS))
+                           + len(CHAMBERS) + len(CLOSED_LOOP))
 
 
 # ------------------------------------------------------------------------------------------

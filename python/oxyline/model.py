@@ -37,7 +37,7 @@ TOP_KEYS = {
 VESSEL_KEYS = {
     "name", "from", "to", "length", "radius", "radius_in", "radius_out", "wall_thickness",
     "youngs_modulus", "poisson_ratio", "segments", "lumped", "arrangement", "output",
-    "description", "valve", "chamber", "through_rc",
+    "description", "valve", "chamber", "through_rc", "heart_pulmonary", "coronary_bed",
 }
 #: heart elements (docs/physics.md §1.8): each law's keys and their quantities ("1/pressure":
 #: a valve's steepness; "elastance": pressure per volume; "volume": the flow factor times 1 s)
@@ -55,6 +55,31 @@ CHAMBER_KEYS = {
                     "passive_volume_coefficient": "1/volume", "rest_volume": "volume"},
 }
 THROUGH_RC_KEYS = {"resistance": "resistance", "capacitance": "capacitance"}
+#: the closed-loop heart block (docs/physics.md §1.10): keys and quantities ("number": none)
+HEART_PULMONARY_KEYS = {
+    "period": "time", "atrial_systole_fraction": "number", "p_wave_divisor": "number",
+    **{f"{side}_ventricle_{k}": q for side in ("right", "left")
+       for k, q in (("elastance", "elastance"), ("rest_volume", "volume"))},
+    **{f"{side}_atrium_{k}": q for side in ("right", "left")
+       for k, q in (("elastance", "elastance"), ("passive_pressure", "pressure"),
+                    ("passive_volume_coefficient", "1/volume"), ("rest_volume", "volume"))},
+    **{f"{valve}_{k}": k for valve in ("tricuspid", "pulmonary_valve", "mitral", "aortic_valve")
+       for k in ("resistance", "inductance")},
+    "pulmonary_resistance": "resistance", "pulmonary_capacitance": "capacitance",
+    "aortic_capacitance": "capacitance",
+}
+#: optional start values of the heart block
+HEART_PULMONARY_START = {
+    **{f"initial_{c}_volume": "volume" for c in ("right_atrium", "right_ventricle",
+                                                 "left_atrium", "left_ventricle")},
+    "initial_pulmonary_pressure": "pressure",
+}
+#: a closed-loop coronary bed (docs/physics.md §1.10), besides its "heart" and "ventricle"
+CORONARY_BED_KEYS = {
+    "arterial_resistance": "resistance", "arterial_capacitance": "capacitance",
+    "microvascular_resistance": "resistance", "intramyocardial_capacitance": "capacitance",
+    "venous_resistance": "resistance", "intramyocardial_factor": "number",
+}
 CHAMBER_COMMON = {"period": "time", "inductance": "inductance", "initial_volume": "volume"}
 ACTIVATION_KEYS = {
     "half-cosine": {"t_active", "t_twitch"},
@@ -311,6 +336,8 @@ def _vessel(v: Any, i: int, units: str) -> dict[str, Any]:
         cv["arrangement"] = v["arrangement"]
     if "output" in v:
         cv["output"] = bool(v["output"])
+    if "heart_pulmonary" in v or "coronary_bed" in v:
+        return _closed_loop_element(v, cv, el, units)
     if "valve" in v or "chamber" in v or "through_rc" in v:
         return _heart_element(v, cv, el, units)
     if "lumped" in v:
@@ -353,6 +380,40 @@ def _vessel(v: Any, i: int, units: str) -> dict[str, Any]:
         if "poisson_ratio" in v:
             g["poisson_ratio"] = _number(v["poisson_ratio"], el, "poisson_ratio")
         cv["geometry"] = g
+    return cv
+
+
+def _closed_loop_element(v: Mapping[str, Any], cv: dict[str, Any], el: str, units: str
+                         ) -> dict[str, Any]:
+    """The canonical form of a ``heart_pulmonary`` or ``coronary_bed`` element
+    (docs/physics.md §1.10)."""
+    kinds = [k for k in ("heart_pulmonary", "coronary_bed", "valve", "chamber", "through_rc",
+                         "lumped", "length") if k in v]
+    if len(kinds) > 1:
+        raise _err(el, f"give one of heart_pulmonary, coronary_bed, valve, chamber, through_rc, "
+                       f"lumped or geometry, not {' and '.join(kinds)}")
+    kind = kinds[0]
+    spec = v[kind]
+    if not isinstance(spec, Mapping):
+        raise _err(el, f"'{kind}' must be a mapping")
+    keys = HEART_PULMONARY_KEYS if kind == "heart_pulmonary" else CORONARY_BED_KEYS
+    optional = HEART_PULMONARY_START if kind == "heart_pulmonary" else {}
+    names = {"heart", "ventricle"} if kind == "coronary_bed" else set()
+    _check_keys(spec, set(keys) | set(optional) | names, f"{el} {kind}")
+    out: dict[str, Any] = {}
+    for k, q in {**keys, **optional}.items():
+        if k in spec:
+            out[k] = (1.0 if q == "number" else _quantity(units, q)) * _number(spec[k], el, k)
+        elif k in keys:
+            raise _err(el, f"{kind} needs '{k}'")
+    if kind == "coronary_bed":
+        if not isinstance(spec.get("heart"), str):
+            raise _err(el, "coronary_bed needs 'heart', the name of a heart_pulmonary element")
+        if spec.get("ventricle") not in ("left", "right"):
+            raise _err(el, f"coronary_bed ventricle must be 'left' or 'right', got "
+                           f"{spec.get('ventricle')!r}")
+        out["heart"], out["ventricle"] = spec["heart"], spec["ventricle"]
+    cv[kind] = out
     return cv
 
 

@@ -53,7 +53,7 @@ from typing import Any
 import numpy as np
 
 from oxyline.errors import ModelError, UnsupportedElement
-from oxyline.io import svzerod_heart
+from oxyline.io import svzerod_closed_loop, svzerod_heart
 from oxyline.model import Model, _build, _copy
 
 COLUMNS = ("name", "time", "flow_in", "flow_out", "pressure_in", "pressure_out")
@@ -63,7 +63,7 @@ METHODS = ("generalized-alpha", "rk4")
 RK4_DERIVATIVE_SUBSTEPS = 20
 
 TOP_KEYS = {"simulation_parameters", "boundary_conditions", "vessels", "junctions", "units",
-            "valves", "chambers", "initial_condition"}
+            "valves", "chambers", "initial_condition", "closed_loop_blocks"}
 # svZeroDSolver's equations do not depend on units and its files do not say which they use; by
 # its convention (and SimVascular's) they are cgs. oxyline's exporter writes a top-level
 # ``units`` ("cgs" or "SI"), which svZeroDSolver ignores and this importer reads.
@@ -80,7 +80,6 @@ FRAME_UNITS = {
 TOP_IGNORED = {"description", "calibration_parameters", "y", "dy"}
 TOP_UNSUPPORTED = {
     "external_solver_coupling_blocks": "3D-0D coupling blocks",
-    "closed_loop_blocks": "closed-loop blocks",
     "initial_condition_d": "user initial derivatives",
 }
 SIM_KEYS = {
@@ -117,6 +116,7 @@ BC_PARAMS = {
     "RESISTANCE": {"R", "Pd"},
     "RCR": {"Rp", "C", "Rd", "Pd"},
     **svzerod_heart.BC_PARAMS,
+    **svzerod_closed_loop.BC_PARAMS,
 }
 
 
@@ -493,7 +493,8 @@ def _heart_elements(cfg: Mapping[str, Any], period: float, vessels: list[dict[st
                 raise ModelError(f"{what}: its {'upstream' if end == 'in' else 'downstream'}_block "
                                  f"'{block}' is not defined")
         layout.connections += [(up, name), (name, down)]
-    unknown = [k for k in initial if k not in known_ic and not _is_comment(k)]
+    unknown = [k for k in initial if k not in known_ic and not _is_comment(k)
+               and not svzerod_closed_loop.handles_initial(k)]
     if unknown:
         raise UnsupportedElement(f"model: 'initial_condition' entry '{unknown[0]}' is not "
                                  "supported (only chamber volumes Vc:<chamber> are)")
@@ -593,6 +594,8 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
                                  f"parameters (its table spans {p}, an earlier one "
                                  f"{model_period})")
             model_period = p if p is not None else model_period
+        elif kind in svzerod_closed_loop.BC_PARAMS:
+            native = svzerod_closed_loop.boundary_condition(kind, vals, el, _num)
         elif kind == "RESISTANCE":
             native = {"type": "resistance", "resistance": _num(_required(vals, "R", el), el, "R"),
                       "pressure": _num(_required(vals, "Pd", el), el, "Pd")}
@@ -606,6 +609,9 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         if kind == "RCR":
             layout.internal.append(("rcr", name, native["proximal_resistance"]))
 
+    heart_period = svzerod_closed_loop.heart_period(cfg)
+    if heart_period is not None:  # svZeroDSolver takes the heart block's period
+        model_period = heart_period
     if model_period < 0.0 and sim_period < 0.0:
         period = 1.0
     elif model_period >= 0.0:
@@ -720,6 +726,7 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         # svZeroDSolver's nodes of this vessel's boundary conditions, inlet first
         layout.connections += [(vbc["inlet"], name)] if "inlet" in vbc else []
         layout.connections += [(name, vbc["outlet"])] if "outlet" in vbc else []
+    svzerod_closed_loop.add_blocks(cfg, period, vessels, bcs, attach, seen_names, _num)
     _heart_elements(cfg, period, vessels, layout, bcs, used_bcs, attach)
     vessel_names = {x["name"] for x in vessels}
 
@@ -762,7 +769,8 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         "description": "converted from an svZeroDSolver input by oxyline.svzerod",
         "period": period,
         "vessels": vessels + hidden,
-        "boundary_conditions": {name: nat for name, (_, nat) in bcs.items()},
+        "boundary_conditions": {name: nat for name, (kind, nat) in bcs.items()
+                                if kind not in svzerod_closed_loop.BC_PARAMS},
         "simulation": {
             "cycles": cycles,
             "dt": dt,

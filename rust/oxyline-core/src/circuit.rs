@@ -13,6 +13,8 @@
 use crate::coefficients::ResistanceLaw;
 use crate::element::Element;
 use crate::element::chamber::{Chamber, Elastance};
+use crate::element::coronary::ClosedLoopCoronary;
+use crate::element::heart::{HeartParams, HeartPulmonary, HeartUnknowns};
 use crate::element::valve::{Valve, ValveLaw};
 use crate::error::{Error, Result};
 use crate::waveform::Waveform;
@@ -236,6 +238,27 @@ pub enum CircuitElement {
         elastance: Elastance,
         node: usize,
         volume: usize,
+    },
+    /// The closed-loop heart block: its pressure nodes (right atrium, right ventricle, left
+    /// atrium, left ventricle, aorta), valve branches (tricuspid, pulmonary, mitral, aortic),
+    /// chamber volumes and pulmonary pressure (indices into `Circuit::extras`).
+    Heart {
+        name: String,
+        params: Box<HeartParams>,
+        nodes: [usize; 5],
+        branches: [usize; 4],
+        volumes: [usize; 4],
+        pulmonary: usize,
+    },
+    /// A closed-loop coronary bed's intramyocardial node, its volume (extra) and the node of
+    /// the ventricle whose pressure squeezes it.
+    Coronary {
+        name: String,
+        capacitance: f64,
+        factor: f64,
+        node: usize,
+        volume: usize,
+        ventricle: usize,
     },
 }
 
@@ -651,6 +674,38 @@ fn resolve(el: &CircuitElement, nn: usize, nb: usize) -> Arc<dyn Element> {
             elastance.clone(),
             *node,
             nn + nb + volume,
+        )),
+        CircuitElement::Heart {
+            name,
+            params,
+            nodes,
+            branches,
+            volumes,
+            pulmonary,
+        } => Arc::new(HeartPulmonary::new(
+            name.clone(),
+            (**params).clone(),
+            HeartUnknowns {
+                pressure: *nodes,
+                flow: branches.map(|b| nn + b),
+                volume: volumes.map(|x| nn + nb + x),
+                pulmonary: nn + nb + pulmonary,
+            },
+        )),
+        CircuitElement::Coronary {
+            name,
+            capacitance,
+            factor,
+            node,
+            volume,
+            ventricle,
+        } => Arc::new(ClosedLoopCoronary::new(
+            name.clone(),
+            *capacitance,
+            *factor,
+            *node,
+            nn + nb + volume,
+            *ventricle,
         )),
     }
 }

@@ -153,6 +153,8 @@ pub fn vessel(i: usize, item: &Bound<'_, PyAny>) -> Res<VesselSpec> {
         arrangement: None,
         output: true,
         valve: None,
+        heart_pulmonary: None,
+        coronary_bed: None,
         chamber: None,
         through_rc: None,
     };
@@ -175,6 +177,8 @@ pub fn vessel(i: usize, item: &Bound<'_, PyAny>) -> Res<VesselSpec> {
             "arrangement" => v.arrangement = Some(arrangement(&val, element)?),
             // heart elements are few: read through their JSON form
             "valve" => v.valve = Some(via_json(&val, element, k)?),
+            "heart_pulmonary" => v.heart_pulmonary = Some(via_json(&val, element, k)?),
+            "coronary_bed" => v.coronary_bed = Some(via_json(&val, element, k)?),
             "chamber" => v.chamber = Some(via_json(&val, element, k)?),
             "through_rc" => v.through_rc = Some(via_json(&val, element, k)?),
             "output" => {

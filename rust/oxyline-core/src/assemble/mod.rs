@@ -7,6 +7,7 @@ pub(crate) mod boundary;
 mod chamber;
 pub(crate) mod checks;
 mod graph;
+mod heart;
 pub mod segments;
 mod valve;
 mod vessel;
@@ -92,9 +93,15 @@ impl NetworkSpec {
             ..Default::default()
         };
         let mut table = Vec::with_capacity(segments);
+        let mut links = HeartLinks::default();
         for (vi, v) in self.vessels.iter().enumerate() {
-            if v.valve.is_some() || v.chamber.is_some() || v.through_rc.is_some() {
-                let chain = heart_element(&mut circuit, v, graph.vessel_ends[vi])?;
+            if v.valve.is_some()
+                || v.chamber.is_some()
+                || v.through_rc.is_some()
+                || v.heart_pulmonary.is_some()
+                || v.coronary_bed.is_some()
+            {
+                let chain = heart_element(&mut circuit, v, graph.vessel_ends[vi], &mut links)?;
                 if v.output {
                     vessel::record_probes(
                         &mut probes,
@@ -133,6 +140,7 @@ impl NetworkSpec {
             }
             table.extend(segs);
         }
+        heart::resolve(&mut circuit, &links.hearts, &links.beds)?;
         for (node, bc) in &self.boundary_conditions {
             let k = graph.index[node.as_str()];
             let inlet = graph.ends[k][0].1;
@@ -155,11 +163,20 @@ impl NetworkSpec {
     }
 }
 
-/// Stamp a valve or chamber element (a `vessel` entry with `valve` or `chamber`).
+/// Heart blocks and the coronary beds that refer to them (resolved once all are stamped).
+#[derive(Default)]
+struct HeartLinks {
+    hearts: Vec<(String, [usize; 2])>,
+    beds: Vec<(usize, String, crate::spec::CoronaryBedSpec)>,
+}
+
+/// Stamp a heart element (a `vessel` entry with `valve`, `chamber`, `through_rc`,
+/// `heart_pulmonary` or `coronary_bed`).
 fn heart_element(
     circuit: &mut Circuit,
     v: &crate::spec::VesselSpec,
     ends: (usize, usize),
+    links: &mut HeartLinks,
 ) -> Result<vessel::Chain> {
     let el = format!("vessel '{}'", v.name);
     let kinds = [
@@ -168,12 +185,26 @@ fn heart_element(
         v.valve.is_some(),
         v.chamber.is_some(),
         v.through_rc.is_some(),
+        v.heart_pulmonary.is_some(),
+        v.coronary_bed.is_some(),
     ];
     if kinds.iter().filter(|&&k| k).count() != 1 {
         return Err(crate::error::Error::model(
             el,
-            "give one of geometry, lumped, valve, chamber or through_rc",
+            "give one of geometry, lumped, valve, chamber, through_rc, heart_pulmonary or coronary_bed",
         ));
+    }
+    if let Some(s) = &v.heart_pulmonary {
+        let (chain, ventricles) = heart::stamp(circuit, &v.name, s, ends)?;
+        links.hearts.push((v.name.clone(), ventricles));
+        return Ok(chain);
+    }
+    if let Some(s) = &v.coronary_bed {
+        let chain = heart::stamp_coronary(circuit, &v.name, s, ends)?;
+        links
+            .beds
+            .push((circuit.elements.len() - 1, v.name.clone(), s.clone()));
+        return Ok(chain);
     }
     match (&v.valve, &v.chamber, &v.through_rc) {
         (Some(s), _, _) => valve::stamp(circuit, &v.name, s, ends),

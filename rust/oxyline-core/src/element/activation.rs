@@ -69,7 +69,7 @@ const FOURIER: [[f64; 2]; 25] = [
     [0.000004903, 0.000005805],
 ];
 
-fn fourier_raw(tc: f64, period: f64) -> f64 {
+pub(crate) fn fourier_raw(tc: f64, period: f64) -> f64 {
     FOURIER.iter().enumerate().fold(0.0, |v, (i, [a, b])| {
         let w = 2.0 * PI * i as f64 * tc / period;
         v + a * w.cos() - b * w.sin()

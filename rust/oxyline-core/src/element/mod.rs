@@ -12,6 +12,8 @@
 
 pub mod activation;
 pub mod chamber;
+pub mod coronary;
+pub mod heart;
 pub mod valve;
 
 use std::fmt::Debug;
@@ -33,6 +35,14 @@ pub trait Element: Debug + Send + Sync {
     /// (e.g. a valve fully open). Default: the Jacobian at (y, t).
     fn stiffest_jacobian(&self, t: f64, y: &[f64], j: &mut [f64]) {
         self.jacobian(t, y, j);
+    }
+    /// Called by generalized-α before each Newton correction is added to the iterate
+    /// `y_new`, with the α_f level `y_af` of the residual it corrects (svZeroDSolver's
+    /// `post_solve`: the heart block resets the flows of its closed valves). Default: nothing.
+    fn after_correction(&self, _y_af: &[f64], _y_new: &mut [f64]) {}
+    /// Why RK4 cannot integrate this element (None: it can).
+    fn rk4_unsupported(&self) -> Option<String> {
+        None
     }
     /// c depends on the state other than linearly (Newton refactorises per iteration).
     fn is_nonlinear(&self) -> bool;

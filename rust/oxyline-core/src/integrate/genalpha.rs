@@ -253,6 +253,10 @@ impl NewtonProblem for Iterate<'_, '_> {
     }
     fn update(&mut self, dx: &mut [f64]) {
         let ga = &mut *self.ga;
+        // svZeroDSolver's post-solve hook acts on the iterate before the correction is added
+        for el in &ga.dae.elements {
+            el.after_correction(&ga.y_af, &mut ga.y_new);
+        }
         let gdt = ga.gamma * ga.dt;
         for ((ydn, yn), d) in ga.yd_new.iter_mut().zip(&mut ga.y_new).zip(dx.iter_mut()) {
             *ydn += *d;

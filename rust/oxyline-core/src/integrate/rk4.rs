@@ -8,7 +8,7 @@
 use super::algebraic::{Algebraic, Elimination, Reduction, reduce_prescribed_inductors};
 use super::newton::{self, NewtonControl, singular};
 use crate::circuit::{Dae, Regime};
-use crate::error::Result;
+use crate::error::{Error, Result};
 
 /// A state integrated together with the flow in the same RK4 step (species amounts): its
 /// derivative is evaluated at every stage from that stage's consistent flow state, so the
@@ -142,6 +142,13 @@ impl<'a> Rk4<'a> {
     /// The integrator of `dae` in `regime` with step `dt`. A circuit whose algebraic part stays
     /// singular after the index reduction (index 2) is a model error.
     pub fn new(dae: &'a Dae, regime: Regime, dt: f64) -> Result<Self> {
+        if let Some((el, why)) = dae
+            .elements
+            .iter()
+            .find_map(|el| el.rk4_unsupported().map(|why| (el.name(), why)))
+        {
+            return Err(Error::model(el, format!("RK4 cannot integrate it: {why}")));
+        }
         let Reduction { e, rate } = reduce_prescribed_inductors(dae, regime);
         let n = dae.n;
         let mut alg = Algebraic::analyse(dae, &e, regime)?;

@@ -119,6 +119,14 @@ pub struct VesselSpec {
     /// A heart valve instead of a vessel (docs/physics.md §1.8).
     #[serde(default)]
     pub valve: Option<ValveSpec>,
+    /// The closed-loop heart and pulmonary circulation block instead of a vessel
+    /// (docs/physics.md §1.10).
+    #[serde(default)]
+    pub heart_pulmonary: Option<Box<HeartPulmonarySpec>>,
+    /// A closed-loop coronary bed whose intramyocardial pressure follows a heart block's
+    /// ventricle (docs/physics.md §1.10).
+    #[serde(default)]
+    pub coronary_bed: Option<CoronaryBedSpec>,
     /// A heart chamber instead of a vessel (docs/physics.md §1.8).
     #[serde(default)]
     pub chamber: Option<ChamberSpec>,
@@ -216,6 +224,81 @@ pub enum ActivationSpec {
     },
     /// svZeroDSolver's 25-mode ventricular `fourier` activation (no parameters).
     Fourier {},
+}
+
+/// The closed-loop heart and pulmonary circulation (svZeroDSolver's
+/// `ClosedLoopHeartAndPulmonary`, docs/physics.md §1.10) between the element's `from` node (the
+/// venous return into the right atrium) and its `to` node (the aorta). SI: elastances Pa/m³,
+/// volumes m³, resistances Pa·s/m³, inductances Pa·s²/m³, capacitances m³/Pa, times s.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HeartPulmonarySpec {
+    pub period: f64,
+    /// Atrial systole duration as a fraction of the period (svZeroDSolver's `Tsa`).
+    pub atrial_systole_fraction: f64,
+    /// The atrial contraction ends at period / p_wave_divisor (svZeroDSolver's `tpwave`).
+    pub p_wave_divisor: f64,
+    pub right_ventricle_elastance: f64,
+    pub left_ventricle_elastance: f64,
+    pub right_ventricle_rest_volume: f64,
+    pub left_ventricle_rest_volume: f64,
+    pub right_atrium_elastance: f64,
+    pub left_atrium_elastance: f64,
+    pub right_atrium_passive_pressure: f64,
+    pub left_atrium_passive_pressure: f64,
+    /// 1/m³
+    pub right_atrium_passive_volume_coefficient: f64,
+    pub left_atrium_passive_volume_coefficient: f64,
+    pub right_atrium_rest_volume: f64,
+    pub left_atrium_rest_volume: f64,
+    pub tricuspid_resistance: f64,
+    pub tricuspid_inductance: f64,
+    pub pulmonary_valve_resistance: f64,
+    pub pulmonary_valve_inductance: f64,
+    pub mitral_resistance: f64,
+    pub mitral_inductance: f64,
+    pub aortic_valve_resistance: f64,
+    pub aortic_valve_inductance: f64,
+    pub pulmonary_resistance: f64,
+    pub pulmonary_capacitance: f64,
+    pub aortic_capacitance: f64,
+    /// Start values of a zero-start run (default 0).
+    #[serde(default)]
+    pub initial_right_atrium_volume: f64,
+    #[serde(default)]
+    pub initial_right_ventricle_volume: f64,
+    #[serde(default)]
+    pub initial_left_atrium_volume: f64,
+    #[serde(default)]
+    pub initial_left_ventricle_volume: f64,
+    #[serde(default)]
+    pub initial_pulmonary_pressure: f64,
+}
+
+/// Which ventricle of a heart block loads a closed-loop coronary bed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Ventricle {
+    Left,
+    Right,
+}
+
+/// A closed-loop coronary bed (svZeroDSolver's `ClosedLoopCoronaryLeft`/`Right`) from the
+/// element's `from` node to its `to` node: R_a, the arterial capacitor C_a, R_am, the
+/// intramyocardial capacitor C_im under `intramyocardial_factor` × the pressure of the heart
+/// block `heart`'s `ventricle`, and R_v (docs/physics.md §1.10).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CoronaryBedSpec {
+    pub arterial_resistance: f64,
+    pub arterial_capacitance: f64,
+    pub microvascular_resistance: f64,
+    pub intramyocardial_capacitance: f64,
+    pub venous_resistance: f64,
+    /// The name of the `heart_pulmonary` element whose ventricle squeezes the bed.
+    pub heart: String,
+    pub ventricle: Ventricle,
+    pub intramyocardial_factor: f64,
 }
 
 /// svZeroDSolver's `BloodVesselRC`: C dP_from/dt + (P_from − P_to)/R = Q, Q the same at both

@@ -1,0 +1,348 @@
+//! The closed-loop heart and pulmonary circulation of Sankaran et al. 2012 as one block
+//! (svZeroDSolver's `ClosedLoopHeartAndPulmonary`, docs/physics.md §1.10): four chambers, four
+//! on/off valves with inductors, a pulmonary capacitor with its drain resistance and the
+//! aortic capacitor. The circuit holds the block's unknowns (`crate::assemble::heart`): the
+//! chamber pressures and the aortic pressure as nodes, the valve flows as branches (R = 0 in
+//! the constant matrix), the four chamber volumes and the pulmonary pressure as element
+//! unknowns. This element adds everything that is not a constant circuit coefficient:
+//!
+//! * the chamber pressure laws, P_atrium = A(t) E_max (V − V_aso) + (1 − A(t)) K_p
+//!   (e^{K_v (V − V_aso)} − 1) and P_ventricle = E_s e(t) (V − V_u), with A the wrapping-cosine
+//!   atrial activation and e the 25-mode Fourier elastance series (unscaled);
+//! * the on/off valves: a valve is closed (v = 0) when the pressure behind it does not exceed
+//!   the pressure in front AND its flow is not positive, else open (v = 1); an open valve adds
+//!   R Q to its inductor row and passes Q into the downstream volume; a closed valve's flow is
+//!   left out of both volume balances. As in svZeroDSolver the valve state is read from the
+//!   Newton iterate and held constant in the Jacobian, and the flow of a closed valve is reset
+//!   to zero before each Newton correction ([`Element::after_correction`]).
+//! * the pulmonary bed as svZeroDSolver writes it: C_p dP_pul/dt = v_PV Q_PV − (P_pul − P_LA)/R_pd,
+//!   while the left atrium receives v_PV Q_PV (the right ventricle's outflow) directly. The
+//!   pulmonary valve's branch therefore runs from the right ventricle to the left atrium and its
+//!   row gets P_pul − P_LA added, so that it reads L dQ/dt + R v Q = P_RV − P_pul.
+
+use super::activation::{Activation, fourier_raw};
+use super::{Element, in_cycle};
+
+/// An atrium's pressure law (an exponential passive part and a linear active one).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Atrium {
+    /// Active elastance E_max (Pa/m³).
+    pub max_elastance: f64,
+    /// Passive pressure scale K_p (Pa).
+    pub passive_pressure: f64,
+    /// Passive volume coefficient K_v (1/m³).
+    pub passive_volume_coefficient: f64,
+    /// Volume V_aso where both parts vanish (m³).
+    pub rest_volume: f64,
+}
+
+impl Atrium {
+    /// P(V) and dP/dV at activation `a`.
+    fn pressure(&self, a: f64, v: f64) -> (f64, f64) {
+        let ex = (self.passive_volume_coefficient * (v - self.rest_volume)).exp();
+        let psi = self.passive_pressure * (ex - 1.0);
+        let dpsi = self.passive_pressure * self.passive_volume_coefficient * ex;
+        // svZeroDSolver's split: A E_max V − [A E_max V_aso + ψ (A − 1)]
+        (
+            a * self.max_elastance * v
+                - (a * self.max_elastance * self.rest_volume + psi * (a - 1.0)),
+            a * self.max_elastance - dpsi * (a - 1.0),
+        )
+    }
+}
+
+/// The block's parameters (SI).
+#[derive(Debug, Clone, PartialEq)]
+pub struct HeartParams {
+    pub period: f64,
+    /// The wrapping-cosine atrial activation (systole fraction T_sa/T, P-wave divisor).
+    pub atrial_activation: Activation,
+    pub right_atrium: Atrium,
+    pub left_atrium: Atrium,
+    /// Ventricular elastance scales E_s (Pa/m³) and rest volumes V_u (m³), [right, left].
+    pub ventricle_elastance: [f64; 2],
+    pub ventricle_rest_volume: [f64; 2],
+    /// Open-valve resistances (Pa·s/m³): tricuspid, pulmonary, mitral, aortic.
+    pub valve_resistance: [f64; 4],
+    /// Pulmonary drain resistance R_pd (Pa·s/m³).
+    pub pulmonary_resistance: f64,
+}
+
+/// DAE unknowns of the block.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct HeartUnknowns {
+    /// Pressures: right atrium, right ventricle, left atrium, left ventricle, aorta.
+    pub pressure: [usize; 5],
+    /// Valve flows: tricuspid, pulmonary, mitral, aortic.
+    pub flow: [usize; 4],
+    /// Volumes (right atrium, right ventricle, left atrium, left ventricle); their rows hold
+    /// the chambers' volume balances.
+    pub volume: [usize; 4],
+    /// Pulmonary pressure (its row: the pulmonary capacitor).
+    pub pulmonary: usize,
+}
+
+const RA: usize = 0;
+const RV: usize = 1;
+const LA: usize = 2;
+const LV: usize = 3;
+const AO: usize = 4;
+
+#[derive(Debug, Clone)]
+pub struct HeartPulmonary {
+    pub name: String,
+    pub params: HeartParams,
+    pub unknowns: HeartUnknowns,
+    rows: Vec<usize>,
+    pattern: Vec<(usize, usize)>,
+}
+
+impl HeartPulmonary {
+    pub fn new(name: String, params: HeartParams, u: HeartUnknowns) -> Self {
+        let (p, q, v, pul) = (u.pressure, u.flow, u.volume, u.pulmonary);
+        let rows = vec![
+            p[RA], p[RV], p[LA], p[LV], q[0], q[1], q[2], q[3], v[0], v[1], pul, v[2], v[3], p[AO],
+        ];
+        // in the order `jacobian` writes
+        let pattern = vec![
+            (p[RA], v[0]),
+            (p[RV], v[1]),
+            (p[LA], v[2]),
+            (p[LV], v[3]),
+            (q[0], q[0]),
+            (q[1], q[1]),
+            (q[1], pul),
+            (q[1], p[LA]),
+            (q[2], q[2]),
+            (q[3], q[3]),
+            (v[0], q[0]),
+            (v[1], q[1]),
+            (v[1], q[0]),
+            (pul, q[1]),
+            (pul, pul),
+            (pul, p[LA]),
+            (v[2], q[1]),
+            (v[2], q[2]),
+            (v[3], q[2]),
+            (v[3], q[3]),
+            (p[AO], q[3]),
+        ];
+        HeartPulmonary {
+            name,
+            params,
+            unknowns: u,
+            rows,
+            pattern,
+        }
+    }
+
+    /// Valve positions (1 open, 0 closed) at state `y`: tricuspid, pulmonary, mitral, aortic.
+    pub fn valves(&self, y: &[f64]) -> [f64; 4] {
+        let (p, q) = (self.unknowns.pressure, self.unknowns.flow);
+        // the pressures behind and in front of each valve
+        let ends = [
+            (p[RA], p[RV]),
+            (p[RV], self.unknowns.pulmonary),
+            (p[LA], p[LV]),
+            (p[LV], p[AO]),
+        ];
+        let mut v = [1.0; 4];
+        for (k, (up, down)) in ends.into_iter().enumerate() {
+            if y[up] <= y[down] && y[q[k]] <= 0.0 {
+                v[k] = 0.0;
+            }
+        }
+        v
+    }
+
+    /// Atrial activation and the unscaled ventricular elastance at time t.
+    fn activation(&self, t: f64) -> (f64, f64) {
+        let period = self.params.period;
+        (
+            self.params.atrial_activation.eval(t, period),
+            fourier_raw(in_cycle(t, period), period),
+        )
+    }
+}
+
+impl Element for HeartPulmonary {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn rows(&self) -> &[usize] {
+        &self.rows
+    }
+    fn pattern(&self) -> &[(usize, usize)] {
+        &self.pattern
+    }
+    fn residual(&self, t: f64, y: &[f64], c: &mut [f64]) {
+        let (u, pr) = (&self.unknowns, &self.params);
+        let (a, e) = self.activation(t);
+        let v = self.valves(y);
+        let q = u.flow.map(|i| y[i]);
+        let vol = u.volume.map(|i| y[i]);
+        let (p_pul, p_la) = (y[u.pulmonary], y[u.pressure[LA]]);
+        c[0] = -pr.right_atrium.pressure(a, vol[0]).0;
+        c[1] = -e * pr.ventricle_elastance[0] * (vol[1] - pr.ventricle_rest_volume[0]);
+        c[2] = -pr.left_atrium.pressure(a, vol[2]).0;
+        c[3] = -e * pr.ventricle_elastance[1] * (vol[3] - pr.ventricle_rest_volume[1]);
+        for k in 0..4 {
+            c[4 + k] = pr.valve_resistance[k] * v[k] * q[k];
+        }
+        c[5] += p_pul - p_la;
+        c[8] = (v[0] - 1.0) * q[0];
+        c[9] = (v[1] - 1.0) * q[1] + (1.0 - v[0]) * q[0];
+        c[10] = -v[1] * q[1] + (p_pul - p_la) / pr.pulmonary_resistance;
+        c[11] = (1.0 - v[1]) * q[1] + (v[2] - 1.0) * q[2];
+        c[12] = (1.0 - v[2]) * q[2] + (v[3] - 1.0) * q[3];
+        c[13] = (1.0 - v[3]) * q[3];
+    }
+    fn jacobian(&self, t: f64, y: &[f64], j: &mut [f64]) {
+        let (u, pr) = (&self.unknowns, &self.params);
+        let (a, e) = self.activation(t);
+        let v = self.valves(y);
+        let rv = pr.valve_resistance;
+        let g = 1.0 / pr.pulmonary_resistance;
+        j.copy_from_slice(&[
+            -pr.right_atrium.pressure(a, y[u.volume[0]]).1,
+            -e * pr.ventricle_elastance[0],
+            -pr.left_atrium.pressure(a, y[u.volume[2]]).1,
+            -e * pr.ventricle_elastance[1],
+            rv[0] * v[0],
+            rv[1] * v[1],
+            1.0,
+            -1.0,
+            rv[2] * v[2],
+            rv[3] * v[3],
+            v[0] - 1.0,
+            v[1] - 1.0,
+            1.0 - v[0],
+            -v[1],
+            g,
+            -g,
+            1.0 - v[1],
+            v[2] - 1.0,
+            1.0 - v[2],
+            v[3] - 1.0,
+            1.0 - v[3],
+        ]);
+    }
+    fn after_correction(&self, y_af: &[f64], y_new: &mut [f64]) {
+        for (k, open) in self.valves(y_af).into_iter().enumerate() {
+            if open < 0.5 {
+                y_new[self.unknowns.flow[k]] = 0.0;
+            }
+        }
+    }
+    fn rk4_unsupported(&self) -> Option<String> {
+        Some(
+            "its on/off valves are defined by the implicit step's Newton iteration (the state \
+             read from each iterate, a closed valve's flow reset to zero before each \
+             correction, as svZeroDSolver does), which RK4 does not have; use \
+             method=\"generalized-alpha\""
+                .into(),
+        )
+    }
+    fn is_nonlinear(&self) -> bool {
+        true
+    }
+    fn period(&self) -> Option<f64> {
+        Some(self.params.period)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn block() -> HeartPulmonary {
+        let atrium = Atrium {
+            max_elastance: 2e7,
+            passive_pressure: 900.0,
+            passive_volume_coefficient: 5e3,
+            rest_volume: 5e-6,
+        };
+        let params = HeartParams {
+            period: 1.0,
+            atrial_activation: Activation::WrappingCosine {
+                systole_fraction: 0.4,
+                p_wave_divisor: 9.0,
+            },
+            right_atrium: atrium,
+            left_atrium: atrium,
+            ventricle_elastance: [2e7, 3e7],
+            ventricle_rest_volume: [9e-6, 5e-6],
+            valve_resistance: [8e5, 3e6, 5e5, 3e6],
+            pulmonary_resistance: 1e7,
+        };
+        let u = HeartUnknowns {
+            pressure: [0, 1, 2, 3, 4],
+            flow: [5, 6, 7, 8],
+            volume: [9, 10, 11, 12],
+            pulmonary: 13,
+        };
+        HeartPulmonary::new("h".into(), params, u)
+    }
+
+    #[test]
+    fn jacobian_is_the_derivative_of_the_residual_at_fixed_valves() {
+        // tricuspid and aortic valves open (forward pressure), pulmonary and mitral closed
+        // (backward pressure, backflow): central differences with the valve states unchanged
+        let h = block();
+        let y = [
+            1500.0, 900.0, 2000.0, 12000.0, 11000.0, 2e-5, -1e-7, -2e-7, 3e-4, 4e-5, 1.2e-4, 3e-5,
+            1e-4, 1400.0,
+        ];
+        assert_eq!(h.valves(&y), [1.0, 0.0, 0.0, 1.0]);
+        let t = 0.95; // inside the atrial contraction
+        let mut j = vec![0.0; h.pattern().len()];
+        h.jacobian(t, &y, &mut j);
+        for (k, &(row, col)) in h.pattern().iter().enumerate() {
+            let r = h.rows().iter().position(|&i| i == row).unwrap();
+            let step = 1e-6 * y[col].abs().max(1e-12);
+            let (mut a, mut b) = (y, y);
+            a[col] += step;
+            b[col] -= step;
+            let (mut ca, mut cb) = ([0.0; 14], [0.0; 14]);
+            h.residual(t, &a, &mut ca);
+            h.residual(t, &b, &mut cb);
+            let fd = (ca[r] - cb[r]) / (2.0 * step);
+            // O(step²) truncation of the exponential atrium law, round-off elsewhere
+            assert!(
+                (fd - j[k]).abs() <= 1e-6 * j[k].abs().max(1.0),
+                "({row}, {col}): {fd} vs {}",
+                j[k]
+            );
+        }
+    }
+
+    #[test]
+    fn closed_valve_flows_are_reset_before_a_correction() {
+        let h = block();
+        let y = [
+            1500.0, 900.0, 2000.0, 12000.0, 11000.0, 2e-5, -1e-7, -2e-7, 3e-4, 4e-5, 1.2e-4, 3e-5,
+            1e-4, 1400.0,
+        ];
+        let mut y_new = y;
+        h.after_correction(&y, &mut y_new);
+        assert_eq!(&y_new[5..9], &[2e-5, 0.0, 0.0, 3e-4]);
+    }
+
+    #[test]
+    fn atrium_law_and_its_derivative() {
+        // closed form at activation a: a E (V − V0) + (1 − a) K_p (e^{K_v (V − V0)} − 1)
+        let at = Atrium {
+            max_elastance: 2.0,
+            passive_pressure: 3.0,
+            passive_volume_coefficient: 0.5,
+            rest_volume: 1.0,
+        };
+        let (a, v) = (0.3, 2.2);
+        let exact = a * 2.0 * (v - 1.0) + (1.0 - a) * 3.0 * ((0.5f64 * (v - 1.0)).exp() - 1.0);
+        let (p, dp) = at.pressure(a, v);
+        assert!((p - exact).abs() < 1e-14, "{p} vs {exact}");
+        let h = 1e-6;
+        let fd = (at.pressure(a, v + h).0 - at.pressure(a, v - h).0) / (2.0 * h);
+        assert!((fd - dp).abs() < 1e-8, "{fd} vs {dp}");
+    }
+}
