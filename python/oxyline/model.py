@@ -37,7 +37,7 @@ TOP_KEYS = {
 VESSEL_KEYS = {
     "name", "from", "to", "length", "radius", "radius_in", "radius_out", "wall_thickness",
     "youngs_modulus", "poisson_ratio", "segments", "lumped", "arrangement", "output",
-    "description", "valve", "chamber", "through_rc",
+    "description", "valve", "chamber", "through_rc", "initial", "initial_rate",
 }
 #: heart elements (docs/physics.md §1.8): each law's keys and their quantities ("1/pressure":
 #: a valve's steepness; "elastance": pressure per volume; "volume": the flow factor times 1 s)
@@ -224,7 +224,10 @@ def _waveform(bc: Mapping[str, Any], key: str, quantity: str, units: str, elemen
     return None
 
 
-_FAST_KEYS = frozenset(VESSEL_KEYS - {"lumped"})
+_FAST_KEYS = frozenset(VESSEL_KEYS - {"lumped", "initial", "initial_rate"})
+# a vessel's start values (docs/physics.md §1.9): end pressures and flows
+START_KEYS = {"pressure_in": "pressure", "pressure_out": "pressure", "flow_in": "flow",
+              "flow_out": "flow"}
 _REAL = (float, int)  # exact types: bool, str and None take the full check
 
 
@@ -311,6 +314,9 @@ def _vessel(v: Any, i: int, units: str) -> dict[str, Any]:
         cv["arrangement"] = v["arrangement"]
     if "output" in v:
         cv["output"] = bool(v["output"])
+    for key in ("initial", "initial_rate"):
+        if key in v:
+            cv[key] = _start_values(v[key], el, key, units)
     if "valve" in v or "chamber" in v or "through_rc" in v:
         return _heart_element(v, cv, el, units)
     if "lumped" in v:
@@ -354,6 +360,14 @@ def _vessel(v: Any, i: int, units: str) -> dict[str, Any]:
             g["poisson_ratio"] = _number(v["poisson_ratio"], el, "poisson_ratio")
         cv["geometry"] = g
     return cv
+
+
+def _start_values(d: Any, el: str, key: str, units: str) -> dict[str, float]:
+    """A vessel's ``initial`` (or ``initial_rate``: the same quantities per second) in SI."""
+    if not isinstance(d, Mapping):
+        raise _err(el, f"'{key}' must be a mapping of {sorted(START_KEYS)}")
+    _check_keys(d, set(START_KEYS), f"{el} {key}")
+    return {k: factor(units, START_KEYS[k]) * _number(x, el, f"{key} {k}") for k, x in d.items()}
 
 
 def _quantity(units: str, q: str) -> float:

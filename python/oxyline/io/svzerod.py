@@ -53,7 +53,7 @@ from typing import Any
 import numpy as np
 
 from oxyline.errors import ModelError, UnsupportedElement
-from oxyline.io import svzerod_heart
+from oxyline.io import svzerod_cycles, svzerod_heart, svzerod_initial
 from oxyline.model import Model, _build, _copy
 
 COLUMNS = ("name", "time", "flow_in", "flow_out", "pressure_in", "pressure_out")
@@ -63,7 +63,7 @@ METHODS = ("generalized-alpha", "rk4")
 RK4_DERIVATIVE_SUBSTEPS = 20
 
 TOP_KEYS = {"simulation_parameters", "boundary_conditions", "vessels", "junctions", "units",
-            "valves", "chambers", "initial_condition"}
+            "valves", "chambers", "initial_condition", "initial_condition_d"}
 # svZeroDSolver's equations do not depend on units and its files do not say which they use; by
 # its convention (and SimVascular's) they are cgs. oxyline's exporter writes a top-level
 # ``units`` ("cgs" or "SI"), which svZeroDSolver ignores and this importer reads.
@@ -81,7 +81,6 @@ TOP_IGNORED = {"description", "calibration_parameters", "y", "dy"}
 TOP_UNSUPPORTED = {
     "external_solver_coupling_blocks": "3D-0D coupling blocks",
     "closed_loop_blocks": "closed-loop blocks",
-    "initial_condition_d": "user initial derivatives",
 }
 SIM_KEYS = {
     "number_of_cardiac_cycles", "number_of_time_pts_per_cardiac_cycle", "absolute_tolerance",
@@ -159,6 +158,10 @@ class RunSettings:
     output_variable_based: bool = False
     #: add the time derivatives (d_* columns, or ydot)
     output_derivative: bool = False
+    #: svZeroDSolver's cycle-to-cycle rule without RCR: the relative error of the vessel caps'
+    #: cycle means that ends the run (extra cycles), else None; the caps (vessel, "in"/"out")
+    cycle_error: float | None = None
+    caps: list[tuple[str, str]] = field(default_factory=list)
 
 
 # ------------------------------------------------------------------------------------------
@@ -454,12 +457,10 @@ def _heart_elements(cfg: Mapping[str, Any], period: float, vessels: list[dict[st
     blocks (a vessel's free end, a chamber, another valve or a boundary condition)."""
     initial = _mapping(cfg.get("initial_condition", {}), "initial_condition")
     names = {v["name"] for v in vessels}
-    known_ic = set()
     for c in svzerod_heart._entries(cfg.get("chambers", []), "chambers"):
         if c["name"] in names or c["name"] in bcs:
             raise ModelError(f"chamber '{c['name']}': name already used by another block")
         native = svzerod_heart.chamber(c, period, initial, _num)
-        known_ic.add(f"Vc:{c['name']}")
         vessels.append({"name": c["name"], "chamber": native,
                         "description": f"svZeroDSolver {c.get('type')}"})
         layout.vessels.append((c["name"], c["name"], c["name"]))
@@ -493,10 +494,7 @@ def _heart_elements(cfg: Mapping[str, Any], period: float, vessels: list[dict[st
                 raise ModelError(f"{what}: its {'upstream' if end == 'in' else 'downstream'}_block "
                                  f"'{block}' is not defined")
         layout.connections += [(up, name), (name, down)]
-    unknown = [k for k in initial if k not in known_ic and not _is_comment(k)]
-    if unknown:
-        raise UnsupportedElement(f"model: 'initial_condition' entry '{unknown[0]}' is not "
-                                 "supported (only chamber volumes Vc:<chamber> are)")
+    # the other initial_condition entries: svzerod_initial.apply
 
 
 def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | None = None
@@ -522,7 +520,7 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         if k in TOP_KEYS or k in TOP_IGNORED or _is_comment(k):
             continue
         if k in TOP_UNSUPPORTED:
-            if k == "initial_condition_d" or cfg[k]:
+            if cfg[k]:
                 raise UnsupportedElement(f"model: '{k}' ({TOP_UNSUPPORTED[k]}) is not supported")
             continue
         raise UnsupportedElement(f"model: unknown top-level key '{k}'")
@@ -628,10 +626,8 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         if cycles < 1:
             raise ModelError(f"simulation_parameters: use_cycle_to_cycle_error gives {cycles} "
                              "cycles (largest RCR time constant too small)")
-    elif cycle_error:
-        raise UnsupportedElement("simulation_parameters: 'use_cycle_to_cycle_error' without RCR "
-                                 "boundary conditions (extra cycles until the cap means "
-                                 "converge) is not supported")
+    # without an RCR, svZeroDSolver runs extra cycles until the caps' means converge
+    # (oxyline.io.svzerod_cycles); the rule needs every step, so it is applied in `simulate`
 
     # ---- vessels
     vessels_in = cfg.get("vessels", [])
@@ -720,11 +716,16 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         # svZeroDSolver's nodes of this vessel's boundary conditions, inlet first
         layout.connections += [(vbc["inlet"], name)] if "inlet" in vbc else []
         layout.connections += [(name, vbc["outlet"])] if "outlet" in vbc else []
+    first_element_node = len(layout.connections)
     _heart_elements(cfg, period, vessels, layout, bcs, used_bcs, attach)
+    # svZeroDSolver numbers the valves' nodes after the junctions' (it creates valves later)
+    element_nodes = layout.connections[first_element_node:]
+    del layout.connections[first_element_node:]
     vessel_names = {x["name"] for x in vessels}
 
     # ---- junctions
     hidden = _junctions(cfg.get("junctions", []), ids, bcs, vessel_names, attach, layout)
+    layout.connections += element_nodes
 
     if not vessels:
         raise ModelError("model: no vessels")
@@ -745,6 +746,7 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
     for h in hidden:
         if h["name"] in names:
             raise ModelError(f"junction branch '{h['name']}': name clashes with a vessel")
+    svzerod_initial.apply(cfg, vessels + hidden, layout.vessels, layout.connections, crl, _num)
 
     dt = period / (float(pts) - 1.0)
     settings = RunSettings(
@@ -756,6 +758,11 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         output_variable_based=_flag(sim, "output_variable_based", False),
         output_derivative=_flag(sim, "output_derivative", False),
     )
+    svzerod_initial.zero_start_coronaries(bcs, settings.steady_initial)
+    if cycle_error and not any(kind == "RCR" for kind, _ in bcs.values()):
+        settings.cycle_error = percent / 100.0
+        settings.caps = svzerod_cycles.caps(
+            [v for v in vessels_in if isinstance(v, Mapping)])
     native: dict[str, Any] = {
         "name": "svzerod",
         "units": system,  # the model converts the file's numbers to SI
@@ -853,6 +860,14 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
     recorded = {v["name"]: 4 * k for k, v in enumerate(x for x in vessels if x.get("output", True))}
     names, idx, extra = _output_columns(layout, recorded, s.output_variable_based)
     shape = (len(names), 1 if s.output_variable_based else 4)
+    if s.cycle_error is not None:
+        ends = {name: (a, b) for name, a, b in layout.vessels}
+        cap_cols = [(recorded[ends[v][end == "out"]] + (2 if end == "in" else 3),
+                     recorded[ends[v][end == "out"]] + (0 if end == "in" else 1))
+                    for v, end in s.caps]
+        times, values = _run_cycle_error(model, native, s, method, (idx, extra), cap_cols)
+        values = np.ascontiguousarray(values.reshape(len(times), *shape).transpose(1, 0, 2))
+        return _frame(pd, names, times, values, None, s)
     times, values, derivs = (_run_derivative if s.output_derivative else _run_streamed)(
         model, native, s, method, (idx, extra), shape)
     return _frame(pd, names, times, values, derivs, s)
@@ -1029,6 +1044,34 @@ def _run_derivative(model: Model, native: Mapping[str, Any], s: RunSettings, met
         return np.ascontiguousarray(a[rows].reshape(len(rows), *shape).transpose(1, 0, 2))
 
     return times, block(y), block(yd)
+
+
+def _run_cycle_error(model: Model, native: Mapping[str, Any], s: RunSettings, method: str,
+                     columns: tuple[np.ndarray, list[tuple[int, int, float]]],
+                     cap_cols: list[tuple[int, int]]) -> tuple[np.ndarray, np.ndarray]:
+    """svZeroDSolver's extra cycles without RCR (:mod:`oxyline.io.svzerod_cycles`): the output
+    times and the (rows, outputs x width) values."""
+    if s.output_derivative:
+        raise UnsupportedElement("simulation_parameters: 'use_cycle_to_cycle_error' without RCR "
+                                 "together with 'output_derivative' is not supported")
+    steps = s.points_per_cycle - 1
+
+    def run(cycles: int) -> tuple[np.ndarray, np.ndarray]:
+        kw, _ = _core_kwargs(model, native, s, method)
+        kw.update(cycles=cycles, output_all_cycles=True, output_every=s.dt)
+        raw = model.network.simulate(**kw)
+        if "error" in raw:
+            raise raw["error"]
+        t = np.asarray(raw["times"])
+        if len(t) != steps * cycles + 1:
+            raise ModelError(f"internal error: {len(t)} rows from the core")
+        data = np.asarray(raw["data"]).reshape(len(t), -1)
+        caps = np.stack([data[:, [q, p]] for q, p in cap_cols], axis=1) if cap_cols else \
+            np.zeros((len(t), 0, 2))
+        return _apply(data, columns), caps
+
+    return svzerod_cycles.run(run, s.cycles, steps, s.output_interval, s.output_all_cycles,
+                              s.cycle_error or 0.0, s.dt)
 
 
 def _backward_derivative(y: np.ndarray, h: float) -> np.ndarray:

@@ -155,6 +155,8 @@ pub fn vessel(i: usize, item: &Bound<'_, PyAny>) -> Res<VesselSpec> {
         valve: None,
         chamber: None,
         through_rc: None,
+        initial: None,
+        initial_rate: None,
     };
     for (k, val) in d.iter() {
         let k = key(&k, element)?;
@@ -177,6 +179,8 @@ pub fn vessel(i: usize, item: &Bound<'_, PyAny>) -> Res<VesselSpec> {
             "valve" => v.valve = Some(via_json(&val, element, k)?),
             "chamber" => v.chamber = Some(via_json(&val, element, k)?),
             "through_rc" => v.through_rc = Some(via_json(&val, element, k)?),
+            "initial" => v.initial = Some(via_json(&val, element, k)?),
+            "initial_rate" => v.initial_rate = Some(via_json(&val, element, k)?),
             "output" => {
                 v.output = val.extract::<bool>().map_err(|_| {
                     Error::model(element(), format!("'output' must be a bool, got {val}"))

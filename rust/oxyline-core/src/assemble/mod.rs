@@ -7,6 +7,7 @@ pub(crate) mod boundary;
 mod chamber;
 pub(crate) mod checks;
 mod graph;
+mod initial;
 pub mod segments;
 mod valve;
 mod vessel;
@@ -95,6 +96,12 @@ impl NetworkSpec {
         for (vi, v) in self.vessels.iter().enumerate() {
             if v.valve.is_some() || v.chamber.is_some() || v.through_rc.is_some() {
                 let chain = heart_element(&mut circuit, v, graph.vessel_ends[vi])?;
+                let interior = if v.chamber.is_some() {
+                    initial::Interior::Inlet
+                } else {
+                    initial::Interior::Linear
+                };
+                record_start(&mut circuit, v, &chain, interior);
                 if v.output {
                     vessel::record_probes(
                         &mut probes,
@@ -116,6 +123,14 @@ impl NetworkSpec {
                 .map(|l| l.stenosis_form)
                 .unwrap_or_default();
             let chain = vessel::stamp(&mut circuit, &v.name, &segs, (arrangement, form), ends);
+            let interior = match arrangement {
+                Arrangement::Rcl => initial::Interior::Rcl {
+                    resistance: segs[0].resistance,
+                    stenosis: segs[0].stenosis,
+                },
+                _ => initial::Interior::Linear,
+            };
+            record_start(&mut circuit, v, &chain, interior);
             if v.output {
                 vessel::record_probes(
                     &mut probes,
@@ -152,6 +167,22 @@ impl NetworkSpec {
             summary,
             segments: table,
         })
+    }
+}
+
+/// The vessel's `initial` and `initial_rate` values, if any.
+fn record_start(
+    circuit: &mut Circuit,
+    v: &crate::spec::VesselSpec,
+    chain: &vessel::Chain,
+    interior: initial::Interior,
+) {
+    let q0 = v.initial.and_then(|x| x.flow_in);
+    if let Some(values) = &v.initial {
+        initial::record(circuit, chain, values, interior, false, q0);
+    }
+    if let Some(values) = &v.initial_rate {
+        initial::record(circuit, chain, values, interior, true, q0);
     }
 }
 

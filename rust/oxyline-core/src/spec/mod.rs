@@ -125,6 +125,26 @@ pub struct VesselSpec {
     /// A flow-through R–C element instead of a vessel (docs/physics.md §1.8).
     #[serde(default)]
     pub through_rc: Option<ThroughRcSpec>,
+    /// Start values of the vessel's end pressures and flows (docs/physics.md §1.9).
+    #[serde(default)]
+    pub initial: Option<EndValues>,
+    /// Start values of their time derivatives (docs/physics.md §1.9).
+    #[serde(default)]
+    pub initial_rate: Option<EndValues>,
+}
+
+/// Values at a vessel's ends, SI (Pa, m³/s, or their rates per second); any may be absent.
+#[derive(Debug, Clone, Copy, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct EndValues {
+    #[serde(default)]
+    pub pressure_in: Option<f64>,
+    #[serde(default)]
+    pub pressure_out: Option<f64>,
+    #[serde(default)]
+    pub flow_in: Option<f64>,
+    #[serde(default)]
+    pub flow_out: Option<f64>,
 }
 
 /// A valve between the element's `from` and `to` nodes: R(P_to − P_from) (Pa·s/m³).
