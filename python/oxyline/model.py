@@ -72,6 +72,9 @@ BC_KEYS = {
     "pressure": {"type", "time", "pressure", "value", "fourier", "interpolation", "steady"},
     "resistance": {"type", "resistance", "pressure"},
     "rcr": {"type", "proximal_resistance", "capacitance", "distal_resistance", "pressure"},
+    # svZeroDSolver's RESISTANCE / RCR at a vessel inlet, its own equations (docs/svzerod.md)
+    "svzerod-inlet": {"type", "resistance", "proximal_resistance", "capacitance",
+                      "distal_resistance", "pressure"},
     "coronary": {"type", "arterial_resistance", "arterial_capacitance", "microvascular_resistance",
                  "intramyocardial_capacitance", "venous_resistance", "intramyocardial_pressure",
                  "pressure", "microvascular_resistance_max", "contraction_time",
@@ -503,6 +506,14 @@ def _boundary_condition(bc: Any, units: str, el: str) -> dict[str, Any]:
         cb["pressure"] = _waveform(bc, "pressure", "pressure", units, el)
     elif kind == "coronary":
         return _coronary(bc, units, el)
+    elif kind == "svzerod-inlet":
+        for k, q in (("resistance", "resistance"), ("proximal_resistance", "resistance"),
+                     ("capacitance", "capacitance"), ("distal_resistance", "resistance")):
+            if k in bc:
+                cb[k] = factor(units, q) * _number(bc[k], el, k)
+        p = bc.get("pressure", 0.0)
+        cb["pressure"] = _waveform({"pressure": p} if not isinstance(p, Mapping) else p,
+                                   "pressure", "pressure", units, el)
     elif kind == "resistance":
         cb["resistance"] = factor(units, "resistance") * _number(bc.get("resistance"), el, "resistance")
         p = bc.get("pressure", 0.0)

@@ -43,6 +43,7 @@ Example::
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 import os
@@ -162,6 +163,8 @@ class RunSettings:
     #: cycle means that ends the run (extra cycles), else None; the caps (vessel, "in"/"out")
     cycle_error: float | None = None
     caps: list[tuple[str, str]] = field(default_factory=list)
+    #: record every unknown of the core (the chambers' volumes are no vessel column)
+    all_unknowns: bool = False
 
 
 # ------------------------------------------------------------------------------------------
@@ -703,10 +706,9 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
                 raise ModelError(f"{el}: its {side} boundary condition '{bc_name}' is not defined")
             kind_bc = bcs[bc_name][0]
             if side == "inlet" and kind_bc in ("RESISTANCE", "RCR"):
-                raise UnsupportedElement(
-                    f"{el}: {kind_bc} boundary condition '{bc_name}' at a vessel inlet is not "
-                    "supported (svZeroDSolver applies P - Pd = R Q with Q along the vessel, a "
-                    "negative resistance)")
+                # svZeroDSolver applies its outlet equations with Q along the vessel:
+                # P_in = Pd + R Q (native `svzerod-inlet`, docs/svzerod.md)
+                bcs[bc_name] = (kind_bc, dict(bcs[bc_name][1], type="svzerod-inlet"))
             if bc_name in used_bcs:
                 raise ModelError(f"boundary condition '{bc_name}': connected to both "
                                  f"{used_bcs[bc_name]} and {el}")
@@ -849,6 +851,15 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
     if method not in METHODS:
         raise ModelError(f"simulate: method must be one of {', '.join(METHODS)}, got {method!r}")
     native, s, layout = _convert(config, units)
+    if method == "rk4":
+        inlet_rcr = [n for n, bc in native["boundary_conditions"].items()
+                     if bc["type"] == "svzerod-inlet" and "capacitance" in bc]
+        if inlet_rcr:
+            # its negative-capacitance stamp gives the core's RK4 stability estimate a spurious
+            # fast mode (6.8e-14 s for a circuit whose fastest eigenvalue is -5000/s)
+            raise UnsupportedElement(f"RCR boundary condition '{inlet_rcr[0]}' at a vessel "
+                                     "inlet: not supported with method='rk4' (use "
+                                     "generalized-alpha)")
     # record every native vessel an output comes from (the hidden parts of a BloodVesselCRL
     # and of a resistive junction too); the drop-in runs in the file's own units, as
     # svZeroDSolver does (same numbers, same Newton tolerance): the equations do not depend
@@ -859,6 +870,10 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
     model = _build({**native, "vessels": vessels, "units": "SI"})
     recorded = {v["name"]: 4 * k for k, v in enumerate(x for x in vessels if x.get("output", True))}
     names, idx, extra = _output_columns(layout, recorded, s.output_variable_based)
+    chambers = [v["name"] for v in native["vessels"] if "chamber" in v]
+    if s.output_variable_based and chambers:
+        names, idx, extra = _with_chamber_volumes(model, chambers, names, idx, extra)
+        s = dataclasses.replace(s, all_unknowns=True)
     shape = (len(names), 1 if s.output_variable_based else 4)
     if s.cycle_error is not None:
         ends = {name: (a, b) for name, a, b in layout.vessels}
@@ -888,26 +903,40 @@ def _output_columns(layout: _Layout, recorded: Mapping[str, int], variable_based
     names: list[str] = []
     idx: list[int] = []
     extra: list[tuple[int, int, float]] = []
-    outlet_of: dict[str, str] = {}
+    node_of: dict[str, tuple[int, int, int]] = {}  # a condition's node: (base, p, q)
     for up, down in layout.connections:
         # a node's flow and pressure are those of the vessel end it joins
         if down in ends:
             base, p, q = recorded[ends[down][0]], 0, 2
         else:
             base, p, q = recorded[ends[up][1]], 1, 3
-            outlet_of[down] = up
+        node_of.setdefault(up, (base, p, q))
+        node_of.setdefault(down, (base, p, q))
         names += [f"flow:{up}:{down}", f"pressure:{up}:{down}"]
         idx += [base + q, base + p]
     for kind, name, ref in layout.internal:
         names.append(f"pressure_c:{name}")
-        if kind == "rcr":  # P_c = P - Rp Q at the Windkessel's inlet
-            base = recorded[ends[outlet_of[name]][1]]
-            idx.append(base + 1)
-            extra.append((len(idx) - 1, base + 3, -float(ref)))
+        if kind == "rcr":  # P_c = P - Rp Q at the Windkessel's node (Q along the vessel)
+            base, p, q = node_of[name]
+            idx.append(base + p)
+            extra.append((len(idx) - 1, base + q, -float(ref)))
         else:  # the resistive junction's centre: the end of a port's hidden vessel there
             vessel, offset = ref
             idx.append(recorded[vessel] + offset)
     return names, np.asarray(idx, dtype=np.intp), extra
+
+
+def _with_chamber_volumes(model: Model, chambers: list[str], names: list[str], idx: np.ndarray,
+                          extra: list[tuple[int, int, float]]
+                          ) -> tuple[list[str], np.ndarray, list[tuple[int, int, float]]]:
+    """The variable table's columns for a run recording every unknown, with svZeroDSolver's
+    ``Vc:<chamber>`` (its last internal variables: chambers are its last blocks) appended."""
+    lay = model.network.unknown_layout()
+    probe = np.asarray(lay["vessel_unknowns"], dtype=np.intp)
+    volume = dict(lay["chamber_volumes"])
+    idx = np.concatenate([probe[idx], np.asarray([volume[c] for c in chambers], dtype=np.intp)])
+    extra = [(j, int(probe[c]), w) for j, c, w in extra]
+    return names + [f"Vc:{c}" for c in chambers], idx, extra
 
 
 def _apply(data: np.ndarray, columns: tuple[np.ndarray, list[tuple[int, int, float]]]
@@ -928,6 +957,8 @@ def _core_kwargs(model: Model, native: Mapping[str, Any], s: RunSettings, method
         "newton_atol": s.absolute_tolerance, "max_iterations": s.max_iterations,
         "output_all_cycles": s.output_all_cycles, "segments": False,
     }
+    if s.all_unknowns:
+        kw["all_unknowns"] = True
     if method == "generalized-alpha":
         kw["dt"] = s.dt
         return kw, 1

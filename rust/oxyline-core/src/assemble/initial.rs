@@ -81,3 +81,43 @@ pub(crate) fn record(
         );
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::spec::parse;
+
+    #[test]
+    fn an_rcl_vessel_starts_with_its_capacitor_behind_r_plus_s_q() {
+        let m = r#"{
+            "vessels": [{"name": "v", "from": "in", "to": "out", "arrangement": "RCL",
+                         "lumped": {"resistance": 1e8, "stenosis_coefficient": 1e12,
+                                    "capacitance": 1e-10, "inductance": 1e5},
+                         "initial": {"pressure_in": 1e4, "flow_in": 1e-6, "flow_out": 2e-6},
+                         "initial_rate": {"pressure_in": 5.0, "flow_in": 1e-7}}],
+            "boundary_conditions": {
+                "in": {"type": "flow", "flow": {"kind": "constant", "value": 1e-6}},
+                "out": {"type": "resistance", "resistance": 1e9}}
+        }"#;
+        let a = parse(m).unwrap().assemble().unwrap();
+        let dae = a.circuit.assemble().unwrap();
+        let (y, yd) = (dae.initial_state(), dae.initial_rate_state());
+        let [p_in, p_out, q_in, q_out] = a.probes.vessel_unknowns[..4] else {
+            unreachable!()
+        };
+        let p_c = (0..dae.n)
+            .find(|&i| dae.names.unknown(i).contains("point 1"))
+            .unwrap();
+        assert_eq!(
+            (y[p_in], y[p_out], y[q_in], y[q_out]),
+            (1e4, 0.0, 1e-6, 2e-6)
+        );
+        // P_c = P_in − (R + S|Q|)Q = 1e4 − (1e8 + 1e6)·1e-6; its rate Ṗ_in − (R + 2S|Q|)Q̇
+        assert!((y[p_c] - (1e4 - 101.0)).abs() < 1e-9, "{}", y[p_c]);
+        assert!(
+            (yd[p_c] - (5.0 - 1.02e8 * 1e-7)).abs() < 1e-9,
+            "{}",
+            yd[p_c]
+        );
+        assert_eq!((yd[p_in], yd[q_in]), (5.0, 1e-7));
+    }
+}

@@ -96,6 +96,11 @@ impl NetworkSpec {
         for (vi, v) in self.vessels.iter().enumerate() {
             if v.valve.is_some() || v.chamber.is_some() || v.through_rc.is_some() {
                 let chain = heart_element(&mut circuit, v, graph.vessel_ends[vi])?;
+                if v.chamber.is_some() {
+                    // the chamber's volume is the element unknown it just added
+                    let volume = circuit.extras.len() - 1;
+                    probes.chamber_volumes.push((v.name.clone(), volume));
+                }
                 let interior = if v.chamber.is_some() {
                     initial::Interior::Inlet
                 } else {
@@ -156,6 +161,7 @@ impl NetworkSpec {
             summary.outlets += usize::from(!inlet);
         }
         probes.shift_branches(circuit.nodes.len());
+        probes.shift_extras(circuit.nodes.len() + circuit.branches.len());
         summary.period = circuit
             .sources
             .iter()

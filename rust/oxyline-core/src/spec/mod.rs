@@ -273,6 +273,27 @@ pub enum BoundarySpec {
     },
     /// A coronary bed with intramyocardial pressure (docs/physics.md §1.7).
     Coronary(Box<CoronarySpec>),
+    /// svZeroDSolver's `RESISTANCE` or `RCR` block at a vessel inlet (docs/svzerod.md).
+    SvzerodInlet(Box<SvzerodInletSpec>),
+}
+
+/// svZeroDSolver's `RESISTANCE` (`resistance`) or `RCR` (`proximal_resistance`,
+/// `capacitance`, `distal_resistance`) block at a vessel inlet, with its equations as written
+/// for an outlet: Q is the flow into the vessel, so P_in = P_d + R Q (resistance), and
+/// P_in = P_c + R_p Q, C dP_c/dt = Q − (P_c − P_d)/R_d (RCR). Values in Pa·s/m³ and m³/Pa.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SvzerodInletSpec {
+    #[serde(default)]
+    pub resistance: Option<f64>,
+    #[serde(default)]
+    pub proximal_resistance: Option<f64>,
+    #[serde(default)]
+    pub capacitance: Option<f64>,
+    #[serde(default)]
+    pub distal_resistance: Option<f64>,
+    #[serde(default)]
+    pub pressure: Option<WaveformSpec>,
 }
 
 /// The `coronary` outlet: arterial resistance and capacitance, microvascular resistance,
