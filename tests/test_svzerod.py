@@ -328,8 +328,6 @@ def _one_vessel(**changes: Any) -> dict[str, Any]:
     ({"simulation_parameters__coupled_simulation": True}, "coupled_simulation"),
     ({"simulation_parameters__foo": 1}, "unknown key 'foo'"),
     ({"initial_condition": {"pressure_c:OUT": 0.0}}, "'initial_condition' entry 'pressure_c"),
-    ({"vessels__0__boundary_conditions": {"inlet": "OUT", "outlet": "INFLOW"}},
-     "RESISTANCE boundary condition 'OUT' at a vessel inlet"),
 ])
 def test_unsupported_inputs_name_the_key(changes: dict[str, Any], match: str) -> None:
     with pytest.raises(oxyline.UnsupportedElement, match=match):

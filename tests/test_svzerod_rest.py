@@ -312,11 +312,10 @@ def test_inlet_rcr_with_rk4_is_refused() -> None:
 
 def test_native_svzerod_inlet_must_sit_at_an_inlet() -> None:
     with pytest.raises(oxyline.ModelError, match="inlet end"):
-        oxyline.load_model({
+        oxyline.simulate(oxyline.load_model({
             "vessels": [{"name": "v", "from": "in", "to": "out", "lumped": {"resistance": 1e7}}],
             "boundary_conditions": {"in": {"type": "flow", "flow": 1e-6},
-                                    "out": {"type": "svzerod-inlet", "resistance": 1e8}}}
-        ).network
+                                    "out": {"type": "svzerod-inlet", "resistance": 1e8}}}))
 
 
 # ------------------------------------------------------------------------------------------
