@@ -54,11 +54,8 @@ SUPPORTED = [
 # case -> text the UnsupportedElement message must contain (the element or key it names)
 UNSUPPORTED = {
     "chamber_sphere": "'ChamberSphere'",
-    "closed_loop_two_hill": "'initial_condition' entry 'pressure:",
     "coupledBlock_closedLoopHeart_singleVessel": "'external_solver_coupling_blocks'",
     "coupledBlock_closedLoopHeart_withCoronaries": "'external_solver_coupling_blocks'",
-    "piecewise_Chamber_and_Valve": "'initial_condition' entry 'pressure:",
-    "pulsatileFlow_R_coronary_cycle_error": "'use_cycle_to_cycle_error'",
     "steadyFlow_calibration": "'calibration_parameters'",
 }
 # chamber and valve cases: tested in tests/test_svzerod_chambers.py
@@ -67,6 +64,9 @@ CHAMBERS = ["chamber_elastance_inductor", "closedLoopHeart_singleVessel_decompos
 CLOSED_LOOP = ["closedLoopHeart_singleVessel", "closedLoopHeart_withCoronaries"]
 # coronary, heart, valve cases: tested in tests/test_svzerod_heart.py
 HEART = ["pulsatileFlow_R_coronary", "pulsatileFlow_R_coronary_varres", "steadyFlow_R_coronary"]
+# initial conditions, cycle-to-cycle rule without RCR: tested in tests/test_svzerod_rest.py
+REST = ["closed_loop_two_hill", "piecewise_Chamber_and_Valve",
+        "pulsatileFlow_R_coronary_cycle_error"]
 MISMATCH_PERIOD = [
     "pulsatileFlow_R_RCR_mismatchPeriod",
     "closedLoopHeart_singleVessel_mistmatchPeriod",
@@ -183,10 +183,10 @@ def svzerod_run(cfg: dict[str, Any], refine: int = 1) -> pd.DataFrame:
 def test_every_case_is_classified() -> None:
     files = {p.stem for p in CASES.glob("*.json")}
     listed = (set(SUPPORTED) | set(UNSUPPORTED) | set(MISMATCH_PERIOD) | set(HEART)
-              | set(CHAMBERS) | set(CLOSED_LOOP))
+              | set(CHAMBERS) | set(CLOSED_LOOP) | set(REST))
     assert files == listed
     assert len(listed) == (len(SUPPORTED) + len(UNSUPPORTED) + len(MISMATCH_PERIOD) + len(HEART)
-                           + len(CHAMBERS) + len(CLOSED_LOOP))
+                           + len(CHAMBERS) + len(CLOSED_LOOP) + len(REST))
 
 
 # ------------------------------------------------------------------------------------------
@@ -327,11 +327,7 @@ def _one_vessel(**changes: Any) -> dict[str, Any]:
     ({"vessels__0__zero_d_element_values__K": 1.0}, "unknown parameter 'K'"),
     ({"simulation_parameters__coupled_simulation": True}, "coupled_simulation"),
     ({"simulation_parameters__foo": 1}, "unknown key 'foo'"),
-    ({"initial_condition": {"pressure_all": 0.0}}, "'initial_condition'"),
-    ({"simulation_parameters__use_cycle_to_cycle_error": True},
-     "'use_cycle_to_cycle_error' without RCR"),
-    ({"vessels__0__boundary_conditions": {"inlet": "OUT", "outlet": "INFLOW"}},
-     "RESISTANCE boundary condition 'OUT' at a vessel inlet"),
+    ({"initial_condition": {"pressure_c:OUT": 0.0}}, "'initial_condition' entry 'pressure_c"),
 ])
 def test_unsupported_inputs_name_the_key(changes: dict[str, Any], match: str) -> None:
     with pytest.raises(oxyline.UnsupportedElement, match=match):

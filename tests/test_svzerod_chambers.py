@@ -19,8 +19,8 @@ from tests.conftest import data_path
 CHAMBER_CASES = {
     "valve_tanh": "valve_status (an internal variable of svZeroDSolver's newer ValveTanh "
                   "whose equation is not in the published sources oxyline follows)",
-    "chamber_elastance_inductor": "valve_status, Vc (the chamber volume is an unknown of the "
-                                  "core but not yet an output column)",
+    "chamber_elastance_inductor": "valve_status (as valve_tanh; the chamber volume Vc is "
+                                  "output)",
 }
 
 

@@ -38,6 +38,7 @@ VESSEL_KEYS = {
     "name", "from", "to", "length", "radius", "radius_in", "radius_out", "wall_thickness",
     "youngs_modulus", "poisson_ratio", "segments", "lumped", "arrangement", "output",
     "description", "valve", "chamber", "through_rc", "heart_pulmonary", "coronary_bed",
+    "initial", "initial_rate",
 }
 #: heart elements (docs/physics.md §1.8): each law's keys and their quantities ("1/pressure":
 #: a valve's steepness; "elastance": pressure per volume; "volume": the flow factor times 1 s)
@@ -97,6 +98,9 @@ BC_KEYS = {
     "pressure": {"type", "time", "pressure", "value", "fourier", "interpolation", "steady"},
     "resistance": {"type", "resistance", "pressure"},
     "rcr": {"type", "proximal_resistance", "capacitance", "distal_resistance", "pressure"},
+    # svZeroDSolver's RESISTANCE / RCR at a vessel inlet, its own equations (docs/svzerod.md)
+    "svzerod-inlet": {"type", "resistance", "proximal_resistance", "capacitance",
+                      "distal_resistance", "pressure"},
     "coronary": {"type", "arterial_resistance", "arterial_capacitance", "microvascular_resistance",
                  "intramyocardial_capacitance", "venous_resistance", "intramyocardial_pressure",
                  "pressure", "microvascular_resistance_max", "contraction_time",
@@ -249,7 +253,10 @@ def _waveform(bc: Mapping[str, Any], key: str, quantity: str, units: str, elemen
     return None
 
 
-_FAST_KEYS = frozenset(VESSEL_KEYS - {"lumped"})
+_FAST_KEYS = frozenset(VESSEL_KEYS - {"lumped", "initial", "initial_rate"})
+# a vessel's start values (docs/physics.md §1.9): end pressures and flows
+START_KEYS = {"pressure_in": "pressure", "pressure_out": "pressure", "flow_in": "flow",
+              "flow_out": "flow"}
 _REAL = (float, int)  # exact types: bool, str and None take the full check
 
 
@@ -336,6 +343,9 @@ def _vessel(v: Any, i: int, units: str) -> dict[str, Any]:
         cv["arrangement"] = v["arrangement"]
     if "output" in v:
         cv["output"] = bool(v["output"])
+    for key in ("initial", "initial_rate"):
+        if key in v:
+            cv[key] = _start_values(v[key], el, key, units)
     if "heart_pulmonary" in v or "coronary_bed" in v:
         return _closed_loop_element(v, cv, el, units)
     if "valve" in v or "chamber" in v or "through_rc" in v:
@@ -415,6 +425,14 @@ def _closed_loop_element(v: Mapping[str, Any], cv: dict[str, Any], el: str, unit
         out["heart"], out["ventricle"] = spec["heart"], spec["ventricle"]
     cv[kind] = out
     return cv
+
+
+def _start_values(d: Any, el: str, key: str, units: str) -> dict[str, float]:
+    """A vessel's ``initial`` (or ``initial_rate``: the same quantities per second) in SI."""
+    if not isinstance(d, Mapping):
+        raise _err(el, f"'{key}' must be a mapping of {sorted(START_KEYS)}")
+    _check_keys(d, set(START_KEYS), f"{el} {key}")
+    return {k: factor(units, START_KEYS[k]) * _number(x, el, f"{key} {k}") for k, x in d.items()}
 
 
 def _quantity(units: str, q: str) -> float:
@@ -550,6 +568,14 @@ def _boundary_condition(bc: Any, units: str, el: str) -> dict[str, Any]:
         cb["pressure"] = _waveform(bc, "pressure", "pressure", units, el)
     elif kind == "coronary":
         return _coronary(bc, units, el)
+    elif kind == "svzerod-inlet":
+        for k, q in (("resistance", "resistance"), ("proximal_resistance", "resistance"),
+                     ("capacitance", "capacitance"), ("distal_resistance", "resistance")):
+            if k in bc:
+                cb[k] = factor(units, q) * _number(bc[k], el, k)
+        p = bc.get("pressure", 0.0)
+        cb["pressure"] = _waveform({"pressure": p} if not isinstance(p, Mapping) else p,
+                                   "pressure", "pressure", units, el)
     elif kind == "resistance":
         cb["resistance"] = factor(units, "resistance") * _number(bc.get("resistance"), el, "resistance")
         p = bc.get("pressure", 0.0)

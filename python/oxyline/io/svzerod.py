@@ -43,6 +43,7 @@ Example::
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 import os
@@ -53,7 +54,7 @@ from typing import Any
 import numpy as np
 
 from oxyline.errors import ModelError, UnsupportedElement
-from oxyline.io import svzerod_closed_loop, svzerod_heart
+from oxyline.io import svzerod_closed_loop, svzerod_cycles, svzerod_heart, svzerod_initial
 from oxyline.model import Model, _build, _copy
 
 COLUMNS = ("name", "time", "flow_in", "flow_out", "pressure_in", "pressure_out")
@@ -63,7 +64,8 @@ METHODS = ("generalized-alpha", "rk4")
 RK4_DERIVATIVE_SUBSTEPS = 20
 
 TOP_KEYS = {"simulation_parameters", "boundary_conditions", "vessels", "junctions", "units",
-            "valves", "chambers", "initial_condition", "closed_loop_blocks"}
+            "valves", "chambers", "initial_condition", "initial_condition_d",
+            "closed_loop_blocks"}
 # svZeroDSolver's equations do not depend on units and its files do not say which they use; by
 # its convention (and SimVascular's) they are cgs. oxyline's exporter writes a top-level
 # ``units`` ("cgs" or "SI"), which svZeroDSolver ignores and this importer reads.
@@ -80,7 +82,6 @@ FRAME_UNITS = {
 TOP_IGNORED = {"description", "calibration_parameters", "y", "dy"}
 TOP_UNSUPPORTED = {
     "external_solver_coupling_blocks": "3D-0D coupling blocks",
-    "initial_condition_d": "user initial derivatives",
 }
 SIM_KEYS = {
     "number_of_cardiac_cycles", "number_of_time_pts_per_cardiac_cycle", "absolute_tolerance",
@@ -159,6 +160,12 @@ class RunSettings:
     output_variable_based: bool = False
     #: add the time derivatives (d_* columns, or ydot)
     output_derivative: bool = False
+    #: svZeroDSolver's cycle-to-cycle rule without RCR: the relative error of the vessel caps'
+    #: cycle means that ends the run (extra cycles), else None; the caps (vessel, "in"/"out")
+    cycle_error: float | None = None
+    caps: list[tuple[str, str]] = field(default_factory=list)
+    #: record every unknown of the core (the chambers' volumes are no vessel column)
+    all_unknowns: bool = False
 
 
 # ------------------------------------------------------------------------------------------
@@ -454,12 +461,10 @@ def _heart_elements(cfg: Mapping[str, Any], period: float, vessels: list[dict[st
     blocks (a vessel's free end, a chamber, another valve or a boundary condition)."""
     initial = _mapping(cfg.get("initial_condition", {}), "initial_condition")
     names = {v["name"] for v in vessels}
-    known_ic = set()
     for c in svzerod_heart._entries(cfg.get("chambers", []), "chambers"):
         if c["name"] in names or c["name"] in bcs:
             raise ModelError(f"chamber '{c['name']}': name already used by another block")
         native = svzerod_heart.chamber(c, period, initial, _num)
-        known_ic.add(f"Vc:{c['name']}")
         vessels.append({"name": c["name"], "chamber": native,
                         "description": f"svZeroDSolver {c.get('type')}"})
         layout.vessels.append((c["name"], c["name"], c["name"]))
@@ -493,11 +498,7 @@ def _heart_elements(cfg: Mapping[str, Any], period: float, vessels: list[dict[st
                 raise ModelError(f"{what}: its {'upstream' if end == 'in' else 'downstream'}_block "
                                  f"'{block}' is not defined")
         layout.connections += [(up, name), (name, down)]
-    unknown = [k for k in initial if k not in known_ic and not _is_comment(k)
-               and not svzerod_closed_loop.handles_initial(k)]
-    if unknown:
-        raise UnsupportedElement(f"model: 'initial_condition' entry '{unknown[0]}' is not "
-                                 "supported (only chamber volumes Vc:<chamber> are)")
+    # the other initial_condition entries: svzerod_initial.apply
 
 
 def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | None = None
@@ -523,7 +524,7 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         if k in TOP_KEYS or k in TOP_IGNORED or _is_comment(k):
             continue
         if k in TOP_UNSUPPORTED:
-            if k == "initial_condition_d" or cfg[k]:
+            if cfg[k]:
                 raise UnsupportedElement(f"model: '{k}' ({TOP_UNSUPPORTED[k]}) is not supported")
             continue
         raise UnsupportedElement(f"model: unknown top-level key '{k}'")
@@ -634,10 +635,8 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         if cycles < 1:
             raise ModelError(f"simulation_parameters: use_cycle_to_cycle_error gives {cycles} "
                              "cycles (largest RCR time constant too small)")
-    elif cycle_error:
-        raise UnsupportedElement("simulation_parameters: 'use_cycle_to_cycle_error' without RCR "
-                                 "boundary conditions (extra cycles until the cap means "
-                                 "converge) is not supported")
+    # without an RCR, svZeroDSolver runs extra cycles until the caps' means converge
+    # (oxyline.io.svzerod_cycles); the rule needs every step, so it is applied in `simulate`
 
     # ---- vessels
     vessels_in = cfg.get("vessels", [])
@@ -713,10 +712,9 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
                 raise ModelError(f"{el}: its {side} boundary condition '{bc_name}' is not defined")
             kind_bc = bcs[bc_name][0]
             if side == "inlet" and kind_bc in ("RESISTANCE", "RCR"):
-                raise UnsupportedElement(
-                    f"{el}: {kind_bc} boundary condition '{bc_name}' at a vessel inlet is not "
-                    "supported (svZeroDSolver applies P - Pd = R Q with Q along the vessel, a "
-                    "negative resistance)")
+                # svZeroDSolver applies its outlet equations with Q along the vessel:
+                # P_in = Pd + R Q (native `svzerod-inlet`, docs/svzerod.md)
+                bcs[bc_name] = (kind_bc, dict(bcs[bc_name][1], type="svzerod-inlet"))
             if bc_name in used_bcs:
                 raise ModelError(f"boundary condition '{bc_name}': connected to both "
                                  f"{used_bcs[bc_name]} and {el}")
@@ -727,11 +725,16 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         layout.connections += [(vbc["inlet"], name)] if "inlet" in vbc else []
         layout.connections += [(name, vbc["outlet"])] if "outlet" in vbc else []
     svzerod_closed_loop.add_blocks(cfg, period, vessels, bcs, attach, seen_names, _num)
+    first_element_node = len(layout.connections)
     _heart_elements(cfg, period, vessels, layout, bcs, used_bcs, attach)
+    # svZeroDSolver numbers the valves' nodes after the junctions' (it creates valves later)
+    element_nodes = layout.connections[first_element_node:]
+    del layout.connections[first_element_node:]
     vessel_names = {x["name"] for x in vessels}
 
     # ---- junctions
     hidden = _junctions(cfg.get("junctions", []), ids, bcs, vessel_names, attach, layout)
+    layout.connections += element_nodes
 
     if not vessels:
         raise ModelError("model: no vessels")
@@ -752,6 +755,7 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
     for h in hidden:
         if h["name"] in names:
             raise ModelError(f"junction branch '{h['name']}': name clashes with a vessel")
+    svzerod_initial.apply(cfg, vessels + hidden, layout.vessels, layout.connections, crl, _num)
 
     dt = period / (float(pts) - 1.0)
     settings = RunSettings(
@@ -763,6 +767,11 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         output_variable_based=_flag(sim, "output_variable_based", False),
         output_derivative=_flag(sim, "output_derivative", False),
     )
+    svzerod_initial.zero_start_coronaries(bcs, settings.steady_initial)
+    if cycle_error and not any(kind == "RCR" for kind, _ in bcs.values()):
+        settings.cycle_error = percent / 100.0
+        settings.caps = svzerod_cycles.caps(
+            [v for v in vessels_in if isinstance(v, Mapping)])
     native: dict[str, Any] = {
         "name": "svzerod",
         "units": system,  # the model converts the file's numbers to SI
@@ -850,6 +859,15 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
     if method not in METHODS:
         raise ModelError(f"simulate: method must be one of {', '.join(METHODS)}, got {method!r}")
     native, s, layout = _convert(config, units)
+    if method == "rk4":
+        inlet_rcr = [n for n, bc in native["boundary_conditions"].items()
+                     if bc["type"] == "svzerod-inlet" and "capacitance" in bc]
+        if inlet_rcr:
+            # its negative-capacitance stamp gives the core's RK4 stability estimate a spurious
+            # fast mode (6.8e-14 s for a circuit whose fastest eigenvalue is -5000/s)
+            raise UnsupportedElement(f"RCR boundary condition '{inlet_rcr[0]}' at a vessel "
+                                     "inlet: not supported with method='rk4' (use "
+                                     "generalized-alpha)")
     # record every native vessel an output comes from (the hidden parts of a BloodVesselCRL
     # and of a resistive junction too); the drop-in runs in the file's own units, as
     # svZeroDSolver does (same numbers, same Newton tolerance): the equations do not depend
@@ -860,7 +878,19 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
     model = _build({**native, "vessels": vessels, "units": "SI"})
     recorded = {v["name"]: 4 * k for k, v in enumerate(x for x in vessels if x.get("output", True))}
     names, idx, extra = _output_columns(layout, recorded, s.output_variable_based)
+    chambers = [v["name"] for v in native["vessels"] if "chamber" in v]
+    if s.output_variable_based and chambers:
+        names, idx, extra = _with_chamber_volumes(model, chambers, names, idx, extra)
+        s = dataclasses.replace(s, all_unknowns=True)
     shape = (len(names), 1 if s.output_variable_based else 4)
+    if s.cycle_error is not None:
+        ends = {name: (a, b) for name, a, b in layout.vessels}
+        cap_cols = [(recorded[ends[v][end == "out"]] + (2 if end == "in" else 3),
+                     recorded[ends[v][end == "out"]] + (0 if end == "in" else 1))
+                    for v, end in s.caps]
+        times, values = _run_cycle_error(model, native, s, method, (idx, extra), cap_cols)
+        values = np.ascontiguousarray(values.reshape(len(times), *shape).transpose(1, 0, 2))
+        return _frame(pd, names, times, values, None, s)
     times, values, derivs = (_run_derivative if s.output_derivative else _run_streamed)(
         model, native, s, method, (idx, extra), shape)
     return _frame(pd, names, times, values, derivs, s)
@@ -881,26 +911,40 @@ def _output_columns(layout: _Layout, recorded: Mapping[str, int], variable_based
     names: list[str] = []
     idx: list[int] = []
     extra: list[tuple[int, int, float]] = []
-    outlet_of: dict[str, str] = {}
+    node_of: dict[str, tuple[int, int, int]] = {}  # a condition's node: (base, p, q)
     for up, down in layout.connections:
         # a node's flow and pressure are those of the vessel end it joins
         if down in ends:
             base, p, q = recorded[ends[down][0]], 0, 2
         else:
             base, p, q = recorded[ends[up][1]], 1, 3
-            outlet_of[down] = up
+        node_of.setdefault(up, (base, p, q))
+        node_of.setdefault(down, (base, p, q))
         names += [f"flow:{up}:{down}", f"pressure:{up}:{down}"]
         idx += [base + q, base + p]
     for kind, name, ref in layout.internal:
         names.append(f"pressure_c:{name}")
-        if kind == "rcr":  # P_c = P - Rp Q at the Windkessel's inlet
-            base = recorded[ends[outlet_of[name]][1]]
-            idx.append(base + 1)
-            extra.append((len(idx) - 1, base + 3, -float(ref)))
+        if kind == "rcr":  # P_c = P - Rp Q at the Windkessel's node (Q along the vessel)
+            base, p, q = node_of[name]
+            idx.append(base + p)
+            extra.append((len(idx) - 1, base + q, -float(ref)))
         else:  # the resistive junction's centre: the end of a port's hidden vessel there
             vessel, offset = ref
             idx.append(recorded[vessel] + offset)
     return names, np.asarray(idx, dtype=np.intp), extra
+
+
+def _with_chamber_volumes(model: Model, chambers: list[str], names: list[str], idx: np.ndarray,
+                          extra: list[tuple[int, int, float]]
+                          ) -> tuple[list[str], np.ndarray, list[tuple[int, int, float]]]:
+    """The variable table's columns for a run recording every unknown, with svZeroDSolver's
+    ``Vc:<chamber>`` (its last internal variables: chambers are its last blocks) appended."""
+    lay = model.network.unknown_layout()
+    probe = np.asarray(lay["vessel_unknowns"], dtype=np.intp)
+    volume = dict(lay["chamber_volumes"])
+    idx = np.concatenate([probe[idx], np.asarray([volume[c] for c in chambers], dtype=np.intp)])
+    extra = [(j, int(probe[c]), w) for j, c, w in extra]
+    return names + [f"Vc:{c}" for c in chambers], idx, extra
 
 
 def _apply(data: np.ndarray, columns: tuple[np.ndarray, list[tuple[int, int, float]]]
@@ -921,6 +965,8 @@ def _core_kwargs(model: Model, native: Mapping[str, Any], s: RunSettings, method
         "newton_atol": s.absolute_tolerance, "max_iterations": s.max_iterations,
         "output_all_cycles": s.output_all_cycles, "segments": False,
     }
+    if s.all_unknowns:
+        kw["all_unknowns"] = True
     if method == "generalized-alpha":
         kw["dt"] = s.dt
         return kw, 1
@@ -1037,6 +1083,34 @@ def _run_derivative(model: Model, native: Mapping[str, Any], s: RunSettings, met
         return np.ascontiguousarray(a[rows].reshape(len(rows), *shape).transpose(1, 0, 2))
 
     return times, block(y), block(yd)
+
+
+def _run_cycle_error(model: Model, native: Mapping[str, Any], s: RunSettings, method: str,
+                     columns: tuple[np.ndarray, list[tuple[int, int, float]]],
+                     cap_cols: list[tuple[int, int]]) -> tuple[np.ndarray, np.ndarray]:
+    """svZeroDSolver's extra cycles without RCR (:mod:`oxyline.io.svzerod_cycles`): the output
+    times and the (rows, outputs x width) values."""
+    if s.output_derivative:
+        raise UnsupportedElement("simulation_parameters: 'use_cycle_to_cycle_error' without RCR "
+                                 "together with 'output_derivative' is not supported")
+    steps = s.points_per_cycle - 1
+
+    def run(cycles: int) -> tuple[np.ndarray, np.ndarray]:
+        kw, _ = _core_kwargs(model, native, s, method)
+        kw.update(cycles=cycles, output_all_cycles=True, output_every=s.dt)
+        raw = model.network.simulate(**kw)
+        if "error" in raw:
+            raise raw["error"]
+        t = np.asarray(raw["times"])
+        if len(t) != steps * cycles + 1:
+            raise ModelError(f"internal error: {len(t)} rows from the core")
+        data = np.asarray(raw["data"]).reshape(len(t), -1)
+        caps = np.stack([data[:, [q, p]] for q, p in cap_cols], axis=1) if cap_cols else \
+            np.zeros((len(t), 0, 2))
+        return _apply(data, columns), caps
+
+    return svzerod_cycles.run(run, s.cycles, steps, s.output_interval, s.output_all_cycles,
+                              s.cycle_error or 0.0, s.dt)
 
 
 def _backward_derivative(y: np.ndarray, h: float) -> np.ndarray:

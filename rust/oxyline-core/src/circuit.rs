@@ -321,6 +321,21 @@ impl Csr {
     }
 }
 
+/// A node pressure or a branch flow of the circuit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Unknown {
+    Node(usize),
+    Branch(usize),
+}
+
+/// The start value of an unknown (`rate`: of its time derivative).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StartValue {
+    pub unknown: Unknown,
+    pub value: f64,
+    pub rate: bool,
+}
+
 #[derive(Debug, Clone, Default)]
 pub struct Circuit {
     pub nodes: Vec<Node>,
@@ -351,6 +366,9 @@ pub struct Circuit {
     pub elements: Vec<CircuitElement>,
     /// (extra, value): element unknowns' values at a zero start (a chamber's initial volume).
     pub initial_extras: Vec<(usize, f64)>,
+    /// Node pressures and branch flows (or their rates) at a zero start, from the vessels'
+    /// `initial` and `initial_rate` (docs/physics.md §1.9).
+    pub start_values: Vec<StartValue>,
     /// Flow-through R–C branches, whose equation takes their `from` node's row.
     pub swapped_rows: Vec<SwappedRow>,
     pub vessel_names: Vec<String>,
@@ -631,16 +649,26 @@ impl Circuit {
             .map(|(b, law)| (nn + b, law.clone()))
             .collect();
         let elements = self.elements.iter().map(|el| resolve(el, nn, nb)).collect();
-        let initial = self
-            .initial_extras
-            .iter()
-            .map(|&(x, v)| (nn + nb + x, v))
+        let index = |u: Unknown| match u {
+            Unknown::Node(i) => i,
+            Unknown::Branch(b) => nn + b,
+        };
+        let starts = |rate: bool| {
+            self.start_values
+                .iter()
+                .filter(move |s| s.rate == rate)
+                .map(move |s| (index(s.unknown), s.value))
+        };
+        let initial = starts(false)
+            .chain(self.initial_extras.iter().map(|&(x, v)| (nn + nb + x, v)))
             .collect();
+        let initial_rate = starts(true).collect();
         Ok(Dae {
             n,
             n_nodes: nn,
             elements,
             initial,
+            initial_rate,
             e,
             windkessel,
             f,
@@ -734,6 +762,8 @@ pub struct Dae {
     /// (unknown, value) set at a zero start (svZeroDSolver's `initial_condition`), e.g. a
     /// chamber's volume: a closed loop has no steady state to start from.
     pub initial: Vec<(usize, f64)>,
+    /// (unknown, value) of ẏ at a zero start (svZeroDSolver's `initial_condition_d`).
+    pub initial_rate: Vec<(usize, f64)>,
     /// Names of the unknowns ([`Names::unknown`]), shared with the circuit.
     pub names: Arc<Names>,
 }
@@ -752,6 +782,15 @@ impl Dae {
             y[i] = v;
         }
         y
+    }
+
+    /// ẏ at a zero start: zero but for the `initial_rate` values.
+    pub fn initial_rate_state(&self) -> Vec<f64> {
+        let mut yd = vec![0.0; self.n];
+        for &(i, v) in &self.initial_rate {
+            yd[i] = v;
+        }
+        yd
     }
 
     pub fn mass(&self, regime: Regime) -> Vec<f64> {

@@ -71,6 +71,8 @@ pub struct Probes {
     pub segment_unknowns: Vec<usize>,
     /// Segment positions (m from the vessel inlet, centre of the segment; NaN for lumped).
     pub segment_position: Vec<f64>,
+    /// Each chamber's name and the unknown index of its blood volume (svZeroDSolver's `Vc`).
+    pub chamber_volumes: Vec<(String, usize)>,
 }
 
 impl Probes {
@@ -78,6 +80,14 @@ impl Probes {
         let mut v = self.vessel_unknowns.clone();
         v.extend(&self.segment_unknowns);
         v
+    }
+
+    /// Chamber volumes were recorded as element-unknown indices: they follow the node
+    /// pressures and branch flows.
+    pub(crate) fn shift_extras(&mut self, n_nodes_and_branches: usize) {
+        for (_, x) in self.chamber_volumes.iter_mut() {
+            *x += n_nodes_and_branches;
+        }
     }
 
     /// Branch (flow) probes were recorded as branch indices: flow unknowns follow the
@@ -304,6 +314,7 @@ mod tests {
             segment_count: vec![2, 1],
             segment_unknowns: (100..109).collect(),
             segment_position: vec![0.5, 1.5, 0.5],
+            chamber_volumes: Vec::new(),
         }
     }
 

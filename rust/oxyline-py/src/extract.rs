@@ -157,6 +157,8 @@ pub fn vessel(i: usize, item: &Bound<'_, PyAny>) -> Res<VesselSpec> {
         coronary_bed: None,
         chamber: None,
         through_rc: None,
+        initial: None,
+        initial_rate: None,
     };
     for (k, val) in d.iter() {
         let k = key(&k, element)?;
@@ -181,6 +183,8 @@ pub fn vessel(i: usize, item: &Bound<'_, PyAny>) -> Res<VesselSpec> {
             "coronary_bed" => v.coronary_bed = Some(via_json(&val, element, k)?),
             "chamber" => v.chamber = Some(via_json(&val, element, k)?),
             "through_rc" => v.through_rc = Some(via_json(&val, element, k)?),
+            "initial" => v.initial = Some(via_json(&val, element, k)?),
+            "initial_rate" => v.initial_rate = Some(via_json(&val, element, k)?),
             "output" => {
                 v.output = val.extract::<bool>().map_err(|_| {
                     Error::model(element(), format!("'output' must be a bool, got {val}"))

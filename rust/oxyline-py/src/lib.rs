@@ -385,6 +385,17 @@ impl Network {
         Ok(d)
     }
 
+    /// Where values live in the unknown vector (the columns of an `all_unknowns` run): each
+    /// output vessel's [pressure_in, pressure_out, flow_in, flow_out] and each chamber's blood
+    /// volume as (name, index).
+    fn unknown_layout<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let p = &self.inner.0.probes;
+        let d = PyDict::new(py);
+        d.set_item("vessel_unknowns", p.vessel_unknowns.clone())?;
+        d.set_item("chamber_volumes", p.chamber_volumes.clone())?;
+        Ok(d)
+    }
+
     /// Layout of the output selection (see `oxyline_core::output`): selected vessels, their
     /// segment counts and positions, the selected variable names and the column counts.
     #[pyo3(signature = (*, variables = None, vessels = None, segments = true))]

@@ -8,6 +8,7 @@ mod chamber;
 pub(crate) mod checks;
 mod graph;
 mod heart;
+mod initial;
 pub mod segments;
 mod valve;
 mod vessel;
@@ -102,6 +103,17 @@ impl NetworkSpec {
                 || v.coronary_bed.is_some()
             {
                 let chain = heart_element(&mut circuit, v, graph.vessel_ends[vi], &mut links)?;
+                if v.chamber.is_some() {
+                    // the chamber's volume is the element unknown it just added
+                    let volume = circuit.extras.len() - 1;
+                    probes.chamber_volumes.push((v.name.clone(), volume));
+                }
+                let interior = if v.chamber.is_some() {
+                    initial::Interior::Inlet
+                } else {
+                    initial::Interior::Linear
+                };
+                record_start(&mut circuit, v, &chain, interior);
                 if v.output {
                     vessel::record_probes(
                         &mut probes,
@@ -123,6 +135,14 @@ impl NetworkSpec {
                 .map(|l| l.stenosis_form)
                 .unwrap_or_default();
             let chain = vessel::stamp(&mut circuit, &v.name, &segs, (arrangement, form), ends);
+            let interior = match arrangement {
+                Arrangement::Rcl => initial::Interior::Rcl {
+                    resistance: segs[0].resistance,
+                    stenosis: segs[0].stenosis,
+                },
+                _ => initial::Interior::Linear,
+            };
+            record_start(&mut circuit, v, &chain, interior);
             if v.output {
                 vessel::record_probes(
                     &mut probes,
@@ -149,6 +169,7 @@ impl NetworkSpec {
             summary.outlets += usize::from(!inlet);
         }
         probes.shift_branches(circuit.nodes.len());
+        probes.shift_extras(circuit.nodes.len() + circuit.branches.len());
         summary.period = circuit
             .sources
             .iter()
@@ -162,6 +183,23 @@ impl NetworkSpec {
         })
     }
 }
+
+/// The vessel's `initial` and `initial_rate` values, if any.
+fn record_start(
+    circuit: &mut Circuit,
+    v: &crate::spec::VesselSpec,
+    chain: &vessel::Chain,
+    interior: initial::Interior,
+) {
+    let q0 = v.initial.and_then(|x| x.flow_in);
+    if let Some(values) = &v.initial {
+        initial::record(circuit, chain, values, interior, false, q0);
+    }
+    if let Some(values) = &v.initial_rate {
+        initial::record(circuit, chain, values, interior, true, q0);
+    }
+}
+
 
 /// Heart blocks and the coronary beds that refer to them (resolved once all are stamped).
 #[derive(Default)]

@@ -141,8 +141,11 @@ fn rk4_limit_frozen(
 /// ~1e-12 and inertances ~1e5 spread the entries over ~20 decades: dense eigensolvers return
 /// spurious Re λ > 0 for lightly damped LC modes, and norm-based iterations (the old power
 /// iteration) overestimate the spectral radius by orders of magnitude.
+///
+/// √|E_ii|: an `svzerod-inlet` Windkessel's capacitance is negative (svZeroDSolver's equations
+/// at an inlet, docs/svzerod.md); any positive diagonal scaling is a similarity.
 fn energy_scale(rk: &Rk4<'_>) -> Vec<f64> {
-    rk.mass_diagonal().iter().map(|e| e.sqrt()).collect()
+    rk.mass_diagonal().iter().map(|e| e.abs().sqrt()).collect()
 }
 
 /// The RK4 iteration operator of the differential unknowns (algebraic unknowns eliminated,

@@ -74,7 +74,8 @@ impl<'d> Plan<'d> {
     ) -> Result<(Vec<f64>, Vec<f64>)> {
         let (dae, n) = (self.dae, self.dae.n);
         let (mut y, mut yd) = match s.start {
-            Start::Zero | Start::SvZeroDZero => (dae.initial_state(), vec![0.0; n]),
+            Start::Zero => (dae.initial_state(), vec![0.0; n]),
+            Start::SvZeroDZero => (dae.initial_state(), dae.initial_rate_state()),
             // a circuit with chambers (a heart, a closed loop) has no steady state of its mean
             // boundary conditions: its `steady` start is the zero state with the chambers'
             // initial volumes, made consistent below (docs/physics.md §1.8)
@@ -288,7 +289,7 @@ fn svzerod_steady_start(dae: &Dae, s: &RunSettings, rho_inf: f64) -> Result<(Vec
     let h = s.period / 10.0;
     let mut ga = GenAlpha::new(dae, Regime::SteadyNoWindkessel, h, rho_inf, s.newton)?;
     // svZeroDSolver starts its steady iterations from the user's initial condition
-    let (mut y, mut yd) = (dae.initial_state(), vec![0.0; dae.n]);
+    let (mut y, mut yd) = (dae.initial_state(), dae.initial_rate_state());
     for i in 0..31 {
         ga.step(h * i as f64, &mut y, &mut yd)?;
     }

@@ -133,6 +133,26 @@ pub struct VesselSpec {
     /// A flow-through R–C element instead of a vessel (docs/physics.md §1.8).
     #[serde(default)]
     pub through_rc: Option<ThroughRcSpec>,
+    /// Start values of the vessel's end pressures and flows (docs/physics.md §1.9).
+    #[serde(default)]
+    pub initial: Option<EndValues>,
+    /// Start values of their time derivatives (docs/physics.md §1.9).
+    #[serde(default)]
+    pub initial_rate: Option<EndValues>,
+}
+
+/// Values at a vessel's ends, SI (Pa, m³/s, or their rates per second); any may be absent.
+#[derive(Debug, Clone, Copy, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct EndValues {
+    #[serde(default)]
+    pub pressure_in: Option<f64>,
+    #[serde(default)]
+    pub pressure_out: Option<f64>,
+    #[serde(default)]
+    pub flow_in: Option<f64>,
+    #[serde(default)]
+    pub flow_out: Option<f64>,
 }
 
 /// A valve between the element's `from` and `to` nodes: R(P_to − P_from) (Pa·s/m³).
@@ -336,6 +356,27 @@ pub enum BoundarySpec {
     },
     /// A coronary bed with intramyocardial pressure (docs/physics.md §1.7).
     Coronary(Box<CoronarySpec>),
+    /// svZeroDSolver's `RESISTANCE` or `RCR` block at a vessel inlet (docs/svzerod.md).
+    SvzerodInlet(Box<SvzerodInletSpec>),
+}
+
+/// svZeroDSolver's `RESISTANCE` (`resistance`) or `RCR` (`proximal_resistance`,
+/// `capacitance`, `distal_resistance`) block at a vessel inlet, with its equations as written
+/// for an outlet: Q is the flow into the vessel, so P_in = P_d + R Q (resistance), and
+/// P_in = P_c + R_p Q, C dP_c/dt = Q − (P_c − P_d)/R_d (RCR). Values in Pa·s/m³ and m³/Pa.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SvzerodInletSpec {
+    #[serde(default)]
+    pub resistance: Option<f64>,
+    #[serde(default)]
+    pub proximal_resistance: Option<f64>,
+    #[serde(default)]
+    pub capacitance: Option<f64>,
+    #[serde(default)]
+    pub distal_resistance: Option<f64>,
+    #[serde(default)]
+    pub pressure: Option<WaveformSpec>,
 }
 
 /// The `coronary` outlet: arterial resistance and capacitance, microvascular resistance,

@@ -6,6 +6,7 @@ mod flow;
 mod pressure;
 mod rcr;
 mod resistance;
+mod svzerod_inlet;
 
 use crate::circuit::{BoundaryTag, Circuit, Label, Part};
 use crate::error::Result;
@@ -86,5 +87,6 @@ pub(crate) fn stamp(
             pressure,
         ),
         BoundarySpec::Coronary(c) => coronary::stamp(circuit, &site, c),
+        BoundarySpec::SvzerodInlet(s) => svzerod_inlet::stamp(circuit, &site, s).map(|()| 0.0),
     }
 }
