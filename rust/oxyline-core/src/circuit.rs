@@ -93,6 +93,18 @@ fn index32(i: usize) -> u32 {
 }
 
 impl Names {
+    /// Heap bytes held (capacities; profiling, `examples/mem_stages`).
+    pub fn heap_bytes(&self) -> usize {
+        let strings = |v: &Vec<String>| {
+            v.capacity() * std::mem::size_of::<String>()
+                + v.iter().map(String::capacity).sum::<usize>()
+        };
+        (self.nodes.capacity() + self.branches.capacity() + self.extras.capacity())
+            * std::mem::size_of::<Label>()
+            + strings(&self.texts)
+            + strings(&self.vessels)
+            + strings(&self.boundaries)
+    }
     /// A free-text label.
     pub fn text(&mut self, s: impl Into<String>) -> Label {
         self.texts.push(s.into());
