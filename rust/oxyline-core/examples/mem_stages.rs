@@ -95,8 +95,17 @@ fn report(a: &oxyline_core::assemble::Assembled, dae: &oxyline_core::circuit::Da
                 + cap(&p.segment_position, p.segment_position.capacity())
                 + p.vessels.iter().map(|v| v.capacity() + 24).sum::<usize>(),
         ),
-        ("vessel names", c.vessel_names.iter().map(|v| v.capacity() + 24).sum::<usize>()),
-        ("dae.e + windkessel", cap(&dae.e, dae.e.capacity()) + dae.windkessel.capacity()),
+        (
+            "vessel names",
+            c.vessel_names
+                .iter()
+                .map(|v| v.capacity() + 24)
+                .sum::<usize>(),
+        ),
+        (
+            "dae.e + windkessel",
+            cap(&dae.e, dae.e.capacity()) + dae.windkessel.capacity(),
+        ),
         (
             "dae.f (csr)",
             cap(&dae.f.ptr, dae.f.ptr.capacity())
@@ -151,6 +160,10 @@ fn main() {
         .as_ref()
         .map(|t| Transport::build(t, &assembled.circuit, &dae, &assembled.probes).unwrap());
     mark("transport plan", segs);
+    // as `ensemble::Member::build` (the binding's network): the plan has its own copy
+    let mut assembled = assembled;
+    assembled.circuit.segments = Vec::new();
+    mark("circuit segments released", segs);
     drop(spec);
     mark("spec dropped", segs);
     if !run {
