@@ -558,7 +558,7 @@ class Model:
         """Drop ``canonical`` (the core holds the model); it is written again from the
         native dict it came from when next asked for, identical (the same conversion)."""
         canon = self.__dict__.get("_canonical")
-        if canon is None or self.source is None:
+        if canon is None or not self.source:  # nothing to write it again from
             return
         self._kept = ([v["name"] for v in canon["vessels"]], canon.get("transport"))
         self._rebuild = self.source
