@@ -118,3 +118,28 @@ def test_a_bad_canonical_vessel_dict_is_a_model_error_naming_it(edit: dict[str, 
     canon["vessels"][0] = {**canon["vessels"][0], **edit}
     with pytest.raises(oxyline.ModelError, match=message):
         _network(canon)
+
+
+def test_a_released_canonical_is_written_again_as_it_was() -> None:
+    """`load_model` releases the canonical dicts once the core has the model (issue 9 item 6);
+    asking for them writes them again from `source`. Truth: the description of the same dict
+    converted before any release, and the core's segment table of a network built from the
+    rewritten description (a different path: the JSON text, not the first hand-over)."""
+    import json
+    import pickle
+
+    from oxyline.model import _unassembled
+
+    d = oxyline.models.load("bifurcation").to_dict()
+    d["oxygen"] = {"inlet": {"po2": 95.0}, "wall": {"model": "graetz", "po2": 50.0}}
+    first = _unassembled(json.loads(json.dumps(d))).canonical
+    m = oxyline.load_model(d)
+    assert m.__dict__["_canonical"] is None  # released
+    assert m.vessel_names == [v["name"] for v in first["vessels"]]
+    assert m.transport_spec == first["transport"]
+    assert m.__dict__["_canonical"] is None  # neither wrote it again
+    again = pickle.loads(pickle.dumps(m))
+    assert m.canonical == first and again.canonical == first
+    net = oxyline._core.Network(json.dumps(m.canonical))
+    a, b = net.segment_table(), m.network.segment_table()
+    assert all((a[k] == b[k]).all() for k in ("resistance", "compliance", "volume"))

@@ -616,6 +616,12 @@ class Model:
 
     ``canonical`` is the JSON-able description passed to the Rust core; ``simulation`` holds
     the run settings from the file (overridable in :func:`oxyline.simulate`).
+
+    Once the core has assembled the model, its per-vessel canonical dicts are released (a
+    whole tree's canonical vessels and outlets took ~185 B per segment beside the core's
+    own tables; issue 9 item 6) and written again from ``source`` on first use
+    (:meth:`release_canonical`); a run reads only the small transport section
+    (:attr:`transport_spec`) and the vessel names.
     """
 
     name: str
@@ -630,6 +636,28 @@ class Model:
     #: left out, see :mod:`oxyline.structured_tree`)
     default_output_vessels: list[str] | None = None
     _network: Any = field(default=None, repr=False, compare=False)
+    #: the native dict ``canonical`` is written from again once released (None: kept)
+    _rebuild: Any = field(default=None, repr=False, compare=False)
+    #: the vessel names and the transport section of a released ``canonical``
+    _kept: Any = field(default=None, repr=False, compare=False)
+
+    def release_canonical(self) -> None:
+        """Drop ``canonical`` (the core holds the model); it is written again from the
+        native dict it came from when next asked for, identical (the same conversion)."""
+        canon = self.__dict__.get("_canonical")
+        if canon is None or not self.source:  # nothing to write it again from
+            return
+        self._kept = ([v["name"] for v in canon["vessels"]], canon.get("transport"))
+        self._rebuild = self.source
+        self.__dict__["_canonical"] = None
+
+    @property
+    def transport_spec(self) -> dict[str, Any] | None:
+        """The canonical transport section (None without species), without writing a
+        released ``canonical`` again."""
+        if self.__dict__.get("_canonical") is None and self._kept is not None:
+            return self._kept[1]
+        return self.canonical.get("transport")
 
     @property
     def network(self) -> _core.Network:
@@ -640,6 +668,8 @@ class Model:
 
     @property
     def vessel_names(self) -> list[str]:
+        if self.__dict__.get("_canonical") is None and self._kept is not None:
+            return list(self._kept[0])
         return [v["name"] for v in self.canonical["vessels"]]
 
     def summary(self) -> dict[str, Any]:
@@ -658,6 +688,24 @@ class Model:
         state = dict(self.__dict__)
         state["_network"] = None
         return state
+
+
+def _get_canonical(self: Model) -> dict[str, Any]:
+    canon = self.__dict__.get("_canonical")
+    if canon is None and self._rebuild is not None:
+        canon = _unassembled(self._rebuild).canonical
+        self.__dict__["_canonical"] = canon
+    return canon
+
+
+def _set_canonical(self: Model, value: dict[str, Any]) -> None:
+    self.__dict__["_canonical"] = value
+    self._rebuild = self._kept = None
+
+
+# a property over the dataclass field: the generated __init__, __eq__ and __repr__ go
+# through it, so a released description is written again when they need it
+Model.canonical = property(_get_canonical, _set_canonical)  # type: ignore[assignment]
 
 
 def _plain_outlet(bc: Any) -> bool:
@@ -711,6 +759,7 @@ def _build(data: dict[str, Any]) -> Model:
     if "variables" in out or "vessels" in out:  # unknown names fail at load time too
         model.network.output_layout(variables=output_names(out.get("variables"), "variables"),
                                     vessels=output_vessels(out.get("vessels", "all")))
+    model.release_canonical()
     return model
 
 

@@ -424,7 +424,7 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     result = _result(model, s, raw, _run_settings(s, raw), complete="error" not in raw)
     _raise_run_error(raw, result)
     # physical bounds and mass balance of the recorded species output (warnings only)
-    check_result(result, model.canonical.get("transport"))
+    check_result(result, model.transport_spec)
     return result
 
 
@@ -565,7 +565,7 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
                          time_chunk, overwrite=overwrite)
 
     # the bounds monitor checks each chunk as it passes (docs/physics.md §2.8)
-    monitor = Monitor(model.canonical.get("transport"))
+    monitor = Monitor(model.transport_spec)
 
     def write(rows: dict[str, Any]) -> None:
         chunk = _result(model, s, rows, {}, False)

@@ -172,7 +172,7 @@ def bounds_findings(model: Model, result: Any) -> list[str]:
     (docs/physics.md §2.8): what ``simulate`` of the patched model would warn."""
     if not result.species:
         return []
-    monitor = Monitor(model.canonical.get("transport"))
+    monitor = Monitor(model.transport_spec)
     monitor.update(result)
     return monitor.messages()
 

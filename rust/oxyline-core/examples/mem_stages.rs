@@ -5,7 +5,45 @@ use oxyline_core::genalpha::NewtonControl;
 use oxyline_core::output::Selection;
 use oxyline_core::spec::parse;
 use oxyline_core::{Method, RunSettings, Start, Transport};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
 use std::time::Instant;
+
+/// The system allocator, counting live heap bytes and their high-water mark: the stage table
+/// gives exact heap bytes per segment (RSS also holds freed pages the allocator keeps).
+struct Counting;
+static LIVE: AtomicUsize = AtomicUsize::new(0);
+static HIGH: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        let now = LIVE.fetch_add(l.size(), Relaxed) + l.size();
+        HIGH.fetch_max(now, Relaxed);
+        unsafe { System.alloc(l) }
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        LIVE.fetch_sub(l.size(), Relaxed);
+        unsafe { System.dealloc(p, l) }
+    }
+    unsafe fn realloc(&self, p: *mut u8, l: Layout, new: usize) -> *mut u8 {
+        if new > l.size() {
+            let now = LIVE.fetch_add(new - l.size(), Relaxed) + new - l.size();
+            HIGH.fetch_max(now, Relaxed);
+        } else {
+            LIVE.fetch_sub(l.size() - new, Relaxed);
+        }
+        unsafe { System.realloc(p, l, new) }
+    }
+}
+
+#[global_allocator]
+static ALLOC: Counting = Counting;
+
+/// Live heap bytes now and their peak since the last call (which resets the peak).
+fn heap() -> (f64, f64) {
+    let live = LIVE.load(Relaxed);
+    (live as f64, HIGH.swap(live, Relaxed) as f64)
+}
 
 fn rss() -> (f64, f64) {
     let s = std::fs::read_to_string("/proc/self/status").unwrap();
@@ -33,25 +71,75 @@ fn cpu() -> f64 {
     (f[0] + f[1]) / 100.0
 }
 
+/// Heap bytes of a vector (its capacity).
+fn cap<T>(v: &[T], capacity: usize) -> usize {
+    let _ = v;
+    capacity * std::mem::size_of::<T>()
+}
+
+/// Heap bytes per segment of the circuit, the segment table, the probes and the DAE, by field.
+fn report(a: &oxyline_core::assemble::Assembled, dae: &oxyline_core::circuit::Dae, segs: f64) {
+    let c = &a.circuit;
+    let p = &a.probes;
+    let rows = [
+        ("circuit.nodes", cap(&c.nodes, c.nodes.capacity())),
+        ("circuit.branches", cap(&c.branches, c.branches.capacity())),
+        ("circuit.segments", cap(&c.segments, c.segments.capacity())),
+        ("circuit.names", c.names.heap_bytes()),
+        ("segment table", cap(&a.segments, a.segments.capacity())),
+        (
+            "probes",
+            cap(&p.vessel_unknowns, p.vessel_unknowns.capacity())
+                + cap(&p.segment_count, p.segment_count.capacity())
+                + cap(&p.segment_unknowns, p.segment_unknowns.capacity())
+                + cap(&p.segment_position, p.segment_position.capacity())
+                + p.vessels.iter().map(|v| v.capacity() + 24).sum::<usize>(),
+        ),
+        (
+            "vessel names",
+            c.vessel_names
+                .iter()
+                .map(|v| v.capacity() + 24)
+                .sum::<usize>(),
+        ),
+        (
+            "dae.e + windkessel",
+            cap(&dae.e, dae.e.capacity()) + dae.windkessel.capacity(),
+        ),
+        (
+            "dae.f (csr)",
+            cap(&dae.f.ptr, dae.f.ptr.capacity())
+                + cap(&dae.f.col, dae.f.col.capacity())
+                + cap(&dae.f.val, dae.f.val.capacity()),
+        ),
+    ];
+    for (name, bytes) in rows {
+        println!("  {name:>20}: {:6.1} B/segment", bytes as f64 / segs);
+    }
+}
+
 fn main() {
     let path = std::env::args().nth(1).expect("model.json");
     let run = std::env::args().nth(2).is_none_or(|a| a != "--no-run");
     let t0 = Instant::now();
     let mark = |stage: &str, segs: f64| {
         let (now, peak) = rss();
+        let (live, high) = heap();
         println!(
-            "| {stage} | {:.2} | {:.2} | {:.0} | {:.0} | {:.0} | {:.0} |",
+            "| {stage} | {:.2} | {:.2} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} |",
             t0.elapsed().as_secs_f64(),
             cpu(),
             now / 1e6,
             now / segs,
             peak / 1e6,
-            peak / segs
+            peak / segs,
+            live / segs,
+            high / segs
         );
     };
     let json = std::fs::read_to_string(&path).unwrap();
     println!(
-        "| stage | wall s | CPU s | rss MB | B/seg | peak MB | peak B/seg |\n|---|---:|---:|---:|---:|---:|---:|"
+        "| stage | wall s | CPU s | rss MB | B/seg | peak MB | peak B/seg | heap B/seg | stage heap peak B/seg |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|"
     );
     let spec = parse(&json).unwrap();
     let segs = spec
@@ -66,11 +154,16 @@ fn main() {
     mark("assemble", segs);
     let dae = assembled.circuit.assemble().unwrap();
     mark("dae", segs);
+    report(&assembled, &dae, segs);
     let transport = spec
         .transport
         .as_ref()
         .map(|t| Transport::build(t, &assembled.circuit, &dae, &assembled.probes).unwrap());
     mark("transport plan", segs);
+    // as `ensemble::Member::build` (the binding's network): the plan has its own copy
+    let mut assembled = assembled;
+    assembled.circuit.segments = Vec::new();
+    mark("circuit segments released", segs);
     drop(spec);
     mark("spec dropped", segs);
     if !run {

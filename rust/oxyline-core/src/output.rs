@@ -68,7 +68,8 @@ pub struct Probes {
     /// Per output vessel, the number of segments and its first segment in the segment list.
     pub segment_count: Vec<usize>,
     /// For every segment of output vessels: [pressure_in, pressure_out, flow].
-    pub segment_unknowns: Vec<usize>,
+    /// (u32: the circuit refuses more than 2^32 unknowns; 12 B per segment less.)
+    pub segment_unknowns: Vec<u32>,
     /// Segment positions (m from the vessel inlet, centre of the segment; NaN for lumped).
     pub segment_position: Vec<f64>,
     /// Each chamber's name and the unknown index of its blood volume (svZeroDSolver's `Vc`).
@@ -78,7 +79,7 @@ pub struct Probes {
 impl Probes {
     pub fn all(&self) -> Vec<usize> {
         let mut v = self.vessel_unknowns.clone();
-        v.extend(&self.segment_unknowns);
+        v.extend(self.segment_unknowns.iter().map(|&u| u as usize));
         v
     }
 
@@ -90,6 +91,14 @@ impl Probes {
         }
     }
 
+    /// Release spare capacity once every probe is recorded.
+    pub(crate) fn shrink_to_fit(&mut self) {
+        self.vessel_unknowns.shrink_to_fit();
+        self.segment_count.shrink_to_fit();
+        self.segment_unknowns.shrink_to_fit();
+        self.segment_position.shrink_to_fit();
+    }
+
     /// Branch (flow) probes were recorded as branch indices: flow unknowns follow the
     /// `n_nodes` pressure unknowns.
     pub(crate) fn shift_branches(&mut self, n_nodes: usize) {
@@ -98,9 +107,10 @@ impl Probes {
                 *x += n_nodes;
             }
         }
+        let shift = u32::try_from(n_nodes).expect("more than 2^32 circuit nodes");
         for (i, x) in self.segment_unknowns.iter_mut().enumerate() {
             if i % 3 == 2 {
-                *x += n_nodes;
+                *x += shift;
             }
         }
     }
@@ -253,7 +263,7 @@ impl Selection {
                     out.extend(
                         self.segment_variables
                             .iter()
-                            .map(|&j| probes.segment_unknowns[3 * s + j]),
+                            .map(|&j| probes.segment_unknowns[3 * s + j] as usize),
                     );
                 }
             }

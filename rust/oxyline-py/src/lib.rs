@@ -423,14 +423,14 @@ impl Network {
         d.set_item(
             "vessel",
             t.iter()
-                .map(|s| s.vessel)
+                .map(|s| s.vessel as usize)
                 .collect::<Vec<_>>()
                 .into_pyarray(py),
         )?;
         d.set_item(
             "index",
             t.iter()
-                .map(|s| s.index)
+                .map(|s| s.index as usize)
                 .collect::<Vec<_>>()
                 .into_pyarray(py),
         )?;

@@ -170,6 +170,9 @@ impl NetworkSpec {
         }
         probes.shift_branches(circuit.nodes.len());
         probes.shift_extras(circuit.nodes.len() + circuit.branches.len());
+        // the capacities above are upper bounds (a vessel's last segment adds no node)
+        circuit.shrink_to_fit();
+        probes.shrink_to_fit();
         summary.period = circuit
             .sources
             .iter()
@@ -276,7 +279,7 @@ mod tests {
     fn the_segment_table_is_the_circuit() {
         let a = parse(MODEL).unwrap().assemble().unwrap();
         let counts: Vec<usize> = (0..3)
-            .map(|v| a.segments.iter().filter(|s| s.vessel == v).count())
+            .map(|v| a.segments.iter().filter(|s| s.vessel as usize == v).count())
             .collect();
         // RCL is svZeroDSolver's one BloodVessel whatever `segments` says
         assert_eq!(counts, vec![4, 3, 1]);

@@ -10,10 +10,10 @@ use crate::spec::{Arrangement, GeometrySpec, LumpedSpec, NetworkSpec, VesselSpec
 /// One flow segment of a vessel, as assembled (SI).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SegmentRow {
-    /// Vessel index in model order.
-    pub vessel: usize,
+    /// Vessel index in model order (u32 as every circuit index: 8 B per segment less).
+    pub vessel: u32,
     /// Position of the segment in its vessel, from the inlet (0-based).
-    pub index: usize,
+    pub index: u32,
     pub resistance: f64,
     pub inductance: f64,
     pub compliance: f64,
@@ -114,8 +114,8 @@ fn lumped(
     let nf = n as f64;
     Ok((0..n)
         .map(|k| SegmentRow {
-            vessel: vi,
-            index: k,
+            vessel: index32(vi),
+            index: index32(k),
             resistance: l.resistance / nf,
             inductance: l.inductance / nf,
             compliance: l.capacitance / nf,
@@ -187,8 +187,8 @@ fn geometric(
             let r1 = g.radius_in + (g.radius_out - g.radius_in) * (k + 1) as f64 / n as f64;
             let s = segment_rlc(dx, r0, r1, blood, wall, spec.inertance_profile);
             SegmentRow {
-                vessel: vi,
-                index: k,
+                vessel: index32(vi),
+                index: index32(k),
                 resistance: s.resistance,
                 inductance: s.inductance,
                 compliance: s.compliance,
@@ -203,4 +203,8 @@ fn geometric(
             }
         })
         .collect())
+}
+
+fn index32(i: usize) -> u32 {
+    u32::try_from(i).expect("more than 2^32 vessels or segments")
 }

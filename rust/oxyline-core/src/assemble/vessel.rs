@@ -176,15 +176,20 @@ pub(crate) fn record_probes(
         probes.segment_count.push(1);
         probes
             .segment_unknowns
-            .extend([points[0], points[2], branches[0]]);
+            .extend([points[0], points[2], branches[0]].map(index32));
         probes.segment_position.push(f64::NAN);
     } else {
         probes.segment_count.push(segs.len());
         for (k, s) in segs.iter().enumerate() {
             probes
                 .segment_unknowns
-                .extend([points[k], points[k + 1], branches[k]]);
+                .extend([points[k], points[k + 1], branches[k]].map(index32));
             probes.segment_position.push(s.position);
         }
     }
+}
+
+/// A circuit index as stored in the probes (the circuit is refused beyond 2^32 unknowns).
+fn index32(i: usize) -> u32 {
+    u32::try_from(i).expect("more than 2^32 circuit elements")
 }

@@ -253,6 +253,9 @@ impl<'r, 'f> Cycles<'r, 'f> {
         self.rec.record(t, &self.state.y)?;
         if species && self.state.species.is_some() {
             self.state.observe(time, &mut self.obs_row)?;
+            // the first row grew the buffer by doubling: keep only its length (a row holds
+            // every species column of every output vessel and segment, ~50 B per segment)
+            self.obs_row.shrink_to_fit();
             self.rec.push_species(&self.obs_row);
         }
         if committed && !self.rec.flush(false) {

@@ -39,7 +39,12 @@ pub(super) fn run(
         .is_some_and(|t| t.formulation() == Formulation::TlQuasisteady);
     // explicit (RK4) transport in the flow's own stages; implicit transport after each step.
     // A resumed run's state is not made consistent again (it is the state the run had).
-    let mut start = y.clone();
+    // (the copy only for a resumed run: it is one more state vector, 20 B per segment)
+    let mut start = if resume.is_some() {
+        y.clone()
+    } else {
+        Vec::new()
+    };
     let y_start = if resume.is_some() { &mut start } else { &mut y };
     let mut flow = plan.flow(s, y_start, transport.is_some() && !quasi)?;
     let (species, initial_stored) = match transport {

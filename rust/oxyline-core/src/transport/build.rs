@@ -221,7 +221,7 @@ impl Transport {
             out_vessels,
             out_segments,
             segment_vessels,
-            node_names: Names::new((0..circuit.nodes.len()).map(|i| circuit.names.node(i)))?,
+            node_names: circuit.names.clone(),
             domain: Vec::new(),
             internal: Vec::new(),
             boundary_faces: Vec::new(),

@@ -78,7 +78,6 @@ impl Plan {
                 "outputs",
                 self.out_vessels.heap() + self.out_segments.heap() + self.segment_vessels.heap(),
             ),
-            ("node_names", self.node_names.heap()),
             ("domain", self.domain.heap()),
             (
                 "internal",
@@ -143,11 +142,5 @@ impl Transport {
             })
             .sum();
         sweep + scratch + species
-    }
-}
-
-impl Heap for Names {
-    fn heap(&self) -> usize {
-        self.text.capacity() + self.ends.heap()
     }
 }

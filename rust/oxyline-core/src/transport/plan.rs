@@ -145,7 +145,9 @@ pub struct Plan {
     pub(super) out_segments: Vec<usize>,
     pub(super) segment_vessels: Vec<u32>,
     /// Names of the circuit nodes (error messages; refined sub-cells are named after them).
-    pub(super) node_names: Names,
+    /// Shared with the circuit and its DAE: a name is written only when a message needs it
+    /// (a copy of every node's name cost 40 B per segment and ~0.1 µs per segment to write).
+    pub(super) node_names: Arc<crate::circuit::Names>,
     /// Nodes solved by the implicit sweep (cells and mixing points).
     pub(super) domain: Vec<usize>,
     /// Faces between two domain nodes as [face, from node, to node], and the other faces.
@@ -194,47 +196,24 @@ impl Plan {
         let Some(&i) = self.node_cell.get(n) else {
             return format!("node {n}");
         };
-        if n < self.node_names.len() || i == usize::MAX {
-            return self
-                .node_names
-                .get(n)
-                .unwrap_or_else(|| format!("node {n}"));
+        if n < self.node_names.n_nodes() || i == usize::MAX {
+            return self.circuit_node_name(n);
         }
         // sub-cells of a node are contiguous, sub-cell 0 being the node itself
         let parent = self.cell_node[i];
         let first = self.node_cell[parent];
         let m = self.node_cell[self.last_sub(parent)] - first + 1;
-        let name = self.node_names.get(parent).unwrap_or_default();
+        let name = self.circuit_node_name(parent);
         format!("{name} (transport cell {}/{m})", i - first + 1)
     }
-}
 
-/// Many short names in one buffer (a `Vec<String>` costs ~3× the text in headers and heap
-/// blocks at a million nodes).
-#[derive(Debug, Default)]
-pub(super) struct Names {
-    pub(super) text: String,
-    pub(super) ends: Vec<u32>,
-}
-
-impl Names {
-    pub(super) fn new<S: AsRef<str>>(names: impl Iterator<Item = S>) -> Result<Names> {
-        let mut n = Names::default();
-        for s in names {
-            n.text.push_str(s.as_ref());
-            let end = u32::try_from(n.text.len())
-                .map_err(|_| bad("transport", "node names too long".into()))?;
-            n.ends.push(end);
+    /// Name of circuit node `n` ("node n" past the circuit's nodes).
+    pub(super) fn circuit_node_name(&self, n: usize) -> String {
+        if n < self.node_names.n_nodes() {
+            self.node_names.node(n)
+        } else {
+            format!("node {n}")
         }
-        Ok(n)
-    }
-    pub(super) fn len(&self) -> usize {
-        self.ends.len()
-    }
-    pub(super) fn get(&self, i: usize) -> Option<String> {
-        let end = *self.ends.get(i)? as usize;
-        let start = if i == 0 { 0 } else { self.ends[i - 1] as usize };
-        Some(self.text[start..end].to_string())
     }
 }
 

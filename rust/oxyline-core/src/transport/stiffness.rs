@@ -93,10 +93,7 @@ impl Transport {
                          generalized-alpha",
                         sp.name,
                         block[i],
-                        self.plan
-                            .node_names
-                            .get(self.plan.cell_node[i])
-                            .unwrap_or_default()
+                        self.plan.circuit_node_name(self.plan.cell_node[i])
                     ),
                 ));
             }
