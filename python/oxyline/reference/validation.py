@@ -341,6 +341,70 @@ def candidate_table(case: Case, log) -> list[str]:
     return rows
 
 
+def _fourier(mean: float, period: float, cos: tuple[float, ...], sin: tuple[float, ...]
+             ) -> PeriodicFlow:
+    """A waveform given by its harmonics relative to the mean flow."""
+    return PeriodicFlow(period, mean, tuple(c * mean for c in cos), tuple(s * mean for s in sin))
+
+
+def heldout_cases() -> list[tuple[str, Case]]:
+    """Vessels and waveforms outside the 27 rows that fixed END_RENEWAL_C (docs/validation-
+    oxygen.md §11): other radii (1.6–14 mm), lengths (5–25 cm), periods (0.5–1 s), a lower
+    diffusivity and waveforms with their own harmonics (up to 4), with and without reversal.
+    The waveforms are illustrative shapes (systolic peak, diastolic coronary flow, triphasic
+    femoral flow), not patient data: what matters is that none of them was used in the fit."""
+    base = load_case("straight")
+
+    def case(name: str, r: float, length: float, segments: int, flow: PeriodicFlow,
+             d: float = 1.2e-9) -> tuple[str, Case]:
+        return name, replace(base, name=name, radius=r, length=length, segments=segments,
+                             flow=flow, diffusivity=d)
+
+    return [
+        case("carotid (r 3.2 mm, L 10 cm, T 0.85 s)", 3.2e-3, 0.10, 10,
+             _fourier(6.5e-6, 0.85, (0.25, -0.15, -0.05, 0.02), (0.55, 0.20, -0.05, -0.05))),
+        case("femoral, triphasic (r 3 mm, L 20 cm)", 3.0e-3, 0.20, 10,
+             _fourier(3.0e-6, 1.0, (0.6, -0.9, -0.3), (1.8, 0.9, -0.5))),
+        case("coronary at exercise (r 1.6 mm, L 4 cm, T 0.5 s)", 1.6e-3, 0.04, 8,
+             _fourier(4.5e-6, 0.5, (-0.35, -0.10), (0.30, -0.10))),
+        case("infrarenal aorta (r 6 mm, L 10 cm, T 0.9 s)", 6.0e-3, 0.10, 10,
+             _fourier(1.0e-5, 0.9, (0.3, -0.6), (1.5, 0.6))),
+        case("ascending aorta (r 14 mm, L 5 cm, T 0.8 s)", 14.0e-3, 0.05, 5,
+             _fourier(8.5e-5, 0.8, (-0.3, -0.4, 0.1), (1.3, 0.4, -0.2))),
+        case("paper aorta, L 5 cm", 8.0e-3, 0.05, 5, base.flow),
+        case("paper aorta, D 0.6e-9 m²/s", 8.0e-3, 0.20, 10, base.flow, d=0.6e-9),
+        case("thoracic aorta at exercise (T 0.5 s, 2.5 × flow)", 8.0e-3, 0.25, 10,
+             _fourier(5.0e-5, 0.5, (0.0, -0.4), (1.5, 0.4))),
+    ]
+
+
+def heldout_table(grid: Grid, log) -> tuple[list[str], list[dict]]:
+    """The end-renewal candidate with END_RENEWAL_C (fitted to the 27 rows of §8) predicting
+    2-D uptakes it was not fitted to; also the C each row alone would need."""
+    rows = ["| vessel | α | reversal | 2-D uptake (mol/s) | s | default vs 2-D | candidate vs 2-D "
+            "| C this row needs |", "|---|---|---|---|---|---|---|---|"]
+    data = []
+    for name, c in heldout_cases():
+        t0 = time.process_time()
+        ref = reference(c, c.flow, grid)
+        fwd, _ = one_d(c, c.flow, {"model": "graetz"})
+        s = end_renewal_number(c, c.flow, fwd)
+        cand, _ = one_d(c, c.flow, {"model": "graetz", "enhancement": 1.0 + END_RENEWAL_C * s})
+        # the enhancement multiplies k; the uptake responds to it almost linearly (bulk PO2
+        # falls < 0.2 mmHg), so the C this row needs is read from the two 1-D runs
+        need = (ref.uptake / fwd - 1.0) / (cand / fwd - 1.0) * END_RENEWAL_C if s > 0 else math.nan
+        log(f"  held-out {name}: 2-D {ref.uptake:.5e} ({ref.cycles} periods, mass "
+            f"{ref.mass_residual:.1e}), default {fwd:.5e}, s {s:.4f}, "
+            f"{time.process_time() - t0:.0f} s")
+        rev = abs(100 * c.flow.reversal_fraction())
+        rows.append(f"| {name} | {c.womersley():.1f} | {rev:.0f} % | {ref.uptake:.4e} | {s:.4f} | "
+                    f"{100 * (fwd / ref.uptake - 1):+.2f} % | {100 * (cand / ref.uptake - 1):+.2f} % "
+                    f"| {need:.3f} |")
+        data.append({"case": name, "womersley_mixed": ref.uptake, "s": s, "default": fwd,
+                     "candidate": cand})
+    return rows, data
+
+
 def outlet_table(case: Case, grid: Grid, log) -> list[str]:
     """Outlet PO2 deficit (P_in − P_out) of each closure vs the 2-D one, example waveform."""
     ref = reference(case, case.flow, grid)
@@ -397,6 +461,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="only the end-renewal candidate against the stored 2-D uptakes (§8)")
     ap.add_argument("--hill", action="store_true",
                     help="only the pulsatile Hill-binding table (docs §9)")
+    ap.add_argument("--heldout", action="store_true",
+                    help="only the held-out check of the end-renewal candidate (docs §11)")
     ap.add_argument("--decompose", action="store_true",
                     help="only the Womersley/quasi-steady decomposition (docs §8)")
     ap.add_argument("--closures", default="",
@@ -421,6 +487,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.hill:
         out = hill_pulsatile_table(cases, grid, log)
         print("\n".join(out))
+        return 0
+    if args.heldout:
+        import json
+
+        out, data = heldout_table(grid, log)
+        print("\n".join(out))
+        log(json.dumps(data))
         return 0
     if args.decompose:
         for c in cases:
