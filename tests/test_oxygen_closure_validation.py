@@ -55,7 +55,9 @@ def test_the_end_renewal_candidate_is_within_2_percent_everywhere() -> None:
     """The emulated end-renewal candidate of docs/validation-oxygen.md §8 (the default law
     times 1 + 0.035 s, s the Womersley near-wall excursion number; one constant fitted to
     these rows, so this guards the emulation and the stored data, it is not an independent
-    validation): every row within 2 % of the stored 2-D uptake (measured worst +1.71 %)."""
+    validation): every row within 2 % of the stored 2-D uptake (measured worst +1.71 %). It
+    fails on vessels outside these rows (§11, `test_the_end_renewal_candidate_on_held_out_
+    vessels`), which is why it stays an emulation."""
     from oxyline.reference.validation import END_RENEWAL_C, end_renewal_number
 
     worst = 0.0
@@ -66,4 +68,52 @@ def test_the_end_renewal_candidate_is_within_2_percent_everywhere() -> None:
         s = end_renewal_number(case, flow, fwd)
         law = {**DEFAULT, "enhancement": 1.0 + END_RENEWAL_C * s}
         worst = max(worst, abs(one_d(case, flow, law)[0] / row["womersley_mixed"] - 1))
+    assert worst < 0.02
+
+
+HELDOUT = {r["case"]: r for r in json.loads(
+    (Path(__file__).parent / "data" / "oxygen_2d_heldout.json").read_text())["cases"]}
+#: the default's error vs the stored 'mixed' 2-D uptake of the held-out aortas (docs/validation-
+#: oxygen.md §11): the Womersley end renewal that no cycle-mean law sees
+HELDOUT_AORTIC_MISS = {"infrarenal aorta": -0.0330, "ascending aorta": -0.1321,
+                       "paper aorta, L 5 cm": -0.0734, "thoracic aorta at exercise": -0.0437}
+
+
+def _heldout() -> list:
+    from oxyline.reference.validation import heldout_cases
+
+    return heldout_cases()
+
+
+def test_the_default_closure_on_held_out_vessels() -> None:
+    """The held-out vessels of docs/validation-oxygen.md §11 (none of them used to choose or fit
+    a closure): the default within 2 % of the stored 2-D uptake where the Womersley near-wall
+    reversal is weak (carotid, femoral, coronary at exercise, the aorta with a lower D), and the
+    documented misses of the large-α aortas reproduced (measured value ± 0.1 %: the 1-D run is
+    deterministic, the margin absorbs platform round-off over 12 cycles)."""
+    for name, case in _heldout():
+        err = one_d(case, case.flow, DEFAULT)[0] / HELDOUT[name]["womersley_mixed"] - 1
+        miss = next((v for k, v in HELDOUT_AORTIC_MISS.items() if name.startswith(k)), None)
+        if miss is None:
+            assert abs(err) < 0.02, (name, err)
+        else:
+            assert err == pytest.approx(miss, abs=1e-3), (name, err)
+
+
+@pytest.mark.xfail(strict=True, reason="docs/validation-oxygen.md §11: the end-renewal "
+                   "candidate, fitted to the 27 rows of §8, misses the held-out aortas by "
+                   "-2.5 to -11.7 %")
+def test_the_end_renewal_candidate_on_held_out_vessels() -> None:
+    """The candidate k (1 + 0.035 s) on vessels it was not fitted to: within 2 % of the stored
+    2-D uptake in every held-out row (the issue-12 target). Expected to fail (strict): if a
+    change makes it pass, §11 and the default must be revisited."""
+    from oxyline.reference.validation import END_RENEWAL_C, end_renewal_number
+
+    worst = 0.0
+    for name, case in _heldout():
+        fwd = one_d(case, case.flow, DEFAULT)[0]
+        s = end_renewal_number(case, case.flow, fwd)
+        law = {**DEFAULT, "enhancement": 1.0 + END_RENEWAL_C * s}
+        up = one_d(case, case.flow, law)[0]
+        worst = max(worst, abs(up / HELDOUT[name]["womersley_mixed"] - 1))
     assert worst < 0.02
