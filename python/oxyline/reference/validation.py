@@ -154,6 +154,42 @@ def end_renewal_number(case: Case, flow: PeriodicFlow, uptake: float) -> float:
                                                                                  * case.length)
 
 
+#: the one constant of the inlet-renewal candidate (docs/validation-oxygen.md §12), fitted by
+#: least squares to the 27 Womersley rows of §2 against the reference with the layer continuing
+#: through the outlet (`backflow="profile"`); fixed before the second held-out set was run
+INLET_RENEWAL_A = 0.327
+
+
+def backward_wall_strain(case: Case, flow: PeriodicFlow, womersley: bool = True) -> float:
+    """B = ∫ max(−γ_w, 0) dt over a period (dimensionless): how far, per unit distance from the
+    wall, near-wall fluid moves backward every period (docs/physics.md §3.6)."""
+    t = np.linspace(0.0, flow.period, 20000, endpoint=False)
+    return float(np.maximum(-wall_shear(case, flow, t, womersley), 0.0).mean() * flow.period)
+
+
+def inlet_renewal_excess(case: Case, flow: PeriodicFlow) -> float:
+    """ΔU = A 2πR α ΔP D B^{3/2}/sqrt(γ̄T) (mol/s): the extra uptake of the layer that the
+    near-wall backward excursion renews at the vessel inlet every period, over the Graetz law
+    of the net mean flow; γ̄ = 4⟨Q⟩/(πR³) the net-mean wall shear, B the backward wall strain
+    of the Womersley profile. The exponent is penetration theory's over a Lévêque layer
+    (docs/physics.md §3.6), A = INLET_RENEWAL_A."""
+    b = backward_wall_strain(case, flow)
+    gamma_t = 4.0 * flow.mean * flow.period / (math.pi * case.radius**3)
+    return (INLET_RENEWAL_A * 2.0 * math.pi * case.radius * case.alpha
+            * (case.p_in - case.p_wall) * case.diffusivity * b**1.5 / math.sqrt(gamma_t))
+
+
+def inlet_renewal_uptake(case: Case, flow: PeriodicFlow) -> float:
+    """The inlet-renewal candidate, emulated: the Graetz law of the net mean flow (`net_mean_
+    factor`) with the `enhancement` 1 + ΔU/U_net (the uptake responds linearly to k while the
+    bulk PO2 falls < 0.2 mmHg along these vessels)."""
+    net_law = {"model": "graetz", "flow": "cycle-mean", "net_mean": True}
+    u_net, _ = one_d(case, flow, net_law)
+    factor = net_mean_factor(flow) * (1.0 + inlet_renewal_excess(case, flow) / u_net)
+    return one_d(case, flow, {"model": "graetz", "flow": "cycle-mean",
+                              "enhancement": factor})[0]
+
+
 def net_mean_factor(flow: PeriodicFlow, samples: int = 20000) -> float:
     """`enhancement` (⟨Q⟩/⟨|Q|⟩)^{1/3} that turns the cycle-mean Graetz law into the law of
     the signed net flow ⟨Q⟩ (the frozen-layer limit of small excursions; see
@@ -379,6 +415,54 @@ def heldout_cases() -> list[tuple[str, Case]]:
     ]
 
 
+def heldout_cases_2() -> list[tuple[str, Case]]:
+    """A second held-out set, defined and run only after INLET_RENEWAL_A was fixed
+    (docs/validation-oxygen.md §12); illustrative waveforms as in `heldout_cases`."""
+    base = load_case("straight")
+
+    def case(name: str, r: float, length: float, segments: int, flow: PeriodicFlow,
+             d: float = 1.2e-9) -> tuple[str, Case]:
+        return name, replace(base, name=name, radius=r, length=length, segments=segments,
+                             flow=flow, diffusivity=d)
+
+    return [
+        case("brachial, triphasic (r 2 mm, L 20 cm, T 0.8 s)", 2.0e-3, 0.20, 10,
+             _fourier(1.0e-6, 0.8, (0.5, -0.8, -0.2), (1.6, 0.7, -0.4))),
+        case("renal (r 2.5 mm, L 3 cm, T 0.9 s)", 2.5e-3, 0.03, 6,
+             _fourier(6.0e-6, 0.9, (0.2, -0.1), (0.4, 0.1))),
+        case("common iliac (r 4.5 mm, L 6 cm, T 1 s)", 4.5e-3, 0.06, 6,
+             _fourier(6.0e-6, 1.0, (0.4, -0.7, -0.2), (1.4, 0.6, -0.3))),
+        case("pulmonary trunk (r 12 mm, L 5 cm, T 0.8 s)", 12.0e-3, 0.05, 5,
+             _fourier(8.5e-5, 0.8, (-0.2, -0.5, 0.0, 0.1), (1.2, 0.2, -0.25, 0.0))),
+        case("aortic arch (r 11 mm, L 10 cm, T 0.6 s)", 11.0e-3, 0.10, 10,
+             _fourier(7.0e-5, 0.6, (0.1, -0.45, -0.1), (1.2, 0.3, -0.15))),
+        case("infrarenal aorta, D 2.4e-9 m²/s", 6.0e-3, 0.10, 10,
+             _fourier(1.0e-5, 0.9, (0.3, -0.6), (1.5, 0.6)), d=2.4e-9),
+    ]
+
+
+def inlet_renewal_table(cases: list[tuple[str, Case]], grid: Grid, log) -> list[str]:
+    """The default and the inlet-renewal candidate against both outlet conditions."""
+    rows = [("| vessel | α | reversal | B | γ̄T | 2-D 'profile' (mol/s) | default vs 'profile' "
+             "| inlet renewal vs 'profile' | default vs 'mixed' | inlet renewal vs 'mixed' |"),
+            "|---|---|---|---|---|---|---|---|---|---|"]
+    for name, c in cases:
+        mixed = reference(c, c.flow, grid).uptake
+        prof = AxisymmetricSolver(c.tube(), c.flow, ConstantPO2(c.p_wall), c.p_in, grid,
+                                  backflow="profile").periodic(tol=1e-8).uptake
+        fwd, _ = one_d(c, c.flow, {"model": "graetz"})
+        ren = inlet_renewal_uptake(c, c.flow)
+        b = backward_wall_strain(c, c.flow)
+        gamma_t = 4.0 * c.flow.mean * c.flow.period / (math.pi * c.radius**3)
+        log(f"  inlet renewal {name}: 2-D mixed {mixed:.5e}, profile {prof:.5e}, default "
+            f"{fwd:.5e}, renewal {ren:.5e}")
+        rev = abs(100 * c.flow.reversal_fraction())
+        rows.append(f"| {name} | {c.womersley():.1f} | {rev:.0f} % | {b:.1f} | {gamma_t:.0f} | "
+                    f"{prof:.4e} | {100 * (fwd / prof - 1):+.2f} % | {100 * (ren / prof - 1):+.2f} % "
+                    f"| {100 * (fwd / mixed - 1):+.2f} % | {100 * (ren / mixed - 1):+.2f} % |")
+    return rows
+
+
 def heldout_table(grid: Grid, log) -> tuple[list[str], list[dict]]:
     """The end-renewal candidate with END_RENEWAL_C (fitted to the 27 rows of §8) predicting
     2-D uptakes it was not fitted to; the C each row alone would need; and the default against
@@ -467,6 +551,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="only the pulsatile Hill-binding table (docs §9)")
     ap.add_argument("--heldout", action="store_true",
                     help="only the held-out check of the end-renewal candidate (docs §11)")
+    ap.add_argument("--renewal", action="store_true",
+                    help="only the inlet-renewal candidate on the held-out sets (docs §12)")
     ap.add_argument("--decompose", action="store_true",
                     help="only the Womersley/quasi-steady decomposition (docs §8)")
     ap.add_argument("--closures", default="",
@@ -498,6 +584,12 @@ def main(argv: list[str] | None = None) -> int:
         out, data = heldout_table(grid, log)
         print("\n".join(out))
         log(json.dumps(data))
+        return 0
+    if args.renewal:
+        for title, cs in (("held-out set 1 (§11)", heldout_cases()),
+                          ("held-out set 2", heldout_cases_2())):
+            out += [f"#### {title}", ""] + inlet_renewal_table(cs, grid, log) + [""]
+        print("\n".join(out))
         return 0
     if args.decompose:
         for c in cases:
