@@ -117,3 +117,21 @@ def test_the_end_renewal_candidate_on_held_out_vessels() -> None:
         up = one_d(case, case.flow, law)[0]
         worst = max(worst, abs(up / HELDOUT[name]["womersley_mixed"] - 1))
     assert worst < 0.02
+
+
+def test_the_inlet_renewal_candidate_on_held_out_vessels() -> None:
+    """The inlet-renewal candidate of docs/validation-oxygen.md §12 (the Graetz law of the net
+    mean flow plus A 2πRαΔP D B^{3/2}/sqrt(γ̄T), A fitted to the 27 rows of §2) on the 14
+    held-out vessels, against the reference with the layer continuing through the outlet: the
+    measured worst is +2.37 % (pulmonary trunk; 12 of 14 within the issue's 2 %), the default's
+    −6.50 %. Bound 2.5 %: the documented result, not the 2 % target; the 1-D runs are
+    deterministic and set 2's stored 2-D values have 6 digits."""
+    from oxyline.reference.validation import heldout_cases_2, inlet_renewal_uptake
+
+    worst, worst_default = 0.0, 0.0
+    for name, case in _heldout() + heldout_cases_2():
+        ref = HELDOUT[name]["womersley_profile"]
+        worst = max(worst, abs(inlet_renewal_uptake(case, case.flow) / ref - 1))
+        worst_default = max(worst_default, abs(one_d(case, case.flow, DEFAULT)[0] / ref - 1))
+    assert worst < 0.025
+    assert worst_default > 0.06
