@@ -121,17 +121,45 @@ def test_the_end_renewal_candidate_on_held_out_vessels() -> None:
 
 def test_the_inlet_renewal_candidate_on_held_out_vessels() -> None:
     """The inlet-renewal candidate of docs/validation-oxygen.md §12 (the Graetz law of the net
-    mean flow plus A 2πRαΔP D B^{3/2}/sqrt(γ̄T), A fitted to the 27 rows of §2) on the 14
+    mean flow plus A 2πRαΔP D B^{3/2}/sqrt(γ̄T), A fitted to the 27 rows of §2) on the 20
     held-out vessels, against the reference with the layer continuing through the outlet: the
-    measured worst is +2.37 % (pulmonary trunk; 12 of 14 within the issue's 2 %), the default's
-    −6.50 %. Bound 2.5 %: the documented result, not the 2 % target; the 1-D runs are
-    deterministic and set 2's stored 2-D values have 6 digits."""
-    from oxyline.reference.validation import heldout_cases_2, inlet_renewal_uptake
+    issue-12 target of 2 % (measured worst −0.95 %, the paper aorta 5 cm long), where the
+    default misses by up to −7.8 % (the ascending aorta at exercise)."""
+    from oxyline.reference.validation import (heldout_cases_2, heldout_cases_3,
+                                              inlet_renewal_uptake)
 
     worst, worst_default = 0.0, 0.0
-    for name, case in _heldout() + heldout_cases_2():
+    for name, case in _heldout() + heldout_cases_2() + heldout_cases_3():
         ref = HELDOUT[name]["womersley_profile"]
         worst = max(worst, abs(inlet_renewal_uptake(case, case.flow) / ref - 1))
         worst_default = max(worst_default, abs(one_d(case, case.flow, DEFAULT)[0] / ref - 1))
-    assert worst < 0.025
-    assert worst_default > 0.06
+    assert worst < 0.02
+    assert worst_default > 0.07
+
+
+def test_wall_shear_is_the_gradient_of_the_womersley_profile() -> None:
+    """`wall_shear` (which gives B) against a finite difference of the reference solver's own
+    Womersley profile at the wall (validated in test_reference_axisymmetric.py), for the
+    aortic example's two harmonics (Womersley 11 and 15.6): the sign error fixed in session 8
+    gave a 100 % difference in the oscillating part. Tolerance 1e-4 of the peak: the one-sided
+    difference with step 1e-6 of the radius."""
+    import math
+
+    import numpy as np
+
+    from oxyline.reference.axisymmetric import womersley_shape
+    from oxyline.reference.validation import wall_shear
+
+    case = load_case("straight")
+    flow = case.flow
+    t = np.linspace(0.0, flow.period, 500, endpoint=False)
+    r, h = case.radius, 1e-6
+    expected = np.full_like(t, 4.0 * flow.mean / (math.pi * r**3))
+    for k, qk in flow.harmonics():
+        a = case.tube().womersley(flow.period / k)
+        edge = womersley_shape(np.array([1.0 - h, 1.0]), a)
+        slope = (edge[0] - edge[1]) / h  # −d(shape)/dρ at the wall
+        expected = expected + np.real(qk / (math.pi * r**3) * slope
+                                      * np.exp(2j * math.pi * k * t / flow.period))
+    got = wall_shear(case, flow, t)
+    assert np.abs(got - expected).max() < 1e-4 * np.abs(expected).max()
