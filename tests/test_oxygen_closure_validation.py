@@ -125,8 +125,7 @@ def test_the_inlet_renewal_candidate_on_held_out_vessels() -> None:
     held-out vessels, against the reference with the layer continuing through the outlet: the
     issue-12 target of 2 % (measured worst −0.95 %, the paper aorta 5 cm long), where the
     default misses by up to −7.8 % (the ascending aorta at exercise)."""
-    from oxyline.reference.validation import (heldout_cases_2, heldout_cases_3,
-                                              inlet_renewal_uptake)
+    from oxyline.reference.validation import heldout_cases_2, heldout_cases_3, inlet_renewal_uptake
 
     worst, worst_default = 0.0, 0.0
     for name, case in _heldout() + heldout_cases_2() + heldout_cases_3():
