@@ -12,6 +12,8 @@ use crate::error::{Error, Result};
 use serde::Deserialize;
 use std::f64::consts::PI;
 
+pub mod renewal;
+
 /// Γ(4/3).
 pub const GAMMA_4_3: f64 = 0.892_979_511_569_249_2;
 /// Fully developed Graetz Sherwood number, constant wall concentration (OEIS A282581).

@@ -1,0 +1,252 @@
+//! Inlet renewal of the concentration boundary layer by the near-wall backward excursion of the
+//! Womersley profile (docs/physics.md §3.6, docs/validation-oxygen.md §12). Near the wall the
+//! fluid moves backward by B y every period (B the backward wall strain); where it leaves the
+//! vessel inlet fresh fluid renews the layer over x_c ∝ B^{3/2} sqrt(D/γ̄), which adds the wall
+//! conductance
+//!
+//! ```text
+//! G_r = A · 2πR D · B^{3/2} / sqrt(γ̄ T),   γ̄ = 4 |⟨Q⟩| / (πR³),
+//! ```
+//!
+//! to the Graetz law of the net mean flow (ΔU = G_r (c − c_w)). The exponent is penetration
+//! theory's; A is fitted to the 27 rows of docs/validation-oxygen.md §2 and checked on 20
+//! held-out vessels there (within 0.95 % of the 2-D reference whose layer continues through
+//! the outlet). A candidate closure: pure functions of the vessel's periodic flow harmonics,
+//! geometry and properties, not yet wired into a run (it needs the per-vessel harmonics).
+
+use super::finite_number;
+use crate::error::{Error, Result};
+use nalgebra::Complex;
+use std::f64::consts::PI;
+
+/// The inlet-renewal constant A (docs/validation-oxygen.md §12; `INLET_RENEWAL_A` of
+/// `oxyline.reference.validation`).
+pub const INLET_RENEWAL_A: f64 = 0.329;
+
+/// A vessel's periodic flow Q(t) = mean + Re Σ_k Q̂_k e^{ikωt} (m³/s), ω = 2π/period;
+/// `harmonics[k − 1]` = Q̂_k (a cos + b sin is Q̂ = a − i b).
+#[derive(Debug, Clone, Copy)]
+pub struct PeriodicFlow<'a> {
+    pub period: f64,
+    pub mean: f64,
+    pub harmonics: &'a [Complex<f64>],
+}
+
+/// −d(shape)/dρ at the wall of one Womersley harmonic, shape = u(ρ)/(Q̂/πR²)
+/// = (1 − J0(zρ)/J0(z))/(1 − 2J1(z)/(z J0(z))), z = α i^{3/2}: the wall shear rate of the
+/// harmonic is Q̂/(πR³) times this. 4 for α → 0 (Poiseuille).
+pub fn womersley_wall_slope(alpha: f64) -> Complex<f64> {
+    if alpha < 0.05 {
+        // the closed form loses digits to the cancellation in 1 − 2J1/(zJ0) at small α
+        slope_series(alpha)
+    } else {
+        slope_closed(alpha)
+    }
+}
+
+/// Taylor series of `slope_closed`: 4 + iα²/6 + α⁴/288 + O(α⁶).
+fn slope_series(alpha: f64) -> Complex<f64> {
+    let a2 = alpha * alpha;
+    Complex::new(4.0 + a2 * a2 / 288.0, a2 / 6.0)
+}
+
+fn slope_closed(alpha: f64) -> Complex<f64> {
+    let z = Complex::from_polar(alpha, 0.75 * PI);
+    let r1 = bessel_ratio_j1_j0(z);
+    -(z * r1) / (Complex::new(1.0, 0.0) - r1 * 2.0 / z)
+}
+
+/// J1(z)/J0(z) by the backward recurrence r_n = J_n/J_{n−1} = 1/(2n/z − r_{n+1}) from r_N = 0
+/// (Miller; converges for every z ≠ 0, with N well above |z|).
+fn bessel_ratio_j1_j0(z: Complex<f64>) -> Complex<f64> {
+    let n_start = z.norm() as usize + 60;
+    let mut r = Complex::new(0.0, 0.0);
+    for n in (1..=n_start).rev() {
+        r = Complex::new(1.0, 0.0) / (Complex::new(2.0 * n as f64, 0.0) / z - r);
+    }
+    r
+}
+
+/// Wall shear rate γ_w(t) (1/s, positive along the net flow's direction sign of `mean`) of the
+/// fully developed Womersley profile of `flow` in a rigid tube.
+pub fn wall_shear_rate(
+    flow: &PeriodicFlow,
+    radius: f64,
+    density: f64,
+    viscosity: f64,
+    t: f64,
+) -> f64 {
+    let scale = 1.0 / (PI * radius.powi(3));
+    let omega = 2.0 * PI / flow.period;
+    let mut g = 4.0 * flow.mean * scale;
+    for (i, qk) in flow.harmonics.iter().enumerate() {
+        let k = (i + 1) as f64;
+        let alpha = radius * (k * omega * density / viscosity).sqrt();
+        let phase = Complex::from_polar(1.0, k * omega * t);
+        g += (qk * scale * womersley_wall_slope(alpha) * phase).re;
+    }
+    g
+}
+
+/// B = ∫ max(−γ_w, 0) dt over one period (dimensionless), γ_w taken positive along the net
+/// flow, by the rectangle rule on `samples` equally spaced times (exact for a trigonometric
+/// polynomial up to the kink of the max; the Python reference uses 20,000).
+pub fn backward_wall_strain(
+    flow: &PeriodicFlow,
+    radius: f64,
+    density: f64,
+    viscosity: f64,
+    samples: usize,
+) -> f64 {
+    let sign = if flow.mean < 0.0 { -1.0 } else { 1.0 };
+    let dt = flow.period / samples as f64;
+    (0..samples)
+        .map(|j| {
+            (-sign * wall_shear_rate(flow, radius, density, viscosity, j as f64 * dt)).max(0.0)
+        })
+        .sum::<f64>()
+        * dt
+}
+
+/// The inlet-renewal conductance G_r (m³/s) of a vessel (module doc): the extra wall uptake
+/// is G_r (c − c_w) on top of the Graetz law of the net mean flow. Errors name the vessel:
+/// non-finite or non-positive geometry/properties/period, or no net flow (the law diverges as
+/// ⟨Q⟩ → 0, docs/validation-oxygen.md §12).
+pub fn inlet_renewal_conductance(
+    vessel: &str,
+    flow: &PeriodicFlow,
+    radius: f64,
+    density: f64,
+    viscosity: f64,
+    diffusivity: f64,
+) -> Result<f64> {
+    for (what, v) in [
+        ("radius", radius),
+        ("blood density", density),
+        ("blood viscosity", viscosity),
+        ("O2 diffusivity", diffusivity),
+        ("flow period", flow.period),
+    ] {
+        finite_number(vessel, what, v, false)?;
+    }
+    if !(flow.mean.is_finite() && flow.mean != 0.0)
+        || flow
+            .harmonics
+            .iter()
+            .any(|q| !(q.re.is_finite() && q.im.is_finite()))
+    {
+        return Err(Error::model(
+            vessel,
+            format!(
+                "inlet renewal needs a finite, nonzero net mean flow and finite harmonics, got mean {} m³/s",
+                flow.mean
+            ),
+        ));
+    }
+    let b = backward_wall_strain(flow, radius, density, viscosity, 20_000);
+    let gamma_t = 4.0 * flow.mean.abs() * flow.period / (PI * radius.powi(3));
+    Ok(INLET_RENEWAL_A * 2.0 * PI * radius * diffusivity * b.powf(1.5) / gamma_t.sqrt())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// −d(shape)/dρ at the wall from scipy's complex Bessel functions (an independent
+    /// implementation), α = 0.5, 2, 5, 11, 30, 60.
+    const SCIPY_SLOPES: [(f64, f64, f64); 6] = [
+        (0.5, 4.000216997407073, 0.041664858371753107),
+        (2.0, 4.054499164773957, 0.659417317143574),
+        (5.0, 5.289423811659766, 3.1745214602309932),
+        (11.0, 9.39826556965691, 7.641547127614052),
+        (30.0, 22.75737193299561, 21.16689806529684),
+        (60.0, 43.948500620519894, 42.4037854912172),
+    ];
+
+    #[test]
+    fn womersley_wall_slope_matches_scipy_bessel_functions() {
+        // 1e-11 relative: both are double-precision evaluations of the same closed form
+        for (alpha, re, im) in SCIPY_SLOPES {
+            let s = womersley_wall_slope(alpha);
+            let want = Complex::new(re, im);
+            assert!(
+                (s - want).norm() < 1e-11 * want.norm(),
+                "α {alpha}: {s} vs {want}"
+            );
+        }
+        // the series branch joins the closed form at the switch (1e-9: the closed form's
+        // cancellation costs ~4 digits there, the series' O(α⁶) term is ~1e-10)
+        assert!((slope_series(0.05) - slope_closed(0.05)).norm() < 1e-9);
+        assert_eq!(womersley_wall_slope(0.0), Complex::new(4.0, 0.0));
+    }
+
+    fn paper_straight() -> [Complex<f64>; 2] {
+        // paper-straight.yaml: cos (0, −8e-6), sin (3e-5, 8e-6) → Q̂ = a − i b
+        [Complex::new(0.0, -3e-5), Complex::new(-8e-6, -8e-6)]
+    }
+
+    #[test]
+    fn backward_wall_strain_of_a_slow_sinusoid_is_the_closed_form() {
+        // α → 0 (radius 0.1 mm): γ_w = γ̄ (1 + a sin ωt); B/(γ̄T) = (2 sqrt(a² − 1) − π + 2 asin(1/a))/(2π)
+        let (r, mean, a, period) = (1e-4, 1e-9, 2.5, 1.0);
+        let h = [Complex::new(0.0, -a * mean)];
+        let flow = PeriodicFlow {
+            period,
+            mean,
+            harmonics: &h,
+        };
+        let b = backward_wall_strain(&flow, r, 1050.0, 3.5e-3, 200_000);
+        let gbar_t = 4.0 * mean * period / (PI * r.powi(3));
+        let want =
+            gbar_t * (2.0 * (a * a - 1.0f64).sqrt() - PI + 2.0 * (1.0 / a).asin()) / (2.0 * PI);
+        // α = 0.055 here: the Womersley correction to the shear is O(α²/6) ≈ 5e-4
+        assert!((b / want - 1.0).abs() < 2e-3, "{b} vs {want}");
+    }
+
+    #[test]
+    fn the_paper_aorta_matches_the_python_reference_formula() {
+        // oxyline.reference.validation: backward_wall_strain = 49.63287234028849 and
+        // inlet_renewal_excess/(α ΔP) = 9.839341556188514e-10 m³/s (both with 20,000 samples)
+        let h = paper_straight();
+        let flow = PeriodicFlow {
+            period: 1.0,
+            mean: 2e-5,
+            harmonics: &h,
+        };
+        let b = backward_wall_strain(&flow, 0.008, 1050.0, 3.5e-3, 20_000);
+        assert!((b / 49.63287234028849 - 1.0).abs() < 1e-9, "{b}");
+        let g = inlet_renewal_conductance("aorta", &flow, 0.008, 1050.0, 3.5e-3, 1.2e-9).unwrap();
+        assert!((g / 9.839341556188514e-10 - 1.0).abs() < 1e-9, "{g}");
+        // a reversed vessel (net flow backward) renews at its other end: the same conductance
+        let neg: Vec<_> = h.iter().map(|q| -q).collect();
+        let back = PeriodicFlow {
+            period: 1.0,
+            mean: -2e-5,
+            harmonics: &neg,
+        };
+        let g_back =
+            inlet_renewal_conductance("aorta", &back, 0.008, 1050.0, 3.5e-3, 1.2e-9).unwrap();
+        assert!((g_back / g - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn bad_input_is_a_typed_error_naming_the_vessel() {
+        let h = paper_straight();
+        let none = PeriodicFlow {
+            period: 1.0,
+            mean: 0.0,
+            harmonics: &h,
+        };
+        let e =
+            inlet_renewal_conductance("aorta", &none, 0.008, 1050.0, 3.5e-3, 1.2e-9).unwrap_err();
+        assert!(e.to_string().contains("aorta") && e.to_string().contains("net mean flow"));
+        let flow = PeriodicFlow {
+            period: 1.0,
+            mean: 2e-5,
+            harmonics: &h,
+        };
+        let e =
+            inlet_renewal_conductance("aorta", &flow, -1.0, 1050.0, 3.5e-3, 1.2e-9).unwrap_err();
+        assert!(e.to_string().contains("aorta") && e.to_string().contains("radius"));
+    }
+}
