@@ -136,3 +136,110 @@ def test_heart_driven_loop_keeps_fick_and_the_physiology() -> None:
     q = res.flow[:, res.branches.index("ejection_left")]
     assert q.max() > 3 * q.mean()          # pulsatile ejection through the aortic valve
     assert abs(q.min()) < 0.01 * q.max()   # the valve closes (tanh: a small leak only)
+
+
+# --- the segment-resolved arterial tree (built-in closed-loop-o2-tree; docs/oxygen.md) ---
+
+def _tree_model(**changes: object) -> dict:
+    p = closed_loop.load("closed-loop-o2-tree")
+    p["dt"] = 4e-3
+    p.update(changes)
+    return p
+
+
+@pytest.fixture(scope="module")
+def tree_rest() -> closed_loop.ClosedLoopO2Result:
+    return closed_loop.simulate_o2(_tree_model())
+
+
+def test_tree_fick_principle_counts_the_wall_uptake(
+        tree_rest: closed_loop.ClosedLoopO2Result) -> None:
+    """Σ organ VO2 + tree wall uptake = CO (CaO2 − CvO2): CaO2 the net content the left heart
+    ejects into the tree's root (its O2 flux over its flow; the valve's small backflow carries
+    the root's content), CvO2 the right heart's (mixed venous). Between the two ejections the
+    tree, organs, veins and right heart store nothing over a periodic cycle (reached to
+    ~1e-11: the tree's warm-started Hill inversions), so Fick holds to 1e-9; the lungs take
+    up the same total."""
+    r = tree_rest
+    q = r.tree.inflow
+    q_r = r.flow[:, r.branches.index("ejection_right")]
+    c_r = r.total[:, r.compartments.index("right_heart")]
+    ca, cv = np.sum(r.tree.in_flux) / np.sum(q), np.sum(q_r * c_r) / np.sum(q_r)
+    vo2 = r.vo2.sum(axis=1).mean() + r.tree.wall.mean()
+    assert r.periodic_error <= 1e-10
+    assert abs(vo2 - q.mean() * (ca - cv)) <= 1e-9 * vo2
+    assert r.uptake.sum(axis=1).mean() == pytest.approx(vo2, rel=1e-9)
+    assert r.summary()["fick_residual"] <= 1e-9
+
+
+def test_tree_loop_mass_balance_is_exact_per_step(
+        tree_rest: closed_loop.ClosedLoopO2Result) -> None:
+    """No inlet: the loop's O2 (compartments + the tree's cells) changes only by lung uptake −
+    organ VO2 − tree wall uptake, every step; and the tree's own amount changes by exactly
+    root inflow − outlet outflow − wall uptake (the transport's invariant, with the fluxes the
+    compartments lose and gain)."""
+    r, t = tree_rest, tree_rest.tree
+    n = np.concatenate([[r.amount_start], r.amount])
+    rate = r.uptake.sum(axis=1) - r.vo2.sum(axis=1) - t.wall
+    assert np.max(np.abs(np.diff(n) - r.dt * rate)) <= 1e-13 * n.max()
+    assert np.allclose(r.amount, np.sum(r.volume * r.total, axis=1) + t.amount, rtol=1e-14)
+    tree_rate = t.in_flux - t.out_flux.sum(axis=1) - t.wall
+    assert np.max(np.abs(np.diff(t.amount) - r.dt * tree_rate[1:])) <= 1e-13 * n.max()
+    # the root carries in the left heart's content at the root's flow
+    c_l = r.total[:, r.compartments.index("left_heart")]
+    fwd = t.inflow > 0   # (a closing tanh valve leaks back a little: the tree's content)
+    assert np.allclose(t.in_flux[fwd], t.inflow[fwd] * c_l[fwd], rtol=1e-12)
+
+
+def test_tree_resting_physiology_and_po2_along_the_tree(
+        tree_rest: closed_loop.ClosedLoopO2Result) -> None:
+    """Resting ranges as for the pool model (docs/oxygen.md); the wall takes up O2 (wall PO2
+    60 mmHg below the blood's ~95) but little of the arterial supply (≤ 1 % of VO2), so PO2
+    falls monotonically, and only slightly, from the root to every outlet."""
+    s = tree_rest.summary()
+    assert 0.95 <= s["SaO2"] <= 0.98 and 0.70 <= s["SvO2"] <= 0.75
+    assert 240 <= s["VO2"] <= 260 and 85 <= s["PaO2"] <= 100 and 35 <= s["PvO2"] <= 45
+    assert 0 < s["VO2_tree_wall"] <= 0.01 * s["VO2"]
+    assert s["cardiac_output"] == pytest.approx(5.0, rel=0.03)
+    along = tree_rest.tree.po2_along()
+    for name in ("thoracic_aorta", "iliac", "supra_aortic"):
+        assert np.all(np.diff(along[name]) < 0)
+    assert along["aortic_root"][0] > along["iliac"][-1] > along["aortic_root"][0] - 2.0
+    # each organ is fed by its outlet: O2 delivery ≈ its flow share × CaO2 × CO
+    co, ca = s["cardiac_output"], s["CaO2"]
+    for k, o in closed_loop.load("closed-loop-o2-tree")["organs"].items():
+        assert s["DO2_organs"][k] == pytest.approx(o["flow_fraction"] * co * ca, rel=0.03)
+
+
+def test_zero_wall_tree_matches_the_pool_on_the_same_flows() -> None:
+    """Limit: a tree whose wall takes up nothing, with fixed organ VO2 (vanishing km), against
+    the pool model driven by the same flows (root inflow → the pool's ejection, outlet flows →
+    its organ inflows). Both conserve O2 exactly and consume the same Σ VO2 at the same
+    cardiac output, so Fick fixes CaO2 − CvO2 identically (to the two runs' 1e-9 Fick
+    residuals). The tree only delays the arterial blood (plug flow) where the pool mixes it,
+    and the 3 L of veins average the organs' outflow: SvO2 agrees to 1e-8 (measured < 1e-9).
+    SaO2 is weighted by the ejection, which includes the valve's small backflow carrying the
+    root's (tree) or the pool's content: 1e-6 (measured 4e-7; a wall leak of 0.01 % of VO2
+    would move it by ~1e-5)."""
+    p = _tree_model(km=1e-6)
+    p["tree"] = {**p["tree"], "wall": {"model": "none"}}
+    r = closed_loop.simulate_o2(p)
+    flows = np.column_stack([r.tree.inflow, r.tree.outflow, r.flow])
+    rp = closed_loop.simulate_o2(_model(km=1e-6), flows=flows)
+    s, sp = r.summary(), rp.summary()
+    assert s["VO2_tree_wall"] == 0.0
+    assert s["cardiac_output"] == pytest.approx(sp["cardiac_output"], rel=1e-12)
+    assert s["VO2"] == pytest.approx(sp["VO2"], rel=1e-6)
+    # Fick with the pool's VO2 and cardiac output (mL O2 per L of blood)
+    assert s["CaO2"] - s["CvO2"] == pytest.approx(sp["VO2"] / sp["cardiac_output"], rel=1e-8)
+    assert abs(s["SaO2"] - sp["SaO2"]) <= 1e-6 and abs(s["SvO2"] - sp["SvO2"]) <= 1e-8
+    assert s["fick_residual"] <= 1e-9 and s["mass_balance_residual"] <= 1e-13
+
+
+def test_tree_input_errors_name_the_element() -> None:
+    p = _tree_model()
+    p["tree"] = {**p["tree"], "vessels": [("aortic_root", "aorta_in", "x", 0.02, -0.01)]}
+    with pytest.raises(oxyline.ModelError, match="aortic_root"):
+        closed_loop.simulate_o2(p)
+    with pytest.raises(oxyline.ModelError, match="flows='heart'"):
+        closed_loop.simulate_o2(_tree_model(), flows=np.zeros((200, 11)))

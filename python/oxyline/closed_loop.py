@@ -65,7 +65,45 @@ STANDARD: dict[str, Any] = {
     },
 }
 
-BUILTINS = {"closed-loop-o2": STANDARD}
+# A systemic arterial trunk (issue 14 item 4: "e.g. the bifurcation or the ADAN56 trunk"): the
+# aorta of ADAN56 (ascending, arch, thoracic, abdominal; radii and lengths rounded from
+# models_data/adan56.yaml) with one equivalent artery per organ bed, whose area is the sum of
+# the bed's feeding arteries there (coronaries; carotids + vertebrals; subclavians;
+# celiac + mesenterics; renals; common iliacs). Wall: h = 0.1 r, E 0.25 MPa (ADAN56: 0.225 MPa),
+# which gives the pool model's arterial compliance (~1.5 mL/mmHg with the beds). Lengths and
+# radii in m. The outlets are the organ beds (node = organ name + "_a").
+TREE: dict[str, Any] = {
+    "youngs_modulus": 2.5e5,              # Pa
+    "wall_ratio": 0.1,                    # h / r
+    "max_segment_length": 0.02,           # m (segments per vessel = ceil(length / this))
+    "flow_cycles": 100,                   # tree flow cycles (its RC time ~2.5 cycles)
+    # the tree's wall: Graetz closure (docs/oxygen.md) against a medial PO2 of 60 mmHg
+    # (arterial media ~40–70 mmHg); "none" gives the zero-uptake limit
+    "wall": {"model": "graetz", "po2": 60.0},
+    "vessels": [
+        # name, from, to, length, radius
+        ("aortic_root", "aorta_in", "sinus", 0.02, 0.0145),
+        ("ascending_aorta", "sinus", "arch", 0.04, 0.0145),
+        ("coronary", "sinus", "heart_a", 0.08, 0.0025),
+        ("aortic_arch", "arch", "descending", 0.08, 0.013),
+        ("supra_aortic", "arch", "brain_a", 0.15, 0.0055),
+        ("subclavian", "arch", "skin_other_a", 0.15, 0.0045),
+        ("thoracic_aorta", "descending", "abdominal", 0.2, 0.011),
+        ("visceral", "abdominal", "splanchnic_a", 0.1, 0.0048),
+        ("renal", "abdominal", "kidneys_a", 0.04, 0.0042),
+        ("abdominal_aorta", "abdominal", "bifurcation", 0.12, 0.008),
+        ("iliac", "bifurcation", "muscle_a", 0.3, 0.0062),
+    ],
+}
+
+STANDARD_TREE: dict[str, Any] = {**copy.deepcopy(STANDARD), "name": "closed-loop-o2-tree",
+                                 "arteries": "tree", "tree": TREE}
+
+BUILTINS = {"closed-loop-o2": STANDARD, "closed-loop-o2-tree": STANDARD_TREE}
+
+
+def _has_tree(p: dict[str, Any]) -> bool:
+    return p.get("arteries", "pool") == "tree"
 
 
 def load(name: str = "closed-loop-o2") -> dict[str, Any]:
@@ -79,7 +117,10 @@ def load(name: str = "closed-loop-o2") -> dict[str, Any]:
 def _layout(p: dict[str, Any]) -> tuple[list[dict], list[dict], dict[str, int]]:
     """Compartments (flow order) and branches of the loop, with the branch index by role."""
     pools, organs = p["pools"], p["organs"]
-    comps = [("left_heart", pools["left_heart"]), ("arteries", pools["arteries"])]
+    tree = _has_tree(p)
+    comps = [("left_heart", pools["left_heart"])]
+    if not tree:
+        comps.append(("arteries", pools["arteries"]))
     comps += [(k, o["volume"]) for k, o in organs.items()]
     comps += [("veins", pools["veins"]), ("right_heart", pools["right_heart"]),
               ("pulmonary_arteries", pools["pulmonary_arteries"]),
@@ -100,8 +141,8 @@ def _layout(p: dict[str, Any]) -> tuple[list[dict], list[dict], dict[str, int]]:
                                     "km": p["km"] * MMHG}
         c.append(entry)
     lungs = p["lungs"]
-    br = [("ejection_left", "left_heart", "arteries", None)]
-    br += [(f"{k}_in", "arteries", k, None) for k in organs]
+    br = [] if tree else [("ejection_left", "left_heart", "arteries", None)]
+    br += [] if tree else [(f"{k}_in", "arteries", k, None) for k in organs]
     br += [(f"{k}_out", k, "veins", None) for k in organs]
     br += [("venous_return", "veins", "right_heart", None),
            ("ejection_right", "right_heart", "pulmonary_arteries", None),
@@ -142,17 +183,21 @@ def flow_table(p: dict[str, Any]) -> np.ndarray:
     return np.column_stack(cols)
 
 
-def balance_flows(flows: np.ndarray, from_: list[int], to: list[int], n: int) -> np.ndarray:
+def balance_flows(flows: np.ndarray, from_: list[int], to: list[int], n: int,
+                  fixed_net: np.ndarray | None = None) -> np.ndarray:
     """The flow table with the smallest constant per-branch corrections that make every
     compartment's net inflow over the cycle vanish (least norm: δ = Aᵀ(AAᵀ)⁺(−net), A the
     compartment–branch incidence). Flows sampled from a flow solution (e.g. the native closed
     loop on branch `chambers`) close their volumes only to the solver's discretisation and
-    periodicity error; the core needs periodic volumes (docs/oxygen.md)."""
+    periodicity error; the core needs periodic volumes (docs/oxygen.md). `fixed_net`: the
+    cycle-mean net inflow per compartment of flows that stay as they are (an arterial tree's)."""
     a = np.zeros((n, flows.shape[1]))
     for b, (f, t) in enumerate(zip(from_, to)):
         a[f, b] -= 1.0
         a[t, b] += 1.0
     net = a @ flows.mean(axis=0)
+    if fixed_net is not None:
+        net = net + fixed_net
     delta = a.T @ (np.linalg.pinv(a @ a.T) @ (-net))
     return flows + delta
 
@@ -185,11 +230,17 @@ def heart_model(p: dict[str, Any]) -> dict[str, Any]:
         return {"name": name, "from": a, "to": b, "arrangement": "RCL", "lumped": values}
 
     v = [{"name": "lv", "from": "mitral_out", "to": "lv_out", "chamber": chamber(3.3e8, 1.2e7)},
-         {"name": "aortic_valve", "from": "lv_out", "to": "aorta_in", "valve": valve},
-         lumped("arteries", "aorta_in", "arteries_out", resistance=1e6, capacitance=1.5e-8,
-                inductance=1e5)]
-    v += [lumped(k, "arteries_out", "veins_in", resistance=r_sys / o["flow_fraction"])
-          for k, o in p["organs"].items()]
+         {"name": "aortic_valve", "from": "lv_out", "to": "aorta_in", "valve": valve}]
+    if _has_tree(p):
+        # the segment-resolved tree in place of the arterial pool; organs at its outlets
+        v += tree_vessels(p)
+        v += [lumped(k, f"{k}_a", "veins_in", resistance=r_sys / o["flow_fraction"])
+              for k, o in p["organs"].items()]
+    else:
+        v += [lumped("arteries", "aorta_in", "arteries_out", resistance=1e6,
+                     capacitance=1.5e-8, inductance=1e5)]
+        v += [lumped(k, "arteries_out", "veins_in", resistance=r_sys / o["flow_fraction"])
+              for k, o in p["organs"].items()]
     v += [lumped("veins", "veins_in", "tric_in", resistance=1e6, capacitance=7.5e-7),
           {"name": "tricuspid_valve", "from": "tric_in", "to": "rv_in", "valve": valve},
           {"name": "rv", "from": "rv_in", "to": "rv_out", "chamber": chamber(0.6e8, 0.6e7)},
@@ -200,9 +251,54 @@ def heart_model(p: dict[str, Any]) -> dict[str, Any]:
           {"name": "mitral_valve", "from": "mitral_in", "to": "mitral_out", "valve": valve}]
     fdt = p.get("flow_dt", 1e-3)
     return {"name": "closed-loop-heart", "units": "SI", "period": T, "vessels": v,
-            "boundary_conditions": {},
+            "boundary_conditions": {}, **_TREE_BLOOD,
             "simulation": {"cycles": 30, "dt": fdt, "method": "generalized-alpha",
                            "output": {"cycles": "last", "every": fdt}}}
+
+
+# blood and segment layout shared by the closed loop and its tree's own model (the same
+# equations for the tree's segments in both)
+_TREE_BLOOD = {"blood": {"density": 1060.0, "viscosity": 0.004}, "arrangement": "inverted-L"}
+
+
+def tree_vessels(p: dict[str, Any]) -> list[dict[str, Any]]:
+    """The arterial tree's vessels (SI), each cut into ceil(length / max_segment_length)
+    segments."""
+    t = p["tree"]
+    out = []
+    for name, a, b, length, radius in t["vessels"]:
+        out.append({"name": name, "from": a, "to": b, "length": length, "radius": radius,
+                    "wall_thickness": t["wall_ratio"] * radius,
+                    "youngs_modulus": t["youngs_modulus"], "poisson_ratio": 0.5,
+                    "segments": max(1, math.ceil(length / t["max_segment_length"] - 1e-9))})
+    return out
+
+
+def tree_model(p: dict[str, Any], time: np.ndarray, inflow: np.ndarray,
+               venous_pressure: np.ndarray) -> dict[str, Any]:
+    """The tree as an open network driven by the closed-loop heart: the aortic-valve flow into
+    its root and, at every outlet, its organ bed's resistance to the recorded venous pressure
+    (both tables over one cycle from the closed-loop run): the same equations the tree's
+    segments obey inside the closed loop. Its `oxygen` section carries the loop's blood (Hill
+    binding) and the tree's wall closure; the root's PO2 is replaced step by step by the left
+    heart's (`oxyline_core::transport::closed_loop_tree`)."""
+    T = p["period"]
+    q = p["cardiac_output"] * 1e-3 / 60.0
+    r_sys = 93.0 * MMHG / q
+    b = p["blood"]
+    bcs: dict[str, Any] = {"aorta_in": {"type": "flow", "time": list(time),
+                                        "flow": list(inflow)}}
+    for k, o in p["organs"].items():
+        bcs[f"{k}_a"] = {"type": "resistance", "resistance": r_sys / o["flow_fraction"],
+                         "pressure": {"time": list(time), "pressure": list(venous_pressure)}}
+    return {"name": "closed-loop-arterial-tree", "units": "SI", "period": T,
+            "vessels": tree_vessels(p), "boundary_conditions": bcs, **_TREE_BLOOD,
+            "oxygen": {"inlet": {"po2": 95.0}, "hemoglobin": "hill",
+                       "hill": {"p50": b["p50"], "n": b["hill_n"], "hb": b["hemoglobin"],
+                                "huefner": b["hufner"]},
+                       "solubility": b["solubility"] * 10.0 * 1e3 * ML_O2,  # mol m⁻³ mmHg⁻¹
+                       "diffusivity": 2.0e-9, "wall": p["tree"]["wall"],
+                       "reference_pressure": 93.0}}
 
 
 def heart_flows(p: dict[str, Any], result: Any = None) -> np.ndarray:
@@ -221,10 +317,43 @@ def heart_flows(p: dict[str, Any], result: Any = None) -> np.ndarray:
 
     organs = list(p["organs"])
     lungs, shunt = q("lungs"), p["lungs"]["shunt_fraction"]
-    cols = [q("aortic_valve"), *[q(o) for o in organs], *[q(o) for o in organs],
+    arterial = [] if _has_tree(p) else [q("aortic_valve"), *[q(o) for o in organs]]
+    cols = [*arterial, *[q(o) for o in organs],
             q("tricuspid_valve"), q("pulmonary_valve"), (1 - shunt) * lungs, shunt * lungs,
             q("mitral_valve")]
     return np.column_stack(cols)
+
+
+def heart_tree_model(p: dict[str, Any], result: Any) -> dict[str, Any]:
+    """:func:`tree_model` with the tables of the last cycle of a :func:`heart_model` run."""
+    t = np.asarray(result.vessel("aortic_valve").time)
+    return tree_model(p, t - t[0], np.asarray(result.vessel("aortic_valve").flow_out),
+                      np.asarray(result.vessel("veins").pressure_in))
+
+
+@dataclass
+class ArterialTreeO2:
+    """The arterial tree's recorded cycle (``ClosedLoopO2Result.tree``): arrays [step] or
+    [step, outlet] / [step, segment]."""
+
+    outlets: list[str]         # organ fed by every outlet
+    segments: list[str]        # "vessel:k"
+    inflow: np.ndarray         # m³/s into the root
+    outflow: np.ndarray        # m³/s out of every outlet
+    in_flux: np.ndarray        # mol/s into the root
+    out_flux: np.ndarray       # mol/s out of every outlet
+    wall: np.ndarray           # mol/s wall uptake
+    amount: np.ndarray         # mol in the tree at each step end
+    po2: np.ndarray            # mmHg per segment
+    flow_periodic_error: float
+
+    def po2_along(self, vessels: list[str] | None = None) -> dict[str, np.ndarray]:
+        """Cycle-mean PO2 (mmHg) of every segment, per vessel (in flow order)."""
+        mean = self.po2.mean(axis=0)
+        out: dict[str, list[float]] = {}
+        for name, v in zip(self.segments, mean):
+            out.setdefault(name.rsplit(":", 1)[0], []).append(float(v))
+        return {k: np.asarray(v) for k, v in out.items() if vessels is None or k in vessels}
 
 
 @dataclass
@@ -242,11 +371,12 @@ class ClosedLoopO2Result:
     vo2: np.ndarray          # mol/s per compartment
     flux: np.ndarray         # mol/s per branch
     uptake: np.ndarray       # mol/s per branch (lungs)
-    amount: np.ndarray       # mol in the loop at each step end
+    amount: np.ndarray       # mol in the loop at each step end (tree included)
     amount_start: float
     dt: float
     cycles: int
     periodic_error: float
+    tree: ArterialTreeO2 | None = None
 
     def _c(self, name: str) -> int:
         return self.compartments.index(name)
@@ -259,46 +389,110 @@ class ClosedLoopO2Result:
         q = self.flow[:, self._b(branch)]
         return float(np.sum(q * var[:, self._c(compartment)]) / np.sum(q))
 
+    def arterial_flow(self) -> np.ndarray:
+        """The left heart's ejection per step (m³/s): into the tree's root or the pool."""
+        if self.tree is not None:
+            return self.tree.inflow
+        return self.flow[:, self._b("ejection_left")]
+
+    def _arterial(self, var: np.ndarray) -> float:
+        q = self.arterial_flow()
+        return float(np.sum(q * var[:, self._c("left_heart")]) / np.sum(q))
+
+    def _arterial_content(self) -> float:
+        """CaO2 (mol/m³): the net O2 the left heart ejects per volume. Into the tree it is the
+        root's flux over its flow: a closing tanh valve leaks back a little blood, which
+        carries the root's content, not the left heart's (the left-heart-weighted content is
+        off by ~5e-8 of VO2 there)."""
+        if self.tree is not None:
+            return float(np.sum(self.tree.in_flux) / np.sum(self.tree.inflow))
+        return self._arterial(self.total)
+
+    def wall_uptake(self) -> np.ndarray:
+        """The arterial tree's wall uptake per step (mol/s; zeros without a tree)."""
+        return self.tree.wall if self.tree is not None else np.zeros(len(self.time))
+
     def summary(self) -> dict[str, Any]:
         """Arterial (left-heart ejection) and mixed-venous (right-heart ejection) PO2 and
-        saturation, flow-weighted over the cycle; VO2 per organ and in total (mL/min); cardiac
-        output (L/min); Fick's residual |VO2 − CO (CaO2 − CvO2)| / VO2 and the largest per-step
+        saturation, flow-weighted over the cycle; VO2 per organ and in total (mL/min; the
+        total includes the arterial tree's wall uptake, `VO2_tree_wall`); cardiac output
+        (L/min); Fick's residual |VO2 − CO (CaO2 − CvO2)| / VO2 and the largest per-step
         mass-balance residual of the loop relative to its O2 amount."""
         to_ml_min = 60.0 / ML_O2
         vo2 = {n: float(self.vo2[:, i].mean()) * to_ml_min
                for i, n in enumerate(self.compartments) if np.any(self.vo2[:, i])}
-        total_vo2 = float(self.vo2.sum(axis=1).mean())
-        co = float(self.flow[:, self._b("ejection_left")].mean())
-        ca = self.flow_weighted(self.total, "ejection_left", "left_heart")
+        wall = self.wall_uptake()
+        total_vo2 = float(self.vo2.sum(axis=1).mean() + wall.mean())
+        co = float(self.arterial_flow().mean())
+        ca = self._arterial_content()
         cv = self.flow_weighted(self.total, "ejection_right", "right_heart")
         fick = abs(total_vo2 - co * (ca - cv)) / total_vo2
         n = np.concatenate([[self.amount_start], self.amount])
-        rate = self.uptake.sum(axis=1) - self.vo2.sum(axis=1)
+        rate = self.uptake.sum(axis=1) - self.vo2.sum(axis=1) - wall
         mass = float(np.max(np.abs(np.diff(n) - self.dt * rate)) / np.max(n))
-        return {
-            "SaO2": self.flow_weighted(self.saturation, "ejection_left", "left_heart"),
+        out = {
+            "SaO2": self._arterial(self.saturation),
             "SvO2": self.flow_weighted(self.saturation, "ejection_right", "right_heart"),
-            "PaO2": self.flow_weighted(self.po2, "ejection_left", "left_heart"),
+            "PaO2": self._arterial(self.po2),
             "PvO2": self.flow_weighted(self.po2, "ejection_right", "right_heart"),
             "CaO2": ca / ML_O2 * 1e-3, "CvO2": cv / ML_O2 * 1e-3,      # mL O2 per L blood
             "VO2": total_vo2 * to_ml_min, "VO2_organs": vo2,
+            "VO2_tree_wall": float(wall.mean()) * to_ml_min,
             "lung_uptake": float(self.uptake.sum(axis=1).mean()) * to_ml_min,
             "cardiac_output": co * 6e4,
             "fick_residual": fick, "mass_balance_residual": mass,
             "cycles": self.cycles, "periodic_error": self.periodic_error,
         }
+        if self.tree is not None:
+            # O2 delivered to each organ by its outlet, and the outlets' flow-weighted PO2
+            t = self.tree
+            out["DO2_organs"] = {k: float(t.out_flux[:, i].mean()) * to_ml_min
+                                 for i, k in enumerate(t.outlets)}
+        return out
 
 
-def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int = 200,
+def _tree_spec(p: dict[str, Any], tree_model_: dict[str, Any], idx: dict[str, int]) -> str:
+    from oxyline.model import build_model
+
+    canonical = build_model(tree_model_).canonical
+    return json.dumps({"model": json.dumps(canonical), "inlet": "aorta_in",
+                       "from": idx["left_heart"], "flow_cycles": int(p["tree"]["flow_cycles"]),
+                       "outlets": [{"boundary": f"{k}_a", "to": idx[k]} for k in p["organs"]]})
+
+
+def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int = 400,
                 tol: float = 1e-13, flows: np.ndarray | str | None = None) -> ClosedLoopO2Result:
     """Runs O2 around the closed loop to its periodic steady state (the core's Newton shooting
     on the cycle map, then plain cycles until the start-of-cycle contents repeat to `tol`).
     `flows` (steps × branches, m³/s, one row per step of `dt`, branches in the order of
     ``result.branches``) replaces the prescribed table, e.g. flows sampled from a flow run; it
     is balanced by :func:`balance_flows` first. ``flows="heart"`` takes them from a run of the
-    native closed-loop heart (:func:`heart_model`, :func:`heart_flows`)."""
+    native closed-loop heart (:func:`heart_model`, :func:`heart_flows`).
+
+    With ``arteries: "tree"`` (built-in ``closed-loop-o2-tree``) the arterial pool is a
+    segment-resolved arterial tree (`tree`) whose O2 runs through the product's transport; its
+    flow comes from the closed-loop heart run (always ``flows="heart"``): the tree is driven by
+    the aortic-valve flow and drains through the organ beds to the venous pressure of that run."""
     p = load(model) if isinstance(model, str) else model
-    comps, (binding, *branches), _ = _layout(p)
+    comps, (binding, *branches), idx = _layout(p)
+    tree_json = None
+    fixed_net = None
+    steps = round(p["period"] / p["dt"])
+    if _has_tree(p):
+        if flows is not None and not (isinstance(flows, str) and flows == "heart"):
+            raise ModelError("closed loop: with an arterial tree the flows come from the heart "
+                             "run (flows='heart')")
+        from oxyline.run import simulate
+
+        heart = simulate(heart_model(p))
+        tree_json = _tree_spec(p, heart_tree_model(p, heart), idx)
+        tf = _core.closed_loop_tree_flows(tree_json, float(p["dt"]), steps)
+        fixed_net = np.zeros(len(comps))
+        fixed_net[idx["left_heart"]] -= np.mean(tf["inflow"])
+        out_mean = np.asarray(tf["outflow"]).reshape(steps, -1).mean(axis=0)
+        for k, qm in zip(p["organs"], out_mean):
+            fixed_net[idx[k]] += qm
+        flows = heart_flows(p, heart)
     if flows is None:
         flows = flow_table(p)
     else:
@@ -311,12 +505,30 @@ def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int 
             raise ModelError(f"closed loop: flows must be (steps, {len(branches)}) for the "
                              f"branches {[b['name'] for b in branches]}, got {flows.shape}")
         flows = balance_flows(flows, [b["from"] for b in branches], [b["to"] for b in branches],
-                              len(comps))
-    spec = {"compartments": comps, "branches": branches, "binding": binding}
+                              len(comps), fixed_net)
+    spec: dict[str, Any] = {"compartments": comps, "branches": branches, "binding": binding}
+    if tree_json is not None:
+        spec["tree"] = json.loads(tree_json)
+    if tree_json is not None:
+        # the tree's Hill inversions are warm-started (tolerance 1e-12 mmHg): its cycle map
+        # repeats to ~1e-11, so the confirming cycles stop there (Fick then holds to ~2e-12)
+        tol = max(tol, 1e-10)
     out = _core.closed_loop_o2(json.dumps(spec), np.ascontiguousarray(flows).ravel(),
                                float(p["dt"]), int(max_cycles), float(tol))
     steps, nc, nb = flows.shape[0], len(comps), len(branches)
     shape_c, shape_b = (steps, nc), (steps, nb)
+    tree = None
+    if tree_json is not None:
+        segs = list(out["tree_segments"])
+        tree = ArterialTreeO2(
+            outlets=list(p["organs"]), segments=segs,
+            inflow=np.asarray(out["tree_inflow"]),
+            outflow=np.asarray(out["tree_outflow"]).reshape(steps, -1),
+            in_flux=np.asarray(out["tree_in_flux"]),
+            out_flux=np.asarray(out["tree_out_flux"]).reshape(steps, -1),
+            wall=np.asarray(out["tree_wall"]), amount=np.asarray(out["tree_amount"]),
+            po2=np.asarray(out["tree_po2"]).reshape(steps, len(segs)) / MMHG,
+            flow_periodic_error=float(out["tree_flow_periodic_error"]))
     return ClosedLoopO2Result(
         compartments=[c["name"] for c in comps], branches=[b["name"] for b in branches],
         time=np.asarray(out["time"]), flow=flows,
@@ -328,4 +540,5 @@ def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int 
         flux=np.asarray(out["flux"]).reshape(shape_b),
         uptake=np.asarray(out["uptake"]).reshape(shape_b),
         amount=np.asarray(out["amount"]), amount_start=float(out["amount_start"]),
-        dt=float(p["dt"]), cycles=int(out["cycles"]), periodic_error=float(out["periodic_error"]))
+        dt=float(p["dt"]), cycles=int(out["cycles"]), periodic_error=float(out["periodic_error"]),
+        tree=tree)

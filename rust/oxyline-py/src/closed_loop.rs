@@ -3,7 +3,8 @@
 
 use crate::to_py;
 use numpy::{PyArray1, PyReadonlyArray1};
-use oxyline_core::transport::closed_loop::{ClosedLoopSpec, run_periodic};
+use oxyline_core::transport::closed_loop::{ClosedLoopSpec, TreeSpec, run_periodic};
+use oxyline_core::transport::closed_loop_tree::ArterialTree;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -26,6 +27,8 @@ pub fn closed_loop_o2<'py>(
     d.set_item("cycles", run.cycles)?;
     d.set_item("periodic_error", run.periodic_error)?;
     d.set_item("amount_start", run.amount_start)?;
+    d.set_item("tree_segments", &run.tree_segments)?;
+    d.set_item("tree_flow_periodic_error", run.tree_flow_periodic_error)?;
     for (k, v) in [
         ("time", &run.time),
         ("volume", &run.volume),
@@ -36,8 +39,48 @@ pub fn closed_loop_o2<'py>(
         ("flux", &run.flux),
         ("uptake", &run.uptake),
         ("amount", &run.amount),
+        ("tree_wall", &run.tree_wall),
+        ("tree_amount", &run.tree_amount),
+        ("tree_in_flux", &run.tree_in_flux),
+        ("tree_out_flux", &run.tree_out_flux),
+        ("tree_po2", &run.tree_po2),
+        ("tree_inflow", &run.tree_inflow),
+        ("tree_outflow", &run.tree_outflow),
     ] {
         d.set_item(k, PyArray1::from_slice(py, v))?;
     }
+    Ok(d)
+}
+
+/// The flow of a closed loop's arterial tree (`closed_loop_tree`) per step of one periodic
+/// cycle: into its root and out of every outlet (m³/s), so that the caller balances the other
+/// branches of the loop against them.
+#[pyfunction]
+#[pyo3(signature = (tree_json, dt, steps))]
+pub fn closed_loop_tree_flows<'py>(
+    py: Python<'py>,
+    tree_json: &str,
+    dt: f64,
+    steps: usize,
+) -> PyResult<Bound<'py, PyDict>> {
+    let spec = TreeSpec::from_json(tree_json).map_err(to_py)?;
+    let names: Vec<String> = spec.outlets.iter().map(|o| o.boundary.clone()).collect();
+    let tree = py
+        .detach(move || {
+            ArterialTree::new(
+                &spec.model,
+                &spec.inlet,
+                &names,
+                dt,
+                steps,
+                spec.flow_cycles,
+            )
+        })
+        .map_err(to_py)?;
+    let d = PyDict::new(py);
+    d.set_item("inflow", PyArray1::from_slice(py, &tree.inflow))?;
+    d.set_item("outflow", PyArray1::from_slice(py, &tree.outflow.concat()))?;
+    d.set_item("flow_periodic_error", tree.flow_periodic_error)?;
+    d.set_item("segments", &tree.segment_names)?;
     Ok(d)
 }

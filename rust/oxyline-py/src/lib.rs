@@ -870,7 +870,7 @@ fn chamber_elastance<'py>(
 #[pymodule]
 mod _core {
     #[pymodule_export]
-    use super::closed_loop::closed_loop_o2;
+    use super::closed_loop::{closed_loop_o2, closed_loop_tree_flows};
     #[pymodule_export]
     use super::{
         ModelError, Network, ResourceError, SolverError, UnstableTimeStep, chamber_elastance,

@@ -18,6 +18,7 @@
 //! solved by Gauss–Seidel sweeps in the listed order (listing the compartments in flow order
 //! makes one sweep nearly exact; the loop closes with a contraction factor ≈ Π dt q/(V + dt q)).
 
+use super::closed_loop_tree::ArterialTree;
 use super::compartment::{self, Consumption};
 use super::lung::LungExchange;
 use crate::error::{Error, Result};
@@ -72,6 +73,43 @@ pub struct ClosedLoopSpec {
     pub branches: Vec<BranchSpec>,
     /// Oxygen binding of blood (SI: solubility mol m⁻³ Pa⁻¹, p50 Pa); `hill` for haemoglobin.
     pub binding: BindingSpec,
+    /// A segment-resolved arterial tree between compartment `from` and the organs (None: the
+    /// branches join the compartments directly).
+    #[serde(default)]
+    pub tree: Option<TreeSpec>,
+}
+
+/// The arterial tree of a closed loop (`closed_loop_tree`): an open network model (canonical
+/// SI JSON with an `oxygen` section) whose root boundary `inlet` is fed by compartment `from`
+/// and whose outlet boundaries feed compartments.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TreeSpec {
+    pub model: String,
+    pub inlet: String,
+    pub from: usize,
+    pub outlets: Vec<TreeOutlet>,
+    /// Flow cycles run before the recorded one (the tree forgets its zero start).
+    #[serde(default = "default_flow_cycles")]
+    pub flow_cycles: usize,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TreeOutlet {
+    pub boundary: String,
+    pub to: usize,
+}
+
+impl TreeSpec {
+    /// Parses the JSON form; a malformed spec is a model error.
+    pub fn from_json(json: &str) -> Result<Self> {
+        serde_json::from_str(json).map_err(|e| Error::model("arterial tree", e.to_string()))
+    }
+}
+
+fn default_flow_cycles() -> usize {
+    40
 }
 
 impl ClosedLoopSpec {
@@ -100,6 +138,11 @@ pub struct ClosedLoop {
     pub uptake: Vec<f64>,
     pub flux: Vec<f64>,
     next: Vec<f64>,
+    /// The arterial tree (`closed_loop_tree`), the compartment feeding its root and the
+    /// compartment of every outlet.
+    pub tree: Option<ArterialTree>,
+    tree_from: usize,
+    tree_to: Vec<usize>,
 }
 
 impl ClosedLoop {
@@ -186,16 +229,48 @@ impl ClosedLoop {
             uptake: vec![0.0; nb],
             flux: vec![0.0; nb],
             next: vec![0.0; nc],
+            tree: None,
+            tree_from: 0,
+            tree_to: Vec::new(),
         })
+    }
+
+    /// Puts the arterial tree of `spec.tree` (built at step dt over `steps` steps per cycle)
+    /// between its feeding compartment and its outlets' compartments.
+    pub fn attach_tree(&mut self, spec: &TreeSpec, dt: f64, steps: usize) -> Result<()> {
+        let nc = self.volume.len();
+        let mut targets = vec![spec.from];
+        targets.extend(spec.outlets.iter().map(|o| o.to));
+        if let Some(&v) = targets.iter().find(|&&v| v >= nc) {
+            return Err(Error::model(
+                "arterial tree",
+                format!("compartment {v} does not exist (there are {nc})"),
+            ));
+        }
+        let names: Vec<String> = spec.outlets.iter().map(|o| o.boundary.clone()).collect();
+        let tree = ArterialTree::new(
+            &spec.model,
+            &spec.inlet,
+            &names,
+            dt,
+            steps,
+            spec.flow_cycles,
+        )?;
+        self.tree_from = spec.from;
+        self.tree_to = spec.outlets.iter().map(|o| o.to).collect();
+        self.tree = Some(tree);
+        Ok(())
     }
 
     /// The loop's O2 amount Σ V C_t (mol).
     pub fn amount(&self) -> f64 {
+        let tree = self.tree.as_ref().map_or(0.0, |t| t.amount());
         self.volume
             .iter()
             .zip(&self.total)
             .map(|(v, c)| v * c)
-            .sum()
+            .sum::<f64>()
+            + tree
     }
 
     /// Free PO2 of a compartment (Pa) and its haemoglobin saturation.
@@ -235,8 +310,14 @@ impl ClosedLoop {
         }
     }
 
-    /// One step of length dt with branch flows `q` (m³/s, positive from → to) held over it.
+    /// One step of length dt with branch flows `q` (m³/s, positive from → to) held over it
+    /// (a loop without arterial tree; see [`ClosedLoop::step_at`]).
     pub fn step(&mut self, dt: f64, q: &[f64], time: f64) -> Result<()> {
+        self.step_at(dt, q, time, 0)
+    }
+
+    /// Step `s` of the cycle: branch flows `q` held over it, and the arterial tree's step `s`.
+    pub fn step_at(&mut self, dt: f64, q: &[f64], time: f64, s: usize) -> Result<()> {
         let nc = self.volume.len();
         let mut v1 = self.volume.clone();
         let mut q_out = vec![0.0; nc];
@@ -255,6 +336,20 @@ impl ClosedLoop {
                 incoming[down].push(b);
             }
         }
+        // the tree's root flow leaves its compartment at the new concentration (implicit, as
+        // a branch); a backflow through the root and the outlets' fluxes are the tree's own
+        let tree_start = match &self.tree {
+            Some(t) => {
+                let q_root = t.inflow[s];
+                v1[self.tree_from] -= dt * q_root;
+                q_out[self.tree_from] += q_root.max(0.0);
+                for (&to, &qo) in self.tree_to.iter().zip(&t.outflow[s]) {
+                    v1[to] += dt * qo;
+                }
+                Some(t.snapshot())
+            }
+            None => None,
+        };
         if let Some(i) = (0..nc).find(|&i| v1[i].is_nan() || v1[i] <= 0.0) {
             return Err(Error::Solver {
                 time,
@@ -265,12 +360,15 @@ impl ClosedLoop {
             });
         }
         self.next.copy_from_slice(&self.total);
+        // the tree's step with the root concentration it last saw (NaN: not run yet)
+        let mut tree_c_in = f64::NAN;
+        self.tree_step(s, &tree_start, &mut tree_c_in)?;
         // the lungs' end-capillary content, recomputed only when the blood entering changes
         let mut cache: Vec<(f64, f64)> = vec![(f64::NAN, 0.0); q.len()];
         for _sweep in 0..200 {
             let mut change = 0.0_f64;
             for n in 0..nc {
-                let mut inflow = 0.0;
+                let mut inflow = self.tree_inflow(n);
                 for &b in &incoming[n] {
                     let c_up = if q[b] >= 0.0 {
                         self.next[self.from[b]]
@@ -300,6 +398,9 @@ impl ClosedLoop {
                 change = change.max((ct - self.next[n]).abs());
                 self.next[n] = ct;
                 self.vo2[n] = vo2;
+                if self.tree.is_some() && n == self.tree_from {
+                    self.tree_step(s, &tree_start, &mut tree_c_in)?;
+                }
             }
             let scale = self.next.iter().fold(0.0_f64, |m, c| m.max(c.abs()));
             if change <= 1e-15 * scale {
@@ -327,6 +428,59 @@ impl ClosedLoop {
         }
         Ok(())
     }
+
+    /// (Re)runs the tree's step `s` from its step-start state when the concentration of the
+    /// compartment feeding its root has changed since the last run (`c_in`): the tree then
+    /// carries in exactly what that compartment's implicit outflow removes.
+    fn tree_step(
+        &mut self,
+        s: usize,
+        start: &Option<(Vec<f64>, Vec<f64>)>,
+        c_in: &mut f64,
+    ) -> Result<()> {
+        let (Some(tree), Some(start)) = (self.tree.as_mut(), start) else {
+            return Ok(());
+        };
+        let c = self.next[self.tree_from];
+        if c == *c_in {
+            return Ok(());
+        }
+        if !c_in.is_nan() {
+            tree.restore(start)?;
+        }
+        tree.step(s, c)?;
+        *c_in = c;
+        Ok(())
+    }
+
+    /// Restores the tree's state of a snapshot (nothing without a tree).
+    fn restore_tree(&mut self, snap: &Option<(Vec<f64>, Vec<f64>)>) -> Result<()> {
+        match (self.tree.as_mut(), snap) {
+            (Some(t), Some(s)) => t.restore(s),
+            _ => Ok(()),
+        }
+    }
+
+    /// O2 the tree brings compartment n over the step (mol/s): its outlets' fluxes, and a
+    /// backflow through its root.
+    fn tree_inflow(&self, n: usize) -> f64 {
+        let Some(t) = &self.tree else { return 0.0 };
+        let mut j = 0.0;
+        for (&to, &f) in self.tree_to.iter().zip(&t.out_flux) {
+            if to == n {
+                j += f;
+            }
+        }
+        if n == self.tree_from && t.in_flux < 0.0 {
+            j -= t.in_flux;
+        }
+        j
+    }
+
+    /// The tree's wall uptake over the last step (mol/s; 0 without a tree).
+    pub fn tree_wall(&self) -> f64 {
+        self.tree.as_ref().map_or(0.0, |t| t.wall)
+    }
 }
 
 /// The recorded last cycle of a periodic closed-loop O2 run (row-major, one row per step end).
@@ -345,6 +499,18 @@ pub struct ClosedLoopRun {
     /// Loop amount at each recorded step end and at the start of the last cycle (mol).
     pub amount: Vec<f64>,
     pub amount_start: f64,
+    /// With an arterial tree: per step its wall uptake (mol/s), its O2 amount (mol), the flux
+    /// into its root and out of every outlet (mol/s), the PO2 (Pa) of every segment.
+    pub tree_wall: Vec<f64>,
+    pub tree_amount: Vec<f64>,
+    pub tree_in_flux: Vec<f64>,
+    pub tree_out_flux: Vec<f64>,
+    pub tree_po2: Vec<f64>,
+    pub tree_segments: Vec<String>,
+    pub tree_flow_periodic_error: f64,
+    /// The tree's flow per step into its root and out of every outlet (m³/s).
+    pub tree_inflow: Vec<f64>,
+    pub tree_outflow: Vec<f64>,
 }
 
 /// One cycle of the flow table from the loop's current state; records into `out` if given.
@@ -362,8 +528,16 @@ fn cycle(
     }
     for s in 0..steps {
         let t = t0 + dt * (s + 1) as f64;
-        lp.step(dt, &flows[s * nb..(s + 1) * nb], t)?;
+        lp.step_at(dt, &flows[s * nb..(s + 1) * nb], t, s)?;
         if let Some(o) = out.as_deref_mut() {
+            if let Some(tree) = &lp.tree {
+                o.tree_wall.push(tree.wall);
+                o.tree_amount.push(tree.amount());
+                o.tree_in_flux.push(tree.in_flux);
+                o.tree_out_flux.extend_from_slice(&tree.out_flux);
+                o.tree_po2
+                    .extend(tree.segment_free().iter().map(|c| c / lp.alpha));
+            }
             o.time[s] = t;
             for n in 0..nc {
                 let k = s * nc + n;
@@ -411,6 +585,97 @@ fn dense_solve(a: &mut [f64], b: &mut [f64], n: usize) -> bool {
     true
 }
 
+/// The shooting state: the compartments' total concentrations, then the tree's cell amounts.
+fn shooting_state(lp: &ClosedLoop) -> Vec<f64> {
+    let mut x = lp.total.clone();
+    if let Some(t) = &lp.tree {
+        x.extend_from_slice(t.cells());
+    }
+    x
+}
+
+/// Starts a cycle from shooting state `x` (volumes `v0`; the tree's carried state, i.e. its
+/// volumes and warm starts, from `tree_base`).
+fn load_state(
+    lp: &mut ClosedLoop,
+    v0: &[f64],
+    x: &[f64],
+    tree_base: &Option<(Vec<f64>, Vec<f64>)>,
+) -> Result<()> {
+    let nc = lp.volume.len();
+    lp.set_state(v0, &x[..nc]);
+    lp.restore_tree(tree_base)?;
+    if let Some(t) = lp.tree.as_mut() {
+        t.set_cells(&x[nc..]);
+    }
+    Ok(())
+}
+
+/// Newton shooting on the cycle map x ↦ Φ(x) of the shooting state (finite-difference
+/// Jacobian, one cycle per unknown), at most `budget` cycles; leaves the loop at the last
+/// iterate and returns the cycles run. The tree's cells are unknowns too: its transit takes
+/// ~3 cycles and its numerical diffusion a long tail, so holding it fixed while the
+/// compartments converge would converge only at that tail's rate.
+fn shoot(
+    lp: &mut ClosedLoop,
+    flows: &[f64],
+    dt: f64,
+    v0: &[f64],
+    budget: usize,
+    tol: f64,
+) -> Result<usize> {
+    let nc = lp.volume.len();
+    let mut x = shooting_state(lp);
+    let n = x.len();
+    let mut tree_base = lp.tree.as_ref().map(|t| t.snapshot());
+    let mut cycles = 0;
+    // each block (concentrations, tree amounts) is scaled by its own largest value
+    let block_scale = |x: &[f64], i: usize| {
+        let r = if i < nc { &x[..nc] } else { &x[nc..] };
+        r.iter().fold(0.0_f64, |m, c| m.max(c.abs())).max(1e-300)
+    };
+    for _newton in 0..6 {
+        if cycles + n + 1 > budget {
+            break;
+        }
+        load_state(lp, v0, &x, &tree_base)?;
+        cycle(lp, flows, dt, 0.0, None)?;
+        cycles += 1;
+        let tree_end = lp.tree.as_ref().map(|t| t.snapshot());
+        let fx: Vec<f64> = shooting_state(lp)
+            .iter()
+            .zip(&x)
+            .map(|(p, q)| p - q)
+            .collect();
+        let scales: Vec<f64> = (0..n).map(|i| block_scale(&x, i)).collect();
+        if fx.iter().zip(&scales).all(|(f, s)| f.abs() <= tol * s) {
+            break;
+        }
+        let mut jac = vec![0.0; n * n]; // J − I, column by column
+        for j in 0..n {
+            let eps = 1e-7 * x[j].abs().max(1e-3 * scales[j]);
+            let mut xp = x.clone();
+            xp[j] += eps;
+            load_state(lp, v0, &xp, &tree_base)?;
+            cycle(lp, flows, dt, 0.0, None)?;
+            cycles += 1;
+            for (i, xi) in shooting_state(lp).iter().enumerate() {
+                jac[i * n + j] = (xi - xp[i] - fx[i]) / eps;
+            }
+        }
+        let mut delta: Vec<f64> = fx.iter().map(|f| -f).collect();
+        if !dense_solve(&mut jac, &mut delta, n) {
+            break;
+        }
+        for (xi, d) in x.iter_mut().zip(&delta) {
+            *xi = (*xi + d).max(0.0);
+        }
+        tree_base = tree_end;
+    }
+    load_state(lp, v0, &x, &tree_base)?;
+    Ok(cycles)
+}
+
 /// Runs the loop on the periodic flow table `flows` (one row of branch flows per step of
 /// length dt) to its periodic steady state and records the last cycle. The loop's slowest
 /// modes are washouts of the large pools (τ = V/Q ≈ 30 s: hundreds of cycles), so the periodic
@@ -449,6 +714,9 @@ pub fn run_periodic(
     }
     let steps = flows.len() / nb;
     let period = dt * steps as f64;
+    if let Some(t) = &spec.tree {
+        lp.attach_tree(t, dt, steps)?;
+    }
     let v0 = lp.volume.clone();
     // periodic volumes: the table's net inflow over a cycle must vanish in every compartment
     // (else no periodic state exists and Fick's balance would include the volume drift)
@@ -457,6 +725,14 @@ pub fn run_periodic(
         for (b, &qb) in row.iter().enumerate() {
             net[lp.from[b]] -= dt * qb;
             net[lp.to[b]] += dt * qb;
+        }
+    }
+    if let Some(t) = &lp.tree {
+        for (qi, qo) in t.inflow.iter().zip(&t.outflow) {
+            net[lp.tree_from] -= dt * qi;
+            for (&to, &q) in lp.tree_to.iter().zip(qo) {
+                net[to] += dt * q;
+            }
         }
     }
     if let Some(i) = (0..nc).find(|&i| net[i].abs() > 1e-9 * v0[i]) {
@@ -476,40 +752,14 @@ pub fn run_periodic(
         cycle(&mut lp, flows, dt, period * cycles as f64, None)?;
         cycles += 1;
     }
-    let mut x = lp.total.clone();
-    for _newton in 0..6 {
-        if cycles + nc + 1 > max_cycles {
-            break;
-        }
-        lp.set_state(&v0, &x);
-        cycle(&mut lp, flows, dt, 0.0, None)?;
-        let fx: Vec<f64> = lp.total.iter().zip(&x).map(|(p, q)| p - q).collect();
-        let scale = x.iter().fold(0.0_f64, |m, c| m.max(c.abs()));
-        cycles += 1;
-        if fx.iter().all(|f| f.abs() <= tol * scale) {
-            break;
-        }
-        let mut jac = vec![0.0; nc * nc]; // J − I, column by column
-        for j in 0..nc {
-            let eps = 1e-7 * x[j].abs().max(1e-3 * scale);
-            let mut xp = x.clone();
-            xp[j] += eps;
-            lp.set_state(&v0, &xp);
-            cycle(&mut lp, flows, dt, 0.0, None)?;
-            cycles += 1;
-            for i in 0..nc {
-                jac[i * nc + j] = (lp.total[i] - xp[i] - fx[i]) / eps;
-            }
-        }
-        let mut delta: Vec<f64> = fx.iter().map(|f| -f).collect();
-        if !dense_solve(&mut jac, &mut delta, nc) {
-            break;
-        }
-        for (xi, d) in x.iter_mut().zip(&delta) {
-            *xi = (*xi + d).max(0.0);
-        }
-    }
-    lp.set_state(&v0, &x);
+    cycles += shoot(
+        &mut lp,
+        flows,
+        dt,
+        &v0,
+        max_cycles.saturating_sub(cycles),
+        tol,
+    )?;
     let mut out = ClosedLoopRun {
         cycles: 0,
         periodic_error: f64::INFINITY,
@@ -523,9 +773,31 @@ pub fn run_periodic(
         uptake: vec![0.0; steps * nb],
         amount: vec![0.0; steps],
         amount_start: 0.0,
+        tree_wall: Vec::new(),
+        tree_amount: Vec::new(),
+        tree_in_flux: Vec::new(),
+        tree_out_flux: Vec::new(),
+        tree_po2: Vec::new(),
+        tree_segments: lp
+            .tree
+            .as_ref()
+            .map_or(Vec::new(), |t| t.segment_names.clone()),
+        tree_flow_periodic_error: lp.tree.as_ref().map_or(0.0, |t| t.flow_periodic_error),
+        tree_inflow: lp.tree.as_ref().map_or(Vec::new(), |t| t.inflow.clone()),
+        tree_outflow: lp.tree.as_ref().map_or(Vec::new(), |t| t.outflow.concat()),
     };
     loop {
         let start = lp.total.clone();
+        let tree_start = lp.tree.as_ref().map(|t| t.snapshot());
+        for v in [
+            &mut out.tree_wall,
+            &mut out.tree_amount,
+            &mut out.tree_in_flux,
+            &mut out.tree_out_flux,
+            &mut out.tree_po2,
+        ] {
+            v.clear();
+        }
         cycle(&mut lp, flows, dt, period * cycles as f64, Some(&mut out))?;
         cycles += 1;
         let scale = lp.total.iter().fold(0.0_f64, |m, c| m.max(c.abs()));
@@ -535,6 +807,9 @@ pub fn run_periodic(
             .zip(&start)
             .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()))
             / scale;
+        if let (Some(t), Some(a)) = (&lp.tree, &tree_start) {
+            out.periodic_error = out.periodic_error.max(t.relative_change(a, &t.snapshot()));
+        }
         if out.periodic_error <= tol || cycles >= max_cycles {
             break;
         }

@@ -31,6 +31,7 @@ use std::sync::Arc;
 
 mod build;
 pub mod closed_loop; // closed circulation: compartments, lungs (issue 14 item 4)
+pub mod closed_loop_tree; // its segment-resolved arterial tree
 pub mod compartment;
 mod fused;
 mod implicit;
@@ -233,6 +234,9 @@ pub struct Transport {
     wvol: Vec<f64>,
     /// Tissue hook: scratch of the implicit wall elimination (empty without tissue).
     tissue: tissue::TissueScratch,
+    /// Closed-loop hook: (boundary, total concentration) carried in by that boundary instead
+    /// of its prescribed value, set step by step by a closed circulation (`closed_loop_tree`).
+    inflow_override: Option<(usize, f64)>,
 }
 
 fn bad(element: &str, msg: String) -> Error {
@@ -271,6 +275,7 @@ impl Transport {
             sweep: Sweep::default(),
             wvol: Vec::new(),
             tissue: tissue::TissueScratch::default(),
+            inflow_override: None,
         }
     }
 

@@ -99,6 +99,9 @@ impl Transport {
             }
             self.bval_species = s;
         }
+        if let Some((k, total)) = self.inflow_override {
+            self.bval[k] = Some(total); // closed-loop hook (`closed_loop_tree`)
+        }
     }
 
     /// Total concentration carried by a face from the boundary end `b` next to node `n`:
