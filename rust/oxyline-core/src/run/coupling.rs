@@ -226,15 +226,20 @@ impl State<'_, '_> {
         let Some(sp) = self.species.as_mut() else {
             return Ok(());
         };
-        sp.y_obs.copy_from_slice(&self.y);
-        sp.yd_obs.copy_from_slice(&self.yd);
         let monolithic = matches!(self.flow, Flow::Monolithic(_));
         let names = &self.dae.names;
         sp.tr
             .check_finite(&sp.z, t, &|v| names.vessel(v).map(str::to_owned))?;
-        self.flow
-            .integrator()
-            .rate(t, &mut sp.y_obs, &mut sp.yd_obs)?;
+        let ig = self.flow.integrator();
+        if ig.rate_is_carried() {
+            // (y, ẏ) are what `rate` would report: no copies of the flow state per row
+            return sp
+                .tr
+                .observe(t, &self.y, Some(&self.yd), &sp.z, !monolithic, out);
+        }
+        sp.y_obs.copy_from_slice(&self.y);
+        sp.yd_obs.copy_from_slice(&self.yd);
+        ig.rate(t, &mut sp.y_obs, &mut sp.yd_obs)?;
         sp.tr
             .observe(t, &sp.y_obs, Some(&sp.yd_obs), &sp.z, !monolithic, out)
     }
