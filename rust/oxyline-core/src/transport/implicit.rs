@@ -353,15 +353,16 @@ impl Transport {
             let c = zs[i] / self.wvol[i];
             self.conc[n] = c;
             let (wl, wc) = if has_wall {
-                let (f, slope) = match anchors.get_mut(n) {
-                    Some(a) => set.binding.free_and_slope_anchored(c, free[n], a),
-                    None => {
-                        set.binding
-                            .free_and_slope_anchored(c, free[n], &mut HillAnchor::default())
-                    }
+                let (f, inv_slope) = match anchors.get_mut(n) {
+                    Some(a) => set.binding.free_and_inv_slope_anchored(c, free[n], a),
+                    None => set.binding.free_and_inv_slope_anchored(
+                        c,
+                        free[n],
+                        &mut HillAnchor::default(),
+                    ),
                 };
                 free[n] = f;
-                let wl = laws.cell_g[i] * (1.0 / slope);
+                let wl = laws.cell_g[i] * inv_slope;
                 (wl, laws.fixed_uptake(i, f) - wl * c)
             } else {
                 (0.0, 0.0)
@@ -440,9 +441,10 @@ impl Transport {
             for (&n, v) in self.plan.cells.iter().zip(inv_slope.iter_mut()) {
                 let mut scratch = HillAnchor::default();
                 let anchor = sp.anchors.get_mut(n).unwrap_or(&mut scratch);
-                let (f, slope) = binding.free_and_slope_anchored(self.conc[n], sp.free[n], anchor);
+                let (f, inv) =
+                    binding.free_and_inv_slope_anchored(self.conc[n], sp.free[n], anchor);
                 sp.free[n] = f;
-                *v = 1.0 / slope;
+                *v = inv;
             }
         }
         self.wall_uptake(s, wconst);
