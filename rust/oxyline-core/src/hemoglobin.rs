@@ -323,11 +323,13 @@ impl Binding {
         self.free_reanchored(ct, guess, anchor)
     }
 
-    /// `free_anchored` and the capacity slope dC_t/dc there (for linearising the wall uptake
-    /// of an implicit step): with an accepted anchor the slope comes from the same series,
-    /// dP/dC_t = (1 − 2k₂u + 3k₃u²)/b, so neither needs a `powf`.
+    /// `free_anchored` and the inverse capacity slope dc/dC_t there (for linearising the wall
+    /// uptake of an implicit step, which multiplies by it): with an accepted anchor it comes
+    /// from the same series, dP/dC_t = (1 − 2k₂u + 3k₃u²)/b, so neither needs a `powf`, and
+    /// it is used as it comes (no division to the slope and back: the implicit step's chain
+    /// of divisions per cell was its cost).
     #[inline]
-    pub fn free_and_slope_anchored(
+    pub fn free_and_inv_slope_anchored(
         &self,
         ct: f64,
         guess: f64,
@@ -338,11 +340,11 @@ impl Binding {
             if ok {
                 let u = (ct - anchor.total) * anchor.inv_slope;
                 let dp_dct = anchor.inv_slope * (1.0 + u * (3.0 * anchor.k3 * u - 2.0 * anchor.k2));
-                return (alpha * p, 1.0 / (alpha * dp_dct));
+                return (alpha * p, alpha * dp_dct);
             }
         }
         let c = self.free_reanchored(ct, guess, anchor);
-        (c, self.capacity_slope(c))
+        (c, 1.0 / self.capacity_slope(c))
     }
 
     /// Exact inversion, and a new anchor at its root.

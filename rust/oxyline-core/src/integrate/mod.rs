@@ -49,6 +49,12 @@ pub trait Integrator {
     /// generalized-α's carried ẏ is already that rate, so (y, ẏ) are left as they are.
     fn rate(&mut self, time: f64, y: &mut [f64], yd: &mut [f64]) -> Result<()>;
 
+    /// Whether [`Integrator::rate`] leaves (y, ẏ) as they are (the carried ẏ is the rate):
+    /// then an observer may read the run's own vectors instead of copies.
+    fn rate_is_carried(&self) -> bool {
+        false
+    }
+
     /// What the integrator carries from step to step besides (y, ẏ) and that changes its
     /// results (e.g. the running scale of its Newton convergence test), for a checkpoint: a run
     /// resumed with [`Integrator::restore_carried`] continues bit for bit.
@@ -124,6 +130,9 @@ impl Integrator for GenAlpha<'_> {
     }
     fn rate(&mut self, _time: f64, _y: &mut [f64], _yd: &mut [f64]) -> Result<()> {
         Ok(())
+    }
+    fn rate_is_carried(&self) -> bool {
+        true
     }
     fn carried(&self) -> Vec<f64> {
         self.newton_scale().peaks().to_vec()

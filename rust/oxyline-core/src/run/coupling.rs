@@ -42,8 +42,13 @@ pub(super) struct Species<'t> {
     level: f64,
     /// The flow state at the start of the step, when a split transport step interpolates its
     /// face flows between the step's start and end (generalized-α); None when it takes the
-    /// end-of-step flows (RK4, whose end state is consistent).
+    /// end-of-step flows (RK4, whose end state is consistent). Kept only while the transport
+    /// reads the whole state (`Transport::needs_step_state`); otherwise the transport carries
+    /// the face flows from one step's end to the next step's start (no copy of y per step).
     step_start: Option<Vec<f64>>,
+    /// The transport holds the face flows of the current flow state (`set_step_start`, then
+    /// carried by every `implicit_step_carried`); false after anything else sets y.
+    start_carried: bool,
     /// Stages of the monolithic RK4 step.
     zk: CoupledStages,
     /// z at the end of the previous cycle (periodicity).
@@ -85,7 +90,8 @@ impl<'t> Species<'t> {
             prev_cycle_z: z.clone(),
             z,
             level: if quasi { 1.0 } else { level },
-            step_start: interpolate.then(|| vec![0.0; y.len()]),
+            step_start: interpolate.then(Vec::new),
+            start_carried: false,
             y_obs: vec![0.0; y.len()],
             yd_obs: vec![0.0; y.len()],
         };
@@ -94,8 +100,29 @@ impl<'t> Species<'t> {
 
     /// The backward-Euler transport step over [t, t + dt] after the flow step that ended in `y`.
     fn implicit_step(&mut self, t: f64, dt: f64, y: &[f64]) -> Result<()> {
+        if self.start_carried {
+            return self
+                .tr
+                .implicit_step_carried(t, dt, self.level, y, &mut self.z);
+        }
         let y0 = self.step_start.as_deref().unwrap_or(y);
         self.tr.implicit_step(t, dt, self.level, y0, y, &mut self.z)
+    }
+
+    /// Before a flow step from `y`: keep what the transport step interpolates from (the
+    /// face flows, or the whole state; see `step_start`).
+    fn before_flow_step(&mut self, y: &[f64]) {
+        let Some(start) = self.step_start.as_mut() else {
+            return;
+        };
+        if self.tr.needs_step_state() {
+            start.clear();
+            start.extend_from_slice(y);
+            self.start_carried = false;
+        } else if !self.start_carried {
+            self.tr.set_step_start(y);
+            self.start_carried = true;
+        }
     }
 
     /// (z, z at the end of the cycle before, the transport's carried state) for a checkpoint.
@@ -118,6 +145,8 @@ impl<'t> Species<'t> {
         }
         self.z.copy_from_slice(&snap.z);
         self.prev_cycle_z.copy_from_slice(&snap.prev_cycle_z);
+        // the flow state is restored too: take the next step's start flows from it
+        self.start_carried = false;
         self.tr.restore_carried(&snap.transport)
     }
 
@@ -150,8 +179,8 @@ impl State<'_, '_> {
                 rk.step_coupled(t, y, &mut sp.z, &mut sp.zk, &mut *sp.tr)
             }
             (flow, mut species) => {
-                if let Some(start) = species.as_mut().and_then(|s| s.step_start.as_mut()) {
-                    start.copy_from_slice(y);
+                if let Some(sp) = species.as_mut() {
+                    sp.before_flow_step(y);
                 }
                 flow.integrator().step(t, y, yd)?;
                 match species {
@@ -197,15 +226,20 @@ impl State<'_, '_> {
         let Some(sp) = self.species.as_mut() else {
             return Ok(());
         };
-        sp.y_obs.copy_from_slice(&self.y);
-        sp.yd_obs.copy_from_slice(&self.yd);
         let monolithic = matches!(self.flow, Flow::Monolithic(_));
         let names = &self.dae.names;
         sp.tr
             .check_finite(&sp.z, t, &|v| names.vessel(v).map(str::to_owned))?;
-        self.flow
-            .integrator()
-            .rate(t, &mut sp.y_obs, &mut sp.yd_obs)?;
+        let ig = self.flow.integrator();
+        if ig.rate_is_carried() {
+            // (y, ẏ) are what `rate` would report: no copies of the flow state per row
+            return sp
+                .tr
+                .observe(t, &self.y, Some(&self.yd), &sp.z, !monolithic, out);
+        }
+        sp.y_obs.copy_from_slice(&self.y);
+        sp.yd_obs.copy_from_slice(&self.yd);
+        ig.rate(t, &mut sp.y_obs, &mut sp.yd_obs)?;
         sp.tr
             .observe(t, &sp.y_obs, Some(&sp.yd_obs), &sp.z, !monolithic, out)
     }

@@ -60,11 +60,11 @@ impl CellRows for BindingRows<'_> {
         let (wl, wc) = if self.laws.has_wall {
             let mut scratch = HillAnchor::default();
             let anchor = self.anchors.get_mut(n).unwrap_or(&mut scratch);
-            let (f, slope) = self
+            let (f, inv_slope) = self
                 .binding
-                .free_and_slope_anchored(c, self.free[n], anchor);
+                .free_and_inv_slope_anchored(c, self.free[n], anchor);
             self.free[n] = f;
-            let wl = self.laws.cell_g[i] * (1.0 / slope);
+            let wl = self.laws.cell_g[i] * inv_slope;
             (wl, self.laws.fixed_uptake(i, f) - wl * c)
         } else {
             (0.0, 0.0)

@@ -34,21 +34,75 @@ impl Transport {
     ) -> Result<()> {
         self.ensure_scratch();
         let t_af = time + alpha_f * dt;
-        self.update_wall_flux(t_af);
         self.load_flows_between(t_af, y0, y1, alpha_f);
-        if self.fused_applies() {
-            return self.fused_tree_step(t_af, dt, z);
-        }
-        // the α_f-level state is only needed by shear-dependent walls (relaxed or instantaneous)
-        let mut ya = std::mem::take(&mut self.sweep.ya);
-        if self
-            .species
-            .iter()
-            .any(|sp| !sp.laws.relax.is_empty() || !sp.laws.dynamic_segs.is_empty())
-        {
+        if self.needs_step_state() {
+            let ya = &mut self.sweep.ya;
             ya.clear();
             ya.extend(y0.iter().zip(y1).map(|(a, b)| a + alpha_f * (b - a)));
         }
+        self.step_with_loaded_flows(t_af, dt, z)
+    }
+
+    /// Whether a step reads the whole α_f-level flow state (shear-dependent walls, relaxed or
+    /// instantaneous), not only the face flows: then the caller keeps the step's start state
+    /// and calls [`Transport::implicit_step`], else it may use
+    /// [`Transport::implicit_step_carried`].
+    pub fn needs_step_state(&self) -> bool {
+        !self.fused_applies()
+            && self
+                .species
+                .iter()
+                .any(|sp| !sp.laws.relax.is_empty() || !sp.laws.dynamic_segs.is_empty())
+    }
+
+    /// The face flows of `y` as the start of the next [`Transport::implicit_step_carried`]
+    /// (a run calls it once before its first step and after anything that sets the flow
+    /// state other than a step, such as a checkpoint restore).
+    pub fn set_step_start(&mut self, y: &[f64]) {
+        self.ensure_scratch();
+        let nf = self.plan.n_flow_faces;
+        let q0 = &mut self.sweep.q_start;
+        q0.clear();
+        q0.extend(self.plan.face_unknowns[..nf].iter().map(|&u| y[u as usize]));
+    }
+
+    /// [`Transport::implicit_step`] with the step's start flows carried from the previous
+    /// step's end (or [`Transport::set_step_start`]) instead of read from a copy of the flow
+    /// state: the same face flows bit for bit (Q_0 is the same number), without copying y
+    /// every step. The end flows become the next step's start.
+    pub fn implicit_step_carried(
+        &mut self,
+        time: f64,
+        dt: f64,
+        alpha_f: f64,
+        y1: &[f64],
+        z: &mut [f64],
+    ) -> Result<()> {
+        self.ensure_scratch();
+        debug_assert!(!self.needs_step_state());
+        let t_af = time + alpha_f * dt;
+        let mut q0 = std::mem::take(&mut self.sweep.q_start);
+        let nf = self.plan.n_flow_faces;
+        assert_eq!(q0.len(), nf, "set_step_start before the first carried step");
+        let unknowns = &self.plan.face_unknowns[..nf];
+        for ((q, q0), &u) in self.qf[..nf].iter_mut().zip(q0.iter_mut()).zip(unknowns) {
+            let q1 = y1[u as usize];
+            *q = *q0 + alpha_f * (q1 - *q0);
+            *q0 = q1;
+        }
+        self.sweep.q_start = q0;
+        self.load_source_and_chain_flows(t_af);
+        self.step_with_loaded_flows(t_af, dt, z)
+    }
+
+    /// The step after the face flows of its α_f level are loaded.
+    fn step_with_loaded_flows(&mut self, t_af: f64, dt: f64, z: &mut [f64]) -> Result<()> {
+        self.update_wall_flux(t_af);
+        if self.fused_applies() {
+            return self.fused_tree_step(t_af, dt, z);
+        }
+        // the α_f-level state (`implicit_step`; only read by shear-dependent walls)
+        let ya = std::mem::take(&mut self.sweep.ya);
         let res = self
             .transport_volumes(t_af, dt)
             .and_then(|()| self.implicit_species(t_af, dt, &ya, z));
@@ -299,15 +353,16 @@ impl Transport {
             let c = zs[i] / self.wvol[i];
             self.conc[n] = c;
             let (wl, wc) = if has_wall {
-                let (f, slope) = match anchors.get_mut(n) {
-                    Some(a) => set.binding.free_and_slope_anchored(c, free[n], a),
-                    None => {
-                        set.binding
-                            .free_and_slope_anchored(c, free[n], &mut HillAnchor::default())
-                    }
+                let (f, inv_slope) = match anchors.get_mut(n) {
+                    Some(a) => set.binding.free_and_inv_slope_anchored(c, free[n], a),
+                    None => set.binding.free_and_inv_slope_anchored(
+                        c,
+                        free[n],
+                        &mut HillAnchor::default(),
+                    ),
                 };
                 free[n] = f;
-                let wl = laws.cell_g[i] * (1.0 / slope);
+                let wl = laws.cell_g[i] * inv_slope;
                 (wl, laws.fixed_uptake(i, f) - wl * c)
             } else {
                 (0.0, 0.0)
@@ -386,9 +441,10 @@ impl Transport {
             for (&n, v) in self.plan.cells.iter().zip(inv_slope.iter_mut()) {
                 let mut scratch = HillAnchor::default();
                 let anchor = sp.anchors.get_mut(n).unwrap_or(&mut scratch);
-                let (f, slope) = binding.free_and_slope_anchored(self.conc[n], sp.free[n], anchor);
+                let (f, inv) =
+                    binding.free_and_inv_slope_anchored(self.conc[n], sp.free[n], anchor);
                 sp.free[n] = f;
-                *v = 1.0 / slope;
+                *v = inv;
             }
         }
         self.wall_uptake(s, wconst);
@@ -702,6 +758,8 @@ pub(super) struct Sweep {
     /// Fused tree step (`fused.rs`): per node, its net inflow and the d and b terms of its
     /// row left by its children and the boundaries; zero between steps.
     pub(super) acc: Vec<[f64; 3]>,
+    /// Face flows at the start of the next step (`Transport::implicit_step_carried`).
+    pub(super) q_start: Vec<f64>,
 }
 
 impl Sweep {

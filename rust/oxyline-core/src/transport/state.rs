@@ -66,6 +66,12 @@ impl Transport {
         for (q, &u) in self.qf[..nf].iter_mut().zip(&self.plan.face_unknowns) {
             *q = flow(u as usize);
         }
+        self.load_source_and_chain_flows(time);
+    }
+
+    /// Source flows at `time` and the interior faces of refined cells, the flow faces being
+    /// loaded.
+    pub(super) fn load_source_and_chain_flows(&mut self, time: f64) {
         for (q, (_, w, _)) in self.qs.iter_mut().zip(&self.plan.sources) {
             *q = w.eval(time);
         }
