@@ -203,7 +203,6 @@ fn record_start(
     }
 }
 
-
 /// Heart blocks and the coronary beds that refer to them (resolved once all are stamped).
 #[derive(Default)]
 struct HeartLinks {
