@@ -16,6 +16,7 @@ import math
 import sys
 import time
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -387,6 +388,14 @@ def _fourier(mean: float, period: float, cos: tuple[float, ...], sin: tuple[floa
     return PeriodicFlow(period, mean, tuple(c * mean for c in cos), tuple(s * mean for s in sin))
 
 
+def _heldout_case(base: Case, name: str, r: float, length: float, segments: int,
+                  flow: PeriodicFlow, d: float = 1.2e-9) -> tuple[str, Case]:
+    """A held-out vessel: the straight example's properties with its own radius, length,
+    segment count, flow and diffusivity."""
+    return name, replace(base, name=name, radius=r, length=length, segments=segments,
+                         flow=flow, diffusivity=d)
+
+
 def heldout_cases() -> list[tuple[str, Case]]:
     """Vessels and waveforms outside the 27 rows that fixed END_RENEWAL_C (docs/validation-
     oxygen.md §11): other radii (1.6–14 mm), lengths (5–25 cm), periods (0.5–1 s), a lower
@@ -394,11 +403,7 @@ def heldout_cases() -> list[tuple[str, Case]]:
     The waveforms are illustrative shapes (systolic peak, diastolic coronary flow, triphasic
     femoral flow), not patient data: what matters is that none of them was used in the fit."""
     base = load_case("straight")
-
-    def case(name: str, r: float, length: float, segments: int, flow: PeriodicFlow,
-             d: float = 1.2e-9) -> tuple[str, Case]:
-        return name, replace(base, name=name, radius=r, length=length, segments=segments,
-                             flow=flow, diffusivity=d)
+    case = partial(_heldout_case, base)
 
     return [
         case("carotid (r 3.2 mm, L 10 cm, T 0.85 s)", 3.2e-3, 0.10, 10,
@@ -422,11 +427,7 @@ def heldout_cases_2() -> list[tuple[str, Case]]:
     """A second held-out set, defined and run only after INLET_RENEWAL_A was fixed
     (docs/validation-oxygen.md §12); illustrative waveforms as in `heldout_cases`."""
     base = load_case("straight")
-
-    def case(name: str, r: float, length: float, segments: int, flow: PeriodicFlow,
-             d: float = 1.2e-9) -> tuple[str, Case]:
-        return name, replace(base, name=name, radius=r, length=length, segments=segments,
-                             flow=flow, diffusivity=d)
+    case = partial(_heldout_case, base)
 
     return [
         case("brachial, triphasic (r 2 mm, L 20 cm, T 0.8 s)", 2.0e-3, 0.20, 10,
@@ -448,11 +449,7 @@ def heldout_cases_3() -> list[tuple[str, Case]]:
     """A third held-out set, defined after the sign fix of `wall_shear` and the re-fit of
     INLET_RENEWAL_A (docs/validation-oxygen.md §12): blind to both."""
     base = load_case("straight")
-
-    def case(name: str, r: float, length: float, segments: int, flow: PeriodicFlow,
-             d: float = 1.2e-9) -> tuple[str, Case]:
-        return name, replace(base, name=name, radius=r, length=length, segments=segments,
-                             flow=flow, diffusivity=d)
+    case = partial(_heldout_case, base)
 
     return [
         case("vertebral (r 1.8 mm, L 15 cm, T 0.9 s)", 1.8e-3, 0.15, 10,
