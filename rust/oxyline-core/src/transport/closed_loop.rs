@@ -119,6 +119,25 @@ impl ClosedLoopSpec {
     }
 }
 
+/// What a step's sweeps hold fixed: its length and index, the compartments' end volumes and
+/// outflow rates, and the branches entering each compartment.
+struct StepPlan {
+    dt: f64,
+    s: usize,
+    v1: Vec<f64>,
+    q_out: Vec<f64>,
+    incoming: Vec<Vec<usize>>,
+}
+
+/// What a step's sweeps carry from one to the next: the lungs' last end-capillary contents
+/// (inflow content, end content), the tree's step-start state and the root content its step
+/// last saw.
+struct SweepState {
+    lung_cache: Vec<(f64, f64)>,
+    tree_start: Option<(Vec<f64>, Vec<f64>)>,
+    tree_c_in: f64,
+}
+
 /// A closed circulation's O2 state.
 pub struct ClosedLoop {
     pub names: Vec<String>,
@@ -317,11 +336,45 @@ impl ClosedLoop {
     }
 
     /// Step `s` of the cycle: branch flows `q` held over it, and the arterial tree's step `s`.
+    /// Backward Euler in the concentrations, solved by Gauss–Seidel sweeps in the listed order
+    /// until no content changes by more than 1e-15 of the largest.
     pub fn step_at(&mut self, dt: f64, q: &[f64], time: f64, s: usize) -> Result<()> {
+        let plan = self.step_plan(dt, q, s);
+        if let Some(i) = (0..plan.v1.len()).find(|&i| plan.v1[i].is_nan() || plan.v1[i] <= 0.0) {
+            return Err(Error::Solver {
+                time,
+                message: format!(
+                    "compartment '{}': its volume would become {:.3e} m³ (the flows empty it)",
+                    self.names[i], plan.v1[i]
+                ),
+            });
+        }
+        self.next.copy_from_slice(&self.total);
+        let mut sweep = SweepState {
+            // the lungs' end-capillary content, recomputed only when the blood entering changes
+            lung_cache: vec![(f64::NAN, 0.0); q.len()],
+            tree_start: self.tree.as_ref().map(|t| t.snapshot()),
+            // the root concentration the tree's step last saw (NaN: not run yet)
+            tree_c_in: f64::NAN,
+        };
+        self.tree_step(s, &sweep.tree_start, &mut sweep.tree_c_in)?;
+        for _sweep in 0..200 {
+            let change = self.sweep(&plan, q, &mut sweep)?;
+            let scale = self.next.iter().fold(0.0_f64, |m, c| m.max(c.abs()));
+            if change <= 1e-15 * scale {
+                break;
+            }
+        }
+        self.finish_step(q, plan.v1, time)
+    }
+
+    /// The step's end volumes (dV/dt = net inflow), the outflow rate of every compartment and
+    /// the branches entering it at this step's flow directions; the tree's root flow leaves its
+    /// compartment as a branch does, its outlets' flows enter theirs.
+    fn step_plan(&self, dt: f64, q: &[f64], s: usize) -> StepPlan {
         let nc = self.volume.len();
         let mut v1 = self.volume.clone();
         let mut q_out = vec![0.0; nc];
-        // branches entering each compartment at this step's flow directions
         let mut incoming: Vec<Vec<usize>> = vec![Vec::new(); nc];
         for (b, &qb) in q.iter().enumerate() {
             let (up, down) = if qb >= 0.0 {
@@ -338,80 +391,83 @@ impl ClosedLoop {
         }
         // the tree's root flow leaves its compartment at the new concentration (implicit, as
         // a branch); a backflow through the root and the outlets' fluxes are the tree's own
-        let tree_start = match &self.tree {
-            Some(t) => {
-                let q_root = t.inflow[s];
-                v1[self.tree_from] -= dt * q_root;
-                q_out[self.tree_from] += q_root.max(0.0);
-                for (&to, &qo) in self.tree_to.iter().zip(&t.outflow[s]) {
-                    v1[to] += dt * qo;
-                }
-                Some(t.snapshot())
-            }
-            None => None,
-        };
-        if let Some(i) = (0..nc).find(|&i| v1[i].is_nan() || v1[i] <= 0.0) {
-            return Err(Error::Solver {
-                time,
-                message: format!(
-                    "compartment '{}': its volume would become {:.3e} m³ (the flows empty it)",
-                    self.names[i], v1[i]
-                ),
-            });
-        }
-        self.next.copy_from_slice(&self.total);
-        // the tree's step with the root concentration it last saw (NaN: not run yet)
-        let mut tree_c_in = f64::NAN;
-        self.tree_step(s, &tree_start, &mut tree_c_in)?;
-        // the lungs' end-capillary content, recomputed only when the blood entering changes
-        let mut cache: Vec<(f64, f64)> = vec![(f64::NAN, 0.0); q.len()];
-        for _sweep in 0..200 {
-            let mut change = 0.0_f64;
-            for n in 0..nc {
-                let mut inflow = self.tree_inflow(n);
-                for &b in &incoming[n] {
-                    let c_up = if q[b] >= 0.0 {
-                        self.next[self.from[b]]
-                    } else {
-                        self.next[self.to[b]]
-                    };
-                    if self.lungs[b].is_some() && q[b] > 0.0 {
-                        if cache[b].0 != c_up {
-                            cache[b] = (c_up, self.carried(b, q[b], &self.next).0);
-                        }
-                        inflow += q[b] * cache[b].1;
-                    } else {
-                        inflow += q[b].abs() * c_up;
-                    }
-                }
-                let (ct, vo2) = compartment::step(
-                    &self.binding,
-                    &self.consumption[n],
-                    self.alpha,
-                    (self.volume[n], self.total[n]),
-                    v1[n],
-                    dt,
-                    q_out[n],
-                    inflow,
-                    self.free[n],
-                );
-                change = change.max((ct - self.next[n]).abs());
-                self.next[n] = ct;
-                self.vo2[n] = vo2;
-                if self.tree.is_some() && n == self.tree_from {
-                    self.tree_step(s, &tree_start, &mut tree_c_in)?;
-                }
-            }
-            let scale = self.next.iter().fold(0.0_f64, |m, c| m.max(c.abs()));
-            if change <= 1e-15 * scale {
-                break;
+        if let Some(t) = &self.tree {
+            let q_root = t.inflow[s];
+            v1[self.tree_from] -= dt * q_root;
+            q_out[self.tree_from] += q_root.max(0.0);
+            for (&to, &qo) in self.tree_to.iter().zip(&t.outflow[s]) {
+                v1[to] += dt * qo;
             }
         }
+        StepPlan {
+            dt,
+            s,
+            v1,
+            q_out,
+            incoming,
+        }
+    }
+
+    /// One Gauss–Seidel sweep over the compartments (each compartment's backward-Euler step
+    /// with the latest contents of its upstream neighbours; the tree reruns its step when the
+    /// content of its root compartment changed). Returns the largest content change.
+    fn sweep(&mut self, plan: &StepPlan, q: &[f64], st: &mut SweepState) -> Result<f64> {
+        let mut change = 0.0_f64;
+        for n in 0..self.volume.len() {
+            let inflow = self.inflow(n, &plan.incoming[n], q, &mut st.lung_cache);
+            let (ct, vo2) = compartment::step(
+                &self.binding,
+                &self.consumption[n],
+                self.alpha,
+                (self.volume[n], self.total[n]),
+                plan.v1[n],
+                plan.dt,
+                plan.q_out[n],
+                inflow,
+                self.free[n],
+            );
+            change = change.max((ct - self.next[n]).abs());
+            self.next[n] = ct;
+            self.vo2[n] = vo2;
+            if self.tree.is_some() && n == self.tree_from {
+                self.tree_step(plan.s, &st.tree_start, &mut st.tree_c_in)?;
+            }
+        }
+        Ok(change)
+    }
+
+    /// O2 entering compartment n (mol/s) from the current iterate: the tree's outlets and
+    /// root backflow, then every incoming branch (upwind content; the lungs' end-capillary
+    /// content through a lung branch).
+    fn inflow(&self, n: usize, incoming: &[usize], q: &[f64], cache: &mut [(f64, f64)]) -> f64 {
+        let mut inflow = self.tree_inflow(n);
+        for &b in incoming {
+            let c_up = if q[b] >= 0.0 {
+                self.next[self.from[b]]
+            } else {
+                self.next[self.to[b]]
+            };
+            if self.lungs[b].is_some() && q[b] > 0.0 {
+                if cache[b].0 != c_up {
+                    cache[b] = (c_up, self.carried(b, q[b], &self.next).0);
+                }
+                inflow += q[b] * cache[b].1;
+            } else {
+                inflow += q[b].abs() * c_up;
+            }
+        }
+        inflow
+    }
+
+    /// Records the solved step's branch fluxes and lung uptakes and moves the state to the
+    /// step's end (volumes `v1`, the solved contents and their free concentrations).
+    fn finish_step(&mut self, q: &[f64], v1: Vec<f64>, time: f64) -> Result<()> {
         for (b, &qb) in q.iter().enumerate() {
             let (c, up) = self.carried(b, qb, &self.next);
             self.flux[b] = qb * c;
             self.uptake[b] = up;
         }
+        let nc = self.volume.len();
         if let Some(i) = (0..nc).find(|&i| !(self.next[i].is_finite() && self.next[i] >= 0.0)) {
             return Err(Error::Solver {
                 time,
@@ -690,7 +746,35 @@ pub fn run_periodic(
     tol: f64,
 ) -> Result<ClosedLoopRun> {
     let mut lp = ClosedLoop::new(spec)?;
-    let (nc, nb) = (lp.volume.len(), lp.flux.len());
+    let steps = check_table(&lp, flows, dt)?;
+    let period = dt * steps as f64;
+    if let Some(t) = &spec.tree {
+        lp.attach_tree(t, dt, steps)?;
+    }
+    let v0 = lp.volume.clone();
+    check_periodic_volumes(&lp, flows, dt, &v0)?;
+    let mut cycles = 0;
+    // two plain cycles bring the state near the attractor, then Newton shooting
+    for _ in 0..2.min(max_cycles) {
+        cycle(&mut lp, flows, dt, period * cycles as f64, None)?;
+        cycles += 1;
+    }
+    cycles += shoot(
+        &mut lp,
+        flows,
+        dt,
+        &v0,
+        max_cycles.saturating_sub(cycles),
+        tol,
+    )?;
+    let mut out = ClosedLoopRun::empty(&lp, steps);
+    confirm(&mut lp, flows, dt, (cycles, max_cycles), tol, &mut out)?;
+    Ok(out)
+}
+
+/// Checks the flow table and the step; returns the steps per cycle.
+fn check_table(lp: &ClosedLoop, flows: &[f64], dt: f64) -> Result<usize> {
+    let nb = lp.flux.len();
     if nb == 0 || flows.len() % nb != 0 || flows.is_empty() {
         return Err(Error::model(
             "closed loop",
@@ -712,14 +796,14 @@ pub fn run_periodic(
             format!("flow table holds a non-finite value {x}"),
         ));
     }
-    let steps = flows.len() / nb;
-    let period = dt * steps as f64;
-    if let Some(t) = &spec.tree {
-        lp.attach_tree(t, dt, steps)?;
-    }
-    let v0 = lp.volume.clone();
-    // periodic volumes: the table's net inflow over a cycle must vanish in every compartment
-    // (else no periodic state exists and Fick's balance would include the volume drift)
+    Ok(flows.len() / nb)
+}
+
+/// Periodic volumes: the table's (and the tree's) net inflow over a cycle must vanish in every
+/// compartment, else no periodic state exists and Fick's balance would include the volume
+/// drift.
+fn check_periodic_volumes(lp: &ClosedLoop, flows: &[f64], dt: f64, v0: &[f64]) -> Result<()> {
+    let (nc, nb) = (lp.volume.len(), lp.flux.len());
     let mut net = vec![0.0; nc];
     for row in flows.chunks(nb) {
         for (b, &qb) in row.iter().enumerate() {
@@ -746,59 +830,68 @@ pub fn run_periodic(
             ),
         ));
     }
-    let mut cycles = 0;
-    // two plain cycles bring the state near the attractor, then Newton shooting
-    for _ in 0..2.min(max_cycles) {
-        cycle(&mut lp, flows, dt, period * cycles as f64, None)?;
-        cycles += 1;
+    Ok(())
+}
+
+impl ClosedLoopRun {
+    /// An empty record of `steps` steps for the loop `lp` (the tree's static fields filled).
+    fn empty(lp: &ClosedLoop, steps: usize) -> Self {
+        let (nc, nb) = (lp.volume.len(), lp.flux.len());
+        let tree = lp.tree.as_ref();
+        ClosedLoopRun {
+            cycles: 0,
+            periodic_error: f64::INFINITY,
+            time: vec![0.0; steps],
+            volume: vec![0.0; steps * nc],
+            total: vec![0.0; steps * nc],
+            po2: vec![0.0; steps * nc],
+            saturation: vec![0.0; steps * nc],
+            vo2: vec![0.0; steps * nc],
+            flux: vec![0.0; steps * nb],
+            uptake: vec![0.0; steps * nb],
+            amount: vec![0.0; steps],
+            amount_start: 0.0,
+            tree_wall: Vec::new(),
+            tree_amount: Vec::new(),
+            tree_in_flux: Vec::new(),
+            tree_out_flux: Vec::new(),
+            tree_po2: Vec::new(),
+            tree_segments: tree.map_or(Vec::new(), |t| t.segment_names.clone()),
+            tree_flow_periodic_error: tree.map_or(0.0, |t| t.flow_periodic_error),
+            tree_inflow: tree.map_or(Vec::new(), |t| t.inflow.clone()),
+            tree_outflow: tree.map_or(Vec::new(), |t| t.outflow.concat()),
+        }
     }
-    cycles += shoot(
-        &mut lp,
-        flows,
-        dt,
-        &v0,
-        max_cycles.saturating_sub(cycles),
-        tol,
-    )?;
-    let mut out = ClosedLoopRun {
-        cycles: 0,
-        periodic_error: f64::INFINITY,
-        time: vec![0.0; steps],
-        volume: vec![0.0; steps * nc],
-        total: vec![0.0; steps * nc],
-        po2: vec![0.0; steps * nc],
-        saturation: vec![0.0; steps * nc],
-        vo2: vec![0.0; steps * nc],
-        flux: vec![0.0; steps * nb],
-        uptake: vec![0.0; steps * nb],
-        amount: vec![0.0; steps],
-        amount_start: 0.0,
-        tree_wall: Vec::new(),
-        tree_amount: Vec::new(),
-        tree_in_flux: Vec::new(),
-        tree_out_flux: Vec::new(),
-        tree_po2: Vec::new(),
-        tree_segments: lp
-            .tree
-            .as_ref()
-            .map_or(Vec::new(), |t| t.segment_names.clone()),
-        tree_flow_periodic_error: lp.tree.as_ref().map_or(0.0, |t| t.flow_periodic_error),
-        tree_inflow: lp.tree.as_ref().map_or(Vec::new(), |t| t.inflow.clone()),
-        tree_outflow: lp.tree.as_ref().map_or(Vec::new(), |t| t.outflow.concat()),
-    };
-    loop {
-        let start = lp.total.clone();
-        let tree_start = lp.tree.as_ref().map(|t| t.snapshot());
+
+    fn clear_tree(&mut self) {
         for v in [
-            &mut out.tree_wall,
-            &mut out.tree_amount,
-            &mut out.tree_in_flux,
-            &mut out.tree_out_flux,
-            &mut out.tree_po2,
+            &mut self.tree_wall,
+            &mut self.tree_amount,
+            &mut self.tree_in_flux,
+            &mut self.tree_out_flux,
+            &mut self.tree_po2,
         ] {
             v.clear();
         }
-        cycle(&mut lp, flows, dt, period * cycles as f64, Some(&mut out))?;
+    }
+}
+
+/// Plain recorded cycles until the start-of-cycle state repeats to `tol` (relative; the tree's
+/// cell amounts too) or `max_cycles` in all; (cycles run so far, max_cycles).
+fn confirm(
+    lp: &mut ClosedLoop,
+    flows: &[f64],
+    dt: f64,
+    (mut cycles, max_cycles): (usize, usize),
+    tol: f64,
+    out: &mut ClosedLoopRun,
+) -> Result<()> {
+    let period = dt * (flows.len() / lp.flux.len()) as f64;
+    loop {
+        let start = lp.total.clone();
+        let tree_start = lp.tree.as_ref().map(|t| t.snapshot());
+        out.clear_tree();
+        cycle(lp, flows, dt, period * cycles as f64, Some(out))?;
         cycles += 1;
         let scale = lp.total.iter().fold(0.0_f64, |m, c| m.max(c.abs()));
         out.periodic_error = lp
@@ -815,5 +908,5 @@ pub fn run_periodic(
         }
     }
     out.cycles = cycles;
-    Ok(out)
+    Ok(())
 }
