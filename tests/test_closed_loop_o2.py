@@ -14,8 +14,10 @@ from oxyline.closed_loop import ML_O2
 
 
 def _model(**changes: object) -> dict:
+    """The pool model on the prescribed flow table (the core's balances on known flows)."""
     p = closed_loop.load("closed-loop-o2")
     p["dt"] = 4e-3
+    p["flows"] = "table"
     p.update(changes)
     return p
 
@@ -124,11 +126,11 @@ def test_external_flow_table_is_balanced_and_used() -> None:
 
 
 def test_heart_driven_loop_keeps_fick_and_the_physiology() -> None:
-    """Flows from the native closed-loop heart (chambers and valves, docs/physics.md §1.8) instead
-    of the prescribed table: the heart pumps the documented cardiac output (within 2 %), the
-    ventricles eject what they receive over the cycle, and Fick's principle, the loop's mass
-    balance and the resting ranges hold as with the prescribed flows."""
-    res = closed_loop.simulate_o2(_model(), flows="heart")
+    """Flows from the native two-ventricle heart (chambers and valves, docs/physics.md §1.8)
+    instead of the prescribed table: the heart pumps the documented cardiac output (within
+    2 %), the ventricles eject what they receive over the cycle, and Fick's principle, the
+    loop's mass balance and the resting ranges hold as with the prescribed flows."""
+    res = closed_loop.simulate_o2(_model(heart="two-ventricle"), flows="heart")
     s = res.summary()
     assert s["cardiac_output"] == pytest.approx(5.0, rel=0.02)
     assert s["fick_residual"] <= 1e-9 and s["mass_balance_residual"] <= 1e-13
@@ -136,6 +138,66 @@ def test_heart_driven_loop_keeps_fick_and_the_physiology() -> None:
     q = res.flow[:, res.branches.index("ejection_left")]
     assert q.max() > 3 * q.mean()          # pulsatile ejection through the aortic valve
     assert abs(q.min()) < 0.01 * q.max()   # the valve closes (tanh: a small leak only)
+
+
+@pytest.fixture(scope="module")
+def block() -> tuple[dict, closed_loop.HeartRun, closed_loop.ClosedLoopO2Result]:
+    p = closed_loop.load("closed-loop-o2")
+    p["dt"] = 4e-3
+    run = closed_loop.run_heart(p)
+    return p, run, closed_loop.simulate_o2(p, flows=closed_loop.heart_flows(p, run))
+
+
+def test_builtin_is_driven_by_the_svzerod_heart_block(block) -> None:
+    """The built-in's default heart is svZeroDSolver's ClosedLoopHeartAndPulmonary
+    (docs/physics.md §1.10; docs/oxygen.md): Fick's principle to 1e-9 and the loop's exact
+    mass balance on its flows, the resting ranges (SaO2 ≈ 97 %, SvO2 70–75 %, VO2 ≈ 250
+    mL/min) and the documented cardiac output (5 L/min within 2 %)."""
+    p, _, res = block
+    s = res.summary()
+    assert p["heart"] == "svzerod-block" and p["flows"] == "heart"
+    assert s["fick_residual"] <= 1e-9 and s["mass_balance_residual"] <= 1e-13
+    assert 0.95 <= s["SaO2"] <= 0.98 and 0.70 <= s["SvO2"] <= 0.75 and 240 <= s["VO2"] <= 260
+    assert 85 <= s["PaO2"] <= 100 and 35 <= s["PvO2"] <= 45
+    assert s["cardiac_output"] == pytest.approx(5.0, rel=0.02)
+
+
+def test_block_flows_conserve_blood_and_its_valves_close(block) -> None:
+    """The block's flows over its last (nearly periodic) cycle: each chamber ejects what it
+    receives (the cycle means through the four valves, the venous return and the lungs agree
+    to the flow run's periodicity, ~1e-4 after 30 cycles: 1e-3), the on/off valves carry no
+    flow while closed (exactly 0, never negative), and the left ventricle ejects in a pulse
+    (peak > 3× mean)."""
+    _, run, _ = block
+    mean = {k: float(np.mean(0.5 * (v[1:] + v[:-1]))) for k, v in run.series.items()}
+    co = mean["aortic"]
+    for k in ("aortic_outflow", "tricuspid", "pulmonary", "mitral", "lungs"):
+        assert mean[k] == pytest.approx(co, rel=1e-3), k
+    for k in ("aortic", "tricuspid", "pulmonary", "mitral"):
+        q = run.series[k]
+        assert q.min() >= -1e-4 * q.max() and np.any(q == 0.0), k
+    assert run.series["aortic"].max() > 3 * co
+
+
+def test_anderson_and_newton_shooting_find_the_same_periodic_state() -> None:
+    """The periodic state is unique: Anderson acceleration of the cycle map (default) and the
+    finite-difference Newton shooting are two independent solvers of Φ(x) = x; both stop when
+    a cycle repeats its start to 1e-13, so their recorded cycles agree to ~1e-12 (1e-10
+    allowed: the last cycle's contraction), with fewer cycles for Anderson."""
+    p = _model()
+    a = closed_loop.simulate_o2(p)
+    n = closed_loop.simulate_o2(p, shooting="newton")
+    assert np.max(np.abs(a.total - n.total)) <= 1e-10 * n.total.max()
+    assert a.cycles < n.cycles
+    with pytest.raises(oxyline.ModelError, match="shooting"):
+        closed_loop.simulate_o2(p, shooting="secant")
+
+
+def test_heart_choice_is_checked() -> None:
+    with pytest.raises(oxyline.ModelError, match="heart must be one of"):
+        closed_loop.heart_model(_model(heart="three-ventricle"))
+    with pytest.raises(oxyline.ModelError, match="flows must be"):
+        closed_loop.simulate_o2(_model(), flows="pump")
 
 
 # --- the segment-resolved arterial tree (built-in closed-loop-o2-tree; docs/oxygen.md) ---

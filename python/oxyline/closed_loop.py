@@ -3,16 +3,17 @@ loop"): heart chambers, systemic arteries, organ beds consuming O2, systemic vei
 as well-mixed compartments joined by the circulation's flows. The physics (compartments,
 Michaelis–Menten VO2, diffusion-limited lung exchange with Hill binding, the periodic steady
 state) lives in the core (``oxyline_core::transport::closed_loop``); this module holds the
-built-in parameter set ``closed-loop-o2``, converts it to SI, builds the periodic flow table and
-summarises the result.
+built-in parameter sets ``closed-loop-o2`` and ``closed-loop-o2-tree``, converts them to SI,
+runs the closed-loop heart that drives the flows and summarises the result.
 
     from oxyline import closed_loop
     res = closed_loop.simulate_o2("closed-loop-o2")
     print(res.summary())     # SaO2, SvO2, PO2s, VO2 per organ, Fick and mass-balance residuals
 
-The flows are prescribed here (a pulsatile ejection of both ventricles, steady organ flows and
-venous return): the closed-loop heart and pulmonary block that will drive them is not merged
-yet (docs/oxygen.md lists what is left).
+The flows come from a closed-loop heart run first (`run_heart`): by default svZeroDSolver's
+ClosedLoopHeartAndPulmonary block (`heart: "svzerod-block"`, docs/physics.md §1.10), or the
+native two-ventricle heart (`heart: "two-ventricle"`), or a prescribed table (`flows:
+"table"`: a pulsatile ejection of both ventricles, steady organ flows and venous return).
 """
 
 from __future__ import annotations
@@ -38,6 +39,13 @@ ML_O2 = 1.0 / 22414.0      # mol per mL O2 (STPD; docs/physics.md: 1 mL = 1/22.4
 STANDARD: dict[str, Any] = {
     "name": "closed-loop-o2",
     "period": 0.8,                       # s (75 beats/min)
+    # the flows: "heart" = a closed-loop heart run (`heart`), "table" = the prescribed
+    # half-sine table of `flow_table`
+    "flows": "heart",
+    # "svzerod-block": svZeroDSolver's ClosedLoopHeartAndPulmonary (`SVZEROD_HEART`);
+    # "two-ventricle": the native chambers and tanh valves of `heart_model`
+    "heart": "svzerod-block",
+    "stressed_volume": 1350.0,           # mL (svzerod-block: 5.0 L/min, see `_block_heart`)
     "dt": 1e-3,                          # s
     "cardiac_output": 5.0,               # L/min
     "ejection_time": 0.3,                # s, both ventricles (half-sine ejection)
@@ -95,6 +103,53 @@ TREE: dict[str, Any] = {
         ("iliac", "bifurcation", "muscle_a", 0.3, 0.0062),
     ],
 }
+
+# svZeroDSolver's ClosedLoopHeartAndPulmonary block (docs/physics.md §1.10) with the parameters
+# of its closedLoopHeart cases (closedLoopHeart_singleVessel / _withCoronaries; Sankaran et al.
+# 2012, Menon et al. 2023), in their units: pressure mmHg, volume mL, time s (elastance mmHg/mL,
+# resistance mmHg s/mL, inductance mmHg s²/mL, capacitance mL/mmHg, K_v 1/mL). Those cases beat
+# at 59 /min (period 1.0169 s); here the block beats at the loop's `period` (75 /min: its
+# activations are fractions of the period) and its start volumes are the cases' own; the
+# stressed blood volume that sets the cardiac output is the systemic veins' start pressure
+# `venous_start_pressure` (mmHg; 5 L/min at rest, see `heart_model`).
+SVZEROD_HEART: dict[str, float] = {
+    "atrial_systole_fraction": 0.40742, "p_wave_divisor": 8.976868,
+    "right_ventricle_elastance": 2.125279, "left_ventricle_elastance": 3.125202,
+    "right_ventricle_rest_volume": 9.424629, "left_ventricle_rest_volume": 5.606007,
+    "pulmonary_valve_inductance": 0.000186865, "pulmonary_valve_resistance": 0.035061704,
+    "tricuspid_inductance": 0.000217032, "tricuspid_resistance": 0.007887459,
+    "mitral_inductance": 0.000351787, "mitral_resistance": 0.005310825,
+    "aortic_valve_resistance": 0.034320234, "aortic_valve_inductance": 0.000110776,
+    "pulmonary_resistance": 0.098865401, "pulmonary_capacitance": 1.090989,
+    "aortic_capacitance": 0.556854,
+    "right_atrium_passive_pressure": 9.22244, "right_atrium_passive_volume_coefficient": 0.004837,
+    "right_atrium_elastance": 0.208858, "right_atrium_rest_volume": 4.848742,
+    "left_atrium_passive_pressure": 9.194992, "left_atrium_passive_volume_coefficient": 0.008067,
+    "left_atrium_elastance": 0.303119, "left_atrium_rest_volume": 9.355754,
+    "initial_right_atrium_volume": 38.43, "initial_right_ventricle_volume": 96.07,
+    "initial_left_atrium_volume": 38.43, "initial_left_ventricle_volume": 96.07,
+    "initial_pulmonary_pressure": 8.0,
+}
+
+# SI factor of every SVZEROD_HEART key by the quantity its name ends with
+_ML = 1e-6
+_SI_BY_SUFFIX = (("elastance", MMHG / _ML), ("rest_volume", _ML), ("_volume", _ML),
+                 ("inductance", MMHG / _ML), ("resistance", MMHG / _ML),
+                 ("capacitance", _ML / MMHG), ("passive_pressure", MMHG),
+                 ("volume_coefficient", 1.0 / _ML), ("pulmonary_pressure", MMHG),
+                 ("fraction", 1.0), ("divisor", 1.0))
+
+
+def heart_block_si(values: dict[str, float], period: float) -> dict[str, float]:
+    """The native ``heart_pulmonary`` keys in SI from values in mmHg, mL and s."""
+    out: dict[str, float] = {"period": period}
+    for k, v in values.items():
+        factor = next((f for suffix, f in _SI_BY_SUFFIX if k.endswith(suffix)), None)
+        if factor is None:
+            raise ModelError(f"heart_pulmonary: '{k}' is not one of its keys")
+        out[k] = v * factor
+    return out
+
 
 STANDARD_TREE: dict[str, Any] = {**copy.deepcopy(STANDARD), "name": "closed-loop-o2-tree",
                                  "arteries": "tree", "tree": TREE}
@@ -203,17 +258,77 @@ def balance_flows(flows: np.ndarray, from_: list[int], to: list[int], n: int,
 
 
 def heart_model(p: dict[str, Any]) -> dict[str, Any]:
-    """A native closed-loop circulation (docs/physics.md §1.8: `chamber` and `valve` elements,
-    no boundary condition) whose flows drive the O2 loop: left and right ventricles (linear
-    elastance, piecewise-cosine activation), four tanh valves, systemic arteries (1.5 mL/mmHg),
-    the organs as parallel resistances sharing the cardiac output by `flow_fraction` at a mean
-    arterial pressure of ~93 mmHg, systemic veins (100 mL/mmHg), pulmonary arteries, lungs,
-    pulmonary veins. Chamber parameters are the `chambers` branch's minimal closed loop (LV) and
-    a right ventricle with a fifth of its active elastance; SI units. Measured (30 cycles, 1 ms):
-    cardiac output 4.97 L/min, arterial pressure 86/112 mmHg, pulmonary arterial mean 20 mmHg."""
-    T = p["period"]
+    """A native closed-loop circulation (no boundary condition) whose flows drive the O2 loop:
+    the heart `p["heart"]` (`_block_heart` or `_two_ventricle_heart`) between the venous
+    return (node ``venous_return``) and the aorta (``aorta_in``), the systemic arteries (a
+    pool of 1.5 mL/mmHg, or the tree of `tree_vessels` with ``arteries: "tree"``), the organs
+    as parallel resistances sharing the cardiac output by `flow_fraction` at a mean arterial
+    pressure of ~93 mmHg, and the systemic veins (100 mL/mmHg); SI units."""
+    kind = p.get("heart", "two-ventricle")
+    if kind not in HEARTS:
+        raise ModelError(f"closed loop: heart must be one of {', '.join(HEARTS)}, got {kind!r}")
+    heart = HEARTS[kind](p)
+    fdt = p.get("flow_dt", 1e-3)
+    return {"name": "closed-loop-heart", "units": "SI", "period": p["period"],
+            "vessels": _systemic(p) + heart, "boundary_conditions": {}, **_TREE_BLOOD,
+            "simulation": {"cycles": 30, "dt": fdt, "method": "generalized-alpha",
+                           "output": {"cycles": "last", "every": fdt}}}
+
+
+def heart_run_options(p: dict[str, Any]) -> dict[str, Any]:
+    """Run options of :func:`heart_model`'s model: svZeroDSolver's block needs an absolute
+    Newton tolerance (its on/off valves, docs/physics.md §1.10); Pa, m³/s and m³ residuals
+    here, 1e-10 is far below their discretisation error."""
+    return {"newton_atol": 1e-10} if p.get("heart", "two-ventricle") == "svzerod-block" else {}
+
+
+def _lumped(name: str, a: str, b: str, **values: float) -> dict[str, Any]:
+    return {"name": name, "from": a, "to": b, "arrangement": "RCL", "lumped": values}
+
+
+def _systemic(p: dict[str, Any]) -> list[dict[str, Any]]:
+    """From the aorta (``aorta_in``) to the venous return (``venous_return``): arteries,
+    organs, veins."""
     q = p["cardiac_output"] * 1e-3 / 60.0
     r_sys = 93.0 * MMHG / q
+    if _has_tree(p):
+        # the segment-resolved tree in place of the arterial pool; organs at its outlets
+        v = tree_vessels(p)
+        v += [_lumped(k, f"{k}_a", "veins_in", resistance=r_sys / o["flow_fraction"])
+              for k, o in p["organs"].items()]
+    else:
+        v = [_lumped("arteries", "aorta_in", "arteries_out", resistance=1e6,
+                     capacitance=1.5e-8, inductance=1e5)]
+        v += [_lumped(k, "arteries_out", "veins_in", resistance=r_sys / o["flow_fraction"])
+              for k, o in p["organs"].items()]
+    return v + [_lumped("veins", "veins_in", "venous_return", resistance=1e6,
+                        capacitance=7.5e-7)]
+
+
+def _block_heart(p: dict[str, Any]) -> list[dict[str, Any]]:
+    """svZeroDSolver's ClosedLoopHeartAndPulmonary (docs/physics.md §1.10) with the
+    parameters of its closedLoopHeart cases (`SVZEROD_HEART`, in SI), beating at the loop's
+    period (run it with :func:`heart_run_options`). Measured (30 cycles, 1 ms, pool arteries, venous start
+    pressure 7 mmHg): see docs/oxygen.md "Oxygen around a closed loop"."""
+    values = dict(p.get("heart_block", SVZEROD_HEART))
+    # the stressed blood volume the circulation needs beyond the cases' start volumes, put
+    # into the ventricles at the start (their law is linear: it empties into the loop within
+    # a few beats; the atria's exponential passive law would not take it smoothly)
+    for side in ("left", "right"):
+        values[f"initial_{side}_ventricle_volume"] += 0.5 * p["stressed_volume"]
+    heart = {"name": "heart_pulmonary", "from": "venous_return", "to": "aorta_in",
+             "heart_pulmonary": heart_block_si(values, p["period"])}
+    return [heart]
+
+
+def _two_ventricle_heart(p: dict[str, Any]) -> list[dict[str, Any]]:
+    """The native two-ventricle heart (docs/physics.md §1.8: `chamber` and `valve` elements):
+    left and right ventricles (linear elastance, piecewise-cosine activation), four tanh
+    valves, pulmonary arteries, lungs, pulmonary veins. Chamber parameters are the `chambers`
+    branch's minimal closed loop (LV) and a right ventricle with a fifth of its active
+    elastance; SI units. Measured (30 cycles, 1 ms): cardiac output 4.97 L/min, arterial
+    pressure 86/112 mmHg, pulmonary arterial mean 20 mmHg."""
+    T = p["period"]
     scale = T / 0.8
 
     def act() -> dict[str, Any]:
@@ -225,35 +340,19 @@ def heart_model(p: dict[str, Any]) -> dict[str, Any]:
                 "rest_volume": 1e-5, "period": T, "initial_volume": 0.6e-3, "activation": act()}
 
     valve = {"law": "tanh", "min_resistance": 1.0e6, "max_resistance": 1.0e11, "steepness": 0.05}
-
-    def lumped(name: str, a: str, b: str, **values: float) -> dict[str, Any]:
-        return {"name": name, "from": a, "to": b, "arrangement": "RCL", "lumped": values}
-
     v = [{"name": "lv", "from": "mitral_out", "to": "lv_out", "chamber": chamber(3.3e8, 1.2e7)},
-         {"name": "aortic_valve", "from": "lv_out", "to": "aorta_in", "valve": valve}]
-    if _has_tree(p):
-        # the segment-resolved tree in place of the arterial pool; organs at its outlets
-        v += tree_vessels(p)
-        v += [lumped(k, f"{k}_a", "veins_in", resistance=r_sys / o["flow_fraction"])
-              for k, o in p["organs"].items()]
-    else:
-        v += [lumped("arteries", "aorta_in", "arteries_out", resistance=1e6,
-                     capacitance=1.5e-8, inductance=1e5)]
-        v += [lumped(k, "arteries_out", "veins_in", resistance=r_sys / o["flow_fraction"])
-              for k, o in p["organs"].items()]
-    v += [lumped("veins", "veins_in", "tric_in", resistance=1e6, capacitance=7.5e-7),
-          {"name": "tricuspid_valve", "from": "tric_in", "to": "rv_in", "valve": valve},
-          {"name": "rv", "from": "rv_in", "to": "rv_out", "chamber": chamber(0.6e8, 0.6e7)},
-          {"name": "pulmonary_valve", "from": "rv_out", "to": "pa_in", "valve": valve},
-          lumped("pulmonary_arteries", "pa_in", "pa_out", resistance=1e6, capacitance=2.25e-8),
-          lumped("lungs", "pa_out", "pv_in", resistance=1.2e7),
-          lumped("pulmonary_veins", "pv_in", "mitral_in", resistance=1e6, capacitance=6e-8),
-          {"name": "mitral_valve", "from": "mitral_in", "to": "mitral_out", "valve": valve}]
-    fdt = p.get("flow_dt", 1e-3)
-    return {"name": "closed-loop-heart", "units": "SI", "period": T, "vessels": v,
-            "boundary_conditions": {}, **_TREE_BLOOD,
-            "simulation": {"cycles": 30, "dt": fdt, "method": "generalized-alpha",
-                           "output": {"cycles": "last", "every": fdt}}}
+         {"name": "aortic_valve", "from": "lv_out", "to": "aorta_in", "valve": valve},
+         {"name": "tricuspid_valve", "from": "venous_return", "to": "rv_in", "valve": valve},
+         {"name": "rv", "from": "rv_in", "to": "rv_out", "chamber": chamber(0.6e8, 0.6e7)},
+         {"name": "pulmonary_valve", "from": "rv_out", "to": "pa_in", "valve": valve},
+         _lumped("pulmonary_arteries", "pa_in", "pa_out", resistance=1e6, capacitance=2.25e-8),
+         _lumped("lungs", "pa_out", "pv_in", resistance=1.2e7),
+         _lumped("pulmonary_veins", "pv_in", "mitral_in", resistance=1e6, capacitance=6e-8),
+         {"name": "mitral_valve", "from": "mitral_in", "to": "mitral_out", "valve": valve}]
+    return v
+
+
+HEARTS = {"svzerod-block": _block_heart, "two-ventricle": _two_ventricle_heart}
 
 
 # blood and segment layout shared by the closed loop and its tree's own model (the same
@@ -301,34 +400,108 @@ def tree_model(p: dict[str, Any], time: np.ndarray, inflow: np.ndarray,
                        "reference_pressure": 93.0}}
 
 
-def heart_flows(p: dict[str, Any], result: Any = None) -> np.ndarray:
-    """The O2 loop's branch flows from a run of :func:`heart_model` (last cycle): each recorded
-    interval's trapezoidal mean flow, averaged over blocks of dt/flow_dt intervals; the shunt
-    takes `shunt_fraction` of the lungs' flow."""
+@dataclass
+class HeartRun:
+    """The last cycle of a :func:`heart_model` run (`run_heart`): the recorded times (s) and,
+    by name, what the O2 loop reads: the flows (m³/s) ``aortic`` (ejection through the aortic
+    valve), ``aortic_outflow`` (into the arteries or the tree's root), ``tricuspid``,
+    ``pulmonary`` (the right ventricle's ejection), ``lungs``, ``mitral``, every organ's, and
+    the pressure ``veins`` (Pa) at the systemic veins' inlet."""
+
+    time: np.ndarray
+    series: dict[str, np.ndarray]
+
+
+def run_heart(p: dict[str, Any]) -> HeartRun:
+    """Runs :func:`heart_model` (30 cycles, last one recorded) and reads its flows."""
+    from oxyline.model import build_model
     from oxyline.run import simulate
 
-    res = result if result is not None else simulate(heart_model(p))
+    model = build_model(heart_model(p))
+    if p.get("heart", "two-ventricle") != "svzerod-block":
+        res = simulate(model)
+
+        def q(name: str) -> np.ndarray:
+            return np.asarray(res.vessel(name).flow_in)
+
+        av = res.vessel("aortic_valve")
+        series = {"aortic": q("aortic_valve"), "aortic_outflow": np.asarray(av.flow_out),
+                  "tricuspid": q("tricuspid_valve"), "pulmonary": q("pulmonary_valve"),
+                  "lungs": q("lungs"), "mitral": q("mitral_valve"),
+                  "veins": np.asarray(res.vessel("veins").pressure_in),
+                  **{k: q(k) for k in p["organs"]}}
+        return HeartRun(np.asarray(av.time), series)
+    return _block_run(p, model)
+
+
+def _block_run(p: dict[str, Any], model: Any) -> HeartRun:
+    """:func:`run_heart` for svZeroDSolver's block: every unknown is recorded, and a valve's
+    flow counts only while it is open (docs/physics.md §1.10: closed when the pressure behind
+    does not exceed the pressure in front and its flow is not positive; a closed valve's
+    inductor flow is left out of the volume balances)."""
+    from oxyline.run import _settings
+
+    s = _settings(model, heart_run_options(p))
+    keep = {k: s[k] for k in ("cycles", "dt", "method", "rho_infty", "start", "newton_atol",
+                              "max_iterations") if k in s}
+    raw = model.network.simulate(period=p["period"], output_every=s["dt"], all_unknowns=True,
+                                 **keep)
+    if "error" in raw:
+        raise raw["error"]
+    t = np.asarray(raw["times"])
+    data = np.asarray(raw["data"]).reshape(len(t), -1)
+    col = {n: data[:, i] for i, n in enumerate(model.network.unknown_names())}
+    h = "heart_pulmonary"
+    pr = {k: col[f"pressure at {h}: {k}"] for k in ("right atrium", "right ventricle",
+                                                     "left atrium", "left ventricle", "aorta")}
+    pr["pulmonary"] = col[f"volume of {h}: pulmonary"]      # P_pul (Pa), an element unknown
+
+    def valve(name: str, behind: str, front: str) -> np.ndarray:
+        q = col[f"flow in {h}: {name} valve"]
+        return np.where((pr[behind] <= pr[front]) & (q <= 0.0), 0.0, q)
+
+    series = {"aortic": valve("aortic", "left ventricle", "aorta"),
+              "aortic_outflow": col[f"flow in {h}: aortic outflow"],
+              "tricuspid": valve("tricuspid", "right atrium", "right ventricle"),
+              "pulmonary": valve("pulmonary", "right ventricle", "pulmonary"),
+              "mitral": valve("mitral", "left atrium", "left ventricle"),
+              "veins": col["pressure at veins_in"]}
+    # the lungs: the pulmonary bed's drain through R_pd, (P_pul − P_LA)/R_pd (its capacitor
+    # C_p smooths the right ventricle's ejection; over a periodic cycle both carry the same
+    # volume). The block's left atrium receives the ejection itself (its bookkeeping,
+    # docs/physics.md §1.10); the O2 loop's pulmonary pools are those of the two-ventricle heart.
+    r_pd = heart_block_si(dict(p.get("heart_block", SVZEROD_HEART)),
+                          p["period"])["pulmonary_resistance"]
+    series["lungs"] = (pr["pulmonary"] - pr["left atrium"]) / r_pd
+    series.update({k: col[f"flow in vessel '{k}' resistance"] for k in p["organs"]})
+    return HeartRun(t, series)
+
+
+def heart_flows(p: dict[str, Any], run: HeartRun | None = None) -> np.ndarray:
+    """The O2 loop's branch flows from a :func:`run_heart` record (last cycle): each recorded
+    interval's trapezoidal mean flow, averaged over blocks of dt/flow_dt intervals; the shunt
+    takes `shunt_fraction` of the lungs' flow. The left heart ejects through the aortic valve
+    into the arterial pool (into the tree: its root's own flow, the aortic outflow)."""
+    run = run if run is not None else run_heart(p)
     k = round(p["dt"] / p.get("flow_dt", 1e-3))
 
     def q(name: str) -> np.ndarray:
-        x = np.asarray(res.vessel(name).flow_in)
+        x = run.series[name]
         mid = 0.5 * (x[1:] + x[:-1])
         return mid.reshape(-1, k).mean(axis=1)
 
     organs = list(p["organs"])
     lungs, shunt = q("lungs"), p["lungs"]["shunt_fraction"]
-    arterial = [] if _has_tree(p) else [q("aortic_valve"), *[q(o) for o in organs]]
+    arterial = [] if _has_tree(p) else [q("aortic"), *[q(o) for o in organs]]
     cols = [*arterial, *[q(o) for o in organs],
-            q("tricuspid_valve"), q("pulmonary_valve"), (1 - shunt) * lungs, shunt * lungs,
-            q("mitral_valve")]
+            q("tricuspid"), q("pulmonary"), (1 - shunt) * lungs, shunt * lungs, q("mitral")]
     return np.column_stack(cols)
 
 
-def heart_tree_model(p: dict[str, Any], result: Any) -> dict[str, Any]:
-    """:func:`tree_model` with the tables of the last cycle of a :func:`heart_model` run."""
-    t = np.asarray(result.vessel("aortic_valve").time)
-    return tree_model(p, t - t[0], np.asarray(result.vessel("aortic_valve").flow_out),
-                      np.asarray(result.vessel("veins").pressure_in))
+def heart_tree_model(p: dict[str, Any], run: HeartRun) -> dict[str, Any]:
+    """:func:`tree_model` with the tables of the last cycle of a :func:`run_heart` record."""
+    return tree_model(p, run.time - run.time[0], run.series["aortic_outflow"],
+                      run.series["veins"])
 
 
 @dataclass
@@ -461,18 +634,23 @@ def _tree_spec(p: dict[str, Any], tree_model_: dict[str, Any], idx: dict[str, in
 
 
 def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int = 400,
-                tol: float = 1e-13, flows: np.ndarray | str | None = None) -> ClosedLoopO2Result:
-    """Runs O2 around the closed loop to its periodic steady state (the core's Newton shooting
-    on the cycle map, then plain cycles until the start-of-cycle contents repeat to `tol`).
-    `flows` (steps × branches, m³/s, one row per step of `dt`, branches in the order of
-    ``result.branches``) replaces the prescribed table, e.g. flows sampled from a flow run; it
-    is balanced by :func:`balance_flows` first. ``flows="heart"`` takes them from a run of the
-    native closed-loop heart (:func:`heart_model`, :func:`heart_flows`).
+                tol: float = 1e-13, flows: np.ndarray | str | None = None,
+                shooting: str = "anderson") -> ClosedLoopO2Result:
+    """Runs O2 around the closed loop to its periodic steady state (the core's Anderson
+    acceleration of the cycle map, or with ``shooting="newton"`` the earlier finite-difference
+    Newton shooting; then plain cycles until the start-of-cycle contents repeat to `tol`).
+    `flows`: ``"heart"`` takes them from a run of the model's closed-loop heart (`heart`:
+    svZeroDSolver's block by default; :func:`run_heart`, :func:`heart_flows`), ``"table"``
+    is the prescribed table (:func:`flow_table`), None the model's own choice (`flows`); a
+    table (steps × branches, m³/s, one row per step of `dt`, branches in the order of
+    ``result.branches``), e.g. flows sampled from a flow run, is balanced by
+    :func:`balance_flows` first.
 
     With ``arteries: "tree"`` (built-in ``closed-loop-o2-tree``) the arterial pool is a
     segment-resolved arterial tree (`tree`) whose O2 runs through the product's transport; its
     flow comes from the closed-loop heart run (always ``flows="heart"``): the tree is driven by
-    the aortic-valve flow and drains through the organ beds to the venous pressure of that run."""
+    the heart's aortic outflow and drains through the organ beds to the venous pressure of that
+    run."""
     p = load(model) if isinstance(model, str) else model
     comps, (binding, *branches), idx = _layout(p)
     tree_json = None
@@ -482,9 +660,7 @@ def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int 
         if flows is not None and not (isinstance(flows, str) and flows == "heart"):
             raise ModelError("closed loop: with an arterial tree the flows come from the heart "
                              "run (flows='heart')")
-        from oxyline.run import simulate
-
-        heart = simulate(heart_model(p))
+        heart = run_heart(p)
         tree_json = _tree_spec(p, heart_tree_model(p, heart), idx)
         tf = _core.closed_loop_tree_flows(tree_json, float(p["dt"]), steps)
         fixed_net = np.zeros(len(comps))
@@ -494,11 +670,14 @@ def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int 
             fixed_net[idx[k]] += qm
         flows = heart_flows(p, heart)
     if flows is None:
+        flows = p.get("flows", "table")
+    if isinstance(flows, str) and flows == "table":
         flows = flow_table(p)
     else:
         if isinstance(flows, str):
             if flows != "heart":
-                raise ModelError(f"closed loop: flows must be a table or 'heart', got {flows!r}")
+                raise ModelError(f"closed loop: flows must be a table, 'table' or 'heart', "
+                                 f"got {flows!r}")
             flows = heart_flows(p)
         flows = np.asarray(flows, dtype=float)
         if flows.ndim != 2 or flows.shape[1] != len(branches):
@@ -506,7 +685,10 @@ def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int 
                              f"branches {[b['name'] for b in branches]}, got {flows.shape}")
         flows = balance_flows(flows, [b["from"] for b in branches], [b["to"] for b in branches],
                               len(comps), fixed_net)
-    spec: dict[str, Any] = {"compartments": comps, "branches": branches, "binding": binding}
+    if shooting not in ("anderson", "newton"):
+        raise ModelError(f"closed loop: shooting must be 'anderson' or 'newton', got {shooting!r}")
+    spec: dict[str, Any] = {"compartments": comps, "branches": branches, "binding": binding,
+                            "shooting": shooting}
     if tree_json is not None:
         spec["tree"] = json.loads(tree_json)
     if tree_json is not None:

@@ -77,6 +77,20 @@ pub struct ClosedLoopSpec {
     /// branches join the compartments directly).
     #[serde(default)]
     pub tree: Option<TreeSpec>,
+    /// How the periodic steady state is found (`run_periodic`).
+    #[serde(default)]
+    pub shooting: Shooting,
+}
+
+/// The periodic-state solver of `run_periodic`: Anderson acceleration of the cycle map (one
+/// cycle per iteration), or Newton with a finite-difference Jacobian (one cycle per unknown
+/// and iteration; the earlier method, kept for comparison).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Shooting {
+    #[default]
+    Anderson,
+    Newton,
 }
 
 /// The arterial tree of a closed loop (`closed_loop_tree`): an open network model (canonical
@@ -611,6 +625,187 @@ fn cycle(
     Ok(())
 }
 
+/// The shooting state: the compartments' total concentrations, then the tree's cell amounts.
+fn shooting_state(lp: &ClosedLoop) -> Vec<f64> {
+    let mut x = lp.total.clone();
+    if let Some(t) = &lp.tree {
+        x.extend_from_slice(t.cells());
+    }
+    x
+}
+
+/// Starts a cycle from shooting state `x` (volumes `v0`; the tree's carried state, i.e. its
+/// volumes and warm starts, from `tree_base`).
+fn load_state(
+    lp: &mut ClosedLoop,
+    v0: &[f64],
+    x: &[f64],
+    tree_base: &Option<(Vec<f64>, Vec<f64>)>,
+) -> Result<()> {
+    let nc = lp.volume.len();
+    lp.set_state(v0, &x[..nc]);
+    lp.restore_tree(tree_base)?;
+    if let Some(t) = lp.tree.as_mut() {
+        t.set_cells(&x[nc..]);
+    }
+    Ok(())
+}
+
+/// Anderson acceleration of the cycle map x ↦ Φ(x) of the shooting state (docs/oxygen.md
+/// "periodic steady state"): x_{k+1} = Φ(x_k) − ΔG γ with γ minimising the weighted residual
+/// ‖W (f_k − ΔF γ)‖ over the last `m` differences of residuals f = Φ(x) − x (ΔF) and of
+/// images (ΔG). For a map that is affine in x (the loop is, for a fixed flow, except Hill
+/// binding and Michaelis–Menten) this is GMRES on (I − J) x = b with one cycle per iteration:
+/// it needs about as many cycles as the map has slow modes (the pools' washouts, ~12), where
+/// a finite-difference Newton Jacobian needs one cycle per unknown (the tree's cells included:
+/// ~70) per iteration; the tree's cells wash out within a few cycles by the plain map itself.
+/// Leaves the loop at the last image Φ(x) and returns the cycles run (at most `budget`).
+fn shoot(
+    lp: &mut ClosedLoop,
+    flows: &[f64],
+    dt: f64,
+    v0: &[f64],
+    budget: usize,
+    tol: f64,
+) -> Result<usize> {
+    let nc = lp.volume.len();
+    let mut x = shooting_state(lp);
+    let n = x.len();
+    // each block (concentrations, tree amounts) weighted by the inverse of its largest value
+    let w: Vec<f64> = (0..n).map(|i| 1.0 / block_scale(&x, nc, i)).collect();
+    let mut tree_base = lp.tree.as_ref().map(|t| t.snapshot());
+    let mut hist = AndersonHistory::new(ANDERSON_MEMORY.min(n));
+    let mut cycles = 0;
+    let mut last: Option<(Vec<f64>, Vec<f64>)> = None; // (f, g) of the previous iterate
+    while cycles < budget {
+        load_state(lp, v0, &x, &tree_base)?;
+        cycle(lp, flows, dt, 0.0, None)?;
+        cycles += 1;
+        tree_base = lp.tree.as_ref().map(|t| t.snapshot());
+        let g = shooting_state(lp);
+        let f: Vec<f64> = g.iter().zip(&x).map(|(a, b)| a - b).collect();
+        if f.iter().zip(&w).all(|(fi, wi)| (fi * wi).abs() <= tol) {
+            return Ok(cycles);
+        }
+        if let Some((f0, g0)) = &last {
+            let df: Vec<f64> = f
+                .iter()
+                .zip(f0)
+                .zip(&w)
+                .map(|((a, b), wi)| (a - b) * wi)
+                .collect();
+            let dg: Vec<f64> = g.iter().zip(g0).map(|(a, b)| a - b).collect();
+            hist.push(df, dg);
+        }
+        let wf: Vec<f64> = f.iter().zip(&w).map(|(a, b)| a * b).collect();
+        let gamma = hist.solve(&wf);
+        x = g.clone();
+        for (k, gk) in gamma.iter().enumerate() {
+            for (xi, dgi) in x.iter_mut().zip(&hist.dg[k]) {
+                *xi -= gk * dgi;
+            }
+        }
+        for xi in x.iter_mut() {
+            *xi = xi.max(0.0);
+        }
+        last = Some((f, g));
+    }
+    Ok(cycles)
+}
+
+/// Differences kept by the Anderson acceleration: enough for the loop's slow modes and the
+/// tree's transit (a linear map of that many modes converges in about that many cycles).
+const ANDERSON_MEMORY: usize = 40;
+
+/// The scale of shooting-state entry i: the largest magnitude in its block (the
+/// compartments' concentrations, the tree's cell amounts).
+fn block_scale(x: &[f64], nc: usize, i: usize) -> f64 {
+    let r = if i < nc { &x[..nc] } else { &x[nc..] };
+    r.iter().fold(0.0_f64, |m, c| m.max(c.abs())).max(1e-300)
+}
+
+/// The weighted residual differences ΔF (columns, oldest first) and image differences ΔG of
+/// Anderson's last `m` iterates.
+struct AndersonHistory {
+    m: usize,
+    df: Vec<Vec<f64>>,
+    dg: Vec<Vec<f64>>,
+}
+
+impl AndersonHistory {
+    fn new(m: usize) -> Self {
+        Self {
+            m,
+            df: Vec::new(),
+            dg: Vec::new(),
+        }
+    }
+
+    fn push(&mut self, df: Vec<f64>, dg: Vec<f64>) {
+        if self.df.len() == self.m {
+            self.df.remove(0);
+            self.dg.remove(0);
+        }
+        self.df.push(df);
+        self.dg.push(dg);
+    }
+
+    /// γ minimising ‖f − ΔF γ‖ (modified Gram–Schmidt QR). A difference column that is, to
+    /// 1e-10 of its norm, a combination of the later ones would make the problem singular:
+    /// the oldest columns go until none is.
+    fn solve(&mut self, f: &[f64]) -> Vec<f64> {
+        loop {
+            match least_squares(&self.df, f) {
+                Some(g) => return g,
+                None => {
+                    self.df.remove(0);
+                    self.dg.remove(0);
+                }
+            }
+        }
+    }
+}
+
+/// min ‖f − A γ‖ over γ for the columns A (modified Gram–Schmidt, newest column first so
+/// that a dependent column found is an old one); None when a column is dependent.
+fn least_squares(cols: &[Vec<f64>], f: &[f64]) -> Option<Vec<f64>> {
+    let k = cols.len();
+    let order: Vec<usize> = (0..k).rev().collect();
+    let mut q: Vec<Vec<f64>> = Vec::with_capacity(k);
+    let mut r = vec![0.0; k * k];
+    for (j, &c) in order.iter().enumerate() {
+        let mut v = cols[c].clone();
+        let norm0 = v.iter().map(|a| a * a).sum::<f64>().sqrt();
+        for (i, qi) in q.iter().enumerate() {
+            let d: f64 = qi.iter().zip(&v).map(|(a, b)| a * b).sum();
+            r[i * k + j] = d;
+            for (vv, qq) in v.iter_mut().zip(qi) {
+                *vv -= d * qq;
+            }
+        }
+        let norm = v.iter().map(|a| a * a).sum::<f64>().sqrt();
+        if norm.is_nan() || norm <= 1e-10 * norm0 {
+            return None;
+        }
+        r[j * k + j] = norm;
+        q.push(v.iter().map(|a| a / norm).collect());
+    }
+    // R y = Qᵀ f, back substitution; y is in `order`
+    let mut y: Vec<f64> = q
+        .iter()
+        .map(|qi| qi.iter().zip(f).map(|(a, b)| a * b).sum())
+        .collect();
+    for j in (0..k).rev() {
+        let s: f64 = (j + 1..k).map(|l| r[j * k + l] * y[l]).sum();
+        y[j] = (y[j] - s) / r[j * k + j];
+    }
+    let mut gamma = vec![0.0; k];
+    for (j, &c) in order.iter().enumerate() {
+        gamma[c] = y[j];
+    }
+    Some(gamma)
+}
+
 /// Solves the small dense system a x = b in place (Gaussian elimination, partial pivoting).
 fn dense_solve(a: &mut [f64], b: &mut [f64], n: usize) -> bool {
     for k in 0..n {
@@ -641,38 +836,12 @@ fn dense_solve(a: &mut [f64], b: &mut [f64], n: usize) -> bool {
     true
 }
 
-/// The shooting state: the compartments' total concentrations, then the tree's cell amounts.
-fn shooting_state(lp: &ClosedLoop) -> Vec<f64> {
-    let mut x = lp.total.clone();
-    if let Some(t) = &lp.tree {
-        x.extend_from_slice(t.cells());
-    }
-    x
-}
-
-/// Starts a cycle from shooting state `x` (volumes `v0`; the tree's carried state, i.e. its
-/// volumes and warm starts, from `tree_base`).
-fn load_state(
-    lp: &mut ClosedLoop,
-    v0: &[f64],
-    x: &[f64],
-    tree_base: &Option<(Vec<f64>, Vec<f64>)>,
-) -> Result<()> {
-    let nc = lp.volume.len();
-    lp.set_state(v0, &x[..nc]);
-    lp.restore_tree(tree_base)?;
-    if let Some(t) = lp.tree.as_mut() {
-        t.set_cells(&x[nc..]);
-    }
-    Ok(())
-}
-
-/// Newton shooting on the cycle map x ↦ Φ(x) of the shooting state (finite-difference
-/// Jacobian, one cycle per unknown), at most `budget` cycles; leaves the loop at the last
+/// `shooting: newton` (the earlier method, kept for comparison): Newton shooting on the cycle
+/// map x ↦ Φ(x) of the shooting state (finite-difference Jacobian, one cycle per unknown), at most `budget` cycles; leaves the loop at the last
 /// iterate and returns the cycles run. The tree's cells are unknowns too: its transit takes
 /// ~3 cycles and its numerical diffusion a long tail, so holding it fixed while the
 /// compartments converge would converge only at that tail's rate.
-fn shoot(
+fn shoot_newton(
     lp: &mut ClosedLoop,
     flows: &[f64],
     dt: f64,
@@ -686,10 +855,6 @@ fn shoot(
     let mut tree_base = lp.tree.as_ref().map(|t| t.snapshot());
     let mut cycles = 0;
     // each block (concentrations, tree amounts) is scaled by its own largest value
-    let block_scale = |x: &[f64], i: usize| {
-        let r = if i < nc { &x[..nc] } else { &x[nc..] };
-        r.iter().fold(0.0_f64, |m, c| m.max(c.abs())).max(1e-300)
-    };
     for _newton in 0..6 {
         if cycles + n + 1 > budget {
             break;
@@ -703,7 +868,7 @@ fn shoot(
             .zip(&x)
             .map(|(p, q)| p - q)
             .collect();
-        let scales: Vec<f64> = (0..n).map(|i| block_scale(&x, i)).collect();
+        let scales: Vec<f64> = (0..n).map(|i| block_scale(&x, nc, i)).collect();
         if fx.iter().zip(&scales).all(|(f, s)| f.abs() <= tol * s) {
             break;
         }
@@ -735,9 +900,9 @@ fn shoot(
 /// Runs the loop on the periodic flow table `flows` (one row of branch flows per step of
 /// length dt) to its periodic steady state and records the last cycle. The loop's slowest
 /// modes are washouts of the large pools (τ = V/Q ≈ 30 s: hundreds of cycles), so the periodic
-/// state is found by Newton shooting on the cycle map x ↦ Φ(x) of the total concentrations at a
-/// cycle start (finite-difference Jacobian, one cycle per compartment), then confirmed by plain
-/// cycles until the start-of-cycle concentrations repeat to `tol` (relative) or `max_cycles`.
+/// state is found by Anderson acceleration of the cycle map x ↦ Φ(x) of the total
+/// concentrations (and the tree's cell amounts) at a cycle start ([`shoot`]), then confirmed by
+/// plain cycles until the start-of-cycle state repeats to `tol` (relative) or `max_cycles`.
 pub fn run_periodic(
     spec: &ClosedLoopSpec,
     flows: &[f64],
@@ -754,19 +919,16 @@ pub fn run_periodic(
     let v0 = lp.volume.clone();
     check_periodic_volumes(&lp, flows, dt, &v0)?;
     let mut cycles = 0;
-    // two plain cycles bring the state near the attractor, then Newton shooting
+    // two plain cycles bring the state near the attractor, then the accelerated shooting
     for _ in 0..2.min(max_cycles) {
         cycle(&mut lp, flows, dt, period * cycles as f64, None)?;
         cycles += 1;
     }
-    cycles += shoot(
-        &mut lp,
-        flows,
-        dt,
-        &v0,
-        max_cycles.saturating_sub(cycles),
-        tol,
-    )?;
+    let budget = max_cycles.saturating_sub(cycles);
+    cycles += match spec.shooting {
+        Shooting::Anderson => shoot(&mut lp, flows, dt, &v0, budget, tol)?,
+        Shooting::Newton => shoot_newton(&mut lp, flows, dt, &v0, budget, tol)?,
+    };
     let mut out = ClosedLoopRun::empty(&lp, steps);
     confirm(&mut lp, flows, dt, (cycles, max_cycles), tol, &mut out)?;
     Ok(out)
