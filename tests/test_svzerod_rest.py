@@ -216,17 +216,20 @@ def test_coronary_zero_start_matches_svzerod(name: str, varying: bool) -> None:
 # the native `initial` (docs/physics.md §1.9)
 
 
+@pytest.mark.parametrize("given_flow", [True, False])
 @pytest.mark.parametrize("method", ["generalized-alpha", "rk4"])
-def test_native_initial_pressure_discharges_the_capacitor(method: str) -> None:
+def test_native_initial_pressure_discharges_the_capacitor(method: str, given_flow: bool) -> None:
     # no inflow; an RCL vessel (R1, C, L = 0) drains through a resistance R2 to 0 Pa. Started
     # at P_in = P0 with no flow, its capacitor node starts at P0 (P_c = P_in − R1 Q_in) and
-    # discharges as P0 exp(−t / (R2 C)) (exact)
+    # discharges as P0 exp(−t / (R2 C)) (exact). An absent `flow_in` is 0 (§1.9): the same
+    # start (it once left the capacitor at 0 Pa)
     r1, r2, c, p0, tau = 1e7, 1e8, 1e-9, 1.0e4, 0.1
+    initial = {"pressure_in": p0, "flow_in": 0.0} if given_flow else {"pressure_in": p0}
     model = oxyline.load_model({
         "period": 1.0,
         "vessels": [{"name": "v", "from": "in", "to": "out", "arrangement": "RCL",
                      "lumped": {"resistance": r1, "capacitance": c},
-                     "initial": {"pressure_in": p0, "flow_in": 0.0}}],
+                     "initial": initial}],
         "boundary_conditions": {"in": {"type": "flow", "flow": 0.0},
                                 "out": {"type": "resistance", "resistance": r2}},
         "simulation": {"cycles": 1, "dt": 1e-4, "method": method, "start": "zero",

@@ -45,24 +45,33 @@ pub(crate) fn record(
     if nb > 1 {
         push(Unknown::Branch(branches[nb - 1]), values.flow_out);
     }
+    // an absent end value is 0 (docs/physics.md §1.9), so one given end still sets the
+    // interior: leaving it at 0 would start the vessel with a jump its equations reject
     let lerp = |a: Option<f64>, b: Option<f64>, k: usize, n: usize| match (a, b) {
-        (Some(a), Some(b)) => Some(a + (b - a) * k as f64 / n as f64),
-        _ => None,
+        (None, None) => None,
+        (a, b) => {
+            let (a, b) = (a.unwrap_or(0.0), b.unwrap_or(0.0));
+            Some(a + (b - a) * k as f64 / n as f64)
+        }
     };
     for (k, &p) in points.iter().enumerate().take(np - 1).skip(1) {
         let value = match interior {
             Interior::Rcl {
                 resistance,
                 stenosis,
-            } => match (values.pressure_in, values.flow_in, flow_at_inlet) {
-                // the rate of (R + S|Q|)Q is (R + 2S|Q|)Q̇, with Q the start flow
-                (Some(p_in), Some(q), Some(q0)) if rate => {
-                    Some(p_in - (resistance + 2.0 * stenosis * q0.abs()) * q)
+            } => match (values.pressure_in, values.flow_in) {
+                (None, None) => None,
+                // absent values are 0 (§1.9): a given P_in alone puts the capacitor at P_in
+                (p_in, q) => {
+                    let (p_in, q) = (p_in.unwrap_or(0.0), q.unwrap_or(0.0));
+                    if rate {
+                        // the rate of (R + S|Q|)Q is (R + 2S|Q|)Q̇, with Q the start flow
+                        let q0 = flow_at_inlet.unwrap_or(0.0);
+                        Some(p_in - (resistance + 2.0 * stenosis * q0.abs()) * q)
+                    } else {
+                        Some(p_in - (resistance + stenosis * q.abs()) * q)
+                    }
                 }
-                (Some(p_in), Some(q), _) if !rate => {
-                    Some(p_in - (resistance + stenosis * q.abs()) * q)
-                }
-                _ => None,
             },
             Interior::Inlet => values.pressure_in,
             Interior::Linear => lerp(values.pressure_in, values.pressure_out, k, np - 1),
