@@ -24,6 +24,7 @@ times in brackets —
     python benches/bench_scale.py --depths 8 10 12 14 16 18 --rk4-max-depth 12
     python benches/bench_scale.py --depths 18 --configs flow o2-k     # the 1e6-segment run
     python benches/bench_scale.py --depths 18 --configs o2-k --zarr   # ... streamed to Zarr
+    python benches/bench_scale.py --depths 18 --configs o2-k --variables flow_in concentration_in
 """
 
 from __future__ import annotations
@@ -102,6 +103,8 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
     model = tree(spec["depth"], spec["per_vessel"], spec["config"])
     kw: dict[str, Any] = {"cycles": 1, "output_every": 0.01, "segments": False,
                           "method": spec["method"]}
+    if spec.get("variables"):
+        kw["variables"] = spec["variables"]
     if spec["method"] == "generalized-alpha":
         kw["dt"] = 1e-3
     c0, w0 = time.process_time(), time.perf_counter()
@@ -206,6 +209,10 @@ def main() -> None:
     ap.add_argument("--time-chunk", type=int, default=10,
                     help="rows per Zarr chunk with --zarr")
     ap.add_argument("--repeat", type=int, default=1)
+    ap.add_argument("--variables", nargs="+",
+                    help="output only these vessel variables (the run's output selection, "
+                         "e.g. pressure_in flow_in concentration_in concentration_out); "
+                         "default: all")
     a = ap.parse_args()
     if a.child:
         print(json.dumps(child(json.loads(a.child))))
@@ -216,6 +223,8 @@ def main() -> None:
             QUICK["rk4_max_depth"]
     out = (f"streamed to Zarr ({a.time_chunk} rows per chunk)" if a.zarr
            else "kept in memory")
+    if a.variables:
+        out += f", variables {' '.join(a.variables)}"
     print(f"# binary trees, {a.per_vessel} segments per vessel, one cycle, vessel output every "
           f"10 ms {out}; CPU s (wall s), best of {a.repeat}; peak RSS of a fresh process; "
           f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}")
@@ -234,7 +243,7 @@ def main() -> None:
                     continue
                 r = measure({"depth": depth, "per_vessel": a.per_vessel, "config": config,
                              "method": method, "repeat": a.repeat, "zarr": a.zarr,
-                             "time_chunk": a.time_chunk})
+                             "time_chunk": a.time_chunk, "variables": a.variables})
                 if "error" in r:
                     print(f"| {method} | {config} | depth {depth} | failed: {r['error']} |")
                     continue

@@ -268,14 +268,12 @@ impl<'r, 'f> Cycles<'r, 'f> {
     /// is complete (mean flow settled, or periodic after the minimum cycles).
     fn end_cycle(&mut self) -> bool {
         let y = &self.state.y;
-        self.periodic_error = scaled_increment(
-            self.state.dae,
-            &y.iter()
-                .zip(&self.prev_cycle_end)
-                .map(|(a, b)| a - b)
-                .collect::<Vec<_>>(),
-            y,
-        );
+        // the change y − y_prev in place of y_prev (no state-sized copy at the end of the run,
+        // when the whole output table is held), then y_prev = y
+        for (p, a) in self.prev_cycle_end.iter_mut().zip(y) {
+            *p = a - *p;
+        }
+        self.periodic_error = scaled_increment(self.state.dae, &self.prev_cycle_end, y);
         self.prev_cycle_end.copy_from_slice(y);
         if self.mean.as_deref_mut().is_some_and(MeanAbs::end_cycle) {
             return false;

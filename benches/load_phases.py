@@ -1,0 +1,93 @@
+"""Where does the load time of a whole tree go? ``oxyline.load_model`` of one
+``bench_scale.py`` tree split into its phases, each in user + system CPU and minor page
+faults, in several fresh processes (issue 9 item 3: the load of one fresh process varied by
+more than the target's margin).
+
+    python benches/load_phases.py --depths 15 16 18 --config o2-k --repeat 3
+
+Phases (the same calls ``load_model`` makes, in its order): ``copy`` (the private copy of the
+user's dict, ``model._copy``), ``canonical`` (checks and SI conversion, ``model._unassembled``),
+``core`` (``_core.Network``: the binding reads the vessel dicts, the core assembles the
+circuit, the DAE and the transport plan), ``release`` (the output-layout check and
+``release_canonical``). ``total`` is ``load_model`` as ``bench_scale.py`` times it (process
+CPU). A page fault of fresh memory costs the kernel a zeroed page: its time is system CPU.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import time
+from typing import Any
+
+
+def usage() -> tuple[float, float, int]:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime, r.ru_stime, r.ru_minflt
+
+
+def child(depth: int, config: str) -> dict[str, Any]:
+    from bench_scale import tree
+
+    from oxyline import model as M
+    from oxyline.loader import gc_paused
+
+    user = tree(depth, 4, config)
+    out: dict[str, Any] = {"segments": (2 ** depth - 1) * 4}
+    c0 = time.process_time()
+    last = usage()
+
+    def mark(phase: str) -> None:
+        nonlocal last
+        now = usage()
+        out[phase] = (now[0] - last[0], now[1] - last[1], now[2] - last[2])
+        last = now
+
+    # the steps of loader.load_model for a dict, one by one
+    with gc_paused():
+        data = M._copy(dict(user))
+    mark("copy")
+    with gc_paused():
+        m = M._unassembled(data)
+        mark("canonical")
+        m.network  # noqa: B018
+        mark("core")
+        m.release_canonical()
+    mark("release")
+    out["total"] = time.process_time() - c0
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--depths", type=int, nargs="+", default=[15, 16])
+    ap.add_argument("--config", default="o2-k")
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--child", nargs=2)
+    a = ap.parse_args()
+    if a.child:
+        print(json.dumps(child(int(a.child[0]), a.child[1])))
+        return
+    phases = ["copy", "canonical", "core", "release"]
+    print(f"# load_model phases, config {a.config}; µs per segment: user+sys CPU "
+          "(sys in brackets), minor page faults per 1000 segments; each row a fresh process")
+    print("| segments | run | " + " | ".join(phases) + " | total µs/seg | faults/kseg |")
+    print("|---:|---:|" + "---:|" * (len(phases) + 2))
+    for depth in a.depths:
+        for i in range(a.repeat):
+            p = subprocess.run([sys.executable, __file__, "--child", str(depth), a.config],
+                               capture_output=True, text=True, check=True)
+            r = json.loads(p.stdout.strip().splitlines()[-1])
+            n = r["segments"]
+            cells = [f"{1e6 * (r[k][0] + r[k][1]) / n:.2f} ({1e6 * r[k][1] / n:.2f})"
+                     for k in phases]
+            faults = sum(r[k][2] for k in phases)
+            print(f"| {n} | {i + 1} | " + " | ".join(cells)
+                  + f" | {1e6 * r['total'] / n:.2f} | {1e3 * faults / n:.0f} |")
+
+
+if __name__ == "__main__":
+    main()
