@@ -163,7 +163,9 @@ fn check_pressure_level(spec: &NetworkSpec) -> Result<()> {
         || spec
             .vessels
             .iter()
-            .any(|v| v.chamber.is_some() || v.heart_pulmonary.is_some())
+            .any(|v| {
+                v.chamber.is_some() || v.chamber_sphere.is_some() || v.heart_pulmonary.is_some()
+            })
     {
         return Ok(());
     }
