@@ -54,7 +54,13 @@ from typing import Any
 import numpy as np
 
 from oxyline.errors import ModelError, UnsupportedElement
-from oxyline.io import svzerod_closed_loop, svzerod_cycles, svzerod_heart, svzerod_initial
+from oxyline.io import (
+    svzerod_closed_loop,
+    svzerod_coupling,
+    svzerod_cycles,
+    svzerod_heart,
+    svzerod_initial,
+)
 from oxyline.model import Model, _build, _copy
 
 COLUMNS = ("name", "time", "flow_in", "flow_out", "pressure_in", "pressure_out")
@@ -80,9 +86,7 @@ FRAME_UNITS = {
 # `description` is free text; the calibrator's observations and settings do not change a forward
 # simulation, and svZeroDSolver ignores them too
 TOP_IGNORED = {"description", "calibration_parameters", "y", "dy"}
-TOP_UNSUPPORTED = {
-    "external_solver_coupling_blocks": "3D-0D coupling blocks",
-}
+TOP_UNSUPPORTED: dict[str, str] = {}
 SIM_KEYS = {
     "number_of_cardiac_cycles", "number_of_time_pts_per_cardiac_cycle", "absolute_tolerance",
     "maximum_nonlinear_iterations", "steady_initial", "rho_infty", "output_variable_based",
@@ -509,6 +513,8 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
     layout). The dict keeps the file's numbers and says their ``units`` (so a model built from
     it is in SI)."""
     cfg = _read_config(config)
+    # coupling blocks with prescribed values are ordinary conditions (svzerod_coupling)
+    cfg, wires, wire_ends = svzerod_coupling.as_forward(cfg)
     layout = _Layout()
     system = file_units(cfg, units)
     if "simulation_parameters" not in cfg:
@@ -745,6 +751,9 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
     # ---- junctions
     hidden = _junctions(cfg.get("junctions", []), ids, bcs, vessel_names, attach, layout)
     layout.connections += element_nodes
+    # a coupling block's wire: svZeroDSolver has no node at its free end, and no vessel row
+    layout.connections = [c for c in layout.connections if not set(c) & wire_ends]
+    layout.not_vessels |= wires
 
     if not vessels:
         raise ModelError("model: no vessels")
