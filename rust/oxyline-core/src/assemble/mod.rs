@@ -5,12 +5,12 @@
 
 pub(crate) mod boundary;
 mod chamber;
-mod sphere;
 pub(crate) mod checks;
 mod graph;
 mod heart;
 mod initial;
 pub mod segments;
+mod sphere;
 mod valve;
 mod vessel;
 
@@ -113,7 +113,10 @@ impl NetworkSpec {
                 if v.chamber_sphere.is_some() {
                     // its five wall unknowns, the last element unknowns it added
                     let first = circuit.extras.len() - 5;
-                    for (k, var) in ["radius", "velo", "stress", "tau", "volume"].iter().enumerate() {
+                    for (k, var) in ["radius", "velo", "stress", "tau", "volume"]
+                        .iter()
+                        .enumerate()
+                    {
                         probes
                             .element_unknowns
                             .push((format!("{var}:{}", v.name), first + k));

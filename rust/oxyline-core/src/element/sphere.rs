@@ -147,7 +147,12 @@ impl Element for ChamberSphere {
     fn residual(&self, t: f64, y: &[f64], c: &mut [f64]) {
         let (q, u) = (&self.params, &self.u);
         let big_r = q.radius + y[u.displacement];
-        let (vel, stress, tau, p) = (y[u.velocity], y[u.stress], y[u.active_stress], y[u.pressure]);
+        let (vel, stress, tau, p) = (
+            y[u.velocity],
+            y[u.stress],
+            y[u.active_stress],
+            y[u.pressure],
+        );
         let growth = 4.0 * PI * vel * big_r * big_r;
         let (abs_a, pos_a) = q.activation(t);
         c[0] = growth;
