@@ -753,7 +753,10 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
     layout.connections += element_nodes
     # a coupling block's wire: svZeroDSolver has no node at its free end, and no vessel row
     layout.connections = [c for c in layout.connections if not set(c) & wire_ends]
-    layout.not_vessels |= wires
+    layout.not_vessels |= set(wires)
+    # the heart's outlet node into a coupling block (its flow and the heart's outlet pressure)
+    layout.connections += [(svzerod_closed_loop.HEART_OUTLET, w) for w, other in wires.items()
+                           if other == svzerod_coupling.HEART]
 
     if not vessels:
         raise ModelError("model: no vessels")

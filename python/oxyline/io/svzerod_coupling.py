@@ -28,13 +28,13 @@ TYPES = {"FLOW": "Q", "PRESSURE": "P"}
 HEART = "ClosedLoopHeartAndPulmonary"
 
 
-def as_forward(cfg: dict[str, Any]) -> tuple[dict[str, Any], set[str], set[str]]:
+def as_forward(cfg: dict[str, Any]) -> tuple[dict[str, Any], dict[str, str], set[str]]:
     """``cfg`` with its coupling blocks as boundary conditions (and hidden wire vessels).
-    Returns (config, names of the wire vessels, names of the conditions at their free ends,
-    which svZeroDSolver's variable table does not have)."""
+    Returns (config, the wire vessels' names and the blocks they connect to, names of the
+    conditions at their free ends, which svZeroDSolver's variable table does not have)."""
     blocks = cfg.get("external_solver_coupling_blocks")
     if not blocks:
-        return cfg, set(), set()
+        return cfg, {}, set()
     if not isinstance(blocks, list):
         raise ModelError("external_solver_coupling_blocks: must be a list")
     cfg = dict(cfg, vessels=list(cfg.get("vessels", [])),
@@ -42,7 +42,7 @@ def as_forward(cfg: dict[str, Any]) -> tuple[dict[str, Any], set[str], set[str]]
     cfg.pop("external_solver_coupling_blocks")
     vessels = {v.get("vessel_name"): v for v in cfg["vessels"] if isinstance(v, Mapping)}
     bcs = {b.get("bc_name") for b in cfg["boundary_conditions"] if isinstance(b, Mapping)}
-    wires: set[str] = set()
+    wires: dict[str, str] = {}
     ends: set[str] = set()
     for i, b in enumerate(blocks):
         if not isinstance(b, Mapping) or not isinstance(b.get("name"), str):
@@ -90,6 +90,6 @@ def as_forward(cfg: dict[str, Any]) -> tuple[dict[str, Any], set[str], set[str]]
                                "zero_d_element_values": {"R_poiseuille": 0.0},
                                "boundary_conditions": sides})
         cfg["boundary_conditions"].append(bc)
-        wires.add(name)
+        wires[name] = other
         ends.add(free)
     return cfg, wires, ends
