@@ -20,7 +20,9 @@ by the load of a shared machine. Models:
   cases ``closedLoopHeart_singleVessel`` and ``closedLoopHeart_withCoronaries``, as stored
   (10 cycles of 100 steps) and lengthened (20 cycles of 1000 steps): svzerod and the drop-in in
   the same run (median wall and CPU seconds), the drop-in against the stored reference and
-  against svzerod with the same settings, svzerod against the stored reference.
+  against svzerod with the same settings, svzerod against the stored reference; then the two
+  ``coupledBlock_closedLoopHeart_*`` cases (coupling blocks with prescribed values) as stored,
+  on the variables the drop-in outputs.
 
 Run ``python benches/bench_heart.py --help``; ``--quick`` (one repeat, N = 200, a few seconds
 on a quiet machine plus the peer tables) is the rerun command. Results print as Markdown.
@@ -231,6 +233,23 @@ def closed_loop_table(repeat: int) -> None:
                   f"{w_g:.3f} / {c_g:.3f} | {c_g / c_p:.2f} | {_frame_error(ga, peer):.1e} | "
                   f"{f'{_frame_error(ga, ref):.1e}' if stored else '–'} | "
                   f"{f'{_frame_error(peer, ref):.1e}' if stored else '–'} | {rk} |")
+    # coupling blocks with prescribed values (variable tables: the drop-in's shared variables,
+    # max|a - e| / range(e))
+    for name in ("coupledBlock_closedLoopHeart_singleVessel",
+                 "coupledBlock_closedLoopHeart_withCoronaries"):
+        cfg = json.loads((CASES / f"{name}.json").read_text())
+        ref = pd.read_json(CASES / "results" / f"result_{name}.json.gz")
+        sp = cfg["simulation_parameters"]
+        peer, w_p, c_p = timed(svzerod.simulate, cfg)
+        ga, w_g, c_g = timed(svz.simulate, cfg)
+        shared = set(ga["name"])
+        print(f"| {name} | {sp['number_of_cardiac_cycles']} × "
+              f"{sp['number_of_time_pts_per_cardiac_cycle'] - 1} | {w_p:.3f} / {c_p:.3f} | "
+              f"{w_g:.3f} / {c_g:.3f} | {c_g / c_p:.2f} | "
+              f"{_variable_errors(ga, peer[peer['name'].isin(shared)]):.1e} | "
+              f"{_variable_errors(ga, ref[ref['name'].isin(shared)]):.1e} | "
+              f"{_variable_errors(peer[peer['name'].isin(shared)], ref[ref['name'].isin(shared)]):.1e} "
+              f"| – |")
     print(f"\nload average at end: {os.getloadavg()[0]:.1f}")
 
 

@@ -53,11 +53,12 @@ SUPPORTED = [
 ]
 # case -> text the UnsupportedElement message must contain (the element or key it names)
 UNSUPPORTED = {
-    "chamber_sphere": "'ChamberSphere'",
-    "coupledBlock_closedLoopHeart_singleVessel": "'external_solver_coupling_blocks'",
-    "coupledBlock_closedLoopHeart_withCoronaries": "'external_solver_coupling_blocks'",
     "steadyFlow_calibration": "'calibration_parameters'",
 }
+# ChamberSphere and the coupling blocks with prescribed values: tested in
+# tests/test_svzerod_sphere.py
+SPHERE = ["chamber_sphere", "coupledBlock_closedLoopHeart_singleVessel",
+          "coupledBlock_closedLoopHeart_withCoronaries"]
 # chamber and valve cases: tested in tests/test_svzerod_chambers.py
 CHAMBERS = ["chamber_elastance_inductor", "closedLoopHeart_singleVessel_decomposed", "valve_tanh"]
 # closed-loop heart block cases: tested in tests/test_svzerod_closed_loop.py
@@ -183,10 +184,10 @@ def svzerod_run(cfg: dict[str, Any], refine: int = 1) -> pd.DataFrame:
 def test_every_case_is_classified() -> None:
     files = {p.stem for p in CASES.glob("*.json")}
     listed = (set(SUPPORTED) | set(UNSUPPORTED) | set(MISMATCH_PERIOD) | set(HEART)
-              | set(CHAMBERS) | set(CLOSED_LOOP) | set(REST))
+              | set(CHAMBERS) | set(CLOSED_LOOP) | set(REST) | set(SPHERE))
     assert files == listed
     assert len(listed) == (len(SUPPORTED) + len(UNSUPPORTED) + len(MISMATCH_PERIOD) + len(HEART)
-                           + len(CHAMBERS) + len(CLOSED_LOOP) + len(REST))
+                           + len(CHAMBERS) + len(CLOSED_LOOP) + len(REST) + len(SPHERE))
 
 
 # ------------------------------------------------------------------------------------------

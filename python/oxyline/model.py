@@ -38,7 +38,7 @@ VESSEL_KEYS = {
     "name", "from", "to", "length", "radius", "radius_in", "radius_out", "wall_thickness",
     "youngs_modulus", "poisson_ratio", "segments", "lumped", "arrangement", "output",
     "description", "valve", "chamber", "through_rc", "heart_pulmonary", "coronary_bed",
-    "initial", "initial_rate",
+    "initial", "initial_rate", "chamber_sphere",
 }
 #: heart elements (docs/physics.md §1.8): each law's keys and their quantities ("1/pressure":
 #: a valve's steepness; "elastance": pressure per volume; "volume": the flow factor times 1 s)
@@ -56,6 +56,14 @@ CHAMBER_KEYS = {
                     "passive_volume_coefficient": "1/volume", "rest_volume": "volume"},
 }
 THROUGH_RC_KEYS = {"resistance": "resistance", "capacitance": "capacitance"}
+#: a spherical chamber with wall mechanics (docs/physics.md §1.11): keys and quantities
+CHAMBER_SPHERE_KEYS = {
+    "density": "density", "wall_thickness": "length", "reference_radius": "length",
+    "w1": "pressure", "w2": "pressure", "viscosity": "viscosity",
+    "max_active_stress": "pressure", "max_activation_rate": "1/time",
+    "min_activation_rate": "1/time", "systole_start": "time", "diastole_start": "time",
+    "activation_steepness": "time", "period": "time",
+}
 #: the closed-loop heart block (docs/physics.md §1.10): keys and quantities ("number": none)
 HEART_PULMONARY_KEYS = {
     "period": "time", "atrial_systole_fraction": "number", "p_wave_divisor": "number",
@@ -348,6 +356,8 @@ def _vessel(v: Any, i: int, units: str) -> dict[str, Any]:
             cv[key] = _start_values(v[key], el, key, units)
     if "heart_pulmonary" in v or "coronary_bed" in v:
         return _closed_loop_element(v, cv, el, units)
+    if "chamber_sphere" in v:
+        return _sphere_element(v, cv, el, units)
     if "valve" in v or "chamber" in v or "through_rc" in v:
         return _heart_element(v, cv, el, units)
     if "lumped" in v:
@@ -427,6 +437,24 @@ def _closed_loop_element(v: Mapping[str, Any], cv: dict[str, Any], el: str, unit
     return cv
 
 
+def _sphere_element(v: Mapping[str, Any], cv: dict[str, Any], el: str, units: str
+                    ) -> dict[str, Any]:
+    """The canonical form of a ``chamber_sphere`` element (docs/physics.md §1.11)."""
+    others = [k for k in ("valve", "chamber", "through_rc", "lumped", "length") if k in v]
+    if others:
+        raise _err(el, f"give one of chamber_sphere, {', '.join(others)}, not both")
+    spec = v["chamber_sphere"]
+    if not isinstance(spec, Mapping):
+        raise _err(el, "'chamber_sphere' must be a mapping")
+    _check_keys(spec, set(CHAMBER_SPHERE_KEYS), f"{el} chamber_sphere")
+    for k in CHAMBER_SPHERE_KEYS:
+        if k not in spec:
+            raise _err(el, f"chamber_sphere needs '{k}'")
+    cv["chamber_sphere"] = {k: _quantity(units, q) * _number(spec[k], el, k)
+                            for k, q in CHAMBER_SPHERE_KEYS.items()}
+    return cv
+
+
 def _start_values(d: Any, el: str, key: str, units: str) -> dict[str, float]:
     """A vessel's ``initial`` (or ``initial_rate``: the same quantities per second) in SI."""
     if not isinstance(d, Mapping):
@@ -444,6 +472,8 @@ def _quantity(units: str, q: str) -> float:
         return factor(units, "flow")
     if q == "1/volume":
         return 1.0 / factor(units, "flow")
+    if q == "1/time":
+        return 1.0 / factor(units, "time")
     return factor(units, q)
 
 

@@ -54,7 +54,13 @@ from typing import Any
 import numpy as np
 
 from oxyline.errors import ModelError, UnsupportedElement
-from oxyline.io import svzerod_closed_loop, svzerod_cycles, svzerod_heart, svzerod_initial
+from oxyline.io import (
+    svzerod_closed_loop,
+    svzerod_coupling,
+    svzerod_cycles,
+    svzerod_heart,
+    svzerod_initial,
+)
 from oxyline.model import Model, _build, _copy
 
 COLUMNS = ("name", "time", "flow_in", "flow_out", "pressure_in", "pressure_out")
@@ -80,9 +86,7 @@ FRAME_UNITS = {
 # `description` is free text; the calibrator's observations and settings do not change a forward
 # simulation, and svZeroDSolver ignores them too
 TOP_IGNORED = {"description", "calibration_parameters", "y", "dy"}
-TOP_UNSUPPORTED = {
-    "external_solver_coupling_blocks": "3D-0D coupling blocks",
-}
+TOP_UNSUPPORTED: dict[str, str] = {}
 SIM_KEYS = {
     "number_of_cardiac_cycles", "number_of_time_pts_per_cardiac_cycle", "absolute_tolerance",
     "maximum_nonlinear_iterations", "steady_initial", "rho_infty", "output_variable_based",
@@ -101,7 +105,7 @@ VESSEL_KEYS = {"vessel_id", "vessel_name", "zero_d_element_type", "zero_d_elemen
 JUNCTION_KEYS = {"junction_name", "junction_type", "inlet_vessels", "outlet_vessels",
                  "inlet_blocks", "outlet_blocks", "junction_values", "calibrate"}
 BC_ENTRY_KEYS = {"bc_name", "bc_type", "bc_values"}
-VESSEL_TYPES = {"BloodVessel", "BloodVesselCRL", "BloodVesselRC"}
+VESSEL_TYPES = {"BloodVessel", "BloodVesselCRL", "BloodVesselRC", "ChamberSphere"}
 NORMAL_JUNCTIONS = {"NORMAL_JUNCTION", "internal_junction"}
 JUNCTION_TYPES = NORMAL_JUNCTIONS | {"BloodVesselJunction", "resistive_junction"}
 # block types this importer knows and cannot translate, with the reason (other unknown types
@@ -136,6 +140,8 @@ class _Layout:
     #: blocks svZeroDSolver leaves out of its vessel-based table (chambers, valves,
     #: BloodVesselRC): in ``vessels`` only for the variable table's node lookup
     not_vessels: set[str] = field(default_factory=set)
+    #: ChamberSphere vessels, whose wall variables follow the nodes in the variable table
+    spheres: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -507,6 +513,8 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
     layout). The dict keeps the file's numbers and says their ``units`` (so a model built from
     it is in SI)."""
     cfg = _read_config(config)
+    # coupling blocks with prescribed values are ordinary conditions (svzerod_coupling)
+    cfg, wires, wire_ends = svzerod_coupling.as_forward(cfg)
     layout = _Layout()
     system = file_units(cfg, units)
     if "simulation_parameters" not in cfg:
@@ -665,9 +673,10 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
             raise ModelError(f"{el}: vessel_name used twice")
         seen_names.add(name)
         el = f"{kind} '{name}'"
-        params = RC_VESSEL_PARAMS if kind == "BloodVesselRC" else BLOOD_VESSEL_PARAMS
+        params = {"BloodVesselRC": RC_VESSEL_PARAMS,
+                  "ChamberSphere": set(svzerod_heart.SPHERE_KEYS)}.get(kind, BLOOD_VESSEL_PARAMS)
         vals = _check_params(_required(v, "zero_d_element_values", el), params, el)
-        lumped = {} if kind == "BloodVesselRC" else {
+        lumped = {} if kind in ("BloodVesselRC", "ChamberSphere") else {
             "resistance": _num(_required(vals, "R_poiseuille", el), el, "R_poiseuille"),
             "capacitance": _num(vals.get("C", 0.0), el, "C"),
             "inductance": _num(vals.get("L", 0.0), el, "L"),
@@ -685,7 +694,14 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         if vid in ids:
             raise ModelError(f"{el}: vessel_id {vid!r} is also used by vessel '{ids[vid]}'")
         ids[vid] = name
-        if kind == "BloodVesselRC":
+        if kind == "ChamberSphere":
+            # a vessel-class block upstream: in the vessel table with its inflow and outflow
+            layout.vessels.append((name, name, name))
+            layout.spheres.append(name)
+            vessels.append({"name": name, "description": "svZeroDSolver ChamberSphere",
+                            "chamber_sphere": svzerod_heart.chamber_sphere(vals, el, period,
+                                                                          _num)})
+        elif kind == "BloodVesselRC":
             layout.vessels.append((name, name, name))
             layout.not_vessels.add(name)
             vessels.append({"name": name, "description": "svZeroDSolver BloodVesselRC",
@@ -735,6 +751,12 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
     # ---- junctions
     hidden = _junctions(cfg.get("junctions", []), ids, bcs, vessel_names, attach, layout)
     layout.connections += element_nodes
+    # a coupling block's wire: svZeroDSolver has no node at its free end, and no vessel row
+    layout.connections = [c for c in layout.connections if not set(c) & wire_ends]
+    layout.not_vessels |= set(wires)
+    # the heart's outlet node into a coupling block (its flow and the heart's outlet pressure)
+    layout.connections += [(svzerod_closed_loop.HEART_OUTLET, w) for w, other in wires.items()
+                           if other == svzerod_coupling.HEART]
 
     if not vessels:
         raise ModelError("model: no vessels")
@@ -879,8 +901,9 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
     recorded = {v["name"]: 4 * k for k, v in enumerate(x for x in vessels if x.get("output", True))}
     names, idx, extra = _output_columns(layout, recorded, s.output_variable_based)
     chambers = [v["name"] for v in native["vessels"] if "chamber" in v]
-    if s.output_variable_based and chambers:
-        names, idx, extra = _with_chamber_volumes(model, chambers, names, idx, extra)
+    if s.output_variable_based and (chambers or layout.spheres):
+        names, idx, extra = _with_chamber_volumes(model, chambers, layout.spheres, names, idx,
+                                                  extra)
         s = dataclasses.replace(s, all_unknowns=True)
     shape = (len(names), 1 if s.output_variable_based else 4)
     if s.cycle_error is not None:
@@ -934,17 +957,22 @@ def _output_columns(layout: _Layout, recorded: Mapping[str, int], variable_based
     return names, np.asarray(idx, dtype=np.intp), extra
 
 
-def _with_chamber_volumes(model: Model, chambers: list[str], names: list[str], idx: np.ndarray,
-                          extra: list[tuple[int, int, float]]
+def _with_chamber_volumes(model: Model, chambers: list[str], spheres: list[str],
+                          names: list[str], idx: np.ndarray, extra: list[tuple[int, int, float]]
                           ) -> tuple[list[str], np.ndarray, list[tuple[int, int, float]]]:
-    """The variable table's columns for a run recording every unknown, with svZeroDSolver's
-    ``Vc:<chamber>`` (its last internal variables: chambers are its last blocks) appended."""
+    """The variable table's columns for a run recording every unknown, with the wall
+    variables of svZeroDSolver's ChamberSphere vessels (``radius:<name>`` …, vessels being its
+    first blocks) and its ``Vc:<chamber>`` (its last internal variables: chambers are its last
+    blocks) appended."""
     lay = model.network.unknown_layout()
     probe = np.asarray(lay["vessel_unknowns"], dtype=np.intp)
     volume = dict(lay["chamber_volumes"])
-    idx = np.concatenate([probe[idx], np.asarray([volume[c] for c in chambers], dtype=np.intp)])
+    wall = dict(lay.get("element_unknowns", []))
+    added = [f"{var}:{s}" for s in spheres for var in svzerod_heart.SPHERE_VARIABLES]
+    cols = [wall[n] for n in added] + [volume[c] for c in chambers]
+    idx = np.concatenate([probe[idx], np.asarray(cols, dtype=np.intp)])
     extra = [(j, int(probe[c]), w) for j, c, w in extra]
-    return names + [f"Vc:{c}" for c in chambers], idx, extra
+    return names + added + [f"Vc:{c}" for c in chambers], idx, extra
 
 
 def _apply(data: np.ndarray, columns: tuple[np.ndarray, list[tuple[int, int, float]]]

@@ -176,3 +176,29 @@ def valve(v: Mapping[str, Any], num: Num) -> tuple[dict[str, Any], str, str]:
     if kind == "ValveTanh":
         native["steepness"] = num(p["Steepness"], el, "Steepness")
     return native, str(p["upstream_block"]), str(p["downstream_block"])
+
+
+# ------------------------------------------------------------------------------------------
+# the spherical chamber (native ``chamber_sphere``, docs/physics.md §1.11)
+
+#: svZeroDSolver's ChamberSphere parameter -> native key
+SPHERE_KEYS = {"rho": "density", "thick0": "wall_thickness", "radius0": "reference_radius",
+               "W1": "w1", "W2": "w2", "eta": "viscosity", "sigma_max": "max_active_stress",
+               "alpha_max": "max_activation_rate", "alpha_min": "min_activation_rate",
+               "tsys": "systole_start", "tdias": "diastole_start",
+               "steepness": "activation_steepness"}
+#: its internal variables in svZeroDSolver's order (``<var>:<block>`` in the variable table)
+SPHERE_VARIABLES = ("radius", "velo", "stress", "tau", "volume")
+
+
+def chamber_sphere(vals: Mapping[str, Any], el: str, period: float, num: Num) -> dict[str, Any]:
+    """The native ``chamber_sphere`` element of a ChamberSphere vessel's
+    ``zero_d_element_values`` (every parameter is required, as svZeroDSolver requires it)."""
+    out: dict[str, Any] = {}
+    for key, nat in SPHERE_KEYS.items():
+        if key not in vals:
+            raise ModelError(f"{el}: missing '{key}'")
+        out[nat] = num(vals[key], el, key)
+    # svZeroDSolver evaluates the activation on the time within the model's cardiac period
+    out["period"] = period
+    return out

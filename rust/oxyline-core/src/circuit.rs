@@ -15,6 +15,7 @@ use crate::element::Element;
 use crate::element::chamber::{Chamber, Elastance};
 use crate::element::coronary::ClosedLoopCoronary;
 use crate::element::heart::{HeartParams, HeartPulmonary, HeartUnknowns};
+use crate::element::sphere::{ChamberSphere, SphereParams, SphereUnknowns};
 use crate::element::valve::{Valve, ValveLaw};
 use crate::error::{Error, Result};
 use crate::waveform::Waveform;
@@ -41,6 +42,11 @@ pub enum Part {
     Intramyocardial,
     /// A chamber's blood volume.
     Volume,
+    /// A spherical chamber's wall unknowns (docs/physics.md §1.11).
+    WallDisplacement,
+    WallVelocity,
+    WallStress,
+    ActiveStress,
 }
 
 impl Part {
@@ -58,6 +64,10 @@ impl Part {
             Part::MicrovascularResistance => "microvascular resistance",
             Part::Intramyocardial => "intramyocardial compartment",
             Part::Volume => "chamber",
+            Part::WallDisplacement => "wall displacement",
+            Part::WallVelocity => "wall velocity",
+            Part::WallStress => "wall stress",
+            Part::ActiveStress => "active stress",
         }
     }
 }
@@ -275,6 +285,15 @@ pub enum CircuitElement {
         node: usize,
         volume: usize,
         ventricle: usize,
+    },
+    /// A spherical chamber (docs/physics.md §1.11): its pressure node and its wall
+    /// displacement, velocity, stress, active stress and volume (indices into
+    /// `Circuit::extras`).
+    Sphere {
+        name: String,
+        params: SphereParams,
+        node: usize,
+        extras: [usize; 5],
     },
 }
 
@@ -761,6 +780,27 @@ fn resolve(el: &CircuitElement, nn: usize, nb: usize) -> Arc<dyn Element> {
             nn + nb + volume,
             *ventricle,
         )),
+        CircuitElement::Sphere {
+            name,
+            params,
+            node,
+            extras,
+        } => {
+            let [displacement, velocity, stress, active_stress, volume] =
+                extras.map(|x| nn + nb + x);
+            Arc::new(ChamberSphere::new(
+                name.clone(),
+                *params,
+                SphereUnknowns {
+                    pressure: *node,
+                    displacement,
+                    velocity,
+                    stress,
+                    active_stress,
+                    volume,
+                },
+            ))
+        }
     }
 }
 

@@ -74,6 +74,9 @@ pub struct Probes {
     pub segment_position: Vec<f64>,
     /// Each chamber's name and the unknown index of its blood volume (svZeroDSolver's `Vc`).
     pub chamber_volumes: Vec<(String, usize)>,
+    /// Other element unknowns by svZeroDSolver's variable name (a spherical chamber's
+    /// `radius:<name>`, `velo`, `stress`, `tau`, `volume`) and their unknown index.
+    pub element_unknowns: Vec<(String, usize)>,
 }
 
 impl Probes {
@@ -86,7 +89,11 @@ impl Probes {
     /// Chamber volumes were recorded as element-unknown indices: they follow the node
     /// pressures and branch flows.
     pub(crate) fn shift_extras(&mut self, n_nodes_and_branches: usize) {
-        for (_, x) in self.chamber_volumes.iter_mut() {
+        for (_, x) in self
+            .chamber_volumes
+            .iter_mut()
+            .chain(self.element_unknowns.iter_mut())
+        {
             *x += n_nodes_and_branches;
         }
     }
@@ -325,6 +332,7 @@ mod tests {
             segment_unknowns: (100..109).collect(),
             segment_position: vec![0.5, 1.5, 0.5],
             chamber_volumes: Vec::new(),
+            element_unknowns: Vec::new(),
         }
     }
 

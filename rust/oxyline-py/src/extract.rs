@@ -157,6 +157,7 @@ pub fn vessel(i: usize, item: &Bound<'_, PyAny>) -> Res<VesselSpec> {
         coronary_bed: None,
         chamber: None,
         through_rc: None,
+        chamber_sphere: None,
         initial: None,
         initial_rate: None,
     };
@@ -183,6 +184,7 @@ pub fn vessel(i: usize, item: &Bound<'_, PyAny>) -> Res<VesselSpec> {
             "coronary_bed" => v.coronary_bed = Some(via_json(&val, element, k)?),
             "chamber" => v.chamber = Some(via_json(&val, element, k)?),
             "through_rc" => v.through_rc = Some(via_json(&val, element, k)?),
+            "chamber_sphere" => v.chamber_sphere = Some(via_json(&val, element, k)?),
             "initial" => v.initial = Some(via_json(&val, element, k)?),
             "initial_rate" => v.initial_rate = Some(via_json(&val, element, k)?),
             "output" => {

@@ -387,12 +387,14 @@ impl Network {
 
     /// Where values live in the unknown vector (the columns of an `all_unknowns` run): each
     /// output vessel's [pressure_in, pressure_out, flow_in, flow_out] and each chamber's blood
-    /// volume as (name, index).
+    /// volume as (name, index), and other element unknowns (a spherical chamber's wall) as
+    /// (svZeroDSolver variable name, index).
     fn unknown_layout<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let p = &self.inner.0.probes;
         let d = PyDict::new(py);
         d.set_item("vessel_unknowns", p.vessel_unknowns.clone())?;
         d.set_item("chamber_volumes", p.chamber_volumes.clone())?;
+        d.set_item("element_unknowns", p.element_unknowns.clone())?;
         Ok(d)
     }
 

@@ -160,10 +160,9 @@ fn check_pressure_level(spec: &NetworkSpec) -> Result<()> {
         .boundary_conditions
         .values()
         .any(|b| !matches!(b, BoundarySpec::Flow { .. }))
-        || spec
-            .vessels
-            .iter()
-            .any(|v| v.chamber.is_some() || v.heart_pulmonary.is_some())
+        || spec.vessels.iter().any(|v| {
+            v.chamber.is_some() || v.chamber_sphere.is_some() || v.heart_pulmonary.is_some()
+        })
     {
         return Ok(());
     }

@@ -10,6 +10,7 @@ mod graph;
 mod heart;
 mod initial;
 pub mod segments;
+mod sphere;
 mod valve;
 mod vessel;
 
@@ -99,6 +100,7 @@ impl NetworkSpec {
             if v.valve.is_some()
                 || v.chamber.is_some()
                 || v.through_rc.is_some()
+                || v.chamber_sphere.is_some()
                 || v.heart_pulmonary.is_some()
                 || v.coronary_bed.is_some()
             {
@@ -108,7 +110,19 @@ impl NetworkSpec {
                     let volume = circuit.extras.len() - 1;
                     probes.chamber_volumes.push((v.name.clone(), volume));
                 }
-                let interior = if v.chamber.is_some() {
+                if v.chamber_sphere.is_some() {
+                    // its five wall unknowns, the last element unknowns it added
+                    let first = circuit.extras.len() - 5;
+                    for (k, var) in ["radius", "velo", "stress", "tau", "volume"]
+                        .iter()
+                        .enumerate()
+                    {
+                        probes
+                            .element_unknowns
+                            .push((format!("{var}:{}", v.name), first + k));
+                    }
+                }
+                let interior = if v.chamber.is_some() || v.chamber_sphere.is_some() {
                     initial::Interior::Inlet
                 } else {
                     initial::Interior::Linear
@@ -225,13 +239,14 @@ fn heart_element(
         v.valve.is_some(),
         v.chamber.is_some(),
         v.through_rc.is_some(),
+        v.chamber_sphere.is_some(),
         v.heart_pulmonary.is_some(),
         v.coronary_bed.is_some(),
     ];
     if kinds.iter().filter(|&&k| k).count() != 1 {
         return Err(crate::error::Error::model(
             el,
-            "give one of geometry, lumped, valve, chamber, through_rc, heart_pulmonary or coronary_bed",
+            "give one of geometry, lumped, valve, chamber, through_rc, chamber_sphere, heart_pulmonary or coronary_bed",
         ));
     }
     if let Some(s) = &v.heart_pulmonary {
@@ -245,6 +260,9 @@ fn heart_element(
             .beds
             .push((circuit.elements.len() - 1, v.name.clone(), s.clone()));
         return Ok(chain);
+    }
+    if let Some(s) = &v.chamber_sphere {
+        return sphere::stamp(circuit, &v.name, s, ends);
     }
     match (&v.valve, &v.chamber, &v.through_rc) {
         (Some(s), _, _) => valve::stamp(circuit, &v.name, s, ends),

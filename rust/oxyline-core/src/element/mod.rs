@@ -14,6 +14,7 @@ pub mod activation;
 pub mod chamber;
 pub mod coronary;
 pub mod heart;
+pub mod sphere;
 pub mod valve;
 
 use std::fmt::Debug;

@@ -133,6 +133,9 @@ pub struct VesselSpec {
     /// A flow-through R–C element instead of a vessel (docs/physics.md §1.8).
     #[serde(default)]
     pub through_rc: Option<ThroughRcSpec>,
+    /// A spherical chamber with wall mechanics instead of a vessel (docs/physics.md §1.11).
+    #[serde(default)]
+    pub chamber_sphere: Option<ChamberSphereSpec>,
     /// Start values of the vessel's end pressures and flows (docs/physics.md §1.9).
     #[serde(default)]
     pub initial: Option<EndValues>,
@@ -319,6 +322,36 @@ pub struct CoronaryBedSpec {
     pub heart: String,
     pub ventricle: Ventricle,
     pub intramyocardial_factor: f64,
+}
+
+/// svZeroDSolver's `ChamberSphere` (docs/physics.md §1.11), SI: a thin spherical shell whose
+/// wall is pushed by the chamber pressure, resisted by a hyperelastic (W₁, W₂) and viscous (η)
+/// stress and contracted by an active stress that follows a tanh-switched activation rate.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChamberSphereSpec {
+    /// Wall density (kg/m³).
+    pub density: f64,
+    /// Reference wall thickness (m).
+    pub wall_thickness: f64,
+    /// Reference (unloaded) radius (m).
+    pub reference_radius: f64,
+    /// Hyperelastic constants (Pa).
+    pub w1: f64,
+    pub w2: f64,
+    /// Wall viscosity (Pa·s).
+    pub viscosity: f64,
+    /// Maximum active stress (Pa).
+    pub max_active_stress: f64,
+    /// Activation rates in systole and diastole (1/s).
+    pub max_activation_rate: f64,
+    pub min_activation_rate: f64,
+    /// Start of systole and of diastole within the cycle, and the switch width (s).
+    pub systole_start: f64,
+    pub diastole_start: f64,
+    pub activation_steepness: f64,
+    /// The cardiac period (s).
+    pub period: f64,
 }
 
 /// svZeroDSolver's `BloodVesselRC`: C dP_from/dt + (P_from − P_to)/R = Q, Q the same at both

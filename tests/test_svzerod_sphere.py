@@ -1,0 +1,122 @@
+"""svZeroDSolver's ChamberSphere (native ``chamber_sphere``, docs/physics.md §1.11) and the
+``external_solver_coupling_blocks`` with prescribed values (docs/svzerod.md) through the
+drop-in, against svZeroDSolver's stored references and a fresh svzerod run (issue 14 item 2)."""
+
+from __future__ import annotations
+
+import copy
+import json
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import oxyline
+from oxyline import svzerod as svz
+from tests.conftest import data_path
+
+
+def case(name: str) -> dict[str, Any]:
+    with open(data_path("svzerod", "cases", f"{name}.json")) as f:
+        return json.load(f)
+
+
+def reference(name: str) -> pd.DataFrame:
+    return pd.read_json(data_path("svzerod", "cases", "results", f"result_{name}.json"))
+
+
+def errors(actual: pd.DataFrame, expected: pd.DataFrame) -> dict[str, float]:
+    """max|a − e| / max|e| per variable of the reference that the drop-in outputs (rows matched
+    by time); svZeroDSolver's `valve_status` variables are not output (docs/svzerod.md)."""
+    out = {}
+    for name, e in expected.groupby("name", sort=False):
+        if name.startswith("valve_status"):
+            continue
+        a = actual[actual["name"] == name]
+        assert len(a) == len(e), name
+        np.testing.assert_allclose(a["time"].to_numpy(float), e["time"].to_numpy(float),
+                                   atol=1e-9)
+        ev = e["y"].to_numpy(float)
+        out[name] = float(np.max(np.abs(a["y"].to_numpy(float) - ev)) / np.max(np.abs(ev)))
+    return out
+
+
+def test_chamber_sphere_matches_reference_in_every_variable() -> None:
+    err = errors(svz.simulate(case("chamber_sphere")), reference("chamber_sphere"))
+    # the five wall variables and the node flows and pressures (17); upstream's rule is 1e-7
+    # relative, the reference is rounded to 10 decimals: measured 3.9e-12
+    assert len(err) == 17 and {f"{v}:ventricle" for v in
+                               ("radius", "velo", "stress", "tau", "volume")} <= set(err)
+    assert max(err.values()) < 1e-6, err
+
+
+def test_chamber_sphere_refuses_rk4_with_the_reason() -> None:
+    with pytest.raises(oxyline.ModelError, match="chamber_sphere 'ventricle'.*RK4 cannot"):
+        svz.simulate(case("chamber_sphere"), method="rk4")
+
+
+def test_native_chamber_sphere_names_a_bad_parameter() -> None:
+    native = svz.to_oxyline_dict(case("chamber_sphere"))
+    sphere = next(v for v in native["vessels"] if "chamber_sphere" in v)
+    sphere["chamber_sphere"]["reference_radius"] = -1.0
+    with pytest.raises(oxyline.ModelError, match="ventricle.*reference_radius"):
+        oxyline.simulate(oxyline.load_model(native))
+    del sphere["chamber_sphere"]["w1"]
+    with pytest.raises(oxyline.ModelError, match="chamber_sphere needs 'w1'"):
+        oxyline.load_model(native)
+
+
+def test_chamber_sphere_conserves_blood_volume() -> None:
+    # the wall's volume change is the integral of the chamber's net inflow (the volume row and
+    # the node's balance share 4π v R²): Q_in − Q_out = dV/dt, checked with the trapezoid rule
+    df = svz.simulate(case("chamber_sphere"))
+    y = {n: g["y"].to_numpy(float) for n, g in df.groupby("name", sort=False)}
+    t = df[df["name"] == "volume:ventricle"]["time"].to_numpy(float)
+    net = y["flow:inlet_valve:ventricle"] - y["flow:ventricle:outlet_valve"]
+    integral = np.concatenate([[0.0], np.cumsum(0.5 * (net[1:] + net[:-1]) * np.diff(t))])
+    v = y["volume:ventricle"]
+    # generalized-α's update is the trapezoid rule only for ρ∞ = 1; its discretisation error
+    # bounds the difference (measured 1.6e-3 of the stroke volume)
+    assert np.max(np.abs(v - integral)) < 1e-2 * np.ptp(v)
+
+
+COUPLED = {"coupledBlock_closedLoopHeart_singleVessel": 1e-7,
+           "coupledBlock_closedLoopHeart_withCoronaries": 2e-1}
+
+
+@pytest.mark.parametrize("name", COUPLED)
+def test_coupling_blocks_with_values_match_reference(name: str) -> None:
+    actual, expected = svz.simulate(case(name)), reference(name)
+    err = errors(actual, expected[expected["name"].isin(set(actual["name"]))])
+    # every coupling block's node flow and pressure, the heart's outlet pressure among them
+    # (the heart block's internal variables are not in the drop-in's variable table yet)
+    assert len(err) == 2 * len(case(name)["external_solver_coupling_blocks"])
+    # upstream's own rule, |a − e| <= rtol (1 + |e|) (rtol 2e-1 for the coronary case)...
+    rtol = COUPLED[name]
+    for n, e in expected.groupby("name", sort=False):
+        if n in err:
+            a = actual[actual["name"] == n]["y"].to_numpy(float)
+            assert np.all(np.abs(a - e["y"].to_numpy(float))
+                          <= rtol * (1 + np.abs(e["y"].to_numpy(float)))), n
+    # ...and much closer: measured 5.5e-13 and 7.3e-6 (the coronary case's valve timing)
+    assert max(err.values()) < 1e-4, err
+
+
+def test_coupling_blocks_match_a_fresh_svzerod_run() -> None:
+    svzerod = pytest.importorskip("svzerod")
+    cfg = case("coupledBlock_closedLoopHeart_singleVessel")
+    fresh = svzerod.simulate(copy.deepcopy(cfg))
+    ours = svz.simulate(cfg)
+    err = errors(ours, fresh[fresh["name"].isin(set(ours["name"]))])
+    # the file's 100 cycles (after 5 the heart's outlet pressure still differs by 1.1e-3: the
+    # on/off valves of the heart block switch at iterate-dependent steps in the start
+    # transient, docs/svzerod.md "Closed-loop blocks")
+    assert len(err) == 4 and max(err.values()) < 1e-9, err
+
+
+def test_coupling_block_without_values_is_unsupported_with_the_reason() -> None:
+    cfg = case("coupledBlock_closedLoopHeart_singleVessel")
+    del cfg["external_solver_coupling_blocks"][0]["values"]
+    with pytest.raises(oxyline.UnsupportedElement, match="external_inlet.*C interface"):
+        svz.simulate(cfg)
