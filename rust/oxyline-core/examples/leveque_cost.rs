@@ -6,7 +6,7 @@
 //! * `setup`     — flow only, one step per cycle: steady solve, plan, factorisation, consistent
 //!   start (what a pass costs before its steps);
 //! * `pass1`     — flow only at the first pass's settings (no probes; an implicit pass at
-//!   period/250 for dt = 1 ms, period/2000 for RK4): the first pass with its own set-up;
+//!   period/125 for dt = 1 ms, period/2000 for RK4): the first pass with its own set-up;
 //! * `o2-k`      — flow + O2, constant k (no first pass);
 //! * `o2-lev`    — flow + O2, Lévêque (first pass + coupled run).
 //!
@@ -74,7 +74,7 @@ fn main() {
     // the first pass's own settings (see run/two_pass.rs `mean_flow_pass`)
     let pass1 = RunSettings {
         method: Method::GeneralizedAlpha { rho_inf: 0.5 },
-        dt: Some(if rk4 { 1.0 / 2000.0 } else { 1.0 / 250.0 }),
+        dt: Some(if rk4 { 1.0 / 2000.0 } else { 1.0 / 125.0 }),
         probes: Vec::new(),
         ..s.clone()
     };
@@ -95,7 +95,9 @@ fn main() {
                 1 => simulate_with_transport(&dae, None, &setup, &mut |_, _| true),
                 2 => simulate_with_transport(&dae, None, &pass1, &mut |_, _| true),
                 3 => simulate_with_transport(&dae, Some(&mut k_tr.new_run()), &s, &mut |_, _| true),
-                _ => simulate_with_transport(&dae, Some(&mut lev_tr.new_run()), &s, &mut |_, _| true),
+                _ => {
+                    simulate_with_transport(&dae, Some(&mut lev_tr.new_run()), &s, &mut |_, _| true)
+                }
             }
             .expect("run");
             *b = b.min(cpu() - t0);
