@@ -8,7 +8,10 @@
 //! * `pass1`     — flow only at the first pass's settings (no probes; an implicit pass at
 //!   period/125 for dt = 1 ms, period/2000 for RK4): the first pass with its own set-up;
 //! * `o2-k`      — flow + O2, constant k (no first pass);
-//! * `o2-lev`    — flow + O2, Lévêque (first pass + coupled run).
+//! * `o2-lev`    — flow + O2, Lévêque (first pass + coupled run);
+//! * `steady`    — the steady solve alone (shared by both passes, inside `setup`);
+//! * `lev-1row`  — the Lévêque run with one output row per cycle: `o2-lev` minus this is the
+//!   cost of the output rows (mostly the species observation at 100 rows).
 //!
 //! The best CPU time of each is printed, and the Lévêque run's excess over constant k split
 //! into the first pass and the rest.
@@ -16,6 +19,7 @@
 //!     cargo run --release -p oxyline-core --example leveque_cost -- k.json leveque.json [reps] [rk4]
 
 use oxyline_core::genalpha::NewtonControl;
+use oxyline_core::integrate::steady::steady_state;
 use oxyline_core::network::parse;
 use oxyline_core::transport::{BALANCE_COLUMNS, VESSEL_COLUMNS};
 use oxyline_core::{Dae, Method, RunSettings, Start, Transport, simulate_with_transport};
@@ -85,20 +89,35 @@ fn main() {
         probes: Vec::new(),
         ..s.clone()
     };
-    let names = ["flow", "setup", "pass1", "o2-k", "o2-lev"];
-    let mut best = [f64::INFINITY; 5];
+    let one_row = RunSettings {
+        output_every: 1.0,
+        ..s.clone()
+    };
+    let names = [
+        "flow", "setup", "pass1", "o2-k", "o2-lev", "steady", "lev-1row",
+    ];
+    let mut best = [f64::INFINITY; 7];
     for _ in 0..reps {
         for (i, b) in best.iter_mut().enumerate() {
             let t0 = cpu();
             match i {
-                0 => simulate_with_transport(&dae, None, &s, &mut |_, _| true),
-                1 => simulate_with_transport(&dae, None, &setup, &mut |_, _| true),
-                2 => simulate_with_transport(&dae, None, &pass1, &mut |_, _| true),
-                3 => simulate_with_transport(&dae, Some(&mut k_tr.new_run()), &s, &mut |_, _| true),
-                _ => {
+                0 => simulate_with_transport(&dae, None, &s, &mut |_, _| true).map(Some),
+                1 => simulate_with_transport(&dae, None, &setup, &mut |_, _| true).map(Some),
+                2 => simulate_with_transport(&dae, None, &pass1, &mut |_, _| true).map(Some),
+                3 => simulate_with_transport(&dae, Some(&mut k_tr.new_run()), &s, &mut |_, _| true)
+                    .map(Some),
+                4 => {
                     simulate_with_transport(&dae, Some(&mut lev_tr.new_run()), &s, &mut |_, _| true)
+                        .map(Some)
+                }
+                5 => steady_state(&dae).map(|_| None),
+                _ => {
+                    let mut tr = lev_tr.new_run();
+                    simulate_with_transport(&dae, Some(&mut tr), &one_row, &mut |_, _| true)
+                        .map(Some)
                 }
             }
+            .map(drop)
             .expect("run");
             *b = b.min(cpu() - t0);
         }
@@ -115,5 +134,11 @@ fn main() {
         excess / f,
         best[2] / f,
         (excess - best[2]) / f
+    );
+    println!(
+        "  Lévêque run = first pass {:.3} + coupled steps and set-up {:.3} + output rows {:.3} flow",
+        best[2] / f,
+        (best[6] - best[2]) / f,
+        (best[4] - best[6]) / f
     );
 }
