@@ -70,15 +70,18 @@ pub(super) fn run_two_pass(
 /// Steps per cycle of the flow-only first pass when the main run is explicit.
 const MEAN_FLOW_STEPS_PER_CYCLE: f64 = 2000.0;
 /// An implicit run at the usual step (>= period/1000) measures the mean |Q| at
-/// period/`MEAN_FLOW_COARSE_STEPS`: the pass then costs a quarter of the coupled run's flow
-/// instead of all of it. The rectangle rule of the mean over 250 steps is accurate to ~2e-5 of
-/// <|Q|> for a reversing sinusoid, so k ∝ <|Q|>^{1/3} to ~7e-6 — far inside the closures' own
-/// uncertainty (docs/physics.md §3.1). With a sharper inflow the step's resolution of the flow
-/// dominates: on the half-sine bench tree (`benches/bench_scale.py`) the 250-step mean differs
-/// from a period/2000 pass by ≤ 1.0e-2 (median 1.2e-3), so k by ≤ 3.3e-3, still inside that
-/// uncertainty; 50 steps would give 5.7e-2 (`examples/mean_flow_accuracy.rs`, benches/results.md).
+/// period/`MEAN_FLOW_COARSE_STEPS`: the pass then costs an eighth of the coupled run's flow
+/// instead of all of it. The mean over 125 steps is accurate to 2.6e-4 of <|Q|> for a reversing
+/// sinusoid (tests/test_oxygen.py checks 1e-3 against the closed form), so k ∝ <|Q|>^{1/3} to
+/// ~1e-4 — far inside the closures' own uncertainty (docs/physics.md
+/// §3.1). With a sharper inflow the step's resolution of the flow dominates (not the
+/// quadrature: the exact integral between steps gives the same): on the half-sine bench trees
+/// (`benches/bench_scale.py`, 16 k and 65 k segments) the 125-step mean differs from a
+/// period/2000 pass by ≤ 1.2e-2 (p99 ≤ 8.9e-3, median 2.5e-3; 250 steps: ≤ 1.1e-2, p99 9.7e-3;
+/// 200 and 160 steps 1.3e-2, 100 steps 1.9e-2), so k by ≤ 4e-3, still inside that uncertainty;
+/// 50 steps would give 5.7e-2 (`examples/mean_flow_accuracy.rs`, benches/results.md).
 /// Finer implicit runs keep their own step (an exact mean).
-const MEAN_FLOW_COARSE_STEPS: f64 = 250.0;
+const MEAN_FLOW_COARSE_STEPS: f64 = 125.0;
 const MEAN_FLOW_FINE_STEPS: f64 = 1000.0;
 
 /// Settings of the flow-only pass that measures the cycle-mean |Q|. The closures need a mean
