@@ -440,6 +440,20 @@ def test_a_local_dask_cluster_gives_the_local_dataset(tmp_path: Path) -> None:
                                       client=client, **FAST)
 
 
+def test_dask_chunks_partition_the_variants_and_interleave_them() -> None:
+    from oxyline.ensemble.cluster import MIN_TASK_VARIANTS, _chunks
+
+    for n, threads in [(1, 2), (7, 2), (200, 2), (1000, 3), (4 * 2 * MIN_TASK_VARIANTS + 5, 2)]:
+        chunks = _chunks(n, threads)
+        assert sorted(i for c in chunks for i in c) == list(range(n))  # each variant once
+        assert len(chunks) % min(threads, n) == 0 or len(chunks) == n
+        assert max(map(len, chunks)) - min(map(len, chunks)) <= 1
+        # a population ordered by cost (age): each task gets every T-th variant, so the
+        # tasks' mean positions, and with them their costs, agree
+        means = [float(np.mean(list(c))) for c in chunks]
+        assert max(means) - min(means) <= len(chunks)
+
+
 SIGINT_CHILD = """
 import sys
 import oxyline

@@ -471,20 +471,22 @@ class Patcher:
         else:
             merge_patch(self.base.source, patch, k)
 
-    def check_all(self, patches: Sequence[Any], first: int = 0) -> dict[int, np.ndarray]:
-        """:meth:`check` every patch (variant ``first + i``) and return the target values of
-        the scale-only patches that take the value path, by position in ``patches`` (see
-        :meth:`Scaler.table`): the checked scale terms serve both, and the values of the
-        whole ensemble are one numpy pass."""
+    def check_all(self, patches: Sequence[Any], numbers: range | None = None
+                  ) -> dict[int, np.ndarray]:
+        """:meth:`check` every patch (variant ``numbers[i]``, default ``i``) and return the
+        target values of the scale-only patches that take the value path, by position in
+        ``patches`` (see :meth:`Scaler.table`): the checked scale terms serve both, and the
+        values of the whole ensemble are one numpy pass."""
+        numbers = range(len(patches)) if numbers is None else numbers
         scaled: list[int] = []
         terms = []
         for i, patch in enumerate(patches):
             if self.scaler is not None and isinstance(patch, Mapping) \
                     and patch.keys() == {"scale"}:
-                terms.append(_scale_terms(patch["scale"], self.scaler.index, first + i))
+                terms.append(_scale_terms(patch["scale"], self.scaler.index, numbers[i]))
                 scaled.append(i)
             else:
-                merge_patch(self.base.source, patch, first + i)
+                merge_patch(self.base.source, patch, numbers[i])
         if not scaled:
             return {}
         assert self.scaler is not None
