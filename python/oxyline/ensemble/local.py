@@ -53,7 +53,7 @@ class Feed:
         self.prepared: dict[int, tuple[Variant, dict[str, Any]]] = {}
         self._next = 0
 
-    def next(self) -> tuple[int, str | None, float, float, Any, Any, Any] | None:
+    def next(self) -> tuple[int, str | None, float, float, Any, Any, Any, Any] | None:
         while self._next < len(self.patches):
             i = self._next
             self._next += 1
@@ -70,7 +70,7 @@ class Feed:
                 continue
             self.prepared[i] = (v, s)
             return (i, v.patch_json, s["period"], s["output_every"], v.vessels, v.outlets,
-                    v.values)
+                    v.values, v.tables)
         return None
 
 
