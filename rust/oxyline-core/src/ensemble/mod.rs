@@ -135,7 +135,7 @@ fn missing(what: String, why: &str) -> Error {
 
 impl Target {
     /// The vessel a vessel target names, or an error naming it.
-    fn vessel<'a>(spec: &'a mut NetworkSpec, i: usize) -> Result<&'a mut VesselSpec> {
+    fn vessel(spec: &mut NetworkSpec, i: usize) -> Result<&mut VesselSpec> {
         let n = spec.vessels.len();
         spec.vessels.get_mut(i).ok_or_else(|| {
             missing(
