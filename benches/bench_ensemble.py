@@ -25,6 +25,9 @@ Per size, in one run:
    same (a later size: 4 untimed runs). pwdb-116 has no svzerod form: n/a;
 3. Dask: ``LocalCluster(n_workers=2, threads_per_worker=1)`` against the local ``workers=2``
    run, after one warm-up ensemble of 2 variants on the cluster (the workers import oxyline).
+   The cluster is started once every size's local runs and svzerod loop are done: its
+   scheduler runs in this process and its workers keep starting up after it returns, which
+   cost the local runs measured beside them CPU.
 
 Wall times are the best of ``--repeat``; CPU time (user + system of this process and its
 threads) is given beside them and the 1-min load average after each size, because the machine
@@ -35,7 +38,6 @@ may be shared. Results are printed as Markdown and appended to ``benches/results
 from __future__ import annotations
 
 import argparse
-import contextlib
 import copy
 import datetime
 import os
@@ -197,44 +199,52 @@ def versus_svzerod(size: Size, ds: Any, runs: int, repeat: int
     return per_run * size.n, timed_runs, where, f"{diff:.1e} over {len(picks)} variants"
 
 
-def measure(size: Size, client: Any, args: argparse.Namespace) -> tuple[str, list[str]]:
-    """One row of the table and its notes."""
-    print(f"{size.name}: workers=1, 2 ...", file=sys.stderr, flush=True)
-    w1, c1, _ = timed(lambda: size.run(workers=1), args.repeat)
-    w2, c2, local = timed(lambda: size.run(workers=2), args.repeat)
-    notes = []
-    sv = "n/a"
-    if size.cfg is not None and "svzerod" in args.parts:
-        print(f"{size.name}: svzerod loop ...", file=sys.stderr, flush=True)
-        sv_wall, measured, where, diff = versus_svzerod(size, local, args.svzerod_runs,
-                                                        args.repeat)
-        extra = ("" if (measured, where) == (size.n, size.name) else
-                 f", {size.n} x the time per run of {measured} timed runs ({where})")
-        sv = f"{sv_wall:.2f}{extra} | **{sv_wall / w2:.1f}x**"
-        notes.append(f"{size.name}: root-vessel time-averaged inlet pressure, oxyline vs "
-                     f"svzerod, max relative difference {diff} run by both (check: < "
-                     f"{SAME_NETWORK_RTOL:g}).")
-    else:
-        sv = "n/a | n/a"
-    dask = "- | -"
-    if client is not None:
+class Row:
+    """One row of the table: the local runs of a size (measured first, with no cluster up),
+    then its LocalCluster run."""
+
+    def __init__(self, size: Size, args: argparse.Namespace) -> None:
+        self.size = size
+        print(f"{size.name}: workers=1, 2 ...", file=sys.stderr, flush=True)
+        self.w1, self.c1, _ = timed(lambda: size.run(workers=1), args.repeat)
+        self.w2, self.c2, self.local = timed(lambda: size.run(workers=2), args.repeat)
+        self.load = load()
+        self.notes: list[str] = []
+        self.sv = "n/a | n/a"
+        if size.cfg is not None and "svzerod" in args.parts:
+            print(f"{size.name}: svzerod loop ...", file=sys.stderr, flush=True)
+            sv_wall, measured, where, diff = versus_svzerod(size, self.local, args.svzerod_runs,
+                                                            args.repeat)
+            extra = ("" if (measured, where) == (size.n, size.name) else
+                     f", {size.n} x the time per run of {measured} timed runs ({where})")
+            self.sv = f"{sv_wall:.2f}{extra} | **{sv_wall / self.w2:.1f}x**"
+            self.notes.append(f"{size.name}: root-vessel time-averaged inlet pressure, oxyline "
+                              f"vs svzerod, max relative difference {diff} run by both (check: "
+                              f"< {SAME_NETWORK_RTOL:g}).")
+        self.dask = "- | -"
+
+    def on_cluster(self, client: Any, args: argparse.Namespace) -> None:
+        size = self.size
         print(f"{size.name}: LocalCluster ...", file=sys.stderr, flush=True)
         size_warm = oxyline.simulate_ensemble(size.model, size.patches[:2], client=client,
                                               progress=False, **size.settings)
         assert (size_warm.status.values == 0).all()
         c0 = cluster_cpu(client)
         wd, _, remote = timed(lambda: size.run(client=client), args.repeat)
-        notes.append(f"{size.name}: LocalCluster CPU (its 2 worker processes, all "
-                     f"{args.repeat} runs) {cluster_cpu(client) - c0:.2f} s against "
-                     f"{c2:.2f} s for the local workers=2 run.")
-        same = all(bool(np.array_equal(local[v].values, remote[v].values, equal_nan=True))
-                   for v in local.data_vars if local[v].dtype.kind == "f")
-        dask = f"{wd:.2f} | **{100 * (wd / w2 - 1):+.0f} %**"
-        notes.append(f"{size.name}: LocalCluster results bit-identical to the local run: "
-                     f"{same}.")
-    row = (f"| {size.name} | {size.n} | {w1:.2f} | {c1:.2f} | {w2:.2f} | {c2:.2f} | "
-           f"**{w1 / w2:.2f}x** | {sv} | {dask} | {load()} |")
-    return row, notes
+        self.notes.append(f"{size.name}: LocalCluster CPU (its 2 worker processes, all "
+                          f"{args.repeat} runs) {cluster_cpu(client) - c0:.2f} s against "
+                          f"{self.c2:.2f} s for the local workers=2 run.")
+        same = all(bool(np.array_equal(self.local[v].values, remote[v].values, equal_nan=True))
+                   for v in self.local.data_vars if self.local[v].dtype.kind == "f")
+        self.dask = f"{wd:.2f} | **{100 * (wd / self.w2 - 1):+.0f} %**"
+        self.notes.append(f"{size.name}: LocalCluster results bit-identical to the local run: "
+                          f"{same}.")
+        self.load += f" / {load()}"
+
+    def __str__(self) -> str:
+        return (f"| {self.size.name} | {self.size.n} | {self.w1:.2f} | {self.c1:.2f} | "
+                f"{self.w2:.2f} | {self.c2:.2f} | **{self.w1 / self.w2:.2f}x** | {self.sv} | "
+                f"{self.dask} | {self.load} |")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -269,25 +279,30 @@ def main(argv: list[str] | None = None) -> int:
     lines += [("| ensemble | variants | 1 worker (s) | CPU (s) | 2 workers (s) | CPU (s) | "
               "scaling | svzerod loop (s) | vs svzerod | LocalCluster (s) | overhead | load |"),
               "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    notes: list[str] = []
-    t0 = time.perf_counter()
-    with contextlib.ExitStack() as stack:
-        client = None
-        if "dask" in args.parts:
-            from distributed import Client, LocalCluster
+    # every local run (and svzerod) first, with no cluster up: a LocalCluster's scheduler
+    # runs in this process and its worker processes keep starting up after it returns, which
+    # cost the local runs measured beside it CPU (session 8: tree-64 at 17 ms CPU per variant
+    # against 10 ms at tree-1000)
+    rows = [Row(size, args) for size in sizes]
+    start = None
+    if "dask" in args.parts:
+        from distributed import Client, LocalCluster
 
-            cluster = stack.enter_context(LocalCluster(
-                n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None))
-            client = stack.enter_context(Client(cluster))
-        start = time.perf_counter() - t0
-        for size in sizes:
-            row, more = measure(size, client, args)
-            lines.append(row)
-            notes += more
-            print(row, file=sys.stderr, flush=True)
-    if client is not None:
+        t0 = time.perf_counter()
+        with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                          dashboard_address=None) as cluster, Client(cluster) as client:
+            start = time.perf_counter() - t0
+            for row in rows:
+                row.on_cluster(client, args)
+    notes: list[str] = []
+    for row in rows:
+        lines.append(str(row))
+        notes += row.notes
+        print(row, file=sys.stderr, flush=True)
+    if start is not None:
         notes.append(f"Cluster start {start:.1f} s and one warm-up ensemble of 2 variants "
-                     "per size, not included.")
+                     "per size, not included; the cluster was started after every local run "
+                     "and svzerod loop (load: after the local runs / after the cluster run).")
     lines += ["", *[f"* {n}" for n in notes]]
     text = "\n".join(lines)
     print(text)

@@ -251,6 +251,72 @@ def test_scale_patches_take_the_value_path_and_stay_the_plain_run(drawn: list[di
             np.testing.assert_array_equal(ds[name].values[k], values, err_msg=f"{k} {name}")
 
 
+_pos = st.floats(0.5, 2.0)
+mixed_patches = st.fixed_dictionaries({}, optional={
+    "vessels": st.fixed_dictionaries({}, optional={
+        "a.b": st.fixed_dictionaries({}, optional={
+            "length": st.floats(5.0, 15.0), "radius_in": st.floats(0.3, 0.5),
+            "youngs_modulus": st.floats(2e6, 8e6), "wall_thickness": st.floats(0.03, 0.08)}),
+        "c": st.fixed_dictionaries({}, optional={"resistance": st.floats(50.0, 200.0),
+                                                 "capacitance": st.floats(5e-5, 2e-4)}).map(
+            lambda lp: {"lumped": lp})}),
+    "boundary_conditions": st.fixed_dictionaries({}, optional={
+        "in": st.tuples(_pos, _pos).map(
+            lambda q: {"time": [0.0, 0.4, 1.0], "flow": [q[0], 3.0 * q[1], q[0]]}),
+        "out1": st.fixed_dictionaries({"distal_resistance": st.floats(5e3, 2e4)}),
+        "out2": st.fixed_dictionaries({"resistance": st.floats(1e4, 4e4)})}),
+    "scale": st.fixed_dictionaries({}, optional={
+        "resistance": _pos, "compliance": _pos,
+        "vessels": st.sampled_from(["all", ["c"], ["a.b"], ["a.b", "d"]])})})
+
+
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(drawn=st.lists(mixed_patches, min_size=1, max_size=4))
+def test_explicit_values_with_scale_take_the_value_path_and_stay_the_plain_run(
+        drawn: list[dict[str, Any]]) -> None:
+    """Patches mixing explicit numbers (geometry, lumped values, outlet values, an inflow
+    table) with ``scale`` reach the core as one number per target plus the table; each variant
+    is still bit for bit ``simulate()`` of the patched model, whatever the thread count."""
+    from oxyline.ensemble.patch import Patcher
+
+    patcher = Patcher(oxyline.load_model(TUBE_CGS))
+    assert all(patcher.variant(p, k).values is not None for k, p in enumerate(drawn) if p)
+    ds = oxyline.simulate_ensemble(TUBE_CGS, drawn, workers=2, **FAST)
+    xr.testing.assert_identical(ds, oxyline.simulate_ensemble(TUBE_CGS, drawn, workers=1,
+                                                              **FAST))
+    assert (ds.status.values == 0).all(), ds.error.values
+    for k, patch in enumerate(drawn):
+        expected = _summary(oxyline.simulate(apply_patch(TUBE_CGS, patch), cycles=2))
+        for name, values in expected.items():
+            np.testing.assert_array_equal(ds[name].values[k], values, err_msg=f"{k} {name}")
+
+
+def test_pwdb_subjects_take_the_value_path_and_stay_the_plain_run() -> None:
+    """PWDB-like subjects (every vessel's Young's modulus, large-artery radii, aortic lengths,
+    every outlet's RCR and an inflow table of the subject's own period) take the value path;
+    each is bit for bit ``simulate()`` of the patched pwdb-116 (its own period included)."""
+    from oxyline import populations as P
+    from oxyline.ensemble.patch import Patcher
+
+    table = P.parameters((25, 75), 3)
+    rows = table.iloc[[0, 364, 729 + 728]].to_dict("records")   # HR -1 SD, mean, +1 SD
+    patches = [P.subject_patch(r) for r in rows]
+    model = oxyline.load_model(P.MODEL)
+    patcher = Patcher(model)
+    variants = [patcher.variant(p, k) for k, p in enumerate(patches)]
+    assert all(v.values is not None and v.tables for v in variants)
+    assert len({v.model.period for v in variants}) == 3  # three heart rates, three periods
+    run = {"cycles": 2, "vessels": P.summary_vessels()}
+    ds = oxyline.simulate_ensemble(model, patches, workers=2, output=P.subject_summary,
+                                   progress=False, **run)
+    assert (ds.status.values == 0).all(), ds.error.values
+    for k, patch in enumerate(patches):
+        res = oxyline.simulate(P.patched(P.MODEL, patch), progress=False, **run)
+        assert ds.period.values[k] == res.settings["period"]
+        for name, value in P.subject_summary(res).items():
+            assert ds[name].values[k] == value, (k, name)
+
+
 def test_a_scale_patch_out_of_range_fails_its_variant_as_before() -> None:
     """A negative factor makes a lumped resistance negative: the value path hands the patch
     to the full path, whose error names the vessel and the value."""
@@ -438,6 +504,20 @@ def test_a_local_dask_cluster_gives_the_local_dataset(tmp_path: Path) -> None:
         with pytest.raises(oxyline.ModelError, match="variant 2: vessels.nope"):
             oxyline.simulate_ensemble(STRAIGHT, [{}, {}, {"vessels": {"nope": {}}}],
                                       client=client, **FAST)
+
+
+def test_dask_chunks_partition_the_variants_and_interleave_them() -> None:
+    from oxyline.ensemble.cluster import MIN_TASK_VARIANTS, _chunks
+
+    for n, threads in [(1, 2), (7, 2), (200, 2), (1000, 3), (4 * 2 * MIN_TASK_VARIANTS + 5, 2)]:
+        chunks = _chunks(n, threads)
+        assert sorted(i for c in chunks for i in c) == list(range(n))  # each variant once
+        assert len(chunks) % min(threads, n) == 0 or len(chunks) == n
+        assert max(map(len, chunks)) - min(map(len, chunks)) <= 1
+        # a population ordered by cost (age): each task gets every T-th variant, so the
+        # tasks' mean positions, and with them their costs, agree
+        means = [float(np.mean(list(c))) for c in chunks]
+        assert max(means) - min(means) <= len(chunks)
 
 
 SIGINT_CHILD = """

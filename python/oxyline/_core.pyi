@@ -115,7 +115,9 @@ class Ensemble:
         feed: Callable[
             [],
             tuple[int, str | None, float, float, dict[int, Any] | None, dict[str, Any] | None,
-                  npt.NDArray[np.float64] | None] | None,
+                  npt.NDArray[np.float64] | None,
+                  list[tuple[int, npt.NDArray[np.float64], npt.NDArray[np.float64]]] | None]
+            | None,
         ],
         *,
         on_done: Callable[
@@ -126,8 +128,9 @@ class Ensemble:
         **settings: Unpack[RunOptions],
     ) -> bool:
         """Run the variants ``feed()`` hands over (``(i, canonical patch JSON or None,
-        period, output_every, vessels, outlets, values)``, ``values`` one SI number per
-        ``targets`` entry (NaN: the base value); None when there are no more) on ``workers``
+        period, output_every, vessels, outlets, values, tables)``, ``values`` one SI number
+        per ``targets`` entry (NaN: the base value), ``tables`` the new ``(target, time,
+        value)`` of ``table`` targets; None when there are no more) on ``workers``
         threads (default
         ``OXYLINE_NUM_THREADS`` or every core), the GIL released; ``on_done(i, raw, layout,
         error_kind, error)`` is called on this thread as each finishes. False if Ctrl-C

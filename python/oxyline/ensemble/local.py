@@ -35,29 +35,29 @@ class Feed:
     """The variants of one ``run_local`` call, prepared one at a time as the core's workers
     need them (:meth:`next`, called on this thread while the others run): the patched
     elements converted to canonical form, and the run settings. A variant whose values the
-    model refuses is recorded as failed and skipped. ``first``: the number of the first
-    variant in the whole ensemble (a chunk of it runs on a cluster worker)."""
+    model refuses is recorded as failed and skipped. ``numbers``: the number of each variant
+    in the whole ensemble (a chunk of it runs on a cluster worker: every T-th variant)."""
 
     def __init__(self, patcher: Patcher, patches: Sequence[Mapping[str, Any]], output: Output,
-                 overrides: Mapping[str, Any], collector: Collector, first: int,
+                 overrides: Mapping[str, Any], collector: Collector, numbers: range,
                  on_skip: Callable[[int], None]) -> None:
         model = patcher.base
         self.patcher = patcher
         # unknown names raise before anything runs; the scale-only patches' target values
         # come out of the same pass (one numpy table for the whole ensemble)
-        self.values = patcher.check_all(patches, first)
+        self.values = patcher.check_all(patches, numbers)
         self.patches, self.output, self.overrides = patches, output, overrides
         #: the run settings of the variants that keep the base model's (most of them)
         self.base_settings = run_settings(model, output, overrides)
-        self.collector, self.first, self.on_skip = collector, first, on_skip
+        self.collector, self.numbers, self.on_skip = collector, numbers, on_skip
         self.prepared: dict[int, tuple[Variant, dict[str, Any]]] = {}
         self._next = 0
 
-    def next(self) -> tuple[int, str | None, float, float, Any, Any, Any] | None:
+    def next(self) -> tuple[int, str | None, float, float, Any, Any, Any, Any] | None:
         while self._next < len(self.patches):
             i = self._next
             self._next += 1
-            k = self.first + i
+            k = self.numbers[i]
             try:
                 v = self.patcher.variant(self.patches[i], k, self.values.pop(i, None))
                 s = (self.base_settings if v.model is self.patcher.base else
@@ -70,7 +70,7 @@ class Feed:
                 continue
             self.prepared[i] = (v, s)
             return (i, v.patch_json, s["period"], s["output_every"], v.vessels, v.outlets,
-                    v.values)
+                    v.values, v.tables)
         return None
 
 
@@ -107,11 +107,13 @@ def cached_base(model: Model) -> Base:
 def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Collector, *,
               workers: int | None, output: Output, progress: Any,
               overrides: Mapping[str, Any],
-              on_variant: Callable[[int], None] | None = None, first: int = 0,
+              on_variant: Callable[[int], None] | None = None, first: int | range = 0,
               base: Base | None = None) -> bool:
     """Run every variant into ``collector``; ``on_variant(i)`` after each one is recorded.
-    Returns False if Ctrl-C stopped the ensemble. ``first``: see :class:`Feed`. ``base``: the
+    Returns False if Ctrl-C stopped the ensemble. ``first``: the number of the first variant
+    in the whole ensemble, or the numbers of all of them (see :class:`Feed`). ``base``: the
     model's :class:`Base` if already built."""
+    numbers = first if isinstance(first, range) else range(first, first + len(patches))
     base = base or Base(model)
     tick, close = _progress(progress, len(patches))
 
@@ -120,7 +122,7 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
             on_variant(i)
         tick()
 
-    feed = Feed(base.patcher, patches, output, overrides, collector, first, recorded)
+    feed = Feed(base.patcher, patches, output, overrides, collector, numbers, recorded)
     base_settings = feed.base_settings
     # summaries go to the collector in one pass at the end, unless a store writes each
     # variant as it finishes (it reads the collector's row)
@@ -131,7 +133,7 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
         v, s = feed.prepared.pop(i)
         collector.facts(i, s["period"], raw)
         if kind is not None:  # "interrupted": stopped by Ctrl-C while it ran
-            collector.fail(i, kind, f"variant {first + i}: {message}"[:ERROR_CHARS])
+            collector.fail(i, kind, f"variant {numbers[i]}: {message}"[:ERROR_CHARS])
         else:
             try:
                 assert raw is not None and layout is not None
@@ -148,7 +150,7 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
                 else:
                     collector.put(i, values)
             except Exception as e:  # noqa: BLE001 - a user's output function fails its variant
-                collector.fail(i, "output", f"variant {first + i}: {type(e).__name__}: {e}"
+                collector.fail(i, "output", f"variant {numbers[i]}: {type(e).__name__}: {e}"
                                [:ERROR_CHARS])
         recorded(i)
 

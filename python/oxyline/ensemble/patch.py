@@ -43,7 +43,6 @@ from oxyline.model import (
     _unassembled,
     _vessels,
 )
-from oxyline.units import factor
 
 SECTIONS = ("vessels", "boundary_conditions", "blood", "oxygen", "transport", "period", "scale")
 VESSEL_PROPERTIES = VESSEL_KEYS - {"name", "from", "to"}
@@ -335,175 +334,91 @@ class Variant:
     patch's vessels (by index) and plain outlets (resistance, RCR with a constant pressure)
     are handed to the core as the canonical dicts themselves (``vessels``, ``outlets``), the
     rest as JSON text: the text of a variant that rescales every vessel cost the thread that
-    feeds the workers more than the rest of its work (the repr of every float)."""
+    feeds the workers more than the rest of its work (the repr of every float). A patch on
+    the value route (:mod:`oxyline.ensemble.values`) has ``values`` and ``tables`` instead."""
 
     patch_json: str | None
     model: Model
     vessels: dict[int, Any] | None = None
     outlets: dict[str, Any] | None = None
-    #: one SI value per :attr:`Scaler.targets` (NaN: the base value), or None
+    #: one SI value per target of :class:`~oxyline.ensemble.values.ValueTable` (NaN: the
+    #: base value), or None
     values: np.ndarray | None = None
-
-
-def _plain_number(x: Any) -> float | None:
-    """``float(x)`` for a number of the model that a scale patch reads (YAML 1.1 reads 5.0e5
-    as a string), or None where the full patch path must give the error."""
-    if isinstance(x, bool) or not isinstance(x, (int, float, str)):
-        return None
-    try:
-        v = float(x)
-    except ValueError:
-        return None
-    return v if math.isfinite(v) else None
-
-
-class Scaler:
-    """A ``scale`` patch as one number per target of the base model (see
-    ``oxyline_core::ensemble::Target``) instead of rescaled, revalidated vessel and condition
-    dicts: the numbers are those :func:`merge_patch` and the canonical conversion would give
-    (``factor * (value * f)``, in that order, so bit for bit), computed with numpy's
-    elementwise IEEE arithmetic. ``usable`` is False when some number of the base model is
-    not a plain number (the full path then reports it)."""
-
-    def __init__(self, base: Model) -> None:
-        src = base.source
-        units = str(src.get("units", "SI"))
-        vessels = src["vessels"]
-        self.index = {v["name"]: i for i, v in enumerate(vessels)}
-        self.n_vessels = len(vessels)
-        self.targets: list[tuple[str, Any]] = []
-        rows: list[tuple[float | None, float, str, bool, list[int]]] = []
-        touching: dict[str, list[int]] = {}
-        for i, v in enumerate(vessels):
-            for node in (str(v.get("from")), str(v.get("to"))):
-                touching.setdefault(node, []).append(i)
-            if "lumped" in v:
-                for key, prop in (("resistance", "resistance"), ("compliance", "capacitance")):
-                    if prop in v["lumped"]:
-                        self.targets.append((f"lumped.{prop}", i))
-                        rows.append((_plain_number(v["lumped"][prop]), factor(units, prop), key,
-                                     False, [i]))
-            elif "youngs_modulus" in v:  # compliance ∝ 1/E
-                self.targets.append(("youngs_modulus", i))
-                rows.append((_plain_number(v["youngs_modulus"]), factor(units, "modulus"),
-                             "compliance", True, [i]))
-        for node, bc in src.get("boundary_conditions", {}).items():
-            kind = str(bc.get("type", "")).lower() if isinstance(bc, Mapping) else ""
-            if node not in touching or kind not in RESISTANCES:
-                continue
-            props = [(p, "resistance") for p in RESISTANCES[kind]]
-            props += [("capacitance", "compliance")] if kind == "rcr" else []
-            for prop, key in props:
-                self.targets.append((prop, node))
-                q = "capacitance" if key == "compliance" else "resistance"
-                rows.append((_plain_number(bc.get(prop)), factor(units, q), key, False,
-                             touching[node]))
-        self.usable = all(r[0] is not None for r in rows)
-        self.src = np.array([r[0] or 0.0 for r in rows])
-        self.unit = np.array([r[1] for r in rows])
-        self.compliance = np.array([r[2] == "compliance" for r in rows], dtype=bool)
-        self.divide = np.array([r[3] for r in rows], dtype=bool)
-        #: a target must stay >= 0 (lumped values) or > 0 (Young's modulus) to take this path
-        self.lumped = np.array([t[0].startswith("lumped.") for t in self.targets], dtype=bool)
-        pairs = [(t, i) for t, r in enumerate(rows) for i in r[4]]
-        self._owner_target = np.array([t for t, _ in pairs], dtype=np.intp)
-        self._owner_vessel = np.array([i for _, i in pairs], dtype=np.intp)
-
-    def check(self, scale: Any, k: int) -> None:
-        _scale_terms(scale, self.index, k)
-
-    def values(self, scale: Any, k: int) -> np.ndarray | None:
-        """The SI value of every target under ``scale`` (NaN: unchanged), or None if one of
-        them is out of range (the full path then fails the variant with its usual error)."""
-        table, ok = self.table([_scale_terms(scale, self.index, k)])
-        return table[0] if ok[0] else None
-
-    def table(self, terms: Sequence[tuple[set[int] | None, dict[str, float]]]
-              ) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`values` of many ``scale`` sections at once, from their checked
-        ``_scale_terms``: a (variants, targets) table and whether each row is usable. The same
-        elementwise IEEE operations on every element as one row at a time, so the same bits;
-        one numpy pass per ensemble instead of ~10 small calls per variant on the thread that
-        feeds the workers."""
-        nan = math.nan
-        res = np.array([f.get("resistance", nan) for _, f in terms])
-        comp = np.array([f.get("compliance", nan) for _, f in terms])
-        f = np.where(self.compliance, comp[:, None], res[:, None])
-        for row, (selected, _) in enumerate(terms):
-            if selected is not None:
-                chosen = np.zeros(self.n_vessels, dtype=bool)
-                chosen[list(selected)] = True
-                hit = np.zeros(f.shape[1], dtype=bool)
-                hit[self._owner_target[chosen[self._owner_vessel]]] = True
-                f[row, ~hit] = nan
-        scaled = np.where(self.divide, self.src / f, self.src * f)  # in the model's units
-        out = self.unit * scaled
-        on = ~np.isnan(f)
-        with np.errstate(invalid="ignore"):
-            bad = on & (~np.isfinite(scaled) | ~np.isfinite(out)
-                        | (self.lumped & ~(scaled >= 0)) | (self.divide & ~(scaled > 0)))
-        return out, ~bad.any(axis=1)
+    #: the replaced waveform tables ``(target, time, value)`` in SI, or None
+    tables: list[tuple[int, np.ndarray, np.ndarray]] | None = None
 
 
 class Patcher:
     """Turns patches into :class:`Variant` s. The canonical form of the base model's elements
-    is computed once; a variant converts only the vessels and conditions its patch changed."""
+    is computed once; a variant converts only the vessels and conditions its patch changed,
+    or takes the value route (:mod:`oxyline.ensemble.values`)."""
 
     def __init__(self, base: Model) -> None:
+        from oxyline.ensemble.values import ValueTable
+
         self.base = base
-        scaler = Scaler(base)
-        #: the scale-only patches' fast path (None: every patch takes the full path)
-        self.scaler = scaler if scaler.usable and scaler.targets else None
+        table = ValueTable(base)
+        #: the value route (None: every patch takes the full path)
+        self.scaler = table if table.targets else None
         canon = base.canonical
         self._vessels = canon["vessels"]
         self._bcs = canon["boundary_conditions"]
-        units = str(base.source.get("units", "SI"))
-        bcs = base.source.get("boundary_conditions", {})
-        # each condition's waveform periods, to check a variant's period as a model load does
-        self._periods = {node: _boundary_conditions({node: bc}, units)[1]
-                         for node, bc in bcs.items()}
+
+    @property
+    def _periods(self) -> dict[str, list[tuple[float, str]]]:
+        """Each condition's waveform periods, to check a variant's period as a model load
+        does (computed once, when a patch first needs them)."""
+        periods = self.__dict__.get("_periods_cache")
+        if periods is None:
+            units = str(self.base.source.get("units", "SI"))
+            bcs = self.base.source.get("boundary_conditions", {})
+            periods = self.__dict__["_periods_cache"] = {
+                node: _boundary_conditions({node: bc}, units)[1] for node, bc in bcs.items()}
+        return periods
+
+    def _parse(self, patch: Any, k: int) -> Any:
+        return None if self.scaler is None else self.scaler.parse(patch, k)
 
     def check(self, patch: Any, k: int) -> None:
         """Raise :class:`ModelError` for unknown names in ``patch`` (variant ``k``), as
-        :meth:`variant` would; a scale-only patch is checked without merging it."""
-        if self.scaler is not None and isinstance(patch, Mapping) and patch.keys() == {"scale"}:
-            self.scaler.check(patch["scale"], k)
-        else:
+        :meth:`variant` would; a patch on the value route is checked without merging it."""
+        if self._parse(patch, k) is None:
             merge_patch(self.base.source, patch, k)
 
-    def check_all(self, patches: Sequence[Any], first: int = 0) -> dict[int, np.ndarray]:
-        """:meth:`check` every patch (variant ``first + i``) and return the target values of
-        the scale-only patches that take the value path, by position in ``patches`` (see
-        :meth:`Scaler.table`): the checked scale terms serve both, and the values of the
-        whole ensemble are one numpy pass."""
-        scaled: list[int] = []
-        terms = []
+    def check_all(self, patches: Sequence[Any], numbers: range | None = None) -> dict[int, Any]:
+        """:meth:`check` every patch (variant ``numbers[i]``, default ``i``) and return the
+        value-route rows of those that take it, by position in ``patches`` (see
+        :meth:`~oxyline.ensemble.values.ValueTable.rows`): the parse serves both, and the
+        values of the whole ensemble are one numpy pass."""
+        numbers = range(len(patches)) if numbers is None else numbers
+        fast: list[int] = []
+        parsed = []
         for i, patch in enumerate(patches):
-            if self.scaler is not None and isinstance(patch, Mapping) \
-                    and patch.keys() == {"scale"}:
-                terms.append(_scale_terms(patch["scale"], self.scaler.index, first + i))
-                scaled.append(i)
+            p = self._parse(patch, numbers[i]) if patch else None
+            if p is None:
+                merge_patch(self.base.source, patch, numbers[i])
             else:
-                merge_patch(self.base.source, patch, first + i)
-        if not scaled:
+                parsed.append(p)
+                fast.append(i)
+        if not parsed:
             return {}
         assert self.scaler is not None
-        table, ok = self.scaler.table(terms)
-        return {i: table[j] for j, i in enumerate(scaled) if ok[j]}
+        rows = self.scaler.rows(parsed)
+        return {i: row for i, row in zip(fast, rows, strict=True) if row is not None}
 
-    def variant(self, patch: Mapping[str, Any], k: int, values: np.ndarray | None = None
-                ) -> Variant:
+    def variant(self, patch: Mapping[str, Any], k: int, row: Any = None) -> Variant:
         """Variant ``k``. Unknown names raise :class:`ModelError`; a value the model refuses
-        raises it too, which the caller records as that variant's failure. ``values``: the
-        target values of a scale-only patch from :meth:`check_all`, if computed there."""
+        raises it too, which the caller records as that variant's failure. ``row``: the
+        value-route row of the patch from :meth:`check_all`, if computed there."""
         if not patch:
             return Variant(None, self.base)
-        if values is not None:
-            return Variant(None, self.base, values=values)
-        if self.scaler is not None and patch.keys() == {"scale"}:
-            values = self.scaler.values(patch["scale"], k)
-            if values is not None:
-                return Variant(None, self.base, values=values)
+        if row is None and self.scaler is not None:
+            parsed = self.scaler.parse(patch, k)
+            row = None if parsed is None else self.scaler.rows([parsed])[0]
+        if row is not None:
+            assert self.scaler is not None
+            return Variant(None, self.scaler.model_with_period(row.period), values=row.values,
+                           tables=row.tables)
         data, vessels, nodes = merge_patch(self.base.source, patch, k)
 
         def convert_vessels(items: list[Any], units: str) -> list[Any]:

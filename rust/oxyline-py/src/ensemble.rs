@@ -7,8 +7,8 @@ use crate::settings::Shared;
 use crate::{error_kind, layout_dict, outcome_dict, recorded_columns, to_py};
 use numpy::{IntoPyArray, PyReadonlyArray1};
 use oxyline_core::ensemble::{
-    ColumnStats, ConditionValue, Member, SpecPatch, StatsFold, Target, Targets, column_stats,
-    run_fed, worker_count,
+    ColumnStats, ConditionValue, Member, SpecPatch, StatsFold, TableValues, Target, Targets,
+    column_stats, run_fed, worker_count,
 };
 use oxyline_core::spec::{BoundarySpec, NetworkSpec, VesselSpec, parse};
 use oxyline_core::{Chunk, Error, Outcome, OutputSink, RunSettings, Selection, Transport};
@@ -37,6 +37,8 @@ struct Input {
     output_every: f64,
     /// One value per target of the ensemble (NaN: the base value), or none.
     values: Option<Vec<f64>>,
+    /// The waveform tables of the variant's table targets.
+    tables: Vec<TableValues>,
 }
 
 /// Vessels (by index) and plain outlets of a patch read from their canonical dicts (see
@@ -71,14 +73,15 @@ fn handed_over(
     Ok(h)
 }
 
-/// The base model with a variant's patch (JSON text, handed-over elements and target values;
-/// none of them: the base itself), assembled.
+/// The base model with a variant's patch (JSON text, handed-over elements, target values and
+/// tables; none of them: the base itself), assembled.
 fn member_of(
     base: &NetworkSpec,
     patch: Option<&str>,
     handed: Handed,
     targets: &Targets,
     values: Option<&[f64]>,
+    tables: &[TableValues],
 ) -> Result<Member, Error> {
     if handed.vessels.is_empty() && handed.outlets.is_empty() && values.is_none() {
         return Member::of_patch(base, patch);
@@ -91,15 +94,16 @@ fn member_of(
     p.boundary_conditions.extend(handed.outlets);
     let mut spec = p.apply(base)?;
     if let Some(values) = values {
-        targets.write(&mut spec, values)?;
+        targets.write(&mut spec, values, tables)?;
     }
     Member::build(&spec)
 }
 
 /// The targets of `Ensemble(targets=...)`: `(kind, key)` pairs, `kind` one of
-/// `lumped.resistance`, `lumped.capacitance`, `youngs_modulus` (key: the vessel's index) or
-/// `resistance`, `proximal_resistance`, `capacitance`, `distal_resistance` (key: the node of
-/// a resistance or RCR condition).
+/// `lumped.resistance`, `lumped.capacitance`, `youngs_modulus`, `length`, `radius_in`,
+/// `radius_out`, `wall_thickness` (key: the vessel's index), `resistance`,
+/// `proximal_resistance`, `capacitance`, `distal_resistance` (key: the node of a resistance
+/// or RCR condition) or `table` (key: the node of a flow or pressure condition).
 fn targets_of(list: &Bound<'_, PyAny>) -> PyResult<Vec<Target>> {
     let mut out = Vec::new();
     for item in list.try_iter()? {
@@ -109,6 +113,11 @@ fn targets_of(list: &Bound<'_, PyAny>) -> PyResult<Vec<Target>> {
             "lumped.resistance" => key.extract().map(Target::LumpedResistance),
             "lumped.capacitance" => key.extract().map(Target::LumpedCapacitance),
             "youngs_modulus" => key.extract().map(Target::YoungsModulus),
+            "length" => key.extract().map(Target::Length),
+            "radius_in" => key.extract().map(Target::RadiusIn),
+            "radius_out" => key.extract().map(Target::RadiusOut),
+            "wall_thickness" => key.extract().map(Target::WallThickness),
+            "table" => key.extract::<String>().map(Target::Table),
             "resistance" => node(ConditionValue::Resistance),
             "proximal_resistance" => node(ConditionValue::ProximalResistance),
             "capacitance" => node(ConditionValue::Capacitance),
@@ -153,10 +162,19 @@ fn run_variant(
         patch,
         handed,
         values,
+        tables,
         ..
     } = input;
-    let built =
-        handed.and_then(|h| member_of(base, patch.as_deref(), h, targets, values.as_deref()));
+    let built = handed.and_then(|h| {
+        member_of(
+            base,
+            patch.as_deref(),
+            h,
+            targets,
+            values.as_deref(),
+            &tables,
+        )
+    });
     let member = match built {
         Ok(m) => m,
         Err(e) => {
@@ -297,6 +315,13 @@ fn deliver(py: Python<'_>, on_done: &Py<PyAny>, i: usize, f: Finished) -> PyResu
     Ok(())
 }
 
+/// A waveform table as `feed()` hands it over: `(target, time, value)`.
+type FedTable<'py> = (
+    usize,
+    PyReadonlyArray1<'py, f64>,
+    PyReadonlyArray1<'py, f64>,
+);
+
 /// What `feed()` returns for a variant (see `Ensemble.run`).
 type Fed<'py> = (
     usize,
@@ -306,6 +331,7 @@ type Fed<'py> = (
     Option<Bound<'py, PyDict>>,
     Option<Bound<'py, PyDict>>,
     Option<PyReadonlyArray1<'py, f64>>,
+    Option<Vec<FedTable<'py>>>,
 );
 
 /// A parsed base model whose variants run in parallel.
@@ -342,11 +368,12 @@ impl Ensemble {
     }
 
     /// Run variants as `feed()` hands them over: it returns `(i, patch, period,
-    /// output_every, vessels, outlets, values)` for the next variant (`patch` its canonical
-    /// JSON, None for the base model; `vessels` {index: canonical vessel dict} and `outlets`
-    /// {node: canonical resistance/RCR dict}: elements of the patch handed over as objects,
-    /// or None; `values`: a float64 array of one SI value per target, NaN for the base value,
-    /// or None)
+    /// output_every, vessels, outlets, values, tables)` for the next variant (`patch` its
+    /// canonical JSON, None for the base model; `vessels` {index: canonical vessel dict} and
+    /// `outlets` {node: canonical resistance/RCR dict}: elements of the patch handed over as
+    /// objects, or None; `values`: a float64 array of one SI value per target, NaN for the
+    /// base value, or None; `tables`: `[(target, time, value)]` float64 arrays of the new
+    /// linear tables of `table` targets, or None)
     /// or None when there are no more, and is called on this thread while the workers
     /// run (so preparing a variant overlaps the runs). `settings`: the run settings shared
     /// with `Network.simulate` (`settings::KEYS`), the same for every variant. `on_done(i, raw, layout, error_kind, error)` is called
@@ -407,13 +434,21 @@ impl Ensemble {
                         .and_then(|v| v.extract::<Option<Fed<'_>>>(py));
                     match item {
                         Ok(item) => item.map(
-                            |(i, patch, period, output_every, vessels, outlets, values)| {
+                            |(i, patch, period, output_every, vessels, outlets, values, tables)| {
+                                let tables = tables
+                                    .unwrap_or_default()
+                                    .into_iter()
+                                    .map(|(k, t, v)| {
+                                        (k, t.as_array().to_vec(), v.as_array().to_vec())
+                                    })
+                                    .collect();
                                 let input = Input {
                                     patch,
                                     handed: handed_over(vessels, outlets),
                                     period,
                                     output_every,
                                     values: values.map(|a| a.as_array().to_vec()),
+                                    tables,
                                 };
                                 (i, input)
                             },

@@ -17,6 +17,7 @@ use crate::error::{Error, Result};
 use crate::spec::transport::TransportSpec;
 use crate::spec::{BloodSpec, BoundarySpec, NetworkSpec, VesselSpec};
 use crate::transport::Transport;
+use crate::waveform::{Interpolation, WaveformSpec};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -88,19 +89,32 @@ impl SpecPatch {
     }
 }
 
-/// A number of the base model that a variant may replace without restating its element (the
-/// resistances and compliances a `scale` patch multiplies, docs/ensembles.md): the front end
-/// hands such a variant one value per target instead of whole vessels and conditions.
+/// A number of the base model that a variant may replace without restating its element: the
+/// resistances and compliances a `scale` patch multiplies and the plain numbers of explicit
+/// patches (vessel geometry, lumped values, outlet values; docs/ensembles.md), or the table of
+/// an inflow/pressure waveform. The front end hands such a variant one value per target (and
+/// its tables) instead of whole vessels and conditions.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Target {
     /// `lumped.resistance` of vessel i.
     LumpedResistance(usize),
     /// `lumped.capacitance` of vessel i.
     LumpedCapacitance(usize),
-    /// `geometry.youngs_modulus` of vessel i.
+    /// `geometry.youngs_modulus` of vessel i (set even where the base has none).
     YoungsModulus(usize),
+    /// `geometry.length` of vessel i.
+    Length(usize),
+    /// `geometry.radius_in` of vessel i.
+    RadiusIn(usize),
+    /// `geometry.radius_out` of vessel i.
+    RadiusOut(usize),
+    /// `geometry.wall_thickness` of vessel i (set even where the base has none).
+    WallThickness(usize),
     /// A number of the resistance or RCR condition at a node.
     Condition(String, ConditionValue),
+    /// The waveform of the flow or pressure condition at a node, replaced by a linear table
+    /// (its value in the values row is unused: see [`Targets::write`]).
+    Table(String),
 }
 
 /// The numbers of a resistance or RCR condition that a [`Target`] may name.
@@ -112,37 +126,57 @@ pub enum ConditionValue {
     DistalResistance,
 }
 
+/// A replacement waveform table: `(target, time, value)`, the target a [`Target::Table`].
+pub type TableValues = (usize, Vec<f64>, Vec<f64>);
+
+fn missing(what: String, why: &str) -> Error {
+    Error::model(what, why.to_owned())
+}
+
 impl Target {
+    /// The vessel a vessel target names, or an error naming it.
+    fn vessel(spec: &mut NetworkSpec, i: usize) -> Result<&mut VesselSpec> {
+        let n = spec.vessels.len();
+        spec.vessels.get_mut(i).ok_or_else(|| {
+            missing(
+                format!("vessel #{i}"),
+                &format!("not in the network ({n} vessels)"),
+            )
+        })
+    }
+
     /// The slot of this target in `spec`, or an error naming the element if it has no such
-    /// number.
+    /// number. A Young's modulus or wall thickness missing from a geometric vessel is
+    /// created (NaN until written).
     fn slot<'a>(&self, spec: &'a mut NetworkSpec) -> Result<&'a mut f64> {
-        let missing = |what: String, why: &str| Error::model(what, why.to_owned());
         match self {
             Target::LumpedResistance(i)
             | Target::LumpedCapacitance(i)
-            | Target::YoungsModulus(i) => {
-                let n = spec.vessels.len();
-                let v = spec.vessels.get_mut(*i).ok_or_else(|| {
-                    missing(
-                        format!("vessel #{i}"),
-                        &format!("not in the network ({n} vessels)"),
-                    )
-                })?;
+            | Target::YoungsModulus(i)
+            | Target::Length(i)
+            | Target::RadiusIn(i)
+            | Target::RadiusOut(i)
+            | Target::WallThickness(i) => {
+                let v = Target::vessel(spec, *i)?;
                 let what = format!("vessel '{}'", v.name);
+                let geometry = v.geometry.as_mut();
                 match self {
                     Target::LumpedResistance(_) => v.lumped.as_mut().map(|l| &mut l.resistance),
                     Target::LumpedCapacitance(_) => v.lumped.as_mut().map(|l| &mut l.capacitance),
-                    _ => v.geometry.as_mut().and_then(|g| g.youngs_modulus.as_mut()),
+                    Target::YoungsModulus(_) => {
+                        geometry.map(|g| g.youngs_modulus.get_or_insert(f64::NAN))
+                    }
+                    Target::WallThickness(_) => {
+                        geometry.map(|g| g.wall_thickness.get_or_insert(f64::NAN))
+                    }
+                    Target::Length(_) => geometry.map(|g| &mut g.length),
+                    Target::RadiusIn(_) => geometry.map(|g| &mut g.radius_in),
+                    _ => geometry.map(|g| &mut g.radius_out),
                 }
                 .ok_or_else(|| missing(what, &format!("has no value for {self:?}")))
             }
             Target::Condition(node, value) => {
-                let bc = spec.boundary_conditions.get_mut(node).ok_or_else(|| {
-                    missing(
-                        format!("boundary condition '{node}'"),
-                        "no condition at this node in the base model",
-                    )
-                })?;
+                let bc = Target::condition(spec, node)?;
                 let slot = match (bc, value) {
                     (BoundarySpec::Resistance { resistance, .. }, ConditionValue::Resistance) => {
                         Some(resistance)
@@ -172,6 +206,38 @@ impl Target {
                     )
                 })
             }
+            Target::Table(node) => Err(missing(
+                format!("boundary condition '{node}'"),
+                "a waveform table is not a single number",
+            )),
+        }
+    }
+
+    fn condition<'a>(spec: &'a mut NetworkSpec, node: &str) -> Result<&'a mut BoundarySpec> {
+        spec.boundary_conditions.get_mut(node).ok_or_else(|| {
+            missing(
+                format!("boundary condition '{node}'"),
+                "no condition at this node in the base model",
+            )
+        })
+    }
+
+    /// The waveform a [`Target::Table`] replaces, or an error naming the condition.
+    fn waveform<'a>(spec: &'a mut NetworkSpec, node: &str) -> Result<&'a mut WaveformSpec> {
+        match Target::condition(spec, node)? {
+            BoundarySpec::Flow { flow: w } | BoundarySpec::Pressure { pressure: w } => Ok(w),
+            _ => Err(missing(
+                format!("boundary condition '{node}'"),
+                "has no flow or pressure waveform",
+            )),
+        }
+    }
+
+    /// Check that `spec` has this target's number (or waveform).
+    fn check(&self, spec: &mut NetworkSpec) -> Result<()> {
+        match self {
+            Target::Table(node) => Target::waveform(spec, node).map(|_| ()),
+            _ => self.slot(spec).map(|_| ()),
         }
     }
 }
@@ -185,7 +251,7 @@ impl Targets {
     pub fn new(base: &NetworkSpec, targets: Vec<Target>) -> Result<Targets> {
         let mut probe = base.clone();
         for t in &targets {
-            t.slot(&mut probe)?;
+            t.check(&mut probe)?;
         }
         Ok(Targets(targets))
     }
@@ -198,9 +264,16 @@ impl Targets {
         self.0.is_empty()
     }
 
-    /// Write `values` (one per target, in SI; NaN leaves the number as it is) into `spec`.
-    /// The values are checked as every model's are, when the variant is assembled.
-    pub fn write(&self, spec: &mut NetworkSpec, values: &[f64]) -> Result<()> {
+    /// Write `values` (one per target, in SI; NaN leaves the number as it is) and `tables`
+    /// (each a [`Target::Table`]'s new linear table: the waveform a patch of `time` and
+    /// `flow`/`pressure` gives, docs/ensembles.md) into `spec`. The values are checked as
+    /// every model's are, when the variant is assembled.
+    pub fn write(
+        &self,
+        spec: &mut NetworkSpec,
+        values: &[f64],
+        tables: &[TableValues],
+    ) -> Result<()> {
         if values.len() != self.0.len() {
             return Err(Error::model(
                 "variant values",
@@ -208,9 +281,23 @@ impl Targets {
             ));
         }
         for (t, &x) in self.0.iter().zip(values) {
-            if !x.is_nan() {
+            if !x.is_nan() && !matches!(t, Target::Table(_)) {
                 *t.slot(spec)? = x;
             }
+        }
+        for (k, time, value) in tables {
+            let Some(Target::Table(node)) = self.0.get(*k) else {
+                return Err(Error::model(
+                    "variant tables",
+                    format!("target #{k} is not a waveform table"),
+                ));
+            };
+            *Target::waveform(spec, node)? = WaveformSpec::Table {
+                time: time.clone(),
+                value: value.clone(),
+                interpolation: Interpolation::Linear,
+                steady: None,
+            };
         }
         Ok(())
     }

@@ -210,11 +210,11 @@ fn target_values_replace_single_numbers() {
     )
     .unwrap();
     let mut spec = base.clone();
-    targets.write(&mut spec, &[5e8, f64::NAN]).unwrap();
+    targets.write(&mut spec, &[5e8, f64::NAN], &[]).unwrap();
     // NaN leaves the outlet: 1e-6 m³/s through 1.5e9 Pa s/m³ (Ohm's law); one linear solve
     let p = inlet_pressure(&Member::build(&spec).unwrap());
     assert!((p - 1.5e3).abs() <= 1e-9 * 1.5e3, "{p}");
-    targets.write(&mut spec, &[f64::NAN, 3e9]).unwrap();
+    targets.write(&mut spec, &[f64::NAN, 3e9], &[]).unwrap();
     let p = inlet_pressure(&Member::build(&spec).unwrap());
     assert!((p - 3.5e3).abs() <= 1e-9 * 3.5e3, "{p}");
     // a number the base does not have, a wrong count and a refused value are errors
@@ -226,8 +226,33 @@ fn target_values_replace_single_numbers() {
     )
     .unwrap_err();
     assert!(e.to_string().contains("'in'"), "{e}");
-    assert!(targets.write(&mut spec, &[1.0]).is_err());
-    targets.write(&mut spec, &[-1.0, f64::NAN]).unwrap();
+    assert!(targets.write(&mut spec, &[1.0], &[]).is_err());
+    targets.write(&mut spec, &[-1.0, f64::NAN], &[]).unwrap();
     let e = Member::build(&spec).err().unwrap();
     assert!(e.to_string().contains("vessel 'v'"), "{e}");
+}
+
+#[test]
+fn table_targets_replace_a_waveform() {
+    let base = parse(MODEL).unwrap();
+    let targets = Targets::new(&base, vec![Target::Table("in".into())]).unwrap();
+    let mut spec = base.clone();
+    // a flat table of 2e-6 m³/s: its time mean drives the steady state, through 1.2e9 Pa s/m³
+    let table = (0, vec![0.0, 0.5, 1.0], vec![2e-6, 2e-6, 2e-6]);
+    targets.write(&mut spec, &[f64::NAN], &[table]).unwrap();
+    let p = inlet_pressure(&Member::build(&spec).unwrap());
+    assert!((p - 2.4e3).abs() <= 1e-9 * 2.4e3, "{p}");
+    // a table for a condition without a waveform, and a geometric number of a lumped vessel,
+    // are errors naming the element
+    let e = Targets::new(&base, vec![Target::Table("out".into())]).unwrap_err();
+    assert!(e.to_string().contains("'out'"), "{e}");
+    let e = Targets::new(&base, vec![Target::Length(0)]).unwrap_err();
+    assert!(e.to_string().contains("vessel 'v'"), "{e}");
+    let wrong = (0, vec![0.0], vec![1.0]);
+    let only_numbers = Targets::new(&base, vec![Target::LumpedResistance(0)]).unwrap();
+    assert!(
+        only_numbers
+            .write(&mut spec, &[f64::NAN], &[wrong])
+            .is_err()
+    );
 }
