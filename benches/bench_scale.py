@@ -36,6 +36,7 @@ import os
 import resource
 import subprocess
 import sys
+import threading
 import time
 from typing import Any
 
@@ -107,6 +108,21 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
         kw["variables"] = spec["variables"]
     if spec["method"] == "generalized-alpha":
         kw["dt"] = 1e-3
+    fraction = spec.get("fraction", 1.0)
+    marks: list[tuple[float, float]] = []  # (simulated time, CPU time) at progress checks
+    if fraction < 1.0:
+        # stop the run a fraction into the cycle (RK4's many small steps on big trees): the
+        # progress callback (every 256 steps) sets the cancel event; the steps are timed
+        # from the first check to the stop, so the start (steady state, step size) is left out
+        cancel = threading.Event()
+
+        def stop(t: float, t_end: float) -> None:
+            if not cancel.is_set():
+                marks.append((t, time.process_time()))
+                if t >= fraction * PERIOD and len(marks) > 1:
+                    cancel.set()
+
+        kw.update(progress=stop, cancel=cancel)
     c0, w0 = time.process_time(), time.perf_counter()
     m = oxyline.load_model(model)
     c1, w1 = time.process_time(), time.perf_counter()
@@ -116,13 +132,21 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
                                            time_chunk=spec["time_chunk"], **kw)
             settings = {"dt": res.attrs["solver_dt"]}
         else:
-            res = oxyline.simulate(m, **kw)
+            try:
+                res = oxyline.simulate(m, **kw)
+            except oxyline.SimulationCancelled as exc:
+                res = exc.result
             settings = res.settings
         c2, w2 = time.process_time(), time.perf_counter()
+        dt = float(settings["dt"])
         out = {"load_cpu": c1 - c0, "load_wall": w1 - w0, "run_cpu": c2 - c1,
                "run_wall": w2 - w1, "segments": int(m.network.summary()["segments"]),
-               "dt": float(settings["dt"]),
-               "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
+               "dt": dt, "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
+        if len(marks) > 1:
+            # a partial cycle: the timed steps only, no end-of-cycle mass balance
+            out["steps"] = round((marks[-1][0] - marks[0][0]) / dt)
+            out["step_cpu"] = marks[-1][1] - marks[0][1]
+            return out
         if not spec.get("zarr") and res.species:
             mb = res.o2_mass_balance
             out["residual"] = float(mb["residual"][-1] / mb["inflow"][-1])
@@ -163,11 +187,18 @@ QUICK = {"depths": [8, 10, 12, 14, 16, 18], "max_depth": {"o2-hill-k": 14},
          "rk4_max_depth": 10}
 
 
+def step_cpu(r: dict[str, Any]) -> float:
+    """CPU s of the timed steps: the whole run, or the steps of a partial cycle."""
+    return r.get("step_cpu", r["run_cpu"])
+
+
 def row(method: str, config: str, r: dict[str, Any], flow: dict[str, Any] | None) -> str:
     """One table row; ``flow``: the flow-only run of the same tree and method (for O2/flow)."""
-    steps = round(PERIOD / r["dt"])
-    ns = 1e9 * r["run_cpu"] / (r["segments"] * steps)
-    ratio = (f"{r['run_cpu'] / flow['run_cpu']:.2f}" if flow and config != "flow" else "–")
+    steps = r.get("steps", round(PERIOD / r["dt"]))
+    ns = 1e9 * step_cpu(r) / (r["segments"] * steps)
+    # (a partial cycle is timed between progress checks: O2/flow per step)
+    ratio = (f"{(step_cpu(r) / steps) / (step_cpu(flow) / flow.get('steps', steps)):.2f}"
+             if flow and config != "flow" else "–")
     res = f"{r['residual']:.1e}" if "residual" in r else "–"
     return (f"| {method} | {config} | {r['segments']} | {steps} | {r['load_cpu']:.2f} "
             f"({r['load_wall']:.2f}) | {r['run_cpu']:.2f} ({r['run_wall']:.2f}) | {ns:.1f} | "
@@ -184,7 +215,7 @@ def print_slopes(rows: dict[tuple[str, str], list[dict[str, Any]]], min_segments
             continue
         n = [r["segments"] for r in rs]
         print(f"  {method:<18} {config:<11} load {slope(n, [r['load_cpu'] for r in rs]):.2f}"
-              f"  run {slope(n, [r['run_cpu'] / (PERIOD / r['dt']) for r in rs]):.2f}"
+              f"  run {slope(n, [step_cpu(r) / r.get('steps', PERIOD / r['dt']) for r in rs]):.2f}"
               f" (per step; {n[0]}-{n[-1]} segments)")
 
 
@@ -213,6 +244,10 @@ def main() -> None:
                     help="output only these vessel variables (the run's output selection, "
                          "e.g. pressure_in flow_in concentration_in concentration_out); "
                          "default: all")
+    ap.add_argument("--rk4-fraction", type=float, default=1.0,
+                    help="RK4 runs stop this fraction into the cycle (its automatic dt makes "
+                         "a whole cycle of a 65 k-segment tree take minutes); O2/flow is then "
+                         "per step")
     a = ap.parse_args()
     if a.child:
         print(json.dumps(child(json.loads(a.child))))
@@ -227,7 +262,10 @@ def main() -> None:
         out += f", variables {' '.join(a.variables)}"
     print(f"# binary trees, {a.per_vessel} segments per vessel, one cycle, vessel output every "
           f"10 ms {out}; CPU s (wall s), best of {a.repeat}; peak RSS of a fresh process; "
-          f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}")
+          f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}"
+          + (f"; RK4 runs stop {a.rk4_fraction:g} into the cycle (ns/seg-step and O2/flow "
+             "over the steps between the first progress check and the stop)"
+             if a.rk4_fraction < 1.0 and "rk4" in a.methods else ""))
     print("| method | config | segments | steps | load s | run s | ns/seg-step | peak MB "
           "| O2/flow | load µs/seg | mass residual |")
     print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
@@ -243,6 +281,7 @@ def main() -> None:
                     continue
                 r = measure({"depth": depth, "per_vessel": a.per_vessel, "config": config,
                              "method": method, "repeat": a.repeat, "zarr": a.zarr,
+                             "fraction": a.rk4_fraction if method == "rk4" else 1.0,
                              "time_chunk": a.time_chunk, "variables": a.variables})
                 if "error" in r:
                     print(f"| {method} | {config} | depth {depth} | failed: {r['error']} |")

@@ -688,6 +688,33 @@ fn incidence(
 }
 
 impl Plan {
+    /// `to_next` and `reads_acc` of the elimination order (see [`Link`]): a node hands its
+    /// terms to its parent in registers when the parent is eliminated next; the parent then
+    /// reads its accumulator only if something else left terms there.
+    fn link_carries(&mut self) {
+        let Some(tree) = self.tree.as_mut() else {
+            return;
+        };
+        let mut reads = vec![false; self.kind.len()];
+        for b in &self.boundary_links {
+            reads[b.node as usize] = true;
+        }
+        for &(n, _, _) in &self.sources {
+            reads[n] = true;
+        }
+        for k in 0..tree.len() {
+            let next = tree.get(k + 1).map_or(u32::MAX, |l| l.node);
+            let l = &mut tree[k];
+            l.to_next = l.parent != u32::MAX && l.parent == next;
+            if l.parent != u32::MAX && !l.to_next {
+                reads[l.parent as usize] = true;
+            }
+        }
+        for l in tree.iter_mut() {
+            l.reads_acc = reads[l.node as usize];
+        }
+    }
+
     /// The solver lists derived from the grid: domain nodes, internal and boundary faces,
     /// simple and general mixing points, the tree elimination order, the face unknowns, and
     /// the build's wall laws.
@@ -735,6 +762,7 @@ impl Plan {
             // (cells < nodes < u32::MAX, checked above)
             l.cell = self.node_cell[l.node as usize] as u32;
         }
+        self.link_carries();
         self.face_unknowns = self.faces[..self.n_flow_faces]
             .iter()
             .map(|f| f.unknown as u32)

@@ -10,9 +10,11 @@
 //!   decay fluxes.
 //!
 //! The per-node accumulators (net inflow, d, b) are packed in one entry, read and zeroed by
-//! the forward pass, so each node's row costs one cache line and no pass clears them. The
-//! sums at a junction (a node with several children) add in another order than the general
-//! path's, so results agree with it to round-off.
+//! the forward pass, so each node's row costs one cache line and no pass clears them. Along a
+//! vessel the parent is the next node eliminated (`Link::to_next`, the chain order of
+//! `tree_order`): there the terms pass in registers and the accumulator is not touched at
+//! all. The sums at a junction (a node with several children) add in another order than the
+//! general path's, so results agree with it to round-off.
 
 #[allow(unused_imports)]
 use super::*;
@@ -74,11 +76,45 @@ impl CellRows for BindingRows<'_> {
     }
 }
 
+/// Where the forward pass takes the flow of a tree face.
+trait FaceFlows {
+    fn flow(&mut self, face: usize) -> f64;
+}
+
+/// The face flows as loaded (`Transport::qf`).
+struct Loaded<'a>(&'a [f64]);
+
+impl FaceFlows for Loaded<'_> {
+    #[inline(always)]
+    fn flow(&mut self, face: usize) -> f64 {
+        self.0[face]
+    }
+}
+
+/// The α_f-level flow Q = Q_0 + α_f (Q_1 − Q_0) of a face from the step's end state `y1` and
+/// its start flow carried in `q0`, which becomes the end flow (the gather of
+/// `Transport::implicit_step_carried`, done where the forward pass reads the face, so that
+/// no pass writes the tree faces' flows and another reads them back).
+struct Carried<'a> {
+    y1: &'a [f64],
+    unknowns: &'a [u32],
+    q0: &'a mut [f64],
+    alpha_f: f64,
+}
+
+impl FaceFlows for Carried<'_> {
+    #[inline(always)]
+    fn flow(&mut self, face: usize) -> f64 {
+        let (q0, q1) = (self.q0[face], self.y1[self.unknowns[face] as usize]);
+        self.q0[face] = q1;
+        q0 + self.alpha_f * (q1 - q0)
+    }
+}
+
 /// The slices the forward pass reads and writes (split from `Transport` so that the row
 /// builder can borrow the species state at the same time).
 struct Forward<'a> {
     tree: &'a [Link],
-    qf: &'a [f64],
     acc: &'a mut [[f64; 3]],
     beta: &'a mut [f64],
     x: &'a mut [f64],
@@ -91,10 +127,9 @@ struct Forward<'a> {
 impl Forward<'_> {
     /// The forward pass (see the module doc); with `first` the new volumes W' = W + dt·(net
     /// inflow) into `wnew` (else read from it). Returns whether every new volume is positive.
-    fn run<R: CellRows>(self, rows: &mut R, first: bool) -> bool {
+    fn run<R: CellRows, F: FaceFlows>(self, rows: &mut R, flows: &mut F, first: bool) -> bool {
         let Forward {
             tree,
-            qf,
             acc,
             beta,
             x,
@@ -105,17 +140,26 @@ impl Forward<'_> {
         } = self;
         // (NaN fails the test too)
         let mut positive = true;
+        // the terms a node leaves in the row of its parent when that parent is eliminated
+        // next (`Link::to_next`): in registers, not in the parent's accumulator
+        let mut carry = [0.0; 3];
         for (l, beta) in tree.iter().zip(beta.iter_mut()) {
             let n = l.node as usize;
-            let [mut net, acc_d, acc_b] = std::mem::take(&mut acc[n]);
-            let (mut aq, mut to_parent) = (0.0, false);
+            let carried = std::mem::take(&mut carry);
+            // (a + carried: the same sums, in the same order, as the terms added to `acc`)
+            let [mut net, acc_d, acc_b] = if l.reads_acc {
+                let a = std::mem::take(&mut acc[n]);
+                [a[0] + carried[0], a[1] + carried[1], a[2] + carried[2]]
+            } else {
+                carried
+            };
+            let (mut q_in, mut aq, mut to_parent) = (0.0, 0.0, false);
             let has_parent = l.parent != u32::MAX;
             if has_parent {
-                let q = qf[l.face as usize];
+                let q = flows.flow(l.face as usize);
                 // inflow into n through the face to the parent
-                let q_in = if l.from_child { -q } else { q };
+                q_in = if l.from_child { -q } else { q };
                 net += q_in;
-                acc[l.parent as usize][0] -= q_in;
                 aq = q.abs();
                 to_parent = (q >= 0.0) == l.from_child;
             }
@@ -138,8 +182,6 @@ impl Forward<'_> {
             }
             if to_parent {
                 d += aq;
-            } else if has_parent {
-                acc[l.parent as usize][1] += aq;
             }
             // one division per node (the divider, not the memory, bounds this loop): x and β
             // use 1/d; without outflow or storage the node keeps its old value (a mixing
@@ -153,18 +195,107 @@ impl Forward<'_> {
                 (x[n], 0.0)
             };
             x[n] = xn;
-            *beta = 0.0;
-            if to_parent {
-                acc[l.parent as usize][2] += aq * xn;
-            } else {
-                *beta = aq * inv_d;
+            *beta = if to_parent { 0.0 } else { aq * inv_d };
+            if has_parent {
+                // the parent's row: net inflow, and the outflow into d (parent upwind) or
+                // the inflow into b (n upwind)
+                let terms = if to_parent {
+                    [-q_in, 0.0, aq * xn]
+                } else {
+                    [-q_in, aq, 0.0]
+                };
+                if l.to_next {
+                    carry = terms;
+                } else {
+                    let a = &mut acc[l.parent as usize];
+                    a[0] -= q_in;
+                    if to_parent {
+                        a[2] += terms[2];
+                    } else {
+                        a[1] += aq;
+                    }
+                }
             }
         }
         positive
     }
 }
 
+/// What the row builder of one species borrows (split from `Transport` beside `Forward`).
+struct RowState<'a> {
+    set: &'a SpeciesPlan,
+    sp: &'a mut Species,
+    wlin: &'a mut [f64],
+    wconst: &'a mut [f64],
+    nc: usize,
+    dt: f64,
+}
+
+impl RowState<'_> {
+    /// The forward pass with this species' row builder.
+    fn forward<F: FaceFlows>(self, fwd: Forward, flows: &mut F, first: bool) -> bool {
+        let RowState {
+            set,
+            sp,
+            wlin,
+            wconst,
+            nc,
+            dt,
+        } = self;
+        let inv_dt = 1.0 / dt;
+        let rate = inv_dt + set.decay;
+        let laws = &*sp.laws;
+        if set.binding.is_identity() || !laws.has_wall {
+            // (the condition of `fixed_rows_of`, with `self` split into its fields here)
+            let g = &laws.cell_g[..nc];
+            let wc = &laws.cell_wc[..nc];
+            let mut rows = FixedRows {
+                g,
+                wc,
+                rate,
+                inv_dt,
+            };
+            fwd.run(&mut rows, flows, first)
+        } else {
+            let mut rows = BindingRows {
+                binding: set.binding,
+                laws,
+                free: &mut sp.free,
+                anchors: &mut sp.anchors,
+                wlin,
+                wconst,
+                rate,
+                inv_dt,
+            };
+            fwd.run(&mut rows, flows, first)
+        }
+    }
+}
+
+/// The α_f-level face flows of a fused step.
+#[derive(Clone, Copy)]
+pub(super) enum StepFlows<'a> {
+    /// Loaded into `Transport::qf`.
+    Loaded,
+    /// The boundary faces' flows loaded, the tree faces' computed by the forward pass from
+    /// the step's end state (`Carried`; see `Transport::gathers_in_forward`).
+    Carried { y1: &'a [f64], alpha_f: f64 },
+}
+
 impl Transport {
+    /// Whether `implicit_step_carried` leaves the tree faces' flows to the fused forward
+    /// pass: one species (its forward pass reads each face once), no refined cells (their
+    /// interior faces' flows are derived from the loaded ones), and every face a flow face
+    /// either in the tree or at a boundary (so each start flow is carried exactly once).
+    pub(super) fn gathers_in_forward(&self) -> bool {
+        let p = &*self.plan;
+        self.species.len() == 1
+            && p.chains.is_empty()
+            && p.faces.len() == p.n_flow_faces
+            && p.internal.len() + p.boundary_links.len() == p.n_flow_faces
+            && self.fused_applies()
+    }
+
     /// Whether `implicit_step` takes the fused tree step: a forest, the conservative
     /// formulation, no species whose wall follows the shear, and no tissue wall (its columns
     /// are eliminated in the row-by-row sweep, `tissue_rows`).
@@ -177,7 +308,13 @@ impl Transport {
 
     /// The implicit step of every species by the fused tree passes (see the module doc), the
     /// face flows being loaded.
-    pub(super) fn fused_tree_step(&mut self, t_af: f64, dt: f64, z: &mut [f64]) -> Result<()> {
+    pub(super) fn fused_tree_step(
+        &mut self,
+        t_af: f64,
+        dt: f64,
+        z: &mut [f64],
+        flows: StepFlows,
+    ) -> Result<()> {
         let (nn, nc) = (self.plan.kind.len(), self.plan.cells.len());
         let ntree = self.plan.tree.as_ref().map_or(0, |t| t.len());
         let sw = &mut self.sweep;
@@ -194,7 +331,7 @@ impl Transport {
             self.load_boundary(s, t_af);
             self.restore_mixing(s);
             self.fused_boundary_terms(s, z);
-            if !self.fused_forward(s, dt, z) {
+            if !self.fused_forward(s, dt, z, flows) {
                 return Err(self.volume_error(t_af));
             }
             self.fused_backward(s, dt, z);
@@ -238,19 +375,17 @@ impl Transport {
         }
     }
 
-    /// The forward pass of species `s` with its row builder; false if a new volume is not
-    /// positive (species 0 computes the volumes).
-    fn fused_forward(&mut self, s: usize, dt: f64, z: &[f64]) -> bool {
+    /// The forward pass of species `s` with its row builder and face flows; false if a new
+    /// volume is not positive (species 0 computes the volumes).
+    fn fused_forward(&mut self, s: usize, dt: f64, z: &[f64], flows: StepFlows) -> bool {
         let nc = self.plan.cells.len();
         let plan = &*self.plan;
         let Some(tree) = plan.tree.as_deref() else {
             return true;
         };
-        let set = &plan.species[s];
         let sw = &mut self.sweep;
         let fwd = Forward {
             tree,
-            qf: &self.qf,
             acc: &mut sw.acc,
             beta: &mut sw.beta,
             x: &mut self.conc,
@@ -259,35 +394,25 @@ impl Transport {
             zs: &z[s * nc..(s + 1) * nc],
             dt,
         };
-        let inv_dt = 1.0 / dt;
-        let rate = inv_dt + set.decay;
-        let sp = &mut self.species[s];
-        let laws = &*sp.laws;
-        if set.binding.is_identity() || !laws.has_wall {
-            // (the condition of `fixed_rows_of`, with `self` split into its fields here)
-            let g = &laws.cell_g[..nc];
-            let wc = &laws.cell_wc[..nc];
-            fwd.run(
-                &mut FixedRows {
-                    g,
-                    wc,
-                    rate,
-                    inv_dt,
-                },
-                s == 0,
-            )
-        } else {
-            let mut rows = BindingRows {
-                binding: set.binding,
-                laws,
-                free: &mut sp.free,
-                anchors: &mut sp.anchors,
-                wlin: &mut sw.wlin,
-                wconst: &mut sw.wconst,
-                rate,
-                inv_dt,
-            };
-            fwd.run(&mut rows, s == 0)
+        let rows = RowState {
+            set: &plan.species[s],
+            sp: &mut self.species[s],
+            wlin: &mut sw.wlin,
+            wconst: &mut sw.wconst,
+            nc,
+            dt,
+        };
+        match flows {
+            StepFlows::Loaded => rows.forward(fwd, &mut Loaded(&self.qf), s == 0),
+            StepFlows::Carried { y1, alpha_f } => {
+                let mut carried = Carried {
+                    y1,
+                    unknowns: &plan.face_unknowns,
+                    q0: &mut sw.q_start,
+                    alpha_f,
+                };
+                rows.forward(fwd, &mut carried, s == 0)
+            }
         }
     }
 

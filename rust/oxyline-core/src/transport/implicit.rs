@@ -1,6 +1,7 @@
 //! Backward-Euler transport step after each generalized-α flow step: tree elimination or
 //! flow-order sweep.
 
+use super::fused::StepFlows;
 #[allow(unused_imports)]
 use super::*;
 
@@ -85,10 +86,24 @@ impl Transport {
         let nf = self.plan.n_flow_faces;
         assert_eq!(q0.len(), nf, "set_step_start before the first carried step");
         let unknowns = &self.plan.face_unknowns[..nf];
-        for ((q, q0), &u) in self.qf[..nf].iter_mut().zip(q0.iter_mut()).zip(unknowns) {
+        let gather = |q: &mut f64, q0: &mut f64, u: u32| {
             let q1 = y1[u as usize];
             *q = *q0 + alpha_f * (q1 - *q0);
             *q0 = q1;
+        };
+        if self.gathers_in_forward() {
+            // the boundary faces here, the tree faces where the forward pass reads them
+            for b in &self.plan.boundary_links {
+                let f = b.face as usize;
+                gather(&mut self.qf[f], &mut q0[f], unknowns[f]);
+            }
+            self.sweep.q_start = q0;
+            self.load_source_and_chain_flows(t_af);
+            self.update_wall_flux(t_af);
+            return self.fused_tree_step(t_af, dt, z, StepFlows::Carried { y1, alpha_f });
+        }
+        for ((q, q0), &u) in self.qf[..nf].iter_mut().zip(q0.iter_mut()).zip(unknowns) {
+            gather(q, q0, u);
         }
         self.sweep.q_start = q0;
         self.load_source_and_chain_flows(t_af);
@@ -99,7 +114,7 @@ impl Transport {
     fn step_with_loaded_flows(&mut self, t_af: f64, dt: f64, z: &mut [f64]) -> Result<()> {
         self.update_wall_flux(t_af);
         if self.fused_applies() {
-            return self.fused_tree_step(t_af, dt, z);
+            return self.fused_tree_step(t_af, dt, z, StepFlows::Loaded);
         }
         // the α_f-level state (`implicit_step`; only read by shear-dependent walls)
         let ya = std::mem::take(&mut self.sweep.ya);

@@ -17,6 +17,12 @@ pub(super) struct Link {
     /// The node's cell (`u32::MAX`: a mixing point), so the fused step reads the cell arrays
     /// without a lookup.
     pub(super) cell: u32,
+    /// The parent is the next node eliminated (a chain along a vessel): the fused step hands
+    /// this node's terms of the parent's row over in registers (`Plan::link_carries`).
+    pub(super) to_next: bool,
+    /// Terms of this node's row wait in the fused step's accumulator (boundary faces, flow
+    /// sources, or a child not eliminated just before it).
+    pub(super) reads_acc: bool,
 }
 
 /// A face between a domain node and a boundary (every boundary face is one), compact for the
@@ -55,43 +61,69 @@ pub(super) fn tree_order(nt: usize, domain: &[usize], internal: &[[u32; 3]]) -> 
     for &n in domain {
         seen[n] = false;
     }
-    // breadth first, `order` being the queue: reversed, the levels run leaves first and each
-    // level in discovery order, which follows the node numbering of the vessels far more
-    // closely than a depth-first order (the elimination's accesses stay near-sequential)
+    // breadth first over chains: a chain (a node and its single-child descendants) is
+    // emitted whole, and the children of its last node start new chains, queued. Reversed,
+    // the order runs leaves first and walks each vessel's nodes (numbered consecutively
+    // along it by the assembly) in one sequence, so the elimination's accesses to every
+    // node-, cell- and face-indexed array are near-sequential streams. A plain breadth-first
+    // order interleaves the vessels of a generation (a stride of one vessel per access,
+    // each cache line fetched once per segment position: the step's cost per node grew
+    // with the tree once a generation no longer fitted the cache), a depth-first one jumps
+    // at every vessel.
     let mut order: Vec<Link> = Vec::with_capacity(domain.len());
+    let mut heads: Vec<Link> = Vec::new();
     for &r in domain {
         if seen[r] {
             continue;
         }
         seen[r] = true;
-        let mut head = order.len();
-        order.push(Link {
+        heads.clear();
+        heads.push(Link {
             node: r as u32,
             parent: u32::MAX,
             face: u32::MAX,
             from_child: false,
             cell: u32::MAX,
+            to_next: false,
+            reads_acc: false,
         });
-        while head < order.len() {
-            let l = order[head];
+        let mut head = 0;
+        while head < heads.len() {
+            let mut l = heads[head];
             head += 1;
-            let n = l.node as usize;
-            for &(f, o) in &adj[ptr[n] as usize..ptr[n + 1] as usize] {
-                if f == l.face {
-                    continue;
+            loop {
+                order.push(l);
+                let n = l.node as usize;
+                let (mut first, mut children) = (None, 0);
+                for &(f, o) in &adj[ptr[n] as usize..ptr[n + 1] as usize] {
+                    if f == l.face {
+                        continue;
+                    }
+                    if seen[o as usize] {
+                        return None; // a loop (or two faces between the same nodes)
+                    }
+                    seen[o as usize] = true;
+                    let child = Link {
+                        node: o,
+                        parent: l.node,
+                        face: f,
+                        from_child: internal_from(internal, f) == o,
+                        cell: u32::MAX,
+                        to_next: false,
+                        reads_acc: false,
+                    };
+                    children += 1;
+                    match children {
+                        1 => first = Some(child),
+                        2 => heads.extend(first.take().into_iter().chain([child])),
+                        _ => heads.push(child),
+                    }
                 }
-                if seen[o as usize] {
-                    return None; // a loop (or two faces between the same nodes)
+                // a single child continues the chain
+                match first {
+                    Some(c) => l = c,
+                    None => break,
                 }
-                seen[o as usize] = true;
-                let from_child = internal_from(internal, f) == o;
-                order.push(Link {
-                    node: o,
-                    parent: l.node,
-                    face: f,
-                    from_child,
-                    cell: u32::MAX,
-                });
             }
         }
     }
@@ -222,3 +254,45 @@ const _: fn() = || {
     fn shared<T: Send + Sync>() {}
     shared::<Plan>();
 };
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two vessels of three nodes each below a root chain (0–1–2 then 2–3–4 and 2–5–6, faces
+    /// numbered along the vessels), plus a loop case.
+    #[test]
+    fn tree_order_eliminates_children_first_and_walks_each_chain_in_one_run() {
+        let internal: Vec<[u32; 3]> = vec![
+            [0, 0, 1],
+            [1, 1, 2],
+            [2, 2, 3],
+            [3, 3, 4],
+            [4, 2, 5],
+            [5, 5, 6],
+        ];
+        let domain: Vec<usize> = (0..7).collect();
+        let order = tree_order(7, &domain, &internal).expect("a tree");
+        assert_eq!(order.len(), 7);
+        let pos: Vec<usize> = (0..7)
+            .map(|n| order.iter().position(|l| l.node as usize == n).unwrap())
+            .collect();
+        // every node before its parent, joined by the face between them
+        for l in &order {
+            if l.parent != u32::MAX {
+                assert!(pos[l.node as usize] < pos[l.parent as usize]);
+                let f = internal[l.face as usize];
+                assert!((f[1], f[2]) == (l.node, l.parent) || (f[1], f[2]) == (l.parent, l.node));
+                assert_eq!(l.from_child, f[1] == l.node);
+            }
+        }
+        // each chain's nodes are eliminated one after the other (4 then 3, 6 then 5, 2–1–0)
+        for (a, b) in [(4, 3), (6, 5), (2, 1), (1, 0)] {
+            assert_eq!(pos[a] + 1, pos[b], "{a} then {b}");
+        }
+        // a loop has no tree order
+        let mut looped = internal.clone();
+        looped.push([6, 4, 6]);
+        assert!(tree_order(7, &domain, &looped).is_none());
+    }
+}
