@@ -11,9 +11,8 @@ only the 1-D model runs here."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
-
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,7 +21,7 @@ import oxyline
 
 pytest.importorskip("scipy")
 
-from oxyline.reference.validation import (  # noqa: E402
+from oxyline.reference.validation import (
     heldout_rows,
     inlet_renewal_uptake,
     load_case,
@@ -108,10 +107,10 @@ def test_the_wired_law_in_a_reversing_tube_is_the_closed_form() -> None:
     the first pass's harmonic (its time step 2e-4 of the period), B sampled 20,000 times, θ_m
     to 1e-7."""
     from scipy import special
-
-    from oxyline.reference.validation import INLET_RENEWAL_A
-    from oxyline.reference.axisymmetric import ConstantPO2, Grid, Tube, richardson, steady_march
     from test_oxygen_wall_flux import LENGTH, N, R, tube
+
+    from oxyline.reference.axisymmetric import ConstantPO2, Grid, Tube, richardson, steady_march
+    from oxyline.reference.validation import INLET_RENEWAL_A
 
     def _graetz_theta(xs: np.ndarray) -> np.ndarray:
         # θ_m by the reference's exact x-marching, Richardson from 400/800 cells (< 1e-7)
