@@ -24,7 +24,6 @@ pytest.importorskip("scipy")
 from oxyline.reference.validation import (
     heldout_rows,
     inlet_renewal_uptake,
-    load_case,
     one_d,
     one_d_run,
     paper_rows,
@@ -82,10 +81,10 @@ def test_the_run_follows_the_law_of_the_pure_formula() -> None:
 def test_both_integrators_keep_the_mass_balance_and_the_law(method: str) -> None:
     """The aortic example with the default closure under each integrator: the O2 mass balance
     (inflow − outflow − wall uptake − change of the stored amount, the residual the result
-    reports) closes to 1e-9 of the inflow at every output time (the conservative transport is
-    exact to round-off: ~1e-15 measured), and the cycle-mean uptake is within 0.5 % of the
-    outlet-independent reference's... of the generalized-α run (the two integrators' flow
-    differs by their truncation errors, ~1e-4 of Q)."""
+    reports) closes to 1e-9 of the inflow (the conservative transport is exact to round-off),
+    the cycle-mean uptake is within the 2 % target of the outlet-independent reference, and
+    the two integrators agree to 0.5 % (their flows differ by their truncation errors; the
+    first pass is the same implicit pass for both)."""
     name, case, flow = next(r for r in paper_rows() if r[0].startswith("straight: example"))
     res = one_d_run(case, flow, DEFAULT, method=method)
     mb = res.o2_mass_balance
@@ -149,12 +148,16 @@ def test_the_wired_law_in_a_reversing_tube_is_the_closed_form() -> None:
 
 
 def test_the_previous_default_stays_selectable_by_name() -> None:
-    """`flow: forward-mean` still gives the session-6 law: on the aortic example it is the
-    documented −0.12 % of the outlet-independent reference... and differs from the default."""
-    case = load_case("straight")
-    old = one_d(case, case.flow, {"model": "graetz", "flow": "forward-mean"})[0]
-    new = one_d(case, case.flow, DEFAULT)[0]
-    assert old != new
+    """`flow: forward-mean` still gives the session 6–8 law by name: on the aortic example
+    −0.12 % of the outlet-independent reference (docs/validation-oxygen.md §13; ± 0.1 %: the
+    1-D run is deterministic, the margin absorbs platform round-off over 12 cycles), and the
+    ascending aorta at exercise still shows its −7.7 % miss there, which the default removes."""
+    name, case, flow = next(r for r in paper_rows() if r[0].startswith("straight: example"))
+    old = one_d(case, flow, {"model": "graetz", "flow": "forward-mean"})[0]
+    assert old / EXTENDED[name]["womersley_extended"] - 1 == pytest.approx(-0.0012, abs=1e-3)
+    name, case, flow = next(r for r in heldout_rows() if r[0].startswith("ascending aorta at"))
+    old = one_d(case, flow, {"model": "graetz", "flow": "forward-mean"})[0]
+    assert old / EXTENDED[name]["womersley_extended"] - 1 == pytest.approx(-0.0773, abs=1e-3)
 
 
 def test_an_unknown_flow_name_is_a_typed_error() -> None:

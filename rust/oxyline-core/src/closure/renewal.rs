@@ -182,8 +182,11 @@ pub fn net_mean(mean_abs: f64, mean_forward: f64) -> f64 {
 /// segment's net mean flow `net[j]` (docs/physics.md §3.6): the vessel's net-mean law G_net =
 /// Σ_j G(net_j) plus the renewal conductance G_r of its inlet (the first segment, or the last
 /// when the net flow runs backward), spread in proportion to G(net_j), and capped per segment
-/// by the law of the cycle-mean |Q| `abs[j]` (every beat renewing the whole layer: the bound
-/// the renewal cannot exceed, reached only as ⟨Q⟩ → 0 where G_r diverges). `flow`: the inlet
+/// by complete renewal every period, penetration theory's 2 sqrt(D/(πT)) over the segment's
+/// wall (never reached in the validated rows, where it is 5–100× the law; it bounds G_r's
+/// divergence as ⟨Q⟩ → 0). A cap by the law of ⟨|Q|⟩ would be wrong: near-wall reversal
+/// renews the layer even when Q(t) keeps its sign (⟨|Q|⟩ = ⟨Q⟩). `abs[j]` (⟨|Q|⟩) is kept for
+/// a segment without net flow, whose net law is the fully developed one. `flow`: the inlet
 /// segment's periodic flow; `nu` the kinematic viscosity μ/ρ (m²/s), `d` the diffusivity.
 pub fn segment_factors(
     vessel: &str,
@@ -211,13 +214,17 @@ pub fn segment_factors(
         }
         _ => f64::INFINITY,
     };
+    let k_renewed = 2.0 * (d / (PI * flow.period)).sqrt();
     Ok(segs
         .iter()
         .zip(abs)
         .zip(&g_net)
         .map(|((s, &qa), &g)| {
             if g > 0.0 {
-                (g * (1.0 + ratio)).min(graetz_conductance(s, d, qa)) / g
+                let cap = (k_renewed * s.area())
+                    .max(graetz_conductance(s, d, qa))
+                    .max(g);
+                (g * (1.0 + ratio)).min(cap) / g
             } else {
                 1.0
             }
@@ -360,9 +367,10 @@ mod tests {
     }
 
     #[test]
-    fn segment_factors_are_capped_by_the_cycle_mean_law() {
-        // a nearly purely oscillating flow (⟨Q⟩ → 0, G_r → ∞) and none at all: the law of
-        // ⟨|Q|⟩, segment by segment
+    fn segment_factors_are_capped_by_complete_renewal() {
+        // a nearly purely oscillating flow (⟨Q⟩ → 0, G_r → ∞) and none at all: penetration
+        // theory's complete renewal every period, 2 sqrt(D/(πT)) × wall area, segment by
+        // segment (above the law of ⟨|Q|⟩ here)
         let h = paper_straight();
         let (d, nu) = (1.2e-9, 3.5e-3 / 1050.0);
         let segs = ten_segments(0.2);
@@ -376,7 +384,9 @@ mod tests {
             };
             let f = segment_factors("aorta", &segs, &net, &abs, &flow, nu, d).unwrap();
             for (s, k) in segs.iter().zip(&f) {
-                let want = graetz_conductance(s, d, 2.5e-5) / graetz_conductance(s, d, net[0]);
+                let renewed = 2.0 * (d / PI).sqrt() * s.area();
+                assert!(renewed > graetz_conductance(s, d, 2.5e-5));
+                let want = renewed / graetz_conductance(s, d, net[0]);
                 assert!((k / want - 1.0).abs() < 1e-12, "{k} vs {want}");
             }
         }
