@@ -716,7 +716,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="only the outlet-independent reference: the extension study and every "
                     "closure against it on the 27 rows and the 20 held-out vessels (docs §13)")
     ap.add_argument("--tables-only", action="store_true",
-                    help="with --outlet-free: skip the extension study")
+                    help="with --outlet-free: skip the extension study and take every 2-D "
+                    "uptake from tests/data/oxygen_2d_extended.json (1-D runs only)")
     ap.add_argument("--closures", default="",
                     help="comma-separated parts of closure labels to run (default: all)")
     args = ap.parse_args(argv)
@@ -766,8 +767,9 @@ def main(argv: list[str] | None = None) -> int:
         data = []
         # the stored 'mixed' and 'profile' uptakes of these rows (the extended one recomputed)
         path = Path(__file__).resolve().parents[3] / "tests" / "data" / "oxygen_2d_extended.json"
-        stored = {r["row"]: {k: v for k, v in r.items() if k in ("womersley_mixed",
-                                                               "womersley_profile")}
+        keep = ("womersley_mixed", "womersley_profile") + (
+            ("womersley_extended",) if args.tables_only else ())
+        stored = {r["row"]: {k: v for k, v in r.items() if k in keep}
                   for r in json.loads(path.read_text())["rows"]} if path.exists() else {}
         for title, rs in (("the 27 rows of §2 (A fitted here, against 'profile')", paper_rows()),
                           ("the 20 held-out vessels (check)", heldout_rows())):

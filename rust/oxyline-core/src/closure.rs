@@ -47,8 +47,9 @@ pub enum MeanFlow {
     ForwardMean,
     /// The Graetz law of the net mean flow |⟨Q⟩| plus the inlet renewal by the near-wall
     /// backward excursion of the Womersley profile (`renewal`, docs/physics.md §3.6), capped
-    /// by the law of ⟨|Q|⟩: within 2 % of the outlet-independent 2-D reference in all 47 rows
-    /// of docs/validation-oxygen.md §13. Needs the vessel's flow harmonics (two-pass run).
+    /// by complete renewal every period: within 2 % of the outlet-independent 2-D reference in
+    /// the 47 rows of docs/validation-oxygen.md §13. Needs the vessel's flow harmonics
+    /// (two-pass run; without them it reads the forward mean).
     #[default]
     InletRenewal,
 }
