@@ -868,6 +868,7 @@ def _unassembled(data: dict[str, Any], convert_vessels: Callable[..., Any] | Non
     duration = (period or 1.0) * float(cycles) if isinstance(cycles, (int, float)) else None
     tr, tr_info = _transport.canonical(data, factor(units, "pressure"), period, duration)
     if tr is not None:
+        _transport.add_blood(tr, canon["blood"])
         canon["transport"] = tr
     # ``data`` is the caller's private copy (load_model, build_model) and is only read here
     return Model(name=name, canonical=canon, simulation=dict(sim), period=period, source=data,

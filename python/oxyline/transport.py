@@ -90,7 +90,9 @@ TISSUE_BOUNDARY_LAYERS = ("leveque", "graetz", "mass-transfer", "permeability")
 HYPOXIC_PO2 = 10.0
 TISSUE_RADIAL_CELLS = 4
 FORMULATIONS = ("conservative", "tl-quasisteady")
-MEAN_FLOWS = ("forward-mean", "cycle-mean")
+#: `graetz` wall's flow: inlet-renewal (the default since session 9, docs/physics.md §3.6), or
+#: the cycle-mean closures of the forward flow (the default before) or of |Q|
+MEAN_FLOWS = ("inlet-renewal", "forward-mean", "cycle-mean")
 #: samples per period of a wall flux given as a Python callable (linear in between)
 FLUX_SAMPLES_PER_PERIOD = 200
 D_HB_DEFAULT = 5.5e-12  # m^2/s, facilitated diffusivity of HbO2 (docs/physics.md §3.4)
@@ -551,6 +553,16 @@ def _species(sp: Mapping[str, Any], i: int, period: float | None,
                                            "concentration", None, d, None, period, duration)
                              for n, o in sp["per_vessel"].items()}
     return out
+
+
+def add_blood(section: dict[str, Any], blood: Mapping[str, float]) -> None:
+    """Give every `graetz` wall of the canonical transport ``section`` the blood's kinematic
+    viscosity μ/ρ (SI): the inlet renewal's Womersley numbers (docs/physics.md §3.6)."""
+    nu = float(blood["viscosity"]) / float(blood["density"])
+    for sp in section["species"]:
+        for wall in [sp.get("wall"), *(sp.get("per_vessel") or {}).values()]:
+            if isinstance(wall, dict) and wall.get("model") == "graetz":
+                wall["kinematic_viscosity"] = nu
 
 
 def canonical(data: Mapping[str, Any], pressure_factor: float, period: float | None,

@@ -52,6 +52,7 @@ __all__ = [
     "SteadyResult",
     "Tube",
     "WallLayer",
+    "backflow_excursion",
     "richardson",
     "steady_march",
     "womersley_shape",
@@ -349,6 +350,7 @@ class PeriodicResult:
     uptake_profile: np.ndarray = field(repr=False)  # cycle-mean uptake per axial cell, mol/s
     x_faces: np.ndarray = field(repr=False)
     state: np.ndarray = field(repr=False)  # periodic PO2 field (radial, axial) at t = 0 mod T
+    uptake_extension: float = 0.0  # wall uptake of the downstream extension (not the vessel's)
 
 
 class AxisymmetricSolver:
@@ -356,20 +358,30 @@ class AxisymmetricSolver:
     through the outlet during reversal: "mixed" (the area-mean PO2 of the last axial cell,
     the 1-D model's zero-gradient value, with a flat profile), "profile" (each radius re-enters
     with its own last-cell PO2: zero axial gradient at every radius, as if the tube went on
-    with its own boundary layer) or a number (mmHg)."""
+    with its own boundary layer) or a number (mmHg).
+
+    ``extension`` (m): the tube continues downstream of x = L by this length (``extension_
+    cells`` uniform cells), with the same wall condition, and the artificial outlet
+    (``backflow``) sits at L + extension. The wall
+    uptake, the outlet flux and the outlet PO2 are still those of the vessel's own length
+    [0, L]. Once the extension exceeds the distance the backflow travels upstream
+    (`backflow_excursion`), nothing entering through the artificial outlet reaches x = L and
+    the result no longer depends on ``backflow`` (docs/validation-oxygen.md §13)."""
 
     def __init__(self, tube: Tube, flow: PeriodicFlow, wall: Wall, inlet_po2: float,
-                 grid: Grid = Grid(), backflow: str | float = "mixed") -> None:
+                 grid: Grid = Grid(), backflow: str | float = "mixed",
+                 extension: float = 0.0, extension_cells: int | None = None) -> None:
         self.tube, self.flow, self.wall, self.grid = tube, flow, wall, grid
         self.p_in, self.backflow = float(inlet_po2), backflow
         self.rad = _build_radial(tube, wall, grid)
         L = tube.length
         xi = np.linspace(0.0, 1.0, grid.axial + 1)
-        self.xf = L * xi**grid.axial_power
+        self.xf = _extended_faces(L * xi**grid.axial_power, extension, extension_cells)
+        self.n_own = grid.axial  # axial cells of the vessel itself; the rest is the extension
         self.dx = np.diff(self.xf)
         self.dt = flow.period / grid.steps_per_period
         self._coef_f = _upwind_coefficients(self.xf)
-        self._coef_b = _upwind_coefficients(L - self.xf[::-1])
+        self._coef_b = _upwind_coefficients(self.xf[-1] - self.xf[::-1])
         self._velocity_table()
         self._diffusion_propagator()
 
@@ -457,8 +469,8 @@ class AxisymmetricSolver:
         return P
 
     def period_map(self, P: np.ndarray) -> tuple[np.ndarray, dict]:
-        acc = {"uptake": np.zeros(self.grid.axial), "consumed": np.zeros(self.grid.axial),
-               "in": 0.0, "out": 0.0}
+        nx = len(self.dx)
+        acc = {"uptake": np.zeros(nx), "consumed": np.zeros(nx), "in": 0.0, "out": 0.0}
         for n in range(self.grid.steps_per_period):
             P = self._diffuse(P, acc)
             P = self._consume(P, acc)
@@ -466,20 +478,21 @@ class AxisymmetricSolver:
             P = self._diffuse(P, acc)
         return P, acc
 
-    def stored(self, P: np.ndarray) -> float:
-        return float(2.0 * math.pi * ((self.rad.kappa * self.rad.w) @ P) @ self.dx)
+    def stored(self, P: np.ndarray, cells: slice = slice(None)) -> float:
+        return float(2.0 * math.pi * ((self.rad.kappa * self.rad.w) @ P[:, cells])
+                     @ self.dx[cells])
 
     # -- periodic state ----------------------------------------------------------------------------
     def initial_state(self) -> np.ndarray:
         """Inlet PO2 everywhere in the blood; the wall layer at its own steady state is not
         needed (the fixed-point solve removes any start)."""
         n = len(self.rad.kappa)
-        return np.full((n, self.grid.axial), self.p_in)
+        return np.full((n, len(self.dx)), self.p_in)
 
     def periodic(self, tol: float = 1e-9, maxiter: int = 200) -> PeriodicResult:
         """Fixed point of the one-period map. Linear problems (no Michaelis–Menten or clipped
         consumption) use GMRES on (I − Φ) x = F(0); otherwise plain iteration."""
-        shape = (len(self.rad.kappa), self.grid.axial)
+        shape = (len(self.rad.kappa), len(self.dx))
         count = 0
         linear = self.rad.consumption is None or self.rad.consumption[0] == 0.0
         if linear:
@@ -512,12 +525,54 @@ class AxisymmetricSolver:
         stored = self.stored(end) - self.stored(P)
         resid = acc["in"] - acc["out"] - acc["uptake"].sum() - acc["consumed"].sum() - stored
         kb = self.tube.solubility * self.tube.capacity_factor
+        own = slice(0, self.n_own)
+        out = acc["out"]
+        if self.n_own < len(self.dx):
+            # the flux through x = L from the balance of [0, L] over the period (its storage
+            # change is the periodic state's residual, ≤ 1e-13 of the inflow)
+            out = acc["in"] - acc["uptake"][own].sum() - acc["consumed"][own].sum() \
+                - self.stored(end, own) + self.stored(P, own)
         return PeriodicResult(
-            uptake=float(acc["uptake"].sum() / T), flux_in=acc["in"] / T,
-            flux_out=acc["out"] / T,
-            outlet_po2=acc["out"] / (kb * self.flow.mean * T) if self.flow.mean > 0 else math.nan,
+            uptake=float(acc["uptake"][own].sum() / T), flux_in=acc["in"] / T,
+            flux_out=out / T,
+            outlet_po2=out / (kb * self.flow.mean * T) if self.flow.mean > 0 else math.nan,
             mass_residual=abs(resid) / max(abs(acc["in"]), 1e-300), cycles=count + 1,
-            uptake_profile=acc["uptake"] / T, x_faces=self.xf, state=end)
+            uptake_profile=acc["uptake"][own] / T, x_faces=self.xf[: self.n_own + 1],
+            state=end, uptake_extension=float(acc["uptake"][self.n_own:].sum() / T))
+
+
+def _extended_faces(xf: np.ndarray, extension: float, cells: int | None) -> np.ndarray:
+    """The vessel's axial faces followed by ``cells`` uniform cells up to L + extension; by
+    default cells of the vessel's last cell size (its largest: the grid is clustered at the
+    inlet), at most 32 of them (the layer there is nearly developed and varies slowly in x;
+    only the part within the backflow excursion of x = L matters, §13 checks the count)."""
+    if extension <= 0.0:
+        return xf
+    n = cells or min(32, max(1, math.ceil(extension / (xf[-1] - xf[-2]) - 1e-9)))
+    return np.concatenate([xf, xf[-1] + extension * np.arange(1, n + 1) / n])
+
+
+def backflow_excursion(tube: Tube, flow: PeriodicFlow, radial: int = 400,
+                       samples: int = 4000) -> float:
+    """How far (m) fluid travels upstream in the periodic Womersley flow: for every radius the
+    largest backward displacement X(t₁) − X(t₂), t₁ < t₂, of a fluid particle held at that
+    radius (X = ∫ u dt over two periods, so a backward stretch across the period boundary
+    counts), maximised over the radius. Axial diffusion is neglected in the reference, so
+    information from an outlet placed this far downstream of x = L never reaches x = L except
+    by hopping radii through radial diffusion, which is slow against the period here (the
+    boundary layer's time scale is 3–52 s, docs/validation-oxygen.md §3)."""
+    R = tube.radius
+    rho = (np.arange(radial) + 0.5) / radial
+    t = np.linspace(0.0, 2.0 * flow.period, 2 * samples, endpoint=False)
+    area = math.pi * R * R
+    u = np.outer(np.full_like(t, flow.mean / area), 2.0 * (1.0 - rho**2))
+    w = 2.0 * math.pi / flow.period
+    for k, qk in flow.harmonics():
+        shape = womersley_shape(rho, tube.womersley(flow.period / k))
+        u = u + np.real(np.outer(qk / area * np.exp(1j * k * w * t), shape))
+    x = np.cumsum(u, axis=0) * (t[1] - t[0])
+    back = np.maximum.accumulate(x, axis=0) - x
+    return float(back.max())
 
 
 # ------------------------------------------------------------------------------------------------

@@ -28,6 +28,7 @@ from oxyline.reference.axisymmetric import (
     Grid,
     PeriodicFlow,
     Tube,
+    backflow_excursion,
 )
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
@@ -214,10 +215,27 @@ def forward_mean_factor(flow: PeriodicFlow, samples: int = 20000) -> float:
 
 
 def one_d(case: Case, flow: PeriodicFlow, closure: dict, hb: bool = False,
-          cycles: int = 12, hill: bool = False) -> tuple[float, float]:
+          cycles: int = 12, hill: bool = False, method: str | None = None
+          ) -> tuple[float, float]:
     """Cycle-mean wall uptake (mol/s) and flow-weighted outlet PO2 (mmHg) of the last cycle.
     ``hb``: linearised haemoglobin; ``hill``: Hill binding with the default (nonlinear)
-    facilitation (the outlet PO2 is then not returned: NaN)."""
+    facilitation (the outlet PO2 is then not returned: NaN); ``method``: the integrator
+    (default: the model's default)."""
+    res = one_d_run(case, flow, closure, hb, cycles, hill, method)
+    t = np.asarray(res.time)
+    last = t >= t[-1] - flow.period * (1 - 1e-9) + flow.period / 400
+    uptake = float(np.mean(np.asarray(res.wall_o2_flux)[last, 0]))
+    j_out = float(np.mean(np.asarray(res.o2_flux_out)[last, 0]))
+    q_out = float(np.mean(np.asarray(res.flow_out)[last, 0]))
+    if hill:
+        return uptake, math.nan
+    cap = case.alpha * (1.0 + hill_secant(case.p_in, case.p_wall, case.alpha)) if hb else case.alpha
+    return uptake, j_out / (cap * q_out)
+
+
+def one_d_run(case: Case, flow: PeriodicFlow, closure: dict, hb: bool = False,
+              cycles: int = 12, hill: bool = False, method: str | None = None):
+    """The 1-D run behind `one_d` (its `oxyline.Result`)."""
     import oxyline
 
     wall = dict(closure, po2=case.p_wall)
@@ -248,16 +266,9 @@ def one_d(case: Case, flow: PeriodicFlow, closure: dict, hb: bool = False,
         "simulation": {"cycles": cycles, "output": {"cycles": "last",
                                                      "every": flow.period / 400}},
     }
-    res = oxyline.simulate(model)
-    t = np.asarray(res.time)
-    last = t >= t[-1] - flow.period * (1 - 1e-9) + flow.period / 400
-    uptake = float(np.mean(np.asarray(res.wall_o2_flux)[last, 0]))
-    j_out = float(np.mean(np.asarray(res.o2_flux_out)[last, 0]))
-    q_out = float(np.mean(np.asarray(res.flow_out)[last, 0]))
-    if hill:
-        return uptake, math.nan
-    cap = case.alpha * (1.0 + hill_secant(case.p_in, case.p_wall, case.alpha)) if hb else case.alpha
-    return uptake, j_out / (cap * q_out)
+    if method is not None:
+        model["simulation"]["method"] = method
+    return oxyline.simulate(model)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -518,6 +529,127 @@ def heldout_table(grid: Grid, log) -> tuple[list[str], list[dict]]:
     return rows, data
 
 
+#: the outlet-independent reference: the tube continued downstream by this multiple of the
+#: backflow excursion (docs/validation-oxygen.md §13: from 1× on the uptake over [0, L] moves
+#: < 0.1 % with the extension and the far outlet condition)
+EXTENSION_FACTOR = 2.0
+
+
+#: the extension is at least this many of the vessel's last (largest) axial cells: the
+#: second-order upwind stencil reaches two cells upstream, so a shorter extension lets the
+#: artificial outlet's ghost value into the vessel (§13: 1.9 % in the curved α-15 row)
+EXTENSION_MIN_CELLS = 4
+
+
+def extended_reference(case: Case, flow: PeriodicFlow, grid: Grid, factor: float = EXTENSION_FACTOR,
+                       backflow: str = "mixed", cells: int | None = None, floor: bool = True):
+    """The 2-D reference on the vessel continued downstream by ``factor`` times the distance
+    the backflow travels (`backflow_excursion`), at least `EXTENSION_MIN_CELLS` of the
+    vessel's last axial cells (``floor``), with at least 8 cells, the uptake measured over the
+    vessel's own length: independent of the artificial outlet condition (§13)."""
+    ext = factor * backflow_excursion(case.tube(), flow)
+    if floor and factor > 0.0:
+        last = case.length * (1.0 - ((grid.axial - 1) / grid.axial) ** grid.axial_power)
+        ext = max(ext, EXTENSION_MIN_CELLS * last)
+        cells = cells or min(32, max(8, math.ceil(ext / last)))
+    return AxisymmetricSolver(case.tube(), flow, ConstantPO2(case.p_wall), case.p_in, grid,
+                              backflow=backflow, extension=ext,
+                              extension_cells=cells).periodic(tol=1e-8)
+
+
+def extension_study(cases: list[tuple[str, Case, PeriodicFlow]], grid: Grid, log) -> list[str]:
+    """Uptake over [0, L] as the downstream extension grows, with both far-outlet conditions,
+    relative to the reference (2× the excursion, 'mixed'); and the extension's cell count."""
+    factors = (0.0, 0.5, 1.0, 1.5, 2.0, 3.0)
+    head = ("| vessel | L (cm) | excursion (cm) | reference (mol/s) | "
+            + " | ".join(f"{f:g}× 'mixed' | {f:g}× 'profile'" for f in factors)
+            + " | 2×, cells ×2 |")
+    rows = [head, "|" + "---|" * (4 + 2 * len(factors) + 1)]
+    for name, c, flow in cases:
+        t0 = time.process_time()
+        exc = backflow_excursion(c.tube(), flow)
+        ref = extended_reference(c, flow, grid, floor=False)
+        cells = []
+        for f in factors:
+            for bf in ("mixed", "profile"):
+                v = ref if (f == EXTENSION_FACTOR and bf == "mixed") else \
+                    extended_reference(c, flow, grid, f, bf, floor=False)
+                cells.append(f"{100 * (v.uptake / ref.uptake - 1):+.3f} %")
+        n = len(ref.x_faces) - 1
+        ext_cells = 2 * len(AxisymmetricSolver(c.tube(), flow, ConstantPO2(c.p_wall), c.p_in,
+                                               grid, extension=EXTENSION_FACTOR * exc).dx[n:])
+        fine = extended_reference(c, flow, grid, cells=ext_cells, floor=False)
+        cells.append(f"{100 * (fine.uptake / ref.uptake - 1):+.3f} %")
+        log(f"  extension {name}: excursion {exc:.4f} m, reference {ref.uptake:.5e}, "
+            f"{time.process_time() - t0:.0f} s")
+        rows.append(f"| {name} | {100 * c.length:.1f} | {100 * exc:.2f} | {ref.uptake:.4e} | "
+                    + " | ".join(cells) + " |")
+    return rows
+
+
+#: the closures of the outlet-independent table (§13); the inlet-renewal law is emulated
+OUTLET_FREE_CLOSURES = {
+    "Graetz, forward-mean (default before session 9)": {"model": "graetz",
+                                                        "flow": "forward-mean"},
+    "inlet renewal, emulated (A = 0.329)": "renewal",
+    "inlet renewal in the run (default)": {"model": "graetz", "flow": "inlet-renewal"},
+    "Lévêque cycle-mean": {"model": "leveque", "shear": "cycle-mean"},
+    "Lévêque instantaneous": {"model": "leveque", "shear": "instantaneous"},
+    "Lévêque relaxed": {"model": "leveque", "shear": "relaxed"},
+    "Graetz (cycle-mean |Q|)": {"model": "graetz", "flow": "cycle-mean"},
+}
+
+
+def outlet_free_table(rows_in: list[tuple[str, Case, PeriodicFlow]], grid: Grid, log,
+                      stored: dict | None = None) -> tuple[list[str], list[dict]]:
+    """Every closure against the outlet-independent reference (and the two outlet conditions
+    for comparison); ``stored``: 2-D uptakes by row name to skip the 2-D runs."""
+    head = ("| row | excursion / L | 2-D, extended (mol/s) | 'mixed' vs extended | 'profile' vs "
+            "extended | " + " | ".join(OUTLET_FREE_CLOSURES) + " |")
+    rows = [head, "|" + "---|" * (5 + len(OUTLET_FREE_CLOSURES))]
+    data = []
+    for name, c, flow in rows_in:
+        t0 = time.process_time()
+        got = (stored or {}).get(name)
+        if got is not None and "womersley_extended" not in got:
+            got = {**got, "womersley_extended": extended_reference(c, flow, grid).uptake}
+        if got is None:
+            ext = extended_reference(c, flow, grid).uptake
+            mixed = reference(c, flow, grid).uptake
+            prof = AxisymmetricSolver(c.tube(), flow, ConstantPO2(c.p_wall), c.p_in, grid,
+                                      backflow="profile").periodic(tol=1e-8).uptake
+            got = {"womersley_extended": ext, "womersley_mixed": mixed,
+                   "womersley_profile": prof}
+        ext = got["womersley_extended"]
+        cells = []
+        for spec in OUTLET_FREE_CLOSURES.values():
+            up = inlet_renewal_uptake(c, flow) if spec == "renewal" else one_d(c, flow, spec)[0]
+            cells.append(f"{100 * (up / ext - 1):+.2f} %")
+        exc = backflow_excursion(c.tube(), flow)
+        log(f"  outlet-free {name}: extended {ext:.5e}, {time.process_time() - t0:.0f} s")
+        rows.append(f"| {name} | {exc / c.length:.2f} | {ext:.4e} | "
+                    f"{100 * (got['womersley_mixed'] / ext - 1):+.2f} % | "
+                    f"{100 * (got['womersley_profile'] / ext - 1):+.2f} % | "
+                    + " | ".join(cells) + " |")
+        data.append({"row": name, **got})
+    return rows, data
+
+
+def paper_rows() -> list[tuple[str, Case, PeriodicFlow]]:
+    """The 27 rows of §2: the three paper examples × their scenarios."""
+    out = []
+    for n in ("straight", "curved", "bifurcated"):
+        c = load_case(n)
+        out += [(f"{n}: {label}", c, flow) for label, flow in scenarios(c)]
+    return out
+
+
+def heldout_rows() -> list[tuple[str, Case, PeriodicFlow]]:
+    """The 20 held-out vessels of §11–12 (sets 1–3)."""
+    return [(name, c, c.flow) for name, c in heldout_cases() + heldout_cases_2()
+            + heldout_cases_3()]
+
+
 def outlet_table(case: Case, grid: Grid, log) -> list[str]:
     """Outlet PO2 deficit (P_in − P_out) of each closure vs the 2-D one, example waveform."""
     ref = reference(case, case.flow, grid)
@@ -580,6 +712,12 @@ def main(argv: list[str] | None = None) -> int:
                     help="only the inlet-renewal candidate on the three held-out sets (docs §12)")
     ap.add_argument("--decompose", action="store_true",
                     help="only the Womersley/quasi-steady decomposition (docs §8)")
+    ap.add_argument("--outlet-free", action="store_true",
+                    help="only the outlet-independent reference: the extension study and every "
+                    "closure against it on the 27 rows and the 20 held-out vessels (docs §13)")
+    ap.add_argument("--tables-only", action="store_true",
+                    help="with --outlet-free: skip the extension study and take every 2-D "
+                    "uptake from tests/data/oxygen_2d_extended.json (1-D runs only)")
     ap.add_argument("--closures", default="",
                     help="comma-separated parts of closure labels to run (default: all)")
     args = ap.parse_args(argv)
@@ -616,6 +754,30 @@ def main(argv: list[str] | None = None) -> int:
                           ("held-out set 3", heldout_cases_3())):
             out += [f"#### {title}", ""] + inlet_renewal_table(cs, grid, log) + [""]
         print("\n".join(out))
+        return 0
+    if args.outlet_free:
+        import json
+
+        study = [r for r in paper_rows() if r[0].startswith(("straight: example",
+                                                             "straight: α 2,",
+                                                             "curved: α 2.1, reversal 30"))]
+        study += [r for r in heldout_rows() if r[0].startswith("ascending aorta at")]
+        if not args.tables_only:
+            out += ["#### extension study", ""] + extension_study(study, grid, log) + [""]
+        data = []
+        # the stored 'mixed' and 'profile' uptakes of these rows (the extended one recomputed)
+        path = Path(__file__).resolve().parents[3] / "tests" / "data" / "oxygen_2d_extended.json"
+        keep = ("womersley_mixed", "womersley_profile") + (
+            ("womersley_extended",) if args.tables_only else ())
+        stored = {r["row"]: {k: v for k, v in r.items() if k in keep}
+                  for r in json.loads(path.read_text())["rows"]} if path.exists() else {}
+        for title, rs in (("the 27 rows of §2 (A fitted here, against 'profile')", paper_rows()),
+                          ("the 20 held-out vessels (check)", heldout_rows())):
+            table, d = outlet_free_table(rs, grid, log, stored)
+            out += [f"#### {title}", ""] + table + [""]
+            data += d
+        print("\n".join(out))
+        log(json.dumps(data))
         return 0
     if args.decompose:
         for c in cases:

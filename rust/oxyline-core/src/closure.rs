@@ -42,9 +42,16 @@ pub enum MeanFlow {
     /// ⟨max(±Q, 0)⟩ in the direction of the net flow: backflow returns fluid whose near-wall
     /// layer is already depleted, so only forward flow renews the layer. Equal to ⟨|Q|⟩
     /// without reversal; within 2 % of the 2-D solution with 10–30 % reversal, where ⟨|Q|⟩
-    /// overestimates the uptake by up to 10 % (docs/validation-oxygen.md §6).
-    #[default]
+    /// overestimates the uptake by up to 10 % (docs/validation-oxygen.md §6). The default
+    /// before session 9.
     ForwardMean,
+    /// The Graetz law of the net mean flow |⟨Q⟩| plus the inlet renewal by the near-wall
+    /// backward excursion of the Womersley profile (`renewal`, docs/physics.md §3.6), capped
+    /// by complete renewal every period: within 2 % of the outlet-independent 2-D reference in
+    /// the 47 rows of docs/validation-oxygen.md §13. Needs the vessel's flow harmonics
+    /// (two-pass run; without them it reads the forward mean).
+    #[default]
+    InletRenewal,
 }
 
 /// A prescribed wall flux (mol m⁻² s⁻¹, positive out of the blood): one value, one value per
@@ -99,6 +106,10 @@ pub enum WallSpec {
         enhancement: f64,
         #[serde(default)]
         permeability: Option<f64>,
+        /// Blood kinematic viscosity μ/ρ (m²/s) for the Womersley numbers of the inlet renewal
+        /// (the Python layer passes the model's blood; default the default blood's).
+        #[serde(default = "default_kinematic_viscosity")]
+        kinematic_viscosity: f64,
     },
     /// Wall-limited exchange q = P_w (c − c_t) with a fixed tissue concentration c_t.
     Permeability {
@@ -108,6 +119,10 @@ pub enum WallSpec {
 }
 fn one() -> f64 {
     1.0
+}
+/// μ/ρ of the default blood (3.5 mPa s, 1050 kg/m³; `spec::BloodSpec`).
+fn default_kinematic_viscosity() -> f64 {
+    3.5e-3 / 1050.0
 }
 
 /// Geometry of one flow segment as seen by a closure.
@@ -285,6 +300,13 @@ impl WallSpec {
                 permeability,
                 ..
             } => {
+                if let WallSpec::Graetz {
+                    kinematic_viscosity,
+                    ..
+                } = self
+                {
+                    check(element, "kinematic_viscosity", *kinematic_viscosity, false)?;
+                }
                 check(element, "wall_concentration", *wall_concentration, true)?;
                 check(element, "enhancement", *enhancement, true)?;
                 perm(permeability)
@@ -317,6 +339,21 @@ impl WallSpec {
         index: usize,
         d: f64,
         q_mean: f64,
+        element: &str,
+    ) -> Result<SegmentLaw> {
+        self.segment_law_scaled(seg, index, d, q_mean, 1.0, element)
+    }
+
+    /// [`WallSpec::segment_law`] with the Graetz conductance multiplied by `renewal` (before
+    /// the permeability in series): the inlet renewal's factor over the law of `q_mean`
+    /// (`renewal::segment_factors`); other closures ignore it.
+    pub fn segment_law_scaled(
+        &self,
+        seg: &SegmentWall,
+        index: usize,
+        d: f64,
+        q_mean: f64,
+        renewal: f64,
         element: &str,
     ) -> Result<SegmentLaw> {
         let s = seg.area();
@@ -378,7 +415,7 @@ impl WallSpec {
                 need_d()?;
                 SegmentLaw::Fixed {
                     g: series(
-                        enhancement * graetz_conductance(seg, d, q_mean),
+                        enhancement * renewal * graetz_conductance(seg, d, q_mean),
                         gp(permeability),
                     ),
                     cw: *wall_concentration,
@@ -606,8 +643,11 @@ mod tests {
             let e = parse(bad).validate("vessel 'v'").unwrap_err().to_string();
             assert!(e.contains("vessel 'v'") && e.contains("flux"), "{e}");
         }
-        // the Graetz closure reads the forward-flow mean unless told otherwise
+        // the Graetz closure uses the inlet renewal unless told otherwise (session 9; the
+        // forward mean before, still selectable by name)
         let g = parse(r#"{"model": "graetz", "wall_concentration": 1.0}"#);
+        assert_eq!(g.mean_flow(), MeanFlow::InletRenewal);
+        let g = parse(r#"{"model": "graetz", "wall_concentration": 1.0, "flow": "forward-mean"}"#);
         assert_eq!(g.mean_flow(), MeanFlow::ForwardMean);
         let g = parse(r#"{"model": "graetz", "wall_concentration": 1.0, "flow": "cycle-mean"}"#);
         assert_eq!(g.mean_flow(), MeanFlow::CycleMean);

@@ -11,10 +11,11 @@
 //! to the Graetz law of the net mean flow (ΔU = G_r (c − c_w)). The exponent is penetration
 //! theory's; A is fitted to the 27 rows of docs/validation-oxygen.md §2 and checked on 20
 //! held-out vessels there (within 0.95 % of the 2-D reference whose layer continues through
-//! the outlet). A candidate closure: pure functions of the vessel's periodic flow harmonics,
-//! geometry and properties, not yet wired into a run (it needs the per-vessel harmonics).
+//! the outlet; within 2 % of the outlet-independent reference in all 47 rows, §13). The
+//! default of the Graetz closure since session 9 (`MeanFlow::InletRenewal`): a run gets each
+//! vessel's flow harmonics from its flow-only first pass (`run::flow_harmonics`).
 
-use super::finite_number;
+use super::{SegmentWall, finite_number, graetz_conductance};
 use crate::error::{Error, Result};
 use nalgebra::Complex;
 use std::f64::consts::PI;
@@ -100,9 +101,28 @@ pub fn backward_wall_strain(
 ) -> f64 {
     let sign = if flow.mean < 0.0 { -1.0 } else { 1.0 };
     let dt = flow.period / samples as f64;
+    // each harmonic's wall-shear amplitude once (a Bessel ratio each), then the samples by
+    // rotating phases: the same sum as `wall_shear_rate` at every sample, without re-evaluating
+    // the Bessel functions per sample (a vessel with 32 harmonics: ~1 ms instead of ~50 ms)
+    let scale = 1.0 / (PI * radius.powi(3));
+    let omega = 2.0 * PI / flow.period;
+    let amps: Vec<Complex<f64>> = flow
+        .harmonics
+        .iter()
+        .enumerate()
+        .map(|(i, qk)| {
+            let alpha = radius * (((i + 1) as f64) * omega * density / viscosity).sqrt();
+            qk * scale * womersley_wall_slope(alpha)
+        })
+        .collect();
+    let g0 = 4.0 * flow.mean * scale;
     (0..samples)
         .map(|j| {
-            (-sign * wall_shear_rate(flow, radius, density, viscosity, j as f64 * dt)).max(0.0)
+            let t = j as f64 * dt;
+            let g = amps.iter().enumerate().fold(g0, |g, (i, a)| {
+                g + (a * Complex::from_polar(1.0, ((i + 1) as f64) * omega * t)).re
+            });
+            (-sign * g).max(0.0)
         })
         .sum::<f64>()
         * dt
@@ -146,6 +166,70 @@ pub fn inlet_renewal_conductance(
     let b = backward_wall_strain(flow, radius, density, viscosity, 20_000);
     let gamma_t = 4.0 * flow.mean.abs() * flow.period / (PI * radius.powi(3));
     Ok(INLET_RENEWAL_A * 2.0 * PI * radius * diffusivity * b.powf(1.5) / gamma_t.sqrt())
+}
+
+/// |⟨Q⟩| of a segment from its cycle-mean |Q| and its forward-flow mean ⟨max(±Q, 0)⟩ =
+/// (⟨|Q|⟩ + |⟨Q⟩|)/2 (`run::mean_flow`): exactly ⟨|Q|⟩ when the flow keeps one sign.
+pub fn net_mean(mean_abs: f64, mean_forward: f64) -> f64 {
+    if mean_forward == mean_abs {
+        mean_abs
+    } else {
+        (2.0 * mean_forward - mean_abs).max(0.0)
+    }
+}
+
+/// The inlet-renewal law of one vessel as per-segment factors on the Graetz law of each
+/// segment's net mean flow `net[j]` (docs/physics.md §3.6): the vessel's net-mean law G_net =
+/// Σ_j G(net_j) plus the renewal conductance G_r of its inlet (the first segment, or the last
+/// when the net flow runs backward), spread in proportion to G(net_j), and capped per segment
+/// by complete renewal every period, penetration theory's 2 sqrt(D/(πT)) over the segment's
+/// wall (never reached in the validated rows, where it is 5–100× the law; it bounds G_r's
+/// divergence as ⟨Q⟩ → 0). A cap by the law of ⟨|Q|⟩ would be wrong: near-wall reversal
+/// renews the layer even when Q(t) keeps its sign (⟨|Q|⟩ = ⟨Q⟩). `abs[j]` (⟨|Q|⟩) is kept for
+/// a segment without net flow, whose net law is the fully developed one. `flow`: the inlet
+/// segment's periodic flow; `nu` the kinematic viscosity μ/ρ (m²/s), `d` the diffusivity.
+pub fn segment_factors(
+    vessel: &str,
+    segs: &[SegmentWall],
+    net: &[f64],
+    abs: &[f64],
+    flow: &PeriodicFlow,
+    nu: f64,
+    d: f64,
+) -> Result<Vec<f64>> {
+    let g_net: Vec<f64> = segs
+        .iter()
+        .zip(net)
+        .map(|(s, &q)| graetz_conductance(s, d, q))
+        .collect();
+    let total: f64 = g_net.iter().sum();
+    let inlet = if flow.mean < 0.0 {
+        segs.last()
+    } else {
+        segs.first()
+    };
+    let ratio = match inlet {
+        Some(s) if flow.mean != 0.0 && total > 0.0 => {
+            inlet_renewal_conductance(vessel, flow, s.radius, 1.0, nu, d)? / total
+        }
+        _ => f64::INFINITY,
+    };
+    let k_renewed = 2.0 * (d / (PI * flow.period)).sqrt();
+    Ok(segs
+        .iter()
+        .zip(abs)
+        .zip(&g_net)
+        .map(|((s, &qa), &g)| {
+            if g > 0.0 {
+                let cap = (k_renewed * s.area())
+                    .max(graetz_conductance(s, d, qa))
+                    .max(g);
+                (g * (1.0 + ratio)).min(cap) / g
+            } else {
+                1.0
+            }
+        })
+        .collect())
 }
 
 #[cfg(test)]
@@ -227,6 +311,83 @@ mod tests {
         let g_back =
             inlet_renewal_conductance("aorta", &back, 0.008, 1050.0, 3.5e-3, 1.2e-9).unwrap();
         assert!((g_back / g - 1.0).abs() < 1e-12);
+    }
+
+    fn ten_segments(length: f64) -> Vec<SegmentWall> {
+        (0..10)
+            .map(|i| SegmentWall {
+                radius: 0.008,
+                x0: length * i as f64 / 10.0,
+                x1: length * (i + 1) as f64 / 10.0,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn segment_factors_add_the_renewal_conductance_to_the_net_mean_law() {
+        // the paper aorta in ten segments: Σ_j G(net) f_j = G_net + G_r (the law of the module
+        // doc), G_net the Graetz law of the whole vessel at the net flow (one segment [0, L]:
+        // the segment laws telescope, 1e-12), G_r the pure function above
+        let h = paper_straight();
+        let flow = PeriodicFlow {
+            period: 1.0,
+            mean: 2e-5,
+            harmonics: &h,
+        };
+        let (d, nu) = (1.2e-9, 3.5e-3 / 1050.0);
+        let segs = ten_segments(0.2);
+        let net = vec![2e-5; 10];
+        let abs = vec![3.1e-5; 10];
+        let f = segment_factors("aorta", &segs, &net, &abs, &flow, nu, d).unwrap();
+        let whole = SegmentWall {
+            radius: 0.008,
+            x0: 0.0,
+            x1: 0.2,
+        };
+        let g_net = graetz_conductance(&whole, d, 2e-5);
+        let g_r = inlet_renewal_conductance("aorta", &flow, 0.008, 1050.0, 3.5e-3, d).unwrap();
+        let got: f64 = segs
+            .iter()
+            .zip(&f)
+            .map(|(s, k)| graetz_conductance(s, d, 2e-5) * k)
+            .sum();
+        assert!(
+            (got / (g_net + g_r) - 1.0).abs() < 1e-12,
+            "{got} vs {}",
+            g_net + g_r
+        );
+        // without backward wall strain (no harmonics) the law is the net-mean Graetz law
+        let steady = PeriodicFlow {
+            period: 1.0,
+            mean: 2e-5,
+            harmonics: &[],
+        };
+        let f = segment_factors("aorta", &segs, &net, &net, &steady, nu, d).unwrap();
+        assert!(f.iter().all(|&k| k == 1.0));
+    }
+
+    #[test]
+    fn segment_factors_are_capped_by_complete_renewal() {
+        // a purely oscillating inlet flow (⟨Q⟩ = 0: G_r → ∞): penetration
+        // theory's complete renewal every period, 2 sqrt(D/(πT)) × wall area, segment by
+        // segment (above the law of ⟨|Q|⟩ here)
+        let h = paper_straight();
+        let (d, nu) = (1.2e-9, 3.5e-3 / 1050.0);
+        let segs = ten_segments(0.2);
+        let net = vec![1e-9; 10];
+        let abs = vec![2.5e-5; 10];
+        let flow = PeriodicFlow {
+            period: 1.0,
+            mean: 0.0,
+            harmonics: &h,
+        };
+        let f = segment_factors("aorta", &segs, &net, &abs, &flow, nu, d).unwrap();
+        for (s, k) in segs.iter().zip(&f) {
+            let renewed = 2.0 * (d / PI).sqrt() * s.area();
+            assert!(renewed > graetz_conductance(s, d, 2.5e-5));
+            let want = renewed / graetz_conductance(s, d, net[0]);
+            assert!((k / want - 1.0).abs() < 1e-12, "{k} vs {want}");
+        }
     }
 
     #[test]

@@ -1,6 +1,8 @@
 //! The cycle-mean |Q| and signed Q of the segments, accumulated during the flow-only first
 //! pass of a transport run (see `two_pass`).
 
+use super::flow_harmonics::FlowHarmonics;
+
 /// Running means of |y_i| and y_i over the current cycle (for cycle-mean wall shear).
 pub(super) struct MeanAbs {
     unknowns: Vec<usize>,
@@ -12,6 +14,8 @@ pub(super) struct MeanAbs {
     pub last_signed: Vec<f64>,
     prev: Vec<f64>,
     count: usize,
+    /// The inlet renewal's flow harmonics, fed with the same steps (None: not needed).
+    pub harmonics: Option<FlowHarmonics>,
 }
 
 /// The flow-only first pass stops once the cycle-mean |Q| of every segment changes by less
@@ -30,6 +34,7 @@ impl MeanAbs {
             last_signed: vec![0.0; n],
             prev: vec![f64::INFINITY; n],
             count: 0,
+            harmonics: None,
         }
     }
 
@@ -37,6 +42,9 @@ impl MeanAbs {
         self.sum.iter_mut().for_each(|v| *v = 0.0);
         self.sum_signed.iter_mut().for_each(|v| *v = 0.0);
         self.count = 0;
+        if let Some(h) = self.harmonics.as_mut() {
+            h.start_cycle();
+        }
     }
 
     pub fn accumulate(&mut self, y: &[f64]) {
@@ -50,6 +58,9 @@ impl MeanAbs {
             *sgn += y[i];
         }
         self.count += 1;
+        if let Some(h) = self.harmonics.as_mut() {
+            h.accumulate(y);
+        }
     }
 
     /// The forward-flow mean of the last cycle, ⟨max(±y_i, 0)⟩ in the direction of the net
@@ -70,6 +81,9 @@ impl MeanAbs {
 
     /// Close the cycle's mean; true once it has settled (see [`MEAN_FLOW_TOL`]).
     pub fn end_cycle(&mut self) -> bool {
+        if let Some(h) = self.harmonics.as_mut() {
+            h.end_cycle();
+        }
         let c = self.count.max(1) as f64;
         for (l, v) in self.last.iter_mut().zip(&self.sum) {
             *l = v / c;

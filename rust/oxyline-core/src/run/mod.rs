@@ -17,6 +17,7 @@
 pub mod checkpoint;
 mod coupling;
 mod cycle;
+mod flow_harmonics; // inlet renewal: the first pass's flow harmonics (issue 12 item 2)
 mod mean_flow;
 pub mod memory;
 mod outcome;

@@ -4,6 +4,7 @@
 //! steady state.
 
 use super::checkpoint::Checkpoints;
+use super::flow_harmonics::{self, FlowHarmonics};
 use super::mean_flow::MeanAbs;
 use super::outcome::Outcome;
 use super::pass::run;
@@ -40,6 +41,7 @@ pub(super) fn run_two_pass(
         mean_abs_flow = m;
     } else if !unknowns.is_empty() {
         let mut mean = MeanAbs::new(unknowns);
+        mean.harmonics = FlowHarmonics::for_transport(tr);
         // the first pass records nothing: no sink
         let first = run(
             dae,
@@ -54,7 +56,7 @@ pub(super) fn run_two_pass(
         if let Some(e) = first.error {
             return Err(e);
         }
-        tr.set_mean_flows(&mean.last, &mean.forward())?;
+        flow_harmonics::set_mean_flows(tr, &mean, s.period)?;
         mean_abs_flow = mean.last;
     }
     if let Some(c) = checkpoints.as_deref_mut() {

@@ -772,6 +772,7 @@ impl Plan {
         let mean = MeanFlows {
             abs: &zero,
             forward: &zero,
+            renewal: &[],
         };
         let laws = Laws::evaluate_all(self, mean, false)?;
         self.base_laws = laws.into_iter().map(Arc::new).collect();

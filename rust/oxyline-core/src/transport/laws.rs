@@ -10,6 +10,10 @@ pub(super) struct MeanFlows<'a> {
     pub abs: &'a [f64],
     /// ⟨max(±Q, 0)⟩ in the direction of the net flow (= `abs` without reversal).
     pub forward: &'a [f64],
+    /// Per species, per segment: the inlet-renewal factor on the Graetz law of the net mean
+    /// flow (`closure::renewal::segment_factors`); empty (or an empty species entry) without
+    /// the flow harmonics, and then `flow: inlet-renewal` walls read the forward mean.
+    pub renewal: &'a [Vec<f64>],
 }
 
 /// Position of every segment in its vessel, counted in segment order (from the inlet).
@@ -37,8 +41,9 @@ impl Laws {
     ) -> Result<Vec<Laws>> {
         let mut offset = plan.species.len() * (plan.cells.len() + 4);
         let mut all = Vec::with_capacity(plan.species.len());
-        for sp in &plan.species {
-            let mut laws = Laws::evaluate(plan, sp, mean, final_pass)?;
+        for (k, sp) in plan.species.iter().enumerate() {
+            let renewal = mean.renewal.get(k).map_or(&[][..], |r| &r[..]);
+            let mut laws = Laws::evaluate(plan, sp, mean, renewal, final_pass)?;
             laws.relax_offset = offset;
             offset += laws.relax.len();
             all.push(laws);
@@ -50,6 +55,7 @@ impl Laws {
         plan: &Plan,
         sp: &SpeciesPlan,
         mean: MeanFlows<'_>,
+        renewal: &[f64],
         final_pass: bool,
     ) -> Result<Laws> {
         let mean_abs = mean.abs;
@@ -78,9 +84,15 @@ impl Laws {
             let seg = &plan.segments[j];
             let vessel = plan.segment_vessels[j] as usize;
             let vessel_wall = &sp.walls[vessel];
-            let q_mean = match vessel_wall.mean_flow() {
-                closure::MeanFlow::CycleMean => mean_abs[j],
-                closure::MeanFlow::ForwardMean => mean.forward[j],
+            let (q_mean, scale) = match vessel_wall.mean_flow() {
+                closure::MeanFlow::CycleMean => (mean_abs[j], 1.0),
+                closure::MeanFlow::InletRenewal if !renewal.is_empty() => (
+                    closure::renewal::net_mean(mean_abs[j], mean.forward[j]),
+                    renewal[j],
+                ),
+                closure::MeanFlow::ForwardMean | closure::MeanFlow::InletRenewal => {
+                    (mean.forward[j], 1.0)
+                }
             };
             if let WallSpec::Flux { flux } = vessel_wall {
                 if has_area(seg) && flux.table().is_some() {
@@ -94,7 +106,14 @@ impl Laws {
                     q: 0.0,
                 }
             } else {
-                vessel_wall.segment_law(&piece.wall, index[j], sp.diffusivity, q_mean, &element)?
+                vessel_wall.segment_law_scaled(
+                    &piece.wall,
+                    index[j],
+                    sp.diffusivity,
+                    q_mean,
+                    scale,
+                    &element,
+                )?
             };
             match law {
                 SegmentLaw::Fixed { g, cw, q } => {

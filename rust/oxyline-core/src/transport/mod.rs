@@ -40,6 +40,7 @@ pub mod lung;
 mod memory;
 mod observe;
 mod plan;
+pub mod renewal; // inlet renewal's per-vessel flows and factors (issue 12 item 2)
 mod rhs;
 mod state;
 mod stiffness;
@@ -389,11 +390,17 @@ impl Transport {
     /// Evaluate the segment laws of this run from segment j's cycle-mean |Q| `mean_abs[j]` and
     /// its forward-flow mean `mean_forward[j]` = ⟨max(±Q, 0)⟩ in the direction of the net flow
     /// (docs/physics.md §3.6).
+    /// Walls with `flow: inlet-renewal` read the forward mean here (no flow harmonics: the
+    /// closed-loop tree, a resumed run); a two-pass run calls `set_mean_flows_renewed`.
     pub fn set_mean_flows(&mut self, mean_abs: &[f64], mean_forward: &[f64]) -> Result<()> {
-        let mean = MeanFlows {
+        self.set_laws(MeanFlows {
             abs: mean_abs,
             forward: mean_forward,
-        };
+            renewal: &[],
+        })
+    }
+
+    fn set_laws(&mut self, mean: MeanFlows<'_>) -> Result<()> {
         let laws = Laws::evaluate_all(&self.plan, mean, true)?;
         let nsegs = self.plan.segments.len();
         for (sp, l) in self.species.iter_mut().zip(laws) {
