@@ -859,15 +859,6 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
     if method not in METHODS:
         raise ModelError(f"simulate: method must be one of {', '.join(METHODS)}, got {method!r}")
     native, s, layout = _convert(config, units)
-    if method == "rk4":
-        inlet_rcr = [n for n, bc in native["boundary_conditions"].items()
-                     if bc["type"] == "svzerod-inlet" and "capacitance" in bc]
-        if inlet_rcr:
-            # its negative-capacitance stamp gives the core's RK4 stability estimate a spurious
-            # fast mode (6.8e-14 s for a circuit whose fastest eigenvalue is -5000/s)
-            raise UnsupportedElement(f"RCR boundary condition '{inlet_rcr[0]}' at a vessel "
-                                     "inlet: not supported with method='rk4' (use "
-                                     "generalized-alpha)")
     # record every native vessel an output comes from (the hidden parts of a BloodVesselCRL
     # and of a resistive junction too); the drop-in runs in the file's own units, as
     # svZeroDSolver does (same numbers, same Newton tolerance): the equations do not depend

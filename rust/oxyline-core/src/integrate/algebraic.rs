@@ -4,7 +4,7 @@
 //! LU, the shared Newton solver when stenoses make the rows nonlinear).
 
 use super::newton::{Magnitude, NewtonProblem, singular};
-use crate::circuit::{Dae, Regime};
+use crate::circuit::{Dae, JacobianKind, Regime};
 use crate::error::{Error, Result};
 use crate::sparse::SparseLu;
 
@@ -62,7 +62,7 @@ pub(super) fn reduce_prescribed_inductors(dae: &Dae, regime: Regime) -> Reductio
     let mut rate = Vec::new();
     let mut work: Vec<usize> = (0..n).rev().collect();
     while let Some(r) = work.pop() {
-        if used[r] || e[r] > 0.0 || nonlinear[r] {
+        if used[r] || e[r] != 0.0 || nonlinear[r] {
             continue;
         }
         let mut free = entries(r).filter(|&(c, _)| known[c].is_none());
@@ -79,7 +79,7 @@ pub(super) fn reduce_prescribed_inductors(dae: &Dae, regime: Regime) -> Reductio
             }
         }
         used[r] = true;
-        if e[j] > 0.0 {
+        if e[j] != 0.0 {
             rate.extend(expr.iter().map(|&(k, s)| (j, -e[j] * s, k)));
             e[j] = 0.0;
             work.push(j); // the inductor's row is now algebraic
@@ -123,7 +123,7 @@ impl Algebraic {
     /// None for a circuit without algebraic unknowns.
     pub(super) fn analyse(dae: &Dae, e: &[f64], regime: Regime) -> Result<Option<Self>> {
         let n = dae.n;
-        let rows: Vec<usize> = (0..n).filter(|&i| e[i] <= 0.0).collect();
+        let rows: Vec<usize> = (0..n).filter(|&i| e[i] == 0.0).collect();
         if rows.is_empty() {
             return Ok(None);
         }
@@ -222,7 +222,12 @@ impl Algebraic {
         }
         if !self.elements.is_empty() {
             let mut j = vec![0.0; dae.element_pattern().len()];
-            dae.element_jacobian(1.0, t, y, &mut j, stiffest);
+            let kind = if stiffest {
+                JacobianKind::Stiffest
+            } else {
+                JacobianKind::Elimination
+            };
+            dae.element_jacobian(1.0, t, y, &mut j, kind);
             for &(v, k) in &self.elements {
                 self.vals[v] = j[k];
             }

@@ -151,6 +151,16 @@ impl<'a> Rk4<'a> {
         }
         let Reduction { e, rate } = reduce_prescribed_inductors(dae, regime);
         let n = dae.n;
+        for el in &dae.elements {
+            if el.switched_unknowns().iter().any(|&i| e[i] == 0.0) {
+                return Err(Error::model(
+                    el.name(),
+                    "RK4 cannot integrate it: a valve without inductance has no flow state to \
+                     hold while closed; give every valve an inductance or use \
+                     method=\"generalized-alpha\"",
+                ));
+            }
+        }
         let mut alg = Algebraic::analyse(dae, &e, regime)?;
         if let Some(a) = alg.as_mut() {
             a.check_index1(dae)?;
@@ -159,7 +169,7 @@ impl<'a> Rk4<'a> {
             dae,
             regime,
             dt,
-            diff: (0..n).filter(|&i| e[i] > 0.0).collect(),
+            diff: (0..n).filter(|&i| e[i] != 0.0).collect(),
             e,
             rate,
             alg,
@@ -211,23 +221,27 @@ impl<'a> Rk4<'a> {
             k[i] = (self.f[i] - self.dae.f.row_dot(i, y)) / self.e[i];
         }
         for &(i, s) in &self.dae.stenosis {
-            if self.e[i] > 0.0 {
+            if self.e[i] != 0.0 {
                 k[i] -= s * y[i].abs() * y[i] / self.e[i];
             }
         }
         if self.regime == Regime::Transient {
             for (i, law) in &self.dae.varying {
-                if self.e[*i] > 0.0 {
+                if self.e[*i] != 0.0 {
                     k[*i] -= law.delta(time) * y[*i] / self.e[*i];
                 }
             }
         }
         let e = &self.e;
         self.dae.element_terms(time, y, |i, c| {
-            if e[i] > 0.0 {
+            if e[i] != 0.0 {
                 k[i] -= c / e[i];
             }
         });
+        // switching laws in their explicit form: a closed valve's flow keeps its value
+        for el in &self.dae.elements {
+            el.rk4_held(y, &mut |i| k[i] = 0.0);
+        }
         Ok(())
     }
 
@@ -307,7 +321,17 @@ impl<'a> Rk4<'a> {
         }
         self.st.stage = stage;
         self.forcing(time + dt);
-        self.solve_algebraic(y, time + dt)
+        self.solve_algebraic(y, time + dt)?;
+        // a valve that closed during the step: its flow is clamped at zero (docs/physics.md
+        // §1.10), and the algebraic unknowns follow
+        let mut clamped = false;
+        for el in &self.dae.elements {
+            clamped |= el.rk4_after_step(y);
+        }
+        if clamped {
+            self.solve_algebraic(y, time + dt)?;
+        }
+        Ok(())
     }
 
     /// E_ii of the differential unknowns, in `diff` order.
@@ -322,7 +346,7 @@ impl<'a> Rk4<'a> {
             .dae
             .stenosis
             .iter()
-            .filter(|(i, _)| self.e[*i] > 0.0)
+            .filter(|(i, _)| self.e[*i] != 0.0)
             .map(|&(i, s)| (i, 2.0 * s * y[i].abs()))
             .collect();
         self.lin_state = y.to_vec();
