@@ -456,13 +456,16 @@ def _heart_outputs(heart: tuple[list[Any], list[Any], list[int]], extra: np.ndar
                    ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Chamber volumes and valve status (1 open, 0 closed) from the extra columns: a valve is
     open while the pressure behind it exceeds the pressure in front; a heart block's valve also
-    while its flow is positive (docs/physics.md §1.10)."""
+    while its flow is positive (docs/physics.md §1.10) — beyond 1e-6 of its peak: with
+    generalized-α a closed valve keeps the flow of the last Newton correction (round-off of
+    either sign, svZeroDSolver's reset), with RK4 exactly zero."""
     chambers, valves, _ = heart
     volume = {name: extra[:, k].copy() for k, (name, _) in enumerate(chambers)}
     status = {}
     for k, (name, _, on_off) in enumerate(valves):
         up, down, q = (extra[:, len(chambers) + 3 * k + j] for j in range(3))
-        open_ = (up > down) | ((q > 0.0) if on_off else False)
+        floor = 1e-6 * float(np.max(np.abs(q), initial=0.0))
+        open_ = (up > down) | ((q > floor) if on_off else False)
         status[name] = open_.astype(np.int8)
     return volume, status
 

@@ -947,6 +947,11 @@ def _apply(data: np.ndarray, columns: tuple[np.ndarray, list[tuple[int, int, flo
     return out
 
 
+#: the most RK4 steps the drop-in takes before refusing a stiff model (about a minute of a
+#: small circuit's steps)
+RK4_MAX_STEPS = 5e7
+
+
 def _core_kwargs(model: Model, native: Mapping[str, Any], s: RunSettings, method: str
                  ) -> tuple[dict[str, Any], int]:
     """The core's run settings for svZeroDSolver's, and the RK4 sub-steps per output step."""
@@ -962,9 +967,17 @@ def _core_kwargs(model: Model, native: Mapping[str, Any], s: RunSettings, method
         kw["dt"] = s.dt
         return kw, 1
     # sub-steps per output step: stable (half the RK4 limit) and resolving the time tables
-    dt_max = model.network.rk4_stability_limit()[0]
+    dt_max, element, _ = model.network.rk4_stability_limit()
     h = min([0.5 * dt_max] + _table_spacings(native))
     sub = max(1, math.ceil(s.dt / h * (1.0 - 1e-12)))
+    steps = sub * (s.points_per_cycle - 1) * s.cycles
+    if steps > RK4_MAX_STEPS:
+        # e.g. a closed valve behind a chamber's outlet inductor: R_max/L is a nanosecond
+        # time constant (docs/physics.md §1.8), which only an implicit step passes over
+        raise ModelError(
+            f"rk4 cannot integrate this model in reasonable time: its stability limit "
+            f"{dt_max:.3g} s (set by {element}) needs {steps:.3g} steps, more than "
+            f"{RK4_MAX_STEPS:.0e}; use method='generalized-alpha'")
     kw["dt"] = s.dt / sub
     return kw, sub
 

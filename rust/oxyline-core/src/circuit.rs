@@ -794,7 +794,6 @@ pub struct Dae {
     pub names: Arc<Names>,
 }
 
-
 /// Which Jacobian of the elements an iteration matrix uses (see `crate::element::Element`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum JacobianKind {
@@ -802,6 +801,8 @@ pub enum JacobianKind {
     Exact,
     /// The stiffest state (RK4's stability bound).
     Stiffest,
+    /// Every valve closed (RK4's stability bound: a closed valve behind an inductor).
+    Closed,
     /// RK4's elimination of the algebraic unknowns (a safeguarded Newton matrix).
     Elimination,
 }
@@ -873,23 +874,17 @@ impl Dae {
         }
     }
 
-    /// Call `visit(row, (∂c_el/∂y · x)_row)` entry by entry, the Jacobian at (y, t) (each
-    /// element's stiffest state with `stiffest`).
+    /// Call `visit(row, (∂c_el/∂y · x)_row)` entry by entry, the Jacobian of `kind` at (y, t).
     pub fn element_matvec(
         &self,
         t: f64,
         y: &[f64],
-        stiffest: bool,
+        kind: JacobianKind,
         x: &[f64],
         mut visit: impl FnMut(usize, f64),
     ) {
         let pattern = self.element_pattern();
         let mut j = vec![0.0; pattern.len()];
-        let kind = if stiffest {
-            JacobianKind::Stiffest
-        } else {
-            JacobianKind::Exact
-        };
         self.element_jacobian(1.0, t, y, &mut j, kind);
         for (&(r, c), v) in pattern.iter().zip(&j) {
             visit(r, v * x[c]);
@@ -922,6 +917,7 @@ impl Dae {
             match kind {
                 JacobianKind::Exact => el.jacobian(t, y, out),
                 JacobianKind::Stiffest => el.stiffest_jacobian(t, y, out),
+                JacobianKind::Closed => el.closed_jacobian(t, y, out),
                 JacobianKind::Elimination => el.elimination_jacobian(t, y, out),
             }
             out.iter_mut().for_each(|v| *v *= a);

@@ -42,6 +42,15 @@ pub trait Element: Debug + Send + Sync {
     fn elimination_jacobian(&self, t: f64, y: &[f64], j: &mut [f64]) {
         self.jacobian(t, y, j);
     }
+    /// The Jacobian with every valve closed (RK4's stability bound also takes this state: a
+    /// closed valve's R_max behind an inductor sets the R/L rate). Default: the stiffest.
+    fn closed_jacobian(&self, t: f64, y: &[f64], j: &mut [f64]) {
+        self.stiffest_jacobian(t, y, j);
+    }
+    /// Whether [`Element::closed_jacobian`] differs from the stiffest state.
+    fn has_closed_state(&self) -> bool {
+        false
+    }
     /// Called by generalized-α before each Newton correction is added to the iterate
     /// `y_new`, with the α_f level `y_af` of the residual it corrects (svZeroDSolver's
     /// `post_solve`: the heart block resets the flows of its closed valves). Default: nothing.

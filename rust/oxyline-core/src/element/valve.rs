@@ -114,6 +114,18 @@ impl Element for Valve {
         j[1] = 0.0;
         j[2] = 0.0;
     }
+    /// Fully closed (R = R_max): the fastest R/L rate when an inductor (a chamber's outlet)
+    /// drives the valve's flow.
+    fn closed_jacobian(&self, _t: f64, _y: &[f64], j: &mut [f64]) {
+        j[0] = match self.law {
+            ValveLaw::Tanh { r_max, .. } | ValveLaw::Piecewise { r_max, .. } => r_max,
+        };
+        j[1] = 0.0;
+        j[2] = 0.0;
+    }
+    fn has_closed_state(&self) -> bool {
+        true
+    }
     fn is_nonlinear(&self) -> bool {
         true
     }

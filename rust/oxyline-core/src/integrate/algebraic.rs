@@ -207,7 +207,7 @@ impl Algebraic {
         dae: &Dae,
         y: &[f64],
         t: f64,
-        stiffest: bool,
+        kind: JacobianKind,
     ) -> std::result::Result<(), String> {
         let nf = self.stamps_src.len();
         for (v, &k) in self.vals[..nf].iter_mut().zip(&self.stamps_src) {
@@ -222,11 +222,6 @@ impl Algebraic {
         }
         if !self.elements.is_empty() {
             let mut j = vec![0.0; dae.element_pattern().len()];
-            let kind = if stiffest {
-                JacobianKind::Stiffest
-            } else {
-                JacobianKind::Elimination
-            };
             dae.element_jacobian(1.0, t, y, &mut j, kind);
             for &(v, k) in &self.elements {
                 self.vals[v] = j[k];
@@ -238,7 +233,7 @@ impl Algebraic {
 
     /// Factorise at y = 0 and probe one solve: a singular algebraic part means an index-2 DAE.
     pub(super) fn check_index1(&mut self, dae: &Dae) -> Result<()> {
-        let ok = self.factor(dae, &vec![0.0; dae.n], 0.0, true).is_ok() && {
+        let ok = (self.factor(dae, &vec![0.0; dae.n], 0.0, JacobianKind::Stiffest)).is_ok() && {
             let mut probe: Vec<f64> = (0..self.rows.len()).map(|i| 1.0 + (i % 7) as f64).collect();
             self.lu.solve_in_place(&mut probe)
         };
@@ -295,7 +290,7 @@ impl NewtonProblem for Elimination<'_> {
             return Ok(());
         }
         self.alg
-            .factor(self.dae, self.y, self.time, false)
+            .factor(self.dae, self.y, self.time, JacobianKind::Elimination)
             .map_err(|m| singular(self.time, &m))
     }
     fn solve(&mut self, r: &mut [f64]) -> Result<()> {

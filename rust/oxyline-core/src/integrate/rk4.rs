@@ -7,7 +7,7 @@
 
 use super::algebraic::{Algebraic, Elimination, Reduction, reduce_prescribed_inductors};
 use super::newton::{self, NewtonControl, singular};
-use crate::circuit::{Dae, Regime};
+use crate::circuit::{Dae, JacobianKind, Regime};
 use crate::error::{Error, Result};
 
 /// A state integrated together with the flow in the same RK4 step (species amounts): its
@@ -136,6 +136,8 @@ pub struct Rk4<'a> {
     /// which it linearises stenoses (empty: zero).
     lin_time: f64,
     lin_state: Vec<f64>,
+    /// The elements' state in `linear_operator`: stiffest (valves open) or valves closed.
+    lin_kind: JacobianKind,
 }
 
 impl<'a> Rk4<'a> {
@@ -178,6 +180,7 @@ impl<'a> Rk4<'a> {
             lin_stenosis: Vec::new(),
             lin_time: 0.0,
             lin_state: Vec::new(),
+            lin_kind: JacobianKind::Stiffest,
         })
     }
 
@@ -379,6 +382,21 @@ impl<'a> Rk4<'a> {
         times
     }
 
+    /// Whether an element has a closed state for the stability bound (a valve).
+    pub fn has_closed_states(&self) -> bool {
+        self.dae.elements.iter().any(|e| e.has_closed_state())
+    }
+
+    /// Take the elements' closed state (`true`) or their stiffest one in `linear_operator`.
+    pub fn set_valves_closed(&mut self, closed: bool) -> Result<()> {
+        self.lin_kind = if closed {
+            JacobianKind::Closed
+        } else {
+            JacobianKind::Stiffest
+        };
+        self.refactor_linearization()
+    }
+
     /// Freeze time-varying coefficients at `t` for `linear_operator`.
     pub fn set_operator_time(&mut self, t: f64) -> Result<()> {
         self.lin_time = t;
@@ -396,7 +414,7 @@ impl<'a> Rk4<'a> {
             } else {
                 &self.lin_state
             };
-            alg.factor(self.dae, y, self.lin_time, true)
+            alg.factor(self.dae, y, self.lin_time, self.lin_kind)
                 .map_err(|m| singular(self.lin_time, &m))?;
         }
         Ok(())
@@ -425,7 +443,7 @@ impl<'a> Rk4<'a> {
             if has_elements {
                 let mut jx = vec![0.0; n];
                 self.dae
-                    .element_matvec(self.lin_time, &lin, true, &y, |r, v| jx[r] += v);
+                    .element_matvec(self.lin_time, &lin, self.lin_kind, &y, |r, v| jx[r] += v);
                 for (rl, &g) in alg.r.iter_mut().zip(&alg.rows) {
                     *rl -= jx[g];
                 }
@@ -438,7 +456,7 @@ impl<'a> Rk4<'a> {
         let mut jy = vec![0.0; if has_elements { n } else { 0 }];
         if has_elements {
             self.dae
-                .element_matvec(self.lin_time, &lin, true, &y, |r, v| jy[r] += v);
+                .element_matvec(self.lin_time, &lin, self.lin_kind, &y, |r, v| jy[r] += v);
         }
         for (j, &i) in self.diff.iter().enumerate() {
             let el = if has_elements { jy[i] } else { 0.0 };

@@ -131,11 +131,15 @@ mod tests {
         let dae = a.circuit.assemble().unwrap();
         let mut rk = Rk4::new(&dae, crate::circuit::Regime::Transient, 1e-3).unwrap();
         assert_eq!(rk.diff.len(), 1);
-        let lambda = (1.0 / (1e9 - 1e8) - 1.0 / 1e8) / 1e-9;
+        let lambda: f64 = (1.0 / (1e9 - 1e8) - 1.0 / 1e8) / 1e-9;
         let lim = rk4_limit(&mut rk, &dae.names).unwrap();
         // RK4's real-axis limit 2.7853/|λ|; the dense eigenvalue of a 1×1 operator: round-off
         let exact = 2.785293563405282 / lambda.abs();
-        assert!((lim.dt_max - exact).abs() < 1e-9 * exact, "{} vs {exact}", lim.dt_max);
+        assert!(
+            (lim.dt_max - exact).abs() < 1e-9 * exact,
+            "{} vs {exact}",
+            lim.dt_max
+        );
     }
 
     #[test]
