@@ -87,6 +87,7 @@ class Network:
         period: float,
         output_every: float,
         all_unknowns: bool = False,
+        extra_columns: list[int] | None = None,
         progress: Callable[[float, float], None] | None = None,
         chunk_sink: Callable[[dict[str, Any]], None] | None = None,
         chunk_rows: int = 1024,

@@ -169,6 +169,15 @@ class Result:
     #: the recorded flow variables (an output selection records fewer; all by default)
     vessel_variables: tuple[str, ...] = VESSEL_VARIABLES
     segment_variables: tuple[str, ...] = SEGMENT_VARIABLES
+    #: blood volume (m^3) of every chamber over time: each ``chamber`` vessel, and a
+    #: ``heart_pulmonary`` block's four chambers as ``<vessel>:right_atrium`` …
+    #: ``<vessel>:left_ventricle`` (empty without chambers)
+    chamber_volume: dict[str, np.ndarray] = field(default_factory=dict)
+    #: 1 while a valve is open, 0 while closed, over time: each ``valve`` vessel (open while
+    #: the pressure behind exceeds the pressure in front) and a heart block's four valves
+    #: ``<vessel>:tricuspid|pulmonary|mitral|aortic`` (its on/off rule: open also while the
+    #: flow is positive; docs/physics.md §1.10)
+    valve_status: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __getattr__(self, key: str) -> Any:
         # species variables: {name}_concentration_in, {name}_flux_out, wall_{name}_flux,
@@ -395,6 +404,16 @@ class Result:
             for name in ("po2_in", "po2_out", "segment_po2"):
                 if name in data_vars and scale is not None:
                     data_vars[name][2]["po2_per_concentration"] = float(scale)
+        if self.chamber_volume:
+            coords["chamber"] = ("chamber", np.array(list(self.chamber_volume), dtype=object))
+            data_vars["chamber_volume"] = (
+                ("time", "chamber"), np.column_stack(list(self.chamber_volume.values())),
+                {"units": "m^3"})
+        if self.valve_status:
+            coords["valve"] = ("valve", np.array(list(self.valve_status), dtype=object))
+            data_vars["valve_status"] = (
+                ("time", "valve"), np.column_stack(list(self.valve_status.values())),
+                {"units": "1", "description": "1 open, 0 closed"})
         attrs: dict[str, Any] = {"model": self.model_name, "oxyline_version": __version__,
                                  "complete": int(self.complete)}
         if (tuple(self.vessel_variables), tuple(self.segment_variables)) != (
@@ -453,6 +472,16 @@ class Result:
             missing = [v for v in VESSEL_VARIABLES if v not in self.vessel_variables]
             raise _not_selected(", ".join(missing))
         return long_table(self.vessels, self.time, self._vessel_block)
+
+    def heart_table(self) -> Any:
+        """pandas DataFrame indexed by time with one column per chamber volume
+        (``Vc:<chamber>``, m^3) and per valve status (``valve_status:<valve>``, 1 open, 0
+        closed), svZeroDSolver's variable names; empty without chambers and valves."""
+        import pandas as pd
+
+        cols = {f"Vc:{k}": v for k, v in self.chamber_volume.items()}
+        cols.update({f"valve_status:{k}": v for k, v in self.valve_status.items()})
+        return pd.DataFrame(cols, index=pd.Index(self.time, name="time"))
 
 
 def _unpickle_result(state: dict[str, Any]) -> Result:

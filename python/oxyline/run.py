@@ -414,6 +414,9 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     core = _checkpoints(model, overrides)
     if resume is not None:
         core["resume"] = resume
+    heart = _heart_layout(model)
+    if heart[2]:
+        core["extra_columns"] = heart[2]
     try:
         raw = _run(model, s, overrides.get("progress"), _cancel(overrides), **core)
     except ModelError as exc:
@@ -421,11 +424,50 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
             raise CheckpointError(f"{resume_path}: {str(exc).removeprefix('checkpoint: ')}") \
                 from None
         raise
+    extra = _split_heart_columns(raw, len(heart[2]))
     result = _result(model, s, raw, _run_settings(s, raw), complete="error" not in raw)
+    if extra is not None:
+        result.chamber_volume, result.valve_status = _heart_outputs(heart, extra)
     _raise_run_error(raw, result)
     # physical bounds and mass balance of the recorded species output (warnings only)
     check_result(result, model.transport_spec)
     return result
+
+
+def _heart_layout(model: Model) -> tuple[list[Any], list[Any], list[int]]:
+    """The chambers (name, volume unknown) and valves (name, [pressure behind, pressure in
+    front, flow], on/off rule) of the model, and the unknowns to record for them."""
+    lay = model.network.unknown_layout()
+    chambers, valves = list(lay["chamber_volumes"]), list(lay.get("valves", ()))
+    cols = [int(i) for _, i in chambers] + [int(c) for _, u, _ in valves for c in u]
+    return chambers, valves, cols
+
+
+def _split_heart_columns(raw: dict[str, Any], n: int) -> np.ndarray | None:
+    """Take the `n` extra columns (recorded after the selected ones) out of ``raw["data"]``."""
+    if n == 0:
+        return None
+    data = raw["data"]
+    raw["data"] = data[:, : data.shape[1] - n]
+    return data[:, data.shape[1] - n:]
+
+
+def _heart_outputs(heart: tuple[list[Any], list[Any], list[int]], extra: np.ndarray
+                   ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """Chamber volumes and valve status (1 open, 0 closed) from the extra columns: a valve is
+    open while the pressure behind it exceeds the pressure in front; a heart block's valve also
+    while its flow is positive (docs/physics.md §1.10) — beyond 1e-6 of its peak: with
+    generalized-α a closed valve keeps the flow of the last Newton correction (round-off of
+    either sign, svZeroDSolver's reset), with RK4 exactly zero."""
+    chambers, valves, _ = heart
+    volume = {name: extra[:, k].copy() for k, (name, _) in enumerate(chambers)}
+    status = {}
+    for k, (name, _, on_off) in enumerate(valves):
+        up, down, q = (extra[:, len(chambers) + 3 * k + j] for j in range(3))
+        floor = 1e-6 * float(np.max(np.abs(q), initial=0.0))
+        open_ = (up > down) | ((q > floor) if on_off else False)
+        status[name] = open_.astype(np.int8)
+    return volume, status
 
 
 def resume(path: str | os.PathLike[str], **overrides: Any) -> Result:

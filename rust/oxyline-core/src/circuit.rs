@@ -834,6 +834,19 @@ pub struct Dae {
     pub names: Arc<Names>,
 }
 
+/// Which Jacobian of the elements an iteration matrix uses (see `crate::element::Element`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum JacobianKind {
+    /// ∂c/∂y at the state (generalized-α's Newton).
+    Exact,
+    /// The stiffest state (RK4's stability bound).
+    Stiffest,
+    /// Every valve closed (RK4's stability bound: a closed valve behind an inductor).
+    Closed,
+    /// RK4's elimination of the algebraic unknowns (a safeguarded Newton matrix).
+    Elimination,
+}
+
 impl Dae {
     /// Some element varies in time by itself (a chamber): the circuit has no steady state of
     /// its mean boundary conditions.
@@ -901,19 +914,18 @@ impl Dae {
         }
     }
 
-    /// Call `visit(row, (∂c_el/∂y · x)_row)` entry by entry, the Jacobian at (y, t) (each
-    /// element's stiffest state with `stiffest`).
+    /// Call `visit(row, (∂c_el/∂y · x)_row)` entry by entry, the Jacobian of `kind` at (y, t).
     pub fn element_matvec(
         &self,
         t: f64,
         y: &[f64],
-        stiffest: bool,
+        kind: JacobianKind,
         x: &[f64],
         mut visit: impl FnMut(usize, f64),
     ) {
         let pattern = self.element_pattern();
         let mut j = vec![0.0; pattern.len()];
-        self.element_jacobian(1.0, t, y, &mut j, stiffest);
+        self.element_jacobian(1.0, t, y, &mut j, kind);
         for (&(r, c), v) in pattern.iter().zip(&j) {
             visit(r, v * x[c]);
         }
@@ -928,17 +940,25 @@ impl Dae {
             .collect()
     }
 
-    /// a·∂c_el/∂y at (y, t) into `vals` ([`Dae::element_pattern`] order); `stiffest` takes
-    /// each element's stiffest state instead (RK4's stability bound).
-    pub fn element_jacobian(&self, a: f64, t: f64, y: &[f64], vals: &mut [f64], stiffest: bool) {
+    /// a·∂c_el/∂y at (y, t) into `vals` ([`Dae::element_pattern`] order), of the `kind`
+    /// an iteration needs (each element's stiffest state for RK4's stability bound).
+    pub fn element_jacobian(
+        &self,
+        a: f64,
+        t: f64,
+        y: &[f64],
+        vals: &mut [f64],
+        kind: JacobianKind,
+    ) {
         let mut k = 0;
         for el in &self.elements {
             let m = el.pattern().len();
             let out = &mut vals[k..k + m];
-            if stiffest {
-                el.stiffest_jacobian(t, y, out);
-            } else {
-                el.jacobian(t, y, out);
+            match kind {
+                JacobianKind::Exact => el.jacobian(t, y, out),
+                JacobianKind::Stiffest => el.stiffest_jacobian(t, y, out),
+                JacobianKind::Closed => el.closed_jacobian(t, y, out),
+                JacobianKind::Elimination => el.elimination_jacobian(t, y, out),
             }
             out.iter_mut().for_each(|v| *v *= a);
             k += m;

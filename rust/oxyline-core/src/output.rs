@@ -72,11 +72,36 @@ pub struct Probes {
     pub segment_unknowns: Vec<u32>,
     /// Segment positions (m from the vessel inlet, centre of the segment; NaN for lumped).
     pub segment_position: Vec<f64>,
-    /// Each chamber's name and the unknown index of its blood volume (svZeroDSolver's `Vc`).
+    /// Each chamber's name and the unknown index of its blood volume (svZeroDSolver's `Vc`);
+    /// a heart block's four chambers as `<vessel>:right_atrium` … `<vessel>:left_ventricle`.
     pub chamber_volumes: Vec<(String, usize)>,
     /// Other element unknowns by svZeroDSolver's variable name (a spherical chamber's
     /// `radius:<name>`, `velo`, `stress`, `tau`, `volume`) and their unknown index.
     pub element_unknowns: Vec<(String, usize)>,
+    /// Each valve's status inputs (see [`ValveProbe`]).
+    pub valves: Vec<ValveProbe>,
+}
+
+/// The vessel name inside a valve element's name `valve '<vessel>'`.
+fn valve_vessel(element: &str) -> String {
+    element
+        .strip_prefix("valve '")
+        .and_then(|s| s.strip_suffix('\''))
+        .unwrap_or(element)
+        .to_owned()
+}
+
+/// Where a valve's status is read (docs/physics.md §1.8, §1.10): the pressures behind and in
+/// front of it and its flow, as unknown indices.
+#[derive(Debug, Clone)]
+pub struct ValveProbe {
+    /// The valve vessel's name, or `<heart vessel>:<tricuspid|pulmonary|mitral|aortic>`.
+    pub name: String,
+    /// [pressure behind, pressure in front, flow].
+    pub unknowns: [usize; 3],
+    /// The heart block's on/off rule (open also while its flow is positive); else a `valve`
+    /// element, open while the pressure behind exceeds the pressure in front.
+    pub on_off: bool,
 }
 
 impl Probes {
@@ -95,6 +120,61 @@ impl Probes {
             .chain(self.element_unknowns.iter_mut())
         {
             *x += n_nodes_and_branches;
+        }
+    }
+
+    /// The valves' status inputs of the assembled circuit's elements (unknown indices: nodes,
+    /// then branches after `n_nodes`, then element unknowns after `n_nodes_and_branches`).
+    pub(crate) fn record_valves(
+        &mut self,
+        circuit: &crate::circuit::Circuit,
+        vessel_names: &[(String, usize)],
+    ) {
+        use crate::circuit::CircuitElement;
+        let nn = circuit.nodes.len();
+        let nx = nn + circuit.branches.len();
+        let mut hearts = vessel_names.iter();
+        for el in &circuit.elements {
+            match el {
+                CircuitElement::Valve {
+                    name,
+                    branch,
+                    from,
+                    to,
+                    ..
+                } => self.valves.push(ValveProbe {
+                    name: valve_vessel(name),
+                    unknowns: [*from, *to, nn + branch],
+                    on_off: false,
+                }),
+                CircuitElement::Heart {
+                    nodes,
+                    branches,
+                    pulmonary,
+                    ..
+                } => {
+                    let Some((vessel, _)) = hearts.next() else {
+                        continue;
+                    };
+                    let ends = [
+                        (nodes[0], nodes[1]),
+                        (nodes[1], nx + pulmonary),
+                        (nodes[2], nodes[3]),
+                        (nodes[3], nodes[4]),
+                    ];
+                    for (k, part) in ["tricuspid", "pulmonary", "mitral", "aortic"]
+                        .into_iter()
+                        .enumerate()
+                    {
+                        self.valves.push(ValveProbe {
+                            name: format!("{vessel}:{part}"),
+                            unknowns: [ends[k].0, ends[k].1, nn + branches[k]],
+                            on_off: true,
+                        });
+                    }
+                }
+                _ => {}
+            }
         }
     }
 
@@ -333,6 +413,7 @@ mod tests {
             segment_position: vec![0.5, 1.5, 0.5],
             chamber_volumes: Vec::new(),
             element_unknowns: Vec::new(),
+            valves: Vec::new(),
         }
     }
 

@@ -386,15 +386,20 @@ impl Network {
     }
 
     /// Where values live in the unknown vector (the columns of an `all_unknowns` run): each
-    /// output vessel's [pressure_in, pressure_out, flow_in, flow_out] and each chamber's blood
-    /// volume as (name, index), and other element unknowns (a spherical chamber's wall) as
-    /// (svZeroDSolver variable name, index).
+    /// output vessel's [pressure_in, pressure_out, flow_in, flow_out], each chamber's blood
+    /// volume as (name, index), other element unknowns (a spherical chamber's wall) as
+    /// (svZeroDSolver variable name, index) and each valve's status inputs as (name,
+    /// [pressure behind, pressure in front, flow], on_off rule) (docs/physics.md §1.10).
     fn unknown_layout<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let p = &self.inner.0.probes;
         let d = PyDict::new(py);
         d.set_item("vessel_unknowns", p.vessel_unknowns.clone())?;
         d.set_item("chamber_volumes", p.chamber_volumes.clone())?;
         d.set_item("element_unknowns", p.element_unknowns.clone())?;
+        let valves: Vec<(String, [usize; 3], bool)> = (p.valves.iter())
+            .map(|v| (v.name.clone(), v.unknowns, v.on_off))
+            .collect();
+        d.set_item("valves", valves)?;
         Ok(d)
     }
 
@@ -672,7 +677,8 @@ impl Network {
     ///
     /// `settings`: the run settings shared with `Ensemble.run` (`settings::KEYS`: cycles,
     /// method, dt, ..., the output selection).
-    #[pyo3(signature = (*, period, output_every, all_unknowns = false, progress = None,
+    #[pyo3(signature = (*, period, output_every, all_unknowns = false, extra_columns = None,
+        progress = None,
         chunk_sink = None, chunk_rows = 1024, keep_current_cycle = true, checkpoint_sink = None,
         checkpoint_every_cycles = None, checkpoint_every_seconds = None, resume = None,
         **settings))]
@@ -683,6 +689,7 @@ impl Network {
         period: f64,
         output_every: f64,
         all_unknowns: bool,
+        extra_columns: Option<Vec<usize>>,
         progress: Option<Py<PyAny>>,
         chunk_sink: Option<Py<PyAny>>,
         chunk_rows: usize,
@@ -716,6 +723,17 @@ impl Network {
             )
         };
         settings.probes = cols;
+        // unknowns recorded after the selected columns (chamber volumes, valve pressures and
+        // flows: `unknown_layout`), bounds-checked here
+        if let Some(extra) = extra_columns {
+            if let Some(&bad) = extra.iter().find(|&&c| c >= self.inner.1.n) {
+                return Err(ModelError::new_err(format!(
+                    "simulation: extra column {bad} is not an unknown (the circuit has {})",
+                    self.inner.1.n
+                )));
+            }
+            settings.probes.extend(extra);
+        }
         settings.species_columns = species_columns;
         let inner = self.inner.clone();
         let mut species = if shared.transport {

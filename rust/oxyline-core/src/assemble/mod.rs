@@ -19,6 +19,14 @@ use crate::error::Result;
 use crate::output::Probes;
 use crate::segment::Blood;
 use crate::spec::{Arrangement, NetworkSpec};
+
+/// A heart block's chambers, in the order of its volume unknowns (output names).
+const HEART_CHAMBERS: [&str; 4] = [
+    "right_atrium",
+    "right_ventricle",
+    "left_atrium",
+    "left_ventricle",
+];
 pub use chamber::chamber_elastance;
 pub use segments::SegmentRow;
 
@@ -96,6 +104,7 @@ impl NetworkSpec {
         };
         let mut table = Vec::with_capacity(segments);
         let mut links = HeartLinks::default();
+        let mut hearts: Vec<(String, usize)> = Vec::new();
         for (vi, v) in self.vessels.iter().enumerate() {
             if v.valve.is_some()
                 || v.chamber.is_some()
@@ -121,6 +130,15 @@ impl NetworkSpec {
                             .element_unknowns
                             .push((format!("{var}:{}", v.name), first + k));
                     }
+                }
+                if v.heart_pulmonary.is_some() {
+                    // its four volumes, then the pulmonary pressure, are its element unknowns
+                    let first = circuit.extras.len() - 5;
+                    for (k, part) in HEART_CHAMBERS.into_iter().enumerate() {
+                        let name = format!("{}:{part}", v.name);
+                        probes.chamber_volumes.push((name, first + k));
+                    }
+                    hearts.push((v.name.clone(), vi));
                 }
                 let interior = if v.chamber.is_some() || v.chamber_sphere.is_some() {
                     initial::Interior::Inlet
@@ -184,6 +202,7 @@ impl NetworkSpec {
         }
         probes.shift_branches(circuit.nodes.len());
         probes.shift_extras(circuit.nodes.len() + circuit.branches.len());
+        probes.record_valves(&circuit, &hearts);
         // the capacities above are upper bounds (a vessel's last segment adds no node)
         circuit.shrink_to_fit();
         probes.shrink_to_fit();

@@ -155,6 +155,37 @@ impl HeartPulmonary {
         v
     }
 
+    /// ∂c/∂y at (y, t) with the valve positions `v` held.
+    fn jacobian_at(&self, t: f64, y: &[f64], v: [f64; 4], j: &mut [f64]) {
+        let (u, pr) = (&self.unknowns, &self.params);
+        let (a, e) = self.activation(t);
+        let rv = pr.valve_resistance;
+        let g = 1.0 / pr.pulmonary_resistance;
+        j.copy_from_slice(&[
+            -pr.right_atrium.pressure(a, y[u.volume[0]]).1,
+            -e * pr.ventricle_elastance[0],
+            -pr.left_atrium.pressure(a, y[u.volume[2]]).1,
+            -e * pr.ventricle_elastance[1],
+            rv[0] * v[0],
+            rv[1] * v[1],
+            1.0,
+            -1.0,
+            rv[2] * v[2],
+            rv[3] * v[3],
+            v[0] - 1.0,
+            v[1] - 1.0,
+            1.0 - v[0],
+            -v[1],
+            g,
+            -g,
+            1.0 - v[1],
+            v[2] - 1.0,
+            1.0 - v[2],
+            v[3] - 1.0,
+            1.0 - v[3],
+        ]);
+    }
+
     /// Atrial activation and the unscaled ventricular elastance at time t.
     fn activation(&self, t: f64) -> (f64, f64) {
         let period = self.params.period;
@@ -198,34 +229,12 @@ impl Element for HeartPulmonary {
         c[13] = (1.0 - v[3]) * q[3];
     }
     fn jacobian(&self, t: f64, y: &[f64], j: &mut [f64]) {
-        let (u, pr) = (&self.unknowns, &self.params);
-        let (a, e) = self.activation(t);
-        let v = self.valves(y);
-        let rv = pr.valve_resistance;
-        let g = 1.0 / pr.pulmonary_resistance;
-        j.copy_from_slice(&[
-            -pr.right_atrium.pressure(a, y[u.volume[0]]).1,
-            -e * pr.ventricle_elastance[0],
-            -pr.left_atrium.pressure(a, y[u.volume[2]]).1,
-            -e * pr.ventricle_elastance[1],
-            rv[0] * v[0],
-            rv[1] * v[1],
-            1.0,
-            -1.0,
-            rv[2] * v[2],
-            rv[3] * v[3],
-            v[0] - 1.0,
-            v[1] - 1.0,
-            1.0 - v[0],
-            -v[1],
-            g,
-            -g,
-            1.0 - v[1],
-            v[2] - 1.0,
-            1.0 - v[2],
-            v[3] - 1.0,
-            1.0 - v[3],
-        ]);
+        self.jacobian_at(t, y, self.valves(y), j);
+    }
+    /// Every valve open: the resistances R/L damp the inductor rows, and the open valves couple
+    /// the chambers to each other (RK4's stability bound, docs/physics.md §1.10).
+    fn stiffest_jacobian(&self, t: f64, y: &[f64], j: &mut [f64]) {
+        self.jacobian_at(t, y, [1.0; 4], j);
     }
     fn after_correction(&self, y_af: &[f64], y_new: &mut [f64]) {
         for (k, open) in self.valves(y_af).into_iter().enumerate() {
@@ -234,14 +243,30 @@ impl Element for HeartPulmonary {
             }
         }
     }
-    fn rk4_unsupported(&self) -> Option<String> {
-        Some(
-            "its on/off valves are defined by the implicit step's Newton iteration (the state \
-             read from each iterate, a closed valve's flow reset to zero before each \
-             correction, as svZeroDSolver does), which RK4 does not have; use \
-             method=\"generalized-alpha\""
-                .into(),
-        )
+    /// A closed valve's flow does not change (its inductor row would integrate the pressure
+    /// difference; svZeroDSolver resets that flow to zero at every iteration instead).
+    fn rk4_held(&self, y: &[f64], held: &mut dyn FnMut(usize)) {
+        for (k, open) in self.valves(y).into_iter().enumerate() {
+            if open < 0.5 {
+                held(self.unknowns.flow[k]);
+            }
+        }
+    }
+    /// A valve the rule finds closed at the end of a step has its flow clamped at zero: the
+    /// step at which a closing valve's flow would reverse.
+    fn rk4_after_step(&self, y: &mut [f64]) -> bool {
+        let mut changed = false;
+        for (k, open) in self.valves(y).into_iter().enumerate() {
+            let q = self.unknowns.flow[k];
+            if open < 0.5 && y[q] != 0.0 {
+                y[q] = 0.0;
+                changed = true;
+            }
+        }
+        changed
+    }
+    fn switched_unknowns(&self) -> Vec<usize> {
+        self.unknowns.flow.to_vec()
     }
     fn is_nonlinear(&self) -> bool {
         true

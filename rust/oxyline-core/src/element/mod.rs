@@ -37,6 +37,21 @@ pub trait Element: Debug + Send + Sync {
     fn stiffest_jacobian(&self, t: f64, y: &[f64], j: &mut [f64]) {
         self.jacobian(t, y, j);
     }
+    /// The Jacobian of RK4's Newton elimination of the algebraic unknowns (the differential
+    /// ones fixed): a matrix that keeps that iteration well defined away from the solution
+    /// (see the valve's). Default: the Jacobian at (y, t).
+    fn elimination_jacobian(&self, t: f64, y: &[f64], j: &mut [f64]) {
+        self.jacobian(t, y, j);
+    }
+    /// The Jacobian with every valve closed (RK4's stability bound also takes this state: a
+    /// closed valve's R_max behind an inductor sets the R/L rate). Default: the stiffest.
+    fn closed_jacobian(&self, t: f64, y: &[f64], j: &mut [f64]) {
+        self.stiffest_jacobian(t, y, j);
+    }
+    /// Whether [`Element::closed_jacobian`] differs from the stiffest state.
+    fn has_closed_state(&self) -> bool {
+        false
+    }
     /// Called by generalized-α before each Newton correction is added to the iterate
     /// `y_new`, with the α_f level `y_af` of the residual it corrects (svZeroDSolver's
     /// `post_solve`: the heart block resets the flows of its closed valves). Default: nothing.
@@ -44,6 +59,19 @@ pub trait Element: Debug + Send + Sync {
     /// Why RK4 cannot integrate this element (None: it can).
     fn rk4_unsupported(&self) -> Option<String> {
         None
+    }
+    /// The differential unknowns of a switching law (a valve's flow) that RK4 holds at zero
+    /// rate at stage state `y` (a closed valve), reported through `held`: the explicit form of
+    /// an on/off law (docs/physics.md §1.10). Default: none.
+    fn rk4_held(&self, _y: &[f64], _held: &mut dyn FnMut(usize)) {}
+    /// Project a completed RK4 step onto the switching law (a valve the law finds closed has
+    /// its flow clamped at zero); true when the state changed. Default: nothing.
+    fn rk4_after_step(&self, _y: &mut [f64]) -> bool {
+        false
+    }
+    /// The unknowns [`Element::rk4_held`] may hold (each needs a differential row).
+    fn switched_unknowns(&self) -> Vec<usize> {
+        Vec::new()
     }
     /// c depends on the state other than linearly (Newton refactorises per iteration).
     fn is_nonlinear(&self) -> bool;

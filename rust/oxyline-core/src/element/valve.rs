@@ -94,12 +94,37 @@ impl Element for Valve {
         j[1] = -q * dr;
         j[2] = q * dr;
     }
+    /// With an inductor (a chamber's outlet) fixing the valve's flow Q, RK4's elimination
+    /// solves the valve row for the pressure difference ΔP = P_to − P_from: its derivative
+    /// 1 + Q R′(ΔP) (per unit ΔP) vanishes in backflow where Q R′ = −1, which Newton's iterates
+    /// reach away from the solution (the matrix turns singular). At the solution Q = −ΔP/R, so
+    /// |Q R′| = |ΔP R′/R| ≤ max_u u sech²u / (1 + tanh u) = 0.28 for the tanh law (u = k ΔP,
+    /// R_max ≥ R_min ≥ 0); capping Q R′ at −1/2 therefore leaves Newton exact near the solution
+    /// and keeps the matrix regular away from it.
+    fn elimination_jacobian(&self, t: f64, y: &[f64], j: &mut [f64]) {
+        self.jacobian(t, y, j);
+        if j[2] < -0.5 {
+            (j[1], j[2]) = (0.5, -0.5);
+        }
+    }
     /// Fully open (R = R_min), with no switching term: the smallest resistance gives the
     /// fastest R–C time constants of the circuit around it.
     fn stiffest_jacobian(&self, _t: f64, _y: &[f64], j: &mut [f64]) {
         j[0] = self.law.r_min();
         j[1] = 0.0;
         j[2] = 0.0;
+    }
+    /// Fully closed (R = R_max): the fastest R/L rate when an inductor (a chamber's outlet)
+    /// drives the valve's flow.
+    fn closed_jacobian(&self, _t: f64, _y: &[f64], j: &mut [f64]) {
+        j[0] = match self.law {
+            ValveLaw::Tanh { r_max, .. } | ValveLaw::Piecewise { r_max, .. } => r_max,
+        };
+        j[1] = 0.0;
+        j[2] = 0.0;
+    }
+    fn has_closed_state(&self) -> bool {
+        true
     }
     fn is_nonlinear(&self) -> bool {
         true

@@ -4,7 +4,7 @@
 //! LU, the shared Newton solver when stenoses make the rows nonlinear).
 
 use super::newton::{Magnitude, NewtonProblem, singular};
-use crate::circuit::{Dae, Regime};
+use crate::circuit::{Dae, JacobianKind, Regime};
 use crate::error::{Error, Result};
 use crate::sparse::SparseLu;
 
@@ -62,7 +62,7 @@ pub(super) fn reduce_prescribed_inductors(dae: &Dae, regime: Regime) -> Reductio
     let mut rate = Vec::new();
     let mut work: Vec<usize> = (0..n).rev().collect();
     while let Some(r) = work.pop() {
-        if used[r] || e[r] > 0.0 || nonlinear[r] {
+        if used[r] || e[r] != 0.0 || nonlinear[r] {
             continue;
         }
         let mut free = entries(r).filter(|&(c, _)| known[c].is_none());
@@ -79,7 +79,7 @@ pub(super) fn reduce_prescribed_inductors(dae: &Dae, regime: Regime) -> Reductio
             }
         }
         used[r] = true;
-        if e[j] > 0.0 {
+        if e[j] != 0.0 {
             rate.extend(expr.iter().map(|&(k, s)| (j, -e[j] * s, k)));
             e[j] = 0.0;
             work.push(j); // the inductor's row is now algebraic
@@ -123,7 +123,7 @@ impl Algebraic {
     /// None for a circuit without algebraic unknowns.
     pub(super) fn analyse(dae: &Dae, e: &[f64], regime: Regime) -> Result<Option<Self>> {
         let n = dae.n;
-        let rows: Vec<usize> = (0..n).filter(|&i| e[i] <= 0.0).collect();
+        let rows: Vec<usize> = (0..n).filter(|&i| e[i] == 0.0).collect();
         if rows.is_empty() {
             return Ok(None);
         }
@@ -207,7 +207,7 @@ impl Algebraic {
         dae: &Dae,
         y: &[f64],
         t: f64,
-        stiffest: bool,
+        kind: JacobianKind,
     ) -> std::result::Result<(), String> {
         let nf = self.stamps_src.len();
         for (v, &k) in self.vals[..nf].iter_mut().zip(&self.stamps_src) {
@@ -222,7 +222,7 @@ impl Algebraic {
         }
         if !self.elements.is_empty() {
             let mut j = vec![0.0; dae.element_pattern().len()];
-            dae.element_jacobian(1.0, t, y, &mut j, stiffest);
+            dae.element_jacobian(1.0, t, y, &mut j, kind);
             for &(v, k) in &self.elements {
                 self.vals[v] = j[k];
             }
@@ -233,7 +233,7 @@ impl Algebraic {
 
     /// Factorise at y = 0 and probe one solve: a singular algebraic part means an index-2 DAE.
     pub(super) fn check_index1(&mut self, dae: &Dae) -> Result<()> {
-        let ok = self.factor(dae, &vec![0.0; dae.n], 0.0, true).is_ok() && {
+        let ok = (self.factor(dae, &vec![0.0; dae.n], 0.0, JacobianKind::Stiffest)).is_ok() && {
             let mut probe: Vec<f64> = (0..self.rows.len()).map(|i| 1.0 + (i % 7) as f64).collect();
             self.lu.solve_in_place(&mut probe)
         };
@@ -290,7 +290,7 @@ impl NewtonProblem for Elimination<'_> {
             return Ok(());
         }
         self.alg
-            .factor(self.dae, self.y, self.time, false)
+            .factor(self.dae, self.y, self.time, JacobianKind::Elimination)
             .map_err(|m| singular(self.time, &m))
     }
     fn solve(&mut self, r: &mut [f64]) -> Result<()> {

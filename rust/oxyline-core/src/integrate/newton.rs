@@ -4,7 +4,7 @@
 //! maps to the state, which a [`NewtonProblem`] supplies. The stopping rule is shared: either
 //! svZeroDSolver's absolute residual (bit-compatible with it) or one scaled-increment rule.
 
-use crate::circuit::Dae;
+use crate::circuit::{Dae, JacobianKind};
 use crate::error::{Error, Result};
 
 /// Newton stopping rule. `atol: Some(a)` reproduces svZeroDSolver (max |residual| < a,
@@ -181,7 +181,7 @@ pub fn jacobian_values(dae: &Dae, a: f64, diag: &[f64], y: &[f64], t: f64, vals:
         vals[nf + i] += a * 2.0 * s * y[i].abs();
     }
     if !dae.elements.is_empty() {
-        dae.element_jacobian(a, t, y, &mut vals[nf + dae.n..], false);
+        dae.element_jacobian(a, t, y, &mut vals[nf + dae.n..], JacobianKind::Exact);
     }
 }
 

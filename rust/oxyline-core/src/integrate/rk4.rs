@@ -7,7 +7,7 @@
 
 use super::algebraic::{Algebraic, Elimination, Reduction, reduce_prescribed_inductors};
 use super::newton::{self, NewtonControl, singular};
-use crate::circuit::{Dae, Regime};
+use crate::circuit::{Dae, JacobianKind, Regime};
 use crate::error::{Error, Result};
 
 /// A state integrated together with the flow in the same RK4 step (species amounts): its
@@ -136,6 +136,8 @@ pub struct Rk4<'a> {
     /// which it linearises stenoses (empty: zero).
     lin_time: f64,
     lin_state: Vec<f64>,
+    /// The elements' state in `linear_operator`: stiffest (valves open) or valves closed.
+    lin_kind: JacobianKind,
 }
 
 impl<'a> Rk4<'a> {
@@ -151,6 +153,16 @@ impl<'a> Rk4<'a> {
         }
         let Reduction { e, rate } = reduce_prescribed_inductors(dae, regime);
         let n = dae.n;
+        for el in &dae.elements {
+            if el.switched_unknowns().iter().any(|&i| e[i] == 0.0) {
+                return Err(Error::model(
+                    el.name(),
+                    "RK4 cannot integrate it: a valve without inductance has no flow state to \
+                     hold while closed; give every valve an inductance or use \
+                     method=\"generalized-alpha\"",
+                ));
+            }
+        }
         let mut alg = Algebraic::analyse(dae, &e, regime)?;
         if let Some(a) = alg.as_mut() {
             a.check_index1(dae)?;
@@ -159,7 +171,7 @@ impl<'a> Rk4<'a> {
             dae,
             regime,
             dt,
-            diff: (0..n).filter(|&i| e[i] > 0.0).collect(),
+            diff: (0..n).filter(|&i| e[i] != 0.0).collect(),
             e,
             rate,
             alg,
@@ -168,6 +180,7 @@ impl<'a> Rk4<'a> {
             lin_stenosis: Vec::new(),
             lin_time: 0.0,
             lin_state: Vec::new(),
+            lin_kind: JacobianKind::Stiffest,
         })
     }
 
@@ -211,23 +224,27 @@ impl<'a> Rk4<'a> {
             k[i] = (self.f[i] - self.dae.f.row_dot(i, y)) / self.e[i];
         }
         for &(i, s) in &self.dae.stenosis {
-            if self.e[i] > 0.0 {
+            if self.e[i] != 0.0 {
                 k[i] -= s * y[i].abs() * y[i] / self.e[i];
             }
         }
         if self.regime == Regime::Transient {
             for (i, law) in &self.dae.varying {
-                if self.e[*i] > 0.0 {
+                if self.e[*i] != 0.0 {
                     k[*i] -= law.delta(time) * y[*i] / self.e[*i];
                 }
             }
         }
         let e = &self.e;
         self.dae.element_terms(time, y, |i, c| {
-            if e[i] > 0.0 {
+            if e[i] != 0.0 {
                 k[i] -= c / e[i];
             }
         });
+        // switching laws in their explicit form: a closed valve's flow keeps its value
+        for el in &self.dae.elements {
+            el.rk4_held(y, &mut |i| k[i] = 0.0);
+        }
         Ok(())
     }
 
@@ -307,7 +324,17 @@ impl<'a> Rk4<'a> {
         }
         self.st.stage = stage;
         self.forcing(time + dt);
-        self.solve_algebraic(y, time + dt)
+        self.solve_algebraic(y, time + dt)?;
+        // a valve that closed during the step: its flow is clamped at zero (docs/physics.md
+        // §1.10), and the algebraic unknowns follow
+        let mut clamped = false;
+        for el in &self.dae.elements {
+            clamped |= el.rk4_after_step(y);
+        }
+        if clamped {
+            self.solve_algebraic(y, time + dt)?;
+        }
+        Ok(())
     }
 
     /// E_ii of the differential unknowns, in `diff` order.
@@ -322,7 +349,7 @@ impl<'a> Rk4<'a> {
             .dae
             .stenosis
             .iter()
-            .filter(|(i, _)| self.e[*i] > 0.0)
+            .filter(|(i, _)| self.e[*i] != 0.0)
             .map(|&(i, s)| (i, 2.0 * s * y[i].abs()))
             .collect();
         self.lin_state = y.to_vec();
@@ -355,6 +382,21 @@ impl<'a> Rk4<'a> {
         times
     }
 
+    /// Whether an element has a closed state for the stability bound (a valve).
+    pub fn has_closed_states(&self) -> bool {
+        self.dae.elements.iter().any(|e| e.has_closed_state())
+    }
+
+    /// Take the elements' closed state (`true`) or their stiffest one in `linear_operator`.
+    pub fn set_valves_closed(&mut self, closed: bool) -> Result<()> {
+        self.lin_kind = if closed {
+            JacobianKind::Closed
+        } else {
+            JacobianKind::Stiffest
+        };
+        self.refactor_linearization()
+    }
+
     /// Freeze time-varying coefficients at `t` for `linear_operator`.
     pub fn set_operator_time(&mut self, t: f64) -> Result<()> {
         self.lin_time = t;
@@ -372,7 +414,7 @@ impl<'a> Rk4<'a> {
             } else {
                 &self.lin_state
             };
-            alg.factor(self.dae, y, self.lin_time, true)
+            alg.factor(self.dae, y, self.lin_time, self.lin_kind)
                 .map_err(|m| singular(self.lin_time, &m))?;
         }
         Ok(())
@@ -401,7 +443,7 @@ impl<'a> Rk4<'a> {
             if has_elements {
                 let mut jx = vec![0.0; n];
                 self.dae
-                    .element_matvec(self.lin_time, &lin, true, &y, |r, v| jx[r] += v);
+                    .element_matvec(self.lin_time, &lin, self.lin_kind, &y, |r, v| jx[r] += v);
                 for (rl, &g) in alg.r.iter_mut().zip(&alg.rows) {
                     *rl -= jx[g];
                 }
@@ -414,7 +456,7 @@ impl<'a> Rk4<'a> {
         let mut jy = vec![0.0; if has_elements { n } else { 0 }];
         if has_elements {
             self.dae
-                .element_matvec(self.lin_time, &lin, true, &y, |r, v| jy[r] += v);
+                .element_matvec(self.lin_time, &lin, self.lin_kind, &y, |r, v| jy[r] += v);
         }
         for (j, &i) in self.diff.iter().enumerate() {
             let el = if has_elements { jy[i] } else { 0.0 };

@@ -81,7 +81,32 @@ const TIME_VARYING_MARGIN: f64 = 0.9;
 /// [`rk4_limit`] with the spectrum method chosen. A circuit with time-varying coefficients
 /// (docs/physics.md §1.7) is judged on its instantaneous operator: the smallest limit over the
 /// sampled times of a period, times [`TIME_VARYING_MARGIN`].
+///
+/// Circuits with valves are judged in two states, every valve open (R_min: the fastest R–C
+/// modes) and every valve closed (R_max: the fastest R/L mode of a valve behind an inductor,
+/// e.g. a chamber's outlet, docs/physics.md §1.8), and take the smaller limit.
 pub fn rk4_limit_by(
+    rk: &mut Rk4<'_>,
+    names: &Names,
+    method: SpectrumMethod,
+) -> Result<StabilityLimit> {
+    let open = limit_over_period(rk, names, method)?;
+    if !rk.has_closed_states() {
+        return Ok(open);
+    }
+    rk.set_valves_closed(true)?;
+    let closed = limit_over_period(rk, names, method);
+    rk.set_valves_closed(false)?;
+    let closed = closed?;
+    Ok(if closed.dt_max < open.dt_max {
+        closed
+    } else {
+        open
+    })
+}
+
+/// The limit of the elements' current state: frozen, or over the sampled times of a period.
+fn limit_over_period(
     rk: &mut Rk4<'_>,
     names: &Names,
     method: SpectrumMethod,

@@ -278,7 +278,13 @@ fn steady_start(dae: &Dae, ys: &[f64]) -> (Vec<f64>, Vec<f64>) {
     dae.static_residual(&y, &f, &mut r);
     dae.element_residual(0.0, &y, &mut r);
     let yd = (0..n)
-        .map(|i| if dae.e[i] > 0.0 { r[i] / dae.e[i] } else { 0.0 })
+        .map(|i| {
+            if dae.e[i] != 0.0 {
+                r[i] / dae.e[i]
+            } else {
+                0.0
+            }
+        })
         .collect();
     (y, yd)
 }

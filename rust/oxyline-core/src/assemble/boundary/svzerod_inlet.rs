@@ -111,6 +111,38 @@ mod tests {
     }
 
     #[test]
+    fn rk4_keeps_the_negative_capacitance_row_differential() {
+        // inlet RCR → rigid resistance R_v → outlet pressure 0: the only state is P_c, with
+        // Q = P_in/R_v, P_in = P_c + R_p Q and C dP_c/dt = Q − (P_c − P_d)/R_d, so
+        // λ = (1/(R_v − R_p) − 1/R_d)/C. Eliminating the −C row as algebraic (the old RK4)
+        // turned the inlet into a negative resistance and λ > 0 (no stable step at all).
+        use crate::integrate::Rk4;
+        use crate::integrate::stability::rk4_limit;
+        let m = r#"{
+            "vessels": [{"name": "v", "from": "in", "to": "out", "arrangement": "RCL",
+                         "lumped": {"resistance": 1e9}}],
+            "boundary_conditions": {
+                "in": {"type": "svzerod-inlet", "proximal_resistance": 1e8,
+                       "capacitance": 1e-9, "distal_resistance": 1e8,
+                       "pressure": {"kind": "constant", "value": 1000.0}},
+                "out": {"type": "pressure", "pressure": {"kind": "constant", "value": 0.0}}}
+        }"#;
+        let a = parse(m).unwrap().assemble().unwrap();
+        let dae = a.circuit.assemble().unwrap();
+        let mut rk = Rk4::new(&dae, crate::circuit::Regime::Transient, 1e-3).unwrap();
+        assert_eq!(rk.diff.len(), 1);
+        let lambda: f64 = (1.0 / (1e9 - 1e8) - 1.0 / 1e8) / 1e-9;
+        let lim = rk4_limit(&mut rk, &dae.names).unwrap();
+        // RK4's real-axis limit 2.7853/|λ|; the dense eigenvalue of a 1×1 operator: round-off
+        let exact = 2.785293563405282 / lambda.abs();
+        assert!(
+            (lim.dt_max - exact).abs() < 1e-9 * exact,
+            "{} vs {exact}",
+            lim.dt_max
+        );
+    }
+
+    #[test]
     fn an_svzerod_inlet_at_an_outlet_is_a_model_error() {
         let m = r#"{
             "vessels": [{"name": "v", "from": "in", "to": "out", "lumped": {"resistance": 1e8}}],

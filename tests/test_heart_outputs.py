@@ -1,0 +1,75 @@
+"""Chamber volumes and valve status in the native Result (issue 14 item 4), checked against
+physics rather than against the columns they are read from: a chamber's volume against its
+own flow balance dV/dt = Q_in − Q_out (the vessel's recorded flows, integrated), a closed
+valve against its flow, and the heart block's isovolumic phases (both left-heart valves
+closed: the ventricle's volume does not change, docs/physics.md §1.10)."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+import oxyline
+from oxyline import svzerod as svz
+from tests.conftest import data_path
+from tests.test_svzerod_chambers import CLOSED_LOOP
+
+
+@pytest.fixture(scope="module")
+def loop() -> oxyline.Result:
+    return oxyline.simulate(oxyline.load_model(copy.deepcopy(CLOSED_LOOP)), cycles=4,
+                            method="generalized-alpha", dt=1e-4, output_every=1e-4,
+                            output_cycles="all")
+
+
+def test_chamber_volume_follows_its_flow_balance(loop: oxyline.Result) -> None:
+    lv = loop.vessel("lv")
+    v = loop.chamber_volume["lv"]
+    net = lv.flow_in - lv.flow_out
+    # trapezoid integral of the recorded flows over the recorded steps (generalized-α's own
+    # quadrature differs from the trapezoid by O(dt²) per step around the valve switches)
+    integral = v[0] + np.concatenate([[0.0], np.cumsum(0.5 * (net[1:] + net[:-1])
+                                                       * np.diff(loop.time))])
+    stroke = np.ptp(v[-8000:])
+    err = float(np.max(np.abs(v - integral)) / stroke)
+    assert stroke > 1e-5 and err < 1e-3, (stroke, err)
+
+
+def test_valve_status_matches_its_flow(loop: oxyline.Result) -> None:
+    for name in ("aortic_valve", "mitral_valve"):
+        status = loop.valve_status[name]
+        q = loop.vessel(name).flow_in
+        assert status.dtype == np.int8 and set(np.unique(status)) == {0, 1}
+        # closed (R → R_max = 1e11 Pa s/m^3): a leak ΔP/R_max of at most 5e-7 m^3/s for the
+        # ~5e4 Pa across a closed valve, 2.7e-3 of the open valve's peak flow (2e-4 m^3/s)
+        assert np.max(np.abs(q[status == 0])) < 1e-2 * np.max(np.abs(q)), name
+    # the two valves of the ventricle are never open together (isovolumic phases between)
+    both = loop.valve_status["aortic_valve"] & loop.valve_status["mitral_valve"]
+    assert both.mean() < 0.01, both.mean()
+    ds = loop.to_xarray()
+    assert ds["valve_status"].dims == ("time", "valve")
+    np.testing.assert_array_equal(ds["chamber_volume"].sel(chamber="lv"), loop.chamber_volume["lv"])
+    table = loop.heart_table()
+    assert {"Vc:lv", "valve_status:aortic_valve"} <= set(table.columns)
+
+
+def test_heart_block_isovolumic_phases() -> None:
+    """svZeroDSolver's closed-loop heart as the native `heart_pulmonary` element with RK4's
+    explicit valve law: while the mitral and aortic valves are both closed, the left
+    ventricle's volume is constant (a closed valve's flow is held at zero)."""
+    model = oxyline.load_model(svz.to_oxyline_dict(str(data_path(
+        "svzerod", "cases", "closedLoopHeart_singleVessel.json"))))
+    res = oxyline.simulate(model, method="rk4", cycles=4, output_every=1e-3)
+    names = {f"CLH:{v}" for v in ("tricuspid", "pulmonary", "mitral", "aortic")}
+    assert set(res.valve_status) == names
+    lv = res.chamber_volume["CLH:left_ventricle"]
+    closed = (res.valve_status["CLH:mitral"] == 0) & (res.valve_status["CLH:aortic"] == 0)
+    pairs = closed[1:] & closed[:-1]
+    assert pairs.sum() > 20  # both isovolumic phases are sampled
+    change = np.max(np.abs(np.diff(lv)[pairs])) / np.ptp(lv)
+    # the closed valves' flows are exactly zero: only round-off of the volume sums
+    assert change < 1e-12, change
+    # ejection happens: the aortic valve opens once per cycle
+    assert 0.1 < res.valve_status["CLH:aortic"].mean() < 0.6
