@@ -455,18 +455,27 @@ def _split_heart_columns(raw: dict[str, Any], n: int) -> np.ndarray | None:
 def _heart_outputs(heart: tuple[list[Any], list[Any], list[int]], extra: np.ndarray
                    ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Chamber volumes and valve status (1 open, 0 closed) from the extra columns: a valve is
-    open while the pressure behind it exceeds the pressure in front; a heart block's valve also
-    while its flow is positive (docs/physics.md §1.10) — beyond 1e-6 of its peak: with
-    generalized-α a closed valve keeps the flow of the last Newton correction (round-off of
-    either sign, svZeroDSolver's reset), with RK4 exactly zero."""
+    open while the pressure behind it exceeds the pressure in front; a heart block's valve
+    (docs/physics.md §1.10) also stays open while its flow is still forward after the pressure
+    difference reversed (the inertial end of ejection), until the flow reverses. Once closed,
+    only the pressure difference reopens it: with generalized-α a closed valve keeps the small
+    flow of the last Newton correction (~1e-3 of the peak, of either sign; svZeroDSolver's
+    reset), which must not read as open. With RK4 a closed valve's flow is exactly zero."""
     chambers, valves, _ = heart
     volume = {name: extra[:, k].copy() for k, (name, _) in enumerate(chambers)}
     status = {}
     for k, (name, _, on_off) in enumerate(valves):
         up, down, q = (extra[:, len(chambers) + 3 * k + j] for j in range(3))
-        floor = 1e-6 * float(np.max(np.abs(q), initial=0.0))
-        open_ = (up > down) | ((q > floor) if on_off else False)
-        status[name] = open_.astype(np.int8)
+        pushed = up > down
+        if not on_off:
+            status[name] = pushed.astype(np.int8)
+            continue
+        open_ = np.zeros(len(q), dtype=np.int8)
+        was_open = False
+        for i in range(len(q)):  # hysteresis: a sequence, not an elementwise rule
+            was_open = bool(pushed[i]) or (was_open and q[i] > 0.0)
+            open_[i] = was_open
+        status[name] = open_
     return volume, status
 
 

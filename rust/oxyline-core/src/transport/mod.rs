@@ -391,7 +391,7 @@ impl Transport {
     /// its forward-flow mean `mean_forward[j]` = ⟨max(±Q, 0)⟩ in the direction of the net flow
     /// (docs/physics.md §3.6).
     /// Walls with `flow: inlet-renewal` read the forward mean here (no flow harmonics: the
-    /// closed-loop tree, a resumed run); a two-pass run calls `set_mean_flows_renewed`.
+    /// closed-loop tree); a two-pass run calls `set_mean_flows_renewed`.
     pub fn set_mean_flows(&mut self, mean_abs: &[f64], mean_forward: &[f64]) -> Result<()> {
         self.set_laws(MeanFlows {
             abs: mean_abs,
