@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import signal
 import subprocess
@@ -152,3 +153,15 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         if "slow" in item.keywords:
             item.add_marker(skip)
+
+
+def svzerod_run(cfg: dict[str, Any], refine: int = 1) -> Any:
+    """The peer itself, optionally with a `refine` times finer step and outputs at the same
+    times."""
+    svzerod = pytest.importorskip("svzerod")
+    cfg = json.loads(json.dumps(cfg))
+    sp = cfg["simulation_parameters"]
+    sp["number_of_time_pts_per_cardiac_cycle"] = (
+        (sp["number_of_time_pts_per_cardiac_cycle"] - 1) * refine + 1)
+    sp["output_interval"] = sp.get("output_interval", 1) * refine
+    return svzerod.simulate(cfg)

@@ -7,7 +7,6 @@ Every case file is classified explicitly below, so a case that changes status fa
 
 from __future__ import annotations
 
-import copy
 import json
 import re
 import textwrap
@@ -17,7 +16,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import data_path
+from conftest import data_path, svzerod_run
 
 import oxyline
 from oxyline import svzerod as svz
@@ -163,18 +162,6 @@ def assert_same_layout(actual: pd.DataFrame, expected: pd.DataFrame) -> None:
         assert actual["time"].isna().all()
     else:
         np.testing.assert_allclose(actual["time"], expected["time"], rtol=0, atol=1e-9)
-
-
-def svzerod_run(cfg: dict[str, Any], refine: int = 1) -> pd.DataFrame:
-    """The peer itself, optionally with a `refine` times finer step and outputs at the same
-    times."""
-    svzerod = pytest.importorskip("svzerod")
-    cfg = copy.deepcopy(cfg)
-    sp = cfg["simulation_parameters"]
-    sp["number_of_time_pts_per_cardiac_cycle"] = (
-        (sp["number_of_time_pts_per_cardiac_cycle"] - 1) * refine + 1)
-    sp["output_interval"] = sp.get("output_interval", 1) * refine
-    return svzerod.simulate(cfg)
 
 
 # ------------------------------------------------------------------------------------------

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import svzerod_run
 
 import oxyline
 from oxyline import svzerod as svz
@@ -80,13 +81,9 @@ def test_closed_loop_heart_decomposed_matches_reference() -> None:
 def test_rk4_matches_svzerod_20x_finer() -> None:
     """valve_tanh (chamber_elastance_inductor: see test_rk4_refuses_flow_driven_valve)."""
     name = "valve_tanh"
-    svzerod = pytest.importorskip("svzerod")
+    pytest.importorskip("svzerod")
     cfg = json.loads(case(name).read_text())
-    fine = json.loads(json.dumps(cfg))
-    sp = fine["simulation_parameters"]
-    sp["number_of_time_pts_per_cardiac_cycle"] = (sp["number_of_time_pts_per_cardiac_cycle"] - 1) * 20 + 1
-    sp["output_interval"] = 20
-    errors = compare(svz.simulate(cfg, method="rk4"), svzerod.simulate(fine))
+    errors = compare(svz.simulate(cfg, method="rk4"), svzerod_run(cfg, 20))
     assert len(errors) >= 4
     # discretisation error: 1.8e-4 of the inflow's range (1.6e-4 against svzerod 80x finer),
     # at the valve's switch (tanh of steepness 100 over pressures of order 1, a width of 0.01):
@@ -108,14 +105,9 @@ RK4_CHAMBER_CASES = {
     pytest.param("piecewise_Chamber_and_Valve", marks=pytest.mark.slow),  # 30 cycles, ~15 s
 ])
 def test_rk4_chamber_cases_match_svzerod_20x_finer(name: str) -> None:
-    svzerod = pytest.importorskip("svzerod")
+    pytest.importorskip("svzerod")
     cfg = json.loads(case(name).read_text())
-    fine = json.loads(json.dumps(cfg))
-    sp = fine["simulation_parameters"]
-    sp["number_of_time_pts_per_cardiac_cycle"] = (sp["number_of_time_pts_per_cardiac_cycle"]
-                                                  - 1) * 20 + 1
-    sp["output_interval"] = 20
-    errors = compare(svz.simulate(cfg, method="rk4"), svzerod.simulate(fine))
+    errors = compare(svz.simulate(cfg, method="rk4"), svzerod_run(cfg, 20))
     assert len(errors) >= 4
     # 3x the measured value: the piecewise valves switch within one RK4 sub-step
     assert max(errors.values()) <= 3 * RK4_CHAMBER_CASES[name], errors

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 import pytest
+from conftest import svzerod_run
 
 import oxyline
 from oxyline import svzerod as svz
@@ -62,14 +63,9 @@ def test_rk4_matches_svzerod_20x_finer(name: str) -> None:
     the pressure in front or the flow is positive, a closed valve's flow held and clamped at
     zero after the step in which it would reverse) against svzerod's implicit on/off valves
     run 20x finer."""
-    svzerod = pytest.importorskip("svzerod")
+    pytest.importorskip("svzerod")
     cfg = json.loads(case(name).read_text())
-    fine = json.loads(json.dumps(cfg))
-    sp = fine["simulation_parameters"]
-    sp["number_of_time_pts_per_cardiac_cycle"] = (sp["number_of_time_pts_per_cardiac_cycle"]
-                                                  - 1) * 20 + 1
-    sp["output_interval"] = 20
-    errors = scaled_errors(svz.simulate(cfg, method="rk4"), svzerod.simulate(fine))
+    errors = scaled_errors(svz.simulate(cfg, method="rk4"), svzerod_run(cfg, 20))
     # a valve closes at the end of the RK4 sub-step in which its flow crosses zero: the
     # switch is first order in the sub-step (the motion between switches fourth order), so
     # the agreement is the valve timing error, 2.6x the measured value as margin
@@ -80,16 +76,13 @@ def test_rk4_valve_timing_converges_with_the_step(monkeypatch: pytest.MonkeyPatc
     """closedLoopHeart_singleVessel with RK4 at an 8x smaller sub-step than the drop-in's
     against svzerod 320x finer: 3.8e-4 → 9.2e-6 (the valve switches are resolved to the
     sub-step, docs/physics.md §1.10)."""
-    svzerod = pytest.importorskip("svzerod")
+    pytest.importorskip("svzerod")
     from oxyline.io import svzerod as dropin
 
     name = "closedLoopHeart_singleVessel"
     cfg = json.loads(case(name).read_text())
-    fine = json.loads(json.dumps(cfg))
-    sp = fine["simulation_parameters"]
-    sp["number_of_time_pts_per_cardiac_cycle"] = 99 * 320 + 1
-    sp["output_interval"] = 320
-    expected = svzerod.simulate(fine)
+    assert cfg["simulation_parameters"]["number_of_time_pts_per_cardiac_cycle"] == 100
+    expected = svzerod_run(cfg, 320)
     core_kwargs = dropin._core_kwargs
 
     def finer(*args: Any, **kw: Any) -> Any:
