@@ -678,11 +678,9 @@ fn shoot(
     let mut cycles = 0;
     let mut last: Option<(Vec<f64>, Vec<f64>)> = None; // (f, g) of the previous iterate
     while cycles < budget {
-        load_state(lp, v0, &x, &tree_base)?;
-        cycle(lp, flows, dt, 0.0, None)?;
+        let g = cycle_image(lp, flows, dt, v0, &x, &tree_base)?;
         cycles += 1;
         tree_base = lp.tree.as_ref().map(|t| t.snapshot());
-        let g = shooting_state(lp);
         let f: Vec<f64> = g.iter().zip(&x).map(|(a, b)| a - b).collect();
         if f.iter().zip(&w).all(|(fi, wi)| (fi * wi).abs() <= tol) {
             return Ok(cycles);
@@ -711,6 +709,21 @@ fn shoot(
         last = Some((f, g));
     }
     Ok(cycles)
+}
+
+/// The cycle map Φ of both shooting methods: loads the shooting state `x` (and the tree's
+/// snapshot), runs one cycle and returns the state at its end.
+fn cycle_image(
+    lp: &mut ClosedLoop,
+    flows: &[f64],
+    dt: f64,
+    v0: &[f64],
+    x: &[f64],
+    tree_base: &Option<(Vec<f64>, Vec<f64>)>,
+) -> Result<Vec<f64>> {
+    load_state(lp, v0, x, tree_base)?;
+    cycle(lp, flows, dt, 0.0, None)?;
+    Ok(shooting_state(lp))
 }
 
 /// Differences kept by the Anderson acceleration: enough for the loop's slow modes and the
@@ -859,15 +872,10 @@ fn shoot_newton(
         if cycles + n + 1 > budget {
             break;
         }
-        load_state(lp, v0, &x, &tree_base)?;
-        cycle(lp, flows, dt, 0.0, None)?;
+        let gx = cycle_image(lp, flows, dt, v0, &x, &tree_base)?;
         cycles += 1;
         let tree_end = lp.tree.as_ref().map(|t| t.snapshot());
-        let fx: Vec<f64> = shooting_state(lp)
-            .iter()
-            .zip(&x)
-            .map(|(p, q)| p - q)
-            .collect();
+        let fx: Vec<f64> = gx.iter().zip(&x).map(|(p, q)| p - q).collect();
         let scales: Vec<f64> = (0..n).map(|i| block_scale(&x, nc, i)).collect();
         if fx.iter().zip(&scales).all(|(f, s)| f.abs() <= tol * s) {
             break;
@@ -877,10 +885,9 @@ fn shoot_newton(
             let eps = 1e-7 * x[j].abs().max(1e-3 * scales[j]);
             let mut xp = x.clone();
             xp[j] += eps;
-            load_state(lp, v0, &xp, &tree_base)?;
-            cycle(lp, flows, dt, 0.0, None)?;
+            let gp = cycle_image(lp, flows, dt, v0, &xp, &tree_base)?;
             cycles += 1;
-            for (i, xi) in shooting_state(lp).iter().enumerate() {
+            for (i, xi) in gp.iter().enumerate() {
                 jac[i * n + j] = (xi - xp[i] - fx[i]) / eps;
             }
         }
