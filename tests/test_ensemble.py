@@ -520,6 +520,19 @@ def test_dask_chunks_partition_the_variants_and_interleave_them() -> None:
         assert max(means) - min(means) <= len(chunks)
 
 
+
+def test_dask_chunks_go_to_the_workers_in_proportion_to_their_threads() -> None:
+    from collections import Counter
+
+    from oxyline.ensemble.cluster import _placement
+
+    # two idle workers holding the scattered model: the scheduler alone put both chunks of a
+    # small ensemble on one of them (the other waited for work stealing)
+    assert sorted(_placement({"tcp://b": 1, "tcp://a": 1}, 2)) == ["tcp://a", "tcp://b"]
+    counts = Counter(_placement({"tcp://a": 2, "tcp://b": 1}, 12))
+    assert counts == {"tcp://a": 8, "tcp://b": 4}
+    assert _placement({}, 3) == [None, None, None]  # no workers known: Dask decides
+
 SIGINT_CHILD = """
 import sys
 import oxyline
