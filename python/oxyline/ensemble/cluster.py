@@ -135,7 +135,7 @@ def run_on_client(client: Any, model: Model, patches: list[dict[str, Any]], inde
     futures = {client.submit(run_chunk, shared, [patches[i] for i in c], c, output,
                              workers, dict(overrides), pure=False,
                              workers=None if where is None else [where],
-                             allow_other_workers=True): c
+                             allow_other_workers=where is not None): c
                for c, where in zip(chunks, _placement(nthreads, len(chunks)), strict=True)}
     tick, close = _progress(progress, len(patches))
     finished = True
