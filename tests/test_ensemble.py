@@ -131,6 +131,11 @@ def test_dataframe_columns_become_nested_patches_row_by_row() -> None:
     assert type(patches[0]["boundary_conditions"]["out2"]["resistance"]) is int
     assert list(index) == ["x", "y", "z"]
     assert as_patches(df.iloc[:0], oxyline.load_model(TUBE))[0] == []
+    # an unknown name is reported at the first row that sets it; an empty column sets nothing
+    with pytest.raises(oxyline.ModelError, match=r"variant 1: vessels\.zz\.radius"):
+        as_patches(pd.DataFrame({"vessels.zz.radius": [np.nan, 1.0]}), oxyline.load_model(TUBE))
+    assert as_patches(pd.DataFrame({"vessels.zz.radius": [np.nan]}),
+                      oxyline.load_model(TUBE))[0] == [{}]
 
 @pytest.mark.parametrize(("patch", "path"), [
     ({"vessels": {"nope": {"radius": 1.0}}}, "vessels.nope"),

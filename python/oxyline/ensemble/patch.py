@@ -326,16 +326,16 @@ def frame_patches(frame: Any, vessel_names: Iterable[str], nodes: Iterable[str]
     insertion per cell. The same patches as :func:`dotted_patch` of each row, with the
     same key order (the columns')."""
     names = {"vessels": set(vessel_names), "boundary_conditions": set(nodes)}
-    n = len(frame)
-    patches: list[dict[str, Any]] = [{} for _ in range(n)]
-    if n == 0:
-        return patches
-    for j, column in enumerate(frame.columns):
-        path = _column_path(column, names, 0)
+    patches: list[dict[str, Any]] = [{} for _ in range(len(frame))]
+    for c, column in enumerate(frame.columns):
+        path = None  # resolved at the column's first value: an empty column names nothing
         # tolist(): Python scalars (as DataFrame.to_dict gives) for numeric columns
-        for patch, value in zip(patches, frame.iloc[:, j].tolist(), strict=True):
+        for k, (patch, value) in enumerate(zip(patches, frame.iloc[:, c].tolist(),
+                                               strict=True)):
             keep, value = _cell(value)
             if keep:
+                if path is None:
+                    path = _column_path(column, names, k)
                 _put(patch, path, value)
     return patches
 
