@@ -109,6 +109,34 @@ def test_dataframe_rows_are_dotted_path_patches() -> None:
     np.testing.assert_array_equal(c.pressure_in_mean.values[1], wide["pressure_in_mean"].values)
 
 
+
+def test_dataframe_columns_become_nested_patches_row_by_row() -> None:
+    from oxyline.ensemble.patch import as_patches
+
+    df = pd.DataFrame({"vessels.a.b.radius": [0.003, np.nan, 0.005],
+                       "vessels.c.lumped.resistance": [1e8, 2e8, np.nan],
+                       "scale.resistance": [1.5, 0.5, 1.0],
+                       "boundary_conditions.out2.resistance": [1, 2, 3]},
+                      index=["x", "y", "z"])
+    patches, index = as_patches(df, oxyline.load_model(TUBE))
+    # written out by hand: an empty cell leaves the base value, the dotted vessel name
+    # "a.b" is one key, integers stay integers
+    assert patches == [
+        {"vessels": {"a.b": {"radius": 0.003}, "c": {"lumped": {"resistance": 1e8}}},
+         "scale": {"resistance": 1.5}, "boundary_conditions": {"out2": {"resistance": 1}}},
+        {"vessels": {"c": {"lumped": {"resistance": 2e8}}}, "scale": {"resistance": 0.5},
+         "boundary_conditions": {"out2": {"resistance": 2}}},
+        {"vessels": {"a.b": {"radius": 0.005}}, "scale": {"resistance": 1.0},
+         "boundary_conditions": {"out2": {"resistance": 3}}}]
+    assert type(patches[0]["boundary_conditions"]["out2"]["resistance"]) is int
+    assert list(index) == ["x", "y", "z"]
+    assert as_patches(df.iloc[:0], oxyline.load_model(TUBE))[0] == []
+    # an unknown name is reported at the first row that sets it; an empty column sets nothing
+    with pytest.raises(oxyline.ModelError, match=r"variant 1: vessels\.zz\.radius"):
+        as_patches(pd.DataFrame({"vessels.zz.radius": [np.nan, 1.0]}), oxyline.load_model(TUBE))
+    assert as_patches(pd.DataFrame({"vessels.zz.radius": [np.nan]}),
+                      oxyline.load_model(TUBE))[0] == [{}]
+
 @pytest.mark.parametrize(("patch", "path"), [
     ({"vessels": {"nope": {"radius": 1.0}}}, "vessels.nope"),
     ({"vessels": {"c": {"radiuss": 1.0}}}, "vessels.c.radiuss"),
@@ -519,6 +547,19 @@ def test_dask_chunks_partition_the_variants_and_interleave_them() -> None:
         means = [float(np.mean(list(c))) for c in chunks]
         assert max(means) - min(means) <= len(chunks)
 
+
+
+def test_dask_chunks_go_to_the_workers_in_proportion_to_their_threads() -> None:
+    from collections import Counter
+
+    from oxyline.ensemble.cluster import _placement
+
+    # two idle workers holding the scattered model: the scheduler alone put both chunks of a
+    # small ensemble on one of them (the other waited for work stealing)
+    assert sorted(_placement({"tcp://b": 1, "tcp://a": 1}, 2)) == ["tcp://a", "tcp://b"]
+    counts = Counter(_placement({"tcp://a": 2, "tcp://b": 1}, 12))
+    assert counts == {"tcp://a": 8, "tcp://b": 4}
+    assert _placement({}, 3) == [None, None, None]  # no workers known: Dask decides
 
 SIGINT_CHILD = """
 import sys

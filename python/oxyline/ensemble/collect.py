@@ -169,17 +169,30 @@ def callable_values(output: Callable[[Result], Mapping[str, float]], result: Res
 
 def patch_coords(patches: Sequence[Mapping[str, Any]]) -> dict[str, np.ndarray]:
     """The scalar patch values by dotted path, one entry per variant (NaN/'' where a variant
-    does not set it)."""
-    flat = [flatten(p) for p in patches]
-    paths = sorted({k for f in flat for k in f})
+    does not set it). One pass over the patches collects each path's (variant, value) pairs
+    (a population's patch sets ~340 paths: looking every path up in every patch cost as much
+    as checking the patches, on the calling thread after the last variant)."""
+    columns: dict[str, tuple[list[int], list[Any]]] = {}
+    for j, patch in enumerate(patches):
+        for path, value in flatten(patch).items():
+            col = columns.get(path)
+            if col is None:
+                col = columns[path] = ([], [])
+            col[0].append(j)
+            col[1].append(value)
+    n = len(patches)
     coords = {}
-    for path in paths:
-        vals = [f.get(path) for f in flat]
-        if all(v is None or (isinstance(v, (int, float)) and not isinstance(v, bool))
-               for v in vals):
-            coords[path] = np.array([np.nan if v is None else float(v) for v in vals])
+    for path in sorted(columns):
+        rows, vals = columns[path]
+        if all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in vals):
+            arr = np.full(n, np.nan)
+            arr[rows] = [float(v) for v in vals]
+            coords[path] = arr
         else:
-            coords[path] = np.array(["" if v is None else str(v) for v in vals])
+            texts = [""] * n
+            for j, v in zip(rows, vals, strict=True):
+                texts[j] = str(v)
+            coords[path] = np.array(texts)
     return coords
 
 
