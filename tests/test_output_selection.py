@@ -151,8 +151,15 @@ def test_large_model_default_output(full: oxyline.Result,
     assert full.vessel_variables == tuple(_core.VESSEL_VARIABLES)
     assert full.species["o2"].vessel_variables == tuple(_core.SPECIES_VESSEL_VARIABLES)
     assert full.has_segments
+    # at the threshold (lowered to the model's own segment count) still complete
+    segments = int(oxyline.load_model("paper-bifurcated").network.summary()["segments"])
+    monkeypatch.setattr(run, "LARGE_MODEL_SEGMENTS", segments)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", oxyline.OutputSizeWarning)
+        at = oxyline.simulate("paper-bifurcated", cycles=1, segments=False)
+    assert at.vessel_variables == tuple(_core.VESSEL_VARIABLES)
     # above it (lowered so that a small model is "large"): the documented subset, said once
-    monkeypatch.setattr(run, "LARGE_MODEL_SEGMENTS", 5)
+    monkeypatch.setattr(run, "LARGE_MODEL_SEGMENTS", segments - 1)
     with pytest.warns(oxyline.OutputSizeWarning, match="variables='all'") as rec:
         res = oxyline.simulate("paper-bifurcated", cycles=1)
     assert len(rec) == 1 and "no segment output" in str(rec[0].message)
