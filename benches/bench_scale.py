@@ -105,7 +105,8 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
     kw: dict[str, Any] = {"cycles": 1, "output_every": 0.01, "segments": False,
                           "method": spec["method"]}
     if spec.get("variables"):
-        kw["variables"] = spec["variables"]
+        # "all": every variable, also above the large-model threshold (oxyline.run)
+        kw["variables"] = "all" if spec["variables"] == ["all"] else spec["variables"]
     if spec["method"] == "generalized-alpha":
         kw["dt"] = 1e-3
     fraction = spec.get("fraction", 1.0)
@@ -242,8 +243,9 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--variables", nargs="+",
                     help="output only these vessel variables (the run's output selection, "
-                         "e.g. pressure_in flow_in concentration_in concentration_out); "
-                         "default: all")
+                         "e.g. pressure_in flow_in concentration_in concentration_out; "
+                         "'all': every variable); default: the simulate() default (above "
+                         "oxyline.run.LARGE_MODEL_SEGMENTS the large-model subset)")
     ap.add_argument("--rk4-fraction", type=float, default=1.0,
                     help="RK4 runs stop this fraction into the cycle (its automatic dt makes "
                          "a whole cycle of a 65 k-segment tree take minutes); O2/flow is then "

@@ -33,12 +33,19 @@ def main() -> None:
     ap.add_argument("--depth", type=int, default=14)
     ap.add_argument("--config", default="o2-k")
     ap.add_argument("--no-run", action="store_true")
+    ap.add_argument("--large-threshold", type=int, default=None,
+                    help="set oxyline.run.LARGE_MODEL_SEGMENTS (e.g. 1 at depth 16: the "
+                         "large-model default output on a 262 k-segment tree)")
     a = ap.parse_args()
 
     from bench_scale import tree
 
     import oxyline
 
+    if a.large_threshold is not None:
+        import oxyline.run
+
+        oxyline.run.LARGE_MODEL_SEGMENTS = a.large_threshold
     segments = (2 ** a.depth - 1) * 4
     rows: list[tuple[str, float, float, float]] = []
 
@@ -53,9 +60,22 @@ def main() -> None:
     m = oxyline.load_model(model)
     t = mark("load_model (copy, checks, core network)", t)
     if not a.no_run:
+        samples: list[tuple[float, float, float, float]] = []  # (t, CPU, rss, peak)
+
+        def progress(t: float, t_end: float) -> None:
+            # the core reports every few hundred steps: the first report is after the run's
+            # setup (steady state, LU, plan state), the last one just before the output is
+            # handed to Python
+            samples.append((t, time.process_time(), *rss()))
+
         res = oxyline.simulate(m, cycles=1, dt=1e-3, output_every=0.01, segments=False,
-                               method="generalized-alpha")
+                               method="generalized-alpha", progress=progress)
+        for label, (tt, cpu, now, peak) in (("run: first progress report", samples[0]),
+                                            ("run: last progress report", samples[-1])):
+            rows.append((f"{label} (t = {tt:.3f} s)", cpu - t, now, peak))
         t = mark("simulate (result kept)", t)
+        print("recorded vessel variables:", *res.vessel_variables,
+              *(v for sp in res.species.values() for v in sp.vessel_variables))
         out = res.data.nbytes + sum(sp.vessel_data.base.nbytes if sp.vessel_data.base is not None
                                     else sp.vessel_data.nbytes for sp in res.species.values())
         del res

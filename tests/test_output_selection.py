@@ -5,6 +5,7 @@ and in a streamed Zarr store."""
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -111,3 +112,79 @@ def test_unknown_names_are_model_errors(kw: dict, match: str) -> None:
 def test_species_variables_need_species() -> None:
     with pytest.raises(oxyline.ModelError, match="'concentration_in' needs species transport"):
         oxyline.simulate("bifurcation", cycles=1, variables=["concentration_in"])
+
+
+def _output_bytes(res: oxyline.Result) -> int:
+    """Bytes of the arrays a result holds its output in: the time column, the flow block and
+    each species block (views share their base array: count every buffer once)."""
+    bufs = {id(a): a for a in [res.time, res.data]}
+    for sp in res.species.values():
+        base = sp.vessel_data
+        while isinstance(base.base, np.ndarray):  # up to the array the core filled
+            base = base.base
+        bufs[id(base)] = base
+    return sum(a.nbytes for a in bufs.values())
+
+
+@pytest.mark.parametrize("kw", [{}, {"segments": False},
+                                {"variables": FLOW_VARS + O2_VARS, "vessels": 1}])
+def test_memory_accounting_matches_the_arrays(kw: dict) -> None:
+    # the estimate a run is admitted by (max_memory, OutputSizeWarning) against the nbytes of
+    # the arrays the run returns: both count 8-byte numbers, so they agree exactly
+    from oxyline import run
+
+    model = oxyline.load_model("paper-bifurcated")
+    if "vessels" in kw:  # one vessel, by its position
+        kw = {**kw, "vessels": [model.network.output_layout()["vessels"][kw["vessels"]]]}
+    s = run._settings(model, {"cycles": 1, **kw})
+    need, rows, _ = run._output_size(model, s)
+    res = oxyline.simulate(model, cycles=1, **kw)
+    assert rows == res.time.size
+    assert need == _output_bytes(res)
+
+
+def test_large_model_default_output(full: oxyline.Result,
+                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    from oxyline import run
+
+    # the default stays complete below the threshold: no warning, every variable
+    assert full.vessel_variables == tuple(_core.VESSEL_VARIABLES)
+    assert full.species["o2"].vessel_variables == tuple(_core.SPECIES_VESSEL_VARIABLES)
+    assert full.has_segments
+    # at the threshold (lowered to the model's own segment count) still complete
+    segments = int(oxyline.load_model("paper-bifurcated").network.summary()["segments"])
+    monkeypatch.setattr(run, "LARGE_MODEL_SEGMENTS", segments)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", oxyline.OutputSizeWarning)
+        at = oxyline.simulate("paper-bifurcated", cycles=1, segments=False)
+    assert at.vessel_variables == tuple(_core.VESSEL_VARIABLES)
+    # above it (lowered so that a small model is "large"): the documented subset, said once
+    monkeypatch.setattr(run, "LARGE_MODEL_SEGMENTS", segments - 1)
+    with pytest.warns(oxyline.OutputSizeWarning, match="variables='all'") as rec:
+        res = oxyline.simulate("paper-bifurcated", cycles=1)
+    assert len(rec) == 1 and "no segment output" in str(rec[0].message)
+    assert res.vessel_variables == run.LARGE_MODEL_VARIABLES
+    sp, fsp = res.species["o2"], full.species["o2"]
+    assert sp.vessel_variables == run.LARGE_MODEL_SPECIES_VARIABLES
+    assert not res.has_segments and sp.segment_data.shape[1] == 0
+    for name in run.LARGE_MODEL_VARIABLES:  # same run, a subset of its columns: bit-identical
+        assert np.array_equal(getattr(res, name), getattr(full, name))
+    for name in run.LARGE_MODEL_SPECIES_VARIABLES:
+        assert np.array_equal(getattr(sp, name), getattr(fsp, name))
+    assert np.array_equal(sp.balance_data, fsp.balance_data)
+    # explicit segments: the segment subset too; variables='all' (keyword or model file):
+    # everything, no warning
+    with pytest.warns(oxyline.OutputSizeWarning, match="segment_flow, segment_concentration"):
+        res = oxyline.simulate("paper-bifurcated", cycles=1, segments=True)
+    assert res.segment_variables == ("segment_pressure_in", "segment_flow")
+    assert res.species["o2"].segment_variables == ("concentration", "wall_flux")
+    assert np.array_equal(res.segment_flow, full.segment_flow)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", oxyline.OutputSizeWarning)
+        every = oxyline.simulate("paper-bifurcated", cycles=1, variables="all")
+        model = examples.load("paper-bifurcated").to_dict()
+        model["simulation"] = {"output": {"variables": "all"}}
+        from_file = oxyline.simulate(model, cycles=1)
+    for r in (every, from_file):
+        assert np.array_equal(r.data, full.data)
+        assert np.array_equal(r.species["o2"].vessel_data, fsp.vessel_data)

@@ -131,8 +131,9 @@ ARRANGEMENTS = {"inverted-L", "L", "pi", "RCL"}
 
 
 def output_names(value: Any, key: str) -> list[str] | None:
-    """An output selection list of names (None: everything); a single name is a list of one."""
-    if value is None:
+    """An output selection list of names (None, or ``all``: everything); a single name is a
+    list of one."""
+    if value is None or value == "all":
         return None
     if isinstance(value, str):
         return [value]

@@ -164,6 +164,46 @@ def _vessels(model: Model, selection: Any) -> list[str] | None:
     return output_vessels(selection)
 
 
+#: Above this many segments an in-memory run without a ``variables`` selection records the
+#: large-model default below instead of every variable (issue 9: at ~1e6 segments every vessel
+#: variable every 10 ms alone is 1.8 kB per segment, more than a 3 GB budget leaves after the
+#: network and the run; benches/results.md, "Large-model default output").
+LARGE_MODEL_SEGMENTS = 500_000
+#: The large-model default: the vessel's inflow end (pressure_in; in a tree pressure_out is
+#: the children's pressure_in), both flows, the outflow concentration and the wall flux.
+LARGE_MODEL_VARIABLES = ("pressure_in", "flow_in", "flow_out")
+LARGE_MODEL_SPECIES_VARIABLES = ("concentration_out", "wall_flux")
+#: ... and, only when segment output is asked for explicitly, these segment variables.
+LARGE_MODEL_SEGMENT_VARIABLES = ("segment_pressure_in", "segment_flow")
+LARGE_MODEL_SPECIES_SEGMENT_VARIABLES = ("segment_concentration", "segment_wall_flux")
+
+
+def _large_model_output(model: Model, s: dict[str, Any], overrides: Mapping[str, Any]) -> None:
+    """Apply the large-model default output to the settings ``s`` of an in-memory run of a
+    model above :data:`LARGE_MODEL_SEGMENTS` that selects no ``variables`` (simulate keyword or
+    model ``simulation: output:``): fewer vessel variables and, unless ``segments`` is given,
+    no segment output, said in one :class:`OutputSizeWarning`. ``variables="all"`` keeps
+    everything. Smaller models keep the complete default."""
+    out = model.simulation.get("output") or {}
+    if "variables" in overrides or "variables" in out:
+        return
+    segments = int(model.network.summary()["segments"])
+    if segments <= LARGE_MODEL_SEGMENTS:
+        return
+    species = model.transport_spec is not None
+    chosen = list(LARGE_MODEL_VARIABLES) + (list(LARGE_MODEL_SPECIES_VARIABLES) if species else [])
+    if "segments" not in overrides and "segments" not in out:
+        s["segments"] = False
+    if s["segments"]:
+        chosen += LARGE_MODEL_SEGMENT_VARIABLES
+        chosen += LARGE_MODEL_SPECIES_SEGMENT_VARIABLES if species else ()
+    s["variables"] = chosen
+    warnings.warn(f"{segments} segments (> {LARGE_MODEL_SEGMENTS}): recording only "
+                  f"{', '.join(chosen)}{'' if s['segments'] else ' (no segment output)'}; "
+                  "variables='all' (and segments=True) records everything",
+                  OutputSizeWarning, stacklevel=4)
+
+
 def _selection(s: Mapping[str, Any]) -> dict[str, Any]:
     """The core's output-selection keywords of settings ``s``."""
     return {"variables": s["variables"], "vessels": s["vessels"], "segments": s["segments"]}
@@ -410,6 +450,7 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
               resume_path: Any = None) -> Result:
     """`simulate` of a loaded model; ``resume``: the core state of a checkpoint."""
     s = _settings(model, overrides)
+    _large_model_output(model, s, overrides)
     _check_output_memory(model, s, overrides)
     core = _checkpoints(model, overrides)
     if resume is not None:
