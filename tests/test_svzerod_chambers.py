@@ -79,6 +79,11 @@ def test_rk4_matches_svzerod_20x_finer() -> None:
     pytest.importorskip("svzerod")
     cfg = json.loads(case(name).read_text())
     errors = compare(svz.simulate(cfg, method="rk4"), svzerod_run(cfg, 20))
+    # svZeroDSolver's valve_status is an algebraic variable solved at its generalized-α
+    # stage: after a switch it oscillates around f(Δp), shrinking by ρ∞ each step (1.2e-2 of
+    # its range at 20x finer), an artefact of that integrator; RK4's is f(Δp) itself, and the
+    # pressures it follows are compared
+    errors.pop("valve_status:valve")
     assert len(errors) >= 4
     # discretisation error: 1.8e-4 of the inflow's range (1.6e-4 against svzerod 80x finer),
     # at the valve's switch (tanh of steepness 100 over pressures of order 1, a width of 0.01):

@@ -623,6 +623,7 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     valves_open: dict[str, bool] = {}
 
     def result_of(rows: dict[str, Any], settings: dict[str, Any], complete: bool) -> Result:
+        # (``rows``' data loses the extra columns: a copy of the dict of rows)
         extra = _split_heart_columns(rows, len(heart[2]))
         res = _result(model, s, rows, settings, complete)
         if extra is not None:
@@ -630,8 +631,8 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
         return res
 
     template = dict(empty, data=np.zeros((0, empty["data"].shape[1] + len(heart[2]))))
-    store = ZarrAppender(path, dataset(result_of(template, _run_settings(s, None), False)),
-                         time_chunk, overwrite=overwrite)
+    store = ZarrAppender(path, dataset(result_of(dict(template), _run_settings(s, None),
+                                                 False)), time_chunk, overwrite=overwrite)
 
     # the bounds monitor checks each chunk as it passes (docs/physics.md §2.8)
     monitor = Monitor(model.transport_spec)

@@ -1027,7 +1027,7 @@ def _output_columns(layout: _Layout, recorded: Mapping[str, int], variable_based
             names += [f"{var}:{name}" for var, _ in svzerod_closed_loop.VARIABLES]
             idx += heart_cols
         else:  # a tanh valve: its law's switch at the pressure difference across it
-            behind, front, _ = dict((n, u) for n, u, _ in lay["valves"])[name]
+            behind, front, _ = {n: u for n, u, _ in lay["valves"]}[name]
             names.append(f"valve_status:{name}")
             idx.append(int(front))
             extra.append((len(idx) - 1, int(behind), -1.0))

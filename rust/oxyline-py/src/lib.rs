@@ -417,9 +417,7 @@ impl Network {
             .find(|v| v.name == name)
             .and_then(|v| v.law)
             .ok_or_else(|| {
-                PyValueError::new_err(format!(
-                    "valve_closure: '{name}' is not a valve element"
-                ))
+                PyValueError::new_err(format!("valve_closure: '{name}' is not a valve element"))
             })?;
         let out: Vec<f64> = dp.iter().map(|&d| law.closure(d)).collect();
         Ok(out.into_pyarray(py))
