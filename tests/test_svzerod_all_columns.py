@@ -49,9 +49,10 @@ FAMILIES = {
                     "coupledBlock_closedLoopHeart_withCoronaries"],
 }
 #: the coronary coupled case: the heart block's on/off valves switch at iterate-dependent
-#: steps, so svZeroDSolver's own reruns differ from its stored result (svzerod 3.2: 3.2e-6 of
-#: the range); upstream's tolerance for it is 2e-1
-LOOSER = {"coupledBlock_closedLoopHeart_withCoronaries": 2e-4}
+#: steps, so svZeroDSolver's own reruns differ from its stored result (svzerod 3.2: 1.2e-4 of
+#: the range in Q_LA:CLH; upstream's tolerance for it is 2e-1); measured 2.1e-4 (Q_LV:CLH,
+#: the same against a fresh svzerod 3.2 run)
+LOOSER = {"coupledBlock_closedLoopHeart_withCoronaries": 5e-4}
 
 
 def case(name: str) -> dict[str, Any]:
