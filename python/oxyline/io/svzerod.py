@@ -512,15 +512,18 @@ def _heart_elements(cfg: Mapping[str, Any], period: float, vessels: list[dict[st
     # the other initial_condition entries: svzerod_initial.apply
 
 
-def _closed_loop_layout(vessels: list[dict[str, Any]], bcs: Mapping[str, Any],
-                        layout: _Layout) -> list[tuple[str, str]]:
+def _closed_loop_layout(cfg: Mapping[str, Any], vessels: list[dict[str, Any]],
+                        bcs: Mapping[str, Any], layout: _Layout) -> list[tuple[str, str]]:
     """The heart block and the closed-loop conditions in the variable table: each as a block
     whose ends are those of its native vessels (svZeroDSolver has no vessel row for them), the
     heart's internal variables, and svZeroDSolver's nodes around the heart, in its order: the
-    heart's inlet, each closed-loop condition into it (file order), the heart's outlet."""
+    heart's inlet, each closed-loop condition into it (file order), the heart's outlet, the
+    outlet into each of its ``outlet_blocks`` (a vessel, or a coupling block's wire)."""
     cl = svzerod_closed_loop
     if not any(v["name"] == cl.HEART and "heart_pulmonary" in v for v in vessels):
         return []
+    outlets = next(b["outlet_blocks"] for b in cfg["closed_loop_blocks"]
+                   if b.get("closed_loop_type") == "ClosedLoopHeartAndPulmonary")
     layout.vessels.append((cl.HEART, cl.HEART, cl.HEART))
     layout.not_vessels.add(cl.HEART)
     layout.internal.append(("heart", cl.HEART, None))
@@ -534,7 +537,7 @@ def _closed_loop_layout(vessels: list[dict[str, Any]], bcs: Mapping[str, Any],
             continue
         layout.not_vessels.add(name)
         nodes.append((name, cl.HEART_INLET))
-    return nodes + [(cl.HEART, cl.HEART_OUTLET)]
+    return nodes + [(cl.HEART, cl.HEART_OUTLET)] + [(cl.HEART_OUTLET, o) for o in outlets]
 
 
 def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | None = None
@@ -775,7 +778,7 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         layout.connections += [(vbc["inlet"], name)] if "inlet" in vbc else []
         layout.connections += [(name, vbc["outlet"])] if "outlet" in vbc else []
     svzerod_closed_loop.add_blocks(cfg, period, vessels, bcs, attach, seen_names, _num)
-    heart_nodes = _closed_loop_layout(vessels, bcs, layout)
+    heart_nodes = _closed_loop_layout(cfg, vessels, bcs, layout)
     first_element_node = len(layout.connections)
     _heart_elements(cfg, period, vessels, layout, bcs, used_bcs, attach)
     # svZeroDSolver numbers the valves' nodes after the junctions' (it creates valves later)
@@ -790,9 +793,6 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
     layout.connections = [c for c in layout.connections if not set(c) & wire_ends]
     layout.not_vessels |= set(wires)
     layout.connections += heart_nodes
-    # the heart's outlet node into a coupling block (its flow and the heart's outlet pressure)
-    layout.connections += [(svzerod_closed_loop.HEART_OUTLET, w) for w, other in wires.items()
-                           if other == svzerod_coupling.HEART]
 
     if not vessels:
         raise ModelError("model: no vessels")
