@@ -600,3 +600,41 @@ def test_sigint_stops_the_threads_and_returns_the_finished_variants() -> None:
     finished, never, other = int(words[1]), int(words[2]), int(words[3])
     assert other == 0  # only finished (0), stopped while running (5) and never started (-1)
     assert finished >= 2 and never > 1000  # Ctrl-C lands within a few variants
+
+
+def test_heart_outputs_in_the_ensemble_equal_simulate() -> None:
+    """Chamber volumes and valve status (issue 14 item 4) as ensemble summary variables
+    ``chamber_volume_<stat>`` (variant, chamber) and ``valve_status_<stat>`` (variant, valve),
+    against each patched model's own simulate(): the same statistics of its
+    ``Result.chamber_volume`` / ``valve_status`` over the output times."""
+    import copy
+
+    from oxyline.io.results import stats
+    from tests.test_svzerod_chambers import CLOSED_LOOP
+
+    run = {"cycles": 3, "output_cycles": "last", "progress": False}
+    model = copy.deepcopy(CLOSED_LOOP)
+    patches = [{}, {"vessels": {"systemic": {"lumped": {"resistance": 1.0e8}}}}]
+    ds = oxyline.simulate_ensemble(model, patches, **run)
+    assert ds["chamber_volume_mean"].dims == ("variant", "chamber")
+    assert list(ds["valve"].values) == ["aortic_valve", "mitral_valve"]
+    assert list(ds["status"].values) == [0, 0]
+    for i, patch in enumerate(patches):
+        res = oxyline.simulate(apply_patch(model, patch), **run)
+        for var, dim, parts in (("chamber_volume", "chamber", res.chamber_volume),
+                                ("valve_status", "valve", res.valve_status)):
+            for name, arr in parts.items():
+                for stat, want in zip(("mean", "min", "max"),
+                                      stats(np.asarray(arr, dtype=float), res.time)):
+                    got = ds[f"{var}_{stat}"].sel({dim: name}).values[i]
+                    # the same core run on another path (the ensemble's workers): measured
+                    # bit-identical; 1e-12 relative allows a different summation order
+                    np.testing.assert_allclose(got, want, rtol=1e-12, err_msg=f"{var} {name}")
+    # the aortic valve opens and closes every beat (open fractions strictly between 0 and 1),
+    # and the lower systemic resistance moves more blood per beat (a larger stroke volume)
+    aortic = ds.valve_status_mean.sel(valve="aortic_valve")
+    assert np.all((aortic > 0) & (aortic < 1))
+    stroke = ds.chamber_volume_max - ds.chamber_volume_min
+    assert float(stroke[1, 0]) > float(stroke[0, 0])
+    full = oxyline.simulate_ensemble(model, patches, output="full", **run)
+    assert full["chamber_volume"].dims == ("variant", "time", "chamber")

@@ -16,13 +16,9 @@ import oxyline
 from oxyline import svzerod as svz
 from tests.conftest import data_path
 
-#: cases the drop-in runs, with the svZeroDSolver variables it does not output and why
-CHAMBER_CASES = {
-    "valve_tanh": "valve_status (an internal variable of svZeroDSolver's newer ValveTanh "
-                  "whose equation is not in the published sources oxyline follows)",
-    "chamber_elastance_inductor": "valve_status (as valve_tanh; the chamber volume Vc is "
-                                  "output)",
-}
+#: cases the drop-in runs; every svZeroDSolver variable is output, the tanh valves'
+#: valve_status and the chamber volume Vc among them
+CHAMBER_CASES = ["valve_tanh", "chamber_elastance_inductor"]
 
 
 def case(name: str) -> Any:
@@ -39,7 +35,7 @@ def compare(actual: pd.DataFrame, expected: pd.DataFrame) -> dict[str, float]:
     out = {}
     for name, e in expected.groupby("name", sort=False):
         a = actual[actual["name"] == name]
-        if a.empty or name.startswith("valve_status:"):
+        if a.empty:
             continue
         np.testing.assert_allclose(a["time"].to_numpy(), e["time"].to_numpy(), atol=1e-9)
         ev, av = e["y"].to_numpy(float), a["y"].to_numpy(float)
@@ -48,14 +44,13 @@ def compare(actual: pd.DataFrame, expected: pd.DataFrame) -> dict[str, float]:
     return out
 
 
-@pytest.mark.parametrize("name", list(CHAMBER_CASES))
+@pytest.mark.parametrize("name", CHAMBER_CASES)
 def test_generalized_alpha_matches_reference(name: str) -> None:
     actual = svz.simulate(str(case(name)))
     errors = compare(actual, reference(name))
-    missing = set(reference(name)["name"]) - set(errors)
-    # only the variables listed as not output are missing
-    assert all(m.split(":")[0] in ("valve_status", "Vc") for m in missing), missing
-    assert len(errors) >= 4
+    # every variable, valve_status among them (svZeroDSolver's ValveTanh internal variable)
+    assert set(errors) == set(reference(name)["name"])
+    assert any(n.startswith("valve_status:") for n in errors)
     # 1e-6 of each variable's range: svZeroDSolver's Newton tolerance (1e-9 absolute) and the
     # reference's 10 stored decimals, far below any modelling difference
     assert max(errors.values()) <= 1e-6, errors
@@ -84,6 +79,11 @@ def test_rk4_matches_svzerod_20x_finer() -> None:
     pytest.importorskip("svzerod")
     cfg = json.loads(case(name).read_text())
     errors = compare(svz.simulate(cfg, method="rk4"), svzerod_run(cfg, 20))
+    # svZeroDSolver's valve_status is an algebraic variable solved at its generalized-α
+    # stage: after a switch it oscillates around f(Δp), shrinking by ρ∞ each step (1.2e-2 of
+    # its range at 20x finer), an artefact of that integrator; RK4's is f(Δp) itself, and the
+    # pressures it follows are compared
+    errors.pop("valve_status:valve")
     assert len(errors) >= 4
     # discretisation error: 1.8e-4 of the inflow's range (1.6e-4 against svzerod 80x finer),
     # at the valve's switch (tanh of steepness 100 over pressures of order 1, a width of 0.01):

@@ -70,6 +70,9 @@ class Network:
         their ``node_pressure``, output ``vessels`` and their ``pressure_in``,
         ``pressure_out``, ``flow_in``, ``flow_out``."""
     def unknown_names(self) -> list[str]: ...
+    def valve_closure(self, name: str, dp: list[float]) -> npt.NDArray[np.float64]:
+        """svZeroDSolver's valve_status of valve element ``name`` at the pressure differences
+        ``dp`` = P_front − P_behind (0 open, 1 closed)."""
     def circuit(self) -> dict[str, Any]: ...
     def source_flows(self, t: float) -> list[float]: ...
     def derivative(
@@ -126,6 +129,7 @@ class Ensemble:
         ],
         workers: int | None = None,
         summary: bool = False,
+        heart: bool = False,
         **settings: Unpack[RunOptions],
     ) -> bool:
         """Run the variants ``feed()`` hands over (``(i, canonical patch JSON or None,

@@ -493,7 +493,8 @@ def _split_heart_columns(raw: dict[str, Any], n: int) -> np.ndarray | None:
     return data[:, data.shape[1] - n:]
 
 
-def _heart_outputs(heart: tuple[list[Any], list[Any], list[int]], extra: np.ndarray
+def _heart_outputs(heart: tuple[list[Any], list[Any], list[int]], extra: np.ndarray,
+                   state: dict[str, bool] | None = None
                    ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Chamber volumes and valve status (1 open, 0 closed) from the extra columns: a valve is
     open while the pressure behind it exceeds the pressure in front; a heart block's valve
@@ -501,8 +502,11 @@ def _heart_outputs(heart: tuple[list[Any], list[Any], list[int]], extra: np.ndar
     difference reversed (the inertial end of ejection), until the flow reverses. Once closed,
     only the pressure difference reopens it: with generalized-α a closed valve keeps the small
     flow of the last Newton correction (~1e-3 of the peak, of either sign; svZeroDSolver's
-    reset), which must not read as open. With RK4 a closed valve's flow is exactly zero."""
+    reset), which must not read as open. With RK4 a closed valve's flow is exactly zero.
+    ``state``: each on/off valve's last status, carried from one chunk of a streamed run to
+    the next (updated here), so that chunks give the statuses of the whole run."""
     chambers, valves, _ = heart
+    state = {} if state is None else state
     volume = {name: extra[:, k].copy() for k, (name, _) in enumerate(chambers)}
     status = {}
     for k, (name, _, on_off) in enumerate(valves):
@@ -512,10 +516,11 @@ def _heart_outputs(heart: tuple[list[Any], list[Any], list[int]], extra: np.ndar
             status[name] = pushed.astype(np.int8)
             continue
         open_ = np.zeros(len(q), dtype=np.int8)
-        was_open = False
+        was_open = state.get(name, False)
         for i in range(len(q)):  # hysteresis: a sequence, not an elementwise rule
             was_open = bool(pushed[i]) or (was_open and q[i] > 0.0)
             open_[i] = was_open
+        state[name] = was_open
         status[name] = open_
     return volume, status
 
@@ -653,26 +658,40 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
                       f"{_memory.human(need)} on disk (before compression)", OutputSizeWarning,
                       stacklevel=2)
     empty = _empty_rows(model, s)
-    store = ZarrAppender(path, dataset(_result(model, s, empty, _run_settings(s, None), False)),
-                         time_chunk, overwrite=overwrite)
+    # chamber volumes and valve status, as in simulate(): extra core columns per chunk
+    heart = _heart_layout(model)
+    core = {"extra_columns": heart[2]} if heart[2] else {}
+    valves_open: dict[str, bool] = {}
+
+    def result_of(rows: dict[str, Any], settings: dict[str, Any], complete: bool) -> Result:
+        # (``rows``' data loses the extra columns: a copy of the dict of rows)
+        extra = _split_heart_columns(rows, len(heart[2]))
+        res = _result(model, s, rows, settings, complete)
+        if extra is not None:
+            res.chamber_volume, res.valve_status = _heart_outputs(heart, extra, valves_open)
+        return res
+
+    template = dict(empty, data=np.zeros((0, empty["data"].shape[1] + len(heart[2]))))
+    store = ZarrAppender(path, dataset(result_of(dict(template), _run_settings(s, None),
+                                                 False)), time_chunk, overwrite=overwrite)
 
     # the bounds monitor checks each chunk as it passes (docs/physics.md §2.8)
     monitor = Monitor(model.transport_spec)
 
     def write(rows: dict[str, Any]) -> None:
-        chunk = _result(model, s, rows, {}, False)
+        chunk = result_of(dict(rows), {}, False)
         monitor.update(chunk)
         store.append(dataset(chunk))
 
     try:
         raw = _run(model, s, overrides.get("progress"), _cancel(overrides), chunk_sink=write,
-                   chunk_rows=time_chunk)
+                   chunk_rows=time_chunk, **core)
     except Exception:
         store.remove()  # refused before the first step (e.g. an unstable dt): no output at all
         raise
     try:
-        store.finish(dataset(_result(model, s, empty, _run_settings(s, raw),
-                                     "error" not in raw)).attrs)
+        store.finish(dataset(result_of(dict(template), _run_settings(s, raw),
+                                       "error" not in raw)).attrs)
     except (OSError, RuntimeError, ValueError) as exc:  # e.g. the disk just filled up
         if "error" not in raw:
             raw = {**raw, "error": OutputError(f"{store.path}: cannot write the run's final "

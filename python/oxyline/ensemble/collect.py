@@ -2,7 +2,9 @@
 
 * ``"summary"``: per (variant, vessel) ``<var>_mean``, ``_min`` and ``_max`` of the output
   (the last cycle by default), exactly :meth:`oxyline.Result.summary`; memory O(variants ×
-  vessels);
+  vessels); a model with chambers or valves also has ``chamber_volume_<stat>`` per (variant,
+  chamber) and ``valve_status_<stat>`` per (variant, valve) (the mean: the fraction of the
+  time open) of :attr:`oxyline.Result.chamber_volume` and ``valve_status``;
 * ``"full"``: the variables of :meth:`oxyline.Result.to_xarray` with a leading ``variant``
   dim (``time`` and ``segment`` padded with NaN where variants differ in length);
 * a callable ``f(result) -> {name: float}``: those scalars along ``variant``.
@@ -29,6 +31,8 @@ from oxyline.result import Result
 STATUS = {"ok": 0, "model": 1, "unstable": 2, "solver": 3, "output": 4, "interrupted": 5,
           "not run": -1}
 STATS = ("mean", "min", "max")
+#: the heart outputs' summary variables and their dim besides ``variant``
+HEART_DIMS = {"chamber_volume": "chamber", "valve_status": "valve"}
 #: the per-variant facts every ensemble dataset has besides its outputs
 FACTS = ("status", "error", "warning", "period", "cycles_run", "periodic_error")
 ERROR_CHARS = 400  # stored error messages are cut to this length (fixed-width strings)
@@ -77,6 +81,22 @@ def _flow_stats(result: Result, column_stats: Sequence[np.ndarray] | None
     block = [np.asarray(s)[: kv * nv] for s in column_stats]
     return {name: tuple(s[k::kv] for s in block)
             for k, name in enumerate(result.vessel_variables)}
+
+
+def heart_summary(chamber_volume: Mapping[str, np.ndarray], valve_status: Mapping[str, Any],
+                  t: np.ndarray) -> dict[str, np.ndarray]:
+    """``chamber_volume_<stat>`` and ``valve_status_<stat>`` (one value per chamber or valve)
+    of a result's heart outputs over its output times, as :func:`summary_values` takes the
+    vessels' (time averages by the trapezoidal rule)."""
+    from oxyline.io.results import stats
+
+    out = {}
+    for var, parts in (("chamber_volume", chamber_volume), ("valve_status", valve_status)):
+        if parts:
+            a = np.column_stack([np.asarray(v, dtype=float) for v in parts.values()])
+            for stat, val in zip(STATS, stats(a, np.asarray(t, dtype=float))):
+                out[f"{var}_{stat}"] = val
+    return out
 
 
 class _Columns(NamedTuple):
@@ -210,6 +230,8 @@ class Collector:
         self.periodic_error = np.full(n, np.nan)
         self.values: dict[str, np.ndarray] = {}  # summary/callable outputs by name
         self.datasets: dict[int, Any] = {}  # full output
+        #: the model's chambers and valves (coordinates of the heart summary variables)
+        self.heart: dict[str, list[str]] = {}
 
     def fail(self, i: int, kind: str, message: str) -> None:
         self.status[i] = STATUS[kind]
@@ -246,8 +268,7 @@ class Collector:
             for name, v in values.items():
                 arr = self.values.get(name)
                 if arr is None:
-                    shape = (self.n, len(self.vessels)) if np.ndim(v) else (self.n,)
-                    arr = self.values[name] = np.full(shape, np.nan)
+                    arr = self.values[name] = np.full((self.n, *np.shape(v)), np.nan)
                 arr[i] = v
         self.status[i] = STATUS["ok"]
 
@@ -276,10 +297,14 @@ class Collector:
             ds = ds.assign_coords({k: v for k, v in coords.items() if k != "variant"})
             ds.attrs.update(attrs)
             return ds
-        if self.values and any(v.ndim == 2 for v in self.values.values()):
-            coords["vessel"] = ("vessel", np.array(self.vessels, dtype=str))
+        dims = {name: next((d for var, d in HEART_DIMS.items() if name.startswith(f"{var}_")),
+                           "vessel") for name, arr in self.values.items() if arr.ndim == 2}
+        for dim in set(dims.values()):
+            names = self.vessels if dim == "vessel" else self.heart.get(dim)
+            if names is not None:
+                coords[dim] = (dim, np.array(names, dtype=str))
         for name, arr in self.values.items():
-            data[name] = (("variant", "vessel") if arr.ndim == 2 else ("variant",), arr)
+            data[name] = (("variant", dims[name]) if arr.ndim == 2 else ("variant",), arr)
         return xr.Dataset(data, coords=coords, attrs=dict(attrs))
 
 

@@ -11,12 +11,26 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Any
 
 from oxyline import _core
-from oxyline.ensemble.collect import ERROR_CHARS, Collector, Output, StatsBatch, stats_summary
+from oxyline.ensemble.collect import (
+    ERROR_CHARS,
+    Collector,
+    Output,
+    StatsBatch,
+    heart_summary,
+    stats_summary,
+)
 from oxyline.ensemble.patch import Patcher, Variant
 from oxyline.errors import ModelError
 from oxyline.model import Model
 from oxyline.monitor import Monitor
-from oxyline.run import _result, _run_settings, _settings
+from oxyline.run import (
+    _heart_layout,
+    _heart_outputs,
+    _result,
+    _run_settings,
+    _settings,
+    _split_heart_columns,
+)
 
 
 def run_settings(model: Model, output: Output, overrides: Mapping[str, Any]) -> dict[str, Any]:
@@ -124,9 +138,14 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
 
     feed = Feed(base.patcher, patches, output, overrides, collector, numbers, recorded)
     base_settings = feed.base_settings
+    # chamber volumes and valve status, as in simulate(): their unknowns are recorded after
+    # the output columns (a patch changes values, not the model's structure)
+    heart = _heart_layout(model)
+    collector.heart = {"chamber": [n for n, _ in heart[0]], "valve": [n for n, _, _ in heart[1]]}
     # summaries go to the collector in one pass at the end, unless a store writes each
-    # variant as it finishes (it reads the collector's row)
-    batch = StatsBatch(collector) if output == "summary" and on_variant is None else None
+    # variant as it finishes (it reads the collector's row) or it has heart outputs
+    batch = StatsBatch(collector) if output == "summary" and on_variant is None \
+        and not heart[2] else None
 
     def done(i: int, raw: dict[str, Any] | None, layout: dict[str, Any] | None,
              kind: str | None, message: str | None) -> None:
@@ -140,15 +159,19 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
                 if batch is not None and batch.add(i, raw, layout):
                     recorded(i)
                     return
+                hearts = _variant_heart(heart, raw)
                 # a summary without species is read from the core's column statistics; the
                 # bounds monitor only concerns species, so it needs the Result only then
                 values = stats_summary(raw, layout) if output == "summary" else None
                 if values is None:
                     result = _result(v.model, s, raw, _run_settings(s, raw), True, layout)
-                    collector.put(i, collector.outputs(result, raw.get("column_stats")))
+                    if hearts is not None:
+                        result.chamber_volume, result.valve_status = hearts
+                    values = collector.outputs(result, raw.get("column_stats"))
                     collector.warn(i, bounds_findings(v.model, result))
-                else:
-                    collector.put(i, values)
+                if output == "summary" and hearts is not None:
+                    values = {**values, **heart_summary(*hearts, raw["times"])}
+                collector.put(i, values)
             except Exception as e:  # noqa: BLE001 - a user's output function fails its variant
                 collector.fail(i, "output", f"variant {numbers[i]}: {type(e).__name__}: {e}"
                                [:ERROR_CHARS])
@@ -162,11 +185,24 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
         with _old_objects_frozen():
             # a summary's statistics are computed on the worker threads (see summary_values)
             return ensemble.run(feed.next, on_done=done, workers=workers,
-                                summary=output == "summary", **core)
+                                summary=output == "summary", heart=bool(heart[2]), **core)
     finally:
         if batch is not None:
             batch.flush()
         close()
+
+
+def _variant_heart(heart: tuple[list[Any], list[Any], list[int]], raw: dict[str, Any]
+                   ) -> tuple[dict[str, Any], dict[str, Any]] | None:
+    """A variant's chamber volumes and valve status from the heart columns the core recorded
+    after its output columns (taken off ``raw``'s data and column statistics), or None."""
+    n = len(heart[2])
+    extra = _split_heart_columns(raw, n)
+    if extra is None:
+        return None
+    if raw.get("column_stats") is not None:
+        raw["column_stats"] = tuple(a[: len(a) - n] for a in raw["column_stats"])
+    return _heart_outputs(heart, extra)
 
 
 def bounds_findings(model: Model, result: Any) -> list[str]:

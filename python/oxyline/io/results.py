@@ -478,11 +478,19 @@ def _result_from_dataset(ds: Any, label: str) -> Result:
             scale = float(np.median(p[ok] / c[ok])) if ok.any() else None
         species[oxygen].po2_per_concentration = None if scale is None else float(_plain(scale))
     settings = {k[len("solver_"):]: v for k, v in attrs.items() if k.startswith("solver_")}
-    return Result(model_name=str(attrs.get("model", Path(label).stem)), vessels=vessels,
-                  time=time, data=data, segment_count=segment_count, segment_position=positions,
-                  settings=settings, complete=bool(attrs.get("complete", 1)), species=species,
-                  oxygen=None if oxygen is None else str(oxygen), vessel_variables=vvars,
-                  segment_variables=svars)
+    result = Result(model_name=str(attrs.get("model", Path(label).stem)), vessels=vessels,
+                    time=time, data=data, segment_count=segment_count,
+                    segment_position=positions, settings=settings,
+                    complete=bool(attrs.get("complete", 1)), species=species,
+                    oxygen=None if oxygen is None else str(oxygen), vessel_variables=vvars,
+                    segment_variables=svars)
+    # the heart outputs (Result.chamber_volume, Result.valve_status), if the model had them
+    for var, dim, field in (("chamber_volume", "chamber", result.chamber_volume),
+                            ("valve_status", "valve", result.valve_status)):
+        if var in ds.variables:
+            values = need(var, ("time", dim))
+            field.update({str(n): values[:, k].copy() for k, n in enumerate(need(dim))})
+    return result
 
 
 def _species_from_dataset(ds: Any, attrs: dict[str, Any], need: Any, nt: int, nv: int,

@@ -47,7 +47,7 @@ import dataclasses
 import itertools
 import math
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -134,8 +134,11 @@ class _Layout:
     vessels: list[tuple[str, str, str]] = field(default_factory=list)
     #: svZeroDSolver's nodes (upstream block, downstream block) in the order it numbers them
     connections: list[tuple[str, str]] = field(default_factory=list)
-    #: internal variables in svZeroDSolver's order: ("rcr", name, Rp) or ("junction", name,
-    #: (hidden vessel, 0 or 1: its pressure_in or pressure_out is the junction's centre))
+    #: internal variables: ("rcr", name, Rp), ("junction", name, (hidden vessel, 0 or 1: its
+    #: pressure_in or pressure_out is the junction's centre)), ("ClosedLoopRCR" or
+    #: "ClosedLoopCoronary", name, native vessel), ("heart", name, None), ("valve", name,
+    #: None: a tanh valve's status); output in svZeroDSolver's block order (see
+    #: ``INTERNAL_ORDER``), ChamberSphere wall variables first and ``Vc`` last
     internal: list[tuple[str, str, Any]] = field(default_factory=list)
     #: blocks svZeroDSolver leaves out of its vessel-based table (chambers, valves,
     #: BloodVesselRC): in ``vessels`` only for the variable table's node lookup
@@ -488,6 +491,8 @@ def _heart_elements(cfg: Mapping[str, Any], period: float, vessels: list[dict[st
                         "description": f"svZeroDSolver {v.get('type')}"})
         layout.vessels.append((name, name, name))
         layout.not_vessels.add(name)
+        if native["law"] == "tanh":  # its valve_status (svZeroDSolver's ValveTanh only)
+            layout.internal.append(("valve", name, None))
         for block, end, other_end in ((up, "in", "out"), (down, "out", "in")):
             what = f"valve '{name}'"
             if block in bcs:
@@ -505,6 +510,34 @@ def _heart_elements(cfg: Mapping[str, Any], period: float, vessels: list[dict[st
                                  f"'{block}' is not defined")
         layout.connections += [(up, name), (name, down)]
     # the other initial_condition entries: svzerod_initial.apply
+
+
+def _closed_loop_layout(cfg: Mapping[str, Any], vessels: list[dict[str, Any]],
+                        bcs: Mapping[str, Any], layout: _Layout) -> list[tuple[str, str]]:
+    """The heart block and the closed-loop conditions in the variable table: each as a block
+    whose ends are those of its native vessels (svZeroDSolver has no vessel row for them), the
+    heart's internal variables, and svZeroDSolver's nodes around the heart, in its order: the
+    heart's inlet, each closed-loop condition into it (file order), the heart's outlet, the
+    outlet into each of its ``outlet_blocks`` (a vessel, or a coupling block's wire)."""
+    cl = svzerod_closed_loop
+    if not any(v["name"] == cl.HEART and "heart_pulmonary" in v for v in vessels):
+        return []
+    outlets = next(b["outlet_blocks"] for b in cfg["closed_loop_blocks"]
+                   if b.get("closed_loop_type") == "ClosedLoopHeartAndPulmonary")
+    layout.vessels.append((cl.HEART, cl.HEART, cl.HEART))
+    layout.not_vessels.add(cl.HEART)
+    layout.internal.append(("heart", cl.HEART, None))
+    nodes = [(cl.HEART_INLET, cl.HEART)]
+    for name, (kind, _) in bcs.items():
+        if kind == "ClosedLoopRCR":
+            layout.vessels.append((name, f"{name}:proximal", f"{name}:distal"))
+        elif kind in cl.CORONARY_TYPES:
+            layout.vessels.append((name, f"{name}:bed", f"{name}:bed"))
+        else:
+            continue
+        layout.not_vessels.add(name)
+        nodes.append((name, cl.HEART_INLET))
+    return nodes + [(cl.HEART, cl.HEART_OUTLET)] + [(cl.HEART_OUTLET, o) for o in outlets]
 
 
 def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | None = None
@@ -617,6 +650,10 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         bcs[name] = (kind, native)
         if kind == "RCR":
             layout.internal.append(("rcr", name, native["proximal_resistance"]))
+        elif kind == "ClosedLoopRCR":  # P_c: the capacitor node of its hidden Rp-C vessel
+            layout.internal.append((kind, name, f"{name}:proximal"))
+        elif kind in svzerod_closed_loop.CORONARY_TYPES:  # volume_im of its coronary_bed
+            layout.internal.append(("ClosedLoopCoronary", name, f"{name}:bed"))
 
     heart_period = svzerod_closed_loop.heart_period(cfg)
     if heart_period is not None:  # svZeroDSolver takes the heart block's period
@@ -741,6 +778,7 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         layout.connections += [(vbc["inlet"], name)] if "inlet" in vbc else []
         layout.connections += [(name, vbc["outlet"])] if "outlet" in vbc else []
     svzerod_closed_loop.add_blocks(cfg, period, vessels, bcs, attach, seen_names, _num)
+    heart_nodes = _closed_loop_layout(cfg, vessels, bcs, layout)
     first_element_node = len(layout.connections)
     _heart_elements(cfg, period, vessels, layout, bcs, used_bcs, attach)
     # svZeroDSolver numbers the valves' nodes after the junctions' (it creates valves later)
@@ -754,9 +792,7 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
     # a coupling block's wire: svZeroDSolver has no node at its free end, and no vessel row
     layout.connections = [c for c in layout.connections if not set(c) & wire_ends]
     layout.not_vessels |= set(wires)
-    # the heart's outlet node into a coupling block (its flow and the heart's outlet pressure)
-    layout.connections += [(svzerod_closed_loop.HEART_OUTLET, w) for w, other in wires.items()
-                           if other == svzerod_coupling.HEART]
+    layout.connections += heart_nodes
 
     if not vessels:
         raise ModelError("model: no vessels")
@@ -777,7 +813,10 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
     for h in hidden:
         if h["name"] in names:
             raise ModelError(f"junction branch '{h['name']}': name clashes with a vessel")
-    svzerod_initial.apply(cfg, vessels + hidden, layout.vessels, layout.connections, crl, _num)
+    # the closed-loop blocks' start values are the heart block's own (svzerod_closed_loop)
+    closed = {a for a, _ in heart_nodes}
+    svzerod_initial.apply(cfg, vessels + hidden, [e for e in layout.vessels if e[0] not in closed],
+                          layout.connections, crl, _num)
 
     dt = period / (float(pts) - 1.0)
     settings = RunSettings(
@@ -890,88 +929,139 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
     vessels = [dict(v, output=True) if v["name"] in needed else v for v in native["vessels"]]
     model = _build({**native, "vessels": vessels, "units": "SI"})
     recorded = {v["name"]: 4 * k for k, v in enumerate(x for x in vessels if x.get("output", True))}
-    names, idx, extra = _output_columns(layout, recorded, s.output_variable_based)
     chambers = [v["name"] for v in native["vessels"] if "chamber" in v]
-    if s.output_variable_based and (chambers or layout.spheres):
-        names, idx, extra = _with_chamber_volumes(model, chambers, layout.spheres, names, idx,
-                                                  extra)
+    elements = chambers or layout.spheres or any(k in ELEMENT_KINDS for k, _, _ in
+                                                 layout.internal)
+    if s.output_variable_based and elements:
+        # the elements' variables are unknowns of the core no vessel column holds
+        names, columns = _output_columns(layout, recorded, True, model.network, chambers)
         s = dataclasses.replace(s, all_unknowns=True)
+    else:
+        names, columns = _output_columns(layout, recorded, s.output_variable_based)
     shape = (len(names), 1 if s.output_variable_based else 4)
     if s.cycle_error is not None:
         ends = {name: (a, b) for name, a, b in layout.vessels}
         cap_cols = [(recorded[ends[v][end == "out"]] + (2 if end == "in" else 3),
                      recorded[ends[v][end == "out"]] + (0 if end == "in" else 1))
                     for v, end in s.caps]
-        times, values = _run_cycle_error(model, native, s, method, (idx, extra), cap_cols)
+        times, values = _run_cycle_error(model, native, s, method, columns, cap_cols)
         values = np.ascontiguousarray(values.reshape(len(times), *shape).transpose(1, 0, 2))
         return _frame(pd, names, times, values, None, s)
-    times, values, derivs = (_run_derivative if s.output_derivative else _run_streamed)(
-        model, native, s, method, (idx, extra), shape)
+    # svZeroDSolver's valve_status is solved at generalized-α's α_f stage (see _alpha_stage):
+    # a recursion over every step
+    every_step = s.output_derivative or (bool(columns[2]) and method == "generalized-alpha")
+    times, values, derivs = (_run_every_step if every_step else _run_streamed)(
+        model, native, s, method, columns, shape)
     return _frame(pd, names, times, values, derivs, s)
 
 
-def _output_columns(layout: _Layout, recorded: Mapping[str, int], variable_based: bool
-                    ) -> tuple[list[str], np.ndarray, list[tuple[int, int, float]]]:
-    """The output names and columns: column j of the output is recorded column ``idx[j]``
-    plus ``w`` times recorded column ``c`` for each (j, c, w) in ``extra``. Recorded columns
-    are each recorded vessel's pressure_in, pressure_out, flow_in, flow_out (at
-    ``recorded[vessel] + 0 .. 3``)."""
+#: svZeroDSolver's block order of the internal variables in its variable table (after the
+#: ChamberSphere vessels' wall variables; the chambers' ``Vc`` come last)
+INTERNAL_ORDER = {"rcr": 1, "ClosedLoopRCR": 1, "ClosedLoopCoronary": 1, "junction": 2,
+                  "heart": 3, "valve": 4}
+#: the internal variables read from the core's element unknowns (the run records every one)
+ELEMENT_KINDS = {"ClosedLoopCoronary", "heart", "valve"}
+
+#: output columns: column j is recorded column ``idx[j]`` plus ``w`` times recorded column
+#: ``c`` for each (j, c, w) in ``extra``, then mapped by ``f`` for each (j, f) in ``post``
+Columns = tuple[np.ndarray, list[tuple[int, int, float]], list[tuple[int, Any]]]
+
+
+def _output_columns(layout: _Layout, recorded: Mapping[str, int], variable_based: bool,
+                    network: Any = None, chambers: Sequence[str] = ()
+                    ) -> tuple[list[str], Columns]:
+    """The output names and columns. Recorded columns are each recorded vessel's pressure_in,
+    pressure_out, flow_in, flow_out (at ``recorded[vessel] + 0 .. 3``); with ``network`` (the
+    core network of a run recording every unknown) they are its unknowns instead, and the
+    variable table has the elements' variables too (ChamberSphere walls, closed-loop
+    coronary volumes, the heart block's variables, tanh valves' status, chambers' ``Vc``)."""
     ends = {name: (a, b) for name, a, b in layout.vessels}
     if not variable_based:
         shown = [n for n, _, _ in layout.vessels if n not in layout.not_vessels]
         idx = [recorded[ends[n][0]] + k if k in (0, 2) else recorded[ends[n][1]] + k
                for n in shown for k in range(4)]
-        return shown, np.asarray(idx, dtype=np.intp), []
+        return shown, (np.asarray(idx, dtype=np.intp), [], [])
+    lay = None if network is None else network.unknown_layout()
+    probe = None if lay is None else np.asarray(lay["vessel_unknowns"], dtype=np.intp)
+
+    def col(vessel: str, k: int) -> int:
+        c = recorded[vessel] + k
+        return c if probe is None else int(probe[c])
+
     names: list[str] = []
     idx: list[int] = []
     extra: list[tuple[int, int, float]] = []
-    node_of: dict[str, tuple[int, int, int]] = {}  # a condition's node: (base, p, q)
+    post: list[tuple[int, Any]] = []
+    node_of: dict[str, tuple[str, int, int]] = {}  # a condition's node: (vessel, p, q)
     for up, down in layout.connections:
         # a node's flow and pressure are those of the vessel end it joins
-        if down in ends:
-            base, p, q = recorded[ends[down][0]], 0, 2
-        else:
-            base, p, q = recorded[ends[up][1]], 1, 3
-        node_of.setdefault(up, (base, p, q))
-        node_of.setdefault(down, (base, p, q))
+        v, p, q = (ends[down][0], 0, 2) if down in ends else (ends[up][1], 1, 3)
+        node_of.setdefault(up, (v, p, q))
+        node_of.setdefault(down, (v, p, q))
         names += [f"flow:{up}:{down}", f"pressure:{up}:{down}"]
-        idx += [base + q, base + p]
-    for kind, name, ref in layout.internal:
-        names.append(f"pressure_c:{name}")
+        idx += [col(v, q), col(v, p)]
+    element = {} if lay is None else dict(lay.get("element_unknowns", []))
+    # a ChamberSphere is a vessel, svZeroDSolver's first blocks
+    for name in (f"{var}:{s}" for s in layout.spheres for var in svzerod_heart.SPHERE_VARIABLES):
+        names.append(name)
+        idx.append(element[name])
+    for kind, name, ref in sorted(layout.internal, key=lambda e: INTERNAL_ORDER[e[0]]):
+        if kind in ELEMENT_KINDS and lay is None:
+            raise ModelError(f"internal error: '{name}' needs every unknown recorded")
         if kind == "rcr":  # P_c = P - Rp Q at the Windkessel's node (Q along the vessel)
-            base, p, q = node_of[name]
-            idx.append(base + p)
-            extra.append((len(idx) - 1, base + q, -float(ref)))
-        else:  # the resistive junction's centre: the end of a port's hidden vessel there
-            vessel, offset = ref
-            idx.append(recorded[vessel] + offset)
-    return names, np.asarray(idx, dtype=np.intp), extra
+            v, p, q = node_of[name]
+            names.append(f"pressure_c:{name}")
+            idx.append(col(v, p))
+            extra.append((len(idx) - 1, col(v, q), -float(ref)))
+        elif kind == "junction":  # the resistive junction's centre: a port's hidden vessel end
+            names.append(f"pressure_c:{name}")
+            idx.append(col(ref[0], ref[1]))
+        elif kind == "ClosedLoopRCR":  # P_c: the capacitor node, its Rp-C vessel's outlet
+            names.append(f"P_c:{name}")
+            idx.append(col(ref, 1))
+        elif kind == "ClosedLoopCoronary":
+            names.append(f"volume_im:{name}")
+            idx.append(element[f"volume_im:{ref}"])
+        elif kind == "heart":
+            heart_cols = _heart_columns(lay, name)
+            names += [f"{var}:{name}" for var, _ in svzerod_closed_loop.VARIABLES]
+            idx += heart_cols
+        else:  # a tanh valve: its law's switch at the pressure difference across it
+            behind, front, _ = {n: u for n, u, _ in lay["valves"]}[name]
+            names.append(f"valve_status:{name}")
+            idx.append(int(front))
+            extra.append((len(idx) - 1, int(behind), -1.0))
+            post.append((len(idx) - 1, _valve_closure(network, name)))
+    if lay is not None:  # svZeroDSolver's chambers are its last blocks
+        volume = dict(lay["chamber_volumes"])
+        names += [f"Vc:{c}" for c in chambers]
+        idx += [volume[c] for c in chambers]
+    return names, (np.asarray(idx, dtype=np.intp), extra, post)
 
 
-def _with_chamber_volumes(model: Model, chambers: list[str], spheres: list[str],
-                          names: list[str], idx: np.ndarray, extra: list[tuple[int, int, float]]
-                          ) -> tuple[list[str], np.ndarray, list[tuple[int, int, float]]]:
-    """The variable table's columns for a run recording every unknown, with the wall
-    variables of svZeroDSolver's ChamberSphere vessels (``radius:<name>`` …, vessels being its
-    first blocks) and its ``Vc:<chamber>`` (its last internal variables: chambers are its last
-    blocks) appended."""
-    lay = model.network.unknown_layout()
-    probe = np.asarray(lay["vessel_unknowns"], dtype=np.intp)
+def _heart_columns(lay: Mapping[str, Any], heart: str) -> list[int]:
+    """The unknowns of the heart block's variables (svzerod_closed_loop.VARIABLES)."""
     volume = dict(lay["chamber_volumes"])
-    wall = dict(lay.get("element_unknowns", []))
-    added = [f"{var}:{s}" for s in spheres for var in svzerod_heart.SPHERE_VARIABLES]
-    cols = [wall[n] for n in added] + [volume[c] for c in chambers]
-    idx = np.concatenate([probe[idx], np.asarray(cols, dtype=np.intp)])
-    extra = [(j, int(probe[c]), w) for j, c, w in extra]
-    return names + added + [f"Vc:{c}" for c in chambers], idx, extra
+    valve = {n: u for n, u, _ in lay["valves"]}
+    return [int(volume[f"{heart}:{where}"]) if isinstance(where, str)
+            else int(valve[f"{heart}:{where[0]}"][where[1]])
+            for _, where in svzerod_closed_loop.VARIABLES]
 
 
-def _apply(data: np.ndarray, columns: tuple[np.ndarray, list[tuple[int, int, float]]]
-           ) -> np.ndarray:
-    idx, extra = columns
+def _valve_closure(network: Any, name: str) -> Any:
+    """The core's valve_status of valve ``name`` from the pressure difference across it."""
+    def f(dp: np.ndarray) -> np.ndarray:
+        return np.asarray(network.valve_closure(name, dp.tolist()))
+    return f
+
+
+def _apply(data: np.ndarray, columns: Columns) -> np.ndarray:
+    idx, extra, post = columns
     out = data[:, idx]
     for j, c, w in extra:
         out[:, j] += w * data[:, c]
+    for j, f in post:
+        out[:, j] = f(out[:, j])
     return out
 
 
@@ -1030,7 +1120,7 @@ def _check_times(s: RunSettings, got: np.ndarray, times: np.ndarray) -> None:
 
 
 def _run_streamed(model: Model, native: Mapping[str, Any], s: RunSettings, method: str,
-                  columns: tuple[np.ndarray, list[tuple[int, int, float]]],
+                  columns: Columns,
                   shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, None]:
     """Run and keep the output rows only: (times, (output, time, width) values, None) for
     ``shape`` = (outputs, width: 4 quantities of a vessel or 1 variable)."""
@@ -1078,11 +1168,31 @@ def _run_streamed(model: Model, native: Mapping[str, Any], s: RunSettings, metho
     return times, values, None
 
 
-def _run_derivative(model: Model, native: Mapping[str, Any], s: RunSettings, method: str,
-                    columns: tuple[np.ndarray, list[tuple[int, int, float]]],
-                    shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Run recording every step of every cycle and return (times, values, time derivatives)
-    at svZeroDSolver's output rows. Generalized-α: svZeroDSolver's own ẏ, from its update
+def _alpha_stage(dp: np.ndarray, law: Any, rho: float, steady: bool) -> np.ndarray:
+    """svZeroDSolver's algebraic internal variable s = f(Δp) (a tanh valve's valve_status)
+    through every generalized-α step: its equation holds at the α_f stage, f(Δp_{n+α_f}) =
+    s_n + α_f (s_{n+1} − s_n), Δp_{n+α_f} = Δp_n + α_f (Δp_{n+1} − Δp_n), α_f = 1/(1 + ρ∞)
+    (the pressures are the core's, which solves the same stage equations). Between steps
+    s_{n+1} − f(Δp_{n+1}) changes sign and shrinks by ρ∞ (its output oscillates around
+    f(Δp) after a switch, as svZeroDSolver's does). Start: 0, svZeroDSolver's zero state, or
+    f(Δp_0) after its steady iterations (their leftover, as for ẏ₀ in ``_run_every_step``,
+    decays as ρ∞^n)."""
+    af = 1.0 / (1.0 + rho)
+    stage = law(dp[:-1] + af * (dp[1:] - dp[:-1]))
+    out = np.empty_like(dp)
+    out[0] = law(dp[:1])[0] if steady else 0.0
+    for n in range(len(dp) - 1):
+        out[n + 1] = out[n] + (stage[n] - out[n]) / af
+    return out
+
+
+def _run_every_step(model: Model, native: Mapping[str, Any], s: RunSettings, method: str,
+                    columns: Columns,
+                    shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Run recording every step of every cycle and return (times, values, time derivatives
+    or None without ``output_derivative``) at svZeroDSolver's output rows, the tanh valves'
+    valve_status through :func:`_alpha_stage` with generalized-α. Derivatives: with
+    generalized-α svZeroDSolver's own ẏ, from its update
     ẏ_{n+1} = (1 + ρ∞)(y_{n+1} − y_n)/Δt − ρ∞ ẏ_n from ẏ_0 = 0 (exact for ρ∞ = 0 and for a
     zero start; after a steady start its ẏ_0, left over from the steady iterations, is taken
     as 0, an error that decays as ρ∞^n). RK4: second-order backward differences of at least
@@ -1098,10 +1208,16 @@ def _run_derivative(model: Model, native: Mapping[str, Any], s: RunSettings, met
     if "error" in raw:
         raise raw["error"]
     t = np.asarray(raw["times"])
-    y = _apply(np.asarray(raw["data"]).reshape(len(t), -1), columns)
+    idx, extra, post = columns
+    y = _apply(np.asarray(raw["data"]).reshape(len(t), -1), (idx, extra, []))
     if len(t) != (s.points_per_cycle - 1) * s.cycles * sub + 1:
         raise ModelError(f"internal error: {len(t)} rows from the core")
-    if method == "generalized-alpha":
+    for j, law in post:
+        y[:, j] = law(y[:, j]) if method != "generalized-alpha" else \
+            _alpha_stage(y[:, j], law, s.rho_infty, s.steady_initial)
+    if not s.output_derivative:
+        yd = None
+    elif method == "generalized-alpha":
         rho = s.rho_infty
         yd = np.zeros_like(y)
         for n in range(len(t) - 1):
@@ -1114,11 +1230,11 @@ def _run_derivative(model: Model, native: Mapping[str, Any], s: RunSettings, met
     def block(a: np.ndarray) -> np.ndarray:  # (time, output x width) -> (output, time, width)
         return np.ascontiguousarray(a[rows].reshape(len(rows), *shape).transpose(1, 0, 2))
 
-    return times, block(y), block(yd)
+    return times, block(y), None if yd is None else block(yd)
 
 
 def _run_cycle_error(model: Model, native: Mapping[str, Any], s: RunSettings, method: str,
-                     columns: tuple[np.ndarray, list[tuple[int, int, float]]],
+                     columns: Columns,
                      cap_cols: list[tuple[int, int]]) -> tuple[np.ndarray, np.ndarray]:
     """svZeroDSolver's extra cycles without RCR (:mod:`oxyline.io.svzerod_cycles`): the output
     times and the (rows, outputs x width) values."""

@@ -48,6 +48,15 @@ FACTORS = {"iml": "left", "imr": "right"}
 INITIAL = {"V_RA": "initial_right_atrium_volume", "V_RV": "initial_right_ventricle_volume",
            "V_LA": "initial_left_atrium_volume", "V_LV": "initial_left_ventricle_volume",
            "P_pul": "initial_pulmonary_pressure"}
+#: the heart block's internal variables in svZeroDSolver's order (its variable table): a
+#: chamber's volume (the core's ``chamber_volumes`` entry ``CLH:<chamber>``) or a pressure or
+#: flow at a valve (the core's valve probe ``CLH:<valve>``: 0 the pressure behind it, 1 the
+#: pressure in front, 2 its flow; the pulmonary valve opens into the pulmonary pressure P_pul)
+VARIABLES = (("V_RA", "right_atrium"), ("Q_RA", ("tricuspid", 2)), ("P_RV", ("tricuspid", 1)),
+             ("V_RV", "right_ventricle"), ("Q_RV", ("pulmonary", 2)),
+             ("P_pul", ("pulmonary", 1)), ("P_LA", ("mitral", 0)), ("V_LA", "left_atrium"),
+             ("Q_LA", ("mitral", 2)), ("P_LV", ("mitral", 1)), ("V_LV", "left_ventricle"),
+             ("Q_LV", ("aortic", 2)))
 BLOCK_KEYS = {"outlet_blocks", "closed_loop_type", "cardiac_cycle_period", "parameters"}
 
 Num = Callable[[Any, str, str], float]

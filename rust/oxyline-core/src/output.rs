@@ -102,6 +102,9 @@ pub struct ValveProbe {
     /// The heart block's on/off rule (open also while its flow is positive); else a `valve`
     /// element, open while the pressure behind exceeds the pressure in front.
     pub on_off: bool,
+    /// A `valve` element's law (its `closure` is svZeroDSolver's `valve_status`); None for
+    /// the heart block's on/off valves.
+    pub law: Option<crate::element::valve::ValveLaw>,
 }
 
 impl Probes {
@@ -138,14 +141,15 @@ impl Probes {
             match el {
                 CircuitElement::Valve {
                     name,
+                    law,
                     branch,
                     from,
                     to,
-                    ..
                 } => self.valves.push(ValveProbe {
                     name: valve_vessel(name),
                     unknowns: [*from, *to, nn + branch],
                     on_off: false,
+                    law: Some(*law),
                 }),
                 CircuitElement::Heart {
                     nodes,
@@ -170,6 +174,7 @@ impl Probes {
                             name: format!("{vessel}:{part}"),
                             unknowns: [ends[k].0, ends[k].1, nn + branches[k]],
                             on_off: true,
+                            law: None,
                         });
                     }
                 }

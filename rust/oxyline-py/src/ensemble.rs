@@ -147,6 +147,10 @@ struct Output {
     transport: bool,
     /// Summary output: compute [`ColumnStats`] here, on the worker thread.
     summary: bool,
+    /// Record the heart outputs' unknowns after the selected columns (each chamber's
+    /// volume, then each valve's [pressure behind, pressure in front, flow], as
+    /// `Network.unknown_layout` lists them); the rows are then kept (no streamed summary).
+    heart: bool,
 }
 
 /// One variant: patch, assemble, select, run; `template` holds the shared settings.
@@ -203,13 +207,18 @@ fn run_variant(
         }
     };
     let selected = output.variables.is_some() || output.vessels.is_some();
-    let (probes, species_columns) = recorded_columns(
+    let (mut probes, species_columns) = recorded_columns(
         &member.assembled.probes,
         member.transport.as_ref(),
         &sel,
         selected,
         output.segments,
     );
+    if output.heart {
+        let p = &member.assembled.probes;
+        probes.extend(p.chamber_volumes.iter().map(|&(_, u)| u));
+        probes.extend(p.valves.iter().flat_map(|v| v.unknowns));
+    }
     let settings = RunSettings {
         probes,
         species_columns,
@@ -221,7 +230,7 @@ fn run_variant(
     // species, two or more vessels: see `stats_summary` in ensemble/collect.py) folds them
     // as the rows stream by: no output table per variant
     let species_recorded = output.transport && member.transport.is_some();
-    let streamed = output.summary && !species_recorded && sel.vessels.len() >= 2;
+    let streamed = output.summary && !species_recorded && !output.heart && sel.vessels.len() >= 2;
     if streamed {
         let mut fold = StatsFold::new(settings.probes.len());
         let mut write = |c: Chunk<'_>| {
@@ -382,8 +391,11 @@ impl Ensemble {
     /// False if Ctrl-C stopped the ensemble (the variants finished until then were handed
     /// over, running ones as "interrupted"; the rest were never fed). `summary`: each
     /// finished variant's `raw` also has `column_stats`, the (mean, min, max) arrays of
-    /// `oxyline_core::ensemble::column_stats` over its output columns.
-    #[pyo3(signature = (feed, *, on_done, workers = None, summary = false, **settings))]
+    /// `oxyline_core::ensemble::column_stats` over its output columns. `heart`: record the
+    /// chamber volumes' and valves' unknowns after the output columns (see `Output::heart`).
+    #[pyo3(signature = (feed, *, on_done, workers = None, summary = false, heart = false,
+        **settings))]
+    #[allow(clippy::too_many_arguments)]
     fn run(
         &self,
         py: Python<'_>,
@@ -391,6 +403,7 @@ impl Ensemble {
         on_done: Py<PyAny>,
         workers: Option<usize>,
         summary: bool,
+        heart: bool,
         settings: Option<Bound<'_, PyDict>>,
     ) -> PyResult<bool> {
         let shared = Shared::from_kwargs(settings.as_ref())?;
@@ -405,6 +418,7 @@ impl Ensemble {
             segments: shared.segments,
             transport: shared.transport,
             summary,
+            heart,
         };
         let (base, targets) = (self.base.clone(), self.targets.clone());
         let job = |_: usize, input: Input, cancelled: &AtomicBool| {

@@ -403,6 +403,26 @@ impl Network {
         Ok(d)
     }
 
+    /// svZeroDSolver's `valve_status` of the `valve` element of vessel `name` at the pressure
+    /// differences `dp` = P_front − P_behind (its law's switch, 0 open, 1 closed;
+    /// docs/physics.md §1.8). `ValueError` for a name that is no valve element.
+    fn valve_closure<'py>(
+        &self,
+        py: Python<'py>,
+        name: &str,
+        dp: Vec<f64>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let probes = &self.inner.0.probes;
+        let law = (probes.valves.iter())
+            .find(|v| v.name == name)
+            .and_then(|v| v.law)
+            .ok_or_else(|| {
+                PyValueError::new_err(format!("valve_closure: '{name}' is not a valve element"))
+            })?;
+        let out: Vec<f64> = dp.iter().map(|&d| law.closure(d)).collect();
+        Ok(out.into_pyarray(py))
+    }
+
     /// Layout of the output selection (see `oxyline_core::output`): selected vessels, their
     /// segment counts and positions, the selected variable names and the column counts.
     #[pyo3(signature = (*, variables = None, vessels = None, segments = true))]

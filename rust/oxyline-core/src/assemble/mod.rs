@@ -131,6 +131,12 @@ impl NetworkSpec {
                             .push((format!("{var}:{}", v.name), first + k));
                     }
                 }
+                if v.coronary_bed.is_some() {
+                    // its intramyocardial volume, the one element unknown it adds
+                    // (svZeroDSolver's `volume_im`)
+                    let volume = circuit.extras.len() - 1;
+                    (probes.element_unknowns).push((format!("volume_im:{}", v.name), volume));
+                }
                 if v.heart_pulmonary.is_some() {
                     // its four volumes, then the pulmonary pressure, are its element unknowns
                     let first = circuit.extras.len() - 5;

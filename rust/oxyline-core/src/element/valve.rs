@@ -41,6 +41,21 @@ impl ValveLaw {
             ValveLaw::Piecewise { r_min, r_max } => (if dp < 0.0 { r_min } else { r_max }, 0.0),
         }
     }
+    /// svZeroDSolver's `valve_status` at `dp` = P_to − P_from: the fraction of the way from
+    /// R_min to R_max of the law's switch (0 open, 1 closed), 0.5 (1 + tanh(k dp)) for `tanh`
+    /// (its `ValveTanh` outputs it as an internal variable) and 0 or 1 for `piecewise`.
+    pub fn closure(&self, dp: f64) -> f64 {
+        match *self {
+            ValveLaw::Tanh { steepness, .. } => 0.5 * (1.0 + (steepness * dp).tanh()),
+            ValveLaw::Piecewise { .. } => {
+                if dp < 0.0 {
+                    0.0
+                } else {
+                    1.0
+                }
+            }
+        }
+    }
     pub fn r_min(&self) -> f64 {
         match *self {
             ValveLaw::Tanh { r_min, .. } | ValveLaw::Piecewise { r_min, .. } => r_min,
@@ -180,5 +195,25 @@ mod tests {
         };
         assert_eq!(law.resistance(-1e-9).0, 1.0);
         assert_eq!(law.resistance(0.0).0, 1e3);
+    }
+
+    #[test]
+    fn closure_is_the_fraction_of_the_resistance_switch() {
+        // svZeroDSolver's valve_status: (R − R_min)/(R_max − R_min), 0 open, 1 closed
+        let law = ValveLaw::Tanh {
+            r_min: 2.0,
+            r_max: 1e4,
+            steepness: 0.3,
+        };
+        for dp in [-50.0, -1.0, 0.0, 0.7, 20.0] {
+            let frac = (law.resistance(dp).0 - 2.0) / (1e4 - 2.0);
+            assert!((law.closure(dp) - frac).abs() < 1e-12, "{dp}");
+        }
+        assert_eq!(law.closure(0.0), 0.5);
+        let pw = ValveLaw::Piecewise {
+            r_min: 1.0,
+            r_max: 1e3,
+        };
+        assert_eq!((pw.closure(-1e-9), pw.closure(0.0)), (0.0, 1.0));
     }
 }
