@@ -83,7 +83,7 @@ fn rk4_increment(dt: f64, weighted_sum: f64) -> f64 {
 }
 
 /// Stage `s` of a coupled state's RK4 step, applied entry by entry as the stage derivative is
-/// computed, so that the derivative is never stored: stages 1–3 add the entry to the running
+/// computed ([`StageSink::sweep`]), so that the derivative is never stored: stages 1–3 add the entry to the running
 /// weighted sum and write the next stage state base + c Δt k in place of the stage state just
 /// read (an entry's stage value is read only for its own derivative, before it is handed
 /// over); stage 4 completes the sum and advances the base state. Bit for bit the stage and
@@ -105,50 +105,23 @@ impl StageSink<'_> {
         self.stage
     }
 
-    /// Entry `i` of this stage's derivative. Entry `i` of the stage state is overwritten
-    /// (stages 1–3): read it before.
-    #[inline(always)]
-    pub fn put(&mut self, i: usize, k: f64) {
-        let sum = rk4_weighted_sum(self.acc[i], k, self.s);
-        if self.s < 3 {
-            self.acc[i] = sum;
-            self.stage[i] = self.base[i] + self.c_dt * k;
-        } else {
-            self.base[i] += rk4_increment(self.dt, sum);
-        }
-    }
-
     /// Entries `start..start + n` in one pass: `rate(j, z)` is the derivative of entry
-    /// `start + j` at its stage value `z` (the stage is picked once per pass, not per entry).
+    /// `start + j` at its stage value `z`. (One call site of `rate`, so that it is inlined; the
+    /// branch on the stage is the same for every entry.)
     #[inline(always)]
     pub fn sweep(&mut self, start: usize, n: usize, mut rate: impl FnMut(usize, f64) -> f64) {
         let r = start..start + n;
-        let (base, acc, stage) = (
-            &mut self.base[r.clone()],
-            &mut self.acc[r.clone()],
-            &mut self.stage[r],
-        );
+        let (base, acc) = (&mut self.base[r.clone()], &mut self.acc[r.clone()]);
+        let stage = &mut self.stage[r];
         let (s, dt, c_dt) = (self.s, self.dt, self.c_dt);
-        if s < 3 {
-            for (j, ((a, st), b)) in acc
-                .iter_mut()
-                .zip(stage.iter_mut())
-                .zip(base.iter())
-                .enumerate()
-            {
-                let k = rate(j, *st);
-                *a = rk4_weighted_sum(*a, k, s);
-                *st = b + c_dt * k;
-            }
-        } else {
-            for (j, ((b, a), st)) in base
-                .iter_mut()
-                .zip(acc.iter())
-                .zip(stage.iter())
-                .enumerate()
-            {
-                let k = rate(j, *st);
-                *b += rk4_increment(dt, rk4_weighted_sum(*a, k, s));
+        for (j, ((b, a), st)) in base.iter_mut().zip(acc.iter_mut()).zip(stage).enumerate() {
+            let k = rate(j, *st);
+            let sum = rk4_weighted_sum(*a, k, s);
+            if s < 3 {
+                *a = sum;
+                *st = *b + c_dt * k;
+            } else {
+                *b += rk4_increment(dt, sum);
             }
         }
     }

@@ -212,7 +212,11 @@ impl Transport {
         macro_rules! rate {
             ($i:expr, $z:expr) => {{
                 let (i, n) = ($i, cells[$i]);
-                let wall = has_wall.then(|| (laws, i, free[n]));
+                let wall = if has_wall {
+                    Some((laws, i, free[n]))
+                } else {
+                    None
+                };
                 cell_rate(dnode[n], wall, lambda, $z, &mut i_wall, &mut i_decay)
             }};
         }
