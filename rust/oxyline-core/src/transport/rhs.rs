@@ -1,4 +1,5 @@
-//! Explicit right-hand side (monolithic RK4 with the flow).
+//! Explicit right-hand side (monolithic RK4 with the flow, docs/physics.md §2.5: the
+//! conservative finite-volume form, V = V0 + C (P − P_ref), upwind face fluxes).
 //!
 //! Per stage and species: one pass over the cells (volumes on the first species, total and
 //! free concentrations), the face fluxes, and one pass over the cells for their rates. In the
