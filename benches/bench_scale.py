@@ -25,6 +25,13 @@ times in brackets —
     python benches/bench_scale.py --depths 18 --configs flow o2-k     # the 1e6-segment run
     python benches/bench_scale.py --depths 18 --configs o2-k --zarr   # ... streamed to Zarr
     python benches/bench_scale.py --depths 18 --configs o2-k --variables flow_in concentration_in
+    python benches/bench_scale.py --depths 12 14 16 --methods rk4 --rk4-max-depth 16 \
+        --rk4-fraction 0.01 --baseline /path/to/old        # before/after in the same run
+
+O2/flow is per step (a partial RK4 cycle: the steps between the first progress check and the
+stop); "run O2/flow" is the whole ``simulate`` call, including the steady start, RK4's step
+size search and the Lévêque closure's one-off first pass (a partial cycle: extrapolated to the
+whole cycle at the timed steps' rate).
 """
 
 from __future__ import annotations
@@ -117,10 +124,17 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
         # from the first check to the stop, so the start (steady state, step size) is left out
         cancel = threading.Event()
 
+        # the Lévêque closure runs a one-off flow-only cycle first: its checks are not timed,
+        # the main pass starts when the clock goes back
+        in_first_pass = [spec["config"] == "o2-leveque"]
+
         def stop(t: float, t_end: float) -> None:
             if not cancel.is_set():
+                if marks and t < marks[-1][0]:
+                    marks.clear()
+                    in_first_pass[0] = False
                 marks.append((t, time.process_time()))
-                if t >= fraction * PERIOD and len(marks) > 1:
+                if t >= fraction * PERIOD and len(marks) > 1 and not in_first_pass[0]:
                     cancel.set()
 
         kw.update(progress=stop, cancel=cancel)
@@ -144,9 +158,13 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
                "run_wall": w2 - w1, "segments": int(m.network.summary()["segments"]),
                "dt": dt, "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
         if len(marks) > 1:
-            # a partial cycle: the timed steps only, no end-of-cycle mass balance
+            # a partial cycle: the timed steps only, no end-of-cycle mass balance; the whole
+            # cycle's CPU estimated as everything before the first timed check (steady start,
+            # step size, first pass, the first steps) plus the remaining steps at the timed rate
             out["steps"] = round((marks[-1][0] - marks[0][0]) / dt)
             out["step_cpu"] = marks[-1][1] - marks[0][1]
+            rest = round((PERIOD - marks[0][0]) / dt)
+            out["cycle_cpu"] = marks[0][1] - c1 + out["step_cpu"] / out["steps"] * rest
             return out
         if not spec.get("zarr") and res.species:
             mb = res.o2_mass_balance
@@ -155,12 +173,18 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def measure(spec: dict[str, Any]) -> dict[str, Any]:
-    """Run ``spec`` in a fresh interpreter; best (smallest CPU) of ``repeat`` runs."""
+def measure(spec: dict[str, Any], baseline: str | None = None) -> dict[str, Any]:
+    """Run ``spec`` in a fresh interpreter; best (smallest CPU) of ``repeat`` runs.
+    ``baseline``: a directory holding another build of the ``oxyline`` package, put first on
+    the child's path (a before/after comparison in the same run)."""
+    env = None
+    if baseline:
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+            [baseline, *filter(None, [os.environ.get("PYTHONPATH")])]))
     best: dict[str, Any] | None = None
     for _ in range(spec["repeat"]):
         p = subprocess.run([sys.executable, __file__, "--child", json.dumps(spec)],
-                           capture_output=True, text=True, check=False)
+                           capture_output=True, text=True, check=False, env=env)
         if p.returncode != 0:
             return {"error": (p.stderr.strip().splitlines() or ["?"])[-1]}
         r = json.loads(p.stdout.strip().splitlines()[-1])
@@ -200,11 +224,15 @@ def row(method: str, config: str, r: dict[str, Any], flow: dict[str, Any] | None
     # (a partial cycle is timed between progress checks: O2/flow per step)
     ratio = (f"{(step_cpu(r) / steps) / (step_cpu(flow) / flow.get('steps', steps)):.2f}"
              if flow and config != "flow" else "–")
+    # the whole simulate call (steady start, step size, first pass included; a partial cycle
+    # extrapolated to the whole one)
+    run_ratio = (f"{r.get('cycle_cpu', r['run_cpu']) / flow.get('cycle_cpu', flow['run_cpu']):.2f}"
+                 if flow and config != "flow" else "–")
     res = f"{r['residual']:.1e}" if "residual" in r else "–"
     return (f"| {method} | {config} | {r['segments']} | {steps} | {r['load_cpu']:.2f} "
             f"({r['load_wall']:.2f}) | {r['run_cpu']:.2f} ({r['run_wall']:.2f}) | {ns:.1f} | "
             f"{r['peak_mb']:.0f} | {ratio} | {1e6 * r['load_cpu'] / r['segments']:.2f} | "
-            f"{res} |")
+            f"{res} | {run_ratio} |")
 
 
 def print_slopes(rows: dict[tuple[str, str], list[dict[str, Any]]], min_segments: float) -> None:
@@ -250,6 +278,9 @@ def main() -> None:
                     help="RK4 runs stop this fraction into the cycle (its automatic dt makes "
                          "a whole cycle of a 65 k-segment tree take minutes); O2/flow is then "
                          "per step")
+    ap.add_argument("--baseline", metavar="DIR",
+                    help="also run every configuration with the oxyline package in DIR "
+                         "(rows marked 'baseline', right after this build's)")
     a = ap.parse_args()
     if a.child:
         print(json.dumps(child(json.loads(a.child))))
@@ -269,28 +300,32 @@ def main() -> None:
              "over the steps between the first progress check and the stop)"
              if a.rk4_fraction < 1.0 and "rk4" in a.methods else ""))
     print("| method | config | segments | steps | load s | run s | ns/seg-step | peak MB "
-          "| O2/flow | load µs/seg | mass residual |")
-    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+          "| O2/flow | load µs/seg | mass residual | run O2/flow |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     rows: dict[tuple[str, str], list[dict[str, Any]]] = {}
     skipped: list[str] = []
     for method in a.methods:
         for depth in a.depths:
-            flow = None
+            flows: dict[str | None, dict[str, Any]] = {}
             for config in a.configs:
                 limit = a.rk4_max_depth if method == "rk4" else max_depth.get(config, 99)
                 if depth > limit:
                     skipped.append(f"{method} {config} depth {depth}")
                     continue
-                r = measure({"depth": depth, "per_vessel": a.per_vessel, "config": config,
-                             "method": method, "repeat": a.repeat, "zarr": a.zarr,
-                             "fraction": a.rk4_fraction if method == "rk4" else 1.0,
-                             "time_chunk": a.time_chunk, "variables": a.variables})
-                if "error" in r:
-                    print(f"| {method} | {config} | depth {depth} | failed: {r['error']} |")
-                    continue
-                flow = r if config == "flow" else flow
-                print(row(method, config, r, flow), flush=True)
-                rows.setdefault((method, config), []).append(r)
+                spec = {"depth": depth, "per_vessel": a.per_vessel, "config": config,
+                        "method": method, "repeat": a.repeat, "zarr": a.zarr,
+                        "fraction": a.rk4_fraction if method == "rk4" else 1.0,
+                        "time_chunk": a.time_chunk, "variables": a.variables}
+                for build in ([None, a.baseline] if a.baseline else [None]):
+                    label = f"{method} (baseline)" if build else method
+                    r = measure(spec, build)
+                    if "error" in r:
+                        print(f"| {label} | {config} | depth {depth} | failed: {r['error']} |")
+                        continue
+                    if config == "flow":
+                        flows[build] = r
+                    print(row(label, config, r, flows.get(build)), flush=True)
+                    rows.setdefault((label, config), []).append(r)
     if skipped:
         print(f"\nnot run (--rk4-max-depth {a.rk4_max_depth}: RK4's automatic dt makes its step "
               f"count grow with the tree; --quick also stops Hill at depth 14): "

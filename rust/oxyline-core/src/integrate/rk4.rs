@@ -15,6 +15,14 @@ use crate::error::{Error, Result};
 /// coupled system is advanced as one ODE (docs/physics.md §2.5, "monolithic").
 pub trait Coupled {
     fn derivative(&mut self, time: f64, y: &[f64], z: &[f64], dz: &mut [f64]) -> Result<()>;
+
+    /// The derivative at (t, y, the sink's stage state), each entry handed to `sink` as it is
+    /// computed (a state that can do so saves storing the four stage derivatives and the
+    /// separate stage and combination passes over them). By default: [`Coupled::derivative`]
+    /// into the sink's scratch, then every entry to the sink.
+    fn stage_derivative(&mut self, time: f64, y: &[f64], sink: &mut StageSink<'_>) -> Result<()> {
+        stage_derivative_stored(self, time, y, sink)
+    }
 }
 
 /// Flow only.
@@ -26,11 +34,14 @@ impl Coupled for Uncoupled {
     }
 }
 
-/// Stage storage of an RK4 step: the four stage derivatives and the stage state.
+/// Stage storage of an RK4 step: the stage state and the running weighted sum of the stage
+/// derivatives (coupled states, see [`StageSink`]); the four stage derivatives of a plain ODE
+/// ([`rk4_ode`]; the first one is the scratch of [`Coupled::stage_derivative`]'s default).
 #[derive(Debug, Clone, Default)]
 pub struct CoupledStages {
     k: [Vec<f64>; 4],
     stage: Vec<f64>,
+    acc: Vec<f64>,
 }
 
 impl CoupledStages {
@@ -38,8 +49,100 @@ impl CoupledStages {
         CoupledStages {
             k: [vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]],
             stage: vec![0.0; n],
+            acc: vec![0.0; n],
         }
     }
+
+    /// Storage for a coupled state only (no stage derivatives kept: [`StageSink`]).
+    pub fn coupled(n: usize) -> Self {
+        CoupledStages {
+            k: Default::default(),
+            stage: vec![0.0; n],
+            acc: vec![0.0; n],
+        }
+    }
+}
+
+/// The classical RK4 weights (1, 2, 2, 1) summed stage by stage: the running sum after stage
+/// `s` (0-based) given the one before (`acc`, ignored at stage 0) and stage `s`'s derivative
+/// `k`. Summed left to right, ((k1 + 2 k2) + 2 k3) + k4, as the combination always was, so
+/// folding it one stage at a time rounds exactly as the four-term expression.
+#[inline(always)]
+fn rk4_weighted_sum(acc: f64, k: f64, s: usize) -> f64 {
+    match s {
+        0 => k,
+        1 | 2 => acc + 2.0 * k,
+        _ => acc + k,
+    }
+}
+
+/// The increment Δt/6 · (weighted sum of the four stage derivatives) of the RK4 combination.
+#[inline(always)]
+fn rk4_increment(dt: f64, weighted_sum: f64) -> f64 {
+    dt / 6.0 * weighted_sum
+}
+
+/// Stage `s` of a coupled state's RK4 step, applied entry by entry as the stage derivative is
+/// computed ([`StageSink::sweep`]), so that the derivative is never stored: stages 1–3 add the entry to the running
+/// weighted sum and write the next stage state base + c Δt k in place of the stage state just
+/// read (an entry's stage value is read only for its own derivative, before it is handed
+/// over); stage 4 completes the sum and advances the base state. Bit for bit the stage and
+/// combination kernels [`rk4_stage`] and [`rk4_combine`].
+pub struct StageSink<'a> {
+    s: usize,
+    dt: f64,
+    c_dt: f64,
+    base: &'a mut [f64],
+    acc: &'a mut [f64],
+    stage: &'a mut [f64],
+    scratch: &'a mut Vec<f64>,
+}
+
+impl StageSink<'_> {
+    /// The stage state at which this stage's derivative is evaluated.
+    #[inline]
+    pub fn z(&self) -> &[f64] {
+        self.stage
+    }
+
+    /// Entries `start..start + n` in one pass: `rate(j, z)` is the derivative of entry
+    /// `start + j` at its stage value `z`. (One call site of `rate`, so that it is inlined; the
+    /// branch on the stage is the same for every entry.)
+    #[inline(always)]
+    pub fn sweep(&mut self, start: usize, n: usize, mut rate: impl FnMut(usize, f64) -> f64) {
+        let r = start..start + n;
+        let (base, acc) = (&mut self.base[r.clone()], &mut self.acc[r.clone()]);
+        let stage = &mut self.stage[r];
+        let (s, dt, c_dt) = (self.s, self.dt, self.c_dt);
+        for (j, ((b, a), st)) in base.iter_mut().zip(acc.iter_mut()).zip(stage).enumerate() {
+            let k = rate(j, *st);
+            let sum = rk4_weighted_sum(*a, k, s);
+            if s < 3 {
+                *a = sum;
+                *st = *b + c_dt * k;
+            } else {
+                *b += rk4_increment(dt, sum);
+            }
+        }
+    }
+}
+
+/// [`Coupled::stage_derivative`] by way of the stored derivative (the trait's default, also
+/// the fallback of a state whose derivative cannot be handed over entry by entry).
+pub fn stage_derivative_stored<C: Coupled + ?Sized>(
+    coupled: &mut C,
+    time: f64,
+    y: &[f64],
+    sink: &mut StageSink<'_>,
+) -> Result<()> {
+    let mut k = std::mem::take(sink.scratch);
+    k.resize(sink.stage.len(), 0.0);
+    let done = coupled.derivative(time, y, sink.stage, &mut k);
+    if done.is_ok() {
+        sink.sweep(0, k.len(), |j, _| k[j]);
+    }
+    *sink.scratch = k;
+    done
 }
 
 /// Stage times (fractions of the step) of stages 2–4 of the classical RK4 tableau; stage s + 1
@@ -75,7 +178,10 @@ pub fn rk4_stage(stage: &mut [f64], base: &[f64], k: &[f64], c_dt: f64, rows: Ro
 /// The classical RK4 combination `y_i += Δt/6 (k1 + 2 k2 + 2 k3 + k4)_i` for the `rows`.
 #[inline]
 pub fn rk4_combine(y: &mut [f64], k: &[Vec<f64>; 4], dt: f64, rows: Rows<'_>) {
-    let increment = |i: usize| dt / 6.0 * (k[0][i] + 2.0 * k[1][i] + 2.0 * k[2][i] + k[3][i]);
+    let increment = |i: usize| {
+        let sum = (0..4).fold(0.0, |acc, s| rk4_weighted_sum(acc, k[s][i], s));
+        rk4_increment(dt, sum)
+    };
     match rows {
         Rows::All => {
             for (i, yi) in y.iter_mut().enumerate() {
@@ -300,22 +406,37 @@ impl<'a> Rk4<'a> {
         stage.copy_from_slice(y);
         self.rhs(time, &mut stage, 0)?;
         if coupled_on {
+            if zk.stage.len() != z.len() || zk.acc.len() != z.len() {
+                *zk = CoupledStages::coupled(z.len());
+            }
             zk.stage.copy_from_slice(z);
-            coupled.derivative(time, &stage, &zk.stage, &mut zk.k[0])?;
         }
+        // the coupled state's stage s derivative is evaluated at the flow's stage s state; its
+        // sink writes the coupled stage s + 1 state (or, at the last stage, the new state)
+        let mut coupled_stage = |s: usize, ts: f64, y_stage: &[f64], z: &mut [f64]| {
+            if !coupled_on {
+                return Ok(());
+            }
+            let c_dt = RK4_STAGE.get(s).map_or(0.0, |c| c * dt);
+            let mut sink = StageSink {
+                s,
+                dt,
+                c_dt,
+                base: z,
+                acc: &mut zk.acc,
+                stage: &mut zk.stage,
+                scratch: &mut zk.k[0],
+            };
+            coupled.stage_derivative(ts, y_stage, &mut sink)
+        };
+        coupled_stage(0, time, &stage, z)?;
         for (s, c) in RK4_STAGE.into_iter().enumerate() {
             rk4_stage(&mut stage, y, &self.st.k[s], c * dt, Rows::Only(&self.diff));
             let ts = time + c * dt;
             self.rhs(ts, &mut stage, s + 1)?;
-            if coupled_on {
-                rk4_stage(&mut zk.stage, z, &zk.k[s], c * dt, Rows::All);
-                coupled.derivative(ts, &stage, &zk.stage, &mut zk.k[s + 1])?;
-            }
+            coupled_stage(s + 1, ts, &stage, z)?;
         }
         rk4_combine(y, &self.st.k, dt, Rows::Only(&self.diff));
-        if coupled_on {
-            rk4_combine(z, &zk.k, dt, Rows::All);
-        }
         // algebraic unknowns of the last stage are the best warm start
         if let Some(alg) = &self.alg {
             for &g in &alg.rows {

@@ -178,7 +178,7 @@ impl State<'_, '_> {
         match (&mut self.flow, self.species.as_mut()) {
             (Flow::Monolithic(rk), Some(sp)) => {
                 let n = sp.z.len();
-                let zk = sp.zk.get_or_insert_with(|| CoupledStages::new(n));
+                let zk = sp.zk.get_or_insert_with(|| CoupledStages::coupled(n));
                 rk.step_coupled(t, y, &mut sp.z, zk, &mut *sp.tr)
             }
             (flow, mut species) => {
