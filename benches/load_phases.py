@@ -17,9 +17,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import subprocess
 import sys
+import tempfile
 import time
 from typing import Any
 
@@ -29,14 +31,16 @@ def usage() -> tuple[float, float, int]:
     return r.ru_utime, r.ru_stime, r.ru_minflt
 
 
-def child(depth: int, config: str) -> dict[str, Any]:
+def child(depth: int, config: str, route: str) -> dict[str, Any]:
     from bench_scale import tree
 
     from oxyline import model as M
+    from oxyline.io.native import read_mapping
     from oxyline.loader import gc_paused
 
-    user = tree(depth, 4, config)
     out: dict[str, Any] = {"segments": (2 ** depth - 1) * 4}
+    if route == "dict":
+        user = tree(depth, 4, config)
     c0 = time.process_time()
     last = usage()
 
@@ -46,19 +50,55 @@ def child(depth: int, config: str) -> dict[str, Any]:
         out[phase] = (now[0] - last[0], now[1] - last[1], now[2] - last[2])
         last = now
 
-    # the steps of loader.load_model for a dict, one by one
+    # the steps of loader.load_model, one by one
     with gc_paused():
-        data = M._copy(dict(user))
-    mark("copy")
+        if route == "dict":
+            data = M._copy(dict(user))
+        else:  # a file the parent wrote: read_mapping is load_model's reader
+            data = read_mapping(_file(depth, config, route))
+    mark("copy" if route == "dict" else "read")
     with gc_paused():
-        m = M._unassembled(data)
-        mark("canonical")
-        m.network  # noqa: B018
-        mark("core")
-        m.release_canonical()
+        if hasattr(M, "_NativeReader"):  # this branch: the core reads the plain elements
+            reader = M._NativeReader()
+            m = M._unassembled(data, reader.vessels, reader.boundary_conditions)
+            names = reader.parts.names()
+            mark("canonical")
+            m._network = M._network(m.canonical, None, reader.parts)
+            mark("core")
+            m.release_canonical(names)
+        else:  # before: a canonical dict per element, read by the binding
+            m = M._unassembled(data)
+            mark("canonical")
+            m.network  # noqa: B018
+            mark("core")
+            m.release_canonical()
     mark("release")
     out["total"] = time.process_time() - c0
+    m.network.steady_state()
+    mark("steady")
     return out
+
+
+def _file(depth: int, config: str, route: str) -> str:
+    return os.path.join(tempfile.gettempdir(), f"oxyline-load-phases-{depth}-{config}.{route}")
+
+
+def _write(depth: int, config: str, route: str) -> None:
+    """The tree as a native model file (JSON or YAML), written once per depth."""
+    from bench_scale import tree
+
+    path = _file(depth, config, route)
+    if os.path.exists(path):
+        return
+    m = tree(depth, 4, config)
+    m["boundary_conditions"] = {k: dict(v) for k, v in m["boundary_conditions"].items()}
+    with open(path, "w") as f:
+        if route == "json":
+            json.dump(m, f)
+        else:
+            import yaml
+
+            yaml.safe_dump(m, f, sort_keys=False)
 
 
 def main() -> None:
@@ -66,19 +106,26 @@ def main() -> None:
     ap.add_argument("--depths", type=int, nargs="+", default=[15, 16])
     ap.add_argument("--config", default="o2-k")
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--child", nargs=2)
+    ap.add_argument("--route", choices=["dict", "json", "yaml"], default="dict",
+                    help="the model as a dict (copied, as load_model does) or a file")
+    ap.add_argument("--child", nargs=3)
     a = ap.parse_args()
     if a.child:
-        print(json.dumps(child(int(a.child[0]), a.child[1])))
+        print(json.dumps(child(int(a.child[0]), a.child[1], a.child[2])))
         return
-    phases = ["copy", "canonical", "core", "release"]
-    print(f"# load_model phases, config {a.config}; µs per segment: user+sys CPU "
-          "(sys in brackets), minor page faults per 1000 segments; each row a fresh process")
-    print("| segments | run | " + " | ".join(phases) + " | total µs/seg | faults/kseg |")
-    print("|---:|---:|" + "---:|" * (len(phases) + 2))
+    phases = ["copy" if a.route == "dict" else "read", "canonical", "core", "release"]
+    print(f"# load_model phases, config {a.config}, route {a.route}; µs per segment: user+sys "
+          "CPU (sys in brackets), minor page faults per 1000 segments; each row a fresh "
+          "process; `steady`: the steady solve a run starts from (not in the total)")
+    print("| segments | run | " + " | ".join(phases)
+          + " | total µs/seg | faults/kseg | steady |")
+    print("|---:|---:|" + "---:|" * (len(phases) + 3))
     for depth in a.depths:
+        if a.route != "dict":
+            _write(depth, a.config, a.route)
         for i in range(a.repeat):
-            p = subprocess.run([sys.executable, __file__, "--child", str(depth), a.config],
+            p = subprocess.run([sys.executable, __file__, "--child", str(depth), a.config,
+                                a.route],
                                capture_output=True, text=True, check=True)
             r = json.loads(p.stdout.strip().splitlines()[-1])
             n = r["segments"]
@@ -86,7 +133,8 @@ def main() -> None:
                      for k in phases]
             faults = sum(r[k][2] for k in phases)
             print(f"| {n} | {i + 1} | " + " | ".join(cells)
-                  + f" | {1e6 * r['total'] / n:.2f} | {1e3 * faults / n:.0f} |")
+                  + f" | {1e6 * r['total'] / n:.2f} | {1e3 * faults / n:.0f} | "
+                  f"{1e6 * (r['steady'][0] + r['steady'][1]) / n:.2f} |")
 
 
 if __name__ == "__main__":
