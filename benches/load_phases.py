@@ -79,6 +79,22 @@ def child(depth: int, config: str, route: str) -> dict[str, Any]:
     return out
 
 
+def child_builtin(name: str) -> dict[str, Any]:
+    """``load_model`` of a built-in whole tree (its compact dict with structured-tree
+    conditions, grown on load): the structured-tree builder's route."""
+    import oxyline
+
+    d = oxyline.models.load_dict(name)
+    out: dict[str, Any] = {}
+    last = usage()
+    m = oxyline.load_model(d)
+    now = usage()
+    out["load"] = (now[0] - last[0], now[1] - last[1], now[2] - last[2])
+    out["segments"] = m.network.summary()["segments"]
+    out["vessels"] = len(m.vessel_names)
+    return out
+
+
 def _file(depth: int, config: str, route: str) -> str:
     return os.path.join(tempfile.gettempdir(), f"oxyline-load-phases-{depth}-{config}.{route}")
 
@@ -103,16 +119,31 @@ def _write(depth: int, config: str, route: str) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--depths", type=int, nargs="+", default=[15, 16])
+    ap.add_argument("--depths", type=int, nargs="*", default=[15, 16])
     ap.add_argument("--config", default="o2-k")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--route", choices=["dict", "json", "yaml"], default="dict",
                     help="the model as a dict (copied, as load_model does) or a file")
+    ap.add_argument("--builtin", nargs="*", default=[],
+                    help="also time load_model of these built-in whole trees (adan56-st)")
     ap.add_argument("--child", nargs=3)
+    ap.add_argument("--child-builtin")
     a = ap.parse_args()
     if a.child:
         print(json.dumps(child(int(a.child[0]), a.child[1], a.child[2])))
         return
+    if a.child_builtin:
+        print(json.dumps(child_builtin(a.child_builtin)))
+        return
+    for name in a.builtin:
+        for i in range(a.repeat):
+            p = subprocess.run([sys.executable, __file__, "--child-builtin", name],
+                               capture_output=True, text=True, check=True)
+            r = json.loads(p.stdout.strip().splitlines()[-1])
+            n, (u, s, f) = r["segments"], r["load"]
+            print(f"# built-in {name}: {r['vessels']} vessels, {n} segments, run {i + 1}: "
+                  f"load_model {1e6 * (u + s) / n:.2f} µs/segment ({1e6 * s / n:.2f} system), "
+                  f"{1e3 * f / n:.0f} faults/kseg")
     phases = ["copy" if a.route == "dict" else "read", "canonical", "core", "release"]
     print(f"# load_model phases, config {a.config}, route {a.route}; µs per segment: user+sys "
           "CPU (sys in brackets), minor page faults per 1000 segments; each row a fresh "

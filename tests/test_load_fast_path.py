@@ -224,3 +224,29 @@ def test_an_outlet_the_native_reader_refuses_gets_the_full_checks_error() -> Non
     with pytest.raises(oxyline.ModelError,
                        match="boundary condition 'o': 'capacitance' must be a number"):
         oxyline.load_model(d)
+
+
+def test_the_copy_shares_no_container_with_the_users_dict() -> None:
+    """`load_model`'s private copy (lists of plain dicts are copied in C) is equal to the
+    user's dict and shares none of its dicts or lists, nested ones included."""
+    from oxyline.model import _copy
+
+    d = {"vessels": [{"name": "a", "length": 1.0}, {"name": "b", "lumped": {"r": [1, 2]}},
+                     {"name": "c"}],
+         "boundary_conditions": {"in": {"type": "flow", "time": [0, 1], "flow": (1, 2)},
+                                 "o": {"type": "resistance", "resistance": 1.0}},
+         "plain": [{"x": 1}, {"y": 2}], "table": ({"t": 0},)}
+    c = _copy(d)
+    assert c == {**d, "boundary_conditions": {**d["boundary_conditions"],
+                                              "in": {**d["boundary_conditions"]["in"],
+                                                     "flow": [1, 2]}},
+                 "table": [{"t": 0}]}
+
+    def containers(x: Any) -> list[int]:
+        if isinstance(x, dict):
+            return [id(x)] + [i for v in x.values() for i in containers(v)]
+        if isinstance(x, (list, tuple)):
+            return [id(x)] + [i for v in x for i in containers(v)]
+        return []
+
+    assert not set(containers(c)) & set(containers(d))

@@ -22,7 +22,6 @@ import json
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from itertools import chain
 from typing import Any
 
 from oxyline import _core
@@ -155,34 +154,20 @@ def output_vessels(value: Any) -> list[str] | None:
 _ATOMS = frozenset({str, int, float, bool, type(None)})
 
 
-_DICT = frozenset({dict})
-
-
-def _flat_dicts(items: Any) -> bool:
-    """Every item a dict whose values are plain (checked in C: map, chain, issuperset)."""
-    return (_DICT.issuperset(map(type, items))
-            and _ATOMS.issuperset(map(type, chain.from_iterable(map(dict.values, items)))))
-
-
 def _copy(data: Any) -> Any:
     """Deep copy of a model description: dicts and lists (tuples become lists) are rebuilt,
     plain values shared, anything else (arrays, ...) deep-copied. A quarter of the cost of a JSON
     round trip on 10^5-vessel models and linear in their size."""
     t = type(data)
     # a dict or list of plain values only (a vessel, a waveform table) is copied in C: the
-    # type check of its values runs in C too (map + issuperset), 4x faster than rebuilding it;
-    # so is a dict or list of such dicts (a tree's vessels and outlets): no call per element
+    # type check of its values runs in C too (map + issuperset), 4x faster than rebuilding it
     if t is dict:
         if _ATOMS.issuperset(map(type, data.values())):
             return data.copy()
-        if _flat_dicts(data.values()):
-            return dict(zip(data.keys(), map(dict.copy, data.values())))
         return {k: v if type(v) in _ATOMS else _copy(v) for k, v in data.items()}
     if t is list or t is tuple:
         if _ATOMS.issuperset(map(type, data)):
             return list(data)
-        if _flat_dicts(data):
-            return list(map(dict.copy, data))
         return [v if type(v) in _ATOMS else _copy(v) for v in data]
     if t in _ATOMS:
         return data

@@ -31,6 +31,11 @@ fn main() {
         .map(|r| r.parse().unwrap())
         .unwrap_or(1);
     let json = std::fs::read_to_string(&path).unwrap();
+    println!(
+        "# B per element: vessel spec {}, segment row {}",
+        std::mem::size_of::<oxyline_core::spec::VesselSpec>(),
+        std::mem::size_of::<oxyline_core::SegmentRow>()
+    );
     let stages = ["parse", "assemble", "dae", "transport", "steady"];
     println!(
         "| run | segments | {} | total µs/seg | faults/kseg |",
