@@ -815,7 +815,12 @@ def _build(data: dict[str, Any]) -> Model:
     from oxyline.structured_tree import build_with_trees, has_trees
 
     if has_trees(data):  # a model-to-model step, like an importer
-        return build_with_trees(data, _build)
+        return build_with_trees(data, _build_native)
+    return _build_native(data)
+
+
+def _build_native(data: dict[str, Any]) -> Model:
+    """:func:`_build` of a model without structured-tree conditions."""
     # the bulk of the vessels and outlets goes to the core without canonical dicts; the
     # canonical description is written in full from ``source`` when asked for
     reader = _NativeReader()

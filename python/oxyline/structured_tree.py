@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
+from operator import itemgetter
 from typing import Any
 
 from oxyline.errors import ModelError
@@ -211,10 +212,10 @@ def expand(data: Mapping[str, Any]) -> tuple[dict[str, Any], set[str]]:
         if not isinstance(terminal, Mapping) or terminal.get("type") == TYPE:
             raise _err(node, f"'terminal' must be an outlet condition, got {terminal!r}")
         sources = {v["from"] for v in grown}
-        for v in grown:
-            tree.add(v["name"])
-            if v["to"] not in sources:
-                bcs[v["to"]] = dict(terminal)
+        tree.update(map(itemgetter("name"), grown))
+        for to in map(itemgetter("to"), grown):
+            if to not in sources:
+                bcs[to] = dict(terminal)
         vessels.extend(grown)
     out = dict(data)
     out["vessels"], out["boundary_conditions"] = vessels, bcs
@@ -228,10 +229,11 @@ def build_with_trees(data: dict[str, Any], build_native: Callable[[dict[str, Any
     expanded, tree = expand(data)
     model = build_native(expanded)
     model.source = data
-    # from the expanded native vessels (the names and output flags the canonical form has):
-    # reading ``model.canonical`` would write its released description again (a second pass
-    # of the whole conversion, ~1 µs per segment of a 3e5-segment tree)
-    names = (str(v["name"]) for v in expanded["vessels"] if v.get("output", True))
+    # the model's own vessels come first in ``expanded`` (the tree vessels are appended), with
+    # the names and output flags of their canonical form: reading ``model.canonical`` would
+    # write its released description again (a second pass of the whole conversion)
+    own = expanded["vessels"][:len(data.get("vessels") or [])]
+    names = (str(v["name"]) for v in own if isinstance(v, Mapping) and v.get("output", True))
     model.default_output_vessels = [n for n in names if n not in tree]
     return model
 
