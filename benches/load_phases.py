@@ -3,20 +3,29 @@
 faults, in several fresh processes (issue 9 item 3: the load of one fresh process varied by
 more than the target's margin).
 
-    python benches/load_phases.py --depths 15 16 18 --config o2-k --repeat 3
+    python benches/load_phases.py --depths 14 16 18 --configs o2-k o2-leveque --repeat 3
+
+    python benches/load_phases.py --depths 16 --route json --repeat 2
+    python benches/load_phases.py --depths --builtin adan56-st --repeat 2
 
 Phases (the same calls ``load_model`` makes, in its order): ``copy`` (the private copy of the
-user's dict, ``model._copy``), ``canonical`` (checks and SI conversion, ``model._unassembled``),
-``core`` (``_core.Network``: the binding reads the vessel dicts, the core assembles the
+user's dict, ``model._copy``) or ``read`` (``--route json|yaml``: the tree written once as a
+native file, read by ``oxyline.io.native.read_mapping``), ``canonical`` (checks and SI
+conversion, ``model._unassembled``; since issue 9 item 3 the binding reads the plain vessels
+and outlets here, ``_core.NativeParts``), ``core`` (``_core.Network``: the core assembles the
 circuit, the DAE and the transport plan), ``release`` (the output-layout check and
 ``release_canonical``). ``total`` is ``load_model`` as ``bench_scale.py`` times it (process
-CPU). A page fault of fresh memory costs the kernel a zeroed page: its time is system CPU.
+CPU); ``steady`` the steady solve a run starts from (not part of the load). A page fault of
+fresh memory costs the kernel a zeroed page: its time is system CPU. ``--builtin`` times
+``load_model`` of a built-in whole tree (the structured-tree builder's route). The same
+script runs against an older checkout with ``PYTHONPATH=<its python dir>:benches``.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import resource
 import subprocess
@@ -120,7 +129,8 @@ def _write(depth: int, config: str, route: str) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--depths", type=int, nargs="*", default=[15, 16])
-    ap.add_argument("--config", default="o2-k")
+    ap.add_argument("--configs", nargs="+", default=["o2-k"],
+                    help="bench_scale.py configs (o2-k; o2-leveque: the default closure)")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--route", choices=["dict", "json", "yaml"], default="dict",
                     help="the model as a dict (copied, as load_model does) or a file")
@@ -144,29 +154,45 @@ def main() -> None:
             print(f"# built-in {name}: {r['vessels']} vessels, {n} segments, run {i + 1}: "
                   f"load_model {1e6 * (u + s) / n:.2f} µs/segment ({1e6 * s / n:.2f} system), "
                   f"{1e3 * f / n:.0f} faults/kseg")
-    phases = ["copy" if a.route == "dict" else "read", "canonical", "core", "release"]
-    print(f"# load_model phases, config {a.config}, route {a.route}; µs per segment: user+sys "
+    for config in a.configs:
+        table(a.depths, config, a.route, a.repeat)
+
+
+def table(depths: list[int], config: str, route: str, repeat: int) -> None:
+    """The phase table of one config and route, and the log-log slope of the total load time
+    against segments (best run per size; issue 9 item 7's target <= 1.1)."""
+    phases = ["copy" if route == "dict" else "read", "canonical", "core", "release"]
+    print(f"# load_model phases, config {config}, route {route}; µs per segment: user+sys "
           "CPU (sys in brackets), minor page faults per 1000 segments; each row a fresh "
-          "process; `steady`: the steady solve a run starts from (not in the total)")
+          "process; `steady`: the steady solve a run starts from (not in the total); "
+          f"load average {os.getloadavg()[0]:.1f}")
     print("| segments | run | " + " | ".join(phases)
           + " | total µs/seg | faults/kseg | steady |")
     print("|---:|---:|" + "---:|" * (len(phases) + 3))
-    for depth in a.depths:
-        if a.route != "dict":
-            _write(depth, a.config, a.route)
-        for i in range(a.repeat):
-            p = subprocess.run([sys.executable, __file__, "--child", str(depth), a.config,
-                                a.route],
+    best: dict[int, float] = {}
+    for depth in depths:
+        if route != "dict":
+            _write(depth, config, route)
+        for i in range(repeat):
+            p = subprocess.run([sys.executable, __file__, "--child", str(depth), config, route],
                                capture_output=True, text=True, check=True)
             r = json.loads(p.stdout.strip().splitlines()[-1])
             n = r["segments"]
+            best[n] = min(best.get(n, math.inf), r["total"])
             cells = [f"{1e6 * (r[k][0] + r[k][1]) / n:.2f} ({1e6 * r[k][1] / n:.2f})"
                      for k in phases]
             faults = sum(r[k][2] for k in phases)
             print(f"| {n} | {i + 1} | " + " | ".join(cells)
                   + f" | {1e6 * r['total'] / n:.2f} | {1e3 * faults / n:.0f} | "
                   f"{1e6 * (r['steady'][0] + r['steady'][1]) / n:.2f} |")
-
+    if len(best) > 1:
+        x = [math.log(n) for n in best]
+        y = [math.log(t) for t in best.values()]
+        mx, my = sum(x) / len(x), sum(y) / len(y)
+        slope = (sum((a - mx) * (b - my) for a, b in zip(x, y))
+                 / sum((a - mx) ** 2 for a in x))
+        print(f"# load slope (log-log, best of {repeat} per size, {min(best)}-{max(best)} "
+              f"segments): {slope:.3f}; load average {os.getloadavg()[0]:.1f}")
 
 if __name__ == "__main__":
     main()
