@@ -170,12 +170,15 @@ fn outlet(item: &Bound<'_, PyAny>, (r, c, p): (f64, f64, f64)) -> Option<Boundar
     }
 }
 
+/// Outlet conditions by node name, in the order read.
+pub(crate) type Outlets = Vec<(String, BoundarySpec)>;
+
 /// The vessels and outlets of a native model read by this module; the ones it left to Python
 /// are listed (`slow_vessels`, the node names `outlets` returns) and filled in by Python.
 #[pyclass(module = "oxyline._core")]
 pub struct NativeParts {
     vessels: Vec<Option<VesselSpec>>,
-    pub(crate) outlets: Vec<(String, BoundarySpec)>,
+    pub(crate) outlets: Outlets,
 }
 
 #[pymethods]
@@ -241,7 +244,7 @@ impl NativeParts {
 
 impl NativeParts {
     /// The vessels and outlets, moved out (a second call gets none).
-    pub(crate) fn take(&mut self) -> Result<(Vec<VesselSpec>, Vec<(String, BoundarySpec)>), Error> {
+    pub(crate) fn take(&mut self) -> Result<(Vec<VesselSpec>, Outlets), Error> {
         let vessels = std::mem::take(&mut self.vessels);
         let outlets = std::mem::take(&mut self.outlets);
         let vessels = vessels
