@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from operator import itemgetter
 from typing import Any
 
 from oxyline.errors import ModelError
@@ -212,8 +211,8 @@ def expand(data: Mapping[str, Any]) -> tuple[dict[str, Any], set[str]]:
         if not isinstance(terminal, Mapping) or terminal.get("type") == TYPE:
             raise _err(node, f"'terminal' must be an outlet condition, got {terminal!r}")
         sources = {v["from"] for v in grown}
-        tree.update(map(itemgetter("name"), grown))
-        for to in map(itemgetter("to"), grown):
+        tree.update([v["name"] for v in grown])
+        for to in [v["to"] for v in grown]:
             if to not in sources:
                 bcs[to] = dict(terminal)
         vessels.extend(grown)
