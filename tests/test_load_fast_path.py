@@ -143,3 +143,110 @@ def test_a_released_canonical_is_written_again_as_it_was() -> None:
     net = oxyline._core.Network(json.dumps(m.canonical))
     a, b = net.segment_table(), m.network.segment_table()
     assert all((a[k] == b[k]).all() for k in ("resistance", "compliance", "volume"))
+
+
+def _mixed_model(units: str) -> dict[str, Any]:
+    """Plain vessels and outlets (read by the core's binding) around elements it leaves to
+    the full Python check: a lumped vessel in the middle of the list, a vessel name that is
+    an int, a table-driven outlet pressure and an outlet type spelled in capitals."""
+    return {"name": "mixed", "units": units, "period": 1.0,
+            "vessels": [dict(VESSELS[0]),
+                        {"name": 7, "from": "j", "to": "k", "segments": 2,
+                         "lumped": {"resistance": 1e3, "capacitance": 1e-6}},
+                        dict(VESSELS[1]),
+                        {"name": "d", "from": "k", "to": "o3", "length": 2, "radius": 0.2,
+                         "wall_thickness": 0.02, "youngs_modulus": 4e6, "segments": 4},
+                        {"name": "e", "from": "k", "to": "o4", "length": 2, "radius": 0.1}],
+            "boundary_conditions": {
+                "in": {"type": "flow", "value": 1.0},
+                "o": {"type": "rcr", "proximal_resistance": 100, "capacitance": 1e-4,
+                      "distal_resistance": 900, "pressure": 10},
+                "o3": {"type": "RCR", "proximal_resistance": 100, "capacitance": 1e-4,
+                       "distal_resistance": 900},
+                "o4": {"type": "resistance", "resistance": 1e3,
+                       "pressure": {"time": [0.0, 1.0], "pressure": [5.0, 5.0]}}}}
+
+
+@pytest.mark.parametrize("units", ["SI", "cgs"])
+def test_the_native_reader_builds_the_network_the_json_text_builds(units: str) -> None:
+    """`load_model` hands the user's plain vessels and outlets to the core's binding, which
+    checks and converts them itself; the rest go through Python's full check. The reference is
+    the canonical model as JSON text (the core's serde parser, no dict read at all): the same
+    multiplications by the same unit factors, so the same bits."""
+    import json
+
+    import numpy as np
+
+    from oxyline import _core
+    from oxyline.model import _unassembled
+
+    d = _mixed_model(units)
+    m = oxyline.load_model(d)
+    ref = _core.Network(json.dumps(_unassembled(_mixed_model(units)).canonical))
+    a, b = m.network.segment_table(), ref.segment_table()
+    assert a["vessel_names"] == b["vessel_names"] == ["a", "7", "b", "d", "e"]
+    for k in ("resistance", "inductance", "compliance", "stenosis", "volume", "radius_in",
+              "radius_out", "length"):
+        np.testing.assert_array_equal(a[k], b[k])
+    np.testing.assert_array_equal(m.network.steady_state()["state"], ref.steady_state()["state"])
+    assert m.network.unknown_names() == ref.unknown_names()
+    assert m.vessel_names == ["a", "7", "b", "d", "e"]
+    # an independent check of the conversion: Poiseuille's R = 8 mu L / (pi r^4) of the rigid
+    # uniform vessel 'e' (2 length units, radius 0.1, one segment; docs/physics.md §1.1)
+    f = factor(units, "length")
+    mu = 3.5e-3
+    r_e = a["resistance"][np.asarray(a["vessel"]) == 4]
+    assert r_e == pytest.approx([8 * mu * 2 * f / (np.pi * (0.1 * f) ** 4)], rel=1e-12)
+
+
+@pytest.mark.parametrize("edit, message", [
+    ({"length": -1.0}, "vessel 'a': length must be a finite number > 0"),
+    ({"length": True}, "vessel 'a': 'length' must be a number"),
+    ({"radius_in": 0.001}, "vessel 'a': give 'radius' or 'radius_in'/'radius_out', not both"),
+    ({"valve": {"law": "piecewise", "min_resistance": 1.0, "max_resistance": 1e9}},
+     "vessel 'a': give one of valve, chamber, through_rc, lumped or geometry"),
+    ({"segments": 0}, "vessel 'a': 'segments' must be an integer >= 1"),
+])
+def test_a_vessel_the_native_reader_refuses_gets_the_full_checks_error(
+        edit: dict[str, Any], message: str) -> None:
+    """The binding's reader never decides an error itself: a vessel it does not take goes to
+    Python's full check, whose message names the vessel and the value. (A valve beside a
+    geometry used to pass the Python fast path with its valve dropped.)"""
+    d = _mixed_model("SI")
+    d["vessels"][0] = {**d["vessels"][0], **edit}
+    with pytest.raises(oxyline.ModelError, match=message):
+        oxyline.load_model(d)
+
+
+def test_an_outlet_the_native_reader_refuses_gets_the_full_checks_error() -> None:
+    d = _mixed_model("SI")
+    d["boundary_conditions"]["o"]["capacitance"] = "1e-4x"
+    with pytest.raises(oxyline.ModelError,
+                       match="boundary condition 'o': 'capacitance' must be a number"):
+        oxyline.load_model(d)
+
+
+def test_the_copy_shares_no_container_with_the_users_dict() -> None:
+    """`load_model`'s private copy (lists of plain dicts are copied in C) is equal to the
+    user's dict and shares none of its dicts or lists, nested ones included."""
+    from oxyline.model import _copy
+
+    d = {"vessels": [{"name": "a", "length": 1.0}, {"name": "b", "lumped": {"r": [1, 2]}},
+                     {"name": "c"}],
+         "boundary_conditions": {"in": {"type": "flow", "time": [0, 1], "flow": (1, 2)},
+                                 "o": {"type": "resistance", "resistance": 1.0}},
+         "plain": [{"x": 1}, {"y": 2}], "table": ({"t": 0},)}
+    c = _copy(d)
+    assert c == {**d, "boundary_conditions": {**d["boundary_conditions"],
+                                              "in": {**d["boundary_conditions"]["in"],
+                                                     "flow": [1, 2]}},
+                 "table": [{"t": 0}]}
+
+    def containers(x: Any) -> list[int]:
+        if isinstance(x, dict):
+            return [id(x)] + [i for v in x.values() for i in containers(v)]
+        if isinstance(x, (list, tuple)):
+            return [id(x)] + [i for v in x for i in containers(v)]
+        return []
+
+    assert not set(containers(c)) & set(containers(d))

@@ -672,13 +672,16 @@ class Model:
     #: the vessel names and the transport section of a released ``canonical``
     _kept: Any = field(default=None, repr=False, compare=False)
 
-    def release_canonical(self) -> None:
+    def release_canonical(self, names: list[str] | None = None) -> None:
         """Drop ``canonical`` (the core holds the model); it is written again from the
-        native dict it came from when next asked for, identical (the same conversion)."""
+        native dict it came from when next asked for, identical (the same conversion).
+        ``names``: the vessel names, when ``canonical`` was written without its vessels."""
         canon = self.__dict__.get("_canonical")
         if canon is None or not self.source:  # nothing to write it again from
             return
-        self._kept = ([v["name"] for v in canon["vessels"]], canon.get("transport"))
+        if names is None:
+            names = [v["name"] for v in canon["vessels"]]
+        self._kept = (names, canon.get("transport"))
         self._rebuild = self.source
         self.__dict__["_canonical"] = None
 
@@ -748,12 +751,15 @@ def _plain_outlet(bc: Any) -> bool:
     return p is None or (type(p) is dict and p.get("kind") == "constant")
 
 
-def _network(canonical: dict[str, Any], max_memory: Any = None) -> _core.Network:
+def _network(canonical: dict[str, Any], max_memory: Any = None,
+             parts: Any = None) -> _core.Network:
     """The core network of a canonical model. The vessels and the plain outlets (the bulk of a
     large tree) are handed over as the dicts themselves, read key by key by the binding; the
     rest as JSON text. Writing the whole model as text cost ~2 µs per segment (the repr of
     every float, then the parse). The core refuses a model whose memory estimate exceeds
-    ``max_memory`` (see :mod:`oxyline.memory`) before it allocates for it."""
+    ``max_memory`` (see :mod:`oxyline.memory`) before it allocates for it. ``parts``: the
+    vessels and outlets :class:`_NativeReader` read from the native dict (not in
+    ``canonical``)."""
     bcs = canonical.get("boundary_conditions")
     outlets, other = {}, {}
     if isinstance(bcs, dict):
@@ -768,7 +774,35 @@ def _network(canonical: dict[str, Any], max_memory: Any = None) -> _core.Network
     if type(vessels) is not list:  # not a canonical model: the JSON parse reports it
         rest["vessels"], vessels = vessels, None
     # compact separators: the text is the core's input only (5 % less to write)
-    return _core.Network(json.dumps(rest, separators=(",", ":")), vessels, outlets)
+    return _core.Network(json.dumps(rest, separators=(",", ":")), vessels, outlets, parts)
+
+
+class _NativeReader:
+    """The vessels and outlets of a native model dict read by the core's binding
+    (``_core.NativeParts``) instead of through a canonical dict per element: it takes the
+    plain geometric vessels and resistance/RCR outlets (the bulk of a large tree) with the
+    checks :func:`_fast_vessel` and :func:`_fast_outlet` make, and leaves every other element
+    to :func:`_vessel` and :func:`_boundary_condition` (the full check and its precise error).
+    Used as ``_unassembled``'s converters: the canonical description it gives has only the
+    elements Python converted; ``parts`` holds all of them for :func:`_network`."""
+
+    def __init__(self) -> None:
+        self.parts: Any = None
+
+    def vessels(self, vessels: list[Any], units: str) -> list[dict[str, Any]]:
+        self.parts = _core.NativeParts(vessels, factor(units, "length"),
+                                       factor(units, "modulus"))
+        for i in self.parts.slow_vessels():
+            self.parts.put_vessel(i, _vessel(vessels[i], i, units))
+        return []
+
+    def boundary_conditions(self, bcs: Mapping[str, Any], units: str
+                            ) -> tuple[dict[str, Any], list[tuple[float, str]]]:
+        if type(bcs) is not dict:
+            return _boundary_conditions(bcs, units)
+        slow = self.parts.read_outlets(bcs, factor(units, "resistance"),
+                                       factor(units, "capacitance"), factor(units, "pressure"))
+        return _boundary_conditions({node: bcs[node] for node in slow}, units)
 
 
 def build_model(data: dict[str, Any]) -> Model:
@@ -782,15 +816,25 @@ def _build(data: dict[str, Any]) -> Model:
     from oxyline.structured_tree import build_with_trees, has_trees
 
     if has_trees(data):  # a model-to-model step, like an importer
-        return build_with_trees(data, _build)
-    model = _unassembled(data)
-    model.network  # noqa: B018 - assemble now so that invalid models fail at load time
+        return build_with_trees(data, _build_native)
+    return _build_native(data)
+
+
+def _build_native(data: dict[str, Any]) -> Model:
+    """:func:`_build` of a model without structured-tree conditions."""
+    # the bulk of the vessels and outlets goes to the core without canonical dicts; the
+    # canonical description is written in full from ``source`` when asked for
+    reader = _NativeReader()
+    model = _unassembled(data, reader.vessels, reader.boundary_conditions)
+    names = reader.parts.names()
+    # assemble now so that invalid models fail at load time
+    model._network = _network(model.canonical, model.simulation.get("max_memory"), reader.parts)
     sim = model.simulation
     out = sim.get("output") or {}
     if "variables" in out or "vessels" in out:  # unknown names fail at load time too
         model.network.output_layout(variables=output_names(out.get("variables"), "variables"),
                                     vessels=output_vessels(out.get("vessels", "all")))
-    model.release_canonical()
+    model.release_canonical(names)
     return model
 
 

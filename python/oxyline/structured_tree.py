@@ -211,10 +211,10 @@ def expand(data: Mapping[str, Any]) -> tuple[dict[str, Any], set[str]]:
         if not isinstance(terminal, Mapping) or terminal.get("type") == TYPE:
             raise _err(node, f"'terminal' must be an outlet condition, got {terminal!r}")
         sources = {v["from"] for v in grown}
-        for v in grown:
-            tree.add(v["name"])
-            if v["to"] not in sources:
-                bcs[v["to"]] = dict(terminal)
+        tree.update([v["name"] for v in grown])
+        for to in [v["to"] for v in grown]:
+            if to not in sources:
+                bcs[to] = dict(terminal)
         vessels.extend(grown)
     out = dict(data)
     out["vessels"], out["boundary_conditions"] = vessels, bcs
@@ -228,8 +228,12 @@ def build_with_trees(data: dict[str, Any], build_native: Callable[[dict[str, Any
     expanded, tree = expand(data)
     model = build_native(expanded)
     model.source = data
-    model.default_output_vessels = [v["name"] for v in model.canonical["vessels"]
-                                    if v.get("output", True) and v["name"] not in tree]
+    # the model's own vessels come first in ``expanded`` (the tree vessels are appended), with
+    # the names and output flags of their canonical form: reading ``model.canonical`` would
+    # write its released description again (a second pass of the whole conversion)
+    own = expanded["vessels"][:len(data.get("vessels") or [])]
+    names = (str(v["name"]) for v in own if isinstance(v, Mapping) and v.get("output", True))
+    model.default_output_vessels = [n for n in names if n not in tree]
     return model
 
 

@@ -158,7 +158,10 @@ def _parse_yaml(text: str, p: Path) -> Any:
 def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     """A JSON object whose keys are unique. Keys starting with ``_`` are comments (JSON has none;
     svZeroDSolver's files repeat ``"_comment_"``): a repeated one keeps its last value."""
-    out: dict[str, Any] = {}
+    out = dict(pairs)  # in C; a repeated key shows as fewer entries than pairs
+    if len(out) == len(pairs):
+        return out
+    out = {}
     for k, v in pairs:
         if k in out and not k.startswith("_"):
             raise ValueError(f"duplicate key {k!r}")

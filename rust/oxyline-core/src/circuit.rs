@@ -593,10 +593,14 @@ impl Circuit {
             }
             moved[node] = Some(nn + nb + x);
         }
+        // a node row holds its incidences (or 1–3 entries), a branch row 3 (or a node's
+        // incidences): allocated once at an upper bound instead of grown by doubling (whose
+        // copies touch the pattern's bytes twice at 1e6 segments)
+        let nnz = 2 * inc.len() + 3 * (nn + nb) + self.extras.len();
         let mut f = Csr {
             ptr: Vec::with_capacity(n + 1),
-            col: Vec::new(),
-            val: Vec::new(),
+            col: Vec::with_capacity(nnz),
+            val: Vec::with_capacity(nnz),
         };
         f.ptr.push(0);
         for i in 0..nn {

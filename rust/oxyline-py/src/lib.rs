@@ -16,6 +16,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
 mod extract;
+mod native;
 use std::cell::Cell;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -302,19 +303,29 @@ impl Network {
     /// `vessels` (the canonical vessel dicts) and `outlets` (node -> canonical resistance or
     /// RCR condition with a constant pressure) may be handed over as Python objects instead of
     /// inside `model_json` (see `extract`): a large tree then needs no text for its bulk.
+    /// `parts`: the vessels and outlets read from a native model (`native::NativeParts`),
+    /// moved into the spec in their order (before `vessels`, `outlets`).
     #[new]
-    #[pyo3(signature = (model_json, vessels = None, outlets = None))]
+    #[pyo3(signature = (model_json, vessels = None, outlets = None, parts = None))]
     fn new(
         py: Python<'_>,
         model_json: &str,
         vessels: Option<Bound<'_, PyList>>,
         outlets: Option<Bound<'_, PyDict>>,
+        parts: Option<Bound<'_, native::NativeParts>>,
     ) -> PyResult<Self> {
+        let (mut native_vessels, mut bcs) = match parts {
+            Some(p) => p.borrow_mut().take().map_err(to_py)?,
+            None => (Vec::new(), Vec::new()),
+        };
         let vessels = vessels
             .map(|v| extract::vessels(&v))
             .transpose()
             .map_err(to_py)?;
-        let mut bcs = Vec::new();
+        if let Some(v) = vessels {
+            native_vessels.extend(v);
+        }
+        let vessels = Some(native_vessels).filter(|v| !v.is_empty());
         for (node, bc) in outlets.iter().flat_map(|d| d.iter()) {
             let node: String = node.extract()?;
             let spec = extract::outlet(&node, &bc).map_err(to_py)?;
@@ -325,8 +336,11 @@ impl Network {
         let built = py.detach(
             move || -> Result<((Assembled, Dae), Option<Transport>), Error> {
                 let mut spec = parse(model_json)?;
-                if let Some(v) = vessels {
-                    spec.vessels.extend(v);
+                match vessels {
+                    // moved, not copied: ~700 B per vessel
+                    Some(v) if spec.vessels.is_empty() => spec.vessels = v,
+                    Some(v) => spec.vessels.extend(v),
+                    None => {}
                 }
                 for (node, bc) in bcs {
                     if spec.boundary_conditions.insert(node.clone(), bc).is_some() {
@@ -914,7 +928,7 @@ mod _core {
     #[pymodule_export]
     use super::{
         ModelError, Network, ResourceError, SolverError, UnstableTimeStep, chamber_elastance,
-        ensemble::Ensemble,
+        ensemble::Ensemble, native::NativeParts,
     };
 
     use pyo3::types::PyModuleMethods;

@@ -726,6 +726,8 @@ impl Plan {
         if self.faces.len().max(nn).max(self.pieces.len()) >= u32::MAX as usize {
             return Err(bad("transport", "network too large".into()));
         }
+        // nearly every face is internal: one allocation at the bound, no doubling copies
+        self.internal.reserve_exact(self.faces.len());
         for (fi, f) in self.faces.iter().enumerate() {
             match (f.from, f.to) {
                 (End::Node(a), End::Node(b)) => self.internal.push([fi as u32, a as u32, b as u32]),

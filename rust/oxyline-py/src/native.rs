@@ -1,0 +1,257 @@
+//! The bulk of a large native model read straight from the user's dicts (issue 9 item 3):
+//! plain geometric vessels and plain resistance/RCR outlets, checked and converted to SI here
+//! instead of through a canonical Python dict per element (`oxyline.model._fast_vessel` and
+//! `_fast_outlet` did the same checks in Python, ~1 µs per segment of a tree). An element this
+//! reader does not take (anything else, or a value out of range) is left to Python, which
+//! converts it with its full check (and precise error) and hands its canonical dict back
+//! through [`NativeParts::put_vessel`]. The same numbers as the canonical route: each value is
+//! multiplied by the same unit factor once.
+
+use crate::extract;
+use oxyline_core::Error;
+use oxyline_core::spec::{Arrangement, BoundarySpec, GeometrySpec, VesselSpec};
+use oxyline_core::waveform::WaveformSpec;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyFloat, PyInt, PyList, PyString};
+
+/// A value of exact type float or int (bool, str, None and subclasses take the full check),
+/// as f64 (an int too large for a float is left to the full check as well).
+fn real(v: &Bound<'_, PyAny>) -> Option<f64> {
+    if v.is_exact_instance_of::<PyFloat>() || v.is_exact_instance_of::<PyInt>() {
+        v.extract::<f64>().ok()
+    } else {
+        None
+    }
+}
+
+/// 0 < x < ∞ (false for NaN).
+fn positive(v: &Bound<'_, PyAny>) -> Option<f64> {
+    real(v).filter(|x| *x > 0.0 && *x < f64::INFINITY)
+}
+
+fn finite(v: &Bound<'_, PyAny>) -> Option<f64> {
+    real(v).filter(|x| x.is_finite())
+}
+
+fn name(v: &Bound<'_, PyAny>) -> Option<String> {
+    if !v.is_exact_instance_of::<PyString>() {
+        return None;
+    }
+    v.cast::<PyString>().ok()?.to_str().ok().map(str::to_owned)
+}
+
+fn arrangement(v: &Bound<'_, PyAny>) -> Option<Arrangement> {
+    match name(v)?.as_str() {
+        "inverted-L" => Some(Arrangement::InvertedL),
+        "L" => Some(Arrangement::L),
+        "pi" => Some(Arrangement::Pi),
+        "RCL" => Some(Arrangement::Rcl),
+        _ => None,
+    }
+}
+
+/// A plain geometric vessel (name, from, to, length, radius or radius_in/radius_out, optional
+/// wall, segments, arrangement, output, description) in SI, or None. `length` and `modulus`
+/// are the model's unit factors.
+fn vessel(item: &Bound<'_, PyAny>, length: f64, modulus: f64) -> Option<VesselSpec> {
+    if !item.is_exact_instance_of::<PyDict>() {
+        return None;
+    }
+    let d = item.cast::<PyDict>().ok()?;
+    let mut v = VesselSpec {
+        name: String::new(),
+        from: String::new(),
+        to: String::new(),
+        segments: None,
+        geometry: None,
+        lumped: None,
+        arrangement: None,
+        output: true,
+        valve: None,
+        heart_pulmonary: None,
+        coronary_bed: None,
+        chamber: None,
+        through_rc: None,
+        chamber_sphere: None,
+        initial: None,
+        initial_rate: None,
+    };
+    let mut g = GeometrySpec {
+        length: f64::NAN,
+        radius_in: f64::NAN,
+        radius_out: f64::NAN,
+        wall_thickness: None,
+        youngs_modulus: None,
+        poisson_ratio: 0.5,
+    };
+    let (mut has_name, mut has_from, mut has_to) = (false, false, false);
+    let (mut radius, mut radius_in, mut radius_out) = (None, None, None);
+    for (k, x) in d.iter() {
+        if !k.is_exact_instance_of::<PyString>() {
+            return None;
+        }
+        match k.cast::<PyString>().ok()?.to_str().ok()? {
+            "name" => (v.name, has_name) = (name(&x)?, true),
+            "from" => (v.from, has_from) = (name(&x)?, true),
+            "to" => (v.to, has_to) = (name(&x)?, true),
+            "length" => g.length = length * positive(&x)?,
+            "radius" => radius = Some(positive(&x)?),
+            "radius_in" => radius_in = Some(positive(&x)?),
+            "radius_out" => radius_out = Some(positive(&x)?),
+            "wall_thickness" => g.wall_thickness = Some(length * positive(&x)?),
+            "youngs_modulus" => g.youngs_modulus = Some(modulus * positive(&x)?),
+            "poisson_ratio" => g.poisson_ratio = finite(&x)?,
+            "segments" => {
+                if !x.is_exact_instance_of::<PyInt>() {
+                    return None;
+                }
+                v.segments = Some(x.extract::<usize>().ok().filter(|&n| n >= 1)?);
+            }
+            "arrangement" => v.arrangement = Some(arrangement(&x)?),
+            "output" => v.output = x.is_truthy().ok()?,
+            "description" => {}
+            _ => return None,
+        }
+    }
+    (g.radius_in, g.radius_out) = match (radius, radius_in, radius_out) {
+        (Some(r), None, None) => (length * r, length * r),
+        (None, Some(a), Some(b)) => (length * a, length * b),
+        _ => return None,
+    };
+    if !(has_name && has_from && has_to) || g.length.is_nan() {
+        return None;
+    }
+    v.geometry = Some(g);
+    Some(v)
+}
+
+/// A resistance or RCR outlet with plain finite values and a constant (or no) pressure, in
+/// SI, or None. `factors`: resistance, capacitance, pressure.
+fn outlet(item: &Bound<'_, PyAny>, (r, c, p): (f64, f64, f64)) -> Option<BoundarySpec> {
+    if !item.is_exact_instance_of::<PyDict>() {
+        return None;
+    }
+    let d = item.cast::<PyDict>().ok()?;
+    let kind = name(&d.get_item("type").ok()??)?;
+    let (mut pressure, mut values) = (0.0, [None; 4]);
+    for (k, x) in d.iter() {
+        if !k.is_exact_instance_of::<PyString>() {
+            return None;
+        }
+        let slot = match (kind.as_str(), k.cast::<PyString>().ok()?.to_str().ok()?) {
+            (_, "type") => continue,
+            (_, "pressure") => {
+                pressure = finite(&x)?;
+                continue;
+            }
+            ("resistance", "resistance") => 0,
+            ("rcr", "proximal_resistance") => 1,
+            ("rcr", "capacitance") => 2,
+            ("rcr", "distal_resistance") => 3,
+            _ => return None,
+        };
+        values[slot] = Some(finite(&x)?);
+    }
+    let pressure = Some(WaveformSpec::Constant {
+        value: p * pressure,
+    });
+    match (kind.as_str(), values) {
+        ("resistance", [Some(x), ..]) => Some(BoundarySpec::Resistance {
+            resistance: r * x,
+            pressure,
+        }),
+        ("rcr", [None, Some(rp), Some(cap), Some(rd)]) => Some(BoundarySpec::Rcr {
+            proximal_resistance: r * rp,
+            capacitance: c * cap,
+            distal_resistance: r * rd,
+            pressure,
+        }),
+        _ => None,
+    }
+}
+
+/// Outlet conditions by node name, in the order read.
+pub(crate) type Outlets = Vec<(String, BoundarySpec)>;
+
+/// The vessels and outlets of a native model read by this module; the ones it left to Python
+/// are listed (`slow_vessels`, the node names `outlets` returns) and filled in by Python.
+#[pyclass(module = "oxyline._core")]
+pub struct NativeParts {
+    vessels: Vec<Option<VesselSpec>>,
+    pub(crate) outlets: Outlets,
+}
+
+#[pymethods]
+impl NativeParts {
+    /// Read the plain vessels of the native `vessels` list (unit factors `length`, `modulus`).
+    #[new]
+    fn new(vessels: &Bound<'_, PyList>, length: f64, modulus: f64) -> Self {
+        NativeParts {
+            vessels: vessels
+                .iter()
+                .map(|v| vessel(&v, length, modulus))
+                .collect(),
+            outlets: Vec::new(),
+        }
+    }
+
+    /// Indices of the vessels this reader did not take, in order.
+    fn slow_vessels(&self) -> Vec<usize> {
+        (0..self.vessels.len())
+            .filter(|&i| self.vessels[i].is_none())
+            .collect()
+    }
+
+    /// Vessel `i` from its canonical dict (converted by Python's full check).
+    fn put_vessel(&mut self, i: usize, canonical: &Bound<'_, PyAny>) -> PyResult<()> {
+        let v = extract::vessel(i, canonical).map_err(crate::to_py)?;
+        self.vessels[i] = Some(v);
+        Ok(())
+    }
+
+    /// Read the plain outlets of the native `boundary_conditions` mapping (unit factors
+    /// `resistance`, `capacitance`, `pressure`); returns the node keys of the conditions left
+    /// to Python, in order.
+    fn read_outlets<'py>(
+        &mut self,
+        bcs: &Bound<'py, PyDict>,
+        resistance: f64,
+        capacitance: f64,
+        pressure: f64,
+    ) -> Vec<Bound<'py, PyAny>> {
+        let mut slow = Vec::new();
+        self.outlets.reserve(bcs.len());
+        for (node, bc) in bcs.iter() {
+            match (
+                name(&node),
+                outlet(&bc, (resistance, capacitance, pressure)),
+            ) {
+                (Some(n), Some(spec)) => self.outlets.push((n, spec)),
+                _ => slow.push(node),
+            }
+        }
+        slow
+    }
+
+    /// The vessel names in model order (every vessel read or put).
+    fn names(&self) -> Vec<&str> {
+        self.vessels
+            .iter()
+            .map(|v| v.as_ref().map_or("", |v| v.name.as_str()))
+            .collect()
+    }
+}
+
+impl NativeParts {
+    /// The vessels and outlets, moved out (a second call gets none).
+    pub(crate) fn take(&mut self) -> Result<(Vec<VesselSpec>, Outlets), Error> {
+        let vessels = std::mem::take(&mut self.vessels);
+        let outlets = std::mem::take(&mut self.outlets);
+        let vessels = vessels
+            .into_iter()
+            .enumerate()
+            .map(|(i, v)| v.ok_or_else(|| Error::model(format!("vessel #{i}"), "was not read")))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok((vessels, outlets))
+    }
+}
