@@ -705,13 +705,13 @@ impl Plan {
         for k in 0..tree.len() {
             let next = tree.get(k + 1).map_or(u32::MAX, |l| l.node);
             let l = &mut tree[k];
-            l.to_next = l.parent != u32::MAX && l.parent == next;
-            if l.parent != u32::MAX && !l.to_next {
+            l.set_to_next(l.parent != u32::MAX && l.parent == next);
+            if l.parent != u32::MAX && !l.to_next() {
                 reads[l.parent as usize] = true;
             }
         }
         for l in tree.iter_mut() {
-            l.reads_acc = reads[l.node as usize];
+            l.set_reads_acc(reads[l.node as usize]);
         }
     }
 
