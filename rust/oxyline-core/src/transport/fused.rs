@@ -11,7 +11,7 @@
 //!
 //! The per-node accumulators (net inflow, d, b) are packed in one entry, read and zeroed by
 //! the forward pass, so each node's row costs one cache line and no pass clears them. Along a
-//! vessel the parent is the next node eliminated (`Link::to_next`, the chain order of
+//! vessel the parent is the next node eliminated (`Link::parent_is_next`, the chain order of
 //! `tree_order`): there the terms pass in registers and the accumulator is not touched at
 //! all. The sums at a junction (a node with several children) add in another order than the
 //! general path's, so results agree with it to round-off.
@@ -149,7 +149,7 @@ impl Forward<'_> {
         // (NaN fails the test too)
         let mut positive = true;
         // the terms a node leaves in the row of its parent when that parent is eliminated
-        // next (`Link::to_next`): in registers, not in the parent's accumulator
+        // next (`Link::parent_is_next`): in registers, not in the parent's accumulator
         let mut carry = [0.0; 3];
         for (l, beta) in tree.iter().zip(beta.iter_mut()) {
             let n = l.node as usize;
@@ -166,10 +166,10 @@ impl Forward<'_> {
             if has_parent {
                 let q = flows.flow(l.face() as usize);
                 // inflow into n through the face to the parent
-                q_in = if l.from_child() { -q } else { q };
+                q_in = if l.face_from_child() { -q } else { q };
                 net += q_in;
                 aq = q.abs();
-                to_parent = (q >= 0.0) == l.from_child();
+                to_parent = (q >= 0.0) == l.face_from_child();
             }
             let (mut d, b);
             let cell = l.cell as usize;
@@ -212,7 +212,7 @@ impl Forward<'_> {
                 } else {
                     [-q_in, aq, 0.0]
                 };
-                if l.to_next() {
+                if l.parent_is_next() {
                     carry = terms;
                 } else {
                     let a = &mut acc[l.parent as usize];

@@ -546,7 +546,7 @@ impl Transport {
             if l.parent != u32::MAX {
                 let q = qf[l.face() as usize];
                 aq = q.abs();
-                to_parent = (q >= 0.0) == l.from_child();
+                to_parent = (q >= 0.0) == l.face_from_child();
                 if to_parent {
                     den[n] += aq;
                 } else {

@@ -48,14 +48,14 @@ impl Link {
 
     /// The face points from this node to its parent (positive flow runs child → parent).
     #[inline(always)]
-    pub(super) fn from_child(&self) -> bool {
+    pub(super) fn face_from_child(&self) -> bool {
         self.bits & Self::FROM_CHILD != 0
     }
 
     /// The parent is the next node eliminated (a chain along a vessel): the fused step hands
     /// this node's terms of the parent's row over in registers (`Plan::link_carries`).
     #[inline(always)]
-    pub(super) fn to_next(&self) -> bool {
+    pub(super) fn parent_is_next(&self) -> bool {
         self.bits & Self::TO_NEXT != 0
     }
 
@@ -66,7 +66,7 @@ impl Link {
         self.bits & Self::READS_ACC != 0
     }
 
-    pub(super) fn set_to_next(&mut self, v: bool) {
+    pub(super) fn set_parent_is_next(&mut self, v: bool) {
         self.bits = (self.bits & !Self::TO_NEXT) | if v { Self::TO_NEXT } else { 0 };
     }
 
@@ -321,7 +321,7 @@ mod tests {
                 assert!(pos[l.node as usize] < pos[l.parent as usize]);
                 let f = internal[l.face() as usize];
                 assert!((f[1], f[2]) == (l.node, l.parent) || (f[1], f[2]) == (l.parent, l.node));
-                assert_eq!(l.from_child(), f[1] == l.node);
+                assert_eq!(l.face_from_child(), f[1] == l.node);
             }
         }
         // each chain's nodes are eliminated one after the other (4 then 3, 6 then 5, 2–1–0)
