@@ -71,7 +71,10 @@ fn hill(p: f64, p50: f64, n: f64) -> (f64, f64) {
 /// With the cubic Taylor model C_t − C_t(P₁) = b d + c d² + e d³ (d = P − P₁) and u = (C_t −
 /// C_t(P₁))/b, series reversion gives d = u − k₂u² + k₃u³ + k₄u⁴ + …, k₂ = c/b,
 /// k₃ = 2k₂² − e/b, k₄ = 5k₂e/b − 5k₂³. The result is accepted when the first neglected terms
-/// — k₄u⁴ and the model's remainder H|S⁗|d⁴/(24b), each doubled — are below the tolerance.
+/// — k₄u⁴ and the model's remainder H|S⁗|d⁴/(24b), each doubled — are below the tolerance:
+/// bound·u⁴ < P_TOL, i.e. |u| below (P_TOL/bound)^¼, folded with the trusted span into one
+/// limit `u_max` when the anchor is made (48 bytes per node: the implicit step reads every
+/// cell's anchor once per step, so its size is memory traffic).
 #[derive(Debug, Clone, Copy)]
 pub struct HillAnchor {
     /// Anchor pressure P₁ (Pa).
@@ -82,15 +85,14 @@ pub struct HillAnchor {
     inv_slope: f64,
     k2: f64,
     k3: f64,
-    /// Error bound coefficient: |ΔP error| ≤ bound · u⁴.
-    bound: f64,
-    /// |u| above this leaves the model's trusted span (negative: no anchor yet).
-    span: f64,
+    /// |u| above this leaves the model's trusted span or its error bound (negative: no
+    /// anchor yet).
+    u_max: f64,
 }
 
 impl HillAnchor {
     /// Values per anchor in a checkpoint.
-    pub const CARRIED: usize = 7;
+    pub const CARRIED: usize = 6;
 
     /// The anchor as plain numbers (a checkpoint carries it: the inversion is warm-started).
     pub fn to_array(&self) -> [f64; Self::CARRIED] {
@@ -100,8 +102,7 @@ impl HillAnchor {
             self.inv_slope,
             self.k2,
             self.k3,
-            self.bound,
-            self.span,
+            self.u_max,
         ]
     }
 
@@ -113,8 +114,7 @@ impl HillAnchor {
             inv_slope: a[2],
             k2: a[3],
             k3: a[4],
-            bound: a[5],
-            span: a[6],
+            u_max: a[5],
         }
     }
 }
@@ -127,8 +127,7 @@ impl Default for HillAnchor {
             inv_slope: 0.0,
             k2: 0.0,
             k3: 0.0,
-            bound: f64::INFINITY,
-            span: -1.0,
+            u_max: -1.0,
         }
     }
 }
@@ -171,27 +170,25 @@ impl HillAnchor {
         let k2 = c * inv_slope;
         let e_b = e * inv_slope;
         let k4 = 5.0 * k2 * e_b - 5.0 * k2 * k2 * k2;
+        let bound = 2.0 * (k4.abs() + remainder * inv_slope);
+        // bound·u⁴ < P_TOL ⇔ |u| < (P_TOL/bound)^¼ (a zero bound leaves only the span)
+        let u_err = (P_TOL / bound).sqrt().sqrt();
         HillAnchor {
             p,
             total: alpha * p + capacity * s,
             inv_slope,
             k2,
             k3: 2.0 * k2 * k2 - e_b,
-            bound: 2.0 * (k4.abs() + remainder * inv_slope),
-            span: ANCHOR_SPAN * p,
+            u_max: u_err.min(ANCHOR_SPAN * p),
         }
     }
 
-    /// P from C_t by the series, and whether it is within tolerance (branch-free).
+    /// P from C_t by the series, u, and whether it is within tolerance (branch-free).
     #[inline(always)]
-    fn invert(&self, ct: f64) -> (f64, bool) {
+    fn invert(&self, ct: f64) -> (f64, f64, bool) {
         let u = (ct - self.total) * self.inv_slope;
-        let u2 = u * u;
         let p = self.p + u * (1.0 + u * (self.k3 * u - self.k2));
-        (
-            p,
-            ct > 0.0 && u.abs() <= self.span && self.bound * u2 * u2 < P_TOL,
-        )
+        (p, u, ct > 0.0 && u.abs() < self.u_max)
     }
 }
 
@@ -312,10 +309,10 @@ impl Binding {
     /// `free` for repeated inversions near a previous solution (one node): the local series
     /// inverse about `anchor` when it is within tolerance, so most calls need no `powf`;
     /// otherwise the exact Newton solve, re-anchored at its root.
-    #[inline]
+    #[inline(always)]
     pub fn free_anchored(&self, ct: f64, guess: f64, anchor: &mut HillAnchor) -> f64 {
         if let Binding::Hill { alpha, .. } = *self {
-            let (p, ok) = anchor.invert(ct);
+            let (p, _, ok) = anchor.invert(ct);
             if ok {
                 return alpha * p;
             }
@@ -328,7 +325,9 @@ impl Binding {
     /// from the same series, dP/dC_t = (1 − 2k₂u + 3k₃u²)/b, so neither needs a `powf`, and
     /// it is used as it comes (no division to the slope and back: the implicit step's chain
     /// of divisions per cell was its cost).
-    #[inline]
+    /// (The accepted series is inlined into the implicit step's cell loop; the re-anchoring
+    /// is a cold call.)
+    #[inline(always)]
     pub fn free_and_inv_slope_anchored(
         &self,
         ct: f64,
@@ -336,18 +335,31 @@ impl Binding {
         anchor: &mut HillAnchor,
     ) -> (f64, f64) {
         if let Binding::Hill { alpha, .. } = *self {
-            let (p, ok) = anchor.invert(ct);
+            let (p, u, ok) = anchor.invert(ct);
             if ok {
-                let u = (ct - anchor.total) * anchor.inv_slope;
                 let dp_dct = anchor.inv_slope * (1.0 + u * (3.0 * anchor.k3 * u - 2.0 * anchor.k2));
                 return (alpha * p, alpha * dp_dct);
             }
         }
+        self.free_and_inv_slope_reanchored(ct, guess, anchor)
+    }
+
+    /// The exact inversion and its inverse slope, re-anchored at the root (the cold path of
+    /// `free_and_inv_slope_anchored`).
+    #[cold]
+    #[inline(never)]
+    fn free_and_inv_slope_reanchored(
+        &self,
+        ct: f64,
+        guess: f64,
+        anchor: &mut HillAnchor,
+    ) -> (f64, f64) {
         let c = self.free_reanchored(ct, guess, anchor);
         (c, 1.0 / self.capacity_slope(c))
     }
 
     /// Exact inversion, and a new anchor at its root.
+    #[inline(never)]
     fn free_reanchored(&self, ct: f64, guess: f64, anchor: &mut HillAnchor) -> f64 {
         let c = self.free(ct, guess);
         if let Binding::Hill {

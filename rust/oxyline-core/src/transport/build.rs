@@ -688,7 +688,7 @@ fn incidence(
 }
 
 impl Plan {
-    /// `to_next` and `reads_acc` of the elimination order (see [`Link`]): a node hands its
+    /// `parent_is_next` and `reads_acc` of the elimination order (see [`Link`]): a node hands its
     /// terms to its parent in registers when the parent is eliminated next; the parent then
     /// reads its accumulator only if something else left terms there.
     fn link_carries(&mut self) {
@@ -705,13 +705,13 @@ impl Plan {
         for k in 0..tree.len() {
             let next = tree.get(k + 1).map_or(u32::MAX, |l| l.node);
             let l = &mut tree[k];
-            l.to_next = l.parent != u32::MAX && l.parent == next;
-            if l.parent != u32::MAX && !l.to_next {
+            l.set_parent_is_next(l.parent != u32::MAX && l.parent == next);
+            if l.parent != u32::MAX && !l.parent_is_next() {
                 reads[l.parent as usize] = true;
             }
         }
         for l in tree.iter_mut() {
-            l.reads_acc = reads[l.node as usize];
+            l.set_reads_acc(reads[l.node as usize]);
         }
     }
 

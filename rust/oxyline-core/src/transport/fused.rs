@@ -11,7 +11,7 @@
 //!
 //! The per-node accumulators (net inflow, d, b) are packed in one entry, read and zeroed by
 //! the forward pass, so each node's row costs one cache line and no pass clears them. Along a
-//! vessel the parent is the next node eliminated (`Link::to_next`, the chain order of
+//! vessel the parent is the next node eliminated (`Link::parent_is_next`, the chain order of
 //! `tree_order`): there the terms pass in registers and the accumulator is not touched at
 //! all. The sums at a junction (a node with several children) add in another order than the
 //! general path's, so results agree with it to round-off.
@@ -20,7 +20,8 @@
 use super::*;
 
 /// How the fused step builds a cell's row (a binding also records the wall linearisation it
-/// used in `sweep.wlin`, `wconst`, which the backward pass reads).
+/// used: the slope in `sweep.wlin`, which the backward pass reads, and the sum of the
+/// constant parts in `sweep.wc_sum`).
 trait CellRows {
     /// d and b of cell `i` (node `n`) before the face terms, from its old amount `zi`, old
     /// and new transport volumes `v` and `w` (the old concentration zi/v only where needed).
@@ -43,14 +44,21 @@ impl CellRows for FixedRows<'_> {
 }
 
 /// A binding with fixed laws (see `binding_rows`): free concentration and capacity slope at
-/// the old state (anchored inversion), the wall linearised in C_t about it.
+/// the old state (anchored inversion), the wall linearised in C_t about it. The free
+/// concentrations found here are not stored (8 bytes read and written per cell and step):
+/// the observation inverts every node again (`free_of_nodes`), and `free` is read only as
+/// the warm start of a re-anchoring, for which last row's value serves (the exact inversion
+/// converges from any start to the same tolerance). Nor are the constant parts wc of the
+/// linearised wall W = wl·C_t + wc: the step's wall flux needs only their sum, added here in
+/// elimination order (Σ wl x + Σ wc instead of Σ (wl x + wc): the same flux to round-off,
+/// without a per-cell array written here and read back by the backward pass).
 struct BindingRows<'a> {
     binding: Binding,
     laws: &'a Laws,
-    free: &'a mut [f64],
+    free: &'a [f64],
     anchors: &'a mut [HillAnchor],
     wlin: &'a mut [f64],
-    wconst: &'a mut [f64],
+    wc_sum: f64,
     rate: f64,
     inv_dt: f64,
 }
@@ -65,13 +73,13 @@ impl CellRows for BindingRows<'_> {
             let (f, inv_slope) = self
                 .binding
                 .free_and_inv_slope_anchored(c, self.free[n], anchor);
-            self.free[n] = f;
             let wl = self.laws.cell_g[i] * inv_slope;
             (wl, self.laws.fixed_uptake(i, f) - wl * c)
         } else {
             (0.0, 0.0)
         };
-        (self.wlin[i], self.wconst[i]) = (wl, wc);
+        self.wlin[i] = wl;
+        self.wc_sum += wc;
         (w * self.rate + wl, zi * self.inv_dt - wc)
     }
 }
@@ -141,13 +149,13 @@ impl Forward<'_> {
         // (NaN fails the test too)
         let mut positive = true;
         // the terms a node leaves in the row of its parent when that parent is eliminated
-        // next (`Link::to_next`): in registers, not in the parent's accumulator
+        // next (`Link::parent_is_next`): in registers, not in the parent's accumulator
         let mut carry = [0.0; 3];
         for (l, beta) in tree.iter().zip(beta.iter_mut()) {
             let n = l.node as usize;
             let carried = std::mem::take(&mut carry);
             // (a + carried: the same sums, in the same order, as the terms added to `acc`)
-            let [mut net, acc_d, acc_b] = if l.reads_acc {
+            let [mut net, acc_d, acc_b] = if l.reads_acc() {
                 let a = std::mem::take(&mut acc[n]);
                 [a[0] + carried[0], a[1] + carried[1], a[2] + carried[2]]
             } else {
@@ -156,12 +164,12 @@ impl Forward<'_> {
             let (mut q_in, mut aq, mut to_parent) = (0.0, 0.0, false);
             let has_parent = l.parent != u32::MAX;
             if has_parent {
-                let q = flows.flow(l.face as usize);
+                let q = flows.flow(l.face() as usize);
                 // inflow into n through the face to the parent
-                q_in = if l.from_child { -q } else { q };
+                q_in = if l.face_from_child() { -q } else { q };
                 net += q_in;
                 aq = q.abs();
-                to_parent = (q >= 0.0) == l.from_child;
+                to_parent = (q >= 0.0) == l.face_from_child();
             }
             let (mut d, b);
             let cell = l.cell as usize;
@@ -204,7 +212,7 @@ impl Forward<'_> {
                 } else {
                     [-q_in, aq, 0.0]
                 };
-                if l.to_next {
+                if l.parent_is_next() {
                     carry = terms;
                 } else {
                     let a = &mut acc[l.parent as usize];
@@ -226,7 +234,7 @@ struct RowState<'a> {
     set: &'a SpeciesPlan,
     sp: &'a mut Species,
     wlin: &'a mut [f64],
-    wconst: &'a mut [f64],
+    wc_sum: &'a mut f64,
     nc: usize,
     dt: f64,
 }
@@ -238,7 +246,7 @@ impl RowState<'_> {
             set,
             sp,
             wlin,
-            wconst,
+            wc_sum,
             nc,
             dt,
         } = self;
@@ -260,15 +268,63 @@ impl RowState<'_> {
             let mut rows = BindingRows {
                 binding: set.binding,
                 laws,
-                free: &mut sp.free,
+                free: &sp.free,
                 anchors: &mut sp.anchors,
                 wlin,
-                wconst,
+                wc_sum: 0.0,
                 rate,
                 inv_dt,
             };
-            fwd.run(&mut rows, flows, first)
+            let positive = fwd.run(&mut rows, flows, first);
+            *wc_sum = rows.wc_sum;
+            positive
         }
+    }
+}
+
+/// The slices the backward pass reads and writes.
+struct Backward<'a> {
+    tree: &'a [Link],
+    beta: &'a [f64],
+    x: &'a mut [f64],
+    wnew: &'a [f64],
+    zs: &'a mut [f64],
+    lambda: f64,
+}
+
+impl Backward<'_> {
+    /// Back-substitution parents first and N = W' x; returns the wall flux Σ (wl x + wc)
+    /// (wc per cell, or left to the caller: `None`) and the decay flux Σ λ W' x.
+    #[inline(always)]
+    fn run(self, wl: &[f64], wc: Option<&[f64]>) -> (f64, f64) {
+        let Backward {
+            tree,
+            beta,
+            x,
+            wnew,
+            zs,
+            lambda,
+        } = self;
+        let (mut i_wall, mut i_decay) = (0.0, 0.0);
+        for (l, &beta) in tree.iter().zip(beta).rev() {
+            let n = l.node as usize;
+            let mut xn = x[n];
+            if beta != 0.0 {
+                xn += beta * x[l.parent as usize];
+                x[n] = xn;
+            }
+            if l.cell != u32::MAX {
+                let i = l.cell as usize;
+                let w = wnew[i];
+                i_wall += match wc {
+                    Some(wc) => wl[i] * xn + wc[i],
+                    None => wl[i] * xn,
+                };
+                i_decay += lambda * w * xn;
+                zs[i] = w * xn;
+            }
+        }
+        (i_wall, i_decay)
     }
 }
 
@@ -325,7 +381,6 @@ impl Transport {
         sw.wnew.resize(nc, 0.0);
         if self.species.iter().any(|sp| !sp.free.is_empty()) {
             sw.wlin.resize(nc, 0.0);
-            sw.wconst.resize(nc, 0.0);
         }
         for s in 0..self.species.len() {
             self.load_boundary(s, t_af);
@@ -398,7 +453,7 @@ impl Transport {
             set: &plan.species[s],
             sp: &mut self.species[s],
             wlin: &mut sw.wlin,
-            wconst: &mut sw.wconst,
+            wc_sum: &mut sw.wc_sum,
             nc,
             dt,
         };
@@ -426,34 +481,23 @@ impl Transport {
             return;
         };
         let laws = &*self.species[s].laws;
+        let fixed = self.fixed_rows_of(s);
         let sw = &self.sweep;
-        let (wl, wc) = if self.fixed_rows_of(s) {
-            (&laws.cell_g[..nc], &laws.cell_wc[..nc])
-        } else {
-            (&sw.wlin[..nc], &sw.wconst[..nc])
+        let pass = Backward {
+            tree,
+            beta: &sw.beta,
+            x: &mut self.conc[..],
+            wnew: &sw.wnew[..nc],
+            zs: &mut z[s * nc..(s + 1) * nc],
+            lambda: plan.species[s].decay,
         };
-        let lambda = plan.species[s].decay;
-        let (x, wnew, zs) = (
-            &mut self.conc[..],
-            &sw.wnew[..nc],
-            &mut z[s * nc..(s + 1) * nc],
-        );
-        let (mut i_wall, mut i_decay) = (0.0, 0.0);
-        for (l, &beta) in tree.iter().zip(&sw.beta).rev() {
-            let n = l.node as usize;
-            let mut xn = x[n];
-            if beta != 0.0 {
-                xn += beta * x[l.parent as usize];
-                x[n] = xn;
-            }
-            if l.cell != u32::MAX {
-                let i = l.cell as usize;
-                let w = wnew[i];
-                i_wall += wl[i] * xn + wc[i];
-                i_decay += lambda * w * xn;
-                zs[i] = w * xn;
-            }
-        }
+        // fixed rows: the per-cell wc of the laws; a binding: wc summed by the forward pass
+        let (i_wall, i_decay) = if fixed {
+            pass.run(&laws.cell_g[..nc], Some(&laws.cell_wc[..nc]))
+        } else {
+            let (i_wall, i_decay) = pass.run(&sw.wlin[..nc], None);
+            (i_wall + sw.wc_sum, i_decay)
+        };
         let (i_in, i_out) = self.implicit_boundary_fluxes();
         let acc = &mut z[nsp * nc + 4 * s..nsp * nc + 4 * s + 4];
         for (a, v) in acc.iter_mut().zip([i_in, i_out, i_wall, i_decay]) {

@@ -544,9 +544,9 @@ impl Transport {
             let n = l.node as usize;
             let (mut aq, mut to_parent) = (0.0, false);
             if l.parent != u32::MAX {
-                let q = qf[l.face as usize];
+                let q = qf[l.face() as usize];
                 aq = q.abs();
-                to_parent = (q >= 0.0) == l.from_child;
+                to_parent = (q >= 0.0) == l.face_from_child();
                 if to_parent {
                     den[n] += aq;
                 } else {
@@ -775,6 +775,8 @@ pub(super) struct Sweep {
     pub(super) acc: Vec<[f64; 3]>,
     /// Face flows at the start of the next step (`Transport::implicit_step_carried`).
     pub(super) q_start: Vec<f64>,
+    /// Fused tree step with a binding: Σ wc of the cells' linearised walls (`fused.rs`).
+    pub(super) wc_sum: f64,
 }
 
 impl Sweep {

@@ -6,23 +6,73 @@
 use super::*;
 
 /// One domain node in the elimination order of [`tree_order`]: its parent in the spanning
-/// forest (`u32::MAX` for a root) and the face joining them.
+/// forest (`u32::MAX` for a root) and the face joining them. 16 bytes: the fused step reads
+/// every link twice per step, so the face index shares its word with the three flags.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Link {
     pub(super) node: u32,
     pub(super) parent: u32,
-    pub(super) face: u32,
-    /// The face points from this node to its parent (positive flow runs child → parent).
-    pub(super) from_child: bool,
     /// The node's cell (`u32::MAX`: a mixing point), so the fused step reads the cell arrays
     /// without a lookup.
     pub(super) cell: u32,
+    /// The face to the parent (low 29 bits, [`Link::NO_FACE`] for a root) and the flags
+    /// `FROM_CHILD`, `TO_NEXT`, `READS_ACC` (see their accessors).
+    bits: u32,
+}
+
+impl Link {
+    const FACE: u32 = (1 << 29) - 1;
+    /// The face of a root (no parent).
+    pub(super) const NO_FACE: u32 = Self::FACE;
+    const FROM_CHILD: u32 = 1 << 29;
+    const TO_NEXT: u32 = 1 << 30;
+    const READS_ACC: u32 = 1 << 31;
+
+    /// The link of `node` to `parent` through `face` (`face` < [`Link::NO_FACE`], checked by
+    /// `tree_order`).
+    pub(super) fn new(node: u32, parent: u32, face: u32, from_child: bool) -> Link {
+        debug_assert!(face <= Self::FACE);
+        let flag = if from_child { Self::FROM_CHILD } else { 0 };
+        Link {
+            node,
+            parent,
+            cell: u32::MAX,
+            bits: (face & Self::FACE) | flag,
+        }
+    }
+
+    #[inline(always)]
+    pub(super) fn face(&self) -> u32 {
+        self.bits & Self::FACE
+    }
+
+    /// The face points from this node to its parent (positive flow runs child → parent).
+    #[inline(always)]
+    pub(super) fn face_from_child(&self) -> bool {
+        self.bits & Self::FROM_CHILD != 0
+    }
+
     /// The parent is the next node eliminated (a chain along a vessel): the fused step hands
     /// this node's terms of the parent's row over in registers (`Plan::link_carries`).
-    pub(super) to_next: bool,
+    #[inline(always)]
+    pub(super) fn parent_is_next(&self) -> bool {
+        self.bits & Self::TO_NEXT != 0
+    }
+
     /// Terms of this node's row wait in the fused step's accumulator (boundary faces, flow
     /// sources, or a child not eliminated just before it).
-    pub(super) reads_acc: bool,
+    #[inline(always)]
+    pub(super) fn reads_acc(&self) -> bool {
+        self.bits & Self::READS_ACC != 0
+    }
+
+    pub(super) fn set_parent_is_next(&mut self, v: bool) {
+        self.bits = (self.bits & !Self::TO_NEXT) | if v { Self::TO_NEXT } else { 0 };
+    }
+
+    pub(super) fn set_reads_acc(&mut self, v: bool) {
+        self.bits = (self.bits & !Self::READS_ACC) | if v { Self::READS_ACC } else { 0 };
+    }
 }
 
 /// A face between a domain node and a boundary (every boundary face is one), compact for the
@@ -40,6 +90,10 @@ pub(super) struct BoundaryLink {
 /// faces is a forest (no loops, no parallel faces): then the upwind system can be eliminated
 /// leaves first for any flow directions (`Transport::tree_solve`). None otherwise. Linear time.
 pub(super) fn tree_order(nt: usize, domain: &[usize], internal: &[[u32; 3]]) -> Option<Vec<Link>> {
+    // (a face index must fit a link's 29 bits; beyond, the general sweep takes over)
+    if internal.iter().any(|e| e[0] >= Link::NO_FACE) {
+        return None;
+    }
     let mut ptr = vec![0u32; nt + 1];
     for &[_, a, b] in internal {
         ptr[a as usize + 1] += 1;
@@ -78,15 +132,7 @@ pub(super) fn tree_order(nt: usize, domain: &[usize], internal: &[[u32; 3]]) -> 
         }
         seen[r] = true;
         heads.clear();
-        heads.push(Link {
-            node: r as u32,
-            parent: u32::MAX,
-            face: u32::MAX,
-            from_child: false,
-            cell: u32::MAX,
-            to_next: false,
-            reads_acc: false,
-        });
+        heads.push(Link::new(r as u32, u32::MAX, Link::NO_FACE, false));
         let mut head = 0;
         while head < heads.len() {
             let mut l = heads[head];
@@ -96,22 +142,14 @@ pub(super) fn tree_order(nt: usize, domain: &[usize], internal: &[[u32; 3]]) -> 
                 let n = l.node as usize;
                 let (mut first, mut children) = (None, 0);
                 for &(f, o) in &adj[ptr[n] as usize..ptr[n + 1] as usize] {
-                    if f == l.face {
+                    if l.parent != u32::MAX && f == l.face() {
                         continue;
                     }
                     if seen[o as usize] {
                         return None; // a loop (or two faces between the same nodes)
                     }
                     seen[o as usize] = true;
-                    let child = Link {
-                        node: o,
-                        parent: l.node,
-                        face: f,
-                        from_child: internal_from(internal, f) == o,
-                        cell: u32::MAX,
-                        to_next: false,
-                        reads_acc: false,
-                    };
+                    let child = Link::new(o, l.node, f, internal_from(internal, f) == o);
                     children += 1;
                     match children {
                         1 => first = Some(child),
@@ -281,9 +319,9 @@ mod tests {
         for l in &order {
             if l.parent != u32::MAX {
                 assert!(pos[l.node as usize] < pos[l.parent as usize]);
-                let f = internal[l.face as usize];
+                let f = internal[l.face() as usize];
                 assert!((f[1], f[2]) == (l.node, l.parent) || (f[1], f[2]) == (l.parent, l.node));
-                assert_eq!(l.from_child, f[1] == l.node);
+                assert_eq!(l.face_from_child(), f[1] == l.node);
             }
         }
         // each chain's nodes are eliminated one after the other (4 then 3, 6 then 5, 2–1–0)
