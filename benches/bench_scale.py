@@ -22,6 +22,8 @@ times in brackets —
     python benches/bench_scale.py --quick               # the issue's table, ~10 min quiet
     python benches/bench_scale.py                       # depths 8, 10, 12, 14, 16
     python benches/bench_scale.py --depths 8 10 12 14 16 18 --rk4-max-depth 12
+    python benches/bench_scale.py --depths 8 10 12 14 16 18 --configs flow o2-k \
+        --methods generalized-alpha        # issue 9 item 7: slopes 1e3-1e6 (and >= 1e4)
     python benches/bench_scale.py --depths 18 --configs flow o2-k     # the 1e6-segment run
     python benches/bench_scale.py --depths 18 --configs o2-k --zarr   # ... streamed to Zarr
     python benches/bench_scale.py --depths 18 --configs o2-k --variables flow_in concentration_in
