@@ -29,6 +29,8 @@ times in brackets —
     python benches/bench_scale.py --quick               # the issue's table, ~10 min quiet
     python benches/bench_scale.py                       # depths 8, 10, 12, 14, 16
     python benches/bench_scale.py --depths 8 10 12 14 16 18 --rk4-max-depth 12
+    python benches/bench_scale.py --depths 8 10 12 14 16 18 --configs flow o2-k \
+        --methods generalized-alpha        # issue 9 item 7: slopes 1e3-1e6 (and >= 1e4)
     python benches/bench_scale.py --depths 18 --configs flow o2-k     # the 1e6-segment run
     python benches/bench_scale.py --depths 18 --configs o2-k --zarr   # ... streamed to Zarr
     python benches/bench_scale.py --depths 18 --configs o2-k --variables flow_in concentration_in
@@ -279,8 +281,10 @@ def main() -> None:
                     choices=["generalized-alpha", "rk4"])
     ap.add_argument("--rk4-max-depth", type=int, default=12,
                     help="largest tree run with RK4 (its stable dt shrinks with the vessels)")
-    ap.add_argument("--fit-min-segments", type=float, default=1e4,
-                    help="smallest tree included in the log-log fits")
+    ap.add_argument("--fit-min-segments", type=float, nargs="+", default=[1e3, 1e4],
+                    help="smallest tree included in the log-log fits, one fit per value "
+                         "(default: from 1e3, the range of issue 9 item 7, and from 1e4, "
+                         "the fits of earlier sessions)")
     ap.add_argument("--zarr", action="store_true",
                     help="stream the output to a Zarr store (simulate_to_zarr) instead of "
                          "keeping it in memory")
@@ -349,7 +353,8 @@ def main() -> None:
         print(f"\nnot run (--rk4-max-depth {a.rk4_max_depth}: RK4's automatic dt makes its step "
               f"count grow with the tree; --quick also stops Hill at depth 14): "
               + ", ".join(skipped))
-    print_slopes(rows, a.fit_min_segments)
+    for min_segments in a.fit_min_segments:
+        print_slopes(rows, min_segments)
 
 
 if __name__ == "__main__":

@@ -30,7 +30,11 @@ pub struct GenAlpha<'a> {
     /// For each chain-rule capacitor, the value index of its F entry (node row, flow column).
     chain_flow_entry: Vec<usize>,
     factored: bool,
+    /// The forcing vector of a nonlinear step (empty for linear circuits: see `forcing`).
     f: Vec<f64>,
+    /// The forcing of a linear step, by row: most rows have none, so a dense vector would be
+    /// zeroed and read back every step for nothing.
+    forcing: SparseForcing,
     r: Vec<f64>,
     /// Newton iterate and α_f level of a nonlinear step (empty for linear circuits, whose
     /// step needs neither: a million-segment tree saves three state vectors).
@@ -109,7 +113,8 @@ impl<'a> GenAlpha<'a> {
             n_stamps: stamps.len(),
             chain_flow_entry,
             factored: false,
-            f: vec![0.0; n],
+            f: vec![0.0; nonlinear],
+            forcing: SparseForcing::new(dae),
             r: vec![0.0; n],
             y_new: vec![0.0; nonlinear],
             yd_new: vec![0.0; nonlinear],
@@ -284,7 +289,7 @@ impl GenAlpha<'_> {
         let (am, af, gamma, dt) = (self.am, self.af, self.gamma, self.dt);
         let pred = (gamma - 1.0) / gamma;
         let t_af = time + af * dt;
-        self.dae.forcing_into(t_af, self.regime, &mut self.f);
+        self.forcing.eval(self.dae, t_af, self.regime);
         if !self.factored {
             self.factor(t_af, y, &[])?;
         }
@@ -292,8 +297,18 @@ impl GenAlpha<'_> {
         let c_am = 1.0 + am * (pred - 1.0);
         let f = &self.dae.f;
         let mut rmax = 0.0f64;
+        let (rows, values) = (&self.forcing.rows, &self.forcing.values);
+        let (mut next, mut next_row) = (0, rows.first().map_or(usize::MAX, |&r| r as usize));
         for (i, r) in self.r.iter_mut().enumerate() {
-            let mut v = self.f[i] - self.e[i] * yd[i] * c_am;
+            // f_i as `Dae::forcing_into` gives it (0 on a row without forcing)
+            let fi = if i == next_row {
+                next += 1;
+                next_row = rows.get(next).map_or(usize::MAX, |&r| r as usize);
+                values[next - 1]
+            } else {
+                0.0
+            };
+            let mut v = fi - self.e[i] * yd[i] * c_am;
             for k in f.ptr[i]..f.ptr[i + 1] {
                 v -= f.val[k] * y[f.col[k] as usize];
             }
@@ -315,5 +330,58 @@ impl GenAlpha<'_> {
             *ydi = pred * *ydi + ri;
         }
         Ok(())
+    }
+}
+
+/// The forcing rows of a circuit, each with its waveforms, and their values at one time: the
+/// sparse form of `Dae::forcing_into`, summed in the same order (from 0.0, in the order of
+/// `Dae::forcing`), so the same bits.
+struct SparseForcing {
+    /// Rows with forcing, increasing.
+    rows: Vec<u32>,
+    /// Row k sums the waveforms `Dae::forcing[entries[ptr[k]..ptr[k + 1]]]`.
+    ptr: Vec<usize>,
+    entries: Vec<usize>,
+    /// The values at the last `eval`, by row.
+    values: Vec<f64>,
+}
+
+impl SparseForcing {
+    fn new(dae: &Dae) -> Self {
+        let mut entries: Vec<usize> = (0..dae.forcing.len()).collect();
+        // stable: a row's waveforms stay in their order
+        entries.sort_by_key(|&k| dae.forcing[k].0);
+        let (mut rows, mut ptr) = (Vec::new(), vec![0]);
+        for (j, &k) in entries.iter().enumerate() {
+            let row = dae.forcing[k].0 as u32;
+            if rows.last() != Some(&row) {
+                if j > 0 {
+                    ptr.push(j);
+                }
+                rows.push(row);
+            }
+        }
+        ptr.push(entries.len());
+        let values = vec![0.0; rows.len()];
+        SparseForcing {
+            rows,
+            ptr,
+            entries,
+            values,
+        }
+    }
+
+    fn eval(&mut self, dae: &Dae, t: f64, regime: Regime) {
+        for (k, value) in self.values.iter_mut().enumerate() {
+            *value = 0.0;
+            for &e in &self.entries[self.ptr[k]..self.ptr[k + 1]] {
+                let w = &dae.forcing[e].1;
+                *value += if regime == Regime::Transient {
+                    w.eval(t)
+                } else {
+                    w.mean()
+                };
+            }
+        }
     }
 }
