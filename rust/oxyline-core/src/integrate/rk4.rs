@@ -374,11 +374,9 @@ impl<'a> Rk4<'a> {
 
     /// Time derivative of the differential unknowns at (t, y) (zero for algebraic ones);
     /// the algebraic unknowns of `y` are made consistent first.
+    /// The stiff branches keep their mode (`y` may not be consistent yet: a zero start's
+    /// pressures would read every valve half-closed).
     pub fn derivative(&mut self, time: f64, y: &mut [f64]) -> Result<Vec<f64>> {
-        if !self.stiff.is_empty() {
-            self.forcing(time);
-            self.select_mode(y)?;
-        }
         self.rhs(time, y, 0)?;
         let mut out = vec![0.0; self.dae.n];
         for &i in &self.diff {
