@@ -137,9 +137,32 @@ def _variable_errors(actual: Any, expected: Any) -> float:
     return worst
 
 
+#: RK4 sub-steps per output step of the drop-in in the chamber table (None: automatic, from
+#: the stability bound and the time tables); the stiff chamber-inductor case needs 20 to
+#: resolve its valves' switch (docs/physics.md §1.8, tests/test_svzerod_chambers.py)
+RK4_SUBSTEPS = {"valve_tanh": None, "chamber_elastance_inductor": 20,
+                "closedLoopHeart_singleVessel_decomposed": None, "chamber_sphere": None}
+
+
+def _refined(cfg: Any, factor: int) -> Any:
+    fine = json.loads(json.dumps(cfg))
+    sp = fine["simulation_parameters"]
+    sp["number_of_time_pts_per_cardiac_cycle"] = (
+        sp["number_of_time_pts_per_cardiac_cycle"] - 1) * factor + 1
+    sp["output_interval"] = sp.get("output_interval", 1) * factor
+    return fine
+
+
+def _late(frame: Any, t0: float) -> Any:
+    """Rows at t > t0 (the zero start's t = 0 row and start transient left out)."""
+    return frame[frame["time"] > t0]
+
+
 def chamber_table() -> None:
     """svzerod and the drop-in on the chamber/valve peer cases: wall and CPU seconds of each in
-    the same run, and the drop-in's accuracy against the stored reference."""
+    the same run, the drop-in's accuracy against the stored reference, and RK4 (steps, CPU) against
+    svzerod 20x finer (chamber_sphere, which svzerod 3.2 cannot run: against oxyline's
+    generalized-α 400x finer)."""
     import time
 
     import pandas as pd
@@ -148,33 +171,43 @@ def chamber_table() -> None:
     import oxyline
     import oxyline.svzerod as svz
 
-    print("\n| case | svzerod wall (s) | svzerod CPU (s) | gen-α wall (s) | gen-α CPU (s) | "
-          "gen-α err vs reference | RK4 wall (s) | RK4 err vs svzerod 20x |")
-    print("|---|---|---|---|---|---|---|---|")
+    print(f"\nload average at start: {os.getloadavg()[0]:.1f}\n")
+    print("| case | svzerod wall (s) | svzerod CPU (s) | gen-α wall (s) | gen-α CPU (s) | "
+          "gen-α err vs reference | RK4 sub-steps | RK4 CPU (s) | RK4 err vs fine |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for name in ("valve_tanh", "chamber_elastance_inductor",
-                 "closedLoopHeart_singleVessel_decomposed"):
+                 "closedLoopHeart_singleVessel_decomposed", "chamber_sphere"):
         cfg = json.loads((CASES / f"{name}.json").read_text())
         ref = pd.read_json(CASES / "results" / f"result_{name}.json.gz")
+        sphere = name == "chamber_sphere"
         t, c = time.perf_counter(), time.process_time()
-        svzerod.simulate(cfg)
+        if not sphere:
+            svzerod.simulate(cfg)
         t_peer, c_peer = time.perf_counter() - t, time.process_time() - c
         t, c = time.perf_counter(), time.process_time()
         ga = svz.simulate(cfg)
         t_ga, c_ga = time.perf_counter() - t, time.process_time() - c
+        sub = RK4_SUBSTEPS[name]
         try:
-            t = time.perf_counter()
-            rk = svz.simulate(cfg, method="rk4")
-            t_rk = f"{time.perf_counter() - t:.3f}"
-            fine = json.loads(json.dumps(cfg))
-            sp = fine["simulation_parameters"]
-            sp["number_of_time_pts_per_cardiac_cycle"] = (
-                sp["number_of_time_pts_per_cardiac_cycle"] - 1) * 20 + 1
-            sp["output_interval"] = 20
-            e_rk = f"{_variable_errors(rk, svzerod.simulate(fine)):.1e}"
-        except oxyline.SolverError as err:
-            t_rk, e_rk = "–", f"fails: {str(err)[:60]}"
-        print(f"| {name} | {t_peer:.3f} | {c_peer:.3f} | {t_ga:.3f} | {c_ga:.3f} | "
-              f"{_variable_errors(ga, ref):.1e} | {t_rk} | {e_rk} |")
+            c = time.process_time()
+            rk = svz.simulate(cfg, method="rk4", rk4_substeps=sub)
+            c_rk = f"{time.process_time() - c:.2f}"
+            if sphere:
+                # the zero start's t = 0 row: gen-α writes the given start, RK4 its consistent
+                # algebraic unknowns
+                fine = svz.simulate(_refined(cfg, 400))
+                e_rk = f"{_variable_errors(_late(rk, 0.0), _late(fine, 0.0)):.1e} (gen-α 400x)"
+            elif name.startswith("closedLoop"):
+                fine = svzerod.simulate(_refined(cfg, 20))
+                e_rk = f"{_frame_error(_late(rk, 0.0), _late(fine, 0.0)):.1e}"
+            else:
+                e_rk = f"{_variable_errors(rk, svzerod.simulate(_refined(cfg, 20))):.1e}"
+        except (oxyline.SolverError, oxyline.ModelError) as err:
+            c_rk, e_rk = "–", f"fails: {str(err)[:60]}"
+        peer = ("–", "–") if sphere else (f"{t_peer:.3f}", f"{c_peer:.3f}")
+        print(f"| {name} | {peer[0]} | {peer[1]} | {t_ga:.3f} | {c_ga:.3f} | "
+              f"{_variable_errors(ga, ref):.1e} | {sub or 'auto'} | {c_rk} | {e_rk} |")
+    print(f"\nload average at end: {os.getloadavg()[0]:.1f}")
 
 
 def _frame_error(actual: Any, expected: Any) -> float:
@@ -273,9 +306,14 @@ def main() -> None:
                     "tables (the rerun command)")
     ap.add_argument("--closed-loop", action="store_true", help="only the closed-loop heart-block "
                     "cases against svzerod (time and accuracy)")
+    ap.add_argument("--chambers", action="store_true", help="only the chamber/valve cases "
+                    "(gen-α and RK4 against svzerod)")
     args = ap.parse_args()
     if args.closed_loop:
         closed_loop_table(args.repeat)
+        return
+    if args.chambers:
+        chamber_table()
         return
     if args.quick:
         args.repeat, args.sizes = 1, "200"

@@ -74,7 +74,7 @@ def test_closed_loop_heart_decomposed_matches_reference() -> None:
 
 
 def test_rk4_matches_svzerod_20x_finer() -> None:
-    """valve_tanh (chamber_elastance_inductor: see test_rk4_refuses_flow_driven_valve)."""
+    """valve_tanh (chamber_elastance_inductor: see test_rk4_stiff_chamber_inductor_...)."""
     name = "valve_tanh"
     pytest.importorskip("svzerod")
     cfg = json.loads(case(name).read_text())
@@ -113,15 +113,23 @@ def test_rk4_chamber_cases_match_svzerod_20x_finer(name: str) -> None:
     assert max(errors.values()) <= 3 * RK4_CHAMBER_CASES[name], errors
 
 
-def test_rk4_refuses_flow_driven_valve() -> None:
+def test_rk4_stiff_chamber_inductor_matches_svzerod_20x_finer() -> None:
     """chamber_elastance_inductor: the chamber's outlet inductor (L = 3.5e-4) drives the flow
-    through valve1; closed (R_max = 1e5) that branch relaxes at R_max/L = 2.8e8 1/s, so RK4's
-    stability limit (docs/physics.md §1.8: every valve open and every valve closed) is ~1e-8 s
-    and its 30 cycles would take ~3e9 steps: the drop-in refuses with the limit and its
-    element (before, the bound took the valves open only, and RK4 blew up at t = 0.88 s)."""
-    with pytest.raises(oxyline.ModelError, match="rk4 cannot integrate this model in reasonable "
-                       "time: its stability limit .* s \\(set by"):
-        svz.simulate(str(case("chamber_elastance_inductor")), method="rk4")
+    through valve1; closed (R_max = 1e5) that branch relaxes at R_max/L = 2.8e8 1/s (~3e9
+    explicit steps for its 30 cycles). RK4 makes the branch algebraic while R(ΔP) Δt > L
+    (docs/physics.md §1.8, "stiff branches"): the stability bound is then set by the vessel
+    (4.2e-2 s, was ~1e-8 s), and 20 sub-steps per output step resolve the valves' switch
+    (tanh of width 0.01 over pressure swings of 10 in ~0.1 s)."""
+    pytest.importorskip("svzerod")
+    name = "chamber_elastance_inductor"
+    cfg = json.loads(case(name).read_text())
+    errors = compare(svz.simulate(cfg, method="rk4", rk4_substeps=20), svzerod_run(cfg, 20))
+    assert len(errors) >= 8
+    # measured 2.5e-3 (Vc, the chamber volume after 30 cycles): svzerod 20x finer is itself
+    # 2.5e-3 off svzerod 100x finer, while this RK4 run is 2.7e-4 off it; the default sub-step
+    # (one per output step, 1e-2 s) gives 1.2e-1, svZeroDSolver's own step 2.9e-1. 2x the
+    # measured value: the peer's own discretisation error dominates the comparison
+    assert max(errors.values()) <= 5e-3, errors
 
 
 # ------------------------------------------------------------------------------------------

@@ -175,6 +175,8 @@ class RunSettings:
     caps: list[tuple[str, str]] = field(default_factory=list)
     #: record every unknown of the core (the chambers' volumes are no vessel column)
     all_unknowns: bool = False
+    #: RK4 sub-steps per output step (None: from the stability bound and the time tables)
+    rk4_substeps: int | None = None
 
 
 # ------------------------------------------------------------------------------------------
@@ -897,7 +899,8 @@ def _table_spacings(native: Mapping[str, Any]) -> list[float]:
 
 
 def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
-             method: str = "generalized-alpha", units: str | None = None) -> Any:
+             method: str = "generalized-alpha", units: str | None = None,
+             rk4_substeps: int | None = None) -> Any:
     """Run an svZeroDSolver configuration and return ``svzerod.simulate``'s DataFrame.
 
     The frame holds the file's own numbers, as svZeroDSolver's does; ``df.attrs["units"]``
@@ -908,7 +911,9 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
     Newton tolerance. ``method="rk4"`` uses oxyline's explicit RK4 with a stable sub-step
     inside each output step (outputs at the same times). Inductor flows a FLOW condition fixes
     (e.g. an R-L vessel fed by a FLOW condition) are made algebraic first; circuits still
-    singular after that raise :class:`oxyline.ModelError`.
+    singular after that raise :class:`oxyline.ModelError`. ``rk4_substeps`` sets the RK4
+    sub-steps per output step (default: half the stability limit, and the spacing of the time
+    tables); a smaller sub-step resolves a steep valve's switch (docs/physics.md §1.8).
 
     ``output_variable_based`` gives svZeroDSolver's variable table (``name, time, y``: the
     flow and pressure of each of its nodes, then internal variables such as an RCR's
@@ -920,6 +925,11 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
     if method not in METHODS:
         raise ModelError(f"simulate: method must be one of {', '.join(METHODS)}, got {method!r}")
     native, s, layout = _convert(config, units)
+    if rk4_substeps is not None:
+        if method != "rk4" or int(rk4_substeps) < 1:
+            raise ModelError(f"simulate: rk4_substeps={rk4_substeps!r} needs method='rk4' and "
+                             "a positive integer")
+        s = dataclasses.replace(s, rk4_substeps=int(rk4_substeps))
     # record every native vessel an output comes from (the hidden parts of a BloodVesselCRL
     # and of a resistive junction too); the drop-in runs in the file's own units, as
     # svZeroDSolver does (same numbers, same Newton tolerance): the equations do not depend
@@ -1088,6 +1098,12 @@ def _core_kwargs(model: Model, native: Mapping[str, Any], s: RunSettings, method
     dt_max, element, _ = model.network.rk4_stability_limit()
     h = min([0.5 * dt_max] + _table_spacings(native))
     sub = max(1, math.ceil(s.dt / h * (1.0 - 1e-12)))
+    if s.rk4_substeps is not None:
+        if s.rk4_substeps < sub and s.dt / s.rk4_substeps > 0.5 * dt_max:
+            raise ModelError(
+                f"rk4_substeps={s.rk4_substeps}: the sub-step {s.dt / s.rk4_substeps:.3g} s "
+                f"exceeds half the RK4 stability limit {dt_max:.3g} s (set by {element})")
+        sub = s.rk4_substeps
     steps = sub * (s.points_per_cycle - 1) * s.cycles
     if steps > RK4_MAX_STEPS:
         # e.g. a closed valve behind a chamber's outlet inductor: R_max/L is a nanosecond

@@ -73,6 +73,16 @@ pub trait Element: Debug + Send + Sync {
     fn switched_unknowns(&self) -> Vec<usize> {
         Vec::new()
     }
+    /// A valve's branch: (its flow unknown, R_min, R_max). Behind an inductor (a chamber's
+    /// outlet) such a branch relaxes at R(ΔP)/L, which RK4 treats as algebraic when that rate
+    /// exceeds 1/Δt (docs/physics.md §1.8, "stiff branches"). Default: not a valve.
+    fn valve_branch(&self) -> Option<(usize, f64, f64)> {
+        None
+    }
+    /// The valve's resistance R(ΔP) at state `y` (see [`Element::valve_branch`]).
+    fn valve_resistance(&self, _y: &[f64]) -> f64 {
+        0.0
+    }
     /// c depends on the state other than linearly (Newton refactorises per iteration).
     fn is_nonlinear(&self) -> bool;
     /// The period of c's time dependence (None: c does not depend on time).

@@ -183,19 +183,6 @@ impl Element for ChamberSphere {
         j[11] = -dgrowth[0];
         j[12] = -dgrowth[1];
     }
-    fn rk4_unsupported(&self) -> Option<String> {
-        // measured on svZeroDSolver's chamber_sphere case: the Newton iteration of RK4's
-        // algebraic elimination (the chamber pressure, fixed only through the balance of the
-        // valve flows and the wall's volume rate) does not converge from the first sub-step,
-        // at 1e-4 s as at the stability limit (1.4e-3 s); generalized-α solves the same rows
-        // together with the wall's dynamics
-        Some(
-            "RK4's algebraic elimination does not converge for it (the chamber pressure is \
-             fixed only by the balance of its inflow, outflow and wall volume rate); use \
-             method=\"generalized-alpha\""
-                .into(),
-        )
-    }
     fn is_nonlinear(&self) -> bool {
         true
     }

@@ -141,6 +141,15 @@ impl Element for Valve {
     fn has_closed_state(&self) -> bool {
         true
     }
+    fn valve_branch(&self) -> Option<(usize, f64, f64)> {
+        let r_max = match self.law {
+            ValveLaw::Tanh { r_max, .. } | ValveLaw::Piecewise { r_max, .. } => r_max,
+        };
+        Some((self.pattern[0].0, self.law.r_min(), r_max))
+    }
+    fn valve_resistance(&self, y: &[f64]) -> f64 {
+        self.law.resistance(self.state(y).1).0
+    }
     fn is_nonlinear(&self) -> bool {
         true
     }

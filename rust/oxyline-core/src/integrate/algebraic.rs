@@ -314,4 +314,10 @@ impl NewtonProblem for Elimination<'_> {
     fn is_linear(&self) -> bool {
         self.alg.is_linear()
     }
+    /// Valve laws are steep (a tanh switch of width 1/k, an exponential flow law when
+    /// R_min = 0): plain Newton oscillates across the switch or overshoots into the exponential
+    /// branch, so corrections that increase the residual are halved (docs/physics.md §1.8).
+    fn backtracks(&self) -> bool {
+        self.alg.element_nonlinear
+    }
 }

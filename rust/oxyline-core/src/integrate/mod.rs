@@ -17,6 +17,7 @@ pub mod newton;
 pub mod rk4;
 pub mod stability;
 pub mod steady;
+mod stiff;
 
 use crate::error::Result;
 pub use genalpha::GenAlpha;

@@ -6,6 +6,7 @@
 
 use crate::circuit::{Dae, JacobianKind};
 use crate::error::{Error, Result};
+use std::cmp::Ordering;
 
 /// Newton stopping rule. `atol: Some(a)` reproduces svZeroDSolver (max |residual| < a,
 /// absolute and unscaled); `None` takes one exact solve for linear circuits and iterates on the
@@ -112,11 +113,28 @@ pub trait NewtonProblem {
     fn unknowns(&self) -> Option<&[usize]>;
     /// A linear problem is solved exactly by the first correction.
     fn is_linear(&self) -> bool;
+    /// Halve a correction that did not pass the natural monotonicity test before taking the
+    /// next one: a backtracking line search for strongly nonlinear rows (RK4's elimination of
+    /// steep valve laws, docs/physics.md §1.8). Default: plain Newton.
+    fn backtracks(&self) -> bool {
+        false
+    }
 }
+
+/// Halvings of one correction before the line search gives up and takes the next Newton
+/// correction from where it stands (2⁻³⁰ of a step is below any useful change).
+const MAX_HALVINGS: usize = 30;
 
 /// Newton's method on `problem` with the residual buffer `r`. `scale` carries the running
 /// magnitudes of the scaled-increment rule between calls. Not converging in
 /// `control.max_iter` iterations is a solver error at `time`.
+///
+/// A problem that [`NewtonProblem::backtracks`] takes a correction only when the simplified
+/// correction at the new iterate, J_old⁻¹ r_new, is smaller than the correction itself (both
+/// as scaled increments): Deuflhard's natural monotonicity test, invariant under the scaling
+/// of the rows (a residual norm would mix Pa and m³/s rows, and a valve's KCL residual of
+/// 1e-6 m³/s would count for nothing against its pressure rows); otherwise the correction is
+/// halved.
 pub fn solve<P: NewtonProblem>(
     problem: &mut P,
     r: &mut [f64],
@@ -124,21 +142,57 @@ pub fn solve<P: NewtonProblem>(
     scale: &mut Magnitude,
     time: f64,
 ) -> Result<()> {
-    for it in 0..control.max_iter {
+    // the scaled size of the last correction of a backtracking problem, that correction and
+    // the simplified correction
+    let mut before: Option<f64> = None;
+    let (mut dx, mut simplified): (Vec<f64>, Vec<f64>) = (Vec::new(), Vec::new());
+    let mut halvings = 0;
+    let mut it = 0;
+    while it < control.max_iter {
         problem.residual(r);
+        if let Some(before) = before {
+            simplified.clear();
+            simplified.extend_from_slice(r);
+            // the factorisation is still that of the last correction's iterate
+            let now = match problem.solve(&mut simplified) {
+                Ok(()) => scale.increment(problem.unknowns(), &simplified),
+                Err(_) => f64::NAN,
+            };
+            // an overflow (NaN) is halved too
+            let worse = matches!(now.partial_cmp(&before), Some(Ordering::Greater) | None);
+            if worse && halvings < MAX_HALVINGS {
+                for d in dx.iter_mut() {
+                    *d *= -0.5;
+                }
+                problem.update(&mut dx);
+                for d in dx.iter_mut() {
+                    *d = -*d;
+                }
+                halvings += 1;
+                continue;
+            }
+        }
+        halvings = 0;
+        it += 1;
         if let Some(atol) = control.atol {
             // svZeroDSolver checks the residual before each solve and gives up without a
             // last correction
             if amax(r) < atol {
                 return Ok(());
             }
-            if it + 1 == control.max_iter {
+            if it == control.max_iter {
                 break;
             }
         }
-        problem.factor(it)?;
+        problem.factor(it - 1)?;
         problem.solve(r)?;
         problem.update(r);
+        if problem.backtracks() {
+            dx.clear();
+            dx.extend_from_slice(r);
+            scale.observe(problem.state());
+            before = Some(scale.increment(problem.unknowns(), r));
+        }
         if control.atol.is_none() {
             if problem.is_linear() {
                 return Ok(());

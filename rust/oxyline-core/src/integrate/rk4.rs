@@ -7,6 +7,7 @@
 
 use super::algebraic::{Algebraic, Elimination, Reduction, reduce_prescribed_inductors};
 use super::newton::{self, NewtonControl, singular};
+use super::stiff::{self, STIFF_RATE, StiffBranch};
 use crate::circuit::{Dae, JacobianKind, Regime};
 use crate::error::{Error, Result};
 
@@ -244,6 +245,22 @@ pub struct Rk4<'a> {
     lin_state: Vec<f64>,
     /// The elements' state in `linear_operator`: stiffest (valves open) or valves closed.
     lin_kind: JacobianKind,
+    /// E of the index reduction with every stiff branch differential.
+    base_e: Vec<f64>,
+    /// Valves behind inductors (see `stiff`), and which of them are algebraic now (bit i).
+    stiff: Vec<StiffBranch>,
+    mask: u64,
+    /// The (E, differential unknowns, algebraic part) of the other masks met so far.
+    parked: Vec<Mode>,
+}
+
+/// E, the differential unknowns and the algebraic part for one set of algebraic stiff
+/// branches.
+struct Mode {
+    mask: u64,
+    e: Vec<f64>,
+    diff: Vec<usize>,
+    alg: Option<Algebraic>,
 }
 
 impl<'a> Rk4<'a> {
@@ -269,15 +286,16 @@ impl<'a> Rk4<'a> {
                 ));
             }
         }
-        let mut alg = Algebraic::analyse(dae, &e, regime)?;
-        if let Some(a) = alg.as_mut() {
-            a.check_index1(dae)?;
-        }
+        let Mode { e, diff, alg, .. } = Self::mode(dae, regime, &e, &[], 0)?;
         Ok(Rk4 {
             dae,
             regime,
             dt,
-            diff: (0..n).filter(|&i| e[i] != 0.0).collect(),
+            stiff: stiff::find(dae, &e),
+            base_e: e.clone(),
+            mask: 0,
+            parked: Vec::new(),
+            diff,
             e,
             rate,
             alg,
@@ -288,6 +306,112 @@ impl<'a> Rk4<'a> {
             lin_state: Vec::new(),
             lin_kind: JacobianKind::Stiffest,
         })
+    }
+
+    /// The mode with the stiff branches of `mask` algebraic. A singular algebraic part (after
+    /// the index reduction: index 2) is a model error.
+    fn mode(
+        dae: &Dae,
+        regime: Regime,
+        base_e: &[f64],
+        stiff: &[StiffBranch],
+        mask: u64,
+    ) -> Result<Mode> {
+        let mut e = base_e.to_vec();
+        for (i, b) in stiff.iter().enumerate() {
+            if mask & (1 << i) != 0 {
+                e[b.inductor] = 0.0;
+            }
+        }
+        let mut alg = Algebraic::analyse(dae, &e, regime)?;
+        if let Some(a) = alg.as_mut() {
+            a.check_index1(dae)?;
+        }
+        Ok(Mode {
+            mask,
+            diff: (0..dae.n).filter(|&i| e[i] != 0.0).collect(),
+            e,
+            alg,
+        })
+    }
+
+    /// Number of stiff branches (valves behind inductors, see `stiff`).
+    pub fn stiff_branches(&self) -> usize {
+        self.stiff.len()
+    }
+
+    /// Make the stiff branches of `mask` (bit i: branch i) algebraic: the current E, the
+    /// differential unknowns and the algebraic part are parked and the mask's taken (built on
+    /// first use). The algebraic Newton's running scale carries over.
+    pub fn set_stiff_mask(&mut self, mask: u64) -> Result<()> {
+        if mask == self.mask {
+            return Ok(());
+        }
+        let next = match self.parked.iter().position(|m| m.mask == mask) {
+            Some(k) => self.parked.swap_remove(k),
+            None => Self::mode(self.dae, self.regime, &self.base_e, &self.stiff, mask)?,
+        };
+        let scale = self.alg.as_ref().map(|a| a.magnitude);
+        let Mode { e, diff, alg, .. } = next;
+        let old = Mode {
+            mask: self.mask,
+            e: std::mem::replace(&mut self.e, e),
+            diff: std::mem::replace(&mut self.diff, diff),
+            alg: std::mem::replace(&mut self.alg, alg),
+        };
+        self.parked.push(old);
+        self.mask = mask;
+        if let (Some(a), Some(s)) = (self.alg.as_mut(), scale) {
+            a.magnitude = s;
+        }
+        Ok(())
+    }
+
+    /// The mask whose branches are algebraic at state `y` and step `dt`: R(ΔP) Δt > L, or a
+    /// flow that the inductor's rate at `y` (the forcing last set) reverses within the step,
+    /// Q (Q + Δt Q̇) < 0: the valve closes in this step, and its flow through the closing
+    /// valve is the quasi-steady one (explicit stages would drive it backwards through the
+    /// switch, where the elimination has no well-posed start).
+    fn stiff_mask_at(&self, y: &[f64], dt: f64) -> u64 {
+        (self.stiff.iter().enumerate())
+            .filter(|(_, b)| {
+                let r = self.dae.elements[b.valve].valve_resistance(y);
+                if r * dt > STIFF_RATE * b.inductance {
+                    return true;
+                }
+                let j = b.inductor;
+                let rate = (self.f[j] - self.dae.f.row_dot(j, y)) / b.inductance;
+                y[j] * (y[j] + dt * rate) < 0.0
+            })
+            .fold(0, |m, (i, _)| m | (1 << i))
+    }
+
+    /// The mask of the branches that stay algebraic at step `dt` even with the valve fully
+    /// open (R_min Δt > L): the others can be differential at that step.
+    pub fn stiff_mask_open(&self, dt: f64) -> u64 {
+        (self.stiff.iter().enumerate())
+            .filter(|(_, b)| b.r_min * dt > STIFF_RATE * b.inductance)
+            .fold(0, |m, (i, _)| m | (1 << i))
+    }
+
+    /// The mask of every stiff branch.
+    pub fn stiff_mask_all(&self) -> u64 {
+        (0..self.stiff.len()).fold(0, |m, i| m | (1 << i))
+    }
+
+    /// [`Rk4::set_stiff_mask`] for `linear_operator` (the stability bound): the algebraic part
+    /// is refactorised at the linearisation point.
+    pub fn set_operator_mask(&mut self, mask: u64) -> Result<()> {
+        self.set_stiff_mask(mask)?;
+        self.refactor_linearization()
+    }
+
+    /// Take the stiff branches' mode of state `y` at this integrator's step.
+    fn select_mode(&mut self, y: &[f64]) -> Result<()> {
+        if self.stiff.is_empty() {
+            return Ok(());
+        }
+        self.set_stiff_mask(self.stiff_mask_at(y, self.dt))
     }
 
     /// The forcing at `time`, with the index reduction's slope terms.
@@ -356,6 +480,8 @@ impl<'a> Rk4<'a> {
 
     /// Time derivative of the differential unknowns at (t, y) (zero for algebraic ones);
     /// the algebraic unknowns of `y` are made consistent first.
+    /// The stiff branches keep their mode (`y` may not be consistent yet: a zero start's
+    /// pressures would read every valve half-closed).
     pub fn derivative(&mut self, time: f64, y: &mut [f64]) -> Result<Vec<f64>> {
         self.rhs(time, y, 0)?;
         let mut out = vec![0.0; self.dae.n];
@@ -378,7 +504,19 @@ impl<'a> Rk4<'a> {
 
     pub fn make_consistent(&mut self, time: f64, y: &mut [f64]) -> Result<()> {
         self.forcing(time);
-        self.solve_algebraic(y, time)
+        // the given flows of the stiff branches' inductors are start values (a zero start's
+        // 0), as for every differential unknown: the valves' state follows from them
+        if !self.stiff.is_empty() {
+            self.set_stiff_mask(0)?;
+        }
+        self.solve_algebraic(y, time)?;
+        // the valves' resistances follow the consistent pressures
+        let mask = self.mask;
+        self.select_mode(y)?;
+        if self.mask != mask {
+            self.solve_algebraic(y, time)?;
+        }
+        Ok(())
     }
 
     pub fn step(&mut self, time: f64, y: &mut [f64]) -> Result<()> {
@@ -402,6 +540,12 @@ impl<'a> Rk4<'a> {
     ) -> Result<()> {
         let dt = self.dt;
         let coupled_on = !z.is_empty();
+        // stiff branches: algebraic for the whole step when R(ΔP) Δt > L at its start (or the
+        // valve closes within it)
+        if !self.stiff.is_empty() {
+            self.forcing(time);
+            self.select_mode(y)?;
+        }
         let mut stage = std::mem::take(&mut self.st.stage);
         stage.copy_from_slice(y);
         self.rhs(time, &mut stage, 0)?;

@@ -85,7 +85,38 @@ const TIME_VARYING_MARGIN: f64 = 0.9;
 /// Circuits with valves are judged in two states, every valve open (R_min: the fastest R–C
 /// modes) and every valve closed (R_max: the fastest R/L mode of a valve behind an inductor,
 /// e.g. a chamber's outlet, docs/physics.md §1.8), and take the smaller limit.
+///
+/// Stiff branches (a valve behind an inductor, docs/physics.md §1.8) are algebraic in the step
+/// whenever R(ΔP) Δt > L, so the closed state is judged with all of them algebraic (limit A);
+/// the branches that can still be differential at a step of A with the valve fully open
+/// (R_min A ≤ L) are then put back differential for the open state (limit B), and the smaller
+/// of A and B is the limit. While differential a branch's own rate R/L ≤ 1/Δt is inside RK4's
+/// real-axis interval by construction.
 pub fn rk4_limit_by(
+    rk: &mut Rk4<'_>,
+    names: &Names,
+    method: SpectrumMethod,
+) -> Result<StabilityLimit> {
+    if rk.stiff_branches() == 0 {
+        return limit_open_closed(rk, names, method);
+    }
+    rk.set_operator_mask(rk.stiff_mask_all())?;
+    let all = limit_open_closed(rk, names, method);
+    let all = all.and_then(|a| {
+        let open_mask = rk.stiff_mask_open(a.dt_max);
+        if open_mask == rk.stiff_mask_all() {
+            return Ok(a);
+        }
+        rk.set_operator_mask(open_mask)?;
+        let open = limit_over_period(rk, names, method)?;
+        Ok(if open.dt_max < a.dt_max { open } else { a })
+    });
+    rk.set_operator_mask(0)?;
+    all
+}
+
+/// The smaller limit of the valves open and closed (the stiff branches as set).
+fn limit_open_closed(
     rk: &mut Rk4<'_>,
     names: &Names,
     method: SpectrumMethod,
