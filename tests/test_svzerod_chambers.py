@@ -124,6 +124,10 @@ def test_rk4_stiff_chamber_inductor_matches_svzerod_20x_finer() -> None:
     name = "chamber_elastance_inductor"
     cfg = json.loads(case(name).read_text())
     errors = compare(svz.simulate(cfg, method="rk4", rk4_substeps=20), svzerod_run(cfg, 20))
+    # the valves' valve_status: svZeroDSolver's generalized-α-stage artefact, left out as in
+    # test_rk4_matches_svzerod_20x_finer (the pressures it follows are compared)
+    for n in [n for n in errors if n.startswith("valve_status:")]:
+        errors.pop(n)
     assert len(errors) >= 8
     # measured 2.5e-3 (Vc, the chamber volume after 30 cycles): svzerod 20x finer is itself
     # 2.5e-3 off svzerod 100x finer, while this RK4 run is 2.7e-4 off it; the default sub-step
