@@ -115,16 +115,22 @@ pub fn backward_wall_strain(flow: &PeriodicFlow, radius: f64, density: f64, visc
     let f0 = -sign * 4.0 * flow.mean * scale;
     let shear = BackwardShear { f0, c: &c, omega };
     let m = (CROSSING_SAMPLES_PER_HARMONIC * c.len()).max(64);
-    let unit: Vec<Complex<f64>> = (0..m)
-        .map(|p| Complex::from_polar(1.0, 2.0 * PI * p as f64 / m as f64))
-        .collect();
-    let sample = |j: usize| {
-        c.iter()
-            .enumerate()
-            .fold(f0, |f, (i, ck)| f + (ck * unit[((i + 1) * j) % m]).re)
-    };
     let dt = flow.period / m as f64;
-    let values: Vec<f64> = (0..m).map(sample).collect();
+    let values: Vec<f64> = UNIT_ROOTS.with(|cell| {
+        let mut unit = cell.borrow_mut();
+        if unit.len() != m {
+            // e^{2πip/m}, shared by every vessel with as many harmonics on this thread
+            *unit = (0..m)
+                .map(|p| Complex::from_polar(1.0, 2.0 * PI * p as f64 / m as f64))
+                .collect();
+        }
+        let sample = |j: usize| {
+            c.iter()
+                .enumerate()
+                .fold(f0, |f, (i, ck)| f + (ck * unit[((i + 1) * j) % m]).re)
+        };
+        (0..m).map(sample).collect()
+    });
     let mut arc_start = (values[0] > 0.0).then_some(0.0);
     let mut b = 0.0;
     for j in 0..m {
@@ -142,6 +148,11 @@ pub fn backward_wall_strain(flow: &PeriodicFlow, radius: f64, density: f64, visc
         b += shear.primitive(flow.period) - shear.primitive(s);
     }
     b
+}
+
+thread_local! {
+    /// The m-th roots of unity of the last [`backward_wall_strain`] on this thread.
+    static UNIT_ROOTS: std::cell::RefCell<Vec<Complex<f64>>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 /// Samples per harmonic on which [`backward_wall_strain`] brackets the sign changes: 16 per
