@@ -143,24 +143,7 @@ pub fn vessel(i: usize, item: &Bound<'_, PyAny>) -> Res<VesselSpec> {
     let element: &dyn Fn() -> String = &name_of;
     let d = dict(item, element, "vessel")?;
     let (mut name, mut from, mut to) = (None, None, None);
-    let mut v = VesselSpec {
-        name: String::new(),
-        from: String::new(),
-        to: String::new(),
-        segments: None,
-        geometry: None,
-        lumped: None,
-        arrangement: None,
-        output: true,
-        valve: None,
-        heart_pulmonary: None,
-        coronary_bed: None,
-        chamber: None,
-        through_rc: None,
-        chamber_sphere: None,
-        initial: None,
-        initial_rate: None,
-    };
+    let mut v = VesselSpec::blank();
     for (k, val) in d.iter() {
         let k = key(&k, element)?;
         match k {

@@ -58,24 +58,7 @@ fn vessel(item: &Bound<'_, PyAny>, length: f64, modulus: f64) -> Option<VesselSp
         return None;
     }
     let d = item.cast::<PyDict>().ok()?;
-    let mut v = VesselSpec {
-        name: String::new(),
-        from: String::new(),
-        to: String::new(),
-        segments: None,
-        geometry: None,
-        lumped: None,
-        arrangement: None,
-        output: true,
-        valve: None,
-        heart_pulmonary: None,
-        coronary_bed: None,
-        chamber: None,
-        through_rc: None,
-        chamber_sphere: None,
-        initial: None,
-        initial_rate: None,
-    };
+    let mut v = VesselSpec::blank();
     let mut g = GeometrySpec {
         length: f64::NAN,
         radius_in: f64::NAN,

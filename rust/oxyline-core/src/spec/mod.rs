@@ -144,6 +144,31 @@ pub struct VesselSpec {
     pub initial_rate: Option<EndValues>,
 }
 
+impl VesselSpec {
+    /// A vessel with no name, ends or element yet (recorded in the output): what the binding's
+    /// readers fill in key by key.
+    pub fn blank() -> Self {
+        VesselSpec {
+            name: String::new(),
+            from: String::new(),
+            to: String::new(),
+            segments: None,
+            geometry: None,
+            lumped: None,
+            arrangement: None,
+            output: true,
+            valve: None,
+            heart_pulmonary: None,
+            coronary_bed: None,
+            chamber: None,
+            through_rc: None,
+            chamber_sphere: None,
+            initial: None,
+            initial_rate: None,
+        }
+    }
+}
+
 /// Values at a vessel's ends, SI (Pa, m³/s, or their rates per second); any may be absent.
 #[derive(Debug, Clone, Copy, Default, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
