@@ -161,6 +161,64 @@ def test_unknown_dotted_columns_raise() -> None:
         oxyline.simulate_ensemble(TUBE, pd.DataFrame({"vessels.zz.radius": [1.0]}), **FAST)
 
 
+@pytest.mark.parametrize(("patch", "path"), [
+    ({"oxygen": {"wal": {"po2": 50.0}}}, r"oxygen\.wal: unknown oxygen property"),
+    # the base wall is a graetz wall: k belongs to a mass-transfer wall
+    ({"oxygen": {"wall": {"k": 5e-6}}}, r"oxygen\.wall\.k: unknown property of a graetz wall"),
+    ({"transport": {"cells": 2}}, r"transport: the model has no 'transport' section"),
+    # a dotted path one level too deep: a mapping where the property holds a number
+    ({"vessels": {"aorta": {"radius": {"x": 0.008}}}},
+     r"vessels\.aorta\.radius: expected a number, got the mapping"),
+    ({"blood": {"viscosity": {"x": 4e-3}}}, r"blood\.viscosity: expected a number"),
+    ({"boundary_conditions": {"outlet": {"resistance": {"x": 1.0}}}},
+     r"boundary_conditions\.outlet\.resistance: expected a number"),
+])
+def test_unknown_transport_keys_and_too_deep_paths_raise_before_running(
+        patch: dict[str, Any], path: str) -> None:
+    """As unknown vessel properties: raised before any variant runs (a typo is not a failed
+    variant), naming the variant and the path; a mapping-valued wall with the right keys
+    still merges (``oxygen.wall.po2``)."""
+    with pytest.raises(oxyline.ModelError, match=f"variant 1: {path}"):
+        oxyline.simulate_ensemble(STRAIGHT, [{"oxygen": {"wall": {"po2": 50.0}}}, patch],
+                                  **FAST)
+    m = apply_patch(STRAIGHT, {"oxygen": {"wall": {"model": "mass-transfer", "k": 5e-6}}})
+    assert m["oxygen"]["wall"] == {"model": "mass-transfer", "po2": 60.0, "k": 5e-6}
+
+
+def test_dataframe_cells_and_columns_that_do_not_parse() -> None:
+    from oxyline.ensemble.patch import as_patches
+
+    model = oxyline.load_model(TUBE)
+    # pandas' missing values of nullable columns are empty cells, as NaN: the base value
+    df = pd.DataFrame({"vessels.a.b.radius": pd.array([pd.NA, 0.005], dtype="Float64"),
+                       "boundary_conditions.out2.resistance": pd.array([3, pd.NA],
+                                                                       dtype="Int64"),
+                       "blood.viscosity": pd.Series([None, 4e-3], dtype=object)})
+    assert as_patches(df, model)[0] == [
+        {"boundary_conditions": {"out2": {"resistance": 3}}},
+        {"vessels": {"a.b": {"radius": 0.005}}, "blood": {"viscosity": 4e-3}}]
+    # MultiIndex columns: each level is one key (a dotted vessel name needs no splitting)
+    multi = pd.DataFrame([[0.005, 2e-3]], columns=pd.MultiIndex.from_tuples(
+        [("vessels", "a.b", "radius"), ("blood", "viscosity", "")]))
+    assert as_patches(multi, model)[0] == [{"vessels": {"a.b": {"radius": 0.005}},
+                                            "blood": {"viscosity": 2e-3}}]
+    for column, message in [("vessels.a.b.radius.", "empty key"),
+                            ("vessels.c..resistance", "empty key"),
+                            ("vessels.a.b", r"expected vessels\.NAME\.PROPERTY"),
+                            ("radius", "unknown patch section"),
+                            ("vessels.a.b.radius.x", r"vessels\.a\.b\.radius: expected a num")]:
+        with pytest.raises(oxyline.ModelError, match=f"variant 1: .*{message}"):
+            oxyline.simulate_ensemble(TUBE, pd.DataFrame({column: [np.nan, 1.0]}), **FAST)
+
+
+@pytest.mark.parametrize("workers", [0, -1, "2", 1.5, True])
+def test_a_bad_worker_count_is_a_model_error(workers: Any) -> None:
+    with pytest.raises(oxyline.ModelError, match=f"workers must be .* got {workers!r}"):
+        oxyline.simulate_ensemble(STRAIGHT, [{}], workers=workers, **FAST)
+    assert oxyline.simulate_ensemble(STRAIGHT, [{}], workers=np.int64(1),
+                                     **FAST).status.values.tolist() == [0]
+
+
 # ---- identity with simulate() ------------------------------------------------------------
 
 def _summary(res: oxyline.Result) -> dict[str, np.ndarray]:

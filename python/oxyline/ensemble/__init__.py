@@ -10,13 +10,14 @@ whatever the number of workers. See docs/ensembles.md.
 
 from __future__ import annotations
 
+import operator
 import os
 from collections.abc import Mapping
 from typing import Any
 
 from oxyline.ensemble.collect import STATUS, Collector, Output, check_output
 from oxyline.ensemble.patch import apply_patch, as_patches
-from oxyline.errors import SimulationInterrupted
+from oxyline.errors import ModelError, SimulationInterrupted
 from oxyline.loader import load_model
 from oxyline.model import Model
 from oxyline.monitor import warn
@@ -52,6 +53,7 @@ def simulate_ensemble(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     ([0, 0], ('variant', 'vessel'))
     """
     check_output(output)
+    workers = _workers(workers)
     model = load_model(model)
     patches, index = as_patches(variants, model)
     if client is not None:
@@ -61,6 +63,23 @@ def simulate_ensemble(model: Model | str | os.PathLike[str] | Mapping[str, Any],
                              progress=progress, workers=workers, overrides=overrides)
     return _local(model, patches, index, workers=workers, output=output, store=store,
                   progress=progress, overrides=overrides)
+
+
+def _workers(workers: Any) -> int | None:
+    """``workers`` checked: None (``OXYLINE_NUM_THREADS`` or every core) or a whole number
+    >= 1 (a numpy integer too), never a bool or a text."""
+    if workers is None:
+        return None
+    try:
+        if isinstance(workers, bool):
+            raise TypeError
+        n = operator.index(workers)
+    except TypeError:
+        n = None
+    if n is None or n < 1:
+        raise ModelError(f"simulate_ensemble: workers must be None (every core, or "
+                         f"OXYLINE_NUM_THREADS) or a whole number >= 1, got {workers!r}")
+    return n
 
 
 def _local(model: Model, patches: list[dict[str, Any]], index: Any, *, workers: int | None,

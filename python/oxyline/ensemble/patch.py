@@ -48,6 +48,16 @@ SECTIONS = ("vessels", "boundary_conditions", "blood", "oxygen", "transport", "p
 VESSEL_PROPERTIES = VESSEL_KEYS - {"name", "from", "to"}
 BLOOD_KEYS = {"density", "viscosity"}
 SCALE_KEYS = {"resistance", "compliance", "vessels"}
+#: properties that hold one number: a mapping there is a dotted path gone too deep
+#: (``vessels.aorta.radius.x``), refused with the path before anything runs
+SCALAR_KEYS = {
+    "vessels": {"length", "radius", "radius_in", "radius_out", "wall_thickness",
+                "youngs_modulus", "poisson_ratio", "segments"},
+    "lumped": LUMPED_KEYS,
+    "blood": BLOOD_KEYS,
+    "boundary_conditions": {"resistance", "proximal_resistance", "distal_resistance",
+                            "capacitance"},
+}
 #: the keys of a condition's waveform: patching one replaces the whole waveform
 WAVEFORM_KEYS = {"time", "flow", "pressure", "value", "fourier", "interpolation", "steady"}
 RESISTANCES = {"resistance": ("resistance",), "rcr": ("proximal_resistance", "distal_resistance")}
@@ -65,6 +75,35 @@ def _mapping(value: Any, k: int, path: str) -> Mapping[str, Any]:
     if not isinstance(value, Mapping):
         raise ModelError(f"{_where(k, path)}: expected a mapping, got {value!r}")
     return value
+
+
+def _scalars(props: Mapping[str, Any], kind: str, k: int, path: str) -> None:
+    """Refuse a mapping where ``kind`` holds one number (a dotted path one level too deep)."""
+    for key in SCALAR_KEYS[kind] & props.keys():
+        if isinstance(props[key], Mapping):
+            raise ModelError(f"{_where(k, f'{path}.{key}')}: expected a number, got the "
+                             f"mapping {props[key]!r} (a dotted path ends at the property)")
+
+
+def _check_transport(source: Mapping[str, Any], section: str, patch: Mapping[str, Any],
+                     k: int) -> None:
+    """Unknown keys of an ``oxygen`` or ``transport`` patch (and of its ``oxygen.wall``)
+    raise here, naming the variant and the path, as unknown vessel properties do; the
+    values are checked when the variant's model is built (a bad one fails the variant)."""
+    from oxyline.transport import OXYGEN_KEYS, TRANSPORT_KEYS, WALL_KEYS
+
+    allowed = OXYGEN_KEYS if section == "oxygen" else TRANSPORT_KEYS
+    for key in patch:
+        if key not in allowed:
+            raise _unknown(k, f"{section}.{key}", f"{section} property", allowed)
+    wall = patch.get("wall") if section == "oxygen" else None
+    if isinstance(wall, Mapping):
+        base = source[section].get("wall")
+        model = wall.get("model", base.get("model") if isinstance(base, Mapping) else base)
+        for key in wall:
+            if str(model) in WALL_KEYS and key not in WALL_KEYS[str(model)]:
+                raise _unknown(k, f"oxygen.wall.{key}", f"property of a {model} wall",
+                               WALL_KEYS[str(model)])
 
 
 def _merge(base: Any, patch: Any) -> Any:
@@ -86,10 +125,13 @@ def _patch_vessel(vessel: Mapping[str, Any], props: Any, k: int, path: str) -> d
                 raise ModelError(f"{_where(k, f'{path}.{key}')}: a variant cannot change the "
                                  "network's topology")
             raise _unknown(k, f"{path}.{key}", "vessel property", VESSEL_PROPERTIES)
+    _scalars(props, "vessels", k, path)
     if "lumped" in props:
-        for key in _mapping(props["lumped"], k, f"{path}.lumped"):
+        lumped = _mapping(props["lumped"], k, f"{path}.lumped")
+        for key in lumped:
             if key not in LUMPED_KEYS:
                 raise _unknown(k, f"{path}.lumped.{key}", "lumped property", LUMPED_KEYS)
+        _scalars(lumped, "lumped", k, f"{path}.lumped")
     base = dict(vessel)
     if "radius" in props:
         base.pop("radius_in", None)
@@ -107,6 +149,7 @@ def _patch_condition(bc: Mapping[str, Any], props: Any, k: int, path: str) -> di
     for key in props:
         if key not in allowed:
             raise _unknown(k, f"{path}.{key}", f"property of a {kind} condition", allowed)
+    _scalars(props, "boundary_conditions", k, path)
     if "type" in props and str(props["type"]).lower() != str(bc.get("type", "")).lower():
         return _copy(dict(props))  # another kind of condition: nothing of the old one holds
     base = dict(bc)
@@ -236,13 +279,15 @@ def merge_patch(source: Mapping[str, Any], patch: Mapping[str, Any], k: int = 0,
         for key in _mapping(patch["blood"], k, "blood"):
             if key not in BLOOD_KEYS:
                 raise _unknown(k, f"blood.{key}", "blood property", BLOOD_KEYS)
+        _scalars(patch["blood"], "blood", k, "blood")
         data["blood"] = _merge(source.get("blood") or {}, patch["blood"])
     for section in ("oxygen", "transport"):
         if section in patch:
             if section not in source:
                 raise ModelError(f"{_where(k, section)}: the model has no '{section}' section "
                                  "to patch")
-            data[section] = _merge(source[section], _mapping(patch[section], k, section))
+            _check_transport(source, section, _mapping(patch[section], k, section), k)
+            data[section] = _merge(source[section], patch[section])
     if "period" in patch:
         data["period"] = patch["period"]
     if "scale" in patch:
@@ -273,27 +318,47 @@ def apply_patch(model: Model | Mapping[str, Any] | str, patch: Mapping[str, Any]
 def _column_path(column: Any, names: Mapping[str, set[str]], k: int) -> list[str]:
     """The keys of a dotted-path column (``vessels.CCA.radius`` -> ``["vessels", "CCA",
     "radius"]``); a vessel or node name may itself contain dots: the longest known name wins.
-    Unknown names raise :class:`ModelError` naming variant ``k`` and the column."""
-    parts = str(column).split(".")
+    A tuple (a MultiIndex column) is the keys themselves (trailing empty levels dropped).
+    Unknown names and empty keys raise :class:`ModelError` naming variant ``k`` and the
+    column."""
+    if isinstance(column, tuple):
+        parts = [str(p) for p in column]
+        while len(parts) > 1 and parts[-1] == "":
+            parts.pop()
+        label = ".".join(parts)
+    else:
+        label = str(column)
+        parts = label.split(".")
     section, rest = parts[0], parts[1:]
-    if section in names:
+    if section in names and not isinstance(column, tuple):
         for cut in range(len(rest) - 1, 0, -1):
             if ".".join(rest[:cut]) in names[section]:
                 rest = [".".join(rest[:cut]), *rest[cut:]]
                 break
         else:
-            raise ModelError(f"{_where(k, str(column))}: no vessel or node of the model "
-                             "starts this path" if len(rest) > 1 else
-                             f"{_where(k, str(column))}: expected {section}.NAME.PROPERTY")
+            no_property = len(rest) <= 1 or ".".join(rest) in names[section]
+            raise ModelError(f"{_where(k, label)}: expected {section}.NAME.PROPERTY"
+                             if no_property else
+                             f"{_where(k, label)}: no vessel or node of the model starts "
+                             "this path")
+    if "" in (section, *rest):
+        raise ModelError(f"{_where(k, label)}: empty key in the column's dotted path")
     return [section, *rest]
 
 
 def _cell(value: Any) -> tuple[bool, Any]:
-    """(whether the cell sets a value, the plain Python value): an empty (NaN) cell leaves
-    the base model's value."""
-    if isinstance(value, float) and math.isnan(value):
+    """(whether the cell sets a value, the plain Python value): an empty cell (NaN, None, or
+    pandas' ``NA``/``NaT`` of a nullable column) leaves the base model's value."""
+    if hasattr(value, "item") and not isinstance(value, (list, tuple, dict)):
+        try:
+            value = value.item()  # a numpy scalar (or 0-d array): the Python value
+        except (ValueError, TypeError):
+            pass
+    if value is None or (isinstance(value, float) and math.isnan(value)):
         return False, None
-    return True, value.item() if hasattr(value, "item") else value
+    if type(value).__name__ in ("NAType", "NaTType"):  # pandas' missing values
+        return False, None
+    return True, value
 
 
 def _put(patch: dict[str, Any], path: Sequence[str], value: Any) -> None:
