@@ -76,3 +76,58 @@ def test_named_summary_quantities_and_failures() -> None:
         sensitivity.sobol(OHM, bad, 4, "pressure_in_mean[v]", cycles=1, progress=False)
     with pytest.raises(oxyline.ModelError, match="summary variable"):
         sensitivity.sobol(OHM, problem, 4, "pressure_in_mean", cycles=1, progress=False)
+
+
+R = "vessels.v.lumped.resistance"
+
+
+@pytest.mark.parametrize(("problem", "n", "message"), [
+    ([R], 4, "problem must be a mapping"),
+    ({"names": R, "bounds": [[1e8, 2e8]]}, 4, "needs 'names'"),
+    ({"names": [R], "bounds": [[1e8, 2e8], [1.0, 2.0]]}, 4, "one 'bounds' entry per name"),
+    ({"names": [R], "bounds": [[2e8, 1e8]]}, 4, f"parameter '{R}': bounds .* low < high"),
+    ({"names": [R], "bounds": [[2e8, 2e8]]}, 4, "low < high"),
+    ({"names": [R], "bounds": [[1e8, 2e8, 3e8]]}, 4, "low < high"),
+    ({"names": [R], "bounds": [["a", "b"]]}, 4, "bounds must be numbers, got \\['a', 'b'\\]"),
+    # NaN samples would be empty DataFrame cells (the base value): silent zero indices
+    ({"names": [R], "bounds": [[float("nan"), 2e8]]}, 4, "bounds must be finite"),
+    ({"names": [R, R], "bounds": [[1e8, 2e8]] * 2}, 4, "named twice"),
+    ({"names": [R], "bounds": [[1e8, 2e8]], "groups": ["g"]}, 4, "groups not supported"),
+    ({"names": [R], "bounds": [[1e8, 2e8]], "num_vars": 2}, 4, "'num_vars' is 2"),
+    ({"names": ["vessels.v.lumped.resistanse"], "bounds": [[1e8, 2e8]]}, 4,
+     r"variant 0: vessels\.v\.lumped\.resistanse: unknown lumped property"),
+    ({"names": ["vessels.w.radius"], "bounds": [[1e-3, 2e-3]]}, 4,
+     r"variant 0: vessels\.w\.radius: no vessel"),
+    ({"names": [R], "bounds": [[1e8, 2e8]]}, 6, "n must be a power of 2 .*, got 6"),
+    ({"names": [R], "bounds": [[1e8, 2e8]]}, 0, "n must be a power of 2"),
+    ({"names": [R], "bounds": [[1e8, 2e8]]}, 4.0, "n must be a power of 2"),
+])
+def test_a_bad_problem_is_a_model_error_naming_the_parameter(problem: object, n: object,
+                                                             message: str) -> None:
+    with pytest.raises(oxyline.ModelError, match=message):
+        sensitivity.sobol(OHM, problem, n, "pressure_in_mean[v]", cycles=1, progress=False)
+
+
+def test_bad_quantities_are_model_errors_and_constant_ones_get_zero_indices() -> None:
+    problem = {"names": [R, "blood.density"], "bounds": [[1e8, 9e8], [1000.0, 1100.0]]}
+    run = {"cycles": 1, "output_every": 0.5, "progress": False}
+    # refused before anything runs: an unknown vessel, a quantity that is no quantity
+    with pytest.raises(oxyline.ModelError, match=r"'pressure_in_mean\[w\]': no vessel named 'w'"):
+        sensitivity.sobol(OHM, problem, 4, "pressure_in_mean[w]", **run)
+    with pytest.raises(oxyline.ModelError, match="a quantity is a callable"):
+        sensitivity.sobol(OHM, problem, 4, 3, **run)
+    # a NaN quantity names the quantity and a sample, never NaN or made-up indices
+    with pytest.raises(oxyline.ModelError, match=r"quantity 'po2' is nan for 16 of 16 samples, "
+                                                 r"e.g. variant 0 \(vessels\.v\.lumped"):
+        sensitivity.sobol(OHM, problem, 4, lambda res: {"po2": float("nan")}, **run)
+    # the inlet pressure does not depend on the density at all (steady flow: only inertances
+    # see it): a constant quantity has zero variance, indices 0 (not 0/0) and a warning
+    with pytest.warns(UserWarning, match="'p_density' is the same"):
+        si = sensitivity.sobol({**OHM, "blood": {"density": 1050.0}},
+                               {"names": ["blood.density"], "bounds": [[1000.0, 1100.0]]}, 4,
+                               lambda res: {"p_density": float(res.pressure_in[0, 0])}, **run)
+    frame = si["p_density"]
+    assert frame[["S1", "S1_conf", "ST", "ST_conf"]].to_numpy().tolist() == [[0.0] * 4]
+    # P = Q (R1 + R2) exactly: the same closed form as above, at every sample
+    p = frame.attrs["values"]
+    assert np.allclose(p, 1e-6 * (1e8 + 1e9), rtol=1e-12)

@@ -10,8 +10,11 @@ resistance``, ``oxygen.wall.k``, ``scale.resistance``), in the model's units. Ne
 
 from __future__ import annotations
 
+import math
+import operator
 import os
 import re
+import warnings
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
@@ -54,6 +57,112 @@ def _named(quantity: Any) -> list[tuple[str, str]] | None:
                              f"'var[vessel]' or (var, vessel), got {q!r}")
         out.append((m["var"], m["vessel"]))
     return out
+
+
+#: SALib problem keys sobol() passes on (``groups`` is refused: SALib 1.x's Sobol' sampler
+#: ignores them while its analysis counts groups, a sample-count mismatch)
+PROBLEM_KEYS = {"names", "bounds", "num_vars", "dists"}
+#: distributions whose two bounds are [low, high] with low < high (SALib's default: unif)
+INTERVALS = ("unif", "logunif")
+
+
+def _check_problem(problem: Any) -> dict[str, Any]:
+    """SALib's problem dict, checked: one finite bound pair per distinct name (a NaN sample
+    would be an empty cell, i.e. the base value, and every index a silent 0)."""
+    if not isinstance(problem, Mapping):
+        raise ModelError("sobol: problem must be a mapping {'names': [dotted paths], 'bounds': "
+                         f"[[low, high], ...]}}, got {problem!r}")
+    extra = set(problem) - PROBLEM_KEYS
+    if extra:
+        raise ModelError(f"sobol: problem key(s) {', '.join(sorted(map(str, extra)))} not "
+                         f"supported (allowed: {', '.join(sorted(PROBLEM_KEYS))})")
+    names = problem.get("names")
+    if isinstance(names, str) or not isinstance(names, Sequence) or not names:
+        raise ModelError(f"sobol: problem needs 'names', a list of dotted patch paths, got "
+                         f"{names!r}")
+    names = [str(n) for n in names]
+    seen = {n for i, n in enumerate(names) if n in names[:i]}
+    if seen:
+        raise ModelError(f"sobol: parameter(s) {', '.join(sorted(seen))} named twice")
+    bounds = problem.get("bounds")
+    if not isinstance(bounds, Sequence) or len(bounds) != len(names):
+        raise ModelError(f"sobol: problem needs one 'bounds' entry per name ({len(names)}), got "
+                         f"{bounds!r}")
+    dists = problem.get("dists", ["unif"] * len(names))
+    if isinstance(dists, str) or len(dists) != len(names):
+        raise ModelError(f"sobol: problem 'dists' needs one distribution per name, got {dists!r}")
+    if problem.get("num_vars", len(names)) != len(names):
+        raise ModelError(f"sobol: problem 'num_vars' is {problem['num_vars']!r} but there are "
+                         f"{len(names)} names")
+    checked = []
+    for name, b, dist in zip(names, bounds, dists, strict=True):
+        try:
+            b = [float(x) for x in b]
+        except (TypeError, ValueError):
+            raise ModelError(f"sobol: parameter {name!r}: bounds must be numbers, got {b!r}") \
+                from None
+        if not all(map(math.isfinite, b)):
+            raise ModelError(f"sobol: parameter {name!r}: bounds must be finite, got {b!r}")
+        if dist in INTERVALS and (len(b) != 2 or not b[0] < b[1]):
+            raise ModelError(f"sobol: parameter {name!r}: bounds of a {dist} distribution are "
+                             f"[low, high] with low < high, got {b!r}")
+        checked.append(b)
+    return {**problem, "names": names, "bounds": checked, "num_vars": len(names)}
+
+
+def _check_n(n: Any) -> int:
+    """The base sample size: a power of 2 (the balance of Sobol' points)."""
+    try:
+        if isinstance(n, bool):
+            raise TypeError
+        m = operator.index(n)
+    except TypeError:
+        m = 0
+    if m < 1 or m & (m - 1):
+        raise ModelError(f"sobol: n must be a power of 2 (the base sample size of Saltelli's "
+                         f"scheme on Sobol' points), got {n!r}")
+    return m
+
+
+def _check_quantity(quantity: Any, model: Model) -> None:
+    """A callable, or summary variables of vessels the model has (checked before the
+    ensemble runs)."""
+    named = _named(quantity)
+    if named is None:
+        if not callable(quantity):
+            raise ModelError(f"sobol: a quantity is a callable f(result), a summary variable "
+                             f"'var[vessel]' or (var, vessel), got {quantity!r}")
+        return
+    for var, vessel in named:
+        if vessel not in model.vessel_names:
+            raise ModelError(f"sobol: quantity '{var}[{vessel}]': no vessel named {vessel!r} in "
+                             f"model '{model.name}'")
+
+
+def _check_values(name: str, y: np.ndarray, x: np.ndarray, names: Sequence[str]) -> None:
+    """Every sample's quantity must be a finite number: a NaN would turn every index into
+    a meaningless number."""
+    bad = np.flatnonzero(~np.isfinite(y))
+    if bad.size:
+        k = int(bad[0])
+        at = ", ".join(f"{p}={v:g}" for p, v in zip(names, x[k], strict=True))
+        raise ModelError(f"sobol: quantity {name!r} is {y[k]} for {bad.size} of {len(y)} "
+                         f"samples, e.g. variant {k} ({at})")
+
+
+def _analyze(analyze: Any, problem: Mapping[str, Any], name: str, y: np.ndarray,
+             **kwargs: Any) -> dict[str, Any]:
+    """SALib's Sobol' analysis; a quantity that no parameter changes (zero variance: the
+    indices are 0/0) gets indices 0 and a warning instead of numpy's division warnings."""
+    if np.ptp(y) == 0:
+        warnings.warn(f"sobol: quantity {name!r} is the same ({y[0]:g}) for every sample: no "
+                      "parameter changes it, its indices are set to 0", UserWarning,
+                      stacklevel=3)
+        d = problem["num_vars"]
+        zeros = np.zeros(d)
+        return {"S1": zeros, "S1_conf": zeros, "ST": zeros, "ST_conf": zeros,
+                "S2": np.zeros((d, d))}
+    return analyze.analyze(problem, y, **kwargs)
 
 
 def _outputs(quantity: Any) -> tuple[Any, Callable[[Any], dict[str, np.ndarray]]]:
@@ -108,13 +217,17 @@ def sobol(model: Model | str | os.PathLike[str] | Mapping[str, Any], problem: Ma
     from oxyline.ensemble import simulate_ensemble
 
     sample, analyze = _salib()
-    problem = dict(problem)
-    names = list(problem.get("names", []))
-    problem.setdefault("num_vars", len(names))
-    if not names or len(problem.get("bounds", [])) != len(names):
-        raise ModelError("sobol: problem needs 'names' and one [low, high] 'bounds' per name")
+    problem = _check_problem(problem)
+    names = problem["names"]
+    n = _check_n(n)
     model = load_model(model)
+    _check_quantity(quantity, model)
     x = sample.sample(problem, n, calc_second_order=calc_second_order, seed=seed)
+    bad = np.flatnonzero(~np.isfinite(x).all(axis=0))
+    if bad.size:  # a NaN cell would leave the base model's value
+        raise ModelError(f"sobol: SALib drew non-finite samples of {names[bad[0]]!r} (bounds "
+                         f"{problem['bounds'][bad[0]]}, distribution "
+                         f"{problem.get('dists', ['unif'] * len(names))[bad[0]]})")
     output, read = _outputs(quantity)
     ds = simulate_ensemble(model, pd.DataFrame(x, columns=names), workers=workers,
                            client=client, output=output, progress=progress, **overrides)
@@ -124,14 +237,15 @@ def sobol(model: Model | str | os.PathLike[str] | Mapping[str, Any], problem: Ma
                          f"{ds['error'].values[failed[0]]}")
     out = {}
     for name, y in read(ds).items():
-        si = analyze.analyze(problem, np.asarray(y, dtype=float),
-                             calc_second_order=calc_second_order, num_resamples=num_resamples,
-                             conf_level=conf_level, seed=seed)
+        y = np.asarray(y, dtype=float)
+        _check_values(name, y, x, names)
+        si = _analyze(analyze, problem, name, y, calc_second_order=calc_second_order,
+                      num_resamples=num_resamples, conf_level=conf_level, seed=seed)
         df = pd.DataFrame({k: np.asarray(si[k]) for k in ("S1", "S1_conf", "ST", "ST_conf")},
                           index=pd.Index(names, name="parameter"))
         if calc_second_order:
             df.attrs["S2"] = np.asarray(si["S2"])
         df.attrs["samples"] = x
-        df.attrs["values"] = np.asarray(y, dtype=float)
+        df.attrs["values"] = y
         out[name] = df
     return out
