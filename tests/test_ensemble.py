@@ -428,6 +428,10 @@ def test_full_output_is_the_plain_result_along_variant() -> None:
     ds = oxyline.simulate_ensemble(STRAIGHT, variants, output="full", **FAST)
     for k, patch in enumerate(variants):
         plain = oxyline.simulate(apply_patch(STRAIGHT, patch), cycles=2).to_xarray()
+        # every variable and coordinate of to_xarray(), with a leading variant dim
+        for name in plain.data_vars:
+            assert ds[name].dims == ("variant", *plain[name].dims), name
+        assert set(plain.coords) <= set(ds.coords)
         n = plain.sizes["time"]
         np.testing.assert_array_equal(ds["time"].values[k, :n], plain["time"].values)
         for name in ("pressure_in", "po2_out", "segment_flow"):
