@@ -623,6 +623,23 @@ def test_a_local_dask_cluster_gives_the_local_dataset(tmp_path: Path) -> None:
             oxyline.simulate_ensemble(STRAIGHT, [{}, {}, {"vessels": {"nope": {}}}],
                                       client=client, **FAST)
 
+        # Ctrl-C on the client (deterministic: raised by the progress callback once the first
+        # chunk is merged) cancels the other chunk and returns the finished variants
+        def stop(done: int, total: int) -> None:
+            raise KeyboardInterrupt
+
+        with pytest.raises(oxyline.SimulationInterrupted) as info:
+            oxyline.simulate_ensemble(STRAIGHT, variants, client=client, cycles=2,
+                                      progress=stop)
+        st = info.value.result.status.values
+        # one chunk of the two (every 2nd variant) finished whole, the other never reported
+        # (either may finish first; variant 3, radius -1, fails: status 1)
+        assert set(np.flatnonzero(st != -1)) in ({0, 2, 4, 6}, {1, 3, 5, 7}), st
+        assert st[3] in (1, -1) and set(st.tolist()) - {0, 1} == {-1}, st
+        ok = st == 0
+        np.testing.assert_array_equal(info.value.result.pressure_in_max.values[ok],
+                                      local.pressure_in_max.values[ok])
+
 
 def test_dask_chunks_partition_the_variants_and_interleave_them() -> None:
     from oxyline.ensemble.cluster import MIN_TASK_VARIANTS, _chunks
