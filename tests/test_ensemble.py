@@ -185,6 +185,20 @@ def test_unknown_transport_keys_and_too_deep_paths_raise_before_running(
     assert m["oxygen"]["wall"] == {"model": "mass-transfer", "po2": 60.0, "k": 5e-6}
 
 
+def test_a_transport_patch_is_the_plain_run_of_its_patched_model() -> None:
+    """The ``transport`` section merges key by key (a model that has one): two transport
+    cells per segment give the plain run of that model, bit for bit, and a different PO2."""
+    model = oxyline.load_model(STRAIGHT).to_dict()
+    model["transport"] = {"cells_per_segment": 1}
+    patches = [{}, {"transport": {"cells_per_segment": 2}}]
+    ds = oxyline.simulate_ensemble(model, patches, **FAST)
+    assert ds.status.values.tolist() == [0, 0]
+    for k, patch in enumerate(patches):
+        plain = oxyline.simulate(apply_patch(model, patch), cycles=2).summary()
+        np.testing.assert_array_equal(ds.po2_out_mean.values[k], plain["po2_out_mean"].values)
+    assert ds.po2_out_mean.values[0, 0] != ds.po2_out_mean.values[1, 0]
+
+
 def test_dataframe_cells_and_columns_that_do_not_parse() -> None:
     from oxyline.ensemble.patch import as_patches
 
