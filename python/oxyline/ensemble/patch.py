@@ -349,6 +349,8 @@ def _column_path(column: Any, names: Mapping[str, set[str]], k: int) -> list[str
 def _cell(value: Any) -> tuple[bool, Any]:
     """(whether the cell sets a value, the plain Python value): an empty cell (NaN, None, or
     pandas' ``NA``/``NaT`` of a nullable column) leaves the base model's value."""
+    if type(value) is float:  # most cells (``tolist()`` of a float column): one test
+        return (False, None) if math.isnan(value) else (True, value)
     if hasattr(value, "item") and not isinstance(value, (list, tuple, dict)):
         try:
             value = value.item()  # a numpy scalar (or 0-d array): the Python value
