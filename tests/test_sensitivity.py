@@ -94,6 +94,8 @@ R = "vessels.v.lumped.resistance"
     ({"names": [R, R], "bounds": [[1e8, 2e8]] * 2}, 4, "named twice"),
     ({"names": [R], "bounds": [[1e8, 2e8]], "groups": ["g"]}, 4, "groups not supported"),
     ({"names": [R], "bounds": [[1e8, 2e8]], "num_vars": 2}, 4, "'num_vars' is 2"),
+    ({"names": [R], "bounds": [[1e8, 2e8]], "dists": ["gauss"]}, 4,
+     "SALib refused the problem: Distributions: choose one of unif"),
     ({"names": ["vessels.v.lumped.resistanse"], "bounds": [[1e8, 2e8]]}, 4,
      r"variant 0: vessels\.v\.lumped\.resistanse: unknown lumped property"),
     ({"names": ["vessels.w.radius"], "bounds": [[1e-3, 2e-3]]}, 4,

@@ -222,7 +222,10 @@ def sobol(model: Model | str | os.PathLike[str] | Mapping[str, Any], problem: Ma
     n = _check_n(n)
     model = load_model(model)
     _check_quantity(quantity, model)
-    x = sample.sample(problem, n, calc_second_order=calc_second_order, seed=seed)
+    try:
+        x = sample.sample(problem, n, calc_second_order=calc_second_order, seed=seed)
+    except ValueError as e:  # e.g. an unknown distribution name: SALib's message names them
+        raise ModelError(f"sobol: SALib refused the problem: {e}") from e
     bad = np.flatnonzero(~np.isfinite(x).all(axis=0))
     if bad.size:  # a NaN cell would leave the base model's value
         raise ModelError(f"sobol: SALib drew non-finite samples of {names[bad[0]]!r} (bounds "
