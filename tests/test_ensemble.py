@@ -181,8 +181,20 @@ def test_unknown_transport_keys_and_too_deep_paths_raise_before_running(
     with pytest.raises(oxyline.ModelError, match=f"variant 1: {path}"):
         oxyline.simulate_ensemble(STRAIGHT, [{"oxygen": {"wall": {"po2": 50.0}}}, patch],
                                   **FAST)
-    m = apply_patch(STRAIGHT, {"oxygen": {"wall": {"model": "mass-transfer", "k": 5e-6}}})
-    assert m["oxygen"]["wall"] == {"model": "mass-transfer", "po2": 60.0, "k": 5e-6}
+    # the same closure merges key by key; another closure replaces the whole wall (the
+    # graetz wall's keys need not be a mass-transfer wall's, e.g. a leveque wall's shear)
+    m = apply_patch(STRAIGHT, {"oxygen": {"wall": {"po2": 50.0}}})
+    assert m["oxygen"]["wall"] == {"model": "graetz", "po2": 50.0}
+    wall = {"model": "mass-transfer", "k": 5e-6, "po2": 55.5}
+    m = apply_patch(STRAIGHT, {"oxygen": {"wall": wall}})
+    assert m["oxygen"]["wall"] == wall
+    leveque = oxyline.load_model(STRAIGHT).to_dict()
+    leveque["oxygen"]["wall"] = {"model": "leveque", "po2": 55.5, "shear": "cycle-mean"}
+    ds = oxyline.simulate_ensemble(leveque, [{"oxygen": {"wall": wall}}], **FAST)
+    assert ds.status.values.tolist() == [0], ds.error.values
+    plain = oxyline.simulate(apply_patch(STRAIGHT, {"oxygen": {"wall": wall}}), cycles=2)
+    np.testing.assert_array_equal(ds.po2_out_mean.values[0],
+                                  plain.summary()["po2_out_mean"].values)
 
 
 def test_a_transport_patch_is_the_plain_run_of_its_patched_model() -> None:

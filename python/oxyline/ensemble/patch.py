@@ -11,7 +11,7 @@ A patch is a dict in the native model format, deep-merged into the model::
 Values are in the model's units. A waveform property (``time``, ``flow``, ``pressure``,
 ``value``, ``fourier``) replaces the condition's whole waveform; ``radius`` replaces
 ``radius_in``/``radius_out`` and the other way round; a new ``type`` replaces the whole
-condition. ``scale`` multiplies, after the explicit values: ``resistance`` scales the
+condition, a new ``oxygen.wall.model`` the whole wall. ``scale`` multiplies, after the explicit values: ``resistance`` scales the
 resistance of lumped vessels and of the resistance and RCR conditions at the ends of the
 selected vessels, ``compliance`` the capacitance of lumped vessels and RCR conditions and
 divides the Young's modulus of the geometric vessels (their compliance is proportional to
@@ -98,12 +98,16 @@ def _check_transport(source: Mapping[str, Any], section: str, patch: Mapping[str
             raise _unknown(k, f"{section}.{key}", f"{section} property", allowed)
     wall = patch.get("wall") if section == "oxygen" else None
     if isinstance(wall, Mapping):
-        base = source[section].get("wall")
-        model = wall.get("model", base.get("model") if isinstance(base, Mapping) else base)
+        model = wall.get("model", _wall_model(source[section].get("wall")))
         for key in wall:
             if str(model) in WALL_KEYS and key not in WALL_KEYS[str(model)]:
                 raise _unknown(k, f"oxygen.wall.{key}", f"property of a {model} wall",
                                WALL_KEYS[str(model)])
+
+
+def _wall_model(wall: Any) -> str:
+    """The closure of an ``oxygen.wall`` entry (a mapping with ``model``, or its name)."""
+    return str(wall.get("model", "") if isinstance(wall, Mapping) else wall)
 
 
 def _merge(base: Any, patch: Any) -> Any:
@@ -288,6 +292,12 @@ def merge_patch(source: Mapping[str, Any], patch: Mapping[str, Any], k: int = 0,
                                  "to patch")
             _check_transport(source, section, _mapping(patch[section], k, section), k)
             data[section] = _merge(source[section], patch[section])
+            wall = patch[section].get("wall") if section == "oxygen" else None
+            if isinstance(wall, Mapping) and "model" in wall \
+                    and str(wall["model"]) != _wall_model(source[section].get("wall")):
+                # another wall closure: none of the old one's keys hold (as a new condition
+                # type replaces the whole condition)
+                data[section]["wall"] = _copy(dict(wall))
     if "period" in patch:
         data["period"] = patch["period"]
     if "scale" in patch:
