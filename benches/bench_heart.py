@@ -52,35 +52,34 @@ sys.path.insert(0, {here!r})
 import networks, oxyline
 import oxyline.svzerod as svz
 what, n = {what!r}, {n!r}
+
+
+def timed(f):
+    t, c = time.perf_counter(), time.process_time()
+    f()
+    return time.perf_counter() - t, time.process_time() - c
+
+
+nan = (float("nan"), float("nan"))
 if {impl!r} == "svzerod":
     import svzerod
     cfg = networks.build(what, n)
-    t = time.perf_counter()
-    svzerod.simulate(cfg)
-    ga, rk = time.perf_counter() - t, float("nan")
+    ga, rk = timed(lambda: svzerod.simulate(cfg)), nan
 elif what in ("chain", "tree"):
     cfg = networks.build(what, n)
-    t = time.perf_counter()
-    svz.simulate(cfg)
-    ga = time.perf_counter() - t
+    ga = timed(lambda: svz.simulate(cfg))
     model = oxyline.load_model(cfg)
-    t = time.perf_counter()
-    oxyline.simulate(model, method="rk4", dt="auto", segments=False)
-    rk = time.perf_counter() - t
+    rk = timed(lambda: oxyline.simulate(model, method="rk4", dt="auto", segments=False))
 else:
     cfg = json.load(open({cases!r} + "/" + what + ".json"))
-    t = time.perf_counter()
-    svz.simulate(cfg)
-    ga = time.perf_counter() - t
-    t = time.perf_counter()
-    svz.simulate(cfg, method="rk4")
-    rk = time.perf_counter() - t
+    ga = timed(lambda: svz.simulate(cfg))
+    rk = timed(lambda: svz.simulate(cfg, method="rk4"))
 print({mark!r} + json.dumps({{"ga": ga, "rk4": rk}}))
 '''
 
 
 def run_child(what: str, n: int | None, pythonpath: str | None,
-              impl: str = "oxyline") -> dict[str, float]:
+              impl: str = "oxyline") -> dict[str, list[float]]:
     env = dict(os.environ)
     if pythonpath:
         env["PYTHONPATH"] = pythonpath
@@ -305,15 +304,15 @@ def closed_loop_table(repeat: int) -> None:
 def constant_table(sizes: str, repeat: int, baseline: str | None) -> None:
     """Constant-coefficient chain/tree: svzerod, this build's drop-in (generalized-α) and
     native RK4 (and ``baseline``'s), each in a fresh subprocess, interleaved; best of
-    ``repeat``."""
+    ``repeat`` wall and CPU seconds (CPU: robust to a shared machine)."""
     impls: dict[str, str | None] = {"svzerod": None, "this": None}
     if baseline:
         impls["baseline"] = str(Path(baseline).resolve())
-    print(f"load average at start: {os.getloadavg()[0]:.1f}\n")
-    print("| model | build | gen-α drop-in wall (s, best) | RK4 native wall (s, best) | "
-          "svzerod / gen-α |")
+    print(f"\nload average at start: {os.getloadavg()[0]:.1f}\n")
+    print("| model | build | gen-α drop-in wall / CPU (s) | RK4 native wall / CPU (s) | "
+          "CPU svzerod / gen-α |")
     print("|---|---|---|---|---|")
-    rows: dict[tuple[str, str], dict[str, list[float]]] = {}
+    rows: dict[tuple[str, str], dict[str, list[list[float]]]] = {}
     models = [(t, int(float(n))) for n in sizes.split(",") for t in ("chain", "tree")]
     for what, n in models:
         for _ in range(repeat):
@@ -322,19 +321,24 @@ def constant_table(sizes: str, repeat: int, baseline: str | None) -> None:
                 d = rows.setdefault((f"{what} {n}", impl), {"ga": [], "rk4": []})
                 d["ga"].append(r["ga"])
                 d["rk4"].append(r["rk4"])
+
+    def best(runs: list[list[float]]) -> tuple[float, float]:
+        return min(w for w, _ in runs), min(c for _, c in runs)
+
     for what, n in models:
-        peer = min(rows[(f"{what} {n}", "svzerod")]["ga"])
+        peer = best(rows[(f"{what} {n}", "svzerod")]["ga"])[1]
         for impl in impls:
             d = rows[(f"{what} {n}", impl)]
-            rk4 = "–" if impl == "svzerod" else f"{min(d['rk4']):.3f}"
-            print(f"| {what} {n} | {impl} | {min(d['ga']):.3f} | {rk4} | "
-                  f"{peer / min(d['ga']):.2f} |")
+            ga, rk4 = best(d["ga"]), best(d["rk4"])
+            rk = "–" if impl == "svzerod" else f"{rk4[0]:.3f} / {rk4[1]:.3f}"
+            print(f"| {what} {n} | {impl} | {ga[0]:.3f} / {ga[1]:.3f} | {rk} | "
+                  f"{peer / ga[1]:.2f} |")
     if baseline:
-        print("\n| model | gen-α this/baseline | RK4 this/baseline |\n|---|---|---|")
+        print("\n| model | CPU gen-α this/baseline | CPU RK4 this/baseline |\n|---|---|---|")
         for what, n in models:
             a, b = rows[(f"{what} {n}", "this")], rows[(f"{what} {n}", "baseline")]
-            print(f"| {what} {n} | {min(a['ga']) / min(b['ga']):.3f} | "
-                  f"{min(a['rk4']) / min(b['rk4']):.3f} |")
+            print(f"| {what} {n} | {best(a['ga'])[1] / best(b['ga'])[1]:.3f} | "
+                  f"{best(a['rk4'])[1] / best(b['rk4'])[1]:.3f} |")
     print(f"\nload average at end: {os.getloadavg()[0]:.1f}")
 
 
