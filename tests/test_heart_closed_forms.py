@@ -222,3 +222,14 @@ def test_bad_coronary_is_a_model_error_naming_it(
 def test_the_coronary_used_for_bad_input_runs() -> None:
     res = oxyline.simulate(oxyline.load_model(coronary(lambda bc: None)), cycles=2, dt=1e-3)
     assert np.all(np.isfinite(res.vessel("lca").flow_in))
+
+
+def test_heart_block_out_of_step_with_the_model_period_is_named() -> None:
+    from oxyline import closed_loop
+
+    m = closed_loop.heart_model(closed_loop.load())
+    block = next(v for v in m["vessels"] if "heart_pulmonary" in v)
+    block["heart_pulmonary"]["period"] = 0.9 * m["period"]
+    with pytest.raises(oxyline.ModelError, match=rf"vessel '{block['name']}' heart_pulmonary"
+                                                 r".*period mismatch.*0\.72"):
+        oxyline.load_model(m)
