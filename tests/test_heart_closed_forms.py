@@ -40,11 +40,12 @@ def chamber_model(resistance: float) -> dict[str, Any]:
 
 def activation_integral(t: np.ndarray) -> np.ndarray:
     """∫₀ᵗ φ(s) ds of the piecewise-cosine activation (docs/physics.md §1.8), by hand."""
-    tau = np.mod(t, T)
+    cycles = np.floor(t / T + 1e-12)  # whole cycles (t on a cycle's end counts it)
+    tau = t - cycles * T
     c = np.clip(tau - T_C0, 0.0, T_C)
     r = np.clip(tau - T_R0, 0.0, T_R)
     per_cycle = T_C / 2 + T_R / 2
-    return (np.floor(t / T + 1e-12) * per_cycle
+    return (cycles * per_cycle
             + c / 2 - T_C / (2 * np.pi) * np.sin(np.pi * c / T_C)
             + r / 2 + T_R / (2 * np.pi) * np.sin(np.pi * r / T_R))
 
