@@ -210,8 +210,12 @@ def coronary(change: Callable[[dict[str, Any]], Any]) -> dict[str, Any]:
      ["'out'", "period", "0.9"]),
     (lambda bc: bc.update(intramyocardial_capacitance=-1e-10),
      ["'out'", "intramyocardial_capacitance", "-1e-10"]),
+    (lambda bc: bc.update(microvascular_resistance_max=5e9, contraction_time=0.3,
+                          relaxation_time=0.4, cycle_period=0.8),
+     ["'out'", "cycle_period", "0.8", "1 s"]),
 ], ids=["missing-p-im", "p-im-table-without-pressure", "p-im-table-without-time",
-        "p-im-table-lengths", "p-im-table-nan", "p-im-period-mismatch", "negative-c-im"])
+        "p-im-table-lengths", "p-im-table-nan", "p-im-period-mismatch", "negative-c-im",
+        "varying-resistance-period-mismatch"])
 def test_bad_coronary_is_a_model_error_naming_it(
         change: Callable[[dict[str, Any]], Any], words: list[str]) -> None:
     with pytest.raises(oxyline.ModelError) as err:
@@ -222,6 +226,11 @@ def test_bad_coronary_is_a_model_error_naming_it(
 
 def test_the_coronary_used_for_bad_input_runs() -> None:
     res = oxyline.simulate(oxyline.load_model(coronary(lambda bc: None)), cycles=2, dt=1e-3)
+    assert np.all(np.isfinite(res.vessel("lca").flow_in))
+    varying = coronary(lambda bc: bc.update(microvascular_resistance_max=5e9,
+                                            contraction_time=0.3, relaxation_time=0.4,
+                                            cycle_period=1.0))
+    res = oxyline.simulate(oxyline.load_model(varying), cycles=2, dt=1e-3)
     assert np.all(np.isfinite(res.vessel("lca").flow_in))
 
 

@@ -546,6 +546,8 @@ def _boundary_conditions(bcs: Mapping[str, Any], units: str
                     periods.append((w["time"][-1] - w["time"][0], el))
                 elif isinstance(w, dict) and w["kind"] == "fourier":
                     periods.append((w["period"], el))
+            if isinstance(cb.get("cycle_period"), float):  # a coronary's varying R_am
+                periods.append((cb["cycle_period"], f"{el} cycle_period"))
         out[str(node)] = cb
     return out, periods
 
