@@ -11,7 +11,8 @@ heart run, (with the tree) the tree's own flow run driven by its aortic outflow,
 loop to its periodic steady state at the O2 step dt (flows block-averaged): Anderson
 acceleration of the cycle map (default) or, with `--shooting both`, also the earlier
 finite-difference Newton shooting (one cycle per unknown) in the same run. The rows with the
-prescribed flow table time the O2 solve alone.
+prescribed flow table time the O2 solve alone. Flow only and flow + O2 run in turn, best of
+`--repeats` (default 3) CPU seconds of each: same-run ratios (~2 min quiet).
 """
 
 from __future__ import annotations
@@ -20,40 +21,39 @@ import argparse
 import os
 import time
 
+from bench_heart import interleaved
+
 import oxyline
 from oxyline import closed_loop, examples
 
 
-def cpu(fn, repeats: int) -> float:
-    best = float("inf")
-    for _ in range(repeats):
-        t0 = time.process_time()
-        fn()
-        best = min(best, time.process_time() - t0)
-    return best
-
-
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--repeats", type=int, default=3, help="interleaved repeats (best of)")
     ap.add_argument("--tree-only", action="store_true", help="only the arterial-tree rows")
     ap.add_argument("--shooting", choices=("anderson", "both"), default="anderson",
                     help="'both': also the finite-difference Newton shooting, same run")
     a = ap.parse_args()
     shootings = ("anderson", "newton") if a.shooting == "both" else ("anderson",)
-    print(f"load average at start: {os.getloadavg()}")
+    start = time.perf_counter()
+    print(f"# bench_closed_loop_o2.py, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, "
+          f"best of {a.repeats} interleaved repeats (flow only, flow + O2, flow only, ...), "
+          f"process CPU seconds\n")
+    print(f"load average at start: {os.getloadavg()[0]:.1f}\n")
     print("| model | flow only (s CPU) | flow + O2 (s CPU) | ratio |")
     print("|---|---:|---:|---:|")
     if not a.tree_only:
         m = examples.load("paper-curved-coronary")
-        flow = cpu(lambda: oxyline.simulate(m, transport=False), a.repeats)
-        o2 = cpu(lambda: oxyline.simulate(m), a.repeats)
+        r = interleaved({"flow": lambda: oxyline.simulate(m, transport=False),
+                         "o2": lambda: oxyline.simulate(m)}, a.repeats)
+        flow, o2 = r["flow"][2], r["o2"][2]
         print(f"| paper-curved-coronary, 8 cycles, 9 segments | {flow:.3f} | {o2:.3f} | "
               f"{o2 / flow:.2f} |")
         rows("closed-loop-o2", a.repeats, shootings)
         table_rows(a.repeats)
     rows("closed-loop-o2-tree", a.repeats, shootings)
-    print(f"load average at end: {os.getloadavg()}")
+    print(f"\nload average at end: {os.getloadavg()[0]:.1f}; whole bench "
+          f"{time.perf_counter() - start:.0f} s wall")
 
 
 def rows(name: str, repeats: int, shootings: tuple[str, ...]) -> None:
@@ -61,15 +61,14 @@ def rows(name: str, repeats: int, shootings: tuple[str, ...]) -> None:
     for dt in (4e-3, 1e-3):
         p = closed_loop.load(name)
         p["dt"] = dt
-        flow = cpu(lambda p=p: closed_loop.run_heart(p), repeats)
+        calls = {"flow": lambda p=p: closed_loop.run_heart(p)}
         for shooting in shootings:
-            res = None
-
-            def both(p=p, shooting=shooting) -> None:
-                nonlocal res
-                res = closed_loop.simulate_o2(p, shooting=shooting)
-
-            o2 = cpu(both, max(1, repeats // 3))
+            calls[shooting] = lambda p=p, shooting=shooting: closed_loop.simulate_o2(
+                p, shooting=shooting)
+        r = interleaved(calls, repeats)
+        flow = r["flow"][2]
+        for shooting in shootings:
+            res, o2 = r[shooting][0], r[shooting][2]
             s = res.summary()
             segs = f", {len(res.tree.segments)} segments" if res.tree is not None else ""
             print(f"| {name} block-driven, O2 dt {dt * 1e3:g} ms, {shooting}, {res.cycles} O2 "
@@ -86,18 +85,14 @@ def table_rows(repeats: int) -> None:
         p = closed_loop.load()
         p["dt"] = dt
         p["flows"] = "table"
-        table = cpu(lambda p=p: closed_loop.flow_table(p), repeats)
-        res = None
-
-        def run(p=p) -> None:
-            nonlocal res
-            res = closed_loop.simulate_o2(p)
-
-        t = cpu(run, max(1, repeats // 2))
+        r = interleaved({"table": lambda p=p: closed_loop.flow_table(p),
+                         "o2": lambda p=p: closed_loop.simulate_o2(p)}, repeats)
+        res, t = r["o2"][0], r["o2"][2]
         steps = round(p["period"] / dt) * res.cycles
         per = t / steps / len(res.compartments) * 1e6
         print(f"| closed-loop-o2 prescribed table, dt {dt * 1e3:g} ms, {res.cycles} cycles to "
-              f"periodic | {table:.4f} (table) | {t:.3f} | {per:.2f} µs per compartment-step |")
+              f"periodic | {r['table'][2]:.4f} (table) | {t:.3f} | {per:.2f} µs per "
+              f"compartment-step |")
 
 
 if __name__ == "__main__":

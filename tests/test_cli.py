@@ -122,9 +122,10 @@ def test_models_and_info(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["models"]) == 0
     lines = capsys.readouterr().out.splitlines()
     try:
-        from oxyline import models
+        from oxyline import closed_loop, models
 
-        assert len(lines) == len(list(models.list())) > 0  # one line per built-in model
+        # one line per built-in model, and per closed-loop O2 built-in (oxyline.closed_loop)
+        assert len(lines) == len(list(models.list())) + len(closed_loop.BUILTINS) > 0
     except ImportError:
         assert "bifurcation" in lines
     assert main(["info"]) == 0
@@ -170,3 +171,24 @@ def test_bad_input_messages(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     with pytest.raises(SystemExit) as exc:  # argparse usage errors are exit code 2 as well
         main(["run"])
     assert exc.value.code == 2
+
+
+def test_run_closed_loop_o2_builtin_writes_its_summary(tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """`oxyline models` lists the closed-loop O2 built-ins and `oxyline run` solves one to its
+    periodic state: the written summary obeys Fick's principle (an independent balance: VO2 =
+    CO (CaO2 − CvO2), issue 14 item 4) and the resting ranges of docs/oxygen.md."""
+    assert main(["models"]) == 0
+    assert "closed-loop-o2-tree" in capsys.readouterr().out
+    out = tmp_path / "s.json"
+    assert main(["run", "closed-loop-o2", "--dt", "4e-3", "-o", str(out)]) == 0
+    s = json.loads(out.read_text())
+    co, vo2 = s["cardiac_output"], s["VO2"]                      # L/min, mL/min
+    assert s["fick_residual"] < 1e-9
+    # CaO2, CvO2 in mL O2 per L blood
+    assert vo2 == pytest.approx(co * (s["CaO2"] - s["CvO2"]), rel=1e-9)
+    assert 0.95 < s["SaO2"] < 0.99 and 0.70 < s["SvO2"] < 0.76 and 230 < vo2 < 260
+    assert "SvO2" in capsys.readouterr().out
+    assert main(["run", "closed-loop-o2", "-o", str(tmp_path / "x.nc")]) == 2
+    assert main(["run", "closed-loop-o2", "--cycles", "3"]) == 2
+    assert "--cycles" in capsys.readouterr().err

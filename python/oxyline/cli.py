@@ -102,12 +102,59 @@ def _run_options(args: argparse.Namespace) -> dict[str, object]:
     return overrides
 
 
+def _is_closed_loop(name: str | None) -> bool:
+    """A built-in of :mod:`oxyline.closed_loop` (not a flow network: no file of that name)."""
+    from oxyline import closed_loop
+
+    return name in closed_loop.BUILTINS and not Path(name).exists()
+
+
+#: the `run` options a closed-loop O2 built-in takes (its O2 step is `--dt`)
+_CLOSED_LOOP_OPTIONS = ("output", "dt", "quiet")
+
+
+def _run_closed_loop(args: argparse.Namespace) -> int:
+    """`oxyline run closed-loop-o2[-tree]`: O2 around the closed loop to its periodic steady
+    state (:func:`oxyline.closed_loop.simulate_o2`); prints its summary, ``-o x.json`` writes
+    it (docs/oxygen.md "Oxygen around a closed loop")."""
+    import json
+
+    from oxyline import closed_loop
+
+    used = [k for k, v in vars(args).items() if v not in (None, False)
+            and k not in ("command", "func", "model", *_CLOSED_LOOP_OPTIONS)]
+    if used:
+        raise InputError(f"{args.model}: a closed-loop O2 built-in takes -o FILE.json, --dt and "
+                         f"--quiet only, not --{used[0].replace('_', '-')}")
+    if args.output and Path(args.output).suffix.lower() != ".json":
+        raise InputError(f"{args.output}: the summary of {args.model} is written as .json")
+    p = closed_loop.load(args.model)
+    if args.dt is not None:
+        p["dt"] = args.dt
+    s = closed_loop.simulate_o2(p).summary()
+    if args.output:
+        Path(args.output).write_text(json.dumps(s, indent=1) + "\n")
+    if not args.quiet:
+        print(f"{args.model}: cardiac output {s['cardiac_output']:.2f} L/min, "
+              f"SaO2 {s['SaO2']:.1%}, SvO2 {s['SvO2']:.1%}, PaO2 {s['PaO2']:.1f} mmHg, "
+              f"PvO2 {s['PvO2']:.1f} mmHg, VO2 {s['VO2']:.1f} mL/min")
+        print("VO2 per organ (mL/min): " + ", ".join(f"{k} {v:.1f}"
+                                                    for k, v in s["VO2_organs"].items()))
+        print(f"Fick residual {s['fick_residual']:.1e}, O2 balance per step "
+              f"{s['mass_balance_residual']:.1e}, {s['cycles']} O2 cycles")
+        if args.output:
+            print(f"summary written to {args.output}")
+    return 0
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     import signal
 
     import oxyline
 
     signal.signal(signal.SIGTERM, _on_sigterm)
+    if _is_closed_loop(args.model):
+        return _run_closed_loop(args)
     _check_outputs(args)
     overrides = _run_options(args)
     if args.resume:
@@ -360,6 +407,11 @@ def _cmd_models(args: argparse.Namespace) -> int:
             print(f"{e[0]!s:<24}{' '.join(str(x) for x in e[1:])}")
         else:
             print(getattr(e, "name", str(e)))
+    from oxyline import closed_loop
+
+    for name in closed_loop.BUILTINS:  # not flow networks: `run` prints their O2 summary
+        print(f"{name:<24}closed-loop O2 (oxyline.closed_loop; `oxyline run {name}` prints "
+              f"SaO2, SvO2, VO2 per organ)")
     return 0
 
 

@@ -511,6 +511,9 @@ def _heart_element(v: Mapping[str, Any], cv: dict[str, Any], el: str, units: str
         elif k not in ("inductance", "initial_volume"):
             raise _err(el, f"{kind} needs '{k}'")
     if kind == "chamber":
+        if out.get("initial_volume", 0.0) < 0.0:  # a blood volume (the core checks the rest)
+            raise _err(el, f"chamber initial_volume must be >= 0, got "
+                           f"{spec['initial_volume']!r}")
         act = spec.get("activation")
         if not isinstance(act, Mapping) or act.get("kind") not in ACTIVATION_KEYS:
             raise _err(el, f"chamber needs an 'activation' with kind one of "
@@ -543,8 +546,24 @@ def _boundary_conditions(bcs: Mapping[str, Any], units: str
                     periods.append((w["time"][-1] - w["time"][0], el))
                 elif isinstance(w, dict) and w["kind"] == "fourier":
                     periods.append((w["period"], el))
+            if isinstance(cb.get("cycle_period"), float):  # a coronary's varying R_am
+                periods.append((cb["cycle_period"], f"{el} cycle_period"))
         out[str(node)] = cb
     return out, periods
+
+
+def _element_periods(vessels: list[dict[str, Any]]) -> list[tuple[float, str]]:
+    """The cardiac periods of the heart elements (a `chamber`'s activation, a
+    `heart_pulmonary` block), with the element: like a waveform's, each must equal the model
+    period, or the chamber would beat out of step with the cycles that are run, output and
+    tested for periodicity (docs/physics.md §1.8)."""
+    out: list[tuple[float, str]] = []
+    for v in vessels:
+        for kind in ("chamber", "heart_pulmonary"):
+            spec = v.get(kind)
+            if isinstance(spec, dict) and "period" in spec:
+                out.append((spec["period"], f"vessel '{v['name']}' {kind} (its activation)"))
+    return out
 
 
 def _finite(x: Any) -> bool:
@@ -788,12 +807,16 @@ class _NativeReader:
 
     def __init__(self) -> None:
         self.parts: Any = None
+        #: the vessels converted by :func:`_vessel` (every heart element is among them)
+        self.converted: list[dict[str, Any]] = []
 
     def vessels(self, vessels: list[Any], units: str) -> list[dict[str, Any]]:
         self.parts = _core.NativeParts(vessels, factor(units, "length"),
                                        factor(units, "modulus"))
         for i in self.parts.slow_vessels():
-            self.parts.put_vessel(i, _vessel(vessels[i], i, units))
+            cv = _vessel(vessels[i], i, units)
+            self.converted.append(cv)
+            self.parts.put_vessel(i, cv)
         return []
 
     def boundary_conditions(self, bcs: Mapping[str, Any], units: str
@@ -895,11 +918,13 @@ def _unassembled(data: dict[str, Any], convert_vessels: Callable[..., Any] | Non
         if period <= 0:
             raise _err("model", f"period must be > 0, got {period}")
     period_source = "the model period is"
-    for p, el in periods:
+    # the native reader's canonical vessel list is empty: its converted vessels hold the rest
+    converted = getattr(getattr(convert_vessels, "__self__", None), "converted", [])
+    for p, el in periods + _element_periods(canon["vessels"] or converted):
         if period is None:
             period, period_source = p, f"{el} repeats every"
         elif abs(p - period) > 1e-9 * period:
-            raise _err(el, f"period mismatch: its waveform repeats every {p:g} s but "
+            raise _err(el, f"period mismatch: it repeats every {p:g} s but "
                            f"{period_source} {period:g} s")
     sim = data.get("simulation", {}) or {}
     _check_keys(sim, SIM_KEYS, "simulation")
