@@ -136,7 +136,8 @@ class _Layout:
     connections: list[tuple[str, str]] = field(default_factory=list)
     #: internal variables: ("rcr", name, Rp), ("junction", name, (hidden vessel, 0 or 1: its
     #: pressure_in or pressure_out is the junction's centre)), ("ClosedLoopRCR" or
-    #: "ClosedLoopCoronary", name, native vessel), ("heart", name, None), ("valve", name,
+    #: "ClosedLoopCoronary", name, native vessel), ("CORONARY", name, C_im: an open-loop
+    #: coronary's volume_im), ("heart", name, None), ("valve", name,
     #: None: a tanh valve's status); output in svZeroDSolver's block order (see
     #: ``INTERNAL_ORDER``), ChamberSphere wall variables first and ``Vc`` last
     internal: list[tuple[str, str, Any]] = field(default_factory=list)
