@@ -136,7 +136,8 @@ class _Layout:
     connections: list[tuple[str, str]] = field(default_factory=list)
     #: internal variables: ("rcr", name, Rp), ("junction", name, (hidden vessel, 0 or 1: its
     #: pressure_in or pressure_out is the junction's centre)), ("ClosedLoopRCR" or
-    #: "ClosedLoopCoronary", name, native vessel), ("heart", name, None), ("valve", name,
+    #: "ClosedLoopCoronary", name, native vessel), ("CORONARY", name, C_im: an open-loop
+    #: coronary's volume_im), ("heart", name, None), ("valve", name,
     #: None: a tanh valve's status); output in svZeroDSolver's block order (see
     #: ``INTERNAL_ORDER``), ChamberSphere wall variables first and ``Vc`` last
     internal: list[tuple[str, str, Any]] = field(default_factory=list)
@@ -656,6 +657,8 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
             layout.internal.append((kind, name, f"{name}:proximal"))
         elif kind in svzerod_closed_loop.CORONARY_TYPES:  # volume_im of its coronary_bed
             layout.internal.append(("ClosedLoopCoronary", name, f"{name}:bed"))
+        elif kind in svzerod_heart.BC_PARAMS:  # volume_im: C_im times its transmural change
+            layout.internal.append(("CORONARY", name, native["intramyocardial_capacitance"]))
 
     heart_period = svzerod_closed_loop.heart_period(cfg)
     if heart_period is not None:  # svZeroDSolver takes the heart block's period
@@ -954,12 +957,16 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
         cap_cols = [(recorded[ends[v][end == "out"]] + (2 if end == "in" else 3),
                      recorded[ends[v][end == "out"]] + (0 if end == "in" else 1))
                     for v, end in s.caps]
+        if s.all_unknowns:  # the run records every unknown: the vessels' columns are theirs
+            probe = model.network.unknown_layout()["vessel_unknowns"]
+            cap_cols = [(int(probe[q]), int(probe[p])) for q, p in cap_cols]
         times, values = _run_cycle_error(model, native, s, method, columns, cap_cols)
         values = np.ascontiguousarray(values.reshape(len(times), *shape).transpose(1, 0, 2))
         return _frame(pd, names, times, values, None, s)
     # svZeroDSolver's valve_status is solved at generalized-α's α_f stage (see _alpha_stage):
     # a recursion over every step
-    every_step = s.output_derivative or (bool(columns[2]) and method == "generalized-alpha")
+    every_step = s.output_derivative or _needs_start(columns) or (
+        bool(columns[2]) and method == "generalized-alpha")
     times, values, derivs = (_run_every_step if every_step else _run_streamed)(
         model, native, s, method, columns, shape)
     return _frame(pd, names, times, values, derivs, s)
@@ -967,10 +974,37 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
 
 #: svZeroDSolver's block order of the internal variables in its variable table (after the
 #: ChamberSphere vessels' wall variables; the chambers' ``Vc`` come last)
-INTERNAL_ORDER = {"rcr": 1, "ClosedLoopRCR": 1, "ClosedLoopCoronary": 1, "junction": 2,
-                  "heart": 3, "valve": 4}
+INTERNAL_ORDER = {"rcr": 1, "ClosedLoopRCR": 1, "ClosedLoopCoronary": 1, "CORONARY": 1,
+                  "junction": 2, "heart": 3, "valve": 4}
 #: the internal variables read from the core's element unknowns (the run records every one)
-ELEMENT_KINDS = {"ClosedLoopCoronary", "heart", "valve"}
+ELEMENT_KINDS = {"ClosedLoopCoronary", "CORONARY", "heart", "valve"}
+
+
+class _VolumeSinceStart:
+    """An open-loop ``CORONARY``'s ``volume_im`` from the core's transmural pressure u of its
+    intramyocardial compartment (docs/physics.md §1.7): V_im = C_im (u − u(0)).
+
+    svZeroDSolver's block holds V_im itself, measured from the start (its
+    ``setup_initial_state_dependent_params`` takes the start's compartment pressure P_Cim_0
+    and P_im(0), or the mean P_im after the steady start, whose steady equations set V_im =
+    0), and integrates dV_im/dt = Q_am − Q_v; the core integrates C_im du/dt over the same
+    flows with the same steps. The law needs the run's first row, the start (``history``).
+    Left out: after the steady start svZeroDSolver's P_Cim_0 also holds R_am C_a (Ṗ_in −
+    R_a Q̇_in) of its leftover ẏ₀, a constant offset taken as 0 here (as ẏ₀ is, see
+    ``_run_every_step``; −6.5e-10 mL in steadyFlow_R_coronary)."""
+
+    history = True
+
+    def __init__(self, capacitance: float) -> None:
+        self.capacitance = capacitance
+
+    def __call__(self, u: np.ndarray) -> np.ndarray:
+        return self.capacitance * (u - u[0])
+
+
+def _needs_start(columns: Columns) -> bool:
+    """Whether a column's law needs the run from its start (see :class:`_VolumeSinceStart`)."""
+    return any(getattr(f, "history", False) for _, f in columns[2])
 
 #: output columns: column j is recorded column ``idx[j]`` plus ``w`` times recorded column
 #: ``c`` for each (j, c, w) in ``extra``, then mapped by ``f`` for each (j, f) in ``post``
@@ -1032,6 +1066,11 @@ def _output_columns(layout: _Layout, recorded: Mapping[str, int], variable_based
         elif kind == "ClosedLoopCoronary":
             names.append(f"volume_im:{name}")
             idx.append(element[f"volume_im:{ref}"])
+        elif kind == "CORONARY":  # the compartment node's unknown is u = P_c − P_im
+            names.append(f"volume_im:{name}")
+            idx.append(network.unknown_names().index(
+                f"pressure at boundary condition '{name}' intramyocardial compartment"))
+            post.append((len(idx) - 1, _VolumeSinceStart(float(ref))))
         elif kind == "heart":
             heart_cols = _heart_columns(lay, name)
             names += [f"{var}:{name}" for var, _ in svzerod_closed_loop.VARIABLES]
@@ -1229,8 +1268,8 @@ def _run_every_step(model: Model, native: Mapping[str, Any], s: RunSettings, met
     if len(t) != (s.points_per_cycle - 1) * s.cycles * sub + 1:
         raise ModelError(f"internal error: {len(t)} rows from the core")
     for j, law in post:
-        y[:, j] = law(y[:, j]) if method != "generalized-alpha" else \
-            _alpha_stage(y[:, j], law, s.rho_infty, s.steady_initial)
+        y[:, j] = law(y[:, j]) if method != "generalized-alpha" or getattr(law, "history", False) \
+            else _alpha_stage(y[:, j], law, s.rho_infty, s.steady_initial)
     if not s.output_derivative:
         yd = None
     elif method == "generalized-alpha":
