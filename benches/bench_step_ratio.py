@@ -173,14 +173,14 @@ class Interleave:
 
 
 def measure(depth: int, method: str, configs: list[str], rounds: int, warmup: int = 1,
-            per_vessel: int = 4) -> tuple[int, list[Lane]]:
+            per_vessel: int = 4, checks: int | None = None) -> tuple[int, list[Lane]]:
     """Time ``rounds`` interleaved blocks per configuration (after ``warmup`` untimed ones);
     (segments, lanes). Each lane's ``blocks`` are (t0, t1, CPU s) of its main pass.
 
     A block is ~1.7e7 segment-steps (~0.5 s of generalized-α flow, at least 256 steps), so
     that small trees are not timed in slivers of a few ms. The run gets enough cycles for the
     blocks, not more: a closure's first pass runs as many cycles as the run (until its mean
-    flow settles), untimed but not free."""
+    flow settles), untimed but not free. ``checks``: progress checks per block instead."""
     models = [oxyline.load_model(tree(depth, per_vessel, c)) for c in configs]
     segments = int(models[0].network.summary()["segments"])
     kw: dict[str, Any] = {"output_every": 0.01, "segments": False, "method": method}
@@ -190,7 +190,8 @@ def measure(depth: int, method: str, configs: list[str], rounds: int, warmup: in
         # RK4's automatic step is at most half its stability limit (run/plan.rs; an O2 run's
         # may be smaller still: more steps per block, the same simulated time)
         dt = 0.5 * models[0].network.rk4_stability_limit()[0]
-    checks = max(1, round(BLOCK_SEGMENT_STEPS / (segments * CHECK_STEPS)))
+    if checks is None:
+        checks = max(1, round(BLOCK_SEGMENT_STEPS / (segments * CHECK_STEPS)))
     block_time = checks * CHECK_STEPS * dt
     # + the first check, one block of overshoot (the binding's 100 ms check filter), a cycle
     kw["cycles"] = math.ceil((warmup + rounds + 2) * block_time / PERIOD) + 1
