@@ -5,13 +5,15 @@ so a ratio of two separate runs cannot show a 1.6× bound. Here every configurat
 tree and integrator runs at the same time, each a single ``oxyline.simulate`` call in its own
 thread, built once (``load_model``; the steady start, RK4's step size and the closures' first
 pass happen once per configuration, untimed), and the runs take turns: flow, o2-k, o2-leveque,
-o2-default, o2-hill-k, flow, ... one block of 256 steps each (the core's progress check; a
-few tenths of a cycle in generalized-α, a small fraction of an RK4 cycle), only one stepping
-at a time. A block is the thread CPU time (``time.thread_time``: the core steps on the
-calling thread, the GIL released) between the run's resumption and its next progress check.
-Slow drift of the machine then lands on both sides of each ratio alike, and in
-generalized-α all configurations advance in lockstep, so each round's blocks cover the same
-part of the cycle (systole costs more Newton iterations than diastole).
+o2-hill-k, o2-default, flow, ... one block each, only one stepping at a time. A block is a
+span of simulated time, the same for every run: ~1.7e7 segment-steps (1 s of a 16 k-segment
+tree at 1 ms steps, 0.256 s at 65 k and above; never under 256 steps, the core's progress
+check interval). Its cost is the thread CPU time (``time.thread_time``: the core steps on the
+calling thread, the GIL released) between the run's resumption and the progress check that
+ends the block; its steps are its simulated time over the run's step (RK4: each run's own
+automatic step). Slow drift of the machine then lands on both sides of each ratio alike, and all
+configurations advance in lockstep, so each round's blocks cover the same part of the cycle
+(systole costs more Newton iterations than diastole).
 
 What "per step" covers: the main (coupled) pass only — the flow step, the species step and
 the output rows recorded during those steps (vessel-level every 10 ms, as in
@@ -262,8 +264,9 @@ def main() -> None:
     a = ap.parse_args()
     configs = ["flow", *[c for c in a.configs if c != "flow"]]
     depths = a.depths + ([18] if a.large and 18 not in a.depths else [])
-    print(f"# interleaved blocks of {CHECK_STEPS} steps, {a.rounds} timed (+{a.warmup} warm-up) "
-          f"per configuration, main pass only; thread CPU time; binary trees, 4 segments per "
+    print(f"# interleaved blocks of ~{BLOCK_SEGMENT_STEPS:.2g} segment-steps (>= {CHECK_STEPS} "
+          f"steps), {a.rounds} timed (+{a.warmup} warm-up) per configuration, main pass only; "
+          f"thread CPU time; binary trees, 4 segments per "
           f"vessel, vessel output every 10 ms; {os.cpu_count()} CPUs, load average "
           f"{os.getloadavg()[0]:.1f}")
     print(HEADER)
