@@ -31,9 +31,12 @@ def test_every_configuration_is_timed_in_its_main_pass(lanes):
         assert ln.error is None, (ln.config, ln.error)
         assert len(ln.blocks) == 1, ln.config
         t0, t1, cpu = ln.blocks[0]
-        # the timed block is the main pass's second check interval: 256-512 steps of 1 ms
-        assert t0 == pytest.approx(0.512) and t1 == pytest.approx(0.768), ln.config
-        assert bench_step_ratio.steps_of(ln, ln.blocks[0]) == 256
+        # the timed block follows the warm-up block in the main pass (from step 512 at 1 ms)
+        # and lasts at least 256 steps, a whole number of progress checks (longer only if
+        # the binding held back a check, at most one per 100 ms reaches Python)
+        assert t0 >= 0.512 - 1e-9 and t1 - t0 >= 0.256 - 1e-9, ln.config
+        steps = bench_step_ratio.steps_of(ln, ln.blocks[0])
+        assert steps >= 256 and steps % 256 == 0, (ln.config, steps)
         assert cpu > 0
     assert [bool(ln.result.species) for ln in ls] == [False, True, True]
     table = bench_step_ratio.rows(segments, "generalized-alpha", ls)
