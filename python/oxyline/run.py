@@ -90,7 +90,7 @@ OPTIONS = frozenset({"cycles", "dt", "method", "output_every", "output_cycles", 
                      "max_iterations", "transport", "variables", "vessels", "max_memory",
                      "checkpoint", "checkpoint_every", "cancel"})
 
-STARTS = ("steady", "zero", "svzerod-steady", "svzerod-zero")
+STARTS = ("steady", "periodic", "zero", "svzerod-steady", "svzerod-zero")
 
 
 def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
