@@ -12,7 +12,8 @@ of ``benches/networks.py`` (``--vessels`` vessels, svzerod's settings: ``--cycle
 ``R_poiseuille`` and the outlets' ``R``) by a factor in [0.8, 1.2]: in oxyline the patch
 ``{"scale": {"resistance": f}}``, in svzerod the same numbers written into a copy of the
 configuration; ``pwdb-200``: 200 subjects of ``oxyline.populations.pwdb_like`` spread evenly
-over the 4,374 (pwdb-116, run to periodicity 1e-4, the population bench's output).
+over the 4,374 (pwdb-116, from the periodic start to periodicity 1e-4, the population
+bench's output).
 
 The machine drifts (±30 % between runs of the same build on a quiet machine), so nothing is
 measured in blocks: every round runs, per size, each configuration once, in an order rotated
@@ -133,12 +134,14 @@ class Size:
             picks = np.linspace(0, len(everyone) - 1, self.n).round().astype(int)
             self.model = oxyline.load_model(P.MODEL)
             self.patches = [everyone[i] for i in picks]
+            # each subject from its periodic state, as bench_population.py runs them
             self.settings = {"output": P.subject_summary, "until_periodic": 1e-4,
-                             "vessels": P.summary_vessels(),
+                             "start": "periodic", "vessels": P.summary_vessels(),
                              "variables": ["pressure_in", "pressure_out",
                                            "segment_pressure_in"]}
             self.what = (f"{self.n} of the 4,374 pwdb_like subjects of pwdb-116 (spread "
-                         "evenly), to periodicity 1e-4, per-subject summary")
+                         "evenly), from the periodic start to periodicity 1e-4, per-subject "
+                         "summary")
         else:
             raise SystemExit(f"unknown size {name!r} (tree-N or pwdb-N)")
 
