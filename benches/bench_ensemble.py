@@ -1,8 +1,9 @@
 """Ensembles (``oxyline.simulate_ensemble``): thread scaling, throughput against a loop of
-svZeroDSolver runs, and the overhead of a Dask LocalCluster, at three sizes in one run.
+svZeroDSolver runs, and the overhead of a Dask LocalCluster, interleaved in rounds.
 
-    python benches/bench_ensemble.py --quick      # the headline table (a few minutes quiet)
-    python benches/bench_ensemble.py              # best of 2, the same table
+    python benches/bench_ensemble.py --quick                        # 3 rounds, every size
+    python benches/bench_ensemble.py --quick --sizes tree-64,tree-1000   # ~5 min quiet
+    python benches/bench_ensemble.py --quick --sizes pwdb-200            # ~5 min quiet
 
 Sizes (``--sizes``): ``tree-64`` and ``tree-1000``, 64 and 1,000 variants of the svzerod tree
 of ``benches/networks.py`` (``--vessels`` vessels, svzerod's settings: ``--cycles`` cycles of
@@ -11,29 +12,37 @@ of ``benches/networks.py`` (``--vessels`` vessels, svzerod's settings: ``--cycle
 ``R_poiseuille`` and the outlets' ``R``) by a factor in [0.8, 1.2]: in oxyline the patch
 ``{"scale": {"resistance": f}}``, in svzerod the same numbers written into a copy of the
 configuration; ``pwdb-200``: 200 subjects of ``oxyline.populations.pwdb_like`` spread evenly
-over the 4,374 (pwdb-116, run to periodicity 1e-4, the population bench's output).
+over the 4,374 (pwdb-116, from the periodic start to periodicity 1e-4, the population
+bench's output).
 
-Per size, in one run:
+The machine drifts (±30 % between runs of the same build on a quiet machine), so nothing is
+measured in blocks: every round runs, per size, each configuration once, in an order rotated
+from round to round —
 
-1. thread scaling: the ensemble with ``workers=1`` and ``workers=2`` (summary output);
-2. svzerod: a Python loop of ``svzerod.simulate(config_k)`` (the svzerod PyPI package; each
-   call returns its DataFrame) against the ``workers=2`` ensemble. The loop is timed once per
-   network, on the first size (tree-64: all 64 configurations; at most ``--svzerod-runs``
-   spread evenly over the variants), and every size's loop time is that time per run × its
-   variants (tree-1000: 1000 × the tree-64 time per run; the table says so); the
-   time-averaged root pressures of both are compared as a check that the networks are the
-   same (a later size: 4 untimed runs). pwdb-116 has no svzerod form: n/a;
-3. Dask: ``LocalCluster(n_workers=2, threads_per_worker=1)`` against the local ``workers=2``
-   run, after one warm-up ensemble of 2 variants on the cluster (the workers import oxyline).
-   The cluster is started once every size's local runs and svzerod loop are done: its
-   scheduler runs in this process and its workers keep starting up after it returns, which
-   cost the local runs measured beside them CPU. Then the cluster's fixed cost per call
-   (the median of 2-variant ensembles on the cluster minus on local threads, first size)
-   and the local ensemble duration above which its overhead stays within 15 %.
+* ``1 worker`` / ``2 workers``: the local ensemble with ``workers=1`` / ``workers=2`` (summary
+  output);
+* ``LocalCluster``: ``client=`` a ``LocalCluster(n_workers=2, threads_per_worker=1)``, started
+  once before the first round (one warm-up ensemble of 2 variants per size on it, then idle
+  while the local runs of later configurations run: its idle background CPU is printed);
+* ``svzerod``: a Python loop of ``svzerod.simulate(config_k)`` (the svzerod PyPI package; each
+  call returns its DataFrame) over ``--svzerod-runs`` of the size's variants spread evenly
+  (tree-64: all 64; tree-1000: a subset, the table says how many). pwdb-116 has no svzerod
+  form.
 
-Wall times are the best of ``--repeat``; CPU time (user + system of this process and its
-threads) is given beside them and the 1-min load average after each size, because the machine
-may be shared. Results are printed as Markdown and appended to ``benches/results.md``
+and every ratio is formed within one round: scaling = 1 worker / 2 workers, LocalCluster
+overhead = LocalCluster / 2 workers − 1, vs svzerod = svzerod time per run / 2-worker ensemble
+time per variant (the same networks: the root vessel's time-averaged inlet pressure agrees to
+1e-6, checked on the first round). The tables give the best and the median wall time per
+configuration and the median (min–max) of the per-round ratios. Each round also times the
+machine's own 1 → 2 scaling (two processes of a CPU-bound Python loop against one): the
+ceiling that no ensemble code can pass on this machine at that moment. After the rounds, the
+cluster's fixed cost per call (median of 2-variant ensembles on the cluster minus on local
+threads, first size) and the local ensemble duration above which its overhead stays within
+15 %.
+
+CPU time (user + system of this process and its threads; for the LocalCluster plus its worker
+processes) is given beside the wall times and the 1-min load average per round, because the
+machine may be shared. Results are printed as Markdown and appended to ``benches/results.md``
 (``--output ''`` for none).
 """
 
@@ -92,18 +101,6 @@ def cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def timed(fn: Any, repeat: int) -> tuple[float, float, Any]:
-    """(best wall time, CPU time of that call, its value) over ``repeat`` calls."""
-    best = (np.inf, np.nan, None)
-    for _ in range(repeat):
-        c0, t0 = cpu(), time.perf_counter()
-        value = fn()
-        wall, used = time.perf_counter() - t0, cpu() - c0
-        if wall < best[0]:
-            best = (wall, used, value)
-    return best
-
-
 def cluster_cpu(client: Any) -> float:
     """User + system CPU time of the cluster's worker processes so far (s)."""
     return sum(client.run(cpu).values())
@@ -137,12 +134,14 @@ class Size:
             picks = np.linspace(0, len(everyone) - 1, self.n).round().astype(int)
             self.model = oxyline.load_model(P.MODEL)
             self.patches = [everyone[i] for i in picks]
+            # each subject from its periodic state, as bench_population.py runs them
             self.settings = {"output": P.subject_summary, "until_periodic": 1e-4,
-                             "vessels": P.summary_vessels(),
+                             "start": "periodic", "vessels": P.summary_vessels(),
                              "variables": ["pressure_in", "pressure_out",
                                            "segment_pressure_in"]}
             self.what = (f"{self.n} of the 4,374 pwdb_like subjects of pwdb-116 (spread "
-                         "evenly), to periodicity 1e-4, per-subject summary")
+                         "evenly), from the periodic start to periodicity 1e-4, per-subject "
+                         "summary")
         else:
             raise SystemExit(f"unknown size {name!r} (tree-N or pwdb-N)")
 
@@ -153,107 +152,152 @@ class Size:
         return ds
 
 
-#: svzerod's time per run of a network, measured once per network (see :func:`versus_svzerod`)
-SVZEROD_PER_RUN: dict[tuple[int, int, int], tuple[float, int, str]] = {}
-#: svzerod runs of a size whose per-run time was measured on an earlier size: the pressure
-#: check only (not timed)
-CHECK_RUNS = 4
+class Svzerod:
+    """The svzerod loop of a size: ``runs`` of its configurations spread evenly over its
+    variants (all of them if ``runs`` >= variants)."""
 
-
-def versus_svzerod(size: Size, ds: Any, runs: int, repeat: int
-                   ) -> tuple[float, int, str, str]:
-    """(svzerod loop time for every variant, runs timed, the size they were timed on, check
-    text). The loop's time per run is measured once per network, on the first size that
-    runs it (``runs`` configurations spread evenly over its variants; tree-64: all 64), and
-    every size's loop time is that per-run time × its variants (tree-1000: measured × 1000 /
-    64); a later size runs :data:`CHECK_RUNS` untimed configurations for the pressure check."""
-    import svzerod
-
-    assert size.cfg is not None
-    cached = SVZEROD_PER_RUN.get(size.key)
-    count = min(runs if cached is None else CHECK_RUNS, size.n)
-    picks = np.linspace(0, size.n - 1, count).round().astype(int)
-    fs = factors(size.n)
-    configs = [svzerod_config(size.cfg, fs[i]) for i in picks]
-    if cached is None:
-        wall, used, frames = timed(lambda: [svzerod.simulate(c) for c in configs], repeat)
-        print(f"{size.name}: svzerod loop of {len(picks)} runs: {wall:.2f} s wall, {used:.2f} s "
-              "CPU", file=sys.stderr, flush=True)
-        cached = SVZEROD_PER_RUN[size.key] = (wall / len(picks), len(picks), size.name)
-    else:
-        frames = [svzerod.simulate(c) for c in configs]
-    # the same networks: the time-averaged inlet pressure of the root vessel, variant by
-    # variant, both in Pa (svzerod reports in its file's units, cgs here: dyn/cm^2 = 0.1 Pa)
-    root = size.model.vessel_names[0]
-    to_si = units.factor(dropin.file_units(size.cfg), "pressure")
-    sv_mean = np.array([time_average(f[f["name"] == root], "pressure_in") * to_si
-                        for f in frames])
-    ox_mean = ds.pressure_in_mean.sel(vessel=root).values[picks]
-    diff = float(np.max(np.abs(ox_mean / sv_mean - 1)))
-    # both are the same generalized-alpha scheme on the same linear circuit and output times:
-    # they differ by round-off (1e-15 measured), far below 1e-6; another network, or a units
-    # mix-up (a factor 10), is far above it. (The plain mean of svzerod's output rows, equal
-    # weights instead of the trapezoidal rule's half weights at the ends, differs by ~7e-4.)
-    if not diff < SAME_NETWORK_RTOL:
-        raise SystemExit(f"oxyline and svzerod disagree: root-vessel time-averaged inlet "
-                         f"pressure differs by {diff:.1e} (relative) > {SAME_NETWORK_RTOL:g}")
-    per_run, timed_runs, where = cached
-    return per_run * size.n, timed_runs, where, f"{diff:.1e} over {len(picks)} variants"
-
-
-class Row:
-    """One row of the table: the local runs of a size (measured first, with no cluster up),
-    then its LocalCluster run."""
-
-    def __init__(self, size: Size, args: argparse.Namespace) -> None:
+    def __init__(self, size: Size, runs: int) -> None:
+        assert size.cfg is not None
         self.size = size
-        print(f"{size.name}: workers=1, 2 ...", file=sys.stderr, flush=True)
-        # 1 and 2 workers alternate (best of each): the CPU time per variant drifted by up to
-        # a third between consecutive runs on the quiet machine (tree-1000, session 9: 12.87 s
-        # CPU for 1 worker, 9.70 s for 2 right after), which a block of repeats of one count
-        # puts entirely on its side of the ratio
-        w1 = w2 = (np.inf, np.nan, None)
-        for _ in range(args.repeat):
-            w1 = min(w1, timed(lambda: size.run(workers=1), 1), key=lambda r: r[0])
-            w2 = min(w2, timed(lambda: size.run(workers=2), 1), key=lambda r: r[0])
-        (self.w1, self.c1, _), (self.w2, self.c2, self.local) = w1, w2
-        self.load = load()
-        self.notes: list[str] = []
-        self.sv = "n/a | n/a"
-        if size.cfg is not None and "svzerod" in args.parts:
-            print(f"{size.name}: svzerod loop ...", file=sys.stderr, flush=True)
-            sv_wall, measured, where, diff = versus_svzerod(size, self.local, args.svzerod_runs,
-                                                            args.repeat)
-            extra = ("" if (measured, where) == (size.n, size.name) else
-                     f", {size.n} x the time per run of {measured} timed runs ({where})")
-            self.sv = f"{sv_wall:.2f}{extra} | **{sv_wall / self.w2:.1f}x**"
-            self.notes.append(f"{size.name}: root-vessel time-averaged inlet pressure, oxyline "
-                              f"vs svzerod, max relative difference {diff} run by both (check: "
-                              f"< {SAME_NETWORK_RTOL:g}).")
-        self.dask = "- | -"
+        self.picks = np.linspace(0, size.n - 1, min(runs, size.n)).round().astype(int)
+        fs = factors(size.n)
+        self.configs = [svzerod_config(size.cfg, fs[i]) for i in self.picks]
+        self.check = ""
 
-    def on_cluster(self, client: Any, args: argparse.Namespace) -> None:
+    def run(self) -> list[Any]:
+        import svzerod
+
+        return [svzerod.simulate(c) for c in self.configs]
+
+    def same_network(self, frames: list[Any], ds: Any) -> None:
+        """Check that oxyline and svzerod ran the same networks: the time-averaged inlet
+        pressure of the root vessel, variant by variant, both in Pa (svzerod reports in its
+        file's units, cgs here: dyn/cm^2 = 0.1 Pa)."""
         size = self.size
-        print(f"{size.name}: LocalCluster ...", file=sys.stderr, flush=True)
-        size_warm = oxyline.simulate_ensemble(size.model, size.patches[:2], client=client,
-                                              progress=False, **size.settings)
-        assert (size_warm.status.values == 0).all()
-        c0 = cluster_cpu(client)
-        wd, _, remote = timed(lambda: size.run(client=client), args.repeat)
-        self.notes.append(f"{size.name}: LocalCluster CPU (its 2 worker processes, all "
-                          f"{args.repeat} runs) {cluster_cpu(client) - c0:.2f} s against "
-                          f"{self.c2:.2f} s for the local workers=2 run.")
-        same = all(bool(np.array_equal(self.local[v].values, remote[v].values, equal_nan=True))
-                   for v in self.local.data_vars if self.local[v].dtype.kind == "f")
-        self.dask = f"{wd:.2f} | **{100 * (wd / self.w2 - 1):+.0f} %**"
-        self.notes.append(f"{size.name}: LocalCluster results bit-identical to the local run: "
-                          f"{same}.")
-        self.load += f" / {load()}"
+        root = size.model.vessel_names[0]
+        to_si = units.factor(dropin.file_units(size.cfg), "pressure")
+        sv_mean = np.array([time_average(f[f["name"] == root], "pressure_in") * to_si
+                            for f in frames])
+        ox_mean = ds.pressure_in_mean.sel(vessel=root).values[self.picks]
+        diff = float(np.max(np.abs(ox_mean / sv_mean - 1)))
+        # both are the same generalized-alpha scheme on the same linear circuit and output
+        # times: they differ by round-off (1e-15 measured), far below 1e-6; another network, or
+        # a units mix-up (a factor 10), is far above it. (The plain mean of svzerod's output
+        # rows, equal weights instead of the trapezoidal rule's half weights at the ends,
+        # differs by ~7e-4.)
+        if not diff < SAME_NETWORK_RTOL:
+            raise SystemExit(f"oxyline and svzerod disagree: root-vessel time-averaged inlet "
+                             f"pressure differs by {diff:.1e} (relative) > {SAME_NETWORK_RTOL:g}")
+        self.check = (f"{size.name}: root-vessel time-averaged inlet pressure, oxyline vs "
+                      f"svzerod, max relative difference {diff:.1e} over the {len(frames)} "
+                      f"variants svzerod ran (check: < {SAME_NETWORK_RTOL:g}).")
 
-    def __str__(self) -> str:
-        return (f"| {self.size.name} | {self.size.n} | {self.w1:.2f} | {self.c1:.2f} | "
-                f"{self.w2:.2f} | {self.c2:.2f} | **{self.w1 / self.w2:.2f}x** | {self.sv} | "
-                f"{self.dask} | {self.load} |")
+
+#: the configurations of a round, in their order in the tables
+CONFIGS = ("1 worker", "2 workers", "LocalCluster", "svzerod")
+
+
+class Rounds:
+    """Every measurement of one size: per configuration and round, (wall s, CPU s)."""
+
+    def __init__(self, size: Size, svz: Svzerod | None) -> None:
+        self.size, self.svz = size, svz
+        self.runs: dict[str, list[tuple[float, float]]] = {}
+        self.loads: list[float] = []
+        self.notes: list[str] = []
+        self.identical: bool | None = None
+
+    def configs(self, client: Any) -> list[str]:
+        return [c for c in CONFIGS if (c != "LocalCluster" or client is not None)
+                and (c != "svzerod" or self.svz is not None)]
+
+    def measure(self, config: str, client: Any, first: bool) -> None:
+        size = self.size
+        c0, t0 = cpu(), time.perf_counter()
+        w0 = cluster_cpu(client) if config == "LocalCluster" else 0.0
+        if config == "svzerod":
+            assert self.svz is not None
+            frames = self.svz.run()
+        else:
+            kw = ({"client": client} if config == "LocalCluster"
+                  else {"workers": 1 if config == "1 worker" else 2})
+            ds = size.run(**kw)
+        wall, used = time.perf_counter() - t0, cpu() - c0
+        if config == "LocalCluster":
+            used += cluster_cpu(client) - w0
+        self.runs.setdefault(config, []).append((wall, used))
+        if config == "2 workers":
+            self.local = ds
+        if first and config == "svzerod":
+            self.frames = frames
+        if first and config == "LocalCluster":
+            self.remote = ds
+
+    def checks(self) -> None:
+        """After the first round: svzerod ran the same networks, the cluster the same bits."""
+        if self.svz is not None and hasattr(self, "frames"):
+            self.svz.same_network(self.frames, self.local)
+            self.notes.append(self.svz.check)
+            del self.frames
+        if hasattr(self, "remote"):
+            self.identical = all(
+                bool(np.array_equal(self.local[v].values, self.remote[v].values, equal_nan=True))
+                for v in self.local.data_vars if self.local[v].dtype.kind == "f")
+            self.notes.append(f"{self.size.name}: LocalCluster results bit-identical to the "
+                              f"local run: {self.identical}.")
+            del self.remote
+
+    def ratios(self) -> dict[str, list[float]]:
+        """Per round: scaling, LocalCluster overhead (%), vs svzerod."""
+        w1 = [w for w, _ in self.runs["1 worker"]]
+        w2 = [w for w, _ in self.runs["2 workers"]]
+        out = {"scaling": [a / b for a, b in zip(w1, w2, strict=True)]}
+        if "LocalCluster" in self.runs:
+            out["overhead"] = [100 * (d / b - 1) for (d, _), b in
+                               zip(self.runs["LocalCluster"], w2, strict=True)]
+        if "svzerod" in self.runs:
+            assert self.svz is not None
+            per_run = [s / len(self.svz.picks) for s, _ in self.runs["svzerod"]]
+            out["svzerod"] = [p / (b / self.size.n) for p, b in zip(per_run, w2, strict=True)]
+        return out
+
+    def best(self, config: str) -> tuple[float, float, float]:
+        """(best wall, its CPU, median wall) of ``config``."""
+        runs = self.runs[config]
+        wall, used = min(runs)
+        return wall, used, float(np.median([w for w, _ in runs]))
+
+
+def spread(values: list[float], fmt: str) -> str:
+    """``median (min–max)`` of per-round values."""
+    if len(values) == 1:
+        return format(values[0], fmt)
+    return (f"{format(float(np.median(values)), fmt)} ({format(min(values), fmt)}–"
+            f"{format(max(values), fmt)})")
+
+
+#: iterations of the machine-scaling reference loop (~0.4 s of one core)
+REFERENCE_LOOP = 4_000_000
+
+
+def machine_scaling() -> float:
+    """The machine's own 1 → 2 scaling right now: 2 × the wall time of one process running a
+    CPU-bound Python loop over that of two such processes at once. On a shared or
+    frequency-scaled host (2 vCPUs that share a physical core, a turbo that drops with both
+    cores busy) it is below 2; an ensemble's scaling cannot exceed it."""
+    import subprocess
+
+    cmd = [sys.executable, "-c", f"s = 0\nfor i in range({REFERENCE_LOOP}): s += i * i"]
+
+    def wall(n: int) -> float:
+        t0 = time.perf_counter()
+        procs = [subprocess.Popen(cmd) for _ in range(n)]
+        for p in procs:
+            p.wait()
+        return time.perf_counter() - t0
+
+    one = min(wall(1), wall(1))
+    return 2 * one / wall(2)
 
 
 #: calls of a 2-variant ensemble that measure the cluster's fixed cost per call
@@ -286,64 +330,110 @@ def fixed_cost(size: Size, client: Any) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--quick", action="store_true",
-                    help="best of 1 (the headline table in a few minutes on a quiet machine)")
+    ap.add_argument("--quick", action="store_true", help="3 rounds (the headline tables)")
     ap.add_argument("--sizes", default="tree-64,tree-1000,pwdb-200")
     ap.add_argument("--vessels", type=int, default=31, help="vessels of the svzerod tree")
     ap.add_argument("--cycles", type=int, default=networks.CYCLES)
     ap.add_argument("--pts", type=int, default=networks.PTS_PER_CYCLE)
-    ap.add_argument("--repeat", type=int, default=2)
+    ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--svzerod-runs", type=int, default=64,
-                    help="svzerod runs measured per size (the rest extrapolated)")
+                    help="svzerod runs per size and round (variants spread evenly)")
     ap.add_argument("--parts", default="svzerod,dask", help="besides the thread scaling")
     ap.add_argument("--output", default=str(HERE / "results.md"))
     args = ap.parse_args(argv)
     if args.quick:
-        args.repeat = 1
+        args.rounds = 3
 
     sizes = [Size(name, args) for name in args.sizes.split(",")]
+    rows = [Rounds(s, Svzerod(s, args.svzerod_runs)
+                   if s.cfg is not None and "svzerod" in args.parts else None) for s in sizes]
     # warm-up (imports, first assembly), not timed
     for size in sizes:
         oxyline.simulate_ensemble(size.model, size.patches[:2], progress=False, **size.settings)
     now = datetime.datetime.now(datetime.timezone.utc)
-    lines = [f"## Ensembles (bench_ensemble.py), {now:%Y-%m-%d %H:%M} UTC", "",
-             (f"{os.cpu_count()} x {platform.processor() or platform.machine()}, oxyline "
-              f"{oxyline.__version__}; best of {args.repeat}; load = 1-min load average after "
-              "the row. Targets (issue 10): 1 -> 2 workers >= 1.8x, >= 50x a loop of svzerod "
-              "runs, LocalCluster (2 worker processes x 1 thread) <= +15 % over local "
-              "threads (workers=2)."), ""]
-    lines += [f"* {s.name}: {s.what}" for s in sizes] + [""]
-    lines += [("| ensemble | variants | 1 worker (s) | CPU (s) | 2 workers (s) | CPU (s) | "
-              "scaling | svzerod loop (s) | vs svzerod | LocalCluster (s) | overhead | load |"),
-              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    # every local run (and svzerod) first, with no cluster up: a LocalCluster's scheduler
-    # runs in this process and its worker processes keep starting up after it returns, which
-    # cost the local runs measured beside it CPU (session 8: tree-64 at 17 ms CPU per variant
-    # against 10 ms at tree-1000)
-    rows = [Row(size, args) for size in sizes]
-    start = None
+    t_start = time.perf_counter()
+    client = cluster = None
+    notes: list[str] = []
     if "dask" in args.parts:
         from distributed import Client, LocalCluster
 
         t0 = time.perf_counter()
-        with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                          dashboard_address=None) as cluster, Client(cluster) as client:
-            start = time.perf_counter() - t0
+        cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        client = Client(cluster)
+        start = time.perf_counter() - t0
+        for size in sizes:  # the workers import oxyline and hold the model
+            oxyline.simulate_ensemble(size.model, size.patches[:2], client=client,
+                                      progress=False, **size.settings)
+        time.sleep(2.0)  # the worker processes' start-up settles
+        c0, w0, t0 = cpu(), cluster_cpu(client), time.perf_counter()
+        time.sleep(2.0)
+        idle = (cpu() - c0 + cluster_cpu(client) - w0) / (time.perf_counter() - t0)
+        notes.append(f"LocalCluster started once before the rounds ({start:.1f} s) with one "
+                     f"warm-up ensemble of 2 variants per size, not timed; idle, it (the "
+                     f"scheduler in this process and its 2 worker processes) used {idle:.3f} "
+                     "CPU-s per second beside the local runs.")
+    machine: list[float] = []
+    try:
+        for r in range(args.rounds):
             for row in rows:
-                row.on_cluster(client, args)
-            fixed = fixed_cost(rows[0].size, client)
-    notes: list[str] = []
+                configs = row.configs(client)
+                k = r % len(configs)
+                order = configs[k:] + configs[:k]
+                print(f"round {r + 1}/{args.rounds} {row.size.name}: {', '.join(order)} ...",
+                      file=sys.stderr, flush=True)
+                for config in order:
+                    row.measure(config, client, first=r == 0)
+                row.loads.append(os.getloadavg()[0])
+                if r == 0:
+                    row.checks()
+            machine.append(machine_scaling())
+        fixed = fixed_cost(sizes[0], client) if client is not None else None
+    finally:
+        if client is not None:
+            client.close()
+            cluster.close()
+    elapsed = time.perf_counter() - t_start
+    lines = [f"## Ensembles (bench_ensemble.py), {now:%Y-%m-%d %H:%M} UTC", "",
+             (f"{os.cpu_count()} x {platform.processor() or platform.machine()}, oxyline "
+              f"{oxyline.__version__}; {args.rounds} rounds, each running every configuration "
+              "of a size once (order rotated per round); ratios formed within a round, "
+              "median (min–max) over the rounds; load = 1-min load average after each round. "
+              "Targets (issue 10): 1 -> 2 workers >= 1.8x, >= 50x a loop of svzerod runs, "
+              "LocalCluster (2 worker processes x 1 thread) <= +15 % over local threads "
+              f"(workers=2). Whole bench {elapsed / 60:.1f} min."), ""]
+    lines += [f"* {s.name}: {s.what}" for s in sizes] + [""]
+    lines += ["| ensemble | variants | configuration | best (s) | CPU of best (s) | median (s) |",
+              "|---|---:|---|---:|---:|---:|"]
     for row in rows:
-        lines.append(str(row))
+        for config in CONFIGS:
+            if config in row.runs:
+                wall, used, med = row.best(config)
+                what = config if config != "svzerod" else (
+                    f"svzerod loop, {len(row.svz.picks)} runs" if row.svz else config)
+                lines.append(f"| {row.size.name} | {row.size.n} | {what} | {wall:.2f} | "
+                             f"{used:.2f} | {med:.2f} |")
+    lines += ["", ("| ensemble | scaling 1 -> 2 workers | vs svzerod (per variant) | "
+                   "LocalCluster overhead | load |"), "|---|---:|---:|---:|---:|"]
+    for row in rows:
+        rat = row.ratios()
+        sv = (f"**{spread(rat['svzerod'], '.1f')}x**" + (
+            "" if row.svz is None or len(row.svz.picks) == row.size.n else
+            f" ({len(row.svz.picks)} of the {row.size.n} variants in svzerod)")
+            if "svzerod" in rat else "n/a")
+        ov = f"**{spread(rat['overhead'], '+.0f')} %**" if "overhead" in rat else "-"
+        lines.append(f"| {row.size.name} | **{spread(rat['scaling'], '.2f')}x** | {sv} | {ov} | "
+                     f"{spread(row.loads, '.2f')} |")
+    lines += ["", (f"Machine 1 -> 2 scaling in the same rounds (2 processes of a CPU-bound "
+                   f"Python loop against 1): {', '.join(f'{m:.2f}x' for m in machine)}."), ""]
+    for row in rows:
+        rat = row.ratios()
+        per = "; ".join(f"{k} " + ", ".join(f"{v:.2f}" for v in vals) for k, vals in rat.items())
+        notes.append(f"{row.size.name} per round: {per}.")
         notes += row.notes
-        print(row, file=sys.stderr, flush=True)
-    if start is not None:
-        notes.append(f"Cluster start {start:.1f} s and one warm-up ensemble of 2 variants "
-                     "per size, not included; the cluster was started after every local run "
-                     "and svzerod loop (load: after the local runs / after the cluster run).")
-    if start is not None:
+    if fixed is not None:
         notes.append(fixed)
-    lines += ["", *[f"* {n}" for n in notes]]
+    lines += [f"* {n}" for n in notes]
     text = "\n".join(lines)
     print(text)
     if args.output:

@@ -4,11 +4,18 @@ with the per-subject summary as output. Target (issue 10): < 10 min on the 2-cor
     python benches/bench_population.py              # simulate_ensemble if oxyline has it
     python benches/bench_population.py --serial     # loop simulate() over a subset, extrapolate
     python benches/bench_population.py --serial --subset 60
+    python benches/bench_population.py --start steady            # the steady start instead
+    python benches/bench_population.py --compare-starts 24       # steady vs periodic start
 
 The serial path times ``oxyline.simulate(patched model) + subject_summary`` for ``--subset``
 subjects spread evenly over the population (every age and level), recording only the summary's
 vessels and variables, and projects the total for 4,374 subjects on 1 core and, assuming
 perfect scaling, on 2. Prints the load average: the machine is shared, report ratios.
+
+Every subject starts at the periodic state of its (linear) circuit (``start="periodic"``,
+docs/physics.md §1.9; ``--start steady`` for the mean) and runs until its cycle-to-cycle change
+is below 1e-4. ``--compare-starts N`` runs N subjects spread over the population from both
+starts and prints the cycles each needed and the largest difference of their summaries.
 """
 
 from __future__ import annotations
@@ -27,7 +34,7 @@ TARGET_S = 600.0
 VARIABLES = ["pressure_in", "pressure_out", "segment_pressure_in"]
 
 
-def serial(patches: list[dict], table, subset: int, max_length: float | None
+def serial(patches: list[dict], table, subset: int, max_length: float | None, start: str
            ) -> dict[str, float]:
     picks = np.linspace(0, len(patches) - 1, subset).round().astype(int)
     base = oxyline.models.load_dict(P.MODEL)
@@ -39,7 +46,7 @@ def serial(patches: list[dict], table, subset: int, max_length: float | None
         model = P.patched(base, patches[i])
         t1 = time.perf_counter()
         res = oxyline.simulate(model, until_periodic=1e-4, vessels=P.summary_vessels(),
-                               variables=VARIABLES, progress=False)
+                               variables=VARIABLES, progress=False, start=start)
         s = P.subject_summary(res)
         t2, c2 = time.perf_counter(), time.process_time()
         times.append(t2 - t0)
@@ -61,7 +68,7 @@ def serial(patches: list[dict], table, subset: int, max_length: float | None
             "projected_1core_s": per * len(patches), "projected_2core_s": per * len(patches) / 2}
 
 
-def ensemble(patches: list[dict], subset: int | None) -> dict[str, float]:
+def ensemble(patches: list[dict], subset: int | None, start: str) -> dict[str, float]:
     """The population (or ``subset`` subjects spread evenly over it) through
     ``simulate_ensemble`` on all cores, recording only what the summary reads."""
     if subset:
@@ -70,12 +77,39 @@ def ensemble(patches: list[dict], subset: int | None) -> dict[str, float]:
     t0, c0 = time.perf_counter(), time.process_time()
     ds = oxyline.simulate_ensemble(P.MODEL, patches, output=P.subject_summary,
                                    until_periodic=1e-4, vessels=P.summary_vessels(),
-                                   variables=VARIABLES, progress=False)
+                                   variables=VARIABLES, progress=False, start=start)
     # process CPU time (every thread): under load the wall time measures the other processes
     total, cpu = time.perf_counter() - t0, time.process_time() - c0
     failed = int((ds["status"] != 0).sum()) if "status" in ds else 0
     return {"total_s": total, "per_subject_s": total / len(patches), "failed": failed,
             "n": len(patches), "cpu_s": cpu, "cycles": float(ds["cycles_run"].mean())}
+
+
+def compare_starts(patches: list[dict], subset: int) -> None:
+    """``subset`` subjects spread over the population from the steady and the periodic start,
+    each to periodicity 1e-4: cycles per subject, CPU time, and each summary's largest
+    relative difference from the periodic state itself (the steady start run to 1e-9)."""
+    picks = np.linspace(0, len(patches) - 1, subset).round().astype(int)
+    chosen = [patches[i] for i in picks]
+    out = {}
+    for start, tol in (("steady", 1e-4), ("periodic", 1e-4), ("reference", 1e-9)):
+        t0, c0 = time.perf_counter(), time.process_time()
+        out[start] = oxyline.simulate_ensemble(
+            P.MODEL, chosen, output=P.subject_summary, until_periodic=tol, max_cycles=400,
+            vessels=P.summary_vessels(), variables=VARIABLES, progress=False,
+            start="steady" if start == "reference" else start)
+        cycles = out[start]["cycles_run"]
+        print(f"start={start} (to {tol:g}): {cycles.values.mean():.2f} cycles per subject "
+              f"(min {int(cycles.min())}, max {int(cycles.max())}), "
+              f"{time.perf_counter() - t0:.1f} s wall, {time.process_time() - c0:.1f} s CPU "
+              f"for {subset} subjects")
+    ref = out["reference"]
+    names = [v for v in ref.data_vars if v.endswith(("bp", "map", "pwv", "po2"))]
+    for start in ("steady", "periodic"):
+        worst = max((float(np.nanmax(np.abs(out[start][v].values / ref[v].values - 1))), v)
+                    for v in names)
+        print(f"start={start}: largest relative difference of a summary value from the "
+              f"periodic state (1e-9) {worst[0]:.1e} ({worst[1]})")
 
 
 def main() -> None:
@@ -85,6 +119,10 @@ def main() -> None:
                     help="run this many subjects spread over the population (serial: 36)")
     ap.add_argument("--max-length", type=float, default=None,
                     help="override the built-in's segmentation max_length [m] (default 0.02)")
+    ap.add_argument("--start", default="periodic", choices=("periodic", "steady"),
+                    help="each subject's start (default: its periodic state)")
+    ap.add_argument("--compare-starts", type=int, default=0, metavar="N",
+                    help="N subjects from both starts: cycles and summary difference")
     args = ap.parse_args()
     print(f"load average {os.getloadavg()}, {os.cpu_count()} cores")
     t0 = time.perf_counter()
@@ -92,8 +130,10 @@ def main() -> None:
     patches = P.pwdb_like()
     gen = time.perf_counter() - t0
     print(f"generated {len(patches)} subjects in {gen:.1f} s")
-    if args.serial or not hasattr(oxyline, "simulate_ensemble"):
-        out = serial(patches, table, args.subset or 36, args.max_length)
+    if args.compare_starts:
+        compare_starts(patches, args.compare_starts)
+    elif args.serial or not hasattr(oxyline, "simulate_ensemble"):
+        out = serial(patches, table, args.subset or 36, args.max_length, args.start)
         print(f"\nserial, {args.subset} subjects: {out['per_subject_s']:.3f} s CPU per subject "
               f"(median {out['median_s']:.3f}; wall {out['wall_s']:.3f}, of which simulate "
               f"{out['simulate_s']:.3f}), "
@@ -103,9 +143,9 @@ def main() -> None:
               f"{TARGET_S / 60:.0f} min: {'met' if out['projected_2core_s'] < TARGET_S else 'NOT met'}"
               f" (+ {gen:.0f} s generation)")
     else:
-        out = ensemble(patches, args.subset)
+        out = ensemble(patches, args.subset, args.start)
         projected = out["per_subject_s"] * len(patches)
-        print(f"\nsimulate_ensemble: {out['total_s']:.1f} s wall for {out['n']} subjects "
+        print(f"\nsimulate_ensemble (start={args.start}): {out['total_s']:.1f} s wall for {out['n']} subjects "
               f"({out['per_subject_s'] * 1e3:.1f} ms each; CPU {out['cpu_s']:.1f} s, "
               f"{out['cpu_s'] / out['n'] * 1e3:.1f} ms per subject), {out['failed']} failed; "
               f"{len(patches)} subjects: {projected / 60:.1f} min; target "

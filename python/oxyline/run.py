@@ -90,7 +90,7 @@ OPTIONS = frozenset({"cycles", "dt", "method", "output_every", "output_cycles", 
                      "max_iterations", "transport", "variables", "vessels", "max_memory",
                      "checkpoint", "checkpoint_every", "cancel"})
 
-STARTS = ("steady", "zero", "svzerod-steady", "svzerod-zero")
+STARTS = ("steady", "zero", "svzerod-steady", "svzerod-zero", "periodic")
 
 
 def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
@@ -424,7 +424,8 @@ def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any], **overri
     ``overrides`` replace the model's ``simulation`` settings: ``cycles``, ``dt`` (s or
     ``"auto"``), ``method`` (``"auto"``, ``"rk4"``, ``"generalized-alpha"``), ``output_every``
     (s), ``output_cycles`` (``"last"``/``"all"``), ``until_periodic`` (relative tolerance),
-    ``max_cycles``, ``rho_infty``, ``start`` (``"steady"``, ``"zero"``), ``segments`` (bool),
+    ``max_cycles``, ``rho_infty``, ``start`` (``"steady"``, ``"periodic"``,
+    ``"zero"``), ``segments`` (bool),
     ``progress`` (bool or callback ``f(t, t_end)``).
 
     Run control: ``max_memory`` (bytes or e.g. ``"8 GB"``; default 80 % of the available

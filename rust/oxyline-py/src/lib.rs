@@ -134,12 +134,13 @@ fn parse_method(method: &str, rho_infty: f64) -> PyResult<Method> {
 fn parse_start(start: &str, rho_infty: f64) -> PyResult<Start> {
     Ok(match start {
         "steady" => Start::Steady,
+        "periodic" => Start::Periodic,
         "svzerod-steady" => Start::SvZeroDSteady { rho_inf: rho_infty },
         "zero" => Start::Zero,
         "svzerod-zero" => Start::SvZeroDZero,
         other => {
             return Err(ModelError::new_err(format!(
-                "simulation: unknown start '{other}' (expected steady, zero, svzerod-steady or svzerod-zero)"
+                "simulation: unknown start '{other}' (expected steady, periodic, zero, svzerod-steady or svzerod-zero)"
             )));
         }
     })

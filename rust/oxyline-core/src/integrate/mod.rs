@@ -7,6 +7,7 @@
 //! * [`newton`] — the one Newton solver both use (and the steady state), with svZeroDSolver's
 //!   absolute-residual rule or one scaled-increment rule;
 //! * [`steady`] — the steady state of the mean boundary conditions;
+//! * [`periodic`] — the periodic state at t = 0 of a linear circuit (the `periodic` start);
 //! * [`stability`] — the largest stable RK4 step and the element that sets it.
 //!
 //! The run loop drives either through [`Integrator`].
@@ -14,6 +15,7 @@
 mod algebraic;
 pub mod genalpha;
 pub mod newton;
+pub mod periodic;
 pub mod rk4;
 pub mod stability;
 pub mod steady;

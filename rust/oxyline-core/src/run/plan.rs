@@ -8,6 +8,7 @@ use super::settings::{Method, RunSettings, Start};
 use crate::circuit::{Dae, Regime};
 use crate::error::{Error, Result};
 use crate::integrate::genalpha::GenAlpha;
+use crate::integrate::periodic;
 use crate::integrate::rk4::Rk4;
 use crate::integrate::stability::{StabilityLimit, rk4_limit};
 use crate::integrate::steady::SteadyCache;
@@ -79,11 +80,18 @@ impl<'d> Plan<'d> {
             // a circuit with chambers (a heart, a closed loop) has no steady state of its mean
             // boundary conditions: its `steady` start is the zero state with the chambers'
             // initial volumes, made consistent below (docs/physics.md §1.8)
-            Start::Steady if dae.has_chambers() => (dae.initial_state(), vec![0.0; n]),
+            Start::Steady | Start::Periodic if dae.has_chambers() => {
+                (dae.initial_state(), vec![0.0; n])
+            }
             Start::Steady => steady_start(dae, steady.get()?),
+            Start::Periodic if !periodic::applies(dae) => steady_start(dae, steady.get()?),
+            Start::Periodic => steady_start(
+                dae,
+                &periodic::periodic_state(dae, steady.get()?, s.period)?,
+            ),
             Start::SvZeroDSteady { rho_inf } => svzerod_steady_start(dae, s, rho_inf)?,
         };
-        if matches!(s.start, Start::Zero | Start::Steady) && !self.use_rk4 {
+        if matches!(s.start, Start::Zero | Start::Steady | Start::Periodic) && !self.use_rk4 {
             self.make_consistent(&mut y, &mut yd);
         }
         Ok((y, yd))
@@ -268,7 +276,7 @@ fn check_stable(dt: f64, lim: &StabilityLimit) -> Result<()> {
     Ok(())
 }
 
-/// The steady state `ys`, with the ẏ that the transient forcing at t = 0 gives it.
+/// The state `ys` (steady or periodic), with the ẏ that the transient forcing at t = 0 gives it.
 fn steady_start(dae: &Dae, ys: &[f64]) -> (Vec<f64>, Vec<f64>) {
     let n = dae.n;
     let y = ys.to_vec();

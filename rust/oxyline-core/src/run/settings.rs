@@ -30,6 +30,9 @@ impl Method {
 pub enum Start {
     /// Exact steady solution of the mean boundary conditions.
     Steady,
+    /// The periodic solution at t = 0 of a linear circuit, from the harmonics of its forcing
+    /// (`integrate::periodic`); any other circuit starts as `Steady`.
+    Periodic,
     /// svZeroDSolver's: 31 generalized-α steps of T/10 with mean BCs and no Windkessel C.
     SvZeroDSteady { rho_inf: f64 },
     /// Zero differential state; algebraic unknowns consistent with the forcing at t = 0.
