@@ -79,8 +79,14 @@ pub trait Element: Debug + Send + Sync {
     fn valve_branch(&self) -> Option<(usize, f64, f64)> {
         None
     }
-    /// The valve's resistance R(ΔP) at state `y` (see [`Element::valve_branch`]).
-    fn valve_resistance(&self, _y: &[f64]) -> f64 {
+    /// The valve's resistance R(ΔP) at state `y` with its pressure drop P_from − P_to raised
+    /// by `lift` (0: the valve's own reading; see [`Element::valve_branch`]).
+    fn valve_resistance(&self, _y: &[f64], _lift: f64) -> f64 {
+        0.0
+    }
+    /// The valve law's flow (P_from − P_to)/R(ΔP) at the pressures of `y` (see
+    /// [`Element::valve_branch`]).
+    fn valve_flow(&self, _y: &[f64]) -> f64 {
         0.0
     }
     /// c depends on the state other than linearly (Newton refactorises per iteration).

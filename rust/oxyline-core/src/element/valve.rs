@@ -147,8 +147,13 @@ impl Element for Valve {
         };
         Some((self.pattern[0].0, self.law.r_min(), r_max))
     }
-    fn valve_resistance(&self, y: &[f64]) -> f64 {
-        self.law.resistance(self.state(y).1).0
+    fn valve_resistance(&self, y: &[f64], lift: f64) -> f64 {
+        // state's ΔP is P_to − P_from: a larger drop is a smaller ΔP
+        self.law.resistance(self.state(y).1 - lift).0
+    }
+    fn valve_flow(&self, y: &[f64]) -> f64 {
+        let dp = self.state(y).1;
+        -dp / self.law.resistance(dp).0
     }
     fn is_nonlinear(&self) -> bool {
         true

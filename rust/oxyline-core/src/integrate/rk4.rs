@@ -372,15 +372,29 @@ impl<'a> Rk4<'a> {
     /// Q (Q + Δt Q̇) < 0: the valve closes in this step, and its flow through the closing
     /// valve is the quasi-steady one (explicit stages would drive it backwards through the
     /// switch, where the elimination has no well-posed start).
+    ///
+    /// A valve that reads R(ΔP) Δt > L at no or forward flow while the branch's whole drop
+    /// (chamber to the valve's far side, ΔP + L Q̇) opens it is opening: its inductor is
+    /// accelerating the flow from rest (a zero start's 0, svZeroDSolver's start), and the
+    /// branch stays differential (docs/physics.md §1.8). Its closed reading is the tanh's
+    /// switch width, |Q| ≤ width/R, which one explicit stage crosses; quasi-steady, the
+    /// branch would instead jump to the open valve's flow (1.2 of the aortic flow's range
+    /// at closedLoopHeart_singleVessel_decomposed's start).
     fn stiff_mask_at(&self, y: &[f64], dt: f64) -> u64 {
         (self.stiff.iter().enumerate())
             .filter(|(_, b)| {
-                let r = self.dae.elements[b.valve].valve_resistance(y);
-                if r * dt > STIFF_RATE * b.inductance {
-                    return true;
-                }
+                let valve = &self.dae.elements[b.valve];
                 let j = b.inductor;
                 let rate = (self.f[j] - self.dae.f.row_dot(j, y)) / b.inductance;
+                let stiff =
+                    |lift: f64| valve.valve_resistance(y, lift) * dt > STIFF_RATE * b.inductance;
+                if stiff(0.0) {
+                    let opening =
+                        b.orientation * y[j] >= 0.0 && !stiff(b.orientation * b.inductance * rate);
+                    if !opening {
+                        return true;
+                    }
+                }
                 y[j] * (y[j] + dt * rate) < 0.0
             })
             .fold(0, |m, (i, _)| m | (1 << i))
@@ -406,12 +420,19 @@ impl<'a> Rk4<'a> {
         self.refactor_linearization()
     }
 
-    /// Take the stiff branches' mode of state `y` at this integrator's step.
-    fn select_mode(&mut self, y: &[f64]) -> Result<()> {
+    /// Take the stiff branches' mode of state `y` at this integrator's step. A branch turning
+    /// algebraic starts its elimination from its quasi-steady state (see
+    /// [`StiffBranch::quasi_steady`]); `y` holds the elimination's start values only.
+    fn select_mode(&mut self, y: &mut [f64]) -> Result<()> {
         if self.stiff.is_empty() {
             return Ok(());
         }
-        self.set_stiff_mask(self.stiff_mask_at(y, self.dt))
+        let mask = self.stiff_mask_at(y, self.dt);
+        let fresh = mask & !self.mask;
+        for (_, b) in (self.stiff.iter().enumerate()).filter(|(i, _)| fresh & (1 << i) != 0) {
+            b.quasi_steady(self.dae, &self.f, y);
+        }
+        self.set_stiff_mask(mask)
     }
 
     /// The forcing at `time`, with the index reduction's slope terms.

@@ -17,7 +17,37 @@ pub(super) struct StiffBranch {
     pub(super) inductance: f64,
     /// Index of the valve in `Dae::elements`.
     pub(super) valve: usize,
+    /// The valve's flow unknown and the capacitance-free node between inductor and valve.
+    pub(super) flow: usize,
+    pub(super) node: usize,
     pub(super) r_min: f64,
+    /// +1 when the inductor's flow is the valve's (both along the branch), −1 when opposed:
+    /// the branch's whole pressure drop is the valve's plus `orientation` · L dQ/dt.
+    pub(super) orientation: f64,
+}
+
+impl StiffBranch {
+    /// Put the branch at the quasi-steady state of its algebraic mode: the node at the
+    /// pressure for which the inductor's row reads L dQ/dt = 0 (the chamber's), both flows
+    /// the valve law's at that pressure. The elimination's Newton starts there when the branch
+    /// turns algebraic: from an open valve's state a closing valve's R jumps by R_max/R_min
+    /// within one correction (k ΔP of ~1e3 at the aortic closure of svZeroDSolver's
+    /// closedLoopHeart_singleVessel_decomposed), which the damped Newton's monotonicity test
+    /// rejects at every halving.
+    pub(super) fn quasi_steady(&self, dae: &Dae, f: &[f64], y: &mut [f64]) {
+        let j = self.inductor;
+        let Some(c) = (dae.f.ptr[j]..dae.f.ptr[j + 1])
+            .find(|&k| dae.f.col[k] as usize == self.node)
+            .map(|k| dae.f.val[k])
+            .filter(|&c| c != 0.0)
+        else {
+            return;
+        };
+        y[self.node] += (f[j] - dae.f.row_dot(j, y)) / c;
+        let q = dae.elements[self.valve].valve_flow(y);
+        y[self.flow] = q;
+        y[j] = self.orientation * q;
+    }
 }
 
 /// At most this many stiff branches switch (one bit each of a mode mask); further ones stay
@@ -49,11 +79,15 @@ pub(super) fn find(dae: &Dae, e: &[f64]) -> Vec<StiffBranch> {
     }
     let mut out = Vec::new();
     for r in (0..dae.n_nodes).filter(|&r| e[r] == 0.0 && !element_row[r]) {
-        let cols: Vec<usize> = (dae.f.ptr[r]..dae.f.ptr[r + 1])
+        let cols: Vec<(usize, f64)> = (dae.f.ptr[r]..dae.f.ptr[r + 1])
             .filter(|&k| dae.f.val[k] != 0.0)
-            .map(|k| dae.f.col[k] as usize)
+            .map(|k| (dae.f.col[k] as usize, dae.f.val[k]))
             .collect();
-        let [a, b] = cols[..] else { continue };
+        let [(a, ca), (b, cb)] = cols[..] else {
+            continue;
+        };
+        // a flow balance ±Q_a ± Q_b = 0: the flows run along each other when the signs differ
+        let orientation = -(ca * cb).signum();
         for (q, j) in [(a, b), (b, a)] {
             let Some(&(valve, _, r_min)) = valves.iter().find(|v| v.1 == q) else {
                 continue;
@@ -63,7 +97,10 @@ pub(super) fn find(dae: &Dae, e: &[f64]) -> Vec<StiffBranch> {
                     inductor: j,
                     inductance: e[j],
                     valve,
+                    flow: q,
+                    node: r,
                     r_min,
+                    orientation,
                 });
             }
         }
