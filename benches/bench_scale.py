@@ -143,7 +143,10 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
         if marks and t < marks[-1][0]:
             marks.clear()  # the main pass after a first pass
         marks.append((t, time.process_time()))
-        if fraction < 1.0 and t >= fraction * PERIOD and len(marks) > 1:
+        # (only a pass whose first check came before the stop: the RK4 pass, not the
+        # generalized-alpha first pass of a closure that needs the mean flow)
+        if fraction < 1.0 and t >= fraction * PERIOD and len(marks) > 1 \
+                and marks[0][0] < fraction * PERIOD:
             cancel.set()
 
     kw.update(progress=mark, cancel=cancel)

@@ -88,8 +88,12 @@ fn main() {
     // ns per step of the main pass: marks (t, cpu) restart when t goes back (a second pass)
     let timed = |dae: &oxyline_core::Dae, run: Option<&mut Transport>, s: &RunSettings| {
         let mut marks: Vec<(f64, f64)> = Vec::new();
-        let mut counting = false;
+        let (mut counting, mut stopped) = (false, false);
         let mut progress = |t: f64, _: f64| {
+            // (an interrupted run reports its cycle count once more: not a new pass)
+            if stopped {
+                return false;
+            }
             if marks.last().is_some_and(|m| t < m.0) {
                 marks.clear();
             }
@@ -104,7 +108,8 @@ fn main() {
             if t < 1.0 - 1e-9 {
                 marks.push((t, cpu_ns()));
             }
-            t < stop || marks.len() < 2
+            stopped = t >= stop && marks.len() >= 2;
+            !stopped
         };
         match simulate_with_transport(dae, run, s, &mut progress) {
             Ok(_) | Err(oxyline_core::Error::Interrupted { .. }) => {}
