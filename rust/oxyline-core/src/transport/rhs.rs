@@ -165,18 +165,28 @@ impl Transport {
         }
         let (mut i_in, mut i_out) = (0.0, 0.0);
         let inlet = &self.plan.boundary_inlet;
-        for &fi in &self.plan.boundary_faces {
-            let f = &self.plan.faces[fi];
-            let (q, c) = self.upwind(fi);
-            let flux = q * c;
-            match f.from {
-                End::Node(n) => dnode[n] -= flux,
-                End::Boundary(b) => account(inlet[b], flux, &mut i_in, &mut i_out),
-            }
-            match f.to {
-                End::Node(n) => dnode[n] += flux,
-                End::Boundary(b) => account(inlet[b], -flux, &mut i_in, &mut i_out),
-            }
+        // the boundary faces as their 16-byte links (the same faces in the same order, see
+        // `Plan::boundary_links`), not the faces themselves: a tree has one per outlet, and
+        // reading each outlet's `Face` cost a cache miss per face and stage. The flux into
+        // the node, q_in·c with q_in = ±q, is the ±(q·c) of the face's orientation exactly.
+        debug_assert_eq!(
+            self.plan.boundary_links.len(),
+            self.plan.boundary_faces.len()
+        );
+        for b in &self.plan.boundary_links {
+            let (n, bb, q) = (
+                b.node as usize,
+                b.boundary as usize,
+                self.qf[b.face as usize],
+            );
+            let c = if (q >= 0.0) == b.into_node {
+                self.boundary_conc(bb, End::Node(n))
+            } else {
+                self.conc[n]
+            };
+            let flux_in = if b.into_node { q * c } else { -(q * c) };
+            dnode[n] += flux_in;
+            account(inlet[bb], flux_in, &mut i_in, &mut i_out);
         }
         for ((n, _, b), &q) in self.plan.sources.iter().zip(&self.qs) {
             let c = if q >= 0.0 {
