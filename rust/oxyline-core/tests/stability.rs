@@ -121,3 +121,57 @@ fn stiff_wall_exchange_limits_the_automatic_rk4_step() {
     );
     assert!(cells.iter().sum::<f64>() >= 0.95 * c_w * total, "{cells:?}");
 }
+
+/// Issue 9: a generalized-α run computes no RK4 stability limit (its first pass with the
+/// default closure included), an RK4 run reports the limit its step obeys.
+#[test]
+fn only_rk4_runs_probe_the_rk4_limit() {
+    use oxyline_core::genalpha::NewtonControl;
+    use oxyline_core::{Method, RunSettings, Start, Transport, simulate_with_transport};
+    let json = r#"{"vessels": [{"name": "tube", "from": "in", "to": "out", "segments": 4,
+            "geometry": {"length": 0.1, "radius_in": 3e-3, "radius_out": 3e-3,
+                         "wall_thickness": 1e-3, "youngs_modulus": 4e5}}],
+          "boundary_conditions": {"in": {"type": "flow", "flow": {"kind": "fourier", "period": 1.0,
+                                          "mean": 5e-6, "sin": [8e-6]}},
+                                  "out": {"type": "resistance", "resistance": 1e8}},
+          "transport": {"species": [{"name": "o2", "inlet": {"kind": "constant", "value": 1.0},
+              "wall": {"model": "graetz", "wall_concentration": 0.2}}]}}"#;
+    let spec = parse(json).unwrap();
+    let assembled = spec.assemble().unwrap();
+    let dae = assembled.circuit.assemble().unwrap();
+    let prototype = Transport::build(
+        spec.transport.as_ref().unwrap(),
+        &assembled.circuit,
+        &dae,
+        &assembled.probes,
+    )
+    .unwrap();
+    for (method, dt) in [
+        (Method::GeneralizedAlpha { rho_inf: 0.5 }, Some(1e-3)),
+        (Method::Rk4, None),
+    ] {
+        let s = RunSettings {
+            method,
+            dt,
+            period: 1.0,
+            cycles: 1,
+            until_periodic: None,
+            max_cycles: 1,
+            output_every: 1e-2,
+            output_all_cycles: true,
+            keep_current_cycle: true,
+            start: Start::Steady,
+            newton: NewtonControl::default(),
+            probes: vec![],
+            species_columns: None,
+        };
+        let mut tr = prototype.new_run();
+        let out = simulate_with_transport(&dae, Some(&mut tr), &s, &mut |_, _| true).unwrap();
+        assert!(out.error.is_none(), "{:?}", out.error);
+        let rk4 = matches!(method, Method::Rk4);
+        assert_eq!(out.stability.is_some(), rk4, "{method:?}");
+        if let Some(lim) = &out.stability {
+            assert!(out.dt <= lim.dt_max, "dt {} above {}", out.dt, lim.dt_max);
+        }
+    }
+}

@@ -36,19 +36,50 @@ pub struct PeriodicFlow<'a> {
 /// −d(shape)/dρ at the wall of one Womersley harmonic, shape = u(ρ)/(Q̂/πR²)
 /// = (1 − J0(zρ)/J0(z))/(1 − 2J1(z)/(z J0(z))), z = α i^{3/2}: the wall shear rate of the
 /// harmonic is Q̂/(πR³) times this. 4 for α → 0 (Poiseuille).
+///
+/// With J0 + J2 = (2/z) J1 the denominator is −J2/J0, so the slope is z J1(z)/J2(z): no
+/// cancellation at small α. Up to [`SLOPE_SERIES_MAX_ALPHA`] it is summed as a power series
+/// (`slope_power_series`), beyond by Miller's backward recurrence (`slope_closed`).
 pub fn womersley_wall_slope(alpha: f64) -> Complex<f64> {
-    if alpha < 0.05 {
-        // the closed form loses digits to the cancellation in 1 − 2J1/(zJ0) at small α
-        slope_series(alpha)
+    if alpha <= SLOPE_SERIES_MAX_ALPHA {
+        slope_power_series(alpha)
     } else {
         slope_closed(alpha)
     }
 }
 
-/// Taylor series of `slope_closed`: 4 + iα²/6 + α⁴/288 + O(α⁶).
-fn slope_series(alpha: f64) -> Complex<f64> {
-    let a2 = alpha * alpha;
-    Complex::new(4.0 + a2 * a2 / 288.0, a2 / 6.0)
+/// Below this α [`womersley_wall_slope`] sums the power series (≤ 30 real terms: ~20× cheaper
+/// than the recurrence, which needs |z| + 60 complex steps); see `slope_power_series` for its
+/// error bound.
+pub const SLOPE_SERIES_MAX_ALPHA: f64 = 12.0;
+
+/// z J1(z)/J2(z) = 2 S1/S2 with S_ν = Σ_m (i x)^m/(m! (m+ν)!), x = α²/4 (the Bessel power
+/// series J_ν(z) = (z/2)^ν Σ_m (−z²/4)^m/(m!(m+ν)!) with −z²/4 = i α²/4). The powers of i
+/// split each sum into real and imaginary parts of real terms, summed until a term is below
+/// 1e-17 of its sum. Round-off: the terms' magnitudes sum to I_ν(α)/(α/2)^ν against
+/// |J_ν(z)|/(α/2)^ν for the sum, a ratio ≈ e^{(1 − 1/√2) α} ≤ 34 at α = 12, so the relative
+/// error is at most ~2 × 30 terms × 34 × 1.1e-16 ≈ 2e-13 (measured against scipy's complex
+/// Bessel functions: ≤ 5e-16 for α ≤ 12; the tests check 1e-11 and the join with the
+/// recurrence).
+fn slope_power_series(alpha: f64) -> Complex<f64> {
+    let x = 0.25 * alpha * alpha;
+    // (real, imaginary) parts of S1 and S2; the m = 0 terms are 1/1! and 1/2!
+    let (mut t1, mut t2) = (1.0, 0.5);
+    let (mut s1, mut s2) = ([1.0, 0.0], [0.5, 0.0]);
+    for m in 1..200 {
+        let mf = m as f64;
+        t1 *= x / (mf * (mf + 1.0));
+        t2 *= x / (mf * (mf + 2.0));
+        // i^m: 1, i, −1, −i
+        let (part, sign) = (m % 2, if m % 4 >= 2 { -1.0 } else { 1.0 });
+        s1[part] += sign * t1;
+        s2[part] += sign * t2;
+        let small = |t: f64, s: [f64; 2]| t <= 1e-17 * s[0].abs().max(s[1].abs());
+        if small(t1, s1) && small(t2, s2) {
+            break;
+        }
+    }
+    Complex::new(s1[0], s1[1]) * 2.0 / Complex::new(s2[0], s2[1])
 }
 
 fn slope_closed(alpha: f64) -> Complex<f64> {
@@ -91,73 +122,116 @@ pub fn wall_shear_rate(
 
 /// B = ∫ max(−γ_w, 0) dt over one period (dimensionless), γ_w taken positive along the net
 /// flow. Exact for the trigonometric polynomial γ_w (docs/physics.md §3.6): the sign changes
-/// of γ_w are bracketed on [`CROSSING_SAMPLES_PER_HARMONIC`] samples per harmonic (phases from
-/// one shared table, no trigonometric call per sample), refined by regula falsi, and the
+/// of γ_w are bracketed on at least [`CROSSING_SAMPLES_PER_HARMONIC`] samples per harmonic
+/// (a power of two: all samples at once by one inverse FFT), refined by regula falsi, and the
 /// backward arcs integrated with γ_w's antiderivative. A backward excursion narrower than one
-/// sample spacing (T/(16H)) between two forward samples would be missed; its strain is below
-/// that width times its depth, far under the law's accuracy. Cost per vessel: O(16 H²) plus a
-/// few H-term evaluations per crossing (the 20,000-sample rectangle rule it replaces cost
-/// ~12 ms per vessel: 50 min for a 1e6-segment tree's first pass).
+/// sample spacing (≤ T/(16H)) between two forward samples would be missed; its strain is below
+/// that width times its depth, far under the law's accuracy. Cost per vessel: O(m log m) for
+/// the m samples plus a few H-term evaluations per crossing (the 20,000-sample rectangle rule
+/// it replaces cost ~12 ms per vessel: 50 min for a 1e6-segment tree's first pass; the direct
+/// sum over the samples after it, O(16 H²), ~50 µs).
 pub fn backward_wall_strain(flow: &PeriodicFlow, radius: f64, density: f64, viscosity: f64) -> f64 {
     let sign = if flow.mean < 0.0 { -1.0 } else { 1.0 };
     // f(t) = −sign γ_w(t) = f0 + Re Σ_k c_k e^{ikωt}: the backward shear
     let scale = 1.0 / (PI * radius.powi(3));
     let omega = 2.0 * PI / flow.period;
-    let c: Vec<Complex<f64>> = flow
-        .harmonics
-        .iter()
-        .enumerate()
-        .map(|(i, qk)| {
+    let f0 = -sign * 4.0 * flow.mean * scale;
+    SCRATCH.with(|cell| {
+        let mut scratch = cell.borrow_mut();
+        let Scratch { c, values, fft } = &mut *scratch;
+        c.clear();
+        c.extend(flow.harmonics.iter().enumerate().map(|(i, qk)| {
             let alpha = radius * (((i + 1) as f64) * omega * density / viscosity).sqrt();
             -sign * qk * scale * womersley_wall_slope(alpha)
-        })
-        .collect();
-    let f0 = -sign * 4.0 * flow.mean * scale;
-    let shear = BackwardShear { f0, c: &c, omega };
-    let m = (CROSSING_SAMPLES_PER_HARMONIC * c.len()).max(64);
-    let dt = flow.period / m as f64;
-    let values: Vec<f64> = UNIT_ROOTS.with(|cell| {
-        let mut unit = cell.borrow_mut();
-        if unit.len() != m {
-            // e^{2πip/m}, shared by every vessel with as many harmonics on this thread
-            *unit = (0..m)
-                .map(|p| Complex::from_polar(1.0, 2.0 * PI * p as f64 / m as f64))
-                .collect();
+        }));
+        let shear = BackwardShear { f0, c, omega };
+        let m = (CROSSING_SAMPLES_PER_HARMONIC * c.len())
+            .max(64)
+            .next_power_of_two();
+        fft.sample(f0, c, m, values);
+        let dt = flow.period / m as f64;
+        let mut arc_start = (values[0] > 0.0).then_some(0.0);
+        let mut b = 0.0;
+        for j in 0..m {
+            let (fa, fb) = (values[j], values[(j + 1) % m]);
+            if (fa > 0.0) == (fb > 0.0) {
+                continue;
+            }
+            let root = shear.crossing(j as f64 * dt, (j + 1) as f64 * dt, fa, fb);
+            match arc_start.take() {
+                Some(s) => b += shear.primitive(root) - shear.primitive(s),
+                None => arc_start = Some(root),
+            }
         }
-        let sample = |j: usize| {
-            c.iter()
-                .enumerate()
-                .fold(f0, |f, (i, ck)| f + (ck * unit[((i + 1) * j) % m]).re)
-        };
-        (0..m).map(sample).collect()
-    });
-    let mut arc_start = (values[0] > 0.0).then_some(0.0);
-    let mut b = 0.0;
-    for j in 0..m {
-        let (fa, fb) = (values[j], values[(j + 1) % m]);
-        if (fa > 0.0) == (fb > 0.0) {
-            continue;
+        if let Some(s) = arc_start {
+            b += shear.primitive(flow.period) - shear.primitive(s);
         }
-        let root = shear.crossing(j as f64 * dt, (j + 1) as f64 * dt, fa, fb);
-        match arc_start.take() {
-            Some(s) => b += shear.primitive(root) - shear.primitive(s),
-            None => arc_start = Some(root),
-        }
-    }
-    if let Some(s) = arc_start {
-        b += shear.primitive(flow.period) - shear.primitive(s);
-    }
-    b
+        b
+    })
+}
+
+/// The per-thread buffers of [`backward_wall_strain`], reused from vessel to vessel.
+#[derive(Default)]
+struct Scratch {
+    c: Vec<Complex<f64>>,
+    values: Vec<f64>,
+    fft: Fft,
 }
 
 thread_local! {
-    /// The m-th roots of unity of the last [`backward_wall_strain`] on this thread.
-    static UNIT_ROOTS: std::cell::RefCell<Vec<Complex<f64>>> = const { std::cell::RefCell::new(Vec::new()) };
+    static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::default());
 }
 
-/// Samples per harmonic on which [`backward_wall_strain`] brackets the sign changes: 16 per
-/// period of the highest harmonic.
+/// Samples per harmonic (at least) on which [`backward_wall_strain`] brackets the sign changes:
+/// 16 per period of the highest harmonic.
 const CROSSING_SAMPLES_PER_HARMONIC: usize = 16;
+
+/// A radix-2 inverse FFT of one size at a time, with its table of roots of unity (kept while
+/// the size stays: every vessel with as many harmonics on this thread shares it).
+#[derive(Default)]
+struct Fft {
+    /// e^{2πip/m}, p < m/2, each from its own `from_polar` (no accumulated rotation).
+    roots: Vec<Complex<f64>>,
+    work: Vec<Complex<f64>>,
+}
+
+impl Fft {
+    /// values[j] = f0 + Re Σ_{k=1}^{H} c_k e^{2πijk/m}, j < m (m a power of two > 2H): the
+    /// inverse DFT of (0, c_1, …, c_H, 0, …), in m/2 log2 m butterflies instead of m H terms.
+    /// Round-off: O(ε log2 m Σ|c_k|), that of the direct sum (whose phases came from the same
+    /// table) within a small factor.
+    fn sample(&mut self, f0: f64, c: &[Complex<f64>], m: usize, values: &mut Vec<f64>) {
+        debug_assert!(m.is_power_of_two() && 2 * c.len() < m);
+        if self.roots.len() != m / 2 {
+            self.roots = (0..m / 2)
+                .map(|p| Complex::from_polar(1.0, 2.0 * PI * p as f64 / m as f64))
+                .collect();
+        }
+        let a = &mut self.work;
+        a.clear();
+        a.resize(m, Complex::new(0.0, 0.0));
+        // bit-reversed order of the input, then in-place butterflies (decimation in time)
+        let bits = m.trailing_zeros();
+        for (k, ck) in c.iter().enumerate() {
+            a[((k + 1).reverse_bits() >> (usize::BITS - bits)) % m] = *ck;
+        }
+        let mut half = 1;
+        while half < m {
+            let stride = m / (2 * half);
+            for block in a.chunks_exact_mut(2 * half) {
+                let (lo, hi) = block.split_at_mut(half);
+                for (p, (u, v)) in lo.iter_mut().zip(hi.iter_mut()).enumerate() {
+                    let t = *v * self.roots[p * stride];
+                    *v = *u - t;
+                    *u += t;
+                }
+            }
+            half *= 2;
+        }
+        values.clear();
+        values.extend(a.iter().map(|z| f0 + z.re));
+    }
+}
 
 /// The backward wall shear f(t) = f0 + Re Σ_k c_k e^{ikωt} of [`backward_wall_strain`].
 struct BackwardShear<'a> {
@@ -167,18 +241,31 @@ struct BackwardShear<'a> {
 }
 
 impl BackwardShear<'_> {
+    /// The phases e^{ikωt} by powers of one `from_polar` (H complex products instead of H
+    /// sine-cosine pairs; the k-th power's rounding is ~k ulp, far below the crossing's
+    /// tolerance).
     fn value(&self, t: f64) -> f64 {
-        self.c.iter().enumerate().fold(self.f0, |f, (i, ck)| {
-            f + (ck * Complex::from_polar(1.0, (i + 1) as f64 * self.omega * t)).re
-        })
+        let w = Complex::from_polar(1.0, self.omega * t);
+        let mut phase = w;
+        let mut f = self.f0;
+        for ck in self.c {
+            f += (ck * phase).re;
+            phase *= w;
+        }
+        f
     }
 
     /// ∫_0^t f: f0 t + Re Σ_k c_k (e^{ikωt} − 1)/(ikω).
     fn primitive(&self, t: f64) -> f64 {
-        self.c.iter().enumerate().fold(self.f0 * t, |f, (i, ck)| {
+        let w = Complex::from_polar(1.0, self.omega * t);
+        let mut phase = w;
+        let mut f = self.f0 * t;
+        for (i, ck) in self.c.iter().enumerate() {
             let kw = Complex::new(0.0, (i + 1) as f64 * self.omega);
-            f + (ck * (Complex::from_polar(1.0, kw.im * t) - 1.0) / kw).re
-        })
+            f += (ck * (phase - 1.0) / kw).re;
+            phase *= w;
+        }
+        f
     }
 
     /// The sign change of f in [a, b] (f(a) = fa, f(b) = fb of opposite signs), by the
@@ -228,6 +315,26 @@ pub fn inlet_renewal_conductance(
     viscosity: f64,
     diffusivity: f64,
 ) -> Result<f64> {
+    renewal_conductance(
+        &|| vessel.to_owned(),
+        flow,
+        radius,
+        density,
+        viscosity,
+        diffusivity,
+    )
+}
+
+/// [`inlet_renewal_conductance`] with the vessel's name made only for an error (a tree's
+/// setup calls it once per vessel).
+fn renewal_conductance(
+    vessel: &dyn Fn() -> String,
+    flow: &PeriodicFlow,
+    radius: f64,
+    density: f64,
+    viscosity: f64,
+    diffusivity: f64,
+) -> Result<f64> {
     for (what, v) in [
         ("radius", radius),
         ("blood density", density),
@@ -235,7 +342,10 @@ pub fn inlet_renewal_conductance(
         ("O2 diffusivity", diffusivity),
         ("flow period", flow.period),
     ] {
-        finite_number(vessel, what, v, false)?;
+        finite_number("", what, v, false).map_err(|e| match e {
+            Error::Model { message, .. } => Error::model(vessel(), message),
+            e => e,
+        })?;
     }
     if !(flow.mean.is_finite() && flow.mean != 0.0)
         || flow
@@ -244,7 +354,7 @@ pub fn inlet_renewal_conductance(
             .any(|q| !(q.re.is_finite() && q.im.is_finite()))
     {
         return Err(Error::model(
-            vessel,
+            vessel(),
             format!(
                 "inlet renewal needs a finite, nonzero net mean flow and finite harmonics, got mean {} m³/s",
                 flow.mean
@@ -285,12 +395,32 @@ pub fn segment_factors(
     nu: f64,
     d: f64,
 ) -> Result<Vec<f64>> {
-    let g_net: Vec<f64> = segs
-        .iter()
-        .zip(net)
-        .map(|(s, &q)| graetz_conductance(s, d, q))
-        .collect();
-    let total: f64 = g_net.iter().sum();
+    let mut out = Vec::with_capacity(segs.len());
+    segment_factors_into(&|| vessel.to_owned(), segs, net, abs, flow, nu, d, &mut out)?;
+    Ok(out)
+}
+
+/// [`segment_factors`] into `out` (cleared first; reused from vessel to vessel by a tree's
+/// setup), the vessel's name made only for an error.
+#[allow(clippy::too_many_arguments)]
+pub fn segment_factors_into(
+    vessel: &dyn Fn() -> String,
+    segs: &[SegmentWall],
+    net: &[f64],
+    abs: &[f64],
+    flow: &PeriodicFlow,
+    nu: f64,
+    d: f64,
+    out: &mut Vec<f64>,
+) -> Result<()> {
+    // G(net_j) first, in `out`; then each replaced by its factor
+    out.clear();
+    out.extend(
+        segs.iter()
+            .zip(net)
+            .map(|(s, &q)| graetz_conductance(s, d, q)),
+    );
+    let total: f64 = out.iter().sum();
     let inlet = if flow.mean < 0.0 {
         segs.last()
     } else {
@@ -298,26 +428,29 @@ pub fn segment_factors(
     };
     let ratio = match inlet {
         Some(s) if flow.mean != 0.0 && total > 0.0 => {
-            inlet_renewal_conductance(vessel, flow, s.radius, 1.0, nu, d)? / total
+            renewal_conductance(vessel, flow, s.radius, 1.0, nu, d)? / total
         }
         _ => f64::INFINITY,
     };
     let k_renewed = 2.0 * (d / (PI * flow.period)).sqrt();
-    Ok(segs
-        .iter()
-        .zip(abs)
-        .zip(&g_net)
-        .map(|((s, &qa), &g)| {
-            if g > 0.0 {
-                let cap = (k_renewed * s.area())
-                    .max(graetz_conductance(s, d, qa))
-                    .max(g);
-                (g * (1.0 + ratio)).min(cap) / g
+    for ((s, &qa), f) in segs.iter().zip(abs).zip(out.iter_mut()) {
+        let g = *f;
+        *f = if g > 0.0 {
+            let renewed = g * (1.0 + ratio);
+            // the cap max(complete renewal, G(⟨|Q|⟩), g) only binds above the larger of the
+            // other two: the law of ⟨|Q|⟩ (two Graetz series) is evaluated only then
+            let cap = (k_renewed * s.area()).max(g);
+            let cap = if renewed > cap {
+                cap.max(graetz_conductance(s, d, qa))
             } else {
-                1.0
-            }
-        })
-        .collect())
+                cap
+            };
+            renewed.min(cap) / g
+        } else {
+            1.0
+        };
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -346,10 +479,18 @@ mod tests {
                 "α {alpha}: {s} vs {want}"
             );
         }
-        // the series branch joins the closed form at the switch (1e-9: the closed form's
-        // cancellation costs ~4 digits there, the series' O(α⁶) term is ~1e-10)
-        assert!((slope_series(0.05) - slope_closed(0.05)).norm() < 1e-9);
+        // the power series joins the recurrence at the switch and agrees with it below
+        // (1e-13: both round-off; the closed form loses digits to 1 − 2J1/(zJ0) ≈ α²/8 at
+        // small α, hence from α = 0.5 on)
+        for alpha in [0.5, 1.0, 3.0, 7.0, SLOPE_SERIES_MAX_ALPHA] {
+            let (a, b) = (slope_power_series(alpha), slope_closed(alpha));
+            assert!((a - b).norm() < 1e-13 * b.norm(), "α {alpha}: {a} vs {b}");
+        }
+        // Poiseuille in the limit, and its first Womersley terms 4 + iα²/6 + α⁴/288 + O(α⁶)
         assert_eq!(womersley_wall_slope(0.0), Complex::new(4.0, 0.0));
+        let a: f64 = 0.01;
+        let taylor = Complex::new(4.0 + a.powi(4) / 288.0, a * a / 6.0);
+        assert!((womersley_wall_slope(a) - taylor).norm() < 1e-15);
     }
 
     fn paper_straight() -> [Complex<f64>; 2] {
@@ -404,6 +545,52 @@ mod tests {
             let want = (2.0 * f0 * theta + 2.0 * c * theta.sin()) / omega;
             assert!(want > 0.0);
             assert!((b / want - 1.0).abs() < 1e-12, "{b} vs {want}");
+        }
+    }
+
+    #[test]
+    fn backward_wall_strain_of_many_harmonics_is_the_integral_of_the_backward_shear() {
+        // 24 harmonics (a sharp waveform with reversal; 512 samples in the inverse FFT)
+        // against a midpoint rule of max(−γ_w, 0) with γ_w summed term by term (as
+        // `wall_shear_rate`, one sine-cosine per term: independent of the FFT, the powers and
+        // the crossings). The midpoint rule's error at the few kinks is O(h²) of the shear's
+        // slope there: 1e-8 relative with 200,000 points.
+        let h: Vec<Complex<f64>> = (1..=24)
+            .map(|k| {
+                let k = k as f64;
+                Complex::from_polar(3e-5 / k, 0.7 * k + 0.3 * k * k)
+            })
+            .collect();
+        for (r, mean) in [(0.008, 2e-5), (1.5e-3, -6e-6), (3e-4, 2.5e-6)] {
+            let flow = PeriodicFlow {
+                period: 0.8,
+                mean,
+                harmonics: &h,
+            };
+            let (rho, mu) = (1050.0, 3.5e-3);
+            let b = backward_wall_strain(&flow, r, rho, mu);
+            let n = 200_000;
+            let dt = flow.period / n as f64;
+            // γ_w as `wall_shear_rate` sums it, its Womersley factors computed once
+            let scale = 1.0 / (PI * r.powi(3));
+            let omega = 2.0 * PI / flow.period;
+            let c: Vec<Complex<f64>> = (1..=h.len())
+                .map(|k| {
+                    let alpha = r * (k as f64 * omega * rho / mu).sqrt();
+                    h[k - 1] * scale * womersley_wall_slope(alpha)
+                })
+                .collect();
+            let want: f64 = (0..n)
+                .map(|i| {
+                    let t = (i as f64 + 0.5) * dt;
+                    let g = c.iter().enumerate().fold(4.0 * mean * scale, |g, (k, ck)| {
+                        g + (ck * Complex::from_polar(1.0, (k + 1) as f64 * omega * t)).re
+                    });
+                    (-mean.signum() * g).max(0.0) * dt
+                })
+                .sum();
+            assert!(want > 0.0);
+            assert!((b / want - 1.0).abs() < 1e-8, "r {r}: {b} vs {want}");
         }
     }
 

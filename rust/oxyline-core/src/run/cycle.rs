@@ -202,7 +202,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
             self.rec.clear();
         }
         if let Some(m) = self.mean.as_deref_mut() {
-            m.start_cycle();
+            m.start_cycle(self.steps_per_cycle);
         }
         if rows.recorded && (!s.output_all_cycles || cycle == 0) {
             let t = if s.output_all_cycles { rows.t0 } else { 0.0 };

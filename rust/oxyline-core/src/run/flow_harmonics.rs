@@ -2,11 +2,15 @@
 //! inlet-renewal closure needs of each vessel (its backward wall strain B from every
 //! harmonic's Womersley wall shear, docs/physics.md §3.6). Fed by `MeanAbs` step by step;
 //! only vessels with a `flow: inlet-renewal` wall are tracked, so other runs pay nothing.
+//!
+//! The harmonics are running sums, folded in every [`BLOCK`] steps: the pass holds H complex
+//! sums per vessel (H ≤ 32: 512 B) and a block of samples (8 B per step and vessel), not the
+//! cycle's samples (8 B × steps per cycle per vessel, plus the growth of their vector).
 
 use super::mean_flow::MeanAbs;
 use crate::error::Result;
 use crate::transport::Transport;
-use crate::transport::renewal::VesselFlow;
+use crate::transport::renewal::VesselFlows;
 use nalgebra::Complex;
 use std::f64::consts::PI;
 
@@ -14,85 +18,150 @@ use std::f64::consts::PI;
 /// waveform's sharp features; the wall shear's backward part comes from the first few).
 const MAX_HARMONICS: usize = 32;
 
-/// The samples of the tracked flows over the current cycle (steps are equally spaced in a
-/// cycle), and the harmonics of the last completed one.
+/// Steps of samples held before they are folded into the sums: each fold reads and writes
+/// every vessel's sums once, so the sums' memory traffic is 1/`BLOCK` of a fold per step.
+const BLOCK: usize = 16;
+
+/// The running Fourier sums of the tracked flows over the current cycle (steps equally
+/// spaced in a cycle), and after [`FlowHarmonics::end_cycle`] the harmonics of that cycle.
 pub(super) struct FlowHarmonics {
     vessels: Vec<usize>,
     unknowns: Vec<usize>,
-    /// Samples of the current cycle, step after step (`unknowns.len()` per step). Memory:
-    /// 8 B × tracked vessels × steps per cycle, for the first pass only.
-    samples: Vec<f64>,
-    /// Per tracked vessel: its flow over the last completed cycle.
-    pub last: Vec<VesselFlow>,
+    /// Steps of the current cycle, and how many were accumulated.
+    steps: usize,
+    count: usize,
+    /// Harmonics kept per vessel: min(`MAX_HARMONICS`, (steps − 1)/2).
+    per_vessel: usize,
+    /// Per tracked vessel, `per_vessel` sums Σ_s y_s e^{−2πiks/N}; the harmonics once the cycle
+    /// is complete.
+    sums: Vec<Complex<f64>>,
+    /// Per tracked vessel Σ_s y_s; the mean once the cycle is complete.
+    means: Vec<f64>,
+    /// Samples not yet folded in, step after step (`unknowns.len()` per step).
+    block: Vec<f64>,
+    /// The phases of the block's steps, e^{−2πiks/N}, `per_vessel` per step.
+    phases: Vec<Complex<f64>>,
+    /// Whether `sums` and `means` hold the harmonics of a completed cycle.
+    complete: bool,
 }
 
 impl FlowHarmonics {
     /// The accumulator for `tr`'s renewal vessels; None when no wall needs it.
     pub fn for_transport(tr: &Transport) -> Option<Self> {
         let inlets = tr.renewal_inlets();
-        (!inlets.is_empty()).then(|| FlowHarmonics {
-            vessels: inlets.iter().map(|p| p.0).collect(),
-            unknowns: inlets.iter().map(|p| p.1).collect(),
-            samples: Vec::new(),
-            last: Vec::new(),
-        })
+        (!inlets.is_empty()).then(|| Self::new(inlets))
     }
 
-    pub fn start_cycle(&mut self) {
-        self.samples.clear();
+    fn new(inlets: Vec<(usize, usize)>) -> Self {
+        FlowHarmonics {
+            vessels: inlets.iter().map(|p| p.0).collect(),
+            unknowns: inlets.iter().map(|p| p.1).collect(),
+            steps: 0,
+            count: 0,
+            per_vessel: 0,
+            sums: Vec::new(),
+            means: Vec::new(),
+            block: Vec::new(),
+            phases: Vec::new(),
+            complete: false,
+        }
+    }
+
+    /// A new cycle of `steps` equally spaced steps (the samples come at t_s = s T/N, s = 1..N).
+    pub fn start_cycle(&mut self, steps: usize) {
+        let m = self.unknowns.len();
+        self.steps = steps;
+        self.count = 0;
+        self.complete = false;
+        self.per_vessel = if steps < 4 {
+            0
+        } else {
+            MAX_HARMONICS.min((steps - 1) / 2)
+        };
+        self.sums.clear();
+        self.sums
+            .resize(m * self.per_vessel, Complex::new(0.0, 0.0));
+        self.means.clear();
+        self.means.resize(m, 0.0);
+        self.block.clear();
+        self.block.reserve_exact(m * BLOCK);
     }
 
     pub fn accumulate(&mut self, y: &[f64]) {
-        self.samples.extend(self.unknowns.iter().map(|&i| y[i]));
+        self.block.extend(self.unknowns.iter().map(|&i| y[i]));
+        self.count += 1;
+        if self.block.len() >= BLOCK * self.unknowns.len() {
+            self.fold();
+        }
     }
 
-    /// The discrete Fourier series of the cycle's samples y_n (n = 1..N, at t_n = n T/N from
-    /// the cycle start): mean = Σ y_n/N, Q̂_k = (2/N) Σ y_n e^{−2πikn/N}, k < N/2. A constant
-    /// time shift of the samples only shifts the waveform, which leaves B unchanged.
+    /// Fold the block's samples into the sums (in step order: the same sums as one step at a
+    /// time). The phase of sample s and harmonic k is e^{−2πi((ks) mod N)/N}, each from its
+    /// own `from_polar` of an angle below 2π.
+    fn fold(&mut self) {
+        let (m, h) = (self.unknowns.len(), self.per_vessel);
+        let rows = self.block.len() / m.max(1);
+        let first = self.count - rows + 1; // the block's first sample index s
+        let n = self.steps.max(1);
+        self.phases.clear();
+        for s in first..first + rows {
+            self.phases
+                .extend((1..=h).map(|k| {
+                    Complex::from_polar(1.0, -2.0 * PI * ((k * s) % n) as f64 / n as f64)
+                }));
+        }
+        for (u, (mean, sums)) in self
+            .means
+            .iter_mut()
+            .zip(self.sums.chunks_exact_mut(h.max(1)))
+            .enumerate()
+        {
+            for r in 0..rows {
+                let y = self.block[r * m + u];
+                *mean += y;
+                for (acc, w) in sums.iter_mut().zip(&self.phases[r * h..(r + 1) * h]) {
+                    *acc += w * y;
+                }
+            }
+        }
+        self.block.clear();
+    }
+
+    /// Close the cycle: the discrete Fourier series of its samples y_s (s = 1..N, at t_s =
+    /// s T/N from the cycle start): mean = Σ y_s/N, Q̂_k = (2/N) Σ y_s e^{−2πiks/N}, k < N/2.
+    /// A constant time shift of the samples only shifts the waveform, which leaves B
+    /// unchanged. A cycle of fewer than 4 steps, or cut short, gives no harmonics.
     pub fn end_cycle(&mut self) {
-        let m = self.unknowns.len();
-        let n = self.samples.len() / m.max(1);
-        if n < 4 {
+        self.fold();
+        if self.per_vessel == 0 || self.count != self.steps {
             return;
         }
-        let h = MAX_HARMONICS.min((n - 1) / 2);
-        self.last = self
-            .vessels
-            .iter()
-            .enumerate()
-            .map(|(u, &vessel)| {
-                let y = |s: usize| self.samples[s * m + u];
-                let mean = (0..n).map(y).sum::<f64>() / n as f64;
-                let harmonics = (1..=h)
-                    .map(|k| {
-                        let step = Complex::from_polar(1.0, -2.0 * PI * k as f64 / n as f64);
-                        let mut phase = step; // sample s is at t_{s+1}
-                        let mut acc = Complex::new(0.0, 0.0);
-                        for s in 0..n {
-                            acc += phase * y(s);
-                            phase *= step;
-                        }
-                        acc * (2.0 / n as f64)
-                    })
-                    .collect();
-                VesselFlow {
-                    vessel,
-                    mean,
-                    harmonics,
-                }
-            })
-            .collect();
+        let n = self.count as f64;
+        self.sums.iter_mut().for_each(|q| *q *= 2.0 / n);
+        self.means.iter_mut().for_each(|y| *y /= n);
+        self.complete = true;
+        // the block is not needed again this pass
+        self.block = Vec::new();
+        self.phases = Vec::new();
+    }
+
+    /// The harmonics of the last completed cycle (None before one completes).
+    pub fn flows(&self) -> Option<VesselFlows<'_>> {
+        self.complete.then_some(VesselFlows {
+            vessels: &self.vessels,
+            means: &self.means,
+            harmonics: &self.sums,
+            per_vessel: self.per_vessel,
+        })
     }
 }
 
 /// Set `tr`'s segment laws from the first pass: the cycle means, and the inlet renewal of
 /// every vessel whose harmonics were recorded (the one call of `two_pass`).
 pub(super) fn set_mean_flows(tr: &mut Transport, mean: &MeanAbs, period: f64) -> Result<()> {
-    match mean.harmonics.as_ref() {
-        Some(h) if !h.last.is_empty() => {
-            tr.set_mean_flows_renewed(&mean.last, &mean.forward(), period, &h.last)
-        }
-        _ => tr.set_mean_flows(&mean.last, &mean.forward()),
+    match mean.harmonics.as_ref().and_then(FlowHarmonics::flows) {
+        Some(flows) => tr.set_mean_flows_renewed(&mean.last, &mean.forward(), period, flows),
+        None => tr.set_mean_flows(&mean.last, &mean.forward()),
     }
 }
 
@@ -103,26 +172,23 @@ mod tests {
     #[test]
     fn the_cycle_samples_give_the_waveform_harmonics() {
         // y(t) = m + a cos ωt + b sin 2ωt + c cos 5ωt at t_n = n T/N (n = 1..N): the exact
-        // discrete series (no aliasing below N/2), so round-off only (1e-13 of the amplitude)
+        // discrete series (no aliasing below N/2), so round-off only (1e-13 of the amplitude).
+        // N = 400 is not a multiple of the block: the last fold is partial.
         let (m, a, b, c, n) = (2e-5, 3e-5, -8e-6, 1e-6, 400usize);
-        let mut h = FlowHarmonics {
-            vessels: vec![7],
-            unknowns: vec![1],
-            samples: Vec::new(),
-            last: Vec::new(),
-        };
-        h.start_cycle();
+        // two vessels, the second with the negated flow (its harmonics negated)
+        let mut h = FlowHarmonics::new(vec![(7, 1), (9, 2)]);
+        h.start_cycle(n);
+        assert!(h.flows().is_none());
         for s in 1..=n {
             let th = 2.0 * PI * s as f64 / n as f64;
             let y = m + a * th.cos() + b * (2.0 * th).sin() + c * (5.0 * th).cos();
-            h.accumulate(&[0.0, y]);
+            h.accumulate(&[0.0, y, -y]);
         }
         h.end_cycle();
-        let f = &h.last[0];
-        assert_eq!(f.vessel, 7);
-        assert_eq!(f.harmonics.len(), MAX_HARMONICS);
+        let f = h.flows().expect("a completed cycle");
+        assert_eq!(f.vessels, &[7, 9]);
+        assert_eq!(f.per_vessel, MAX_HARMONICS);
         let tol = 1e-13 * a;
-        assert!((f.mean - m).abs() < tol);
         // Q = mean + Re Σ Q̂_k e^{ikωt}: a cos → Q̂ = a, b sin → Q̂ = −i b
         let want = |k: usize| match k {
             1 => Complex::new(a, 0.0),
@@ -130,8 +196,18 @@ mod tests {
             5 => Complex::new(c, 0.0),
             _ => Complex::new(0.0, 0.0),
         };
-        for (k, q) in f.harmonics.iter().enumerate() {
-            assert!((q - want(k + 1)).norm() < tol, "harmonic {}: {q}", k + 1);
+        for (i, sign) in [(0, 1.0), (1, -1.0)] {
+            let flow = f.flow(i, 1.0);
+            assert!((flow.mean - sign * m).abs() < tol);
+            for (k, q) in flow.harmonics.iter().enumerate() {
+                let w = want(k + 1) * sign;
+                assert!((q - w).norm() < tol, "vessel {i} harmonic {}: {q}", k + 1);
+            }
         }
+        // a cycle cut short gives none
+        h.start_cycle(n);
+        h.accumulate(&[0.0, 1.0, 1.0]);
+        h.end_cycle();
+        assert!(h.flows().is_none());
     }
 }

@@ -38,12 +38,13 @@ impl MeanAbs {
         }
     }
 
-    pub fn start_cycle(&mut self) {
+    /// A new cycle of `steps` steps (the harmonics' phases need the count up front).
+    pub fn start_cycle(&mut self, steps: usize) {
         self.sum.iter_mut().for_each(|v| *v = 0.0);
         self.sum_signed.iter_mut().for_each(|v| *v = 0.0);
         self.count = 0;
         if let Some(h) = self.harmonics.as_mut() {
-            h.start_cycle();
+            h.start_cycle(steps);
         }
     }
 

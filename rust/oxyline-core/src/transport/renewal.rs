@@ -4,16 +4,30 @@
 
 use super::laws::MeanFlows;
 use super::*;
-use crate::closure::renewal::{PeriodicFlow, net_mean, segment_factors};
+use crate::closure::renewal::{PeriodicFlow, net_mean, segment_factors_into};
 use nalgebra::Complex;
 
-/// One vessel's periodic inlet flow measured by the first pass: Q(t) = mean + Re Σ_k
-/// harmonics[k − 1] e^{ikωt}.
-#[derive(Debug, Clone)]
-pub struct VesselFlow {
-    pub vessel: usize,
-    pub mean: f64,
-    pub harmonics: Vec<Complex<f64>>,
+/// The periodic inlet flows of the renewal vessels, measured by the first pass: vessel
+/// `vessels[i]` has Q(t) = means[i] + Re Σ_{k=1}^{H} harmonics[i H + k − 1] e^{ikωt}, H =
+/// `per_vessel` (one flat array: no allocation per vessel).
+#[derive(Debug, Clone, Copy)]
+pub struct VesselFlows<'a> {
+    pub vessels: &'a [usize],
+    pub means: &'a [f64],
+    pub harmonics: &'a [Complex<f64>],
+    pub per_vessel: usize,
+}
+
+impl<'a> VesselFlows<'a> {
+    /// The `i`-th vessel's flow over `period`.
+    pub fn flow(&self, i: usize, period: f64) -> PeriodicFlow<'a> {
+        let h = self.per_vessel;
+        PeriodicFlow {
+            period,
+            mean: self.means[i],
+            harmonics: &self.harmonics[i * h..(i + 1) * h],
+        }
+    }
 }
 
 impl Transport {
@@ -49,7 +63,7 @@ impl Transport {
         mean_abs: &[f64],
         mean_forward: &[f64],
         period: f64,
-        flows: &[VesselFlow],
+        flows: VesselFlows<'_>,
     ) -> Result<()> {
         let renewal = self.renewal_factors(mean_abs, mean_forward, period, flows)?;
         self.set_laws(MeanFlows {
@@ -59,60 +73,87 @@ impl Transport {
         })
     }
 
+    /// Per species, per segment: the renewal factor (1 where the wall does not renew). The
+    /// vessels' segment lists, walls and means live in buffers reused from vessel to vessel.
     fn renewal_factors(
         &self,
         mean_abs: &[f64],
         mean_forward: &[f64],
         period: f64,
-        flows: &[VesselFlow],
+        flows: VesselFlows<'_>,
     ) -> Result<Vec<Vec<f64>>> {
         let p = &self.plan;
-        let mut segs_of = vec![Vec::new(); p.species.first().map_or(0, |s| s.walls.len())];
-        for (j, &v) in p.segment_vessels.iter().enumerate() {
-            if let Some(s) = segs_of.get_mut(v as usize) {
-                s.push(j);
-            }
-        }
+        let (start, list) = segments_by_vessel(
+            &p.segment_vessels,
+            p.species.first().map_or(0, |s| s.walls.len()),
+        );
+        let (mut walls, mut net, mut abs, mut fs) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         let mut all = Vec::with_capacity(p.species.len());
         for sp in &p.species {
             let mut factors = vec![1.0; p.segments.len()];
-            for f in flows {
+            for (i, &vessel) in flows.vessels.iter().enumerate() {
                 let WallSpec::Graetz {
                     flow: closure::MeanFlow::InletRenewal,
                     kinematic_viscosity,
                     ..
-                } = sp.walls[f.vessel]
+                } = sp.walls[vessel]
                 else {
                     continue;
                 };
-                let js = &segs_of[f.vessel];
-                let walls: Vec<_> = js.iter().map(|&j| p.segments[j].wall).collect();
-                let net: Vec<f64> = js
-                    .iter()
-                    .map(|&j| net_mean(mean_abs[j], mean_forward[j]))
-                    .collect();
-                let abs: Vec<f64> = js.iter().map(|&j| mean_abs[j]).collect();
-                let flow = PeriodicFlow {
-                    period,
-                    mean: f.mean,
-                    harmonics: &f.harmonics,
-                };
-                let element = format!("species '{}' wall of vessel #{}", sp.name, f.vessel);
-                let fs = segment_factors(
+                let js = &list[start[vessel]..start[vessel + 1]];
+                walls.clear();
+                walls.extend(js.iter().map(|&j| p.segments[j as usize].wall));
+                net.clear();
+                net.extend(
+                    js.iter()
+                        .map(|&j| net_mean(mean_abs[j as usize], mean_forward[j as usize])),
+                );
+                abs.clear();
+                abs.extend(js.iter().map(|&j| mean_abs[j as usize]));
+                let element = || format!("species '{}' wall of vessel #{vessel}", sp.name);
+                segment_factors_into(
                     &element,
                     &walls,
                     &net,
                     &abs,
-                    &flow,
+                    &flows.flow(i, period),
                     kinematic_viscosity,
                     sp.diffusivity,
+                    &mut fs,
                 )?;
-                for (&j, v) in js.iter().zip(fs) {
-                    factors[j] = v;
+                for (&j, &v) in js.iter().zip(&fs) {
+                    factors[j as usize] = v;
                 }
             }
             all.push(factors);
         }
         Ok(all)
     }
+}
+
+/// The segments of every vessel in segment order, as one list with offsets: vessel v's are
+/// `list[start[v]..start[v + 1]]` (two arrays instead of a vector per vessel).
+fn segments_by_vessel(segment_vessels: &[u32], n_vessels: usize) -> (Vec<usize>, Vec<u32>) {
+    let mut start = vec![0usize; n_vessels + 1];
+    for &v in segment_vessels {
+        if let Some(c) = start.get_mut(v as usize + 1) {
+            *c += 1;
+        }
+    }
+    for v in 0..n_vessels {
+        start[v + 1] += start[v];
+    }
+    let mut next = start.clone();
+    let mut list = vec![0u32; start[n_vessels]];
+    for (j, &v) in segment_vessels.iter().enumerate() {
+        if let Some(k) = next
+            .get_mut(v as usize)
+            .filter(|_| (v as usize) < n_vessels)
+        {
+            list[*k] = j as u32;
+            *k += 1;
+        }
+    }
+    (start, list)
 }
