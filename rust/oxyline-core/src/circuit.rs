@@ -520,9 +520,9 @@ impl Circuit {
         Arc::make_mut(&mut self.names).add_vessel(name) as usize
     }
 
-    /// Assemble the DAE (linear in the network size).
+    /// Assemble the DAE (linear in the network size): which row holds each node's equation,
+    /// the node–branch incidences, then the flow matrix F, the mass diagonal E and the forcing.
     pub fn assemble(&self) -> Result<Dae> {
-        let nn = self.nodes.len();
         let n = self.n_unknowns();
         if u32::try_from(n).is_err() {
             return Err(Error::model(
@@ -530,140 +530,12 @@ impl Circuit {
                 format!("has {n} unknowns, more than 2^32"),
             ));
         }
-        let mut fixed = vec![None; nn];
-        for (k, (node, _)) in self.fixed_pressures.iter().enumerate() {
-            if fixed[*node].is_some() {
-                return Err(Error::model(
-                    self.names.node(*node),
-                    "has two pressure conditions",
-                ));
-            }
-            fixed[*node] = Some(k);
-        }
-        // Incidence lists, built by counting so that assembly stays O(n).
-        let mut deg = vec![0usize; nn + 1];
-        for b in &self.branches {
-            deg[b.from] += 1;
-            deg[b.to] += 1;
-        }
-        let mut start = vec![0usize; nn + 1];
-        for i in 0..nn {
-            start[i + 1] = start[i] + deg[i];
-        }
-        let mut inc: Vec<(usize, f64)> = vec![(0, 0.0); start[nn]];
-        let mut fill = start.clone();
-        for (bi, b) in self.branches.iter().enumerate() {
-            inc[fill[b.from]] = (nn + bi, 1.0); // flow leaves `from`
-            fill[b.from] += 1;
-            inc[fill[b.to]] = (nn + bi, -1.0);
-            fill[b.to] += 1;
-        }
-        let nb = self.branches.len();
-        // node -> the element unknown (or branch) whose row takes its flow balance
-        let mut moved = vec![None; nn];
-        let mut swapped: Vec<Option<SwappedRow>> = vec![None; nn];
-        let mut balance_of_branch = vec![usize::MAX; nb];
-        for sw in &self.swapped_rows {
-            let node = sw.node;
-            if fixed[node].is_some()
-                || swapped[node].is_some()
-                || self.nodes[node].capacitance != 0.0
-            {
-                return Err(Error::model(
-                    self.names.node(node),
-                    "a through_rc element's inlet node cannot also have a pressure condition, a capacitance or a second such element",
-                ));
-            }
-            swapped[node] = Some(*sw);
-            moved[node] = Some(nn + sw.branch);
-            balance_of_branch[sw.branch] = node;
-        }
-        for &(node, x) in &self.moved_rows {
-            if self.nodes[node].capacitance != 0.0 {
-                return Err(Error::model(
-                    self.names.node(node),
-                    "a chamber's pressure node cannot also hold a vessel's capacitance (put a valve or a resistance between them)",
-                ));
-            }
-            if fixed[node].is_some() || moved[node].is_some() {
-                return Err(Error::model(
-                    self.names.node(node),
-                    "a chamber's pressure node cannot also have a pressure condition or a second chamber",
-                ));
-            }
-            moved[node] = Some(nn + nb + x);
-        }
-        // a node row holds its incidences (or 1–3 entries), a branch row 3 (or a node's
-        // incidences): allocated once at an upper bound instead of grown by doubling (whose
-        // copies touch the pattern's bytes twice at 1e6 segments)
-        let nnz = 2 * inc.len() + 3 * (nn + nb) + self.extras.len();
-        let mut f = Csr {
-            ptr: Vec::with_capacity(n + 1),
-            col: Vec::with_capacity(nnz),
-            val: Vec::with_capacity(nnz),
-        };
-        f.ptr.push(0);
-        for i in 0..nn {
-            if let Some(sw) = swapped[i] {
-                let b = &self.branches[sw.branch];
-                f.col
-                    .extend([i as u32, b.to as u32, (nn + sw.branch) as u32]);
-                f.val
-                    .extend([1.0 / sw.resistance, -1.0 / sw.resistance, -1.0]);
-            } else if fixed[i].is_some() || moved[i].is_some() {
-                f.col.push(i as u32);
-                f.val.push(1.0);
-            } else {
-                for &(c, s) in &inc[start[i]..start[i + 1]] {
-                    f.col.push(c as u32);
-                    f.val.push(s);
-                }
-            }
-            f.ptr.push(f.col.len());
-        }
-        for (bi, b) in self.branches.iter().enumerate() {
-            let node = balance_of_branch[bi];
-            if node != usize::MAX {
-                for &(c, s) in &inc[start[node]..start[node + 1]] {
-                    f.col.push(c as u32);
-                    f.val.push(s);
-                }
-            } else {
-                f.col.extend([b.from as u32, b.to as u32, (nn + bi) as u32]);
-                f.val.extend([-1.0, 1.0, b.resistance]);
-            }
-            f.ptr.push(f.col.len());
-        }
-        let mut owner = vec![usize::MAX; self.extras.len()];
-        for &(node, x) in &self.moved_rows {
-            owner[x] = node;
-        }
-        for &node in &owner {
-            if node != usize::MAX {
-                for &(c, s) in &inc[start[node]..start[node + 1]] {
-                    f.col.push(c as u32);
-                    f.val.push(s);
-                }
-            }
-            f.ptr.push(f.col.len());
-        }
-        let mut e = vec![0.0; n];
-        let mut windkessel = vec![false; n];
-        for (i, node) in self.nodes.iter().enumerate() {
-            if fixed[i].is_none() {
-                e[i] = node.capacitance;
-                windkessel[i] = node.windkessel;
-            }
-            if let Some(sw) = swapped[i] {
-                e[i] = sw.capacitance;
-            }
-        }
-        for (bi, b) in self.branches.iter().enumerate() {
-            e[nn + bi] = b.inductance;
-        }
-        for (x, &m) in self.extras.iter().enumerate() {
-            e[nn + nb + x] = m;
-        }
+        let rows = self.row_owners()?;
+        let incidence = Incidence::of(self);
+        let f = self.flow_matrix(&rows, &incidence);
+        let (e, windkessel) = self.mass_diagonal(&rows);
+        let forcing = self.forcing(&rows);
+        let (nn, nb) = (self.nodes.len(), self.branches.len());
         let stenosis: Vec<(usize, f64)> = self
             .branches
             .iter()
@@ -671,15 +543,6 @@ impl Circuit {
             .filter(|(_, b)| b.stenosis != 0.0)
             .map(|(bi, b)| (nn + bi, b.stenosis))
             .collect();
-        let mut forcing = Vec::new();
-        for (node, w) in &self.sources {
-            if fixed[*node].is_none() {
-                forcing.push((moved[*node].unwrap_or(*node), w.clone()));
-            }
-        }
-        for (node, w) in &self.fixed_pressures {
-            forcing.push((*node, w.clone()));
-        }
         let chain_rule = self
             .chain_rule
             .iter()
@@ -688,30 +551,13 @@ impl Circuit {
                 ..*c
             })
             .collect();
-        // a branch row reads −P_from + P_to + R Q + L Q̇ = e(t)
-        for (b, w) in &self.branch_sources {
-            forcing.push((nn + b, w.clone()));
-        }
         let varying = self
             .resistance_laws
             .iter()
             .map(|(b, law)| (nn + b, law.clone()))
             .collect();
         let elements = self.elements.iter().map(|el| resolve(el, nn, nb)).collect();
-        let index = |u: Unknown| match u {
-            Unknown::Node(i) => i,
-            Unknown::Branch(b) => nn + b,
-        };
-        let starts = |rate: bool| {
-            self.start_values
-                .iter()
-                .filter(move |s| s.rate == rate)
-                .map(move |s| (index(s.unknown), s.value))
-        };
-        let initial = starts(false)
-            .chain(self.initial_extras.iter().map(|&(x, v)| (nn + nb + x, v)))
-            .collect();
-        let initial_rate = starts(true).collect();
+        let (initial, initial_rate) = self.start(nn, nb);
         Ok(Dae {
             n,
             n_nodes: nn,
@@ -727,6 +573,228 @@ impl Circuit {
             forcing,
             names: self.names.clone(),
         })
+    }
+
+    /// Which row holds each node's equation: a pressure condition, a flow-through R–C element
+    /// (the node's balance moves to the element's branch row), a chamber (the balance moves to
+    /// its volume's row). A node may have at most one of them (checked here, by name).
+    fn row_owners(&self) -> Result<RowOwners> {
+        let (nn, nb) = (self.nodes.len(), self.branches.len());
+        let mut rows = RowOwners {
+            fixed: vec![None; nn],
+            swapped: vec![None; nn],
+            moved: vec![None; nn],
+            balance_of_branch: vec![usize::MAX; nb],
+        };
+        for (k, (node, _)) in self.fixed_pressures.iter().enumerate() {
+            if rows.fixed[*node].is_some() {
+                return Err(Error::model(
+                    self.names.node(*node),
+                    "has two pressure conditions",
+                ));
+            }
+            rows.fixed[*node] = Some(k);
+        }
+        for sw in &self.swapped_rows {
+            let node = sw.node;
+            if rows.fixed[node].is_some()
+                || rows.swapped[node].is_some()
+                || self.nodes[node].capacitance != 0.0
+            {
+                return Err(Error::model(
+                    self.names.node(node),
+                    "a through_rc element's inlet node cannot also have a pressure condition, a capacitance or a second such element",
+                ));
+            }
+            rows.swapped[node] = Some(*sw);
+            rows.moved[node] = Some(nn + sw.branch);
+            rows.balance_of_branch[sw.branch] = node;
+        }
+        for &(node, x) in &self.moved_rows {
+            if self.nodes[node].capacitance != 0.0 {
+                return Err(Error::model(
+                    self.names.node(node),
+                    "a chamber's pressure node cannot also hold a vessel's capacitance (put a valve or a resistance between them)",
+                ));
+            }
+            if rows.fixed[node].is_some() || rows.moved[node].is_some() {
+                return Err(Error::model(
+                    self.names.node(node),
+                    "a chamber's pressure node cannot also have a pressure condition or a second chamber",
+                ));
+            }
+            rows.moved[node] = Some(nn + nb + x);
+        }
+        Ok(rows)
+    }
+
+    /// The flow matrix F: a node row holds its incidences (the flow balance) unless its
+    /// balance moved, a branch row −P_from + P_to + R Q (or the balance of the node it took
+    /// over), an element unknown's row the balance of the chamber node it owns.
+    fn flow_matrix(&self, rows: &RowOwners, incidence: &Incidence) -> Csr {
+        let (nn, nb) = (self.nodes.len(), self.branches.len());
+        let n = self.n_unknowns();
+        // a node row holds its incidences (or 1–3 entries), a branch row 3 (or a node's
+        // incidences): allocated once at an upper bound instead of grown by doubling (whose
+        // copies touch the pattern's bytes twice at 1e6 segments)
+        let nnz = 2 * incidence.inc.len() + 3 * (nn + nb) + self.extras.len();
+        let mut f = Csr {
+            ptr: Vec::with_capacity(n + 1),
+            col: Vec::with_capacity(nnz),
+            val: Vec::with_capacity(nnz),
+        };
+        let push_balance = |f: &mut Csr, node: usize| {
+            for &(c, s) in incidence.at(node) {
+                f.col.push(c as u32);
+                f.val.push(s);
+            }
+        };
+        f.ptr.push(0);
+        for i in 0..nn {
+            if let Some(sw) = rows.swapped[i] {
+                let b = &self.branches[sw.branch];
+                f.col
+                    .extend([i as u32, b.to as u32, (nn + sw.branch) as u32]);
+                f.val
+                    .extend([1.0 / sw.resistance, -1.0 / sw.resistance, -1.0]);
+            } else if rows.fixed[i].is_some() || rows.moved[i].is_some() {
+                f.col.push(i as u32);
+                f.val.push(1.0);
+            } else {
+                push_balance(&mut f, i);
+            }
+            f.ptr.push(f.col.len());
+        }
+        for (bi, b) in self.branches.iter().enumerate() {
+            let node = rows.balance_of_branch[bi];
+            if node != usize::MAX {
+                push_balance(&mut f, node);
+            } else {
+                f.col.extend([b.from as u32, b.to as u32, (nn + bi) as u32]);
+                f.val.extend([-1.0, 1.0, b.resistance]);
+            }
+            f.ptr.push(f.col.len());
+        }
+        let mut owner = vec![usize::MAX; self.extras.len()];
+        for &(node, x) in &self.moved_rows {
+            owner[x] = node;
+        }
+        for &node in &owner {
+            if node != usize::MAX {
+                push_balance(&mut f, node);
+            }
+            f.ptr.push(f.col.len());
+        }
+        f
+    }
+
+    /// The mass diagonal E (node capacitances, branch inductances, element unknowns' E_ii) and
+    /// which node capacitances are Windkessel capacitors.
+    fn mass_diagonal(&self, rows: &RowOwners) -> (Vec<f64>, Vec<bool>) {
+        let (nn, nb) = (self.nodes.len(), self.branches.len());
+        let n = self.n_unknowns();
+        let mut e = vec![0.0; n];
+        let mut windkessel = vec![false; n];
+        for (i, node) in self.nodes.iter().enumerate() {
+            if rows.fixed[i].is_none() {
+                e[i] = node.capacitance;
+                windkessel[i] = node.windkessel;
+            }
+            if let Some(sw) = rows.swapped[i] {
+                e[i] = sw.capacitance;
+            }
+        }
+        for (bi, b) in self.branches.iter().enumerate() {
+            e[nn + bi] = b.inductance;
+        }
+        for (x, &m) in self.extras.iter().enumerate() {
+            e[nn + nb + x] = m;
+        }
+        (e, windkessel)
+    }
+
+    /// The forcing by row: inflows (into the row that holds the node's balance), prescribed
+    /// pressures, and pressure sources in series with a branch (a branch row reads
+    /// −P_from + P_to + R Q + L Q̇ = e(t)).
+    fn forcing(&self, rows: &RowOwners) -> Vec<(usize, Waveform)> {
+        let nn = self.nodes.len();
+        let mut forcing = Vec::new();
+        for (node, w) in &self.sources {
+            if rows.fixed[*node].is_none() {
+                forcing.push((rows.moved[*node].unwrap_or(*node), w.clone()));
+            }
+        }
+        for (node, w) in &self.fixed_pressures {
+            forcing.push((*node, w.clone()));
+        }
+        for (b, w) in &self.branch_sources {
+            forcing.push((nn + b, w.clone()));
+        }
+        forcing
+    }
+
+    /// The start values (and start rates) of a zero start, by DAE unknown.
+    #[allow(clippy::type_complexity)]
+    fn start(&self, nn: usize, nb: usize) -> (Vec<(usize, f64)>, Vec<(usize, f64)>) {
+        let index = |u: Unknown| match u {
+            Unknown::Node(i) => i,
+            Unknown::Branch(b) => nn + b,
+        };
+        let starts = |rate: bool| {
+            self.start_values
+                .iter()
+                .filter(move |s| s.rate == rate)
+                .map(move |s| (index(s.unknown), s.value))
+        };
+        let initial = starts(false)
+            .chain(self.initial_extras.iter().map(|&(x, v)| (nn + nb + x, v)))
+            .collect();
+        (initial, starts(true).collect())
+    }
+}
+
+/// Which row holds each node's equation (`Circuit::row_owners`).
+struct RowOwners {
+    /// The node's pressure condition (index into `fixed_pressures`).
+    fixed: Vec<Option<usize>>,
+    /// The flow-through R–C element whose branch row takes the node's balance.
+    swapped: Vec<Option<SwappedRow>>,
+    /// The unknown whose row takes the node's flow balance.
+    moved: Vec<Option<usize>>,
+    /// Per branch: the node whose balance its row holds (`usize::MAX`: its own equation).
+    balance_of_branch: Vec<usize>,
+}
+
+/// Node → (flow unknown, sign) incidences, built by counting so that assembly stays O(n).
+struct Incidence {
+    start: Vec<usize>,
+    inc: Vec<(usize, f64)>,
+}
+
+impl Incidence {
+    fn of(circuit: &Circuit) -> Self {
+        let nn = circuit.nodes.len();
+        let mut deg = vec![0usize; nn + 1];
+        for b in &circuit.branches {
+            deg[b.from] += 1;
+            deg[b.to] += 1;
+        }
+        let mut start = vec![0usize; nn + 1];
+        for i in 0..nn {
+            start[i + 1] = start[i] + deg[i];
+        }
+        let mut inc: Vec<(usize, f64)> = vec![(0, 0.0); start[nn]];
+        let mut fill = start.clone();
+        for (bi, b) in circuit.branches.iter().enumerate() {
+            inc[fill[b.from]] = (nn + bi, 1.0); // flow leaves `from`
+            fill[b.from] += 1;
+            inc[fill[b.to]] = (nn + bi, -1.0);
+            fill[b.to] += 1;
+        }
+        Incidence { start, inc }
+    }
+    fn at(&self, node: usize) -> &[(usize, f64)] {
+        &self.inc[self.start[node]..self.start[node + 1]]
     }
 }
 

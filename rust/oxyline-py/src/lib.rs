@@ -742,36 +742,13 @@ impl Network {
         let every = checkpoint_every(checkpoint_every_cycles, checkpoint_every_seconds)?;
         let resume = resume.map(|d| checkpoint::from_dict(&d)).transpose()?;
         let checkpointing = checkpoint_sink.is_some() || resume.is_some();
-        let segments = shared.segments;
-        let selected = shared.variables.is_some() || shared.vessels.is_some();
+        let transport_on = shared.transport;
         let mut settings = shared.run_settings(period, output_every, keep_current_cycle)?;
-        let sel = self.selection(shared.variables, shared.vessels, segments)?;
-        let (cols, species_columns) = if all_unknowns {
-            ((0..self.inner.1.n).collect(), None)
-        } else {
-            recorded_columns(
-                &self.inner.0.probes,
-                self.transport.as_deref(),
-                &sel,
-                selected,
-                segments,
-            )
-        };
-        settings.probes = cols;
-        // unknowns recorded after the selected columns (chamber volumes, valve pressures and
-        // flows: `unknown_layout`), bounds-checked here
-        if let Some(extra) = extra_columns {
-            if let Some(&bad) = extra.iter().find(|&&c| c >= self.inner.1.n) {
-                return Err(ModelError::new_err(format!(
-                    "simulation: extra column {bad} is not an unknown (the circuit has {})",
-                    self.inner.1.n
-                )));
-            }
-            settings.probes.extend(extra);
-        }
+        let (probes, species_columns) = self.columns(shared, all_unknowns, extra_columns)?;
+        settings.probes = probes;
         settings.species_columns = species_columns;
         let inner = self.inner.clone();
-        let mut species = if shared.transport {
+        let mut species = if transport_on {
             self.transport.as_deref().map(Transport::new_run)
         } else {
             None
@@ -785,18 +762,11 @@ impl Network {
             // the first Python error of a callback (progress, Ctrl-C or the sink) stops the run
             // and is reported instead of the core's Interrupted
             let pending: Cell<Option<PyErr>> = Cell::new(None);
-            let mut last = Instant::now();
-            // Python sees at most one call per 100 ms, plus the first call of every new
-            // cycle: a callback that reacts to a cycle-end event (a checkpoint written, a
-            // cancel) then acts within 256 steps however fast the run is
-            let mut last_cycle = 0_i64;
+            let mut gate = ProgressGate::new(period);
             let mut cb = |t: f64, t_end: f64| -> bool {
-                let cycle = (t / period).floor() as i64;
-                if last.elapsed() < Duration::from_millis(100) && t < t_end && cycle == last_cycle {
+                if !gate.open(t, t_end) {
                     return true;
                 }
-                last = Instant::now();
-                last_cycle = cycle;
                 Python::attach(|py| {
                     let r = py.check_signals().and_then(|()| match &progress {
                         Some(f) => f.call1(py, (t, t_end)).map(drop),
@@ -870,22 +840,98 @@ impl Network {
             };
             (out, pending.into_inner())
         });
-        let mut out = outcome.map_err(to_py)?;
-        let error = out.error.take();
-        let d = outcome_dict(py, out)?;
-        match (pending, error) {
-            (Some(e), _) => {
-                d.set_item("error_kind", "interrupted")?;
-                d.set_item("error", e.value(py).clone())?;
-            }
-            (None, Some(e)) => {
-                d.set_item("error_kind", error_kind(&e))?;
-                d.set_item("error", to_py(e).value(py).clone())?;
-            }
-            (None, None) => {}
-        }
-        Ok(d)
+        finished_run(py, outcome, pending)
     }
+}
+
+impl Network {
+    /// The unknowns a run records: the selected output columns (or every unknown), then the
+    /// `extra_columns` (chamber volumes, valve pressures and flows: `unknown_layout`),
+    /// bounds-checked here; and the species columns of the selection.
+    fn columns(
+        &self,
+        shared: settings::Shared,
+        all_unknowns: bool,
+        extra_columns: Option<Vec<usize>>,
+    ) -> PyResult<(Vec<usize>, Option<Vec<usize>>)> {
+        let segments = shared.segments;
+        let selected = shared.variables.is_some() || shared.vessels.is_some();
+        let sel = self.selection(shared.variables, shared.vessels, segments)?;
+        let (mut cols, species_columns) = if all_unknowns {
+            ((0..self.inner.1.n).collect(), None)
+        } else {
+            recorded_columns(
+                &self.inner.0.probes,
+                self.transport.as_deref(),
+                &sel,
+                selected,
+                segments,
+            )
+        };
+        if let Some(extra) = extra_columns {
+            if let Some(&bad) = extra.iter().find(|&&c| c >= self.inner.1.n) {
+                return Err(ModelError::new_err(format!(
+                    "simulation: extra column {bad} is not an unknown (the circuit has {})",
+                    self.inner.1.n
+                )));
+            }
+            cols.extend(extra);
+        }
+        Ok((cols, species_columns))
+    }
+}
+
+/// When the run's progress callback reaches Python: at most once per 100 ms, plus the first
+/// call of every new cycle (a callback that reacts to a cycle-end event, a checkpoint written
+/// or a cancel, then acts within 256 steps however fast the run is), and at the end.
+struct ProgressGate {
+    period: f64,
+    last: Instant,
+    last_cycle: i64,
+}
+
+impl ProgressGate {
+    fn new(period: f64) -> Self {
+        ProgressGate {
+            period,
+            last: Instant::now(),
+            last_cycle: 0,
+        }
+    }
+    fn open(&mut self, t: f64, t_end: f64) -> bool {
+        let cycle = (t / self.period).floor() as i64;
+        if self.last.elapsed() < Duration::from_millis(100) && t < t_end && cycle == self.last_cycle
+        {
+            return false;
+        }
+        self.last = Instant::now();
+        self.last_cycle = cycle;
+        true
+    }
+}
+
+/// The run's result dict; a run stopped by a callback's Python error (progress, Ctrl-C, a
+/// sink) or by the core keeps its rows and says why in `error`/`error_kind`.
+fn finished_run(
+    py: Python<'_>,
+    outcome: std::result::Result<Outcome, Error>,
+    pending: Option<PyErr>,
+) -> PyResult<Bound<'_, PyDict>> {
+    let mut out = outcome.map_err(to_py)?;
+    let error = out.error.take();
+    let d = outcome_dict(py, out)?;
+    match (pending, error) {
+        (Some(e), _) => {
+            d.set_item("error_kind", "interrupted")?;
+            d.set_item("error", e.value(py).clone())?;
+        }
+        (None, Some(e)) => {
+            d.set_item("error_kind", error_kind(&e))?;
+            d.set_item("error", to_py(e).value(py).clone())?;
+        }
+        (None, None) => {}
+    }
+    Ok(d)
 }
 
 /// When to checkpoint: every n cycles, or after a wall time in seconds (never both).

@@ -54,7 +54,26 @@ pub struct Assembled {
 }
 
 impl NetworkSpec {
+    /// Graph → circuit: the node graph, each vessel (segments, or a heart element) with its
+    /// probes, the heart blocks' links, then one stamp per boundary condition.
     pub fn assemble(&self) -> Result<Assembled> {
+        let blood = self.checked_blood()?;
+        let graph = graph::build(self)?;
+        let mut st = Stamping::new(self, &graph)?;
+        for vi in 0..self.vessels.len() {
+            if is_heart_element(&self.vessels[vi]) {
+                st.heart_element(vi)?;
+            } else {
+                st.segmented_vessel(vi, blood)?;
+            }
+        }
+        heart::resolve(&mut st.circuit, &st.links.hearts, &st.links.beds)?;
+        st.boundary_conditions()?;
+        Ok(st.finish())
+    }
+
+    /// The blood's properties and the segmentation setting, checked.
+    fn checked_blood(&self) -> Result<Blood> {
         let blood = Blood {
             density: self.blood.density,
             viscosity: self.blood.viscosity,
@@ -64,20 +83,50 @@ impl NetworkSpec {
         if let Some(m) = self.max_segment_length {
             checks::check_positive("segmentation", "max_length", m)?;
         }
-        let graph = graph::build(self)?;
-        let segments: usize = self.vessels.iter().map(|v| segments::count(self, v)).sum();
+        Ok(blood)
+    }
+}
+
+/// A `vessel` entry that is a heart element (valve, chamber, through-RC, sphere, heart block,
+/// coronary bed) rather than a segmented vessel.
+fn is_heart_element(v: &crate::spec::VesselSpec) -> bool {
+    v.valve.is_some()
+        || v.chamber.is_some()
+        || v.through_rc.is_some()
+        || v.chamber_sphere.is_some()
+        || v.heart_pulmonary.is_some()
+        || v.coronary_bed.is_some()
+}
+
+/// The circuit, probes and segment table while the network's parts are stamped into them.
+struct Stamping<'a> {
+    spec: &'a NetworkSpec,
+    graph: &'a graph::Graph<'a>,
+    circuit: Circuit,
+    probes: Probes,
+    summary: Summary,
+    table: Vec<segments::SegmentRow>,
+    links: HeartLinks,
+    hearts: Vec<(String, usize)>,
+}
+
+impl<'a> Stamping<'a> {
+    /// Storage for the whole network, allocated once at upper bounds (after the memory the
+    /// model will need is checked against what it allows).
+    fn new(spec: &'a NetworkSpec, graph: &'a graph::Graph<'a>) -> Result<Self> {
+        let segments: usize = spec.vessels.iter().map(|v| segments::count(spec, v)).sum();
         // a segment adds one branch and (but for the last of its vessel) one node; a boundary
         // condition at most two nodes and two branches
-        let bcs = self.boundary_conditions.len();
+        let bcs = spec.boundary_conditions.len();
         // refuse a model too large for the memory allowed before allocating for it
         crate::run::memory::check_model(
-            &self.name,
+            &spec.name,
             segments,
-            self.vessels.len() + bcs,
-            self.transport
+            spec.vessels.len() + bcs,
+            spec.transport
                 .as_ref()
                 .map(|t| (t.cells_per_segment.max(1.0), t.species.len())),
-            self.max_memory,
+            spec.max_memory,
         )?;
         let mut circuit = Circuit::try_with_capacity(
             graph.names.len() + segments + 2 * bcs,
@@ -88,124 +137,154 @@ impl NetworkSpec {
             circuit.add_node(*name, 0.0, 0.0);
         }
         let mut probes = Probes::default();
-        let with_output = self.vessels.iter().filter(|v| v.output).count();
+        let with_output = spec.vessels.iter().filter(|v| v.output).count();
         probes.vessels.reserve(with_output);
         probes.vessel_unknowns.reserve(4 * with_output);
-        if self.output_segments {
+        if spec.output_segments {
             probes.segment_count.reserve(with_output);
             probes.segment_unknowns.reserve(3 * segments);
             probes.segment_position.reserve(segments);
         }
-        let mut summary = Summary {
-            vessels: self.vessels.len(),
+        let summary = Summary {
+            vessels: spec.vessels.len(),
             nodes: graph.names.len(),
             junctions: graph.junctions(),
             ..Default::default()
         };
-        let mut table = Vec::with_capacity(segments);
-        let mut links = HeartLinks::default();
-        let mut hearts: Vec<(String, usize)> = Vec::new();
-        for (vi, v) in self.vessels.iter().enumerate() {
-            if v.valve.is_some()
-                || v.chamber.is_some()
-                || v.through_rc.is_some()
-                || v.chamber_sphere.is_some()
-                || v.heart_pulmonary.is_some()
-                || v.coronary_bed.is_some()
+        Ok(Stamping {
+            spec,
+            graph,
+            circuit,
+            probes,
+            summary,
+            table: Vec::with_capacity(segments),
+            links: HeartLinks::default(),
+            hearts: Vec::new(),
+        })
+    }
+
+    /// A heart element and the probes of its element unknowns (chamber volumes, a sphere's
+    /// wall, a coronary bed's intramyocardial volume, a heart block's volumes).
+    fn heart_element(&mut self, vi: usize) -> Result<()> {
+        let v = &self.spec.vessels[vi];
+        let (circuit, probes) = (&mut self.circuit, &mut self.probes);
+        let ends = self.graph.vessel_ends[vi];
+        let chain = heart_element(circuit, v, ends, &mut self.links)?;
+        if v.chamber.is_some() {
+            // the chamber's volume is the element unknown it just added
+            let volume = circuit.extras.len() - 1;
+            probes.chamber_volumes.push((v.name.clone(), volume));
+        }
+        if v.chamber_sphere.is_some() {
+            // its five wall unknowns, the last element unknowns it added
+            let first = circuit.extras.len() - 5;
+            for (k, var) in ["radius", "velo", "stress", "tau", "volume"]
+                .iter()
+                .enumerate()
             {
-                let chain = heart_element(&mut circuit, v, graph.vessel_ends[vi], &mut links)?;
-                if v.chamber.is_some() {
-                    // the chamber's volume is the element unknown it just added
-                    let volume = circuit.extras.len() - 1;
-                    probes.chamber_volumes.push((v.name.clone(), volume));
-                }
-                if v.chamber_sphere.is_some() {
-                    // its five wall unknowns, the last element unknowns it added
-                    let first = circuit.extras.len() - 5;
-                    for (k, var) in ["radius", "velo", "stress", "tau", "volume"]
-                        .iter()
-                        .enumerate()
-                    {
-                        probes
-                            .element_unknowns
-                            .push((format!("{var}:{}", v.name), first + k));
-                    }
-                }
-                if v.coronary_bed.is_some() {
-                    // its intramyocardial volume, the one element unknown it adds
-                    // (svZeroDSolver's `volume_im`)
-                    let volume = circuit.extras.len() - 1;
-                    (probes.element_unknowns).push((format!("volume_im:{}", v.name), volume));
-                }
-                if v.heart_pulmonary.is_some() {
-                    // its four volumes, then the pulmonary pressure, are its element unknowns
-                    let first = circuit.extras.len() - 5;
-                    for (k, part) in HEART_CHAMBERS.into_iter().enumerate() {
-                        let name = format!("{}:{part}", v.name);
-                        probes.chamber_volumes.push((name, first + k));
-                    }
-                    hearts.push((v.name.clone(), vi));
-                }
-                let interior = if v.chamber.is_some() || v.chamber_sphere.is_some() {
-                    initial::Interior::Inlet
-                } else {
-                    initial::Interior::Linear
-                };
-                record_start(&mut circuit, v, &chain, interior);
-                if v.output {
-                    vessel::record_probes(
-                        &mut probes,
-                        &v.name,
-                        &chain,
-                        &[],
-                        Arrangement::InvertedL,
-                        self.output_segments,
-                    );
-                }
-                continue;
+                probes
+                    .element_unknowns
+                    .push((format!("{var}:{}", v.name), first + k));
             }
-            let arrangement = v.arrangement.unwrap_or(self.arrangement);
-            let segs = segments::discretise(self, vi, blood, arrangement)?;
-            let ends = graph.vessel_ends[vi];
-            let form = v
-                .lumped
-                .as_ref()
-                .map(|l| l.stenosis_form)
-                .unwrap_or_default();
-            let chain = vessel::stamp(&mut circuit, &v.name, &segs, (arrangement, form), ends);
-            let interior = match arrangement {
-                Arrangement::Rcl => initial::Interior::Rcl {
-                    resistance: segs[0].resistance,
-                    stenosis: segs[0].stenosis,
-                },
-                _ => initial::Interior::Linear,
-            };
-            record_start(&mut circuit, v, &chain, interior);
-            if v.output {
-                vessel::record_probes(
-                    &mut probes,
-                    &v.name,
-                    &chain,
-                    &segs,
-                    arrangement,
-                    self.output_segments,
-                );
-            }
-            summary.segments += segs.len();
-            for s in &segs {
-                summary.total_compliance += s.compliance;
-                summary.total_volume += s.volume;
-            }
-            table.extend(segs);
         }
-        heart::resolve(&mut circuit, &links.hearts, &links.beds)?;
-        for (node, bc) in &self.boundary_conditions {
-            let k = graph.index[node.as_str()];
-            let inlet = graph.ends[k][0].1;
-            summary.total_compliance += boundary::stamp(&mut circuit, node, k, inlet, bc)?;
-            summary.inlets += usize::from(inlet);
-            summary.outlets += usize::from(!inlet);
+        if v.coronary_bed.is_some() {
+            // its intramyocardial volume, the one element unknown it adds
+            // (svZeroDSolver's `volume_im`)
+            let volume = circuit.extras.len() - 1;
+            (probes.element_unknowns).push((format!("volume_im:{}", v.name), volume));
         }
+        if v.heart_pulmonary.is_some() {
+            // its four volumes, then the pulmonary pressure, are its element unknowns
+            let first = circuit.extras.len() - 5;
+            for (k, part) in HEART_CHAMBERS.into_iter().enumerate() {
+                let name = format!("{}:{part}", v.name);
+                probes.chamber_volumes.push((name, first + k));
+            }
+            self.hearts.push((v.name.clone(), vi));
+        }
+        let interior = if v.chamber.is_some() || v.chamber_sphere.is_some() {
+            initial::Interior::Inlet
+        } else {
+            initial::Interior::Linear
+        };
+        record_start(circuit, v, &chain, interior);
+        if v.output {
+            vessel::record_probes(
+                probes,
+                &v.name,
+                &chain,
+                &[],
+                Arrangement::InvertedL,
+                self.spec.output_segments,
+            );
+        }
+        Ok(())
+    }
+
+    /// A vessel cut into segments (docs/physics.md §1), stamped with its probes; its rows go
+    /// to the segment table.
+    fn segmented_vessel(&mut self, vi: usize, blood: Blood) -> Result<()> {
+        let (spec, v) = (self.spec, &self.spec.vessels[vi]);
+        let arrangement = v.arrangement.unwrap_or(spec.arrangement);
+        let segs = segments::discretise(spec, vi, blood, arrangement)?;
+        let ends = self.graph.vessel_ends[vi];
+        let form = v
+            .lumped
+            .as_ref()
+            .map(|l| l.stenosis_form)
+            .unwrap_or_default();
+        let circuit = &mut self.circuit;
+        let chain = vessel::stamp(circuit, &v.name, &segs, (arrangement, form), ends);
+        let interior = match arrangement {
+            Arrangement::Rcl => initial::Interior::Rcl {
+                resistance: segs[0].resistance,
+                stenosis: segs[0].stenosis,
+            },
+            _ => initial::Interior::Linear,
+        };
+        record_start(circuit, v, &chain, interior);
+        if v.output {
+            vessel::record_probes(
+                &mut self.probes,
+                &v.name,
+                &chain,
+                &segs,
+                arrangement,
+                spec.output_segments,
+            );
+        }
+        self.summary.segments += segs.len();
+        for s in &segs {
+            self.summary.total_compliance += s.compliance;
+            self.summary.total_volume += s.volume;
+        }
+        self.table.extend(segs);
+        Ok(())
+    }
+
+    /// One stamp per boundary condition (`boundary`, one file per type).
+    fn boundary_conditions(&mut self) -> Result<()> {
+        for (node, bc) in &self.spec.boundary_conditions {
+            let k = self.graph.index[node.as_str()];
+            let inlet = self.graph.ends[k][0].1;
+            let c = boundary::stamp(&mut self.circuit, node, k, inlet, bc)?;
+            self.summary.total_compliance += c;
+            self.summary.inlets += usize::from(inlet);
+            self.summary.outlets += usize::from(!inlet);
+        }
+        Ok(())
+    }
+
+    /// The probes moved to DAE unknowns, the valves recorded, storage trimmed.
+    fn finish(self) -> Assembled {
+        let Stamping {
+            mut circuit,
+            mut probes,
+            mut summary,
+            table,
+            hearts,
+            ..
+        } = self;
         probes.shift_branches(circuit.nodes.len());
         probes.shift_extras(circuit.nodes.len() + circuit.branches.len());
         probes.record_valves(&circuit, &hearts);
@@ -217,12 +296,12 @@ impl NetworkSpec {
             .iter()
             .chain(&circuit.fixed_pressures)
             .find_map(|(_, w)| w.period());
-        Ok(Assembled {
+        Assembled {
             circuit,
             probes,
             summary,
             segments: table,
-        })
+        }
     }
 }
 
