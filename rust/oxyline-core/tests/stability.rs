@@ -134,7 +134,7 @@ fn only_rk4_runs_probe_the_rk4_limit() {
           "boundary_conditions": {"in": {"type": "flow", "flow": {"kind": "fourier", "period": 1.0,
                                           "mean": 5e-6, "sin": [8e-6]}},
                                   "out": {"type": "resistance", "resistance": 1e8}},
-          "transport": {"species": [{"name": "o2", "inlet": {"kind": "constant", "value": 1.0},
+          "transport": {"species": [{"name": "o2", "diffusivity": 1.2e-9, "inlet": {"kind": "constant", "value": 1.0},
               "wall": {"model": "graetz", "wall_concentration": 0.2}}]}}"#;
     let spec = parse(json).unwrap();
     let assembled = spec.assemble().unwrap();
