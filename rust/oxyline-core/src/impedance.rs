@@ -24,31 +24,19 @@ pub fn input_impedances(dae: &Dae, node: usize, omegas: &[f64]) -> Result<Vec<c6
             format!("angular frequency {w} must be finite and >= 0"),
         ));
     }
-    // F's entries, then one diagonal stamp per row for iωE (duplicates are summed)
-    let nnz = dae.f.ptr[n];
-    let mut stamps: Vec<(usize, usize)> = Vec::with_capacity(nnz + n);
-    for i in 0..n {
-        for k in dae.f.ptr[i]..dae.f.ptr[i + 1] {
-            stamps.push((i, dae.f.col[k] as usize));
-        }
-    }
-    stamps.extend((0..n).map(|i| (i, i)));
+    let mut system = FrequencySystem::new(dae);
     // at ω = 0 capacitor rows have no pivot and the elimination falls back to faer's LU for
     // good, so zero frequency gets its own solver and the others keep the O(n) one
-    let mut lu_ac = SparseLu::<c64>::analyse(n, &stamps)?;
+    let mut lu_ac = SparseLu::<c64>::analyse(n, &system.stamps)?;
     let mut lu_dc = match omegas.contains(&0.0) {
-        true => Some(SparseLu::<c64>::analyse(n, &stamps)?),
+        true => Some(SparseLu::<c64>::analyse(n, &system.stamps)?),
         false => None,
     };
-    let mut vals: Vec<c64> = dae.f.val[..nnz].iter().map(|&v| c64::new(v, 0.0)).collect();
-    vals.resize(nnz + n, c64::new(0.0, 0.0));
     let mut rhs = vec![c64::new(0.0, 0.0); n];
     omegas
         .iter()
         .map(|&omega| {
-            for (v, &e) in vals[nnz..].iter_mut().zip(&dae.e) {
-                *v = c64::new(0.0, omega * e);
-            }
+            system.set_frequency(dae, omega);
             let singular = |why: String| {
                 Error::solver(
                     0.0,
@@ -59,7 +47,7 @@ pub fn input_impedances(dae: &Dae, node: usize, omegas: &[f64]) -> Result<Vec<c6
                 Some(dc) if omega == 0.0 => dc,
                 _ => &mut lu_ac,
             };
-            lu.factor(&vals).map_err(singular)?;
+            lu.factor(&system.vals).map_err(singular)?;
             rhs.iter_mut().for_each(|x| *x = c64::new(0.0, 0.0));
             rhs[node] = c64::new(1.0, 0.0);
             if !lu.solve_in_place(&mut rhs) {
@@ -68,6 +56,41 @@ pub fn input_impedances(dae: &Dae, node: usize, omegas: &[f64]) -> Result<Vec<c6
             Ok(rhs[node])
         })
         .collect()
+}
+
+/// The frequency-domain matrix iωE + F in the stamp form `SparseLu` takes: F's entries, then
+/// one diagonal stamp per row for iωE (duplicates are summed). Shared by the input impedance
+/// and the periodic start (`integrate::periodic`), which solve the same system per frequency.
+pub(crate) struct FrequencySystem {
+    /// (row, column) of every value, in `vals` order
+    pub stamps: Vec<(usize, usize)>,
+    /// F's values, then the diagonal iωE of the frequency last set
+    pub vals: Vec<c64>,
+    nnz: usize,
+}
+
+impl FrequencySystem {
+    pub fn new(dae: &Dae) -> Self {
+        let n = dae.n;
+        let nnz = dae.f.ptr[n];
+        let mut stamps: Vec<(usize, usize)> = Vec::with_capacity(nnz + n);
+        for i in 0..n {
+            for k in dae.f.ptr[i]..dae.f.ptr[i + 1] {
+                stamps.push((i, dae.f.col[k] as usize));
+            }
+        }
+        stamps.extend((0..n).map(|i| (i, i)));
+        let mut vals: Vec<c64> = dae.f.val[..nnz].iter().map(|&v| c64::new(v, 0.0)).collect();
+        vals.resize(nnz + n, c64::new(0.0, 0.0));
+        FrequencySystem { stamps, vals, nnz }
+    }
+
+    /// Sets the diagonal stamps to iωE (ω in rad/s).
+    pub fn set_frequency(&mut self, dae: &Dae, omega: f64) {
+        for (v, &e) in self.vals[self.nnz..].iter_mut().zip(&dae.e) {
+            *v = c64::new(0.0, omega * e);
+        }
+    }
 }
 
 #[cfg(test)]

@@ -241,31 +241,34 @@ struct BackwardShear<'a> {
 }
 
 impl BackwardShear<'_> {
-    /// The phases e^{ikωt} by powers of one `from_polar` (H complex products instead of H
-    /// sine-cosine pairs; the k-th power's rounding is ~k ulp, far below the crossing's
-    /// tolerance).
-    fn value(&self, t: f64) -> f64 {
+    /// start + Σ_k term(k, c_k, e^{ikωt}), the phases by powers of one `from_polar` (H complex
+    /// products instead of H sine-cosine pairs; the k-th power's rounding is ~k ulp, far below
+    /// the crossing's tolerance).
+    fn harmonic_sum(
+        &self,
+        t: f64,
+        start: f64,
+        term: impl Fn(f64, Complex<f64>, Complex<f64>) -> f64,
+    ) -> f64 {
         let w = Complex::from_polar(1.0, self.omega * t);
         let mut phase = w;
-        let mut f = self.f0;
-        for ck in self.c {
-            f += (ck * phase).re;
+        let mut f = start;
+        for (i, ck) in self.c.iter().enumerate() {
+            f += term((i + 1) as f64, *ck, phase);
             phase *= w;
         }
         f
     }
 
+    fn value(&self, t: f64) -> f64 {
+        self.harmonic_sum(t, self.f0, |_, ck, phase| (ck * phase).re)
+    }
+
     /// ∫_0^t f: f0 t + Re Σ_k c_k (e^{ikωt} − 1)/(ikω).
     fn primitive(&self, t: f64) -> f64 {
-        let w = Complex::from_polar(1.0, self.omega * t);
-        let mut phase = w;
-        let mut f = self.f0 * t;
-        for (i, ck) in self.c.iter().enumerate() {
-            let kw = Complex::new(0.0, (i + 1) as f64 * self.omega);
-            f += (ck * (phase - 1.0) / kw).re;
-            phase *= w;
-        }
-        f
+        self.harmonic_sum(t, self.f0 * t, |k, ck, phase| {
+            (ck * (phase - 1.0) / Complex::new(0.0, k * self.omega)).re
+        })
     }
 
     /// The sign change of f in [a, b] (f(a) = fa, f(b) = fb of opposite signs), by the

@@ -9,6 +9,7 @@
 
 use crate::circuit::{Dae, Regime};
 use crate::error::{Error, Result};
+use crate::impedance::FrequencySystem;
 use crate::sparse::SparseLu;
 use faer::c64;
 use std::f64::consts::PI;
@@ -49,28 +50,16 @@ pub fn periodic_state(dae: &Dae, steady: &[f64], period: f64) -> Result<Vec<f64>
             samples[j * rows.len() + r] = f[row];
         }
     }
-    // F's entries, then one diagonal stamp per row for i k ω E (duplicates are summed)
-    let nnz = dae.f.ptr[n];
-    let mut stamps: Vec<(usize, usize)> = Vec::with_capacity(nnz + n);
-    for i in 0..n {
-        for k in dae.f.ptr[i]..dae.f.ptr[i + 1] {
-            stamps.push((i, dae.f.col[k] as usize));
-        }
-    }
-    stamps.extend((0..n).map(|i| (i, i)));
-    let mut lu = SparseLu::<c64>::analyse(n, &stamps)?;
-    let mut vals: Vec<c64> = dae.f.val[..nnz].iter().map(|&v| c64::new(v, 0.0)).collect();
-    vals.resize(nnz + n, c64::new(0.0, 0.0));
+    let mut system = FrequencySystem::new(dae);
+    let mut lu = SparseLu::<c64>::analyse(n, &system.stamps)?;
     let mut rhs = vec![c64::new(0.0, 0.0); n];
     let mut y = steady.to_vec();
     for k in 1..=PERIODIC_HARMONICS {
         let omega = 2.0 * PI * k as f64 / period;
-        for (v, &e) in vals[nnz..].iter_mut().zip(&dae.e) {
-            *v = c64::new(0.0, omega * e);
-        }
+        system.set_frequency(dae, omega);
         let singular =
             |why: String| Error::solver(0.0, format!("periodic start, harmonic {k}: {why}"));
-        lu.factor(&vals).map_err(singular)?;
+        lu.factor(&system.vals).map_err(singular)?;
         rhs.iter_mut().for_each(|x| *x = c64::new(0.0, 0.0));
         // F_k = (1/M) Σ_j f(t_j) e^(−i k ω t_j), t_j = j T / M
         for j in 0..SAMPLES {

@@ -289,7 +289,7 @@ impl Transport {
         let mut q_in = vec![0.0; self.plan.boundary_inlet.len()];
         for b in &self.plan.boundary_links {
             let q = self.qf[b.face as usize];
-            q_in[b.boundary as usize] += if b.into_node { q } else { -q };
+            q_in[b.boundary as usize] += b.inflow(q);
         }
         for ((_, _, bb), &q) in self.plan.sources.iter().zip(&self.qs) {
             q_in[*bb] += q;
@@ -307,12 +307,7 @@ impl Transport {
                 b.boundary as usize,
                 self.qf[b.face as usize],
             );
-            let c = if (q >= 0.0) == b.into_node {
-                self.lagged_boundary(bb, End::Node(n))
-            } else {
-                self.conc[n]
-            };
-            j_in[bb] += if b.into_node { q * c } else { -q * c };
+            j_in[bb] += b.flux_in(q, self.conc[n], || self.lagged_boundary(bb, End::Node(n)));
         }
         for ((n, _, bb), &q) in self.plan.sources.iter().zip(&self.qs) {
             let c = if q >= 0.0 {

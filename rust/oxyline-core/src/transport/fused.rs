@@ -411,8 +411,8 @@ impl Transport {
         for b in &plan.boundary_links {
             let (n, q) = (b.node as usize, self.qf[b.face as usize]);
             let acc = &mut sw.acc[n];
-            acc[0] += if b.into_node { q } else { -q };
-            if (q >= 0.0) == b.into_node {
+            acc[0] += b.inflow(q);
+            if b.boundary_upwind(q) {
                 sw.lag[n] = old(n);
                 acc[2] += q.abs() * inflow_value(self.bval[b.boundary as usize], sw.lag[n]);
             } else {

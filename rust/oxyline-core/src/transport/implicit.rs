@@ -486,19 +486,8 @@ impl Transport {
         let (qf, conc) = (&self.qf[..], &self.conc[..]);
         for b in &self.plan.boundary_links {
             let (n, bb, q) = (b.node as usize, b.boundary as usize, qf[b.face as usize]);
-            // the boundary is upwind: it carries its value in; else the node's leaves
-            let c = if (q >= 0.0) == b.into_node {
-                self.lagged_boundary(bb, End::Node(n))
-            } else {
-                conc[n]
-            };
-            let q_in = if b.into_node { q } else { -q };
-            account(
-                self.plan.boundary_inlet[bb],
-                q_in * c,
-                &mut i_in,
-                &mut i_out,
-            );
+            let flux_in = b.flux_in(q, conc[n], || self.lagged_boundary(bb, End::Node(n)));
+            account(self.plan.boundary_inlet[bb], flux_in, &mut i_in, &mut i_out);
         }
         for ((n, _, bb), &q) in self.plan.sources.iter().zip(&self.qs) {
             let c = if q >= 0.0 {

@@ -86,6 +86,33 @@ pub(super) struct BoundaryLink {
     pub(super) into_node: bool,
 }
 
+impl BoundaryLink {
+    /// The flow into the node (m³/s) of the face flow `q`: ±q by the face's orientation.
+    #[inline]
+    pub(super) fn inflow(&self, q: f64) -> f64 {
+        if self.into_node { q } else { -q }
+    }
+
+    /// Whether the boundary is upwind of the node at face flow `q`: then it carries its own
+    /// value in, else the node's value leaves through it.
+    #[inline]
+    pub(super) fn boundary_upwind(&self, q: f64) -> bool {
+        (q >= 0.0) == self.into_node
+    }
+
+    /// Upwind species flux into the node (mol/s) at face flow `q`: the boundary's value
+    /// (`boundary`, asked only when it is upwind) or the node's `node_conc`.
+    #[inline]
+    pub(super) fn flux_in(&self, q: f64, node_conc: f64, boundary: impl FnOnce() -> f64) -> f64 {
+        let c = if self.boundary_upwind(q) {
+            boundary()
+        } else {
+            node_conc
+        };
+        self.inflow(q) * c
+    }
+}
+
 /// Children-before-parents order of the domain nodes when the undirected graph of the internal
 /// faces is a forest (no loops, no parallel faces): then the upwind system can be eliminated
 /// leaves first for any flow directions (`Transport::tree_solve`). None otherwise. Linear time.

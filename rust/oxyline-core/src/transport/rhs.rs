@@ -179,12 +179,7 @@ impl Transport {
                 b.boundary as usize,
                 self.qf[b.face as usize],
             );
-            let c = if (q >= 0.0) == b.into_node {
-                self.boundary_conc(bb, End::Node(n))
-            } else {
-                self.conc[n]
-            };
-            let flux_in = if b.into_node { q * c } else { -(q * c) };
+            let flux_in = b.flux_in(q, self.conc[n], || self.boundary_conc(bb, End::Node(n)));
             dnode[n] += flux_in;
             account(inlet[bb], flux_in, &mut i_in, &mut i_out);
         }
