@@ -600,6 +600,27 @@ mod tests {
     }
 
     #[test]
+    fn anchor_is_32_bytes_and_a_checkpoint_restores_it_exactly() {
+        // two anchors per cache line (the implicit step streams one per cell)
+        assert_eq!(std::mem::size_of::<HillAnchor>(), 32);
+        let b = standard();
+        let alpha = 1.40e-3 / MMHG;
+        for p in [3.0, 27.0, 60.0, 95.0, 400.0] {
+            let mut a = HillAnchor::default();
+            let c = b.free_anchored(b.total(alpha * p * MMHG), 0.0, &mut a);
+            let mut back = HillAnchor::from_array(&a.to_array());
+            assert_eq!(back.to_array(), a.to_array(), "{p} mmHg");
+            // the restored anchor takes the same path to the same bits
+            let ct = b.total(c * (1.0 + 1e-5));
+            let (x, y) = (
+                b.free_anchored(ct, c, &mut a),
+                b.free_anchored(ct, c, &mut back),
+            );
+            assert_eq!(x.to_bits(), y.to_bits(), "{p} mmHg");
+        }
+    }
+
+    #[test]
     fn anchored_inversion_through_anchor_refreshes() {
         // nodes whose totals drift by growing relative steps (1e-9 … 3e-2 per call, both
         // signs), as cells do between stages; includes a zero and a negative total
