@@ -75,8 +75,8 @@ fn hill(p: f64, p50: f64, n: f64) -> (f64, f64) {
 /// bound·u⁴ < P_TOL, i.e. |u| below (P_TOL/bound)^¼, folded with the trusted span into one
 /// limit `u_max` when the anchor is made.
 ///
-/// 32 bytes per node (two per cache line): the implicit step reads every cell's anchor once
-/// per step, so its size is memory traffic. k₃ and `u_max` are single precision: `u_max` is
+/// 40 bytes per node (was 48): the implicit step reads every cell's anchor once per step, so
+/// its size is memory traffic. k₃ and `u_max` are single precision: `u_max` is
 /// rounded down (a slightly stricter acceptance), and k₃'s rounding (2⁻²⁴ relative) moves the
 /// series' P by |k₃|u³·2⁻²⁴, which `u_max` also keeps below 1e-3 P_TOL (for the standard
 /// oxyhaemoglobin law ~1e-14 Pa, four orders under P_TOL and below one ulp of P). k₂'s term is
@@ -600,9 +600,9 @@ mod tests {
     }
 
     #[test]
-    fn anchor_is_32_bytes_and_a_checkpoint_restores_it_exactly() {
-        // two anchors per cache line (the implicit step streams one per cell)
-        assert_eq!(std::mem::size_of::<HillAnchor>(), 32);
+    fn anchor_is_40_bytes_and_a_checkpoint_restores_it_exactly() {
+        // the implicit step streams one anchor per cell: its size is memory traffic
+        assert_eq!(std::mem::size_of::<HillAnchor>(), 40);
         let b = standard();
         let alpha = 1.40e-3 / MMHG;
         for p in [3.0, 27.0, 60.0, 95.0, 400.0] {
