@@ -499,7 +499,8 @@ impl Transport {
         let rows = RowState {
             set: &plan.species[s],
             laws,
-            linearised: (!fixed).then_some((&sw.wlin[..nc], &sw.wconst[..nc])),
+            // (lazily: without a binding the scratch arrays are empty)
+            linearised: (!fixed).then(|| (&sw.wlin[..nc], &sw.wconst[..nc])),
             nc,
             dt,
         };
