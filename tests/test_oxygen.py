@@ -126,6 +126,43 @@ def test_hill_vessel_end_po2_inverts_the_carried_content() -> None:
         np.testing.assert_allclose(content(po2[1:, 0]), ct, rtol=1e-10)
 
 
+def test_hill_bifurcation_keeps_mass_balance_and_the_hill_law_at_every_vessel_end() -> None:
+    """A compliant bifurcation (the fused tree step's junction and its binding rows, the
+    wall linearised per cell before the elimination) with Hill blood losing O2 to a
+    constant-k wall, generalized-α: the stored O2 closes against the boundary, wall and decay
+    fluxes to round-off (1e-12 of the inflow), and at both ends of every vessel the reported
+    PO2 and the carried content C_t = flux/Q satisfy C_t = αP + H Pⁿ/(Pⁿ + P50ⁿ) (physics
+    §4.2, checked in numpy) to the inversions' tolerance (1e-10 mmHg Newton, 1e-12 mmHg
+    anchored series)."""
+    geo = {"wall_thickness": 5e-4, "youngs_modulus": 4e5}
+    vessels = [{"name": "trunk", "from": "in", "to": "j", "segments": 8, "length": 0.06,
+                "radius": 3e-3, **geo},
+               {"name": "a", "from": "j", "to": "out_a", "segments": 6, "length": 0.05,
+                "radius": 2.4e-3, **geo},
+               {"name": "b", "from": "j", "to": "out_b", "segments": 5, "length": 0.04,
+                "radius": 2.0e-3, **geo}]
+    m = {"period": 1.0, "vessels": vessels,
+         "boundary_conditions": {
+             "in": {"type": "flow", "fourier": {"period": 1, "mean": 6e-6, "sin": [3e-6]}},
+             "out_a": {"type": "resistance", "resistance": 2.9e9},
+             "out_b": {"type": "resistance", "resistance": 4.7e9}},
+         "oxygen": {"inlet": {"po2": 95.0}, "hemoglobin": "hill",
+                    "wall": {"model": "mass-transfer", "k": 2e-3, "po2": 40.0}}}
+    res = oxyline.simulate(m, method="generalized-alpha", dt=1e-3, cycles=2, output_every=0.02)
+    mb = res.o2_mass_balance
+    assert np.abs(mb["residual"]).max() <= 1e-12 * np.abs(mb["inflow"]).max()
+    h = 1.34 * 150 / 22.414
+
+    def content(p: np.ndarray) -> np.ndarray:
+        return ALPHA * p + h * p**2.7 / (p**2.7 + 26.8**2.7)
+
+    assert (res.po2_in[-1] - res.po2_out[-1]).min() > 1.0  # every vessel loses visibly
+    for po2, flux, q in ((res.po2_in, res.o2_flux_in, res.flow_in),
+                         (res.po2_out, res.o2_flux_out, res.flow_out)):
+        assert (q[1:] > 0).all()
+        np.testing.assert_allclose(content(po2[1:]), flux[1:] / q[1:], rtol=1e-10)
+
+
 def test_flow_only_results_are_unchanged_by_transport() -> None:
     m = examples.load("paper-bifurcated")
     with_o2 = oxyline.simulate(m, cycles=2, method="generalized-alpha", dt=1e-3)

@@ -18,35 +18,12 @@
 //!
 //!     cargo run --release -p oxyline-core --example leveque_cost -- k.json leveque.json [reps] [rk4]
 
+mod common;
+
+use common::{cpu, load};
 use oxyline_core::genalpha::NewtonControl;
 use oxyline_core::integrate::steady::steady_state;
-use oxyline_core::network::parse;
-use oxyline_core::transport::{BALANCE_COLUMNS, VESSEL_COLUMNS};
-use oxyline_core::{Dae, Method, RunSettings, Start, Transport, simulate_with_transport};
-
-/// CPU seconds of this process (user + system, from /proc: robust on a shared machine).
-fn cpu() -> f64 {
-    let stat = std::fs::read_to_string("/proc/self/stat").expect("/proc/self/stat");
-    let rest = &stat[stat.rfind(')').expect("stat format") + 2..];
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    let ticks: f64 = f[11].parse::<f64>().expect("utime") + f[12].parse::<f64>().expect("stime");
-    ticks / 100.0
-}
-
-/// The circuit, its transport prototype and the vessel-level output columns of a model file.
-fn load(path: &str) -> (Dae, Transport, Vec<usize>, Vec<usize>) {
-    let json = std::fs::read_to_string(path).expect("readable model file");
-    let spec = parse(&json).expect("valid model");
-    let assembled = spec.assemble().expect("valid network");
-    let dae = assembled.circuit.assemble().expect("valid circuit");
-    let spec_tr = spec.transport.as_ref().expect("a transport section");
-    let tr = Transport::build(spec_tr, &assembled.circuit, &dae, &assembled.probes).expect("ok");
-    let nv = assembled.probes.vessels.len();
-    let mut columns: Vec<usize> = (0..VESSEL_COLUMNS * nv).collect();
-    let balance = tr.columns_per_species() - BALANCE_COLUMNS;
-    columns.extend(balance..balance + BALANCE_COLUMNS);
-    (dae, tr, assembled.probes.vessel_unknowns.clone(), columns)
-}
+use oxyline_core::{Method, RunSettings, Start, simulate_with_transport};
 
 fn main() {
     let mut args = std::env::args().skip(1);
@@ -54,8 +31,10 @@ fn main() {
     let (k_path, lev_path) = (args.next().expect(usage), args.next().expect(usage));
     let reps: usize = args.next().map_or(3, |r| r.parse().expect("reps"));
     let rk4 = args.next().as_deref() == Some("rk4");
-    let (dae, k_tr, probes, columns) = load(&k_path);
-    let (_, lev_tr, _, _) = load(&lev_path);
+    let k = load(&k_path);
+    let (dae, k_tr, columns) = (&k.dae, &k.transport, k.vessel_columns());
+    let probes = k.assembled.probes.vessel_unknowns.clone();
+    let lev_tr = load(&lev_path).transport;
     let s = RunSettings {
         method: if rk4 {
             Method::Rk4
@@ -101,19 +80,19 @@ fn main() {
         for (i, b) in best.iter_mut().enumerate() {
             let t0 = cpu();
             match i {
-                0 => simulate_with_transport(&dae, None, &s, &mut |_, _| true).map(Some),
-                1 => simulate_with_transport(&dae, None, &setup, &mut |_, _| true).map(Some),
-                2 => simulate_with_transport(&dae, None, &pass1, &mut |_, _| true).map(Some),
-                3 => simulate_with_transport(&dae, Some(&mut k_tr.new_run()), &s, &mut |_, _| true)
+                0 => simulate_with_transport(dae, None, &s, &mut |_, _| true).map(Some),
+                1 => simulate_with_transport(dae, None, &setup, &mut |_, _| true).map(Some),
+                2 => simulate_with_transport(dae, None, &pass1, &mut |_, _| true).map(Some),
+                3 => simulate_with_transport(dae, Some(&mut k_tr.new_run()), &s, &mut |_, _| true)
                     .map(Some),
                 4 => {
-                    simulate_with_transport(&dae, Some(&mut lev_tr.new_run()), &s, &mut |_, _| true)
+                    simulate_with_transport(dae, Some(&mut lev_tr.new_run()), &s, &mut |_, _| true)
                         .map(Some)
                 }
-                5 => steady_state(&dae).map(|_| None),
+                5 => steady_state(dae).map(|_| None),
                 _ => {
                     let mut tr = lev_tr.new_run();
-                    simulate_with_transport(&dae, Some(&mut tr), &one_row, &mut |_, _| true)
+                    simulate_with_transport(dae, Some(&mut tr), &one_row, &mut |_, _| true)
                         .map(Some)
                 }
             }

@@ -16,9 +16,10 @@
 //! steps (from its first progress check to the cycle's end; the 125-step first pass has no
 //! check before it ends).
 
+mod common;
+
+use common::{Model, load};
 use oxyline_core::genalpha::NewtonControl;
-use oxyline_core::network::parse;
-use oxyline_core::transport::{BALANCE_COLUMNS, VESSEL_COLUMNS};
 use oxyline_core::{Method, RunSettings, Start, Transport, simulate_with_transport};
 
 /// CPU ns this process has run (/proc/self/schedstat, first field).
@@ -41,27 +42,11 @@ fn main() {
     };
     let stop: f64 = args.next().expect(usage).parse().expect("stop time");
     let paths: Vec<String> = args.collect();
-    let mut models = Vec::new();
-    for p in &paths {
-        let spec = parse(&std::fs::read_to_string(p).expect("readable")).expect("valid model");
-        let assembled = spec.assemble().expect("valid network");
-        let dae = assembled.circuit.assemble().expect("valid circuit");
-        let tr = Transport::build(
-            spec.transport.as_ref().expect("a transport section"),
-            &assembled.circuit,
-            &dae,
-            &assembled.probes,
-        )
-        .expect("valid transport");
-        models.push((assembled, dae, tr));
-    }
-    let (a0, dae0, _) = &models[0];
+    let models: Vec<Model> = paths.iter().map(|p| load(p)).collect();
+    let (a0, dae0) = (&models[0].assembled, &models[0].dae);
     let nseg = a0.circuit.segments.len() as f64;
-    let settings = |tr: &Transport, a: &oxyline_core::network::Assembled| {
-        let nv = a.probes.vessels.len();
-        let mut columns: Vec<usize> = (0..VESSEL_COLUMNS * nv).collect();
-        let balance = tr.columns_per_species() - BALANCE_COLUMNS;
-        columns.extend(balance..balance + BALANCE_COLUMNS);
+    let settings = |m: &Model| {
+        let columns = m.vessel_columns();
         RunSettings {
             method,
             dt: matches!(method, Method::GeneralizedAlpha { .. }).then_some(1e-3),
@@ -74,7 +59,7 @@ fn main() {
             keep_current_cycle: true,
             start: Start::Steady,
             newton: NewtonControl::default(),
-            probes: a.probes.vessel_unknowns.clone(),
+            probes: m.assembled.probes.vessel_unknowns.clone(),
             species_columns: Some(columns),
         }
     };
@@ -121,17 +106,17 @@ fn main() {
     };
     let mut best = vec![f64::INFINITY; models.len() + 1];
     for _ in 0..reps {
-        let s = settings(&models[0].2, a0);
+        let s = settings(&models[0]);
         if only.as_deref() != Some("species") {
             best[0] = best[0].min(timed(dae0, None, &s));
         }
         if only.as_deref() == Some("flow") {
             continue;
         }
-        for (k, (a, dae, tr)) in models.iter().enumerate() {
-            let s = settings(tr, a);
-            let mut run = tr.new_run();
-            best[k + 1] = best[k + 1].min(timed(dae, Some(&mut run), &s));
+        for (k, m) in models.iter().enumerate() {
+            let s = settings(m);
+            let mut run = m.transport.new_run();
+            best[k + 1] = best[k + 1].min(timed(&m.dae, Some(&mut run), &s));
         }
     }
     println!("segments {nseg}: flow {:.1} ns/seg-step", best[0] / nseg);

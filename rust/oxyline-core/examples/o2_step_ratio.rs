@@ -11,20 +11,11 @@
 //! (every 256 steps) past it, and the CPU time between the first and the last check is compared
 //! (per step: the steady start and RK4's step-size search left out).
 
-use oxyline_core::genalpha::NewtonControl;
-use oxyline_core::network::parse;
-use oxyline_core::transport::{BALANCE_COLUMNS, VESSEL_COLUMNS};
-use oxyline_core::{Method, RunSettings, Start, Transport, simulate_with_transport};
+mod common;
 
-/// CPU seconds of this process (user + system, from /proc: robust on a shared machine).
-fn cpu() -> f64 {
-    let stat = std::fs::read_to_string("/proc/self/stat").expect("/proc/self/stat");
-    // the fields after the parenthesised command name; utime and stime are fields 14, 15
-    let rest = &stat[stat.rfind(')').expect("stat format") + 2..];
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    let ticks: f64 = f[11].parse::<f64>().expect("utime") + f[12].parse::<f64>().expect("stime");
-    ticks / 100.0
-}
+use common::{cpu, load};
+use oxyline_core::genalpha::NewtonControl;
+use oxyline_core::{Method, RunSettings, Start, Transport, simulate_with_transport};
 
 fn main() {
     let mut args = std::env::args().skip(1);
@@ -35,17 +26,9 @@ fn main() {
         _ => Method::GeneralizedAlpha { rho_inf: 0.5 },
     };
     let stop: Option<f64> = args.next().map(|t| t.parse().expect("stop time"));
-    let json = std::fs::read_to_string(&path).expect("readable model file");
-    let spec = parse(&json).expect("valid model");
-    let assembled = spec.assemble().expect("valid network");
-    let dae = assembled.circuit.assemble().expect("valid circuit");
-    let spec_tr = spec.transport.as_ref().expect("a transport section");
-    let prototype =
-        Transport::build(spec_tr, &assembled.circuit, &dae, &assembled.probes).expect("valid");
-    let nv = assembled.probes.vessels.len();
-    let mut columns: Vec<usize> = (0..VESSEL_COLUMNS * nv).collect();
-    let balance = prototype.columns_per_species() - BALANCE_COLUMNS;
-    columns.extend(balance..balance + BALANCE_COLUMNS);
+    let model = load(&path);
+    let (assembled, dae, prototype) = (&model.assembled, &model.dae, &model.transport);
+    let columns = model.vessel_columns();
     let s = RunSettings {
         method,
         dt: matches!(method, Method::GeneralizedAlpha { .. }).then_some(1e-3),
@@ -69,7 +52,7 @@ fn main() {
             marks.push(cpu());
             stop.is_none_or(|stop| t < stop || marks.len() < 2)
         };
-        match simulate_with_transport(&dae, run, &s, &mut progress) {
+        match simulate_with_transport(dae, run, &s, &mut progress) {
             Ok(_) => cpu() - t0,
             Err(oxyline_core::Error::Interrupted { .. }) => marks[marks.len() - 1] - marks[0],
             Err(e) => panic!("run failed: {e}"),

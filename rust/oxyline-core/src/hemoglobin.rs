@@ -73,8 +73,14 @@ fn hill(p: f64, p50: f64, n: f64) -> (f64, f64) {
 /// k₃ = 2k₂² − e/b, k₄ = 5k₂e/b − 5k₂³. The result is accepted when the first neglected terms
 /// — k₄u⁴ and the model's remainder H|S⁗|d⁴/(24b), each doubled — are below the tolerance:
 /// bound·u⁴ < P_TOL, i.e. |u| below (P_TOL/bound)^¼, folded with the trusted span into one
-/// limit `u_max` when the anchor is made (48 bytes per node: the implicit step reads every
-/// cell's anchor once per step, so its size is memory traffic).
+/// limit `u_max` when the anchor is made.
+///
+/// 40 bytes per node (was 48): the implicit step reads every cell's anchor once per step, so
+/// its size is memory traffic. k₃ and `u_max` are single precision: `u_max` is
+/// rounded down (a slightly stricter acceptance), and k₃'s rounding (2⁻²⁴ relative) moves the
+/// series' P by |k₃|u³·2⁻²⁴, which `u_max` also keeps below 1e-3 P_TOL (for the standard
+/// oxyhaemoglobin law ~1e-14 Pa, four orders under P_TOL and below one ulp of P). k₂'s term is
+/// ~1e3 times larger: it stays double.
 #[derive(Debug, Clone, Copy)]
 pub struct HillAnchor {
     /// Anchor pressure P₁ (Pa).
@@ -84,10 +90,20 @@ pub struct HillAnchor {
     /// 1/b = 1/(dC_t/dP) at P₁.
     inv_slope: f64,
     k2: f64,
-    k3: f64,
+    k3: f32,
     /// |u| above this leaves the model's trusted span or its error bound (negative: no
     /// anchor yet).
-    u_max: f64,
+    u_max: f32,
+}
+
+/// `x` as f32 rounded toward zero (|result| ≤ |x|: a limit stored this way never widens).
+fn f32_toward_zero(x: f64) -> f32 {
+    let r = x as f32;
+    if (r as f64).abs() > x.abs() && r != 0.0 {
+        f32::from_bits(r.to_bits() - 1)
+    } else {
+        r
+    }
 }
 
 impl HillAnchor {
@@ -101,8 +117,8 @@ impl HillAnchor {
             self.total,
             self.inv_slope,
             self.k2,
-            self.k3,
-            self.u_max,
+            f64::from(self.k3),
+            f64::from(self.u_max),
         ]
     }
 
@@ -113,8 +129,9 @@ impl HillAnchor {
             total: a[1],
             inv_slope: a[2],
             k2: a[3],
-            k3: a[4],
-            u_max: a[5],
+            // (exact for a checkpoint of this layout)
+            k3: a[4] as f32,
+            u_max: f32_toward_zero(a[5]),
         }
     }
 }
@@ -173,13 +190,17 @@ impl HillAnchor {
         let bound = 2.0 * (k4.abs() + remainder * inv_slope);
         // bound·u⁴ < P_TOL ⇔ |u| < (P_TOL/bound)^¼ (a zero bound leaves only the span)
         let u_err = (P_TOL / bound).sqrt().sqrt();
+        let k3 = 2.0 * k2 * k2 - e_b;
+        // k₃ stored in f32: its rounding error |k₃|u³·2⁻²⁴ (with k₃'s own rounding) below
+        // 1e-3 P_TOL ⇔ |u| < (1e-3 P_TOL / (|k₃| 2⁻²³))^⅓
+        let u_k3 = (1e-3 * P_TOL / (k3.abs() * f64::from(f32::EPSILON))).cbrt();
         HillAnchor {
             p,
             total: alpha * p + capacity * s,
             inv_slope,
             k2,
-            k3: 2.0 * k2 * k2 - e_b,
-            u_max: u_err.min(ANCHOR_SPAN * p),
+            k3: k3 as f32,
+            u_max: f32_toward_zero(u_err.min(u_k3).min(ANCHOR_SPAN * p)),
         }
     }
 
@@ -187,8 +208,22 @@ impl HillAnchor {
     #[inline(always)]
     fn invert(&self, ct: f64) -> (f64, f64, bool) {
         let u = (ct - self.total) * self.inv_slope;
-        let p = self.p + u * (1.0 + u * (self.k3 * u - self.k2));
-        (p, u, ct > 0.0 && u.abs() < self.u_max)
+        let p = self.p + u * (1.0 + u * (f64::from(self.k3) * u - self.k2));
+        (p, u, ct > 0.0 && u.abs() < f64::from(self.u_max))
+    }
+
+    /// The warm start of the exact inversion after the series was not accepted for `ct`:
+    /// the series' own P (its error grows like u⁴, so just outside `u_max` it is far inside
+    /// Newton's final-step test, and within the trusted span it beats the last stored free
+    /// value by orders), else `guess` (no anchor yet, a non-positive total, or a wild
+    /// extrapolation). α·P, in units of c.
+    #[inline(always)]
+    fn warm_start(&self, p_series: f64, alpha: f64, ct: f64, guess: f64) -> f64 {
+        if self.u_max > 0.0 && p_series > 0.0 && alpha * p_series < ct {
+            alpha * p_series
+        } else {
+            guess
+        }
     }
 }
 
@@ -316,6 +351,8 @@ impl Binding {
             if ok {
                 return alpha * p;
             }
+            let guess = anchor.warm_start(p, alpha, ct, guess);
+            return self.free_reanchored(ct, guess, anchor);
         }
         self.free_reanchored(ct, guess, anchor)
     }
@@ -337,9 +374,12 @@ impl Binding {
         if let Binding::Hill { alpha, .. } = *self {
             let (p, u, ok) = anchor.invert(ct);
             if ok {
-                let dp_dct = anchor.inv_slope * (1.0 + u * (3.0 * anchor.k3 * u - 2.0 * anchor.k2));
+                let k3 = f64::from(anchor.k3);
+                let dp_dct = anchor.inv_slope * (1.0 + u * (3.0 * k3 * u - 2.0 * anchor.k2));
                 return (alpha * p, alpha * dp_dct);
             }
+            let guess = anchor.warm_start(p, alpha, ct, guess);
+            return self.free_and_inv_slope_reanchored(ct, guess, anchor);
         }
         self.free_and_inv_slope_reanchored(ct, guess, anchor)
     }
@@ -557,6 +597,27 @@ mod tests {
         );
         // a step's change (|ΔP|/P ≲ 1e-4) must take the series path
         assert_eq!(fast, near, "series path taken {fast} of {near} times");
+    }
+
+    #[test]
+    fn anchor_is_40_bytes_and_a_checkpoint_restores_it_exactly() {
+        // the implicit step streams one anchor per cell: its size is memory traffic
+        assert_eq!(std::mem::size_of::<HillAnchor>(), 40);
+        let b = standard();
+        let alpha = 1.40e-3 / MMHG;
+        for p in [3.0, 27.0, 60.0, 95.0, 400.0] {
+            let mut a = HillAnchor::default();
+            let c = b.free_anchored(b.total(alpha * p * MMHG), 0.0, &mut a);
+            let mut back = HillAnchor::from_array(&a.to_array());
+            assert_eq!(back.to_array(), a.to_array(), "{p} mmHg");
+            // the restored anchor takes the same path to the same bits
+            let ct = b.total(c * (1.0 + 1e-5));
+            let (x, y) = (
+                b.free_anchored(ct, c, &mut a),
+                b.free_anchored(ct, c, &mut back),
+            );
+            assert_eq!(x.to_bits(), y.to_bits(), "{p} mmHg");
+        }
     }
 
     #[test]

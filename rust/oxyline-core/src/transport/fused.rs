@@ -19,68 +19,94 @@
 #[allow(unused_imports)]
 use super::*;
 
-/// How the fused step builds a cell's row (a binding also records the wall linearisation it
-/// used: the slope in `sweep.wlin`, which the backward pass reads, and the sum of the
-/// constant parts in `sweep.wc_sum`).
-trait CellRows {
-    /// d and b of cell `i` (node `n`) before the face terms, from its old amount `zi`, old
-    /// and new transport volumes `v` and `w` (the old concentration zi/v only where needed).
-    fn row(&mut self, i: usize, n: usize, zi: f64, v: f64, w: f64) -> (f64, f64);
-}
-
-/// A wall linear in C_t (see `fixed_rows`): d = W'(1/dt + λ) + g, b = N/dt − (q − g c_w).
-struct FixedRows<'a> {
-    g: &'a [f64],
+/// A cell's row with its wall linear in C_t, W = wl·C_t + wc (see `fixed_rows`): the laws'
+/// (g, q − g c_w) of a wall without binding, or a binding's wall linearised about the old
+/// state (`linearise_binding_wall`): d = W'(1/dt + λ) + wl, b = N/dt − wc.
+struct LinearRows<'a> {
+    wl: &'a [f64],
     wc: &'a [f64],
     rate: f64,
     inv_dt: f64,
 }
 
-impl CellRows for FixedRows<'_> {
+impl LinearRows<'_> {
+    /// d and b of cell `i` before the face terms, from its old amount `zi` and new
+    /// transport volume `w`.
     #[inline(always)]
-    fn row(&mut self, i: usize, _n: usize, zi: f64, _v: f64, w: f64) -> (f64, f64) {
-        (w * self.rate + self.g[i], zi * self.inv_dt - self.wc[i])
+    fn row(&self, i: usize, zi: f64, w: f64) -> (f64, f64) {
+        (w * self.rate + self.wl[i], zi * self.inv_dt - self.wc[i])
     }
 }
 
-/// A binding with fixed laws (see `binding_rows`): free concentration and capacity slope at
-/// the old state (anchored inversion), the wall linearised in C_t about it. The free
-/// concentrations found here are not stored (8 bytes read and written per cell and step):
-/// the observation inverts every node again (`free_of_nodes`), and `free` is read only as
-/// the warm start of a re-anchoring, for which last row's value serves (the exact inversion
-/// converges from any start to the same tolerance). Nor are the constant parts wc of the
-/// linearised wall W = wl·C_t + wc: the step's wall flux needs only their sum, added here in
-/// elimination order (Σ wl x + Σ wc instead of Σ (wl x + wc): the same flux to round-off,
-/// without a per-cell array written here and read back by the backward pass).
-struct BindingRows<'a> {
-    binding: Binding,
-    laws: &'a Laws,
-    free: &'a [f64],
-    anchors: &'a mut [HillAnchor],
-    wlin: &'a mut [f64],
-    wc_sum: f64,
-    rate: f64,
-    inv_dt: f64,
+/// The free concentration of node `n` at total `c` and dc/dC_t there.
+trait Inversion {
+    fn free_and_inv_slope(&mut self, n: usize, c: f64) -> (f64, f64);
 }
 
-impl CellRows for BindingRows<'_> {
+/// Hill's law: the node's anchored series (every Hill node has an anchor), the exact
+/// inversion only when the series is out of its tolerance.
+struct Anchored<'a> {
+    binding: Binding,
+    free: &'a [f64],
+    anchors: &'a mut [HillAnchor],
+}
+
+impl Inversion for Anchored<'_> {
     #[inline(always)]
-    fn row(&mut self, i: usize, n: usize, zi: f64, v: f64, w: f64) -> (f64, f64) {
-        let c = zi / v;
-        let (wl, wc) = if self.laws.has_wall {
-            let mut scratch = HillAnchor::default();
-            let anchor = self.anchors.get_mut(n).unwrap_or(&mut scratch);
-            let (f, inv_slope) = self
-                .binding
-                .free_and_inv_slope_anchored(c, self.free[n], anchor);
-            let wl = self.laws.cell_g[i] * inv_slope;
-            (wl, self.laws.fixed_uptake(i, f) - wl * c)
-        } else {
-            (0.0, 0.0)
-        };
-        self.wlin[i] = wl;
-        self.wc_sum += wc;
-        (w * self.rate + wl, zi * self.inv_dt - wc)
+    fn free_and_inv_slope(&mut self, n: usize, c: f64) -> (f64, f64) {
+        self.binding
+            .free_and_inv_slope_anchored(c, self.free[n], &mut self.anchors[n])
+    }
+}
+
+/// Any other binding (affine: closed form), by the exact inversion.
+struct Exact<'a> {
+    binding: Binding,
+    free: &'a [f64],
+}
+
+impl Inversion for Exact<'_> {
+    #[inline(always)]
+    fn free_and_inv_slope(&mut self, n: usize, c: f64) -> (f64, f64) {
+        let f = self.binding.free(c, self.free[n]);
+        (f, 1.0 / self.binding.capacity_slope(f))
+    }
+}
+
+/// What the linearisation of a binding's wall reads per cell.
+struct Cells<'a> {
+    cells: &'a [usize],
+    zs: &'a [f64],
+    wvol: &'a [f64],
+    laws: &'a Laws,
+}
+
+impl Cells<'_> {
+    /// Per cell: the old total concentration c = N/W, its free concentration and dc/dC_t by
+    /// `inversion`, and the wall's linearisation (`Laws::linearised_uptake`) into `wlin`,
+    /// `wconst`; returns Σ wconst.
+    #[inline(always)]
+    fn linearise<I: Inversion>(
+        self,
+        mut inversion: I,
+        wlin: &mut [f64],
+        wconst: &mut [f64],
+    ) -> f64 {
+        let mut sum = 0.0;
+        let rows = wlin.iter_mut().zip(wconst.iter_mut());
+        for (i, ((&n, (&zi, &v)), (wl, wc))) in self
+            .cells
+            .iter()
+            .zip(self.zs.iter().zip(self.wvol))
+            .zip(rows)
+            .enumerate()
+        {
+            let c = zi / v;
+            let (f, inv_slope) = inversion.free_and_inv_slope(n, c);
+            (*wl, *wc) = self.laws.linearised_uptake(i, f, inv_slope, c);
+            sum += *wc;
+        }
+        sum
     }
 }
 
@@ -135,7 +161,7 @@ struct Forward<'a> {
 impl Forward<'_> {
     /// The forward pass (see the module doc); with `first` the new volumes W' = W + dt·(net
     /// inflow) into `wnew` (else read from it). Returns whether every new volume is positive.
-    fn run<R: CellRows, F: FaceFlows>(self, rows: &mut R, flows: &mut F, first: bool) -> bool {
+    fn run<F: FaceFlows>(self, rows: &LinearRows, flows: &mut F, first: bool) -> bool {
         let Forward {
             tree,
             acc,
@@ -182,7 +208,7 @@ impl Forward<'_> {
                 } else {
                     wnew[cell]
                 };
-                let (d0, b0) = rows.row(cell, n, zs[cell], wvol[cell], w);
+                let (d0, b0) = rows.row(cell, zs[cell], w);
                 (d, b) = (d0 + acc_d, b0 + acc_b);
             } else {
                 // a mixing point: no storage
@@ -232,53 +258,33 @@ impl Forward<'_> {
 /// What the row builder of one species borrows (split from `Transport` beside `Forward`).
 struct RowState<'a> {
     set: &'a SpeciesPlan,
-    sp: &'a mut Species,
-    wlin: &'a mut [f64],
-    wc_sum: &'a mut f64,
+    laws: &'a Laws,
+    /// A binding's wall linearised per cell (`linearise_binding_wall`), or None: the laws'.
+    linearised: Option<(&'a [f64], &'a [f64])>,
     nc: usize,
     dt: f64,
 }
 
 impl RowState<'_> {
-    /// The forward pass with this species' row builder.
+    /// The forward pass with this species' rows: W = wl·C_t + wc with (wl, wc) the laws'
+    /// (g, q − g c_w) of a wall linear in C_t, or a binding's linearisation.
     fn forward<F: FaceFlows>(self, fwd: Forward, flows: &mut F, first: bool) -> bool {
         let RowState {
             set,
-            sp,
-            wlin,
-            wc_sum,
+            laws,
+            linearised,
             nc,
             dt,
         } = self;
         let inv_dt = 1.0 / dt;
-        let rate = inv_dt + set.decay;
-        let laws = &*sp.laws;
-        if set.binding.is_identity() || !laws.has_wall {
-            // (the condition of `fixed_rows_of`, with `self` split into its fields here)
-            let g = &laws.cell_g[..nc];
-            let wc = &laws.cell_wc[..nc];
-            let mut rows = FixedRows {
-                g,
-                wc,
-                rate,
-                inv_dt,
-            };
-            fwd.run(&mut rows, flows, first)
-        } else {
-            let mut rows = BindingRows {
-                binding: set.binding,
-                laws,
-                free: &sp.free,
-                anchors: &mut sp.anchors,
-                wlin,
-                wc_sum: 0.0,
-                rate,
-                inv_dt,
-            };
-            let positive = fwd.run(&mut rows, flows, first);
-            *wc_sum = rows.wc_sum;
-            positive
-        }
+        let (wl, wc) = linearised.unwrap_or((&laws.cell_g[..nc], &laws.cell_wc[..nc]));
+        let rows = LinearRows {
+            wl,
+            wc,
+            rate: inv_dt + set.decay,
+            inv_dt,
+        };
+        fwd.run(&rows, flows, first)
     }
 }
 
@@ -381,11 +387,15 @@ impl Transport {
         sw.wnew.resize(nc, 0.0);
         if self.species.iter().any(|sp| !sp.free.is_empty()) {
             sw.wlin.resize(nc, 0.0);
+            sw.wconst.resize(nc, 0.0);
         }
         for s in 0..self.species.len() {
             self.load_boundary(s, t_af);
             self.restore_mixing(s);
             self.fused_boundary_terms(s, z);
+            if !self.fixed_rows_of(s) {
+                self.linearise_binding_wall(s, z);
+            }
             if !self.fused_forward(s, dt, z, flows) {
                 return Err(self.volume_error(t_af));
             }
@@ -430,6 +440,41 @@ impl Transport {
         }
     }
 
+    /// The wall of binding species `s` (a wall with fixed laws, see `fixed_rows_of`)
+    /// linearised in C_t about the old state, cell by cell, into `sweep.wlin` and
+    /// `sweep.wconst`, and Σ wconst into `sweep.wc_sum` (the backward pass adds it to
+    /// Σ wl x). A pass of its own before the forward pass: the cells are independent here,
+    /// so their inversions (a division, the series, its slope) overlap, where inside the
+    /// forward pass each cell's chain of two divisions and the series stalled the
+    /// elimination.
+    fn linearise_binding_wall(&mut self, s: usize, z: &[f64]) {
+        let nc = self.plan.cells.len();
+        let binding = self.plan.species[s].binding;
+        let sp = &mut self.species[s];
+        let cells = Cells {
+            cells: &self.plan.cells,
+            zs: &z[s * nc..(s + 1) * nc],
+            wvol: &self.wvol[..nc],
+            laws: &sp.laws,
+        };
+        let sw = &mut self.sweep;
+        let (wlin, wconst) = (&mut sw.wlin[..nc], &mut sw.wconst[..nc]);
+        sw.wc_sum = if matches!(binding, Binding::Hill { .. }) {
+            let inversion = Anchored {
+                binding,
+                free: &sp.free,
+                anchors: &mut sp.anchors,
+            };
+            cells.linearise(inversion, wlin, wconst)
+        } else {
+            let inversion = Exact {
+                binding,
+                free: &sp.free,
+            };
+            cells.linearise(inversion, wlin, wconst)
+        };
+    }
+
     /// The forward pass of species `s` with its row builder and face flows; false if a new
     /// volume is not positive (species 0 computes the volumes).
     fn fused_forward(&mut self, s: usize, dt: f64, z: &[f64], flows: StepFlows) -> bool {
@@ -438,6 +483,7 @@ impl Transport {
         let Some(tree) = plan.tree.as_deref() else {
             return true;
         };
+        let fixed = self.fixed_rows_of(s);
         let sw = &mut self.sweep;
         let fwd = Forward {
             tree,
@@ -449,11 +495,12 @@ impl Transport {
             zs: &z[s * nc..(s + 1) * nc],
             dt,
         };
+        let laws = &*self.species[s].laws;
         let rows = RowState {
             set: &plan.species[s],
-            sp: &mut self.species[s],
-            wlin: &mut sw.wlin,
-            wc_sum: &mut sw.wc_sum,
+            laws,
+            // (lazily: without a binding the scratch arrays are empty)
+            linearised: (!fixed).then(|| (&sw.wlin[..nc], &sw.wconst[..nc])),
             nc,
             dt,
         };

@@ -377,8 +377,7 @@ impl Transport {
                     ),
                 };
                 free[n] = f;
-                let wl = laws.cell_g[i] * inv_slope;
-                (wl, laws.fixed_uptake(i, f) - wl * c)
+                laws.linearised_uptake(i, f, inv_slope, c)
             } else {
                 (0.0, 0.0)
             };

@@ -159,6 +159,21 @@ impl Laws {
         self.cell_g[i] * free - self.cell_gcw[i] + self.cell_q[i]
     }
 
+    /// The fixed wall uptake of cell `i` linearised in the total concentration about the old
+    /// state (total `c`, free `free`, dc/dC_t = `inv_slope` there): W ≈ wl·C_t + wc, returns
+    /// (wl, wc) (the implicit step's binding rows, docs/physics.md §4).
+    #[inline(always)]
+    pub(super) fn linearised_uptake(
+        &self,
+        i: usize,
+        free: f64,
+        inv_slope: f64,
+        c: f64,
+    ) -> (f64, f64) {
+        let wl = self.cell_g[i] * inv_slope;
+        (wl, self.fixed_uptake(i, free) - wl * c)
+    }
+
     /// Wall uptake (mol/s) of wall piece `p` with its own law (any kind) at the current shear
     /// (`shear_cbrt` per segment, read by dynamic laws only), `free` the free concentration
     /// per node.
