@@ -19,6 +19,7 @@ mod coupling;
 mod cycle;
 mod flow_harmonics; // inlet renewal: the first pass's flow harmonics (issue 12 item 2)
 mod mean_flow;
+mod heap; // freed pages back to the OS before a large pass's cycle loop
 pub mod memory;
 mod outcome;
 mod pass;
