@@ -48,7 +48,7 @@ pub fn simulate(
 ) -> Result<Outcome> {
     pass::run(
         dae,
-        &SteadyCache::new(dae),
+        &mut SteadyCache::new(dae),
         s,
         None,
         None,
