@@ -18,8 +18,8 @@ pub mod checkpoint;
 mod coupling;
 mod cycle;
 mod flow_harmonics; // inlet renewal: the first pass's flow harmonics (issue 12 item 2)
-mod mean_flow;
 mod heap; // freed pages back to the OS before a large pass's cycle loop
+mod mean_flow;
 pub mod memory;
 mod outcome;
 mod pass;

@@ -59,7 +59,16 @@ pub(super) fn run_two_pass(
     if let Some(c) = checkpoints.as_deref_mut() {
         c.mean_abs_flow.clone_from(&mean_abs_flow);
     }
-    let mut out = run(dae, &mut steady, s, Some(tr), None, sink, progress, checkpoints)?;
+    let mut out = run(
+        dae,
+        &mut steady,
+        s,
+        Some(tr),
+        None,
+        sink,
+        progress,
+        checkpoints,
+    )?;
     if let Some(t) = out.transport.as_mut() {
         t.mean_abs_flow = mean_abs_flow;
     }
