@@ -102,6 +102,12 @@ impl<'d> SteadyCache<'d> {
         }
     }
 
+    /// Forget the solved state once no pass will start from it again: a state-sized vector
+    /// (~20 B per segment) that would otherwise stay resident through the whole run.
+    pub fn release(&mut self) {
+        self.value.take();
+    }
+
     /// The steady state, solved on the first call.
     pub fn get(&self) -> Result<&[f64]> {
         match self.value.get_or_init(|| steady_state(self.dae)) {

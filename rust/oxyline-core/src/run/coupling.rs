@@ -55,6 +55,9 @@ pub(super) struct Species<'t> {
     /// z at the end of the previous cycle (periodicity).
     prev_cycle_z: Vec<f64>,
     /// Scratch of `observe`: the flow state and its rate as the integrator reports them.
+    /// Sized by the first observation that needs them: an integrator whose carried ẏ is the
+    /// rate (generalized-α) never does, and two state-sized vectors (~40 B per segment) would
+    /// stay resident under the whole output table.
     y_obs: Vec<f64>,
     yd_obs: Vec<f64>,
 }
@@ -93,8 +96,8 @@ impl<'t> Species<'t> {
             level: if quasi { 1.0 } else { level },
             step_start: interpolate.then(Vec::new),
             start_carried: false,
-            y_obs: vec![0.0; y.len()],
-            yd_obs: vec![0.0; y.len()],
+            y_obs: Vec::new(),
+            yd_obs: Vec::new(),
         };
         Ok((species, initial_stored))
     }
@@ -240,8 +243,8 @@ impl State<'_, '_> {
                 .tr
                 .observe(t, &self.y, Some(&self.yd), &sp.z, !monolithic, out);
         }
-        sp.y_obs.copy_from_slice(&self.y);
-        sp.yd_obs.copy_from_slice(&self.yd);
+        sp.y_obs.clone_from(&self.y);
+        sp.yd_obs.clone_from(&self.yd);
         ig.rate(t, &mut sp.y_obs, &mut sp.yd_obs)?;
         sp.tr
             .observe(t, &sp.y_obs, Some(&sp.yd_obs), &sp.z, !monolithic, out)

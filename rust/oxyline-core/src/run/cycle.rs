@@ -28,6 +28,8 @@ pub(super) struct Cycles<'r, 'f> {
     pub periodic_error: f64,
     prev_cycle_end: Vec<f64>,
     obs_row: Vec<f64>,
+    /// The allocator's free pages were handed back after the pass's first output row.
+    released: bool,
 }
 
 /// What the rows of one cycle are for.
@@ -63,6 +65,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
             cycles_run: 0,
             periodic_error: f64::NAN,
             obs_row: Vec::new(),
+            released: false,
         }
     }
 
@@ -240,6 +243,13 @@ impl<'r, 'f> Cycles<'r, 'f> {
         if due && rows.recorded {
             let t = if all { t_new } else { t_new - rows.t0 };
             self.output_row(t, t_new, rows.species, rows.committed)?;
+            if !self.released {
+                // the setup's (and a first pass's) freed memory, and the first steps' and
+                // observations' scratch, would stay resident under the output table the
+                // loop grows from here: hand it back once (see `heap`)
+                self.released = true;
+                super::heap::release_free_pages(self.state.dae.n);
+            }
         }
         if self.steps % 256 == 0 && !progress(t_new, self.t_end()) {
             return Err(Error::Interrupted { time: t_new });

@@ -18,6 +18,7 @@ pub mod checkpoint;
 mod coupling;
 mod cycle;
 mod flow_harmonics; // inlet renewal: the first pass's flow harmonics (issue 12 item 2)
+mod heap; // freed pages back to the OS before a large pass's cycle loop
 mod mean_flow;
 pub mod memory;
 mod outcome;
@@ -47,7 +48,7 @@ pub fn simulate(
 ) -> Result<Outcome> {
     pass::run(
         dae,
-        &SteadyCache::new(dae),
+        &mut SteadyCache::new(dae),
         s,
         None,
         None,

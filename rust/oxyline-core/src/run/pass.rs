@@ -19,7 +19,7 @@ use crate::transport::{Formulation, Transport};
 #[allow(clippy::too_many_arguments)]
 pub(super) fn run(
     dae: &Dae,
-    steady: &SteadyCache<'_>,
+    steady: &mut SteadyCache<'_>,
     s: &RunSettings,
     mut transport: Option<&mut Transport>,
     mean: Option<&mut MeanAbs>,
@@ -34,6 +34,10 @@ pub(super) fn run(
         Some(r) => resume_state(r, dae, plan.dt)?,
         None => plan.initial_state(steady, s)?,
     };
+    if mean.is_none() {
+        // the last pass (a first pass's coupled run starts from the same state) has its start
+        steady.release();
+    }
     let quasi = transport
         .as_deref()
         .is_some_and(|t| t.formulation() == Formulation::TlQuasisteady);

@@ -25,9 +25,9 @@ pub(super) fn run_two_pass(
 ) -> Result<Outcome> {
     // the steady state is solved at most once per call, by whichever part of either pass
     // needs it first
-    let steady = SteadyCache::new(dae);
+    let mut steady = SteadyCache::new(dae);
     let Some(tr) = transport else {
-        return run(dae, &steady, s, None, None, sink, progress, checkpoints);
+        return run(dae, &mut steady, s, None, None, sink, progress, checkpoints);
     };
     let unknowns = tr.mean_flow_unknowns();
     let mut mean_abs_flow = Vec::new();
@@ -42,7 +42,7 @@ pub(super) fn run_two_pass(
         // the first pass records nothing: no sink
         let first = run(
             dae,
-            &steady,
+            &mut steady,
             &mean_flow_pass(s),
             None,
             Some(&mut mean),
@@ -59,7 +59,16 @@ pub(super) fn run_two_pass(
     if let Some(c) = checkpoints.as_deref_mut() {
         c.mean_abs_flow.clone_from(&mean_abs_flow);
     }
-    let mut out = run(dae, &steady, s, Some(tr), None, sink, progress, checkpoints)?;
+    let mut out = run(
+        dae,
+        &mut steady,
+        s,
+        Some(tr),
+        None,
+        sink,
+        progress,
+        checkpoints,
+    )?;
     if let Some(t) = out.transport.as_mut() {
         t.mean_abs_flow = mean_abs_flow;
     }
