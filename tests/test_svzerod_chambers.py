@@ -118,21 +118,23 @@ def test_rk4_stiff_chamber_inductor_matches_svzerod_20x_finer() -> None:
     through valve1; closed (R_max = 1e5) that branch relaxes at R_max/L = 2.8e8 1/s (~3e9
     explicit steps for its 30 cycles). RK4 makes the branch algebraic while R(ΔP) Δt > L
     (docs/physics.md §1.8, "stiff branches"): the stability bound is then set by the vessel
-    (4.2e-2 s, was ~1e-8 s), and 20 sub-steps per output step resolve the valves' switch
-    (tanh of width 0.01 over pressure swings of 10 in ~0.1 s)."""
+    (4.2e-2 s, was ~1e-8 s), and the core's step doubling over the 30 cycles (docs/physics.md
+    §1.8, "RK4's step for valves and chambers") picks 16 sub-steps per output step to resolve
+    the valves' switch (tanh of width 0.01 over pressure swings of 10 in ~0.1 s)."""
     pytest.importorskip("svzerod")
     name = "chamber_elastance_inductor"
     cfg = json.loads(case(name).read_text())
-    errors = compare(svz.simulate(cfg, method="rk4", rk4_substeps=20), svzerod_run(cfg, 20))
+    errors = compare(svz.simulate(cfg, method="rk4"), svzerod_run(cfg, 20))
     # the valves' valve_status: svZeroDSolver's generalized-α-stage artefact, left out as in
     # test_rk4_matches_svzerod_20x_finer (the pressures it follows are compared)
     for n in [n for n in errors if n.startswith("valve_status:")]:
         errors.pop(n)
     assert len(errors) >= 8
-    # measured 2.5e-3 (Vc, the chamber volume after 30 cycles): svzerod 20x finer is itself
-    # 2.5e-3 off svzerod 100x finer, while this RK4 run is 2.7e-4 off it; the default sub-step
-    # (one per output step, 1e-2 s) gives 1.2e-1, svZeroDSolver's own step 2.9e-1. 2x the
-    # measured value: the peer's own discretisation error dominates the comparison
+    # measured 2.5e-3 (16 sub-steps; 20 give the same): svzerod 20x finer is itself 2.5e-3
+    # off svzerod 100x finer, while an RK4 run of 20 sub-steps is 2.7e-4 off it; the stability
+    # bound's sub-step (one per output step, 1e-2 s) gives 1.2e-1 (Vc, the chamber volume
+    # after 30 cycles), svZeroDSolver's own step 2.9e-1. 2x the measured value: the peer's own
+    # discretisation error dominates the comparison
     assert max(errors.values()) <= 5e-3, errors
 
 

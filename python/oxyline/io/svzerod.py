@@ -1158,7 +1158,7 @@ def _core_kwargs(model: Model, native: Mapping[str, Any], s: RunSettings, method
 
 
 #: the accuracy the RK4 step of a model with valves or chambers is refined to: the estimated
-#: error of the first cycle, scaled by each unknown's range (the core's
+#: error of the first cycles, scaled by each unknown's range (the core's
 #: ``rk4_step_refinement``, docs/physics.md §1.8)
 RK4_SWITCH_TOL = 1e-2
 #: the most the RK4 step is divided by for that accuracy
@@ -1168,7 +1168,8 @@ RK4_MAX_REFINEMENT = 64
 def _switch_refinement(model: Model, kw: Mapping[str, Any], s: RunSettings, sub: int) -> int:
     """The factor by which the core's step-doubling criterion divides the RK4 sub-step (1
     without valves or chambers), at most ``RK4_MAX_REFINEMENT`` and within ``RK4_MAX_STEPS``;
-    the first cycle's trial runs cost up to 2 ``max_factor`` sub-stepped cycles."""
+    the trial runs (the run's first cycles, up to 2e4 steps) cost up to 2 ``max_factor`` times
+    as many steps."""
     budget = RK4_MAX_STEPS / (sub * (s.points_per_cycle - 1) * s.cycles)
     max_factor = 1
     while 2 * max_factor <= min(RK4_MAX_REFINEMENT, budget):
