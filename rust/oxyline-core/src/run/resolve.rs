@@ -166,7 +166,8 @@ mod tests {
         let b = vec![vec![0.0, 100.0, 0.0], vec![2.0, 100.0, 0.0]];
         let a = vec![vec![0.1, 100.00005, 0.0], vec![2.0, 100.0, 0.0]];
         // unknown 0: 0.1 / range 2; unknown 1: 5e-5 / (1e-6 · 100); unknown 2 left out
-        assert!((difference(&a, &b) - 0.5).abs() < 1e-12);
+        // (100.00005 − 100 carries the rounding of 100.00005: ~1e-14 absolute, 1e-10 scaled)
+        assert!((difference(&a, &b) - 0.5).abs() < 1e-9);
         let a = vec![vec![0.1, 100.0, 0.0], vec![2.0, 100.0, 0.0]];
         assert!((difference(&a, &b) - 0.05).abs() < 1e-12);
     }
