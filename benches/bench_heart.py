@@ -157,9 +157,9 @@ def _variable_errors(actual: Any, expected: Any, scale: str = "range") -> float:
 
 
 #: RK4 sub-steps per output step of the drop-in in the chamber table (None: automatic, from
-#: the stability bound and the time tables); the stiff chamber-inductor case needs 20 to
-#: resolve its valves' switch (docs/physics.md §1.8, tests/test_svzerod_chambers.py)
-RK4_SUBSTEPS = {"valve_tanh": None, "chamber_elastance_inductor": 20,
+#: the stability bound and the time tables, refined for valves and chambers by the core's step
+#: doubling: docs/physics.md §1.8, tests/test_svzerod_chambers.py)
+RK4_SUBSTEPS = {"valve_tanh": None, "chamber_elastance_inductor": None,
                 "closedLoopHeart_singleVessel_decomposed": None, "chamber_sphere": None}
 
 

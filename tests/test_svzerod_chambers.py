@@ -118,21 +118,23 @@ def test_rk4_stiff_chamber_inductor_matches_svzerod_20x_finer() -> None:
     through valve1; closed (R_max = 1e5) that branch relaxes at R_max/L = 2.8e8 1/s (~3e9
     explicit steps for its 30 cycles). RK4 makes the branch algebraic while R(ΔP) Δt > L
     (docs/physics.md §1.8, "stiff branches"): the stability bound is then set by the vessel
-    (4.2e-2 s, was ~1e-8 s), and 20 sub-steps per output step resolve the valves' switch
-    (tanh of width 0.01 over pressure swings of 10 in ~0.1 s)."""
+    (4.2e-2 s, was ~1e-8 s), and the core's step doubling over the 30 cycles (docs/physics.md
+    §1.8, "RK4's step for valves and chambers") picks 16 sub-steps per output step to resolve
+    the valves' switch (tanh of width 0.01 over pressure swings of 10 in ~0.1 s)."""
     pytest.importorskip("svzerod")
     name = "chamber_elastance_inductor"
     cfg = json.loads(case(name).read_text())
-    errors = compare(svz.simulate(cfg, method="rk4", rk4_substeps=20), svzerod_run(cfg, 20))
+    errors = compare(svz.simulate(cfg, method="rk4"), svzerod_run(cfg, 20))
     # the valves' valve_status: svZeroDSolver's generalized-α-stage artefact, left out as in
     # test_rk4_matches_svzerod_20x_finer (the pressures it follows are compared)
     for n in [n for n in errors if n.startswith("valve_status:")]:
         errors.pop(n)
     assert len(errors) >= 8
-    # measured 2.5e-3 (Vc, the chamber volume after 30 cycles): svzerod 20x finer is itself
-    # 2.5e-3 off svzerod 100x finer, while this RK4 run is 2.7e-4 off it; the default sub-step
-    # (one per output step, 1e-2 s) gives 1.2e-1, svZeroDSolver's own step 2.9e-1. 2x the
-    # measured value: the peer's own discretisation error dominates the comparison
+    # measured 2.5e-3 (16 sub-steps; 20 give the same): svzerod 20x finer is itself 2.5e-3
+    # off svzerod 100x finer, while an RK4 run of 20 sub-steps is 2.7e-4 off it; the stability
+    # bound's sub-step (one per output step, 1e-2 s) gives 1.2e-1 (Vc, the chamber volume
+    # after 30 cycles), svZeroDSolver's own step 2.9e-1. 2x the measured value: the peer's own
+    # discretisation error dominates the comparison
     assert max(errors.values()) <= 5e-3, errors
 
 
@@ -176,14 +178,14 @@ def test_rk4_closed_loop_heart_decomposed_matches_svzerod_20x_finer() -> None:
     """RK4 starts the decomposed heart as svZeroDSolver does: the ventricles' outlet inductors
     at rest, accelerating the flow through the opening aortic and pulmonary valves (the branch
     stays differential although its valve reads half-open at zero flow, docs/physics.md §1.8).
-    It started those branches algebraic at the open valve's quasi-steady flow (1.2 of the
-    aortic flow's range at t = 0), and the start's displaced volume left 2e-2 after t = 0.1 s
-    at every sub-step. Now the error shrinks with the sub-step (the valves' switch timing,
-    docs/physics.md §1.10): 5.4e-2 (mitral flow at its opening) with the default one per output
-    step, 2.6e-2 with 4, 1.1e-2 with 8, 3.9e-3 with 16, 7.0e-4 with 32."""
+    The error is the valves' switch timing, first order in the sub-step (docs/physics.md §1.8,
+    "RK4's step for valves and chambers"): 5.4e-2 (mitral flow at its opening) at the stability
+    bound's sub-step, 2.6e-2 / 1.1e-2 / 5.0e-3 with 4 / 8 / 16 sub-steps. The drop-in's default
+    takes the sub-step from the core's step doubling over the first cycle (16 here, estimated
+    error 7.4e-3): no `rk4_substeps` needed."""
     pytest.importorskip("svzerod")
     cfg = decomposed_variables()
-    rk4, fine = svz.simulate(cfg, method="rk4", rk4_substeps=16), svzerod_run(cfg, 20)
+    rk4, fine = svz.simulate(cfg, method="rk4"), svzerod_run(cfg, 20)
     # the t = 0 row left out: svzerod writes its given start (pressures 0), RK4 the start's
     # consistent pressures (the chambers' E(0)(V − V_rest))
     errors = compare(rk4[rk4["time"] > 0], fine[fine["time"] > 0])
@@ -195,10 +197,33 @@ def test_rk4_closed_loop_heart_decomposed_matches_svzerod_20x_finer() -> None:
     for n in [n for n in errors if n.startswith("valve_status:") or n == "pressure:RA:TV"]:
         errors.pop(n)
     assert len(errors) >= 35
-    # measured 3.9e-3 (the mitral flow at its opening, first order in the sub-step); the
-    # floor of the other variables, 2.3e-3 (aortic valve flow at t = 1 ms), is svzerod 20x
-    # finer's own start error (svzerod 10x finer is 2.3e-3 off it there). 2x the measured value
-    assert max(errors.values()) <= 8e-3, errors
+    # measured 5.0e-3 (pressure:LA:MV; 32 sub-steps give the same 5.2e-3: svzerod 20x finer's
+    # own error, e.g. its start, 2.3e-3 off svzerod 10x at t = 1 ms); the issue's criterion is
+    # "within discretisation error", the expert's 1e-2: 2x the measured value
+    assert max(errors.values()) <= 1e-2, errors
+
+
+def test_rk4_step_refinement_estimates_the_error() -> None:
+    """The core's step doubling (docs/physics.md §1.8) on the decomposed heart: its estimate
+    for the sub-step it picks bounds the error against the independent svzerod 20x finer
+    (5.0e-3, the previous test) and meets the drop-in's tolerance; a circuit without valves or
+    chambers gets factor 1 without a trial run."""
+    from oxyline.io import svzerod as dropin
+
+    cfg = decomposed_variables()
+    model, s = svz.to_model(cfg), svz.run_settings(cfg)
+    assert not s.steady_initial and s.cycles == 1
+    # the drop-in's run: svZeroDSolver's zero start, one sub-step per output step (the
+    # stability bound's)
+    factor, estimate, converged = model.network.rk4_step_refinement(
+        period=s.period, output_every=s.dt, tol=dropin.RK4_SWITCH_TOL, max_factor=64,
+        dt=s.dt, method="rk4", start="svzerod-zero", cycles=1, segments=False)
+    assert converged and factor in (8, 16, 32)  # a power of two; 1 and 2 are 5.4e-2 off
+    # measured 7.4e-3 (16): the difference of the 8 and 16 sub-step runs, first order
+    assert 5.0e-3 <= estimate <= dropin.RK4_SWITCH_TOL
+    plain = svz.to_model(str(case("pulsatileFlow_R_RCR")))
+    assert plain.network.rk4_step_refinement(
+        period=1.0, output_every=0.01, tol=1e-2, max_factor=64, method="rk4") == (1, 0.0, True)
 
 
 # ------------------------------------------------------------------------------------------

@@ -1143,6 +1143,8 @@ def _core_kwargs(model: Model, native: Mapping[str, Any], s: RunSettings, method
                 f"rk4_substeps={s.rk4_substeps}: the sub-step {s.dt / s.rk4_substeps:.3g} s "
                 f"exceeds half the RK4 stability limit {dt_max:.3g} s (set by {element})")
         sub = s.rk4_substeps
+    else:
+        sub *= _switch_refinement(model, kw, s, sub)
     steps = sub * (s.points_per_cycle - 1) * s.cycles
     if steps > RK4_MAX_STEPS:
         # e.g. a closed valve behind a chamber's outlet inductor: R_max/L is a nanosecond
@@ -1153,6 +1155,32 @@ def _core_kwargs(model: Model, native: Mapping[str, Any], s: RunSettings, method
             f"{RK4_MAX_STEPS:.0e}; use method='generalized-alpha'")
     kw["dt"] = s.dt / sub
     return kw, sub
+
+
+#: the accuracy the RK4 step of a model with valves or chambers is refined to: the estimated
+#: error of the first cycles, scaled by each unknown's range (the core's
+#: ``rk4_step_refinement``, docs/physics.md §1.8)
+RK4_SWITCH_TOL = 1e-2
+#: the most the RK4 step is divided by for that accuracy
+RK4_MAX_REFINEMENT = 64
+
+
+def _switch_refinement(model: Model, kw: Mapping[str, Any], s: RunSettings, sub: int) -> int:
+    """The factor by which the core's step-doubling criterion divides the RK4 sub-step (1
+    without valves or chambers), at most ``RK4_MAX_REFINEMENT`` and within ``RK4_MAX_STEPS``;
+    the trial runs (the run's first cycles, up to 2e4 steps) cost up to 2 ``max_factor`` times
+    as many steps."""
+    budget = RK4_MAX_STEPS / (sub * (s.points_per_cycle - 1) * s.cycles)
+    max_factor = 1
+    while 2 * max_factor <= min(RK4_MAX_REFINEMENT, budget):
+        max_factor *= 2
+    if max_factor == 1:
+        return 1
+    settings = {k: v for k, v in kw.items() if k not in ("period", "all_unknowns")}
+    factor, _, _ = model.network.rk4_step_refinement(
+        period=s.period, output_every=s.dt, tol=RK4_SWITCH_TOL, max_factor=max_factor,
+        dt=s.dt / sub, **settings)
+    return int(factor)
 
 
 def _wanted(s: RunSettings) -> tuple[np.ndarray, int]:
@@ -1298,9 +1326,10 @@ def _run_cycle_error(model: Model, native: Mapping[str, Any], s: RunSettings, me
                                  "together with 'output_derivative' is not supported")
     steps = s.points_per_cycle - 1
 
+    planned, _ = _core_kwargs(model, native, s, method)  # once: its RK4 step trials
+
     def run(cycles: int) -> tuple[np.ndarray, np.ndarray]:
-        kw, _ = _core_kwargs(model, native, s, method)
-        kw.update(cycles=cycles, output_all_cycles=True, output_every=s.dt)
+        kw = dict(planned, cycles=cycles, output_all_cycles=True, output_every=s.dt)
         raw = model.network.simulate(**kw)
         if "error" in raw:
             raise raw["error"]

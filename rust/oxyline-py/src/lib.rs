@@ -636,6 +636,29 @@ impl Network {
         .map_err(to_py)
     }
 
+    /// The factor by which to divide the RK4 step of a run with these settings so that its
+    /// first cycle is within `tol` of the converged solution (step doubling; 1 without valves
+    /// or chambers): (factor, estimated error, converged). See `run::rk4_step_refinement`.
+    #[pyo3(signature = (*, period, output_every, tol, max_factor, **settings))]
+    fn rk4_step_refinement(
+        &self,
+        py: Python<'_>,
+        period: f64,
+        output_every: f64,
+        tol: f64,
+        max_factor: usize,
+        settings: Option<Bound<'_, PyDict>>,
+    ) -> PyResult<(usize, f64, bool)> {
+        let shared = settings::Shared::from_kwargs(settings.as_ref())?;
+        let s = shared.run_settings(period, output_every, false)?;
+        let inner = self.inner.clone();
+        py.detach(move || {
+            let r = oxyline_core::run::rk4_step_refinement(&inner.1, &s, tol, max_factor)?;
+            Ok::<_, Error>((r.factor, r.estimate, r.converged))
+        })
+        .map_err(to_py)
+    }
+
     /// The RK4 iteration operator of the differential unknowns (algebraic unknowns eliminated)
     /// in energy-scaled coordinates, dense, row-major, with its size: for checking the stability
     /// bound against an independent eigensolver.

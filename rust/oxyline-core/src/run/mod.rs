@@ -10,7 +10,8 @@
 //! * `pass` — one pass: settings → plan → initial state → cycle loop → outcome;
 //! * `two_pass` — the flow-only first pass that measures the cycle-mean |Q| for the closures
 //!   (accumulated by `mean_flow`), then the coupled pass;
-//! * `outcome` — what the run returns ([`Outcome`]).
+//! * `outcome` — what the run returns ([`Outcome`]);
+//! * `resolve` — RK4's step for circuits with valves and chambers, by step doubling.
 //!
 //! A failed or interrupted run still returns everything recorded so far.
 
@@ -25,12 +26,14 @@ mod outcome;
 mod pass;
 mod plan;
 mod recorder;
+mod resolve; // RK4's step for valves and chambers by step doubling (issue 14)
 mod settings;
 mod two_pass;
 
 pub use checkpoint::{CHECKPOINT_VERSION, Checkpoints, Every, Snapshot};
 pub use outcome::{Outcome, TransportOutcome};
 pub use recorder::{Chunk, OutputSink};
+pub use resolve::{Refinement, rk4_step_refinement};
 pub use settings::{Method, RunSettings, Start};
 
 use crate::circuit::Dae;
