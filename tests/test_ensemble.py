@@ -625,6 +625,10 @@ def _peak(res: oxyline.Result) -> dict[str, float]:
     return {"p_max": float(res.pressure_in.max())}
 
 
+def _interrupt(done: int, total: int) -> None:
+    raise KeyboardInterrupt
+
+
 def _rootish_chunks(dask_scheduler: Any) -> list[bool]:
     """Whether the scheduler takes each ensemble task for a root-ish one (queued, handed out
     as worker threads free up)."""
@@ -665,6 +669,16 @@ def test_a_local_dask_cluster_gives_the_local_dataset(tmp_path: Path) -> None:
                                              progress=look)
         xr.testing.assert_identical(balanced, oxyline.simulate_ensemble(STRAIGHT, many, **FAST))
         assert len(rootish) > 2 * 2 and all(rootish), rootish
+        # Ctrl-C (on the first merged chunk; 6 chunks, each of every 6th variant) cancels the
+        # running and queued chunks and returns the merged one
+        with pytest.raises(oxyline.SimulationInterrupted) as stopped:
+            oxyline.simulate_ensemble(STRAIGHT, many, client=client, cycles=2,
+                                      progress=_interrupt)
+        st = stopped.value.result.status.values
+        done = np.flatnonzero(st != -1)
+        assert len(done) == 10 and len(set(done % 6)) == 1, st  # the one merged chunk
+        np.testing.assert_array_equal(stopped.value.result.pressure_in_max.values[done],
+                                      balanced.pressure_in_max.values[done])
         with pytest.raises(oxyline.ModelError, match="variant 2: vessels.nope"):
             oxyline.simulate_ensemble(STRAIGHT, [{}, {}, {"vessels": {"nope": {}}}],
                                       client=client, **FAST)
