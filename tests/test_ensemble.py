@@ -625,6 +625,17 @@ def _peak(res: oxyline.Result) -> dict[str, float]:
     return {"p_max": float(res.pressure_in.max())}
 
 
+def _interrupt(done: int, total: int) -> None:
+    raise KeyboardInterrupt
+
+
+def _rootish_chunks(dask_scheduler: Any) -> list[bool]:
+    """Whether the scheduler takes each ensemble task for a root-ish one (queued, handed out
+    as worker threads free up)."""
+    return [dask_scheduler.is_rootish(ts) for key, ts in dask_scheduler.tasks.items()
+            if str(key).startswith("run_chunk")]
+
+
 def test_a_local_dask_cluster_gives_the_local_dataset(tmp_path: Path) -> None:
     distributed = pytest.importorskip("distributed")
     variants = [{"vessels": {"aorta": {"radius": r}}} for r in np.linspace(0.006, 0.01, 7)]
@@ -645,6 +656,29 @@ def test_a_local_dask_cluster_gives_the_local_dataset(tmp_path: Path) -> None:
                                                store=tmp_path / "d.zarr", **FAST)
             np.testing.assert_array_equal(stored.pressure_in_max.values,
                                           local.pressure_in_max.values)
+        # a bigger ensemble: many unpinned tasks, which the scheduler queues (root-ish)
+        many = [{"vessels": {"aorta": {"radius": r}}} for r in np.linspace(0.006, 0.01, 60)]
+        many[17] = {"vessels": {"aorta": {"radius": -1.0}}}
+        rootish: list[bool] = []
+
+        def look(done: int, total: int) -> None:
+            if not rootish:  # every task still exists on the scheduler (futures held)
+                rootish.extend(client.run_on_scheduler(_rootish_chunks))
+
+        balanced = oxyline.simulate_ensemble(STRAIGHT, many, client=client, cycles=2,
+                                             progress=look)
+        xr.testing.assert_identical(balanced, oxyline.simulate_ensemble(STRAIGHT, many, **FAST))
+        assert len(rootish) > 2 * 2 and all(rootish), rootish
+        # Ctrl-C (on the first merged chunk; 6 chunks, each of every 6th variant) cancels the
+        # running and queued chunks and returns the merged one
+        with pytest.raises(oxyline.SimulationInterrupted) as stopped:
+            oxyline.simulate_ensemble(STRAIGHT, many, client=client, cycles=2,
+                                      progress=_interrupt)
+        st = stopped.value.result.status.values
+        done = np.flatnonzero(st != -1)
+        assert len(done) == 10 and len(set(done % 6)) == 1, st  # the one merged chunk
+        np.testing.assert_array_equal(stopped.value.result.pressure_in_max.values[done],
+                                      balanced.pressure_in_max.values[done])
         with pytest.raises(oxyline.ModelError, match="variant 2: vessels.nope"):
             oxyline.simulate_ensemble(STRAIGHT, [{}, {}, {"vessels": {"nope": {}}}],
                                       client=client, **FAST)
@@ -668,18 +702,34 @@ def test_a_local_dask_cluster_gives_the_local_dataset(tmp_path: Path) -> None:
 
 
 def test_dask_chunks_partition_the_variants_and_interleave_them() -> None:
-    from oxyline.ensemble.cluster import MIN_TASK_VARIANTS, _chunks
+    from oxyline.ensemble.cluster import MIN_TASK_VARIANTS, TASKS_PER_THREAD, _chunks
 
-    for n, threads in [(1, 2), (7, 2), (200, 2), (1000, 3), (4 * 2 * MIN_TASK_VARIANTS + 5, 2)]:
+    for n, threads in [(1, 2), (7, 2), (47, 2), (48, 2), (200, 2), (1000, 3), (4374, 2),
+                       (4 * 2 * MIN_TASK_VARIANTS + 5, 2)]:
         chunks = _chunks(n, threads)
         assert sorted(i for c in chunks for i in c) == list(range(n))  # each variant once
         assert len(chunks) % min(threads, n) == 0 or len(chunks) == n
         assert max(map(len, chunks)) - min(map(len, chunks)) <= 1
+        # one task per thread, or more than 2 per thread (Dask queues only those), each of
+        # MIN_TASK_VARIANTS at least
+        per_thread = len(chunks) // min(threads, n)
+        assert per_thread == 1 or 2 < per_thread <= TASKS_PER_THREAD, (n, len(chunks))
+        assert per_thread == 1 or min(map(len, chunks)) >= MIN_TASK_VARIANTS
         # a population ordered by cost (age): each task gets every T-th variant, so the
         # tasks' mean positions, and with them their costs, agree
         means = [float(np.mean(list(c))) for c in chunks]
         assert max(means) - min(means) <= len(chunks)
+    assert len(_chunks(200, 2)) > 2 * 2 and len(_chunks(20, 2)) == 2
 
+
+def test_only_small_ensembles_are_pinned_to_workers() -> None:
+    from oxyline.ensemble.cluster import _plan
+
+    two = {"tcp://a": 1, "tcp://b": 1}
+    chunks, where = _plan(20, two)
+    assert where is not None and sorted(where) == ["tcp://a", "tcp://b"]
+    chunks, where = _plan(200, two)  # Dask balances: no restriction (it would bypass the queue)
+    assert where is None and len(chunks) > 2 * 2
 
 
 def test_dask_chunks_go_to_the_workers_in_proportion_to_their_threads() -> None:

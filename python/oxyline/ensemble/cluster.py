@@ -17,12 +17,18 @@ from oxyline.ensemble.collect import FACTS, Collector, Output
 from oxyline.ensemble.patch import Patcher
 from oxyline.model import Model
 
-#: at most this many tasks per worker thread: enough to balance chunks of unequal cost
-TASKS_PER_THREAD = 4
-#: the fewest variants of a task beyond the first per thread: a task costs a round trip to the
-#: scheduler, its patches and results in transit and a thread pool on its worker, so it
-#: should carry seconds of work (256 variants: ~3 s of a 31-vessel tree, ~1 min of pwdb-116)
-MIN_TASK_VARIANTS = 256
+#: tasks per worker thread of an ensemble that Dask balances (see :func:`_chunks`): the run
+#: ends on a task's tail, so the smaller the tasks the shorter the idle tail
+TASKS_PER_THREAD = 16
+#: the fewest variants of a balanced ensemble's task. A task costs ~3 ms of a worker's CPU
+#: besides its variants (its patches and results in transit, the chunk's collector; 64 tasks
+#: of 1 tree variant: 0.78 s of worker CPU against 0.59 s as 2 tasks, session 12); the
+#: scheduler's round trip is hidden as the next task is already on its worker. 8 variants:
+#: ~70 ms of a 31-vessel tree, ~0.6 s of pwdb-116
+MIN_TASK_VARIANTS = 8
+#: Dask queues a task group on the scheduler only above 2 tasks per worker thread (its
+#: "root-ish" rule, ``distributed.scheduler.Scheduler.is_rootish``); fewer are pinned
+QUEUED_TASKS_PER_THREAD = 3
 
 
 def run_chunk(model: Model, patches: Sequence[Mapping[str, Any]], numbers: range,
@@ -47,15 +53,19 @@ def run_chunk(model: Model, patches: Sequence[Mapping[str, Any]], numbers: range
 
 
 def _chunks(n: int, threads: int) -> list[range]:
-    """The variants of each task: (nearly) equally many, a whole number of tasks per worker
-    thread (equal chunks then finish together): one per thread, more only while each still
-    holds :data:`MIN_TASK_VARIANTS`. A task takes every T-th variant (T tasks), not a block
-    of neighbours: the variants of a sweep or a population are ordered by their parameters,
-    and their cost follows them (a young PWDB subject runs 12-18 cycles to periodicity, an
-    old one 6), so blocks of neighbours gave one worker most of the work (+26 % wall time on
-    200 subjects over local threads, which take the variants one by one)."""
+    """The variants of each task. A task takes every T-th variant (T tasks), not a block of
+    neighbours: the variants of a sweep or a population are ordered by their parameters, and
+    their cost follows them (a young PWDB subject needs more cycles to periodicity than an
+    old one). A small ensemble gets one task per worker thread (:func:`_placement` pins
+    them); a big one :data:`TASKS_PER_THREAD` per thread of at least
+    :data:`MIN_TASK_VARIANTS` each, which Dask hands out as threads free up (:func:`_plan`):
+    two static halves left one worker idle while the other finished its half, whenever its
+    subjects or its share of a shared machine were slower (pwdb-200: +26 % median, -9 ...
+    +49 %, over local threads, which take the variants one by one)."""
     threads = max(1, threads)
-    per_thread = max(1, min(TASKS_PER_THREAD, n // (threads * MIN_TASK_VARIANTS)))
+    per_thread = min(TASKS_PER_THREAD, n // (threads * MIN_TASK_VARIANTS))
+    if per_thread < QUEUED_TASKS_PER_THREAD:
+        per_thread = 1
     tasks = max(1, min(n, threads * per_thread))
     return [range(j, n, tasks) for j in range(tasks)]
 
@@ -72,6 +82,23 @@ def _placement(nthreads: Mapping[str, int], tasks: int) -> list[str | None]:
     if not slots:
         return [None] * tasks
     return [slots[j % len(slots)] for j in range(tasks)]
+
+
+def _plan(n: int, nthreads: Mapping[str, int]) -> tuple[list[range], list[str | None] | None]:
+    """The chunks of an ensemble of ``n`` variants on workers of ``nthreads`` threads, and
+    the worker each is pinned to, or None: Dask balances them. More tasks than 2 per thread,
+    unrestricted and submitted in one graph, are "root-ish": the scheduler sends each worker
+    only as many as it has threads (+ one, ``distributed.scheduler.worker-saturation`` 1.1)
+    and keeps the rest queued, so a worker that finishes early takes the next task and the
+    run no longer ends on one worker's half (Dask's scheduling-policies docs, "Avoid
+    over-saturating workers"). Worker restrictions, even loose ones, exempt a task from that
+    queue (``Scheduler.is_rootish``), so only the one-task-per-thread chunks of a small
+    ensemble are pinned."""
+    threads = sum(nthreads.values()) or 1
+    chunks = _chunks(n, threads)
+    if len(chunks) >= QUEUED_TASKS_PER_THREAD * threads:
+        return chunks, None
+    return chunks, _placement(nthreads, len(chunks))
 
 
 def _merge(into: Collector, part: Collector, rows: range) -> None:
@@ -128,15 +155,19 @@ def run_on_client(client: Any, model: Model, patches: list[dict[str, Any]], inde
         from oxyline.ensemble.store import StoreWriter
 
         writer = StoreWriter(store, collector, patches, _attrs(model, output), index)
-    nthreads = client.nthreads()
-    threads = sum(nthreads.values()) or 1
-    chunks = _chunks(len(patches), threads)
+    chunks, where = _plan(len(patches), client.nthreads())
     shared = _scattered(client, model)
-    futures = {client.submit(run_chunk, shared, [patches[i] for i in c], c, output,
-                             workers, dict(overrides), pure=False,
-                             workers=None if where is None else [where],
-                             allow_other_workers=where is not None): c
-               for c, where in zip(chunks, _placement(nthreads, len(chunks)), strict=True)}
+    parts = [[patches[i] for i in c] for c in chunks]
+    k = len(chunks)
+    if where is None:  # one graph: the scheduler queues the tasks and hands them out
+        futures = dict(zip(client.map(run_chunk, [shared] * k, parts, chunks, [output] * k,
+                                      [workers] * k, [dict(overrides)] * k, pure=False),
+                           chunks, strict=True))
+    else:
+        futures = {client.submit(run_chunk, shared, part, c, output, workers, dict(overrides),
+                                 pure=False, workers=None if w is None else [w],
+                                 allow_other_workers=w is not None): c
+                   for part, c, w in zip(parts, chunks, where, strict=True)}
     tick, close = _progress(progress, len(patches))
     finished = True
     try:
