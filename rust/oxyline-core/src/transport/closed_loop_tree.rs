@@ -16,6 +16,7 @@
 //! per step: the tree's Σ N changes by dt (root inflow − outlet outflow − wall uptake) exactly
 //! (the transport's linear invariant), and the compartments lose and gain those same fluxes.
 
+use super::plan::upwind_flux_in;
 use super::{End, Transport};
 use crate::circuit::Regime;
 use crate::error::{Error, Result};
@@ -49,6 +50,37 @@ pub struct ArterialTree {
     pub segment_names: Vec<String>,
 }
 
+/// Index of the boundary condition called `name` in the tree's circuit.
+fn boundary_index(circuit: &crate::circuit::Circuit, name: &str) -> Result<usize> {
+    circuit
+        .boundaries
+        .iter()
+        .position(|b| b.name == name)
+        .ok_or_else(|| {
+            Error::model(
+                "arterial tree",
+                format!("'{name}' is not one of its boundary conditions"),
+            )
+        })
+}
+
+/// `vessel:k` for every segment, k counted from the vessel's inlet.
+fn segment_names(circuit: &crate::circuit::Circuit) -> Vec<String> {
+    let mut seg_count = vec![0usize; circuit.vessel_names.len()];
+    circuit
+        .segments
+        .iter()
+        .map(|s| {
+            seg_count[s.vessel] += 1;
+            format!(
+                "{}:{}",
+                circuit.vessel_names[s.vessel],
+                seg_count[s.vessel] - 1
+            )
+        })
+        .collect()
+}
+
 impl ArterialTree {
     /// Assemble the tree model (canonical SI JSON with an `oxygen` section), run its flow by
     /// generalized-α at step dt for `cycles` cycles of `steps` steps and keep the last one; the
@@ -78,22 +110,10 @@ impl ArterialTree {
                 "carries oxygen only (one species)",
             ));
         }
-        let find = |name: &str| {
-            circuit
-                .boundaries
-                .iter()
-                .position(|b| b.name == name)
-                .ok_or_else(|| {
-                    Error::model(
-                        "arterial tree",
-                        format!("'{name}' is not one of its boundary conditions"),
-                    )
-                })
-        };
-        let inlet = find(inlet)?;
+        let inlet = boundary_index(circuit, inlet)?;
         let outlets = outlets
             .iter()
-            .map(|o| find(o))
+            .map(|o| boundary_index(circuit, o))
             .collect::<Result<Vec<_>>>()?;
         if steps == 0 || cycles == 0 || !(dt.is_finite() && dt > 0.0) {
             return Err(Error::model(
@@ -104,19 +124,7 @@ impl ArterialTree {
             ));
         }
         let (ys, alpha_f, flow_periodic_error) = periodic_flow(&dae, dt, steps, cycles)?;
-        let mut seg_count = vec![0usize; circuit.vessel_names.len()];
-        let segment_names = circuit
-            .segments
-            .iter()
-            .map(|s| {
-                seg_count[s.vessel] += 1;
-                format!(
-                    "{}:{}",
-                    circuit.vessel_names[s.vessel],
-                    seg_count[s.vessel] - 1
-                )
-            })
-            .collect();
+        let segment_names = segment_names(circuit);
         set_closure_flows(&mut tr, &ys, alpha_f)?;
         let z = tr.initial_state(&ys[0])?;
         let binding = tr.plan.species[0].binding;
@@ -137,17 +145,22 @@ impl ArterialTree {
             flow_periodic_error,
             segment_names,
         };
-        for s in 0..steps {
-            let t_af = tree.dt * (s as f64 + tree.alpha_f);
-            let (y0, y1) = (&tree.ys[s], &tree.ys[s + 1]);
-            tree.tr.load_flows_between(t_af, y0, y1, tree.alpha_f);
-            let q = tree.tr.boundary_flows();
-            tree.inflow.push(q[tree.inlet]);
-            tree.outflow
-                .push(tree.outlets.iter().map(|&b| -q[b]).collect());
-        }
-        tree.out_flux = vec![0.0; tree.outlets.len()];
+        tree.record_boundary_flows(steps);
         Ok(tree)
+    }
+
+    /// The inlet's inflow and every outlet's outflow at each step of the stored cycle.
+    fn record_boundary_flows(&mut self, steps: usize) {
+        for s in 0..steps {
+            let t_af = self.dt * (s as f64 + self.alpha_f);
+            let (y0, y1) = (&self.ys[s], &self.ys[s + 1]);
+            self.tr.load_flows_between(t_af, y0, y1, self.alpha_f);
+            let q = self.tr.boundary_flows();
+            self.inflow.push(q[self.inlet]);
+            self.outflow
+                .push(self.outlets.iter().map(|&b| -q[b]).collect());
+        }
+        self.out_flux = vec![0.0; self.outlets.len()];
     }
 
     /// Steps per cycle of the tree's flow.
@@ -310,12 +323,9 @@ impl Transport {
             j_in[bb] += b.flux_in(q, self.conc[n], || self.lagged_boundary(bb, End::Node(n)));
         }
         for ((n, _, bb), &q) in self.plan.sources.iter().zip(&self.qs) {
-            let c = if q >= 0.0 {
+            j_in[*bb] += upwind_flux_in(q, true, self.conc[*n], || {
                 self.lagged_boundary(*bb, End::Node(*n))
-            } else {
-                self.conc[*n]
-            };
-            j_in[*bb] += q * c;
+            });
         }
         j_in
     }

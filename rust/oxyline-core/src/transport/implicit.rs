@@ -489,12 +489,15 @@ impl Transport {
             account(self.plan.boundary_inlet[bb], flux_in, &mut i_in, &mut i_out);
         }
         for ((n, _, bb), &q) in self.plan.sources.iter().zip(&self.qs) {
-            let c = if q >= 0.0 {
+            let flux_in = upwind_flux_in(q, true, self.conc[*n], || {
                 self.lagged_boundary(*bb, End::Node(*n))
-            } else {
-                self.conc[*n]
-            };
-            account(self.plan.boundary_inlet[*bb], q * c, &mut i_in, &mut i_out);
+            });
+            account(
+                self.plan.boundary_inlet[*bb],
+                flux_in,
+                &mut i_in,
+                &mut i_out,
+            );
         }
         (i_in, i_out)
     }

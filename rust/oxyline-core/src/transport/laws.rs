@@ -29,6 +29,40 @@ fn segment_index_in_vessel(segment_vessels: &[u32], n_vessels: usize) -> Vec<usi
         .collect()
 }
 
+/// A segment with a wall to exchange through (a radius and a length).
+fn has_area(seg: &Segment) -> bool {
+    seg.wall.radius > 0.0 && seg.dx() > 0.0
+}
+
+/// The segments of relaxed-shear walls, each with its relaxation time and cycle-mean |Q|.
+fn relaxed_segments(plan: &Plan, sp: &SpeciesPlan, mean_abs: &[f64]) -> Vec<(usize, f64, f64)> {
+    let mut relax = Vec::new();
+    for (j, seg) in plan.segments.iter().enumerate() {
+        if sp.walls[plan.segment_vessels[j] as usize].is_relaxed() && has_area(seg) {
+            let tau = closure::relaxation_time(&seg.wall, sp.diffusivity, mean_abs[j]);
+            relax.push((j, tau, mean_abs[j]));
+        }
+    }
+    relax
+}
+
+/// The mean flow a wall's closure reads at segment `j` and the renewal factor it scales by.
+fn closure_mean_flow(
+    wall: &WallSpec,
+    j: usize,
+    mean: MeanFlows<'_>,
+    renewal: &[f64],
+) -> (f64, f64) {
+    match wall.mean_flow() {
+        closure::MeanFlow::CycleMean => (mean.abs[j], 1.0),
+        closure::MeanFlow::InletRenewal if !renewal.is_empty() => (
+            closure::renewal::net_mean(mean.abs[j], mean.forward[j]),
+            renewal[j],
+        ),
+        closure::MeanFlow::ForwardMean | closure::MeanFlow::InletRenewal => (mean.forward[j], 1.0),
+    }
+}
+
 impl Laws {
     /// The laws of every species of `plan` for the cycle means `mean` (per segment: ⟨|Q|⟩
     /// and the forward-flow mean, see `closure::MeanFlow`). Before the final pass
@@ -58,7 +92,6 @@ impl Laws {
         renewal: &[f64],
         final_pass: bool,
     ) -> Result<Laws> {
-        let mean_abs = mean.abs;
         let nc = plan.cells.len();
         let mut l = Laws {
             cell_g: vec![0.0; nc],
@@ -66,14 +99,8 @@ impl Laws {
             cell_q: vec![0.0; nc],
             ..Laws::default()
         };
-        let has_area = |seg: &Segment| seg.wall.radius > 0.0 && seg.dx() > 0.0;
         if final_pass {
-            for (j, seg) in plan.segments.iter().enumerate() {
-                if sp.walls[plan.segment_vessels[j] as usize].is_relaxed() && has_area(seg) {
-                    let tau = closure::relaxation_time(&seg.wall, sp.diffusivity, mean_abs[j]);
-                    l.relax.push((j, tau, mean_abs[j]));
-                }
-            }
+            l.relax = relaxed_segments(plan, sp, mean.abs);
         }
         let element = format!("species '{}' wall", sp.name);
         l.laws.reserve_exact(plan.pieces.len());
@@ -84,16 +111,6 @@ impl Laws {
             let seg = &plan.segments[j];
             let vessel = plan.segment_vessels[j] as usize;
             let vessel_wall = &sp.walls[vessel];
-            let (q_mean, scale) = match vessel_wall.mean_flow() {
-                closure::MeanFlow::CycleMean => (mean_abs[j], 1.0),
-                closure::MeanFlow::InletRenewal if !renewal.is_empty() => (
-                    closure::renewal::net_mean(mean_abs[j], mean.forward[j]),
-                    renewal[j],
-                ),
-                closure::MeanFlow::ForwardMean | closure::MeanFlow::InletRenewal => {
-                    (mean.forward[j], 1.0)
-                }
-            };
             if let WallSpec::Flux { flux } = vessel_wall {
                 if has_area(seg) && flux.table().is_some() {
                     tables.add(vessel, flux, p, piece, index[j]);
@@ -106,6 +123,7 @@ impl Laws {
                     q: 0.0,
                 }
             } else {
+                let (q_mean, scale) = closure_mean_flow(vessel_wall, j, mean, renewal);
                 vessel_wall.segment_law_scaled(
                     &piece.wall,
                     index[j],
@@ -115,41 +133,53 @@ impl Laws {
                     &element,
                 )?
             };
-            match law {
-                SegmentLaw::Fixed { g, cw, q } => {
-                    let (c, share) = (piece.cell as usize, piece.share);
-                    l.cell_g[c] += share * g;
-                    l.cell_gcw[c] += share * g * cw;
-                    l.cell_q[c] += share * q;
-                }
-                SegmentLaw::Instantaneous { .. } => {
-                    l.dynamic.push(p);
-                    // pieces are contiguous per segment
-                    if l.dynamic_segs.last() != Some(&j) {
-                        l.dynamic_segs.push(j);
-                    }
+            l.push_law(p, piece, law);
+        }
+        l.finish(plan.segments.len(), tables);
+        Ok(l)
+    }
+
+    /// Adds piece `p`'s law: a fixed law to its cell's sums (by the piece's share), an
+    /// instantaneous one to the pieces evaluated each step.
+    fn push_law(&mut self, p: usize, piece: &Piece, law: SegmentLaw) {
+        let j = piece.seg as usize;
+        match law {
+            SegmentLaw::Fixed { g, cw, q } => {
+                let (c, share) = (piece.cell as usize, piece.share);
+                self.cell_g[c] += share * g;
+                self.cell_gcw[c] += share * g * cw;
+                self.cell_q[c] += share * q;
+            }
+            SegmentLaw::Instantaneous { .. } => {
+                self.dynamic.push(p);
+                // pieces are contiguous per segment
+                if self.dynamic_segs.last() != Some(&j) {
+                    self.dynamic_segs.push(j);
                 }
             }
-            l.laws.push(law);
         }
-        if !l.relax.is_empty() {
-            l.relax_of_seg = vec![u32::MAX; plan.segments.len()];
-            for (k, &(j, _, _)) in l.relax.iter().enumerate() {
-                l.relax_of_seg[j] = k as u32;
+        self.laws.push(law);
+    }
+
+    /// The per-cell and per-segment indexes once every piece's law is in.
+    fn finish(&mut self, n_segments: usize, tables: wall_flux::TableBuilder) {
+        if !self.relax.is_empty() {
+            self.relax_of_seg = vec![u32::MAX; n_segments];
+            for (k, &(j, _, _)) in self.relax.iter().enumerate() {
+                self.relax_of_seg[j] = k as u32;
             }
         }
-        l.cell_wc = l
+        self.cell_wc = self
             .cell_q
             .iter()
-            .zip(&l.cell_gcw)
+            .zip(&self.cell_gcw)
             .map(|(q, gcw)| q - gcw)
             .collect();
-        l.flux_tables = tables.finish(&l.cell_q);
-        l.has_wall = !l.dynamic.is_empty()
-            || l.flux_tables.is_some()
-            || l.cell_g.iter().any(|&g| g != 0.0)
-            || l.cell_q.iter().any(|&q| q != 0.0);
-        Ok(l)
+        self.flux_tables = tables.finish(&self.cell_q);
+        self.has_wall = !self.dynamic.is_empty()
+            || self.flux_tables.is_some()
+            || self.cell_g.iter().any(|&g| g != 0.0)
+            || self.cell_q.iter().any(|&q| q != 0.0);
     }
 
     /// Wall uptake (mol/s) of cell `i` from its fixed laws at free concentration `free`:

@@ -104,13 +104,32 @@ impl BoundaryLink {
     /// (`boundary`, asked only when it is upwind) or the node's `node_conc`.
     #[inline]
     pub(super) fn flux_in(&self, q: f64, node_conc: f64, boundary: impl FnOnce() -> f64) -> f64 {
-        let c = if self.boundary_upwind(q) {
+        upwind_flux_in(q, self.into_node, node_conc, boundary)
+    }
+}
+
+/// Upwind species flux into a node (mol/s) across a boundary carrying flow `q`, positive into
+/// the node when `into_node` (an inward boundary face, or any point flow source) and out of it
+/// otherwise: the boundary's value when it is upwind (`boundary`, asked only then), else the
+/// node's `node_conc`. The one upwind rule of boundary faces and flow sources alike.
+#[inline]
+pub(super) fn upwind_flux_in(
+    q: f64,
+    into_node: bool,
+    node_conc: f64,
+    boundary: impl FnOnce() -> f64,
+) -> f64 {
+    let (inflow, boundary_upwind) = if into_node {
+        (q, q >= 0.0)
+    } else {
+        (-q, q < 0.0)
+    };
+    inflow
+        * if boundary_upwind {
             boundary()
         } else {
             node_conc
-        };
-        self.inflow(q) * c
-    }
+        }
 }
 
 /// Children-before-parents order of the domain nodes when the undirected graph of the internal

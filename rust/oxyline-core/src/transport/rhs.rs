@@ -184,12 +184,9 @@ impl Transport {
             account(inlet[bb], flux_in, &mut i_in, &mut i_out);
         }
         for ((n, _, b), &q) in self.plan.sources.iter().zip(&self.qs) {
-            let c = if q >= 0.0 {
+            let flux = upwind_flux_in(q, true, self.conc[*n], || {
                 self.boundary_conc(*b, End::Node(*n))
-            } else {
-                self.conc[*n]
-            };
-            let flux = q * c;
+            });
             dnode[*n] += flux;
             account(inlet[*b], flux, &mut i_in, &mut i_out);
         }
