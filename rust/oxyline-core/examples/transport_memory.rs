@@ -3,20 +3,18 @@
 //!
 //!     cargo run --release -p oxyline-core --example transport_memory -- model.json
 
-use oxyline_core::Transport;
-use oxyline_core::network::parse;
+mod common;
 
 fn main() {
     let path = std::env::args()
         .nth(1)
         .expect("usage: transport_memory MODEL.json");
-    let json = std::fs::read_to_string(&path).expect("readable model file");
-    let spec = parse(&json).expect("valid model");
-    let assembled = spec.assemble().expect("valid network");
-    let dae = assembled.circuit.assemble().expect("valid circuit");
-    let spec_tr = spec.transport.as_ref().expect("a transport section");
-    let prototype =
-        Transport::build(spec_tr, &assembled.circuit, &dae, &assembled.probes).expect("valid");
+    let common::Model {
+        assembled,
+        dae,
+        transport: prototype,
+        ..
+    } = common::load(&path);
     let segments = assembled.circuit.segments.len() as f64;
     let mut run = prototype.new_run();
     let unknowns = run.mean_flow_unknowns();

@@ -1,5 +1,5 @@
 //! The model-loading prologue and the CPU clock shared by the per-step cost examples
-//! (`leveque_cost`, `o2_step_ratio`, `o2_pass_ratio`), included by each with `mod common;`.
+//! (`leveque_cost`, `o2_step_ratio`, `o2_pass_ratio`, `transport_memory`), included by each with `mod common;`.
 // (each example uses a part of this module)
 #![allow(dead_code)]
 
