@@ -18,7 +18,7 @@ if __name__ == "__main__":
     fig = None
     for name in ("adan56", "adan56-st"):
         t0 = time.perf_counter()
-        m = oxyline.models.load(name)
+        m = oxyline.catalogue.load(name)
         t1 = time.perf_counter()
         inlet = next(iter(plot.inlets(m)))
         z = oxyline.impedance(m, inlet, f)

@@ -24,7 +24,7 @@ import time
 from bench_heart import interleaved
 
 import oxyline
-from oxyline import closed_loop, examples
+from oxyline import catalogue, closed_loop
 
 
 def main() -> None:
@@ -43,7 +43,7 @@ def main() -> None:
     print("| model | flow only (s CPU) | flow + O2 (s CPU) | ratio |")
     print("|---|---:|---:|---:|")
     if not a.tree_only:
-        m = examples.load("paper-curved-coronary")
+        m = catalogue.load("paper-curved-coronary")
         r = interleaved({"flow": lambda: oxyline.simulate(m, transport=False),
                          "o2": lambda: oxyline.simulate(m)}, a.repeats)
         flow, o2 = r["flow"][2], r["o2"][2]

@@ -37,7 +37,7 @@ VARIABLES = ["pressure_in", "pressure_out", "segment_pressure_in"]
 def serial(patches: list[dict], table, subset: int, max_length: float | None, start: str
            ) -> dict[str, float]:
     picks = np.linspace(0, len(patches) - 1, subset).round().astype(int)
-    base = oxyline.models.load_dict(P.MODEL)
+    base = oxyline.catalogue.load_dict(P.MODEL)
     if max_length:
         base["segmentation"] = {"max_length": max_length}
     times, cycles, sims, cpu = [], [], [], []

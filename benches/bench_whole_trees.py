@@ -49,19 +49,19 @@ def main() -> None:
     import oxyline
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--models", nargs="+", default=list(oxyline.models.WHOLE_TREES))
+    ap.add_argument("--models", nargs="+", default=list(oxyline.catalogue.WHOLE_TREES))
     args = ap.parse_args()
     exe = [sys.executable, "-m", "oxyline.cli"]  # the command line of this interpreter
     rows: list[str] = []
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.models:
-            data: dict[str, Any] = oxyline.models.load_dict(name)
+            data: dict[str, Any] = oxyline.catalogue.load_dict(name)
             flow = Path(tmp) / f"{name}.json"
             flow.write_text(json.dumps(data))
             o2 = Path(tmp) / f"{name}-o2.json"
             o2.write_text(json.dumps({**data, "oxygen": OXYGEN}))
             c0 = time.process_time()  # load alone (growth + assembly), in this process
-            segments = oxyline.models.load(name).network.summary()["segments"]
+            segments = oxyline.catalogue.load(name).network.summary()["segments"]
             load_cpu = time.process_time() - c0
             res = {}
             for label, path in (("flow", flow), ("o2", o2)):

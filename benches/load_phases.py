@@ -45,7 +45,7 @@ def child(depth: int, config: str, route: str) -> dict[str, Any]:
 
     from oxyline import model as M
     from oxyline.io.native import read_mapping
-    from oxyline.loader import gc_paused
+    from oxyline.memory import gc_paused
 
     out: dict[str, Any] = {"segments": (2 ** depth - 1) * 4}
     if route == "dict":
@@ -93,7 +93,7 @@ def child_builtin(name: str) -> dict[str, Any]:
     conditions, grown on load): the structured-tree builder's route."""
     import oxyline
 
-    d = oxyline.models.load_dict(name)
+    d = oxyline.catalogue.load_dict(name)
     out: dict[str, Any] = {}
     last = usage()
     m = oxyline.load_model(d)

@@ -122,10 +122,10 @@ def test_models_and_info(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["models"]) == 0
     lines = capsys.readouterr().out.splitlines()
     try:
-        from oxyline import closed_loop, models
+        from oxyline import catalogue, closed_loop
 
         # one line per built-in model, and per closed-loop O2 built-in (oxyline.closed_loop)
-        assert len(lines) == len(list(models.list())) + len(closed_loop.BUILTINS) > 0
+        assert len(lines) == len(list(catalogue.list())) + len(closed_loop.BUILTINS) > 0
     except ImportError:
         assert "bifurcation" in lines
     assert main(["info"]) == 0

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import oxyline
-from oxyline import examples
+from oxyline import catalogue
 from oxyline.plot_oxygen import without_intramyocardial_pressure
 
 SYSTOLE = 0.35  # s, the systolic window of the example's P_lv(t) (its file's comments)
@@ -62,7 +62,7 @@ def periodic_inflow(src: dict, t: np.ndarray, with_pim: bool = True) -> np.ndarr
 
 @pytest.fixture(scope="module")
 def runs() -> dict:
-    m = examples.load("paper-curved-coronary")
+    m = catalogue.load("paper-curved-coronary")
     rigid = oxyline.load_model(without_intramyocardial_pressure(m))
     return {"src": m.source,
             "rk4": oxyline.simulate(m, method="rk4", transport=False),
@@ -133,7 +133,7 @@ def test_impediment_figure_shows_both_cases(runs: dict) -> None:
 
 
 def test_rigid_variant_drops_only_the_intramyocardial_pressure() -> None:
-    m = examples.load("paper-curved-coronary")
+    m = catalogue.load("paper-curved-coronary")
     s = without_intramyocardial_pressure(m)
     ref = copy.deepcopy(m.source)
     ref["boundary_conditions"]["outlet"]["intramyocardial_pressure"] = 0.0

@@ -15,7 +15,7 @@ from conftest import data_path
 
 import oxyline
 import oxyline.io as oio
-from oxyline.io.svzerod_export import vessel_segments
+from oxyline.io.svzerod.writer import vessel_segments
 
 MU = 3.5e-3
 
@@ -397,12 +397,12 @@ def test_summary_table_and_files(tmp_path: Path, result: oxyline.Result) -> None
 
 
 def test_round_trips_of_every_built_in_model(tmp_path: Path) -> None:
-    models = pytest.importorskip("oxyline.models")
+    catalogue = pytest.importorskip("oxyline.catalogue")
     pytest.importorskip("networkx")
-    for name in models.list():
-        if name in models.WHOLE_TREES:  # 3e5 vessels: loads in a minute; a model with
+    for name in catalogue.list():
+        if name in catalogue.WHOLE_TREES:  # 3e5 vessels: loads in a minute; a model with
             continue                    # trees is round-tripped in test_structured_tree.py
-        m = models.load(name)
+        m = catalogue.load(name)
         assert oio.from_networkx(oio.to_networkx(m)).canonical == m.canonical, name
         if any(bc.get("type") == "coronary" for bc in m.source["boundary_conditions"].values()):
             # the table format has no coronary columns: refused by name, not written lossily
@@ -426,8 +426,8 @@ def _tube_resistance(g: dict, mu: float) -> float:
 
 def test_svzerod_export_of_adan56_matches_the_analytic_tree_split() -> None:
     svzerod = pytest.importorskip("svzerod")
-    models = pytest.importorskip("oxyline.models")
-    src = models.load("adan56").to_dict()
+    catalogue = pytest.importorskip("oxyline.catalogue")
+    src = catalogue.load("adan56").to_dict()
     inlet = next(n for n, bc in src["boundary_conditions"].items() if bc["type"] == "flow")
     src["boundary_conditions"][inlet] = {"type": "flow", "value": 1e-4}
     m = oxyline.load_model(src)

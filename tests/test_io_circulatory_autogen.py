@@ -101,7 +101,7 @@ def result() -> oxyline.Result:
 @pytest.fixture(scope="module")
 def builtin() -> dict[str, Any]:
     """The shipped file."""
-    return oxyline.models.load_dict("whole-body-140")
+    return oxyline.catalogue.load_dict("whole-body-140")
 
 
 @pytest.fixture(scope="module")
@@ -246,8 +246,8 @@ def test_shipped_file_matches_the_importer(builtin: dict[str, Any]) -> None:
     # ~6e-13 between CPUs/BLAS builds. 1e-9 is far above that and far below any real change.
     diff = model_differences(fresh, builtin, rel=1e-9)
     assert not diff, f"regenerate with benches/make_models_data.py: {diff[:5]}"
-    assert "whole-body-140" in oxyline.models.list()
-    assert oxyline.models.path("whole-body") == oxyline.models.path("whole-body-140")
+    assert "whole-body-140" in oxyline.catalogue.list()
+    assert oxyline.catalogue.path("whole-body") == oxyline.catalogue.path("whole-body-140")
 
 
 # --- running it ---------------------------------------------------------------------------------
@@ -497,7 +497,7 @@ def test_cli_validate_knows_the_builtin(tmp_path: Path) -> None:
 
 
 def test_yaml_is_plain_native_format(builtin: dict[str, Any]) -> None:
-    text = oxyline.models.path("whole-body-140").read_text()
+    text = oxyline.catalogue.path("whole-body-140").read_text()
     assert text.startswith("# oxyline built-in model 'whole-body-140'")
     d = yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
     assert d == builtin

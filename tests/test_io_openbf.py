@@ -292,7 +292,7 @@ def test_adan56_inlet_repair() -> None:
         _t2, q2 = read_inlet(f, repair=False)
     assert np.array_equal(q2, raw_q)
     # the built-in model and the default import carry the repaired inflow
-    for d in (_quiet(FILES["adan56"]), oxyline.models.load_dict("adan56")):
+    for d in (_quiet(FILES["adan56"]), oxyline.catalogue.load_dict("adan56")):
         assert d["boundary_conditions"]["n1"]["flow"][17] == -2.10178e-05
     # README: mean 6.77 L/min (the openBF copy), peak 573 mL/s; the repair removes 0.44 %
     assert np.trapezoid(raw_q, raw_t) / raw_t[-1] * 6e4 == pytest.approx(6.77, abs=0.01)
@@ -340,7 +340,7 @@ def test_segmentation_is_at_most_1_cm() -> None:
 # built-in models -------------------------------------------------------------------------
 
 def test_builtin_model_names() -> None:
-    names = oxyline.models.list()
+    names = oxyline.catalogue.list()
     for n in ("cca", "aortic-bifurcation", "adan56", "circle-of-willis", "matthys37",
               "bifurcation"):
         assert n in names
@@ -355,7 +355,7 @@ def test_builtin_model_names() -> None:
     ("cca", 1, 1), ("aortic-bifurcation", 3, 2), ("adan56", 77, 31),
     ("circle-of-willis", 33, 11), ("matthys37", 37, 16)])
 def test_builtin_models_load(name: str, vessels: int, outlets: int) -> None:
-    s = oxyline.models.load(name).summary()
+    s = oxyline.catalogue.load(name).summary()
     assert (s["vessels"], s["outlets"], s["inlets"]) == (vessels, outlets, 1)
 
 
@@ -374,7 +374,7 @@ def test_builtin_files_are_the_importer_output() -> None:
     for name, key in (("cca", "cca"), ("adan56", "adan56"), ("circle-of-willis", "cow")):
         # not bit-identical: the import linearises the tube law at the steady mean pressure (a
         # linear network solve), which rounds differently on another CPU/BLAS build
-        diff = model_differences(_quiet(FILES[key], name=name), oxyline.models.load_dict(name),
+        diff = model_differences(_quiet(FILES[key], name=name), oxyline.catalogue.load_dict(name),
                                  rel=1e-9)
         assert not diff, f"{name}: regenerate with benches/make_models_data.py: {diff[:5]}"
 

@@ -15,7 +15,7 @@ import pytest
 from conftest import run_child
 
 import oxyline
-from oxyline import examples
+from oxyline import catalogue
 from oxyline.cli import main
 from oxyline.io import results
 from oxyline.run import _settings
@@ -38,7 +38,7 @@ def _assert_store_equals_result(ds: Any, res: oxyline.Result) -> None:
 ])
 def test_streamed_store_equals_the_in_memory_result(tmp_path: Path, name: str,
                                                     options: dict[str, Any], chunk: int) -> None:
-    model = examples.load(name)
+    model = catalogue.load(name)
     ds = oxyline.simulate_to_zarr(model, tmp_path / "s.zarr", time_chunk=chunk, **options)
     res = oxyline.simulate(model, **options)
     assert ds.sizes["time"] % chunk != 0
@@ -52,7 +52,7 @@ def test_streamed_store_equals_the_in_memory_result(tmp_path: Path, name: str,
 
 
 def test_the_core_hands_over_at_most_one_chunk() -> None:
-    model = examples.load("paper-bifurcated")
+    model = catalogue.load("paper-bifurcated")
     s = _settings(model, {"cycles": 2, "output_cycles": "all"})
     full = model.network.simulate(**s)
     chunks: list[dict[str, Any]] = []

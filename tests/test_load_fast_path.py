@@ -130,7 +130,7 @@ def test_a_released_canonical_is_written_again_as_it_was() -> None:
 
     from oxyline.model import _unassembled
 
-    d = oxyline.models.load("bifurcation").to_dict()
+    d = oxyline.catalogue.load("bifurcation").to_dict()
     d["oxygen"] = {"inlet": {"po2": 95.0}, "wall": {"model": "graetz", "po2": 50.0}}
     first = _unassembled(json.loads(json.dumps(d))).canonical
     m = oxyline.load_model(d)

@@ -12,7 +12,7 @@ import pytest
 from test_cli import assert_valid_image
 
 import oxyline
-from oxyline import examples
+from oxyline import catalogue
 from oxyline.cli import main
 from oxyline.io import results
 
@@ -38,7 +38,7 @@ def tube(species: list[dict] | None = None, oxygen: dict | None = None) -> dict:
 def runs() -> dict[str, oxyline.Result]:
     return {
         "flow": oxyline.simulate("bifurcation", cycles=1, output_every=0.004),
-        "oxygen": oxyline.simulate(examples.load("paper-bifurcated"), cycles=1,
+        "oxygen": oxyline.simulate(catalogue.load("paper-bifurcated"), cycles=1,
                                    output_every=0.004),
         # oxygen and a second species: species order, shared TL elements, decay balance
         "two-species": oxyline.simulate(tube(DRUG, {"inlet": {"po2": 85.0}})),
@@ -108,7 +108,7 @@ def test_open_result_reads_netcdf_and_zarr_files(runs: dict[str, oxyline.Result]
 
 
 def test_without_segment_output_the_species_segment_arrays_stay_absent() -> None:
-    res = oxyline.simulate(examples.load("paper-bifurcated"), cycles=1, segments=False)
+    res = oxyline.simulate(catalogue.load("paper-bifurcated"), cycles=1, segments=False)
     back = oxyline.open_result(res.to_xarray())
     assert_same(back, res, segments=False)
     assert not back.has_segments and back.species["o2"].segment_data.shape[1] == 0

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import oxyline
-from oxyline import _core, examples
+from oxyline import _core, catalogue
 
 FLOW_VARS = ["pressure_in", "flow_out", "segment_flow"]
 O2_VARS = ["concentration_out", "wall_flux", "segment_concentration"]
@@ -78,7 +78,7 @@ def test_segments_false_and_vessels_none(full: oxyline.Result) -> None:
 
 def test_selection_in_the_model_file_and_streamed_to_zarr(full: oxyline.Result,
                                                           tmp_path: Path) -> None:
-    model = examples.load("paper-bifurcated").to_dict()
+    model = catalogue.load("paper-bifurcated").to_dict()
     vessel = full.vessels[0]
     model["simulation"] = {"output": {"variables": ["flow_in", "concentration_in"],
                                       "vessels": [vessel], "segments": False}}
@@ -103,7 +103,7 @@ def test_selection_in_the_model_file_and_streamed_to_zarr(full: oxyline.Result,
 def test_unknown_names_are_model_errors(kw: dict, match: str) -> None:
     with pytest.raises(oxyline.ModelError, match=match):
         oxyline.simulate("bifurcation", cycles=1, **kw)
-    model = examples.load("bifurcation").to_dict()
+    model = catalogue.load("bifurcation").to_dict()
     model["simulation"] = {"output": kw}
     with pytest.raises(oxyline.ModelError, match=match):  # at load time too
         oxyline.load_model(model)
@@ -182,7 +182,7 @@ def test_large_model_default_output(full: oxyline.Result,
     with warnings.catch_warnings():
         warnings.simplefilter("error", oxyline.OutputSizeWarning)
         every = oxyline.simulate("paper-bifurcated", cycles=1, variables="all")
-        model = examples.load("paper-bifurcated").to_dict()
+        model = catalogue.load("paper-bifurcated").to_dict()
         model["simulation"] = {"output": {"variables": "all"}}
         from_file = oxyline.simulate(model, cycles=1)
     for r in (every, from_file):

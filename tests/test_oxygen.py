@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from scipy.special import gammainc
 
 import oxyline
-from oxyline import examples
+from oxyline import catalogue
 
 MMHG = 133.322368
 ALPHA = 1.40e-3  # mol m^-3 mmHg^-1
@@ -164,7 +164,7 @@ def test_hill_bifurcation_keeps_mass_balance_and_the_hill_law_at_every_vessel_en
 
 
 def test_flow_only_results_are_unchanged_by_transport() -> None:
-    m = examples.load("paper-bifurcated")
+    m = catalogue.load("paper-bifurcated")
     with_o2 = oxyline.simulate(m, cycles=2, method="generalized-alpha", dt=1e-3)
     plain = oxyline.simulate(m, cycles=2, method="generalized-alpha", dt=1e-3, transport=False)
     assert np.array_equal(with_o2.data, plain.data)
@@ -173,7 +173,7 @@ def test_flow_only_results_are_unchanged_by_transport() -> None:
 
 @pytest.mark.parametrize("name", ["paper-straight", "paper-curved", "paper-bifurcated"])
 def test_paper_examples_run_with_exact_mass_balance(name: str) -> None:
-    m = examples.load(name)
+    m = catalogue.load(name)
     res = oxyline.simulate(m, cycles=3)
     mb = res.o2_mass_balance
     assert abs(mb["residual"][-1]) <= 1e-12 * mb["inflow"][-1]
@@ -191,7 +191,7 @@ def test_paper_examples_run_with_exact_mass_balance(name: str) -> None:
 def test_straight_vessel_bulk_drop_matches_the_leveque_estimate() -> None:
     """docs/physics.md §3.5: with the cycle-mean flow of 20 mL/s, the aortic bulk PO2 drop is 0.072 mmHg
     (no-Hb Lévêque, 85 → 60 mmHg wall)."""
-    res = oxyline.simulate(examples.load("paper-straight"))
+    res = oxyline.simulate(catalogue.load("paper-straight"))
     drop = 85.0 - res.po2_out[:, 0].mean()
     assert drop == pytest.approx(0.072, rel=0.06)
 

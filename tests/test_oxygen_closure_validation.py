@@ -13,7 +13,7 @@ import pytest
 
 pytest.importorskip("scipy")
 
-from oxyline.reference.validation import load_case, one_d, scenarios
+from validation.closures import load_case, one_d, scenarios
 
 DATA = json.loads((Path(__file__).parent / "data" / "oxygen_2d_uptakes.json").read_text())
 STORED = {(r["case"], r["scenario"]): r for r in DATA["cases"]}
@@ -60,7 +60,7 @@ def test_the_end_renewal_candidate_is_within_2_percent_everywhere() -> None:
     validation): every row within 2 % of the stored 2-D uptake (measured worst +1.71 %). It
     fails on vessels outside these rows (§11, `test_the_end_renewal_candidate_on_held_out_
     vessels`), which is why it stays an emulation."""
-    from oxyline.reference.validation import END_RENEWAL_C, end_renewal_number
+    from validation.closures import END_RENEWAL_C, end_renewal_number
 
     worst = 0.0
     for (case_name, label), row in STORED.items():
@@ -82,7 +82,7 @@ HELDOUT_AORTIC_MISS = {"infrarenal aorta": -0.0330, "ascending aorta": -0.1321,
 
 
 def _heldout() -> list:
-    from oxyline.reference.validation import heldout_cases
+    from validation.closures import heldout_cases
 
     return heldout_cases()
 
@@ -109,7 +109,7 @@ def test_the_end_renewal_candidate_on_held_out_vessels() -> None:
     """The candidate k (1 + 0.035 s) on vessels it was not fitted to: within 2 % of the stored
     2-D uptake in every held-out row (the issue-12 target). Expected to fail (strict): if a
     change makes it pass, §11 and the default must be revisited."""
-    from oxyline.reference.validation import END_RENEWAL_C, end_renewal_number
+    from validation.closures import END_RENEWAL_C, end_renewal_number
 
     worst = 0.0
     for name, case in _heldout():
@@ -127,7 +127,7 @@ def test_the_inlet_renewal_candidate_on_held_out_vessels() -> None:
     held-out vessels, against the reference with the layer continuing through the outlet: the
     issue-12 target of 2 % (measured worst −0.95 %, the paper aorta 5 cm long), where the
     default misses by up to −7.8 % (the ascending aorta at exercise)."""
-    from oxyline.reference.validation import heldout_cases_2, heldout_cases_3, inlet_renewal_uptake
+    from validation.closures import heldout_cases_2, heldout_cases_3, inlet_renewal_uptake
 
     worst, worst_default = 0.0, 0.0
     for name, case in _heldout() + heldout_cases_2() + heldout_cases_3():
@@ -148,8 +148,8 @@ def test_wall_shear_is_the_gradient_of_the_womersley_profile() -> None:
 
     import numpy as np
 
-    from oxyline.reference.axisymmetric import womersley_shape
-    from oxyline.reference.validation import wall_shear
+    from validation.axisymmetric import womersley_shape
+    from validation.closures import wall_shear
 
     case = load_case("straight")
     flow = case.flow

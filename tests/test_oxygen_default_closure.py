@@ -21,7 +21,7 @@ import oxyline
 
 pytest.importorskip("scipy")
 
-from oxyline.reference.validation import (
+from validation.closures import (
     heldout_rows,
     inlet_renewal_uptake,
     one_d,
@@ -109,8 +109,8 @@ def test_the_wired_law_in_a_reversing_tube_is_the_closed_form() -> None:
     from scipy import special
     from test_oxygen_wall_flux import AREA, LENGTH, N, R, tube
 
-    from oxyline.reference.axisymmetric import ConstantPO2, Grid, Tube, richardson, steady_march
-    from oxyline.reference.validation import INLET_RENEWAL_A
+    from validation.axisymmetric import ConstantPO2, Grid, Tube, richardson, steady_march
+    from validation.closures import INLET_RENEWAL_A
 
     def _graetz_theta(xs: np.ndarray) -> np.ndarray:
         # θ_m by the reference's exact x-marching, Richardson from 400/800 cells (< 1e-7)

@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 
 import oxyline
-from oxyline import examples
+from oxyline import catalogue
 from oxyline.monitor import species_bounds
 
 
 def _with_formulation(name: str, formulation: str) -> dict:
-    m = copy.deepcopy(examples.load(name).source)
+    m = copy.deepcopy(catalogue.load(name).source)
     m["oxygen"]["formulation"] = formulation
     return m
 
@@ -46,7 +46,7 @@ def test_the_default_formulation_does_not_warn_on_the_paper_examples() -> None:
     for name in ("paper-curved", "paper-straight", "paper-bifurcated"):
         with warnings.catch_warnings():
             warnings.simplefilter("error", oxyline.PhysicalBoundsWarning)
-            oxyline.simulate(examples.load(name), cycles=3)
+            oxyline.simulate(catalogue.load(name), cycles=3)
 
 
 def test_tl_quasisteady_aorta_names_flow_reversal() -> None:

@@ -112,7 +112,7 @@ def test_bad_flux_input_names_the_vessel() -> None:
 def _graetz_theta(x_star: float) -> float:
     """Mixed-cup θ_m(x*) from the 2-D reference's exact x-marching (an independent Graetz
     solution), Richardson-extrapolated from 400/800 radial cells (error < 1e-7)."""
-    from oxyline.reference.axisymmetric import ConstantPO2, Grid, Tube, richardson, steady_march
+    from validation.axisymmetric import ConstantPO2, Grid, Tube, richardson, steady_march
 
     tube_ = Tube(radius=R, length=LENGTH)
     runs = [steady_march(tube_, ConstantPO2(0.0), np.array([x_star]), Grid(radial=n))

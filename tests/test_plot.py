@@ -188,10 +188,10 @@ def test_import_oxyline_does_not_import_matplotlib() -> None:
 
 
 def test_oxygen_profile_of_the_paper_bifurcation(tmp_path: Path) -> None:
-    models = pytest.importorskip("oxyline.models")
-    if "paper-bifurcated" not in models.list():
+    catalogue = pytest.importorskip("oxyline.catalogue")
+    if "paper-bifurcated" not in catalogue.list():
         pytest.skip("no paper-bifurcated built-in model")
-    m = models.load("paper-bifurcated")
+    m = catalogue.load("paper-bifurcated")
     res = oxyline.simulate(m, cycles=1)
     ds = res.to_xarray()
     if "segment_po2" not in ds:

@@ -30,7 +30,7 @@ def table():
 
 @pytest.fixture(scope="module")
 def baseline():
-    return oxyline.models.load_dict("pwdb-116")
+    return oxyline.catalogue.load_dict("pwdb-116")
 
 
 # ------------------------------------------------------------------------- the generator

@@ -1,7 +1,7 @@
-"""The 2-D axisymmetric reference solver (oxyline.reference.axisymmetric) against closed forms:
+"""The 2-D axisymmetric reference solver (validation.axisymmetric) against closed forms:
 the Graetz series, the Lévêque limit, Poiseuille/Womersley profiles, mass conservation and a
 cylindrical wall layer's conductance. Coarse grids only (seconds); the full grid and time-step
-study is `python -m oxyline.reference.validation` (docs/validation-oxygen.md)."""
+study is `python -m validation.closures` (docs/validation-oxygen.md)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import pytest
 
 pytest.importorskip("scipy")
 
-from oxyline.reference.axisymmetric import (
+from validation.axisymmetric import (
     AxisymmetricSolver,
     ConstantPO2,
     Grid,
@@ -133,10 +133,10 @@ def test_wall_layer_equals_its_series_mass_transfer_coefficient() -> None:
 
 @pytest.mark.slow
 def test_validation_study_quick_run(capsys: pytest.CaptureFixture[str]) -> None:
-    """`python -m oxyline.reference.validation --quick` end to end on one example (coarse
+    """`python -m validation.closures --quick` end to end on one example (coarse
     grids): every table row is there and the Graetz closure is within 5 % of the 2-D uptake
     for the example waveform (measured on the fine grid: +0.1 %)."""
-    from oxyline.reference import validation
+    from validation import closures as validation
 
     assert validation.main(["--quick", "--only", "curved", "--skip-convergence"]) == 0
     out = capsys.readouterr().out
@@ -150,7 +150,7 @@ def test_profile_backflow_conserves_mass_and_equals_mixed_without_wall_reversal(
     """`backflow="profile"` (each radius re-enters with its own last-cell PO2): the period's
     mass balance closes to round-off with reversal, and where nothing flows backwards at any
     radius (curved example: Womersley 2.1, no reversal) it is the "mixed" solution."""
-    from oxyline.reference.validation import load_case
+    from validation.closures import load_case
 
     c = load_case("curved")
     grid = Grid(16, 24, steps_per_period=40)
@@ -169,8 +169,8 @@ def test_the_extended_reference_does_not_depend_on_the_outlet_condition() -> Non
     (to 1e-4: what the outlet does cannot travel further upstream than the backflow), while at
     the vessel's own outlet the two conditions differ by percent; the whole domain's mass
     balance closes to round-off and the vessel's outflow is its inflow minus its uptake."""
-    from oxyline.reference.axisymmetric import backflow_excursion
-    from oxyline.reference.validation import extended_reference, load_case
+    from validation.axisymmetric import backflow_excursion
+    from validation.closures import extended_reference, load_case
 
     c = load_case("straight")
     grid = Grid(16, 24, steps_per_period=40)

@@ -1,5 +1,5 @@
 """Haemoglobin facilitation with Hill binding (issue 12 item 5): the 2-D reference with Hill
-binding in the fluid (`oxyline.reference.hill`), the nonlinear facilitation factor
+binding in the fluid (`validation.hill`), the nonlinear facilitation factor
 (`oxyline.facilitation`) and the 1-D closure against the 2-D solution
 (docs/validation-oxygen.md §7)."""
 
@@ -15,15 +15,15 @@ pytest.importorskip("scipy")
 
 import oxyline
 from oxyline.facilitation import hill_factor, linear_factor
-from oxyline.reference.axisymmetric import (
+from validation.axisymmetric import (
     ConstantPO2,
     Grid,
     Tube,
     richardson,
     steady_march,
 )
-from oxyline.reference.hill import HillBlood, hill_uptake
-from oxyline.reference.validation import HILL, load_case
+from validation.closures import HILL, load_case
+from validation.hill import HillBlood, hill_uptake
 
 ALPHA, D, D_HB = 1.40e-3, 1.2e-9, 5.5e-12
 H = 150 * 1.34 / 22.414
@@ -96,8 +96,8 @@ def test_pulsatile_hill_solver_without_haemoglobin_is_the_dissolved_solver() -> 
     curved example's pulsatile flow, same grid: they differ only by the time discretisation
     of the radial step (backward Euler halves vs the exact exponential; measured 4.5e-4 on
     40×48×100, so 1e-2 bounds it on this coarse grid). Mass is conserved to round-off."""
-    from oxyline.reference.axisymmetric import AxisymmetricSolver, ConstantPO2, Grid
-    from oxyline.reference.hill import hill_periodic
+    from validation.axisymmetric import AxisymmetricSolver, ConstantPO2, Grid
+    from validation.hill import hill_periodic
 
     c = load_case("curved")
     grid = Grid(20, 24, steps_per_period=50)

@@ -17,7 +17,7 @@ from scipy.special import gammainc
 from test_oxygen import check_mass_balance_and_positivity, networks, tube
 
 import oxyline
-from oxyline import examples
+from oxyline import catalogue
 
 R, DX, Q, N = 3e-3, 0.01, 2e-6, 10
 V = Q / (math.pi * R * R)
@@ -69,7 +69,7 @@ def test_cell_counts_and_per_vessel_overrides() -> None:
     m = dye_tube(None, cells_per_vessel={"tube": 2})
     assert oxyline.load_model(m).network.transport_layout()["cells"] == 2 * N
     # oxygen section: cells_per_segment and per_vessel {cells_per_segment} (keeps the wall)
-    ox = examples.load("paper-bifurcated").source
+    ox = catalogue.load("paper-bifurcated").source
     base = oxyline.load_model(ox).network.transport_layout()["cells"]
     ox2 = copy.deepcopy(ox)
     ox2["oxygen"]["cells_per_segment"] = 2
@@ -81,7 +81,7 @@ def test_cell_counts_and_per_vessel_overrides() -> None:
 
 
 def test_refined_paper_example_keeps_the_exact_mass_balance() -> None:
-    m = copy.deepcopy(examples.load("paper-bifurcated").source)
+    m = copy.deepcopy(catalogue.load("paper-bifurcated").source)
     m["oxygen"]["cells_per_segment"] = 3
     res = oxyline.simulate(m, cycles=2)
     mb = res.o2_mass_balance
@@ -93,7 +93,7 @@ def test_refined_paper_example_keeps_the_exact_mass_balance() -> None:
 def test_bad_cells_per_segment_names_key_and_value(bad: object) -> None:
     with pytest.raises(oxyline.ModelError, match=f"cells_per_segment.*{bad!r}"):
         oxyline.load_model(dye_tube(bad))  # type: ignore[arg-type]
-    ox = copy.deepcopy(examples.load("paper-straight").source)
+    ox = copy.deepcopy(catalogue.load("paper-straight").source)
     ox["oxygen"]["cells_per_segment"] = bad
     with pytest.raises(oxyline.ModelError, match=f"oxygen.*cells_per_segment.*{bad!r}"):
         oxyline.load_model(ox)

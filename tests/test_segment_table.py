@@ -173,7 +173,7 @@ def test_model_module_is_a_leaf_and_formats_are_sniffed_once() -> None:
     from pathlib import Path
 
     from oxyline import model
-    from oxyline.io.native import sniff_format
+    from oxyline.io.formats import sniff_format
 
     tree = ast.parse(Path(model.__file__).read_text())
     imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}

@@ -76,7 +76,7 @@ def tree(depth: int) -> dict[str, Any]:
 
 
 def refined(name: str, max_length: float) -> dict[str, Any]:
-    d = copy.deepcopy(oxyline.models.load_dict(name))
+    d = copy.deepcopy(oxyline.catalogue.load_dict(name))
     d["segmentation"] = {"max_length": max_length}
     for v in d["vessels"]:
         v.pop("segments", None)
@@ -100,7 +100,7 @@ def check(model_dict: dict[str, Any]) -> tuple[float, float, int]:
     pytest.param(lambda: chain(30), id="chain-120"),
     pytest.param(lambda: tree(6), id="tree-221"),
     # shipped, 687 unknowns: the power iteration reported 2.18e-5 s for it
-    pytest.param(lambda: oxyline.models.load_dict("circle-of-willis"), id="circle-of-willis"),
+    pytest.param(lambda: oxyline.catalogue.load_dict("circle-of-willis"), id="circle-of-willis"),
 ])
 def test_krylov_limit_matches_dense_eigenvalues(case: Any) -> None:
     check(case())
@@ -110,7 +110,7 @@ def test_krylov_limit_matches_dense_eigenvalues(case: Any) -> None:
 @pytest.mark.parametrize("case", [
     pytest.param(lambda: chain(150), id="chain-600"),
     # shipped, 1,085 unknowns: the power iteration reported 6.5e-6 s for it
-    pytest.param(lambda: oxyline.models.load_dict("matthys37"), id="matthys37"),
+    pytest.param(lambda: oxyline.catalogue.load_dict("matthys37"), id="matthys37"),
     pytest.param(lambda: refined("circle-of-willis", 0.01), id="circle-of-willis-10mm"),
     pytest.param(lambda: chain(600), id="chain-2400"),
     pytest.param(lambda: tree(9), id="tree-2044"),

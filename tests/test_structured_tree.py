@@ -278,7 +278,7 @@ def test_windkessels_replaced_by_trees_keep_the_steady_pressures() -> None:
     steady state, so this is the issue's 2 % criterion on the means, met to rounding."""
     from oxyline.structured_tree import replace_windkessels
 
-    base = oxyline.models.load_dict("adan56")
+    base = oxyline.catalogue.load_dict("adan56")
     st = replace_windkessels(base, min_radius=5e-4)
     trees = [bc for bc in st["boundary_conditions"].values() if bc["type"] == "structured-tree"]
     assert len(trees) == 31

@@ -208,7 +208,7 @@ def test_rk4_step_refinement_estimates_the_error() -> None:
     for the sub-step it picks bounds the error against the independent svzerod 20x finer
     (5.0e-3, the previous test) and meets the drop-in's tolerance; a circuit without valves or
     chambers gets factor 1 without a trial run."""
-    from oxyline.io import svzerod as dropin
+    from oxyline.io.svzerod import dropin
 
     cfg = decomposed_variables()
     model, s = svz.to_model(cfg), svz.run_settings(cfg)

@@ -16,7 +16,7 @@ from conftest import data_path
 
 import oxyline
 from oxyline import svzerod as svz
-from oxyline.io import svzerod_cycles
+from oxyline.io.svzerod import cycles as svzerod_cycles
 
 CASES = data_path("svzerod", "cases")
 # generalized-alpha against the stored references: the drop-in runs svZeroDSolver's own

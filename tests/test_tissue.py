@@ -122,7 +122,7 @@ def test_straight_tube_against_the_2d_reference_with_a_wall_layer() -> None:
     wall column) against the 2-D axisymmetric solution with the same wall layer. Both at
     their steady state; uptake through the lumen wall and the wall PO2 at the inner face."""
     pytest.importorskip("scipy")
-    from oxyline.reference.axisymmetric import (
+    from validation.axisymmetric import (
         AxisymmetricSolver,
         Grid,
         PeriodicFlow,
@@ -198,7 +198,7 @@ def test_conjugate_closure_against_the_2d_reference(case: str, layer: str) -> No
     Measured (Graetz / Lévêque): no-flux −0.01/−0.01 %, thick-mm +0.16/+0.76 %, flow-x4
     −0.43/−0.05 %, thin −1.17/+0.16 %."""
     pytest.importorskip("scipy")
-    from oxyline.reference.axisymmetric import (
+    from validation.axisymmetric import (
         AxisymmetricSolver,
         Grid,
         PeriodicFlow,

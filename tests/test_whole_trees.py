@@ -11,7 +11,7 @@ import math
 import pytest
 
 import oxyline
-from oxyline import models
+from oxyline import catalogue
 from oxyline.structured_tree import (
     expand,
     murray_root_radii,
@@ -23,12 +23,12 @@ N_TERMINALS = 95  # whole-body-140's terminal R-C-R compartments (names ending i
 
 @pytest.fixture(scope="module")
 def base() -> dict:
-    return models.load_dict("whole-body-140")
+    return catalogue.load_dict("whole-body-140")
 
 
 @pytest.fixture(scope="module")
 def st() -> dict:
-    return models.load_dict("whole-body-140-st")
+    return catalogue.load_dict("whole-body-140-st")
 
 
 def grown_resistance(vessels: list[dict], bcs: dict, node: str, mu: float) -> float:
@@ -107,7 +107,7 @@ def test_whole_body_140_st_keeps_the_steady_pressures(base) -> None:
     node of the named arteries it equals the Windkessel version's (which also keeps the wall
     viscosity branches: no steady flow). Trees grown to 0.5 mm here (14 k segments); the
     built-in 0.1 mm model: test below (slow) and docs."""
-    data = models._whole_body_trees(min_radius=5e-4)
+    data = catalogue._whole_body_trees(min_radius=5e-4)
     p_wk = oxyline.load_model(base).network.steady_state()
     p_st = oxyline.load_model(data).network.steady_state()
     assert_named_pressures_agree(base, p_wk, p_st)
@@ -130,7 +130,7 @@ def assert_named_pressures_agree(base: dict, p_wk: dict, p_st: dict) -> float:
 def test_whole_body_140_st_full_size(base) -> None:
     """The built-in model itself (0.1 mm trees): its size, and the steady pressures at the
     named arteries (load + steady solve ~10-30 s on the shared machine)."""
-    m = models.load("whole-body-140-st")
+    m = catalogue.load("whole-body-140-st")
     s = m.network.summary()
     assert (s["vessels"], s["segments"]) == (256_368, 305_949)
     worst = assert_named_pressures_agree(
@@ -179,14 +179,14 @@ def test_whole_body_140_st_carries_oxygen() -> None:
     model takes an oxygen section (whole-body-140 itself is refused) and conserves O2 over
     its default one-cycle run. Trees grown only to 1 mm (capped at alpha·r0: 3.8 k segments;
     ~0.7 s CPU; residual measured 9e-14 of the inflow)."""
-    data = models._whole_body_trees(min_radius=1e-3)
+    data = catalogue._whole_body_trees(min_radius=1e-3)
     data["oxygen"] = {"inlet": {"po2": 95.0}, "wall": {"model": "leveque", "po2": 60.0}}
     res = oxyline.simulate(oxyline.load_model(data), segments=False)
     mb = res.o2_mass_balance
     # residual of the conservative transport: rounding of sums over the cells and 1000 steps
     assert abs(mb["residual"][-1]) < 1e-9 * mb["inflow"][-1]
     assert mb["wall_uptake"][-1] > 0.0
-    base = models.load_dict("whole-body-140")
+    base = catalogue.load_dict("whole-body-140")
     base["oxygen"] = data["oxygen"]
     with pytest.raises(oxyline.ModelError, match="no lumen volume"):
         oxyline.simulate(oxyline.load_model(base), cycles=1)

@@ -11,7 +11,7 @@ Quick use::
 
 from __future__ import annotations
 
-from oxyline import _core, models, sensitivity
+from oxyline import _core, catalogue, sensitivity
 from oxyline.ensemble import simulate_ensemble
 from oxyline.errors import (
     CheckpointError,
@@ -27,7 +27,7 @@ from oxyline.errors import (
     UnsupportedElement,
 )
 from oxyline.frequency import impedance
-from oxyline.io.results import open_result
+from oxyline.io.result_reader import open_result
 from oxyline.loader import load_model
 from oxyline.model import Model
 from oxyline.monitor import PhysicalBoundsWarning
@@ -56,9 +56,9 @@ __all__ = [
     "UnsupportedElement",
     "VesselResult",
     "__version__",
+    "catalogue",
     "impedance",
     "load_model",
-    "models",
     "open_result",
     "resume",
     "sensitivity",

@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -263,7 +263,7 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     else:
         # the file names its model; only a built-in one can be found from the name alone
         try:
-            model = oxyline.models.load(res.model_name)
+            model = oxyline.catalogue.load(res.model_name)
         except oxyline.ModelError:
             raise InputError(f"{args.result}: model '{res.model_name}' is not a built-in model; "
                              "give the model file it was run from with --model") from None
@@ -383,30 +383,10 @@ def _cmd_convert(args: argparse.Namespace) -> int:
 
 
 def _cmd_models(args: argparse.Namespace) -> int:
-    try:
-        from oxyline import models
-    except ImportError:
-        models = None
-    entries: list[Any] = []
-    if models is not None and hasattr(models, "list"):
-        entries = list(models.list())
-        if hasattr(models, "describe"):
-            desc = models.describe()
-            entries = [{"name": n, "description": desc.get(n, "")} if isinstance(n, str) else n
-                       for n in entries]
-    if not entries:
-        from oxyline import examples
+    from oxyline import catalogue
 
-        entries = examples.names()
-    for e in entries:
-        if isinstance(e, str):
-            print(e)
-        elif isinstance(e, Mapping):
-            print(f"{e.get('name', '?'):<24}{e.get('description', '')}")
-        elif isinstance(e, (tuple, list)) and e:
-            print(f"{e[0]!s:<24}{' '.join(str(x) for x in e[1:])}")
-        else:
-            print(getattr(e, "name", str(e)))
+    for name, description in catalogue.describe().items():
+        print(f"{name:<24}{description}")
     from oxyline import closed_loop
 
     for name in closed_loop.BUILTINS:  # not flow networks: `run` prints their O2 summary

@@ -54,7 +54,7 @@ def _plt() -> Any:
 
 
 def _model(model: Model | str | os.PathLike[str] | Mapping[str, Any]) -> Model:
-    from oxyline.io._common import as_model
+    from oxyline.io.formats import as_model
 
     return as_model(model)
 

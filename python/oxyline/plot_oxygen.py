@@ -172,10 +172,10 @@ def _main(argv: list[str]) -> int:
     if len(argv) != 2 or argv[0] != "coronary":
         print("usage: python -m oxyline.plot_oxygen coronary OUTDIR", file=sys.stderr)
         return 2
-    from oxyline import examples, simulate
+    from oxyline import catalogue, simulate
     from oxyline.loader import load_model
 
-    model = examples.load("paper-curved-coronary")
+    model = catalogue.load("paper-curved-coronary")
     fig = coronary_impediment(simulate(model), simulate(load_model(
         without_intramyocardial_pressure(model))), systole=0.35)
     out = Path(argv[1])

@@ -262,9 +262,9 @@ def parameters(ages: Sequence[float] = (25, 35, 45, 55, 65, 75), levels: int = 3
 @lru_cache(maxsize=1)
 def _base() -> tuple[list[dict[str, Any]]]:
     """The built-in's segment table (cached; callers copy before changing it)."""
-    from oxyline import models
+    from oxyline import catalogue
 
-    return (pwdb.geometry_of(models.load_dict(MODEL)),)
+    return (pwdb.geometry_of(catalogue.load_dict(MODEL)),)
 
 
 @lru_cache(maxsize=4096)
@@ -308,9 +308,9 @@ def subject_patch(row: Mapping[str, float], base: list[dict[str, Any]] | None = 
 def base_model(oxygen: bool = False) -> dict[str, Any]:
     """The native dict of ``pwdb-116`` (the population's base model), with the :data:`OXYGEN`
     section when ``oxygen`` (then :func:`subject_summary` reports ``ica_po2``)."""
-    from oxyline import models
+    from oxyline import catalogue
 
-    data = models.load_dict(MODEL)
+    data = catalogue.load_dict(MODEL)
     if oxygen:
         data["oxygen"] = copy.deepcopy(OXYGEN)
     return data

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from oxyline import _core
+from oxyline.io import results
 
 # the column schema is the core's (oxyline_core::output): no column name is written here
 VESSEL_VARIABLES: tuple[str, ...] = tuple(_core.VESSEL_VARIABLES)
@@ -370,7 +371,7 @@ class Result:
         :func:`oxyline.open_result` is its inverse (also for the files written from it)."""
         import xarray as xr
 
-        from oxyline import __version__
+        from oxyline._core import __version__
 
         coords: dict[str, Any] = {"time": ("time", self.time, {"units": "s"}),
                                   "vessel": ("vessel", np.array(self.vessels, dtype=object))}
@@ -434,8 +435,6 @@ class Result:
     def to_netcdf(self, path: str | os.PathLike[str]) -> Path:
         """Write NetCDF-4 (h5netcdf): dims time, vessel, segment; units, model name, solver
         settings and oxyline version in attrs. See :func:`oxyline.io.results.to_netcdf`."""
-        from oxyline.io import results
-
         return results.to_netcdf(self, path)
 
     def to_zarr(self, path: str | os.PathLike[str], time_chunk: int = 1024,
@@ -443,26 +442,18 @@ class Result:
         """Write a Zarr store chunked along time (written after the run; needs ``zarr``); an
         existing store is replaced only with ``overwrite=True``.
         See :func:`oxyline.io.results.to_zarr`."""
-        from oxyline.io import results
-
         return results.to_zarr(self, path, time_chunk=time_chunk, overwrite=overwrite)
 
     def summary(self) -> Any:
         """pandas DataFrame per vessel: mean/min/max of every per-vessel variable (SI)."""
-        from oxyline.io import results
-
         return results.summary(self)
 
     def to_csv(self, path: str | os.PathLike[str]) -> Path:
         """Write :meth:`summary` as CSV (TSV for .tsv)."""
-        from oxyline.io import results
-
         return results.to_csv(self, path)
 
     def to_parquet(self, path: str | os.PathLike[str]) -> Path:
         """Write :meth:`summary` as Parquet (needs pyarrow)."""
-        from oxyline.io import results
-
         return results.to_parquet(self, path)
 
     def to_pandas(self) -> Any:

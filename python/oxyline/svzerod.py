@@ -1,19 +1,20 @@
-"""svZeroDSolver drop-in (public path ``oxyline.svzerod``); the importer and runner live in
-:mod:`oxyline.io.svzerod`, beside the exporter :mod:`oxyline.io.svzerod_export`."""
+"""svZeroDSolver drop-in (public path ``oxyline.svzerod``); the importer is
+:mod:`oxyline.io.svzerod.reader`, the runner :mod:`oxyline.io.svzerod.dropin`, the exporter
+:mod:`oxyline.io.svzerod.writer`."""
 
-from oxyline.io import svzerod as _impl
-from oxyline.io.svzerod import (
+from oxyline.io.svzerod import reader as _reader
+from oxyline.io.svzerod.dropin import simulate
+from oxyline.io.svzerod.reader import (
     RunSettings,
     file_units,
     run_settings,
-    simulate,
     to_model,
     to_oxyline_dict,
 )
 
-# the public module documents itself with the implementation's docstring (its example is run
-# by the tests)
-__doc__ = _impl.__doc__
+# the public module documents itself with the importer's docstring (its example is run by the
+# tests)
+__doc__ = _reader.__doc__
 
 __all__ = ["RunSettings", "file_units", "run_settings", "simulate", "to_model",
            "to_oxyline_dict"]

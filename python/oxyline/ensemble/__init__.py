@@ -15,12 +15,18 @@ import os
 from collections.abc import Mapping
 from typing import Any
 
-from oxyline.ensemble.collect import STATUS, Collector, Output, check_output
+from oxyline.ensemble.collect import (
+    STATUS,
+    Collector,
+    Output,
+    check_output,
+    dataset_attrs,
+    finish,
+)
 from oxyline.ensemble.patch import apply_patch, as_patches
-from oxyline.errors import ModelError, SimulationInterrupted
+from oxyline.errors import ModelError
 from oxyline.loader import load_model
 from oxyline.model import Model
-from oxyline.monitor import warn
 
 __all__ = ["STATUS", "apply_patch", "simulate_ensemble"]
 
@@ -92,50 +98,8 @@ def _local(model: Model, patches: list[dict[str, Any]], index: Any, *, workers: 
     if store is not None:
         from oxyline.ensemble.store import StoreWriter
 
-        writer = StoreWriter(store, collector, patches, _attrs(model, output), index)
+        writer = StoreWriter(store, collector, patches, dataset_attrs(model, output), index)
         on_variant = writer.write
     finished = run_local(model, patches, collector, workers=workers, output=output,
                          progress=progress, overrides=overrides, on_variant=on_variant)
-    return _finish(model, patches, index, collector, output, writer, finished)
-
-
-def _finish(model: Model, patches: list[dict[str, Any]], index: Any, collector: Collector,
-            output: Output, writer: Any, finished: bool) -> Any:
-    """The ensemble's dataset (the closed store, or the collected variants); an interrupted
-    ensemble raises :class:`SimulationInterrupted` carrying it. Shared by the local and the
-    Dask paths."""
-    if writer is not None:
-        writer.close(complete=finished)
-        ds = writer.open()
-    else:
-        ds = collector.dataset(patches, _attrs(model, output), index)
-    _warn_bounds(collector)
-    if not finished:
-        done = int((ds["status"].values == 0).sum())
-        raise SimulationInterrupted(
-            f"ensemble interrupted after {done} finished variant(s) of {len(patches)}; the "
-            "dataset is in exc.result (status -1: not run)", ds)
-    return ds
-
-
-def _warn_bounds(collector: Collector) -> None:
-    """One :class:`~oxyline.PhysicalBoundsWarning` for the whole ensemble, naming the
-    variants whose species output left its physical bounds (each variant's findings are in
-    the dataset's ``warning``); the ensemble itself ran on."""
-    hit = [i for i, w in enumerate(collector.warning) if w]
-    if hit:
-        shown = ", ".join(map(str, hit[:20])) + (", ..." if len(hit) > 20 else "")
-        msg = (f"{len(hit)} variant(s) left their physical bounds (variants {shown}; each "
-               f"variant's findings are in the dataset's 'warning'); variant {hit[0]}: "
-               f"{collector.warning[hit[0]]}")
-        # warn → _warn_bounds → _finish → _local / run_on_client → simulate_ensemble → caller
-        warn([msg], stacklevel=5)
-
-
-def _attrs(model: Model, output: Output) -> dict[str, Any]:
-    from oxyline import __version__
-
-    return {"model": model.name, "oxyline_version": __version__,
-            "output": output if isinstance(output, str) else getattr(output, "__name__",
-                                                                      "callable"),
-            "status_codes": ", ".join(f"{v}: {k}" for k, v in STATUS.items())}
+    return finish(model, patches, index, collector, output, writer, finished)

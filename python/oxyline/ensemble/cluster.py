@@ -13,7 +13,7 @@ import pickle
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from oxyline.ensemble.collect import FACTS, Collector, Output
+from oxyline.ensemble.collect import FACTS, Collector, Output, dataset_attrs, finish
 from oxyline.ensemble.patch import Patcher
 from oxyline.model import Model
 
@@ -142,7 +142,6 @@ def run_on_client(client: Any, model: Model, patches: list[dict[str, Any]], inde
                   overrides: Mapping[str, Any]) -> Any:
     from distributed import as_completed
 
-    from oxyline.ensemble import _attrs, _finish
     from oxyline.ensemble.local import _progress, run_settings
 
     patcher = Patcher(model)
@@ -154,7 +153,7 @@ def run_on_client(client: Any, model: Model, patches: list[dict[str, Any]], inde
     if store is not None:
         from oxyline.ensemble.store import StoreWriter
 
-        writer = StoreWriter(store, collector, patches, _attrs(model, output), index)
+        writer = StoreWriter(store, collector, patches, dataset_attrs(model, output), index)
     chunks, where = _plan(len(patches), client.nthreads())
     shared = _scattered(client, model)
     parts = [[patches[i] for i in c] for c in chunks]
@@ -183,4 +182,4 @@ def run_on_client(client: Any, model: Model, patches: list[dict[str, Any]], inde
         client.cancel(list(futures))
     finally:
         close()
-    return _finish(model, patches, index, collector, output, writer, finished)
+    return finish(model, patches, index, collector, output, writer, finished)

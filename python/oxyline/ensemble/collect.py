@@ -23,8 +23,11 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from oxyline._core import __version__
 from oxyline.ensemble.patch import flatten
-from oxyline.errors import ModelError
+from oxyline.errors import ModelError, SimulationInterrupted
+from oxyline.model import Model
+from oxyline.monitor import warn
 from oxyline.result import Result
 
 #: ``status`` of a variant: 0 finished; the others say why it has no output
@@ -342,3 +345,43 @@ def _stack_full(datasets: Mapping[int, Any], n: int) -> Any:
             ds = ds.assign_coords({name: first[name]})
     ds.attrs.update({k: v for k, v in first.attrs.items() if not k.startswith("solver_")})
     return ds
+
+
+def finish(model: Model, patches: list[dict[str, Any]], index: Any, collector: Collector,
+            output: Output, writer: Any, finished: bool) -> Any:
+    """The ensemble's dataset (the closed store, or the collected variants); an interrupted
+    ensemble raises :class:`SimulationInterrupted` carrying it. Shared by the local and the
+    Dask paths."""
+    if writer is not None:
+        writer.close(complete=finished)
+        ds = writer.open()
+    else:
+        ds = collector.dataset(patches, dataset_attrs(model, output), index)
+    _warn_bounds(collector)
+    if not finished:
+        done = int((ds["status"].values == 0).sum())
+        raise SimulationInterrupted(
+            f"ensemble interrupted after {done} finished variant(s) of {len(patches)}; the "
+            "dataset is in exc.result (status -1: not run)", ds)
+    return ds
+
+
+def _warn_bounds(collector: Collector) -> None:
+    """One :class:`~oxyline.PhysicalBoundsWarning` for the whole ensemble, naming the
+    variants whose species output left its physical bounds (each variant's findings are in
+    the dataset's ``warning``); the ensemble itself ran on."""
+    hit = [i for i, w in enumerate(collector.warning) if w]
+    if hit:
+        shown = ", ".join(map(str, hit[:20])) + (", ..." if len(hit) > 20 else "")
+        msg = (f"{len(hit)} variant(s) left their physical bounds (variants {shown}; each "
+               f"variant's findings are in the dataset's 'warning'); variant {hit[0]}: "
+               f"{collector.warning[hit[0]]}")
+        # warn → _warn_bounds → _finish → _local / run_on_client → simulate_ensemble → caller
+        warn([msg], stacklevel=5)
+
+
+def dataset_attrs(model: Model, output: Output) -> dict[str, Any]:
+    return {"model": model.name, "oxyline_version": __version__,
+            "output": output if isinstance(output, str) else getattr(output, "__name__",
+                                                                      "callable"),
+            "status_codes": ", ".join(f"{v}: {k}" for k, v in STATUS.items())}

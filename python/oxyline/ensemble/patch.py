@@ -31,6 +31,11 @@ from typing import Any
 
 import numpy as np
 
+from oxyline.ensemble.scale import mapping as _mapping
+from oxyline.ensemble.scale import scale_terms as _scale_terms
+from oxyline.ensemble.scale import unknown as _unknown
+from oxyline.ensemble.scale import where as _where
+from oxyline.ensemble.values import ValueTable
 from oxyline.errors import ModelError
 from oxyline.model import (
     BC_KEYS,
@@ -47,7 +52,6 @@ from oxyline.model import (
 SECTIONS = ("vessels", "boundary_conditions", "blood", "oxygen", "transport", "period", "scale")
 VESSEL_PROPERTIES = VESSEL_KEYS - {"name", "from", "to"}
 BLOOD_KEYS = {"density", "viscosity"}
-SCALE_KEYS = {"resistance", "compliance", "vessels"}
 #: properties that hold one number: a mapping there is a dotted path gone too deep
 #: (``vessels.aorta.radius.x``), refused with the path before anything runs
 SCALAR_KEYS = {
@@ -61,20 +65,6 @@ SCALAR_KEYS = {
 #: the keys of a condition's waveform: patching one replaces the whole waveform
 WAVEFORM_KEYS = {"time", "flow", "pressure", "value", "fourier", "interpolation", "steady"}
 RESISTANCES = {"resistance": ("resistance",), "rcr": ("proximal_resistance", "distal_resistance")}
-
-
-def _where(k: int, path: str) -> str:
-    return f"variant {k}: {path}"
-
-
-def _unknown(k: int, path: str, what: str, allowed: Iterable[str]) -> ModelError:
-    return ModelError(f"{_where(k, path)}: unknown {what} (allowed: {', '.join(sorted(allowed))})")
-
-
-def _mapping(value: Any, k: int, path: str) -> Mapping[str, Any]:
-    if not isinstance(value, Mapping):
-        raise ModelError(f"{_where(k, path)}: expected a mapping, got {value!r}")
-    return value
 
 
 def _scalars(props: Mapping[str, Any], kind: str, k: int, path: str) -> None:
@@ -172,35 +162,6 @@ def _value(x: Any, k: int, path: str) -> float:
         return float(x)
     except (TypeError, ValueError):
         raise ModelError(f"{_where(k, path)}: cannot scale {x!r}, not a number") from None
-
-
-def _scale_terms(scale: Any, index: Mapping[Any, int], k: int
-                 ) -> tuple[set[int] | None, dict[str, float]]:
-    """The vessels (indices; None: all) and the factors of a ``scale`` section, checked.
-    ``index``: the vessel indices by name."""
-    scale = _mapping(scale, k, "scale")
-    for key in scale:
-        if key not in SCALE_KEYS:
-            raise _unknown(k, f"scale.{key}", "scale key", SCALE_KEYS)
-    chosen = scale.get("vessels", "all")
-    selected = None
-    if chosen != "all":
-        if isinstance(chosen, str) or not isinstance(chosen, Sequence):
-            raise ModelError(f"{_where(k, 'scale.vessels')}: expected 'all' or a list of vessel "
-                             f"names, got {chosen!r}")
-        for name in chosen:
-            if name not in index:
-                raise ModelError(f"{_where(k, f'scale.vessels.{name}')}: no vessel named "
-                                 f"{name!r} in the model")
-        selected = {index[n] for n in chosen}
-    factors = {}
-    for key in ("resistance", "compliance"):
-        if key in scale:
-            f = scale[key]
-            if isinstance(f, bool) or not isinstance(f, (int, float)) or not math.isfinite(f):
-                raise ModelError(f"{_where(k, f'scale.{key}')}: expected a number, got {f!r}")
-            factors[key] = float(f)
-    return selected, factors
 
 
 def _scaled(data: dict[str, Any], scale: Any, k: int) -> tuple[set[int], set[str]]:
@@ -469,8 +430,6 @@ class Patcher:
     or takes the value route (:mod:`oxyline.ensemble.values`)."""
 
     def __init__(self, base: Model) -> None:
-        from oxyline.ensemble.values import ValueTable
-
         self.base = base
         table = ValueTable(base)
         #: the value route (None: every patch takes the full path)

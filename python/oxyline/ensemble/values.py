@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from oxyline.ensemble.scale import scale_terms
 from oxyline.model import Model, _boundary_conditions
 from oxyline.units import factor
 
@@ -72,7 +73,7 @@ def _table(value: Any) -> np.ndarray | None:
 class Parsed:
     """What the value route reads of one patch: ``(target, value in the model's units)``
     pairs, tables ``(target, time, value in the model's units)`` and the checked scale terms
-    (see ``patch._scale_terms``) or None."""
+    (see :func:`~oxyline.ensemble.scale.scale_terms`) or None."""
 
     entries: list[tuple[int, float]]
     tables: list[tuple[int, np.ndarray, np.ndarray]]
@@ -167,8 +168,6 @@ class ValueTable:
     def parse(self, patch: Any, k: int) -> Parsed | None:
         """The value-route reading of ``patch`` (variant ``k``), or None if it needs the full
         path. Raises :class:`~oxyline.ModelError` only for a malformed ``scale``."""
-        from oxyline.ensemble.patch import _scale_terms
-
         if not isinstance(patch, Mapping) \
                 or not patch.keys() <= {"vessels", "boundary_conditions", "scale"}:
             return None
@@ -188,7 +187,7 @@ class ValueTable:
         if "scale" in patch:
             if not self.usable:
                 return None
-            scale = _scale_terms(patch["scale"], self.vessel_index, k)
+            scale = scale_terms(patch["scale"], self.vessel_index, k)
         return Parsed(entries, tables, scale)
 
     def _vessel(self, name: Any, props: Any, entries: list[tuple[int, float]]) -> bool:

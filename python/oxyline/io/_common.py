@@ -10,8 +10,8 @@ from pathlib import Path
 from typing import Any
 
 from oxyline.errors import ModelError
-from oxyline.loader import load_model
-from oxyline.model import Model
+from oxyline.memory import gc_paused
+from oxyline.model import Model, _build, _copy
 
 PathLike = str | os.PathLike[str]
 
@@ -64,24 +64,18 @@ def is_missing(value: Any) -> bool:
         return False
 
 
-def load_with_context(data: dict[str, Any], where: str) -> Model:
-    """``load_model(data)``; a :class:`ModelError` is re-raised prefixed with ``where``."""
+def build(data: dict[str, Any], where: str | None = None, *, owned: bool = False) -> Model:
+    """The :class:`Model` of the native model dict ``data`` (copied first unless the caller
+    ``owned`` it: the dict becomes the model's ``source``). A :class:`ModelError` is re-raised
+    prefixed with ``where`` (the file or table it came from)."""
     try:
-        return load_model(data)
+        with gc_paused():
+            return _build(data if owned else _copy(dict(data)))
     except ModelError as exc:
         msg = str(exc)
-        raise type(exc)(msg if msg.startswith(where) else f"{where}: {msg}") from None
-
-
-def as_model(model: Model | PathLike | Mapping[str, Any]) -> Model:
-    """A :class:`Model` from a model, a dict, a file path or a built-in name."""
-    if isinstance(model, Model):
-        return model
-    if isinstance(model, Mapping):
-        return load_model(model)
-    from oxyline.io.native import read_model
-
-    return read_model(model)
+        if where is None or msg.startswith(where):
+            raise
+        raise type(exc)(f"{where}: {msg}") from None
 
 
 def model_source(model: Model) -> dict[str, Any]:

@@ -63,7 +63,7 @@ from typing import Any
 import numpy as np
 
 from oxyline.errors import ModelError
-from oxyline.loader import load_model
+from oxyline.io._common import build
 from oxyline.model import Model, build_model
 
 PathLike = str | os.PathLike[str]
@@ -543,7 +543,7 @@ def read_circulatory_autogen(vessel_array_csv: PathLike, parameters_csv: PathLik
                              **options: Any) -> Model:
     """Load a circulatory_autogen model's arterial tree as an :class:`oxyline.Model`; options as
     :func:`to_native_dict`."""
-    return load_model(to_native_dict(vessel_array_csv, parameters_csv, **options))
+    return build(to_native_dict(vessel_array_csv, parameters_csv, **options), owned=True)
 
 
 __all__ = ["CirculatoryAutogenWarning", "calibrate_terminal_resistance_scale",

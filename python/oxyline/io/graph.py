@@ -18,8 +18,8 @@ from oxyline.io._common import (
     ALIASES,
     LUMPED_COLUMNS,
     VESSEL_COLUMNS,
+    build,
     is_missing,
-    load_with_context,
     model_source,
     plain,
 )
@@ -124,4 +124,4 @@ def from_networkx(G: Any, boundary_conditions: Mapping[str, Any] | None = None,
     data.update(model_keys)
     data["vessels"] = plain(vessels)
     data["boundary_conditions"] = plain(bcs)
-    return load_with_context(data, "graph")
+    return build(data, "graph")

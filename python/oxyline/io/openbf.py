@@ -71,7 +71,8 @@ from typing import Any
 import numpy as np
 
 from oxyline.errors import ModelError, UnsupportedElement
-from oxyline.loader import load_model
+from oxyline.io._common import build
+from oxyline.io.native import read_mapping  # YAML 1.2, duplicate keys and bombs refused
 from oxyline.model import Model, build_model
 
 PathLike = str | os.PathLike[str]
@@ -269,8 +270,6 @@ class _Vessel:
 
 
 def _load_yaml(p: Path) -> dict[str, Any]:
-    from oxyline.io.native import read_mapping  # YAML 1.2, duplicate keys and bombs refused
-
     data = read_mapping(p)
     if not isinstance(data.get("network"), list):
         raise ModelError(f"{p}: not an openBF file (needs a top-level 'network:' list)")
@@ -551,7 +550,7 @@ def read_openbf(path: PathLike, **options: Any) -> Model:
     >>> len(m.vessel_names)
     3
     """
-    return load_model(to_native_dict(path, **options))
+    return build(to_native_dict(path, **options), owned=True)
 
 
 __all__ = ["OpenBFWarning", "adan_wall_thickness", "read_inlet", "read_openbf", "to_native_dict"]

@@ -30,13 +30,14 @@ from oxyline.io._common import (
     LUMPED_COLUMNS,
     VESSEL_COLUMNS,
     PathLike,
+    build,
     check_path,
     is_missing,
-    load_with_context,
     model_source,
     plain,
 )
-from oxyline.model import Model
+from oxyline.io.native import dump_native, read_mapping
+from oxyline.model import Model, _copy
 
 BC_COLUMNS = ("node", "type", "value", "waveform", "interpolation", "steady", "fourier_period",
               "fourier_mean", "fourier_cos", "fourier_sin", "resistance", "pressure",
@@ -250,6 +251,11 @@ def from_tables(vessels: Any, bcs: Any = None, **model_keys: Any) -> Model:
     >>> oxyline.io.from_tables(v, b).vessel_names
     ['A']
     """
+    return build(*_tables_dict(vessels, bcs, model_keys))
+
+
+def _tables_dict(vessels: Any, bcs: Any, model_keys: dict[str, Any]) -> tuple[dict[str, Any], str]:
+    """The native model dict of the tables and where they come from (for error messages)."""
     vdf, vwhere = _read_frame(vessels, "vessel", ("name", "from", "to"))
     data: dict[str, Any] = dict(model_keys)
     data["vessels"] = _vessels_from_frame(vdf, vwhere)
@@ -262,7 +268,7 @@ def from_tables(vessels: Any, bcs: Any = None, **model_keys: Any) -> Model:
         base = None if bwhere.endswith(" table") else Path(bwhere).parent
         data["boundary_conditions"] = _bcs_from_frame(bdf, bwhere, base)
     where = vwhere if bcs is None or isinstance(bcs, Mapping) else f"{vwhere} + {bwhere}"
-    return load_with_context(data, where)
+    return data, where
 
 
 def _sibling(path: Path, tag: str) -> Path:
@@ -354,8 +360,6 @@ def write_tables(model: Model, path: PathLike) -> list[Path]:
     ``<stem>_waveforms/<node>.csv`` (waveform tables) and ``<stem>_model.yaml`` (the other
     top-level keys: name, units, blood, period, simulation…). Returns the files written.
     :func:`read_tables` reads them back into the same model."""
-    from oxyline.io.native import dump_native
-
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     wdir = p.with_name(f"{p.stem}_waveforms")
@@ -380,15 +384,19 @@ def read_tables(path: PathLike, bcs: PathLike | None = None, **model_keys: Any) 
     """Read tables written by :func:`write_tables`: ``path`` is the vessel table; the BC table
     defaults to ``<stem>_bcs<suffix>`` and the top-level keys to ``<stem>_model.yaml`` (both
     optional); ``model_keys`` override the latter."""
+    return build(*native_dict(path, bcs, **model_keys), owned=True)
+
+
+def native_dict(path: PathLike, bcs: PathLike | None = None, **model_keys: Any
+                ) -> tuple[dict[str, Any], str]:
+    """The native model dict of the tables :func:`read_tables` reads, and the files it came
+    from (``vessels.csv + vessels_bcs.csv``, the prefix of its error messages)."""
     p = check_path(path)
     b = Path(bcs) if bcs is not None else _sibling(p, "bcs")
     keys: dict[str, Any] = {}
     meta = p.with_name(f"{p.stem}_model.yaml")
     if meta.exists():
-        from oxyline.io.native import read_mapping
-
         keys = read_mapping(meta)
     keys.update(model_keys)
-    if bcs is not None or b.exists():
-        return from_tables(p, b, **keys)
-    return from_tables(p, None, **keys)
+    data, where = _tables_dict(p, b if bcs is not None or b.exists() else None, keys)
+    return _copy(data), where

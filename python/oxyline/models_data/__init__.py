@@ -1,1 +1,1 @@
-"""Data files of the built-in models (see oxyline.models and NOTICE)."""
+"""Data files of the built-in models (see oxyline.catalogue and NOTICE)."""

@@ -7,8 +7,6 @@
 //! sums per vessel (H ≤ 32: 512 B) and a block of samples (8 B per step and vessel), not the
 //! cycle's samples (8 B × steps per cycle per vessel, plus the growth of their vector).
 
-use super::mean_flow::MeanAbs;
-use crate::error::Result;
 use crate::transport::Transport;
 use crate::transport::renewal::VesselFlows;
 use nalgebra::Complex;
@@ -153,15 +151,6 @@ impl FlowHarmonics {
             harmonics: &self.sums,
             per_vessel: self.per_vessel,
         })
-    }
-}
-
-/// Set `tr`'s segment laws from the first pass: the cycle means, and the inlet renewal of
-/// every vessel whose harmonics were recorded (the one call of `two_pass`).
-pub(super) fn set_mean_flows(tr: &mut Transport, mean: &MeanAbs, period: f64) -> Result<()> {
-    match mean.harmonics.as_ref().and_then(FlowHarmonics::flows) {
-        Some(flows) => tr.set_mean_flows_renewed(&mean.last, &mean.forward(), period, flows),
-        None => tr.set_mean_flows(&mean.last, &mean.forward()),
     }
 }
 

@@ -2,6 +2,8 @@
 //! pass of a transport run (see `two_pass`).
 
 use super::flow_harmonics::FlowHarmonics;
+use crate::error::Result;
+use crate::transport::Transport;
 
 /// Running means of |y_i| and y_i over the current cycle (for cycle-mean wall shear).
 pub(super) struct MeanAbs {
@@ -104,5 +106,14 @@ impl MeanAbs {
             .fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
         self.prev.copy_from_slice(&self.last);
         change <= MEAN_FLOW_TOL * scale
+    }
+}
+
+/// Set `tr`'s segment laws from the first pass: the cycle means, and the inlet renewal of
+/// every vessel whose harmonics were recorded (the one call of `two_pass`).
+pub(super) fn set_mean_flows(tr: &mut Transport, mean: &MeanAbs, period: f64) -> Result<()> {
+    match mean.harmonics.as_ref().and_then(FlowHarmonics::flows) {
+        Some(flows) => tr.set_mean_flows_renewed(&mean.last, &mean.forward(), period, flows),
+        None => tr.set_mean_flows(&mean.last, &mean.forward()),
     }
 }

@@ -4,8 +4,8 @@
 //! steady state.
 
 use super::checkpoint::Checkpoints;
-use super::flow_harmonics::{self, FlowHarmonics};
-use super::mean_flow::MeanAbs;
+use super::flow_harmonics::FlowHarmonics;
+use super::mean_flow::{self, MeanAbs};
 use super::outcome::Outcome;
 use super::pass::run;
 use super::recorder::OutputSink;
@@ -53,7 +53,7 @@ pub(super) fn run_two_pass(
         if let Some(e) = first.error {
             return Err(e);
         }
-        flow_harmonics::set_mean_flows(tr, &mean, s.period)?;
+        mean_flow::set_mean_flows(tr, &mean, s.period)?;
         mean_abs_flow = mean.last;
     }
     if let Some(c) = checkpoints.as_deref_mut() {

@@ -2,7 +2,7 @@
 
 svZeroDSolver names the start value of each of its node variables, ``pressure:A:B`` and
 ``flow:A:B`` (the connection from block A to block B), and of a chamber's volume ``Vc:<chamber>``
-(read by :mod:`oxyline.io.svzerod_heart`). ``pressure_all``/``flow_all`` set every node pressure
+(read by :mod:`oxyline.io.svzerod.heart`). ``pressure_all``/``flow_all`` set every node pressure
 / flow not named; names that match no variable are ignored, as svZeroDSolver's loader
 (``load_initial_condition``) ignores them. Here each node value becomes the native ``initial``
 (``initial_rate`` for ``initial_condition_d``) of the vessel ends that meet at that node
@@ -15,7 +15,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from oxyline.errors import UnsupportedElement
-from oxyline.io import svzerod_closed_loop
+from oxyline.io.svzerod import closed_loop as svzerod_closed_loop
 
 #: blocks whose unknowns svZeroDSolver's node values fix (checked against svzerod 3.2, round-off
 #: agreement): a coronary's compartment pressure at the start (P_Cim_0) and a

@@ -40,7 +40,7 @@ try:
     from scipy import special
     from scipy.sparse.linalg import LinearOperator, gmres
 except ImportError as exc:  # pragma: no cover - exercised only without scipy
-    raise ImportError("oxyline.reference needs scipy (pip install 'oxyline[reference]')") from exc
+    raise ImportError("validation needs scipy (pip install scipy)") from exc
 
 __all__ = [
     "AxisymmetricSolver",

@@ -1,9 +1,9 @@
 """Built-in network models, loadable by name.
 
 >>> import oxyline
->>> "adan56" in oxyline.models.list()
+>>> "adan56" in oxyline.catalogue.list()
 True
->>> m = oxyline.models.load("adan56")
+>>> m = oxyline.catalogue.load("adan56")
 >>> len(m.vessel_names)
 77
 
@@ -42,7 +42,15 @@ from collections.abc import Callable
 from importlib import resources
 from typing import Any
 
+from oxyline import examples
 from oxyline.errors import ModelError
+from oxyline.memory import gc_paused
+from oxyline.model import Model, _build, _copy
+from oxyline.structured_tree import (
+    murray_root_radii,
+    replace_terminal_vessels,
+    replace_windkessels,
+)
 
 _DATA = "oxyline.models_data"
 
@@ -79,8 +87,6 @@ _registered: dict[str, tuple[Callable[[], Any], str]] = {}
 
 def _with_structured_trees(base: str) -> Callable[[], Any]:
     def build() -> Any:
-        from oxyline.structured_tree import replace_windkessels
-
         data = replace_windkessels(load_dict(base))
         data["name"] = f"{base}-st"
         data["simulation"] = dict(WHOLE_TREE_SIMULATION)
@@ -169,12 +175,9 @@ def _whole_body_trees(min_radius: float = 1.0e-4) -> dict[str, Any]:
     vessel whose radius follows Murray's law from the base model's steady flows; tree vessels
     cut at 1 cm like adan56's; the named arteries compliant again (their wall branches folded
     back, so oxygen can run; docs/structured-tree.md)."""
-    from oxyline.loader import load_model
-    from oxyline.structured_tree import murray_root_radii, replace_terminal_vessels
-
     base = load_dict("whole-body-140")
     terminals = terminal_compartments(base)
-    radii = murray_root_radii(base, load_model(base).network.steady_state(), terminals)
+    radii = murray_root_radii(base, build(base).network.steady_state(), terminals)
     data = _compliant_arteries(
         replace_terminal_vessels(base, radii, min_radius=min_radius, max_length=0.01))
     data["name"] = "whole-body-140-st"
@@ -203,25 +206,24 @@ def register(name: str, loader: Callable[[], Any], description: str = "") -> Non
     """Add a named model: ``loader()`` returns an :class:`oxyline.Model` or a model dict.
 
     >>> import oxyline
-    >>> from oxyline import examples
-    >>> oxyline.models.register("tiny", lambda: examples.load("bifurcation"), "demo")
-    >>> oxyline.models.load("tiny").vessel_names[0]
+    >>> oxyline.catalogue.register("tiny", lambda: oxyline.catalogue.load("bifurcation"), "demo")
+    >>> oxyline.catalogue.load("tiny").vessel_names[0]
     'parent'
     """
     _registered[name] = (loader, description)
 
 
 def _examples() -> builtins.list[str]:
-    from oxyline import examples
-
-    return builtins.list(examples.names())
+    """Names of the example networks (``oxyline/examples/<name>.yaml``)."""
+    return sorted(p.name[:-5] for p in resources.files(examples).iterdir()
+                  if p.name.endswith(".yaml"))
 
 
 def list() -> builtins.list[str]:
     """Names of all built-in models: the shipped networks, the examples and registered ones.
 
     >>> import oxyline
-    >>> {"cca", "adan56", "bifurcation"} <= set(oxyline.models.list())
+    >>> {"cca", "adan56", "bifurcation"} <= set(oxyline.catalogue.list())
     True
     """
     return sorted(set(BUILTIN) | set(_registered) | set(_examples()))
@@ -231,13 +233,13 @@ def describe() -> dict[str, str]:
     """Name -> one-line description of every built-in model.
 
     >>> import oxyline
-    >>> oxyline.models.describe()["adan56"]
+    >>> oxyline.catalogue.describe()["adan56"]
     'Boileau 2015 ADAN56 (openBF), 77 segments, 31 WK3'
     """
     out = {name: desc for name, (_f, desc) in BUILTIN.items()}
     out.update({name: desc for name, (_l, desc) in _registered.items()})
     for name in _examples():
-        out.setdefault(name, "example (oxyline.examples)")
+        out.setdefault(name, "example network (oxyline/examples)")
     return dict(sorted(out.items()))
 
 
@@ -258,13 +260,16 @@ def path(name: str) -> Any:
     """Path (importlib resource) of a shipped model file.
 
     >>> import oxyline
-    >>> oxyline.models.path("cca").name
+    >>> oxyline.catalogue.path("cca").name
     'cca.yaml'
     """
     key = _canonical(name)
-    if key not in BUILTIN:
-        raise ModelError(f"'{name}': not a shipped model file (shipped: {', '.join(BUILTIN)})")
-    return resources.files(_DATA) / BUILTIN[key][0]
+    if key in BUILTIN:
+        return resources.files(_DATA) / BUILTIN[key][0]
+    if key in _examples():
+        return resources.files(examples) / f"{key}.yaml"
+    raise ModelError(f"'{name}': not a shipped model file (shipped: "
+                     f"{', '.join([*BUILTIN, *_examples()])})")
 
 
 _LOADER: Any = None
@@ -293,7 +298,7 @@ def load_dict(name: str) -> dict[str, Any]:
     tree, the compact dict with its ``structured-tree`` conditions (grown on load).
 
     >>> import oxyline
-    >>> d = oxyline.models.load_dict("cca")
+    >>> d = oxyline.catalogue.load_dict("cca")
     >>> d["vessels"][0]["name"]
     'common_carotid_artery'
     """
@@ -305,28 +310,28 @@ def load_dict(name: str) -> dict[str, Any]:
     return data
 
 
-def load(name: str) -> Any:
-    """Load a built-in model (shipped network, registered model or example) by name.
+def build(data: dict[str, Any]) -> Model:
+    """The :class:`Model` of a native model dict (a copy of it is validated and assembled)."""
+    with gc_paused():
+        return _build(_copy(dict(data)))
+
+
+def load(name: str) -> Model:
+    """Load a built-in model (shipped network, example or registered model) by name.
 
     >>> import oxyline
-    >>> oxyline.models.load("aortic-bifurcation").vessel_names
+    >>> oxyline.catalogue.load("aortic-bifurcation").vessel_names
     ['parent', 'd1', 'd2']
     """
-    from oxyline.loader import load_model
-    from oxyline.model import Model
-
     key = _canonical(name)
     if key in _registered:
         out = _registered[key][0]()
-        return out if isinstance(out, Model) else load_model(out)
-    if key in BUILTIN:
-        return load_model(load_dict(key))
-    if key in _examples():
-        from oxyline import examples
-
-        return examples.load(key)
+        return out if isinstance(out, Model) else build(out)
+    if key in BUILTIN or key in _examples():
+        return build(load_dict(key))
     raise ModelError(f"'{name}': neither a file nor a built-in model "
                      f"(built-ins: {', '.join(list())})")
 
 
-__all__ = ["ALIASES", "BUILTIN", "WHOLE_TREES", "describe", "list", "load", "load_dict", "path", "register"]
+__all__ = ["ALIASES", "BUILTIN", "WHOLE_TREES", "build", "describe", "list", "load", "load_dict",
+           "path", "register"]

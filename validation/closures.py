@@ -1,6 +1,6 @@
 """Closure validation study: every 1-D wall closure against the 2-D axisymmetric reference.
 
-``python -m oxyline.reference.validation [--quick] [--only straight,curved,bifurcated]``
+``python -m validation.closures [--quick] [--only straight,curved,bifurcated]``
 prints the Markdown tables of docs/validation-oxygen.md (tens of minutes on one core; ``--quick``
 uses coarse grids for a smoke run).
 
@@ -17,12 +17,13 @@ import sys
 import time
 from dataclasses import dataclass, replace
 from functools import partial
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
 import yaml
 
-from oxyline.reference.axisymmetric import (
+from validation.axisymmetric import (
     AxisymmetricSolver,
     ConstantPO2,
     Grid,
@@ -31,7 +32,8 @@ from oxyline.reference.axisymmetric import (
     backflow_excursion,
 )
 
-EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+#: the paper examples of the installed package
+EXAMPLES = resources.files("oxyline.examples")
 SH_FULLY_DEVELOPED = 3.656793457763292
 HILL = {"p50": 26.8, "n": 2.7, "hb": 150.0, "huefner": 1.34}
 D_HB = 5.5e-12  # m²/s, the hb_facilitation default
@@ -345,10 +347,10 @@ STEADY_HILL_RATIO = {"straight": 2.471, "curved": 2.718, "bifurcated": 2.543}
 
 
 def hill_pulsatile_table(cases: list[Case], grid: Grid, log) -> list[str]:
-    """The example waveforms with Hill binding in the fluid (`oxyline.reference.hill.
+    """The example waveforms with Hill binding in the fluid (`validation.hill.
     hill_periodic`) against the 1-D model with `hemoglobin: hill` (default facilitation,
     default closure) — the pulsatile counterpart of §7."""
-    from oxyline.reference.hill import HillBlood, hill_periodic
+    from validation.hill import HillBlood, hill_periodic
 
     head = ("| example | 2-D pulsatile, Hill (mol/s) | 2-D Hill / dissolved, pulsatile | "
             "(steady, §7) | 1-D Hill, facilitated (default) | 1-D dissolved vs 2-D dissolved "
@@ -379,7 +381,7 @@ def candidate_table(case: Case, log) -> list[str]:
     1 + END_RENEWAL_C · s (`end_renewal_number`), against the stored 2-D uptakes of §8."""
     import json
 
-    data = Path(__file__).resolve().parents[3] / "tests" / "data" / "oxygen_2d_uptakes.json"
+    data = Path(__file__).resolve().parents[1] / "tests" / "data" / "oxygen_2d_uptakes.json"
     stored = {(r["case"], r["scenario"]): r for r in json.loads(data.read_text())["cases"]}
     rows = ["| scenario | s | default vs 2-D | candidate vs 2-D |", "|---|---|---|---|"]
     for label, flow in scenarios(case):
@@ -766,7 +768,7 @@ def main(argv: list[str] | None = None) -> int:
             out += ["#### extension study", ""] + extension_study(study, grid, log) + [""]
         data = []
         # the stored 'mixed' and 'profile' uptakes of these rows (the extended one recomputed)
-        path = Path(__file__).resolve().parents[3] / "tests" / "data" / "oxygen_2d_extended.json"
+        path = Path(__file__).resolve().parents[1] / "tests" / "data" / "oxygen_2d_extended.json"
         keep = ("womersley_mixed", "womersley_profile") + (
             ("womersley_extended",) if args.tables_only else ())
         stored = {r["row"]: {k: v for k, v in r.items() if k in keep}

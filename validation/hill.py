@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 from scipy.linalg import solve_banded
 
-from oxyline.reference.axisymmetric import _cell_average, _radial_faces, richardson
+from validation.axisymmetric import _cell_average, _radial_faces, richardson
 
 
 @dataclass(frozen=True)
@@ -208,7 +208,7 @@ def hill_periodic(blood: HillBlood, tube: Any, flow: Any, p_in: float, p_wall: f
     periodic state is reached by running periods from the inlet state until the cycle-mean
     uptake changes by less than ``tol`` (relative) between periods: the layer forgets its
     start on the boundary-layer time, so this is slow for the aorta but needs no linearity."""
-    from oxyline.reference.axisymmetric import (
+    from validation.axisymmetric import (
         AxisymmetricSolver,
         ConstantPO2,
         _advection_rate,

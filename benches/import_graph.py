@@ -1,0 +1,109 @@
+"""Import circles and long functions of the Python package (a measurement, not a test).
+
+    python benches/import_graph.py [python/oxyline]
+
+Reads every module with :mod:`ast` (nothing is imported), builds the graph of imports between
+the package's modules twice: module-level imports only, and every import including those inside
+functions; prints each strongly connected component of more than one module (an import circle),
+the number of function-local imports of the package, and the functions longer than 80 lines.
+"""
+
+from __future__ import annotations
+
+import ast
+import sys
+from pathlib import Path
+
+import networkx as nx
+
+
+def module_name(root: Path, path: Path) -> str:
+    parts = list(path.relative_to(root.parent).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def resolve(current: str, is_pkg: bool, node: ast.ImportFrom) -> str:
+    if node.level == 0:
+        return node.module or ""
+    base = current.split(".")
+    base = base if is_pkg else base[:-1]
+    base = base[: len(base) - (node.level - 1)]
+    return ".".join(base + ([node.module] if node.module else []))
+
+
+def imports(tree: ast.Module, current: str, is_pkg: bool, known: set[str]):
+    """(target module, is function-local) for every import of a package module."""
+    local_lines: set[int] = set()
+    for fn in ast.walk(tree):
+        if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            for sub in ast.walk(fn):
+                if isinstance(sub, (ast.Import, ast.ImportFrom)):
+                    local_lines.add(id(sub))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = resolve(current, is_pkg, node)
+            # `from pkg import mod` imports the submodule pkg.mod when it is one
+            names = [f"{base}.{a.name}" if f"{base}.{a.name}" in known else base
+                     for a in node.names]
+        else:
+            continue
+        if _type_checking_only(tree, node):
+            continue
+        for name in names:
+            while name and name not in known:
+                name = name.rpartition(".")[0]
+            if name and name != current:
+                yield name, id(node) in local_lines
+
+
+def _type_checking_only(tree: ast.Module, node: ast.AST) -> bool:
+    for top in tree.body:
+        if (isinstance(top, ast.If) and "TYPE_CHECKING" in ast.unparse(top.test)
+                and any(sub is node for sub in ast.walk(top))):
+            return True
+    return False
+
+
+def long_functions(tree: ast.Module, mod: str, limit: int = 80):
+    for fn in ast.walk(tree):
+        if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            n = fn.end_lineno - fn.lineno + 1
+            if n > limit:
+                yield n, f"{mod}.{fn.name}"
+
+
+def main(root: Path) -> None:
+    files = {module_name(root, p): p for p in sorted(root.rglob("*.py"))}
+    # the compiled extension (oxyline._core, typed by its .pyi) is a leaf of the graph
+    known = set(files) | {module_name(root, p) for p in root.rglob("*.pyi")}
+    top, every = nx.DiGraph(), nx.DiGraph()
+    top.add_nodes_from(files)
+    every.add_nodes_from(files)
+    local = 0
+    longs = []
+    for mod, path in files.items():
+        tree = ast.parse(path.read_text(), str(path))
+        for target, is_local in imports(tree, mod, path.name == "__init__.py", known):
+            every.add_edge(mod, target)
+            if is_local:
+                local += 1
+            else:
+                top.add_edge(mod, target)
+        longs.extend(long_functions(tree, mod))
+    for label, g in (("module-level imports", top), ("all imports (incl. function-local)", every)):
+        circles = [sorted(c) for c in nx.strongly_connected_components(g) if len(c) > 1]
+        print(f"{label}: {len(circles)} circle(s)")
+        for c in sorted(circles, key=len, reverse=True):
+            print(f"  {len(c):3d} modules: {', '.join(c)}")
+    print(f"function-local imports of the package: {local}")
+    print(f"functions over 80 lines: {len(longs)}")
+    for n, name in sorted(longs, reverse=True):
+        print(f"  {n:4d}  {name}")
+
+
+if __name__ == "__main__":
+    main(Path(sys.argv[1] if len(sys.argv) > 1 else "python/oxyline"))
