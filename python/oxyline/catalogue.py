@@ -29,7 +29,7 @@ library is Apache-2.0, see ``models_data/LICENSE`` and ``models_data/NOTICE`` fo
   virtual populations of :mod:`oxyline.populations` (``docs/populations.md``).
 
 They were converted with :func:`oxyline.io.openbf.to_native_dict` (default options; script
-``benches/make_models_data.py``). Every name listed by :mod:`oxyline.examples` (e.g.
+``benches/make_models_data.py``). Every example network of ``oxyline/examples/`` (e.g.
 ``bifurcation``) loads as well, and other modules can add models with :func:`register`.
 """
 

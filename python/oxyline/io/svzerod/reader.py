@@ -536,16 +536,9 @@ def _closed_loop_layout(cfg: Mapping[str, Any], vessels: list[dict[str, Any]],
     return nodes + [(cl.HEART, cl.HEART_OUTLET)] + [(cl.HEART_OUTLET, o) for o in outlets]
 
 
-def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | None = None
-             ) -> tuple[dict[str, Any], RunSettings, _Layout]:
-    """svZeroDSolver config -> (oxyline native dict, svZeroDSolver run settings, output
-    layout). The dict keeps the file's numbers and says their ``units`` (so a model built from
-    it is in SI)."""
-    cfg = _read_config(config)
-    # coupling blocks with prescribed values are ordinary conditions (svzerod_coupling)
-    cfg, wires, wire_ends = svzerod_coupling.as_forward(cfg)
-    layout = _Layout()
-    system = file_units(cfg, units)
+def _check_top(cfg: Mapping[str, Any]) -> None:
+    """The top-level sections: required ones present, none unknown (in svZeroDSolver's order
+    of complaints: an inconsistent period first)."""
     if "simulation_parameters" not in cfg:
         bad = [k for k in ("calibration_parameters", "y", "dy") if k in cfg]
         if bad:
@@ -566,7 +559,24 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
             continue
         raise UnsupportedElement(f"model: unknown top-level key '{k}'")
 
-    # ---- simulation parameters
+
+@dataclass
+class _Simulation:
+    """The ``simulation_parameters`` section, checked."""
+
+    raw: Mapping[str, Any]
+    cycles: int
+    points: int
+    interval: int
+    max_iterations: int
+    absolute_tolerance: float
+    rho: float
+    cycle_error: bool
+    percent: float
+    period: float
+
+
+def _simulation(cfg: Mapping[str, Any]) -> _Simulation:
     sim = _mapping(cfg["simulation_parameters"], "simulation_parameters")
     for k in sim:
         if _is_comment(k) or k in SIM_IGNORED:
@@ -576,19 +586,73 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
     for k, what in SIM_UNSUPPORTED_FLAGS.items():
         if _flag(sim, k, False):
             raise UnsupportedElement(f"simulation_parameters: '{k}' ({what}) is not supported")
-    cycles = _int(sim, "number_of_cardiac_cycles", None, 1)
-    pts = _int(sim, "number_of_time_pts_per_cardiac_cycle", None, 2)
-    interval = _int(sim, "output_interval", 1, 1)
-    max_iter = _int(sim, "maximum_nonlinear_iterations", 30, 1)
-    atol = _num(sim.get("absolute_tolerance", 1e-8), "simulation_parameters", "absolute_tolerance")
-    rho = _num(sim.get("rho_infty", 0.5), "simulation_parameters", "rho_infty")
-    cycle_error = _flag(sim, "use_cycle_to_cycle_error", False)
-    percent = _num(sim.get("sim_cycle_to_cycle_percent_error", 1.0), "simulation_parameters",
-                   "sim_cycle_to_cycle_percent_error")
-    sim_period = _num(sim.get("cardiac_period", -1.0), "simulation_parameters", "cardiac_period")
+    where = "simulation_parameters"
+    return _Simulation(
+        raw=sim,
+        cycles=_int(sim, "number_of_cardiac_cycles", None, 1),
+        points=_int(sim, "number_of_time_pts_per_cardiac_cycle", None, 2),
+        interval=_int(sim, "output_interval", 1, 1),
+        max_iterations=_int(sim, "maximum_nonlinear_iterations", 30, 1),
+        absolute_tolerance=_num(sim.get("absolute_tolerance", 1e-8), where,
+                                "absolute_tolerance"),
+        rho=_num(sim.get("rho_infty", 0.5), where, "rho_infty"),
+        cycle_error=_flag(sim, "use_cycle_to_cycle_error", False),
+        percent=_num(sim.get("sim_cycle_to_cycle_percent_error", 1.0), where,
+                     "sim_cycle_to_cycle_percent_error"),
+        period=_num(sim.get("cardiac_period", -1.0), where, "cardiac_period"),
+    )
 
-    # ---- boundary conditions (svZeroDSolver adds their parameters in file order; the first
-    # time table fixes the period and every other must match it exactly)
+
+def _same_period(el: str, p: float | None, model_period: float) -> float:
+    """The period a condition's table fixes: the first table's, which every other must match
+    exactly (svZeroDSolver's rule)."""
+    if p is None:
+        return model_period
+    if model_period > 0.0 and p != model_period:
+        raise ModelError(f"{el}: Inconsistent cardiac cycle period defined in parameters (its "
+                         f"table spans {p}, an earlier one {model_period})")
+    return p
+
+
+def _condition(kind: str, vals: Mapping[str, Any], el: str, model_period: float
+               ) -> tuple[dict[str, Any], float]:
+    """One boundary condition as a native condition, and the period its table fixes."""
+    if kind in ("FLOW", "PRESSURE"):
+        key = "Q" if kind == "FLOW" else "P"
+        y = _numlist(_required(vals, key, el), el, key)
+        t = _numlist(_required(vals, "t", el), el, "t")
+        q = "flow" if kind == "FLOW" else "pressure"
+        if not y:
+            raise ModelError(f"{el}: '{key}' is empty")
+        if len(y) == 1:
+            return {"type": q, q: y[0]}, model_period
+        if len(t) != len(y):
+            raise ModelError(f"{el}: 't' has {len(t)} entries but '{key}' has {len(y)}")
+        model_period = _same_period(el, t[-1] - t[0], model_period)
+        tt, yy = _periodic_table(t, y, el)
+        # svZeroDSolver's steady start uses the arithmetic mean of the samples
+        return {"type": q, "time": tt, q: yy, "steady": sum(y) / len(y)}, model_period
+    if kind in svzerod_heart.BC_PARAMS:
+        native, p = svzerod_heart.boundary_condition(kind, vals, el, _num, _numlist,
+                                                     _periodic_table)
+        return native, _same_period(el, p, model_period)
+    if kind in svzerod_closed_loop.BC_PARAMS:
+        return svzerod_closed_loop.boundary_condition(kind, vals, el, _num), model_period
+    if kind == "RESISTANCE":
+        return {"type": "resistance", "resistance": _num(_required(vals, "R", el), el, "R"),
+                "pressure": _num(_required(vals, "Pd", el), el, "Pd")}, model_period
+    return {"type": "rcr",
+            "proximal_resistance": _num(_required(vals, "Rp", el), el, "Rp"),
+            "capacitance": _num(_required(vals, "C", el), el, "C"),
+            "distal_resistance": _num(_required(vals, "Rd", el), el, "Rd"),
+            "pressure": _num(vals.get("Pd", 0.0), el, "Pd")}, model_period
+
+
+def _conditions(cfg: Mapping[str, Any], layout: _Layout
+                ) -> tuple[dict[str, tuple[str, dict[str, Any]]], float]:
+    """The boundary conditions (name -> (svZeroDSolver type, native condition), in file
+    order, as svZeroDSolver adds their parameters) and the period their tables fix (-1:
+    none); their internal variables go to ``layout``."""
     bc_list = cfg["boundary_conditions"]
     # a closed loop of chambers needs none (the chambers fix the pressure level)
     if not isinstance(bc_list, list) or not (bc_list or cfg.get("chambers")):
@@ -602,47 +666,7 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         vals = _check_params(_required(b, "bc_values", el), BC_PARAMS[kind], el)
         if name in bcs:
             raise ModelError(f"{el}: bc_name used twice")
-        native: dict[str, Any]
-        if kind in ("FLOW", "PRESSURE"):
-            key = "Q" if kind == "FLOW" else "P"
-            y = _numlist(_required(vals, key, el), el, key)
-            t = _numlist(_required(vals, "t", el), el, "t")
-            q = "flow" if kind == "FLOW" else "pressure"
-            if not y:
-                raise ModelError(f"{el}: '{key}' is empty")
-            if len(y) == 1:
-                native = {"type": q, q: y[0]}
-            else:
-                if len(t) != len(y):
-                    raise ModelError(f"{el}: 't' has {len(t)} entries but '{key}' has {len(y)}")
-                p = t[-1] - t[0]
-                if model_period > 0.0 and p != model_period:
-                    raise ModelError(f"{el}: Inconsistent cardiac cycle period defined in "
-                                     f"parameters (its table spans {p}, an earlier one "
-                                     f"{model_period})")
-                model_period = p
-                tt, yy = _periodic_table(t, y, el)
-                # svZeroDSolver's steady start uses the arithmetic mean of the samples
-                native = {"type": q, "time": tt, q: yy, "steady": sum(y) / len(y)}
-        elif kind in svzerod_heart.BC_PARAMS:
-            native, p = svzerod_heart.boundary_condition(kind, vals, el, _num, _numlist,
-                                                         _periodic_table)
-            if p is not None and model_period > 0.0 and p != model_period:
-                raise ModelError(f"{el}: Inconsistent cardiac cycle period defined in "
-                                 f"parameters (its table spans {p}, an earlier one "
-                                 f"{model_period})")
-            model_period = p if p is not None else model_period
-        elif kind in svzerod_closed_loop.BC_PARAMS:
-            native = svzerod_closed_loop.boundary_condition(kind, vals, el, _num)
-        elif kind == "RESISTANCE":
-            native = {"type": "resistance", "resistance": _num(_required(vals, "R", el), el, "R"),
-                      "pressure": _num(_required(vals, "Pd", el), el, "Pd")}
-        else:
-            native = {"type": "rcr",
-                      "proximal_resistance": _num(_required(vals, "Rp", el), el, "Rp"),
-                      "capacitance": _num(_required(vals, "C", el), el, "C"),
-                      "distal_resistance": _num(_required(vals, "Rd", el), el, "Rd"),
-                      "pressure": _num(vals.get("Pd", 0.0), el, "Pd")}
+        native, model_period = _condition(kind, vals, el, model_period)
         bcs[name] = (kind, native)
         if kind == "RCR":
             layout.internal.append(("rcr", name, native["proximal_resistance"]))
@@ -652,7 +676,12 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
             layout.internal.append(("ClosedLoopCoronary", name, f"{name}:bed"))
         elif kind in svzerod_heart.BC_PARAMS:  # volume_im: C_im times its transmural change
             layout.internal.append(("CORONARY", name, native["intramyocardial_capacitance"]))
+    return bcs, model_period
 
+
+def _period(cfg: Mapping[str, Any], model_period: float, sim_period: float) -> float:
+    """The cardiac period: the heart block's, else the tables', else ``cardiac_period``, else
+    1 (svZeroDSolver's rule); the tables and ``cardiac_period`` must agree."""
     heart_period = svzerod_closed_loop.heart_period(cfg)
     if heart_period is not None:  # svZeroDSolver takes the heart block's period
         model_period = heart_period
@@ -668,188 +697,264 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         period = sim_period
     if not period > 0.0:
         raise ModelError(f"simulation_parameters: the cardiac period must be > 0, got {period}")
-    svzerod_heart.finish(bcs, period)
+    return period
 
-    if cycle_error and any(kind == "RCR" for kind, _ in bcs.values()):
-        # Pfaller et al. 2021, eq. 21, as in svZeroDSolver's Solver.cpp
-        tau = max(n["capacitance"] * n["distal_resistance"]
-                  for kind, n in bcs.values() if kind == "RCR")
-        cycles = math.ceil(-tau / period * math.log(percent / 100.0))
-        if cycles < 1:
-            raise ModelError(f"simulation_parameters: use_cycle_to_cycle_error gives {cycles} "
-                             "cycles (largest RCR time constant too small)")
-    # without an RCR, svZeroDSolver runs extra cycles until the caps' means converge
-    # (oxyline.io.svzerod.cycles); the rule needs every step, so it is applied in `simulate`
 
-    # ---- vessels
-    vessels_in = cfg.get("vessels", [])
+def _rcr_cycles(bcs: Mapping[str, tuple[str, dict[str, Any]]], period: float,
+                percent: float) -> int:
+    """``use_cycle_to_cycle_error`` with RCR outlets: the cycles of Pfaller et al. 2021,
+    eq. 21, as in svZeroDSolver's Solver.cpp."""
+    tau = max(n["capacitance"] * n["distal_resistance"]
+              for kind, n in bcs.values() if kind == "RCR")
+    cycles = math.ceil(-tau / period * math.log(percent / 100.0))
+    if cycles < 1:
+        raise ModelError(f"simulation_parameters: use_cycle_to_cycle_error gives {cycles} "
+                         "cycles (largest RCR time constant too small)")
+    return cycles
+
+
+class _Ends:
+    """The node at each vessel end, set once (a second connection of an end is an error
+    naming both)."""
+
+    def __init__(self) -> None:
+        self.nodes: dict[tuple[str, str], str] = {}  # (vessel, "in"/"out") -> node name
+        self.owner: dict[tuple[str, str], str] = {}
+
+    def attach(self, vessel: str, end: str, node: str, what: str) -> None:
+        key = (vessel, end)
+        if key in self.nodes:
+            raise ModelError(f"vessel '{vessel}': its {'inlet' if end == 'in' else 'outlet'} is "
+                             f"connected twice ({self.owner[key]} and {what})")
+        self.nodes[key] = node
+        self.owner[key] = what
+
+
+def _lumped(kind: str, vals: Mapping[str, Any], el: str) -> dict[str, Any]:
+    """The lumped R-L-C (and stenosis) of a BloodVessel-class block."""
+    if kind in ("BloodVesselRC", "ChamberSphere"):
+        return {}
+    lumped = {
+        "resistance": _num(_required(vals, "R_poiseuille", el), el, "R_poiseuille"),
+        "capacitance": _num(vals.get("C", 0.0), el, "C"),
+        "inductance": _num(vals.get("L", 0.0), el, "L"),
+        "stenosis_coefficient": _num(vals.get("stenosis_coefficient", 0.0), el,
+                                     "stenosis_coefficient"),
+    }
+    if kind == "BloodVessel" and lumped["stenosis_coefficient"] != 0.0 \
+            and lumped["capacitance"] != 0.0:
+        # svZeroDSolver's own discretisation of the stenosis next to the capacitor
+        # (docs/svzerod.md, "C + stenosis"); oxyline's native default is "branch"
+        lumped["stenosis_form"] = "svzerod"
+    return lumped
+
+
+def _vessel(name: str, kind: str, vals: Mapping[str, Any], lumped: dict[str, Any], el: str,
+            period: float, layout: _Layout, crl: list[tuple[dict[str, Any], dict[str, Any]]]
+            ) -> dict[str, Any]:
+    """The native vessel of one svZeroDSolver vessel block (the front part of a
+    BloodVesselCRL, whose back part goes to ``crl``); its output rows go to ``layout``."""
+    if kind == "ChamberSphere":
+        # a vessel-class block upstream: in the vessel table with its inflow and outflow
+        layout.vessels.append((name, name, name))
+        layout.spheres.append(name)
+        return {"name": name, "description": "svZeroDSolver ChamberSphere",
+                "chamber_sphere": svzerod_heart.chamber_sphere(vals, el, period, _num)}
+    if kind == "BloodVesselRC":
+        layout.vessels.append((name, name, name))
+        layout.not_vessels.add(name)
+        return {"name": name, "description": "svZeroDSolver BloodVesselRC",
+                "through_rc": {"resistance": _num(_required(vals, "Rpd", el), el, "Rpd"),
+                               "capacitance": _num(_required(vals, "Cp", el), el, "Cp")}}
+    if kind == "BloodVesselCRL":
+        front, back = _crl_vessels(name, lumped)
+        crl.append((front, back))
+        layout.vessels.append((name, name, back["name"]))
+        return front
+    layout.vessels.append((name, name, name))
+    return {"name": name, "arrangement": "RCL", "lumped": lumped,
+            "description": "svZeroDSolver BloodVessel"}
+
+
+def _vessel_conditions(v: Mapping[str, Any], name: str, el: str,
+                       bcs: dict[str, tuple[str, dict[str, Any]]], used_bcs: dict[str, str],
+                       ends: _Ends, layout: _Layout) -> None:
+    """Attach a vessel's ``boundary_conditions`` (inlet, outlet) to its ends."""
+    vbc = _mapping(v.get("boundary_conditions", {}), f"{el} boundary_conditions")
+    for side, bc_name in vbc.items():
+        if _is_comment(side):
+            continue
+        if side not in ("inlet", "outlet"):
+            raise UnsupportedElement(f"{el}: unknown boundary_conditions key '{side}'")
+        if not isinstance(bc_name, str) or bc_name not in bcs:
+            raise ModelError(f"{el}: its {side} boundary condition '{bc_name}' is not defined")
+        kind_bc = bcs[bc_name][0]
+        if side == "inlet" and kind_bc in ("RESISTANCE", "RCR"):
+            # svZeroDSolver applies its outlet equations with Q along the vessel:
+            # P_in = Pd + R Q (native `svzerod-inlet`, docs/svzerod.md)
+            bcs[bc_name] = (kind_bc, dict(bcs[bc_name][1], type="svzerod-inlet"))
+        if bc_name in used_bcs:
+            raise ModelError(f"boundary condition '{bc_name}': connected to both "
+                             f"{used_bcs[bc_name]} and {el}")
+        used_bcs[bc_name] = el
+        ends.attach(name, "in" if side == "inlet" else "out", bc_name,
+                    f"boundary condition '{bc_name}'")
+    # svZeroDSolver's nodes of this vessel's boundary conditions, inlet first
+    layout.connections += [(vbc["inlet"], name)] if "inlet" in vbc else []
+    layout.connections += [(name, vbc["outlet"])] if "outlet" in vbc else []
+
+
+@dataclass
+class _Vessels:
+    """The converted vessel blocks."""
+
+    vessels: list[dict[str, Any]] = field(default_factory=list)
+    ids: dict[Any, str] = field(default_factory=dict)
+    names: set[str] = field(default_factory=set)
+    #: the (front, back) parts of each BloodVesselCRL
+    crl: list[tuple[dict[str, Any], dict[str, Any]]] = field(default_factory=list)
+
+
+def _vessels(vessels_in: Any, period: float, bcs: dict[str, tuple[str, dict[str, Any]]],
+             used_bcs: dict[str, str], ends: _Ends, layout: _Layout) -> _Vessels:
     if not isinstance(vessels_in, list):
         raise ModelError("vessels: must be a list")
-    vessels: list[dict[str, Any]] = []
-    ids: dict[Any, str] = {}
-    ends: dict[tuple[str, str], str] = {}  # (vessel, "in"/"out") -> node name
-    end_owner: dict[tuple[str, str], str] = {}
-    used_bcs: dict[str, str] = {}
-
-    def attach(vessel: str, end: str, node: str, what: str) -> None:
-        key = (vessel, end)
-        if key in ends:
-            raise ModelError(f"vessel '{vessel}': its {'inlet' if end == 'in' else 'outlet'} is "
-                             f"connected twice ({end_owner[key]} and {what})")
-        ends[key] = node
-        end_owner[key] = what
-
-    seen_names: set[str] = set()
-    crl: list[tuple[dict[str, Any], dict[str, Any]]] = []
+    out = _Vessels()
     for i, v in enumerate(vessels_in):
         v, name, kind, el = _entry(v, f"vessels[{i}]", "vessel_name", "vessel", VESSEL_KEYS,
                                    "zero_d_element_type", VESSEL_TYPES)
-        if name in seen_names:
+        if name in out.names:
             raise ModelError(f"{el}: vessel_name used twice")
-        seen_names.add(name)
+        out.names.add(name)
         el = f"{kind} '{name}'"
         params = {"BloodVesselRC": RC_VESSEL_PARAMS,
                   "ChamberSphere": set(svzerod_heart.SPHERE_KEYS)}.get(kind, BLOOD_VESSEL_PARAMS)
         vals = _check_params(_required(v, "zero_d_element_values", el), params, el)
-        lumped = {} if kind in ("BloodVesselRC", "ChamberSphere") else {
-            "resistance": _num(_required(vals, "R_poiseuille", el), el, "R_poiseuille"),
-            "capacitance": _num(vals.get("C", 0.0), el, "C"),
-            "inductance": _num(vals.get("L", 0.0), el, "L"),
-            "stenosis_coefficient": _num(vals.get("stenosis_coefficient", 0.0), el,
-                                         "stenosis_coefficient"),
-        }
-        if kind == "BloodVessel" and lumped["stenosis_coefficient"] != 0.0 \
-                and lumped["capacitance"] != 0.0:
-            # svZeroDSolver's own discretisation of the stenosis next to the capacitor
-            # (docs/svzerod.md, "C + stenosis"); oxyline's native default is "branch"
-            lumped["stenosis_form"] = "svzerod"
+        lumped = _lumped(kind, vals, el)
         vid = _required(v, "vessel_id", el)
         if isinstance(vid, bool) or not isinstance(vid, (int, str)):
             raise ModelError(f"{el}: vessel_id must be an integer or a name, got {vid!r}")
-        if vid in ids:
-            raise ModelError(f"{el}: vessel_id {vid!r} is also used by vessel '{ids[vid]}'")
-        ids[vid] = name
-        if kind == "ChamberSphere":
-            # a vessel-class block upstream: in the vessel table with its inflow and outflow
-            layout.vessels.append((name, name, name))
-            layout.spheres.append(name)
-            vessels.append({"name": name, "description": "svZeroDSolver ChamberSphere",
-                            "chamber_sphere": svzerod_heart.chamber_sphere(vals, el, period,
-                                                                          _num)})
-        elif kind == "BloodVesselRC":
-            layout.vessels.append((name, name, name))
-            layout.not_vessels.add(name)
-            vessels.append({"name": name, "description": "svZeroDSolver BloodVesselRC",
-                            "through_rc": {"resistance": _num(_required(vals, "Rpd", el), el,
-                                                              "Rpd"),
-                                           "capacitance": _num(_required(vals, "Cp", el), el,
-                                                               "Cp")}})
-        elif kind == "BloodVesselCRL":
-            front, back = _crl_vessels(name, lumped)
-            vessels.append(front)
-            crl.append((front, back))
-            layout.vessels.append((name, name, back["name"]))
-        else:
-            layout.vessels.append((name, name, name))
-            vessels.append({"name": name, "arrangement": "RCL", "lumped": lumped,
-                            "description": "svZeroDSolver BloodVessel"})
-        vbc = _mapping(v.get("boundary_conditions", {}), f"{el} boundary_conditions")
-        for side, bc_name in vbc.items():
-            if _is_comment(side):
-                continue
-            if side not in ("inlet", "outlet"):
-                raise UnsupportedElement(f"{el}: unknown boundary_conditions key '{side}'")
-            if not isinstance(bc_name, str) or bc_name not in bcs:
-                raise ModelError(f"{el}: its {side} boundary condition '{bc_name}' is not defined")
-            kind_bc = bcs[bc_name][0]
-            if side == "inlet" and kind_bc in ("RESISTANCE", "RCR"):
-                # svZeroDSolver applies its outlet equations with Q along the vessel:
-                # P_in = Pd + R Q (native `svzerod-inlet`, docs/svzerod.md)
-                bcs[bc_name] = (kind_bc, dict(bcs[bc_name][1], type="svzerod-inlet"))
-            if bc_name in used_bcs:
-                raise ModelError(f"boundary condition '{bc_name}': connected to both "
-                                 f"{used_bcs[bc_name]} and {el}")
-            used_bcs[bc_name] = el
-            attach(name, "in" if side == "inlet" else "out", bc_name,
-                   f"boundary condition '{bc_name}'")
-        # svZeroDSolver's nodes of this vessel's boundary conditions, inlet first
-        layout.connections += [(vbc["inlet"], name)] if "inlet" in vbc else []
-        layout.connections += [(name, vbc["outlet"])] if "outlet" in vbc else []
-    svzerod_closed_loop.add_blocks(cfg, period, vessels, bcs, attach, seen_names, _num)
-    heart_nodes = _closed_loop_layout(cfg, vessels, bcs, layout)
-    first_element_node = len(layout.connections)
-    _heart_elements(cfg, period, vessels, layout, bcs, used_bcs, attach)
-    # svZeroDSolver numbers the valves' nodes after the junctions' (it creates valves later)
-    element_nodes = layout.connections[first_element_node:]
-    del layout.connections[first_element_node:]
-    vessel_names = {x["name"] for x in vessels}
+        if vid in out.ids:
+            raise ModelError(f"{el}: vessel_id {vid!r} is also used by vessel '{out.ids[vid]}'")
+        out.ids[vid] = name
+        out.vessels.append(_vessel(name, kind, vals, lumped, el, period, layout, out.crl))
+        _vessel_conditions(v, name, el, bcs, used_bcs, ends, layout)
+    return out
 
-    # ---- junctions
-    hidden = _junctions(cfg.get("junctions", []), ids, bcs, vessel_names, attach, layout)
-    layout.connections += element_nodes
-    # a coupling block's wire: svZeroDSolver has no node at its free end, and no vessel row
-    layout.connections = [c for c in layout.connections if not set(c) & wire_ends]
-    layout.not_vessels |= set(wires)
-    layout.connections += heart_nodes
 
-    if not vessels:
+def _connect(vs: _Vessels, hidden: list[dict[str, Any]], ends: _Ends,
+             bcs: Mapping[str, Any], used_bcs: Mapping[str, str]) -> None:
+    """Name every vessel's end nodes (a free end gets ``<vessel>:inlet``/``:outlet``), split
+    each BloodVesselCRL at its capacitor node, and refuse clashing names and unconnected
+    conditions."""
+    if not vs.vessels:
         raise ModelError("model: no vessels")
     for name in used_bcs.keys() ^ bcs.keys():
         raise ModelError(f"boundary condition '{name}': not connected to any vessel")
-    for v in vessels:
-        v["from"] = ends.get((v["name"], "in"), f"{v['name']}:inlet")
-        v["to"] = ends.get((v["name"], "out"), f"{v['name']}:outlet")
-    for front, back in crl:  # the capacitor node between the two parts of a BloodVesselCRL
+    for v in vs.vessels:
+        v["from"] = ends.nodes.get((v["name"], "in"), f"{v['name']}:inlet")
+        v["to"] = ends.nodes.get((v["name"], "out"), f"{v['name']}:outlet")
+    for front, back in vs.crl:  # the capacitor node between the two parts of a BloodVesselCRL
         back["to"] = front["to"]
         back["from"] = front["to"] = f"{front['name']}:C"
         hidden.append(back)
-    names = {x["name"] for x in vessels}
-    for front, _ in crl:
+    names = {x["name"] for x in vs.vessels}
+    for front, _ in vs.crl:
         if front["to"] in names or front["to"] in bcs:
             raise ModelError(f"BloodVesselCRL '{front['name']}': its capacitor node name "
                              f"'{front['to']}' is also used by another block")
     for h in hidden:
         if h["name"] in names:
             raise ModelError(f"junction branch '{h['name']}': name clashes with a vessel")
-    # the closed-loop blocks' start values are the heart block's own (svzerod_closed_loop)
-    closed = {a for a, _ in heart_nodes}
-    svzerod_initial.apply(cfg, vessels + hidden, [e for e in layout.vessels if e[0] not in closed],
-                          layout.connections, crl, _num)
 
-    dt = period / (float(pts) - 1.0)
-    settings = RunSettings(
-        period=period, cycles=cycles, points_per_cycle=pts, dt=dt, output_interval=interval,
-        output_all_cycles=_flag(sim, "output_all_cycles", False),
-        output_mean_only=_flag(sim, "output_mean_only", False),
-        steady_initial=_flag(sim, "steady_initial", True), rho_infty=rho,
-        absolute_tolerance=atol, max_iterations=max_iter, units=system,
-        output_variable_based=_flag(sim, "output_variable_based", False),
-        output_derivative=_flag(sim, "output_derivative", False),
-    )
-    svzerod_initial.zero_start_coronaries(bcs, settings.steady_initial)
-    if cycle_error and not any(kind == "RCR" for kind, _ in bcs.values()):
-        settings.cycle_error = percent / 100.0
-        settings.caps = svzerod_cycles.caps(
-            [v for v in vessels_in if isinstance(v, Mapping)])
-    native: dict[str, Any] = {
+
+def _native(system: str, period: float, vessels: list[dict[str, Any]],
+            bcs: Mapping[str, tuple[str, dict[str, Any]]], settings: RunSettings
+            ) -> dict[str, Any]:
+    """The native model dict (the file's numbers, in ``system`` units)."""
+    return {
         "name": "svzerod",
         "units": system,  # the model converts the file's numbers to SI
         "description": "converted from an svZeroDSolver input by oxyline.svzerod",
         "period": period,
-        "vessels": vessels + hidden,
+        "vessels": vessels,
         "boundary_conditions": {name: nat for name, (kind, nat) in bcs.items()
                                 if kind not in svzerod_closed_loop.BC_PARAMS},
         "simulation": {
-            "cycles": cycles,
-            "dt": dt,
+            "cycles": settings.cycles,
+            "dt": settings.dt,
             "method": "generalized-alpha",
-            "rho_infty": rho,
+            "rho_infty": settings.rho_infty,
             "start": "svzerod-steady" if settings.steady_initial else "svzerod-zero",
             "output": {"cycles": "all" if settings.output_all_cycles else "last",
-                       "every": dt * interval, "segments": False},
+                       "every": settings.dt * settings.output_interval, "segments": False},
         },
     }
-    return native, settings, layout
+
+
+def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | None = None
+             ) -> tuple[dict[str, Any], RunSettings, _Layout]:
+    """svZeroDSolver config -> (oxyline native dict, svZeroDSolver run settings, output
+    layout). The dict keeps the file's numbers and says their ``units`` (so a model built from
+    it is in SI)."""
+    cfg = _read_config(config)
+    # coupling blocks with prescribed values are ordinary conditions (svzerod_coupling)
+    cfg, wires, wire_ends = svzerod_coupling.as_forward(cfg)
+    layout = _Layout()
+    system = file_units(cfg, units)
+    _check_top(cfg)
+    sim = _simulation(cfg)
+    bcs, model_period = _conditions(cfg, layout)
+    period = _period(cfg, model_period, sim.period)
+    svzerod_heart.finish(bcs, period)
+    cycles = sim.cycles
+    if sim.cycle_error and any(kind == "RCR" for kind, _ in bcs.values()):
+        cycles = _rcr_cycles(bcs, period, sim.percent)
+    # without an RCR, svZeroDSolver runs extra cycles until the caps' means converge
+    # (oxyline.io.svzerod.cycles); the rule needs every step, so it is applied in `simulate`
+
+    ends, used_bcs = _Ends(), {}
+    vessels_in = cfg.get("vessels", [])
+    vs = _vessels(vessels_in, period, bcs, used_bcs, ends, layout)
+    svzerod_closed_loop.add_blocks(cfg, period, vs.vessels, bcs, ends.attach, vs.names, _num)
+    heart_nodes = _closed_loop_layout(cfg, vs.vessels, bcs, layout)
+    first_element_node = len(layout.connections)
+    _heart_elements(cfg, period, vs.vessels, layout, bcs, used_bcs, ends.attach)
+    # svZeroDSolver numbers the valves' nodes after the junctions' (it creates valves later)
+    element_nodes = layout.connections[first_element_node:]
+    del layout.connections[first_element_node:]
+    vessel_names = {x["name"] for x in vs.vessels}
+    hidden = _junctions(cfg.get("junctions", []), vs.ids, bcs, vessel_names, ends.attach,
+                        layout)
+    layout.connections += element_nodes
+    # a coupling block's wire: svZeroDSolver has no node at its free end, and no vessel row
+    layout.connections = [c for c in layout.connections if not set(c) & wire_ends]
+    layout.not_vessels |= set(wires)
+    layout.connections += heart_nodes
+    _connect(vs, hidden, ends, bcs, used_bcs)
+    # the closed-loop blocks' start values are the heart block's own (svzerod_closed_loop)
+    closed = {a for a, _ in heart_nodes}
+    svzerod_initial.apply(cfg, vs.vessels + hidden,
+                          [e for e in layout.vessels if e[0] not in closed],
+                          layout.connections, vs.crl, _num)
+
+    raw = sim.raw
+    settings = RunSettings(
+        period=period, cycles=cycles, points_per_cycle=sim.points,
+        dt=period / (float(sim.points) - 1.0), output_interval=sim.interval,
+        output_all_cycles=_flag(raw, "output_all_cycles", False),
+        output_mean_only=_flag(raw, "output_mean_only", False),
+        steady_initial=_flag(raw, "steady_initial", True), rho_infty=sim.rho,
+        absolute_tolerance=sim.absolute_tolerance, max_iterations=sim.max_iterations,
+        units=system, output_variable_based=_flag(raw, "output_variable_based", False),
+        output_derivative=_flag(raw, "output_derivative", False),
+    )
+    svzerod_initial.zero_start_coronaries(bcs, settings.steady_initial)
+    if sim.cycle_error and not any(kind == "RCR" for kind, _ in bcs.values()):
+        settings.cycle_error = sim.percent / 100.0
+        settings.caps = svzerod_cycles.caps(
+            [v for v in vessels_in if isinstance(v, Mapping)])
+    return _native(system, period, vs.vessels + hidden, bcs, settings), settings, layout
 
 
 def to_oxyline_dict(config: Mapping[str, Any] | str | os.PathLike[str],
