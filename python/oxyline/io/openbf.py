@@ -276,26 +276,7 @@ def _load_yaml(p: Path) -> dict[str, Any]:
     return data
 
 
-def to_native_dict(path: PathLike, *, linearize: str | float = "mean", taper: str = "linear",
-                   wk2: str = "parallel", openbf_compat: bool = False, repair_inlet: bool = True,
-                   max_segment_length: float = 0.01, name: str | None = None) -> dict[str, Any]:
-    """Convert an openBF YAML file (and its inlet table) into an oxyline native model dict (SI).
-
-    Parameters: ``linearize`` ("mean", "pext" or a pressure in Pa: where each vessel's radius
-    and compliance are evaluated on openBF's tube law), ``taper`` ("linear" or "openbf"),
-    ``wk2`` ("parallel" or "openbf"), ``openbf_compat`` (all of openBF v2's behaviours: taper,
-    WK2 and ignored ``gamma profile`` keys), ``repair_inlet`` (fix the ADAN56 inflow),
-    ``max_segment_length`` [m], ``name``. See the module docstring for the mapping.
-
-    >>> from pathlib import Path
-    >>> f = Path("../shared/networks/openbf/models/boileau2015/cca/cca.yaml")
-    >>> d = to_native_dict(f) if f.exists() else {"vessels": [{"name": "common_carotid_artery"}]}
-    >>> d["vessels"][0]["name"]
-    'common_carotid_artery'
-    """
-    p = Path(path)
-    if openbf_compat:
-        taper, wk2 = "openbf", "openbf"
+def _check_options(linearize: str | float, taper: str, wk2: str) -> None:
     if taper not in ("linear", "openbf"):
         raise ModelError(f"read_openbf: taper must be 'linear' or 'openbf', got {taper!r}")
     if wk2 not in ("parallel", "openbf"):
@@ -304,19 +285,22 @@ def to_native_dict(path: PathLike, *, linearize: str | float = "mean", taper: st
             and linearize not in ("mean", "pext"):
         raise ModelError(f"read_openbf: linearize must be 'mean', 'pext' or a pressure in Pa, "
                          f"got {linearize!r}")
-    data = _load_yaml(p)
-    for k in data:
-        if k not in TOP_KEYS:
-            _warn(f"{p.name}: top-level key '{k}' is not used by the importer")
+
+
+def _blood(data: Mapping[str, Any], p: Path) -> tuple[float, float]:
+    """The file's blood density and viscosity (openBF's defaults when it has none)."""
     blood = data.get("blood") or {}
     if not blood:
         _warn(f"{p.name}: no 'blood:' section; using rho = 1060 kg/m^3 and mu = 4.0e-3 Pa s")
     if not isinstance(blood, Mapping):
         raise ModelError(f"{p}: 'blood' must be a mapping with rho and mu")
-    rho = _num(blood.get("rho", 1060.0), f"{p}: blood", "rho")
-    mu = _num(blood.get("mu", 4.0e-3), f"{p}: blood", "mu")
+    return (_num(blood.get("rho", 1060.0), f"{p}: blood", "rho"),
+            _num(blood.get("mu", 4.0e-3), f"{p}: blood", "mu"))
 
-    # vessels
+
+def _vessels(data: Mapping[str, Any], p: Path, taper: str, openbf_compat: bool, rho: float
+             ) -> tuple[list[_Vessel], list[Mapping[str, Any]]]:
+    """The network's vessels (labels made unique) and their raw entries."""
     vessels: list[_Vessel] = []
     raw: list[Mapping[str, Any]] = []
     seen: Counter[str] = Counter()
@@ -346,14 +330,16 @@ def to_native_dict(path: PathLike, *, linearize: str | float = "mean", taper: st
         vv["label"] = label
         vessels.append(_Vessel(vv, where, taper, not openbf_compat, rho))
         raw.append(vv)
-
     if spaced:
         _warn(f"{p.name}: 'gamma profile' (with a space) in {len(spaced)} vessel(s) ("
               f"{', '.join(spaced[:3])}{', ...' if len(spaced) > 3 else ''}) is " + (
                   "ignored, as openBF does (openbf_compat): gamma_profile = 2" if openbf_compat
                   else "read as gamma_profile (openBF itself ignores it and uses 2)"))
+    return vessels, raw
 
-    # topology: inlet node, outlets
+
+def _inlet_node(vessels: list[_Vessel], p: Path) -> Any:
+    """openBF's inlet node: node 1, or the one node that starts vessels but ends none."""
     starts = Counter(v.sn for v in vessels)
     ends = Counter(v.tn for v in vessels)
     sources = [n for n in starts if n not in ends]
@@ -371,8 +357,12 @@ def to_native_dict(path: PathLike, *, linearize: str | float = "mean", taper: st
                              f"and no upstream vessel (only node {inlet_node} is an inlet)")
     if starts[inlet_node] != 1:
         raise ModelError(f"{p}: the inlet node {inlet_node} must start exactly one vessel")
+    return inlet_node
 
-    # inlet table
+
+def _inlet_table(data: Mapping[str, Any], raw: list[Mapping[str, Any]], p: Path,
+                 repair: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The inflow table (t, Q) of the file's ``inlet_file`` (or ``<project>_inlet.dat``)."""
     inlet_file = data.get("inlet_file")
     if inlet_file is None:
         for v in raw:
@@ -383,13 +373,14 @@ def to_native_dict(path: PathLike, *, linearize: str | float = "mean", taper: st
         if not guess.is_file():
             raise ModelError(f"{p}: no 'inlet_file' given and {guess.name} not found")
         inlet_file = guess.name
-    t, q = read_inlet(p.parent / str(inlet_file), repair=repair_inlet)
+    t, q = read_inlet(p.parent / str(inlet_file), repair=repair)
     if abs(t[0]) > 1e-12:
         _warn(f"{inlet_file}: the inlet table starts at t = {t[0]} s, not 0; openBF assumes 0")
-    period = float(t[-1] - t[0])
-    q_mean = float(np.trapezoid(q, t) / period)
+    return t, q
 
-    # gamma profile -> effective viscosity
+
+def _gamma(vessels: list[_Vessel], p: Path) -> float:
+    """The one velocity-profile gamma of the model (the most common one)."""
     gammas = Counter(v.gamma for v in vessels)
     gamma, _ = gammas.most_common(1)[0]
     if len(gammas) > 1:
@@ -397,57 +388,130 @@ def to_native_dict(path: PathLike, *, linearize: str | float = "mean", taper: st
         _warn(f"{p.name}: mixed gamma_profile values {dict(gammas)}; oxyline has one viscosity "
               f"per model, gamma = {gamma:g} used for all (differs for: {', '.join(odd[:8])}"
               f"{', ...' if len(odd) > 8 else ''})")
-    mu_eff = mu * (gamma + 2.0) / 4.0
+    return gamma
 
-    # outlets
-    outlet_of: dict[Any, _Vessel] = {}
+
+def _missing_outlet(v: _Vessel, r: Mapping[str, Any], vessels: list[_Vessel],
+                    raw: list[Mapping[str, Any]], starts: Counter[Any]) -> Exception:
+    """The error of a terminal vessel without a Windkessel (a reflection-coefficient outlet
+    is not supported)."""
+    if "Rt" not in r:
+        return ModelError(f"{v.where}: terminal vessel (node {v.tn}) without an outlet "
+                          "condition (R1/R2/Cc or Rt)")
+    rt = _num(r["Rt"], v.where, "Rt")
+    others = [x.label for x, y in zip(vessels, raw)
+              if x is not v and "Rt" in y and "R1" not in y and x.tn not in starts]
+    also = f" (also Rt outlets: {', '.join(others)})" if others else ""
+    return UnsupportedElement(
+        f"{v.where}: reflection-coefficient outlet (Rt = {rt:g}) is not supported by the 0-D "
+        f"importer; give a Windkessel (R1, R2, Cc) instead (a linear equivalent is a "
+        f"resistance Z0 (1 + Rt)/(1 - Rt), Z0 = {v.z0():.4g} Pa s m^-3){also}")
+
+
+def _windkessel(v: _Vessel, r: Mapping[str, Any], wk2: str) -> dict[str, Any]:
+    """The native outlet condition of a terminal vessel's Windkessel (R1, R2, Cc, Pout)."""
+    pout = _num(r.get("Pout", 0.0), v.where, "Pout")
+    r1 = _num(r["R1"], v.where, "R1")
+    cc = _num(r.get("Cc", 0.0), v.where, "Cc")
+    if "R2" in r and _num(r["R2"], v.where, "R2") != 0.0:
+        r2 = _num(r["R2"], v.where, "R2")
+    elif wk2 == "openbf":
+        r2 = r1 - v.z0()  # openBF v2: R2 = R1 - rho c0/A0, R1 stays proximal
+    else:
+        r1, r2 = 0.0, r1  # two-element Windkessel: R1 parallel to Cc
+    if r.get("inlet_impedance_matching"):
+        z0 = v.z0()
+        _warn(f"{v.where}: inlet_impedance_matching: proximal resistance set to Z0 = "
+              f"{z0:.4g} Pa s m^-3 at A0 (openBF updates it with A(t))")
+        r1, r2 = z0, r1 + r2 - z0
+    if r2 <= 0 or r1 < 0 or cc < 0:
+        raise ModelError(f"{v.where}: Windkessel needs R2 > 0, R1 >= 0, Cc >= 0 "
+                         f"(got R1={r1:g}, R2={r2:g}, Cc={cc:g})")
+    if cc == 0.0:
+        return {"type": "resistance", "resistance": r1 + r2, "pressure": pout}
+    return {"type": "rcr", "proximal_resistance": r1, "capacitance": cc,
+            "distal_resistance": r2, "pressure": pout}
+
+
+def _outlets(vessels: list[_Vessel], raw: list[Mapping[str, Any]], wk2: str
+             ) -> tuple[dict[str, Any], dict[Any, tuple[float, float]]]:
+    """The outlet conditions by node name, and each outlet node's (total resistance, Pout)."""
+    starts = Counter(v.sn for v in vessels)
+    ends = Counter(v.tn for v in vessels)
     bcs: dict[str, Any] = {}
-    terminal_resistance: dict[Any, float] = {}
+    terminal_resistance: dict[Any, tuple[float, float]] = {}
     for v, r in zip(vessels, raw):
-        terminal = v.tn not in starts
-        if not terminal:
+        if v.tn in starts:
             if any(k in r for k in ("R1", "R2", "Cc", "Rt")):
                 _warn(f"{v.where}: outlet parameters on an inner vessel (node {v.tn}) ignored")
             continue
         if ends[v.tn] > 1:
             raise ModelError(f"{v.where}: outlet node {v.tn} is shared by several vessels")
-        outlet_of[v.tn] = v
-        pout = _num(r.get("Pout", 0.0), v.where, "Pout")
         if "R1" not in r:
-            if "Rt" in r:
-                rt = _num(r["Rt"], v.where, "Rt")
-                others = [x.label for x, y in zip(vessels, raw)
-                          if x is not v and "Rt" in y and "R1" not in y and x.tn not in starts]
-                also = f" (also Rt outlets: {', '.join(others)})" if others else ""
-                raise UnsupportedElement(
-                    f"{v.where}: reflection-coefficient outlet (Rt = {rt:g}) is not supported "
-                    f"by the 0-D importer; give a Windkessel (R1, R2, Cc) instead (a linear "
-                    f"equivalent is a resistance Z0 (1 + Rt)/(1 - Rt), Z0 = {v.z0():.4g} "
-                    f"Pa s m^-3){also}")
-            raise ModelError(f"{v.where}: terminal vessel (node {v.tn}) without an outlet "
-                             "condition (R1/R2/Cc or Rt)")
-        r1 = _num(r["R1"], v.where, "R1")
-        cc = _num(r.get("Cc", 0.0), v.where, "Cc")
-        if "R2" in r and _num(r["R2"], v.where, "R2") != 0.0:
-            r2 = _num(r["R2"], v.where, "R2")
-        elif wk2 == "openbf":
-            r2 = r1 - v.z0()  # openBF v2: R2 = R1 - rho c0/A0, R1 stays proximal
-        else:
-            r1, r2 = 0.0, r1  # two-element Windkessel: R1 parallel to Cc
-        if r.get("inlet_impedance_matching"):
-            z0 = v.z0()
-            _warn(f"{v.where}: inlet_impedance_matching: proximal resistance set to Z0 = "
-                  f"{z0:.4g} Pa s m^-3 at A0 (openBF updates it with A(t))")
-            r1, r2 = z0, r1 + r2 - z0
-        if r2 <= 0 or r1 < 0 or cc < 0:
-            raise ModelError(f"{v.where}: Windkessel needs R2 > 0, R1 >= 0, Cc >= 0 "
-                             f"(got R1={r1:g}, R2={r2:g}, Cc={cc:g})")
-        if cc == 0.0:
-            bcs[f"n{v.tn}"] = {"type": "resistance", "resistance": r1 + r2, "pressure": pout}
-        else:
-            bcs[f"n{v.tn}"] = {"type": "rcr", "proximal_resistance": r1, "capacitance": cc,
-                               "distal_resistance": r2, "pressure": pout}
-        terminal_resistance[v.tn] = (r1 + r2, pout)
+            _num(r.get("Pout", 0.0), v.where, "Pout")
+            raise _missing_outlet(v, r, vessels, raw, starts)
+        bc = bcs[f"n{v.tn}"] = _windkessel(v, r, wk2)
+        total = bc["resistance"] if bc["type"] == "resistance" \
+            else bc["proximal_resistance"] + bc["distal_resistance"]
+        terminal_resistance[v.tn] = (total, bc["pressure"])
+    return bcs, terminal_resistance
+
+
+def _native_vessel(v: _Vessel, p_in: float, p_out: float) -> dict[str, Any]:
+    """The native vessel of ``v`` linearised at the end pressures ``p_in``, ``p_out``."""
+    r_in, r_out, h_eff = v.linearised(p_in, p_out)
+    if v.h0_given is not None:
+        h_file = f"h0 {v.h0_given:.4g} m"
+    else:
+        ha, hb = v.h0(np.array([0.0, v.length])).tolist()
+        h_file = f"h0 from the ADAN law ({ha:.4g}-{hb:.4g} m)"
+    desc = (f"openBF: Rp {v.rp_file:.6g} m, Rd {v.rd_file:.6g} m, {h_file}, E {v.E:.6g} Pa, "
+            f"Pext {v.pext:.6g} Pa, gamma_profile {v.gamma:g}; linearised at "
+            f"{p_in:.6g}->{p_out:.6g} Pa (radii and compliance-equivalent wall thickness)")
+    nv: dict[str, Any] = {"name": v.label, "from": f"n{v.sn}", "to": f"n{v.tn}",
+                          "length": v.length}
+    if abs(r_in - r_out) <= 1e-12 * r_in:
+        nv["radius"] = r_in
+    else:
+        nv["radius_in"], nv["radius_out"] = r_in, r_out
+    nv.update(wall_thickness=h_eff, youngs_modulus=v.E, poisson_ratio=POISSON, description=desc)
+    return nv
+
+
+def to_native_dict(path: PathLike, *, linearize: str | float = "mean", taper: str = "linear",
+                   wk2: str = "parallel", openbf_compat: bool = False, repair_inlet: bool = True,
+                   max_segment_length: float = 0.01, name: str | None = None) -> dict[str, Any]:
+    """Convert an openBF YAML file (and its inlet table) into an oxyline native model dict (SI).
+
+    Parameters: ``linearize`` ("mean", "pext" or a pressure in Pa: where each vessel's radius
+    and compliance are evaluated on openBF's tube law), ``taper`` ("linear" or "openbf"),
+    ``wk2`` ("parallel" or "openbf"), ``openbf_compat`` (all of openBF v2's behaviours: taper,
+    WK2 and ignored ``gamma profile`` keys), ``repair_inlet`` (fix the ADAN56 inflow),
+    ``max_segment_length`` [m], ``name``. See the module docstring for the mapping.
+
+    >>> from pathlib import Path
+    >>> f = Path("../shared/networks/openbf/models/boileau2015/cca/cca.yaml")
+    >>> d = to_native_dict(f) if f.exists() else {"vessels": [{"name": "common_carotid_artery"}]}
+    >>> d["vessels"][0]["name"]
+    'common_carotid_artery'
+    """
+    p = Path(path)
+    if openbf_compat:
+        taper, wk2 = "openbf", "openbf"
+    _check_options(linearize, taper, wk2)
+    data = _load_yaml(p)
+    for k in data:
+        if k not in TOP_KEYS:
+            _warn(f"{p.name}: top-level key '{k}' is not used by the importer")
+    rho, mu = _blood(data, p)
+    vessels, raw = _vessels(data, p, taper, openbf_compat, rho)
+    inlet_node = _inlet_node(vessels, p)
+    t, q = _inlet_table(data, raw, p, repair_inlet)
+    period = float(t[-1] - t[0])
+    q_mean = float(np.trapezoid(q, t) / period)
+    gamma = _gamma(vessels, p)
+    mu_eff = mu * (gamma + 2.0) / 4.0  # openBF's friction 2 (gamma + 2) pi mu
+    outlets, terminal_resistance = _outlets(vessels, raw, wk2)
 
     # linearisation pressures at the vessel ends
     if linearize == "pext":
@@ -457,34 +521,10 @@ def to_native_dict(path: PathLike, *, linearize: str | float = "mean", taper: st
     else:
         pl = float(linearize)
         p_ends = {id(v): (pl, pl) for v in vessels}
-
-    native_vessels = []
-    for v in vessels:
-        p_in, p_out = p_ends[id(v)]
-        r_in, r_out, h_eff = v.linearised(p_in, p_out)
-        if v.h0_given is not None:
-            h_file = f"h0 {v.h0_given:.4g} m"
-        else:
-            ha, hb = v.h0(np.array([0.0, v.length])).tolist()
-            h_file = f"h0 from the ADAN law ({ha:.4g}-{hb:.4g} m)"
-        desc = (f"openBF: Rp {v.rp_file:.6g} m, Rd {v.rd_file:.6g} m, {h_file}, E {v.E:.6g} Pa, "
-                f"Pext {v.pext:.6g} Pa, gamma_profile {v.gamma:g}; linearised at "
-                f"{p_in:.6g}->{p_out:.6g} Pa (radii and compliance-equivalent wall thickness)")
-        nv: dict[str, Any] = {"name": v.label, "from": f"n{v.sn}", "to": f"n{v.tn}",
-                              "length": v.length}
-        if abs(r_in - r_out) <= 1e-12 * r_in:
-            nv["radius"] = r_in
-        else:
-            nv["radius_in"], nv["radius_out"] = r_in, r_out
-        nv.update(wall_thickness=h_eff, youngs_modulus=v.E, poisson_ratio=POISSON,
-                  description=desc)
-        native_vessels.append(nv)
-
     bcs = {f"n{inlet_node}": {"type": "flow", "time": t.tolist(), "flow": q.tolist(),
-                              "interpolation": "linear"}, **bcs}
-    model_name = name or str(data.get("project_name", p.stem))
+                              "interpolation": "linear"}, **outlets}
     return {
-        "name": model_name,
+        "name": name or str(data.get("project_name", p.stem)),
         "description": (
             f"Imported from openBF file {p.name} (Apache-2.0 openBF model library). Blood "
             f"viscosity {mu:g} Pa s x (gamma_profile {gamma:g} + 2)/4 = {mu_eff:g} Pa s "
@@ -496,7 +536,7 @@ def to_native_dict(path: PathLike, *, linearize: str | float = "mean", taper: st
         "inertance_profile": "flat",
         "segmentation": {"max_length": float(max_segment_length)},
         "period": period,
-        "vessels": native_vessels,
+        "vessels": [_native_vessel(v, *p_ends[id(v)]) for v in vessels],
         "boundary_conditions": bcs,
         "simulation": {"cycles": 10, "until_periodic": 1e-6, "max_cycles": 200,
                        "dt": "auto", "method": "auto",
