@@ -57,6 +57,7 @@ import json
 import math
 import os
 import warnings
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -185,6 +186,168 @@ def _warn(msg: str) -> None:
     warnings.warn(msg, CirculatoryAutogenWarning, stacklevel=3)
 
 
+def _resistance_scale(scale: float | str, vessel_array_csv: PathLike, parameters_csv: PathLike,
+                      obs_data_json: PathLike | None, options: dict[str, Any]
+                      ) -> tuple[float, str]:
+    """The terminal resistance factor (``"calibrate"``: fitted to the observed mean pressure)
+    and the description's note on its calibration."""
+    if not isinstance(scale, str):
+        return scale, ""
+    if scale != "calibrate" or obs_data_json is None:
+        raise ModelError("terminal_resistance_scale must be a number > 0, or 'calibrate' "
+                         "with obs_data_json")
+    raw = to_native_dict(vessel_array_csv, parameters_csv, obs_data_json=obs_data_json,
+                         **options)
+    factor, node, target = calibrate_terminal_resistance_scale(raw, obs_data_json)
+    return factor, (f" (calibrated: the one factor that makes the steady-solve mean pressure "
+                    f"at {node} equal the observed {target:g} Pa of "
+                    f"{Path(obs_data_json).name} at the mean inflow)")
+
+
+def _tree(rows: list[dict[str, Any]], vessel_array_csv: PathLike
+          ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """The arterial modules to import, checked, and their root (fed by the heart)."""
+    by_name = {r["name"]: r for r in rows}
+    if len(by_name) != len(rows):
+        raise ModelError(f"{vessel_array_csv}: duplicate module names")
+    for r in rows:
+        for other in r["inp"] + r["out"]:
+            if other not in by_name:
+                raise ModelError(f"{vessel_array_csv}: module '{r['name']}' refers to unknown "
+                                 f"module '{other}'")
+    tree = [r for r in rows if r["vessel_type"] not in NOT_IMPORTED]
+    for r in tree:
+        vt = r["vessel_type"]
+        if vt not in GEOMETRIC | SIMPLE | TERMINAL:
+            raise ModelError(f"module '{r['name']}': vessel_type '{vt}' is not supported "
+                             f"(supported: {sorted(GEOMETRIC | SIMPLE | TERMINAL)})")
+        if vt in TERMINAL and r["BC_type"] != "pp":
+            raise ModelError(f"terminal '{r['name']}': BC_type '{r['BC_type']}' not supported (pp)")
+        if vt not in TERMINAL and r["BC_type"] not in ARRANGEMENT:
+            raise ModelError(f"module '{r['name']}': BC_type '{r['BC_type']}' not supported")
+    in_tree = {r["name"] for r in tree}
+    roots = [r for r in tree if not any(i in in_tree for i in r["inp"])]
+    if len(roots) != 1:
+        raise ModelError(f"expected one arterial root fed by the heart, found "
+                         f"{[r['name'] for r in roots]}")
+    return tree, roots[0]
+
+
+def _node_names(tree: list[dict[str, Any]], root: dict[str, Any]) -> dict[tuple[str, str], str]:
+    """The node name of every module end ``(module, "in"/"out")``: the ends a connection
+    joins share one node (union of ends), named after the one module that ends there."""
+    in_tree = {r["name"] for r in tree}
+    parent: dict[tuple[str, str], tuple[str, str]] = {}
+
+    def find(x: tuple[str, str]) -> tuple[str, str]:
+        parent.setdefault(x, x)
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    for r in tree:
+        find((r["name"], "in"))
+        find((r["name"], "out"))
+        for o in r["out"]:
+            if o in in_tree:
+                parent[find((o, "in"))] = find((r["name"], "out"))
+    members: dict[tuple[str, str], list[tuple[str, str]]] = {}
+    for x in list(parent):
+        members.setdefault(find(x), []).append(x)
+    names: dict[tuple[str, str], str] = {}
+    for ends in members.values():
+        outs = sorted(n for n, side in ends if side == "out")
+        ins = sorted(n for n, side in ends if side == "in")
+        if len(outs) == 1:
+            label = f"{outs[0]}.out"
+        elif (root["name"], "in") in ends:
+            label = "aortic_root"
+        else:
+            label = f"{ins[0]}.in"
+        for end in ends:
+            names[end] = label
+    return names
+
+
+def _terminal(nm: str, ends: tuple[str, str], params: dict[str, tuple[float, str, str]],
+              scale: float, venous_pressure: float) -> tuple[dict[str, Any], dict[str, Any]]:
+    """A terminal module (R_T/2, C_T, R_T/2): its vessel and its outlet condition."""
+    R_T = _value(params, f"R_T_{nm}", "Js_per_m6", nm) * scale
+    C_T = _value(params, f"C_T_{nm}", "m6_per_J", nm)
+    vessel = {
+        "name": nm, "from": ends[0], "to": ends[1], "arrangement": "L",
+        "lumped": {"resistance": R_T / 2, "inductance": 0.0, "capacitance": C_T},
+        "description": (f"circulatory_autogen terminal (pp_T_fixed_I_type): "
+                        f"R_T {R_T:.6g} Pa s m^-3, C_T {C_T:.6g} m^3/Pa; first half "
+                        f"R_T/2 + C_T here, second half R_T/2 = outlet resistance"),
+    }
+    return vessel, {"type": "resistance", "resistance": R_T / 2,
+                    "pressure": float(venous_pressure)}
+
+
+def _artery(r: dict[str, Any], ends: tuple[str, str], params: dict[str, tuple[float, str, str]]
+            ) -> dict[str, Any]:
+    """An arterial module: lumped (R, I, C) or geometric (r_0, l, E, h(r_0))."""
+    nm, vt, bc = r["name"], r["vessel_type"], r["BC_type"]
+    arrangement, segments = ARRANGEMENT[bc]
+    v: dict[str, Any] = {"name": nm, "from": ends[0], "to": ends[1],
+                         "arrangement": arrangement, "segments": segments}
+    if vt in SIMPLE:
+        v["lumped"] = {"resistance": _value(params, f"R_{nm}", "Js_per_m6", nm),
+                       "inductance": _value(params, f"I_{nm}", "Js2_per_m6", nm),
+                       "capacitance": _value(params, f"C_{nm}", "m6_per_J", nm)}
+        v["description"] = f"circulatory_autogen {vt} ({bc})"
+        return v
+    r0 = _value(params, f"r_0_{nm}", "metre", nm)
+    length = _value(params, f"l_{nm}", "metre", nm)
+    E = _value(params, f"E_{nm}", "J_per_m3", nm)
+    h = wall_thickness(r0, params)
+    refs = sorted({params[k][2] for k in (f"r_0_{nm}", f"l_{nm}", f"E_{nm}")})
+    v.update({"length": length, "radius": r0, "wall_thickness": h, "youngs_modulus": E,
+              "poisson_ratio": 0.0,
+              "description": (f"circulatory_autogen {vt} ({bc}); r_0 {r0:.6g} m, "
+                              f"l {length:.6g} m, E {E:.6g} Pa, h(r_0) {h:.6g} m; "
+                              f"source: {', '.join(refs)}")})
+    return v
+
+
+def _inflow(inflow: str | tuple[Any, Any] | PathLike, mynard_template: PathLike | None,
+            period: float) -> tuple[np.ndarray, np.ndarray, str]:
+    """The aortic inflow table (t, Q) and where it comes from."""
+    if isinstance(inflow, tuple):
+        t_in, q_in = (np.asarray(x, dtype=float) for x in inflow)
+        return t_in, q_in, "user-given inflow table"
+    if inflow == "mynard2015" or inflow is None:
+        tpl = Path(mynard_template) if mynard_template else (
+            Path(__file__).resolve().parents[4] / "shared" / "networks" / "pwdb"
+            / "Mynard2015_aortic_flow_template.csv")
+        if not tpl.is_file():
+            raise ModelError(f"Mynard aortic flow template not found at {tpl} "
+                             f"(pass mynard_template=...)")
+        t_in, q_in = mynard_aortic_flow(tpl, period)
+        return t_in, q_in, ("Mynard & Smolich 2015 aortic root flow template (PWDB "
+                            "Mynard2015_aortic_flow_template.csv, MIT; systole 0-0.309 s, zero "
+                            f"flow in diastole to T = {period:g} s)")
+    raise ModelError(f"inflow must be 'mynard2015' or a (time, flow) pair, got {inflow!r}")
+
+
+def _scaled_inflow(t_in: np.ndarray, q_in: np.ndarray, cardiac_output: float | None,
+                   obs_data_json: PathLike | None) -> tuple[np.ndarray, str]:
+    """The inflow scaled to the cardiac output (given, else the observations'), and the
+    source of that output."""
+    co_source = "unscaled"
+    if cardiac_output is None and obs_data_json is not None:
+        cardiac_output = cardiac_output_from_obs(obs_data_json)
+        co_source = (f"the sum of the mean terminal-region flows of {Path(obs_data_json).name} "
+                     f"(leg, arm, head, trunk)")
+    elif cardiac_output is not None:
+        co_source = "given"
+    if cardiac_output is not None:
+        q_in = q_in * (float(cardiac_output) / _cycle_mean(t_in, q_in))
+    return q_in, co_source
+
+
 def to_native_dict(vessel_array_csv: PathLike, parameters_csv: PathLike, *,
                    obs_data_json: PathLike | None = None,
                    inflow: str | tuple[Any, Any] | PathLike = "mynard2015",
@@ -210,83 +373,16 @@ def to_native_dict(vessel_array_csv: PathLike, parameters_csv: PathLike, *,
     their C moves to the wall branches), ``pp`` modules an exact T (``<name>.distal_half``), and a
     1 Pa s m^-3 connector ``aortic_inlet`` carries the inflow. Removes the ~50 Hz ringing.
     """
-    calibration = ""
-    if isinstance(terminal_resistance_scale, str):
-        if terminal_resistance_scale != "calibrate" or obs_data_json is None:
-            raise ModelError("terminal_resistance_scale must be a number > 0, or 'calibrate' "
-                             "with obs_data_json")
-        raw = to_native_dict(vessel_array_csv, parameters_csv, obs_data_json=obs_data_json,
-                             inflow=inflow, mynard_template=mynard_template,
-                             cardiac_output=cardiac_output, venous_pressure=venous_pressure)
-        terminal_resistance_scale, node, target = calibrate_terminal_resistance_scale(
-            raw, obs_data_json)
-        calibration = (f" (calibrated: the one factor that makes the steady-solve mean pressure "
-                       f"at {node} equal the observed {target:g} Pa of "
-                       f"{Path(obs_data_json).name} at the mean inflow)")
-    if not (terminal_resistance_scale > 0 and math.isfinite(terminal_resistance_scale)):
-        raise ModelError(f"terminal_resistance_scale must be > 0, got {terminal_resistance_scale}")
+    scale, calibration = _resistance_scale(
+        terminal_resistance_scale, vessel_array_csv, parameters_csv, obs_data_json,
+        {"inflow": inflow, "mynard_template": mynard_template, "cardiac_output": cardiac_output,
+         "venous_pressure": venous_pressure})
+    if not (scale > 0 and math.isfinite(scale)):
+        raise ModelError(f"terminal_resistance_scale must be > 0, got {scale}")
     rows = read_vessel_array(vessel_array_csv)
     params = read_parameters(parameters_csv)
-    by_name = {r["name"]: r for r in rows}
-    if len(by_name) != len(rows):
-        raise ModelError(f"{vessel_array_csv}: duplicate module names")
-    for r in rows:
-        for other in r["inp"] + r["out"]:
-            if other not in by_name:
-                raise ModelError(f"{vessel_array_csv}: module '{r['name']}' refers to unknown "
-                                 f"module '{other}'")
-    tree = [r for r in rows if r["vessel_type"] not in NOT_IMPORTED]
-    for r in tree:
-        vt = r["vessel_type"]
-        if vt not in GEOMETRIC | SIMPLE | TERMINAL:
-            raise ModelError(f"module '{r['name']}': vessel_type '{vt}' is not supported "
-                             f"(supported: {sorted(GEOMETRIC | SIMPLE | TERMINAL)})")
-        if vt in TERMINAL and r["BC_type"] != "pp":
-            raise ModelError(f"terminal '{r['name']}': BC_type '{r['BC_type']}' not supported (pp)")
-        if vt not in TERMINAL and r["BC_type"] not in ARRANGEMENT:
-            raise ModelError(f"module '{r['name']}': BC_type '{r['BC_type']}' not supported")
-    in_tree = {r["name"] for r in tree}
-    hearts = [r for r in rows if r["vessel_type"] == "heart"]
-    roots = [r for r in tree if not any(i in in_tree for i in r["inp"])]
-    if len(roots) != 1:
-        raise ModelError(f"expected one arterial root fed by the heart, found "
-                         f"{[r['name'] for r in roots]}")
-    root = roots[0]
-
-    # union of module ends: (module, "in"/"out")
-    parent: dict[tuple[str, str], tuple[str, str]] = {}
-
-    def find(x: tuple[str, str]) -> tuple[str, str]:
-        parent.setdefault(x, x)
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]
-            x = parent[x]
-        return x
-
-    for r in tree:
-        find((r["name"], "in"))
-        find((r["name"], "out"))
-        for o in r["out"]:
-            if o in in_tree:
-                parent[find((o, "in"))] = find((r["name"], "out"))
-    members: dict[tuple[str, str], list[tuple[str, str]]] = {}
-    for x in list(parent):
-        members.setdefault(find(x), []).append(x)
-    node_name: dict[tuple[str, str], str] = {}
-    for rep, ends in members.items():
-        outs = sorted(n for n, side in ends if side == "out")
-        ins = sorted(n for n, side in ends if side == "in")
-        if len(outs) == 1:
-            label = f"{outs[0]}.out"
-        elif (root["name"], "in") in ends:
-            label = "aortic_root"
-        else:
-            label = f"{ins[0]}.in"
-        node_name[rep] = label
-
-    def node(module: str, side: str) -> str:
-        return node_name[find((module, side))]
-
+    tree, root = _tree(rows, vessel_array_csv)
+    nodes = _node_names(tree, root)
     rho = _value(params, "rho", "Js2_per_m5", "global")
     mu = _value(params, "mu", "Js_per_m3", "global")
     period = _value(params, "T", "second", "global") if "T" in params else 1.0
@@ -295,85 +391,34 @@ def to_native_dict(vessel_array_csv: PathLike, parameters_csv: PathLike, *,
 
     vessels: list[dict[str, Any]] = []
     bcs: dict[str, dict[str, Any]] = {}
-    n_geo = n_simple = n_term = 0
     for r in tree:
-        nm, vt, bc = r["name"], r["vessel_type"], r["BC_type"]
+        nm = r["name"]
+        ends = (nodes[(nm, "in")], nodes[(nm, "out")])
         u_ext = params.get(f"u_ext_{nm}", (0.0, "J_per_m3", ""))[0]
         if abs(u_ext) > 1.0:
             _warn(f"'{nm}': u_ext = {u_ext} Pa ignored (no external pressure on 0-D vessels)")
-        if vt in TERMINAL:
-            R_T = _value(params, f"R_T_{nm}", "Js_per_m6", nm) * terminal_resistance_scale
-            C_T = _value(params, f"C_T_{nm}", "m6_per_J", nm)
-            vessels.append({
-                "name": nm, "from": node(nm, "in"), "to": node(nm, "out"), "arrangement": "L",
-                "lumped": {"resistance": R_T / 2, "inductance": 0.0, "capacitance": C_T},
-                "description": (f"circulatory_autogen terminal (pp_T_fixed_I_type): "
-                                f"R_T {R_T:.6g} Pa s m^-3, C_T {C_T:.6g} m^3/Pa; first half "
-                                f"R_T/2 + C_T here, second half R_T/2 = outlet resistance"),
-            })
-            bcs[node(nm, "out")] = {"type": "resistance", "resistance": R_T / 2,
-                                    "pressure": float(venous_pressure)}
-            n_term += 1
-            continue
-        arrangement, segments = ARRANGEMENT[bc]
-        v: dict[str, Any] = {"name": nm, "from": node(nm, "in"), "to": node(nm, "out"),
-                             "arrangement": arrangement, "segments": segments}
-        if vt in SIMPLE:
-            v["lumped"] = {"resistance": _value(params, f"R_{nm}", "Js_per_m6", nm),
-                           "inductance": _value(params, f"I_{nm}", "Js2_per_m6", nm),
-                           "capacitance": _value(params, f"C_{nm}", "m6_per_J", nm)}
-            v["description"] = f"circulatory_autogen {vt} ({bc})"
-            n_simple += 1
+        if r["vessel_type"] in TERMINAL:
+            vessel, bcs[ends[1]] = _terminal(nm, ends, params, scale, venous_pressure)
+            vessels.append(vessel)
         else:
-            r0 = _value(params, f"r_0_{nm}", "metre", nm)
-            length = _value(params, f"l_{nm}", "metre", nm)
-            E = _value(params, f"E_{nm}", "J_per_m3", nm)
-            h = wall_thickness(r0, params)
-            refs = sorted({params[k][2] for k in (f"r_0_{nm}", f"l_{nm}", f"E_{nm}")})
-            v.update({"length": length, "radius": r0, "wall_thickness": h, "youngs_modulus": E,
-                      "poisson_ratio": 0.0,
-                      "description": (f"circulatory_autogen {vt} ({bc}); r_0 {r0:.6g} m, "
-                                      f"l {length:.6g} m, E {E:.6g} Pa, h(r_0) {h:.6g} m; "
-                                      f"source: {', '.join(refs)}")})
-            n_geo += 1
-        vessels.append(v)
+            vessels.append(_artery(r, ends, params))
+    counts = Counter("terminal" if r["vessel_type"] in TERMINAL else
+                     "simple" if r["vessel_type"] in SIMPLE else "geometric" for r in tree)
 
-    # inflow
-    if isinstance(inflow, tuple):
-        t_in, q_in = (np.asarray(x, dtype=float) for x in inflow)
-        source = "user-given inflow table"
-    elif inflow == "mynard2015" or inflow is None:
-        tpl = Path(mynard_template) if mynard_template else (
-            Path(__file__).resolve().parents[4] / "shared" / "networks" / "pwdb"
-            / "Mynard2015_aortic_flow_template.csv")
-        if not tpl.is_file():
-            raise ModelError(f"Mynard aortic flow template not found at {tpl} "
-                             f"(pass mynard_template=...)")
-        t_in, q_in = mynard_aortic_flow(tpl, period)
-        source = ("Mynard & Smolich 2015 aortic root flow template (PWDB "
-                  "Mynard2015_aortic_flow_template.csv, MIT; systole 0-0.309 s, zero flow in "
-                  f"diastole to T = {period:g} s)")
-    else:
-        raise ModelError(f"inflow must be 'mynard2015' or a (time, flow) pair, got {inflow!r}")
-    co_source = "unscaled"
-    if cardiac_output is None and obs_data_json is not None:
-        cardiac_output = cardiac_output_from_obs(obs_data_json)
-        co_source = (f"the sum of the mean terminal-region flows of {Path(obs_data_json).name} "
-                     f"(leg, arm, head, trunk)")
-    elif cardiac_output is not None:
-        co_source = "given"
-    if cardiac_output is not None:
-        q_in = q_in * (float(cardiac_output) / _cycle_mean(t_in, q_in))
+    t_in, q_in, source = _inflow(inflow, mynard_template, period)
+    q_in, co_source = _scaled_inflow(t_in, q_in, cardiac_output, obs_data_json)
     q_mean = _cycle_mean(t_in, q_in)
     bcs = {"aortic_root": {"type": "flow", "time": [float(x) for x in t_in],
                            "flow": [float(x) for x in q_in], "interpolation": "linear"}, **bcs}
 
-    n_heart = len(hearts)
+    n_geo, n_simple = counts["geometric"], counts["simple"]
+    n_heart = sum(r["vessel_type"] == "heart" for r in rows)
     skipped = sorted({r["vessel_type"] for r in rows if r["vessel_type"] in NOT_IMPORTED})
     description = (
         f"Arterial tree of the circulatory_autogen model {Path(vessel_array_csv).name} "
         f"(FinbarArgus/circulatory_autogen, Apache-2.0): {n_geo + n_simple} arterial 0-D modules "
-        f"({n_geo} geometric, {n_simple} lumped) and {n_term} terminals. Module equations from "
+        f"({n_geo} geometric, {n_simple} lumped) and {counts['terminal']} terminals. Module "
+        f"equations from "
         f"upstream module_config.json/BG_modules.cellml: pv = R-I then C (L), vv = C/2-R-I-C/2 "
         f"(pi), pp = T mapped to pi x 2 segments, terminal = R_T/2-C_T-R_T/2 to "
         f"{venous_pressure:g} Pa (venous pressure); h(r) from the global a..d_vessel law, "
@@ -382,8 +427,8 @@ def to_native_dict(vessel_array_csv: PathLike, parameters_csv: PathLike, *,
         f"scaled to a mean of {q_mean * 1e6:.2f} mL/s ({q_mean * 6e4:.2f} L/min; {co_source}). "
         f"Dropped: {'' if wall_viscosity else 'wall-viscosity R_v = 0.01 s/C, '}terminal "
         f"I_T = 1e-6, gravity (beta_g 0)."
-        + ("" if terminal_resistance_scale == 1.0 else
-           f" Terminal resistances R_T scaled by {terminal_resistance_scale:.6g}{calibration}."))
+        + ("" if scale == 1.0 else
+           f" Terminal resistances R_T scaled by {scale:.6g}{calibration}."))
     if wall_viscosity:
         vessels, bcs = _with_wall_viscosity(vessels, bcs)
         description += (" Wall viscosity kept: R_v = 0.01 s/C in series with every capacitor "
