@@ -348,6 +348,30 @@ def _scaled_inflow(t_in: np.ndarray, q_in: np.ndarray, cardiac_output: float | N
     return q_in, co_source
 
 
+def _description(vessel_array_csv: PathLike, rows: list[dict[str, Any]], counts: Counter[str],
+                 root: str, source: str, q_mean: float, co_source: str, venous_pressure: float,
+                 wall_viscosity: bool, scale: float, calibration: str) -> str:
+    """The imported model's description: what was imported, mapped and dropped."""
+    n_geo, n_simple = counts["geometric"], counts["simple"]
+    n_heart = sum(r["vessel_type"] == "heart" for r in rows)
+    skipped = sorted({r["vessel_type"] for r in rows if r["vessel_type"] in NOT_IMPORTED})
+    return (
+        f"Arterial tree of the circulatory_autogen model {Path(vessel_array_csv).name} "
+        f"(FinbarArgus/circulatory_autogen, Apache-2.0): {n_geo + n_simple} arterial 0-D modules "
+        f"({n_geo} geometric, {n_simple} lumped) and {counts['terminal']} terminals. Module "
+        f"equations from "
+        f"upstream module_config.json/BG_modules.cellml: pv = R-I then C (L), vv = C/2-R-I-C/2 "
+        f"(pi), pp = T mapped to pi x 2 segments, terminal = R_T/2-C_T-R_T/2 to "
+        f"{venous_pressure:g} Pa (venous pressure); h(r) from the global a..d_vessel law, "
+        f"Poisson ratio 0 (C = 2 pi r^3 l/(E h)). Not imported: {', '.join(skipped)} modules "
+        f"({n_heart} heart): inflow at the aortic root ({root} inlet) is the {source}, "
+        f"scaled to a mean of {q_mean * 1e6:.2f} mL/s ({q_mean * 6e4:.2f} L/min; {co_source}). "
+        f"Dropped: {'' if wall_viscosity else 'wall-viscosity R_v = 0.01 s/C, '}terminal "
+        f"I_T = 1e-6, gravity (beta_g 0)."
+        + ("" if scale == 1.0 else
+           f" Terminal resistances R_T scaled by {scale:.6g}{calibration}."))
+
+
 def to_native_dict(vessel_array_csv: PathLike, parameters_csv: PathLike, *,
                    obs_data_json: PathLike | None = None,
                    inflow: str | tuple[Any, Any] | PathLike = "mynard2015",
@@ -411,24 +435,8 @@ def to_native_dict(vessel_array_csv: PathLike, parameters_csv: PathLike, *,
     bcs = {"aortic_root": {"type": "flow", "time": [float(x) for x in t_in],
                            "flow": [float(x) for x in q_in], "interpolation": "linear"}, **bcs}
 
-    n_geo, n_simple = counts["geometric"], counts["simple"]
-    n_heart = sum(r["vessel_type"] == "heart" for r in rows)
-    skipped = sorted({r["vessel_type"] for r in rows if r["vessel_type"] in NOT_IMPORTED})
-    description = (
-        f"Arterial tree of the circulatory_autogen model {Path(vessel_array_csv).name} "
-        f"(FinbarArgus/circulatory_autogen, Apache-2.0): {n_geo + n_simple} arterial 0-D modules "
-        f"({n_geo} geometric, {n_simple} lumped) and {counts['terminal']} terminals. Module "
-        f"equations from "
-        f"upstream module_config.json/BG_modules.cellml: pv = R-I then C (L), vv = C/2-R-I-C/2 "
-        f"(pi), pp = T mapped to pi x 2 segments, terminal = R_T/2-C_T-R_T/2 to "
-        f"{venous_pressure:g} Pa (venous pressure); h(r) from the global a..d_vessel law, "
-        f"Poisson ratio 0 (C = 2 pi r^3 l/(E h)). Not imported: {', '.join(skipped)} modules "
-        f"({n_heart} heart): inflow at the aortic root ({root['name']} inlet) is the {source}, "
-        f"scaled to a mean of {q_mean * 1e6:.2f} mL/s ({q_mean * 6e4:.2f} L/min; {co_source}). "
-        f"Dropped: {'' if wall_viscosity else 'wall-viscosity R_v = 0.01 s/C, '}terminal "
-        f"I_T = 1e-6, gravity (beta_g 0)."
-        + ("" if scale == 1.0 else
-           f" Terminal resistances R_T scaled by {scale:.6g}{calibration}."))
+    description = _description(vessel_array_csv, rows, counts, root["name"], source, q_mean,
+                               co_source, venous_pressure, wall_viscosity, scale, calibration)
     if wall_viscosity:
         vessels, bcs = _with_wall_viscosity(vessels, bcs)
         description += (" Wall viscosity kept: R_v = 0.01 s/C in series with every capacitor "

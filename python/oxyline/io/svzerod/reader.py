@@ -361,6 +361,81 @@ def file_units(cfg: Mapping[str, Any], units: str | None = None) -> str:
     return "cgs" if value.lower() == "cgs" else "SI"
 
 
+def _junction_ports(j: Mapping[str, Any], key: str, by_id: bool, el: str,
+                    ids: Mapping[Any, str], bcs: Mapping[str, Any],
+                    vessel_names: set[str]) -> list[str]:
+    """The vessels a junction's ``key`` lists (by vessel_id or by name)."""
+    items = j[key]
+    if not isinstance(items, list):
+        raise ModelError(f"{el}: '{key}' must be a list")
+    out = []
+    for x in items:
+        if isinstance(x, bool) or not isinstance(x, (int, str)):
+            raise ModelError(f"{el}: '{key}' must list vessel ids or names, got {x!r}")
+        if by_id:
+            if x not in ids:
+                raise ModelError(f"{el}: '{key}' names vessel_id {x!r}, which no vessel has")
+            out.append(ids[x])
+        elif x in vessel_names:
+            out.append(str(x))
+        elif x in bcs:
+            raise UnsupportedElement(f"{el}: connecting boundary condition '{x}' to a "
+                                     "junction is not supported")
+        else:
+            raise ModelError(f"{el}: '{key}' names block '{x}', which is not defined")
+    return out
+
+
+def _resistive_junction(j: Mapping[str, Any], jname: str, el: str, inlets: list[str],
+                        outlets: list[str], attach: Any, layout: _Layout,
+                        hidden: list[dict[str, Any]]) -> None:
+    """P_in,i - P_c = R_i Q_in,i and P_c - P_out,k = R_k Q_out,k around a centre node
+    (svZeroDSolver's ResistiveJunction): one hidden R vessel per port, R listed for the
+    inlets, then the outlets."""
+    vals = _check_params(_required(j, "junction_values", el), {"R"}, el)
+    r = _numlist(_required(vals, "R", el), el, "R")
+    if len(r) != len(inlets) + len(outlets):
+        raise ModelError(f"{el}: 'R' has {len(r)} entries for {len(inlets)} inlets and "
+                         f"{len(outlets)} outlets")
+    ports = [(name, f"{name}:{jname}", jname) for name in inlets]
+    ports += [(name, jname, f"{jname}:{name}") for name in outlets]
+    for k, (name, a, b) in enumerate(ports):
+        hidden.append({"name": a if k < len(inlets) else b, "from": a, "to": b,
+                       "arrangement": "RCL", "output": False,
+                       "lumped": {"resistance": r[k]}})
+        attach(name, "out" if k < len(inlets) else "in", hidden[-1]["name"],
+               f"junction '{jname}'")
+    # its pressure_c: the centre end of the last port's hidden vessel
+    layout.internal.append(("junction", jname, (hidden[-1]["name"], 0 if outlets else 1)))
+
+
+def _blood_vessel_junction(j: Mapping[str, Any], jname: str, el: str, inlets: list[str],
+                           outlets: list[str], attach: Any,
+                           hidden: list[dict[str, Any]]) -> None:
+    """BloodVesselJunction: one inlet, an R(+S)-L branch (no C) to every outlet."""
+    vals = _check_params(_required(j, "junction_values", el), BVJ_PARAMS, el)
+    if len(inlets) != 1:
+        raise UnsupportedElement(f"{el}: {len(inlets)} inlets; a BloodVesselJunction has "
+                                 "exactly one")
+    lists = {}
+    for key in BVJ_PARAMS:
+        lists[key] = _numlist(_required(vals, key, el), el, key)
+        if len(lists[key]) != len(outlets):
+            raise ModelError(f"{el}: '{key}' has {len(lists[key])} entries for "
+                             f"{len(outlets)} outlets")
+    what = f"junction '{jname}'"
+    attach(inlets[0], "out", jname, what)
+    for k, name in enumerate(outlets):
+        node = f"{jname}:{name}"
+        hidden.append({
+            "name": node, "from": jname, "to": node, "arrangement": "RCL", "output": False,
+            "lumped": {"resistance": lists["R_poiseuille"][k], "capacitance": 0.0,
+                       "inductance": lists["L"][k],
+                       "stenosis_coefficient": lists["stenosis_coefficient"][k]},
+        })
+        attach(name, "in", node, what)
+
+
 def _junctions(junctions: Any, ids: Mapping[Any, str], bcs: Mapping[str, Any],
                vessel_names: set[str], attach: Any, layout: _Layout) -> list[dict[str, Any]]:
     """svZeroDSolver's junctions: shared nodes (NORMAL_JUNCTION), or hidden vessels around
@@ -376,87 +451,29 @@ def _junctions(junctions: Any, ids: Mapping[Any, str], bcs: Mapping[str, Any],
         el = f"{kind} '{jname}'"
         if jname in bcs or jname in vessel_names:
             raise ModelError(f"{el}: name already used by another block")
-
-        def resolve(key: str, by_id: bool, j: Mapping[str, Any] = j, el: str = el) -> list[str]:
-            items = j[key]
-            if not isinstance(items, list):
-                raise ModelError(f"{el}: '{key}' must be a list")
-            out = []
-            for x in items:
-                if isinstance(x, bool) or not isinstance(x, (int, str)):
-                    raise ModelError(f"{el}: '{key}' must list vessel ids or names, got {x!r}")
-                if by_id:
-                    if x not in ids:
-                        raise ModelError(f"{el}: '{key}' names vessel_id {x!r}, which no vessel has")
-                    out.append(ids[x])
-                elif x in vessel_names:
-                    out.append(str(x))
-                elif x in bcs:
-                    raise UnsupportedElement(f"{el}: connecting boundary condition '{x}' to a "
-                                             "junction is not supported")
-                else:
-                    raise ModelError(f"{el}: '{key}' names block '{x}', which is not defined")
-            return out
-
         if "inlet_vessels" in j and "outlet_vessels" in j:
-            inlets, outlets = resolve("inlet_vessels", True), resolve("outlet_vessels", True)
+            keys, by_id = ("inlet_vessels", "outlet_vessels"), True
         elif "inlet_blocks" in j and "outlet_blocks" in j:
-            inlets, outlets = resolve("inlet_blocks", False), resolve("outlet_blocks", False)
+            keys, by_id = ("inlet_blocks", "outlet_blocks"), False
         else:
             raise ModelError(f"{el}: needs 'inlet_vessels' and 'outlet_vessels' (vessel ids) or "
                              "'inlet_blocks' and 'outlet_blocks' (names)")
-        what = f"junction '{jname}'"
+        inlets, outlets = (_junction_ports(j, key, by_id, el, ids, bcs, vessel_names)
+                           for key in keys)
         layout.connections += [(name, jname) for name in inlets]
         layout.connections += [(jname, name) for name in outlets]
         if kind in NORMAL_JUNCTIONS:
             _check_params(j.get("junction_values", {}), set(), el)
             for name in inlets:
-                attach(name, "out", jname, what)
+                attach(name, "out", jname, f"junction '{jname}'")
             for name in outlets:
-                attach(name, "in", jname, what)
-            continue
-        if kind == "resistive_junction":
-            # P_in,i - P_c = R_i Q_in,i and P_c - P_out,k = R_k Q_out,k around a centre node
-            # (svZeroDSolver's ResistiveJunction): one hidden R vessel per port, R listed for
-            # the inlets, then the outlets
-            vals = _check_params(_required(j, "junction_values", el), {"R"}, el)
-            r = _numlist(_required(vals, "R", el), el, "R")
-            if len(r) != len(inlets) + len(outlets):
-                raise ModelError(f"{el}: 'R' has {len(r)} entries for {len(inlets)} inlets and "
-                                 f"{len(outlets)} outlets")
-            ports = [(name, f"{name}:{jname}", jname) for name in inlets]
-            ports += [(name, jname, f"{jname}:{name}") for name in outlets]
-            for k, (name, a, b) in enumerate(ports):
-                hidden.append({"name": a if k < len(inlets) else b, "from": a, "to": b,
-                               "arrangement": "RCL", "output": False,
-                               "lumped": {"resistance": r[k]}})
-                attach(name, "out" if k < len(inlets) else "in", hidden[-1]["name"], what)
-            # its pressure_c: the centre end of the last port's hidden vessel
-            layout.internal.append(("junction", jname, (hidden[-1]["name"], 0 if outlets else 1)))
-            continue
-        # BloodVesselJunction: one inlet, an R(+S)-L branch (no C) to every outlet
-        vals = _check_params(_required(j, "junction_values", el), BVJ_PARAMS, el)
-        if len(inlets) != 1:
-            raise UnsupportedElement(f"{el}: {len(inlets)} inlets; a BloodVesselJunction has "
-                                     "exactly one")
-        lists = {}
-        for key in BVJ_PARAMS:
-            lists[key] = _numlist(_required(vals, key, el), el, key)
-            if len(lists[key]) != len(outlets):
-                raise ModelError(f"{el}: '{key}' has {len(lists[key])} entries for "
-                                 f"{len(outlets)} outlets")
-        attach(inlets[0], "out", jname, what)
-        for k, name in enumerate(outlets):
-            node = f"{jname}:{name}"
-            hidden.append({
-                "name": node, "from": jname, "to": node, "arrangement": "RCL", "output": False,
-                "lumped": {"resistance": lists["R_poiseuille"][k], "capacitance": 0.0,
-                           "inductance": lists["L"][k],
-                           "stenosis_coefficient": lists["stenosis_coefficient"][k]},
-            })
-            attach(name, "in", node, what)
-
+                attach(name, "in", jname, f"junction '{jname}'")
+        elif kind == "resistive_junction":
+            _resistive_junction(j, jname, el, inlets, outlets, attach, layout, hidden)
+        else:
+            _blood_vessel_junction(j, jname, el, inlets, outlets, attach, hidden)
     return hidden
+
 
 def _heart_elements(cfg: Mapping[str, Any], period: float, vessels: list[dict[str, Any]],
                     layout: _Layout, bcs: Mapping[str, Any], used_bcs: dict[str, str],

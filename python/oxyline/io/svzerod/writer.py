@@ -102,6 +102,34 @@ def _sample(w: Mapping[str, Any], period: float, samples: int) -> tuple[list[flo
     return t.tolist(), y.tolist()
 
 
+def _segment_blocks(model: Model, f: Any, vessels: list[dict[str, Any]],
+                    junctions: list[dict[str, Any]]) -> tuple[dict[str, int], dict[str, int]]:
+    """One BloodVessel per segment (values scaled by ``f(quantity)``) into ``vessels``, the
+    junctions between a vessel's segments into ``junctions``; returns the ids of each
+    vessel's first and last block."""
+    blocks = vessel_blocks(model)
+    first: dict[str, int] = {}
+    last: dict[str, int] = {}
+    for v in model.canonical["vessels"]:
+        name = v["name"]
+        ids = []
+        for k, s in enumerate(blocks[name]):
+            vals = {"R_poiseuille": s["R"] * f("resistance"), "C": s["C"] * f("capacitance"),
+                    "L": s["L"] * f("inductance"), "stenosis_coefficient": s["S"] * f("stenosis")}
+            vid = len(vessels)
+            vessels.append({"vessel_id": vid, "vessel_name": f"{name}_seg{k}",
+                            "vessel_length": s["length"] * f("length"),
+                            "zero_d_element_type": "BloodVessel",
+                            "zero_d_element_values": vals})
+            ids.append(vid)
+            if k > 0:
+                junctions.append({"junction_name": f"J_{name}_{k}",
+                                  "junction_type": "NORMAL_JUNCTION",
+                                  "inlet_vessels": [ids[k - 1]], "outlet_vessels": [vid]})
+        first[name], last[name] = ids[0], ids[-1]
+    return first, last
+
+
 def to_svzerod(model: Model, units: str = "cgs", samples: int = 201,
                points_per_cycle: int | None = None, cycles: int | None = None) -> dict[str, Any]:
     """svZeroDSolver input dict for ``model`` (see the module docstring for the mapping).
@@ -126,28 +154,9 @@ def to_svzerod(model: Model, units: str = "cgs", samples: int = 201,
 
     canon = model.canonical
     period = float(model.period or 1.0)
-    blocks = vessel_blocks(model)
     vessels: list[dict[str, Any]] = []
     junctions: list[dict[str, Any]] = []
-    first: dict[str, int] = {}
-    last: dict[str, int] = {}
-    for v in canon["vessels"]:
-        name = v["name"]
-        ids = []
-        for k, s in enumerate(blocks[name]):
-            vals = {"R_poiseuille": s["R"] * f("resistance"), "C": s["C"] * f("capacitance"),
-                    "L": s["L"] * f("inductance"), "stenosis_coefficient": s["S"] * f("stenosis")}
-            vid = len(vessels)
-            vessels.append({"vessel_id": vid, "vessel_name": f"{name}_seg{k}",
-                            "vessel_length": s["length"] * f("length"),
-                            "zero_d_element_type": "BloodVessel",
-                            "zero_d_element_values": vals})
-            ids.append(vid)
-            if k > 0:
-                junctions.append({"junction_name": f"J_{name}_{k}",
-                                  "junction_type": "NORMAL_JUNCTION",
-                                  "inlet_vessels": [ids[k - 1]], "outlet_vessels": [vid]})
-        first[name], last[name] = ids[0], ids[-1]
+    first, last = _segment_blocks(model, f, vessels, junctions)
     # network nodes: ends arriving (inlets of the junction) and leaving
     arriving: dict[str, list[str]] = {}
     leaving: dict[str, list[str]] = {}
