@@ -43,6 +43,7 @@ def main() -> int:
     import pandas  # warm-up, as in bench_svzerod.py
 
     import oxyline.svzerod as svz
+    from oxyline.io.svzerod import reader
     from oxyline import _core
     from oxyline.model import _build
     from oxyline.result import long_table
@@ -56,7 +57,7 @@ def main() -> int:
         for topo in args.topologies.split(","):
             cfg = networks.build(topo, n, args.cycles)
             t0 = time.perf_counter()
-            native, s = svz._convert(cfg)
+            native, s, _ = reader._convert(cfg)
             t1 = time.perf_counter()
             model = _build({**native, "units": "SI"})  # the file's units, as the drop-in runs
             t2 = time.perf_counter()
