@@ -43,8 +43,8 @@ def main() -> int:
     import pandas  # warm-up, as in bench_svzerod.py
 
     import oxyline.svzerod as svz
-    from oxyline.io.svzerod import reader
     from oxyline import _core
+    from oxyline.io.svzerod import reader
     from oxyline.model import _build
     from oxyline.result import long_table
 
