@@ -327,6 +327,24 @@ def test_read_model_dispatches_on_the_peer_files(tmp_path: Path) -> None:
     oio.write_model(m, tmp_path / "ibif.csv")
     assert oio.detect_format(tmp_path / "ibif.csv") == "tables"
     assert oio.read_model(tmp_path / "ibif.csv").canonical == m.canonical
+    # load_model reads every format of the registry too: the openBF file's vessels and
+    # outlets, the tables written from it, the svZeroDSolver case
+    assert oxyline.load_model(ibif).canonical == m.canonical
+    assert oxyline.load_model(tmp_path / "ibif.csv").canonical == m.canonical
+    assert oxyline.load_model(case).vessel_names == oio.read_model(case).vessel_names
+
+
+def test_load_model_reads_json_whatever_the_suffix(tmp_path: Path) -> None:
+    """A model file with a suffix no format claims is JSON (read_mapping's rule) for
+    load_model; read_model, which dispatches on the suffix, refuses it naming the file."""
+    src = {"vessels": [{"name": "A", "from": "a", "to": "b", "length": 0.1, "radius": 3e-3}],
+           "boundary_conditions": {"a": {"type": "flow", "value": 1e-6},
+                                   "b": {"type": "pressure", "value": 0.0}}}
+    for name in ("model", "model.cfg"):
+        (tmp_path / name).write_text(json.dumps(src))
+        assert oxyline.load_model(tmp_path / name).vessel_names == ["A"]
+    with pytest.raises(oxyline.ModelError, match=r"model\.cfg: unknown model file type '\.cfg'"):
+        oio.read_model(tmp_path / "model.cfg")
 
 
 def test_read_model_errors_name_the_file(tmp_path: Path) -> None:

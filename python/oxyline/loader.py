@@ -14,6 +14,7 @@ from typing import Any
 from oxyline import catalogue
 from oxyline.errors import ModelError
 from oxyline.io import formats
+from oxyline.io.native import read_mapping
 from oxyline.memory import gc_paused
 from oxyline.model import Model, _build, _copy
 
@@ -41,7 +42,11 @@ def load_model(source: str | os.PathLike[str] | Mapping[str, Any] | Model) -> Mo
     p = Path(source)
     if not p.exists() and not p.suffix:
         return catalogue.load(str(source))  # built-in models and examples
-    data, _where = formats.read_native(p)
+    if formats.claimed(p):
+        data, _where = formats.read_native(p)
+    else:  # any other suffix: a JSON mapping (read_mapping's rule), in any mapping format
+        data = read_mapping(p)
+        data = formats.from_mapping(data) or data
     with gc_paused():
         return _build(data)
 

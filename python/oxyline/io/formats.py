@@ -117,6 +117,12 @@ def _format(name: str, p: Path) -> Format:
     return FORMATS[name]
 
 
+def claimed(path: PathLike) -> bool:
+    """Whether the suffix of ``path`` is one the registry reads (YAML/JSON or a format's)."""
+    suffix = Path(path).suffix.lower()
+    return suffix in MAPPING_SUFFIXES or any(suffix in f.suffixes for f in FORMATS.values())
+
+
 def detect_format(path: PathLike) -> str:
     """Format of an existing model file: native, svzerod, tables or openbf."""
     p = check_path(path)
@@ -199,5 +205,5 @@ def write_model(model: Model | PathLike | Mapping[str, Any], path: PathLike,
     return fmt.write(m, p)
 
 
-__all__ = ["FORMATS", "Format", "as_model", "detect_format", "from_mapping", "read_model",
+__all__ = ["FORMATS", "Format", "as_model", "claimed", "detect_format", "from_mapping", "read_model",
            "read_native", "sniff_format", "write_model"]
