@@ -5,7 +5,8 @@
 Reads every module with :mod:`ast` (nothing is imported), builds the graph of imports between
 the package's modules twice: module-level imports only, and every import including those inside
 functions; prints each strongly connected component of more than one module (an import circle),
-the number of function-local imports of the package, and the functions longer than 80 lines.
+the number of function-local imports of the package, the functions longer than 80 lines and the
+lines of the package by role.
 """
 
 from __future__ import annotations
@@ -76,6 +77,29 @@ def long_functions(tree: ast.Module, mod: str, limit: int = 80):
                 yield n, f"{mod}.{fn.name}"
 
 
+#: the package's modules by role (first matching prefix; the rest is "orchestration")
+ROLES = (
+    ("schema checks", ("oxyline.model", "oxyline.transport", "oxyline.units", "oxyline.errors",
+                       "oxyline.memory")),
+    ("physics", ("oxyline.structured_tree", "oxyline.facilitation", "oxyline.pwdb",
+                 "oxyline.frequency")),
+    ("svZeroDSolver drop-in runner", ("oxyline.io.svzerod.dropin", "oxyline.io.svzerod.cycles",
+                                      "oxyline.svzerod")),
+    ("results", ("oxyline.result", "oxyline.io.results", "oxyline.io.result_reader",
+                 "oxyline.checkpoint")),
+    ("file formats", ("oxyline.io",)),
+    ("presentation", ("oxyline.plot", "oxyline.cli", "oxyline.monitor")),
+    ("reference solvers", ("oxyline.reference",)),
+)
+
+
+def role(mod: str) -> str:
+    for name, prefixes in ROLES:
+        if any(mod == p or mod.startswith((p + ".", p + "_")) for p in prefixes):
+            return name
+    return "orchestration"
+
+
 def main(root: Path) -> None:
     files = {module_name(root, p): p for p in sorted(root.rglob("*.py"))}
     # the compiled extension (oxyline._core, typed by its .pyi) is a leaf of the graph
@@ -103,6 +127,12 @@ def main(root: Path) -> None:
     print(f"functions over 80 lines: {len(longs)}")
     for n, name in sorted(longs, reverse=True):
         print(f"  {n:4d}  {name}")
+    lines: dict[str, int] = {}
+    for mod, path in files.items():
+        lines[role(mod)] = lines.get(role(mod), 0) + len(path.read_text().splitlines())
+    print(f"lines: {sum(lines.values())}")
+    for name, n in sorted(lines.items(), key=lambda x: -x[1]):
+        print(f"  {n:6d}  {name}")
 
 
 if __name__ == "__main__":
