@@ -1,0 +1,87 @@
+//! The core's schema reader (`oxyline_core::model::native`) called on the user's Python
+//! objects: the model's top level, its vessels and boundary conditions, the period check and
+//! the simulation section. Each returns the canonical SI description as Python objects.
+
+use super::node::{PyNode, to_python};
+use crate::errors::to_py;
+use oxyline_core::Error;
+use oxyline_core::model::native;
+use oxyline_core::model::units::Units;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+/// The unit system named `units` (checked by `read_header` before).
+pub(crate) fn units(units: &str) -> PyResult<Units> {
+    Units::parse(units).ok_or_else(|| {
+        to_py(Error::model(
+            "model",
+            format!("units must be 'SI' or 'cgs', got '{units}'"),
+        ))
+    })
+}
+
+/// (name, canonical top-level sections, period or None) of a native model dict.
+#[pyfunction]
+pub(crate) fn read_header<'py>(
+    py: Python<'py>,
+    data: Bound<'py, PyAny>,
+) -> PyResult<(String, Bound<'py, PyAny>, Option<f64>)> {
+    let node = PyNode(data);
+    let header = native::header(&node).map_err(to_py)?;
+    let period = native::period(&node).map_err(to_py)?;
+    let canon = to_python(py, &serde_json::Value::Object(header.canonical))?;
+    Ok((header.name, canon, period))
+}
+
+/// The canonical dicts of the native `vessels` (a list), in order.
+#[pyfunction]
+pub(crate) fn read_vessels<'py>(
+    py: Python<'py>,
+    vessels: &Bound<'py, PyList>,
+    units: &str,
+) -> PyResult<Vec<Bound<'py, PyAny>>> {
+    let u = self::units(units)?;
+    vessels
+        .iter()
+        .enumerate()
+        .map(|(i, v)| {
+            let c = native::vessel(&PyNode(v), i, u).map_err(to_py)?;
+            to_python(py, &c)
+        })
+        .collect()
+}
+
+/// Canonical boundary conditions by node and the periods of their waveforms, with the
+/// element they come from.
+#[pyfunction]
+pub(crate) fn read_conditions<'py>(
+    py: Python<'py>,
+    bcs: Bound<'py, PyAny>,
+    units: &str,
+) -> PyResult<(Bound<'py, PyDict>, Vec<(f64, String)>)> {
+    let u = self::units(units)?;
+    let out = PyDict::new(py);
+    let mut periods = Vec::new();
+    for (node, bc) in oxyline_core::model::node::Node::entries(&PyNode(bcs)) {
+        let el = format!("boundary condition '{node}'");
+        let c = native::boundary_condition(&bc, u, &el).map_err(to_py)?;
+        periods.extend(native::condition_periods(&c, &el));
+        out.set_item(node, to_python(py, &c)?)?;
+    }
+    Ok((out, periods))
+}
+
+/// The model period: `period` (None: not given) checked against every element's.
+#[pyfunction]
+pub(crate) fn check_periods(
+    period: Option<f64>,
+    periods: Vec<(f64, String)>,
+) -> PyResult<Option<f64>> {
+    native::check_periods(period, &periods).map_err(to_py)
+}
+
+/// The keys of a model's `simulation` section and its method.
+#[pyfunction]
+pub(crate) fn check_simulation(sim: Bound<'_, PyAny>) -> PyResult<()> {
+    native::simulation(&PyNode(sim)).map_err(to_py)
+}
