@@ -59,6 +59,7 @@ mod _core {
         reader::NativeParts,
         reader::schema::{
             check_periods, check_simulation, read_conditions, read_header, read_vessels,
+            resolve_settings,
         },
     };
 
@@ -86,6 +87,8 @@ mod _core {
             m.add("LUMPED_KEYS", vessel::LUMPED_KEYS.to_vec())?;
             m.add("ARRANGEMENTS", vessel::ARRANGEMENTS.to_vec())?;
             m.add("METHODS", schema::METHODS.to_vec())?;
+            m.add("STARTS", oxyline_core::model::settings::STARTS.to_vec())?;
+            m.add("OPTIONS", oxyline_core::model::settings::OPTIONS.to_vec())?;
             let bc = pyo3::types::PyDict::new(m.py());
             for (kind, keys) in boundary::BC_KEYS {
                 bc.set_item(*kind, keys.to_vec())?;

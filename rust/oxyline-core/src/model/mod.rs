@@ -14,6 +14,7 @@ use crate::error::{Error, Result};
 
 pub mod native;
 pub mod node;
+pub mod settings;
 pub mod transport;
 pub mod units;
 

@@ -59,7 +59,11 @@ impl Node for PyNode<'_> {
         m.get_item(key).ok().map(PyNode)
     }
     fn entries(&self) -> Vec<(String, Self)> {
-        let show = |k: &Bound<'_, PyAny>| k.str().map(|s| s.to_string()).unwrap_or_default();
+        // a text key as it is (no `str()` call): the common case, once per key of a vessel
+        let show = |k: &Bound<'_, PyAny>| match k.cast::<PyString>() {
+            Ok(s) => s.to_str().map(str::to_owned).unwrap_or_default(),
+            Err(_) => k.str().map(|s| s.to_string()).unwrap_or_default(),
+        };
         if let Ok(d) = self.0.cast::<PyDict>() {
             return d.iter().map(|(k, v)| (show(&k), PyNode(v))).collect();
         }
@@ -136,4 +140,74 @@ pub(crate) fn to_python<'py>(py: Python<'py>, v: &Value) -> PyResult<Bound<'py, 
             d.into_any()
         }
     })
+}
+
+/// A run setting's Python value: as [`PyNode`], and numpy's numbers and bools count as
+/// numbers and bools (`numbers.Integral`, `numbers.Real`, `numpy.bool_`), as `simulate`
+/// has always taken them.
+#[derive(Clone)]
+pub(crate) struct PySetting<'py>(pub Bound<'py, PyAny>);
+
+impl<'py> PySetting<'py> {
+    fn node(&self) -> PyNode<'py> {
+        PyNode(self.0.clone())
+    }
+    fn is(&self, module: &str, name: &str) -> bool {
+        let py = self.0.py();
+        py.import(module)
+            .and_then(|m| m.getattr(name))
+            .and_then(|t| self.0.is_instance(&t))
+            .unwrap_or(false)
+    }
+}
+
+impl<'py> Node for PySetting<'py> {
+    fn kind(&self) -> Kind {
+        match self.node().kind() {
+            Kind::Other if self.is("numpy", "bool_") => Kind::Bool,
+            Kind::Other if self.is("numbers", "Integral") => Kind::Int,
+            Kind::Other if self.is("numbers", "Real") => Kind::Float,
+            k => k,
+        }
+    }
+    fn number(&self) -> Option<f64> {
+        match self.kind() {
+            Kind::Int | Kind::Float => self.0.extract::<f64>().ok(),
+            _ => None,
+        }
+    }
+    fn integer(&self) -> Option<i64> {
+        (self.kind() == Kind::Int)
+            .then(|| self.0.extract::<i64>().ok())
+            .flatten()
+    }
+    fn text(&self) -> Option<String> {
+        self.node().text()
+    }
+    fn get(&self, key: &str) -> Option<Self> {
+        self.node().get(key).map(|n| PySetting(n.0))
+    }
+    fn entries(&self) -> Vec<(String, Self)> {
+        let entries = self.node().entries();
+        entries
+            .into_iter()
+            .map(|(k, n)| (k, PySetting(n.0)))
+            .collect()
+    }
+    fn items(&self) -> Option<Vec<Self>> {
+        let items = self.node().items()?;
+        Some(items.into_iter().map(|n| PySetting(n.0)).collect())
+    }
+    fn repr(&self) -> String {
+        self.node().repr()
+    }
+    fn show(&self) -> String {
+        self.node().show()
+    }
+    fn type_name(&self) -> String {
+        self.node().type_name()
+    }
+    fn truthy(&self) -> bool {
+        self.node().truthy()
+    }
 }

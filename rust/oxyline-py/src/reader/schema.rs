@@ -85,3 +85,33 @@ pub(crate) fn check_periods(
 pub(crate) fn check_simulation(sim: Bound<'_, PyAny>) -> PyResult<()> {
     native::simulation(&PyNode(sim)).map_err(to_py)
 }
+
+/// The run settings of a model's `simulation` section with `simulate`'s keyword overrides,
+/// checked and defaulted by the core (`oxyline_core::model::settings`); `period`: the model's.
+#[pyfunction]
+pub(crate) fn resolve_settings<'py>(
+    py: Python<'py>,
+    sim: Bound<'py, PyAny>,
+    overrides: Bound<'py, PyAny>,
+    period: Option<f64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    use super::node::PySetting;
+    let s = oxyline_core::model::settings::resolve(&PySetting(sim), &PySetting(overrides), period)
+        .map_err(to_py)?;
+    let d = PyDict::new(py);
+    d.set_item("period", s.period)?;
+    d.set_item("cycles", s.cycles)?;
+    d.set_item("dt", s.dt)?;
+    d.set_item("method", s.method)?;
+    d.set_item("output_every", s.output_every)?;
+    d.set_item("output_all_cycles", s.output_all_cycles)?;
+    d.set_item("until_periodic", s.until_periodic)?;
+    d.set_item("max_cycles", s.max_cycles)?;
+    d.set_item("rho_infty", s.rho_infty)?;
+    d.set_item("start", s.start)?;
+    d.set_item("segments", s.segments)?;
+    d.set_item("newton_atol", s.newton_atol)?;
+    d.set_item("max_iterations", s.max_iterations)?;
+    d.set_item("transport", s.transport)?;
+    Ok(d)
+}
