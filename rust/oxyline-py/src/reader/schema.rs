@@ -10,6 +10,9 @@ use oxyline_core::model::units::Units;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
+/// Periods of the elements that repeat, with the element.
+type Periods = Vec<(f64, String)>;
+
 /// The unit system named `units` (checked by `read_header` before).
 pub(crate) fn units(units: &str) -> PyResult<Units> {
     Units::parse(units).ok_or_else(|| {
@@ -58,7 +61,7 @@ pub(crate) fn read_conditions<'py>(
     py: Python<'py>,
     bcs: Bound<'py, PyAny>,
     units: &str,
-) -> PyResult<(Bound<'py, PyDict>, Vec<(f64, String)>)> {
+) -> PyResult<(Bound<'py, PyDict>, Periods)> {
     let u = self::units(units)?;
     let out = PyDict::new(py);
     let mut periods = Vec::new();

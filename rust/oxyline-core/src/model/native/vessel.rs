@@ -177,6 +177,9 @@ const CORONARY_BED_KEYS: &[(&str, Quantity)] = &[
     ("intramyocardial_factor", Number),
 ];
 
+/// Keys and their quantities.
+type Table = &'static [(&'static str, Quantity)];
+
 fn names<'a>(table: &[(&'a str, Quantity)]) -> Vec<&'a str> {
     table.iter().map(|(k, _)| *k).collect()
 }
@@ -424,7 +427,7 @@ fn closed_loop_element<N: Node>(
     )?;
     let spec = section(v, &kind, el)?;
     let heart = kind == "heart_pulmonary";
-    let (keys, optional): (&[(&str, Quantity)], &[(&str, Quantity)]) = if heart {
+    let (keys, optional): (Table, Table) = if heart {
         (HEART_PULMONARY_KEYS, HEART_PULMONARY_START)
     } else {
         (CORONARY_BED_KEYS, &[])
