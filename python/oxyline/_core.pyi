@@ -26,6 +26,9 @@ LUMPED_KEYS: list[str]
 ARRANGEMENTS: list[str]
 METHODS: list[str]
 BC_KEYS: dict[str, list[str]]
+# the run-settings schema (oxyline_core::model::settings)
+STARTS: list[str]
+OPTIONS: list[str]
 
 class RunOptions(TypedDict, total=False):
     """The run settings ``Network.simulate`` and ``Ensemble.run`` share (``**settings``)."""
@@ -177,3 +180,4 @@ def read_conditions(bcs: Any, units: str
                     ) -> tuple[dict[str, Any], list[tuple[float, str]]]: ...
 def check_periods(period: float | None, periods: list[tuple[float, str]]) -> float | None: ...
 def check_simulation(sim: Any) -> None: ...
+def resolve_settings(sim: Any, overrides: Any, period: float | None) -> dict[str, Any]: ...

@@ -54,6 +54,71 @@ pub trait Node: Sized {
     }
 }
 
+/// A mapping whose entries are read once: every `get` then scans them instead of asking the
+/// front end again (a vessel's ~25 lookups cost one pass over its keys, not 25 calls into
+/// Python). Any other value is passed through as it is.
+#[derive(Clone)]
+pub struct Fields<N> {
+    node: N,
+    entries: Option<Vec<(String, N)>>,
+}
+
+impl<N: Node + Clone> Fields<N> {
+    pub fn new(node: N) -> Self {
+        let entries = node.is_map().then(|| node.entries());
+        Fields { node, entries }
+    }
+}
+
+impl<N: Node + Clone> Node for Fields<N> {
+    fn kind(&self) -> Kind {
+        self.node.kind()
+    }
+    fn number(&self) -> Option<f64> {
+        self.node.number()
+    }
+    fn integer(&self) -> Option<i64> {
+        self.node.integer()
+    }
+    fn text(&self) -> Option<String> {
+        self.node.text()
+    }
+    fn get(&self, key: &str) -> Option<Self> {
+        match &self.entries {
+            Some(e) => e
+                .iter()
+                .find(|(k, _)| k == key)
+                .map(|(_, v)| Fields::new(v.clone())),
+            None => None,
+        }
+    }
+    fn entries(&self) -> Vec<(String, Self)> {
+        self.entries
+            .iter()
+            .flatten()
+            .map(|(k, v)| (k.clone(), Fields::new(v.clone())))
+            .collect()
+    }
+    fn items(&self) -> Option<Vec<Self>> {
+        Some(self.node.items()?.into_iter().map(Fields::new).collect())
+    }
+    fn repr(&self) -> String {
+        self.node.repr()
+    }
+    fn show(&self) -> String {
+        self.node.show()
+    }
+    fn type_name(&self) -> String {
+        self.node.type_name()
+    }
+    fn truthy(&self) -> bool {
+        self.node.truthy()
+    }
+    fn has(&self, key: &str) -> bool {
+        self.entries.iter().flatten().any(|(k, _)| k == key)
+    }
+}
+
 /// Python's `repr` of a float: the shortest text that reads back the same, in fixed notation
 /// for exponents −4 ≤ e < 16 (with at least one decimal), else `d.dddde±XX`.
 pub fn py_repr(x: f64) -> String {

@@ -10,6 +10,7 @@ use crate::errors::to_py;
 use crate::reader::extract;
 use oxyline_core::Error;
 use oxyline_core::model::native;
+use oxyline_core::model::node::Fields;
 use oxyline_core::model::units::Quantity;
 use oxyline_core::model::{Arrangement, BoundarySpec, GeometrySpec, VesselSpec};
 use oxyline_core::waveform::WaveformSpec;
@@ -200,7 +201,7 @@ impl NativeParts {
         let mut canonical = Vec::new();
         for i in self.slow_vessels() {
             let item = vessels.get_item(i)?;
-            let c = native::vessel(&PyNode(item), i, u).map_err(to_py)?;
+            let c = native::vessel(&Fields::new(PyNode(item)), i, u).map_err(to_py)?;
             let v: VesselSpec = serde_json::from_value(c.clone())
                 .map_err(|e| to_py(Error::model(format!("vessel #{i}"), e.to_string())))?;
             self.vessels[i] = Some(v);

@@ -6,6 +6,7 @@ use super::node::{PyNode, to_python};
 use crate::errors::to_py;
 use oxyline_core::Error;
 use oxyline_core::model::native;
+use oxyline_core::model::node::{Fields, Node};
 use oxyline_core::model::units::Units;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -48,7 +49,7 @@ pub(crate) fn read_vessels<'py>(
         .iter()
         .enumerate()
         .map(|(i, v)| {
-            let c = native::vessel(&PyNode(v), i, u).map_err(to_py)?;
+            let c = native::vessel(&Fields::new(PyNode(v)), i, u).map_err(to_py)?;
             to_python(py, &c)
         })
         .collect()
@@ -65,9 +66,9 @@ pub(crate) fn read_conditions<'py>(
     let u = self::units(units)?;
     let out = PyDict::new(py);
     let mut periods = Vec::new();
-    for (node, bc) in oxyline_core::model::node::Node::entries(&PyNode(bcs)) {
+    for (node, bc) in Node::entries(&PyNode(bcs)) {
         let el = format!("boundary condition '{node}'");
-        let c = native::boundary_condition(&bc, u, &el).map_err(to_py)?;
+        let c = native::boundary_condition(&Fields::new(bc), u, &el).map_err(to_py)?;
         periods.extend(native::condition_periods(&c, &el));
         out.set_item(node, to_python(py, &c)?)?;
     }
