@@ -7,7 +7,6 @@
 
 use super::node::PyNode;
 use crate::errors::to_py;
-use crate::reader::extract;
 use oxyline_core::Error;
 use oxyline_core::model::native;
 use oxyline_core::model::node::Fields;
@@ -208,13 +207,6 @@ impl NativeParts {
             canonical.push(c);
         }
         Ok(native::element_periods(&canonical))
-    }
-
-    /// Vessel `i` from its canonical dict.
-    fn put_vessel(&mut self, i: usize, canonical: &Bound<'_, PyAny>) -> PyResult<()> {
-        let v = extract::vessel(i, canonical).map_err(to_py)?;
-        self.vessels[i] = Some(v);
-        Ok(())
     }
 
     /// Read the plain outlets of the native `boundary_conditions` mapping (in the unit system
