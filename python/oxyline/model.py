@@ -308,7 +308,7 @@ def _unassembled(data: dict[str, Any], convert_vessels: Callable[..., Any] | Non
     ``convert_vessels`` and ``convert_boundary_conditions`` stand in for :func:`_vessels` and
     :func:`_boundary_conditions` (an ensemble reuses the base model's canonical elements that
     a variant leaves as they are)."""
-    name, canon, period = _core.read_header(data)
+    name, canon = _core.read_header(data)
     units = str(data.get("units", "SI"))
     vessels = data["vessels"]
     canon["vessels"] = (convert_vessels or _vessels)(vessels, units)
@@ -317,7 +317,7 @@ def _unassembled(data: dict[str, Any], convert_vessels: Callable[..., Any] | Non
         data.get("boundary_conditions", {}), units)
     # the native reader's canonical vessel list is empty: it found the heart elements' periods
     known = getattr(getattr(convert_vessels, "__self__", None), "periods", [])
-    period = _core.check_periods(period, periods + _element_periods(canon["vessels"]) + known)
+    period = _core.check_periods(data, periods + _element_periods(canon["vessels"]) + known)
     sim = data.get("simulation", {}) or {}
     _core.check_simulation(sim)
     from oxyline import transport as _transport

@@ -24,17 +24,15 @@ pub(crate) fn units(units: &str) -> PyResult<Units> {
     })
 }
 
-/// (name, canonical top-level sections, period or None) of a native model dict.
+/// (name, canonical top-level sections) of a native model dict.
 #[pyfunction]
 pub(crate) fn read_header<'py>(
     py: Python<'py>,
     data: Bound<'py, PyAny>,
-) -> PyResult<(String, Bound<'py, PyAny>, Option<f64>)> {
-    let node = PyNode(data);
-    let header = native::header(&node).map_err(to_py)?;
-    let period = native::period(&node).map_err(to_py)?;
+) -> PyResult<(String, Bound<'py, PyAny>)> {
+    let header = native::header(&PyNode(data)).map_err(to_py)?;
     let canon = to_python(py, &serde_json::Value::Object(header.canonical))?;
-    Ok((header.name, canon, period))
+    Ok((header.name, canon))
 }
 
 /// The canonical dicts of the native `vessels` (a list), in order.
@@ -63,10 +61,12 @@ pub(crate) fn read_conditions<'py>(
     bcs: Bound<'py, PyAny>,
     units: &str,
 ) -> PyResult<(Bound<'py, PyDict>, Periods)> {
+    let bcs = PyNode(bcs);
+    native::check_conditions(&bcs).map_err(to_py)?;
     let u = self::units(units)?;
     let out = PyDict::new(py);
     let mut periods = Vec::new();
-    for (node, bc) in Node::entries(&PyNode(bcs)) {
+    for (node, bc) in Node::entries(&bcs) {
         let el = format!("boundary condition '{node}'");
         let c = native::boundary_condition(&Fields::new(bc), u, &el).map_err(to_py)?;
         periods.extend(native::condition_periods(&c, &el));
@@ -75,12 +75,11 @@ pub(crate) fn read_conditions<'py>(
     Ok((out, periods))
 }
 
-/// The model period: `period` (None: not given) checked against every element's.
+/// The model period: the model's `period` (None: not given) checked against every
+/// element's.
 #[pyfunction]
-pub(crate) fn check_periods(
-    period: Option<f64>,
-    periods: Vec<(f64, String)>,
-) -> PyResult<Option<f64>> {
+pub(crate) fn check_periods(data: Bound<'_, PyAny>, periods: Periods) -> PyResult<Option<f64>> {
+    let period = native::period(&PyNode(data)).map_err(to_py)?;
     native::check_periods(period, &periods).map_err(to_py)
 }
 

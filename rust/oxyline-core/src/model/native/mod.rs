@@ -240,12 +240,6 @@ pub fn header<N: Node>(data: &N) -> Result<Header> {
     if !vessels.is_some_and(|v| v.type_name() == "list" && v.truthy()) {
         return Err(err("model", "'vessels' must be a non-empty list"));
     }
-    if data.get("boundary_conditions").is_some_and(|b| !b.is_map()) {
-        return Err(err(
-            "model",
-            "'boundary_conditions' must be a mapping from node name to condition",
-        ));
-    }
     if let Some(m) = seg.and_then(|s| s.get("max_length")) {
         let x = number(Some(&m), "segmentation", "max_length")?;
         canon.insert(
@@ -311,6 +305,18 @@ fn choice<N: Node>(value: Option<N>, default: &str, options: &[&str], key: &str)
             ),
         )),
     }
+}
+
+/// The model's `boundary_conditions` section is a mapping (checked after the vessels, as
+/// the sections are read in that order).
+pub fn check_conditions<N: Node>(bcs: &N) -> Result<()> {
+    if !bcs.is_map() {
+        return Err(err(
+            "model",
+            "'boundary_conditions' must be a mapping from node name to condition",
+        ));
+    }
+    Ok(())
 }
 
 /// The model's `period` (None when not given), > 0.
