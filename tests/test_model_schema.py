@@ -26,8 +26,8 @@ CHAMBER = {"law": "linear", "max_elastance": 1e8, "passive_elastance": 1e6,
 
 
 @pytest.mark.parametrize("edit, pattern", [
-    ({"law": [1.0, 2.0]}, r"vessel 'LV': chamber law must be one of \['elastance-inductor', "
-                          r"'exponential', 'linear'\], got \[1\.0, 2\.0\]"),
+    ({"law": [1.0, 2.0]}, (r"vessel 'LV': chamber law must be one of \['elastance-inductor', "
+                           r"'exponential', 'linear'\], got \[1\.0, 2\.0\]")),
     ({"law": {"a": 1}}, r"chamber law .* got \{'a': 1\}"),
     ({"activation": {"kind": [1]}}, r"vessel 'LV': chamber needs an 'activation' with kind"),
 ])
