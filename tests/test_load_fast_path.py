@@ -8,7 +8,7 @@ from typing import Any
 import pytest
 
 import oxyline
-from oxyline.model import _boundary_condition, _fast_outlet, _fast_vessel, _vessel
+from oxyline import _core
 from oxyline.units import factor
 
 VESSELS: list[dict[str, Any]] = [
@@ -19,12 +19,22 @@ VESSELS: list[dict[str, Any]] = [
 ]
 
 
-@pytest.mark.parametrize("v", VESSELS, ids=["uniform", "tapered"])
-def test_fast_vessel_equals_the_full_check(v: dict[str, Any]) -> None:
-    fast = _fast_vessel(v, 1.0, 1.0)
-    assert fast is not None
-    assert fast == _vessel(v, 0, "SI")
-    assert all(type(x) is float for x in fast["geometry"].values())  # ints become floats
+#: the canonical forms of VESSELS, written by hand (SI: the numbers as given, ints as floats)
+CANONICAL: list[dict[str, Any]] = [
+    {"name": "a", "from": "in", "to": "j",
+     "geometry": {"length": 0.05, "radius_in": 0.003, "radius_out": 0.003}},
+    {"name": "b", "from": "j", "to": "o", "segments": 3, "arrangement": "pi", "output": False,
+     "geometry": {"length": 1.0, "radius_in": 0.003, "radius_out": 0.002,
+                  "wall_thickness": 3e-4, "youngs_modulus": 400000.0, "poisson_ratio": 0.5}},
+]
+
+
+@pytest.mark.parametrize("i", [0, 1], ids=["uniform", "tapered"])
+def test_the_fast_reader_takes_plain_vessels_the_schema_reads_as_written(i: int) -> None:
+    assert _core.NativeParts([VESSELS[i]], "SI").slow_vessels() == []
+    full = _core.read_vessels([VESSELS[i]], "SI")[0]
+    assert full == CANONICAL[i]
+    assert all(type(x) is float for x in full["geometry"].values())  # ints become floats
 
 
 @pytest.mark.parametrize("edit", [
@@ -33,7 +43,7 @@ def test_fast_vessel_equals_the_full_check(v: dict[str, Any]) -> None:
     {"lumped": {"resistance": 1.0}}, {"radiuss": 1.0}, {"youngs_modulus": -1.0},
 ])
 def test_fast_vessel_leaves_anything_doubtful_to_the_full_check(edit: dict[str, Any]) -> None:
-    assert _fast_vessel({**VESSELS[0], **edit}, 1.0, 1.0) is None
+    assert _core.NativeParts([{**VESSELS[0], **edit}], "SI").slow_vessels() == [0]
 
 
 def test_the_model_owns_its_description() -> None:
@@ -58,9 +68,18 @@ OUTLETS: list[dict[str, Any]] = [
 
 @pytest.mark.parametrize("bc", OUTLETS, ids=["rcr", "rcr-pressure", "resistance", "resistance-p"])
 @pytest.mark.parametrize("units", ["SI", "cgs"])
-def test_fast_outlet_equals_the_full_check(bc: dict[str, Any], units: str) -> None:
-    R, C, P = (factor(units, q) for q in ("resistance", "capacitance", "pressure"))
-    assert _fast_outlet(bc, R, C, P) == _boundary_condition(bc, units, "x")
+def test_the_fast_reader_takes_plain_outlets(bc: dict[str, Any], units: str) -> None:
+    parts = _core.NativeParts([VESSELS[0]], units)
+    assert parts.read_outlets({"x": bc}, units) == []
+    # the schema's full check: every number times its unit factor, the pressure a constant
+    full = _core.read_conditions({"x": bc}, units)[0]["x"]
+    scale = {"resistance": "resistance", "proximal_resistance": "resistance",
+             "distal_resistance": "resistance", "capacitance": "capacitance"}
+    for k, q in scale.items():
+        if k in bc:
+            assert full[k] == factor(units, q) * bc[k]
+    assert full["pressure"] == {"kind": "constant",
+                                "value": factor(units, "pressure") * bc.get("pressure", 0.0)}
 
 
 @pytest.mark.parametrize("edit", [
@@ -68,7 +87,8 @@ def test_fast_outlet_equals_the_full_check(bc: dict[str, Any], units: str) -> No
     {"pressure": None}, {"type": "RCR"}, {"distal_resistance": "9"}, {"resistence": 1.0},
 ])
 def test_fast_outlet_leaves_anything_doubtful_to_the_full_check(edit: dict[str, Any]) -> None:
-    assert _fast_outlet({**OUTLETS[0], **edit}, 1.0, 1.0, 1.0) is None
+    parts = _core.NativeParts([VESSELS[0]], "SI")
+    assert parts.read_outlets({"x": {**OUTLETS[0], **edit}}, "SI") == ["x"]
 
 
 def _handover_model() -> oxyline.Model:

@@ -3,8 +3,6 @@ arrays in a :class:`~oxyline.result.Result`."""
 
 from __future__ import annotations
 
-import math
-import numbers
 import os
 import signal
 import threading
@@ -14,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from oxyline import _core
 from oxyline import checkpoint as _checkpoint
 from oxyline import memory as _memory
 from oxyline.errors import (
@@ -26,7 +25,7 @@ from oxyline.errors import (
     SimulationInterrupted,
 )
 from oxyline.loader import load_model
-from oxyline.model import METHODS, Model, output_names, output_vessels
+from oxyline.model import Model, output_names, output_vessels
 from oxyline.monitor import Monitor, check_result
 from oxyline.monitor import warn as _warn_bounds
 from oxyline.result import (
@@ -41,119 +40,25 @@ from oxyline.result import (
 ProgressCallback = Callable[[float, float], None]
 
 
-def _where(key: str, overrides: Mapping[str, Any]) -> str:
-    """Where a setting came from, for error messages: the simulate() keyword or the model's
-    ``simulation`` (``output``) section."""
-    if key in overrides:
-        return f"simulate: {key}"
-    section = "simulation output" if key in ("output_every", "output_cycles", "segments") \
-        else "simulation"
-    return f"{section}: {key.removeprefix('output_') if section.endswith('output') else key}"
-
-
-def _integer(value: Any, where: str, minimum: int) -> int:
-    """An integer >= minimum: Python and numpy integers (and floats that are whole numbers);
-    bools and strings are refused."""
-    if isinstance(value, numbers.Real) and not isinstance(value, numbers.Integral) \
-            and not isinstance(value, (bool, np.bool_)) and float(value).is_integer():
-        value = int(value)
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral) \
-            or value < minimum:
-        raise ModelError(f"{where} must be an integer >= {minimum}, got {value!r}")
-    return int(value)
-
-
-def _real(value: Any, where: str, low: float = 0.0, high: float = math.inf,
-          low_open: bool = True) -> float:
-    """A finite number in (low, high] (or [low, high] with ``low_open=False``): Python and
-    numpy numbers; bools, strings, NaN and infinities are refused."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-        raise ModelError(f"{where} must be a number, got {value!r}")
-    x = float(value)
-    inside = (x > low if low_open else x >= low) and x <= high
-    if not math.isfinite(x) or not inside:
-        bound = f"{'>' if low_open else '>='} {low:g}" + (f" and <= {high:g}"
-                                                           if high < math.inf else "")
-        raise ModelError(f"{where} must be a finite number {bound}, got {value!r}")
-    return x
-
-
-def _flag(value: Any, where: str) -> bool:
-    """A true/false setting: ``segments="no"`` is an error, not True."""
-    if not isinstance(value, (bool, np.bool_)):
-        raise ModelError(f"{where} must be true or false, got {value!r}")
-    return bool(value)
-
-
-OPTIONS = frozenset({"cycles", "dt", "method", "output_every", "output_cycles", "until_periodic",
-                     "max_cycles", "rho_infty", "start", "segments", "progress", "newton_atol",
-                     "max_iterations", "transport", "variables", "vessels", "max_memory",
-                     "checkpoint", "checkpoint_every", "cancel"})
-
-STARTS = ("steady", "zero", "svzerod-steady", "svzerod-zero", "periodic")
+#: the keywords of :func:`simulate` and how a run starts (the core's run-settings schema)
+OPTIONS = frozenset(_core.OPTIONS)
+STARTS = tuple(_core.STARTS)
 
 
 def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
-    """The run settings of ``model`` with ``overrides``, each checked like the model itself:
-    a :class:`ModelError` names the setting, where it came from and the value."""
-    sim = dict(model.simulation)
-    out = dict(sim.get("output", {}) or {})
-    unknown = set(overrides) - OPTIONS
-    if unknown:
-        raise ModelError(f"simulate: unknown option(s) {', '.join(sorted(unknown))}")
-
-    def get(key: str, section: Mapping[str, Any], file_key: str, default: Any) -> tuple[Any, str]:
-        return overrides.get(key, section.get(file_key, default)), _where(key, overrides)
-
-    period = model.period or 1.0
-    cycles = _integer(*get("cycles", sim, "cycles", 10), 1)
-    dt, where = get("dt", sim, "dt", "auto")
-    if isinstance(dt, str) and dt != "auto":
-        raise ModelError(f"{where} must be 'auto' or a number > 0, got {dt!r}")
-    dt = None if dt is None or dt == "auto" else _real(dt, where)
-    method, where = get("method", sim, "method", "auto")
-    if not isinstance(method, str) or method not in METHODS:
-        raise ModelError(f"{where} must be one of {sorted(METHODS)}, got {method!r}")
-    every = _real(*get("output_every", out, "every", period / 1000.0))
-    out_cycles, where = get("output_cycles", out, "cycles", "last")
-    if not isinstance(out_cycles, str) or out_cycles not in ("last", "all"):
-        raise ModelError(f"{where} must be 'last' or 'all', got {out_cycles!r}")
-    until, where = get("until_periodic", sim, "until_periodic", None)
-    until = None if until is None else _real(until, where)
-    max_cycles, where = get("max_cycles", sim, "max_cycles", None)
-    if max_cycles is not None:
-        max_cycles = _integer(max_cycles, where, 1)
-        if until is not None and max_cycles < cycles:
-            raise ModelError(f"{where} ({max_cycles}) is less than cycles ({cycles}), the "
-                             "least number of cycles a run until_periodic takes")
-    start, where = get("start", sim, "start", "steady")
-    if not isinstance(start, str) or start not in STARTS:
-        raise ModelError(f"{where} must be one of {', '.join(STARTS)}, got {start!r}")
-    atol, where = get("newton_atol", {}, "", None)
+    """The run settings of ``model`` with ``overrides``, each checked like the model itself by
+    the core's schema: a :class:`ModelError` names the setting, where it came from and the
+    value. The output selection and the progress callback are Python's."""
+    s = _core.resolve_settings(model.simulation, dict(overrides), model.period)
+    out = dict(model.simulation.get("output", {}) or {})
     progress = overrides.get("progress")
     if progress is not None and not isinstance(progress, (bool, np.bool_)) \
             and not callable(progress):
         raise ModelError(f"simulate: progress must be true, false or a callback f(t, t_end), "
                          f"got {progress!r}")
-    return {
-        "period": float(period),
-        "cycles": cycles,
-        "dt": dt,
-        "method": method,
-        "output_every": every,
-        "output_all_cycles": out_cycles == "all",
-        "until_periodic": until,
-        "max_cycles": max(cycles, 100) if max_cycles is None else max_cycles,
-        "rho_infty": _real(*get("rho_infty", sim, "rho_infty", 0.5), low=0.0, high=1.0,
-                           low_open=False),
-        "start": start,
-        "segments": _flag(*get("segments", out, "segments", True)),
-        "variables": output_names(overrides.get("variables", out.get("variables")), "variables"),
-        "vessels": _vessels(model, overrides.get("vessels", out.get("vessels"))),
-        "newton_atol": None if atol is None else _real(atol, where),
-        "max_iterations": _integer(*get("max_iterations", {}, "", 30), 1),
-        "transport": _flag(*get("transport", {}, "", True)),
-    }
+    s["variables"] = output_names(overrides.get("variables", out.get("variables")), "variables")
+    s["vessels"] = _vessels(model, overrides.get("vessels", out.get("vessels")))
+    return s
 
 
 def _vessels(model: Model, selection: Any) -> list[str] | None:
@@ -592,7 +497,7 @@ def _check_output_memory(model: Model, s: Mapping[str, Any],
     estimate and the settings to change), and announce a large one
     (:class:`OutputSizeWarning`), before the run starts."""
     need, rows, cols = _output_size(model, s)
-    where = _where("max_memory", overrides)
+    where = f"{'simulate' if 'max_memory' in overrides else 'simulation'}: max_memory"
     limit = _memory.limit(overrides.get("max_memory", model.simulation.get("max_memory")), where)
     if limit is not None and need > limit:
         raise ResourceError(

@@ -7,7 +7,7 @@
 //! kept, so the first row is the fresh-process figure.
 
 use oxyline_core::Transport;
-use oxyline_core::spec::parse;
+use oxyline_core::model::parse;
 
 /// (thread CPU ns, system ticks, minor faults).
 fn usage() -> (f64, f64, f64) {
@@ -33,7 +33,7 @@ fn main() {
     let json = std::fs::read_to_string(&path).unwrap();
     println!(
         "# B per element: vessel spec {}, segment row {}",
-        std::mem::size_of::<oxyline_core::spec::VesselSpec>(),
+        std::mem::size_of::<oxyline_core::model::VesselSpec>(),
         std::mem::size_of::<oxyline_core::SegmentRow>()
     );
     let stages = ["parse", "assemble", "dae", "transport", "steady"];

@@ -2,8 +2,8 @@
 //! profiling aid for issue 9, item 6): `cargo run --release --example mem_stages -- model.json`.
 
 use oxyline_core::genalpha::NewtonControl;
+use oxyline_core::model::parse;
 use oxyline_core::output::Selection;
-use oxyline_core::spec::parse;
 use oxyline_core::{Method, RunSettings, Start, Transport};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};

@@ -120,7 +120,7 @@ pub enum WallSpec {
 fn one() -> f64 {
     1.0
 }
-/// μ/ρ of the default blood (3.5 mPa s, 1050 kg/m³; `spec::BloodSpec`).
+/// μ/ρ of the default blood (3.5 mPa s, 1050 kg/m³; `model::BloodSpec`).
 fn default_kinematic_viscosity() -> f64 {
     3.5e-3 / 1050.0
 }

@@ -96,7 +96,7 @@ impl FrequencySystem {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::spec::parse;
+    use crate::model::parse;
 
     /// A bifurcation with a loop-free tree and the same with a loop: the O(n) elimination and
     /// faer's LU must reproduce the dense solve of `frequency::input_impedance`.

@@ -13,13 +13,13 @@ mod graetz;
 pub mod hemoglobin;
 pub mod impedance;
 pub mod integrate;
+pub mod model;
 pub mod network;
 pub mod output;
 pub mod run;
 pub mod segment;
 pub mod simulate;
 pub mod sparse;
-pub mod spec;
 pub mod transport;
 pub mod waveform;
 
@@ -28,10 +28,10 @@ pub use circuit::{Circuit, Dae, Regime};
 pub use error::{Error, Result};
 // the integrators' old module paths (`crate::rk4::Rk4`, `crate::genalpha::GenAlpha`, ...)
 pub use integrate::{genalpha, rk4, stability};
+pub use model::NetworkSpec;
 pub use output::{Probes, Selection};
 pub use run::{
     Chunk, Method, Outcome, OutputSink, RunSettings, Start, TransportOutcome, simulate,
     simulate_to_sink, simulate_with_transport,
 };
-pub use spec::NetworkSpec;
 pub use transport::{Transport, TransportSpec};

@@ -6,7 +6,7 @@ use oxyline_core::run::checkpoint::{CHECKPOINT_VERSION, Snapshot};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::ModelError;
+use crate::errors::ModelError;
 
 /// The snapshot's arrays and their dict keys, in one place for both directions:
 /// `arrays!(s, &)` borrows them for writing, `arrays!(s, &mut)` for reading into.

@@ -1,7 +1,7 @@
 //! Binding of the closed-loop O2 run (`oxyline_core::transport::closed_loop`): JSON spec and a
 //! flat flow table in, the recorded last cycle out (flat arrays; Python reshapes them).
 
-use crate::to_py;
+use crate::errors::to_py;
 use numpy::{PyArray1, PyReadonlyArray1};
 use oxyline_core::transport::closed_loop::{ClosedLoopSpec, TreeSpec, run_periodic};
 use oxyline_core::transport::closed_loop_tree::ArterialTree;

@@ -2,15 +2,16 @@
 //! released (see `oxyline_core::ensemble`). Each finished variant is handed to a Python
 //! callback on the calling thread, in completion order, while the others keep running.
 
-use crate::extract;
+use crate::errors::{error_kind, to_py};
+use crate::reader::extract;
+use crate::results::{layout_dict, outcome_dict, recorded_columns};
 use crate::settings::Shared;
-use crate::{error_kind, layout_dict, outcome_dict, recorded_columns, to_py};
 use numpy::{IntoPyArray, PyReadonlyArray1};
 use oxyline_core::ensemble::{
     ColumnStats, ConditionValue, Member, SpecPatch, StatsFold, TableValues, Target, Targets,
     column_stats, run_fed, worker_count,
 };
-use oxyline_core::spec::{BoundarySpec, NetworkSpec, VesselSpec, parse};
+use oxyline_core::model::{BoundarySpec, NetworkSpec, VesselSpec, parse};
 use oxyline_core::{Chunk, Error, Outcome, OutputSink, RunSettings, Selection, Transport};
 use pyo3::exceptions::PyKeyboardInterrupt;
 use pyo3::prelude::*;

@@ -2,9 +2,10 @@
 //! ([`KEYS`], exported as `_core.RUN_SETTINGS`), read from their `**settings` by one parser,
 //! and one place that turns them into the core's [`RunSettings`].
 
-use crate::{parse_method, parse_start};
+use crate::errors::ModelError;
 use oxyline_core::RunSettings;
 use oxyline_core::genalpha::NewtonControl;
+use oxyline_core::{Method, Start};
 use pyo3::conversion::FromPyObjectOwned;
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
@@ -137,4 +138,32 @@ impl Shared {
             species_columns: None,
         })
     }
+}
+
+pub(crate) fn parse_method(method: &str, rho_infty: f64) -> PyResult<Method> {
+    Ok(match method {
+        "rk4" => Method::Rk4,
+        "generalized-alpha" => Method::GeneralizedAlpha { rho_inf: rho_infty },
+        "auto" => Method::Auto { rho_inf: rho_infty },
+        other => {
+            return Err(ModelError::new_err(format!(
+                "simulation: unknown method '{other}' (expected rk4, generalized-alpha or auto)"
+            )));
+        }
+    })
+}
+
+pub(crate) fn parse_start(start: &str, rho_infty: f64) -> PyResult<Start> {
+    Ok(match start {
+        "steady" => Start::Steady,
+        "periodic" => Start::Periodic,
+        "svzerod-steady" => Start::SvZeroDSteady { rho_inf: rho_infty },
+        "zero" => Start::Zero,
+        "svzerod-zero" => Start::SvZeroDZero,
+        other => {
+            return Err(ModelError::new_err(format!(
+                "simulation: unknown start '{other}' (expected steady, periodic, zero, svzerod-steady or svzerod-zero)"
+            )));
+        }
+    })
 }

@@ -8,7 +8,7 @@ use crate::circuit::{Circuit, CircuitElement, Label, Part};
 use crate::element::activation::Activation;
 use crate::element::chamber::{Elastance, ElastanceLaw};
 use crate::error::Result;
-use crate::spec::{ActivationSpec, ChamberLawSpec, ChamberSpec};
+use crate::model::{ActivationSpec, ChamberLawSpec, ChamberSpec};
 
 fn activation(el: &str, spec: &ActivationSpec, period: f64) -> Result<Activation> {
     Ok(match *spec {
@@ -150,7 +150,7 @@ pub(crate) fn stamp(
 mod tests {
     use crate::circuit::Regime;
     use crate::integrate::{GenAlpha, Integrator, NewtonControl, Rk4};
-    use crate::spec::parse;
+    use crate::model::parse;
 
     /// A left ventricle, two tanh valves, an artery and a vein in a loop: no boundary
     /// condition (docs/physics.md §1.8).

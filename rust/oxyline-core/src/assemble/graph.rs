@@ -6,7 +6,7 @@
 //! node, and each vessel's arrangement puts its end capacitance there (see `vessel.rs`).
 
 use crate::error::{Error, Result};
-use crate::spec::{BoundarySpec, NetworkSpec};
+use crate::model::{BoundarySpec, NetworkSpec};
 use std::collections::HashMap;
 
 /// Graph nodes and, per node, the vessel ends meeting there.

@@ -8,7 +8,7 @@ use crate::circuit::{Circuit, CircuitElement};
 use crate::element::activation::Activation;
 use crate::element::heart::{Atrium, HeartParams};
 use crate::error::{Error, Result};
-use crate::spec::{CoronaryBedSpec, HeartPulmonarySpec, Ventricle};
+use crate::model::{CoronaryBedSpec, HeartPulmonarySpec, Ventricle};
 
 /// The block's parameters, checked (every resistance, inductance, capacitance, elastance and
 /// time positive or zero as the law needs).

@@ -5,7 +5,7 @@
 
 use super::vessel::Chain;
 use crate::circuit::{Circuit, StartValue, Unknown};
-use crate::spec::EndValues;
+use crate::model::EndValues;
 
 /// How the unknowns between a vessel's ends follow its end values.
 #[derive(Debug, Clone, Copy)]
@@ -93,7 +93,7 @@ pub(crate) fn record(
 
 #[cfg(test)]
 mod tests {
-    use crate::spec::parse;
+    use crate::model::parse;
 
     #[test]
     fn an_rcl_vessel_starts_with_its_capacitor_behind_r_plus_s_q() {

@@ -16,9 +16,9 @@ mod vessel;
 
 use crate::circuit::Circuit;
 use crate::error::Result;
+use crate::model::{Arrangement, NetworkSpec};
 use crate::output::Probes;
 use crate::segment::Blood;
-use crate::spec::{Arrangement, NetworkSpec};
 
 /// A heart block's chambers, in the order of its volume unknowns (output names).
 const HEART_CHAMBERS: [&str; 4] = [
@@ -89,7 +89,7 @@ impl NetworkSpec {
 
 /// A `vessel` entry that is a heart element (valve, chamber, through-RC, sphere, heart block,
 /// coronary bed) rather than a segmented vessel.
-fn is_heart_element(v: &crate::spec::VesselSpec) -> bool {
+fn is_heart_element(v: &crate::model::VesselSpec) -> bool {
     v.valve.is_some()
         || v.chamber.is_some()
         || v.through_rc.is_some()
@@ -308,7 +308,7 @@ impl<'a> Stamping<'a> {
 /// The vessel's `initial` and `initial_rate` values, if any.
 fn record_start(
     circuit: &mut Circuit,
-    v: &crate::spec::VesselSpec,
+    v: &crate::model::VesselSpec,
     chain: &vessel::Chain,
     interior: initial::Interior,
 ) {
@@ -325,14 +325,14 @@ fn record_start(
 #[derive(Default)]
 struct HeartLinks {
     hearts: Vec<(String, [usize; 2])>,
-    beds: Vec<(usize, String, crate::spec::CoronaryBedSpec)>,
+    beds: Vec<(usize, String, crate::model::CoronaryBedSpec)>,
 }
 
 /// Stamp a heart element (a `vessel` entry with `valve`, `chamber`, `through_rc`,
 /// `heart_pulmonary` or `coronary_bed`).
 fn heart_element(
     circuit: &mut Circuit,
-    v: &crate::spec::VesselSpec,
+    v: &crate::model::VesselSpec,
     ends: (usize, usize),
     links: &mut HeartLinks,
 ) -> Result<vessel::Chain> {
@@ -378,7 +378,7 @@ fn heart_element(
 
 #[cfg(test)]
 mod tests {
-    use crate::spec::parse;
+    use crate::model::parse;
 
     const MODEL: &str = r#"{
         "vessels": [

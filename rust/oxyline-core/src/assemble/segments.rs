@@ -4,8 +4,8 @@
 
 use super::checks::{check_nonnegative, check_positive};
 use crate::error::{Error, Result};
+use crate::model::{Arrangement, GeometrySpec, LumpedSpec, NetworkSpec, VesselSpec};
 use crate::segment::{Blood, Wall, segment_rlc};
-use crate::spec::{Arrangement, GeometrySpec, LumpedSpec, NetworkSpec, VesselSpec};
 
 /// One flow segment of a vessel, as assembled (SI).
 #[derive(Debug, Clone, Copy, PartialEq)]

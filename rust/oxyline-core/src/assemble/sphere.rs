@@ -8,7 +8,7 @@ use super::vessel::Chain;
 use crate::circuit::{Circuit, CircuitElement, Label, Part};
 use crate::element::sphere::SphereParams;
 use crate::error::{Error, Result};
-use crate::spec::ChamberSphereSpec;
+use crate::model::ChamberSphereSpec;
 
 /// The checked wall parameters of chamber `name`.
 pub fn sphere_params(name: &str, s: &ChamberSphereSpec) -> Result<SphereParams> {

@@ -6,7 +6,7 @@ use super::vessel::Chain;
 use crate::circuit::{Circuit, CircuitElement, Label, Part};
 use crate::element::valve::ValveLaw;
 use crate::error::{Error, Result};
-use crate::spec::{ThroughRcSpec, ValveSpec};
+use crate::model::{ThroughRcSpec, ValveSpec};
 
 pub(crate) fn stamp(
     circuit: &mut Circuit,

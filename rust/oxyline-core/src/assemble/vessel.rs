@@ -5,8 +5,8 @@
 
 use super::segments::SegmentRow;
 use crate::circuit::{ChainRuleCapacitor, Circuit, Label, Part, SegmentGeom};
+use crate::model::{Arrangement, StenosisForm};
 use crate::output::Probes;
-use crate::spec::{Arrangement, StenosisForm};
 
 /// The circuit nodes along a vessel (inlet node, interior points, outlet node) and its branches.
 pub(crate) struct Chain {

@@ -14,8 +14,8 @@
 use crate::assemble::Assembled;
 use crate::circuit::Dae;
 use crate::error::{Error, Result};
-use crate::spec::transport::TransportSpec;
-use crate::spec::{BloodSpec, BoundarySpec, NetworkSpec, VesselSpec};
+use crate::model::transport::TransportSpec;
+use crate::model::{BloodSpec, BoundarySpec, NetworkSpec, VesselSpec};
 use crate::transport::Transport;
 use crate::waveform::{Interpolation, WaveformSpec};
 use serde::Deserialize;

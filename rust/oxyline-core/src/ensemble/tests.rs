@@ -1,5 +1,5 @@
 use super::*;
-use crate::spec::parse;
+use crate::model::parse;
 use std::sync::atomic::AtomicUsize;
 
 /// Constant inflow through a lumped resistance into a resistance outlet: at steady state the

@@ -93,7 +93,7 @@ impl ArterialTree {
         steps: usize,
         cycles: usize,
     ) -> Result<Self> {
-        let spec = crate::spec::parse(model_json)?;
+        let spec = crate::model::parse(model_json)?;
         let assembled = spec.assemble()?;
         let circuit = &assembled.circuit;
         let dae = circuit.assemble()?;

@@ -24,8 +24,8 @@ use crate::circuit::{Circuit, Dae};
 use crate::closure::{self, SegmentLaw, SegmentWall, WallSpec};
 use crate::error::{Error, Result};
 use crate::hemoglobin::{Binding, HillAnchor};
+pub use crate::model::transport::{Formulation, SpeciesSpec, TransportSpec};
 use crate::output::Probes;
-pub use crate::spec::transport::{Formulation, SpeciesSpec, TransportSpec};
 use crate::waveform::Waveform;
 use std::sync::Arc;
 

@@ -24,7 +24,7 @@
 #[allow(unused_imports)]
 use super::*;
 use crate::closure::finite_number;
-use crate::spec::transport::{ConsumptionSpec, OuterSpec, TissueSpec};
+use crate::model::transport::{ConsumptionSpec, OuterSpec, TissueSpec};
 use std::f64::consts::PI;
 
 /// Per output vessel and per output segment: innermost, outermost and minimum wall

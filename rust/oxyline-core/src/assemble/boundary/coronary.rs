@@ -16,7 +16,7 @@ use crate::assemble::checks::{check_nonnegative, check_positive};
 use crate::circuit::{Circuit, Part};
 use crate::coefficients::ResistanceLaw;
 use crate::error::{Error, Result};
-use crate::spec::CoronarySpec;
+use crate::model::CoronarySpec;
 use crate::waveform::Waveform;
 
 /// Returns the bed's capacitance C_a + C_im (for the summary's total compliance).
@@ -100,7 +100,7 @@ fn law(c: &CoronarySpec, pim: &Waveform, el: &str) -> Result<Option<ResistanceLa
 #[cfg(test)]
 mod tests {
     use crate::integrate::steady_state;
-    use crate::spec::parse;
+    use crate::model::parse;
 
     #[test]
     fn steady_bed_is_its_three_resistances_in_series() {

@@ -1,5 +1,5 @@
 //! Boundary conditions: one stamp function per condition type, each in its own file, so that
-//! a new condition type touches one file (plus its `BoundarySpec` variant in `crate::spec`).
+//! a new condition type touches one file (plus its `BoundarySpec` variant in `crate::model`).
 
 mod coronary;
 mod flow;
@@ -10,7 +10,7 @@ mod svzerod_inlet;
 
 use crate::circuit::{BoundaryTag, Circuit, Label, Part};
 use crate::error::Result;
-use crate::spec::BoundarySpec;
+use crate::model::BoundarySpec;
 use crate::waveform::{Waveform, WaveformSpec};
 
 /// Where a condition sits: the free vessel end's circuit node, which end it is, and the tag

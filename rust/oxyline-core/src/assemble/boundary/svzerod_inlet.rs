@@ -14,7 +14,7 @@ use super::Site;
 use crate::assemble::checks::{check_nonnegative, check_positive};
 use crate::circuit::{Circuit, Part};
 use crate::error::{Error, Result};
-use crate::spec::SvzerodInletSpec;
+use crate::model::SvzerodInletSpec;
 
 pub(super) fn stamp(circuit: &mut Circuit, site: &Site, s: &SvzerodInletSpec) -> Result<()> {
     let el = &site.element;
@@ -66,7 +66,7 @@ pub(super) fn stamp(circuit: &mut Circuit, site: &Site, s: &SvzerodInletSpec) ->
 #[cfg(test)]
 mod tests {
     use crate::integrate::steady_state;
-    use crate::spec::parse;
+    use crate::model::parse;
 
     fn model(inlet: &str) -> String {
         format!(

@@ -1,6 +1,9 @@
-//! The network model as written by a front end: every serde input type of the canonical SI
-//! JSON (vessels joined at named nodes, boundary conditions at free ends, blood, segmentation,
-//! and the species transport section). Nothing here builds a circuit: see `crate::assemble`.
+//! The one schema of a network model. `native` reads the model as a user writes it (the
+//! README's YAML/dict form, any unit system: `units`) from the front end's values (`node`),
+//! checks every key and value and writes the canonical SI description; the serde types here
+//! are that canonical description (vessels joined at named nodes, boundary conditions at free
+//! ends, blood, segmentation, and the species transport section: `transport`). Nothing here
+//! builds a circuit: see `crate::assemble`.
 
 use crate::segment::{InertanceProfile, WallModel};
 use crate::waveform::WaveformSpec;
@@ -9,7 +12,11 @@ use std::collections::BTreeMap;
 
 use crate::error::{Error, Result};
 
+pub mod native;
+pub mod node;
+pub mod settings;
 pub mod transport;
+pub mod units;
 
 #[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq, Default)]
 pub enum Arrangement {

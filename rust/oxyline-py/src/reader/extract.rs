@@ -6,7 +6,7 @@
 //! would give.
 
 use oxyline_core::Error;
-use oxyline_core::spec::{
+use oxyline_core::model::{
     Arrangement, BoundarySpec, GeometrySpec, LumpedSpec, StenosisForm, VesselSpec,
 };
 use oxyline_core::waveform::WaveformSpec;
@@ -185,7 +185,7 @@ pub fn vessel(i: usize, item: &Bound<'_, PyAny>) -> Res<VesselSpec> {
 }
 
 /// A small nested spec read through its JSON text (`json.dumps`, then the core's parser).
-fn via_json<T: oxyline_core::spec::DeserializeOwned>(
+fn via_json<T: oxyline_core::model::DeserializeOwned>(
     v: &Bound<'_, PyAny>,
     element: &dyn Fn() -> String,
     what: &str,
@@ -197,7 +197,7 @@ fn via_json<T: oxyline_core::spec::DeserializeOwned>(
         .and_then(|j| j.call_method1("dumps", (v,)))
         .and_then(|s| s.extract())
         .map_err(|e| bad(e.to_string()))?;
-    oxyline_core::spec::from_json(&text).map_err(|e| bad(e.to_string()))
+    oxyline_core::model::from_json(&text).map_err(|e| bad(e.to_string()))
 }
 
 /// Every vessel of the canonical `vessels` list.

@@ -1,15 +1,17 @@
-//! The bulk of a large native model read straight from the user's dicts (issue 9 item 3):
-//! plain geometric vessels and plain resistance/RCR outlets, checked and converted to SI here
-//! instead of through a canonical Python dict per element (`oxyline.model._fast_vessel` and
-//! `_fast_outlet` did the same checks in Python, ~1 µs per segment of a tree). An element this
-//! reader does not take (anything else, or a value out of range) is left to Python, which
-//! converts it with its full check (and precise error) and hands its canonical dict back
-//! through [`NativeParts::put_vessel`]. The same numbers as the canonical route: each value is
-//! multiplied by the same unit factor once.
+//! The bulk of a large native model read straight from the user's dicts: plain geometric
+//! vessels and plain resistance/RCR outlets, converted to SI here without a canonical dict per
+//! element. An element this reader does not take (anything else, or a value out of range)
+//! goes through the core's full schema check (`oxyline_core::model::native`, with its precise
+//! error): [`NativeParts::read_rest`] for vessels, `read_conditions` for outlets. The same
+//! numbers as the canonical route: each value is multiplied by the same unit factor once.
 
-use crate::extract;
+use super::node::PyNode;
+use crate::errors::to_py;
 use oxyline_core::Error;
-use oxyline_core::spec::{Arrangement, BoundarySpec, GeometrySpec, VesselSpec};
+use oxyline_core::model::native;
+use oxyline_core::model::node::Fields;
+use oxyline_core::model::units::Quantity;
+use oxyline_core::model::{Arrangement, BoundarySpec, GeometrySpec, VesselSpec};
 use oxyline_core::waveform::WaveformSpec;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyFloat, PyInt, PyList, PyString};
@@ -166,16 +168,18 @@ pub struct NativeParts {
 
 #[pymethods]
 impl NativeParts {
-    /// Read the plain vessels of the native `vessels` list (unit factors `length`, `modulus`).
+    /// Read the plain vessels of the native `vessels` list (in the unit system `units`).
     #[new]
-    fn new(vessels: &Bound<'_, PyList>, length: f64, modulus: f64) -> Self {
-        NativeParts {
+    fn new(vessels: &Bound<'_, PyList>, units: &str) -> PyResult<Self> {
+        let u = super::schema::units(units)?;
+        let (length, modulus) = (u.factor(Quantity::Length), u.factor(Quantity::Modulus));
+        Ok(NativeParts {
             vessels: vessels
                 .iter()
                 .map(|v| vessel(&v, length, modulus))
                 .collect(),
             outlets: Vec::new(),
-        }
+        })
     }
 
     /// Indices of the vessels this reader did not take, in order.
@@ -185,23 +189,38 @@ impl NativeParts {
             .collect()
     }
 
-    /// Vessel `i` from its canonical dict (converted by Python's full check).
-    fn put_vessel(&mut self, i: usize, canonical: &Bound<'_, PyAny>) -> PyResult<()> {
-        let v = extract::vessel(i, canonical).map_err(crate::to_py)?;
-        self.vessels[i] = Some(v);
-        Ok(())
+    /// Read the vessels the fast reader did not take with the core's full check (and its
+    /// precise error); returns the periods of their heart elements, with the element.
+    fn read_rest(
+        &mut self,
+        vessels: &Bound<'_, PyList>,
+        units: &str,
+    ) -> PyResult<Vec<(f64, String)>> {
+        let u = super::schema::units(units)?;
+        let mut canonical = Vec::new();
+        for i in self.slow_vessels() {
+            let item = vessels.get_item(i)?;
+            let c = native::vessel(&Fields::new(PyNode(item)), i, u).map_err(to_py)?;
+            let v: VesselSpec = serde_json::from_value(c.clone())
+                .map_err(|e| to_py(Error::model(format!("vessel #{i}"), e.to_string())))?;
+            self.vessels[i] = Some(v);
+            canonical.push(c);
+        }
+        Ok(native::element_periods(&canonical))
     }
 
-    /// Read the plain outlets of the native `boundary_conditions` mapping (unit factors
-    /// `resistance`, `capacitance`, `pressure`); returns the node keys of the conditions left
+    /// Read the plain outlets of the native `boundary_conditions` mapping (in the unit system
+    /// `units`); returns the node keys of the conditions left
     /// to Python, in order.
     fn read_outlets<'py>(
         &mut self,
         bcs: &Bound<'py, PyDict>,
-        resistance: f64,
-        capacitance: f64,
-        pressure: f64,
-    ) -> Vec<Bound<'py, PyAny>> {
+        units: &str,
+    ) -> PyResult<Vec<Bound<'py, PyAny>>> {
+        let u = super::schema::units(units)?;
+        let resistance = u.factor(Quantity::Resistance);
+        let capacitance = u.factor(Quantity::Capacitance);
+        let pressure = u.factor(Quantity::Pressure);
         let mut slow = Vec::new();
         self.outlets.reserve(bcs.len());
         for (node, bc) in bcs.iter() {
@@ -213,7 +232,7 @@ impl NativeParts {
                 _ => slow.push(node),
             }
         }
-        slow
+        Ok(slow)
     }
 
     /// The vessel names in model order (every vessel read or put).

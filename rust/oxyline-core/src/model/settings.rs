@@ -1,0 +1,362 @@
+//! The run settings of a model: its `simulation` section (and `simulation: output:`) with the
+//! caller's overrides (`oxyline.simulate`'s keywords), each checked and defaulted here. A
+//! message names the setting and where it came from (`simulate: cycles` for a keyword,
+//! `simulation: cycles` or `simulation output: every` for the file) and the value.
+
+use super::native::{METHODS, err, py_list};
+use super::node::{Kind, Node, py_g};
+use crate::error::{Error, Result};
+
+/// The keywords `oxyline.simulate` takes.
+pub const OPTIONS: &[&str] = &[
+    "cycles",
+    "dt",
+    "method",
+    "output_every",
+    "output_cycles",
+    "until_periodic",
+    "max_cycles",
+    "rho_infty",
+    "start",
+    "segments",
+    "progress",
+    "newton_atol",
+    "max_iterations",
+    "transport",
+    "variables",
+    "vessels",
+    "max_memory",
+    "checkpoint",
+    "checkpoint_every",
+    "cancel",
+];
+/// How a run starts.
+pub const STARTS: &[&str] = &[
+    "steady",
+    "zero",
+    "svzerod-steady",
+    "svzerod-zero",
+    "periodic",
+];
+
+/// The resolved run settings (defaults: `oxyline.simulate`'s documentation).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Settings {
+    pub period: f64,
+    pub cycles: i64,
+    pub dt: Option<f64>,
+    pub method: String,
+    pub output_every: f64,
+    pub output_all_cycles: bool,
+    pub until_periodic: Option<f64>,
+    pub max_cycles: i64,
+    pub rho_infty: f64,
+    pub start: String,
+    pub segments: bool,
+    pub newton_atol: Option<f64>,
+    pub max_iterations: i64,
+    pub transport: bool,
+}
+
+/// A setting's value: given (by the caller or the file) or the default.
+enum Val<N> {
+    Given(N),
+    Int(i64),
+    Float(f64),
+    Text(&'static str),
+    Flag(bool),
+    Null,
+}
+
+impl<N: Node> Val<N> {
+    fn kind(&self) -> Kind {
+        match self {
+            Val::Given(n) => n.kind(),
+            Val::Int(_) => Kind::Int,
+            Val::Float(_) => Kind::Float,
+            Val::Text(_) => Kind::Str,
+            Val::Flag(_) => Kind::Bool,
+            Val::Null => Kind::Null,
+        }
+    }
+    fn number(&self) -> Option<f64> {
+        match self {
+            Val::Given(n) => n.number(),
+            Val::Int(i) => Some(*i as f64),
+            Val::Float(x) => Some(*x),
+            _ => None,
+        }
+    }
+    fn text(&self) -> Option<String> {
+        match self {
+            Val::Given(n) => n.text(),
+            Val::Text(t) => Some((*t).to_owned()),
+            _ => None,
+        }
+    }
+    fn repr(&self) -> String {
+        match self {
+            Val::Given(n) => n.repr(),
+            Val::Int(i) => i.to_string(),
+            Val::Float(x) => super::node::py_repr(*x),
+            Val::Text(t) => format!("'{t}'"),
+            Val::Flag(b) => if *b { "True" } else { "False" }.into(),
+            Val::Null => "None".into(),
+        }
+    }
+    fn truthy(&self) -> bool {
+        match self {
+            Val::Given(n) => n.truthy(),
+            Val::Flag(b) => *b,
+            _ => true,
+        }
+    }
+}
+
+/// The settings of a model's `simulation` section `sim` (a mapping, maybe empty) with the
+/// caller's `overrides` (a mapping); `period`: the model's (1 s if it has none).
+pub fn resolve<N: Node>(sim: &N, overrides: &N, period: Option<f64>) -> Result<Settings> {
+    let unknown: Vec<String> = {
+        let mut u: Vec<String> = overrides
+            .entries()
+            .into_iter()
+            .map(|(k, _)| k)
+            .filter(|k| !OPTIONS.contains(&k.as_str()))
+            .collect();
+        u.sort();
+        u
+    };
+    if !unknown.is_empty() {
+        return Err(Error::model(
+            "simulate",
+            format!("unknown option(s) {}", unknown.join(", ")),
+        ));
+    }
+    let out = sim.get("output").filter(Node::truthy);
+    // (value, where it came from) of a setting: the keyword, else the file's key, else default
+    let get = |key: &str, section: Option<&N>, file_key: &str, default: Val<N>| {
+        if let Some(v) = overrides.get(key) {
+            return (Val::Given(v), format!("simulate: {key}"));
+        }
+        let in_output = ["output_every", "output_cycles", "segments"].contains(&key);
+        let place = if in_output {
+            format!("simulation output: {}", key.trim_start_matches("output_"))
+        } else {
+            format!("simulation: {key}")
+        };
+        let given = section.and_then(|s| s.get(file_key));
+        (given.map_or(default, Val::Given), place)
+    };
+    let period = period.unwrap_or(1.0);
+    let (v, w) = get("cycles", Some(sim), "cycles", Val::Int(10));
+    let cycles = integer(&v, &w, 1)?;
+    let (dt, w) = get("dt", Some(sim), "dt", Val::Text("auto"));
+    let dt = match (dt.kind(), dt.text()) {
+        (Kind::Null, _) => None,
+        (_, Some(t)) if t == "auto" => None,
+        (Kind::Str, _) => {
+            return Err(setting(
+                &w,
+                format!("must be 'auto' or a number > 0, got {}", dt.repr()),
+            ));
+        }
+        _ => Some(real(&dt, &w, 0.0, f64::INFINITY, true)?),
+    };
+    let (m, w) = get("method", Some(sim), "method", Val::Text("auto"));
+    let method = m
+        .text()
+        .filter(|t| METHODS.contains(&t.as_str()))
+        .ok_or_else(|| {
+            setting(
+                &w,
+                format!("must be one of {}, got {}", py_list(METHODS), m.repr()),
+            )
+        })?;
+    let (v, w) = get(
+        "output_every",
+        out.as_ref(),
+        "every",
+        Val::Float(period / 1000.0),
+    );
+    let output_every = real(&v, &w, 0.0, f64::INFINITY, true)?;
+    let (c, w) = get("output_cycles", out.as_ref(), "cycles", Val::Text("last"));
+    let all_cycles = match c.text().as_deref() {
+        Some("last") => false,
+        Some("all") => true,
+        _ => {
+            return Err(setting(
+                &w,
+                format!("must be 'last' or 'all', got {}", c.repr()),
+            ));
+        }
+    };
+    let (u, w) = get("until_periodic", Some(sim), "until_periodic", Val::Null);
+    let until = match u.kind() {
+        Kind::Null => None,
+        _ => Some(real(&u, &w, 0.0, f64::INFINITY, true)?),
+    };
+    let (mc, w) = get("max_cycles", Some(sim), "max_cycles", Val::Null);
+    let max_cycles = match mc.kind() {
+        Kind::Null => cycles.max(100),
+        _ => {
+            let m = integer(&mc, &w, 1)?;
+            if until.is_some() && m < cycles {
+                return Err(setting(
+                    &w,
+                    format!(
+                        "({m}) is less than cycles ({cycles}), the least number of cycles a run \
+                         until_periodic takes"
+                    ),
+                ));
+            }
+            m
+        }
+    };
+    let (s, w) = get("start", Some(sim), "start", Val::Text("steady"));
+    let start = s
+        .text()
+        .filter(|t| STARTS.contains(&t.as_str()))
+        .ok_or_else(|| {
+            setting(
+                &w,
+                format!("must be one of {}, got {}", STARTS.join(", "), s.repr()),
+            )
+        })?;
+    let (atol, atol_where) = get("newton_atol", None, "", Val::Null);
+    let (r, w) = get("rho_infty", Some(sim), "rho_infty", Val::Float(0.5));
+    let rho_infty = real(&r, &w, 0.0, 1.0, false)?;
+    let (f, w) = get("segments", out.as_ref(), "segments", Val::Flag(true));
+    let segments = flag(&f, &w)?;
+    let newton_atol = match atol.kind() {
+        Kind::Null => None,
+        _ => Some(real(&atol, &atol_where, 0.0, f64::INFINITY, true)?),
+    };
+    let (n, w) = get("max_iterations", None, "", Val::Int(30));
+    let max_iterations = integer(&n, &w, 1)?;
+    let (t, w) = get("transport", None, "", Val::Flag(true));
+    let transport = flag(&t, &w)?;
+    Ok(Settings {
+        period,
+        cycles,
+        dt,
+        method,
+        output_every,
+        output_all_cycles: all_cycles,
+        until_periodic: until,
+        max_cycles,
+        rho_infty,
+        start,
+        segments,
+        newton_atol,
+        max_iterations,
+        transport,
+    })
+}
+
+/// An error of the setting `place` ("simulate: cycles"): its two parts are element and key.
+fn setting(place: &str, message: String) -> Error {
+    let (element, key) = place.split_once(": ").unwrap_or((place, ""));
+    err(element, format!("{key} {message}"))
+}
+
+/// An integer >= `minimum`: integers (and whole floats, read as the integer); bools and text
+/// are refused.
+fn integer<N: Node>(v: &Val<N>, place: &str, minimum: i64) -> Result<i64> {
+    let whole = match v.kind() {
+        Kind::Int => v.number().map(|x| x as i64),
+        Kind::Float => v.number().filter(|x| x.fract() == 0.0).map(|x| x as i64),
+        _ => None,
+    };
+    match whole {
+        Some(n) if n >= minimum => Ok(n),
+        Some(n) if v.kind() == Kind::Float => Err(setting(
+            place,
+            format!("must be an integer >= {minimum}, got {n}"),
+        )),
+        _ => Err(setting(
+            place,
+            format!("must be an integer >= {minimum}, got {}", v.repr()),
+        )),
+    }
+}
+
+/// A finite number in (low, high] (or [low, high] with `low_open` false); bools, text, NaN
+/// and infinities are refused.
+fn real<N: Node>(v: &Val<N>, place: &str, low: f64, high: f64, low_open: bool) -> Result<f64> {
+    let Some(x) = v
+        .number()
+        .filter(|_| matches!(v.kind(), Kind::Int | Kind::Float))
+    else {
+        return Err(setting(
+            place,
+            format!("must be a number, got {}", v.repr()),
+        ));
+    };
+    let inside = (if low_open { x > low } else { x >= low }) && x <= high;
+    if !x.is_finite() || !inside {
+        let op = if low_open { ">" } else { ">=" };
+        let upper = if high < f64::INFINITY {
+            format!(" and <= {}", py_g(high))
+        } else {
+            String::new()
+        };
+        return Err(setting(
+            place,
+            format!(
+                "must be a finite number {op} {}{upper}, got {}",
+                py_g(low),
+                v.repr()
+            ),
+        ));
+    }
+    Ok(x)
+}
+
+/// A true/false setting: `segments: "no"` is an error, not true.
+fn flag<N: Node>(v: &Val<N>, place: &str) -> Result<bool> {
+    if v.kind() != Kind::Bool {
+        return Err(setting(
+            place,
+            format!("must be true or false, got {}", v.repr()),
+        ));
+    }
+    Ok(v.truthy())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    #[test]
+    fn defaults_and_overrides() {
+        let s = resolve(&json!({"cycles": 3}), &json!({"dt": 1e-4}), Some(0.8)).unwrap();
+        assert_eq!((s.cycles, s.dt, s.max_cycles), (3, Some(1e-4), 100));
+        assert_eq!(s.output_every, 0.8 / 1000.0);
+        assert_eq!((s.method.as_str(), s.start.as_str()), ("auto", "steady"));
+        assert!(s.segments && s.transport && !s.output_all_cycles);
+    }
+
+    #[test]
+    fn errors_name_the_setting_its_place_and_value() {
+        let e = |sim: serde_json::Value, o: serde_json::Value| {
+            resolve(&sim, &o, None).unwrap_err().to_string()
+        };
+        assert_eq!(
+            e(json!({}), json!({"cycles": -2.0})),
+            "simulate: cycles must be an integer >= 1, got -2"
+        );
+        assert_eq!(
+            e(json!({"output": {"every": 0}}), json!({})),
+            "simulation output: every must be a finite number > 0, got 0"
+        );
+        assert_eq!(
+            e(json!({}), json!({"rho_infty": 2})),
+            "simulate: rho_infty must be a finite number >= 0 and <= 1, got 2"
+        );
+        assert_eq!(
+            e(json!({}), json!({"segmnts": true, "a": 1})),
+            "simulate: unknown option(s) a, segmnts"
+        );
+    }
+}
