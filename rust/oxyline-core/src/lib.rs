@@ -13,6 +13,7 @@ mod graetz;
 pub mod hemoglobin;
 pub mod impedance;
 pub mod integrate;
+pub mod model;
 pub mod network;
 pub mod output;
 pub mod run;

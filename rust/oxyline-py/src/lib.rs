@@ -25,6 +25,7 @@ mod checkpoint;
 mod closed_loop;
 mod ensemble;
 mod settings;
+mod trees;
 
 // the schema names the columns `Transport::observe` writes, one name per column
 const _: () = assert!(oxyline_core::transport::VESSEL_COLUMNS == SPECIES_VESSEL_VARIABLES.len());
@@ -995,6 +996,11 @@ fn chamber_elastance<'py>(
 mod _core {
     #[pymodule_export]
     use super::closed_loop::{closed_loop_o2, closed_loop_tree_flows};
+    #[pymodule_export]
+    use super::trees::{
+        facilitation_factor, grow_structured_tree, grow_trees, linear_facilitation_factor,
+        match_structured_tree, poiseuille_resistance, structured_tree_wall,
+    };
     #[pymodule_export]
     use super::{
         ModelError, Network, ResourceError, SolverError, UnstableTimeStep, chamber_elastance,
