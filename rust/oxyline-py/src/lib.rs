@@ -998,7 +998,7 @@ mod _core {
     use super::closed_loop::{closed_loop_o2, closed_loop_tree_flows};
     #[pymodule_export]
     use super::trees::{
-        facilitation_factor, grow_structured_tree, grow_trees, linear_facilitation_factor,
+        StructuredTrees, facilitation_factor, grow_structured_tree, linear_facilitation_factor,
         match_structured_tree, poiseuille_resistance, structured_tree_wall,
     };
     #[pymodule_export]

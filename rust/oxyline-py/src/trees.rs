@@ -182,46 +182,60 @@ pub fn grow_structured_tree<'py>(
     Ok((list, leaves))
 }
 
-/// Grow the structured-tree `trees` (node -> (condition dict, the terminal condition's
-/// canonical JSON)) into `parts`: the vessels after the model's own, each leaf with its copy
-/// of the terminal condition. Root radii default to the vessel ends at the nodes. Returns the
-/// number of tree vessels.
-#[pyfunction]
-pub fn grow_trees(
-    py: Python<'_>,
-    parts: &Bound<'_, NativeParts>,
-    trees: Vec<(String, Bound<'_, PyDict>, String)>,
-    length: f64,
-    modulus: f64,
-) -> PyResult<usize> {
-    let u = Units { length, modulus };
-    let mut read = Vec::with_capacity(trees.len());
-    for (node, bc, terminal) in &trees {
-        let input = tree_input(node, bc)?;
-        let terminal: BoundarySpec =
-            from_json(terminal).map_err(|e| model_error(node, format!("'terminal': {e}")))?;
-        read.push((node.clone(), input, terminal));
+/// The structured trees of a model, checked and grown by the core when the model is read
+/// (before its other elements, as their conditions come first in the error order), then moved
+/// into the parts the core assembles.
+#[pyclass(module = "oxyline._core")]
+pub struct StructuredTrees {
+    trees: Vec<(String, Grown)>,
+}
+
+#[pymethods]
+impl StructuredTrees {
+    /// `trees`: (node, condition dict, root radius in model units) per tree; `length`,
+    /// `modulus`: the model's unit factors.
+    #[new]
+    fn new(
+        py: Python<'_>,
+        trees: Vec<(String, Bound<'_, PyDict>, Bound<'_, PyAny>)>,
+        length: f64,
+        modulus: f64,
+    ) -> PyResult<Self> {
+        let u = Units { length, modulus };
+        let mut out = Vec::with_capacity(trees.len());
+        for (node, bc, root) in &trees {
+            let input = tree_input(node, bc)?;
+            let root = Root::Given(number(node, "root_radius", root)?);
+            let g = py
+                .detach(|| Tree::new(node, &input, root, u)?.grow())
+                .map_err(crate::to_py)?;
+            out.push((node.clone(), g));
+        }
+        Ok(StructuredTrees { trees: out })
     }
-    let mut parts = parts.borrow_mut();
-    let own = parts.vessels.len();
-    let mut grown = 0;
-    for (node, input, terminal) in read {
-        let root = match input.root_radius {
-            Some(r) => Root::Given(r),
-            None => {
-                let vessels = parts.vessels[..own].iter().flatten();
-                Root::Vessel(st::root_radius(&node, vessels).map_err(crate::to_py)?)
-            }
-        };
-        let g = py
-            .detach(|| Tree::new(&node, &input, root, u)?.grow())
-            .map_err(crate::to_py)?;
-        grown += g.vessels.len();
-        parts.vessels.extend(g.vessels.into_iter().map(Some));
-        let outlets = g.leaves.into_iter().map(|leaf| (leaf, terminal.clone()));
-        parts.outlets.extend(outlets);
+
+    /// The number of tree vessels.
+    fn vessel_count(&self) -> usize {
+        self.trees.iter().map(|(_, g)| g.vessels.len()).sum()
     }
-    Ok(grown)
+
+    /// Move the trees into `parts`: the vessels after the model's own, each leaf with its copy
+    /// of its tree's terminal condition (`terminals`: canonical JSON per tree, in order).
+    fn move_into(
+        &mut self,
+        parts: &Bound<'_, NativeParts>,
+        terminals: Vec<String>,
+    ) -> PyResult<()> {
+        let mut parts = parts.borrow_mut();
+        for ((node, g), terminal) in std::mem::take(&mut self.trees).into_iter().zip(terminals) {
+            let terminal: BoundarySpec =
+                from_json(&terminal).map_err(|e| model_error(&node, format!("'terminal': {e}")))?;
+            parts.vessels.extend(g.vessels.into_iter().map(Some));
+            let outlets = g.leaves.into_iter().map(|leaf| (leaf, terminal.clone()));
+            parts.outlets.extend(outlets);
+        }
+        Ok(())
+    }
 }
 
 /// (min_radius, terminal resistance) of the structured tree below `node` (root radius
