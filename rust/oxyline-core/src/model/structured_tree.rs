@@ -480,14 +480,28 @@ impl Tree {
     }
 }
 
-/// Steady (Poiseuille) resistance of a uniform tube: the core's segment resistance
-/// (docs/physics.md §1.1) of one segment of the whole length; tapered from `r_in` to `r_out`.
+/// Steady Poiseuille resistance ∫ 8μ/(π r⁴) dx of a tube tapered linearly from `r_in` to
+/// `r_out` (SI), in the closed form 8μ/(3π k) (r_in⁻³ − r_out⁻³), k = (r_out − r_in)/length,
+/// and 8μ l/(π r⁴) when uniform: the resistance of docs/physics.md §1.1 (the segment
+/// resistance of `segment::segment_rlc` is the same integral in a form stable as r_out → r_in;
+/// the two agree to rounding, test below), written as the importers' calibrations were.
 pub fn poiseuille_resistance(length: f64, r_in: f64, r_out: f64, viscosity: f64) -> f64 {
+    let pi = std::f64::consts::PI;
+    if (r_out - r_in).abs() < 1e-12 * r_in {
+        return 8.0 * viscosity * length / (pi * r_in.powf(4.0));
+    }
+    let k = (r_out - r_in) / length;
+    8.0 * viscosity / (pi * 3.0 * k) * (r_in.powf(-3.0) - r_out.powf(-3.0))
+}
+
+/// Steady resistance of a tree vessel of radius `r`: the core's segment resistance of one
+/// segment of the whole length (docs/physics.md §1.1).
+fn vessel_resistance(length: f64, r: f64, viscosity: f64) -> f64 {
     let blood = Blood {
         density: 0.0,
         viscosity,
     };
-    segment_rlc(length, r_in, r_out, blood, None, InertanceProfile::Flat).resistance
+    segment_rlc(length, r, r, blood, None, InertanceProfile::Flat).resistance
 }
 
 /// A tree's radius classes: the shape for the steady resistance.
@@ -531,8 +545,7 @@ impl Shape {
                     let (ci, cj) = (i + di, j + dj);
                     if exists(ci, cj) {
                         let r = self.radius(ci, cj);
-                        let vessel =
-                            poiseuille_resistance(self.length_ratio * r, r, r, self.viscosity);
+                        let vessel = vessel_resistance(self.length_ratio * r, r, self.viscosity);
                         g += 1.0 / (vessel + below[ci * cols + cj]);
                     }
                 }

@@ -297,3 +297,18 @@ fn numbers_are_written_as_percent_g() {
         assert_eq!(fmt_g(x), s);
     }
 }
+
+#[test]
+fn poiseuille_closed_form_is_the_segment_resistance() {
+    use crate::segment::{Blood, InertanceProfile, segment_rlc};
+    let blood = Blood {
+        density: 1050.0,
+        viscosity: MU,
+    };
+    for (l, a, b) in [(0.05, 2e-3, 2e-3), (0.05, 4e-3, 2e-3), (0.2, 1e-3, 1.3e-3)] {
+        let s = segment_rlc(l, a, b, blood, None, InertanceProfile::Flat).resistance;
+        // the same integral in two closed forms: rounding (the taper form loses a few digits
+        // to the difference r_in⁻³ − r_out⁻³)
+        assert!((poiseuille_resistance(l, a, b, MU) / s - 1.0).abs() < 1e-13);
+    }
+}
