@@ -186,7 +186,7 @@ impl WallLaw {
         match *self {
             WallLaw::KLaw { k1, k2, k3 } => {
                 let ehr = k1 * (k2 * r).exp() + k3;
-                if !(ehr > 0.0) {
+                if ehr.is_nan() || ehr <= 0.0 {
                     return Err(err(
                         node,
                         format!(
@@ -352,7 +352,7 @@ impl Tree {
             Root::Vessel(r) => r,
         };
         let max_vessels = input.max_vessels.unwrap_or(MAX_VESSELS);
-        if !(max_vessels >= 1.0) {
+        if max_vessels.is_nan() || max_vessels < 1.0 {
             return Err(err(
                 node,
                 format!(
@@ -567,7 +567,7 @@ impl Shape {
         min_radius: f64,
         tree_fraction: f64,
     ) -> Result<(f64, f64)> {
-        if !(total > 0.0) {
+        if total.is_nan() || total <= 0.0 {
             return Err(err(
                 node,
                 format!(
