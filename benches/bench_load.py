@@ -3,9 +3,10 @@
 loaded by the previous route (trees calibrated and grown in Python, handed over as vessel
 dicts) and by the current one (the core calibrates and grows them) in the same process.
 
-CPU seconds (``time.process_time``), best of ``--repeat`` loads; the core part of a tree load
-(``oxyline.model._network``: hand-over, parse, assembly, transport plan) is timed again on its
-own after each load.
+CPU seconds (``time.process_time``), best of ``--repeat`` loads. ``load_model`` builds the
+core network (hand-over of the native dicts, parse, assembly, transport plan); the core build
+from the canonical dicts (``oxyline.model._network``, the route of a model rebuilt from its
+canonical description) is timed on its own after each load.
 
     python benches/bench_load.py --depths 12 15 18 --repeat 3
     python benches/bench_load.py --depths --st-repeat 2      # adan56-st only
@@ -41,119 +42,64 @@ def measure(depth: int, config: str, repeat: int) -> dict[str, float]:
             best[k] = min(best.get(k, float("inf")), v)
         del m, n
         gc.collect()
-    best["python"] = best["load"] - best["core"]
     best["segments"] = segments
     return best
 
 
 # ---------------------------------------------------------------- the previous route
-# The structured-tree code as it was before the core grew the trees (python/oxyline, kept here
-# verbatim as the baseline of the comparison only): calibration per radius class and growth
-# into native vessel dicts in Python, then a load of the expanded plain model.
-
-OLUFSEN = {"k1": 2.0e6, "k2": -2253.0, "k3": 8.65e4}
+#: the revision whose python/oxyline/structured_tree.py is the previous route: trees calibrated
+#: and grown in Python, handed to the core as vessel dicts
+BEFORE = "5179ade"
 
 
-def _previous_dc_resistance(r0: float, a: float, b: float, lrr: float, rmin: float, mu: float,
-                            r_leaf: float) -> float:
-    memo: dict[tuple[int, int], float] = {}
+def previous_module(rev: str) -> Any:
+    """``oxyline.structured_tree`` as it was at ``rev`` (read with git), run against the
+    installed package."""
+    import importlib.util
+    import pathlib
+    import subprocess
+    import tempfile
 
-    def below(i: int, j: int) -> float:
-        if (i, j) not in memo:
-            g = 0.0
-            for di, dj in ((1, 0), (0, 1)):
-                r = a ** (i + di) * b ** (j + dj) * r0
-                if r >= rmin:
-                    g += 1.0 / (8.0 * mu * lrr / (math.pi * r**3) + below(i + di, j + dj))
-            memo[(i, j)] = r_leaf if g == 0.0 else 1.0 / g
-        return memo[(i, j)]
-
-    return below(0, 0)
-
-
-def _previous_condition(r0: float, total: float, mu: float) -> tuple[float, float]:
-    a, lrr = 0.9, 50.0
-    rmin = min(1e-4, a * r0)
-    while _previous_dc_resistance(r0, a, 0.6, lrr, rmin, mu, 0.0) > 0.9 * total:
-        rmin *= 1.05
-    lo, hi = 0.0, total * 2.0 ** 20
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        if _previous_dc_resistance(r0, a, 0.6, lrr, rmin, mu, mid) < total:
-            lo = mid
-        else:
-            hi = mid
-        if hi - lo <= 1e-15 * hi:
-            break
-    return rmin, 0.5 * (lo + hi)
+    repo = pathlib.Path(__file__).resolve().parent.parent
+    text = subprocess.run(["git", "show", f"{rev}:python/oxyline/structured_tree.py"],
+                          cwd=repo, capture_output=True, text=True, check=True).stdout
+    with tempfile.TemporaryDirectory() as tmp:
+        path = pathlib.Path(tmp) / "structured_tree_before.py"
+        path.write_text(text)
+        spec = importlib.util.spec_from_file_location("structured_tree_before", path)
+        assert spec is not None and spec.loader is not None
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+    return mod
 
 
-def _previous_grow(node: str, r0: float, rmin: float, dx: float | None) -> list[dict[str, Any]]:
-    a, b, lrr = 0.9, 0.6, 50.0
-    prefix = f"{node}/st/"
-    out: list[dict[str, Any]] = []
-    stack = [("b", b * r0), ("a", a * r0)]
-    while stack:
-        path, r = stack.pop()
-        if r < rmin:
-            continue
-        length = lrr * r
-        ehr = OLUFSEN["k1"] * math.exp(OLUFSEN["k2"] * r) + OLUFSEN["k3"]
-        v: dict[str, Any] = {"name": prefix + path,
-                             "from": node if len(path) == 1 else prefix + path[:-1],
-                             "to": prefix + path, "length": length, "radius": r,
-                             "wall_thickness": 0.1 * r, "youngs_modulus": ehr / 0.1}
-        if dx is not None:
-            v["segments"] = max(1, math.ceil(length / dx - 1e-9))
-        out.append(v)
-        stack.append((path + "b", b * r))
-        stack.append((path + "a", a * r))
-    return out
-
-
-def previous_route(base: dict[str, Any]) -> tuple[Any, dict[str, float]]:
+def previous_route(base: dict[str, Any], old: Any) -> tuple[Any, dict[str, float]]:
     """adan56-st by the previous route: (model, terminal resistance per outlet)."""
-    import oxyline
+    from oxyline import model as M
 
-    mu = float((base.get("blood") or {}).get("viscosity", 3.5e-3))
-    ends = {v["to"]: v for v in base["vessels"]}
-    vessels, bcs, leaf_r = list(base["vessels"]), {}, {}
-    for node, bc in base["boundary_conditions"].items():
-        if bc.get("type") != "rcr":
-            bcs[node] = bc
-            continue
-        v = ends[node]
-        r0 = float(v.get("radius_out", v.get("radius")))
-        rmin, leaf = _previous_condition(r0, bc["proximal_resistance"] + bc["distal_resistance"],
-                                         mu)
-        leaf_r[node] = leaf
-        grown = _previous_grow(node, r0, rmin, None)
-        sources = {g["from"] for g in grown}
-        for g in grown:
-            if g["to"] not in sources:
-                bcs[g["to"]] = {"type": "resistance", "resistance": leaf,
-                                "pressure": bc.get("pressure", 0.0)}
-        vessels.extend(grown)
-    data = {**base, "vessels": vessels, "boundary_conditions": bcs}
-    return oxyline.load_model(data), leaf_r
+    data = old.replace_windkessels(base)
+    leaf_r = {n: bc["terminal"]["resistance"] for n, bc in data["boundary_conditions"].items()
+              if bc.get("type") == "structured-tree"}
+    return old.build_with_trees(M._copy(dict(data)), M._build_native), leaf_r
 
 
-def current_route(base: dict[str, Any]) -> tuple[Any, dict[str, float]]:
-    import oxyline
+def current_route(base: dict[str, Any], old: Any) -> tuple[Any, dict[str, float]]:
+    from oxyline import model as M
     from oxyline.structured_tree import replace_windkessels
 
     data = replace_windkessels(base)
     leaf_r = {n: bc["terminal"]["resistance"] for n, bc in data["boundary_conditions"].items()
               if bc.get("type") == "structured-tree"}
-    return oxyline.load_model(data), leaf_r
+    return M.build_model(data), leaf_r
 
 
-def adan56_st(repeat: int) -> None:
+def adan56_st(repeat: int, before: str) -> None:
     import copy
 
     import oxyline
 
     base = oxyline.models.load_dict("adan56")
+    old = previous_module(before)
     best: dict[str, float] = {}
     results = {}
     for _ in range(repeat):
@@ -161,7 +107,7 @@ def adan56_st(repeat: int) -> None:
             data = copy.deepcopy(base)
             gc.collect()
             t0 = time.process_time()
-            m, leaf = route(data)
+            m, leaf = route(data, old)
             best[name] = min(best.get(name, math.inf), time.process_time() - t0)
             results[name] = (m.network.summary()["segments"], m.vessel_names, leaf)
             del m
@@ -172,7 +118,7 @@ def adan56_st(repeat: int) -> None:
     worst = max(abs(l1[k] / l0[k] - 1.0) for k in l0)
     assert worst < 1e-12, worst
     print(f"\nadan56-st: {len(n1)} vessels, {s1} segments; terminal resistances agree to "
-          f"{worst:.1e}")
+          f"{worst:.1e}; previous route: structured_tree.py at {before}")
     print("| route | load s (CPU) | µs/segment |")
     print("|---|---:|---:|")
     for name in ("previous", "current"):
@@ -186,19 +132,20 @@ def main() -> None:
     ap.add_argument("--config", default="o2-k")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--st-repeat", type=int, default=2, help="adan56-st loads per route (0: none)")
+    ap.add_argument("--before", default=BEFORE, help="revision of the previous route")
     a = ap.parse_args()
     if a.depths:
         print(f"tree family ({a.config})")
-        print("| segments | load_model s | µs/seg | core µs/seg (hand-over, build) | "
-              "rest µs/seg |")
-        print("|---:|---:|---:|---:|---:|")
+        print("| segments | load_model + core build s | µs/seg | core build from canonical "
+              "dicts µs/seg |")
+        print("|---:|---:|---:|---:|")
     for d in a.depths:
         r = measure(d, a.config, 1 if d >= 18 else a.repeat)
         us = 1e6 / r["segments"]
         print(f"| {r['segments']} | {r['load']:.3f} | {r['load'] * us:.2f} | {r['core'] * us:.2f} "
-              f"| {r['python'] * us:.2f} |", flush=True)
+              "|", flush=True)
     if a.st_repeat:
-        adan56_st(a.st_repeat)
+        adan56_st(a.st_repeat, a.before)
 
 
 if __name__ == "__main__":

@@ -227,6 +227,7 @@ impl StructuredTrees {
         terminals: Vec<String>,
     ) -> PyResult<()> {
         let mut parts = parts.borrow_mut();
+        parts.vessels.reserve(self.vessel_count());
         for ((node, g), terminal) in std::mem::take(&mut self.trees).into_iter().zip(terminals) {
             let terminal: BoundarySpec =
                 from_json(&terminal).map_err(|e| model_error(&node, format!("'terminal': {e}")))?;

@@ -520,10 +520,15 @@ impl Shape {
         self.alpha.powf(i as f64) * self.beta.powf(j as f64) * self.root_radius
     }
 
-    /// Steady resistance below the root (m-radius `min_radius`) with every leaf ending at
-    /// `r_leaf`. A subtree depends only on its root radius α^i β^j r0, so it is computed once
-    /// per class (i, j), deepest classes first.
+    /// Steady resistance below the root (tree grown to `min_radius`) with every leaf ending
+    /// at `r_leaf`.
     pub fn resistance(&self, min_radius: f64, r_leaf: f64) -> f64 {
+        self.classes(min_radius).resistance(r_leaf)
+    }
+
+    /// The radius classes of the tree grown to `min_radius`, with each class's vessel
+    /// resistance (None: no vessel of that class).
+    fn classes(&self, min_radius: f64) -> Classes {
         let exists = |i: usize, j: usize| self.radius(i, j) >= min_radius;
         let mut imax = 0;
         while exists(imax + 1, 0) && imax < MAX_CLASSES {
@@ -534,25 +539,17 @@ impl Shape {
             jmax += 1;
         }
         let cols = jmax + 2;
-        let mut below = vec![0.0; (imax + 2) * cols];
-        for i in (0..=imax).rev() {
-            for j in (0..=jmax).rev() {
-                if i + j > 0 && !exists(i, j) {
-                    continue;
+        let mut vessel = vec![None; (imax + 2) * cols];
+        for i in 0..imax + 2 {
+            for j in 0..cols {
+                if i + j > 0 && exists(i, j) {
+                    let r = self.radius(i, j);
+                    vessel[i * cols + j] =
+                        Some(vessel_resistance(self.length_ratio * r, r, self.viscosity));
                 }
-                let mut g = 0.0;
-                for (di, dj) in [(1, 0), (0, 1)] {
-                    let (ci, cj) = (i + di, j + dj);
-                    if exists(ci, cj) {
-                        let r = self.radius(ci, cj);
-                        let vessel = vessel_resistance(self.length_ratio * r, r, self.viscosity);
-                        g += 1.0 / (vessel + below[ci * cols + cj]);
-                    }
-                }
-                below[i * cols + j] = if g == 0.0 { r_leaf } else { 1.0 / g };
             }
         }
-        below[0]
+        Classes { imax, cols, vessel }
     }
 
     /// The structured tree below `node` whose steady resistance is `total` (SI): (min_radius,
@@ -578,7 +575,8 @@ impl Shape {
         }
         let largest = self.alpha * self.root_radius;
         let mut rmin = min_radius.min(largest); // at least the a-daughter
-        while self.resistance(rmin, 0.0) > tree_fraction * total {
+        let mut classes = self.classes(rmin);
+        while classes.resistance(0.0) > tree_fraction * total {
             rmin *= 1.05;
             if rmin > largest {
                 return Err(err(
@@ -591,11 +589,12 @@ impl Shape {
                     ),
                 ));
             }
+            classes = self.classes(rmin);
         }
         let (mut lo, mut hi) = (0.0, total * 2f64.powi(20));
         for _ in 0..200 {
             let mid = 0.5 * (lo + hi);
-            if self.resistance(rmin, mid) < total {
+            if classes.resistance(mid) < total {
                 lo = mid;
             } else {
                 hi = mid;
@@ -605,6 +604,38 @@ impl Shape {
             }
         }
         Ok((rmin, 0.5 * (lo + hi)))
+    }
+}
+
+/// The radius classes (i, j) of a tree, row-major with `cols` columns, and each one's vessel
+/// resistance: a subtree depends only on its root radius α^i β^j r0, so the steady resistance
+/// is computed once per class, deepest classes first.
+struct Classes {
+    imax: usize,
+    cols: usize,
+    vessel: Vec<Option<f64>>,
+}
+
+impl Classes {
+    /// Steady resistance below the root with every leaf ending at `r_leaf`.
+    fn resistance(&self, r_leaf: f64) -> f64 {
+        let cols = self.cols;
+        let mut below = vec![0.0; self.vessel.len()];
+        for i in (0..=self.imax).rev() {
+            for j in (0..cols - 1).rev() {
+                if i + j > 0 && self.vessel[i * cols + j].is_none() {
+                    continue;
+                }
+                let mut g = 0.0;
+                for c in [(i + 1) * cols + j, i * cols + j + 1] {
+                    if let Some(vessel) = self.vessel[c] {
+                        g += 1.0 / (vessel + below[c]);
+                    }
+                }
+                below[i * cols + j] = if g == 0.0 { r_leaf } else { 1.0 / g };
+            }
+        }
+        below[0]
     }
 }
 
