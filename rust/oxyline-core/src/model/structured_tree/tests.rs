@@ -312,3 +312,36 @@ fn poiseuille_closed_form_is_the_segment_resistance() {
         assert!((poiseuille_resistance(l, a, b, MU) / s - 1.0).abs() < 1e-13);
     }
 }
+
+#[test]
+fn root_radius_is_the_vessel_end_at_the_node() {
+    let mut a = VesselSpec::blank();
+    (a.name, a.from, a.to) = ("a".into(), "in".into(), "out".into());
+    a.geometry = Some(GeometrySpec {
+        length: 0.1,
+        radius_in: 2e-3,
+        radius_out: 1e-3,
+        wall_thickness: None,
+        youngs_modulus: None,
+        poisson_ratio: 0.5,
+    });
+    let mut lumped = VesselSpec::blank();
+    (lumped.name, lumped.from, lumped.to) = ("r".into(), "out".into(), "x".into());
+    let vessels = [a, lumped];
+    assert_eq!(root_radius("out", &vessels).unwrap(), 1e-3);
+    assert_eq!(root_radius("in", &vessels).unwrap(), 2e-3);
+    let e = root_radius("x", &vessels).unwrap_err().to_string();
+    assert!(
+        e.ends_with("vessel 'r' at this node has no radius: give 'root_radius'"),
+        "{e}"
+    );
+    let e = root_radius("nowhere", &vessels).unwrap_err().to_string();
+    assert!(e.ends_with("no vessel ends at this node"), "{e}");
+    // the SI radius of the vessel is the root radius as given in SI
+    let i = input(0.9, 0.6, 4e-4);
+    let given = Tree::new("out", &i, Root::Given(1e-3), Units::SI).unwrap();
+    assert_eq!(
+        Tree::new("out", &i, Root::Vessel(1e-3), Units::SI).unwrap(),
+        given
+    );
+}
