@@ -1,19 +1,24 @@
-"""Load time of the whole-tree family of ``bench_scale.py`` (issue 9, item 3), split into the core
-(``oxyline.model._network``: the hand-over of the canonical model — vessels and plain outlets
-as the dicts themselves, the rest as JSON text — then parse, assembly and transport plan) and
-the rest of the Python side (copy, checks, canonical dicts).
+"""Load time: ``load_model`` + core build per segment of the whole-tree family of
+``bench_scale.py`` (with oxygen by default), and the structured-tree model ``adan56-st``
+loaded by the previous route (trees calibrated and grown in Python, handed over as vessel
+dicts) and by the current one (the core calibrates and grows them) in the same process.
 
-CPU seconds (``time.process_time``), best of ``--repeat`` loads in one process; the core part
-is timed again on its own after each load.
+CPU seconds (``time.process_time``), best of ``--repeat`` loads. ``load_model`` builds the
+core network (hand-over of the native dicts, parse, assembly, transport plan); the core build
+from the canonical dicts (``oxyline.model._network``, the route of a model rebuilt from its
+canonical description) is timed on its own after each load.
 
     python benches/bench_load.py --depths 12 15 18 --repeat 3
+    python benches/bench_load.py --depths --st-repeat 2      # adan56-st only
 """
 
 from __future__ import annotations
 
 import argparse
 import gc
+import math
 import time
+from typing import Any
 
 from bench_scale import tree
 
@@ -37,24 +42,110 @@ def measure(depth: int, config: str, repeat: int) -> dict[str, float]:
             best[k] = min(best.get(k, float("inf")), v)
         del m, n
         gc.collect()
-    best["python"] = best["load"] - best["core"]
     best["segments"] = segments
     return best
 
 
+# ---------------------------------------------------------------- the previous route
+#: the revision whose python/oxyline/structured_tree.py is the previous route: trees calibrated
+#: and grown in Python, handed to the core as vessel dicts
+BEFORE = "5179ade"
+
+
+def previous_module(rev: str) -> Any:
+    """``oxyline.structured_tree`` as it was at ``rev`` (read with git), run against the
+    installed package."""
+    import importlib.util
+    import pathlib
+    import subprocess
+    import tempfile
+
+    repo = pathlib.Path(__file__).resolve().parent.parent
+    text = subprocess.run(["git", "show", f"{rev}:python/oxyline/structured_tree.py"],
+                          cwd=repo, capture_output=True, text=True, check=True).stdout
+    with tempfile.TemporaryDirectory() as tmp:
+        path = pathlib.Path(tmp) / "structured_tree_before.py"
+        path.write_text(text)
+        spec = importlib.util.spec_from_file_location("structured_tree_before", path)
+        assert spec is not None and spec.loader is not None
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+    return mod
+
+
+def previous_route(base: dict[str, Any], old: Any) -> tuple[Any, dict[str, float]]:
+    """adan56-st by the previous route: (model, terminal resistance per outlet)."""
+    from oxyline import model as M
+
+    data = old.replace_windkessels(base)
+    leaf_r = {n: bc["terminal"]["resistance"] for n, bc in data["boundary_conditions"].items()
+              if bc.get("type") == "structured-tree"}
+    return old.build_with_trees(M._copy(dict(data)), M._build_native), leaf_r
+
+
+def current_route(base: dict[str, Any], old: Any) -> tuple[Any, dict[str, float]]:
+    from oxyline import model as M
+    from oxyline.structured_tree import replace_windkessels
+
+    data = replace_windkessels(base)
+    leaf_r = {n: bc["terminal"]["resistance"] for n, bc in data["boundary_conditions"].items()
+              if bc.get("type") == "structured-tree"}
+    return M.build_model(data), leaf_r
+
+
+def adan56_st(repeat: int, before: str) -> None:
+    import copy
+
+    import oxyline
+
+    base = oxyline.models.load_dict("adan56")
+    old = previous_module(before)
+    best: dict[str, float] = {}
+    results = {}
+    for _ in range(repeat):
+        for name, route in (("previous", previous_route), ("current", current_route)):
+            data = copy.deepcopy(base)
+            gc.collect()
+            t0 = time.process_time()
+            m, leaf = route(data, old)
+            best[name] = min(best.get(name, math.inf), time.process_time() - t0)
+            results[name] = (m.network.summary()["segments"], m.vessel_names, leaf)
+            del m
+    (s0, n0, l0), (s1, n1, l1) = results["previous"], results["current"]
+    # the same tree: vessel names and order, segments; the terminal resistances by the same
+    # bisection on sums in another order (rounding)
+    assert n0 == n1 and s0 == s1, (len(n0), len(n1), s0, s1)
+    worst = max(abs(l1[k] / l0[k] - 1.0) for k in l0)
+    assert worst < 1e-12, worst
+    print(f"\nadan56-st: {len(n1)} vessels, {s1} segments; terminal resistances agree to "
+          f"{worst:.1e}; previous route: structured_tree.py at {before}")
+    print("| route | load s (CPU) | µs/segment |")
+    print("|---|---:|---:|")
+    for name in ("previous", "current"):
+        print(f"| {name} | {best[name]:.2f} | {best[name] * 1e6 / s1:.2f} |")
+    print(f"| speed-up | {best['previous'] / best['current']:.1f}x | |", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--depths", type=int, nargs="+", default=[12, 15])
+    ap.add_argument("--depths", type=int, nargs="*", default=[12, 15, 18])
     ap.add_argument("--config", default="o2-k")
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--st-repeat", type=int, default=2, help="adan56-st loads per route (0: none)")
+    ap.add_argument("--before", default=BEFORE, help="revision of the previous route")
     a = ap.parse_args()
-    print("| segments | load_model s | µs/seg | core µs/seg (hand-over, build) | rest µs/seg |")
-    print("|---:|---:|---:|---:|---:|")
+    if a.depths:
+        print(f"tree family ({a.config})")
+        print("| segments | load_model + core build s | µs/seg | core build from canonical "
+              "dicts µs/seg |")
+        print("|---:|---:|---:|---:|")
     for d in a.depths:
         r = measure(d, a.config, 1 if d >= 18 else a.repeat)
         us = 1e6 / r["segments"]
         print(f"| {r['segments']} | {r['load']:.3f} | {r['load'] * us:.2f} | {r['core'] * us:.2f} "
-              f"| {r['python'] * us:.2f} |", flush=True)
+              "|", flush=True)
+    if a.st_repeat:
+        adan56_st(a.st_repeat, a.before)
 
 
 if __name__ == "__main__":

@@ -193,7 +193,9 @@ class Model:
 def _get_canonical(self: Model) -> dict[str, Any]:
     canon = self.__dict__.get("_canonical")
     if canon is None and self._rebuild is not None:
-        canon = _unassembled(self._rebuild).canonical
+        from oxyline.structured_tree import expanded
+
+        canon = _unassembled(expanded(self._rebuild)).canonical
         self.__dict__["_canonical"] = canon
     return canon
 
@@ -284,12 +286,15 @@ def _build(data: dict[str, Any]) -> Model:
     return _build_native(data)
 
 
-def _build_native(data: dict[str, Any]) -> Model:
-    """:func:`_build` of a model without structured-tree conditions."""
+def _build_native(data: dict[str, Any], grow: Callable[[Any], Any] | None = None) -> Model:
+    """:func:`_build` of a model without structured-tree conditions; ``grow`` adds the
+    structured trees to the parts the core reads (:func:`oxyline.structured_tree.build_with_trees`)."""
     # the bulk of the vessels and outlets goes to the core without canonical dicts; the
     # canonical description is written in full from ``source`` when asked for
     reader = _NativeReader()
     model = _unassembled(data, reader.vessels, reader.boundary_conditions)
+    if grow is not None:
+        grow(reader.parts)
     names = reader.parts.names()
     # assemble now so that invalid models fail at load time
     model._network = _network(model.canonical, model.simulation.get("max_memory"), reader.parts)

@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from oxyline import _core
 from oxyline.errors import ModelError
 
 MMHG = 133.33                 # Pa per mmHg, PWDB's conversion factor
@@ -259,11 +260,9 @@ def windkessels(geo: list[dict[str, Any]], k3_cgs: float, pvc: float = 1.0
 
 
 def poiseuille_resistance(length: float, r_in: float, r_out: float, mu: float = MU) -> float:
-    """Exact Poiseuille resistance of a linearly tapered tube: int 8 mu / (pi r^4) dx."""
-    if abs(r_out - r_in) < 1e-12 * r_in:
-        return 8 * mu * length / (math.pi * r_in ** 4)
-    k = (r_out - r_in) / length
-    return 8 * mu / (math.pi * 3 * k) * (r_in ** -3 - r_out ** -3)
+    """Exact Poiseuille resistance of a linearly tapered tube (the core's segment resistance,
+    docs/physics.md §1.1)."""
+    return float(_core.poiseuille_resistance(length, r_in, r_out, mu))
 
 
 @lru_cache(maxsize=256)

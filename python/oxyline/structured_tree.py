@@ -1,100 +1,38 @@
 """Structured-tree outlets (Olufsen 1999, Ann Biomed Eng 27; Olufsen et al. 2000): below an
-outlet, an asymmetric binary tree of small arteries down to a minimum radius, expanded on load
-into ordinary native vessels. See docs/structured-tree.md.
+outlet, an asymmetric binary tree of small arteries down to a minimum radius. The core grows
+it (``rust/oxyline-core/src/model/structured_tree.rs``: the growth rule, the closed-form
+vessel count, the wall law, the steady resistance); this module orchestrates. See
+docs/structured-tree.md.
 
 Growth rule: the tree's root is the outlet node. A node whose radius is r has daughters of radius
 ``alpha·r`` (path letter ``a``) and ``beta·r`` (``b``), the root having ``root_radius``. A
 daughter exists only if its radius is >= ``min_radius``; a tree vessel without daughters ends at
 the ``terminal`` condition. A vessel of radius r has length ``length_ratio·r`` and is named
-``<node>/st/<path>``; its distal node has the same name. Only geometry and wall data are
-written here: the core computes every segment's R, L and C from them.
+``<node>/st/<path>``; its distal node has the same name.
 
-The translation is a model-to-model step like an importer: :func:`expand` rewrites a native
-model dict, and :func:`oxyline.model._build` calls it when a boundary condition has
-``type: structured-tree``.
+On load (:func:`build_with_trees`, which :func:`oxyline.model._build` calls when a boundary
+condition has ``type: structured-tree``) the core reads each condition dict and grows its tree
+straight into the model it assembles: no vessel dict is written. :func:`expand` writes the
+expanded native model (for the canonical description and for editing).
 """
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable, Mapping
 from typing import Any
 
+from oxyline import _core
 from oxyline.errors import ModelError
 from oxyline.units import factor
 
 TYPE = "structured-tree"
-KEYS = {"type", "alpha", "beta", "length_ratio", "min_radius", "root_radius", "stiffness",
-        "terminal", "segments", "max_length", "max_vessels"}
-#: Olufsen et al. (2000) Eh/r = k1 exp(k2 r) + k3, converted to SI (Pa, 1/m, Pa)
-OLUFSEN_STIFFNESS = {"k1": 2.0e6, "k2": -2253.0, "k3": 8.65e4}
-#: wall thickness / radius written with the {k1, k2, k3} law, whose value fixes only E·h/r
-#: (all the thin-wall compliance depends on)
-K_LAW_THICKNESS_RATIO = 0.1
 MAX_VESSELS = 2_000_000
 
 
 def _err(node: str, message: str) -> ModelError:
     return ModelError(f"boundary condition '{node}' ({TYPE}): {message}")
-
-
-def _num(node: str, key: str, value: Any, lo: float = 0.0, hi: float = math.inf,
-         lo_open: bool = True, hi_open: bool = True) -> float:
-    """A finite number in (lo, hi) (closed ends where asked), named by its key."""
-    if isinstance(value, str):
-        try:
-            value = float(value)
-        except ValueError:
-            pass
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise _err(node, f"'{key}' must be a finite number, got {value!r}")
-    v = float(value)
-    if (v <= lo if lo_open else v < lo) or (v >= hi if hi_open else v > hi):
-        lb, rb = "(" if lo_open else "[", ")" if hi_open else "]"
-        raise _err(node, f"'{key}' must be in {lb}{lo:g}, {hi:g}{rb}, got {v:g}")
-    return v
-
-
-def _wall(node: str, stiffness: Any, L: float, E: float) -> Callable[[float], tuple[float, float]]:
-    """(youngs_modulus, wall_thickness) of a tree vessel of radius r (SI) from ``stiffness``."""
-    s = OLUFSEN_STIFFNESS if stiffness is None else stiffness
-    if not isinstance(s, Mapping):
-        raise _err(node, f"'stiffness' must be a mapping, got {stiffness!r}")
-    keys = set(s)
-    if keys == {"k1", "k2", "k3"}:
-        given = stiffness is not None
-        k1 = E * _num(node, "stiffness.k1", s["k1"], -math.inf) if given else s["k1"]
-        k2 = _num(node, "stiffness.k2", s["k2"], -math.inf) / L if given else s["k2"]
-        k3 = E * _num(node, "stiffness.k3", s["k3"], -math.inf) if given else s["k3"]
-
-        def k_law(r: float) -> tuple[float, float]:
-            ehr = k1 * math.exp(k2 * r) + k3
-            if not ehr > 0:
-                raise _err(node, f"stiffness gives E·h/r = {ehr:g} Pa <= 0 at radius {r:g} m")
-            return ehr / K_LAW_THICKNESS_RATIO, K_LAW_THICKNESS_RATIO * r
-
-        return k_law
-    if keys == {"youngs_modulus", "thickness_ratio"}:
-        e = E * _num(node, "stiffness.youngs_modulus", s["youngs_modulus"])
-        ratio = _num(node, "stiffness.thickness_ratio", s["thickness_ratio"])
-        return lambda r: (e, ratio * r)
-    raise _err(node, f"'stiffness' needs {{k1, k2, k3}} or {{youngs_modulus, thickness_ratio}}, "
-                     f"got keys {sorted(keys)}")
-
-
-def tree_size(alpha: float, beta: float, root_radius: float, min_radius: float) -> int:
-    """Number of tree vessels, counted without growing the tree: radii only shrink along a
-    path, so a vessel exists iff its own radius alpha^i beta^j r0 >= min_radius, and there are
-    C(i + j, i) paths with i a's and j b's."""
-    n, i = 0, 0
-    while alpha**i * root_radius >= min_radius:
-        j = 0
-        while alpha**i * beta**j * root_radius >= min_radius:
-            if i + j > 0:
-                n += math.comb(i + j, i)
-            j += 1
-        i += 1
-    return n
 
 
 def structured_tree(node: str, *, root_radius: float, alpha: float = 0.9, beta: float = 0.6,
@@ -103,8 +41,9 @@ def structured_tree(node: str, *, root_radius: float, alpha: float = 0.9, beta: 
                     max_length: float | None = None, max_vessels: int = MAX_VESSELS,
                     units: str = "SI") -> list[dict[str, Any]]:
     """The native vessels of the structured tree below outlet ``node`` (parents before
-    daughters). Leaves end at nodes ``<node>/st/<path>`` that no vessel leaves: give them a
-    boundary condition (the ``structured-tree`` condition applies its ``terminal`` one).
+    daughters), grown by the core. Leaves end at nodes ``<node>/st/<path>`` that no vessel
+    leaves: give them a boundary condition (the ``structured-tree`` condition applies its
+    ``terminal`` one).
 
     Lengths and moduli are in ``units`` (``stiffness`` k1, k3 as moduli, k2 per length);
     ``stiffness`` defaults to Olufsen et al. (2000), E·h/r = 2e6 e^(-2253 r) + 8.65e4 Pa.
@@ -114,57 +53,20 @@ def structured_tree(node: str, *, root_radius: float, alpha: float = 0.9, beta: 
     >>> [v["name"] for v in vs]
     ['out/st/a', 'out/st/aa', 'out/st/aaa', 'out/st/aaaa', 'out/st/aaaaa', 'out/st/b']
     """
-    L, E = factor(units, "length"), factor(units, "modulus")
-    a = _num(node, "alpha", alpha, 0.0, 1.0)
-    b = _num(node, "beta", beta, 0.0, 1.0)
-    lrr = _num(node, "length_ratio", length_ratio)
-    rmin = L * _num(node, "min_radius", min_radius)
-    r0 = L * _num(node, "root_radius", root_radius)
-    if isinstance(max_vessels, bool) or not isinstance(max_vessels, (int, float)) \
-            or not max_vessels >= 1:
-        raise _err(node, f"'max_vessels' must be a number >= 1, got {max_vessels!r}")
-    if segments is not None and max_length is not None:
-        raise _err(node, "give 'segments' or 'max_length', not both")
-    if segments is not None and (isinstance(segments, bool) or not isinstance(segments, int)
-                                 or segments < 1):
-        raise _err(node, f"'segments' must be an integer >= 1, got {segments!r}")
-    dx = None if max_length is None else L * _num(node, "max_length", max_length)
-    wall = _wall(node, stiffness, L, E)
-    n = tree_size(a, b, r0, rmin)
-    if n > max_vessels:
-        raise _err(node, f"the tree has {n} vessels, more than max_vessels = {max_vessels:g} "
-                         f"(raise min_radius = {rmin:g} m or max_vessels)")
-    if n == 0:
-        raise _err(node, f"no daughter reaches min_radius = {rmin:g} m (root radius {r0:g} m, "
-                         f"alpha = {a:g})")
-    return _grow(node, a, b, lrr, rmin, r0, wall, segments, dx, L, E)
+    condition = {"alpha": alpha, "beta": beta, "length_ratio": length_ratio,
+                 "min_radius": min_radius, "stiffness": stiffness, "segments": segments,
+                 "max_length": max_length, "max_vessels": max_vessels}
+    vessels, _ = _grow(node, condition, root_radius, units)
+    return vessels
 
 
-def _grow(node: str, a: float, b: float, lrr: float, rmin: float, r0: float,
-          wall: Callable[[float], tuple[float, float]], segments: int | None, dx: float | None,
-          L: float, E: float) -> list[dict[str, Any]]:
-    """Depth-first growth (SI inside, vessels written in the caller's units)."""
-    prefix = f"{node}/st/"
-    out: list[dict[str, Any]] = []
-    stack = [("b", b * r0), ("a", a * r0)]  # popped a first: a-subtree before b
-    while stack:
-        path, r = stack.pop()
-        if r < rmin:
-            continue
-        length = lrr * r
-        e, h = wall(r)
-        v: dict[str, Any] = {"name": prefix + path,
-                             "from": node if len(path) == 1 else prefix + path[:-1],
-                             "to": prefix + path, "length": length / L, "radius": r / L,
-                             "wall_thickness": h / L, "youngs_modulus": e / E}
-        if segments is not None:
-            v["segments"] = segments
-        elif dx is not None:
-            v["segments"] = max(1, math.ceil(length / dx - 1e-9))
-        out.append(v)
-        stack.append((path + "b", b * r))
-        stack.append((path + "a", a * r))
-    return out
+def _grow(node: str, condition: Mapping[str, Any], root_radius: Any, units: str
+          ) -> tuple[list[dict[str, Any]], list[str]]:
+    """(vessel dicts in ``units``, leaf nodes) of the tree of ``condition`` at ``node``."""
+    if not isinstance(condition, dict):
+        condition = dict(condition)
+    return _core.grow_structured_tree(node, condition, root_radius, factor(units, "length"),
+                                      factor(units, "modulus"))
 
 
 def _root_radius(data: Mapping[str, Any], node: str) -> float:
@@ -188,9 +90,16 @@ def has_trees(data: Mapping[str, Any]) -> bool:
         isinstance(bc, Mapping) and bc.get("type") == TYPE for bc in bcs.values())
 
 
+def _terminal(node: str, bc: Mapping[str, Any]) -> Mapping[str, Any]:
+    terminal = bc.get("terminal", {"type": "pressure", "value": 0.0})
+    if not isinstance(terminal, Mapping) or terminal.get("type") == TYPE:
+        raise _err(node, f"'terminal' must be an outlet condition, got {terminal!r}")
+    return terminal
+
+
 def expand(data: Mapping[str, Any]) -> tuple[dict[str, Any], set[str]]:
-    """``data`` with every structured-tree condition replaced by its vessels and terminal
-    conditions, and the names of the tree vessels."""
+    """``data`` with every structured-tree condition replaced by its vessels (dicts written
+    by the core) and terminal conditions, and the names of the tree vessels."""
     units = str(data.get("units", "SI"))
     vessels = list(data.get("vessels") or [])
     bcs: dict[str, Any] = {}
@@ -200,96 +109,73 @@ def expand(data: Mapping[str, Any]) -> tuple[dict[str, Any], set[str]]:
             bcs[node] = bc
             continue
         node = str(node)
-        unknown = set(bc) - KEYS
-        if unknown:
-            raise _err(node, f"unknown key '{min(unknown)}' (allowed: "
-                             f"{', '.join(sorted(KEYS))})")
-        kw = {k: bc[k] for k in KEYS - {"type", "terminal", "root_radius"} if k in bc}
         root = bc["root_radius"] if "root_radius" in bc else _root_radius(data, node)
-        grown = structured_tree(node, root_radius=root, units=units, **kw)
-        terminal = bc.get("terminal", {"type": "pressure", "value": 0.0})
-        if not isinstance(terminal, Mapping) or terminal.get("type") == TYPE:
-            raise _err(node, f"'terminal' must be an outlet condition, got {terminal!r}")
-        sources = {v["from"] for v in grown}
-        tree.update([v["name"] for v in grown])
-        for to in [v["to"] for v in grown]:
-            if to not in sources:
-                bcs[to] = dict(terminal)
+        grown, leaves = _grow(node, bc, root, units)
+        terminal = _terminal(node, bc)
+        tree.update(v["name"] for v in grown)
+        for leaf in leaves:
+            bcs[leaf] = dict(terminal)
         vessels.extend(grown)
     out = dict(data)
     out["vessels"], out["boundary_conditions"] = vessels, bcs
     return out, tree
 
 
-def build_with_trees(data: dict[str, Any], build_native: Callable[[dict[str, Any]], Any]) -> Any:
-    """The model of ``data`` (which has structured-tree conditions): expanded, built by
-    ``build_native``, with ``data`` kept as its source and tree vessels out of the default
-    output selection."""
-    expanded, tree = expand(data)
-    model = build_native(expanded)
+def expanded(data: dict[str, Any]) -> dict[str, Any]:
+    """``data``, its structured trees expanded if it has any."""
+    return expand(data)[0] if has_trees(data) else data
+
+
+def build_with_trees(data: dict[str, Any], build_native: Callable[..., Any]) -> Any:
+    """The model of ``data`` (which has structured-tree conditions): the rest of the model
+    read as usual, each tree grown by the core into the parts it assembles (after the
+    model's own vessels, each leaf with its copy of the terminal condition), ``data`` kept
+    as its source and tree vessels out of the default output selection."""
+    from oxyline.model import _boundary_conditions
+
+    units = str(data.get("units", "SI"))
+    rest: dict[str, Any] = {}
+    trees: list[tuple[str, dict[str, Any], Any]] = []
+    for node, bc in data["boundary_conditions"].items():
+        if not (isinstance(bc, Mapping) and bc.get("type") == TYPE):
+            rest[node] = bc
+            continue
+        node = str(node)
+        root = bc["root_radius"] if "root_radius" in bc else _root_radius(data, node)
+        trees.append((node, dict(bc), root))
+    # checked and grown first (their errors before the other elements'), moved in on assembly
+    grown = _core.StructuredTrees(trees, factor(units, "length"), factor(units, "modulus"))
+    # each terminal condition converted once (any outlet condition), copied per leaf
+    terminals = []
+    for node, bc, _ in trees:
+        canon, _ = _boundary_conditions({node: _terminal(node, bc)}, units)
+        terminals.append(json.dumps(canon[node]))
+    model = build_native({**data, "boundary_conditions": rest},
+                         lambda parts: grown.move_into(parts, terminals))
     model.source = data
-    # the model's own vessels come first in ``expanded`` (the tree vessels are appended), with
-    # the names and output flags of their canonical form: reading ``model.canonical`` would
-    # write its released description again (a second pass of the whole conversion)
-    own = expanded["vessels"][:len(data.get("vessels") or [])]
-    names = (str(v["name"]) for v in own if isinstance(v, Mapping) and v.get("output", True))
-    model.default_output_vessels = [n for n in names if n not in tree]
+    if model._rebuild is not None:  # the released description is written from ``data``
+        model._rebuild = data
+    own = (v for v in data.get("vessels") or [] if isinstance(v, Mapping))
+    model.default_output_vessels = [str(v["name"]) for v in own if v.get("output", True)]
     return model
 
 
-__all__ = ["structured_tree", "tree_size"]
-
-
-def _dc_resistance(r0: float, a: float, b: float, lrr: float, rmin: float, mu: float,
-                   r_leaf: float) -> float:
-    """Steady resistance below a node of radius r0 with every leaf ending at ``r_leaf``
-    (Poiseuille, as the core's segment resistance of docs/physics.md §1.1). A subtree depends
-    only on its root radius alpha^i beta^j r0, so it is computed once per (i, j)."""
-    memo: dict[tuple[int, int], float] = {}
-
-    def below(i: int, j: int) -> float:  # resistance from node (i, j) to the leaves
-        if (i, j) not in memo:
-            g = 0.0
-            for di, dj in ((1, 0), (0, 1)):
-                r = a ** (i + di) * b ** (j + dj) * r0
-                if r >= rmin:
-                    g += 1.0 / (8.0 * mu * lrr / (math.pi * r**3) + below(i + di, j + dj))
-            memo[(i, j)] = r_leaf if g == 0.0 else 1.0 / g
-        return memo[(i, j)]
-
-    return below(0, 0)
+__all__ = ["structured_tree"]
 
 
 def _tree_condition(node: str, r0: float, total: float, mu: float, min_radius: float,
                     tree_fraction: float, pressure: float,
                     tree: Mapping[str, Any]) -> dict[str, Any]:
     """The structured-tree condition at ``node`` (root radius ``r0``) whose steady resistance
-    is ``total`` (SI): the tree grows to ``min_radius`` (at most alpha·r0), raised by factors
-    of 1.05 until the tree alone (leaves at the outlet pressure) has at most ``tree_fraction``
-    of ``total``, and every leaf ends at one terminal resistance that supplies the rest
-    (bisection)."""
+    is ``total`` (SI): min_radius and the leaves' terminal resistance matched by the core
+    (``Shape::matched``: min_radius raised by factors of 1.05 until the tree alone has at
+    most ``tree_fraction`` of ``total``, the terminal resistance by bisection)."""
     a, b = tree.get("alpha", 0.9), tree.get("beta", 0.6)
     lrr = tree.get("length_ratio", 50.0)
-    if not total > 0:
-        raise _err(node, f"the resistance to match is {total:g} Pa s/m^3, not > 0")
-    rmin = min(min_radius, a * r0)  # at least the a-daughter (binds only for coarse trees)
-    while _dc_resistance(r0, a, b, lrr, rmin, mu, 0.0) > tree_fraction * total:
-        rmin *= 1.05
-        if rmin > a * r0:  # no tree vessel left: the root alone is above the fraction
-            raise _err(node, f"no tree below root radius {r0:g} m has at most "
-                             f"{tree_fraction:g} of the resistance {total:g} Pa s/m^3")
-    lo, hi = 0.0, total * 2.0 ** 20
-    for _ in range(200):  # R(leaf) is increasing: bisection to rounding
-        mid = 0.5 * (lo + hi)
-        if _dc_resistance(r0, a, b, lrr, rmin, mu, mid) < total:
-            lo = mid
-        else:
-            hi = mid
-        if hi - lo <= 1e-15 * hi:
-            break
+    rmin, leaf = _core.match_structured_tree(node, r0, total, mu, min_radius, tree_fraction,
+                                             a, b, lrr)
     return {"type": TYPE, **tree, "min_radius": rmin,
-            "terminal": {"type": "resistance", "resistance": 0.5 * (lo + hi),
-                         "pressure": pressure}}
+            "terminal": {"type": "resistance", "resistance": leaf, "pressure": pressure}}
 
 
 def replace_windkessels(data: Mapping[str, Any], min_radius: float = 1.0e-4,
@@ -379,8 +265,9 @@ def replace_terminal_vessels(data: Mapping[str, Any], root_radii: Mapping[str, f
         drop |= names
         for node in nodes:
             bcs.pop(node, None)
-        r0 = _num(name, "root radius", r0)
-        e, h = _wall(name, tree.get("stiffness"), 1.0, 1.0)(r0)
+        if not (isinstance(r0, (int, float)) and 0 < r0 < math.inf):
+            raise _err(name, f"'root radius' must be in (0, inf), got {r0!r}")
+        e, h = _core.structured_tree_wall(name, tree.get("stiffness"), float(r0))
         node = str(vessels[name]["to"])
         root = {"name": name, "from": vessels[name]["from"], "to": node,
                 "length": lrr * r0, "radius": r0, "wall_thickness": h, "youngs_modulus": e,
@@ -391,7 +278,7 @@ def replace_terminal_vessels(data: Mapping[str, Any], root_radii: Mapping[str, f
         elif "max_length" in tree:
             root["segments"] = max(1, math.ceil(lrr * r0 / float(tree["max_length"]) - 1e-9))
         roots[name] = root
-        r_root = 8.0 * mu * lrr / (math.pi * r0**3)  # Poiseuille, docs/physics.md §1.1
+        r_root = _core.poiseuille_resistance(lrr * r0, r0, r0, mu)
         bcs[node] = _tree_condition(node, r0, total - r_root, mu, min_radius, tree_fraction,
                                     pressure, tree)
     out["vessels"] = [roots.get(v["name"], v) for v in data["vessels"]

@@ -211,10 +211,6 @@ def _hill(ox: Mapping[str, Any], alpha_mmhg: float) -> dict[str, float]:
     return {"p50": p50, "n": n, "capacity": capacity, "alpha": alpha_mmhg}
 
 
-def hill_saturation(p: float, p50: float, n: float) -> float:
-    return 0.0 if p <= 0 else 1.0 / (1.0 + (p50 / p) ** n)
-
-
 def _facilitation(spec: Any, h: dict[str, float] | None, d: float, p_in: float, p_w: float,
                   element: str) -> float:
     """E_Hb (docs/physics.md §3.4): (1 + K̄)^(1/3) (1 + K̄ D_Hb/D)^(2/3) for linearised binding
@@ -226,12 +222,8 @@ def _facilitation(spec: Any, h: dict[str, float] | None, d: float, p_in: float, 
         raise _err(element, "hb_facilitation needs hemoglobin: hill or linearized")
     f = _check(spec if isinstance(spec, Mapping) else {}, {"d_hb"}, f"{element} hb_facilitation")
     d_hb = _num(f.get("d_hb", D_HB_DEFAULT), element, "d_hb", minimum=0.0)
-    if not h.get("linearized"):
-        return facilitation.hill_factor(p_in, p_w, h["alpha"], d, d_hb, h["capacity"], h["p50"],
-                                        h["n"])
-    ds = hill_saturation(p_in, h["p50"], h["n"]) - hill_saturation(p_w, h["p50"], h["n"])
-    kbar = h["capacity"] * ds / (h["alpha"] * (p_in - p_w)) if p_in != p_w else 0.0
-    return facilitation.linear_factor(kbar, d, d_hb)
+    law = (facilitation.secant_factor if h.get("linearized") else facilitation.hill_factor)
+    return law(p_in, p_w, h["alpha"], d, d_hb, h["capacity"], h["p50"], h["n"])
 
 
 def _flux_row(v: Any, element: str) -> list[float]:

@@ -55,7 +55,7 @@ pub enum Binding {
 
 /// Hill saturation S(P) and dS/dP, written in the ratio x = P/P50 so that it is exact at P = 0.
 #[inline]
-fn hill(p: f64, p50: f64, n: f64) -> (f64, f64) {
+pub fn hill(p: f64, p50: f64, n: f64) -> (f64, f64) {
     if p <= 0.0 {
         return (0.0, 0.0);
     }

@@ -16,6 +16,7 @@ mod network;
 mod reader;
 mod results;
 mod settings;
+mod trees;
 
 use errors::to_py;
 use results::ArrayPair;
@@ -50,6 +51,11 @@ fn chamber_elastance<'py>(
 mod _core {
     #[pymodule_export]
     use super::closed_loop::{closed_loop_o2, closed_loop_tree_flows};
+    #[pymodule_export]
+    use super::trees::{
+        StructuredTrees, facilitation_factor, grow_structured_tree, linear_facilitation_factor,
+        match_structured_tree, poiseuille_resistance, structured_tree_wall,
+    };
     #[pymodule_export]
     use super::{
         chamber_elastance,

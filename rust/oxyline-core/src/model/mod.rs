@@ -3,7 +3,8 @@
 //! checks every key and value and writes the canonical SI description; the serde types here
 //! are that canonical description (vessels joined at named nodes, boundary conditions at free
 //! ends, blood, segmentation, and the species transport section: `transport`). Nothing here
-//! builds a circuit: see `crate::assemble`.
+//! builds a circuit: see `crate::assemble`. Structured-tree growth (`structured_tree`) and the
+//! haemoglobin facilitation factor (`facilitation`) are computed here when a model is read.
 
 use crate::segment::{InertanceProfile, WallModel};
 use crate::waveform::WaveformSpec;
@@ -12,9 +13,11 @@ use std::collections::BTreeMap;
 
 use crate::error::{Error, Result};
 
+pub mod facilitation;
 pub mod native;
 pub mod node;
 pub mod settings;
+pub mod structured_tree;
 pub mod transport;
 pub mod units;
 

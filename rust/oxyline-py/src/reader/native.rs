@@ -162,7 +162,7 @@ pub(crate) type Outlets = Vec<(String, BoundarySpec)>;
 /// are listed (`slow_vessels`, the node names `outlets` returns) and filled in by Python.
 #[pyclass(module = "oxyline._core")]
 pub struct NativeParts {
-    vessels: Vec<Option<VesselSpec>>,
+    pub(crate) vessels: Vec<Option<VesselSpec>>,
     pub(crate) outlets: Outlets,
 }
 
