@@ -16,7 +16,6 @@ from oxyline.errors import ModelError
 from oxyline.loader import load_model
 from oxyline.model import Model
 
-
 #: The views of :func:`impedance`: into the branches leaving the node (``"downstream"``), into
 #: those entering it (``"upstream"``), or into every branch at the node (``"both"``).
 Direction = Literal["downstream", "upstream", "both"]
