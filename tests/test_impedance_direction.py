@@ -127,3 +127,12 @@ def test_zero_frequency_downstream_is_the_steady_resistance() -> None:
 def test_bad_direction_is_a_model_error_naming_the_argument(bad: Any) -> None:
     with pytest.raises(oxyline.ModelError, match="direction"):
         oxyline.impedance(network("L"), "j", [1.0], direction=bad)
+
+
+def test_empty_and_closed_sides_are_typed_errors() -> None:
+    m = network("inverted-L")
+    with pytest.raises(oxyline.ModelError, match="nothing upstream"):
+        oxyline.impedance(m, "in", [1.0], direction="upstream")
+    # the feed vessel seen from j is closed at its flow inlet: no finite Z(0)
+    with pytest.raises(oxyline.ModelError, match="no pressure boundary.*0 Hz"):
+        oxyline.impedance(m, "j", [0.0], direction="upstream")

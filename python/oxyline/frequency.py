@@ -34,8 +34,9 @@ def impedance(model: Model | str | os.PathLike[str] | Mapping[str, Any], node: s
     vessels that end there (and an inlet condition), ``"both"`` into every branch at the node
     (the two in parallel: the impedance a flow injected into the junction itself meets). The
     node's capacitance is split by the segments it belongs to (an L or π vessel ending at the
-    node counts upstream). Upstream of a network inlet with a flow condition the line is closed,
-    so Z(0) there has no finite value and 0 Hz is refused.
+    node counts upstream). A side with nothing on it (upstream of a network inlet) raises
+    ``ModelError``; a side closed by a flow inlet (no pressure boundary on it) has no
+    finite Z(0), so 0 Hz raises ``ModelError`` there.
 
     >>> import oxyline
     >>> z = oxyline.impedance("bifurcation", "inlet", [0.0, 1.0, 5.0])

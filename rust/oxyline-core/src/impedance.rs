@@ -150,8 +150,60 @@ pub fn input_impedances_toward(
             b.from = g;
         }
     }
+    let side_branches = cut
+        .branches
+        .iter()
+        .filter(|b| b.from != b.to && (b.from == node || b.to == node))
+        .count();
+    if side_branches == 0 && cut.nodes[node].capacitance == 0.0 {
+        let side = if downstream { "downstream" } else { "upstream" };
+        return Err(Error::model(
+            circuit.names.node(node),
+            format!("has nothing {side} of it (direction '{side}'): its impedance is infinite"),
+        ));
+    }
+    if omegas.contains(&0.0) && !reaches_a_pressure(&cut, node, ground) {
+        let side = if downstream { "downstream" } else { "upstream" };
+        return Err(Error::model(
+            circuit.names.node(node),
+            format!(
+                "its {side} side reaches no pressure boundary (a closed line): its impedance at \
+                 0 Hz is infinite; ask for frequencies > 0"
+            ),
+        ));
+    }
     let dae = cut.assemble()?;
     input_impedances(&dae, node, omegas)
+}
+
+/// Whether a prescribed-pressure node other than `ground` is reachable from `node` through
+/// the branches of `circuit` (else nothing holds the side's mean pressure: Z(0) is infinite).
+fn reaches_a_pressure(circuit: &Circuit, node: usize, ground: Option<usize>) -> bool {
+    let nn = circuit.nodes.len();
+    let mut fixed = vec![false; nn];
+    for &(n, _) in &circuit.fixed_pressures {
+        fixed[n] = Some(n) != ground;
+    }
+    let mut adj = vec![Vec::new(); nn];
+    for b in &circuit.branches {
+        adj[b.from].push(b.to);
+        adj[b.to].push(b.from);
+    }
+    let mut seen = vec![false; nn];
+    let mut stack = vec![node];
+    seen[node] = true;
+    while let Some(n) = stack.pop() {
+        if fixed[n] {
+            return true;
+        }
+        for &m in &adj[n] {
+            if !seen[m] && Some(m) != ground {
+                seen[m] = true;
+                stack.push(m);
+            }
+        }
+    }
+    false
 }
 
 /// The frequency-domain matrix iωE + F in the stamp form `SparseLu` takes: F's entries, then
@@ -312,6 +364,20 @@ mod direction_tests {
                 assert!((down[k] - both[k]).norm() > 0.01 * both[k].norm());
             }
         }
+    }
+
+    #[test]
+    fn an_empty_side_is_a_model_error() {
+        let (a, _) = junction("L");
+        let dae = a.circuit.assemble().unwrap();
+        let c = &a.circuit;
+        let inlet = (0..c.nodes.len())
+            .position(|i| c.names.node(i) == "in")
+            .unwrap();
+        let e = input_impedances_toward(c, &dae, inlet, Direction::Upstream, &[1.0])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("nothing upstream"), "{e}");
     }
 
     #[test]
