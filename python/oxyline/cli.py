@@ -337,7 +337,7 @@ def _cmd_impedance(args: argparse.Namespace) -> int:
         raise InputError(f"--fmax and --df must be > 0, got {args.fmax:g} and {args.df:g}")
     model = _load(args.model)
     f = np.arange(0.0, args.fmax + 0.5 * args.df, args.df)
-    z = oxyline.impedance(model, args.node, f)
+    z = oxyline.impedance(model, args.node, f, direction=args.direction)
     rows = ["frequency_Hz,modulus_Pa_s_m3,phase_rad,real_Pa_s_m3,imag_Pa_s_m3"]
     rows += [f"{fi:.6g},{abs(zi):.10e},{np.angle(zi):.10e},{zi.real:.10e},{zi.imag:.10e}"
              for fi, zi in zip(f, z)]
@@ -461,6 +461,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--node", required=True, help="graph node (e.g. the inlet)")
     p.add_argument("--fmax", type=float, default=20.0, help="highest frequency, Hz (20)")
     p.add_argument("--df", type=float, default=0.25, help="frequency step, Hz (0.25)")
+    p.add_argument("--direction", choices=("downstream", "upstream", "both"),
+                   default="downstream",
+                   help="the side of NODE to look into (downstream; both: every branch)")
     p.add_argument("--plot", metavar="DIR", help="write impedance.csv and impedance.png/.svg")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(func=_cmd_impedance)

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, Literal, get_args
 
 import numpy as np
 
@@ -16,19 +16,36 @@ from oxyline.errors import ModelError
 from oxyline.loader import load_model
 from oxyline.model import Model
 
+#: The views of :func:`impedance`: into the branches leaving the node (``"downstream"``), into
+#: those entering it (``"upstream"``), or into every branch at the node (``"both"``).
+Direction = Literal["downstream", "upstream", "both"]
+DIRECTIONS: tuple[str, ...] = get_args(Direction)
+
 
 def impedance(model: Model | str | os.PathLike[str] | Mapping[str, Any], node: str,
-              frequencies: Any) -> np.ndarray:
+              frequencies: Any, *, direction: Direction = "downstream") -> np.ndarray:
     """Input impedance (Pa·s/m³, complex) seen from graph node ``node`` into the network
     downstream of it, at each of ``frequencies`` (Hz, >= 0; any shape, the result has the
     same): a unit flow injected at the node, every pressure boundary held at zero and every
     flow boundary open. Z(0) is the network's steady (Poiseuille) resistance.
+
+    ``direction`` picks the view at the node: ``"downstream"`` (default) looks into the
+    vessels that start at the node (and an outlet condition there), ``"upstream"`` into the
+    vessels that end there (and an inlet condition), ``"both"`` into every branch at the node
+    (the two in parallel: the impedance a flow injected into the junction itself meets). The
+    node's capacitance is split by the segments it belongs to (an L or π vessel ending at the
+    node counts upstream). A side with nothing on it (upstream of a network inlet) raises
+    ``ModelError``; a side closed by a flow inlet (no pressure boundary on it) has no
+    finite Z(0), so 0 Hz raises ``ModelError`` there.
 
     >>> import oxyline
     >>> z = oxyline.impedance("bifurcation", "inlet", [0.0, 1.0, 5.0])
     >>> z.shape, bool(abs(z[0].imag) < 1e-6 * z[0].real)
     ((3,), True)
     """
+    if direction not in DIRECTIONS:
+        raise ModelError(f"impedance: direction must be one of {', '.join(DIRECTIONS)}, "
+                         f"got {direction!r}")
     m = load_model(model)
     f = np.asarray(frequencies, dtype=float)
     bad = ~np.isfinite(f) | (f < 0)
@@ -36,8 +53,9 @@ def impedance(model: Model | str | os.PathLike[str] | Mapping[str, Any], node: s
         raise ModelError(f"impedance: frequencies must be finite and >= 0 Hz, got "
                          f"{f[bad].ravel()[0]:g}")
     # one symbolic analysis, then O(n) per frequency in the core with the GIL released
-    re, im = m.network.input_impedances(str(node), (2.0 * math.pi * f).ravel().tolist())
+    re, im = m.network.input_impedances(str(node), (2.0 * math.pi * f).ravel().tolist(),
+                                        direction)
     return (re + 1j * im).reshape(f.shape)
 
 
-__all__ = ["impedance"]
+__all__ = ["DIRECTIONS", "Direction", "impedance"]

@@ -96,9 +96,10 @@ class TissueResult:
 @dataclass
 class SpeciesResult:
     """Transport outputs of one species (SI). Concentrations are the free (dissolved) values,
-    fluxes carry the total (free + bound) amount; ``flux_in``/``flux_out`` are the convective
-    fluxes Q·C through the vessel's first/last branch (where ``flow_in``/``flow_out`` are
-    taken), ``wall_flux`` the uptake of the vessel's segments (mol/s, positive out of the blood).
+    fluxes carry the total (free + bound) amount; ``concentration_in``/``_out`` are the values at
+    the vessel's end faces (the upwind value carried into the cell of its first segment, the
+    value leaving the cell of its last: docs/oxygen.md "Vessel ends"), ``flux_in``/``flux_out``
+    Q·C there with Q = ``flow_in``/``flow_out``, ``wall_flux`` the uptake of the vessel's segments (mol/s, positive out of the blood).
     Segment ``tl_resistance``/``tl_inductance`` are the paper's R_i = dL_i/dt (dimensionless)
     and L_i = −dx/v (s), NaN where |v| < the velocity threshold."""
 

@@ -389,6 +389,11 @@ pub struct Circuit {
     pub boundaries: Vec<BoundaryTag>,
     pub source_boundary: Vec<usize>,
     pub segments: Vec<SegmentGeom>,
+    /// The capacitance each vessel end puts on its end node, with the branch of that end
+    /// segment: (node, branch, capacitance). Two per segmented vessel, kept when `segments`
+    /// is released, so that a node's capacitance can be told apart by the side it belongs to
+    /// (`impedance::Direction`).
+    pub end_capacitors: Vec<(usize, usize, f64)>,
     /// Capacitor rows in svZeroDSolver's form (empty unless a vessel asks for it).
     pub chain_rule: Vec<ChainRuleCapacitor>,
     /// Element unknowns after the branch flows (a chamber's volume): their E_ii.

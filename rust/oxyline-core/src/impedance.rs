@@ -4,9 +4,10 @@
 //! analysed once and refactorised per frequency. The dense `frequency::input_impedance` stays
 //! as the independent check of small circuits.
 
-use crate::circuit::Dae;
+use crate::circuit::{Circuit, Dae};
 use crate::error::{Error, Result};
 use crate::sparse::SparseLu;
+use crate::waveform::Waveform;
 use faer::c64;
 
 const ELEMENT: &str = "input_impedance";
@@ -56,6 +57,153 @@ pub fn input_impedances(dae: &Dae, node: usize, omegas: &[f64]) -> Result<Vec<c6
             Ok(rhs[node])
         })
         .collect()
+}
+
+/// Which part of the network an input impedance looks into from its node. Branches are
+/// oriented along the flow path (vessels from `from` to `to`, boundary elements outwards), so
+/// the branches leaving the node lead downstream and those entering it upstream.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Direction {
+    /// The branches leaving the node and what lies beyond them (the vessels starting there,
+    /// an outlet condition), with the share of the node's capacitance of the segments that
+    /// start there.
+    #[default]
+    Downstream,
+    /// The branches entering the node and what lies behind them (the vessels ending there,
+    /// an inlet condition), with the capacitance share of the segments that end there.
+    Upstream,
+    /// Every branch at the node: the parallel combination of both views.
+    Both,
+}
+
+impl Direction {
+    /// The direction named `name` ("downstream", "upstream", "both").
+    pub fn parse(name: &str) -> Result<Direction> {
+        match name {
+            "downstream" => Ok(Direction::Downstream),
+            "upstream" => Ok(Direction::Upstream),
+            "both" => Ok(Direction::Both),
+            _ => Err(Error::model(
+                ELEMENT,
+                format!("direction must be 'downstream', 'upstream' or 'both', got '{name}'"),
+            )),
+        }
+    }
+}
+
+/// Z(ω) seen from circuit node `node` in `direction`, at each angular frequency of `omegas`
+/// (see [`input_impedances`]). `dae` is the circuit's own DAE, used as it is for
+/// [`Direction::Both`]; the other views solve a copy of the circuit in which every branch on
+/// the other side is detached from the node and ends at a node of zero pressure instead (so
+/// the part behind it, left without excitation, stays regular and carries nothing), and the
+/// node keeps only the capacitance of its side's segments.
+pub fn input_impedances_toward(
+    circuit: &Circuit,
+    dae: &Dae,
+    node: usize,
+    direction: Direction,
+    omegas: &[f64],
+) -> Result<Vec<c64>> {
+    if direction == Direction::Both {
+        return input_impedances(dae, node, omegas);
+    }
+    if node >= circuit.nodes.len() {
+        return Err(Error::model(
+            ELEMENT,
+            format!("node {node} out of {}", circuit.nodes.len()),
+        ));
+    }
+    let mut cut = circuit.clone();
+    let downstream = direction == Direction::Downstream;
+    // the capacitance the vessel ends on the other side put on the node
+    let other_side: f64 = circuit
+        .end_capacitors
+        .iter()
+        .filter(|&&(n, bi, _)| {
+            let b = &circuit.branches[bi];
+            n == node && (if downstream { b.to } else { b.from }) == node
+        })
+        .map(|&(_, _, c)| c)
+        .sum();
+    let c = &mut cut.nodes[node].capacitance;
+    // (exactly zero when nothing else is left: rounding must not leave a tiny capacitor)
+    *c = if (*c - other_side).abs() <= 1e-12 * c.abs() {
+        0.0
+    } else {
+        *c - other_side
+    };
+    let mut ground = None;
+    for bi in 0..cut.branches.len() {
+        let b = &cut.branches[bi];
+        if b.from == b.to || (if downstream { b.to } else { b.from }) != node {
+            continue;
+        }
+        let g = *ground.get_or_insert_with(|| {
+            let g = cut.add_node("impedance: detached side", 0.0, 0.0);
+            cut.fixed_pressures.push((g, Waveform::constant(0.0)));
+            g
+        });
+        let b = &mut cut.branches[bi];
+        if downstream {
+            b.to = g;
+        } else {
+            b.from = g;
+        }
+    }
+    let side_branches = cut
+        .branches
+        .iter()
+        .filter(|b| b.from != b.to && (b.from == node || b.to == node))
+        .count();
+    if side_branches == 0 && cut.nodes[node].capacitance == 0.0 {
+        let side = if downstream { "downstream" } else { "upstream" };
+        return Err(Error::model(
+            circuit.names.node(node),
+            format!("has nothing {side} of it (direction '{side}'): its impedance is infinite"),
+        ));
+    }
+    if omegas.contains(&0.0) && !reaches_a_pressure(&cut, node, ground) {
+        let side = if downstream { "downstream" } else { "upstream" };
+        return Err(Error::model(
+            circuit.names.node(node),
+            format!(
+                "its {side} side reaches no pressure boundary (a closed line): its impedance at \
+                 0 Hz is infinite; ask for frequencies > 0"
+            ),
+        ));
+    }
+    let dae = cut.assemble()?;
+    input_impedances(&dae, node, omegas)
+}
+
+/// Whether a prescribed-pressure node other than `ground` is reachable from `node` through
+/// the branches of `circuit` (else nothing holds the side's mean pressure: Z(0) is infinite).
+fn reaches_a_pressure(circuit: &Circuit, node: usize, ground: Option<usize>) -> bool {
+    let nn = circuit.nodes.len();
+    let mut fixed = vec![false; nn];
+    for &(n, _) in &circuit.fixed_pressures {
+        fixed[n] = Some(n) != ground;
+    }
+    let mut adj = vec![Vec::new(); nn];
+    for b in &circuit.branches {
+        adj[b.from].push(b.to);
+        adj[b.to].push(b.from);
+    }
+    let mut seen = vec![false; nn];
+    let mut stack = vec![node];
+    seen[node] = true;
+    while let Some(n) = stack.pop() {
+        if fixed[n] {
+            return true;
+        }
+        for &m in &adj[n] {
+            if !seen[m] && Some(m) != ground {
+                seen[m] = true;
+                stack.push(m);
+            }
+        }
+    }
+    false
 }
 
 /// The frequency-domain matrix iωE + F in the stamp form `SparseLu` takes: F's entries, then
@@ -160,5 +308,82 @@ mod tests {
         assert!(input_impedances(&dae, 0, &[1.0, f64::NAN]).is_err());
         assert!(input_impedances(&dae, 0, &[-1.0]).is_err());
         assert!(input_impedances(&dae, dae.n, &[1.0]).is_err());
+    }
+}
+
+#[cfg(test)]
+mod direction_tests {
+    use super::*;
+    use crate::spec::parse;
+
+    /// A feed vessel into a junction with two daughters, lumped, in arrangement `arr`.
+    fn junction(arr: &str) -> (crate::assemble::Assembled, usize) {
+        let v = |name: &str, a: &str, b: &str, c: f64| {
+            format!(
+                r#"{{"name":"{name}","from":"{a}","to":"{b}","segments":3,"lumped":
+                {{"resistance":5e7,"inductance":2e6,"capacitance":{c}}}}}"#
+            )
+        };
+        let json = format!(
+            r#"{{"name":"t","arrangement":"{arr}","vessels":[{},{},{}],
+            "boundary_conditions":{{"in":{{"type":"flow","flow":{{"kind":"constant","value":1e-6}}}},
+            "o1":{{"type":"resistance","resistance":1e9,"pressure":{{"kind":"constant","value":0}}}},
+            "o2":{{"type":"resistance","resistance":2e9,"pressure":{{"kind":"constant","value":0}}}}}}}}"#,
+            v("p", "in", "j", 6e-11),
+            v("a", "j", "o1", 3e-11),
+            v("b", "j", "o2", 2e-11)
+        );
+        let assembled = parse(&json).unwrap().assemble().unwrap();
+        let c = &assembled.circuit;
+        let j = (0..c.nodes.len())
+            .position(|i| c.names.node(i) == "j")
+            .unwrap();
+        (assembled, j)
+    }
+
+    /// Kirchhoff at the node: the admittances of the two sides add up to the node's,
+    /// whatever the arrangement puts at the node.
+    #[test]
+    fn the_two_sides_add_up_to_the_node() {
+        for arr in ["inverted-L", "L", "pi"] {
+            let (mut a, j) = junction(arr);
+            // as a model holds it: the per-segment geometry is released after the build
+            a.circuit.segments = Vec::new();
+            let dae = a.circuit.assemble().unwrap();
+            let omegas = [0.5, 3.0, 20.0];
+            let z = |d| input_impedances_toward(&a.circuit, &dae, j, d, &omegas).unwrap();
+            let (down, up, both) = (
+                z(Direction::Downstream),
+                z(Direction::Upstream),
+                z(Direction::Both),
+            );
+            for k in 0..omegas.len() {
+                let y = down[k].inv() + up[k].inv();
+                let err = (y - both[k].inv()).norm() / both[k].inv().norm();
+                assert!(err <= 1e-10, "{arr} {}: {err}", omegas[k]);
+                assert!((down[k] - both[k]).norm() > 0.01 * both[k].norm());
+            }
+        }
+    }
+
+    #[test]
+    fn an_empty_side_is_a_model_error() {
+        let (a, _) = junction("L");
+        let dae = a.circuit.assemble().unwrap();
+        let c = &a.circuit;
+        let inlet = (0..c.nodes.len())
+            .position(|i| c.names.node(i) == "in")
+            .unwrap();
+        let e = input_impedances_toward(c, &dae, inlet, Direction::Upstream, &[1.0])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("nothing upstream"), "{e}");
+    }
+
+    #[test]
+    fn unknown_directions_are_model_errors() {
+        let e = Direction::parse("sideways").unwrap_err().to_string();
+        assert!(e.contains("direction") && e.contains("sideways"), "{e}");
+        assert_eq!(Direction::parse("both").unwrap(), Direction::Both);
     }
 }

@@ -436,21 +436,28 @@ impl Network {
     }
 
     /// Input impedances (Pa·s/m³) seen from graph node `node` at each angular frequency of
-    /// `omegas` (rad/s): (real parts, imaginary parts). O(n) per frequency by the time
-    /// stepping's elimination, with the GIL released.
+    /// `omegas` (rad/s) into the network `direction` of it ("downstream", "upstream",
+    /// "both"): (real parts, imaginary parts). O(n) per frequency by the time stepping's
+    /// elimination, with the GIL released.
+    #[pyo3(signature = (node, omegas, direction = "downstream"))]
     fn input_impedances<'py>(
         &self,
         py: Python<'py>,
         node: &str,
         omegas: Vec<f64>,
+        direction: &str,
     ) -> PyResult<ArrayPair<'py>> {
+        use oxyline_core::impedance::{Direction, input_impedances_toward};
+        let direction = Direction::parse(direction).map_err(to_py)?;
         let circuit = &self.inner.0.circuit;
         let idx = (0..circuit.nodes.len())
             .position(|i| circuit.names.node(i) == node)
             .ok_or_else(|| ModelError::new_err(format!("node '{node}': not in the network")))?;
         let inner = self.inner.clone();
         let z = py
-            .detach(move || oxyline_core::impedance::input_impedances(&inner.1, idx, &omegas))
+            .detach(move || {
+                input_impedances_toward(&inner.0.circuit, &inner.1, idx, direction, &omegas)
+            })
             .map_err(to_py)?;
         let re: Vec<f64> = z.iter().map(|z| z.re).collect();
         let im: Vec<f64> = z.iter().map(|z| z.im).collect();

@@ -137,6 +137,12 @@ fn stamp_segments(
         let area = 2.0 * std::f64::consts::PI * radius * (s.x1 - s.x0);
         circuit.nodes[a].wall_area += cp * area;
         circuit.nodes[b].wall_area += cd * area;
+        if k == 0 {
+            circuit.end_capacitors.push((a, branch, cp * s.compliance));
+        }
+        if k + 1 == n {
+            circuit.end_capacitors.push((b, branch, cd * s.compliance));
+        }
         circuit.segments.push(SegmentGeom {
             vessel,
             branch,

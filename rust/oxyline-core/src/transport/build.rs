@@ -157,18 +157,21 @@ impl Transport {
         if dae.n >= u32::MAX as usize {
             return Err(bad("transport", "network too large".into()));
         }
-        let mut kind = classify_nodes(circuit, dae)?;
+        let mut kind = exterior_nodes(circuit);
+        let shares = segment_shares(circuit, &kind)?;
+        let volume = node_volumes(circuit, &shares);
+        classify_nodes(circuit, dae, &volume, &mut kind)?;
         let (mut faces, sources) = flow_faces(circuit, &kind)?;
         contract_boundary_points(circuit, &mut kind, &mut faces);
         let mut face_of_unknown = vec![u32::MAX; dae.n];
         for (fi, f) in faces.iter().enumerate() {
             face_of_unknown[f.unknown] = fi as u32;
         }
-        let m_node = refinement(spec, circuit, &kind)?;
+        let m_node = refinement(spec, circuit, &kind, &shares)?;
         let n_flow_faces = faces.len();
         let refined = Refined::new(&mut kind, &mut faces, &sources, &m_node);
-        let layout = CellLayout::new(circuit, dae, &kind, &m_node, &refined.first_extra);
-        let segments = segments(circuit, &face_of_unknown);
+        let layout = CellLayout::new(&volume, dae, &kind, &m_node, &refined.first_extra);
+        let segments = segments(circuit, &face_of_unknown, &shares);
         let (pieces, seg_pieces) =
             wall_pieces(&segments, &m_node, &layout.node_cell, &refined.first_extra);
         let species = species_plans(spec, circuit)?;
@@ -183,7 +186,8 @@ impl Transport {
             &pieces,
             &seg_pieces,
         )?;
-        let (out_vessels, out_segments) = output_layout(circuit, probes, &face_of_unknown);
+        let (mut out_vessels, out_segments) = output_layout(circuit, probes, &face_of_unknown);
+        end_cells(&mut out_vessels, &out_segments, &segments, &kind);
         drop(face_of_unknown);
         let nn = kind.len();
         let (node_ptr, node_faces, source_ptr, source_list) = incidence(nn, &faces, &sources);
@@ -238,17 +242,88 @@ impl Transport {
     }
 }
 
-/// Cell, mixing point or exterior node, per circuit node. A compliant node without lumen
-/// volume is an error (it would store blood but no solute).
-fn classify_nodes(circuit: &Circuit, dae: &Dae) -> Result<Vec<Kind>> {
+/// The nodes outside the transport domain (boundary-condition and prescribed-pressure
+/// nodes: `Exterior`); every other node starts as a mixing point.
+fn exterior_nodes(circuit: &Circuit) -> Vec<Kind> {
     let mut kind = vec![Kind::Mixing; circuit.nodes.len()];
     for (n, _) in &circuit.fixed_pressures {
         kind[*n] = Kind::Exterior;
     }
     for (i, node) in circuit.nodes.iter().enumerate() {
-        if node.boundary.is_some() || kind[i] == Kind::Exterior {
+        if node.boundary.is_some() {
             kind[i] = Kind::Exterior;
-        } else if node.volume > 0.0 {
+        }
+    }
+    kind
+}
+
+/// Every segment's (node, share) of its lumen volume and wall as transport holds them. The
+/// arrangement puts a segment's capacitor, volume and wall at its end nodes; where an end is a
+/// prescribed-pressure node (a `pressure` condition: the first segment of an inverted-L vessel
+/// fed by an inlet pressure, half of it for π, the last of an L vessel at an outlet pressure)
+/// that node is outside the transport domain, and the share moves to the segment's other end.
+/// The flow circuit keeps its capacitor where it was (at a prescribed pressure it carries no
+/// dynamics of the network); the moved volume is rigid in its new cell, whose volume changes
+/// by the net inflow exactly as before. A segment with both ends outside the domain (one
+/// segment between two prescribed pressures) has no cell for its volume: an error.
+fn segment_shares(circuit: &Circuit, kind: &[Kind]) -> Result<Vec<[(usize, f64); 2]>> {
+    circuit
+        .segments
+        .iter()
+        .enumerate()
+        .map(|(j, s)| {
+            let [(a, sa), (b, sb)] = s.nodes;
+            let (ea, eb) = (kind[a] == Kind::Exterior, kind[b] == Kind::Exterior);
+            match (ea && sa > 0.0, eb && sb > 0.0) {
+                (false, false) => Ok(s.nodes),
+                _ if ea && eb && (s.volume > 0.0 || s.radius > 0.0) => Err(bad(
+                    &format!("vessel '{}'", circuit.vessel_names[s.vessel]),
+                    format!(
+                        "segment {} joins two prescribed-pressure nodes, so transport has no \
+                         cell for its volume and wall; give the vessel at least 2 segments",
+                        segment_number(circuit, j)
+                    ),
+                )),
+                _ if ea && eb => Ok(s.nodes),
+                (true, _) => Ok([(a, 0.0), (b, sa + sb)]),
+                (false, true) => Ok([(a, sa + sb), (b, 0.0)]),
+            }
+        })
+        .collect()
+}
+
+/// 1-based position of segment `j` within its vessel (for messages).
+fn segment_number(circuit: &Circuit, j: usize) -> usize {
+    let v = circuit.segments[j].vessel;
+    circuit.segments[..j]
+        .iter()
+        .filter(|s| s.vessel == v)
+        .count()
+        + 1
+}
+
+/// Lumen volume per circuit node at the reference pressure with the transport's shares: the
+/// circuit's, with the shares `segment_shares` moved off prescribed-pressure nodes.
+fn node_volumes(circuit: &Circuit, shares: &[[(usize, f64); 2]]) -> Vec<f64> {
+    let mut volume: Vec<f64> = circuit.nodes.iter().map(|n| n.volume).collect();
+    for (s, moved) in circuit.segments.iter().zip(shares) {
+        for (&(n, before), &(_, after)) in s.nodes.iter().zip(moved) {
+            if before != after {
+                volume[n] += (after - before) * s.volume;
+            }
+        }
+    }
+    volume
+}
+
+/// Cells among the domain nodes: those holding lumen volume. A compliant node without lumen
+/// volume is an error (it would store blood but no solute).
+fn classify_nodes(circuit: &Circuit, dae: &Dae, volume: &[f64], kind: &mut [Kind]) -> Result<()> {
+    for i in 0..circuit.nodes.len() {
+        if kind[i] == Kind::Exterior {
+            continue;
+        }
+        if volume[i] > 0.0 {
             kind[i] = Kind::Cell;
         } else if dae.e[i] > 0.0 {
             return Err(bad(
@@ -257,7 +332,7 @@ fn classify_nodes(circuit: &Circuit, dae: &Dae) -> Result<Vec<Kind>> {
             ));
         }
     }
-    Ok(kind)
+    Ok(())
 }
 
 /// One face per branch with a domain end (its ends: domain nodes or boundary conditions),
@@ -359,7 +434,12 @@ fn contract_boundary_points(circuit: &Circuit, kind: &mut [Kind], faces: &mut Ve
 
 /// Sub-cells per circuit node (docs/physics.md §5): `cells_per_segment`, per vessel
 /// `cells_per_vessel`; a node shared by vessels (a junction cell) takes the finest.
-fn refinement(spec: &TransportSpec, circuit: &Circuit, kind: &[Kind]) -> Result<Vec<usize>> {
+fn refinement(
+    spec: &TransportSpec,
+    circuit: &Circuit,
+    kind: &[Kind],
+    shares: &[[(usize, f64); 2]],
+) -> Result<Vec<usize>> {
     let m_default = cells_per_segment(spec.cells_per_segment, "transport", "cells_per_segment")?;
     let mut m_vessel = vec![m_default; circuit.vessel_names.len()];
     for (name, &v) in &spec.cells_per_vessel {
@@ -372,8 +452,8 @@ fn refinement(spec: &TransportSpec, circuit: &Circuit, kind: &[Kind]) -> Result<
         m_vessel[vi] = cells_per_segment(v, &format!("vessel '{name}'"), "cells_per_segment")?;
     }
     let mut m_node = vec![1usize; circuit.nodes.len()];
-    for sg in &circuit.segments {
-        for &(n, share) in &sg.nodes {
+    for (sg, nodes) in circuit.segments.iter().zip(shares) {
+        for &(n, share) in nodes {
             if share > 0.0 && kind[n] == Kind::Cell {
                 m_node[n] = m_node[n].max(m_vessel[sg.vessel]);
             }
@@ -460,7 +540,7 @@ struct CellLayout {
 
 impl CellLayout {
     fn new(
-        circuit: &Circuit,
+        volume: &[f64],
         dae: &Dae,
         kind: &[Kind],
         m_node: &[usize],
@@ -473,14 +553,14 @@ impl CellLayout {
             v0: Vec::new(),
             cap: Vec::new(),
         };
-        for n in (0..circuit.nodes.len()).filter(|&n| kind[n] == Kind::Cell) {
+        for n in (0..volume.len()).filter(|&n| kind[n] == Kind::Cell) {
             let m = m_node[n];
             for k in 0..m {
                 let c = if k == 0 { n } else { first_extra[n] + k - 1 };
                 l.node_cell[c] = l.cells.len();
                 l.cells.push(c);
                 l.cell_node.push(n);
-                l.v0.push(circuit.nodes[n].volume / m as f64);
+                l.v0.push(volume[n] / m as f64);
                 l.cap.push(dae.e[n] / m as f64);
             }
         }
@@ -488,17 +568,23 @@ impl CellLayout {
     }
 }
 
-/// The flow segments as the transport sees them (branch unknown and face, nodes, wall).
-fn segments(circuit: &Circuit, face_of_unknown: &[u32]) -> Vec<Segment> {
+/// The flow segments as the transport sees them (branch unknown and face, nodes and their
+/// shares as `segment_shares` placed them, wall).
+fn segments(
+    circuit: &Circuit,
+    face_of_unknown: &[u32],
+    shares: &[[(usize, f64); 2]],
+) -> Vec<Segment> {
     let nc_nodes = circuit.nodes.len();
     circuit
         .segments
         .iter()
-        .map(|s| Segment {
+        .zip(shares)
+        .map(|(s, nodes)| Segment {
             branch_unknown: (nc_nodes + s.branch) as u32,
             face: face_of_unknown[nc_nodes + s.branch],
-            nodes: s.nodes.map(|(n, _)| n as u32),
-            shares: s.nodes.map(|(_, share)| share),
+            nodes: nodes.map(|(n, _)| n as u32),
+            shares: nodes.map(|(_, share)| share),
             wall: SegmentWall {
                 radius: s.radius,
                 x0: s.x0,
@@ -544,9 +630,35 @@ fn output_layout(
             first: face(probes.vessel_unknowns[4 * k + 2]),
             last: face(probes.vessel_unknowns[4 * k + 3]),
             segs: start..out_segments.len(),
+            inlet_cell: u32::MAX,
+            outlet_cell: u32::MAX,
         });
     }
     (out_vessels, out_segments)
+}
+
+/// The cells at the ends of every output vessel that hold a share of its first (last)
+/// segment: the vessel's inlet (outlet) value is then the one carried into (out of) that cell,
+/// not the one of the vessel's first (last) branch, which lies inside the vessel.
+fn end_cells(
+    out_vessels: &mut [OutVessel],
+    out_segments: &[usize],
+    segments: &[Segment],
+    kind: &[Kind],
+) {
+    let cell_with_share = |j: usize, end: usize| {
+        let sg = &segments[j];
+        let n = sg.nodes[end];
+        if sg.shares[end] > 0.0 && kind[n as usize] == Kind::Cell {
+            n
+        } else {
+            u32::MAX
+        }
+    };
+    for v in out_vessels.iter_mut().filter(|v| !v.segs.is_empty()) {
+        v.inlet_cell = cell_with_share(out_segments[v.segs.start], 0);
+        v.outlet_cell = cell_with_share(out_segments[v.segs.end - 1], 1);
+    }
 }
 
 /// Wall pieces: a segment's share in each cell; a refined node's share of the segment

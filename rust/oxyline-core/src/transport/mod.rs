@@ -198,12 +198,17 @@ impl Segment {
     }
 }
 
-/// Outputs of one vessel: its first and last face (`usize::MAX`: none) and its segment range.
+/// Outputs of one vessel: its first and last face (`usize::MAX`: none), its segment range,
+/// and the cells holding a share of its first and last segment at the vessel's ends
+/// (`u32::MAX`: none, the end face then is the vessel's end). The inlet of an inverted-L or π
+/// vessel lies upstream of its first cell, the outlet of an L or π vessel downstream of its last.
 #[derive(Debug, Clone)]
 struct OutVessel {
     first: usize,
     last: usize,
     segs: std::ops::Range<usize>,
+    inlet_cell: u32,
+    outlet_cell: u32,
 }
 
 pub const VESSEL_COLUMNS: usize = 5;

@@ -100,12 +100,85 @@ impl Transport {
             return (f64::NAN, f64::NAN);
         }
         let (q, c) = self.upwind(fi);
+        let free = self.free_upwind(s, oriented(&self.plan.faces, &self.qf, fi).1, c);
+        (q * c, free)
+    }
+
+    /// Free concentration of the total `c` carried from the upwind end `up`: a domain node's
+    /// own inversion (`free_of_nodes`), a boundary's value inverted here.
+    fn free_upwind(&self, s: usize, up: End, c: f64) -> f64 {
         let binding = self.plan.species[s].binding;
-        let free = match oriented(&self.plan.faces, &self.qf, fi).1 {
+        match up {
             End::Node(n) if !binding.is_identity() && self.plan.kind[n] != Kind::Exterior => {
                 self.species[s].free[n]
             }
             _ => binding.free(c, c),
+        }
+    }
+
+    /// Total and free concentration carried into node `n` by the faces and flow sources that
+    /// bring flow into it (flow-weighted), or the node's own when nothing flows in. The
+    /// interior faces of a refined cell are not inflows from outside it.
+    fn carried_into(&self, s: usize, n: usize) -> (f64, f64) {
+        let p = &self.plan;
+        let (mut q_in, mut j_in, mut count, mut free) = (0.0, 0.0, 0usize, f64::NAN);
+        for &fi in &p.node_faces[p.node_ptr[n]..p.node_ptr[n + 1]] {
+            let (q, up, _) = oriented(&p.faces, &self.qf, fi);
+            if fi >= p.n_flow_faces || q == 0.0 || up == End::Node(n) {
+                continue;
+            }
+            let c = self.upwind(fi).1;
+            (q_in, j_in, count) = (q_in + q.abs(), j_in + q.abs() * c, count + 1);
+            free = self.free_upwind(s, up, c);
+        }
+        for &k in p.node_sources(n) {
+            let q = self.qs[k as usize];
+            if q > 0.0 {
+                let c = self.boundary_conc(p.sources[k as usize].2, End::Node(n));
+                (q_in, j_in, count) = (q_in + q, j_in + q * c, count + 1);
+                free = self.free_upwind(s, End::Boundary(0), c);
+            }
+        }
+        match count {
+            0 => (self.conc[n], self.free_at(s, n)),
+            1 => (j_in / q_in, free),
+            _ => {
+                let c = j_in / q_in;
+                let binding = self.plan.species[s].binding;
+                (c, binding.free(c, self.free_at(s, n)))
+            }
+        }
+    }
+
+    /// Flux and free concentration at a vessel's inlet: with a cell holding its first
+    /// segment's share at the inlet, the value carried into that cell (the upwind value of
+    /// the faces entering it) at forward flow, the cell's own at backflow; else its first
+    /// face's.
+    fn vessel_inlet(&self, s: usize, v: &OutVessel) -> (f64, f64) {
+        if v.inlet_cell == u32::MAX || v.first >= self.plan.faces.len() {
+            return self.face_flux(s, v.first);
+        }
+        let (n, q) = (v.inlet_cell as usize, self.qf[v.first]);
+        let (c, free) = if q >= 0.0 {
+            self.carried_into(s, n)
+        } else {
+            (self.conc[n], self.free_at(s, n))
+        };
+        (q * c, free)
+    }
+
+    /// Flux and free concentration at a vessel's outlet: with a cell holding its last
+    /// segment's share at the outlet, that cell's value at forward flow (what leaves it), the
+    /// value carried into it at backflow; else its last face's.
+    fn vessel_outlet(&self, s: usize, v: &OutVessel) -> (f64, f64) {
+        if v.outlet_cell == u32::MAX || v.last >= self.plan.faces.len() {
+            return self.face_flux(s, v.last);
+        }
+        let (n, q) = (self.plan.last_sub(v.outlet_cell as usize), self.qf[v.last]);
+        let (c, free) = if q >= 0.0 {
+            (self.conc[n], self.free_at(s, n))
+        } else {
+            self.carried_into(s, n)
         };
         (q * c, free)
     }
@@ -132,8 +205,8 @@ impl Transport {
     /// Per output vessel: inlet and outlet concentration and flux, wall uptake.
     fn observe_vessels(&self, s: usize, out: &mut Vec<f64>) {
         for v in &self.plan.out_vessels {
-            let (j_in, c_in) = self.face_flux(s, v.first);
-            let (j_out, c_out) = self.face_flux(s, v.last);
+            let (j_in, c_in) = self.vessel_inlet(s, v);
+            let (j_out, c_out) = self.vessel_outlet(s, v);
             let wall: f64 = self.plan.out_segments[v.segs.clone()]
                 .iter()
                 .map(|&j| self.segment_wall(s, j))
