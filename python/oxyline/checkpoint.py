@@ -27,12 +27,15 @@ import numpy as np
 
 from oxyline import _core
 from oxyline.errors import CheckpointError, ModelError, OutputError
+from oxyline.io.atomic import replace_atomically
 
 FORMAT = "oxyline-checkpoint"
 #: layout of the file (meta keys and arrays)
 FILE_VERSION = 1
 _SCALARS = ("version", "cycles_run", "steps", "dt", "periodic_error")
 #: settings of a run that control it, not its results: not stored, may change on resume
+#: the longest wall time between checkpoints (~32 years): any longer means never
+MAX_EVERY_SECONDS = 1e9
 RUN_CONTROL = frozenset({"progress", "cancel", "checkpoint", "checkpoint_every", "max_memory"})
 
 
@@ -44,7 +47,7 @@ def parse_every(value: Any) -> dict[str, Any]:
     if value is None:
         return {}
     if isinstance(value, str):
-        m = re.fullmatch(r"\s*(\d+)\s*cycles?\s*", value)
+        m = re.fullmatch(r"\s*(\d{1,12})\s*cycles?\s*", value)
         if m and int(m.group(1)) >= 1:
             return {"checkpoint_every_cycles": int(m.group(1))}
         m = re.fullmatch(r"\s*([0-9.]+)\s*(s|sec|seconds?)\s*", value)
@@ -54,10 +57,18 @@ def parse_every(value: Any) -> dict[str, Any]:
             except ValueError:
                 pass
     if isinstance(value, numbers.Real) and not isinstance(value, bool) \
-            and np.isfinite(float(value)) and float(value) >= 0:
+            and _finite(value) and 0 <= float(value) <= MAX_EVERY_SECONDS:
         return {"checkpoint_every_seconds": float(value)}
-    raise ModelError(f"simulate: checkpoint_every must be seconds of wall time (a number >= 0) "
-                     f"or 'N cycles', got {value!r}")
+    raise ModelError(f"simulate: checkpoint_every must be seconds of wall time (a number from 0 "
+                     f"to {MAX_EVERY_SECONDS:g}) or 'N cycles' (N from 1 to 10**12), got "
+                     f"{value!r:.80}")
+
+
+def _finite(value: Any) -> bool:
+    try:
+        return bool(np.isfinite(float(value)))
+    except (OverflowError, ValueError):  # an integer beyond any float
+        return False
 
 
 def _json_default(obj: Any) -> Any:
@@ -80,6 +91,23 @@ def stored_settings(overrides: Mapping[str, Any]) -> dict[str, Any]:
     return settings
 
 
+def check_writable(path: str | os.PathLike[str]) -> None:
+    """Before the run: a checkpoint can be written at ``path`` (its directory exists and takes
+    a new file, and ``path`` is no directory), so that a bad path fails at once, not at the
+    first checkpoint with the run's output lost."""
+    import tempfile
+
+    p = Path(path)
+    if p.is_dir():
+        raise ModelError(f"simulate: checkpoint {os.fspath(path)!r} is a directory")
+    try:
+        with tempfile.TemporaryFile(dir=p.parent):
+            pass
+    except OSError as exc:
+        raise ModelError(f"simulate: checkpoint {os.fspath(path)!r}: cannot write into "
+                         f"'{p.parent}': {exc.strerror or exc}") from None
+
+
 def write(path: str | os.PathLike[str], meta: Mapping[str, Any],
           state: Mapping[str, Any]) -> None:
     """Write the core's ``state`` with ``meta`` (model, settings) to ``path`` atomically."""
@@ -88,39 +116,96 @@ def write(path: str | os.PathLike[str], meta: Mapping[str, Any],
                 state={k: state[k] for k in _SCALARS})
     text = json.dumps(full, default=_json_default).encode()
     arrays = {k: np.asarray(v, dtype=np.float64) for k, v in state.items() if k not in _SCALARS}
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.partial")
-    try:
+
+    def write_archive(tmp: Path) -> None:
         with open(tmp, "wb") as f:
             np.savez(f, meta=np.frombuffer(text, dtype=np.uint8), **arrays)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
+
+    try:
+        replace_atomically(path, write_archive)
     except OSError as exc:
-        tmp.unlink(missing_ok=True)
         raise OutputError(f"{path}: cannot write the checkpoint: {exc.strerror or exc}; the "
                           "previous checkpoint (if any) is kept") from exc
 
 
 def read(path: str | os.PathLike[str]) -> tuple[dict[str, Any], dict[str, Any]]:
-    """(meta, state) of a checkpoint file; :class:`CheckpointError` naming the file if it is
-    not one this version reads."""
+    """(meta, state) of a checkpoint file; :class:`CheckpointError` naming the file, and the
+    field, if it is not one this version reads (truncated, corrupted, another format, a field
+    of the wrong type)."""
+    import stat
+
     path = Path(path)
-    if not path.is_file():
-        raise CheckpointError(f"{path}: checkpoint file not found")
+    try:
+        mode = path.stat().st_mode
+    except OSError:
+        raise CheckpointError(f"{path}: checkpoint file not found") from None
+    if not stat.S_ISREG(mode):
+        raise CheckpointError(f"{path}: a checkpoint must be a regular file")
     try:
         with np.load(path, allow_pickle=False) as z:
+            if not hasattr(z, "files") or "meta" not in z.files:
+                raise CheckpointError(f"{path}: not an oxyline checkpoint (no 'meta' record)")
             meta = json.loads(bytes(z["meta"]).decode())
             arrays = {k: np.array(z[k]) for k in z.files if k != "meta"}
-    except (OSError, ValueError, KeyError, UnicodeDecodeError, EOFError) as exc:
-        raise CheckpointError(f"{path}: not an oxyline checkpoint ({exc})") from None
-    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-        raise CheckpointError(f"{path}: not an oxyline checkpoint")
-    if meta.get("version") != FILE_VERSION:
-        raise CheckpointError(f"{path}: checkpoint file version {meta.get('version')}, this "
-                              f"oxyline ({_core.__version__}) reads version {FILE_VERSION}")
-    state = dict(meta.get("state") or {})
+    except CheckpointError:
+        raise
+    except (Exception, MemoryError) as exc:  # noqa: BLE001 - any damage: zip, zlib, npy, JSON
+        raise CheckpointError(f"{path}: not an oxyline checkpoint or damaged "
+                              f"({type(exc).__name__}: {str(exc)[:200]})") from None
+    _check_meta(path, meta)
+    state = dict(meta["state"])
     if state.get("version") != _core.CHECKPOINT_VERSION:
-        raise CheckpointError(f"{path}: run state version {state.get('version')}, this oxyline "
-                              f"({_core.__version__}) reads version {_core.CHECKPOINT_VERSION}")
+        raise CheckpointError(f"{path}: run state version {state.get('version')!r}, this "
+                              f"oxyline ({_core.__version__}) reads version "
+                              f"{_core.CHECKPOINT_VERSION}")
+    for key, a in arrays.items():
+        if a.dtype != np.float64 or a.ndim != 1:
+            raise CheckpointError(f"{path}: field '{key}' must be a 1-D float64 array, got "
+                                  f"{a.ndim}-D {a.dtype}")
+        if key in state:
+            raise CheckpointError(f"{path}: field '{key}' is both a number and an array")
     state.update(arrays)
     return meta, state
+
+
+def _is_int(x: Any) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool)
+
+
+def _is_real(x: Any) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x)
+
+
+#: the checks of the file's fields: (field, test, what it must be)
+_META_FIELDS: tuple[tuple[str, Any, str], ...] = (
+    ("model", lambda x: isinstance(x, dict), "a mapping (the model)"),
+    ("settings", lambda x: isinstance(x, dict), "a mapping (the run settings)"),
+    ("state", lambda x: isinstance(x, dict), "a mapping (the run state's numbers)"),
+    ("checkpoint_every", lambda x: x is None or isinstance(x, str) or _is_real(x),
+     "seconds, 'N cycles' or null"),
+)
+_STATE_FIELDS: tuple[tuple[str, Any, str], ...] = (
+    ("cycles_run", lambda x: _is_int(x) and 0 <= x < 2**63, "an integer >= 0"),
+    ("steps", lambda x: _is_int(x) and 0 <= x < 2**63, "an integer >= 0"),
+    ("dt", lambda x: _is_real(x) and x > 0, "a finite number > 0"),
+    ("periodic_error", lambda x: x is None or isinstance(x, (int, float))
+     and not isinstance(x, bool), "a number"),
+)
+
+
+def _check_meta(path: Path, meta: Any) -> None:
+    """Every field of a checkpoint's metadata present and of its type, before any is used."""
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise CheckpointError(f"{path}: not an oxyline checkpoint (field 'format' is not "
+                              f"{FORMAT!r})")
+    if not _is_int(meta.get("version")) or meta["version"] != FILE_VERSION:
+        raise CheckpointError(f"{path}: checkpoint file version {meta.get('version')!r}, this "
+                              f"oxyline ({_core.__version__}) reads version {FILE_VERSION}")
+    for fields, record, where in ((_META_FIELDS, meta, ""), (_STATE_FIELDS, None, "state/")):
+        record = meta["state"] if record is None else record
+        for key, ok, what in fields:
+            if key not in record:
+                raise CheckpointError(f"{path}: field '{where}{key}' is missing")
+            if not ok(record[key]):
+                raise CheckpointError(f"{path}: field '{where}{key}' must be {what}, got "
+                                      f"{record[key]!r:.80}")

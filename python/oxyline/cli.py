@@ -47,8 +47,15 @@ def _check_writable_dir(path: str, parent: Path) -> None:
 
 def _check_outputs(args: argparse.Namespace) -> None:
     """Check every output path before the run, so that a bad one fails in a second, not after
-    the run: suffix, an existing directory that can be written, and no existing Zarr store
-    unless --overwrite (a .nc/.csv file is replaced only once the new one is complete)."""
+    the run: no two roles for one file, suffix, an existing directory that can be written,
+    and no existing Zarr store unless --overwrite (a .nc/.csv file is replaced only once the
+    new one is complete)."""
+    _check_clashes(args)
+    if getattr(args, "checkpoint", None):
+        ckpt = Path(args.checkpoint)
+        if ckpt.is_dir():
+            raise InputError(f"{args.checkpoint}: --checkpoint is a directory")
+        _check_writable_dir(args.checkpoint, ckpt.parent)
     if args.output:
         out = Path(args.output)
         if out.suffix.lower() not in RESULT_SUFFIXES:
@@ -67,12 +74,64 @@ def _check_outputs(args: argparse.Namespace) -> None:
         _check_writable_dir(args.plot, plot_dir if plot_dir.is_dir() else plot_dir.parent)
 
 
-def _on_sigterm(signum: int, frame: object) -> None:
-    """SIGTERM (a batch scheduler's stop) stops a run like Ctrl-C: the partial result is
-    written, and the exit code is 143 (128 + 15)."""
-    from oxyline.errors import SimulationTerminated
+class _Stop:
+    """SIGINT (Ctrl-C) and SIGTERM (a batch scheduler's stop) in ``oxyline run``. Before the
+    run starts they stop at once (nothing computed, nothing to keep). From the start of the
+    run on they only set the run's cancel event and are remembered: the run stops at its next
+    check (within 0.1 s) with its partial result, a run that has already ended keeps its
+    whole result, and that result is written before the exit code (130 or 143) tells what
+    stopped it. A second signal changes nothing: the file being written is finished."""
 
-    raise SimulationTerminated("run terminated (SIGTERM)")
+    def __init__(self) -> None:
+        import threading
+
+        self.signum: int | None = None
+        self.event = threading.Event()
+        self.armed = False
+
+    def __call__(self, signum: int, frame: object) -> None:
+        import signal
+
+        if self.signum is None:
+            self.signum = signum
+        if not self.armed:
+            if signum == signal.SIGTERM:
+                from oxyline.errors import SimulationTerminated
+
+                raise SimulationTerminated("run terminated (SIGTERM)")
+            raise KeyboardInterrupt
+        self.event.set()
+
+    @property
+    def terminated(self) -> bool:
+        import signal
+
+        return self.signum == signal.SIGTERM
+
+
+def _check_clashes(args: argparse.Namespace) -> None:
+    """Refuse two roles for one file: the input model (or resumed checkpoint), the result,
+    the checkpoint and the summary must all be different files."""
+    from oxyline.io.atomic import same_file
+
+    roles: list[tuple[str, str]] = []
+    model = getattr(args, "model", None)
+    if model and Path(model).exists():
+        roles.append(("the input model", model))
+    if getattr(args, "resume", None):
+        roles.append(("the resumed checkpoint", args.resume))
+    for name, key in (("-o", "output"), ("--checkpoint", "checkpoint"),
+                      ("--summary", "summary")):
+        value = getattr(args, key, None)
+        if value:
+            roles.append((name, value))
+    for i, (role_a, a) in enumerate(roles):
+        for role_b, b in roles[i + 1:]:
+            if role_b == "--checkpoint" and role_a == "the resumed checkpoint":
+                continue  # a resumed run goes on checkpointing into its file
+            if same_file(a, b):
+                raise InputError(f"{b}: {role_b} names the same file as {role_a} ({a}); it "
+                                 "would be overwritten: give another file")
 
 
 def _run_options(args: argparse.Namespace) -> dict[str, object]:
@@ -150,9 +209,18 @@ def _run_closed_loop(args: argparse.Namespace) -> int:
 def _cmd_run(args: argparse.Namespace) -> int:
     import signal
 
+    stop = _Stop()
+    handlers = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        return _run_and_write(args, stop)
+    finally:
+        for s, h in handlers.items():
+            signal.signal(s, h)
+
+
+def _run_and_write(args: argparse.Namespace, stop: _Stop) -> int:
     import oxyline
 
-    signal.signal(signal.SIGTERM, _on_sigterm)
     if _is_closed_loop(args.model):
         return _run_closed_loop(args)
     _check_outputs(args)
@@ -170,6 +238,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if stream and args.resume:
         raise InputError(f"{args.output}: a resumed run writes .nc or .csv, not a streamed "
                          ".zarr store")
+    # from here on a signal cancels the run and its result is still written
+    overrides["cancel"] = stop.event
+    stop.armed = True
+    if stop.signum is not None:
+        stop.event.set()
     try:
         if args.resume:
             res = oxyline.resume(args.resume, **overrides)
@@ -184,13 +257,20 @@ def _cmd_run(args: argparse.Namespace) -> int:
             raise
         raise type(exc)(f"{args.model}: {msg}") from None
     except oxyline.SimulationInterrupted as exc:
-        terminated = isinstance(exc, oxyline.SimulationTerminated)
+        terminated = stop.terminated or isinstance(exc, oxyline.SimulationTerminated)
         if args.output and exc.result is not None:
             if not stream:
                 _write(exc.result, args.output, args.overwrite)
             print(f"{'terminated' if terminated else 'interrupted'}; partial result written "
                   f"to {args.output}", file=sys.stderr)
         return 143 if terminated else 130
+    except oxyline.OutputError as exc:  # e.g. a checkpoint the full disk refused: keep -o
+        result = getattr(exc, "result", None)
+        if args.output and not stream and isinstance(result, oxyline.Result):
+            _write(result, args.output, args.overwrite)
+            print(f"partial result (up to the failure) written to {args.output}",
+                  file=sys.stderr)
+        raise
     except oxyline.SolverError as exc:  # the rows up to the failure are kept too
         result = getattr(exc, "result", None)
         if args.output and result is not None:
@@ -203,6 +283,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
         _write(res, args.output, args.overwrite)
     if args.summary:
         _write_summary(res, args.summary)
+    if stop.signum is not None:  # stopped once the run had ended: its whole result is kept
+        print(f"{'terminated' if stop.terminated else 'interrupted'} after the run"
+              + (f"; result written to {args.output}" if args.output else ""), file=sys.stderr)
+        return 143 if stop.terminated else 130
     figures = []
     if args.plot:
         from oxyline import plot
@@ -285,13 +369,11 @@ def _write(res: Any, path: str, overwrite: bool = False) -> None:
         res.to_zarr(p, overwrite=overwrite)
     elif suffix == ".csv":
         from oxyline.errors import OutputError
+        from oxyline.io.atomic import replace_atomically
 
-        tmp = p.with_name(f".{p.name}.{os.getpid()}.partial")
-        try:  # written whole, then renamed: a full disk leaves no half table
-            res.to_pandas().to_csv(tmp, index=False)
-            os.replace(tmp, p)
+        try:  # written whole, then renamed: a full disk or a signal leaves no half table
+            replace_atomically(p, lambda tmp: res.to_pandas().to_csv(tmp, index=False))
         except OSError as exc:
-            tmp.unlink(missing_ok=True)
             raise OutputError(f"{p}: cannot write the table: {exc.strerror or exc}; nothing "
                               "was written", res) from exc
     else:

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from oxyline import _core
-from oxyline.errors import ModelError
+from oxyline.errors import ModelError, core_errors
 
 MMHG = 133.322368          # Pa per mmHg (docs/physics.md)
 ML_O2 = 1.0 / 22414.0      # mol per mL O2 (STPD; docs/physics.md: 1 mL = 1/22.414 mmol)
@@ -444,8 +444,9 @@ def _block_run(p: dict[str, Any], model: Any) -> HeartRun:
     s = _settings(model, heart_run_options(p))
     keep = {k: s[k] for k in ("cycles", "dt", "method", "rho_infty", "start", "newton_atol",
                               "max_iterations") if k in s}
-    raw = model.network.simulate(period=p["period"], output_every=s["dt"], all_unknowns=True,
-                                 **keep)
+    with core_errors("closed-loop flow run"):
+        raw = model.network.simulate(period=p["period"], output_every=s["dt"],
+                                     all_unknowns=True, **keep)
     if "error" in raw:
         raise raw["error"]
     t = np.asarray(raw["times"])
@@ -695,8 +696,9 @@ def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int 
         # the tree's Hill inversions are warm-started (tolerance 1e-12 mmHg): its cycle map
         # repeats to ~1e-11, so the confirming cycles stop there (Fick then holds to ~2e-12)
         tol = max(tol, 1e-10)
-    out = _core.closed_loop_o2(json.dumps(spec), np.ascontiguousarray(flows).ravel(),
-                               float(p["dt"]), int(max_cycles), float(tol))
+    with core_errors("closed-loop O2 run"):
+        out = _core.closed_loop_o2(json.dumps(spec), np.ascontiguousarray(flows).ravel(),
+                                   float(p["dt"]), int(max_cycles), float(tol))
     steps, nc, nb = flows.shape[0], len(comps), len(branches)
     shape_c, shape_b = (steps, nc), (steps, nb)
     tree = None

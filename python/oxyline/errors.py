@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
+
 from oxyline._core import ModelError, ResourceError, SolverError, UnstableTimeStep
 
 
@@ -48,6 +51,32 @@ class CheckpointError(ModelError):
 
 class OutputSizeWarning(UserWarning):
     """The requested output is large (many GB): said before it is computed and written."""
+
+
+# ---- a panic of the Rust core never reaches the caller as a panic ---------------------------
+# PyO3 turns a Rust panic into ``pyo3_runtime.PanicException``, a ``BaseException`` that
+# ``except Exception`` does not catch and whose message says nothing of what was being done.
+# :func:`core_errors` wraps the calls into the core (the run, the model's assembly, the
+# impedance solve, an ensemble) and raises SolverError with the panic's message instead;
+# ``exc.__cause__`` keeps the panic for a bug report.
+
+def is_panic(exc: BaseException) -> bool:
+    """Whether ``exc`` is a Rust panic turned into a Python exception by PyO3."""
+    t = type(exc)
+    return t.__name__ == "PanicException" and t.__module__ in ("pyo3_runtime", "builtins")
+
+
+@contextlib.contextmanager
+def core_errors(what: str) -> Iterator[None]:
+    """Raise :class:`SolverError` naming ``what`` for a panic of the core inside the block."""
+    try:
+        yield
+    except BaseException as exc:
+        if not is_panic(exc):
+            raise
+        msg = str(exc) or "(no message)"
+        raise SolverError(f"{what}: internal error in the core (a Rust panic: {msg}); please "
+                          "report it with the model that caused it") from exc
 
 
 __all__ = [

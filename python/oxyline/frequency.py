@@ -12,7 +12,7 @@ from typing import Any, Literal, get_args
 
 import numpy as np
 
-from oxyline.errors import ModelError
+from oxyline.errors import ModelError, core_errors
 from oxyline.loader import load_model
 from oxyline.model import Model
 
@@ -47,15 +47,31 @@ def impedance(model: Model | str | os.PathLike[str] | Mapping[str, Any], node: s
         raise ModelError(f"impedance: direction must be one of {', '.join(DIRECTIONS)}, "
                          f"got {direction!r}")
     m = load_model(model)
-    f = np.asarray(frequencies, dtype=float)
+    f = _frequencies(frequencies)
     bad = ~np.isfinite(f) | (f < 0)
     if bad.any():
         raise ModelError(f"impedance: frequencies must be finite and >= 0 Hz, got "
                          f"{f[bad].ravel()[0]:g}")
     # one symbolic analysis, then O(n) per frequency in the core with the GIL released
-    re, im = m.network.input_impedances(str(node), (2.0 * math.pi * f).ravel().tolist(),
-                                        direction)
+    with core_errors("impedance"):
+        re, im = m.network.input_impedances(str(node), (2.0 * math.pi * f).ravel().tolist(),
+                                            direction)
     return (re + 1j * im).reshape(f.shape)
+
+
+def _frequencies(frequencies: Any) -> np.ndarray:
+    """``frequencies`` as a float array: real numbers only (a complex, string, None or
+    beyond-float entry is refused with :class:`ModelError` naming the argument)."""
+    try:
+        raw = np.asarray(frequencies)
+    except (ValueError, TypeError, OverflowError) as exc:  # ragged lists and the like
+        raise ModelError(f"impedance: frequencies must be an array of numbers (Hz): {exc}") \
+            from None
+    if raw.dtype.kind not in "iuf":  # complex, strings, objects (None, huge integers), ...
+        raise ModelError(f"impedance: frequencies must be real numbers in Hz, got an array of "
+                         f"{raw.dtype} (e.g. {raw.ravel()[0]!r:.40})" if raw.size else
+                         f"impedance: frequencies must be real numbers in Hz, got {raw.dtype}")
+    return raw.astype(float)
 
 
 __all__ = ["DIRECTIONS", "Direction", "impedance"]

@@ -33,6 +33,9 @@ from oxyline.errors import ModelError
 
 #: share of the available memory a run may take by default
 DEFAULT_FRACTION = 0.8
+#: more output rows per cycle than this is no output anyone can hold (1e12 rows of one column
+#: are 8 TB)
+MAX_ROWS_PER_CYCLE = 1e12
 #: outputs above this many bytes are announced (OutputSizeWarning) before they are computed
 WARN_BYTES = 2e9
 
@@ -144,7 +147,14 @@ def output_estimate(layout: dict[str, Any], period: float, every: float, cycles:
                     all_cycles: bool) -> tuple[float, int, int]:
     """(bytes, rows, columns) of the output a run holds: rows of time, flow columns and
     species columns, 8 bytes each."""
-    per_cycle = max(1, round(period / every))
+    ratio = period / every if every > 0 else math.inf
+    if not ratio <= MAX_ROWS_PER_CYCLE:
+        from oxyline.errors import ResourceError
+
+        raise ResourceError(f"simulate: output_every = {every:g} s gives {ratio:.3g} output rows "
+                            f"per cycle of {period:g} s, more than {MAX_ROWS_PER_CYCLE:.0e}; "
+                            "choose a longer output_every")
+    per_cycle = max(1, round(ratio))
     rows = per_cycle * cycles + 1 if all_cycles else per_cycle + 1
     cols = 1 + int(layout["n_columns"])
     tl = layout.get("transport")

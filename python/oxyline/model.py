@@ -242,7 +242,10 @@ def _network(canonical: dict[str, Any], max_memory: Any = None,
     if type(vessels) is not list:  # not a canonical model: the JSON parse reports it
         rest["vessels"], vessels = vessels, None
     # compact separators: the text is the core's input only (5 % less to write)
-    return _core.Network(json.dumps(rest, separators=(",", ":")), vessels, outlets, parts)
+    from oxyline.errors import core_errors
+
+    with core_errors(f"model '{canonical.get('name', '?')}'"):
+        return _core.Network(json.dumps(rest, separators=(",", ":")), vessels, outlets, parts)
 
 
 class _NativeReader:
@@ -282,7 +285,8 @@ def _build(data: dict[str, Any]) -> Model:
     from oxyline.structured_tree import build_with_trees, has_trees
 
     if has_trees(data):  # a model-to-model step, like an importer
-        return build_with_trees(data, _build_native)
+        # the trees' vessels are estimated against the memory allowed before they are grown
+        return build_with_trees(data, _build_native, _memory.default_limit())
     return _build_native(data)
 
 

@@ -23,6 +23,7 @@ from oxyline.errors import (
     ResourceError,
     SimulationCancelled,
     SimulationInterrupted,
+    core_errors,
 )
 from oxyline.loader import load_model
 from oxyline.model import Model, output_names, output_vessels
@@ -297,7 +298,8 @@ def _run(model: Model, s: Mapping[str, Any], progress: Any, cancel: Any = None,
     with _ACTIVE_LOCK:
         _ACTIVE.append(event)
     try:
-        raw = model.network.simulate(progress=check, **s, **core)
+        with core_errors(f"simulate '{model.name}'"):
+            raw = model.network.simulate(progress=check, **s, **core)
         if isinstance(callback, _CycleProgress) and "error" not in raw:
             callback.finish(int(raw["cycles_run"]))
         return raw
@@ -349,7 +351,18 @@ def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any], **overri
     >>> res.flow_in.shape[1]
     3
     """
+    _refuse_checkpoint_on_input(model, overrides.get("checkpoint"))
     return _simulate(load_model(model), overrides)
+
+
+def _refuse_checkpoint_on_input(model: Any, checkpoint: Any) -> None:
+    """A checkpoint file that is the model file itself would overwrite the model."""
+    from oxyline.io.atomic import same_file
+
+    if isinstance(model, (str, os.PathLike)) and isinstance(checkpoint, (str, os.PathLike)) \
+            and os.path.exists(model) and same_file(model, checkpoint):
+        raise ModelError(f"simulate: checkpoint {os.fspath(checkpoint)!r} is the model file "
+                         "itself; it would be overwritten: give another file")
 
 
 def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
@@ -450,6 +463,10 @@ def resume(path: str | os.PathLike[str], **overrides: Any) -> Result:
         model = load_model(meta["model"])
     except ModelError as exc:
         raise CheckpointError(f"{path}: its model does not load: {exc}") from None
+    try:  # every stored setting checked before the run, named as a field of the file
+        _settings(model, meta["settings"])
+    except ModelError as exc:
+        raise CheckpointError(f"{path}: field 'settings': {exc}") from None
     control = {"checkpoint": os.fspath(path), "checkpoint_every": meta.get("checkpoint_every")}
     if "checkpoint" in overrides and overrides["checkpoint"] is None:  # no more checkpoints
         control = {}
@@ -476,6 +493,7 @@ def _checkpoints(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
     if not isinstance(path, (str, os.PathLike)):
         raise ModelError(f"simulate: checkpoint must be a file path, got {path!r}")
     core = _checkpoint.parse_every(every)
+    _checkpoint.check_writable(path)
     meta = {"model": model.to_dict(), "settings": _checkpoint.stored_settings(overrides),
             "checkpoint_every": every, "oxyline": _core_version()}
 
@@ -506,6 +524,17 @@ def _check_output_memory(model: Model, s: Mapping[str, Any],
             f"{_memory.human(limit)}; output fewer rows (output_every, output_cycles='last', "
             "fewer cycles) or columns (variables, vessels, segments=False), stream it to disk "
             "with simulate_to_zarr, or raise max_memory")
+    if limit is not None and "max_memory" in overrides:
+        # a max_memory given to this run bounds the whole run: the model's state too (the
+        # model was assembled under its own file's limit)
+        counts = model.network.summary()
+        state = _memory.model_estimate(counts, model.canonical)
+        if state + need > limit:
+            raise ResourceError(
+                f"simulate: the run needs about {_memory.human(state + need)} of memory "
+                f"(estimate: the model's state {_memory.human(state)}, its output "
+                f"{_memory.human(need)}), above max_memory = {_memory.human(limit)}; output "
+                "fewer rows or columns, a coarser segmentation, or raise max_memory")
     if need > _memory.WARN_BYTES:
         warnings.warn(f"the output ({rows} rows x {cols} columns) takes about "
                       f"{_memory.human(need)} in memory, and as much when written to a file",
@@ -592,7 +621,7 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     try:
         raw = _run(model, s, overrides.get("progress"), _cancel(overrides), chunk_sink=write,
                    chunk_rows=time_chunk, **core)
-    except Exception:
+    except BaseException:
         store.remove()  # refused before the first step (e.g. an unstable dt): no output at all
         raise
     try:

@@ -34,7 +34,8 @@ __all__ = ["STATUS", "apply_patch", "simulate_ensemble"]
 def simulate_ensemble(model: Model | str | os.PathLike[str] | Mapping[str, Any], variants: Any,
                       *, workers: int | None = None, client: Any = None,
                       output: Output = "summary", store: str | os.PathLike[str] | None = None,
-                      progress: Any = True, **overrides: Any) -> Any:
+                      progress: Any = True, cancel: Any = None,
+                      variant_timeout: float | None = None, **overrides: Any) -> Any:
     """Run every variant of ``model`` and return an ``xarray.Dataset`` along ``variant``.
 
     ``variants``: a sequence of patch dicts in the native model format (``{"vessels": {NAME:
@@ -48,9 +49,18 @@ def simulate_ensemble(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     ``progress``: a bar over variants, or a callback ``f(done, total)``. ``overrides``: the
     run settings of :func:`oxyline.simulate` (``cycles``, ``until_periodic``, ...).
 
+    ``cancel`` (a ``threading.Event``; on this machine): setting it stops the ensemble (seen
+    within 0.1 s: no more variants start, the running ones stop at their next check) with
+    :class:`~oxyline.SimulationCancelled`; Ctrl-C also stops an ensemble running in a worker
+    thread. ``variant_timeout`` (s of wall time): a variant running longer is stopped and
+    fails with a solver error naming ``variant_timeout``; the others run on. ``output="full"``
+    is estimated before any variant runs: above ``max_memory`` it is refused with
+    :class:`~oxyline.ResourceError`.
+
     A variant that fails has ``status != 0`` and its ``error``; it never stops the others.
     Ctrl-C raises :class:`~oxyline.SimulationInterrupted` with the dataset of the finished
-    variants as ``exc.result``.
+    variants as ``exc.result`` (``status`` -1: not run, 5: interrupted), as a cancel does
+    with :class:`~oxyline.SimulationCancelled`.
 
     >>> import oxyline
     >>> ds = oxyline.simulate_ensemble("bifurcation", [{}, {"vessels": {"parent": {"radius":
@@ -60,15 +70,62 @@ def simulate_ensemble(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     """
     check_output(output)
     workers = _workers(workers)
+    control = _control(cancel, variant_timeout, client)
     model = load_model(model)
     patches, index = as_patches(variants, model)
+    if output == "full" and store is None:
+        _check_full_output(model, len(patches), overrides)
     if client is not None:
         from oxyline.ensemble.cluster import run_on_client
 
         return run_on_client(client, model, patches, index, output=output, store=store,
                              progress=progress, workers=workers, overrides=overrides)
     return _local(model, patches, index, workers=workers, output=output, store=store,
-                  progress=progress, overrides=overrides)
+                  progress=progress, overrides=overrides, control=control)
+
+
+def _control(cancel: Any, variant_timeout: Any, client: Any) -> dict[str, Any]:
+    """``cancel`` and ``variant_timeout`` checked (for ensembles on this machine)."""
+    import math
+
+    if client is not None and (cancel is not None or variant_timeout is not None):
+        raise ModelError("simulate_ensemble: cancel and variant_timeout are for ensembles on "
+                         "this machine; stop a Dask ensemble with client.cancel")
+    if cancel is not None and not callable(getattr(cancel, "is_set", None)):
+        raise ModelError(f"simulate_ensemble: cancel must be a threading.Event (anything with "
+                         f"is_set()), got {cancel!r:.60}")
+    if variant_timeout is not None:
+        ok = isinstance(variant_timeout, (int, float)) and not isinstance(variant_timeout, bool)
+        try:
+            ok = ok and math.isfinite(variant_timeout) and 0 < variant_timeout <= 1e9
+        except OverflowError:
+            ok = False
+        if not ok:
+            raise ModelError(f"simulate_ensemble: variant_timeout must be seconds of wall time "
+                             f"(a number > 0 and <= 1e9), got {variant_timeout!r:.40}")
+        variant_timeout = float(variant_timeout)
+    return {"cancel": cancel, "variant_timeout": variant_timeout}
+
+
+def _check_full_output(model: Model, n: int, overrides: Mapping[str, Any]) -> None:
+    """Before any variant runs: the full output of ``n`` variants (each the size of the base
+    model's; a patch changes values, not the columns) must fit into the memory allowed, else
+    :class:`~oxyline.ResourceError` with the estimate and what to change."""
+    from oxyline import memory as _memory
+    from oxyline.ensemble.local import run_settings
+    from oxyline.errors import ResourceError
+    from oxyline.run import _output_size
+
+    need, rows, cols = _output_size(model, run_settings(model, "full", overrides))
+    where = "simulate_ensemble: max_memory"
+    limit = _memory.limit(overrides.get("max_memory", model.simulation.get("max_memory")), where)
+    if limit is not None and need * n > limit:
+        raise ResourceError(
+            f"simulate_ensemble: output='full' of {n} variants ({rows} rows x {cols} columns "
+            f"each) needs about {_memory.human(need * n)} of memory (estimate), above "
+            f"max_memory = {_memory.human(limit)}; use output='summary' or a callable, write "
+            "the variants to a store (store=...), output fewer rows or columns, or raise "
+            "max_memory")
 
 
 def _workers(workers: Any) -> int | None:
@@ -89,7 +146,8 @@ def _workers(workers: Any) -> int | None:
 
 
 def _local(model: Model, patches: list[dict[str, Any]], index: Any, *, workers: int | None,
-           output: Output, store: Any, progress: Any, overrides: Mapping[str, Any]) -> Any:
+           output: Output, store: Any, progress: Any, overrides: Mapping[str, Any],
+           control: Mapping[str, Any]) -> Any:
     from oxyline.ensemble.local import run_local
 
     collector = Collector(len(patches), output, model.vessel_names)
@@ -101,5 +159,8 @@ def _local(model: Model, patches: list[dict[str, Any]], index: Any, *, workers: 
         writer = StoreWriter(store, collector, patches, dataset_attrs(model, output), index)
         on_variant = writer.write
     finished = run_local(model, patches, collector, workers=workers, output=output,
-                         progress=progress, overrides=overrides, on_variant=on_variant)
-    return finish(model, patches, index, collector, output, writer, finished)
+                         progress=progress, overrides=overrides, on_variant=on_variant,
+                         **control)
+    cancel = control.get("cancel")
+    return finish(model, patches, index, collector, output, writer, finished,
+                  cancelled=cancel is not None and cancel.is_set())

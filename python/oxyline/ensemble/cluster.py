@@ -117,6 +117,28 @@ def _merge(into: Collector, part: Collector, rows: range) -> None:
         dest[rows.start:rows.stop:rows.step] = arr
 
 
+#: Dask's retries of a task whose worker died (killed, out of memory, lost node): the task
+#: runs again on another (or restarted) worker; a chunk that fails this often is split into
+#: one task per variant, so that only a variant that kills its worker fails
+RETRIES = 2
+
+
+def _check_sendable(output: Output) -> None:
+    """An output callable must reach the workers (pickled with cloudpickle, as Dask does)."""
+    if not callable(output):
+        return
+    from oxyline.errors import ModelError
+
+    try:
+        import cloudpickle
+
+        cloudpickle.dumps(output)
+    except Exception as exc:  # noqa: BLE001 - any pickling failure, named
+        raise ModelError(f"simulate_ensemble: output {getattr(output, '__name__', output)!r} "
+                         f"cannot be sent to the Dask workers ({type(exc).__name__}: {exc}); "
+                         "use a module-level function of plain data") from None
+
+
 #: the model last scattered to each client's workers: (its pickle's digest, the future)
 _SCATTERED: dict[int, tuple[str, Any]] = {}
 
@@ -148,6 +170,7 @@ def run_on_client(client: Any, model: Model, patches: list[dict[str, Any]], inde
     for k, patch in enumerate(patches):  # unknown names fail here, before any task starts
         patcher.check(patch, k)
     run_settings(model, output, overrides)  # so do unknown settings
+    _check_sendable(output)
     collector = Collector(len(patches), output, model.vessel_names)
     writer = None
     if store is not None:
@@ -160,19 +183,39 @@ def run_on_client(client: Any, model: Model, patches: list[dict[str, Any]], inde
     k = len(chunks)
     if where is None:  # one graph: the scheduler queues the tasks and hands them out
         futures = dict(zip(client.map(run_chunk, [shared] * k, parts, chunks, [output] * k,
-                                      [workers] * k, [dict(overrides)] * k, pure=False),
+                                      [workers] * k, [dict(overrides)] * k, pure=False,
+                                      retries=RETRIES),
                            chunks, strict=True))
     else:
         futures = {client.submit(run_chunk, shared, part, c, output, workers, dict(overrides),
                                  pure=False, workers=None if w is None else [w],
-                                 allow_other_workers=w is not None): c
+                                 allow_other_workers=w is not None, retries=RETRIES): c
                    for part, c, w in zip(parts, chunks, where, strict=True)}
     tick, close = _progress(progress, len(patches))
     finished = True
     try:
-        for fut in as_completed(futures):
-            rows = futures[fut]
-            _merge(collector, fut.result(), rows)
+        pending = as_completed(futures)
+        for fut in pending:
+            rows = futures.pop(fut)
+            try:
+                part = fut.result()
+            except Exception as exc:  # noqa: BLE001 - a worker lost (killed, out of memory)
+                if len(rows) > 1:
+                    # Dask's retries are used up: each variant of the chunk on its own task,
+                    # so that the healthy ones run and only the one that kills its worker fails
+                    for i in rows:
+                        single = client.submit(run_chunk, shared, [patches[i]], range(i, i + 1),
+                                               output, workers, dict(overrides), pure=False,
+                                               retries=RETRIES)
+                        futures[single] = range(i, i + 1)
+                        pending.add(single)
+                    continue
+                collector.fail(rows.start, "worker", f"variant {rows.start}: its Dask worker "
+                               f"failed {RETRIES + 1} times ({type(exc).__name__}: {exc})"
+                               [:400])
+                part = None
+            if part is not None:
+                _merge(collector, part, rows)
             for i in rows:
                 if writer is not None:
                     writer.write(i)

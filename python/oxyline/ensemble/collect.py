@@ -25,14 +25,14 @@ import numpy as np
 
 from oxyline._core import __version__
 from oxyline.ensemble.patch import flatten
-from oxyline.errors import ModelError, SimulationInterrupted
+from oxyline.errors import ModelError, SimulationCancelled, SimulationInterrupted
 from oxyline.model import Model
 from oxyline.monitor import warn
 from oxyline.result import Result
 
 #: ``status`` of a variant: 0 finished; the others say why it has no output
 STATUS = {"ok": 0, "model": 1, "unstable": 2, "solver": 3, "output": 4, "interrupted": 5,
-          "not run": -1}
+          "resource": 6, "worker": 7, "not run": -1}
 STATS = ("mean", "min", "max")
 #: the heart outputs' summary variables and their dim besides ``variant``
 HEART_DIMS = {"chamber_volume": "chamber", "valve_status": "valve"}
@@ -237,7 +237,9 @@ class Collector:
         self.heart: dict[str, list[str]] = {}
 
     def fail(self, i: int, kind: str, message: str) -> None:
-        self.status[i] = STATUS[kind]
+        # an error kind without its own code (a newer core's) is a solver failure, never a
+        # KeyError that loses the finished variants
+        self.status[i] = STATUS.get(kind, STATUS["solver"])
         self.error[i] = message
 
     def warn(self, i: int, messages: Sequence[str]) -> None:
@@ -348,10 +350,10 @@ def _stack_full(datasets: Mapping[int, Any], n: int) -> Any:
 
 
 def finish(model: Model, patches: list[dict[str, Any]], index: Any, collector: Collector,
-            output: Output, writer: Any, finished: bool) -> Any:
+            output: Output, writer: Any, finished: bool, cancelled: bool = False) -> Any:
     """The ensemble's dataset (the closed store, or the collected variants); an interrupted
-    ensemble raises :class:`SimulationInterrupted` carrying it. Shared by the local and the
-    Dask paths."""
+    ensemble raises :class:`SimulationInterrupted` (:class:`SimulationCancelled` when its
+    ``cancel`` was set) carrying it. Shared by the local and the Dask paths."""
     if writer is not None:
         writer.close(complete=finished)
         ds = writer.open()
@@ -360,9 +362,11 @@ def finish(model: Model, patches: list[dict[str, Any]], index: Any, collector: C
     _warn_bounds(collector)
     if not finished:
         done = int((ds["status"].values == 0).sum())
-        raise SimulationInterrupted(
-            f"ensemble interrupted after {done} finished variant(s) of {len(patches)}; the "
-            "dataset is in exc.result (status -1: not run)", ds)
+        cls = SimulationCancelled if cancelled else SimulationInterrupted
+        raise cls(
+            f"ensemble {'cancelled' if cancelled else 'interrupted'} after {done} finished "
+            f"variant(s) of {len(patches)}; the dataset is in exc.result (status -1: not run, "
+            "5: interrupted)", ds)
     return ds
 
 
@@ -376,7 +380,7 @@ def _warn_bounds(collector: Collector) -> None:
         msg = (f"{len(hit)} variant(s) left their physical bounds (variants {shown}; each "
                f"variant's findings are in the dataset's 'warning'); variant {hit[0]}: "
                f"{collector.warning[hit[0]]}")
-        # warn → _warn_bounds → _finish → _local / run_on_client → simulate_ensemble → caller
+        # warn → _warn_bounds → finish → _local / run_on_client → simulate_ensemble → caller
         warn([msg], stacklevel=5)
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 import gc
 import json
+import threading
 import weakref
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Any
@@ -20,7 +21,7 @@ from oxyline.ensemble.collect import (
     stats_summary,
 )
 from oxyline.ensemble.patch import Patcher, Variant
-from oxyline.errors import ModelError
+from oxyline.errors import ModelError, ResourceError, core_errors
 from oxyline.model import Model
 from oxyline.monitor import Monitor
 from oxyline.run import (
@@ -38,10 +39,11 @@ def run_settings(model: Model, output: Output, overrides: Mapping[str, Any]) -> 
     segment output: it is not recorded unless asked for (the vessel values do not change)."""
     if output == "summary" and "segments" not in overrides:
         overrides = {**overrides, "segments": False}
-    per_run = {"checkpoint", "checkpoint_every", "cancel"} & set(overrides)
+    per_run = {"checkpoint", "checkpoint_every"} & set(overrides)
     if per_run:  # options of one simulate() run, not of an ensemble
         raise ModelError(f"simulate_ensemble: {', '.join(sorted(per_run))} is not an ensemble "
-                         "option (Ctrl-C stops an ensemble with the finished variants)")
+                         "option (Ctrl-C or cancel= stops an ensemble with the finished "
+                         "variants)")
     return _settings(model, overrides)
 
 
@@ -66,6 +68,12 @@ class Feed:
         self.collector, self.numbers, self.on_skip = collector, numbers, on_skip
         self.prepared: dict[int, tuple[Variant, dict[str, Any]]] = {}
         self._next = 0
+        from oxyline import memory as _memory
+
+        #: the memory a variant may take (max_memory, else the default share of the free)
+        self.memory_limit = _memory.limit(overrides.get("max_memory",
+                                                        model.simulation.get("max_memory")),
+                                          "simulate_ensemble: max_memory")
 
     def next(self) -> tuple[int, str | None, float, float, Any, Any, Any, Any] | None:
         while self._next < len(self.patches):
@@ -76,6 +84,12 @@ class Feed:
                 v = self.patcher.variant(self.patches[i], k, self.values.pop(i, None))
                 s = (self.base_settings if v.model is self.patcher.base else
                      run_settings(v.model, self.output, self.overrides))
+                if v.model is not self.patcher.base:
+                    self._check_memory(v.model, k)
+            except ResourceError as e:
+                self.collector.fail(i, "resource", f"variant {k}: {e}"[:ERROR_CHARS])
+                self.on_skip(i)
+                continue
             except ModelError as e:
                 if str(e).startswith(f"variant {k}: "):
                     raise  # a mistake in the patches (e.g. a text where a number is scaled)
@@ -86,6 +100,23 @@ class Feed:
             return (i, v.patch_json, s["period"], s["output_every"], v.vessels, v.outlets,
                     v.values, v.tables)
         return None
+
+
+    def _check_memory(self, model: Model, k: int) -> None:
+        """A variant whose model (another structure than the base's, e.g. more segments) is
+        estimated above the memory allowed fails with status "resource" before it runs."""
+        from oxyline import memory as _memory
+
+        if self.memory_limit is None:
+            return
+        canonical = model.canonical
+        counts = {"segments": _memory.segment_count(canonical),
+                  "vessels": len(canonical.get("vessels") or ())}
+        need = _memory.model_estimate(counts, canonical)
+        if need > self.memory_limit:
+            raise ResourceError(f"the model needs about {_memory.human(need)} of memory "
+                                f"(estimate, {counts['segments']} segments), above max_memory "
+                                f"= {_memory.human(self.memory_limit)}")
 
 
 class Base:
@@ -122,7 +153,8 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
               workers: int | None, output: Output, progress: Any,
               overrides: Mapping[str, Any],
               on_variant: Callable[[int], None] | None = None, first: int | range = 0,
-              base: Base | None = None) -> bool:
+              base: Base | None = None, cancel: Any = None,
+              variant_timeout: float | None = None) -> bool:
     """Run every variant into ``collector``; ``on_variant(i)`` after each one is recorded.
     Returns False if Ctrl-C stopped the ensemble. ``first``: the number of the first variant
     in the whole ensemble, or the numbers of all of them (see :class:`Feed`). ``base``: the
@@ -181,12 +213,28 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
     # ``Network.simulate`` (each variant's period and output_every go with the variant)
     core = {k: base_settings[k] for k in _core.RUN_SETTINGS}
     ensemble = base.ensemble
+    # Ctrl-C in the main thread sets every active run's event (oxyline.run): an ensemble in a
+    # worker thread stops too; `poll` raises once it is set (checked ~10 times a second)
+    from oxyline import run as _run_module
+    from oxyline.errors import SimulationCancelled
+
+    event = cancel if cancel is not None else threading.Event()
+
+    def poll() -> None:
+        if event.is_set():
+            raise SimulationCancelled("ensemble cancelled")
+
+    with _run_module._ACTIVE_LOCK:
+        _run_module._ACTIVE.append(event)
     try:
-        with _old_objects_frozen():
+        with _old_objects_frozen(), core_errors("simulate_ensemble"):
             # a summary's statistics are computed on the worker threads (see summary_values)
             return ensemble.run(feed.next, on_done=done, workers=workers,
-                                summary=output == "summary", heart=bool(heart[2]), **core)
+                                summary=output == "summary", heart=bool(heart[2]), poll=poll,
+                                variant_timeout=variant_timeout, **core)
     finally:
+        with _run_module._ACTIVE_LOCK:
+            _run_module._ACTIVE.remove(event)
         if batch is not None:
             batch.flush()
         close()

@@ -187,7 +187,10 @@ def _scaled(data: dict[str, Any], scale: Any, k: int) -> tuple[set[int], set[str
             changed.add(i)
         elif "compliance" in factors and "youngs_modulus" in v:
             e = _value(v["youngs_modulus"], k, f"vessels.{v['name']}.youngs_modulus")
-            vessels[i] = {**v, "youngs_modulus": e / factors["compliance"]}
+            # compliance ∝ 1/E; a factor 0 gives E = inf, which the model refuses for the
+            # variant (naming the vessel), as it refuses a negative factor's E < 0
+            f = factors["compliance"]
+            vessels[i] = {**v, "youngs_modulus": e / f if f != 0 else math.inf}
             changed.add(i)
     bcs = data["boundary_conditions"] = dict(data.get("boundary_conditions", {}))
     changed_nodes: set[str] = set()

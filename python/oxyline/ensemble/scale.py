@@ -51,7 +51,13 @@ def scale_terms(scale: Any, index: Mapping[Any, int], k: int
     for key in ("resistance", "compliance"):
         if key in scale:
             f = scale[key]
-            if isinstance(f, bool) or not isinstance(f, (int, float)) or not math.isfinite(f):
-                raise ModelError(f"{where(k, f'scale.{key}')}: expected a number, got {f!r}")
+            try:
+                ok = not isinstance(f, bool) and isinstance(f, (int, float)) \
+                    and math.isfinite(f)
+            except OverflowError:  # an integer beyond any float
+                ok = False
+            if not ok:
+                raise ModelError(f"{where(k, f'scale.{key}')}: expected a number, got "
+                                 f"{f!r:.40}")
             factors[key] = float(f)
     return selected, factors

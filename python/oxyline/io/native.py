@@ -182,10 +182,9 @@ def read_mapping(path: PathLike) -> dict[str, Any]:
         raise ModelError(f"{p}: {size / 2**20:.0f} MiB is more than the {limit / 2**20:.0f} MiB "
                          f"a {'YAML' if is_yaml else 'JSON'} model file may have "
                          f"(oxyline.io.native.MAX_{'YAML' if is_yaml else 'JSON'}_BYTES)")
-    try:
-        text = _decode(p.read_bytes(), p)
-    except OSError as exc:
-        raise ModelError(f"{p}: cannot read: {exc.strerror or exc}") from None
+    from oxyline.io._common import read_regular_file
+
+    text = _decode(read_regular_file(p, "model file", limit), p)
     try:
         data = _parse_yaml(text, p) if is_yaml else json.loads(text, object_pairs_hook=_unique_keys)
     except ModelError:

@@ -139,8 +139,13 @@ def read_inlet(path: PathLike, *, repair: bool = True) -> tuple[np.ndarray, np.n
     p = Path(path)
     if not p.is_file():
         raise ModelError(f"{p}: inlet file not found")
+    import io
+
+    from oxyline.io._common import read_regular_text
+
+    text = read_regular_text(p, "openBF inlet table")
     try:
-        data = np.loadtxt(p, ndmin=2)
+        data = np.loadtxt(io.StringIO(text), ndmin=2)
     except ValueError as exc:
         raise ModelError(f"{p}: cannot read the inlet table: {exc}") from None
     if data.shape[1] < 2 or data.shape[0] < 2:

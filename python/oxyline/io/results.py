@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 from oxyline.errors import OutputError
 from oxyline.io._common import PathLike
+from oxyline.io.atomic import deferred_signals, replace_atomically
 
 if TYPE_CHECKING:
     from oxyline.result import Result
@@ -41,11 +42,6 @@ def dataset(result: Result) -> Any:
 # h5py crashes the process (SIGSEGV) when the disk fills during its own writes, a plain write
 # raises OSError. Larger files are written by h5py directly after a free-space check.
 NETCDF_IN_MEMORY_BYTES = 512 << 20
-
-
-def _tmp_sibling(p: Path) -> Path:
-    """A temporary name beside ``p`` (same file system, so that the final rename is atomic)."""
-    return p.with_name(f".{p.name}.{os.getpid()}.partial")
 
 
 def check_free_space(p: Path, need: int, result: Any = None) -> None:
@@ -104,8 +100,8 @@ def to_netcdf(result: Result, path: PathLike) -> Path:
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     ds = dataset(result)
-    tmp = _tmp_sibling(p)
-    try:
+
+    def write(tmp: Path) -> None:
         data = _netcdf4_bytes(ds) if ds.nbytes <= NETCDF_IN_MEMORY_BYTES else None
         if data is not None:
             with open(tmp, "wb") as fh:
@@ -113,11 +109,12 @@ def to_netcdf(result: Result, path: PathLike) -> Path:
         else:
             check_free_space(p, int(ds.nbytes), result)
             ds.to_netcdf(tmp, engine="h5netcdf")
-        os.replace(tmp, p)
+
+    try:
+        replace_atomically(p, write)
     except OutputError:
         raise
     except (OSError, RuntimeError) as exc:
-        tmp.unlink(missing_ok=True)
         why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
         raise OutputError(f"{p}: cannot write the NetCDF file: {why}; nothing was written (the "
                           "result is still in memory: exc.result)", result) from exc
@@ -176,31 +173,68 @@ def to_zarr(result: Result, path: PathLike, time_chunk: int = 1024,
     """
     p = Path(path)
     _refuse_existing(p, overwrite)
-    tmp = _tmp_sibling(p)
+    chunk = min(time_chunk, max(1, len(result.time)))
     try:
-        _write_zarr(dataset(result), tmp, min(time_chunk, max(1, len(result.time))))
-        if p.exists():  # overwrite: the old store goes only once the new one is complete
-            old = p.with_name(f".{p.name}.{os.getpid()}.old")
-            os.replace(p, old)
-            os.replace(tmp, p)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, p)
+        # an existing store (overwrite) goes only once the new one is complete
+        replace_atomically(p, lambda tmp: _write_zarr(dataset(result), tmp, chunk), sync=False)
     except (OSError, RuntimeError, ValueError) as exc:
-        shutil.rmtree(tmp, ignore_errors=True)
         raise OutputError(f"{p}: cannot write the Zarr store: {_why(exc)}; nothing was written "
                           "(the result is still in memory: exc.result)", result) from exc
     return p
+
+
+class _StoreLock:
+    """An exclusive lock on a store path for the life of one writer (``.<name>.lock`` beside
+    it, ``flock``): a second process writing the same store is refused instead of both ending
+    with a broken one. Where ``fcntl`` is missing (Windows) there is no lock."""
+
+    def __init__(self, path: Path) -> None:
+        self.file = path.with_name(f".{path.name}.lock")
+        self.fd: int | None = None
+        try:
+            import fcntl
+        except ImportError:
+            return
+        while self.fd is None:
+            try:
+                fd = os.open(self.file, os.O_RDWR | os.O_CREAT, 0o644)
+            except OSError as exc:
+                raise OutputError(f"{path}: cannot create the store's lock file "
+                                  f"{self.file.name}: {_why(exc)}") from exc
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                os.close(fd)
+                raise OutputError(f"{path}: another process is writing this store (lock "
+                                  f"{self.file.name}); nothing was written") from None
+            try:  # the holder before us may have removed the file between open and flock
+                same = os.fstat(fd).st_ino == os.stat(self.file).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                self.fd = fd
+            else:
+                os.close(fd)
+
+    def release(self) -> None:
+        if self.fd is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(self.file)
+            os.close(self.fd)
+            self.fd = None
 
 
 class ZarrAppender:
     """A Zarr store created from a zero-row template dataset (the variables, coordinates and
     attributes of :func:`dataset`) and grown along ``time`` chunk by chunk.
 
-    The consolidated metadata that ``xarray.open_zarr`` reads is rewritten after every chunk,
-    so the store stays valid if the process dies mid-run. A chunk that cannot be written
-    (disk full) is rolled back, so the store keeps exactly the rows of the chunks before it,
-    and :class:`oxyline.OutputError` says so.
+    The store is created under a temporary name and renamed into place. The consolidated
+    metadata that ``xarray.open_zarr`` reads is the store's commit record: it is rewritten
+    (atomically) only after every variable of a chunk has been appended, and SIGINT/SIGTERM
+    are deferred while a chunk is appended, so an interrupted or killed run leaves a store
+    that opens with whole rows. A chunk that cannot be written (disk full) is rolled back, so
+    the store keeps exactly the rows of the chunks before it, and :class:`oxyline.OutputError`
+    says so. One process at a time writes a store (a second one is refused).
     """
 
     def __init__(self, path: PathLike, template: Any, time_chunk: int,
@@ -208,31 +242,38 @@ class ZarrAppender:
         self.path = Path(path)
         self.rows = 0
         self._zarr = _zarr()
-        _refuse_existing(self.path, overwrite)
+        self._lock = _StoreLock(self.path)
         try:
-            _write_zarr(template, self.path, time_chunk)
+            _refuse_existing(self.path, overwrite)
+            replace_atomically(self.path, lambda tmp: _write_zarr(template, tmp, time_chunk),
+                               sync=False)
             # the metadata of every array as stored, not the consolidated copy (stale once grown)
             self._group = self._zarr.open_group(self.path, mode="r+", zarr_format=2,
                                                 use_consolidated=False)
+        except OutputError:
+            self._lock.release()
+            raise
         except (OSError, RuntimeError, ValueError) as exc:
-            self.remove()
+            self._lock.release()
             raise OutputError(f"{self.path}: cannot create the Zarr store: {_why(exc)}") from exc
         self._timed = [n for n, v in template.variables.items() if "time" in v.dims]
 
     def append(self, ds: Any) -> None:
-        """Append the rows of ``ds`` (a dataset with the template's variables) along time."""
+        """Append the rows of ``ds`` (a dataset with the template's variables) along time:
+        every variable, then the consolidated metadata, with signals deferred."""
         n = int(ds.sizes["time"])
-        try:
-            for name in self._timed:
-                self._group[name].append(ds[name].values, axis=0)
-            self._consolidate()
-        except Exception as exc:
-            self._roll_back()
-            raise OutputError(
-                f"{self.path}: writing output rows {self.rows}-{self.rows + n - 1} failed: "
-                f"{_why(exc)}; the store keeps the {self.rows} rows written before (readable "
-                "with oxyline.open_result)") from exc
-        self.rows += n
+        with deferred_signals():
+            try:
+                for name in self._timed:
+                    self._group[name].append(ds[name].values, axis=0)
+                self._consolidate()
+            except Exception as exc:
+                self._roll_back()
+                raise OutputError(
+                    f"{self.path}: writing output rows {self.rows}-{self.rows + n - 1} failed: "
+                    f"{_why(exc)}; the store keeps the {self.rows} rows written before "
+                    "(readable with oxyline.open_result)") from exc
+            self.rows += n
 
     def _roll_back(self) -> None:
         """Cut every time-dependent array back to the rows written before a failed chunk (each
@@ -246,12 +287,19 @@ class ZarrAppender:
             self._consolidate()
 
     def finish(self, attrs: dict[str, Any]) -> None:
-        """Replace the store's attributes (e.g. with the run's facts once it has ended)."""
-        self._group.attrs.put(dict(attrs))
-        self._consolidate()
+        """Replace the store's attributes (e.g. with the run's facts once it has ended), and
+        let other writers have the store."""
+        try:
+            with deferred_signals():
+                self._group.attrs.put(dict(attrs))
+                self._consolidate()
+        finally:
+            self._lock.release()
 
     def remove(self) -> None:
-        shutil.rmtree(self.path, ignore_errors=True)
+        with deferred_signals():
+            shutil.rmtree(self.path, ignore_errors=True)
+            self._lock.release()
 
     def _consolidate(self) -> None:
         import warnings

@@ -32,9 +32,11 @@ from oxyline.io._common import (
     PathLike,
     build,
     check_path,
+    confined_file,
     is_missing,
     model_source,
     plain,
+    read_regular_text,
 )
 from oxyline.io.native import dump_native, read_mapping
 from oxyline.model import Model, _copy
@@ -63,9 +65,12 @@ def _read_frame(source: Any, what: str, string_columns: tuple[str, ...]) -> tupl
 
     if isinstance(source, pd.DataFrame):
         return source.copy(), f"{what} table"
+    import io
+
     p = check_path(source)
+    text = read_regular_text(p, f"{what} table")
     try:
-        df = pd.read_csv(p, sep=_sep(p), comment="#", skipinitialspace=True,
+        df = pd.read_csv(io.StringIO(text), sep=_sep(p), comment="#", skipinitialspace=True,
                          dtype={c: str for c in string_columns}, keep_default_na=True,
                          **_exact_float_option())
     except Exception as exc:
@@ -140,8 +145,9 @@ def _read_waveform_file(path: Path, where: str) -> tuple[list[float], list[float
     """Two columns (time, value), comma/tab/space separated, optional header and # comments."""
     if not path.exists():
         raise ModelError(f"{where}: waveform file {path} not found")
+    text = read_regular_text(path, f"waveform file of {where}")
     times, values = [], []
-    for ln, line in enumerate(path.read_text().splitlines(), 1):
+    for ln, line in enumerate(text.splitlines(), 1):
         line = line.split("#")[0].strip()
         if not line:
             continue
@@ -329,7 +335,7 @@ def to_tables(model: Model, waveform_dir: PathLike | None = None) -> tuple[Any, 
                     brows.append(row)
                     continue
                 wdir.mkdir(parents=True, exist_ok=True)
-                wp = wdir / f"{node}.csv"
+                wp = confined_file(wdir, node, ".csv", f"{el}: node")
                 lines = [f"time,{kind}"] + [f"{float(t)!r},{float(x)!r}"
                                             for t, x in zip(bc["time"], bc[kind])]
                 wp.write_text("\n".join(lines) + "\n")

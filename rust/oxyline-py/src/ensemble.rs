@@ -19,6 +19,7 @@ use pyo3::types::PyDict;
 use std::cell::RefCell;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
 
 /// What a worker hands back: the assembled variant and its selection (None if it could not
 /// be assembled) and the run's outcome.
@@ -152,6 +153,48 @@ struct Output {
     /// volume, then each valve's [pressure behind, pressure in front, flow], as
     /// `Network.unknown_layout` lists them); the rows are then kept (no streamed summary).
     heart: bool,
+    /// Wall time a variant may run: it is stopped at its next progress check after that and
+    /// fails with a solver error naming `variant_timeout` (the others run on).
+    timeout: Option<Duration>,
+}
+
+/// A variant stopped because it ran past `timeout` (not by a cancelled ensemble) fails with
+/// an error that says so instead of "interrupted".
+fn name_timeout(
+    mut outcome: oxyline_core::Result<Outcome>,
+    timeout: Option<Duration>,
+    started: Instant,
+    cancelled: &AtomicBool,
+) -> oxyline_core::Result<Outcome> {
+    let Some(limit) = timeout else {
+        return outcome;
+    };
+    if started.elapsed() < limit || cancelled.load(Ordering::Relaxed) {
+        return outcome;
+    }
+    let late = |e: &Error| match e {
+        Error::Interrupted { time } => Some(Error::solver(
+            *time,
+            format!(
+                "variant_timeout: stopped after {:.3} s of wall time (the limit)",
+                limit.as_secs_f64()
+            ),
+        )),
+        _ => None,
+    };
+    match &mut outcome {
+        Ok(out) => {
+            if let Some(e) = out.error.as_ref().and_then(late) {
+                out.error = Some(e);
+            }
+        }
+        Err(e) => {
+            if let Some(n) = late(e) {
+                *e = n;
+            }
+        }
+    }
+    outcome
 }
 
 /// One variant: patch, assemble, select, run; `template` holds the shared settings.
@@ -225,8 +268,12 @@ fn run_variant(
         species_columns,
         ..template.clone()
     };
-    // a cancelled ensemble stops its running variants at their next progress check
-    let mut keep_going = |_: f64, _: f64| !cancelled.load(Ordering::Relaxed);
+    // a cancelled ensemble stops its running variants at their next progress check, as
+    // does a variant past its variant_timeout
+    let started = Instant::now();
+    let mut keep_going = |_: f64, _: f64| {
+        !cancelled.load(Ordering::Relaxed) && output.timeout.is_none_or(|l| started.elapsed() < l)
+    };
     // a summary that the collecting thread reads from the column statistics alone (no
     // species, two or more vessels: see `stats_summary` in ensemble/collect.py) folds them
     // as the rows stream by: no output table per variant
@@ -249,6 +296,7 @@ fn run_variant(
             &mut sink,
             &mut keep_going,
         );
+        let outcome = name_timeout(outcome, output.timeout, started, cancelled);
         let finished = matches!(&outcome, Ok(out) if out.error.is_none());
         let stats = if finished { fold.finish() } else { None };
         // a finished run without two distinct output times (no time average) needs its rows:
@@ -272,6 +320,7 @@ fn run_variant(
         &settings,
         &mut keep_going,
     );
+    let outcome = name_timeout(outcome, output.timeout, started, cancelled);
     let stats = match &outcome {
         Ok(out) if output.summary && out.error.is_none() => {
             column_stats(&out.times, &out.data, out.n_probes)
@@ -394,8 +443,11 @@ impl Ensemble {
     /// finished variant's `raw` also has `column_stats`, the (mean, min, max) arrays of
     /// `oxyline_core::ensemble::column_stats` over its output columns. `heart`: record the
     /// chamber volumes' and valves' unknowns after the output columns (see `Output::heart`).
+    /// `poll()` (if given) is called on this thread a few times a second: an exception it
+    /// raises stops the ensemble as Ctrl-C does (a `cancel` event). `variant_timeout`: the
+    /// wall time (s) each variant may run (see `Output::timeout`).
     #[pyo3(signature = (feed, *, on_done, workers = None, summary = false, heart = false,
-        **settings))]
+        poll = None, variant_timeout = None, **settings))]
     #[allow(clippy::too_many_arguments)]
     fn run(
         &self,
@@ -405,8 +457,21 @@ impl Ensemble {
         workers: Option<usize>,
         summary: bool,
         heart: bool,
+        poll: Option<Py<PyAny>>,
+        variant_timeout: Option<f64>,
         settings: Option<Bound<'_, PyDict>>,
     ) -> PyResult<bool> {
+        let timeout =
+            variant_timeout
+                .map(|s| {
+                    Duration::try_from_secs_f64(s).ok().filter(|d| !d.is_zero()).ok_or_else(|| {
+                    crate::errors::ModelError::new_err(format!(
+                        "simulate_ensemble: variant_timeout must be a number of seconds > 0, \
+                         got {s}"
+                    ))
+                })
+                })
+                .transpose()?;
         let shared = Shared::from_kwargs(settings.as_ref())?;
         let workers = worker_count(workers).map_err(to_py)?;
         // the cycles before the last are not recorded: a variant stopped early is reported
@@ -420,6 +485,7 @@ impl Ensemble {
             transport: shared.transport,
             summary,
             heart,
+            timeout,
         };
         let (base, targets) = (self.base.clone(), self.targets.clone());
         let job = |_: usize, input: Input, cancelled: &AtomicBool| {
@@ -478,6 +544,9 @@ impl Ensemble {
             let mut done = |item: Option<(usize, Finished)>| -> bool {
                 Python::attach(|py| {
                     keep(py.check_signals());
+                    if let Some(p) = &poll {
+                        keep(p.call0(py).map(drop));
+                    }
                     if let Some((i, f)) = item {
                         keep(deliver(py, &on_done, i, f));
                     }

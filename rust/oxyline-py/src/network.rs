@@ -693,10 +693,15 @@ fn checkpoint_every(cycles: Option<usize>, seconds: Option<f64>) -> PyResult<Eve
             "simulation: checkpoint_every must be >= 1 cycle",
         )),
         (Some(n), None) => Ok(Every::Cycles(n)),
-        (None, Some(s)) if s.is_finite() && s >= 0.0 => Ok(Every::Wall(Duration::from_secs_f64(s))),
-        (None, Some(s)) => Err(ModelError::new_err(format!(
-            "simulation: checkpoint_every must be a number of seconds >= 0, got {s}"
-        ))),
+        // a wall time a Duration cannot hold (e.g. 1e20 s) is refused, never a panic
+        (None, Some(s)) => match Duration::try_from_secs_f64(s) {
+            Ok(d) => Ok(Every::Wall(d)),
+            Err(_) => Err(ModelError::new_err(format!(
+                "simulation: checkpoint_every must be a number of seconds >= 0 and below \
+                 {:e}, got {s}",
+                Duration::MAX.as_secs_f64()
+            ))),
+        },
         (None, None) => Ok(Every::Wall(Duration::from_secs(300))),
     }
 }

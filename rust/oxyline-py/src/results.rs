@@ -179,7 +179,12 @@ pub(crate) fn finished_run(
     outcome: std::result::Result<Outcome, Error>,
     pending: Option<PyErr>,
 ) -> PyResult<Bound<'_, PyDict>> {
-    let mut out = outcome.map_err(to_py)?;
+    let mut out = match outcome {
+        Ok(out) => out,
+        // a callback's Python error (Ctrl-C, a cancel event) that stopped the run before its
+        // first step (e.g. during the step estimate) is raised itself, not the core's error
+        Err(e) => return Err(pending.unwrap_or_else(|| to_py(e))),
+    };
     let error = out.error.take();
     let d = outcome_dict(py, out)?;
     match (pending, error) {

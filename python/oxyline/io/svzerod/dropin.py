@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from oxyline.errors import ModelError, UnsupportedElement
+from oxyline.errors import ModelError, ResourceError, UnsupportedElement, core_errors
 from oxyline.io.svzerod import closed_loop as svzerod_closed_loop
 from oxyline.io.svzerod import cycles as svzerod_cycles
 from oxyline.io.svzerod import heart as svzerod_heart
@@ -93,6 +93,7 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
     else:
         names, columns = _output_columns(layout, recorded, s.output_variable_based)
     shape = (len(names), 1 if s.output_variable_based else 4)
+    _check_output_memory(s, shape)
     if s.cycle_error is not None:
         ends = {name: (a, b) for name, a, b in layout.vessels}
         cap_cols = [(recorded[ends[v][end == "out"]] + (2 if end == "in" else 3),
@@ -324,6 +325,28 @@ def _switch_refinement(model: Model, kw: Mapping[str, Any], s: RunSettings, sub:
     return int(factor)
 
 
+#: bytes per output value while the table is built: the core's rows, the values array, the
+#: step indices and times, and the DataFrame's long format (measured ~40 B per value)
+OUTPUT_BYTES_PER_VALUE = 48
+
+
+def _check_output_memory(s: RunSettings, shape: tuple[int, int]) -> None:
+    """Refuse an output table the memory allowed cannot hold (ResourceError naming the
+    settings that size it), before anything of it is allocated."""
+    from oxyline import memory as _memory
+
+    steps = (s.points_per_cycle - 1) * (s.cycles if s.output_all_cycles else 1)
+    rows = steps // s.output_interval + 1
+    need = float(rows) * shape[0] * shape[1] * OUTPUT_BYTES_PER_VALUE
+    limit = _memory.default_limit()
+    if limit is not None and need > limit:
+        raise ResourceError(
+            f"simulation_parameters: the output ({rows} times x {shape[0] * shape[1]} values) "
+            f"needs about {_memory.human(need)} of memory (estimate), above the "
+            f"{_memory.human(limit)} allowed; lower number_of_time_pts_per_cardiac_cycle or "
+            "number_of_cardiac_cycles (with output_all_cycles), or raise output_interval")
+
+
 def _wanted(s: RunSettings) -> tuple[np.ndarray, int]:
     """Global step indices svZeroDSolver outputs, and the first one."""
     steps = s.points_per_cycle - 1
@@ -380,8 +403,9 @@ def _run_streamed(model: Model, native: Mapping[str, Any], s: RunSettings, metho
         count["out"] = o + n
 
     chunk_rows = max(1, (1 << 20) // max(1, shape[0] * shape[1]))  # ~8 MB per chunk
-    raw = model.network.simulate(**kw, chunk_sink=take, chunk_rows=chunk_rows,
-                                 keep_current_cycle=False)
+    with core_errors("svZeroDSolver run"):
+        raw = model.network.simulate(**kw, chunk_sink=take, chunk_rows=chunk_rows,
+                                     keep_current_cycle=False)
     if "error" in raw:
         raise raw["error"]
     if count["out"] != wanted.size:
@@ -428,7 +452,8 @@ def _run_every_step(model: Model, native: Mapping[str, Any], s: RunSettings, met
         sub = RK4_DERIVATIVE_SUBSTEPS
         kw["dt"] = s.dt / sub
     kw.update(output_all_cycles=True, output_every=kw["dt"])
-    raw = model.network.simulate(**kw)
+    with core_errors("svZeroDSolver run"):
+        raw = model.network.simulate(**kw)
     if "error" in raw:
         raise raw["error"]
     t = np.asarray(raw["times"])
@@ -471,7 +496,8 @@ def _run_cycle_error(model: Model, native: Mapping[str, Any], s: RunSettings, me
 
     def run(cycles: int) -> tuple[np.ndarray, np.ndarray]:
         kw = dict(planned, cycles=cycles, output_all_cycles=True, output_every=s.dt)
-        raw = model.network.simulate(**kw)
+        with core_errors("svZeroDSolver run"):
+            raw = model.network.simulate(**kw)
         if "error" in raw:
             raise raw["error"]
         t = np.asarray(raw["times"])

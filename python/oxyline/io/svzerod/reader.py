@@ -49,7 +49,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from oxyline.errors import ModelError, UnsupportedElement
+from oxyline.errors import ModelError, ResourceError, UnsupportedElement
 from oxyline.io.native import read_mapping
 from oxyline.io.svzerod import closed_loop as svzerod_closed_loop
 from oxyline.io.svzerod import coupling as svzerod_coupling
@@ -207,9 +207,13 @@ def _check_params(d: Any, allowed: set[str] | tuple[str, ...], element: str) -> 
 def _num(v: Any, element: str, key: str) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise ModelError(f"{element}: '{key}' must be a number, got {v!r}")
-    x = float(v)
+    try:
+        x = float(v)
+    except OverflowError:  # an integer beyond any float
+        x = math.inf
     if not math.isfinite(x):
-        raise ModelError(f"{element}: '{key}' must be finite, got {x}")
+        got = x if isinstance(v, float) else f"an integer of {v.bit_length()} bits"
+        raise ModelError(f"{element}: '{key}' must be finite, got {got}")
     return x
 
 
@@ -260,10 +264,28 @@ def _int(sim: Mapping[str, Any], key: str, default: int | None, minimum: int) ->
     v = _required(sim, key, "simulation_parameters")
     if isinstance(v, float) and v.is_integer():  # JSON 10.0, read as an integer by svZeroDSolver
         v = int(v)
-    if isinstance(v, bool) or not isinstance(v, int) or v < minimum:
-        raise ModelError(f"simulation_parameters: '{key}' must be an integer >= {minimum}, "
-                         f"got {v!r}")
+    if isinstance(v, bool) or not isinstance(v, int) or not minimum <= v <= MAX_COUNT:
+        raise ModelError(f"simulation_parameters: '{key}' must be an integer from {minimum} "
+                         f"to {MAX_COUNT:.0e}, got {v!r:.40}")
     return v
+
+
+#: the largest count (cycles, time points) a file may ask for; the planned number of time
+#: steps is bounded again by MAX_TIME_STEPS
+MAX_COUNT = 10**9
+#: the most time steps (cycles x steps per cycle) a file may plan: about a day of running
+#: at 100 µs per step, far beyond any svZeroDSolver case (svZeroDSolver itself allocates its
+#: whole output up front and fails at once on such a file)
+MAX_TIME_STEPS = 10**9
+
+
+def _check_steps(cycles: int, pts: int, where: str) -> None:
+    steps = cycles * (pts - 1)
+    if steps > MAX_TIME_STEPS:
+        raise ResourceError(f"simulation_parameters: {where}: {cycles} cycles x {pts - 1} "
+                            f"steps per cycle = {steps:.3g} time steps, more than the "
+                            f"{MAX_TIME_STEPS:.0e} a run may plan (number_of_cardiac_cycles, "
+                            "number_of_time_pts_per_cardiac_cycle)")
 
 
 # ------------------------------------------------------------------------------------------
@@ -723,7 +745,12 @@ def _rcr_cycles(bcs: Mapping[str, tuple[str, dict[str, Any]]], period: float,
     eq. 21, as in svZeroDSolver's Solver.cpp."""
     tau = max(n["capacitance"] * n["distal_resistance"]
               for kind, n in bcs.values() if kind == "RCR")
-    cycles = math.ceil(-tau / period * math.log(percent / 100.0))
+    need = -tau / period * math.log(percent / 100.0)
+    if not need <= MAX_COUNT:  # also NaN/inf of extreme time constants
+        raise ResourceError(f"simulation_parameters: use_cycle_to_cycle_error gives "
+                            f"{need:.3g} cycles (largest RCR time constant {tau:.3g} s), "
+                            f"more than {MAX_COUNT:.0e}")
+    cycles = math.ceil(need)
     if cycles < 1:
         raise ModelError(f"simulation_parameters: use_cycle_to_cycle_error gives {cycles} "
                          "cycles (largest RCR time constant too small)")
@@ -925,8 +952,14 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
     period = _period(cfg, model_period, sim.period)
     svzerod_heart.finish(bcs, period)
     cycles = sim.cycles
+    if sim.cycle_error and not 0.0 < sim.percent < 100.0:
+        raise ModelError(f"simulation_parameters: 'sim_cycle_to_cycle_percent_error' must be "
+                         f"between 0 and 100 (exclusive) with use_cycle_to_cycle_error, got "
+                         f"{sim.percent:g}")
     if sim.cycle_error and any(kind == "RCR" for kind, _ in bcs.values()):
         cycles = _rcr_cycles(bcs, period, sim.percent)
+    _check_steps(cycles, sim.points, "use_cycle_to_cycle_error" if sim.cycle_error else
+                 "number_of_cardiac_cycles")
     # without an RCR, svZeroDSolver runs extra cycles until the caps' means converge
     # (oxyline.io.svzerod.cycles); the rule needs every step, so it is applied in `simulate`
 

@@ -97,18 +97,37 @@ pub fn rk4_limit_by(
     names: &Names,
     method: SpectrumMethod,
 ) -> Result<StabilityLimit> {
+    rk4_limit_probed(rk, names, method, &mut || true)
+}
+
+/// What an estimate asks between its pieces of work (each matrix-vector product, each
+/// sampled time): false stops it with [`Error::Interrupted`], so that a cancelled run stops
+/// during the estimate of its step too, not only once it steps.
+pub type KeepGoing<'a> = dyn FnMut() -> bool + 'a;
+
+fn interrupted() -> crate::Error {
+    crate::Error::Interrupted { time: 0.0 }
+}
+
+/// [`rk4_limit_by`], asking `go` between its pieces of work.
+pub fn rk4_limit_probed(
+    rk: &mut Rk4<'_>,
+    names: &Names,
+    method: SpectrumMethod,
+    go: &mut KeepGoing<'_>,
+) -> Result<StabilityLimit> {
     if rk.stiff_branches() == 0 {
-        return limit_open_closed(rk, names, method);
+        return limit_open_closed(rk, names, method, go);
     }
     rk.set_operator_mask(rk.stiff_mask_all())?;
-    let all = limit_open_closed(rk, names, method);
+    let all = limit_open_closed(rk, names, method, go);
     let all = all.and_then(|a| {
         let open_mask = rk.stiff_mask_open(a.dt_max);
         if open_mask == rk.stiff_mask_all() {
             return Ok(a);
         }
         rk.set_operator_mask(open_mask)?;
-        let open = limit_over_period(rk, names, method)?;
+        let open = limit_over_period(rk, names, method, go)?;
         Ok(if open.dt_max < a.dt_max { open } else { a })
     });
     rk.set_operator_mask(0)?;
@@ -120,13 +139,14 @@ fn limit_open_closed(
     rk: &mut Rk4<'_>,
     names: &Names,
     method: SpectrumMethod,
+    go: &mut KeepGoing<'_>,
 ) -> Result<StabilityLimit> {
-    let open = limit_over_period(rk, names, method)?;
+    let open = limit_over_period(rk, names, method, go)?;
     if !rk.has_closed_states() {
         return Ok(open);
     }
     rk.set_valves_closed(true)?;
-    let closed = limit_over_period(rk, names, method);
+    let closed = limit_over_period(rk, names, method, go);
     rk.set_valves_closed(false)?;
     let closed = closed?;
     Ok(if closed.dt_max < open.dt_max {
@@ -141,14 +161,22 @@ fn limit_over_period(
     rk: &mut Rk4<'_>,
     names: &Names,
     method: SpectrumMethod,
+    go: &mut KeepGoing<'_>,
 ) -> Result<StabilityLimit> {
     if !rk.is_time_varying() {
-        return rk4_limit_frozen(rk, names, method);
+        return rk4_limit_frozen(rk, names, method, go);
     }
     let mut worst: Option<StabilityLimit> = None;
     for t in rk.operator_times(TIME_SAMPLES) {
         rk.set_operator_time(t)?;
-        let lim = rk4_limit_frozen(rk, names, method)?;
+        let lim = rk4_limit_frozen(rk, names, method, go);
+        let lim = match lim {
+            Ok(lim) => lim,
+            Err(e) => {
+                rk.set_operator_time(0.0)?;
+                return Err(e);
+            }
+        };
         if worst.as_ref().is_none_or(|w| lim.dt_max < w.dt_max) {
             worst = Some(lim);
         }
@@ -166,7 +194,11 @@ fn rk4_limit_frozen(
     rk: &mut Rk4<'_>,
     names: &Names,
     method: SpectrumMethod,
+    go: &mut KeepGoing<'_>,
 ) -> Result<StabilityLimit> {
+    if !go() {
+        return Err(interrupted());
+    }
     if rk.diff.is_empty() {
         return Ok(StabilityLimit {
             dt_max: f64::INFINITY,
@@ -183,7 +215,7 @@ fn rk4_limit_frozen(
     let (limit, at) = if dense {
         dense_limit(rk)?
     } else {
-        krylov_limit(rk)?
+        krylov_limit(rk, go)?
     };
     Ok(StabilityLimit {
         element: names.unknown(rk.diff[at]),
@@ -270,11 +302,14 @@ fn dense_limit(rk: &mut Rk4<'_>) -> Result<(StabilityLimit, usize)> {
 /// reach. Iteration stops when pushing changes the limit by less than 0.1 %; the result is then
 /// conservative by at most that much. Checked against dense eigenvalues from 100 to 5,000
 /// unknowns (tests/test_stability.py).
-fn krylov_limit(rk: &mut Rk4<'_>) -> Result<(StabilityLimit, usize)> {
+fn krylov_limit(rk: &mut Rk4<'_>, go: &mut KeepGoing<'_>) -> Result<(StabilityLimit, usize)> {
     let nd = rk.diff.len();
     let scale = energy_scale(rk);
     let mut x = vec![0.0; nd];
     let mut op = |v: &[f64], out: &mut [f64]| -> Result<()> {
+        if !go() {
+            return Err(interrupted());
+        }
         for ((xi, vi), s) in x.iter_mut().zip(v).zip(&scale) {
             *xi = vi / s;
         }

@@ -28,7 +28,7 @@ pub(super) fn run(
     mut checkpoints: Option<&mut Checkpoints<'_>>,
 ) -> Result<Outcome> {
     s.validate(dae)?;
-    let mut plan = Plan::new(dae, steady, s, transport.as_deref_mut())?;
+    let mut plan = Plan::new(dae, steady, s, transport.as_deref_mut(), progress)?;
     let resume = checkpoints.as_deref_mut().and_then(|c| c.resume.take());
     let (mut y, yd) = match &resume {
         Some(r) => resume_state(r, dae, plan.dt)?,

@@ -10,7 +10,7 @@ use crate::error::{Error, Result};
 use crate::integrate::genalpha::GenAlpha;
 use crate::integrate::periodic;
 use crate::integrate::rk4::Rk4;
-use crate::integrate::stability::{StabilityLimit, rk4_limit};
+use crate::integrate::stability::{SpectrumMethod, StabilityLimit, rk4_limit_probed};
 use crate::integrate::steady::SteadyCache;
 use crate::transport::{Formulation, Transport};
 
@@ -32,14 +32,18 @@ pub(super) struct Plan<'d> {
 impl<'d> Plan<'d> {
     /// Choose the integrator and the step. A transport run limits RK4's automatic step by the
     /// upwind Courant number of the mean flow (see [`transport_step_limit`]).
+    /// `progress(t, t_end)` is asked during RK4's stability estimate (false: interrupted).
     pub fn new(
         dae: &'d Dae,
         steady: &SteadyCache<'_>,
         s: &RunSettings,
         transport: Option<&mut Transport>,
+        progress: &mut dyn FnMut(f64, f64) -> bool,
     ) -> Result<Self> {
         let (transport_dt, reaction) = transport_step_limit(dae, steady, transport);
-        let (use_rk4, stability, rk4) = choose_method(dae, steady, s, transport_dt)?;
+        let t_end = s.max_cycles() as f64 * s.period;
+        let mut go = || progress(0.0, t_end);
+        let (use_rk4, stability, rk4) = choose_method(dae, steady, s, transport_dt, &mut go)?;
         let rk4_limit = stability.as_ref().filter(|_| use_rk4);
         let (dt, steps_per_cycle, stride) = schedule(s, rk4_limit, transport_dt)?;
         if let Some(lim) = reaction.filter(|_| use_rk4 && s.dt.is_some()) {
@@ -204,6 +208,7 @@ fn choose_method<'d>(
     steady: &SteadyCache<'_>,
     s: &RunSettings,
     transport_dt: f64,
+    go: &mut dyn FnMut() -> bool,
 ) -> Result<(bool, Option<StabilityLimit>, Option<Rk4<'d>>)> {
     let mut use_rk4 = matches!(s.method, Method::Rk4);
     if !matches!(s.method, Method::Rk4 | Method::Auto { .. }) {
@@ -220,7 +225,7 @@ fn choose_method<'d>(
                     rk.set_linearization(ys)?;
                 }
             }
-            let lim = rk4_limit(rk, &dae.names)?;
+            let lim = rk4_limit_probed(rk, &dae.names, SpectrumMethod::Auto, go)?;
             if let Method::Auto { .. } = s.method {
                 use_rk4 = (0.5 * lim.dt_max).min(transport_dt) >= s.output_every / 20.0;
             }
@@ -248,6 +253,7 @@ fn schedule(
         (Some(lim), None) => (0.5 * lim.dt_max).min(s.output_every).min(transport_dt),
         (None, dt) => dt.unwrap_or(s.output_every),
     };
+    check_step_count(s, dt, rk4_limit)?;
     let substeps = ((s.period / out_per_cycle as f64) / dt * (1.0 - 1e-12))
         .ceil()
         .max(1.0) as usize;
@@ -263,6 +269,34 @@ fn schedule(
         check_stable(dt, lim)?;
     }
     Ok((dt, steps_per_cycle, stride))
+}
+
+/// The most steps a run may plan per cycle. A step this small comes from a degenerate
+/// stability limit (e.g. a negative stenosis coefficient, an element with a vanishing
+/// capacitance) or a mistyped `dt`; such a run would not end, so it is refused before the
+/// first step, naming what set the step.
+pub const MAX_STEPS_PER_CYCLE: f64 = 1e9;
+
+fn check_step_count(s: &RunSettings, dt: f64, rk4_limit: Option<&StabilityLimit>) -> Result<()> {
+    let planned = s.period / dt;
+    if planned <= MAX_STEPS_PER_CYCLE {
+        return Ok(());
+    }
+    let by = match (s.dt, rk4_limit) {
+        (Some(_), _) => "the requested dt".to_owned(),
+        (None, Some(lim)) => format!("RK4's stability limit, set by {}", lim.element),
+        (None, None) => "the output interval".to_owned(),
+    };
+    Err(Error::Resource {
+        what: format!("time step {dt:.3e} s ({by})"),
+        bytes: 0,
+        message: format!(
+            "{planned:.3e} steps per cycle of {} s, more than the {MAX_STEPS_PER_CYCLE:.0e} a \
+             run may plan; check that element's parameters, or use a larger dt or method \
+             'generalized-alpha'",
+            s.period
+        ),
+    })
 }
 
 fn check_stable(dt: f64, lim: &StabilityLimit) -> Result<()> {
@@ -380,5 +414,28 @@ mod tests {
                 element: "branch a".into()
             }
         );
+    }
+
+    #[test]
+    fn a_step_count_no_run_can_take_is_refused_naming_what_set_it() {
+        // RK4's automatic step from a degenerate limit (1.6e-18 s): 3e17 steps per cycle
+        let e = schedule(&settings(None, 0.01), Some(&limit(3.2e-18)), f64::INFINITY);
+        match e.unwrap_err() {
+            Error::Resource { what, message, .. } => {
+                assert!(what.contains("branch a"), "{what}");
+                assert!(message.contains("steps per cycle"), "{message}");
+            }
+            other => panic!("expected a resource error, got {other:?}"),
+        }
+        // a mistyped dt
+        let e = schedule(&settings(Some(1e-15), 0.01), None, f64::INFINITY).unwrap_err();
+        assert!(matches!(&e, Error::Resource { what, .. } if what.contains("requested dt")));
+        // the largest count a run may plan still runs
+        let ok = schedule(
+            &settings(Some(1.0 / MAX_STEPS_PER_CYCLE), 0.01),
+            None,
+            f64::INFINITY,
+        );
+        assert_eq!(ok.unwrap().1 as f64, MAX_STEPS_PER_CYCLE);
     }
 }

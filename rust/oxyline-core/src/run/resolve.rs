@@ -57,7 +57,7 @@ pub fn rk4_step_refinement(
     let mut s = s.clone();
     s.method = Method::Rk4;
     let steady = SteadyCache::new(dae);
-    let mut plan = Plan::new(dae, &steady, &s, None)?;
+    let mut plan = Plan::new(dae, &steady, &s, None, &mut |_, _| true)?;
     let (y0, _) = plan.initial_state(&steady, &s)?;
     let cycles = s
         .max_cycles()

@@ -1,0 +1,627 @@
+"""Hostile inputs aimed at the run, its files and its paths: each gives a typed error whose
+message names the argument (or a clean run), never a raw exception, a Rust panic, a hang or a
+file written where it does not belong."""
+
+from __future__ import annotations
+
+import copy
+import io
+import json
+import os
+import threading
+import time
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import oxyline
+from oxyline.cli import main
+from oxyline.errors import CheckpointError, ModelError, ResourceError
+
+EXAMPLE = Path(oxyline.__file__).parent / "examples" / "bifurcation.yaml"
+FAST = {"cycles": 1, "progress": False}
+
+# a minimal svZeroDSolver file: a flow into one resistive vessel and a resistance
+SVZ: dict[str, Any] = {
+    "simulation_parameters": {"number_of_cardiac_cycles": 2,
+                              "number_of_time_pts_per_cardiac_cycle": 11},
+    "boundary_conditions": [
+        {"bc_name": "INFLOW", "bc_type": "FLOW", "bc_values": {"Q": [5.0, 5.0],
+                                                               "t": [0.0, 1.0]}},
+        {"bc_name": "OUT", "bc_type": "RESISTANCE", "bc_values": {"R": 100.0, "Pd": 0.0}}],
+    "vessels": [{"vessel_id": 0, "vessel_length": 10.0, "vessel_name": "branch0_seg0",
+                 "zero_d_element_type": "BloodVessel",
+                 "zero_d_element_values": {"R_poiseuille": 100.0},
+                 "boundary_conditions": {"inlet": "INFLOW", "outlet": "OUT"}}],
+    "junctions": [],
+}
+
+
+def bifurcation() -> dict[str, Any]:
+    import yaml
+
+    return yaml.safe_load(EXAMPLE.read_text())
+
+
+def raises(cls: type[BaseException], *names: str) -> Any:
+    """pytest.raises(cls) whose message must name each of ``names``."""
+
+    class Check:
+        def __enter__(self) -> Any:
+            self.ctx = pytest.raises(cls)
+            self.info = self.ctx.__enter__()
+            return self.info
+
+        def __exit__(self, *exc: object) -> bool:
+            out = self.ctx.__exit__(*exc)
+            msg = str(self.info.value)
+            for n in names:
+                assert n in msg, f"{n!r} not in {msg!r}"
+            return out
+
+    return Check()
+
+
+# ---- durations and counts against representable ranges ------------------------------------
+
+@pytest.mark.parametrize("every", [1e20, 10**30, "1e20 s", "10000000000000000000000 cycles",
+                                   -1.0, float("nan")])
+def test_checkpoint_every_out_of_range_is_a_model_error(tmp_path: Path, every: Any) -> None:
+    with raises(ModelError, "checkpoint_every"):
+        oxyline.simulate("bifurcation", checkpoint=tmp_path / "c.ckpt", checkpoint_every=every,
+                         **FAST)
+
+
+def test_checkpoint_every_beyond_a_duration_never_panics_in_the_core() -> None:
+    # the binding itself (below the Python check): a ModelError, not a Rust panic
+    net = oxyline.load_model("bifurcation").network
+    with raises(ModelError, "checkpoint_every"):
+        net.simulate(period=1.0, output_every=0.01, checkpoint_sink=lambda d: None,
+                     checkpoint_every_seconds=1e20, cycles=1)
+
+
+def test_cli_checkpoint_every_huge_exits_2(tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    rc = main(["run", "bifurcation", "--cycles", "1", "--quiet", "--checkpoint",
+               str(tmp_path / "c.ckpt"), "--checkpoint-every", "1e20"])
+    assert rc == 2 and "checkpoint_every" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("key", "value"), [("cycles", 10**30), ("max_cycles", 2**64),
+                                            ("max_iterations", 10**400)])
+def test_huge_integer_counts_are_model_errors(key: str, value: int) -> None:
+    with raises(ModelError, key):
+        oxyline.simulate("bifurcation", **{**FAST, key: value})
+
+
+@pytest.mark.parametrize("key", ["dt", "output_every", "until_periodic"])
+def test_huge_integer_durations_are_model_errors(key: str) -> None:
+    with raises(ModelError, key):
+        oxyline.simulate("bifurcation", **{**FAST, key: 10**400})
+
+
+def test_huge_integer_radius_is_a_model_error_naming_it() -> None:
+    m = bifurcation()
+    m["vessels"][0]["radius"] = 10**400
+    with raises(ModelError, "radius"):
+        oxyline.load_model(m)
+
+
+def test_output_every_denormal_is_a_resource_error() -> None:
+    with raises(ResourceError, "output_every"):
+        oxyline.simulate("bifurcation", output_every=5e-324, **FAST)
+
+
+def test_tiny_dt_plans_no_endless_run() -> None:
+    with raises(ResourceError, "steps per cycle", "dt"):
+        oxyline.simulate("bifurcation", dt=1e-15, method="generalized-alpha", **FAST)
+
+
+@pytest.mark.parametrize("freq", [[1.0 + 2.0j], ["5 Hz"], [None], [10**400], [[1.0], [1.0, 2.0]]])
+def test_impedance_frequencies_not_real_numbers_are_model_errors(freq: Any) -> None:
+    with raises(ModelError, "frequencies"):
+        oxyline.impedance("bifurcation", "inlet", freq)
+
+
+# ---- svZeroDSolver files ---------------------------------------------------------------------
+
+@pytest.mark.parametrize(("key", "value", "cls"), [
+    ("number_of_cardiac_cycles", 1e9, ResourceError),
+    ("number_of_cardiac_cycles", 10**30, ModelError),
+    ("number_of_time_pts_per_cardiac_cycle", 1e9, ResourceError),
+    ("number_of_time_pts_per_cardiac_cycle", 10**400, ModelError),
+])
+def test_svzerod_counts_beyond_any_run_are_refused_at_once(key: str, value: Any,
+                                                           cls: type[Exception]) -> None:
+    cfg = copy.deepcopy(SVZ)
+    cfg["simulation_parameters"][key] = value
+    start = time.perf_counter()
+    with raises(cls, key):
+        oxyline.load_model(cfg)
+    assert time.perf_counter() - start < 30  # refused before any run (bounds a hang only)
+
+
+@pytest.mark.parametrize("percent", [0, 0.0, -5.0, 100.0])
+def test_svzerod_cycle_error_percent_out_of_range(percent: float) -> None:
+    cfg = copy.deepcopy(SVZ)
+    cfg["simulation_parameters"].update(use_cycle_to_cycle_error=True,
+                                        sim_cycle_to_cycle_percent_error=percent)
+    with raises(ModelError, "sim_cycle_to_cycle_percent_error"):
+        oxyline.load_model(cfg)
+
+
+def test_svzerod_huge_integer_value_is_a_model_error() -> None:
+    cfg = copy.deepcopy(SVZ)
+    cfg["boundary_conditions"][1]["bc_values"]["R"] = 10**400
+    with raises(ModelError, "'R'"):
+        oxyline.load_model(cfg)
+
+
+# ---- structured trees: counted in closed form first ------------------------------------------
+
+def test_structured_tree_near_one_is_refused_in_closed_form() -> None:
+    start = time.perf_counter()
+    with raises(ModelError, "max_vessels", "alpha"):
+        oxyline.structured_tree("out", root_radius=1e-3, alpha=0.999999, beta=0.999999,
+                                min_radius=1e-5)
+    assert time.perf_counter() - start < 5  # the count would run for hours
+
+
+def test_structured_tree_bound_is_a_lower_bound_of_the_count() -> None:
+    from oxyline.structured_tree import tree_size, tree_size_bound
+
+    for a, b, r0, rmin in [(0.9, 0.6, 1e-3, 1e-4), (0.8, 0.8, 1e-3, 5e-5), (0.95, 0.3, 1, 0.01),
+                           (0.5, 0.5, 1.0, 0.5), (0.5, 0.5, 1.0, 0.4999)]:
+        bound, count = tree_size_bound(a, b, r0, rmin), tree_size(a, b, r0, rmin)
+        assert bound <= count
+        if a == b and count > 10:  # a full binary tree: the bound is within rounding of it
+            assert bound >= count / 4
+
+
+@pytest.mark.parametrize("value", [6e6 * 1e3, 10**400, 0])
+def test_structured_tree_max_vessels_out_of_range(value: Any) -> None:
+    with raises(ModelError, "max_vessels"):
+        oxyline.structured_tree("out", root_radius=1e-3, max_vessels=value)
+
+
+# ---- nesting and self-reference ----------------------------------------------------------------
+
+def test_self_referencing_model_is_a_model_error() -> None:
+    m = bifurcation()
+    m["blood"]["self"] = m
+    with raises(ModelError, "refers to itself"):
+        oxyline.load_model(m)
+
+
+def test_deeply_nested_model_is_a_model_error() -> None:
+    m = bifurcation()
+    deep: dict[str, Any] = {}
+    node = deep
+    for _ in range(5000):
+        node["x"] = {}
+        node = node["x"]
+    m["blood"]["deep"] = deep
+    with raises(ModelError, "nested deeper"):
+        oxyline.load_model(m)
+
+
+def test_yaml_alias_cycle_is_a_model_error(tmp_path: Path) -> None:
+    p = tmp_path / "m.yaml"
+    p.write_text(EXAMPLE.read_text() + "\nloop: &a [*a]\n")
+    with raises(ModelError):
+        oxyline.load_model(p)
+
+
+# ---- paths ---------------------------------------------------------------------------------------
+
+def test_cli_refuses_a_checkpoint_on_the_input_model(tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    model = tmp_path / "m.yaml"
+    model.write_text(EXAMPLE.read_text())
+    before = model.read_bytes()
+    rc = main(["run", str(model), "--quiet", "--checkpoint", str(model)])
+    assert rc == 2 and "--checkpoint" in capsys.readouterr().err
+    assert model.read_bytes() == before
+    link = tmp_path / "link.yaml"
+    os.link(model, link)  # the same file under another name
+    rc = main(["run", str(model), "--quiet", "--checkpoint", str(link)])
+    assert rc == 2 and model.read_bytes() == before
+
+
+def test_cli_refuses_checkpoint_equal_to_output_and_output_on_input(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "out.nc"
+    rc = main(["run", "bifurcation", "--quiet", "-o", str(out), "--checkpoint",
+               str(tmp_path / "sub" / ".." / "out.nc")])
+    assert rc == 2 and "--checkpoint" in capsys.readouterr().err and not out.exists()
+    model = tmp_path / "m.csv"
+    model.write_text("x")
+    rc = main(["run", str(model), "--quiet", "-o", str(model)])
+    assert rc == 2 and "-o" in capsys.readouterr().err and model.read_text() == "x"
+
+
+def test_cli_unwritable_checkpoint_fails_before_the_run(tmp_path: Path,
+                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    rc = main(["run", "bifurcation", "--quiet", "-o", str(tmp_path / "o.nc"), "--checkpoint",
+               str(tmp_path / "missing" / "c.ckpt")])
+    assert rc == 2 and "c.ckpt" in capsys.readouterr().err
+
+
+def test_api_refuses_a_checkpoint_on_the_model_file(tmp_path: Path) -> None:
+    model = tmp_path / "m.yaml"
+    model.write_text(EXAMPLE.read_text())
+    with raises(ModelError, "checkpoint"):
+        oxyline.simulate(model, checkpoint=model, **FAST)
+
+
+@pytest.mark.parametrize("node", ["../escaped", "/tmp/abs", "a/b", "..", "c:\\x", ""])
+def test_write_tables_keeps_node_file_names_inside_the_output_directory(
+        tmp_path: Path, node: str) -> None:
+    from oxyline.io import write_tables
+
+    m = bifurcation()
+    old = next(iter(m["boundary_conditions"]))
+    m["boundary_conditions"] = {node if k == old else k: v
+                                for k, v in m["boundary_conditions"].items()}
+    for v in m["vessels"]:
+        v["from"] = node if v["from"] == old else v["from"]
+    m["boundary_conditions"][node] = {"type": "flow", "time": [0.0, 0.5, 1.0],
+                                      "flow": [1e-6, 2e-6, 1e-6]}
+    try:
+        model = oxyline.load_model(m)
+    except ModelError:
+        return  # a name the model itself refuses: nothing to write
+    out = tmp_path / "out" / "t.csv"
+    with raises(ModelError, "node"):
+        write_tables(model, out)
+    inside = {p.resolve() for p in tmp_path.rglob("*")}
+    assert all(str(p).startswith(str(tmp_path.resolve())) for p in inside)
+    assert not (tmp_path / "escaped.csv").exists() and not Path("/tmp/abs.csv").exists()
+
+
+@pytest.mark.parametrize("target", ["fifo", "/dev/zero", "/dev/urandom", "dir",
+                                    "/proc/self/status"])
+def test_waveform_tables_must_be_regular_files(tmp_path: Path, target: str) -> None:
+    if target == "fifo":
+        path = tmp_path / "wave.csv"
+        os.mkfifo(path)
+    elif target == "dir":
+        path = tmp_path / "wave.csv"
+        path.mkdir()
+    else:
+        path = Path(target)
+    vessels = tmp_path / "v.csv"
+    vessels.write_text("name,from,to,length,radius,wall_thickness,youngs_modulus\n"
+                       "a,in,out,0.1,0.003,0.0003,4e5\n")
+    (tmp_path / "v_bcs.csv").write_text(f"node,type,waveform,resistance\nin,flow,{path},\n"
+                                        "out,resistance,,1e8\n")
+    done: list[BaseException] = []
+
+    def load() -> None:
+        try:
+            oxyline.io.read_tables(vessels)
+        except BaseException as exc:  # noqa: BLE001 - handed to the test thread
+            done.append(exc)
+
+    t = threading.Thread(target=load, daemon=True)
+    t.start()
+    t.join(timeout=60)  # a FIFO opened for reading would block here forever
+    assert done, "reading a waveform table blocked"
+    assert isinstance(done[0], ModelError), repr(done[0])
+    assert "regular file" in str(done[0]) and str(path) in str(done[0])
+
+
+def test_table_size_limit(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from oxyline.io import _common
+
+    monkeypatch.setattr(_common, "MAX_TABLE_BYTES", 100)
+    vessels = tmp_path / "v.csv"
+    vessels.write_text("name,from,to,length,radius,wall_thickness,youngs_modulus\n"
+                       + "a,in,out,0.1,0.003,0.0003,4e5\n" * 10)
+    with raises(ModelError, "100"):
+        oxyline.io.read_tables(vessels)
+
+
+# ---- checkpoints: validated field by field ------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def good_checkpoint(tmp_path_factory: pytest.TempPathFactory) -> bytes:
+    p = tmp_path_factory.mktemp("ckpt") / "run.ckpt"
+    oxyline.simulate("bifurcation", cycles=2, checkpoint=p, checkpoint_every="1 cycle",
+                     progress=False)
+    return p.read_bytes()
+
+
+def _rewrite(data: bytes, meta_change: Any) -> bytes:
+    """The archive with its JSON meta record changed by ``meta_change(meta)``."""
+    src = zipfile.ZipFile(io.BytesIO(data))
+    out = io.BytesIO()
+    with zipfile.ZipFile(out, "w") as dst:
+        for name in src.namelist():
+            raw = src.read(name)
+            if name == "meta.npy":
+                meta = json.loads(bytes(np.load(io.BytesIO(raw))).decode())
+                meta_change(meta)
+                buf = io.BytesIO()
+                np.save(buf, np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8))
+                raw = buf.getvalue()
+            dst.writestr(name, raw)
+    return out.getvalue()
+
+
+def _set(path: list[str], value: Any) -> Any:
+    def change(meta: dict[str, Any]) -> None:
+        d = meta
+        for k in path[:-1]:
+            d = d[k]
+        if value is _DELETE:
+            del d[path[-1]]
+        else:
+            d[path[-1]] = value
+    return change
+
+
+_DELETE = object()
+
+
+@pytest.mark.parametrize(("path", "value", "field"), [
+    (["state", "dt"], "0.001", "state/dt"),
+    (["state", "dt"], -1.0, "state/dt"),
+    (["state", "cycles_run"], 1.5, "state/cycles_run"),
+    (["state", "steps"], _DELETE, "state/steps"),
+    (["settings"], [1, 2], "settings"),
+    (["settings"], {"cycles": "many"}, "settings"),
+    (["model"], _DELETE, "model"),
+    (["model"], "bifurcation", "model"),
+    (["checkpoint_every"], {"s": 1}, "checkpoint_every"),
+    (["version"], "1", "version"),
+    (["state"], None, "state"),
+])
+def test_checkpoint_field_of_the_wrong_type_is_named(tmp_path: Path, good_checkpoint: bytes,
+                                                     path: list[str], value: Any,
+                                                     field: str) -> None:
+    p = tmp_path / "bad.ckpt"
+    p.write_bytes(_rewrite(good_checkpoint, _set(path, value)))
+    with raises(CheckpointError, str(p), field):
+        oxyline.resume(p, progress=False)
+
+
+@pytest.mark.parametrize("damage", ["truncate", "npy", "empty", "directory", "fifo"])
+def test_damaged_checkpoints_are_checkpoint_errors(tmp_path: Path, good_checkpoint: bytes,
+                                                   damage: str) -> None:
+    p = tmp_path / "bad.ckpt"
+    if damage == "truncate":
+        p.write_bytes(good_checkpoint[: len(good_checkpoint) // 2])
+    elif damage == "npy":
+        np.save(p.open("wb"), np.arange(5.0))
+    elif damage == "empty":
+        p.write_bytes(b"")
+    elif damage == "directory":
+        p.mkdir()
+    else:
+        os.mkfifo(p)
+    with raises(CheckpointError, str(p)):
+        oxyline.resume(p, progress=False)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.data())
+def test_bit_flipped_checkpoints_are_refused_or_resume(tmp_path: Path, good_checkpoint: bytes,
+                                                       data: st.DataObject) -> None:
+    """Any byte of the file changed: a CheckpointError (or the run resumes, where the byte was
+    one the zip format does not check), never another exception."""
+    i = data.draw(st.integers(0, len(good_checkpoint) - 1), label="byte")
+    flip = data.draw(st.integers(1, 255), label="xor")
+    raw = bytearray(good_checkpoint)
+    raw[i] ^= flip
+    p = tmp_path / "flipped.ckpt"
+    p.write_bytes(bytes(raw))
+    try:
+        oxyline.resume(p, progress=False)
+    except (CheckpointError, ModelError):
+        pass
+
+
+_JSON = st.recursive(st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=5),
+                     lambda c: st.lists(c, max_size=3) | st.dictionaries(st.text(max_size=5), c,
+                                                                         max_size=3),
+                     max_leaves=8)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(key=st.sampled_from(["state", "settings", "model", "checkpoint_every", "format",
+                            "version", "oxyline"]),
+       sub=st.sampled_from([None, "dt", "cycles_run", "steps", "periodic_error", "version"]),
+       value=_JSON)
+def test_mutated_checkpoint_metadata_is_refused_or_resumes(tmp_path: Path,
+                                                           good_checkpoint: bytes, key: str,
+                                                           sub: str | None, value: Any) -> None:
+    def change(meta: dict[str, Any]) -> None:
+        if sub is not None and key == "state" and isinstance(meta.get("state"), dict):
+            meta["state"][sub] = value
+        else:
+            meta[key] = value
+
+    p = tmp_path / "mutated.ckpt"
+    p.write_bytes(_rewrite(good_checkpoint, change))
+    try:
+        oxyline.resume(p, progress=False)
+    except (CheckpointError, ModelError) as exc:
+        assert str(p) in str(exc) or "checkpoint" in str(exc)
+
+
+# ---- cancellation in every phase ---------------------------------------------------------------
+
+def test_cancel_acts_during_the_automatic_step_estimate() -> None:
+    """RK4's stability estimate of a 6,000-segment model (Krylov, seconds on a large model)
+    asks the run's progress check between its matrix-vector products: a cancel set at the
+    first check (t = 0, before any step) stops the run there, with no rows computed."""
+    m = bifurcation()
+    for v in m["vessels"]:
+        v["segments"] = 10000  # an estimate of ~1 s: longer than the 0.1 s between checks
+    model = oxyline.load_model(m)
+    ev = threading.Event()
+    calls: list[float] = []
+
+    def first_check_cancels(t: float, t_end: float) -> None:
+        calls.append(t)
+        ev.set()
+
+    with pytest.raises(oxyline.SimulationCancelled) as info:
+        oxyline.simulate(model, cycles=1000, method="rk4", cancel=ev,
+                         progress=first_check_cancels)
+    assert calls[0] == 0.0  # asked during the estimate, before the first step
+    assert info.value.result is None or len(info.value.result.time) == 0
+
+
+# ---- a panic of the core never reaches the caller as one ---------------------------------------
+
+def test_a_core_panic_becomes_a_solver_error() -> None:
+    from oxyline.errors import core_errors
+
+    panic = type("PanicException", (BaseException,), {"__module__": "pyo3_runtime"})
+    with raises(oxyline.SolverError, "simulate", "boom"), core_errors("simulate"):
+        raise panic("boom")
+    with pytest.raises(KeyboardInterrupt), core_errors("simulate"):
+        raise KeyboardInterrupt
+
+
+def test_structured_tree_memory_estimate_refuses_before_growing() -> None:
+    from oxyline import _core
+    from oxyline.structured_tree import CORE_BYTES_PER_VESSEL
+
+    assert CORE_BYTES_PER_VESSEL == _core.BYTES_PER_ELEMENT + _core.FLOW_BYTES_PER_SEGMENT
+    with raises(ResourceError, "'out'", "memory"):
+        oxyline.structured_tree("out", root_radius=1e-3, min_radius=5e-5, memory_limit=1e6)
+
+
+# ---- ensembles ----------------------------------------------------------------------------------
+
+def test_ensemble_full_output_is_estimated_before_any_variant_runs() -> None:
+    with raises(ResourceError, "output='full'", "max_memory"):
+        oxyline.simulate_ensemble("bifurcation", [{}] * 2500, output="full", cycles=1,
+                                  progress=False, max_memory="1 MB")
+
+
+def test_ensemble_variant_timeout_fails_the_slow_variants_only() -> None:
+    slow = oxyline.simulate_ensemble("bifurcation", [{}, {}], cycles=2000, progress=False,
+                                     variant_timeout=1e-3)
+    assert slow.status.values.tolist() == [3, 3]
+    assert all("variant_timeout" in e for e in slow.error.values)
+    ok = oxyline.simulate_ensemble("bifurcation", [{}, {}], cycles=1, progress=False,
+                                   variant_timeout=1e6)
+    assert ok.status.values.tolist() == [0, 0]
+
+
+@pytest.mark.parametrize("value", [0, -1.0, float("inf"), "10 s", 10**400, True])
+def test_ensemble_variant_timeout_out_of_range(value: Any) -> None:
+    with raises(ModelError, "variant_timeout"):
+        oxyline.simulate_ensemble("bifurcation", [{}], cycles=1, progress=False,
+                                  variant_timeout=value)
+
+
+def test_ensemble_cancel_returns_what_finished_with_per_variant_status() -> None:
+    ev = threading.Event()
+
+    def stop_after_first(done: int, total: int) -> None:
+        if done >= 1:
+            ev.set()
+
+    variants = [{"vessels": {"parent": {"radius": 0.003 + 1e-5 * k}}} for k in range(40)]
+    with pytest.raises(oxyline.SimulationCancelled) as info:
+        oxyline.simulate_ensemble("bifurcation", variants, cycles=3, workers=1,
+                                  progress=stop_after_first, cancel=ev)
+    ds = info.value.result
+    status = ds.status.values
+    assert (status == 0).sum() >= 1 and set(status.tolist()) <= {0, 5, -1}
+    assert (status == -1).sum() >= 1  # the rest never started
+    with raises(ModelError, "cancel"):
+        oxyline.simulate_ensemble("bifurcation", [{}], cancel=object(), progress=False)
+
+
+_CELL = (st.floats(allow_nan=True, allow_infinity=True) | st.integers(-10**30, 10**30)
+         | st.sampled_from(["", "x", "1e400", "nan", None, "0"]))
+
+
+@settings(max_examples=15, deadline=None)
+@given(column=st.sampled_from(["vessels.parent.radius", "vessels.daughter1.length",
+                               "boundary_conditions.ica_out.resistance", "blood.viscosity",
+                               "scale.compliance", "scale.resistance", "period",
+                               "vessels.parent.segments"]),
+       cells=st.lists(_CELL, min_size=1, max_size=3))
+def test_mutated_ensemble_patch_tables_give_statuses_or_model_errors(column: str,
+                                                                     cells: list[Any]) -> None:
+    """Any values in a patch table's column: each variant runs or fails with its status and
+    error (6: above the memory allowed, estimated before it runs), or the table is refused
+    with a ModelError naming the column; nothing else."""
+    import pandas as pd
+
+    df = pd.DataFrame({column: pd.Series(cells, dtype=object)})
+    try:
+        # max_memory: a variant of 1e5+ segments is refused (status 6) instead of run
+        ds = oxyline.simulate_ensemble("bifurcation", df, cycles=1, progress=False, workers=1,
+                                       max_memory="100 MB")
+    except ModelError as exc:
+        assert column.split(".")[-1] in str(exc) or "variant" in str(exc), str(exc)
+        return
+    assert len(ds.status) == len(cells)
+    failed = ds.status.values != 0
+    assert all(ds.error.values[failed]), "a failed variant without its error"
+
+
+def test_max_memory_of_a_run_bounds_the_model_state_too() -> None:
+    m = bifurcation()
+    for v in m["vessels"]:
+        v["segments"] = 2000
+    model = oxyline.load_model(m)
+    # the output of one cycle every 0.1 s is tiny; the 6,000-segment state is not
+    with raises(ResourceError, "max_memory", "state"):
+        oxyline.simulate(model, cycles=1, output_every=0.1, segments=False, progress=False,
+                         max_memory="1 MB")
+
+
+def test_overflowing_stiffness_law_is_a_model_error() -> None:
+    with raises(ModelError, "stiffness"):
+        oxyline.structured_tree("out", root_radius=1e-3, min_radius=5e-4,
+                                stiffness={"k1": 1.0, "k2": 1e300, "k3": 0.0})
+
+
+def test_ensemble_variant_above_max_memory_fails_before_it_runs() -> None:
+    ds = oxyline.simulate_ensemble("bifurcation", [{}, {"vessels": {"parent": {
+        "segments": 400_000}}}], cycles=1, progress=False, max_memory="100 MB")
+    assert ds.status.values.tolist() == [0, 6]
+    assert "max_memory" in ds.error.values[1] and "variant 1" in ds.error.values[1]
+
+
+def test_svzerod_output_table_is_estimated_before_it_is_allocated() -> None:
+    from oxyline.io import svzerod
+
+    cfg = copy.deepcopy(SVZ)
+    cfg["simulation_parameters"].update(number_of_cardiac_cycles=1,
+                                        number_of_time_pts_per_cardiac_cycle=int(1e9))
+    with raises(ResourceError, "number_of_time_pts_per_cardiac_cycle"):  # ~190 GB
+        svzerod.simulate(cfg)
+
+
+def test_a_second_writer_of_a_zarr_store_is_refused(tmp_path: Path) -> None:
+    pytest.importorskip("zarr")
+    from oxyline.errors import OutputError
+    from oxyline.io.results import _StoreLock
+
+    path = tmp_path / "run.zarr"
+    held = _StoreLock(path)  # another writer holds the store
+    try:
+        with raises(OutputError, "another process is writing"):
+            oxyline.simulate_to_zarr("bifurcation", path, cycles=1, overwrite=True,
+                                     progress=False)
+    finally:
+        held.release()
+    ds = oxyline.simulate_to_zarr("bifurcation", path, cycles=1, overwrite=True,
+                                  progress=False)
+    assert ds.attrs["complete"] == 1
+    assert not list(tmp_path.glob(".*"))  # no lock or temporary left
