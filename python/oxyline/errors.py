@@ -50,11 +50,18 @@ class OutputSizeWarning(UserWarning):
     """The requested output is large (many GB): said before it is computed and written."""
 
 
+class PeriodicityWarning(UserWarning):
+    """A run ``until_periodic`` stopped at ``max_cycles`` with its cycle-to-cycle change still
+    above the tolerance: the last cycle is not the periodic state it asked for (the result's
+    ``settings["periodic_reached"]`` is False)."""
+
+
 __all__ = [
     "CheckpointError",
     "ModelError",
     "OutputError",
     "OutputSizeWarning",
+    "PeriodicityWarning",
     "ResourceError",
     "SimulationCancelled",
     "SimulationInterrupted",
