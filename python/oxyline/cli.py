@@ -97,13 +97,15 @@ def _run_options(args: argparse.Namespace) -> dict[str, object]:
             else args.until_periodic
     if args.max_cycles is not None:
         overrides["max_cycles"] = args.max_cycles
+    if args.rtol is not None:
+        overrides["rtol"] = args.rtol
     if args.output_every is not None:
         overrides["output_every"] = args.output_every
     if args.method is not None:
         overrides["method"] = args.method
     if args.resume and len(overrides) > 1:
         raise InputError(f"{args.resume}: a resumed run keeps its checkpoint's settings (no "
-                         "--cycles, --dt, --until-periodic, --max-cycles, --output-every "
+                         "--cycles, --dt, --rtol, --until-periodic, --max-cycles, --output-every "
                          "or --method)")
     if args.checkpoint:
         overrides["checkpoint"] = args.checkpoint
@@ -256,6 +258,11 @@ def _print_table(model: Any, res: Any, stream: bool, rows: int = 20) -> None:
         q_in = res.flow_in[:, shown].mean(axis=0)
     print(f"{model.name}: {len(vessels)} vessels, method {s['method']}, dt {s['dt']:.3e} s, "
           f"{s['cycles_run']} cycles, cycle-to-cycle change {s['periodic_error']:.2e}")
+    if s.get("steps") is not None:
+        est = ", ".join(f"{k.removeprefix('error_estimate_')} {v:.1e}" for k, v in s.items()
+                        if k.startswith("error_estimate_"))
+        print(f"error control: rtol {s['rtol']:g}, {s['steps']} steps ({s['rejected_steps']} "
+              f"rejected), dt {s['dt_min']:.2e} to {s['dt_max']:.2e} s; estimated error {est}")
     if s.get("periodic_reached") in (False, 0):
         print(f"not periodic: the change is above until_periodic = {s['until_periodic']:g} "
               "after max_cycles")
@@ -468,6 +475,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="run until the cycle-to-cycle change is below TOL (relative), at least "
                         "--cycles and at most --max-cycles cycles; 'none' runs exactly --cycles "
                         "even if the model asks for periodicity")
+    p.add_argument("--rtol", type=float, metavar="TOL",
+                   help="error control: generalized-alpha with a variable step keeping the "
+                        "estimated error of every unknown within TOL (relative); excludes --dt")
     p.add_argument("--max-cycles", type=int, metavar="N",
                    help="most cycles a run --until-periodic takes (default: the model's, else "
                         "max(cycles, 100))")

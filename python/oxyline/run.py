@@ -89,7 +89,7 @@ def _flag(value: Any, where: str) -> bool:
 OPTIONS = frozenset({"cycles", "dt", "method", "output_every", "output_cycles", "until_periodic",
                      "max_cycles", "rho_infty", "start", "segments", "progress", "newton_atol",
                      "max_iterations", "transport", "variables", "vessels", "max_memory",
-                     "checkpoint", "checkpoint_every", "cancel"})
+                     "checkpoint", "checkpoint_every", "cancel", "rtol", "atol"})
 
 STARTS = ("steady", "zero", "svzerod-steady", "svzerod-zero", "periodic")
 
@@ -136,7 +136,10 @@ def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
             and not callable(progress):
         raise ModelError(f"simulate: progress must be true, false or a callback f(t, t_end), "
                          f"got {progress!r}")
+    rtol, atol_by_kind = _tolerances(sim, overrides, get)
     return {
+        "rtol": rtol,
+        "atol": atol_by_kind,
         "period": float(period),
         "cycles": cycles,
         "dt": dt,
@@ -155,6 +158,21 @@ def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
         "max_iterations": _integer(*get("max_iterations", {}, "", 30), 1),
         "transport": _flag(*get("transport", {}, "", True)),
     }
+
+
+def _tolerances(sim: Mapping[str, Any], overrides: Mapping[str, Any],
+                get: Callable[..., tuple[Any, str]]) -> tuple[float | None, dict[str, float] | None]:
+    """Error control's ``rtol`` (a number; the core checks 0 < rtol < 1) and ``atol`` (a
+    mapping of kind to a number, SI; the core names an unknown kind)."""
+    rtol, where = get("rtol", sim, "rtol", None)
+    rtol = None if rtol is None else _real(rtol, where)
+    atol, where = get("atol", sim, "atol", None)
+    if atol is None:
+        return rtol, None
+    if not isinstance(atol, Mapping):
+        raise ModelError(f"{where} must be a mapping of kind (pressure, flow, volume, species) "
+                         f"to a number in SI units, got {atol!r}")
+    return rtol, {str(k): _real(v, f"{where}.{k}") for k, v in atol.items()}
 
 
 def _vessels(model: Model, selection: Any) -> list[str] | None:
@@ -342,10 +360,15 @@ def _result(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
 def _run_settings(s: Mapping[str, Any], raw: Mapping[str, Any] | None) -> dict[str, Any]:
     """The settings recorded with a result: the requested ones and, after the run, its facts."""
     settings = {k: s[k] for k in ("period", "cycles", "method", "output_every", "rho_infty",
-                                  "until_periodic")}
+                                  "until_periodic", "rtol")}
     if raw is not None:
         settings.update(method=raw["method"], dt=raw["dt"], cycles_run=raw["cycles_run"],
                         periodic_error=raw["periodic_error"], rk4_dt_max=raw.get("rk4_dt_max"))
+        if "error_estimate" in raw:  # error control: its steps and estimates (dt: the mean)
+            settings.update({k: raw[k] for k in ("steps", "rejected_steps", "dt_min", "dt_max")})
+            settings.update({f"error_estimate_{kind}": float(v)
+                             for kind, v in raw["error_estimate"].items()
+                             if v > 0.0 or kind in ("pressure", "flow")})
         if s["until_periodic"] is not None:
             # the stopping rule's own test (the core stops on change < tolerance)
             settings["periodic_reached"] = bool(raw["periodic_error"] < s["until_periodic"])
@@ -443,6 +466,13 @@ def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any], **overri
     ``max_cycles``, ``rho_infty``, ``start`` (``"steady"``, ``"periodic"``,
     ``"zero"``), ``segments`` (bool),
     ``progress`` (bool or callback ``f(t, t_end)``).
+
+    Error control (docs/physics.md §10): ``rtol`` (0 < rtol < 1) runs generalized-α with a
+    variable step whose estimated error of every unknown stays within ``atol + rtol·|y|``
+    (``atol``: a mapping ``{"pressure": Pa, "flow": m^3/s, "volume": m^3, "species":
+    mol/m^3}``, defaults 1 Pa, 1e-9, 1e-9, 1e-6), output from the dense output at every
+    ``output_every`` (which then never changes the solution); ``result.error_estimate`` gives
+    the largest estimate per kind. It excludes ``dt`` (a fixed step) and ``method="rk4"``.
 
     Cycles: without ``until_periodic`` (keyword or the model's ``simulation`` section) a run
     takes exactly ``cycles``; with it, ``cycles`` is the least and ``max_cycles`` (default

@@ -152,6 +152,15 @@ impl<'a> GenAlpha<'a> {
         Ok(())
     }
 
+    /// Change the step (error-controlled runs): the iteration matrix depends on it, so a
+    /// linear circuit refactorises at its next step; the same step keeps the factors.
+    pub fn set_dt(&mut self, dt: f64) {
+        if dt.to_bits() != self.dt.to_bits() {
+            self.dt = dt;
+            self.factored = false;
+        }
+    }
+
     /// α_f: the level at which the residual (and so the face flows for transport) is enforced.
     pub fn alpha_f(&self) -> f64 {
         self.af

@@ -38,6 +38,20 @@ impl<'d> Plan<'d> {
         s: &RunSettings,
         transport: Option<&mut Transport>,
     ) -> Result<Self> {
+        if s.adaptive().is_some() {
+            // error control: generalized-α, its steps chosen during the run; the plan's step
+            // is only the quasi-steady transport's start (docs/physics.md §10)
+            let out_per_cycle = (s.period / s.output_every).round().max(1.0) as usize;
+            return Ok(Plan {
+                dae,
+                use_rk4: false,
+                stability: None,
+                dt: s.period / 1000.0,
+                steps_per_cycle: out_per_cycle,
+                stride: 1,
+                rk4: None,
+            });
+        }
         let (transport_dt, reaction) = transport_step_limit(dae, steady, transport);
         let (use_rk4, stability, rk4) = choose_method(dae, steady, s, transport_dt)?;
         let rk4_limit = stability.as_ref().filter(|_| use_rk4);
@@ -330,6 +344,7 @@ mod tests {
             newton: NewtonControl::default(),
             probes: Vec::new(),
             species_columns: None,
+            tolerances: None,
         }
     }
 

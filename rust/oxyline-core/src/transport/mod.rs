@@ -329,6 +329,11 @@ impl Transport {
     pub fn n_cells(&self) -> usize {
         self.plan.cells.len()
     }
+    /// Each cell's lumen volume V₀ at the reference pressure (m³): an error-controlled run
+    /// weighs the amounts of a cell by a concentration tolerance times it.
+    pub fn reference_volumes(&self) -> &[f64] {
+        &self.plan.v0
+    }
     /// Length of the coupled state: amounts per cell and species, then 4 accumulators per
     /// species (I_in, I_out, I_wall, I_decay), then the relaxed shears of every species.
     pub fn state_len(&self) -> usize {
