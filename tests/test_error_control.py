@@ -141,11 +141,45 @@ def test_bad_error_control_settings_name_the_setting(settings: dict[str, Any],
         oxyline.simulate("bifurcation", cycles=1, **settings)
 
 
-# Values of fixed-step runs computed on the build before error control (the same code path,
-# untouched): equal to 1e-12 relative (the tolerance allows a compiler's reassociation only;
-# the run is bit-identical on one machine).
+# Values of fixed-step runs (RK4 auto, generalized-α with O2, generalized-α on adan56)
+# computed with the build before error control: equal to 1e-12 relative (the fixed-step path
+# is untouched; the tolerance only allows another compiler's reassociation, the runs are
+# bit-identical on one machine).
 FIXED = {
-    # (model, settings) -> (row, vessel index, variable) -> value
+    ('bifurcation', (('cycles', 1), ('output_every', 0.05))): {
+        (3, 0, 'pressure_in'): 15738.793561163195,
+        (3, 2, 'pressure_in'): 15592.130589943503,
+        (3, 0, 'flow_out'): 9.590191379507863e-06,
+        (3, 2, 'flow_out'): 3.2766443715971856e-06,
+        (20, 0, 'pressure_in'): 9301.54371544021,
+        (20, 2, 'pressure_in'): 9213.841837958666,
+        (20, 0, 'flow_out'): 5.5157159335522685e-06,
+        (20, 2, 'flow_out'): 1.9373814929815092e-06,
+    },
+    ('paper-bifurcated', (('cycles', 1), ('dt', 0.001), ('method', 'generalized-alpha'), ('output_every', 0.05))): {
+        (3, 0, 'pressure_in'): 15770.581073597947,
+        (3, 2, 'pressure_in'): 15642.238739339215,
+        (3, 0, 'flow_out'): 9.572106683213857e-06,
+        (3, 2, 'flow_out'): 3.287986344370022e-06,
+        (3, 0, 'po2_out'): 85.26519321630956,
+        (3, 2, 'po2_out'): 85.24437535685497,
+        (20, 0, 'pressure_in'): 9330.633841248671,
+        (20, 2, 'pressure_in'): 9241.65877406065,
+        (20, 0, 'flow_out'): 5.557227229064835e-06,
+        (20, 2, 'flow_out'): 1.9429474760505923e-06,
+        (20, 0, 'po2_out'): 85.17149919862352,
+        (20, 2, 'po2_out'): 85.00166283148673,
+    },
+    ('adan56', (('cycles', 1), ('dt', 0.005), ('method', 'generalized-alpha'), ('output_every', 0.05))): {
+        (3, 0, 'pressure_in'): 15120.373569108631,
+        (3, 76, 'pressure_in'): 10310.68564775052,
+        (3, 0, 'flow_out'): 0.0004780707733801279,
+        (3, 76, 'flow_out'): 7.210377725860245e-07,
+        (20, 0, 'pressure_in'): 11103.429551708097,
+        (20, 76, 'pressure_in'): 12869.253310436552,
+        (20, 0, 'flow_out'): 1.753781355090939e-05,
+        (20, 76, 'flow_out'): 1.2722717823833713e-06,
+    },
 }
 
 
@@ -155,3 +189,20 @@ def test_fixed_step_runs_are_unchanged() -> None:
         for (row, vessel, key), want in values.items():
             got = float(getattr(res, key)[row, vessel])
             assert got == pytest.approx(want, rel=1e-12, abs=0.0), (model, key)
+
+
+def test_cli_rtol_reports_the_estimate_in_the_summary_and_the_file(
+        tmp_path: Any, capsys: pytest.CaptureFixture[str]) -> None:
+    xr = pytest.importorskip("xarray")
+    from oxyline.cli import main
+
+    out = tmp_path / "r.nc"
+    assert main(["run", "bifurcation", "--cycles", "1", "--rtol", "1e-3", "--output-every",
+                 "0.01", "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "error control: rtol 0.001" in text and "estimated error pressure" in text
+    with xr.open_dataset(out, engine="h5netcdf") as ds:
+        assert ds.sizes["time"] == 101
+        assert 0 < ds.attrs["solver_error_estimate_pressure"] <= 1e-3
+        assert 0 < ds.attrs["solver_error_estimate_flow"] <= 1e-3
+        assert ds.attrs["solver_rtol"] == 1e-3 and ds.attrs["solver_steps"] > 0

@@ -50,6 +50,11 @@ pub trait Integrator {
     /// Change the step Δt (error-controlled runs).
     fn set_dt(&mut self, dt: f64);
 
+    /// Filter a local error estimate of the step just taken through the step's iteration
+    /// matrix, v ← (α_m E + α_f γ Δt J)⁻¹ α_m E v (Shampine's filter: unchanged for modes
+    /// slow against Δt, damped for stiff ones). Integrators without one leave v as it is.
+    fn filter_error(&mut self, _v: &mut [f64]) {}
+
     /// Advance (y, ẏ) from `time` to `time + dt` in place. RK4 leaves `yd` untouched.
     fn step(&mut self, time: f64, y: &mut [f64], yd: &mut [f64]) -> Result<()>;
 
@@ -139,6 +144,9 @@ impl Integrator for GenAlpha<'_> {
     }
     fn set_dt(&mut self, dt: f64) {
         GenAlpha::set_dt(self, dt);
+    }
+    fn filter_error(&mut self, v: &mut [f64]) {
+        GenAlpha::filter_error(self, v);
     }
     fn step(&mut self, time: f64, y: &mut [f64], yd: &mut [f64]) -> Result<()> {
         GenAlpha::step(self, time, y, yd)

@@ -34,6 +34,8 @@ pub(super) struct Adaptive {
     /// The largest |y_i| so far: rtol is relative to it (a pulsatile flow is judged against
     /// its peak, not against its zero crossings).
     peak: Vec<f64>,
+    /// The differential unknowns' local error estimate of the current step (scratch).
+    le: Vec<f64>,
     /// Output rows per cycle.
     pub out_per_cycle: usize,
     /// The step to try next.
@@ -51,9 +53,15 @@ pub(super) struct Adaptive {
     h2: f64,
     /// Accepted states before y0 (0, 1, 2 or more).
     history: usize,
-    /// The species amounts at the start of the step and at the accepted state before.
+    /// The species amounts at the start of the step; the cells' concentrations (amount over
+    /// transport volume, species-major) at the start of the step and at the state before.
     z0: Vec<f64>,
-    zm1: Vec<f64>,
+    c0: Vec<f64>,
+    cm1: Vec<f64>,
+    /// The concentrations at the end of the step just taken.
+    c1: Vec<f64>,
+    /// The largest |c| so far per cell and species.
+    c_peak: Vec<f64>,
     /// Largest scaled error per kind over the run (pressure, flow, volume, species), × rtol.
     pub estimate: [f64; 4],
     pub steps: usize,
@@ -68,6 +76,9 @@ pub(super) struct Adaptive {
     yi: Vec<f64>,
     ydi: Vec<f64>,
     zi: Vec<f64>,
+    /// The cells' transport volumes at the step's start, and interpolated.
+    v0: Vec<f64>,
+    vi: Vec<f64>,
 }
 
 /// What one flow step's estimate found: the largest scaled error and its value per kind.
@@ -91,6 +102,7 @@ impl Adaptive {
             c_algebraic: rho_inf / (2.0 * (1.0 + rho_inf).powi(2)),
             algebraic: dae.e.iter().map(|&e| e == 0.0).collect(),
             peak: Vec::new(),
+            le: Vec::new(),
             delta: rate_shift(rho_inf),
             out_per_cycle,
             // a small first step: its estimate is first order (no history yet)
@@ -104,7 +116,10 @@ impl Adaptive {
             h2: 0.0,
             history: 0,
             z0: Vec::new(),
-            zm1: Vec::new(),
+            c0: Vec::new(),
+            cm1: Vec::new(),
+            c1: Vec::new(),
+            c_peak: Vec::new(),
             estimate: [0.0; 4],
             steps: 0,
             rejected: 0,
@@ -114,6 +129,8 @@ impl Adaptive {
             yi: Vec::new(),
             ydi: Vec::new(),
             zi: Vec::new(),
+            v0: Vec::new(),
+            vi: Vec::new(),
         }
     }
 
@@ -131,6 +148,12 @@ impl Adaptive {
         self.yd0.clone_from(&st.yd);
         if let Some(sp) = st.species.as_ref() {
             self.z0.clone_from(&sp.z);
+            self.v0.clear();
+            self.v0.extend_from_slice(sp.tr.cell_transport_volumes());
+            if self.c0.is_empty() {
+                concentrations(st, &mut self.c0);
+                self.c_peak = self.c0.iter().map(|c| c.abs()).collect();
+            }
         }
     }
 
@@ -156,55 +179,62 @@ impl Adaptive {
     }
 
     /// The scaled error of the flow step of `h` that ended in `y` (≤ 1 meets the tolerances).
-    /// Differential unknowns: Milne's device on the last three accepted states, per unit step
-    /// (a first-order, larger estimate while fewer are known). Algebraic unknowns hold their
-    /// constraint at the α_f level, so their error does not accumulate: it is the fixed point
-    /// ρ∞/(1 + ρ∞)² · h² y''/2 of one step's, y'' from the last three states (none at the
-    /// first step).
-    fn flow_error(&self, y: &[f64], h: f64) -> FlowError {
-        let (rtol, atol) = (self.tol.rtol, self.tol.atol.as_array());
-        let per_step = self.omega * h;
-        let mut kinds = [0.0f64; 3];
-        let mut add = |i: usize, scaled: f64, yi: f64| {
-            let k = self.kind(i);
-            let e = scaled / (atol[k] + rtol * yi.abs().max(self.peak[i]));
-            kinds[k] = kinds[k].max(e);
-        };
-        let (h1, h2, alg) = (self.h1, self.h2, self.c_algebraic);
-        let curvature =
-            |y1: f64, y0: f64, ym: f64| (2.0 * ((y1 - y0) / h - (y0 - ym) / h1) / (h + h1)).abs();
+    /// Differential unknowns: Milne's device on the last three accepted states (a first-order,
+    /// larger estimate while fewer are known), filtered through the step's iteration matrix
+    /// (Shampine's filter: a stiff mode's oscillation under the damped roots is not an error
+    /// of the solution), per unit step. Algebraic unknowns hold their constraint at the α_f
+    /// level, so their error does not accumulate: it is the fixed point ρ∞/(1 + ρ∞)² · h² y''/2
+    /// of one step's, y'' from the last three states (none at the first step).
+    fn flow_error(&mut self, st: &mut State<'_, '_>, h: f64) -> FlowError {
+        let y = &st.y;
+        let (h1, h2) = (self.h1, self.h2);
+        self.le.clear();
         match self.history {
             0 => {
                 let start = y.iter().zip(&self.y0).zip(&self.yd0);
-                for (i, ((&y1, &y0), &d0)) in start.enumerate() {
-                    if !self.algebraic[i] {
-                        add(i, (y1 - y0 - h * d0).abs() / per_step, y1);
-                    }
-                }
+                self.le
+                    .extend(start.map(|((&y1, &y0), &d0)| y1 - y0 - h * d0));
             }
             1 => {
                 let r = h / h1;
-                for (i, ((&y1, &y0), &ym)) in y.iter().zip(&self.y0).zip(&self.ym1).enumerate() {
-                    let e = if self.algebraic[i] {
-                        alg * h * h * curvature(y1, y0, ym)
-                    } else {
-                        (y1 - y0 - r * (y0 - ym)).abs() / per_step
-                    };
-                    add(i, e, y1);
-                }
+                let past = y.iter().zip(&self.y0).zip(&self.ym1);
+                self.le
+                    .extend(past.map(|((&y1, &y0), &ym)| y1 - y0 - r * (y0 - ym)));
             }
             _ => {
                 let ([la, lb, lc], f) = quadratic_extrapolation(h, h1, h2, self.c_local);
                 let past = self.ym2.iter().zip(&self.ym1).zip(&self.y0);
-                for (i, (&y1, ((&a, &b), &c))) in y.iter().zip(past).enumerate() {
-                    let e = if self.algebraic[i] {
-                        alg * h * h * curvature(y1, c, b)
-                    } else {
-                        (f * (y1 - (la * a + lb * b + lc * c))).abs() / per_step
-                    };
-                    add(i, e, y1);
-                }
+                self.le.extend(
+                    y.iter()
+                        .zip(past)
+                        .map(|(&y1, ((&a, &b), &c))| f * (y1 - (la * a + lb * b + lc * c))),
+                );
             }
+        }
+        for (v, &alg) in self.le.iter_mut().zip(&self.algebraic) {
+            if alg {
+                *v = 0.0;
+            }
+        }
+        st.flow.integrator().filter_error(&mut self.le);
+        let (rtol, atol) = (self.tol.rtol, self.tol.atol.as_array());
+        let per_step = self.omega * h;
+        let alg = self.c_algebraic;
+        let mut kinds = [0.0f64; 3];
+        let y = &st.y;
+        for (i, &yi) in y.iter().enumerate() {
+            let scaled = if !self.algebraic[i] {
+                self.le[i].abs() / per_step
+            } else if self.history == 0 {
+                0.0
+            } else {
+                let (b, a) = (self.y0[i], self.ym1[i]);
+                let curvature = 2.0 * ((yi - b) / h - (b - a) / h1) / (h + h1);
+                alg * h * h * curvature.abs()
+            };
+            let k = self.kind(i);
+            let e = scaled / (atol[k] + rtol * yi.abs().max(self.peak[i]));
+            kinds[k] = kinds[k].max(e);
         }
         FlowError {
             max: kinds.iter().fold(0.0f64, |m, &e| m.max(e)),
@@ -213,32 +243,34 @@ impl Adaptive {
     }
 
     /// The scaled local error of the species step of `h` (backward Euler: h/(2h + h₁) times
-    /// the difference to the linear extrapolation), per cell weighted by atol·V₀ + rtol·|N|.
+    /// the difference to the linear extrapolation), on the cells' concentrations (the amounts
+    /// also follow the volume's pulsation, which the flow step carries), weighted by
+    /// atol + rtol·(largest |c| so far).
     fn species_error(&self, st: &State<'_, '_>, h: f64) -> f64 {
-        let Some(sp) = st.species.as_ref() else {
-            return 0.0;
-        };
-        if self.history == 0 {
+        if st.species.is_none() || self.history == 0 {
             return 0.0;
         }
-        let v0 = sp.tr.reference_volumes();
-        let nc = v0.len();
-        let n = nc * sp.tr.species_names().len();
         let (rtol, atol) = (self.tol.rtol, self.tol.atol.species);
         let (r, f) = (h / self.h1, h / (2.0 * h + self.h1));
         let per_step = self.omega * h;
         let mut worst = 0.0f64;
-        for (i, ((&z1, &z0), &zm)) in sp.z[..n].iter().zip(&self.z0).zip(&self.zm1).enumerate() {
-            let le = f * (z1 - z0 - r * (z0 - zm));
-            let w = atol * v0[i % nc] + rtol * z1.abs();
-            worst = worst.max(le.abs() / (per_step * w));
+        let past = self.c0.iter().zip(&self.cm1).zip(&self.c_peak);
+        for (&c1, ((&c0, &cm), &peak)) in self.c1.iter().zip(past) {
+            let le = f * (c1 - c0 - r * (c0 - cm));
+            worst = worst.max(le.abs() / (per_step * (atol + rtol * peak.max(c1.abs()))));
         }
         worst
     }
 
+    /// After the species step: its cells' concentrations (for the estimate and the dense
+    /// output of the step).
+    pub fn after_species(&mut self, st: &State<'_, '_>) {
+        concentrations(st, &mut self.c1);
+    }
+
     /// The errors of the flow step just taken (before the species follow it).
-    pub fn judge_flow(&self, st: &State<'_, '_>, h: f64) -> (f64, [f64; 3]) {
-        let e = self.flow_error(&st.y, h);
+    pub fn judge_flow(&mut self, st: &mut State<'_, '_>, h: f64) -> (f64, [f64; 3]) {
+        let e = self.flow_error(st, h);
         (e.max, e.kinds)
     }
 
@@ -258,7 +290,12 @@ impl Adaptive {
         // y_{n-2} ← y_{n-1} ← y_n (buffers swapped, no copies)
         std::mem::swap(&mut self.ym2, &mut self.ym1);
         std::mem::swap(&mut self.ym1, &mut self.y0);
-        std::mem::swap(&mut self.zm1, &mut self.z0);
+        // c_{n-1} ← c_n ← c_{n+1}
+        std::mem::swap(&mut self.cm1, &mut self.c0);
+        std::mem::swap(&mut self.c0, &mut self.c1);
+        for (p, c) in self.c_peak.iter_mut().zip(&self.c0) {
+            *p = p.max(c.abs());
+        }
         (self.h2, self.h1) = (self.h1, h);
         self.history += 1;
         let next = self.control.next(h, flow, species);
@@ -306,7 +343,7 @@ impl Adaptive {
         theta: f64,
         h: f64,
         st: &State<'_, '_>,
-    ) -> (&[f64], &[f64], &[f64]) {
+    ) -> (&[f64], &[f64], &[f64], &[f64]) {
         let n = st.y.len();
         self.yi.resize(n, 0.0);
         self.ydi.resize(n, 0.0);
@@ -317,10 +354,29 @@ impl Adaptive {
         }
         self.zi.clear();
         if let Some(sp) = st.species.as_ref() {
+            // amounts and the cells' transport volumes linearly: the observed concentration
+            // z/V is a weighted mean of the two ends' (within their bounds), and the amounts'
+            // balance with the linear accumulators holds
             let z0 = &self.z0;
             self.zi
                 .extend(sp.z.iter().zip(z0).map(|(&b, &a)| a + theta * (b - a)));
+            let v1 = sp.tr.cell_transport_volumes();
+            self.vi.clear();
+            self.vi
+                .extend(v1.iter().zip(&self.v0).map(|(&b, &a)| a + theta * (b - a)));
         }
-        (&self.yi, &self.ydi, &self.zi)
+        (&self.yi, &self.ydi, &self.zi, &self.vi)
     }
+}
+
+/// The cells' concentrations (amount over transport volume) of every species into `out`.
+fn concentrations(st: &State<'_, '_>, out: &mut Vec<f64>) {
+    out.clear();
+    let Some(sp) = st.species.as_ref() else {
+        return;
+    };
+    let vol = sp.tr.cell_transport_volumes();
+    let nc = vol.len();
+    let n = nc * sp.tr.species_names().len();
+    out.extend(sp.z[..n].iter().enumerate().map(|(k, &z)| z / vol[k % nc]));
 }

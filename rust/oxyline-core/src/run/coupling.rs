@@ -218,17 +218,16 @@ impl State<'_, '_> {
     }
 
     /// The species outputs at `t` of an interpolated flow state (y, ẏ) and amounts `z`
-    /// (dense output between steps), with the transport's own volumes of the step's end (those
-    /// its amounts are consistent with at the end: an interpolated row's concentration is off
-    /// by the volume's change over the step's remainder, inside the first-order interpolation
-    /// of the amounts). What the transport carries between steps (volumes, warm starts) is put
-    /// back afterwards, so output times never change the solution.
+    /// (dense output between steps), over the cells' transport `volumes` interpolated alike.
+    /// What the transport carries between steps (volumes, warm starts) is put back
+    /// afterwards, so output times never change the solution.
     pub fn observe_at(
         &mut self,
         t: f64,
         y: &[f64],
         yd: &[f64],
         z: &[f64],
+        volumes: &[f64],
         out: &mut Vec<f64>,
     ) -> Result<()> {
         out.clear();
@@ -239,6 +238,7 @@ impl State<'_, '_> {
         sp.tr
             .check_finite(z, t, &|v| names.vessel(v).map(str::to_owned))?;
         let carried = sp.tr.carried();
+        sp.tr.set_cell_transport_volumes(volumes);
         let seen = sp.tr.observe(t, y, Some(yd), z, true, out);
         sp.tr.restore_carried(&carried)?;
         seen

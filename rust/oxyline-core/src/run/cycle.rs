@@ -298,7 +298,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
             ad.save_start(&self.state);
             let stepped = self.state.advance_flow(t, h);
             let (err, kinds) = match stepped {
-                Ok(()) => ad.judge_flow(&self.state, h),
+                Ok(()) => ad.judge_flow(&mut self.state, h),
                 // a Newton failure at a step above the smallest: try a smaller one
                 Err(e) if h <= ad.h_min() => return Err(e),
                 Err(_) => (f64::INFINITY, [0.0; 3]),
@@ -309,6 +309,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
                 continue;
             }
             self.state.advance_species(t, h)?;
+            ad.after_species(&self.state);
             let t_new = if h == rem { t_end } else { t + h };
             while next_out <= n_out {
                 let tau = t0 + period * next_out as f64 / n_out as f64;
@@ -354,9 +355,9 @@ impl<'r, 'f> Cycles<'r, 'f> {
         self.rec
             .record_with(t, |i| ad.interpolate(i, theta, h, y, yd).0)?;
         if rows.species && self.state.species.is_some() {
-            let (yi, ydi, zi) = ad.interpolate_all(theta, h, &self.state);
+            let (yi, ydi, zi, vi) = ad.interpolate_all(theta, h, &self.state);
             self.state
-                .observe_at(time, yi, ydi, zi, &mut self.obs_row)?;
+                .observe_at(time, yi, ydi, zi, vi, &mut self.obs_row)?;
             self.obs_row.shrink_to_fit();
             self.rec.push_species(&self.obs_row);
         }
