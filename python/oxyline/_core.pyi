@@ -47,6 +47,8 @@ class RunOptions(TypedDict, total=False):
     transport: bool  # True
     variables: list[str] | None
     vessels: list[str] | None
+    rtol: float | None  # error control (generalized-alpha, variable step)
+    atol: dict[str, float] | None  # by kind: pressure, flow, volume, species
 
 class ModelError(ValueError): ...
 class UnstableTimeStep(ModelError): ...

@@ -134,6 +134,16 @@ def _check_clashes(args: argparse.Namespace) -> None:
                                  "would be overwritten: give another file")
 
 
+def _tolerance_or_none(text: str) -> float | str:
+    """``--until-periodic``: a number, or ``none`` (run exactly ``--cycles``)."""
+    if text.strip().lower() == "none":
+        return "none"
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a number or 'none', got {text!r}") from None
+
+
 def _run_options(args: argparse.Namespace) -> dict[str, object]:
     """The simulate() options of the command line (checkpoints included)."""
     overrides: dict[str, object] = {"progress": not args.quiet}
@@ -142,12 +152,20 @@ def _run_options(args: argparse.Namespace) -> dict[str, object]:
     if args.dt is not None:
         overrides["dt"] = args.dt
     if args.until_periodic is not None:
-        overrides["until_periodic"] = args.until_periodic
+        overrides["until_periodic"] = None if args.until_periodic == "none" \
+            else args.until_periodic
+    if args.max_cycles is not None:
+        overrides["max_cycles"] = args.max_cycles
+    if args.rtol is not None:
+        overrides["rtol"] = args.rtol
+    if args.output_every is not None:
+        overrides["output_every"] = args.output_every
     if args.method is not None:
         overrides["method"] = args.method
     if args.resume and len(overrides) > 1:
         raise InputError(f"{args.resume}: a resumed run keeps its checkpoint's settings (no "
-                         "--cycles, --dt, --until-periodic or --method)")
+                         "--cycles, --dt, --rtol, --until-periodic, --max-cycles, --output-every "
+                         "or --method)")
     if args.checkpoint:
         overrides["checkpoint"] = args.checkpoint
     if args.checkpoint_every is not None:
@@ -324,6 +342,14 @@ def _print_table(model: Any, res: Any, stream: bool, rows: int = 20) -> None:
         q_in = res.flow_in[:, shown].mean(axis=0)
     print(f"{model.name}: {len(vessels)} vessels, method {s['method']}, dt {s['dt']:.3e} s, "
           f"{s['cycles_run']} cycles, cycle-to-cycle change {s['periodic_error']:.2e}")
+    if s.get("steps") is not None:
+        est = ", ".join(f"{k.removeprefix('error_estimate_')} {v:.1e}" for k, v in s.items()
+                        if k.startswith("error_estimate_"))
+        print(f"error control: rtol {s['rtol']:g}, {s['steps']} steps ({s['rejected_steps']} "
+              f"rejected), dt {s['dt_min']:.2e} to {s['dt_max']:.2e} s; estimated error {est}")
+    if s.get("periodic_reached") in (False, 0):
+        print(f"not periodic: the change is above until_periodic = {s['until_periodic']:g} "
+              "after max_cycles")
     width = max([24] + [len(vessels[i]) + 2 for i in shown])
     print(f"{'vessel':<{width}}{'mean P_in [mmHg]':>18}{'mean Q_in [mL/s]':>18}")
     for i, p, q in zip(shown, p_in, q_in):
@@ -507,9 +533,18 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--dt", type=float, help="time step in s (default: auto)")
     p.add_argument("--method", choices=["auto", "rk4", "generalized-alpha"],
                    help="time integrator (default: the model's, else auto)")
-    p.add_argument("--until-periodic", type=float, metavar="TOL",
-                   help="run until the cycle-to-cycle change is below TOL (relative), at most "
-                        "max_cycles")
+    p.add_argument("--until-periodic", type=_tolerance_or_none, metavar="TOL",
+                   help="run until the cycle-to-cycle change is below TOL (relative), at least "
+                        "--cycles and at most --max-cycles cycles; 'none' runs exactly --cycles "
+                        "even if the model asks for periodicity")
+    p.add_argument("--rtol", type=float, metavar="TOL",
+                   help="error control: generalized-alpha with a variable step keeping the "
+                        "estimated error of every unknown within TOL (relative); excludes --dt")
+    p.add_argument("--max-cycles", type=int, metavar="N",
+                   help="most cycles a run --until-periodic takes (default: the model's, else "
+                        "max(cycles, 100))")
+    p.add_argument("--output-every", type=float, metavar="SECONDS",
+                   help="output interval in s (default: the model's, else period/1000)")
     p.add_argument("--checkpoint", metavar="FILE",
                    help="write the run's state to FILE at cycle ends (atomically), to continue "
                         "it later with --resume FILE")

@@ -79,11 +79,18 @@ def core_errors(what: str) -> Iterator[None]:
                           "report it with the model that caused it") from exc
 
 
+class PeriodicityWarning(UserWarning):
+    """A run ``until_periodic`` stopped at ``max_cycles`` with its cycle-to-cycle change still
+    above the tolerance: the last cycle is not the periodic state it asked for (the result's
+    ``settings["periodic_reached"]`` is False)."""
+
+
 __all__ = [
     "CheckpointError",
     "ModelError",
     "OutputError",
     "OutputSizeWarning",
+    "PeriodicityWarning",
     "ResourceError",
     "SimulationCancelled",
     "SimulationInterrupted",

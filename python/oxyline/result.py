@@ -181,6 +181,17 @@ class Result:
     #: flow is positive; docs/physics.md §1.10)
     valve_status: dict[str, np.ndarray] = field(default_factory=dict)
 
+    @property
+    def error_estimate(self) -> dict[str, float]:
+        """An error-controlled run's (``rtol``) largest estimated error per kind of unknown
+        over the run (``pressure``, ``flow``, and ``volume``/``species`` where present),
+        relative to atol/rtol + |y| (docs/physics.md §10): at most ``rtol`` where the step
+        control met its tolerance. Empty for a fixed-step run. Stored in the file attributes
+        as ``solver_error_estimate_<kind>``."""
+        pre = "error_estimate_"
+        return {k.removeprefix(pre): float(v) for k, v in self.settings.items()
+                if k.startswith(pre)}
+
     def __getattr__(self, key: str) -> Any:
         # species variables: {name}_concentration_in, {name}_flux_out, wall_{name}_flux,
         # segment_{name}_concentration, ..., {name}_mass_balance; oxygen adds po2_in/po2_out,
@@ -428,7 +439,9 @@ class Result:
             attrs["species"] = list(self.species)
             if self.oxygen is not None:
                 attrs["oxygen_species"] = self.oxygen
-        attrs.update({f"solver_{k}": (v if isinstance(v, (int, float, str)) else str(v))
+        # (a flag is stored as 0/1: NetCDF attributes have no boolean type)
+        attrs.update({f"solver_{k}": (int(v) if isinstance(v, bool) else v
+                                      if isinstance(v, (int, float, str)) else str(v))
                       for k, v in self.settings.items() if v is not None})
         return xr.Dataset(data_vars, coords=coords, attrs=attrs)
 

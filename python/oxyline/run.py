@@ -20,6 +20,7 @@ from oxyline.errors import (
     ModelError,
     OutputError,
     OutputSizeWarning,
+    PeriodicityWarning,
     ResourceError,
     SimulationCancelled,
     SimulationInterrupted,
@@ -247,11 +248,31 @@ def _result(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
 def _run_settings(s: Mapping[str, Any], raw: Mapping[str, Any] | None) -> dict[str, Any]:
     """The settings recorded with a result: the requested ones and, after the run, its facts."""
     settings = {k: s[k] for k in ("period", "cycles", "method", "output_every", "rho_infty",
-                                  "until_periodic")}
+                                  "until_periodic", "rtol")}
     if raw is not None:
         settings.update(method=raw["method"], dt=raw["dt"], cycles_run=raw["cycles_run"],
                         periodic_error=raw["periodic_error"], rk4_dt_max=raw.get("rk4_dt_max"))
+        if "error_estimate" in raw:  # error control: its steps and estimates (dt: the mean)
+            settings.update({k: raw[k] for k in ("steps", "rejected_steps", "dt_min", "dt_max")})
+            settings.update({f"error_estimate_{kind}": float(v)
+                             for kind, v in raw["error_estimate"].items()
+                             if v > 0.0 or kind in ("pressure", "flow")})
+        if s["until_periodic"] is not None:
+            # the stopping rule's own test (the core stops on change < tolerance)
+            settings["periodic_reached"] = bool(raw["periodic_error"] < s["until_periodic"])
     return settings
+
+
+def _warn_not_periodic(name: str, s: Mapping[str, Any], complete: bool) -> None:
+    """Say so when a run ``until_periodic`` ended at ``max_cycles`` above its tolerance
+    (settings ``s`` of the result)."""
+    if s.get("periodic_reached", True) or not complete:
+        return
+    warnings.warn(f"{name}: not periodic after {s['cycles_run']} cycles "
+                  f"(max_cycles): the cycle-to-cycle change {s['periodic_error']:.2e} is above "
+                  f"until_periodic = {s['until_periodic']:g}; raise max_cycles or start "
+                  "closer to the periodic state (start='periodic')", PeriodicityWarning,
+                  stacklevel=4)
 
 
 # The cancel events of the runs in progress (any thread): Ctrl-C sets them all (see
@@ -335,6 +356,21 @@ def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any], **overri
     ``"zero"``), ``segments`` (bool),
     ``progress`` (bool or callback ``f(t, t_end)``).
 
+    Error control (docs/physics.md §10): ``rtol`` (0 < rtol < 1) runs generalized-α with a
+    variable step whose estimated error of every unknown stays within ``atol + rtol·|y|``
+    (``atol``: a mapping ``{"pressure": Pa, "flow": m^3/s, "volume": m^3, "species":
+    mol/m^3}``, defaults 1 Pa, 1e-9, 1e-9, 1e-6), output from the dense output at every
+    ``output_every`` (which then never changes the solution); ``result.error_estimate`` gives
+    the largest estimate per kind. It excludes ``dt`` (a fixed step) and ``method="rk4"``.
+
+    Cycles: without ``until_periodic`` (keyword or the model's ``simulation`` section) a run
+    takes exactly ``cycles``; with it, ``cycles`` is the least and ``max_cycles`` (default
+    max(cycles, 100)) the most, and a run that reaches ``max_cycles`` above its tolerance
+    warns (:class:`~oxyline.PeriodicityWarning`) and records
+    ``settings["periodic_reached"] = False``. A keyword wins over the model file, so
+    ``cycles=N, until_periodic=None`` runs exactly N cycles of a model that asks for
+    periodicity.
+
     Run control: ``max_memory`` (bytes or e.g. ``"8 GB"``; default 80 % of the available
     memory, see :mod:`oxyline.memory`): an output estimated above it is refused with
     :class:`~oxyline.ResourceError` before the run. ``checkpoint`` (a file) and
@@ -389,6 +425,7 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     if extra is not None:
         result.chamber_volume, result.valve_status = _heart_outputs(heart, extra)
     _raise_run_error(raw, result)
+    _warn_not_periodic(result.model_name, result.settings, result.complete)
     # physical bounds and mass balance of the recorded species output (warnings only)
     check_result(result, model.transport_spec)
     return result
@@ -640,6 +677,7 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
             raise
         opened = None
     _raise_run_error(raw, opened)
+    _warn_not_periodic(model.name, _run_settings(s, raw), True)
     _warn_bounds(monitor.messages())
     return opened
 

@@ -53,6 +53,7 @@ fn main() {
         newton: NewtonControl::default(),
         probes,
         species_columns: Some(columns),
+        tolerances: None,
     };
     // the first pass's own settings (see run/two_pass.rs `mean_flow_pass`)
     let pass1 = RunSettings {

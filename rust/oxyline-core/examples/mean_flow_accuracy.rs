@@ -92,6 +92,7 @@ fn main() {
             newton: NewtonControl::default(),
             probes: unknowns.clone(),
             species_columns: None,
+            tolerances: None,
         };
         let out = simulate_with_transport(&dae, None, &s, &mut |_, _| true).expect("flow run");
         let (abs, fwd) = means(&out.data, n, out.times.len());

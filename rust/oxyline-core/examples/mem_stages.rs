@@ -189,6 +189,7 @@ fn main() {
         newton: NewtonControl::default(),
         probes: sel.flow_columns(&assembled.probes),
         species_columns: transport.as_ref().map(|_| sel.species_columns(&counts)),
+        tolerances: None,
     };
     let mut species = transport.as_ref().map(Transport::new_run);
     mark("settings + transport run copy", segs);

@@ -61,6 +61,7 @@ fn main() {
             newton: NewtonControl::default(),
             probes: m.assembled.probes.vessel_unknowns.clone(),
             species_columns: Some(columns),
+            tolerances: None,
         }
     };
     let only = std::env::var("O2_PASS_ONLY").ok();

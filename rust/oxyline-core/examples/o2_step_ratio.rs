@@ -43,6 +43,7 @@ fn main() {
         newton: NewtonControl::default(),
         probes: assembled.probes.vessel_unknowns.clone(),
         species_columns: Some(columns),
+        tolerances: None,
     };
     let (mut best_flow, mut best_o2) = (f64::INFINITY, f64::INFINITY);
     // CPU s of a run: whole, or between the first progress check and the one past `stop`

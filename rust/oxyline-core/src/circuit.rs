@@ -158,6 +158,10 @@ impl Names {
     pub fn n_nodes(&self) -> usize {
         self.nodes.len()
     }
+    /// Number of branches (their flows follow the node pressures among the unknowns).
+    pub fn n_branches(&self) -> usize {
+        self.branches.len()
+    }
     /// Name of node `i`.
     pub fn node(&self, i: usize) -> String {
         self.write(self.nodes[i])

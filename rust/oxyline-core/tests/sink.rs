@@ -48,6 +48,7 @@ fn settings(probes: Vec<usize>, all_cycles: bool, until_periodic: Option<f64>) -
         newton: NewtonControl::default(),
         probes,
         species_columns: None,
+        tolerances: None,
     }
 }
 

@@ -97,6 +97,7 @@ fn stiff_wall_exchange_limits_the_automatic_rk4_step() {
         newton: NewtonControl::default(),
         probes: vec![],
         species_columns: None,
+        tolerances: None,
     };
     let out = simulate_with_transport(&dae, Some(&mut transport), &s, &mut |_, _| true).unwrap();
     assert!(out.error.is_none(), "{:?}", out.error);
@@ -164,6 +165,7 @@ fn only_rk4_runs_probe_the_rk4_limit() {
             newton: NewtonControl::default(),
             probes: vec![],
             species_columns: None,
+            tolerances: None,
         };
         let mut tr = prototype.new_run();
         let out = simulate_with_transport(&dae, Some(&mut tr), &s, &mut |_, _| true).unwrap();

@@ -261,6 +261,7 @@ fn settings(method: Method, dt: f64, cycles: usize, probes: Vec<usize>) -> RunSe
         newton: NewtonControl::default(),
         probes,
         species_columns: None,
+        tolerances: None,
     }
 }
 

@@ -160,6 +160,20 @@ pub(crate) fn outcome_dict(py: Python<'_>, out: Outcome) -> PyResult<Bound<'_, P
     d.set_item("cycles_run", out.cycles_run)?;
     d.set_item("periodic_error", out.periodic_error)?;
     d.set_item("max_buffered_rows", out.max_buffered_rows)?;
+    if let Some(ec) = &out.error_control {
+        let est = PyDict::new(py);
+        for (kind, v) in oxyline_core::integrate::adaptive::KINDS
+            .iter()
+            .zip(ec.estimate)
+        {
+            est.set_item(*kind, v)?;
+        }
+        d.set_item("error_estimate", est)?;
+        d.set_item("steps", ec.steps)?;
+        d.set_item("rejected_steps", ec.rejected)?;
+        d.set_item("dt_min", ec.dt_min)?;
+        d.set_item("dt_max", ec.dt_max)?;
+    }
     if let Some(lim) = &out.stability {
         d.set_item("rk4_dt_max", lim.dt_max)?;
         d.set_item("rk4_limiting_element", lim.element.clone())?;

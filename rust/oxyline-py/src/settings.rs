@@ -5,14 +5,16 @@
 use crate::errors::ModelError;
 use oxyline_core::RunSettings;
 use oxyline_core::genalpha::NewtonControl;
+use oxyline_core::integrate::adaptive::{Atol, KINDS, Tolerances};
 use oxyline_core::{Method, Start};
 use pyo3::conversion::FromPyObjectOwned;
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use std::collections::HashMap;
 
 /// The keywords of [`Shared`], in the order of the `_core.pyi` stub's `RunOptions`.
-pub(crate) const KEYS: [&str; 14] = [
+pub(crate) const KEYS: [&str; 16] = [
     "cycles",
     "method",
     "rho_infty",
@@ -27,6 +29,8 @@ pub(crate) const KEYS: [&str; 14] = [
     "transport",
     "variables",
     "vessels",
+    "rtol",
+    "atol",
 ];
 
 /// The shared settings (defaults: those of `oxyline.simulate`'s documentation).
@@ -48,6 +52,10 @@ pub(crate) struct Shared {
     /// The output selection (None: every variable / every output vessel).
     pub variables: Option<Vec<String>>,
     pub vessels: Option<Vec<String>>,
+    /// Error control (docs/physics.md §10): the relative tolerance, and absolute ones by kind
+    /// (`oxyline_core::integrate::adaptive::KINDS`; absent kinds keep the core's defaults).
+    rtol: Option<f64>,
+    atol: Option<HashMap<String, f64>>,
 }
 
 impl Default for Shared {
@@ -67,6 +75,8 @@ impl Default for Shared {
             transport: true,
             variables: None,
             vessels: None,
+            rtol: None,
+            atol: None,
         }
     }
 }
@@ -101,6 +111,8 @@ impl Shared {
                 "transport" => s.transport = arg(&key, &v)?,
                 "variables" => s.variables = arg(&key, &v)?,
                 "vessels" => s.vessels = arg(&key, &v)?,
+                "rtol" => s.rtol = arg(&key, &v)?,
+                "atol" => s.atol = atol_arg(&v)?,
                 _ => {
                     return Err(PyTypeError::new_err(format!(
                         "unexpected keyword argument '{key}'"
@@ -136,8 +148,56 @@ impl Shared {
             },
             probes: Vec::new(),
             species_columns: None,
+            tolerances: self.tolerances()?,
         })
     }
+
+    /// The core's tolerances of `rtol` and `atol` (None without `rtol`; `atol` alone is an
+    /// error naming it).
+    fn tolerances(&self) -> PyResult<Option<Tolerances>> {
+        let Some(rtol) = self.rtol else {
+            if self.atol.is_some() {
+                return Err(ModelError::new_err(
+                    "simulation: atol needs rtol (error control)",
+                ));
+            }
+            return Ok(None);
+        };
+        let mut atol = Atol::default();
+        for (kind, &v) in self.atol.iter().flatten() {
+            let slot = match kind.as_str() {
+                "pressure" => &mut atol.pressure,
+                "flow" => &mut atol.flow,
+                "volume" => &mut atol.volume,
+                "species" => &mut atol.species,
+                _ => {
+                    return Err(ModelError::new_err(format!(
+                        "simulation: atol has no kind '{kind}' (kinds: {})",
+                        KINDS.join(", ")
+                    )));
+                }
+            };
+            *slot = v;
+        }
+        Ok(Some(Tolerances { rtol, atol }))
+    }
+}
+
+/// `atol`: a mapping of kind → number; anything else is a `ModelError` naming the setting.
+fn atol_arg(value: &Bound<'_, PyAny>) -> PyResult<Option<HashMap<String, f64>>> {
+    if value.is_none() {
+        return Ok(None);
+    }
+    value
+        .extract::<HashMap<String, f64>>()
+        .map(Some)
+        .map_err(|_| {
+            ModelError::new_err(format!(
+                "simulation: atol must be a mapping of kind ({}) to a number, got {}",
+                KINDS.join(", "),
+                value.repr().map_or_else(|_| "?".into(), |r| r.to_string())
+            ))
+        })
 }
 
 pub(crate) fn parse_method(method: &str, rho_infty: f64) -> PyResult<Method> {

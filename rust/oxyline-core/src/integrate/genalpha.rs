@@ -152,6 +152,31 @@ impl<'a> GenAlpha<'a> {
         Ok(())
     }
 
+    /// Change the step (error-controlled runs): the iteration matrix depends on it, so a
+    /// linear circuit refactorises at its next step; the same step keeps the factors.
+    pub fn set_dt(&mut self, dt: f64) {
+        if dt.to_bits() != self.dt.to_bits() {
+            self.dt = dt;
+            self.factored = false;
+        }
+    }
+
+    /// Shampine's filter of a local error estimate (see `Integrator::filter_error`), with
+    /// the factors of the step just taken (of its last Newton iteration for a nonlinear
+    /// circuit); nothing before the first factorisation or if the solve fails.
+    pub fn filter_error(&mut self, v: &mut [f64]) {
+        if !self.factored {
+            return;
+        }
+        let saved: Vec<f64> = v.to_vec();
+        for (x, e) in v.iter_mut().zip(self.e.iter()) {
+            *x *= self.am * e;
+        }
+        if !self.lu.solve_in_place(v) {
+            v.copy_from_slice(&saved);
+        }
+    }
+
     /// α_f: the level at which the residual (and so the face flows for transport) is enforced.
     pub fn alpha_f(&self) -> f64 {
         self.af

@@ -8,10 +8,13 @@
 //!   absolute-residual rule or one scaled-increment rule;
 //! * [`steady`] — the steady state of the mean boundary conditions;
 //! * [`periodic`] — the periodic state at t = 0 of a linear circuit (the `periodic` start);
-//! * [`stability`] — the largest stable RK4 step and the element that sets it.
+//! * [`stability`] — the largest stable RK4 step and the element that sets it;
+//! * [`adaptive`] — error control for generalized-α: tolerances, local error estimate,
+//!   step-size controller, dense output.
 //!
 //! The run loop drives either through [`Integrator`].
 
+pub mod adaptive;
 mod algebraic;
 pub mod genalpha;
 pub mod newton;
@@ -43,6 +46,14 @@ pub trait Integrator {
     /// transport step uses face flows interpolated at this level, so that species are carried by
     /// the same flows that conserve volume.
     fn alpha_f(&self) -> f64;
+
+    /// Change the step Δt (error-controlled runs).
+    fn set_dt(&mut self, dt: f64);
+
+    /// Filter a local error estimate of the step just taken through the step's iteration
+    /// matrix, v ← (α_m E + α_f γ Δt J)⁻¹ α_m E v (Shampine's filter: unchanged for modes
+    /// slow against Δt, damped for stiff ones). Integrators without one leave v as it is.
+    fn filter_error(&mut self, _v: &mut [f64]) {}
 
     /// Advance (y, ẏ) from `time` to `time + dt` in place. RK4 leaves `yd` untouched.
     fn step(&mut self, time: f64, y: &mut [f64], yd: &mut [f64]) -> Result<()>;
@@ -101,6 +112,9 @@ impl Integrator for Rk4<'_> {
     fn alpha_f(&self) -> f64 {
         1.0
     }
+    fn set_dt(&mut self, dt: f64) {
+        self.dt = dt;
+    }
     fn step(&mut self, time: f64, y: &mut [f64], _yd: &mut [f64]) -> Result<()> {
         Rk4::step(self, time, y)
     }
@@ -127,6 +141,12 @@ impl Integrator for GenAlpha<'_> {
     }
     fn alpha_f(&self) -> f64 {
         GenAlpha::alpha_f(self)
+    }
+    fn set_dt(&mut self, dt: f64) {
+        GenAlpha::set_dt(self, dt);
+    }
+    fn filter_error(&mut self, v: &mut [f64]) {
+        GenAlpha::filter_error(self, v);
     }
     fn step(&mut self, time: f64, y: &mut [f64], yd: &mut [f64]) -> Result<()> {
         GenAlpha::step(self, time, y, yd)

@@ -29,6 +29,8 @@ pub const OPTIONS: &[&str] = &[
     "checkpoint",
     "checkpoint_every",
     "cancel",
+    "rtol",
+    "atol",
 ];
 /// How a run starts.
 pub const STARTS: &[&str] = &[
@@ -56,6 +58,11 @@ pub struct Settings {
     pub newton_atol: Option<f64>,
     pub max_iterations: i64,
     pub transport: bool,
+    /// Error control's relative tolerance (None: fixed steps); the run checks 0 < rtol < 1.
+    pub rtol: Option<f64>,
+    /// Error control's absolute tolerance per kind of unknown (SI); the run names an unknown
+    /// kind.
+    pub atol: Option<Vec<(String, f64)>>,
 }
 
 /// A setting's value: given (by the caller or the file) or the default.
@@ -235,6 +242,9 @@ pub fn resolve<N: Node>(sim: &N, overrides: &N, period: Option<f64>) -> Result<S
     let max_iterations = integer(&n, &w, 1)?;
     let (t, w) = get("transport", None, "", Val::Flag(true));
     let transport = flag(&t, &w)?;
+    let rtol = get("rtol", Some(sim), "rtol", Val::Null);
+    let atol = get("atol", Some(sim), "atol", Val::Null);
+    let (rtol, atol) = tolerances(&rtol, &atol)?;
     Ok(Settings {
         period,
         cycles,
@@ -250,7 +260,45 @@ pub fn resolve<N: Node>(sim: &N, overrides: &N, period: Option<f64>) -> Result<S
         newton_atol,
         max_iterations,
         transport,
+        rtol,
+        atol,
     })
+}
+
+type Tolerance<N> = (Val<N>, String);
+
+/// Error control's `rtol` (a finite number > 0) and `atol` (a mapping of kind to a finite
+/// number > 0), each named by where it came from.
+fn tolerances<N: Node>(
+    rtol: &Tolerance<N>,
+    atol: &Tolerance<N>,
+) -> Result<(Option<f64>, Option<Vec<(String, f64)>>)> {
+    let r = match rtol.0.kind() {
+        Kind::Null => None,
+        _ => Some(real(&rtol.0, &rtol.1, 0.0, f64::INFINITY, true)?),
+    };
+    let a = match (&atol.0, atol.0.kind()) {
+        (_, Kind::Null) => None,
+        (Val::Given(n), Kind::Map) => {
+            let mut out = Vec::new();
+            for (k, v) in n.entries() {
+                let place = format!("{}.{k}", atol.1);
+                out.push((k, real(&Val::Given(v), &place, 0.0, f64::INFINITY, true)?));
+            }
+            Some(out)
+        }
+        _ => {
+            return Err(setting(
+                &atol.1,
+                format!(
+                    "must be a mapping of kind (pressure, flow, volume, species) to a number in \
+                     SI units, got {}",
+                    atol.0.repr()
+                ),
+            ));
+        }
+    };
+    Ok((r, a))
 }
 
 /// An error of the setting `place` ("simulate: cycles"): its two parts are element and key.

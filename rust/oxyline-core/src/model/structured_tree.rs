@@ -14,8 +14,8 @@
 //! the steady resistance are computed per class, without growing the tree.
 
 use crate::error::{Error, Result};
-use crate::segment::{Blood, InertanceProfile, segment_rlc};
 use crate::model::{GeometrySpec, VesselSpec};
+use crate::segment::{Blood, InertanceProfile, segment_rlc};
 
 /// The boundary condition's `type`.
 pub const TYPE: &str = "structured-tree";

@@ -197,6 +197,53 @@ impl State<'_, '_> {
         }
     }
 
+    /// The flow part of one split step of `h` from `t` (error-controlled runs, which judge the
+    /// flow step before the species follow it): the transport's start flows are set first.
+    pub fn advance_flow(&mut self, t: f64, h: f64) -> Result<()> {
+        if let Some(sp) = self.species.as_mut() {
+            sp.before_flow_step(&self.y);
+        }
+        self.dt = h;
+        let ig = self.flow.integrator();
+        ig.set_dt(h);
+        ig.step(t, &mut self.y, &mut self.yd)
+    }
+
+    /// The species part of the split step of `h` from `t` that [`State::advance_flow`] began.
+    pub fn advance_species(&mut self, t: f64, h: f64) -> Result<()> {
+        match self.species.as_mut() {
+            Some(sp) => sp.implicit_step(t, h, &self.y),
+            None => Ok(()),
+        }
+    }
+
+    /// The species outputs at `t` of an interpolated flow state (y, ẏ) and amounts `z`
+    /// (dense output between steps), over the cells' transport `volumes` interpolated alike.
+    /// What the transport carries between steps (volumes, warm starts) is put back
+    /// afterwards, so output times never change the solution.
+    pub fn observe_at(
+        &mut self,
+        t: f64,
+        y: &[f64],
+        yd: &[f64],
+        z: &[f64],
+        volumes: &[f64],
+        out: &mut Vec<f64>,
+    ) -> Result<()> {
+        out.clear();
+        let Some(sp) = self.species.as_mut() else {
+            return Ok(());
+        };
+        let names = &self.dae.names;
+        sp.tr
+            .check_finite(z, t, &|v| names.vessel(v).map(str::to_owned))?;
+        let carried = sp.tr.carried();
+        sp.tr.set_cell_transport_volumes(volumes);
+        let seen = sp.tr.observe(t, y, Some(yd), z, true, out);
+        sp.tr.restore_carried(&carried)?;
+        seen
+    }
+
     /// The checks run every few steps: the explicit transport's Courant number and a finite
     /// flow state.
     pub fn check(&mut self, t: f64) -> Result<()> {

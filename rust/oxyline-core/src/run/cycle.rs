@@ -2,6 +2,7 @@
 //! state, reports progress, and stops when the run is periodic (or the mean flow of a first
 //! pass has settled), interrupted, or failed.
 
+use super::adaptive::Adaptive;
 use super::checkpoint::{Checkpoints, Snapshot};
 use super::coupling::State;
 use super::mean_flow::MeanAbs;
@@ -30,6 +31,8 @@ pub(super) struct Cycles<'r, 'f> {
     obs_row: Vec<f64>,
     /// The allocator's free pages were handed back after the pass's first output row.
     released: bool,
+    /// Error control (None: the fixed step).
+    pub adaptive: Option<Adaptive>,
 }
 
 /// What the rows of one cycle are for.
@@ -66,7 +69,12 @@ impl<'r, 'f> Cycles<'r, 'f> {
             periodic_error: f64::NAN,
             obs_row: Vec::new(),
             released: false,
+            adaptive: None,
         }
+    }
+
+    pub fn s_period(&self) -> f64 {
+        self.s.period
     }
 
     fn t_end(&self) -> f64 {
@@ -211,8 +219,14 @@ impl<'r, 'f> Cycles<'r, 'f> {
             let t = if s.output_all_cycles { rows.t0 } else { 0.0 };
             self.output_row(t, rows.t0, true, committed)?;
         }
-        for k in 1..=self.steps_per_cycle {
-            self.step(k, &rows, progress)?;
+        if let Some(mut ad) = self.adaptive.take() {
+            let done = self.adaptive_cycle(&mut ad, &rows, progress);
+            self.adaptive = Some(ad);
+            done?;
+        } else {
+            for k in 1..=self.steps_per_cycle {
+                self.step(k, &rows, progress)?;
+            }
         }
         self.cycles_run = cycle + 1;
         Ok(self.end_cycle())
@@ -253,6 +267,102 @@ impl<'r, 'f> Cycles<'r, 'f> {
         }
         if self.steps % 256 == 0 && !progress(t_new, self.t_end()) {
             return Err(Error::Interrupted { time: t_new });
+        }
+        Ok(())
+    }
+
+    /// One cycle of an error-controlled run (docs/physics.md §10): steps chosen by the local
+    /// error estimate, the last one ending on the cycle's end, output rows from the dense
+    /// output at the cycle's output times.
+    fn adaptive_cycle(
+        &mut self,
+        ad: &mut Adaptive,
+        rows: &CycleRows,
+        progress: &mut dyn FnMut(f64, f64) -> bool,
+    ) -> Result<()> {
+        let period = self.s.period;
+        let (t0, t_end) = (rows.t0, rows.t0 + period);
+        let n_out = ad.out_per_cycle;
+        let mut next_out = 1;
+        let mut t = t0;
+        while t < t_end {
+            let rem = t_end - t;
+            // the last step ends on the cycle's end; a remainder under two steps is halved
+            let h = if ad.h >= rem * (1.0 - 1e-9) {
+                rem
+            } else if ad.h > 0.5 * rem {
+                0.5 * rem
+            } else {
+                ad.h
+            };
+            ad.save_start(&self.state);
+            let stepped = self.state.advance_flow(t, h);
+            let (err, kinds) = match stepped {
+                Ok(()) => ad.judge_flow(&mut self.state, h),
+                // a Newton failure at a step above the smallest: try a smaller one
+                Err(e) if h <= ad.h_min() => return Err(e),
+                Err(_) => (f64::INFINITY, [0.0; 3]),
+            };
+            if err > 1.0 && h > ad.h_min() {
+                ad.restore(&mut self.state);
+                ad.reject(h, err);
+                continue;
+            }
+            self.state.advance_species(t, h)?;
+            ad.after_species(&self.state);
+            let t_new = if h == rem { t_end } else { t + h };
+            while next_out <= n_out {
+                let tau = t0 + period * next_out as f64 / n_out as f64;
+                if tau > t_new + 1e-12 * period {
+                    break;
+                }
+                self.dense_row(ad, rows, (tau - t) / h, h, tau)?;
+                next_out += 1;
+            }
+            ad.accept(&self.state, h, err, kinds);
+            self.steps += 1;
+            t = t_new;
+            if ad.steps % 64 == 0 || t == t_end {
+                self.state.check(t)?;
+            }
+            if self.steps % 256 == 0 && !progress(t, self.t_end()) {
+                return Err(Error::Interrupted { time: t });
+            }
+        }
+        Ok(())
+    }
+
+    /// The output row at `time`, θ into the step of `h` just taken: the probes from the
+    /// dense output, the species outputs of the interpolated state.
+    fn dense_row(
+        &mut self,
+        ad: &mut Adaptive,
+        rows: &CycleRows,
+        theta: f64,
+        h: f64,
+        time: f64,
+    ) -> Result<()> {
+        if !rows.recorded {
+            return Ok(());
+        }
+        let t = if self.s.output_all_cycles {
+            time
+        } else {
+            time - rows.t0
+        };
+        let theta = theta.clamp(0.0, 1.0);
+        let (y, yd) = (&self.state.y, &self.state.yd);
+        self.rec
+            .record_with(t, |i| ad.interpolate(i, theta, h, y, yd).0)?;
+        if rows.species && self.state.species.is_some() {
+            let (yi, ydi, zi, vi) = ad.interpolate_all(theta, h, &self.state);
+            self.state
+                .observe_at(time, yi, ydi, zi, vi, &mut self.obs_row)?;
+            self.obs_row.shrink_to_fit();
+            self.rec.push_species(&self.obs_row);
+        }
+        if rows.committed && !self.rec.flush(false) {
+            return Err(Error::Interrupted { time });
         }
         Ok(())
     }

@@ -15,6 +15,7 @@
 //!
 //! A failed or interrupted run still returns everything recorded so far.
 
+mod adaptive; // error control: variable step, dense output (docs/physics.md §10)
 pub mod checkpoint;
 mod coupling;
 mod cycle;
@@ -31,7 +32,7 @@ mod settings;
 mod two_pass;
 
 pub use checkpoint::{CHECKPOINT_VERSION, Checkpoints, Every, Snapshot};
-pub use outcome::{Outcome, TransportOutcome};
+pub use outcome::{ErrorControlOutcome, Outcome, TransportOutcome};
 pub use recorder::{Chunk, OutputSink};
 pub use resolve::{Refinement, rk4_step_refinement};
 pub use settings::{Method, RunSettings, Start};

@@ -23,6 +23,21 @@ pub struct Outcome {
     /// Most output rows the driver held at once: all of them without a sink; with one, at most
     /// the sink's chunk for all-cycles output and one cycle's output for last-cycle output.
     pub max_buffered_rows: usize,
+    /// Error control's account (None for a fixed step).
+    pub error_control: Option<ErrorControlOutcome>,
+}
+
+/// What an error-controlled run reports (docs/physics.md §10).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ErrorControlOutcome {
+    /// Largest estimated error per kind over the run (pressure, flow, volume, species; see
+    /// `integrate::adaptive::KINDS`), relative to atol/rtol + |y|: at most rtol where the
+    /// controller met its tolerance.
+    pub estimate: [f64; 4],
+    pub steps: usize,
+    pub rejected: usize,
+    pub dt_min: f64,
+    pub dt_max: f64,
 }
 
 /// Species outputs, recorded at the same times as the flow probes.
@@ -49,14 +64,28 @@ impl Outcome {
         error: Option<Error>,
     ) -> Outcome {
         let (cycles_run, periodic_error) = (cycles.cycles_run, cycles.periodic_error);
+        let period = cycles.s_period();
         let (state, rec) = (cycles.state, cycles.rec);
         let (n_probes, columns_per_species) = (rec.n_probes(), rec.columns_per_species());
+        let error_control = cycles.adaptive.map(|ad| ErrorControlOutcome {
+            estimate: ad.estimate,
+            steps: ad.steps,
+            rejected: ad.rejected,
+            dt_min: ad.h_smallest,
+            dt_max: ad.h_largest,
+        });
+        // an error-controlled run reports its mean step
+        let dt = match &error_control {
+            Some(ec) if ec.steps > 0 => cycles_run as f64 * period / ec.steps as f64,
+            _ => state.dt,
+        };
         Outcome {
+            error_control,
             max_buffered_rows: rec.max_rows,
             times: rec.times,
             data: rec.data,
             n_probes,
-            dt: state.dt,
+            dt,
             method,
             cycles_run,
             periodic_error,

@@ -1,5 +1,6 @@
 //! One pass of a run: settings → plan → initial state → cycle loop → outcome.
 
+use super::adaptive::Adaptive;
 use super::checkpoint::{Checkpoints, Snapshot};
 use super::coupling::{Species, State};
 use super::cycle::Cycles;
@@ -28,7 +29,14 @@ pub(super) fn run(
     mut checkpoints: Option<&mut Checkpoints<'_>>,
 ) -> Result<Outcome> {
     s.validate(dae)?;
+    if s.adaptive().is_some() && checkpoints.is_some() {
+        return Err(crate::error::Error::model(
+            "simulation",
+            "checkpoints need a fixed step: give dt instead of rtol to checkpoint a run",
+        ));
+    }
     let mut plan = Plan::new(dae, steady, s, transport.as_deref_mut(), progress)?;
+
     let resume = checkpoints.as_deref_mut().and_then(|c| c.resume.take());
     let (mut y, yd) = match &resume {
         Some(r) => resume_state(r, dae, plan.dt)?,
@@ -80,6 +88,9 @@ pub(super) fn run(
     };
     let method = plan.method_name();
     let mut cycles = Cycles::new(s, state, rec, mean, plan.steps_per_cycle, plan.stride);
+    cycles.adaptive = s
+        .adaptive()
+        .map(|tol| Adaptive::new(dae, tol, s.method.rho_inf(), s.period, s.output_every));
     if let Some(r) = &resume {
         cycles.restore(r)?;
     }

@@ -40,6 +40,20 @@ impl<'d> Plan<'d> {
         transport: Option<&mut Transport>,
         progress: &mut dyn FnMut(f64, f64) -> bool,
     ) -> Result<Self> {
+        if s.adaptive().is_some() {
+            // error control: generalized-α, its steps chosen during the run; the plan's step
+            // is only the quasi-steady transport's start (docs/physics.md §10)
+            let out_per_cycle = (s.period / s.output_every).round().max(1.0) as usize;
+            return Ok(Plan {
+                dae,
+                use_rk4: false,
+                stability: None,
+                dt: s.period / 1000.0,
+                steps_per_cycle: out_per_cycle,
+                stride: 1,
+                rk4: None,
+            });
+        }
         let (transport_dt, reaction) = transport_step_limit(dae, steady, transport);
         let t_end = s.max_cycles() as f64 * s.period;
         let mut go = || progress(0.0, t_end);
@@ -364,6 +378,7 @@ mod tests {
             newton: NewtonControl::default(),
             probes: Vec::new(),
             species_columns: None,
+            tolerances: None,
         }
     }
 

@@ -125,6 +125,18 @@ impl<'p, 's, 'f> Recorder<'p, 's, 'f> {
         Ok(())
     }
 
+    /// Record one row whose value of unknown `i` is `value(i)` (dense output: only the
+    /// probes are interpolated).
+    pub fn record_with(&mut self, t: f64, value: impl Fn(usize) -> f64) -> Result<()> {
+        if self.times.len() == self.times.capacity() {
+            self.reserve(self.times.len().max(64))?;
+        }
+        self.times.push(t);
+        self.data.extend(self.probes.iter().map(|&i| value(i)));
+        self.max_rows = self.max_rows.max(self.times.len());
+        Ok(())
+    }
+
     /// Keep the selected columns of one `observe` row (all species blocks).
     pub fn push_species(&mut self, row: &[f64]) {
         match self.species_select {

@@ -2,6 +2,7 @@
 
 use crate::circuit::Dae;
 use crate::error::{Error, Result};
+use crate::integrate::adaptive::Tolerances;
 use crate::integrate::newton::NewtonControl;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -65,6 +66,9 @@ pub struct RunSettings {
     /// Recorded columns of each species block of `Transport::observe` (see
     /// `crate::output::Selection::species_columns`); None records every column.
     pub species_columns: Option<Vec<usize>>,
+    /// Error control (docs/physics.md §10): generalized-α with a variable step meeting these
+    /// tolerances and output by dense output. None: the fixed step of `dt` (or `auto`).
+    pub tolerances: Option<Tolerances>,
 }
 
 impl RunSettings {
@@ -86,10 +90,18 @@ impl RunSettings {
         if let Some(dt) = self.dt.filter(|dt| !(dt.is_finite() && *dt > 0.0)) {
             return bad(format!("dt must be > 0, got {dt}"));
         }
+        if let Some(tol) = &self.tolerances {
+            validate_tolerances(tol, self)?;
+        }
         if let Some(p) = self.probes.iter().find(|&&p| p >= dae.n) {
             return bad(format!("output index {p} out of range"));
         }
         Ok(())
+    }
+
+    /// An error-controlled run: tolerances and no fixed step.
+    pub(super) fn adaptive(&self) -> Option<Tolerances> {
+        self.tolerances.filter(|_| self.dt.is_none())
     }
 
     /// The most cycles the run may take: `cycles`, or up to `max_cycles` while waiting for
@@ -101,6 +113,32 @@ impl RunSettings {
             self.cycles
         }
     }
+}
+
+/// rtol in (0, 1), every atol finite and > 0; error control runs generalized-α and excludes
+/// a fixed `dt`.
+fn validate_tolerances(tol: &Tolerances, s: &RunSettings) -> Result<()> {
+    let bad = |what: String| Err(Error::model("simulation", what));
+    if !(tol.rtol.is_finite() && tol.rtol > 0.0 && tol.rtol < 1.0) {
+        return bad(format!("rtol must be > 0 and < 1, got {}", tol.rtol));
+    }
+    let kinds = crate::integrate::adaptive::KINDS;
+    for (kind, a) in kinds.iter().zip(tol.atol.as_array()) {
+        if !(a.is_finite() && a > 0.0) {
+            return bad(format!("atol {kind} must be a finite number > 0, got {a}"));
+        }
+    }
+    if let Some(dt) = s.dt {
+        return bad(format!(
+            "rtol (error control) and dt = {dt} (a fixed step) exclude each other: give one"
+        ));
+    }
+    if matches!(s.method, Method::Rk4) {
+        return bad(
+            "rtol (error control) runs generalized-alpha: method 'rk4' needs a fixed dt".into(),
+        );
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -131,6 +169,7 @@ mod tests {
             newton: NewtonControl::default(),
             probes: vec![0],
             species_columns: None,
+            tolerances: None,
         };
         assert!(ok.validate(&dae).is_ok());
         let message = |s: RunSettings| match s.validate(&dae) {

@@ -102,6 +102,16 @@ fn mean_flow_pass(s: &RunSettings) -> RunSettings {
         probes: Vec::new(),
         ..s.clone()
     };
+    if s.tolerances.is_some() && s.dt.is_none() {
+        // an error-controlled run measures the mean on the fixed coarse implicit step: the
+        // closures then depend neither on its tolerances' steps nor on its output interval
+        first.tolerances = None;
+        first.method = Method::GeneralizedAlpha {
+            rho_inf: s.method.rho_inf(),
+        };
+        first.dt = Some(s.period / MEAN_FLOW_COARSE_STEPS);
+        return first;
+    }
     match s.method {
         Method::Rk4 => {
             first.method = Method::GeneralizedAlpha { rho_inf: 0.5 };

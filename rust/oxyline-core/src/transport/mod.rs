@@ -334,6 +334,26 @@ impl Transport {
     pub fn n_cells(&self) -> usize {
         self.plan.cells.len()
     }
+    /// Each cell's transport volume after the last step (m³; before the first, its volume
+    /// at the start): the amounts of a cell over it are the concentrations the step
+    /// transported, which an error-controlled run judges and interpolates.
+    pub fn cell_transport_volumes(&self) -> &[f64] {
+        if self.wvol.is_empty() {
+            &self.vol
+        } else {
+            &self.wvol
+        }
+    }
+    /// Replace the cells' transport volumes (the dense output of an error-controlled run
+    /// observes amounts interpolated within a step over volumes interpolated alike; it
+    /// restores the carried state afterwards).
+    pub fn set_cell_transport_volumes(&mut self, volumes: &[f64]) {
+        if self.wvol.is_empty() {
+            self.vol.copy_from_slice(volumes);
+        } else {
+            self.wvol.copy_from_slice(volumes);
+        }
+    }
     /// Length of the coupled state: amounts per cell and species, then 4 accumulators per
     /// species (I_in, I_out, I_wall, I_decay), then the relaxed shears of every species.
     pub fn state_len(&self) -> usize {

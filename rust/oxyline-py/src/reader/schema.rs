@@ -116,5 +116,16 @@ pub(crate) fn resolve_settings<'py>(
     d.set_item("newton_atol", s.newton_atol)?;
     d.set_item("max_iterations", s.max_iterations)?;
     d.set_item("transport", s.transport)?;
+    d.set_item("rtol", s.rtol)?;
+    match s.atol {
+        Some(atol) => {
+            let a = PyDict::new(py);
+            for (kind, v) in atol {
+                a.set_item(kind, v)?;
+            }
+            d.set_item("atol", a)?;
+        }
+        None => d.set_item("atol", py.None())?,
+    }
     Ok(d)
 }

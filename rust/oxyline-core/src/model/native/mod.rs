@@ -44,6 +44,8 @@ pub const SIM_KEYS: &[&str] = &[
     "rho_infty",
     "start",
     "max_memory",
+    "rtol",
+    "atol",
 ];
 pub const OUTPUT_KEYS: &[&str] = &["cycles", "every", "segments", "variables", "vessels"];
 /// Run methods a model's `simulation: method` may name.

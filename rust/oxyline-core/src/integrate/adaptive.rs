@@ -1,0 +1,219 @@
+//! Error control for generalized-α (docs/physics.md §10): the tolerances, the local error
+//! estimate of a step, the step-size controller and the dense output between steps.
+//!
+//! * **Local error.** Generalized-α's principal root on ẏ = λy is e^z − C z³ + O(z⁴), z = λh,
+//!   |C| = 1/12 + ¼((1 − ρ∞)/(1 + ρ∞))² (1/12 the trapezoidal rule at ρ∞ = 1, 1/9 at the
+//!   default 0.5, 1/3 at 0). The quadratic through the last three accepted states, extrapolated
+//!   to the new time, misses y(t + h) by y'''·h(h + h₁)(h + h₁ + h₂)/6; the difference between
+//!   the step's result and that extrapolation is therefore (π/6 + |C|h³) y''' (π the product),
+//!   and the step's local error |C|h³ y''' is that difference times |C|h³/(π/6 + |C|h³)
+//!   (Milne's device: one extrapolation per step, no second solve).
+//! * **Error per unit step.** A periodic forced response accumulates the local errors τ of
+//!   its harmonic at ω into a global error τ/(h|iω − λ|) ≤ τ/(hω); the controlled quantity is
+//!   therefore le/(h ω₁), ω₁ = 2π/T the fundamental: an upper bound of the periodic response's
+//!   error except near a resonance (|iω − λ| < ω, quality factor Q > 1, up to Q× more).
+//! * **Species.** The split transport step is backward Euler (first order): its local error
+//!   h²z̈/2 is h/(2h + h₁) times its difference from the linear extrapolation of the last two
+//!   accepted amounts, weighted per cell by atol·V₀ + rtol·|N| (a concentration tolerance).
+//! * **Dense output.** Generalized-α's carried ẏₙ is the rate at tₙ − δh, δ = γ − ½ (exact for
+//!   the principal root to O(h²)); the cubic Hermite interpolant uses the rates shifted back to
+//!   the step ends with the step's own ÿ, so output between steps keeps the method's order.
+
+/// The kinds of unknowns an absolute tolerance is given for, in the order of [`Atol`] and of
+/// the reported estimate.
+pub const KINDS: [&str; 4] = ["pressure", "flow", "volume", "species"];
+
+/// Absolute tolerances per kind, SI.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Atol {
+    /// Pa (default 1 Pa = 0.0075 mmHg).
+    pub pressure: f64,
+    /// m³/s (default 1e-9 m³/s = 1 µL/s).
+    pub flow: f64,
+    /// m³, chamber volumes (default 1e-9 m³ = 1 µL).
+    pub volume: f64,
+    /// mol/m³, species concentration (default 1e-6 mol/m³).
+    pub species: f64,
+}
+
+impl Default for Atol {
+    fn default() -> Self {
+        Atol {
+            pressure: 1.0,
+            flow: 1e-9,
+            volume: 1e-9,
+            species: 1e-6,
+        }
+    }
+}
+
+impl Atol {
+    pub fn as_array(&self) -> [f64; 4] {
+        [self.pressure, self.flow, self.volume, self.species]
+    }
+}
+
+/// What an error-controlled run asks for.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Tolerances {
+    pub rtol: f64,
+    pub atol: Atol,
+}
+
+/// |C| of generalized-α's local error |C| h³ y''' (see the module comment).
+pub fn local_error_constant(rho_inf: f64) -> f64 {
+    let r = (1.0 - rho_inf) / (1.0 + rho_inf);
+    1.0 / 12.0 + 0.25 * r * r
+}
+
+/// δ = γ − ½: the carried rate ẏₙ is the rate at tₙ − δh.
+pub fn rate_shift(rho_inf: f64) -> f64 {
+    let am = 0.5 * (3.0 - rho_inf) / (1.0 + rho_inf);
+    let af = 1.0 / (1.0 + rho_inf);
+    am - af
+}
+
+/// The step-size controller: error per unit step, order 2 for the flow and 1 for the species
+/// (so the error falls as h² and h), safety 0.9, growth at most 1.5× and shrinking at most 5×
+/// per step. A proposal within [1, 1.25) of the current step keeps it: a linear circuit then
+/// keeps its factorised iteration matrix.
+#[derive(Debug, Clone, Copy)]
+pub struct StepControl {
+    pub h_min: f64,
+    pub h_max: f64,
+}
+
+pub const SAFETY: f64 = 0.9;
+pub const GROW: f64 = 1.5;
+pub const SHRINK: f64 = 0.2;
+
+impl StepControl {
+    /// The next step after a step of `h` with the scaled errors (≤ 1 meets the tolerance).
+    pub fn next(&self, h: f64, flow_err: f64, species_err: f64) -> f64 {
+        let f = |err: f64, order: f64| {
+            if err > 0.0 {
+                SAFETY * err.powf(-1.0 / order)
+            } else {
+                GROW
+            }
+        };
+        let factor = f(flow_err, 2.0)
+            .min(f(species_err, 1.0))
+            .clamp(SHRINK, GROW);
+        let factor = if (1.0..1.25).contains(&factor) {
+            1.0
+        } else {
+            factor
+        };
+        (h * factor).clamp(self.h_min, self.h_max)
+    }
+}
+
+/// Weights of the quadratic through (−h₁ − h₂, −h₁, 0) evaluated at h (Lagrange), for the
+/// values (y_{n−2}, y_{n−1}, yₙ); and the factor |C|h³/(π/6 + |C|h³) from the difference to
+/// the local error.
+pub fn quadratic_extrapolation(h: f64, h1: f64, h2: f64, c: f64) -> ([f64; 3], f64) {
+    let (a, b, x) = (-(h1 + h2), -h1, h);
+    let la = (x - b) * x / ((a - b) * a);
+    let lb = (x - a) * x / ((b - a) * b);
+    let lc = (x - a) * (x - b) / (a * b);
+    let pi = h * (h + h1) * (h + h1 + h2);
+    let ch3 = c * h * h * h;
+    ([la, lb, lc], ch3 / (pi / 6.0 + ch3))
+}
+
+/// Cubic Hermite basis at θ ∈ [0, 1] for (y₀, h d₀, y₁, h d₁), and its derivative (per unit θ).
+pub fn hermite(theta: f64) -> ([f64; 4], [f64; 4]) {
+    let (t2, t3) = (theta * theta, theta * theta * theta);
+    (
+        [
+            2.0 * t3 - 3.0 * t2 + 1.0,
+            t3 - 2.0 * t2 + theta,
+            -2.0 * t3 + 3.0 * t2,
+            t3 - t2,
+        ],
+        [
+            6.0 * t2 - 6.0 * theta,
+            3.0 * t2 - 4.0 * theta + 1.0,
+            -6.0 * t2 + 6.0 * theta,
+            3.0 * t2 - 2.0 * theta,
+        ],
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Generalized-α's principal root on ẏ = λy (the amplification of (y, hẏ)).
+    fn principal_root(z: f64, rho: f64) -> f64 {
+        let am = 0.5 * (3.0 - rho) / (1.0 + rho);
+        let af = 1.0 / (1.0 + rho);
+        let g = 0.5 + am - af;
+        let d = am - af * g * z;
+        let (b_y, b_v) = (z / d, (af * (1.0 - g) * z - (1.0 - am)) / d);
+        let (a00, a01) = (1.0 + g * b_y, (1.0 - g) + g * b_v);
+        let (tr, det) = (a00 + b_v, a00 * b_v - a01 * b_y);
+        let disc = (tr * tr - 4.0 * det).sqrt();
+        let (l1, l2) = ((tr + disc) / 2.0, (tr - disc) / 2.0);
+        if (l1 - 1.0).abs() < (l2 - 1.0).abs() {
+            l1
+        } else {
+            l2
+        }
+    }
+
+    #[test]
+    fn the_error_constant_is_that_of_the_principal_root() {
+        // (e^z − root)/z³ → −|C| as z → 0, for the trapezoidal end, the default and ρ∞ = 0
+        for rho in [1.0, 0.5, 0.0] {
+            let z: f64 = 1e-3;
+            let c = (z.exp() - principal_root(z, rho)) / (z * z * z);
+            let want = local_error_constant(rho);
+            assert!((c + want).abs() < 2e-3 * want, "ρ∞ {rho}: {c} vs −{want}");
+        }
+        assert!((local_error_constant(0.5) - 1.0 / 9.0).abs() < 1e-15);
+        assert!((rate_shift(0.5) - 1.0 / 6.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn extrapolation_is_exact_for_quadratics_and_scales_the_cubic_error() {
+        let (h, h1, h2) = (0.3, 0.2, 0.5);
+        let ([la, lb, lc], _) = quadratic_extrapolation(h, h1, h2, 0.1);
+        let q = |t: f64| 1.0 - 2.0 * t + 3.0 * t * t;
+        let p = la * q(-h1 - h2) + lb * q(-h1) + lc * q(0.0);
+        assert!((p - q(h)).abs() < 1e-12);
+        // a cubic t³ is missed by h(h + h1)(h + h1 + h2) (y''' = 6)
+        let p3 = la * (-h1 - h2).powi(3) + lb * (-h1).powi(3);
+        let miss = h.powi(3) - p3;
+        assert!((miss - h * (h + h1) * (h + h1 + h2)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn hermite_reproduces_cubics() {
+        let y = |t: f64| 2.0 + t - 3.0 * t * t + 0.5 * t * t * t;
+        let d = |t: f64| 1.0 - 6.0 * t + 1.5 * t * t;
+        let (t0, h) = (0.4, 0.7);
+        for theta in [0.0, 0.25, 0.6, 1.0] {
+            let (b, db) = hermite(theta);
+            let v = b[0] * y(t0) + b[1] * h * d(t0) + b[2] * y(t0 + h) + b[3] * h * d(t0 + h);
+            let dv =
+                (db[0] * y(t0) + db[1] * h * d(t0) + db[2] * y(t0 + h)) / h + db[3] * d(t0 + h);
+            let t = t0 + theta * h;
+            assert!((v - y(t)).abs() < 1e-12 && (dv - d(t)).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn the_controller_keeps_grows_and_shrinks_within_its_limits() {
+        let c = StepControl {
+            h_min: 1e-9,
+            h_max: 1.0,
+        };
+        assert_eq!(c.next(0.01, 0.7, 0.0), 0.01); // 0.9·0.7^-1/2 = 1.08: keep
+        assert!((c.next(0.01, 0.01, 0.0) - 0.015).abs() < 1e-15); // capped at 1.5×
+        assert!((c.next(0.01, 1e6, 0.0) - 0.002).abs() < 1e-15); // at most 5× smaller
+        // species (first order) decide when their error is the larger
+        assert!((c.next(0.01, 0.1, 2.0) - 0.01 * 0.45).abs() < 1e-15);
+    }
+}

@@ -1,0 +1,382 @@
+//! The error-controlled cycle loop (docs/physics.md §10): generalized-α with a variable step
+//! chosen from a local error estimate, output rows from the dense output at the requested
+//! times, so the output interval never changes the solution. The estimates, the controller
+//! and the interpolant are in `integrate::adaptive`; here they meet the run's state.
+
+use super::coupling::State;
+use crate::circuit::Dae;
+use crate::integrate::adaptive::{
+    StepControl, Tolerances, hermite, local_error_constant, quadratic_extrapolation, rate_shift,
+};
+
+/// The local errors of a forced periodic response accumulate over 1/ω₁ (|iω − λ| ≥ ω) for a
+/// normal, non-resonant circuit; coupled circuits amplify them more (the RLC line of
+/// tests/test_error_control.py by up to 2.6× at 1/ω₁, 2.0× at 2/ω₁): the accumulation time is
+/// taken as 3/ω₁ (measured there: 0.1–1.6 rtol over rtol 1e-2 … 1e-6).
+const ACCUMULATION: f64 = 3.0;
+
+/// Accepted steps after a rejection during which the step does not grow.
+const HOLD_AFTER_REJECTION: usize = 8;
+
+/// The carried state of an error-controlled run.
+pub(super) struct Adaptive {
+    tol: Tolerances,
+    control: StepControl,
+    /// ω₁/3: the error per unit step is scaled to the fundamental (see the
+    /// module of `integrate::adaptive`, and `ACCUMULATION`).
+    omega: f64,
+    c_local: f64,
+    /// ρ∞/(2(1 + ρ∞)²): an algebraic unknown's error per h² y''.
+    c_algebraic: f64,
+    delta: f64,
+    /// Unknowns without a rate in the DAE (E = 0).
+    algebraic: Vec<bool>,
+    /// The largest |y_i| so far: rtol is relative to it (a pulsatile flow is judged against
+    /// its peak, not against its zero crossings).
+    peak: Vec<f64>,
+    /// The differential unknowns' local error estimate of the current step (scratch).
+    le: Vec<f64>,
+    /// Output rows per cycle.
+    pub out_per_cycle: usize,
+    /// The step to try next.
+    pub h: f64,
+    /// Unknowns below `kind_end[0]` are pressures, then flows up to `kind_end[1]`, then
+    /// volumes (element unknowns).
+    kind_end: [usize; 2],
+    /// (y, ẏ) at the start of the current step; the two accepted states before it.
+    y0: Vec<f64>,
+    yd0: Vec<f64>,
+    ym1: Vec<f64>,
+    ym2: Vec<f64>,
+    /// The steps that ended at y0 and at ym1.
+    h1: f64,
+    h2: f64,
+    /// Accepted states before y0 (0, 1, 2 or more).
+    history: usize,
+    /// The species amounts at the start of the step; the cells' concentrations (amount over
+    /// transport volume, species-major) at the start of the step and at the state before.
+    z0: Vec<f64>,
+    c0: Vec<f64>,
+    cm1: Vec<f64>,
+    /// The concentrations at the end of the step just taken.
+    c1: Vec<f64>,
+    /// The largest |c| so far per cell and species.
+    c_peak: Vec<f64>,
+    /// Largest scaled error per kind over the run (pressure, flow, volume, species), × rtol.
+    pub estimate: [f64; 4],
+    pub steps: usize,
+    pub rejected: usize,
+    /// Accepted steps left that may not grow the step (set by a rejection: a rejected growth
+    /// would otherwise be retried at once, the history's uneven spacing being part of the
+    /// error it sees).
+    hold: usize,
+    pub h_smallest: f64,
+    pub h_largest: f64,
+    /// Interpolated (y, ẏ, z) of species output rows (sized on first use).
+    yi: Vec<f64>,
+    ydi: Vec<f64>,
+    zi: Vec<f64>,
+    /// The cells' transport volumes at the step's start, and interpolated.
+    v0: Vec<f64>,
+    vi: Vec<f64>,
+}
+
+/// What one flow step's estimate found: the largest scaled error and its value per kind.
+struct FlowError {
+    max: f64,
+    kinds: [f64; 3],
+}
+
+impl Adaptive {
+    pub fn new(dae: &Dae, tol: Tolerances, rho_inf: f64, period: f64, output_every: f64) -> Self {
+        let out_per_cycle = (period / output_every).round().max(1.0) as usize;
+        let n_nodes = dae.n_nodes;
+        Adaptive {
+            tol,
+            control: StepControl {
+                h_min: period * 1e-9,
+                h_max: period / 32.0,
+            },
+            omega: 2.0 * std::f64::consts::PI / (ACCUMULATION * period),
+            c_local: local_error_constant(rho_inf),
+            c_algebraic: rho_inf / (2.0 * (1.0 + rho_inf).powi(2)),
+            algebraic: dae.e.iter().map(|&e| e == 0.0).collect(),
+            peak: Vec::new(),
+            le: Vec::new(),
+            delta: rate_shift(rho_inf),
+            out_per_cycle,
+            // a small first step: its estimate is first order (no history yet)
+            h: period * 1e-3 * (tol.rtol / 1e-3).sqrt().min(1.0),
+            kind_end: [n_nodes, n_nodes + dae.names.n_branches()],
+            y0: Vec::new(),
+            yd0: Vec::new(),
+            ym1: Vec::new(),
+            ym2: Vec::new(),
+            h1: 0.0,
+            h2: 0.0,
+            history: 0,
+            z0: Vec::new(),
+            c0: Vec::new(),
+            cm1: Vec::new(),
+            c1: Vec::new(),
+            c_peak: Vec::new(),
+            estimate: [0.0; 4],
+            steps: 0,
+            rejected: 0,
+            hold: 0,
+            h_smallest: f64::INFINITY,
+            h_largest: 0.0,
+            yi: Vec::new(),
+            ydi: Vec::new(),
+            zi: Vec::new(),
+            v0: Vec::new(),
+            vi: Vec::new(),
+        }
+    }
+
+    /// The smallest step the controller takes (a step there is accepted whatever its error).
+    pub fn h_min(&self) -> f64 {
+        self.control.h_min
+    }
+
+    /// Keep the state at the start of a step.
+    pub fn save_start(&mut self, st: &State<'_, '_>) {
+        if self.peak.is_empty() {
+            self.peak = st.y.iter().map(|v| v.abs()).collect();
+        }
+        self.y0.clone_from(&st.y);
+        self.yd0.clone_from(&st.yd);
+        if let Some(sp) = st.species.as_ref() {
+            self.z0.clone_from(&sp.z);
+            self.v0.clear();
+            self.v0.extend_from_slice(sp.tr.cell_transport_volumes());
+            if self.c0.is_empty() {
+                concentrations(st, &mut self.c0);
+                self.c_peak = self.c0.iter().map(|c| c.abs()).collect();
+            }
+        }
+    }
+
+    /// Back to the start of a rejected step (the species have not moved yet).
+    pub fn restore(&self, st: &mut State<'_, '_>) {
+        st.y.copy_from_slice(&self.y0);
+        st.yd.copy_from_slice(&self.yd0);
+    }
+
+    /// A rejected step (or a failed Newton iteration): the step to try instead.
+    pub fn reject(&mut self, h: f64, err: f64) {
+        self.rejected += 1;
+        self.hold = HOLD_AFTER_REJECTION;
+        self.h = self
+            .control
+            .next(h, err, 0.0)
+            .min(0.5 * h)
+            .max(self.control.h_min);
+    }
+
+    fn kind(&self, i: usize) -> usize {
+        usize::from(i >= self.kind_end[0]) + usize::from(i >= self.kind_end[1])
+    }
+
+    /// The scaled error of the flow step of `h` that ended in `y` (≤ 1 meets the tolerances).
+    /// Differential unknowns: Milne's device on the last three accepted states (a first-order,
+    /// larger estimate while fewer are known), filtered through the step's iteration matrix
+    /// (Shampine's filter: a stiff mode's oscillation under the damped roots is not an error
+    /// of the solution), per unit step. Algebraic unknowns hold their constraint at the α_f
+    /// level, so their error does not accumulate: it is the fixed point ρ∞/(1 + ρ∞)² · h² y''/2
+    /// of one step's, y'' from the last three states (none at the first step).
+    fn flow_error(&mut self, st: &mut State<'_, '_>, h: f64) -> FlowError {
+        let y = &st.y;
+        let (h1, h2) = (self.h1, self.h2);
+        self.le.clear();
+        match self.history {
+            0 => {
+                let start = y.iter().zip(&self.y0).zip(&self.yd0);
+                self.le
+                    .extend(start.map(|((&y1, &y0), &d0)| y1 - y0 - h * d0));
+            }
+            1 => {
+                let r = h / h1;
+                let past = y.iter().zip(&self.y0).zip(&self.ym1);
+                self.le
+                    .extend(past.map(|((&y1, &y0), &ym)| y1 - y0 - r * (y0 - ym)));
+            }
+            _ => {
+                let ([la, lb, lc], f) = quadratic_extrapolation(h, h1, h2, self.c_local);
+                let past = self.ym2.iter().zip(&self.ym1).zip(&self.y0);
+                self.le.extend(
+                    y.iter()
+                        .zip(past)
+                        .map(|(&y1, ((&a, &b), &c))| f * (y1 - (la * a + lb * b + lc * c))),
+                );
+            }
+        }
+        for (v, &alg) in self.le.iter_mut().zip(&self.algebraic) {
+            if alg {
+                *v = 0.0;
+            }
+        }
+        st.flow.integrator().filter_error(&mut self.le);
+        let (rtol, atol) = (self.tol.rtol, self.tol.atol.as_array());
+        let per_step = self.omega * h;
+        let alg = self.c_algebraic;
+        let mut kinds = [0.0f64; 3];
+        let y = &st.y;
+        for (i, &yi) in y.iter().enumerate() {
+            let scaled = if !self.algebraic[i] {
+                self.le[i].abs() / per_step
+            } else if self.history == 0 {
+                0.0
+            } else {
+                let (b, a) = (self.y0[i], self.ym1[i]);
+                let curvature = 2.0 * ((yi - b) / h - (b - a) / h1) / (h + h1);
+                alg * h * h * curvature.abs()
+            };
+            let k = self.kind(i);
+            let e = scaled / (atol[k] + rtol * yi.abs().max(self.peak[i]));
+            kinds[k] = kinds[k].max(e);
+        }
+        FlowError {
+            max: kinds.iter().fold(0.0f64, |m, &e| m.max(e)),
+            kinds,
+        }
+    }
+
+    /// The scaled local error of the species step of `h` (backward Euler: h/(2h + h₁) times
+    /// the difference to the linear extrapolation), on the cells' concentrations (the amounts
+    /// also follow the volume's pulsation, which the flow step carries), weighted by
+    /// atol + rtol·(largest |c| so far).
+    fn species_error(&self, st: &State<'_, '_>, h: f64) -> f64 {
+        if st.species.is_none() || self.history == 0 {
+            return 0.0;
+        }
+        let (rtol, atol) = (self.tol.rtol, self.tol.atol.species);
+        let (r, f) = (h / self.h1, h / (2.0 * h + self.h1));
+        let per_step = self.omega * h;
+        let mut worst = 0.0f64;
+        let past = self.c0.iter().zip(&self.cm1).zip(&self.c_peak);
+        for (&c1, ((&c0, &cm), &peak)) in self.c1.iter().zip(past) {
+            let le = f * (c1 - c0 - r * (c0 - cm));
+            worst = worst.max(le.abs() / (per_step * (atol + rtol * peak.max(c1.abs()))));
+        }
+        worst
+    }
+
+    /// After the species step: its cells' concentrations (for the estimate and the dense
+    /// output of the step).
+    pub fn after_species(&mut self, st: &State<'_, '_>) {
+        concentrations(st, &mut self.c1);
+    }
+
+    /// The errors of the flow step just taken (before the species follow it).
+    pub fn judge_flow(&mut self, st: &mut State<'_, '_>, h: f64) -> (f64, [f64; 3]) {
+        let e = self.flow_error(st, h);
+        (e.max, e.kinds)
+    }
+
+    /// An accepted step of `h`: record its estimates, shift the history, propose the next step.
+    pub fn accept(&mut self, st: &State<'_, '_>, h: f64, flow: f64, kinds: [f64; 3]) {
+        let species = self.species_error(st, h);
+        let rtol = self.tol.rtol;
+        for (e, k) in self.estimate.iter_mut().zip(kinds.iter().chain([&species])) {
+            *e = e.max(k * rtol);
+        }
+        for (p, v) in self.peak.iter_mut().zip(&st.y) {
+            *p = p.max(v.abs());
+        }
+        self.steps += 1;
+        self.h_smallest = self.h_smallest.min(h);
+        self.h_largest = self.h_largest.max(h);
+        // y_{n-2} ← y_{n-1} ← y_n (buffers swapped, no copies)
+        std::mem::swap(&mut self.ym2, &mut self.ym1);
+        std::mem::swap(&mut self.ym1, &mut self.y0);
+        // c_{n-1} ← c_n ← c_{n+1}
+        std::mem::swap(&mut self.cm1, &mut self.c0);
+        std::mem::swap(&mut self.c0, &mut self.c1);
+        for (p, c) in self.c_peak.iter_mut().zip(&self.c0) {
+            *p = p.max(c.abs());
+        }
+        (self.h2, self.h1) = (self.h1, h);
+        self.history += 1;
+        let next = self.control.next(h, flow, species);
+        self.h = if self.hold > 0 { next.min(h) } else { next };
+        self.hold = self.hold.saturating_sub(1);
+    }
+
+    /// The rate shifts (s₀, s₁) of the carried ẏ at the two ends of a step of `h` that starts
+    /// after a step of `h1` (none for the start's consistent rate).
+    fn shifts(&self, h: f64) -> (f64, f64) {
+        let s0 = if self.history == 0 {
+            0.0
+        } else {
+            self.delta * self.h1
+        };
+        (s0, self.delta * h)
+    }
+
+    /// The dense output of unknown `i` at θ of the step of `h` from (y0, ẏ0) to (y, ẏ): the
+    /// value and the rate. Call before [`Adaptive::accept`] (which moves y0 into the history).
+    pub fn interpolate(&self, i: usize, theta: f64, h: f64, y: &[f64], yd: &[f64]) -> (f64, f64) {
+        if self.algebraic[i] && self.history > 0 {
+            // an algebraic unknown's carried rate follows the spurious root (−ρ∞ per step):
+            // the quadratic through its last three values instead
+            let (a, b, c) = (self.ym1[i], self.y0[i], y[i]);
+            let (x, h1) = (theta * h, self.h1);
+            let (s01, s12) = ((b - a) / h1, (c - b) / h);
+            let curv = (s12 - s01) / (h + h1);
+            return (b + x * (s01 + curv * (x + h1)), s01 + curv * (2.0 * x + h1));
+        }
+        let (s0, s1) = self.shifts(h);
+        let (b, db) = hermite(theta);
+        let ydd = (yd[i] - self.yd0[i]) / (h - s1 + s0);
+        let d0 = self.yd0[i] + s0 * ydd;
+        let d1 = yd[i] + s1 * ydd;
+        let v = b[0] * self.y0[i] + b[1] * h * d0 + b[2] * y[i] + b[3] * h * d1;
+        let dv = (db[0] * self.y0[i] + db[2] * y[i]) / h + db[1] * d0 + db[3] * d1;
+        (v, dv)
+    }
+
+    /// The whole interpolated state at θ (flow by Hermite, species amounts linearly, as
+    /// backward Euler is first order), for a species output row.
+    pub fn interpolate_all(
+        &mut self,
+        theta: f64,
+        h: f64,
+        st: &State<'_, '_>,
+    ) -> (&[f64], &[f64], &[f64], &[f64]) {
+        let n = st.y.len();
+        self.yi.resize(n, 0.0);
+        self.ydi.resize(n, 0.0);
+        for i in 0..n {
+            let (v, d) = self.interpolate(i, theta, h, &st.y, &st.yd);
+            self.yi[i] = v;
+            self.ydi[i] = d;
+        }
+        self.zi.clear();
+        if let Some(sp) = st.species.as_ref() {
+            // amounts and the cells' transport volumes linearly: the observed concentration
+            // z/V is a weighted mean of the two ends' (within their bounds), and the amounts'
+            // balance with the linear accumulators holds
+            let z0 = &self.z0;
+            self.zi
+                .extend(sp.z.iter().zip(z0).map(|(&b, &a)| a + theta * (b - a)));
+            let v1 = sp.tr.cell_transport_volumes();
+            self.vi.clear();
+            self.vi
+                .extend(v1.iter().zip(&self.v0).map(|(&b, &a)| a + theta * (b - a)));
+        }
+        (&self.yi, &self.ydi, &self.zi, &self.vi)
+    }
+}
+
+/// The cells' concentrations (amount over transport volume) of every species into `out`.
+fn concentrations(st: &State<'_, '_>, out: &mut Vec<f64>) {
+    out.clear();
+    let Some(sp) = st.species.as_ref() else {
+        return;
+    };
+    let vol = sp.tr.cell_transport_volumes();
+    let nc = vol.len();
+    let n = nc * sp.tr.species_names().len();
+    out.extend(sp.z[..n].iter().enumerate().map(|(k, &z)| z / vol[k % nc]));
+}
