@@ -132,6 +132,18 @@ def test_models_and_info(capsys: pytest.CaptureFixture[str]) -> None:
     assert oxyline.__version__ in capsys.readouterr().out
 
 
+def test_version_is_the_installed_distributions(capsys: pytest.CaptureFixture[str]) -> None:
+    """`oxyline --version` and `oxyline.__version__` (the compiled core's) name the version the
+    installed distribution's metadata declares (pyproject/Cargo.toml), not a second copy."""
+    from importlib.metadata import version
+
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--version"])
+    assert exit_info.value.code == 0
+    assert capsys.readouterr().out.strip() == f"oxyline {version('oxyline')}"
+    assert oxyline.__version__ == version("oxyline")
+
+
 def _bad(tmp_path: Path, old: str, new: str) -> Path:
     p = tmp_path / "bad.yaml"
     text = EXAMPLE.read_text()

@@ -425,9 +425,16 @@ def _cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def _version() -> str:
+    from oxyline import __version__
+
+    return __version__
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="oxyline", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"oxyline {_version()}")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("run", help="run a model file or built-in model")
     p.add_argument("model", nargs="?", help="built-in name, or a .yaml/.json/.csv model "
