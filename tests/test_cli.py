@@ -48,7 +48,7 @@ def test_run_end_to_end_writes_netcdf_summary_and_figures(tmp_path: Path) -> Non
         assert np.trapezoid(q, t) / t[-1] == pytest.approx(6e-6, rel=1e-4)  # Fourier mean
         assert ds.attrs["model"] == "bifurcation" and ds.attrs["solver_cycles"] == 2
     summary = (tmp_path / "summary.csv").read_text()
-    assert summary.startswith("# oxyline summary") and "daughter2," in summary
+    assert summary.startswith("vessel,pressure_in_mean [Pa],") and "daughter2," in summary
     figs = sorted(p.name for p in (tmp_path / "figs").iterdir())
     assert figs == ["network_map.png", "network_map.svg", "profile.png", "profile.svg",
                     "waveforms.png", "waveforms.svg"]
@@ -66,7 +66,9 @@ def test_run_zarr_and_csv_outputs(tmp_path: Path, capsys: pytest.CaptureFixture[
     assert main(["run", "bifurcation", "--cycles", "1", "-o", str(tmp_path / "r.csv"),
                  "--quiet"]) == 0
     header = (tmp_path / "r.csv").read_text().splitlines()[0]
-    assert header == "name,time,flow_in,flow_out,pressure_in,pressure_out"
+    # svZeroDSolver's column names, each with its unit (SI, whatever the input file's units)
+    assert header == ("name,time [s],flow_in [m^3/s],flow_out [m^3/s],pressure_in [Pa],"
+                      "pressure_out [Pa]")
 
 
 def test_validate_prints_the_analytic_compliance(capsys: pytest.CaptureFixture[str]) -> None:
@@ -204,3 +206,19 @@ def test_run_closed_loop_o2_builtin_writes_its_summary(tmp_path: Path,
     assert main(["run", "closed-loop-o2", "-o", str(tmp_path / "x.nc")]) == 2
     assert main(["run", "closed-loop-o2", "--cycles", "3"]) == 2
     assert "--cycles" in capsys.readouterr().err
+
+
+def test_csv_of_an_svzerod_file_says_its_si_units(tmp_path: Path) -> None:
+    """`run file.json -o out.csv` converts the cgs file to SI and says so in the column names:
+    the inlet pressure of the steady junction case is the file's analytical 3462.5 dyn/cm^2,
+    i.e. 346.25 Pa, in a column a plain pd.read_csv finds by its unit."""
+    import pandas as pd
+
+    case = (Path(__file__).parent / "data" / "svzerod" / "cases"
+            / "steadyFlow_blood_vessel_junction.json")
+    out = tmp_path / "out.csv"
+    assert main(["run", str(case), "-o", str(out), "--quiet"]) == 0
+    df = pd.read_csv(out)
+    inlet = df[df["name"] == "branch0_seg0"]
+    np.testing.assert_allclose(inlet["pressure_in [Pa]"], 346.25, rtol=1e-9)  # steady: round-off
+    np.testing.assert_allclose(inlet["flow_in [m^3/s]"], 5e-6, rtol=1e-9)     # 5 mL/s

@@ -4,6 +4,8 @@ A page's ```python blocks run in order in one namespace, as a reader would paste
 session (a later block may use a name an earlier one defined), in an empty working directory
 that sees the clone's `tests/` and `python/` folders.
 Blocks that cannot run here (a Slurm cluster) are fenced ```py instead, and the page says why.
+A block after a line `<!-- example: slow -->` (a study of minutes of CPU) runs with --runslow
+only, in the page's `[slow]` test, which runs every block of the page.
 """
 
 from __future__ import annotations
@@ -16,16 +18,27 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / "README.md"
 PAGES = [README, *sorted((REPO / "docs").glob("*.md"))]
-FENCE = re.compile(r"^```python\n(.*?)^```", flags=re.DOTALL | re.MULTILINE)
+FENCE = re.compile(r"^(<!-- example: slow -->\n)?```python\n(.*?)^```",
+                   flags=re.DOTALL | re.MULTILINE)
+
+
+def _examples(page: Path) -> list[tuple[bool, str]]:
+    """(slow, code) of each ```python block of ``page``, in order."""
+    return [(bool(slow), code) for slow, code in FENCE.findall(page.read_text(encoding="utf-8"))]
 
 
 def _blocks(page: Path) -> list[str]:
-    return FENCE.findall(page.read_text(encoding="utf-8"))
+    return [code for _, code in _examples(page)]
 
 
-@pytest.mark.parametrize("page", [p for p in PAGES if _blocks(p)],
-                         ids=lambda p: str(p.relative_to(REPO)))
-def test_page_examples_run(page: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+CASES = [pytest.param(p, False, id=str(p.relative_to(REPO))) for p in PAGES if _blocks(p)]
+CASES += [pytest.param(p, True, id=f"{p.relative_to(REPO)}[slow]", marks=pytest.mark.slow)
+          for p in PAGES if any(slow for slow, _ in _examples(p))]
+
+
+@pytest.mark.parametrize(("page", "with_slow"), CASES)
+def test_page_examples_run(page: Path, with_slow: bool, tmp_path: Path,
+                           monkeypatch: pytest.MonkeyPatch) -> None:
     import matplotlib
 
     matplotlib.use("Agg")  # figures in examples are written to files, never shown
@@ -33,7 +46,9 @@ def test_page_examples_run(page: Path, tmp_path: Path, monkeypatch: pytest.Monke
         (tmp_path / folder).symlink_to(REPO / folder, target_is_directory=True)
     monkeypatch.chdir(tmp_path)
     namespace: dict[str, object] = {"__name__": "__docs__"}
-    for i, code in enumerate(_blocks(page)):
+    for i, (slow, code) in enumerate(_examples(page)):
+        if slow and not with_slow:
+            continue
         try:
             exec(compile(code, f"{page.name}[block {i}]", "exec"), namespace)  # noqa: S102
         except Exception as exc:  # the page and the block, not only the line, in the report

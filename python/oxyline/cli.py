@@ -288,7 +288,7 @@ def _write(res: Any, path: str, overwrite: bool = False) -> None:
 
         tmp = p.with_name(f".{p.name}.{os.getpid()}.partial")
         try:  # written whole, then renamed: a full disk leaves no half table
-            res.to_pandas().to_csv(tmp, index=False)
+            res.to_pandas(units=True).to_csv(tmp, index=False)  # units in the names
             os.replace(tmp, p)
         except OSError as exc:
             tmp.unlink(missing_ok=True)

@@ -465,13 +465,27 @@ class Result:
 
         return results.to_parquet(self, path)
 
-    def to_pandas(self) -> Any:
+    def to_pandas(self, units: bool = False) -> Any:
         """Long table with svZeroDSolver's columns: name, time, flow_in, flow_out, pressure_in,
-        pressure_out (SI). Needs all four vessel variables in the output selection."""
+        pressure_out, in SI units, which ``df.attrs["units"]`` names per column. With
+        ``units=True`` the column names carry them too (``"pressure_in [Pa]"``), so the units
+        survive a CSV file. Needs all four vessel variables in the output selection.
+
+        >>> import oxyline
+        >>> df = oxyline.simulate("bifurcation", cycles=1).to_pandas(units=True)
+        >>> list(df.columns[:3])
+        ['name', 'time [s]', 'flow_in [m^3/s]']
+        """
         if tuple(self.vessel_variables) != VESSEL_VARIABLES:
             missing = [v for v in VESSEL_VARIABLES if v not in self.vessel_variables]
             raise _not_selected(", ".join(missing))
-        return long_table(self.vessels, self.time, self._vessel_block)
+        df = long_table(self.vessels, self.time, self._vessel_block)
+        unit_of = {c: UNITS[c] for c in LONG_COLUMNS if c in UNITS}
+        if units:
+            df.columns = [f"{c} [{unit_of[c]}]" if c in unit_of else c for c in df.columns]
+            unit_of = {f"{c} [{u}]": u for c, u in unit_of.items()}
+        df.attrs["units"] = unit_of
+        return df
 
     def heart_table(self) -> Any:
         """pandas DataFrame indexed by time with one column per chamber volume
