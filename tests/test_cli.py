@@ -222,3 +222,21 @@ def test_csv_of_an_svzerod_file_says_its_si_units(tmp_path: Path) -> None:
     inlet = df[df["name"] == "branch0_seg0"]
     np.testing.assert_allclose(inlet["pressure_in [Pa]"], 346.25, rtol=1e-9)  # steady: round-off
     np.testing.assert_allclose(inlet["flow_in [m^3/s]"], 5e-6, rtol=1e-9)     # 5 mL/s
+
+
+def test_result_file_holds_its_model_for_plot(tmp_path: Path) -> None:
+    """A result file keeps the model it was run from (attribute model_json): `oxyline plot`
+    needs no --model for a model file that is not built in, and the stored model, run again,
+    gives the stored pressures (same solver path: to round-off, 1e-12)."""
+    case = (Path(__file__).parent / "data" / "svzerod" / "cases"
+            / "steadyFlow_blood_vessel_junction.json")
+    out = tmp_path / "j.nc"
+    assert main(["run", str(case), "-o", str(out), "--quiet"]) == 0
+    back = oxyline.open_result(out)
+    assert back.model_json is not None
+    again = oxyline.simulate(oxyline.load_model(json.loads(back.model_json)))
+    np.testing.assert_allclose(again.pressure_in, back.pressure_in, rtol=1e-12)
+    figs = tmp_path / "figs"
+    figs.mkdir()
+    assert main(["plot", str(out), "--plot", str(figs), "--quiet"]) == 0
+    assert (figs / "profile.png").exists()

@@ -10,6 +10,7 @@ says what was kept).
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from collections.abc import Mapping, Sequence
@@ -260,13 +261,17 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     res = oxyline.open_result(args.result)
     if args.model is not None:
         model = _load(args.model)
+    elif res.model_json is not None:  # the file holds the model it was run from
+        model = oxyline.load_model(json.loads(res.model_json))
     else:
-        # the file names its model; only a built-in one can be found from the name alone
+        # a file without its model (a whole tree, or an older file): a built-in one can be
+        # found from its name alone
         try:
             model = oxyline.models.load(res.model_name)
         except oxyline.ModelError:
-            raise InputError(f"{args.result}: model '{res.model_name}' is not a built-in model; "
-                             "give the model file it was run from with --model") from None
+            raise InputError(f"{args.result}: model '{res.model_name}' is not a built-in model "
+                             "and the file does not hold it; give the model file it was run "
+                             "from with --model") from None
     missing = [v for v in res.vessels if v not in set(model.vessel_names)]
     if missing:
         raise InputError(f"{args.result}: vessel '{missing[0]}' is not in model "

@@ -146,6 +146,33 @@ class SpeciesResult:
         return out
 
 
+#: the largest model description (JSON characters) a result file keeps in its attributes:
+#: a NetCDF attribute is one HDF5 object-header message, at most 64 KiB
+MAX_MODEL_JSON = 60_000
+
+
+def model_json(description: Any) -> str | None:
+    """``description`` (a model's native dict) as compact JSON, or None when it is longer than
+    :data:`MAX_MODEL_JSON` or not JSON (numpy arrays are written as lists)."""
+    import json
+
+    def plain(o: Any) -> Any:
+        if isinstance(o, np.ndarray):
+            return o.tolist()
+        if isinstance(o, np.generic):
+            return o.item()
+        raise TypeError(type(o).__name__)
+
+    vessels = description.get("vessels", ()) if isinstance(description, dict) else ()
+    if len(vessels) > MAX_MODEL_JSON // 50:  # > 50 characters a vessel: too long, not dumped
+        return None
+    try:
+        text = json.dumps(description, separators=(",", ":"), default=plain)
+    except (TypeError, ValueError):
+        return None
+    return text if len(text) <= MAX_MODEL_JSON else None
+
+
 @dataclass
 class Result:
     """Output of :func:`oxyline.simulate`.
@@ -178,6 +205,10 @@ class Result:
     #: ``<vessel>:tricuspid|pulmonary|mitral|aortic`` (its on/off rule: open also while the
     #: flow is positive; docs/physics.md §1.10)
     valve_status: dict[str, np.ndarray] = field(default_factory=dict)
+    #: the model it was run from, as JSON in the native schema (SI), so that a result file
+    #: rebuilds its model (``oxyline plot`` needs no ``--model``); None above
+    #: :data:`MAX_MODEL_JSON` characters (a whole tree), where only the name is kept
+    model_json: str | None = None
 
     def __getattr__(self, key: str) -> Any:
         # species variables: {name}_concentration_in, {name}_flux_out, wall_{name}_flux,
@@ -416,6 +447,8 @@ class Result:
                 {"units": "1", "description": "1 open, 0 closed"})
         attrs: dict[str, Any] = {"model": self.model_name, "oxyline_version": __version__,
                                  "complete": int(self.complete)}
+        if self.model_json is not None:
+            attrs["model_json"] = self.model_json
         if (tuple(self.vessel_variables), tuple(self.segment_variables)) != (
                 VESSEL_VARIABLES, SEGMENT_VARIABLES):
             # an output selection: what oxyline.open_result must find (all of them otherwise)

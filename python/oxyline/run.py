@@ -36,6 +36,7 @@ from oxyline.result import (
     Result,
     SpeciesResult,
     TissueResult,
+    model_json,
 )
 
 ProgressCallback = Callable[[float, float], None]
@@ -335,6 +336,7 @@ def _result(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
         species=_species_results(model, raw, layout, empty_segments), oxygen=model.transport.get("oxygen"),
         vessel_variables=tuple(layout["vessel_variables"]),
         segment_variables=tuple(layout["segment_variables"]),
+        model_json=model_json(model.source) if model.source else None,
     )
 
 
