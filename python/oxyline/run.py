@@ -10,7 +10,7 @@ import signal
 import threading
 import warnings
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -38,6 +38,11 @@ from oxyline.result import (
     TissueResult,
     model_json,
 )
+
+if TYPE_CHECKING:  # Unpack is typing's from Python 3.11
+    from typing_extensions import Unpack
+
+    from oxyline.options import SimulateOptions
 
 ProgressCallback = Callable[[float, float], None]
 
@@ -420,7 +425,8 @@ def _raise_run_error(raw: Mapping[str, Any], partial: Any) -> None:
     raise err
 
 
-def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any], **overrides: Any) -> Result:
+def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any],
+             **overrides: Unpack[SimulateOptions]) -> Result:
     """Run a network and return its pressure and flow waveforms.
 
     ``overrides`` replace the model's ``simulation`` settings: ``cycles``, ``dt`` (s or
@@ -620,7 +626,8 @@ def _output_size(model: Model, s: Mapping[str, Any]) -> tuple[float, int, int]:
 
 def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
                      path: str | os.PathLike[str], *, time_chunk: int = 1024,
-                     overwrite: bool = False, **overrides: Any) -> Any:
+                     overwrite: bool = False,
+                     **overrides: Unpack[SimulateOptions]) -> Any:
     """Run a network, writing its output to a Zarr store *during* the run, and return the store
     opened lazily as an ``xarray.Dataset``.
 
