@@ -132,6 +132,9 @@ def test_models_and_info(capsys: pytest.CaptureFixture[str]) -> None:
         assert "bifurcation" in lines
     assert main(["info"]) == 0
     assert oxyline.__version__ in capsys.readouterr().out
+    assert main(["info", "bifurcation"]) == 0  # with a model: its summary too
+    out = capsys.readouterr().out
+    assert oxyline.__version__ in out and "vessels          3" in out
 
 
 def test_version_is_the_installed_distributions(capsys: pytest.CaptureFixture[str]) -> None:
@@ -240,3 +243,30 @@ def test_result_file_holds_its_model_for_plot(tmp_path: Path) -> None:
     figs.mkdir()
     assert main(["plot", str(out), "--plot", str(figs), "--quiet"]) == 0
     assert (figs / "profile.png").exists()
+
+
+def test_validate_volume_and_species_lines(capsys: pytest.CaptureFixture[str]) -> None:
+    """`validate` prints the geometric blood volume (bifurcation: sum of pi r^2 L of its three
+    tubes, from the example file's numbers), no volume for a lumped-only model (never
+    '0.0000 mL'), and the oxygen section of a model that has one."""
+    assert main(["validate", "bifurcation"]) == 0
+    out = capsys.readouterr().out
+    volume = math.pi * (0.003**2 * 0.0645 + 0.0025**2 * 0.0623 + 0.002**2 * 0.062) * 1e6  # mL
+    line = next(x for x in out.splitlines() if x.startswith("total volume"))
+    assert float(line.split()[2]) == pytest.approx(volume, rel=1e-4)  # printed to 4 decimals
+    case = (Path(__file__).parent / "data" / "svzerod" / "cases"
+            / "steadyFlow_blood_vessel_junction.json")
+    assert main(["validate", str(case)]) == 0
+    out = capsys.readouterr().out
+    assert "0.0000 mL" not in out and "no vessel geometry" in out
+    assert main(["validate", "paper-bifurcated"]) == 0
+    assert "species          o2 (oxygen: o2, wall graetz)" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("command", ["run", "plot", "validate", "impedance", "convert", "models",
+                                     "info"])
+def test_every_subcommand_has_help(command: str, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main([command, "--help"])
+    assert exit_info.value.code == 0
+    assert capsys.readouterr().out.startswith(f"usage: oxyline {command}")

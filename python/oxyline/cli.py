@@ -320,7 +320,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     for key in ("vessels", "segments", "nodes", "junctions", "inlets", "outlets", "unknowns"):
         print(f"{key:<17}{s[key]}")
     print(f"total compliance {s['total_compliance']:.4e} m^3/Pa")
-    print(f"total volume     {s['total_volume'] * 1e6:.4f} mL")
+    print(_volume_line(model, s["total_volume"]))
     print(f"period           {s['period']} s")
     print(f"rk4 stable dt    {s['rk4_dt_max']:.4e} s ({'exact' if s['rk4_limit_exact'] else 'Krylov, conservative'},"
           f" set by {s['rk4_limiting_element']})")
@@ -330,7 +330,26 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     print(f"run settings     method {sim.get('method', 'auto')}, dt {sim.get('dt', 'auto')}, "
           f"cycles {sim.get('cycles', 10)}, output every {out.get('every', period / 1000):g} s "
           f"({out.get('cycles', 'last')} cycle{'s' if out.get('cycles') == 'all' else ''})")
+    species = [str(x) for x in model.transport.get("species", [])]
+    if species:
+        oxygen = model.transport.get("oxygen")
+        wall = (model.to_dict().get("oxygen") or {}).get("wall") or {}
+        note = f" (oxygen: {oxygen}, wall {wall.get('model', 'none')})" if oxygen else ""
+        print(f"species          {', '.join(species)}{note}")
     return 0
+
+
+def _volume_line(model: Any, volume: float) -> str:
+    """The blood volume line of `validate`: lumped elements and chambers have no geometric
+    volume, so a model of those only has none to print (never a misleading 0 mL)."""
+    vessels = model.canonical["vessels"]
+    geometric = sum(1 for v in vessels if "geometry" in v)
+    if geometric == 0:
+        return "total volume     - (lumped elements and chambers only: no vessel geometry)"
+    if geometric < len(vessels):
+        return (f"total volume     {volume * 1e6:.4f} mL (the {geometric} geometric vessels; "
+                f"{len(vessels) - geometric} lumped elements or chambers have no geometry)")
+    return f"total volume     {volume * 1e6:.4f} mL"
 
 
 def _cmd_impedance(args: argparse.Namespace) -> int:
@@ -427,6 +446,8 @@ def _cmd_info(args: argparse.Namespace) -> int:
     from oxyline import _core
 
     print(f"oxyline {oxyline.__version__} ({_core.build_profile} build), threads: {os.cpu_count()}")
+    if args.model is not None:  # `info MODEL`: the model's summary, as `validate` prints it
+        return _cmd_validate(args)
     return 0
 
 
@@ -511,7 +532,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="units of an svZeroDSolver output file (default cgs: cm, dyn/cm^2, mL/s)")
     p.set_defaults(func=_cmd_convert)
     sub.add_parser("models", help="list built-in models").set_defaults(func=_cmd_models)
-    sub.add_parser("info", help="version and build").set_defaults(func=_cmd_info)
+    p = sub.add_parser("info", help="version and build; with MODEL, the model's summary")
+    p.add_argument("model", nargs="?", help="built-in name, or a model file (any format)")
+    p.set_defaults(func=_cmd_info)
     return parser
 
 
