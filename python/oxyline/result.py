@@ -210,6 +210,15 @@ class Result:
     #: :data:`MAX_MODEL_JSON` characters (a whole tree), where only the name is kept
     model_json: str | None = None
 
+    def __repr__(self) -> str:
+        """One line of facts, not the arrays (a notebook echoes a result whole)."""
+        t = self.time
+        span = f"{t[0]:g}-{t[-1]:g} s" if len(t) else "empty"
+        species = f", species={list(self.species)}" if self.species else ""
+        state = "" if self.complete else ", complete=False"
+        return (f"<oxyline.Result model={self.model_name!r}: {len(self.vessels)} vessels, "
+                f"{sum(self.segment_count)} segments, {len(t)} times ({span}){species}{state}>")
+
     def __getattr__(self, key: str) -> Any:
         # species variables: {name}_concentration_in, {name}_flux_out, wall_{name}_flux,
         # segment_{name}_concentration, ..., {name}_mass_balance; oxygen adds po2_in/po2_out,
