@@ -98,7 +98,7 @@ def adan56_st(repeat: int, before: str) -> None:
 
     import oxyline
 
-    base = oxyline.models.load_dict("adan56")
+    base = oxyline.catalogue.load_dict("adan56")
     old = previous_module(before)
     best: dict[str, float] = {}
     results = {}

@@ -1,6 +1,6 @@
 """Per-step O2/flow cost, interleaved (issue 9 item 4: O2 ≤ 1.6× flow per step, Hill ≤ 2×).
 
-Single runs of the same build drift by ±30 % on this machine (benches/results.md, session 10),
+Single runs of the same build drift by ±30 % on this machine (docs/performance.md),
 so a ratio of two separate runs cannot show a 1.6× bound. Here every configuration of one
 tree and integrator runs at the same time, each a single ``oxyline.simulate`` call in its own
 thread, built once (``load_model``; the steady start, RK4's step size and the closures' first

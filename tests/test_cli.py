@@ -48,7 +48,7 @@ def test_run_end_to_end_writes_netcdf_summary_and_figures(tmp_path: Path) -> Non
         assert np.trapezoid(q, t) / t[-1] == pytest.approx(6e-6, rel=1e-4)  # Fourier mean
         assert ds.attrs["model"] == "bifurcation" and ds.attrs["solver_cycles"] == 2
     summary = (tmp_path / "summary.csv").read_text()
-    assert summary.startswith("# oxyline summary") and "daughter2," in summary
+    assert summary.startswith("vessel,pressure_in_mean [Pa],") and "daughter2," in summary
     figs = sorted(p.name for p in (tmp_path / "figs").iterdir())
     assert figs == ["network_map.png", "network_map.svg", "profile.png", "profile.svg",
                     "waveforms.png", "waveforms.svg"]
@@ -66,7 +66,9 @@ def test_run_zarr_and_csv_outputs(tmp_path: Path, capsys: pytest.CaptureFixture[
     assert main(["run", "bifurcation", "--cycles", "1", "-o", str(tmp_path / "r.csv"),
                  "--quiet"]) == 0
     header = (tmp_path / "r.csv").read_text().splitlines()[0]
-    assert header == "name,time,flow_in,flow_out,pressure_in,pressure_out"
+    # svZeroDSolver's column names, each with its unit (SI, whatever the input file's units)
+    assert header == ("name,time [s],flow_in [m^3/s],flow_out [m^3/s],pressure_in [Pa],"
+                      "pressure_out [Pa]")
 
 
 def test_validate_prints_the_analytic_compliance(capsys: pytest.CaptureFixture[str]) -> None:
@@ -119,6 +121,21 @@ def test_models_and_info(capsys: pytest.CaptureFixture[str]) -> None:
     assert any(line.startswith("bifurcation ") for line in lines)
     assert main(["info"]) == 0
     assert oxyline.__version__ in capsys.readouterr().out
+    assert main(["info", "bifurcation"]) == 0  # with a model: its summary too
+    out = capsys.readouterr().out
+    assert oxyline.__version__ in out and "vessels          3" in out
+
+
+def test_version_is_the_installed_distributions(capsys: pytest.CaptureFixture[str]) -> None:
+    """`oxyline --version` and `oxyline.__version__` (the compiled core's) name the version the
+    installed distribution's metadata declares (pyproject/Cargo.toml), not a second copy."""
+    from importlib.metadata import version
+
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--version"])
+    assert exit_info.value.code == 0
+    assert capsys.readouterr().out.strip() == f"oxyline {version('oxyline')}"
+    assert oxyline.__version__ == version("oxyline")
 
 
 def _bad(tmp_path: Path, old: str, new: str) -> Path:
@@ -181,3 +198,64 @@ def test_run_closed_loop_o2_builtin_writes_its_summary(tmp_path: Path,
     assert main(["run", "closed-loop-o2", "-o", str(tmp_path / "x.nc")]) == 2
     assert main(["run", "closed-loop-o2", "--cycles", "3"]) == 2
     assert "--cycles" in capsys.readouterr().err
+
+
+def test_csv_of_an_svzerod_file_says_its_si_units(tmp_path: Path) -> None:
+    """`run file.json -o out.csv` converts the cgs file to SI and says so in the column names:
+    the inlet pressure of the steady junction case is the file's analytical 3462.5 dyn/cm^2,
+    i.e. 346.25 Pa, in a column a plain pd.read_csv finds by its unit."""
+    import pandas as pd
+
+    case = (Path(__file__).parent / "data" / "svzerod" / "cases"
+            / "steadyFlow_blood_vessel_junction.json")
+    out = tmp_path / "out.csv"
+    assert main(["run", str(case), "-o", str(out), "--quiet"]) == 0
+    df = pd.read_csv(out)
+    inlet = df[df["name"] == "branch0_seg0"]
+    np.testing.assert_allclose(inlet["pressure_in [Pa]"], 346.25, rtol=1e-9)  # steady: round-off
+    np.testing.assert_allclose(inlet["flow_in [m^3/s]"], 5e-6, rtol=1e-9)     # 5 mL/s
+
+
+def test_result_file_holds_its_model_for_plot(tmp_path: Path) -> None:
+    """A result file keeps the model it was run from (attribute model_json): `oxyline plot`
+    needs no --model for a model file that is not built in, and the stored model, run again,
+    gives the stored pressures (same solver path: to round-off, 1e-12)."""
+    case = (Path(__file__).parent / "data" / "svzerod" / "cases"
+            / "steadyFlow_blood_vessel_junction.json")
+    out = tmp_path / "j.nc"
+    assert main(["run", str(case), "-o", str(out), "--quiet"]) == 0
+    back = oxyline.open_result(out)
+    assert back.model_json is not None
+    again = oxyline.simulate(oxyline.load_model(json.loads(back.model_json)))
+    np.testing.assert_allclose(again.pressure_in, back.pressure_in, rtol=1e-12)
+    figs = tmp_path / "figs"
+    figs.mkdir()
+    assert main(["plot", str(out), "--plot", str(figs), "--quiet"]) == 0
+    assert (figs / "profile.png").exists()
+
+
+def test_validate_volume_and_species_lines(capsys: pytest.CaptureFixture[str]) -> None:
+    """`validate` prints the geometric blood volume (bifurcation: sum of pi r^2 L of its three
+    tubes, from the example file's numbers), no volume for a lumped-only model (never
+    '0.0000 mL'), and the oxygen section of a model that has one."""
+    assert main(["validate", "bifurcation"]) == 0
+    out = capsys.readouterr().out
+    volume = math.pi * (0.003**2 * 0.0645 + 0.0025**2 * 0.0623 + 0.002**2 * 0.062) * 1e6  # mL
+    line = next(x for x in out.splitlines() if x.startswith("total volume"))
+    assert float(line.split()[2]) == pytest.approx(volume, rel=1e-4)  # printed to 4 decimals
+    case = (Path(__file__).parent / "data" / "svzerod" / "cases"
+            / "steadyFlow_blood_vessel_junction.json")
+    assert main(["validate", str(case)]) == 0
+    out = capsys.readouterr().out
+    assert "0.0000 mL" not in out and "no vessel geometry" in out
+    assert main(["validate", "paper-bifurcated"]) == 0
+    assert "species          o2 (oxygen: o2, wall graetz)" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("command", ["run", "plot", "validate", "impedance", "convert", "models",
+                                     "info"])
+def test_every_subcommand_has_help(command: str, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main([command, "--help"])
+    assert exit_info.value.code == 0
+    assert capsys.readouterr().out.startswith(f"usage: oxyline {command}")

@@ -124,7 +124,7 @@ VALVE = {"law": "tanh", "min_resistance": 1.0e6, "max_resistance": 1.0e11, "stee
 
 
 def loop() -> dict[str, Any]:
-    """The README's minimal closed loop (one chamber, two tanh valves)."""
+    """The schema page's minimal closed loop (one chamber, two tanh valves)."""
     m = chamber_model(1.3e8)
     lv = m["vessels"][0]
     lv["from"] = "mitral_out"

@@ -215,10 +215,13 @@ def test_cli_plot_errors_exit_2(runs: dict[str, oxyline.Result], tmp_path: Path,
     assert "not an oxyline result: no variable 'time'" in capsys.readouterr().err
     assert main(["plot", str(tmp_path / "none.nc"), "--plot", str(tmp_path / "f")]) == 2
     assert "none.nc: file not found" in capsys.readouterr().err
-    # a model that is not built in needs --model, and the model must hold the result's vessels
-    runs["two-species"].to_netcdf(tmp_path / "tube.nc")
+    # a file without its model (an older file, or a tree above MAX_MODEL_JSON) of a model
+    # that is not built in needs --model, and the model must hold the result's vessels
+    import dataclasses
+
+    dataclasses.replace(runs["two-species"], model_json=None).to_netcdf(tmp_path / "tube.nc")
     assert main(["plot", str(tmp_path / "tube.nc"), "--plot", str(tmp_path / "f")]) == 2
-    assert "is not a built-in model; give the model file" in capsys.readouterr().err
+    assert "is not a built-in model and the file does not hold it" in capsys.readouterr().err
     assert main(["plot", str(tmp_path / "tube.nc"), "--model", "bifurcation", "--plot",
                  str(tmp_path / "f")]) == 2
     assert "vessel 'tube' is not in model 'bifurcation'" in capsys.readouterr().err

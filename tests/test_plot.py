@@ -222,3 +222,29 @@ def test_profile_of_lumped_vessels_counts_vessels() -> None:
     assert str(d["distance_units"]) == "vessel"
     np.testing.assert_allclose(d["distance"], [0, 1, 1, 2])
     np.testing.assert_allclose(d["mean"], [400.0, 300.0, 300.0, 0.0], atol=1e-6)  # Q R drops
+
+
+JUNCTION_CASE = (Path(__file__).parent / "data" / "svzerod" / "cases"
+                 / "steadyFlow_blood_vessel_junction.json")
+
+
+def test_profile_through_an_svzerod_blood_vessel_junction() -> None:
+    """A BloodVesselJunction's branches are model vessels without output: the profile skips
+    them and shows the analytical pressures of the case's own description (dyn/cm² -> Pa)."""
+    m = oxyline.load_model(JUNCTION_CASE)
+    res = oxyline.simulate(m)
+    d = plot.profile_data(res, m, "branch1_seg0", "pressure")
+    assert list(d["vessels"]) == ["branch0_seg0", "branch1_seg0"]
+    # inlet 3462.5; branch 0 outlet 3462.5 - 5 * 300; branch 1 inlet (junction 1) 1580 and
+    # outlet 432.5, from the file's "analytical results"; a steady case, to round-off
+    np.testing.assert_allclose(d["mean"], np.array([3462.5, 1962.5, 1580.0, 432.5]) * 0.1,
+                               rtol=1e-9)
+
+
+def test_cli_plot_of_an_svzerod_file_with_junctions(tmp_path: Path) -> None:
+    from oxyline.cli import main
+
+    out = tmp_path / "figs"
+    out.mkdir()
+    assert main(["run", str(JUNCTION_CASE), "--plot", str(out), "--quiet"]) == 0
+    assert {"waveforms.png", "profile.png", "network_map.png"} <= {p.name for p in out.iterdir()}

@@ -10,6 +10,7 @@ says what was kept).
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from collections.abc import Sequence
@@ -370,13 +371,17 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     res = oxyline.open_result(args.result)
     if args.model is not None:
         model = _load(args.model)
+    elif res.model_json is not None:  # the file holds the model it was run from
+        model = oxyline.load_model(json.loads(res.model_json))
     else:
-        # the file names its model; only a built-in one can be found from the name alone
+        # a file without its model (a whole tree, or an older file): a built-in one can be
+        # found from its name alone
         try:
             model = oxyline.catalogue.load(res.model_name)
         except oxyline.ModelError:
-            raise InputError(f"{args.result}: model '{res.model_name}' is not a built-in model; "
-                             "give the model file it was run from with --model") from None
+            raise InputError(f"{args.result}: model '{res.model_name}' is not a built-in model "
+                             "and the file does not hold it; give the model file it was run "
+                             "from with --model") from None
     missing = [v for v in res.vessels if v not in set(model.vessel_names)]
     if missing:
         raise InputError(f"{args.result}: vessel '{missing[0]}' is not in model "
@@ -398,7 +403,7 @@ def _write(res: Any, path: str, overwrite: bool = False) -> None:
         from oxyline.io.atomic import replace_atomically
 
         try:  # written whole, then renamed: a full disk or a signal leaves no half table
-            replace_atomically(p, lambda tmp: res.to_pandas().to_csv(tmp, index=False))
+            replace_atomically(p, lambda tmp: res.to_pandas(units=True).to_csv(tmp, index=False))
         except OSError as exc:
             raise OutputError(f"{p}: cannot write the table: {exc.strerror or exc}; nothing "
                               "was written", res) from exc
@@ -423,7 +428,7 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     for key in ("vessels", "segments", "nodes", "junctions", "inlets", "outlets", "unknowns"):
         print(f"{key:<17}{s[key]}")
     print(f"total compliance {s['total_compliance']:.4e} m^3/Pa")
-    print(f"total volume     {s['total_volume'] * 1e6:.4f} mL")
+    print(_volume_line(model, s["total_volume"]))
     print(f"period           {s['period']} s")
     print(f"rk4 stable dt    {s['rk4_dt_max']:.4e} s ({'exact' if s['rk4_limit_exact'] else 'Krylov, conservative'},"
           f" set by {s['rk4_limiting_element']})")
@@ -433,7 +438,26 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     print(f"run settings     method {sim.get('method', 'auto')}, dt {sim.get('dt', 'auto')}, "
           f"cycles {sim.get('cycles', 10)}, output every {out.get('every', period / 1000):g} s "
           f"({out.get('cycles', 'last')} cycle{'s' if out.get('cycles') == 'all' else ''})")
+    species = [str(x) for x in model.transport.get("species", [])]
+    if species:
+        oxygen = model.transport.get("oxygen")
+        wall = (model.to_dict().get("oxygen") or {}).get("wall") or {}
+        note = f" (oxygen: {oxygen}, wall {wall.get('model', 'none')})" if oxygen else ""
+        print(f"species          {', '.join(species)}{note}")
     return 0
+
+
+def _volume_line(model: Any, volume: float) -> str:
+    """The blood volume line of `validate`: lumped elements and chambers have no geometric
+    volume, so a model of those only has none to print (never a misleading 0 mL)."""
+    vessels = model.canonical["vessels"]
+    geometric = sum(1 for v in vessels if "geometry" in v)
+    if geometric == 0:
+        return "total volume     - (lumped elements and chambers only: no vessel geometry)"
+    if geometric < len(vessels):
+        return (f"total volume     {volume * 1e6:.4f} mL (the {geometric} geometric vessels; "
+                f"{len(vessels) - geometric} lumped elements or chambers have no geometry)")
+    return f"total volume     {volume * 1e6:.4f} mL"
 
 
 def _cmd_impedance(args: argparse.Namespace) -> int:
@@ -510,12 +534,21 @@ def _cmd_info(args: argparse.Namespace) -> int:
     from oxyline import _core
 
     print(f"oxyline {oxyline.__version__} ({_core.build_profile} build), threads: {os.cpu_count()}")
+    if args.model is not None:  # `info MODEL`: the model's summary, as `validate` prints it
+        return _cmd_validate(args)
     return 0
+
+
+def _version() -> str:
+    from oxyline import __version__
+
+    return __version__
 
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="oxyline", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"oxyline {_version()}")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("run", help="run a model file or built-in model")
     p.add_argument("model", nargs="?", help="built-in name, or a .yaml/.json/.csv model "
@@ -599,7 +632,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="units of an svZeroDSolver output file (default cgs: cm, dyn/cm^2, mL/s)")
     p.set_defaults(func=_cmd_convert)
     sub.add_parser("models", help="list built-in models").set_defaults(func=_cmd_models)
-    sub.add_parser("info", help="version and build").set_defaults(func=_cmd_info)
+    p = sub.add_parser("info", help="version and build; with MODEL, the model's summary")
+    p.add_argument("model", nargs="?", help="built-in name, or a model file (any format)")
+    p.set_defaults(func=_cmd_info)
     return parser
 
 

@@ -264,7 +264,12 @@ def profile_data(result: Result, model: Model | str, outlet: str, quantity: str 
     m = _model(model)
     ds = result.to_xarray()
     _, vessels = _graph(m)
-    names = path(m, outlet, inlet)
+    # vessels without output are left out: the junction branches of an svZeroDSolver
+    # BloodVesselJunction (lumped, no length) are model vessels but no result columns
+    names = [n for n in path(m, outlet, inlet) if n in result.vessels]
+    if not names:
+        raise ValueError(f"no vessel on the path to '{outlet}' has output (recorded vessels: "
+                         f"{', '.join(result.vessels[:10])})")
     seg_in = seg_out = seg_mid = None
     for cand in (f"segment_{quantity}_in", f"segment_{quantity}"):
         if cand in ds.data_vars:

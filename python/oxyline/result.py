@@ -148,6 +148,33 @@ class SpeciesResult:
         return out
 
 
+#: the largest model description (JSON characters) a result file keeps in its attributes:
+#: a NetCDF attribute is one HDF5 object-header message, at most 64 KiB
+MAX_MODEL_JSON = 60_000
+
+
+def model_json(description: Any) -> str | None:
+    """``description`` (a model's native dict) as compact JSON, or None when it is longer than
+    :data:`MAX_MODEL_JSON` or not JSON (numpy arrays are written as lists)."""
+    import json
+
+    def plain(o: Any) -> Any:
+        if isinstance(o, np.ndarray):
+            return o.tolist()
+        if isinstance(o, np.generic):
+            return o.item()
+        raise TypeError(type(o).__name__)
+
+    vessels = description.get("vessels", ()) if isinstance(description, dict) else ()
+    if len(vessels) > MAX_MODEL_JSON // 50:  # > 50 characters a vessel: too long, not dumped
+        return None
+    try:
+        text = json.dumps(description, separators=(",", ":"), default=plain)
+    except (TypeError, ValueError):
+        return None
+    return text if len(text) <= MAX_MODEL_JSON else None
+
+
 @dataclass
 class Result:
     """Output of :func:`oxyline.simulate`.
@@ -180,6 +207,19 @@ class Result:
     #: ``<vessel>:tricuspid|pulmonary|mitral|aortic`` (its on/off rule: open also while the
     #: flow is positive; docs/physics.md §1.10)
     valve_status: dict[str, np.ndarray] = field(default_factory=dict)
+    #: the model it was run from, as JSON in the native schema (SI), so that a result file
+    #: rebuilds its model (``oxyline plot`` needs no ``--model``); None above
+    #: :data:`MAX_MODEL_JSON` characters (a whole tree), where only the name is kept
+    model_json: str | None = None
+
+    def __repr__(self) -> str:
+        """One line of facts, not the arrays (a notebook echoes a result whole)."""
+        t = self.time
+        span = f"{t[0]:g}-{t[-1]:g} s" if len(t) else "empty"
+        species = f", species={list(self.species)}" if self.species else ""
+        state = "" if self.complete else ", complete=False"
+        return (f"<oxyline.Result model={self.model_name!r}: {len(self.vessels)} vessels, "
+                f"{sum(self.segment_count)} segments, {len(t)} times ({span}){species}{state}>")
 
     @property
     def error_estimate(self) -> dict[str, float]:
@@ -429,6 +469,8 @@ class Result:
                 {"units": "1", "description": "1 open, 0 closed"})
         attrs: dict[str, Any] = {"model": self.model_name, "oxyline_version": __version__,
                                  "complete": int(self.complete)}
+        if self.model_json is not None:
+            attrs["model_json"] = self.model_json
         if (tuple(self.vessel_variables), tuple(self.segment_variables)) != (
                 VESSEL_VARIABLES, SEGMENT_VARIABLES):
             # an output selection: what oxyline.open_result must find (all of them otherwise)
@@ -470,13 +512,27 @@ class Result:
         """Write :meth:`summary` as Parquet (needs pyarrow)."""
         return results.to_parquet(self, path)
 
-    def to_pandas(self) -> Any:
+    def to_pandas(self, units: bool = False) -> Any:
         """Long table with svZeroDSolver's columns: name, time, flow_in, flow_out, pressure_in,
-        pressure_out (SI). Needs all four vessel variables in the output selection."""
+        pressure_out, in SI units, which ``df.attrs["units"]`` names per column. With
+        ``units=True`` the column names carry them too (``"pressure_in [Pa]"``), so the units
+        survive a CSV file. Needs all four vessel variables in the output selection.
+
+        >>> import oxyline
+        >>> df = oxyline.simulate("bifurcation", cycles=1).to_pandas(units=True)
+        >>> list(df.columns[:3])
+        ['name', 'time [s]', 'flow_in [m^3/s]']
+        """
         if tuple(self.vessel_variables) != VESSEL_VARIABLES:
             missing = [v for v in VESSEL_VARIABLES if v not in self.vessel_variables]
             raise _not_selected(", ".join(missing))
-        return long_table(self.vessels, self.time, self._vessel_block)
+        df = long_table(self.vessels, self.time, self._vessel_block)
+        unit_of = {c: UNITS[c] for c in LONG_COLUMNS if c in UNITS}
+        if units:
+            df.columns = [f"{c} [{unit_of[c]}]" if c in unit_of else c for c in df.columns]
+            unit_of = {f"{c} [{u}]": u for c, u in unit_of.items()}
+        df.attrs["units"] = unit_of
+        return df
 
     def heart_table(self) -> Any:
         """pandas DataFrame indexed by time with one column per chamber volume

@@ -8,7 +8,7 @@ import signal
 import threading
 import warnings
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -37,7 +37,13 @@ from oxyline.result import (
     Result,
     SpeciesResult,
     TissueResult,
+    model_json,
 )
+
+if TYPE_CHECKING:  # Unpack is typing's from Python 3.11
+    from typing_extensions import Unpack
+
+    from oxyline.options import SimulateOptions
 
 ProgressCallback = Callable[[float, float], None]
 
@@ -242,6 +248,7 @@ def _result(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
         species=_species_results(model, raw, layout, empty_segments), oxygen=model.transport.get("oxygen"),
         vessel_variables=tuple(layout["vessel_variables"]),
         segment_variables=tuple(layout["segment_variables"]),
+        model_json=model_json(model.source) if model.source else None,
     )
 
 
@@ -346,7 +353,8 @@ def _raise_run_error(raw: Mapping[str, Any], partial: Any) -> None:
     raise err
 
 
-def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any], **overrides: Any) -> Result:
+def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any],
+             **overrides: Unpack[SimulateOptions]) -> Result:
     """Run a network and return its pressure and flow waveforms.
 
     ``overrides`` replace the model's ``simulation`` settings: ``cycles``, ``dt`` (s or
@@ -589,7 +597,8 @@ def _output_size(model: Model, s: Mapping[str, Any]) -> tuple[float, int, int]:
 
 def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
                      path: str | os.PathLike[str], *, time_chunk: int = 1024,
-                     overwrite: bool = False, **overrides: Any) -> Any:
+                     overwrite: bool = False,
+                     **overrides: Unpack[SimulateOptions]) -> Any:
     """Run a network, writing its output to a Zarr store *during* the run, and return the store
     opened lazily as an ``xarray.Dataset``.
 

@@ -177,7 +177,8 @@ def _result_from_dataset(ds: Any, label: str) -> Result:
                     segment_position=positions, settings=settings,
                     complete=bool(attrs.get("complete", 1)), species=species,
                     oxygen=None if oxygen is None else str(oxygen), vessel_variables=vvars,
-                    segment_variables=svars)
+                    segment_variables=svars,
+                    model_json=str(attrs["model_json"]) if "model_json" in attrs else None)
     # the heart outputs (Result.chamber_volume, Result.valve_status), if the model had them
     for var, dim, field in (("chamber_volume", "chamber", result.chamber_volume),
                             ("valve_status", "valve", result.valve_status)):

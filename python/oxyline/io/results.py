@@ -348,17 +348,16 @@ def summary(result: Result | Any) -> Any:
 
 
 def to_csv(result: Result | Any, path: PathLike) -> Path:
-    """Write :func:`summary` (of a result or its dataset) as CSV (TSV for ``.tsv``); a first
-    comment line gives the units."""
+    """Write :func:`summary` (of a result or its dataset) as CSV (TSV for ``.tsv``), each
+    column name with its unit (``pressure_in_mean [Pa]``): one header row, no comment line, so
+    ``pandas.read_csv(path, index_col="vessel")`` reads it as it is."""
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     df = summary(result)
+    units = df.attrs["units"]
+    df = df.rename(columns={c: f"{c} [{units[c]}]" for c in df.columns if units.get(c)})
     sep = "\t" if p.suffix.lower() == ".tsv" else ","
-    with p.open("w") as fh:
-        fh.write("# oxyline summary of model '" + df.attrs["model"] + "'; units: "
-                 + ", ".join(f"{k} [{u}]" for k, u in df.attrs["units"].items()
-                             if k.endswith("_mean")).replace("_mean", "") + "\n")
-        df.to_csv(fh, sep=sep)
+    replace_atomically(p, lambda tmp: df.to_csv(tmp, sep=sep))  # a whole table or none
     return p
 
 

@@ -1,0 +1,62 @@
+"""The keyword arguments of :func:`oxyline.simulate` and :func:`oxyline.simulate_to_zarr`, typed
+so that editors and type checkers show and check them. Each overrides the model's
+``simulation:`` setting of the same meaning and is checked like the model itself (a bad value
+is a :class:`~oxyline.ModelError` naming the setting)."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Sequence
+from typing import Literal, TypedDict
+
+
+class SimulateOptions(TypedDict, total=False):
+    """Options of :func:`oxyline.simulate` (all optional; units SI)."""
+
+    #: cardiac cycles to run (with ``until_periodic``: at least this many)
+    cycles: int
+    #: time step, s, or ``"auto"`` (half the stable RK4 step, or the output interval)
+    dt: float | Literal["auto"]
+    #: time integrator
+    method: Literal["auto", "rk4", "generalized-alpha"]
+    #: output interval, s
+    output_every: float
+    #: keep the last cycle (time from 0) or every cycle
+    output_cycles: Literal["last", "all"]
+    #: stop when the cycle-to-cycle change of the state is below this relative tolerance
+    until_periodic: float | None
+    #: the most cycles a run ``until_periodic`` may take
+    max_cycles: int
+    #: generalized-α spectral radius at infinity (default 0.5)
+    rho_infty: float
+    #: initial state: the steady solution of the mean conditions, the periodic state of a
+    #: linear circuit, zero, or svZeroDSolver's starts
+    start: Literal["steady", "periodic", "zero", "svzerod-steady", "svzerod-zero"]
+    #: record the per-segment variables (default True)
+    segments: bool
+    #: a progress bar (True) on runs longer than a second, or a callback ``f(t, t_end)``
+    progress: bool | Callable[[float, float], object]
+    #: Newton's absolute tolerance of the generalized-α step
+    newton_atol: float
+    #: Newton's iteration limit of the generalized-α step
+    max_iterations: int
+    #: run the species transport (default True when the model has species)
+    transport: bool
+    #: the variables to record: names of ``oxyline._core.VESSEL_VARIABLES`` etc., or ``"all"``
+    variables: Sequence[str] | Literal["all"] | None
+    #: the vessels to record: names, ``"all"`` or ``"none"``
+    vessels: Sequence[str] | Literal["all", "none"] | None
+    #: refuse a model and output estimated above this many bytes (or e.g. ``"8 GB"``)
+    max_memory: int | float | str
+    #: a file the run's state is written to at cycle ends, for :func:`oxyline.resume`
+    checkpoint: str | None
+    #: how often to checkpoint: seconds of wall time, or ``"N cycles"``
+    checkpoint_every: float | str
+    #: setting this event stops the run with :class:`~oxyline.SimulationCancelled`
+    cancel: threading.Event | None
+    #: error control: the relative tolerance of every unknown's local error per step
+    #: (generalized-α with a variable step and dense output; excludes ``dt`` and ``"rk4"``)
+    rtol: float | None
+    #: error control's absolute tolerance per kind of unknown, SI: ``{"pressure": Pa, "flow":
+    #: m^3/s, "volume": m^3, "species": mol/m^3}`` (defaults 1, 1e-9, 1e-9, 1e-6)
+    atol: dict[str, float] | None
