@@ -1,4 +1,4 @@
-"""Cost of oxygen on the coronary and closed-loop examples (issue 14 item 5, O2 part): the same
+"""Cost of oxygen on the coronary and closed-loop examples: the same
 model run flow-only and flow + O2, CPU time (process time, robust to a loaded machine) with the
 load average, and the closed-loop O2 solve to periodic steady state.
 

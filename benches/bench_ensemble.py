@@ -399,7 +399,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{oxyline.__version__}; {args.rounds} rounds, each running every configuration "
               "of a size once (order rotated per round); ratios formed within a round, "
               "median (min–max) over the rounds; load = 1-min load average after each round. "
-              "Targets (issue 10): 1 -> 2 workers >= 1.8x, >= 50x a loop of svzerod runs, "
+              "Targets: 1 -> 2 workers >= 1.8x, >= 50x a loop of svzerod runs, "
               "LocalCluster (2 worker processes x 1 thread) <= +15 % over local threads "
               f"(workers=2). Whole bench {elapsed / 60:.1f} min."), ""]
     lines += [f"* {s.name}: {s.what}" for s in sizes] + [""]

@@ -1,4 +1,4 @@
-"""Time-varying coefficients, chambers, valves and closed loops (issue 14 items 1, 5): each
+"""Time-varying coefficients, chambers, valves and closed loops: each
 table times oxyline against svzerod 3.2 in the same run, interleaved (svzerod, oxyline
 generalized-α, oxyline RK4, then again: every solver sees the same machine state), and reports
 the best of ``--repeat`` (default 3) wall and CPU seconds of each with the accuracy.

@@ -1,4 +1,4 @@
-"""Memory estimate vs measured peak (issue 13 item 2): for each case, a child process warms up
+"""Memory estimate vs measured peak: for each case, a child process warms up
 (imports, a tiny run), then loads the model and runs it; the table compares the estimate the
 `max_memory` check uses (model + output, `oxyline.memory`) with the peak resident memory the
 load and run added (VmHWM − VmRSS before). Linux only (/proc).

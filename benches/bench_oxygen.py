@@ -1,4 +1,4 @@
-"""Cost of oxygen transport relative to flow only (issue 3: target <= 1.6x).
+"""Cost of oxygen transport relative to flow only (target <= 1.6x).
 
 A binary tree of 2^depth - 1 compliant vessels (3 segments each), pulsatile inflow, RCR
 outlets; the same run with and without the `oxygen` section. Closures: constant k (single

@@ -1,5 +1,5 @@
 """The 4,374-subject PWDB-like population on pwdb-116, each subject run to periodicity (1e-4)
-with the per-subject summary as output. Target (issue 10): < 10 min on the 2-core machine.
+with the per-subject summary as output. Target: < 10 min on the 2-core machine.
 
     python benches/bench_population.py              # simulate_ensemble if oxyline has it
     python benches/bench_population.py --serial     # loop simulate() over a subset, extrapolate

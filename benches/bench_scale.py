@@ -1,4 +1,4 @@
-"""Whole-tree scaling of flow and oxygen transport (issue 9, items 3, 4, 6, 7).
+"""Whole-tree scaling of flow and oxygen transport.
 
 The tree family: a symmetric binary tree of ``2^depth - 1`` geometric vessels, Murray radii
 r_child = r_parent 2^(-1/3) from a 1 cm root, lengths l = 10 r, Olufsen's wall law
@@ -17,7 +17,7 @@ first pass also measures each vessel's flow harmonics).
 
 Two O2/flow ratios: ``O2/flow run`` of the whole ``simulate`` (for Lévêque and the default
 closure it includes their one-off flow-only first pass), and ``O2/flow step`` per step of the
-main pass only (what issue 9 item 4 asks): the CPU time between the first and the last
+main pass only (what the load rework asks): the CPU time between the first and the last
 progress check of the main pass (every 256 steps, at most every 0.1 s wall), so the steady
 start, the first pass and the result's assembly are left out of both runs alike.
 
@@ -30,7 +30,7 @@ times in brackets —
     python benches/bench_scale.py                       # depths 8, 10, 12, 14, 16
     python benches/bench_scale.py --depths 8 10 12 14 16 18 --rk4-max-depth 12
     python benches/bench_scale.py --depths 8 10 12 14 16 18 --configs flow o2-k \
-        --methods generalized-alpha        # issue 9 item 7: slopes 1e3-1e6 (and >= 1e4)
+        --methods generalized-alpha        # the scale targets: slopes 1e3-1e6 (and >= 1e4)
     python benches/bench_scale.py --depths 18 --configs flow o2-k     # the 1e6-segment run
     python benches/bench_scale.py --depths 18 --configs o2-k --zarr   # ... streamed to Zarr
     python benches/bench_scale.py --depths 18 --configs o2-k --variables flow_in concentration_in
@@ -290,7 +290,7 @@ def main() -> None:
                     help="largest tree run with RK4 (its stable dt shrinks with the vessels)")
     ap.add_argument("--fit-min-segments", type=float, nargs="+", default=[1e3, 1e4],
                     help="smallest tree included in the log-log fits, one fit per value "
-                         "(default: from 1e3, the range of issue 9 item 7, and from 1e4, "
+                         "(default: from 1e3, the range of the scale targets, and from 1e4, "
                          "the fits of earlier sessions)")
     ap.add_argument("--zarr", action="store_true",
                     help="stream the output to a Zarr store (simulate_to_zarr) instead of "

@@ -1,4 +1,4 @@
-"""RK4 stability limit above the dense size (issue 13 item 5): old vs new vs dense.
+"""RK4 stability limit above the dense size: old vs new vs dense.
 
     python benches/bench_stability.py                    # 1e3 ... 1e5 unknowns + built-ins
     python benches/bench_stability.py --old-pythonpath /path/to/old/python   # add the old limit

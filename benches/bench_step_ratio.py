@@ -1,4 +1,4 @@
-"""Per-step O2/flow cost, interleaved (issue 9 item 4: O2 ≤ 1.6× flow per step, Hill ≤ 2×).
+"""Per-step O2/flow cost, interleaved (O2 ≤ 1.6× flow per step, Hill ≤ 2×).
 
 Single runs of the same build drift by ±30 % on this machine (docs/performance.md),
 so a ratio of two separate runs cannot show a 1.6× bound. Here every configuration of one

@@ -3,7 +3,7 @@ command line, flow only and with oxygen, each in a fresh ``oxyline run`` process
 ``/usr/bin/time -v`` (wall, CPU = user + system, peak RSS). The model runs with its own
 settings (``WHOLE_TREE_SIMULATION``: one cycle of generalized-alpha at dt = 1 ms, vessel
 output of the named arteries every 10 ms) and, for oxygen, an ``oxygen`` section with the
-default Lévêque closure (inlet 95 mmHg, wall 60 mmHg). Issue 9's budget: 1e6 segments with
+default Lévêque closure (inlet 95 mmHg, wall 60 mmHg). The scale budget: 1e6 segments with
 O2 in < 180 s and < 3 GB. Prints a markdown table for benches/results.md.
 
 Run: python benches/bench_whole_trees.py [--models adan56-st whole-body-140-st]

@@ -36,7 +36,7 @@ from oxyline.ensemble import cluster as C
 
 
 def pinned_plan(n: int, nthreads: Any) -> tuple[list[range], list[str | None]]:
-    """Session 11's chunking: one task per worker thread (more, up to 4 per thread, only
+    """The earlier chunking: one task per worker thread (more, up to 4 per thread, only
     while each keeps 256 variants), every task pinned to a worker thread in turn."""
     threads = max(1, sum(nthreads.values()))
     per_thread = max(1, min(4, n // (threads * 256)))

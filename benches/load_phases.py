@@ -1,6 +1,6 @@
 """Where does the load time of a whole tree go? ``oxyline.load_model`` of one
 ``bench_scale.py`` tree split into its phases, each in user + system CPU and minor page
-faults, in several fresh processes (issue 9 item 3: the load of one fresh process varied by
+faults, in several fresh processes (the load of one fresh process varied by
 more than the target's margin).
 
     python benches/load_phases.py --depths 14 16 18 --configs o2-k o2-leveque --repeat 3
@@ -11,7 +11,7 @@ more than the target's margin).
 Phases (the same calls ``load_model`` makes, in its order): ``copy`` (the private copy of the
 user's dict, ``model._copy``) or ``read`` (``--route json|yaml``: the tree written once as a
 native file, read by ``oxyline.io.native.read_mapping``), ``canonical`` (checks and SI
-conversion, ``model._unassembled``; since issue 9 item 3 the binding reads the plain vessels
+conversion, ``model._unassembled``; since the load rework the binding reads the plain vessels
 and outlets here, ``_core.NativeParts``), ``core`` (``_core.Network``: the core assembles the
 circuit, the DAE and the transport plan), ``release`` (the output-layout check and
 ``release_canonical``). ``total`` is ``load_model`` as ``bench_scale.py`` times it (process
@@ -160,7 +160,7 @@ def main() -> None:
 
 def table(depths: list[int], config: str, route: str, repeat: int) -> None:
     """The phase table of one config and route, and the log-log slope of the total load time
-    against segments (best run per size; issue 9 item 7's target <= 1.1)."""
+    against segments (best run per size; the scale work's target <= 1.1)."""
     phases = ["copy" if route == "dict" else "read", "canonical", "core", "release"]
     print(f"# load_model phases, config {config}, route {route}; µs per segment: user+sys "
           "CPU (sys in brackets), minor page faults per 1000 segments; each row a fresh "

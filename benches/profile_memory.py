@@ -1,5 +1,5 @@
 """Where does the memory of a whole-tree run go? Resident set size after each stage of loading
-and running one tree of ``bench_scale.py`` (issue 9, item 6), in one fresh process.
+and running one tree of ``bench_scale.py``, in one fresh process.
 
     python benches/profile_memory.py --depth 16 --config o2-k
 

@@ -1,5 +1,5 @@
 """How far svZeroDSolver's own result for coupledBlock_closedLoopHeart_withCoronaries moves under
-round-off, beside the drop-in's distance from it (issue 14 item 2, docs/svzerod.md "The on/off
+round-off, beside the drop-in's distance from it (docs/svzerod.md "The on/off
 valves and round-off").
 
 Runs the file's 100 cycles with svzerod 3.2 and the drop-in, unchanged and with one start value

@@ -129,7 +129,7 @@ def wall_shear(case: Case, flow: PeriodicFlow, t: np.ndarray, womersley: bool = 
         if a < 1e-3:
             slope = 4.0
         else:  # −d(shape)/dρ at the wall, shape = womersley_shape (d/dρ of −J0(zρ)/J0(z) is
-            # z J1(zρ)/J0(z); session 8 fixed the sign: before, every harmonic with α ≥ 1e-3
+            # z J1(zρ)/J0(z); a later fix corrected the sign: before, every harmonic with α ≥ 1e-3
             # entered with the opposite sign, which changed B for multi-harmonic waveforms)
             z = a * np.exp(0.75j * math.pi)
             j0, j1 = special.jv(0, z), special.jv(1, z)
@@ -591,7 +591,7 @@ def extension_study(cases: list[tuple[str, Case, PeriodicFlow]], grid: Grid, log
 
 #: the closures of the outlet-independent table (§13); the inlet-renewal law is emulated
 OUTLET_FREE_CLOSURES = {
-    "Graetz, forward-mean (default before session 9)": {"model": "graetz",
+    "Graetz, forward-mean (the earlier default)": {"model": "graetz",
                                                         "flow": "forward-mean"},
     "inlet renewal, emulated (A = 0.329)": "renewal",
     "inlet renewal in the run (default)": {"model": "graetz", "flow": "inlet-renewal"},

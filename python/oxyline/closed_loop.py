@@ -1,4 +1,4 @@
-"""Oxygen around a closed circulation (issue 14 item 4; docs/oxygen.md "Oxygen around a closed
+"""Oxygen around a closed circulation (docs/oxygen.md "Oxygen around a closed
 loop"): heart chambers, systemic arteries, organ beds consuming O2, systemic veins and the lungs
 as well-mixed compartments joined by the circulation's flows. The physics (compartments,
 Michaelis–Menten VO2, diffusion-limited lung exchange with Hill binding, the periodic steady
@@ -73,7 +73,7 @@ STANDARD: dict[str, Any] = {
     },
 }
 
-# A systemic arterial trunk (issue 14 item 4: "e.g. the bifurcation or the ADAN56 trunk"): the
+# A systemic arterial trunk ("e.g. the bifurcation or the ADAN56 trunk"): the
 # aorta of ADAN56 (ascending, arch, thoracic, abdominal; radii and lengths rounded from
 # models_data/adan56.yaml) with one equivalent artery per organ bed, whose area is the sum of
 # the bed's feeding arteries there (coronaries; carotids + vertebrals; subclavians;

@@ -116,7 +116,7 @@ class Model:
 
     Once the core has assembled the model, its per-vessel canonical dicts are released (a
     whole tree's canonical vessels and outlets took ~185 B per segment beside the core's
-    own tables; issue 9 item 6) and written again from ``source`` on first use
+    own tables; the scale targets) and written again from ``source`` on first use
     (:meth:`release_canonical`); a run reads only the small transport section
     (:attr:`transport_spec`) and the vessel names.
     """

@@ -78,7 +78,7 @@ def _vessels(model: Model, selection: Any) -> list[str] | None:
 
 
 #: Above this many segments an in-memory run without a ``variables`` selection records the
-#: large-model default below instead of every variable (issue 9: at ~1e6 segments every vessel
+#: large-model default below instead of every variable (at ~1e6 segments every vessel
 #: variable every 10 ms alone is 1.8 kB per segment, more than a 3 GB budget leaves after the
 #: network and the run; benches/results.md, "Large-model default output").
 LARGE_MODEL_SEGMENTS = 500_000

@@ -90,7 +90,7 @@ TISSUE_BOUNDARY_LAYERS = ("leveque", "graetz", "mass-transfer", "permeability")
 HYPOXIC_PO2 = 10.0
 TISSUE_RADIAL_CELLS = 4
 FORMULATIONS = ("conservative", "tl-quasisteady")
-#: `graetz` wall's flow: inlet-renewal (the default since session 9, docs/physics.md §3.6), or
+#: `graetz` wall's flow: inlet-renewal (the default since the inlet-renewal fit, docs/physics.md §3.6), or
 #: the cycle-mean closures of the forward flow (the default before) or of |Q|
 MEAN_FLOWS = ("inlet-renewal", "forward-mean", "cycle-mean")
 #: samples per period of a wall flux given as a Python callable (linear in between)

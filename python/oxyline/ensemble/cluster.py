@@ -22,7 +22,7 @@ from oxyline.model import Model
 TASKS_PER_THREAD = 16
 #: the fewest variants of a balanced ensemble's task. A task costs ~3 ms of a worker's CPU
 #: besides its variants (its patches and results in transit, the chunk's collector; 64 tasks
-#: of 1 tree variant: 0.78 s of worker CPU against 0.59 s as 2 tasks, session 12); the
+#: of 1 tree variant: 0.78 s of worker CPU against 0.59 s as 2 tasks); the
 #: scheduler's round trip is hidden as the next task is already on its worker. 8 variants:
 #: ~70 ms of a 31-vessel tree, ~0.6 s of pwdb-116
 MIN_TASK_VARIANTS = 8

@@ -1,4 +1,4 @@
-//! CPU time and page faults of each core stage of loading a canonical JSON model (issue 9
+//! CPU time and page faults of each core stage of loading a canonical JSON model (the scale targets
 //! item 3, a profiling aid): `cargo run --release -p oxyline-core --example load_stages --
 //! model.json [repeats]`. Stages: JSON parse, assemble (graph, segments, circuit, probes), the
 //! DAE, the transport plan, and the steady state a run starts from. CPU is this thread's

@@ -1,5 +1,5 @@
 //! Resident memory after each stage of building and running a canonical JSON model (a
-//! profiling aid for issue 9, item 6): `cargo run --release --example mem_stages -- model.json`.
+//! profiling aid for the scale targets): `cargo run --release --example mem_stages -- model.json`.
 
 use oxyline_core::genalpha::NewtonControl;
 use oxyline_core::model::parse;

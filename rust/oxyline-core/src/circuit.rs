@@ -462,7 +462,7 @@ impl Circuit {
         Ok(c)
     }
     /// Release the spare capacity of the per-node, per-branch and per-segment tables once
-    /// the circuit is complete (issue 9 item 6: ~15 B per segment at 1e6 segments).
+    /// the circuit is complete (~15 B per segment at 1e6 segments).
     pub fn shrink_to_fit(&mut self) {
         self.nodes.shrink_to_fit();
         self.branches.shrink_to_fit();

@@ -43,7 +43,7 @@ pub enum MeanFlow {
     /// layer is already depleted, so only forward flow renews the layer. Equal to ⟨|Q|⟩
     /// without reversal; within 2 % of the 2-D solution with 10–30 % reversal, where ⟨|Q|⟩
     /// overestimates the uptake by up to 10 % (docs/validation-oxygen.md §6). The default
-    /// before session 9.
+    /// before the inlet-renewal fit.
     ForwardMean,
     /// The Graetz law of the net mean flow |⟨Q⟩| plus the inlet renewal by the near-wall
     /// backward excursion of the Womersley profile (`renewal`, docs/physics.md §3.6), capped
@@ -643,7 +643,7 @@ mod tests {
             let e = parse(bad).validate("vessel 'v'").unwrap_err().to_string();
             assert!(e.contains("vessel 'v'") && e.contains("flux"), "{e}");
         }
-        // the Graetz closure uses the inlet renewal unless told otherwise (session 9; the
+        // the Graetz closure uses the inlet renewal unless told otherwise (the
         // forward mean before, still selectable by name)
         let g = parse(r#"{"model": "graetz", "wall_concentration": 1.0}"#);
         assert_eq!(g.mean_flow(), MeanFlow::InletRenewal);

@@ -55,7 +55,7 @@ fn krylov_limit_matches_the_dense_spectrum() {
     }
 }
 
-/// Issue 13 item 6: a stiff wall exchange (k = 30 m/s, rate 2k/r = 2e4 /s in a 3 mm tube) made
+/// the scale targets: a stiff wall exchange (k = 30 m/s, rate 2k/r = 2e4 /s in a 3 mm tube) made
 /// RK4's automatic step unstable for the species (NaN in the O2 columns, exit 0). The step now
 /// keeps the species rate at half RK4's real-axis limit, and the run stays finite and bounded
 /// by the inlet and wall concentrations.
@@ -123,7 +123,7 @@ fn stiff_wall_exchange_limits_the_automatic_rk4_step() {
     assert!(cells.iter().sum::<f64>() >= 0.95 * c_w * total, "{cells:?}");
 }
 
-/// Issue 9: a generalized-α run computes no RK4 stability limit (its first pass with the
+/// the scale targets: a generalized-α run computes no RK4 stability limit (its first pass with the
 /// default closure included), an RK4 run reports the limit its step obeys.
 #[test]
 fn only_rk4_runs_probe_the_rk4_limit() {

@@ -12,7 +12,7 @@
 //! theory's; A is fitted to the 27 rows of docs/validation-oxygen.md §2 and checked on 20
 //! held-out vessels there (within 0.95 % of the 2-D reference whose layer continues through
 //! the outlet; within 2 % of the outlet-independent reference in all 47 rows, §13). The
-//! default of the Graetz closure since session 9 (`MeanFlow::InletRenewal`): a run gets each
+//! default of the Graetz closure since the inlet-renewal fit (`MeanFlow::InletRenewal`): a run gets each
 //! vessel's flow harmonics from its flow-only first pass (`run::flow_harmonics`).
 
 use super::{SegmentWall, finite_number, graetz_conductance};

@@ -314,7 +314,7 @@ impl Member {
     /// Assemble a model exactly as a single run does (`spec → circuit → DAE → transport`).
     /// The circuit's per-segment geometry (`Circuit::segments`) is read only by the transport
     /// plan's build, which keeps its own compact copy: it is released here (88 B per segment;
-    /// issue 9 item 6), the segment table (`Assembled::segments`) stays.
+    /// the scale targets), the segment table (`Assembled::segments`) stays.
     pub fn build(spec: &NetworkSpec) -> Result<Member> {
         let mut assembled = spec.assemble()?;
         let dae = assembled.circuit.assemble()?;

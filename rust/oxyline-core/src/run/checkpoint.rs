@@ -1,4 +1,4 @@
-//! Checkpoints (issue 13 item 7): at the end of a cycle the run hands a [`Snapshot`] of
+//! Checkpoints: at the end of a cycle the run hands a [`Snapshot`] of
 //! everything it needs to continue — the flow state (y, ẏ), what the integrator and the
 //! transport carry between steps, the species amounts, the periodicity references, the
 //! cycle-mean |Q| of a two-pass run and the output recorded so far — to a caller's `save`.

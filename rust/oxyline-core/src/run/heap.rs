@@ -1,5 +1,5 @@
 //! Freed heap pages handed back to the operating system once a large pass's output begins
-//! (issue 9 item 6: the 1.05 M-segment O2 cycle's peak resident set).
+//! (the 1.05 M-segment O2 cycle's peak resident set).
 //!
 //! The setup of a pass (the steady state, the first pass of a transport run, the integrator's
 //! factors, the closures' per-vessel work) and its first steps and observations allocate and
@@ -8,7 +8,7 @@
 //! vectors come from the heaps too) and returns only what lies at a heap's top. The output
 //! table, reserved in one allocation of its final size, fills page by page and cannot reuse
 //! those freed pages: they stayed resident under it to the run's peak, ~40 MiB of a
-//! 262 k-segment O2 run's (benches/results.md, "1.05 M peak memory (session 12, helper mem)").
+//! 262 k-segment O2 run's (measured with benches/profile_memory.py).
 //! `malloc_trim` returns every whole free page of every arena (`MADV_DONTNEED`; the
 //! allocator's bookkeeping stays). The cycle loop calls it once per pass, after the pass's
 //! first output row past its start (`Cycles::step`): calling it before the loop missed the

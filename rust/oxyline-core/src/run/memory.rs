@@ -1,4 +1,4 @@
-//! Memory estimates made before anything large is allocated (issue 13 item 2): a model with
+//! Memory estimates made before anything large is allocated: a model with
 //! 10⁹ segments, or an output of every cycle of a long run, is refused with a typed
 //! [`Error::Resource`] giving the estimate and the setting to change, instead of taking all
 //! RAM and aborting the process.

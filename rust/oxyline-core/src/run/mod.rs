@@ -19,7 +19,7 @@ mod adaptive; // error control: variable step, dense output (docs/physics.md §1
 pub mod checkpoint;
 mod coupling;
 mod cycle;
-mod flow_harmonics; // inlet renewal: the first pass's flow harmonics (issue 12 item 2)
+mod flow_harmonics; // inlet renewal: the first pass's flow harmonics
 mod heap; // freed pages back to the OS before a large pass's cycle loop
 mod mean_flow;
 pub mod memory;
@@ -27,7 +27,7 @@ mod outcome;
 mod pass;
 mod plan;
 mod recorder;
-mod resolve; // RK4's step for valves and chambers by step doubling (issue 14)
+mod resolve; // RK4's step for valves and chambers by step doubling
 mod settings;
 mod two_pass;
 

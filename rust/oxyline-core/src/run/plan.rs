@@ -62,7 +62,7 @@ impl<'d> Plan<'d> {
         let (dt, steps_per_cycle, stride) = schedule(s, rk4_limit, transport_dt)?;
         if let Some(lim) = reaction.filter(|_| use_rk4 && s.dt.is_some()) {
             // a user's step must also keep the species' own stiffness stable, as the flow's
-            // (issue 13 item 6); the automatic step keeps half of it
+            // (its own limit); the automatic step keeps half of it
             check_stable(dt, &lim)?;
         }
         Ok(Plan {
@@ -169,7 +169,7 @@ impl<'d> Plan<'d> {
 /// limit the flow eigenvalues do not see. The automatic step keeps the Courant number of the
 /// mean flow below 0.5 × 1.39 / 3 (pulsatile peaks of up to 3× the mean); the run itself
 /// monitors the actual value. The species' own stiffness (wall exchange, decay: real negative
-/// rates, RK4's real-axis limit 2.785) is kept at half its limit too (issue 13 item 6; see
+/// rates, RK4's real-axis limit 2.785) is kept at half its limit too (see
 /// `Transport::max_reaction_rate`). Infinite without transport, without a steady state, or with
 /// a non-positive volume there (left to the run to report).
 ///

@@ -30,7 +30,7 @@ use crate::waveform::Waveform;
 use std::sync::Arc;
 
 mod build;
-pub mod closed_loop; // closed circulation: compartments, lungs (issue 14 item 4)
+pub mod closed_loop; // closed circulation: compartments, lungs
 pub mod closed_loop_tree; // its segment-resolved arterial tree
 pub mod compartment;
 mod fused;
@@ -40,11 +40,11 @@ pub mod lung;
 mod memory;
 mod observe;
 mod plan;
-pub mod renewal; // inlet renewal's per-vessel flows and factors (issue 12 item 2)
+pub mod renewal; // inlet renewal's per-vessel flows and factors
 mod rhs;
 mod state;
 mod stiffness;
-mod tissue; // wall/tissue compartment (issue 12 item 6)
+mod tissue; // wall/tissue compartment
 mod wall_flux;
 pub use stiffness::ReactionRate;
 pub use tissue::{TISSUE_BALANCE_COLUMNS, TISSUE_SEGMENT_COLUMNS, TISSUE_VESSEL_COLUMNS};

@@ -1,5 +1,5 @@
 //! The species' own stiffness (wall exchange, decay) for the explicit RK4 step: the advection
-//! Courant bound (`max_outflow_rate`) does not see it (issue 13 item 6).
+//! Courant bound (`max_outflow_rate`) does not see it.
 
 #[allow(unused_imports)]
 use super::*;
