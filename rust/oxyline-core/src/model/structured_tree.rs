@@ -51,6 +51,9 @@ pub const HARD_MAX_VESSELS: f64 = 1.0e8;
 /// Radius classes (i, j) visited at most when counting: beyond, α or β is so close to 1 that
 /// the count is reported as a lower bound.
 const MAX_CLASSES: usize = 10_000_000;
+/// Radius classes visited to give the exact count of a tree the closed-form bound already
+/// refuses (the message names it when it is cheap to get).
+const REFUSED_CLASSES: usize = 100_000;
 
 /// The element a tree's errors name.
 pub fn element(node: &str) -> String {
@@ -275,16 +278,17 @@ pub fn vessel_count_bound(alpha: f64, beta: f64, root_radius: f64, min_radius: f
 /// Number of tree vessels, counted without growing the tree: a vessel exists iff its own
 /// radius α^i β^j r0 ≥ `min_radius`, and C(i + j, i) paths have i a's and j b's.
 pub fn vessel_count(alpha: f64, beta: f64, root_radius: f64, min_radius: f64) -> Count {
-    vessel_count_upto(alpha, beta, root_radius, min_radius, u128::MAX)
+    vessel_count_within(alpha, beta, root_radius, min_radius, MAX_CLASSES)
 }
 
-/// [`vessel_count`], stopped (inexact, a lower bound) as soon as the count passes `limit`.
-pub fn vessel_count_upto(
+/// [`vessel_count`], stopped (inexact, a lower bound) after `max_classes` radius classes: the
+/// work is per class, never per vessel.
+pub fn vessel_count_within(
     alpha: f64,
     beta: f64,
     root_radius: f64,
     min_radius: f64,
-    limit: u128,
+    max_classes: usize,
 ) -> Count {
     let (mut n, mut exact, mut classes) = (0u128, true, 0usize);
     let mut i = 0i32;
@@ -293,14 +297,11 @@ pub fn vessel_count_upto(
         let mut paths = 1u128; // C(i + j, i) at j = 0
         while alpha.powf(f64::from(i)) * beta.powf(f64::from(j)) * root_radius >= min_radius {
             classes += 1;
-            if classes > MAX_CLASSES {
+            if classes > max_classes {
                 return Count { n, exact: false };
             }
             if i + j > 0 {
                 n = n.saturating_add(paths);
-                if n > limit {
-                    return Count { n, exact: false };
-                }
             }
             j += 1;
             // C(i + j, i) = C(i + j − 1, i) (i + j) / j, exact in integers
@@ -449,10 +450,16 @@ impl Tree {
         // the closed-form bound first: trees of α, β near 1 are refused without counting
         let bound = vessel_count_bound(alpha, beta, r0, rmin);
         if bound > max_vessels {
-            return Err(too_many(format!("at least {}", fmt_g(bound))));
+            // the message gives the exact count when few classes hold it
+            let c = vessel_count_within(alpha, beta, r0, rmin, REFUSED_CLASSES);
+            return Err(too_many(if c.exact {
+                c.n.to_string()
+            } else {
+                format!("at least {}", fmt_g(bound.max(c.n as f64)))
+            }));
         }
-        // counted exactly up to well past the limit (the message gives the count), never for ever
-        let count = vessel_count_upto(alpha, beta, r0, rmin, 10 * max_vessels as u128 + 1000);
+        // counted per radius class (at most MAX_CLASSES of them: never for ever)
+        let count = vessel_count(alpha, beta, r0, rmin);
         if count.n as f64 > max_vessels || !count.exact {
             let n = if count.exact {
                 count.n.to_string()
