@@ -229,7 +229,10 @@ impl StructuredTrees {
             let input = tree_input(node, bc)?;
             let root = Root::Given(number(node, "root_radius", root)?);
             let left = memory_limit.map(|m| {
-                let n: usize = out.iter().map(|(_, g): &(String, Grown)| g.vessels.len()).sum();
+                let n: usize = out
+                    .iter()
+                    .map(|(_, g): &(String, Grown)| g.vessels.len())
+                    .sum();
                 m - oxyline_core::run::memory::model_bytes(n, n, 0.0, 0)
             });
             let g = py

@@ -378,13 +378,19 @@ fn trees_near_one_and_guards_out_of_range_are_refused_before_counting() {
         beta: Some(0.999999),
         ..input(0.999999, 0.6, 1e-5)
     });
-    assert!(near.contains("at least inf vessels") && near.contains("alpha = 0.999999"), "{near}");
+    assert!(
+        near.contains("at least inf vessels") && near.contains("alpha = 0.999999"),
+        "{near}"
+    );
     for bad in [0.0, 6e9, f64::NAN, f64::INFINITY] {
         let m = msg(TreeInput {
             max_vessels: Some(bad),
             ..input(0.9, 0.6, 4e-4)
         });
-        assert!(m.contains("'max_vessels' must be a number from 1 to 1e+08"), "{m}");
+        assert!(
+            m.contains("'max_vessels' must be a number from 1 to 1e+08"),
+            "{m}"
+        );
     }
 }
 
