@@ -672,8 +672,27 @@ impl Shape {
                 ),
             ));
         }
-        let largest = self.alpha * self.root_radius;
+        let alpha = number(node, "alpha", self.alpha, 0.0, 1.0)?;
+        let beta = number(node, "beta", self.beta, 0.0, 1.0)?;
+        let largest = alpha * self.root_radius;
         let mut rmin = min_radius.min(largest); // at least the a-daughter
+        // the class table's size in closed form: α, β near 1 are refused, not tabulated
+        let span = (self.root_radius / rmin).ln();
+        let table = (span / -alpha.ln() + 2.0) * (span / -beta.ln() + 2.0);
+        if table.is_nan() || table > MAX_CLASSES as f64 {
+            return Err(err(
+                node,
+                format!(
+                    "a tree with alpha = {}, beta = {} down to min_radius = {} m has about {} \
+                     radius classes, more than {} (raise min_radius or lower alpha, beta)",
+                    fmt_g(alpha),
+                    fmt_g(beta),
+                    fmt_g(rmin),
+                    fmt_g(table),
+                    fmt_g(MAX_CLASSES as f64)
+                ),
+            ));
+        }
         let mut classes = self.classes(rmin);
         while classes.resistance(0.0) > tree_fraction * total {
             rmin *= 1.05;

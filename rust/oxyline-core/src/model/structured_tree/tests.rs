@@ -430,3 +430,28 @@ fn memory_is_estimated_from_the_count_before_growing() {
     assert!(matches!(e, Error::Resource { .. }), "{e}");
     assert!(e.to_string().contains("boundary condition 'out'"), "{e}");
 }
+
+#[test]
+fn matching_a_tree_near_one_is_refused_before_its_class_table() {
+    let shape = Shape {
+        alpha: 0.999999,
+        beta: 0.999999,
+        length_ratio: 50.0,
+        root_radius: 1e-3,
+        viscosity: MU,
+    };
+    let e = shape
+        .matched("out", 1e9, 1e-5, 0.9)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("radius classes") && e.contains("alpha = 0.999999"),
+        "{e}"
+    );
+    let one = Shape {
+        alpha: 1.0,
+        ..shape
+    };
+    let e = one.matched("out", 1e9, 1e-5, 0.9).unwrap_err().to_string();
+    assert!(e.contains("'alpha' must be in (0, 1), got 1"), "{e}");
+}
