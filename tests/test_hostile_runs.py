@@ -172,13 +172,22 @@ def test_structured_tree_near_one_is_refused_in_closed_form() -> None:
     assert time.perf_counter() - start < 5  # the count would run for hours
 
 
+def _enumerated(alpha: float, beta: float, r: float, rmin: float) -> int:
+    """Vessels below a node of radius r, by the growth rule written out (independent of the
+    core's count)."""
+    return sum(1 + _enumerated(alpha, beta, k * r, rmin) for k in (alpha, beta) if k * r >= rmin)
+
+
 def test_structured_tree_bound_is_a_lower_bound_of_the_count() -> None:
-    from oxyline.structured_tree import tree_size, tree_size_bound
+    from oxyline import _core
 
     for a, b, r0, rmin in [(0.9, 0.6, 1e-3, 1e-4), (0.8, 0.8, 1e-3, 5e-5), (0.95, 0.3, 1, 0.01),
                            (0.5, 0.5, 1.0, 0.5), (0.5, 0.5, 1.0, 0.4999)]:
-        bound, count = tree_size_bound(a, b, r0, rmin), tree_size(a, b, r0, rmin)
+        bound = _core.structured_tree_count_bound(a, b, r0, rmin)
+        count = _enumerated(a, b, r0, rmin)
         assert bound <= count
+        grown = oxyline.structured_tree("out", root_radius=r0, alpha=a, beta=b, min_radius=rmin)
+        assert len(grown) == count
         if a == b and count > 10:  # a full binary tree: the bound is within rounding of it
             assert bound >= count / 4
 
@@ -493,11 +502,17 @@ def test_a_core_panic_becomes_a_solver_error() -> None:
 
 def test_structured_tree_memory_estimate_refuses_before_growing() -> None:
     from oxyline import _core
-    from oxyline.structured_tree import CORE_BYTES_PER_VESSEL
 
-    assert CORE_BYTES_PER_VESSEL == _core.BYTES_PER_ELEMENT + _core.FLOW_BYTES_PER_SEGMENT
     with raises(ResourceError, "'out'", "memory"):
         oxyline.structured_tree("out", root_radius=1e-3, min_radius=5e-5, memory_limit=1e6)
+    # the estimate is the core's bytes per one-segment vessel times the enumerated count
+    need = _enumerated(0.9, 0.6, 1e-3, 5e-5) * (_core.BYTES_PER_ELEMENT
+                                                 + _core.FLOW_BYTES_PER_SEGMENT)
+    with raises(ResourceError, "'out'", "memory"):
+        oxyline.structured_tree("out", root_radius=1e-3, min_radius=5e-5,
+                                memory_limit=0.999 * need)
+    assert oxyline.structured_tree("out", root_radius=1e-3, min_radius=5e-5,
+                                   memory_limit=1.001 * need)
 
 
 # ---- ensembles ----------------------------------------------------------------------------------
@@ -599,7 +614,7 @@ def test_ensemble_variant_above_max_memory_fails_before_it_runs() -> None:
 
 
 def test_svzerod_output_table_is_estimated_before_it_is_allocated() -> None:
-    from oxyline.io import svzerod
+    from oxyline import svzerod  # the public drop-in
 
     cfg = copy.deepcopy(SVZ)
     cfg["simulation_parameters"].update(number_of_cardiac_cycles=1,

@@ -39,11 +39,16 @@ def structured_tree(node: str, *, root_radius: float, alpha: float = 0.9, beta: 
                     length_ratio: float = 50.0, min_radius: float = 1.0e-4,
                     stiffness: Mapping[str, float] | None = None, segments: int | None = None,
                     max_length: float | None = None, max_vessels: int = MAX_VESSELS,
-                    units: str = "SI") -> list[dict[str, Any]]:
+                    units: str = "SI", memory_limit: float | None = None
+                    ) -> list[dict[str, Any]]:
     """The native vessels of the structured tree below outlet ``node`` (parents before
     daughters), grown by the core. Leaves end at nodes ``<node>/st/<path>`` that no vessel
     leaves: give them a boundary condition (the ``structured-tree`` condition applies its
     ``terminal`` one).
+
+    Before any vessel is made the core bounds the vessel count in closed form, then counts
+    it: a tree above ``max_vessels`` (at most 1e8) is a ModelError, and one whose estimated
+    memory exceeds ``memory_limit`` (bytes; None: no limit) a ResourceError.
 
     Lengths and moduli are in ``units`` (``stiffness`` k1, k3 as moduli, k2 per length);
     ``stiffness`` defaults to Olufsen et al. (2000), E·h/r = 2e6 e^(-2253 r) + 8.65e4 Pa.
@@ -56,17 +61,17 @@ def structured_tree(node: str, *, root_radius: float, alpha: float = 0.9, beta: 
     condition = {"alpha": alpha, "beta": beta, "length_ratio": length_ratio,
                  "min_radius": min_radius, "stiffness": stiffness, "segments": segments,
                  "max_length": max_length, "max_vessels": max_vessels}
-    vessels, _ = _grow(node, condition, root_radius, units)
+    vessels, _ = _grow(node, condition, root_radius, units, memory_limit)
     return vessels
 
 
-def _grow(node: str, condition: Mapping[str, Any], root_radius: Any, units: str
-          ) -> tuple[list[dict[str, Any]], list[str]]:
+def _grow(node: str, condition: Mapping[str, Any], root_radius: Any, units: str,
+          memory_limit: float | None = None) -> tuple[list[dict[str, Any]], list[str]]:
     """(vessel dicts in ``units``, leaf nodes) of the tree of ``condition`` at ``node``."""
     if not isinstance(condition, dict):
         condition = dict(condition)
     return _core.grow_structured_tree(node, condition, root_radius, factor(units, "length"),
-                                      factor(units, "modulus"))
+                                      factor(units, "modulus"), memory_limit)
 
 
 def _root_radius(data: Mapping[str, Any], node: str) -> float:
@@ -126,11 +131,13 @@ def expanded(data: dict[str, Any]) -> dict[str, Any]:
     return expand(data)[0] if has_trees(data) else data
 
 
-def build_with_trees(data: dict[str, Any], build_native: Callable[..., Any]) -> Any:
+def build_with_trees(data: dict[str, Any], build_native: Callable[..., Any],
+                     memory_limit: float | None = None) -> Any:
     """The model of ``data`` (which has structured-tree conditions): the rest of the model
     read as usual, each tree grown by the core into the parts it assembles (after the
     model's own vessels, each leaf with its copy of the terminal condition), ``data`` kept
-    as its source and tree vessels out of the default output selection."""
+    as its source and tree vessels out of the default output selection. The trees'
+    estimated memory is checked against ``memory_limit`` (bytes) before they are grown."""
     from oxyline.model import _boundary_conditions
 
     units = str(data.get("units", "SI"))
@@ -144,7 +151,8 @@ def build_with_trees(data: dict[str, Any], build_native: Callable[..., Any]) -> 
         root = bc["root_radius"] if "root_radius" in bc else _root_radius(data, node)
         trees.append((node, dict(bc), root))
     # checked and grown first (their errors before the other elements'), moved in on assembly
-    grown = _core.StructuredTrees(trees, factor(units, "length"), factor(units, "modulus"))
+    grown = _core.StructuredTrees(trees, factor(units, "length"), factor(units, "modulus"),
+                                  memory_limit)
     # each terminal condition converted once (any outlet condition), copied per leaf
     terminals = []
     for node, bc, _ in trees:

@@ -314,7 +314,7 @@ mod tests {
 #[cfg(test)]
 mod direction_tests {
     use super::*;
-    use crate::spec::parse;
+    use crate::model::parse;
 
     /// A feed vessel into a junction with two daughters, lumped, in arrangement `arr`.
     fn junction(arr: &str) -> (crate::assemble::Assembled, usize) {

@@ -54,7 +54,8 @@ mod _core {
     #[pymodule_export]
     use super::trees::{
         StructuredTrees, facilitation_factor, grow_structured_tree, linear_facilitation_factor,
-        match_structured_tree, poiseuille_resistance, structured_tree_wall,
+        match_structured_tree, poiseuille_resistance, structured_tree_count_bound,
+        structured_tree_wall,
     };
     #[pymodule_export]
     use super::{

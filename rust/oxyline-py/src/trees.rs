@@ -115,11 +115,15 @@ fn tree_input(node: &str, bc: &Bound<'_, PyDict>) -> PyResult<TreeInput> {
                 let real = (x.is_instance_of::<PyInt>() || x.is_instance_of::<PyFloat>())
                     && !x.is_instance_of::<PyBool>();
                 t.max_vessels = Some(match x.extract::<f64>() {
-                    Ok(v) if real && v >= 1.0 => v,
+                    Ok(v) if real => v,
                     _ => {
+                        let shown: String = repr(&x).chars().take(40).collect();
                         return Err(model_error(
                             node,
-                            format!("'max_vessels' must be a number >= 1, got {}", repr(&x)),
+                            format!(
+                                "'max_vessels' must be a number from 1 to {}, got {shown}",
+                                st::fmt_g(st::HARD_MAX_VESSELS)
+                            ),
                         ));
                     }
                 });
@@ -156,11 +160,25 @@ fn native_vessel<'py>(py: Python<'py>, v: &VesselSpec, u: Units) -> PyResult<Bou
     Ok(d)
 }
 
+/// The tree of `input` checked (count in closed form, then counted; memory estimated against
+/// `memory_limit` bytes) and only then grown.
+fn checked_growth(
+    node: &str,
+    input: &TreeInput,
+    root: Root,
+    u: Units,
+    memory_limit: Option<f64>,
+) -> Result<Grown, Error> {
+    let tree = Tree::new(node, input, root, u)?;
+    tree.check_memory(memory_limit)?;
+    tree.grow()
+}
+
 /// The structured tree of `condition` below `node` as native vessel dicts (model units: unit
 /// factors `length`, `modulus`) and its leaf nodes. `root_radius` (model units) stands in for
-/// the condition's own.
+/// the condition's own; `memory_limit` (bytes; None: none) bounds the tree's estimated memory.
 #[pyfunction]
-#[pyo3(signature = (node, condition, root_radius, length = 1.0, modulus = 1.0))]
+#[pyo3(signature = (node, condition, root_radius, length = 1.0, modulus = 1.0, memory_limit = None))]
 pub fn grow_structured_tree<'py>(
     py: Python<'py>,
     node: &str,
@@ -168,12 +186,13 @@ pub fn grow_structured_tree<'py>(
     root_radius: &Bound<'py, PyAny>,
     length: f64,
     modulus: f64,
+    memory_limit: Option<f64>,
 ) -> PyResult<(Bound<'py, PyList>, Vec<String>)> {
     let u = Units { length, modulus };
     let input = tree_input(node, condition)?;
     let root = Root::Given(number(node, "root_radius", root_radius)?);
     let Grown { vessels, leaves } = py
-        .detach(|| Tree::new(node, &input, root, u)?.grow())
+        .detach(|| checked_growth(node, &input, root, u, memory_limit))
         .map_err(crate::to_py)?;
     let list = PyList::empty(py);
     for v in &vessels {
@@ -193,21 +212,31 @@ pub struct StructuredTrees {
 #[pymethods]
 impl StructuredTrees {
     /// `trees`: (node, condition dict, root radius in model units) per tree; `length`,
-    /// `modulus`: the model's unit factors.
+    /// `modulus`: the model's unit factors; `memory_limit`: bytes all trees may take (None:
+    /// no limit), each tree estimated against what the ones before it left.
     #[new]
+    #[pyo3(signature = (trees, length, modulus, memory_limit = None))]
     fn new(
         py: Python<'_>,
         trees: Vec<(String, Bound<'_, PyDict>, Bound<'_, PyAny>)>,
         length: f64,
         modulus: f64,
+        memory_limit: Option<f64>,
     ) -> PyResult<Self> {
         let u = Units { length, modulus };
         let mut out = Vec::with_capacity(trees.len());
         for (node, bc, root) in &trees {
             let input = tree_input(node, bc)?;
             let root = Root::Given(number(node, "root_radius", root)?);
+            let left = memory_limit.map(|m| {
+                let n: usize = out
+                    .iter()
+                    .map(|(_, g): &(String, Grown)| g.vessels.len())
+                    .sum();
+                m - oxyline_core::run::memory::model_bytes(n, n, 0.0, 0)
+            });
             let g = py
-                .detach(|| Tree::new(node, &input, root, u)?.grow())
+                .detach(|| checked_growth(node, &input, root, u, left))
                 .map_err(crate::to_py)?;
             out.push((node.clone(), g));
         }
@@ -276,6 +305,18 @@ pub fn structured_tree_wall(
 ) -> PyResult<(f64, f64)> {
     let law = stiffness(node, stiffness_law)?;
     st::wall_at(node, law, radius, Units::SI).map_err(crate::to_py)
+}
+
+/// A lower bound of the vessel count of the structured tree (α, β, root radius, min_radius),
+/// in closed form (`vessel_count_bound`).
+#[pyfunction]
+pub fn structured_tree_count_bound(
+    alpha: f64,
+    beta: f64,
+    root_radius: f64,
+    min_radius: f64,
+) -> f64 {
+    st::vessel_count_bound(alpha, beta, root_radius, min_radius)
 }
 
 /// Steady Poiseuille resistance of a tube tapered linearly from `r_in` to `r_out` (SI).

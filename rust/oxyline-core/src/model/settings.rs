@@ -94,6 +94,13 @@ impl<N: Node> Val<N> {
             _ => None,
         }
     }
+    fn integer(&self) -> Option<i64> {
+        match self {
+            Val::Given(n) => n.integer(),
+            Val::Int(i) => Some(*i),
+            _ => None,
+        }
+    }
     fn text(&self) -> Option<String> {
         match self {
             Val::Given(n) => n.text(),
@@ -307,15 +314,38 @@ fn setting(place: &str, message: String) -> Error {
     err(element, format!("{key} {message}"))
 }
 
-/// An integer >= `minimum`: integers (and whole floats, read as the integer); bools and text
-/// are refused.
+/// The largest count a setting takes (2⁵³: every count below is exact as a float, and no run
+/// gets near it).
+pub const MAX_COUNT: i64 = 1 << 53;
+
+/// An integer from `minimum` to [`MAX_COUNT`]: integers (and whole floats, read as the
+/// integer); bools and text are refused, and so are integers beyond the range (never
+/// saturated into it).
 fn integer<N: Node>(v: &Val<N>, place: &str, minimum: i64) -> Result<i64> {
+    let beyond = || {
+        let shown: String = v.repr().chars().take(40).collect();
+        setting(
+            place,
+            format!("must be an integer from {minimum} to 2**53, got {shown}"),
+        )
+    };
     let whole = match v.kind() {
-        Kind::Int => v.number().map(|x| x as i64),
-        Kind::Float => v.number().filter(|x| x.fract() == 0.0).map(|x| x as i64),
+        Kind::Int => Some(v.integer().ok_or_else(beyond)?),
+        Kind::Float => v
+            .number()
+            .filter(|x| x.fract() == 0.0)
+            .map(|x| {
+                if x.abs() <= MAX_COUNT as f64 {
+                    Ok(x as i64)
+                } else {
+                    Err(beyond())
+                }
+            })
+            .transpose()?,
         _ => None,
     };
     match whole {
+        Some(n) if n > MAX_COUNT => Err(beyond()),
         Some(n) if n >= minimum => Ok(n),
         Some(n) if v.kind() == Kind::Float => Err(setting(
             place,
@@ -406,5 +436,18 @@ mod tests {
             e(json!({}), json!({"segmnts": true, "a": 1})),
             "simulate: unknown option(s) a, segmnts"
         );
+    }
+
+    #[test]
+    fn counts_beyond_the_range_are_refused_not_saturated() {
+        let e = |o: serde_json::Value| resolve(&json!({}), &o, None).unwrap_err().to_string();
+        assert_eq!(
+            e(json!({"max_cycles": u64::MAX})),
+            "simulate: max_cycles must be an integer from 1 to 2**53, got 18446744073709551615"
+        );
+        assert!(e(json!({"cycles": 1e30})).starts_with("simulate: cycles must be an integer"));
+        assert!(e(json!({"max_iterations": (1u64 << 53) + 1})).contains("max_iterations"));
+        let s = resolve(&json!({}), &json!({"cycles": 1u64 << 53}), None).unwrap();
+        assert_eq!(s.cycles, 1 << 53);
     }
 }

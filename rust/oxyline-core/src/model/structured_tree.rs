@@ -15,6 +15,7 @@
 
 use crate::error::{Error, Result};
 use crate::model::{GeometrySpec, VesselSpec};
+use crate::run::memory;
 use crate::segment::{Blood, InertanceProfile, segment_rlc};
 
 /// The boundary condition's `type`.
@@ -44,9 +45,15 @@ pub const OLUFSEN_STIFFNESS: Stiffness = Stiffness::KLaw {
 pub const K_LAW_THICKNESS_RATIO: f64 = 0.1;
 /// The default guard on the number of tree vessels.
 pub const MAX_VESSELS: f64 = 2.0e6;
+/// No tree may have more vessels than this, whatever `max_vessels` says (10⁸ vessels need tens
+/// of GB while the model is built).
+pub const HARD_MAX_VESSELS: f64 = 1.0e8;
 /// Radius classes (i, j) visited at most when counting: beyond, α or β is so close to 1 that
 /// the count is reported as a lower bound.
 const MAX_CLASSES: usize = 10_000_000;
+/// Radius classes visited to give the exact count of a tree the closed-form bound already
+/// refuses (the message names it when it is cheap to get).
+const REFUSED_CLASSES: usize = 100_000;
 
 /// The element a tree's errors name.
 pub fn element(node: &str) -> String {
@@ -186,7 +193,22 @@ impl WallLaw {
         match *self {
             WallLaw::KLaw { k1, k2, k3 } => {
                 let ehr = k1 * (k2 * r).exp() + k3;
-                if ehr.is_nan() || ehr <= 0.0 {
+                // an overflowing law (k2·r beyond ln f64::MAX) is refused, not an infinite wall
+                if !(ehr / K_LAW_THICKNESS_RATIO).is_finite() {
+                    return Err(err(
+                        node,
+                        format!(
+                            "stiffness gives E·h/r = {} Pa at radius {} m, not a finite number \
+                             (k1 = {}, k2 = {} 1/m, k3 = {})",
+                            fmt_g(ehr),
+                            fmt_g(r),
+                            fmt_g(k1),
+                            fmt_g(k2),
+                            fmt_g(k3)
+                        ),
+                    ));
+                }
+                if ehr <= 0.0 {
                     return Err(err(
                         node,
                         format!(
@@ -232,9 +254,42 @@ pub struct Count {
     pub exact: bool,
 }
 
+/// A lower bound of [`vessel_count`] in closed form (no counting): every vessel down to depth
+/// D = ⌊ln(r0/rmin) / ln(1/min(α, β))⌋ exists (a full binary tree of 2^(D+1) − 2 vessels), and
+/// so do the pure α and pure β chains (I + J vessels, I = ⌊ln(r0/rmin) / ln(1/α)⌋, J
+/// likewise); one depth less for rounding. Infinite when the full tree is deeper than 1000.
+pub fn vessel_count_bound(alpha: f64, beta: f64, root_radius: f64, min_radius: f64) -> f64 {
+    let inside = |f: f64| f > 0.0 && f < 1.0;
+    if !(inside(alpha) && inside(beta)) || root_radius.is_nan() || root_radius < min_radius {
+        return 0.0;
+    }
+    let span = (root_radius / min_radius).ln();
+    let depth = |f: f64| (span / -f.ln()).floor().max(1.0) - 1.0;
+    let full = depth(alpha.min(beta));
+    let chains = depth(alpha) + depth(beta);
+    let full_count = if full > 1000.0 {
+        f64::INFINITY
+    } else {
+        2f64.powf(full + 1.0) - 2.0
+    };
+    full_count.max(chains)
+}
+
 /// Number of tree vessels, counted without growing the tree: a vessel exists iff its own
 /// radius α^i β^j r0 ≥ `min_radius`, and C(i + j, i) paths have i a's and j b's.
 pub fn vessel_count(alpha: f64, beta: f64, root_radius: f64, min_radius: f64) -> Count {
+    vessel_count_within(alpha, beta, root_radius, min_radius, MAX_CLASSES)
+}
+
+/// [`vessel_count`], stopped (inexact, a lower bound) after `max_classes` radius classes: the
+/// work is per class, never per vessel.
+pub fn vessel_count_within(
+    alpha: f64,
+    beta: f64,
+    root_radius: f64,
+    min_radius: f64,
+    max_classes: usize,
+) -> Count {
     let (mut n, mut exact, mut classes) = (0u128, true, 0usize);
     let mut i = 0i32;
     while alpha.powf(f64::from(i)) * root_radius >= min_radius {
@@ -242,7 +297,7 @@ pub fn vessel_count(alpha: f64, beta: f64, root_radius: f64, min_radius: f64) ->
         let mut paths = 1u128; // C(i + j, i) at j = 0
         while alpha.powf(f64::from(i)) * beta.powf(f64::from(j)) * root_radius >= min_radius {
             classes += 1;
-            if classes > MAX_CLASSES {
+            if classes > max_classes {
                 return Count { n, exact: false };
             }
             if i + j > 0 {
@@ -352,11 +407,12 @@ impl Tree {
             Root::Vessel(r) => r,
         };
         let max_vessels = input.max_vessels.unwrap_or(MAX_VESSELS);
-        if max_vessels.is_nan() || max_vessels < 1.0 {
+        if !(1.0..=HARD_MAX_VESSELS).contains(&max_vessels) {
             return Err(err(
                 node,
                 format!(
-                    "'max_vessels' must be a number >= 1, got {}",
+                    "'max_vessels' must be a number from 1 to {}, got {}",
+                    fmt_g(HARD_MAX_VESSELS),
                     fmt_g(max_vessels)
                 ),
             ));
@@ -378,6 +434,31 @@ impl Tree {
             (None, None) => Segmentation::Model,
         };
         let wall = WallLaw::new(node, input.stiffness, u)?;
+        let too_many = |n: String| {
+            err(
+                node,
+                format!(
+                    "the tree has {n} vessels, more than max_vessels = {} (alpha = {}, beta = {}; \
+                     raise min_radius = {} m or max_vessels)",
+                    fmt_g(max_vessels),
+                    fmt_g(alpha),
+                    fmt_g(beta),
+                    fmt_g(rmin)
+                ),
+            )
+        };
+        // the closed-form bound first: trees of α, β near 1 are refused without counting
+        let bound = vessel_count_bound(alpha, beta, r0, rmin);
+        if bound > max_vessels {
+            // the message gives the exact count when few classes hold it
+            let c = vessel_count_within(alpha, beta, r0, rmin, REFUSED_CLASSES);
+            return Err(too_many(if c.exact {
+                c.n.to_string()
+            } else {
+                format!("at least {}", fmt_g(bound.max(c.n as f64)))
+            }));
+        }
+        // counted per radius class (at most MAX_CLASSES of them: never for ever)
         let count = vessel_count(alpha, beta, r0, rmin);
         if count.n as f64 > max_vessels || !count.exact {
             let n = if count.exact {
@@ -385,14 +466,7 @@ impl Tree {
             } else {
                 format!("at least {}", count.n)
             };
-            return Err(err(
-                node,
-                format!(
-                    "the tree has {n} vessels, more than max_vessels = {} (raise min_radius = {} m or max_vessels)",
-                    fmt_g(max_vessels),
-                    fmt_g(rmin)
-                ),
-            ));
+            return Err(too_many(n));
         }
         if count.n == 0 {
             return Err(err(
@@ -416,6 +490,31 @@ impl Tree {
             segmentation,
             count: count.n,
         })
+    }
+
+    /// Refuse the tree (a typed resource error) when its vessels' estimated memory exceeds
+    /// `limit` (bytes; None: no limit), before any of them is made: the core's per-vessel and
+    /// per-segment bytes of `run::memory` (segments known before growing: a fixed count, else
+    /// one per vessel, a lower bound).
+    pub fn check_memory(&self, limit: Option<f64>) -> Result<()> {
+        let Some(limit) = limit else {
+            return Ok(());
+        };
+        let per_vessel = match self.segmentation {
+            Segmentation::Count(n) => n,
+            Segmentation::Model | Segmentation::MaxLength(_) => 1,
+        };
+        let n = usize::try_from(self.count).unwrap_or(usize::MAX);
+        let need = memory::model_bytes(n.saturating_mul(per_vessel), n, 0.0, 0);
+        if need > limit {
+            return Err(Error::over_limit(
+                format!("{}: the tree's {n} vessels", element(&self.node)),
+                need,
+                limit,
+                "raise min_radius or lower max_vessels",
+            ));
+        }
+        Ok(())
     }
 
     /// The tree's vessels, depth first (SI; the wall law may still refuse a radius).
@@ -573,8 +672,27 @@ impl Shape {
                 ),
             ));
         }
-        let largest = self.alpha * self.root_radius;
+        let alpha = number(node, "alpha", self.alpha, 0.0, 1.0)?;
+        let beta = number(node, "beta", self.beta, 0.0, 1.0)?;
+        let largest = alpha * self.root_radius;
         let mut rmin = min_radius.min(largest); // at least the a-daughter
+        // the class table's size in closed form: α, β near 1 are refused, not tabulated
+        let span = (self.root_radius / rmin).ln();
+        let table = (span / -alpha.ln() + 2.0) * (span / -beta.ln() + 2.0);
+        if table.is_nan() || table > MAX_CLASSES as f64 {
+            return Err(err(
+                node,
+                format!(
+                    "a tree with alpha = {}, beta = {} down to min_radius = {} m has about {} \
+                     radius classes, more than {} (raise min_radius or lower alpha, beta)",
+                    fmt_g(alpha),
+                    fmt_g(beta),
+                    fmt_g(rmin),
+                    fmt_g(table),
+                    fmt_g(MAX_CLASSES as f64)
+                ),
+            ));
+        }
         let mut classes = self.classes(rmin);
         while classes.resistance(0.0) > tree_fraction * total {
             rmin *= 1.05;

@@ -229,7 +229,7 @@ fn errors_name_the_node_key_and_value_as_written() {
             ..base.clone()
         }),
         format!(
-            "{pre}the tree has 18 vessels, more than max_vessels = 10 (raise min_radius = 0.0004 m or max_vessels)"
+            "{pre}the tree has 18 vessels, more than max_vessels = 10 (alpha = 0.9, beta = 0.6; raise min_radius = 0.0004 m or max_vessels)"
         )
     );
     assert!(
@@ -344,4 +344,114 @@ fn root_radius_is_the_vessel_end_at_the_node() {
         Tree::new("out", &i, Root::Vessel(1e-3), Units::SI).unwrap(),
         given
     );
+}
+
+#[test]
+fn closed_form_bound_is_a_lower_bound_of_the_enumeration() {
+    for (a, b, r0, rmin) in [
+        (0.9, 0.6, 1e-3, 1e-4),
+        (0.8, 0.8, 1e-3, 5e-5),
+        (0.95, 0.3, 1.0, 0.01),
+        (0.5, 0.5, 1.0, 0.5),
+        (0.5, 0.5, 1.0, 0.4999),
+        (0.7, 0.7, 1.0, 1e-3),
+    ] {
+        let n = enumerate(a, b, r0, rmin) as f64;
+        let bound = vessel_count_bound(a, b, r0, rmin);
+        assert!(bound <= n, "{a} {b} {r0} {rmin}: {bound} > {n}");
+        if a == b && n > 10.0 {
+            // a full binary tree: the bound is within one level of it
+            assert!(bound >= n / 4.0, "{a} {rmin}: {bound} vs {n}");
+        }
+    }
+}
+
+#[test]
+fn trees_near_one_and_guards_out_of_range_are_refused_before_counting() {
+    let msg = |i: TreeInput| {
+        Tree::new("out", &i, Root::Given(1e-3), Units::SI)
+            .unwrap_err()
+            .to_string()
+    };
+    // ~10^(10^6) vessels: refused by the closed-form bound, not by a count
+    let near = msg(TreeInput {
+        beta: Some(0.999999),
+        ..input(0.999999, 0.6, 1e-5)
+    });
+    assert!(
+        near.contains("at least inf vessels") && near.contains("alpha = 0.999999"),
+        "{near}"
+    );
+    for bad in [0.0, 6e9, f64::NAN, f64::INFINITY] {
+        let m = msg(TreeInput {
+            max_vessels: Some(bad),
+            ..input(0.9, 0.6, 4e-4)
+        });
+        assert!(
+            m.contains("'max_vessels' must be a number from 1 to 1e+08"),
+            "{m}"
+        );
+    }
+}
+
+#[test]
+fn an_overflowing_wall_law_is_refused_naming_the_node() {
+    let k = Stiffness::KLaw {
+        k1: 1.0,
+        k2: 1e300,
+        k3: 0.0,
+    };
+    let tree = Tree::new(
+        "out",
+        &TreeInput {
+            stiffness: Some(k),
+            ..input(0.9, 0.6, 5e-4)
+        },
+        Root::Given(1e-3),
+        Units::SI,
+    )
+    .unwrap();
+    let e = tree.grow().unwrap_err().to_string();
+    assert!(
+        e.starts_with("boundary condition 'out' (structured-tree): stiffness gives E·h/r = inf"),
+        "{e}"
+    );
+}
+
+#[test]
+fn memory_is_estimated_from_the_count_before_growing() {
+    let tree = Tree::new("out", &input(0.9, 0.6, 5e-5), Root::Given(1e-3), Units::SI).unwrap();
+    let n = enumerate(0.9, 0.6, 1e-3, 5e-5) as f64;
+    // one segment per vessel: each vessel's element and segment bytes
+    let need = n * (memory::BYTES_PER_ELEMENT + memory::FLOW_BYTES_PER_SEGMENT);
+    assert!(tree.check_memory(Some(need * 1.001)).is_ok());
+    assert!(tree.check_memory(None).is_ok());
+    let e = tree.check_memory(Some(need * 0.999)).unwrap_err();
+    assert!(matches!(e, Error::Resource { .. }), "{e}");
+    assert!(e.to_string().contains("boundary condition 'out'"), "{e}");
+}
+
+#[test]
+fn matching_a_tree_near_one_is_refused_before_its_class_table() {
+    let shape = Shape {
+        alpha: 0.999999,
+        beta: 0.999999,
+        length_ratio: 50.0,
+        root_radius: 1e-3,
+        viscosity: MU,
+    };
+    let e = shape
+        .matched("out", 1e9, 1e-5, 0.9)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("radius classes") && e.contains("alpha = 0.999999"),
+        "{e}"
+    );
+    let one = Shape {
+        alpha: 1.0,
+        ..shape
+    };
+    let e = one.matched("out", 1e9, 1e-5, 0.9).unwrap_err().to_string();
+    assert!(e.contains("'alpha' must be in (0, 1), got 1"), "{e}");
 }
