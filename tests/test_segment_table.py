@@ -184,8 +184,10 @@ def test_model_module_is_a_leaf_and_formats_are_sniffed_once() -> None:
                         # errors and units itself (checked below), not an importer
                         "oxyline.structured_tree"}, imported
     tree_module = ast.parse(Path(model.__file__).with_name("structured_tree.py").read_text())
+    # ``oxyline``: its ``_core`` (the core grows the trees); never oxyline.model (no circle)
     assert {n.module for n in ast.walk(tree_module) if isinstance(n, ast.ImportFrom)} <= {
-        "__future__", "math", "collections.abc", "typing", "oxyline.errors", "oxyline.units"}
+        "__future__", "math", "collections.abc", "typing", "oxyline", "oxyline.errors",
+        "oxyline.units"}
     cfg = _one_vessel(0.0)
     assert sniff_format(cfg) == "svzerod" and sniff_format(_lumped3()) == "native"
     assert sniff_format({"network": []}) == "openbf"

@@ -28,6 +28,7 @@ from typing import Any
 from oxyline import _core
 from oxyline import memory as _memory  # a leaf too: imports only _core and errors
 from oxyline.errors import ModelError
+from oxyline.structured_tree import build_with_trees, expanded, has_trees
 from oxyline.units import factor
 
 #: the schema's key sets, as the core checks them
@@ -193,7 +194,6 @@ class Model:
 def _get_canonical(self: Model) -> dict[str, Any]:
     canon = self.__dict__.get("_canonical")
     if canon is None and self._rebuild is not None:
-        from oxyline.structured_tree import expanded
 
         canon = _unassembled(expanded(self._rebuild)).canonical
         self.__dict__["_canonical"] = canon
@@ -282,11 +282,10 @@ def build_model(data: dict[str, Any]) -> Model:
 def _build(data: dict[str, Any]) -> Model:
     """The model of ``data``, which becomes the model's ``source``: callers pass a dict they
     own (a copy of the user's, or one they built)."""
-    from oxyline.structured_tree import build_with_trees, has_trees
-
     if has_trees(data):  # a model-to-model step, like an importer
         # the trees' vessels are estimated against the memory allowed before they are grown
-        return build_with_trees(data, _build_native, _memory.default_limit())
+        return build_with_trees(data, _build_native, _boundary_conditions,
+                                _memory.default_limit())
     return _build_native(data)
 
 

@@ -132,14 +132,15 @@ def expanded(data: dict[str, Any]) -> dict[str, Any]:
 
 
 def build_with_trees(data: dict[str, Any], build_native: Callable[..., Any],
+                     convert_conditions: Callable[..., Any],
                      memory_limit: float | None = None) -> Any:
     """The model of ``data`` (which has structured-tree conditions): the rest of the model
     read as usual, each tree grown by the core into the parts it assembles (after the
     model's own vessels, each leaf with its copy of the terminal condition), ``data`` kept
     as its source and tree vessels out of the default output selection. The trees'
-    estimated memory is checked against ``memory_limit`` (bytes) before they are grown."""
-    from oxyline.model import _boundary_conditions
-
+    estimated memory is checked against ``memory_limit`` (bytes) before they are grown.
+    ``convert_conditions(conditions, units)`` is the model's reader of boundary conditions
+    (passed in: this module is below :mod:`oxyline.model`, not beside it)."""
     units = str(data.get("units", "SI"))
     rest: dict[str, Any] = {}
     trees: list[tuple[str, dict[str, Any], Any]] = []
@@ -156,7 +157,7 @@ def build_with_trees(data: dict[str, Any], build_native: Callable[..., Any],
     # each terminal condition converted once (any outlet condition), copied per leaf
     terminals = []
     for node, bc, _ in trees:
-        canon, _ = _boundary_conditions({node: _terminal(node, bc)}, units)
+        canon, _ = convert_conditions({node: _terminal(node, bc)}, units)
         terminals.append(json.dumps(canon[node]))
     model = build_native({**data, "boundary_conditions": rest},
                          lambda parts: grown.move_into(parts, terminals))
