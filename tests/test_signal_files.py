@@ -131,8 +131,8 @@ def _check_result_file(path: Path) -> int:
 
         df = pd.read_csv(path)
         assert len(df) > 0 and not df.isna().any().any(), "a CSV with missing cells"
-        assert np.all(np.diff(df["time"].unique()) > 0)
-        return int(df["time"].nunique())
+        assert np.all(np.diff(df["time [s]"].unique()) > 0)
+        return int(df["time [s]"].nunique())
     if path.suffix == ".zarr":
         with xr.open_zarr(path) as ds:
             n = ds.sizes["time"]
