@@ -62,7 +62,7 @@ pub struct Settings {
     pub rtol: Option<f64>,
     /// Error control's absolute tolerance per kind of unknown (SI); the run names an unknown
     /// kind.
-    pub atol: Option<Vec<(String, f64)>>,
+    pub atol: Option<AbsoluteTolerances>,
 }
 
 /// A setting's value: given (by the caller or the file) or the default.
@@ -273,13 +273,15 @@ pub fn resolve<N: Node>(sim: &N, overrides: &N, period: Option<f64>) -> Result<S
 }
 
 type Tolerance<N> = (Val<N>, String);
+/// Error control's `atol`: (kind, value) pairs.
+type AbsoluteTolerances = Vec<(String, f64)>;
 
 /// Error control's `rtol` (a finite number > 0) and `atol` (a mapping of kind to a finite
 /// number > 0), each named by where it came from.
 fn tolerances<N: Node>(
     rtol: &Tolerance<N>,
     atol: &Tolerance<N>,
-) -> Result<(Option<f64>, Option<Vec<(String, f64)>>)> {
+) -> Result<(Option<f64>, Option<AbsoluteTolerances>)> {
     let r = match rtol.0.kind() {
         Kind::Null => None,
         _ => Some(real(&rtol.0, &rtol.1, 0.0, f64::INFINITY, true)?),
