@@ -183,7 +183,7 @@ def test_run_closed_loop_o2_builtin_writes_its_summary(tmp_path: Path,
                                                        capsys: pytest.CaptureFixture[str]) -> None:
     """`oxyline models` lists the closed-loop O2 built-ins and `oxyline run` solves one to its
     periodic state: the written summary obeys Fick's principle (an independent balance: VO2 =
-    CO (CaO2 − CvO2), issue 14 item 4) and the resting ranges of docs/oxygen.md."""
+    CO (CaO2 − CvO2)) and the resting ranges of docs/oxygen.md."""
     assert main(["models"]) == 0
     assert "closed-loop-o2-tree" in capsys.readouterr().out
     out = tmp_path / "s.json"

@@ -1,4 +1,4 @@
-"""Oxygen around a closed loop (issue 14 item 4; docs/oxygen.md "Oxygen around a closed loop"):
+"""Oxygen around a closed loop (docs/oxygen.md "Oxygen around a closed loop"):
 Fick's principle and the loop's exact mass balance at periodic steady state, the lung's
 complete-equilibration limit against the Hill curve, and resting physiology in documented
 ranges. Coarse steps (4 ms) keep the tests fast; the balances hold for any step."""

@@ -1,4 +1,4 @@
-"""Coronary oxygen (issue 14 item 3): `paper-curved-coronary`, the paper's coronary vessel fed
+"""Coronary oxygen: `paper-curved-coronary`, the paper's coronary vessel fed
 by aortic pressure and draining into a coronary bed under intramyocardial pressure
 (docs/physics.md §1.7, docs/oxygen.md "Coronary oxygen"). Checked against the closed-form
 periodic solution of the linear circuit and the O2 mass balance, not against the code's own

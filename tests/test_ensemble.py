@@ -786,7 +786,7 @@ def test_sigint_stops_the_threads_and_returns_the_finished_variants() -> None:
 
 
 def test_heart_outputs_in_the_ensemble_equal_simulate() -> None:
-    """Chamber volumes and valve status (issue 14 item 4) as ensemble summary variables
+    """Chamber volumes and valve status as ensemble summary variables
     ``chamber_volume_<stat>`` (variant, chamber) and ``valve_status_<stat>`` (variant, valve),
     against each patched model's own simulate(): the same statistics of its
     ``Result.chamber_volume`` / ``valve_status`` over the output times."""

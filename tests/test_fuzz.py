@@ -1,4 +1,4 @@
-"""Fuzzing (issue 13, item 9): hypothesis mutates valid models (delete, retype, corrupt, duplicate
+"""Fuzzing: hypothesis mutates valid models (delete, retype, corrupt, duplicate
 keys and nodes) and every mutant must give a typed error or a finite run, never a crash, an
 untyped exception or a hang.
 
@@ -6,7 +6,7 @@ The mutants run in a child process with an address-space cap and a timeout, one 
 (importing oxyline costs more than running a small model), so that a crash or runaway memory
 fails the test instead of the test run. The CI profile is bounded and derandomized (the same
 mutants on every run, a few seconds); ``HYPOTHESIS_PROFILE=explore`` searches new random mutants,
-``OXYLINE_FUZZ_EXAMPLES=N`` sets how many batches. Sizes that only item 2 of issue 13 (memory
+``OXYLINE_FUZZ_EXAMPLES=N`` sets how many batches. Sizes that only the memory estimate (memory
 estimates before allocating) can refuse, e.g. ``segments: 10**9``, are not drawn yet.
 """
 
@@ -166,7 +166,7 @@ def mutants(draw: Any) -> tuple[str, str]:  # st.DrawFn (hypothesis >= 6.x)
 
 def _known(mutate: dict[str, Any]) -> tuple[str, str]:
     """The bifurcation with ``mutate`` merged into its ``simulation`` section, as JSON: the
-    mutants the fuzzer found before issue 13's fixes (settings that raised a raw ValueError)."""
+    mutants the fuzzer found before the settings fixes (settings that raised a raw ValueError)."""
     data = copy.deepcopy(BASES[0])
     sim = data.setdefault("simulation", {})
     for k, v in mutate.items():

@@ -1,4 +1,4 @@
-"""Issue 14 item 1 against closed forms (not svZeroDSolver's output): a chamber's time-varying
+"""Time-varying chambers against closed forms (not svZeroDSolver's output): a chamber's time-varying
 elastance E(t) and a tanh valve in both integrators, RK4's stability bound with E(t), and the
 typed errors of the native heart elements and the coronary condition (docs/physics.md §1.7,
 §1.8)."""

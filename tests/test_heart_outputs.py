@@ -1,4 +1,4 @@
-"""Chamber volumes and valve status in the native Result (issue 14 item 4), checked against
+"""Chamber volumes and valve status in the native Result, checked against
 physics rather than against the columns they are read from: a chamber's volume against its
 own flow balance dV/dt = Q_in − Q_out (the vessel's recorded flows, integrated), a closed
 valve against its flow, and the heart block's isovolumic phases (both left-heart valves

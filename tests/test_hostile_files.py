@@ -1,4 +1,4 @@
-"""Hostile and odd model files (issue 13, item 4): every one gives a typed error naming the file,
+"""Hostile and odd model files: every one gives a typed error naming the file,
 quickly and in bounded memory, never a hang, a raw decoding error or a silently wrong model."""
 
 from __future__ import annotations

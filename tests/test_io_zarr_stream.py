@@ -182,7 +182,7 @@ def test_cli_interrupted_run_exits_130_with_the_partial_store(
 
 @pytest.mark.parametrize("chunk", [97, 1000])
 def test_streamed_heart_outputs_equal_the_in_memory_result(tmp_path: Path, chunk: int) -> None:
-    """Chamber volumes and valve status (issue 14 item 4) in the streamed store: the same
+    """Chamber volumes and valve status in the streamed store: the same
     arrays bit for bit, also for the heart block's valves, whose status is a sequence (a
     closed valve reopens only by its pressure difference): carried across chunk borders."""
     import json

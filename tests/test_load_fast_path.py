@@ -141,7 +141,7 @@ def test_a_bad_canonical_vessel_dict_is_a_model_error_naming_it(edit: dict[str, 
 
 
 def test_a_released_canonical_is_written_again_as_it_was() -> None:
-    """`load_model` releases the canonical dicts once the core has the model (issue 9 item 6);
+    """`load_model` releases the canonical dicts once the core has the model;
     asking for them writes them again from `source`. Truth: the description of the same dict
     converted before any release, and the core's segment table of a network built from the
     rewritten description (a different path: the JSON text, not the first hand-over)."""

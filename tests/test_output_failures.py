@@ -1,4 +1,4 @@
-"""Disk full and bad output paths (issue 13, item 3): a failed write is a typed error that names
+"""Disk full and bad output paths: a failed write is a typed error that names
 the file and keeps the result, never a crash; output paths are checked before the run; an
 existing store is never deleted without --overwrite. Disk full is simulated by a file-size limit
 (RLIMIT_FSIZE: writes past it fail with EFBIG, as with ENOSPC) in a child process, or by a Zarr

@@ -42,7 +42,7 @@ def tube(n: int, species: list[dict] | None = None, oxygen: dict | None = None, 
 
 
 # ---------------------------------------------------------------------------------------------
-# second species with first-order decay in steady plug flow (issue 3, "must show" 3)
+# second species with first-order decay in steady plug flow ("must show" 3)
 
 @pytest.mark.parametrize("method", ["generalized-alpha", "auto"])
 def test_decay_in_steady_plug_flow_converges_to_the_exponential(method: str) -> None:

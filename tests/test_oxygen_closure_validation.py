@@ -17,7 +17,7 @@ from validation.closures import load_case, one_d, scenarios
 
 DATA = json.loads((Path(__file__).parent / "data" / "oxygen_2d_uptakes.json").read_text())
 STORED = {(r["case"], r["scenario"]): r for r in DATA["cases"]}
-#: the default before session 9 (still selectable by name); the tests of this name document
+#: the default before the inlet-renewal fit (still selectable by name); the tests of this name document
 #: its errors against the outlet-dependent references of §6–§12
 DEFAULT = {"model": "graetz", "flow": "forward-mean"}
 
@@ -141,7 +141,7 @@ def test_the_inlet_renewal_candidate_on_held_out_vessels() -> None:
 def test_wall_shear_is_the_gradient_of_the_womersley_profile() -> None:
     """`wall_shear` (which gives B) against a finite difference of the reference solver's own
     Womersley profile at the wall (validated in test_reference_axisymmetric.py), for the
-    aortic example's two harmonics (Womersley 11 and 15.6): the sign error fixed in session 8
+    aortic example's two harmonics (Womersley 11 and 15.6): the sign error fixed earlier
     gave a 100 % difference in the oscillating part. Tolerance 1e-4 of the peak: the one-sided
     difference with step 1e-6 of the radius."""
     import math

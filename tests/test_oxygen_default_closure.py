@@ -1,4 +1,4 @@
-"""The default wall closure since session 9, `graetz` with `flow: inlet-renewal` (the Graetz
+"""The default wall closure since the inlet-renewal fit, `graetz` with `flow: inlet-renewal` (the Graetz
 law of the net mean flow plus the inlet renewal by the Womersley profile's near-wall backward
 excursion, docs/physics.md §3.6), wired into runs: against the outlet-independent 2-D reference
 (the tube continued downstream beyond the backflow's excursion, uptake over the vessel's own
@@ -55,7 +55,7 @@ def test_the_default_on_held_out_vessels_against_the_outlet_independent_referenc
 def test_the_default_on_the_paper_examples_and_reversal_cases() -> None:
     """The 27 rows of §2 (the three paper examples, Womersley 2–15, reversal 0–30 %): within
     2 % of the outlet-independent reference. A was fitted on these rows against the 'profile'
-    reference (session 8) and not re-fitted; this guards the wiring on the fit set."""
+    reference and not re-fitted; this guards the wiring on the fit set."""
     worst, name = _worst(paper_rows())
     assert abs(worst) < 0.02, (name, worst)
 
@@ -150,7 +150,7 @@ def test_the_wired_law_in_a_reversing_tube_is_the_closed_form() -> None:
 
 
 def test_the_previous_default_stays_selectable_by_name() -> None:
-    """`flow: forward-mean` still gives the session 6–8 law by name: on the aortic example
+    """`flow: forward-mean` still gives the earlier law by name: on the aortic example
     −0.12 % of the outlet-independent reference (docs/validation-oxygen.md §13; ± 0.1 %: the
     1-D run is deterministic, the margin absorbs platform round-off over 12 cycles), and the
     ascending aorta at exercise still shows its −7.7 % miss there, which the default removes."""

@@ -1,4 +1,4 @@
-"""The physical-bounds monitor (issue 12 item 4, docs/physics.md §2.8): maximum principle and
+"""The physical-bounds monitor (docs/physics.md §2.8): maximum principle and
 mass balance of the recorded species output, and the validity range of tl-quasisteady."""
 
 from __future__ import annotations

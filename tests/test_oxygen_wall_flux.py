@@ -1,5 +1,5 @@
 """Prescribed wall flux varying in space and time, and the forward-flow-mean Graetz closure
-(issue 12 items 7 and the reversal closure; docs/physics.md §3.1 C1, §3.6)."""
+(the reversal closure; docs/physics.md §3.1 C1, §3.6)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Haemoglobin facilitation with Hill binding (issue 12 item 5): the 2-D reference with Hill
+"""Haemoglobin facilitation with Hill binding: the 2-D reference with Hill
 binding in the fluid (`validation.hill`), the nonlinear facilitation factor
 (`oxyline.facilitation`) and the 1-D closure against the 2-D solution
 (docs/validation-oxygen.md §7)."""

@@ -1,4 +1,4 @@
-"""Resource exhaustion (issue 13 item 2): a model or an output too large for the memory allowed
+"""Resource exhaustion: a model or an output too large for the memory allowed
 is refused with a typed ResourceError (estimate + the setting to change) before anything is
 allocated; large buffers in the core are allocated fallibly; large outputs are announced.
 

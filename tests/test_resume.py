@@ -1,4 +1,4 @@
-"""Stops and resumption (issue 13 item 7): checkpoints and ``resume`` (bit-identical to the
+"""Stops and resumption: checkpoints and ``resume`` (bit-identical to the
 uninterrupted run), the cancel handle, Ctrl-C in worker threads, SIGTERM and solver failures in
 the command line."""
 

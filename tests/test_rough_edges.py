@@ -1,4 +1,4 @@
-"""Rough edges a new user meets (issue 13, item 10)."""
+"""Rough edges a new user meets."""
 
 from __future__ import annotations
 

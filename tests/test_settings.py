@@ -1,4 +1,4 @@
-"""Run settings are checked like the model (issue 13, item 8): every bad value is a ModelError
+"""Run settings are checked like the model: every bad value is a ModelError
 naming the setting, where it came from (simulate keyword or the model's simulation section) and
 the value; numpy scalars are numbers like Python's."""
 

@@ -1,4 +1,4 @@
-"""RK4 stability bound above the dense size (issue 13 item 5): the Krylov estimate of the core
+"""RK4 stability bound above the dense size: the Krylov estimate of the core
 against numpy's dense eigenvalues of the same operator (exported by ``rk4_operator``), for
 chains, trees and refined built-in models from ~100 to ~5,000 differential unknowns.
 
@@ -153,7 +153,7 @@ def test_method_is_checked() -> None:
 
 
 def test_stiff_oxygen_wall_exchange_stays_finite_under_rk4() -> None:
-    """Issue 13 item 6: k = 30 m/s in a 3 mm tube is an exchange rate 2k/r = 2e4 /s; RK4's
+    """k = 30 m/s in a 3 mm tube is an exchange rate 2k/r = 2e4 /s; RK4's
     automatic step (7.7e-4 s from the flow alone) gave NaN O2 columns. The step now keeps that
     rate at half RK4's real-axis limit 2.785, and every O2 output is finite."""
     model = oxyline.load_model({
@@ -184,7 +184,7 @@ def _stiff_tube(k: float = 30.0) -> dict:
 
 
 def test_a_user_rk4_step_above_the_species_limit_is_refused_naming_species_and_vessel() -> None:
-    """Issue 13 item 6: a user step stable for the flow (7.7e-4 s) but not for the O2 wall
+    """a user step stable for the flow (7.7e-4 s) but not for the O2 wall
     exchange: rate 2k/r = 2e4 /s (1 %: the compliant volume at the steady pressure), RK4's
     real-axis limit 2.785 / rate = 1.40e-4 s. Before, the run wrote NaN (then stopped with a
     SolverError); now it is refused before the first step, like the flow's own limit."""

@@ -1,4 +1,4 @@
-"""Structured-tree outlets (issue 11): the growth rule, the expansion into native vessels, the
+"""Structured-tree outlets: the growth rule, the expansion into native vessels, the
 errors, and the input impedance of a grown tree against independent truths: its Poiseuille
 resistance (series/parallel sum) at 0 Hz and the exact transmission-line solution of the same
 tree at 1-20 Hz. Every expected value is computed here from the growth rule and the segment

@@ -1,5 +1,5 @@
-"""Every svZeroDSolver reference case with a stored result, compared on ALL its stored columns
-(issue 14 item 2): the drop-in must return the same variables in the same order (vessel rows,
+"""Every svZeroDSolver reference case with a stored result, compared on ALL its stored columns:
+the drop-in must return the same variables in the same order (vessel rows,
 or svZeroDSolver's variable table with its nodes, the blocks' internal variables, the heart
 block's, chamber volumes and valve status) and the same numbers.
 

@@ -1,4 +1,4 @@
-"""svZeroDSolver's chamber and valve cases through the drop-in (issue 14 items 1-2): the
+"""svZeroDSolver's chamber and valve cases through the drop-in: the
 stored references (generalized-α, svZeroDSolver's own step) and svzerod run 20x finer (RK4),
 plus the element laws against closed forms."""
 

@@ -1,4 +1,4 @@
-"""svZeroDSolver's closed-loop blocks through the drop-in (issue 14 item 2): the
+"""svZeroDSolver's closed-loop blocks through the drop-in: the
 ClosedLoopHeartAndPulmonary block, ClosedLoopRCR and the closed-loop coronaries against the
 stored svZeroDSolver references, the same model in the native format (SI) against the
 references converted to SI, and the typed refusals (docs/physics.md §1.10, docs/svzerod.md)."""

@@ -1,4 +1,4 @@
-"""Coronary outlets (issue 14): svZeroDSolver's ``CORONARY`` and ``CORONARY_VAR_RES`` through the
+"""Coronary outlets: svZeroDSolver's ``CORONARY`` and ``CORONARY_VAR_RES`` through the
 drop-in, against the peer's stored references (generalized-alpha), fresh peer runs 20x finer
 (RK4) and the analytical steady solution; the native ``coronary`` condition against a closed-form
 periodic solution. The case classification lives in tests/test_svzerod.py (``HEART``)."""

@@ -1,5 +1,5 @@
 """The heart block's on/off valves (``ClosedLoopHeartAndPulmonary``, docs/physics.md §1.10) in the
-coronary coupled case, against fresh svzerod runs (issue 14 item 2, docs/svzerod.md "The on/off
+coronary coupled case, against fresh svzerod runs (docs/svzerod.md "The on/off
 valves and round-off").
 
 svZeroDSolver 3.2 resets a closed valve's flow to zero before each Newton correction

@@ -1,6 +1,6 @@
 """svZeroDSolver's ChamberSphere (native ``chamber_sphere``, docs/physics.md §1.11) and the
 ``external_solver_coupling_blocks`` with prescribed values (docs/svzerod.md) through the
-drop-in, against svZeroDSolver's stored references and a fresh svzerod run (issue 14 item 2)."""
+drop-in, against svZeroDSolver's stored references and a fresh svzerod run."""
 
 from __future__ import annotations
 

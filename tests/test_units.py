@@ -1,4 +1,4 @@
-"""Every result carries the units it actually has (issue 13, item 1), on every path: native files,
+"""Every result carries the units it actually has, on every path: native files,
 svZeroDSolver JSON through oxyline's own loader and through the drop-in, importers to NetCDF and
 Zarr, the console table and the figures. Each path is checked against the same model run natively
 (the built-in bifurcation, SI): the svZeroDSolver export of it is the same circuit (docs/io.md),

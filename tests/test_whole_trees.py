@@ -1,4 +1,4 @@
-"""Built-in whole trees (issue 11, item 4): ``whole-body-140-st``, whole-body-140 with each
+"""Built-in whole trees: ``whole-body-140-st``, whole-body-140 with each
 lumped terminal compartment replaced by a structured tree of the same steady resistance
 (docs/structured-tree.md). The independent truths: the steady resistance of each grown tree
 summed vessel by vessel (Poiseuille, series and parallel) against the source's R_T, and the
