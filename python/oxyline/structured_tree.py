@@ -102,19 +102,30 @@ def _terminal(node: str, bc: Mapping[str, Any]) -> Mapping[str, Any]:
     return terminal
 
 
+def _split(data: Mapping[str, Any]
+           ) -> tuple[dict[str, Any], list[tuple[str, dict[str, Any], Any]]]:
+    """(the other boundary conditions, the structured-tree conditions as (node, condition,
+    root radius)) of ``data``, in the model's order."""
+    rest: dict[str, Any] = {}
+    trees: list[tuple[str, dict[str, Any], Any]] = []
+    for node, bc in data["boundary_conditions"].items():
+        if not (isinstance(bc, Mapping) and bc.get("type") == TYPE):
+            rest[node] = bc
+            continue
+        node = str(node)
+        root = bc["root_radius"] if "root_radius" in bc else _root_radius(data, node)
+        trees.append((node, dict(bc), root))
+    return rest, trees
+
+
 def expand(data: Mapping[str, Any]) -> tuple[dict[str, Any], set[str]]:
     """``data`` with every structured-tree condition replaced by its vessels (dicts written
     by the core) and terminal conditions, and the names of the tree vessels."""
     units = str(data.get("units", "SI"))
     vessels = list(data.get("vessels") or [])
-    bcs: dict[str, Any] = {}
+    bcs, trees = _split(data)
     tree: set[str] = set()
-    for node, bc in data["boundary_conditions"].items():
-        if not (isinstance(bc, Mapping) and bc.get("type") == TYPE):
-            bcs[node] = bc
-            continue
-        node = str(node)
-        root = bc["root_radius"] if "root_radius" in bc else _root_radius(data, node)
+    for node, bc, root in trees:
         grown, leaves = _grow(node, bc, root, units)
         terminal = _terminal(node, bc)
         tree.update(v["name"] for v in grown)
@@ -142,15 +153,7 @@ def build_with_trees(data: dict[str, Any], build_native: Callable[..., Any],
     ``convert_conditions(conditions, units)`` is the model's reader of boundary conditions
     (passed in: this module is below :mod:`oxyline.model`, not beside it)."""
     units = str(data.get("units", "SI"))
-    rest: dict[str, Any] = {}
-    trees: list[tuple[str, dict[str, Any], Any]] = []
-    for node, bc in data["boundary_conditions"].items():
-        if not (isinstance(bc, Mapping) and bc.get("type") == TYPE):
-            rest[node] = bc
-            continue
-        node = str(node)
-        root = bc["root_radius"] if "root_radius" in bc else _root_radius(data, node)
-        trees.append((node, dict(bc), root))
+    rest, trees = _split(data)
     # checked and grown first (their errors before the other elements'), moved in on assembly
     grown = _core.StructuredTrees(trees, factor(units, "length"), factor(units, "modulus"),
                                   memory_limit)
