@@ -31,7 +31,6 @@ from typing import Any
 
 import numpy as np
 
-from oxyline import _core
 from oxyline.errors import ModelError
 
 MMHG = 133.33                 # Pa per mmHg, PWDB's conversion factor
@@ -259,79 +258,43 @@ def windkessels(geo: list[dict[str, Any]], k3_cgs: float, pvc: float = 1.0
     return out
 
 
-def poiseuille_resistance(length: float, r_in: float, r_out: float, mu: float = MU) -> float:
-    """Exact Poiseuille resistance of a linearly tapered tube (the core's segment resistance,
-    docs/physics.md §1.1)."""
-    return float(_core.poiseuille_resistance(length, r_in, r_out, mu))
+def steady_model(geo: list[dict[str, Any]], k3_cgs: float, r_total: dict[int, float],
+                 q_mean: float) -> dict[str, Any]:
+    """The native model dict of the steady circuit of ``geo``: the segments with the wall law
+    (its wall does not enter a steady state), constant inflow ``q_mean`` at the inlet, terminal
+    segment i ending in the resistance ``r_total[i]`` to ``P_OUT`` (an RCR at steady state)."""
+    base = vessel_properties(geo, geo, k3_cgs)
+    vessels = [{"name": g["name"], "from": node(g["inlet"]), "to": node(g["outlet"]),
+                **p, "poisson_ratio": POISSON} for g, p in zip(geo, base, strict=True)]
+    bcs: dict[str, dict[str, Any]] = {INLET_NODE: {"type": "flow", "flow": q_mean}}
+    for s, r in r_total.items():
+        bcs[node(geo[s - 1]["outlet"])] = {"type": "resistance", "resistance": r,
+                                           "pressure": P_OUT}
+    return {"name": "pwdb-steady", "units": "SI", "blood": {"density": RHO, "viscosity": MU},
+            "vessels": vessels, "boundary_conditions": bcs}
 
 
-@lru_cache(maxsize=256)
-def _ports(key: tuple[tuple[float, ...], ...], terminals: tuple[int, ...], mu: float
-           ) -> tuple[np.ndarray, dict[int, int]]:
-    """Conductance matrix of the vessels (Poiseuille resistors) reduced by Schur complement
-    onto the ports: node 1 (the inlet) and the terminal nodes. Reducing the 109-node matrix
-    to 47 ports once per geometry keeps every later solve small (below OpenBLAS's threading
-    threshold, which makes a 109 x 109 solve 40x slower on a loaded machine)."""
-    nodes = sorted({int(k[0]) for k in key} | {int(k[1]) for k in key})
-    idx = {n: i for i, n in enumerate(nodes)}
-    G = np.zeros((len(nodes), len(nodes)))
-    for a, b, length, r_in, r_out in key:
-        c = 1.0 / poiseuille_resistance(length, r_in, r_out, mu)
-        i, j = idx[int(a)], idx[int(b)]
-        G[i, i] += c
-        G[j, j] += c
-        G[i, j] -= c
-        G[j, i] -= c
-    ports = [1, *terminals]
-    p = [idx[n] for n in ports]
-    inner = [i for i in range(len(nodes)) if i not in set(p)]
-    S = G[np.ix_(p, p)] - G[np.ix_(p, inner)] @ np.linalg.solve(G[np.ix_(inner, inner)],
-                                                                G[np.ix_(inner, p)])
-    return S, {n: i for i, n in enumerate(ports)}
+def root_mean_pressure(geo: list[dict[str, Any]], k3_cgs: float, r_total: dict[int, float],
+                       q_mean: float) -> float:
+    """Mean pressure [Pa] at the aortic root (node 1): the core's steady state of
+    :func:`steady_model` (vessels as Poiseuille resistors; the cycle mean of the linear
+    circuit)."""
+    from oxyline.model import build_model
+
+    st = build_model(steady_model(geo, k3_cgs, r_total, q_mean)).network.steady_state()
+    return float(st["node_pressure"][st["nodes"].index(INLET_NODE)])
 
 
-def _port_system(geo: list[dict[str, Any]], segs: Sequence[int], mu: float
-                 ) -> tuple[np.ndarray, np.ndarray]:
-    key = tuple((g["inlet"], g["outlet"], g["length"], g["radius_in"], g["radius_out"])
-                for g in geo)
-    outlets = [geo[s - 1]["outlet"] for s in segs]
-    S, port = _ports(key, tuple(sorted(outlets)), mu)
-    return S, np.array([port[n] for n in outlets])
-
-
-def _root_pressure(S: np.ndarray, j: np.ndarray, r: np.ndarray, q_mean: float) -> float:
-    A = S.copy()
-    A[j, j] += 1.0 / r
-    b = np.zeros(len(S))
-    b[0] = q_mean
-    b[j] += P_OUT / r
-    return float(np.linalg.solve(A, b)[0])
-
-
-def root_mean_pressure(geo: list[dict[str, Any]], r_total: dict[int, float], q_mean: float,
-                       mu: float = MU) -> float:
-    """Mean pressure [Pa] at the aortic root (node 1) of the steady resistive circuit: vessels
-    as Poiseuille resistors, terminal segment i as r_total[i] to P_OUT, inflow q_mean (the
-    cycle mean of the linear circuit)."""
-    segs = sorted(r_total)
-    S, j = _port_system(geo, segs, mu)
-    return _root_pressure(S, j, np.array([r_total[s] for s in segs]), q_mean)
-
-
-def calibrate_scale(geo: list[dict[str, Any]], fixed: dict[int, float], scaled: dict[int, float],
-                    q_mean: float, target: float) -> float:
+def calibrate_scale(geo: list[dict[str, Any]], k3_cgs: float, fixed: dict[int, float],
+                    scaled: dict[int, float], q_mean: float, target: float) -> float:
     """The factor s such that terminal resistances fixed[i] + s scaled[i] make the steady
     (= cycle-mean) aortic root pressure equal ``target`` [Pa] at inflow ``q_mean``: secant
     iteration on P(s), increasing and nearly linear, to 1e-10 relative."""
-    segs = sorted(scaled)
-    S, j = _port_system(geo, segs, MU)
-    r0 = np.array([fixed[k] for k in segs])
-    r1 = np.array([scaled[k] for k in segs])
-
     def f(s: float) -> float:
-        return _root_pressure(S, j, r0 + s * r1, q_mean) - target
+        r = {k: fixed[k] + s * scaled[k] for k in sorted(scaled)}
+        return root_mean_pressure(geo, k3_cgs, r, q_mean) - target
 
-    s0 = (target - P_OUT) / q_mean * float(np.sum(1.0 / r1))   # PWDB: arteries ignored
+    s0 = (target - P_OUT) / q_mean * sum(1.0 / r for r in scaled.values())  # arteries ignored
     s1, f0 = 0.95 * s0, f(s0)
     f1 = f(s1)
     for _ in range(50):
@@ -397,7 +360,7 @@ def outlet_conditions(geo: list[dict[str, Any]], k3_cgs: float, pvc: float, q_me
     ``q_mean``: R1 = Z, R2 = s x the bed's resistance share, C (see :func:`windkessels`; PWDB
     scales Z + share, which can make R2 < 0 at small s). Returns (node -> condition, s)."""
     wk = windkessels(geo, k3_cgs, pvc)
-    s = calibrate_scale(geo, {k: v["z"] for k, v in wk.items()},
+    s = calibrate_scale(geo, k3_cgs, {k: v["z"] for k, v in wk.items()},
                         {k: v["r_bed"] for k, v in wk.items()}, q_mean, mbp)
     out = {}
     for seg, w in sorted(wk.items()):
