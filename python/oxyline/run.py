@@ -622,22 +622,12 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     ...     print(ds.sizes["time"], ds.attrs["complete"])
     2001 1
     """
-    import xarray as xr
-
     from oxyline.io.results import ZarrAppender, dataset
 
     if isinstance(time_chunk, bool) or not isinstance(time_chunk, int) or time_chunk < 1:
         raise ModelError(f"simulate_to_zarr: time_chunk must be an integer >= 1, got {time_chunk!r}")
     model = load_model(model)
-    if "checkpoint" in overrides or "checkpoint_every" in overrides:
-        raise ModelError("simulate_to_zarr: checkpoints are not supported with a streamed "
-                         "store; use simulate(..., checkpoint=...)")
-    s = _settings(model, overrides)
-    need, rows, cols = _output_size(model, s)
-    if need > _memory.WARN_BYTES:  # memory stays bounded, the store does not
-        warnings.warn(f"{path}: the output ({rows} rows x {cols} columns) takes about "
-                      f"{_memory.human(need)} on disk (before compression)", OutputSizeWarning,
-                      stacklevel=2)
+    s = _zarr_settings(model, path, overrides)
     empty = _empty_rows(model, s)
     # chamber volumes and valve status, as in simulate(): extra core columns per chunk
     heart = _heart_layout(model)
@@ -670,9 +660,40 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     except BaseException:
         store.remove()  # refused before the first step (e.g. an unstable dt): no output at all
         raise
+    raw, opened = _close_store(
+        store, raw, lambda raw: dataset(result_of(dict(template), _run_settings(s, raw),
+                                                  "error" not in raw)).attrs)
+    _raise_run_error(raw, opened)
+    _warn_not_periodic(model.name, _run_settings(s, raw), True)
+    _warn_bounds(monitor.messages())
+    return opened
+
+
+def _zarr_settings(model: Model, path: str | os.PathLike[str], overrides: Mapping[str, Any]
+                   ) -> dict[str, Any]:
+    """The settings of a streamed run (no checkpoints), warning when the store will be large."""
+    if "checkpoint" in overrides or "checkpoint_every" in overrides:
+        raise ModelError("simulate_to_zarr: checkpoints are not supported with a streamed "
+                         "store; use simulate(..., checkpoint=...)")
+    s = _settings(model, overrides)
+    need, rows, cols = _output_size(model, s)
+    if need > _memory.WARN_BYTES:  # memory stays bounded, the store does not
+        warnings.warn(f"{path}: the output ({rows} rows x {cols} columns) takes about "
+                      f"{_memory.human(need)} on disk (before compression)", OutputSizeWarning,
+                      stacklevel=3)
+    return s
+
+
+def _close_store(store: Any, raw: dict[str, Any],
+                 final_attrs: Callable[[dict[str, Any]], dict[str, Any]]
+                 ) -> tuple[dict[str, Any], Any]:
+    """Write the run's final attributes and open the store: (the run's outcome, with an
+    ``OutputError`` when the attributes cannot be written, and the opened store, None when a
+    failing disk left it unreadable after an error)."""
+    import xarray as xr
+
     try:
-        store.finish(dataset(result_of(dict(template), _run_settings(s, raw),
-                                       "error" not in raw)).attrs)
+        store.finish(final_attrs(raw))
     except (OSError, RuntimeError, ValueError) as exc:  # e.g. the disk just filled up
         if "error" not in raw:
             raw = {**raw, "error": OutputError(f"{store.path}: cannot write the run's final "
@@ -685,10 +706,7 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
         if "error" not in raw:
             raise
         opened = None
-    _raise_run_error(raw, opened)
-    _warn_not_periodic(model.name, _run_settings(s, raw), True)
-    _warn_bounds(monitor.messages())
-    return opened
+    return raw, opened
 
 
 def _empty_rows(model: Model, s: Mapping[str, Any]) -> dict[str, Any]:

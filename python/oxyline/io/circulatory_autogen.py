@@ -413,19 +413,7 @@ def to_native_dict(vessel_array_csv: PathLike, parameters_csv: PathLike, *,
     if "beta_g" in params and params["beta_g"][0] != 0:
         _warn(f"beta_g = {params['beta_g'][0]}: gravity is not modelled by oxyline, ignored")
 
-    vessels: list[dict[str, Any]] = []
-    bcs: dict[str, dict[str, Any]] = {}
-    for r in tree:
-        nm = r["name"]
-        ends = (nodes[(nm, "in")], nodes[(nm, "out")])
-        u_ext = params.get(f"u_ext_{nm}", (0.0, "J_per_m3", ""))[0]
-        if abs(u_ext) > 1.0:
-            _warn(f"'{nm}': u_ext = {u_ext} Pa ignored (no external pressure on 0-D vessels)")
-        if r["vessel_type"] in TERMINAL:
-            vessel, bcs[ends[1]] = _terminal(nm, ends, params, scale, venous_pressure)
-            vessels.append(vessel)
-        else:
-            vessels.append(_artery(r, ends, params))
+    vessels, bcs = _vessels_and_outlets(tree, nodes, params, scale, venous_pressure)
     counts = Counter("terminal" if r["vessel_type"] in TERMINAL else
                      "simple" if r["vessel_type"] in SIMPLE else "geometric" for r in tree)
 
@@ -457,6 +445,28 @@ def to_native_dict(vessel_array_csv: PathLike, parameters_csv: PathLike, *,
                        "method": "generalized-alpha",
                        "output": {"cycles": "last", "every": 0.001}},
     }
+
+
+def _vessels_and_outlets(tree: list[dict[str, Any]], nodes: dict[tuple[str, str], str],
+                         params: dict[str, tuple[float, str, str]], scale: float,
+                         venous_pressure: float
+                         ) -> tuple[list[dict[str, Any]], dict[str, dict[str, Any]]]:
+    """The native vessels of the tree's modules (terminals as R_T/2, C_T, R_T/2 lumped vessels)
+    and the terminals' outlet conditions."""
+    vessels: list[dict[str, Any]] = []
+    bcs: dict[str, dict[str, Any]] = {}
+    for r in tree:
+        nm = r["name"]
+        ends = (nodes[(nm, "in")], nodes[(nm, "out")])
+        u_ext = params.get(f"u_ext_{nm}", (0.0, "J_per_m3", ""))[0]
+        if abs(u_ext) > 1.0:
+            _warn(f"'{nm}': u_ext = {u_ext} Pa ignored (no external pressure on 0-D vessels)")
+        if r["vessel_type"] in TERMINAL:
+            vessel, bcs[ends[1]] = _terminal(nm, ends, params, scale, venous_pressure)
+            vessels.append(vessel)
+        else:
+            vessels.append(_artery(r, ends, params))
+    return vessels, bcs
 
 
 def _with_wall_viscosity(vessels: list[dict[str, Any]], bcs: dict[str, dict[str, Any]]
