@@ -11,22 +11,9 @@ Quick use::
 
 from __future__ import annotations
 
-from oxyline import _core, catalogue, sensitivity
+from oxyline import _core, catalogue, errors, sensitivity
 from oxyline.ensemble import simulate_ensemble
-from oxyline.errors import (
-    CheckpointError,
-    ModelError,
-    OutputError,
-    OutputSizeWarning,
-    PeriodicityWarning,
-    ResourceError,
-    SimulationCancelled,
-    SimulationInterrupted,
-    SimulationTerminated,
-    SolverError,
-    UnstableTimeStep,
-    UnsupportedElement,
-)
+from oxyline.errors import *  # every public error and warning (errors.__all__)
 from oxyline.frequency import impedance
 from oxyline.io.result_reader import open_result
 from oxyline.loader import load_model
@@ -40,22 +27,10 @@ from oxyline.transport import HemoglobinFacilitationWarning
 __version__: str = _core.__version__
 
 __all__ = [
-    "CheckpointError",
     "HemoglobinFacilitationWarning",
     "Model",
-    "ModelError",
-    "OutputError",
-    "OutputSizeWarning",
-    "PeriodicityWarning",
     "PhysicalBoundsWarning",
-    "ResourceError",
     "Result",
-    "SimulationCancelled",
-    "SimulationInterrupted",
-    "SimulationTerminated",
-    "SolverError",
-    "UnstableTimeStep",
-    "UnsupportedElement",
     "VesselResult",
     "__version__",
     "catalogue",
@@ -69,3 +44,4 @@ __all__ = [
     "simulate_to_zarr",
     "structured_tree",
 ]
+__all__ += errors.__all__

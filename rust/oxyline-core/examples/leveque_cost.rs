@@ -21,9 +21,8 @@
 mod common;
 
 use common::{cpu, load};
-use oxyline_core::genalpha::NewtonControl;
 use oxyline_core::integrate::steady::steady_state;
-use oxyline_core::{Method, RunSettings, Start, simulate_with_transport};
+use oxyline_core::{Method, RunSettings, simulate_with_transport};
 
 fn main() {
     let mut args = std::env::args().skip(1);
@@ -35,25 +34,15 @@ fn main() {
     let (dae, k_tr, columns) = (&k.dae, &k.transport, k.vessel_columns());
     let probes = k.assembled.probes.vessel_unknowns.clone();
     let lev_tr = load(&lev_path).transport;
+    let method = if rk4 {
+        Method::Rk4
+    } else {
+        Method::GeneralizedAlpha { rho_inf: 0.5 }
+    };
+    // one cycle of period 1 s: the bench trees (`benches/bench_scale.py`) beat once a second
     let s = RunSettings {
-        method: if rk4 {
-            Method::Rk4
-        } else {
-            Method::GeneralizedAlpha { rho_inf: 0.5 }
-        },
-        dt: (!rk4).then_some(1e-3),
-        period: 1.0, // the bench trees (`benches/bench_scale.py`) beat once a second
-        cycles: 1,
-        until_periodic: None,
-        max_cycles: 1,
-        output_every: 1e-2,
-        output_all_cycles: false,
-        keep_current_cycle: true,
-        start: Start::Steady,
-        newton: NewtonControl::default(),
-        probes,
         species_columns: Some(columns),
-        tolerances: None,
+        ..RunSettings::one_cycle(method, (!rk4).then_some(1e-3), probes)
     };
     // the first pass's own settings (see run/two_pass.rs `mean_flow_pass`)
     let pass1 = RunSettings {

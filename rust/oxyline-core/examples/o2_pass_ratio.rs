@@ -19,8 +19,7 @@
 mod common;
 
 use common::{Model, load};
-use oxyline_core::genalpha::NewtonControl;
-use oxyline_core::{Method, RunSettings, Start, Transport, simulate_with_transport};
+use oxyline_core::{Method, RunSettings, Transport, simulate_with_transport};
 
 /// CPU ns this process has run (/proc/self/schedstat, first field).
 fn cpu_ns() -> f64 {
@@ -47,21 +46,10 @@ fn main() {
     let nseg = a0.circuit.segments.len() as f64;
     let settings = |m: &Model| {
         let columns = m.vessel_columns();
+        let dt = matches!(method, Method::GeneralizedAlpha { .. }).then_some(1e-3);
         RunSettings {
-            method,
-            dt: matches!(method, Method::GeneralizedAlpha { .. }).then_some(1e-3),
-            period: 1.0,
-            cycles: 1,
-            until_periodic: None,
-            max_cycles: 1,
-            output_every: 1e-2,
-            output_all_cycles: false,
-            keep_current_cycle: true,
-            start: Start::Steady,
-            newton: NewtonControl::default(),
-            probes: m.assembled.probes.vessel_unknowns.clone(),
             species_columns: Some(columns),
-            tolerances: None,
+            ..RunSettings::one_cycle(method, dt, m.assembled.probes.vessel_unknowns.clone())
         }
     };
     let only = std::env::var("O2_PASS_ONLY").ok();

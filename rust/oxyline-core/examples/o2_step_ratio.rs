@@ -14,8 +14,7 @@
 mod common;
 
 use common::{cpu, load};
-use oxyline_core::genalpha::NewtonControl;
-use oxyline_core::{Method, RunSettings, Start, Transport, simulate_with_transport};
+use oxyline_core::{Method, RunSettings, Transport, simulate_with_transport};
 
 fn main() {
     let mut args = std::env::args().skip(1);
@@ -29,21 +28,11 @@ fn main() {
     let model = load(&path);
     let (assembled, dae, prototype) = (&model.assembled, &model.dae, &model.transport);
     let columns = model.vessel_columns();
+    // one cycle of period 1 s: the bench trees (`benches/bench_scale.py`) beat once a second
+    let dt = matches!(method, Method::GeneralizedAlpha { .. }).then_some(1e-3);
     let s = RunSettings {
-        method,
-        dt: matches!(method, Method::GeneralizedAlpha { .. }).then_some(1e-3),
-        period: 1.0, // the bench trees (`benches/bench_scale.py`) beat once a second
-        cycles: 1,
-        until_periodic: None,
-        max_cycles: 1,
-        output_every: 1e-2,
-        output_all_cycles: false,
-        keep_current_cycle: true,
-        start: Start::Steady,
-        newton: NewtonControl::default(),
-        probes: assembled.probes.vessel_unknowns.clone(),
         species_columns: Some(columns),
-        tolerances: None,
+        ..RunSettings::one_cycle(method, dt, assembled.probes.vessel_unknowns.clone())
     };
     let (mut best_flow, mut best_o2) = (f64::INFINITY, f64::INFINITY);
     // CPU s of a run: whole, or between the first progress check and the one past `stop`

@@ -2,10 +2,10 @@
 //! output of the same run without a sink, no chunk is longer than asked, the driver never holds
 //! more than one chunk, and a stopped run still hands over what it computed.
 
-use oxyline_core::genalpha::NewtonControl;
-use oxyline_core::network::parse;
+mod common;
+
 use oxyline_core::{
-    Dae, Error, Method, OutputSink, RunSettings, Start, Transport, simulate_to_sink,
+    Dae, Error, Method, OutputSink, RunSettings, Transport, simulate_to_sink,
     simulate_with_transport,
 };
 
@@ -20,35 +20,21 @@ const TUBE: &str = r#"{"vessels": [{"name": "tube", "from": "in", "to": "out", "
     "initial": 0.1, "wall": {"model": "mass-transfer", "k": 5e-6, "wall_concentration": 0.084}}]}}"#;
 
 fn build() -> (Dae, Transport, Vec<usize>) {
-    let spec = parse(TUBE).unwrap();
-    let assembled = spec.assemble().unwrap();
-    let dae = assembled.circuit.assemble().unwrap();
-    let tr = Transport::build(
-        spec.transport.as_ref().unwrap(),
-        &assembled.circuit,
-        &dae,
-        &assembled.probes,
-    )
-    .unwrap();
-    (dae, tr, assembled.probes.all())
+    let common::Built {
+        assembled,
+        dae,
+        transport,
+    } = common::build(TUBE);
+    (dae, transport, assembled.probes.all())
 }
 
 fn settings(probes: Vec<usize>, all_cycles: bool, until_periodic: Option<f64>) -> RunSettings {
     RunSettings {
-        method: Method::Rk4,
-        dt: Some(1e-3),
-        period: 1.0,
         cycles: 3,
         until_periodic,
         max_cycles: 4,
-        output_every: 1e-2,
         output_all_cycles: all_cycles,
-        keep_current_cycle: true,
-        start: Start::Steady,
-        newton: NewtonControl::default(),
-        probes,
-        species_columns: None,
-        tolerances: None,
+        ..RunSettings::one_cycle(Method::Rk4, Some(1e-3), probes)
     }
 }
 

@@ -1,6 +1,8 @@
 //! RK4 stability bound: the Krylov estimate against the dense spectrum of the same operator
 //! (faer's dense eigensolver, a code path independent of the Arnoldi iteration).
 
+mod common;
+
 use oxyline_core::network::parse;
 use oxyline_core::stability::{SpectrumMethod, rk4_limit_by};
 use oxyline_core::{Regime, rk4::Rk4};
@@ -61,8 +63,7 @@ fn krylov_limit_matches_the_dense_spectrum() {
 /// by the inlet and wall concentrations.
 #[test]
 fn stiff_wall_exchange_limits_the_automatic_rk4_step() {
-    use oxyline_core::genalpha::NewtonControl;
-    use oxyline_core::{Method, RunSettings, Start, Transport, simulate_with_transport};
+    use oxyline_core::{Method, RunSettings, simulate_with_transport};
     let (r, k, c_in, c_w) = (3e-3, 30.0, 1.0, 0.2);
     let json = format!(
         r#"{{"vessels": [{{"name": "tube", "from": "in", "to": "out", "segments": 10,
@@ -73,31 +74,11 @@ fn stiff_wall_exchange_limits_the_automatic_rk4_step() {
           "transport": {{"species": [{{"name": "o2", "inlet": {{"kind": "constant", "value": {c_in}}},
               "wall": {{"model": "mass-transfer", "k": {k}, "wall_concentration": {c_w}}}}}]}}}}"#
     );
-    let spec = parse(&json).unwrap();
-    let assembled = spec.assemble().unwrap();
-    let dae = assembled.circuit.assemble().unwrap();
-    let mut transport = Transport::build(
-        spec.transport.as_ref().unwrap(),
-        &assembled.circuit,
-        &dae,
-        &assembled.probes,
-    )
-    .unwrap();
+    let common::Built { dae, transport, .. } = common::build(&json);
+    let mut transport = transport;
     let s = RunSettings {
-        method: Method::Rk4,
-        dt: None,
-        period: 1.0,
-        cycles: 1,
-        until_periodic: None,
-        max_cycles: 1,
-        output_every: 1e-2,
         output_all_cycles: true,
-        keep_current_cycle: true,
-        start: Start::Steady,
-        newton: NewtonControl::default(),
-        probes: vec![],
-        species_columns: None,
-        tolerances: None,
+        ..RunSettings::one_cycle(Method::Rk4, None, vec![])
     };
     let out = simulate_with_transport(&dae, Some(&mut transport), &s, &mut |_, _| true).unwrap();
     assert!(out.error.is_none(), "{:?}", out.error);
@@ -127,8 +108,7 @@ fn stiff_wall_exchange_limits_the_automatic_rk4_step() {
 /// default closure included), an RK4 run reports the limit its step obeys.
 #[test]
 fn only_rk4_runs_probe_the_rk4_limit() {
-    use oxyline_core::genalpha::NewtonControl;
-    use oxyline_core::{Method, RunSettings, Start, Transport, simulate_with_transport};
+    use oxyline_core::{Method, RunSettings, simulate_with_transport};
     let json = r#"{"vessels": [{"name": "tube", "from": "in", "to": "out", "segments": 4,
             "geometry": {"length": 0.1, "radius_in": 3e-3, "radius_out": 3e-3,
                          "wall_thickness": 1e-3, "youngs_modulus": 4e5}}],
@@ -137,35 +117,18 @@ fn only_rk4_runs_probe_the_rk4_limit() {
                                   "out": {"type": "resistance", "resistance": 1e8}},
           "transport": {"species": [{"name": "o2", "diffusivity": 1.2e-9, "inlet": {"kind": "constant", "value": 1.0},
               "wall": {"model": "graetz", "wall_concentration": 0.2}}]}}"#;
-    let spec = parse(json).unwrap();
-    let assembled = spec.assemble().unwrap();
-    let dae = assembled.circuit.assemble().unwrap();
-    let prototype = Transport::build(
-        spec.transport.as_ref().unwrap(),
-        &assembled.circuit,
-        &dae,
-        &assembled.probes,
-    )
-    .unwrap();
+    let common::Built {
+        dae,
+        transport: prototype,
+        ..
+    } = common::build(json);
     for (method, dt) in [
         (Method::GeneralizedAlpha { rho_inf: 0.5 }, Some(1e-3)),
         (Method::Rk4, None),
     ] {
         let s = RunSettings {
-            method,
-            dt,
-            period: 1.0,
-            cycles: 1,
-            until_periodic: None,
-            max_cycles: 1,
-            output_every: 1e-2,
             output_all_cycles: true,
-            keep_current_cycle: true,
-            start: Start::Steady,
-            newton: NewtonControl::default(),
-            probes: vec![],
-            species_columns: None,
-            tolerances: None,
+            ..RunSettings::one_cycle(method, dt, vec![])
         };
         let mut tr = prototype.new_run();
         let out = simulate_with_transport(&dae, Some(&mut tr), &s, &mut |_, _| true).unwrap();

@@ -4,10 +4,9 @@
 mod common;
 
 use common::{Built, build, build_error};
-use oxyline_core::genalpha::NewtonControl;
 use oxyline_core::rk4::CoupledStages;
 use oxyline_core::transport::{BALANCE_COLUMNS, SEGMENT_COLUMNS, VESSEL_COLUMNS};
-use oxyline_core::{Method, RunSettings, Start, simulate_with_transport};
+use oxyline_core::{Method, RunSettings, simulate_with_transport};
 use std::f64::consts::PI;
 
 const MMHG: f64 = 133.322_368;
@@ -248,20 +247,10 @@ fn e1_rigid_pulsatile_flow_with_reversal_conserves_mass() {
 
 fn settings(method: Method, dt: f64, cycles: usize, probes: Vec<usize>) -> RunSettings {
     RunSettings {
-        method,
-        dt: Some(dt),
-        period: 1.0,
         cycles,
-        until_periodic: None,
         max_cycles: cycles,
-        output_every: 1e-2,
         output_all_cycles: true,
-        keep_current_cycle: true,
-        start: Start::Steady,
-        newton: NewtonControl::default(),
-        probes,
-        species_columns: None,
-        tolerances: None,
+        ..RunSettings::one_cycle(method, Some(dt), probes)
     }
 }
 

@@ -111,15 +111,7 @@ impl Chamber {
 }
 
 impl Element for Chamber {
-    fn name(&self) -> &str {
-        &self.name
-    }
-    fn rows(&self) -> &[usize] {
-        &self.rows
-    }
-    fn pattern(&self) -> &[(usize, usize)] {
-        &self.pattern
-    }
+    element_fields!();
     fn residual(&self, t: f64, y: &[f64], c: &mut [f64]) {
         c[0] = -self.elastance.pressure(t, y[self.pattern[0].1]).0;
     }

@@ -43,15 +43,7 @@ impl ClosedLoopCoronary {
 }
 
 impl Element for ClosedLoopCoronary {
-    fn name(&self) -> &str {
-        &self.name
-    }
-    fn rows(&self) -> &[usize] {
-        &self.rows
-    }
-    fn pattern(&self) -> &[(usize, usize)] {
-        &self.pattern
-    }
+    element_fields!();
     fn residual(&self, _t: f64, y: &[f64], c: &mut [f64]) {
         let [(_, v), (_, p), (_, m)] = self.pattern;
         let cim = self.capacitance;

@@ -197,15 +197,7 @@ impl HeartPulmonary {
 }
 
 impl Element for HeartPulmonary {
-    fn name(&self) -> &str {
-        &self.name
-    }
-    fn rows(&self) -> &[usize] {
-        &self.rows
-    }
-    fn pattern(&self) -> &[(usize, usize)] {
-        &self.pattern
-    }
+    element_fields!();
     fn residual(&self, t: f64, y: &[f64], c: &mut [f64]) {
         let (u, pr) = (&self.unknowns, &self.params);
         let (a, e) = self.activation(t);

@@ -10,6 +10,22 @@
 //! once, RK4 eliminates a constant algebraic part): elements only switch on the per-step
 //! (time-varying) or per-iteration (nonlinear) refactorisation.
 
+/// The three accessors of an [`Element`] that keeps its `name`, `rows` and `pattern` as fields
+/// (every element here does): one definition instead of one copy per element.
+macro_rules! element_fields {
+    () => {
+        fn name(&self) -> &str {
+            &self.name
+        }
+        fn rows(&self) -> &[usize] {
+            &self.rows
+        }
+        fn pattern(&self) -> &[(usize, usize)] {
+            &self.pattern
+        }
+    };
+}
+
 pub mod activation;
 pub mod chamber;
 pub mod coronary;

@@ -135,15 +135,7 @@ impl ChamberSphere {
 }
 
 impl Element for ChamberSphere {
-    fn name(&self) -> &str {
-        &self.name
-    }
-    fn rows(&self) -> &[usize] {
-        &self.rows
-    }
-    fn pattern(&self) -> &[(usize, usize)] {
-        &self.pattern
-    }
+    element_fields!();
     fn residual(&self, t: f64, y: &[f64], c: &mut [f64]) {
         let (q, u) = (&self.params, &self.u);
         let big_r = q.radius + y[u.displacement];

@@ -89,15 +89,7 @@ impl Valve {
 }
 
 impl Element for Valve {
-    fn name(&self) -> &str {
-        &self.name
-    }
-    fn rows(&self) -> &[usize] {
-        &self.rows
-    }
-    fn pattern(&self) -> &[(usize, usize)] {
-        &self.pattern
-    }
+    element_fields!();
     fn residual(&self, _t: f64, y: &[f64], c: &mut [f64]) {
         let (q, dp) = self.state(y);
         c[0] = self.law.resistance(dp).0 * q;

@@ -380,6 +380,60 @@ pub struct Grown {
     pub leaves: Vec<String>,
 }
 
+/// How a tree's vessels are cut into segments: `segments` or `max_length` (in the model's
+/// units), else the model's own segmentation.
+fn segmentation(node: &str, input: &TreeInput, u: Units) -> Result<Segmentation> {
+    Ok(match (input.segments, input.max_length) {
+        (Some(_), Some(_)) => {
+            return Err(err(node, "give 'segments' or 'max_length', not both"));
+        }
+        (Some(n), None) if n < 1 => {
+            return Err(err(
+                node,
+                format!("'segments' must be an integer >= 1, got {n}"),
+            ));
+        }
+        (Some(n), None) => Segmentation::Count(n as usize),
+        (None, Some(dx)) => {
+            Segmentation::MaxLength(u.length * number(node, "max_length", dx, 0.0, f64::INFINITY)?)
+        }
+        (None, None) => Segmentation::Model,
+    })
+}
+
+/// The vessel count of the tree (α, β) from `r0` down to `rmin`, refused (`too_many`, given
+/// the count as the message says it) above `max_vessels`.
+fn checked_count(
+    (alpha, beta): (f64, f64),
+    r0: f64,
+    rmin: f64,
+    max_vessels: f64,
+    too_many: impl Fn(String) -> Error,
+) -> Result<Count> {
+    // the closed-form bound first: trees of α, β near 1 are refused without counting
+    let bound = vessel_count_bound(alpha, beta, r0, rmin);
+    if bound > max_vessels {
+        // the message gives the exact count when few classes hold it
+        let c = vessel_count_within(alpha, beta, r0, rmin, REFUSED_CLASSES);
+        return Err(too_many(if c.exact {
+            c.n.to_string()
+        } else {
+            format!("at least {}", fmt_g(bound.max(c.n as f64)))
+        }));
+    }
+    // counted per radius class (at most MAX_CLASSES of them: never for ever)
+    let count = vessel_count(alpha, beta, r0, rmin);
+    if count.n as f64 > max_vessels || !count.exact {
+        let n = if count.exact {
+            count.n.to_string()
+        } else {
+            format!("at least {}", count.n)
+        };
+        return Err(too_many(n));
+    }
+    Ok(count)
+}
+
 impl Tree {
     /// The tree of `input` below `node` whose root has radius `root`, checked in the order of
     /// the keys, and refused above `max_vessels` before anything is grown.
@@ -417,22 +471,7 @@ impl Tree {
                 ),
             ));
         }
-        let segmentation = match (input.segments, input.max_length) {
-            (Some(_), Some(_)) => {
-                return Err(err(node, "give 'segments' or 'max_length', not both"));
-            }
-            (Some(n), None) if n < 1 => {
-                return Err(err(
-                    node,
-                    format!("'segments' must be an integer >= 1, got {n}"),
-                ));
-            }
-            (Some(n), None) => Segmentation::Count(n as usize),
-            (None, Some(dx)) => {
-                Segmentation::MaxLength(u.length * number(node, "max_length", dx, 0.0, inf)?)
-            }
-            (None, None) => Segmentation::Model,
-        };
+        let segmentation = segmentation(node, input, u)?;
         let wall = WallLaw::new(node, input.stiffness, u)?;
         let too_many = |n: String| {
             err(
@@ -447,27 +486,7 @@ impl Tree {
                 ),
             )
         };
-        // the closed-form bound first: trees of α, β near 1 are refused without counting
-        let bound = vessel_count_bound(alpha, beta, r0, rmin);
-        if bound > max_vessels {
-            // the message gives the exact count when few classes hold it
-            let c = vessel_count_within(alpha, beta, r0, rmin, REFUSED_CLASSES);
-            return Err(too_many(if c.exact {
-                c.n.to_string()
-            } else {
-                format!("at least {}", fmt_g(bound.max(c.n as f64)))
-            }));
-        }
-        // counted per radius class (at most MAX_CLASSES of them: never for ever)
-        let count = vessel_count(alpha, beta, r0, rmin);
-        if count.n as f64 > max_vessels || !count.exact {
-            let n = if count.exact {
-                count.n.to_string()
-            } else {
-                format!("at least {}", count.n)
-            };
-            return Err(too_many(n));
-        }
+        let count = checked_count((alpha, beta), r0, rmin, max_vessels, too_many)?;
         if count.n == 0 {
             return Err(err(
                 node,

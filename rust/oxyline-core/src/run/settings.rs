@@ -72,6 +72,28 @@ pub struct RunSettings {
 }
 
 impl RunSettings {
+    /// One cycle of period 1 s from the steady state, output every 10 ms of the last cycle
+    /// (kept while it runs), every species column, fixed step `dt` (None: automatic): the run
+    /// the tests and examples change a field or two of.
+    pub fn one_cycle(method: Method, dt: Option<f64>, probes: Vec<usize>) -> Self {
+        RunSettings {
+            method,
+            dt,
+            period: 1.0,
+            cycles: 1,
+            until_periodic: None,
+            max_cycles: 1,
+            output_every: 1e-2,
+            output_all_cycles: false,
+            keep_current_cycle: true,
+            start: Start::Steady,
+            newton: NewtonControl::default(),
+            probes,
+            species_columns: None,
+            tolerances: None,
+        }
+    }
+
     /// Refuse settings no run can honour, naming the offending value.
     pub(super) fn validate(&self, dae: &Dae) -> Result<()> {
         let bad = |what: String| Err(Error::model("simulation", what));
