@@ -130,7 +130,7 @@ def bench(name: str, cycles: int, rtols: tuple[float, ...], outputs: tuple[float
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for rtol in rtols:
         for every in outputs:
-            res, cpu = run(model, cycles=cycles, rtol=rtol, output_every=every)
+            res, cpu = run(model, cycles=cycles, rtol=rtol, dt="auto", output_every=every)
             e = errors(res, ref)
             s, est = res.settings, res.error_estimate
             match = "| | |"
@@ -139,7 +139,7 @@ def bench(name: str, cycles: int, rtols: tuple[float, ...], outputs: tuple[float
                 # the ratio at equal output: the same error-controlled run (output never
                 # changes its solution) writing rows as often as the matched fixed step did
                 # (a fixed step of 20 ms writes 50 rows a cycle, not 1000)
-                cpu_eq = run(model, cycles=cycles, rtol=rtol, output_every=m[2])[1] if m else 0
+                cpu_eq = run(model, cycles=cycles, rtol=rtol, dt="auto", output_every=m[2])[1] if m else 0
                 match = (f"| {m[1] * 1e3:.3g} ms, {m[0]:.3f} s | {cpu_eq / m[0]:.2f} |" if m
                          else "| none of the sweep | — |")
                 ratio = f"{cpu_eq / m[0]:.2f}" if m else "— (finer than the sweep)"
