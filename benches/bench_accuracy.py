@@ -16,9 +16,12 @@ Errors (all relative, maximum over the output vessels):
 
 CPU: ``time.process_time`` of the ``simulate`` call (loading excluded). "fixed match": the
 cheapest fixed step of the sweep whose three errors are all at most the error-controlled
-run's (at 1 ms output), and the CPU ratio of the error-controlled run to it.
+run's (at 1 ms output), and the CPU ratio of the error-controlled run to it, the
+error-controlled run writing its rows as often as that fixed step did (its solution does not
+depend on the output interval; a fixed step writes a row per step at most). All runs take
+exactly ``cycles`` cycles (``until_periodic=None``).
 
-    python benches/bench_accuracy.py                     # adan56, paper-bifurcated
+    python benches/bench_accuracy.py                     # the whole benchmark set
     python benches/bench_accuracy.py --models adan56 --cycles 2
 """
 
@@ -33,22 +36,45 @@ import numpy as np
 
 import oxyline
 
+MODELS = ("adan56", "whole-body-140", "circle-of-willis", "paper-bifurcated", "closed-loop-o2",
+          "tree-1e5-o2", "adan56-st")
 OUTPUTS = (1e-3, 5e-3, 10e-3, 20e-3)
 RTOLS = (1e-2, 1e-3, 1e-4)
-SWEEP = (50, 100, 200, 400, 800, 1600, 3200)  # fixed steps per cycle
+SWEEP = (50, 100, 200, 400, 800, 1600, 3200, 6400)  # fixed steps per cycle
+REF_ROWS = 32000  # reference rows per cycle: every output time of the runs is one of them
+
+
+def load(name: str) -> Any:
+    """A model of the benchmark set: a catalogue name; ``closed-loop-o2`` (its closed-loop
+    heart circuit: chambers and valves, what its O2 run is driven by); ``tree-1e5-o2`` (the
+    scale bench's binary tree of 2^14 − 1 vessels × 6 segments ≈ 1e5 segments, O2 by a
+    mass-transfer wall)."""
+    if name == "closed-loop-o2":
+        from oxyline import closed_loop
+        from oxyline.model import build_model
+        return build_model(closed_loop.heart_model(closed_loop.load(name)))
+    if name == "tree-1e5-o2":
+        import sys
+        from pathlib import Path
+        sys.path.insert(0, str(Path(__file__).parent))
+        import bench_scale
+        return oxyline.load_model(bench_scale.tree(14, 6, "o2-k"))
+    return oxyline.load_model(name)
 
 
 def run(model: Any, **kw: Any) -> tuple[Any, float]:
     t0 = time.process_time()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        res = oxyline.simulate(model, progress=False, **kw)
+        res = oxyline.simulate(model, progress=False, until_periodic=None, **kw)
     return res, time.process_time() - t0
 
 
 def at(ref: Any, key: str, t: np.ndarray) -> np.ndarray:
-    """The reference's ``key`` at times ``t`` (linear between its rows every T/3200: an
-    interpolation error ~(T/3200)²|y''|/8, ~3e-5 of a 10 Hz harmonic's amplitude)."""
+    """The reference's ``key`` at times ``t``: its rows every T/32000 hold every output time of
+    the runs (T/n for n dividing 32000: 1, 5, 10, 20 ms at T = 1 s, the sweep's steps), so the
+    interpolation is exact there (elsewhere linear: ~(T/32000)²|y''|/8, 3e-5 of a 100 Hz
+    component)."""
     a = getattr(ref, key)
     return np.column_stack([np.interp(t, ref.time, a[:, j]) for j in range(a.shape[1])])
 
@@ -72,42 +98,57 @@ def fmt(e: float) -> str:
     return "—" if np.isnan(e) else f"{100 * e:.3g} %"
 
 
-def bench(name: str, cycles: int, rtols: tuple[float, ...], outputs: tuple[float, ...]) -> None:
-    model = oxyline.load_model(name)
+def sweep_match(fixed: list[Any], e: tuple[float, float, float]
+                ) -> tuple[float, float, float] | None:
+    """(CPU, dt, output spacing) of the cheapest fixed step of the sweep whose three errors are all at most
+    ``e``'s (PO2 ignored where the model has none)."""
+    ok = [(c, dt, every) for dt, c, f, every in fixed
+          if all(np.isnan(x) or x <= y for x, y in zip(f, e, strict=True))]
+    return min(ok) if ok else None
+
+
+def bench(name: str, cycles: int, rtols: tuple[float, ...], outputs: tuple[float, ...],
+          sweep: tuple[int, ...], ref_factor: int, summary: list[str]) -> None:
+    model = load(name)
     period = model.period or 1.0
-    ref_dt = period / (20 * SWEEP[-1])
+    ref_dt = period / (ref_factor * sweep[-1])
+    n_ref = ref_factor * sweep[-1]
+    rows = REF_ROWS if n_ref % REF_ROWS == 0 else n_ref  # a row per step if not a multiple
     ref, ref_cpu = run(model, cycles=cycles, dt=ref_dt, method="generalized-alpha",
-                       output_every=period / SWEEP[-1])
+                       output_every=period / rows)
     print(f"\n### {name} ({cycles} cycles; reference: generalized-α dt = {ref_dt:.2e} s, "
           f"{ref_cpu:.1f} s CPU)\n")
     fixed = []
-    for n in SWEEP:
+    for n in sweep:
         res, cpu = run(model, cycles=cycles, dt=period / n, method="generalized-alpha",
                        output_every=1e-3)
-        fixed.append((period / n, cpu, errors(res, ref)))
+        fixed.append((period / n, cpu, errors(res, ref), float(res.time[1] - res.time[0])))
     print("| fixed generalized-α dt | pulse pressure | flow | PO2 | CPU |")
     print("|---|---|---|---|---|")
-    for dt, cpu, (a, b, c) in fixed:
+    for dt, cpu, (a, b, c), _ in fixed:
         print(f"| {dt * 1e3:.3g} ms | {fmt(a)} | {fmt(b)} | {fmt(c)} | {cpu:.3f} s |")
     print("\n| rtol | output | pulse pressure | flow | PO2 | estimate (p / q / species) | "
-          "steps (rejected) | dt range | CPU | fixed match (dt, CPU) | CPU ratio |")
+          "steps (rejected) | dt range | CPU | fixed match (dt, CPU) | CPU ratio at its output |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for rtol in rtols:
         for every in outputs:
-            res, cpu = run(model, cycles=cycles, rtol=rtol, output_every=every)
+            res, cpu = run(model, cycles=cycles, rtol=rtol, dt="auto", output_every=every)
             e = errors(res, ref)
             s, est = res.settings, res.error_estimate
-            match = ""
+            match = "| | |"
             if every == outputs[0]:
-                ok = [(c, dt) for dt, c, f in fixed
-                      if all(np.isnan(x) or x <= y for x, y in zip(f, e, strict=True))]
-                if ok:
-                    c, dt = min(ok)
-                    match = f"| {dt * 1e3:.3g} ms, {c:.3f} s | {cpu / c:.2f} |"
-                else:
-                    match = "| none of the sweep | — |"
-            else:
-                match = "| | |"
+                m = sweep_match(fixed, e)
+                # the ratio at equal output: the same error-controlled run (output never
+                # changes its solution) writing rows as often as the matched fixed step did
+                # (a fixed step of 20 ms writes 50 rows a cycle, not 1000)
+                cpu_eq = run(model, cycles=cycles, rtol=rtol, dt="auto", output_every=m[2])[1] if m else 0
+                match = (f"| {m[1] * 1e3:.3g} ms, {m[0]:.3f} s | {cpu_eq / m[0]:.2f} |" if m
+                         else "| none of the sweep | — |")
+                ratio = f"{cpu_eq / m[0]:.2f}" if m else "— (finer than the sweep)"
+                summary.append(f"| {name} | rtol {rtol:g} | {fmt(e[0])} / {fmt(e[1])} / "
+                               f"{fmt(e[2])} | {cpu:.3f} s ({cpu_eq:.3f} s) | "
+                               f"{f'{m[1] * 1e3:.3g} ms, {m[0]:.3f} s' if m else '—'} "
+                               f"| {ratio} |")
             est_s = " / ".join(f"{est.get(k, float('nan')):.1e}"
                                for k in ("pressure", "flow", "species"))
             print(f"| {rtol:g} | {every * 1e3:g} ms | {fmt(e[0])} | {fmt(e[1])} | {fmt(e[2])} "
@@ -117,14 +158,27 @@ def bench(name: str, cycles: int, rtols: tuple[float, ...], outputs: tuple[float
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--models", nargs="+", default=["adan56", "paper-bifurcated"])
+    ap.add_argument("--models", nargs="+", default=list(MODELS))
     ap.add_argument("--cycles", type=int, default=3)
     ap.add_argument("--rtols", type=float, nargs="+", default=list(RTOLS))
     ap.add_argument("--outputs", type=float, nargs="+", default=list(OUTPUTS),
                     help="output intervals in s (the first is compared with the sweep)")
+    ap.add_argument("--sweep", type=int, nargs="+", default=list(SWEEP),
+                    help="fixed steps per cycle of the sweep (the largest sets the reference)")
+    ap.add_argument("--ref-factor", type=int, default=20,
+                    help="the reference step is the sweep's finest over this")
     a = ap.parse_args()
+    summary: list[str] = []
     for name in a.models:
-        bench(name, a.cycles, tuple(a.rtols), tuple(a.outputs))
+        bench(name, a.cycles, tuple(a.rtols), tuple(a.outputs), tuple(sorted(a.sweep)),
+              a.ref_factor, summary)
+    print("\n## Summary (errors: pulse pressure / flow / PO2; ratio: CPU of the "
+          "error-controlled run over the cheapest fixed step of equal error)\n")
+    print("| model | method | error vs reference | CPU at 1 ms output (at the fixed step's) | "
+          "cheapest fixed step of equal error "
+          "(dt, CPU) | ratio |")
+    print("|---|---|---|---|---|---|")
+    print("\n".join(summary))
 
 
 if __name__ == "__main__":

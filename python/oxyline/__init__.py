@@ -12,6 +12,7 @@ Quick use::
 from __future__ import annotations
 
 from oxyline import _core, catalogue, errors, sensitivity
+from oxyline.convergence import convergence, estimate_space_error
 from oxyline.ensemble import simulate_ensemble
 from oxyline.errors import *  # every public error and warning (errors.__all__)
 from oxyline.frequency import impedance
@@ -34,6 +35,8 @@ __all__ = [
     "VesselResult",
     "__version__",
     "catalogue",
+    "convergence",
+    "estimate_space_error",
     "impedance",
     "load_model",
     "open_result",

@@ -10,8 +10,9 @@
 //!   (Milne's device: one extrapolation per step, no second solve).
 //! * **Error per unit step.** A periodic forced response accumulates the local errors τ of
 //!   its harmonic at ω into a global error τ/(h|iω − λ|) ≤ τ/(hω); the controlled quantity is
-//!   therefore le/(h ω₁), ω₁ = 2π/T the fundamental: an upper bound of the periodic response's
-//!   error except near a resonance (|iω − λ| < ω, quality factor Q > 1, up to Q× more).
+//!   therefore le/(h ω_i), ω_i the unknown's signal frequency peak|ÿ|/peak|ẏ| (at least the
+//!   fundamental ω₁ = 2π/T; `run::adaptive`): an upper bound of the periodic response's error
+//!   except near a resonance (|iω − λ| < ω, quality factor Q > 1, up to Q× more).
 //! * **Species.** The split transport step is backward Euler (first order): its local error
 //!   h²z̈/2 is h/(2h + h₁) times its difference from the linear extrapolation of the last two
 //!   accepted amounts, weighted per cell by atol·V₀ + rtol·|N| (a concentration tolerance).

@@ -43,6 +43,8 @@ pub struct GenAlpha<'a> {
     y_af: Vec<f64>,
     /// Running scale of the Newton increments (see `Magnitude`).
     magnitude: Magnitude,
+    /// The unfiltered estimate of `filter_error` (empty until an error-controlled run).
+    filter_scratch: Vec<f64>,
 }
 
 impl<'a> GenAlpha<'a> {
@@ -120,6 +122,7 @@ impl<'a> GenAlpha<'a> {
             yd_new: vec![0.0; nonlinear],
             y_af: vec![0.0; nonlinear],
             magnitude: Magnitude::new(dae),
+            filter_scratch: Vec::new(),
         })
     }
 
@@ -168,13 +171,18 @@ impl<'a> GenAlpha<'a> {
         if !self.factored {
             return;
         }
-        let saved: Vec<f64> = v.to_vec();
+        // (the estimate is kept in the scratch vector, reused from step to step, in case the
+        // solve fails)
+        let mut saved = std::mem::take(&mut self.filter_scratch);
+        saved.clear();
+        saved.extend_from_slice(v);
         for (x, e) in v.iter_mut().zip(self.e.iter()) {
             *x *= self.am * e;
         }
         if !self.lu.solve_in_place(v) {
             v.copy_from_slice(&saved);
         }
+        self.filter_scratch = saved;
     }
 
     /// α_f: the level at which the residual (and so the face flows for transport) is enforced.

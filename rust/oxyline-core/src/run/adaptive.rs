@@ -8,11 +8,19 @@ use crate::circuit::Dae;
 use crate::integrate::adaptive::{
     StepControl, Tolerances, hermite, local_error_constant, quadratic_extrapolation, rate_shift,
 };
+use std::cell::Cell;
 
-/// The local errors of a forced periodic response accumulate over 1/ω₁ (|iω − λ| ≥ ω) for a
-/// normal, non-resonant circuit; coupled circuits amplify them more (the RLC line of
-/// tests/test_error_control.py by up to 2.6× at 1/ω₁, 2.0× at 2/ω₁): the accumulation time is
-/// taken as 3/ω₁ (measured there: 0.1–1.6 rtol over rtol 1e-2 … 1e-6).
+/// The local errors of a forced periodic response's harmonic at ω accumulate over 1/ω
+/// (|iω − λ| ≥ ω) for a normal, non-resonant circuit; coupled circuits amplify them more (the
+/// RLC line of tests/test_error_control.py by up to 2.6× at 1/ω₁, 2.0× at 2/ω₁): the
+/// accumulation time is taken as 3/ω (measured there: 0.1–1.6 rtol over rtol 1e-2 … 1e-6).
+///
+/// Each unknown's ω is its signal frequency ω_i = peak|ÿ_i|/peak|ẏ_i| (at least the
+/// fundamental ω₁). For a sum of harmonics of amplitudes A_m, the local error C h³ Σ A_m ω_m³
+/// over h ω_i bounds the harmonics' accumulated errors C h² Σ A_m ω_m² from above (Cauchy–
+/// Schwarz: (Σ A ω³)(Σ A ω) ≥ (Σ A ω²)²), where a single 1/ω₁ for every unknown overstated
+/// the errors of fast, small components (a small vessel's segment flows) by ω_m/ω₁ and let
+/// them set the step.
 const ACCUMULATION: f64 = 3.0;
 
 /// Accepted steps after a rejection during which the step does not grow.
@@ -22,7 +30,7 @@ const HOLD_AFTER_REJECTION: usize = 8;
 pub(super) struct Adaptive {
     tol: Tolerances,
     control: StepControl,
-    /// ω₁/3: the error per unit step is scaled to the fundamental (see the
+    /// ω₁/3: the error per unit step is scaled to the fundamental at the least (see the
     /// module of `integrate::adaptive`, and `ACCUMULATION`).
     omega: f64,
     c_local: f64,
@@ -31,6 +39,12 @@ pub(super) struct Adaptive {
     delta: f64,
     /// Unknowns without a rate in the DAE (E = 0).
     algebraic: Vec<bool>,
+    /// The largest |ẏ_i| and |ÿ_i| so far: their ratio is the unknown's signal frequency ω_i,
+    /// over which its local errors accumulate (see `Adaptive::flow_error`).
+    rate_peak: Vec<f64>,
+    accel_peak: Vec<f64>,
+    /// ω_i/ACCUMULATION, at least ω₁/ACCUMULATION (`omega`).
+    signal_omega: Vec<f64>,
     /// The largest |y_i| so far: rtol is relative to it (a pulsatile flow is judged against
     /// its peak, not against its zero crossings).
     peak: Vec<f64>,
@@ -79,6 +93,22 @@ pub(super) struct Adaptive {
     /// The cells' transport volumes at the step's start, and interpolated.
     v0: Vec<f64>,
     vi: Vec<f64>,
+    /// The dense output's weights of the row being written.
+    basis: Cell<Option<Basis>>,
+}
+
+/// The dense output's weights at one θ of one step (see `Adaptive::basis`).
+#[derive(Clone, Copy)]
+struct Basis {
+    theta: f64,
+    h: f64,
+    /// The step before (the start's rate shift depends on it).
+    h1: f64,
+    b: [f64; 4],
+    db: [f64; 4],
+    s0: f64,
+    s1: f64,
+    inv_span: f64,
 }
 
 /// What one flow step's estimate found: the largest scaled error and its value per kind.
@@ -102,6 +132,9 @@ impl Adaptive {
             c_algebraic: rho_inf / (2.0 * (1.0 + rho_inf).powi(2)),
             algebraic: dae.e.iter().map(|&e| e == 0.0).collect(),
             peak: Vec::new(),
+            rate_peak: Vec::new(),
+            accel_peak: Vec::new(),
+            signal_omega: Vec::new(),
             le: Vec::new(),
             delta: rate_shift(rho_inf),
             out_per_cycle,
@@ -131,6 +164,7 @@ impl Adaptive {
             zi: Vec::new(),
             v0: Vec::new(),
             vi: Vec::new(),
+            basis: Cell::new(None),
         }
     }
 
@@ -143,6 +177,9 @@ impl Adaptive {
     pub fn save_start(&mut self, st: &State<'_, '_>) {
         if self.peak.is_empty() {
             self.peak = st.y.iter().map(|v| v.abs()).collect();
+            self.rate_peak = vec![0.0; st.y.len()];
+            self.accel_peak = vec![0.0; st.y.len()];
+            self.signal_omega = vec![self.omega; st.y.len()];
         }
         self.y0.clone_from(&st.y);
         self.yd0.clone_from(&st.yd);
@@ -172,10 +209,6 @@ impl Adaptive {
             .next(h, err, 0.0)
             .min(0.5 * h)
             .max(self.control.h_min);
-    }
-
-    fn kind(&self, i: usize) -> usize {
-        usize::from(i >= self.kind_end[0]) + usize::from(i >= self.kind_end[1])
     }
 
     /// The scaled error of the flow step of `h` that ended in `y` (≤ 1 meets the tolerances).
@@ -218,23 +251,32 @@ impl Adaptive {
         }
         st.flow.integrator().filter_error(&mut self.le);
         let (rtol, atol) = (self.tol.rtol, self.tol.atol.as_array());
-        let per_step = self.omega * h;
         let alg = self.c_algebraic;
+        // (the first two steps' estimates are first order: judged as they are, one step's
+        // error, or the start would crawl)
+        let first = self.history < 2;
         let mut kinds = [0.0f64; 3];
         let y = &st.y;
-        for (i, &yi) in y.iter().enumerate() {
-            let scaled = if !self.algebraic[i] {
-                self.le[i].abs() / per_step
-            } else if self.history == 0 {
-                0.0
-            } else {
-                let (b, a) = (self.y0[i], self.ym1[i]);
-                let curvature = 2.0 * ((yi - b) / h - (b - a) / h1) / (h + h1);
-                alg * h * h * curvature.abs()
-            };
-            let k = self.kind(i);
-            let e = scaled / (atol[k] + rtol * yi.abs().max(self.peak[i]));
-            kinds[k] = kinds[k].max(e);
+        let ends = [0, self.kind_end[0], self.kind_end[1], y.len()];
+        for (k, worst) in kinds.iter_mut().enumerate() {
+            for (i, &yi) in y.iter().enumerate().take(ends[k + 1]).skip(ends[k]) {
+                let scaled = if !self.algebraic[i] {
+                    // accumulated over 1/ω_i, and over one step at the least
+                    let accumulated = if first {
+                        1.0
+                    } else {
+                        (self.signal_omega[i] * h).min(1.0)
+                    };
+                    self.le[i].abs() / accumulated
+                } else if self.history == 0 {
+                    0.0
+                } else {
+                    let (b, a) = (self.y0[i], self.ym1[i]);
+                    let curvature = 2.0 * ((yi - b) / h - (b - a) / h1) / (h + h1);
+                    alg * h * h * curvature.abs()
+                };
+                *worst = worst.max(scaled / (atol[k] + rtol * yi.abs().max(self.peak[i])));
+            }
         }
         FlowError {
             max: kinds.iter().fold(0.0f64, |m, &e| m.max(e)),
@@ -284,6 +326,9 @@ impl Adaptive {
         for (p, v) in self.peak.iter_mut().zip(&st.y) {
             *p = p.max(v.abs());
         }
+        if self.history > 0 {
+            self.track_signal_frequency(&st.y, h);
+        }
         self.steps += 1;
         self.h_smallest = self.h_smallest.min(h);
         self.h_largest = self.h_largest.max(h);
@@ -303,6 +348,26 @@ impl Adaptive {
         self.hold = self.hold.saturating_sub(1);
     }
 
+    /// The running peaks of |ẏ| and |ÿ| of every unknown from the divided differences of the
+    /// last three accepted states (not from the carried rates, which follow the damped
+    /// spurious root at a start), and from them its signal frequency.
+    fn track_signal_frequency(&mut self, y: &[f64], h: f64) {
+        let (omega1, h1) = (self.omega, self.h1);
+        let (inv_h, inv_h1, inv_span) = (1.0 / h, 1.0 / h1, 2.0 / (h + h1));
+        let rates = self.rate_peak.iter_mut().zip(&mut self.accel_peak);
+        let past = y.iter().zip(&self.y0).zip(&self.ym1);
+        for (((r, a), w), ((&y1, &y0), &ym)) in rates.zip(&mut self.signal_omega).zip(past) {
+            let (s1, s0) = ((y1 - y0) * inv_h, (y0 - ym) * inv_h1);
+            *r = r.max(s1.abs());
+            *a = a.max(((s1 - s0) * inv_span).abs());
+            *w = if *r > 0.0 {
+                (*a / *r / ACCUMULATION).max(omega1)
+            } else {
+                omega1
+            };
+        }
+    }
+
     /// The rate shifts (s₀, s₁) of the carried ẏ at the two ends of a step of `h` that starts
     /// after a step of `h1` (none for the start's consistent rate).
     fn shifts(&self, h: f64) -> (f64, f64) {
@@ -312,6 +377,31 @@ impl Adaptive {
             self.delta * self.h1
         };
         (s0, self.delta * h)
+    }
+
+    /// The Hermite basis and rate shifts at θ of a step of `h`, kept for the row's unknowns.
+    fn basis(&self, theta: f64, h: f64) -> Basis {
+        if let Some(k) = self
+            .basis
+            .get()
+            .filter(|k| (k.theta, k.h, k.h1) == (theta, h, self.h1))
+        {
+            return k;
+        }
+        let (s0, s1) = self.shifts(h);
+        let (b, db) = hermite(theta);
+        let k = Basis {
+            theta,
+            h,
+            h1: self.h1,
+            b,
+            db,
+            s0,
+            s1,
+            inv_span: 1.0 / (h - s1 + s0),
+        };
+        self.basis.set(Some(k));
+        k
     }
 
     /// The dense output of unknown `i` at θ of the step of `h` from (y0, ẏ0) to (y, ẏ): the
@@ -326,11 +416,11 @@ impl Adaptive {
             let curv = (s12 - s01) / (h + h1);
             return (b + x * (s01 + curv * (x + h1)), s01 + curv * (2.0 * x + h1));
         }
-        let (s0, s1) = self.shifts(h);
-        let (b, db) = hermite(theta);
-        let ydd = (yd[i] - self.yd0[i]) / (h - s1 + s0);
-        let d0 = self.yd0[i] + s0 * ydd;
-        let d1 = yd[i] + s1 * ydd;
+        let k = self.basis(theta, h);
+        let ydd = (yd[i] - self.yd0[i]) * k.inv_span;
+        let d0 = self.yd0[i] + k.s0 * ydd;
+        let d1 = yd[i] + k.s1 * ydd;
+        let (b, db) = (k.b, k.db);
         let v = b[0] * self.y0[i] + b[1] * h * d0 + b[2] * y[i] + b[3] * h * d1;
         let dv = (db[0] * self.y0[i] + db[2] * y[i]) / h + db[1] * d0 + db[3] * d1;
         (v, dv)
