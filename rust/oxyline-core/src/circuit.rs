@@ -47,6 +47,8 @@ pub enum Part {
     WallVelocity,
     WallStress,
     ActiveStress,
+    /// A friction cell of a Womersley segment (`k`: the segment), `crate::womersley`.
+    FrictionCell,
 }
 
 impl Part {
@@ -68,6 +70,7 @@ impl Part {
             Part::WallVelocity => "wall velocity",
             Part::WallStress => "wall stress",
             Part::ActiveStress => "active stress",
+            Part::FrictionCell => "friction cell",
         }
     }
 }
@@ -140,6 +143,7 @@ impl Names {
                 match part {
                     Part::Whole => format!("vessel '{v}'"),
                     Part::Point | Part::Segment => format!("vessel '{v}' {} {k}", part.suffix()),
+                    Part::FrictionCell => format!("vessel '{v}' segment {k} friction cell"),
                     _ => format!("vessel '{v}' {}", part.suffix()),
                 }
             }
@@ -178,7 +182,15 @@ impl Names {
         } else if i < nn + nb {
             format!("flow in {}", self.branch(i - nn))
         } else {
-            format!("volume of {}", self.write(self.extras[i - nn - nb]))
+            let label = self.extras[i - nn - nb];
+            let what = match label {
+                Label::Vessel {
+                    part: Part::FrictionCell,
+                    ..
+                } => "flow in",
+                _ => "volume of",
+            };
+            format!("{what} {}", self.write(label))
         }
     }
     /// Names of all unknowns.
@@ -327,6 +339,17 @@ pub struct SegmentGeom {
     pub compliance: f64,
 }
 
+/// A cell R_k ‖ L_k in series with branch `branch` (a Womersley segment, `crate::womersley`):
+/// its unknown is the flow i_k through L_k (element unknown `extra`), with the row
+/// L_k di_k/dt + R_k i_k − R_k Q = 0, and the branch's row gains R_k (Q − i_k), the cell's
+/// pressure drop. The cell hangs off the branch's flow alone, so a tree stays a tree.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrictionCell {
+    pub branch: usize,
+    pub extra: usize,
+    pub resistance: f64,
+}
+
 #[derive(Debug, Clone)]
 pub struct Branch {
     pub from: usize,
@@ -415,6 +438,8 @@ pub struct Circuit {
     pub start_values: Vec<StartValue>,
     /// Flow-through R–C branches, whose equation takes their `from` node's row.
     pub swapped_rows: Vec<SwappedRow>,
+    /// Friction cells of Womersley segments, in the order of their branches.
+    pub friction_cells: Vec<FrictionCell>,
     pub vessel_names: Vec<String>,
     /// Node and branch names (shared with the assembled DAE).
     pub names: Arc<Names>,
@@ -519,6 +544,21 @@ impl Circuit {
         Arc::make_mut(&mut self.names).extras.push(label);
         self.extras.push(mass);
         self.extras.len() - 1
+    }
+    /// Put a cell R ‖ L in series with branch `branch` (`crate::womersley`).
+    pub fn add_friction_cell(
+        &mut self,
+        name: impl Into<NameOf>,
+        branch: usize,
+        resistance: f64,
+        inductance: f64,
+    ) {
+        let extra = self.add_extra(name, inductance);
+        self.friction_cells.push(FrictionCell {
+            branch,
+            extra,
+            resistance,
+        });
     }
     pub fn unknown_name(&self, i: usize) -> String {
         self.names.unknown(i)
@@ -646,7 +686,10 @@ impl Circuit {
         // a node row holds its incidences (or 1–3 entries), a branch row 3 (or a node's
         // incidences): allocated once at an upper bound instead of grown by doubling (whose
         // copies touch the pattern's bytes twice at 1e6 segments)
-        let nnz = 2 * incidence.inc.len() + 3 * (nn + nb) + self.extras.len();
+        let nnz = 2 * incidence.inc.len()
+            + 3 * (nn + nb)
+            + self.extras.len()
+            + 3 * self.friction_cells.len();
         let mut f = Csr {
             ptr: Vec::with_capacity(n + 1),
             col: Vec::with_capacity(nnz),
@@ -674,23 +717,44 @@ impl Circuit {
             }
             f.ptr.push(f.col.len());
         }
+        // the cells of each branch (pushed in branch order, so one cursor walks them)
+        let mut cell = 0;
         for (bi, b) in self.branches.iter().enumerate() {
+            let first = cell;
+            while cell < self.friction_cells.len() && self.friction_cells[cell].branch == bi {
+                cell += 1;
+            }
+            let cells = &self.friction_cells[first..cell];
             let node = rows.balance_of_branch[bi];
             if node != usize::MAX {
                 push_balance(&mut f, node);
             } else {
+                let r_cells: f64 = cells.iter().map(|c| c.resistance).sum();
                 f.col.extend([b.from as u32, b.to as u32, (nn + bi) as u32]);
-                f.val.extend([-1.0, 1.0, b.resistance]);
+                f.val.extend([-1.0, 1.0, b.resistance + r_cells]);
+                for c in cells {
+                    f.col.push((nn + nb + c.extra) as u32);
+                    f.val.push(-c.resistance);
+                }
             }
             f.ptr.push(f.col.len());
         }
-        let mut owner = vec![usize::MAX; self.extras.len()];
+        let mut owner = vec![Owner::None; self.extras.len()];
         for &(node, x) in &self.moved_rows {
-            owner[x] = node;
+            owner[x] = Owner::Node(node);
         }
-        for &node in &owner {
-            if node != usize::MAX {
-                push_balance(&mut f, node);
+        for c in &self.friction_cells {
+            owner[c.extra] = Owner::Cell(*c);
+        }
+        for o in &owner {
+            match *o {
+                Owner::Node(node) => push_balance(&mut f, node),
+                Owner::Cell(c) => {
+                    f.col
+                        .extend([(nn + c.branch) as u32, (nn + nb + c.extra) as u32]);
+                    f.val.extend([-c.resistance, c.resistance]);
+                }
+                Owner::None => {}
             }
             f.ptr.push(f.col.len());
         }
@@ -760,6 +824,15 @@ impl Circuit {
             .collect();
         (initial, starts(true).collect())
     }
+}
+
+/// What an element unknown's row of F holds: a moved node balance, a friction cell's
+/// equation, or nothing (the element writes it).
+#[derive(Clone, Copy)]
+enum Owner {
+    None,
+    Node(usize),
+    Cell(FrictionCell),
 }
 
 /// Which row holds each node's equation (`Circuit::row_owners`).

@@ -234,7 +234,8 @@ impl<'a> Stamping<'a> {
             .map(|l| l.stenosis_form)
             .unwrap_or_default();
         let circuit = &mut self.circuit;
-        let chain = vessel::stamp(circuit, &v.name, &segs, (arrangement, form), ends);
+        let friction = segments::friction(spec, v);
+        let chain = vessel::stamp(circuit, &v.name, &segs, (arrangement, form, friction), ends);
         let interior = match arrangement {
             Arrangement::Rcl => initial::Interior::Rcl {
                 resistance: segs[0].resistance,

@@ -7,6 +7,7 @@ use super::segments::SegmentRow;
 use crate::circuit::{ChainRuleCapacitor, Circuit, Label, Part, SegmentGeom};
 use crate::model::{Arrangement, StenosisForm};
 use crate::output::Probes;
+use crate::segment::WallFriction;
 
 /// The circuit nodes along a vessel (inlet node, interior points, outlet node) and its branches.
 pub(crate) struct Chain {
@@ -15,12 +16,13 @@ pub(crate) struct Chain {
 }
 
 /// Stamp vessel `name` (index `vessel` in `circuit.vessel_names`) between graph nodes
-/// `p_from` and `p_to`; `form` says how generalized-α writes an RCL vessel's stenosis.
+/// `p_from` and `p_to`; `form` says how generalized-α writes an RCL vessel's stenosis,
+/// `friction` whether each segment's branch carries Womersley friction cells.
 pub(crate) fn stamp(
     circuit: &mut Circuit,
     name: &str,
     segs: &[SegmentRow],
-    (arrangement, form): (Arrangement, StenosisForm),
+    (arrangement, form, friction): (Arrangement, StenosisForm, WallFriction),
     (p_from, p_to): (usize, usize),
 ) -> Chain {
     let vessel = circuit.add_vessel(name);
@@ -43,6 +45,9 @@ pub(crate) fn stamp(
     } else {
         stamp_segments(circuit, vessel, segs, arrangement, &points)
     };
+    if friction == WallFriction::Womersley && arrangement != Arrangement::Rcl {
+        stamp_friction_cells(circuit, vessel, segs, &branches);
+    }
     Chain { points, branches }
 }
 
@@ -155,6 +160,23 @@ fn stamp_segments(
         });
     }
     branches
+}
+
+/// Womersley friction (`crate::womersley`): each segment's branch gets the flat-profile
+/// inertance and Poiseuille resistance (as the row says) in series with its R‖L cells.
+fn stamp_friction_cells(
+    circuit: &mut Circuit,
+    vessel: usize,
+    segs: &[SegmentRow],
+    branches: &[usize],
+) {
+    for (k, (s, &b)) in segs.iter().zip(branches).enumerate() {
+        let f = crate::womersley::cells(s.resistance, s.inductance);
+        circuit.branches[b].inductance = f.inductance;
+        for (r, l) in f.cells {
+            circuit.add_friction_cell(label(vessel, Part::FrictionCell, k + 1), b, r, l);
+        }
+    }
 }
 
 /// Record the vessel's probes: its end pressures and flows and, with `segments`, every

@@ -22,6 +22,7 @@ pub const VESSEL_KEYS: &[&str] = &[
     "segments",
     "lumped",
     "arrangement",
+    "wall_friction",
     "output",
     "description",
     "valve",
@@ -34,6 +35,8 @@ pub const VESSEL_KEYS: &[&str] = &[
     "chamber_sphere",
 ];
 pub const ARRANGEMENTS: &[&str] = &["inverted-L", "L", "pi", "RCL"];
+/// A segment's friction and inertia: Poiseuille, or Womersley's (docs/physics.md §1.12).
+pub const WALL_FRICTIONS: &[&str] = &["poiseuille", "womersley"];
 pub const LUMPED_KEYS: &[&str] = &[
     "resistance",
     "inductance",
@@ -239,6 +242,23 @@ pub fn vessel<N: Node>(v: &N, i: usize, units: Units) -> Result<Value> {
             cv.insert(key.into(), start_values(&d, &el, key, units)?);
         }
     }
+    if v.has("wall_friction")
+        && [
+            "heart_pulmonary",
+            "coronary_bed",
+            "chamber_sphere",
+            "valve",
+            "chamber",
+            "through_rc",
+        ]
+        .iter()
+        .any(|k| v.has(k))
+    {
+        return Err(err(
+            &el,
+            "wall_friction applies to a vessel with length and radius, not to a heart, valve or lumped element",
+        ));
+    }
     if v.has("heart_pulmonary") || v.has("coronary_bed") {
         return closed_loop_element(v, cv, &el, units);
     }
@@ -248,12 +268,40 @@ pub fn vessel<N: Node>(v: &N, i: usize, units: Units) -> Result<Value> {
     if v.has("valve") || v.has("chamber") || v.has("through_rc") {
         return heart_element(v, cv, &el, units);
     }
+    let friction = wall_friction(v, &el)?;
     if let Some(lp) = v.get("lumped") {
+        if friction.as_deref() == Some("womersley") {
+            return Err(err(
+                &el,
+                "wall_friction 'womersley' needs the vessel's length and radius, not lumped values",
+            ));
+        }
         cv.insert("lumped".into(), lumped(&lp, &el, units)?);
     } else {
         cv.insert("geometry".into(), geometry(v, &el, units)?);
+        if let Some(f) = friction {
+            cv.insert("wall_friction".into(), json!(f));
+        }
     }
     Ok(Value::Object(cv))
+}
+
+/// The vessel's `wall_friction` (None: the model's), checked against [`WALL_FRICTIONS`].
+fn wall_friction<N: Node>(v: &N, el: &str) -> Result<Option<String>> {
+    let Some(x) = v.get("wall_friction") else {
+        return Ok(None);
+    };
+    match x.text() {
+        Some(t) if WALL_FRICTIONS.contains(&t.as_str()) => Ok(Some(t)),
+        _ => Err(err(
+            el,
+            format!(
+                "wall_friction must be one of {}, got {}",
+                py_list(WALL_FRICTIONS),
+                x.repr()
+            ),
+        )),
+    }
 }
 
 fn lumped<N: Node>(lp: &N, el: &str, units: Units) -> Result<Value> {
