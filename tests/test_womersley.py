@@ -171,3 +171,43 @@ def test_womersley_on_lumped_or_heart_elements_is_refused() -> None:
     bad = rigid_tube(1e-3, 0.1, "sometimes")
     with pytest.raises(oxyline.ModelError, match="wall_friction.*'sometimes'"):
         oxyline.load_model(bad)
+
+
+# --------------------------------------------------------------------------------------------
+# Olufsen's stopping rule (``stopping: olufsen``) with Womersley vessels in the tree
+# --------------------------------------------------------------------------------------------
+
+def olufsen_stopping(r: float, rmin: float, omega: float, z_series) -> complex:
+    """Impedance below a node of radius r > rmin as Olufsen grew her trees: both daughters
+    always, each a leaf (terminal pressure 0) once its radius is at or below rmin."""
+    y = 0j
+    for ratio in (A_, B_):
+        rd = ratio * r
+        below = olufsen_stopping(rd, rmin, omega, z_series) if rd > rmin else 0j
+        y += 1.0 / line(rd, LRR * rd, omega, below, z_series)
+    return 1.0 / y
+
+
+def count_olufsen(r: float, rmin: float) -> int:
+    return 0 if r <= rmin else sum(1 + count_olufsen(k * r, rmin) for k in (A_, B_))
+
+
+def test_olufsen_stopping_with_womersley_vessels_matches_her_recursion() -> None:
+    root, rmin = 1e-3, 4.5e-4
+    data = tree(root, rmin, "poiseuille", 16)
+    data["boundary_conditions"]["out"].update(
+        {"min_radius": rmin, "stopping": "olufsen", "wall_friction": "womersley"})
+    m = oxyline.load_model(data)
+    tree_vessels = [n for n in m.vessel_names if "/st/" in n]
+    assert len(tree_vessels) == count_olufsen(root, rmin) == 28
+    f = np.array([0.0, 1.0, 2.0, 5.0, 10.0, 20.0])
+    exact = np.array([olufsen_stopping(root, rmin, 2 * math.pi * fi, z_womersley) for fi in f])
+    z = oxyline.impedance(m, "out", f)
+    assert abs(z[0].real / exact[0].real - 1.0) < 1e-9  # steady: Poiseuille sums, exact
+    mod = np.abs(np.abs(z) / np.abs(exact) - 1.0)
+    phase = np.abs(np.angle(z / exact))
+    assert mod.max() < 0.02 and phase.max() < 0.03, (mod, phase)
+    bad = tree(root, rmin, "poiseuille", 1)
+    bad["boundary_conditions"]["out"]["stopping"] = "never"
+    with pytest.raises(oxyline.ModelError, match="'out'.*'stopping'.*'never'"):
+        oxyline.load_model(bad)
