@@ -87,6 +87,8 @@ pub enum Label {
     Vessel { vessel: u32, part: Part, k: u32 },
     /// A part of boundary condition `tag` (index into `Names::boundaries`).
     Boundary { tag: u32, part: Part },
+    /// The viscoelastic wall of circuit node `node` (its elastic pressure).
+    Wall(u32),
 }
 
 /// The names of a circuit's nodes and branches, shared by the circuit and its DAE.
@@ -147,6 +149,7 @@ impl Names {
                     _ => format!("vessel '{v}' {}", part.suffix()),
                 }
             }
+            Label::Wall(node) => format!("the wall at {}", self.write(self.nodes[node as usize])),
             Label::Boundary { tag, part } => format!(
                 "boundary condition '{}' {}",
                 self.boundaries[tag as usize],
@@ -188,6 +191,7 @@ impl Names {
                     part: Part::FrictionCell,
                     ..
                 } => "flow in",
+                Label::Wall(_) => "elastic pressure of",
                 _ => "volume of",
             };
             format!("{what} {}", self.write(label))
@@ -350,6 +354,19 @@ pub struct FrictionCell {
     pub resistance: f64,
 }
 
+/// A Kelvin–Voigt wall at node `node` (docs/physics.md §1.13): the node's capacitance C sits
+/// behind a resistance R_v = τ/C, τ the capacitance-weighted wall relaxation time η/E of the
+/// segments sharing the node. Element unknown `extra` is the wall's elastic pressure P_e, with
+/// the row C dP_e/dt + (P_e − P)/R_v = 0; the node's own row becomes its flow balance with the
+/// wall's flow (P − P_e)/R_v in place of C dP/dt. The wall hangs off its node alone.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ViscousWall {
+    pub node: usize,
+    pub extra: usize,
+    /// Σ C_i τ_i over the segment shares at the node (s·m³/Pa).
+    pub capacitance_time: f64,
+}
+
 #[derive(Debug, Clone)]
 pub struct Branch {
     pub from: usize,
@@ -440,6 +457,10 @@ pub struct Circuit {
     pub swapped_rows: Vec<SwappedRow>,
     /// Friction cells of Womersley segments, in the order of their branches.
     pub friction_cells: Vec<FrictionCell>,
+    /// Viscoelastic walls, one per node that has one.
+    pub viscous_walls: Vec<ViscousWall>,
+    /// Node → index into `viscous_walls`.
+    viscous_wall_of: std::collections::HashMap<usize, usize>,
     pub vessel_names: Vec<String>,
     /// Node and branch names (shared with the assembled DAE).
     pub names: Arc<Names>,
@@ -560,6 +581,46 @@ impl Circuit {
             resistance,
         });
     }
+    /// Give node `node` a share `capacitance` of wall with relaxation time `relaxation`
+    /// (η/E, s) behind a viscous resistance (a Kelvin–Voigt wall, [`ViscousWall`]).
+    pub fn add_wall_viscosity(&mut self, node: usize, capacitance: f64, relaxation: f64) {
+        if !(capacitance > 0.0 && relaxation > 0.0) {
+            return;
+        }
+        let k = match self.viscous_wall_of.get(&node) {
+            Some(&k) => k,
+            None => {
+                let extra = self.add_extra(Label::Wall(node as u32), 0.0);
+                self.viscous_walls.push(ViscousWall {
+                    node,
+                    extra,
+                    capacitance_time: 0.0,
+                });
+                self.viscous_wall_of
+                    .insert(node, self.viscous_walls.len() - 1);
+                self.viscous_walls.len() - 1
+            }
+        };
+        self.viscous_walls[k].capacitance_time += capacitance * relaxation;
+    }
+    /// The viscoelastic walls in force, as (wall, capacitance C, viscous resistance R_v): the
+    /// nodes' capacitance as it is now (an impedance view may have split it), the relaxation
+    /// time their shares gave. Walls at prescribed pressures, or whose node's row moved to an
+    /// element, are left elastic.
+    fn active_walls(&self, rows: &RowOwners) -> Vec<(ViscousWall, f64, f64)> {
+        self.viscous_walls
+            .iter()
+            .filter(|w| {
+                rows.fixed[w.node].is_none()
+                    && rows.moved[w.node].is_none()
+                    && self.nodes[w.node].capacitance > 0.0
+            })
+            .map(|w| {
+                let c = self.nodes[w.node].capacitance;
+                (*w, c, w.capacitance_time / (c * c))
+            })
+            .collect()
+    }
     pub fn unknown_name(&self, i: usize) -> String {
         self.names.unknown(i)
     }
@@ -581,10 +642,15 @@ impl Circuit {
         }
         let rows = self.row_owners()?;
         let incidence = Incidence::of(self);
-        let f = self.flow_matrix(&rows, &incidence);
-        let (e, windkessel) = self.mass_diagonal(&rows);
-        let forcing = self.forcing(&rows);
+        let walls = self.active_walls(&rows);
+        let f = self.flow_matrix(&rows, &incidence, &walls);
+        let (e, windkessel) = self.mass_diagonal(&rows, &walls);
         let (nn, nb) = (self.nodes.len(), self.branches.len());
+        let wall_unknowns = walls
+            .iter()
+            .map(|(w, _, _)| (w.node, nn + nb + w.extra))
+            .collect();
+        let forcing = self.forcing(&rows);
         let stenosis: Vec<(usize, f64)> = self
             .branches
             .iter()
@@ -620,6 +686,7 @@ impl Circuit {
             chain_rule,
             varying,
             forcing,
+            walls: wall_unknowns,
             names: self.names.clone(),
         })
     }
@@ -680,7 +747,12 @@ impl Circuit {
     /// The flow matrix F: a node row holds its incidences (the flow balance) unless its
     /// balance moved, a branch row −P_from + P_to + R Q (or the balance of the node it took
     /// over), an element unknown's row the balance of the chamber node it owns.
-    fn flow_matrix(&self, rows: &RowOwners, incidence: &Incidence) -> Csr {
+    fn flow_matrix(
+        &self,
+        rows: &RowOwners,
+        incidence: &Incidence,
+        walls: &[(ViscousWall, f64, f64)],
+    ) -> Csr {
         let (nn, nb) = (self.nodes.len(), self.branches.len());
         let n = self.n_unknowns();
         // a node row holds its incidences (or 1–3 entries), a branch row 3 (or a node's
@@ -689,7 +761,16 @@ impl Circuit {
         let nnz = 2 * incidence.inc.len()
             + 3 * (nn + nb)
             + self.extras.len()
-            + 3 * self.friction_cells.len();
+            + 3 * self.friction_cells.len()
+            + 4 * walls.len();
+        // per node: its viscoelastic wall's unknown and 1/R_v (none for most circuits)
+        let mut wall_at: Vec<Option<(u32, f64)>> = Vec::new();
+        if !walls.is_empty() {
+            wall_at = vec![None; nn];
+            for (w, _, rv) in walls {
+                wall_at[w.node] = Some(((nn + nb + w.extra) as u32, 1.0 / rv));
+            }
+        }
         let mut f = Csr {
             ptr: Vec::with_capacity(n + 1),
             col: Vec::with_capacity(nnz),
@@ -714,6 +795,11 @@ impl Circuit {
                 f.val.push(1.0);
             } else {
                 push_balance(&mut f, i);
+                if let Some(&Some((wall, g))) = wall_at.get(i) {
+                    // the wall's flow (P − P_e)/R_v in place of C dP/dt
+                    f.col.extend([i as u32, wall]);
+                    f.val.extend([g, -g]);
+                }
             }
             f.ptr.push(f.col.len());
         }
@@ -746,13 +832,20 @@ impl Circuit {
         for c in &self.friction_cells {
             owner[c.extra] = Owner::Cell(*c);
         }
-        for o in &owner {
+        for &(w, _, rv) in walls {
+            owner[w.extra] = Owner::Wall(w.node, 1.0 / rv);
+        }
+        for (x, o) in owner.iter().enumerate() {
             match *o {
                 Owner::Node(node) => push_balance(&mut f, node),
                 Owner::Cell(c) => {
                     f.col
                         .extend([(nn + c.branch) as u32, (nn + nb + c.extra) as u32]);
                     f.val.extend([-c.resistance, c.resistance]);
+                }
+                Owner::Wall(node, g) => {
+                    f.col.extend([node as u32, (nn + nb + x) as u32]);
+                    f.val.extend([-g, g]);
                 }
                 Owner::None => {}
             }
@@ -763,7 +856,11 @@ impl Circuit {
 
     /// The mass diagonal E (node capacitances, branch inductances, element unknowns' E_ii) and
     /// which node capacitances are Windkessel capacitors.
-    fn mass_diagonal(&self, rows: &RowOwners) -> (Vec<f64>, Vec<bool>) {
+    fn mass_diagonal(
+        &self,
+        rows: &RowOwners,
+        walls: &[(ViscousWall, f64, f64)],
+    ) -> (Vec<f64>, Vec<bool>) {
         let (nn, nb) = (self.nodes.len(), self.branches.len());
         let n = self.n_unknowns();
         let mut e = vec![0.0; n];
@@ -782,6 +879,11 @@ impl Circuit {
         }
         for (x, &m) in self.extras.iter().enumerate() {
             e[nn + nb + x] = m;
+        }
+        // a viscoelastic wall's capacitance moves to its elastic pressure
+        for &(w, c, _) in walls {
+            e[w.node] = 0.0;
+            e[nn + nb + w.extra] = c;
         }
         (e, windkessel)
     }
@@ -833,6 +935,8 @@ enum Owner {
     None,
     Node(usize),
     Cell(FrictionCell),
+    /// A viscoelastic wall's row: (node, 1/R_v).
+    Wall(usize, f64),
 }
 
 /// Which row holds each node's equation (`Circuit::row_owners`).
@@ -976,6 +1080,10 @@ pub struct Dae {
     pub varying: Vec<(usize, ResistanceLaw)>,
     /// (row, waveform): f_row(t) = w(t).
     pub forcing: Vec<(usize, Waveform)>,
+    /// (node, unknown): nodes whose capacitance sits behind a viscoelastic wall, and the
+    /// unknown holding the wall's elastic pressure (the lumen volume follows it, not the
+    /// node's pressure).
+    pub walls: Vec<(usize, usize)>,
     /// Nonlinear and time-varying elements, each adding c_el(y, t) to its rows (evaluated at
     /// the true time in every regime: a chamber's elastance has no mean to stand for it).
     pub elements: Vec<Arc<dyn Element>>,

@@ -17,12 +17,13 @@ pub(crate) struct Chain {
 
 /// Stamp vessel `name` (index `vessel` in `circuit.vessel_names`) between graph nodes
 /// `p_from` and `p_to`; `form` says how generalized-α writes an RCL vessel's stenosis,
-/// `friction` whether each segment's branch carries Womersley friction cells.
+/// `friction` whether each segment's branch carries Womersley friction cells, `relaxation`
+/// the wall's η/E (s; 0: elastic, else a Kelvin–Voigt wall behind each capacitance).
 pub(crate) fn stamp(
     circuit: &mut Circuit,
     name: &str,
     segs: &[SegmentRow],
-    (arrangement, form, friction): (Arrangement, StenosisForm, WallFriction),
+    (arrangement, form, friction, relaxation): (Arrangement, StenosisForm, WallFriction, f64),
     (p_from, p_to): (usize, usize),
 ) -> Chain {
     let vessel = circuit.add_vessel(name);
@@ -45,6 +46,13 @@ pub(crate) fn stamp(
     } else {
         stamp_segments(circuit, vessel, segs, arrangement, &points)
     };
+    if relaxation > 0.0 && arrangement != Arrangement::Rcl {
+        let (cp, cd) = shares(arrangement);
+        for (k, s) in segs.iter().enumerate() {
+            circuit.add_wall_viscosity(points[k], cp * s.compliance, relaxation);
+            circuit.add_wall_viscosity(points[k + 1], cd * s.compliance, relaxation);
+        }
+    }
     if friction == WallFriction::Womersley && arrangement != Arrangement::Rcl {
         stamp_friction_cells(circuit, vessel, segs, &branches);
     }
@@ -110,6 +118,15 @@ fn stamp_rcl(
     vec![b0, b1]
 }
 
+/// The shares of a segment's C, volume and wall area at its (proximal, distal) node.
+fn shares(arrangement: Arrangement) -> (f64, f64) {
+    match arrangement {
+        Arrangement::InvertedL => (1.0, 0.0),
+        Arrangement::L => (0.0, 1.0),
+        _ => (0.5, 0.5),
+    }
+}
+
 /// One R–L branch per segment; C, volume and wall area at the ends by the arrangement.
 fn stamp_segments(
     circuit: &mut Circuit,
@@ -119,11 +136,7 @@ fn stamp_segments(
     points: &[usize],
 ) -> Vec<usize> {
     let n = segs.len();
-    let (cp, cd) = match arrangement {
-        Arrangement::InvertedL => (1.0, 0.0),
-        Arrangement::L => (0.0, 1.0),
-        _ => (0.5, 0.5),
-    };
+    let (cp, cd) = shares(arrangement);
     let mut branches = Vec::with_capacity(n);
     for (k, s) in segs.iter().enumerate() {
         let label = if n == 1 {

@@ -73,6 +73,9 @@ pub struct GeometrySpec {
     pub youngs_modulus: Option<f64>,
     #[serde(default = "default_poisson")]
     pub poisson_ratio: f64,
+    /// Kelvin–Voigt wall viscosity η (Pa·s; 0: elastic wall), docs/physics.md §1.13.
+    #[serde(default)]
+    pub wall_viscosity: f64,
 }
 fn default_poisson() -> f64 {
     0.5

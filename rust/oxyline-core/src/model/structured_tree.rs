@@ -668,6 +668,7 @@ impl Tree {
             wall_thickness: Some(h),
             youngs_modulus: Some(e),
             poisson_ratio: 0.5,
+            wall_viscosity: 0.0,
         });
         Ok(v)
     }

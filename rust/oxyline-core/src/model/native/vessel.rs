@@ -19,6 +19,7 @@ pub const VESSEL_KEYS: &[&str] = &[
     "wall_thickness",
     "youngs_modulus",
     "poisson_ratio",
+    "wall_viscosity",
     "segments",
     "lumped",
     "arrangement",
@@ -378,6 +379,19 @@ fn geometry<N: Node>(v: &N, el: &str, units: Units) -> Result<Value> {
     if let Some(e) = v.get("youngs_modulus") {
         let e = positive(Some(&e), el, "youngs_modulus", false)?;
         g.insert("youngs_modulus".into(), json!(units.factor(Modulus) * e));
+    }
+    if let Some(eta) = v.get("wall_viscosity") {
+        let eta = positive(Some(&eta), el, "wall_viscosity", true)?;
+        if !(v.has("wall_thickness") && v.has("youngs_modulus")) {
+            return Err(err(
+                el,
+                "wall_viscosity needs a wall (wall_thickness and youngs_modulus)",
+            ));
+        }
+        g.insert(
+            "wall_viscosity".into(),
+            json!(units.factor(Viscosity) * eta),
+        );
     }
     if let Some(nu) = v.get("poisson_ratio") {
         g.insert(

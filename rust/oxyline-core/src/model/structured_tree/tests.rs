@@ -324,6 +324,7 @@ fn root_radius_is_the_vessel_end_at_the_node() {
         wall_thickness: None,
         youngs_modulus: None,
         poisson_ratio: 0.5,
+        wall_viscosity: 0.0,
     });
     let mut lumped = VesselSpec::blank();
     (lumped.name, lumped.from, lumped.to) = ("r".into(), "out".into(), "x".into());
