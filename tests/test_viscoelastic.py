@@ -136,3 +136,32 @@ def test_bad_wall_viscosity_names_the_vessel_key_and_value() -> None:
     data["vessels"][0] = vessel(1, float("nan"))
     with pytest.raises(oxyline.ModelError, match="vessel 'v'.*wall_viscosity"):
         oxyline.load_model(data)
+
+
+def test_downstream_impedance_at_a_viscoelastic_junction() -> None:
+    """π segments put half of each vessel's wall at the junction; the downstream view keeps
+    only the daughters' halves, each still behind its own R_v: Z = 1/Σ_d (Y_d + 1/Z_d),
+    Y_d = iω(C_d/2)/(1 + iωτ), Z_d = R_d + iωL_d + 1/(Y_d + 1/R_out)."""
+    eta, r_out = 1e4, 2e8
+    tau = eta / E
+    rp, lp, cp = per_length()
+    lengths = {"p": 0.05, "a": 0.1, "b": 0.07}
+    ends = {"p": ("in", "j"), "a": ("j", "oa"), "b": ("j", "ob")}
+    vessels = [{"name": n, "from": ends[n][0], "to": ends[n][1], "length": ln, "radius": R,
+                "wall_thickness": H, "youngs_modulus": E, "wall_viscosity": eta}
+               for n, ln in lengths.items()]
+    m = {"name": "junction", "period": 1.0, "arrangement": "pi", "vessels": vessels,
+         "boundary_conditions": {"in": {"type": "flow", "value": 1e-6},
+                                 "oa": {"type": "resistance", "resistance": r_out},
+                                 "ob": {"type": "resistance", "resistance": r_out}}}
+    f = np.array([1.0, 5.0, 20.0])
+    z = oxyline.impedance(m, "j", f)
+    w = 2 * math.pi * f
+    y = 0j
+    for n in ("a", "b"):
+        ln = lengths[n]
+        half = 1j * w * cp * ln / 2 / (1 + 1j * w * tau)
+        zd = (rp + 1j * w * lp) * ln + 1.0 / (half + 1.0 / r_out)
+        y = y + half + 1.0 / zd
+    # a sparse solve of ~12 unknowns against the closed form: rounding only
+    np.testing.assert_allclose(z, 1.0 / y, rtol=1e-9)

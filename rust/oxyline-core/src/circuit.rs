@@ -355,16 +355,18 @@ pub struct FrictionCell {
 }
 
 /// A Kelvin–Voigt wall at node `node` (docs/physics.md §1.13): the node's capacitance C sits
-/// behind a resistance R_v = τ/C, τ the capacitance-weighted wall relaxation time η/E of the
-/// segments sharing the node. Element unknown `extra` is the wall's elastic pressure P_e, with
+/// behind a resistance R_v = τ/C, τ the capacitance-weighted mean of the wall relaxation times
+/// η/E of the viscoelastic segments sharing the node. Element unknown `extra` is the wall's elastic pressure P_e, with
 /// the row C dP_e/dt + (P_e − P)/R_v = 0; the node's own row becomes its flow balance with the
 /// wall's flow (P − P_e)/R_v in place of C dP/dt. The wall hangs off its node alone.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ViscousWall {
     pub node: usize,
     pub extra: usize,
-    /// Σ C_i τ_i over the segment shares at the node (s·m³/Pa).
+    /// Σ C_i τ_i over the viscoelastic segment shares at the node (s·m³/Pa).
     pub capacitance_time: f64,
+    /// Σ C_i over the same shares (m³/Pa).
+    pub capacitance: f64,
 }
 
 #[derive(Debug, Clone)]
@@ -595,6 +597,7 @@ impl Circuit {
                     node,
                     extra,
                     capacitance_time: 0.0,
+                    capacitance: 0.0,
                 });
                 self.viscous_wall_of
                     .insert(node, self.viscous_walls.len() - 1);
@@ -602,10 +605,11 @@ impl Circuit {
             }
         };
         self.viscous_walls[k].capacitance_time += capacitance * relaxation;
+        self.viscous_walls[k].capacitance += capacitance;
     }
     /// The viscoelastic walls in force, as (wall, capacitance C, viscous resistance R_v): the
-    /// nodes' capacitance as it is now (an impedance view may have split it), the relaxation
-    /// time their shares gave. Walls at prescribed pressures, or whose node's row moved to an
+    /// nodes' capacitance as it is now (an impedance view may have split it) behind τ/C, τ
+    /// the mean relaxation time of the viscoelastic shares. Walls at prescribed pressures, or whose node's row moved to an
     /// element, are left elastic.
     fn active_walls(&self, rows: &RowOwners) -> Vec<(ViscousWall, f64, f64)> {
         self.viscous_walls
@@ -617,7 +621,7 @@ impl Circuit {
             })
             .map(|w| {
                 let c = self.nodes[w.node].capacitance;
-                (*w, c, w.capacitance_time / (c * c))
+                (*w, c, w.capacitance_time / w.capacitance / c)
             })
             .collect()
     }
