@@ -1,6 +1,7 @@
 """ADAN56 and the circle of Willis against openBF's stored 1-D results with Poiseuille and
-Womersley segments (``wall_friction``), as ``validate_openbf.py`` compares them: prints the
-table of docs/validation.md ("Friction options against openBF"). ~10 min.
+Womersley segments (``wall_friction``), as ``validate_openbf.py`` compares them: prints one
+row per model and option as it goes (~4 runs to periodicity; over 25 min on a loaded
+2-core machine).
 
 openBF's own friction is the quasi-steady profile law (``gamma_profile``); the importer folds it
 into the model viscosity, which the Womersley cells then also use.
@@ -30,19 +31,16 @@ def reader(friction: str) -> Any:
 
 
 def main() -> None:
-    rows = []
+    print("| model | friction | mean P max / median | pulse P max / median | mean Q max / median |")
+    print("|---|---|---:|---:|---:|", flush=True)
     for model in ("adan56", "circle_of_willis"):
         for friction in ("poiseuille", "womersley"):
             vo.read_openbf = reader(friction)
             s = vo.summary(vo.compare(model)["rows"])
-            rows.append((model, friction, s))
+            cells = " | ".join(f"{100 * s[k][0]:.2f} / {100 * s[k][1]:.2f}"
+                               for k in ("mean_p", "pp", "mean_q"))
+            print(f"| {model} | {friction} | {cells} |", flush=True)
     vo.read_openbf = _READ
-    print("| model | friction | mean P max / median | pulse P max / median | mean Q max / median |")
-    print("|---|---|---:|---:|---:|")
-    for model, friction, s in rows:
-        cells = " | ".join(f"{100 * s[k][0]:.2f} / {100 * s[k][1]:.2f}"
-                           for k in ("mean_p", "pp", "mean_q"))
-        print(f"| {model} | {friction} | {cells} |")
 
 
 if __name__ == "__main__":
