@@ -39,7 +39,8 @@ def structured_tree(node: str, *, root_radius: float, alpha: float = 0.9, beta: 
                     length_ratio: float = 50.0, min_radius: float = 1.0e-4,
                     stiffness: Mapping[str, float] | None = None, segments: int | None = None,
                     max_length: float | None = None, max_vessels: int = MAX_VESSELS,
-                    units: str = "SI", memory_limit: float | None = None
+                    units: str = "SI", memory_limit: float | None = None,
+                    stopping: str = "min-radius", wall_friction: str | None = None
                     ) -> list[dict[str, Any]]:
     """The native vessels of the structured tree below outlet ``node`` (parents before
     daughters), grown by the core. Leaves end at nodes ``<node>/st/<path>`` that no vessel
@@ -52,6 +53,9 @@ def structured_tree(node: str, *, root_radius: float, alpha: float = 0.9, beta: 
 
     Lengths and moduli are in ``units`` (``stiffness`` k1, k3 as moduli, k2 per length);
     ``stiffness`` defaults to Olufsen et al. (2000), E·h/r = 2e6 e^(-2253 r) + 8.65e4 Pa.
+    ``stopping="olufsen"`` grows the tree as Olufsen's code (the first vessel at or below
+    ``min_radius`` is a leaf); ``wall_friction`` ("poiseuille" or "womersley") is written on
+    every vessel (docs/structured-tree.md).
 
     >>> import oxyline
     >>> vs = oxyline.structured_tree("out", root_radius=1e-3, min_radius=5.5e-4)
@@ -60,7 +64,9 @@ def structured_tree(node: str, *, root_radius: float, alpha: float = 0.9, beta: 
     """
     condition = {"alpha": alpha, "beta": beta, "length_ratio": length_ratio,
                  "min_radius": min_radius, "stiffness": stiffness, "segments": segments,
-                 "max_length": max_length, "max_vessels": max_vessels}
+                 "max_length": max_length, "max_vessels": max_vessels, "stopping": stopping}
+    if wall_friction is not None:
+        condition["wall_friction"] = wall_friction
     vessels, _ = _grow(node, condition, root_radius, units, memory_limit)
     return vessels
 

@@ -47,6 +47,8 @@ pub enum Part {
     WallVelocity,
     WallStress,
     ActiveStress,
+    /// A friction cell of a Womersley segment (`k`: the segment), `crate::womersley`.
+    FrictionCell,
 }
 
 impl Part {
@@ -68,6 +70,7 @@ impl Part {
             Part::WallVelocity => "wall velocity",
             Part::WallStress => "wall stress",
             Part::ActiveStress => "active stress",
+            Part::FrictionCell => "friction cell",
         }
     }
 }
@@ -84,6 +87,8 @@ pub enum Label {
     Vessel { vessel: u32, part: Part, k: u32 },
     /// A part of boundary condition `tag` (index into `Names::boundaries`).
     Boundary { tag: u32, part: Part },
+    /// The viscoelastic wall of circuit node `node` (its elastic pressure).
+    Wall(u32),
 }
 
 /// The names of a circuit's nodes and branches, shared by the circuit and its DAE.
@@ -140,9 +145,11 @@ impl Names {
                 match part {
                     Part::Whole => format!("vessel '{v}'"),
                     Part::Point | Part::Segment => format!("vessel '{v}' {} {k}", part.suffix()),
+                    Part::FrictionCell => format!("vessel '{v}' segment {k} friction cell"),
                     _ => format!("vessel '{v}' {}", part.suffix()),
                 }
             }
+            Label::Wall(node) => format!("the wall at {}", self.write(self.nodes[node as usize])),
             Label::Boundary { tag, part } => format!(
                 "boundary condition '{}' {}",
                 self.boundaries[tag as usize],
@@ -178,7 +185,16 @@ impl Names {
         } else if i < nn + nb {
             format!("flow in {}", self.branch(i - nn))
         } else {
-            format!("volume of {}", self.write(self.extras[i - nn - nb]))
+            let label = self.extras[i - nn - nb];
+            let what = match label {
+                Label::Vessel {
+                    part: Part::FrictionCell,
+                    ..
+                } => "flow in",
+                Label::Wall(_) => "elastic pressure of",
+                _ => "volume of",
+            };
+            format!("{what} {}", self.write(label))
         }
     }
     /// Names of all unknowns.
@@ -327,6 +343,32 @@ pub struct SegmentGeom {
     pub compliance: f64,
 }
 
+/// A cell R_k ‖ L_k in series with branch `branch` (a Womersley segment, `crate::womersley`):
+/// its unknown is the flow i_k through L_k (element unknown `extra`), with the row
+/// L_k di_k/dt + R_k i_k − R_k Q = 0, and the branch's row gains R_k (Q − i_k), the cell's
+/// pressure drop. The cell hangs off the branch's flow alone, so a tree stays a tree.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrictionCell {
+    pub branch: usize,
+    pub extra: usize,
+    pub resistance: f64,
+}
+
+/// A Kelvin–Voigt wall at node `node` (docs/physics.md §1.13): the node's capacitance C sits
+/// behind a resistance R_v = τ/C, τ the capacitance-weighted mean of the wall relaxation times
+/// η/E of the viscoelastic segments sharing the node. Element unknown `extra` is the wall's elastic pressure P_e, with
+/// the row C dP_e/dt + (P_e − P)/R_v = 0; the node's own row becomes its flow balance with the
+/// wall's flow (P − P_e)/R_v in place of C dP/dt. The wall hangs off its node alone.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ViscousWall {
+    pub node: usize,
+    pub extra: usize,
+    /// Σ C_i τ_i over the viscoelastic segment shares at the node (s·m³/Pa).
+    pub capacitance_time: f64,
+    /// Σ C_i over the same shares (m³/Pa).
+    pub capacitance: f64,
+}
+
 #[derive(Debug, Clone)]
 pub struct Branch {
     pub from: usize,
@@ -415,6 +457,12 @@ pub struct Circuit {
     pub start_values: Vec<StartValue>,
     /// Flow-through R–C branches, whose equation takes their `from` node's row.
     pub swapped_rows: Vec<SwappedRow>,
+    /// Friction cells of Womersley segments, in the order of their branches.
+    pub friction_cells: Vec<FrictionCell>,
+    /// Viscoelastic walls, one per node that has one.
+    pub viscous_walls: Vec<ViscousWall>,
+    /// Node → index into `viscous_walls`.
+    viscous_wall_of: std::collections::HashMap<usize, usize>,
     pub vessel_names: Vec<String>,
     /// Node and branch names (shared with the assembled DAE).
     pub names: Arc<Names>,
@@ -520,6 +568,63 @@ impl Circuit {
         self.extras.push(mass);
         self.extras.len() - 1
     }
+    /// Put a cell R ‖ L in series with branch `branch` (`crate::womersley`).
+    pub fn add_friction_cell(
+        &mut self,
+        name: impl Into<NameOf>,
+        branch: usize,
+        resistance: f64,
+        inductance: f64,
+    ) {
+        let extra = self.add_extra(name, inductance);
+        self.friction_cells.push(FrictionCell {
+            branch,
+            extra,
+            resistance,
+        });
+    }
+    /// Give node `node` a share `capacitance` of wall with relaxation time `relaxation`
+    /// (η/E, s) behind a viscous resistance (a Kelvin–Voigt wall, [`ViscousWall`]).
+    pub fn add_wall_viscosity(&mut self, node: usize, capacitance: f64, relaxation: f64) {
+        if !(capacitance > 0.0 && relaxation > 0.0) {
+            return;
+        }
+        let k = match self.viscous_wall_of.get(&node) {
+            Some(&k) => k,
+            None => {
+                let extra = self.add_extra(Label::Wall(node as u32), 0.0);
+                self.viscous_walls.push(ViscousWall {
+                    node,
+                    extra,
+                    capacitance_time: 0.0,
+                    capacitance: 0.0,
+                });
+                self.viscous_wall_of
+                    .insert(node, self.viscous_walls.len() - 1);
+                self.viscous_walls.len() - 1
+            }
+        };
+        self.viscous_walls[k].capacitance_time += capacitance * relaxation;
+        self.viscous_walls[k].capacitance += capacitance;
+    }
+    /// The viscoelastic walls in force, as (wall, capacitance C, viscous resistance R_v): the
+    /// nodes' capacitance as it is now (an impedance view may have split it) behind τ/C, τ
+    /// the mean relaxation time of the viscoelastic shares. Walls at prescribed pressures, or whose node's row moved to an
+    /// element, are left elastic.
+    fn active_walls(&self, rows: &RowOwners) -> Vec<(ViscousWall, f64, f64)> {
+        self.viscous_walls
+            .iter()
+            .filter(|w| {
+                rows.fixed[w.node].is_none()
+                    && rows.moved[w.node].is_none()
+                    && self.nodes[w.node].capacitance > 0.0
+            })
+            .map(|w| {
+                let c = self.nodes[w.node].capacitance;
+                (*w, c, w.capacitance_time / w.capacitance / c)
+            })
+            .collect()
+    }
     pub fn unknown_name(&self, i: usize) -> String {
         self.names.unknown(i)
     }
@@ -541,10 +646,15 @@ impl Circuit {
         }
         let rows = self.row_owners()?;
         let incidence = Incidence::of(self);
-        let f = self.flow_matrix(&rows, &incidence);
-        let (e, windkessel) = self.mass_diagonal(&rows);
-        let forcing = self.forcing(&rows);
+        let walls = self.active_walls(&rows);
+        let f = self.flow_matrix(&rows, &incidence, &walls);
+        let (e, windkessel) = self.mass_diagonal(&rows, &walls);
         let (nn, nb) = (self.nodes.len(), self.branches.len());
+        let wall_unknowns = walls
+            .iter()
+            .map(|(w, _, _)| (w.node, nn + nb + w.extra))
+            .collect();
+        let forcing = self.forcing(&rows);
         let stenosis: Vec<(usize, f64)> = self
             .branches
             .iter()
@@ -580,6 +690,7 @@ impl Circuit {
             chain_rule,
             varying,
             forcing,
+            walls: wall_unknowns,
             names: self.names.clone(),
         })
     }
@@ -640,13 +751,30 @@ impl Circuit {
     /// The flow matrix F: a node row holds its incidences (the flow balance) unless its
     /// balance moved, a branch row −P_from + P_to + R Q (or the balance of the node it took
     /// over), an element unknown's row the balance of the chamber node it owns.
-    fn flow_matrix(&self, rows: &RowOwners, incidence: &Incidence) -> Csr {
+    fn flow_matrix(
+        &self,
+        rows: &RowOwners,
+        incidence: &Incidence,
+        walls: &[(ViscousWall, f64, f64)],
+    ) -> Csr {
         let (nn, nb) = (self.nodes.len(), self.branches.len());
         let n = self.n_unknowns();
         // a node row holds its incidences (or 1–3 entries), a branch row 3 (or a node's
         // incidences): allocated once at an upper bound instead of grown by doubling (whose
         // copies touch the pattern's bytes twice at 1e6 segments)
-        let nnz = 2 * incidence.inc.len() + 3 * (nn + nb) + self.extras.len();
+        let nnz = 2 * incidence.inc.len()
+            + 3 * (nn + nb)
+            + self.extras.len()
+            + 3 * self.friction_cells.len()
+            + 4 * walls.len();
+        // per node: its viscoelastic wall's unknown and 1/R_v (none for most circuits)
+        let mut wall_at: Vec<Option<(u32, f64)>> = Vec::new();
+        if !walls.is_empty() {
+            wall_at = vec![None; nn];
+            for (w, _, rv) in walls {
+                wall_at[w.node] = Some(((nn + nb + w.extra) as u32, 1.0 / rv));
+            }
+        }
         let mut f = Csr {
             ptr: Vec::with_capacity(n + 1),
             col: Vec::with_capacity(nnz),
@@ -671,26 +799,59 @@ impl Circuit {
                 f.val.push(1.0);
             } else {
                 push_balance(&mut f, i);
+                if let Some(&Some((wall, g))) = wall_at.get(i) {
+                    // the wall's flow (P − P_e)/R_v in place of C dP/dt
+                    f.col.extend([i as u32, wall]);
+                    f.val.extend([g, -g]);
+                }
             }
             f.ptr.push(f.col.len());
         }
+        // the cells of each branch (pushed in branch order, so one cursor walks them)
+        let mut cell = 0;
         for (bi, b) in self.branches.iter().enumerate() {
+            let first = cell;
+            while cell < self.friction_cells.len() && self.friction_cells[cell].branch == bi {
+                cell += 1;
+            }
+            let cells = &self.friction_cells[first..cell];
             let node = rows.balance_of_branch[bi];
             if node != usize::MAX {
                 push_balance(&mut f, node);
             } else {
+                let r_cells: f64 = cells.iter().map(|c| c.resistance).sum();
                 f.col.extend([b.from as u32, b.to as u32, (nn + bi) as u32]);
-                f.val.extend([-1.0, 1.0, b.resistance]);
+                f.val.extend([-1.0, 1.0, b.resistance + r_cells]);
+                for c in cells {
+                    f.col.push((nn + nb + c.extra) as u32);
+                    f.val.push(-c.resistance);
+                }
             }
             f.ptr.push(f.col.len());
         }
-        let mut owner = vec![usize::MAX; self.extras.len()];
+        let mut owner = vec![Owner::None; self.extras.len()];
         for &(node, x) in &self.moved_rows {
-            owner[x] = node;
+            owner[x] = Owner::Node(node);
         }
-        for &node in &owner {
-            if node != usize::MAX {
-                push_balance(&mut f, node);
+        for c in &self.friction_cells {
+            owner[c.extra] = Owner::Cell(*c);
+        }
+        for &(w, _, rv) in walls {
+            owner[w.extra] = Owner::Wall(w.node, 1.0 / rv);
+        }
+        for (x, o) in owner.iter().enumerate() {
+            match *o {
+                Owner::Node(node) => push_balance(&mut f, node),
+                Owner::Cell(c) => {
+                    f.col
+                        .extend([(nn + c.branch) as u32, (nn + nb + c.extra) as u32]);
+                    f.val.extend([-c.resistance, c.resistance]);
+                }
+                Owner::Wall(node, g) => {
+                    f.col.extend([node as u32, (nn + nb + x) as u32]);
+                    f.val.extend([-g, g]);
+                }
+                Owner::None => {}
             }
             f.ptr.push(f.col.len());
         }
@@ -699,7 +860,11 @@ impl Circuit {
 
     /// The mass diagonal E (node capacitances, branch inductances, element unknowns' E_ii) and
     /// which node capacitances are Windkessel capacitors.
-    fn mass_diagonal(&self, rows: &RowOwners) -> (Vec<f64>, Vec<bool>) {
+    fn mass_diagonal(
+        &self,
+        rows: &RowOwners,
+        walls: &[(ViscousWall, f64, f64)],
+    ) -> (Vec<f64>, Vec<bool>) {
         let (nn, nb) = (self.nodes.len(), self.branches.len());
         let n = self.n_unknowns();
         let mut e = vec![0.0; n];
@@ -718,6 +883,11 @@ impl Circuit {
         }
         for (x, &m) in self.extras.iter().enumerate() {
             e[nn + nb + x] = m;
+        }
+        // a viscoelastic wall's capacitance moves to its elastic pressure
+        for &(w, c, _) in walls {
+            e[w.node] = 0.0;
+            e[nn + nb + w.extra] = c;
         }
         (e, windkessel)
     }
@@ -760,6 +930,17 @@ impl Circuit {
             .collect();
         (initial, starts(true).collect())
     }
+}
+
+/// What an element unknown's row of F holds: a moved node balance, a friction cell's
+/// equation, or nothing (the element writes it).
+#[derive(Clone, Copy)]
+enum Owner {
+    None,
+    Node(usize),
+    Cell(FrictionCell),
+    /// A viscoelastic wall's row: (node, 1/R_v).
+    Wall(usize, f64),
 }
 
 /// Which row holds each node's equation (`Circuit::row_owners`).
@@ -903,6 +1084,10 @@ pub struct Dae {
     pub varying: Vec<(usize, ResistanceLaw)>,
     /// (row, waveform): f_row(t) = w(t).
     pub forcing: Vec<(usize, Waveform)>,
+    /// (node, unknown): nodes whose capacitance sits behind a viscoelastic wall, and the
+    /// unknown holding the wall's elastic pressure (the lumen volume follows it, not the
+    /// node's pressure).
+    pub walls: Vec<(usize, usize)>,
     /// Nonlinear and time-varying elements, each adding c_el(y, t) to its rows (evaluated at
     /// the true time in every regime: a chamber's elastance has no mean to stand for it).
     pub elements: Vec<Arc<dyn Element>>,

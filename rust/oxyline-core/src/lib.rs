@@ -22,6 +22,7 @@ pub mod simulate;
 pub mod sparse;
 pub mod transport;
 pub mod waveform;
+pub mod womersley;
 
 pub use assemble::{Assembled, SegmentRow, Summary};
 pub use circuit::{Circuit, Dae, Regime};

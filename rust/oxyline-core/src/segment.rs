@@ -23,6 +23,17 @@ pub enum InertanceProfile {
     Poiseuille,
 }
 
+/// Friction and inertia of a segment's flow.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum WallFriction {
+    /// Poiseuille resistance and the `inertance_profile` inertance at every frequency.
+    #[default]
+    Poiseuille,
+    /// Womersley's oscillatory-flow impedance as a Foster network (`crate::womersley`).
+    Womersley,
+}
+
 #[derive(Debug, Clone, Copy)]
 pub struct Blood {
     pub density: f64,

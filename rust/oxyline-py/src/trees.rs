@@ -11,6 +11,7 @@ use oxyline_core::model::structured_tree::{
     self as st, Grown, Root, Shape, Stiffness, Tree, TreeInput, Units,
 };
 use oxyline_core::model::{BoundarySpec, VesselSpec, from_json};
+use oxyline_core::segment::WallFriction;
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyMapping, PyString};
 
@@ -98,6 +99,35 @@ fn tree_input(node: &str, bc: &Bound<'_, PyDict>) -> PyResult<TreeInput> {
             "max_length" if x.is_none() => {}
             "max_length" => t.max_length = Some(number(node, "max_length", &x)?),
             "stiffness" => t.stiffness = stiffness(node, &x)?,
+            "stopping" => {
+                let name = x.extract::<String>().unwrap_or_else(|_| repr(&x));
+                t.stopping = Some(st::Stopping::parse(&name).ok_or_else(|| {
+                    model_error(
+                        node,
+                        format!(
+                            "'stopping' must be one of {}, got {}",
+                            st::STOPPINGS.join(", "),
+                            repr(&x)
+                        ),
+                    )
+                })?);
+            }
+            "wall_friction" => {
+                let name = x.extract::<String>().unwrap_or_default();
+                t.wall_friction = Some(match name.as_str() {
+                    "poiseuille" => WallFriction::Poiseuille,
+                    "womersley" => WallFriction::Womersley,
+                    _ => {
+                        return Err(model_error(
+                            node,
+                            format!(
+                                "'wall_friction' must be one of poiseuille, womersley, got {}",
+                                repr(&x)
+                            ),
+                        ));
+                    }
+                });
+            }
             "segments" if x.is_none() => {}
             "segments" => {
                 let int = x.is_instance_of::<PyInt>() && !x.is_instance_of::<PyBool>();
@@ -156,6 +186,13 @@ fn native_vessel<'py>(py: Python<'py>, v: &VesselSpec, u: Units) -> PyResult<Bou
     )?;
     if let Some(n) = v.segments {
         d.set_item("segments", n)?;
+    }
+    if let Some(f) = v.wall_friction {
+        let name = match f {
+            WallFriction::Poiseuille => "poiseuille",
+            WallFriction::Womersley => "womersley",
+        };
+        d.set_item("wall_friction", name)?;
     }
     Ok(d)
 }

@@ -234,7 +234,15 @@ impl<'a> Stamping<'a> {
             .map(|l| l.stenosis_form)
             .unwrap_or_default();
         let circuit = &mut self.circuit;
-        let chain = vessel::stamp(circuit, &v.name, &segs, (arrangement, form), ends);
+        let friction = segments::friction(spec, v);
+        // Kelvin–Voigt wall: relaxation time η/E (0: elastic)
+        let relaxation = v
+            .geometry
+            .as_ref()
+            .and_then(|g| g.youngs_modulus.map(|e| g.wall_viscosity / e))
+            .unwrap_or(0.0);
+        let physics = (arrangement, form, friction, relaxation);
+        let chain = vessel::stamp(circuit, &v.name, &segs, physics, ends);
         let interior = match arrangement {
             Arrangement::Rcl => initial::Interior::Rcl {
                 resistance: segs[0].resistance,

@@ -5,7 +5,7 @@
 use super::checks::{check_nonnegative, check_positive};
 use crate::error::{Error, Result};
 use crate::model::{Arrangement, GeometrySpec, LumpedSpec, NetworkSpec, VesselSpec};
-use crate::segment::{Blood, Wall, segment_rlc};
+use crate::segment::{Blood, InertanceProfile, Wall, WallFriction, segment_rlc};
 
 /// One flow segment of a vessel, as assembled (SI).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -60,6 +60,11 @@ pub(crate) fn count(spec: &NetworkSpec, v: &VesselSpec) -> usize {
         (None, _) => v.segments.unwrap_or(1),
     }
     .max(1)
+}
+
+/// Vessel `v`'s friction and inertia: its own `wall_friction` or the model's.
+pub(crate) fn friction(spec: &NetworkSpec, v: &VesselSpec) -> WallFriction {
+    v.wall_friction.unwrap_or(spec.wall_friction)
 }
 
 /// The segments of vessel `vi` of `spec`.
@@ -181,11 +186,16 @@ fn geometric(
         (None, None) => 1,
     };
     let dx = g.length / n as f64;
+    // a Womersley segment's series inertance is the flat profile's: its cells add the rest
+    let profile = match friction(spec, v) {
+        WallFriction::Womersley => InertanceProfile::Flat,
+        WallFriction::Poiseuille => spec.inertance_profile,
+    };
     Ok((0..n)
         .map(|k| {
             let r0 = g.radius_in + (g.radius_out - g.radius_in) * k as f64 / n as f64;
             let r1 = g.radius_in + (g.radius_out - g.radius_in) * (k + 1) as f64 / n as f64;
-            let s = segment_rlc(dx, r0, r1, blood, wall, spec.inertance_profile);
+            let s = segment_rlc(dx, r0, r1, blood, wall, profile);
             SegmentRow {
                 vessel: index32(vi),
                 index: index32(k),

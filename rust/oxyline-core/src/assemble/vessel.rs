@@ -7,6 +7,7 @@ use super::segments::SegmentRow;
 use crate::circuit::{ChainRuleCapacitor, Circuit, Label, Part, SegmentGeom};
 use crate::model::{Arrangement, StenosisForm};
 use crate::output::Probes;
+use crate::segment::WallFriction;
 
 /// The circuit nodes along a vessel (inlet node, interior points, outlet node) and its branches.
 pub(crate) struct Chain {
@@ -15,12 +16,14 @@ pub(crate) struct Chain {
 }
 
 /// Stamp vessel `name` (index `vessel` in `circuit.vessel_names`) between graph nodes
-/// `p_from` and `p_to`; `form` says how generalized-α writes an RCL vessel's stenosis.
+/// `p_from` and `p_to`; `form` says how generalized-α writes an RCL vessel's stenosis,
+/// `friction` whether each segment's branch carries Womersley friction cells, `relaxation`
+/// the wall's η/E (s; 0: elastic, else a Kelvin–Voigt wall behind each capacitance).
 pub(crate) fn stamp(
     circuit: &mut Circuit,
     name: &str,
     segs: &[SegmentRow],
-    (arrangement, form): (Arrangement, StenosisForm),
+    (arrangement, form, friction, relaxation): (Arrangement, StenosisForm, WallFriction, f64),
     (p_from, p_to): (usize, usize),
 ) -> Chain {
     let vessel = circuit.add_vessel(name);
@@ -43,6 +46,16 @@ pub(crate) fn stamp(
     } else {
         stamp_segments(circuit, vessel, segs, arrangement, &points)
     };
+    if relaxation > 0.0 && arrangement != Arrangement::Rcl {
+        let (cp, cd) = shares(arrangement);
+        for (k, s) in segs.iter().enumerate() {
+            circuit.add_wall_viscosity(points[k], cp * s.compliance, relaxation);
+            circuit.add_wall_viscosity(points[k + 1], cd * s.compliance, relaxation);
+        }
+    }
+    if friction == WallFriction::Womersley && arrangement != Arrangement::Rcl {
+        stamp_friction_cells(circuit, vessel, segs, &branches);
+    }
     Chain { points, branches }
 }
 
@@ -105,6 +118,15 @@ fn stamp_rcl(
     vec![b0, b1]
 }
 
+/// The shares of a segment's C, volume and wall area at its (proximal, distal) node.
+fn shares(arrangement: Arrangement) -> (f64, f64) {
+    match arrangement {
+        Arrangement::InvertedL => (1.0, 0.0),
+        Arrangement::L => (0.0, 1.0),
+        _ => (0.5, 0.5),
+    }
+}
+
 /// One R–L branch per segment; C, volume and wall area at the ends by the arrangement.
 fn stamp_segments(
     circuit: &mut Circuit,
@@ -114,11 +136,7 @@ fn stamp_segments(
     points: &[usize],
 ) -> Vec<usize> {
     let n = segs.len();
-    let (cp, cd) = match arrangement {
-        Arrangement::InvertedL => (1.0, 0.0),
-        Arrangement::L => (0.0, 1.0),
-        _ => (0.5, 0.5),
-    };
+    let (cp, cd) = shares(arrangement);
     let mut branches = Vec::with_capacity(n);
     for (k, s) in segs.iter().enumerate() {
         let label = if n == 1 {
@@ -155,6 +173,23 @@ fn stamp_segments(
         });
     }
     branches
+}
+
+/// Womersley friction (`crate::womersley`): each segment's branch gets the flat-profile
+/// inertance and Poiseuille resistance (as the row says) in series with its R‖L cells.
+fn stamp_friction_cells(
+    circuit: &mut Circuit,
+    vessel: usize,
+    segs: &[SegmentRow],
+    branches: &[usize],
+) {
+    for (k, (s, &b)) in segs.iter().zip(branches).enumerate() {
+        let f = crate::womersley::cells(s.resistance, s.inductance);
+        circuit.branches[b].inductance = f.inductance;
+        for (r, l) in f.cells {
+            circuit.add_friction_cell(label(vessel, Part::FrictionCell, k + 1), b, r, l);
+        }
+    }
 }
 
 /// Record the vessel's probes: its end pressures and flows and, with `segments`, every

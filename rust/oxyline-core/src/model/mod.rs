@@ -6,7 +6,7 @@
 //! builds a circuit: see `crate::assemble`. Structured-tree growth (`structured_tree`) and the
 //! haemoglobin facilitation factor (`facilitation`) are computed here when a model is read.
 
-use crate::segment::{InertanceProfile, WallModel};
+use crate::segment::{InertanceProfile, WallFriction, WallModel};
 use crate::waveform::WaveformSpec;
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -73,6 +73,9 @@ pub struct GeometrySpec {
     pub youngs_modulus: Option<f64>,
     #[serde(default = "default_poisson")]
     pub poisson_ratio: f64,
+    /// Kelvin–Voigt wall viscosity η (Pa·s; 0: elastic wall), docs/physics.md §1.13.
+    #[serde(default)]
+    pub wall_viscosity: f64,
 }
 fn default_poisson() -> f64 {
     0.5
@@ -124,6 +127,9 @@ pub struct VesselSpec {
     pub lumped: Option<LumpedSpec>,
     #[serde(default)]
     pub arrangement: Option<Arrangement>,
+    /// This vessel's friction and inertia (default: the model's `wall_friction`).
+    #[serde(default)]
+    pub wall_friction: Option<WallFriction>,
     #[serde(default = "yes")]
     pub output: bool,
     /// A heart valve instead of a vessel (docs/physics.md §1.8).
@@ -166,6 +172,7 @@ impl VesselSpec {
             geometry: None,
             lumped: None,
             arrangement: None,
+            wall_friction: None,
             output: true,
             valve: None,
             heart_pulmonary: None,
@@ -487,6 +494,9 @@ pub struct NetworkSpec {
     pub wall_model: WallModel,
     #[serde(default)]
     pub inertance_profile: InertanceProfile,
+    /// The vessels' friction and inertia (each vessel may override it).
+    #[serde(default)]
+    pub wall_friction: WallFriction,
     #[serde(default)]
     pub max_segment_length: Option<f64>,
     pub vessels: Vec<VesselSpec>,

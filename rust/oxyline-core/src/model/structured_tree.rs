@@ -16,12 +16,12 @@
 use crate::error::{Error, Result};
 use crate::model::{GeometrySpec, VesselSpec};
 use crate::run::memory;
-use crate::segment::{Blood, InertanceProfile, segment_rlc};
+use crate::segment::{Blood, InertanceProfile, WallFriction, segment_rlc};
 
 /// The boundary condition's `type`.
 pub const TYPE: &str = "structured-tree";
 /// The condition's keys, sorted.
-pub const KEYS: [&str; 11] = [
+pub const KEYS: [&str; 13] = [
     "alpha",
     "beta",
     "length_ratio",
@@ -31,9 +31,36 @@ pub const KEYS: [&str; 11] = [
     "root_radius",
     "segments",
     "stiffness",
+    "stopping",
     "terminal",
     "type",
+    "wall_friction",
 ];
+/// The values `stopping` may take (docs/structured-tree.md).
+pub const STOPPINGS: [&str; 2] = ["min-radius", "olufsen"];
+
+/// Where a tree stops growing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Stopping {
+    /// A daughter exists only if its radius is >= `min_radius`: every vessel is at least
+    /// `min_radius`.
+    #[default]
+    MinRadius,
+    /// Olufsen's code: a vessel above `min_radius` always has both daughters, and the first
+    /// vessel at or below `min_radius` on a path is a leaf.
+    Olufsen,
+}
+
+impl Stopping {
+    /// The rule named `name` (one of [`STOPPINGS`]).
+    pub fn parse(name: &str) -> Option<Stopping> {
+        match name {
+            "min-radius" => Some(Stopping::MinRadius),
+            "olufsen" => Some(Stopping::Olufsen),
+            _ => None,
+        }
+    }
+}
 /// Olufsen et al. (2000) E·h/r = k1 exp(k2 r) + k3, converted to SI (Pa, 1/m, Pa).
 pub const OLUFSEN_STIFFNESS: Stiffness = Stiffness::KLaw {
     k1: 2.0e6,
@@ -133,6 +160,9 @@ pub struct TreeInput {
     pub segments: Option<i64>,
     pub max_length: Option<f64>,
     pub max_vessels: Option<f64>,
+    pub stopping: Option<Stopping>,
+    /// The tree vessels' `wall_friction` (None: the model's).
+    pub wall_friction: Option<WallFriction>,
 }
 
 /// A finite number in (lo, hi), named by its key (Python's messages).
@@ -281,6 +311,31 @@ pub fn vessel_count(alpha: f64, beta: f64, root_radius: f64, min_radius: f64) ->
     vessel_count_within(alpha, beta, root_radius, min_radius, MAX_CLASSES)
 }
 
+/// [`vessel_count`] under `stopping`. Olufsen's tree has both daughters of the root and of
+/// every vessel above `min_radius`: 2 (1 + N₊), N₊ the vessels of radius > `min_radius`
+/// (counted as today's rule counts, with the strict comparison), none if r0 <= `min_radius`.
+pub fn vessel_count_by(
+    stopping: Stopping,
+    (alpha, beta): (f64, f64),
+    root_radius: f64,
+    min_radius: f64,
+    max_classes: usize,
+) -> Count {
+    match stopping {
+        Stopping::MinRadius => {
+            vessel_count_within(alpha, beta, root_radius, min_radius, max_classes)
+        }
+        Stopping::Olufsen if root_radius <= min_radius => Count { n: 0, exact: true },
+        Stopping::Olufsen => {
+            let above = classes_within(alpha, beta, root_radius, min_radius, true, max_classes);
+            Count {
+                n: above.n.saturating_add(1).saturating_mul(2),
+                exact: above.exact && above.n < u128::MAX / 2,
+            }
+        }
+    }
+}
+
 /// [`vessel_count`], stopped (inexact, a lower bound) after `max_classes` radius classes: the
 /// work is per class, never per vessel.
 pub fn vessel_count_within(
@@ -290,12 +345,31 @@ pub fn vessel_count_within(
     min_radius: f64,
     max_classes: usize,
 ) -> Count {
+    classes_within(alpha, beta, root_radius, min_radius, false, max_classes)
+}
+
+/// Vessels of radius >= `min_radius` (> with `strict`), per radius class.
+fn classes_within(
+    alpha: f64,
+    beta: f64,
+    root_radius: f64,
+    min_radius: f64,
+    strict: bool,
+    max_classes: usize,
+) -> Count {
+    let keep = |r: f64| {
+        if strict {
+            r > min_radius
+        } else {
+            r >= min_radius
+        }
+    };
     let (mut n, mut exact, mut classes) = (0u128, true, 0usize);
     let mut i = 0i32;
-    while alpha.powf(f64::from(i)) * root_radius >= min_radius {
+    while keep(alpha.powf(f64::from(i)) * root_radius) {
         let mut j = 0i32;
         let mut paths = 1u128; // C(i + j, i) at j = 0
-        while alpha.powf(f64::from(i)) * beta.powf(f64::from(j)) * root_radius >= min_radius {
+        while keep(alpha.powf(f64::from(i)) * beta.powf(f64::from(j)) * root_radius) {
             classes += 1;
             if classes > max_classes {
                 return Count { n, exact: false };
@@ -368,6 +442,8 @@ pub struct Tree {
     pub root_radius: f64,
     wall: WallLaw,
     segmentation: Segmentation,
+    pub stopping: Stopping,
+    wall_friction: Option<WallFriction>,
     /// Its vessel count.
     pub count: u128,
 }
@@ -404,6 +480,7 @@ fn segmentation(node: &str, input: &TreeInput, u: Units) -> Result<Segmentation>
 /// The vessel count of the tree (α, β) from `r0` down to `rmin`, refused (`too_many`, given
 /// the count as the message says it) above `max_vessels`.
 fn checked_count(
+    stopping: Stopping,
     (alpha, beta): (f64, f64),
     r0: f64,
     rmin: f64,
@@ -414,7 +491,7 @@ fn checked_count(
     let bound = vessel_count_bound(alpha, beta, r0, rmin);
     if bound > max_vessels {
         // the message gives the exact count when few classes hold it
-        let c = vessel_count_within(alpha, beta, r0, rmin, REFUSED_CLASSES);
+        let c = vessel_count_by(stopping, (alpha, beta), r0, rmin, REFUSED_CLASSES);
         return Err(too_many(if c.exact {
             c.n.to_string()
         } else {
@@ -422,7 +499,7 @@ fn checked_count(
         }));
     }
     // counted per radius class (at most MAX_CLASSES of them: never for ever)
-    let count = vessel_count(alpha, beta, r0, rmin);
+    let count = vessel_count_by(stopping, (alpha, beta), r0, rmin, MAX_CLASSES);
     if count.n as f64 > max_vessels || !count.exact {
         let n = if count.exact {
             count.n.to_string()
@@ -486,7 +563,8 @@ impl Tree {
                 ),
             )
         };
-        let count = checked_count((alpha, beta), r0, rmin, max_vessels, too_many)?;
+        let stopping = input.stopping.unwrap_or_default();
+        let count = checked_count(stopping, (alpha, beta), r0, rmin, max_vessels, too_many)?;
         if count.n == 0 {
             return Err(err(
                 node,
@@ -507,6 +585,8 @@ impl Tree {
             root_radius: r0,
             wall,
             segmentation,
+            stopping,
+            wall_friction: input.wall_friction,
             count: count.n,
         })
     }
@@ -549,8 +629,13 @@ impl Tree {
             (String::from("b"), self.beta * self.root_radius),
             (String::from("a"), self.alpha * self.root_radius),
         ];
+        let olufsen = self.stopping == Stopping::Olufsen;
+        if olufsen && self.root_radius <= self.min_radius {
+            stack.clear();
+        }
         while let Some((path, r)) = stack.pop() {
-            if r < self.min_radius {
+            // Olufsen's daughters all exist (their parent is above min_radius)
+            if !olufsen && r < self.min_radius {
                 continue;
             }
             let name = format!("{prefix}{path}");
@@ -560,10 +645,18 @@ impl Tree {
                 format!("{prefix}{}", &path[..path.len() - 1])
             };
             let (a, b) = (self.alpha * r, self.beta * r);
-            if a < self.min_radius && b < self.min_radius {
+            let leaf = if olufsen {
+                r <= self.min_radius
+            } else {
+                a < self.min_radius && b < self.min_radius
+            };
+            if leaf {
                 out.leaves.push(name.clone());
             }
             out.vessels.push(self.vessel(name, from, r)?);
+            if olufsen && leaf {
+                continue;
+            }
             stack.push((format!("{path}b"), b));
             stack.push((path, a));
             let last = stack.len() - 1;
@@ -577,6 +670,7 @@ impl Tree {
         let length = self.length_ratio * r;
         let (e, h) = self.wall.at(&self.node, r)?;
         let mut v = VesselSpec::blank();
+        v.wall_friction = self.wall_friction;
         v.to = name.clone();
         v.name = name;
         v.from = from;
@@ -593,6 +687,7 @@ impl Tree {
             wall_thickness: Some(h),
             youngs_modulus: Some(e),
             poisson_ratio: 0.5,
+            wall_viscosity: 0.0,
         });
         Ok(v)
     }

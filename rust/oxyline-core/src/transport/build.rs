@@ -217,6 +217,7 @@ impl Transport {
             face_unknowns: Vec::new(),
             chains: refined.chains,
             cell_node: layout.cell_node,
+            volume_unknown: layout.volume_unknown,
             last_sub,
             pieces,
             seg_pieces,
@@ -536,6 +537,9 @@ struct CellLayout {
     cell_node: Vec<usize>,
     v0: Vec<f64>,
     cap: Vec<f64>,
+    /// Per cell: the unknown its volume follows (empty: its node's pressure, as always without
+    /// viscoelastic walls).
+    volume_unknown: Vec<usize>,
 }
 
 impl CellLayout {
@@ -552,16 +556,23 @@ impl CellLayout {
             cell_node: Vec::new(),
             v0: Vec::new(),
             cap: Vec::new(),
+            volume_unknown: Vec::new(),
         };
+        // a viscoelastic wall's volume follows its elastic pressure (`Dae::walls`)
+        let walls: std::collections::HashMap<usize, usize> = dae.walls.iter().copied().collect();
         for n in (0..volume.len()).filter(|&n| kind[n] == Kind::Cell) {
             let m = m_node[n];
+            let u = walls.get(&n).copied().unwrap_or(n);
             for k in 0..m {
                 let c = if k == 0 { n } else { first_extra[n] + k - 1 };
                 l.node_cell[c] = l.cells.len();
                 l.cells.push(c);
                 l.cell_node.push(n);
                 l.v0.push(volume[n] / m as f64);
-                l.cap.push(dae.e[n] / m as f64);
+                l.cap.push(dae.e[u] / m as f64);
+                if !walls.is_empty() {
+                    l.volume_unknown.push(u);
+                }
             }
         }
         l

@@ -71,7 +71,10 @@ impl Plan {
             ("sources", self.source_ptr.heap() + self.source_list.heap()),
             ("segments", self.segments.heap()),
             ("face_unknowns", self.face_unknowns.heap()),
-            ("cell_node", self.cell_node.heap()),
+            (
+                "cell_node",
+                self.cell_node.heap() + self.volume_unknown.heap(),
+            ),
             ("last_sub", self.last_sub.heap()),
             ("pieces", self.pieces.heap() + self.seg_pieces.heap()),
             (

@@ -249,6 +249,9 @@ pub struct Plan {
     pub(super) chains: Vec<Chain>,
     /// Per cell: the circuit node whose pressure sets its volume.
     pub(super) cell_node: Vec<usize>,
+    /// Per cell: the unknown setting its volume where that is not `cell_node` (a viscoelastic
+    /// wall's elastic pressure); empty when no cell has one.
+    pub(super) volume_unknown: Vec<usize>,
     /// Per circuit node: its last sub-cell (itself unless refined; empty without
     /// refinement, see `last_sub`).
     pub(super) last_sub: Vec<usize>,
@@ -287,6 +290,16 @@ pub struct Plan {
 }
 
 impl Plan {
+    /// The unknown whose value sets cell `i`'s volume (its node's pressure, or its
+    /// viscoelastic wall's elastic pressure).
+    #[inline]
+    pub(super) fn volume_unknown(&self, i: usize) -> usize {
+        match self.volume_unknown.get(i) {
+            Some(&u) => u,
+            None => self.cell_node[i],
+        }
+    }
+
     /// The last sub-cell of circuit node `n` (itself unless refined): the donor of the faces
     /// leaving the node, and the value reported for its segments.
     #[inline]

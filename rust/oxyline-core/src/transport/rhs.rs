@@ -122,7 +122,7 @@ impl Transport {
         let mut bad_volume = false;
         for (i, &n) in plan.cells.iter().enumerate() {
             let v = if s == 0 {
-                let v = plan.v0[i] + plan.cap[i] * (y[plan.cell_node[i]] - plan.p_ref);
+                let v = plan.v0[i] + plan.cap[i] * (y[plan.volume_unknown(i)] - plan.p_ref);
                 bad_volume |= v.is_nan() || v <= 0.0;
                 vol[i] = v;
                 v

@@ -32,7 +32,8 @@ impl Transport {
 
     pub(super) fn volumes(&mut self, y: &[f64], time: f64) -> Result<()> {
         for (i, &n) in self.plan.cell_node.iter().enumerate() {
-            let v = self.plan.v0[i] + self.plan.cap[i] * (y[n] - self.plan.p_ref);
+            let v = self.plan.v0[i]
+                + self.plan.cap[i] * (y[self.plan.volume_unknown(i)] - self.plan.p_ref);
             if v.is_nan() || v <= 0.0 {
                 return Err(Error::solver(
                     time,

@@ -58,6 +58,7 @@ fn geometry(d: &Bound<'_, PyDict>, element: &dyn Fn() -> String) -> Res<Geometry
         wall_thickness: None,
         youngs_modulus: None,
         poisson_ratio: 0.5,
+        wall_viscosity: 0.0,
     };
     for (k, v) in d.iter() {
         let k = key(&k, element)?;
@@ -69,6 +70,7 @@ fn geometry(d: &Bound<'_, PyDict>, element: &dyn Fn() -> String) -> Res<Geometry
             "wall_thickness" => g.wall_thickness = Some(x),
             "youngs_modulus" => g.youngs_modulus = Some(x),
             "poisson_ratio" => g.poisson_ratio = x,
+            "wall_viscosity" => g.wall_viscosity = x,
             _ => return Err(unknown(element, k)),
         }
     }
@@ -161,6 +163,7 @@ pub fn vessel(i: usize, item: &Bound<'_, PyAny>) -> Res<VesselSpec> {
             "geometry" => v.geometry = Some(geometry(dict(&val, element, k)?, element)?),
             "lumped" => v.lumped = Some(lumped(dict(&val, element, k)?, element)?),
             "arrangement" => v.arrangement = Some(arrangement(&val, element)?),
+            "wall_friction" => v.wall_friction = Some(via_json(&val, element, k)?),
             // heart elements are few: read through their JSON form
             "valve" => v.valve = Some(via_json(&val, element, k)?),
             "heart_pulmonary" => v.heart_pulmonary = Some(via_json(&val, element, k)?),

@@ -68,6 +68,7 @@ fn vessel(item: &Bound<'_, PyAny>, length: f64, modulus: f64) -> Option<VesselSp
         wall_thickness: None,
         youngs_modulus: None,
         poisson_ratio: 0.5,
+        wall_viscosity: 0.0,
     };
     let (mut has_name, mut has_from, mut has_to) = (false, false, false);
     let (mut radius, mut radius_in, mut radius_out) = (None, None, None);

@@ -29,6 +29,7 @@ pub const TOP_KEYS: &[&str] = &[
     "simulation",
     "wall_model",
     "inertance_profile",
+    "wall_friction",
     "description",
     "oxygen",
     "species",
@@ -235,6 +236,13 @@ pub fn header<N: Node>(data: &N) -> Result<Header> {
         &["flat", "poiseuille"],
         "inertance_profile",
     )?;
+    let friction = choice(
+        data.get("wall_friction"),
+        "poiseuille",
+        vessel::WALL_FRICTIONS,
+        "wall_friction",
+    )?;
+    canon.insert("wall_friction".into(), json!(friction));
     canon.insert("wall_model".into(), json!(wall));
     canon.insert("inertance_profile".into(), json!(profile));
     let vessels = data.get("vessels");
@@ -290,7 +298,7 @@ fn arrangement<N: Node>(value: Option<N>) -> Result<String> {
     }
 }
 
-/// One of two model-wide options (`wall_model`, `inertance_profile`).
+/// One of two model-wide options (`wall_model`, `inertance_profile`, `wall_friction`).
 fn choice<N: Node>(value: Option<N>, default: &str, options: &[&str], key: &str) -> Result<String> {
     let Some(v) = value else {
         return Ok(default.to_owned());

@@ -45,7 +45,7 @@ fn vessel_errors_name_the_vessel_key_and_value() {
         "vessel 'left': unknown key 'radiuss' (allowed: arrangement, chamber, chamber_sphere, \
          coronary_bed, description, from, heart_pulmonary, initial, initial_rate, length, \
          lumped, name, output, poisson_ratio, radius, radius_in, radius_out, segments, through_rc, \
-         to, valve, wall_thickness, youngs_modulus)"
+         to, valve, wall_friction, wall_thickness, wall_viscosity, youngs_modulus)"
     );
     assert_eq!(
         vessel_error(json!({"name": "shunt", "from": "J", "to": "o",

@@ -19,9 +19,11 @@ pub const VESSEL_KEYS: &[&str] = &[
     "wall_thickness",
     "youngs_modulus",
     "poisson_ratio",
+    "wall_viscosity",
     "segments",
     "lumped",
     "arrangement",
+    "wall_friction",
     "output",
     "description",
     "valve",
@@ -34,6 +36,8 @@ pub const VESSEL_KEYS: &[&str] = &[
     "chamber_sphere",
 ];
 pub const ARRANGEMENTS: &[&str] = &["inverted-L", "L", "pi", "RCL"];
+/// A segment's friction and inertia: Poiseuille, or Womersley's (docs/physics.md §1.12).
+pub const WALL_FRICTIONS: &[&str] = &["poiseuille", "womersley"];
 pub const LUMPED_KEYS: &[&str] = &[
     "resistance",
     "inductance",
@@ -239,6 +243,23 @@ pub fn vessel<N: Node>(v: &N, i: usize, units: Units) -> Result<Value> {
             cv.insert(key.into(), start_values(&d, &el, key, units)?);
         }
     }
+    if v.has("wall_friction")
+        && [
+            "heart_pulmonary",
+            "coronary_bed",
+            "chamber_sphere",
+            "valve",
+            "chamber",
+            "through_rc",
+        ]
+        .iter()
+        .any(|k| v.has(k))
+    {
+        return Err(err(
+            &el,
+            "wall_friction applies to a vessel with length and radius, not to a heart, valve or lumped element",
+        ));
+    }
     if v.has("heart_pulmonary") || v.has("coronary_bed") {
         return closed_loop_element(v, cv, &el, units);
     }
@@ -248,12 +269,40 @@ pub fn vessel<N: Node>(v: &N, i: usize, units: Units) -> Result<Value> {
     if v.has("valve") || v.has("chamber") || v.has("through_rc") {
         return heart_element(v, cv, &el, units);
     }
+    let friction = wall_friction(v, &el)?;
     if let Some(lp) = v.get("lumped") {
+        if friction.as_deref() == Some("womersley") {
+            return Err(err(
+                &el,
+                "wall_friction 'womersley' needs the vessel's length and radius, not lumped values",
+            ));
+        }
         cv.insert("lumped".into(), lumped(&lp, &el, units)?);
     } else {
         cv.insert("geometry".into(), geometry(v, &el, units)?);
+        if let Some(f) = friction {
+            cv.insert("wall_friction".into(), json!(f));
+        }
     }
     Ok(Value::Object(cv))
+}
+
+/// The vessel's `wall_friction` (None: the model's), checked against [`WALL_FRICTIONS`].
+fn wall_friction<N: Node>(v: &N, el: &str) -> Result<Option<String>> {
+    let Some(x) = v.get("wall_friction") else {
+        return Ok(None);
+    };
+    match x.text() {
+        Some(t) if WALL_FRICTIONS.contains(&t.as_str()) => Ok(Some(t)),
+        _ => Err(err(
+            el,
+            format!(
+                "wall_friction must be one of {}, got {}",
+                py_list(WALL_FRICTIONS),
+                x.repr()
+            ),
+        )),
+    }
 }
 
 fn lumped<N: Node>(lp: &N, el: &str, units: Units) -> Result<Value> {
@@ -330,6 +379,19 @@ fn geometry<N: Node>(v: &N, el: &str, units: Units) -> Result<Value> {
     if let Some(e) = v.get("youngs_modulus") {
         let e = positive(Some(&e), el, "youngs_modulus", false)?;
         g.insert("youngs_modulus".into(), json!(units.factor(Modulus) * e));
+    }
+    if let Some(eta) = v.get("wall_viscosity") {
+        let eta = positive(Some(&eta), el, "wall_viscosity", true)?;
+        if !(v.has("wall_thickness") && v.has("youngs_modulus")) {
+            return Err(err(
+                el,
+                "wall_viscosity needs a wall (wall_thickness and youngs_modulus)",
+            ));
+        }
+        g.insert(
+            "wall_viscosity".into(),
+            json!(units.factor(Viscosity) * eta),
+        );
     }
     if let Some(nu) = v.get("poisson_ratio") {
         g.insert(

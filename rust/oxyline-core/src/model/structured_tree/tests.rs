@@ -324,6 +324,7 @@ fn root_radius_is_the_vessel_end_at_the_node() {
         wall_thickness: None,
         youngs_modulus: None,
         poisson_ratio: 0.5,
+        wall_viscosity: 0.0,
     });
     let mut lumped = VesselSpec::blank();
     (lumped.name, lumped.from, lumped.to) = ("r".into(), "out".into(), "x".into());
@@ -454,4 +455,44 @@ fn matching_a_tree_near_one_is_refused_before_its_class_table() {
     };
     let e = one.matched("out", 1e9, 1e-5, 0.9).unwrap_err().to_string();
     assert!(e.contains("'alpha' must be in (0, 1), got 1"), "{e}");
+}
+
+/// Olufsen's rule written out recursively: below a node above `rmin` both daughters exist.
+fn enumerate_olufsen(alpha: f64, beta: f64, r: f64, rmin: f64) -> usize {
+    if r <= rmin {
+        return 0;
+    }
+    [alpha, beta]
+        .iter()
+        .map(|&k| 1 + enumerate_olufsen(alpha, beta, k * r, rmin))
+        .sum()
+}
+
+#[test]
+fn olufsen_stopping_counts_grows_and_ends_at_the_first_vessel_at_or_below_min_radius() {
+    for (a, b, rmin) in [(0.9, 0.6, 4e-4), (0.9, 0.6, 1e-4), (0.8, 0.3, 2e-5)] {
+        let tree_input = TreeInput {
+            stopping: Some(Stopping::Olufsen),
+            ..input(a, b, rmin)
+        };
+        let tree = Tree::new("out", &tree_input, Root::Given(1e-3), Units::SI).unwrap();
+        let expected = enumerate_olufsen(a, b, 1e-3, rmin);
+        assert_eq!(tree.count as usize, expected, "{a} {b} {rmin}");
+        let grown = tree.grow().unwrap();
+        assert_eq!(grown.vessels.len(), expected);
+        let radius = |name: &String| {
+            let v = grown.vessels.iter().find(|v| &v.name == name).unwrap();
+            v.geometry.as_ref().unwrap().radius_in
+        };
+        // every leaf at or below min_radius, every other vessel above it
+        assert!(grown.leaves.iter().all(|l| radius(l) <= rmin));
+        let leaves: std::collections::HashSet<&String> = grown.leaves.iter().collect();
+        for v in &grown.vessels {
+            let r = v.geometry.as_ref().unwrap().radius_in;
+            assert_eq!(leaves.contains(&v.name), r <= rmin, "{}", v.name);
+        }
+        // a superset of today's tree
+        let today = Tree::new("out", &input(a, b, rmin), Root::Given(1e-3), Units::SI).unwrap();
+        assert!(tree.count > today.count);
+    }
 }
