@@ -1,0 +1,375 @@
+"""Exact parameter sensitivities of a model's periodic state, and calibration to targets.
+
+:func:`sensitivities` asks the core for the tangent-linear generalized-α run to the periodic
+state (one extra solve per parameter and step on the run's own factorisation) and combines
+the signals into the named outputs of :mod:`oxyline.targets`. :func:`calibrate` fits
+parameters to targets with ``scipy.optimize.least_squares`` on that Jacobian, each parameter
+as the logarithm of its factor over the start (so positive parameters stay positive and
+their steps are relative), and returns the calibrated native model dict with the
+Gauss–Newton covariance and a convergence report. Parameters are named by the ensemble patch
+paths (docs/calibration.md).
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from oxyline.ensemble.patch import apply_patch
+from oxyline.loader import load_model
+from oxyline.model import Model, build_model
+from oxyline.targets import CalibrationError, Target, combine, parse_targets, signals_of
+
+__all__ = ["CalibrationError", "CalibrationResult", "Sensitivities", "calibrate",
+           "sensitivities"]
+
+#: two-sided 95 % quantile of the normal distribution (the intervals of the report)
+Z95 = 1.959963984540054
+
+
+@dataclass
+class Sensitivities:
+    """The outputs of a model's periodic cycle and their derivatives: ``jacobian[i, j]`` is
+    d ``values[i]`` / d parameter j, both in SI (a scale factor is dimensionless)."""
+
+    outputs: list[str]
+    parameters: list[str]
+    #: the parameters' values (SI; 1 for a scale)
+    parameter_values: np.ndarray
+    values: np.ndarray
+    jacobian: np.ndarray
+    #: cycles run to the periodic state and the last cycle's relative change
+    cycles: int
+    periodic_change: float
+    #: rows of ``values`` per output (a series has one per time)
+    rows: dict[str, slice] = field(default_factory=dict)
+
+
+def _settings(model: Model, steps_per_cycle: int | None) -> tuple[float, int, float]:
+    period = model.period
+    if period is None:
+        raise CalibrationError(f"model '{model.name}': sensitivities need a periodic model "
+                               "(a period or periodic waveforms)")
+    if steps_per_cycle is None:
+        dt = model.simulation.get("dt")
+        steps_per_cycle = int(round(period / float(dt))) if dt else 400
+    rho = float(model.simulation.get("rho_infty", 0.5))
+    return float(period), max(int(steps_per_cycle), 1), rho
+
+
+def _tangent(model: Model, parameters: Sequence[str], signals: list[tuple[str, str]],
+             steps_per_cycle: int | None, tol: float, max_cycles: int) -> dict[str, Any]:
+    from oxyline import _core
+    from oxyline.errors import core_errors
+
+    period, steps, rho = _settings(model, steps_per_cycle)
+    with core_errors(f"model '{model.name}'"):
+        return _core.tangent_sensitivities(json.dumps(model.canonical), list(parameters),
+                                           signals, period, steps, rho, max_cycles, tol)
+
+
+def _evaluate(model: Model, parameters: Sequence[str], targets: Sequence[Target],
+              steps_per_cycle: int | None, tol: float, max_cycles: int
+              ) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+    """Every target's value(s) and Jacobian rows (d/d SI parameter) at ``model``."""
+    signals = sorted({s for t in targets for s in t.signals})
+    raw = _tangent(model, parameters, signals, steps_per_cycle, tol, max_cycles)
+    values, jac = [], []
+    for t in targets:
+        cols = [signals.index(s) for s in t.signals]
+        v, j = combine(t.output, raw["times"], raw["signals"][:, cols],
+                       raw["derivatives"][:, :, cols], t.times)
+        values.append(v)
+        jac.append(j.reshape(len(v), len(parameters)))
+    return np.concatenate(values), np.concatenate(jac), raw
+
+
+def sensitivities(model: Model | Mapping[str, Any] | str, parameters: Sequence[str],
+                  outputs: Sequence[str], *, steps_per_cycle: int | None = None,
+                  tol: float = 1e-12, max_cycles: int = 2000) -> Sensitivities:
+    """The Jacobian of ``outputs`` (names, :mod:`oxyline.targets`) with respect to
+    ``parameters`` (patch paths) at the periodic state of ``model``, exact for the
+    generalized-α discretisation (the model's ``dt``, or 400 steps a cycle). A ``series``
+    output has one row per step of the cycle.
+
+    >>> s = sensitivities("bifurcation", ["scale.resistance"], ["parent.pressure_in.mean"])
+    >>> bool(s.jacobian[0, 0] > 0)
+    True
+    """
+    m = load_model(model)
+    if isinstance(outputs, str) or isinstance(parameters, str):
+        raise CalibrationError("parameters and outputs: expected lists of names")
+    targets = [Target(o, None, signals=signals_of(o, m)) for o in outputs]
+    signals = sorted({s for t in targets for s in t.signals})
+    raw = _tangent(m, parameters, signals, steps_per_cycle, tol, max_cycles)
+    values, jac, rows, start = [], [], {}, 0
+    for t in targets:
+        cols = [signals.index(s) for s in t.signals]
+        v, j = combine(t.output, raw["times"], raw["signals"][:, cols],
+                       raw["derivatives"][:, :, cols], raw["times"])
+        values.append(v)
+        jac.append(j.reshape(len(v), len(parameters)))
+        rows[t.output] = slice(start, start + len(v))
+        start += len(v)
+    return Sensitivities(list(outputs), list(parameters), np.asarray(raw["values"]),
+                         np.concatenate(values), np.concatenate(jac), int(raw["cycles"]),
+                         float(raw["periodic_change"]), rows)
+
+
+# ---- the native model at a parameter point --------------------------------------------------
+
+def _vessel(source: Mapping[str, Any], name: str, path: str) -> Mapping[str, Any]:
+    for v in source.get("vessels", []):
+        if v.get("name") == name:
+            return v
+    raise CalibrationError(f"parameter '{path}': no vessel named {name!r}")
+
+
+def _base_value(source: Mapping[str, Any], path: str) -> float:
+    """The number ``path`` names in the native dict (in its own units; 1 for a scale)."""
+    parts = path.split(".")
+    try:
+        if parts[0] == "scale":
+            return 1.0
+        if parts[0] == "vessels":
+            v = _vessel(source, parts[1], path)
+            if parts[2:] == ["radius"] and "radius" not in v:
+                return float(v["radius_in"])
+            node: Any = v
+            for key in parts[2:]:
+                node = node[key]
+            return float(node)
+        if parts[0] == "boundary_conditions":
+            return float(source["boundary_conditions"][parts[1]][parts[2]])
+    except (KeyError, IndexError, TypeError, ValueError):
+        pass
+    raise CalibrationError(f"parameter '{path}': no such number in the model")
+
+
+def _scale_inflow(data: dict[str, Any], factor: float) -> None:
+    """Multiply every flow condition's waveform (``value`` or ``flow``) by ``factor``."""
+    for node, bc in (data.get("boundary_conditions") or {}).items():
+        if str(bc.get("type", "")).lower() != "flow":
+            continue
+        keys = [k for k in ("value", "flow") if k in bc]
+        if not keys:
+            raise CalibrationError(f"parameter 'scale.inflow': the flow condition at {node!r} "
+                                   "has no 'value' or 'flow' to scale")
+        for k in keys:
+            bc[k] = (np.asarray(bc[k], dtype=float) * factor).tolist()
+
+
+def native_model(source: Mapping[str, Any], parameters: Sequence[str],
+                 values: Sequence[float]) -> dict[str, Any]:
+    """The native model dict ``source`` with each parameter set to its value (native units;
+    a scale to its factor)."""
+    patch: dict[str, Any] = {}
+    inflow = None
+    for path, x in zip(parameters, values, strict=True):
+        parts = path.split(".")
+        if path == "scale.inflow":
+            inflow = float(x)
+        elif parts[0] == "scale":
+            patch.setdefault("scale", {})[parts[1]] = float(x)
+        elif parts[0] == "vessels":
+            props = patch.setdefault("vessels", {}).setdefault(parts[1], {})
+            if len(parts) == 4:  # vessels.<name>.lumped.<key>
+                lumped = dict(_vessel(source, parts[1], path).get("lumped", {}))
+                props["lumped"] = {**lumped, **props.get("lumped", {}), parts[3]: float(x)}
+            else:
+                props[parts[2]] = float(x)
+        else:
+            patch.setdefault("boundary_conditions", {}).setdefault(parts[1], {})[parts[2]] = \
+                float(x)
+    data = apply_patch(dict(source), patch) if patch else copy.deepcopy(dict(source))
+    if inflow is not None:
+        _scale_inflow(data, inflow)
+    return data
+
+
+# ---- calibration ----------------------------------------------------------------------------
+
+@dataclass
+class CalibrationResult:
+    """A fit: the calibrated native ``model`` dict (loads and runs), the parameters' values
+    (native units), the weighted residuals (r = (output − target)/sigma), the Gauss–Newton
+    covariance of the log factors and the report of the optimiser."""
+
+    model: dict[str, Any]
+    parameters: dict[str, float]
+    start: dict[str, float]
+    residuals: np.ndarray
+    cost: float
+    #: covariance of log(parameter) (the fit's variables): (JᵀJ)⁻¹ with J of the weighted
+    #: residuals, so the sigmas are read as the data's standard deviations
+    covariance: np.ndarray
+    #: 95 % intervals of each parameter (native units, from the log-normal approximation)
+    intervals: dict[str, tuple[float, float]]
+    success: bool
+    report: dict[str, Any]
+
+
+def _bounds(parameters: Sequence[str], start: np.ndarray, bounds: Any
+            ) -> tuple[np.ndarray, np.ndarray]:
+    lo = np.full(len(parameters), -np.inf)
+    hi = np.full(len(parameters), np.inf)
+    if bounds is None:
+        return lo, hi
+    if not isinstance(bounds, Mapping):
+        raise CalibrationError("bounds: expected a mapping {parameter: (low, high)}")
+    for path, b in bounds.items():
+        if path not in parameters:
+            raise CalibrationError(f"bounds: {path!r} is not one of the parameters")
+        k = list(parameters).index(path)
+        try:
+            a, c = (float(x) for x in b)
+        except (TypeError, ValueError):
+            raise CalibrationError(f"bounds of '{path}': expected (low, high), got {b!r}"
+                                   ) from None
+        if not (0 < a < c) or np.isnan(c):
+            raise CalibrationError(f"bounds of '{path}': need 0 < low < high, got {b!r}")
+        if not a <= start[k] <= c:
+            raise CalibrationError(f"bounds of '{path}': ({a:g}, {c:g}) exclude the start "
+                                   f"{start[k]:g}")
+        lo[k], hi[k] = np.log(a / start[k]), np.log(c / start[k])
+    return lo, hi
+
+
+class _Stop(Exception):
+    """An evaluation failed at a trial point: the fit stops at the best point so far."""
+
+
+class _Problem:
+    """The weighted residuals and their Jacobian in the log factors, cached per point (scipy
+    asks for them separately) and the best point reached."""
+
+    def __init__(self, source: dict[str, Any], parameters: list[str], start: np.ndarray,
+                 targets: list[Target], options: dict[str, Any]) -> None:
+        self.source, self.parameters, self.start = source, parameters, start
+        self.targets, self.options = targets, options
+        self.data = np.concatenate([t.value for t in targets])
+        self.sigma = np.concatenate([t.sigma for t in targets])
+        self.cache: tuple[bytes, np.ndarray, np.ndarray] | None = None
+        self.best: tuple[float, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.error: str | None = None
+        self.evaluations = 0
+
+    def values(self, theta: np.ndarray) -> np.ndarray:
+        return self.start * np.exp(theta)
+
+    def model(self, theta: np.ndarray) -> dict[str, Any]:
+        return native_model(self.source, self.parameters, self.values(theta))
+
+    def _eval(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        key = theta.tobytes()
+        if self.cache is None or self.cache[0] != key:
+            try:
+                m = build_model(self.model(theta))
+                v, j_si, raw = _evaluate(m, self.parameters, self.targets, **self.options)
+            except Exception as e:  # noqa: BLE001 — any failure at a trial point ends the fit
+                self.error = f"{type(e).__name__}: {e}"
+                raise _Stop from e
+            self.evaluations += 1
+            r = (v - self.data) / self.sigma
+            # d r / d log(p) = d r / d p · p (p in SI: the core's values)
+            j = j_si * np.asarray(raw["values"])[None, :] / self.sigma[:, None]
+            self.cache = (key, r, j)
+            cost = 0.5 * float(r @ r)
+            if self.best is None or cost < self.best[0]:
+                self.best = (cost, theta.copy(), r, j)
+        return self.cache[1], self.cache[2]
+
+    def fun(self, theta: np.ndarray) -> np.ndarray:
+        return self._eval(theta)[0]
+
+    def jac(self, theta: np.ndarray) -> np.ndarray:
+        return self._eval(theta)[1]
+
+
+def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
+              parameters: Sequence[str], *, bounds: Mapping[str, Any] | None = None,
+              method: str = "lm", max_evaluations: int = 100, xtol: float = 1e-10,
+              steps_per_cycle: int | None = None, tol: float = 1e-12,
+              max_cycles: int = 2000) -> CalibrationResult:
+    """Fit ``parameters`` (patch paths) of ``model`` to ``targets`` (see
+    :func:`oxyline.targets.parse_targets`) by ``scipy.optimize.least_squares`` with the
+    core's exact Jacobian: ``method="lm"`` (Levenberg–Marquardt, no bounds) or ``"trf"``
+    (trust-region reflective, ``bounds`` {path: (low, high)} in the model's units).
+
+    A fit that fails at a trial point (a model the core refuses, a diverged run) returns the
+    best point reached with ``success=False`` and the failure in ``report["error"]``.
+    """
+    from scipy.optimize import least_squares
+
+    if method not in ("lm", "trf"):
+        raise CalibrationError(f"method: expected 'lm' or 'trf', got {method!r}")
+    base = load_model(model)
+    params = list(parameters)
+    if not params or isinstance(parameters, str):
+        raise CalibrationError("parameters: expected a non-empty list of parameter paths")
+    if len(set(params)) != len(params):
+        raise CalibrationError(f"parameters: given twice in {params}")
+    tlist = parse_targets(targets, base)
+    start = np.array([_base_value(base.source, p) for p in params])
+    bad = [p for p, x in zip(params, start, strict=True) if not x > 0]
+    if bad:
+        raise CalibrationError(f"parameter '{bad[0]}': the start must be positive (fitted in "
+                               "log space)")
+    lo, hi = _bounds(params, start, bounds)
+    if method == "lm" and (np.isfinite(lo).any() or np.isfinite(hi).any()):
+        raise CalibrationError("method 'lm' takes no bounds: use method='trf'")
+    options = dict(steps_per_cycle=steps_per_cycle, tol=tol, max_cycles=max_cycles)
+    problem = _Problem(copy.deepcopy(base.source), params, start, tlist, options)
+    problem.jac(np.zeros(len(params)))  # paths and targets are checked here, before the fit
+    n_res = len(problem.data)
+    if method == "lm" and n_res < len(params):
+        raise CalibrationError(f"method 'lm' needs at least as many target values ({n_res}) "
+                               f"as parameters ({len(params)}): use method='trf'")
+    report: dict[str, Any] = {"method": method}
+    try:
+        fit = least_squares(problem.fun, np.zeros(len(params)), jac=problem.jac,
+                            bounds=(lo, hi) if method == "trf" else (-np.inf, np.inf),
+                            method=method, x_scale=1.0, xtol=xtol, ftol=1e-12, gtol=1e-12,
+                            max_nfev=max_evaluations)
+        theta, success = fit.x, bool(fit.success)
+        report.update(status=int(fit.status), message=str(fit.message), nfev=int(fit.nfev),
+                      njev=int(fit.njev or 0), optimality=float(fit.optimality))
+    except _Stop:
+        assert problem.best is not None
+        theta, success = problem.best[1], False
+        report.update(status=-1, message="an evaluation failed; the best point reached is "
+                      "returned", error=problem.error)
+    r, j = problem._eval(theta)
+    return _result(problem, theta, r, j, success, report)
+
+
+def _result(problem: _Problem, theta: np.ndarray, r: np.ndarray, j: np.ndarray,
+            success: bool, report: dict[str, Any]) -> CalibrationResult:
+    params = problem.parameters
+    jtj = j.T @ j
+    sv = np.linalg.svd(j, compute_uv=False) if j.size else np.zeros(0)
+    rank_tol = sv.max(initial=0.0) * max(j.shape) * np.finfo(float).eps
+    rank = int((sv > rank_tol).sum())
+    cov = np.linalg.pinv(jtj)
+    report.update(evaluations=problem.evaluations, rank=rank,
+                  condition=float(sv.max() / sv.min()) if rank == len(params) else np.inf)
+    if rank < len(params):
+        # the directions the data do not see: parameters with a share of the null space
+        _, _, vt = np.linalg.svd(j)
+        null = np.abs(vt[rank:]).max(axis=0)
+        report["unidentifiable"] = [p for p, w in zip(params, null, strict=True) if w > 0.1]
+    values = problem.values(theta)
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    intervals = {p: (float(v * np.exp(-Z95 * s)), float(v * np.exp(Z95 * s)))
+                 for p, v, s in zip(params, values, sd, strict=True)}
+    return CalibrationResult(
+        model=problem.model(theta), parameters=dict(zip(params, map(float, values),
+                                                        strict=True)),
+        start=dict(zip(params, map(float, problem.start), strict=True)), residuals=r,
+        cost=0.5 * float(r @ r), covariance=cov, intervals=intervals, success=success,
+        report=report)
