@@ -12,6 +12,7 @@ Quick use::
 from __future__ import annotations
 
 from oxyline import _core, catalogue, sensitivity
+from oxyline.calibrate import CalibrationError, calibrate, sensitivities
 from oxyline.ensemble import simulate_ensemble
 from oxyline.errors import (
     CheckpointError,
@@ -40,6 +41,7 @@ from oxyline.transport import HemoglobinFacilitationWarning
 __version__: str = _core.__version__
 
 __all__ = [
+    "CalibrationError",
     "CheckpointError",
     "HemoglobinFacilitationWarning",
     "Model",
@@ -58,11 +60,13 @@ __all__ = [
     "UnsupportedElement",
     "VesselResult",
     "__version__",
+    "calibrate",
     "catalogue",
     "impedance",
     "load_model",
     "open_result",
     "resume",
+    "sensitivities",
     "sensitivity",
     "simulate",
     "simulate_ensemble",

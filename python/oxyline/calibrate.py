@@ -57,7 +57,8 @@ def _settings(model: Model, steps_per_cycle: int | None) -> tuple[float, int, fl
                                "(a period or periodic waveforms)")
     if steps_per_cycle is None:
         dt = model.simulation.get("dt")
-        steps_per_cycle = int(round(period / float(dt))) if dt else 400
+        # "auto" (or none): 400 steps a cycle
+        steps_per_cycle = round(period / dt) if isinstance(dt, (int, float)) else 400
     rho = float(model.simulation.get("rho_infty", 0.5))
     return float(period), max(int(steps_per_cycle), 1), rho
 
@@ -152,16 +153,23 @@ def _base_value(source: Mapping[str, Any], path: str) -> float:
 
 
 def _scale_inflow(data: dict[str, Any], factor: float) -> None:
-    """Multiply every flow condition's waveform (``value`` or ``flow``) by ``factor``."""
+    """Multiply every flow condition's waveform (``value``, ``flow`` or ``fourier``) by
+    ``factor``."""
     for node, bc in (data.get("boundary_conditions") or {}).items():
         if str(bc.get("type", "")).lower() != "flow":
             continue
         keys = [k for k in ("value", "flow") if k in bc]
-        if not keys:
+        if not keys and not isinstance(bc.get("fourier"), Mapping):
             raise CalibrationError(f"parameter 'scale.inflow': the flow condition at {node!r} "
-                                   "has no 'value' or 'flow' to scale")
+                                   "has no 'value', 'flow' or 'fourier' to scale")
         for k in keys:
             bc[k] = (np.asarray(bc[k], dtype=float) * factor).tolist()
+        if isinstance(bc.get("fourier"), Mapping):
+            f = dict(bc["fourier"])
+            for k in ("mean", "cos", "sin"):
+                if k in f:
+                    f[k] = (np.asarray(f[k], dtype=float) * factor).tolist()
+            bc["fourier"] = f
 
 
 def native_model(source: Mapping[str, Any], parameters: Sequence[str],
@@ -249,8 +257,9 @@ class _Problem:
     asks for them separately) and the best point reached."""
 
     def __init__(self, source: dict[str, Any], parameters: list[str], start: np.ndarray,
-                 targets: list[Target], options: dict[str, Any]) -> None:
+                 targets: list[Target], options: dict[str, Any], exact: bool = True) -> None:
         self.source, self.parameters, self.start = source, parameters, start
+        self.exact = exact
         self.targets, self.options = targets, options
         self.data = np.concatenate([t.value for t in targets])
         self.sigma = np.concatenate([t.sigma for t in targets])
@@ -270,14 +279,17 @@ class _Problem:
         if self.cache is None or self.cache[0] != key:
             try:
                 m = build_model(self.model(theta))
-                v, j_si, raw = _evaluate(m, self.parameters, self.targets, **self.options)
-            except Exception as e:  # noqa: BLE001 — any failure at a trial point ends the fit
+                # without the exact Jacobian the core runs the primal only
+                params = self.parameters if self.exact else []
+                v, j_si, raw = _evaluate(m, params, self.targets, **self.options)
+            except Exception as e:
                 self.error = f"{type(e).__name__}: {e}"
                 raise _Stop from e
             self.evaluations += 1
             r = (v - self.data) / self.sigma
             # d r / d log(p) = d r / d p · p (p in SI: the core's values)
-            j = j_si * np.asarray(raw["values"])[None, :] / self.sigma[:, None]
+            j = j_si * np.asarray(raw["values"])[None, :] / self.sigma[:, None] if self.exact \
+                else np.zeros((len(r), 0))
             self.cache = (key, r, j)
             cost = 0.5 * float(r @ r)
             if self.best is None or cost < self.best[0]:
@@ -294,12 +306,17 @@ class _Problem:
 def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
               parameters: Sequence[str], *, bounds: Mapping[str, Any] | None = None,
               method: str = "lm", max_evaluations: int = 100, xtol: float = 1e-10,
+              jacobian: str = "exact",
               steps_per_cycle: int | None = None, tol: float = 1e-12,
               max_cycles: int = 2000) -> CalibrationResult:
     """Fit ``parameters`` (patch paths) of ``model`` to ``targets`` (see
     :func:`oxyline.targets.parse_targets`) by ``scipy.optimize.least_squares`` with the
     core's exact Jacobian: ``method="lm"`` (Levenberg–Marquardt, no bounds) or ``"trf"``
     (trust-region reflective, ``bounds`` {path: (low, high)} in the model's units).
+
+    ``jacobian="2-point"`` lets scipy estimate the Jacobian by forward differences instead
+    (for comparison: docs/calibration.md, "Cost"; the covariance is still the exact one
+    at the end point).
 
     A fit that fails at a trial point (a model the core refuses, a diverged run) returns the
     best point reached with ``success=False`` and the failure in ``report["error"]``.
@@ -308,6 +325,8 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
 
     if method not in ("lm", "trf"):
         raise CalibrationError(f"method: expected 'lm' or 'trf', got {method!r}")
+    if jacobian not in ("exact", "2-point"):
+        raise CalibrationError(f"jacobian: expected 'exact' or '2-point', got {jacobian!r}")
     base = load_model(model)
     params = list(parameters)
     if not params or isinstance(parameters, str):
@@ -323,16 +342,19 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
     lo, hi = _bounds(params, start, bounds)
     if method == "lm" and (np.isfinite(lo).any() or np.isfinite(hi).any()):
         raise CalibrationError("method 'lm' takes no bounds: use method='trf'")
-    options = dict(steps_per_cycle=steps_per_cycle, tol=tol, max_cycles=max_cycles)
+    options = {"steps_per_cycle": steps_per_cycle, "tol": tol, "max_cycles": max_cycles}
     problem = _Problem(copy.deepcopy(base.source), params, start, tlist, options)
     problem.jac(np.zeros(len(params)))  # paths and targets are checked here, before the fit
+    if jacobian != "exact":
+        problem.exact, problem.cache = False, None
     n_res = len(problem.data)
     if method == "lm" and n_res < len(params):
         raise CalibrationError(f"method 'lm' needs at least as many target values ({n_res}) "
                                f"as parameters ({len(params)}): use method='trf'")
     report: dict[str, Any] = {"method": method}
     try:
-        fit = least_squares(problem.fun, np.zeros(len(params)), jac=problem.jac,
+        fit = least_squares(problem.fun, np.zeros(len(params)),
+                            jac=problem.jac if problem.exact else "2-point",
                             bounds=(lo, hi) if method == "trf" else (-np.inf, np.inf),
                             method=method, x_scale=1.0, xtol=xtol, ftol=1e-12, gtol=1e-12,
                             max_nfev=max_evaluations)
@@ -344,13 +366,24 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
         theta, success = problem.best[1], False
         report.update(status=-1, message="an evaluation failed; the best point reached is "
                       "returned", error=problem.error)
-    r, j = problem._eval(theta)
+    best = problem.best
+    if best is not None and best[1].tobytes() == theta.tobytes() and best[3].shape[1]:
+        r, j = best[2], best[3]
+    else:  # the end point's exact Jacobian (the covariance's), unless it cannot be had
+        problem.exact, problem.cache = True, None
+        try:
+            r, j = problem._eval(theta)
+        except _Stop:
+            r = best[2] if best is not None else np.full(len(problem.data), np.nan)
+            j = np.full((len(r), len(params)), np.nan)
     return _result(problem, theta, r, j, success, report)
 
 
 def _result(problem: _Problem, theta: np.ndarray, r: np.ndarray, j: np.ndarray,
             success: bool, report: dict[str, Any]) -> CalibrationResult:
     params = problem.parameters
+    if not np.isfinite(j).all():  # no Jacobian at the end point: no covariance
+        j = np.zeros_like(j)
     jtj = j.T @ j
     sv = np.linalg.svd(j, compute_uv=False) if j.size else np.zeros(0)
     rank_tol = sv.max(initial=0.0) * max(j.shape) * np.finfo(float).eps
@@ -364,7 +397,8 @@ def _result(problem: _Problem, theta: np.ndarray, r: np.ndarray, j: np.ndarray,
         null = np.abs(vt[rank:]).max(axis=0)
         report["unidentifiable"] = [p for p, w in zip(params, null, strict=True) if w > 0.1]
     values = problem.values(theta)
-    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    # (an unidentified direction's sd is huge: the interval is then (0, inf), not an overflow)
+    sd = np.minimum(np.sqrt(np.clip(np.diag(cov), 0.0, None)), 700.0 / Z95)
     intervals = {p: (float(v * np.exp(-Z95 * s)), float(v * np.exp(Z95 * s)))
                  for p, v, s in zip(params, values, sd, strict=True)}
     return CalibrationResult(
@@ -373,3 +407,54 @@ def _result(problem: _Problem, theta: np.ndarray, r: np.ndarray, j: np.ndarray,
         start=dict(zip(params, map(float, problem.start), strict=True)), residuals=r,
         cost=0.5 * float(r @ r), covariance=cov, intervals=intervals, success=success,
         report=report)
+
+
+# ---- command line ---------------------------------------------------------------------------
+
+def read_problem(path: str) -> dict[str, Any]:
+    """A calibration problem file (YAML or JSON): ``parameters`` (a list of paths, or a
+    mapping {path: {bounds: [low, high]}}), ``targets`` (as :func:`calibrate` takes them) and
+    optionally ``method``."""
+    import yaml
+
+    try:
+        with open(path, encoding="utf-8") as f:
+            data = yaml.safe_load(f)
+    except yaml.YAMLError as e:
+        raise CalibrationError(f"{path}: not a YAML or JSON file ({e})") from None
+    if not isinstance(data, Mapping):
+        raise CalibrationError(f"{path}: expected a mapping with 'parameters' and 'targets'")
+    unknown = set(data) - {"parameters", "targets", "method"}
+    if unknown or not {"parameters", "targets"} <= set(data):
+        raise CalibrationError(f"{path}: needs 'parameters' and 'targets' (and optionally "
+                               f"'method'); unknown keys {sorted(unknown)}")
+    params = data["parameters"]
+    bounds: dict[str, Any] = {}
+    if isinstance(params, Mapping):
+        for p, opts in params.items():
+            if isinstance(opts, Mapping) and "bounds" in opts:
+                bounds[p] = opts["bounds"]
+        params = list(params)
+    method = str(data.get("method", "trf" if bounds else "lm"))
+    return {"parameters": list(params), "targets": data["targets"],
+            "bounds": bounds or None, "method": method}
+
+
+def main_cli(model: str, problem_file: str, output: str, quiet: bool = False) -> int:
+    """``oxyline calibrate MODEL TARGETS.yaml -o OUT``: fit, write the calibrated model, print
+    the parameters with their 95 % intervals and the report. Exit 0 on convergence, 1 if the
+    fit failed (the best point is written all the same)."""
+    from oxyline.io import dump_native
+
+    problem = read_problem(problem_file)
+    res = calibrate(model, problem["targets"], problem["parameters"],
+                    bounds=problem["bounds"], method=problem["method"])
+    path = dump_native(res.model, output)
+    if not quiet:
+        for p, v in res.parameters.items():
+            lo, hi = res.intervals[p]
+            print(f"{p:<48} {res.start[p]:.6g} -> {v:.6g}   95 %: [{lo:.6g}, {hi:.6g}]")
+        print(f"cost {res.cost:.6g}, {res.report.get('nfev', '?')} evaluations: "
+              f"{res.report.get('message')}")
+        print(f"calibrated model written to {path}")
+    return 0 if res.success else 1

@@ -126,7 +126,8 @@ def combine(output: str, times: np.ndarray, values: np.ndarray, derivs: np.ndarr
     dd = np.concatenate((dx[:, -1:], dx), axis=1)
     t = np.mod(np.asarray(at, dtype=float), period)
     val = np.interp(t, tt, xx)
-    jac = np.stack([np.interp(t, tt, row) for row in dd], axis=1)
+    jac = np.stack([np.interp(t, tt, row) for row in dd], axis=1) if len(dd) \
+        else np.zeros((t.size, 0))
     return val, jac
 
 
@@ -178,7 +179,7 @@ def _finite(name: str, key: str, x: Any, series: bool) -> np.ndarray:
     bad = ~np.isfinite(a)
     if bad.any():
         raise CalibrationError(f"target '{name}': {key} holds a non-finite value "
-                               f"{a.ravel()[np.argmax(bad.ravel())]!r}")
+                               f"{float(a.ravel()[np.argmax(bad.ravel())])!r}")
     return np.atleast_1d(a)
 
 

@@ -2,7 +2,7 @@
 //! the binding of `oxyline.sensitivities` and `oxyline.calibrate`.
 
 use crate::errors::to_py;
-use numpy::IntoPyArray;
+use numpy::{IntoPyArray, PyArrayMethods};
 use oxyline_core::model::parse;
 use oxyline_core::sensitivity::{TangentSettings, sensitivities};
 use pyo3::prelude::*;
