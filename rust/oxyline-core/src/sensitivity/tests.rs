@@ -171,7 +171,7 @@ fn check(path: &str) {
         c.periodic_change
     );
     let nsig = SIGNALS.len();
-    for j in 0..nsig {
+    for (j, signal) in SIGNALS.iter().enumerate() {
         let col = |v: &[f64]| -> Vec<f64> { v.iter().skip(j).step_by(nsig).copied().collect() };
         let (d, u, w) = (
             col(&c.derivs),
@@ -179,7 +179,7 @@ fn check(path: &str) {
             col(&down.cycle.values),
         );
         let scale = d.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-        assert!(scale > 0.0, "{path}: zero derivative of {:?}", SIGNALS[j]);
+        assert!(scale > 0.0, "{path}: zero derivative of {signal:?}");
         let worst = d
             .iter()
             .zip(u.iter().zip(&w))
@@ -187,8 +187,7 @@ fn check(path: &str) {
             .fold(0.0f64, f64::max);
         assert!(
             worst <= 1e-6 * scale,
-            "{path} {:?}: {worst:e} vs scale {scale:e}",
-            SIGNALS[j]
+            "{path} {signal:?}: {worst:e} vs scale {scale:e}"
         );
     }
 }
