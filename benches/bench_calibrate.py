@@ -55,11 +55,13 @@ def gradient_cost(name: str, counts: list[int], steps: int) -> None:
     t0, s0 = _timed(lambda: oxyline.sensitivities(model, [], outputs, **kw), 2)
     print(f"\n{name}: forward run to the periodic state {t0 * 1e3:.0f} ms "
           f"({s0.cycles} cycles of {steps} steps)")
-    print(f"{'parameters':>10} {'time (ms)':>10} {'x forward':>10} {'x forward per param':>20}")
+    print(f"{'parameters':>10} {'cycles':>7} {'time (ms)':>10} {'x forward':>10} "
+          f"{'x forward per param':>20}")
     for n in counts:
         params = _parameters(model, n)
-        t, _s = _timed(lambda p=params: oxyline.sensitivities(model, p, outputs, **kw))
-        print(f"{n:>10} {t * 1e3:>10.0f} {t / t0:>10.2f} {(t / t0 - 1) / n:>20.3f}")
+        t, s = _timed(lambda p=params: oxyline.sensitivities(model, p, outputs, **kw))
+        print(f"{n:>10} {s.cycles:>7} {t * 1e3:>10.0f} {t / t0:>10.2f} "
+              f"{(t / t0 - 1) / n:>20.3f}")
 
 
 def calibration_speedup() -> None:

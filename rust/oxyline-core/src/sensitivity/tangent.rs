@@ -12,8 +12,9 @@
 //! factorisation. The tangent is exact for the discrete scheme: it is the derivative of the
 //! numbers the run computes, not of the ODE's solution.
 //!
-//! The periodic state: cycles are repeated until y, ẏ and every s, ṡ at a cycle start repeat
-//! to `tol` relative to their scale (the tangent cycle map has the primal's contraction).
+//! The periodic state: cycles are repeated until y and every p·s at a cycle start repeat to
+//! `tol` relative to the state's scale (p·s is the state's response to a 100 % change of p;
+//! the tangent cycle map has the primal's contraction).
 
 use super::parameter::DaeTangent;
 use crate::circuit::Dae;
@@ -94,11 +95,43 @@ fn residual(dae: &Dae, c: f64, y: &[f64], yd: &[f64], r: &mut [f64]) {
     }
 }
 
+/// The nonzero entries of a [`DaeTangent`]: a parameter touches a few elements, so its right
+/// side costs O(its entries) per step instead of a pass over the whole matrix.
+struct SparseTangent {
+    /// (row, dE_row)
+    e: Vec<(usize, f64)>,
+    /// (row, col, dF_row,col)
+    f: Vec<(usize, usize, f64)>,
+    forcing: Vec<(usize, f64)>,
+}
+
+impl SparseTangent {
+    fn of(dae: &Dae, t: &DaeTangent) -> SparseTangent {
+        let e = (0..dae.n)
+            .filter(|&i| t.de[i] != 0.0)
+            .map(|i| (i, t.de[i]))
+            .collect();
+        let mut f = Vec::new();
+        for i in 0..dae.n {
+            for k in dae.f.ptr[i]..dae.f.ptr[i + 1] {
+                if t.df[k] != 0.0 {
+                    f.push((i, dae.f.col[k] as usize, t.df[k]));
+                }
+            }
+        }
+        SparseTangent {
+            e,
+            f,
+            forcing: t.dforcing.clone(),
+        }
+    }
+}
+
 /// The tangent right side df − dE (c ẏ + α_m Δ) − dF (y + α_f γ Δt Δ) at one step, added to
 /// `r` (which holds −c E ṡ − F s on entry).
 fn tangent_source(
     dae: &Dae,
-    t: &DaeTangent,
+    t: &SparseTangent,
     s: &Scheme,
     c: f64,
     (y, yd, delta): (&[f64], &[f64], &[f64]),
@@ -106,16 +139,13 @@ fn tangent_source(
     r: &mut [f64],
 ) {
     let gdt = s.af * s.gamma * s.dt;
-    let f = &dae.f;
-    for (i, ri) in r.iter_mut().enumerate() {
-        let mut v = -t.de[i] * (c * yd[i] + s.am * delta[i]);
-        for k in f.ptr[i]..f.ptr[i + 1] {
-            let j = f.col[k] as usize;
-            v -= t.df[k] * (y[j] + gdt * delta[j]);
-        }
-        *ri += v;
+    for &(i, de) in &t.e {
+        r[i] -= de * (c * yd[i] + s.am * delta[i]);
     }
-    for &(k, factor) in &t.dforcing {
+    for &(i, j, df) in &t.f {
+        r[i] -= df * (y[j] + gdt * delta[j]);
+    }
+    for &(k, factor) in &t.forcing {
         r[dae.forcing[k].0] += factor * forcing[k];
     }
 }
@@ -141,6 +171,8 @@ pub fn periodic_tangent(
     lu.factor(&kvals)
         .map_err(|m| crate::integrate::newton::singular(0.0, &m))?;
     let np = params.len();
+    let values: Vec<f64> = params.iter().map(|t| t.value).collect();
+    let params: Vec<SparseTangent> = params.iter().map(|t| SparseTangent::of(dae, t)).collect();
     // state: y, ẏ then s_p, ṡ_p for each parameter
     let mut y = dae.initial_state();
     let mut yd = vec![0.0; n];
@@ -216,10 +248,15 @@ pub fn periodic_tangent(
             }
         }
         cycles += 1;
-        change = start
-            .iter()
-            .zip(std::iter::once(&y).chain(s.iter()))
-            .map(|(a, b)| relative_change(a, b, dae.n_nodes))
+        // a tangent is measured as p·s, the state's response to a 100 % change of p, against
+        // the state's own scale: a part of s that is only rounding then never holds it back
+        let k = dae.n_nodes.min(n);
+        let scale = |v: &[f64]| v.iter().fold(1e-300f64, |m, x| m.max(x.abs()));
+        let floor = [scale(&y[..k]), scale(&y[k..])];
+        change = std::iter::once(1.0)
+            .chain(values.iter().copied())
+            .zip(start.iter().zip(std::iter::once(&y).chain(s.iter())))
+            .map(|(p, (a, b))| relative_change(a, b, k, p.abs(), floor))
             .fold(0.0, f64::max);
         if last {
             rec.cycles = cycles;
@@ -231,16 +268,17 @@ pub fn periodic_tangent(
     out.ok_or_else(|| Error::model("sensitivities", "max_cycles must be at least 1"))
 }
 
-/// The change of a state vector over one cycle: max |a − b| relative to max |b|, taken apart
-/// for the node rows (pressures) and the rest (flows, whose scale is another).
-fn relative_change(a: &[f64], b: &[f64], n_nodes: usize) -> f64 {
-    let part = |a: &[f64], b: &[f64]| {
-        let scale = b.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-300);
-        a.iter()
+/// The change of a state vector over one cycle, `p` times `b − a`, relative to the larger of
+/// `p` |b| and `floor`, taken apart for the node rows (pressures, before `k`) and the rest
+/// (flows, whose scale is another).
+fn relative_change(a: &[f64], b: &[f64], k: usize, p: f64, floor: [f64; 2]) -> f64 {
+    let part = |a: &[f64], b: &[f64], floor: f64| {
+        let scale = b.iter().fold(floor, |m, v| m.max(p * v.abs()));
+        p * a
+            .iter()
             .zip(b)
             .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
             / scale
     };
-    let k = n_nodes.min(a.len());
-    part(&a[..k], &b[..k]).max(part(&a[k..], &b[k..]))
+    part(&a[..k], &b[..k], floor[0]).max(part(&a[k..], &b[k..], floor[1]))
 }
