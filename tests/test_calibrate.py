@@ -207,3 +207,23 @@ def test_cli_writes_a_calibrated_model(tmp_path) -> None:
     fitted = yaml.safe_load(out.read_text())
     assert fitted["boundary_conditions"]["o2"]["resistance"] == pytest.approx(1.3e9, rel=1e-6)
     assert main(["calibrate", str(model), str(tmp_path / "nope.yaml"), "-o", str(out)]) == 2
+
+
+@pytest.mark.slow  # 3,600 model runs (~30 s idle); needs the bayes extra (emcee)
+def test_the_posterior_agrees_with_the_gauss_newton_covariance() -> None:
+    """For data that determine the parameters well (2 % noise, 25 values, 3 parameters) the
+    posterior in log(parameter) is close to Gaussian: its mean near the fit and its spread the
+    Gauss-Newton one. Tolerances: 8 walkers x 300 steps after a 150-step burn-in give ~100
+    independent draws, so the sample mean is good to ~0.1 sd and the sample sd to ~10 %; 0.5
+    sd and a factor 1.5 leave room for that and for the likelihood's curvature."""
+    pytest.importorskip("emcee")
+    res = oxyline.calibrate(MODEL, _synthetic(0.02), list(TRUE), method="bayes",
+                            posterior={"walkers": 8, "steps": 450, "burn": 150})
+    assert res.samples is not None and res.samples.shape == (8 * 300, 3)
+    assert 0.1 < res.report["acceptance"] < 0.9
+    logs = np.log(res.samples)
+    fit = np.log([res.parameters[p] for p in TRUE])
+    sd = np.sqrt(np.diag(res.covariance))
+    assert (np.abs(logs.mean(axis=0) - fit) < 0.5 * sd).all(), (logs.mean(axis=0) - fit) / sd
+    ratio = logs.std(axis=0) / sd
+    assert ((ratio > 1 / 1.5) & (ratio < 1.5)).all(), ratio

@@ -220,6 +220,8 @@ class CalibrationResult:
     intervals: dict[str, tuple[float, float]]
     success: bool
     report: dict[str, Any]
+    #: ``method="bayes"``: posterior samples of the parameters (native units), one row each
+    samples: np.ndarray | None = None
 
 
 def _bounds(parameters: Sequence[str], start: np.ndarray, bounds: Any
@@ -306,13 +308,19 @@ class _Problem:
 def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
               parameters: Sequence[str], *, bounds: Mapping[str, Any] | None = None,
               method: str = "lm", max_evaluations: int = 100, xtol: float = 1e-10,
-              jacobian: str = "exact",
+              jacobian: str = "exact", posterior: Mapping[str, Any] | None = None,
               steps_per_cycle: int | None = None, tol: float = 1e-12,
               max_cycles: int = 2000) -> CalibrationResult:
     """Fit ``parameters`` (patch paths) of ``model`` to ``targets`` (see
     :func:`oxyline.targets.parse_targets`) by ``scipy.optimize.least_squares`` with the
     core's exact Jacobian: ``method="lm"`` (Levenberg–Marquardt, no bounds) or ``"trf"``
     (trust-region reflective, ``bounds`` {path: (low, high)} in the model's units).
+
+    ``method="bayes"``: the posterior by emcee's affine-invariant ensemble sampler (the
+    ``bayes`` extra), started around the gradient-based fit (trf with bounds, else lm), with a
+    Gaussian likelihood of the weighted residuals and a flat prior in log(parameter) within the
+    bounds; ``posterior`` sets ``walkers`` (default 4 per parameter, at least 8), ``steps``
+    (500), ``burn`` (half) and ``seed`` (0). ``samples`` holds the draws after the burn-in.
 
     ``jacobian="2-point"`` lets scipy estimate the Jacobian by forward differences instead
     (for comparison: docs/calibration.md, "Cost"; the covariance is still the exact one
@@ -323,8 +331,11 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
     """
     from scipy.optimize import least_squares
 
-    if method not in ("lm", "trf"):
-        raise CalibrationError(f"method: expected 'lm' or 'trf', got {method!r}")
+    if method not in ("lm", "trf", "bayes"):
+        raise CalibrationError(f"method: expected 'lm', 'trf' or 'bayes', got {method!r}")
+    if method == "bayes":
+        return _bayes(model, targets, parameters, bounds, max_evaluations, xtol, jacobian,
+                      steps_per_cycle, tol, max_cycles, posterior)
     if jacobian not in ("exact", "2-point"):
         raise CalibrationError(f"jacobian: expected 'exact' or '2-point', got {jacobian!r}")
     base = load_model(model)
@@ -458,3 +469,60 @@ def main_cli(model: str, problem_file: str, output: str, quiet: bool = False) ->
               f"{res.report.get('message')}")
         print(f"calibrated model written to {path}")
     return 0 if res.success else 1
+
+
+def _bayes(model: Any, targets: Any, parameters: Sequence[str], bounds: Any,
+           max_evaluations: int, xtol: float, jacobian: str, steps_per_cycle: int | None,
+           tol: float, max_cycles: int, posterior: Mapping[str, Any] | None
+           ) -> CalibrationResult:
+    """``method="bayes"``: the gradient fit, then emcee from around it (see :func:`calibrate`)."""
+    try:
+        import emcee
+    except ImportError:
+        raise CalibrationError("method 'bayes' needs emcee: pip install oxyline[bayes]"
+                               ) from None
+    opts = {"walkers": max(8, 4 * len(parameters)), "steps": 500, "burn": None, "seed": 0,
+            **(posterior or {})}
+    unknown = set(opts) - {"walkers", "steps", "burn", "seed"}
+    if unknown:
+        raise CalibrationError(f"posterior: unknown options {sorted(unknown)}")
+    fit = calibrate(model, targets, parameters, bounds=bounds,
+                    method="trf" if bounds else "lm", max_evaluations=max_evaluations,
+                    xtol=xtol, jacobian=jacobian, steps_per_cycle=steps_per_cycle, tol=tol,
+                    max_cycles=max_cycles)
+    params = list(parameters)
+    start = np.array([fit.start[p] for p in params])
+    lo, hi = _bounds(params, start, bounds)
+    base = load_model(model)
+    problem = _Problem(copy.deepcopy(base.source), params, start,
+                       parse_targets(targets, base),
+                       {"steps_per_cycle": steps_per_cycle, "tol": tol,
+                        "max_cycles": max_cycles}, exact=False)
+
+    def log_prob(theta: np.ndarray) -> float:
+        if (theta < lo).any() or (theta > hi).any():
+            return -np.inf
+        try:
+            r = problem.fun(theta)
+        except _Stop:  # a point the model refuses has no likelihood
+            return -np.inf
+        return -0.5 * float(r @ r)
+
+    theta_fit = np.log(np.array([fit.parameters[p] for p in params]) / start)
+    rng = np.random.default_rng(int(opts["seed"]))
+    cov = fit.covariance if np.isfinite(fit.covariance).all() else np.eye(len(params)) * 1e-4
+    # walkers in a small ball around the fit (a tenth of its Gauss-Newton spread), in bounds
+    p0 = rng.multivariate_normal(theta_fit, 0.01 * cov, size=int(opts["walkers"]))
+    p0 = np.clip(p0, lo + 1e-12, hi - 1e-12)
+    sampler = emcee.EnsembleSampler(int(opts["walkers"]), len(params), log_prob)
+    # the sampler's own stream, seeded: the same samples on every call
+    sampler.random_state = np.random.RandomState(int(opts["seed"])).get_state()
+    steps = int(opts["steps"])
+    burn = steps // 2 if opts["burn"] is None else int(opts["burn"])
+    sampler.run_mcmc(p0, steps, progress=False)
+    chain = sampler.get_chain(discard=burn, flat=True)
+    fit.samples = start * np.exp(chain)
+    fit.report.update(method="bayes", fit_method="trf" if bounds else "lm",
+                      acceptance=float(np.mean(sampler.acceptance_fraction)),
+                      posterior_evaluations=problem.evaluations)
+    return fit
