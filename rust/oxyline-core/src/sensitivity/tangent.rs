@@ -19,7 +19,7 @@
 use super::parameter::DaeTangent;
 use crate::circuit::Dae;
 use crate::error::{Error, Result};
-use crate::integrate::newton::{jacobian_stamps, jacobian_values};
+use crate::integrate::newton::{jacobian_stamps, jacobian_values, singular};
 use crate::sparse::SparseLu;
 
 /// How the periodic tangent is run.
@@ -150,6 +150,105 @@ fn tangent_source(
     }
 }
 
+/// The primal state (y, ẏ), the tangents (s_p, ṡ_p) and the one factorisation they share.
+struct Stepper<'a> {
+    dae: &'a Dae,
+    lu: SparseLu,
+    scheme: Scheme,
+    /// c = 1 + α_m (pred − 1): the weight of ẏ in a step's residual
+    c: f64,
+    params: Vec<SparseTangent>,
+    forcing: Vec<f64>,
+    r: Vec<f64>,
+    rs: Vec<f64>,
+    y: Vec<f64>,
+    yd: Vec<f64>,
+    s: Vec<Vec<f64>>,
+    sd: Vec<Vec<f64>>,
+}
+
+impl<'a> Stepper<'a> {
+    fn new(dae: &'a Dae, params: &[DaeTangent], scheme: Scheme) -> Result<Stepper<'a>> {
+        let n = dae.n;
+        let stamps = jacobian_stamps(dae);
+        let mut lu = SparseLu::analyse(n, &stamps)?;
+        let am_e: Vec<f64> = dae.e.iter().map(|e| scheme.am * e).collect();
+        let mut kvals = vec![0.0; stamps.len()];
+        let a = scheme.af * scheme.gamma * scheme.dt;
+        jacobian_values(dae, a, &am_e, &vec![0.0; n], 0.0, &mut kvals);
+        lu.factor(&kvals).map_err(|m| singular(0.0, &m))?;
+        let pred = (scheme.gamma - 1.0) / scheme.gamma;
+        let np = params.len();
+        Ok(Stepper {
+            dae,
+            lu,
+            c: 1.0 + scheme.am * (pred - 1.0),
+            scheme,
+            params: params.iter().map(|t| SparseTangent::of(dae, t)).collect(),
+            forcing: vec![0.0; dae.forcing.len()],
+            r: vec![0.0; n],
+            rs: vec![0.0; n],
+            y: dae.initial_state(),
+            yd: vec![0.0; n],
+            s: vec![vec![0.0; n]; np],
+            sd: vec![vec![0.0; n]; np],
+        })
+    }
+
+    /// One step from `time`: the primal's increment Δ, then each tangent's on the same
+    /// factors (it needs the primal's Δ and pre-step state), then both advance.
+    fn step(&mut self, time: f64) -> Result<()> {
+        let (dae, sc) = (self.dae, &self.scheme);
+        let t_af = time + sc.af * sc.dt;
+        self.r.iter_mut().for_each(|v| *v = 0.0);
+        for (fk, (row, w)) in dae.forcing.iter().enumerate() {
+            self.forcing[fk] = w.eval(t_af);
+            self.r[*row] += self.forcing[fk];
+        }
+        residual(dae, self.c, &self.y, &self.yd, &mut self.r);
+        if !self.lu.solve_in_place(&mut self.r) {
+            return Err(singular(t_af, "non-finite solution"));
+        }
+        for (p, t) in self.params.iter().enumerate() {
+            self.rs.iter_mut().for_each(|v| *v = 0.0);
+            residual(dae, self.c, &self.s[p], &self.sd[p], &mut self.rs);
+            let primal = (&self.y[..], &self.yd[..], &self.r[..]);
+            tangent_source(dae, t, sc, self.c, primal, &self.forcing, &mut self.rs);
+            if !self.lu.solve_in_place(&mut self.rs) {
+                return Err(singular(t_af, "non-finite tangent"));
+            }
+            advance(sc, &mut self.s[p], &mut self.sd[p], &self.rs);
+        }
+        advance(sc, &mut self.y, &mut self.yd, &self.r);
+        Ok(())
+    }
+
+    /// The state at a cycle start: y, then each s_p.
+    fn snapshot(&self) -> Vec<Vec<f64>> {
+        std::iter::once(self.y.clone())
+            .chain(self.s.iter().cloned())
+            .collect()
+    }
+
+    /// The change since `start`: a tangent is measured as p·s, the state's response to a
+    /// 100 % change of p, against the state's own scale (a part of s that is only rounding
+    /// then never holds the test back).
+    fn change(&self, start: &[Vec<f64>], values: &[f64]) -> f64 {
+        let k = self.dae.n_nodes.min(self.dae.n);
+        let scale = |v: &[f64]| v.iter().fold(1e-300f64, |m, x| m.max(x.abs()));
+        let floor = [scale(&self.y[..k]), scale(&self.y[k..])];
+        std::iter::once(1.0)
+            .chain(values.iter().copied())
+            .zip(
+                start
+                    .iter()
+                    .zip(std::iter::once(&self.y).chain(self.s.iter())),
+            )
+            .map(|(p, (a, b))| relative_change(a, b, k, p.abs(), floor))
+            .fold(0.0, f64::max)
+    }
+}
+
 /// Run generalized-α with the tangents of `params` to the periodic state and record the
 /// unknowns `signals` (and their derivatives) over the last cycle.
 pub fn periodic_tangent(
@@ -158,114 +257,50 @@ pub fn periodic_tangent(
     signals: &[usize],
     set: TangentSettings,
 ) -> Result<PeriodicTangent> {
-    let n = dae.n;
+    if set.max_cycles == 0 {
+        return Err(Error::model(
+            "sensitivities",
+            "max_cycles must be at least 1",
+        ));
+    }
     let ns = set.steps_per_cycle.max(1);
     let scheme = Scheme::new(set.rho_infty, set.period / ns as f64)?;
-    let stamps = jacobian_stamps(dae);
-    let mut lu = SparseLu::analyse(n, &stamps)?;
-    let am_e: Vec<f64> = dae.e.iter().map(|e| scheme.am * e).collect();
-    let mut kvals = vec![0.0; stamps.len()];
-    let y0 = vec![0.0; n];
-    let a = scheme.af * scheme.gamma * scheme.dt;
-    jacobian_values(dae, a, &am_e, &y0, 0.0, &mut kvals);
-    lu.factor(&kvals)
-        .map_err(|m| crate::integrate::newton::singular(0.0, &m))?;
-    let np = params.len();
+    let dt = scheme.dt;
+    let mut st = Stepper::new(dae, params, scheme)?;
     let values: Vec<f64> = params.iter().map(|t| t.value).collect();
-    let params: Vec<SparseTangent> = params.iter().map(|t| SparseTangent::of(dae, t)).collect();
-    // state: y, ẏ then s_p, ṡ_p for each parameter
-    let mut y = dae.initial_state();
-    let mut yd = vec![0.0; n];
-    let mut s = vec![vec![0.0; n]; np];
-    let mut sd = vec![vec![0.0; n]; np];
-    let (nsig, mut out) = (signals.len(), None);
+    let (np, nsig) = (params.len(), signals.len());
     let mut change = f64::INFINITY;
-    let mut cycles = 0;
-    let pred = (scheme.gamma - 1.0) / scheme.gamma;
-    let c = 1.0 + scheme.am * (pred - 1.0);
-    let mut forcing = vec![0.0; dae.forcing.len()];
-    let (mut r, mut rs) = (vec![0.0; n], vec![0.0; n]);
-    while cycles < set.max_cycles {
-        let last = change <= set.tol || cycles + 1 == set.max_cycles;
-        let start: Vec<Vec<f64>> = std::iter::once(y.clone())
-            .chain(s.iter().cloned())
-            .collect();
+    for cycle in 1..=set.max_cycles {
+        let last = change <= set.tol || cycle == set.max_cycles;
+        let start = st.snapshot();
+        if !last {
+            for k in 0..ns {
+                st.step(k as f64 * dt)?;
+            }
+            change = st.change(&start, &values);
+            continue;
+        }
         let mut rec = PeriodicTangent {
-            times: Vec::with_capacity(if last { ns } else { 0 }),
-            values: Vec::new(),
-            derivs: if last {
-                vec![0.0; np * ns * nsig]
-            } else {
-                Vec::new()
-            },
-            cycles: 0,
+            times: Vec::with_capacity(ns),
+            values: Vec::with_capacity(ns * nsig),
+            derivs: vec![0.0; np * ns * nsig],
+            cycles: cycle,
             periodic_change: change,
         };
         for k in 0..ns {
-            let time = k as f64 * scheme.dt;
-            let t_af = time + scheme.af * scheme.dt;
-            r.iter_mut().for_each(|v| *v = 0.0);
-            for (fk, (row, w)) in dae.forcing.iter().enumerate() {
-                forcing[fk] = w.eval(t_af);
-                r[*row] += forcing[fk];
-            }
-            residual(dae, c, &y, &yd, &mut r);
-            if !lu.solve_in_place(&mut r) {
-                return Err(crate::integrate::newton::singular(
-                    t_af,
-                    "non-finite solution",
-                ));
-            }
-            for p in 0..np {
-                rs.iter_mut().for_each(|v| *v = 0.0);
-                residual(dae, c, &s[p], &sd[p], &mut rs);
-                tangent_source(
-                    dae,
-                    &params[p],
-                    &scheme,
-                    c,
-                    (&y, &yd, &r),
-                    &forcing,
-                    &mut rs,
-                );
-                if !lu.solve_in_place(&mut rs) {
-                    return Err(crate::integrate::newton::singular(
-                        t_af,
-                        "non-finite tangent",
-                    ));
-                }
-                advance(&scheme, &mut s[p], &mut sd[p], &rs);
-                if last {
-                    for (j, &u) in signals.iter().enumerate() {
-                        rec.derivs[(p * ns + k) * nsig + j] = s[p][u];
-                    }
+            st.step(k as f64 * dt)?;
+            rec.times.push((k + 1) as f64 * dt);
+            rec.values.extend(signals.iter().map(|&u| st.y[u]));
+            for (p, s) in st.s.iter().enumerate() {
+                for (j, &u) in signals.iter().enumerate() {
+                    rec.derivs[(p * ns + k) * nsig + j] = s[u];
                 }
             }
-            advance(&scheme, &mut y, &mut yd, &r);
-            if last {
-                rec.times.push(time + scheme.dt);
-                rec.values.extend(signals.iter().map(|&u| y[u]));
-            }
         }
-        cycles += 1;
-        // a tangent is measured as p·s, the state's response to a 100 % change of p, against
-        // the state's own scale: a part of s that is only rounding then never holds it back
-        let k = dae.n_nodes.min(n);
-        let scale = |v: &[f64]| v.iter().fold(1e-300f64, |m, x| m.max(x.abs()));
-        let floor = [scale(&y[..k]), scale(&y[k..])];
-        change = std::iter::once(1.0)
-            .chain(values.iter().copied())
-            .zip(start.iter().zip(std::iter::once(&y).chain(s.iter())))
-            .map(|(p, (a, b))| relative_change(a, b, k, p.abs(), floor))
-            .fold(0.0, f64::max);
-        if last {
-            rec.cycles = cycles;
-            rec.periodic_change = change;
-            out = Some(rec);
-            break;
-        }
+        rec.periodic_change = st.change(&start, &values);
+        return Ok(rec);
     }
-    out.ok_or_else(|| Error::model("sensitivities", "max_cycles must be at least 1"))
+    unreachable!("the last cycle returns")
 }
 
 /// The change of a state vector over one cycle, `p` times `b − a`, relative to the larger of
