@@ -253,7 +253,7 @@ def test_validate_volume_and_species_lines(capsys: pytest.CaptureFixture[str]) -
 
 
 @pytest.mark.parametrize("command", ["run", "plot", "validate", "impedance", "convert", "models",
-                                     "info"])
+                                     "info", "calibrate"])
 def test_every_subcommand_has_help(command: str, capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit) as exit_info:
         main([command, "--help"])

@@ -12,6 +12,7 @@ Quick use::
 from __future__ import annotations
 
 from oxyline import _core, catalogue, errors, sensitivity
+from oxyline.calibrate import CalibrationError, calibrate, sensitivities
 from oxyline.convergence import convergence, estimate_space_error
 from oxyline.ensemble import simulate_ensemble
 from oxyline.errors import *  # every public error and warning (errors.__all__)
@@ -28,12 +29,14 @@ from oxyline.transport import HemoglobinFacilitationWarning
 __version__: str = _core.__version__
 
 __all__ = [
+    "CalibrationError",
     "HemoglobinFacilitationWarning",
     "Model",
     "PhysicalBoundsWarning",
     "Result",
     "VesselResult",
     "__version__",
+    "calibrate",
     "catalogue",
     "convergence",
     "estimate_space_error",
@@ -41,6 +44,7 @@ __all__ = [
     "load_model",
     "open_result",
     "resume",
+    "sensitivities",
     "sensitivity",
     "simulate",
     "simulate_ensemble",

@@ -173,6 +173,11 @@ def closed_loop_o2(spec_json: str, flows: np.ndarray, dt: float, max_cycles: int
 def chamber_elastance(name: str, chamber_json: str, times: list[float]
                       ) -> tuple[np.ndarray, np.ndarray]:
     """(E(t), V_rest(t)) of a canonical chamber spec (JSON text) at ``times``."""
+def tangent_sensitivities(model_json: str, paths: list[str], signals: list[tuple[str, str]],
+                          period: float, steps_per_cycle: int, rho_infty: float = 0.5,
+                          max_cycles: int = 2000, tol: float = 1e-12) -> dict[str, Any]:
+    """The (vessel, variable) signals over the periodic cycle of a canonical model and their
+    exact derivatives with respect to the parameter ``paths`` (oxyline.calibrate)."""
 
 # the core's model schema (oxyline_core::model::native) on native model dicts
 def read_header(data: Any) -> tuple[str, dict[str, Any]]: ...

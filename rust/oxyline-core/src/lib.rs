@@ -18,6 +18,7 @@ pub mod network;
 pub mod output;
 pub mod run;
 pub mod segment;
+pub mod sensitivity;
 pub mod simulate;
 pub mod sparse;
 pub mod transport;

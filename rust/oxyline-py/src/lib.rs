@@ -8,6 +8,7 @@ use oxyline_core::output::{
 };
 use pyo3::prelude::*;
 
+mod calibrate;
 mod checkpoint;
 mod closed_loop;
 mod ensemble;
@@ -49,6 +50,8 @@ fn chamber_elastance<'py>(
 
 #[pymodule]
 mod _core {
+    #[pymodule_export]
+    use super::calibrate::tangent_sensitivities;
     #[pymodule_export]
     use super::closed_loop::{closed_loop_o2, closed_loop_tree_flows};
     #[pymodule_export]

@@ -1,0 +1,103 @@
+"""Cost of exact sensitivities and of calibration with them (docs/calibration.md, "Cost").
+
+1. Gradient cost: on adan56 (31 RCR outlets), the wall time of the tangent run to the periodic
+   state with 1, 10 and 100 parameters (outlet R and C, vessel lengths and stiffnesses),
+   relative to the same run with none (one forward run to the periodic state, same cycles and
+   step), and per parameter.
+2. Calibration: the bifurcation's two outlet resistances and the parent's stiffness fitted to
+   synthetic targets from known values, by ``least_squares`` (trf) with the core's Jacobian and
+   with scipy's forward differences ("2-point"): wall time, evaluations, final cost.
+
+    python benches/bench_calibrate.py
+    python benches/bench_calibrate.py --counts 1 10 --steps 200
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import oxyline
+from oxyline.calibrate import _base_value, native_model
+
+
+def _parameters(model: oxyline.Model, count: int) -> list[str]:
+    """``count`` differentiable parameters of ``model``: outlet R/C first, then vessel lengths
+    and stiffnesses."""
+    paths = []
+    for node, bc in model.source["boundary_conditions"].items():
+        if bc.get("type") == "rcr":
+            paths += [f"boundary_conditions.{node}.{k}"
+                      for k in ("distal_resistance", "capacitance", "proximal_resistance")]
+    for v in model.source["vessels"]:
+        if "length" in v:
+            paths.append(f"vessels.{v['name']}.length")
+        if "youngs_modulus" in v:
+            paths.append(f"vessels.{v['name']}.youngs_modulus")
+    if len(paths) < count:
+        raise SystemExit(f"{model.name} has only {len(paths)} parameters")
+    return paths[:count]
+
+
+def _timed(fn, repeat: int = 1) -> tuple[float, object]:
+    best, out = float("inf"), None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - t0)
+    return best, out
+
+
+def gradient_cost(name: str, counts: list[int], steps: int) -> None:
+    model = oxyline.load_model(name)
+    outputs = [f"{model.vessel_names[0]}.pressure_in.mean"]
+    kw = {"steps_per_cycle": steps, "tol": 1e-8}
+    t0, s0 = _timed(lambda: oxyline.sensitivities(model, [], outputs, **kw), 2)
+    print(f"\n{name}: forward run to the periodic state {t0 * 1e3:.0f} ms "
+          f"({s0.cycles} cycles of {steps} steps)")
+    print(f"{'parameters':>10} {'cycles':>7} {'time (ms)':>10} {'x forward':>10} "
+          f"{'x forward per param':>20}")
+    for n in counts:
+        params = _parameters(model, n)
+        t, s = _timed(lambda p=params: oxyline.sensitivities(model, p, outputs, **kw))
+        print(f"{n:>10} {s.cycles:>7} {t * 1e3:>10.0f} {t / t0:>10.2f} "
+              f"{(t / t0 - 1) / n:>20.3f}")
+
+
+def calibration_speedup() -> None:
+    import scipy.optimize  # noqa: F401 — its import (~1 s) is not the fit's time
+
+    params = ["boundary_conditions.ica_out.resistance", "boundary_conditions.eca_out.resistance",
+              "vessels.parent.youngs_modulus"]
+    source = oxyline.load_model("bifurcation").source
+    true = [_base_value(source, p) * f for p, f in zip(params, (1.4, 0.8, 1.5), strict=True)]
+    outputs = ["parent.pressure_in.max", "parent.pressure_in.min", "parent.pressure_in.mean",
+               "flow_split.daughter1.parent", "daughter2.pressure_out.pulse"]
+    values = oxyline.sensitivities(native_model(source, params, true), [], outputs).values
+    targets = {o: {"value": v, "sigma": 0.01 * abs(v)} for o, v in zip(outputs, values,
+                                                                          strict=True)}
+    print("\nbifurcation, 3 parameters, 5 targets, trf:")
+    print(f"{'Jacobian':>10} {'time (s)':>9} {'evaluations':>12} {'cost':>10} {'success':>8}")
+    times = {}
+    for jac in ("exact", "2-point"):
+        t, res = _timed(lambda j=jac: oxyline.calibrate("bifurcation", targets, params,
+                                                          method="trf", jacobian=j), 3)
+        times[jac] = t
+        print(f"{jac:>10} {t:>9.2f} {res.report['evaluations']:>12} {res.cost:>10.2e} "
+              f"{res.success!s:>8}")
+    print(f"speed-up of the exact Jacobian: {times['2-point'] / times['exact']:.1f}x")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--model", default="adan56")
+    ap.add_argument("--counts", type=int, nargs="*", default=[1, 10, 100])
+    ap.add_argument("--steps", type=int, default=400, help="steps per cycle")
+    args = ap.parse_args()
+    if args.counts:
+        gradient_cost(args.model, args.counts, args.steps)
+    calibration_speedup()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,528 @@
+"""Exact parameter sensitivities of a model's periodic state, and calibration to targets.
+
+:func:`sensitivities` asks the core for the tangent-linear generalized-α run to the periodic
+state (one extra solve per parameter and step on the run's own factorisation) and combines
+the signals into the named outputs of :mod:`oxyline.targets`. :func:`calibrate` fits
+parameters to targets with ``scipy.optimize.least_squares`` on that Jacobian, each parameter
+as the logarithm of its factor over the start (so positive parameters stay positive and
+their steps are relative), and returns the calibrated native model dict with the
+Gauss–Newton covariance and a convergence report. Parameters are named by the ensemble patch
+paths (docs/calibration.md).
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from oxyline.ensemble.patch import apply_patch
+from oxyline.loader import load_model
+from oxyline.model import Model, build_model
+from oxyline.targets import CalibrationError, Target, combine, parse_targets, signals_of
+
+__all__ = ["CalibrationError", "CalibrationResult", "Sensitivities", "calibrate",
+           "sensitivities"]
+
+#: two-sided 95 % quantile of the normal distribution (the intervals of the report)
+Z95 = 1.959963984540054
+
+
+@dataclass
+class Sensitivities:
+    """The outputs of a model's periodic cycle and their derivatives: ``jacobian[i, j]`` is
+    d ``values[i]`` / d parameter j, both in SI (a scale factor is dimensionless)."""
+
+    outputs: list[str]
+    parameters: list[str]
+    #: the parameters' values (SI; 1 for a scale)
+    parameter_values: np.ndarray
+    values: np.ndarray
+    jacobian: np.ndarray
+    #: cycles run to the periodic state and the last cycle's relative change
+    cycles: int
+    periodic_change: float
+    #: rows of ``values`` per output (a series has one per time)
+    rows: dict[str, slice] = field(default_factory=dict)
+
+
+def _settings(model: Model, steps_per_cycle: int | None) -> tuple[float, int, float]:
+    period = model.period
+    if period is None:
+        raise CalibrationError(f"model '{model.name}': sensitivities need a periodic model "
+                               "(a period or periodic waveforms)")
+    if steps_per_cycle is None:
+        dt = model.simulation.get("dt")
+        # "auto" (or none): 400 steps a cycle
+        steps_per_cycle = round(period / dt) if isinstance(dt, (int, float)) else 400
+    rho = float(model.simulation.get("rho_infty", 0.5))
+    return float(period), max(int(steps_per_cycle), 1), rho
+
+
+def _tangent(model: Model, parameters: Sequence[str], signals: list[tuple[str, str]],
+             steps_per_cycle: int | None, tol: float, max_cycles: int) -> dict[str, Any]:
+    from oxyline import _core
+    from oxyline.errors import core_errors
+
+    period, steps, rho = _settings(model, steps_per_cycle)
+    with core_errors(f"model '{model.name}'"):
+        return _core.tangent_sensitivities(json.dumps(model.canonical), list(parameters),
+                                           signals, period, steps, rho, max_cycles, tol)
+
+
+def _evaluate(model: Model, parameters: Sequence[str], targets: Sequence[Target],
+              steps_per_cycle: int | None, tol: float, max_cycles: int
+              ) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+    """Every target's value(s) and Jacobian rows (d/d SI parameter) at ``model``."""
+    signals = sorted({s for t in targets for s in t.signals})
+    raw = _tangent(model, parameters, signals, steps_per_cycle, tol, max_cycles)
+    values, jac = [], []
+    for t in targets:
+        cols = [signals.index(s) for s in t.signals]
+        v, j = combine(t.output, raw["times"], raw["signals"][:, cols],
+                       raw["derivatives"][:, :, cols], t.times)
+        values.append(v)
+        jac.append(j.reshape(len(v), len(parameters)))
+    return np.concatenate(values), np.concatenate(jac), raw
+
+
+def sensitivities(model: Model | Mapping[str, Any] | str, parameters: Sequence[str],
+                  outputs: Sequence[str], *, steps_per_cycle: int | None = None,
+                  tol: float = 1e-12, max_cycles: int = 2000) -> Sensitivities:
+    """The Jacobian of ``outputs`` (names, :mod:`oxyline.targets`) with respect to
+    ``parameters`` (patch paths) at the periodic state of ``model``, exact for the
+    generalized-α discretisation (the model's ``dt``, or 400 steps a cycle). A ``series``
+    output has one row per step of the cycle.
+
+    >>> s = sensitivities("bifurcation", ["scale.resistance"], ["parent.pressure_in.mean"])
+    >>> bool(s.jacobian[0, 0] > 0)
+    True
+    """
+    m = load_model(model)
+    if isinstance(outputs, str) or isinstance(parameters, str):
+        raise CalibrationError("parameters and outputs: expected lists of names")
+    targets = [Target(o, None, signals=signals_of(o, m)) for o in outputs]
+    signals = sorted({s for t in targets for s in t.signals})
+    raw = _tangent(m, parameters, signals, steps_per_cycle, tol, max_cycles)
+    values, jac, rows, start = [], [], {}, 0
+    for t in targets:
+        cols = [signals.index(s) for s in t.signals]
+        v, j = combine(t.output, raw["times"], raw["signals"][:, cols],
+                       raw["derivatives"][:, :, cols], raw["times"])
+        values.append(v)
+        jac.append(j.reshape(len(v), len(parameters)))
+        rows[t.output] = slice(start, start + len(v))
+        start += len(v)
+    return Sensitivities(list(outputs), list(parameters), np.asarray(raw["values"]),
+                         np.concatenate(values), np.concatenate(jac), int(raw["cycles"]),
+                         float(raw["periodic_change"]), rows)
+
+
+# ---- the native model at a parameter point --------------------------------------------------
+
+def _vessel(source: Mapping[str, Any], name: str, path: str) -> Mapping[str, Any]:
+    for v in source.get("vessels", []):
+        if v.get("name") == name:
+            return v
+    raise CalibrationError(f"parameter '{path}': no vessel named {name!r}")
+
+
+def _base_value(source: Mapping[str, Any], path: str) -> float:
+    """The number ``path`` names in the native dict (in its own units; 1 for a scale)."""
+    parts = path.split(".")
+    try:
+        if parts[0] == "scale":
+            return 1.0
+        if parts[0] == "vessels":
+            v = _vessel(source, parts[1], path)
+            if parts[2:] == ["radius"] and "radius" not in v:
+                return float(v["radius_in"])
+            node: Any = v
+            for key in parts[2:]:
+                node = node[key]
+            return float(node)
+        if parts[0] == "boundary_conditions":
+            return float(source["boundary_conditions"][parts[1]][parts[2]])
+    except (KeyError, IndexError, TypeError, ValueError):
+        pass
+    raise CalibrationError(f"parameter '{path}': no such number in the model")
+
+
+def _scale_inflow(data: dict[str, Any], factor: float) -> None:
+    """Multiply every flow condition's waveform (``value``, ``flow`` or ``fourier``) by
+    ``factor``."""
+    for node, bc in (data.get("boundary_conditions") or {}).items():
+        if str(bc.get("type", "")).lower() != "flow":
+            continue
+        keys = [k for k in ("value", "flow") if k in bc]
+        if not keys and not isinstance(bc.get("fourier"), Mapping):
+            raise CalibrationError(f"parameter 'scale.inflow': the flow condition at {node!r} "
+                                   "has no 'value', 'flow' or 'fourier' to scale")
+        for k in keys:
+            bc[k] = (np.asarray(bc[k], dtype=float) * factor).tolist()
+        if isinstance(bc.get("fourier"), Mapping):
+            f = dict(bc["fourier"])
+            for k in ("mean", "cos", "sin"):
+                if k in f:
+                    f[k] = (np.asarray(f[k], dtype=float) * factor).tolist()
+            bc["fourier"] = f
+
+
+def native_model(source: Mapping[str, Any], parameters: Sequence[str],
+                 values: Sequence[float]) -> dict[str, Any]:
+    """The native model dict ``source`` with each parameter set to its value (native units;
+    a scale to its factor)."""
+    patch: dict[str, Any] = {}
+    inflow = None
+    for path, x in zip(parameters, values, strict=True):
+        parts = path.split(".")
+        if path == "scale.inflow":
+            inflow = float(x)
+        elif parts[0] == "scale":
+            patch.setdefault("scale", {})[parts[1]] = float(x)
+        elif parts[0] == "vessels":
+            props = patch.setdefault("vessels", {}).setdefault(parts[1], {})
+            if len(parts) == 4:  # vessels.<name>.lumped.<key>
+                lumped = dict(_vessel(source, parts[1], path).get("lumped", {}))
+                props["lumped"] = {**lumped, **props.get("lumped", {}), parts[3]: float(x)}
+            else:
+                props[parts[2]] = float(x)
+        else:
+            patch.setdefault("boundary_conditions", {}).setdefault(parts[1], {})[parts[2]] = \
+                float(x)
+    data = apply_patch(dict(source), patch) if patch else copy.deepcopy(dict(source))
+    if inflow is not None:
+        _scale_inflow(data, inflow)
+    return data
+
+
+# ---- calibration ----------------------------------------------------------------------------
+
+@dataclass
+class CalibrationResult:
+    """A fit: the calibrated native ``model`` dict (loads and runs), the parameters' values
+    (native units), the weighted residuals (r = (output − target)/sigma), the Gauss–Newton
+    covariance of the log factors and the report of the optimiser."""
+
+    model: dict[str, Any]
+    parameters: dict[str, float]
+    start: dict[str, float]
+    residuals: np.ndarray
+    cost: float
+    #: covariance of log(parameter) (the fit's variables): (JᵀJ)⁻¹ with J of the weighted
+    #: residuals, so the sigmas are read as the data's standard deviations
+    covariance: np.ndarray
+    #: 95 % intervals of each parameter (native units, from the log-normal approximation)
+    intervals: dict[str, tuple[float, float]]
+    success: bool
+    report: dict[str, Any]
+    #: ``method="bayes"``: posterior samples of the parameters (native units), one row each
+    samples: np.ndarray | None = None
+
+
+def _bounds(parameters: Sequence[str], start: np.ndarray, bounds: Any
+            ) -> tuple[np.ndarray, np.ndarray]:
+    lo = np.full(len(parameters), -np.inf)
+    hi = np.full(len(parameters), np.inf)
+    if bounds is None:
+        return lo, hi
+    if not isinstance(bounds, Mapping):
+        raise CalibrationError("bounds: expected a mapping {parameter: (low, high)}")
+    for path, b in bounds.items():
+        if path not in parameters:
+            raise CalibrationError(f"bounds: {path!r} is not one of the parameters")
+        k = list(parameters).index(path)
+        try:
+            a, c = (float(x) for x in b)
+        except (TypeError, ValueError):
+            raise CalibrationError(f"bounds of '{path}': expected (low, high), got {b!r}"
+                                   ) from None
+        if not (0 < a < c) or np.isnan(c):
+            raise CalibrationError(f"bounds of '{path}': need 0 < low < high, got {b!r}")
+        if not a <= start[k] <= c:
+            raise CalibrationError(f"bounds of '{path}': ({a:g}, {c:g}) exclude the start "
+                                   f"{start[k]:g}")
+        lo[k], hi[k] = np.log(a / start[k]), np.log(c / start[k])
+    return lo, hi
+
+
+class _Stop(Exception):
+    """An evaluation failed at a trial point: the fit stops at the best point so far."""
+
+
+class _Problem:
+    """The weighted residuals and their Jacobian in the log factors, cached per point (scipy
+    asks for them separately) and the best point reached."""
+
+    def __init__(self, source: dict[str, Any], parameters: list[str], start: np.ndarray,
+                 targets: list[Target], options: dict[str, Any], exact: bool = True) -> None:
+        self.source, self.parameters, self.start = source, parameters, start
+        self.exact = exact
+        self.targets, self.options = targets, options
+        self.data = np.concatenate([t.value for t in targets])
+        self.sigma = np.concatenate([t.sigma for t in targets])
+        self.cache: tuple[bytes, np.ndarray, np.ndarray] | None = None
+        self.best: tuple[float, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.error: str | None = None
+        self.evaluations = 0
+
+    def values(self, theta: np.ndarray) -> np.ndarray:
+        return self.start * np.exp(theta)
+
+    def model(self, theta: np.ndarray) -> dict[str, Any]:
+        return native_model(self.source, self.parameters, self.values(theta))
+
+    def _eval(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        key = theta.tobytes()
+        if self.cache is None or self.cache[0] != key:
+            try:
+                m = build_model(self.model(theta))
+                # without the exact Jacobian the core runs the primal only
+                params = self.parameters if self.exact else []
+                v, j_si, raw = _evaluate(m, params, self.targets, **self.options)
+            except Exception as e:
+                self.error = f"{type(e).__name__}: {e}"
+                raise _Stop from e
+            self.evaluations += 1
+            r = (v - self.data) / self.sigma
+            # d r / d log(p) = d r / d p · p (p in SI: the core's values)
+            j = j_si * np.asarray(raw["values"])[None, :] / self.sigma[:, None] if self.exact \
+                else np.zeros((len(r), 0))
+            self.cache = (key, r, j)
+            cost = 0.5 * float(r @ r)
+            if self.best is None or cost < self.best[0]:
+                self.best = (cost, theta.copy(), r, j)
+        return self.cache[1], self.cache[2]
+
+    def fun(self, theta: np.ndarray) -> np.ndarray:
+        return self._eval(theta)[0]
+
+    def jac(self, theta: np.ndarray) -> np.ndarray:
+        return self._eval(theta)[1]
+
+
+def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
+              parameters: Sequence[str], *, bounds: Mapping[str, Any] | None = None,
+              method: str = "lm", max_evaluations: int = 100, xtol: float = 1e-10,
+              jacobian: str = "exact", posterior: Mapping[str, Any] | None = None,
+              steps_per_cycle: int | None = None, tol: float = 1e-12,
+              max_cycles: int = 2000) -> CalibrationResult:
+    """Fit ``parameters`` (patch paths) of ``model`` to ``targets`` (see
+    :func:`oxyline.targets.parse_targets`) by ``scipy.optimize.least_squares`` with the
+    core's exact Jacobian: ``method="lm"`` (Levenberg–Marquardt, no bounds) or ``"trf"``
+    (trust-region reflective, ``bounds`` {path: (low, high)} in the model's units).
+
+    ``method="bayes"``: the posterior by emcee's affine-invariant ensemble sampler (the
+    ``bayes`` extra), started around the gradient-based fit (trf with bounds, else lm), with a
+    Gaussian likelihood of the weighted residuals and a flat prior in log(parameter) within the
+    bounds; ``posterior`` sets ``walkers`` (default 4 per parameter, at least 8), ``steps``
+    (500), ``burn`` (half) and ``seed`` (0). ``samples`` holds the draws after the burn-in.
+
+    ``jacobian="2-point"`` lets scipy estimate the Jacobian by forward differences instead
+    (for comparison: docs/calibration.md, "Cost"; the covariance is still the exact one
+    at the end point).
+
+    A fit that fails at a trial point (a model the core refuses, a diverged run) returns the
+    best point reached with ``success=False`` and the failure in ``report["error"]``.
+    """
+    from scipy.optimize import least_squares
+
+    if method not in ("lm", "trf", "bayes"):
+        raise CalibrationError(f"method: expected 'lm', 'trf' or 'bayes', got {method!r}")
+    if method == "bayes":
+        return _bayes(model, targets, parameters, bounds, max_evaluations, xtol, jacobian,
+                      steps_per_cycle, tol, max_cycles, posterior)
+    if jacobian not in ("exact", "2-point"):
+        raise CalibrationError(f"jacobian: expected 'exact' or '2-point', got {jacobian!r}")
+    base = load_model(model)
+    params = list(parameters)
+    if not params or isinstance(parameters, str):
+        raise CalibrationError("parameters: expected a non-empty list of parameter paths")
+    if len(set(params)) != len(params):
+        raise CalibrationError(f"parameters: given twice in {params}")
+    tlist = parse_targets(targets, base)
+    start = np.array([_base_value(base.source, p) for p in params])
+    bad = [p for p, x in zip(params, start, strict=True) if not x > 0]
+    if bad:
+        raise CalibrationError(f"parameter '{bad[0]}': the start must be positive (fitted in "
+                               "log space)")
+    lo, hi = _bounds(params, start, bounds)
+    if method == "lm" and (np.isfinite(lo).any() or np.isfinite(hi).any()):
+        raise CalibrationError("method 'lm' takes no bounds: use method='trf'")
+    options = {"steps_per_cycle": steps_per_cycle, "tol": tol, "max_cycles": max_cycles}
+    problem = _Problem(copy.deepcopy(base.source), params, start, tlist, options)
+    problem.jac(np.zeros(len(params)))  # paths and targets are checked here, before the fit
+    if jacobian != "exact":
+        problem.exact, problem.cache = False, None
+    n_res = len(problem.data)
+    if method == "lm" and n_res < len(params):
+        raise CalibrationError(f"method 'lm' needs at least as many target values ({n_res}) "
+                               f"as parameters ({len(params)}): use method='trf'")
+    report: dict[str, Any] = {"method": method}
+    try:
+        fit = least_squares(problem.fun, np.zeros(len(params)),
+                            jac=problem.jac if problem.exact else "2-point",
+                            bounds=(lo, hi) if method == "trf" else (-np.inf, np.inf),
+                            method=method, x_scale=1.0, xtol=xtol, ftol=1e-12, gtol=1e-12,
+                            max_nfev=max_evaluations)
+        theta, success = fit.x, bool(fit.success)
+        report.update(status=int(fit.status), message=str(fit.message), nfev=int(fit.nfev),
+                      njev=int(fit.njev or 0), optimality=float(fit.optimality))
+    except _Stop:
+        assert problem.best is not None
+        theta, success = problem.best[1], False
+        report.update(status=-1, message="an evaluation failed; the best point reached is "
+                      "returned", error=problem.error)
+    best = problem.best
+    if best is not None and best[1].tobytes() == theta.tobytes() and best[3].shape[1]:
+        r, j = best[2], best[3]
+    else:  # the end point's exact Jacobian (the covariance's), unless it cannot be had
+        problem.exact, problem.cache = True, None
+        try:
+            r, j = problem._eval(theta)
+        except _Stop:
+            r = best[2] if best is not None else np.full(len(problem.data), np.nan)
+            j = np.full((len(r), len(params)), np.nan)
+    return _result(problem, theta, r, j, success, report)
+
+
+def _result(problem: _Problem, theta: np.ndarray, r: np.ndarray, j: np.ndarray,
+            success: bool, report: dict[str, Any]) -> CalibrationResult:
+    params = problem.parameters
+    if not np.isfinite(j).all():  # no Jacobian at the end point: no covariance
+        j = np.zeros_like(j)
+    jtj = j.T @ j
+    sv = np.linalg.svd(j, compute_uv=False) if j.size else np.zeros(0)
+    rank_tol = sv.max(initial=0.0) * max(j.shape) * np.finfo(float).eps
+    rank = int((sv > rank_tol).sum())
+    cov = np.linalg.pinv(jtj)
+    report.update(evaluations=problem.evaluations, rank=rank,
+                  condition=float(sv.max() / sv.min()) if rank == len(params) else np.inf)
+    if rank < len(params):
+        # the directions the data do not see: parameters with a share of the null space
+        _, _, vt = np.linalg.svd(j)
+        null = np.abs(vt[rank:]).max(axis=0)
+        report["unidentifiable"] = [p for p, w in zip(params, null, strict=True) if w > 0.1]
+    values = problem.values(theta)
+    # (an unidentified direction's sd is huge: the interval is then (0, inf), not an overflow)
+    sd = np.minimum(np.sqrt(np.clip(np.diag(cov), 0.0, None)), 700.0 / Z95)
+    intervals = {p: (float(v * np.exp(-Z95 * s)), float(v * np.exp(Z95 * s)))
+                 for p, v, s in zip(params, values, sd, strict=True)}
+    return CalibrationResult(
+        model=problem.model(theta), parameters=dict(zip(params, map(float, values),
+                                                        strict=True)),
+        start=dict(zip(params, map(float, problem.start), strict=True)), residuals=r,
+        cost=0.5 * float(r @ r), covariance=cov, intervals=intervals, success=success,
+        report=report)
+
+
+# ---- command line ---------------------------------------------------------------------------
+
+def read_problem(path: str) -> dict[str, Any]:
+    """A calibration problem file (YAML or JSON): ``parameters`` (a list of paths, or a
+    mapping {path: {bounds: [low, high]}}), ``targets`` (as :func:`calibrate` takes them) and
+    optionally ``method``."""
+    import yaml
+
+    try:
+        with open(path, encoding="utf-8") as f:
+            data = yaml.safe_load(f)
+    except yaml.YAMLError as e:
+        raise CalibrationError(f"{path}: not a YAML or JSON file ({e})") from None
+    if not isinstance(data, Mapping):
+        raise CalibrationError(f"{path}: expected a mapping with 'parameters' and 'targets'")
+    unknown = set(data) - {"parameters", "targets", "method"}
+    if unknown or not {"parameters", "targets"} <= set(data):
+        raise CalibrationError(f"{path}: needs 'parameters' and 'targets' (and optionally "
+                               f"'method'); unknown keys {sorted(unknown)}")
+    params = data["parameters"]
+    bounds: dict[str, Any] = {}
+    if isinstance(params, Mapping):
+        for p, opts in params.items():
+            if isinstance(opts, Mapping) and "bounds" in opts:
+                bounds[p] = opts["bounds"]
+        params = list(params)
+    method = str(data.get("method", "trf" if bounds else "lm"))
+    return {"parameters": list(params), "targets": data["targets"],
+            "bounds": bounds or None, "method": method}
+
+
+def main_cli(model: str, problem_file: str, output: str, quiet: bool = False) -> int:
+    """``oxyline calibrate MODEL TARGETS.yaml -o OUT``: fit, write the calibrated model, print
+    the parameters with their 95 % intervals and the report. Exit 0 on convergence, 1 if the
+    fit failed (the best point is written all the same)."""
+    from oxyline.io import dump_native
+
+    problem = read_problem(problem_file)
+    res = calibrate(model, problem["targets"], problem["parameters"],
+                    bounds=problem["bounds"], method=problem["method"])
+    path = dump_native(res.model, output)
+    if not quiet:
+        for p, v in res.parameters.items():
+            lo, hi = res.intervals[p]
+            print(f"{p:<48} {res.start[p]:.6g} -> {v:.6g}   95 %: [{lo:.6g}, {hi:.6g}]")
+        print(f"cost {res.cost:.6g}, {res.report.get('nfev', '?')} evaluations: "
+              f"{res.report.get('message')}")
+        print(f"calibrated model written to {path}")
+    return 0 if res.success else 1
+
+
+def _bayes(model: Any, targets: Any, parameters: Sequence[str], bounds: Any,
+           max_evaluations: int, xtol: float, jacobian: str, steps_per_cycle: int | None,
+           tol: float, max_cycles: int, posterior: Mapping[str, Any] | None
+           ) -> CalibrationResult:
+    """``method="bayes"``: the gradient fit, then emcee from around it (see :func:`calibrate`)."""
+    try:
+        import emcee
+    except ImportError:
+        raise CalibrationError("method 'bayes' needs emcee: pip install oxyline[bayes]"
+                               ) from None
+    opts = {"walkers": max(8, 4 * len(parameters)), "steps": 500, "burn": None, "seed": 0,
+            **(posterior or {})}
+    unknown = set(opts) - {"walkers", "steps", "burn", "seed"}
+    if unknown:
+        raise CalibrationError(f"posterior: unknown options {sorted(unknown)}")
+    fit = calibrate(model, targets, parameters, bounds=bounds,
+                    method="trf" if bounds else "lm", max_evaluations=max_evaluations,
+                    xtol=xtol, jacobian=jacobian, steps_per_cycle=steps_per_cycle, tol=tol,
+                    max_cycles=max_cycles)
+    params = list(parameters)
+    start = np.array([fit.start[p] for p in params])
+    lo, hi = _bounds(params, start, bounds)
+    base = load_model(model)
+    problem = _Problem(copy.deepcopy(base.source), params, start,
+                       parse_targets(targets, base),
+                       {"steps_per_cycle": steps_per_cycle, "tol": tol,
+                        "max_cycles": max_cycles}, exact=False)
+
+    def log_prob(theta: np.ndarray) -> float:
+        if (theta < lo).any() or (theta > hi).any():
+            return -np.inf
+        try:
+            r = problem.fun(theta)
+        except _Stop:  # a point the model refuses has no likelihood
+            return -np.inf
+        return -0.5 * float(r @ r)
+
+    theta_fit = np.log(np.array([fit.parameters[p] for p in params]) / start)
+    rng = np.random.default_rng(int(opts["seed"]))
+    cov = fit.covariance if np.isfinite(fit.covariance).all() else np.eye(len(params)) * 1e-4
+    # walkers in a small ball around the fit (a tenth of its Gauss-Newton spread), in bounds
+    p0 = rng.multivariate_normal(theta_fit, 0.01 * cov, size=int(opts["walkers"]))
+    p0 = np.clip(p0, lo + 1e-12, hi - 1e-12)
+    sampler = emcee.EnsembleSampler(int(opts["walkers"]), len(params), log_prob)
+    # the sampler's own stream, seeded: the same samples on every call
+    sampler.random_state = np.random.RandomState(int(opts["seed"])).get_state()
+    steps = int(opts["steps"])
+    burn = steps // 2 if opts["burn"] is None else int(opts["burn"])
+    sampler.run_mcmc(p0, steps, progress=False)
+    chain = sampler.get_chain(discard=burn, flat=True)
+    fit.samples = start * np.exp(chain)
+    fit.report.update(method="bayes", fit_method="trf" if bounds else "lm",
+                      acceptance=float(np.mean(sampler.acceptance_fraction)),
+                      posterior_evaluations=problem.evaluations)
+    return fit

@@ -1,0 +1,201 @@
+"""Calibration targets and outputs by name, and their derivatives from the core's tangent.
+
+An output names a quantity of the periodic cycle:
+
+* ``"<vessel>.<variable>.<statistic>"``: ``variable`` one of ``pressure_in``,
+  ``pressure_out``, ``flow_in``, ``flow_out``; ``statistic`` one of ``min``, ``max``,
+  ``mean``, ``pulse`` (max − min);
+* ``"flow_split.<vessel>.<parent>"``: mean flow into ``vessel`` over mean flow into ``parent``;
+* ``"cardiac_output"``: the mean inflow of the model's flow conditions (through the vessels
+  that start at them);
+* ``"<vessel>.<variable>.series"``: the signal over the cycle, compared with data at given
+  times (targets only).
+
+The core (:func:`oxyline._core.tangent_sensitivities`) gives the signals over the periodic
+cycle and their exact derivatives; here they are only combined: a mean is the mean of the
+derivatives, a maximum the derivative at the step of the maximum (the derivative of the
+discrete maximum, exact wherever the maximum is unique).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from oxyline.errors import ModelError
+
+VARIABLES = ("pressure_in", "pressure_out", "flow_in", "flow_out")
+STATISTICS = ("min", "max", "mean", "pulse", "series")
+
+
+class CalibrationError(ModelError):
+    """A calibration that cannot be set up: a target, datum, bound or parameter that does not
+    fit the model. The message names it."""
+
+
+@dataclass
+class Target:
+    """One output and what it should be: ``value`` (a number, or the data of a series at
+    ``times`` in s from the cycle's start), weighed by ``1/sigma``."""
+
+    output: str
+    value: Any
+    sigma: Any = None
+    times: Any = None
+    #: the signals the output reads, as (vessel, variable)
+    signals: list[tuple[str, str]] = field(default_factory=list)
+
+    @property
+    def size(self) -> int:
+        return len(np.atleast_1d(self.value))
+
+
+def _fail(what: str, why: str, error: type[ModelError]) -> ModelError:
+    return error(f"output '{what}': {why}")
+
+
+def signals_of(output: str, model: Any, error: type[ModelError] = ModelError
+               ) -> list[tuple[str, str]]:
+    """The (vessel, variable) signals ``output`` reads; an error naming it if the vessel,
+    variable or statistic does not exist in ``model`` (a :class:`~oxyline.Model`)."""
+    names = set(model.vessel_names)
+    parts = output.split(".")
+    if output == "cardiac_output":
+        inlets = _inlet_vessels(model)
+        if not inlets:
+            raise _fail(output, "the model has no flow condition", error)
+        return [(v, "flow_in") for v in inlets]
+    if parts[0] == "flow_split":
+        if len(parts) != 3:
+            raise _fail(output, "expected flow_split.<vessel>.<parent>", error)
+        for v in parts[1:]:
+            if v not in names:
+                raise _fail(output, f"no vessel named {v!r} in model '{model.name}'", error)
+        return [(parts[1], "flow_in"), (parts[2], "flow_in")]
+    if len(parts) != 3:
+        raise _fail(output, "expected <vessel>.<variable>.<statistic>, flow_split.<vessel>."
+                    "<parent> or cardiac_output", error)
+    vessel, variable, stat = parts
+    if vessel not in names:
+        raise _fail(output, f"no vessel named {vessel!r} in model '{model.name}'", error)
+    if variable not in VARIABLES:
+        raise _fail(output, f"unknown variable {variable!r} (one of {', '.join(VARIABLES)})",
+                    error)
+    if stat not in STATISTICS:
+        raise _fail(output, f"unknown statistic {stat!r} (one of {', '.join(STATISTICS)})",
+                    error)
+    return [(vessel, variable)]
+
+
+def _inlet_vessels(model: Any) -> list[str]:
+    bcs = model.source.get("boundary_conditions", {}) or {}
+    inflow = {n for n, bc in bcs.items() if str(bc.get("type", "")).lower() == "flow"}
+    return [str(v["name"]) for v in model.source["vessels"] if str(v.get("from")) in inflow]
+
+
+def combine(output: str, times: np.ndarray, values: np.ndarray, derivs: np.ndarray,
+            at: Any = None) -> tuple[np.ndarray, np.ndarray]:
+    """The output's value(s) and derivatives from its signals over the cycle: ``values``
+    (n_steps × n_signals), ``derivs`` (n_params × n_steps × n_signals). Returns (value
+    (m,), jacobian (m × n_params))."""
+    stat = output.split(".")[-1]
+    if output == "cardiac_output":
+        return np.atleast_1d(values.sum(axis=1).mean()), derivs.sum(axis=2).mean(axis=1)[None]
+    if output.startswith("flow_split."):
+        q, p = values[:, 0].mean(), values[:, 1].mean()
+        dq, dp = derivs[:, :, 0].mean(axis=1), derivs[:, :, 1].mean(axis=1)
+        return np.atleast_1d(q / p), ((dq * p - q * dp) / p**2)[None]
+    x, dx = values[:, 0], derivs[:, :, 0]
+    if stat == "mean":
+        return np.atleast_1d(x.mean()), dx.mean(axis=1)[None]
+    hi, lo = int(np.argmax(x)), int(np.argmin(x))
+    if stat == "max":
+        return np.atleast_1d(x[hi]), dx[:, hi][None]
+    if stat == "min":
+        return np.atleast_1d(x[lo]), dx[:, lo][None]
+    if stat == "pulse":
+        return np.atleast_1d(x[hi] - x[lo]), (dx[:, hi] - dx[:, lo])[None]
+    # a series, linearly interpolated at the data's times (periodic in the cycle)
+    period = times[-1]
+    tt = np.concatenate(([0.0], times))
+    xx = np.concatenate(([x[-1]], x))
+    dd = np.concatenate((dx[:, -1:], dx), axis=1)
+    t = np.mod(np.asarray(at, dtype=float), period)
+    val = np.interp(t, tt, xx)
+    jac = np.stack([np.interp(t, tt, row) for row in dd], axis=1) if len(dd) \
+        else np.zeros((t.size, 0))
+    return val, jac
+
+
+def parse_targets(targets: Any, model: Any) -> list[Target]:
+    """The targets of a mapping ``{output: value | {value, sigma | weight, times}}`` or a list
+    of such mappings with an ``output`` key; every number checked finite."""
+    if isinstance(targets, Mapping):
+        items = [{"output": k, **(v if isinstance(v, Mapping) else {"value": v})}
+                 for k, v in targets.items()]
+    elif isinstance(targets, Sequence) and not isinstance(targets, str):
+        items = [dict(t) for t in targets]
+    else:
+        raise CalibrationError(f"targets: expected a mapping or a list, got {targets!r}")
+    if not items:
+        raise CalibrationError("targets: none given")
+    out = []
+    for item in items:
+        name = str(item.get("output", "?"))
+        unknown = set(item) - {"output", "value", "sigma", "weight", "times"}
+        if unknown:
+            raise CalibrationError(f"target '{name}': unknown keys {sorted(unknown)}")
+        if "value" not in item:
+            raise CalibrationError(f"target '{name}': no value")
+        series = name.endswith(".series")
+        value = _finite(name, "value", item["value"], series)
+        times = None
+        if series:
+            if "times" not in item:
+                raise CalibrationError(f"target '{name}': a series needs its data's times")
+            times = _finite(name, "times", item["times"], True)
+            if times.shape != value.shape:
+                raise CalibrationError(f"target '{name}': {times.size} times for "
+                                       f"{value.size} values")
+        sigma = _sigma(name, item, value)
+        t = Target(name, value, sigma, times)
+        t.signals = signals_of(name, model, CalibrationError)
+        out.append(t)
+    return out
+
+
+def _finite(name: str, key: str, x: Any, series: bool) -> np.ndarray:
+    try:
+        a = np.asarray(x, dtype=float)
+    except (TypeError, ValueError):
+        raise CalibrationError(f"target '{name}': {key} {x!r} is not a number") from None
+    if (a.ndim != 1 if series else a.ndim != 0) or a.size == 0:
+        raise CalibrationError(f"target '{name}': {key} must be "
+                               f"{'a list of numbers' if series else 'one number'}")
+    bad = ~np.isfinite(a)
+    if bad.any():
+        raise CalibrationError(f"target '{name}': {key} holds a non-finite value "
+                               f"{float(a.ravel()[np.argmax(bad.ravel())])!r}")
+    return np.atleast_1d(a)
+
+
+def _sigma(name: str, item: Mapping[str, Any], value: np.ndarray) -> np.ndarray:
+    """The residual's scale: ``sigma``, or 1/``weight``, or 1 % of the value's magnitude."""
+    if "sigma" in item and "weight" in item:
+        raise CalibrationError(f"target '{name}': give sigma or weight, not both")
+    if "sigma" in item:
+        s = np.broadcast_to(_finite(name, "sigma", item["sigma"], np.ndim(item["sigma"]) == 1),
+                            value.shape).astype(float)
+    elif "weight" in item:
+        w = np.broadcast_to(_finite(name, "weight", item["weight"],
+                                    np.ndim(item["weight"]) == 1), value.shape)
+        s = np.where(w > 0, 1.0 / np.where(w > 0, w, 1.0), math.inf)
+    else:
+        s = np.full(value.shape, 0.01 * max(float(np.abs(value).max()), 1e-300))
+    if (s <= 0).any():
+        raise CalibrationError(f"target '{name}': sigma must be positive")
+    return s

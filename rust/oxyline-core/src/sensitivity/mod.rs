@@ -1,0 +1,86 @@
+//! Exact parameter sensitivities of a model's periodic state: the parameters by their patch
+//! paths ([`parameter`]), the derivative of the DAE with respect to each, and the
+//! tangent-linear generalized-α run to the periodic state ([`tangent`]).
+
+pub mod parameter;
+pub mod tangent;
+
+use crate::error::{Error, Result};
+use crate::model::NetworkSpec;
+use crate::output::VESSEL_VARIABLES;
+pub use parameter::{DaeTangent, Parameter};
+pub use tangent::{PeriodicTangent, TangentSettings, periodic_tangent};
+
+/// The result of [`sensitivities`]: the parameters' SI values and the signals over the
+/// periodic cycle with their derivatives.
+#[derive(Debug, Clone)]
+pub struct Sensitivities {
+    pub values: Vec<f64>,
+    pub cycle: PeriodicTangent,
+}
+
+/// d(signal)/d(parameter) over the periodic cycle of `spec`. `signals` are (vessel, variable)
+/// pairs, the variable one of [`VESSEL_VARIABLES`]; `paths` the parameters' patch paths.
+pub fn sensitivities(
+    spec: &NetworkSpec,
+    paths: &[String],
+    signals: &[(String, String)],
+    settings: TangentSettings,
+) -> Result<Sensitivities> {
+    let mut spec = spec.clone();
+    for v in &mut spec.vessels {
+        v.output = true;
+    }
+    let params = paths
+        .iter()
+        .map(|p| Parameter::parse(&spec, p))
+        .collect::<Result<Vec<_>>>()?;
+    let assembled = spec.assemble()?;
+    let circuit = &assembled.circuit;
+    let dae = circuit.assemble()?;
+    parameter::check_linear(circuit, &dae)?;
+    let stamps = parameter::Stamps::new(circuit, &dae);
+    let mut tangents = Vec::with_capacity(params.len());
+    for (p, path) in params.iter().zip(paths) {
+        let mut t = stamps.tangent(&spec, p, path)?;
+        // a node whose row a pressure condition took holds no capacitance
+        for (node, _) in &circuit.fixed_pressures {
+            t.de[*node] = 0.0;
+        }
+        tangents.push(t);
+    }
+    let probes = &assembled.probes;
+    let unknowns = signals
+        .iter()
+        .map(|(vessel, var)| {
+            let vi = probes
+                .vessels
+                .iter()
+                .position(|v| v == vessel)
+                .ok_or_else(|| {
+                    Error::model(
+                        format!("output '{vessel}:{var}'"),
+                        format!("no vessel named '{vessel}' in model '{}'", spec.name),
+                    )
+                })?;
+            let k = VESSEL_VARIABLES
+                .iter()
+                .position(|v| v == var)
+                .ok_or_else(|| {
+                    Error::model(
+                        format!("output '{vessel}:{var}'"),
+                        format!("unknown variable '{var}' (one of {VESSEL_VARIABLES:?})"),
+                    )
+                })?;
+            Ok(probes.vessel_unknowns[4 * vi + k])
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let cycle = periodic_tangent(&dae, &tangents, &unknowns, settings)?;
+    Ok(Sensitivities {
+        values: tangents.iter().map(|t| t.value).collect(),
+        cycle,
+    })
+}
+
+#[cfg(test)]
+mod tests;

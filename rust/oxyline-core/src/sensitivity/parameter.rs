@@ -1,0 +1,372 @@
+//! Scalar parameters of a model addressed by the ensemble patch paths
+//! (`vessels.<name>.radius`, `boundary_conditions.<node>.capacitance`, `scale.resistance`, …),
+//! and the exact derivative of the assembled DAE E ẏ + F y = f(t) with respect to each.
+//!
+//! The DAE is linear in its element values (node capacitances and branch inductances on the
+//! diagonal of E, branch resistances on the diagonal of F's branch rows, the incidences are
+//! constants), so its derivative is the derivative of those values stamped where they are.
+//! Each element value is a power law in the parameters this module knows (docs/physics.md
+//! §1.1): a segment's R, L and C are proportional to its length; its C to 1/E (thin and thick
+//! walls alike); for a uniform radius r its R ∝ r⁻⁴, L ∝ r⁻², and thin-wall C ∝ r³ at a fixed
+//! wall thickness; boundary and lumped values enter as themselves. The derivative of a power
+//! law x = a pᵏ is k x / p: analytic, no differencing.
+
+use crate::circuit::{Circuit, Dae};
+use crate::error::{Error, Result};
+use crate::model::{Arrangement, BoundarySpec, NetworkSpec};
+use crate::segment::WallModel;
+
+/// What a parameter path names.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Parameter {
+    /// `boundary_conditions.<node>.<resistance|proximal_resistance|distal_resistance|capacitance>`
+    Condition { node: String, key: String },
+    /// `vessels.<name>.length`
+    Length(usize),
+    /// `vessels.<name>.radius` of a vessel of uniform radius.
+    Radius(usize),
+    /// `vessels.<name>.youngs_modulus`
+    YoungsModulus(usize),
+    /// `vessels.<name>.lumped.<resistance|capacitance|inductance>`
+    Lumped(usize, String),
+    /// `scale.resistance`: every resistance and RCR condition and lumped vessel resistance.
+    ResistanceScale,
+    /// `scale.compliance`: every capacitance of the network (C ∝ 1/E for geometric vessels).
+    ComplianceScale,
+    /// `scale.inflow`: every flow condition's waveform.
+    InflowScale,
+}
+
+/// The derivative of the DAE with respect to one parameter, at the parameter's value.
+#[derive(Debug, Clone)]
+pub struct DaeTangent {
+    /// The parameter's path as given.
+    pub path: String,
+    /// Its value (SI; 1 for a scale factor).
+    pub value: f64,
+    /// dE/dp by unknown.
+    pub de: Vec<f64>,
+    /// dF/dp by value of `Dae::f` (same pattern).
+    pub df: Vec<f64>,
+    /// d f_row / dp = factor · f_row(t), by index into `Dae::forcing`.
+    pub dforcing: Vec<(usize, f64)>,
+}
+
+fn unknown(path: &str, why: impl Into<String>) -> Error {
+    Error::model(format!("parameter '{path}'"), why)
+}
+
+impl Parameter {
+    /// Resolve `path` against `spec`: the vessel or condition must exist and hold the number.
+    pub fn parse(spec: &NetworkSpec, path: &str) -> Result<Parameter> {
+        let parts: Vec<&str> = path.split('.').collect();
+        match parts.as_slice() {
+            ["scale", "resistance"] => Ok(Parameter::ResistanceScale),
+            ["scale", "compliance"] => Ok(Parameter::ComplianceScale),
+            ["scale", "inflow"] => Ok(Parameter::InflowScale),
+            ["boundary_conditions", node, key] => condition(spec, path, node, key),
+            ["vessels", name, rest @ ..] if !rest.is_empty() => vessel(spec, path, name, rest),
+            _ => Err(unknown(
+                path,
+                "not a parameter path (vessels.<name>.<length|radius|youngs_modulus|lumped.resistance|lumped.capacitance|lumped.inductance>, boundary_conditions.<node>.<resistance|proximal_resistance|distal_resistance|capacitance>, scale.<resistance|compliance|inflow>)",
+            )),
+        }
+    }
+}
+
+fn condition(spec: &NetworkSpec, path: &str, node: &str, key: &str) -> Result<Parameter> {
+    let bc = spec.boundary_conditions.get(node).ok_or_else(|| {
+        unknown(
+            path,
+            format!(
+                "no boundary condition at node '{node}' in model '{}'",
+                spec.name
+            ),
+        )
+    })?;
+    let ok = matches!(
+        (bc, key),
+        (BoundarySpec::Resistance { .. }, "resistance")
+            | (
+                BoundarySpec::Rcr { .. },
+                "proximal_resistance" | "distal_resistance" | "capacitance"
+            )
+    );
+    if !ok {
+        return Err(unknown(
+            path,
+            format!("the condition at node '{node}' has no differentiable value '{key}'"),
+        ));
+    }
+    Ok(Parameter::Condition {
+        node: node.to_owned(),
+        key: key.to_owned(),
+    })
+}
+
+fn vessel(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<Parameter> {
+    let vi = spec
+        .vessels
+        .iter()
+        .position(|v| v.name == name)
+        .ok_or_else(|| {
+            unknown(
+                path,
+                format!("no vessel named '{name}' in model '{}'", spec.name),
+            )
+        })?;
+    let v = &spec.vessels[vi];
+    let arrangement = v.arrangement.unwrap_or(spec.arrangement);
+    let p = match (rest, &v.geometry, &v.lumped) {
+        (["length"], Some(_), _) => Parameter::Length(vi),
+        (["youngs_modulus"], Some(g), _) if g.youngs_modulus.is_some() => {
+            Parameter::YoungsModulus(vi)
+        }
+        (["radius"], Some(g), _) => {
+            if g.radius_in != g.radius_out {
+                return Err(unknown(
+                    path,
+                    "the vessel is tapered: its radius is not one number",
+                ));
+            }
+            if g.wall_thickness.is_some() && spec.wall_model != WallModel::Thin {
+                return Err(unknown(path, "radius derivatives need the thin wall model"));
+            }
+            Parameter::Radius(vi)
+        }
+        (["lumped", key], _, Some(_))
+            if matches!(*key, "resistance" | "capacitance" | "inductance") =>
+        {
+            if arrangement == Arrangement::Rcl {
+                return Err(unknown(path, "lumped RCL vessels are not supported"));
+            }
+            Parameter::Lumped(vi, (*key).to_owned())
+        }
+        _ => {
+            return Err(unknown(
+                path,
+                format!(
+                    "vessel '{name}' has no differentiable value '{}'",
+                    rest.join(".")
+                ),
+            ));
+        }
+    };
+    Ok(p)
+}
+
+/// Refuse what the tangent does not cover: a circuit that is not linear and constant, or
+/// one whose rows were moved (heart elements).
+pub fn check_linear(circuit: &Circuit, dae: &Dae) -> Result<()> {
+    let why = if !dae.stenosis.is_empty() || !dae.chain_rule.is_empty() {
+        Some("stenoses")
+    } else if !dae.elements.is_empty() || !circuit.moved_rows.is_empty() {
+        Some("heart elements")
+    } else if !circuit.swapped_rows.is_empty() {
+        Some("through_rc elements")
+    } else if !dae.varying.is_empty() {
+        Some("time-varying resistances")
+    } else {
+        None
+    };
+    match why {
+        Some(w) => Err(Error::model(
+            "sensitivities",
+            format!("need a linear circuit, but the model has {w}"),
+        )),
+        None => Ok(()),
+    }
+}
+
+/// Where a circuit's element values sit in the DAE.
+pub struct Stamps<'a> {
+    circuit: &'a Circuit,
+    dae: &'a Dae,
+    /// The index into `dae.f.val` of each branch's resistance (its row's diagonal).
+    branch_r: Vec<usize>,
+}
+
+impl<'a> Stamps<'a> {
+    pub fn new(circuit: &'a Circuit, dae: &'a Dae) -> Stamps<'a> {
+        let nn = circuit.nodes.len();
+        let branch_r = (0..circuit.branches.len())
+            .map(|b| {
+                let row = nn + b;
+                (dae.f.ptr[row]..dae.f.ptr[row + 1])
+                    .find(|&k| dae.f.col[k] as usize == row)
+                    .expect("a branch row holds its resistance")
+            })
+            .collect();
+        Stamps {
+            circuit,
+            dae,
+            branch_r,
+        }
+    }
+
+    fn blank(&self, path: &str, value: f64) -> DaeTangent {
+        DaeTangent {
+            path: path.to_owned(),
+            value,
+            de: vec![0.0; self.dae.n],
+            df: vec![0.0; self.dae.f.val.len()],
+            dforcing: Vec::new(),
+        }
+    }
+
+    fn branch_named(&self, name: &str) -> Option<usize> {
+        (0..self.circuit.branches.len()).find(|&b| self.circuit.names.branch(b) == name)
+    }
+
+    fn node_named(&self, name: &str) -> Option<usize> {
+        (0..self.circuit.nodes.len()).find(|&i| self.circuit.names.node(i) == name)
+    }
+
+    /// Node i's capacitance as the DAE holds it (0 on a row a pressure condition took).
+    fn node_c(&self, i: usize) -> f64 {
+        self.dae.e[i]
+    }
+
+    /// The derivative of the DAE with respect to `p` (named `path`) of `spec`.
+    pub fn tangent(&self, spec: &NetworkSpec, p: &Parameter, path: &str) -> Result<DaeTangent> {
+        let nn = self.circuit.nodes.len();
+        let missing = || unknown(path, "its element is not in the assembled circuit");
+        let mut t;
+        match p {
+            Parameter::Condition { node, key } => {
+                let bc = &spec.boundary_conditions[node];
+                let (value, label) = match (bc, key.as_str()) {
+                    (BoundarySpec::Resistance { resistance, .. }, _) => (*resistance, "resistance"),
+                    (
+                        BoundarySpec::Rcr {
+                            proximal_resistance,
+                            ..
+                        },
+                        "proximal_resistance",
+                    ) => (*proximal_resistance, "proximal resistance"),
+                    (
+                        BoundarySpec::Rcr {
+                            distal_resistance, ..
+                        },
+                        "distal_resistance",
+                    ) => (*distal_resistance, "distal resistance"),
+                    (BoundarySpec::Rcr { capacitance, .. }, _) => (*capacitance, "capacitor"),
+                    _ => return Err(missing()),
+                };
+                t = self.blank(path, value);
+                let name = format!("boundary condition '{node}' {label}");
+                if label == "capacitor" {
+                    let i = self.node_named(&name).ok_or_else(missing)?;
+                    t.de[i] = 1.0;
+                } else {
+                    let b = self.branch_named(&name).ok_or_else(missing)?;
+                    t.df[self.branch_r[b]] = 1.0;
+                }
+            }
+            Parameter::Length(vi) | Parameter::Radius(vi) | Parameter::YoungsModulus(vi) => {
+                let g = spec.vessels[*vi].geometry.as_ref().ok_or_else(missing)?;
+                // exponents of (R, L, C) in the parameter
+                let (value, k) = match p {
+                    Parameter::Length(_) => (g.length, [1.0, 1.0, 1.0]),
+                    Parameter::Radius(_) => (g.radius_in, [-4.0, -2.0, 3.0]),
+                    _ => (g.youngs_modulus.unwrap_or(f64::NAN), [0.0, 0.0, -1.0]),
+                };
+                t = self.blank(path, value);
+                self.vessel_power_law(&mut t, &spec.vessels[*vi].name, k, value);
+            }
+            Parameter::Lumped(vi, key) => {
+                let l = spec.vessels[*vi].lumped.as_ref().ok_or_else(missing)?;
+                let (value, k) = match key.as_str() {
+                    "resistance" => (l.resistance, [1.0, 0.0, 0.0]),
+                    "inductance" => (l.inductance, [0.0, 1.0, 0.0]),
+                    _ => (l.capacitance, [0.0, 0.0, 1.0]),
+                };
+                t = self.blank(path, value);
+                // split evenly over the segments: each value is value/n, d/dvalue = 1/n
+                self.vessel_linear(&mut t, &spec.vessels[*vi].name, k);
+            }
+            Parameter::ResistanceScale => {
+                t = self.blank(path, 1.0);
+                self.resistance_scale(&mut t, spec);
+            }
+            Parameter::ComplianceScale => {
+                t = self.blank(path, 1.0);
+                for i in 0..nn {
+                    t.de[i] = self.node_c(i);
+                }
+            }
+            Parameter::InflowScale => {
+                t = self.blank(path, 1.0);
+                let fixed: Vec<usize> = self.circuit.fixed_pressures.iter().map(|f| f.0).collect();
+                for (k, (row, _)) in self.dae.forcing.iter().enumerate() {
+                    if *row < nn && !fixed.contains(row) {
+                        t.dforcing.push((k, 1.0));
+                    }
+                }
+                if t.dforcing.is_empty() {
+                    return Err(unknown(path, "the model has no flow condition"));
+                }
+            }
+        }
+        Ok(t)
+    }
+
+    /// The segments of vessel `name`: (branch, node shares, compliance).
+    fn segments_of<'b>(
+        &'b self,
+        name: &'b str,
+    ) -> impl Iterator<Item = &'b crate::circuit::SegmentGeom> + 'b {
+        self.circuit
+            .segments
+            .iter()
+            .filter(move |s| self.circuit.vessel_names[s.vessel] == name)
+    }
+
+    /// d/dp of a vessel whose segment values are power laws x ∝ p^k, k for (R, L, C).
+    fn vessel_power_law(&self, t: &mut DaeTangent, name: &str, k: [f64; 3], p: f64) {
+        let nn = self.circuit.nodes.len();
+        for s in self.segments_of(name) {
+            let b = &self.circuit.branches[s.branch];
+            t.df[self.branch_r[s.branch]] += k[0] * b.resistance / p;
+            t.de[nn + s.branch] += k[1] * b.inductance / p;
+            for &(node, share) in &s.nodes {
+                t.de[node] += k[2] * share * s.compliance / p;
+            }
+        }
+    }
+
+    /// d/dvalue of a lumped vessel's total R, L or C split evenly over its segments.
+    fn vessel_linear(&self, t: &mut DaeTangent, name: &str, which: [f64; 3]) {
+        let nn = self.circuit.nodes.len();
+        let n = self.segments_of(name).count() as f64;
+        for s in self.segments_of(name) {
+            t.df[self.branch_r[s.branch]] += which[0] / n;
+            t.de[nn + s.branch] += which[1] / n;
+            for &(node, share) in &s.nodes {
+                t.de[node] += which[2] * share / n;
+            }
+        }
+    }
+
+    /// `scale.resistance` as the patch applies it: every resistance and RCR condition at a
+    /// vessel end and every lumped vessel's resistance, multiplied (dR/ds = R at s = 1).
+    fn resistance_scale(&self, t: &mut DaeTangent, spec: &NetworkSpec) {
+        for (node, bc) in &spec.boundary_conditions {
+            let labels: &[&str] = match bc {
+                BoundarySpec::Resistance { .. } => &["resistance"],
+                BoundarySpec::Rcr { .. } => &["proximal resistance", "distal resistance"],
+                _ => &[],
+            };
+            for l in labels {
+                if let Some(b) = self.branch_named(&format!("boundary condition '{node}' {l}")) {
+                    t.df[self.branch_r[b]] += self.circuit.branches[b].resistance;
+                }
+            }
+        }
+        for v in spec.vessels.iter().filter(|v| v.lumped.is_some()) {
+            for s in self.segments_of(&v.name) {
+                t.df[self.branch_r[s.branch]] += self.circuit.branches[s.branch].resistance;
+            }
+        }
+    }
+}

@@ -1,0 +1,256 @@
+//! Tangent sensitivities against central differences of the same periodic run, one test per
+//! parameter kind. The difference quotient's error is O(h²) truncation plus rounding of
+//! ~1e-16 × |signal| / (h p): with h = 1e-4 relative both are below 1e-8 of the derivative's
+//! scale, so agreement to 1e-6 relative tells a wrong tangent from a right one.
+
+use super::*;
+use crate::model::{BoundarySpec, parse};
+use crate::waveform::WaveformSpec;
+
+/// An inflow (two harmonics) into a uniform elastic parent that splits into an elastic
+/// daughter ending in an RCR and a lumped daughter ending in a resistance.
+const MODEL: &str = r#"{
+  "name": "y",
+  "vessels": [
+    {"name": "parent", "from": "in", "to": "j", "segments": 3,
+     "geometry": {"length": 0.1, "radius_in": 0.004, "radius_out": 0.004,
+                  "wall_thickness": 0.0006, "youngs_modulus": 4e5}},
+    {"name": "d1", "from": "j", "to": "o1", "segments": 2,
+     "geometry": {"length": 0.08, "radius_in": 0.003, "radius_out": 0.0025,
+                  "wall_thickness": 0.0005, "youngs_modulus": 6e5}},
+    {"name": "d2", "from": "j", "to": "o2", "segments": 2,
+     "lumped": {"resistance": 3e7, "inductance": 1e5, "capacitance": 2e-10}}
+  ],
+  "boundary_conditions": {
+    "in": {"type": "flow", "flow": {"kind": "fourier", "period": 0.8, "mean": 5e-6,
+                                    "cos": [3e-6, -1e-6], "sin": [4e-6, 1e-6]}},
+    "o1": {"type": "rcr", "proximal_resistance": 1.5e8, "capacitance": 6e-9,
+           "distal_resistance": 1.2e9},
+    "o2": {"type": "resistance", "resistance": 1.6e9}
+  }
+}"#;
+
+const SIGNALS: [(&str, &str); 4] = [
+    ("parent", "pressure_in"),
+    ("d1", "flow_out"),
+    ("d2", "flow_in"),
+    ("d1", "pressure_out"),
+];
+
+fn settings() -> TangentSettings {
+    TangentSettings {
+        period: 0.8,
+        steps_per_cycle: 200,
+        rho_infty: 0.5,
+        max_cycles: 400,
+        tol: 1e-13,
+    }
+}
+
+fn run(spec: &NetworkSpec, paths: &[&str]) -> Sensitivities {
+    let paths: Vec<String> = paths.iter().map(|p| p.to_string()).collect();
+    let signals: Vec<(String, String)> = SIGNALS
+        .iter()
+        .map(|(a, b)| (a.to_string(), b.to_string()))
+        .collect();
+    sensitivities(spec, &paths, &signals, settings()).unwrap()
+}
+
+/// The model with parameter `path` multiplied by `f`, written into the spec directly.
+fn scaled(path: &str, f: f64) -> NetworkSpec {
+    let mut s = parse(MODEL).unwrap();
+    let vi = |s: &NetworkSpec, n: &str| s.vessels.iter().position(|v| v.name == n).unwrap();
+    let parts: Vec<&str> = path.split('.').collect();
+    match parts.as_slice() {
+        ["vessels", n, "length"] => {
+            let i = vi(&s, n);
+            s.vessels[i].geometry.as_mut().unwrap().length *= f;
+        }
+        ["vessels", n, "radius"] => {
+            let i = vi(&s, n);
+            let g = s.vessels[i].geometry.as_mut().unwrap();
+            g.radius_in *= f;
+            g.radius_out *= f;
+        }
+        ["vessels", n, "youngs_modulus"] => {
+            let i = vi(&s, n);
+            *s.vessels[i]
+                .geometry
+                .as_mut()
+                .unwrap()
+                .youngs_modulus
+                .as_mut()
+                .unwrap() *= f;
+        }
+        ["vessels", n, "lumped", "capacitance"] => {
+            let i = vi(&s, n);
+            s.vessels[i].lumped.as_mut().unwrap().capacitance *= f;
+        }
+        ["vessels", n, "lumped", "resistance"] => {
+            let i = vi(&s, n);
+            s.vessels[i].lumped.as_mut().unwrap().resistance *= f;
+        }
+        ["boundary_conditions", node, key] => match s.boundary_conditions.get_mut(*node) {
+            Some(BoundarySpec::Resistance { resistance, .. }) => *resistance *= f,
+            Some(BoundarySpec::Rcr {
+                proximal_resistance,
+                capacitance,
+                distal_resistance,
+                ..
+            }) => match *key {
+                "proximal_resistance" => *proximal_resistance *= f,
+                "capacitance" => *capacitance *= f,
+                _ => *distal_resistance *= f,
+            },
+            _ => unreachable!(),
+        },
+        ["scale", "resistance"] => {
+            for bc in s.boundary_conditions.values_mut() {
+                match bc {
+                    BoundarySpec::Resistance { resistance, .. } => *resistance *= f,
+                    BoundarySpec::Rcr {
+                        proximal_resistance,
+                        distal_resistance,
+                        ..
+                    } => {
+                        *proximal_resistance *= f;
+                        *distal_resistance *= f;
+                    }
+                    _ => {}
+                }
+            }
+            for v in &mut s.vessels {
+                if let Some(l) = v.lumped.as_mut() {
+                    l.resistance *= f;
+                }
+            }
+        }
+        ["scale", "compliance"] => {
+            for bc in s.boundary_conditions.values_mut() {
+                if let BoundarySpec::Rcr { capacitance, .. } = bc {
+                    *capacitance *= f;
+                }
+            }
+            for v in &mut s.vessels {
+                if let Some(l) = v.lumped.as_mut() {
+                    l.capacitance *= f;
+                }
+                if let Some(g) = v.geometry.as_mut() {
+                    *g.youngs_modulus.as_mut().unwrap() /= f;
+                }
+            }
+        }
+        ["scale", "inflow"] => {
+            if let Some(BoundarySpec::Flow {
+                flow: WaveformSpec::Fourier { mean, cos, sin, .. },
+            }) = s.boundary_conditions.get_mut("in")
+            {
+                *mean *= f;
+                cos.iter_mut().chain(sin.iter_mut()).for_each(|c| *c *= f);
+            }
+        }
+        _ => unreachable!("{path}"),
+    }
+    s
+}
+
+/// Largest |tangent − central difference| over the cycle and signals, relative to the
+/// derivative's scale per signal.
+fn check(path: &str) {
+    let base = parse(MODEL).unwrap();
+    let exact = run(&base, &[path]);
+    let h = 1e-4;
+    let up = run(&scaled(path, 1.0 + h), &[]);
+    let down = run(&scaled(path, 1.0 - h), &[]);
+    let p = exact.values[0];
+    let c = &exact.cycle;
+    // the cycle before the last one changed by at most `tol`; the last by about as much
+    assert!(
+        c.periodic_change <= 1e-11,
+        "{path}: not periodic {}",
+        c.periodic_change
+    );
+    let nsig = SIGNALS.len();
+    for (j, signal) in SIGNALS.iter().enumerate() {
+        let col = |v: &[f64]| -> Vec<f64> { v.iter().skip(j).step_by(nsig).copied().collect() };
+        let (d, u, w) = (
+            col(&c.derivs),
+            col(&up.cycle.values),
+            col(&down.cycle.values),
+        );
+        let scale = d.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        assert!(scale > 0.0, "{path}: zero derivative of {signal:?}");
+        let worst = d
+            .iter()
+            .zip(u.iter().zip(&w))
+            .map(|(dk, (uk, wk))| (dk - (uk - wk) / (2.0 * h * p)).abs())
+            .fold(0.0f64, f64::max);
+        assert!(
+            worst <= 1e-6 * scale,
+            "{path} {signal:?}: {worst:e} vs scale {scale:e}"
+        );
+    }
+}
+
+#[test]
+fn windkessel_and_resistance_conditions() {
+    check("boundary_conditions.o1.proximal_resistance");
+    check("boundary_conditions.o1.distal_resistance");
+    check("boundary_conditions.o1.capacitance");
+    check("boundary_conditions.o2.resistance");
+}
+
+#[test]
+fn vessel_geometry_and_wall() {
+    check("vessels.parent.length");
+    check("vessels.d1.length");
+    check("vessels.parent.radius");
+    check("vessels.parent.youngs_modulus");
+}
+
+#[test]
+fn lumped_values_and_scales() {
+    check("vessels.d2.lumped.resistance");
+    check("vessels.d2.lumped.capacitance");
+    check("scale.resistance");
+    check("scale.compliance");
+    check("scale.inflow");
+}
+
+#[test]
+fn several_parameters_share_one_run() {
+    let base = parse(MODEL).unwrap();
+    let one = run(&base, &["vessels.parent.radius"]);
+    let two = run(
+        &base,
+        &["boundary_conditions.o2.resistance", "vessels.parent.radius"],
+    );
+    let n = one.cycle.derivs.len();
+    // the same arithmetic for the same parameter; the runs may stop after different cycle
+    // counts (the periodic test takes every tangent), within the periodic tolerance
+    let scale = one.cycle.derivs.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    for (a, b) in one.cycle.derivs.iter().zip(&two.cycle.derivs[n..]) {
+        assert!((a - b).abs() <= 1e-9 * scale, "{a} {b}");
+    }
+}
+
+#[test]
+fn bad_paths_name_themselves() {
+    let base = parse(MODEL).unwrap();
+    let err = |p: &str| {
+        sensitivities(&base, &[p.to_owned()], &[], settings())
+            .err()
+            .unwrap()
+            .to_string()
+    };
+    assert!(err("vessels.nope.radius").contains("no vessel named 'nope'"));
+    assert!(err("vessels.d1.radius").contains("tapered"));
+    assert!(err("boundary_conditions.o2.capacitance").contains("'capacitance'"));
+    assert!(err("boundary_conditions.zz.resistance").contains("node 'zz'"));
+    assert!(err("blood.viscosity").contains("parameter 'blood.viscosity'"));
+    let signal = sensitivities(&base, &[], &[("parent".into(), "speed".into())], settings())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(signal.contains("unknown variable 'speed'"), "{signal}");
+}
