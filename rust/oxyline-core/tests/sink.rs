@@ -3,7 +3,7 @@
 //! more than one chunk, and a stopped run still hands over what it computed.
 
 use oxyline_core::genalpha::NewtonControl;
-use oxyline_core::network::parse;
+use oxyline_core::model::parse;
 use oxyline_core::{
     Dae, Error, Method, OutputSink, RunSettings, Start, Transport, simulate_to_sink,
     simulate_with_transport,

@@ -1,7 +1,7 @@
 //! RK4 stability bound: the Krylov estimate against the dense spectrum of the same operator
 //! (faer's dense eigensolver, a code path independent of the Arnoldi iteration).
 
-use oxyline_core::network::parse;
+use oxyline_core::model::parse;
 use oxyline_core::stability::{SpectrumMethod, rk4_limit_by};
 use oxyline_core::{Regime, rk4::Rk4};
 

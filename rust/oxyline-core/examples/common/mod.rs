@@ -3,7 +3,7 @@
 // (each example uses a part of this module)
 #![allow(dead_code)]
 
-use oxyline_core::network::{Assembled, parse};
+use oxyline_core::{Assembled, model::parse};
 use oxyline_core::transport::{BALANCE_COLUMNS, VESSEL_COLUMNS};
 use oxyline_core::{Dae, Transport};
 
