@@ -67,8 +67,7 @@ mod _core {
         reader::model::{canonical_model, read_model},
         reader::schema::{
             check_periods, check_simulation, read_conditions, read_header, read_transport,
-            read_vessels, transport_section,
-            resolve_settings,
+            read_vessels, resolve_settings, transport_section,
         },
     };
 

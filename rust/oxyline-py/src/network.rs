@@ -119,7 +119,10 @@ impl Network {
         let (vessels, outlets, rest) = {
             let mut p = parts.borrow_mut();
             let rest = p.rest.take().ok_or_else(|| {
-                to_py(Error::model("model", "was not read (no parts to build from)"))
+                to_py(Error::model(
+                    "model",
+                    "was not read (no parts to build from)",
+                ))
             })?;
             let (v, o) = p.take().map_err(to_py)?;
             (v, o, rest)

@@ -86,7 +86,10 @@ pub const WALL_KEYS: &[(&str, &[&str])] = &[
             "flow",
         ],
     ),
-    ("permeability", &["model", "permeability", "po2", "concentration"]),
+    (
+        "permeability",
+        &["model", "permeability", "po2", "concentration"],
+    ),
 ];
 pub const SPECIES_KEYS: &[&str] = &[
     "name",
@@ -192,7 +195,10 @@ fn num<N: Node>(v: Option<&N>, el: &str, key: &str, bound: Bound) -> Result<f64>
         return Err(err(el, format!("'{key}' must be > 0, got {}", py_repr(x))));
     }
     if bound == Bound::NonNegative && x < 0.0 {
-        return Err(err(el, format!("'{key}' must be >= 0.0, got {}", py_repr(x))));
+        return Err(err(
+            el,
+            format!("'{key}' must be >= 0.0, got {}", py_repr(x)),
+        ));
     }
     Ok(x)
 }
@@ -253,7 +259,12 @@ fn to_value<N: Node>(n: &N) -> Value {
         Kind::Float => json!(n.number()),
         Kind::Str => Value::String(n.text().unwrap_or_default()),
         Kind::List => Value::Array(n.items().unwrap_or_default().iter().map(to_value).collect()),
-        Kind::Map => Value::Object(n.entries().iter().map(|(k, v)| (k.clone(), to_value(v))).collect()),
+        Kind::Map => Value::Object(
+            n.entries()
+                .iter()
+                .map(|(k, v)| (k.clone(), to_value(v)))
+                .collect(),
+        ),
         Kind::Other => Value::String(n.repr()),
     }
 }
@@ -273,8 +284,19 @@ fn wave<N: Node>(spec: &N, key: &str, scale: f64, el: &str, ctx: &Context) -> Re
         return bolus(&b, scale, el, ctx.duration);
     }
     if let Some(fo) = spec.get("fourier") {
-        check(&fo, &["period", "mean", "cos", "sin"], &format!("{el} fourier"))?;
-        let period = num_or(&fo, "period", ctx.period.unwrap_or(1.0), el, "period", Bound::Positive)?;
+        check(
+            &fo,
+            &["period", "mean", "cos", "sin"],
+            &format!("{el} fourier"),
+        )?;
+        let period = num_or(
+            &fo,
+            "period",
+            ctx.period.unwrap_or(1.0),
+            el,
+            "period",
+            Bound::Positive,
+        )?;
         let mean = scale * num_or(&fo, "mean", 0.0, el, "mean", Bound::Any)?;
         let series = |name: &str| -> Result<Vec<f64>> {
             let Some(s) = fo.get(name) else {
@@ -286,7 +308,9 @@ fn wave<N: Node>(spec: &N, key: &str, scale: f64, el: &str, ctx: &Context) -> Re
                 .collect()
         };
         let (cos, sin) = (series("cos")?, series("sin")?);
-        return Ok(json!({"kind": "fourier", "period": period, "mean": mean, "cos": cos, "sin": sin}));
+        return Ok(
+            json!({"kind": "fourier", "period": period, "mean": mean, "cos": cos, "sin": sin}),
+        );
     }
     if let Some(time) = spec.get("time") {
         let t = items(&time, el, "time")?
@@ -301,12 +325,17 @@ fn wave<N: Node>(spec: &N, key: &str, scale: f64, el: &str, ctx: &Context) -> Re
             .map(|x| Ok(scale * num(Some(x), el, key, Bound::NonNegative)?))
             .collect::<Result<Vec<_>>>()?;
         if t.len() != v.len() || t.len() < 2 {
-            return Err(err(el, format!("'time' and '{key}' need the same length >= 2")));
+            return Err(err(
+                el,
+                format!("'time' and '{key}' need the same length >= 2"),
+            ));
         }
         if !strictly_increasing(&t) {
             return Err(err(el, "'time' must be strictly increasing"));
         }
-        let interp = spec.get("interpolation").map_or_else(|| json!("linear"), |i| to_value(&i));
+        let interp = spec
+            .get("interpolation")
+            .map_or_else(|| json!("linear"), |i| to_value(&i));
         return Ok(json!({"kind": "table", "time": t, "value": v, "interpolation": interp}));
     }
     if let Some(x) = spec.get(key) {
@@ -335,7 +364,11 @@ fn bolus<N: Node>(spec: &N, scale: f64, element: &str, duration: Option<f64>) ->
     let t0 = num_or(&g, "t0", 0.0, &el, "t0", Bound::NonNegative)?;
     let a = num(g.get("a").as_ref(), &el, "a", Bound::NonNegative)?;
     let b = num(g.get("b").as_ref(), &el, "b", Bound::Positive)?;
-    let end = duration.filter(|d| *d != 0.0).unwrap_or(0.0).max(t0 + 40.0 * b * (1.0 + a)) + 1.0;
+    let end = duration
+        .filter(|d| *d != 0.0)
+        .unwrap_or(0.0)
+        .max(t0 + 40.0 * b * (1.0 + a))
+        + 1.0;
     let n = 4000;
     let times: Vec<f64> = (0..n).map(|i| end * i as f64 / (n - 1) as f64).collect();
     let vals: Vec<f64> = times
@@ -406,9 +439,19 @@ fn hill<N: Node>(ox: &N, alpha: f64) -> Result<Hill> {
 
 /// E_Hb of the wall layer between inlet PO2 `p_in` and wall PO2 `p_w` (docs/physics.md §3.4):
 /// the secant factor for linearised binding, the nonlinear Lévêque layer's for Hill binding.
-fn facilitation<N: Node>(spec: &N, h: Option<Hill>, d: f64, p_in: f64, p_w: f64, el: &str) -> Result<f64> {
+fn facilitation<N: Node>(
+    spec: &N,
+    h: Option<Hill>,
+    d: f64,
+    p_in: f64,
+    p_w: f64,
+    el: &str,
+) -> Result<f64> {
     let Some(h) = h else {
-        return Err(err(el, "hb_facilitation needs hemoglobin: hill or linearized"));
+        return Err(err(
+            el,
+            "hb_facilitation needs hemoglobin: hill or linearized",
+        ));
     };
     let fel = format!("{el} hb_facilitation");
     let d_hb = if spec.is_map() {
@@ -437,16 +480,24 @@ fn flux_row<N: Node>(v: &N, el: &str) -> Result<Vec<f64>> {
     if matches!(v.kind(), Kind::Int | Kind::Float | Kind::Str) {
         return Ok(vec![num(Some(v), el, "flux", Bound::Any)?]);
     }
-    let vals = v.items().filter(|_| v.kind() != Kind::Bool).ok_or_else(|| {
-        err(
-            el,
-            format!("'flux' must be a number or a list of numbers, got {}", v.repr()),
-        )
-    })?;
+    let vals = v
+        .items()
+        .filter(|_| v.kind() != Kind::Bool)
+        .ok_or_else(|| {
+            err(
+                el,
+                format!(
+                    "'flux' must be a number or a list of numbers, got {}",
+                    v.repr()
+                ),
+            )
+        })?;
     if vals.is_empty() {
         return Err(err(el, "'flux' needs at least one value"));
     }
-    vals.iter().map(|x| num(Some(x), el, "flux", Bound::Any)).collect()
+    vals.iter()
+        .map(|x| num(Some(x), el, "flux", Bound::Any))
+        .collect()
 }
 
 fn same_lengths(rows: &[Vec<f64>]) -> bool {
@@ -465,7 +516,12 @@ fn flux<N: Node>(spec: &N, el: &str, ctx: &Context) -> Result<Value> {
         let rows = times
             .iter()
             .map(|&t| {
-                let v = spec.call(t).map_err(|e| err(el, format!("the flux callable failed at t = {}: {e}", py_repr(t))))?;
+                let v = spec.call(t).map_err(|e| {
+                    err(
+                        el,
+                        format!("the flux callable failed at t = {}: {e}", py_repr(t)),
+                    )
+                })?;
                 flux_row(&v, el)
             })
             .collect::<Result<Vec<_>>>()?;
@@ -531,9 +587,14 @@ impl WallValue<'_> {
                     Err(err(el, "wall needs 'po2' (mmHg)"))
                 }
             }
-            WallValue::Species { el } => {
-                num_or(spec, "concentration", 0.0, el, "concentration", Bound::NonNegative)
-            }
+            WallValue::Species { el } => num_or(
+                spec,
+                "concentration",
+                0.0,
+                el,
+                "concentration",
+                Bound::NonNegative,
+            ),
         }
     }
 }
@@ -558,7 +619,13 @@ fn off<N: Node>(v: &N) -> bool {
 }
 
 /// Canonical wall closure of `spec` (None, a model name or a mapping with `model`).
-fn wall<N: Node>(spec: Option<&N>, el: &str, w: &WallContext, ctx: &Context, warnings: &mut Vec<String>) -> Result<Value> {
+fn wall<N: Node>(
+    spec: Option<&N>,
+    el: &str,
+    w: &WallContext,
+    ctx: &Context,
+    warnings: &mut Vec<String>,
+) -> Result<Value> {
     let Some(spec) = spec.filter(|s| s.kind() != Kind::Null) else {
         return Ok(json!({"model": "none"}));
     };
@@ -571,8 +638,18 @@ fn wall<N: Node>(spec: Option<&N>, el: &str, w: &WallContext, ctx: &Context, war
     wall_of(spec, el, w, ctx, warnings)
 }
 
-fn wall_of<N: Node>(spec: &N, el: &str, w: &WallContext, ctx: &Context, warnings: &mut Vec<String>) -> Result<Value> {
-    let Some(model) = spec.get("model").filter(|_| spec.is_map()).map(|m| m.show()) else {
+fn wall_of<N: Node>(
+    spec: &N,
+    el: &str,
+    w: &WallContext,
+    ctx: &Context,
+    warnings: &mut Vec<String>,
+) -> Result<Value> {
+    let Some(model) = spec
+        .get("model")
+        .filter(|_| spec.is_map())
+        .map(|m| m.show())
+    else {
         return Err(err(
             el,
             "wall needs a 'model' (none, flux, mass-transfer, leveque, graetz, permeability)",
@@ -582,7 +659,10 @@ fn wall_of<N: Node>(spec: &N, el: &str, w: &WallContext, ctx: &Context, warnings
         let names: Vec<&str> = WALL_KEYS.iter().map(|(m, _)| *m).collect();
         return Err(err(
             el,
-            format!("unknown wall model '{model}' (expected {})", names.join(", ")),
+            format!(
+                "unknown wall model '{model}' (expected {})",
+                names.join(", ")
+            ),
         ));
     };
     check(spec, keys, &format!("{el} wall"))?;
@@ -601,24 +681,60 @@ fn wall_of<N: Node>(spec: &N, el: &str, w: &WallContext, ctx: &Context, warnings
     }
     let cw = w.value.read(spec)?;
     if model == "permeability" {
-        let p = num(spec.get("permeability").as_ref(), el, "permeability", Bound::NonNegative)?;
+        let p = num(
+            spec.get("permeability").as_ref(),
+            el,
+            "permeability",
+            Bound::NonNegative,
+        )?;
         out.insert("permeability".into(), json!(p));
         out.insert("tissue_concentration".into(), json!(cw));
         return Ok(Value::Object(out));
     }
     out.insert("wall_concentration".into(), json!(cw));
     if let Some(p) = spec.get("permeability") {
-        out.insert("permeability".into(), json!(num(Some(&p), el, "permeability", Bound::Positive)?));
+        out.insert(
+            "permeability".into(),
+            json!(num(Some(&p), el, "permeability", Bound::Positive)?),
+        );
     }
     if model == "mass-transfer" {
         let k = num(spec.get("k").as_ref(), el, "k", Bound::NonNegative)?;
         out.insert("k".into(), json!(k));
         return Ok(Value::Object(out));
     }
-    let mut enh = num_or(spec, "enhancement", 1.0, el, "enhancement", Bound::NonNegative)?;
+    let enh = enhancement(spec, &model, cw, el, w, warnings)?;
+    out.insert("enhancement".into(), json!(enh));
+    layer_options(spec, &model, el, ctx, &mut out)?;
+    Ok(Value::Object(out))
+}
+
+/// The enhancement of a Lévêque or Graetz wall: the given factor times the haemoglobin
+/// facilitation E_Hb (on by default with haemoglobin, docs/physics.md §3.4; switched off, a
+/// warning) at wall concentration `cw`.
+fn enhancement<N: Node>(
+    spec: &N,
+    model: &str,
+    cw: f64,
+    el: &str,
+    w: &WallContext,
+    warnings: &mut Vec<String>,
+) -> Result<f64> {
+    let enh = num_or(
+        spec,
+        "enhancement",
+        1.0,
+        el,
+        "enhancement",
+        Bound::NonNegative,
+    )?;
     // haemoglobin: facilitated boundary-layer transport by default (docs/physics.md §3.4)
-    let fac = spec.get("hb_facilitation").filter(|f| f.kind() != Kind::Null);
-    let explicit_false = fac.as_ref().is_some_and(|f| f.kind() == Kind::Bool && !f.truthy());
+    let fac = spec
+        .get("hb_facilitation")
+        .filter(|f| f.kind() != Kind::Null);
+    let explicit_false = fac
+        .as_ref()
+        .is_some_and(|f| f.kind() == Kind::Bool && !f.truthy());
     if explicit_false && w.hill.is_some() {
         warnings.push(format!(
             "{el}: hb_facilitation is off with haemoglobin: the {model} wall flux comes from \
@@ -636,18 +752,36 @@ fn wall_of<N: Node>(spec: &N, el: &str, w: &WallContext, ctx: &Context, warnings
         };
         let p_w = w.hill.map_or(0.0, |h| cw / h.alpha);
         let empty = json!({});
-        enh *= match f {
-            Some(f) => facilitation(f, w.hill, w.diffusivity, p_in, p_w, el)?,
-            None => facilitation(&empty, w.hill, w.diffusivity, p_in, p_w, el)?,
-        };
+        return Ok(enh
+            * match f {
+                Some(f) => facilitation(f, w.hill, w.diffusivity, p_in, p_w, el)?,
+                None => facilitation(&empty, w.hill, w.diffusivity, p_in, p_w, el)?,
+            });
     }
-    out.insert("enhancement".into(), json!(enh));
+    Ok(enh)
+}
+
+/// A Graetz wall's mean flow and the blood's kinematic viscosity; a Lévêque wall's shear.
+fn layer_options<N: Node>(
+    spec: &N,
+    model: &str,
+    el: &str,
+    ctx: &Context,
+    out: &mut Map<String, Value>,
+) -> Result<()> {
     if model == "graetz" {
         if let Some(flow) = spec.get("flow") {
-            if !flow.text().is_some_and(|f| MEAN_FLOWS.contains(&f.as_str())) {
+            if !flow
+                .text()
+                .is_some_and(|f| MEAN_FLOWS.contains(&f.as_str()))
+            {
                 return Err(err(
                     el,
-                    format!("flow must be one of {}, got {}", py_tuple(MEAN_FLOWS), flow.repr()),
+                    format!(
+                        "flow must be one of {}, got {}",
+                        py_tuple(MEAN_FLOWS),
+                        flow.repr()
+                    ),
                 ));
             }
             out.insert("flow".into(), to_value(&flow));
@@ -660,7 +794,8 @@ fn wall_of<N: Node>(spec: &N, el: &str, w: &WallContext, ctx: &Context, warnings
     if model == "leveque" {
         let shear = spec.get("shear");
         let ok = shear.as_ref().is_none_or(|s| {
-            s.text().is_some_and(|t| ["cycle-mean", "instantaneous", "relaxed"].contains(&t.as_str()))
+            s.text()
+                .is_some_and(|t| ["cycle-mean", "instantaneous", "relaxed"].contains(&t.as_str()))
         });
         if !ok {
             let got = shear.map_or_else(String::new, |s| s.repr());
@@ -669,9 +804,12 @@ fn wall_of<N: Node>(spec: &N, el: &str, w: &WallContext, ctx: &Context, warnings
                 format!("shear must be 'cycle-mean', 'instantaneous' or 'relaxed', got {got}"),
             ));
         }
-        out.insert("shear".into(), shear.map_or_else(|| json!("cycle-mean"), |s| to_value(&s)));
+        out.insert(
+            "shear".into(),
+            shear.map_or_else(|| json!("cycle-mean"), |s| to_value(&s)),
+        );
     }
-    Ok(Value::Object(out))
+    Ok(())
 }
 
 /// `('a', 'b')`: a tuple of names as the front end prints it.
@@ -693,8 +831,22 @@ mod tissue;
 fn oxygen<N: Node>(ox: &N, ctx: &Context, warnings: &mut Vec<String>) -> Result<Value> {
     check(ox, OXYGEN_KEYS, "oxygen")?;
     let el = "oxygen";
-    let alpha = num_or(ox, "solubility", SOLUBILITY, el, "solubility", Bound::Positive)?;
-    let d = num_or(ox, "diffusivity", DIFFUSIVITY, el, "diffusivity", Bound::Positive)?;
+    let alpha = num_or(
+        ox,
+        "solubility",
+        SOLUBILITY,
+        el,
+        "solubility",
+        Bound::Positive,
+    )?;
+    let d = num_or(
+        ox,
+        "diffusivity",
+        DIFFUSIVITY,
+        el,
+        "diffusivity",
+        Bound::Positive,
+    )?;
     let Some(inlet_spec) = ox.get("inlet") else {
         return Err(err(el, "needs 'inlet' (e.g. {po2: 85})"));
     };
@@ -720,17 +872,44 @@ fn oxygen<N: Node>(ox: &N, ctx: &Context, warnings: &mut Vec<String>) -> Result<
         diffusivity: d,
         p_in: Some(p_fac),
     };
-    let tissue_ctx = tissue::Oxygen { alpha, hill: h, d, p_in };
+    let tissue_ctx = tissue::Oxygen {
+        alpha,
+        hill: h,
+        d,
+        p_in,
+    };
     let wall_spec = ox.get("wall");
     if is_tissue(wall_spec.as_ref()) {
-        let (lumen, t) = tissue::read(wall_spec.as_ref().expect("a tissue wall"), el, &tissue_ctx, ctx, warnings)?;
+        let (lumen, t) = tissue::read(
+            wall_spec.as_ref().expect("a tissue wall"),
+            el,
+            &tissue_ctx,
+            ctx,
+            warnings,
+        )?;
         sp.insert("wall".into(), lumen);
         sp.insert("tissue".into(), t);
     } else {
-        sp.insert("wall".into(), wall(wall_spec.as_ref(), el, &w, ctx, warnings)?);
+        sp.insert(
+            "wall".into(),
+            wall(wall_spec.as_ref(), el, &w, ctx, warnings)?,
+        );
     }
+    ends(ox, alpha, ctx, &mut sp)?;
+    if let Some(pv) = ox.get("per_vessel") {
+        per_vessel(&pv, &w, &tissue_ctx, ctx, &mut sp, warnings)?;
+    }
+    Ok(Value::Object(sp))
+}
+
+/// Oxygen's per-inlet values, outlet backflow and initial PO2 into the species `sp`.
+fn ends<N: Node>(ox: &N, alpha: f64, ctx: &Context, sp: &mut Map<String, Value>) -> Result<()> {
+    let el = "oxygen";
     if let Some(inlets) = ox.get("inlets") {
-        sp.insert("inlets".into(), waves(&inlets, "po2", alpha, el, "inlet", ctx, el)?);
+        sp.insert(
+            "inlets".into(),
+            waves(&inlets, "po2", alpha, el, "inlet", ctx, el)?,
+        );
     }
     if let Some(back) = ox.get("outlet_backflow") {
         if back.text().as_deref() != Some("zero-gradient") {
@@ -740,23 +919,32 @@ fn oxygen<N: Node>(ox: &N, ctx: &Context, warnings: &mut Vec<String>) -> Result<
                     "outlet_backflow must be 'zero-gradient' or {outlet: {po2: ..}}",
                 ));
             }
-            sp.insert("backflow".into(), waves(&back, "po2", alpha, el, "backflow", ctx, el)?);
+            sp.insert(
+                "backflow".into(),
+                waves(&back, "po2", alpha, el, "backflow", ctx, el)?,
+            );
         }
     }
     if let Some(ini) = ox.get("initial") {
-        let v = if ini.is_map() { ini.get("po2") } else { Some(ini) };
-        sp.insert("initial".into(), json!(alpha * num(v.as_ref(), el, "initial po2", Bound::NonNegative)?));
+        let v = if ini.is_map() {
+            ini.get("po2")
+        } else {
+            Some(ini)
+        };
+        sp.insert(
+            "initial".into(),
+            json!(alpha * num(v.as_ref(), el, "initial po2", Bound::NonNegative)?),
+        );
     }
-    if let Some(pv) = ox.get("per_vessel") {
-        per_vessel(&pv, &w, &tissue_ctx, ctx, &mut sp, warnings)?;
-    }
-    Ok(Value::Object(sp))
+    Ok(())
 }
 
 /// Oxygen's `hemoglobin` mode: its Hill law (None: no haemoglobin) and canonical binding.
 fn hemoglobin<N: Node>(ox: &N, alpha: f64, p_in: Option<f64>) -> Result<(Option<Hill>, Value)> {
     let el = "oxygen";
-    let mode = ox.get("hemoglobin").map_or_else(|| "none".to_owned(), |m| m.show());
+    let mode = ox
+        .get("hemoglobin")
+        .map_or_else(|| "none".to_owned(), |m| m.show());
     match mode.as_str() {
         "none" => Ok((None, json!({"kind": "none"}))),
         "hill" | "linearized" => {
@@ -789,13 +977,24 @@ fn hemoglobin<N: Node>(ox: &N, alpha: f64, p_in: Option<f64>) -> Result<(Option<
         }
         _ => Err(err(
             el,
-            format!("hemoglobin must be none, hill or linearized, got {}", py_quote(&mode)),
+            format!(
+                "hemoglobin must be none, hill or linearized, got {}",
+                py_quote(&mode)
+            ),
         )),
     }
 }
 
 /// Per-inlet (or per-outlet) waveforms `{node: wave}`, named `{el} {what} 'node'`.
-fn waves<N: Node>(d: &N, key: &str, scale: f64, el: &str, what: &str, ctx: &Context, map_el: &str) -> Result<Value> {
+fn waves<N: Node>(
+    d: &N,
+    key: &str,
+    scale: f64,
+    el: &str,
+    what: &str,
+    ctx: &Context,
+    map_el: &str,
+) -> Result<Value> {
     if !d.is_map() {
         return Err(err(map_el, format!("expected a mapping, got {}", d.repr())));
     }
@@ -817,7 +1016,10 @@ fn per_vessel<N: Node>(
     warnings: &mut Vec<String>,
 ) -> Result<()> {
     if !pv.is_map() {
-        return Err(err("oxygen", format!("'per_vessel' must be a mapping, got {}", pv.repr())));
+        return Err(err(
+            "oxygen",
+            format!("'per_vessel' must be a mapping, got {}", pv.repr()),
+        ));
     }
     let (mut walls, mut tissues) = (Map::new(), Map::new());
     for (name, over) in pv.entries() {
@@ -827,7 +1029,13 @@ fn per_vessel<N: Node>(
         if over.has("wall") || !over.has("cells_per_segment") {
             let spec = over.get("wall");
             if is_tissue(spec.as_ref()) {
-                let (lumen, layer) = tissue::read(spec.as_ref().expect("a tissue wall"), &vel, t, ctx, warnings)?;
+                let (lumen, layer) = tissue::read(
+                    spec.as_ref().expect("a tissue wall"),
+                    &vel,
+                    t,
+                    ctx,
+                    warnings,
+                )?;
                 walls.insert(name.clone(), lumen);
                 tissues.insert(name, layer);
             } else {
@@ -867,17 +1075,27 @@ fn cells<N: Node>(v: &N, el: &str) -> Result<i64> {
 
 /// (cells_per_segment, per-vessel overrides) of the oxygen (`per_vessel: {name:
 /// {cells_per_segment: m}}`) or transport (`cells_per_vessel: {name: m}`) section.
-fn refinement<N: Node>(s: Option<&N>, el: &str, key: &str) -> Result<(Option<i64>, Map<String, Value>)> {
+fn refinement<N: Node>(
+    s: Option<&N>,
+    el: &str,
+    key: &str,
+) -> Result<(Option<i64>, Map<String, Value>)> {
     let mut over = Map::new();
     let Some(s) = s else {
         return Ok((None, over));
     };
-    let m = s.get("cells_per_segment").map(|v| cells(&v, el)).transpose()?;
+    let m = s
+        .get("cells_per_segment")
+        .map(|v| cells(&v, el))
+        .transpose()?;
     let Some(pv) = s.get(key).filter(Node::truthy) else {
         return Ok((m, over));
     };
     if !pv.is_map() {
-        return Err(err(el, format!("'{key}' must be a mapping, got {}", pv.repr())));
+        return Err(err(
+            el,
+            format!("'{key}' must be a mapping, got {}", pv.repr()),
+        ));
     }
     for (name, v) in pv.entries() {
         let v = if key == "per_vessel" {
@@ -888,7 +1106,10 @@ fn refinement<N: Node>(s: Option<&N>, el: &str, key: &str) -> Result<(Option<i64
         } else {
             v
         };
-        over.insert(name.clone(), json!(cells(&v, &format!("{el} vessel '{name}'"))?));
+        over.insert(
+            name.clone(),
+            json!(cells(&v, &format!("{el} vessel '{name}'"))?),
+        );
     }
     Ok((m, over))
 }
@@ -908,17 +1129,29 @@ pub fn read<N: Node>(data: &N, ctx: &Context) -> Result<Option<Transport>> {
     }
     let mut formulation = tr.as_ref().and_then(|t| t.get("formulation"));
     let p_ref = match tr.as_ref().and_then(|t| t.get("reference_pressure")) {
-        Some(p) => ctx.pressure_factor * num(Some(&p), "transport", "reference_pressure", Bound::Any)?,
+        Some(p) => {
+            ctx.pressure_factor * num(Some(&p), "transport", "reference_pressure", Bound::Any)?
+        }
         None => ctx.pressure_factor * 0.0,
     };
     let mut p_ref = p_ref;
     let (mut species, mut warnings, mut oxygen_info) = (Vec::new(), Vec::new(), None);
     if let Some(ox) = &ox {
         if !ox.is_map() {
-            return Err(err("oxygen", format!("expected a mapping, got {}", ox.repr())));
+            return Err(err(
+                "oxygen",
+                format!("expected a mapping, got {}", ox.repr()),
+            ));
         }
         let o2 = oxygen(ox, ctx, &mut warnings)?;
-        let solubility = num_or(ox, "solubility", SOLUBILITY, "oxygen", "solubility", Bound::Any)?;
+        let solubility = num_or(
+            ox,
+            "solubility",
+            SOLUBILITY,
+            "oxygen",
+            "solubility",
+            Bound::Any,
+        )?;
         oxygen_info = Some((o2["name"].as_str().unwrap_or("o2").to_owned(), solubility));
         species.push(o2);
         if let Some(f) = ox.get("formulation") {
@@ -943,26 +1176,48 @@ pub fn read<N: Node>(data: &N, ctx: &Context) -> Result<Option<Transport>> {
             _ => {
                 return Err(err(
                     "oxygen",
-                    format!("formulation must be one of {}, got {}", py_tuple(FORMULATIONS), f.repr()),
+                    format!(
+                        "formulation must be one of {}, got {}",
+                        py_tuple(FORMULATIONS),
+                        f.repr()
+                    ),
                 ));
             }
         },
     };
-    let names: Vec<String> = species.iter().map(|s| s["name"].as_str().unwrap_or("").to_owned()).collect();
+    let names: Vec<String> = species
+        .iter()
+        .map(|s| s["name"].as_str().unwrap_or("").to_owned())
+        .collect();
     let mut unique = names.clone();
     unique.sort();
     unique.dedup();
     if unique.len() != names.len() {
         let quoted: Vec<String> = names.iter().map(|n| py_quote(n)).collect();
-        return Err(err("species", format!("names must be unique, got [{}]", quoted.join(", "))));
+        return Err(err(
+            "species",
+            format!("names must be unique, got [{}]", quoted.join(", ")),
+        ));
     }
     let mut out = Map::new();
     out.insert("reference_pressure".into(), json!(p_ref));
     out.insert("formulation".into(), json!(formulation));
     out.insert("species".into(), Value::Array(species));
+    grid(tr.as_ref(), ox.as_ref(), &mut out)?;
+    Ok(Some(Transport {
+        section: Value::Object(out),
+        species: names,
+        oxygen: oxygen_info,
+        warnings,
+    }))
+}
+
+/// The transport cells per flow segment, one grid for all species (oxygen's keys win), and
+/// the velocity threshold, into the section `out`.
+fn grid<N: Node>(tr: Option<&N>, ox: Option<&N>, out: &mut Map<String, Value>) -> Result<()> {
     // transport cells per flow segment: one grid for all species (oxygen's keys win)
-    let (mut m, mut cells_pv) = refinement(tr.as_ref(), "transport", "cells_per_vessel")?;
-    if let Some(ox) = &ox {
+    let (mut m, mut cells_pv) = refinement(tr, "transport", "cells_per_vessel")?;
+    if let Some(ox) = ox {
         let (m_ox, pv_ox) = refinement(Some(ox), "oxygen", "per_vessel")?;
         m = m_ox.or(m);
         cells_pv.extend(pv_ox);
@@ -973,14 +1228,14 @@ pub fn read<N: Node>(data: &N, ctx: &Context) -> Result<Option<Transport>> {
     if !cells_pv.is_empty() {
         out.insert("cells_per_vessel".into(), Value::Object(cells_pv));
     }
-    if let Some(v) = tr.as_ref().and_then(|t| t.get("velocity_threshold")) {
-        let x = num(Some(&v), "transport", "velocity_threshold", Bound::NonNegative)?;
+    if let Some(v) = tr.and_then(|t| t.get("velocity_threshold")) {
+        let x = num(
+            Some(&v),
+            "transport",
+            "velocity_threshold",
+            Bound::NonNegative,
+        )?;
         out.insert("velocity_threshold".into(), json!(x));
     }
-    Ok(Some(Transport {
-        section: Value::Object(out),
-        species: names,
-        oxygen: oxygen_info,
-        warnings,
-    }))
+    Ok(())
 }

@@ -18,6 +18,16 @@ use serde_json::{Map, Value};
 /// Periods of the elements that repeat, with the element.
 type Periods = Vec<(f64, String)>;
 
+/// What `read_model` returns: the parts, name, period, canonical transport section (None
+/// without species) and transport facts.
+type Read<'py> = (
+    Bound<'py, NativeParts>,
+    String,
+    Option<f64>,
+    Bound<'py, PyAny>,
+    Bound<'py, PyDict>,
+);
+
 /// Canonical conditions of `bcs` (all of them, or the nodes `only`) and their periods.
 fn conditions<'py>(
     bcs: &PyNode<'py>,
@@ -64,16 +74,7 @@ fn period_and_simulation(data: &PyNode<'_>, periods: &Periods) -> PyResult<Optio
 /// (the bulk of a large tree) are read straight into the parts; every other element goes
 /// through the core's full schema check.
 #[pyfunction]
-pub(crate) fn read_model<'py>(
-    py: Python<'py>,
-    data: Bound<'py, PyAny>,
-) -> PyResult<(
-    Bound<'py, NativeParts>,
-    String,
-    Option<f64>,
-    Bound<'py, PyAny>,
-    Bound<'py, PyDict>,
-)> {
+pub(crate) fn read_model<'py>(py: Python<'py>, data: Bound<'py, PyAny>) -> PyResult<Read<'py>> {
     let node = PyNode(data);
     let header = native::header(&node).map_err(to_py)?;
     let units = header.units;
@@ -119,7 +120,10 @@ pub(crate) fn canonical_model<'py>(
     let header = native::header(&node).map_err(to_py)?;
     let units = header.units;
     let mut canon = header.canonical;
-    let vessels = node.get("vessels").and_then(|v| v.items()).unwrap_or_default();
+    let vessels = node
+        .get("vessels")
+        .and_then(|v| v.items())
+        .unwrap_or_default();
     let mut list = Vec::with_capacity(vessels.len());
     for (i, v) in vessels.into_iter().enumerate() {
         list.push(native::vessel(&Fields::new(v), i, units).map_err(to_py)?);

@@ -172,6 +172,29 @@ pub struct NativeParts {
 
 #[pymethods]
 impl NativeParts {
+    /// Read the plain vessels of the native `vessels` list (in the unit system `units`): the
+    /// fast reader alone, as `read_model` uses it.
+    #[new]
+    fn new(vessels: &Bound<'_, PyList>, units: &str) -> PyResult<Self> {
+        Self::read(vessels, super::schema::units(units)?)
+    }
+
+    /// Indices of the vessels the fast reader did not take, in order.
+    fn slow_vessels(&self) -> Vec<usize> {
+        self.slow()
+    }
+
+    /// Read the plain outlets of the native `boundary_conditions` mapping (in the unit system
+    /// `units`); returns the node keys of the conditions left to the full check, in order.
+    #[pyo3(name = "read_outlets")]
+    fn py_read_outlets<'py>(
+        &mut self,
+        bcs: &Bound<'py, PyDict>,
+        units: &str,
+    ) -> PyResult<Vec<Bound<'py, PyAny>>> {
+        Ok(self.read_outlets(bcs, super::schema::units(units)?))
+    }
+
     /// The vessel names in model order (every vessel read or put).
     fn names(&self) -> Vec<&str> {
         self.vessels

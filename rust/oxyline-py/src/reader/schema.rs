@@ -178,7 +178,11 @@ pub(crate) fn duration<N: Node>(data: &N, period: Option<f64>) -> Option<f64> {
     let sim = data.get("simulation").filter(Node::truthy);
     let get = |k: &str| sim.as_ref().and_then(|s| s.get(k));
     let periodic = get("until_periodic").is_some_and(|u| u.truthy());
-    let (key, default) = if periodic { ("max_cycles", 100.0) } else { ("cycles", 10.0) };
+    let (key, default) = if periodic {
+        ("max_cycles", 100.0)
+    } else {
+        ("cycles", 10.0)
+    };
     let cycles = match get(key) {
         None => Some(default),
         Some(c) => match c.kind() {

@@ -27,7 +27,14 @@ pub(super) fn species<N: Node>(
     let Some(name) = sp.get("name") else {
         return Err(err(el, "needs a 'name'"));
     };
-    let d = num_or(sp, "diffusivity", 0.0, el, "diffusivity", Bound::NonNegative)?;
+    let d = num_or(
+        sp,
+        "diffusivity",
+        0.0,
+        el,
+        "diffusivity",
+        Bound::NonNegative,
+    )?;
     let binding = binding(sp.get("binding"), el)?;
     let Some(inlet) = sp.get("inlet") else {
         return Err(err(el, "needs 'inlet' (e.g. {concentration: 1.0})"));
@@ -45,32 +52,61 @@ pub(super) fn species<N: Node>(
     out.insert("decay".into(), json!(decay));
     out.insert("binding".into(), binding);
     let key = "concentration";
-    out.insert("inlet".into(), wave(&inlet, key, 1.0, &format!("{el} inlet"), ctx)?);
-    out.insert("wall".into(), wall(sp.get("wall").as_ref(), el, &w, ctx, warnings)?);
+    out.insert(
+        "inlet".into(),
+        wave(&inlet, key, 1.0, &format!("{el} inlet"), ctx)?,
+    );
+    out.insert(
+        "wall".into(),
+        wall(sp.get("wall").as_ref(), el, &w, ctx, warnings)?,
+    );
     if let Some(inlets) = sp.get("inlets") {
-        out.insert("inlets".into(), waves(&inlets, key, 1.0, el, "inlet", ctx, el)?);
+        out.insert(
+            "inlets".into(),
+            waves(&inlets, key, 1.0, el, "inlet", ctx, el)?,
+        );
     }
     if let Some(back) = sp.get("backflow") {
-        out.insert("backflow".into(), waves(&back, key, 1.0, el, "backflow", ctx, el)?);
+        out.insert(
+            "backflow".into(),
+            waves(&back, key, 1.0, el, "backflow", ctx, el)?,
+        );
     }
     if let Some(ini) = sp.get("initial") {
-        out.insert("initial".into(), json!(num(Some(&ini), el, "initial", Bound::NonNegative)?));
+        out.insert(
+            "initial".into(),
+            json!(num(Some(&ini), el, "initial", Bound::NonNegative)?),
+        );
     }
     if let Some(pv) = sp.get("per_vessel") {
-        if !pv.is_map() {
-            return Err(err(el, format!("'per_vessel' must be a mapping, got {}", pv.repr())));
-        }
-        let mut walls = Map::new();
-        for (n, o) in pv.entries() {
-            let vel = format!("{el} per_vessel '{n}'");
-            if !o.is_map() {
-                return Err(err(&vel, format!("expected a mapping, got {}", o.repr())));
-            }
-            walls.insert(n, wall(o.get("wall").as_ref(), &vel, &w, ctx, warnings)?);
-        }
-        out.insert("per_vessel".into(), Value::Object(walls));
+        out.insert("per_vessel".into(), per_vessel(&pv, el, &w, ctx, warnings)?);
     }
     Ok(Value::Object(out))
+}
+
+/// The walls of `per_vessel: {name: {wall: ..}}`.
+fn per_vessel<N: Node>(
+    pv: &N,
+    el: &str,
+    w: &WallContext,
+    ctx: &Context,
+    warnings: &mut Vec<String>,
+) -> Result<Value> {
+    if !pv.is_map() {
+        return Err(err(
+            el,
+            format!("'per_vessel' must be a mapping, got {}", pv.repr()),
+        ));
+    }
+    let mut walls = Map::new();
+    for (n, o) in pv.entries() {
+        let vel = format!("{el} per_vessel '{n}'");
+        if !o.is_map() {
+            return Err(err(&vel, format!("expected a mapping, got {}", o.repr())));
+        }
+        walls.insert(n, wall(o.get("wall").as_ref(), &vel, w, ctx, warnings)?);
+    }
+    Ok(Value::Object(walls))
 }
 
 /// `binding`: none, `{kind: linear, partition}` or `{kind: saturable, b_max, k_d, n}`
@@ -79,19 +115,30 @@ fn binding<N: Node>(b: Option<N>, el: &str) -> Result<Value> {
     let Some(b) = b.filter(|b| !b.is_null_or("none")) else {
         return Ok(json!({"kind": "none"}));
     };
-    check(&b, &["kind", "partition", "b_max", "k_d", "n"], &format!("{el} binding"))?;
+    check(
+        &b,
+        &["kind", "partition", "b_max", "k_d", "n"],
+        &format!("{el} binding"),
+    )?;
     let kind = b.get("kind");
     match kind.as_ref().and_then(Node::text).as_deref() {
         Some("linear") => {
-            let p = num(b.get("partition").as_ref(), el, "partition", Bound::NonNegative)?;
+            let p = num(
+                b.get("partition").as_ref(),
+                el,
+                "partition",
+                Bound::NonNegative,
+            )?;
             Ok(json!({"kind": "linear", "partition": p}))
         }
         Some("saturable") => {
             let p50 = num(b.get("k_d").as_ref(), el, "k_d", Bound::Positive)?;
             let n = num_or(&b, "n", 1.0, el, "n", Bound::Positive)?;
             let capacity = num(b.get("b_max").as_ref(), el, "b_max", Bound::Positive)?;
-            Ok(json!({"kind": "hill", "solubility": 1.0, "p50": p50, "n": n,
-                      "capacity": capacity}))
+            Ok(
+                json!({"kind": "hill", "solubility": 1.0, "p50": p50, "n": n,
+                      "capacity": capacity}),
+            )
         }
         _ => Err(err(
             el,

@@ -55,9 +55,26 @@ fn layer<N: Node>(
     let consumption = consumption(&t.get("consumption").expect("checked"), alpha_t, el)?;
     let outer = outer(t.get("outer"), alpha_t, el)?;
     let cells = radial_cells(t.get("radial_cells"), el)?;
-    let thickness = num(t.get("thickness").as_ref(), el, "thickness", Bound::Positive)?;
-    let diffusivity = num(t.get("diffusivity").as_ref(), el, "diffusivity", Bound::Positive)?;
-    let hypoxic = num_or(t, "hypoxic_po2", HYPOXIC_PO2, el, "hypoxic_po2", Bound::NonNegative)?;
+    let thickness = num(
+        t.get("thickness").as_ref(),
+        el,
+        "thickness",
+        Bound::Positive,
+    )?;
+    let diffusivity = num(
+        t.get("diffusivity").as_ref(),
+        el,
+        "diffusivity",
+        Bound::Positive,
+    )?;
+    let hypoxic = num_or(
+        t,
+        "hypoxic_po2",
+        HYPOXIC_PO2,
+        el,
+        "hypoxic_po2",
+        Bound::NonNegative,
+    )?;
     let tissue = json!({
         "thickness": thickness, "diffusivity": diffusivity, "partition": alpha_t / o.alpha,
         "consumption": consumption, "outer": outer, "radial_cells": cells,
@@ -98,12 +115,20 @@ fn outer<N: Node>(outer: Option<N>, alpha_t: f64, el: &str) -> Result<Value> {
     }
     let keys: Vec<String> = outer.entries().into_iter().map(|(k, _)| k).collect();
     if outer.is_map() && keys == ["po2"] {
-        let p = num(outer.get("po2").as_ref(), el, "outer po2", Bound::NonNegative)?;
+        let p = num(
+            outer.get("po2").as_ref(),
+            el,
+            "outer po2",
+            Bound::NonNegative,
+        )?;
         return Ok(json!({"kind": "concentration", "value": alpha_t * p}));
     }
     Err(err(
         el,
-        format!("outer must be 'no-flux' or {{po2: mmHg}}, got {}", outer.repr()),
+        format!(
+            "outer must be 'no-flux' or {{po2: mmHg}}, got {}",
+            outer.repr()
+        ),
     ))
 }
 
@@ -167,7 +192,10 @@ fn boundary_layer<N: Node>(
             ));
         }
     }
-    if spec.get("shear").is_some_and(|s| s.as_str() != Some("cycle-mean")) {
+    if spec
+        .get("shear")
+        .is_some_and(|s| s.as_str() != Some("cycle-mean"))
+    {
         return Err(err(
             el,
             "boundary_layer shear must be cycle-mean with a tissue wall",
