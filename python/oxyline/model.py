@@ -210,11 +210,12 @@ def _boundary_conditions(bcs: Mapping[str, Any], units: str
     return _core.read_conditions(bcs, units)
 
 
-def _unassembled(data: dict[str, Any], convert_vessels: Callable[..., Any],
-                 convert_boundary_conditions: Callable[..., Any]) -> Model:
-    """An ensemble variant's model of ``data`` with its canonical description, not assembled:
-    ``convert_vessels(vessels, units)`` and ``convert_boundary_conditions(conditions, units)``
-    reuse the base model's canonical elements that the variant leaves as they are."""
+def _unassembled(data: dict[str, Any], convert_vessels: Callable[..., Any] = _vessels,
+                 convert_boundary_conditions: Callable[..., Any] = _boundary_conditions
+                 ) -> Model:
+    """The model of ``data`` with its canonical description, not assembled (an ensemble's
+    variant): ``convert_vessels(vessels, units)`` and ``convert_boundary_conditions(conditions,
+    units)`` may reuse the base model's canonical elements the variant leaves as they are."""
     name, canon = _core.read_header(data)
     units = str(data.get("units", "SI"))
     canon["vessels"] = convert_vessels(data["vessels"], units)
