@@ -1239,3 +1239,98 @@ fn grid<N: Node>(tr: Option<&N>, ox: Option<&N>, out: &mut Map<String, Value>) -
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ctx() -> Context {
+        Context {
+            pressure_factor: 1.0,
+            period: Some(1.0),
+            duration: Some(10.0),
+            kinematic_viscosity: Some(3.5e-3 / 1050.0),
+        }
+    }
+
+    fn read_json(v: Value) -> Result<Option<Transport>> {
+        read(&v, &ctx())
+    }
+
+    /// PO2 in mmHg becomes a concentration α P (mol/m³); the Hill P50 becomes Pa; the Hill
+    /// capacity is Hb × Hüfner / 22.414 mL/mmol (hand-computed, not the reader's constants).
+    #[test]
+    fn oxygen_converts_mmhg_and_hemoglobin_to_si() {
+        let tr = read_json(json!({"oxygen": {
+            "inlet": {"po2": 85.0}, "hemoglobin": "hill",
+            "wall": {"model": "mass-transfer", "k": 1e-5, "po2": 60.0}}}))
+        .unwrap()
+        .unwrap();
+        let sp = &tr.section["species"][0];
+        assert_eq!(sp["inlet"]["value"].as_f64(), Some(1.40e-3 * 85.0));
+        assert_eq!(
+            sp["wall"]["wall_concentration"].as_f64(),
+            Some(1.40e-3 * 60.0)
+        );
+        assert_eq!(sp["binding"]["p50"].as_f64(), Some(26.8 * 133.322368));
+        let cap = sp["binding"]["capacity"].as_f64().unwrap();
+        assert!((cap - 150.0 * 1.34 / 22.414).abs() < 1e-12 * cap);
+        assert_eq!(tr.species, ["o2"]);
+        assert_eq!(tr.oxygen, Some(("o2".to_owned(), 1.40e-3)));
+    }
+
+    /// A Lévêque wall with haemoglobin is facilitated by default (E_Hb > 1, docs/physics.md
+    /// §3.4); switched off it keeps the given enhancement and warns.
+    #[test]
+    fn hemoglobin_facilitates_a_leveque_wall_unless_switched_off() {
+        let on = read_json(
+            json!({"oxygen": {"inlet": {"po2": 85.0}, "hemoglobin": "hill",
+            "wall": {"model": "leveque", "po2": 60.0}}}),
+        )
+        .unwrap()
+        .unwrap();
+        let e = on.section["species"][0]["wall"]["enhancement"]
+            .as_f64()
+            .unwrap();
+        assert!(e > 1.5 && e < 5.0, "E_Hb = {e}");
+        assert!(on.warnings.is_empty());
+        let off = read_json(
+            json!({"oxygen": {"inlet": {"po2": 85.0}, "hemoglobin": "hill",
+            "wall": {"model": "leveque", "po2": 60.0, "hb_facilitation": false}}}),
+        )
+        .unwrap()
+        .unwrap();
+        assert_eq!(
+            off.section["species"][0]["wall"]["enhancement"].as_f64(),
+            Some(1.0)
+        );
+        assert!(off.warnings[0].contains("dissolved O2 only"));
+    }
+
+    /// Messages name the section, the key and the value as the user wrote them.
+    #[test]
+    fn errors_name_the_section_key_and_value() {
+        let msg = |v: Value| read_json(v).err().unwrap().to_string();
+        let m = msg(json!({"oxygen": {"inlet": {"po2": 85.0}, "colour": 1}}));
+        assert!(
+            m.contains("oxygen") && m.contains("unknown key 'colour'"),
+            "{m}"
+        );
+        let m = msg(json!({"oxygen": {"inlet": {"po2": -1.0}}}));
+        assert!(
+            m.contains("oxygen inlet") && m.contains("'po2' must be >= 0.0, got -1.0"),
+            "{m}"
+        );
+        let m = msg(json!({"species": [{"name": "s", "inlet": 1.0, "decay": "fast"}]}));
+        assert!(
+            m.contains("species 's'") && m.contains("'decay'") && m.contains("'fast'"),
+            "{m}"
+        );
+        let m = msg(json!({"oxygen": {"inlet": {"po2": 85}, "per_vessel": {
+            "ICA": {"wall": {"model": "graetz", "po2": 50, "flow": "mean"}}}}}));
+        assert!(
+            m.contains("per_vessel 'ICA'") && m.contains("'mean'"),
+            "{m}"
+        );
+    }
+}
