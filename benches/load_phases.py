@@ -11,8 +11,8 @@ more than the target's margin).
 Phases (the same calls ``load_model`` makes, in its order): ``copy`` (the private copy of the
 user's dict, ``model._copy``) or ``read`` (``--route json|yaml``: the tree written once as a
 native file, read by ``oxyline.io.native.read_mapping``), ``canonical`` (checks and SI
-conversion, ``model._unassembled``; since the load rework the binding reads the plain vessels
-and outlets here, ``_core.NativeParts``), ``core`` (``_core.Network``: the core assembles the
+conversion: ``_core.read_model``, which reads the whole model and the plain vessels and
+outlets straight into the network's parts), ``core`` (``_core.Network.from_parts``: the core assembles the
 circuit, the DAE and the transport plan), ``release`` (the output-layout check and
 ``release_canonical``). ``total`` is ``load_model`` as ``bench_scale.py`` times it (process
 CPU); ``steady`` the steady solve a run starts from (not part of the load). A page fault of
@@ -67,7 +67,12 @@ def child(depth: int, config: str, route: str) -> dict[str, Any]:
             data = read_mapping(_file(depth, config, route))
     mark("copy" if route == "dict" else "read")
     with gc_paused():
-        if hasattr(M, "_NativeReader"):  # this branch: the core reads the plain elements
+        if hasattr(M._core, "read_model"):  # this branch: the core reads the model once
+            parts, *_ = M._core.read_model(data)
+            mark("canonical")
+            network = M._core.Network.from_parts(parts, None)
+            mark("core")
+        elif hasattr(M, "_NativeReader"):  # the core reads the plain elements
             reader = M._NativeReader()
             m = M._unassembled(data, reader.vessels, reader.boundary_conditions)
             names = reader.parts.names()
@@ -75,15 +80,16 @@ def child(depth: int, config: str, route: str) -> dict[str, Any]:
             m._network = M._network(m.canonical, None, reader.parts)
             mark("core")
             m.release_canonical(names)
+            network = m.network
         else:  # before: a canonical dict per element, read by the binding
             m = M._unassembled(data)
             mark("canonical")
-            m.network  # noqa: B018
+            network = m.network
             mark("core")
             m.release_canonical()
     mark("release")
     out["total"] = time.process_time() - c0
-    m.network.steady_state()
+    network.steady_state()
     mark("steady")
     return out
 

@@ -170,9 +170,7 @@ def build_with_trees(data: dict[str, Any], build_native: Callable[..., Any],
         terminals.append(json.dumps(canon[node]))
     model = build_native({**data, "boundary_conditions": rest},
                          lambda parts: grown.move_into(parts, terminals))
-    model.source = data
-    if model._rebuild is not None:  # the released description is written from ``data``
-        model._rebuild = data
+    model.source = data  # ``canonical`` is written from it, trees grown, when asked for
     own = (v for v in data.get("vessels") or [] if isinstance(v, Mapping))
     model.default_output_vessels = [str(v["name"]) for v in own if v.get("output", True)]
     return model

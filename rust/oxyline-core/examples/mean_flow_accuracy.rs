@@ -9,7 +9,7 @@
 //! (`RHO=1.0` runs the passes with ρ∞ = 1, `LINEAR=1` integrates |Q| exactly between steps.)
 
 use oxyline_core::genalpha::NewtonControl;
-use oxyline_core::network::parse;
+use oxyline_core::model::parse;
 use oxyline_core::{Method, RunSettings, Start, Transport, simulate_with_transport};
 
 /// ∫|q| over a step of the linear interpolant between q0 and q1, divided by the step.

@@ -14,7 +14,6 @@ pub mod hemoglobin;
 pub mod impedance;
 pub mod integrate;
 pub mod model;
-pub mod network;
 pub mod output;
 pub mod run;
 pub mod segment;

@@ -3,7 +3,7 @@
 
 mod common;
 
-use oxyline_core::network::parse;
+use oxyline_core::model::parse;
 use oxyline_core::stability::{SpectrumMethod, rk4_limit_by};
 use oxyline_core::{Regime, rk4::Rk4};
 

@@ -67,9 +67,10 @@ mod _core {
         errors::{ModelError, ResourceError, SolverError, UnstableTimeStep},
         network::Network,
         reader::NativeParts,
+        reader::model::{canonical_model, read_model},
         reader::schema::{
-            check_periods, check_simulation, read_conditions, read_header, read_vessels,
-            resolve_settings,
+            check_periods, check_simulation, read_conditions, read_header, read_transport,
+            read_vessels, resolve_settings, transport_section,
         },
     };
 
@@ -104,6 +105,15 @@ mod _core {
                 bc.set_item(*kind, keys.to_vec())?;
             }
             m.add("BC_KEYS", bc)?;
+            use oxyline_core::model::species;
+            m.add("OXYGEN_KEYS", species::OXYGEN_KEYS.to_vec())?;
+            m.add("TRANSPORT_KEYS", species::TRANSPORT_KEYS.to_vec())?;
+            m.add("SPECIES_KEYS", species::SPECIES_KEYS.to_vec())?;
+            let walls = pyo3::types::PyDict::new(m.py());
+            for (model, keys) in species::WALL_KEYS {
+                walls.set_item(*model, keys.to_vec())?;
+            }
+            m.add("WALL_KEYS", walls)?;
         }
         // the run settings `Network.simulate` and `Ensemble.run` take as `**settings`
         m.add("RUN_SETTINGS", super::settings::KEYS.to_vec())?;

@@ -106,6 +106,53 @@ impl Network {
         })
     }
 
+    /// The network of a model read by `read_model` (its parts, structured trees grown into
+    /// them, moved into the spec): the model crosses from Python once. `max_memory`: the
+    /// memory limit in bytes (None: none).
+    #[staticmethod]
+    #[pyo3(signature = (parts, max_memory = None))]
+    fn from_parts(
+        py: Python<'_>,
+        parts: Bound<'_, reader::NativeParts>,
+        max_memory: Option<f64>,
+    ) -> PyResult<Self> {
+        let (vessels, outlets, rest) = {
+            let mut p = parts.borrow_mut();
+            let rest = p.rest.take().ok_or_else(|| {
+                to_py(Error::model(
+                    "model",
+                    "was not read (no parts to build from)",
+                ))
+            })?;
+            let (v, o) = p.take().map_err(to_py)?;
+            (v, o, rest)
+        };
+        let built = py.detach(
+            move || -> Result<((Assembled, Dae), Option<Transport>), Error> {
+                let mut spec: oxyline_core::NetworkSpec =
+                    serde_json::from_value(serde_json::Value::Object(rest))
+                        .map_err(|e| Error::model("model", e.to_string()))?;
+                spec.vessels = vessels;
+                spec.max_memory = max_memory;
+                for (node, bc) in outlets {
+                    if spec.boundary_conditions.insert(node.clone(), bc).is_some() {
+                        return Err(Error::model(
+                            format!("boundary condition '{node}'"),
+                            "given twice",
+                        ));
+                    }
+                }
+                let m = oxyline_core::ensemble::Member::build(&spec)?;
+                Ok(((m.assembled, m.dae), m.transport))
+            },
+        );
+        let (built, transport) = built.map_err(to_py)?;
+        Ok(Network {
+            inner: Arc::new(built),
+            transport: transport.map(Arc::new),
+        })
+    }
+
     /// Counts and totals for `oxyline validate`.
     fn summary<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let (a, dae) = &*self.inner;

@@ -3,8 +3,8 @@
 // (each example uses a part of this module)
 #![allow(dead_code)]
 
-use oxyline_core::network::{Assembled, parse};
 use oxyline_core::transport::{BALANCE_COLUMNS, VESSEL_COLUMNS};
+use oxyline_core::{Assembled, model::parse};
 use oxyline_core::{Dae, Transport};
 
 /// CPU seconds of this process (user + system, from /proc: robust on a shared machine).

@@ -49,6 +49,14 @@ pub trait Node: Sized {
     fn is_map(&self) -> bool {
         self.kind() == Kind::Map
     }
+    /// A function of time the front end can call (a wall flux f(t) given as a callable).
+    fn callable(&self) -> bool {
+        false
+    }
+    /// The value of a callable at `t` (its failure as text).
+    fn call(&self, _t: f64) -> Result<Self, String> {
+        Err(format!("{} is not callable", self.repr()))
+    }
     fn has(&self, key: &str) -> bool {
         self.get(key).is_some()
     }
@@ -116,6 +124,12 @@ impl<N: Node + Clone> Node for Fields<N> {
     }
     fn has(&self, key: &str) -> bool {
         self.entries.iter().flatten().any(|(k, _)| k == key)
+    }
+    fn callable(&self) -> bool {
+        self.node.callable()
+    }
+    fn call(&self, t: f64) -> Result<Self, String> {
+        self.node.call(t).map(Fields::new)
     }
 }
 

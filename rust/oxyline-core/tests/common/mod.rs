@@ -6,7 +6,7 @@
 #![allow(dead_code)]
 
 use oxyline_core::Transport;
-use oxyline_core::network::parse;
+use oxyline_core::model::parse;
 
 pub struct Built {
     pub assembled: oxyline_core::Assembled,

@@ -10,7 +10,7 @@ use crate::errors::to_py;
 use oxyline_core::Error;
 use oxyline_core::model::native;
 use oxyline_core::model::node::Fields;
-use oxyline_core::model::units::Quantity;
+use oxyline_core::model::units::{Quantity, Units};
 use oxyline_core::model::{Arrangement, BoundarySpec, GeometrySpec, VesselSpec};
 use oxyline_core::waveform::WaveformSpec;
 use pyo3::prelude::*;
@@ -159,20 +159,55 @@ fn outlet(item: &Bound<'_, PyAny>, (r, c, p): (f64, f64, f64)) -> Option<Boundar
 /// Outlet conditions by node name, in the order read.
 pub(crate) type Outlets = Vec<(String, BoundarySpec)>;
 
-/// The vessels and outlets of a native model read by this module; the ones it left to Python
-/// are listed (`slow_vessels`, the node names `outlets` returns) and filled in by Python.
+/// The vessels and outlets of a native model (read here, or by the core's full check where
+/// this module leaves them), and the rest of the canonical model (`reader::model::read_model`):
+/// what the network is built from, with structured trees grown into it (`trees`).
 #[pyclass(module = "oxyline._core")]
 pub struct NativeParts {
     pub(crate) vessels: Vec<Option<VesselSpec>>,
     pub(crate) outlets: Outlets,
+    /// The rest of the canonical model (top level, the conditions not in `outlets`, the
+    /// transport section) when the whole model was read here (`read_model`).
+    pub(crate) rest: Option<serde_json::Map<String, serde_json::Value>>,
 }
 
 #[pymethods]
 impl NativeParts {
-    /// Read the plain vessels of the native `vessels` list (in the unit system `units`).
+    /// Read the plain vessels of the native `vessels` list (in the unit system `units`): the
+    /// fast reader alone, as `read_model` uses it.
     #[new]
     fn new(vessels: &Bound<'_, PyList>, units: &str) -> PyResult<Self> {
-        let u = super::schema::units(units)?;
+        Self::read(vessels, super::schema::units(units)?)
+    }
+
+    /// Indices of the vessels the fast reader did not take, in order.
+    fn slow_vessels(&self) -> Vec<usize> {
+        self.slow()
+    }
+
+    /// Read the plain outlets of the native `boundary_conditions` mapping (in the unit system
+    /// `units`); returns the node keys of the conditions left to the full check, in order.
+    #[pyo3(name = "read_outlets")]
+    fn py_read_outlets<'py>(
+        &mut self,
+        bcs: &Bound<'py, PyDict>,
+        units: &str,
+    ) -> PyResult<Vec<Bound<'py, PyAny>>> {
+        Ok(self.read_outlets(bcs, super::schema::units(units)?))
+    }
+
+    /// The vessel names in model order (every vessel read or put).
+    fn names(&self) -> Vec<&str> {
+        self.vessels
+            .iter()
+            .map(|v| v.as_ref().map_or("", |v| v.name.as_str()))
+            .collect()
+    }
+}
+
+impl NativeParts {
+    /// Read the plain vessels of the native `vessels` list (in the unit system `u`).
+    pub(crate) fn read(vessels: &Bound<'_, PyList>, u: Units) -> PyResult<Self> {
         let (length, modulus) = (u.factor(Quantity::Length), u.factor(Quantity::Modulus));
         Ok(NativeParts {
             vessels: vessels
@@ -180,11 +215,12 @@ impl NativeParts {
                 .map(|v| vessel(&v, length, modulus))
                 .collect(),
             outlets: Vec::new(),
+            rest: None,
         })
     }
 
-    /// Indices of the vessels this reader did not take, in order.
-    fn slow_vessels(&self) -> Vec<usize> {
+    /// Indices of the vessels the fast reader did not take, in order.
+    fn slow(&self) -> Vec<usize> {
         (0..self.vessels.len())
             .filter(|&i| self.vessels[i].is_none())
             .collect()
@@ -192,14 +228,13 @@ impl NativeParts {
 
     /// Read the vessels the fast reader did not take with the core's full check (and its
     /// precise error); returns the periods of their heart elements, with the element.
-    fn read_rest(
+    pub(crate) fn read_rest(
         &mut self,
         vessels: &Bound<'_, PyList>,
-        units: &str,
+        u: Units,
     ) -> PyResult<Vec<(f64, String)>> {
-        let u = super::schema::units(units)?;
         let mut canonical = Vec::new();
-        for i in self.slow_vessels() {
+        for i in self.slow() {
             let item = vessels.get_item(i)?;
             let c = native::vessel(&Fields::new(PyNode(item)), i, u).map_err(to_py)?;
             let v: VesselSpec = serde_json::from_value(c.clone())
@@ -211,14 +246,12 @@ impl NativeParts {
     }
 
     /// Read the plain outlets of the native `boundary_conditions` mapping (in the unit system
-    /// `units`); returns the node keys of the conditions left
-    /// to Python, in order.
-    fn read_outlets<'py>(
+    /// `u`); returns the node keys of the conditions left to the full check, in order.
+    pub(crate) fn read_outlets<'py>(
         &mut self,
         bcs: &Bound<'py, PyDict>,
-        units: &str,
-    ) -> PyResult<Vec<Bound<'py, PyAny>>> {
-        let u = super::schema::units(units)?;
+        u: Units,
+    ) -> Vec<Bound<'py, PyAny>> {
         let resistance = u.factor(Quantity::Resistance);
         let capacitance = u.factor(Quantity::Capacitance);
         let pressure = u.factor(Quantity::Pressure);
@@ -233,19 +266,8 @@ impl NativeParts {
                 _ => slow.push(node),
             }
         }
-        Ok(slow)
+        slow
     }
-
-    /// The vessel names in model order (every vessel read or put).
-    fn names(&self) -> Vec<&str> {
-        self.vessels
-            .iter()
-            .map(|v| v.as_ref().map_or("", |v| v.name.as_str()))
-            .collect()
-    }
-}
-
-impl NativeParts {
     /// The vessels and outlets, moved out (a second call gets none).
     pub(crate) fn take(&mut self) -> Result<(Vec<VesselSpec>, Outlets), Error> {
         let vessels = std::mem::take(&mut self.vessels);

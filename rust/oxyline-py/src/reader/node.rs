@@ -112,6 +112,12 @@ impl Node for PyNode<'_> {
     fn truthy(&self) -> bool {
         self.0.is_truthy().unwrap_or(true)
     }
+    fn callable(&self) -> bool {
+        self.0.is_callable()
+    }
+    fn call(&self, t: f64) -> Result<Self, String> {
+        self.0.call1((t,)).map(PyNode).map_err(|e| e.to_string())
+    }
 }
 
 /// A canonical JSON value as Python objects (floats stay floats, integers ints).

@@ -5,9 +5,9 @@
 use super::node::{PyNode, to_python};
 use crate::errors::to_py;
 use oxyline_core::Error;
-use oxyline_core::model::native;
-use oxyline_core::model::node::{Fields, Node};
-use oxyline_core::model::units::Units;
+use oxyline_core::model::node::{Fields, Kind, Node};
+use oxyline_core::model::units::{Quantity, Units};
+use oxyline_core::model::{native, species};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
@@ -81,6 +81,117 @@ pub(crate) fn read_conditions<'py>(
 pub(crate) fn check_periods(data: Bound<'_, PyAny>, periods: Periods) -> PyResult<Option<f64>> {
     let period = native::period(&PyNode(data)).map_err(to_py)?;
     native::check_periods(period, &periods).map_err(to_py)
+}
+
+/// The canonical transport section of a native model (None without `oxygen` or `species`)
+/// and its facts for results (species names, the oxygen species and its solubility per mmHg),
+/// read by the core (`oxyline_core::model::species`); `period`: the model's. The sections are
+/// read against the model's units, blood and run duration.
+#[pyfunction]
+pub(crate) fn read_transport<'py>(
+    py: Python<'py>,
+    data: Bound<'py, PyAny>,
+    period: Option<f64>,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyDict>)> {
+    let node = PyNode(data);
+    let header = native::header(&node).map_err(to_py)?;
+    let ctx = transport_context(&node, &header.canonical["blood"], header.units, period);
+    let (section, info) = transport(py, &node, &ctx)?;
+    let section = match section {
+        Some(s) => to_python(py, &s)?,
+        None => py.None().into_bound(py),
+    };
+    Ok((section, info))
+}
+
+/// What the transport sections of a model are read against: its pressure unit, period, run
+/// duration and blood (canonical, SI).
+pub(crate) fn transport_context<N: Node>(
+    data: &N,
+    blood: &serde_json::Value,
+    units: Units,
+    period: Option<f64>,
+) -> species::Context {
+    let (mu, rho) = (blood["viscosity"].as_f64(), blood["density"].as_f64());
+    species::Context {
+        pressure_factor: units.factor(Quantity::Pressure),
+        period,
+        duration: duration(data, period),
+        kinematic_viscosity: mu.zip(rho).map(|(mu, rho)| mu / rho),
+    }
+}
+
+/// The transport sections of `data` alone (no blood: a `graetz` wall without its kinematic
+/// viscosity), read against a pressure unit factor, a period and a run duration.
+#[pyfunction]
+pub(crate) fn transport_section<'py>(
+    py: Python<'py>,
+    data: Bound<'py, PyAny>,
+    pressure_factor: f64,
+    period: Option<f64>,
+    duration: Option<f64>,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyDict>)> {
+    let ctx = species::Context {
+        pressure_factor,
+        period,
+        duration,
+        kinematic_viscosity: None,
+    };
+    let (section, info) = transport(py, &PyNode(data), &ctx)?;
+    let section = match section {
+        Some(s) => to_python(py, &s)?,
+        None => py.None().into_bound(py),
+    };
+    Ok((section, info))
+}
+
+/// (canonical transport section or None, facts for results); a wall that needs it warns
+/// (`oxyline.HemoglobinFacilitationWarning`).
+pub(crate) fn transport<'py>(
+    py: Python<'py>,
+    node: &PyNode<'py>,
+    ctx: &species::Context,
+) -> PyResult<(Option<serde_json::Value>, Bound<'py, PyDict>)> {
+    let info = PyDict::new(py);
+    let Some(tr) = species::read(node, ctx).map_err(to_py)? else {
+        return Ok((None, info));
+    };
+    if !tr.warnings.is_empty() {
+        let category = py
+            .import("oxyline.transport")?
+            .getattr("HemoglobinFacilitationWarning")?;
+        for w in &tr.warnings {
+            let text = std::ffi::CString::new(w.as_str()).unwrap_or_default();
+            PyErr::warn(py, &category, &text, 2)?;
+        }
+    }
+    info.set_item("species", &tr.species)?;
+    info.set_item("oxygen", tr.oxygen.as_ref().map(|o| o.0.clone()))?;
+    info.set_item("solubility", tr.oxygen.as_ref().map(|o| o.1))?;
+    Ok((Some(tr.section), info))
+}
+
+/// The run's duration (s) a callable wall flux and a bolus are sampled over: the model period
+/// (1 s when none) times the file's `cycles` (`max_cycles` when `until_periodic`); None when
+/// the count is no number.
+pub(crate) fn duration<N: Node>(data: &N, period: Option<f64>) -> Option<f64> {
+    let sim = data.get("simulation").filter(Node::truthy);
+    let get = |k: &str| sim.as_ref().and_then(|s| s.get(k));
+    let periodic = get("until_periodic").is_some_and(|u| u.truthy());
+    let (key, default) = if periodic {
+        ("max_cycles", 100.0)
+    } else {
+        ("cycles", 10.0)
+    };
+    let cycles = match get(key) {
+        None => Some(default),
+        Some(c) => match c.kind() {
+            Kind::Bool => Some(if c.truthy() { 1.0 } else { 0.0 }),
+            Kind::Int | Kind::Float => c.number(),
+            _ => None,
+        },
+    };
+    cycles.map(|c| period.unwrap_or(1.0) * c)
 }
 
 /// The keys of a model's `simulation` section and its method.
