@@ -63,8 +63,13 @@ class _Bar:
         self.total, self.n, self.shown = total, 0.0, []
         self.format = str(kwargs.get("bar_format", ""))
 
+        self.desc = str(kwargs.get("desc", ""))
+
     def refresh(self) -> None:
         self.shown.append((self.n, self.total))
+
+    def set_description(self, desc: str, refresh: bool = True) -> None:
+        self.desc = desc
 
     def close(self) -> None:
         pass
@@ -76,7 +81,7 @@ class _Bar:
 ])
 def test_progress_counts_cycles_and_never_goes_back(monkeypatch: pytest.MonkeyPatch,
                                                     model: str, options: dict) -> None:
-    import tqdm.auto
+    from oxyline import run
 
     bars: list[_Bar] = []
 
@@ -84,17 +89,40 @@ def test_progress_counts_cycles_and_never_goes_back(monkeypatch: pytest.MonkeyPa
         bars.append(_Bar(**kwargs))
         return bars[-1]
 
-    monkeypatch.setattr(tqdm.auto, "tqdm", make)
+    monkeypatch.setattr(run, "tqdm_class", lambda: make)
     res = oxyline.simulate(model, progress=True, **options)
     shown = bars[0].shown
     counts = [n for n, _ in shown]
     assert counts == sorted(counts)  # before: the oxygen run's bar jumped from 3.0 s back to 0.3 s
-    assert counts[-1] >= res.settings["cycles_run"] - 1e-9
+    # the count ends at the cycles run: before, an oxygen run's flow-only pass was added and
+    # a 3-cycle run counted 6
+    assert counts[-1] == pytest.approx(res.settings["cycles_run"], abs=1e-9)
+    assert max(counts) <= res.settings["cycles_run"] + 1e-9
+    assert bars[0].desc == "run"
     if "until_periodic" in options:  # before: a percentage of max_cycles, stuck at a few %
         assert all(total is None for _, total in shown)
         assert "until the cycle-to-cycle change < 1e-06" in bars[0].format
     else:
         assert "cycles" in bars[0].format
+
+
+def test_progress_bar_in_a_notebook_without_ipywidgets_is_the_text_bar(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """tqdm.auto in Jupyter without ipywidgets warned "IProgress not found" on every run."""
+    import sys
+    import types
+    import warnings
+
+    import tqdm.std
+
+    from oxyline import run
+
+    monkeypatch.setitem(sys.modules, "ipykernel", types.ModuleType("ipykernel"))
+    monkeypatch.setitem(sys.modules, "ipywidgets", None)  # import fails: not installed
+    assert run.tqdm_class() is tqdm.std.tqdm
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        oxyline.simulate("bifurcation", cycles=1, progress=True)
 
 
 CEREBRAL = ("MCA", "ACA", "PCA", "Basilar", "int-carotid", "cerebral")

@@ -27,7 +27,7 @@ from typing import Any
 
 from oxyline import _core
 from oxyline import memory as _memory  # a leaf too: imports only _core and errors
-from oxyline.errors import ModelError
+from oxyline.errors import ModelError, warn_implausible
 from oxyline.structured_tree import build_with_trees, expanded, has_trees
 from oxyline.units import factor
 
@@ -301,6 +301,7 @@ def _build_native(data: dict[str, Any], grow: Callable[[Any], Any] | None = None
     names = reader.parts.names()
     # assemble now so that invalid models fail at load time
     model._network = _network(model.canonical, model.simulation.get("max_memory"), reader.parts)
+    warn_implausible(model._network.plausibility())
     sim = model.simulation
     out = sim.get("output") or {}
     if "variables" in out or "vessels" in out:  # unknown names fail at load time too

@@ -2,8 +2,12 @@
 
 ``import oxyline`` never imports this module or matplotlib; ``import oxyline.plot`` does not
 import matplotlib either until a function is called. Every function returns the
-:class:`matplotlib.figure.Figure`; axes are labelled with units (pressures in mmHg, flows in
-mL/s, lengths in cm), texts that would overlap are dropped.
+:class:`matplotlib.figure.Figure`; axes are labelled ``quantity [unit]`` (pressures in mmHg,
+flows in mL/s or a smaller prefix for microvascular flows, lengths in cm, O2 fluxes in mol/s
+with the SI prefix that suits the figure's values), texts that would overlap are dropped.
+Curves that coincide (the pressure at a node two vessels share) are drawn once, labelled with
+every vessel; flows whose peaks differ by more than a decade go in separate panels, one per
+decade; a colour bar spanning a narrow range says so in the title.
 
 >>> import oxyline, oxyline.plot
 >>> res = oxyline.simulate("bifurcation", cycles=2)
@@ -59,8 +63,41 @@ def _model(model: Model | str | os.PathLike[str] | Mapping[str, Any]) -> Model:
     return as_model(model)
 
 
-def display(units: str) -> tuple[str, float]:
-    """Display units and the factor from SI ``units`` (Pa → mmHg, m³/s → mL/s, …)."""
+#: SI prefixes, largest first: a quantity shown with the prefix that puts its largest
+#: magnitude in [1, 1000) (no "nmol/s" values in the millions)
+PREFIXES = ((1e3, "k"), (1.0, ""), (1e-3, "m"), (1e-6, "µ"), (1e-9, "n"), (1e-12, "p"),
+            (1e-15, "f"))
+
+
+def _peak(values: Any) -> float:
+    a = np.abs(np.asarray(values, dtype=float))
+    a = a[np.isfinite(a)]
+    return float(a.max()) if a.size else 0.0
+
+
+def prefixed(units: str, values: Any) -> tuple[str, float]:
+    """``units`` with the SI prefix that puts the largest magnitude of ``values`` in
+    [1, 1000), and the factor from ``units``: ``prefixed("mol/s", [2e-6])`` is
+    ``("µmol/s", 1e6)``."""
+    peak = _peak(values)
+    for scale, p in PREFIXES:
+        if peak >= scale:
+            return p + units, 1.0 / scale
+    return PREFIXES[-1][1] + units, 1.0 / PREFIXES[-1][0]
+
+
+def display(units: str, values: Any = None) -> tuple[str, float]:
+    """Display units and the factor from SI ``units``: Pa → mmHg; m³/s → mL/s (µL/s or nL/s
+    when every value of ``values`` is below 0.01 mL/s); m → cm; mol/s with the SI prefix that
+    suits ``values`` (nmol/s without them).
+
+    >>> display("Pa")[0], display("mol/s", [3e-5])
+    ('mmHg', ('µmol/s', 1000000.0))
+    """
+    if values is not None and units == "m^3/s" and 0 < _peak(values) < 1e-8:
+        return ("µL/s", 1e9) if _peak(values) >= 1e-11 else ("nL/s", 1e12)
+    if values is not None and units.startswith("mol/s"):
+        return prefixed(units, values)
     return DISPLAY.get(units, (units, 1.0))
 
 
@@ -104,10 +141,54 @@ def _declutter(fig: Any, texts: Sequence[Any]) -> None:
             kept.append(bb)
 
 
+#: line styles cycled over the colours: distinct vessels stay distinct beyond ten of them
+STYLES = ("-", "--", ":", "-.")
+
+
+def same_curves(series: Mapping[str, np.ndarray]) -> list[tuple[list[str], np.ndarray]]:
+    """The curves of ``series`` (name -> values) with those that coincide merged, each with all
+    its names: two vessels leaving one node read the same node pressure, and two lines drawn
+    on top of each other would hide one of them. Coincide: equal to 1e-9 of the largest
+    magnitude (round-off of one node's value read twice)."""
+    scale = max((_peak(v) for v in series.values()), default=0.0) or 1.0
+    groups: list[tuple[list[str], np.ndarray]] = []
+    for name, y in series.items():
+        for names, y0 in groups:
+            if y0.shape == y.shape and np.allclose(y, y0, rtol=0.0, atol=1e-9 * scale):
+                names.append(name)
+                break
+        else:
+            groups.append(([name], np.asarray(y)))
+    return groups
+
+
+def decade_groups(peaks: Mapping[str, float]) -> list[list[str]]:
+    """Names grouped, largest peak first, so that the peaks within a group lie within a
+    factor of 10: a flow of 0.5 mL/s on the axis of a 400 mL/s aortic flow is a flat line,
+    so each group gets its own panel."""
+    groups: list[list[str]] = []
+    for n in sorted(peaks, key=lambda k: -peaks[k]):
+        if groups and peaks[n] * 10.0 >= peaks[groups[-1][0]]:
+            groups[-1].append(n)
+        else:
+            groups.append([n])
+    return groups
+
+
 def waveforms(result: Result, vessels: Sequence[str] | str | None = None,
               quantities: Sequence[str] = ("pressure", "flow"), end: str = "in") -> Figure:
     """Waveforms of ``quantities`` (one panel each, e.g. "pressure", "flow", "po2", or a result
-    variable name) at the ``end`` ("in"/"out") of each of ``vessels`` (default: up to 6)."""
+    variable name) at the ``end`` ("in"/"out") of each of ``vessels`` (default: up to 6).
+    A quantity whose peaks differ by more than a decade between the vessels gets one panel
+    per decade (:func:`decade_groups`); coinciding curves are drawn once
+    (:func:`same_curves`), labelled ``a = b``.
+
+    >>> import oxyline, oxyline.plot
+    >>> res = oxyline.simulate("bifurcation", cycles=1)
+    >>> fig = oxyline.plot.waveforms(res, ["parent", "daughter1"])
+    >>> [ax.get_ylabel() for ax in fig.axes]
+    ['pressure [mmHg]', 'flow [mL/s]']
+    """
     plt = _plt()
     ds = result.to_xarray()
     if isinstance(vessels, str):
@@ -117,28 +198,48 @@ def waveforms(result: Result, vessels: Sequence[str] | str | None = None,
         if n not in result.vessels:
             raise KeyError(f"vessel '{n}' has no output (vessels: {', '.join(result.vessels[:10])}"
                            f"{', ...' if len(result.vessels) > 10 else ''})")
-    variables = [_vessel_variable(ds, q, end) for q in quantities]
-    fig, axes = plt.subplots(len(variables), 1, sharex=True, squeeze=False,
-                             figsize=(7.0, 2.4 * len(variables) + 0.8), layout="constrained")
-    for ax, var in zip(axes[:, 0], variables):
-        units, k = display(str(ds[var].attrs.get("units", "")))
-        for n in names:
-            ax.plot(result.time, ds[var].sel(vessel=n).values * k, label=n, lw=1.4)
-        end_txt = {"in": "inlet", "out": "outlet"}.get(var.rsplit("_", 1)[-1], "")
-        ylabel = f"{_label(var)}"
-        ax.set_ylabel(f"{ylabel} [{units}]" if units else ylabel)
-        if end_txt:
-            ax.set_title(f"{_label(var)} at the vessel {end_txt}", fontsize=10, loc="left")
-        ax.grid(alpha=0.3)
+    panels: list[tuple[str, dict[str, np.ndarray], bool]] = []
+    for var in (_vessel_variable(ds, q, end) for q in quantities):
+        series = {n: np.asarray(ds[var].sel(vessel=n).values, dtype=float) for n in names}
+        groups = decade_groups({n: _peak(y) for n, y in series.items()})
+        panels += [(var, {n: series[n] for n in g}, len(groups) > 1) for g in groups]
+    fig, axes = plt.subplots(len(panels), 1, sharex=True, squeeze=False,
+                             figsize=(7.0, 2.4 * len(panels) + 0.8), layout="constrained")
+    for ax, (var, series, split) in zip(axes[:, 0], panels):
+        _waveform_panel(ax, result.time, var, series, str(ds[var].attrs.get("units", "")),
+                        names, split)
     axes[-1, 0].set_xlabel("time [s]")
-    handles, labels = axes[0, 0].get_legend_handles_labels()
+    by_label: dict[str, Any] = {}
+    for ax in axes[:, 0]:
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            by_label.setdefault(lab, h)
     # below the panels: long vessel names (whole-body-140) beside them squeezed the axes and
     # covered the title
-    longest = max((len(x) for x in labels), default=0)
-    fig.legend(handles, labels, loc="outside lower center", fontsize=8, title="vessel",
-               ncols=1 if longest > 40 else min(3, max(1, len(labels))))
+    longest = max((len(x) for x in by_label), default=0)
+    fig.legend(list(by_label.values()), list(by_label), loc="outside lower center", fontsize=8,
+               title="vessel", ncols=1 if longest > 40 else min(3, max(1, len(by_label))))
     fig.suptitle(f"{result.model_name}: waveforms", fontsize=11)
     return fig
+
+
+def _waveform_panel(ax: Any, time: Any, var: str, series: Mapping[str, np.ndarray], si: str,
+                    names: Sequence[str], split: bool) -> None:
+    """One panel of :func:`waveforms`: the curves of ``series`` in display units, each
+    vessel in the colour and style of its place in ``names``."""
+    units, k = display(si, np.concatenate([y.ravel() for y in series.values()]))
+    for merged, y in same_curves(series):
+        i = names.index(merged[0])
+        ax.plot(time, y * k, label=" = ".join(merged), lw=1.4, color=f"C{i % 10}",
+                ls=STYLES[(i // 10) % len(STYLES)])
+    ax.set_ylabel(f"{_label(var)} [{units}]" if units else _label(var))
+    end_txt = {"in": "inlet", "out": "outlet"}.get(var.rsplit("_", 1)[-1], "")
+    title = f"{_label(var)} at the vessel {end_txt}" if end_txt else ""
+    if split:
+        peaks = [_peak(y) * k for y in series.values()]
+        title += f"{', ' if title else ''}peaks {min(peaks):.3g} to {max(peaks):.3g} {units}"
+    if title:
+        ax.set_title(title, fontsize=10, loc="left")
+    ax.grid(alpha=0.3)
 
 
 def _graph(model: Model) -> tuple[dict[str, list[tuple[str, str]]], dict[str, dict[str, Any]]]:
@@ -345,7 +446,7 @@ def profile(result: Result, model: Model | str, outlet: str,
     for row, q in enumerate(quantities):
         ax = axes[row, 0]
         d = profile_data(result, m, outlet, q, inlet)
-        units, k = display(str(d["units"]))
+        units, k = display(str(d["units"]), np.concatenate([d["min"], d["max"]]))
         xk = 1.0 if str(d["distance_units"]) == "vessel" else 100.0
         x = d["distance"] * xk
         ax.fill_between(x, d["min"] * k, d["max"] * k, color="C0", alpha=0.2,
@@ -471,7 +572,7 @@ def _values(model: Model, values: Any, result: Result | None, label: str | None,
         if both:  # the vessel's mean: average of its two ends
             a = 0.5 * (a + ds[f"{values}_out"].values)
         mean = np.trapezoid(a, t, axis=0) / (t[-1] - t[0]) if len(t) > 1 else a.mean(axis=0)
-        u, k = display(str(ds[var].attrs.get("units", "")))
+        u, k = display(str(ds[var].attrs.get("units", "")), mean)
         by = dict(zip(result.vessels, mean * k))
         return (np.array([by.get(n, math.nan) for n in names]),
                 label or f"time-mean {_label(var)}", units if units is not None else u,
@@ -546,6 +647,7 @@ def network_map(model: Model | str | os.PathLike[str], values: Any = None,
     sm = plt.cm.ScalarMappable(norm=norm, cmap=cm)
     cb = fig.colorbar(sm, ax=ax, shrink=0.8, pad=0.02)
     cb.set_label(f"{label} [{units}]" if units else label)
+    cb.ax.yaxis.get_major_formatter().set_useOffset(False)  # full values, no hidden offset
     texts = []
     if labels or (labels is None and len(vessels) <= 150):
         for v, s in zip(vessels, segs):
@@ -554,9 +656,23 @@ def network_map(model: Model | str | os.PathLike[str], values: Any = None,
                                  ha="center", va="bottom", color="0.1", zorder=3.5,
                                  bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none",
                                        "alpha": 0.7}))
-    ax.set_title(f"{m.name}: {label}{note}", fontsize=11)
+    ax.set_title(f"{m.name}: {label}{note}{narrow_range_note(vmin, vmax, units)}", fontsize=11)
     _declutter(fig, texts)
     return fig
+
+
+def narrow_range_note(vmin: float, vmax: float, units: str) -> str:
+    """A note for a colour bar whose range is narrow (under 5 % of its level): the full
+    colour scale then stands for a small difference, and the reader must be told.
+
+    >>> narrow_range_note(99.96, 100.0, "mmHg")
+    '\\n(colours span only 0.04 mmHg: 99.96 to 100 mmHg)'
+    """
+    level = max(abs(vmin), abs(vmax))
+    span = vmax - vmin
+    if not (level > 0 and 0 < span < 0.05 * level):
+        return ""
+    return f"\n(colours span only {span:.2g} {units}: {vmin:.6g} to {vmax:.6g} {units})"
 
 
 def save_figures(result: Result, model: Model | str | os.PathLike[str],
@@ -612,10 +728,10 @@ def impedance(frequencies: Any, z: Any, label: str | None = None,
     plt = _plt()
     if ax is None:
         fig, ax = plt.subplots(2, 1, sharex=True, figsize=(6.0, 5.0), layout="constrained")
-        ax[0].set_ylabel("|Z| (Pa s/m$^3$)")
+        ax[0].set_ylabel("|Z| [Pa·s/m³]")
         ax[0].set_yscale("log")
-        ax[1].set_ylabel("phase (rad)")
-        ax[1].set_xlabel("frequency (Hz)")
+        ax[1].set_ylabel("phase [rad]")
+        ax[1].set_xlabel("frequency [Hz]")
         ax[1].axhline(0.0, color="0.6", lw=0.8)
     fig = ax[0].figure
     f, zz = np.asarray(frequencies, dtype=float), np.asarray(z, dtype=complex)
