@@ -63,10 +63,9 @@ def _model(model: Model | str | os.PathLike[str] | Mapping[str, Any]) -> Model:
     return as_model(model)
 
 
-#: SI prefixes, largest first: a quantity shown with the prefix that puts its largest
+#: SI prefixes (power of ten, symbol), largest first: a quantity shown with the prefix that puts its largest
 #: magnitude in [1, 1000) (no "nmol/s" values in the millions)
-PREFIXES = ((1e3, "k"), (1.0, ""), (1e-3, "m"), (1e-6, "µ"), (1e-9, "n"), (1e-12, "p"),
-            (1e-15, "f"))
+PREFIXES = ((3, "k"), (0, ""), (-3, "m"), (-6, "µ"), (-9, "n"), (-12, "p"), (-15, "f"))
 
 
 def _peak(values: Any) -> float:
@@ -80,10 +79,10 @@ def prefixed(units: str, values: Any) -> tuple[str, float]:
     [1, 1000), and the factor from ``units``: ``prefixed("mol/s", [2e-6])`` is
     ``("µmol/s", 1e6)``."""
     peak = _peak(values)
-    for scale, p in PREFIXES:
-        if peak >= scale:
-            return p + units, 1.0 / scale
-    return PREFIXES[-1][1] + units, 1.0 / PREFIXES[-1][0]
+    for exponent, p in PREFIXES:
+        if peak >= 10.0 ** exponent:
+            break
+    return p + units, 10.0 ** -exponent
 
 
 def display(units: str, values: Any = None) -> tuple[str, float]:
@@ -198,16 +197,18 @@ def waveforms(result: Result, vessels: Sequence[str] | str | None = None,
         if n not in result.vessels:
             raise KeyError(f"vessel '{n}' has no output (vessels: {', '.join(result.vessels[:10])}"
                            f"{', ...' if len(result.vessels) > 10 else ''})")
-    panels: list[tuple[str, dict[str, np.ndarray], bool]] = []
+    panels: list[tuple[str, dict[str, np.ndarray], tuple[str, float], bool]] = []
     for var in (_vessel_variable(ds, q, end) for q in quantities):
         series = {n: np.asarray(ds[var].sel(vessel=n).values, dtype=float) for n in names}
+        # one unit per quantity in the figure, from all its values (its panels compare)
+        unit = display(str(ds[var].attrs.get("units", "")),
+                       np.concatenate([y.ravel() for y in series.values()]))
         groups = decade_groups({n: _peak(y) for n, y in series.items()})
-        panels += [(var, {n: series[n] for n in g}, len(groups) > 1) for g in groups]
+        panels += [(var, {n: series[n] for n in g}, unit, len(groups) > 1) for g in groups]
     fig, axes = plt.subplots(len(panels), 1, sharex=True, squeeze=False,
                              figsize=(7.0, 2.4 * len(panels) + 0.8), layout="constrained")
-    for ax, (var, series, split) in zip(axes[:, 0], panels):
-        _waveform_panel(ax, result.time, var, series, str(ds[var].attrs.get("units", "")),
-                        names, split)
+    for ax, (var, series, unit, split) in zip(axes[:, 0], panels):
+        _waveform_panel(ax, result.time, var, series, unit, names, split)
     axes[-1, 0].set_xlabel("time [s]")
     by_label: dict[str, Any] = {}
     for ax in axes[:, 0]:
@@ -222,11 +223,11 @@ def waveforms(result: Result, vessels: Sequence[str] | str | None = None,
     return fig
 
 
-def _waveform_panel(ax: Any, time: Any, var: str, series: Mapping[str, np.ndarray], si: str,
-                    names: Sequence[str], split: bool) -> None:
-    """One panel of :func:`waveforms`: the curves of ``series`` in display units, each
-    vessel in the colour and style of its place in ``names``."""
-    units, k = display(si, np.concatenate([y.ravel() for y in series.values()]))
+def _waveform_panel(ax: Any, time: Any, var: str, series: Mapping[str, np.ndarray],
+                    unit: tuple[str, float], names: Sequence[str], split: bool) -> None:
+    """One panel of :func:`waveforms`: the curves of ``series`` in the display ``unit``
+    (name, factor from SI), each vessel in the colour and style of its place in ``names``."""
+    units, k = unit
     for merged, y in same_curves(series):
         i = names.index(merged[0])
         ax.plot(time, y * k, label=" = ".join(merged), lw=1.4, color=f"C{i % 10}",

@@ -71,9 +71,11 @@ def outlet_flux(result: Result, model: Model | None = None) -> Any:
     if result.oxygen is None:
         raise ValueError("this result has no oxygen section")
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
+    # one unit for the figure (the panels compare), its prefix from the larger values
+    unit, k = prefixed("mol/s", np.concatenate([np.ravel(result.o2_flux_out),
+                                                np.ravel(result.wall_o2_flux)]))
     for ax, data, what in ((a1, result.o2_flux_out, "J$_{out}$"),
                            (a2, result.wall_o2_flux, "wall uptake")):
-        unit, k = prefixed("mol/s", data)
         series = {name: np.asarray(data[:, i]) for i, name in enumerate(result.vessels)}
         for names, y in same_curves(series):
             i = list(result.vessels).index(names[0])
