@@ -259,3 +259,22 @@ def test_no_built_in_model_or_reference_case_or_network_under_tests_data_warns()
             found[src] = w
     assert found == {}
     assert loaded >= 55  # 14 built-ins, 37 svZeroDSolver cases, the openBF models
+
+
+def test_the_command_line_prints_one_line_and_can_silence_it(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from oxyline.cli import main
+
+    p = tmp_path / "aorta.json"
+    p.write_text(json.dumps({
+        "name": "aorta", "units": "SI",
+        "vessels": [{"name": "aorta", "from": "in", "to": "out", "length": 0.1, "radius": 1.2,
+                     "wall_thickness": 0.002, "youngs_modulus": 4e5}],
+        "boundary_conditions": {"in": {"type": "flow", "value": 1e-4},
+                                "out": {"type": "resistance", "resistance": 1e8}}}))
+    assert main(["validate", str(p)]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert err == [line for line in err if line.startswith("warning: vessel 'aorta': radius")]
+    assert len(err) == 1 and "in cm in an SI file" in err[0]
+    assert main(["--no-plausibility", "validate", str(p)]) == 0
+    assert capsys.readouterr().err == ""

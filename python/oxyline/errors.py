@@ -99,19 +99,21 @@ class PlausibilityWarning(UserWarning):
         warnings.simplefilter("ignore", oxyline.PlausibilityWarning)
 
     >>> import warnings, oxyline
-    >>> m = oxyline.load_model("bifurcation")
-    >>> m.canonical["vessels"][0]["geometry"]["radius_in"]  # SI: metres
-    0.01
-    >>> bad = m.to_dict()
-    >>> bad["vessels"][0]["radius"] = 1.0     # a radius of 1 cm written in an SI file
+    >>> bad = oxyline.catalogue.load_dict("bifurcation")
+    >>> bad["vessels"][0]["radius"]               # SI: metres
+    0.003
+    >>> bad["vessels"][0]["radius"] = 0.3         # 3 mm written in cm in an SI file
     >>> with warnings.catch_warnings(record=True) as seen:
     ...     warnings.simplefilter("always")
     ...     _ = oxyline.load_model(bad)
     >>> w = seen[0].message
     >>> (w.element, w.key, w.value, w.unit)
-    ("vessel 'parent'", 'radius', 1.0, 'm')
-    >>> w.likely_cause
-    'a value in cm in an SI file (SI expects m)'
+    ("vessel 'parent'", 'radius', 0.3, 'm')
+    >>> print(w.likely_cause)
+    a value in cm in an SI file (SI expects m) or a value in mm in an SI file (SI expects m)
+
+    The command line prints each as ``warning: ...``; ``oxyline --no-plausibility run ...``
+    silences them.
     """
 
     def __init__(self, message: str, element: str = "", key: str = "", value: float = 0.0,

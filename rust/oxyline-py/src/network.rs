@@ -134,7 +134,7 @@ impl Network {
                 d.set_item("unit", w.unit)?;
                 d.set_item("low", w.low)?;
                 d.set_item("high", w.high)?;
-                d.set_item("likely_cause", w.likely_cause)?;
+                d.set_item("likely_cause", w.likely_cause.as_deref())?;
                 d.set_item("more", w.more)?;
                 d.set_item("message", w.message())?;
                 Ok(d)

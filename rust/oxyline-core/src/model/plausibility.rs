@@ -235,7 +235,7 @@ pub struct Warning {
     pub low: f64,
     pub high: f64,
     /// The unit mix-up that explains the value, if one does.
-    pub likely_cause: Option<&'static str>,
+    pub likely_cause: Option<String>,
     /// How many more elements have the same key out of range (their warnings left out).
     pub more: usize,
 }
@@ -261,7 +261,7 @@ impl Warning {
         } else {
             (self.low / self.value.abs(), "small")
         };
-        match self.likely_cause {
+        match &self.likely_cause {
             Some(cause) => m.push_str(&format!("; too {way}: likely {cause}")),
             None => m.push_str(&format!(
                 "; {} times too {way}, more than a unit mix-up explains",
@@ -318,19 +318,21 @@ impl Findings {
     }
 }
 
-/// The mix-up whose factor brings `v` into the range, nearest the typical value.
-fn likely_cause(v: f64, r: &Range) -> Option<&'static str> {
-    r.mix_ups
+/// The mix-ups whose factor brings `v` into the range, nearest the typical value first, at
+/// most two (a radius of 1.2 m may be 1.2 cm or 1.2 mm), joined by "or".
+fn likely_cause(v: f64, r: &Range) -> Option<String> {
+    let mut fits: Vec<&MixUp> = r
+        .mix_ups
         .iter()
         .filter(|(f, _)| {
             let meant = v / f;
             meant >= r.low && meant <= r.high
         })
-        .min_by(|a, b| {
-            let d = |f: f64| (v / f / r.typical).ln().abs();
-            d(a.0).total_cmp(&d(b.0))
-        })
-        .map(|(_, cause)| *cause)
+        .collect();
+    let d = |f: f64| (v / f / r.typical).ln().abs();
+    fits.sort_by(|a, b| d(a.0).total_cmp(&d(b.0)));
+    let causes: Vec<&str> = fits.iter().take(2).map(|(_, cause)| *cause).collect();
+    (!causes.is_empty()).then(|| causes.join(" or "))
 }
 
 /// The warnings of a canonical model, vessels first, then boundary conditions.
@@ -505,20 +507,19 @@ mod tests {
 
     #[test]
     fn a_radius_in_cm_is_named_as_such() {
-        let w = likely_cause(1.2, &RADIUS);
-        assert_eq!(w, Some("a value in cm in an SI file (SI expects m)"));
+        let w = likely_cause(0.3, &RADIUS).unwrap();
+        assert!(w.starts_with("a value in cm in an SI file (SI expects m)"));
+        // 1.2 m: an aorta's 1.2 cm or an artery's 1.2 mm, both named
+        let w = likely_cause(1.2, &RADIUS).unwrap();
+        assert!(w.contains("in cm in an SI") && w.contains("in mm in an SI"));
     }
 
     #[test]
     fn a_stiffness_in_mpa_is_named_as_such() {
-        assert_eq!(
-            likely_cause(0.4, &MODULUS),
-            Some("a value in MPa in an SI file (SI expects Pa)")
-        );
-        assert_eq!(
-            likely_cause(400.0, &MODULUS),
-            Some("a value in kPa in an SI file (SI expects Pa)")
-        );
+        let mpa = likely_cause(0.4, &MODULUS).unwrap();
+        assert!(mpa.starts_with("a value in MPa in an SI file (SI expects Pa)"));
+        let kpa = likely_cause(400.0, &MODULUS).unwrap();
+        assert!(kpa.starts_with("a value in kPa in an SI file (SI expects Pa)"));
     }
 
     #[test]
