@@ -120,6 +120,11 @@ class Model:
     own tables; the scale targets) and written again from ``source`` on first use
     (:meth:`release_canonical`); a run reads only the small transport section
     (:attr:`transport_spec`) and the vessel names.
+
+    >>> import oxyline
+    >>> m = oxyline.load_model("bifurcation")
+    >>> m.name, m.vessel_names, m.period
+    ('bifurcation', ['parent', 'daughter1', 'daughter2'], 1.0)
     """
 
     name: str

@@ -77,7 +77,11 @@ def _peak(values: Any) -> float:
 def prefixed(units: str, values: Any) -> tuple[str, float]:
     """``units`` with the SI prefix that puts the largest magnitude of ``values`` in
     [1, 1000), and the factor from ``units``: ``prefixed("mol/s", [2e-6])`` is
-    ``("µmol/s", 1e6)``."""
+    ``("µmol/s", 1e6)``.
+
+    >>> prefixed("mol/s", [2e-6, -5e-7])
+    ('µmol/s', 1000000.0)
+    """
     peak = _peak(values)
     for exponent, p in PREFIXES:
         if peak >= 10.0 ** exponent:
@@ -148,7 +152,12 @@ def same_curves(series: Mapping[str, np.ndarray]) -> list[tuple[list[str], np.nd
     """The curves of ``series`` (name -> values) with those that coincide merged, each with all
     its names: two vessels leaving one node read the same node pressure, and two lines drawn
     on top of each other would hide one of them. Coincide: equal to 1e-9 of the largest
-    magnitude (round-off of one node's value read twice)."""
+    magnitude (round-off of one node's value read twice).
+
+    >>> import numpy as np
+    >>> [names for names, _ in same_curves({"a": np.ones(3), "b": np.ones(3), "c": np.zeros(3)})]
+    [['a', 'b'], ['c']]
+    """
     scale = max((_peak(v) for v in series.values()), default=0.0) or 1.0
     groups: list[tuple[list[str], np.ndarray]] = []
     for name, y in series.items():
@@ -164,7 +173,11 @@ def same_curves(series: Mapping[str, np.ndarray]) -> list[tuple[list[str], np.nd
 def decade_groups(peaks: Mapping[str, float]) -> list[list[str]]:
     """Names grouped, largest peak first, so that the peaks within a group lie within a
     factor of 10: a flow of 0.5 mL/s on the axis of a 400 mL/s aortic flow is a flat line,
-    so each group gets its own panel."""
+    so each group gets its own panel.
+
+    >>> decade_groups({"aorta": 4e-4, "iliac": 6e-5, "digital": 2e-7})
+    [['aorta', 'iliac'], ['digital']]
+    """
     groups: list[list[str]] = []
     for n in sorted(peaks, key=lambda k: -peaks[k]):
         if groups and peaks[n] * 10.0 >= peaks[groups[-1][0]]:
@@ -254,7 +267,12 @@ def _graph(model: Model) -> tuple[dict[str, list[tuple[str, str]]], dict[str, di
 
 
 def inlets(model: Model) -> list[str]:
-    """Nodes with a flow or pressure condition at the start of a vessel."""
+    """Nodes with a flow or pressure condition at the start of a vessel.
+
+    >>> import oxyline, oxyline.plot as plot
+    >>> plot.inlets(oxyline.load_model("bifurcation"))
+    ['inlet']
+    """
     starts = {v["from"] for v in model.canonical["vessels"]}
     ends = {v["to"] for v in model.canonical["vessels"]}
     bcs = model.canonical["boundary_conditions"]
@@ -264,7 +282,12 @@ def inlets(model: Model) -> list[str]:
 
 
 def outlets(model: Model) -> list[str]:
-    """Nodes with a boundary condition at the end of a vessel."""
+    """Nodes with a boundary condition at the end of a vessel.
+
+    >>> import oxyline, oxyline.plot as plot
+    >>> plot.outlets(oxyline.load_model("bifurcation"))
+    ['ica_out', 'eca_out']
+    """
     ends = {v["to"] for v in model.canonical["vessels"]}
     starts = {v["from"] for v in model.canonical["vessels"]}
     return [n for n in model.canonical["boundary_conditions"] if n in ends and n not in starts]
@@ -272,7 +295,12 @@ def outlets(model: Model) -> list[str]:
 
 def path(model: Model, outlet: str, inlet: str | None = None) -> list[str]:
     """Vessel names along the (fewest-vessel) path from ``inlet`` (default: the inlet that
-    reaches it) to ``outlet`` (an outlet node or a vessel name), following vessel direction."""
+    reaches it) to ``outlet`` (an outlet node or a vessel name), following vessel direction.
+
+    >>> import oxyline, oxyline.plot as plot
+    >>> plot.path(oxyline.load_model("bifurcation"), "eca_out")
+    ['parent', 'daughter2']
+    """
     adj, vessels = _graph(model)
     target = vessels[outlet]["to"] if outlet in vessels else outlet
     if target not in adj:
@@ -298,7 +326,12 @@ def path(model: Model, outlet: str, inlet: str | None = None) -> list[str]:
 def internal_vessels(model: Model) -> set[str]:
     """Vessels that are internal branches of a model, not arteries: dead ends (one end touches
     no other vessel and has no boundary condition), e.g. the '.wall' branches that put a wall
-    viscosity in series with a capacitance (whole-body-140)."""
+    viscosity in series with a capacitance (whole-body-140).
+
+    >>> import oxyline, oxyline.plot as plot
+    >>> plot.internal_vessels(oxyline.load_model("bifurcation"))
+    set()
+    """
     count: dict[str, int] = {}
     for v in model.canonical["vessels"]:
         for end in (v["from"], v["to"]):
@@ -319,7 +352,13 @@ def representative_vessels(result: Result, model: Model, n: int = 5) -> list[str
     one whose path from the inlet overlaps least with the paths already chosen (largest mean
     flow first among equals), so that the figure spans the regions of the network (e.g. the
     brain, an arm and the legs) rather than one of them; never an internal branch
-    (:func:`internal_vessels`). Falls back to the first vessels that are not internal."""
+    (:func:`internal_vessels`). Falls back to the first vessels that are not internal.
+
+    >>> import oxyline, oxyline.plot as plot
+    >>> m = oxyline.load_model("bifurcation")
+    >>> plot.representative_vessels(oxyline.simulate(m, cycles=1), m, n=2)
+    ['parent', 'daughter1']
+    """
     skip = internal_vessels(model)
     named = [v for v in result.vessels if v not in skip]
     paths: dict[str, set[str]] = {}
@@ -362,7 +401,14 @@ def profile_data(result: Result, model: Model | str, outlet: str, quantity: str 
     """Distance [m] from the inlet and time mean/min/max of ``quantity`` (SI) along the path to
     ``outlet``; uses per-segment output when present, else the vessel ends. Lumped vessels
     have no length; a path of lumped vessels only counts one unit per vessel
-    (``distance_units`` "vessel" instead of "m")."""
+    (``distance_units`` "vessel" instead of "m").
+
+    >>> import oxyline, oxyline.plot as plot
+    >>> res = oxyline.simulate("bifurcation", cycles=1)
+    >>> d = plot.profile_data(res, "bifurcation", "ica_out")
+    >>> round(float(d["distance"][-1]), 4), str(d["units"])
+    (0.1268, 'Pa')
+    """
     m = _model(model)
     ds = result.to_xarray()
     _, vessels = _graph(m)
@@ -437,7 +483,14 @@ def profile(result: Result, model: Model | str, outlet: str,
     """Time-mean ``quantity`` (with its min–max band over the cycle) against distance along the
     path from the inlet to ``outlet`` (node or vessel name). ``quantity`` may be a list, one panel
     each; "pressure", "flow", "po2", "o2_flux" or any result variable. Vessel boundaries are
-    marked and named."""
+    marked and named.
+
+    >>> import oxyline, oxyline.plot as plot
+    >>> res = oxyline.simulate("bifurcation", cycles=1)
+    >>> fig = plot.profile(res, "bifurcation", "ica_out", ["pressure", "flow"])
+    >>> fig.axes[-1].get_xlabel()
+    'distance from the inlet [cm]'
+    """
     plt = _plt()
     m = _model(model)
     quantities = [quantity] if isinstance(quantity, str) else list(quantity)
@@ -601,6 +654,12 @@ def network_map(model: Model | str | os.PathLike[str], values: Any = None,
     networks with loops when networkx is installed), "tree", "spring", "kamada-kawai". Line width
     follows the radius; lumped vessels are dashed; vessel names are drawn when they fit
     (``labels=None``: up to 150 vessels), and any that would overlap are dropped.
+
+    >>> import oxyline, oxyline.plot as plot
+    >>> res = oxyline.simulate("bifurcation", cycles=1)
+    >>> fig = plot.network_map("bifurcation", result=res)
+    >>> fig.axes[-1].get_ylabel()
+    'time-mean pressure [mmHg]'
     """
     plt = _plt()
     from matplotlib import colors as mcolors
@@ -683,7 +742,15 @@ def save_figures(result: Result, model: Model | str | os.PathLike[str],
     up to 4 terminal vessels; pressure, flow and PO2 when present), ``profile`` (inlet to the
     outlet farthest from it; pressure, PO2, convective and wall O2 flux when present, flow) and
     ``network_map`` (time-mean pressure).
-    Returns the files written."""
+    Returns the files written.
+
+    >>> import oxyline, oxyline.plot as plot
+    >>> import tempfile
+    >>> res = oxyline.simulate("bifurcation", cycles=1)
+    >>> with tempfile.TemporaryDirectory() as out:
+    ...     sorted(p.name for p in plot.save_figures(res, "bifurcation", out, formats=("png",)))
+    ['network_map.png', 'profile.png', 'waveforms.png']
+    """
     plt = _plt()
     m = _model(model)
     out = Path(outdir)
@@ -725,7 +792,14 @@ def impedance(frequencies: Any, z: Any, label: str | None = None,
               ax: Sequence[Any] | None = None) -> Figure:
     """Modulus (Pa·s/m³, log scale) and phase (rad) of input impedances ``z`` (complex, from
     :func:`oxyline.impedance`) against frequency (Hz). Curves go on the axes ``ax`` (modulus,
-    phase) of an earlier call when given, to compare networks."""
+    phase) of an earlier call when given, to compare networks.
+
+    >>> import oxyline, oxyline.plot as plot
+    >>> f = [0.5, 1.0, 2.0]
+    >>> fig = plot.impedance(f, oxyline.impedance("bifurcation", "inlet", f))
+    >>> fig.axes[0].get_ylabel()
+    '|Z| [Pa·s/m³]'
+    """
     plt = _plt()
     if ax is None:
         fig, ax = plt.subplots(2, 1, sharex=True, figsize=(6.0, 5.0), layout="constrained")

@@ -65,7 +65,7 @@ def outlet_flux(result: Result, model: Model | None = None) -> Any:
     >>> res = oxyline.simulate("paper-bifurcated", cycles=1)
     >>> fig = plot_oxygen.outlet_flux(res)
     >>> [ax.get_ylabel() for ax in fig.axes]
-    ['J$_{out}$ [nmol/s]', 'wall uptake [nmol/s]']
+    ['J$_{out}$ [µmol/s]', 'wall uptake [µmol/s]']
     """
     plt = _plt()
     if result.oxygen is None:
@@ -129,7 +129,15 @@ def wall_uptake(result: Result, model: Model | None = None) -> Any:
 
 def save_oxygen_figures(result: Result, model: Model | None, outdir: str | os.PathLike[str],
                         formats: tuple[str, ...] = ("png", "svg")) -> list[Path]:
-    """Write ``o2_outlet_flux`` and ``o2_wall_uptake`` figures; returns the files written."""
+    """Write ``o2_outlet_flux`` and ``o2_wall_uptake`` figures; returns the files written.
+
+    >>> import tempfile, oxyline
+    >>> from oxyline import plot_oxygen
+    >>> res = oxyline.simulate("paper-bifurcated", cycles=1)
+    >>> with tempfile.TemporaryDirectory() as out:
+    ...     [p.name for p in plot_oxygen.save_oxygen_figures(res, None, out, formats=("png",))]
+    ['o2_outlet_flux.png', 'o2_wall_uptake.png']
+    """
     plt = _plt()
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
@@ -148,7 +156,16 @@ def save_oxygen_figures(result: Result, model: Model | None, outdir: str | os.Pa
 
 def without_intramyocardial_pressure(model: Model) -> dict[str, Any]:
     """The model's source with every `coronary` outlet's intramyocardial pressure set to 0:
-    the same bed without the systolic squeeze (the reference case of the impediment)."""
+    the same bed without the systolic squeeze (the reference case of the impediment).
+
+    >>> import oxyline
+    >>> from oxyline import plot_oxygen
+    >>> m = oxyline.load_model("paper-curved-coronary")
+    >>> src = plot_oxygen.without_intramyocardial_pressure(m)
+    >>> {bc["intramyocardial_pressure"] for bc in src["boundary_conditions"].values()
+    ...  if bc.get("type") == "coronary"}
+    {0.0}
+    """
     src = copy.deepcopy(model.source)
     for bc in src.get("boundary_conditions", {}).values():
         if isinstance(bc, dict) and bc.get("type") == "coronary":
@@ -160,7 +177,17 @@ def coronary_impediment(result: Result, rigid: Result, vessel: str | None = None
                         systole: float | None = None) -> Any:
     """Inflow and wall O2 uptake of one vessel with the intramyocardial pressure (`result`) and
     without it (`rigid`, from :func:`without_intramyocardial_pressure`), with the systolic
-    means in the legend (docs/oxygen.md "Coronary oxygen"). Flow in mL/s, uptake in nmol/s."""
+    means in the legend (docs/oxygen.md "Coronary oxygen"). Flow in mL/s, uptake in nmol/s.
+
+    >>> import oxyline
+    >>> from oxyline import plot_oxygen
+    >>> m = oxyline.load_model("paper-curved-coronary")
+    >>> rigid = oxyline.load_model(plot_oxygen.without_intramyocardial_pressure(m))
+    >>> fig = plot_oxygen.coronary_impediment(oxyline.simulate(m, cycles=1),
+    ...                                       oxyline.simulate(rigid, cycles=1), systole=0.35)
+    >>> fig.axes[1].get_ylabel()
+    'wall O$_2$ uptake [nmol/s]'
+    """
     plt = _plt()
     name = vessel or result.vessels[0]
     i = list(result.vessels).index(name)

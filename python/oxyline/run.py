@@ -527,6 +527,20 @@ def resume(path: str | os.PathLike[str], **overrides: Any) -> Result:
     ``max_memory``, ``checkpoint`` and ``checkpoint_every`` may be given (by default it goes on
     checkpointing into ``path`` as often as before). :class:`~oxyline.CheckpointError` if the
     file is not a checkpoint this version reads.
+
+    >>> import os, tempfile, threading, oxyline
+    >>> stop = threading.Event()
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     ck = os.path.join(d, "run.ckpt")
+    ...     try:  # stopped once the checkpoint of cycle 1 is written
+    ...         oxyline.simulate("bifurcation", cycles=3, checkpoint=ck,
+    ...                          checkpoint_every="1 cycle", cancel=stop,
+    ...                          progress=lambda t, t_end: os.path.exists(ck) and stop.set())
+    ...     except oxyline.SimulationCancelled as stopped:
+    ...         partial = stopped.result
+    ...     res = oxyline.resume(ck)
+    >>> partial.complete, res.complete, res.settings["cycles_run"]
+    (False, True, 3)
     """
     meta, state = _checkpoint.read(path)
     changed = set(overrides) - _checkpoint.RUN_CONTROL
