@@ -278,3 +278,15 @@ def test_the_command_line_prints_one_line_and_can_silence_it(
     assert len(err) == 1 and "in cm in an SI file" in err[0]
     assert main(["--no-plausibility", "validate", str(p)]) == 0
     assert capsys.readouterr().err == ""
+
+
+def test_an_svzerod_model_name_names_the_result() -> None:
+    ref = DATA / "svzerod" / "cases" / "vmr" / "reference"
+    [path] = list(ref.glob("*.json"))
+    name = json.loads(path.read_text())["simulation_parameters"]["model_name"]
+    m = oxyline.load_model(path)
+    assert m.name == name == "0140_2001"
+    res = oxyline.simulate(m, cycles=1)
+    assert res.model_name == name and res.to_xarray().attrs["model"] == name
+    # a file without one keeps the generic name
+    assert oxyline.load_model(DATA / "svzerod" / "cases" / "steadyFlow_R_R.json").name == "svzerod"
