@@ -7,6 +7,7 @@ from __future__ import annotations
 import copy
 import errno
 import json
+import os
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -122,3 +123,97 @@ def test_a_float_where_a_chamber_case_has_a_list_is_a_model_error_naming_the_key
         with pytest.raises(oxyline.ModelError) as exc:
             oxyline.load_model(bad)
         assert str(path[-1]) in str(exc.value), (path, str(exc.value))
+
+
+# ---- Dask: workers that die, and cancel ---------------------------------------------------
+
+POISON_SEGMENTS = 7  # the poison variant is the one whose aorta has 7 segments
+
+
+def _peak(res: oxyline.Result) -> dict[str, float]:
+    return {"p_max": float(res.pressure_in.max())}
+
+
+def _poison(res: oxyline.Result) -> dict[str, float]:
+    """Kills the worker process that runs the poison variant (a crash in its output)."""
+    import os
+
+    if res.segment_count[0] == POISON_SEGMENTS:
+        os._exit(1)
+    return _peak(res)
+
+
+def _die() -> None:
+    import os
+
+    os._exit(1)
+
+
+def test_dask_ensembles_survive_their_workers_killed_and_can_be_cancelled() -> None:
+    distributed = pytest.importorskip("distributed")
+    import threading
+
+    radii = np.linspace(0.006, 0.01, 8)
+    variants = [{"vessels": {"aorta": {"radius": r}}} for r in radii]
+    healthy = oxyline.simulate_ensemble(STRAIGHT, variants, output=_peak, **FAST)
+    assert (healthy.status.values == 0).all()
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        # every worker killed once the first chunk is in: the restarted workers finish the
+        # ensemble (the model is scattered to them again)
+        killed = []
+
+        def kill_all(done: int, total: int) -> None:
+            if not killed:
+                killed.append(done)
+                try:
+                    client.run(_die)
+                except Exception:  # noqa: BLE001, S110 - the workers die while answering
+                    pass
+
+        ds = oxyline.simulate_ensemble(STRAIGHT, variants, client=client, output=_peak,
+                                       cycles=2, progress=kill_all)
+        assert killed and (ds.status.values == 0).all(), ds.status.values
+        np.testing.assert_array_equal(ds.p_max.values, healthy.p_max.values)
+
+        # cancel= stops a Dask ensemble (set here once the first chunk is in): the finished
+        # variants come back, the others have status -1
+        client.wait_for_workers(2, timeout=120)
+        many = [{"vessels": {"aorta": {"radius": r}}} for r in np.linspace(0.006, 0.01, 40)]
+        many_ok = oxyline.simulate_ensemble(STRAIGHT, many, output=_peak, **FAST)
+        stop = threading.Event()
+        with pytest.raises(oxyline.SimulationCancelled) as exc:
+            oxyline.simulate_ensemble(STRAIGHT, many, client=client, output=_peak,
+                                      cycles=2, cancel=stop,
+                                      progress=lambda done, total: stop.set())
+        st = exc.value.result.status.values
+        done = st == 0
+        assert 0 < done.sum() < 40 and set(st[~done].tolist()) == {-1}, st
+        np.testing.assert_array_equal(exc.value.result.p_max.values[done],
+                                      many_ok.p_max.values[done])
+        with pytest.raises(oxyline.ModelError, match="variant_timeout is for ensembles"):
+            oxyline.simulate_ensemble(STRAIGHT, variants, client=client, variant_timeout=5)
+
+
+@pytest.mark.skipif(not os.environ.get("OXYLINE_SLOW_DASK"),
+                    reason="kills Dask workers ~10 times; set OXYLINE_SLOW_DASK=1 (a loaded "
+                           "machine may not restart them within the test's time)")
+def test_a_dask_variant_that_kills_its_worker_fails_alone() -> None:
+    distributed = pytest.importorskip("distributed")
+    variants = [{"vessels": {"aorta": {"radius": r}}} for r in np.linspace(0.006, 0.01, 8)]
+    healthy = oxyline.simulate_ensemble(STRAIGHT, variants, output=_peak, **FAST)
+    poisoned = copy.deepcopy(variants)
+    poisoned[2]["vessels"]["aorta"]["segments"] = POISON_SEGMENTS
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        # it fails with that error; the others of its chunk run on (before:
+        # FutureCancelledError and no result)
+        ds = oxyline.simulate_ensemble(STRAIGHT, poisoned, client=client, output=_poison,
+                                       **FAST)
+    st = ds.status.values
+    assert st[2] != 0 and "Dask worker failed" in str(ds.error.values[2])
+    ok = np.arange(8) != 2
+    assert (st[ok] == 0).all(), st
+    np.testing.assert_array_equal(ds.p_max.values[ok], healthy.p_max.values[ok])
