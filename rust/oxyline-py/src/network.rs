@@ -16,6 +16,10 @@ use std::cell::Cell;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+/// What `Network::new` builds: the circuit and its DAE, the transport plan and the
+/// plausibility warnings of the model.
+type Built = ((Assembled, Dae), Option<Transport>, Vec<Warning>);
+
 /// An assembled network: built once from the canonical SI JSON model, run many times.
 #[pyclass(frozen, module = "oxyline._core")]
 pub(crate) struct Network {
@@ -80,29 +84,27 @@ impl Network {
         }
         // the text is parsed where Python holds it (no copy); the spec is dropped once the
         // circuit and the transport plan are built from it
-        let built = py.detach(
-            move || -> Result<((Assembled, Dae), Option<Transport>, Vec<Warning>), Error> {
-                let mut spec = parse(model_json)?;
-                match vessels {
-                    // moved, not copied: ~700 B per vessel
-                    Some(v) if spec.vessels.is_empty() => spec.vessels = v,
-                    Some(v) => spec.vessels.extend(v),
-                    None => {}
+        let built = py.detach(move || -> Result<Built, Error> {
+            let mut spec = parse(model_json)?;
+            match vessels {
+                // moved, not copied: ~700 B per vessel
+                Some(v) if spec.vessels.is_empty() => spec.vessels = v,
+                Some(v) => spec.vessels.extend(v),
+                None => {}
+            }
+            for (node, bc) in bcs {
+                if spec.boundary_conditions.insert(node.clone(), bc).is_some() {
+                    return Err(Error::model(
+                        format!("boundary condition '{node}'"),
+                        "given twice",
+                    ));
                 }
-                for (node, bc) in bcs {
-                    if spec.boundary_conditions.insert(node.clone(), bc).is_some() {
-                        return Err(Error::model(
-                            format!("boundary condition '{node}'"),
-                            "given twice",
-                        ));
-                    }
-                }
-                // the same assembly as every ensemble member: spec → circuit → DAE → transport
-                let m = oxyline_core::ensemble::Member::build(&spec)?;
-                let warnings = plausibility::check(&spec);
-                Ok(((m.assembled, m.dae), m.transport, warnings))
-            },
-        );
+            }
+            // the same assembly as every ensemble member: spec → circuit → DAE → transport
+            let m = oxyline_core::ensemble::Member::build(&spec)?;
+            let warnings = plausibility::check(&spec);
+            Ok(((m.assembled, m.dae), m.transport, warnings))
+        });
         let (built, transport, plausibility) = built.map_err(to_py)?;
         Ok(Network {
             inner: Arc::new(built),
