@@ -210,7 +210,7 @@ def _scatter_again(client: Any, model: Model) -> Any:
         try:
             client.wait_for_workers(1, timeout=max(1.0, deadline - time.monotonic()))
             return _scattered(client, model)
-        except Exception:  # noqa: BLE001 - a worker that left mid-scatter (TimeoutError,
+        except Exception:  # a worker that left mid-scatter (TimeoutError,
             # OSError, ValueError "Can not use replicate to delete data"): try again
             if time.monotonic() > deadline:
                 raise
