@@ -203,8 +203,12 @@ def test_oxygen_profile_of_the_paper_bifurcation(tmp_path: Path) -> None:
     np.testing.assert_allclose(d["mean"][-len(sel):], expected, rtol=1e-12)
     assert np.all(np.diff(d["distance"]) > 0)  # cell centres in order along CCA then ICA
     fig = plot.profile(res, m, "ICA", ["pressure", "po2", "o2_flux"])
+    # the O2 flux in the prefix that puts its values in [1, 1000): ~3 µmol/s, not nmol/s in
+    # the thousands
     assert [ax.get_ylabel() for ax in fig.axes] == ["pressure [mmHg]", "PO$_2$ [mmHg]",
-                                                     "convective O$_2$ flux [nmol/s]"]
+                                                     "convective O$_2$ flux [µmol/s]"]
+    peak = max(np.abs(c.get_paths()[0].vertices[:, 1]).max() for c in fig.axes[2].collections)
+    assert 1.0 <= peak < 1000.0
     _assert_no_text_overlap(fig)
     fig.savefig(tmp_path / "o2.png", dpi=60)
     _check_png(tmp_path / "o2.png")
@@ -248,3 +252,91 @@ def test_cli_plot_of_an_svzerod_file_with_junctions(tmp_path: Path) -> None:
     out.mkdir()
     assert main(["run", str(JUNCTION_CASE), "--plot", str(out), "--quiet"]) == 0
     assert {"waveforms.png", "profile.png", "network_map.png"} <= {p.name for p in out.iterdir()}
+
+
+# ---- paper-ready defaults: checked on the figure's properties, not its pixels --------------
+
+def _lines(ax: object) -> list[tuple[str, np.ndarray]]:
+    return [(ln.get_label(), np.asarray(ln.get_ydata())) for ln in ax.get_lines()]  # type: ignore[attr-defined]
+
+
+def test_vessels_leaving_one_node_are_one_curve_named_for_both(result: oxyline.Result) -> None:
+    """daughter1 and daughter2 leave node J1: their inlet pressure is J1's, drawn twice it was
+    one line hiding the other."""
+    fig = plot.waveforms(result, ["parent", "daughter1", "daughter2"])
+    ax_p, ax_q = fig.axes[:2]
+    labels = [lab for lab, _ in _lines(ax_p)]
+    assert labels == ["parent", "daughter1 = daughter2"]
+    np.testing.assert_allclose(_lines(ax_p)[1][1], result.vessel("daughter2").pressure_in / MMHG)
+    assert [lab for lab, _ in _lines(ax_q)] == ["parent", "daughter1", "daughter2"]  # flows differ
+    for ax in fig.axes:  # no two lines of a panel alike
+        ys = [y for _, y in _lines(ax)]
+        assert all(not np.allclose(a, b) for i, a in enumerate(ys) for b in ys[i + 1:])
+    legend = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert legend == ["parent", "daughter1 = daughter2", "daughter1", "daughter2"]
+    matplotlib.pyplot.close(fig)
+
+
+def test_flows_that_differ_by_decades_get_a_panel_each_decade() -> None:
+    d = oxyline.catalogue.load_dict("bifurcation")
+    d["boundary_conditions"]["eca_out"]["resistance"] *= 300  # ECA flow 1/100 of the ICA's
+    res = oxyline.simulate(d, cycles=1)
+    fig = plot.waveforms(res, ["parent", "daughter1", "daughter2"])
+    flow_axes = [ax for ax in fig.axes if ax.get_ylabel().startswith("flow")]
+    assert len(flow_axes) == 2
+    assert [lab for lab, _ in _lines(flow_axes[0])] == ["parent", "daughter1"]
+    assert [lab for lab, _ in _lines(flow_axes[1])] == ["daughter2"]
+    for ax in flow_axes:  # within a panel the peaks lie within a decade
+        peaks = [np.abs(y).max() for _, y in _lines(ax)]
+        assert max(peaks) <= 10 * min(peaks)
+        assert "peaks" in ax.get_title(loc="left")
+        assert ax.get_ylabel() == "flow [mL/s]"  # one unit for the quantity in the figure
+    q2 = res.vessel("daughter2").flow_in * 1e6
+    np.testing.assert_allclose(_lines(flow_axes[1])[0][1], q2)
+    matplotlib.pyplot.close(fig)
+
+
+def test_units_get_the_prefix_that_suits_the_values() -> None:
+    assert plot.display("mol/s", [2.5e-6]) == ("µmol/s", 1e6)
+    assert plot.display("mol/s", [3e-3, -7e-3]) == ("mmol/s", 1e3)
+    assert plot.display("mol/s", [4e-13]) == ("fmol/s", 1e15)
+    assert plot.display("m^3/s", [5e-4]) == ("mL/s", 1e6)  # arteries: mL/s as clinicians read
+    assert plot.display("m^3/s", [2e-10]) == ("µL/s", 1e9)  # an arteriole's
+    assert plot.display("Pa", [1e4]) == ("mmHg", 1 / MMHG)
+    for peak in (1e-14, 3e-9, 7.7e-5, 2.0):
+        unit, k = plot.prefixed("mol/s", [peak])
+        assert 1.0 <= peak * k < 1000.0, (peak, unit)
+
+
+def test_a_narrow_colour_range_is_stated(model: oxyline.Model) -> None:
+    fig = plot.network_map(model, values={"parent": 100.0, "daughter1": 99.98,
+                                          "daughter2": 99.96}, label="mean pressure",
+                           units="mmHg")
+    title = fig.axes[0].get_title()
+    assert "colours span only 0.04 mmHg" in title and "99.96 to 100 mmHg" in title
+    assert not fig.axes[-1].yaxis.get_major_formatter().get_useOffset()  # full tick values
+    _assert_no_text_overlap(fig)
+    fig = plot.network_map(model, values={"parent": 100.0, "daughter1": 80.0,
+                                          "daughter2": 60.0}, units="mmHg")
+    assert "span only" not in fig.axes[0].get_title()
+    matplotlib.pyplot.close("all")
+
+
+def test_every_axis_label_names_its_unit_one_way(result: oxyline.Result,
+                                                   model: oxyline.Model) -> None:
+    """`quantity [unit]` on every axis of every figure (before: `(nmol/s)`, `(Pa s/m$^3$)`
+    beside `[mmHg]`)."""
+    import re
+
+    from oxyline import plot_oxygen
+
+    o2 = oxyline.simulate("paper-bifurcated", cycles=1)
+    figs = [plot.waveforms(result), plot.profile(result, model, "ica_out", ["pressure", "flow"]),
+            plot.network_map(model, result=result), plot_oxygen.outlet_flux(o2),
+            plot_oxygen.wall_uptake(o2), plot.impedance([1.0, 2.0], [1e8 + 1e7j, 9e7 - 2e7j])]
+    labels = [lab for fig in figs for ax in fig.axes
+              for lab in (ax.get_xlabel(), ax.get_ylabel()) if lab]
+    assert len(labels) >= 12
+    for lab in labels:
+        assert re.fullmatch(r"[^()\[\]]+( \([^)]*\))? \[[^\]]+\]( ?;.*)?", lab), lab
+    matplotlib.pyplot.close("all")

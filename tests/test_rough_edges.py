@@ -63,8 +63,13 @@ class _Bar:
         self.total, self.n, self.shown = total, 0.0, []
         self.format = str(kwargs.get("bar_format", ""))
 
+        self.desc = str(kwargs.get("desc", ""))
+
     def refresh(self) -> None:
         self.shown.append((self.n, self.total))
+
+    def set_description(self, desc: str, refresh: bool = True) -> None:
+        self.desc = desc
 
     def close(self) -> None:
         pass
@@ -76,7 +81,7 @@ class _Bar:
 ])
 def test_progress_counts_cycles_and_never_goes_back(monkeypatch: pytest.MonkeyPatch,
                                                     model: str, options: dict) -> None:
-    import tqdm.auto
+    from oxyline import run
 
     bars: list[_Bar] = []
 
@@ -84,17 +89,40 @@ def test_progress_counts_cycles_and_never_goes_back(monkeypatch: pytest.MonkeyPa
         bars.append(_Bar(**kwargs))
         return bars[-1]
 
-    monkeypatch.setattr(tqdm.auto, "tqdm", make)
+    monkeypatch.setattr(run, "tqdm_class", lambda: make)
     res = oxyline.simulate(model, progress=True, **options)
     shown = bars[0].shown
     counts = [n for n, _ in shown]
     assert counts == sorted(counts)  # before: the oxygen run's bar jumped from 3.0 s back to 0.3 s
-    assert counts[-1] >= res.settings["cycles_run"] - 1e-9
+    # the count ends at the cycles run: before, an oxygen run's flow-only pass was added and
+    # a 3-cycle run counted 6
+    assert counts[-1] == pytest.approx(res.settings["cycles_run"], abs=1e-9)
+    assert max(counts) <= res.settings["cycles_run"] + 1e-9
+    assert bars[0].desc == "run"
     if "until_periodic" in options:  # before: a percentage of max_cycles, stuck at a few %
         assert all(total is None for _, total in shown)
         assert "until the cycle-to-cycle change < 1e-06" in bars[0].format
     else:
         assert "cycles" in bars[0].format
+
+
+def test_progress_bar_in_a_notebook_without_ipywidgets_is_the_text_bar(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """tqdm.auto in Jupyter without ipywidgets warned "IProgress not found" on every run."""
+    import sys
+    import types
+    import warnings
+
+    import tqdm.std
+
+    from oxyline import run
+
+    monkeypatch.setitem(sys.modules, "ipykernel", types.ModuleType("ipykernel"))
+    monkeypatch.setitem(sys.modules, "ipywidgets", None)  # import fails: not installed
+    assert run.tqdm_class() is tqdm.std.tqdm
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        oxyline.simulate("bifurcation", cycles=1, progress=True)
 
 
 CEREBRAL = ("MCA", "ACA", "PCA", "Basilar", "int-carotid", "cerebral")
@@ -146,15 +174,27 @@ def test_oxygen_figure_one_unit_full_tick_values_distinct_styles() -> None:
     res = oxyline.simulate("paper-bifurcated", cycles=1)
     fig = plot_oxygen.outlet_flux(res)
     a1, a2 = fig.axes[:2]
-    # before: nmol/s above, pmol/s below; the wall-uptake axis hid a +2.1e3 offset
-    assert "(nmol/s)" in a1.get_ylabel() and "(nmol/s)" in a2.get_ylabel()
+    # before: nmol/s above, pmol/s below; the wall-uptake axis hid a +2.1e3 offset; then
+    # nmol/s values in the thousands: one unit, with the prefix that suits the figure
+    unit = a1.get_ylabel().split("[")[1].rstrip("]")
+    assert a2.get_ylabel().endswith(f"[{unit}]") and unit.endswith("mol/s")
+    k = {"mmol/s": 1e3, "µmol/s": 1e6, "nmol/s": 1e9, "pmol/s": 1e12}[unit]
+    assert 1.0 <= k * max(np.abs(res.o2_flux_out).max(), np.abs(res.wall_o2_flux).max()) < 1000
     for ax in (a1, a2):
         assert not ax.yaxis.get_major_formatter().get_useOffset()
-    styles = [line.get_linestyle() for line in a1.get_lines()]
-    assert len(set(styles)) == len(styles) == len(res.vessels)  # coinciding daughters visible
-    wall = res.wall_o2_flux * 1e9
-    level, plotted = np.max(np.abs(wall)), np.concatenate([ln.get_ydata() for ln in a2.get_lines()])
-    assert np.allclose(np.sort(plotted), np.sort(wall.T.ravel()))  # the values, no rescaling
+    # coinciding curves (the symmetric daughters) drawn once and named together; every vessel
+    # named once; the curves left are all different
+    labels = [line.get_label() for line in a1.get_lines()]
+    assert sorted(n for lab in labels for n in lab.split(" = ")) == sorted(res.vessels)
+    ys = [line.get_ydata() for line in a1.get_lines()]
+    assert all(not np.allclose(a, b) for i, a in enumerate(ys) for b in ys[i + 1:])
+    wall = res.wall_o2_flux * k
+    level = np.max(np.abs(wall))
+    plotted = np.concatenate([ln.get_ydata() for ln in a2.get_lines()])
+    merged = [lab for lab in (ln.get_label() for ln in a2.get_lines())]
+    expected = np.concatenate([wall[:, list(res.vessels).index(lab.split(" = ")[0])]
+                               for lab in merged])
+    assert np.allclose(plotted, expected)  # the values, in the unit named
     if np.ptp(wall) < 0.01 * level:  # a flat uptake says how flat it is
         assert any("varies by" in t.get_text() for t in a2.texts)
     plt.close(fig)

@@ -98,7 +98,13 @@ def _with_structured_trees(base: str) -> Callable[[], Any]:
 def terminal_compartments(data: dict[str, Any]) -> builtins.list[str]:
     """The first lumped vessel of each lumped terminal compartment of ``data``: from every
     pressure outlet, up through lumped vessels to the one that starts where a geometric vessel
-    ends (whole-body-140: the 95 ``*_T`` terminals; not the ``.wall`` dead ends)."""
+    ends (whole-body-140: the 95 ``*_T`` terminals; not the ``.wall`` dead ends).
+
+    >>> import oxyline
+    >>> d = oxyline.catalogue.load_dict("whole-body-140")
+    >>> len(oxyline.catalogue.terminal_compartments(d))
+    95
+    """
     arriving = {v["to"]: v for v in data["vessels"]}
     out = []
     for node, bc in data["boundary_conditions"].items():
@@ -311,7 +317,14 @@ def load_dict(name: str) -> dict[str, Any]:
 
 
 def build(data: dict[str, Any]) -> Model:
-    """The :class:`Model` of a native model dict (a copy of it is validated and assembled)."""
+    """The :class:`Model` of a native model dict (a copy of it is validated and assembled).
+
+    >>> import oxyline
+    >>> d = oxyline.catalogue.load_dict("bifurcation")
+    >>> d["vessels"][0]["youngs_modulus"] = 8e5    # a stiffer parent
+    >>> oxyline.catalogue.build(d).vessel_names
+    ['parent', 'daughter1', 'daughter2']
+    """
     with gc_paused():
         return _build(_copy(dict(data)))
 

@@ -13,6 +13,7 @@ import argparse
 import json
 import os
 import sys
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -549,6 +550,9 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="oxyline", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"oxyline {_version()}")
+    parser.add_argument("--no-plausibility", action="store_true",
+                        help="do not warn about model values outside their physiological "
+                             "ranges (PlausibilityWarning: likely unit mix-ups)")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("run", help="run a model file or built-in model")
     p.add_argument("model", nargs="?", help="built-in name, or a .yaml/.json/.csv model "
@@ -645,6 +649,13 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _show_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                  file: Any = None, line: str | None = None) -> None:
+    """A warning as one line, ``warning: <message>``, like the errors (not Python's file and
+    line of the library code)."""
+    print(f"warning: {message}", file=sys.stderr if file is None else file)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
@@ -653,7 +664,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     from oxyline.errors import ModelError, OutputError, SolverError
 
     try:
-        return int(args.func(args))
+        with warnings.catch_warnings():  # restores the caller's display after the command
+            warnings.showwarning = _show_warning
+            if args.no_plausibility:
+                from oxyline.errors import PlausibilityWarning
+
+                warnings.simplefilter("ignore", PlausibilityWarning)
+            return int(args.func(args))
     except OutputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 3

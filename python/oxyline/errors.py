@@ -85,12 +85,84 @@ class PeriodicityWarning(UserWarning):
     ``settings["periodic_reached"]`` is False)."""
 
 
+class PlausibilityWarning(UserWarning):
+    """A model value outside the range it takes in the human circulation, most often a unit
+    mix-up (a radius in cm in an SI file, a flow in mL/s, a stiffness in MPa, cgs values in an
+    SI file). The core's model checks the ranges (``oxyline_core::model::plausibility``); this
+    warning carries what it found: ``element`` (``"vessel 'aorta'"``), ``key``, ``value`` and
+    ``unit`` (SI), the range ``low``..``high`` (``low`` 0: no lower bound) and
+    ``likely_cause`` (the mix-up whose factor explains the value, or None).
+
+    Silence it with the standard warnings filter::
+
+        import warnings, oxyline
+        warnings.simplefilter("ignore", oxyline.PlausibilityWarning)
+
+    >>> import warnings, oxyline
+    >>> bad = oxyline.catalogue.load_dict("bifurcation")
+    >>> bad["vessels"][0]["radius"]               # SI: metres
+    0.003
+    >>> bad["vessels"][0]["radius"] = 0.3         # 3 mm written in cm in an SI file
+    >>> with warnings.catch_warnings(record=True) as seen:
+    ...     warnings.simplefilter("always")
+    ...     _ = oxyline.load_model(bad)
+    >>> w = seen[0].message
+    >>> (w.element, w.key, w.value, w.unit)
+    ("vessel 'parent'", 'radius', 0.3, 'm')
+    >>> print(w.likely_cause)
+    a value in cm in an SI file (SI expects m) or a value in mm in an SI file (SI expects m)
+
+    The command line prints each as ``warning: ...``; ``oxyline --no-plausibility run ...``
+    silences them.
+    """
+
+    def __init__(self, message: str, element: str = "", key: str = "", value: float = 0.0,
+                 unit: str = "", low: float = 0.0, high: float = 0.0,
+                 likely_cause: str | None = None, more: int = 0) -> None:
+        super().__init__(message)
+        self.element, self.key, self.value, self.unit = element, key, value, unit
+        self.low, self.high, self.likely_cause, self.more = low, high, likely_cause, more
+
+    def __reduce__(self) -> tuple[object, ...]:  # picklable (a Dask worker's warnings)
+        return (type(self), (str(self), self.element, self.key, self.value, self.unit,
+                             self.low, self.high, self.likely_cause, self.more))
+
+
+def _caller_stacklevel() -> int:
+    """The stack level of the first frame outside the oxyline package (a warning then points
+    at the user's line that loaded the model)."""
+    import sys
+    from pathlib import Path
+
+    package = str(Path(__file__).parent)
+    frame, level = sys._getframe(1), 1
+    while frame is not None and frame.f_code.co_filename.startswith(package):
+        frame, level = frame.f_back, level + 1
+    return level
+
+
+def warn_implausible(found: list[dict[str, object]]) -> None:
+    """Emit one :class:`PlausibilityWarning` per finding of the core's check (the network's
+    ``plausibility()``); Python re-emits, it does not check again."""
+    import warnings
+
+    if not found:
+        return
+    level = _caller_stacklevel()
+    for d in found:
+        fields = {k: d[k] for k in ("element", "key", "value", "unit", "low", "high",
+                                    "likely_cause", "more")}
+        warnings.warn(PlausibilityWarning(str(d["message"]), **fields),  # type: ignore[arg-type]
+                      stacklevel=level)
+
+
 __all__ = [
     "CheckpointError",
     "ModelError",
     "OutputError",
     "OutputSizeWarning",
     "PeriodicityWarning",
+    "PlausibilityWarning",
     "ResourceError",
     "SimulationCancelled",
     "SimulationInterrupted",

@@ -16,7 +16,7 @@ from typing import Any
 
 from oxyline import _core
 from oxyline import memory as _memory  # a leaf too: imports only _core and errors
-from oxyline.errors import ModelError, core_errors
+from oxyline.errors import ModelError, core_errors, warn_implausible
 from oxyline.structured_tree import build_with_trees, expanded, has_trees
 
 #: the schema's key sets, as the core checks them
@@ -76,6 +76,11 @@ class Model:
     :func:`oxyline.simulate`), ``source`` the native dict it was read from. ``canonical``, the
     JSON-able SI description (the core's input), is written from ``source`` when first asked
     for: a whole tree's canonical vessels cost ~185 B per segment beside the core's own tables.
+
+    >>> import oxyline
+    >>> m = oxyline.load_model("bifurcation")
+    >>> m.name, m.vessel_names, m.period
+    ('bifurcation', ['parent', 'daughter1', 'daughter2'], 1.0)
     """
 
     name: str
@@ -192,6 +197,7 @@ def _build_native(data: dict[str, Any], grow: Callable[[Any], Any] | None = None
     limit = _memory.limit(sim.get("max_memory"), "simulation: max_memory")
     with core_errors(f"model '{name}'"):
         model._network = _core.Network.from_parts(parts, limit)
+    warn_implausible(model._network.plausibility())
     out = sim.get("output") or {}
     if "variables" in out or "vessels" in out:  # unknown names fail at load time too
         model.network.output_layout(variables=output_names(out.get("variables"), "variables"),

@@ -2,8 +2,12 @@
 
 ``import oxyline`` never imports this module or matplotlib; ``import oxyline.plot`` does not
 import matplotlib either until a function is called. Every function returns the
-:class:`matplotlib.figure.Figure`; axes are labelled with units (pressures in mmHg, flows in
-mL/s, lengths in cm), texts that would overlap are dropped.
+:class:`matplotlib.figure.Figure`; axes are labelled ``quantity [unit]`` (pressures in mmHg,
+flows in mL/s or a smaller prefix for microvascular flows, lengths in cm, O2 fluxes in mol/s
+with the SI prefix that suits the figure's values), texts that would overlap are dropped.
+Curves that coincide (the pressure at a node two vessels share) are drawn once, labelled with
+every vessel; flows whose peaks differ by more than a decade go in separate panels, one per
+decade; a colour bar spanning a narrow range says so in the title.
 
 >>> import oxyline, oxyline.plot
 >>> res = oxyline.simulate("bifurcation", cycles=2)
@@ -59,8 +63,44 @@ def _model(model: Model | str | os.PathLike[str] | Mapping[str, Any]) -> Model:
     return as_model(model)
 
 
-def display(units: str) -> tuple[str, float]:
-    """Display units and the factor from SI ``units`` (Pa → mmHg, m³/s → mL/s, …)."""
+#: SI prefixes (power of ten, symbol), largest first: a quantity shown with the prefix that puts its largest
+#: magnitude in [1, 1000) (no "nmol/s" values in the millions)
+PREFIXES = ((3, "k"), (0, ""), (-3, "m"), (-6, "µ"), (-9, "n"), (-12, "p"), (-15, "f"))
+
+
+def _peak(values: Any) -> float:
+    a = np.abs(np.asarray(values, dtype=float))
+    a = a[np.isfinite(a)]
+    return float(a.max()) if a.size else 0.0
+
+
+def prefixed(units: str, values: Any) -> tuple[str, float]:
+    """``units`` with the SI prefix that puts the largest magnitude of ``values`` in
+    [1, 1000), and the factor from ``units``: ``prefixed("mol/s", [2e-6])`` is
+    ``("µmol/s", 1e6)``.
+
+    >>> prefixed("mol/s", [2e-6, -5e-7])
+    ('µmol/s', 1000000.0)
+    """
+    peak = _peak(values)
+    for exponent, p in PREFIXES:
+        if peak >= 10.0 ** exponent:
+            break
+    return p + units, 10.0 ** -exponent
+
+
+def display(units: str, values: Any = None) -> tuple[str, float]:
+    """Display units and the factor from SI ``units``: Pa → mmHg; m³/s → mL/s (µL/s or nL/s
+    when every value of ``values`` is below 0.01 mL/s); m → cm; mol/s with the SI prefix that
+    suits ``values`` (nmol/s without them).
+
+    >>> display("Pa")[0], display("mol/s", [3e-5])
+    ('mmHg', ('µmol/s', 1000000.0))
+    """
+    if values is not None and units == "m^3/s" and 0 < _peak(values) < 1e-8:
+        return ("µL/s", 1e9) if _peak(values) >= 1e-11 else ("nL/s", 1e12)
+    if values is not None and units.startswith("mol/s"):
+        return prefixed(units, values)
     return DISPLAY.get(units, (units, 1.0))
 
 
@@ -104,10 +144,63 @@ def _declutter(fig: Any, texts: Sequence[Any]) -> None:
             kept.append(bb)
 
 
+#: line styles cycled over the colours: distinct vessels stay distinct beyond ten of them
+STYLES = ("-", "--", ":", "-.")
+
+
+def same_curves(series: Mapping[str, np.ndarray]) -> list[tuple[list[str], np.ndarray]]:
+    """The curves of ``series`` (name -> values) with those that coincide merged, each with all
+    its names: two vessels leaving one node read the same node pressure, and two lines drawn
+    on top of each other would hide one of them. Coincide: equal to 1e-9 of the largest
+    magnitude (round-off of one node's value read twice).
+
+    >>> import numpy as np
+    >>> [names for names, _ in same_curves({"a": np.ones(3), "b": np.ones(3), "c": np.zeros(3)})]
+    [['a', 'b'], ['c']]
+    """
+    scale = max((_peak(v) for v in series.values()), default=0.0) or 1.0
+    groups: list[tuple[list[str], np.ndarray]] = []
+    for name, y in series.items():
+        for names, y0 in groups:
+            if y0.shape == y.shape and np.allclose(y, y0, rtol=0.0, atol=1e-9 * scale):
+                names.append(name)
+                break
+        else:
+            groups.append(([name], np.asarray(y)))
+    return groups
+
+
+def decade_groups(peaks: Mapping[str, float]) -> list[list[str]]:
+    """Names grouped, largest peak first, so that the peaks within a group lie within a
+    factor of 10: a flow of 0.5 mL/s on the axis of a 400 mL/s aortic flow is a flat line,
+    so each group gets its own panel.
+
+    >>> decade_groups({"aorta": 4e-4, "iliac": 6e-5, "digital": 2e-7})
+    [['aorta', 'iliac'], ['digital']]
+    """
+    groups: list[list[str]] = []
+    for n in sorted(peaks, key=lambda k: -peaks[k]):
+        if groups and peaks[n] * 10.0 >= peaks[groups[-1][0]]:
+            groups[-1].append(n)
+        else:
+            groups.append([n])
+    return groups
+
+
 def waveforms(result: Result, vessels: Sequence[str] | str | None = None,
               quantities: Sequence[str] = ("pressure", "flow"), end: str = "in") -> Figure:
     """Waveforms of ``quantities`` (one panel each, e.g. "pressure", "flow", "po2", or a result
-    variable name) at the ``end`` ("in"/"out") of each of ``vessels`` (default: up to 6)."""
+    variable name) at the ``end`` ("in"/"out") of each of ``vessels`` (default: up to 6).
+    A quantity whose peaks differ by more than a decade between the vessels gets one panel
+    per decade (:func:`decade_groups`); coinciding curves are drawn once
+    (:func:`same_curves`), labelled ``a = b``.
+
+    >>> import oxyline, oxyline.plot
+    >>> res = oxyline.simulate("bifurcation", cycles=1)
+    >>> fig = oxyline.plot.waveforms(res, ["parent", "daughter1"])
+    >>> [ax.get_ylabel() for ax in fig.axes]
+    ['pressure [mmHg]', 'flow [mL/s]']
+    """
     plt = _plt()
     ds = result.to_xarray()
     if isinstance(vessels, str):
@@ -117,28 +210,50 @@ def waveforms(result: Result, vessels: Sequence[str] | str | None = None,
         if n not in result.vessels:
             raise KeyError(f"vessel '{n}' has no output (vessels: {', '.join(result.vessels[:10])}"
                            f"{', ...' if len(result.vessels) > 10 else ''})")
-    variables = [_vessel_variable(ds, q, end) for q in quantities]
-    fig, axes = plt.subplots(len(variables), 1, sharex=True, squeeze=False,
-                             figsize=(7.0, 2.4 * len(variables) + 0.8), layout="constrained")
-    for ax, var in zip(axes[:, 0], variables):
-        units, k = display(str(ds[var].attrs.get("units", "")))
-        for n in names:
-            ax.plot(result.time, ds[var].sel(vessel=n).values * k, label=n, lw=1.4)
-        end_txt = {"in": "inlet", "out": "outlet"}.get(var.rsplit("_", 1)[-1], "")
-        ylabel = f"{_label(var)}"
-        ax.set_ylabel(f"{ylabel} [{units}]" if units else ylabel)
-        if end_txt:
-            ax.set_title(f"{_label(var)} at the vessel {end_txt}", fontsize=10, loc="left")
-        ax.grid(alpha=0.3)
+    panels: list[tuple[str, dict[str, np.ndarray], tuple[str, float], bool]] = []
+    for var in (_vessel_variable(ds, q, end) for q in quantities):
+        series = {n: np.asarray(ds[var].sel(vessel=n).values, dtype=float) for n in names}
+        # one unit per quantity in the figure, from all its values (its panels compare)
+        unit = display(str(ds[var].attrs.get("units", "")),
+                       np.concatenate([y.ravel() for y in series.values()]))
+        groups = decade_groups({n: _peak(y) for n, y in series.items()})
+        panels += [(var, {n: series[n] for n in g}, unit, len(groups) > 1) for g in groups]
+    fig, axes = plt.subplots(len(panels), 1, sharex=True, squeeze=False,
+                             figsize=(7.0, 2.4 * len(panels) + 0.8), layout="constrained")
+    for ax, (var, series, unit, split) in zip(axes[:, 0], panels):
+        _waveform_panel(ax, result.time, var, series, unit, names, split)
     axes[-1, 0].set_xlabel("time [s]")
-    handles, labels = axes[0, 0].get_legend_handles_labels()
+    by_label: dict[str, Any] = {}
+    for ax in axes[:, 0]:
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            by_label.setdefault(lab, h)
     # below the panels: long vessel names (whole-body-140) beside them squeezed the axes and
     # covered the title
-    longest = max((len(x) for x in labels), default=0)
-    fig.legend(handles, labels, loc="outside lower center", fontsize=8, title="vessel",
-               ncols=1 if longest > 40 else min(3, max(1, len(labels))))
+    longest = max((len(x) for x in by_label), default=0)
+    fig.legend(list(by_label.values()), list(by_label), loc="outside lower center", fontsize=8,
+               title="vessel", ncols=1 if longest > 40 else min(3, max(1, len(by_label))))
     fig.suptitle(f"{result.model_name}: waveforms", fontsize=11)
     return fig
+
+
+def _waveform_panel(ax: Any, time: Any, var: str, series: Mapping[str, np.ndarray],
+                    unit: tuple[str, float], names: Sequence[str], split: bool) -> None:
+    """One panel of :func:`waveforms`: the curves of ``series`` in the display ``unit``
+    (name, factor from SI), each vessel in the colour and style of its place in ``names``."""
+    units, k = unit
+    for merged, y in same_curves(series):
+        i = names.index(merged[0])
+        ax.plot(time, y * k, label=" = ".join(merged), lw=1.4, color=f"C{i % 10}",
+                ls=STYLES[(i // 10) % len(STYLES)])
+    ax.set_ylabel(f"{_label(var)} [{units}]" if units else _label(var))
+    end_txt = {"in": "inlet", "out": "outlet"}.get(var.rsplit("_", 1)[-1], "")
+    title = f"{_label(var)} at the vessel {end_txt}" if end_txt else ""
+    if split:
+        peaks = [_peak(y) * k for y in series.values()]
+        title += f"{', ' if title else ''}peaks {min(peaks):.3g} to {max(peaks):.3g} {units}"
+    if title:
+        ax.set_title(title, fontsize=10, loc="left")
+    ax.grid(alpha=0.3)
 
 
 def _graph(model: Model) -> tuple[dict[str, list[tuple[str, str]]], dict[str, dict[str, Any]]]:
@@ -152,7 +267,12 @@ def _graph(model: Model) -> tuple[dict[str, list[tuple[str, str]]], dict[str, di
 
 
 def inlets(model: Model) -> list[str]:
-    """Nodes with a flow or pressure condition at the start of a vessel."""
+    """Nodes with a flow or pressure condition at the start of a vessel.
+
+    >>> import oxyline, oxyline.plot as plot
+    >>> plot.inlets(oxyline.load_model("bifurcation"))
+    ['inlet']
+    """
     starts = {v["from"] for v in model.canonical["vessels"]}
     ends = {v["to"] for v in model.canonical["vessels"]}
     bcs = model.canonical["boundary_conditions"]
@@ -162,7 +282,12 @@ def inlets(model: Model) -> list[str]:
 
 
 def outlets(model: Model) -> list[str]:
-    """Nodes with a boundary condition at the end of a vessel."""
+    """Nodes with a boundary condition at the end of a vessel.
+
+    >>> import oxyline, oxyline.plot as plot
+    >>> plot.outlets(oxyline.load_model("bifurcation"))
+    ['ica_out', 'eca_out']
+    """
     ends = {v["to"] for v in model.canonical["vessels"]}
     starts = {v["from"] for v in model.canonical["vessels"]}
     return [n for n in model.canonical["boundary_conditions"] if n in ends and n not in starts]
@@ -170,7 +295,12 @@ def outlets(model: Model) -> list[str]:
 
 def path(model: Model, outlet: str, inlet: str | None = None) -> list[str]:
     """Vessel names along the (fewest-vessel) path from ``inlet`` (default: the inlet that
-    reaches it) to ``outlet`` (an outlet node or a vessel name), following vessel direction."""
+    reaches it) to ``outlet`` (an outlet node or a vessel name), following vessel direction.
+
+    >>> import oxyline, oxyline.plot as plot
+    >>> plot.path(oxyline.load_model("bifurcation"), "eca_out")
+    ['parent', 'daughter2']
+    """
     adj, vessels = _graph(model)
     target = vessels[outlet]["to"] if outlet in vessels else outlet
     if target not in adj:
@@ -196,7 +326,12 @@ def path(model: Model, outlet: str, inlet: str | None = None) -> list[str]:
 def internal_vessels(model: Model) -> set[str]:
     """Vessels that are internal branches of a model, not arteries: dead ends (one end touches
     no other vessel and has no boundary condition), e.g. the '.wall' branches that put a wall
-    viscosity in series with a capacitance (whole-body-140)."""
+    viscosity in series with a capacitance (whole-body-140).
+
+    >>> import oxyline, oxyline.plot as plot
+    >>> plot.internal_vessels(oxyline.load_model("bifurcation"))
+    set()
+    """
     count: dict[str, int] = {}
     for v in model.canonical["vessels"]:
         for end in (v["from"], v["to"]):
@@ -217,7 +352,13 @@ def representative_vessels(result: Result, model: Model, n: int = 5) -> list[str
     one whose path from the inlet overlaps least with the paths already chosen (largest mean
     flow first among equals), so that the figure spans the regions of the network (e.g. the
     brain, an arm and the legs) rather than one of them; never an internal branch
-    (:func:`internal_vessels`). Falls back to the first vessels that are not internal."""
+    (:func:`internal_vessels`). Falls back to the first vessels that are not internal.
+
+    >>> import oxyline, oxyline.plot as plot
+    >>> m = oxyline.load_model("bifurcation")
+    >>> plot.representative_vessels(oxyline.simulate(m, cycles=1), m, n=2)
+    ['parent', 'daughter1']
+    """
     skip = internal_vessels(model)
     named = [v for v in result.vessels if v not in skip]
     paths: dict[str, set[str]] = {}
@@ -260,7 +401,14 @@ def profile_data(result: Result, model: Model | str, outlet: str, quantity: str 
     """Distance [m] from the inlet and time mean/min/max of ``quantity`` (SI) along the path to
     ``outlet``; uses per-segment output when present, else the vessel ends. Lumped vessels
     have no length; a path of lumped vessels only counts one unit per vessel
-    (``distance_units`` "vessel" instead of "m")."""
+    (``distance_units`` "vessel" instead of "m").
+
+    >>> import oxyline, oxyline.plot as plot
+    >>> res = oxyline.simulate("bifurcation", cycles=1)
+    >>> d = plot.profile_data(res, "bifurcation", "ica_out")
+    >>> round(float(d["distance"][-1]), 4), str(d["units"])
+    (0.1268, 'Pa')
+    """
     m = _model(model)
     ds = result.to_xarray()
     _, vessels = _graph(m)
@@ -335,7 +483,14 @@ def profile(result: Result, model: Model | str, outlet: str,
     """Time-mean ``quantity`` (with its min–max band over the cycle) against distance along the
     path from the inlet to ``outlet`` (node or vessel name). ``quantity`` may be a list, one panel
     each; "pressure", "flow", "po2", "o2_flux" or any result variable. Vessel boundaries are
-    marked and named."""
+    marked and named.
+
+    >>> import oxyline, oxyline.plot as plot
+    >>> res = oxyline.simulate("bifurcation", cycles=1)
+    >>> fig = plot.profile(res, "bifurcation", "ica_out", ["pressure", "flow"])
+    >>> fig.axes[-1].get_xlabel()
+    'distance from the inlet [cm]'
+    """
     plt = _plt()
     m = _model(model)
     quantities = [quantity] if isinstance(quantity, str) else list(quantity)
@@ -345,7 +500,7 @@ def profile(result: Result, model: Model | str, outlet: str,
     for row, q in enumerate(quantities):
         ax = axes[row, 0]
         d = profile_data(result, m, outlet, q, inlet)
-        units, k = display(str(d["units"]))
+        units, k = display(str(d["units"]), np.concatenate([d["min"], d["max"]]))
         xk = 1.0 if str(d["distance_units"]) == "vessel" else 100.0
         x = d["distance"] * xk
         ax.fill_between(x, d["min"] * k, d["max"] * k, color="C0", alpha=0.2,
@@ -471,7 +626,7 @@ def _values(model: Model, values: Any, result: Result | None, label: str | None,
         if both:  # the vessel's mean: average of its two ends
             a = 0.5 * (a + ds[f"{values}_out"].values)
         mean = np.trapezoid(a, t, axis=0) / (t[-1] - t[0]) if len(t) > 1 else a.mean(axis=0)
-        u, k = display(str(ds[var].attrs.get("units", "")))
+        u, k = display(str(ds[var].attrs.get("units", "")), mean)
         by = dict(zip(result.vessels, mean * k))
         return (np.array([by.get(n, math.nan) for n in names]),
                 label or f"time-mean {_label(var)}", units if units is not None else u,
@@ -499,6 +654,12 @@ def network_map(model: Model | str | os.PathLike[str], values: Any = None,
     networks with loops when networkx is installed), "tree", "spring", "kamada-kawai". Line width
     follows the radius; lumped vessels are dashed; vessel names are drawn when they fit
     (``labels=None``: up to 150 vessels), and any that would overlap are dropped.
+
+    >>> import oxyline, oxyline.plot as plot
+    >>> res = oxyline.simulate("bifurcation", cycles=1)
+    >>> fig = plot.network_map("bifurcation", result=res)
+    >>> fig.axes[-1].get_ylabel()
+    'time-mean pressure [mmHg]'
     """
     plt = _plt()
     from matplotlib import colors as mcolors
@@ -546,6 +707,7 @@ def network_map(model: Model | str | os.PathLike[str], values: Any = None,
     sm = plt.cm.ScalarMappable(norm=norm, cmap=cm)
     cb = fig.colorbar(sm, ax=ax, shrink=0.8, pad=0.02)
     cb.set_label(f"{label} [{units}]" if units else label)
+    cb.ax.yaxis.get_major_formatter().set_useOffset(False)  # full values, no hidden offset
     texts = []
     if labels or (labels is None and len(vessels) <= 150):
         for v, s in zip(vessels, segs):
@@ -554,9 +716,23 @@ def network_map(model: Model | str | os.PathLike[str], values: Any = None,
                                  ha="center", va="bottom", color="0.1", zorder=3.5,
                                  bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none",
                                        "alpha": 0.7}))
-    ax.set_title(f"{m.name}: {label}{note}", fontsize=11)
+    ax.set_title(f"{m.name}: {label}{note}{narrow_range_note(vmin, vmax, units)}", fontsize=11)
     _declutter(fig, texts)
     return fig
+
+
+def narrow_range_note(vmin: float, vmax: float, units: str) -> str:
+    """A note for a colour bar whose range is narrow (under 5 % of its level): the full
+    colour scale then stands for a small difference, and the reader must be told.
+
+    >>> narrow_range_note(99.96, 100.0, "mmHg")
+    '\\n(colours span only 0.04 mmHg: 99.96 to 100 mmHg)'
+    """
+    level = max(abs(vmin), abs(vmax))
+    span = vmax - vmin
+    if not (level > 0 and 0 < span < 0.05 * level):
+        return ""
+    return f"\n(colours span only {span:.2g} {units}: {vmin:.6g} to {vmax:.6g} {units})"
 
 
 def save_figures(result: Result, model: Model | str | os.PathLike[str],
@@ -566,7 +742,15 @@ def save_figures(result: Result, model: Model | str | os.PathLike[str],
     up to 4 terminal vessels; pressure, flow and PO2 when present), ``profile`` (inlet to the
     outlet farthest from it; pressure, PO2, convective and wall O2 flux when present, flow) and
     ``network_map`` (time-mean pressure).
-    Returns the files written."""
+    Returns the files written.
+
+    >>> import oxyline, oxyline.plot as plot
+    >>> import tempfile
+    >>> res = oxyline.simulate("bifurcation", cycles=1)
+    >>> with tempfile.TemporaryDirectory() as out:
+    ...     sorted(p.name for p in plot.save_figures(res, "bifurcation", out, formats=("png",)))
+    ['network_map.png', 'profile.png', 'waveforms.png']
+    """
     plt = _plt()
     m = _model(model)
     out = Path(outdir)
@@ -608,14 +792,21 @@ def impedance(frequencies: Any, z: Any, label: str | None = None,
               ax: Sequence[Any] | None = None) -> Figure:
     """Modulus (Pa·s/m³, log scale) and phase (rad) of input impedances ``z`` (complex, from
     :func:`oxyline.impedance`) against frequency (Hz). Curves go on the axes ``ax`` (modulus,
-    phase) of an earlier call when given, to compare networks."""
+    phase) of an earlier call when given, to compare networks.
+
+    >>> import oxyline, oxyline.plot as plot
+    >>> f = [0.5, 1.0, 2.0]
+    >>> fig = plot.impedance(f, oxyline.impedance("bifurcation", "inlet", f))
+    >>> fig.axes[0].get_ylabel()
+    '|Z| [Pa·s/m³]'
+    """
     plt = _plt()
     if ax is None:
         fig, ax = plt.subplots(2, 1, sharex=True, figsize=(6.0, 5.0), layout="constrained")
-        ax[0].set_ylabel("|Z| (Pa s/m$^3$)")
+        ax[0].set_ylabel("|Z| [Pa·s/m³]")
         ax[0].set_yscale("log")
-        ax[1].set_ylabel("phase (rad)")
-        ax[1].set_xlabel("frequency (Hz)")
+        ax[1].set_ylabel("phase [rad]")
+        ax[1].set_xlabel("frequency [Hz]")
         ax[1].axhline(0.0, color="0.6", lw=0.8)
     fig = ax[0].figure
     f, zz = np.asarray(frequencies, dtype=float), np.asarray(z, dtype=complex)

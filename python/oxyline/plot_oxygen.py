@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from oxyline.model import Model
+from oxyline.plot import STYLES, prefixed, same_curves
 from oxyline.result import Result
 
 
@@ -35,9 +36,8 @@ def _note(model: Model | None) -> str:
     return "\n(radii and inflow waveform assumed, not the paper's)" if "assum" in desc else ""
 
 
-# vessels whose curves coincide (the daughters of a symmetric bifurcation) stay visible: each
-# vessel gets its own line style on top of its colour
-STYLES = ("-", "--", ":", "-.")
+# vessels whose curves coincide (the daughters of a symmetric bifurcation) are drawn once and
+# named together (plot.same_curves); the others get a line style on top of their colour
 
 
 def _honest_axis(ax: Any, values: np.ndarray, unit: str) -> None:
@@ -57,21 +57,33 @@ def _honest_axis(ax: Any, values: np.ndarray, unit: str) -> None:
 def outlet_flux(result: Result, model: Model | None = None) -> Any:
     """Convective O2 flux Q·C at the end of each vessel against time (the paper's Fig. 4),
     with each vessel's wall uptake in a second panel (J_in − J_out also contains the change of
-    the O2 stored in the compliant vessel, which dominates it). Both panels in nmol/s."""
+    the O2 stored in the compliant vessel, which dominates it). Each panel in mol/s with the
+    SI prefix that suits its values; coinciding curves (symmetric daughters) drawn once.
+
+    >>> import oxyline
+    >>> from oxyline import plot_oxygen
+    >>> res = oxyline.simulate("paper-bifurcated", cycles=1)
+    >>> fig = plot_oxygen.outlet_flux(res)
+    >>> [ax.get_ylabel() for ax in fig.axes]
+    ['J$_{out}$ [µmol/s]', 'wall uptake [µmol/s]']
+    """
     plt = _plt()
     if result.oxygen is None:
         raise ValueError("this result has no oxygen section")
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
-    j_out, wall = result.o2_flux_out * 1e9, result.wall_o2_flux * 1e9
-    for i, name in enumerate(result.vessels):
-        style = STYLES[i % len(STYLES)]
-        a1.plot(result.time, j_out[:, i], style, label=name)
-        a2.plot(result.time, wall[:, i], style, label=name)
-    a1.set_ylabel("J_out (nmol/s)")
-    a2.set_ylabel("wall uptake (nmol/s)")
-    _honest_axis(a1, j_out, "nmol/s")
-    _honest_axis(a2, wall, "nmol/s")
-    a2.set_xlabel("time in cycle (s)")
+    # one unit for the figure (the panels compare), its prefix from the larger values
+    unit, k = prefixed("mol/s", np.concatenate([np.ravel(result.o2_flux_out),
+                                                np.ravel(result.wall_o2_flux)]))
+    for ax, data, what in ((a1, result.o2_flux_out, "J$_{out}$"),
+                           (a2, result.wall_o2_flux, "wall uptake")):
+        series = {name: np.asarray(data[:, i]) for i, name in enumerate(result.vessels)}
+        for names, y in same_curves(series):
+            i = list(result.vessels).index(names[0])
+            ax.plot(result.time, y * k, STYLES[i % len(STYLES)], color=f"C{i % 10}",
+                    label=" = ".join(names))
+        ax.set_ylabel(f"{what} [{unit}]")
+        _honest_axis(ax, np.asarray(data) * k, unit)
+    a2.set_xlabel("time in cycle [s]")
     a1.legend(fontsize=8)
     a1.set_title(f"{result.model_name}: convective O$_2$ flux at the vessel outlets{_note(model)}",
                  fontsize=10)
@@ -80,7 +92,15 @@ def outlet_flux(result: Result, model: Model | None = None) -> Any:
 
 
 def wall_uptake(result: Result, model: Model | None = None) -> Any:
-    """Cycle-mean wall O2 flux per unit length along each vessel (mol m^-1 s^-1)."""
+    """Cycle-mean wall O2 flux per unit length along each vessel, in mol/(m·s) with the SI
+    prefix that suits the values.
+
+    >>> import oxyline
+    >>> from oxyline import plot_oxygen
+    >>> res = oxyline.simulate("paper-bifurcated", cycles=1)
+    >>> plot_oxygen.wall_uptake(res).axes[0].get_xlabel()
+    'distance from the vessel inlet [mm]'
+    """
     plt = _plt()
     if result.oxygen is None or not result.has_segments:
         raise ValueError("needs an oxygen result with segment output")
@@ -88,14 +108,18 @@ def wall_uptake(result: Result, model: Model | None = None) -> Any:
     w = result.species[result.oxygen].segment("wall_flux").mean(axis=0)
     pos = result.segment_position
     start = np.concatenate([[0], np.cumsum(result.segment_count)]).astype(int)
+    lines = []
     for i, name in enumerate(result.vessels):
         a, b = start[i], start[i + 1]
         if b - a < 1:
             continue
         dx = 2 * pos[a] if b - a == 1 else pos[a + 1] - pos[a]
-        ax.plot(pos[a:b] * 1e3, w[a:b] / dx * 1e9, "o" + STYLES[i % len(STYLES)], label=name)
-    ax.set_xlabel("distance from the vessel inlet (mm)")
-    ax.set_ylabel("wall O$_2$ uptake (nmol m$^{-1}$ s$^{-1}$)")
+        lines.append((i, name, pos[a:b] * 1e3, w[a:b] / dx))
+    unit, k = prefixed("mol/(m·s)", np.concatenate([y for *_, y in lines]) if lines else [])
+    for i, name, x, y in lines:
+        ax.plot(x, y * k, "o" + STYLES[i % len(STYLES)], color=f"C{i % 10}", label=name)
+    ax.set_xlabel("distance from the vessel inlet [mm]")
+    ax.set_ylabel(f"wall O$_2$ uptake [{unit}]")
     ax.legend(fontsize=8)
     ax.set_title(f"{result.model_name}: cycle-mean wall uptake along each vessel{_note(model)}",
                  fontsize=10)
@@ -105,7 +129,15 @@ def wall_uptake(result: Result, model: Model | None = None) -> Any:
 
 def save_oxygen_figures(result: Result, model: Model | None, outdir: str | os.PathLike[str],
                         formats: tuple[str, ...] = ("png", "svg")) -> list[Path]:
-    """Write ``o2_outlet_flux`` and ``o2_wall_uptake`` figures; returns the files written."""
+    """Write ``o2_outlet_flux`` and ``o2_wall_uptake`` figures; returns the files written.
+
+    >>> import tempfile, oxyline
+    >>> from oxyline import plot_oxygen
+    >>> res = oxyline.simulate("paper-bifurcated", cycles=1)
+    >>> with tempfile.TemporaryDirectory() as out:
+    ...     [p.name for p in plot_oxygen.save_oxygen_figures(res, None, out, formats=("png",))]
+    ['o2_outlet_flux.png', 'o2_wall_uptake.png']
+    """
     plt = _plt()
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
@@ -124,7 +156,16 @@ def save_oxygen_figures(result: Result, model: Model | None, outdir: str | os.Pa
 
 def without_intramyocardial_pressure(model: Model) -> dict[str, Any]:
     """The model's source with every `coronary` outlet's intramyocardial pressure set to 0:
-    the same bed without the systolic squeeze (the reference case of the impediment)."""
+    the same bed without the systolic squeeze (the reference case of the impediment).
+
+    >>> import oxyline
+    >>> from oxyline import plot_oxygen
+    >>> m = oxyline.load_model("paper-curved-coronary")
+    >>> src = plot_oxygen.without_intramyocardial_pressure(m)
+    >>> {bc["intramyocardial_pressure"] for bc in src["boundary_conditions"].values()
+    ...  if bc.get("type") == "coronary"}
+    {0.0}
+    """
     src = copy.deepcopy(model.source)
     for bc in src.get("boundary_conditions", {}).values():
         if isinstance(bc, dict) and bc.get("type") == "coronary":
@@ -136,7 +177,17 @@ def coronary_impediment(result: Result, rigid: Result, vessel: str | None = None
                         systole: float | None = None) -> Any:
     """Inflow and wall O2 uptake of one vessel with the intramyocardial pressure (`result`) and
     without it (`rigid`, from :func:`without_intramyocardial_pressure`), with the systolic
-    means in the legend (docs/oxygen.md "Coronary oxygen"). Flow in mL/s, uptake in nmol/s."""
+    means in the legend (docs/oxygen.md "Coronary oxygen"). Flow in mL/s, uptake in nmol/s.
+
+    >>> import oxyline
+    >>> from oxyline import plot_oxygen
+    >>> m = oxyline.load_model("paper-curved-coronary")
+    >>> rigid = oxyline.load_model(plot_oxygen.without_intramyocardial_pressure(m))
+    >>> fig = plot_oxygen.coronary_impediment(oxyline.simulate(m, cycles=1),
+    ...                                       oxyline.simulate(rigid, cycles=1), systole=0.35)
+    >>> fig.axes[1].get_ylabel()
+    'wall O$_2$ uptake [nmol/s]'
+    """
     plt = _plt()
     name = vessel or result.vessels[0]
     i = list(result.vessels).index(name)
@@ -154,11 +205,11 @@ def coronary_impediment(result: Result, rigid: Result, vessel: str | None = None
     if systole:
         for ax in (a1, a2):
             ax.axvspan(0, systole, color="0.9", zorder=0)
-    a1.set_ylabel(f"inflow of '{name}' (mL/s)")
-    a2.set_ylabel("wall O$_2$ uptake (nmol/s)")
+    a1.set_ylabel(f"inflow of '{name}' [mL/s]")
+    a2.set_ylabel("wall O$_2$ uptake [nmol/s]")
     _honest_axis(a2, np.concatenate([result.wall_o2_flux[:, i], rigid.wall_o2_flux[:, i]]) * 1e9,
                  "nmol/s")
-    a2.set_xlabel("time in cycle (s); grey: systole")
+    a2.set_xlabel("time in cycle [s]; grey: systole")
     a1.legend(fontsize=8)
     a2.legend(fontsize=8, loc="lower right")
     a1.set_title(f"{result.model_name}: systolic flow impediment by intramyocardial pressure",

@@ -25,7 +25,13 @@ UNITS = {
 
 @dataclass
 class VesselResult:
-    """Waveforms of one vessel (SI units); segment arrays have shape (time, segment)."""
+    """Waveforms of one vessel (SI units); segment arrays have shape (time, segment).
+
+    >>> import oxyline
+    >>> v = oxyline.simulate("bifurcation", cycles=1).vessel("parent")
+    >>> v.name, v.flow_in.shape == v.time.shape, v.segment_flow.shape[1]
+    ('parent', True, 10)
+    """
 
     name: str
     time: np.ndarray
@@ -181,6 +187,15 @@ class Result:
 
     ``data`` is the (time, column) array produced by the core; the attributes below are views
     into it (no copies). Times start at 0 for the last-cycle output.
+
+    >>> import oxyline
+    >>> res = oxyline.simulate("bifurcation", cycles=1)
+    >>> res.model_name, res.vessels
+    ('bifurcation', ['parent', 'daughter1', 'daughter2'])
+    >>> res.pressure_in.shape == (res.time.size, 3)
+    True
+    >>> float(res.summary().loc["parent", "flow_in_mean"]) > 0
+    True
     """
 
     model_name: str

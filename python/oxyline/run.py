@@ -123,43 +123,71 @@ def _selection(s: Mapping[str, Any]) -> dict[str, Any]:
 
 
 class _CycleProgress:
-    """Progress in cardiac cycles, never backwards. The core reports (t, t_end) of its current
-    pass; a pass that starts again from t = 0 (e.g. the flow pre-run of a transport model) adds
-    the time done so far, so the count only grows. A run ``until_periodic`` has no known end:
-    it shows the cycles done and its stopping rule instead of a percentage that would stop at
-    a few percent of ``max_cycles``."""
+    """Progress in cardiac cycles, never backwards, counting N for a run of N cycles. A
+    transport model whose closures need the cycle-mean flow runs a flow-only pass over the
+    same cycles first, then the coupled pass from t = 0 again (docs/physics.md §3.1): the
+    flow-only pass is shown in the bar's description and the count is the coupled pass's (it
+    used to add both and count 2N). A run ``until_periodic`` has no known end: it shows the
+    cycles done and its stopping rule instead of a percentage that would stop at a few
+    percent of ``max_cycles``."""
 
-    def __init__(self, bar: Any, period: float, open_ended: bool) -> None:
+    def __init__(self, bar: Any, period: float, open_ended: bool, passes: int = 1) -> None:
         self.bar, self.period, self.open_ended = bar, period, open_ended
-        self.done = 0.0  # time of the passes that ended
+        self.pass_left = passes - 1  # passes before the one that is counted
         self.last = 0.0
 
     def __call__(self, t: float, t_end: float) -> None:
-        if t < self.last:  # a new pass from 0
-            self.done += self.last
+        if t < self.last and self.pass_left > 0:  # the counted pass starts from 0 again
+            self.pass_left -= 1
+            self.bar.set_description("run", refresh=False)
         self.last = t
+        if self.pass_left > 0:
+            self.bar.set_description(f"run (flow-only pass {min(t, t_end) / self.period:.1f}/"
+                                     f"{t_end / self.period:.4g} cycles first)", refresh=False)
+            self.bar.refresh()
+            return
         if not self.open_ended:
-            self.bar.total = round((self.done + t_end) / self.period, 2)
-        self.bar.n = round((self.done + min(t, t_end)) / self.period, 2)
+            self.bar.total = round(t_end / self.period, 2)
+        self.bar.n = max(self.bar.n, round(min(t, t_end) / self.period, 2))
         self.bar.refresh()
 
     def finish(self, cycles_run: int) -> None:
         """The count at the end of the run (the core reports every few hundred steps)."""
-        self.bar.n = round(self.done / self.period + cycles_run, 2)
+        self.bar.set_description("run", refresh=False)
+        self.bar.n = round(float(cycles_run), 2)
         if not self.open_ended:
             self.bar.total = self.bar.n
         self.bar.refresh()
 
 
+def tqdm_class() -> Any:
+    """The progress bar class: tqdm's notebook widget in Jupyter when ipywidgets is installed,
+    its text bar otherwise (``tqdm.auto`` in a notebook without ipywidgets warns "IProgress not
+    found" on every run); None without tqdm."""
+    import sys
+
+    try:
+        from tqdm.std import tqdm
+    except ImportError:
+        return None
+    if "ipykernel" in sys.modules:
+        try:
+            import ipywidgets  # noqa: F401
+            from tqdm.notebook import tqdm as notebook_tqdm
+        except ImportError:
+            return tqdm
+        return notebook_tqdm
+    return tqdm
+
+
 def _progress_bar(enabled: bool | ProgressCallback | None,
-                  s: Mapping[str, Any] | None = None) -> tuple[Any, Any]:
+                  s: Mapping[str, Any] | None = None, passes: int = 1) -> tuple[Any, Any]:
     if callable(enabled):
         return enabled, None
     if not enabled:
         return None, None
-    try:
-        from tqdm.auto import tqdm
-    except ImportError:
+    tqdm = tqdm_class()
+    if tqdm is None:
         return None, None
     period = float(s["period"]) if s else 1.0
     until = s.get("until_periodic") if s else None
@@ -172,7 +200,7 @@ def _progress_bar(enabled: bool | ProgressCallback | None,
                "[{elapsed}<{remaining}]")
     bar = tqdm(total=None if until is not None else 1.0, unit="cycle", delay=1.0, desc="run",
                bar_format=fmt)
-    return _CycleProgress(bar, period, until is not None), bar
+    return _CycleProgress(bar, period, until is not None, passes), bar
 
 
 def _species_results(model: Model, raw: Mapping[str, Any], layout: Mapping[str, Any],
@@ -313,7 +341,8 @@ def _run(model: Model, s: Mapping[str, Any], progress: Any, cancel: Any = None,
     The run stops with :class:`SimulationCancelled` once ``cancel`` (a ``threading.Event``)
     is set; it is checked with the progress, every few hundred steps and at most every 0.1 s
     (at once after a progress callback that set it)."""
-    callback, bar = _progress_bar(progress, s)
+    callback, bar = _progress_bar(progress, s, model.network.passes()
+                                  if progress and not callable(progress) else 1)
     event = threading.Event() if cancel is None else cancel
 
     def check(t: float, t_end: float) -> None:
@@ -498,6 +527,20 @@ def resume(path: str | os.PathLike[str], **overrides: Any) -> Result:
     ``max_memory``, ``checkpoint`` and ``checkpoint_every`` may be given (by default it goes on
     checkpointing into ``path`` as often as before). :class:`~oxyline.CheckpointError` if the
     file is not a checkpoint this version reads.
+
+    >>> import os, tempfile, threading, oxyline
+    >>> stop = threading.Event()
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     ck = os.path.join(d, "run.ckpt")
+    ...     try:  # stopped once the checkpoint of cycle 1 is written
+    ...         oxyline.simulate("bifurcation", cycles=3, checkpoint=ck,
+    ...                          checkpoint_every="1 cycle", cancel=stop,
+    ...                          progress=lambda t, t_end: os.path.exists(ck) and stop.set())
+    ...     except oxyline.SimulationCancelled as stopped:
+    ...         partial = stopped.result
+    ...     res = oxyline.resume(ck)
+    >>> partial.complete, res.complete, res.settings["cycles_run"]
+    (False, True, 3)
     """
     meta, state = _checkpoint.read(path)
     changed = set(overrides) - _checkpoint.RUN_CONTROL

@@ -211,6 +211,14 @@ def sobol(model: Model | str | os.PathLike[str] | Mapping[str, Any], problem: Ma
     asked for, ``.attrs["samples"]`` the parameter samples and ``.attrs["values"]`` the
     quantity per sample. Raises :class:`~oxyline.ModelError` if a variant failed (its values
     would bias every index).
+
+    >>> import oxyline
+    >>> problem = {"names": ["boundary_conditions.ica_out.resistance"],
+    ...            "bounds": [[2.5e9, 3.5e9]]}
+    >>> s = oxyline.sensitivity.sobol("bifurcation", problem, 8, "pressure_in_mean[parent]",
+    ...                               cycles=1, progress=False)
+    >>> list(s["pressure_in_mean[parent]"].columns)
+    ['S1', 'S1_conf', 'ST', 'ST_conf']
     """
     import pandas as pd
 

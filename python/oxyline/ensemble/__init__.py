@@ -49,9 +49,9 @@ def simulate_ensemble(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     ``progress``: a bar over variants, or a callback ``f(done, total)``. ``overrides``: the
     run settings of :func:`oxyline.simulate` (``cycles``, ``until_periodic``, ...).
 
-    ``cancel`` (a ``threading.Event``; on this machine): setting it stops the ensemble (seen
-    within 0.1 s: no more variants start, the running ones stop at their next check) with
-    :class:`~oxyline.SimulationCancelled`; Ctrl-C also stops an ensemble running in a worker
+    ``cancel`` (a ``threading.Event``): setting it stops the ensemble (seen within 0.1 s: no
+    more variants start, the running ones stop at their next check; on a Dask ``client`` its
+    tasks are cancelled) with :class:`~oxyline.SimulationCancelled`; Ctrl-C also stops an ensemble running in a worker
     thread. ``variant_timeout`` (s of wall time): a variant running longer is stopped and
     fails with a solver error naming ``variant_timeout``; the others run on. ``output="full"``
     is estimated before any variant runs: above ``max_memory`` it is refused with
@@ -79,18 +79,21 @@ def simulate_ensemble(model: Model | str | os.PathLike[str] | Mapping[str, Any],
         from oxyline.ensemble.cluster import run_on_client
 
         return run_on_client(client, model, patches, index, output=output, store=store,
-                             progress=progress, workers=workers, overrides=overrides)
+                             progress=progress, workers=workers, overrides=overrides,
+                             cancel=control["cancel"])
     return _local(model, patches, index, workers=workers, output=output, store=store,
                   progress=progress, overrides=overrides, control=control)
 
 
 def _control(cancel: Any, variant_timeout: Any, client: Any) -> dict[str, Any]:
-    """``cancel`` and ``variant_timeout`` checked (for ensembles on this machine)."""
+    """``cancel`` and ``variant_timeout`` checked (``variant_timeout`` for ensembles on this
+    machine; a Dask ensemble's cancel cancels its tasks)."""
     import math
 
-    if client is not None and (cancel is not None or variant_timeout is not None):
-        raise ModelError("simulate_ensemble: cancel and variant_timeout are for ensembles on "
-                         "this machine; stop a Dask ensemble with client.cancel")
+    if client is not None and variant_timeout is not None:
+        raise ModelError("simulate_ensemble: variant_timeout is for ensembles on this machine; "
+                         "give the Dask workers their own limits (e.g. the nanny's memory "
+                         "limit) or cancel= to stop the ensemble")
     if cancel is not None and not callable(getattr(cancel, "is_set", None)):
         raise ModelError(f"simulate_ensemble: cancel must be a threading.Event (anything with "
                          f"is_set()), got {cancel!r:.60}")

@@ -139,6 +139,11 @@ def _check_sendable(output: Output) -> None:
                          "use a module-level function of plain data") from None
 
 
+#: seconds to wait for a restarted worker when every worker died (its nanny restarts it in
+#: a few seconds; a cluster without nannies never does: then the ensemble stops with
+#: Dask's TimeoutError)
+WORKER_WAIT = 120.0
+
 #: the model last scattered to each client's workers: (its pickle's digest, the future)
 _SCATTERED: dict[int, tuple[str, Any]] = {}
 
@@ -159,9 +164,61 @@ def _scattered(client: Any, model: Model) -> Any:
     return future
 
 
+class _Cancelled(Exception):
+    """The ensemble's ``cancel`` event was set."""
+
+
+def _watch(cancel: Any, client: Any, futures: Mapping[Any, range]) -> Any:
+    """A thread that cancels the ensemble's tasks once ``cancel`` is set (checked every
+    0.1 s), so that the wait for the next finished chunk ends at once; stopped with the
+    event it returns."""
+    import threading
+
+    over = threading.Event()
+
+    def watch() -> None:
+        while not over.wait(0.1):
+            if cancel.is_set():
+                client.cancel(list(futures.copy()))  # a copy: the loop adds and pops
+                return
+
+    threading.Thread(target=watch, daemon=True, name="oxyline-ensemble-cancel").start()
+    return over
+
+
+def _lost(shared: Any) -> bool:
+    """Whether the scattered model is gone from the cluster (every worker that held it died):
+    the chunks that need it are cancelled by Dask, not failed by their variants."""
+    return shared.status != "finished"
+
+
+def _cancelled(exc: BaseException) -> bool:
+    """A chunk cancelled by Dask (its scattered model lost with the workers), not failed."""
+    from concurrent.futures import CancelledError
+
+    return isinstance(exc, CancelledError)
+
+
+def _scatter_again(client: Any, model: Model) -> Any:
+    """:func:`_scattered` once a worker is back: workers being restarted come and go while a
+    dying one is still listed, so the scatter is tried again until it lands (at most
+    :data:`WORKER_WAIT` seconds)."""
+    import time
+
+    deadline = time.monotonic() + WORKER_WAIT
+    while True:
+        try:
+            client.wait_for_workers(1, timeout=max(1.0, deadline - time.monotonic()))
+            return _scattered(client, model)
+        except Exception:  # a worker that left mid-scatter (TimeoutError,
+            # OSError, ValueError "Can not use replicate to delete data"): try again
+            if time.monotonic() > deadline:
+                raise
+
+
 def run_on_client(client: Any, model: Model, patches: list[dict[str, Any]], index: Any, *,
                   output: Output, store: Any, progress: Any, workers: int | None,
-                  overrides: Mapping[str, Any]) -> Any:
+                  overrides: Mapping[str, Any], cancel: Any = None) -> Any:
     from distributed import as_completed
 
     from oxyline.ensemble.local import _progress, run_settings
@@ -193,36 +250,71 @@ def run_on_client(client: Any, model: Model, patches: list[dict[str, Any]], inde
                    for part, c, w in zip(parts, chunks, where, strict=True)}
     tick, close = _progress(progress, len(patches))
     finished = True
+    over = _watch(cancel, client, futures) if cancel is not None else None
+    #: times each chunk was sent again because the model it needs was lost with its workers
+    resent: dict[range, int] = {}
     try:
         pending = as_completed(futures)
-        for fut in pending:
-            rows = futures.pop(fut)
-            try:
-                part = fut.result()
-            except Exception as exc:  # noqa: BLE001 - a worker lost (killed, out of memory)
-                if len(rows) > 1:
-                    # Dask's retries are used up: each variant of the chunk on its own task,
-                    # so that the healthy ones run and only the one that kills its worker fails
-                    for i in rows:
-                        single = client.submit(run_chunk, shared, [patches[i]], range(i, i + 1),
-                                               output, workers, dict(overrides), pure=False,
-                                               retries=RETRIES)
-                        futures[single] = range(i, i + 1)
-                        pending.add(single)
-                    continue
-                collector.fail(rows.start, "worker", f"variant {rows.start}: its Dask worker "
-                               f"failed {RETRIES + 1} times ({type(exc).__name__}: {exc})"
-                               [:400])
-                part = None
-            if part is not None:
-                _merge(collector, part, rows)
-            for i in rows:
-                if writer is not None:
-                    writer.write(i)
-                tick()
-    except KeyboardInterrupt:
+
+        def send(rows: range) -> None:
+            again = client.submit(run_chunk, shared, [patches[i] for i in rows], rows, output,
+                                  workers, dict(overrides), pure=False, retries=RETRIES)
+            futures[again] = rows
+            pending.add(again)
+
+        #: single variants whose worker died while others ran beside them: each runs again
+        #: alone at the end (a task queued on a worker that another variant kills is counted
+        #: as killed by Dask too), and fails only if it kills its worker alone
+        suspects: list[range] = []
+        alone: set[range] = set()
+        while True:
+            for fut in pending:
+                rows = futures.pop(fut)
+                if cancel is not None and cancel.is_set():
+                    raise _Cancelled
+                try:
+                    part = fut.result()
+                except Exception as exc:  # noqa: BLE001 - a worker lost (killed, out of memory)
+                    if _lost(shared):  # every worker that held the model died: scatter again
+                        shared = _scatter_again(client, model)
+                    if _cancelled(exc) and resent.get(rows, 0) <= RETRIES:
+                        # cancelled by Dask for the lost model, not failed by its variants:
+                        # sent again as it was (to the restarted workers)
+                        resent[rows] = resent.get(rows, 0) + 1
+                        send(rows)
+                        continue
+                    if len(rows) > 1:
+                        # Dask's retries are used up: each variant of the chunk on its own
+                        # task, so that the healthy ones run and only the one that kills its
+                        # worker fails
+                        for i in rows:
+                            send(range(i, i + 1))
+                        continue
+                    if rows not in alone:
+                        suspects.append(rows)
+                        continue
+                    collector.fail(rows.start, "worker", f"variant {rows.start}: its Dask "
+                                   f"worker failed {RETRIES + 1} times when it ran alone "
+                                   f"({type(exc).__name__}: {exc})"[:400])
+                    part = None
+                if part is not None:
+                    _merge(collector, part, rows)
+                for i in rows:
+                    if writer is not None:
+                        writer.write(i)
+                    tick()
+            if not suspects:
+                break
+            rows = suspects.pop(0)  # one at a time: nothing else runs beside it
+            alone.add(rows)
+            resent.pop(rows, None)
+            send(rows)
+    except (KeyboardInterrupt, _Cancelled):
         finished = False
         client.cancel(list(futures))
     finally:
+        if over is not None:
+            over.set()
         close()
-    return finish(model, patches, index, collector, output, writer, finished)
+    return finish(model, patches, index, collector, output, writer, finished,
+                  cancelled=cancel is not None and cancel.is_set())

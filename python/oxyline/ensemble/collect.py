@@ -356,6 +356,12 @@ def finish(model: Model, patches: list[dict[str, Any]], index: Any, collector: C
     ``cancel`` was set) carrying it. Shared by the local and the Dask paths."""
     if writer is not None:
         writer.close(complete=finished)
+        if writer.failure is not None:  # disk full: say what the store holds, lose nothing
+            from oxyline.errors import OutputError
+
+            _warn_bounds(collector)
+            raise OutputError(writer.failure_message(),
+                              collector.dataset(patches, dataset_attrs(model, output), index))
         ds = writer.open()
     else:
         ds = collector.dataset(patches, dataset_attrs(model, output), index)

@@ -290,9 +290,10 @@ def _progress(enabled: Any, total: int) -> tuple[Callable[[], None], Callable[[]
         return tick, lambda: None
     if not enabled:
         return (lambda: None), (lambda: None)
-    try:
-        from tqdm.auto import tqdm
-    except ImportError:
+    from oxyline.run import tqdm_class
+
+    tqdm = tqdm_class()  # the text bar in a notebook without ipywidgets (no TqdmWarning)
+    if tqdm is None:
         return (lambda: None), (lambda: None)
     bar = tqdm(total=total, unit="variant", delay=1.0)
     return (lambda: bar.update(1)), bar.close

@@ -48,6 +48,11 @@ class StoreWriter:
         self._group = self._zarr.open_group(self.path, mode="r+", zarr_format=2,
                                             use_consolidated=False)
         self._written: set[str] = set()
+        #: the variants whose rows (status last) are in the store, in the order written
+        self.stored: list[int] = []
+        #: the variant whose write failed and the error (disk full, ...); nothing is written
+        #: after it, the ensemble runs on in memory
+        self.failure: tuple[int, OSError] | None = None
 
     def _array(self, name: str, value: Any) -> Any:
         if name not in self._group:
@@ -60,19 +65,45 @@ class StoreWriter:
         return self._group[name]
 
     def write(self, i: int) -> None:
-        """Write variant ``i`` as the collector holds it (its status last)."""
+        """Write variant ``i`` as the collector holds it (its status last). A write that fails
+        (disk full, a lost mount) stops the writing, not the ensemble: the failure is kept for
+        :meth:`failure_message`, and the variant's status in the store stays -1 (not run), so
+        the store holds whole variants only."""
+        if self.failure is not None:
+            return
         c = self.collector
-        if c.status[i] == 0:
-            for name, arr in c.values.items():
-                self._array(name, arr[i])[i] = arr[i]
-        for name in FACTS:
-            value = getattr(c, name)[i]
-            self._group[name][i] = str(value)[:ERROR_CHARS] if name in TEXTS else value
-        self._group["status"][i] = c.status[i]
+        try:
+            if c.status[i] == 0:
+                for name, arr in c.values.items():
+                    self._array(name, arr[i])[i] = arr[i]
+            for name in FACTS:
+                value = getattr(c, name)[i]
+                self._group[name][i] = str(value)[:ERROR_CHARS] if name in TEXTS else value
+            self._group["status"][i] = c.status[i]
+        except OSError as exc:
+            self.failure = (i, exc)
+            return
+        self.stored.append(i)
+
+    def failure_message(self) -> str:
+        """What a failed store holds: the variant and error that stopped the writing and the
+        variants written whole before it."""
+        assert self.failure is not None
+        i, exc = self.failure
+        held = _ranges(sorted(self.stored))
+        return (f"{self.path}: writing variant {i} failed ({type(exc).__name__}: "
+                f"{exc.strerror or exc}); the store holds {len(self.stored)} of "
+                f"{self.collector.n} variants whole ({held or 'none'}; status 0 or a failure "
+                "code), the others have status -1 there. Every finished variant is in "
+                "exc.result (in memory)")
 
     def close(self, complete: bool) -> None:
-        self._group.attrs["complete"] = int(complete)
-        self._consolidate()
+        try:
+            self._group.attrs["complete"] = int(complete and self.failure is None)
+            self._consolidate()
+        except OSError as exc:
+            if self.failure is None:
+                self.failure = (-1, exc)
 
     def open(self) -> Any:
         import xarray as xr
@@ -83,3 +114,14 @@ class StoreWriter:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # consolidated metadata is not part of the v2 spec
             self._zarr.consolidate_metadata(self.path, zarr_format=2)
+
+
+def _ranges(numbers: Sequence[int]) -> str:
+    """``0-3, 7, 9-10``: sorted variant numbers as ranges."""
+    runs: list[list[int]] = []
+    for k in numbers:
+        if runs and k == runs[-1][1] + 1:
+            runs[-1][1] = k
+        else:
+            runs.append([k, k])
+    return ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in runs)

@@ -5,6 +5,7 @@ use crate::results::{ArrayPair, finished_run, layout_dict, put_rows, recorded_co
 use crate::{checkpoint, reader, settings};
 use numpy::{IntoPyArray, PyArray1};
 use oxyline_core::model::parse;
+use oxyline_core::model::plausibility::{self, Warning};
 use oxyline_core::output::VESSEL_VARIABLES;
 use oxyline_core::run::checkpoint::{Checkpoints, Every, Snapshot};
 use oxyline_core::{Assembled, Chunk, Dae, Error, OutputSink, Selection, Transport};
@@ -15,6 +16,10 @@ use std::cell::Cell;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+/// What `Network::new` builds: the circuit and its DAE, the transport plan and the
+/// plausibility warnings of the model.
+type Built = ((Assembled, Dae), Option<Transport>, Vec<Warning>);
+
 /// An assembled network: built once from the canonical SI JSON model, run many times.
 #[pyclass(frozen, module = "oxyline._core")]
 pub(crate) struct Network {
@@ -22,6 +27,8 @@ pub(crate) struct Network {
     /// Validated species transport, never run: each run takes `new_run` (the shared plan and a
     /// fresh state); None for flow-only models.
     transport: Option<Arc<Transport>>,
+    /// The model's values outside their physiological ranges (`model::plausibility`).
+    plausibility: Vec<Warning>,
 }
 
 impl Network {
@@ -77,32 +84,32 @@ impl Network {
         }
         // the text is parsed where Python holds it (no copy); the spec is dropped once the
         // circuit and the transport plan are built from it
-        let built = py.detach(
-            move || -> Result<((Assembled, Dae), Option<Transport>), Error> {
-                let mut spec = parse(model_json)?;
-                match vessels {
-                    // moved, not copied: ~700 B per vessel
-                    Some(v) if spec.vessels.is_empty() => spec.vessels = v,
-                    Some(v) => spec.vessels.extend(v),
-                    None => {}
+        let built = py.detach(move || -> Result<Built, Error> {
+            let mut spec = parse(model_json)?;
+            match vessels {
+                // moved, not copied: ~700 B per vessel
+                Some(v) if spec.vessels.is_empty() => spec.vessels = v,
+                Some(v) => spec.vessels.extend(v),
+                None => {}
+            }
+            for (node, bc) in bcs {
+                if spec.boundary_conditions.insert(node.clone(), bc).is_some() {
+                    return Err(Error::model(
+                        format!("boundary condition '{node}'"),
+                        "given twice",
+                    ));
                 }
-                for (node, bc) in bcs {
-                    if spec.boundary_conditions.insert(node.clone(), bc).is_some() {
-                        return Err(Error::model(
-                            format!("boundary condition '{node}'"),
-                            "given twice",
-                        ));
-                    }
-                }
-                // the same assembly as every ensemble member: spec → circuit → DAE → transport
-                let m = oxyline_core::ensemble::Member::build(&spec)?;
-                Ok(((m.assembled, m.dae), m.transport))
-            },
-        );
-        let (built, transport) = built.map_err(to_py)?;
+            }
+            // the same assembly as every ensemble member: spec → circuit → DAE → transport
+            let m = oxyline_core::ensemble::Member::build(&spec)?;
+            let warnings = plausibility::check(&spec);
+            Ok(((m.assembled, m.dae), m.transport, warnings))
+        });
+        let (built, transport, plausibility) = built.map_err(to_py)?;
         Ok(Network {
             inner: Arc::new(built),
             transport: transport.map(Arc::new),
+            plausibility,
         })
     }
 
@@ -128,7 +135,7 @@ impl Network {
             (v, o, rest)
         };
         let built = py.detach(
-            move || -> Result<((Assembled, Dae), Option<Transport>), Error> {
+            move || -> Result<Built, Error> {
                 let mut spec: oxyline_core::NetworkSpec =
                     serde_json::from_value(serde_json::Value::Object(rest))
                         .map_err(|e| Error::model("model", e.to_string()))?;
@@ -143,14 +150,47 @@ impl Network {
                     }
                 }
                 let m = oxyline_core::ensemble::Member::build(&spec)?;
-                Ok(((m.assembled, m.dae), m.transport))
+                let warnings = plausibility::check(&spec);
+                Ok(((m.assembled, m.dae), m.transport, warnings))
             },
         );
-        let (built, transport) = built.map_err(to_py)?;
+        let (built, transport, plausibility) = built.map_err(to_py)?;
         Ok(Network {
             inner: Arc::new(built),
             transport: transport.map(Arc::new),
+            plausibility,
         })
+    }
+
+    /// How many passes a run makes over its cycles: 2 for a transport model whose wall
+    /// closures need the cycle-mean flow (a flow-only pass first, docs/physics.md §3.1), else
+    /// 1. The progress bar counts the cycles of the last pass only.
+    fn passes(&self) -> usize {
+        match &self.transport {
+            Some(t) if !t.mean_flow_unknowns().is_empty() => 2,
+            _ => 1,
+        }
+    }
+
+    /// The model's values outside their physiological ranges, one dict each (element, key,
+    /// value, unit, low, high, likely_cause, more, message) for `oxyline.PlausibilityWarning`.
+    fn plausibility<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        self.plausibility
+            .iter()
+            .map(|w| {
+                let d = PyDict::new(py);
+                d.set_item("element", &w.element)?;
+                d.set_item("key", &w.key)?;
+                d.set_item("value", w.value)?;
+                d.set_item("unit", w.unit)?;
+                d.set_item("low", w.low)?;
+                d.set_item("high", w.high)?;
+                d.set_item("likely_cause", w.likely_cause.as_deref())?;
+                d.set_item("more", w.more)?;
+                d.set_item("message", w.message())?;
+                Ok(d)
+            })
+            .collect()
     }
 
     /// Counts and totals for `oxyline validate`.

@@ -1004,7 +1004,11 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
         settings.cycle_error = sim.percent / 100.0
         settings.caps = svzerod_cycles.caps(
             [v for v in vessels_in if isinstance(v, Mapping)])
-    return _native(system, period, vs.vessels + hidden, bcs, settings), settings, layout
+    native = _native(system, period, vs.vessels + hidden, bcs, settings)
+    # svZeroDSolver's own name for the model (VMR files carry it) names the results
+    if isinstance(raw.get("model_name"), str) and raw["model_name"].strip():
+        native["name"] = raw["model_name"].strip()
+    return native, settings, layout
 
 
 def to_oxyline_dict(config: Mapping[str, Any] | str | os.PathLike[str],
