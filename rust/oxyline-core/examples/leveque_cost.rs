@@ -54,6 +54,7 @@ fn main() {
         probes,
         species_columns: Some(columns),
         tolerances: None,
+        svzerod: Default::default(),
     };
     // the first pass's own settings (see run/two_pass.rs `mean_flow_pass`)
     let pass1 = RunSettings {

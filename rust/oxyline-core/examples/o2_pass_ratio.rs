@@ -62,6 +62,7 @@ fn main() {
             probes: m.assembled.probes.vessel_unknowns.clone(),
             species_columns: Some(columns),
             tolerances: None,
+            svzerod: Default::default(),
         }
     };
     let only = std::env::var("O2_PASS_ONLY").ok();

@@ -44,6 +44,7 @@ fn main() {
         probes: assembled.probes.vessel_unknowns.clone(),
         species_columns: Some(columns),
         tolerances: None,
+        svzerod: Default::default(),
     };
     let (mut best_flow, mut best_o2) = (f64::INFINITY, f64::INFINITY);
     // CPU s of a run: whole, or between the first progress check and the one past `stop`

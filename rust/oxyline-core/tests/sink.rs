@@ -49,6 +49,7 @@ fn settings(probes: Vec<usize>, all_cycles: bool, until_periodic: Option<f64>) -
         probes,
         species_columns: None,
         tolerances: None,
+        svzerod: Default::default(),
     }
 }
 

@@ -98,6 +98,7 @@ fn stiff_wall_exchange_limits_the_automatic_rk4_step() {
         probes: vec![],
         species_columns: None,
         tolerances: None,
+        svzerod: Default::default(),
     };
     let out = simulate_with_transport(&dae, Some(&mut transport), &s, &mut |_, _| true).unwrap();
     assert!(out.error.is_none(), "{:?}", out.error);
@@ -166,6 +167,7 @@ fn only_rk4_runs_probe_the_rk4_limit() {
             probes: vec![],
             species_columns: None,
             tolerances: None,
+            svzerod: Default::default(),
         };
         let mut tr = prototype.new_run();
         let out = simulate_with_transport(&dae, Some(&mut tr), &s, &mut |_, _| true).unwrap();

@@ -262,6 +262,7 @@ fn settings(method: Method, dt: f64, cycles: usize, probes: Vec<usize>) -> RunSe
         probes,
         species_columns: None,
         tolerances: None,
+        svzerod: Default::default(),
     }
 }
 

@@ -16,6 +16,7 @@ mod network;
 mod reader;
 mod results;
 mod settings;
+mod svzerod;
 mod trees;
 
 use errors::to_py;
@@ -50,7 +51,7 @@ fn chamber_elastance<'py>(
 #[pymodule]
 mod _core {
     #[pymodule_export]
-    use super::closed_loop::{closed_loop_o2, closed_loop_tree_flows};
+    use super::closed_loop::closed_loop_o2;
     #[pymodule_export]
     use super::trees::{
         StructuredTrees, facilitation_factor, grow_structured_tree, linear_facilitation_factor,

@@ -73,7 +73,8 @@ pub(super) fn run(
         .as_ref()
         .map(|sp| (sp.tr.species_names().len(), sp.tr.columns_per_species()));
     let columns = s.species_columns.as_deref();
-    let mut rec = Recorder::new(&s.probes, layout, columns, initial_stored, sink)?;
+    let mut rec = Recorder::new(&s.probes, layout, columns, initial_stored, sink)?
+        .with_extra_columns(s.svzerod.extra_columns(s.probes.len()));
     if !s.output_all_cycles && mean.is_none() {
         // last-cycle output: one cycle's rows and the row at its start
         rec.reserve_rows(plan.steps_per_cycle / plan.stride + 1)?;
@@ -91,6 +92,7 @@ pub(super) fn run(
     cycles.adaptive = s
         .adaptive()
         .map(|tol| Adaptive::new(dae, tol, s.method.rho_inf(), s.period, s.output_every));
+    cycles.start_svzerod(!plan.use_rk4);
     if let Some(r) = &resume {
         cycles.restore(r)?;
     }
