@@ -35,6 +35,14 @@ pub(super) fn run(
             "checkpoints need a fixed step: give dt instead of rtol to checkpoint a run",
         ));
     }
+    if !s.svzerod.is_empty() && checkpoints.is_some() {
+        // the derived columns and cycle means start at the run's start, which a snapshot
+        // does not carry
+        return Err(crate::error::Error::model(
+            "simulation",
+            "svZeroDSolver's output conventions (svzerod) cannot be checkpointed",
+        ));
+    }
     let mut plan = Plan::new(dae, steady, s, transport.as_deref_mut(), progress)?;
 
     let resume = checkpoints.as_deref_mut().and_then(|c| c.resume.take());
