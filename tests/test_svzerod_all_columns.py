@@ -94,9 +94,9 @@ def check(name: str) -> None:
     err = column_errors(svz.simulate(case(name)), reference(name))
     worst = max(err, key=err.get)
     tol = LOOSER.get(name, TOL)
-    # (the cycle means of pulsatileFlow_R_RCR_mean_derivative*'s derivatives, 1.7e-7 of
-    # max|e|, are cancellations of svZeroDSolver's ẏ₀ after its steady start, taken as 0:
-    # docs/svzerod.md, `output_derivative`)
+    # (the cycle means of pulsatileFlow_R_RCR_mean_derivative*'s derivatives match to the
+    # file's rounding: the core outputs generalized-α's own ẏ, svZeroDSolver's ẏ₀ after its
+    # steady start included; docs/svzerod.md, `output_derivative`)
     for (var, col), e in err.items():
         assert e <= tol, (var, col, e, "worst", worst, err[worst])
 

@@ -131,6 +131,7 @@ class Network:
         checkpoint_every_cycles: int | None = None,
         checkpoint_every_seconds: float | None = None,
         resume: dict[str, Any] | None = None,
+        svzerod: dict[str, Any] | None = None,
         **settings: Unpack[RunOptions],
     ) -> dict[str, Any]:
         """Run the network; with ``chunk_sink``, the output rows are handed to it during the

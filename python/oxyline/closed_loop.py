@@ -625,13 +625,34 @@ class ClosedLoopO2Result:
         return out
 
 
-def _tree_spec(p: dict[str, Any], tree_model_: dict[str, Any], idx: dict[str, int]) -> str:
+def _tree_spec(p: dict[str, Any], tree_model_: dict[str, Any], idx: dict[str, int]
+               ) -> dict[str, Any]:
     from oxyline.model import build_model
 
     canonical = build_model(tree_model_).canonical
-    return json.dumps({"model": json.dumps(canonical), "inlet": "aorta_in",
-                       "from": idx["left_heart"], "flow_cycles": int(p["tree"]["flow_cycles"]),
-                       "outlets": [{"boundary": f"{k}_a", "to": idx[k]} for k in p["organs"]]})
+    return {"model": json.dumps(canonical), "inlet": "aorta_in",
+            "from": idx["left_heart"], "flow_cycles": int(p["tree"]["flow_cycles"]),
+            "outlets": [{"boundary": f"{k}_a", "to": idx[k]} for k in p["organs"]]}
+
+
+def _flow_table(p: dict[str, Any], flows: np.ndarray | str | None,
+                branches: list[dict[str, Any]]) -> tuple[np.ndarray, bool]:
+    """The loop's flow table and whether the core balances it: the prescribed table is
+    periodic by construction; a heart run's or a caller's table is balanced first."""
+    if flows is None:
+        flows = p.get("flows", "table")
+    if isinstance(flows, str) and flows == "table":
+        return flow_table(p), False
+    if isinstance(flows, str):
+        if flows != "heart":
+            raise ModelError(f"closed loop: flows must be a table, 'table' or 'heart', "
+                             f"got {flows!r}")
+        flows = heart_flows(p)
+    flows = np.asarray(flows, dtype=float)
+    if flows.ndim != 2 or flows.shape[1] != len(branches):
+        raise ModelError(f"closed loop: flows must be (steps, {len(branches)}) for the "
+                         f"branches {[b['name'] for b in branches]}, got {flows.shape}")
+    return flows, True
 
 
 def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int = 400,
@@ -644,85 +665,62 @@ def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int 
     svZeroDSolver's block by default; :func:`run_heart`, :func:`heart_flows`), ``"table"``
     is the prescribed table (:func:`flow_table`), None the model's own choice (`flows`); a
     table (steps × branches, m³/s, one row per step of `dt`, branches in the order of
-    ``result.branches``), e.g. flows sampled from a flow run, is balanced by
-    :func:`balance_flows` first.
+    ``result.branches``), e.g. flows sampled from a flow run, is balanced first by the core:
+    the least-norm constant per-branch corrections that make every compartment's volume
+    periodic (a linear solve on the loop's graph Laplacian, docs/oxygen.md).
 
     With ``arteries: "tree"`` (built-in ``closed-loop-o2-tree``) the arterial pool is a
     segment-resolved arterial tree (`tree`) whose O2 runs through the product's transport; its
     flow comes from the closed-loop heart run (always ``flows="heart"``): the tree is driven by
     the heart's aortic outflow and drains through the organ beds to the venous pressure of that
-    run."""
+    run; the balance holds the tree's own flows as they are."""
     p = load(model) if isinstance(model, str) else model
     comps, (binding, *branches), idx = _layout(p)
-    tree_json = None
-    fixed_net = None
-    steps = round(p["period"] / p["dt"])
+    if shooting not in ("anderson", "newton"):
+        raise ModelError(f"closed loop: shooting must be 'anderson' or 'newton', got {shooting!r}")
+    spec: dict[str, Any] = {"compartments": comps, "branches": branches, "binding": binding,
+                            "shooting": shooting}
     if _has_tree(p):
         if flows is not None and not (isinstance(flows, str) and flows == "heart"):
             raise ModelError("closed loop: with an arterial tree the flows come from the heart "
                              "run (flows='heart')")
         heart = run_heart(p)
-        tree_json = _tree_spec(p, heart_tree_model(p, heart), idx)
-        tf = _core.closed_loop_tree_flows(tree_json, float(p["dt"]), steps)
-        fixed_net = np.zeros(len(comps))
-        fixed_net[idx["left_heart"]] -= np.mean(tf["inflow"])
-        out_mean = np.asarray(tf["outflow"]).reshape(steps, -1).mean(axis=0)
-        for k, qm in zip(p["organs"], out_mean):
-            fixed_net[idx[k]] += qm
+        spec["tree"] = _tree_spec(p, heart_tree_model(p, heart), idx)
         flows = heart_flows(p, heart)
-    if flows is None:
-        flows = p.get("flows", "table")
-    if isinstance(flows, str) and flows == "table":
-        flows = flow_table(p)
-    else:
-        if isinstance(flows, str):
-            if flows != "heart":
-                raise ModelError(f"closed loop: flows must be a table, 'table' or 'heart', "
-                                 f"got {flows!r}")
-            flows = heart_flows(p)
-        flows = np.asarray(flows, dtype=float)
-        if flows.ndim != 2 or flows.shape[1] != len(branches):
-            raise ModelError(f"closed loop: flows must be (steps, {len(branches)}) for the "
-                             f"branches {[b['name'] for b in branches]}, got {flows.shape}")
-        flows = balance_flows(flows, [b["from"] for b in branches], [b["to"] for b in branches],
-                              len(comps), fixed_net)
-    if shooting not in ("anderson", "newton"):
-        raise ModelError(f"closed loop: shooting must be 'anderson' or 'newton', got {shooting!r}")
-    spec: dict[str, Any] = {"compartments": comps, "branches": branches, "binding": binding,
-                            "shooting": shooting}
-    if tree_json is not None:
-        spec["tree"] = json.loads(tree_json)
-    if tree_json is not None:
         # the tree's Hill inversions are warm-started (tolerance 1e-12 mmHg): its cycle map
         # repeats to ~1e-11, so the confirming cycles stop there (Fick then holds to ~2e-12)
         tol = max(tol, 1e-10)
+    table, spec["balance"] = _flow_table(p, flows, branches)
     with core_errors("closed-loop O2 run"):
-        out = _core.closed_loop_o2(json.dumps(spec), np.ascontiguousarray(flows).ravel(),
+        out = _core.closed_loop_o2(json.dumps(spec), np.ascontiguousarray(table).ravel(),
                                    float(p["dt"]), int(max_cycles), float(tol))
-    steps, nc, nb = flows.shape[0], len(comps), len(branches)
-    shape_c, shape_b = (steps, nc), (steps, nb)
+    return _result(p, comps, branches, out, table.shape[0])
+
+
+def _result(p: dict[str, Any], comps: list[dict[str, Any]], branches: list[dict[str, Any]],
+            out: dict[str, Any], steps: int) -> ClosedLoopO2Result:
+    """The result of a core run's record (flat arrays reshaped)."""
+    nc, nb = len(comps), len(branches)
+
+    def rows(key: str, width: int, scale: float = 1.0) -> np.ndarray:
+        return np.asarray(out[key]).reshape(steps, width) / scale
+
     tree = None
-    if tree_json is not None:
+    if _has_tree(p):
         segs = list(out["tree_segments"])
         tree = ArterialTreeO2(
             outlets=list(p["organs"]), segments=segs,
-            inflow=np.asarray(out["tree_inflow"]),
-            outflow=np.asarray(out["tree_outflow"]).reshape(steps, -1),
+            inflow=np.asarray(out["tree_inflow"]), outflow=rows("tree_outflow", len(p["organs"])),
             in_flux=np.asarray(out["tree_in_flux"]),
-            out_flux=np.asarray(out["tree_out_flux"]).reshape(steps, -1),
+            out_flux=rows("tree_out_flux", len(p["organs"])),
             wall=np.asarray(out["tree_wall"]), amount=np.asarray(out["tree_amount"]),
-            po2=np.asarray(out["tree_po2"]).reshape(steps, len(segs)) / MMHG,
+            po2=rows("tree_po2", len(segs), MMHG),
             flow_periodic_error=float(out["tree_flow_periodic_error"]))
     return ClosedLoopO2Result(
         compartments=[c["name"] for c in comps], branches=[b["name"] for b in branches],
-        time=np.asarray(out["time"]), flow=flows,
-        volume=np.asarray(out["volume"]).reshape(shape_c),
-        total=np.asarray(out["total"]).reshape(shape_c),
-        po2=np.asarray(out["po2"]).reshape(shape_c) / MMHG,
-        saturation=np.asarray(out["saturation"]).reshape(shape_c),
-        vo2=np.asarray(out["vo2"]).reshape(shape_c),
-        flux=np.asarray(out["flux"]).reshape(shape_b),
-        uptake=np.asarray(out["uptake"]).reshape(shape_b),
+        time=np.asarray(out["time"]), flow=rows("flow", nb), volume=rows("volume", nc),
+        total=rows("total", nc), po2=rows("po2", nc, MMHG), saturation=rows("saturation", nc),
+        vo2=rows("vo2", nc), flux=rows("flux", nb), uptake=rows("uptake", nb),
         amount=np.asarray(out["amount"]), amount_start=float(out["amount_start"]),
         dt=float(p["dt"]), cycles=int(out["cycles"]), periodic_error=float(out["periodic_error"]),
         tree=tree)

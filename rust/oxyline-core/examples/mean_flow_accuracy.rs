@@ -93,6 +93,7 @@ fn main() {
             probes: unknowns.clone(),
             species_columns: None,
             tolerances: None,
+            svzerod: Default::default(),
         };
         let out = simulate_with_transport(&dae, None, &s, &mut |_, _| true).expect("flow run");
         let (abs, fwd) = means(&out.data, n, out.times.len());

@@ -190,6 +190,7 @@ fn main() {
         probes: sel.flow_columns(&assembled.probes),
         species_columns: transport.as_ref().map(|_| sel.species_columns(&counts)),
         tolerances: None,
+        svzerod: Default::default(),
     };
     let mut species = transport.as_ref().map(Transport::new_run);
     mark("settings + transport run copy", segs);

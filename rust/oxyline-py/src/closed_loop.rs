@@ -1,10 +1,10 @@
 //! Binding of the closed-loop O2 run (`oxyline_core::transport::closed_loop`): JSON spec and a
-//! flat flow table in, the recorded last cycle out (flat arrays; Python reshapes them).
+//! flat flow table in (balanced by the core with `balance`), the recorded last cycle and the
+//! table used out (flat arrays; Python reshapes them).
 
 use crate::errors::to_py;
 use numpy::{PyArray1, PyReadonlyArray1};
-use oxyline_core::transport::closed_loop::{ClosedLoopSpec, TreeSpec, run_periodic};
-use oxyline_core::transport::closed_loop_tree::ArterialTree;
+use oxyline_core::transport::closed_loop::{ClosedLoopSpec, run_periodic};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -46,41 +46,9 @@ pub fn closed_loop_o2<'py>(
         ("tree_po2", &run.tree_po2),
         ("tree_inflow", &run.tree_inflow),
         ("tree_outflow", &run.tree_outflow),
+        ("flow", &run.flow),
     ] {
         d.set_item(k, PyArray1::from_slice(py, v))?;
     }
-    Ok(d)
-}
-
-/// The flow of a closed loop's arterial tree (`closed_loop_tree`) per step of one periodic
-/// cycle: into its root and out of every outlet (m³/s), so that the caller balances the other
-/// branches of the loop against them.
-#[pyfunction]
-#[pyo3(signature = (tree_json, dt, steps))]
-pub fn closed_loop_tree_flows<'py>(
-    py: Python<'py>,
-    tree_json: &str,
-    dt: f64,
-    steps: usize,
-) -> PyResult<Bound<'py, PyDict>> {
-    let spec = TreeSpec::from_json(tree_json).map_err(to_py)?;
-    let names: Vec<String> = spec.outlets.iter().map(|o| o.boundary.clone()).collect();
-    let tree = py
-        .detach(move || {
-            ArterialTree::new(
-                &spec.model,
-                &spec.inlet,
-                &names,
-                dt,
-                steps,
-                spec.flow_cycles,
-            )
-        })
-        .map_err(to_py)?;
-    let d = PyDict::new(py);
-    d.set_item("inflow", PyArray1::from_slice(py, &tree.inflow))?;
-    d.set_item("outflow", PyArray1::from_slice(py, &tree.outflow.concat()))?;
-    d.set_item("flow_periodic_error", tree.flow_periodic_error)?;
-    d.set_item("segments", &tree.segment_names)?;
     Ok(d)
 }

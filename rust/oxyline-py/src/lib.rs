@@ -17,6 +17,7 @@ mod network;
 mod reader;
 mod results;
 mod settings;
+mod svzerod;
 mod trees;
 
 use errors::to_py;
@@ -53,7 +54,7 @@ mod _core {
     #[pymodule_export]
     use super::calibrate::tangent_sensitivities;
     #[pymodule_export]
-    use super::closed_loop::{closed_loop_o2, closed_loop_tree_flows};
+    use super::closed_loop::closed_loop_o2;
     #[pymodule_export]
     use super::trees::{
         StructuredTrees, facilitation_factor, grow_structured_tree, linear_facilitation_factor,

@@ -570,13 +570,16 @@ impl Network {
     /// `resume` (such a dict), the run continues from that state, bit-identical to the run
     /// that saved it.
     ///
+    /// `svzerod`: svZeroDSolver's output and stop conventions for the drop-in (derived
+    /// columns, rates, the cycle-to-cycle rule; see `svzerod.rs`), recorded after the columns.
+    ///
     /// `settings`: the run settings shared with `Ensemble.run` (`settings::KEYS`: cycles,
     /// method, dt, ..., the output selection).
     #[pyo3(signature = (*, period, output_every, all_unknowns = false, extra_columns = None,
         progress = None,
         chunk_sink = None, chunk_rows = 1024, keep_current_cycle = true, checkpoint_sink = None,
         checkpoint_every_cycles = None, checkpoint_every_seconds = None, resume = None,
-        **settings))]
+        svzerod = None, **settings))]
     #[allow(clippy::too_many_arguments)]
     fn simulate<'py>(
         &self,
@@ -593,6 +596,7 @@ impl Network {
         checkpoint_every_cycles: Option<usize>,
         checkpoint_every_seconds: Option<f64>,
         resume: Option<Bound<'py, PyDict>>,
+        svzerod: Option<Bound<'py, PyDict>>,
         settings: Option<Bound<'py, PyDict>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let shared = settings::Shared::from_kwargs(settings.as_ref())?;
@@ -607,6 +611,9 @@ impl Network {
         let (probes, species_columns) = self.columns(shared, all_unknowns, extra_columns)?;
         settings.probes = probes;
         settings.species_columns = species_columns;
+        if let Some(d) = &svzerod {
+            settings.svzerod = crate::svzerod::rules(d, &self.inner.0.probes)?;
+        }
         let inner = self.inner.clone();
         let mut species = if transport_on {
             self.transport.as_deref().map(Transport::new_run)
@@ -617,7 +624,8 @@ impl Network {
             .as_ref()
             .map(|t| t.species_names())
             .unwrap_or_default();
-        let n_probes = settings.probes.len();
+        let n_probes =
+            settings.probes.len() + settings.svzerod.extra_columns(settings.probes.len());
         let (outcome, pending) = py.detach(|| {
             // the first Python error of a callback (progress, Ctrl-C or the sink) stops the run
             // and is reported instead of the core's Interrupted

@@ -149,6 +149,7 @@ impl Shared {
             probes: Vec::new(),
             species_columns: None,
             tolerances: self.tolerances()?,
+            svzerod: Default::default(),
         })
     }
 

@@ -62,7 +62,9 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
     ``output_variable_based`` gives svZeroDSolver's variable table (``name, time, y``: the
     flow and pressure of each of its nodes, then internal variables such as an RCR's
     ``pressure_c``); ``output_derivative`` adds the time derivatives (``d_*`` columns or
-    ``ydot``), computed from every step of the run (see docs/svzerod.md).
+    ``ydot``): generalized-α's own ẏ from the core, as svZeroDSolver reports it (see
+    docs/svzerod.md). The core runs the whole configuration in one call, svZeroDSolver's
+    cycle-to-cycle rule included; this function reads the file and formats the rows.
     """
     import pandas as pd
 
@@ -94,23 +96,19 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
         names, columns = _output_columns(layout, recorded, s.output_variable_based)
     shape = (len(names), 1 if s.output_variable_based else 4)
     _check_output_memory(s, shape)
+    rules: dict[str, Any] = {"derived": columns.derived, "rates": s.output_derivative}
     if s.cycle_error is not None:
         ends = {name: (a, b) for name, a, b in layout.vessels}
-        cap_cols = [(recorded[ends[v][end == "out"]] + (2 if end == "in" else 3),
-                     recorded[ends[v][end == "out"]] + (0 if end == "in" else 1))
-                    for v, end in s.caps]
-        if s.all_unknowns:  # the run records every unknown: the vessels' columns are theirs
-            probe = model.network.unknown_layout()["vessel_unknowns"]
-            cap_cols = [(int(probe[q]), int(probe[p])) for q, p in cap_cols]
-        times, values = _run_cycle_error(model, native, s, method, columns, cap_cols)
-        values = np.ascontiguousarray(values.reshape(len(times), *shape).transpose(1, 0, 2))
-        return _frame(pd, names, times, values, None, s)
-    # svZeroDSolver's valve_status is solved at generalized-α's α_f stage (see _alpha_stage):
-    # a recursion over every step
-    every_step = s.output_derivative or _needs_start(columns) or (
-        bool(columns[2]) and method == "generalized-alpha")
-    times, values, derivs = (_run_every_step if every_step else _run_streamed)(
-        model, native, s, method, columns, shape)
+        probe = model.network.unknown_layout()["vessel_unknowns"]
+        # a cap's flow and pressure (svZeroDSolver's order), as unknowns of the core
+        caps = [int(probe[recorded[ends[v][end == "out"]] + k])
+                for v, end in s.caps for k in ((2, 0) if end == "in" else (3, 1))]
+        rules["cycle_mean_stop"] = {"caps": caps, "tolerance": s.cycle_error,
+                                    "max_extra": MAX_EXTRA_CYCLES}
+    if method == "rk4" and s.output_derivative:
+        times, values, derivs = _run_rk4_derivative(model, native, s, columns, shape, rules)
+    else:
+        times, values, derivs = _run(model, native, s, method, columns, shape, rules)
     return _frame(pd, names, times, values, derivs, s)
 
 
@@ -120,37 +118,21 @@ INTERNAL_ORDER = {"rcr": 1, "ClosedLoopRCR": 1, "ClosedLoopCoronary": 1, "CORONA
                   "junction": 2, "heart": 3, "valve": 4}
 #: the internal variables read from the core's element unknowns (the run records every one)
 ELEMENT_KINDS = {"ClosedLoopCoronary", "CORONARY", "heart", "valve"}
+#: the most cycles the cycle-to-cycle rule may add before the drop-in gives up
+#: (svZeroDSolver itself has no cap and would run forever)
+MAX_EXTRA_CYCLES = 2000
 
 
-class _VolumeSinceStart:
-    """An open-loop ``CORONARY``'s ``volume_im`` from the core's transmural pressure u of its
-    intramyocardial compartment (docs/physics.md §1.7): V_im = C_im (u − u(0)).
+@dataclasses.dataclass
+class Columns:
+    """Output column j is recorded column ``idx[j]`` plus ``w`` times recorded column ``c``
+    for each (j, c, w) in ``extra``; a negative ``idx[j]`` = −1 − k is the core's derived
+    column k (``derived``: a tanh valve's ``valve_status``, a coronary's ``volume_im``,
+    recorded after the columns; see ``oxyline_core::run::svzerod``)."""
 
-    svZeroDSolver's block holds V_im itself, measured from the start (its
-    ``setup_initial_state_dependent_params`` takes the start's compartment pressure P_Cim_0
-    and P_im(0), or the mean P_im after the steady start, whose steady equations set V_im =
-    0), and integrates dV_im/dt = Q_am − Q_v; the core integrates C_im du/dt over the same
-    flows with the same steps. The law needs the run's first row, the start (``history``).
-    Left out: after the steady start svZeroDSolver's P_Cim_0 also holds R_am C_a (Ṗ_in −
-    R_a Q̇_in) of its leftover ẏ₀, a constant offset taken as 0 here (as ẏ₀ is, see
-    ``_run_every_step``; −6.5e-10 mL in steadyFlow_R_coronary)."""
-
-    history = True
-
-    def __init__(self, capacitance: float) -> None:
-        self.capacitance = capacitance
-
-    def __call__(self, u: np.ndarray) -> np.ndarray:
-        return self.capacitance * (u - u[0])
-
-
-def _needs_start(columns: Columns) -> bool:
-    """Whether a column's law needs the run from its start (see :class:`_VolumeSinceStart`)."""
-    return any(getattr(f, "history", False) for _, f in columns[2])
-
-#: output columns: column j is recorded column ``idx[j]`` plus ``w`` times recorded column
-#: ``c`` for each (j, c, w) in ``extra``, then mapped by ``f`` for each (j, f) in ``post``
-Columns = tuple[np.ndarray, list[tuple[int, int, float]], list[tuple[int, Any]]]
+    idx: np.ndarray
+    extra: list[tuple[int, int, float]]
+    derived: list[tuple[Any, ...]]
 
 
 def _output_columns(layout: _Layout, recorded: Mapping[str, int], variable_based: bool,
@@ -166,7 +148,7 @@ def _output_columns(layout: _Layout, recorded: Mapping[str, int], variable_based
         shown = [n for n, _, _ in layout.vessels if n not in layout.not_vessels]
         idx = [recorded[ends[n][0]] + k if k in (0, 2) else recorded[ends[n][1]] + k
                for n in shown for k in range(4)]
-        return shown, (np.asarray(idx, dtype=np.intp), [], [])
+        return shown, Columns(np.asarray(idx, dtype=np.intp), [], [])
     lay = None if network is None else network.unknown_layout()
     probe = None if lay is None else np.asarray(lay["vessel_unknowns"], dtype=np.intp)
 
@@ -177,7 +159,7 @@ def _output_columns(layout: _Layout, recorded: Mapping[str, int], variable_based
     names: list[str] = []
     idx: list[int] = []
     extra: list[tuple[int, int, float]] = []
-    post: list[tuple[int, Any]] = []
+    derived: list[tuple[Any, ...]] = []
     node_of: dict[str, tuple[str, int, int]] = {}  # a condition's node: (vessel, p, q)
     for up, down in layout.connections:
         # a node's flow and pressure are those of the vessel end it joins
@@ -208,26 +190,29 @@ def _output_columns(layout: _Layout, recorded: Mapping[str, int], variable_based
         elif kind == "ClosedLoopCoronary":
             names.append(f"volume_im:{name}")
             idx.append(element[f"volume_im:{ref}"])
-        elif kind == "CORONARY":  # the compartment node's unknown is u = P_c − P_im
+        elif kind == "CORONARY":
+            # V_im = C_im (u − u(0)), u = P_c − P_im the compartment node's unknown: svZeroDSolver
+            # measures V_im from the start (its P_Cim_0 after the steady start also holds a
+            # leftover R_am C_a (Ṗ_in − R_a Q̇_in) of ẏ₀, −6.5e-10 mL in steadyFlow_R_coronary,
+            # taken as 0 here)
             names.append(f"volume_im:{name}")
-            idx.append(network.unknown_names().index(
-                f"pressure at boundary condition '{name}' intramyocardial compartment"))
-            post.append((len(idx) - 1, _VolumeSinceStart(float(ref))))
+            u = network.unknown_names().index(
+                f"pressure at boundary condition '{name}' intramyocardial compartment")
+            derived.append(("from_start", u, float(ref)))
+            idx.append(-len(derived))
         elif kind == "heart":
             heart_cols = _heart_columns(lay, name)
             names += [f"{var}:{name}" for var, _ in svzerod_closed_loop.VARIABLES]
             idx += heart_cols
-        else:  # a tanh valve: its law's switch at the pressure difference across it
-            behind, front, _ = {n: u for n, u, _ in lay["valves"]}[name]
+        else:  # a tanh valve: svZeroDSolver's valve_status, followed by the core
             names.append(f"valve_status:{name}")
-            idx.append(int(front))
-            extra.append((len(idx) - 1, int(behind), -1.0))
-            post.append((len(idx) - 1, _valve_closure(network, name)))
+            derived.append(("valve_status", name))
+            idx.append(-len(derived))
     if lay is not None:  # svZeroDSolver's chambers are its last blocks
         volume = dict(lay["chamber_volumes"])
         names += [f"Vc:{c}" for c in chambers]
         idx += [volume[c] for c in chambers]
-    return names, (np.asarray(idx, dtype=np.intp), extra, post)
+    return names, Columns(np.asarray(idx, dtype=np.intp), extra, derived)
 
 
 def _heart_columns(lay: Mapping[str, Any], heart: str) -> list[int]:
@@ -239,21 +224,22 @@ def _heart_columns(lay: Mapping[str, Any], heart: str) -> list[int]:
             for _, where in svzerod_closed_loop.VARIABLES]
 
 
-def _valve_closure(network: Any, name: str) -> Any:
-    """The core's valve_status of valve ``name`` from the pressure difference across it."""
-    def f(dp: np.ndarray) -> np.ndarray:
-        return np.asarray(network.valve_closure(name, dp.tolist()))
-    return f
+def _apply(data: np.ndarray, columns: Columns, rates: bool) -> tuple[np.ndarray, np.ndarray | None]:
+    """The output columns (and, with ``rates``, their derivatives) of the core's rows
+    [recorded | derived | (their rates)]."""
+    nd = len(columns.derived)
+    width = (data.shape[1] - 2 * nd) // 2 if rates else data.shape[1] - nd
+    idx = np.where(columns.idx < 0, width - 1 - columns.idx, columns.idx)
 
+    def pick(block: np.ndarray) -> np.ndarray:
+        out = block[:, idx]
+        for j, c, w in columns.extra:
+            out[:, j] += w * block[:, c]
+        return out
 
-def _apply(data: np.ndarray, columns: Columns) -> np.ndarray:
-    idx, extra, post = columns
-    out = data[:, idx]
-    for j, c, w in extra:
-        out[:, j] += w * data[:, c]
-    for j, f in post:
-        out[:, j] = f(out[:, j])
-    return out
+    if not rates:
+        return pick(data), None
+    return pick(data[:, :width + nd]), pick(data[:, width + nd:])
 
 
 #: the most RK4 steps the drop-in takes before refusing a stiff model (about a minute of a
@@ -366,11 +352,24 @@ def _check_times(s: RunSettings, got: np.ndarray, times: np.ndarray) -> None:
         raise ModelError("internal error: output times of the core do not match svZeroDSolver's")
 
 
-def _run_streamed(model: Model, native: Mapping[str, Any], s: RunSettings, method: str,
-                  columns: Columns,
-                  shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, None]:
-    """Run and keep the output rows only: (times, (output, time, width) values, None) for
-    ``shape`` = (outputs, width: 4 quantities of a vessel or 1 variable)."""
+def _simulate(model: Model, kw: Mapping[str, Any], rules: Mapping[str, Any],
+              **stream: Any) -> Mapping[str, Any]:
+    """One core run of the drop-in; its error raised."""
+    with core_errors("svZeroDSolver run"):
+        raw = model.network.simulate(**kw, svzerod=dict(rules), **stream)
+    if "error" in raw:
+        raise raw["error"]
+    return raw
+
+
+def _run(model: Model, native: Mapping[str, Any], s: RunSettings, method: str,
+         columns: Columns, shape: tuple[int, int], rules: Mapping[str, Any]
+         ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """One core run: (times, (output, time, width) values, derivatives or None) at
+    svZeroDSolver's output rows, ``shape`` = (outputs, width: 4 quantities of a vessel or 1
+    variable)."""
+    if "cycle_mean_stop" in rules:
+        return _run_cycle_error(model, native, s, method, columns, shape, rules)
     k = s.output_interval
     wanted, first = _wanted(s)
     # the core records every `stride`-th global step (and the start of the last cycle)
@@ -380,10 +379,12 @@ def _run_streamed(model: Model, native: Mapping[str, Any], s: RunSettings, metho
         stride = 1
     kw, _ = _core_kwargs(model, native, s, method)
     kw["output_every"] = s.dt * stride if method == "generalized-alpha" else s.dt
+    rates = bool(rules["rates"])
     # The core streams its rows in small chunks, each written straight into the output-major
     # (output, time, width) block that becomes the DataFrame's float block: the run never
     # holds a second, time-major copy of the output (the largest allocation at 10^4 vessels).
     values = np.empty((shape[0], wanted.size, shape[1]))
+    derivs = np.empty_like(values) if rates else None
     core_times: list[np.ndarray] = []
     count = {"core": 0, "out": 0}
 
@@ -398,124 +399,82 @@ def _run_streamed(model: Model, native: Mapping[str, Any], s: RunSettings, metho
         o, n = count["out"], len(t)
         if o + n > wanted.size:
             raise ModelError(f"internal error: more than {wanted.size} output rows from the core")
-        values[:, o:o + n, :] = _apply(data, columns).reshape(n, *shape).transpose(1, 0, 2)
+        y, yd = _apply(data, columns, rates)
+        values[:, o:o + n, :] = y.reshape(n, *shape).transpose(1, 0, 2)
+        if derivs is not None and yd is not None:
+            derivs[:, o:o + n, :] = yd.reshape(n, *shape).transpose(1, 0, 2)
         core_times.append(t)
         count["out"] = o + n
 
     chunk_rows = max(1, (1 << 20) // max(1, shape[0] * shape[1]))  # ~8 MB per chunk
-    with core_errors("svZeroDSolver run"):
-        raw = model.network.simulate(**kw, chunk_sink=take, chunk_rows=chunk_rows,
-                                     keep_current_cycle=False)
-    if "error" in raw:
-        raise raw["error"]
+    _simulate(model, kw, rules, chunk_sink=take, chunk_rows=chunk_rows,
+              keep_current_cycle=False)
     if count["out"] != wanted.size:
         raise ModelError(f"internal error: {count['out']} output rows from the core, "
                          f"expected {wanted.size}")
     times = _output_times(s, wanted, first)
     _check_times(s, np.concatenate(core_times) if core_times else np.empty(0), times)
-    return times, values, None
+    return times, values, derivs
 
 
-def _alpha_stage(dp: np.ndarray, law: Any, rho: float, steady: bool) -> np.ndarray:
-    """svZeroDSolver's algebraic internal variable s = f(Δp) (a tanh valve's valve_status)
-    through every generalized-α step: its equation holds at the α_f stage, f(Δp_{n+α_f}) =
-    s_n + α_f (s_{n+1} − s_n), Δp_{n+α_f} = Δp_n + α_f (Δp_{n+1} − Δp_n), α_f = 1/(1 + ρ∞)
-    (the pressures are the core's, which solves the same stage equations). Between steps
-    s_{n+1} − f(Δp_{n+1}) changes sign and shrinks by ρ∞ (its output oscillates around
-    f(Δp) after a switch, as svZeroDSolver's does). Start: 0, svZeroDSolver's zero state, or
-    f(Δp_0) after its steady iterations (their leftover, as for ẏ₀ in ``_run_every_step``,
-    decays as ρ∞^n)."""
-    af = 1.0 / (1.0 + rho)
-    stage = law(dp[:-1] + af * (dp[1:] - dp[:-1]))
-    out = np.empty_like(dp)
-    out[0] = law(dp[:1])[0] if steady else 0.0
-    for n in range(len(dp) - 1):
-        out[n + 1] = out[n] + (stage[n] - out[n]) / af
-    return out
+def _blocks(a: np.ndarray, rows: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """(time, output x width) rows -> (output, time, width)."""
+    return np.ascontiguousarray(a[rows].reshape(len(rows), *shape).transpose(1, 0, 2))
 
 
-def _run_every_step(model: Model, native: Mapping[str, Any], s: RunSettings, method: str,
-                    columns: Columns,
-                    shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """Run recording every step of every cycle and return (times, values, time derivatives
-    or None without ``output_derivative``) at svZeroDSolver's output rows, the tanh valves'
-    valve_status through :func:`_alpha_stage` with generalized-α. Derivatives: with
-    generalized-α svZeroDSolver's own ẏ, from its update
-    ẏ_{n+1} = (1 + ρ∞)(y_{n+1} − y_n)/Δt − ρ∞ ẏ_n from ẏ_0 = 0 (exact for ρ∞ = 0 and for a
-    zero start; after a steady start its ẏ_0, left over from the steady iterations, is taken
-    as 0, an error that decays as ρ∞^n). RK4: second-order backward differences of at least
-    ``RK4_DERIVATIVE_SUBSTEPS`` sub-steps per output step."""
+def _run_cycle_error(model: Model, native: Mapping[str, Any], s: RunSettings, method: str,
+                     columns: Columns, shape: tuple[int, int], rules: Mapping[str, Any]
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """svZeroDSolver's extra cycles without RCR: the core runs until its cycle-to-cycle rule
+    holds, recording every output step; the rows svZeroDSolver outputs are picked from
+    them (:func:`oxyline.io.svzerod.cycles.output_rows`)."""
+    steps = s.points_per_cycle - 1
+    kw, _ = _core_kwargs(model, native, s, method)
+    kw.update(output_all_cycles=True, output_every=s.dt)
+    raw = _simulate(model, kw, rules)
+    t = np.asarray(raw["times"])
+    extra = int(raw["cycles_run"]) - s.cycles
+    if len(t) != steps * (s.cycles + extra) + 1:
+        raise ModelError(f"internal error: {len(t)} rows from the core")
+    y, yd = _apply(np.asarray(raw["data"]).reshape(len(t), -1), columns, bool(rules["rates"]))
+    rows, times = svzerod_cycles.output_rows(s.cycles, steps, extra, s.output_interval,
+                                             s.output_all_cycles)
+    return s.dt * times, _blocks(y, rows, shape), None if yd is None else _blocks(yd, rows, shape)
+
+
+def _run_rk4_derivative(model: Model, native: Mapping[str, Any], s: RunSettings,
+                        columns: Columns, shape: tuple[int, int], rules: Mapping[str, Any]
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """RK4 with ``output_derivative``: RK4 carries no ẏ, so the derivative is the
+    second-order backward difference of at least ``RK4_DERIVATIVE_SUBSTEPS`` recorded
+    sub-steps per output step (the left derivative where a time table has a kink, as
+    svZeroDSolver's ẏ there)."""
+    if "cycle_mean_stop" in rules:
+        raise UnsupportedElement("simulation_parameters: 'use_cycle_to_cycle_error' without RCR "
+                                 "together with 'output_derivative' needs "
+                                 "method='generalized-alpha'")
     wanted, first = _wanted(s)
-    kw, sub = _core_kwargs(model, native, s, method)
-    if method == "rk4" and sub < RK4_DERIVATIVE_SUBSTEPS:
+    kw, sub = _core_kwargs(model, native, s, "rk4")
+    if sub < RK4_DERIVATIVE_SUBSTEPS:
         # the backward differences see a table's kink only at an output time itself
         sub = RK4_DERIVATIVE_SUBSTEPS
         kw["dt"] = s.dt / sub
     kw.update(output_all_cycles=True, output_every=kw["dt"])
-    with core_errors("svZeroDSolver run"):
-        raw = model.network.simulate(**kw)
-    if "error" in raw:
-        raise raw["error"]
+    raw = _simulate(model, kw, dict(rules, rates=False))
     t = np.asarray(raw["times"])
-    idx, extra, post = columns
-    y = _apply(np.asarray(raw["data"]).reshape(len(t), -1), (idx, extra, []))
     if len(t) != (s.points_per_cycle - 1) * s.cycles * sub + 1:
         raise ModelError(f"internal error: {len(t)} rows from the core")
-    for j, law in post:
-        y[:, j] = law(y[:, j]) if method != "generalized-alpha" or getattr(law, "history", False) \
-            else _alpha_stage(y[:, j], law, s.rho_infty, s.steady_initial)
-    if not s.output_derivative:
-        yd = None
-    elif method == "generalized-alpha":
-        rho = s.rho_infty
-        yd = np.zeros_like(y)
-        for n in range(len(t) - 1):
-            yd[n + 1] = (1.0 + rho) * (y[n + 1] - y[n]) / kw["dt"] - rho * yd[n]
-    else:
-        yd = _backward_derivative(y, kw["dt"])
+    y, _ = _apply(np.asarray(raw["data"]).reshape(len(t), -1), columns, False)
+    yd = _backward_derivative(y, kw["dt"])
     rows = wanted * sub
     times = _output_times(s, wanted, first)
     _check_times(s, t[rows] - (0.0 if s.output_all_cycles else s.dt * first), times)
-    def block(a: np.ndarray) -> np.ndarray:  # (time, output x width) -> (output, time, width)
-        return np.ascontiguousarray(a[rows].reshape(len(rows), *shape).transpose(1, 0, 2))
-
-    return times, block(y), None if yd is None else block(yd)
-
-
-def _run_cycle_error(model: Model, native: Mapping[str, Any], s: RunSettings, method: str,
-                     columns: Columns,
-                     cap_cols: list[tuple[int, int]]) -> tuple[np.ndarray, np.ndarray]:
-    """svZeroDSolver's extra cycles without RCR (:mod:`oxyline.io.svzerod.cycles`): the output
-    times and the (rows, outputs x width) values."""
-    if s.output_derivative:
-        raise UnsupportedElement("simulation_parameters: 'use_cycle_to_cycle_error' without RCR "
-                                 "together with 'output_derivative' is not supported")
-    steps = s.points_per_cycle - 1
-
-    planned, _ = _core_kwargs(model, native, s, method)  # once: its RK4 step trials
-
-    def run(cycles: int) -> tuple[np.ndarray, np.ndarray]:
-        kw = dict(planned, cycles=cycles, output_all_cycles=True, output_every=s.dt)
-        with core_errors("svZeroDSolver run"):
-            raw = model.network.simulate(**kw)
-        if "error" in raw:
-            raise raw["error"]
-        t = np.asarray(raw["times"])
-        if len(t) != steps * cycles + 1:
-            raise ModelError(f"internal error: {len(t)} rows from the core")
-        data = np.asarray(raw["data"]).reshape(len(t), -1)
-        caps = np.stack([data[:, [q, p]] for q, p in cap_cols], axis=1) if cap_cols else \
-            np.zeros((len(t), 0, 2))
-        return _apply(data, columns), caps
-
-    return svzerod_cycles.run(run, s.cycles, steps, s.output_interval, s.output_all_cycles,
-                              s.cycle_error or 0.0, s.dt)
+    return times, _blocks(y, rows, shape), _blocks(yd, rows, shape)
 
 
 def _backward_derivative(y: np.ndarray, h: float) -> np.ndarray:
-    """Time derivative of rows `y` spaced `h` apart by second-order backward differences (the
-    left derivative where a time table has a kink, as svZeroDSolver's ẏ there), forward ones
-    at the first two rows."""
+    """Time derivative of rows `y` spaced `h` apart by second-order backward differences,
+    forward ones at the first two rows."""
     yd = np.empty_like(y)
     if len(y) < 3:
         yd[:] = (y[-1] - y[0]) / (h * max(1, len(y) - 1))

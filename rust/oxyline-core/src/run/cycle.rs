@@ -8,6 +8,7 @@ use super::coupling::State;
 use super::mean_flow::MeanAbs;
 use super::recorder::Recorder;
 use super::settings::RunSettings;
+use super::svzerod::{CycleMeans, DerivedState};
 use crate::error::{Error, Result};
 use crate::integrate::newton::scaled_increment;
 
@@ -33,6 +34,9 @@ pub(super) struct Cycles<'r, 'f> {
     released: bool,
     /// Error control (None: the fixed step).
     pub adaptive: Option<Adaptive>,
+    /// svZeroDSolver's derived columns and cycle means (`RunSettings::svzerod`).
+    derived: Option<DerivedState>,
+    cycle_means: Option<CycleMeans>,
 }
 
 /// What the rows of one cycle are for.
@@ -70,6 +74,25 @@ impl<'r, 'f> Cycles<'r, 'f> {
             obs_row: Vec::new(),
             released: false,
             adaptive: None,
+            derived: None,
+            cycle_means: None,
+        }
+    }
+
+    /// Start svZeroDSolver's derived columns and cycle means at the initial state (`implicit`:
+    /// the run steps generalized-α, whose α_f stage the valve status follows).
+    pub fn start_svzerod(&mut self, implicit: bool) {
+        let rules = &self.s.svzerod;
+        let y = &self.state.y;
+        if !rules.derived.is_empty() {
+            let alpha_f = implicit.then(|| 1.0 / (1.0 + self.s.method.rho_inf()));
+            let steady = matches!(self.s.start, super::settings::Start::SvZeroDSteady { .. });
+            self.derived = Some(DerivedState::new(&rules.derived, y, alpha_f, steady));
+        }
+        if let Some(stop) = &rules.cycle_mean_stop {
+            let mut m = CycleMeans::new(stop);
+            m.add(y);
+            self.cycle_means = Some(m);
         }
     }
 
@@ -203,11 +226,12 @@ impl<'r, 'f> Cycles<'r, 'f> {
         // rows certain to be output can go to the sink as they come; a cycle that may still be
         // superseded by the next (last-cycle output with `until_periodic`) waits for its end
         let committed = s.output_all_cycles || last;
+        let open_ended = s.until_periodic.is_some() || s.svzerod.cycle_mean_stop.is_some();
         let rows = CycleRows {
             t0: cycle as f64 * s.period,
             committed,
-            recorded: committed || s.until_periodic.is_some() || s.keep_current_cycle,
-            species: s.output_all_cycles || s.until_periodic.is_some() || last,
+            recorded: committed || open_ended || s.keep_current_cycle,
+            species: s.output_all_cycles || open_ended || last,
         };
         if !s.output_all_cycles {
             self.rec.clear();
@@ -229,7 +253,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
             }
         }
         self.cycles_run = cycle + 1;
-        Ok(self.end_cycle())
+        self.end_cycle()
     }
 
     /// Step `k` of the cycle, and its output row when due.
@@ -246,6 +270,12 @@ impl<'r, 'f> Cycles<'r, 'f> {
         done?;
         if let Some(m) = self.mean.as_deref_mut() {
             m.accumulate(&self.state.y);
+        }
+        if let Some(d) = self.derived.as_mut() {
+            d.after_step(&self.state.y, dt);
+        }
+        if let Some(m) = self.cycle_means.as_mut() {
+            m.add(&self.state.y);
         }
         if k % 64 == 0 || k == self.steps_per_cycle {
             self.state.check(t_new)?;
@@ -371,6 +401,15 @@ impl<'r, 'f> Cycles<'r, 'f> {
     /// `species`; a `committed` row goes on to the sink once a chunk is full.
     fn output_row(&mut self, t: f64, time: f64, species: bool, committed: bool) -> Result<()> {
         self.rec.record(t, &self.state.y)?;
+        if let Some(d) = &self.derived {
+            self.rec.record_extra(d.value.iter().copied());
+        }
+        if self.s.svzerod.rates {
+            let yd = &self.state.yd;
+            let derived = self.derived.as_ref().map_or(&[][..], |d| &d.rate[..]);
+            let rates = self.s.probes.iter().map(|&i| yd[i]);
+            self.rec.record_extra(rates.chain(derived.iter().copied()));
+        }
         if species && self.state.species.is_some() {
             self.state.observe(time, &mut self.obs_row)?;
             // the first row grew the buffer by doubling: keep only its length (a row holds
@@ -386,7 +425,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
 
     /// Close a cycle: the periodicity error and the first pass's mean flow. False when the run
     /// is complete (mean flow settled, or periodic after the minimum cycles).
-    fn end_cycle(&mut self) -> bool {
+    fn end_cycle(&mut self) -> Result<bool> {
         let y = &self.state.y;
         // the change y − y_prev in place of y_prev (no state-sized copy at the end of the run,
         // when the whole output table is held), then y_prev = y
@@ -396,15 +435,19 @@ impl<'r, 'f> Cycles<'r, 'f> {
         self.periodic_error = scaled_increment(self.state.dae, &self.prev_cycle_end, y);
         self.prev_cycle_end.copy_from_slice(y);
         if self.mean.as_deref_mut().is_some_and(MeanAbs::end_cycle) {
-            return false;
+            return Ok(false);
+        }
+        if let Some(m) = self.cycle_means.as_mut() {
+            let stop = m.end_cycle(y, self.cycles_run, self.s.cycles)?;
+            return Ok(!stop);
         }
         if let Some(sp) = self.state.species.as_mut() {
             // species need several transit times: include them in the periodicity test
             self.periodic_error = self.periodic_error.max(sp.cycle_change());
         }
-        match self.s.until_periodic {
+        Ok(match self.s.until_periodic {
             Some(tol) => !(self.cycles_run >= self.s.cycles && self.periodic_error < tol),
             None => true,
-        }
+        })
     }
 }

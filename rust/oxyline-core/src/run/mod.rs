@@ -29,6 +29,7 @@ mod plan;
 mod recorder;
 mod resolve; // RK4's step for valves and chambers by step doubling
 mod settings;
+mod svzerod; // svZeroDSolver's output and stop conventions (the drop-in)
 mod two_pass;
 
 pub use checkpoint::{CHECKPOINT_VERSION, Checkpoints, Every, Snapshot};
@@ -36,6 +37,7 @@ pub use outcome::{ErrorControlOutcome, Outcome, TransportOutcome};
 pub use recorder::{Chunk, OutputSink};
 pub use resolve::{Refinement, rk4_step_refinement};
 pub use settings::{Method, RunSettings, Start};
+pub use svzerod::{CycleMeanStop, Derived, SvZeroDRules};
 
 use crate::circuit::Dae;
 use crate::error::Result;

@@ -35,6 +35,14 @@ pub(super) fn run(
             "checkpoints need a fixed step: give dt instead of rtol to checkpoint a run",
         ));
     }
+    if !s.svzerod.is_empty() && checkpoints.is_some() {
+        // the derived columns and cycle means start at the run's start, which a snapshot
+        // does not carry
+        return Err(crate::error::Error::model(
+            "simulation",
+            "svZeroDSolver's output conventions (svzerod) cannot be checkpointed",
+        ));
+    }
     let mut plan = Plan::new(dae, steady, s, transport.as_deref_mut(), progress)?;
 
     let resume = checkpoints.as_deref_mut().and_then(|c| c.resume.take());
@@ -73,7 +81,8 @@ pub(super) fn run(
         .as_ref()
         .map(|sp| (sp.tr.species_names().len(), sp.tr.columns_per_species()));
     let columns = s.species_columns.as_deref();
-    let mut rec = Recorder::new(&s.probes, layout, columns, initial_stored, sink)?;
+    let mut rec = Recorder::new(&s.probes, layout, columns, initial_stored, sink)?
+        .with_extra_columns(s.svzerod.extra_columns(s.probes.len()));
     if !s.output_all_cycles && mean.is_none() {
         // last-cycle output: one cycle's rows and the row at its start
         rec.reserve_rows(plan.steps_per_cycle / plan.stride + 1)?;
@@ -91,6 +100,7 @@ pub(super) fn run(
     cycles.adaptive = s
         .adaptive()
         .map(|tol| Adaptive::new(dae, tol, s.method.rho_inf(), s.period, s.output_every));
+    cycles.start_svzerod(!plan.use_rk4);
     if let Some(r) = &resume {
         cycles.restore(r)?;
     }

@@ -379,6 +379,7 @@ mod tests {
             probes: Vec::new(),
             species_columns: None,
             tolerances: None,
+            svzerod: Default::default(),
         }
     }
 

@@ -45,6 +45,8 @@ pub(super) struct Recorder<'p, 's, 'f> {
     sink: Option<&'s mut OutputSink<'f>>,
     /// Most rows held at once.
     pub max_rows: usize,
+    /// Columns after the probes (svZeroDSolver's derived columns and rates: `record_extra`).
+    extra: usize,
 }
 
 impl<'p, 's, 'f> Recorder<'p, 's, 'f> {
@@ -79,7 +81,19 @@ impl<'p, 's, 'f> Recorder<'p, 's, 'f> {
             initial_stored,
             sink,
             max_rows: 0,
+            extra: 0,
         })
+    }
+
+    /// Record `extra` more columns per row, after the probes (see `record_extra`).
+    pub fn with_extra_columns(mut self, extra: usize) -> Self {
+        self.extra = extra;
+        self
+    }
+
+    /// Values per row: the probes and the extra columns.
+    fn width(&self) -> usize {
+        self.probes.len() + self.extra
     }
 
     /// Make room for `rows` rows at once (the whole table is then one allocation of its final
@@ -95,7 +109,7 @@ impl<'p, 's, 'f> Recorder<'p, 's, 'f> {
 
     /// Room for `rows` more rows of every table (fallible).
     fn reserve(&mut self, rows: usize) -> Result<()> {
-        let np = self.probes.len();
+        let np = self.width();
         try_reserve(&mut self.times, rows, "output times")?;
         try_reserve(&mut self.data, rows.saturating_mul(np), "output rows")?;
         try_reserve(
@@ -105,8 +119,9 @@ impl<'p, 's, 'f> Recorder<'p, 's, 'f> {
         )
     }
 
+    /// Values per row (the probes and the extra columns).
     pub fn n_probes(&self) -> usize {
-        self.probes.len()
+        self.width()
     }
 
     /// Recorded columns per species.
@@ -123,6 +138,11 @@ impl<'p, 's, 'f> Recorder<'p, 's, 'f> {
         self.data.extend(self.probes.iter().map(|&i| y[i]));
         self.max_rows = self.max_rows.max(self.times.len());
         Ok(())
+    }
+
+    /// The extra columns of the row just recorded (exactly `extra` values).
+    pub fn record_extra(&mut self, values: impl Iterator<Item = f64>) {
+        self.data.extend(values.take(self.extra));
     }
 
     /// Record one row whose value of unknown `i` is `value(i)` (dense output: only the
@@ -151,7 +171,7 @@ impl<'p, 's, 'f> Recorder<'p, 's, 'f> {
 
     /// The rows and Σ N(0) of a checkpoint (see `Cycles::restore`).
     pub fn restore(&mut self, snap: &super::checkpoint::Snapshot) -> Result<()> {
-        let np = self.probes.len();
+        let np = self.width();
         let rows = snap.times.len();
         // species rows may be fewer (cycles whose species outputs are not computed)
         let nt = snap.transport_rows.len();
@@ -208,7 +228,7 @@ impl<'p, 's, 'f> Recorder<'p, 's, 'f> {
             return true;
         }
         let end = if all { n } else { n - n % rows };
-        let (np, nc) = (self.probes.len(), self.transport_cols);
+        let (np, nc) = (self.probes.len() + self.extra, self.transport_cols);
         let mut done = 0;
         while done < end {
             let upto = (done + rows).min(end);

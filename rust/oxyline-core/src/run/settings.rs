@@ -69,6 +69,9 @@ pub struct RunSettings {
     /// Error control (docs/physics.md §10): generalized-α with a variable step meeting these
     /// tolerances and output by dense output. None: the fixed step of `dt` (or `auto`).
     pub tolerances: Option<Tolerances>,
+    /// svZeroDSolver's output and stop conventions (derived columns, rates, its
+    /// cycle-to-cycle rule) asked by the drop-in; empty by default.
+    pub svzerod: super::svzerod::SvZeroDRules,
 }
 
 impl RunSettings {
@@ -91,6 +94,7 @@ impl RunSettings {
             probes,
             species_columns: None,
             tolerances: None,
+            svzerod: Default::default(),
         }
     }
 
@@ -118,7 +122,10 @@ impl RunSettings {
         if let Some(p) = self.probes.iter().find(|&&p| p >= dae.n) {
             return bad(format!("output index {p} out of range"));
         }
-        Ok(())
+        if !self.svzerod.is_empty() && self.adaptive().is_some() {
+            return bad("svZeroDSolver's output conventions need a fixed step (dt)".into());
+        }
+        self.svzerod.validate(dae.n)
     }
 
     /// An error-controlled run: tolerances and no fixed step.
@@ -129,7 +136,9 @@ impl RunSettings {
     /// The most cycles the run may take: `cycles`, or up to `max_cycles` while waiting for
     /// periodicity.
     pub(super) fn max_cycles(&self) -> usize {
-        if self.until_periodic.is_some() {
+        if let Some(stop) = &self.svzerod.cycle_mean_stop {
+            self.cycles + stop.max_extra
+        } else if self.until_periodic.is_some() {
             self.max_cycles.max(self.cycles)
         } else {
             self.cycles
@@ -192,6 +201,7 @@ mod tests {
             probes: vec![0],
             species_columns: None,
             tolerances: None,
+            svzerod: Default::default(),
         };
         assert!(ok.validate(&dae).is_ok());
         let message = |s: RunSettings| match s.validate(&dae) {

@@ -100,6 +100,7 @@ const MEAN_FLOW_FINE_STEPS: f64 = 1000.0;
 fn mean_flow_pass(s: &RunSettings) -> RunSettings {
     let mut first = RunSettings {
         probes: Vec::new(),
+        svzerod: Default::default(),
         ..s.clone()
     };
     if s.tolerances.is_some() && s.dt.is_none() {

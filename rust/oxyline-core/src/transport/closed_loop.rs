@@ -80,6 +80,10 @@ pub struct ClosedLoopSpec {
     /// How the periodic steady state is found (`run_periodic`).
     #[serde(default)]
     pub shooting: Shooting,
+    /// Correct the flow table first so that every compartment's volume is periodic, the
+    /// tree's flows counted (`closed_loop_balance`); the run's `flow` is the table it used.
+    #[serde(default)]
+    pub balance: bool,
 }
 
 /// The periodic-state solver of `run_periodic`: Anderson acceleration of the cycle map (one
@@ -581,6 +585,8 @@ pub struct ClosedLoopRun {
     /// The tree's flow per step into its root and out of every outlet (m³/s).
     pub tree_inflow: Vec<f64>,
     pub tree_outflow: Vec<f64>,
+    /// The flow table the run used (row-major steps × branches; balanced with `balance`).
+    pub flow: Vec<f64>,
 }
 
 /// One cycle of the flow table from the loop's current state; records into `out` if given.
@@ -923,6 +929,11 @@ pub fn run_periodic(
     if let Some(t) = &spec.tree {
         lp.attach_tree(t, dt, steps)?;
     }
+    let mut table = flows.to_vec();
+    if spec.balance {
+        balance_with_tree(&lp, &mut table)?;
+    }
+    let flows = table.as_slice();
     let v0 = lp.volume.clone();
     check_periodic_volumes(&lp, flows, dt, &v0)?;
     let mut cycles = 0;
@@ -938,7 +949,22 @@ pub fn run_periodic(
     };
     let mut out = ClosedLoopRun::empty(&lp, steps);
     confirm(&mut lp, flows, dt, (cycles, max_cycles), tol, &mut out)?;
+    out.flow = table;
     Ok(out)
+}
+
+/// [`balance_flows`](super::closed_loop_balance::balance_flows) of the loop's table, the
+/// attached tree's cycle-mean inflow and outflows held as they are.
+fn balance_with_tree(lp: &ClosedLoop, flows: &mut [f64]) -> Result<()> {
+    let mut fixed = vec![0.0; lp.volume.len()];
+    if let Some(t) = &lp.tree {
+        let n = t.inflow.len().max(1) as f64;
+        fixed[lp.tree_from] -= t.inflow.iter().sum::<f64>() / n;
+        for (k, &to) in lp.tree_to.iter().enumerate() {
+            fixed[to] += t.outflow.iter().map(|q| q[k]).sum::<f64>() / n;
+        }
+    }
+    super::closed_loop_balance::balance_flows(flows, &lp.from, &lp.to, &fixed)
 }
 
 /// Checks the flow table and the step; returns the steps per cycle.
@@ -1029,6 +1055,7 @@ impl ClosedLoopRun {
             tree_flow_periodic_error: tree.map_or(0.0, |t| t.flow_periodic_error),
             tree_inflow: tree.map_or(Vec::new(), |t| t.inflow.clone()),
             tree_outflow: tree.map_or(Vec::new(), |t| t.outflow.concat()),
+            flow: Vec::new(),
         }
     }
 

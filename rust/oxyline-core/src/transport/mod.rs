@@ -31,6 +31,7 @@ use std::sync::Arc;
 
 mod build;
 pub mod closed_loop; // closed circulation: compartments, lungs
+pub mod closed_loop_balance; // its flow table's periodic volumes
 pub mod closed_loop_tree; // its segment-resolved arterial tree
 pub mod compartment;
 mod fused;
