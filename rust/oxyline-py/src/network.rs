@@ -134,26 +134,24 @@ impl Network {
             let (v, o) = p.take().map_err(to_py)?;
             (v, o, rest)
         };
-        let built = py.detach(
-            move || -> Result<Built, Error> {
-                let mut spec: oxyline_core::NetworkSpec =
-                    serde_json::from_value(serde_json::Value::Object(rest))
-                        .map_err(|e| Error::model("model", e.to_string()))?;
-                spec.vessels = vessels;
-                spec.max_memory = max_memory;
-                for (node, bc) in outlets {
-                    if spec.boundary_conditions.insert(node.clone(), bc).is_some() {
-                        return Err(Error::model(
-                            format!("boundary condition '{node}'"),
-                            "given twice",
-                        ));
-                    }
+        let built = py.detach(move || -> Result<Built, Error> {
+            let mut spec: oxyline_core::NetworkSpec =
+                serde_json::from_value(serde_json::Value::Object(rest))
+                    .map_err(|e| Error::model("model", e.to_string()))?;
+            spec.vessels = vessels;
+            spec.max_memory = max_memory;
+            for (node, bc) in outlets {
+                if spec.boundary_conditions.insert(node.clone(), bc).is_some() {
+                    return Err(Error::model(
+                        format!("boundary condition '{node}'"),
+                        "given twice",
+                    ));
                 }
-                let m = oxyline_core::ensemble::Member::build(&spec)?;
-                let warnings = plausibility::check(&spec);
-                Ok(((m.assembled, m.dae), m.transport, warnings))
-            },
-        );
+            }
+            let m = oxyline_core::ensemble::Member::build(&spec)?;
+            let warnings = plausibility::check(&spec);
+            Ok(((m.assembled, m.dae), m.transport, warnings))
+        });
         let (built, transport, plausibility) = built.map_err(to_py)?;
         Ok(Network {
             inner: Arc::new(built),
