@@ -52,12 +52,13 @@ def test_max_cycles_above_tolerance_warns_and_flags() -> None:
 def test_cli_cycle_and_output_flags(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     xr = pytest.importorskip("xarray")
     out = tmp_path / "r.nc"
-    with pytest.warns(oxyline.PeriodicityWarning):
-        code = main(["run", "bifurcation", "--cycles", "1", "--until-periodic", "1e-14",
-                     "--max-cycles", "2", "--output-every", "0.02", "-o", str(out)])
+    # the command line shows the PeriodicityWarning as one `warning:` line on stderr
+    code = main(["run", "bifurcation", "--cycles", "1", "--until-periodic", "1e-14",
+                 "--max-cycles", "2", "--output-every", "0.02", "-o", str(out)])
     assert code == 0
-    text = capsys.readouterr().out
-    assert "2 cycles" in text and "not periodic" in text
+    captured = capsys.readouterr()
+    assert "2 cycles" in captured.out and "not periodic" in captured.out
+    assert "warning: " in captured.err and "periodic" in captured.err
     with xr.open_dataset(out, engine="h5netcdf") as ds:
         assert ds.attrs["solver_periodic_reached"] == 0
         assert ds.sizes["time"] == 51  # 0 .. 1 s every 20 ms

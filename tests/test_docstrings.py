@@ -64,8 +64,15 @@ def test_every_public_function_and_class_has_an_example() -> None:
 def test_the_examples_of_a_module_run(module: str) -> None:
     import matplotlib.pyplot as plt
 
+    from oxyline import catalogue
+
     mod = importlib.import_module(module)
-    result = doctest.testmod(mod, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE,
-                             report=True)
-    plt.close("all")
+    registered = dict(catalogue._registered)  # an example registers a model: not for later tests
+    try:
+        result = doctest.testmod(mod, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE,
+                                 report=True)
+    finally:
+        catalogue._registered.clear()
+        catalogue._registered.update(registered)
+        plt.close("all")
     assert result.failed == 0, f"{result.failed} of {result.attempted} examples of {module} failed"

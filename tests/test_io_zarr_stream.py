@@ -170,7 +170,7 @@ def test_cli_interrupted_run_exits_130_with_the_partial_store(
 ) -> None:
     from oxyline import run
 
-    monkeypatch.setattr(run, "_progress_bar", lambda enabled, s=None: (_stop_after(0.3), None))
+    monkeypatch.setattr(run, "_progress_bar", lambda enabled, s=None, passes=1: (_stop_after(0.3), None))
     out = tmp_path / "out.zarr"
     assert main(["run", "bifurcation", "--cycles", "200", "--method", "rk4", "-o", str(out)]) \
         == 130

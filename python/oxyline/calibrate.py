@@ -328,6 +328,14 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
 
     A fit that fails at a trial point (a model the core refuses, a diverged run) returns the
     best point reached with ``success=False`` and the failure in ``report["error"]``.
+
+    >>> path = "boundary_conditions.ica_out.resistance"
+    >>> truth = native_model(load_model("bifurcation").source, [path], [3.5e9])
+    >>> out = ["parent.pressure_in.mean", "flow_split.daughter1.parent"]
+    >>> measured = sensitivities(truth, [], out).values
+    >>> fit = calibrate("bifurcation", dict(zip(out, measured)), [path])
+    >>> bool(fit.success), round(fit.parameters[path] / 3.5e9, 6)
+    (True, 1.0)
     """
     from scipy.optimize import least_squares
 

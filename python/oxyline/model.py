@@ -103,7 +103,14 @@ class Model:
     def canonical(self) -> dict[str, Any]:
         """The canonical SI description (written from ``source`` on first use)."""
         if self._canonical is None:
-            self._canonical = _core.canonical_model(expanded(self.source))
+            native = expanded(self.source)
+            canonical = _core.canonical_model(native)
+            # the core's map is sorted by node; keep the file's order (plots, legends, tables)
+            bcs = canonical.get("boundary_conditions") or {}
+            order = {n: i for i, n in enumerate(native.get("boundary_conditions") or {})}
+            canonical["boundary_conditions"] = dict(
+                sorted(bcs.items(), key=lambda kv: order.get(kv[0], len(order))))
+            self._canonical = canonical
         return self._canonical
 
     @property
