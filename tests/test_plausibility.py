@@ -290,3 +290,23 @@ def test_an_svzerod_model_name_names_the_result() -> None:
     assert res.model_name == name and res.to_xarray().attrs["model"] == name
     # a file without one keeps the generic name
     assert oxyline.load_model(DATA / "svzerod" / "cases" / "steadyFlow_R_R.json").name == "svzerod"
+
+
+def test_the_svzerod_drop_in_of_a_cgs_file_does_not_read_its_numbers_as_si(
+        tmp_path: Path) -> None:
+    """The drop-in runs in a cgs file's own numbers (as svZeroDSolver does); the SI ranges do
+    not apply to them, while the same file loaded as a model (converted to SI) is checked."""
+    import warnings
+
+    import oxyline.svzerod as svz
+    from oxyline.io.svzerod import writer
+
+    d = writer.to_svzerod(oxyline.load_model("bifurcation"), units="cgs", samples=201,
+                          points_per_cycle=101, cycles=1)
+    p = tmp_path / "b_cgs.json"
+    p.write_text(json.dumps(d))
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        svz.simulate(json.loads(p.read_text()))
+        oxyline.load_model(p)
+    assert not [w for w in seen if isinstance(w.message, oxyline.PlausibilityWarning)]

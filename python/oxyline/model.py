@@ -9,6 +9,7 @@ job. The schema is described in docs/schema.md.
 from __future__ import annotations
 
 import copy
+import functools
 import json
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -181,17 +182,19 @@ def build_model(data: dict[str, Any]) -> Model:
     return _build(_copy(dict(data)))
 
 
-def _build(data: dict[str, Any]) -> Model:
+def _build(data: dict[str, Any], *, plausibility: bool = True) -> Model:
     """The model of ``data``, which becomes the model's ``source``: callers pass a dict they
-    own (a copy of the user's, or one they built)."""
+    own (a copy of the user's, or one they built). ``plausibility=False`` for numbers that are
+    not in SI (the svZeroDSolver drop-in runs in a cgs file's own numbers): the ranges are SI."""
+    native = functools.partial(_build_native, plausibility=plausibility)
     if has_trees(data):  # a model-to-model step, like an importer
         # the trees' vessels are estimated against the memory allowed before they are grown
-        return build_with_trees(data, _build_native, _boundary_conditions,
-                                _memory.default_limit())
-    return _build_native(data)
+        return build_with_trees(data, native, _boundary_conditions, _memory.default_limit())
+    return native(data)
 
 
-def _build_native(data: dict[str, Any], grow: Callable[[Any], Any] | None = None) -> Model:
+def _build_native(data: dict[str, Any], grow: Callable[[Any], Any] | None = None, *,
+                  plausibility: bool = True) -> Model:
     """:func:`_build` of a model without structured-tree conditions: the core reads ``data``
     once and builds the network from what it read; ``grow`` adds the structured trees to those
     parts first (:func:`oxyline.structured_tree.build_with_trees`)."""
@@ -204,7 +207,8 @@ def _build_native(data: dict[str, Any], grow: Callable[[Any], Any] | None = None
     limit = _memory.limit(sim.get("max_memory"), "simulation: max_memory")
     with core_errors(f"model '{name}'"):
         model._network = _core.Network.from_parts(parts, limit)
-    warn_implausible(model._network.plausibility())
+    if plausibility:
+        warn_implausible(model._network.plausibility())
     out = sim.get("output") or {}
     if "variables" in out or "vessels" in out:  # unknown names fail at load time too
         model.network.output_layout(variables=output_names(out.get("variables"), "variables"),

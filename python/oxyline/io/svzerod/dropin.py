@@ -83,7 +83,7 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
     needed = {x for _, a, b in layout.vessels for x in (a, b)}
     needed |= {ref[0] for kind, _, ref in layout.internal if kind == "junction"}
     vessels = [dict(v, output=True) if v["name"] in needed else v for v in native["vessels"]]
-    model = _build({**native, "vessels": vessels, "units": "SI"})
+    model = _build({**native, "vessels": vessels, "units": "SI"}, plausibility=s.units == "SI")
     recorded = {v["name"]: 4 * k for k, v in enumerate(x for x in vessels if x.get("output", True))}
     chambers = [v["name"] for v in native["vessels"] if "chamber" in v]
     elements = chambers or layout.spheres or any(k in ELEMENT_KINDS for k, _, _ in
