@@ -178,7 +178,7 @@ def test_model_module_is_a_leaf_and_formats_are_sniffed_once() -> None:
     tree = ast.parse(Path(model.__file__).read_text())
     imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
     imported |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
-    assert imported <= {"__future__", "copy", "json", "math", "collections.abc", "dataclasses",
+    assert imported <= {"__future__", "copy", "functools", "json", "math", "collections.abc", "dataclasses",
                         "typing", "oxyline", "oxyline.errors", "oxyline.units",
                         # structured-tree growth: a model-to-model step that imports only
                         # errors and units itself (checked below), not an importer
