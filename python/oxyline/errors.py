@@ -98,6 +98,8 @@ class PlausibilityWarning(UserWarning):
         import warnings, oxyline
         warnings.simplefilter("ignore", oxyline.PlausibilityWarning)
 
+    Examples
+    --------
     >>> import warnings, oxyline
     >>> bad = oxyline.catalogue.load_dict("bifurcation")
     >>> bad["vessels"][0]["radius"]               # SI: metres
