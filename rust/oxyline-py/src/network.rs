@@ -20,6 +20,25 @@ use std::time::{Duration, Instant};
 /// plausibility warnings of the model.
 type Built = ((Assembled, Dae), Option<Transport>, Vec<Warning>);
 
+/// `spec` with the outlets' conditions added (each node once), assembled as every ensemble
+/// member is (spec → circuit → DAE → transport), with its plausibility findings.
+fn assemble(
+    mut spec: oxyline_core::NetworkSpec,
+    outlets: Vec<(String, oxyline_core::model::BoundarySpec)>,
+) -> Result<Built, Error> {
+    for (node, bc) in outlets {
+        if spec.boundary_conditions.insert(node.clone(), bc).is_some() {
+            return Err(Error::model(
+                format!("boundary condition '{node}'"),
+                "given twice",
+            ));
+        }
+    }
+    let m = oxyline_core::ensemble::Member::build(&spec)?;
+    let warnings = plausibility::check(&spec);
+    Ok(((m.assembled, m.dae), m.transport, warnings))
+}
+
 /// An assembled network: built once from the canonical SI JSON model, run many times.
 #[pyclass(frozen, module = "oxyline._core")]
 pub(crate) struct Network {
@@ -32,6 +51,14 @@ pub(crate) struct Network {
 }
 
 impl Network {
+    fn from_built((built, transport, plausibility): Built) -> Self {
+        Network {
+            inner: Arc::new(built),
+            transport: transport.map(Arc::new),
+            plausibility,
+        }
+    }
+
     fn selection(
         &self,
         variables: Option<Vec<String>>,
@@ -92,25 +119,9 @@ impl Network {
                 Some(v) => spec.vessels.extend(v),
                 None => {}
             }
-            for (node, bc) in bcs {
-                if spec.boundary_conditions.insert(node.clone(), bc).is_some() {
-                    return Err(Error::model(
-                        format!("boundary condition '{node}'"),
-                        "given twice",
-                    ));
-                }
-            }
-            // the same assembly as every ensemble member: spec → circuit → DAE → transport
-            let m = oxyline_core::ensemble::Member::build(&spec)?;
-            let warnings = plausibility::check(&spec);
-            Ok(((m.assembled, m.dae), m.transport, warnings))
+            assemble(spec, bcs)
         });
-        let (built, transport, plausibility) = built.map_err(to_py)?;
-        Ok(Network {
-            inner: Arc::new(built),
-            transport: transport.map(Arc::new),
-            plausibility,
-        })
+        Ok(Network::from_built(built.map_err(to_py)?))
     }
 
     /// The network of a model read by `read_model` (its parts, structured trees grown into
@@ -140,24 +151,9 @@ impl Network {
                     .map_err(|e| Error::model("model", e.to_string()))?;
             spec.vessels = vessels;
             spec.max_memory = max_memory;
-            for (node, bc) in outlets {
-                if spec.boundary_conditions.insert(node.clone(), bc).is_some() {
-                    return Err(Error::model(
-                        format!("boundary condition '{node}'"),
-                        "given twice",
-                    ));
-                }
-            }
-            let m = oxyline_core::ensemble::Member::build(&spec)?;
-            let warnings = plausibility::check(&spec);
-            Ok(((m.assembled, m.dae), m.transport, warnings))
+            assemble(spec, outlets)
         });
-        let (built, transport, plausibility) = built.map_err(to_py)?;
-        Ok(Network {
-            inner: Arc::new(built),
-            transport: transport.map(Arc::new),
-            plausibility,
-        })
+        Ok(Network::from_built(built.map_err(to_py)?))
     }
 
     /// How many passes a run makes over its cycles: 2 for a transport model whose wall

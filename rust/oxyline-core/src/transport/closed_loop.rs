@@ -825,36 +825,6 @@ fn least_squares(cols: &[Vec<f64>], f: &[f64]) -> Option<Vec<f64>> {
     Some(gamma)
 }
 
-/// Solves the small dense system a x = b in place (Gaussian elimination, partial pivoting).
-fn dense_solve(a: &mut [f64], b: &mut [f64], n: usize) -> bool {
-    for k in 0..n {
-        let p = (k..n)
-            .max_by(|&i, &j| a[i * n + k].abs().total_cmp(&a[j * n + k].abs()))
-            .unwrap_or(k);
-        if a[p * n + k] == 0.0 {
-            return false;
-        }
-        if p != k {
-            for j in 0..n {
-                a.swap(k * n + j, p * n + j);
-            }
-            b.swap(k, p);
-        }
-        for i in k + 1..n {
-            let f = a[i * n + k] / a[k * n + k];
-            for j in k..n {
-                a[i * n + j] -= f * a[k * n + j];
-            }
-            b[i] -= f * b[k];
-        }
-    }
-    for k in (0..n).rev() {
-        let s: f64 = (k + 1..n).map(|j| a[k * n + j] * b[j]).sum();
-        b[k] = (b[k] - s) / a[k * n + k];
-    }
-    true
-}
-
 /// `shooting: newton` (the earlier method, kept for comparison): Newton shooting on the cycle
 /// map x ↦ Φ(x) of the shooting state (finite-difference Jacobian, one cycle per unknown), at most `budget` cycles; leaves the loop at the last
 /// iterate and returns the cycles run. The tree's cells are unknowns too: its transit takes
@@ -898,7 +868,7 @@ fn shoot_newton(
             }
         }
         let mut delta: Vec<f64> = fx.iter().map(|f| -f).collect();
-        if !dense_solve(&mut jac, &mut delta, n) {
+        if !super::closed_loop_balance::lu_solve(&jac, &mut delta, n, 0.0) {
             break;
         }
         for (xi, d) in x.iter_mut().zip(&delta) {

@@ -45,7 +45,7 @@ pub fn balance_flows(
         }
     }
     let mut phi: Vec<f64> = net[1..].iter().map(|x| -(x - shift)).collect();
-    solve_dense(&mut lap, &mut phi, m)?;
+    solve_dense(&lap, &mut phi, m)?;
     let potential = |c: usize| if c == 0 { 0.0 } else { phi[c - 1] };
     for (b, (&f, &t)) in from.iter().zip(to).enumerate() {
         let delta = potential(t) - potential(f);
@@ -58,40 +58,34 @@ pub fn balance_flows(
     Ok(())
 }
 
-/// Solves a · x = b in place (row-major m × m, Gaussian elimination with partial pivoting);
+/// Solves a · x = b in place (row-major m × m) by nalgebra's LU with partial pivoting;
 /// a singular matrix (compartments the branches do not connect) is a model error.
-fn solve_dense(a: &mut [f64], b: &mut [f64], m: usize) -> Result<()> {
+fn solve_dense(a: &[f64], b: &mut [f64], m: usize) -> Result<()> {
     let scale = a.iter().fold(0.0f64, |s, x| s.max(x.abs()));
-    for k in 0..m {
-        let p = (k..m)
-            .max_by(|&i, &j| a[i * m + k].abs().total_cmp(&a[j * m + k].abs()))
-            .unwrap_or(k);
-        if a[p * m + k].abs() <= 1e-12 * scale {
-            return Err(Error::model(
-                "closed loop",
-                "the branches do not connect every compartment: no flow correction closes \
-                 their volumes",
-            ));
-        }
-        if p != k {
-            for j in 0..m {
-                a.swap(k * m + j, p * m + j);
-            }
-            b.swap(k, p);
-        }
-        for i in k + 1..m {
-            let f = a[i * m + k] / a[k * m + k];
-            for j in k..m {
-                a[i * m + j] -= f * a[k * m + j];
-            }
-            b[i] -= f * b[k];
-        }
-    }
-    for k in (0..m).rev() {
-        let s: f64 = (k + 1..m).map(|j| a[k * m + j] * b[j]).sum();
-        b[k] = (b[k] - s) / a[k * m + k];
+    if !lu_solve(a, b, m, 1e-12 * scale) {
+        return Err(Error::model(
+            "closed loop",
+            "the branches do not connect every compartment: no flow correction closes \
+             their volumes",
+        ));
     }
     Ok(())
+}
+
+/// Solves the small dense system a · x = b (row-major n × n) in place by nalgebra's LU with
+/// partial pivoting; false (b untouched) when a pivot is at most `tiny` in magnitude.
+pub(super) fn lu_solve(a: &[f64], b: &mut [f64], n: usize, tiny: f64) -> bool {
+    let lu = nalgebra::DMatrix::from_row_slice(n, n, a).lu();
+    if lu.u().diagonal().iter().any(|p| p.abs() <= tiny) {
+        return false;
+    }
+    match lu.solve(&nalgebra::DVector::from_column_slice(b)) {
+        Some(x) if x.iter().all(|v| v.is_finite()) => {
+            b.copy_from_slice(x.as_slice());
+            true
+        }
+        _ => false,
+    }
 }
 
 #[cfg(test)]
