@@ -26,6 +26,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from oxyline import plot_oxygen
+from oxyline.plot_style import STYLES, peak_magnitude, prefixed, same_curves
+
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
@@ -63,32 +66,6 @@ def _model(model: Model | str | os.PathLike[str] | Mapping[str, Any]) -> Model:
     return as_model(model)
 
 
-#: SI prefixes (power of ten, symbol), largest first: a quantity shown with the prefix that puts its largest
-#: magnitude in [1, 1000) (no "nmol/s" values in the millions)
-PREFIXES = ((3, "k"), (0, ""), (-3, "m"), (-6, "µ"), (-9, "n"), (-12, "p"), (-15, "f"))
-
-
-def _peak(values: Any) -> float:
-    a = np.abs(np.asarray(values, dtype=float))
-    a = a[np.isfinite(a)]
-    return float(a.max()) if a.size else 0.0
-
-
-def prefixed(units: str, values: Any) -> tuple[str, float]:
-    """``units`` with the SI prefix that puts the largest magnitude of ``values`` in
-    [1, 1000), and the factor from ``units``: ``prefixed("mol/s", [2e-6])`` is
-    ``("µmol/s", 1e6)``.
-
-    >>> prefixed("mol/s", [2e-6, -5e-7])
-    ('µmol/s', 1000000.0)
-    """
-    peak = _peak(values)
-    for exponent, p in PREFIXES:
-        if peak >= 10.0 ** exponent:
-            break
-    return p + units, 10.0 ** -exponent
-
-
 def display(units: str, values: Any = None) -> tuple[str, float]:
     """Display units and the factor from SI ``units``: Pa → mmHg; m³/s → mL/s (µL/s or nL/s
     when every value of ``values`` is below 0.01 mL/s); m → cm; mol/s with the SI prefix that
@@ -97,8 +74,8 @@ def display(units: str, values: Any = None) -> tuple[str, float]:
     >>> display("Pa")[0], display("mol/s", [3e-5])
     ('mmHg', ('µmol/s', 1000000.0))
     """
-    if values is not None and units == "m^3/s" and 0 < _peak(values) < 1e-8:
-        return ("µL/s", 1e9) if _peak(values) >= 1e-11 else ("nL/s", 1e12)
+    if values is not None and units == "m^3/s" and 0 < peak_magnitude(values) < 1e-8:
+        return ("µL/s", 1e9) if peak_magnitude(values) >= 1e-11 else ("nL/s", 1e12)
     if values is not None and units.startswith("mol/s"):
         return prefixed(units, values)
     return DISPLAY.get(units, (units, 1.0))
@@ -142,32 +119,6 @@ def _declutter(fig: Any, texts: Sequence[Any]) -> None:
             t.set_visible(False)
         else:
             kept.append(bb)
-
-
-#: line styles cycled over the colours: distinct vessels stay distinct beyond ten of them
-STYLES = ("-", "--", ":", "-.")
-
-
-def same_curves(series: Mapping[str, np.ndarray]) -> list[tuple[list[str], np.ndarray]]:
-    """The curves of ``series`` (name -> values) with those that coincide merged, each with all
-    its names: two vessels leaving one node read the same node pressure, and two lines drawn
-    on top of each other would hide one of them. Coincide: equal to 1e-9 of the largest
-    magnitude (round-off of one node's value read twice).
-
-    >>> import numpy as np
-    >>> [names for names, _ in same_curves({"a": np.ones(3), "b": np.ones(3), "c": np.zeros(3)})]
-    [['a', 'b'], ['c']]
-    """
-    scale = max((_peak(v) for v in series.values()), default=0.0) or 1.0
-    groups: list[tuple[list[str], np.ndarray]] = []
-    for name, y in series.items():
-        for names, y0 in groups:
-            if y0.shape == y.shape and np.allclose(y, y0, rtol=0.0, atol=1e-9 * scale):
-                names.append(name)
-                break
-        else:
-            groups.append(([name], np.asarray(y)))
-    return groups
 
 
 def decade_groups(peaks: Mapping[str, float]) -> list[list[str]]:
@@ -216,7 +167,7 @@ def waveforms(result: Result, vessels: Sequence[str] | str | None = None,
         # one unit per quantity in the figure, from all its values (its panels compare)
         unit = display(str(ds[var].attrs.get("units", "")),
                        np.concatenate([y.ravel() for y in series.values()]))
-        groups = decade_groups({n: _peak(y) for n, y in series.items()})
+        groups = decade_groups({n: peak_magnitude(y) for n, y in series.items()})
         panels += [(var, {n: series[n] for n in g}, unit, len(groups) > 1) for g in groups]
     fig, axes = plt.subplots(len(panels), 1, sharex=True, squeeze=False,
                              figsize=(7.0, 2.4 * len(panels) + 0.8), layout="constrained")
@@ -249,7 +200,7 @@ def _waveform_panel(ax: Any, time: Any, var: str, series: Mapping[str, np.ndarra
     end_txt = {"in": "inlet", "out": "outlet"}.get(var.rsplit("_", 1)[-1], "")
     title = f"{_label(var)} at the vessel {end_txt}" if end_txt else ""
     if split:
-        peaks = [_peak(y) * k for y in series.values()]
+        peaks = [peak_magnitude(y) * k for y in series.values()]
         title += f"{', ' if title else ''}peaks {min(peaks):.3g} to {max(peaks):.3g} {units}"
     if title:
         ax.set_title(title, fontsize=10, loc="left")
@@ -773,8 +724,6 @@ def save_figures(result: Result, model: Model | str | os.PathLike[str],
     figures["network_map"] = network_map(m, result=result)
     if getattr(result, "oxygen", None) is not None:
         # the paper's Fig. 4 (outlet convective O2 flux) and the wall uptake along each vessel
-        from oxyline import plot_oxygen
-
         figures["o2_outlet_flux"] = plot_oxygen.outlet_flux(result, m)
         if result.has_segments:
             figures["o2_wall_uptake"] = plot_oxygen.wall_uptake(result, m)

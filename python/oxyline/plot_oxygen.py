@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from oxyline.model import Model
-from oxyline.plot import STYLES, prefixed, same_curves
+from oxyline.plot_style import STYLES, prefixed, same_curves
 from oxyline.result import Result
 
 
