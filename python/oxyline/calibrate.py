@@ -346,30 +346,10 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
                       steps_per_cycle, tol, max_cycles, posterior)
     if jacobian not in ("exact", "2-point"):
         raise CalibrationError(f"jacobian: expected 'exact' or '2-point', got {jacobian!r}")
-    base = load_model(model)
-    params = list(parameters)
-    if not params or isinstance(parameters, str):
-        raise CalibrationError("parameters: expected a non-empty list of parameter paths")
-    if len(set(params)) != len(params):
-        raise CalibrationError(f"parameters: given twice in {params}")
-    tlist = parse_targets(targets, base)
-    start = np.array([_base_value(base.source, p) for p in params])
-    bad = [p for p, x in zip(params, start, strict=True) if not x > 0]
-    if bad:
-        raise CalibrationError(f"parameter '{bad[0]}': the start must be positive (fitted in "
-                               "log space)")
-    lo, hi = _bounds(params, start, bounds)
-    if method == "lm" and (np.isfinite(lo).any() or np.isfinite(hi).any()):
-        raise CalibrationError("method 'lm' takes no bounds: use method='trf'")
-    options = {"steps_per_cycle": steps_per_cycle, "tol": tol, "max_cycles": max_cycles}
-    problem = _Problem(copy.deepcopy(base.source), params, start, tlist, options)
-    problem.jac(np.zeros(len(params)))  # paths and targets are checked here, before the fit
-    if jacobian != "exact":
-        problem.exact, problem.cache = False, None
-    n_res = len(problem.data)
-    if method == "lm" and n_res < len(params):
-        raise CalibrationError(f"method 'lm' needs at least as many target values ({n_res}) "
-                               f"as parameters ({len(params)}): use method='trf'")
+    problem, (lo, hi) = _problem(model, targets, parameters, bounds, method, jacobian,
+                                 {"steps_per_cycle": steps_per_cycle, "tol": tol,
+                                  "max_cycles": max_cycles})
+    params = problem.parameters
     report: dict[str, Any] = {"method": method}
     try:
         fit = least_squares(problem.fun, np.zeros(len(params)),
@@ -396,6 +376,37 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
             r = best[2] if best is not None else np.full(len(problem.data), np.nan)
             j = np.full((len(r), len(params)), np.nan)
     return _result(problem, theta, r, j, success, report)
+
+
+def _problem(model: Model | Mapping[str, Any] | str, targets: Any, parameters: Sequence[str],
+             bounds: Mapping[str, Any] | None, method: str, jacobian: str,
+             options: dict[str, Any]) -> tuple[_Problem, tuple[np.ndarray, np.ndarray]]:
+    """The least-squares problem of :func:`calibrate` and its bounds in log space, every input
+    checked (paths, targets, start, bounds, sizes) before the fit starts."""
+    base = load_model(model)
+    params = list(parameters)
+    if not params or isinstance(parameters, str):
+        raise CalibrationError("parameters: expected a non-empty list of parameter paths")
+    if len(set(params)) != len(params):
+        raise CalibrationError(f"parameters: given twice in {params}")
+    tlist = parse_targets(targets, base)
+    start = np.array([_base_value(base.source, p) for p in params])
+    bad = [p for p, x in zip(params, start, strict=True) if not x > 0]
+    if bad:
+        raise CalibrationError(f"parameter '{bad[0]}': the start must be positive (fitted in "
+                               "log space)")
+    lo, hi = _bounds(params, start, bounds)
+    if method == "lm" and (np.isfinite(lo).any() or np.isfinite(hi).any()):
+        raise CalibrationError("method 'lm' takes no bounds: use method='trf'")
+    problem = _Problem(copy.deepcopy(base.source), params, start, tlist, options)
+    problem.jac(np.zeros(len(params)))  # paths and targets are checked here, before the fit
+    if jacobian != "exact":
+        problem.exact, problem.cache = False, None
+    n_res = len(problem.data)
+    if method == "lm" and n_res < len(params):
+        raise CalibrationError(f"method 'lm' needs at least as many target values ({n_res}) "
+                               f"as parameters ({len(params)}): use method='trf'")
+    return problem, (lo, hi)
 
 
 def _result(problem: _Problem, theta: np.ndarray, r: np.ndarray, j: np.ndarray,
