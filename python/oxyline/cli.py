@@ -546,15 +546,14 @@ def _version() -> str:
     return __version__
 
 
-def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="oxyline", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--version", action="version", version=f"oxyline {_version()}")
-    parser.add_argument("--no-plausibility", action="store_true",
-                        help="do not warn about model values outside their physiological "
-                             "ranges (PlausibilityWarning: likely unit mix-ups)")
-    sub = parser.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("run", help="run a model file or built-in model")
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from oxyline.calibrate import main_cli  # scipy is imported only for this command
+
+    return main_cli(args.model, args.targets, args.output, args.quiet)
+
+
+def _add_run(p: argparse.ArgumentParser) -> None:
+    """The options of ``oxyline run``."""
     p.add_argument("model", nargs="?", help="built-in name, or a .yaml/.json/.csv model "
                    "(native, svZeroDSolver, openBF, tables); omitted with --resume")
     p.add_argument("-o", "--output", help="result file: .nc (NetCDF), .zarr (written during the "
@@ -594,6 +593,17 @@ def _parser() -> argparse.ArgumentParser:
                         "FILE")
     p.add_argument("--quiet", action="store_true", help="no progress bar and no table")
     p.set_defaults(func=_cmd_run)
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="oxyline", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"oxyline {_version()}")
+    parser.add_argument("--no-plausibility", action="store_true",
+                        help="do not warn about model values outside their physiological "
+                             "ranges (PlausibilityWarning: likely unit mix-ups)")
+    sub = parser.add_subparsers(dest="command", required=True)
+    _add_run(sub.add_parser("run", help="run a model file or built-in model"))
     p = sub.add_parser("plot", help="write the figures of a saved result (.nc/.zarr)",
                        description="Write the figures of `run --plot` (PNG + SVG) from a result "
                        "file written by `run -o` or Result.to_netcdf/to_zarr.")
@@ -641,8 +651,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("targets", help="YAML/JSON file: parameters, targets, method")
     p.add_argument("-o", "--output", required=True, help="calibrated model file (.yaml/.json)")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
-    p.set_defaults(func=lambda a: __import__("oxyline.calibrate", fromlist=["main_cli"])
-                   .main_cli(a.model, a.targets, a.output, a.quiet))
+    p.set_defaults(func=_cmd_calibrate)
     p = sub.add_parser("info", help="version and build; with MODEL, the model's summary")
     p.add_argument("model", nargs="?", help="built-in name, or a model file (any format)")
     p.set_defaults(func=_cmd_info)
