@@ -310,3 +310,17 @@ def test_the_svzerod_drop_in_of_a_cgs_file_does_not_read_its_numbers_as_si(
         svz.simulate(json.loads(p.read_text()))
         oxyline.load_model(p)
     assert not [w for w in seen if isinstance(w.message, oxyline.PlausibilityWarning)]
+
+
+def test_load_model_can_leave_the_check_out_for_one_model() -> None:
+    import warnings
+
+    bad = oxyline.catalogue.load_dict("bifurcation")
+    bad["vessels"][0]["radius"] = 0.3  # 3 mm written in cm in an SI file
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        oxyline.load_model(bad, check_plausibility=False)
+        quiet = [w for w in seen if isinstance(w.message, oxyline.PlausibilityWarning)]
+        oxyline.load_model(bad)
+        loud = [w for w in seen if isinstance(w.message, oxyline.PlausibilityWarning)]
+    assert quiet == [] and len(loud) == 1 and "radius" in str(loud[0].message)

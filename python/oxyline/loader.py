@@ -8,27 +8,38 @@ from __future__ import annotations
 
 import contextlib
 import os
+import warnings
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
 from oxyline import catalogue
-from oxyline.errors import ModelError
+from oxyline.errors import ModelError, PlausibilityWarning
 from oxyline.io import formats
 from oxyline.io.native import read_mapping
 from oxyline.memory import gc_paused
 from oxyline.model import Model, _build, _copy
 
 
-def load_model(source: str | os.PathLike[str] | Mapping[str, Any] | Model) -> Model:
+def load_model(source: str | os.PathLike[str] | Mapping[str, Any] | Model, *,
+               check_plausibility: bool = True) -> Model:
     """Load and validate a network from a model file (any format of :mod:`oxyline.io.formats`),
-    a built-in model name, or a dict.
+    a built-in model name, or a dict. ``check_plausibility=False``: no
+    :class:`~oxyline.errors.PlausibilityWarning` for values outside physiological ranges.
 
     >>> import oxyline
     >>> m = oxyline.load_model("bifurcation")
     >>> m.vessel_names
     ['parent', 'daughter1', 'daughter2']
     """
+    if check_plausibility:
+        return _load(source)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PlausibilityWarning)
+        return _load(source)
+
+
+def _load(source: str | os.PathLike[str] | Mapping[str, Any] | Model) -> Model:
     if isinstance(source, Model):
         return source
     if not isinstance(source, (Mapping, str, os.PathLike)):
