@@ -3,11 +3,12 @@ arrays in a :class:`~oxyline.result.Result`."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import threading
 import warnings
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -335,6 +336,22 @@ def _cancel_runs_on_ctrl_c() -> None:
     signal.signal(signal.SIGINT, cancel_runs_then_interrupt)
 
 
+@contextlib.contextmanager
+def cancellable(cancel: Any = None) -> Iterator[Any]:
+    """The cancel event of a run (``cancel``, or a new ``threading.Event``), registered for
+    Ctrl-C while the block runs: the main thread's SIGINT sets it, so a run in a worker thread
+    stops too."""
+    event = threading.Event() if cancel is None else cancel
+    _cancel_runs_on_ctrl_c()
+    with _ACTIVE_LOCK:
+        _ACTIVE.append(event)
+    try:
+        yield event
+    finally:
+        with _ACTIVE_LOCK:
+            _ACTIVE.remove(event)
+
+
 def _run(model: Model, s: Mapping[str, Any], progress: Any, cancel: Any = None,
          **core: Any) -> dict[str, Any]:
     """The core's raw output of a run with settings ``s``, with a progress bar if asked for.
@@ -343,26 +360,21 @@ def _run(model: Model, s: Mapping[str, Any], progress: Any, cancel: Any = None,
     (at once after a progress callback that set it)."""
     callback, bar = _progress_bar(progress, s, model.network.passes()
                                   if progress and not callable(progress) else 1)
-    event = threading.Event() if cancel is None else cancel
-
-    def check(t: float, t_end: float) -> None:
-        if callback is not None:
-            callback(t, t_end)
-        if event.is_set():
-            raise SimulationCancelled("run cancelled")
-
-    _cancel_runs_on_ctrl_c()
-    with _ACTIVE_LOCK:
-        _ACTIVE.append(event)
     try:
-        with core_errors(f"simulate '{model.name}'"):
-            raw = model.network.simulate(progress=check, **s, **core)
+        with cancellable(cancel) as event:
+
+            def check(t: float, t_end: float) -> None:
+                if callback is not None:
+                    callback(t, t_end)
+                if event.is_set():
+                    raise SimulationCancelled("run cancelled")
+
+            with core_errors(f"simulate '{model.name}'"):
+                raw = model.network.simulate(progress=check, **s, **core)
         if isinstance(callback, _CycleProgress) and "error" not in raw:
             callback.finish(int(raw["cycles_run"]))
         return raw
     finally:
-        with _ACTIVE_LOCK:
-            _ACTIVE.remove(event)
         if bar is not None:
             bar.close()
 

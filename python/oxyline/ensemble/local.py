@@ -6,7 +6,6 @@ from __future__ import annotations
 import contextlib
 import gc
 import json
-import threading
 import weakref
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Any
@@ -215,26 +214,22 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
     ensemble = base.ensemble
     # Ctrl-C in the main thread sets every active run's event (oxyline.run): an ensemble in a
     # worker thread stops too; `poll` raises once it is set (checked ~10 times a second)
-    from oxyline import run as _run_module
     from oxyline.errors import SimulationCancelled
+    from oxyline.run import cancellable
 
-    event = cancel if cancel is not None else threading.Event()
-
-    def poll() -> None:
-        if event.is_set():
-            raise SimulationCancelled("ensemble cancelled")
-
-    with _run_module._ACTIVE_LOCK:
-        _run_module._ACTIVE.append(event)
     try:
-        with _old_objects_frozen(), core_errors("simulate_ensemble"):
+        with cancellable(cancel) as event, _old_objects_frozen(), \
+                core_errors("simulate_ensemble"):
+
+            def poll() -> None:
+                if event.is_set():
+                    raise SimulationCancelled("ensemble cancelled")
+
             # a summary's statistics are computed on the worker threads (see summary_values)
             return ensemble.run(feed.next, on_done=done, workers=workers,
                                 summary=output == "summary", heart=bool(heart[2]), poll=poll,
                                 variant_timeout=variant_timeout, **core)
     finally:
-        with _run_module._ACTIVE_LOCK:
-            _run_module._ACTIVE.remove(event)
         if batch is not None:
             batch.flush()
         close()
