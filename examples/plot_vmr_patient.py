@@ -15,12 +15,13 @@ import matplotlib.pyplot as plt
 import oxyline
 import oxyline.plot as op
 
-try:  # run as a script from the repository
-    repo = Path(__file__).resolve().parents[1]
-except NameError:  # run by the documentation build (cwd: the repository)
-    repo = Path.cwd()
-model = oxyline.load_model(repo / "tests/data/svzerod/cases/vmr/reference/"
-                           "0140_2001_optimal_from_0d.json")
+CASE = "tests/data/svzerod/cases/vmr/reference/0140_2001_optimal_from_0d.json"
+try:  # run as a script
+    here = Path(__file__).resolve().parent
+except NameError:  # run by the documentation build, from the examples folder
+    here = Path.cwd()
+model = oxyline.load_model(next(d / CASE for d in (here.parent, here, Path.cwd())
+                                if (d / CASE).exists()))
 res = oxyline.simulate(model, cycles=3, until_periodic=None)
 print(f"{len(model.vessel_names)} vessels; cardiac period {model.period:.3f} s")
 
