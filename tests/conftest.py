@@ -28,6 +28,20 @@ DATA = REPO / "tests" / "data"
 SHARED = REPO.parent / "shared"
 
 
+def first_harmonic(vessel: Any, variable: str, period: float, steps: int) -> tuple[Any, Any]:
+    """The first cycle of ``variable`` of a vessel result sampled ``steps`` times a period
+    (the run's last cycle), and its first Fourier coefficient (complex, sin(ωt) → −i)."""
+    import math
+
+    import numpy as np
+
+    t = np.asarray(vessel.time)
+    keep = t < t[0] + period * (1 - 1e-9)
+    t, x = t[keep], np.asarray(getattr(vessel, variable))[keep]
+    assert len(t) == steps
+    return x, 2.0 / steps * np.sum(x * np.exp(-2j * math.pi * t / period))
+
+
 def data_path(*parts: str) -> Path:
     """A file or folder of ``tests/data`` (e.g. ``data_path("openbf", "models")``). Large
     files are stored gzipped: ``name`` resolves to ``name.gz`` when only that exists, which

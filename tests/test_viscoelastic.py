@@ -19,6 +19,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import first_harmonic
 
 import oxyline
 
@@ -98,12 +99,7 @@ def test_periodic_state_agrees_with_the_impedance(method: str, friction: str) ->
     steps = 1000
     res = oxyline.simulate(m, cycles=12, dt=period / steps, method=method,
                            output_every=period / steps)
-    v = res.vessel("v")
-    t = np.asarray(v.time)
-    keep = t < t[0] + period * (1 - 1e-9)
-    t, p = t[keep], np.asarray(v.pressure_in)[keep]
-    assert len(t) == steps
-    harmonic = 2.0 / steps * np.sum(p * np.exp(-2j * math.pi * t / period))
+    p, harmonic = first_harmonic(res.vessel("v"), "pressure_in", period, steps)
     zw, z0 = oxyline.impedance(m, "in", [1.0 / period, 0.0])
     # second order in dt at 1000 steps per period (~1e-5), after 11 periods of decay of the
     # start (the vessel-outlet RC time 1e8 · C ≈ 0.03 s)
