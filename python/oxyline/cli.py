@@ -263,14 +263,25 @@ def _run_and_write(args: argparse.Namespace, stop: _Stop) -> int:
     stop.armed = True
     if stop.signum is not None:
         stop.event.set()
+    res = _simulate(args, model, overrides, stream, stop)
+    if isinstance(res, int):  # interrupted: the partial result is written
+        return res
+    return _write_and_report(args, model, res, stream, stop)
+
+
+def _simulate(args: argparse.Namespace, model: Any, overrides: dict[str, Any], stream: bool,
+              stop: _Stop) -> Any:
+    """The run's result, or the exit status of a run a signal stopped (its partial result
+    written to ``--output``); a failed run's rows up to the failure are written too."""
+    import oxyline
+
     try:
         if args.resume:
-            res = oxyline.resume(args.resume, **overrides)
-        elif stream:
-            res = oxyline.simulate_to_zarr(model, args.output, overwrite=args.overwrite,
-                                           **overrides)
-        else:
-            res = oxyline.simulate(model, **overrides)
+            return oxyline.resume(args.resume, **overrides)
+        if stream:
+            return oxyline.simulate_to_zarr(model, args.output, overwrite=args.overwrite,
+                                            **overrides)
+        return oxyline.simulate(model, **overrides)
     except oxyline.ModelError as exc:  # run settings (e.g. an unstable dt): name the model
         msg = str(exc)
         if msg.startswith(args.model):
@@ -299,6 +310,13 @@ def _run_and_write(args: argparse.Namespace, stop: _Stop) -> int:
             print(f"partial result (up to the failure) written to {args.output}",
                   file=sys.stderr)
         raise
+
+
+def _write_and_report(args: argparse.Namespace, model: Any, res: Any, stream: bool,
+                      stop: _Stop) -> int:
+    """Write a finished run's result, summary and figures and print what was written."""
+    import oxyline
+
     if args.output and not stream:
         _write(res, args.output, args.overwrite)
     if args.summary:

@@ -136,11 +136,8 @@ def model_estimate(summary: dict[str, Any], canonical: dict[str, Any]) -> float:
     tr = canonical.get("transport") or {}
     species = len(tr.get("species") or ())
     cells = max(1.0, float(tr.get("cells_per_segment", 1.0))) if species else 0.0
-    segments = summary["segments"]
     elements = summary["vessels"] + len(canonical.get("boundary_conditions") or {})
-    return (segments * _core.FLOW_BYTES_PER_SEGMENT
-            + segments * cells * species * _core.TRANSPORT_BYTES_PER_CELL
-            + elements * _core.BYTES_PER_ELEMENT)
+    return _core.model_bytes(summary["segments"], elements, cells, species)
 
 
 def output_estimate(layout: dict[str, Any], period: float, every: float, cycles: int,

@@ -216,11 +216,113 @@ def _scatter_again(client: Any, model: Model) -> Any:
                 raise
 
 
+class _ClientRun:
+    """One ensemble on a Dask client: the chunks sent, the failures sorted (a lost model sent
+    again, a failed chunk split into single variants, a suspect variant run again alone),
+    the parts merged into the collector."""
+
+    def __init__(self, client: Any, model: Model, patches: list[dict[str, Any]],
+                 output: Output, workers: int | None, overrides: Mapping[str, Any],
+                 collector: Collector) -> None:
+        self.client, self.model, self.patches = client, model, patches
+        self.args = (output, workers, dict(overrides))
+        self.collector = collector
+        self.shared = _scattered(client, model)
+        self.futures: dict[Any, range] = {}
+        self.pending: Any = None
+        #: times each chunk was sent again because the model it needs was lost with its
+        #: workers
+        self.resent: dict[range, int] = {}
+        #: single variants whose worker died while others ran beside them: each runs again
+        #: alone at the end (a task queued on a worker that another variant kills is counted
+        #: as killed by Dask too), and fails only if it kills its worker alone
+        self.suspects: list[range] = []
+        self.alone: set[range] = set()
+
+    def submit_all(self) -> None:
+        """Every chunk, placed by :func:`_plan`."""
+        output, workers, overrides = self.args
+        chunks, where = _plan(len(self.patches), self.client.nthreads())
+        parts = [[self.patches[i] for i in c] for c in chunks]
+        k = len(chunks)
+        if where is None:  # one graph: the scheduler queues the tasks and hands them out
+            futures = self.client.map(run_chunk, [self.shared] * k, parts, chunks,
+                                      [output] * k, [workers] * k, [dict(overrides)] * k,
+                                      pure=False, retries=RETRIES)
+            self.futures = dict(zip(futures, chunks, strict=True))
+        else:
+            self.futures = {
+                self.client.submit(run_chunk, self.shared, part, c, output, workers,
+                                   dict(overrides), pure=False,
+                                   workers=None if w is None else [w],
+                                   allow_other_workers=w is not None, retries=RETRIES): c
+                for part, c, w in zip(parts, chunks, where, strict=True)}
+
+    def send(self, rows: range) -> None:
+        output, workers, overrides = self.args
+        again = self.client.submit(run_chunk, self.shared, [self.patches[i] for i in rows],
+                                   rows, output, workers, dict(overrides), pure=False,
+                                   retries=RETRIES)
+        self.futures[again] = rows
+        self.pending.add(again)
+
+    def failed(self, rows: range, exc: BaseException) -> bool:
+        """Handle a chunk whose task failed; True when its variants are recorded as failed
+        (False: they were sent again or set aside)."""
+        if _lost(self.shared):  # every worker that held the model died: scatter again
+            self.shared = _scatter_again(self.client, self.model)
+        if _cancelled(exc) and self.resent.get(rows, 0) <= RETRIES:
+            # cancelled by Dask for the lost model, not failed by its variants: sent again as
+            # it was (to the restarted workers)
+            self.resent[rows] = self.resent.get(rows, 0) + 1
+            self.send(rows)
+            return False
+        if len(rows) > 1:
+            # Dask's retries are used up: each variant of the chunk on its own task, so that
+            # the healthy ones run and only the one that kills its worker fails
+            for i in rows:
+                self.send(range(i, i + 1))
+            return False
+        if rows not in self.alone:
+            self.suspects.append(rows)
+            return False
+        self.collector.fail(rows.start, "worker", f"variant {rows.start}: its Dask worker "
+                            f"failed {RETRIES + 1} times when it ran alone "
+                            f"({type(exc).__name__}: {exc})"[:400])
+        return True
+
+    def collect(self, cancel: Any, done: Any) -> None:
+        """Merge every chunk as it finishes (``done(i)`` per variant), then run the suspects
+        one at a time."""
+        from distributed import as_completed
+
+        self.pending = as_completed(self.futures)
+        while True:
+            for fut in self.pending:
+                rows = self.futures.pop(fut)
+                if cancel is not None and cancel.is_set():
+                    raise _Cancelled
+                try:
+                    part = fut.result()
+                except Exception as exc:  # noqa: BLE001 - a worker lost (killed, out of memory)
+                    if not self.failed(rows, exc):
+                        continue
+                    part = None
+                if part is not None:
+                    _merge(self.collector, part, rows)
+                for i in rows:
+                    done(i)
+            if not self.suspects:
+                break
+            rows = self.suspects.pop(0)  # one at a time: nothing else runs beside it
+            self.alone.add(rows)
+            self.resent.pop(rows, None)
+            self.send(rows)
+
+
 def run_on_client(client: Any, model: Model, patches: list[dict[str, Any]], index: Any, *,
                   output: Output, store: Any, progress: Any, workers: int | None,
                   overrides: Mapping[str, Any], cancel: Any = None) -> Any:
-    from distributed import as_completed
-
     from oxyline.ensemble.local import _progress, run_settings
 
     patcher = Patcher(model)
@@ -234,84 +336,22 @@ def run_on_client(client: Any, model: Model, patches: list[dict[str, Any]], inde
         from oxyline.ensemble.store import StoreWriter
 
         writer = StoreWriter(store, collector, patches, dataset_attrs(model, output), index)
-    chunks, where = _plan(len(patches), client.nthreads())
-    shared = _scattered(client, model)
-    parts = [[patches[i] for i in c] for c in chunks]
-    k = len(chunks)
-    if where is None:  # one graph: the scheduler queues the tasks and hands them out
-        futures = dict(zip(client.map(run_chunk, [shared] * k, parts, chunks, [output] * k,
-                                      [workers] * k, [dict(overrides)] * k, pure=False,
-                                      retries=RETRIES),
-                           chunks, strict=True))
-    else:
-        futures = {client.submit(run_chunk, shared, part, c, output, workers, dict(overrides),
-                                 pure=False, workers=None if w is None else [w],
-                                 allow_other_workers=w is not None, retries=RETRIES): c
-                   for part, c, w in zip(parts, chunks, where, strict=True)}
+    run = _ClientRun(client, model, patches, output, workers, overrides, collector)
+    run.submit_all()
     tick, close = _progress(progress, len(patches))
+
+    def done(i: int) -> None:
+        if writer is not None:
+            writer.write(i)
+        tick()
+
     finished = True
-    over = _watch(cancel, client, futures) if cancel is not None else None
-    #: times each chunk was sent again because the model it needs was lost with its workers
-    resent: dict[range, int] = {}
+    over = _watch(cancel, client, run.futures) if cancel is not None else None
     try:
-        pending = as_completed(futures)
-
-        def send(rows: range) -> None:
-            again = client.submit(run_chunk, shared, [patches[i] for i in rows], rows, output,
-                                  workers, dict(overrides), pure=False, retries=RETRIES)
-            futures[again] = rows
-            pending.add(again)
-
-        #: single variants whose worker died while others ran beside them: each runs again
-        #: alone at the end (a task queued on a worker that another variant kills is counted
-        #: as killed by Dask too), and fails only if it kills its worker alone
-        suspects: list[range] = []
-        alone: set[range] = set()
-        while True:
-            for fut in pending:
-                rows = futures.pop(fut)
-                if cancel is not None and cancel.is_set():
-                    raise _Cancelled
-                try:
-                    part = fut.result()
-                except Exception as exc:  # noqa: BLE001 - a worker lost (killed, out of memory)
-                    if _lost(shared):  # every worker that held the model died: scatter again
-                        shared = _scatter_again(client, model)
-                    if _cancelled(exc) and resent.get(rows, 0) <= RETRIES:
-                        # cancelled by Dask for the lost model, not failed by its variants:
-                        # sent again as it was (to the restarted workers)
-                        resent[rows] = resent.get(rows, 0) + 1
-                        send(rows)
-                        continue
-                    if len(rows) > 1:
-                        # Dask's retries are used up: each variant of the chunk on its own
-                        # task, so that the healthy ones run and only the one that kills its
-                        # worker fails
-                        for i in rows:
-                            send(range(i, i + 1))
-                        continue
-                    if rows not in alone:
-                        suspects.append(rows)
-                        continue
-                    collector.fail(rows.start, "worker", f"variant {rows.start}: its Dask "
-                                   f"worker failed {RETRIES + 1} times when it ran alone "
-                                   f"({type(exc).__name__}: {exc})"[:400])
-                    part = None
-                if part is not None:
-                    _merge(collector, part, rows)
-                for i in rows:
-                    if writer is not None:
-                        writer.write(i)
-                    tick()
-            if not suspects:
-                break
-            rows = suspects.pop(0)  # one at a time: nothing else runs beside it
-            alone.add(rows)
-            resent.pop(rows, None)
-            send(rows)
+        run.collect(cancel, done)
     except (KeyboardInterrupt, _Cancelled):
         finished = False
-        client.cancel(list(futures))
+        client.cancel(list(run.futures))
     finally:
         if over is not None:
             over.set()

@@ -190,19 +190,7 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
                 if batch is not None and batch.add(i, raw, layout):
                     recorded(i)
                     return
-                hearts = _variant_heart(heart, raw)
-                # a summary without species is read from the core's column statistics; the
-                # bounds monitor only concerns species, so it needs the Result only then
-                values = stats_summary(raw, layout) if output == "summary" else None
-                if values is None:
-                    result = _result(v.model, s, raw, _run_settings(s, raw), True, layout)
-                    if hearts is not None:
-                        result.chamber_volume, result.valve_status = hearts
-                    values = collector.outputs(result, raw.get("column_stats"))
-                    collector.warn(i, bounds_findings(v.model, result))
-                if output == "summary" and hearts is not None:
-                    values = {**values, **heart_summary(*hearts, raw["times"])}
-                collector.put(i, values)
+                _record(collector, i, output, heart, v.model, s, raw, layout)
             except Exception as e:  # noqa: BLE001 - a user's output function fails its variant
                 collector.fail(i, "output", f"variant {numbers[i]}: {type(e).__name__}: {e}"
                                [:ERROR_CHARS])
@@ -233,6 +221,25 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
         if batch is not None:
             batch.flush()
         close()
+
+
+def _record(collector: Collector, i: int, output: Output,
+            heart: tuple[list[Any], list[Any], list[int]], model: Model, s: dict[str, Any],
+            raw: dict[str, Any], layout: dict[str, Any]) -> None:
+    """Put the outputs of finished variant ``i`` (its run ``raw``) into ``collector``."""
+    hearts = _variant_heart(heart, raw)
+    # a summary without species is read from the core's column statistics; the bounds
+    # monitor only concerns species, so it needs the Result only then
+    values = stats_summary(raw, layout) if output == "summary" else None
+    if values is None:
+        result = _result(model, s, raw, _run_settings(s, raw), True, layout)
+        if hearts is not None:
+            result.chamber_volume, result.valve_status = hearts
+        values = collector.outputs(result, raw.get("column_stats"))
+        collector.warn(i, bounds_findings(model, result))
+    if output == "summary" and hearts is not None:
+        values = {**values, **heart_summary(*hearts, raw["times"])}
+    collector.put(i, values)
 
 
 def _variant_heart(heart: tuple[list[Any], list[Any], list[int]], raw: dict[str, Any]

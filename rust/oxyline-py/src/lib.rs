@@ -49,6 +49,30 @@ fn chamber_elastance<'py>(
     Ok((e.into_pyarray(py), v.into_pyarray(py)))
 }
 
+/// A canonical waveform spec (JSON text) of `element` evaluated by the core at `times`: the
+/// transport monitor reads a Fourier inlet's range from it (no second evaluator in Python).
+#[pyfunction]
+fn waveform_values<'py>(
+    py: Python<'py>,
+    element: &str,
+    spec_json: &str,
+    times: Vec<f64>,
+) -> PyResult<Bound<'py, numpy::PyArray1<f64>>> {
+    let spec: oxyline_core::waveform::WaveformSpec = oxyline_core::model::from_json(spec_json)
+        .map_err(|e| to_py(oxyline_core::Error::model(element, e)))?;
+    let w = oxyline_core::waveform::Waveform::from_spec(&spec, element).map_err(to_py)?;
+    let v: Vec<f64> = times.iter().map(|&t| w.eval(t)).collect();
+    Ok(v.into_pyarray(py))
+}
+
+/// Estimated peak bytes of a model (`oxyline_core::run::memory::model_bytes`): `segments`
+/// flow segments, `elements` vessels and boundary conditions, `cells` transport cells per
+/// segment and `species` species.
+#[pyfunction]
+fn model_bytes(segments: usize, elements: usize, cells: f64, species: usize) -> f64 {
+    oxyline_core::run::memory::model_bytes(segments, elements, cells, species)
+}
+
 #[pymodule]
 mod _core {
     #[pymodule_export]
@@ -66,6 +90,7 @@ mod _core {
         chamber_elastance,
         ensemble::Ensemble,
         errors::{ModelError, ResourceError, SolverError, UnstableTimeStep},
+        model_bytes,
         network::Network,
         reader::NativeParts,
         reader::model::{canonical_model, read_model},
@@ -73,6 +98,7 @@ mod _core {
             check_periods, check_simulation, read_conditions, read_header, read_transport,
             read_vessels, resolve_settings, transport_section,
         },
+        waveform_values,
     };
 
     use pyo3::types::{PyDictMethods, PyModuleMethods};
