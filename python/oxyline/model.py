@@ -238,7 +238,7 @@ def _unassembled(data: dict[str, Any], convert_vessels: Callable[..., Any] = _ve
     canon["vessels"] = convert_vessels(data["vessels"], units)
     canon["boundary_conditions"], periods = convert_boundary_conditions(
         data.get("boundary_conditions", {}), units)
-    period = _core.check_periods(data, periods + _element_periods(canon["vessels"]))
+    period = _core.check_periods(data, periods, canon["vessels"])
     sim = data.get("simulation", {}) or {}
     _core.check_simulation(sim)
     tr, info = _core.read_transport(data, period)
@@ -247,10 +247,3 @@ def _unassembled(data: dict[str, Any], convert_vessels: Callable[..., Any] = _ve
     return Model(name=name, simulation=dict(sim), period=period, source=data, transport=info,
                  _canonical=canon)
 
-
-def _element_periods(vessels: list[dict[str, Any]]) -> list[tuple[float, str]]:
-    """The cardiac periods of the canonical heart elements (a `chamber`'s activation, a
-    `heart_pulmonary` block), with the element: each must equal the model period."""
-    return [(v[kind]["period"], f"vessel '{v['name']}' {kind} (its activation)")
-            for v in vessels for kind in ("chamber", "heart_pulmonary")
-            if isinstance(v.get(kind), dict) and "period" in v[kind]]

@@ -76,9 +76,32 @@ pub(crate) fn read_conditions<'py>(
 }
 
 /// The model period: the model's `period` (None: not given) checked against every
-/// element's.
+/// element's: `periods` (a waveform's, with the element) and the cardiac periods of the heart
+/// elements among the canonical `vessels` (see `native::element_periods`).
 #[pyfunction]
-pub(crate) fn check_periods(data: Bound<'_, PyAny>, periods: Periods) -> PyResult<Option<f64>> {
+#[pyo3(signature = (data, periods, vessels = None))]
+pub(crate) fn check_periods(
+    data: Bound<'_, PyAny>,
+    mut periods: Periods,
+    vessels: Option<Bound<'_, PyList>>,
+) -> PyResult<Option<f64>> {
+    for v in vessels.iter().flat_map(|l| l.iter()) {
+        let Ok(v) = v.cast_into::<PyDict>() else {
+            continue;
+        };
+        for kind in ["chamber", "heart_pulmonary"] {
+            let p = v.get_item(kind)?.and_then(|s| s.cast_into::<PyDict>().ok());
+            if let Some(p) = p.and_then(|s| s.get_item("period").ok().flatten()) {
+                let name: String = v
+                    .get_item("name")?
+                    .map_or(Ok(String::new()), |n| n.extract())?;
+                periods.push((
+                    p.extract()?,
+                    format!("vessel '{name}' {kind} (its activation)"),
+                ));
+            }
+        }
+    }
     let period = native::period(&PyNode(data)).map_err(to_py)?;
     native::check_periods(period, &periods).map_err(to_py)
 }
