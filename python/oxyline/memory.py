@@ -114,22 +114,6 @@ def limit(value: Any, where: str) -> float | None:
     return default_limit() if value is None else parse(value, where)
 
 
-def segment_count(canonical: dict[str, Any]) -> int:
-    """The flow segments of a canonical model, as the core counts them (a vessel's
-    ``segments``, else its length over ``max_segment_length``, else 1)."""
-    m = canonical.get("max_segment_length")
-    total = 0
-    for v in canonical.get("vessels") or ():
-        n = v.get("segments") if isinstance(v, dict) else None
-        g = v.get("geometry") if isinstance(v, dict) else None
-        if n is None and isinstance(g, dict) and isinstance(m, (int, float)) and m > 0:
-            length = g.get("length")
-            if isinstance(length, (int, float)) and math.isfinite(length):
-                n = max(1, math.ceil(length / m * (1.0 - 1e-12)))
-        total += n if isinstance(n, int) and n >= 1 else 1
-    return total
-
-
 def model_estimate(summary: dict[str, Any], canonical: dict[str, Any]) -> float:
     """Estimated peak bytes of a model (``Model.summary()`` and its canonical form): the same
     formula the core applies before it assembles the model."""

@@ -189,7 +189,7 @@ def _build(data: dict[str, Any], *, plausibility: bool = True) -> Model:
     native = functools.partial(_build_native, plausibility=plausibility)
     if has_trees(data):  # a model-to-model step, like an importer
         # the trees' vessels are estimated against the memory allowed before they are grown
-        return build_with_trees(data, native, _boundary_conditions, _memory.default_limit())
+        return build_with_trees(data, native, _core.read_conditions, _memory.default_limit())
     return native(data)
 
 
@@ -216,19 +216,9 @@ def _build_native(data: dict[str, Any], grow: Callable[[Any], Any] | None = None
     return model
 
 
-def _vessels(vessels: list[Any], units: str) -> list[dict[str, Any]]:
-    """The canonical vessels of a native ``vessels`` list (the core's full check)."""
-    return _core.read_vessels(vessels, units)
-
-
-def _boundary_conditions(bcs: Mapping[str, Any], units: str
-                         ) -> tuple[dict[str, Any], list[tuple[float, str]]]:
-    """Canonical boundary conditions and the periods of their waveforms (with the element)."""
-    return _core.read_conditions(bcs, units)
-
-
-def _unassembled(data: dict[str, Any], convert_vessels: Callable[..., Any] = _vessels,
-                 convert_boundary_conditions: Callable[..., Any] = _boundary_conditions
+def _unassembled(data: dict[str, Any],
+                 convert_vessels: Callable[..., Any] = _core.read_vessels,
+                 convert_boundary_conditions: Callable[..., Any] = _core.read_conditions
                  ) -> Model:
     """The model of ``data`` with its canonical description, not assembled (an ensemble's
     variant): ``convert_vessels(vessels, units)`` and ``convert_boundary_conditions(conditions,

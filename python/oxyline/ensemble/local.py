@@ -69,7 +69,8 @@ class Feed:
         self._next = 0
         from oxyline import memory as _memory
 
-        #: the memory a variant may take (max_memory, else the default share of the free)
+        #: the memory a variant may take (max_memory, else the default share of the free):
+        #: the core checks each variant's model against it as it assembles it
         self.memory_limit = _memory.limit(overrides.get("max_memory",
                                                         model.simulation.get("max_memory")),
                                           "simulate_ensemble: max_memory")
@@ -83,8 +84,6 @@ class Feed:
                 v = self.patcher.variant(self.patches[i], k, self.values.pop(i, None))
                 s = (self.base_settings if v.model is self.patcher.base else
                      run_settings(v.model, self.output, self.overrides))
-                if v.model is not self.patcher.base:
-                    self._check_memory(v.model, k)
             except ResourceError as e:
                 self.collector.fail(i, "resource", f"variant {k}: {e}"[:ERROR_CHARS])
                 self.on_skip(i)
@@ -99,23 +98,6 @@ class Feed:
             return (i, v.patch_json, s["period"], s["output_every"], v.vessels, v.outlets,
                     v.values, v.tables)
         return None
-
-
-    def _check_memory(self, model: Model, k: int) -> None:
-        """A variant whose model (another structure than the base's, e.g. more segments) is
-        estimated above the memory allowed fails with status "resource" before it runs."""
-        from oxyline import memory as _memory
-
-        if self.memory_limit is None:
-            return
-        canonical = model.canonical
-        counts = {"segments": _memory.segment_count(canonical),
-                  "vessels": len(canonical.get("vessels") or ())}
-        need = _memory.model_estimate(counts, canonical)
-        if need > self.memory_limit:
-            raise ResourceError(f"the model needs about {_memory.human(need)} of memory "
-                                f"(estimate, {counts['segments']} segments), above max_memory "
-                                f"= {_memory.human(self.memory_limit)}")
 
 
 class Base:
@@ -216,7 +198,8 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
             # a summary's statistics are computed on the worker threads (see summary_values)
             return ensemble.run(feed.next, on_done=done, workers=workers,
                                 summary=output == "summary", heart=bool(heart[2]), poll=poll,
-                                variant_timeout=variant_timeout, **core)
+                                variant_timeout=variant_timeout,
+                                max_memory=feed.memory_limit, **core)
     finally:
         if batch is not None:
             batch.flush()

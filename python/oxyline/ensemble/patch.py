@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from oxyline import _core
 from oxyline.ensemble.scale import mapping as _mapping
 from oxyline.ensemble.scale import scale_terms as _scale_terms
 from oxyline.ensemble.scale import unknown as _unknown
@@ -42,11 +43,9 @@ from oxyline.model import (
     LUMPED_KEYS,
     VESSEL_KEYS,
     Model,
-    _boundary_conditions,
     _copy,
     _plain_outlet,
     _unassembled,
-    _vessels,
 )
 
 SECTIONS = ("vessels", "boundary_conditions", "blood", "oxygen", "transport", "period", "scale")
@@ -450,7 +449,7 @@ class Patcher:
             units = str(self.base.source.get("units", "SI"))
             bcs = self.base.source.get("boundary_conditions", {})
             periods = self.__dict__["_periods_cache"] = {
-                node: _boundary_conditions({node: bc}, units)[1] for node, bc in bcs.items()}
+                node: _core.read_conditions({node: bc}, units)[1] for node, bc in bcs.items()}
         return periods
 
     def _parse(self, patch: Any, k: int) -> Any:
@@ -501,7 +500,7 @@ class Patcher:
         def convert_vessels(items: list[Any], units: str) -> list[Any]:
             out = list(self._vessels)
             for i in sorted(vessels):
-                out[i] = _vessels([items[i]], units)[0]
+                out[i] = _core.read_vessels([items[i]], units)[0]
             return out
 
         def convert_conditions(items: Mapping[str, Any], units: str
@@ -509,7 +508,7 @@ class Patcher:
             out, periods = dict(self._bcs), []
             for node, bc in items.items():
                 if node in nodes:
-                    canon, p = _boundary_conditions({node: bc}, units)
+                    canon, p = _core.read_conditions({node: bc}, units)
                     out[node] = canon[node]
                     periods += p
                 else:

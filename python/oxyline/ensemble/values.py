@@ -31,8 +31,9 @@ from typing import Any
 
 import numpy as np
 
+from oxyline import _core
 from oxyline.ensemble.scale import scale_terms
-from oxyline.model import Model, _boundary_conditions
+from oxyline.model import Model
 from oxyline.units import factor
 
 #: a geometric vessel's numbers: (property, unit quantity)
@@ -295,7 +296,7 @@ class ValueTable:
         with species, whose transport section depends on the period)."""
         if self._periods is None:
             units = str(self.base.source.get("units", "SI"))
-            self._periods = {node: _boundary_conditions({node: bc}, units)[1] for node, bc in
+            self._periods = {node: _core.read_conditions({node: bc}, units)[1] for node, bc in
                              self.base.source.get("boundary_conditions", {}).items()}
         new = {self.targets[t][1]: float(time[-1] - time[0]) for t, time, _ in tables}
         period = self.base.source.get("period")

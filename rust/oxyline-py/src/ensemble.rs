@@ -445,9 +445,11 @@ impl Ensemble {
     /// chamber volumes' and valves' unknowns after the output columns (see `Output::heart`).
     /// `poll()` (if given) is called on this thread a few times a second: an exception it
     /// raises stops the ensemble as Ctrl-C does (a `cancel` event). `variant_timeout`: the
-    /// wall time (s) each variant may run (see `Output::timeout`).
+    /// wall time (s) each variant may run (see `Output::timeout`). `max_memory` (bytes; None:
+    /// no limit): each variant's model is checked against it as it is assembled
+    /// (`run::memory::check_model`); one above it fails with error_kind "resource".
     #[pyo3(signature = (feed, *, on_done, workers = None, summary = false, heart = false,
-        poll = None, variant_timeout = None, **settings))]
+        poll = None, variant_timeout = None, max_memory = None, **settings))]
     #[allow(clippy::too_many_arguments)]
     fn run(
         &self,
@@ -459,6 +461,7 @@ impl Ensemble {
         heart: bool,
         poll: Option<Py<PyAny>>,
         variant_timeout: Option<f64>,
+        max_memory: Option<f64>,
         settings: Option<Bound<'_, PyDict>>,
     ) -> PyResult<bool> {
         let timeout =
@@ -487,7 +490,14 @@ impl Ensemble {
             heart,
             timeout,
         };
-        let (base, targets) = (self.base.clone(), self.targets.clone());
+        let base = match max_memory {
+            Some(limit) => Arc::new(NetworkSpec {
+                max_memory: Some(limit),
+                ..(*self.base).clone()
+            }),
+            None => self.base.clone(),
+        };
+        let targets = self.targets.clone();
         let job = |_: usize, input: Input, cancelled: &AtomicBool| {
             let s = RunSettings {
                 period: input.period,
