@@ -81,6 +81,17 @@ def test_bounds_come_from_inlet_initial_wall_and_backflow_values() -> None:
     assert species_bounds(dict(sp, decay=0.1)) == (0.0, 4.0)
 
 
+def test_bounds_of_a_fourier_inlet_are_its_extremes() -> None:
+    # 90 + 10 cos(2πt/T) + 5 sin(4πt/T): extremes of the closed form found on a fine grid
+    # (1e6 points, ~1e-9 of the range); the monitor samples 4097 points of one period (its
+    # extremes within ~1e-6 of the range)
+    inlet = {"kind": "fourier", "period": 0.8, "mean": 90.0, "cos": [10.0], "sin": [0.0, 5.0]}
+    t = np.linspace(0.0, 0.8, 1_000_001)
+    f = 90.0 + 10.0 * np.cos(2 * np.pi * t / 0.8) + 5.0 * np.sin(4 * np.pi * t / 0.8)
+    lo, hi = species_bounds({"name": "x", "inlet": inlet, "wall": {"model": "none"}})
+    assert abs(lo - f.min()) < 1e-4 and abs(hi - f.max()) < 1e-4
+
+
 def _bounds_messages(run) -> list[str]:
     with warnings.catch_warnings(record=True) as rec:
         warnings.simplefilter("always")
