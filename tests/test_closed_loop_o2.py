@@ -144,8 +144,8 @@ def test_heart_driven_loop_keeps_fick_and_the_physiology() -> None:
 def block() -> tuple[dict, closed_loop.HeartRun, closed_loop.ClosedLoopO2Result]:
     p = closed_loop.load("closed-loop-o2")
     p["dt"] = 4e-3
-    run = closed_loop.run_heart(p)
-    return p, run, closed_loop.simulate_o2(p, flows=closed_loop.heart_flows(p, run))
+    res = closed_loop.simulate_o2(p)
+    return p, res.heart, res
 
 
 def test_builtin_is_driven_by_the_svzerod_heart_block(block) -> None:
