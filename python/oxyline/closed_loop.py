@@ -238,25 +238,6 @@ def flow_table(p: dict[str, Any]) -> np.ndarray:
     return np.column_stack(cols)
 
 
-def balance_flows(flows: np.ndarray, from_: list[int], to: list[int], n: int,
-                  fixed_net: np.ndarray | None = None) -> np.ndarray:
-    """The flow table with the smallest constant per-branch corrections that make every
-    compartment's net inflow over the cycle vanish (least norm: δ = Aᵀ(AAᵀ)⁺(−net), A the
-    compartment–branch incidence). Flows sampled from a flow solution (e.g. the native closed
-    loop on branch `chambers`) close their volumes only to the solver's discretisation and
-    periodicity error; the core needs periodic volumes (docs/oxygen.md). `fixed_net`: the
-    cycle-mean net inflow per compartment of flows that stay as they are (an arterial tree's)."""
-    a = np.zeros((n, flows.shape[1]))
-    for b, (f, t) in enumerate(zip(from_, to)):
-        a[f, b] -= 1.0
-        a[t, b] += 1.0
-    net = a @ flows.mean(axis=0)
-    if fixed_net is not None:
-        net = net + fixed_net
-    delta = a.T @ (np.linalg.pinv(a @ a.T) @ (-net))
-    return flows + delta
-
-
 def heart_model(p: dict[str, Any]) -> dict[str, Any]:
     """A native closed-loop circulation (no boundary condition) whose flows drive the O2 loop:
     the heart `p["heart"]` (`_block_heart` or `_two_ventricle_heart`) between the venous
