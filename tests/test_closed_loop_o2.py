@@ -200,6 +200,15 @@ def test_heart_choice_is_checked() -> None:
         closed_loop.simulate_o2(_model(), flows="pump")
 
 
+def test_heart_driven_o2_step_must_span_whole_flow_steps() -> None:
+    """The core averages the heart run's recorded intervals over each O2 step: an O2 step of
+    1.5 flow steps is refused as a model error naming both steps."""
+    p = _model(heart="two-ventricle")
+    p["dt"] = 1.5e-3
+    with pytest.raises(oxyline.ModelError, match=r"closed-loop heart: the O2 step 0\.0015 s"):
+        closed_loop.simulate_o2(p, flows="heart")
+
+
 # --- the segment-resolved arterial tree (built-in closed-loop-o2-tree; docs/oxygen.md) ---
 
 def _tree_model(**changes: object) -> dict:

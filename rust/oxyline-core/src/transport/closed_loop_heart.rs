@@ -156,7 +156,8 @@ pub fn heart_flows(
     let rec = run(spec, period)?;
     let k = (dt / spec.dt).round() as usize;
     let intervals = rec.time.len().saturating_sub(1);
-    if k == 0 || intervals == 0 || intervals % k != 0 {
+    let whole = k > 0 && ((k as f64) * spec.dt - dt).abs() <= 1e-9 * dt;
+    if !whole || intervals == 0 || intervals % k != 0 {
         return Err(Error::model(
             "closed-loop heart",
             format!(
