@@ -246,3 +246,52 @@ fn set_tree_tables(
     tree.model = model.to_string();
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Three recorded rows of (valve flow, pressure behind, pressure in front).
+    fn recorded() -> Recorded {
+        let names = ["q", "behind", "front"];
+        Recorded {
+            time: vec![0.0, 1.0, 2.0],
+            data: vec![-1.0, 1.0, 2.0, -1.0, 3.0, 2.0, 2.0, 1.0, 2.0],
+            n: 3,
+            index: names
+                .iter()
+                .enumerate()
+                .map(|(i, n)| (n.to_string(), i))
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn a_valve_carries_no_flow_only_while_closed() {
+        // docs/physics.md §1.10: closed when the pressure behind does not exceed the pressure
+        // in front and the flow is not positive; open it passes the flow, backflow included
+        let s = Series {
+            terms: vec![("q".into(), 0.5)],
+            valve: Some(("behind".into(), "front".into())),
+        };
+        assert_eq!(recorded().eval(&s).unwrap(), vec![0.0, -0.5, 1.0]);
+        let plain = Series {
+            terms: vec![("q".into(), 1.0), ("front".into(), -1.0)],
+            valve: None,
+        };
+        assert_eq!(recorded().eval(&plain).unwrap(), vec![-3.0, -3.0, 0.0]);
+    }
+
+    #[test]
+    fn an_unknown_name_is_a_model_error_naming_it() {
+        let s = Series {
+            terms: vec![("flow in nowhere".into(), 1.0)],
+            valve: None,
+        };
+        let e = recorded().eval(&s).unwrap_err().to_string();
+        assert!(
+            e.contains("'flow in nowhere' is not one of its unknowns"),
+            "{e}"
+        );
+    }
+}
