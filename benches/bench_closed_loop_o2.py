@@ -5,9 +5,9 @@ load average, and the closed-loop O2 solve to periodic steady state.
     python benches/bench_closed_loop_o2.py [--repeats 3] [--tree-only] [--shooting both]
 
 `closed-loop-o2` and `closed-loop-o2-tree` are driven by their default heart, svZeroDSolver's
-ClosedLoopHeartAndPulmonary block (`closed_loop.run_heart`: 30 cycles at 1 ms, every unknown
-recorded). Flow only = that heart run; flow + O2 = `closed_loop.simulate_o2`, i.e. the same
-heart run, (with the tree) the tree's own flow run driven by its aortic outflow, and the O2
+ClosedLoopHeartAndPulmonary block (`closed_loop.heart_model`: 30 cycles at 1 ms). Flow only =
+that heart run (`oxyline.simulate`); flow + O2 = `closed_loop.simulate_o2`, i.e. one core call:
+the same heart run (every unknown of its last cycle recorded), (with the tree) the tree's own flow run driven by its aortic outflow, and the O2
 loop to its periodic steady state at the O2 step dt (flows block-averaged): Anderson
 acceleration of the cycle map (default) or, with `--shooting both`, also the earlier
 finite-difference Newton shooting (one cycle per unknown) in the same run. The rows with the
@@ -61,7 +61,8 @@ def rows(name: str, repeats: int, shootings: tuple[str, ...]) -> None:
     for dt in (4e-3, 1e-3):
         p = closed_loop.load(name)
         p["dt"] = dt
-        calls = {"flow": lambda p=p: closed_loop.run_heart(p)}
+        calls = {"flow": lambda p=p: oxyline.simulate(
+            oxyline.load_model(closed_loop.heart_model(p)), **closed_loop.heart_run_options(p))}
         for shooting in shootings:
             calls[shooting] = lambda p=p, shooting=shooting: closed_loop.simulate_o2(
                 p, shooting=shooting)

@@ -144,8 +144,8 @@ def test_heart_driven_loop_keeps_fick_and_the_physiology() -> None:
 def block() -> tuple[dict, closed_loop.HeartRun, closed_loop.ClosedLoopO2Result]:
     p = closed_loop.load("closed-loop-o2")
     p["dt"] = 4e-3
-    run = closed_loop.run_heart(p)
-    return p, run, closed_loop.simulate_o2(p, flows=closed_loop.heart_flows(p, run))
+    res = closed_loop.simulate_o2(p)
+    return p, res.heart, res
 
 
 def test_builtin_is_driven_by_the_svzerod_heart_block(block) -> None:
@@ -198,6 +198,15 @@ def test_heart_choice_is_checked() -> None:
         closed_loop.heart_model(_model(heart="three-ventricle"))
     with pytest.raises(oxyline.ModelError, match="flows must be"):
         closed_loop.simulate_o2(_model(), flows="pump")
+
+
+def test_heart_driven_o2_step_must_span_whole_flow_steps() -> None:
+    """The core averages the heart run's recorded intervals over each O2 step: an O2 step of
+    1.5 flow steps is refused as a model error naming both steps."""
+    p = _model(heart="two-ventricle")
+    p["dt"] = 1.5e-3
+    with pytest.raises(oxyline.ModelError, match=r"closed-loop heart: the O2 step 0\.0015 s"):
+        closed_loop.simulate_o2(p, flows="heart")
 
 
 # --- the segment-resolved arterial tree (built-in closed-loop-o2-tree; docs/oxygen.md) ---

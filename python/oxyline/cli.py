@@ -509,26 +509,16 @@ def _cmd_impedance(args: argparse.Namespace) -> int:
 
 
 def _cmd_convert(args: argparse.Namespace) -> int:
-    from oxyline.io import read_model, write_model
+    from oxyline.io import formats
 
-    model = read_model(args.input, format=args.from_format)
+    model = formats.read_model(args.input, format=args.from_format)
     out = Path(args.output)
-    fmt = args.to_format
+    fmt = args.to_format or formats.output_format(out)
     if fmt is None:
-        suffix = out.suffix.lower()
-        if suffix in (".csv", ".tsv"):
-            fmt = "tables"
-        elif suffix in (".yaml", ".yml", ".json"):
-            fmt = "native"
-        else:
-            raise InputError(f"{out}: cannot tell the output format from the suffix "
-                             "(use .yaml/.json, .csv/.tsv, or --to)")
-    if fmt == "svzerod":
-        from oxyline.io import dump_native, to_svzerod
-
-        written = [dump_native(to_svzerod(model, units=args.units), out)]
-    else:
-        written = write_model(model, out, format=fmt)
+        raise InputError(f"{out}: cannot tell the output format from the suffix (use "
+                         f"{', '.join(formats.WRITE_SUFFIXES)}, or --to)")
+    options = {"units": args.units} if "units" in formats.FORMATS[fmt].write_options else {}
+    written = formats.write_model(model, out, format=fmt, **options)
     print(f"{args.input} -> {fmt}: " + ", ".join(str(p) for p in written))
     return 0
 

@@ -10,7 +10,7 @@ runs the closed-loop heart that drives the flows and summarises the result.
     res = closed_loop.simulate_o2("closed-loop-o2")
     print(res.summary())     # SaO2, SvO2, PO2s, VO2 per organ, Fick and mass-balance residuals
 
-The flows come from a closed-loop heart run first (`run_heart`): by default svZeroDSolver's
+The flows come from a closed-loop heart the core runs first (`heart_spec`): by default svZeroDSolver's
 ClosedLoopHeartAndPulmonary block (`heart: "svzerod-block"`, docs/physics.md §1.10), or the
 native two-ventricle heart (`heart: "two-ventricle"`), or a prescribed table (`flows:
 "table"`: a pulsatile ejection of both ventricles, steady organ flows and venous return).
@@ -238,25 +238,6 @@ def flow_table(p: dict[str, Any]) -> np.ndarray:
     return np.column_stack(cols)
 
 
-def balance_flows(flows: np.ndarray, from_: list[int], to: list[int], n: int,
-                  fixed_net: np.ndarray | None = None) -> np.ndarray:
-    """The flow table with the smallest constant per-branch corrections that make every
-    compartment's net inflow over the cycle vanish (least norm: δ = Aᵀ(AAᵀ)⁺(−net), A the
-    compartment–branch incidence). Flows sampled from a flow solution (e.g. the native closed
-    loop on branch `chambers`) close their volumes only to the solver's discretisation and
-    periodicity error; the core needs periodic volumes (docs/oxygen.md). `fixed_net`: the
-    cycle-mean net inflow per compartment of flows that stay as they are (an arterial tree's)."""
-    a = np.zeros((n, flows.shape[1]))
-    for b, (f, t) in enumerate(zip(from_, to)):
-        a[f, b] -= 1.0
-        a[t, b] += 1.0
-    net = a @ flows.mean(axis=0)
-    if fixed_net is not None:
-        net = net + fixed_net
-    delta = a.T @ (np.linalg.pinv(a @ a.T) @ (-net))
-    return flows + delta
-
-
 def heart_model(p: dict[str, Any]) -> dict[str, Any]:
     """A native closed-loop circulation (no boundary condition) whose flows drive the O2 loop:
     the heart `p["heart"]` (`_block_heart` or `_two_ventricle_heart`) between the venous
@@ -373,14 +354,20 @@ def tree_vessels(p: dict[str, Any]) -> list[dict[str, Any]]:
     return out
 
 
-def tree_model(p: dict[str, Any], time: np.ndarray, inflow: np.ndarray,
-               venous_pressure: np.ndarray) -> dict[str, Any]:
+def tree_model(p: dict[str, Any], time: np.ndarray | None = None,
+               inflow: np.ndarray | None = None,
+               venous_pressure: np.ndarray | None = None) -> dict[str, Any]:
     """The tree as an open network driven by the closed-loop heart: the aortic-valve flow into
     its root and, at every outlet, its organ bed's resistance to the recorded venous pressure
-    (both tables over one cycle from the closed-loop run): the same equations the tree's
-    segments obey inside the closed loop. Its `oxygen` section carries the loop's blood (Hill
-    binding) and the tree's wall closure; the root's PO2 is replaced step by step by the left
-    heart's (`oxyline_core::transport::closed_loop_tree`)."""
+    (both tables over one cycle; in :func:`simulate_o2` the core writes those of its heart run
+    into them, here without tables the cardiac output and 7 mmHg): the same equations the
+    tree's segments obey inside the closed loop. Its `oxygen` section carries the loop's blood
+    (Hill binding) and the tree's wall closure; the root's PO2 is replaced step by step by the
+    left heart's (`oxyline_core::transport::closed_loop_tree`)."""
+    if time is None or inflow is None or venous_pressure is None:
+        time = np.array([0.0, p["period"]])
+        inflow = np.full(2, p["cardiac_output"] * 1e-3 / 60.0)
+        venous_pressure = np.full(2, 7.0 * MMHG)
     T = p["period"]
     q = p["cardiac_output"] * 1e-3 / 60.0
     r_sys = 93.0 * MMHG / q
@@ -402,107 +389,86 @@ def tree_model(p: dict[str, Any], time: np.ndarray, inflow: np.ndarray,
 
 @dataclass
 class HeartRun:
-    """The last cycle of a :func:`heart_model` run (`run_heart`): the recorded times (s) and,
-    by name, what the O2 loop reads: the flows (m³/s) ``aortic`` (ejection through the aortic
-    valve), ``aortic_outflow`` (into the arteries or the tree's root), ``tricuspid``,
-    ``pulmonary`` (the right ventricle's ejection), ``lungs``, ``mitral``, every organ's, and
-    the pressure ``veins`` (Pa) at the systemic veins' inlet."""
+    """The last cycle of the closed-loop heart's run (``ClosedLoopO2Result.heart``): the
+    recorded times (s, from 0) and, by name, what the O2 loop reads: the flows (m³/s)
+    ``aortic`` (ejection through the aortic valve), ``aortic_outflow`` (into the arteries or
+    the tree's root), ``tricuspid``, ``pulmonary`` (the right ventricle's ejection), ``lungs``,
+    ``mitral``, every organ's, and the pressure ``veins`` (Pa) at the systemic veins' inlet."""
 
     time: np.ndarray
     series: dict[str, np.ndarray]
 
 
-def run_heart(p: dict[str, Any]) -> HeartRun:
-    """Runs :func:`heart_model` (30 cycles, last one recorded) and reads its flows."""
-    from oxyline.model import build_model
-    from oxyline.run import simulate
-
-    model = build_model(heart_model(p))
-    if p.get("heart", "two-ventricle") != "svzerod-block":
-        res = simulate(model)
-
-        def q(name: str) -> np.ndarray:
-            return np.asarray(res.vessel(name).flow_in)
-
-        av = res.vessel("aortic_valve")
-        series = {"aortic": q("aortic_valve"), "aortic_outflow": np.asarray(av.flow_out),
-                  "tricuspid": q("tricuspid_valve"), "pulmonary": q("pulmonary_valve"),
-                  "lungs": q("lungs"), "mitral": q("mitral_valve"),
-                  "veins": np.asarray(res.vessel("veins").pressure_in),
-                  **{k: q(k) for k in p["organs"]}}
-        return HeartRun(np.asarray(av.time), series)
-    return _block_run(p, model)
+def _series(terms: list[tuple[str, float]], valve: tuple[str, str] | None = None
+            ) -> dict[str, Any]:
+    return {"terms": terms, **({"valve": valve} if valve else {})}
 
 
-def _block_run(p: dict[str, Any], model: Any) -> HeartRun:
-    """:func:`run_heart` for svZeroDSolver's block: every unknown is recorded, and a valve's
-    flow counts only while it is open (docs/physics.md §1.10: closed when the pressure behind
-    does not exceed the pressure in front and its flow is not positive; a closed valve's
-    inductor flow is left out of the volume balances)."""
-    from oxyline.run import _settings
-
-    s = _settings(model, heart_run_options(p))
-    keep = {k: s[k] for k in ("cycles", "dt", "method", "rho_infty", "start", "newton_atol",
-                              "max_iterations") if k in s}
-    with core_errors("closed-loop flow run"):
-        raw = model.network.simulate(period=p["period"], output_every=s["dt"],
-                                     all_unknowns=True, **keep)
-    if "error" in raw:
-        raise raw["error"]
-    t = np.asarray(raw["times"])
-    data = np.asarray(raw["data"]).reshape(len(t), -1)
-    col = {n: data[:, i] for i, n in enumerate(model.network.unknown_names())}
+def _block_series(p: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """svZeroDSolver's block, by unknown name: a valve's flow counts only while it is open
+    (docs/physics.md §1.10: closed when the pressure behind does not exceed the pressure in
+    front and its flow is not positive; a closed valve's inductor flow is left out of the
+    volume balances). The lungs: the pulmonary bed's drain through R_pd, (P_pul − P_LA)/R_pd
+    (its capacitor C_p smooths the right ventricle's ejection; over a periodic cycle both
+    carry the same volume). The block's left atrium receives the ejection itself (its
+    bookkeeping, docs/physics.md §1.10); the O2 loop's pulmonary pools are those of the
+    two-ventricle heart."""
     h = "heart_pulmonary"
-    pr = {k: col[f"pressure at {h}: {k}"] for k in ("right atrium", "right ventricle",
-                                                     "left atrium", "left ventricle", "aorta")}
-    pr["pulmonary"] = col[f"volume of {h}: pulmonary"]      # P_pul (Pa), an element unknown
+    pr = {k: f"pressure at {h}: {k}" for k in ("right atrium", "right ventricle", "left atrium",
+                                                "left ventricle", "aorta")}
+    pr["pulmonary"] = f"volume of {h}: pulmonary"      # P_pul (Pa), an element unknown
 
-    def valve(name: str, behind: str, front: str) -> np.ndarray:
-        q = col[f"flow in {h}: {name} valve"]
-        return np.where((pr[behind] <= pr[front]) & (q <= 0.0), 0.0, q)
+    def valve(name: str, behind: str, front: str) -> dict[str, Any]:
+        return _series([(f"flow in {h}: {name} valve", 1.0)], (pr[behind], pr[front]))
 
-    series = {"aortic": valve("aortic", "left ventricle", "aorta"),
-              "aortic_outflow": col[f"flow in {h}: aortic outflow"],
-              "tricuspid": valve("tricuspid", "right atrium", "right ventricle"),
-              "pulmonary": valve("pulmonary", "right ventricle", "pulmonary"),
-              "mitral": valve("mitral", "left atrium", "left ventricle"),
-              "veins": col["pressure at veins_in"]}
-    # the lungs: the pulmonary bed's drain through R_pd, (P_pul − P_LA)/R_pd (its capacitor
-    # C_p smooths the right ventricle's ejection; over a periodic cycle both carry the same
-    # volume). The block's left atrium receives the ejection itself (its bookkeeping,
-    # docs/physics.md §1.10); the O2 loop's pulmonary pools are those of the two-ventricle heart.
     r_pd = heart_block_si(dict(p.get("heart_block", SVZEROD_HEART)),
                           p["period"])["pulmonary_resistance"]
-    series["lungs"] = (pr["pulmonary"] - pr["left atrium"]) / r_pd
-    series.update({k: col[f"flow in vessel '{k}' resistance"] for k in p["organs"]})
-    return HeartRun(t, series)
+    return {"aortic": valve("aortic", "left ventricle", "aorta"),
+            "aortic_outflow": _series([(f"flow in {h}: aortic outflow", 1.0)]),
+            "tricuspid": valve("tricuspid", "right atrium", "right ventricle"),
+            "pulmonary": valve("pulmonary", "right ventricle", "pulmonary"),
+            "mitral": valve("mitral", "left atrium", "left ventricle"),
+            "veins": _series([("pressure at veins_in", 1.0)]),
+            "lungs": _series([(pr["pulmonary"], 1.0 / r_pd), (pr["left atrium"], -1.0 / r_pd)]),
+            **{k: _series([(f"flow in vessel '{k}' resistance", 1.0)]) for k in p["organs"]}}
 
 
-def heart_flows(p: dict[str, Any], run: HeartRun | None = None) -> np.ndarray:
-    """The O2 loop's branch flows from a :func:`run_heart` record (last cycle): each recorded
-    interval's trapezoidal mean flow, averaged over blocks of dt/flow_dt intervals; the shunt
-    takes `shunt_fraction` of the lungs' flow. The left heart ejects through the aortic valve
-    into the arterial pool (into the tree: its root's own flow, the aortic outflow)."""
-    run = run if run is not None else run_heart(p)
-    k = round(p["dt"] / p.get("flow_dt", 1e-3))
+def _two_ventricle_series(p: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """The native two-ventricle heart, by unknown name: its valves' and resistances' flows."""
+    def q(name: str, part: str = " resistance") -> dict[str, Any]:
+        return _series([(f"flow in vessel '{name}'{part}", 1.0)])
 
-    def q(name: str) -> np.ndarray:
-        x = run.series[name]
-        mid = 0.5 * (x[1:] + x[:-1])
-        return mid.reshape(-1, k).mean(axis=1)
+    return {"aortic": q("aortic_valve", ""), "aortic_outflow": q("aortic_valve", ""),
+            "tricuspid": q("tricuspid_valve", ""), "pulmonary": q("pulmonary_valve", ""),
+            "mitral": q("mitral_valve", ""), "lungs": q("lungs"),
+            "veins": _series([("pressure at veins_in", 1.0)]), **{k: q(k) for k in p["organs"]}}
 
+
+def _scaled(series: dict[str, Any], factor: float) -> dict[str, Any]:
+    return {**series, "terms": [(n, c * factor) for n, c in series["terms"]]}
+
+
+def heart_spec(p: dict[str, Any]) -> dict[str, Any]:
+    """The core's closed-loop heart run (:func:`heart_model`, 30 cycles, every unknown of the
+    last one recorded) and the O2 loop's branch flows read from it, in branch order: each
+    step's flow is the mean of the recorded intervals it spans; the shunt takes
+    `shunt_fraction` of the lungs' flow. The left heart ejects through the aortic valve into
+    the arterial pool (into the tree: its root's own flow, the aortic outflow)."""
+    from oxyline.model import build_model
+
+    series = (_block_series if p.get("heart", "two-ventricle") == "svzerod-block"
+              else _two_ventricle_series)(p)
     organs = list(p["organs"])
-    lungs, shunt = q("lungs"), p["lungs"]["shunt_fraction"]
-    arterial = [] if _has_tree(p) else [q("aortic"), *[q(o) for o in organs]]
-    cols = [*arterial, *[q(o) for o in organs],
-            q("tricuspid"), q("pulmonary"), (1 - shunt) * lungs, shunt * lungs, q("mitral")]
-    return np.column_stack(cols)
-
-
-def heart_tree_model(p: dict[str, Any], run: HeartRun) -> dict[str, Any]:
-    """:func:`tree_model` with the tables of the last cycle of a :func:`run_heart` record."""
-    return tree_model(p, run.time - run.time[0], run.series["aortic_outflow"],
-                      run.series["veins"])
+    shunt = p["lungs"]["shunt_fraction"]
+    arterial = [] if _has_tree(p) else [series["aortic"], *[series[o] for o in organs]]
+    branches = [*arterial, *[series[o] for o in organs], series["tricuspid"],
+                series["pulmonary"], _scaled(series["lungs"], 1 - shunt),
+                _scaled(series["lungs"], shunt), series["mitral"]]
+    model = build_model(heart_model(p))
+    return {"model": model.canonical, "dt": p.get("flow_dt", 1e-3), "cycles": 30,
+            "newton_atol": heart_run_options(p).get("newton_atol"), "branches": branches,
+            "record": list(series.items()), "tree_inflow": series["aortic_outflow"],
+            "tree_venous_pressure": series["veins"]}
 
 
 @dataclass
@@ -551,6 +517,8 @@ class ClosedLoopO2Result:
     cycles: int
     periodic_error: float
     tree: ArterialTreeO2 | None = None
+    #: the closed-loop heart's last cycle when it gave the flows
+    heart: HeartRun | None = None
 
     def _c(self, name: str) -> int:
         return self.compartments.index(name)
@@ -625,20 +593,22 @@ class ClosedLoopO2Result:
         return out
 
 
-def _tree_spec(p: dict[str, Any], tree_model_: dict[str, Any], idx: dict[str, int]
-               ) -> dict[str, Any]:
+def _tree_spec(p: dict[str, Any], idx: dict[str, int]) -> dict[str, Any]:
+    """The arterial tree of the core's loop: its model's inlet and outlet tables are those of
+    the core's heart run."""
     from oxyline.model import build_model
 
-    canonical = build_model(tree_model_).canonical
+    canonical = build_model(tree_model(p)).canonical
     return {"model": json.dumps(canonical), "inlet": "aorta_in",
             "from": idx["left_heart"], "flow_cycles": int(p["tree"]["flow_cycles"]),
             "outlets": [{"boundary": f"{k}_a", "to": idx[k]} for k in p["organs"]]}
 
 
 def _flow_table(p: dict[str, Any], flows: np.ndarray | str | None,
-                branches: list[dict[str, Any]]) -> tuple[np.ndarray, bool]:
+                branches: list[dict[str, Any]]) -> tuple[np.ndarray | None, bool]:
     """The loop's flow table and whether the core balances it: the prescribed table is
-    periodic by construction; a heart run's or a caller's table is balanced first."""
+    periodic by construction; a caller's table is balanced first; None: the core's heart run
+    gives it (balanced)."""
     if flows is None:
         flows = p.get("flows", "table")
     if isinstance(flows, str) and flows == "table":
@@ -647,7 +617,7 @@ def _flow_table(p: dict[str, Any], flows: np.ndarray | str | None,
         if flows != "heart":
             raise ModelError(f"closed loop: flows must be a table, 'table' or 'heart', "
                              f"got {flows!r}")
-        flows = heart_flows(p)
+        return None, True
     flows = np.asarray(flows, dtype=float)
     if flows.ndim != 2 or flows.shape[1] != len(branches):
         raise ModelError(f"closed loop: flows must be (steps, {len(branches)}) for the "
@@ -662,7 +632,8 @@ def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int 
     acceleration of the cycle map, or with ``shooting="newton"`` the earlier finite-difference
     Newton shooting; then plain cycles until the start-of-cycle contents repeat to `tol`).
     `flows`: ``"heart"`` takes them from a run of the model's closed-loop heart (`heart`:
-    svZeroDSolver's block by default; :func:`run_heart`, :func:`heart_flows`), ``"table"``
+    svZeroDSolver's block by default; :func:`heart_spec`: the core runs it, then the O2
+    loop, in one call; its last cycle is ``result.heart``), ``"table"``
     is the prescribed table (:func:`flow_table`), None the model's own choice (`flows`); a
     table (steps × branches, m³/s, one row per step of `dt`, branches in the order of
     ``result.branches``), e.g. flows sampled from a flow run, is balanced first by the core:
@@ -684,17 +655,20 @@ def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int 
         if flows is not None and not (isinstance(flows, str) and flows == "heart"):
             raise ModelError("closed loop: with an arterial tree the flows come from the heart "
                              "run (flows='heart')")
-        heart = run_heart(p)
-        spec["tree"] = _tree_spec(p, heart_tree_model(p, heart), idx)
-        flows = heart_flows(p, heart)
+        spec["tree"] = _tree_spec(p, idx)
+        flows = "heart"
         # the tree's Hill inversions are warm-started (tolerance 1e-12 mmHg): its cycle map
         # repeats to ~1e-11, so the confirming cycles stop there (Fick then holds to ~2e-12)
         tol = max(tol, 1e-10)
     table, spec["balance"] = _flow_table(p, flows, branches)
+    if table is None:   # the core runs the heart, then O2 on its flows: one call
+        spec.update(heart=heart_spec(p), period=float(p["period"]))
     with core_errors("closed-loop O2 run"):
-        out = _core.closed_loop_o2(json.dumps(spec), np.ascontiguousarray(table).ravel(),
+        out = _core.closed_loop_o2(json.dumps(spec),
+                                   np.ascontiguousarray(table if table is not None
+                                                        else np.empty(0)).ravel(),
                                    float(p["dt"]), int(max_cycles), float(tol))
-    return _result(p, comps, branches, out, table.shape[0])
+    return _result(p, comps, branches, out, len(out["time"]))
 
 
 def _result(p: dict[str, Any], comps: list[dict[str, Any]], branches: list[dict[str, Any]],
@@ -723,4 +697,6 @@ def _result(p: dict[str, Any], comps: list[dict[str, Any]], branches: list[dict[
         vo2=rows("vo2", nc), flux=rows("flux", nb), uptake=rows("uptake", nb),
         amount=np.asarray(out["amount"]), amount_start=float(out["amount_start"]),
         dt=float(p["dt"]), cycles=int(out["cycles"]), periodic_error=float(out["periodic_error"]),
-        tree=tree)
+        tree=tree, heart=HeartRun(np.asarray(out["heart_time"]),
+                                  {k: np.asarray(v) for k, v in out["heart_series"].items()})
+        if out["heart_series"] else None)

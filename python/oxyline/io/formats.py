@@ -36,8 +36,8 @@ MAPPING_SUFFIXES = (".yaml", ".yml", ".json")
 
 #: a reader: the file -> (native model dict, where it came from for error messages)
 Reader = Callable[[Path], tuple[dict[str, Any], str]]
-#: a writer: (model, path) -> the files written
-Writer = Callable[[Model, Path], list[Path]]
+#: a writer: (model, path, **options) -> the files written
+Writer = Callable[..., list[Path]]
 
 
 @dataclass(frozen=True)
@@ -53,6 +53,8 @@ class Format:
     #: a parsed mapping -> the native model dict (formats whose files are YAML/JSON mappings
     #: and that need nothing but the mapping; ``load_model(dict)`` converts them too)
     from_mapping: Callable[[dict[str, Any]], dict[str, Any]] | None = None
+    #: the keyword options its writer takes (:func:`write_model`)
+    write_options: tuple[str, ...] = ()
 
 
 def _mapping_reader(convert: Callable[[dict[str, Any]], dict[str, Any]]) -> Reader:
@@ -72,9 +74,10 @@ def _write_native(model: Model, p: Path) -> list[Path]:
     return [save_model(model, p)]
 
 
-def _write_svzerod(model: Model, p: Path) -> list[Path]:
-    return [dump_native(svzerod_export.to_svzerod(model), p.with_suffix(".json") if not p.suffix
-                        else p)]
+def _write_svzerod(model: Model, p: Path, **options: Any) -> list[Path]:
+    """svZeroDSolver JSON; options as :func:`oxyline.io.to_svzerod` (``units``, ...)."""
+    return [dump_native(svzerod_export.to_svzerod(model, **options),
+                        p.with_suffix(".json") if not p.suffix else p)]
 
 
 def _read_openbf(p: Path) -> tuple[dict[str, Any], str]:
@@ -92,7 +95,8 @@ def _as_native(data: dict[str, Any]) -> dict[str, Any]:
 FORMATS: dict[str, Format] = {
     "native": Format("native", (), _mapping_reader(_as_native), _write_native, _as_native),
     "svzerod": Format("svzerod", (), _mapping_reader(svzerod.to_oxyline_dict), _write_svzerod,
-                      svzerod.to_oxyline_dict),
+                      svzerod.to_oxyline_dict,
+                      ("units", "samples", "points_per_cycle", "cycles")),
     "tables": Format("tables", (".csv", ".tsv", ".txt"), _read_tables,
                      lambda model, p: tables.write_tables(model, p)),
     "openbf": Format("openbf", (), _read_openbf, None),
@@ -191,19 +195,35 @@ def as_model(model: Model | PathLike | Mapping[str, Any]) -> Model:
     return read_model(model)
 
 
+#: the format a file is written in by its suffix (svZeroDSolver JSON is asked for by name)
+WRITE_SUFFIXES = {".csv": "tables", ".tsv": "tables", **dict.fromkeys(MAPPING_SUFFIXES, "native")}
+
+
+def output_format(path: PathLike) -> str | None:
+    """The format :func:`write_model` writes ``path`` in when none is named (None: the suffix
+    names none)."""
+    return WRITE_SUFFIXES.get(Path(path).suffix.lower())
+
+
 def write_model(model: Model | PathLike | Mapping[str, Any], path: PathLike,
-                format: str | None = None) -> list[Path]:
-    """Write ``model`` to ``path`` in ``format`` (guessed from the suffix when None: .csv/.tsv →
-    tables, .yaml/.yml/.json → native; svZeroDSolver JSON must be asked for with
-    ``format="svzerod"``). Returns the files written."""
+                format: str | None = None, **options: Any) -> list[Path]:
+    """Write ``model`` to ``path`` in ``format`` (guessed from the suffix when None:
+    :data:`WRITE_SUFFIXES`, else native; svZeroDSolver JSON must be asked for with
+    ``format="svzerod"``); ``options`` go to the format's writer (svzerod: ``units``).
+    Returns the files written."""
     m = as_model(model)
     p = Path(path)
-    fmt = _format(format or ("tables" if p.suffix.lower() in (".csv", ".tsv") else "native"), p)
+    fmt = _format(format or output_format(p) or "native", p)
     if fmt.write is None:
         raise ModelError(f"{p}: writing {fmt.name} files is not supported ({fmt.name} is an "
                          "input format)")
-    return fmt.write(m, p)
+    unknown = sorted(set(options) - set(fmt.write_options))
+    if unknown:
+        raise ModelError(f"{p}: the {fmt.name} writer has no option {', '.join(unknown)} "
+                         f"(options: {', '.join(fmt.write_options) or 'none'})")
+    return fmt.write(m, p, **options)
 
 
-__all__ = ["FORMATS", "Format", "as_model", "claimed", "detect_format", "from_mapping", "read_model",
-           "read_native", "sniff_format", "write_model"]
+__all__ = ["FORMATS", "WRITE_SUFFIXES", "Format", "as_model", "claimed", "detect_format",
+           "from_mapping", "output_format", "read_model", "read_native", "sniff_format",
+           "write_model"]

@@ -121,20 +121,15 @@ def _vessels_from_frame(df: Any, where: str) -> list[dict[str, Any]]:
                 continue
             if k in _STRING_VESSEL:
                 v[k] = str(val).strip()
-            elif k in _INT_VESSEL:
+            elif k in _INT_VESSEL:  # the schema refuses a fraction, naming the vessel
                 n = _number(val, el, c)
-                if not n.is_integer():
-                    raise ModelError(f"{el}: column '{c}' must be an integer, got {val!r}")
-                v[k] = int(n)
+                v[k] = int(n) if n.is_integer() else n
             elif k == "output":
                 v[k] = str(val).strip().lower() in ("1", "true", "yes", "1.0")
             elif k in LUMPED_COLUMNS:
                 lumped[k] = _number(val, el, c)
             else:
                 v[k] = _number(val, el, c)
-        for k in ("name", "from", "to"):
-            if k not in v:
-                raise ModelError(f"{el}: empty '{k}'")
         if lumped:
             v["lumped"] = lumped
         vessels.append(v)
@@ -220,20 +215,8 @@ def _bcs_from_frame(df: Any, where: str, base: Path | None) -> dict[str, dict[st
             else:
                 raise ModelError(f"{el}: a {kind} condition needs 'value', 'waveform' or "
                                  "'fourier_mean'")
-        elif kind == "resistance":
-            if "resistance" not in cell:
-                raise ModelError(f"{el}: a resistance condition needs column 'resistance'")
-            bc["resistance"] = _number(cell["resistance"], el, "resistance")
-            bc["pressure"] = _number(cell.get("pressure", 0.0), el, "pressure")
-        elif kind == "rcr":
-            for k in ("proximal_resistance", "capacitance", "distal_resistance"):
-                if k not in cell:
-                    raise ModelError(f"{el}: an rcr condition needs column '{k}'")
-                bc[k] = _number(cell[k], el, k)
-            bc["pressure"] = _number(cell.get("pressure", 0.0), el, "pressure")
-        else:
-            raise ModelError(f"{el}: column 'type' must be flow, pressure, resistance or rcr, got "
-                             f"{row['type']!r}")
+        else:  # resistance, rcr, ...: the schema checks the type, its keys and defaults
+            bc.update({k: _number(v, el, k) for k, v in cell.items() if k not in ("node", "type")})
         if node in out:
             raise ModelError(f"{el}: node '{node}' has two boundary conditions")
         out[node] = bc

@@ -1,6 +1,7 @@
 //! Binding of the closed-loop O2 run (`oxyline_core::transport::closed_loop`): JSON spec and a
 //! flat flow table in (balanced by the core with `balance`), the recorded last cycle and the
-//! table used out (flat arrays; Python reshapes them).
+//! table used out (flat arrays; Python reshapes them). With a `heart` in the spec the core runs
+//! the closed-loop heart first and reads the flows from it (the table passed is then empty).
 
 use crate::errors::to_py;
 use numpy::{PyArray1, PyReadonlyArray1};
@@ -29,6 +30,11 @@ pub fn closed_loop_o2<'py>(
     d.set_item("amount_start", run.amount_start)?;
     d.set_item("tree_segments", &run.tree_segments)?;
     d.set_item("tree_flow_periodic_error", run.tree_flow_periodic_error)?;
+    let heart = PyDict::new(py);
+    for (name, v) in &run.heart_series {
+        heart.set_item(name, PyArray1::from_slice(py, v))?;
+    }
+    d.set_item("heart_series", heart)?;
     for (k, v) in [
         ("time", &run.time),
         ("volume", &run.volume),
@@ -47,6 +53,7 @@ pub fn closed_loop_o2<'py>(
         ("tree_inflow", &run.tree_inflow),
         ("tree_outflow", &run.tree_outflow),
         ("flow", &run.flow),
+        ("heart_time", &run.heart_time),
     ] {
         d.set_item(k, PyArray1::from_slice(py, v))?;
     }

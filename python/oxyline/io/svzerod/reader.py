@@ -867,9 +867,7 @@ def _vessels(vessels_in: Any, period: float, bcs: dict[str, tuple[str, dict[str,
     for i, v in enumerate(vessels_in):
         v, name, kind, el = _entry(v, f"vessels[{i}]", "vessel_name", "vessel", VESSEL_KEYS,
                                    "zero_d_element_type", VESSEL_TYPES)
-        if name in out.names:
-            raise ModelError(f"{el}: vessel_name used twice")
-        out.names.add(name)
+        out.names.add(name)  # a name used twice: the schema names it
         el = f"{kind} '{name}'"
         params = {"BloodVesselRC": RC_VESSEL_PARAMS,
                   "ChamberSphere": set(svzerod_heart.SPHERE_KEYS)}.get(kind, BLOOD_VESSEL_PARAMS)
@@ -891,8 +889,6 @@ def _connect(vs: _Vessels, hidden: list[dict[str, Any]], ends: _Ends,
     """Name every vessel's end nodes (a free end gets ``<vessel>:inlet``/``:outlet``), split
     each BloodVesselCRL at its capacitor node, and refuse clashing names and unconnected
     conditions."""
-    if not vs.vessels:
-        raise ModelError("model: no vessels")
     for name in used_bcs.keys() ^ bcs.keys():
         raise ModelError(f"boundary condition '{name}': not connected to any vessel")
     for v in vs.vessels:

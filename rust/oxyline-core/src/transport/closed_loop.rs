@@ -84,6 +84,13 @@ pub struct ClosedLoopSpec {
     /// tree's flows counted (`closed_loop_balance`); the run's `flow` is the table it used.
     #[serde(default)]
     pub balance: bool,
+    /// The closed-loop heart whose run gives the flow table (and the tree's boundary tables);
+    /// its table is always balanced (`closed_loop_heart`).
+    #[serde(default)]
+    pub heart: Option<super::closed_loop_heart::HeartSpec>,
+    /// The heart run's period (s); the O2 loop's cycle is the same.
+    #[serde(default)]
+    pub period: Option<f64>,
 }
 
 /// The periodic-state solver of `run_periodic`: Anderson acceleration of the cycle map (one
@@ -587,6 +594,9 @@ pub struct ClosedLoopRun {
     pub tree_outflow: Vec<f64>,
     /// The flow table the run used (row-major steps × branches; balanced with `balance`).
     pub flow: Vec<f64>,
+    /// With a heart: its recorded times (from 0) and named series over the last flow cycle.
+    pub heart_time: Vec<f64>,
+    pub heart_series: Vec<(String, Vec<f64>)>,
 }
 
 /// One cycle of the flow table from the loop's current state; records into `out` if given.
@@ -894,13 +904,29 @@ pub fn run_periodic(
     tol: f64,
 ) -> Result<ClosedLoopRun> {
     let mut lp = ClosedLoop::new(spec)?;
+    let mut tree = spec.tree.clone();
+    let heart = match &spec.heart {
+        Some(h) => {
+            let period = spec
+                .period
+                .ok_or_else(|| Error::model("closed-loop heart", "needs the loop's period"))?;
+            Some(super::closed_loop_heart::heart_flows(
+                h,
+                dt,
+                period,
+                tree.as_mut(),
+            )?)
+        }
+        None => None,
+    };
+    let flows = heart.as_ref().map_or(flows, |h| h.table.as_slice());
     let steps = check_table(&lp, flows, dt)?;
     let period = dt * steps as f64;
-    if let Some(t) = &spec.tree {
+    if let Some(t) = &tree {
         lp.attach_tree(t, dt, steps)?;
     }
     let mut table = flows.to_vec();
-    if spec.balance {
+    if spec.balance || heart.is_some() {
         balance_with_tree(&lp, &mut table)?;
     }
     let flows = table.as_slice();
@@ -920,6 +946,10 @@ pub fn run_periodic(
     let mut out = ClosedLoopRun::empty(&lp, steps);
     confirm(&mut lp, flows, dt, (cycles, max_cycles), tol, &mut out)?;
     out.flow = table;
+    if let Some(h) = heart {
+        out.heart_time = h.time;
+        out.heart_series = h.record;
+    }
     Ok(out)
 }
 
@@ -1026,6 +1056,8 @@ impl ClosedLoopRun {
             tree_inflow: tree.map_or(Vec::new(), |t| t.inflow.clone()),
             tree_outflow: tree.map_or(Vec::new(), |t| t.outflow.concat()),
             flow: Vec::new(),
+            heart_time: Vec::new(),
+            heart_series: Vec::new(),
         }
     }
 

@@ -32,6 +32,7 @@ use std::sync::Arc;
 mod build;
 pub mod closed_loop; // closed circulation: compartments, lungs
 pub mod closed_loop_balance; // its flow table's periodic volumes
+pub mod closed_loop_heart; // the heart run that drives its flows
 pub mod closed_loop_tree; // its segment-resolved arterial tree
 pub mod compartment;
 mod fused;
