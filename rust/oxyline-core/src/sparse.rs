@@ -135,11 +135,11 @@ pub struct TreeLu<T: Scalar = f64> {
     vertex: Vec<u32>,
     /// The parent vertex of the vertex at each position (NONE for a root).
     parent: Vec<u32>,
-    diag: Vec<T>,
     up: Vec<T>,
     /// K[parent(v), v], divided by the pivot after `factor`
     down: Vec<T>,
-    /// pivots, stored as reciprocals after `factor`
+    /// The diagonal while `factor` sums the stamps, then the pivots, stored as reciprocals
+    /// (one array: the diagonal is not needed after the elimination).
     pivot: Vec<T>,
     /// The position of each vertex's parent in the elimination order (NONE for a root).
     parent_pos: Vec<u32>,
@@ -308,7 +308,6 @@ impl<T: Scalar> TreeLu<T> {
             slots,
             vertex,
             parent,
-            diag: vec![T::ZERO; n],
             up: vec![T::ZERO; n],
             down: vec![T::ZERO; n],
             pivot: vec![T::ZERO; n],
@@ -318,21 +317,20 @@ impl<T: Scalar> TreeLu<T> {
     }
 
     fn factor(&mut self, vals: &[T]) -> bool {
-        self.diag.iter_mut().for_each(|x| *x = T::ZERO);
+        self.pivot.iter_mut().for_each(|x| *x = T::ZERO);
         self.up.iter_mut().for_each(|x| *x = T::ZERO);
         self.down.iter_mut().for_each(|x| *x = T::ZERO);
         for (&slot, &v) in self.slots.iter().zip(vals) {
             let k = (slot >> 2) as usize;
             match slot & 3 {
-                DIAG => self.diag[k] += v,
+                DIAG => self.pivot[k] += v,
                 UP => self.up[k] += v,
                 _ => self.down[k] += v,
             }
         }
-        self.pivot.copy_from_slice(&self.diag);
         // per-vertex magnitude: the units of pressure and flow rows differ by many decades, so a
         // pivot is judged against the terms that formed it, not a global scale
-        let mut magnitude: Vec<f64> = self.diag.iter().map(|d| d.modulus()).collect();
+        let mut magnitude: Vec<f64> = self.pivot.iter().map(|d| d.modulus()).collect();
         if let Some(pool) = self.partition.pool() {
             if !pool.install(|| self.eliminate_parallel(&mut magnitude)) {
                 return false;
