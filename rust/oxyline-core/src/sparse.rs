@@ -144,7 +144,7 @@ pub struct TreeLu<T: Scalar = f64> {
     /// The position of each vertex's parent in the elimination order (NONE for a root).
     parent_pos: Vec<u32>,
     /// The blocks solved in parallel and the top tree solved serially (see `parallel`).
-    partition: parallel::Partition,
+    partition: Box<parallel::Partition>,
 }
 
 const NONE: u32 = u32::MAX;
@@ -290,7 +290,7 @@ impl<T: Scalar> TreeLu<T> {
             .iter()
             .map(|&p| if p == NONE { NONE } else { pos[p as usize] })
             .collect();
-        let partition = parallel::Partition::new(n, &blocks, &parent_pos);
+        let partition = Box::new(parallel::Partition::new(n, &blocks, &parent_pos));
         let slots = stamps
             .iter()
             .map(|&(r, c)| {
@@ -730,10 +730,9 @@ mod tests {
             stamps.push((i, i));
             vals.push(2.0 + rnd());
             if i > 0 {
-                let p = if fan == 0 {
-                    (rnd() * i as f64) as usize
-                } else {
-                    (i - 1) / fan
+                let p = match (i - 1).checked_div(fan) {
+                    Some(p) => p,
+                    None => (rnd() * i as f64) as usize,
                 };
                 let c = 0.5 + rnd();
                 stamps.extend([(i, p), (p, i)]);
