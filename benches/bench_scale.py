@@ -36,6 +36,15 @@ times in brackets —
     python benches/bench_scale.py --depths 18 --configs o2-k --variables flow_in concentration_in
     python benches/bench_scale.py --depths 12 14 16 --methods rk4 --rk4-max-depth 16 \
         --rk4-fraction 0.01 --baseline /path/to/old        # before/after in the same run
+    python benches/bench_scale.py --depths 16 18 --configs flow o2-k \
+        --methods generalized-alpha --threads 1 2          # one run on 1 and 2 threads
+
+``--threads``: each configuration on each thread count (``simulate(threads=N)``); the
+``wall 1/N`` column is the wall-time speed-up of the run over the same tree on the first
+count. The memory floor of the machine is measured first in the same run: a STREAM-like
+copy of a 256 MB array (numpy, one thread), given as ns per 8-byte value copied; the
+``copies/seg-step`` column is a step's wall time per segment in units of that copy, i.e.
+how many doubles a step could have copied per segment in its time.
 
 O2/flow is per step (a partial RK4 cycle: the steps between the first progress check and the
 stop); "run O2/flow" is the whole ``simulate`` call, including the steady start, RK4's step
@@ -125,13 +134,16 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
     model = tree(spec["depth"], spec["per_vessel"], spec["config"])
     kw: dict[str, Any] = {"cycles": 1, "output_every": 0.01, "segments": False,
                           "method": spec["method"]}
+    if spec.get("threads"):
+        kw["threads"] = spec["threads"]
     if spec.get("variables"):
         # "all": every variable, also above the large-model threshold (oxyline.run)
         kw["variables"] = "all" if spec["variables"] == ["all"] else spec["variables"]
     if spec["method"] == "generalized-alpha":
         kw["dt"] = 1e-3
     fraction = spec.get("fraction", 1.0)
-    marks: list[tuple[float, float]] = []  # (simulated time, CPU time) at progress checks
+    # (simulated time, CPU time, wall time) at progress checks
+    marks: list[tuple[float, float, float]] = []
     # with ``fraction`` < 1, stop the run a fraction into the cycle (RK4's many small steps
     # on big trees): the progress callback (every 256 steps) sets the cancel event; the steps
     # are timed from the first check to the stop, so the start (steady state, step size) is
@@ -146,7 +158,7 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
         if marks and t < marks[-1][0]:
             marks.clear()  # the main pass after a first pass
             passes.append(t)
-        marks.append((t, time.process_time()))
+        marks.append((t, time.process_time(), time.perf_counter()))
         # (the RK4 pass only, not the generalized-alpha first pass of a closure that needs
         # the mean flow)
         main = bool(passes) or spec["config"] not in FIRST_PASS
@@ -177,6 +189,7 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
             # the main pass's steps between its first and last progress checks
             out["main_steps"] = round((marks[-1][0] - marks[0][0]) / dt)
             out["main_cpu"] = marks[-1][1] - marks[0][1]
+            out["main_wall"] = marks[-1][2] - marks[0][2]
         if fraction < 1.0 and len(marks) > 1:
             # a partial cycle: the timed steps only, no end-of-cycle mass balance
             out["steps"], out["step_cpu"] = out["main_steps"], out["main_cpu"]
@@ -242,6 +255,41 @@ def main_step_cpu(r: dict[str, Any]) -> float | None:
     return r["main_cpu"] / r["main_steps"] if r.get("main_steps") else None
 
 
+def copy_ns() -> float:
+    """A STREAM-like copy on this machine, now: ns per 8-byte value of copying a 256 MB array
+    into another (read + write, numpy, one thread; best of 5), measured in a child process
+    (Linux keeps a process's peak RSS across fork and exec: measured here, the 512 MB would
+    become every later child's peak)."""
+    p = subprocess.run([sys.executable, __file__, "--copy"], capture_output=True, text=True,
+                       check=True)
+    return float(p.stdout.strip().splitlines()[-1])
+
+
+def copy_in_this_process() -> float:
+    """`copy_ns`'s measurement."""
+    import numpy as np
+
+    a = np.ones(1 << 25)
+    b = np.empty_like(a)
+    best = math.inf
+    for _ in range(5):
+        t0 = time.perf_counter()
+        np.copyto(b, a)
+        best = min(best, time.perf_counter() - t0)
+    return 1e9 * best / a.size
+
+
+def thread_cells(r: dict[str, Any], first: dict[str, Any] | None, copy: float) -> str:
+    """The threads, wall speed-up over the first thread count's run of the same tree, and the
+    main pass's wall ns per segment-step in copies of one double (see the module doc)."""
+    speedup = (f"{(first['run_wall']) / r['run_wall']:.2f}" if first and first is not r
+               else "–")
+    wall = r.get("main_wall")
+    copies = (f"{1e9 * wall / (r['segments'] * r['main_steps']) / copy:.1f}"
+              if wall and r.get("main_steps") else "–")
+    return f" {r.get('threads') or 'all'} | {speedup} | {copies} |"
+
+
 def row(method: str, config: str, r: dict[str, Any], flow: dict[str, Any] | None) -> str:
     """One table row; ``flow``: the flow-only run of the same tree and method (for O2/flow)."""
     steps = r.get("steps", round(PERIOD / r["dt"]))
@@ -278,6 +326,7 @@ def print_slopes(rows: dict[tuple[str, str], list[dict[str, Any]]], min_segments
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--child", help=argparse.SUPPRESS)
+    ap.add_argument("--copy", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--quick", action="store_true",
                     help="depths 8-18 (gen-alpha flow/o2-k/o2-leveque to 1.05 M, Hill to "
                          "65 k, RK4 1-4 k): < 10 min on a quiet 2-core machine")
@@ -298,6 +347,9 @@ def main() -> None:
     ap.add_argument("--time-chunk", type=int, default=10,
                     help="rows per Zarr chunk with --zarr")
     ap.add_argument("--repeat", type=int, default=1)
+    ap.add_argument("--threads", type=int, nargs="+", default=[None],
+                    help="run every configuration on each of these thread counts "
+                         "(simulate(threads=N); default: the simulate() default, every core)")
     ap.add_argument("--variables", nargs="+",
                     help="output only these vessel variables (the run's output selection, "
                          "e.g. pressure_in flow_in concentration_in concentration_out; "
@@ -314,6 +366,9 @@ def main() -> None:
     if a.child:
         print(json.dumps(child(json.loads(a.child))))
         return
+    if a.copy:
+        print(copy_in_this_process())
+        return
     max_depth: dict[str, int] = {}
     if a.quick:
         a.depths, max_depth, a.rk4_max_depth = QUICK["depths"], QUICK["max_depth"], \
@@ -328,10 +383,12 @@ def main() -> None:
           + (f"; RK4 runs stop {a.rk4_fraction:g} into the cycle (ns/seg-step and O2/flow "
              "over the steps between the first progress check and the stop)"
              if a.rk4_fraction < 1.0 and "rk4" in a.methods else ""))
+    copy = copy_ns()
+    print(f"STREAM-like copy: {copy:.2f} ns per double (256 MB array, one thread)")
     print("| method | config | segments | steps | load s | run s | ns/seg-step run "
           "| ns/seg-step main pass | peak MB | O2/flow run | O2/flow step (main pass) "
-          "| load µs/seg | mass residual |")
-    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+          "| load µs/seg | mass residual | threads | wall 1/N | copies/seg-step |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     rows: dict[tuple[str, str], list[dict[str, Any]]] = {}
     skipped: list[str] = []
     for method in a.methods:
@@ -342,20 +399,27 @@ def main() -> None:
                 if depth > limit:
                     skipped.append(f"{method} {config} depth {depth}")
                     continue
-                spec = {"depth": depth, "per_vessel": a.per_vessel, "config": config,
-                        "method": method, "repeat": a.repeat, "zarr": a.zarr,
-                        "fraction": a.rk4_fraction if method == "rk4" else 1.0,
-                        "time_chunk": a.time_chunk, "variables": a.variables}
-                for build in ([None, a.baseline] if a.baseline else [None]):
+                firsts: dict[str | None, dict[str, Any]] = {}
+                for threads, build in [(t, b) for t in a.threads
+                                       for b in ([None, a.baseline] if a.baseline else [None])]:
+                    spec = {"depth": depth, "per_vessel": a.per_vessel, "config": config,
+                            "method": method, "repeat": a.repeat, "zarr": a.zarr,
+                            "fraction": a.rk4_fraction if method == "rk4" else 1.0,
+                            "time_chunk": a.time_chunk, "variables": a.variables,
+                            "threads": threads}
                     label = f"{method} (baseline)" if build else method
                     r = measure(spec, build)
                     if "error" in r:
                         print(f"| {label} | {config} | depth {depth} | failed: {r['error']} |")
                         continue
-                    if config == "flow":
+                    r["threads"] = threads
+                    first = firsts.setdefault(build, r)
+                    if config == "flow" and threads == a.threads[0]:
                         flows[build] = r
-                    print(row(label, config, r, flows.get(build)), flush=True)
-                    rows.setdefault((label, config), []).append(r)
+                    print(row(label, config, r, flows.get(build))
+                          + thread_cells(r, first, copy), flush=True)
+                    if threads == a.threads[0]:
+                        rows.setdefault((label, config), []).append(r)
     if skipped:
         print(f"\nnot run (--rk4-max-depth {a.rk4_max_depth}: RK4's automatic dt makes its step "
               f"count grow with the tree; --quick also stops Hill at depth 14): "

@@ -36,7 +36,10 @@ _SCALARS = ("version", "cycles_run", "steps", "dt", "periodic_error")
 #: settings of a run that control it, not its results: not stored, may change on resume
 #: the longest wall time between checkpoints (~32 years): any longer means never
 MAX_EVERY_SECONDS = 1e9
-RUN_CONTROL = frozenset({"progress", "cancel", "checkpoint", "checkpoint_every", "max_memory"})
+#: settings a resumed run may change: they change how it runs, not its results (``threads``:
+#: the same bits on any number of threads)
+RUN_CONTROL = frozenset({"progress", "cancel", "checkpoint", "checkpoint_every", "max_memory",
+                         "threads"})
 
 
 def parse_every(value: Any) -> dict[str, Any]:

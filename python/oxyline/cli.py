@@ -168,6 +168,8 @@ def _run_options(args: argparse.Namespace) -> dict[str, object]:
         raise InputError(f"{args.resume}: a resumed run keeps its checkpoint's settings (no "
                          "--cycles, --dt, --rtol, --until-periodic, --max-cycles, --output-every "
                          "or --method)")
+    if args.threads is not None:
+        overrides["threads"] = args.threads
     if args.checkpoint:
         overrides["checkpoint"] = args.checkpoint
     if args.checkpoint_every is not None:
@@ -581,6 +583,9 @@ def _add_run(p: argparse.ArgumentParser) -> None:
                    help="run until the cycle-to-cycle change is below TOL (relative), at least "
                         "--cycles and at most --max-cycles cycles; 'none' runs exactly --cycles "
                         "even if the model asks for periodicity")
+    p.add_argument("--threads", type=int, metavar="N",
+                   help="threads of the run (default: every core; 1: serial); the results are "
+                        "the same on any number of threads")
     p.add_argument("--rtol", type=float, metavar="TOL",
                    help="error control: generalized-alpha with a variable step keeping the "
                         "estimated error of every unknown within TOL (relative); excludes --dt")

@@ -60,3 +60,6 @@ class SimulateOptions(TypedDict, total=False):
     #: error control's absolute tolerance per kind of unknown, SI: ``{"pressure": Pa, "flow":
     #: m^3/s, "volume": m^3, "species": mol/m^3}`` (defaults 1, 1e-9, 1e-9, 1e-6)
     atol: dict[str, float] | None
+    #: threads of this run (default: every core; 1: serial); the results are the same bits
+    #: on any number of threads (docs/performance.md)
+    threads: int | None

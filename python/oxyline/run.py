@@ -403,7 +403,8 @@ def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     (s), ``output_cycles`` (``"last"``/``"all"``), ``until_periodic`` (relative tolerance),
     ``max_cycles``, ``rho_infty``, ``start`` (``"steady"``, ``"periodic"``,
     ``"zero"``), ``segments`` (bool),
-    ``progress`` (bool or callback ``f(t, t_end)``).
+    ``progress`` (bool or callback ``f(t, t_end)``), ``threads`` (default: every core; ``1``
+    serial; large trees split their elimination over them, with the same bits for any number).
 
     Error control (docs/physics.md §10): ``rtol`` (0 < rtol < 1) runs generalized-α with a
     variable step whose estimated error of every unknown stays within ``atol + rtol·|y|``

@@ -20,6 +20,7 @@ pub mod segment;
 pub mod sensitivity;
 pub mod simulate;
 pub mod sparse;
+pub mod threads;
 pub mod transport;
 pub mod waveform;
 pub mod womersley;

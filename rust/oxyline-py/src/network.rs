@@ -602,6 +602,7 @@ impl Network {
         let checkpointing = checkpoint_sink.is_some() || resume.is_some();
         let transport_on = shared.transport;
         let mut settings = shared.run_settings(period, output_every, keep_current_cycle)?;
+        let threads = shared.threads;
         let (probes, species_columns) = self.columns(shared, all_unknowns, extra_columns)?;
         settings.probes = probes;
         settings.species_columns = species_columns;
@@ -674,32 +675,36 @@ impl Network {
                     r.map_err(|e| pending.set(Some(e))).is_ok()
                 })
             };
-            let out = if checkpointing {
-                let mut ck = Checkpoints::new(every, &mut save, resume);
-                oxyline_core::run::simulate_checkpointed(
-                    &inner.1,
-                    species.as_mut(),
-                    &settings,
-                    chunk_sink.is_some().then_some(&mut sink),
-                    &mut ck,
-                    &mut cb,
-                )
-            } else if chunk_sink.is_some() {
-                oxyline_core::simulate_to_sink(
-                    &inner.1,
-                    species.as_mut(),
-                    &settings,
-                    &mut sink,
-                    &mut cb,
-                )
-            } else {
-                oxyline_core::simulate_with_transport(
-                    &inner.1,
-                    species.as_mut(),
-                    &settings,
-                    &mut cb,
-                )
+            // the run stays on this thread; its large loops use the pool of `threads`
+            let run = || {
+                if checkpointing {
+                    let mut ck = Checkpoints::new(every, &mut save, resume);
+                    oxyline_core::run::simulate_checkpointed(
+                        &inner.1,
+                        species.as_mut(),
+                        &settings,
+                        chunk_sink.is_some().then_some(&mut sink),
+                        &mut ck,
+                        &mut cb,
+                    )
+                } else if chunk_sink.is_some() {
+                    oxyline_core::simulate_to_sink(
+                        &inner.1,
+                        species.as_mut(),
+                        &settings,
+                        &mut sink,
+                        &mut cb,
+                    )
+                } else {
+                    oxyline_core::simulate_with_transport(
+                        &inner.1,
+                        species.as_mut(),
+                        &settings,
+                        &mut cb,
+                    )
+                }
             };
+            let out = oxyline_core::threads::with_threads(threads, run).and_then(|o| o);
             (out, pending.into_inner())
         });
         finished_run(py, outcome, pending)

@@ -14,7 +14,7 @@ use pyo3::types::PyDict;
 use std::collections::HashMap;
 
 /// The keywords of [`Shared`], in the order of the `_core.pyi` stub's `RunOptions`.
-pub(crate) const KEYS: [&str; 16] = [
+pub(crate) const KEYS: [&str; 17] = [
     "cycles",
     "method",
     "rho_infty",
@@ -31,6 +31,7 @@ pub(crate) const KEYS: [&str; 16] = [
     "vessels",
     "rtol",
     "atol",
+    "threads",
 ];
 
 /// The shared settings (defaults: those of `oxyline.simulate`'s documentation).
@@ -56,6 +57,9 @@ pub(crate) struct Shared {
     /// (`oxyline_core::integrate::adaptive::KINDS`; absent kinds keep the core's defaults).
     rtol: Option<f64>,
     atol: Option<HashMap<String, f64>>,
+    /// Threads of a single run (None: every core; see `oxyline_core::threads`). An ensemble
+    /// runs its variants one per thread and each variant serially.
+    pub threads: Option<usize>,
 }
 
 impl Default for Shared {
@@ -77,6 +81,7 @@ impl Default for Shared {
             vessels: None,
             rtol: None,
             atol: None,
+            threads: None,
         }
     }
 }
@@ -113,6 +118,7 @@ impl Shared {
                 "vessels" => s.vessels = arg(&key, &v)?,
                 "rtol" => s.rtol = arg(&key, &v)?,
                 "atol" => s.atol = atol_arg(&v)?,
+                "threads" => s.threads = arg(&key, &v)?,
                 _ => {
                     return Err(PyTypeError::new_err(format!(
                         "unexpected keyword argument '{key}'"

@@ -9,6 +9,7 @@ use super::newton::{self, Magnitude, NewtonProblem, jacobian_stamps, jacobian_va
 use crate::circuit::{Dae, Regime};
 use crate::error::{Error, Result};
 use crate::sparse::SparseLu;
+use rayon::prelude::*;
 use std::borrow::Cow;
 
 // moved to `newton`, kept here for the callers of `crate::genalpha::...`
@@ -328,26 +329,27 @@ impl GenAlpha<'_> {
         }
         // with y_new = y and ẏ_new = pred·ẏ: y_αf = y, ẏ_αm = ẏ (1 + αm (pred − 1))
         let c_am = 1.0 + am * (pred - 1.0);
-        let f = &self.dae.f;
-        let mut rmax = 0.0f64;
-        let (rows, values) = (&self.forcing.rows, &self.forcing.values);
-        let (mut next, mut next_row) = (0, rows.first().map_or(usize::MAX, |&r| r as usize));
-        for (i, r) in self.r.iter_mut().enumerate() {
-            // f_i as `Dae::forcing_into` gives it (0 on a row without forcing)
-            let fi = if i == next_row {
-                next += 1;
-                next_row = rows.get(next).map_or(usize::MAX, |&r| r as usize);
-                values[next - 1]
-            } else {
-                0.0
-            };
-            let mut v = fi - self.e[i] * yd[i] * c_am;
-            for k in f.ptr[i]..f.ptr[i + 1] {
-                v -= f.val[k] * y[f.col[k] as usize];
-            }
-            rmax = rmax.max(v.abs());
-            *r = v;
-        }
+        let pool = crate::threads::pool().filter(|_| self.r.len() >= PARALLEL_ROWS);
+        let residual = LinearResidual {
+            dae: self.dae,
+            e: &self.e,
+            forcing: &self.forcing,
+            y,
+            yd,
+            c_am,
+        };
+        // each row is independent, and the largest |r| is the same in any grouping: the same
+        // bits on any number of threads
+        let rmax = match &pool {
+            Some(pool) => pool.install(|| {
+                self.r
+                    .par_chunks_mut(PARALLEL_ROWS)
+                    .enumerate()
+                    .map(|(c, r)| residual.rows(c * PARALLEL_ROWS, r))
+                    .reduce(|| 0.0, f64::max)
+            }),
+            None => residual.rows(0, &mut self.r),
+        };
         if let Some(atol) = self.control.atol {
             if rmax < atol {
                 yd.iter_mut().for_each(|v| *v *= pred);
@@ -358,11 +360,64 @@ impl GenAlpha<'_> {
             return Err(singular(t_af, "non-finite solution"));
         }
         let gdt = gamma * dt;
-        for ((yi, ydi), ri) in y.iter_mut().zip(yd.iter_mut()).zip(&self.r) {
-            *yi += gdt * ri;
-            *ydi = pred * *ydi + ri;
+        let update = |y: &mut [f64], yd: &mut [f64], r: &[f64]| {
+            for ((yi, ydi), ri) in y.iter_mut().zip(yd.iter_mut()).zip(r) {
+                *yi += gdt * ri;
+                *ydi = pred * *ydi + ri;
+            }
+        };
+        match &pool {
+            Some(pool) => pool.install(|| {
+                y.par_chunks_mut(PARALLEL_ROWS)
+                    .zip(yd.par_chunks_mut(PARALLEL_ROWS))
+                    .zip(self.r.par_chunks(PARALLEL_ROWS))
+                    .for_each(|((y, yd), r)| update(y, yd, r))
+            }),
+            None => update(y, yd, &self.r),
         }
         Ok(())
+    }
+}
+
+/// Rows per task of a linear step's residual and update on the run's threads (and the least
+/// number of unknowns for which they are split at all).
+const PARALLEL_ROWS: usize = 1 << 15;
+
+/// The residual of a linear step at its predictor (see `step_linear`).
+struct LinearResidual<'r> {
+    dae: &'r Dae,
+    e: &'r [f64],
+    forcing: &'r SparseForcing,
+    y: &'r [f64],
+    yd: &'r [f64],
+    c_am: f64,
+}
+
+impl LinearResidual<'_> {
+    /// The rows `first..first + r.len()` into `r`; the largest |r|.
+    fn rows(&self, first: usize, r: &mut [f64]) -> f64 {
+        let (f, y, yd) = (&self.dae.f, self.y, self.yd);
+        let (rows, values) = (&self.forcing.rows, &self.forcing.values);
+        let mut next = rows.partition_point(|&row| (row as usize) < first);
+        let mut next_row = rows.get(next).map_or(usize::MAX, |&r| r as usize);
+        let mut rmax = 0.0f64;
+        for (i, r) in (first..).zip(r.iter_mut()) {
+            // f_i as `Dae::forcing_into` gives it (0 on a row without forcing)
+            let fi = if i == next_row {
+                next += 1;
+                next_row = rows.get(next).map_or(usize::MAX, |&r| r as usize);
+                values[next - 1]
+            } else {
+                0.0
+            };
+            let mut v = fi - self.e[i] * yd[i] * self.c_am;
+            for k in f.ptr[i]..f.ptr[i + 1] {
+                v -= f.val[k] * y[f.col[k] as usize];
+            }
+            rmax = rmax.max(v.abs());
+            *r = v;
+        }
+        rmax
     }
 }
 

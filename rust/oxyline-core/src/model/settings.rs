@@ -31,6 +31,7 @@ pub const OPTIONS: &[&str] = &[
     "cancel",
     "rtol",
     "atol",
+    "threads",
 ];
 /// How a run starts.
 pub const STARTS: &[&str] = &[
@@ -63,6 +64,8 @@ pub struct Settings {
     /// Error control's absolute tolerance per kind of unknown (SI); the run names an unknown
     /// kind.
     pub atol: Option<AbsoluteTolerances>,
+    /// Threads of one run (None: every core; 1: the serial code path; see `crate::threads`).
+    pub threads: Option<i64>,
 }
 
 /// A setting's value: given (by the caller or the file) or the default.
@@ -252,6 +255,11 @@ pub fn resolve<N: Node>(sim: &N, overrides: &N, period: Option<f64>) -> Result<S
     let rtol = get("rtol", Some(sim), "rtol", Val::Null);
     let atol = get("atol", Some(sim), "atol", Val::Null);
     let (rtol, atol) = tolerances(&rtol, &atol)?;
+    let (th, w) = get("threads", Some(sim), "threads", Val::Null);
+    let threads = match th.kind() {
+        Kind::Null => None,
+        _ => Some(integer(&th, &w, 1)?),
+    };
     Ok(Settings {
         period,
         cycles,
@@ -269,6 +277,7 @@ pub fn resolve<N: Node>(sim: &N, overrides: &N, period: Option<f64>) -> Result<S
         transport,
         rtol,
         atol,
+        threads,
     })
 }
 

@@ -47,6 +47,7 @@ pub const SIM_KEYS: &[&str] = &[
     "max_memory",
     "rtol",
     "atol",
+    "threads",
 ];
 pub const OUTPUT_KEYS: &[&str] = &["cycles", "every", "segments", "variables", "vessels"];
 /// Run methods a model's `simulation: method` may name.

@@ -1,0 +1,80 @@
+//! The threads of one run (`threads=`): a rayon pool that the large loops of a step (the tree
+//! elimination, the step's residual and update) split their work over, while the run itself —
+//! its time loop, callbacks and output — stays on the calling thread (so that Ctrl-C and the
+//! Python callbacks behave as in a serial run).
+//!
+//! Each run's pool is set for the calling thread only ([`with_threads`]); code that runs without
+//! one (Rust callers, ensemble variants, which already fill the cores) runs serially: the same
+//! code path as before threads existed. The parallel loops use fixed partitions and the serial
+//! order of every sum, so a run's results are bit-identical for any number of threads.
+
+use crate::error::{Error, Result};
+use rayon::{ThreadPool, ThreadPoolBuilder};
+use std::cell::RefCell;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock};
+
+thread_local! {
+    /// The pool of the run on this thread (None: serial).
+    static POOL: RefCell<Option<Arc<ThreadPool>>> = const { RefCell::new(None) };
+}
+
+/// One pool per thread count, built at the first run that asks for it and kept (building one
+/// starts its threads; a test suite or a study runs many small simulations).
+fn pool_of(threads: usize) -> Result<Arc<ThreadPool>> {
+    static POOLS: OnceLock<Mutex<HashMap<usize, Arc<ThreadPool>>>> = OnceLock::new();
+    let mut pools = POOLS
+        .get_or_init(Default::default)
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    if let Some(p) = pools.get(&threads) {
+        return Ok(p.clone());
+    }
+    let pool = ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .thread_name(|i| format!("oxyline-run-{i}"))
+        .build()
+        .map_err(|e| {
+            Error::model(
+                "simulation",
+                format!("threads: cannot start {threads}: {e}"),
+            )
+        })?;
+    let pool = Arc::new(pool);
+    pools.insert(threads, pool.clone());
+    Ok(pool)
+}
+
+/// The number of threads a run uses for `threads` (None: every core the process may use).
+pub fn resolve(threads: Option<usize>) -> usize {
+    threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+}
+
+/// Run `f` with the run pool of `threads` threads set for this thread (None: every core;
+/// 1: no pool, the serial code path). The previous setting is restored afterwards.
+pub fn with_threads<R>(threads: Option<usize>, f: impl FnOnce() -> R) -> Result<R> {
+    if threads == Some(0) {
+        return Err(Error::model(
+            "simulation",
+            "threads must be an integer >= 1, got 0".to_owned(),
+        ));
+    }
+    let n = resolve(threads);
+    let pool = if n > 1 { Some(pool_of(n)?) } else { None };
+    let previous = POOL.with(|p| p.replace(pool));
+    // restored also if `f` panics (the binding turns a panic into an error and goes on)
+    struct Restore(Option<Option<Arc<ThreadPool>>>);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            let previous = self.0.take().flatten();
+            POOL.with(|p| *p.borrow_mut() = previous);
+        }
+    }
+    let _restore = Restore(Some(previous));
+    Ok(f())
+}
+
+/// The run pool of this thread, if it has more than one thread.
+pub fn pool() -> Option<Arc<ThreadPool>> {
+    POOL.with(|p| p.borrow().clone())
+}
