@@ -5,6 +5,7 @@
 //! a step: it is refactorised once per step, and again per Newton iteration only when stenoses
 //! make it depend on the iterate.
 
+use super::leaves::Leaves;
 use super::newton::{self, Magnitude, NewtonProblem, jacobian_stamps, jacobian_values};
 use crate::circuit::{Dae, Regime};
 use crate::error::{Error, Result};
@@ -25,6 +26,9 @@ pub struct GenAlpha<'a> {
     gamma: f64,
     control: NewtonControl,
     lu: SparseLu,
+    /// The trailing leaf unknowns (friction cells) of a linear circuit, condensed out of `lu`
+    /// (`super::leaves`); None: `lu` is the whole iteration matrix.
+    leaves: Option<Leaves>,
     /// Number of values of the iteration matrix (the stamps of `jacobian_stamps`).
     n_stamps: usize,
     /// For each chain-rule capacitor, the value index of its F entry (node row, flow column).
@@ -74,7 +78,6 @@ impl<'a> GenAlpha<'a> {
         let af = 1.0 / (1.0 + rho_inf);
         let gamma = 0.5 + am - af;
         let stamps = jacobian_stamps(dae);
-        let lu = SparseLu::analyse(dae.n, &stamps)?;
         // (the node row of a capacitor holds its R branch's flow: the incidence)
         let chain_flow_entry = dae
             .chain_rule
@@ -102,6 +105,13 @@ impl<'a> GenAlpha<'a> {
         } else {
             n
         };
+        let (leaves, lu) = match (nonlinear == 0)
+            .then(|| Leaves::find(dae, &e, &stamps))
+            .flatten()
+        {
+            Some((leaves, lu)) => (Some(leaves), lu),
+            None => (None, SparseLu::analyse(dae.n, &stamps)?),
+        };
         Ok(GenAlpha {
             dae,
             e,
@@ -112,6 +122,7 @@ impl<'a> GenAlpha<'a> {
             gamma,
             control,
             lu,
+            leaves,
             n_stamps: stamps.len(),
             chain_flow_entry,
             factored: false,
@@ -150,7 +161,13 @@ impl<'a> GenAlpha<'a> {
         }
         self.dae
             .varying_jacobian(c, time, self.regime, &mut kvals[nf..nf + self.dae.n]);
-        self.lu.factor(&kvals).map_err(|m| singular(time, &m))?;
+        // (ẏ's weight in a linear step's residual, `step_linear`)
+        let c_am = 1.0 + self.am * ((self.gamma - 1.0) / self.gamma - 1.0);
+        match &mut self.leaves {
+            Some(leaves) => leaves.factor(&mut self.lu, &kvals, c_am),
+            None => self.lu.factor(&kvals),
+        }
+        .map_err(|m| singular(time, &m))?;
         self.factored = true;
         Ok(())
     }
@@ -179,7 +196,11 @@ impl<'a> GenAlpha<'a> {
         for (x, e) in v.iter_mut().zip(self.e.iter()) {
             *x *= self.am * e;
         }
-        if !self.lu.solve_in_place(v) {
+        let solved = match &self.leaves {
+            Some(leaves) => leaves.solve_in_place(&self.lu, v),
+            None => self.lu.solve_in_place(v),
+        };
+        if !solved {
             v.copy_from_slice(&saved);
         }
         self.filter_scratch = saved;
@@ -332,7 +353,8 @@ impl GenAlpha<'_> {
         let mut rmax = 0.0f64;
         let (rows, values) = (&self.forcing.rows, &self.forcing.values);
         let (mut next, mut next_row) = (0, rows.first().map_or(usize::MAX, |&r| r as usize));
-        for (i, r) in self.r.iter_mut().enumerate() {
+        let start = self.leaves.as_ref().map_or(self.r.len(), |l| l.start);
+        for (i, r) in self.r[..start].iter_mut().enumerate() {
             // f_i as `Dae::forcing_into` gives it (0 on a row without forcing)
             let fi = if i == next_row {
                 next += 1;
@@ -348,17 +370,29 @@ impl GenAlpha<'_> {
             rmax = rmax.max(v.abs());
             *r = v;
         }
+        if let Some(leaves) = &self.leaves {
+            rmax = rmax.max(leaves.residual_and_fold(y, yd, &mut self.r));
+        }
         if let Some(atol) = self.control.atol {
             if rmax < atol {
                 yd.iter_mut().for_each(|v| *v *= pred);
                 return Ok(());
             }
         }
-        if !self.lu.solve_in_place(&mut self.r) {
+        if !self.lu.solve_in_place(&mut self.r[..start]) {
             return Err(singular(t_af, "non-finite solution"));
         }
         let gdt = gamma * dt;
-        for ((yi, ydi), ri) in y.iter_mut().zip(yd.iter_mut()).zip(&self.r) {
+        if let Some(leaves) = &self.leaves {
+            if !leaves.back_substitute_and_update(&self.r, y, yd, gdt, pred) {
+                return Err(singular(t_af, "non-finite solution"));
+            }
+        }
+        for ((yi, ydi), ri) in y[..start]
+            .iter_mut()
+            .zip(yd[..start].iter_mut())
+            .zip(&self.r[..start])
+        {
             *yi += gdt * ri;
             *ydi = pred * *ydi + ri;
         }
