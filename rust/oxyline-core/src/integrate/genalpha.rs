@@ -371,7 +371,8 @@ impl GenAlpha<'_> {
             *r = v;
         }
         if let Some(leaves) = &self.leaves {
-            rmax = rmax.max(leaves.residual_and_fold(y, yd, &mut self.r));
+            let with_max = self.control.atol.is_some();
+            rmax = rmax.max(leaves.residual_and_fold(y, yd, &mut self.r, with_max));
         }
         if let Some(atol) = self.control.atol {
             if rmax < atol {

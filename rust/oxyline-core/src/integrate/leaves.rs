@@ -216,17 +216,33 @@ impl Leaves {
 
     /// The leaves' residuals −E ẏ c_am − F y (no forcing on a leaf row; c_am as given to
     /// `factor`) into `r[start..]`, folded into their parents' residuals (which `r[..start]`
-    /// must hold); returns the largest magnitude of the leaves' residuals.
-    pub fn residual_and_fold(&self, y: &[f64], yd: &[f64], r: &mut [f64]) -> f64 {
+    /// must hold); returns the largest magnitude of the leaves' residuals if `with_max`
+    /// (else 0: the running maximum is a serial chain the step only needs for an absolute
+    /// tolerance).
+    pub fn residual_and_fold(&self, y: &[f64], yd: &[f64], r: &mut [f64], with_max: bool) -> f64 {
         let (head, tail) = r.split_at_mut(self.start);
         let (yl, ydl) = (&y[self.start..], &yd[self.start..]);
         let mut rmax = 0.0f64;
+        // the cells of one branch are consecutive: their fold is summed before it is stored
+        // (one store per parent instead of a store-to-load chain through it)
+        let (mut parent, mut fold) = (usize::MAX, 0.0);
         for (((rj, l), &yj), &ydj) in tail.iter_mut().zip(&self.leaf).zip(yl).zip(ydl) {
             let p = l.parent as usize;
             let v = -l.mass * ydj - l.a * yj - l.b * y[p];
-            rmax = rmax.max(v.abs());
-            head[p] -= l.down * v;
+            if p != parent {
+                if parent != usize::MAX {
+                    head[parent] -= fold;
+                }
+                (parent, fold) = (p, 0.0);
+            }
+            fold += l.down * v;
             *rj = v;
+        }
+        if parent != usize::MAX {
+            head[parent] -= fold;
+        }
+        if with_max {
+            rmax = tail.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         }
         rmax
     }
