@@ -354,7 +354,14 @@ impl GenAlpha<'_> {
         let (rows, values) = (&self.forcing.rows, &self.forcing.values);
         let (mut next, mut next_row) = (0, rows.first().map_or(usize::MAX, |&r| r as usize));
         let start = self.leaves.as_ref().map_or(self.r.len(), |l| l.start);
-        for (i, r) in self.r[..start].iter_mut().enumerate() {
+        // each row's F entries (a branch's without its condensed cells', `Leaves::row_end`,
+        // unless an absolute tolerance judges the whole rows' residuals)
+        let with_max = self.control.atol.is_some();
+        let row_end = match &self.leaves {
+            Some(l) if !with_max => &l.row_end[..],
+            _ => &f.ptr[1..],
+        };
+        for ((i, r), &end) in self.r[..start].iter_mut().enumerate().zip(row_end) {
             // f_i as `Dae::forcing_into` gives it (0 on a row without forcing)
             let fi = if i == next_row {
                 next += 1;
@@ -364,14 +371,13 @@ impl GenAlpha<'_> {
                 0.0
             };
             let mut v = fi - self.e[i] * yd[i] * c_am;
-            for k in f.ptr[i]..f.ptr[i + 1] {
+            for k in f.ptr[i]..end {
                 v -= f.val[k] * y[f.col[k] as usize];
             }
             rmax = rmax.max(v.abs());
             *r = v;
         }
         if let Some(leaves) = &self.leaves {
-            let with_max = self.control.atol.is_some();
             rmax = rmax.max(leaves.residual_and_fold(y, yd, &mut self.r, with_max));
         }
         if let Some(atol) = self.control.atol {

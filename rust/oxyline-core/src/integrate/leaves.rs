@@ -24,6 +24,10 @@ pub struct Leaves {
     leaf: Vec<Leaf>,
     /// The α_m weight folded into the leaves' `mass` (`factor`).
     c_am: f64,
+    /// Per row of the reduced system: the end of its F entries without the leaves' columns
+    /// (a branch's row ends with its cells' entries), so the step's residual pass reads
+    /// neither them nor the leaves' values; the leaves add F_pj y_j to their fold instead.
+    pub row_end: Vec<usize>,
     /// Per full stamp: its index among the reduced stamps, or `NONE` (a leaf's stamp).
     reduced_slot: Vec<u32>,
     /// The leaf stamps: (stamp index, leaf << 2 | kind), kind `JJ`, `JP` or `PJ`.
@@ -40,6 +44,9 @@ pub struct Leaves {
 #[derive(Clone, Copy, Default)]
 struct Leaf {
     parent: u32,
+    /// F_pj, the leaf's term in its parent's row, if `Leaves::row_end` leaves it out of the
+    /// row (else 0).
+    f_pj: f64,
     /// E_j times the step's α_m weight of ẏ in its residual (`factor`'s `c_am`).
     mass: f64,
     a: f64,
@@ -142,6 +149,31 @@ impl Leaves {
             }
         }
         let parent_diag: Vec<u32> = leaf.iter().map(|l| diag[l.parent as usize]).collect();
+        // a row's leaf entries must be its last ones (and single) to be cut off its end
+        let mut row_end = dae.f.ptr[1..=start].to_vec();
+        let mut cut = true;
+        for (i, end) in row_end.iter_mut().enumerate() {
+            let lo = dae.f.ptr[i];
+            while *end > lo && dae.f.col[*end - 1] as usize >= start {
+                *end -= 1;
+            }
+            cut &= (lo..*end).all(|k| (dae.f.col[k] as usize) < start);
+        }
+        if cut {
+            for (i, &end) in row_end.iter().enumerate() {
+                for k in end..dae.f.ptr[i + 1] {
+                    let j = dae.f.col[k] as usize - start;
+                    if leaf[j].parent as usize != i || leaf[j].f_pj != 0.0 {
+                        cut = false;
+                    }
+                    leaf[j].f_pj = dae.f.val[k];
+                }
+            }
+        }
+        if !cut {
+            row_end.copy_from_slice(&dae.f.ptr[1..=start]);
+            leaf.iter_mut().for_each(|l| l.f_pj = 0.0);
+        }
         if parent_diag.contains(&NONE) {
             return None;
         }
@@ -150,6 +182,7 @@ impl Leaves {
             start,
             leaf,
             c_am: 1.0,
+            row_end,
             reduced_slot,
             leaf_stamps,
             parent_diag,
@@ -215,10 +248,11 @@ impl Leaves {
     }
 
     /// The leaves' residuals −E ẏ c_am − F y (no forcing on a leaf row; c_am as given to
-    /// `factor`) into `r[start..]`, folded into their parents' residuals (which `r[..start]`
-    /// must hold); returns the largest magnitude of the leaves' residuals if `with_max`
-    /// (else 0: the running maximum is a serial chain the step only needs for an absolute
-    /// tolerance).
+    /// `factor`) into `r[start..]`, folded into their parents' residuals, which `r[..start]`
+    /// must hold: over whole rows if `with_max`, else over `row_end` (the leaves' own terms
+    /// F_pj y_j are then added here). Returns the largest magnitude of the leaves' residuals
+    /// if `with_max` (else 0: the running maximum is a serial chain the step only needs for
+    /// an absolute tolerance).
     pub fn residual_and_fold(&self, y: &[f64], yd: &[f64], r: &mut [f64], with_max: bool) -> f64 {
         let (head, tail) = r.split_at_mut(self.start);
         let (yl, ydl) = (&y[self.start..], &yd[self.start..]);
@@ -226,6 +260,7 @@ impl Leaves {
         // the cells of one branch are consecutive: their fold is summed before it is stored
         // (one store per parent instead of a store-to-load chain through it)
         let (mut parent, mut fold) = (usize::MAX, 0.0);
+        let cut = if with_max { 0.0 } else { 1.0 };
         for (((rj, l), &yj), &ydj) in tail.iter_mut().zip(&self.leaf).zip(yl).zip(ydl) {
             let p = l.parent as usize;
             let v = -l.mass * ydj - l.a * yj - l.b * y[p];
@@ -235,7 +270,7 @@ impl Leaves {
                 }
                 (parent, fold) = (p, 0.0);
             }
-            fold += l.down * v;
+            fold += cut * l.f_pj * yj + l.down * v;
             *rj = v;
         }
         if parent != usize::MAX {
