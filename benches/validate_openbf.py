@@ -260,8 +260,8 @@ def friction_comparison(models: tuple[str, ...] = ("adan56", "circle_of_willis")
     for name, by in runs.items():
         pv = {label: per_vessel(rows) for label, rows in by.items()}
         out += ["", f"#### {name}, per vessel (worst of x = 0, 0.25, 0.5, 0.75, 1; %)", "",
-                "| vessel | mean P Pois. | mean P Wom. | pulse P Pois. | pulse P Wom. | "
-                "waveform Pois. | waveform Wom. |", "|---|---:|---:|---:|---:|---:|---:|"]
+                ("| vessel | mean P Pois. | mean P Wom. | pulse P Pois. | pulse P Wom. | "
+                 "waveform Pois. | waveform Wom. |"), "|---|---:|---:|---:|---:|---:|---:|"]
         a, b = pv["Poiseuille"], pv["Womersley"]
         for lab in a:
             out.append(f"| {lab} | {100 * a[lab]['mean_p']:+.2f} | {100 * b[lab]['mean_p']:+.2f} "

@@ -589,7 +589,7 @@ def to_native_dict(path: PathLike, *, linearize: str | float = "mean", taper: st
         "blood": {"density": rho, "viscosity": mu_eff},
         "arrangement": "inverted-L",
         "inertance_profile": "flat",
-        "wall_friction": wall_friction,
+        **({"wall_friction": wall_friction} if wall_friction != "poiseuille" else {}),
         "segmentation": {"max_length": float(max_segment_length)},
         "period": period,
         "vessels": [_native_vessel(v, *p_ends[id(v)], viscoelastic) for v in vessels],
