@@ -6,8 +6,9 @@ file with :func:`oxyline.io.openbf.read_openbf` in openBF-compatible mode, run o
 points (x = 0, 0.25, 0.5, 0.75, 1 of every vessel) and times, and compare mean pressure,
 systolic, diastolic and pulse pressure, and mean flow.
 
-Run ``python benches/validate_openbf.py`` to rewrite the table in ``docs/validation.md``'s data
-file (``docs/validation_table.md``) and the figure ``docs/figures/adan56_pressure.png``.
+Run ``python benches/validate_openbf.py`` to rewrite the tables in ``docs/validation.md`` and
+the figure ``docs/figures/adan56_pressure.png``; ``--friction`` rewrites the Poiseuille vs
+Womersley tables (ADAN56 and the circle of Willis, per vessel).
 """
 
 from __future__ import annotations
@@ -60,8 +61,9 @@ def simulate(model: str, root: Path = OPENBF, cycles: int | None = None,
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         m = read_openbf(root / MODELS[model], **opts)
-    if cycles is None:
-        res = oxyline.simulate(m, until_periodic=1e-6, cycles=5, max_cycles=200)
+    if cycles is None:  # the periodic start (exact for a linear circuit) then >= 3 cycles
+        res = oxyline.simulate(m, until_periodic=1e-6, cycles=3, max_cycles=200,
+                               start="periodic")
     else:
         res = oxyline.simulate(m, start="zero", cycles=cycles, until_periodic=None)
     return m, res
@@ -205,6 +207,79 @@ def figure(c: dict[str, Any], out: Path) -> None:
     plt.close(fig)
 
 
+def waveform_error(rows: list[dict[str, Any]], c: dict[str, Any]) -> None:
+    """Add to each row ``wave_err``: the RMS difference of the pressure waveforms over the
+    cycle, relative to openBF's pulse pressure at that point."""
+    t, P, res, m = c["t"], c["P"], c["res"], c["model"]
+    cache: dict[str, np.ndarray] = {}
+    for r in rows:
+        lab, j = r["vessel"], POSITIONS.index(r["x"])
+        if lab not in cache:
+            cache[lab] = sample(res, lab, "P", t, m.period)
+        d = cache[lab][:, j] - P[lab][:, j]
+        r["wave_err"] = float(np.sqrt(np.mean(d**2)) / r["pp_ref"])
+
+
+def per_vessel(rows: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
+    """Per vessel, the signed error of largest magnitude over its five points: mean and pulse
+    pressure, and the largest waveform error (``wave_err``)."""
+    out: dict[str, dict[str, float]] = {}
+    for r in rows:
+        v = out.setdefault(r["vessel"], {"mean_p": 0.0, "pp": 0.0, "wave": 0.0})
+        for key in ("mean_p", "pp"):
+            if abs(r[f"{key}_err"]) > abs(v[key]):
+                v[key] = r[f"{key}_err"]
+        v["wave"] = max(v["wave"], r.get("wave_err", float("nan")))
+    return out
+
+
+FRICTIONS = {"Poiseuille": {}, "Womersley": {"wall_friction": "womersley"}}
+
+
+def friction_comparison(models: tuple[str, ...] = ("adan56", "circle_of_willis")) -> str:
+    """Poiseuille vs Womersley segments against openBF, per model and per vessel (markdown)."""
+    runs: dict[str, dict[str, list[dict[str, Any]]]] = {}
+    for name in models:
+        runs[name] = {}
+        for label, opts in FRICTIONS.items():
+            c = compare(name, **opts)
+            waveform_error(c["rows"], c)
+            runs[name][label] = c["rows"]
+            print(f"{name} {label}: {summary(c['rows'])}", flush=True)
+    head = ("| model | friction | mean P max / median | pulse P max / median | "
+            "waveform RMS / pulse P max / median |")
+    out = [head, "|---|---|---:|---:|---:|"]
+    for name, by in runs.items():
+        for label, rows in by.items():
+            s = summary(rows)
+            w = np.array([r["wave_err"] for r in rows])
+            out.append(f"| {name} | {label} | {100 * s['mean_p'][0]:.2f} / "
+                       f"{100 * s['mean_p'][1]:.2f} | {100 * s['pp'][0]:.2f} / "
+                       f"{100 * s['pp'][1]:.2f} | {100 * w.max():.2f} / "
+                       f"{100 * np.median(w):.2f} |")
+    for name, by in runs.items():
+        pv = {label: per_vessel(rows) for label, rows in by.items()}
+        out += ["", f"#### {name}, per vessel (worst of x = 0, 0.25, 0.5, 0.75, 1; %)", "",
+                ("| vessel | mean P Pois. | mean P Wom. | pulse P Pois. | pulse P Wom. | "
+                 "waveform Pois. | waveform Wom. |"), "|---|---:|---:|---:|---:|---:|---:|"]
+        a, b = pv["Poiseuille"], pv["Womersley"]
+        for lab in a:
+            out.append(f"| {lab} | {100 * a[lab]['mean_p']:+.2f} | {100 * b[lab]['mean_p']:+.2f} "
+                       f"| {100 * a[lab]['pp']:+.2f} | {100 * b[lab]['pp']:+.2f} | "
+                       f"{100 * a[lab]['wave']:.2f} | {100 * b[lab]['wave']:.2f} |")
+    return "\n".join(out)
+
+
+def _replace_block(marker: str, gen: str) -> None:
+    doc = REPO / "docs" / "validation.md"
+    text = doc.read_text()
+    a, b = f"<!-- GENERATED: {marker} -->", "<!-- END GENERATED -->"
+    if a in text:
+        end = text.index(b, text.index(a))
+        text = text[: text.index(a) + len(a)] + "\n" + gen + "\n" + text[end:]
+        doc.write_text(text)
+
+
 def main() -> None:
     """Recompute everything in docs/validation.md (between the GENERATED markers) and the
     figure."""
@@ -230,17 +305,15 @@ def main() -> None:
     gen = "\n".join(out)
     print(gen)
     figure(periodic["adan56"], REPO / "docs" / "figures" / "adan56_pressure.png")
-    doc = REPO / "docs" / "validation.md"
-    if doc.exists():
-        text = doc.read_text()
-        a, b = "<!-- GENERATED: benches/validate_openbf.py -->", "<!-- END GENERATED -->"
-        if a in text and b in text:
-            text = text[: text.index(a) + len(a)] + "\n" + gen + "\n" + text[text.index(b):]
-            doc.write_text(text)
+    _replace_block("benches/validate_openbf.py", gen)
 
 
 if __name__ == "__main__":
-    if sys.argv[1:]:
+    if sys.argv[1:] == ["--friction"]:
+        gen = friction_comparison()
+        print(gen)
+        _replace_block("benches/validate_openbf.py --friction", gen)
+    elif sys.argv[1:]:
         for name in sys.argv[1:]:
             print(name, summary(compare(name)["rows"]))
     else:

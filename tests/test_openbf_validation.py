@@ -127,3 +127,57 @@ def test_same_transient_as_openbf_closes_the_ibif_pressure_gap() -> None:
     assert not bad, bad
     bad = _worst(rows, "mean_q", 0.003)
     assert not bad, bad
+
+
+# Womersley segments (``wall_friction="womersley"``) against openBF. openBF's friction is
+# quasi-steady (2 (gamma + 2) pi mu Q / A^2) with a flat-profile inertia: the reference has no
+# frequency-dependent friction, so these bound how far the Womersley option moves oxyline from
+# openBF's 1-D results (docs/validation.md, "Poiseuille against Womersley segments").
+
+
+@functools.cache
+def _compare_womersley(model: str) -> list[dict[str, Any]]:
+    c = V.compare(model, root=OPENBF, wall_friction="womersley")
+    V.waveform_error(c["rows"], c)
+    return c["rows"]
+
+
+@pytest.mark.parametrize("model", ["cca", "ibif"])
+def test_womersley_segments_against_openbf_small_cases(model: str) -> None:
+    """Single carotid and aortic bifurcation: mean pressure within 2 % (measured 0.21 % and
+    1.40 %, as with Poiseuille segments), pulse pressure within 2 % (0.80 %, 0.89 %), mean
+    flow within 1 % (0.18 %, 0.65 %), pressure waveform RMS within 3 % of the pulse pressure
+    (1.1 %, 2.4 %): large, short vessels, where friction is a small part of the impedance."""
+    rows = _compare_womersley(model)
+    for key, tol in (("mean_p", 0.02), ("pp", 0.02), ("mean_q", 0.01)):
+        bad = _worst(rows, key, tol)
+        assert not bad, f"{model} ({key}): {bad}"
+    assert max(r["wave_err"] for r in rows) < 0.03
+
+
+@pytest.mark.slow
+def test_womersley_segments_against_openbf_adan56() -> None:
+    """ADAN56 (~1 min): mean pressure within 2 % everywhere (measured 1.62 %); pulse pressure
+    within 20 % everywhere (17.6 %, at the anterior tibial ends) with a median below 5 %
+    (4.1 %). Womersley's boundary-layer friction damps the pulse along the long, narrow leg
+    arteries more than openBF's quasi-steady friction: oxyline's tibial pulse pressure falls
+    below its Poiseuille value there."""
+    rows = _compare_womersley("adan56")
+    assert not _worst(rows, "mean_p", 0.02)
+    pp = np.array([abs(r["pp_err"]) for r in rows])
+    assert pp.max() <= 0.20 and np.median(pp) <= 0.05, (pp.max(), np.median(pp))
+    pois = {(r["vessel"], r["x"]): r for r in _compare("adan56")}
+    for side in ("L", "R"):
+        key = (f"anterior_tibial_{side}", 1.0)
+        wom = next(r for r in rows if (r["vessel"], r["x"]) == key)
+        assert wom["pp_ox"] < pois[key]["pp_ox"]
+
+
+@pytest.mark.slow
+def test_womersley_segments_against_openbf_circle_of_willis() -> None:
+    """Circle of Willis: mean pressure within 1 % (measured 0.48 %), pulse pressure within 7 %
+    (5.7 %), waveform RMS within 10 % of the pulse pressure (7.2 %)."""
+    rows = _compare_womersley("circle_of_willis")
+    assert not _worst(rows, "mean_p", 0.01)
+    assert not _worst(rows, "pp", 0.07)
+    assert max(r["wave_err"] for r in rows) < 0.10

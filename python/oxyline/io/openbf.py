@@ -48,6 +48,22 @@ inlet
     inflow has two corrupted exponents; it is recognised and repaired with the STARFiSh/pylsewave
     values (with a warning) unless ``repair_inlet=False``.
 
+``visco-elastic: true``
+    openBF v2's Kelvin-Voigt wall: P = Pext + beta' (sqrt(A/A0) - 1) + Gamma/(A0 sqrt(A)) dA/dt
+    with Gamma = b0 + b1/(2 R0), b0 = 0.6 kg/s, b1 = 1.5e-3 kg m/s (its built-in law, the
+    parameters of Mynard & Smolich 2015), which openBF solves as the momentum diffusion
+    dQ/dt = Cv d2Q/dx2, Cv = Gamma/(rho sqrt(A0)). oxyline's ``wall_viscosity`` eta puts
+    R_v = (eta/E)/C behind each segment's compliance (docs/physics.md section 1.13): the shunt
+    admittance i w C'/(1 + i w tau). Both give the same linear wave number when
+    tau = eta/E = Cv rho C'/A0 = 2 Gamma/(beta' sqrt(A0)), i.e. eta = 2 Gamma (1 - nu^2)/(sqrt(pi)
+    h0) (independent of the linearisation pressure: C' and Gamma/(A0 sqrt(A)) scale alike).
+    Along a taper tau is averaged with the compliance as weight (the rule of a junction, where
+    shares of different tau meet). ``viscoelastic=True`` applies openBF's law to every vessel,
+    ``False`` ignores the key (elastic walls).
+``wall_friction``
+    ``"poiseuille"`` (default: openBF's quasi-steady friction) or ``"womersley"`` (oxyline's
+    frequency-dependent friction and inertia, docs/physics.md section 1.12; not openBF's).
+
 ``taper="openbf"`` reproduces another openBF v2 behaviour: its radius along a tapered vessel is
 R0_i = Rp + (Rd - Rp)/(M - 1) * (i - 1) * dx (a per-cell slope multiplied by a length in metres),
 so the vessel keeps R0 ~= Rp over its whole length (the openBF ADAN56 reference areas confirm
@@ -80,6 +96,10 @@ PathLike = str | os.PathLike[str]
 POISSON = 0.5  # openBF's sigma
 # ADAN56 inflow: the two corrupted rows of the openBF copy and the clean STARFiSh/pylsewave values
 ADAN56_INLET_REPAIR = {0.437555: (-2.10178e-55, -2.10178e-05), 0.515992: (5.25444e-66, 5.25444e-06)}
+
+# openBF v2's wall viscosity law Gamma = b0 + b1/(2 R0) [kg/s] (Mynard & Smolich 2015)
+VISCO_B0 = 0.6
+VISCO_B1 = 1.5e-3
 
 VESSEL_KEYS = {
     "label", "sn", "tn", "L", "M", "R0", "Rp", "Rd", "E", "h0", "Pext", "Pout", "gamma_profile",
@@ -228,6 +248,10 @@ class _Vessel:
             g = v["gamma profile"]
         self.gamma = _num(g, where, "gamma_profile") if g is not None else 2.0
         self.rho = rho
+        ve = v.get("visco-elastic", False)
+        if not isinstance(ve, bool):
+            raise ModelError(f"{where}: 'visco-elastic' must be true or false, got {ve!r}")
+        self.viscoelastic = ve
 
     def R0(self, x: np.ndarray) -> np.ndarray:
         return self.r0[0] + (self.r0[1] - self.r0[0]) * x / self.length
@@ -255,6 +279,17 @@ class _Vessel:
         x = np.array(self.length)
         c0 = math.sqrt(float(self.beta(x)) / (2.0 * self.rho))
         return self.rho * c0 / (math.pi * float(self.R0(x)) ** 2)
+
+    def wall_viscosity(self) -> float:
+        """Kelvin-Voigt viscosity eta [Pa s] of openBF's viscoelastic wall: E times the
+        compliance-weighted mean of tau = 2 Gamma/(beta' sqrt(A0)) along the vessel."""
+        x = 0.5 * self.length * (_GL_X + 1.0)
+        r0 = self.R0(x)
+        gamma = VISCO_B0 + VISCO_B1 / (2.0 * r0)
+        beta = self.beta(x)
+        tau = 2.0 * gamma / (beta * math.sqrt(math.pi) * r0)
+        weight = _GL_W * r0**2 / beta  # dA/dP = 2 A0/beta' (the common factor 2 pi dropped)
+        return float(self.E * np.sum(weight * tau) / np.sum(weight))
 
     def linearised(self, p_in: float, p_out: float) -> tuple[float, float, float]:
         """(r_in, r_out, compliance-equivalent wall thickness) at pressures p_in -> p_out."""
@@ -323,8 +358,6 @@ def _vessels(data: Mapping[str, Any], p: Path, taper: str, openbf_compat: bool, 
                 _warn(f"{where}: key '{k}' is not an openBF key; ignored")
         if "gamma profile" in v and "gamma_profile" not in v:
             spaced.append(label)
-        if v.get("visco-elastic"):
-            _warn(f"{where}: visco-elastic wall ignored (linear elastic model)")
         seen[label] += 1
         if seen[label] > 1:
             new = f"{label}_{seen[label]}"
@@ -462,8 +495,11 @@ def _outlets(vessels: list[_Vessel], raw: list[Mapping[str, Any]], wk2: str
     return bcs, terminal_resistance
 
 
-def _native_vessel(v: _Vessel, p_in: float, p_out: float) -> dict[str, Any]:
-    """The native vessel of ``v`` linearised at the end pressures ``p_in``, ``p_out``."""
+def _native_vessel(v: _Vessel, p_in: float, p_out: float,
+                   viscoelastic: bool | None = None) -> dict[str, Any]:
+    """The native vessel of ``v`` linearised at the end pressures ``p_in``, ``p_out``; with
+    a viscoelastic wall (the file's ``visco-elastic``, or ``viscoelastic`` when not None)
+    openBF's wall viscosity."""
     r_in, r_out, h_eff = v.linearised(p_in, p_out)
     if v.h0_given is not None:
         h_file = f"h0 {v.h0_given:.4g} m"
@@ -480,19 +516,27 @@ def _native_vessel(v: _Vessel, p_in: float, p_out: float) -> dict[str, Any]:
     else:
         nv["radius_in"], nv["radius_out"] = r_in, r_out
     nv.update(wall_thickness=h_eff, youngs_modulus=v.E, poisson_ratio=POISSON, description=desc)
+    if v.viscoelastic if viscoelastic is None else viscoelastic:
+        nv["wall_viscosity"] = v.wall_viscosity()
+        nv["description"] += (f"; visco-elastic wall (Gamma = {VISCO_B0:g} + {VISCO_B1:g}/(2 R0) "
+                              f"kg/s): wall_viscosity {nv['wall_viscosity']:.6g} Pa s")
     return nv
 
 
 def to_native_dict(path: PathLike, *, linearize: str | float = "mean", taper: str = "linear",
                    wk2: str = "parallel", openbf_compat: bool = False, repair_inlet: bool = True,
-                   max_segment_length: float = 0.01, name: str | None = None) -> dict[str, Any]:
+                   max_segment_length: float = 0.01, name: str | None = None,
+                   wall_friction: str = "poiseuille", viscoelastic: bool | None = None
+                   ) -> dict[str, Any]:
     """Convert an openBF YAML file (and its inlet table) into an oxyline native model dict (SI).
 
     Parameters: ``linearize`` ("mean", "pext" or a pressure in Pa: where each vessel's radius
     and compliance are evaluated on openBF's tube law), ``taper`` ("linear" or "openbf"),
     ``wk2`` ("parallel" or "openbf"), ``openbf_compat`` (all of openBF v2's behaviours: taper,
     WK2 and ignored ``gamma profile`` keys), ``repair_inlet`` (fix the ADAN56 inflow),
-    ``max_segment_length`` [m], ``name``. See the module docstring for the mapping.
+    ``max_segment_length`` [m], ``name``, ``wall_friction`` ("poiseuille" or "womersley"),
+    ``viscoelastic`` (None: each vessel's ``visco-elastic`` key; True/False: openBF's
+    viscoelastic wall on every vessel / on none). See the module docstring for the mapping.
 
     >>> from pathlib import Path
     >>> f = Path("../shared/networks/openbf/models/boileau2015/cca/cca.yaml")
@@ -504,6 +548,12 @@ def to_native_dict(path: PathLike, *, linearize: str | float = "mean", taper: st
     if openbf_compat:
         taper, wk2 = "openbf", "openbf"
     _check_options(linearize, taper, wk2)
+    if wall_friction not in ("poiseuille", "womersley"):
+        raise ModelError(f"read_openbf: wall_friction must be 'poiseuille' or 'womersley', "
+                         f"got {wall_friction!r}")
+    if viscoelastic is not None and not isinstance(viscoelastic, bool):
+        raise ModelError(f"read_openbf: viscoelastic must be None, True or False, got "
+                         f"{viscoelastic!r}")
     data = _load_yaml(p)
     for k in data:
         if k not in TOP_KEYS:
@@ -539,9 +589,10 @@ def to_native_dict(path: PathLike, *, linearize: str | float = "mean", taper: st
         "blood": {"density": rho, "viscosity": mu_eff},
         "arrangement": "inverted-L",
         "inertance_profile": "flat",
+        **({"wall_friction": wall_friction} if wall_friction != "poiseuille" else {}),
         "segmentation": {"max_length": float(max_segment_length)},
         "period": period,
-        "vessels": [_native_vessel(v, *p_ends[id(v)]) for v in vessels],
+        "vessels": [_native_vessel(v, *p_ends[id(v)], viscoelastic) for v in vessels],
         "boundary_conditions": bcs,
         "simulation": {"cycles": 10, "until_periodic": 1e-6, "max_cycles": 200,
                        "dt": "auto", "method": "auto",
@@ -586,7 +637,8 @@ def read_openbf(path: PathLike, **options: Any) -> Model:
     """Read an openBF YAML network (and its inlet table) as a validated :class:`oxyline.Model`.
 
     ``options`` are those of :func:`to_native_dict` (``linearize``, ``taper``, ``wk2``,
-    ``openbf_compat``, ``repair_inlet``, ``max_segment_length``, ``name``).
+    ``openbf_compat``, ``repair_inlet``, ``max_segment_length``, ``name``, ``wall_friction``,
+    ``viscoelastic``).
 
     >>> from pathlib import Path
     >>> import oxyline

@@ -459,6 +459,9 @@ pub struct Circuit {
     pub swapped_rows: Vec<SwappedRow>,
     /// Friction cells of Womersley segments, in the order of their branches.
     pub friction_cells: Vec<FrictionCell>,
+    /// Cells whose unknown is not placed yet (`place_friction_cells`): their names and
+    /// inertances.
+    pending_cells: Vec<(Label, f64)>,
     /// Viscoelastic walls, one per node that has one.
     pub viscous_walls: Vec<ViscousWall>,
     /// Node → index into `viscous_walls`.
@@ -568,7 +571,8 @@ impl Circuit {
         self.extras.push(mass);
         self.extras.len() - 1
     }
-    /// Put a cell R ‖ L in series with branch `branch` (`crate::womersley`).
+    /// Put a cell R ‖ L in series with branch `branch` (`crate::womersley`). Its unknown is
+    /// placed by [`Circuit::place_friction_cells`], after every other element unknown.
     pub fn add_friction_cell(
         &mut self,
         name: impl Into<NameOf>,
@@ -576,12 +580,23 @@ impl Circuit {
         resistance: f64,
         inductance: f64,
     ) {
-        let extra = self.add_extra(name, inductance);
+        let label = self.label(name.into());
+        self.pending_cells.push((label, inductance));
         self.friction_cells.push(FrictionCell {
             branch,
-            extra,
+            extra: usize::MAX,
             resistance,
         });
+    }
+    /// Give the friction cells added since the last call their unknowns, after every other
+    /// unknown: the cells are then the DAE's trailing leaves, which a linear
+    /// generalized-α step condenses into their branches (`integrate::leaves`).
+    pub fn place_friction_cells(&mut self) {
+        let pending = std::mem::take(&mut self.pending_cells);
+        let first = self.friction_cells.len() - pending.len();
+        for (k, (label, inductance)) in pending.into_iter().enumerate() {
+            self.friction_cells[first + k].extra = self.add_extra(label, inductance);
+        }
     }
     /// Give node `node` a share `capacitance` of wall with relaxation time `relaxation`
     /// (η/E, s) behind a viscous resistance (a Kelvin–Voigt wall, [`ViscousWall`]).

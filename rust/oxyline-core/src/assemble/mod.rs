@@ -293,6 +293,7 @@ impl<'a> Stamping<'a> {
             hearts,
             ..
         } = self;
+        circuit.place_friction_cells();
         probes.shift_branches(circuit.nodes.len());
         probes.shift_extras(circuit.nodes.len() + circuit.branches.len());
         probes.record_valves(&circuit, &hearts);

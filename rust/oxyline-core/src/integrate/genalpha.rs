@@ -5,6 +5,7 @@
 //! a step: it is refactorised once per step, and again per Newton iteration only when stenoses
 //! make it depend on the iterate.
 
+use super::leaves::Leaves;
 use super::newton::{self, Magnitude, NewtonProblem, jacobian_stamps, jacobian_values};
 use crate::circuit::{Dae, Regime};
 use crate::error::{Error, Result};
@@ -26,6 +27,9 @@ pub struct GenAlpha<'a> {
     gamma: f64,
     control: NewtonControl,
     lu: SparseLu,
+    /// The trailing leaf unknowns (friction cells) of a linear circuit, condensed out of `lu`
+    /// (`super::leaves`); None: `lu` is the whole iteration matrix.
+    leaves: Option<Leaves>,
     /// Number of values of the iteration matrix (the stamps of `jacobian_stamps`).
     n_stamps: usize,
     /// For each chain-rule capacitor, the value index of its F entry (node row, flow column).
@@ -75,7 +79,6 @@ impl<'a> GenAlpha<'a> {
         let af = 1.0 / (1.0 + rho_inf);
         let gamma = 0.5 + am - af;
         let stamps = jacobian_stamps(dae);
-        let lu = SparseLu::analyse(dae.n, &stamps)?;
         // (the node row of a capacitor holds its R branch's flow: the incidence)
         let chain_flow_entry = dae
             .chain_rule
@@ -103,6 +106,13 @@ impl<'a> GenAlpha<'a> {
         } else {
             n
         };
+        let (leaves, lu) = match (nonlinear == 0)
+            .then(|| Leaves::find(dae, &e, &stamps))
+            .flatten()
+        {
+            Some((leaves, lu)) => (Some(leaves), lu),
+            None => (None, SparseLu::analyse(dae.n, &stamps)?),
+        };
         Ok(GenAlpha {
             dae,
             e,
@@ -113,6 +123,7 @@ impl<'a> GenAlpha<'a> {
             gamma,
             control,
             lu,
+            leaves,
             n_stamps: stamps.len(),
             chain_flow_entry,
             factored: false,
@@ -151,7 +162,13 @@ impl<'a> GenAlpha<'a> {
         }
         self.dae
             .varying_jacobian(c, time, self.regime, &mut kvals[nf..nf + self.dae.n]);
-        self.lu.factor(&kvals).map_err(|m| singular(time, &m))?;
+        // (ẏ's weight in a linear step's residual, `step_linear`)
+        let c_am = 1.0 + self.am * ((self.gamma - 1.0) / self.gamma - 1.0);
+        match &mut self.leaves {
+            Some(leaves) => leaves.factor(&mut self.lu, &kvals, c_am),
+            None => self.lu.factor(&kvals),
+        }
+        .map_err(|m| singular(time, &m))?;
         self.factored = true;
         Ok(())
     }
@@ -180,7 +197,11 @@ impl<'a> GenAlpha<'a> {
         for (x, e) in v.iter_mut().zip(self.e.iter()) {
             *x *= self.am * e;
         }
-        if !self.lu.solve_in_place(v) {
+        let solved = match &self.leaves {
+            Some(leaves) => leaves.solve_in_place(&self.lu, v),
+            None => self.lu.solve_in_place(v),
+        };
+        if !solved {
             v.copy_from_slice(&saved);
         }
         self.filter_scratch = saved;
@@ -329,7 +350,15 @@ impl GenAlpha<'_> {
         }
         // with y_new = y and ẏ_new = pred·ẏ: y_αf = y, ẏ_αm = ẏ (1 + αm (pred − 1))
         let c_am = 1.0 + am * (pred - 1.0);
-        let pool = crate::threads::pool().filter(|_| self.r.len() >= PARALLEL_ROWS);
+        let start = self.leaves.as_ref().map_or(self.r.len(), |l| l.start);
+        // each row's F entries (a branch's without its condensed cells', `Leaves::row_end`,
+        // unless an absolute tolerance judges the whole rows' residuals)
+        let with_max = self.control.atol.is_some();
+        let row_end = match &self.leaves {
+            Some(l) if !with_max => &l.row_end[..],
+            _ => &self.dae.f.ptr[1..],
+        };
+        let pool = crate::threads::pool().filter(|_| start >= PARALLEL_ROWS);
         let residual = LinearResidual {
             dae: self.dae,
             e: &self.e,
@@ -337,43 +366,53 @@ impl GenAlpha<'_> {
             y,
             yd,
             c_am,
+            row_end,
         };
+        let head = &mut self.r[..start];
         // each row is independent, and the largest |r| is the same in any grouping: the same
         // bits on any number of threads
-        let rmax = match &pool {
+        let mut rmax = match &pool {
             Some(pool) => pool.install(|| {
-                self.r
-                    .par_chunks_mut(PARALLEL_ROWS)
+                head.par_chunks_mut(PARALLEL_ROWS)
                     .enumerate()
                     .map(|(c, r)| residual.rows(c * PARALLEL_ROWS, r))
                     .reduce(|| 0.0, f64::max)
             }),
-            None => residual.rows(0, &mut self.r),
+            None => residual.rows(0, head),
         };
+        if let Some(leaves) = &self.leaves {
+            rmax = rmax.max(leaves.residual_and_fold(y, yd, &mut self.r, with_max));
+        }
         if let Some(atol) = self.control.atol {
             if rmax < atol {
                 yd.iter_mut().for_each(|v| *v *= pred);
                 return Ok(());
             }
         }
-        if !self.lu.solve_in_place(&mut self.r) {
+        if !self.lu.solve_in_place(&mut self.r[..start]) {
             return Err(singular(t_af, "non-finite solution"));
         }
         let gdt = gamma * dt;
+        if let Some(leaves) = &self.leaves {
+            if !leaves.back_substitute_and_update(&self.r, y, yd, gdt, pred) {
+                return Err(singular(t_af, "non-finite solution"));
+            }
+        }
         let update = |y: &mut [f64], yd: &mut [f64], r: &[f64]| {
             for ((yi, ydi), ri) in y.iter_mut().zip(yd.iter_mut()).zip(r) {
                 *yi += gdt * ri;
                 *ydi = pred * *ydi + ri;
             }
         };
+        let (y, yd, r) = (&mut y[..start], &mut yd[..start], &self.r[..start]);
         match &pool {
             Some(pool) => pool.install(|| {
                 y.par_chunks_mut(PARALLEL_ROWS)
                     .zip(yd.par_chunks_mut(PARALLEL_ROWS))
-                    .zip(self.r.par_chunks(PARALLEL_ROWS))
+                    .zip(r.par_chunks(PARALLEL_ROWS))
                     .for_each(|((y, yd), r)| update(y, yd, r))
             }),
-            None => update(y, yd, &self.r),
+            None => update(y, yd, r),
         }
         Ok(())
     }
@@ -391,6 +430,8 @@ struct LinearResidual<'r> {
     y: &'r [f64],
     yd: &'r [f64],
     c_am: f64,
+    /// the end of each row's F entries (`Dae::f.ptr[1..]`, or without condensed cells)
+    row_end: &'r [usize],
 }
 
 impl LinearResidual<'_> {
@@ -411,7 +452,7 @@ impl LinearResidual<'_> {
                 0.0
             };
             let mut v = fi - self.e[i] * yd[i] * self.c_am;
-            for k in f.ptr[i]..f.ptr[i + 1] {
+            for k in f.ptr[i]..self.row_end[i] {
                 v -= f.val[k] * y[f.col[k] as usize];
             }
             rmax = rmax.max(v.abs());

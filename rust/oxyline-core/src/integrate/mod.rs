@@ -17,6 +17,7 @@
 pub mod adaptive;
 mod algebraic;
 pub mod genalpha;
+mod leaves;
 pub mod newton;
 pub mod periodic;
 pub mod rk4;
