@@ -60,3 +60,6 @@ class SimulateOptions(TypedDict, total=False):
     #: error control's absolute tolerance per kind of unknown, SI: ``{"pressure": Pa, "flow":
     #: m^3/s, "volume": m^3, "species": mol/m^3}`` (defaults 1, 1e-9, 1e-9, 1e-6)
     atol: dict[str, float] | None
+    #: add a spatial error estimate (one refinement of every vessel's segments) to
+    #: ``result.error_estimate["space"]``
+    estimate_space_error: bool
