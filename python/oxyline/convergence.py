@@ -43,10 +43,11 @@ class ConvergenceLevel:
 
 def refined(model: Model | str | os.PathLike[str] | Mapping[str, Any],
             factor: int) -> Model:
-    """The model with every vessel's segmentation refined ``factor`` times: each segmented
+    """The model with every vessel's segmentation refined ``factor`` times: each geometric
     vessel (structured-tree vessels included, the trees grown) gets ``factor`` times the
     segments it has now, however they were decided (``segments``, ``max_length`` or
-    ``auto``)."""
+    ``auto``); a lumped vessel only when it is cut into several already (or ``auto``): one
+    lumped segment is an element, not a line."""
     if not (isinstance(factor, int) and not isinstance(factor, bool) and factor >= 1):
         raise ModelError(f"convergence: refinement factor must be an integer >= 1, got {factor!r}")
     m = load_model(model)
@@ -55,21 +56,36 @@ def refined(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     counts = np.bincount(np.asarray(table["vessel"], dtype=np.int64),
                          minlength=len(table["vessel_names"]))
     by_name = dict(zip(table["vessel_names"], counts.tolist(), strict=True))
+    extra = 0
     for v in data.get("vessels", []):
         n = by_name.get(str(v.get("name")), 0)
-        if n > 0:  # a segmented vessel (a heart element has no segments)
+        if n > 0 and _is_line(v, n):
             v["segments"] = factor * n
+            extra += (factor - 1) * n
     seg = data.get("segmentation")
     if isinstance(seg, Mapping):  # every count is explicit now
         data["segmentation"] = {k: x for k, x in seg.items() if k not in ("max_length",
                                                                           "segments")}
     out = load_model(data)
-    want = factor * m.summary()["segments"]
-    if out.summary()["segments"] != want:
-        raise ModelError(f"convergence: refining {factor}x gave {out.summary()['segments']} "
+    # (the network's own counts: a model's summary() also asks for the RK4 limit, which an
+    # index-2 circuit has none of)
+    want, got = len(table["vessel"]) + extra, out.network.summary()["segments"]
+    if got != want:
+        raise ModelError(f"convergence: refining {factor}x gave {got} "
                          f"segments, not {want} (a vessel whose segmentation cannot be "
                          f"refined, e.g. an RCL block)")
     return out
+
+
+def _is_line(vessel: Mapping[str, Any], segments: int) -> bool:
+    """Whether a native vessel of ``segments`` segments stands for a transmission line to
+    refine: a geometric vessel, or a lumped one cut into several (or ``auto``); a lumped
+    vessel of one segment is an element its author sized (a wall branch, a resistor)."""
+    if not isinstance(vessel, Mapping) or any(
+            k in vessel for k in ("valve", "chamber", "through_rc", "chamber_sphere",
+                                  "heart_pulmonary", "coronary_bed")):
+        return False
+    return "lumped" not in vessel or segments > 1 or vessel.get("segments") == "auto"
 
 
 def convergence(model: Model | str | os.PathLike[str] | Mapping[str, Any], node: str,
@@ -97,7 +113,7 @@ def convergence(model: Model | str | os.PathLike[str] | Mapping[str, Any], node:
         z = impedance(mk, node, frequencies, direction=direction)
         change = (np.full(z.shape, np.nan) if prev is None
                   else np.abs(z - prev) / np.abs(z))
-        out.append(ConvergenceLevel(r, int(mk.summary()["segments"]), z, change))
+        out.append(ConvergenceLevel(r, int(mk.network.summary()["segments"]), z, change))
         prev = z
     return out
 
