@@ -157,7 +157,7 @@ fn harmonic_powers(w: &Waveform, period: f64) -> Vec<f64> {
 /// The lowest K whose harmonics 1..=K carry all but `rtol` of the pulsatile power (0: none).
 pub fn significant_harmonics(power: &[f64], rtol: f64) -> usize {
     let total: f64 = power.iter().sum();
-    if !(total > 0.0) {
+    if total.is_nan() || total <= 0.0 {
         return 0;
     }
     let mut tail = total;
