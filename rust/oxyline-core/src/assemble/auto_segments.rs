@@ -3,7 +3,7 @@
 //! the highest significant harmonic of the forcing.
 //!
 //! The rule, in two steps:
-//! 1. **Significant harmonics.** Every time-varying waveform of a boundary condition is cut
+//! 1. **Significant harmonics.** Every time-varying flow or pressure condition is cut
 //!    into its harmonics (the Fourier coefficients of a series; a DFT of 4096 samples of a
 //!    table). The significant ones are the lowest K that together carry all but a fraction
 //!    `rtol` of its pulsatile power (Σ_{k>K} |a_k|² ≤ rtol Σ_{k≥1} |a_k|²). The highest
@@ -20,9 +20,14 @@
 //!    input impedance Z_in = (A Z_T + B)/(C Z_T + D) of a line closed by Z_T can move more
 //!    than its two-port, near a reflection's minimum; over random arterial lines (radius
 //!    0.1–20 mm, length 3–300 radii, E 0.1–3 MPa, 1–30 Hz, 1–64 segments) closed by loads
-//!    from Z_c/10 to 10 Z_c the ratio is 1.5 at the median, 2.3 at 90 % and 5.4 at 99 %. This is the section's known error (θ²/2n per
-//!    vessel for the first-order L arrangements, θ³/24n² for π) evaluated exactly rather than
-//!    from its leading term, so it holds for lossy (resistance-dominated) vessels too.
+//!    from Z_c/10 to 10 Z_c the ratio is 1.5 at the median, 2.3 at 90 % and 5.4 at 99 %.
+//!    This is the sections' known error (θ²/2n per vessel for the first-order L
+//!    arrangements, θ³/24n² for π) evaluated exactly rather than from its leading term, so it
+//!    holds for lossy (resistance-dominated) vessels too.
+//!
+//! The rule bounds each vessel's error; vessels in series add theirs (a ladder's wave speed
+//! is off the same way in each), so a network's inlet impedance can be a few times rtol off
+//! (ADAN56: ~3× at 1e-2; benches/bench_space.py, docs/solvers.md).
 //!
 //! A rigid vessel (no compliance) is exactly one series impedance: one segment. An RCL
 //! vessel is always one segment (svZeroDSolver's block).
@@ -97,12 +102,10 @@ impl AutoRule {
 pub fn forcing_frequency<'a>(bcs: impl IntoIterator<Item = &'a BoundarySpec>, rtol: f64) -> f64 {
     let mut best: Option<f64> = None;
     for bc in bcs {
+        // the driving conditions (an outlet's reference pressure is not the forcing)
         let w = match bc {
             BoundarySpec::Flow { flow } => Some(flow),
             BoundarySpec::Pressure { pressure } => Some(pressure),
-            BoundarySpec::Resistance { pressure, .. } | BoundarySpec::Rcr { pressure, .. } => {
-                pressure.as_ref()
-            }
             _ => None,
         };
         let Some(w) = w.and_then(|s| Waveform::from_spec(s, "").ok()) else {
