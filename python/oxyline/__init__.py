@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from oxyline import _core, catalogue, errors, sensitivity
 from oxyline.calibrate import CalibrationError, calibrate, sensitivities
-from oxyline.convergence import convergence, estimate_space_error
+from oxyline.convergence import convergence, estimate_space_error, forcing_harmonics
 from oxyline.ensemble import simulate_ensemble
 from oxyline.errors import *  # every public error and warning (errors.__all__)
 from oxyline.frequency import impedance
@@ -40,6 +40,7 @@ __all__ = [
     "catalogue",
     "convergence",
     "estimate_space_error",
+    "forcing_harmonics",
     "impedance",
     "load_model",
     "open_result",

@@ -162,12 +162,14 @@ def _run_options(args: argparse.Namespace) -> dict[str, object]:
         overrides["rtol"] = args.rtol
     if args.output_every is not None:
         overrides["output_every"] = args.output_every
+    if getattr(args, "estimate_space_error", False):
+        overrides["estimate_space_error"] = True
     if args.method is not None:
         overrides["method"] = args.method
     if args.resume and len(overrides) > 1:
         raise InputError(f"{args.resume}: a resumed run keeps its checkpoint's settings (no "
-                         "--cycles, --dt, --rtol, --until-periodic, --max-cycles, --output-every "
-                         "or --method)")
+                         "--cycles, --dt, --rtol, --until-periodic, --max-cycles, --output-every, "
+                         "--estimate-space-error or --method)")
     if args.threads is not None:
         overrides["threads"] = args.threads
     if args.checkpoint:
@@ -257,6 +259,9 @@ def _run_and_write(args: argparse.Namespace, stop: _Stop) -> int:
     # a .zarr output is written during the run (memory bounded by one chunk); --plot then
     # reads the finished store back (oxyline.open_result) instead of keeping a second copy
     stream = bool(args.output) and Path(args.output).suffix.lower() == ".zarr"
+    if stream and overrides.get("estimate_space_error"):
+        raise InputError(f"{args.output}: --estimate-space-error writes .nc or .csv, not a "
+                         "streamed .zarr store")
     if stream and args.resume:
         raise InputError(f"{args.output}: a resumed run writes .nc or .csv, not a streamed "
                          ".zarr store")
@@ -366,9 +371,12 @@ def _print_table(model: Any, res: Any, stream: bool, rows: int = 20) -> None:
           f"{s['cycles_run']} cycles, cycle-to-cycle change {s['periodic_error']:.2e}")
     if s.get("steps") is not None:
         est = ", ".join(f"{k.removeprefix('error_estimate_')} {v:.1e}" for k, v in s.items()
-                        if k.startswith("error_estimate_"))
+                        if k.startswith("error_estimate_") and k != "error_estimate_space")
         print(f"error control: rtol {s['rtol']:g}, {s['steps']} steps ({s['rejected_steps']} "
               f"rejected), dt {s['dt_min']:.2e} to {s['dt_max']:.2e} s; estimated error {est}")
+    if s.get("error_estimate_space") is not None:
+        print(f"space: the inlet impedance moves {float(s['error_estimate_space']):.1e} "
+              "(relative) when every vessel's segments are doubled")
     if s.get("periodic_reached") in (False, 0):
         print(f"not periodic: the change is above until_periodic = {s['until_periodic']:g} "
               "after max_cycles")
@@ -589,6 +597,10 @@ def _add_run(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rtol", type=float, metavar="TOL",
                    help="error control: generalized-alpha with a variable step keeping the "
                         "estimated error of every unknown within TOL (relative); excludes --dt")
+    p.add_argument("--estimate-space-error", action="store_true",
+                   help="also estimate the spatial error: the inlet impedance's change over the "
+                        "forcing's significant harmonics when every vessel's segments are "
+                        "doubled (in the summary and the result's attributes)")
     p.add_argument("--max-cycles", type=int, metavar="N",
                    help="most cycles a run --until-periodic takes (default: the model's, else "
                         "max(cycles, 100))")

@@ -63,3 +63,6 @@ class SimulateOptions(TypedDict, total=False):
     #: threads of this run (default: every core; 1: serial); the results are the same bits
     #: on any number of threads (docs/performance.md)
     threads: int | None
+    #: add a spatial error estimate (one refinement of every vessel's segments) to
+    #: ``result.error_estimate["space"]``
+    estimate_space_error: bool

@@ -241,8 +241,11 @@ class Result:
         """An error-controlled run's (``rtol``) largest estimated error per kind of unknown
         over the run (``pressure``, ``flow``, and ``volume``/``species`` where present),
         relative to atol/rtol + |y| (docs/physics.md §10): at most ``rtol`` where the step
-        control met its tolerance. Empty for a fixed-step run. Stored in the file attributes
-        as ``solver_error_estimate_<kind>``."""
+        control met its tolerance. Empty for a fixed-step run. With
+        ``simulate(..., estimate_space_error=True)`` also ``space``: the largest relative
+        change of the inlet impedance over the forcing's significant harmonics under one
+        doubling of every vessel's segments (docs/solvers.md, "Space"). Stored in the file
+        attributes as ``solver_error_estimate_<kind>``."""
         pre = "error_estimate_"
         return {k.removeprefix(pre): float(v) for k, v in self.settings.items()
                 if k.startswith(pre)}

@@ -412,6 +412,10 @@ def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     mol/m^3}``, defaults 1 Pa, 1e-9, 1e-9, 1e-6), output from the dense output at every
     ``output_every`` (which then never changes the solution); ``result.error_estimate`` gives
     the largest estimate per kind. It excludes ``dt`` (a fixed step) and ``method="rk4"``.
+    ``estimate_space_error=True`` adds ``result.error_estimate["space"]``: the largest
+    relative change of the input impedance at the flow or pressure inlets over the forcing's
+    significant harmonics when every vessel's segments are doubled (docs/solvers.md,
+    "Space"), with either integrator.
 
     Cycles: without ``until_periodic`` (keyword or the model's ``simulation`` section) a run
     takes exactly ``cycles``; with it, ``cycles`` is the least and ``max_cycles`` (default
@@ -454,6 +458,8 @@ def _refuse_checkpoint_on_input(model: Any, checkpoint: Any) -> None:
 def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
               resume_path: Any = None) -> Result:
     """`simulate` of a loaded model; ``resume``: the core state of a checkpoint."""
+    space = _space_flag(overrides)
+    overrides = {k: v for k, v in overrides.items() if k != "estimate_space_error"}
     s = _settings(model, overrides)
     _large_model_output(model, s, overrides)
     _check_output_memory(model, s, overrides)
@@ -475,10 +481,22 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     if extra is not None:
         result.chamber_volume, result.valve_status = _heart_outputs(heart, extra)
     _raise_run_error(raw, result)
+    if space:  # one refinement of every vessel: the inlet impedance's change
+        from oxyline.convergence import inlet_space_error
+
+        result.settings["error_estimate_space"] = inlet_space_error(model)
     _warn_not_periodic(result.model_name, result.settings, result.complete)
     # physical bounds and mass balance of the recorded species output (warnings only)
     check_result(result, model.transport_spec)
     return result
+
+
+def _space_flag(overrides: Mapping[str, Any]) -> bool:
+    """``estimate_space_error``, checked (a bool)."""
+    flag = overrides.get("estimate_space_error", False)
+    if not isinstance(flag, (bool, np.bool_)):
+        raise ModelError(f"simulate: estimate_space_error must be true or false, got {flag!r}")
+    return bool(flag)
 
 
 def _heart_layout(model: Model) -> tuple[list[Any], list[Any], list[int]]:

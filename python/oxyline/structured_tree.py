@@ -21,7 +21,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import Any, Literal
 
 from oxyline import _core
 from oxyline.errors import ModelError
@@ -37,7 +37,8 @@ def _err(node: str, message: str) -> ModelError:
 
 def structured_tree(node: str, *, root_radius: float, alpha: float = 0.9, beta: float = 0.6,
                     length_ratio: float = 50.0, min_radius: float = 1.0e-4,
-                    stiffness: Mapping[str, float] | None = None, segments: int | None = None,
+                    stiffness: Mapping[str, float] | None = None,
+                    segments: int | Literal["auto"] | None = None,
                     max_length: float | None = None, max_vessels: int = MAX_VESSELS,
                     units: str = "SI", memory_limit: float | None = None,
                     stopping: str = "min-radius", wall_friction: str | None = None

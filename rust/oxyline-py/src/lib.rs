@@ -93,7 +93,7 @@ mod _core {
         model_bytes,
         network::Network,
         reader::NativeParts,
-        reader::model::{canonical_model, read_model},
+        reader::model::{canonical_model, forcing_frequency, read_model},
         reader::schema::{
             check_periods, check_simulation, read_conditions, read_header, read_transport,
             read_vessels, resolve_settings, transport_section,

@@ -129,6 +129,9 @@ fn tree_input(node: &str, bc: &Bound<'_, PyDict>) -> PyResult<TreeInput> {
                 });
             }
             "segments" if x.is_none() => {}
+            "segments" if x.extract::<String>().is_ok_and(|t| t == "auto") => {
+                t.segments_auto = true;
+            }
             "segments" => {
                 let int = x.is_instance_of::<PyInt>() && !x.is_instance_of::<PyBool>();
                 t.segments = Some(match x.extract::<i64>() {
@@ -136,7 +139,10 @@ fn tree_input(node: &str, bc: &Bound<'_, PyDict>) -> PyResult<TreeInput> {
                     _ => {
                         return Err(model_error(
                             node,
-                            format!("'segments' must be an integer >= 1, got {}", repr(&x)),
+                            format!(
+                                "'segments' must be an integer >= 1 or 'auto', got {}",
+                                repr(&x)
+                            ),
                         ));
                     }
                 });
@@ -186,6 +192,8 @@ fn native_vessel<'py>(py: Python<'py>, v: &VesselSpec, u: Units) -> PyResult<Bou
     )?;
     if let Some(n) = v.segments {
         d.set_item("segments", n)?;
+    } else if v.segments_auto {
+        d.set_item("segments", "auto")?;
     }
     if let Some(f) = v.wall_friction {
         let name = match f {

@@ -3,6 +3,7 @@
 //! probes (`vessel`), then one stamp per boundary condition (`boundary`, one file per type).
 //! Every step is linear in the network size.
 
+pub mod auto_segments;
 pub(crate) mod boundary;
 mod chamber;
 pub(crate) mod checks;
@@ -83,6 +84,12 @@ impl NetworkSpec {
         if let Some(m) = self.max_segment_length {
             checks::check_positive("segmentation", "max_length", m)?;
         }
+        if let Some(r) = self.segmentation_rtol.filter(|r| !(*r > 0.0 && *r < 1.0)) {
+            return Err(crate::error::Error::model(
+                "segmentation",
+                format!("rtol must be in (0, 1), got {r}"),
+            ));
+        }
         Ok(blood)
     }
 }
@@ -108,13 +115,20 @@ struct Stamping<'a> {
     table: Vec<segments::SegmentRow>,
     links: HeartLinks,
     hearts: Vec<(String, usize)>,
+    /// The `segments: auto` rule (None: no vessel asks for it).
+    auto: Option<auto_segments::AutoRule>,
 }
 
 impl<'a> Stamping<'a> {
     /// Storage for the whole network, allocated once at upper bounds (after the memory the
     /// model will need is checked against what it allows).
     fn new(spec: &'a NetworkSpec, graph: &'a graph::Graph<'a>) -> Result<Self> {
-        let segments: usize = spec.vessels.iter().map(|v| segments::count(spec, v)).sum();
+        let auto = auto_segments::AutoRule::of(spec);
+        let segments: usize = spec
+            .vessels
+            .iter()
+            .map(|v| segments::count(spec, v, auto.as_ref()))
+            .sum();
         // a segment adds one branch and (but for the last of its vessel) one node; a boundary
         // condition at most two nodes and two branches
         let bcs = spec.boundary_conditions.len();
@@ -160,6 +174,7 @@ impl<'a> Stamping<'a> {
             table: Vec::with_capacity(segments),
             links: HeartLinks::default(),
             hearts: Vec::new(),
+            auto,
         })
     }
 
@@ -226,7 +241,7 @@ impl<'a> Stamping<'a> {
     fn segmented_vessel(&mut self, vi: usize, blood: Blood) -> Result<()> {
         let (spec, v) = (self.spec, &self.spec.vessels[vi]);
         let arrangement = v.arrangement.unwrap_or(spec.arrangement);
-        let segs = segments::discretise(spec, vi, blood, arrangement)?;
+        let segs = segments::discretise(spec, vi, blood, arrangement, self.auto.as_ref())?;
         let ends = self.graph.vessel_ends[vi];
         let form = v
             .lumped

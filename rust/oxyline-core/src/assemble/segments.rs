@@ -2,6 +2,7 @@
 //! volume (docs/physics.md §1.1). This table is the one source of the per-segment physics; the
 //! Python layer reads it through the binding (`Network.segment_table`).
 
+use super::auto_segments::AutoRule;
 use super::checks::{check_nonnegative, check_positive};
 use crate::error::{Error, Result};
 use crate::model::{Arrangement, GeometrySpec, LumpedSpec, NetworkSpec, VesselSpec};
@@ -46,8 +47,11 @@ impl SegmentRow {
 
 /// How many segments vessel `v` gets (as [`discretise`] decides, for a valid vessel): used to
 /// size the circuit's tables before stamping, so that they are allocated once.
-pub(crate) fn count(spec: &NetworkSpec, v: &VesselSpec) -> usize {
+pub(crate) fn count(spec: &NetworkSpec, v: &VesselSpec, auto: Option<&AutoRule>) -> usize {
     let arrangement = v.arrangement.unwrap_or(spec.arrangement);
+    if let (Some(rule), true) = (auto, is_auto(spec, v)) {
+        return auto_count(spec, v, rule, arrangement).unwrap_or(1);
+    }
     match (&v.geometry, arrangement) {
         (_, Arrangement::Rcl) => 1,
         (Some(g), _) => match (v.segments, spec.max_segment_length) {
@@ -62,6 +66,48 @@ pub(crate) fn count(spec: &NetworkSpec, v: &VesselSpec) -> usize {
     .max(1)
 }
 
+/// Whether vessel `v` is cut by the `auto` rule: its own `segments: auto`, or the model's
+/// for a geometric vessel without its own `segments` (a lumped vessel is an element its
+/// author sized, split only when it says `segments: auto` itself).
+pub(crate) fn is_auto(spec: &NetworkSpec, v: &VesselSpec) -> bool {
+    v.segments_auto || (spec.segments_auto && v.segments.is_none() && v.geometry.is_some())
+}
+
+/// The `auto` count of vessel `v` from its whole length's R, L, C (None: a value the
+/// discretisation refuses, reported there).
+fn auto_count(
+    spec: &NetworkSpec,
+    v: &VesselSpec,
+    rule: &AutoRule,
+    arrangement: Arrangement,
+) -> Option<usize> {
+    let (r, l, c) = match (&v.geometry, &v.lumped) {
+        (Some(g), None) => {
+            let ok = |x: f64| x.is_finite() && x > 0.0;
+            if !(ok(g.length) && ok(g.radius_in) && ok(g.radius_out)) {
+                return None;
+            }
+            let el = format!("vessel '{}'", v.name);
+            let blood = Blood {
+                density: spec.blood.density,
+                viscosity: spec.blood.viscosity,
+            };
+            let s = segment_rlc(
+                g.length,
+                g.radius_in,
+                g.radius_out,
+                blood,
+                wall(spec, g, &el).ok()?,
+                spec.inertance_profile,
+            );
+            (s.resistance, s.inductance, s.compliance)
+        }
+        (None, Some(lp)) => (lp.resistance, lp.inductance, lp.capacitance),
+        _ => return None,
+    };
+    Some(rule.count(r, l, c, arrangement))
+}
+
 /// Vessel `v`'s friction and inertia: its own `wall_friction` or the model's.
 pub(crate) fn friction(spec: &NetworkSpec, v: &VesselSpec) -> WallFriction {
     v.wall_friction.unwrap_or(spec.wall_friction)
@@ -73,6 +119,7 @@ pub(crate) fn discretise(
     vi: usize,
     blood: Blood,
     arrangement: Arrangement,
+    auto: Option<&AutoRule>,
 ) -> Result<Vec<SegmentRow>> {
     let v = &spec.vessels[vi];
     let el = format!("vessel '{}'", v.name);
@@ -82,8 +129,18 @@ pub(crate) fn discretise(
             "give either geometry or lumped values, not both",
         )),
         (None, None) => Err(Error::model(&el, "needs geometry or lumped values")),
-        (None, Some(l)) => lumped(v, vi, l, arrangement, &el),
-        (Some(g), None) => geometric(spec, v, vi, g, blood, arrangement, &el),
+        (None, Some(l)) => {
+            let n = auto
+                .filter(|_| is_auto(spec, v))
+                .map(|_| count(spec, v, auto));
+            lumped(v, vi, l, arrangement, &el, n)
+        }
+        (Some(g), None) => {
+            let n = auto
+                .filter(|_| is_auto(spec, v))
+                .map(|_| count(spec, v, auto));
+            geometric(spec, v, vi, g, blood, arrangement, &el, n)
+        }
     }
 }
 
@@ -94,6 +151,7 @@ fn lumped(
     l: &LumpedSpec,
     arrangement: Arrangement,
     el: &str,
+    auto: Option<usize>,
 ) -> Result<Vec<SegmentRow>> {
     check_nonnegative(el, "resistance", l.resistance)?;
     check_nonnegative(el, "inductance", l.inductance)?;
@@ -111,7 +169,7 @@ fn lumped(
     let n = if arrangement == Arrangement::Rcl {
         1
     } else {
-        v.segments.unwrap_or(1)
+        auto.or(v.segments).unwrap_or(1)
     };
     if n == 0 {
         return Err(Error::model(el, "segments must be >= 1, got 0"));
@@ -162,7 +220,9 @@ fn wall(spec: &NetworkSpec, g: &GeometrySpec, el: &str) -> Result<Option<Wall>> 
     }
 }
 
-/// Equal-length segments along a linear taper, each integrated exactly.
+/// Equal-length segments along a linear taper, each integrated exactly (`auto`: the count
+/// the `auto` rule gave).
+#[allow(clippy::too_many_arguments)]
 fn geometric(
     spec: &NetworkSpec,
     v: &VesselSpec,
@@ -171,6 +231,7 @@ fn geometric(
     blood: Blood,
     arrangement: Arrangement,
     el: &str,
+    auto: Option<usize>,
 ) -> Result<Vec<SegmentRow>> {
     if arrangement == Arrangement::Rcl {
         return Err(Error::model(el, "the RCL arrangement needs lumped values"));
@@ -179,7 +240,7 @@ fn geometric(
     check_positive(el, "radius_in", g.radius_in)?;
     check_positive(el, "radius_out", g.radius_out)?;
     let wall = wall(spec, g, el)?;
-    let n = match (v.segments, spec.max_segment_length) {
+    let n = match (auto.or(v.segments), spec.max_segment_length) {
         (Some(0), _) => return Err(Error::model(el, "segments must be >= 1, got 0")),
         (Some(n), _) => n,
         (None, Some(m)) => ((g.length / m) * (1.0 - 1e-12)).ceil().max(1.0) as usize,

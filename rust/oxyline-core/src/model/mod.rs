@@ -123,6 +123,10 @@ pub struct VesselSpec {
     pub to: String,
     #[serde(default)]
     pub segments: Option<usize>,
+    /// `segments: auto`: the count from the wave speed and the forcing
+    /// (`assemble::auto_segments`); `segments` is then None.
+    #[serde(default)]
+    pub segments_auto: bool,
     #[serde(default)]
     pub geometry: Option<GeometrySpec>,
     #[serde(default)]
@@ -171,6 +175,7 @@ impl VesselSpec {
             from: String::new(),
             to: String::new(),
             segments: None,
+            segments_auto: false,
             geometry: None,
             lumped: None,
             arrangement: None,
@@ -501,6 +506,13 @@ pub struct NetworkSpec {
     pub wall_friction: WallFriction,
     #[serde(default)]
     pub max_segment_length: Option<f64>,
+    /// `segmentation: {segments: auto}`: every vessel that gives no `segments` is cut by the
+    /// `auto` rule (`assemble::auto_segments`).
+    #[serde(default)]
+    pub segments_auto: bool,
+    /// The `auto` rule's relative tolerance (None: `auto_segments::DEFAULT_RTOL`).
+    #[serde(default)]
+    pub segmentation_rtol: Option<f64>,
     pub vessels: Vec<VesselSpec>,
     pub boundary_conditions: BTreeMap<String, BoundarySpec>,
     #[serde(default = "yes")]

@@ -158,6 +158,8 @@ pub struct TreeInput {
     pub root_radius: Option<f64>,
     pub stiffness: Option<Stiffness>,
     pub segments: Option<i64>,
+    /// `segments: auto`: each tree vessel cut by the `auto` rule.
+    pub segments_auto: bool,
     pub max_length: Option<f64>,
     pub max_vessels: Option<f64>,
     pub stopping: Option<Stopping>,
@@ -274,6 +276,8 @@ enum Segmentation {
     Count(usize),
     /// At most this length (m).
     MaxLength(f64),
+    /// By the `auto` rule (`assemble::auto_segments`).
+    Auto,
 }
 
 /// The number of vessels of a tree, counted per radius class; `exact` is false when the count
@@ -459,6 +463,12 @@ pub struct Grown {
 /// How a tree's vessels are cut into segments: `segments` or `max_length` (in the model's
 /// units), else the model's own segmentation.
 fn segmentation(node: &str, input: &TreeInput, u: Units) -> Result<Segmentation> {
+    if input.segments_auto {
+        if input.max_length.is_some() {
+            return Err(err(node, "give 'segments' or 'max_length', not both"));
+        }
+        return Ok(Segmentation::Auto);
+    }
     Ok(match (input.segments, input.max_length) {
         (Some(_), Some(_)) => {
             return Err(err(node, "give 'segments' or 'max_length', not both"));
@@ -601,7 +611,7 @@ impl Tree {
         };
         let per_vessel = match self.segmentation {
             Segmentation::Count(n) => n,
-            Segmentation::Model | Segmentation::MaxLength(_) => 1,
+            Segmentation::Model | Segmentation::MaxLength(_) | Segmentation::Auto => 1,
         };
         let n = usize::try_from(self.count).unwrap_or(usize::MAX);
         let need = memory::model_bytes(n.saturating_mul(per_vessel), n, 0.0, 0);
@@ -674,8 +684,9 @@ impl Tree {
         v.to = name.clone();
         v.name = name;
         v.from = from;
+        v.segments_auto = self.segmentation == Segmentation::Auto;
         v.segments = match self.segmentation {
-            Segmentation::Model => None,
+            Segmentation::Model | Segmentation::Auto => None,
             Segmentation::Count(n) => Some(n),
             // (1e-9: a length a rounding above a whole number of pieces is not cut once more)
             Segmentation::MaxLength(dx) => Some(((length / dx - 1e-9).ceil() as usize).max(1)),

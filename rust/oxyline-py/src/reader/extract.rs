@@ -160,6 +160,7 @@ pub fn vessel(i: usize, item: &Bound<'_, PyAny>) -> Res<VesselSpec> {
                     )
                 })?)
             }
+            "segments_auto" => v.segments_auto = val.extract::<bool>().unwrap_or(false),
             "geometry" => v.geometry = Some(geometry(dict(&val, element, k)?, element)?),
             "lumped" => v.lumped = Some(lumped(dict(&val, element, k)?, element)?),
             "arrangement" => v.arrangement = Some(arrangement(&val, element)?),

@@ -139,3 +139,52 @@ pub(crate) fn canonical_model<'py>(
     }
     to_python(py, &Value::Object(canon))
 }
+
+/// The highest significant frequency (Hz) of a native model dict's forcing and the
+/// segmentation tolerance it was found at (`rtol`, else the model's `segmentation: rtol`, else
+/// the default): the `segments: auto` rule's (`oxyline_core::assemble::auto_segments`).
+#[pyfunction]
+#[pyo3(signature = (data, rtol = None))]
+pub(crate) fn forcing_frequency(data: Bound<'_, PyAny>, rtol: Option<f64>) -> PyResult<(f64, f64)> {
+    use oxyline_core::assemble::auto_segments;
+    let node = PyNode(data);
+    let header = native::header(&node).map_err(to_py)?;
+    let rtol = rtol
+        .or_else(|| {
+            header
+                .canonical
+                .get("segmentation_rtol")
+                .and_then(Value::as_f64)
+        })
+        .unwrap_or(auto_segments::DEFAULT_RTOL);
+    if !(rtol > 0.0 && rtol < 1.0) {
+        return Err(to_py(oxyline_core::Error::model(
+            "segmentation",
+            format!("rtol must be in (0, 1), got {rtol}"),
+        )));
+    }
+    // the flow and pressure conditions only (a structured tree is grown later)
+    let all = conditions_node(&node);
+    let forcing: Vec<Bound<'_, PyAny>> = Node::entries(&all)
+        .into_iter()
+        .filter(|(_, bc)| {
+            bc.get("type")
+                .and_then(|t| t.text())
+                .is_some_and(|t| t == "flow" || t == "pressure")
+        })
+        .map(|(n, _)| pyo3::types::PyString::new(all.0.py(), &n).into_any())
+        .collect();
+    let (bcs, _) = conditions(&all, Some(&forcing), header.units)?;
+    let specs = bcs
+        .into_iter()
+        .map(|(n, v)| {
+            serde_json::from_value::<oxyline_core::model::BoundarySpec>(v).map_err(|e| {
+                to_py(oxyline_core::Error::model(
+                    format!("boundary condition '{n}'"),
+                    e.to_string(),
+                ))
+            })
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    Ok((auto_segments::forcing_frequency(&specs, rtol), rtol))
+}

@@ -223,7 +223,7 @@ pub fn header<N: Node>(data: &N) -> Result<Header> {
     );
     let seg = data.get("segmentation").filter(Node::truthy);
     if let Some(seg) = &seg {
-        check_keys(seg, &["max_length"], "segmentation")?;
+        check_keys(seg, &["max_length", "segments", "rtol"], "segmentation")?;
     }
     let wall = choice(
         data.get("wall_model"),
@@ -251,18 +251,51 @@ pub fn header<N: Node>(data: &N) -> Result<Header> {
     if !vessels.is_some_and(|v| v.type_name() == "list" && v.truthy()) {
         return Err(err("model", "'vessels' must be a non-empty list"));
     }
-    if let Some(m) = seg.and_then(|s| s.get("max_length")) {
+    if let Some(m) = seg.as_ref().and_then(|s| s.get("max_length")) {
         let x = number(Some(&m), "segmentation", "max_length")?;
         canon.insert(
             "max_segment_length".into(),
             f(units.factor(Quantity::Length) * x),
         );
     }
+    if let Some(seg) = &seg {
+        segmentation_auto(seg, &mut canon)?;
+    }
     Ok(Header {
         name,
         units,
         canonical: canon,
     })
+}
+
+/// The model's `segmentation: {segments: auto, rtol}` (docs/solvers.md, "Space").
+fn segmentation_auto<N: Node>(seg: &N, canon: &mut Map<String, Value>) -> Result<()> {
+    if let Some(n) = seg.get("segments") {
+        if n.text().as_deref() != Some("auto") {
+            return Err(err(
+                "segmentation",
+                format!("'segments' must be 'auto', got {}", n.repr()),
+            ));
+        }
+        if seg.has("max_length") {
+            return Err(err(
+                "segmentation",
+                "give 'segments: auto' or 'max_length', not both",
+            ));
+        }
+        canon.insert("segments_auto".into(), json!(true));
+    }
+    if let Some(r) = seg.get("rtol") {
+        let x = number(Some(&r), "segmentation", "rtol")?;
+        if !(x > 0.0 && x < 1.0) {
+            return Err(err(
+                "segmentation",
+                format!("'rtol' must be in (0, 1), got {}", py_g(x)),
+            ));
+        }
+        canon.insert("segmentation_rtol".into(), f(x));
+    }
+    Ok(())
 }
 
 fn blood<N: Node>(value: Option<N>, units: Units) -> Result<Value> {

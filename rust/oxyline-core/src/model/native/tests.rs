@@ -38,7 +38,11 @@ fn vessel_errors_name_the_vessel_key_and_value() {
     );
     assert_eq!(
         with("segments", json!(2.5)),
-        "vessel 'left': 'segments' must be an integer >= 1, got 2.5"
+        "vessel 'left': 'segments' must be an integer >= 1 or 'auto', got 2.5"
+    );
+    assert_eq!(
+        with("segments", json!("autox")),
+        "vessel 'left': 'segments' must be an integer >= 1 or 'auto', got 'autox'"
     );
     assert_eq!(
         with("radiuss", json!(1)),

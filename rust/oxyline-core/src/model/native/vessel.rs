@@ -210,10 +210,16 @@ pub fn vessel<N: Node>(v: &N, i: usize, units: Units) -> Result<Value> {
             Some(x) if n.kind() == crate::model::node::Kind::Int => {
                 cv.insert("segments".into(), json!(x));
             }
+            _ if n.text().as_deref() == Some("auto") => {
+                cv.insert("segments_auto".into(), json!(true));
+            }
             _ => {
                 return Err(err(
                     &el,
-                    format!("'segments' must be an integer >= 1, got {}", n.repr()),
+                    format!(
+                        "'segments' must be an integer >= 1 or 'auto', got {}",
+                        n.repr()
+                    ),
                 ));
             }
         }

@@ -1,0 +1,173 @@
+"""``segments: auto`` against exact transmission lines, and the spatial error estimate.
+
+* A uniform elastic tube closed by a mismatched resistance: its input impedance in closed form,
+
+      Z_in = Z_c (Z_T + Z_c tanh γℓ) / (Z_c + Z_T tanh γℓ),
+      γ = √((r + iωl) iωc),  Z_c = √((r + iωl) / (iωc)),
+
+  with r = 8μ/(πa⁴), l = ρ/(πa²), c = 2πa³(1 − ν²)/(E h) per length (a the radius, ν = ½),
+  written here from the physics, not read from the model.
+* A structured tree against Olufsen's recursion (a line per vessel, parallel at every
+  bifurcation: tests/test_womersley.py), Poiseuille friction.
+
+In both, ``auto`` at rtol must bring the input impedance within rtol of the exact one at every
+harmonic of the forcing it keeps (:func:`oxyline.forcing_harmonics`), for rtol 1e-2 and 1e-3.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from test_womersley import A_, B_, EH_R, LRR, olufsen, z_poiseuille
+
+import oxyline
+from oxyline.cli import main
+from oxyline.convergence import inlet_space_error
+
+RHO, MU = 1050.0, 3.5e-3
+RADIUS, LENGTH = 4e-3, 0.3  # m
+E, H = 4.0e5, 4e-4  # Pa, m: c ≈ √(E h / 2ρa) ≈ 4.4 m/s
+Z_T = 5.0e7  # outlet resistance (Pa s/m^3), ~1/3 of the tube's Z_c: reflections shape Z_in
+# a pulse-like inflow: harmonics 1-8 of 1 Hz, amplitudes falling as 1/k^2
+INFLOW = {"period": 1.0, "mean": 5e-6,
+          "cos": [4e-6 / k**2 for k in range(1, 9)], "sin": [2e-6 / k**2 for k in range(1, 9)]}
+
+
+def tube(arrangement: str, rtol: float, segments: Any = "auto") -> dict[str, Any]:
+    return {"name": "tube", "arrangement": arrangement,
+            "blood": {"density": RHO, "viscosity": MU},
+            "segmentation": {"rtol": rtol},
+            "vessels": [{"name": "v", "from": "in", "to": "out", "length": LENGTH,
+                         "radius": RADIUS, "wall_thickness": H, "youngs_modulus": E,
+                         "segments": segments}],
+            "boundary_conditions": {"in": {"type": "flow", "fourier": INFLOW},
+                                    "out": {"type": "resistance", "resistance": Z_T}}}
+
+
+def exact_tube(f: np.ndarray) -> np.ndarray:
+    w = 2 * np.pi * f
+    r, l = 8 * MU / (np.pi * RADIUS**4), RHO / (np.pi * RADIUS**2)
+    c = 2 * np.pi * RADIUS**3 * 0.75 / (E * H)
+    z, y = r + 1j * w * l, 1j * w * c
+    g, zc = np.sqrt(z * y), np.sqrt(z / y)
+    t = np.tanh(g * LENGTH)
+    return zc * (Z_T + zc * t) / (zc + Z_T * t)
+
+
+@pytest.mark.parametrize("arrangement", ["pi", "inverted-L", "L"])
+@pytest.mark.parametrize("rtol", [1e-2, 1e-3])
+def test_auto_tube_is_within_rtol_of_the_transmission_line(arrangement: str,
+                                                           rtol: float) -> None:
+    model = tube(arrangement, rtol)
+    f = oxyline.forcing_harmonics(model)
+    # the series' power falls as 1/k^4: all but rtol of it is in the first few harmonics
+    assert f[0] == 1.0 and 2 <= len(f) <= 8
+    z = oxyline.impedance(model, "in", f)
+    err = np.abs(z / exact_tube(f) - 1.0)
+    assert err.max() <= rtol, (arrangement, rtol, err)
+    # and not by luck of a huge count: the next coarser explicit count is outside rtol
+    n = oxyline.load_model(model).summary()["segments"]
+    z1 = oxyline.impedance(tube(arrangement, rtol, max(1, n // 2)), "in", f)
+    assert n == 1 or np.abs(z1 / exact_tube(f) - 1.0).max() > rtol / 4, (n, arrangement)
+
+
+def tree_model(root: float, rtol: float, segments: Any = "auto") -> dict[str, Any]:
+    return {"name": "st", "arrangement": "pi", "blood": {"density": RHO, "viscosity": MU},
+            "segmentation": {"rtol": rtol},
+            "vessels": [{"name": "feed", "from": "in", "to": "out", "length": 1e-3,
+                         "radius": root}],
+            "boundary_conditions": {
+                "in": {"type": "flow", "fourier": {**INFLOW, "mean": 1e-7,
+                                                   "cos": [x / 50 for x in INFLOW["cos"]],
+                                                   "sin": [x / 50 for x in INFLOW["sin"]]}},
+                "out": {"type": "structured-tree", "alpha": A_, "beta": B_,
+                        "length_ratio": LRR, "min_radius": 0.3 * root,
+                        "stiffness": {"youngs_modulus": EH_R * 10, "thickness_ratio": 0.1},
+                        "segments": segments}}}
+
+
+@pytest.mark.parametrize("rtol", [1e-2, 1e-3])
+def test_auto_structured_tree_is_within_rtol_of_olufsens_recursion(rtol: float) -> None:
+    root = 2e-3
+    model = tree_model(root, rtol)
+    f = oxyline.forcing_harmonics(model)
+    exact = np.array([olufsen(root, 0.3 * root, 2 * math.pi * fi, z_poiseuille) for fi in f])
+    z = oxyline.impedance(model, "out", f)
+    err = np.abs(z / exact - 1.0)
+    assert err.max() <= rtol, (rtol, err)
+    # the default (one segment per tree vessel) is no closer, and outside 1e-3
+    err1 = np.abs(oxyline.impedance(tree_model(root, rtol, 1), "out", f) / exact - 1.0).max()
+    assert err1 >= err.max() and (rtol > 1e-3 or err1 > rtol), (err1, err)
+
+
+def test_model_level_auto_leaves_explicit_segments_alone() -> None:
+    two = {**tube("pi", 1e-3, 3), "segmentation": {"segments": "auto", "rtol": 1e-3}}
+    two["vessels"] = [dict(two["vessels"][0], name="a", to="mid"),
+                      {k: v for k, v in two["vessels"][0].items() if k != "segments"}
+                      | {"name": "b", "from": "mid"}]
+    table = oxyline.load_model(two).network.segment_table()
+    counts = np.bincount(table["vessel"])
+    assert counts[0] == 3 and counts[1] > 3  # b's count from the rule, a's its own
+    plain = {**two, "segmentation": {}}
+    plain["vessels"] = [two["vessels"][0], dict(two["vessels"][1], segments=3)]
+    ref = oxyline.load_model(plain).network.segment_table()
+    # the explicit vessel's segments are the same rows either way (one code path)
+    for key in ("resistance", "inductance", "compliance"):
+        np.testing.assert_array_equal(table[key][:3], ref[key][:3])
+
+
+@pytest.mark.parametrize(("where", "value", "match"), [
+    ("vessel", "autox", r"vessel 'v'.*'segments' must be an integer >= 1 or 'auto'"),
+    ("model", "autox", r"segmentation.*'segments' must be 'auto'"),
+    ("rtol", 0.0, r"segmentation.*'rtol' must be in \(0, 1\)"),
+    ("rtol", 1.0, r"segmentation.*'rtol' must be in \(0, 1\)"),
+    ("rtol", -1e-3, r"segmentation.*'rtol' must be in \(0, 1\)"),
+    ("rtol", float("nan"), r"segmentation.*'rtol' must be finite"),
+    ("tree", "autox", r"'segments' must be an integer >= 1 or 'auto'"),
+])
+def test_bad_auto_settings_are_model_errors(where: str, value: Any, match: str) -> None:
+    if where == "tree":
+        model = tree_model(2e-3, 1e-2, value)
+    else:
+        model = tube("pi", 1e-3)
+        if where == "vessel":
+            model["vessels"][0]["segments"] = value
+        elif where == "model":
+            model["segmentation"] = {"segments": value}
+        else:
+            model["segmentation"] = {"rtol": value}
+    with pytest.raises(oxyline.ModelError, match=match):
+        oxyline.load_model(model).summary()
+
+
+def test_space_error_estimate_brackets_the_true_error(tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]
+                                                      ) -> None:
+    """The estimate (one doubling's change) against the true error of the model's own
+    segmentation at the kept harmonics: a π ladder's change is ~3/4 of its error
+    (Richardson), so within 0.3-1.2 times it."""
+    model = tube("pi", 1e-2, 4)
+    f = oxyline.forcing_harmonics(model)
+    true = np.abs(oxyline.impedance(model, "in", f) / exact_tube(f) - 1.0).max()
+    res = oxyline.simulate(model, cycles=1, estimate_space_error=True)
+    est = res.error_estimate["space"]
+    assert 0.3 * true <= est <= 1.2 * true, (est, true)
+    assert est == pytest.approx(inlet_space_error(model), rel=1e-12)
+    # recorded in the file's attributes and read back
+    path = tmp_path / "run.nc"
+    res.to_netcdf(path)
+    back = oxyline.open_result(path)
+    assert back.error_estimate["space"] == pytest.approx(est, rel=1e-12)
+    with pytest.raises(oxyline.ModelError, match="estimate_space_error"):
+        oxyline.simulate(model, cycles=1, estimate_space_error="yes")
+    # the command line's summary says it
+    model_file = tmp_path / "tube.yaml"
+    import yaml
+
+    model_file.write_text(yaml.safe_dump(model))
+    assert main(["run", str(model_file), "--cycles", "1", "--estimate-space-error"]) == 0
+    assert "space: the inlet impedance moves" in capsys.readouterr().out
