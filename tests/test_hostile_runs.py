@@ -500,6 +500,44 @@ def test_a_core_panic_becomes_a_solver_error() -> None:
         raise KeyboardInterrupt
 
 
+def test_a_panic_at_a_binding_entry_is_a_solver_error_naming_it() -> None:
+    """The binding's own guard (not only the package's ``core_errors`` blocks): a panic at
+    any entry of ``oxyline._core`` is a SolverError with the entry and the panic's message,
+    never pyo3's PanicException (a BaseException ``except Exception`` lets through)."""
+    from oxyline import _core
+
+    with raises(oxyline.SolverError, "_panic_probe", "a Rust panic", "probe 42"):
+        _core._panic_probe("probe 42")
+    try:
+        _core._panic_probe("again")
+    except Exception as exc:  # noqa: BLE001 - the point: an ordinary Exception
+        assert isinstance(exc, oxyline.SolverError)
+
+
+BINDING = Path(__file__).parents[1] / "rust" / "oxyline-py" / "src"
+
+
+@pytest.mark.skipif(not BINDING.is_dir(), reason="needs the binding's sources")
+def test_every_binding_entry_is_guarded_against_panics() -> None:
+    """Every ``#[pyfunction]`` and ``#[pymethods]`` block of the binding carries
+    ``#[oxyline_py_guard::guard]`` among its attributes (the guard the test above proves)."""
+    import re
+
+    unguarded, entries = [], 0
+    for src in sorted(BINDING.rglob("*.rs")):
+        lines = src.read_text().splitlines()
+        for k, line in enumerate(lines):
+            if re.match(r"\s*#\[(pyfunction|pymethods)\b", line):
+                entries += 1
+                j = k - 1
+                while j >= 0 and lines[j].strip().startswith(("#[", "///")) \
+                        and "oxyline_py_guard::guard" not in lines[j]:
+                    j -= 1
+                if j < 0 or "oxyline_py_guard::guard" not in lines[j]:
+                    unguarded.append(f"{src.name}:{k + 1}")
+    assert entries >= 20 and not unguarded, unguarded
+
+
 def test_structured_tree_memory_estimate_refuses_before_growing() -> None:
     from oxyline import _core
 
@@ -513,6 +551,52 @@ def test_structured_tree_memory_estimate_refuses_before_growing() -> None:
                                 memory_limit=0.999 * need)
     assert oxyline.structured_tree("out", root_radius=1e-3, min_radius=5e-5,
                                    memory_limit=1.001 * need)
+
+
+# ---- a process at the end of its address space ---------------------------------------------
+
+_NEAR_LIMIT = """
+import resource, signal, sys
+signal.signal(signal.SIGINT, signal.SIG_DFL)
+import oxyline
+model = oxyline.load_model("bifurcation")
+with open("/proc/self/status") as f:
+    vm = next(int(line.split()[1]) * 1024 for line in f if line.startswith("VmSize:"))
+resource.setrlimit(resource.RLIMIT_AS, (vm + int(float(sys.argv[1]) * 1e6),
+                                        resource.RLIM_INFINITY))
+try:
+    res = oxyline.simulate(model, cycles=1, progress=False)
+    print("ran", len(res.time))
+except (oxyline.ResourceError, MemoryError) as exc:
+    print("refused", type(exc).__name__, exc)
+"""
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads /proc (Linux)")
+@pytest.mark.parametrize("left_mb", [2.0, 3.0, 4.0, 400.0])
+def test_a_first_run_near_the_address_space_limit_raises_instead_of_aborting(
+        left_mb: float) -> None:
+    """With 2-4 MB of address space left (RLIMIT_AS in a child), the first run raises a typed
+    error (before: the linear algebra's scratch allocation aborted the process, SIGABRT);
+    with room left it runs (the same child, so the refusal is the limit's doing)."""
+    import signal
+    import subprocess
+    import sys
+
+    child = subprocess.Popen([sys.executable, "-c", _NEAR_LIMIT, str(left_mb)],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        out, err = child.communicate(timeout=120)
+    finally:
+        child.kill()
+        child.wait()
+    assert child.returncode == 0, (child.returncode, err[-2000:])
+    if left_mb < 10:
+        assert out.startswith("refused"), out + err[-2000:]
+        assert "MemoryError" in out or "out of memory" in out, out
+    else:
+        assert out.startswith("ran 1001"), out + err[-2000:]
 
 
 # ---- ensembles ----------------------------------------------------------------------------------

@@ -35,6 +35,7 @@ const _: () = assert!(
 
 /// (E(t), V_rest(t)) of a canonical chamber spec (JSON text) at `times`: the drop-in rebuilds
 /// a chamber's volume V = V_rest + P/E from its recorded pressure (docs/svzerod.md).
+#[oxyline_py_guard::guard]
 #[pyfunction]
 fn chamber_elastance<'py>(
     py: Python<'py>,
@@ -65,7 +66,7 @@ mod _core {
     use super::{
         chamber_elastance,
         ensemble::Ensemble,
-        errors::{ModelError, ResourceError, SolverError, UnstableTimeStep},
+        errors::{_panic_probe, ModelError, ResourceError, SolverError, UnstableTimeStep},
         network::Network,
         reader::NativeParts,
         reader::model::{canonical_model, read_model},
