@@ -24,7 +24,7 @@ pub fn guard(attr: TokenStream, item: TokenStream) -> TokenStream {
     }
     let mut item = parse_macro_input!(item as Item);
     match &mut item {
-        Item::Fn(f) => wrap(&mut f.sig, &mut *f.block, None),
+        Item::Fn(f) => wrap(&mut f.sig, &mut f.block, None),
         Item::Impl(imp) => {
             let owner = imp.self_ty.to_token_stream().to_string().replace(' ', "");
             for it in &mut imp.items {
