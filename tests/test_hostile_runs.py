@@ -488,6 +488,45 @@ def test_cancel_acts_during_the_automatic_step_estimate() -> None:
     assert info.value.result is None or len(info.value.result.time) == 0
 
 
+_PHASES = {
+    "generalized-alpha steps": ("bifurcation", lambda t: t > 0,
+                                {"cycles": 10**4, "method": "generalized-alpha"}),
+    "RK4 steps": ("bifurcation", lambda t: t > 0, {"cycles": 10**4, "method": "rk4"}),
+    "until_periodic cycles": ("bifurcation", lambda t: t > 2.0,
+                              {"until_periodic": 1e-14, "max_cycles": 10**4}),
+    "O2 transport": ("paper-bifurcated", lambda t: t > 0, {"cycles": 10**4}),
+    "Zarr stream": ("bifurcation", lambda t: t > 0, {"cycles": 10**4}),
+    "before the start": ("bifurcation", None, {"cycles": 10**4}),
+}
+
+
+@pytest.mark.parametrize("phase", list(_PHASES))
+def test_cancel_acts_at_the_next_check_in_every_phase(tmp_path: Path, phase: str) -> None:
+    """A cancel set in any phase of a 10,000-cycle run (minutes) stops it at the run's next
+    progress check (checks are 0.1 s of wall time apart): the progress callback that set it
+    is the last one, or one more at most, and the run raises SimulationCancelled."""
+    name, when, settings_ = _PHASES[phase]
+    ev = threading.Event()
+    calls_after: list[float] = []
+
+    def progress(t: float, t_end: float) -> None:
+        if ev.is_set():
+            calls_after.append(t)
+        elif when is not None and when(t):
+            ev.set()
+
+    if when is None:
+        ev.set()
+    run = (oxyline.simulate if phase != "Zarr stream" else
+           lambda m, **kw: oxyline.simulate_to_zarr(m, tmp_path / "r.zarr", **kw))
+    with pytest.raises(oxyline.SimulationCancelled) as info:
+        run(name, cancel=ev, progress=progress, **settings_)
+    assert len(calls_after) <= 1, calls_after
+    res = info.value.result
+    if res is not None and len(res.time):
+        assert float(res.time[-1]) < 10.0  # a partial result: far from the 10,000 cycles
+
+
 # ---- a panic of the core never reaches the caller as one ---------------------------------------
 
 def test_a_core_panic_becomes_a_solver_error() -> None:
@@ -597,6 +636,67 @@ def test_a_first_run_near_the_address_space_limit_raises_instead_of_aborting(
         assert "MemoryError" in out or "out of memory" in out, out
     else:
         assert out.startswith("ran 1001"), out + err[-2000:]
+
+
+# ---- more hostile numbers -------------------------------------------------------------------
+
+@pytest.mark.parametrize(("key", "value"), [("compliance", 0), ("resistance", 0.0),
+                                            ("compliance", -2.0)])
+def test_an_ensemble_scale_factor_of_zero_or_below_is_a_model_error(key: str,
+                                                                     value: float) -> None:
+    # before: ZeroDivisionError (compliance 0 divides Young's modulus)
+    with raises(ModelError, f"scale.{key}", "> 0", "variant 0"):
+        oxyline.simulate_ensemble("bifurcation", [{"scale": {key: value}}], cycles=1,
+                                  progress=False)
+
+
+@pytest.mark.parametrize("coefficient", [-1e12, -1e14])
+def test_rk4_with_a_negative_stenosis_coefficient_plans_no_endless_run(
+        coefficient: float) -> None:
+    """A negative stenosis coefficient makes RK4's stability limit ~1e-15 s (before: a run
+    of 6e17 steps per cycle started): refused at once, naming the element that sets it."""
+    model = {
+        "name": "stenosis", "period": 1.0,
+        "vessels": [
+            {"name": "a", "from": "in", "to": "j", "length": 0.0625, "radius": 0.0039,
+             "wall_thickness": 3e-4, "youngs_modulus": 1e6},
+            {"name": "s", "from": "j", "to": "out",
+             "lumped": {"resistance": 1e6, "capacitance": 1e-10, "inductance": 1e4,
+                        "stenosis_coefficient": coefficient}}],
+        "boundary_conditions": {"in": {"type": "flow", "value": 1e-5},
+                                "out": {"type": "resistance", "resistance": 1e7}},
+    }
+    with pytest.raises((ResourceError, oxyline.UnstableTimeStep)) as info:
+        oxyline.simulate(model, method="rk4", cycles=1, start="zero", progress=False)
+    msg = str(info.value)
+    assert "steps per cycle" in msg and ("'s'" in msg or " j" in msg), msg
+
+
+@pytest.mark.parametrize("segments", [1e7, 10**7])
+def test_an_ensemble_variant_of_ten_million_segments_never_allocates_them(
+        segments: Any) -> None:
+    """``segments: 1e7`` (a float) is refused as a model error of its variant; 10**7 is
+    above the memory allowed (status 6, estimated before it runs); the other variant runs."""
+    ds = oxyline.simulate_ensemble("bifurcation", [{}, {"vessels": {"parent": {
+        "segments": segments}}}], cycles=1, progress=False, max_memory="2 GB")
+    assert ds.status.values.tolist() == [0, 1 if isinstance(segments, float) else 6]
+    assert "segments" in ds.error.values[1] or "max_memory" in ds.error.values[1]
+
+
+def test_an_output_callable_the_dask_workers_cannot_receive_is_a_model_error() -> None:
+    distributed = pytest.importorskip("distributed")
+    lock = threading.Lock()
+
+    def holds_a_lock(res: Any) -> dict[str, float]:  # a closure over an unpicklable lock
+        with lock:
+            return {"p": float(res.pressure_in.max())}
+
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client:
+        with raises(ModelError, "output", "holds_a_lock", "Dask"):
+            oxyline.simulate_ensemble("bifurcation", [{}], client=client, output=holds_a_lock,
+                                      cycles=1, progress=False)
 
 
 # ---- ensembles ----------------------------------------------------------------------------------

@@ -52,12 +52,13 @@ def scale_terms(scale: Any, index: Mapping[Any, int], k: int
         if key in scale:
             f = scale[key]
             try:
+                # a factor of 0 or below leaves no resistance or compliance (1/0 downstream)
                 ok = not isinstance(f, bool) and isinstance(f, (int, float)) \
-                    and math.isfinite(f)
+                    and math.isfinite(f) and f > 0
             except OverflowError:  # an integer beyond any float
                 ok = False
             if not ok:
-                raise ModelError(f"{where(k, f'scale.{key}')}: expected a number, got "
+                raise ModelError(f"{where(k, f'scale.{key}')}: expected a number > 0, got "
                                  f"{f!r:.40}")
             factors[key] = float(f)
     return selected, factors
