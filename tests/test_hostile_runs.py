@@ -618,13 +618,12 @@ def test_a_first_run_near_the_address_space_limit_raises_instead_of_aborting(
     """With 2-4 MB of address space left (RLIMIT_AS in a child), the first run raises a typed
     error (before: the linear algebra's scratch allocation aborted the process, SIGABRT);
     with room left it runs (the same child, so the refusal is the limit's doing)."""
-    import signal
     import subprocess
     import sys
 
+    # the child resets SIGINT itself (the script's first lines)
     child = subprocess.Popen([sys.executable, "-c", _NEAR_LIMIT, str(left_mb)],
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         out, err = child.communicate(timeout=120)
     finally:
@@ -693,10 +692,10 @@ def test_an_output_callable_the_dask_workers_cannot_receive_is_a_model_error() -
 
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
                                   dashboard_address=None) as cluster, \
-            distributed.Client(cluster) as client:
-        with raises(ModelError, "output", "holds_a_lock", "Dask"):
-            oxyline.simulate_ensemble("bifurcation", [{}], client=client, output=holds_a_lock,
-                                      cycles=1, progress=False)
+            distributed.Client(cluster) as client, \
+            raises(ModelError, "output", "holds_a_lock", "Dask"):
+        oxyline.simulate_ensemble("bifurcation", [{}], client=client, output=holds_a_lock,
+                                  cycles=1, progress=False)
 
 
 # ---- ensembles ----------------------------------------------------------------------------------
