@@ -52,13 +52,12 @@ def scale_terms(scale: Any, index: Mapping[Any, int], k: int
         if key in scale:
             f = scale[key]
             try:
-                # a factor of 0 or below leaves no resistance or compliance (1/0 downstream)
                 ok = not isinstance(f, bool) and isinstance(f, (int, float)) \
-                    and math.isfinite(f) and f > 0
+                    and math.isfinite(f)
             except OverflowError:  # an integer beyond any float
                 ok = False
             if not ok:
-                raise ModelError(f"{where(k, f'scale.{key}')}: expected a number > 0, got "
+                raise ModelError(f"{where(k, f'scale.{key}')}: expected a number, got "
                                  f"{f!r:.40}")
             factors[key] = float(f)
     return selected, factors
