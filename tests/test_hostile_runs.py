@@ -826,3 +826,56 @@ def test_a_second_writer_of_a_zarr_store_is_refused(tmp_path: Path) -> None:
                                   progress=False)
     assert ds.attrs["complete"] == 1
     assert not list(tmp_path.glob(".*"))  # no lock or temporary left
+
+
+_ZARR_WRITER = """
+import signal, sys
+signal.signal(signal.SIGINT, signal.SIG_DFL)
+import oxyline
+from oxyline.errors import OutputError
+print("ready", flush=True)
+sys.stdin.readline()  # both start together
+try:
+    ds = oxyline.simulate_to_zarr("bifurcation", sys.argv[1], cycles=3, overwrite=True,
+                                  progress=False)
+    print("wrote", int(ds.attrs["complete"]), flush=True)
+except OutputError as exc:
+    print("refused", exc, flush=True)
+"""
+
+
+def test_two_processes_writing_one_zarr_store_leave_it_whole(tmp_path: Path) -> None:
+    """Two processes start ``simulate_to_zarr(path, overwrite=True)`` on the same path at
+    once (before: both ended with broken stores): each writes a whole store or is refused with
+    OutputError, at least one writes, and the store left opens complete."""
+    pytest.importorskip("zarr")
+    import subprocess
+    import sys
+
+    import xarray as xr
+
+    path = tmp_path / "run.zarr"
+    children = [subprocess.Popen([sys.executable, "-c", _ZARR_WRITER, str(path)],
+                                 stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                 stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    try:
+        for c in children:
+            assert c.stdout is not None and c.stdout.readline().strip() == "ready"
+        for c in children:  # the go signal, to both as close together as possible
+            assert c.stdin is not None
+            c.stdin.write("go\n")
+            c.stdin.flush()
+        outs = [c.communicate(timeout=300) for c in children]
+    finally:
+        for c in children:
+            c.kill()
+            c.wait()
+    said = [out.strip().splitlines()[-1] if out.strip() else "" for out, _ in outs]
+    for c, (out, err), last in zip(children, outs, said, strict=True):
+        assert c.returncode == 0 and (last == "wrote 1" or last.startswith("refused")), \
+            (last, err[-2000:])
+    assert "wrote 1" in said
+    with xr.open_zarr(path) as ds:
+        assert ds.attrs["complete"] == 1 and ds.sizes["time"] >= 2
+        assert np.isfinite(ds["pressure_in"].values).all()
+    assert not [p.name for p in tmp_path.iterdir() if p.name != "run.zarr"]
