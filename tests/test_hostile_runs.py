@@ -488,6 +488,45 @@ def test_cancel_acts_during_the_automatic_step_estimate() -> None:
     assert info.value.result is None or len(info.value.result.time) == 0
 
 
+_PHASES = {
+    "generalized-alpha steps": ("bifurcation", lambda t: t > 0,
+                                {"cycles": 10**4, "method": "generalized-alpha"}),
+    "RK4 steps": ("bifurcation", lambda t: t > 0, {"cycles": 10**4, "method": "rk4"}),
+    "until_periodic cycles": ("bifurcation", lambda t: t > 2.0,
+                              {"until_periodic": 1e-14, "max_cycles": 10**4}),
+    "O2 transport": ("paper-bifurcated", lambda t: t > 0, {"cycles": 10**4}),
+    "Zarr stream": ("bifurcation", lambda t: t > 0, {"cycles": 10**4}),
+    "before the start": ("bifurcation", None, {"cycles": 10**4}),
+}
+
+
+@pytest.mark.parametrize("phase", list(_PHASES))
+def test_cancel_acts_at_the_next_check_in_every_phase(tmp_path: Path, phase: str) -> None:
+    """A cancel set in any phase of a 10,000-cycle run (minutes) stops it at the run's next
+    progress check (checks are 0.1 s of wall time apart): the progress callback that set it
+    is the last one, or one more at most, and the run raises SimulationCancelled."""
+    name, when, settings_ = _PHASES[phase]
+    ev = threading.Event()
+    calls_after: list[float] = []
+
+    def progress(t: float, t_end: float) -> None:
+        if ev.is_set():
+            calls_after.append(t)
+        elif when is not None and when(t):
+            ev.set()
+
+    if when is None:
+        ev.set()
+    run = (oxyline.simulate if phase != "Zarr stream" else
+           lambda m, **kw: oxyline.simulate_to_zarr(m, tmp_path / "r.zarr", **kw))
+    with pytest.raises(oxyline.SimulationCancelled) as info:
+        run(name, cancel=ev, progress=progress, **settings_)
+    assert len(calls_after) <= 1, calls_after
+    res = info.value.result
+    if res is not None and len(res.time):
+        assert float(res.time[-1]) < 10.0  # a partial result: far from the 10,000 cycles
+
+
 # ---- a panic of the core never reaches the caller as one ---------------------------------------
 
 def test_a_core_panic_becomes_a_solver_error() -> None:
@@ -498,6 +537,44 @@ def test_a_core_panic_becomes_a_solver_error() -> None:
         raise panic("boom")
     with pytest.raises(KeyboardInterrupt), core_errors("simulate"):
         raise KeyboardInterrupt
+
+
+def test_a_panic_at_a_binding_entry_is_a_solver_error_naming_it() -> None:
+    """The binding's own guard (not only the package's ``core_errors`` blocks): a panic at
+    any entry of ``oxyline._core`` is a SolverError with the entry and the panic's message,
+    never pyo3's PanicException (a BaseException ``except Exception`` lets through)."""
+    from oxyline import _core
+
+    with raises(oxyline.SolverError, "_panic_probe", "a Rust panic", "probe 42"):
+        _core._panic_probe("probe 42")
+    try:
+        _core._panic_probe("again")
+    except Exception as exc:  # noqa: BLE001 - the point: an ordinary Exception
+        assert isinstance(exc, oxyline.SolverError)
+
+
+BINDING = Path(__file__).parents[1] / "rust" / "oxyline-py" / "src"
+
+
+@pytest.mark.skipif(not BINDING.is_dir(), reason="needs the binding's sources")
+def test_every_binding_entry_is_guarded_against_panics() -> None:
+    """Every ``#[pyfunction]`` and ``#[pymethods]`` block of the binding carries
+    ``#[oxyline_py_guard::guard]`` among its attributes (the guard the test above proves)."""
+    import re
+
+    unguarded, entries = [], 0
+    for src in sorted(BINDING.rglob("*.rs")):
+        lines = src.read_text().splitlines()
+        for k, line in enumerate(lines):
+            if re.match(r"\s*#\[(pyfunction|pymethods)\b", line):
+                entries += 1
+                j = k - 1
+                while j >= 0 and lines[j].strip().startswith(("#[", "///")) \
+                        and "oxyline_py_guard::guard" not in lines[j]:
+                    j -= 1
+                if j < 0 or "oxyline_py_guard::guard" not in lines[j]:
+                    unguarded.append(f"{src.name}:{k + 1}")
+    assert entries >= 20 and not unguarded, unguarded
 
 
 def test_structured_tree_memory_estimate_refuses_before_growing() -> None:
@@ -513,6 +590,115 @@ def test_structured_tree_memory_estimate_refuses_before_growing() -> None:
                                 memory_limit=0.999 * need)
     assert oxyline.structured_tree("out", root_radius=1e-3, min_radius=5e-5,
                                    memory_limit=1.001 * need)
+
+
+# ---- a process at the end of its address space ---------------------------------------------
+
+_NEAR_LIMIT = """
+import resource, signal, sys
+signal.signal(signal.SIGINT, signal.SIG_DFL)
+import oxyline
+model = oxyline.load_model("bifurcation")
+with open("/proc/self/status") as f:
+    vm = next(int(line.split()[1]) * 1024 for line in f if line.startswith("VmSize:"))
+resource.setrlimit(resource.RLIMIT_AS, (vm + int(float(sys.argv[1]) * 1e6),
+                                        resource.RLIM_INFINITY))
+try:
+    res = oxyline.simulate(model, cycles=1, progress=False)
+    print("ran", len(res.time))
+except (oxyline.ResourceError, MemoryError) as exc:
+    print("refused", type(exc).__name__, exc)
+"""
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads /proc (Linux)")
+@pytest.mark.parametrize("left_mb", [2.0, 3.0, 4.0, 400.0])
+def test_a_first_run_near_the_address_space_limit_raises_instead_of_aborting(
+        left_mb: float) -> None:
+    """With 2-4 MB of address space left (RLIMIT_AS in a child), the first run raises a typed
+    error (before: the linear algebra's scratch allocation aborted the process, SIGABRT);
+    with room left it runs (the same child, so the refusal is the limit's doing)."""
+    import subprocess
+    import sys
+
+    # the child resets SIGINT itself (the script's first lines)
+    child = subprocess.Popen([sys.executable, "-c", _NEAR_LIMIT, str(left_mb)],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        out, err = child.communicate(timeout=120)
+    finally:
+        child.kill()
+        child.wait()
+    assert child.returncode == 0, (child.returncode, err[-2000:])
+    if left_mb < 10:
+        assert out.startswith("refused"), out + err[-2000:]
+        assert "MemoryError" in out or "out of memory" in out, out
+    else:
+        assert out.startswith("ran 1001"), out + err[-2000:]
+
+
+# ---- more hostile numbers -------------------------------------------------------------------
+
+@pytest.mark.parametrize(("key", "value"), [("compliance", 0), ("compliance", -2.0),
+                                            ("resistance", -1.0)])
+def test_an_ensemble_scale_factor_of_zero_or_below_fails_its_variant(key: str,
+                                                                      value: float) -> None:
+    # before: ZeroDivisionError (compliance 0 divides Young's modulus) for the whole ensemble;
+    # now that variant fails with its error (status 1), the others run
+    ds = oxyline.simulate_ensemble("bifurcation", [{"scale": {key: value}}, {}], cycles=1,
+                                   progress=False)
+    assert ds.status.values.tolist() == [1, 0]
+    assert "variant 0" in ds.error.values[0] and ("vessel" in ds.error.values[0]
+                                                 or "boundary condition" in ds.error.values[0])
+
+
+@pytest.mark.parametrize("coefficient", [-1e12, -1e14])
+def test_rk4_with_a_negative_stenosis_coefficient_plans_no_endless_run(
+        coefficient: float) -> None:
+    """A negative stenosis coefficient makes RK4's stability limit ~1e-15 s (before: a run
+    of 6e17 steps per cycle started): refused at once, naming the element that sets it."""
+    model = {
+        "name": "stenosis", "period": 1.0,
+        "vessels": [
+            {"name": "a", "from": "in", "to": "j", "length": 0.0625, "radius": 0.0039,
+             "wall_thickness": 3e-4, "youngs_modulus": 1e6},
+            {"name": "s", "from": "j", "to": "out",
+             "lumped": {"resistance": 1e6, "capacitance": 1e-10, "inductance": 1e4,
+                        "stenosis_coefficient": coefficient}}],
+        "boundary_conditions": {"in": {"type": "flow", "value": 1e-5},
+                                "out": {"type": "resistance", "resistance": 1e7}},
+    }
+    with pytest.raises((ResourceError, oxyline.UnstableTimeStep)) as info:
+        oxyline.simulate(model, method="rk4", cycles=1, start="zero", progress=False)
+    msg = str(info.value)
+    assert "steps per cycle" in msg and ("'s'" in msg or " j" in msg), msg
+
+
+@pytest.mark.parametrize("segments", [1e7, 10**7])
+def test_an_ensemble_variant_of_ten_million_segments_never_allocates_them(
+        segments: Any) -> None:
+    """``segments: 1e7`` (a float) is refused as a model error of its variant; 10**7 is
+    above the memory allowed (status 6, estimated before it runs); the other variant runs."""
+    ds = oxyline.simulate_ensemble("bifurcation", [{}, {"vessels": {"parent": {
+        "segments": segments}}}], cycles=1, progress=False, max_memory="2 GB")
+    assert ds.status.values.tolist() == [0, 1 if isinstance(segments, float) else 6]
+    assert "segments" in ds.error.values[1] or "max_memory" in ds.error.values[1]
+
+
+def test_an_output_callable_the_dask_workers_cannot_receive_is_a_model_error() -> None:
+    distributed = pytest.importorskip("distributed")
+    lock = threading.Lock()
+
+    def holds_a_lock(res: Any) -> dict[str, float]:  # a closure over an unpicklable lock
+        with lock:
+            return {"p": float(res.pressure_in.max())}
+
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster, \
+            distributed.Client(cluster) as client, \
+            raises(ModelError, "output", "holds_a_lock", "Dask"):
+        oxyline.simulate_ensemble("bifurcation", [{}], client=client, output=holds_a_lock,
+                                  cycles=1, progress=False)
 
 
 # ---- ensembles ----------------------------------------------------------------------------------
@@ -640,3 +826,56 @@ def test_a_second_writer_of_a_zarr_store_is_refused(tmp_path: Path) -> None:
                                   progress=False)
     assert ds.attrs["complete"] == 1
     assert not list(tmp_path.glob(".*"))  # no lock or temporary left
+
+
+_ZARR_WRITER = """
+import signal, sys
+signal.signal(signal.SIGINT, signal.SIG_DFL)
+import oxyline
+from oxyline.errors import OutputError
+print("ready", flush=True)
+sys.stdin.readline()  # both start together
+try:
+    ds = oxyline.simulate_to_zarr("bifurcation", sys.argv[1], cycles=3, overwrite=True,
+                                  progress=False)
+    print("wrote", int(ds.attrs["complete"]), flush=True)
+except OutputError as exc:
+    print("refused", exc, flush=True)
+"""
+
+
+def test_two_processes_writing_one_zarr_store_leave_it_whole(tmp_path: Path) -> None:
+    """Two processes start ``simulate_to_zarr(path, overwrite=True)`` on the same path at
+    once (before: both ended with broken stores): each writes a whole store or is refused with
+    OutputError, at least one writes, and the store left opens complete."""
+    pytest.importorskip("zarr")
+    import subprocess
+    import sys
+
+    import xarray as xr
+
+    path = tmp_path / "run.zarr"
+    children = [subprocess.Popen([sys.executable, "-c", _ZARR_WRITER, str(path)],
+                                 stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                 stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    try:
+        for c in children:
+            assert c.stdout is not None and c.stdout.readline().strip() == "ready"
+        for c in children:  # the go signal, to both as close together as possible
+            assert c.stdin is not None
+            c.stdin.write("go\n")
+            c.stdin.flush()
+        outs = [c.communicate(timeout=300) for c in children]
+    finally:
+        for c in children:
+            c.kill()
+            c.wait()
+    said = [out.strip().splitlines()[-1] if out.strip() else "" for out, _ in outs]
+    for c, (out, err), last in zip(children, outs, said, strict=True):
+        assert c.returncode == 0 and (last == "wrote 1" or last.startswith("refused")), \
+            (last, err[-2000:])
+    assert "wrote 1" in said
+    with xr.open_zarr(path) as ds:
+        assert ds.attrs["complete"] == 1 and ds.sizes["time"] >= 2
+        assert np.isfinite(ds["pressure_in"].values).all()
+    assert not [p.name for p in tmp_path.iterdir() if p.name != "run.zarr"]

@@ -117,9 +117,11 @@ def _merge(into: Collector, part: Collector, rows: range) -> None:
         dest[rows.start:rows.stop:rows.step] = arr
 
 
-#: Dask's retries of a task whose worker died (killed, out of memory, lost node): the task
-#: runs again on another (or restarted) worker; a chunk that fails this often is split into
-#: one task per variant, so that only a variant that kills its worker fails
+#: Dask's retries of a task that raised (``retries=``). A task whose worker died (killed,
+#: out of memory, lost node) is run again by the scheduler until it was on
+#: ``allowed_failures + 1`` dying workers (``distributed.scheduler.allowed-failures``,
+#: default 3), then fails with ``KilledWorker``; a chunk that fails so is split into one task
+#: per variant, so that only a variant that kills its worker fails
 RETRIES = 2
 
 
@@ -287,7 +289,7 @@ class _ClientRun:
             self.suspects.append(rows)
             return False
         self.collector.fail(rows.start, "worker", f"variant {rows.start}: its Dask worker "
-                            f"failed {RETRIES + 1} times when it ran alone "
+                            "failed when it ran alone "
                             f"({type(exc).__name__}: {exc})"[:400])
         return True
 

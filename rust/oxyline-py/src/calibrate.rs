@@ -12,6 +12,7 @@ use pyo3::types::PyDict;
 /// `model_json` and their derivatives with respect to the parameters `paths`: a dict of
 /// `values` (SI value of each parameter), `times` (n_steps), `signals` (n_steps × n_signals),
 /// `derivatives` (n_params × n_steps × n_signals), `cycles` and `periodic_change`.
+#[oxyline_py_guard::guard]
 #[pyfunction]
 #[pyo3(signature = (model_json, paths, signals, period, steps_per_cycle, rho_infty = 0.5,
                     max_cycles = 2000, tol = 1e-12))]

@@ -9,6 +9,7 @@ use oxyline_core::transport::closed_loop::{ClosedLoopSpec, run_periodic};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
+#[oxyline_py_guard::guard]
 #[pyfunction]
 #[pyo3(signature = (spec_json, flows, dt, max_cycles, tol))]
 pub fn closed_loop_o2<'py>(

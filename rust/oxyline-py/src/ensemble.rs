@@ -400,6 +400,7 @@ pub struct Ensemble {
     targets: Arc<Targets>,
 }
 
+#[oxyline_py_guard::guard]
 #[pymethods]
 impl Ensemble {
     /// Parse the canonical SI JSON of the base model (once for every variant). `targets`:

@@ -50,3 +50,29 @@ pub(crate) fn error_kind(e: &Error) -> &'static str {
         Error::Resource { .. } => "resource",
     }
 }
+
+/// The body of a Python entry, with a Rust panic inside it turned into `SolverError` naming
+/// the entry and the panic's message (`#[oxyline_py_guard::guard]` wraps every entry in it):
+/// pyo3 would raise its `PanicException`, a `BaseException` no `except Exception` catches.
+/// The default panic hook has already printed the panic's location to stderr.
+pub(crate) fn guarded<T>(entry: &str, body: impl FnOnce() -> T) -> PyResult<T> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(body)).map_err(|payload| {
+        let msg = payload
+            .downcast_ref::<&str>()
+            .map(|s| (*s).to_owned())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "(no message)".to_owned());
+        SolverError::new_err(format!(
+            "{entry}: internal error in the core (a Rust panic: {msg}); please report it with \
+             the model that caused it"
+        ))
+    })
+}
+
+/// A hidden entry that panics with `message`: the tests' proof that a panic at an entry
+/// reaches Python as `SolverError` (there is no input known to make the core panic).
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub(crate) fn _panic_probe(message: &str) {
+    panic!("{message}")
+}

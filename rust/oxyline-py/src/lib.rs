@@ -35,6 +35,7 @@ const _: () = assert!(
 
 /// (E(t), V_rest(t)) of a canonical chamber spec (JSON text) at `times`: the drop-in rebuilds
 /// a chamber's volume V = V_rest + P/E from its recorded pressure (docs/svzerod.md).
+#[oxyline_py_guard::guard]
 #[pyfunction]
 fn chamber_elastance<'py>(
     py: Python<'py>,
@@ -51,6 +52,7 @@ fn chamber_elastance<'py>(
 
 /// A canonical waveform spec (JSON text) of `element` evaluated by the core at `times`: the
 /// transport monitor reads a Fourier inlet's range from it (no second evaluator in Python).
+#[oxyline_py_guard::guard]
 #[pyfunction]
 fn waveform_values<'py>(
     py: Python<'py>,
@@ -68,6 +70,7 @@ fn waveform_values<'py>(
 /// Estimated peak bytes of a model (`oxyline_core::run::memory::model_bytes`): `segments`
 /// flow segments, `elements` vessels and boundary conditions, `cells` transport cells per
 /// segment and `species` species.
+#[oxyline_py_guard::guard]
 #[pyfunction]
 fn model_bytes(segments: usize, elements: usize, cells: f64, species: usize) -> f64 {
     oxyline_core::run::memory::model_bytes(segments, elements, cells, species)
@@ -89,7 +92,7 @@ mod _core {
     use super::{
         chamber_elastance,
         ensemble::Ensemble,
-        errors::{ModelError, ResourceError, SolverError, UnstableTimeStep},
+        errors::{_panic_probe, ModelError, ResourceError, SolverError, UnstableTimeStep},
         model_bytes,
         network::Network,
         reader::NativeParts,

@@ -76,6 +76,7 @@ impl Network {
     }
 }
 
+#[oxyline_py_guard::guard]
 #[pymethods]
 impl Network {
     /// `vessels` (the canonical vessel dicts) and `outlets` (node -> canonical resistance or

@@ -222,6 +222,7 @@ fn checked_growth(
 /// The structured tree of `condition` below `node` as native vessel dicts (model units: unit
 /// factors `length`, `modulus`) and its leaf nodes. `root_radius` (model units) stands in for
 /// the condition's own; `memory_limit` (bytes; None: none) bounds the tree's estimated memory.
+#[oxyline_py_guard::guard]
 #[pyfunction]
 #[pyo3(signature = (node, condition, root_radius, length = 1.0, modulus = 1.0, memory_limit = None))]
 pub fn grow_structured_tree<'py>(
@@ -254,6 +255,7 @@ pub struct StructuredTrees {
     trees: Vec<(String, Grown)>,
 }
 
+#[oxyline_py_guard::guard]
 #[pymethods]
 impl StructuredTrees {
     /// `trees`: (node, condition dict, root radius in model units) per tree; `length`,
@@ -301,7 +303,7 @@ impl StructuredTrees {
         terminals: Vec<String>,
     ) -> PyResult<()> {
         let mut parts = parts.borrow_mut();
-        parts.vessels.reserve(self.vessel_count());
+        parts.vessels.reserve(self.vessel_count()?);
         for ((node, g), terminal) in std::mem::take(&mut self.trees).into_iter().zip(terminals) {
             let terminal: BoundarySpec =
                 from_json(&terminal).map_err(|e| model_error(&node, format!("'terminal': {e}")))?;
@@ -315,6 +317,7 @@ impl StructuredTrees {
 
 /// (min_radius, terminal resistance) of the structured tree below `node` (root radius
 /// `root_radius`, SI) whose steady resistance is `total` (see `Shape::matched`).
+#[oxyline_py_guard::guard]
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
 pub fn match_structured_tree(
@@ -342,6 +345,7 @@ pub fn match_structured_tree(
 
 /// (Young's modulus, wall thickness) in SI of a vessel of radius `radius` (SI) under the
 /// `stiffness` law of a structured tree (None: Olufsen's).
+#[oxyline_py_guard::guard]
 #[pyfunction]
 pub fn structured_tree_wall(
     node: &str,
@@ -354,6 +358,7 @@ pub fn structured_tree_wall(
 
 /// A lower bound of the vessel count of the structured tree (α, β, root radius, min_radius),
 /// in closed form (`vessel_count_bound`).
+#[oxyline_py_guard::guard]
 #[pyfunction]
 pub fn structured_tree_count_bound(
     alpha: f64,
@@ -365,6 +370,7 @@ pub fn structured_tree_count_bound(
 }
 
 /// Steady Poiseuille resistance of a tube tapered linearly from `r_in` to `r_out` (SI).
+#[oxyline_py_guard::guard]
 #[pyfunction]
 pub fn poiseuille_resistance(length: f64, r_in: f64, r_out: f64, viscosity: f64) -> f64 {
     st::poiseuille_resistance(length, r_in, r_out, viscosity)
@@ -373,6 +379,7 @@ pub fn poiseuille_resistance(length: f64, r_in: f64, r_out: f64, viscosity: f64)
 /// The haemoglobin facilitation factor E_Hb of the wall layer between inlet PO2 `p_in` and
 /// wall PO2 `p_w`: the nonlinear Lévêque layer of Hill binding, or (`linearized`) the closed
 /// form with the Hill secant over [p_w, p_in].
+#[oxyline_py_guard::guard]
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
 pub fn facilitation_factor(
@@ -402,6 +409,7 @@ pub fn facilitation_factor(
 }
 
 /// E_Hb of linearised binding with secant K̄ (closed form).
+#[oxyline_py_guard::guard]
 #[pyfunction]
 pub fn linear_facilitation_factor(kbar: f64, d: f64, d_hb: f64) -> f64 {
     facilitation::linear_factor(kbar, d, d_hb)

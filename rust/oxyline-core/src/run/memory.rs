@@ -59,6 +59,66 @@ pub fn check_model(
     Ok(())
 }
 
+/// Bytes of the dense linear algebra's scratch: the matrix products (faer's gemm, used by the
+/// eigenvalue estimate of RK4's step and by dense factorisations) take packing buffers of
+/// twice the L3 cache the first time a thread multiplies matrices, and that allocation aborts
+/// the process when it fails. Twice the L3 size the kernel reports (at most 128 MiB); the
+/// library's own default cache (2 MiB) when it reports none.
+pub fn scratch_bytes() -> f64 {
+    static BYTES: std::sync::OnceLock<f64> = std::sync::OnceLock::new();
+    *BYTES.get_or_init(|| {
+        let l3 = std::fs::read_to_string("/sys/devices/system/cpu/cpu0/cache/index3/size")
+            .ok()
+            .and_then(|t| cache_size(t.trim()))
+            .unwrap_or(2.0 * 1024.0 * 1024.0);
+        (2.0 * l3).min(128.0 * 1024.0 * 1024.0)
+    })
+}
+
+/// A sysfs cache size ("32768K", "2M", "1G", "512") in bytes.
+fn cache_size(text: &str) -> Option<f64> {
+    let (digits, scale) = match text.chars().last()? {
+        'K' => (&text[..text.len() - 1], 1024.0),
+        'M' => (&text[..text.len() - 1], 1024.0 * 1024.0),
+        'G' => (&text[..text.len() - 1], 1024.0 * 1024.0 * 1024.0),
+        _ => (text, 1.0),
+    };
+    digits.parse::<f64>().ok().map(|v| v * scale)
+}
+
+thread_local! {
+    /// Whether this thread has shown it can hold the linear algebra's scratch (the library
+    /// keeps it per thread once allocated).
+    static SCRATCH_PROVED: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Before a run's first allocation that cannot fail gracefully: reserve (and release at once)
+/// the linear algebra's scratch ([`scratch_bytes`]) with a fallible allocation, so that a
+/// process near its address-space limit (`ulimit -v`) or out of memory gets a typed
+/// [`Error::Resource`] instead of the allocator's abort. Once per thread.
+pub fn check_scratch() -> Result<()> {
+    if SCRATCH_PROVED.with(|p| p.get()) {
+        return Ok(());
+    }
+    let bytes = scratch_bytes();
+    let mut probe: Vec<u8> = Vec::new();
+    probe
+        .try_reserve_exact(bytes as usize)
+        .map_err(|_| Error::Resource {
+            what: "run".into(),
+            bytes: bytes as u64,
+            message: format!(
+                "cannot reserve the {} the linear algebra's matrix products take per thread \
+                 (out of memory, or above the address-space limit `ulimit -v`); free memory \
+                 or raise the limit",
+                crate::error::human_bytes(bytes)
+            ),
+        })?;
+    drop(probe);
+    SCRATCH_PROVED.with(|p| p.set(true));
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -72,5 +132,16 @@ mod tests {
         assert!(msg.contains("max_memory = 8.000 GB") && msg.contains("max_length"));
         assert!(check_model("small", 1000, 3, Some((1.0, 1)), Some(8e9)).is_ok());
         assert!(check_model("any", usize::MAX / 2, 3, None, None).is_ok());
+    }
+
+    #[test]
+    fn sysfs_cache_sizes_are_read_in_bytes() {
+        assert_eq!(cache_size("32768K"), Some(32.0 * 1024.0 * 1024.0));
+        assert_eq!(cache_size("2M"), Some(2.0 * 1024.0 * 1024.0));
+        assert_eq!(cache_size("512"), Some(512.0));
+        assert_eq!(cache_size("x"), None);
+        let s = scratch_bytes();
+        assert!((4096.0..=128.0 * 1024.0 * 1024.0).contains(&s));
+        assert!(check_scratch().is_ok() && check_scratch().is_ok());
     }
 }

@@ -73,6 +73,7 @@ fn period_and_simulation(data: &PyNode<'_>, periods: &Periods) -> PyResult<Optio
 /// transport section or None, transport facts for results). The plain vessels and outlets
 /// (the bulk of a large tree) are read straight into the parts; every other element goes
 /// through the core's full schema check.
+#[oxyline_py_guard::guard]
 #[pyfunction]
 pub(crate) fn read_model<'py>(py: Python<'py>, data: Bound<'py, PyAny>) -> PyResult<Read<'py>> {
     let node = PyNode(data);
@@ -111,6 +112,7 @@ pub(crate) fn read_model<'py>(py: Python<'py>, data: Bound<'py, PyAny>) -> PyRes
 
 /// The full canonical SI description of a native model dict (every vessel and condition as
 /// its canonical dict), as `read_model` reads it.
+#[oxyline_py_guard::guard]
 #[pyfunction]
 pub(crate) fn canonical_model<'py>(
     py: Python<'py>,
@@ -143,6 +145,7 @@ pub(crate) fn canonical_model<'py>(
 /// The highest significant frequency (Hz) of a native model dict's forcing and the
 /// segmentation tolerance it was found at (`rtol`, else the model's `segmentation: rtol`, else
 /// the default): the `segments: auto` rule's (`oxyline_core::assemble::auto_segments`).
+#[oxyline_py_guard::guard]
 #[pyfunction]
 #[pyo3(signature = (data, rtol = None))]
 pub(crate) fn forcing_frequency(data: Bound<'_, PyAny>, rtol: Option<f64>) -> PyResult<(f64, f64)> {

@@ -171,6 +171,7 @@ pub struct NativeParts {
     pub(crate) rest: Option<serde_json::Map<String, serde_json::Value>>,
 }
 
+#[oxyline_py_guard::guard]
 #[pymethods]
 impl NativeParts {
     /// Read the plain vessels of the native `vessels` list (in the unit system `units`): the

@@ -25,6 +25,7 @@ pub(crate) fn units(units: &str) -> PyResult<Units> {
 }
 
 /// (name, canonical top-level sections) of a native model dict.
+#[oxyline_py_guard::guard]
 #[pyfunction]
 pub(crate) fn read_header<'py>(
     py: Python<'py>,
@@ -36,6 +37,7 @@ pub(crate) fn read_header<'py>(
 }
 
 /// The canonical dicts of the native `vessels` (a list), in order.
+#[oxyline_py_guard::guard]
 #[pyfunction]
 pub(crate) fn read_vessels<'py>(
     py: Python<'py>,
@@ -55,6 +57,7 @@ pub(crate) fn read_vessels<'py>(
 
 /// Canonical boundary conditions by node and the periods of their waveforms, with the
 /// element they come from.
+#[oxyline_py_guard::guard]
 #[pyfunction]
 pub(crate) fn read_conditions<'py>(
     py: Python<'py>,
@@ -78,6 +81,7 @@ pub(crate) fn read_conditions<'py>(
 /// The model period: the model's `period` (None: not given) checked against every
 /// element's: `periods` (a waveform's, with the element) and the cardiac periods of the heart
 /// elements among the canonical `vessels` (see `native::element_periods`).
+#[oxyline_py_guard::guard]
 #[pyfunction]
 #[pyo3(signature = (data, periods, vessels = None))]
 pub(crate) fn check_periods(
@@ -110,6 +114,7 @@ pub(crate) fn check_periods(
 /// and its facts for results (species names, the oxygen species and its solubility per mmHg),
 /// read by the core (`oxyline_core::model::species`); `period`: the model's. The sections are
 /// read against the model's units, blood and run duration.
+#[oxyline_py_guard::guard]
 #[pyfunction]
 pub(crate) fn read_transport<'py>(
     py: Python<'py>,
@@ -146,6 +151,7 @@ pub(crate) fn transport_context<N: Node>(
 
 /// The transport sections of `data` alone (no blood: a `graetz` wall without its kinematic
 /// viscosity), read against a pressure unit factor, a period and a run duration.
+#[oxyline_py_guard::guard]
 #[pyfunction]
 pub(crate) fn transport_section<'py>(
     py: Python<'py>,
@@ -218,6 +224,7 @@ pub(crate) fn duration<N: Node>(data: &N, period: Option<f64>) -> Option<f64> {
 }
 
 /// The keys of a model's `simulation` section and its method.
+#[oxyline_py_guard::guard]
 #[pyfunction]
 pub(crate) fn check_simulation(sim: Bound<'_, PyAny>) -> PyResult<()> {
     native::simulation(&PyNode(sim)).map_err(to_py)
@@ -225,6 +232,7 @@ pub(crate) fn check_simulation(sim: Bound<'_, PyAny>) -> PyResult<()> {
 
 /// The run settings of a model's `simulation` section with `simulate`'s keyword overrides,
 /// checked and defaulted by the core (`oxyline_core::model::settings`); `period`: the model's.
+#[oxyline_py_guard::guard]
 #[pyfunction]
 pub(crate) fn resolve_settings<'py>(
     py: Python<'py>,
