@@ -23,8 +23,7 @@ import numpy as np
 from oxyline.ensemble.patch import apply_patch
 from oxyline.loader import load_model
 from oxyline.model import Model, build_model
-from oxyline.targets import (CalibrationError, Target, combine, parse_targets, path_of,
-                             signals_of)
+from oxyline.targets import CalibrationError, Target, combine, parse_targets, path_of, signals_of
 
 __all__ = ["CalibrationError", "CalibrationResult", "Sensitivities", "calibrate",
            "sensitivities"]
