@@ -278,3 +278,14 @@ def test_a_pulse_wave_velocity_needs_a_path_downstream() -> None:
         oxyline.sensitivities(MODEL, [], ["pwv.d1.parent"])
     with pytest.raises(ModelError, match="no vessel named 'zz'"):
         oxyline.sensitivities(MODEL, [], ["pwv.parent.zz"])
+
+
+def test_cardiac_output_is_the_prescribed_mean_inflow() -> None:
+    # closed form: the flow condition's mean (5e-6 m³/s), proportional to scale.inflow and
+    # independent of every resistance (a prescribed flow); the periodic cycle's mean of the
+    # sampled Fourier waveform equals its mean to rounding (whole harmonics over the cycle)
+    s = oxyline.sensitivities(MODEL, ["scale.inflow", "boundary_conditions.o2.resistance"],
+                              ["cardiac_output"])
+    assert s.values[0] == pytest.approx(5e-6, rel=1e-9)
+    assert s.jacobian[0, 0] == pytest.approx(5e-6, rel=1e-9)
+    assert abs(s.jacobian[0, 1]) * 1.6e9 <= 1e-9 * 5e-6
