@@ -227,3 +227,65 @@ def test_the_posterior_agrees_with_the_gauss_newton_covariance() -> None:
     assert (np.abs(logs.mean(axis=0) - fit) < 0.5 * sd).all(), (logs.mean(axis=0) - fit) / sd
     ratio = logs.std(axis=0) / sd
     assert ((ratio > 1 / 1.5) & (ratio < 1.5)).all(), ratio
+
+
+def _tube() -> tuple[dict, float]:
+    """Two uniform 0.6 m vessels in series, matched at the outlet (R = ρc/(πr²): no
+    reflection), driven by a half-sine systolic inflow (10 harmonics); and the
+    Moens–Korteweg speed of the thin, tethered wall, c = √(2Eh/(3ρr)) (ν = 0.5, physics.md
+    §1.1)."""
+    r, h, e, rho, period = 0.01, 0.001, 4e5, 1050.0, 1.0
+    c = np.sqrt(2 * e * h / (3 * rho * r))
+    t = np.linspace(0, period, 2000, endpoint=False)
+    q = np.where(t < 0.3, np.sin(np.pi * t / 0.3), 0.0) * 1e-4
+    k = np.arange(1, 11)[:, None]
+    fourier = {"period": period, "mean": float(q.mean()),
+               "cos": (2 * np.mean(q * np.cos(2 * np.pi * k * t), axis=1)).tolist(),
+               "sin": (2 * np.mean(q * np.sin(2 * np.pi * k * t), axis=1)).tolist()}
+    wall = {"segments": 60, "length": 0.6, "radius": r, "wall_thickness": h,
+            "youngs_modulus": e}
+    model = {"name": "tube", "units": "SI", "period": period,
+             "vessels": [{"name": "a", "from": "in", "to": "m", **wall},
+                         {"name": "b", "from": "m", "to": "out", **wall}],
+             "boundary_conditions": {
+                 "in": {"type": "flow", "fourier": fourier},
+                 "out": {"type": "resistance", "resistance": rho * c / (np.pi * r * r)}},
+             "simulation": {"dt": 0.001, "method": "generalized-alpha"}}
+    return model, float(c)
+
+
+def test_pulse_wave_velocity_is_moens_korteweg_and_its_derivatives_are_exact() -> None:
+    model, c = _tube()
+    params = ["vessels.a.length", "vessels.b.youngs_modulus"]
+    s = oxyline.sensitivities(model, params, ["pwv.a.b"])
+    # foot-to-foot on the sampled wave (1 ms steps, 0.24 s transit) and the line's
+    # dispersion: within 1 % of the closed form
+    assert s.values[0] == pytest.approx(c, rel=0.01)
+    # closed form: PWV = L / (L_a/c_a + L_b/c_b), c ∝ √E: d PWV/d E_b = c (L_b/L) / (2 E)
+    assert s.jacobian[0, 1] == pytest.approx(c * 0.5 / (2 * 4e5), rel=0.05)
+    h = 1e-4
+    for k, path in enumerate(params):
+        x0 = _base_value(model, path)
+        up, down = (oxyline.sensitivities(native_model(model, [path], [x0 * f]), [],
+                                          ["pwv.a.b"]).values[0] for f in (1 + h, 1 - h))
+        fd = (up - down) / (2 * h * x0)
+        # the path length's own derivative (1/transit for vessels.a.length) is in both
+        assert abs(s.jacobian[0, k] - fd) * x0 <= 1e-6 * c, (path, s.jacobian[0, k], fd)
+
+
+def test_a_pulse_wave_velocity_needs_a_path_downstream() -> None:
+    with pytest.raises(ModelError, match="not downstream"):
+        oxyline.sensitivities(MODEL, [], ["pwv.d1.parent"])
+    with pytest.raises(ModelError, match="no vessel named 'zz'"):
+        oxyline.sensitivities(MODEL, [], ["pwv.parent.zz"])
+
+
+def test_cardiac_output_is_the_prescribed_mean_inflow() -> None:
+    # closed form: the flow condition's mean (5e-6 m³/s), proportional to scale.inflow and
+    # independent of every resistance (a prescribed flow); the periodic cycle's mean of the
+    # sampled Fourier waveform equals its mean to rounding (whole harmonics over the cycle)
+    s = oxyline.sensitivities(MODEL, ["scale.inflow", "boundary_conditions.o2.resistance"],
+                              ["cardiac_output"])
+    assert s.values[0] == pytest.approx(5e-6, rel=1e-9)
+    assert s.jacobian[0, 0] == pytest.approx(5e-6, rel=1e-9)
+    assert abs(s.jacobian[0, 1]) * 1.6e9 <= 1e-9 * 5e-6

@@ -23,7 +23,7 @@ import numpy as np
 from oxyline.ensemble.patch import apply_patch
 from oxyline.loader import load_model
 from oxyline.model import Model, build_model
-from oxyline.targets import CalibrationError, Target, combine, parse_targets, signals_of
+from oxyline.targets import CalibrationError, Target, combine, parse_targets, path_of, signals_of
 
 __all__ = ["CalibrationError", "CalibrationResult", "Sensitivities", "calibrate",
            "sensitivities"]
@@ -48,6 +48,8 @@ class Sensitivities:
     periodic_change: float
     #: rows of ``values`` per output (a series has one per time)
     rows: dict[str, slice] = field(default_factory=dict)
+    #: cycles of the tangents alone, after the forward run, to their periodic state
+    tangent_cycles: int = 0
 
 
 def _settings(model: Model, steps_per_cycle: int | None) -> tuple[float, int, float]:
@@ -84,7 +86,8 @@ def _evaluate(model: Model, parameters: Sequence[str], targets: Sequence[Target]
     for t in targets:
         cols = [signals.index(s) for s in t.signals]
         v, j = combine(t.output, raw["times"], raw["signals"][:, cols],
-                       raw["derivatives"][:, :, cols], t.times)
+                       raw["derivatives"][:, :, cols], t.times,
+                       path_of(t.output, model, parameters))
         values.append(v)
         jac.append(j.reshape(len(v), len(parameters)))
     return np.concatenate(values), np.concatenate(jac), raw
@@ -112,14 +115,15 @@ def sensitivities(model: Model | Mapping[str, Any] | str, parameters: Sequence[s
     for t in targets:
         cols = [signals.index(s) for s in t.signals]
         v, j = combine(t.output, raw["times"], raw["signals"][:, cols],
-                       raw["derivatives"][:, :, cols], raw["times"])
+                       raw["derivatives"][:, :, cols], raw["times"],
+                       path_of(t.output, m, parameters))
         values.append(v)
         jac.append(j.reshape(len(v), len(parameters)))
         rows[t.output] = slice(start, start + len(v))
         start += len(v)
     return Sensitivities(list(outputs), list(parameters), np.asarray(raw["values"]),
                          np.concatenate(values), np.concatenate(jac), int(raw["cycles"]),
-                         float(raw["periodic_change"]), rows)
+                         float(raw["periodic_change"]), rows, int(raw["tangent_cycles"]))
 
 
 # ---- the native model at a parameter point --------------------------------------------------

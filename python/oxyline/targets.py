@@ -8,13 +8,18 @@ An output names a quantity of the periodic cycle:
 * ``"flow_split.<vessel>.<parent>"``: mean flow into ``vessel`` over mean flow into ``parent``;
 * ``"cardiac_output"``: the mean inflow of the model's flow conditions (through the vessels
   that start at them);
+* ``"pwv.<proximal>.<distal>"``: pulse-wave velocity from the inlet of ``proximal`` to the
+  outlet of ``distal`` (downstream of it): the path length over the foot-to-foot transit
+  time (feet by intersecting tangents, :func:`oxyline.populations.foot_time`);
 * ``"<vessel>.<variable>.series"``: the signal over the cycle, compared with data at given
   times (targets only).
 
 The core (:func:`oxyline._core.tangent_sensitivities`) gives the signals over the periodic
 cycle and their exact derivatives; here they are only combined: a mean is the mean of the
 derivatives, a maximum the derivative at the step of the maximum (the derivative of the
-discrete maximum, exact wherever the maximum is unique).
+discrete maximum, exact wherever the maximum is unique). A pulse-wave velocity's feet are
+differentiated likewise at their samples (the steepest upstroke and the diastolic minimum),
+and its path length by the lengths of the vessels on the path.
 """
 
 from __future__ import annotations
@@ -69,6 +74,11 @@ def signals_of(output: str, model: Any, error: type[ModelError] = ModelError
         if not inlets:
             raise _fail(output, "the model has no flow condition", error)
         return [(v, "flow_in") for v in inlets]
+    if parts[0] == "pwv":
+        if len(parts) != 3:
+            raise _fail(output, "expected pwv.<proximal vessel>.<distal vessel>", error)
+        pwv_path(output, model, error)
+        return [(parts[1], "pressure_in"), (parts[2], "pressure_out")]
     if parts[0] == "flow_split":
         if len(parts) != 3:
             raise _fail(output, "expected flow_split.<vessel>.<parent>", error)
@@ -78,7 +88,7 @@ def signals_of(output: str, model: Any, error: type[ModelError] = ModelError
         return [(parts[1], "flow_in"), (parts[2], "flow_in")]
     if len(parts) != 3:
         raise _fail(output, "expected <vessel>.<variable>.<statistic>, flow_split.<vessel>."
-                    "<parent> or cardiac_output", error)
+                    "<parent>, pwv.<proximal>.<distal> or cardiac_output", error)
     vessel, variable, stat = parts
     if vessel not in names:
         raise _fail(output, f"no vessel named {vessel!r} in model '{model.name}'", error)
@@ -91,18 +101,91 @@ def signals_of(output: str, model: Any, error: type[ModelError] = ModelError
     return [(vessel, variable)]
 
 
+def pwv_path(output: str, model: Any, error: type[ModelError] = ModelError
+             ) -> list[tuple[str, float]]:
+    """The vessels from the inlet of ``pwv.<proximal>.<distal>``'s proximal vessel to the
+    outlet of its distal one, with their lengths (m), walking upstream from the distal one."""
+    _, proximal, distal = output.split(".")
+    vessels = {str(v["name"]): v for v in model.canonical["vessels"]}
+    for v in (proximal, distal):
+        if v not in vessels:
+            raise _fail(output, f"no vessel named {v!r} in model '{model.name}'", error)
+    into: dict[str, list[str]] = {}
+    for name, v in vessels.items():
+        into.setdefault(str(v["to"]), []).append(name)
+    path, at = [], distal
+    while True:
+        geometry = vessels[at].get("geometry")
+        if not geometry:
+            raise _fail(output, f"vessel {at!r} on the path has no length (lumped)", error)
+        path.append((at, float(geometry["length"])))
+        if at == proximal:
+            return path[::-1]
+        up = into.get(str(vessels[at]["from"]), [])
+        if len(up) != 1 or len(path) > len(vessels):
+            raise _fail(output, f"vessel {distal!r} is not downstream of {proximal!r} along "
+                        "one path", error)
+        at = up[0]
+
+
 def _inlet_vessels(model: Any) -> list[str]:
     bcs = model.source.get("boundary_conditions", {}) or {}
     inflow = {n for n, bc in bcs.items() if str(bc.get("type", "")).lower() == "flow"}
     return [str(v["name"]) for v in model.source["vessels"] if str(v.get("from")) in inflow]
 
 
+def _foot(times: np.ndarray, x: np.ndarray, dx: np.ndarray) -> tuple[float, np.ndarray]:
+    """The foot time of the periodic signal ``x`` at the step end ``times`` (Δt … T) by
+    :func:`~oxyline.populations.foot_time`, and its derivatives from ``dx`` (n_params ×
+    n_steps): the foot t_mid − (p_mid − p_min)/slope is a smooth function of the samples at
+    the steepest upstroke and the diastolic minimum, which stay the same samples."""
+    from oxyline.populations import foot_time
+
+    dt = times[0]
+    t_all = np.concatenate(([0.0], times))
+    p_all = np.concatenate(([x[-1]], x))
+    d_all = np.concatenate((dx[:, -1:], dx), axis=1)
+    foot = foot_time(t_all, p_all)
+    # the samples foot_time used (the same choices: largest forward difference, lowest sample
+    # in the half period before it)
+    n = len(x)
+    k = int(np.argmax(np.diff(p_all)))
+    window = (k - np.arange(n // 2)) % n
+    m = int(window[np.argmin(p_all[:-1][window])])
+    slope = (p_all[k + 1] - p_all[k]) / dt
+    dslope = (d_all[:, k + 1] - d_all[:, k]) / dt
+    rise = (p_all[k] + p_all[k + 1]) / 2 - p_all[m]
+    drise = (d_all[:, k] + d_all[:, k + 1]) / 2 - d_all[:, m]
+    return foot, -drise / slope + rise * dslope / slope**2
+
+
+def pulse_wave_velocity(times: np.ndarray, values: np.ndarray, derivs: np.ndarray,
+                        length: float, dlength: np.ndarray) -> tuple[float, np.ndarray]:
+    """Path length over the foot-to-foot transit time of the proximal (column 0) and distal
+    (column 1) pressures, and its derivatives (``dlength``: d length / d parameter)."""
+    period = times[-1]
+    f0, d0 = _foot(times, values[:, 0], derivs[:, :, 0])
+    f1, d1 = _foot(times, values[:, 1], derivs[:, :, 1])
+    transit = (f1 - f0) % period
+    if transit <= 0:
+        raise ModelError("pulse-wave velocity: both feet fall on the same sample (the path "
+                         "is shorter than one step of the wave)")
+    dtransit = d1 - d0
+    return length / transit, dlength / transit - length * dtransit / transit**2
+
+
 def combine(output: str, times: np.ndarray, values: np.ndarray, derivs: np.ndarray,
-            at: Any = None) -> tuple[np.ndarray, np.ndarray]:
+            at: Any = None, path: tuple[float, np.ndarray] | None = None
+            ) -> tuple[np.ndarray, np.ndarray]:
     """The output's value(s) and derivatives from its signals over the cycle: ``values``
-    (n_steps × n_signals), ``derivs`` (n_params × n_steps × n_signals). Returns (value
-    (m,), jacobian (m × n_params))."""
+    (n_steps × n_signals), ``derivs`` (n_params × n_steps × n_signals); ``path``, a
+    pulse-wave velocity's length and its derivatives. Returns (value (m,), jacobian
+    (m × n_params))."""
     stat = output.split(".")[-1]
+    if output.startswith("pwv."):
+        length, dlength = path if path is not None else (math.nan, np.zeros(len(derivs)))
+        v, j = pulse_wave_velocity(times, values, derivs, length, dlength)
+        return np.atleast_1d(v), j[None]
     if output == "cardiac_output":
         return np.atleast_1d(values.sum(axis=1).mean()), derivs.sum(axis=2).mean(axis=1)[None]
     if output.startswith("flow_split."):
@@ -129,6 +212,18 @@ def combine(output: str, times: np.ndarray, values: np.ndarray, derivs: np.ndarr
     jac = np.stack([np.interp(t, tt, row) for row in dd], axis=1) if len(dd) \
         else np.zeros((t.size, 0))
     return val, jac
+
+
+def path_of(output: str, model: Any, parameters: Sequence[str]
+            ) -> tuple[float, np.ndarray] | None:
+    """A pulse-wave velocity's path length and its derivative by parameter (1 for the length
+    of a vessel on the path), else None."""
+    if not output.startswith("pwv."):
+        return None
+    path = pwv_path(output, model)
+    on = {f"vessels.{name}.length" for name, _ in path}
+    return (sum(length for _, length in path),
+            np.array([1.0 if p in on else 0.0 for p in parameters]))
 
 
 def parse_targets(targets: Any, model: Any) -> list[Target]:

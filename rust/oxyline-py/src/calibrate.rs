@@ -11,7 +11,8 @@ use pyo3::types::PyDict;
 /// The signals (vessel, variable) over the periodic cycle of the canonical model
 /// `model_json` and their derivatives with respect to the parameters `paths`: a dict of
 /// `values` (SI value of each parameter), `times` (n_steps), `signals` (n_steps × n_signals),
-/// `derivatives` (n_params × n_steps × n_signals), `cycles` and `periodic_change`.
+/// `derivatives` (n_params × n_steps × n_signals), `cycles` (the forward run's, the
+/// recorded one included), `tangent_cycles` and `periodic_change`.
 #[oxyline_py_guard::guard]
 #[pyfunction]
 #[pyo3(signature = (model_json, paths, signals, period, steps_per_cycle, rho_infty = 0.5,
@@ -54,5 +55,6 @@ pub fn tangent_sensitivities<'py>(
     )?;
     d.set_item("cycles", c.cycles)?;
     d.set_item("periodic_change", c.periodic_change)?;
+    d.set_item("tangent_cycles", c.tangent_cycles)?;
     Ok(d)
 }

@@ -2,6 +2,7 @@
 //! paths ([`parameter`]), the derivative of the DAE with respect to each, and the
 //! tangent-linear generalized-α run to the periodic state ([`tangent`]).
 
+pub mod krylov;
 pub mod parameter;
 pub mod tangent;
 

@@ -1,5 +1,5 @@
 //! Forward (tangent-linear) sensitivities of generalized-α on a linear circuit
-//! E ẏ + F y = f(t), through to its periodic state.
+//! E ẏ + F y = f(t), at its periodic state.
 //!
 //! A step of `integrate::genalpha` (linear path) solves K Δ = r with K = α_m E + α_f γ Δt F and
 //! r = f(t + α_f Δt) − c E ẏ − F y (c = 1 + α_m (pred − 1), pred = (γ − 1)/γ), then
@@ -12,10 +12,17 @@
 //! factorisation. The tangent is exact for the discrete scheme: it is the derivative of the
 //! numbers the run computes, not of the ODE's solution.
 //!
-//! The periodic state: cycles are repeated until y and every p·s at a cycle start repeat to
-//! `tol` relative to the state's scale (p·s is the state's response to a 100 % change of p;
-//! the tangent cycle map has the primal's contraction).
+//! The periodic state: the forward run repeats cycles until y at a cycle start repeats to
+//! `tol` relative to the state's scale. Its periodic cycle is then run once more with every
+//! tangent, which records each parameter's source (the terms of the primal above; they touch
+//! few rows) per step. The periodic tangent is the fixed point of the tangent's cycle map
+//! x ↦ Φ x + b_p (Φ the monodromy, shared with the primal; b_p the cycle's response to the
+//! recorded source from x = 0), found by [`super::krylov`] in a few cycles of the tangent alone
+//! (no primal, no re-run of the forward loop) instead of the forward run's count. A tangent
+//! counts as periodic when p·s at a cycle start repeats to `tol` (p·s is the state's response
+//! to a 100 % change of p); the last such cycle is the one recorded.
 
+use super::krylov::Subspace;
 use super::parameter::DaeTangent;
 use crate::circuit::Dae;
 use crate::error::{Error, Result};
@@ -45,6 +52,8 @@ pub struct PeriodicTangent {
     pub cycles: usize,
     /// The largest relative change between the last two cycle starts.
     pub periodic_change: f64,
+    /// Cycles of the tangents alone (after the forward run's `cycles`) to their periodic state.
+    pub tangent_cycles: usize,
 }
 
 struct Scheme {
@@ -95,80 +104,106 @@ fn residual(dae: &Dae, c: f64, y: &[f64], yd: &[f64], r: &mut [f64]) {
     }
 }
 
-/// The nonzero entries of a [`DaeTangent`]: a parameter touches a few elements, so its right
-/// side costs O(its entries) per step instead of a pass over the whole matrix.
-struct SparseTangent {
-    /// (row, dE_row)
-    e: Vec<(usize, f64)>,
-    /// (row, col, dF_row,col)
+/// A parameter's source df − dE (c ẏ + α_m Δ) − dF (y + α_f γ Δt Δ) at each step of the
+/// periodic cycle: it touches the few rows of the parameter's elements, so it is stored
+/// (per step, on those rows) once and reused by every tangent cycle.
+struct Source {
+    rows: Vec<usize>,
+    /// (position in `rows`, unknown i, dE_ii)
+    e: Vec<(usize, usize, f64)>,
+    /// (position in `rows`, column j, dF_ij)
     f: Vec<(usize, usize, f64)>,
-    forcing: Vec<(usize, f64)>,
+    /// (position in `rows`, index into `Dae::forcing`, d f / dp over f)
+    forcing: Vec<(usize, usize, f64)>,
+    /// step k's values on `rows` at k·rows.len()
+    vals: Vec<f64>,
+    /// steps captured
+    steps: usize,
 }
 
-impl SparseTangent {
-    fn of(dae: &Dae, t: &DaeTangent) -> SparseTangent {
-        let e = (0..dae.n)
-            .filter(|&i| t.de[i] != 0.0)
-            .map(|i| (i, t.de[i]))
-            .collect();
+impl Source {
+    fn of(dae: &Dae, t: &DaeTangent, steps: usize) -> Source {
+        let mut rows = Vec::new();
+        let mut index = vec![usize::MAX; dae.n];
+        let mut at = |row: usize| {
+            if index[row] == usize::MAX {
+                index[row] = rows.len();
+                rows.push(row);
+            }
+            index[row]
+        };
+        let mut e = Vec::new();
+        for i in (0..dae.n).filter(|&i| t.de[i] != 0.0) {
+            e.push((at(i), i, t.de[i]));
+        }
         let mut f = Vec::new();
         for i in 0..dae.n {
             for k in dae.f.ptr[i]..dae.f.ptr[i + 1] {
                 if t.df[k] != 0.0 {
-                    f.push((i, dae.f.col[k] as usize, t.df[k]));
+                    f.push((at(i), dae.f.col[k] as usize, t.df[k]));
                 }
             }
         }
-        SparseTangent {
+        let forcing = t
+            .dforcing
+            .iter()
+            .map(|&(k, factor)| (at(dae.forcing[k].0), k, factor))
+            .collect();
+        let vals = Vec::with_capacity(steps * rows.len());
+        Source {
+            rows,
             e,
             f,
-            forcing: t.dforcing.clone(),
+            forcing,
+            vals,
+            steps: 0,
+        }
+    }
+
+    /// Append one step's source, from the primal's pre-step state, increment and forcing.
+    fn capture(&mut self, s: &Scheme, c: f64, pre: (&[f64], &[f64], &[f64]), forcing: &[f64]) {
+        let (y, yd, delta) = pre;
+        self.steps += 1;
+        let base = self.vals.len();
+        self.vals.resize(base + self.rows.len(), 0.0);
+        let v = &mut self.vals[base..];
+        let gdt = s.af * s.gamma * s.dt;
+        for &(at, i, de) in &self.e {
+            v[at] -= de * (c * yd[i] + s.am * delta[i]);
+        }
+        for &(at, j, df) in &self.f {
+            v[at] -= df * (y[j] + gdt * delta[j]);
+        }
+        for &(at, k, factor) in &self.forcing {
+            v[at] += factor * forcing[k];
+        }
+    }
+
+    /// Add step k's source to `r`.
+    fn add(&self, k: usize, r: &mut [f64]) {
+        let m = self.rows.len();
+        for (&row, v) in self.rows.iter().zip(&self.vals[k * m..(k + 1) * m]) {
+            r[row] += v;
         }
     }
 }
 
-/// The tangent right side df − dE (c ẏ + α_m Δ) − dF (y + α_f γ Δt Δ) at one step, added to
-/// `r` (which holds −c E ṡ − F s on entry).
-fn tangent_source(
-    dae: &Dae,
-    t: &SparseTangent,
-    s: &Scheme,
-    c: f64,
-    (y, yd, delta): (&[f64], &[f64], &[f64]),
-    forcing: &[f64],
-    r: &mut [f64],
-) {
-    let gdt = s.af * s.gamma * s.dt;
-    for &(i, de) in &t.e {
-        r[i] -= de * (c * yd[i] + s.am * delta[i]);
-    }
-    for &(i, j, df) in &t.f {
-        r[i] -= df * (y[j] + gdt * delta[j]);
-    }
-    for &(k, factor) in &t.forcing {
-        r[dae.forcing[k].0] += factor * forcing[k];
-    }
-}
-
-/// The primal state (y, ẏ), the tangents (s_p, ṡ_p) and the one factorisation they share.
-struct Stepper<'a> {
+/// The forward run: the primal state (y, ẏ), its increment Δ and the one factorisation.
+struct Primal<'a> {
     dae: &'a Dae,
     lu: SparseLu,
     scheme: Scheme,
     /// c = 1 + α_m (pred − 1): the weight of ẏ in a step's residual
     c: f64,
-    params: Vec<SparseTangent>,
     forcing: Vec<f64>,
+    /// the step's increment Δ after `increment`
     r: Vec<f64>,
-    rs: Vec<f64>,
     y: Vec<f64>,
     yd: Vec<f64>,
-    s: Vec<Vec<f64>>,
-    sd: Vec<Vec<f64>>,
 }
 
-impl<'a> Stepper<'a> {
-    fn new(dae: &'a Dae, params: &[DaeTangent], scheme: Scheme) -> Result<Stepper<'a>> {
+impl<'a> Primal<'a> {
+    fn new(dae: &'a Dae, scheme: Scheme) -> Result<Primal<'a>> {
         let n = dae.n;
         let stamps = jacobian_stamps(dae);
         let mut lu = SparseLu::analyse(n, &stamps)?;
@@ -178,26 +213,20 @@ impl<'a> Stepper<'a> {
         jacobian_values(dae, a, &am_e, &vec![0.0; n], 0.0, &mut kvals);
         lu.factor(&kvals).map_err(|m| singular(0.0, &m))?;
         let pred = (scheme.gamma - 1.0) / scheme.gamma;
-        let np = params.len();
-        Ok(Stepper {
+        Ok(Primal {
             dae,
             lu,
             c: 1.0 + scheme.am * (pred - 1.0),
             scheme,
-            params: params.iter().map(|t| SparseTangent::of(dae, t)).collect(),
             forcing: vec![0.0; dae.forcing.len()],
             r: vec![0.0; n],
-            rs: vec![0.0; n],
             y: dae.initial_state(),
             yd: vec![0.0; n],
-            s: vec![vec![0.0; n]; np],
-            sd: vec![vec![0.0; n]; np],
         })
     }
 
-    /// One step from `time`: the primal's increment Δ, then each tangent's on the same
-    /// factors (it needs the primal's Δ and pre-step state), then both advance.
-    fn step(&mut self, time: f64) -> Result<()> {
+    /// The increment Δ of the step from `time` (into `r`; the state is not advanced).
+    fn increment(&mut self, time: f64) -> Result<()> {
         let (dae, sc) = (self.dae, &self.scheme);
         let t_af = time + sc.af * sc.dt;
         self.r.iter_mut().for_each(|v| *v = 0.0);
@@ -209,48 +238,73 @@ impl<'a> Stepper<'a> {
         if !self.lu.solve_in_place(&mut self.r) {
             return Err(singular(t_af, "non-finite solution"));
         }
-        for (p, t) in self.params.iter().enumerate() {
-            self.rs.iter_mut().for_each(|v| *v = 0.0);
-            residual(dae, self.c, &self.s[p], &self.sd[p], &mut self.rs);
-            let primal = (&self.y[..], &self.yd[..], &self.r[..]);
-            tangent_source(dae, t, sc, self.c, primal, &self.forcing, &mut self.rs);
-            if !self.lu.solve_in_place(&mut self.rs) {
-                return Err(singular(t_af, "non-finite tangent"));
-            }
-            advance(sc, &mut self.s[p], &mut self.sd[p], &self.rs);
-        }
-        advance(sc, &mut self.y, &mut self.yd, &self.r);
         Ok(())
     }
 
-    /// The state at a cycle start: y, then each s_p.
-    fn snapshot(&self) -> Vec<Vec<f64>> {
-        std::iter::once(self.y.clone())
-            .chain(self.s.iter().cloned())
-            .collect()
+    fn advance(&mut self) {
+        advance(&self.scheme, &mut self.y, &mut self.yd, &self.r);
     }
 
-    /// The change since `start`: a tangent is measured as p·s, the state's response to a
-    /// 100 % change of p, against the state's own scale (a part of s that is only rounding
-    /// then never holds the test back).
-    fn change(&self, start: &[Vec<f64>], values: &[f64]) -> f64 {
+    /// (y, ẏ) in one vector: the cycle map's state.
+    fn state(&self) -> Vec<f64> {
+        self.y.iter().chain(&self.yd).copied().collect()
+    }
+
+    /// The scales of y's node rows (pressures) and other rows (flows).
+    fn floor(&self) -> [f64; 2] {
         let k = self.dae.n_nodes.min(self.dae.n);
         let scale = |v: &[f64]| v.iter().fold(1e-300f64, |m, x| m.max(x.abs()));
-        let floor = [scale(&self.y[..k]), scale(&self.y[k..])];
-        std::iter::once(1.0)
-            .chain(values.iter().copied())
-            .zip(
-                start
-                    .iter()
-                    .zip(std::iter::once(&self.y).chain(self.s.iter())),
-            )
-            .map(|(p, (a, b))| relative_change(a, b, k, p.abs(), floor))
-            .fold(0.0, f64::max)
+        [scale(&self.y[..k]), scale(&self.y[k..])]
+    }
+
+    /// One tangent cycle from x = (s, ṡ) with `src`, in place; s at the chosen unknowns
+    /// after each step into `rec` (n_steps × signals).
+    fn tangent_cycle(
+        &self,
+        src: &Source,
+        x: &mut [f64],
+        rs: &mut [f64],
+        signals: &[usize],
+        rec: &mut [f64],
+    ) -> Result<()> {
+        let (s, sd) = x.split_at_mut(self.dae.n);
+        let nsig = signals.len();
+        for k in 0..src.steps {
+            rs.iter_mut().for_each(|v| *v = 0.0);
+            residual(self.dae, self.c, s, sd, rs);
+            src.add(k, rs);
+            if !self.lu.solve_in_place(rs) {
+                return Err(singular(k as f64 * self.scheme.dt, "non-finite tangent"));
+            }
+            advance(&self.scheme, s, sd, rs);
+            for (o, &u) in rec[k * nsig..(k + 1) * nsig].iter_mut().zip(signals) {
+                *o = s[u];
+            }
+        }
+        Ok(())
     }
 }
 
+/// The forward run's cycles to the periodic state (at most `max_cycles` − 1, the last cycle
+/// being the recorded one): the cycles run.
+fn forward_to_periodic(pr: &mut Primal, ns: usize, set: &TangentSettings) -> Result<usize> {
+    let mut change = f64::INFINITY;
+    let mut cycles = 0;
+    while change > set.tol && cycles + 1 < set.max_cycles {
+        let start = pr.y.clone();
+        for k in 0..ns {
+            pr.increment(k as f64 * pr.scheme.dt)?;
+            pr.advance();
+        }
+        cycles += 1;
+        let n = pr.dae.n;
+        change = relative_change(&start, &pr.y, pr.dae.n_nodes.min(n), 1.0, pr.floor());
+    }
+    Ok(cycles)
+}
+
 /// Run generalized-α with the tangents of `params` to the periodic state and record the
-/// unknowns `signals` (and their derivatives) over the last cycle.
+/// unknowns `signals` (and their derivatives) over the periodic cycle.
 pub fn periodic_tangent(
     dae: &Dae,
     params: &[DaeTangent],
@@ -266,41 +320,124 @@ pub fn periodic_tangent(
     let ns = set.steps_per_cycle.max(1);
     let scheme = Scheme::new(set.rho_infty, set.period / ns as f64)?;
     let dt = scheme.dt;
-    let mut st = Stepper::new(dae, params, scheme)?;
-    let values: Vec<f64> = params.iter().map(|t| t.value).collect();
+    let mut pr = Primal::new(dae, scheme)?;
+    let cycles = forward_to_periodic(&mut pr, ns, &set)?;
+    // the periodic cycle: the primal's signals and every parameter's source
+    let mut sources: Vec<Source> = params.iter().map(|t| Source::of(dae, t, ns)).collect();
     let (np, nsig) = (params.len(), signals.len());
-    let mut change = f64::INFINITY;
-    for cycle in 1..=set.max_cycles {
-        let last = change <= set.tol || cycle == set.max_cycles;
-        let start = st.snapshot();
-        if !last {
-            for k in 0..ns {
-                st.step(k as f64 * dt)?;
-            }
-            change = st.change(&start, &values);
-            continue;
+    let mut rec = PeriodicTangent {
+        times: (1..=ns).map(|k| k as f64 * dt).collect(),
+        values: Vec::with_capacity(ns * nsig),
+        derivs: vec![0.0; np * ns * nsig],
+        cycles: cycles + 1,
+        periodic_change: 0.0,
+        tangent_cycles: 0,
+    };
+    let start = pr.state();
+    let n = dae.n;
+    let mut rate_scale = [1e-300f64; 2];
+    for k in 0..ns {
+        pr.increment(k as f64 * dt)?;
+        for src in &mut sources {
+            src.capture(&pr.scheme, pr.c, (&pr.y, &pr.yd, &pr.r), &pr.forcing);
         }
-        let mut rec = PeriodicTangent {
-            times: Vec::with_capacity(ns),
-            values: Vec::with_capacity(ns * nsig),
-            derivs: vec![0.0; np * ns * nsig],
-            cycles: cycle,
-            periodic_change: change,
-        };
-        for k in 0..ns {
-            st.step(k as f64 * dt)?;
-            rec.times.push((k + 1) as f64 * dt);
-            rec.values.extend(signals.iter().map(|&u| st.y[u]));
-            for (p, s) in st.s.iter().enumerate() {
-                for (j, &u) in signals.iter().enumerate() {
-                    rec.derivs[(p * ns + k) * nsig + j] = s[u];
-                }
-            }
+        pr.advance();
+        rec.values.extend(signals.iter().map(|&u| pr.y[u]));
+        let kn = dae.n_nodes.min(n);
+        for (m, part) in rate_scale.iter_mut().zip([&pr.yd[..kn], &pr.yd[kn..]]) {
+            *m = part.iter().fold(*m, |m, v| m.max(v.abs()));
         }
-        rec.periodic_change = st.change(&start, &values);
-        return Ok(rec);
     }
-    unreachable!("the last cycle returns")
+    let floor = pr.floor();
+    rec.periodic_change = relative_change(&start[..n], &pr.y, dae.n_nodes.min(n), 1.0, floor);
+    let weights = weights(dae, floor, rate_scale);
+    let values: Vec<f64> = params.iter().map(|t| t.value).collect();
+    let mut sub = Subspace::new(weights, 256);
+    let run = TangentRun {
+        pr: &pr,
+        sources: &sources,
+        values: &values,
+        signals,
+        floor,
+    };
+    let (tcycles, change) = run.to_periodic(&mut sub, &set, &mut rec.derivs)?;
+    rec.tangent_cycles = tcycles;
+    rec.periodic_change = rec.periodic_change.max(change);
+    Ok(rec)
+}
+
+/// The inner product's weights over (s, ṡ): each row by the inverse square of its group's
+/// scale (node rows and others, of y and of ẏ), so pressures and flows count alike.
+fn weights(dae: &Dae, floor: [f64; 2], rate: [f64; 2]) -> Vec<f64> {
+    let (n, k) = (dae.n, dae.n_nodes.min(dae.n));
+    let w = |i: usize, scale: [f64; 2]| {
+        let s = if i < k { scale[0] } else { scale[1] };
+        1.0 / (s * s)
+    };
+    (0..n)
+        .map(|i| w(i, floor))
+        .chain((0..n).map(|i| w(i, rate)))
+        .collect()
+}
+
+/// The tangents' cycles along the recorded periodic primal.
+struct TangentRun<'r, 'a> {
+    pr: &'r Primal<'a>,
+    sources: &'r [Source],
+    values: &'r [f64],
+    signals: &'r [usize],
+    floor: [f64; 2],
+}
+
+impl TangentRun<'_, '_> {
+    /// Anderson iterations on the shared basis from x = 0 until every tangent is periodic
+    /// (or `max_cycles` tangent cycles); each parameter's last cycle is recorded into
+    /// `derivs`. Returns the tangent cycles run and the largest remaining change.
+    fn to_periodic(
+        &self,
+        sub: &mut Subspace,
+        set: &TangentSettings,
+        derivs: &mut [f64],
+    ) -> Result<(usize, f64)> {
+        let n = self.pr.dae.n;
+        let np = self.sources.len();
+        let block = derivs.len().checked_div(np).unwrap_or(0);
+        let mut rs = vec![0.0; n];
+        let mut x = vec![vec![0.0; 2 * n]; np];
+        let mut r: Vec<Vec<f64>> = vec![Vec::new(); np];
+        let mut change = vec![f64::INFINITY; np];
+        let mut cycles = 0;
+        while cycles < set.max_cycles && change.iter().any(|&c| c > set.tol) {
+            let mut next = Vec::with_capacity(np);
+            let active: Vec<usize> = (0..np).filter(|&p| change[p] > set.tol).collect();
+            for p in active {
+                let xn = if cycles == 0 {
+                    x[p].clone()
+                } else {
+                    sub.next(&x[p], &r[p])
+                };
+                let mut g = xn.clone();
+                let rec = &mut derivs[p * block..(p + 1) * block];
+                self.pr
+                    .tangent_cycle(&self.sources[p], &mut g, &mut rs, self.signals, rec)?;
+                let rn: Vec<f64> = g.iter().zip(&xn).map(|(a, b)| a - b).collect();
+                let kn = self.pr.dae.n_nodes.min(n);
+                let p_abs = self.values[p].abs();
+                change[p] = relative_change(&xn[..n], &g[..n], kn, p_abs, self.floor);
+                next.push((p, xn, rn));
+            }
+            for (p, xn, rn) in next {
+                if cycles > 0 {
+                    let dx = xn.iter().zip(&x[p]).map(|(a, b)| a - b).collect();
+                    let df = rn.iter().zip(&r[p]).map(|(a, b)| a - b).collect();
+                    sub.add(dx, df);
+                }
+                (x[p], r[p]) = (xn, rn);
+            }
+            cycles += 1;
+        }
+        Ok((cycles, change.iter().fold(0.0, |m: f64, &c| m.max(c))))
+    }
 }
 
 /// The change of a state vector over one cycle, `p` times `b − a`, relative to the larger of
