@@ -169,6 +169,15 @@ impl Names {
     pub fn n_branches(&self) -> usize {
         self.branches.len()
     }
+    /// The vessel (index into the vessel names) or boundary condition (vessel count + its
+    /// tag) that branch `b` belongs to; None for a free-text branch.
+    pub fn branch_owner(&self, b: usize) -> Option<usize> {
+        match self.branches[b] {
+            Label::Vessel { vessel, .. } => Some(vessel as usize),
+            Label::Boundary { tag, .. } => Some(self.vessels.len() + tag as usize),
+            _ => None,
+        }
+    }
     /// Name of node `i`.
     pub fn node(&self, i: usize) -> String {
         self.write(self.nodes[i])

@@ -23,6 +23,10 @@ use std::cell::Cell;
 /// them set the step.
 const ACCUMULATION: f64 = 3.0;
 
+/// The smallest share of the largest flow amplitude a flow group's absolute tolerance is
+/// scaled to (a vessel without flow so far is not held to a vanishing one).
+const FLOW_SHARE_FLOOR: f64 = 1e-6;
+
 /// Accepted steps after a rejection during which the step does not grow.
 const HOLD_AFTER_REJECTION: usize = 8;
 
@@ -48,6 +52,14 @@ pub(super) struct Adaptive {
     /// The largest |y_i| so far: rtol is relative to it (a pulsatile flow is judged against
     /// its peak, not against its zero crossings).
     peak: Vec<f64>,
+    /// Each flow unknown's scale group (its vessel, or its boundary condition): a flow is
+    /// judged against its group's amplitude, so a small vessel's flow meets rtol of its own
+    /// amplitude (and atol scaled by its share of the largest), where one flow scale for all
+    /// vessels let a small vessel's flow err by the large vessels' absolute tolerance.
+    flow_group: Vec<u32>,
+    /// The largest |Q| so far per group, and over all groups.
+    group_peak: Vec<f64>,
+    flow_peak: f64,
     /// The differential unknowns' local error estimate of the current step (scratch).
     le: Vec<f64>,
     /// Output rows per cycle.
@@ -135,6 +147,9 @@ impl Adaptive {
             rate_peak: Vec::new(),
             accel_peak: Vec::new(),
             signal_omega: Vec::new(),
+            flow_group: flow_groups(dae),
+            group_peak: Vec::new(),
+            flow_peak: 0.0,
             le: Vec::new(),
             delta: rate_shift(rho_inf),
             out_per_cycle,
@@ -180,6 +195,7 @@ impl Adaptive {
             self.rate_peak = vec![0.0; st.y.len()];
             self.accel_peak = vec![0.0; st.y.len()];
             self.signal_omega = vec![self.omega; st.y.len()];
+            self.track_flow_peaks(&st.y);
         }
         self.y0.clone_from(&st.y);
         self.yd0.clone_from(&st.yd);
@@ -260,6 +276,11 @@ impl Adaptive {
         let ends = [0, self.kind_end[0], self.kind_end[1], y.len()];
         for (k, worst) in kinds.iter_mut().enumerate() {
             for (i, &yi) in y.iter().enumerate().take(ends[k + 1]).skip(ends[k]) {
+                let weight = if k == 1 {
+                    self.flow_weight(i - ends[1], yi)
+                } else {
+                    atol[k] + rtol * yi.abs().max(self.peak[i])
+                };
                 let scaled = if !self.algebraic[i] {
                     // accumulated over 1/ω_i, and over one step at the least
                     let accumulated = if first {
@@ -275,7 +296,7 @@ impl Adaptive {
                     let curvature = 2.0 * ((yi - b) / h - (b - a) / h1) / (h + h1);
                     alg * h * h * curvature.abs()
                 };
-                *worst = worst.max(scaled / (atol[k] + rtol * yi.abs().max(self.peak[i])));
+                *worst = worst.max(scaled / weight);
             }
         }
         FlowError {
@@ -326,6 +347,7 @@ impl Adaptive {
         for (p, v) in self.peak.iter_mut().zip(&st.y) {
             *p = p.max(v.abs());
         }
+        self.track_flow_peaks(&st.y);
         if self.history > 0 {
             self.track_signal_frequency(&st.y, h);
         }
@@ -346,6 +368,33 @@ impl Adaptive {
         let next = self.control.next(h, flow, species);
         self.h = if self.hold > 0 { next.min(h) } else { next };
         self.hold = self.hold.saturating_sub(1);
+    }
+
+    /// The weight of flow unknown `n_nodes + b` at value `q`: rtol of its group's amplitude
+    /// A_g, plus atol scaled by A_g over the largest group's (at least `FLOW_SHARE_FLOOR`).
+    fn flow_weight(&self, b: usize, q: f64) -> f64 {
+        let (rtol, atol) = (self.tol.rtol, self.tol.atol.flow);
+        let a = self.group_peak[self.flow_group[b] as usize];
+        let share = if self.flow_peak > 0.0 {
+            (a / self.flow_peak).max(FLOW_SHARE_FLOOR)
+        } else {
+            1.0
+        };
+        atol * share + rtol * q.abs().max(a)
+    }
+
+    /// The running amplitude of every flow group (from the flows of `y`).
+    fn track_flow_peaks(&mut self, y: &[f64]) {
+        let flows = &y[self.kind_end[0]..self.kind_end[1]];
+        if self.group_peak.is_empty() {
+            let groups = self.flow_group.iter().map(|&g| g as usize + 1).max();
+            self.group_peak = vec![0.0; groups.unwrap_or(0)];
+        }
+        for (&g, q) in self.flow_group.iter().zip(flows) {
+            let p = &mut self.group_peak[g as usize];
+            *p = p.max(q.abs());
+            self.flow_peak = self.flow_peak.max(*p);
+        }
     }
 
     /// The running peaks of |ẏ| and |ÿ| of every unknown from the divided differences of the
@@ -457,6 +506,21 @@ impl Adaptive {
         }
         (&self.yi, &self.ydi, &self.zi, &self.vi)
     }
+}
+
+/// The scale group of every branch's flow: its vessel or boundary condition, else its own.
+fn flow_groups(dae: &Dae) -> Vec<u32> {
+    let names = &dae.names;
+    let owners: Vec<Option<usize>> = (0..names.n_branches())
+        .map(|b| names.branch_owner(b))
+        .collect();
+    let first_free = owners.iter().flatten().map(|&o| o + 1).max().unwrap_or(0);
+    let group = |(b, o): (usize, &Option<usize>)| o.unwrap_or(first_free + b);
+    owners
+        .iter()
+        .enumerate()
+        .map(|x| u32::try_from(group(x)).expect("more than 2^32 flow groups"))
+        .collect()
 }
 
 /// The cells' concentrations (amount over transport volume) of every species into `out`.
