@@ -6,7 +6,8 @@
 use super::coupling::State;
 use crate::circuit::Dae;
 use crate::integrate::adaptive::{
-    StepControl, Tolerances, hermite, local_error_constant, quadratic_extrapolation, rate_shift,
+    GROW, SAFETY, StepControl, Tolerances, hermite, local_error_constant, quadratic_extrapolation,
+    rate_shift,
 };
 use std::cell::Cell;
 
@@ -48,7 +49,7 @@ pub(super) struct Adaptive {
     rate_peak: Vec<f64>,
     accel_peak: Vec<f64>,
     /// ω_i/ACCUMULATION, at least ω₁/ACCUMULATION (`omega`).
-    signal_omega: Vec<f64>,
+    inv_omega: Vec<f64>,
     /// The largest |y_i| so far: rtol is relative to it (a pulsatile flow is judged against
     /// its peak, not against its zero crossings).
     peak: Vec<f64>,
@@ -60,6 +61,10 @@ pub(super) struct Adaptive {
     /// The largest |Q| so far per group, and over all groups.
     group_peak: Vec<f64>,
     flow_peak: f64,
+    /// 1/(atol_i + rtol·s_i) of every unknown: its absolute tolerance (a flow's scaled by its
+    /// group's share of the largest amplitude) plus rtol of its scale s_i (its largest |y| so
+    /// far, a flow's its group's amplitude), kept up to date as the peaks grow.
+    inv_weight: Vec<f64>,
     /// The differential unknowns' local error estimate of the current step (scratch).
     le: Vec<f64>,
     /// Output rows per cycle.
@@ -146,10 +151,11 @@ impl Adaptive {
             peak: Vec::new(),
             rate_peak: Vec::new(),
             accel_peak: Vec::new(),
-            signal_omega: Vec::new(),
+            inv_omega: Vec::new(),
             flow_group: flow_groups(dae),
             group_peak: Vec::new(),
             flow_peak: 0.0,
+            inv_weight: Vec::new(),
             le: Vec::new(),
             delta: rate_shift(rho_inf),
             out_per_cycle,
@@ -194,8 +200,11 @@ impl Adaptive {
             self.peak = st.y.iter().map(|v| v.abs()).collect();
             self.rate_peak = vec![0.0; st.y.len()];
             self.accel_peak = vec![0.0; st.y.len()];
-            self.signal_omega = vec![self.omega; st.y.len()];
-            self.track_flow_peaks(&st.y);
+            self.inv_omega = vec![1.0 / self.omega; st.y.len()];
+            self.inv_weight = (0..st.y.len())
+                .map(|i| 1.0 / self.weight_of(i, self.peak[i]))
+                .collect();
+            self.track_flow_peaks(&st.y, true);
         }
         self.y0.clone_from(&st.y);
         self.yd0.clone_from(&st.yd);
@@ -234,8 +243,28 @@ impl Adaptive {
     /// of the solution), per unit step. Algebraic unknowns hold their constraint at the α_f
     /// level, so their error does not accumulate: it is the fixed point ρ∞/(1 + ρ∞)² · h² y''/2
     /// of one step's, y'' from the last three states (none at the first step).
+    ///
+    /// The filter costs a solve: it is skipped where the unfiltered estimate already lets the
+    /// controller take its largest growth (or keep the step while a rejection holds it), as
+    /// the filtered one would then decide the same.
     fn flow_error(&mut self, st: &mut State<'_, '_>, h: f64) -> FlowError {
-        let y = &st.y;
+        self.local_errors(&st.y, h);
+        let raw = self.scaled_errors(&st.y, h);
+        let needless = if self.hold > 0 {
+            SAFETY * SAFETY
+        } else {
+            (SAFETY / GROW).powi(2)
+        };
+        if raw.max <= needless {
+            return raw;
+        }
+        st.flow.integrator().filter_error(&mut self.le);
+        self.scaled_errors(&st.y, h)
+    }
+
+    /// The differential unknowns' local errors of the step of `h` that ended in `y` into
+    /// `le` (0 for algebraic unknowns).
+    fn local_errors(&mut self, y: &[f64], h: f64) {
         let (h1, h2) = (self.h1, self.h2);
         self.le.clear();
         match self.history {
@@ -265,30 +294,28 @@ impl Adaptive {
                 *v = 0.0;
             }
         }
-        st.flow.integrator().filter_error(&mut self.le);
-        let (rtol, atol) = (self.tol.rtol, self.tol.atol.as_array());
+    }
+
+    /// The largest scaled error per kind of the local errors in `le` (see `flow_error`),
+    /// each unknown weighted by its absolute tolerance plus rtol of its scale.
+    fn scaled_errors(&self, y: &[f64], h: f64) -> FlowError {
+        let (h1, inv_h) = (self.h1, 1.0 / h);
         let alg = self.c_algebraic;
         // (the first two steps' estimates are first order: judged as they are, one step's
         // error, or the start would crawl)
         let first = self.history < 2;
         let mut kinds = [0.0f64; 3];
-        let y = &st.y;
         let ends = [0, self.kind_end[0], self.kind_end[1], y.len()];
         for (k, worst) in kinds.iter_mut().enumerate() {
             for (i, &yi) in y.iter().enumerate().take(ends[k + 1]).skip(ends[k]) {
-                let weight = if k == 1 {
-                    self.flow_weight(i - ends[1], yi)
-                } else {
-                    atol[k] + rtol * yi.abs().max(self.peak[i])
-                };
                 let scaled = if !self.algebraic[i] {
                     // accumulated over 1/ω_i, and over one step at the least
-                    let accumulated = if first {
+                    let per_step = if first {
                         1.0
                     } else {
-                        (self.signal_omega[i] * h).min(1.0)
+                        (self.inv_omega[i] * inv_h).max(1.0)
                     };
-                    self.le[i].abs() / accumulated
+                    self.le[i].abs() * per_step
                 } else if self.history == 0 {
                     0.0
                 } else {
@@ -296,7 +323,7 @@ impl Adaptive {
                     let curvature = 2.0 * ((yi - b) / h - (b - a) / h1) / (h + h1);
                     alg * h * h * curvature.abs()
                 };
-                *worst = worst.max(scaled / weight);
+                *worst = worst.max(scaled * self.inv_weight[i]);
             }
         }
         FlowError {
@@ -344,13 +371,8 @@ impl Adaptive {
         for (e, k) in self.estimate.iter_mut().zip(kinds.iter().chain([&species])) {
             *e = e.max(k * rtol);
         }
-        for (p, v) in self.peak.iter_mut().zip(&st.y) {
-            *p = p.max(v.abs());
-        }
-        self.track_flow_peaks(&st.y);
-        if self.history > 0 {
-            self.track_signal_frequency(&st.y, h);
-        }
+        let grown = self.track_peaks(&st.y, h);
+        self.track_flow_peaks(&st.y, grown);
         self.steps += 1;
         self.h_smallest = self.h_smallest.min(h);
         self.h_largest = self.h_largest.max(h);
@@ -370,51 +392,90 @@ impl Adaptive {
         self.hold = self.hold.saturating_sub(1);
     }
 
-    /// The weight of flow unknown `n_nodes + b` at value `q`: rtol of its group's amplitude
-    /// A_g, plus atol scaled by A_g over the largest group's (at least `FLOW_SHARE_FLOOR`).
-    fn flow_weight(&self, b: usize, q: f64) -> f64 {
-        let (rtol, atol) = (self.tol.rtol, self.tol.atol.flow);
-        let a = self.group_peak[self.flow_group[b] as usize];
-        let share = if self.flow_peak > 0.0 {
-            (a / self.flow_peak).max(FLOW_SHARE_FLOOR)
-        } else {
-            1.0
-        };
-        atol * share + rtol * q.abs().max(a)
-    }
-
-    /// The running amplitude of every flow group (from the flows of `y`).
-    fn track_flow_peaks(&mut self, y: &[f64]) {
-        let flows = &y[self.kind_end[0]..self.kind_end[1]];
+    /// Every group's flow amplitude from the flows of `y`, and (when a peak of `y` grew) the
+    /// flows' scales and absolute tolerances: rtol of the group's amplitude A_g, atol scaled
+    /// by A_g over the largest group's (at least `FLOW_SHARE_FLOOR`).
+    fn track_flow_peaks(&mut self, y: &[f64], grown: bool) {
+        if !grown {
+            return;
+        }
+        let (n0, n1) = (self.kind_end[0], self.kind_end[1]);
         if self.group_peak.is_empty() {
             let groups = self.flow_group.iter().map(|&g| g as usize + 1).max();
             self.group_peak = vec![0.0; groups.unwrap_or(0)];
         }
-        for (&g, q) in self.flow_group.iter().zip(flows) {
+        for (&g, q) in self.flow_group.iter().zip(&y[n0..n1]) {
             let p = &mut self.group_peak[g as usize];
             *p = p.max(q.abs());
             self.flow_peak = self.flow_peak.max(*p);
         }
+        let (atol, rtol, largest) = (self.tol.atol.flow, self.tol.rtol, self.flow_peak);
+        let members = self.flow_group.iter().zip(&self.peak[n0..n1]);
+        for (w, (&g, &p)) in self.inv_weight[n0..n1].iter_mut().zip(members) {
+            let a = self.group_peak[g as usize];
+            let share = if largest > 0.0 {
+                (a / largest).max(FLOW_SHARE_FLOOR)
+            } else {
+                1.0
+            };
+            *w = 1.0 / (atol * share + rtol * p.max(a));
+        }
     }
 
-    /// The running peaks of |ẏ| and |ÿ| of every unknown from the divided differences of the
-    /// last three accepted states (not from the carried rates, which follow the damped
-    /// spurious root at a start), and from them its signal frequency.
-    fn track_signal_frequency(&mut self, y: &[f64], h: f64) {
+    /// atol + rtol·`scale` of unknown `i` by its kind (a flow's atol unscaled: see
+    /// `track_flow_peaks`).
+    fn weight_of(&self, i: usize, scale: f64) -> f64 {
+        let a = self.tol.atol.as_array();
+        let k = if i < self.kind_end[0] {
+            0
+        } else if i < self.kind_end[1] {
+            1
+        } else {
+            2
+        };
+        a[k] + self.tol.rtol * scale
+    }
+
+    /// One pass after an accepted step: every unknown's peak |y| (and its scale, for all but
+    /// the flows, which `track_flow_peaks` sets), and from the divided differences of the last
+    /// three accepted states (not from the carried rates, which follow the damped spurious
+    /// root at a start) the running peaks of |ẏ| and |ÿ| and the signal frequency. True when
+    /// some peak |y| grew.
+    fn track_peaks(&mut self, y: &[f64], h: f64) -> bool {
         let (omega1, h1) = (self.omega, self.h1);
         let (inv_h, inv_h1, inv_span) = (1.0 / h, 1.0 / h1, 2.0 / (h + h1));
-        let rates = self.rate_peak.iter_mut().zip(&mut self.accel_peak);
-        let past = y.iter().zip(&self.y0).zip(&self.ym1);
-        for (((r, a), w), ((&y1, &y0), &ym)) in rates.zip(&mut self.signal_omega).zip(past) {
-            let (s1, s0) = ((y1 - y0) * inv_h, (y0 - ym) * inv_h1);
-            *r = r.max(s1.abs());
-            *a = a.max(((s1 - s0) * inv_span).abs());
-            *w = if *r > 0.0 {
-                (*a / *r / ACCUMULATION).max(omega1)
-            } else {
-                omega1
-            };
+        let (n0, n1) = (self.kind_end[0], self.kind_end[1]);
+        let rates = self.history > 0;
+        let mut grown = false;
+        for (i, &yi) in y.iter().enumerate() {
+            let v = yi.abs();
+            if v > self.peak[i] {
+                self.peak[i] = v;
+                grown = true;
+                if !(n0..n1).contains(&i) {
+                    self.inv_weight[i] = 1.0 / self.weight_of(i, v);
+                }
+            }
+            if !rates {
+                continue;
+            }
+            let (s1, s0) = (
+                (yi - self.y0[i]) * inv_h,
+                (self.y0[i] - self.ym1[i]) * inv_h1,
+            );
+            let (r, a) = (s1.abs(), ((s1 - s0) * inv_span).abs());
+            let (rp, ap) = (&mut self.rate_peak[i], &mut self.accel_peak[i]);
+            if r > *rp || a > *ap {
+                *rp = rp.max(r);
+                *ap = ap.max(a);
+                self.inv_omega[i] = if *rp > 0.0 {
+                    1.0 / (*ap / *rp / ACCUMULATION).max(omega1)
+                } else {
+                    1.0 / omega1
+                };
+            }
         }
+        grown
     }
 
     /// The rate shifts (s₀, s₁) of the carried ẏ at the two ends of a step of `h` that starts
