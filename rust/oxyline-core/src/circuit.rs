@@ -169,12 +169,10 @@ impl Names {
     pub fn n_branches(&self) -> usize {
         self.branches.len()
     }
-    /// The vessel (index into the vessel names) or boundary condition (vessel count + its
-    /// tag) that branch `b` belongs to; None for a free-text branch.
-    pub fn branch_owner(&self, b: usize) -> Option<usize> {
+    /// The vessel (index into the vessel names) that branch `b` is part of, if any.
+    pub fn branch_vessel(&self, b: usize) -> Option<usize> {
         match self.branches[b] {
             Label::Vessel { vessel, .. } => Some(vessel as usize),
-            Label::Boundary { tag, .. } => Some(self.vessels.len() + tag as usize),
             _ => None,
         }
     }

@@ -26,7 +26,10 @@ const ACCUMULATION: f64 = 3.0;
 
 /// The smallest share of the largest flow amplitude a flow group's absolute tolerance is
 /// scaled to (a vessel without flow so far is not held to a vanishing one).
-const FLOW_SHARE_FLOOR: f64 = 1e-6;
+const FLOW_SHARE_FLOOR: f64 = 1e-4;
+
+/// The flow group of a branch that is no vessel's.
+const NO_VESSEL: u32 = u32::MAX;
 
 /// Accepted steps after a rejection during which the step does not grow.
 const HOLD_AFTER_REJECTION: usize = 8;
@@ -53,18 +56,20 @@ pub(super) struct Adaptive {
     /// The largest |y_i| so far: rtol is relative to it (a pulsatile flow is judged against
     /// its peak, not against its zero crossings).
     peak: Vec<f64>,
-    /// Each flow unknown's scale group (its vessel, or its boundary condition): a flow is
-    /// judged against its group's amplitude, so a small vessel's flow meets rtol of its own
-    /// amplitude (and atol scaled by its share of the largest), where one flow scale for all
-    /// vessels let a small vessel's flow err by the large vessels' absolute tolerance.
+    /// Each flow unknown's vessel (`NO_VESSEL` for a boundary condition's or an element's
+    /// own branch): a vessel's flow is judged against its vessel's amplitude, so a small
+    /// vessel's flow meets rtol of its own amplitude (and atol scaled by its share of the
+    /// largest), where one flow scale for all vessels let a small vessel's flow err by the
+    /// large vessels' absolute tolerance. Other flows keep atol and their own peak.
     flow_group: Vec<u32>,
     /// The largest |Q| so far per group, and over all groups.
     group_peak: Vec<f64>,
     flow_peak: f64,
-    /// 1/(atol_i + rtol·s_i) of every unknown: its absolute tolerance (a flow's scaled by its
-    /// group's share of the largest amplitude) plus rtol of its scale s_i (its largest |y| so
+    /// Every unknown's absolute tolerance (a flow's scaled by its group's share of the largest
+    /// amplitude) and the scale s_i rtol is relative to with its value (its largest |y| so
     /// far, a flow's its group's amplitude), kept up to date as the peaks grow.
-    inv_weight: Vec<f64>,
+    atol: Vec<f64>,
+    scale: Vec<f64>,
     /// The differential unknowns' local error estimate of the current step (scratch).
     le: Vec<f64>,
     /// Output rows per cycle.
@@ -155,7 +160,8 @@ impl Adaptive {
             flow_group: flow_groups(dae),
             group_peak: Vec::new(),
             flow_peak: 0.0,
-            inv_weight: Vec::new(),
+            atol: Vec::new(),
+            scale: Vec::new(),
             le: Vec::new(),
             delta: rate_shift(rho_inf),
             out_per_cycle,
@@ -201,9 +207,9 @@ impl Adaptive {
             self.rate_peak = vec![0.0; st.y.len()];
             self.accel_peak = vec![0.0; st.y.len()];
             self.inv_omega = vec![1.0 / self.omega; st.y.len()];
-            self.inv_weight = (0..st.y.len())
-                .map(|i| 1.0 / self.weight_of(i, self.peak[i]))
-                .collect();
+            let a = self.tol.atol.as_array();
+            self.atol = (0..st.y.len()).map(|i| a[self.kind_of(i)]).collect();
+            self.scale.clone_from(&self.peak);
             self.track_flow_peaks(&st.y, true);
         }
         self.y0.clone_from(&st.y);
@@ -299,7 +305,7 @@ impl Adaptive {
     /// The largest scaled error per kind of the local errors in `le` (see `flow_error`),
     /// each unknown weighted by its absolute tolerance plus rtol of its scale.
     fn scaled_errors(&self, y: &[f64], h: f64) -> FlowError {
-        let (h1, inv_h) = (self.h1, 1.0 / h);
+        let (rtol, h1, inv_h) = (self.tol.rtol, self.h1, 1.0 / h);
         let alg = self.c_algebraic;
         // (the first two steps' estimates are first order: judged as they are, one step's
         // error, or the start would crawl)
@@ -323,7 +329,8 @@ impl Adaptive {
                     let curvature = 2.0 * ((yi - b) / h - (b - a) / h1) / (h + h1);
                     alg * h * h * curvature.abs()
                 };
-                *worst = worst.max(scaled * self.inv_weight[i]);
+                let weight = self.atol[i] + rtol * yi.abs().max(self.scale[i]);
+                *worst = worst.max(scaled / weight);
             }
         }
         FlowError {
@@ -401,39 +408,45 @@ impl Adaptive {
         }
         let (n0, n1) = (self.kind_end[0], self.kind_end[1]);
         if self.group_peak.is_empty() {
-            let groups = self.flow_group.iter().map(|&g| g as usize + 1).max();
+            let vessels = self.flow_group.iter().filter(|&&g| g != NO_VESSEL);
+            let groups = vessels.map(|&g| g as usize + 1).max();
             self.group_peak = vec![0.0; groups.unwrap_or(0)];
         }
         for (&g, q) in self.flow_group.iter().zip(&y[n0..n1]) {
+            if g == NO_VESSEL {
+                continue;
+            }
             let p = &mut self.group_peak[g as usize];
             *p = p.max(q.abs());
             self.flow_peak = self.flow_peak.max(*p);
         }
-        let (atol, rtol, largest) = (self.tol.atol.flow, self.tol.rtol, self.flow_peak);
+        let (atol, largest) = (self.tol.atol.flow, self.flow_peak);
         let members = self.flow_group.iter().zip(&self.peak[n0..n1]);
-        for (w, (&g, &p)) in self.inv_weight[n0..n1].iter_mut().zip(members) {
+        let flows = self.scale[n0..n1].iter_mut().zip(&mut self.atol[n0..n1]);
+        for ((s, t), (&g, &p)) in flows.zip(members) {
+            if g == NO_VESSEL {
+                *s = p;
+                continue;
+            }
             let a = self.group_peak[g as usize];
-            let share = if largest > 0.0 {
-                (a / largest).max(FLOW_SHARE_FLOOR)
+            *s = p.max(a);
+            *t = if largest > 0.0 {
+                atol * (a / largest).max(FLOW_SHARE_FLOOR)
             } else {
-                1.0
+                atol
             };
-            *w = 1.0 / (atol * share + rtol * p.max(a));
         }
     }
 
-    /// atol + rtol·`scale` of unknown `i` by its kind (a flow's atol unscaled: see
-    /// `track_flow_peaks`).
-    fn weight_of(&self, i: usize, scale: f64) -> f64 {
-        let a = self.tol.atol.as_array();
-        let k = if i < self.kind_end[0] {
+    /// The kind of unknown `i` (0 pressure, 1 flow, 2 volume: the index into `Atol`).
+    fn kind_of(&self, i: usize) -> usize {
+        if i < self.kind_end[0] {
             0
         } else if i < self.kind_end[1] {
             1
         } else {
             2
-        };
-        a[k] + self.tol.rtol * scale
+        }
     }
 
     /// One pass after an accepted step: every unknown's peak |y| (and its scale, for all but
@@ -453,7 +466,7 @@ impl Adaptive {
                 self.peak[i] = v;
                 grown = true;
                 if !(n0..n1).contains(&i) {
-                    self.inv_weight[i] = 1.0 / self.weight_of(i, v);
+                    self.scale[i] = v;
                 }
             }
             if !rates {
@@ -569,18 +582,15 @@ impl Adaptive {
     }
 }
 
-/// The scale group of every branch's flow: its vessel or boundary condition, else its own.
+/// The vessel of every branch's flow (`NO_VESSEL` for the others').
 fn flow_groups(dae: &Dae) -> Vec<u32> {
     let names = &dae.names;
-    let owners: Vec<Option<usize>> = (0..names.n_branches())
-        .map(|b| names.branch_owner(b))
-        .collect();
-    let first_free = owners.iter().flatten().map(|&o| o + 1).max().unwrap_or(0);
-    let group = |(b, o): (usize, &Option<usize>)| o.unwrap_or(first_free + b);
-    owners
-        .iter()
-        .enumerate()
-        .map(|x| u32::try_from(group(x)).expect("more than 2^32 flow groups"))
+    (0..names.n_branches())
+        .map(|b| {
+            names
+                .branch_vessel(b)
+                .map_or(NO_VESSEL, |v| u32::try_from(v).expect("2^32 vessels"))
+        })
         .collect()
 }
 
