@@ -250,9 +250,9 @@ impl Adaptive {
     /// level, so their error does not accumulate: it is the fixed point ρ∞/(1 + ρ∞)² · h² y''/2
     /// of one step's, y'' from the last three states (none at the first step).
     ///
-    /// The filter costs a solve: it is skipped where the unfiltered estimate already lets the
-    /// controller take its largest growth (or keep the step while a rejection holds it), as
-    /// the filtered one would then decide the same.
+    /// The filter costs a solve: it is skipped where the unfiltered estimate (a valid, usually
+    /// larger one) already lets the controller take its largest growth (or keep the step while
+    /// a rejection holds it).
     fn flow_error(&mut self, st: &mut State<'_, '_>, h: f64) -> FlowError {
         self.local_errors(&st.y, h);
         let raw = self.scaled_errors(&st.y, h);
