@@ -97,6 +97,44 @@ def test_achieved_error_is_within_the_tolerance_and_not_far_below(case: Any) -> 
         assert res.settings["steps"] > 0 and res.settings["dt_min"] <= res.settings["dt_max"]
 
 
+def test_a_small_vessels_flow_meets_rtol_of_its_own_amplitude() -> None:
+    # a large and a small R + L line from two sinusoidal pressures into one outlet: the small
+    # one carries ~1e-8 m^3/s (3e-5 of the large one's flow, ten times the flow atol of
+    # 1e-9 m^3/s, which holds it only through its share of the largest amplitude) at the 10th
+    # harmonic, faster than the large one's: each flow within 2 rtol of its own amplitude,
+    # against the circuit's closed-form (phasor) periodic response
+    lines = {"large": (1e7, 2e6, 1), "small": (4e11, 6.4e9, 10)}  # R, L, forced harmonic
+    r_out, p0, p1 = 1e8, 1.2e4, 4e3
+    model = {"name": "two-sources", "arrangement": "L", "period": T,
+             "vessels": [{"name": v, "from": v + "_in", "to": "j",
+                          "lumped": {"resistance": rv, "inductance": lv}}
+                         for v, (rv, lv, _) in lines.items()]
+             + [{"name": "outlet", "from": "j", "to": "out",
+                 "lumped": {"resistance": 0.5 * r_out}}],
+             "boundary_conditions": {
+                 **{v + "_in": {"type": "pressure", "fourier": {
+                     "period": T, "mean": p0, "sin": [0.0] * (k - 1) + [p1]}}
+                    for v, (_, _, k) in lines.items()},
+                 "out": {"type": "resistance", "resistance": 0.5 * r_out}}}
+
+    def flow(v: str, t: np.ndarray) -> np.ndarray:
+        q = np.zeros_like(t)
+        for k, part in ((0, np.real), *((k, np.imag) for _, _, k in lines.values())):
+            z = {u: ru + 1j * k * W * lu for u, (ru, lu, _) in lines.items()}
+            src = {u: (p0 if k == 0 else p1 * (ku == k)) for u, (_, _, ku) in lines.items()}
+            pj = sum(src[u] / z[u] for u in z) / (sum(1 / z[u] for u in z) + 1 / r_out)
+            q += part((src[v] - pj) / z[v] * np.exp(1j * k * W * t))
+        return q
+
+    for rtol in (1e-3, 1e-4):
+        res = oxyline.simulate(model, rtol=rtol, cycles=3, start="periodic",
+                               output_every=1e-3)
+        for v in lines:
+            q = flow(v, res.time)
+            err = np.max(np.abs(res.vessel(v).flow_in - q)) / np.max(np.abs(q))
+            assert err <= 2 * rtol, (v, rtol, err)
+
+
 def test_dense_output_between_steps_matches_the_closed_form() -> None:
     # 0.1 ms output: ~10-100 rows per step at rtol 1e-4; the interpolant keeps the error
     # within the same 2 rtol as the steps' ends

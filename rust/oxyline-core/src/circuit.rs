@@ -169,6 +169,13 @@ impl Names {
     pub fn n_branches(&self) -> usize {
         self.branches.len()
     }
+    /// The vessel (index into the vessel names) that branch `b` is part of, if any.
+    pub fn branch_vessel(&self, b: usize) -> Option<usize> {
+        match self.branches[b] {
+            Label::Vessel { vessel, .. } => Some(vessel as usize),
+            _ => None,
+        }
+    }
     /// Name of node `i`.
     pub fn node(&self, i: usize) -> String {
         self.write(self.nodes[i])

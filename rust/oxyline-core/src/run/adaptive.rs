@@ -6,7 +6,8 @@
 use super::coupling::State;
 use crate::circuit::Dae;
 use crate::integrate::adaptive::{
-    StepControl, Tolerances, hermite, local_error_constant, quadratic_extrapolation, rate_shift,
+    GROW, SAFETY, StepControl, Tolerances, hermite, local_error_constant, quadratic_extrapolation,
+    rate_shift,
 };
 use std::cell::Cell;
 
@@ -22,6 +23,13 @@ use std::cell::Cell;
 /// the errors of fast, small components (a small vessel's segment flows) by ω_m/ω₁ and let
 /// them set the step.
 const ACCUMULATION: f64 = 3.0;
+
+/// The smallest share of the largest flow amplitude a flow group's absolute tolerance is
+/// scaled to (a vessel without flow so far is not held to a vanishing one).
+const FLOW_SHARE_FLOOR: f64 = 1e-4;
+
+/// The flow group of a branch that is no vessel's.
+const NO_VESSEL: u32 = u32::MAX;
 
 /// Accepted steps after a rejection during which the step does not grow.
 const HOLD_AFTER_REJECTION: usize = 8;
@@ -44,10 +52,24 @@ pub(super) struct Adaptive {
     rate_peak: Vec<f64>,
     accel_peak: Vec<f64>,
     /// ω_i/ACCUMULATION, at least ω₁/ACCUMULATION (`omega`).
-    signal_omega: Vec<f64>,
+    inv_omega: Vec<f64>,
     /// The largest |y_i| so far: rtol is relative to it (a pulsatile flow is judged against
     /// its peak, not against its zero crossings).
     peak: Vec<f64>,
+    /// Each flow unknown's vessel (`NO_VESSEL` for a boundary condition's or an element's
+    /// own branch): a vessel's flow is judged against its vessel's amplitude, so a small
+    /// vessel's flow meets rtol of its own amplitude (and atol scaled by its share of the
+    /// largest), where one flow scale for all vessels let a small vessel's flow err by the
+    /// large vessels' absolute tolerance. Other flows keep atol and their own peak.
+    flow_group: Vec<u32>,
+    /// The largest |Q| so far per group, and over all groups.
+    group_peak: Vec<f64>,
+    flow_peak: f64,
+    /// Every unknown's absolute tolerance (a flow's scaled by its group's share of the largest
+    /// amplitude) and the scale s_i rtol is relative to with its value (its largest |y| so
+    /// far, a flow's its group's amplitude), kept up to date as the peaks grow.
+    atol: Vec<f64>,
+    scale: Vec<f64>,
     /// The differential unknowns' local error estimate of the current step (scratch).
     le: Vec<f64>,
     /// Output rows per cycle.
@@ -134,7 +156,12 @@ impl Adaptive {
             peak: Vec::new(),
             rate_peak: Vec::new(),
             accel_peak: Vec::new(),
-            signal_omega: Vec::new(),
+            inv_omega: Vec::new(),
+            flow_group: flow_groups(dae),
+            group_peak: Vec::new(),
+            flow_peak: 0.0,
+            atol: Vec::new(),
+            scale: Vec::new(),
             le: Vec::new(),
             delta: rate_shift(rho_inf),
             out_per_cycle,
@@ -179,7 +206,11 @@ impl Adaptive {
             self.peak = st.y.iter().map(|v| v.abs()).collect();
             self.rate_peak = vec![0.0; st.y.len()];
             self.accel_peak = vec![0.0; st.y.len()];
-            self.signal_omega = vec![self.omega; st.y.len()];
+            self.inv_omega = vec![1.0 / self.omega; st.y.len()];
+            let a = self.tol.atol.as_array();
+            self.atol = (0..st.y.len()).map(|i| a[self.kind_of(i)]).collect();
+            self.scale.clone_from(&self.peak);
+            self.track_flow_peaks(&st.y, true);
         }
         self.y0.clone_from(&st.y);
         self.yd0.clone_from(&st.yd);
@@ -218,8 +249,28 @@ impl Adaptive {
     /// of the solution), per unit step. Algebraic unknowns hold their constraint at the α_f
     /// level, so their error does not accumulate: it is the fixed point ρ∞/(1 + ρ∞)² · h² y''/2
     /// of one step's, y'' from the last three states (none at the first step).
+    ///
+    /// The filter costs a solve: it is skipped where the unfiltered estimate (a valid, usually
+    /// larger one) already lets the controller take its largest growth (or keep the step while
+    /// a rejection holds it).
     fn flow_error(&mut self, st: &mut State<'_, '_>, h: f64) -> FlowError {
-        let y = &st.y;
+        self.local_errors(&st.y, h);
+        let raw = self.scaled_errors(&st.y, h);
+        let needless = if self.hold > 0 {
+            SAFETY * SAFETY
+        } else {
+            (SAFETY / GROW).powi(2)
+        };
+        if raw.max <= needless {
+            return raw;
+        }
+        st.flow.integrator().filter_error(&mut self.le);
+        self.scaled_errors(&st.y, h)
+    }
+
+    /// The differential unknowns' local errors of the step of `h` that ended in `y` into
+    /// `le` (0 for algebraic unknowns).
+    fn local_errors(&mut self, y: &[f64], h: f64) {
         let (h1, h2) = (self.h1, self.h2);
         self.le.clear();
         match self.history {
@@ -249,25 +300,28 @@ impl Adaptive {
                 *v = 0.0;
             }
         }
-        st.flow.integrator().filter_error(&mut self.le);
-        let (rtol, atol) = (self.tol.rtol, self.tol.atol.as_array());
+    }
+
+    /// The largest scaled error per kind of the local errors in `le` (see `flow_error`),
+    /// each unknown weighted by its absolute tolerance plus rtol of its scale.
+    fn scaled_errors(&self, y: &[f64], h: f64) -> FlowError {
+        let (rtol, h1, inv_h) = (self.tol.rtol, self.h1, 1.0 / h);
         let alg = self.c_algebraic;
         // (the first two steps' estimates are first order: judged as they are, one step's
         // error, or the start would crawl)
         let first = self.history < 2;
         let mut kinds = [0.0f64; 3];
-        let y = &st.y;
         let ends = [0, self.kind_end[0], self.kind_end[1], y.len()];
         for (k, worst) in kinds.iter_mut().enumerate() {
             for (i, &yi) in y.iter().enumerate().take(ends[k + 1]).skip(ends[k]) {
                 let scaled = if !self.algebraic[i] {
                     // accumulated over 1/ω_i, and over one step at the least
-                    let accumulated = if first {
+                    let per_step = if first {
                         1.0
                     } else {
-                        (self.signal_omega[i] * h).min(1.0)
+                        (self.inv_omega[i] * inv_h).max(1.0)
                     };
-                    self.le[i].abs() / accumulated
+                    self.le[i].abs() * per_step
                 } else if self.history == 0 {
                     0.0
                 } else {
@@ -275,7 +329,8 @@ impl Adaptive {
                     let curvature = 2.0 * ((yi - b) / h - (b - a) / h1) / (h + h1);
                     alg * h * h * curvature.abs()
                 };
-                *worst = worst.max(scaled / (atol[k] + rtol * yi.abs().max(self.peak[i])));
+                let weight = self.atol[i] + rtol * yi.abs().max(self.scale[i]);
+                *worst = worst.max(scaled / weight);
             }
         }
         FlowError {
@@ -323,12 +378,8 @@ impl Adaptive {
         for (e, k) in self.estimate.iter_mut().zip(kinds.iter().chain([&species])) {
             *e = e.max(k * rtol);
         }
-        for (p, v) in self.peak.iter_mut().zip(&st.y) {
-            *p = p.max(v.abs());
-        }
-        if self.history > 0 {
-            self.track_signal_frequency(&st.y, h);
-        }
+        let grown = self.track_peaks(&st.y, h);
+        self.track_flow_peaks(&st.y, grown);
         self.steps += 1;
         self.h_smallest = self.h_smallest.min(h);
         self.h_largest = self.h_largest.max(h);
@@ -348,24 +399,96 @@ impl Adaptive {
         self.hold = self.hold.saturating_sub(1);
     }
 
-    /// The running peaks of |ẏ| and |ÿ| of every unknown from the divided differences of the
-    /// last three accepted states (not from the carried rates, which follow the damped
-    /// spurious root at a start), and from them its signal frequency.
-    fn track_signal_frequency(&mut self, y: &[f64], h: f64) {
-        let (omega1, h1) = (self.omega, self.h1);
-        let (inv_h, inv_h1, inv_span) = (1.0 / h, 1.0 / h1, 2.0 / (h + h1));
-        let rates = self.rate_peak.iter_mut().zip(&mut self.accel_peak);
-        let past = y.iter().zip(&self.y0).zip(&self.ym1);
-        for (((r, a), w), ((&y1, &y0), &ym)) in rates.zip(&mut self.signal_omega).zip(past) {
-            let (s1, s0) = ((y1 - y0) * inv_h, (y0 - ym) * inv_h1);
-            *r = r.max(s1.abs());
-            *a = a.max(((s1 - s0) * inv_span).abs());
-            *w = if *r > 0.0 {
-                (*a / *r / ACCUMULATION).max(omega1)
+    /// Every group's flow amplitude from the flows of `y`, and (when a peak of `y` grew) the
+    /// flows' scales and absolute tolerances: rtol of the group's amplitude A_g, atol scaled
+    /// by A_g over the largest group's (at least `FLOW_SHARE_FLOOR`).
+    fn track_flow_peaks(&mut self, y: &[f64], grown: bool) {
+        if !grown {
+            return;
+        }
+        let (n0, n1) = (self.kind_end[0], self.kind_end[1]);
+        if self.group_peak.is_empty() {
+            let vessels = self.flow_group.iter().filter(|&&g| g != NO_VESSEL);
+            let groups = vessels.map(|&g| g as usize + 1).max();
+            self.group_peak = vec![0.0; groups.unwrap_or(0)];
+        }
+        for (&g, q) in self.flow_group.iter().zip(&y[n0..n1]) {
+            if g == NO_VESSEL {
+                continue;
+            }
+            let p = &mut self.group_peak[g as usize];
+            *p = p.max(q.abs());
+            self.flow_peak = self.flow_peak.max(*p);
+        }
+        let (atol, largest) = (self.tol.atol.flow, self.flow_peak);
+        let members = self.flow_group.iter().zip(&self.peak[n0..n1]);
+        let flows = self.scale[n0..n1].iter_mut().zip(&mut self.atol[n0..n1]);
+        for ((s, t), (&g, &p)) in flows.zip(members) {
+            if g == NO_VESSEL {
+                *s = p;
+                continue;
+            }
+            let a = self.group_peak[g as usize];
+            *s = p.max(a);
+            *t = if largest > 0.0 {
+                atol * (a / largest).max(FLOW_SHARE_FLOOR)
             } else {
-                omega1
+                atol
             };
         }
+    }
+
+    /// The kind of unknown `i` (0 pressure, 1 flow, 2 volume: the index into `Atol`).
+    fn kind_of(&self, i: usize) -> usize {
+        if i < self.kind_end[0] {
+            0
+        } else if i < self.kind_end[1] {
+            1
+        } else {
+            2
+        }
+    }
+
+    /// One pass after an accepted step: every unknown's peak |y| (and its scale, for all but
+    /// the flows, which `track_flow_peaks` sets), and from the divided differences of the last
+    /// three accepted states (not from the carried rates, which follow the damped spurious
+    /// root at a start) the running peaks of |ẏ| and |ÿ| and the signal frequency. True when
+    /// some peak |y| grew.
+    fn track_peaks(&mut self, y: &[f64], h: f64) -> bool {
+        let (omega1, h1) = (self.omega, self.h1);
+        let (inv_h, inv_h1, inv_span) = (1.0 / h, 1.0 / h1, 2.0 / (h + h1));
+        let (n0, n1) = (self.kind_end[0], self.kind_end[1]);
+        let rates = self.history > 0;
+        let mut grown = false;
+        for (i, &yi) in y.iter().enumerate() {
+            let v = yi.abs();
+            if v > self.peak[i] {
+                self.peak[i] = v;
+                grown = true;
+                if !(n0..n1).contains(&i) {
+                    self.scale[i] = v;
+                }
+            }
+            if !rates {
+                continue;
+            }
+            let (s1, s0) = (
+                (yi - self.y0[i]) * inv_h,
+                (self.y0[i] - self.ym1[i]) * inv_h1,
+            );
+            let (r, a) = (s1.abs(), ((s1 - s0) * inv_span).abs());
+            let (rp, ap) = (&mut self.rate_peak[i], &mut self.accel_peak[i]);
+            if r > *rp || a > *ap {
+                *rp = rp.max(r);
+                *ap = ap.max(a);
+                self.inv_omega[i] = if *rp > 0.0 {
+                    1.0 / (*ap / *rp / ACCUMULATION).max(omega1)
+                } else {
+                    1.0 / omega1
+                };
+            }
+        }
+        grown
     }
 
     /// The rate shifts (s₀, s₁) of the carried ẏ at the two ends of a step of `h` that starts
@@ -457,6 +580,18 @@ impl Adaptive {
         }
         (&self.yi, &self.ydi, &self.zi, &self.vi)
     }
+}
+
+/// The vessel of every branch's flow (`NO_VESSEL` for the others').
+fn flow_groups(dae: &Dae) -> Vec<u32> {
+    let names = &dae.names;
+    (0..names.n_branches())
+        .map(|b| {
+            names
+                .branch_vessel(b)
+                .map_or(NO_VESSEL, |v| u32::try_from(v).expect("2^32 vessels"))
+        })
+        .collect()
 }
 
 /// The cells' concentrations (amount over transport volume) of every species into `out`.
