@@ -316,6 +316,23 @@ impl<T: Scalar> TreeLu<T> {
         })
     }
 
+    /// Vertex `k`'s pivot (judged against its `magnitude` when `check`) eliminated into its
+    /// parent's: the one step of the tree factorisation, serial or in the top tree.
+    fn eliminate_into_parent(&mut self, k: usize, magnitude: &mut [f64], check: bool) -> bool {
+        let d = self.pivot[k];
+        if check && (d.modulus() <= 1e-12 * magnitude[k] || !d.finite()) {
+            return false;
+        }
+        let p = self.parent_pos[k];
+        if p != NONE {
+            let p = p as usize;
+            let update = self.down[k] * self.up[k] / d;
+            self.pivot[p] -= update;
+            magnitude[p] += update.modulus();
+        }
+        true
+    }
+
     fn factor(&mut self, vals: &[T]) -> bool {
         self.pivot.iter_mut().for_each(|x| *x = T::ZERO);
         self.up.iter_mut().for_each(|x| *x = T::ZERO);
@@ -339,16 +356,8 @@ impl<T: Scalar> TreeLu<T> {
             return true;
         }
         for k in 0..self.n {
-            let d = self.pivot[k];
-            if d.modulus() <= 1e-12 * magnitude[k] || !d.finite() {
+            if !self.eliminate_into_parent(k, &mut magnitude, true) {
                 return false;
-            }
-            let p = self.parent_pos[k];
-            if p != NONE {
-                let p = p as usize;
-                let update = self.down[k] * self.up[k] / d;
-                self.pivot[p] -= update;
-                magnitude[p] += update.modulus();
             }
         }
         self.invert_pivots();

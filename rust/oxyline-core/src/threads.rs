@@ -34,11 +34,12 @@ fn pool_of(threads: usize) -> Result<Arc<ThreadPool>> {
         .num_threads(threads)
         .thread_name(|i| format!("oxyline-run-{i}"))
         .build()
-        .map_err(|e| {
-            Error::model(
-                "simulation",
-                format!("threads: cannot start {threads}: {e}"),
-            )
+        .map_err(|e| Error::Resource {
+            what: "simulation: threads".to_owned(),
+            bytes: 0,
+            message: format!(
+                "cannot start {threads} threads ({e}); set threads = 1 or free resources"
+            ),
         })?;
     let pool = Arc::new(pool);
     pools.insert(threads, pool.clone());
@@ -60,7 +61,14 @@ pub fn with_threads<R>(threads: Option<usize>, f: impl FnOnce() -> R) -> Result<
         ));
     }
     let n = resolve(threads);
-    let pool = if n > 1 { Some(pool_of(n)?) } else { None };
+    let pool = match (n > 1, threads) {
+        (false, _) => None,
+        (true, Some(_)) => Some(pool_of(n)?),
+        // the default (every core) is a speed choice, not the user's: where the system cannot
+        // start the threads (address space or process limits), the run is serial, with the
+        // same bits
+        (true, None) => pool_of(n).ok(),
+    };
     let previous = POOL.with(|p| p.replace(pool));
     // restored also if `f` panics (the binding turns a panic into an error and goes on)
     struct Restore(Option<Option<Arc<ThreadPool>>>);

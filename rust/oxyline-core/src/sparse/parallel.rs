@@ -142,18 +142,11 @@ impl<T: Scalar> TreeLu<T> {
             return false;
         }
         // the top tree, and each block root's update of its parent, in elimination order
-        for &item in &self.partition.serial {
+        for i in 0..self.partition.serial.len() {
+            let item = self.partition.serial[i];
             let k = (item & !ROOT) as usize;
-            let d = self.pivot[k];
-            if item & ROOT == 0 && (d.modulus() <= 1e-12 * magnitude[k] || !d.finite()) {
+            if !self.eliminate_into_parent(k, magnitude, item & ROOT == 0) {
                 return false;
-            }
-            let p = self.parent_pos[k];
-            if p != NONE {
-                let p = p as usize;
-                let update = self.down[k] * self.up[k] / d;
-                self.pivot[p] -= update;
-                magnitude[p] += update.modulus();
             }
         }
         true
