@@ -32,6 +32,8 @@ pub const OPTIONS: &[&str] = &[
     "rtol",
     "atol",
     "threads",
+    // read by the Python run (one impedance refinement after the run), not by the settings
+    "estimate_space_error",
 ];
 /// How a run starts.
 pub const STARTS: &[&str] = &[
