@@ -10,10 +10,11 @@ Sources, each value's provenance in ``docs/populations.md``:
   segment order (the i-th vessel, counting from 1, is segment i);
 * wall law Eh/r0 = k1 exp(k2 r0) + k3 (Mynard & Smolich 2015 eq. 3; PWDB's k2 = 1.5 x Mynard's)
   with wave speed c^2 = (2/3) (Eh/r0) / rho, which oxyline's thin-wall compliance with
-  Poisson ratio 0.5 reproduces exactly: c^2 = Eh / (2 rho r (1 - nu^2));
+  Poisson ratio 0.5 reproduces exactly (the core's ``model/pwdb/wall.rs``);
 * 16 vascular beds (R, C) shared among their terminal segments by outlet area, R1 = the
   terminal segment's characteristic impedance, R2 = the bed's share x one factor calibrated to
-  the mean aortic root pressure, outflow pressure 33.2 mmHg;
+  the mean aortic root pressure, outflow pressure 33.2 mmHg (the core's ``model/pwdb/beds.rs``,
+  on its steady solve of the network);
 * age-specific means and SDs: the literature data and fits of PWDB's
   ``calculate_pwdb_input_parameters.m`` (MIT), recomputed here (``docs/populations.md``).
 
@@ -31,18 +32,14 @@ from typing import Any
 
 import numpy as np
 
+from oxyline import _core
 from oxyline.errors import ModelError
 
-MMHG = 133.33                 # Pa per mmHg, PWDB's conversion factor
-RHO = 1060.0                  # blood density [kg/m^3] (PWDB)
-MU = 2.5e-3                   # blood viscosity [Pa s] (PWDB)
-P_OUT = 33.2 * MMHG           # Windkessel outflow pressure [Pa] (PWDB, Parazynski 1993)
-K1_CGS, K2_CGS, K3_CGS = 3.0e6, -9 * 1.5, 3.37e5   # wall law [g s^-2 cm^-1, cm^-1, g s^-2 cm^-1]
-POISSON = 0.5                 # makes oxyline's c^2 = Eh/(2 rho r (1-nu^2)) PWDB's (2/3)(Eh/r)/rho
-#: wall thickness h = r (a e^(b r) + c e^(d r)), r in cm: not PWDB's (its 1-D model takes Eh),
-#: the law of circulatory_autogen's a..d_vessel (whole-body-140's source); only E h enters the
-#: thin-wall compliance, so h is a labelling choice and E carries the stiffness
-THICKNESS = (0.2802, -5.053, 0.1324, -0.1114)
+MMHG = _core.PWDB_MMHG             # Pa per mmHg, PWDB's conversion factor
+RHO = _core.PWDB_DENSITY           # blood density [kg/m^3] (PWDB)
+MU = _core.PWDB_VISCOSITY          # blood viscosity [Pa s] (PWDB)
+P_OUT = _core.PWDB_OUTFLOW_PRESSURE  # Windkessel outflow pressure [Pa] (PWDB, Parazynski 1993)
+POISSON = _core.PWDB_POISSON_RATIO   # makes the thin-wall c^2 PWDB's (2/3)(Eh/r)/rho
 #: the segments whose diameter PWDB's "large-artery diameter" scales: mean radius >= this
 LARGE_ARTERY_RADIUS = 0.003462 * math.sqrt(1.5)
 PROXIMAL_AORTA = (1, 2)       # segments whose length PWDB's aortic length changes
@@ -121,64 +118,34 @@ def geometry_of(model: dict[str, Any]) -> list[dict[str, Any]]:
     return out
 
 
-def eh_over_r(r: np.ndarray | float, k3_cgs: float) -> np.ndarray:
-    """Wall law Eh/r0 [Pa] at radius r [m] (cgs constants; 1 g s^-2 cm^-1 = 0.1 Pa)."""
-    return 0.1 * (K1_CGS * np.exp(K2_CGS * 100.0 * np.asarray(r)) + k3_cgs)
+def _rows(geo: list[dict[str, Any]]) -> list[tuple[int, int, float, float, float]]:
+    """The segments as the core takes them: (inlet, outlet, length, radius_in, radius_out)."""
+    return [(g["inlet"], g["outlet"], g["length"], g["radius_in"], g["radius_out"])
+            for g in geo]
+
+
+def _paths() -> tuple[tuple[tuple[int, ...], int], tuple[tuple[int, ...], int]]:
+    return (AORTA_FEMORAL, FEMORAL_SEGMENT), (AORTA_CAROTID, CAROTID_SEGMENT)
 
 
 def wave_speed(r: np.ndarray | float, k3_cgs: float, rho: float = RHO) -> np.ndarray:
-    """Moens-Korteweg wave speed of the wall law: c = sqrt((2/3) (Eh/r0) / rho) [m/s]."""
-    return np.sqrt(2.0 / 3.0 * eh_over_r(r, k3_cgs) / rho)
-
-
-def wall_thickness(r: np.ndarray | float) -> np.ndarray:
-    a, b, c, d = THICKNESS
-    rc = 100.0 * np.asarray(r)
-    return np.asarray(r) * (a * np.exp(b * rc) + c * np.exp(d * rc))
-
-
-def _mean_radius(geo: list[dict[str, Any]]) -> np.ndarray:
-    return np.array([(g["radius_in"] + g["radius_out"]) / 2 for g in geo])
-
-
-def _site_radius(g: dict[str, Any], frac: float) -> float:
-    # PWDB takes the wave speed of the half segment at r_in - 0.25 (r_in - r_out)
-    return g["radius_in"] - frac / 2 * (g["radius_in"] - g["radius_out"])
+    """Moens-Korteweg wave speed [m/s] of the wall law at radius ``r`` [m] (the core's):
+    c = sqrt((2/3) (Eh/r0) / rho), Eh/r0 = k1 exp(k2 r0) + k3 (cgs constants)."""
+    r = np.asarray(r, dtype=float)
+    return np.asarray(_core.pwdb_wave_speed(r.ravel().tolist(), k3_cgs, rho)).reshape(r.shape)
 
 
 def theoretical_cf_pwv(geo: list[dict[str, Any]], k3_cgs: float, rho: float = RHO) -> float:
     """Carotid-femoral PWV [m/s] of the wall law along PWDB's path: path length over the
-    difference of the transit times sum(L_i / c_i) to mid-femoral and to mid-carotid, each
-    segment's c at its mean radius (PWDB's ``calculate_theoretical_wave_speeds``)."""
-    c = wave_speed(_mean_radius(geo), k3_cgs, rho)
-
-    def transit(path: Sequence[int], site: int) -> tuple[float, float]:
-        g = geo[site - 1]
-        length = sum(geo[s - 1]["length"] for s in path) + g["length"] / 2
-        t = sum(geo[s - 1]["length"] / c[s - 1] for s in path)
-        t += g["length"] / 2 / float(wave_speed(_site_radius(g, 0.5), k3_cgs, rho))
-        return length, t
-
-    lf, tf = transit(AORTA_FEMORAL, FEMORAL_SEGMENT)
-    lc, tc = transit(AORTA_CAROTID, CAROTID_SEGMENT)
-    return (lf - lc) / (tf - tc)
+    difference of the transit times to mid-femoral and to mid-carotid (PWDB's
+    ``calculate_theoretical_wave_speeds``; computed by the core)."""
+    return _core.pwdb_cf_pwv(_rows(geo), *_paths(), k3_cgs, rho)
 
 
 def fit_k3(geo: list[dict[str, Any]], target_pwv: float) -> float:
-    """The wall-law k3 [g s^-2 cm^-1] giving ``target_pwv`` (cf-PWV, m/s) on ``geo``: the
-    cf-PWV increases with k3: bisection to 1e-12 relative."""
-    lo, hi = 0.0, 5e7             # Eh/r0 > 0 needs k3 >= 0 at the aortic radii
-    if not theoretical_cf_pwv(geo, lo) < target_pwv < theoretical_cf_pwv(geo, hi):
-        raise ModelError(f"cf-PWV {target_pwv} m/s out of reach of the wall law")
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        if theoretical_cf_pwv(geo, mid) < target_pwv:
-            lo = mid
-        else:
-            hi = mid
-        if hi - lo < 1e-12 * abs(hi):
-            break
-    return 0.5 * (lo + hi)
+    """The wall-law k3 [g s^-2 cm^-1] giving ``target_pwv`` (cf-PWV, m/s) on ``geo`` (the
+    core's bisection, to 1e-12 relative)."""
+    return _core.pwdb_fit_k3(_rows(geo), *_paths(), target_pwv)
 
 
 # ---------------------------------------------------------------- inflow
@@ -224,95 +191,26 @@ def aortic_inflow(hr: float, sv: float, lvet: float) -> tuple[list[float], list[
 # ---------------------------------------------------------------- network
 
 
-def _outlets(geo: list[dict[str, Any]]) -> dict[int, tuple[str, float, float, float]]:
-    """terminal segment -> (bed, area share, bed R [Pa s/m^3], bed C [m^3/Pa])."""
-    out = {}
-    for bed, segs, r_bed, c_bed in VASCULAR_BEDS:
-        areas = {s: math.pi * geo[s - 1]["radius_out"] ** 2 for s in segs}
-        total = sum(areas.values())
-        for s in segs:
-            out[s] = (bed, areas[s] / total, r_bed * MMHG * 1e6, c_bed / MMHG / 1e6)
-    return out
+def _beds() -> list[tuple[list[int], float, float]]:
+    """The vascular beds as the core takes them: (terminal segments, R [Pa s/m^3],
+    C [m^3/Pa])."""
+    return [(list(segs), r_bed * MMHG * 1e6, c_bed / MMHG / 1e6)
+            for _bed, segs, r_bed, c_bed in VASCULAR_BEDS]
 
 
 def check_terminals(geo: list[dict[str, Any]]) -> None:
     inlets = {g["inlet"] for g in geo}
     free = {g["seg"] for g in geo if g["outlet"] not in inlets
             and sum(h["outlet"] == g["outlet"] for h in geo) == 1}
-    beds = set(_outlets(geo))
+    beds = {s for _bed, segs, _r, _c in VASCULAR_BEDS for s in segs}
     if free != beds:
         raise ModelError(f"PWDB network: terminal segments {sorted(free ^ beds)} do not match "
                          f"the vascular beds")
 
 
-def windkessels(geo: list[dict[str, Any]], k3_cgs: float, pvc: float = 1.0
-                ) -> dict[int, dict[str, float]]:
-    """PWDB's terminal Windkessels before calibration: for each terminal segment R1 = Z =
-    rho c(r_out) / (pi r_out^2), the bed's resistance share R_bed / (area share), C = pvc C_bed x
-    area share. Returns segment -> {z, r_bed, capacitance}."""
-    out = {}
-    for s, (_bed, share, r_bed, c_bed) in _outlets(geo).items():
-        r = geo[s - 1]["radius_out"]
-        z = RHO * float(wave_speed(r, k3_cgs)) / (math.pi * r * r)
-        out[s] = {"z": z, "r_bed": r_bed / share, "capacitance": pvc * c_bed * share}
-    return out
-
-
-def steady_model(geo: list[dict[str, Any]], k3_cgs: float, r_total: dict[int, float],
-                 q_mean: float) -> dict[str, Any]:
-    """The native model dict of the steady circuit of ``geo``: the segments with the wall law
-    (its wall does not enter a steady state), constant inflow ``q_mean`` at the inlet, terminal
-    segment i ending in the resistance ``r_total[i]`` to ``P_OUT`` (an RCR at steady state)."""
-    base = vessel_properties(geo, geo, k3_cgs)
-    vessels = [{"name": g["name"], "from": node(g["inlet"]), "to": node(g["outlet"]),
-                **p, "poisson_ratio": POISSON} for g, p in zip(geo, base, strict=True)]
-    bcs: dict[str, dict[str, Any]] = {INLET_NODE: {"type": "flow", "flow": q_mean}}
-    for s, r in r_total.items():
-        bcs[node(geo[s - 1]["outlet"])] = {"type": "resistance", "resistance": r,
-                                           "pressure": P_OUT}
-    return {"name": "pwdb-steady", "units": "SI", "blood": {"density": RHO, "viscosity": MU},
-            "vessels": vessels, "boundary_conditions": bcs}
-
-
-def root_mean_pressure(geo: list[dict[str, Any]], k3_cgs: float, r_total: dict[int, float],
-                       q_mean: float) -> float:
-    """Mean pressure [Pa] at the aortic root (node 1): the core's steady state of
-    :func:`steady_model` (vessels as Poiseuille resistors; the cycle mean of the linear
-    circuit)."""
-    from oxyline.model import build_model
-
-    st = build_model(steady_model(geo, k3_cgs, r_total, q_mean)).network.steady_state()
-    return float(st["node_pressure"][st["nodes"].index(INLET_NODE)])
-
-
-def calibrate_scale(geo: list[dict[str, Any]], k3_cgs: float, fixed: dict[int, float],
-                    scaled: dict[int, float], q_mean: float, target: float) -> float:
-    """The factor s such that terminal resistances fixed[i] + s scaled[i] make the steady
-    (= cycle-mean) aortic root pressure equal ``target`` [Pa] at inflow ``q_mean``: secant
-    iteration on P(s), increasing and nearly linear, to 1e-10 relative."""
-    def f(s: float) -> float:
-        r = {k: fixed[k] + s * scaled[k] for k in sorted(scaled)}
-        return root_mean_pressure(geo, k3_cgs, r, q_mean) - target
-
-    s0 = (target - P_OUT) / q_mean * sum(1.0 / r for r in scaled.values())  # arteries ignored
-    s1, f0 = 0.95 * s0, f(s0)
-    f1 = f(s1)
-    for _ in range(50):
-        if abs(f1) < 1e-10 * target:
-            break
-        s0, s1, f0 = s1, s1 - f1 * (s1 - s0) / (f1 - f0), f1
-        f1 = f(s1)
-    else:
-        raise ModelError(f"terminal resistance calibration to {target:g} Pa did not converge")
-    if s1 <= 0:
-        raise ModelError(f"mean pressure {target / MMHG:g} mmHg is out of reach: below the "
-                         f"outflow pressure plus the drop across the arteries and R1")
-    return s1
-
-
 def _large_arteries(base: list[dict[str, Any]]) -> tuple[set[int], set[int]]:
-    big = {g["seg"] for g, r in zip(base, _mean_radius(base), strict=True)
-           if r >= LARGE_ARTERY_RADIUS}
+    big = {g["seg"] for g in base
+           if (g["radius_in"] + g["radius_out"]) / 2 >= LARGE_ARTERY_RADIUS}
     fed = {g["outlet"] for g in base if g["seg"] in big}
     return big, {g["seg"] for g in base if g["seg"] in big or g["inlet"] in fed}
 
@@ -344,27 +242,25 @@ def vessel_properties(base: list[dict[str, Any]], geo: list[dict[str, Any]], k3_
                       ) -> list[dict[str, float]]:
     """Per segment: radius_in/out, length, wall_thickness (the thickness law at the baseline
     mean radius, fixed) and youngs_modulus = (Eh/r0)(r) r / h at the subject's mean radius r,
-    so that the wave speed at the mean radius is the wall law's."""
-    r0 = _mean_radius(base)
-    r = _mean_radius(geo)
-    h = wall_thickness(r0)
-    e = eh_over_r(r, k3_cgs) * r / h
+    so that the wave speed at the mean radius is the wall law's (the core's)."""
+    walls = _core.pwdb_wall_properties(_rows(base), _rows(geo), k3_cgs)
     return [{"length": g["length"], "radius_in": g["radius_in"], "radius_out": g["radius_out"],
-             "wall_thickness": float(hi), "youngs_modulus": float(ei)}
-            for g, hi, ei in zip(geo, h, e, strict=True)]
+             "wall_thickness": h, "youngs_modulus": e} for g, (h, e) in zip(geo, walls, strict=True)]
 
 
 def outlet_conditions(geo: list[dict[str, Any]], k3_cgs: float, pvc: float, q_mean: float,
                       mbp: float) -> tuple[dict[str, dict[str, Any]], float]:
     """RCR outlets calibrated to the mean aortic root pressure ``mbp`` [Pa] at inflow
-    ``q_mean``: R1 = Z, R2 = s x the bed's resistance share, C (see :func:`windkessels`; PWDB
-    scales Z + share, which can make R2 < 0 at small s). Returns (node -> condition, s)."""
-    wk = windkessels(geo, k3_cgs, pvc)
-    s = calibrate_scale(geo, k3_cgs, {k: v["z"] for k, v in wk.items()},
-                        {k: v["r_bed"] for k, v in wk.items()}, q_mean, mbp)
+    ``q_mean``, by the core: per terminal segment R1 = Z = rho c(r_out) / (pi r_out^2), R2 = s
+    x the bed's resistance over the segment's outlet-area share, C = pvc x the bed's
+    compliance x that share, s such that the steady (= cycle-mean) root pressure of the
+    network is ``mbp`` (PWDB scales Z + share, which can make R2 < 0 at small s). Returns
+    (node -> condition, s)."""
+    inlet = int(INLET_NODE[1:])
+    rows, s = _core.pwdb_outlets(_rows(geo), _beds(), k3_cgs, pvc, inlet, q_mean, mbp)
     out = {}
-    for seg, w in sorted(wk.items()):
+    for seg, z, r2, c in rows:
         out[node(geo[seg - 1]["outlet"])] = {
-            "type": "rcr", "proximal_resistance": w["z"], "capacitance": w["capacitance"],
-            "distal_resistance": s * w["r_bed"], "pressure": P_OUT}
+            "type": "rcr", "proximal_resistance": z, "capacitance": c,
+            "distal_resistance": r2, "pressure": P_OUT}
     return out, s

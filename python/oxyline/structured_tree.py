@@ -19,7 +19,6 @@ expanded native model (for the canonical description and for editing).
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Callable, Mapping
 from typing import Any, Literal
 
@@ -163,7 +162,7 @@ def build_with_trees(data: dict[str, Any], build_native: Callable[..., Any],
     rest, trees = _split(data)
     # checked and grown first (their errors before the other elements'), moved in on assembly
     grown = _core.StructuredTrees(trees, factor(units, "length"), factor(units, "modulus"),
-                                  memory_limit)
+                                  memory_limit, len(data.get("vessels") or []))
     # each terminal condition converted once (any outlet condition), copied per leaf
     terminals = []
     for node, bc, _ in trees:
@@ -215,48 +214,6 @@ def replace_windkessels(data: Mapping[str, Any], min_radius: float = 1.0e-4,
     return out
 
 
-def _compartment(data: Mapping[str, Any], vessel: Mapping[str, Any]
-                 ) -> tuple[set[str], set[str], float, float]:
-    """The lumped terminal compartment that starts with ``vessel`` (every vessel downstream of
-    it): its vessel names, its end nodes, its steady resistance to its pressure outlets and
-    their pressure. Dead ends held at zero flow (wall branches) carry no steady flow."""
-    name = str(vessel["name"])
-    bcs = data["boundary_conditions"]
-    leaving: dict[str, list[Mapping[str, Any]]] = {}
-    for v in data["vessels"]:
-        leaving.setdefault(v["from"], []).append(v)
-    names: set[str] = set()
-    nodes: set[str] = set()
-    pressures: set[float] = set()
-
-    def below(v: Mapping[str, Any]) -> float:  # steady resistance from v's inlet (inf: none)
-        lumped = v.get("lumped")
-        if not isinstance(lumped, Mapping) or v["name"] in names:
-            raise _err(name, f"terminal compartment vessel '{v['name']}' is not a lumped "
-                             f"element of a tree")
-        names.add(str(v["name"]))
-        end = v["to"]
-        nodes.add(str(end))
-        bc = bcs.get(end)
-        if isinstance(bc, Mapping) and bc.get("type") == "flow" and bc.get("value") == 0.0:
-            return math.inf
-        if isinstance(bc, Mapping) and bc.get("type") == "pressure":
-            pressures.add(float(bc.get("value", 0.0)))
-            rest = 0.0
-        elif bc is None and end in leaving:
-            g = sum(1.0 / below(w) for w in leaving[end])
-            rest = math.inf if g == 0.0 else 1.0 / g
-        else:
-            raise _err(name, f"terminal compartment node '{end}' has condition {bc!r} "
-                             f"(only pressure outlets and zero-flow dead ends are replaced)")
-        return float(lumped.get("resistance", 0.0)) + rest
-
-    total = below(vessel)
-    if len(pressures) != 1 or not math.isfinite(total):
-        raise _err(name, f"terminal compartment has outlet pressures {sorted(pressures)}")
-    return names, nodes, total, pressures.pop()
-
-
 def replace_terminal_vessels(data: Mapping[str, Any], root_radii: Mapping[str, float],
                              min_radius: float = 1.0e-4, tree_fraction: float = 0.9,
                              **tree: Any) -> dict[str, Any]:
@@ -267,35 +224,31 @@ def replace_terminal_vessels(data: Mapping[str, Any], root_radii: Mapping[str, f
     name and nodes, with radius ``root_radii[name]`` (m) and length ``length_ratio`` times
     it (Olufsen's root vessel); below its end node the tree follows the rule of
     :func:`replace_windkessels` for the resistance the root vessel leaves. ``tree``
-    overrides the other structured-tree parameters."""
+    overrides the other structured-tree parameters. The compartment's steady resistance and
+    the root vessel are the core's (``model/structured_tree/terminal.rs``)."""
     mu = float((data.get("blood") or {}).get("viscosity", 3.5e-3))
-    lrr = float(tree.get("length_ratio", 50.0))
     vessels = {str(v["name"]): v for v in data["vessels"]}
     out = dict(data)
     bcs = dict(out["boundary_conditions"])
     drop: set[str] = set()
     roots: dict[str, dict[str, Any]] = {}
     for name, r0 in root_radii.items():
-        if name not in vessels:
-            raise _err(name, "no such terminal vessel")
-        names, nodes, total, pressure = _compartment(data, vessels[name])
-        drop |= names
+        names, nodes, total, pressure = _core.terminal_compartment(
+            name, list(data["vessels"]), dict(data["boundary_conditions"]))
+        drop.update(names)
         for node in nodes:
             bcs.pop(node, None)
-        if not (isinstance(r0, (int, float)) and 0 < r0 < math.inf):
-            raise _err(name, f"'root radius' must be in (0, inf), got {r0!r}")
-        e, h = _core.structured_tree_wall(name, tree.get("stiffness"), float(r0))
+        length, e, h, segments, r_root = _core.structured_tree_root(
+            name, r0, float(tree.get("length_ratio", 50.0)), tree.get("stiffness"),
+            tree.get("max_length"), mu)
         node = str(vessels[name]["to"])
-        root = {"name": name, "from": vessels[name]["from"], "to": node,
-                "length": lrr * r0, "radius": r0, "wall_thickness": h, "youngs_modulus": e,
+        root = {"name": name, "from": vessels[name]["from"], "to": node, "length": length,
+                "radius": r0, "wall_thickness": h, "youngs_modulus": e,
                 "description": f"structured-tree root vessel replacing the terminal "
                                f"compartment (steady resistance {total:.6e} Pa s/m^3)"}
-        if "segments" in tree:  # the tree vessels' segmentation (see _grow)
-            root["segments"] = tree["segments"]
-        elif "max_length" in tree:
-            root["segments"] = max(1, math.ceil(lrr * r0 / float(tree["max_length"]) - 1e-9))
+        if "segments" in tree or segments is not None:  # the tree vessels' segmentation
+            root["segments"] = tree.get("segments", segments)
         roots[name] = root
-        r_root = _core.poiseuille_resistance(lrr * r0, r0, r0, mu)
         bcs[node] = _tree_condition(node, r0, total - r_root, mu, min_radius, tree_fraction,
                                     pressure, tree)
     out["vessels"] = [roots.get(v["name"], v) for v in data["vessels"]
@@ -306,10 +259,10 @@ def replace_terminal_vessels(data: Mapping[str, Any], root_radii: Mapping[str, f
 
 def murray_root_radii(data: Mapping[str, Any], steady: Mapping[str, Any],
                       terminals: list[str]) -> dict[str, float]:
-    """Root radius of each terminal vessel by Murray's law (flow ∝ r³) from its share of the
-    steady flow of the one vessel with a radius that ends where it starts (its parent):
-    r0 = r_parent · (Q_terminal / Q_parent)^(1/3). ``steady`` is a steady state
-    (``Network.steady_state()``: ``vessels`` and ``flow_in``)."""
+    """Root radius of each terminal vessel by Murray's law (the core's ``murray_radius``)
+    from its share of the steady flow of the one vessel with a radius that ends where it
+    starts (its parent). ``steady`` is a steady state (``Network.steady_state()``:
+    ``vessels`` and ``flow_in``)."""
     flow = dict(zip(steady["vessels"], steady["flow_in"]))
     vessels = {str(v["name"]): v for v in data["vessels"]}
     out: dict[str, float] = {}
@@ -320,8 +273,7 @@ def murray_root_radii(data: Mapping[str, Any], steady: Mapping[str, Any],
         if len(parents) != 1:
             raise _err(name, f"{len(parents)} vessels with a radius end at '{start}' (need one)")
         parent = parents[0]
-        share = flow[name] / flow[parent["name"]]
-        if not 0.0 < share <= 1.0:
-            raise _err(name, f"steady flow share {share:g} of parent '{parent['name']}'")
-        out[name] = float(parent.get("radius_out", parent.get("radius"))) * share ** (1.0 / 3.0)
+        out[name] = _core.murray_radius(name, str(parent["name"]),
+                                        float(parent.get("radius_out", parent.get("radius"))),
+                                        float(flow[name]), float(flow[parent["name"]]))
     return out

@@ -8,6 +8,7 @@ use oxyline_core::output::{
 };
 use pyo3::prelude::*;
 
+mod arterial_laws;
 mod calibrate;
 mod checkpoint;
 mod closed_loop;
@@ -79,6 +80,11 @@ fn model_bytes(segments: usize, elements: usize, cells: f64, species: usize) -> 
 #[pymodule]
 mod _core {
     #[pymodule_export]
+    use super::arterial_laws::{
+        murray_radius, pwdb_cf_pwv, pwdb_eh_over_r, pwdb_fit_k3, pwdb_outlets,
+        pwdb_wall_properties, pwdb_wave_speed, structured_tree_root, terminal_compartment,
+    };
+    #[pymodule_export]
     use super::calibrate::tangent_sensitivities;
     #[pymodule_export]
     use super::closed_loop::closed_loop_o2;
@@ -121,6 +127,15 @@ mod _core {
             super::SPECIES_SEGMENT_VARIABLES.to_vec(),
         )?;
         m.add("BALANCE_VARIABLES", super::BALANCE_VARIABLES.to_vec())?;
+        // PWDB's constants (`oxyline_core::model::pwdb`): the front end names no value itself
+        {
+            use oxyline_core::model::pwdb;
+            m.add("PWDB_MMHG", pwdb::MMHG)?;
+            m.add("PWDB_DENSITY", pwdb::DENSITY)?;
+            m.add("PWDB_VISCOSITY", pwdb::VISCOSITY)?;
+            m.add("PWDB_OUTFLOW_PRESSURE", pwdb::OUTFLOW_PRESSURE)?;
+            m.add("PWDB_POISSON_RATIO", pwdb::POISSON_RATIO)?;
+        }
         // the model schema's key sets (`oxyline_core::model::native`)
         {
             use oxyline_core::model::native::{self as schema, boundary, vessel};

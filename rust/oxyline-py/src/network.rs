@@ -26,12 +26,18 @@ fn assemble(
     mut spec: oxyline_core::NetworkSpec,
     outlets: Vec<(String, oxyline_core::model::BoundarySpec)>,
 ) -> Result<Built, Error> {
+    use std::collections::btree_map::Entry;
     for (node, bc) in outlets {
-        if spec.boundary_conditions.insert(node.clone(), bc).is_some() {
-            return Err(Error::model(
-                format!("boundary condition '{node}'"),
-                "given twice",
-            ));
+        match spec.boundary_conditions.entry(node) {
+            Entry::Occupied(e) => {
+                return Err(Error::model(
+                    format!("boundary condition '{}'", e.key()),
+                    "given twice",
+                ));
+            }
+            Entry::Vacant(e) => {
+                e.insert(bc);
+            }
         }
     }
     let m = oxyline_core::ensemble::Member::build(&spec)?;

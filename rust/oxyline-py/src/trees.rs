@@ -43,7 +43,7 @@ fn number(node: &str, key: &str, x: &Bound<'_, PyAny>) -> PyResult<f64> {
     }
 }
 
-fn stiffness(node: &str, s: &Bound<'_, PyAny>) -> PyResult<Option<Stiffness>> {
+pub(crate) fn stiffness(node: &str, s: &Bound<'_, PyAny>) -> PyResult<Option<Stiffness>> {
     if s.is_none() {
         return Ok(None);
     }
@@ -252,7 +252,11 @@ pub fn grow_structured_tree<'py>(
 /// into the parts the core assembles.
 #[pyclass(module = "oxyline._core")]
 pub struct StructuredTrees {
-    trees: Vec<(String, Grown)>,
+    /// Every tree's vessels, in tree order, grown straight into the element type of the
+    /// parts (one allocation, nothing copied per vessel when they are moved in).
+    vessels: Vec<Option<VesselSpec>>,
+    /// Each tree's node and leaves.
+    leaves: Vec<(String, Vec<String>)>,
 }
 
 #[oxyline_py_guard::guard]
@@ -260,39 +264,60 @@ pub struct StructuredTrees {
 impl StructuredTrees {
     /// `trees`: (node, condition dict, root radius in model units) per tree; `length`,
     /// `modulus`: the model's unit factors; `memory_limit`: bytes all trees may take (None:
-    /// no limit), each tree estimated against what the ones before it left.
+    /// no limit), each tree estimated against what the ones before it left; `own_vessels`:
+    /// the model's own vessel count (room is kept for them).
     #[new]
-    #[pyo3(signature = (trees, length, modulus, memory_limit = None))]
+    #[pyo3(signature = (trees, length, modulus, memory_limit = None, own_vessels = 0))]
     fn new(
         py: Python<'_>,
         trees: Vec<(String, Bound<'_, PyDict>, Bound<'_, PyAny>)>,
         length: f64,
         modulus: f64,
         memory_limit: Option<f64>,
+        own_vessels: usize,
     ) -> PyResult<Self> {
         let u = Units { length, modulus };
-        let mut out = Vec::with_capacity(trees.len());
+        // every tree checked (counted, its memory estimated) before any is grown
+        let mut checked = Vec::with_capacity(trees.len());
+        let mut total = 0usize;
         for (node, bc, root) in &trees {
             let input = tree_input(node, bc)?;
             let root = Root::Given(number(node, "root_radius", root)?);
-            let left = memory_limit.map(|m| {
-                let n: usize = out
-                    .iter()
-                    .map(|(_, g): &(String, Grown)| g.vessels.len())
-                    .sum();
-                m - oxyline_core::run::memory::model_bytes(n, n, 0.0, 0)
-            });
-            let g = py
-                .detach(|| checked_growth(node, &input, root, u, left))
+            let left = memory_limit
+                .map(|m| m - oxyline_core::run::memory::model_bytes(total, total, 0.0, 0));
+            let tree = py
+                .detach(|| -> Result<Tree, Error> {
+                    let tree = Tree::new(node, &input, root, u)?;
+                    tree.check_memory(left)?;
+                    Ok(tree)
+                })
                 .map_err(crate::to_py)?;
-            out.push((node.clone(), g));
+            total = total.saturating_add(usize::try_from(tree.count).unwrap_or(usize::MAX));
+            checked.push((node.clone(), tree));
         }
-        Ok(StructuredTrees { trees: out })
+        py.detach(|| -> Result<Self, Error> {
+            let mut out = StructuredTrees {
+                vessels: Vec::with_capacity(total.saturating_add(own_vessels)),
+                leaves: Vec::with_capacity(checked.len()),
+            };
+            for (node, tree) in checked {
+                let mut leaves = Vec::new();
+                tree.grow_into(|v, leaf| {
+                    if leaf {
+                        leaves.push(v.name.clone());
+                    }
+                    out.vessels.push(Some(v));
+                })?;
+                out.leaves.push((node, leaves));
+            }
+            Ok(out)
+        })
+        .map_err(crate::to_py)
     }
 
     /// The number of tree vessels.
     fn vessel_count(&self) -> usize {
-        self.trees.iter().map(|(_, g)| g.vessels.len()).sum()
+        self.vessels.len()
     }
 
     /// Move the trees into `parts`: the vessels after the model's own, each leaf with its copy
@@ -303,14 +328,20 @@ impl StructuredTrees {
         terminals: Vec<String>,
     ) -> PyResult<()> {
         let mut parts = parts.borrow_mut();
-        parts.vessels.reserve(self.vessel_count()?);
-        for ((node, g), terminal) in std::mem::take(&mut self.trees).into_iter().zip(terminals) {
+        let leaves: usize = self.leaves.iter().map(|(_, l)| l.len()).sum();
+        parts.outlets.reserve(leaves);
+        for ((node, leaves), terminal) in std::mem::take(&mut self.leaves).into_iter().zip(terminals)
+        {
             let terminal: BoundarySpec =
                 from_json(&terminal).map_err(|e| model_error(&node, format!("'terminal': {e}")))?;
-            parts.vessels.extend(g.vessels.into_iter().map(Some));
-            let outlets = g.leaves.into_iter().map(|leaf| (leaf, terminal.clone()));
+            let outlets = leaves.into_iter().map(|leaf| (leaf, terminal.clone()));
             parts.outlets.extend(outlets);
         }
+        // the model's own vessels go in front of the trees' (their storage is the larger)
+        let mut all = std::mem::take(&mut self.vessels);
+        let own = std::mem::take(&mut parts.vessels);
+        all.splice(0..0, own);
+        parts.vessels = all;
         Ok(())
     }
 }

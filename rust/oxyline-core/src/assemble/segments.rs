@@ -121,25 +121,41 @@ pub(crate) fn discretise(
     arrangement: Arrangement,
     auto: Option<&AutoRule>,
 ) -> Result<Vec<SegmentRow>> {
+    // the element's name is written only when a check fails (a structured tree has up to
+    // millions of vessels): the checks are run again with it
+    discretise_as(spec, vi, blood, arrangement, auto, "").or_else(|_| {
+        let el = format!("vessel '{}'", spec.vessels[vi].name);
+        discretise_as(spec, vi, blood, arrangement, auto, &el)
+    })
+}
+
+/// [`discretise`], its errors naming the element `el`.
+fn discretise_as(
+    spec: &NetworkSpec,
+    vi: usize,
+    blood: Blood,
+    arrangement: Arrangement,
+    auto: Option<&AutoRule>,
+    el: &str,
+) -> Result<Vec<SegmentRow>> {
     let v = &spec.vessels[vi];
-    let el = format!("vessel '{}'", v.name);
     match (&v.geometry, &v.lumped) {
         (Some(_), Some(_)) => Err(Error::model(
-            &el,
+            el,
             "give either geometry or lumped values, not both",
         )),
-        (None, None) => Err(Error::model(&el, "needs geometry or lumped values")),
+        (None, None) => Err(Error::model(el, "needs geometry or lumped values")),
         (None, Some(l)) => {
             let n = auto
                 .filter(|_| is_auto(spec, v))
                 .map(|_| count(spec, v, auto));
-            lumped(v, vi, l, arrangement, &el, n)
+            lumped(v, vi, l, arrangement, el, n)
         }
         (Some(g), None) => {
             let n = auto
                 .filter(|_| is_auto(spec, v))
                 .map(|_| count(spec, v, auto));
-            geometric(spec, v, vi, g, blood, arrangement, &el, n)
+            geometric(spec, v, vi, g, blood, arrangement, el, n)
         }
     }
 }

@@ -17,6 +17,7 @@ pub mod facilitation;
 pub mod native;
 pub mod node;
 pub mod plausibility;
+pub mod pwdb;
 pub mod settings;
 pub mod species;
 pub mod structured_tree;

@@ -628,31 +628,50 @@ impl Tree {
 
     /// The tree's vessels, depth first (SI; the wall law may still refuse a radius).
     pub fn grow(&self) -> Result<Grown> {
-        let prefix = format!("{}/st/", self.node);
         let cap = usize::try_from(self.count).unwrap_or(0);
         let mut out = Grown {
             vessels: Vec::with_capacity(cap),
             leaves: Vec::new(),
         };
+        self.grow_into(|v, leaf| {
+            if leaf {
+                out.leaves.push(v.name.clone());
+            }
+            out.vessels.push(v);
+        })?;
+        Ok(out)
+    }
+
+    /// Hand each tree vessel, depth first, to `sink` with whether it is a leaf. Names are
+    /// built by appending one path letter to the parent's name (no formatting per vessel: a
+    /// tree has up to millions of them).
+    pub fn grow_into(&self, mut sink: impl FnMut(VesselSpec, bool)) -> Result<()> {
+        let prefix = format!("{}/st/", self.node);
+        let daughter = |parent: &str, letter: char| {
+            let mut name = String::with_capacity(parent.len() + 1);
+            name.push_str(parent);
+            name.push(letter);
+            name
+        };
         // popped a first: the a-subtree before the b-subtree
         let mut stack = vec![
-            (String::from("b"), self.beta * self.root_radius),
-            (String::from("a"), self.alpha * self.root_radius),
+            (daughter(&prefix, 'b'), self.beta * self.root_radius),
+            (daughter(&prefix, 'a'), self.alpha * self.root_radius),
         ];
         let olufsen = self.stopping == Stopping::Olufsen;
         if olufsen && self.root_radius <= self.min_radius {
             stack.clear();
         }
-        while let Some((path, r)) = stack.pop() {
+        while let Some((name, r)) = stack.pop() {
             // Olufsen's daughters all exist (their parent is above min_radius)
             if !olufsen && r < self.min_radius {
                 continue;
             }
-            let name = format!("{prefix}{path}");
-            let from = if path.len() == 1 {
+            // the parent's name is this one without its last path letter
+            let from = if name.len() == prefix.len() + 1 {
                 self.node.clone()
             } else {
-                format!("{prefix}{}", &path[..path.len() - 1])
+                name[..name.len() - 1].to_string()
             };
             let (a, b) = (self.alpha * r, self.beta * r);
             let leaf = if olufsen {
@@ -660,19 +679,13 @@ impl Tree {
             } else {
                 a < self.min_radius && b < self.min_radius
             };
-            if leaf {
-                out.leaves.push(name.clone());
+            if !(olufsen && leaf) {
+                stack.push((daughter(&name, 'b'), b));
+                stack.push((daughter(&name, 'a'), a));
             }
-            out.vessels.push(self.vessel(name, from, r)?);
-            if olufsen && leaf {
-                continue;
-            }
-            stack.push((format!("{path}b"), b));
-            stack.push((path, a));
-            let last = stack.len() - 1;
-            stack[last].0.push('a');
+            sink(self.vessel(name, from, r)?, leaf);
         }
-        Ok(out)
+        Ok(())
     }
 
     /// The tree vessel `name` of radius `r` from node `from`.
@@ -881,6 +894,8 @@ impl Classes {
         below[0]
     }
 }
+
+pub mod terminal;
 
 #[cfg(test)]
 mod tests;

@@ -496,3 +496,86 @@ fn olufsen_stopping_counts_grows_and_ends_at_the_first_vessel_at_or_below_min_ra
         assert!(tree.count > today.count);
     }
 }
+
+mod terminal_compartments {
+    use super::super::terminal::{self, End, Link};
+
+    fn link(name: &str, from: &str, to: &str, r: Option<f64>) -> Link {
+        Link {
+            name: name.into(),
+            from: from.into(),
+            to: to.into(),
+            lumped_resistance: r,
+        }
+    }
+
+    #[test]
+    fn two_level_walk_is_series_then_parallel_by_hand() {
+        // t (R 1) → j; j feeds a (R 2) → o1 and b (R 6) → k; k feeds c (R 3) → o2 and a
+        // wall branch w (R 5) → dead end: R = 1 + 1/(1/2 + 1/(6 + 3)) = 1 + 18/11
+        let links = vec![
+            link("p", "in", "s", None),
+            link("t", "s", "j", Some(1.0)),
+            link("a", "j", "o1", Some(2.0)),
+            link("b", "j", "k", Some(6.0)),
+            link("c", "k", "o2", Some(3.0)),
+            link("w", "k", "dead", Some(5.0)),
+        ];
+        let ends = |n: &str| match n {
+            "o1" | "o2" => End::Pressure(100.0),
+            "dead" => End::ZeroFlow,
+            _ => End::Open,
+        };
+        let c = terminal::compartment("t", &links, &ends).unwrap();
+        assert!((c.resistance - (1.0 + 18.0 / 11.0)).abs() < 1e-15);
+        assert_eq!(c.pressure, 100.0);
+        assert_eq!(c.vessels.len(), 5);
+        assert!(c.nodes.contains("dead") && !c.nodes.contains("s"));
+        // a geometric vessel inside, two outlet pressures, an unknown condition: refused
+        let mut bad = links.clone();
+        bad[4].lumped_resistance = None;
+        let e = terminal::compartment("t", &bad, &ends).unwrap_err();
+        assert!(e.to_string().contains("'c' is not a lumped element"), "{e}");
+        let two = |n: &str| match n {
+            "o1" => End::Pressure(0.0),
+            "o2" => End::Pressure(1.0),
+            "dead" => End::ZeroFlow,
+            _ => End::Open,
+        };
+        let e = terminal::compartment("t", &links, &two).unwrap_err();
+        assert!(e.to_string().contains("outlet pressures [0, 1]"), "{e}");
+        let other = |n: &str| match n {
+            "o1" => End::Other("{'type': 'rcr'}".into()),
+            _ => ends(n),
+        };
+        let e = terminal::compartment("t", &links, &other).unwrap_err();
+        assert!(e.to_string().contains("node 'o1' has condition {'type': 'rcr'}"), "{e}");
+        assert!(terminal::compartment("nope", &links, &ends).is_err());
+    }
+
+    #[test]
+    fn murray_radii_of_a_split_keep_the_parent_r_cubed() {
+        // flow ∝ r³: daughters carrying 30 % and 70 % have r1³ + r2³ = r_parent³
+        let rp = 2e-3;
+        let r1 = terminal::murray_radius("t1", "p", rp, 3e-6, 1e-5).unwrap();
+        let r2 = terminal::murray_radius("t2", "p", rp, 7e-6, 1e-5).unwrap();
+        assert!(((r1.powi(3) + r2.powi(3)) / rp.powi(3) - 1.0).abs() < 1e-14);
+        let e = terminal::murray_radius("t", "p", rp, -1e-7, 1e-6).unwrap_err();
+        assert!(e.to_string().contains("steady flow share -0.1 of parent 'p'"), "{e}");
+    }
+
+    #[test]
+    fn root_vessel_is_olufsens_with_poiseuilles_resistance() {
+        let r0 = 1e-3;
+        let v = terminal::root_vessel("t", r0, 50.0, None, Some(0.01), 3.5e-3).unwrap();
+        assert_eq!(v.length, 50.0 * r0);
+        assert_eq!(v.segments, Some(5));
+        let pi = std::f64::consts::PI;
+        // 8 μ l / (π r⁴)
+        assert!((v.resistance / (8.0 * 3.5e-3 * 0.05 / (pi * 1e-12)) - 1.0).abs() < 1e-14);
+        // Olufsen's E h / r = 2e6 e^(−2253 r) + 8.65e4 Pa
+        let ehr = 2.0e6 * (-2253.0f64 * r0).exp() + 8.65e4;
+        assert!((v.youngs_modulus * v.wall_thickness / r0 / ehr - 1.0).abs() < 1e-14);
+        assert!(terminal::root_vessel("t", 0.0, 50.0, None, None, 3.5e-3).is_err());
+    }
+}

@@ -1,0 +1,263 @@
+//! Binding of the core's arterial laws that the front end's model builders use: PWDB's wall
+//! law, wave speed and Windkessels with their steady calibration (`model::pwdb`), and the
+//! replacement of terminal elements by structured trees (`model::structured_tree::terminal`).
+//! A PWDB segment crosses as (inlet node, outlet node, length, inlet radius, outlet radius).
+
+use crate::to_py;
+use oxyline_core::model::pwdb::beds::{self, Bed};
+use oxyline_core::model::pwdb::wall::{self, SitePath};
+use oxyline_core::model::pwdb::{DENSITY, Segment};
+use oxyline_core::model::structured_tree::terminal::{self, End, Link};
+use oxyline_core::model::structured_tree::{self as st, Stiffness};
+use pyo3::prelude::*;
+use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyMapping};
+
+/// A segment as it crosses: (inlet, outlet, length, radius_in, radius_out).
+type SegmentRow = (usize, usize, f64, f64, f64);
+/// A measurement path: (segments from the aortic root, site segment).
+type PathRow = (Vec<usize>, usize);
+
+fn segments(rows: Vec<SegmentRow>) -> Vec<Segment> {
+    rows.into_iter()
+        .map(|(inlet, outlet, length, radius_in, radius_out)| Segment {
+            inlet,
+            outlet,
+            length,
+            radius_in,
+            radius_out,
+        })
+        .collect()
+}
+
+fn path(p: &PathRow) -> SitePath<'_> {
+    SitePath {
+        segments: &p.0,
+        site: p.1,
+    }
+}
+
+/// E h/r₀ [Pa] of PWDB's wall law at each radius [m] (k3 in g s⁻² cm⁻¹).
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn pwdb_eh_over_r(radii: Vec<f64>, k3_cgs: f64) -> Vec<f64> {
+    radii.iter().map(|&r| wall::eh_over_r(r, k3_cgs)).collect()
+}
+
+/// Moens–Korteweg wave speed [m/s] of PWDB's wall law at each radius [m].
+#[oxyline_py_guard::guard]
+#[pyfunction]
+#[pyo3(signature = (radii, k3_cgs, density = DENSITY))]
+pub fn pwdb_wave_speed(radii: Vec<f64>, k3_cgs: f64, density: f64) -> Vec<f64> {
+    radii
+        .iter()
+        .map(|&r| wall::wave_speed(r, k3_cgs, density))
+        .collect()
+}
+
+/// (wall thickness, Young's modulus) [m, Pa] of each segment of `subject`: h at the `base`
+/// segment's mean radius, E from the wall law at the subject's.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn pwdb_wall_properties(
+    base: Vec<SegmentRow>,
+    subject: Vec<SegmentRow>,
+    k3_cgs: f64,
+) -> Vec<(f64, f64)> {
+    wall::wall_properties(&segments(base), &segments(subject), k3_cgs)
+}
+
+/// Theoretical carotid-femoral PWV [m/s] of the wall law along the two paths.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+#[pyo3(signature = (geometry, femoral, carotid, k3_cgs, density = DENSITY))]
+pub fn pwdb_cf_pwv(
+    geometry: Vec<SegmentRow>,
+    femoral: PathRow,
+    carotid: PathRow,
+    k3_cgs: f64,
+    density: f64,
+) -> PyResult<f64> {
+    wall::cf_pwv(
+        &segments(geometry),
+        path(&femoral),
+        path(&carotid),
+        k3_cgs,
+        density,
+    )
+    .map_err(to_py)
+}
+
+/// The wall-law k3 [g s⁻² cm⁻¹] whose cf-PWV along the two paths is `target` [m/s].
+#[oxyline_py_guard::guard]
+#[pyfunction]
+#[pyo3(signature = (geometry, femoral, carotid, target, density = DENSITY))]
+pub fn pwdb_fit_k3(
+    geometry: Vec<SegmentRow>,
+    femoral: PathRow,
+    carotid: PathRow,
+    target: f64,
+    density: f64,
+) -> PyResult<f64> {
+    wall::fit_k3(
+        &segments(geometry),
+        path(&femoral),
+        path(&carotid),
+        target,
+        density,
+    )
+    .map_err(to_py)
+}
+
+/// The calibrated terminal Windkessels: `beds` as (terminal segments, R [Pa s/m³], C [m³/Pa]);
+/// returns ([(segment, R1, R2, C)] by segment, the calibration factor s) such that the steady
+/// pressure at node `n<inlet>` is `target` [Pa] at inflow `inflow` [m³/s].
+#[oxyline_py_guard::guard]
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+pub fn pwdb_outlets(
+    py: Python<'_>,
+    geometry: Vec<SegmentRow>,
+    beds: Vec<(Vec<usize>, f64, f64)>,
+    k3_cgs: f64,
+    pvc: f64,
+    inlet: usize,
+    inflow: f64,
+    target: f64,
+) -> PyResult<(Vec<(usize, f64, f64, f64)>, f64)> {
+    let geo = segments(geometry);
+    let beds: Vec<Bed> = beds
+        .into_iter()
+        .map(|(segments, resistance, compliance)| Bed {
+            segments,
+            resistance,
+            compliance,
+        })
+        .collect();
+    py.detach(|| {
+        let wks = beds::windkessels(&geo, &beds, k3_cgs, pvc)?;
+        let walls = wall::wall_properties(&geo, &geo, k3_cgs);
+        let s = beds::calibrate_scale(&geo, &walls, inlet, &wks, inflow, target)?;
+        let mut out: Vec<(usize, f64, f64, f64)> = wks
+            .iter()
+            .map(|w| (w.segment, w.impedance, s * w.bed_resistance, w.capacitance))
+            .collect();
+        out.sort_by_key(|w| w.0);
+        Ok((out, s))
+    })
+    .map_err(to_py)
+}
+
+/// The condition at a node of a terminal compartment (None: no condition).
+fn end(bc: Option<Bound<'_, PyAny>>) -> End {
+    let Some(bc) = bc else {
+        return End::Open;
+    };
+    let text = || End::Other(bc.repr().map_or_else(|_| "?".into(), |r| r.to_string()));
+    let Ok(map) = bc.cast::<PyMapping>() else {
+        return text();
+    };
+    let get = |k: &str| map.get_item(k).ok();
+    let kind = get("type").and_then(|t| t.extract::<String>().ok());
+    let value = get("value");
+    match kind.as_deref() {
+        Some("flow") if value.as_ref().and_then(|v| v.extract::<f64>().ok()) == Some(0.0) => {
+            End::ZeroFlow
+        }
+        Some("pressure") => match value {
+            None => End::Pressure(0.0),
+            Some(v) => v.extract::<f64>().map_or_else(|_| text(), End::Pressure),
+        },
+        _ => text(),
+    }
+}
+
+/// The lumped terminal compartment that starts with vessel `first` of the native `vessels`
+/// list, under the native `conditions`: (its vessels, its nodes, steady resistance [Pa s/m³],
+/// outlet pressure [Pa]).
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn terminal_compartment(
+    first: &str,
+    vessels: &Bound<'_, PyList>,
+    conditions: &Bound<'_, PyDict>,
+) -> PyResult<(Vec<String>, Vec<String>, f64, f64)> {
+    let text = |d: &Bound<'_, PyAny>, k: &str| -> PyResult<String> {
+        Ok(d.get_item(k)?.str()?.to_string())
+    };
+    let mut links = Vec::with_capacity(vessels.len());
+    for v in vessels.iter() {
+        let lumped = v.get_item("lumped").ok().filter(|l| l.cast::<PyMapping>().is_ok());
+        let lumped_resistance = match lumped {
+            None => None,
+            Some(l) => Some(match l.get_item("resistance") {
+                Ok(r) => r.extract::<f64>()?,
+                Err(_) => 0.0,
+            }),
+        };
+        links.push(Link {
+            name: text(&v, "name")?,
+            from: text(&v, "from")?,
+            to: text(&v, "to")?,
+            lumped_resistance,
+        });
+    }
+    let ends = |node: &str| end(conditions.get_item(node).ok().flatten());
+    let c = terminal::compartment(first, &links, &ends).map_err(to_py)?;
+    Ok((
+        c.vessels.into_iter().collect(),
+        c.nodes.into_iter().collect(),
+        c.resistance,
+        c.pressure,
+    ))
+}
+
+/// Murray's law: the root radius [m] of terminal `name` from its share of its parent's
+/// steady flow.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn murray_radius(
+    name: &str,
+    parent: &str,
+    parent_radius: f64,
+    flow: f64,
+    parent_flow: f64,
+) -> PyResult<f64> {
+    terminal::murray_radius(name, parent, parent_radius, flow, parent_flow).map_err(to_py)
+}
+
+/// The structured-tree root vessel of radius `root_radius` [m] replacing terminal `name`:
+/// (length, Young's modulus, wall thickness, segments or None, steady resistance), SI.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+#[pyo3(signature = (name, root_radius, length_ratio, stiffness, max_length, viscosity))]
+pub fn structured_tree_root(
+    name: &str,
+    root_radius: &Bound<'_, PyAny>,
+    length_ratio: f64,
+    stiffness: &Bound<'_, PyAny>,
+    max_length: Option<f64>,
+    viscosity: f64,
+) -> PyResult<(f64, f64, f64, Option<usize>, f64)> {
+    let number = (root_radius.is_instance_of::<PyFloat>()
+        || root_radius.is_instance_of::<PyInt>())
+        && !root_radius.is_instance_of::<PyBool>();
+    let r0 = if number {
+        root_radius.extract::<f64>()?
+    } else {
+        let shown = root_radius.repr().map_or_else(|_| "?".into(), |r| r.to_string());
+        return Err(to_py(oxyline_core::Error::model(
+            st::element(name),
+            format!("'root radius' must be in (0, inf), got {shown}"),
+        )));
+    };
+    let law: Option<Stiffness> = crate::trees::stiffness(name, stiffness)?;
+    let r = terminal::root_vessel(name, r0, length_ratio, law, max_length, viscosity)
+        .map_err(to_py)?;
+    Ok((
+        r.length,
+        r.youngs_modulus,
+        r.wall_thickness,
+        r.segments,
+        r.resistance,
+    ))
+}
