@@ -186,7 +186,10 @@ pub fn terminal_compartment(
     };
     let mut links = Vec::with_capacity(vessels.len());
     for v in vessels.iter() {
-        let lumped = v.get_item("lumped").ok().filter(|l| l.cast::<PyMapping>().is_ok());
+        let lumped = v
+            .get_item("lumped")
+            .ok()
+            .filter(|l| l.cast::<PyMapping>().is_ok());
         let lumped_resistance = match lumped {
             None => None,
             Some(l) => Some(match l.get_item("resistance") {
@@ -238,21 +241,22 @@ pub fn structured_tree_root(
     max_length: Option<f64>,
     viscosity: f64,
 ) -> PyResult<(f64, f64, f64, Option<usize>, f64)> {
-    let number = (root_radius.is_instance_of::<PyFloat>()
-        || root_radius.is_instance_of::<PyInt>())
+    let number = (root_radius.is_instance_of::<PyFloat>() || root_radius.is_instance_of::<PyInt>())
         && !root_radius.is_instance_of::<PyBool>();
     let r0 = if number {
         root_radius.extract::<f64>()?
     } else {
-        let shown = root_radius.repr().map_or_else(|_| "?".into(), |r| r.to_string());
+        let shown = root_radius
+            .repr()
+            .map_or_else(|_| "?".into(), |r| r.to_string());
         return Err(to_py(oxyline_core::Error::model(
             st::element(name),
             format!("'root radius' must be in (0, inf), got {shown}"),
         )));
     };
     let law: Option<Stiffness> = crate::trees::stiffness(name, stiffness)?;
-    let r = terminal::root_vessel(name, r0, length_ratio, law, max_length, viscosity)
-        .map_err(to_py)?;
+    let r =
+        terminal::root_vessel(name, r0, length_ratio, law, max_length, viscosity).map_err(to_py)?;
     Ok((
         r.length,
         r.youngs_modulus,

@@ -330,7 +330,8 @@ impl StructuredTrees {
         let mut parts = parts.borrow_mut();
         let leaves: usize = self.leaves.iter().map(|(_, l)| l.len()).sum();
         parts.outlets.reserve(leaves);
-        for ((node, leaves), terminal) in std::mem::take(&mut self.leaves).into_iter().zip(terminals)
+        for ((node, leaves), terminal) in
+            std::mem::take(&mut self.leaves).into_iter().zip(terminals)
         {
             let terminal: BoundarySpec =
                 from_json(&terminal).map_err(|e| model_error(&node, format!("'terminal': {e}")))?;

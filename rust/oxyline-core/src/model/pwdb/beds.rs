@@ -46,7 +46,12 @@ fn segment(geo: &[Segment], s: usize) -> Result<&Segment> {
 /// The Windkessel of every terminal segment of `beds` (in the beds' order), with the wall law
 /// of `k3_cgs` and the peripheral compliance factor `pvc`: each bed shared by outlet area
 /// π r_out².
-pub fn windkessels(geo: &[Segment], beds: &[Bed], k3_cgs: f64, pvc: f64) -> Result<Vec<Windkessel>> {
+pub fn windkessels(
+    geo: &[Segment],
+    beds: &[Bed],
+    k3_cgs: f64,
+    pvc: f64,
+) -> Result<Vec<Windkessel>> {
     let pi = std::f64::consts::PI;
     let mut out = Vec::new();
     for bed in beds {

@@ -59,7 +59,10 @@ impl Walk<'_> {
     /// vessel's resistance in series with the parallel combination of what its end feeds.
     fn below(&mut self, v: &Link) -> Result<f64> {
         let first = self.first;
-        let Some(r) = v.lumped_resistance.filter(|_| !self.out.vessels.contains(&v.name)) else {
+        let Some(r) = v
+            .lumped_resistance
+            .filter(|_| !self.out.vessels.contains(&v.name))
+        else {
             return Err(err(
                 first,
                 format!(

@@ -549,7 +549,11 @@ mod terminal_compartments {
             _ => ends(n),
         };
         let e = terminal::compartment("t", &links, &other).unwrap_err();
-        assert!(e.to_string().contains("node 'o1' has condition {'type': 'rcr'}"), "{e}");
+        assert!(
+            e.to_string()
+                .contains("node 'o1' has condition {'type': 'rcr'}"),
+            "{e}"
+        );
         assert!(terminal::compartment("nope", &links, &ends).is_err());
     }
 
@@ -561,7 +565,11 @@ mod terminal_compartments {
         let r2 = terminal::murray_radius("t2", "p", rp, 7e-6, 1e-5).unwrap();
         assert!(((r1.powi(3) + r2.powi(3)) / rp.powi(3) - 1.0).abs() < 1e-14);
         let e = terminal::murray_radius("t", "p", rp, -1e-7, 1e-6).unwrap_err();
-        assert!(e.to_string().contains("steady flow share -0.1 of parent 'p'"), "{e}");
+        assert!(
+            e.to_string()
+                .contains("steady flow share -0.1 of parent 'p'"),
+            "{e}"
+        );
     }
 
     #[test]
