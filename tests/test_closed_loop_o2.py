@@ -314,3 +314,29 @@ def test_tree_input_errors_name_the_element() -> None:
         closed_loop.simulate_o2(p)
     with pytest.raises(oxyline.ModelError, match="flows='heart'"):
         closed_loop.simulate_o2(_tree_model(), flows=np.zeros((200, 11)))
+
+
+def test_heart_block_values_are_given_in_mmhg_ml_and_the_core_converts_them() -> None:
+    """The built-in's heart block is handed over in its published units (`units: mmHg-mL`);
+    the core's SI values are 1 mmHg = 133.322368 Pa and 1 mL = 1e-6 m³ applied per quantity.
+    A unit system the section does not know is a ModelError naming the element and value."""
+    p = closed_loop.load("closed-loop-o2")
+    native = closed_loop.heart_model(p)
+    given = next(v["heart_pulmonary"] for v in native["vessels"] if "heart_pulmonary" in v)
+    assert given["units"] == "mmHg-mL"
+    si = next(v["heart_pulmonary"] for v in oxyline.load_model(native).canonical["vessels"]
+              if "heart_pulmonary" in v)
+    mmhg, ml = 133.322368, 1e-6
+    expected = {"left_ventricle_elastance": mmhg / ml, "aortic_valve_resistance": mmhg / ml,
+                "mitral_inductance": mmhg / ml, "pulmonary_capacitance": ml / mmhg,
+                "left_atrium_passive_pressure": mmhg, "left_ventricle_rest_volume": ml,
+                "left_atrium_passive_volume_coefficient": 1 / ml,
+                "initial_pulmonary_pressure": mmhg, "atrial_systole_fraction": 1.0}
+    for key, factor in expected.items():
+        assert si[key] == pytest.approx(given[key] * factor, rel=1e-15), key
+    assert si["period"] == p["period"] and "units" not in si
+    given["units"] = "mmHg-L"
+    with pytest.raises(oxyline.ModelError,
+                       match=r"vessel 'heart_pulmonary'.*heart_pulmonary units must be .*"
+                             r"'mmHg-mL', got 'mmHg-L'"):
+        oxyline.load_model(native)

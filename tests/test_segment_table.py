@@ -180,6 +180,8 @@ def test_model_module_is_a_leaf_and_formats_are_sniffed_once() -> None:
     imported |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
     assert imported <= {"__future__", "copy", "functools", "json", "math", "collections.abc", "dataclasses",
                         "typing", "oxyline", "oxyline.errors", "oxyline.units",
+                        # the run options' output selection checks (a leaf: errors only)
+                        "oxyline.options",
                         # structured-tree growth: a model-to-model step that imports only
                         # errors and units itself (checked below), not an importer
                         "oxyline.structured_tree"}, imported
@@ -188,6 +190,9 @@ def test_model_module_is_a_leaf_and_formats_are_sniffed_once() -> None:
     assert {n.module for n in ast.walk(tree_module) if isinstance(n, ast.ImportFrom)} <= {
         "__future__", "math", "collections.abc", "typing", "oxyline", "oxyline.errors",
         "oxyline.units"}
+    options = ast.parse(Path(model.__file__).with_name("options.py").read_text())
+    assert {n.module for n in ast.walk(options) if isinstance(n, ast.ImportFrom)} <= {
+        "__future__", "collections.abc", "typing", "oxyline.errors"}
     cfg = _one_vessel(0.0)
     assert sniff_format(cfg) == "svzerod" and sniff_format(_lumped3()) == "native"
     assert sniff_format({"network": []}) == "openbf"

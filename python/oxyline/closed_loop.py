@@ -22,12 +22,15 @@ import copy
 import json
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from oxyline import _core
 from oxyline.errors import ModelError, core_errors
+
+if TYPE_CHECKING:
+    from oxyline.model import Model
 
 MMHG = 133.322368          # Pa per mmHg (docs/physics.md)
 ML_O2 = 1.0 / 22414.0      # mol per mL O2 (STPD; docs/physics.md: 1 mL = 1/22.414 mmol)
@@ -130,26 +133,6 @@ SVZEROD_HEART: dict[str, float] = {
     "initial_left_atrium_volume": 38.43, "initial_left_ventricle_volume": 96.07,
     "initial_pulmonary_pressure": 8.0,
 }
-
-# SI factor of every SVZEROD_HEART key by the quantity its name ends with
-_ML = 1e-6
-_SI_BY_SUFFIX = (("elastance", MMHG / _ML), ("rest_volume", _ML), ("_volume", _ML),
-                 ("inductance", MMHG / _ML), ("resistance", MMHG / _ML),
-                 ("capacitance", _ML / MMHG), ("passive_pressure", MMHG),
-                 ("volume_coefficient", 1.0 / _ML), ("pulmonary_pressure", MMHG),
-                 ("fraction", 1.0), ("divisor", 1.0))
-
-
-def heart_block_si(values: dict[str, float], period: float) -> dict[str, float]:
-    """The native ``heart_pulmonary`` keys in SI from values in mmHg, mL and s."""
-    out: dict[str, float] = {"period": period}
-    for k, v in values.items():
-        factor = next((f for suffix, f in _SI_BY_SUFFIX if k.endswith(suffix)), None)
-        if factor is None:
-            raise ModelError(f"heart_pulmonary: '{k}' is not one of its keys")
-        out[k] = v * factor
-    return out
-
 
 STANDARD_TREE: dict[str, Any] = {**copy.deepcopy(STANDARD), "name": "closed-loop-o2-tree",
                                  "arteries": "tree", "tree": TREE}
@@ -288,7 +271,8 @@ def _systemic(p: dict[str, Any]) -> list[dict[str, Any]]:
 
 def _block_heart(p: dict[str, Any]) -> list[dict[str, Any]]:
     """svZeroDSolver's ClosedLoopHeartAndPulmonary (docs/physics.md §1.10) with the
-    parameters of its closedLoopHeart cases (`SVZEROD_HEART`, in SI), beating at the loop's
+    parameters of its closedLoopHeart cases (`SVZEROD_HEART`, in mmHg, mL and s as published:
+    the core converts them), beating at the loop's
     period (run it with :func:`heart_run_options`). Measured (30 cycles, 1 ms, pool arteries, venous start
     pressure 7 mmHg): see docs/oxygen.md "Oxygen around a closed loop"."""
     values = dict(p.get("heart_block", SVZEROD_HEART))
@@ -297,8 +281,9 @@ def _block_heart(p: dict[str, Any]) -> list[dict[str, Any]]:
     # a few beats; the atria's exponential passive law would not take it smoothly)
     for side in ("left", "right"):
         values[f"initial_{side}_ventricle_volume"] += 0.5 * p["stressed_volume"]
+    # the values as given, in their units: the core converts them (`units: mmHg-mL`)
     heart = {"name": "heart_pulmonary", "from": "venous_return", "to": "aorta_in",
-             "heart_pulmonary": heart_block_si(values, p["period"])}
+             "heart_pulmonary": {"units": "mmHg-mL", "period": p["period"], **values}}
     return [heart]
 
 
@@ -404,7 +389,7 @@ def _series(terms: list[tuple[str, float]], valve: tuple[str, str] | None = None
     return {"terms": terms, **({"valve": valve} if valve else {})}
 
 
-def _block_series(p: dict[str, Any]) -> dict[str, dict[str, Any]]:
+def _block_series(p: dict[str, Any], model: Model) -> dict[str, dict[str, Any]]:
     """svZeroDSolver's block, by unknown name: a valve's flow counts only while it is open
     (docs/physics.md §1.10: closed when the pressure behind does not exceed the pressure in
     front and its flow is not positive; a closed valve's inductor flow is left out of the
@@ -421,8 +406,9 @@ def _block_series(p: dict[str, Any]) -> dict[str, dict[str, Any]]:
     def valve(name: str, behind: str, front: str) -> dict[str, Any]:
         return _series([(f"flow in {h}: {name} valve", 1.0)], (pr[behind], pr[front]))
 
-    r_pd = heart_block_si(dict(p.get("heart_block", SVZEROD_HEART)),
-                          p["period"])["pulmonary_resistance"]
+    # R_pd in SI, as the core read it
+    r_pd = next(v["heart_pulmonary"]["pulmonary_resistance"]
+                for v in model.canonical["vessels"] if "heart_pulmonary" in v)
     return {"aortic": valve("aortic", "left ventricle", "aorta"),
             "aortic_outflow": _series([(f"flow in {h}: aortic outflow", 1.0)]),
             "tricuspid": valve("tricuspid", "right atrium", "right ventricle"),
@@ -433,7 +419,7 @@ def _block_series(p: dict[str, Any]) -> dict[str, dict[str, Any]]:
             **{k: _series([(f"flow in vessel '{k}' resistance", 1.0)]) for k in p["organs"]}}
 
 
-def _two_ventricle_series(p: dict[str, Any]) -> dict[str, dict[str, Any]]:
+def _two_ventricle_series(p: dict[str, Any], model: Model) -> dict[str, dict[str, Any]]:
     """The native two-ventricle heart, by unknown name: its valves' and resistances' flows."""
     def q(name: str, part: str = " resistance") -> dict[str, Any]:
         return _series([(f"flow in vessel '{name}'{part}", 1.0)])
@@ -456,15 +442,15 @@ def heart_spec(p: dict[str, Any]) -> dict[str, Any]:
     the arterial pool (into the tree: its root's own flow, the aortic outflow)."""
     from oxyline.model import build_model
 
+    model = build_model(heart_model(p))
     series = (_block_series if p.get("heart", "two-ventricle") == "svzerod-block"
-              else _two_ventricle_series)(p)
+              else _two_ventricle_series)(p, model)
     organs = list(p["organs"])
     shunt = p["lungs"]["shunt_fraction"]
     arterial = [] if _has_tree(p) else [series["aortic"], *[series[o] for o in organs]]
     branches = [*arterial, *[series[o] for o in organs], series["tricuspid"],
                 series["pulmonary"], _scaled(series["lungs"], 1 - shunt),
                 _scaled(series["lungs"], shunt), series["mitral"]]
-    model = build_model(heart_model(p))
     return {"model": model.canonical, "dt": p.get("flow_dt", 1e-3), "cycles": 30,
             "newton_atol": heart_run_options(p).get("newton_atol"), "branches": branches,
             "record": list(series.items()), "tree_inflow": series["aortic_outflow"],

@@ -17,7 +17,8 @@ from typing import Any
 
 from oxyline import _core
 from oxyline import memory as _memory  # a leaf too: imports only _core and errors
-from oxyline.errors import ModelError, core_errors, warn_implausible
+from oxyline.errors import core_errors, warn_implausible
+from oxyline.options import output_names, output_vessels
 from oxyline.structured_tree import build_with_trees, expanded, has_trees
 
 #: the schema's key sets, as the core checks them
@@ -25,24 +26,6 @@ VESSEL_KEYS = frozenset(_core.VESSEL_KEYS)
 LUMPED_KEYS = frozenset(_core.LUMPED_KEYS)
 BC_KEYS = {kind: frozenset(keys) for kind, keys in _core.BC_KEYS.items()}
 METHODS = frozenset(_core.METHODS)
-
-
-def output_names(value: Any, key: str) -> list[str] | None:
-    """An output selection list of names (None, or ``all``: everything); a single name is a
-    list of one."""
-    if value is None or value == "all":
-        return None
-    if isinstance(value, str):
-        return [value]
-    if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) for v in value):
-        raise ModelError(f"simulation output: {key} must be a list of names, got {value!r}")
-    return list(value)
-
-
-def output_vessels(value: Any) -> list[str] | None:
-    """Output ``vessels``: ``all`` (None: every vessel with output), ``none`` (no vessel) or a
-    list of vessel names."""
-    return [] if value == "none" else None if value == "all" else output_names(value, "vessels")
 
 
 _ATOMS = frozenset({str, int, float, bool, type(None)})

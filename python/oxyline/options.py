@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable, Sequence
-from typing import Literal, TypedDict
+from typing import Any, Literal, TypedDict
+
+from oxyline.errors import ModelError
 
 
 class SimulateOptions(TypedDict, total=False):
@@ -66,3 +68,21 @@ class SimulateOptions(TypedDict, total=False):
     #: add a spatial error estimate (one refinement of every vessel's segments) to
     #: ``result.error_estimate["space"]``
     estimate_space_error: bool
+
+
+def output_names(value: Any, key: str) -> list[str] | None:
+    """An output selection list of names (None, or ``all``: everything); a single name is a
+    list of one."""
+    if value is None or value == "all":
+        return None
+    if isinstance(value, str):
+        return [value]
+    if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) for v in value):
+        raise ModelError(f"simulation output: {key} must be a list of names, got {value!r}")
+    return list(value)
+
+
+def output_vessels(value: Any) -> list[str] | None:
+    """Output ``vessels``: ``all`` (None: every vessel with output), ``none`` (no vessel) or a
+    list of vessel names."""
+    return [] if value == "none" else None if value == "all" else output_names(value, "vessels")

@@ -28,9 +28,10 @@ from oxyline.errors import (
     core_errors,
 )
 from oxyline.loader import load_model
-from oxyline.model import Model, output_names, output_vessels
+from oxyline.model import Model
 from oxyline.monitor import Monitor, check_result
 from oxyline.monitor import warn as _warn_bounds
+from oxyline.options import output_names, output_vessels
 from oxyline.result import (
     BALANCE,
     SEGMENT_VARIABLES,

@@ -224,6 +224,35 @@ impl Waveform {
         }
     }
 
+    /// d²w/dt² (within a segment of a table: zero for a linear one, the spline's own for a
+    /// cubic one; one-sided as [`Waveform::slope`]).
+    pub fn curvature(&self, time: f64) -> f64 {
+        match self {
+            Waveform::Constant(_) => 0.0,
+            Waveform::Fourier {
+                omega, cos, sin, ..
+            } => {
+                let mut s = 0.0;
+                for (k, a) in cos.iter().enumerate() {
+                    let w = omega * (k + 1) as f64;
+                    s -= a * w * w * (w * time).cos();
+                }
+                for (k, b) in sin.iter().enumerate() {
+                    let w = omega * (k + 1) as f64;
+                    s -= b * w * w * (w * time).sin();
+                }
+                s
+            }
+            Waveform::Table { t, m, .. } => match m {
+                None => 0.0,
+                Some(m) => {
+                    let (k, a, b, _) = table_locate(t, time);
+                    a * m[k - 1] + b * m[k]
+                }
+            },
+        }
+    }
+
     pub fn eval(&self, time: f64) -> f64 {
         match self {
             Waveform::Constant(v) => *v,
@@ -334,6 +363,12 @@ mod tests {
                 assert!(
                     (w.slope(t) - fd).abs() < 1e-6 * (1.0 + fd.abs()),
                     "{spec} t={t}"
+                );
+                let fd2 = (w.slope(t + h) - w.slope(t - h)) / (2.0 * h);
+                assert!(
+                    (w.curvature(t) - fd2).abs() < 1e-5 * (1.0 + fd2.abs()),
+                    "{spec} t={t}: curvature {} vs {fd2}",
+                    w.curvature(t)
                 );
             }
         }

@@ -13,14 +13,13 @@ from typing import Any
 
 import numpy as np
 
-from oxyline.errors import ModelError, ResourceError, UnsupportedElement, core_errors
+from oxyline.errors import ModelError, ResourceError, core_errors
 from oxyline.io.svzerod import closed_loop as svzerod_closed_loop
 from oxyline.io.svzerod import cycles as svzerod_cycles
 from oxyline.io.svzerod import heart as svzerod_heart
 from oxyline.io.svzerod.reader import (
     FRAME_UNITS,
     METHODS,
-    RK4_DERIVATIVE_SUBSTEPS,
     RunSettings,
     _convert,
     _Layout,
@@ -62,7 +61,8 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
     ``output_variable_based`` gives svZeroDSolver's variable table (``name, time, y``: the
     flow and pressure of each of its nodes, then internal variables such as an RCR's
     ``pressure_c``); ``output_derivative`` adds the time derivatives (``d_*`` columns or
-    ``ydot``): generalized-α's own ẏ from the core, as svZeroDSolver reports it (see
+    ``ydot``) the core records: generalized-α's own ẏ, as svZeroDSolver reports it, or with
+    RK4 the exact rate of the state at each output time, algebraic unknowns included (see
     docs/svzerod.md). The core runs the whole configuration in one call, svZeroDSolver's
     cycle-to-cycle rule included; this function reads the file and formats the rows.
     """
@@ -105,10 +105,7 @@ def simulate(config: Mapping[str, Any] | str | os.PathLike[str], *,
                 for v, end in s.caps for k in ((2, 0) if end == "in" else (3, 1))]
         rules["cycle_mean_stop"] = {"caps": caps, "tolerance": s.cycle_error,
                                     "max_extra": MAX_EXTRA_CYCLES}
-    if method == "rk4" and s.output_derivative:
-        times, values, derivs = _run_rk4_derivative(model, native, s, columns, shape, rules)
-    else:
-        times, values, derivs = _run(model, native, s, method, columns, shape, rules)
+    times, values, derivs = _run(model, native, s, method, columns, shape, rules)
     return _frame(pd, names, times, values, derivs, s)
 
 
@@ -440,49 +437,6 @@ def _run_cycle_error(model: Model, native: Mapping[str, Any], s: RunSettings, me
     rows, times = svzerod_cycles.output_rows(s.cycles, steps, extra, s.output_interval,
                                              s.output_all_cycles)
     return s.dt * times, _blocks(y, rows, shape), None if yd is None else _blocks(yd, rows, shape)
-
-
-def _run_rk4_derivative(model: Model, native: Mapping[str, Any], s: RunSettings,
-                        columns: Columns, shape: tuple[int, int], rules: Mapping[str, Any]
-                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """RK4 with ``output_derivative``: RK4 carries no ẏ, so the derivative is the
-    second-order backward difference of at least ``RK4_DERIVATIVE_SUBSTEPS`` recorded
-    sub-steps per output step (the left derivative where a time table has a kink, as
-    svZeroDSolver's ẏ there)."""
-    if "cycle_mean_stop" in rules:
-        raise UnsupportedElement("simulation_parameters: 'use_cycle_to_cycle_error' without RCR "
-                                 "together with 'output_derivative' needs "
-                                 "method='generalized-alpha'")
-    wanted, first = _wanted(s)
-    kw, sub = _core_kwargs(model, native, s, "rk4")
-    if sub < RK4_DERIVATIVE_SUBSTEPS:
-        # the backward differences see a table's kink only at an output time itself
-        sub = RK4_DERIVATIVE_SUBSTEPS
-        kw["dt"] = s.dt / sub
-    kw.update(output_all_cycles=True, output_every=kw["dt"])
-    raw = _simulate(model, kw, dict(rules, rates=False))
-    t = np.asarray(raw["times"])
-    if len(t) != (s.points_per_cycle - 1) * s.cycles * sub + 1:
-        raise ModelError(f"internal error: {len(t)} rows from the core")
-    y, _ = _apply(np.asarray(raw["data"]).reshape(len(t), -1), columns, False)
-    yd = _backward_derivative(y, kw["dt"])
-    rows = wanted * sub
-    times = _output_times(s, wanted, first)
-    _check_times(s, t[rows] - (0.0 if s.output_all_cycles else s.dt * first), times)
-    return times, _blocks(y, rows, shape), _blocks(yd, rows, shape)
-
-
-def _backward_derivative(y: np.ndarray, h: float) -> np.ndarray:
-    """Time derivative of rows `y` spaced `h` apart by second-order backward differences,
-    forward ones at the first two rows."""
-    yd = np.empty_like(y)
-    if len(y) < 3:
-        yd[:] = (y[-1] - y[0]) / (h * max(1, len(y) - 1))
-        return yd
-    yd[2:] = (3.0 * y[2:] - 4.0 * y[1:-1] + y[:-2]) / (2.0 * h)
-    yd[:2] = (-3.0 * y[:2] + 4.0 * y[1:3] - y[2:4]) / (2.0 * h) if len(y) >= 4 else \
-        (y[1:3] - y[:2]) / h
-    return yd
 
 
 def _frame(pd: Any, names: list[str], times: np.ndarray, values: np.ndarray,

@@ -60,9 +60,6 @@ from oxyline.model import Model, _build, _copy
 
 COLUMNS = ("name", "time", "flow_in", "flow_out", "pressure_in", "pressure_out")
 METHODS = ("generalized-alpha", "rk4")
-#: RK4 sub-steps per output step, at least, when time derivatives are output (their error is
-#: then far below that of svZeroDSolver's own first-order ẏ)
-RK4_DERIVATIVE_SUBSTEPS = 20
 
 TOP_KEYS = {"simulation_parameters", "boundary_conditions", "vessels", "junctions", "units",
             "valves", "chambers", "initial_condition", "initial_condition_d",

@@ -64,6 +64,13 @@ pub trait Integrator {
     /// generalized-α's carried ẏ is already that rate, so (y, ẏ) are left as they are.
     fn rate(&mut self, time: f64, y: &mut [f64], yd: &mut [f64]) -> Result<()>;
 
+    /// The rate ẏ of every unknown that goes with `y` at `time`, for an output that reports it
+    /// (svZeroDSolver's `output_derivative`): RK4's [`Rk4::full_rate`] (algebraic rows
+    /// included; `y` is made consistent); by default [`Integrator::rate`].
+    fn full_rate(&mut self, time: f64, y: &mut [f64], yd: &mut [f64]) -> Result<()> {
+        self.rate(time, y, yd)
+    }
+
     /// Whether [`Integrator::rate`] leaves (y, ẏ) as they are (the carried ẏ is the rate):
     /// then an observer may read the run's own vectors instead of copies.
     fn rate_is_carried(&self) -> bool {
@@ -123,6 +130,9 @@ impl Integrator for Rk4<'_> {
         let d = self.derivative(time, y)?;
         yd.copy_from_slice(&d);
         Ok(())
+    }
+    fn full_rate(&mut self, time: f64, y: &mut [f64], yd: &mut [f64]) -> Result<()> {
+        Rk4::full_rate(self, time, y, yd)
     }
     fn carried(&self) -> Vec<f64> {
         self.newton_scale()

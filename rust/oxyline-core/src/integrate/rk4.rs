@@ -221,6 +221,12 @@ pub fn rk4_ode(
     Ok(())
 }
 
+/// The step, as a fraction of the RK4 step, of the left difference that gives the explicit time
+/// dependence of time-varying coefficients and elements in [`Rk4::full_rate`] (its truncation
+/// error is this fraction of the step times their second derivative; its round-off, 1e-16 of
+/// their value over it, stays far below the rates).
+pub const TIME_PARTIAL_STEP: f64 = 1e-6;
+
 /// Classical RK4 on the differential unknowns of E ẏ + F y + c(y) = f(t), the algebraic ones
 /// eliminated at every stage (see the module documentation).
 pub struct Rk4<'a> {
@@ -510,6 +516,92 @@ impl<'a> Rk4<'a> {
             out[i] = self.st.k[0][i];
         }
         Ok(out)
+    }
+
+    /// ẏ of every unknown at (t, y), the rate an output reports (svZeroDSolver's
+    /// `output_derivative`): the differential rows as [`Rk4::derivative`], the algebraic ones
+    /// from the time derivative of their equations F y + c(t, y) = f(t) along the solution,
+    /// J_aa ẏ_a = ∂f_a/∂t − ∂c_a/∂t − J_ad ẏ_d (J = F + ∂c/∂y with the stenosis and
+    /// time-varying terms). The forcing's slopes are exact, taken [`TIME_PARTIAL_STEP`] of the
+    /// step before `time` (the left one at a table's kink, as svZeroDSolver's ẏ there); the
+    /// explicit time dependence of time-varying coefficients and elements is a left difference
+    /// over that step at fixed y. `y`
+    /// is made consistent (pass a copy of the run's state); the algebraic Newton's running
+    /// scale is left as it was, so recording the rates never changes the run.
+    pub fn full_rate(&mut self, time: f64, y: &mut [f64], yd: &mut [f64]) -> Result<()> {
+        let scale = self.alg.as_ref().map(|a| a.magnitude);
+        let d = self.derivative(time, y);
+        if let (Some(a), Some(s)) = (self.alg.as_mut(), scale) {
+            a.magnitude = s;
+        }
+        yd.copy_from_slice(&d?);
+        if self.alg.is_none() {
+            return Ok(());
+        }
+        let dae = self.dae;
+        let b = self.explicit_time_rate(time, y);
+        let alg = self.alg.as_mut().expect("algebraic part");
+        let mut r: Vec<f64> = alg.rows.iter().map(|&g| b[g]).collect();
+        let e = &self.e;
+        let mut local = vec![usize::MAX; dae.n];
+        for (l, &g) in alg.rows.iter().enumerate() {
+            local[g] = l;
+            for k in dae.f.ptr[g]..dae.f.ptr[g + 1] {
+                let c = dae.f.col[k] as usize;
+                if e[c] != 0.0 {
+                    r[l] -= dae.f.val[k] * yd[c];
+                }
+            }
+        }
+        if !dae.elements.is_empty() {
+            let pattern = dae.element_pattern();
+            let mut jac = vec![0.0; pattern.len()];
+            dae.element_jacobian(1.0, time, y, &mut jac, JacobianKind::Exact);
+            for (&(row, c), v) in pattern.iter().zip(&jac) {
+                if local[row] != usize::MAX && e[c] != 0.0 {
+                    r[local[row]] -= v * yd[c];
+                }
+            }
+        }
+        if !alg.is_constant() {
+            alg.factor(dae, y, time, JacobianKind::Exact)
+                .map_err(|m| singular(time, &m))?;
+        }
+        if !alg.lu.solve_in_place(&mut r) {
+            return Err(singular(time, "algebraic rates"));
+        }
+        for (&g, v) in alg.rows.iter().zip(&r) {
+            yd[g] = *v;
+        }
+        Ok(())
+    }
+
+    /// ∂/∂t of f(t) − D(t) y − c(t, y) at fixed y, every row: the forcing's slopes (with the
+    /// index reduction's slope terms' curvature), the time-varying coefficients' and the
+    /// elements' explicit time dependence by a left difference.
+    fn explicit_time_rate(&self, time: f64, y: &[f64]) -> Vec<f64> {
+        let dae = self.dae;
+        let mut b = vec![0.0; dae.n];
+        let h = TIME_PARTIAL_STEP * self.dt;
+        if self.regime == Regime::Transient {
+            // the slopes just before `time`: the left ones at a table's kink even where the
+            // output time's round-off lands past the knot
+            let before = time - h;
+            for (row, w) in &dae.forcing {
+                b[*row] += w.slope(before);
+            }
+            for &(row, scale, k) in &self.rate {
+                b[row] += scale * dae.forcing[k].1.curvature(before);
+            }
+            for (i, law) in &dae.varying {
+                b[*i] -= (law.delta(time) - law.delta(time - h)) / h * y[*i];
+            }
+        }
+        if dae.elements.iter().any(|el| el.period().is_some()) {
+            dae.element_terms(time, y, |i, c| b[i] -= c / h);
+            dae.element_terms(time - h, y, |i, c| b[i] += c / h);
+        }
+        b
     }
 
     /// Bring the algebraic unknowns of an initial state in line with the forcing at `time`.

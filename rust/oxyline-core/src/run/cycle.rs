@@ -37,6 +37,8 @@ pub(super) struct Cycles<'r, 'f> {
     /// svZeroDSolver's derived columns and cycle means (`RunSettings::svzerod`).
     derived: Option<DerivedState>,
     cycle_means: Option<CycleMeans>,
+    /// (y, ẏ) of an RK4 output row's rates (`record_rates`).
+    rate_scratch: (Vec<f64>, Vec<f64>),
 }
 
 /// What the rows of one cycle are for.
@@ -76,6 +78,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
             adaptive: None,
             derived: None,
             cycle_means: None,
+            rate_scratch: Default::default(),
         }
     }
 
@@ -405,10 +408,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
             self.rec.record_extra(d.value.iter().copied());
         }
         if self.s.svzerod.rates {
-            let yd = &self.state.yd;
-            let derived = self.derived.as_ref().map_or(&[][..], |d| &d.rate[..]);
-            let rates = self.s.probes.iter().map(|&i| yd[i]);
-            self.rec.record_extra(rates.chain(derived.iter().copied()));
+            self.record_rates(time)?;
         }
         if species && self.state.species.is_some() {
             self.state.observe(time, &mut self.obs_row)?;
@@ -420,6 +420,29 @@ impl<'r, 'f> Cycles<'r, 'f> {
         if committed && !self.rec.flush(false) {
             return Err(Error::Interrupted { time });
         }
+        Ok(())
+    }
+
+    /// The rates of the probes and derived columns (svZeroDSolver's `output_derivative`):
+    /// generalized-α's carried ẏ, or the rate RK4 evaluates at the state (its algebraic
+    /// unknowns included), on a copy so that the run is not touched.
+    fn record_rates(&mut self, time: f64) -> Result<()> {
+        let ig = self.state.flow.integrator();
+        let yd = if ig.rate_is_carried() {
+            &self.state.yd
+        } else {
+            let (y, yd) = &mut self.rate_scratch;
+            y.clone_from(&self.state.y);
+            yd.resize(y.len(), 0.0);
+            ig.full_rate(time, y, yd)?;
+            if let Some(d) = self.derived.as_mut() {
+                d.exact_rates(y, yd);
+            }
+            &self.rate_scratch.1
+        };
+        let derived = self.derived.as_ref().map_or(&[][..], |d| &d.rate[..]);
+        let rates = self.s.probes.iter().map(|&i| yd[i]);
+        self.rec.record_extra(rates.chain(derived.iter().copied()));
         Ok(())
     }
 

@@ -47,7 +47,9 @@ pub struct SvZeroDRules {
     pub derived: Vec<Derived>,
     /// Also record the rate of every probe and derived column (after them): generalized-α's
     /// ẏ_{n+1}, the rate svZeroDSolver's state carries and reports. The derived columns' rates
-    /// follow its update ẏ_{n+1} = (1 + ρ∞)(y_{n+1} − y_n)/Δt − ρ∞ ẏ_n.
+    /// follow its update ẏ_{n+1} = (1 + ρ∞)(y_{n+1} − y_n)/Δt − ρ∞ ẏ_n. RK4 records the exact
+    /// rate of the state at the output time (`Rk4::full_rate`, algebraic unknowns included)
+    /// and the derived columns' from it.
     pub rates: bool,
     pub cycle_mean_stop: Option<CycleMeanStop>,
 }
@@ -143,8 +145,37 @@ impl DerivedState {
                 }
                 Derived::FromStart { unknown, scale } => scale * (y[unknown] - self.reference[k]),
             };
-            self.rate[k] = (1.0 + self.rho) * (self.value[k] - old) / dt - self.rho * self.rate[k];
+            if self.alpha_f.is_some() {
+                self.rate[k] =
+                    (1.0 + self.rho) * (self.value[k] - old) / dt - self.rho * self.rate[k];
+            }
         }
+    }
+
+    /// RK4's rates from the state's rate ẏ (see `Rk4::full_rate`), its value being f(Δp)
+    /// itself: f′(Δp) (ẏ_front − ẏ_behind) of a valve status, `scale` ẏ of a from-start
+    /// unknown.
+    pub fn exact_rates(&mut self, y: &[f64], yd: &[f64]) {
+        for (k, d) in self.columns.iter().enumerate() {
+            self.rate[k] = match *d {
+                Derived::ValveStatus { behind, front, law } => {
+                    closure_slope(law, y[front] - y[behind]) * (yd[front] - yd[behind])
+                }
+                Derived::FromStart { unknown, scale } => scale * yd[unknown],
+            };
+        }
+    }
+}
+
+/// d(valve status)/dΔp of [`ValveLaw::closure`]: 0.5 k (1 − tanh²(k Δp)) of a tanh law, 0 of
+/// a piecewise one (its status is a step).
+fn closure_slope(law: ValveLaw, dp: f64) -> f64 {
+    match law {
+        ValveLaw::Tanh { steepness, .. } => {
+            let th = (steepness * dp).tanh();
+            0.5 * steepness * (1.0 - th * th)
+        }
+        ValveLaw::Piecewise { .. } => 0.0,
     }
 }
 

@@ -502,10 +502,12 @@ fn closed_loop_element<N: Node>(
     };
     let mut allowed = names(keys);
     allowed.extend(names(optional));
+    allowed.push("units");
     if !heart {
         allowed.extend(["heart", "ventricle"]);
     }
     check_keys(&spec, &allowed, &format!("{el} {kind}"))?;
+    let units = element_units(&spec, units, &format!("{kind} units"), el)?;
     let mut out = Map::new();
     for (k, q) in keys.iter().chain(optional) {
         if let Some(x) = spec.get(k) {
@@ -536,6 +538,22 @@ fn closed_loop_element<N: Node>(
     }
     cv.insert(kind, Value::Object(out));
     Ok(Value::Object(cv))
+}
+
+/// The units of an element's section: its own `units` key (`SI`, `cgs` or `mmHg-mL`, the
+/// published lumped heart parameters' units), else the model's.
+fn element_units<N: Node>(spec: &N, model: Units, key: &str, el: &str) -> Result<Units> {
+    let Some(u) = spec.get("units") else {
+        return Ok(model);
+    };
+    u.text()
+        .and_then(|t| Units::parse_element(&t))
+        .ok_or_else(|| {
+            err(
+                el,
+                format!("{key} must be 'SI', 'cgs' or 'mmHg-mL', got {}", u.repr()),
+            )
+        })
 }
 
 /// A `chamber_sphere` element (docs/physics.md §1.11).
