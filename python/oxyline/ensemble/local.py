@@ -19,7 +19,7 @@ from oxyline.ensemble.collect import (
     heart_summary,
     stats_summary,
 )
-from oxyline.ensemble.patch import Patcher, Variant
+from oxyline.ensemble.patch import Patcher, Variant, patch_paths, traced
 from oxyline.errors import ModelError, ResourceError, core_errors
 from oxyline.model import Model
 from oxyline.monitor import Monitor
@@ -89,9 +89,10 @@ class Feed:
                 self.on_skip(i)
                 continue
             except ModelError as e:
-                if str(e).startswith(f"variant {k}: "):
-                    raise  # a mistake in the patches (e.g. a text where a number is scaled)
-                self.collector.fail(i, "model", f"variant {k}: {e}"[:ERROR_CHARS])
+                # the patch's names were checked before the run (they raise); a value the
+                # patch or the model refuses fails only this variant
+                text = str(e) if str(e).startswith(f"variant {k}: ") else f"variant {k}: {e}"
+                self.collector.fail(i, "model", text[:ERROR_CHARS])
                 self.on_skip(i)
                 continue
             self.prepared[i] = (v, s)
@@ -165,7 +166,9 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
         v, s = feed.prepared.pop(i)
         collector.facts(i, s["period"], raw)
         if kind is not None:  # "interrupted": stopped by Ctrl-C while it ran
-            collector.fail(i, kind, f"variant {numbers[i]}: {message}"[:ERROR_CHARS])
+            # a value the core refuses as it assembles the variant: traced to the patch
+            paths = patch_paths(feed.patches[i]) if kind == "model" else None
+            collector.fail(i, kind, traced(numbers[i], paths, str(message))[:ERROR_CHARS])
         else:
             try:
                 assert raw is not None and layout is not None

@@ -8,17 +8,15 @@ A patch is a dict in the native model format, deep-merged into the model::
      "period": 0.8,
      "scale": {"resistance": 1.2, "compliance": 0.8, "vessels": ["CCA", "ICA"] | "all"}}
 
-Values are in the model's units. A waveform property (``time``, ``flow``, ``pressure``,
-``value``, ``fourier``) replaces the condition's whole waveform; ``radius`` replaces
-``radius_in``/``radius_out`` and the other way round; a new ``type`` replaces the whole
-condition, a new ``oxygen.wall.model`` the whole wall. ``scale`` multiplies, after the explicit values: ``resistance`` scales the
-resistance of lumped vessels and of the resistance and RCR conditions at the ends of the
-selected vessels, ``compliance`` the capacitance of lumped vessels and RCR conditions and
-divides the Young's modulus of the geometric vessels (their compliance is proportional to
-1/E). A DataFrame row with dotted-path columns (``vessels.CCA.radius``) is the same patch.
+The core applies it (``oxyline_core::model::patch``: the merge rules, the ``scale`` section
+and the checks are there, docs/ensembles.md); this module turns tables and DataFrames into
+patches (a row with dotted-path columns such as ``vessels.CCA.radius`` is a patch) and
+prepares each variant for the core's workers.
 
 An unknown vessel, node, section or property raises :class:`~oxyline.ModelError` naming the
-variant and the path; a value the model refuses (a negative radius) fails only its variant.
+variant and the path before anything runs; a value the patch or the model refuses (a
+compliance factor 0, a negative radius) fails only its variant, with a message naming the
+patch path and the value.
 """
 
 from __future__ import annotations
@@ -33,241 +31,62 @@ import numpy as np
 
 from oxyline import _core
 from oxyline.ensemble.scale import mapping as _mapping
-from oxyline.ensemble.scale import scale_terms as _scale_terms
-from oxyline.ensemble.scale import unknown as _unknown
 from oxyline.ensemble.scale import where as _where
 from oxyline.ensemble.values import ValueTable
 from oxyline.errors import ModelError
-from oxyline.model import (
-    BC_KEYS,
-    LUMPED_KEYS,
-    VESSEL_KEYS,
-    Model,
-    _copy,
-    _plain_outlet,
-    _unassembled,
-)
-
-SECTIONS = ("vessels", "boundary_conditions", "blood", "oxygen", "transport", "period", "scale")
-VESSEL_PROPERTIES = VESSEL_KEYS - {"name", "from", "to"}
-BLOOD_KEYS = {"density", "viscosity"}
-#: properties that hold one number: a mapping there is a dotted path gone too deep
-#: (``vessels.aorta.radius.x``), refused with the path before anything runs
-SCALAR_KEYS = {
-    "vessels": {"length", "radius", "radius_in", "radius_out", "wall_thickness",
-                "youngs_modulus", "poisson_ratio", "segments"},
-    "lumped": LUMPED_KEYS,
-    "blood": BLOOD_KEYS,
-    "boundary_conditions": {"resistance", "proximal_resistance", "distal_resistance",
-                            "capacitance"},
-}
-#: the keys of a condition's waveform: patching one replaces the whole waveform
-WAVEFORM_KEYS = {"time", "flow", "pressure", "value", "fourier", "interpolation", "steady"}
-RESISTANCES = {"resistance": ("resistance",), "rcr": ("proximal_resistance", "distal_resistance")}
+from oxyline.model import Model, _copy, _plain_outlet, _unassembled
 
 
-def _scalars(props: Mapping[str, Any], kind: str, k: int, path: str) -> None:
-    """Refuse a mapping where ``kind`` holds one number (a dotted path one level too deep)."""
-    for key in SCALAR_KEYS[kind] & props.keys():
-        if isinstance(props[key], Mapping):
-            raise ModelError(f"{_where(k, f'{path}.{key}')}: expected a number, got the "
-                             f"mapping {props[key]!r} (a dotted path ends at the property)")
+@dataclass
+class Merged:
+    """A patch applied by the core (``oxyline_core::model::patch``): the variant's native
+    model dict (None if ``refused``), the indices of the vessels and the nodes of the
+    conditions it changed, the patch paths (``path = value``) that changed each of them
+    (keys ``("vessel", i)``, ``("condition", node)``), and the message of a value the patch
+    cannot apply (a compliance factor 0, a factor that is not a number), which fails only
+    its variant."""
+
+    data: dict[str, Any] | None
+    vessels: set[int]
+    nodes: set[str]
+    paths: dict[tuple[str, Any], list[str]]
+    refused: str | None
 
 
-def _check_transport(source: Mapping[str, Any], section: str, patch: Mapping[str, Any],
-                     k: int) -> None:
-    """Unknown keys of an ``oxygen`` or ``transport`` patch (and of its ``oxygen.wall``)
-    raise here, naming the variant and the path, as unknown vessel properties do; the
-    values are checked when the variant's model is built (a bad one fails the variant)."""
-    from oxyline.transport import OXYGEN_KEYS, TRANSPORT_KEYS, WALL_KEYS
-
-    allowed = OXYGEN_KEYS if section == "oxygen" else TRANSPORT_KEYS
-    for key in patch:
-        if key not in allowed:
-            raise _unknown(k, f"{section}.{key}", f"{section} property", allowed)
-    wall = patch.get("wall") if section == "oxygen" else None
-    if isinstance(wall, Mapping):
-        model = wall.get("model", _wall_model(source[section].get("wall")))
-        for key in wall:
-            if str(model) in WALL_KEYS and key not in WALL_KEYS[str(model)]:
-                raise _unknown(k, f"oxygen.wall.{key}", f"property of a {model} wall",
-                               WALL_KEYS[str(model)])
-
-
-def _wall_model(wall: Any) -> str:
-    """The closure of an ``oxygen.wall`` entry (a mapping with ``model``, or its name)."""
-    return str(wall.get("model", "") if isinstance(wall, Mapping) else wall)
-
-
-def _merge(base: Any, patch: Any) -> Any:
-    """``patch`` deep-merged into ``base`` (new containers; mappings merge, anything else
-    replaces)."""
-    if not isinstance(base, Mapping) or not isinstance(patch, Mapping):
-        return _copy(patch)
-    out = dict(base)
-    for key, value in patch.items():
-        out[key] = _merge(base.get(key), value) if isinstance(value, Mapping) else _copy(value)
-    return out
-
-
-def _patch_vessel(vessel: Mapping[str, Any], props: Any, k: int, path: str) -> dict[str, Any]:
-    props = _mapping(props, k, path)
-    for key in props:
-        if key not in VESSEL_PROPERTIES:
-            if key in ("name", "from", "to"):
-                raise ModelError(f"{_where(k, f'{path}.{key}')}: a variant cannot change the "
-                                 "network's topology")
-            raise _unknown(k, f"{path}.{key}", "vessel property", VESSEL_PROPERTIES)
-    _scalars(props, "vessels", k, path)
-    if "lumped" in props:
-        lumped = _mapping(props["lumped"], k, f"{path}.lumped")
-        for key in lumped:
-            if key not in LUMPED_KEYS:
-                raise _unknown(k, f"{path}.lumped.{key}", "lumped property", LUMPED_KEYS)
-        _scalars(lumped, "lumped", k, f"{path}.lumped")
-    base = dict(vessel)
-    if "radius" in props:
-        base.pop("radius_in", None)
-        base.pop("radius_out", None)
-    elif ("radius_in" in props or "radius_out" in props) and "radius" in base:
-        r = base.pop("radius")
-        base["radius_in"] = base["radius_out"] = r
-    return _merge(base, props)
-
-
-def _patch_condition(bc: Mapping[str, Any], props: Any, k: int, path: str) -> dict[str, Any]:
-    props = _mapping(props, k, path)
-    kind = str(props.get("type", bc.get("type", ""))).lower()
-    allowed = BC_KEYS.get(kind, set())
-    for key in props:
-        if key not in allowed:
-            raise _unknown(k, f"{path}.{key}", f"property of a {kind} condition", allowed)
-    _scalars(props, "boundary_conditions", k, path)
-    if "type" in props and str(props["type"]).lower() != str(bc.get("type", "")).lower():
-        return _copy(dict(props))  # another kind of condition: nothing of the old one holds
-    base = dict(bc)
-    if kind in ("flow", "pressure") and props.keys() & (WAVEFORM_KEYS - {"interpolation",
-                                                                         "steady"}):
-        for key in WAVEFORM_KEYS:
-            base.pop(key, None)
-    if "pressure" in props:  # a resistance/RCR outlet pressure: a number or a waveform
-        base.pop("pressure", None)
-    return _merge(base, props)
-
-
-def _value(x: Any, k: int, path: str) -> float:
-    """A number of the model to scale (YAML 1.1 reads 5.0e5 as a string)."""
-    try:
-        return float(x)
-    except (TypeError, ValueError):
-        raise ModelError(f"{_where(k, path)}: cannot scale {x!r}, not a number") from None
-
-
-def _scaled(data: dict[str, Any], scale: Any, k: int) -> tuple[set[int], set[str]]:
-    """Apply the ``scale`` section to ``data`` (the merged model; every element written is a
-    new container) and return the indices of the vessels and the nodes of the conditions it
-    changed."""
-    index = {v["name"]: i for i, v in enumerate(data["vessels"])}
-    chosen, factors = _scale_terms(scale, index, k)
-    selected = set(range(len(data["vessels"]))) if chosen is None else chosen
-    vessels = data["vessels"] = list(data["vessels"])
-    nodes: set[str] = set()
-    changed: set[int] = set()
-    for i in sorted(selected):
-        v = vessels[i]
-        nodes.update((str(v.get("from")), str(v.get("to"))))
-        if "lumped" in v:
-            lp = dict(v["lumped"])
-            for key, prop in (("resistance", "resistance"), ("compliance", "capacitance")):
-                if key in factors and prop in lp:
-                    lp[prop] = _value(lp[prop], k, f"vessels.{v['name']}.lumped.{prop}") \
-                        * factors[key]
-            vessels[i] = {**v, "lumped": lp}
-            changed.add(i)
-        elif "compliance" in factors and "youngs_modulus" in v:
-            e = _value(v["youngs_modulus"], k, f"vessels.{v['name']}.youngs_modulus")
-            # compliance ∝ 1/E; a factor 0 gives E = inf, which the model refuses for the
-            # variant (naming the vessel), as it refuses a negative factor's E < 0
-            f = factors["compliance"]
-            vessels[i] = {**v, "youngs_modulus": e / f if f != 0 else math.inf}
-            changed.add(i)
-    bcs = data["boundary_conditions"] = dict(data.get("boundary_conditions", {}))
-    changed_nodes: set[str] = set()
-    for node in [n for n in bcs if n in nodes]:
-        bc = dict(bcs[node])
-        kind = str(bc.get("type", "")).lower()
-        where = f"boundary_conditions.{node}"
-        props = RESISTANCES.get(kind, ()) if "resistance" in factors else ()
-        for prop in props:
-            bc[prop] = _value(bc.get(prop), k, f"{where}.{prop}") * factors["resistance"]
-        if "compliance" in factors and kind == "rcr":
-            bc["capacitance"] = _value(bc.get("capacitance"), k, f"{where}.capacitance") \
-                * factors["compliance"]
-            props = (*props, "capacitance")
-        if props:  # only the conditions whose values change (an inflow stays as it is)
-            bcs[node] = bc
-            changed_nodes.add(node)
-    return changed, changed_nodes
+def merge(source: Mapping[str, Any], patch: Any, k: int = 0) -> Merged:
+    """``patch`` (variant ``k``) applied to the native model ``source`` by the core. A path
+    that names nothing of the model raises :class:`ModelError` naming the variant and the
+    path; a value the patch cannot apply is returned as ``refused``."""
+    # the core shares the patch's objects in the model: a copy, so that the variant's model
+    # never aliases the caller's lists
+    data, vessels, nodes, paths, refused = _core.merge_patch(dict(source), _copy(patch), k)
+    return Merged(data, set(vessels), set(nodes), paths, refused)
 
 
 def merge_patch(source: Mapping[str, Any], patch: Mapping[str, Any], k: int = 0,
                 ) -> tuple[dict[str, Any], set[int], set[str]]:
-    """The native model ``source`` with ``patch`` (variant ``k``) merged in, sharing every
+    """The native model ``source`` with ``patch`` (variant ``k``) applied, sharing every
     element the patch leaves alone, and the indices of the vessels and the nodes of the
-    conditions it changed. Raises :class:`ModelError` for unknown names."""
-    patch = _mapping(patch, k, "patch")
-    for key in patch:
-        if key not in SECTIONS:
-            raise _unknown(k, key, "patch section", SECTIONS)
-    data = dict(source)
-    touched_vessels: set[int] = set()
-    touched_nodes: set[str] = set()
-    if "vessels" in patch:
-        vessels = data["vessels"] = list(source["vessels"])
-        index = {v.get("name"): i for i, v in enumerate(vessels)}
-        for name, props in _mapping(patch["vessels"], k, "vessels").items():
-            if name not in index:
-                raise ModelError(f"{_where(k, f'vessels.{name}')}: no vessel named {name!r} in "
-                                 f"model '{source.get('name', 'network')}'")
-            i = index[name]
-            vessels[i] = _patch_vessel(vessels[i], props, k, f"vessels.{name}")
-            touched_vessels.add(i)
-    if "boundary_conditions" in patch:
-        bcs = data["boundary_conditions"] = dict(source.get("boundary_conditions", {}))
-        for node, props in _mapping(patch["boundary_conditions"], k,
-                                    "boundary_conditions").items():
-            if node not in bcs:
-                raise ModelError(f"{_where(k, f'boundary_conditions.{node}')}: no boundary "
-                                 f"condition at node {node!r} in model "
-                                 f"'{source.get('name', 'network')}'")
-            bcs[node] = _patch_condition(bcs[node], props, k, f"boundary_conditions.{node}")
-            touched_nodes.add(node)
-    if "blood" in patch:
-        for key in _mapping(patch["blood"], k, "blood"):
-            if key not in BLOOD_KEYS:
-                raise _unknown(k, f"blood.{key}", "blood property", BLOOD_KEYS)
-        _scalars(patch["blood"], "blood", k, "blood")
-        data["blood"] = _merge(source.get("blood") or {}, patch["blood"])
-    for section in ("oxygen", "transport"):
-        if section in patch:
-            if section not in source:
-                raise ModelError(f"{_where(k, section)}: the model has no '{section}' section "
-                                 "to patch")
-            _check_transport(source, section, _mapping(patch[section], k, section), k)
-            data[section] = _merge(source[section], patch[section])
-            wall = patch[section].get("wall") if section == "oxygen" else None
-            if isinstance(wall, Mapping) and "model" in wall \
-                    and str(wall["model"]) != _wall_model(source[section].get("wall")):
-                # another wall closure: none of the old one's keys hold (as a new condition
-                # type replaces the whole condition)
-                data[section]["wall"] = _copy(dict(wall))
-    if "period" in patch:
-        data["period"] = patch["period"]
-    if "scale" in patch:
-        scaled_vessels, scaled_nodes = _scaled(data, patch["scale"], k)
-        touched_vessels |= scaled_vessels
-        touched_nodes |= scaled_nodes
-    return data, touched_vessels, touched_nodes
+    conditions it changed. Raises :class:`ModelError` for unknown names and refused values."""
+    m = merge(source, patch, k)
+    if m.data is None:
+        raise ModelError(m.refused)
+    return m.data, m.vessels, m.nodes
+
+
+def patch_paths(patch: Mapping[str, Any]) -> list[str]:
+    """The scalar leaves of a patch as ``path = value`` (what an error of its variant that the
+    core finds while it assembles the variant is traced to)."""
+    return [f"{p} = {v!r}" for p, v in flatten(patch).items()]
+
+
+def traced(k: int, paths: Sequence[str] | None, error: Exception | str) -> str:
+    """A schema error of a patched element, prefixed by the variant and the patch paths that
+    changed the element (``variant 1: vessels.aorta.radius = -1.0: vessel 'aorta': ...``)."""
+    text = str(error)
+    if text.startswith(f"variant {k}: "):
+        return text
+    return f"variant {k}: {'; '.join(paths)}: {text}" if paths else f"variant {k}: {text}"
 
 
 def apply_patch(model: Model | Mapping[str, Any] | str, patch: Mapping[str, Any]
@@ -457,9 +276,10 @@ class Patcher:
 
     def check(self, patch: Any, k: int) -> None:
         """Raise :class:`ModelError` for unknown names in ``patch`` (variant ``k``), as
-        :meth:`variant` would; a patch on the value route is checked without merging it."""
+        :meth:`variant` would; a patch on the value route is checked without merging it. A
+        value the patch cannot apply is not raised here: it fails only its variant."""
         if self._parse(patch, k) is None:
-            merge_patch(self.base.source, patch, k)
+            merge(self.base.source, patch, k)
 
     def check_all(self, patches: Sequence[Any], numbers: range | None = None) -> dict[int, Any]:
         """:meth:`check` every patch (variant ``numbers[i]``, default ``i``) and return the
@@ -472,7 +292,7 @@ class Patcher:
         for i, patch in enumerate(patches):
             p = self._parse(patch, numbers[i]) if patch else None
             if p is None:
-                merge_patch(self.base.source, patch, numbers[i])
+                merge(self.base.source, patch, numbers[i])
             else:
                 parsed.append(p)
                 fast.append(i)
@@ -482,10 +302,49 @@ class Patcher:
         rows = self.scaler.rows(parsed)
         return {i: row for i, row in zip(fast, rows, strict=True) if row is not None}
 
+    def _read(self, merged: Merged, patch: Mapping[str, Any], k: int) -> Model:
+        """The model of a merged variant: the elements it changed read by the core's schema
+        (the others are the base model's); an error names the patch paths that changed the
+        element it is about."""
+        assert merged.data is not None
+
+        def convert_vessels(items: list[Any], units: str) -> list[Any]:
+            out = list(self._vessels)
+            for i in sorted(merged.vessels):
+                try:
+                    out[i] = _core.read_vessels([items[i]], units)[0]
+                except ModelError as e:
+                    raise ModelError(traced(k, merged.paths.get(("vessel", i)), e)) from None
+            return out
+
+        def convert_conditions(items: Mapping[str, Any], units: str
+                               ) -> tuple[dict[str, Any], list[Any]]:
+            out, periods = dict(self._bcs), []
+            for node, bc in items.items():
+                if node not in merged.nodes:
+                    periods += self._periods[node]
+                    continue
+                try:
+                    canon, p = _core.read_conditions({node: bc}, units)
+                except ModelError as e:
+                    raise ModelError(traced(k, merged.paths.get(("condition", node)),
+                                            e)) from None
+                out[node] = canon[node]
+                periods += p
+            return out, periods
+
+        try:
+            return _unassembled(merged.data, convert_vessels, convert_conditions)
+        except ModelError as e:  # blood, oxygen, transport, period: the other sections
+            others = {key: value for key, value in patch.items()
+                      if key not in ("vessels", "boundary_conditions", "scale")}
+            raise ModelError(traced(k, patch_paths(others), e)) from None
+
     def variant(self, patch: Mapping[str, Any], k: int, row: Any = None) -> Variant:
-        """Variant ``k``. Unknown names raise :class:`ModelError`; a value the model refuses
-        raises it too, which the caller records as that variant's failure. ``row``: the
-        value-route row of the patch from :meth:`check_all`, if computed there."""
+        """Variant ``k``. Unknown names raise :class:`ModelError`; a value the patch or the
+        model refuses raises it too, naming the variant and the patch paths, which the
+        caller records as that variant's failure. ``row``: the value-route row of the patch
+        from :meth:`check_all`, if computed there."""
         if not patch:
             return Variant(None, self.base)
         if row is None and self.scaler is not None:
@@ -495,27 +354,11 @@ class Patcher:
             assert self.scaler is not None
             return Variant(None, self.scaler.model_with_period(row.period), values=row.values,
                            tables=row.tables)
-        data, vessels, nodes = merge_patch(self.base.source, patch, k)
-
-        def convert_vessels(items: list[Any], units: str) -> list[Any]:
-            out = list(self._vessels)
-            for i in sorted(vessels):
-                out[i] = _core.read_vessels([items[i]], units)[0]
-            return out
-
-        def convert_conditions(items: Mapping[str, Any], units: str
-                               ) -> tuple[dict[str, Any], list[Any]]:
-            out, periods = dict(self._bcs), []
-            for node, bc in items.items():
-                if node in nodes:
-                    canon, p = _core.read_conditions({node: bc}, units)
-                    out[node] = canon[node]
-                    periods += p
-                else:
-                    periods += self._periods[node]
-            return out, periods
-
-        model = _unassembled(data, convert_vessels, convert_conditions)
+        merged = merge(self.base.source, patch, k)
+        if merged.data is None:
+            raise ModelError(merged.refused)
+        model = self._read(merged, patch, k)
+        vessels, nodes = merged.vessels, merged.nodes
         canon, base = model.canonical, self.base.canonical
         core: dict[str, Any] = {}
         handed = {i: canon["vessels"][i] for i in sorted(vessels)}

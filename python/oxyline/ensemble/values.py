@@ -8,12 +8,12 @@ A patch takes this route when it changes only
 * the geometry of plain geometric vessels (``length``, ``radius``, ``radius_in``,
   ``radius_out``, ``wall_thickness``, ``youngs_modulus``; finite and > 0),
 * the ``lumped`` ``resistance`` / ``capacitance`` of lumped vessels (finite, >= 0),
-* the numbers of resistance and RCR conditions (finite),
+* the numbers of resistance and RCR conditions (finite, >= 0),
 * the whole table of a flow or pressure condition (``time`` and ``flow``/``pressure``: plain
   numbers, strictly increasing times, at least two rows),
 * and ``scale`` on top (the resistances and compliances it multiplies).
 
-Every number is the one :func:`~oxyline.ensemble.patch.merge_patch` and the canonical
+Every number is the one the core's patch (``oxyline_core::model::patch``) and the canonical
 conversion would give (``factor * value``, ``factor * (value * f)`` or ``factor * (value /
 f)``, in that order), computed with numpy's elementwise IEEE arithmetic for the whole ensemble
 at once: the same bits. Anything else (other properties, a new condition type, a refused or
@@ -57,6 +57,22 @@ def _plain(x: Any) -> float | None:
     except ValueError:
         return None
     return v if math.isfinite(v) else None
+
+
+def _factors_plain(scale: Any) -> bool:
+    """Whether the factors of a ``scale`` section are finite numbers (a mapping of anything
+    else takes the full path, which fails the variant naming the factor)."""
+    if not isinstance(scale, Mapping):
+        return True  # scale_terms names the mistake
+    for key in ("resistance", "compliance"):
+        f = scale.get(key, 1.0)
+        if isinstance(f, bool) or not isinstance(f, (int, float)):
+            return False
+        if isinstance(f, float) and not math.isfinite(f):  # an int beyond any float: full path
+            return False
+        if isinstance(f, int) and not -2**1023 < f < 2**1023:
+            return False
+    return True
 
 
 def _table(value: Any) -> np.ndarray | None:
@@ -186,8 +202,8 @@ class ValueTable:
                 return None
         scale = None
         if "scale" in patch:
-            if not self.usable:
-                return None
+            if not self.usable or not _factors_plain(patch["scale"]):
+                return None  # the full path names a factor that is not a number
             scale = scale_terms(patch["scale"], self.vessel_index, k)
         return Parsed(entries, tables, scale)
 
@@ -229,7 +245,8 @@ class ValueTable:
             if not props.keys() <= set(CONDITIONS[kind]):
                 return False
             for key, x in props.items():
-                if type(x) not in _REAL or not -math.inf < x < math.inf:
+                # a negative value takes the full path, whose error names the patch path
+                if type(x) not in _REAL or not 0 <= x < math.inf:
                     return False
                 entries.append((self.index[(key, node)], x))
             return True

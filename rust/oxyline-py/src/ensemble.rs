@@ -4,6 +4,7 @@
 
 use crate::errors::{error_kind, to_py};
 use crate::reader::extract;
+use crate::reader::node::PyNode;
 use crate::results::{layout_dict, outcome_dict, recorded_columns};
 use crate::settings::Shared;
 use numpy::{IntoPyArray, PyReadonlyArray1};
@@ -11,11 +12,12 @@ use oxyline_core::ensemble::{
     ColumnStats, ConditionValue, Member, SpecPatch, StatsFold, TableValues, Target, Targets,
     column_stats, run_fed, worker_count,
 };
+use oxyline_core::model::patch::{self, Merged, PatchError};
 use oxyline_core::model::{BoundarySpec, NetworkSpec, VesselSpec, parse};
 use oxyline_core::{Chunk, Error, Outcome, OutputSink, RunSettings, Selection, Transport};
 use pyo3::exceptions::PyKeyboardInterrupt;
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyFloat, PyList, PyMapping};
 use std::cell::RefCell;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -574,4 +576,97 @@ impl Ensemble {
             }
         })
     }
+}
+
+/// A patched value as Python objects: the base model's and the patch's objects themselves
+/// (the front end hands over a copy of the patch), rebuilt dicts, scaled floats.
+fn merged_to_python<'py>(py: Python<'py>, m: &Merged<PyNode<'py>>) -> PyResult<Bound<'py, PyAny>> {
+    Ok(match m {
+        Merged::Node(n) => n.0.clone(),
+        Merged::Number(x) => PyFloat::new(py, *x).into_any(),
+        Merged::Map(entries) => {
+            let d = PyDict::new(py);
+            for (k, v) in entries {
+                d.set_item(k, merged_to_python(py, v)?)?;
+            }
+            d.into_any()
+        }
+    })
+}
+
+/// What `merge_patch` returns (see there).
+type MergeOut<'py> = (
+    Option<Bound<'py, PyDict>>,
+    Vec<usize>,
+    Vec<String>,
+    Bound<'py, PyDict>,
+    Option<String>,
+);
+
+/// `merge_patch(source, patch, variant)`: the variant's native model, `patch` applied to
+/// the native model dict `source` by the core (`oxyline_core::model::patch::merge`).
+/// Returns `(data, vessels, nodes, paths, refused)`: the patched model dict (sharing every
+/// element the patch leaves alone), the indices of the changed vessels, the nodes of the
+/// changed conditions, the patch paths (`path = value`) that changed each of them (keys
+/// `("vessel", i)` and `("condition", node)`), and None; or, for a value the patch cannot
+/// apply (the variant fails), `(None, [], [], {}, message)`. A path that names nothing of
+/// the model raises `ModelError` naming the variant and the path.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub(crate) fn merge_patch<'py>(
+    py: Python<'py>,
+    source: Bound<'py, PyDict>,
+    patch: Bound<'py, PyAny>,
+    variant: usize,
+) -> PyResult<MergeOut<'py>> {
+    let base = PyNode(source.clone().into_any());
+    let patched = match patch::merge(&base, &PyNode(patch), variant) {
+        Ok(p) => p,
+        Err(PatchError::Name(e)) => return Err(to_py(e)),
+        Err(PatchError::Value(e)) => {
+            return Ok((
+                None,
+                Vec::new(),
+                Vec::new(),
+                PyDict::new(py),
+                Some(e.to_string()),
+            ));
+        }
+    };
+    let data = source.copy()?;
+    if patched.has_vessels {
+        let list = PyList::new(
+            py,
+            source.get_item("vessels")?.map_or(Ok(Vec::new()), |v| {
+                v.try_iter()?.collect::<PyResult<Vec<_>>>()
+            })?,
+        )?;
+        for (i, v) in &patched.vessels {
+            list.set_item(*i, merged_to_python(py, v)?)?;
+        }
+        data.set_item("vessels", list)?;
+    }
+    if patched.has_conditions {
+        let bcs = PyDict::new(py);
+        if let Some(old) = source.get_item("boundary_conditions")? {
+            bcs.update(old.cast::<PyMapping>()?)?;
+        }
+        for (node, bc) in &patched.conditions {
+            bcs.set_item(node, merged_to_python(py, bc)?)?;
+        }
+        data.set_item("boundary_conditions", bcs)?;
+    }
+    for (key, value) in &patched.sections {
+        data.set_item(key, merged_to_python(py, value)?)?;
+    }
+    let paths = PyDict::new(py);
+    for (i, p) in &patched.vessel_paths {
+        paths.set_item(("vessel", *i), p)?;
+    }
+    for (node, p) in &patched.condition_paths {
+        paths.set_item(("condition", node), p)?;
+    }
+    let vessels = patched.vessels.iter().map(|(i, _)| *i).collect();
+    let nodes = patched.conditions.iter().map(|(n, _)| n.clone()).collect();
+    Ok((Some(data), vessels, nodes, paths, None))
 }

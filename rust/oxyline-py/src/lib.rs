@@ -97,7 +97,7 @@ mod _core {
     #[pymodule_export]
     use super::{
         chamber_elastance,
-        ensemble::Ensemble,
+        ensemble::{Ensemble, merge_patch},
         errors::{_panic_probe, ModelError, ResourceError, SolverError, UnstableTimeStep},
         model_bytes,
         network::Network,

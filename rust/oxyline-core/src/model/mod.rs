@@ -16,6 +16,7 @@ use crate::error::{Error, Result};
 pub mod facilitation;
 pub mod native;
 pub mod node;
+pub mod patch;
 pub mod plausibility;
 pub mod pwdb;
 pub mod settings;
