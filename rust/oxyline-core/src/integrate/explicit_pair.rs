@@ -354,7 +354,14 @@ impl<'a> Dopri5<'a> {
         }
         ydi.clear();
         ydi.resize(y.len(), 0.0);
-        self.rk.rate_into(time, yi, ydi)?;
+        // the elimination's running Newton scale is put back: output times never change
+        // the solution
+        let scale = self.rk.newton_scale().copied();
+        let done = self.rk.rate_into(time, yi, ydi);
+        if let (Some(s), Some(m)) = (scale, self.rk.newton_scale_mut()) {
+            *m = s;
+        }
+        done?;
         zi.clear();
         zi.extend((0..z.len()).map(|i| self.z.dense(i, theta, h, z[i])));
         Ok(())
