@@ -161,7 +161,11 @@ impl Stages {
     fn combine(&mut self, a: &[f64], h: f64, rows: Option<&[usize]>) {
         let one = |i: usize, stage: &mut [f64]| {
             let sum = a.iter().enumerate().fold(0.0, |acc, (j, &w)| {
-                if w == 0.0 { acc } else { acc + w * self.k[j][i] }
+                if w == 0.0 {
+                    acc
+                } else {
+                    acc + w * self.k[j][i]
+                }
             });
             stage[i] = self.start[i] + h * sum;
         };
@@ -439,7 +443,10 @@ mod tests {
         for z in [1e-2, -1e-2] {
             let (_, est, _) = tableau_step(|_, y| y, 0.0, 1.0, z);
             let c = est.abs() / z.abs().powi(5);
-            assert!((c - ESTIMATE_CONSTANT).abs() < 0.01 * ESTIMATE_CONSTANT, "{c}");
+            assert!(
+                (c - ESTIMATE_CONSTANT).abs() < 0.01 * ESTIMATE_CONSTANT,
+                "{c}"
+            );
         }
     }
 

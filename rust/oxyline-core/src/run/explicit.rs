@@ -118,7 +118,10 @@ fn probe(
 /// The highest significant frequency of the forcing at `rtol` (Hz; the unforced default
 /// without a periodic waveform).
 fn forcing_frequency(dae: &Dae, rtol: f64) -> f64 {
-    let each = dae.forcing.iter().filter_map(|(_, w)| waveform_frequency(w, rtol));
+    let each = dae
+        .forcing
+        .iter()
+        .filter_map(|(_, w)| waveform_frequency(w, rtol));
     each.fold(None, |m: Option<f64>, f| Some(m.map_or(f, |m| m.max(f))))
         .unwrap_or(UNFORCED_FREQUENCY)
 }
@@ -409,8 +412,13 @@ impl Cycles<'_, '_> {
                 Err(e) if h <= ex.h_min => return Err(e),
                 Err(_) => [f64::INFINITY; 4],
             };
-            let err = kinds.iter().fold(0.0f64, |m, &k| m.max(k));
-            if !(err <= 1.0) && h > ex.h_min {
+            // a non-finite state (NaN estimate) is an error to reject, not one `max` skips
+            let err = if kinds.iter().any(|k| k.is_nan()) {
+                f64::INFINITY
+            } else {
+                kinds.iter().fold(0.0f64, |m, &k| m.max(k))
+            };
+            if err > 1.0 && h > ex.h_min {
                 let (dp, y, z) = parts(&mut self.state);
                 dp.reject(y, z);
                 ex.reject(h, err);
@@ -525,7 +533,10 @@ mod tests {
         }
         // stiff (ceiling 10 µs): the implicit step at rtol 1e-2 is 1.7 ms
         for rtol in [1e-2, 1e-3, 1e-4] {
-            assert!(!explicit_is_cheaper(rtol, omega, 1e-5, h_max, 0.5), "{rtol}");
+            assert!(
+                !explicit_is_cheaper(rtol, omega, 1e-5, h_max, 0.5),
+                "{rtol}"
+            );
         }
         // the predicted steps follow rtol^(1/4) and rtol^(1/2)
         let (e1, i1) = predicted_steps(1e-4, omega, 1.0, [1.0; 2], 0.5);

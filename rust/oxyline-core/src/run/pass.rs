@@ -1,10 +1,10 @@
 //! One pass of a run: settings → plan → initial state → cycle loop → outcome.
 
 use super::adaptive::Adaptive;
-use super::explicit::Explicit;
 use super::checkpoint::{Checkpoints, Snapshot};
 use super::coupling::{Species, State};
 use super::cycle::Cycles;
+use super::explicit::Explicit;
 use super::mean_flow::MeanAbs;
 use super::outcome::Outcome;
 use super::plan::Plan;
