@@ -21,6 +21,10 @@ error-controlled run writing its rows as often as that fixed step did (its solut
 depend on the output interval; a fixed step writes a row per step at most). All runs take
 exactly ``cycles`` cycles (``until_periodic=None``).
 
+Methods (``--methods``): the error-controlled runs of each rtol with generalized-α, the explicit
+pair (``dopri5``, Dormand–Prince 5(4); a circuit with valves refuses it) and ``auto`` (which
+picks one of the two by predicted cost; the table names the one it ran).
+
     python benches/bench_accuracy.py                     # the whole benchmark set
     python benches/bench_accuracy.py --models adan56 --cycles 2
 """
@@ -40,6 +44,7 @@ MODELS = ("adan56", "whole-body-140", "circle-of-willis", "paper-bifurcated", "c
           "tree-1e5-o2", "adan56-st")
 OUTPUTS = (1e-3, 5e-3, 10e-3, 20e-3)
 RTOLS = (1e-2, 1e-3, 1e-4)
+METHODS = ("generalized-alpha", "dopri5", "auto")
 SWEEP = (50, 100, 200, 400, 800, 1600, 3200, 6400)  # fixed steps per cycle
 REF_ROWS = 32000  # reference rows per cycle: every output time of the runs is one of them
 
@@ -108,7 +113,8 @@ def sweep_match(fixed: list[Any], e: tuple[float, float, float]
 
 
 def bench(name: str, cycles: int, rtols: tuple[float, ...], outputs: tuple[float, ...],
-          sweep: tuple[int, ...], ref_factor: int, summary: list[str]) -> None:
+          sweep: tuple[int, ...], ref_factor: int, summary: list[str],
+          methods: tuple[str, ...] = METHODS) -> None:
     model = load(name)
     period = model.period or 1.0
     ref_dt = period / (ref_factor * sweep[-1])
@@ -127,33 +133,49 @@ def bench(name: str, cycles: int, rtols: tuple[float, ...], outputs: tuple[float
     print("|---|---|---|---|---|")
     for dt, cpu, (a, b, c), _ in fixed:
         print(f"| {dt * 1e3:.3g} ms | {fmt(a)} | {fmt(b)} | {fmt(c)} | {cpu:.3f} s |")
-    print("\n| rtol | output | pulse pressure | flow | PO2 | estimate (p / q / species) | "
-          "steps (rejected) | dt range | CPU | fixed match (dt, CPU) | CPU ratio at its output |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print("\n| rtol | method (ran) | output | pulse pressure | flow | PO2 | estimate (p / q / "
+          "species) | steps (rejected) | dt range | CPU | fixed match (dt, CPU) | "
+          "CPU ratio at its output |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for rtol in rtols:
-        for every in outputs:
-            res, cpu = run(model, cycles=cycles, rtol=rtol, dt="auto", output_every=every)
-            e = errors(res, ref)
-            s, est = res.settings, res.error_estimate
-            match = "| | |"
-            if every == outputs[0]:
-                m = sweep_match(fixed, e)
-                # the ratio at equal output: the same error-controlled run (output never
-                # changes its solution) writing rows as often as the matched fixed step did
-                # (a fixed step of 20 ms writes 50 rows a cycle, not 1000)
-                cpu_eq = run(model, cycles=cycles, rtol=rtol, dt="auto", output_every=m[2])[1] if m else 0
-                match = (f"| {m[1] * 1e3:.3g} ms, {m[0]:.3f} s | {cpu_eq / m[0]:.2f} |" if m
-                         else "| none of the sweep | — |")
-                ratio = f"{cpu_eq / m[0]:.2f}" if m else "— (finer than the sweep)"
-                summary.append(f"| {name} | rtol {rtol:g} | {fmt(e[0])} / {fmt(e[1])} / "
-                               f"{fmt(e[2])} | {cpu:.3f} s ({cpu_eq:.3f} s) | "
-                               f"{f'{m[1] * 1e3:.3g} ms, {m[0]:.3f} s' if m else '—'} "
-                               f"| {ratio} |")
-            est_s = " / ".join(f"{est.get(k, float('nan')):.1e}"
-                               for k in ("pressure", "flow", "species"))
-            print(f"| {rtol:g} | {every * 1e3:g} ms | {fmt(e[0])} | {fmt(e[1])} | {fmt(e[2])} "
-                  f"| {est_s} | {s['steps']} ({s['rejected_steps']}) | "
-                  f"{s['dt_min'] * 1e3:.2g}–{s['dt_max'] * 1e3:.2g} ms | {cpu:.3f} s {match}")
+        for method in methods:
+            controlled(model, name, cycles, rtol, method, outputs, ref, fixed, summary)
+
+
+def controlled(model: Any, name: str, cycles: int, rtol: float, method: str,
+           outputs: tuple[float, ...], ref: Any, fixed: list[Any], summary: list[str]
+           ) -> None:
+    """The rows of one rtol and method: a run per output interval, the first matched with
+    the fixed sweep."""
+    kw = {"cycles": cycles, "rtol": rtol, "dt": "auto", "method": method}
+    for every in outputs:
+        try:
+            res, cpu = run(model, output_every=every, **kw)
+        except oxyline.ModelError as err:
+            print(f"| {rtol:g} | {method} (refused: {err}) |")
+            return
+        e = errors(res, ref)
+        ran = f"{method} ({res.settings['method']})"
+        s, est = res.settings, res.error_estimate
+        match = "| | |"
+        if every == outputs[0]:
+            m = sweep_match(fixed, e)
+            # the ratio at equal output: the same error-controlled run (output never
+            # changes its solution) writing rows as often as the matched fixed step did
+            # (a fixed step of 20 ms writes 50 rows a cycle, not 1000)
+            cpu_eq = run(model, output_every=m[2], **kw)[1] if m else 0
+            match = (f"| {m[1] * 1e3:.3g} ms, {m[0]:.3f} s | {cpu_eq / m[0]:.2f} |" if m
+                     else "| none of the sweep | — |")
+            ratio = f"{cpu_eq / m[0]:.2f}" if m else "— (finer than the sweep)"
+            summary.append(f"| {name} | rtol {rtol:g}, {ran} | {fmt(e[0])} / {fmt(e[1])} / "
+                           f"{fmt(e[2])} | {cpu:.3f} s ({cpu_eq:.3f} s) | "
+                           f"{f'{m[1] * 1e3:.3g} ms, {m[0]:.3f} s' if m else '—'} "
+                           f"| {ratio} |")
+        est_s = " / ".join(f"{est.get(k, float('nan')):.1e}"
+                           for k in ("pressure", "flow", "species"))
+        print(f"| {rtol:g} | {ran} | {every * 1e3:g} ms | {fmt(e[0])} | {fmt(e[1])} | {fmt(e[2])} "
+              f"| {est_s} | {s['steps']} ({s['rejected_steps']}) | "
+              f"{s['dt_min'] * 1e3:.2g}–{s['dt_max'] * 1e3:.2g} ms | {cpu:.3f} s {match}")
 
 
 def main() -> None:
@@ -165,13 +187,14 @@ def main() -> None:
                     help="output intervals in s (the first is compared with the sweep)")
     ap.add_argument("--sweep", type=int, nargs="+", default=list(SWEEP),
                     help="fixed steps per cycle of the sweep (the largest sets the reference)")
+    ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=METHODS)
     ap.add_argument("--ref-factor", type=int, default=20,
                     help="the reference step is the sweep's finest over this")
     a = ap.parse_args()
     summary: list[str] = []
     for name in a.models:
         bench(name, a.cycles, tuple(a.rtols), tuple(a.outputs), tuple(sorted(a.sweep)),
-              a.ref_factor, summary)
+              a.ref_factor, summary, tuple(a.methods))
     print("\n## Summary (errors: pulse pressure / flow / PO2; ratio: CPU of the "
           "error-controlled run over the cheapest fixed step of equal error)\n")
     print("| model | method | error vs reference | CPU at 1 ms output (at the fixed step's) | "

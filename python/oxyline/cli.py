@@ -585,7 +585,7 @@ def _add_run(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cycles", type=int, help="cardiac cycles to run (default: the model's "
                                               "simulation.cycles, else 10)")
     p.add_argument("--dt", type=float, help="time step in s (default: auto)")
-    p.add_argument("--method", choices=["auto", "rk4", "generalized-alpha"],
+    p.add_argument("--method", choices=["auto", "rk4", "generalized-alpha", "dopri5"],
                    help="time integrator (default: the model's, else auto)")
     p.add_argument("--until-periodic", type=_tolerance_or_none, metavar="TOL",
                    help="run until the cycle-to-cycle change is below TOL (relative), at least "

@@ -20,7 +20,7 @@ class SimulateOptions(TypedDict, total=False):
     #: time step, s, or ``"auto"`` (half the stable RK4 step, or the output interval)
     dt: float | Literal["auto"]
     #: time integrator
-    method: Literal["auto", "rk4", "generalized-alpha"]
+    method: Literal["auto", "rk4", "generalized-alpha", "dopri5"]
     #: output interval, s
     output_every: float
     #: keep the last cycle (time from 0) or every cycle

@@ -400,7 +400,7 @@ def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     """Run a network and return its pressure and flow waveforms.
 
     ``overrides`` replace the model's ``simulation`` settings: ``cycles``, ``dt`` (s or
-    ``"auto"``), ``method`` (``"auto"``, ``"rk4"``, ``"generalized-alpha"``), ``output_every``
+    ``"auto"``), ``method`` (``"auto"``, ``"rk4"``, ``"generalized-alpha"``, ``"dopri5"``), ``output_every``
     (s), ``output_cycles`` (``"last"``/``"all"``), ``until_periodic`` (relative tolerance),
     ``max_cycles``, ``rho_infty``, ``start`` (``"steady"``, ``"periodic"``,
     ``"zero"``), ``segments`` (bool),

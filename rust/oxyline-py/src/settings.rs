@@ -212,9 +212,11 @@ pub(crate) fn parse_method(method: &str, rho_infty: f64) -> PyResult<Method> {
         "rk4" => Method::Rk4,
         "generalized-alpha" => Method::GeneralizedAlpha { rho_inf: rho_infty },
         "auto" => Method::Auto { rho_inf: rho_infty },
+        "dopri5" => Method::Dopri5,
         other => {
             return Err(ModelError::new_err(format!(
-                "simulation: unknown method '{other}' (expected rk4, generalized-alpha or auto)"
+                "simulation: unknown method '{other}' (expected rk4, generalized-alpha, dopri5 \
+                 or auto)"
             )));
         }
     })

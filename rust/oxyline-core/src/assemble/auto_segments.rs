@@ -111,16 +111,19 @@ pub fn forcing_frequency<'a>(bcs: impl IntoIterator<Item = &'a BoundarySpec>, rt
         let Some(w) = w.and_then(|s| Waveform::from_spec(s, "").ok()) else {
             continue;
         };
-        let Some(period) = w.period().filter(|p| *p > 0.0) else {
-            continue;
-        };
-        let k = significant_harmonics(&harmonic_powers(&w, period), rtol);
-        if k > 0 {
-            let f = k as f64 / period;
+        if let Some(f) = waveform_frequency(&w, rtol) {
             best = Some(best.map_or(f, |b: f64| b.max(f)));
         }
     }
     best.unwrap_or(UNFORCED_FREQUENCY)
+}
+
+/// The highest significant frequency (Hz) of one periodic waveform (None: not periodic, or
+/// no pulsatile power).
+pub fn waveform_frequency(w: &Waveform, rtol: f64) -> Option<f64> {
+    let period = w.period().filter(|p| *p > 0.0)?;
+    let k = significant_harmonics(&harmonic_powers(w, period), rtol);
+    (k > 0).then(|| k as f64 / period)
 }
 
 /// |a_k|² of harmonics k = 1, 2, … of `w` over `period`.

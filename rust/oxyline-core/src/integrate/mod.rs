@@ -10,12 +10,15 @@
 //! * [`periodic`] — the periodic state at t = 0 of a linear circuit (the `periodic` start);
 //! * [`stability`] — the largest stable RK4 step and the element that sets it;
 //! * [`adaptive`] — error control for generalized-α: tolerances, local error estimate,
-//!   step-size controller, dense output.
+//!   step-size controller, dense output;
+//! * [`explicit_pair`] — Dormand–Prince 5(4) with its continuous extension, for error-controlled
+//!   runs of non-stiff circuits.
 //!
 //! The run loop drives either through [`Integrator`].
 
 pub mod adaptive;
 mod algebraic;
+pub mod explicit_pair;
 pub mod genalpha;
 mod leaves;
 pub mod newton;

@@ -505,6 +505,17 @@ impl<'a> Rk4<'a> {
         Ok(())
     }
 
+    /// ẏ of the differential unknowns at (t, y) into `out` (its other entries untouched);
+    /// the algebraic unknowns of `y` are made consistent first (the stages of an explicit
+    /// pair, `explicit_pair`).
+    pub fn rate_into(&mut self, time: f64, y: &mut [f64], out: &mut [f64]) -> Result<()> {
+        self.rhs(time, y, 0)?;
+        for &i in &self.diff {
+            out[i] = self.st.k[0][i];
+        }
+        Ok(())
+    }
+
     /// Time derivative of the differential unknowns at (t, y) (zero for algebraic ones);
     /// the algebraic unknowns of `y` are made consistent first.
     /// The stiff branches keep their mode (`y` may not be consistent yet: a zero start's

@@ -22,14 +22,14 @@ use std::cell::Cell;
 /// Schwarz: (Σ A ω³)(Σ A ω) ≥ (Σ A ω²)²), where a single 1/ω₁ for every unknown overstated
 /// the errors of fast, small components (a small vessel's segment flows) by ω_m/ω₁ and let
 /// them set the step.
-const ACCUMULATION: f64 = 3.0;
+pub(super) const ACCUMULATION: f64 = 3.0;
 
 /// The smallest share of the largest flow amplitude a flow group's absolute tolerance is
 /// scaled to (a vessel without flow so far is not held to a vanishing one).
-const FLOW_SHARE_FLOOR: f64 = 1e-4;
+pub(super) const FLOW_SHARE_FLOOR: f64 = 1e-4;
 
 /// The flow group of a branch that is no vessel's.
-const NO_VESSEL: u32 = u32::MAX;
+pub(super) const NO_VESSEL: u32 = u32::MAX;
 
 /// Accepted steps after a rejection during which the step does not grow.
 const HOLD_AFTER_REJECTION: usize = 8;
@@ -583,7 +583,7 @@ impl Adaptive {
 }
 
 /// The vessel of every branch's flow (`NO_VESSEL` for the others').
-fn flow_groups(dae: &Dae) -> Vec<u32> {
+pub(super) fn flow_groups(dae: &Dae) -> Vec<u32> {
     let names = &dae.names;
     (0..names.n_branches())
         .map(|b| {

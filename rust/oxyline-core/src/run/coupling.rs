@@ -5,6 +5,7 @@
 use crate::circuit::Dae;
 use crate::error::{Error, Result};
 use crate::integrate::Integrator;
+use crate::integrate::explicit_pair::Dopri5;
 use crate::integrate::rk4::{CoupledStages, Rk4};
 use crate::transport::{Formulation, Transport};
 
@@ -21,6 +22,9 @@ pub(super) enum Flow<'d> {
     /// derivative at every RK4 stage's consistent flow state, which [`Integrator`] (one whole
     /// step at a time) does not expose.
     Monolithic(Box<Rk4<'d>>),
+    /// The explicit pair of an error-controlled run, species (if any) in its stages
+    /// (`run::explicit`).
+    Explicit(Box<Dopri5<'d>>),
 }
 
 impl<'d> Flow<'d> {
@@ -28,6 +32,7 @@ impl<'d> Flow<'d> {
         match self {
             Flow::Split(ig) => ig.as_mut(),
             Flow::Monolithic(rk) => rk.as_mut(),
+            Flow::Explicit(dp) => dp.as_mut(),
         }
     }
 }
@@ -184,6 +189,13 @@ impl State<'_, '_> {
                 let zk = sp.zk.get_or_insert_with(|| CoupledStages::coupled(n));
                 rk.step_coupled(t, y, &mut sp.z, zk, &mut *sp.tr)
             }
+            (Flow::Explicit(dp), Some(sp)) => {
+                // one step of dt accepted whatever its estimate (error-controlled runs step
+                // through `run::explicit`)
+                dp.step(t, self.dt, y, &mut sp.z, &mut *sp.tr)?;
+                dp.accept();
+                Ok(())
+            }
             (flow, mut species) => {
                 if let Some(sp) = species.as_mut() {
                     sp.before_flow_step(y);
@@ -279,7 +291,7 @@ impl State<'_, '_> {
         let Some(sp) = self.species.as_mut() else {
             return Ok(());
         };
-        let monolithic = matches!(self.flow, Flow::Monolithic(_));
+        let monolithic = matches!(self.flow, Flow::Monolithic(_) | Flow::Explicit(_));
         let names = &self.dae.names;
         sp.tr
             .check_finite(&sp.z, t, &|v| names.vessel(v).map(str::to_owned))?;

@@ -14,7 +14,7 @@ use crate::integrate::newton::scaled_increment;
 
 /// The running loop. A failed or interrupted run keeps everything recorded so far.
 pub(super) struct Cycles<'r, 'f> {
-    s: &'r RunSettings,
+    pub(super) s: &'r RunSettings,
     pub state: State<'r, 'r>,
     pub rec: Recorder<'r, 'r, 'f>,
     /// The first pass's running mean of |Q|.
@@ -24,7 +24,7 @@ pub(super) struct Cycles<'r, 'f> {
     stride: usize,
     max_cycles: usize,
     /// Steps taken.
-    steps: usize,
+    pub(super) steps: usize,
     pub cycles_run: usize,
     /// Cycle-to-cycle change of the state at the end of the last cycle run (relative).
     pub periodic_error: f64,
@@ -34,6 +34,8 @@ pub(super) struct Cycles<'r, 'f> {
     released: bool,
     /// Error control (None: the fixed step).
     pub adaptive: Option<Adaptive>,
+    /// Error control with the explicit pair.
+    pub explicit: Option<super::explicit::Explicit>,
     /// svZeroDSolver's derived columns and cycle means (`RunSettings::svzerod`).
     derived: Option<DerivedState>,
     cycle_means: Option<CycleMeans>,
@@ -42,14 +44,14 @@ pub(super) struct Cycles<'r, 'f> {
 }
 
 /// What the rows of one cycle are for.
-struct CycleRows {
-    t0: f64,
+pub(super) struct CycleRows {
+    pub t0: f64,
     /// Certain to be part of the output: they may go to the sink as they come.
-    committed: bool,
+    pub committed: bool,
     /// Recorded at all.
-    recorded: bool,
+    pub recorded: bool,
     /// With their species outputs (those of cycles that will be discarded are not computed).
-    species: bool,
+    pub species: bool,
 }
 
 impl<'r, 'f> Cycles<'r, 'f> {
@@ -76,6 +78,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
             obs_row: Vec::new(),
             released: false,
             adaptive: None,
+            explicit: None,
             derived: None,
             cycle_means: None,
             rate_scratch: Default::default(),
@@ -246,7 +249,11 @@ impl<'r, 'f> Cycles<'r, 'f> {
             let t = if s.output_all_cycles { rows.t0 } else { 0.0 };
             self.output_row(t, rows.t0, true, committed)?;
         }
-        if let Some(mut ad) = self.adaptive.take() {
+        if let Some(mut ex) = self.explicit.take() {
+            let done = self.explicit_cycle(&mut ex, &rows, progress);
+            self.explicit = Some(ex);
+            done?;
+        } else if let Some(mut ad) = self.adaptive.take() {
             let done = self.adaptive_cycle(&mut ad, &rows, progress);
             self.adaptive = Some(ad);
             done?;

@@ -19,6 +19,7 @@ mod adaptive; // error control: variable step, dense output (docs/physics.md §1
 pub mod checkpoint;
 mod coupling;
 mod cycle;
+mod explicit; // error control with the explicit pair (docs/physics.md §10.4)
 mod flow_harmonics; // inlet renewal: the first pass's flow harmonics
 mod heap; // freed pages back to the OS before a large pass's cycle loop
 mod mean_flow;

@@ -67,13 +67,23 @@ impl Outcome {
         let period = cycles.s_period();
         let (state, rec) = (cycles.state, cycles.rec);
         let (n_probes, columns_per_species) = (rec.n_probes(), rec.columns_per_species());
-        let error_control = cycles.adaptive.map(|ad| ErrorControlOutcome {
-            estimate: ad.estimate,
-            steps: ad.steps,
-            rejected: ad.rejected,
-            dt_min: ad.h_smallest,
-            dt_max: ad.h_largest,
+        let explicit = cycles.explicit.map(|ex| ErrorControlOutcome {
+            estimate: ex.estimate,
+            steps: ex.steps,
+            rejected: ex.rejected,
+            dt_min: ex.h_smallest,
+            dt_max: ex.h_largest,
         });
+        let error_control = cycles
+            .adaptive
+            .map(|ad| ErrorControlOutcome {
+                estimate: ad.estimate,
+                steps: ad.steps,
+                rejected: ad.rejected,
+                dt_min: ad.h_smallest,
+                dt_max: ad.h_largest,
+            })
+            .or(explicit);
         // an error-controlled run reports its mean step
         let dt = match &error_control {
             Some(ec) if ec.steps > 0 => cycles_run as f64 * period / ec.steps as f64,

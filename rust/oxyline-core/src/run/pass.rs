@@ -4,6 +4,7 @@ use super::adaptive::Adaptive;
 use super::checkpoint::{Checkpoints, Snapshot};
 use super::coupling::{Species, State};
 use super::cycle::Cycles;
+use super::explicit::Explicit;
 use super::mean_flow::MeanAbs;
 use super::outcome::Outcome;
 use super::plan::Plan;
@@ -74,7 +75,8 @@ pub(super) fn run(
             // per-segment species columns nobody records are not computed
             tr.set_recorded_columns(s.species_columns.as_deref());
             let level = flow.integrator().alpha_f();
-            let (sp, stored) = Species::start(tr, &y, plan.dt, level, !plan.use_rk4)?;
+            let split_implicit = !plan.use_rk4 && plan.explicit.is_none();
+            let (sp, stored) = Species::start(tr, &y, plan.dt, level, split_implicit)?;
             (Some(sp), stored)
         }
         None => (None, Vec::new()),
@@ -99,9 +101,13 @@ pub(super) fn run(
     };
     let method = plan.method_name();
     let mut cycles = Cycles::new(s, state, rec, mean, plan.steps_per_cycle, plan.stride);
-    cycles.adaptive = s
-        .adaptive()
-        .map(|tol| Adaptive::new(dae, tol, s.method.rho_inf(), s.period, s.output_every));
+    match (s.adaptive(), plan.explicit) {
+        (Some(tol), Some(ceiling)) => cycles.explicit = Some(Explicit::new(dae, tol, s, ceiling)),
+        (tol, _) => {
+            cycles.adaptive =
+                tol.map(|tol| Adaptive::new(dae, tol, s.method.rho_inf(), s.period, s.output_every))
+        }
+    }
     cycles.start_svzerod(!plan.use_rk4);
     if let Some(r) = &resume {
         cycles.restore(r)?;

@@ -7,6 +7,7 @@ use super::coupling::{Flow, RK4_UPWIND_COURANT};
 use super::settings::{Method, RunSettings, Start};
 use crate::circuit::{Dae, Regime};
 use crate::error::{Error, Result};
+use crate::integrate::explicit_pair::Dopri5;
 use crate::integrate::genalpha::GenAlpha;
 use crate::integrate::periodic;
 use crate::integrate::rk4::Rk4;
@@ -17,6 +18,8 @@ use crate::transport::{Formulation, Transport};
 pub(super) struct Plan<'d> {
     dae: &'d Dae,
     pub use_rk4: bool,
+    /// An error-controlled run with the explicit pair: its step ceiling.
+    pub explicit: Option<f64>,
     /// RK4's stability limit, when it was probed (`rk4` and `auto`).
     pub stability: Option<StabilityLimit>,
     /// The step: a whole fraction of the period.
@@ -40,21 +43,29 @@ impl<'d> Plan<'d> {
         transport: Option<&mut Transport>,
         progress: &mut dyn FnMut(f64, f64) -> bool,
     ) -> Result<Self> {
+        let quasi = transport
+            .as_deref()
+            .is_some_and(|t| t.formulation() == Formulation::TlQuasisteady);
+        let (transport_dt, reaction) = transport_step_limit(dae, steady, transport);
         if s.adaptive().is_some() {
-            // error control: generalized-α, its steps chosen during the run; the plan's step
-            // is only the quasi-steady transport's start (docs/physics.md §10)
+            // error control: generalized-α or the explicit pair, its steps chosen during the
+            // run; the plan's step is only the quasi-steady transport's start (docs/physics.md
+            // §10)
+            let t_end = s.max_cycles() as f64 * s.period;
+            let mut go = || progress(0.0, t_end);
+            let explicit = super::explicit::choose(dae, steady, s, (transport_dt, quasi), &mut go)?;
             let out_per_cycle = (s.period / s.output_every).round().max(1.0) as usize;
             return Ok(Plan {
                 dae,
                 use_rk4: false,
-                stability: None,
+                explicit: explicit.as_ref().map(|e| e.ceiling),
+                stability: explicit.map(|e| e.stability),
                 dt: s.period / 1000.0,
                 steps_per_cycle: out_per_cycle,
                 stride: 1,
                 rk4: None,
             });
         }
-        let (transport_dt, reaction) = transport_step_limit(dae, steady, transport);
         let t_end = s.max_cycles() as f64 * s.period;
         let mut go = || progress(0.0, t_end);
         let (use_rk4, stability, rk4) = choose_method(dae, steady, s, transport_dt, &mut go)?;
@@ -68,6 +79,7 @@ impl<'d> Plan<'d> {
         Ok(Plan {
             dae,
             use_rk4,
+            explicit: None,
             stability,
             dt,
             steps_per_cycle,
@@ -78,7 +90,9 @@ impl<'d> Plan<'d> {
 
     /// The method's name as reported in the outcome.
     pub fn method_name(&self) -> &'static str {
-        if self.use_rk4 {
+        if self.explicit.is_some() {
+            crate::integrate::explicit_pair::NAME
+        } else if self.use_rk4 {
             "rk4"
         } else {
             "generalized-alpha"
@@ -138,6 +152,14 @@ impl<'d> Plan<'d> {
     /// The run's flow integrator; an RK4 start `y` is made consistent with the forcing at 0.
     /// With `monolithic`, RK4 carries the species in its own stages (see [`Flow`]).
     pub fn flow(&mut self, s: &RunSettings, y: &mut [f64], monolithic: bool) -> Result<Flow<'d>> {
+        if self.explicit.is_some() {
+            let mut rk = match self.rk4.take() {
+                Some(rk) => rk,
+                None => Rk4::new(self.dae, Regime::Transient, self.dt)?,
+            };
+            rk.make_consistent(0.0, y)?;
+            return Ok(Flow::Explicit(Box::new(Dopri5::new(rk))));
+        }
         if !self.use_rk4 {
             // the RK4 integrator of the consistent start (or of the stability probe) is not
             // needed again: drop it before the run's own integrator is built

@@ -11,10 +11,13 @@ pub enum Method {
     GeneralizedAlpha {
         rho_inf: f64,
     },
-    /// Implicit when the stable RK4 step is far below the output step, else RK4.
+    /// Implicit when the stable RK4 step is far below the output step, else RK4; under error
+    /// control, the explicit pair or generalized-α by predicted cost (`run::explicit`).
     Auto {
         rho_inf: f64,
     },
+    /// Dormand–Prince 5(4) under error control (`integrate::explicit_pair`).
+    Dopri5,
 }
 
 impl Method {
@@ -22,7 +25,7 @@ impl Method {
     pub(super) fn rho_inf(self) -> f64 {
         match self {
             Method::GeneralizedAlpha { rho_inf } | Method::Auto { rho_inf } => rho_inf,
-            Method::Rk4 => 0.5,
+            Method::Rk4 | Method::Dopri5 => 0.5,
         }
     }
 }
@@ -119,6 +122,11 @@ impl RunSettings {
         if let Some(tol) = &self.tolerances {
             validate_tolerances(tol, self)?;
         }
+        if let (Method::Dopri5, Some(dt)) = (self.method, self.dt) {
+            return bad(format!(
+                "method 'dopri5' chooses its own steps (error control): give rtol, not dt = {dt}"
+            ));
+        }
         if let Some(p) = self.probes.iter().find(|&&p| p >= dae.n) {
             return bad(format!("output index {p} out of range"));
         }
@@ -128,9 +136,19 @@ impl RunSettings {
         self.svzerod.validate(dae.n)
     }
 
-    /// An error-controlled run: tolerances and no fixed step.
+    /// An error-controlled run: tolerances and no fixed step (`dopri5` without tolerances:
+    /// rtol 1e-3 and the default atol).
     pub(super) fn adaptive(&self) -> Option<Tolerances> {
-        self.tolerances.filter(|_| self.dt.is_none())
+        if self.dt.is_some() {
+            return None;
+        }
+        match (self.tolerances, self.method) {
+            (None, Method::Dopri5) => Some(Tolerances {
+                rtol: 1e-3,
+                atol: Default::default(),
+            }),
+            (tol, _) => tol,
+        }
     }
 
     /// The most cycles the run may take: `cycles`, or up to `max_cycles` while waiting for
@@ -225,6 +243,14 @@ mod tests {
         assert_eq!(
             bad(|s| s.dt = Some(0.0)),
             "simulation: dt must be > 0, got 0"
+        );
+        assert_eq!(
+            bad(|s| {
+                s.method = Method::Dopri5;
+                s.dt = Some(1e-3);
+            }),
+            "simulation: method 'dopri5' chooses its own steps (error control): give rtol, not \
+             dt = 0.001"
         );
         assert_eq!(
             bad(|s| s.probes = vec![0, 7]),

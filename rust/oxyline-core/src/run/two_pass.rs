@@ -103,7 +103,7 @@ fn mean_flow_pass(s: &RunSettings) -> RunSettings {
         svzerod: Default::default(),
         ..s.clone()
     };
-    if s.tolerances.is_some() && s.dt.is_none() {
+    if s.adaptive().is_some() {
         // an error-controlled run measures the mean on the fixed coarse implicit step: the
         // closures then depend neither on its tolerances' steps nor on its output interval
         first.tolerances = None;
@@ -125,7 +125,7 @@ fn mean_flow_pass(s: &RunSettings) -> RunSettings {
                 first.dt = Some(dt.max(s.period / MEAN_FLOW_COARSE_STEPS));
             }
         }
-        Method::Auto { .. } => {}
+        Method::Auto { .. } | Method::Dopri5 => {}
     }
     first
 }

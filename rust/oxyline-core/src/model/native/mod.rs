@@ -51,7 +51,7 @@ pub const SIM_KEYS: &[&str] = &[
 ];
 pub const OUTPUT_KEYS: &[&str] = &["cycles", "every", "segments", "variables", "vessels"];
 /// Run methods a model's `simulation: method` may name.
-pub const METHODS: &[&str] = &["auto", "rk4", "generalized-alpha"];
+pub const METHODS: &[&str] = &["auto", "rk4", "generalized-alpha", "dopri5"];
 
 pub(crate) fn err(element: &str, message: impl Into<String>) -> Error {
     Error::model(element, message)
