@@ -9,7 +9,6 @@ use crate::integrate::adaptive::{
     GROW, SAFETY, StepControl, Tolerances, hermite, local_error_constant, quadratic_extrapolation,
     rate_shift,
 };
-use std::cell::Cell;
 
 /// The local errors of a forced periodic response's harmonic at ω accumulate over 1/ω
 /// (|iω − λ| ≥ ω) for a normal, non-resonant circuit; coupled circuits amplify them more (the
@@ -31,6 +30,9 @@ pub(super) const FLOW_SHARE_FLOOR: f64 = 1e-4;
 /// The flow group of a branch that is no vessel's.
 pub(super) const NO_VESSEL: u32 = u32::MAX;
 
+/// The growth of a flow group's amplitude (relative) that renews the flows' scales.
+const RESCALE: f64 = 0.01;
+
 /// Accepted steps after a rejection during which the step does not grow.
 const HOLD_AFTER_REJECTION: usize = 8;
 
@@ -45,8 +47,9 @@ pub(super) struct Adaptive {
     /// ρ∞/(2(1 + ρ∞)²): an algebraic unknown's error per h² y''.
     c_algebraic: f64,
     delta: f64,
-    /// Unknowns without a rate in the DAE (E = 0).
+    /// Unknowns without a rate in the DAE (E = 0), and their indices.
     algebraic: Vec<bool>,
+    algebraic_index: Vec<u32>,
     /// The largest |ẏ_i| and |ÿ_i| so far: their ratio is the unknown's signal frequency ω_i,
     /// over which its local errors accumulate (see `Adaptive::flow_error`).
     rate_peak: Vec<f64>,
@@ -62,14 +65,20 @@ pub(super) struct Adaptive {
     /// largest), where one flow scale for all vessels let a small vessel's flow err by the
     /// large vessels' absolute tolerance. Other flows keep atol and their own peak.
     flow_group: Vec<u32>,
-    /// The largest |Q| so far per group, and over all groups.
+    /// The largest |Q| so far per group, and over all groups; the groups' largest |Q| when
+    /// the flows' scales were last set (see `track_flow_peaks`).
     group_peak: Vec<f64>,
+    group_set: Vec<f64>,
     flow_peak: f64,
     /// Every unknown's absolute tolerance (a flow's scaled by its group's share of the largest
     /// amplitude) and the scale s_i rtol is relative to with its value (its largest |y| so
     /// far, a flow's its group's amplitude), kept up to date as the peaks grow.
     atol: Vec<f64>,
     scale: Vec<f64>,
+    /// 1/(atol_i + rtol·s_i): an unknown's error weight, at the scale of the step's start
+    /// (the step's own |y| loosened it only while a peak grows; without it the estimate is
+    /// one multiplication per unknown).
+    inv_weight: Vec<f64>,
     /// The differential unknowns' local error estimate of the current step (scratch).
     le: Vec<f64>,
     /// Output rows per cycle.
@@ -115,22 +124,66 @@ pub(super) struct Adaptive {
     /// The cells' transport volumes at the step's start, and interpolated.
     v0: Vec<f64>,
     vi: Vec<f64>,
-    /// The dense output's weights of the row being written.
-    basis: Cell<Option<Basis>>,
 }
 
-/// The dense output's weights at one θ of one step (see `Adaptive::basis`).
-#[derive(Clone, Copy)]
-struct Basis {
-    theta: f64,
+/// The dense output of one row (see [`Adaptive::dense`]): the Hermite weights at θ and
+/// the rate shifts of the step's ends.
+pub(super) struct Dense<'s> {
+    ad: &'s Adaptive,
+    y: &'s [f64],
+    yd: &'s [f64],
     h: f64,
-    /// The step before (the start's rate shift depends on it).
-    h1: f64,
+    /// θh: the time into the step.
+    x: f64,
     b: [f64; 4],
     db: [f64; 4],
     s0: f64,
     s1: f64,
     inv_span: f64,
+}
+
+impl Dense<'_> {
+    /// The interpolated value of unknown `i`.
+    #[inline]
+    pub fn value(&self, i: usize) -> f64 {
+        let ad = self.ad;
+        if ad.algebraic[i] && ad.history > 0 {
+            return self.algebraic(i).0;
+        }
+        let (y0, y1, h) = (ad.y0[i], self.y[i], self.h);
+        let ydd = (self.yd[i] - ad.yd0[i]) * self.inv_span;
+        let d0 = ad.yd0[i] + self.s0 * ydd;
+        let d1 = self.yd[i] + self.s1 * ydd;
+        let b = &self.b;
+        b[0] * y0 + b[1] * h * d0 + b[2] * y1 + b[3] * h * d1
+    }
+
+    /// The interpolated value and rate of unknown `i`.
+    pub fn value_and_rate(&self, i: usize) -> (f64, f64) {
+        let ad = self.ad;
+        if ad.algebraic[i] && ad.history > 0 {
+            return self.algebraic(i);
+        }
+        let (y0, y1, h) = (ad.y0[i], self.y[i], self.h);
+        let ydd = (self.yd[i] - ad.yd0[i]) * self.inv_span;
+        let d0 = ad.yd0[i] + self.s0 * ydd;
+        let d1 = self.yd[i] + self.s1 * ydd;
+        let (b, db) = (&self.b, &self.db);
+        let v = b[0] * y0 + b[1] * h * d0 + b[2] * y1 + b[3] * h * d1;
+        let dv = (db[0] * y0 + db[2] * y1) / h + db[1] * d0 + db[3] * d1;
+        (v, dv)
+    }
+
+    /// An algebraic unknown's carried rate follows the spurious root (−ρ∞ per step): the
+    /// quadratic through its last three values instead (value and rate).
+    fn algebraic(&self, i: usize) -> (f64, f64) {
+        let ad = self.ad;
+        let (a, b, c) = (ad.ym1[i], ad.y0[i], self.y[i]);
+        let (x, h, h1) = (self.x, self.h, ad.h1);
+        let (s01, s12) = ((b - a) / h1, (c - b) / h);
+        let curv = (s12 - s01) / (h + h1);
+        (b + x * (s01 + curv * (x + h1)), s01 + curv * (2.0 * x + h1))
+    }
 }
 
 /// What one flow step's estimate found: the largest scaled error and its value per kind.
@@ -153,15 +206,21 @@ impl Adaptive {
             c_local: local_error_constant(rho_inf),
             c_algebraic: rho_inf / (2.0 * (1.0 + rho_inf).powi(2)),
             algebraic: dae.e.iter().map(|&e| e == 0.0).collect(),
+            algebraic_index: (0..dae.n)
+                .filter(|&i| dae.e[i] == 0.0)
+                .map(|i| u32::try_from(i).expect("2^32 unknowns"))
+                .collect(),
             peak: Vec::new(),
             rate_peak: Vec::new(),
             accel_peak: Vec::new(),
             inv_omega: Vec::new(),
             flow_group: flow_groups(dae),
             group_peak: Vec::new(),
+            group_set: Vec::new(),
             flow_peak: 0.0,
             atol: Vec::new(),
             scale: Vec::new(),
+            inv_weight: Vec::new(),
             le: Vec::new(),
             delta: rate_shift(rho_inf),
             out_per_cycle,
@@ -191,7 +250,6 @@ impl Adaptive {
             zi: Vec::new(),
             v0: Vec::new(),
             vi: Vec::new(),
-            basis: Cell::new(None),
         }
     }
 
@@ -210,7 +268,13 @@ impl Adaptive {
             let a = self.tol.atol.as_array();
             self.atol = (0..st.y.len()).map(|i| a[self.kind_of(i)]).collect();
             self.scale.clone_from(&self.peak);
+            self.inv_weight = vec![0.0; st.y.len()];
             self.track_flow_peaks(&st.y, true);
+            let rtol = self.tol.rtol;
+            let weights = self.atol.iter().zip(&self.scale);
+            for (w, (&a, &s)) in self.inv_weight.iter_mut().zip(weights) {
+                *w = 1.0 / (a + rtol * s);
+            }
         }
         self.y0.clone_from(&st.y);
         self.yd0.clone_from(&st.yd);
@@ -265,6 +329,7 @@ impl Adaptive {
             return raw;
         }
         st.flow.integrator().filter_error(&mut self.le);
+        self.zero_algebraic();
         self.scaled_errors(&st.y, h)
     }
 
@@ -295,42 +360,44 @@ impl Adaptive {
                 );
             }
         }
-        for (v, &alg) in self.le.iter_mut().zip(&self.algebraic) {
-            if alg {
-                *v = 0.0;
-            }
+        self.zero_algebraic();
+    }
+
+    /// The algebraic unknowns' entries of `le` to 0 (their error is judged apart).
+    fn zero_algebraic(&mut self) {
+        for &i in &self.algebraic_index {
+            self.le[i as usize] = 0.0;
         }
     }
 
     /// The largest scaled error per kind of the local errors in `le` (see `flow_error`),
-    /// each unknown weighted by its absolute tolerance plus rtol of its scale.
+    /// each unknown weighted by its absolute tolerance plus rtol of its scale. One branch-free
+    /// pass per kind over the differential unknowns (the algebraic ones' `le` is 0), then the
+    /// few algebraic unknowns by their index.
     fn scaled_errors(&self, y: &[f64], h: f64) -> FlowError {
-        let (rtol, h1, inv_h) = (self.tol.rtol, self.h1, 1.0 / h);
-        let alg = self.c_algebraic;
-        // (the first two steps' estimates are first order: judged as they are, one step's
-        // error, or the start would crawl)
-        let first = self.history < 2;
+        // accumulated over 1/ω_i, and over one step at the least; the first two steps'
+        // estimates are first order: judged as they are, one step's error, or the start
+        // would crawl (a zero 1/h makes the factor 1)
+        let inv_h = if self.history < 2 { 0.0 } else { 1.0 / h };
         let mut kinds = [0.0f64; 3];
         let ends = [0, self.kind_end[0], self.kind_end[1], y.len()];
         for (k, worst) in kinds.iter_mut().enumerate() {
-            for (i, &yi) in y.iter().enumerate().take(ends[k + 1]).skip(ends[k]) {
-                let scaled = if !self.algebraic[i] {
-                    // accumulated over 1/ω_i, and over one step at the least
-                    let per_step = if first {
-                        1.0
-                    } else {
-                        (self.inv_omega[i] * inv_h).max(1.0)
-                    };
-                    self.le[i].abs() * per_step
-                } else if self.history == 0 {
-                    0.0
-                } else {
-                    let (b, a) = (self.y0[i], self.ym1[i]);
-                    let curvature = 2.0 * ((yi - b) / h - (b - a) / h1) / (h + h1);
-                    alg * h * h * curvature.abs()
-                };
-                let weight = self.atol[i] + rtol * yi.abs().max(self.scale[i]);
-                *worst = worst.max(scaled / weight);
+            let r = ends[k]..ends[k + 1];
+            let unknowns = self.le[r.clone()].iter().zip(&self.inv_omega[r.clone()]);
+            *worst = unknowns
+                .zip(&self.inv_weight[r])
+                .fold(0.0f64, |m, ((&e, &w), &iw)| {
+                    m.max(e.abs() * (w * inv_h).max(1.0) * iw)
+                });
+        }
+        if self.history > 0 {
+            let (h1, alg) = (self.h1, self.c_algebraic);
+            for &i in &self.algebraic_index {
+                let i = i as usize;
+                let (a, b, c) = (self.ym1[i], self.y0[i], y[i]);
+                let curvature = 2.0 * ((c - b) / h - (b - a) / h1) / (h + h1);
+                let k = &mut kinds[self.kind_of(i)];
+                *k = k.max(alg * h * h * curvature.abs() * self.inv_weight[i]);
             }
         }
         FlowError {
@@ -401,7 +468,11 @@ impl Adaptive {
 
     /// Every group's flow amplitude from the flows of `y`, and (when a peak of `y` grew) the
     /// flows' scales and absolute tolerances: rtol of the group's amplitude A_g, atol scaled
-    /// by A_g over the largest group's (at least `FLOW_SHARE_FLOOR`).
+    /// by A_g over the largest group's (at least `FLOW_SHARE_FLOOR`). The scales and
+    /// tolerances are renewed when some A_g grew by more than `RESCALE` since they were last
+    /// set (a pass over every flow per step while the amplitudes still grow cost as much as
+    /// the estimate): a flow's scale stays within that share below its amplitude, the
+    /// stricter side.
     fn track_flow_peaks(&mut self, y: &[f64], grown: bool) {
         if !grown {
             return;
@@ -411,21 +482,31 @@ impl Adaptive {
             let vessels = self.flow_group.iter().filter(|&&g| g != NO_VESSEL);
             let groups = vessels.map(|&g| g as usize + 1).max();
             self.group_peak = vec![0.0; groups.unwrap_or(0)];
+            self.group_set = vec![-1.0; self.group_peak.len()];
         }
+        let mut renew = false;
         for (&g, q) in self.flow_group.iter().zip(&y[n0..n1]) {
             if g == NO_VESSEL {
                 continue;
             }
-            let p = &mut self.group_peak[g as usize];
-            *p = p.max(q.abs());
-            self.flow_peak = self.flow_peak.max(*p);
+            let (p, set) = (&mut self.group_peak[g as usize], self.group_set[g as usize]);
+            if q.abs() > *p {
+                *p = q.abs();
+                renew |= *p > set * (1.0 + RESCALE);
+            }
         }
+        if !renew {
+            return;
+        }
+        self.group_set.clone_from(&self.group_peak);
+        self.flow_peak = self.group_peak.iter().fold(0.0f64, |m, &p| m.max(p));
         let (atol, largest) = (self.tol.atol.flow, self.flow_peak);
         let members = self.flow_group.iter().zip(&self.peak[n0..n1]);
+        let rtol = self.tol.rtol;
         let flows = self.scale[n0..n1].iter_mut().zip(&mut self.atol[n0..n1]);
-        for ((s, t), (&g, &p)) in flows.zip(members) {
+        let flows = flows.zip(&mut self.inv_weight[n0..n1]);
+        for (((s, t), w), (&g, &p)) in flows.zip(members) {
             if g == NO_VESSEL {
-                *s = p;
                 continue;
             }
             let a = self.group_peak[g as usize];
@@ -435,6 +516,7 @@ impl Adaptive {
             } else {
                 atol
             };
+            *w = 1.0 / (*t + rtol * *s);
         }
     }
 
@@ -465,8 +547,9 @@ impl Adaptive {
             if v > self.peak[i] {
                 self.peak[i] = v;
                 grown = true;
-                if !(n0..n1).contains(&i) {
+                if !(n0..n1).contains(&i) || self.flow_group[i - n0] == NO_VESSEL {
                     self.scale[i] = v;
+                    self.inv_weight[i] = 1.0 / (self.atol[i] + self.tol.rtol * v);
                 }
             }
             if !rates {
@@ -502,51 +585,24 @@ impl Adaptive {
         (s0, self.delta * h)
     }
 
-    /// The Hermite basis and rate shifts at θ of a step of `h`, kept for the row's unknowns.
-    fn basis(&self, theta: f64, h: f64) -> Basis {
-        if let Some(k) = self
-            .basis
-            .get()
-            .filter(|k| (k.theta, k.h, k.h1) == (theta, h, self.h1))
-        {
-            return k;
-        }
+    /// The dense output at θ of the step of `h` from (y0, ẏ0) to (y, ẏ): its weights are
+    /// computed once for a row's unknowns. Call before [`Adaptive::accept`] (which moves y0
+    /// into the history).
+    pub fn dense<'s>(&'s self, theta: f64, h: f64, y: &'s [f64], yd: &'s [f64]) -> Dense<'s> {
         let (s0, s1) = self.shifts(h);
         let (b, db) = hermite(theta);
-        let k = Basis {
-            theta,
+        Dense {
+            ad: self,
+            y,
+            yd,
             h,
-            h1: self.h1,
+            x: theta * h,
             b,
             db,
             s0,
             s1,
             inv_span: 1.0 / (h - s1 + s0),
-        };
-        self.basis.set(Some(k));
-        k
-    }
-
-    /// The dense output of unknown `i` at θ of the step of `h` from (y0, ẏ0) to (y, ẏ): the
-    /// value and the rate. Call before [`Adaptive::accept`] (which moves y0 into the history).
-    pub fn interpolate(&self, i: usize, theta: f64, h: f64, y: &[f64], yd: &[f64]) -> (f64, f64) {
-        if self.algebraic[i] && self.history > 0 {
-            // an algebraic unknown's carried rate follows the spurious root (−ρ∞ per step):
-            // the quadratic through its last three values instead
-            let (a, b, c) = (self.ym1[i], self.y0[i], y[i]);
-            let (x, h1) = (theta * h, self.h1);
-            let (s01, s12) = ((b - a) / h1, (c - b) / h);
-            let curv = (s12 - s01) / (h + h1);
-            return (b + x * (s01 + curv * (x + h1)), s01 + curv * (2.0 * x + h1));
         }
-        let k = self.basis(theta, h);
-        let ydd = (yd[i] - self.yd0[i]) * k.inv_span;
-        let d0 = self.yd0[i] + k.s0 * ydd;
-        let d1 = yd[i] + k.s1 * ydd;
-        let (b, db) = (k.b, k.db);
-        let v = b[0] * self.y0[i] + b[1] * h * d0 + b[2] * y[i] + b[3] * h * d1;
-        let dv = (db[0] * self.y0[i] + db[2] * y[i]) / h + db[1] * d0 + db[3] * d1;
-        (v, dv)
     }
 
     /// The whole interpolated state at θ (flow by Hermite, species amounts linearly, as
@@ -560,11 +616,12 @@ impl Adaptive {
         let n = st.y.len();
         self.yi.resize(n, 0.0);
         self.ydi.resize(n, 0.0);
-        for i in 0..n {
-            let (v, d) = self.interpolate(i, theta, h, &st.y, &st.yd);
-            self.yi[i] = v;
-            self.ydi[i] = d;
+        let (mut yi, mut ydi) = (std::mem::take(&mut self.yi), std::mem::take(&mut self.ydi));
+        let dense = self.dense(theta, h, &st.y, &st.yd);
+        for ((i, v), d) in yi.iter_mut().enumerate().zip(&mut ydi) {
+            (*v, *d) = dense.value_and_rate(i);
         }
+        (self.yi, self.ydi) = (yi, ydi);
         self.zi.clear();
         if let Some(sp) = st.species.as_ref() {
             // amounts and the cells' transport volumes linearly: the observed concentration

@@ -391,9 +391,8 @@ impl<'r, 'f> Cycles<'r, 'f> {
             time - rows.t0
         };
         let theta = theta.clamp(0.0, 1.0);
-        let (y, yd) = (&self.state.y, &self.state.yd);
-        self.rec
-            .record_with(t, |i| ad.interpolate(i, theta, h, y, yd).0)?;
+        let dense = ad.dense(theta, h, &self.state.y, &self.state.yd);
+        self.rec.record_with(t, |i| dense.value(i))?;
         if rows.species && self.state.species.is_some() {
             let (yi, ydi, zi, vi) = ad.interpolate_all(theta, h, &self.state);
             self.state
