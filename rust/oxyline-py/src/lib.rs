@@ -9,6 +9,7 @@ use oxyline_core::output::{
 use pyo3::prelude::*;
 
 mod calibrate;
+mod calibration;
 mod checkpoint;
 mod closed_loop;
 mod ensemble;
@@ -80,6 +81,8 @@ fn model_bytes(segments: usize, elements: usize, cells: f64, species: usize) -> 
 mod _core {
     #[pymodule_export]
     use super::calibrate::tangent_sensitivities;
+    #[pymodule_export]
+    use super::calibration::CalibrationProblem;
     #[pymodule_export]
     use super::closed_loop::closed_loop_o2;
     #[pymodule_export]
