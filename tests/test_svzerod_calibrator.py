@@ -180,18 +180,24 @@ def test_without_stenosis_calibration_the_coefficient_is_zero() -> None:
     assert math.isclose(got["C"], 3e-5, rel_tol=1e-7)
 
 
-def test_calibrate_lists_fit_only_the_listed_values() -> None:
+@pytest.mark.parametrize("where", ["blocks", "global"])
+def test_calibrate_lists_fit_only_the_listed_values(where: str) -> None:
     """svZeroDSolver 3.2's input: the calibrated 0104 model with every R zeroed and only R
-    listed gives back the stored R (upstream's own R-only check) and keeps C, L and S."""
+    listed (on every block, or once in calibration_parameters) gives back the stored R
+    (upstream's own R-only check) and keeps C, L and S."""
     cfg, ref = _vmr("0104_0001")
     start = copy.deepcopy(ref)
     for v in start["vessels"]:
         v["zero_d_element_values"]["R_poiseuille"] = 0.0
-        v["calibrate"] = ["R_poiseuille"]
+        if where == "blocks":
+            v["calibrate"] = ["R_poiseuille"]
     for j in start["junctions"]:
-        if "junction_values" in j:
+        if "junction_values" in j and where == "blocks":
             j["calibrate"] = ["R_poiseuille"]
-    start.update(y=cfg["y"], dy=cfg["dy"], calibration_parameters=cfg["calibration_parameters"])
+    settings = dict(cfg["calibration_parameters"])
+    if where == "global":
+        settings["calibrate"] = ["R_poiseuille"]
+    start.update(y=cfg["y"], dy=cfg["dy"], calibration_parameters=settings)
     out = svzerod.calibrate(start)
     _assert_same(out, ref)
     for v_out, v_ref in zip(out["vessels"], ref["vessels"]):
@@ -201,8 +207,8 @@ def test_calibrate_lists_fit_only_the_listed_values() -> None:
 
 @pytest.mark.parametrize(("edit", "message"), [
     (lambda c: c.pop("y"), "no 'y'"),
-    (lambda c: c["dy"].pop("flow:INFLOW:branch0_seg0"), "dy: no observations of "
-                                                        "'flow:INFLOW:branch0_seg0'"),
+    (lambda c: c["dy"].pop("flow:INFLOW:branch0_seg0"),
+     "dy: no observations of 'flow:INFLOW:branch0_seg0'"),
     (lambda c: c["y"]["pressure:INFLOW:branch0_seg0"].__setitem__(3, float("nan")),
      r"y\['pressure:INFLOW:branch0_seg0'\]\[3\] is not finite"),
     (lambda c: c["y"]["pressure:INFLOW:branch0_seg0"].pop(), "same number"),

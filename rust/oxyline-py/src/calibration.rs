@@ -37,15 +37,22 @@ impl CalibrationProblem {
         let blocks: Vec<Block> = (vessels.into_iter())
             .map(|(name, vars, params)| Block::Vessel { name, vars, params })
             .chain(
-                (branches.into_iter())
-                    .map(|(name, vars, params)| Block::Branch { name, vars, params }),
+                (branches.into_iter()).map(|(name, vars, params)| Block::Branch {
+                    name,
+                    vars,
+                    params,
+                }),
             )
             .collect();
         let (y, dy) = (y.as_slice()?.to_vec(), dy.as_slice()?.to_vec());
         if n_obs == 0 {
             return Err(ModelError::new_err("calibration: no observations"));
         }
-        let n_params = blocks.iter().flat_map(|b| b.params()).max().map_or(0, |p| p + 1);
+        let n_params = blocks
+            .iter()
+            .flat_map(|b| b.params())
+            .max()
+            .map_or(0, |p| p + 1);
         let obs = Observations {
             y: &y,
             dy: &dy,

@@ -21,9 +21,9 @@ Two selections of the fitted values:
   stenosis coefficients unless ``calibrate_stenosis_coefficient`` is false (they are then 0);
   the written C and L are clipped at 0 (R and the stenosis coefficient keep their sign), and
   ``set_capacitance_to_zero`` writes C = 0;
-* with a ``calibrate`` list on a vessel or junction (svZeroDSolver 3.2's input): only the
-  listed values of the blocks that have one; the others keep their input values, and every
-  value is written as fitted.
+* with a ``calibrate`` list on a vessel or junction, or in ``calibration_parameters`` for the
+  blocks without one (svZeroDSolver 3.2's input): only the listed values; the others keep
+  their input values, and every value is written as fitted.
 """
 
 from __future__ import annotations
@@ -95,12 +95,16 @@ def _node(pressure_or_flow: str, node: str) -> str:
     return f"{pressure_or_flow}:{node}"
 
 
-def _fitted(block: Mapping[str, Any], names: tuple[str, ...], lists: bool, stenosis: bool,
+def _fitted(block: Mapping[str, Any], names: tuple[str, ...], settings: Mapping[str, Any],
             where: str) -> set[str]:
     """The names of `block`'s values to fit (see the module docstring)."""
-    if not lists:
-        return set(names) if stenosis else set(names) - {"stenosis_coefficient"}
-    chosen = block.get("calibrate", [])
+    if not settings["lists"]:
+        every = set(names)
+        return every if settings["calibrate_stenosis_coefficient"] else every - {
+            "stenosis_coefficient"}
+    if "calibrate" not in block:  # the global list, as far as this block has those values
+        return {n for n in settings.get("calibrate", []) if n in names}
+    chosen = block["calibrate"]
     if not isinstance(chosen, list) or not all(isinstance(c, str) for c in chosen):
         raise ModelError(f"{where}: 'calibrate' must be a list of value names, got {chosen!r}")
     unknown = sorted(set(chosen) - set(names))
@@ -118,6 +122,16 @@ def _settings(cfg: Mapping[str, Any]) -> dict[str, Any]:
         raise ModelError(f"calibration_parameters: unknown key(s) {unknown}; known: "
                          f"{sorted(SETTINGS)}")
     out = {**SETTINGS, **given}
+    if "calibrate" in given:
+        chosen = given["calibrate"]
+        known = set(VESSEL_VALUES) | set(BRANCH_VALUES)
+        if not isinstance(chosen, list) or not all(isinstance(c, str) for c in chosen) \
+                or not set(chosen) <= known:
+            raise ModelError(f"calibration_parameters: 'calibrate' must be a list of value "
+                             f"names ({sorted(known)}), got {chosen!r}")
+    blocks = [*cfg.get("vessels", []), *cfg.get("junctions", [])]
+    out["lists"] = "calibrate" in given or any(
+        isinstance(b, Mapping) and "calibrate" in b for b in blocks)
     for key in ("tolerance_gradient", "tolerance_increment", "initial_damping_factor"):
         v = out[key]
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0 \
@@ -167,13 +181,13 @@ def _ends(cfg: Mapping[str, Any]) -> tuple[dict[str, list[str]], dict[str, list[
     return inlets, outlets
 
 
-def _read_blocks(cfg: Mapping[str, Any], stenosis: bool) -> _Problem:
+def _read_blocks(cfg: Mapping[str, Any], settings: Mapping[str, Any]) -> _Problem:
     """The vessels and junction branches of `cfg` with their variables and value slots."""
     for key in ("vessels", "y", "dy"):
         if key not in cfg:
             raise ModelError(f"svZeroDCalibrator input: no '{key}'")
-    blocks = [*cfg["vessels"], *cfg.get("junctions", [])]
-    lists = any("calibrate" in b for b in blocks)
+    lists = settings["lists"]
+    stenosis = settings["calibrate_stenosis_coefficient"]
     inlets, outlets = _ends(cfg)
     pb = _Problem()
     for v in cfg["vessels"]:
@@ -188,7 +202,7 @@ def _read_blocks(cfg: Mapping[str, Any], stenosis: bool) -> _Problem:
                              f"{len(ins)} and {len(outs)}")
         nodes = (_node("pressure", ins[0]), _node("flow", ins[0]),
                  _node("pressure", outs[0]), _node("flow", outs[0]))
-        fitted = _fitted(v, VESSEL_VALUES, lists, stenosis, where)
+        fitted = _fitted(v, VESSEL_VALUES, settings, where)
         values = dict(v.get("zero_d_element_values", {}))
         if not lists and not stenosis:
             values["stenosis_coefficient"] = 0.0  # not a value of the fit: no stenosis
@@ -204,7 +218,7 @@ def _read_blocks(cfg: Mapping[str, Any], stenosis: bool) -> _Problem:
         if len(ins) != 1:
             raise ModelError(f"{where}: a junction with {len(outs)} outlets is fitted as a "
                              f"BloodVesselJunction, which has one inlet, not {len(ins)}")
-        fitted = _fitted(j, BRANCH_VALUES, lists, stenosis, where)
+        fitted = _fitted(j, BRANCH_VALUES, settings, where)
         given = j.get("junction_values", {})
         pb.junction_slots[name] = []
         for i, out in enumerate(outs):
@@ -295,6 +309,8 @@ def _fit(problem: Any, pb: _Problem, settings: Mapping[str, Any]) -> np.ndarray:
     for it in range(settings["maximum_iterations"]):
         _, grad, gram = problem.normal_equations(alpha)
         norm_grad = float(np.linalg.norm(grad[active]))
+        if norm_grad == 0.0:
+            break  # the observations hold exactly: no step to take
         if it > 0:
             damping *= norm_grad / norm_old
         norm_old = norm_grad
@@ -316,11 +332,12 @@ def _fit(problem: Any, pb: _Problem, settings: Mapping[str, Any]) -> np.ndarray:
     return alpha
 
 
-def _write(cfg: Mapping[str, Any], pb: _Problem, alpha: np.ndarray, lists: bool,
+def _write(cfg: Mapping[str, Any], pb: _Problem, alpha: np.ndarray,
            settings: Mapping[str, Any]) -> dict[str, Any]:
     """`cfg` with the fitted values, without the calibrator's keys."""
     out = {k: copy.deepcopy(v) for k, v in cfg.items()
            if k not in ("y", "dy", "calibration_parameters")}
+    lists = settings["lists"]
     zero_c = not lists and settings["set_capacitance_to_zero"]
     clip = (lambda x: max(float(x), 0.0)) if not lists else float
     for v, (_, _, slots) in zip(out["vessels"], pb.vessels):
@@ -358,7 +375,7 @@ def calibrate(config: Mapping[str, Any]) -> dict[str, Any]:
                          f"{type(config).__name__}")
     settings = _settings(config)
     try:
-        pb = _read_blocks(config, bool(settings["calibrate_stenosis_coefficient"]))
+        pb = _read_blocks(config, settings)
     except KeyError as e:
         raise ModelError(f"svZeroDCalibrator input: a vessel or junction has no {e}") from None
     y, dy = _observations(config, pb.variables)
@@ -366,5 +383,4 @@ def calibrate(config: Mapping[str, Any]) -> dict[str, Any]:
         [(n, v, s) for n, v, s in pb.vessels], [(n, v, s) for n, v, s in pb.branches],
         np.ascontiguousarray(y).ravel(), np.ascontiguousarray(dy).ravel(), y.shape[1])
     alpha = _fit(problem, pb, settings)
-    lists = any("calibrate" in b for b in [*config["vessels"], *config.get("junctions", [])])
-    return _write(config, pb, alpha, lists, settings)
+    return _write(config, pb, alpha, settings)

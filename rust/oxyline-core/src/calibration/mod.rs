@@ -140,7 +140,14 @@ pub fn check(blocks: &[Block], obs: &Observations, n_params: usize) -> Result<()
 /// The rows of block `b` at observation `k` for values `a` (its slots' values in order): the
 /// residuals and their derivatives with respect to the block's slots (`jac[row][slot]`).
 /// Returns the number of rows (2 for a vessel, 1 for a branch).
-fn rows(b: &Block, obs: &Observations, k: usize, a: &[f64], r: &mut [f64; 2], jac: &mut [[f64; 4]; 2]) -> usize {
+fn rows(
+    b: &Block,
+    obs: &Observations,
+    k: usize,
+    a: &[f64],
+    r: &mut [f64; 2],
+    jac: &mut [[f64; 4]; 2],
+) -> usize {
     match b {
         Block::Vessel { vars, .. } => {
             let [(p_in, dp_in), (q, dq), (p_out, _), (q_out, dq_out)] = vars.map(|v| obs.at(v, k));
@@ -151,7 +158,12 @@ fn rows(b: &Block, obs: &Observations, k: usize, a: &[f64], r: &mut [f64; 2], ja
             r[0] = p_in - p_out - chord * q - ind * dq_out;
             jac[0] = [-q, 0.0, -dq_out, -q.abs() * q];
             r[1] = q - q_out - cap * (dp_in - slope * dq);
-            jac[1] = [cap * dq, -(dp_in - slope * dq), 0.0, 2.0 * cap * q.abs() * dq];
+            jac[1] = [
+                cap * dq,
+                -(dp_in - slope * dq),
+                0.0,
+                2.0 * cap * q.abs() * dq,
+            ];
             2
         }
         Block::Branch { vars, .. } => {
@@ -208,7 +220,10 @@ pub fn normal_equations(
         let slots = b.params();
         let a: Vec<f64> = slots.iter().map(|&p| alpha[p]).collect();
         if let Some(v) = a.iter().find(|v| !v.is_finite()) {
-            return Err(Error::model(b.name(), format!("element value {v} is not finite")));
+            return Err(Error::model(
+                b.name(),
+                format!("element value {v} is not finite"),
+            ));
         }
         let n = slots.len();
         let (mut g, mut h) = ([0.0; 4], [[0.0; 4]; 4]);

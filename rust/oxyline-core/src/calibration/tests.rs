@@ -117,8 +117,9 @@ fn normal_equations_are_jt_r_and_jt_j() {
 fn data_that_satisfy_the_rows_leave_no_residual() {
     // choose P_in, Q and their rates; Q_out from the capacitor row, P_out from the momentum
     // row with dQ_out/dt = 0 (a steady outflow at each sample)
-    let (r, c, l, s) = (80.0, 2e-4, 1.5, -0.7);
-    let (p_in, q, dp_in, dq) = ([1.3e4, 1.1e4], [12.0, -3.0], [3e4, -2e4], [200.0, -150.0]);
+    let (r, c, l, s): (f64, f64, f64, f64) = (80.0, 2e-4, 1.5, -0.7);
+    let (p_in, q, dp_in, dq): ([f64; 2], [f64; 2], [f64; 2], [f64; 2]) =
+        ([1.3e4, 1.1e4], [12.0, -3.0], [3e4, -2e4], [200.0, -150.0]);
     let q_out: Vec<f64> = (0..2)
         .map(|k| q[k] - c * (dp_in[k] - (r + 2.0 * s * q[k].abs()) * dq[k]))
         .collect();
@@ -191,8 +192,8 @@ fn rows_are_the_assembled_vessel_stamps() {
             x
         };
         let slope = cap.resistance + 2.0 * cap.stenosis * state[flow].abs();
-        let capacitor = row(p_c) - dae.e[p_c] * rate[p_c]
-            + cap.capacitance * (rate[p_in] - slope * rate[flow]);
+        let capacitor =
+            row(p_c) - dae.e[p_c] * rate[p_c] + cap.capacitance * (rate[p_in] - slope * rate[flow]);
         for (mine, theirs) in [(rows[2 * k], row(q_out)), (rows[2 * k + 1], capacitor)] {
             let scale = mine.abs().max(theirs.abs()).max(1.0);
             assert!(
