@@ -186,6 +186,10 @@ def _read_blocks(cfg: Mapping[str, Any], settings: Mapping[str, Any]) -> _Proble
     for key in ("vessels", "y", "dy"):
         if key not in cfg:
             raise ModelError(f"svZeroDCalibrator input: no '{key}'")
+    for key in ("vessels", "junctions"):
+        seq = cfg.get(key, [])
+        if not isinstance(seq, list) or not all(isinstance(b, Mapping) for b in seq):
+            raise ModelError(f"svZeroDCalibrator input: '{key}' must be a list of objects")
     lists = settings["lists"]
     stenosis = settings["calibrate_stenosis_coefficient"]
     inlets, outlets = _ends(cfg)
