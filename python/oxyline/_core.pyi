@@ -185,6 +185,19 @@ def tangent_sensitivities(model_json: str, paths: list[str], signals: list[tuple
     """The (vessel, variable) signals over the periodic cycle of a canonical model and their
     exact derivatives with respect to the parameter ``paths`` (oxyline.calibrate)."""
 
+class CalibrationProblem:
+    """svZeroDSolver's calibration residual (oxyline_core::calibration): RCL vessels
+    ``(name, (P_in, Q_in, P_out, Q_out) variable indices, (R, C, L, S) slots)`` and junction
+    branches ``(name, (P_in, P_out, Q_out), (R, L, S))`` over observations ``y``, ``dy``
+    (variable-major, ``n_obs`` samples per variable)."""
+
+    def __init__(self, vessels: list[tuple[str, tuple[int, ...], tuple[int, ...]]],
+                 branches: list[tuple[str, tuple[int, ...], tuple[int, ...]]],
+                 y: np.ndarray, dy: np.ndarray, n_obs: int) -> None: ...
+    def normal_equations(self, alpha: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+        """(Σr², Jᵀr by slot, the blocks of JᵀJ concatenated row-major: vessels, then
+        branches) at ``alpha``."""
+
 # the core's model schema (oxyline_core::model::native) on native model dicts
 def read_header(data: Any) -> tuple[str, dict[str, Any]]: ...
 def read_vessels(vessels: list[Any], units: str) -> list[dict[str, Any]]: ...

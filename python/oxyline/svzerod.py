@@ -1,8 +1,9 @@
 """svZeroDSolver drop-in (public path ``oxyline.svzerod``); the importer is
 :mod:`oxyline.io.svzerod.reader`, the runner :mod:`oxyline.io.svzerod.dropin`, the exporter
-:mod:`oxyline.io.svzerod.writer`."""
+:mod:`oxyline.io.svzerod.writer`, the calibrator :mod:`oxyline.io.svzerod.calibrator`."""
 
 from oxyline.io.svzerod import reader as _reader
+from oxyline.io.svzerod.calibrator import calibrate
 from oxyline.io.svzerod.dropin import simulate
 from oxyline.io.svzerod.reader import (
     RunSettings,
@@ -16,5 +17,5 @@ from oxyline.io.svzerod.reader import (
 # tests)
 __doc__ = _reader.__doc__
 
-__all__ = ["RunSettings", "file_units", "run_settings", "simulate", "to_model",
+__all__ = ["RunSettings", "calibrate", "file_units", "run_settings", "simulate", "to_model",
            "to_oxyline_dict"]

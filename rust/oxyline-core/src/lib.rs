@@ -2,6 +2,7 @@
 //! integrated with RK4 or generalized-α. Pure Rust; the Python binding lives in `oxyline-py`.
 
 pub mod assemble;
+pub mod calibration;
 pub mod circuit;
 pub mod closure;
 pub mod coefficients;

@@ -10,6 +10,7 @@ use pyo3::prelude::*;
 
 mod arterial_laws;
 mod calibrate;
+mod calibration;
 mod checkpoint;
 mod closed_loop;
 mod ensemble;
@@ -86,6 +87,8 @@ mod _core {
     };
     #[pymodule_export]
     use super::calibrate::tangent_sensitivities;
+    #[pymodule_export]
+    use super::calibration::CalibrationProblem;
     #[pymodule_export]
     use super::closed_loop::closed_loop_o2;
     #[pymodule_export]

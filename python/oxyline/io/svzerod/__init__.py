@@ -4,5 +4,6 @@ configuration to a native model dict (with the element translations of
 :mod:`~oxyline.io.svzerod.coupling` and :mod:`~oxyline.io.svzerod.initial`),
 :mod:`~oxyline.io.svzerod.writer` exports a model, :mod:`~oxyline.io.svzerod.dropin` runs a
 configuration and returns ``svzerod.simulate``'s DataFrame (with the cycle-to-cycle rule of
-:mod:`~oxyline.io.svzerod.cycles`). The public drop-in is :mod:`oxyline.svzerod`.
+:mod:`~oxyline.io.svzerod.cycles`), :mod:`~oxyline.io.svzerod.calibrator` is
+``svzerod.calibrate``. The public drop-in is :mod:`oxyline.svzerod`.
 """

@@ -579,7 +579,8 @@ def _check_top(cfg: Mapping[str, Any]) -> None:
         bad = [k for k in ("calibration_parameters", "y", "dy") if k in cfg]
         if bad:
             raise UnsupportedElement(f"model: '{bad[0]}' without 'simulation_parameters' is an "
-                                     "svZeroDCalibrator input; calibration is not supported")
+                                     "svZeroDCalibrator input, not a simulation: calibrate "
+                                     "it with oxyline.svzerod.calibrate")
         raise ModelError("model: missing 'simulation_parameters' (Define simulation_parameters)")
     if "boundary_conditions" not in cfg:
         raise ModelError("model: missing 'boundary_conditions' (Define at least one boundary "

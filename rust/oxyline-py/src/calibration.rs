@@ -1,0 +1,89 @@
+//! The calibration residual of observed states (`oxyline_core::calibration`): the binding of
+//! `oxyline.svzerod.calibrate`'s Gauss–Newton quantities.
+
+use crate::errors::{ModelError, to_py};
+use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1};
+use oxyline_core::calibration::{Block, Observations, normal_equations};
+use pyo3::prelude::*;
+
+/// A calibration problem: the blocks (RCL vessels and junction branches) and the observations
+/// `y`, `dy` (variable-major, `n_obs` samples per variable), kept for the optimiser's repeated
+/// evaluations.
+#[pyclass(module = "oxyline._core", frozen)]
+pub struct CalibrationProblem {
+    blocks: Vec<Block>,
+    y: Vec<f64>,
+    dy: Vec<f64>,
+    n_obs: usize,
+}
+
+type Vessel = (String, [usize; 4], [usize; 4]);
+type Branch = (String, [usize; 3], [usize; 3]);
+
+#[oxyline_py_guard::guard]
+#[pymethods]
+impl CalibrationProblem {
+    /// `vessels`: (name, (P_in, Q_in, P_out, Q_out) variable indices, (R, C, L, S) slots);
+    /// `branches`: (name, (P_in, P_out, Q_out) variable indices, (R, L, S) slots). The blocks
+    /// of JᵀJ come in this order: vessels, then branches.
+    #[new]
+    fn new(
+        vessels: Vec<Vessel>,
+        branches: Vec<Branch>,
+        y: PyReadonlyArray1<'_, f64>,
+        dy: PyReadonlyArray1<'_, f64>,
+        n_obs: usize,
+    ) -> PyResult<Self> {
+        let blocks: Vec<Block> = (vessels.into_iter())
+            .map(|(name, vars, params)| Block::Vessel { name, vars, params })
+            .chain(
+                (branches.into_iter()).map(|(name, vars, params)| Block::Branch {
+                    name,
+                    vars,
+                    params,
+                }),
+            )
+            .collect();
+        let (y, dy) = (y.as_slice()?.to_vec(), dy.as_slice()?.to_vec());
+        if n_obs == 0 {
+            return Err(ModelError::new_err("calibration: no observations"));
+        }
+        let n_params = blocks
+            .iter()
+            .flat_map(|b| b.params())
+            .max()
+            .map_or(0, |p| p + 1);
+        let obs = Observations {
+            y: &y,
+            dy: &dy,
+            n_obs,
+        };
+        oxyline_core::calibration::check(&blocks, &obs, n_params).map_err(to_py)?;
+        Ok(CalibrationProblem {
+            blocks,
+            y,
+            dy,
+            n_obs,
+        })
+    }
+
+    /// (cost Σr², gradient Jᵀr by slot, the blocks of JᵀJ concatenated row-major) at `alpha`.
+    #[allow(clippy::type_complexity)]
+    fn normal_equations<'py>(
+        &self,
+        py: Python<'py>,
+        alpha: PyReadonlyArray1<'_, f64>,
+    ) -> PyResult<(f64, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
+        let obs = Observations {
+            y: &self.y,
+            dy: &self.dy,
+            n_obs: self.n_obs,
+        };
+        let ne = normal_equations(&self.blocks, &obs, alpha.as_slice()?).map_err(to_py)?;
+        Ok((
+            ne.cost,
+            ne.gradient.into_pyarray(py),
+            ne.gram.into_pyarray(py),
+        ))
+    }
+}
