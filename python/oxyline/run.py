@@ -221,6 +221,8 @@ def _species_results(model: Model, raw: Mapping[str, Any], layout: Mapping[str, 
         seg_vars, ks = SPECIES_SEGMENT, len(SPECIES_SEGMENT)
     data = tr["data"]
     nt = data.shape[0]
+    if nt == 0:  # a run stopped before its first row: no rows, but the columns of the layout
+        data = data.reshape(0, len(tr["species"]) * cols)
     out: dict[str, SpeciesResult] = {}
     ox = model.transport.get("oxygen")
     for k, name in enumerate(tr["species"]):
@@ -388,6 +390,11 @@ def _raise_run_error(raw: Mapping[str, Any], partial: Any) -> None:
         # Ctrl-C, a cancel event, SIGTERM (the CLI): the same class, with the partial result
         cls = type(err) if isinstance(err, SimulationInterrupted) else SimulationInterrupted
         what = str(err) if isinstance(err, SimulationInterrupted) else "run interrupted"
+        if raw.get("max_buffered_rows", 1) == 0:  # no row: stopped in the step estimate or
+            # the mean-flow pass
+            raise cls(f"{what} before its first output row (in the step estimate or the "
+                      "flow-only pass that measures the mean flows); exc.result is the "
+                      "result with no rows (complete=False)", partial) from None
         raise cls(f"{what} after {raw['cycles_run']} complete cycle(s); the partial result is "
                   "in exc.result", partial) from None
     err.result = partial
