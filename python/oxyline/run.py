@@ -491,7 +491,12 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     if space:  # one refinement of every vessel: the inlet impedance's change
         from oxyline.convergence import inlet_space_error
 
-        result.settings["error_estimate_space"] = inlet_space_error(model)
+        try:
+            result.settings["error_estimate_space"] = inlet_space_error(model)
+        except KeyboardInterrupt:  # the run is whole: keep it, without the estimate
+            raise SimulationInterrupted("interrupted during the spatial error estimate, after "
+                                        "the run; exc.result is the whole run's result "
+                                        "(without error_estimate space)", result) from None
     _warn_not_periodic(result.model_name, result.settings, result.complete)
     # physical bounds and mass balance of the recorded species output (warnings only)
     check_result(result, model.transport_spec)
@@ -708,6 +713,8 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     if isinstance(time_chunk, bool) or not isinstance(time_chunk, int) or time_chunk < 1:
         raise ModelError(f"simulate_to_zarr: time_chunk must be an integer >= 1, got {time_chunk!r}")
     model = load_model(model)
+    space = _space_flag(overrides)
+    overrides = {k: v for k, v in overrides.items() if k != "estimate_space_error"}
     s = _zarr_settings(model, path, overrides)
     empty = _empty_rows(model, s)
     # chamber volumes and valve status, as in simulate(): extra core columns per chunk
@@ -741,8 +748,14 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     except BaseException:
         store.remove()  # refused before the first step (e.g. an unstable dt): no output at all
         raise
+    facts: dict[str, Any] = {}
+    if space and "error" not in raw:  # the estimate is a store attribute, as in a NetCDF file
+        from oxyline.convergence import inlet_space_error
+
+        facts["error_estimate_space"] = inlet_space_error(model)
     raw, opened = _close_store(
-        store, raw, lambda raw: dataset(result_of(dict(template), _run_settings(s, raw),
+        store, raw, lambda raw: dataset(result_of(dict(template),
+                                                  {**_run_settings(s, raw), **facts},
                                                   "error" not in raw)).attrs)
     _raise_run_error(raw, opened)
     _warn_not_periodic(model.name, _run_settings(s, raw), True)
