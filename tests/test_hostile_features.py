@@ -18,6 +18,9 @@ import numpy as np
 import pytest
 import yaml
 from conftest import data_path
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from test_hostile_runs import _rewrite
 
 import oxyline
 from oxyline import closed_loop
@@ -412,3 +415,79 @@ def test_cancel_before_the_first_row_keeps_a_streamed_store(tmp_path: Path) -> N
                                  cancel=ev, progress=False)
     ds = info.value.result
     assert ds is not None and ds.sizes["time"] == 0 and ds.attrs["complete"] == 0
+
+
+def test_an_interrupt_during_the_space_estimate_keeps_the_whole_run(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ctrl-C in the impedance refinement that follows the run (a new phase): the run's
+    result is kept in exc.result, whole, without the estimate. Before: a bare
+    KeyboardInterrupt, the computed run lost."""
+    import importlib
+
+    def interrupted(model: Any) -> float:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(importlib.import_module("oxyline.convergence"), "inlet_space_error",
+                        interrupted)
+    with pytest.raises(oxyline.SimulationInterrupted, match="spatial error estimate") as info:
+        oxyline.simulate("bifurcation", estimate_space_error=True, **FAST)
+    res = info.value.result
+    assert res.complete and res.data.shape == (1001, 102)
+    assert "error_estimate_space" not in res.settings
+
+
+@pytest.mark.parametrize("settings_", [{"threads": 2}, {"rtol": 1e-3},
+                                       {"method": "rk4"}])
+def test_cancel_acts_in_the_new_run_paths(settings_: dict[str, Any]) -> None:
+    """A cancel set at the first progress check after t > 0 stops a run on a thread pool, an
+    error-controlled run and a Womersley RK4 run, each with its partial result."""
+    ev = threading.Event()
+
+    def progress(t: float, t_end: float) -> None:
+        if t > 0:
+            ev.set()
+
+    m = bifurcation(wall_friction="womersley")
+    with pytest.raises(oxyline.SimulationCancelled) as info:
+        oxyline.simulate(m, cycles=10**4, cancel=ev, progress=progress, **settings_)
+    res = info.value.result
+    assert not res.complete and len(res.time) > 0 and np.isfinite(res.data).all()
+
+
+@pytest.fixture(scope="module")
+def threaded_checkpoint(tmp_path_factory: pytest.TempPathFactory) -> bytes:
+    p = tmp_path_factory.mktemp("ck") / "run.ckpt"
+    oxyline.simulate(bifurcation(wall_friction="womersley"), cycles=2, threads=2,
+                     checkpoint=p, checkpoint_every="1 cycle", progress=False)
+    return p.read_bytes()
+
+
+_JSON = st.recursive(st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=5),
+                     lambda c: st.lists(c, max_size=3) | st.dictionaries(st.text(max_size=5), c,
+                                                                         max_size=3),
+                     max_leaves=6)
+
+
+@settings(max_examples=30, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(key=st.sampled_from(["threads", "estimate_space_error", "rtol", "atol", "segments",
+                            "method", "cycles"]),
+       value=_JSON)
+def test_mutated_settings_of_a_threaded_checkpoint_are_refused_or_resume(
+        tmp_path: Path, threaded_checkpoint: bytes, key: str, value: Any) -> None:
+    """The stored settings of a checkpoint of a run on 2 threads with Womersley friction,
+    one of them replaced by any JSON value: a CheckpointError naming the file, or a resumed
+    run of finite rows; never another exception."""
+    def change(meta: dict[str, Any]) -> None:
+        meta["settings"][key] = value
+
+    p = tmp_path / "mutated.ckpt"
+    p.write_bytes(_rewrite(threaded_checkpoint, change))
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = oxyline.resume(p, progress=False)
+    except ModelError as exc:  # CheckpointError is a ModelError
+        assert str(p) in str(exc) or "checkpoint" in str(exc), str(exc)
+    else:
+        assert np.isfinite(res.data).all()

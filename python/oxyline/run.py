@@ -595,7 +595,9 @@ def resume(path: str | os.PathLike[str], **overrides: Any) -> Result:
     except ModelError as exc:
         raise CheckpointError(f"{path}: its model does not load: {exc}") from None
     try:  # every stored setting checked before the run, named as a field of the file
-        _settings(model, meta["settings"])
+        _settings(model, {k: v for k, v in meta["settings"].items()
+                          if k != "estimate_space_error"})
+        _space_flag(meta["settings"])
     except ModelError as exc:
         raise CheckpointError(f"{path}: field 'settings': {exc}") from None
     control = {"checkpoint": os.fspath(path), "checkpoint_every": meta.get("checkpoint_every")}
