@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from oxyline.ensemble.patch import apply_patch
+from oxyline.errors import ResourceError
 from oxyline.loader import load_model
 from oxyline.model import Model, build_model
 from oxyline.targets import CalibrationError, Target, combine, parse_targets, path_of, signals_of
@@ -62,7 +63,38 @@ def _settings(model: Model, steps_per_cycle: int | None) -> tuple[float, int, fl
         # "auto" (or none): 400 steps a cycle
         steps_per_cycle = round(period / dt) if isinstance(dt, (int, float)) else 400
     rho = float(model.simulation.get("rho_infty", 0.5))
-    return float(period), max(int(steps_per_cycle), 1), rho
+    return float(period), _count("steps_per_cycle", steps_per_cycle), rho
+
+
+#: Most steps per cycle or cycles a tangent run may plan (as many as a run: `simulate`'s plan).
+_MOST = 10**9
+
+
+def _count(name: str, value: Any) -> int:
+    """A whole number from 1 to ``_MOST`` (a bool, 2.5, 0 or 1e12 is refused, naming it)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer, float)) \
+            or not float(value).is_integer() or not 1 <= value <= _MOST:
+        raise CalibrationError(f"{name}: expected a whole number from 1 to {_MOST:.0e}, "
+                               f"got {value!r}")
+    return int(value)
+
+
+def _check_controls(parameters: Sequence[str], signals: Sequence[Any], steps: int, tol: Any,
+                    max_cycles: Any) -> None:
+    """The tangent run's controls, and its stored derivatives against the memory allowed."""
+    from oxyline import memory
+
+    if isinstance(tol, bool) or not isinstance(tol, (int, float, np.floating)) \
+            or not 0.0 < float(tol) < 1.0:
+        raise CalibrationError(f"tol: expected a number in (0, 1), got {tol!r}")
+    _count("max_cycles", max_cycles)
+    need = 8.0 * steps * max(len(signals), 1) * (len(parameters) + 1)
+    limit = memory.limit(None, "sensitivities: max_memory")
+    if limit is not None and need > limit:
+        raise ResourceError(
+            f"steps_per_cycle = {steps}: the derivatives of {len(signals)} signal(s) by "
+            f"{len(parameters)} parameter(s) at every step need about {memory.human(need)} "
+            f"(estimate), above the {memory.human(limit)} allowed; use fewer steps_per_cycle")
 
 
 def _tangent(model: Model, parameters: Sequence[str], signals: list[tuple[str, str]],
@@ -71,6 +103,7 @@ def _tangent(model: Model, parameters: Sequence[str], signals: list[tuple[str, s
     from oxyline.errors import core_errors
 
     period, steps, rho = _settings(model, steps_per_cycle)
+    _check_controls(parameters, signals, steps, tol, max_cycles)
     with core_errors(f"model '{model.name}'"):
         return _core.tangent_sensitivities(json.dumps(model.canonical), list(parameters),
                                            signals, period, steps, rho, max_cycles, tol)
@@ -345,6 +378,9 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
 
     if method not in ("lm", "trf", "bayes"):
         raise CalibrationError(f"method: expected 'lm', 'trf' or 'bayes', got {method!r}")
+    _count("max_evaluations", max_evaluations)
+    if isinstance(xtol, bool) or not isinstance(xtol, (int, float)) or not 0.0 < xtol < 1.0:
+        raise CalibrationError(f"xtol: expected a number in (0, 1), got {xtol!r}")
     if method == "bayes":
         return _bayes(model, targets, parameters, bounds, max_evaluations, xtol, jacobian,
                       steps_per_cycle, tol, max_cycles, posterior)

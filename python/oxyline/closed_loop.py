@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from oxyline import _core
-from oxyline.errors import ModelError, core_errors
+from oxyline.errors import ModelError, ResourceError, core_errors
 
 if TYPE_CHECKING:
     from oxyline.model import Model
@@ -632,6 +632,7 @@ def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int 
     the heart's aortic outflow and drains through the organ beds to the venous pressure of that
     run; the balance holds the tree's own flows as they are."""
     p = load(model) if isinstance(model, str) else model
+    _check_times(p, max_cycles, tol)
     comps, (binding, *branches), idx = _layout(p)
     if shooting not in ("anderson", "newton"):
         raise ModelError(f"closed loop: shooting must be 'anderson' or 'newton', got {shooting!r}")
@@ -655,6 +656,36 @@ def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int 
                                                         else np.empty(0)).ravel(),
                                    float(p["dt"]), int(max_cycles), float(tol))
     return _result(p, comps, branches, out, len(out["time"]))
+
+
+def _check_times(p: dict[str, Any], max_cycles: Any, tol: Any) -> None:
+    """The loop's period, step and cycle controls, each named when it is not a usable number
+    (before: a period below the step read as "0 recorded intervals", a huge max_cycles as an
+    OverflowError)."""
+    def number(key: str, value: Any, low: float, high: float) -> float:
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.number)) \
+                or not low < float(value) < high:
+            raise ModelError(f"closed loop: {key} must be a number in ({low:g}, {high:g}), got "
+                             f"{value!r}")
+        return float(value)
+
+    period = number("period", p.get("period"), 0.0, math.inf)
+    dt = number("dt", p.get("dt"), 0.0, math.inf)
+    if dt > period:
+        raise ModelError(f"closed loop: dt = {dt:g} s is longer than the period {period:g} s")
+    if period / dt > _MOST_STEPS:
+        raise ResourceError(f"closed loop: period {period:g} s / dt {dt:g} s = "
+                            f"{period / dt:.3g} steps per cycle, more than the {_MOST_STEPS:.0e} "
+                            "a run may plan; use a larger dt or a shorter period")
+    if isinstance(max_cycles, (bool, np.bool_)) or not isinstance(max_cycles, (int, np.integer)) \
+            or not 1 <= max_cycles <= _MOST_STEPS:
+        raise ModelError(f"closed loop: max_cycles must be a whole number from 1 to "
+                         f"{_MOST_STEPS:.0e}, got {max_cycles!r}")
+    number("tol", tol, 0.0, 1.0)
+
+
+#: Most steps per cycle (and cycles) a run may plan, as the core's run plan.
+_MOST_STEPS = 10**9
 
 
 def _result(p: dict[str, Any], comps: list[dict[str, Any]], branches: list[dict[str, Any]],

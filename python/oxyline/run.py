@@ -222,6 +222,8 @@ def _species_results(model: Model, raw: Mapping[str, Any], layout: Mapping[str, 
         seg_vars, ks = SPECIES_SEGMENT, len(SPECIES_SEGMENT)
     data = tr["data"]
     nt = data.shape[0]
+    if nt == 0:  # a run stopped before its first row: no rows, but the columns of the layout
+        data = data.reshape(0, len(tr["species"]) * cols)
     out: dict[str, SpeciesResult] = {}
     ox = model.transport.get("oxygen")
     for k, name in enumerate(tr["species"]):
@@ -389,6 +391,11 @@ def _raise_run_error(raw: Mapping[str, Any], partial: Any) -> None:
         # Ctrl-C, a cancel event, SIGTERM (the CLI): the same class, with the partial result
         cls = type(err) if isinstance(err, SimulationInterrupted) else SimulationInterrupted
         what = str(err) if isinstance(err, SimulationInterrupted) else "run interrupted"
+        if raw.get("max_buffered_rows", 1) == 0:  # no row: stopped in the step estimate or
+            # the mean-flow pass
+            raise cls(f"{what} before its first output row (in the step estimate or the "
+                      "flow-only pass that measures the mean flows); exc.result is the "
+                      "result with no rows (complete=False)", partial) from None
         raise cls(f"{what} after {raw['cycles_run']} complete cycle(s); the partial result is "
                   "in exc.result", partial) from None
     err.result = partial
@@ -485,7 +492,12 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     if space:  # one refinement of every vessel: the inlet impedance's change
         from oxyline.convergence import inlet_space_error
 
-        result.settings["error_estimate_space"] = inlet_space_error(model)
+        try:
+            result.settings["error_estimate_space"] = inlet_space_error(model)
+        except KeyboardInterrupt:  # the run is whole: keep it, without the estimate
+            raise SimulationInterrupted("interrupted during the spatial error estimate, after "
+                                        "the run; exc.result is the whole run's result "
+                                        "(without error_estimate space)", result) from None
     _warn_not_periodic(result.model_name, result.settings, result.complete)
     # physical bounds and mass balance of the recorded species output (warnings only)
     check_result(result, model.transport_spec)
@@ -584,7 +596,9 @@ def resume(path: str | os.PathLike[str], **overrides: Any) -> Result:
     except ModelError as exc:
         raise CheckpointError(f"{path}: its model does not load: {exc}") from None
     try:  # every stored setting checked before the run, named as a field of the file
-        _settings(model, meta["settings"])
+        _settings(model, {k: v for k, v in meta["settings"].items()
+                          if k != "estimate_space_error"})
+        _space_flag(meta["settings"])
     except ModelError as exc:
         raise CheckpointError(f"{path}: field 'settings': {exc}") from None
     control = {"checkpoint": os.fspath(path), "checkpoint_every": meta.get("checkpoint_every")}
@@ -702,6 +716,8 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     if isinstance(time_chunk, bool) or not isinstance(time_chunk, int) or time_chunk < 1:
         raise ModelError(f"simulate_to_zarr: time_chunk must be an integer >= 1, got {time_chunk!r}")
     model = load_model(model)
+    space = _space_flag(overrides)
+    overrides = {k: v for k, v in overrides.items() if k != "estimate_space_error"}
     s = _zarr_settings(model, path, overrides)
     empty = _empty_rows(model, s)
     # chamber volumes and valve status, as in simulate(): extra core columns per chunk
@@ -735,8 +751,14 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     except BaseException:
         store.remove()  # refused before the first step (e.g. an unstable dt): no output at all
         raise
+    facts: dict[str, Any] = {}
+    if space and "error" not in raw:  # the estimate is a store attribute, as in a NetCDF file
+        from oxyline.convergence import inlet_space_error
+
+        facts["error_estimate_space"] = inlet_space_error(model)
     raw, opened = _close_store(
-        store, raw, lambda raw: dataset(result_of(dict(template), _run_settings(s, raw),
+        store, raw, lambda raw: dataset(result_of(dict(template),
+                                                  {**_run_settings(s, raw), **facts},
                                                   "error" not in raw)).attrs)
     _raise_run_error(raw, opened)
     _warn_not_periodic(model.name, _run_settings(s, raw), True)

@@ -69,6 +69,10 @@ def simulate_ensemble(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     ([0, 0], ('variant', 'vessel'))
     """
     check_output(output)
+    if overrides.get("estimate_space_error"):  # before: accepted and silently not computed
+        raise ModelError("simulate_ensemble: estimate_space_error is an estimate of one model's "
+                         "segmentation, not computed per variant; call "
+                         "oxyline.estimate_space_error on the variants of interest")
     workers = _workers(workers)
     control = _control(cancel, variant_timeout, client)
     model = load_model(model)

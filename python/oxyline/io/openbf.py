@@ -622,7 +622,13 @@ def _mean_pressures(vessels: list[_Vessel], inlet: Any, q_mean: float,
         for node, (r, pout) in terminals.items():
             native["boundary_conditions"][f"n{node}"] = {"type": "resistance",
                                                          "resistance": r, "pressure": pout}
-        st = build_model(native).network.steady_state()
+        try:
+            st = build_model(native).network.steady_state()
+        except ModelError as exc:  # name the vessel as the file does (its label)
+            msg = str(exc)
+            for k, v in enumerate(vessels):
+                msg = msg.replace(f"vessel 'v{k}'", f"vessel '{v.label}'")
+            raise ModelError(msg) from None
         P_new = dict(zip(st["nodes"], st["node_pressure"].tolist(), strict=True))
         scale = max(1.0, max(abs(x) for x in P_new.values()))
         done = bool(P) and max(abs(P_new[n] - P[n]) for n in P_new) < 1e-6 * scale
@@ -647,6 +653,13 @@ def read_openbf(path: PathLike, **options: Any) -> Model:
     >>> len(m.vessel_names)
     3
     """
+    import inspect
+
+    known = [k for k in inspect.signature(to_native_dict).parameters if k != "path"]
+    unknown = sorted(set(options) - set(known))
+    if unknown:  # before: a raw TypeError of the converter
+        raise ModelError(f"read_openbf: unknown option(s) {', '.join(map(repr, unknown))} "
+                         f"(allowed: {', '.join(known)})")
     return build(to_native_dict(path, **options), owned=True)
 
 

@@ -592,6 +592,10 @@ impl<T: Scalar> GeneralLu<T> {
                 factored: false,
             }))
         } else {
+            // the supernodal factorisation and solve multiply dense blocks: the linear
+            // algebra's per-thread scratch, whose allocation cannot fail gracefully (faer
+            // allocates its own numeric scratch fallibly)
+            crate::run::memory::check_scratch()?;
             Factors::Faer(Box::new(FaerLu {
                 sym_lu: SymbolicLu::try_new(sym.as_ref())
                     .map_err(|e| Error::solver(0.0, format!("symbolic LU: {e:?}")))?,

@@ -46,6 +46,10 @@ fn pool_of(threads: usize) -> Result<Arc<ThreadPool>> {
     Ok(pool)
 }
 
+/// Most threads a run may ask for.
+pub const MAX_THREADS: usize = 4096;
+const MAX_THREADS_PLUS_ONE: usize = MAX_THREADS + 1;
+
 /// The number of threads a run uses for `threads` (None: every core the process may use).
 pub fn resolve(threads: Option<usize>) -> usize {
     threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
@@ -54,10 +58,12 @@ pub fn resolve(threads: Option<usize>) -> usize {
 /// Run `f` with the run pool of `threads` threads set for this thread (None: every core;
 /// 1: no pool, the serial code path). The previous setting is restored afterwards.
 pub fn with_threads<R>(threads: Option<usize>, f: impl FnOnce() -> R) -> Result<R> {
-    if threads == Some(0) {
+    if let Some(t @ (0 | MAX_THREADS_PLUS_ONE..)) = threads {
+        // more threads than any machine's cores only costs their stacks (a billion would be
+        // started one by one for minutes before failing)
         return Err(Error::model(
             "simulation",
-            "threads must be an integer >= 1, got 0".to_owned(),
+            format!("threads must be an integer from 1 to {MAX_THREADS}, got {t}"),
         ));
     }
     let n = resolve(threads);

@@ -94,6 +94,32 @@ impl NetworkSpec {
     }
 }
 
+/// `segments: auto` stops its search at `MAX_AUTO_SEGMENTS`: a vessel that reaches it is not
+/// within the tolerance, so it is refused (naming the vessel and rtol) instead of run at an
+/// accuracy the rule did not give (e.g. rtol 1e-8 with first-order sections: every vessel).
+fn check_auto_counts(
+    spec: &NetworkSpec,
+    counts: &[usize],
+    rule: &auto_segments::AutoRule,
+) -> Result<()> {
+    let capped = spec
+        .vessels
+        .iter()
+        .zip(counts)
+        .find(|(v, n)| **n >= auto_segments::MAX_AUTO_SEGMENTS && segments::is_auto(spec, v));
+    match capped {
+        Some((v, _)) => Err(crate::error::Error::model(
+            &format!("vessel '{}'", v.name),
+            format!(
+                "segments: auto needs {} or more segments to stay within segmentation rtol =                  {:e}: raise rtol, use arrangement 'pi' (second order), or give its segments",
+                auto_segments::MAX_AUTO_SEGMENTS,
+                rule.rtol
+            ),
+        )),
+        None => Ok(()),
+    }
+}
+
 /// A `vessel` entry that is a heart element (valve, chamber, through-RC, sphere, heart block,
 /// coronary bed) rather than a segmented vessel.
 fn is_heart_element(v: &crate::model::VesselSpec) -> bool {
@@ -124,11 +150,15 @@ impl<'a> Stamping<'a> {
     /// model will need is checked against what it allows).
     fn new(spec: &'a NetworkSpec, graph: &'a graph::Graph<'a>) -> Result<Self> {
         let auto = auto_segments::AutoRule::of(spec);
-        let segments: usize = spec
+        let counts: Vec<usize> = spec
             .vessels
             .iter()
             .map(|v| segments::count(spec, v, auto.as_ref()))
-            .sum();
+            .collect();
+        if let Some(rule) = &auto {
+            check_auto_counts(spec, &counts, rule)?;
+        }
+        let segments: usize = counts.iter().sum();
         // a segment adds one branch and (but for the last of its vessel) one node; a boundary
         // condition at most two nodes and two branches
         let bcs = spec.boundary_conditions.len();

@@ -268,7 +268,7 @@ fn geometric(
         WallFriction::Womersley => InertanceProfile::Flat,
         WallFriction::Poiseuille => spec.inertance_profile,
     };
-    Ok((0..n)
+    let rows: Vec<SegmentRow> = (0..n)
         .map(|k| {
             let r0 = g.radius_in + (g.radius_out - g.radius_in) * k as f64 / n as f64;
             let r1 = g.radius_in + (g.radius_out - g.radius_in) * (k + 1) as f64 / n as f64;
@@ -289,7 +289,35 @@ fn geometric(
                 position: (k as f64 + 0.5) * dx,
             }
         })
-        .collect())
+        .collect();
+    check_coefficients(el, g, &rows)?;
+    Ok(rows)
+}
+
+/// Radii or lengths at the ends of the double range (1e-300 m, 1e300 m) give segments whose
+/// R = 8μ dx/(π r⁴), L or C overflow or vanish: refused here, naming the vessel and its
+/// geometry, instead of surfacing later as a network "with no steady state" or NaN.
+fn check_coefficients(el: &str, g: &GeometrySpec, rows: &[SegmentRow]) -> Result<()> {
+    // normal (not subnormal) numbers: a coefficient of 1e-310 has lost its precision
+    let usable = |s: &SegmentRow| {
+        s.resistance.is_normal()
+            && s.resistance > 0.0
+            && s.inductance.is_normal()
+            && s.inductance > 0.0
+            && (s.compliance == 0.0 || s.compliance.is_normal())
+            && s.compliance >= 0.0
+    };
+    match rows.iter().find(|s| !usable(s)) {
+        Some(s) => Err(Error::model(
+            el,
+            format!(
+                "radius {:e} to {:e} m and length {:e} m give a segment with R = {:e}, L = {:e}, \
+                 C = {:e} (not positive normal numbers): check the radius, length and units",
+                g.radius_in, g.radius_out, g.length, s.resistance, s.inductance, s.compliance
+            ),
+        )),
+        None => Ok(()),
+    }
 }
 
 fn index32(i: usize) -> u32 {

@@ -212,6 +212,11 @@ fn rk4_limit_frozen(
         SpectrumMethod::Dense => true,
         SpectrumMethod::Krylov => false,
     };
+    // the eigensolver's matrix products take the linear algebra's scratch only above faer's
+    // small-product size (both branches factor at most max(n, 48)-square matrices)
+    if rk.diff.len() > crate::run::memory::SMALL_PRODUCT_ORDER {
+        crate::run::memory::check_scratch()?;
+    }
     let (limit, at) = if dense {
         dense_limit(rk)?
     } else {

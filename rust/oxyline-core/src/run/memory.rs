@@ -59,11 +59,17 @@ pub fn check_model(
     Ok(())
 }
 
+/// Matrix products of at most this order in every dimension (m·n·k ≤ 16³) go through faer's
+/// allocation-free small kernels (`nano-gemm`), never the packing buffers.
+pub const SMALL_PRODUCT_ORDER: usize = 16;
+
 /// Bytes of the dense linear algebra's scratch: the matrix products (faer's gemm, used by the
-/// eigenvalue estimate of RK4's step and by dense factorisations) take packing buffers of
-/// twice the L3 cache the first time a thread multiplies matrices, and that allocation aborts
-/// the process when it fails. Twice the L3 size the kernel reports (at most 128 MiB); the
-/// library's own default cache (2 MiB) when it reports none.
+/// eigenvalue estimate of RK4's step and by supernodal sparse factorisations) take packing
+/// buffers of twice the L3 cache the first time a thread multiplies matrices larger than
+/// [`SMALL_PRODUCT_ORDER`], and that allocation aborts the process when it fails. Twice the
+/// L3 size the kernel reports (at most 128 MiB); the library's own default cache (2 MiB)
+/// when it reports none. A run whose plan has no such product (a tree or simplicial sparse
+/// factorisation, no RK4 step estimate of more than that many unknowns) takes none.
 pub fn scratch_bytes() -> f64 {
     static BYTES: std::sync::OnceLock<f64> = std::sync::OnceLock::new();
     *BYTES.get_or_init(|| {
@@ -92,10 +98,11 @@ thread_local! {
     static SCRATCH_PROVED: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
 }
 
-/// Before a run's first allocation that cannot fail gracefully: reserve (and release at once)
-/// the linear algebra's scratch ([`scratch_bytes`]) with a fallible allocation, so that a
-/// process near its address-space limit (`ulimit -v`) or out of memory gets a typed
-/// [`Error::Resource`] instead of the allocator's abort. Once per thread.
+/// Before the first dense matrix product of a thread (RK4's step estimate, a supernodal
+/// factorisation): reserve (and release at once) the linear algebra's scratch
+/// ([`scratch_bytes`]) with a fallible allocation, so that a process near its address-space
+/// limit (`ulimit -v`) or out of memory gets a typed [`Error::Resource`] instead of the
+/// allocator's abort. Once per thread.
 pub fn check_scratch() -> Result<()> {
     if SCRATCH_PROVED.with(|p| p.get()) {
         return Ok(());

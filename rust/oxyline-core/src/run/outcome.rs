@@ -1,8 +1,10 @@
 //! What a run returns: the recorded table, the final state, how the run went.
 
 use super::cycle::Cycles;
+use super::settings::{Method, RunSettings};
 use crate::error::Error;
 use crate::integrate::stability::StabilityLimit;
+use crate::transport::Transport;
 
 #[derive(Debug, Clone)]
 pub struct Outcome {
@@ -56,6 +58,51 @@ pub struct TransportOutcome {
 }
 
 impl Outcome {
+    /// The outcome of a run stopped (`error`) before its recording pass started: during the
+    /// step estimate or a transport run's flow-only mean-flow pass. No row was recorded, so
+    /// its tables are empty but of the run's layout (the columns of `s` and, for a transport
+    /// run, of `transport`'s recorded species columns): the caller still gets a result,
+    /// flagged by `error`, as from a run stopped in any other phase.
+    pub(super) fn unstarted(s: &RunSettings, transport: Option<&Transport>, error: Error) -> Self {
+        let n_probes = s.probes.len() + s.svzerod.extra_columns(s.probes.len());
+        Outcome {
+            times: Vec::new(),
+            data: Vec::new(),
+            n_probes,
+            // no step was planned or taken: the requested step if any
+            dt: s.dt.unwrap_or(f64::NAN),
+            // an automatic choice not made yet stays "auto"
+            method: match s.method {
+                Method::Rk4 => "rk4",
+                Method::GeneralizedAlpha { .. } => "generalized-alpha",
+                Method::Auto { .. } => "auto",
+            },
+            cycles_run: 0,
+            periodic_error: f64::NAN,
+            stability: None,
+            final_state: Vec::new(),
+            error: Some(error),
+            transport: transport.map(|tr| {
+                let species = tr.species_names();
+                let columns_per_species = s
+                    .species_columns
+                    .as_ref()
+                    .map_or(tr.columns_per_species(), Vec::len);
+                TransportOutcome {
+                    // nothing was computed: no stored amount at t = 0 either
+                    initial_stored: vec![f64::NAN; species.len()],
+                    species,
+                    columns_per_species,
+                    data: Vec::new(),
+                    final_state: Vec::new(),
+                    mean_abs_flow: Vec::new(),
+                }
+            }),
+            max_buffered_rows: 0,
+            error_control: None,
+        }
+    }
+
     /// The outcome of the finished (or stopped) cycle loop.
     pub(super) fn of(
         cycles: Cycles<'_, '_>,

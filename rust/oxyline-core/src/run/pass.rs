@@ -44,8 +44,6 @@ pub(super) fn run(
             "svZeroDSolver's output conventions (svzerod) cannot be checkpointed",
         ));
     }
-    // the plan's step estimate is the run's first dense linear algebra
-    super::memory::check_scratch()?;
     let mut plan = Plan::new(dae, steady, s, transport.as_deref_mut(), progress)?;
 
     let resume = checkpoints.as_deref_mut().and_then(|c| c.resume.take());

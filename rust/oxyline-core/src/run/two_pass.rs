@@ -11,7 +11,7 @@ use super::pass::run;
 use super::recorder::OutputSink;
 use super::settings::{Method, RunSettings};
 use crate::circuit::Dae;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::integrate::steady::SteadyCache;
 use crate::transport::Transport;
 
@@ -27,7 +27,8 @@ pub(super) fn run_two_pass(
     // needs it first
     let mut steady = SteadyCache::new(dae);
     let Some(tr) = transport else {
-        return run(dae, &mut steady, s, None, None, sink, progress, checkpoints);
+        let out = run(dae, &mut steady, s, None, None, sink, progress, checkpoints);
+        return keep_interrupted(out, s, None);
     };
     let unknowns = tr.mean_flow_unknowns();
     let mut mean_abs_flow = Vec::new();
@@ -49,9 +50,16 @@ pub(super) fn run_two_pass(
             None,
             progress,
             None,
-        )?;
-        if let Some(e) = first.error {
-            return Err(e);
+        );
+        // stopped in this pass (cancel, signal, solver failure): a result with no rows yet,
+        // of the coupled run's layout, says so (as a stop in any later phase does)
+        match first {
+            Ok(Outcome { error: Some(e), .. }) => return Ok(Outcome::unstarted(s, Some(&*tr), e)),
+            Err(e @ Error::Interrupted { .. }) => {
+                return Ok(Outcome::unstarted(s, Some(&*tr), e));
+            }
+            Err(e) => return Err(e),
+            Ok(_) => {}
         }
         mean_flow::set_mean_flows(tr, &mean, s.period)?;
         mean_abs_flow = mean.last;
@@ -59,20 +67,34 @@ pub(super) fn run_two_pass(
     if let Some(c) = checkpoints.as_deref_mut() {
         c.mean_abs_flow.clone_from(&mean_abs_flow);
     }
-    let mut out = run(
+    let out = run(
         dae,
         &mut steady,
         s,
-        Some(tr),
+        Some(&mut *tr),
         None,
         sink,
         progress,
         checkpoints,
-    )?;
+    );
+    let mut out = keep_interrupted(out, s, Some(&*tr))?;
     if let Some(t) = out.transport.as_mut() {
         t.mean_abs_flow = mean_abs_flow;
     }
     Ok(out)
+}
+
+/// A pass interrupted before its cycle loop (during the step estimate) returns, like one
+/// interrupted later, a result flagged by the interruption: here with no rows.
+fn keep_interrupted(
+    out: Result<Outcome>,
+    s: &RunSettings,
+    tr: Option<&Transport>,
+) -> Result<Outcome> {
+    match out {
+        Err(e @ Error::Interrupted { .. }) => Ok(Outcome::unstarted(s, tr, e)),
+        out => out,
+    }
 }
 
 /// Steps per cycle of the flow-only first pass when the main run is explicit.
