@@ -39,7 +39,7 @@ pub fn sensitivities(
     let assembled = spec.assemble()?;
     let circuit = &assembled.circuit;
     let dae = circuit.assemble()?;
-    parameter::check_linear(circuit, &dae)?;
+    parameter::check_supported(circuit, &dae)?;
     let stamps = parameter::Stamps::new(circuit, &dae);
     let mut tangents = Vec::with_capacity(params.len());
     for (p, path) in params.iter().zip(paths) {
