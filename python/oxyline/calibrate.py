@@ -145,6 +145,9 @@ def _base_value(source: Mapping[str, Any], path: str) -> float:
             v = _vessel(source, parts[1], path)
             if parts[2:] == ["radius"] and "radius" not in v:
                 return float(v["radius_in"])
+            if parts[2:] == ["lumped", "stenosis_coefficient"] and isinstance(
+                    v.get("lumped"), Mapping):  # a lumped vessel without one: S = 0
+                return float(v["lumped"].get("stenosis_coefficient", 0.0))
             node: Any = v
             for key in parts[2:]:
                 node = node[key]
