@@ -379,3 +379,23 @@ def test_the_stenosed_tangent_run_is_the_run_loops_newton_scheme() -> None:
     assert np.abs(s.values[s.rows["parent.pressure_in.series"]] - p).max() \
         <= 1e-9 * np.abs(p).max()
     assert np.abs(s.values[s.rows["d2.flow_in.series"]] - q).max() <= 1e-9 * np.abs(q).max()
+
+
+@pytest.mark.parametrize("stenosed", [False, True])
+def test_the_adjoint_jacobian_is_the_forward_one(stenosed: bool) -> None:
+    """``mode="adjoint"`` (one backward sweep per output, transposed solves) against the
+    forward tangents (checked against central differences above) on every output kind: the
+    two differ only by their fixed points' tolerance (1e-12) and rounding, so 1e-8 of each
+    output's largest response to a 100 % change tells a wrong transpose or weight apart."""
+    model = _stenosed() if stenosed else MODEL
+    params = PARAMETERS + ([STENOSIS] if stenosed else [])
+    outputs = OUTPUTS + ["d1.flow_out.max"]
+    fwd = oxyline.sensitivities(model, params, outputs)
+    adj = oxyline.sensitivities(model, params, outputs, mode="adjoint")
+    np.testing.assert_allclose(adj.values, fwd.values, rtol=1e-12)
+    np.testing.assert_array_equal(adj.parameter_values, fwd.parameter_values)
+    scale = np.maximum(np.abs(fwd.jacobian * fwd.parameter_values).max(axis=1),
+                       1e-5 * np.abs(fwd.values))
+    err = np.abs(adj.jacobian - fwd.jacobian) * np.abs(fwd.parameter_values)
+    assert (err <= 1e-8 * scale[:, None]).all(), err / scale[:, None]
+    assert adj.tangent_cycles < 2000  # the adjoint reached its periodic state

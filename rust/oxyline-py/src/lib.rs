@@ -79,7 +79,7 @@ fn model_bytes(segments: usize, elements: usize, cells: f64, species: usize) -> 
 #[pymodule]
 mod _core {
     #[pymodule_export]
-    use super::calibrate::tangent_sensitivities;
+    use super::calibrate::{adjoint_gradients, tangent_sensitivities};
     #[pymodule_export]
     use super::closed_loop::closed_loop_o2;
     #[pymodule_export]

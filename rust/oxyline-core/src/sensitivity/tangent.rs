@@ -34,6 +34,10 @@
 //! along the cycle, so each tangent cycle refactorises once per step (the slopes 2 S |Q_αf|
 //! are recorded with the sources) and solves every active parameter on that factorisation.
 
+#[path = "adjoint.rs"]
+mod adjoint;
+pub use adjoint::{PeriodicAdjoint, periodic_adjoint};
+
 use super::krylov::Subspace;
 use super::parameter::DaeTangent;
 use crate::circuit::{Dae, Regime};
@@ -200,6 +204,16 @@ impl Source {
             let q = y[i] + gdt * delta[i];
             v[at] -= ds * q.abs() * q;
         }
+    }
+
+    /// Step k's source · `u` (the adjoint's contribution of the step).
+    fn dot(&self, k: usize, u: &[f64]) -> f64 {
+        let m = self.rows.len();
+        self.rows
+            .iter()
+            .zip(&self.vals[k * m..(k + 1) * m])
+            .map(|(&row, v)| u[row] * v)
+            .sum()
     }
 
     /// Add step k's source to `r`.

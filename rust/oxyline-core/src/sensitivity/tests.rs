@@ -56,11 +56,6 @@ fn run(spec: &NetworkSpec, paths: &[&str]) -> Sensitivities {
     sensitivities(spec, &paths, &signals, settings()).unwrap()
 }
 
-/// The model with parameter `path` multiplied by `f`, written into the spec directly.
-fn scaled(path: &str, f: f64) -> NetworkSpec {
-    scaled_from(parse(MODEL).unwrap(), path, f)
-}
-
 /// [`MODEL`] with a stenosis in the lumped daughter: S Q² at its peak flow (~4e-6 m³/s) is
 /// ~1.6× its linear drop R Q, so the nonlinear term matters as much as the linear one.
 fn stenosed() -> NetworkSpec {
@@ -70,6 +65,7 @@ fn stenosed() -> NetworkSpec {
     s
 }
 
+/// `s` with parameter `path` multiplied by `f`, written into the spec directly.
 fn scaled_from(mut s: NetworkSpec, path: &str, f: f64) -> NetworkSpec {
     let vi = |s: &NetworkSpec, n: &str| s.vessels.iter().position(|v| v.name == n).unwrap();
     let parts: Vec<&str> = path.split('.').collect();
@@ -319,4 +315,73 @@ fn bad_paths_name_themselves() {
         .unwrap()
         .to_string();
     assert!(signal.contains("unknown variable 'speed'"), "{signal}");
+}
+
+/// The adjoint's gradient of a functional against the same functional of the forward
+/// tangents (validated against central differences above): a mean of one signal, a weighted
+/// sample of another and a spread of weights over a third. The two differ by the fixed
+/// points' tolerances (1e-13 of the scale) and rounding, so 1e-8 relative tells a wrong
+/// transpose, source or periodic coupling.
+fn check_adjoint(base: &NetworkSpec, paths: &[&str]) {
+    let ns = settings().steps_per_cycle;
+    let nsig = SIGNALS.len();
+    let mut w = vec![0.0; 2 * ns * nsig];
+    for k in 0..ns {
+        w[k * nsig] = 1.0 / ns as f64; // mean inlet pressure
+        w[k * nsig + 2] = ((k * 7) % 11) as f64 * 1e6; // a spread over d2's inflow
+    }
+    w[ns * nsig + 37 * nsig + 1] = 1.0; // d1's outflow at step 37
+    w[ns * nsig + 120 * nsig + 3] = -0.5; // minus half d1's outlet pressure at step 120
+    let owned: Vec<String> = paths.iter().map(|p| p.to_string()).collect();
+    let sig: Vec<(String, String)> = SIGNALS
+        .iter()
+        .map(|(a, b)| (a.to_string(), b.to_string()))
+        .collect();
+    let (_, adj) = adjoint(base, &owned, &sig, &w, settings()).unwrap();
+    let fwd = run(base, paths);
+    let np = paths.len();
+    for f in 0..2 {
+        let wf = &w[f * ns * nsig..(f + 1) * ns * nsig];
+        let value: f64 = wf.iter().zip(&fwd.cycle.values).map(|(a, b)| a * b).sum();
+        assert!((adj.values[f] - value).abs() <= 1e-9 * value.abs(), "J_{f}");
+        let scale = (0..np)
+            .map(|p| {
+                let d = &fwd.cycle.derivs[p * ns * nsig..(p + 1) * ns * nsig];
+                (wf.iter().zip(d).map(|(a, b)| a * b).sum::<f64>() * fwd.values[p]).abs()
+            })
+            .fold(0.0f64, f64::max);
+        for p in 0..np {
+            let d = &fwd.cycle.derivs[p * ns * nsig..(p + 1) * ns * nsig];
+            let tangent: f64 = wf.iter().zip(d).map(|(a, b)| a * b).sum();
+            let got = adj.gradients[f * np + p];
+            assert!(
+                (got - tangent).abs() * fwd.values[p].abs() <= 1e-8 * scale,
+                "{} J_{f}: adjoint {got:e} vs tangent {tangent:e}",
+                paths[p]
+            );
+        }
+    }
+    assert!(
+        adj.adjoint_cycles
+            .iter()
+            .all(|&c| c < settings().max_cycles)
+    );
+}
+
+#[test]
+fn adjoint_gradients_are_the_tangents() {
+    let all = [
+        "boundary_conditions.o1.proximal_resistance",
+        "boundary_conditions.o1.capacitance",
+        "boundary_conditions.o2.resistance",
+        "vessels.parent.radius",
+        "vessels.d1.youngs_modulus",
+        "vessels.d2.lumped.inductance",
+        "scale.compliance",
+        "scale.inflow",
+    ];
+    check_adjoint(&parse(MODEL).unwrap(), &all);
+    let mut stenosed_paths = all.to_vec();
+    stenosed_paths.push("vessels.d2.lumped.stenosis_coefficient");
+    check_adjoint(&stenosed(), &stenosed_paths);
 }
