@@ -4,7 +4,10 @@
    and 100 parameters (outlet R and C, vessel lengths and stiffnesses), relative to the same
    call with none (the forward run to the periodic state, same step and tolerance), and per
    parameter: (t_p / t_0 − 1) / p. Best of 3 (forward) and 2 (tangents) in the same process.
-2. Calibration: the bifurcation's two outlet resistances and the parent's stiffness fitted to
+2. Stenoses (nonlinear: the tangents refactorise once per step along the cycle): adan56 with
+   a lumped stenosed segment (R, S) inserted before 1, 3 and 6 RCR outlets, the sensitivities
+   to their stenosis coefficients relative to the same call with none, per parameter.
+3. Calibration: the bifurcation's two outlet resistances and the parent's stiffness fitted to
    synthetic targets from known values, by ``least_squares`` (trf) with the core's Jacobian and
    with scipy's forward differences ("2-point"): wall time, evaluations, final cost.
 
@@ -64,6 +67,44 @@ def gradient_cost(name: str, counts: list[int], steps: int, tol: float) -> None:
               f"{(t / t0 - 1) / n:>20.3f}")
 
 
+def _with_stenoses(model: oxyline.Model, count: int) -> tuple[dict, list[str]]:
+    """``model``'s native dict with a lumped stenosed segment inserted before each of its
+    first ``count`` RCR outlets (R 1e7 Pa s/m³, S 1e12 Pa s²/m⁶: at a terminal's mean flow of
+    ~5e-6 m³/s a drop of ~75 Pa, a few per cent of the outlet's), and their coefficients'
+    paths."""
+    import copy
+
+    data = copy.deepcopy(model.source)
+    bcs = data["boundary_conditions"]
+    outlets = [n for n, bc in bcs.items() if bc.get("type") == "rcr"][:count]
+    paths = []
+    for node in outlets:
+        name = f"stenosis_{node}"
+        for v in data["vessels"]:
+            if str(v["to"]) == node:
+                v["to"] = f"{node}_in"
+        data["vessels"].append({"name": name, "from": f"{node}_in", "to": node,
+                                "lumped": {"resistance": 1e7, "stenosis_coefficient": 1e12}})
+        paths.append(f"vessels.{name}.lumped.stenosis_coefficient")
+    return data, paths
+
+
+def stenosis_cost(name: str, counts: list[int], steps: int, tol: float) -> None:
+    base = oxyline.load_model(name)
+    outputs = [f"{base.vessel_names[0]}.pressure_in.mean"]
+    kw = {"steps_per_cycle": steps, "tol": tol}
+    print(f"\n{name} with stenoses (Newton steps; tol {tol:g}):")
+    print(f"{'stenoses':>9} {'forward (ms)':>13} {'cycles':>7} {'parameters':>11} "
+          f"{'tangent cycles':>15} {'time (ms)':>10} {'x forward per param':>20}")
+    for n in counts:
+        data, paths = _with_stenoses(base, n)
+        model = oxyline.load_model(data)
+        t0, s0 = _timed(lambda m=model: oxyline.sensitivities(m, [], outputs, **kw), 2)
+        t, s = _timed(lambda m=model, p=paths: oxyline.sensitivities(m, p, outputs, **kw), 2)
+        print(f"{n:>9} {t0 * 1e3:>13.0f} {s0.cycles:>7} {len(paths):>11} "
+              f"{s.tangent_cycles:>15} {t * 1e3:>10.0f} {(t / t0 - 1) / n:>20.3f}")
+
+
 def calibration_speedup() -> None:
     import scipy.optimize  # noqa: F401 — its import (~1 s) is not the fit's time
 
@@ -94,9 +135,12 @@ def main() -> None:
     ap.add_argument("--counts", type=int, nargs="*", default=[1, 5, 20, 100])
     ap.add_argument("--steps", type=int, default=400, help="steps per cycle")
     ap.add_argument("--tol", type=float, default=1e-8, help="periodic-state tolerance")
+    ap.add_argument("--stenoses", type=int, nargs="*", default=[1, 3, 6])
     args = ap.parse_args()
     if args.counts:
         gradient_cost(args.model, args.counts, args.steps, args.tol)
+    if args.stenoses:
+        stenosis_cost(args.model, args.stenoses, args.steps, args.tol)
     calibration_speedup()
 
 

@@ -289,3 +289,113 @@ def test_cardiac_output_is_the_prescribed_mean_inflow() -> None:
     assert s.values[0] == pytest.approx(5e-6, rel=1e-9)
     assert s.jacobian[0, 0] == pytest.approx(5e-6, rel=1e-9)
     assert abs(s.jacobian[0, 1]) * 1.6e9 <= 1e-9 * 5e-6
+
+
+def _stenosed(coefficient: float = 1.2e13) -> dict:
+    """``MODEL`` with a stenosis S Q|Q| in the lumped daughter: at its peak flow (~4e-6 m³/s)
+    the nonlinear drop is ~1.6× the linear one R Q, so the fit has to see the quadratic."""
+    model = copy.deepcopy(MODEL)
+    model["vessels"][2]["lumped"]["stenosis_coefficient"] = coefficient
+    return model
+
+
+STENOSIS = "vessels.d2.lumped.stenosis_coefficient"
+
+
+def test_stenosis_jacobian_matches_central_differences() -> None:
+    """The stenosis coefficient, and linear kinds whose tangents now pass through the
+    Newton matrices of the stenosed circuit, against central differences (relative step
+    1e-4, as above)."""
+    model = _stenosed()
+    params = [STENOSIS, "vessels.d2.lumped.resistance", "boundary_conditions.o2.resistance",
+              "vessels.parent.radius"]
+    exact = oxyline.sensitivities(model, params, OUTPUTS)
+    assert exact.parameter_values[0] == 1.2e13
+    h = 1e-4
+    # per output, the largest response to a 100 % change of a parameter; an output none of
+    # them changes (cardiac output: a prescribed inflow) is held to 1e-11 of its value (the
+    # difference quotient's rounding, 1e-16/h, is 1e-12 of it)
+    scale = np.maximum(np.abs(exact.jacobian * exact.parameter_values).max(axis=1),
+                       1e-5 * np.abs(exact.values))
+    for k, path in enumerate(params):
+        x0 = _base_value(model, path)
+        up, down = (oxyline.sensitivities(native_model(model, [path], [x0 * f]), [],
+                                          OUTPUTS).values for f in (1 + h, 1 - h))
+        err = np.abs(exact.jacobian[:, k] - (up - down) / (2 * h * x0)) * x0
+        assert (err <= 1e-6 * scale + 1e-300).all(), (path, err / scale)
+    # a narrower daughter takes less of the flow and raises the inlet pressure
+    rows = exact.rows
+    assert exact.jacobian[rows["flow_split.d1.parent"], 0][0] > 0
+    assert exact.jacobian[rows["parent.pressure_in.mean"], 0][0] > 0
+
+
+def test_a_stenosis_coefficient_is_recovered_from_synthetic_data() -> None:
+    """Targets of the stenosed model with S = 2.5e13 (and the daughter's outlet resistance
+    1.4e9) fitted from S = 1.2e13 (1.6e9): noise-free data determine both exactly (the
+    quadratic drop and the linear one differ in how they share the pulsatile flow)."""
+    truth = _stenosed(2.5e13)
+    truth["boundary_conditions"]["o2"]["resistance"] = 1.4e9
+    outputs = ["parent.pressure_in.max", "parent.pressure_in.min", "parent.pressure_in.mean",
+               "flow_split.d1.parent", "d2.flow_in.max", "d2.flow_in.min"]
+    measured = oxyline.sensitivities(truth, [], outputs).values
+    targets = {o: {"value": v, "sigma": 0.01 * abs(v)} for o, v in
+               zip(outputs, measured, strict=True)}
+    params = [STENOSIS, "boundary_conditions.o2.resistance"]
+    res = oxyline.calibrate(_stenosed(), targets, params, method="lm")
+    assert res.success, res.report
+    assert res.parameters[STENOSIS] == pytest.approx(2.5e13, rel=1e-6)
+    assert res.parameters["boundary_conditions.o2.resistance"] == pytest.approx(1.4e9, rel=1e-6)
+    assert res.model["vessels"][2]["lumped"]["stenosis_coefficient"] == \
+        pytest.approx(2.5e13, rel=1e-6)
+
+
+def test_stenosis_parameters_a_model_lacks_are_named() -> None:
+    with pytest.raises(ModelError, match=r"parameter 'vessels\.d1\.lumped\.stenosis_coefficient'"
+                                         r".*no differentiable value"):
+        oxyline.sensitivities(MODEL, ["vessels.d1.lumped.stenosis_coefficient"],
+                              ["parent.pressure_in.mean"])
+    with pytest.raises(ModelError, match=r"parameter 'vessels\.d9\.lumped\.stenosis_coefficient'"
+                                         r".*no vessel named 'd9'"):
+        oxyline.sensitivities(MODEL, ["vessels.d9.lumped.stenosis_coefficient"],
+                              ["parent.pressure_in.mean"])
+    # a lumped vessel without a stenosis: S = 0 cannot be fitted in log space
+    with pytest.raises(CalibrationError, match=f"parameter '{STENOSIS}': the start must be "
+                                               "positive"):
+        oxyline.calibrate(MODEL, {"parent.pressure_in.mean": 1e4}, [STENOSIS])
+
+
+def test_the_stenosed_tangent_run_is_the_run_loops_newton_scheme() -> None:
+    """The primal of a stenosed model's tangent run against ``simulate`` with the same step:
+    both take generalized-α's Newton steps (converged to 1e-12 of the state's scale). The
+    run's periodic start is that of the mean flow, which misses the stenosis's mean drop
+    S⟨Q|Q|⟩ − S Q̄²; that offset decays over the cycles (measured 1e-4, 5e-7 and 2e-11 of the
+    pressure after 30, 60 and 120 cycles), so after 120 cycles 1e-9 tells another scheme,
+    step or stenosis law apart."""
+    model = _stenosed()
+    s = oxyline.sensitivities(model, [], ["parent.pressure_in.series", "d2.flow_in.series"])
+    res = oxyline.simulate(model, cycles=120, dt=0.004, start="periodic", output_every=0.004)
+    p = res.vessel("parent").pressure_in[1:]
+    q = res.vessel("d2").flow_in[1:]
+    assert np.abs(s.values[s.rows["parent.pressure_in.series"]] - p).max() \
+        <= 1e-9 * np.abs(p).max()
+    assert np.abs(s.values[s.rows["d2.flow_in.series"]] - q).max() <= 1e-9 * np.abs(q).max()
+
+
+@pytest.mark.parametrize("stenosed", [False, True])
+def test_the_adjoint_jacobian_is_the_forward_one(stenosed: bool) -> None:
+    """``mode="adjoint"`` (one backward sweep per output, transposed solves) against the
+    forward tangents (checked against central differences above) on every output kind: the
+    two differ only by their fixed points' tolerance (1e-12) and rounding, so 1e-8 of each
+    output's largest response to a 100 % change tells a wrong transpose or weight apart."""
+    model = _stenosed() if stenosed else MODEL
+    params = PARAMETERS + ([STENOSIS] if stenosed else [])
+    outputs = OUTPUTS + ["d1.flow_out.max"]
+    fwd = oxyline.sensitivities(model, params, outputs)
+    adj = oxyline.sensitivities(model, params, outputs, mode="adjoint")
+    np.testing.assert_allclose(adj.values, fwd.values, rtol=1e-12)
+    np.testing.assert_array_equal(adj.parameter_values, fwd.parameter_values)
+    scale = np.maximum(np.abs(fwd.jacobian * fwd.parameter_values).max(axis=1),
+                       1e-5 * np.abs(fwd.values))
+    err = np.abs(adj.jacobian - fwd.jacobian) * np.abs(fwd.parameter_values)
+    assert (err <= 1e-8 * scale[:, None]).all(), err / scale[:, None]
+    assert adj.tangent_cycles < 2000  # the adjoint reached its periodic state

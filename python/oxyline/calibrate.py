@@ -126,13 +126,61 @@ def _evaluate(model: Model, parameters: Sequence[str], targets: Sequence[Target]
     return np.concatenate(values), np.concatenate(jac), raw
 
 
+def _adjoint(m: Model, parameters: Sequence[str], targets: Sequence[Target],
+             steps_per_cycle: int | None, tol: float, max_cycles: int
+             ) -> tuple[list[np.ndarray], list[np.ndarray], dict[str, Any]]:
+    """The outputs and their Jacobian rows by the core's adjoint: a primal run gives the
+    signals, each output's derivative is a fixed linear functional of the signals' derivatives
+    there (:func:`~oxyline.targets.combine` applied to a unit basis gives its weights), and one
+    backward sweep per output row gives its gradient for every parameter."""
+    from oxyline import _core
+    from oxyline.errors import core_errors
+
+    signals = sorted({s for t in targets for s in t.signals})
+    raw = _tangent(m, [], signals, steps_per_cycle, tol, max_cycles)
+    ns, nsig = raw["signals"].shape
+    basis = np.eye(ns * nsig).reshape(ns * nsig, ns, nsig)
+    values, weights, paths = [], [], []
+    for t in targets:
+        cols = [signals.index(s) for s in t.signals]
+        path = path_of(t.output, m, parameters)
+        v, w = combine(t.output, raw["times"], raw["signals"][:, cols], basis[:, :, cols],
+                       raw["times"], None if path is None else (path[0], np.zeros(ns * nsig)))
+        values.append(v)
+        weights.append(w.reshape(len(v), ns * nsig))
+        paths.append((path, v))
+    period, steps, rho = _settings(m, steps_per_cycle)
+    with core_errors(f"model '{m.name}'"):
+        out = _core.adjoint_gradients(json.dumps(m.canonical), list(parameters), signals,
+                                      np.ascontiguousarray(np.concatenate(weights).ravel()),
+                                      period, steps, rho, max_cycles, tol)
+    jac, start = [], 0
+    for path, v in paths:
+        j = np.asarray(out["gradients"][start:start + len(v)])
+        if path is not None:  # a pulse-wave velocity L/τ: its path length's own term, v/L
+            j = j + (v / path[0])[:, None] * path[1][None, :]
+        jac.append(j)
+        start += len(v)
+    raw = {**raw, "values": out["values"], "tangent_cycles": max(out["adjoint_cycles"],
+                                                                 default=0),
+           "periodic_change": max(float(raw["periodic_change"]),
+                                  float(out["periodic_change"]))}
+    return values, jac, raw
+
+
 def sensitivities(model: Model | Mapping[str, Any] | str, parameters: Sequence[str],
                   outputs: Sequence[str], *, steps_per_cycle: int | None = None,
-                  tol: float = 1e-12, max_cycles: int = 2000) -> Sensitivities:
+                  tol: float = 1e-12, max_cycles: int = 2000,
+                  mode: str = "forward") -> Sensitivities:
     """The Jacobian of ``outputs`` (names, :mod:`oxyline.targets`) with respect to
     ``parameters`` (patch paths) at the periodic state of ``model``, exact for the
     generalized-α discretisation (the model's ``dt``, or 400 steps a cycle). A ``series``
     output has one row per step of the cycle.
+
+    ``mode="forward"``: tangents, one per parameter (few parameters); ``"adjoint"``: one
+    backward sweep per output row, whatever the number of parameters (many parameters, few
+    outputs). Both give the same Jacobian (to the periodic tolerance); ``tangent_cycles``
+    counts the tangent cycles, or the most backward cycles of an output.
 
     >>> s = sensitivities("bifurcation", ["scale.resistance"], ["parent.pressure_in.mean"])
     >>> bool(s.jacobian[0, 0] > 0)
@@ -141,7 +189,19 @@ def sensitivities(model: Model | Mapping[str, Any] | str, parameters: Sequence[s
     m = load_model(model)
     if isinstance(outputs, str) or isinstance(parameters, str):
         raise CalibrationError("parameters and outputs: expected lists of names")
+    if mode not in ("forward", "adjoint"):
+        raise CalibrationError(f"mode: expected 'forward' or 'adjoint', got {mode!r}")
     targets = [Target(o, None, signals=signals_of(o, m)) for o in outputs]
+    if mode == "adjoint":
+        values, jac, raw = _adjoint(m, parameters, targets, steps_per_cycle, tol, max_cycles)
+        rows, start = {}, 0
+        for t, v in zip(targets, values, strict=True):
+            rows[t.output] = slice(start, start + len(v))
+            start += len(v)
+        return Sensitivities(list(outputs), list(parameters), np.asarray(raw["values"]),
+                             np.concatenate(values), np.concatenate(jac),
+                             int(raw["cycles"]), float(raw["periodic_change"]), rows,
+                             int(raw["tangent_cycles"]))
     signals = sorted({s for t in targets for s in t.signals})
     raw = _tangent(m, parameters, signals, steps_per_cycle, tol, max_cycles)
     values, jac, rows, start = [], [], {}, 0
@@ -178,6 +238,9 @@ def _base_value(source: Mapping[str, Any], path: str) -> float:
             v = _vessel(source, parts[1], path)
             if parts[2:] == ["radius"] and "radius" not in v:
                 return float(v["radius_in"])
+            if parts[2:] == ["lumped", "stenosis_coefficient"] and isinstance(
+                    v.get("lumped"), Mapping):  # a lumped vessel without one: S = 0
+                return float(v["lumped"].get("stenosis_coefficient", 0.0))
             node: Any = v
             for key in parts[2:]:
                 node = node[key]

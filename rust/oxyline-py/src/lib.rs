@@ -86,7 +86,7 @@ mod _core {
         pwdb_wall_properties, pwdb_wave_speed, structured_tree_root, terminal_compartment,
     };
     #[pymodule_export]
-    use super::calibrate::tangent_sensitivities;
+    use super::calibrate::{adjoint_gradients, tangent_sensitivities};
     #[pymodule_export]
     use super::calibration::CalibrationProblem;
     #[pymodule_export]

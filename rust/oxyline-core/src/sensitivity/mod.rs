@@ -1,16 +1,20 @@
 //! Exact parameter sensitivities of a model's periodic state: the parameters by their patch
 //! paths ([`parameter`]), the derivative of the DAE with respect to each, and the
-//! tangent-linear generalized-α run to the periodic state ([`tangent`]).
+//! tangent-linear generalized-α run to the periodic state ([`tangent`]), and its adjoint
+//! (reverse) sweep for many parameters and few functionals ([`adjoint`]).
 
 pub mod krylov;
 pub mod parameter;
 pub mod tangent;
 
+use crate::circuit::Dae;
 use crate::error::{Error, Result};
 use crate::model::NetworkSpec;
 use crate::output::VESSEL_VARIABLES;
 pub use parameter::{DaeTangent, Parameter};
-pub use tangent::{PeriodicTangent, TangentSettings, periodic_tangent};
+pub use tangent::{
+    PeriodicAdjoint, PeriodicTangent, TangentSettings, periodic_adjoint, periodic_tangent,
+};
 
 /// The result of [`sensitivities`]: the parameters' SI values and the signals over the
 /// periodic cycle with their derivatives.
@@ -28,6 +32,36 @@ pub fn sensitivities(
     signals: &[(String, String)],
     settings: TangentSettings,
 ) -> Result<Sensitivities> {
+    let (dae, tangents, unknowns) = prepare(spec, paths, signals)?;
+    let cycle = periodic_tangent(&dae, &tangents, &unknowns, settings)?;
+    Ok(Sensitivities {
+        values: tangents.iter().map(|t| t.value).collect(),
+        cycle,
+    })
+}
+
+/// The gradients of functionals J_f = Σ_k Σ_j w[(f n_steps + k) n_signals + j] · signal j
+/// after step k of the periodic cycle, by the adjoint (one backward sweep per functional,
+/// whatever the number of parameters): the parameters' SI values and the adjoint's result.
+pub fn adjoint(
+    spec: &NetworkSpec,
+    paths: &[String],
+    signals: &[(String, String)],
+    weights: &[f64],
+    settings: TangentSettings,
+) -> Result<(Vec<f64>, PeriodicAdjoint)> {
+    let (dae, tangents, unknowns) = prepare(spec, paths, signals)?;
+    let out = periodic_adjoint(&dae, &tangents, &unknowns, weights, settings)?;
+    Ok((tangents.iter().map(|t| t.value).collect(), out))
+}
+
+/// The DAE of `spec`, the derivative of it by each parameter, and the unknowns of the
+/// signals; an error naming a path, vessel or variable that does not resolve.
+fn prepare(
+    spec: &NetworkSpec,
+    paths: &[String],
+    signals: &[(String, String)],
+) -> Result<(Dae, Vec<DaeTangent>, Vec<usize>)> {
     let mut spec = spec.clone();
     for v in &mut spec.vessels {
         v.output = true;
@@ -39,7 +73,7 @@ pub fn sensitivities(
     let assembled = spec.assemble()?;
     let circuit = &assembled.circuit;
     let dae = circuit.assemble()?;
-    parameter::check_linear(circuit, &dae)?;
+    parameter::check_supported(circuit, &dae)?;
     let stamps = parameter::Stamps::new(circuit, &dae);
     let mut tangents = Vec::with_capacity(params.len());
     for (p, path) in params.iter().zip(paths) {
@@ -76,11 +110,7 @@ pub fn sensitivities(
             Ok(probes.vessel_unknowns[4 * vi + k])
         })
         .collect::<Result<Vec<_>>>()?;
-    let cycle = periodic_tangent(&dae, &tangents, &unknowns, settings)?;
-    Ok(Sensitivities {
-        values: tangents.iter().map(|t| t.value).collect(),
-        cycle,
-    })
+    Ok((dae, tangents, unknowns))
 }
 
 #[cfg(test)]

@@ -10,6 +10,10 @@
 //! walls alike); for a uniform radius r its R ∝ r⁻⁴, L ∝ r⁻², and thin-wall C ∝ r³ at a fixed
 //! wall thickness; boundary and lumped values enter as themselves. The derivative of a power
 //! law x = a pᵏ is k x / p: analytic, no differencing.
+//!
+//! A stenosis adds the nonlinear term c_i(y) = S |Q| Q to its branch row (S split evenly
+//! over a lumped vessel's segments); its derivative with respect to S is |Q| Q at the step's
+//! α_f level, recorded here as dS/dp per branch unknown ([`DaeTangent::dstenosis`]).
 
 use crate::circuit::{Circuit, Dae};
 use crate::error::{Error, Result};
@@ -27,7 +31,7 @@ pub enum Parameter {
     Radius(usize),
     /// `vessels.<name>.youngs_modulus`
     YoungsModulus(usize),
-    /// `vessels.<name>.lumped.<resistance|capacitance|inductance>`
+    /// `vessels.<name>.lumped.<resistance|capacitance|inductance|stenosis_coefficient>`
     Lumped(usize, String),
     /// `scale.resistance`: every resistance and RCR condition and lumped vessel resistance.
     ResistanceScale,
@@ -50,6 +54,8 @@ pub struct DaeTangent {
     pub df: Vec<f64>,
     /// d f_row / dp = factor · f_row(t), by index into `Dae::forcing`.
     pub dforcing: Vec<(usize, f64)>,
+    /// (branch unknown i, dS_i/dp): the stenosis term S_i |y_i| y_i's coefficient.
+    pub dstenosis: Vec<(usize, f64)>,
 }
 
 fn unknown(path: &str, why: impl Into<String>) -> Error {
@@ -68,7 +74,7 @@ impl Parameter {
             ["vessels", name, rest @ ..] if !rest.is_empty() => vessel(spec, path, name, rest),
             _ => Err(unknown(
                 path,
-                "not a parameter path (vessels.<name>.<length|radius|youngs_modulus|lumped.resistance|lumped.capacitance|lumped.inductance>, boundary_conditions.<node>.<resistance|proximal_resistance|distal_resistance|capacitance>, scale.<resistance|compliance|inflow>)",
+                "not a parameter path (vessels.<name>.<length|radius|youngs_modulus|lumped.resistance|lumped.capacitance|lumped.inductance|lumped.stenosis_coefficient>, boundary_conditions.<node>.<resistance|proximal_resistance|distal_resistance|capacitance>, scale.<resistance|compliance|inflow>)",
             )),
         }
     }
@@ -135,7 +141,10 @@ fn vessel(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<P
             Parameter::Radius(vi)
         }
         (["lumped", key], _, Some(_))
-            if matches!(*key, "resistance" | "capacitance" | "inductance") =>
+            if matches!(
+                *key,
+                "resistance" | "capacitance" | "inductance" | "stenosis_coefficient"
+            ) =>
         {
             if arrangement == Arrangement::Rcl {
                 return Err(unknown(path, "lumped RCL vessels are not supported"));
@@ -155,11 +164,12 @@ fn vessel(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<P
     Ok(p)
 }
 
-/// Refuse what the tangent does not cover: a circuit that is not linear and constant, or
-/// one whose rows were moved (heart elements).
-pub fn check_linear(circuit: &Circuit, dae: &Dae) -> Result<()> {
-    let why = if !dae.stenosis.is_empty() || !dae.chain_rule.is_empty() {
-        Some("stenoses")
+/// Refuse what the tangent does not cover: time-varying or element terms, rows that were
+/// moved (heart elements), and svZeroDSolver-form stenoses (chain-rule capacitor rows).
+/// Branch-form stenoses are covered (their S |Q| Q term is differentiated exactly).
+pub fn check_supported(circuit: &Circuit, dae: &Dae) -> Result<()> {
+    let why = if !dae.chain_rule.is_empty() {
+        Some("svZeroDSolver-form stenoses (stenosis_form: svzerod)")
     } else if !dae.elements.is_empty() || !circuit.moved_rows.is_empty() {
         Some("heart elements")
     } else if !circuit.swapped_rows.is_empty() {
@@ -172,7 +182,7 @@ pub fn check_linear(circuit: &Circuit, dae: &Dae) -> Result<()> {
     match why {
         Some(w) => Err(Error::model(
             "sensitivities",
-            format!("need a linear circuit, but the model has {w}"),
+            format!("do not cover models with {w}"),
         )),
         None => Ok(()),
     }
@@ -211,6 +221,7 @@ impl<'a> Stamps<'a> {
             de: vec![0.0; self.dae.n],
             df: vec![0.0; self.dae.f.val.len()],
             dforcing: Vec::new(),
+            dstenosis: Vec::new(),
         }
     }
 
@@ -276,6 +287,11 @@ impl<'a> Stamps<'a> {
             }
             Parameter::Lumped(vi, key) => {
                 let l = spec.vessels[*vi].lumped.as_ref().ok_or_else(missing)?;
+                if key == "stenosis_coefficient" {
+                    t = self.blank(path, l.stenosis_coefficient);
+                    self.vessel_stenosis(&mut t, &spec.vessels[*vi].name);
+                    return Ok(t);
+                }
                 let (value, k) = match key.as_str() {
                     "resistance" => (l.resistance, [1.0, 0.0, 0.0]),
                     "inductance" => (l.inductance, [0.0, 1.0, 0.0]),
@@ -345,6 +361,15 @@ impl<'a> Stamps<'a> {
             for &(node, share) in &s.nodes {
                 t.de[node] += which[2] * share / n;
             }
+        }
+    }
+
+    /// d/dS of a lumped vessel's stenosis coefficient split evenly over its segments' branches.
+    fn vessel_stenosis(&self, t: &mut DaeTangent, name: &str) {
+        let nn = self.circuit.nodes.len();
+        let n = self.segments_of(name).count() as f64;
+        for s in self.segments_of(name) {
+            t.dstenosis.push((nn + s.branch, 1.0 / n));
         }
     }
 

@@ -21,12 +21,29 @@
 //! (no primal, no re-run of the forward loop) instead of the forward run's count. A tangent
 //! counts as periodic when p·s at a cycle start repeats to `tol` (p·s is the state's response
 //! to a 100 % change of p); the last such cycle is the one recorded.
+//!
+//! Stenoses add c(y) = S |Q| Q to their branch rows. The primal is then the run loop's own
+//! Newton step (`integrate::genalpha`), and the converged step satisfies
+//! E (c ẏ + α_m Δ) + F y_αf + c(y_αf) = f with y_αf = y + α_f γ Δt Δ, whose derivative is
+//!
+//!   K_k dΔ = df − dE (c ẏ + α_m Δ) − dF y_αf − (dS) |Q_αf| Q_αf − c E ṡ − (F + J_k) s,
+//!
+//! K_k = α_m E + α_f γ Δt (F + J_k), J_k = diag(2 S |Q_αf|) at step k of the periodic cycle.
+//! The tangent's cycle map is still linear in (s, ṡ) and the same for every parameter (its Φ
+//! is the linearised monodromy), so the fixed-point iteration is unchanged; only K_k varies
+//! along the cycle, so each tangent cycle refactorises once per step (the slopes 2 S |Q_αf|
+//! are recorded with the sources) and solves every active parameter on that factorisation.
+
+#[path = "adjoint.rs"]
+mod adjoint;
+pub use adjoint::{PeriodicAdjoint, periodic_adjoint};
 
 use super::krylov::Subspace;
 use super::parameter::DaeTangent;
-use crate::circuit::Dae;
+use crate::circuit::{Dae, Regime};
 use crate::error::{Error, Result};
-use crate::integrate::newton::{jacobian_stamps, jacobian_values, singular};
+use crate::integrate::genalpha::GenAlpha;
+use crate::integrate::newton::{NewtonControl, jacobian_stamps, jacobian_values, singular};
 use crate::sparse::SparseLu;
 
 /// How the periodic tangent is run.
@@ -57,6 +74,7 @@ pub struct PeriodicTangent {
 }
 
 struct Scheme {
+    rho: f64,
     am: f64,
     af: f64,
     gamma: f64,
@@ -74,6 +92,7 @@ impl Scheme {
         let am = 0.5 * (3.0 - rho) / (1.0 + rho);
         let af = 1.0 / (1.0 + rho);
         Ok(Scheme {
+            rho,
             am,
             af,
             gamma: 0.5 + am - af,
@@ -115,6 +134,8 @@ struct Source {
     f: Vec<(usize, usize, f64)>,
     /// (position in `rows`, index into `Dae::forcing`, d f / dp over f)
     forcing: Vec<(usize, usize, f64)>,
+    /// (position in `rows`, branch unknown i, dS_i/dp)
+    sten: Vec<(usize, usize, f64)>,
     /// step k's values on `rows` at k·rows.len()
     vals: Vec<f64>,
     /// steps captured
@@ -149,12 +170,14 @@ impl Source {
             .iter()
             .map(|&(k, factor)| (at(dae.forcing[k].0), k, factor))
             .collect();
+        let sten = t.dstenosis.iter().map(|&(i, d)| (at(i), i, d)).collect();
         let vals = Vec::with_capacity(steps * rows.len());
         Source {
             rows,
             e,
             f,
             forcing,
+            sten,
             vals,
             steps: 0,
         }
@@ -177,6 +200,20 @@ impl Source {
         for &(at, k, factor) in &self.forcing {
             v[at] += factor * forcing[k];
         }
+        for &(at, i, ds) in &self.sten {
+            let q = y[i] + gdt * delta[i];
+            v[at] -= ds * q.abs() * q;
+        }
+    }
+
+    /// Step k's source · `u` (the adjoint's contribution of the step).
+    fn dot(&self, k: usize, u: &[f64]) -> f64 {
+        let m = self.rows.len();
+        self.rows
+            .iter()
+            .zip(&self.vals[k * m..(k + 1) * m])
+            .map(|(&row, v)| u[row] * v)
+            .sum()
     }
 
     /// Add step k's source to `r`.
@@ -200,6 +237,12 @@ struct Primal<'a> {
     r: Vec<f64>,
     y: Vec<f64>,
     yd: Vec<f64>,
+    /// The run loop's Newton step when the circuit has stenoses (None: linear, `lu` holds
+    /// the one factorisation), and the state it steps to.
+    newton: Option<GenAlpha<'a>>,
+    next: (Vec<f64>, Vec<f64>),
+    /// 2 S |Q_αf| of each `Dae::stenosis` entry at each recorded step (`record_slopes`).
+    slopes: Vec<f64>,
 }
 
 impl<'a> Primal<'a> {
@@ -211,7 +254,19 @@ impl<'a> Primal<'a> {
         let mut kvals = vec![0.0; stamps.len()];
         let a = scheme.af * scheme.gamma * scheme.dt;
         jacobian_values(dae, a, &am_e, &vec![0.0; n], 0.0, &mut kvals);
-        lu.factor(&kvals).map_err(|m| singular(0.0, &m))?;
+        let newton = if dae.stenosis.is_empty() {
+            lu.factor(&kvals).map_err(|m| singular(0.0, &m))?;
+            None
+        } else {
+            let control = NewtonControl::default();
+            Some(GenAlpha::new(
+                dae,
+                Regime::Transient,
+                scheme.dt,
+                scheme.rho,
+                control,
+            )?)
+        };
         let pred = (scheme.gamma - 1.0) / scheme.gamma;
         Ok(Primal {
             dae,
@@ -222,7 +277,30 @@ impl<'a> Primal<'a> {
             r: vec![0.0; n],
             y: dae.initial_state(),
             yd: vec![0.0; n],
+            newton,
+            next: (Vec::new(), Vec::new()),
+            slopes: Vec::new(),
         })
+    }
+
+    /// The iteration matrix's values without the stenosis slopes (in `jacobian_stamps`
+    /// order): a step's matrix adds α_f γ Δt · 2 S |Q_αf| on the stenosis diagonals.
+    fn base_values(&self) -> Vec<f64> {
+        let (dae, sc) = (self.dae, &self.scheme);
+        let am_e: Vec<f64> = dae.e.iter().map(|e| sc.am * e).collect();
+        let mut kvals = vec![0.0; jacobian_stamps(dae).len()];
+        let a = sc.af * sc.gamma * sc.dt;
+        jacobian_values(dae, a, &am_e, &vec![0.0; dae.n], 0.0, &mut kvals);
+        kvals
+    }
+
+    /// Append this step's stenosis slopes 2 S |Q_αf| (after `increment`).
+    fn record_slopes(&mut self) {
+        let gdt = self.scheme.af * self.scheme.gamma * self.scheme.dt;
+        for &(i, s) in &self.dae.stenosis {
+            let q = self.y[i] + gdt * self.r[i];
+            self.slopes.push(2.0 * s * q.abs());
+        }
     }
 
     /// The increment Δ of the step from `time` (into `r`; the state is not advanced).
@@ -234,6 +312,18 @@ impl<'a> Primal<'a> {
             self.forcing[fk] = w.eval(t_af);
             self.r[*row] += self.forcing[fk];
         }
+        if let Some(ga) = &mut self.newton {
+            // the run loop's Newton step; Δ = ẏ_{n+1} − pred ẏ_n
+            let (y1, yd1) = &mut self.next;
+            y1.clone_from(&self.y);
+            yd1.clone_from(&self.yd);
+            ga.step(time, y1, yd1)?;
+            let pred = (sc.gamma - 1.0) / sc.gamma;
+            for ((d, a), b) in self.r.iter_mut().zip(yd1.iter()).zip(&self.yd) {
+                *d = a - pred * b;
+            }
+            return Ok(());
+        }
         residual(dae, self.c, &self.y, &self.yd, &mut self.r);
         if !self.lu.solve_in_place(&mut self.r) {
             return Err(singular(t_af, "non-finite solution"));
@@ -242,6 +332,11 @@ impl<'a> Primal<'a> {
     }
 
     fn advance(&mut self) {
+        if self.newton.is_some() {
+            std::mem::swap(&mut self.y, &mut self.next.0);
+            std::mem::swap(&mut self.yd, &mut self.next.1);
+            return;
+        }
         advance(&self.scheme, &mut self.y, &mut self.yd, &self.r);
     }
 
@@ -256,33 +351,81 @@ impl<'a> Primal<'a> {
         let scale = |v: &[f64]| v.iter().fold(1e-300f64, |m, x| m.max(x.abs()));
         [scale(&self.y[..k]), scale(&self.y[k..])]
     }
+}
 
-    /// One tangent cycle from x = (s, ṡ) with `src`, in place; s at the chosen unknowns
-    /// after each step into `rec` (n_steps × signals).
-    fn tangent_cycle(
-        &self,
-        src: &Source,
-        x: &mut [f64],
-        rs: &mut [f64],
-        signals: &[usize],
-        rec: &mut [f64],
-    ) -> Result<()> {
-        let (s, sd) = x.split_at_mut(self.dae.n);
-        let nsig = signals.len();
-        for k in 0..src.steps {
+/// The tangents' iteration matrices along the periodic cycle: the primal's one factorisation
+/// for a linear circuit, else one per step from the recorded stenosis slopes.
+struct StepMatrices {
+    /// (stamps without the slopes, value index of each stenosis diagonal, a = α_f γ Δt, LU)
+    varying: Option<(Vec<f64>, Vec<usize>, f64, SparseLu)>,
+}
+
+impl StepMatrices {
+    fn of(pr: &Primal) -> Result<StepMatrices> {
+        if pr.newton.is_none() {
+            return Ok(StepMatrices { varying: None });
+        }
+        let dae = pr.dae;
+        let nf = dae.f.val.len();
+        let diag = dae.stenosis.iter().map(|&(i, _)| nf + i).collect();
+        let a = pr.scheme.af * pr.scheme.gamma * pr.scheme.dt;
+        let lu = SparseLu::analyse(dae.n, &jacobian_stamps(dae))?;
+        Ok(StepMatrices {
+            varying: Some((pr.base_values(), diag, a, lu)),
+        })
+    }
+
+    /// The matrix of step k (refactorised when it varies), to solve with.
+    fn at<'m>(&'m mut self, pr: &'m Primal, k: usize) -> Result<&'m SparseLu> {
+        let Some((base, diag, a, lu)) = &mut self.varying else {
+            return Ok(&pr.lu);
+        };
+        let m = diag.len();
+        let mut vals = base.clone();
+        for (&d, slope) in diag.iter().zip(&pr.slopes[k * m..(k + 1) * m]) {
+            vals[d] += *a * slope;
+        }
+        let t = k as f64 * pr.scheme.dt;
+        lu.factor(&vals).map_err(|msg| singular(t, &msg))?;
+        Ok(lu)
+    }
+}
+
+/// One tangent cycle of each job (parameter p, its state x = (s, ṡ) advanced in place, its
+/// record: s at the chosen unknowns after each step, n_steps × signals), step by step so
+/// that a varying matrix is factorised once per step for all of them.
+fn tangent_cycles(
+    pr: &Primal,
+    mats: &mut StepMatrices,
+    sources: &[Source],
+    jobs: &mut [(usize, Vec<f64>, &mut [f64])],
+    signals: &[usize],
+) -> Result<()> {
+    let (dae, n, nsig) = (pr.dae, pr.dae.n, signals.len());
+    let m = dae.stenosis.len();
+    let mut rs = vec![0.0; n];
+    for k in 0..sources.first().map_or(0, |s| s.steps) {
+        let lu = mats.at(pr, k)?;
+        let slopes = pr.slopes.get(k * m..(k + 1) * m).unwrap_or(&[]);
+        for (p, x, rec) in jobs.iter_mut() {
+            let (s, sd) = x.split_at_mut(n);
             rs.iter_mut().for_each(|v| *v = 0.0);
-            residual(self.dae, self.c, s, sd, rs);
-            src.add(k, rs);
-            if !self.lu.solve_in_place(rs) {
-                return Err(singular(k as f64 * self.scheme.dt, "non-finite tangent"));
+            residual(dae, pr.c, s, sd, &mut rs);
+            // −J_k s: the stenosis slopes at this step
+            for (&(i, _), slope) in dae.stenosis.iter().zip(slopes) {
+                rs[i] -= slope * s[i];
             }
-            advance(&self.scheme, s, sd, rs);
+            sources[*p].add(k, &mut rs);
+            if !lu.solve_in_place(&mut rs) {
+                return Err(singular(k as f64 * pr.scheme.dt, "non-finite tangent"));
+            }
+            advance(&pr.scheme, s, sd, &rs);
             for (o, &u) in rec[k * nsig..(k + 1) * nsig].iter_mut().zip(signals) {
                 *o = s[u];
             }
         }
-        Ok(())
     }
+    Ok(())
 }
 
 /// The forward run's cycles to the periodic state (at most `max_cycles` − 1, the last cycle
@@ -341,6 +484,7 @@ pub fn periodic_tangent(
         for src in &mut sources {
             src.capture(&pr.scheme, pr.c, (&pr.y, &pr.yd, &pr.r), &pr.forcing);
         }
+        pr.record_slopes();
         pr.advance();
         rec.values.extend(signals.iter().map(|&u| pr.y[u]));
         let kn = dae.n_nodes.min(n);
@@ -353,8 +497,9 @@ pub fn periodic_tangent(
     let weights = weights(dae, floor, rate_scale);
     let values: Vec<f64> = params.iter().map(|t| t.value).collect();
     let mut sub = Subspace::new(weights, 256);
-    let run = TangentRun {
+    let mut run = TangentRun {
         pr: &pr,
+        mats: StepMatrices::of(&pr)?,
         sources: &sources,
         values: &values,
         signals,
@@ -383,6 +528,7 @@ fn weights(dae: &Dae, floor: [f64; 2], rate: [f64; 2]) -> Vec<f64> {
 /// The tangents' cycles along the recorded periodic primal.
 struct TangentRun<'r, 'a> {
     pr: &'r Primal<'a>,
+    mats: StepMatrices,
     sources: &'r [Source],
     values: &'r [f64],
     signals: &'r [usize],
@@ -394,38 +540,54 @@ impl TangentRun<'_, '_> {
     /// (or `max_cycles` tangent cycles); each parameter's last cycle is recorded into
     /// `derivs`. Returns the tangent cycles run and the largest remaining change.
     fn to_periodic(
-        &self,
+        &mut self,
         sub: &mut Subspace,
         set: &TangentSettings,
         derivs: &mut [f64],
     ) -> Result<(usize, f64)> {
         let n = self.pr.dae.n;
+        let kn = self.pr.dae.n_nodes.min(n);
         let np = self.sources.len();
-        let block = derivs.len().checked_div(np).unwrap_or(0);
-        let mut rs = vec![0.0; n];
+        let block = derivs.len().checked_div(np).unwrap_or(0).max(1);
+        let mut recs: Vec<&mut [f64]> = derivs.chunks_mut(block).collect();
         let mut x = vec![vec![0.0; 2 * n]; np];
         let mut r: Vec<Vec<f64>> = vec![Vec::new(); np];
         let mut change = vec![f64::INFINITY; np];
         let mut cycles = 0;
         while cycles < set.max_cycles && change.iter().any(|&c| c > set.tol) {
-            let mut next = Vec::with_capacity(np);
             let active: Vec<usize> = (0..np).filter(|&p| change[p] > set.tol).collect();
-            for p in active {
-                let xn = if cycles == 0 {
-                    x[p].clone()
-                } else {
-                    sub.next(&x[p], &r[p])
-                };
-                let mut g = xn.clone();
-                let rec = &mut derivs[p * block..(p + 1) * block];
-                self.pr
-                    .tangent_cycle(&self.sources[p], &mut g, &mut rs, self.signals, rec)?;
+            let starts: Vec<Vec<f64>> = active
+                .iter()
+                .map(|&p| {
+                    if cycles == 0 {
+                        x[p].clone()
+                    } else {
+                        sub.next(&x[p], &r[p])
+                    }
+                })
+                .collect();
+            // each active parameter's record, taken out of `recs` for the cycle
+            let mut jobs: Vec<(usize, Vec<f64>, &mut [f64])> = active
+                .iter()
+                .zip(&starts)
+                .map(|(&p, xn)| (p, xn.clone(), std::mem::take(&mut recs[p])))
+                .collect();
+            let ran = tangent_cycles(
+                self.pr,
+                &mut self.mats,
+                self.sources,
+                &mut jobs,
+                self.signals,
+            );
+            let mut next = Vec::with_capacity(active.len());
+            for ((p, g, rec), xn) in jobs.into_iter().zip(starts) {
+                recs[p] = rec;
                 let rn: Vec<f64> = g.iter().zip(&xn).map(|(a, b)| a - b).collect();
-                let kn = self.pr.dae.n_nodes.min(n);
-                let p_abs = self.values[p].abs();
+                let p_abs = scale_of(self.values[p]);
                 change[p] = relative_change(&xn[..n], &g[..n], kn, p_abs, self.floor);
                 next.push((p, xn, rn));
             }
+            ran?;
             for (p, xn, rn) in next {
                 if cycles > 0 {
                     let dx = xn.iter().zip(&x[p]).map(|(a, b)| a - b).collect();
@@ -437,6 +599,16 @@ impl TangentRun<'_, '_> {
             cycles += 1;
         }
         Ok((cycles, change.iter().fold(0.0, |m: f64, &c| m.max(c))))
+    }
+}
+
+/// The scale p·s of a tangent is judged on: |p|, or 1 for a parameter at zero (a stenosis
+/// coefficient of a vessel without one), whose 100 % change is no change.
+fn scale_of(value: f64) -> f64 {
+    if value != 0.0 && value.is_finite() {
+        value.abs()
+    } else {
+        1.0
     }
 }
 

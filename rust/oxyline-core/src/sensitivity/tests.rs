@@ -56,9 +56,17 @@ fn run(spec: &NetworkSpec, paths: &[&str]) -> Sensitivities {
     sensitivities(spec, &paths, &signals, settings()).unwrap()
 }
 
-/// The model with parameter `path` multiplied by `f`, written into the spec directly.
-fn scaled(path: &str, f: f64) -> NetworkSpec {
+/// [`MODEL`] with a stenosis in the lumped daughter: S Q² at its peak flow (~4e-6 m³/s) is
+/// ~1.6× its linear drop R Q, so the nonlinear term matters as much as the linear one.
+fn stenosed() -> NetworkSpec {
     let mut s = parse(MODEL).unwrap();
+    let d2 = s.vessels.iter_mut().find(|v| v.name == "d2").unwrap();
+    d2.lumped.as_mut().unwrap().stenosis_coefficient = 1.2e13;
+    s
+}
+
+/// `s` with parameter `path` multiplied by `f`, written into the spec directly.
+fn scaled_from(mut s: NetworkSpec, path: &str, f: f64) -> NetworkSpec {
     let vi = |s: &NetworkSpec, n: &str| s.vessels.iter().position(|v| v.name == n).unwrap();
     let parts: Vec<&str> = path.split('.').collect();
     match parts.as_slice() {
@@ -89,6 +97,10 @@ fn scaled(path: &str, f: f64) -> NetworkSpec {
         ["vessels", n, "lumped", "resistance"] => {
             let i = vi(&s, n);
             s.vessels[i].lumped.as_mut().unwrap().resistance *= f;
+        }
+        ["vessels", n, "lumped", "stenosis_coefficient"] => {
+            let i = vi(&s, n);
+            s.vessels[i].lumped.as_mut().unwrap().stenosis_coefficient *= f;
         }
         ["boundary_conditions", node, key] => match s.boundary_conditions.get_mut(*node) {
             Some(BoundarySpec::Resistance { resistance, .. }) => *resistance *= f,
@@ -157,11 +169,14 @@ fn scaled(path: &str, f: f64) -> NetworkSpec {
 /// Largest |tangent − central difference| over the cycle and signals, relative to the
 /// derivative's scale per signal.
 fn check(path: &str) {
-    let base = parse(MODEL).unwrap();
-    let exact = run(&base, &[path]);
+    check_on(&parse(MODEL).unwrap(), path);
+}
+
+fn check_on(base: &NetworkSpec, path: &str) {
+    let exact = run(base, &[path]);
     let h = 1e-4;
-    let up = run(&scaled(path, 1.0 + h), &[]);
-    let down = run(&scaled(path, 1.0 - h), &[]);
+    let up = run(&scaled_from(base.clone(), path, 1.0 + h), &[]);
+    let down = run(&scaled_from(base.clone(), path, 1.0 - h), &[]);
     let p = exact.values[0];
     let c = &exact.cycle;
     // the cycle before the last one changed by at most `tol`; the last by about as much
@@ -217,6 +232,52 @@ fn lumped_values_and_scales() {
     check("scale.inflow");
 }
 
+/// A stenosis: its own coefficient, and other kinds whose tangents now pass through the
+/// per-step Newton matrices (the slope 2 S |Q| enters every tangent's homogeneous part).
+#[test]
+fn stenosis_coefficient_and_kinds_through_a_stenosis() {
+    let base = stenosed();
+    check_on(&base, "vessels.d2.lumped.stenosis_coefficient");
+    check_on(&base, "vessels.d2.lumped.resistance");
+    check_on(&base, "boundary_conditions.o2.resistance");
+    check_on(&base, "vessels.parent.radius");
+    check_on(&base, "scale.inflow");
+}
+
+/// A flow through a lone stenosis into a resistance is the quadratic
+/// P = (R_out + R) Q + S Q² at every instant (no capacitance, inductance only in the
+/// parent, which a constant inflow does not excite): d P/d S = Q² exactly.
+#[test]
+fn stenosis_derivative_of_a_steady_flow_is_q_squared() {
+    let json = r#"{
+      "name": "s",
+      "vessels": [
+        {"name": "st", "from": "in", "to": "out",
+         "lumped": {"resistance": 1e7, "stenosis_coefficient": 5e12}}
+      ],
+      "boundary_conditions": {
+        "in": {"type": "flow", "flow": {"kind": "fourier", "period": 0.8, "mean": 4e-6,
+                                        "cos": [], "sin": []}},
+        "out": {"type": "resistance", "resistance": 1e8}
+      }
+    }"#;
+    let spec = parse(json).unwrap();
+    let out = sensitivities(
+        &spec,
+        &["vessels.st.lumped.stenosis_coefficient".to_owned()],
+        &[("st".into(), "pressure_in".into())],
+        settings(),
+    )
+    .unwrap();
+    let q: f64 = 4e-6;
+    let p = (1e8 + 1e7) * q + 5e12 * q * q;
+    let c = &out.cycle;
+    for (v, d) in c.values.iter().zip(&c.derivs) {
+        assert!((v - p).abs() <= 1e-9 * p, "{v} vs {p}");
+        assert!((d - q * q).abs() <= 1e-9 * q * q, "{d} vs {}", q * q);
+    }
+}
+
 #[test]
 fn several_parameters_share_one_run() {
     let base = parse(MODEL).unwrap();
@@ -248,9 +309,79 @@ fn bad_paths_name_themselves() {
     assert!(err("boundary_conditions.o2.capacitance").contains("'capacitance'"));
     assert!(err("boundary_conditions.zz.resistance").contains("node 'zz'"));
     assert!(err("blood.viscosity").contains("parameter 'blood.viscosity'"));
+    assert!(err("vessels.parent.lumped.stenosis_coefficient").contains("no differentiable"));
     let signal = sensitivities(&base, &[], &[("parent".into(), "speed".into())], settings())
         .err()
         .unwrap()
         .to_string();
     assert!(signal.contains("unknown variable 'speed'"), "{signal}");
+}
+
+/// The adjoint's gradient of a functional against the same functional of the forward
+/// tangents (validated against central differences above): a mean of one signal, a weighted
+/// sample of another and a spread of weights over a third. The two differ by the fixed
+/// points' tolerances (1e-13 of the scale) and rounding, so 1e-8 relative tells a wrong
+/// transpose, source or periodic coupling.
+fn check_adjoint(base: &NetworkSpec, paths: &[&str]) {
+    let ns = settings().steps_per_cycle;
+    let nsig = SIGNALS.len();
+    let mut w = vec![0.0; 2 * ns * nsig];
+    for k in 0..ns {
+        w[k * nsig] = 1.0 / ns as f64; // mean inlet pressure
+        w[k * nsig + 2] = ((k * 7) % 11) as f64 * 1e6; // a spread over d2's inflow
+    }
+    w[ns * nsig + 37 * nsig + 1] = 1.0; // d1's outflow at step 37
+    w[ns * nsig + 120 * nsig + 3] = -0.5; // minus half d1's outlet pressure at step 120
+    let owned: Vec<String> = paths.iter().map(|p| p.to_string()).collect();
+    let sig: Vec<(String, String)> = SIGNALS
+        .iter()
+        .map(|(a, b)| (a.to_string(), b.to_string()))
+        .collect();
+    let (_, adj) = adjoint(base, &owned, &sig, &w, settings()).unwrap();
+    let fwd = run(base, paths);
+    let np = paths.len();
+    for f in 0..2 {
+        let wf = &w[f * ns * nsig..(f + 1) * ns * nsig];
+        let value: f64 = wf.iter().zip(&fwd.cycle.values).map(|(a, b)| a * b).sum();
+        assert!((adj.values[f] - value).abs() <= 1e-9 * value.abs(), "J_{f}");
+        let scale = (0..np)
+            .map(|p| {
+                let d = &fwd.cycle.derivs[p * ns * nsig..(p + 1) * ns * nsig];
+                (wf.iter().zip(d).map(|(a, b)| a * b).sum::<f64>() * fwd.values[p]).abs()
+            })
+            .fold(0.0f64, f64::max);
+        for p in 0..np {
+            let d = &fwd.cycle.derivs[p * ns * nsig..(p + 1) * ns * nsig];
+            let tangent: f64 = wf.iter().zip(d).map(|(a, b)| a * b).sum();
+            let got = adj.gradients[f * np + p];
+            assert!(
+                (got - tangent).abs() * fwd.values[p].abs() <= 1e-8 * scale,
+                "{} J_{f}: adjoint {got:e} vs tangent {tangent:e}",
+                paths[p]
+            );
+        }
+    }
+    assert!(
+        adj.adjoint_cycles
+            .iter()
+            .all(|&c| c < settings().max_cycles)
+    );
+}
+
+#[test]
+fn adjoint_gradients_are_the_tangents() {
+    let all = [
+        "boundary_conditions.o1.proximal_resistance",
+        "boundary_conditions.o1.capacitance",
+        "boundary_conditions.o2.resistance",
+        "vessels.parent.radius",
+        "vessels.d1.youngs_modulus",
+        "vessels.d2.lumped.inductance",
+        "scale.compliance",
+        "scale.inflow",
+    ];
+    check_adjoint(&parse(MODEL).unwrap(), &all);
+    let mut stenosed_paths = all.to_vec();
+    stenosed_paths.push("vessels.d2.lumped.stenosis_coefficient");
+    check_adjoint(&stenosed(), &stenosed_paths);
 }

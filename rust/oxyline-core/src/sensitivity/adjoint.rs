@@ -1,0 +1,221 @@
+//! Adjoint (reverse) sensitivities of the periodic state: the gradient of a linear functional
+//! J = Σ_k Σ_j w_kj y_j(t_k) of the recorded signals over the periodic cycle with respect to
+//! every parameter at once, in one backward sweep to the adjoint's own periodic state.
+//!
+//! A tangent step of `super` is (s, ṡ) ↦ (s + γΔt Δ, pred ṡ + Δ) with
+//! Δ = K_k⁻¹ (src_k − c E ṡ − (F + J_k) s). Its transpose takes the adjoint (a, b) of the
+//! step's end to that of its start: δ = γΔt a + b, u = K_k⁻ᵀ δ, a ← a − (F + J_k)ᵀ u,
+//! b ← pred b − c E u; the step's source contributes u · src_k(p) to dJ/dp. The periodic
+//! tangent (s_0 = s_T) makes the adjoint periodic too (the adjoint of the cycle's start feeds
+//! its end), so the backward cycles repeat until (a, b) at the cycle start repeats to `tol`,
+//! and the last cycle's sums u · src_k(p) are the gradient. The cost is that of the forward
+//! run's cycles on the transposed factorisation, whatever the number of parameters (each
+//! parameter's source touches a few rows: its dot products cost next to nothing).
+
+use super::*;
+
+/// Gradients of functionals of the periodic cycle.
+#[derive(Debug, Clone)]
+pub struct PeriodicAdjoint {
+    /// J of each functional at the periodic state.
+    pub values: Vec<f64>,
+    /// gradients[f * n_params + p]: dJ_f / d parameter p.
+    pub gradients: Vec<f64>,
+    /// The forward run's cycles (the recorded one included).
+    pub cycles: usize,
+    /// Backward cycles of each functional to its adjoint's periodic state.
+    pub adjoint_cycles: Vec<usize>,
+    /// The largest relative change between the last two cycle starts (forward or adjoint).
+    pub periodic_change: f64,
+}
+
+/// Kᵀ of the cycle's steps: one factorisation for a linear circuit, else one per step.
+struct Transposed {
+    base: Vec<f64>,
+    diag: Vec<usize>,
+    a: f64,
+    lu: SparseLu,
+    varying: bool,
+}
+
+impl Transposed {
+    fn of(pr: &Primal) -> Result<Transposed> {
+        let dae = pr.dae;
+        let nf = dae.f.val.len();
+        let stamps: Vec<(usize, usize)> = jacobian_stamps(dae)
+            .into_iter()
+            .map(|(i, j)| (j, i))
+            .collect();
+        let mut t = Transposed {
+            base: pr.base_values(),
+            diag: dae.stenosis.iter().map(|&(i, _)| nf + i).collect(),
+            a: pr.scheme.af * pr.scheme.gamma * pr.scheme.dt,
+            lu: SparseLu::analyse(dae.n, &stamps)?,
+            varying: pr.newton.is_some(),
+        };
+        if !t.varying {
+            t.lu.factor(&t.base).map_err(|m| singular(0.0, &m))?;
+        }
+        Ok(t)
+    }
+
+    /// Kᵀ of step k, factorised when it varies along the cycle.
+    fn at(&mut self, pr: &Primal, k: usize) -> Result<&SparseLu> {
+        if self.varying {
+            let m = self.diag.len();
+            let mut vals = self.base.clone();
+            for (&d, slope) in self.diag.iter().zip(&pr.slopes[k * m..(k + 1) * m]) {
+                vals[d] += self.a * slope;
+            }
+            let t = k as f64 * pr.scheme.dt;
+            self.lu.factor(&vals).map_err(|msg| singular(t, &msg))?;
+        }
+        Ok(&self.lu)
+    }
+}
+
+/// The forward run to the periodic state, then its periodic cycle with every parameter's
+/// source and the signals recorded: the primal, the sources and the signals (n_steps ×
+/// signals), and the forward cycles run with the last cycle's change.
+fn recorded_cycle<'a>(
+    dae: &'a Dae,
+    params: &[DaeTangent],
+    signals: &[usize],
+    set: &TangentSettings,
+) -> Result<(Primal<'a>, Vec<Source>, Vec<f64>, usize, f64)> {
+    let ns = set.steps_per_cycle.max(1);
+    let scheme = Scheme::new(set.rho_infty, set.period / ns as f64)?;
+    let dt = scheme.dt;
+    let mut pr = Primal::new(dae, scheme)?;
+    let cycles = forward_to_periodic(&mut pr, ns, set)?;
+    let mut sources: Vec<Source> = params.iter().map(|t| Source::of(dae, t, ns)).collect();
+    let mut values = Vec::with_capacity(ns * signals.len());
+    let start = pr.y.clone();
+    for k in 0..ns {
+        pr.increment(k as f64 * dt)?;
+        for src in &mut sources {
+            src.capture(&pr.scheme, pr.c, (&pr.y, &pr.yd, &pr.r), &pr.forcing);
+        }
+        pr.record_slopes();
+        pr.advance();
+        values.extend(signals.iter().map(|&u| pr.y[u]));
+    }
+    let kn = dae.n_nodes.min(dae.n);
+    let change = relative_change(&start, &pr.y, kn, 1.0, pr.floor());
+    Ok((pr, sources, values, cycles + 1, change))
+}
+
+/// The gradients of the functionals J_f = Σ_k Σ_j weights[(f n_steps + k) n_signals + j]
+/// · signal j after step k of the periodic cycle, with respect to every parameter.
+pub fn periodic_adjoint(
+    dae: &Dae,
+    params: &[DaeTangent],
+    signals: &[usize],
+    weights: &[f64],
+    set: TangentSettings,
+) -> Result<PeriodicAdjoint> {
+    if set.max_cycles == 0 {
+        return Err(Error::model(
+            "sensitivities",
+            "max_cycles must be at least 1",
+        ));
+    }
+    let (ns, nsig) = (set.steps_per_cycle.max(1), signals.len());
+    let block = ns * nsig;
+    if block == 0 || weights.len() % block != 0 {
+        return Err(Error::model(
+            "adjoint",
+            format!(
+                "weights: expected a multiple of {ns} steps x {nsig} signals, got {}",
+                weights.len()
+            ),
+        ));
+    }
+    let (pr, sources, values, cycles, change) = recorded_cycle(dae, params, signals, &set)?;
+    let mut kt = Transposed::of(&pr)?;
+    let mut out = PeriodicAdjoint {
+        values: Vec::new(),
+        gradients: Vec::new(),
+        cycles,
+        adjoint_cycles: Vec::new(),
+        periodic_change: change,
+    };
+    for w in weights.chunks(block) {
+        out.values
+            .push(w.iter().zip(&values).map(|(a, b)| a * b).sum::<f64>());
+        let (grad, n_cycles, change) = backward(&pr, &mut kt, &sources, signals, w, &set)?;
+        out.gradients.extend(grad);
+        out.adjoint_cycles.push(n_cycles);
+        out.periodic_change = out.periodic_change.max(change);
+    }
+    Ok(out)
+}
+
+/// Backward cycles of one functional (weights `w`, n_steps × signals) to the adjoint's
+/// periodic state: the gradient of the last cycle, the cycles run and the last change.
+fn backward(
+    pr: &Primal,
+    kt: &mut Transposed,
+    sources: &[Source],
+    signals: &[usize],
+    w: &[f64],
+    set: &TangentSettings,
+) -> Result<(Vec<f64>, usize, f64)> {
+    let dae = pr.dae;
+    let (n, nsig, ns) = (dae.n, signals.len(), set.steps_per_cycle.max(1));
+    let sc = &pr.scheme;
+    let (gdt, pred) = (sc.gamma * sc.dt, (sc.gamma - 1.0) / sc.gamma);
+    let m = dae.stenosis.len();
+    let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
+    let mut u = vec![0.0; n];
+    let mut grad = vec![0.0; sources.len()];
+    let (mut cycles, mut change) = (0, f64::INFINITY);
+    while cycles < set.max_cycles && change > set.tol {
+        let start: Vec<f64> = a.iter().chain(&b).copied().collect();
+        grad.iter_mut().for_each(|g| *g = 0.0);
+        for k in (0..ns).rev() {
+            for (&s, wk) in signals.iter().zip(&w[k * nsig..(k + 1) * nsig]) {
+                a[s] += wk;
+            }
+            for ((ui, ai), bi) in u.iter_mut().zip(&a).zip(&b) {
+                *ui = gdt * ai + bi;
+            }
+            if !kt.at(pr, k)?.solve_in_place(&mut u) {
+                return Err(singular(k as f64 * sc.dt, "non-finite adjoint"));
+            }
+            for (g, src) in grad.iter_mut().zip(sources) {
+                *g += src.dot(k, &u);
+            }
+            // a ← a − (F + J_k)ᵀ u, b ← pred b − c E u
+            for i in 0..n {
+                for q in dae.f.ptr[i]..dae.f.ptr[i + 1] {
+                    a[dae.f.col[q] as usize] -= dae.f.val[q] * u[i];
+                }
+            }
+            for (&(i, _), slope) in dae.stenosis.iter().zip(&pr.slopes[k * m..(k + 1) * m]) {
+                a[i] -= slope * u[i];
+            }
+            for ((bi, ui), ei) in b.iter_mut().zip(&u).zip(&dae.e) {
+                *bi = pred * *bi - pr.c * ei * ui;
+            }
+        }
+        cycles += 1;
+        let end: Vec<f64> = a.iter().chain(&b).copied().collect();
+        change = adjoint_change(&start, &end, dae);
+    }
+    Ok((grad, cycles, change))
+}
+
+/// The change of the adjoint (a, b) over a cycle relative to its size, taken apart by row
+/// group (node rows, other rows; of a and of b), whose units differ.
+fn adjoint_change(start: &[f64], end: &[f64], dae: &Dae) -> f64 {
+    let (n, kn) = (dae.n, dae.n_nodes.min(dae.n));
+    let floor = [1e-300; 2];
+    relative_change(&start[..n], &end[..n], kn, 1.0, floor).max(relative_change(
+        &start[n..],
+        &end[n..],
+        kn,
+        1.0,
+        floor,
+    ))
+}
