@@ -75,6 +75,7 @@ impl Outcome {
             method: match s.method {
                 Method::Rk4 => "rk4",
                 Method::GeneralizedAlpha { .. } => "generalized-alpha",
+                Method::Dopri5 => crate::integrate::explicit_pair::NAME,
                 Method::Auto { .. } => "auto",
             },
             cycles_run: 0,
