@@ -176,13 +176,16 @@ fn rows(
     }
 }
 
+/// A sparse matrix as (row, column, value) entries.
+pub type Triplets = Vec<(usize, usize, f64)>;
+
 /// The residual of every block at every observation, row by row (block-major, then
 /// observation, then the block's rows), and its Jacobian as (row, slot, value) triplets.
 pub fn residual(
     blocks: &[Block],
     obs: &Observations,
     alpha: &[f64],
-) -> Result<(Vec<f64>, Vec<(usize, usize, f64)>)> {
+) -> Result<(Vec<f64>, Triplets)> {
     check(blocks, obs, alpha.len())?;
     let mut res = Vec::new();
     let mut triplets = Vec::new();
@@ -242,10 +245,9 @@ pub fn normal_equations(
         for (i, &p) in slots.iter().enumerate() {
             out.gradient[p] += g[i];
         }
+        // the lower triangle was summed: mirror it
         for i in 0..n {
-            for j in 0..n {
-                out.gram.push(if j <= i { h[i][j] } else { h[j][i] });
-            }
+            out.gram.extend((0..n).map(|j| h[i.max(j)][i.min(j)]));
         }
     }
     Ok(out)

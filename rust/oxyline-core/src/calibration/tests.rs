@@ -96,9 +96,9 @@ fn normal_equations_are_jt_r_and_jt_j() {
     }
     let cost: f64 = r.iter().map(|x| x * x).sum();
     assert!((ne.cost - cost).abs() <= 1e-12 * cost);
-    for p in 0..ALPHA.len() {
-        let g: f64 = (0..r.len()).map(|i| jac[i][p] * r[i]).sum();
-        assert!((ne.gradient[p] - g).abs() <= 1e-12 * g.abs().max(1.0));
+    for (p, &mine) in ne.gradient.iter().enumerate() {
+        let g: f64 = jac.iter().zip(&r).map(|(row, ri)| row[p] * ri).sum();
+        assert!((mine - g).abs() <= 1e-12 * g.abs().max(1.0));
     }
     // the vessel's 4×4 block, then the branch's 3×3
     let mut k = 0;
