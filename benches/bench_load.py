@@ -1,7 +1,8 @@
 """Load time: ``load_model`` + core build per segment of the whole-tree family of
 ``bench_scale.py`` (with oxygen by default), and the structured-tree model ``adan56-st``
 loaded by the previous route (trees calibrated and grown in Python, handed over as vessel
-dicts) and by the current one (the core calibrates and grows them) in the same process.
+dicts) and by the current one (the core calibrates and grows them) in the same process, with
+the current route's stages (growth, hand-over, core build) timed apart.
 
 CPU seconds (``time.process_time``), best of ``--repeat`` loads. ``load_model`` builds the
 core network (hand-over of the native dicts, parse, assembly, transport plan); the core build
@@ -93,6 +94,35 @@ def current_route(base: dict[str, Any], old: Any) -> tuple[Any, dict[str, float]
     return M.build_model(data), leaf_r
 
 
+def current_stages(base: dict[str, Any]) -> dict[str, float]:
+    """CPU seconds of the current route's stages: the trees checked and grown by the core
+    (``StructuredTrees``), the rest of the model read and the trees moved into its parts
+    (``read_model``, ``move_into``), and the core build (``Network.from_parts``: graph,
+    segments, circuit, DAE; its spec dropped)."""
+    import importlib
+    import json
+
+    from oxyline import _core
+    from oxyline import model as M
+
+    st = importlib.import_module("oxyline.structured_tree")
+    data = M._copy(dict(st.replace_windkessels(base)))
+    rest, trees = st._split(data)
+    terminals = [json.dumps(_core.read_conditions({n: st._terminal(n, bc)}, "SI")[0][n])
+                 for n, bc, _ in trees]
+    gc.collect()
+    t0 = time.process_time()
+    grown = _core.StructuredTrees(trees, 1.0, 1.0, None, len(data["vessels"]))
+    t1 = time.process_time()
+    parts = _core.read_model({**data, "boundary_conditions": rest})[0]
+    grown.move_into(parts, terminals)
+    t2 = time.process_time()
+    net = _core.Network.from_parts(parts, None)
+    t3 = time.process_time()
+    del net
+    return {"trees grown": t1 - t0, "read + moved in": t2 - t1, "core build": t3 - t2}
+
+
 def adan56_st(repeat: int, before: str) -> None:
     import copy
 
@@ -124,6 +154,13 @@ def adan56_st(repeat: int, before: str) -> None:
     for name in ("previous", "current"):
         print(f"| {name} | {best[name]:.2f} | {best[name] * 1e6 / s1:.2f} |")
     print(f"| speed-up | {best['previous'] / best['current']:.1f}x | |", flush=True)
+    stages: dict[str, float] = {}
+    for _ in range(repeat):
+        for k, v in current_stages(copy.deepcopy(base)).items():
+            stages[k] = min(stages.get(k, math.inf), v)
+    print("\n| current route stage | CPU s (best) |\n|---|---:|")
+    for k, v in stages.items():
+        print(f"| {k} | {v:.3f} |")
 
 
 def main() -> None:

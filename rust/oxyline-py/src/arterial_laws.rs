@@ -16,6 +16,8 @@ use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyMapping};
 type SegmentRow = (usize, usize, f64, f64, f64);
 /// A measurement path: (segments from the aortic root, site segment).
 type PathRow = (Vec<usize>, usize);
+/// A calibrated outlet: (terminal segment, R1, R2, C).
+type OutletRow = (usize, f64, f64, f64);
 
 fn segments(rows: Vec<SegmentRow>) -> Vec<Segment> {
     rows.into_iter()
@@ -123,7 +125,7 @@ pub fn pwdb_outlets(
     inlet: usize,
     inflow: f64,
     target: f64,
-) -> PyResult<(Vec<(usize, f64, f64, f64)>, f64)> {
+) -> PyResult<(Vec<OutletRow>, f64)> {
     let geo = segments(geometry);
     let beds: Vec<Bed> = beds
         .into_iter()
@@ -137,7 +139,7 @@ pub fn pwdb_outlets(
         let wks = beds::windkessels(&geo, &beds, k3_cgs, pvc)?;
         let walls = wall::wall_properties(&geo, &geo, k3_cgs);
         let s = beds::calibrate_scale(&geo, &walls, inlet, &wks, inflow, target)?;
-        let mut out: Vec<(usize, f64, f64, f64)> = wks
+        let mut out: Vec<OutletRow> = wks
             .iter()
             .map(|w| (w.segment, w.impedance, s * w.bed_resistance, w.capacitance))
             .collect();
