@@ -81,8 +81,9 @@ fn radius_replaces_both_ends_and_an_end_splits_the_radius() {
     assert_eq!(
         p.vessel_paths,
         vec![
-            (2, vec!["vessels.d.radius = 0.0025".to_owned()]),
-            (0, vec!["vessels.a.b.radius_in = 0.005".to_owned()])
+            // a JSON object's keys in sorted order
+            (0, vec!["vessels.a.b.radius_in = 0.005".to_owned()]),
+            (2, vec!["vessels.d.radius = 0.0025".to_owned()])
         ]
     );
 }
