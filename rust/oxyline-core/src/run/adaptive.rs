@@ -531,11 +531,11 @@ impl Adaptive {
         }
     }
 
-    /// One pass after an accepted step: every unknown's peak |y| (and its scale, for all but
-    /// the flows, which `track_flow_peaks` sets), and from the divided differences of the last
-    /// three accepted states (not from the carried rates, which follow the damped spurious
-    /// root at a start) the running peaks of |ẏ| and |ÿ| and the signal frequency. True when
-    /// some peak |y| grew.
+    /// One pass after an accepted step: every unknown's peak |y| (and its scale and weight,
+    /// for all but the vessels' flows, which `track_flow_peaks` sets), and from the divided
+    /// differences of the last three accepted states (not from the carried rates, which
+    /// follow the damped spurious root at a start) the running peaks of |ẏ| and |ÿ| and the
+    /// signal frequency. True when some peak |y| grew.
     fn track_peaks(&mut self, y: &[f64], h: f64) -> bool {
         let (omega1, h1) = (self.omega, self.h1);
         let (inv_h, inv_h1, inv_span) = (1.0 / h, 1.0 / h1, 2.0 / (h + h1));
