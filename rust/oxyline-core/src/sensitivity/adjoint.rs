@@ -75,6 +75,10 @@ impl Transposed {
     }
 }
 
+/// The primal at the end of its periodic cycle, the parameters' sources, the signals (n_steps
+/// × signals), the forward cycles run and the last cycle's change.
+type Recorded<'a> = (Primal<'a>, Vec<Source>, Vec<f64>, usize, f64);
+
 /// The forward run to the periodic state, then its periodic cycle with every parameter's
 /// source and the signals recorded: the primal, the sources and the signals (n_steps ×
 /// signals), and the forward cycles run with the last cycle's change.
@@ -83,7 +87,7 @@ fn recorded_cycle<'a>(
     params: &[DaeTangent],
     signals: &[usize],
     set: &TangentSettings,
-) -> Result<(Primal<'a>, Vec<Source>, Vec<f64>, usize, f64)> {
+) -> Result<Recorded<'a>> {
     let ns = set.steps_per_cycle.max(1);
     let scheme = Scheme::new(set.rho_infty, set.period / ns as f64)?;
     let dt = scheme.dt;
@@ -260,9 +264,9 @@ fn backward_cycle(
             *g += src.dot(k, &u);
         }
         // a ← a − (F + J_k)ᵀ u, b ← pred b − c E u
-        for i in 0..n {
+        for (i, &ui) in u.iter().enumerate() {
             for q in dae.f.ptr[i]..dae.f.ptr[i + 1] {
-                a[dae.f.col[q] as usize] -= dae.f.val[q] * u[i];
+                a[dae.f.col[q] as usize] -= dae.f.val[q] * ui;
             }
         }
         for (&(i, _), slope) in dae.stenosis.iter().zip(&pr.slopes[k * m..(k + 1) * m]) {
