@@ -7,7 +7,10 @@
 2. Stenoses (nonlinear: the tangents refactorise once per step along the cycle): adan56 with
    a lumped stenosed segment (R, S) inserted before 1, 3 and 6 RCR outlets, the sensitivities
    to their stenosis coefficients relative to the same call with none, per parameter.
-3. Calibration: the bifurcation's two outlet resistances and the parent's stiffness fitted to
+3. Adjoint: the same outputs' gradients by ``mode="adjoint"`` (one backward sweep per output,
+   whatever the parameter count) for 1, 10, 100 parameters (and all the model has), relative
+   to the forward run alone, against the forward tangents' time.
+4. Calibration: the bifurcation's two outlet resistances and the parent's stiffness fitted to
    synthetic targets from known values, by ``least_squares`` (trf) with the core's Jacobian and
    with scipy's forward differences ("2-point"): wall time, evaluations, final cost.
 
@@ -105,6 +108,24 @@ def stenosis_cost(name: str, counts: list[int], steps: int, tol: float) -> None:
               f"{s.tangent_cycles:>15} {t * 1e3:>10.0f} {(t / t0 - 1) / n:>20.3f}")
 
 
+def adjoint_cost(name: str, counts: list[int], steps: int, tol: float) -> None:
+    model = oxyline.load_model(name)
+    outputs = [f"{model.vessel_names[0]}.pressure_in.mean"]
+    kw = {"steps_per_cycle": steps, "tol": tol}
+    t0, s0 = _timed(lambda: oxyline.sensitivities(model, [], outputs, **kw), 3)
+    print(f"\n{name}: adjoint of 1 output (forward run alone {t0 * 1e3:.0f} ms, "
+          f"{s0.cycles} cycles)")
+    print(f"{'parameters':>10} {'adjoint (ms)':>13} {'x forward':>10} {'backward cycles':>16} "
+          f"{'tangents (ms)':>14} {'x forward':>10}")
+    for n in counts:
+        params = _parameters(model, n)
+        ta, sa = _timed(lambda p=params: oxyline.sensitivities(model, p, outputs, mode="adjoint",
+                                                              **kw), 2)
+        tt, _ = _timed(lambda p=params: oxyline.sensitivities(model, p, outputs, **kw), 1)
+        print(f"{n:>10} {ta * 1e3:>13.0f} {ta / t0:>10.2f} {sa.tangent_cycles:>16} "
+              f"{tt * 1e3:>14.0f} {tt / t0:>10.2f}")
+
+
 def calibration_speedup() -> None:
     import scipy.optimize  # noqa: F401 — its import (~1 s) is not the fit's time
 
@@ -136,11 +157,14 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=400, help="steps per cycle")
     ap.add_argument("--tol", type=float, default=1e-8, help="periodic-state tolerance")
     ap.add_argument("--stenoses", type=int, nargs="*", default=[1, 3, 6])
+    ap.add_argument("--adjoint", type=int, nargs="*", default=[1, 10, 100])
     args = ap.parse_args()
     if args.counts:
         gradient_cost(args.model, args.counts, args.steps, args.tol)
     if args.stenoses:
         stenosis_cost(args.model, args.stenoses, args.steps, args.tol)
+    if args.adjoint:
+        adjoint_cost(args.model, args.adjoint, args.steps, args.tol)
     calibration_speedup()
 
 

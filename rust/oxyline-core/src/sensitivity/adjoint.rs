@@ -7,10 +7,11 @@
 //! step's end to that of its start: δ = γΔt a + b, u = K_k⁻ᵀ δ, a ← a − (F + J_k)ᵀ u,
 //! b ← pred b − c E u; the step's source contributes u · src_k(p) to dJ/dp. The periodic
 //! tangent (s_0 = s_T) makes the adjoint periodic too (the adjoint of the cycle's start feeds
-//! its end), so the backward cycles repeat until (a, b) at the cycle start repeats to `tol`,
-//! and the last cycle's sums u · src_k(p) are the gradient. The cost is that of the forward
-//! run's cycles on the transposed factorisation, whatever the number of parameters (each
-//! parameter's source touches a few rows: its dot products cost next to nothing).
+//! its end): its fixed point is found by the tangents' Anderson iteration, until (a, b) at the
+//! start of a cycle run from it repeats to `tol`, and that cycle's sums u · src_k(p) are the
+//! gradient. The cost is a few cycles on the transposed factorisation, whatever the number
+//! of parameters (each parameter's source touches a few rows: its dot products cost next to
+//! nothing).
 
 use super::*;
 
@@ -74,6 +75,10 @@ impl Transposed {
     }
 }
 
+/// The primal at the end of its periodic cycle, the parameters' sources, the signals (n_steps
+/// × signals), the forward cycles run and the last cycle's change.
+type Recorded<'a> = (Primal<'a>, Vec<Source>, Vec<f64>, usize, f64);
+
 /// The forward run to the periodic state, then its periodic cycle with every parameter's
 /// source and the signals recorded: the primal, the sources and the signals (n_steps ×
 /// signals), and the forward cycles run with the last cycle's change.
@@ -82,7 +87,7 @@ fn recorded_cycle<'a>(
     params: &[DaeTangent],
     signals: &[usize],
     set: &TangentSettings,
-) -> Result<(Primal<'a>, Vec<Source>, Vec<f64>, usize, f64)> {
+) -> Result<Recorded<'a>> {
     let ns = set.steps_per_cycle.max(1);
     let scheme = Scheme::new(set.rho_infty, set.period / ns as f64)?;
     let dt = scheme.dt;
@@ -140,10 +145,16 @@ pub fn periodic_adjoint(
         adjoint_cycles: Vec::new(),
         periodic_change: change,
     };
+    let scales: Vec<f64> = params.iter().map(|t| scale_of(t.value)).collect();
     for w in weights.chunks(block) {
-        out.values
-            .push(w.iter().zip(&values).map(|(a, b)| a * b).sum::<f64>());
-        let (grad, n_cycles, change) = backward(&pr, &mut kt, &sources, signals, w, &set)?;
+        let value = w.iter().zip(&values).map(|(a, b)| a * b).sum::<f64>();
+        out.values.push(value);
+        let fun = Functional {
+            w,
+            value,
+            scales: &scales,
+        };
+        let (grad, n_cycles, change) = backward(&pr, &mut kt, &sources, signals, &fun, &set)?;
         out.gradients.extend(grad);
         out.adjoint_cycles.push(n_cycles);
         out.periodic_change = out.periodic_change.max(change);
@@ -151,59 +162,135 @@ pub fn periodic_adjoint(
     Ok(out)
 }
 
-/// Backward cycles of one functional (weights `w`, n_steps × signals) to the adjoint's
-/// periodic state: the gradient of the last cycle, the cycles run and the last change.
+/// One functional: its weights (n_steps × signals), its value, and the parameters' scales
+/// (|p|, or 1 at zero) its gradient is judged on.
+struct Functional<'f> {
+    w: &'f [f64],
+    value: f64,
+    scales: &'f [f64],
+}
+
+impl Functional<'_> {
+    /// The change between two cycles' gradients, p·dJ/dp (J's response to a 100 % change of
+    /// p) relative to the larger of |J| and the largest such response: a functional that no
+    /// parameter changes (a prescribed mean inflow) has an adjoint of rounding noise, whose own
+    /// relative change never settles, but a gradient that does.
+    fn gradient_change(&self, a: &[f64], b: &[f64]) -> f64 {
+        let resp = |g: &[f64]| -> f64 {
+            g.iter()
+                .zip(self.scales)
+                .fold(0.0f64, |m, (x, p)| m.max((x * p).abs()))
+        };
+        let diff = a
+            .iter()
+            .zip(b)
+            .zip(self.scales)
+            .fold(0.0f64, |m, ((x, y), p)| m.max(((x - y) * p).abs()));
+        diff / self.value.abs().max(resp(b)).max(1e-300)
+    }
+}
+
+/// Backward cycles of one functional to the adjoint's periodic state: the gradient of the
+/// last cycle, the cycles run and the last change. The adjoint's cycle map λ ↦ Φᵀ λ + g is
+/// affine like the tangents', so its fixed point is found by the same Anderson iteration
+/// ([`Subspace`]), weighted by the first cycle's magnitudes per row group; the answer is
+/// always that of a cycle actually run. Periodic: the adjoint repeats to `tol`, or the
+/// gradient does between two cycles.
 fn backward(
     pr: &Primal,
     kt: &mut Transposed,
     sources: &[Source],
     signals: &[usize],
-    w: &[f64],
+    fun: &Functional,
     set: &TangentSettings,
 ) -> Result<(Vec<f64>, usize, f64)> {
     let dae = pr.dae;
-    let (n, nsig, ns) = (dae.n, signals.len(), set.steps_per_cycle.max(1));
-    let sc = &pr.scheme;
-    let (gdt, pred) = (sc.gamma * sc.dt, (sc.gamma - 1.0) / sc.gamma);
-    let m = dae.stenosis.len();
-    let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
-    let mut u = vec![0.0; n];
+    let n = dae.n;
+    let w = fun.w;
     let mut grad = vec![0.0; sources.len()];
-    let (mut cycles, mut change) = (0, f64::INFINITY);
+    let mut x = vec![0.0; 2 * n];
+    let mut g = x.clone();
+    backward_cycle(pr, kt, sources, signals, w, &mut g, &mut grad)?;
+    let mut r: Vec<f64> = g.iter().zip(&x).map(|(a, b)| a - b).collect();
+    let mut change = adjoint_change(&x, &g, dae);
+    let mut sub = Subspace::new(adjoint_weights(&g, dae), 256);
+    let mut cycles = 1;
+    let mut last = grad.clone();
     while cycles < set.max_cycles && change > set.tol {
-        let start: Vec<f64> = a.iter().chain(&b).copied().collect();
-        grad.iter_mut().for_each(|g| *g = 0.0);
-        for k in (0..ns).rev() {
-            for (&s, wk) in signals.iter().zip(&w[k * nsig..(k + 1) * nsig]) {
-                a[s] += wk;
-            }
-            for ((ui, ai), bi) in u.iter_mut().zip(&a).zip(&b) {
-                *ui = gdt * ai + bi;
-            }
-            if !kt.at(pr, k)?.solve_in_place(&mut u) {
-                return Err(singular(k as f64 * sc.dt, "non-finite adjoint"));
-            }
-            for (g, src) in grad.iter_mut().zip(sources) {
-                *g += src.dot(k, &u);
-            }
-            // a ← a − (F + J_k)ᵀ u, b ← pred b − c E u
-            for i in 0..n {
-                for q in dae.f.ptr[i]..dae.f.ptr[i + 1] {
-                    a[dae.f.col[q] as usize] -= dae.f.val[q] * u[i];
-                }
-            }
-            for (&(i, _), slope) in dae.stenosis.iter().zip(&pr.slopes[k * m..(k + 1) * m]) {
-                a[i] -= slope * u[i];
-            }
-            for ((bi, ui), ei) in b.iter_mut().zip(&u).zip(&dae.e) {
-                *bi = pred * *bi - pr.c * ei * ui;
-            }
-        }
+        let xn = sub.next(&x, &r);
+        g.clone_from(&xn);
+        backward_cycle(pr, kt, sources, signals, w, &mut g, &mut grad)?;
+        let rn: Vec<f64> = g.iter().zip(&xn).map(|(a, b)| a - b).collect();
+        change = adjoint_change(&xn, &g, dae).min(fun.gradient_change(&last, &grad));
+        last.clone_from(&grad);
+        let dx = xn.iter().zip(&x).map(|(a, b)| a - b).collect();
+        let df = rn.iter().zip(&r).map(|(a, b)| a - b).collect();
+        sub.add(dx, df);
+        (x, r) = (xn, rn);
         cycles += 1;
-        let end: Vec<f64> = a.iter().chain(&b).copied().collect();
-        change = adjoint_change(&start, &end, dae);
     }
     Ok((grad, cycles, change))
+}
+
+/// One backward cycle from the adjoint λ = (a, b) of the cycle's end, in place (to that of
+/// its start), with the cycle's gradient written into `grad`.
+fn backward_cycle(
+    pr: &Primal,
+    kt: &mut Transposed,
+    sources: &[Source],
+    signals: &[usize],
+    w: &[f64],
+    lambda: &mut [f64],
+    grad: &mut [f64],
+) -> Result<()> {
+    let dae = pr.dae;
+    let (n, nsig, m) = (dae.n, signals.len(), dae.stenosis.len());
+    let sc = &pr.scheme;
+    let (gdt, pred) = (sc.gamma * sc.dt, (sc.gamma - 1.0) / sc.gamma);
+    let (a, b) = lambda.split_at_mut(n);
+    let mut u = vec![0.0; n];
+    grad.iter_mut().for_each(|g| *g = 0.0);
+    for k in (0..w.len() / nsig.max(1)).rev() {
+        for (&s, wk) in signals.iter().zip(&w[k * nsig..(k + 1) * nsig]) {
+            a[s] += wk;
+        }
+        for ((ui, ai), bi) in u.iter_mut().zip(a.iter()).zip(b.iter()) {
+            *ui = gdt * ai + bi;
+        }
+        if !kt.at(pr, k)?.solve_in_place(&mut u) {
+            return Err(singular(k as f64 * sc.dt, "non-finite adjoint"));
+        }
+        for (g, src) in grad.iter_mut().zip(sources) {
+            *g += src.dot(k, &u);
+        }
+        // a ← a − (F + J_k)ᵀ u, b ← pred b − c E u
+        for (i, &ui) in u.iter().enumerate() {
+            for q in dae.f.ptr[i]..dae.f.ptr[i + 1] {
+                a[dae.f.col[q] as usize] -= dae.f.val[q] * ui;
+            }
+        }
+        for (&(i, _), slope) in dae.stenosis.iter().zip(&pr.slopes[k * m..(k + 1) * m]) {
+            a[i] -= slope * u[i];
+        }
+        for ((bi, ui), ei) in b.iter_mut().zip(&u).zip(&dae.e) {
+            *bi = pred * *bi - pr.c * ei * ui;
+        }
+    }
+    Ok(())
+}
+
+/// The inner product's weights over (a, b): each row by the inverse square of its group's
+/// magnitude in `lambda` (node rows and others, of a and of b), whose units differ.
+fn adjoint_weights(lambda: &[f64], dae: &Dae) -> Vec<f64> {
+    let (n, kn) = (dae.n, dae.n_nodes.min(dae.n));
+    let group = |i: usize| (i >= n) as usize * 2 + (i % n >= kn) as usize;
+    let mut scale = [1e-300f64; 4];
+    for (i, v) in lambda.iter().enumerate() {
+        scale[group(i)] = scale[group(i)].max(v.abs());
+    }
+    (0..2 * n)
+        .map(|i| 1.0 / (scale[group(i)] * scale[group(i)]))
+        .collect()
 }
 
 /// The change of the adjoint (a, b) over a cycle relative to its size, taken apart by row

@@ -505,7 +505,7 @@ pub fn periodic_tangent(
         signals,
         floor,
     };
-    let (tcycles, change) = run.to_periodic(&mut sub, &set, &mut rec.derivs)?;
+    let (tcycles, change) = run.run_to_periodic(&mut sub, &set, &mut rec.derivs)?;
     rec.tangent_cycles = tcycles;
     rec.periodic_change = rec.periodic_change.max(change);
     Ok(rec)
@@ -539,7 +539,7 @@ impl TangentRun<'_, '_> {
     /// Anderson iterations on the shared basis from x = 0 until every tangent is periodic
     /// (or `max_cycles` tangent cycles); each parameter's last cycle is recorded into
     /// `derivs`. Returns the tangent cycles run and the largest remaining change.
-    fn to_periodic(
+    fn run_to_periodic(
         &mut self,
         sub: &mut Subspace,
         set: &TangentSettings,
