@@ -32,8 +32,9 @@ const IMPLICIT_MAX_STEP_PER_PERIOD: f64 = 1.0 / 32.0;
 const EXPLICIT_STAGES: f64 = 6.0;
 /// The cost of one error-controlled generalized-α step in right-hand sides of the explicit
 /// pair: a residual, a solve with the kept factorisation, the error estimate and, one step
-/// in a few, its filter solve or a refactorisation (measured on the RC and RLC lines of
-/// tests/test_accuracy_explicit.py: 3–5).
+/// in a few, its filter solve or a refactorisation. An estimate from the profile of the
+/// controlled step (docs/physics.md §10, "Where the cost goes": about 2.4 fixed steps), not a
+/// timing of the explicit pair against it.
 const IMPLICIT_STEP_COST: f64 = 4.0;
 /// Step growth at most 5×, shrinking at most 5× per step.
 const GROW: f64 = 5.0;
