@@ -532,3 +532,26 @@ def test_the_scratch_reserved_is_the_plans(method: str, outcome: str) -> None:
         child.wait()
     assert child.returncode == 0, (child.returncode, err[-2000:])
     assert out.startswith(outcome), out + err[-2000:]
+
+
+def test_openbf_keys_are_named_as_the_file_names_them(tmp_path: Path) -> None:
+    """A zero radius given as R0 names R0; blood rho 0 names 'rho' (before: Rp, and the
+    model's 'density')."""
+    with raises(ModelError, "R0"):
+        _openbf(tmp_path, lambda c: c["network"][0].update({"R0": 0.0, "visco-elastic": True}))
+    with raises(ModelError, "'rho'"):
+        _openbf(tmp_path, lambda c: c["blood"].update(rho=0.0))
+
+
+@pytest.mark.parametrize("factor", [10**9])
+def test_estimate_space_error_factor_beyond_memory_names_it(factor: int) -> None:
+    with raises(ResourceError, "factor", "max_memory"):
+        oxyline.estimate_space_error("bifurcation", "inlet", [1.0], factor=factor)
+
+
+def test_wall_viscosity_on_a_lumped_vessel_is_named() -> None:
+    m = bifurcation()
+    m["vessels"].append({**LUMPED, "wall_viscosity": 1.0})
+    m["boundary_conditions"]["lv_out"] = m["boundary_conditions"].pop("ica_out")
+    with raises(ModelError, "lv", "wall_viscosity"):
+        oxyline.load_model(m)

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from oxyline import _core
-from oxyline.errors import ModelError
+from oxyline.errors import ModelError, ResourceError
 from oxyline.frequency import Direction, impedance
 from oxyline.loader import load_model
 from oxyline.model import Model
@@ -130,8 +130,11 @@ def estimate_space_error(model: Model | str | os.PathLike[str] | Mapping[str, An
     >>> err.shape, bool(err.max() < 0.5)
     ((2,), True)
     """
-    levels = convergence(model, node, frequencies, levels=2, factor=factor,
-                         direction=direction)
+    try:
+        levels = convergence(model, node, frequencies, levels=2, factor=factor,
+                             direction=direction)
+    except ResourceError as exc:  # the refined model is the one too large: say which knob
+        raise ResourceError(f"estimate_space_error: factor = {factor!r}: {exc}") from None
     return levels[1].change
 
 

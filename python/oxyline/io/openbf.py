@@ -204,7 +204,8 @@ def _radii(v: Mapping[str, Any], where: str) -> tuple[float, float]:
     else:
         raise ModelError(f"{where}: needs 'R0' or 'Rp'/'Rd' (lumen radius, m)")
     if rp <= 0 or rd <= 0:
-        raise ModelError(f"{where}: radii must be > 0, got Rp={rp}, Rd={rd}")
+        keys = "R0" if "R0" in v and "Rp" not in v and "Rd" not in v else "Rp/Rd"
+        raise ModelError(f"{where}: radii must be > 0, got {keys}: Rp={rp}, Rd={rd}")
     return rp, rd
 
 
@@ -334,8 +335,12 @@ def _blood(data: Mapping[str, Any], p: Path) -> tuple[float, float]:
         _warn(f"{p.name}: no 'blood:' section; using rho = 1060 kg/m^3 and mu = 4.0e-3 Pa s")
     if not isinstance(blood, Mapping):
         raise ModelError(f"{p}: 'blood' must be a mapping with rho and mu")
-    return (_num(blood.get("rho", 1060.0), f"{p}: blood", "rho"),
-            _num(blood.get("mu", 4.0e-3), f"{p}: blood", "mu"))
+    rho = _num(blood.get("rho", 1060.0), f"{p}: blood", "rho")
+    mu = _num(blood.get("mu", 4.0e-3), f"{p}: blood", "mu")
+    for key, value in (("rho", rho), ("mu", mu)):
+        if value <= 0:  # named as the file names it (the model's check says density)
+            raise ModelError(f"{p}: blood: '{key}' must be > 0, got {value!r}")
+    return rho, mu
 
 
 def _vessels(data: Mapping[str, Any], p: Path, taper: str, openbf_compat: bool, rho: float

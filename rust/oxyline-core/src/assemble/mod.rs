@@ -109,7 +109,7 @@ fn check_auto_counts(
         .find(|(v, n)| **n >= auto_segments::MAX_AUTO_SEGMENTS && segments::is_auto(spec, v));
     match capped {
         Some((v, _)) => Err(crate::error::Error::model(
-            &format!("vessel '{}'", v.name),
+            format!("vessel '{}'", v.name),
             format!(
                 "segments: auto needs {} or more segments to stay within segmentation rtol =                  {:e}: raise rtol, use arrangement 'pi' (second order), or give its segments",
                 auto_segments::MAX_AUTO_SEGMENTS,

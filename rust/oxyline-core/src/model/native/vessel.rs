@@ -249,7 +249,7 @@ pub fn vessel<N: Node>(v: &N, i: usize, units: Units) -> Result<Value> {
             cv.insert(key.into(), start_values(&d, &el, key, units)?);
         }
     }
-    if v.has("wall_friction")
+    if (v.has("wall_friction") || v.has("wall_viscosity"))
         && [
             "heart_pulmonary",
             "coronary_bed",
@@ -263,7 +263,7 @@ pub fn vessel<N: Node>(v: &N, i: usize, units: Units) -> Result<Value> {
     {
         return Err(err(
             &el,
-            "wall_friction applies to a vessel with length and radius, not to a heart, valve or lumped element",
+            "wall_friction and wall_viscosity apply to a vessel with length and radius, not to a heart, valve or lumped element",
         ));
     }
     if v.has("heart_pulmonary") || v.has("coronary_bed") {
@@ -281,6 +281,13 @@ pub fn vessel<N: Node>(v: &N, i: usize, units: Units) -> Result<Value> {
             return Err(err(
                 &el,
                 "wall_friction 'womersley' needs the vessel's length and radius, not lumped values",
+            ));
+        }
+        if v.has("wall_viscosity") {
+            // (before: accepted and ignored)
+            return Err(err(
+                &el,
+                "wall_viscosity needs a wall (wall_thickness and youngs_modulus), not lumped values",
             ));
         }
         cv.insert("lumped".into(), lumped(&lp, &el, units)?);
