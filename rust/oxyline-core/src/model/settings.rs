@@ -318,6 +318,10 @@ fn tolerances<N: Node>(
             ));
         }
     };
+    if r.is_none() && a.is_some() {
+        // checked here, where every source of settings passes (a checkpoint's stored ones too)
+        return Err(setting(&atol.1, "needs rtol (error control)".to_string()));
+    }
     Ok((r, a))
 }
 
