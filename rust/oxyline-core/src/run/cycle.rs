@@ -54,6 +54,13 @@ pub(super) struct CycleRows {
     pub species: bool,
 }
 
+impl CycleRows {
+    /// A row's output time: the run's time, or the time into the recorded cycle.
+    pub(super) fn output_time(&self, time: f64, all_cycles: bool) -> f64 {
+        if all_cycles { time } else { time - self.t0 }
+    }
+}
+
 impl<'r, 'f> Cycles<'r, 'f> {
     pub fn new(
         s: &'r RunSettings,
@@ -246,7 +253,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
             m.start_cycle(self.steps_per_cycle);
         }
         if rows.recorded && (!s.output_all_cycles || cycle == 0) {
-            let t = if s.output_all_cycles { rows.t0 } else { 0.0 };
+            let t = rows.output_time(rows.t0, s.output_all_cycles);
             self.output_row(t, rows.t0, true, committed)?;
         }
         if let Some(mut ex) = self.explicit.take() {
@@ -295,7 +302,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
         let all = self.s.output_all_cycles;
         let due = if all { self.steps } else { k } % self.stride == 0;
         if due && rows.recorded {
-            let t = if all { t_new } else { t_new - rows.t0 };
+            let t = rows.output_time(t_new, all);
             self.output_row(t, t_new, rows.species, rows.committed)?;
             if !self.released {
                 // the setup's (and a first pass's) freed memory, and the first steps' and
@@ -385,11 +392,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
         if !rows.recorded {
             return Ok(());
         }
-        let t = if self.s.output_all_cycles {
-            time
-        } else {
-            time - rows.t0
-        };
+        let t = rows.output_time(time, self.s.output_all_cycles);
         let theta = theta.clamp(0.0, 1.0);
         let dense = ad.dense(theta, h, &self.state.y, &self.state.yd);
         self.rec.record_with(t, |i| dense.value(i))?;

@@ -462,11 +462,7 @@ impl Cycles<'_, '_> {
         if !rows.recorded {
             return Ok(());
         }
-        let t = if self.s.output_all_cycles {
-            time
-        } else {
-            time - rows.t0
-        };
+        let t = rows.output_time(time, self.s.output_all_cycles);
         let st = &mut self.state;
         let Flow::Explicit(dp) = &mut st.flow else {
             unreachable!("an explicit run steps the explicit pair");

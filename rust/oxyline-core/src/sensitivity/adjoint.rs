@@ -119,12 +119,7 @@ pub fn periodic_adjoint(
     weights: &[f64],
     set: TangentSettings,
 ) -> Result<PeriodicAdjoint> {
-    if set.max_cycles == 0 {
-        return Err(Error::model(
-            "sensitivities",
-            "max_cycles must be at least 1",
-        ));
-    }
+    set.check()?;
     let (ns, nsig) = (set.steps_per_cycle.max(1), signals.len());
     let block = ns * nsig;
     if block == 0 || weights.len() % block != 0 {

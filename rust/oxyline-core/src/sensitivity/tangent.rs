@@ -57,6 +57,19 @@ pub struct TangentSettings {
     pub tol: f64,
 }
 
+impl TangentSettings {
+    /// The settings both the tangent and the adjoint sweep refuse.
+    pub(crate) fn check(&self) -> Result<()> {
+        if self.max_cycles == 0 {
+            return Err(Error::model(
+                "sensitivities",
+                "max_cycles must be at least 1",
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Values and derivatives of the chosen unknowns over the last (periodic) cycle.
 #[derive(Debug, Clone)]
 pub struct PeriodicTangent {
@@ -454,12 +467,7 @@ pub fn periodic_tangent(
     signals: &[usize],
     set: TangentSettings,
 ) -> Result<PeriodicTangent> {
-    if set.max_cycles == 0 {
-        return Err(Error::model(
-            "sensitivities",
-            "max_cycles must be at least 1",
-        ));
-    }
+    set.check()?;
     let ns = set.steps_per_cycle.max(1);
     let scheme = Scheme::new(set.rho_infty, set.period / ns as f64)?;
     let dt = scheme.dt;
