@@ -77,11 +77,12 @@ def previous_module(rev: str) -> Any:
 def previous_route(base: dict[str, Any], old: Any) -> tuple[Any, dict[str, float]]:
     """adan56-st by the previous route: (model, terminal resistance per outlet)."""
     from oxyline import model as M
+    from oxyline.description import copy_description
 
     data = old.replace_windkessels(base)
     leaf_r = {n: bc["terminal"]["resistance"] for n, bc in data["boundary_conditions"].items()
               if bc.get("type") == "structured-tree"}
-    return old.build_with_trees(M._copy(dict(data)), M._build_native), leaf_r
+    return old.build_with_trees(copy_description(dict(data)), M._build_native), leaf_r
 
 
 def current_route(base: dict[str, Any], old: Any) -> tuple[Any, dict[str, float]]:
@@ -103,10 +104,10 @@ def current_stages(base: dict[str, Any]) -> dict[str, float]:
     import json
 
     from oxyline import _core
-    from oxyline import model as M
+    from oxyline.description import copy_description
 
     st = importlib.import_module("oxyline.structured_tree")
-    data = M._copy(dict(st.replace_windkessels(base)))
+    data = copy_description(dict(st.replace_windkessels(base)))
     rest, trees = st._split(data)
     terminals = [json.dumps(_core.read_conditions({n: st._terminal(n, bc)}, "SI")[0][n])
                  for n, bc, _ in trees]

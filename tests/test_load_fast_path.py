@@ -148,11 +148,11 @@ def test_a_released_canonical_is_written_again_as_it_was() -> None:
     import json
     import pickle
 
-    from oxyline.model import _unassembled
+    from oxyline.ensemble.patch import variant_model
 
     d = oxyline.catalogue.load("bifurcation").to_dict()
     d["oxygen"] = {"inlet": {"po2": 95.0}, "wall": {"model": "graetz", "po2": 50.0}}
-    first = _unassembled(json.loads(json.dumps(d))).canonical
+    first = variant_model(json.loads(json.dumps(d))).canonical
     m = oxyline.load_model(d)
     assert m.__dict__["_canonical"] is None  # released
     assert m.vessel_names == [v["name"] for v in first["vessels"]]
@@ -198,11 +198,11 @@ def test_the_native_reader_builds_the_network_the_json_text_builds(units: str) -
     import numpy as np
 
     from oxyline import _core
-    from oxyline.model import _unassembled
+    from oxyline.ensemble.patch import variant_model
 
     d = _mixed_model(units)
     m = oxyline.load_model(d)
-    ref = _core.Network(json.dumps(_unassembled(_mixed_model(units)).canonical))
+    ref = _core.Network(json.dumps(variant_model(_mixed_model(units)).canonical))
     a, b = m.network.segment_table(), ref.segment_table()
     assert a["vessel_names"] == b["vessel_names"] == ["a", "7", "b", "d", "e"]
     for k in ("resistance", "inductance", "compliance", "stenosis", "volume", "radius_in",
@@ -249,14 +249,14 @@ def test_an_outlet_the_native_reader_refuses_gets_the_full_checks_error() -> Non
 def test_the_copy_shares_no_container_with_the_users_dict() -> None:
     """`load_model`'s private copy (lists of plain dicts are copied in C) is equal to the
     user's dict and shares none of its dicts or lists, nested ones included."""
-    from oxyline.model import _copy
+    from oxyline.description import copy_description
 
     d = {"vessels": [{"name": "a", "length": 1.0}, {"name": "b", "lumped": {"r": [1, 2]}},
                      {"name": "c"}],
          "boundary_conditions": {"in": {"type": "flow", "time": [0, 1], "flow": (1, 2)},
                                  "o": {"type": "resistance", "resistance": 1.0}},
          "plain": [{"x": 1}, {"y": 2}], "table": ({"t": 0},)}
-    c = _copy(d)
+    c = copy_description(d)
     assert c == {**d, "boundary_conditions": {**d["boundary_conditions"],
                                               "in": {**d["boundary_conditions"]["in"],
                                                      "flow": [1, 2]}},

@@ -45,7 +45,7 @@ from typing import Any
 from oxyline import examples
 from oxyline.errors import ModelError
 from oxyline.memory import gc_paused
-from oxyline.model import Model, _build, _copy
+from oxyline.model import Model, build_model
 from oxyline.structured_tree import (
     murray_root_radii,
     replace_terminal_vessels,
@@ -326,7 +326,7 @@ def build(data: dict[str, Any]) -> Model:
     ['parent', 'daughter1', 'daughter2']
     """
     with gc_paused():
-        return _build(_copy(dict(data)))
+        return build_model(data)
 
 
 def load(name: str) -> Model:

@@ -18,7 +18,7 @@ from oxyline.errors import ModelError, PlausibilityWarning
 from oxyline.io import formats
 from oxyline.io.native import read_mapping
 from oxyline.memory import gc_paused
-from oxyline.model import Model, _build, _copy
+from oxyline.model import Model, _build, build_model
 
 
 def load_model(source: str | os.PathLike[str] | Mapping[str, Any] | Model, *,
@@ -51,7 +51,7 @@ def _load(source: str | os.PathLike[str] | Mapping[str, Any] | Model) -> Model:
             if converted is not None:
                 return _build(converted)
             with gc_paused():
-                return _build(_copy(dict(source)))
+                return build_model(source)
     p = Path(source)
     if not p.exists() and not p.suffix:
         return catalogue.load(str(source))  # built-in models and examples

@@ -10,46 +10,16 @@ from __future__ import annotations
 
 import copy
 import functools
-import json
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 from oxyline import _core
 from oxyline import memory as _memory  # a leaf too: imports only _core and errors
+from oxyline.description import copy_description
 from oxyline.errors import core_errors, warn_implausible
 from oxyline.options import output_names, output_vessels
 from oxyline.structured_tree import build_with_trees, expanded, has_trees
-
-#: the schema's key sets, as the core checks them
-VESSEL_KEYS = frozenset(_core.VESSEL_KEYS)
-LUMPED_KEYS = frozenset(_core.LUMPED_KEYS)
-BC_KEYS = {kind: frozenset(keys) for kind, keys in _core.BC_KEYS.items()}
-METHODS = frozenset(_core.METHODS)
-
-
-_ATOMS = frozenset({str, int, float, bool, type(None)})
-
-
-def _copy(data: Any) -> Any:
-    """Deep copy of a model description: dicts and lists (tuples become lists) are rebuilt,
-    plain values shared, anything else (arrays, ...) deep-copied. A quarter of the cost of a JSON
-    round trip on 10^5-vessel models and linear in their size."""
-    t = type(data)
-    # a dict or list of plain values only (a vessel, a waveform table) is copied in C
-    if t is dict:
-        if _ATOMS.issuperset(map(type, data.values())):
-            return data.copy()
-        return {k: v if type(v) in _ATOMS else _copy(v) for k, v in data.items()}
-    if t is list or t is tuple:
-        if _ATOMS.issuperset(map(type, data)):
-            return list(data)
-        return [v if type(v) in _ATOMS else _copy(v) for v in data]
-    if t in _ATOMS:
-        return data
-    if isinstance(data, Mapping):
-        return {k: _copy(v) for k, v in data.items()}
-    return copy.deepcopy(data)
 
 
 @dataclass
@@ -133,36 +103,17 @@ class Model:
         return dict(self.__dict__, _network=None)
 
 
-def _plain_outlet(bc: Any) -> bool:
-    """A canonical resistance or RCR condition with a constant (or no) pressure: the core
-    reads it from the dict itself."""
-    if type(bc) is not dict or bc.get("type") not in ("rcr", "resistance"):
-        return False
-    p = bc.get("pressure")
-    return p is None or (type(p) is dict and p.get("kind") == "constant")
-
-
 def _network(canonical: dict[str, Any], max_memory: Any = None) -> _core.Network:
-    """The core network of a canonical model (an ensemble's variant, an unpickled model): the
-    vessels and plain outlets handed over as the dicts themselves, the rest as JSON text."""
-    bcs = canonical.get("boundary_conditions")
-    outlets, other = {}, bcs
-    if isinstance(bcs, dict):
-        outlets = {n: bc for n, bc in bcs.items() if _plain_outlet(bc) and type(n) is str}
-        other = {n: bc for n, bc in bcs.items() if n not in outlets}
-    rest = {k: v for k, v in canonical.items() if k not in ("vessels", "boundary_conditions")}
-    rest["vessels"], rest["boundary_conditions"] = [], other
-    rest["max_memory"] = _memory.limit(max_memory, "simulation: max_memory")
-    vessels = canonical.get("vessels")
-    if type(vessels) is not list:  # not a canonical model: the JSON parse reports it
-        rest["vessels"], vessels = vessels, None
+    """The core network of a canonical model (an ensemble's variant, an unpickled model): its
+    dicts are read by the core's serde types in place, no text written in between."""
+    limit = _memory.limit(max_memory, "simulation: max_memory")
     with core_errors(f"model '{canonical.get('name', '?')}'"):
-        return _core.Network(json.dumps(rest, separators=(",", ":")), vessels, outlets)
+        return _core.Network(canonical, limit)
 
 
 def build_model(data: dict[str, Any]) -> Model:
     """Validate a native model dict (the README schema) and assemble it."""
-    return _build(_copy(dict(data)))
+    return _build(copy_description(dict(data)))
 
 
 def _build(data: dict[str, Any], *, plausibility: bool = True) -> Model:
@@ -197,26 +148,3 @@ def _build_native(data: dict[str, Any], grow: Callable[[Any], Any] | None = None
         model.network.output_layout(variables=output_names(out.get("variables"), "variables"),
                                     vessels=output_vessels(out.get("vessels", "all")))
     return model
-
-
-def _unassembled(data: dict[str, Any],
-                 convert_vessels: Callable[..., Any] = _core.read_vessels,
-                 convert_boundary_conditions: Callable[..., Any] = _core.read_conditions
-                 ) -> Model:
-    """The model of ``data`` with its canonical description, not assembled (an ensemble's
-    variant): ``convert_vessels(vessels, units)`` and ``convert_boundary_conditions(conditions,
-    units)`` may reuse the base model's canonical elements the variant leaves as they are."""
-    name, canon = _core.read_header(data)
-    units = str(data.get("units", "SI"))
-    canon["vessels"] = convert_vessels(data["vessels"], units)
-    canon["boundary_conditions"], periods = convert_boundary_conditions(
-        data.get("boundary_conditions", {}), units)
-    period = _core.check_periods(data, periods, canon["vessels"])
-    sim = data.get("simulation", {}) or {}
-    _core.check_simulation(sim)
-    tr, info = _core.read_transport(data, period)
-    if tr is not None:
-        canon["transport"] = tr
-    return Model(name=name, simulation=dict(sim), period=period, source=data, transport=info,
-                 _canonical=canon)
-

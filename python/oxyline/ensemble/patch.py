@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -34,7 +34,8 @@ from oxyline.ensemble.scale import mapping as _mapping
 from oxyline.ensemble.scale import where as _where
 from oxyline.ensemble.values import ValueTable
 from oxyline.errors import ModelError
-from oxyline.model import Model, _copy, _plain_outlet, _unassembled
+from oxyline.description import copy_description
+from oxyline.model import Model
 
 
 @dataclass
@@ -59,7 +60,7 @@ def merge(source: Mapping[str, Any], patch: Any, k: int = 0) -> Merged:
     path; a value the patch cannot apply is returned as ``refused``."""
     # the core shares the patch's objects in the model: a copy, so that the variant's model
     # never aliases the caller's lists
-    data, vessels, nodes, paths, refused = _core.merge_patch(dict(source), _copy(patch), k)
+    data, vessels, nodes, paths, refused = _core.merge_patch(dict(source), copy_description(patch), k)
     return Merged(data, set(vessels), set(nodes), paths, refused)
 
 
@@ -104,7 +105,7 @@ def apply_patch(model: Model | Mapping[str, Any] | str, patch: Mapping[str, Any]
     from oxyline.loader import load_model
 
     base = load_model(model)
-    return _copy(merge_patch(base.source, patch)[0])
+    return copy_description(merge_patch(base.source, patch)[0])
 
 
 def _column_path(column: Any, names: Mapping[str, set[str]], k: int) -> list[str]:
@@ -224,14 +225,36 @@ def flatten(patch: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
     return out
 
 
+def variant_model(data: dict[str, Any],
+                  convert_vessels: Callable[..., Any] = _core.read_vessels,
+                  convert_boundary_conditions: Callable[..., Any] = _core.read_conditions
+                  ) -> Model:
+    """The model of ``data`` with its canonical description, not assembled (an ensemble's
+    variant): ``convert_vessels(vessels, units)`` and ``convert_boundary_conditions(conditions,
+    units)`` may reuse the base model's canonical elements the variant leaves as they are."""
+    name, canon = _core.read_header(data)
+    units = str(data.get("units", "SI"))
+    canon["vessels"] = convert_vessels(data["vessels"], units)
+    canon["boundary_conditions"], periods = convert_boundary_conditions(
+        data.get("boundary_conditions", {}), units)
+    period = _core.check_periods(data, periods, canon["vessels"])
+    sim = data.get("simulation", {}) or {}
+    _core.check_simulation(sim)
+    tr, info = _core.read_transport(data, period)
+    if tr is not None:
+        canon["transport"] = tr
+    return Model(name=name, simulation=dict(sim), period=period, source=data, transport=info,
+                 _canonical=canon)
+
+
 @dataclass
 class Variant:
     """A variant ready to run: its canonical patch for the core (None: the base model), its
     model (canonical description, period and transport facts; never assembled here). The
-    patch's vessels (by index) and plain outlets (resistance, RCR with a constant pressure)
-    are handed to the core as the canonical dicts themselves (``vessels``, ``outlets``), the
-    rest as JSON text: the text of a variant that rescales every vessel cost the thread that
-    feeds the workers more than the rest of its work (the repr of every float). A patch on
+    patch's vessels (by index) and conditions (by node) are handed to the core as the
+    canonical dicts themselves (``vessels``, ``outlets``), read there by the core's serde
+    types; the rest as JSON text (the text of a variant that rescales every vessel cost the
+    thread that feeds the workers more than the rest of its work). A patch on
     the value route (:mod:`oxyline.ensemble.values`) has ``values`` and ``tables`` instead."""
 
     patch_json: str | None
@@ -334,7 +357,7 @@ class Patcher:
             return out, periods
 
         try:
-            return _unassembled(merged.data, convert_vessels, convert_conditions)
+            return variant_model(merged.data, convert_vessels, convert_conditions)
         except ModelError as e:  # blood, oxygen, transport, period: the other sections
             others = {key: value for key, value in patch.items()
                       if key not in ("vessels", "boundary_conditions", "scale")}
@@ -362,12 +385,7 @@ class Patcher:
         canon, base = model.canonical, self.base.canonical
         core: dict[str, Any] = {}
         handed = {i: canon["vessels"][i] for i in sorted(vessels)}
-        outlets, other = {}, {}
-        for n in nodes:
-            bc = canon["boundary_conditions"][n]
-            (outlets if _plain_outlet(bc) else other)[n] = bc
-        if other:
-            core["boundary_conditions"] = other
+        outlets = {n: canon["boundary_conditions"][n] for n in nodes}
         if canon["blood"] != base["blood"]:
             core["blood"] = canon["blood"]
         if canon.get("transport") != base.get("transport"):

@@ -11,7 +11,7 @@ from typing import Any
 
 from oxyline.errors import ModelError
 from oxyline.memory import gc_paused
-from oxyline.model import Model, _build, _copy
+from oxyline.model import Model, _build, build_model
 
 PathLike = str | os.PathLike[str]
 
@@ -70,7 +70,7 @@ def build(data: dict[str, Any], where: str | None = None, *, owned: bool = False
     prefixed with ``where`` (the file or table it came from)."""
     try:
         with gc_paused():
-            return _build(data if owned else _copy(dict(data)))
+            return _build(data) if owned else build_model(data)
     except ModelError as exc:
         msg = str(exc)
         if where is None or msg.startswith(where):

@@ -39,7 +39,8 @@ from oxyline.io._common import (
     read_regular_text,
 )
 from oxyline.io.native import dump_native, read_mapping
-from oxyline.model import Model, _copy
+from oxyline.description import copy_description
+from oxyline.model import Model
 
 BC_COLUMNS = ("node", "type", "value", "waveform", "interpolation", "steady", "fourier_period",
               "fourier_mean", "fourier_cos", "fourier_sin", "resistance", "pressure",
@@ -388,4 +389,4 @@ def native_dict(path: PathLike, bcs: PathLike | None = None, **model_keys: Any
         keys = read_mapping(meta)
     keys.update(model_keys)
     data, where = _tables_dict(p, b if bcs is not None or b.exists() else None, keys)
-    return _copy(data), where
+    return copy_description(data), where

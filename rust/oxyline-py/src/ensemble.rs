@@ -3,7 +3,8 @@
 //! callback on the calling thread, in completion order, while the others keep running.
 
 use crate::errors::{error_kind, to_py};
-use crate::reader::extract;
+use crate::reader::de;
+use crate::reader::model::vessel_name;
 use crate::reader::node::PyNode;
 use crate::results::{layout_dict, outcome_dict, recorded_columns};
 use crate::settings::Shared;
@@ -45,8 +46,8 @@ struct Input {
     tables: Vec<TableValues>,
 }
 
-/// Vessels (by index) and plain outlets of a patch read from their canonical dicts (see
-/// `extract`) instead of its JSON text.
+/// Vessels (by index) and conditions of a patch read from their canonical dicts (by the
+/// core's serde types, `reader::de`) instead of its JSON text.
 #[derive(Default)]
 struct Handed {
     vessels: Vec<(usize, VesselSpec)>,
@@ -65,13 +66,13 @@ fn handed_over(
                 format!("vessel index {k} is not an integer"),
             )
         })?;
-        h.vessels.push((i, extract::vessel(i, &v)?));
+        h.vessels.push((i, de::read(&v, || vessel_name(i, &v))?));
     }
     for (k, v) in outlets.iter().flat_map(|d| d.iter()) {
         let node: String = k
             .extract()
             .map_err(|_| Error::model("variant patch", format!("node {k} is not a string")))?;
-        let bc = extract::outlet(&node, &v)?;
+        let bc = de::read(&v, || format!("boundary condition '{node}'"))?;
         h.outlets.push((node, bc));
     }
     Ok(h)
@@ -432,7 +433,7 @@ impl Ensemble {
     /// Run variants as `feed()` hands them over: it returns `(i, patch, period,
     /// output_every, vessels, outlets, values, tables)` for the next variant (`patch` its
     /// canonical JSON, None for the base model; `vessels` {index: canonical vessel dict} and
-    /// `outlets` {node: canonical resistance/RCR dict}: elements of the patch handed over as
+    /// `outlets` {node: canonical condition dict}: elements of the patch handed over as
     /// objects, or None; `values`: a float64 array of one SI value per target, NaN for the
     /// base value, or None; `tables`: `[(target, time, value)]` float64 arrays of the new
     /// linear tables of `table` targets, or None)

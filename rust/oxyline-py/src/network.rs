@@ -11,7 +11,8 @@ use oxyline_core::run::checkpoint::{Checkpoints, Every, Snapshot};
 use oxyline_core::{Assembled, Chunk, Dae, Error, OutputSink, Selection, Transport};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList};
+use pyo3::types::{PyDict, PyString};
+use reader::model::canonical_spec;
 use std::cell::Cell;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -85,48 +86,25 @@ impl Network {
 #[oxyline_py_guard::guard]
 #[pymethods]
 impl Network {
-    /// `vessels` (the canonical vessel dicts) and `outlets` (node -> canonical resistance or
-    /// RCR condition with a constant pressure) may be handed over as Python objects instead of
-    /// inside `model_json` (see `extract`): a large tree then needs no text for its bulk.
-    /// `parts`: the vessels and outlets read from a native model (`reader::NativeParts`),
-    /// moved into the spec in their order (before `vessels`, `outlets`).
+    /// The network of a canonical SI model: its JSON text, or its dicts read in place by the
+    /// core's serde types (`reader::de`; an error names the vessel or condition and the key).
+    /// `max_memory`: the memory limit in bytes (None: the model's own, if any).
     #[new]
-    #[pyo3(signature = (model_json, vessels = None, outlets = None, parts = None))]
-    fn new(
-        py: Python<'_>,
-        model_json: &str,
-        vessels: Option<Bound<'_, PyList>>,
-        outlets: Option<Bound<'_, PyDict>>,
-        parts: Option<Bound<'_, reader::NativeParts>>,
-    ) -> PyResult<Self> {
-        let (mut native_vessels, mut bcs) = match parts {
-            Some(p) => p.borrow_mut().take().map_err(to_py)?,
-            None => (Vec::new(), Vec::new()),
-        };
-        let vessels = vessels
-            .map(|v| reader::extract::vessels(&v))
-            .transpose()
-            .map_err(to_py)?;
-        if let Some(v) = vessels {
-            native_vessels.extend(v);
-        }
-        let vessels = Some(native_vessels).filter(|v| !v.is_empty());
-        for (node, bc) in outlets.iter().flat_map(|d| d.iter()) {
-            let node: String = node.extract()?;
-            let spec = reader::extract::outlet(&node, &bc).map_err(to_py)?;
-            bcs.push((node, spec));
-        }
-        // the text is parsed where Python holds it (no copy); the spec is dropped once the
-        // circuit and the transport plan are built from it
-        let built = py.detach(move || -> Result<Built, Error> {
-            let mut spec = parse(model_json)?;
-            match vessels {
-                // moved, not copied: ~700 B per vessel
-                Some(v) if spec.vessels.is_empty() => spec.vessels = v,
-                Some(v) => spec.vessels.extend(v),
-                None => {}
+    #[pyo3(signature = (model, max_memory = None))]
+    fn new(py: Python<'_>, model: Bound<'_, PyAny>, max_memory: Option<f64>) -> PyResult<Self> {
+        let spec = match model.cast::<PyString>() {
+            // the text is parsed where Python holds it (no copy)
+            Ok(text) => {
+                let text = text.to_str()?;
+                py.detach(|| parse(text)).map_err(to_py)?
             }
-            assemble(spec, bcs)
+            Err(_) => canonical_spec(&model)?,
+        };
+        // the spec is dropped once the circuit and the transport plan are built from it
+        let built = py.detach(move || {
+            let mut spec = spec;
+            spec.max_memory = max_memory.or(spec.max_memory);
+            assemble(spec, Vec::new())
         });
         Ok(Network::from_built(built.map_err(to_py)?))
     }

@@ -56,7 +56,8 @@ from oxyline.io.svzerod import coupling as svzerod_coupling
 from oxyline.io.svzerod import cycles as svzerod_cycles
 from oxyline.io.svzerod import heart as svzerod_heart
 from oxyline.io.svzerod import initial as svzerod_initial
-from oxyline.model import Model, _build, _copy
+from oxyline.description import copy_description
+from oxyline.model import Model, _build
 
 COLUMNS = ("name", "time", "flow_in", "flow_out", "pressure_in", "pressure_out")
 METHODS = ("generalized-alpha", "rk4")
@@ -178,7 +179,7 @@ class RunSettings:
 
 def _read_config(config: Mapping[str, Any] | str | os.PathLike[str]) -> dict[str, Any]:
     if isinstance(config, Mapping):
-        return _copy(dict(config))
+        return copy_description(dict(config))
     return read_mapping(config)
 
 

@@ -1,10 +1,9 @@
-//! The one reader of models from Python objects: a native model dict read in one call
-//! (`model`: top level, elements, transport, by the core's schema), its plain vessels and
-//! outlets read key by key straight into the network's parts (`native`), the schema's
-//! pieces for an ensemble's variants (`schema`), and the canonical element dicts (`extract`)
-//! an ensemble hands over.
+//! The one reader of models from Python objects: a native model dict read in one call by the
+//! core's schema (`model`: top level, elements, transport), its plain vessels and outlets read
+//! straight into the network's parts (`native`), the schema's pieces for an ensemble's
+//! variants (`schema`), and canonical dicts read by the core's serde types in place (`de`).
 
-pub(crate) mod extract;
+pub(crate) mod de;
 pub(crate) mod model;
 pub(crate) mod native;
 

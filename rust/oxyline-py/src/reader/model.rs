@@ -4,10 +4,13 @@
 //! it read (`Network.from_parts`) without a second crossing. [`canonical_model`] writes the
 //! full canonical description (for display and ensembles) from the same readers.
 
+use super::de;
 use super::native::NativeParts;
 use super::node::{PyNode, to_python};
 use super::schema::{transport, transport_context};
 use crate::errors::to_py;
+use oxyline_core::Error;
+use oxyline_core::NetworkSpec;
 use oxyline_core::model::native;
 use oxyline_core::model::node::{Fields, Node};
 use oxyline_core::model::units::Units;
@@ -190,4 +193,50 @@ pub(crate) fn forcing_frequency(data: Bound<'_, PyAny>, rtol: Option<f64>) -> Py
         })
         .collect::<PyResult<Vec<_>>>()?;
     Ok((auto_segments::forcing_frequency(&specs, rtol), rtol))
+}
+
+/// A canonical SI model given as its dicts (an ensemble's variant, a model rebuilt from its
+/// `canonical`), read by the core's serde types in place: each vessel and condition on its
+/// own, so that an error names it, then the rest of the top level.
+pub(crate) fn canonical_spec(model: &Bound<'_, PyAny>) -> PyResult<NetworkSpec> {
+    let py = model.py();
+    let whole = || "model".to_owned();
+    let Ok(d) = model.cast::<PyDict>() else {
+        return de::read(model, whole).map_err(to_py);
+    };
+    let rest = d.copy()?;
+    let vessels = rest.get_item("vessels")?.filter(|v| v.is_instance_of::<PyList>());
+    if vessels.is_some() {
+        rest.set_item("vessels", PyList::empty(py))?;
+    }
+    let bcs = rest.get_item("boundary_conditions")?;
+    let bcs = bcs.and_then(|b| b.cast_into::<PyDict>().ok());
+    if bcs.is_some() {
+        rest.set_item("boundary_conditions", PyDict::new(py))?;
+    }
+    let mut spec: NetworkSpec = de::read(rest.as_any(), whole).map_err(to_py)?;
+    for (i, v) in vessels.iter().flat_map(|l| l.try_iter()).flatten().enumerate() {
+        let v = v?;
+        spec.vessels.push(de::read(&v, || vessel_name(i, &v)).map_err(to_py)?);
+    }
+    for (node, bc) in bcs.iter().flat_map(|d| d.iter()) {
+        let node: String = node.extract().map_err(|_| {
+            to_py(Error::model(
+                "boundary_conditions",
+                format!("node {} is not a string", node.repr().map(|r| r.to_string()).unwrap_or_default()),
+            ))
+        })?;
+        let spec_bc = de::read(&bc, || format!("boundary condition '{node}'")).map_err(to_py)?;
+        spec.boundary_conditions.insert(node, spec_bc);
+    }
+    Ok(spec)
+}
+
+/// `vessel 'name'` of a canonical vessel dict (`vessel #i` when it has no name).
+pub(crate) fn vessel_name(i: usize, v: &Bound<'_, PyAny>) -> String {
+    let name = v.cast::<PyDict>().ok().and_then(|d| d.get_item("name").ok().flatten());
+    match name {
+        Some(n) => format!("vessel '{n}'"),
+        None => format!("vessel #{i}"),
+    }
 }

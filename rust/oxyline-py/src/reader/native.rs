@@ -1,159 +1,36 @@
-//! The bulk of a large native model read straight from the user's dicts: plain geometric
-//! vessels and plain resistance/RCR outlets, converted to SI here without a canonical dict per
-//! element. An element this reader does not take (anything else, or a value out of range)
-//! goes through the core's full schema check (`oxyline_core::model::native`, with its precise
-//! error): [`NativeParts::read_rest`] for vessels, `read_conditions` for outlets. The same
-//! numbers as the canonical route: each value is multiplied by the same unit factor once.
+//! The bulk of a large native model read straight from the user's dicts by the core's serde
+//! types (`oxyline_core::model::native::plain`, over Python objects: `de`): plain geometric
+//! vessels and plain resistance/RCR outlets, in SI without a canonical dict per element. An
+//! element that is not plain goes through the core's full schema check
+//! (`oxyline_core::model::native`, with its precise error): [`NativeParts::read_rest`] for
+//! vessels, `read_conditions` for outlets.
 
+use super::de::PyDe;
 use super::node::PyNode;
 use crate::errors::to_py;
 use oxyline_core::Error;
 use oxyline_core::model::native;
+use oxyline_core::model::native::plain::{PlainOutlet, PlainVessel};
 use oxyline_core::model::node::Fields;
-use oxyline_core::model::units::{Quantity, Units};
-use oxyline_core::model::{Arrangement, BoundarySpec, GeometrySpec, VesselSpec};
-use oxyline_core::waveform::WaveformSpec;
+use oxyline_core::model::units::Units;
+use oxyline_core::model::{BoundarySpec, VesselSpec};
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyFloat, PyInt, PyList, PyString};
+use pyo3::types::{PyDict, PyList, PyString};
+use serde::Deserialize;
 
-/// A value of exact type float or int (bool, str, None and subclasses take the full check),
-/// as f64 (an int too large for a float is left to the full check as well).
-fn real(v: &Bound<'_, PyAny>) -> Option<f64> {
-    if v.is_exact_instance_of::<PyFloat>() || v.is_exact_instance_of::<PyInt>() {
-        v.extract::<f64>().ok()
-    } else {
-        None
-    }
+/// A plain vessel in SI, or None (left to the full check).
+fn vessel(item: &Bound<'_, PyAny>, units: Units) -> Option<VesselSpec> {
+    PlainVessel::deserialize(PyDe(item)).ok()?.spec(units)
 }
 
-/// 0 < x < ∞ (false for NaN).
-fn positive(v: &Bound<'_, PyAny>) -> Option<f64> {
-    real(v).filter(|x| *x > 0.0 && *x < f64::INFINITY)
-}
-
-fn finite(v: &Bound<'_, PyAny>) -> Option<f64> {
-    real(v).filter(|x| x.is_finite())
-}
-
-fn name(v: &Bound<'_, PyAny>) -> Option<String> {
-    if !v.is_exact_instance_of::<PyString>() {
-        return None;
-    }
-    v.cast::<PyString>().ok()?.to_str().ok().map(str::to_owned)
-}
-
-fn arrangement(v: &Bound<'_, PyAny>) -> Option<Arrangement> {
-    match name(v)?.as_str() {
-        "inverted-L" => Some(Arrangement::InvertedL),
-        "L" => Some(Arrangement::L),
-        "pi" => Some(Arrangement::Pi),
-        "RCL" => Some(Arrangement::Rcl),
-        _ => None,
-    }
-}
-
-/// A plain geometric vessel (name, from, to, length, radius or radius_in/radius_out, optional
-/// wall, segments, arrangement, output, description) in SI, or None. `length` and `modulus`
-/// are the model's unit factors.
-fn vessel(item: &Bound<'_, PyAny>, length: f64, modulus: f64) -> Option<VesselSpec> {
-    if !item.is_exact_instance_of::<PyDict>() {
-        return None;
-    }
-    let d = item.cast::<PyDict>().ok()?;
-    let mut v = VesselSpec::blank();
-    let mut g = GeometrySpec {
-        length: f64::NAN,
-        radius_in: f64::NAN,
-        radius_out: f64::NAN,
-        wall_thickness: None,
-        youngs_modulus: None,
-        poisson_ratio: 0.5,
-        wall_viscosity: 0.0,
-    };
-    let (mut has_name, mut has_from, mut has_to) = (false, false, false);
-    let (mut radius, mut radius_in, mut radius_out) = (None, None, None);
-    for (k, x) in d.iter() {
-        if !k.is_exact_instance_of::<PyString>() {
-            return None;
-        }
-        match k.cast::<PyString>().ok()?.to_str().ok()? {
-            "name" => (v.name, has_name) = (name(&x)?, true),
-            "from" => (v.from, has_from) = (name(&x)?, true),
-            "to" => (v.to, has_to) = (name(&x)?, true),
-            "length" => g.length = length * positive(&x)?,
-            "radius" => radius = Some(positive(&x)?),
-            "radius_in" => radius_in = Some(positive(&x)?),
-            "radius_out" => radius_out = Some(positive(&x)?),
-            "wall_thickness" => g.wall_thickness = Some(length * positive(&x)?),
-            "youngs_modulus" => g.youngs_modulus = Some(modulus * positive(&x)?),
-            "poisson_ratio" => g.poisson_ratio = finite(&x)?,
-            "segments" => {
-                if !x.is_exact_instance_of::<PyInt>() {
-                    return None;
-                }
-                v.segments = Some(x.extract::<usize>().ok().filter(|&n| n >= 1)?);
-            }
-            "arrangement" => v.arrangement = Some(arrangement(&x)?),
-            "output" => v.output = x.is_truthy().ok()?,
-            "description" => {}
-            _ => return None,
-        }
-    }
-    (g.radius_in, g.radius_out) = match (radius, radius_in, radius_out) {
-        (Some(r), None, None) => (length * r, length * r),
-        (None, Some(a), Some(b)) => (length * a, length * b),
-        _ => return None,
-    };
-    if !(has_name && has_from && has_to) || g.length.is_nan() {
-        return None;
-    }
-    v.geometry = Some(g);
-    Some(v)
-}
-
-/// A resistance or RCR outlet with plain finite values and a constant (or no) pressure, in
-/// SI, or None. `factors`: resistance, capacitance, pressure.
-fn outlet(item: &Bound<'_, PyAny>, (r, c, p): (f64, f64, f64)) -> Option<BoundarySpec> {
-    if !item.is_exact_instance_of::<PyDict>() {
-        return None;
-    }
-    let d = item.cast::<PyDict>().ok()?;
-    let kind = name(&d.get_item("type").ok()??)?;
-    let (mut pressure, mut values) = (0.0, [None; 4]);
-    for (k, x) in d.iter() {
-        if !k.is_exact_instance_of::<PyString>() {
-            return None;
-        }
-        let slot = match (kind.as_str(), k.cast::<PyString>().ok()?.to_str().ok()?) {
-            (_, "type") => continue,
-            (_, "pressure") => {
-                pressure = finite(&x)?;
-                continue;
-            }
-            ("resistance", "resistance") => 0,
-            ("rcr", "proximal_resistance") => 1,
-            ("rcr", "capacitance") => 2,
-            ("rcr", "distal_resistance") => 3,
-            _ => return None,
-        };
-        values[slot] = Some(finite(&x)?);
-    }
-    let pressure = Some(WaveformSpec::Constant {
-        value: p * pressure,
-    });
-    match (kind.as_str(), values) {
-        ("resistance", [Some(x), ..]) => Some(BoundarySpec::Resistance {
-            resistance: r * x,
-            pressure,
-        }),
-        ("rcr", [None, Some(rp), Some(cap), Some(rd)]) => Some(BoundarySpec::Rcr {
-            proximal_resistance: r * rp,
-            capacitance: c * cap,
-            distal_resistance: r * rd,
-            pressure,
-        }),
-        _ => None,
-    }
+/// A plain outlet in SI by its node, or None (left to the full check).
+fn outlet(
+    node: &Bound<'_, PyAny>,
+    item: &Bound<'_, PyAny>,
+    units: Units,
+) -> Option<(String, BoundarySpec)> {
+    let node = node.cast::<PyString>().ok()?.to_str().ok()?.to_owned();
+    Some((node, PlainOutlet::deserialize(PyDe(item)).ok()?.spec(units)?))
 }
 
 /// Outlet conditions by node name, in the order read.
@@ -209,12 +86,8 @@ impl NativeParts {
 impl NativeParts {
     /// Read the plain vessels of the native `vessels` list (in the unit system `u`).
     pub(crate) fn read(vessels: &Bound<'_, PyList>, u: Units) -> PyResult<Self> {
-        let (length, modulus) = (u.factor(Quantity::Length), u.factor(Quantity::Modulus));
         Ok(NativeParts {
-            vessels: vessels
-                .iter()
-                .map(|v| vessel(&v, length, modulus))
-                .collect(),
+            vessels: vessels.iter().map(|v| vessel(&v, u)).collect(),
             outlets: Vec::new(),
             rest: None,
         })
@@ -253,22 +126,17 @@ impl NativeParts {
         bcs: &Bound<'py, PyDict>,
         u: Units,
     ) -> Vec<Bound<'py, PyAny>> {
-        let resistance = u.factor(Quantity::Resistance);
-        let capacitance = u.factor(Quantity::Capacitance);
-        let pressure = u.factor(Quantity::Pressure);
         let mut slow = Vec::new();
         self.outlets.reserve(bcs.len());
         for (node, bc) in bcs.iter() {
-            match (
-                name(&node),
-                outlet(&bc, (resistance, capacitance, pressure)),
-            ) {
-                (Some(n), Some(spec)) => self.outlets.push((n, spec)),
-                _ => slow.push(node),
+            match outlet(&node, &bc, u) {
+                Some(read) => self.outlets.push(read),
+                None => slow.push(node),
             }
         }
         slow
     }
+
     /// The vessels and outlets, moved out (a second call gets none).
     pub(crate) fn take(&mut self) -> Result<(Vec<VesselSpec>, Outlets), Error> {
         let vessels = std::mem::take(&mut self.vessels);

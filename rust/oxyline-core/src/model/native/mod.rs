@@ -3,8 +3,8 @@
 //! the top level, the vessels and heart elements (`vessel`), and the boundary conditions and
 //! their waveforms (`boundary`). A message names the element, the user's key and value as the
 //! user wrote them. The canonical description is JSON (`serde_json::Value`), the input of
-//! [`crate::model::NetworkSpec`]; the bulk of a large tree may skip it (the binding's fast
-//! reader converts plain vessels and outlets with the same factors).
+//! [`crate::model::NetworkSpec`]; the bulk of a large tree skips it (`plain`: plain vessels
+//! and outlets read by serde straight into the spec types, with the same factors).
 
 use super::node::{Kind, Node, py_g, py_repr};
 use super::units::{Quantity, Units};
@@ -12,6 +12,7 @@ use crate::error::{Error, Result};
 use serde_json::{Map, Value, json};
 
 pub mod boundary;
+pub mod plain;
 pub mod vessel;
 
 pub use boundary::{boundary_condition, condition_periods};
