@@ -20,12 +20,6 @@ TISSUE_SEGMENT_VARIABLES: list[str]
 TISSUE_BALANCE_VARIABLES: list[str]
 #: the keywords of RunOptions (rust/oxyline-py/src/settings.rs)
 RUN_SETTINGS: list[str]
-# the model schema's key sets (oxyline_core::model::native)
-VESSEL_KEYS: list[str]
-LUMPED_KEYS: list[str]
-ARRANGEMENTS: list[str]
-METHODS: list[str]
-BC_KEYS: dict[str, list[str]]
 # the run-settings schema (oxyline_core::model::settings)
 STARTS: list[str]
 OPTIONS: list[str]
@@ -65,11 +59,10 @@ class NativeParts:
     def names(self) -> list[str]: ...
 
 class Network:
-    """An assembled network, built from the canonical SI JSON model."""
+    """An assembled network, built from a canonical SI model: its dicts (read in place by the
+    core's serde types) or its JSON text. ``max_memory``: the memory limit in bytes."""
 
-    def __init__(self, model_json: str, vessels: list[Any] | None = None,
-                 outlets: dict[str, Any] | None = None,
-                 parts: NativeParts | None = None) -> None: ...
+    def __init__(self, model: dict[str, Any] | str, max_memory: float | None = None) -> None: ...
     def summary(self) -> dict[str, Any]: ...
     def passes(self) -> int:
         """2 for a transport model whose closures need a flow-only pass first, else 1."""

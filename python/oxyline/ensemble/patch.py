@@ -30,11 +30,11 @@ from typing import Any
 import numpy as np
 
 from oxyline import _core
+from oxyline.description import copy_description
 from oxyline.ensemble.scale import mapping as _mapping
 from oxyline.ensemble.scale import where as _where
 from oxyline.ensemble.values import ValueTable
 from oxyline.errors import ModelError
-from oxyline.description import copy_description
 from oxyline.model import Model
 
 

@@ -24,6 +24,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from oxyline.description import copy_description
 from oxyline.errors import ModelError
 from oxyline.io._common import (
     ALIASES,
@@ -39,7 +40,6 @@ from oxyline.io._common import (
     read_regular_text,
 )
 from oxyline.io.native import dump_native, read_mapping
-from oxyline.description import copy_description
 from oxyline.model import Model
 
 BC_COLUMNS = ("node", "type", "value", "waveform", "interpolation", "steady", "fourier_period",

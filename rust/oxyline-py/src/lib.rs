@@ -139,20 +139,10 @@ mod _core {
             m.add("PWDB_OUTFLOW_PRESSURE", pwdb::OUTFLOW_PRESSURE)?;
             m.add("PWDB_POISSON_RATIO", pwdb::POISSON_RATIO)?;
         }
-        // the model schema's key sets (`oxyline_core::model::native`)
+        // the run settings' names and the transport sections' key sets (`oxyline_core::model`)
         {
-            use oxyline_core::model::native::{self as schema, boundary, vessel};
-            m.add("VESSEL_KEYS", vessel::VESSEL_KEYS.to_vec())?;
-            m.add("LUMPED_KEYS", vessel::LUMPED_KEYS.to_vec())?;
-            m.add("ARRANGEMENTS", vessel::ARRANGEMENTS.to_vec())?;
-            m.add("METHODS", schema::METHODS.to_vec())?;
             m.add("STARTS", oxyline_core::model::settings::STARTS.to_vec())?;
             m.add("OPTIONS", oxyline_core::model::settings::OPTIONS.to_vec())?;
-            let bc = pyo3::types::PyDict::new(m.py());
-            for (kind, keys) in boundary::BC_KEYS {
-                bc.set_item(*kind, keys.to_vec())?;
-            }
-            m.add("BC_KEYS", bc)?;
             use oxyline_core::model::species;
             m.add("OXYGEN_KEYS", species::OXYGEN_KEYS.to_vec())?;
             m.add("TRANSPORT_KEYS", species::TRANSPORT_KEYS.to_vec())?;

@@ -49,6 +49,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from oxyline.description import copy_description
 from oxyline.errors import ModelError, ResourceError, UnsupportedElement
 from oxyline.io.native import read_mapping
 from oxyline.io.svzerod import closed_loop as svzerod_closed_loop
@@ -56,7 +57,6 @@ from oxyline.io.svzerod import coupling as svzerod_coupling
 from oxyline.io.svzerod import cycles as svzerod_cycles
 from oxyline.io.svzerod import heart as svzerod_heart
 from oxyline.io.svzerod import initial as svzerod_initial
-from oxyline.description import copy_description
 from oxyline.model import Model, _build
 
 COLUMNS = ("name", "time", "flow_in", "flow_out", "pressure_in", "pressure_out")

@@ -109,7 +109,9 @@ impl<'py> PyDe<'_, 'py> {
     }
 
     fn text(&self) -> Res<&Bound<'py, PyString>> {
-        self.0.cast::<PyString>().map_err(|_| must("a string", self.0))
+        self.0
+            .cast::<PyString>()
+            .map_err(|_| must("a string", self.0))
     }
 
     fn sequence<'de, V: Visitor<'de>>(&self, v: V) -> Res<V::Value> {
@@ -128,7 +130,10 @@ impl<'py> PyDe<'_, 'py> {
     }
 
     fn mapping<'de, V: Visitor<'de>>(&self, v: V) -> Res<V::Value> {
-        let d = self.0.cast::<PyDict>().map_err(|_| must("a mapping", self.0))?;
+        let d = self
+            .0
+            .cast::<PyDict>()
+            .map_err(|_| must("a mapping", self.0))?;
         v.visit_map(Map {
             items: d.iter(),
             entry: None,
@@ -303,7 +308,10 @@ impl<'de> Deserializer<'de> for PyDe<'_, '_> {
                 .map_err(|_| de::Error::custom("must be text without lone surrogates"))?;
             return v.visit_enum(name.into_deserializer());
         }
-        let d = self.0.cast::<PyDict>().map_err(|_| must("a name", self.0))?;
+        let d = self
+            .0
+            .cast::<PyDict>()
+            .map_err(|_| must("a name", self.0))?;
         let mut it = d.iter();
         match (it.next(), it.next()) {
             (Some((k, x)), None) => v.visit_enum(Variant { key: k, value: x }),
@@ -415,11 +423,7 @@ impl<'de> de::VariantAccess<'de> for VariantContent<'_> {
         PyDe(&self.0).sequence(v)
     }
 
-    fn struct_variant<V: Visitor<'de>>(
-        self,
-        _: &'static [&'static str],
-        v: V,
-    ) -> Res<V::Value> {
+    fn struct_variant<V: Visitor<'de>>(self, _: &'static [&'static str], v: V) -> Res<V::Value> {
         PyDe(&self.0).mapping(v)
     }
 }

@@ -205,7 +205,9 @@ pub(crate) fn canonical_spec(model: &Bound<'_, PyAny>) -> PyResult<NetworkSpec> 
         return de::read(model, whole).map_err(to_py);
     };
     let rest = d.copy()?;
-    let vessels = rest.get_item("vessels")?.filter(|v| v.is_instance_of::<PyList>());
+    let vessels = rest
+        .get_item("vessels")?
+        .filter(|v| v.is_instance_of::<PyList>());
     if vessels.is_some() {
         rest.set_item("vessels", PyList::empty(py))?;
     }
@@ -215,15 +217,24 @@ pub(crate) fn canonical_spec(model: &Bound<'_, PyAny>) -> PyResult<NetworkSpec> 
         rest.set_item("boundary_conditions", PyDict::new(py))?;
     }
     let mut spec: NetworkSpec = de::read(rest.as_any(), whole).map_err(to_py)?;
-    for (i, v) in vessels.iter().flat_map(|l| l.try_iter()).flatten().enumerate() {
+    for (i, v) in vessels
+        .iter()
+        .flat_map(|l| l.try_iter())
+        .flatten()
+        .enumerate()
+    {
         let v = v?;
-        spec.vessels.push(de::read(&v, || vessel_name(i, &v)).map_err(to_py)?);
+        spec.vessels
+            .push(de::read(&v, || vessel_name(i, &v)).map_err(to_py)?);
     }
     for (node, bc) in bcs.iter().flat_map(|d| d.iter()) {
         let node: String = node.extract().map_err(|_| {
             to_py(Error::model(
                 "boundary_conditions",
-                format!("node {} is not a string", node.repr().map(|r| r.to_string()).unwrap_or_default()),
+                format!(
+                    "node {} is not a string",
+                    node.repr().map(|r| r.to_string()).unwrap_or_default()
+                ),
             ))
         })?;
         let spec_bc = de::read(&bc, || format!("boundary condition '{node}'")).map_err(to_py)?;
@@ -234,7 +245,10 @@ pub(crate) fn canonical_spec(model: &Bound<'_, PyAny>) -> PyResult<NetworkSpec> 
 
 /// `vessel 'name'` of a canonical vessel dict (`vessel #i` when it has no name).
 pub(crate) fn vessel_name(i: usize, v: &Bound<'_, PyAny>) -> String {
-    let name = v.cast::<PyDict>().ok().and_then(|d| d.get_item("name").ok().flatten());
+    let name = v
+        .cast::<PyDict>()
+        .ok()
+        .and_then(|d| d.get_item("name").ok().flatten());
     match name {
         Some(n) => format!("vessel '{n}'"),
         None => format!("vessel #{i}"),

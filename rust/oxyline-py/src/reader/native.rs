@@ -30,7 +30,10 @@ fn outlet(
     units: Units,
 ) -> Option<(String, BoundarySpec)> {
     let node = node.cast::<PyString>().ok()?.to_str().ok()?.to_owned();
-    Some((node, PlainOutlet::deserialize(PyDe(item)).ok()?.spec(units)?))
+    Some((
+        node,
+        PlainOutlet::deserialize(PyDe(item)).ok()?.spec(units)?,
+    ))
 }
 
 /// Outlet conditions by node name, in the order read.

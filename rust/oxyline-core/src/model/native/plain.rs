@@ -174,3 +174,83 @@ impl PlainOutlet {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::native::{boundary_condition, vessel};
+    use crate::model::node::Fields;
+    use serde_json::{Value, json};
+
+    /// The full check's reading (canonical description, then the spec), the reference.
+    fn full_vessel(v: &Value, units: Units) -> VesselSpec {
+        let canonical = vessel(&Fields::new(v.clone()), 0, units).unwrap();
+        serde_json::from_value(canonical).unwrap()
+    }
+
+    fn plain_vessel(v: &Value, units: Units) -> Option<VesselSpec> {
+        PlainVessel::deserialize(v).ok()?.spec(units)
+    }
+
+    /// The same numbers by either route: each value times the same unit factor once.
+    #[test]
+    fn plain_elements_read_as_the_full_check_reads_them() {
+        let vessels = [
+            json!({"name": "a", "from": "in", "to": "j", "length": 5, "radius": 0.3}),
+            json!({"name": "b", "from": "j", "to": "o", "length": 1.5, "radius_in": 0.3,
+                   "radius_out": 0.2, "wall_thickness": 0.03, "youngs_modulus": 4e6,
+                   "poisson_ratio": 0.49, "segments": 3, "arrangement": "pi", "output": 0,
+                   "description": {"any": ["value"]}}),
+        ];
+        for units in [Units::Si, Units::Cgs] {
+            for v in &vessels {
+                let plain = plain_vessel(v, units).expect("plain");
+                assert_eq!(format!("{plain:?}"), format!("{:?}", full_vessel(v, units)));
+            }
+            for bc in [
+                json!({"type": "rcr", "proximal_resistance": 1e3, "capacitance": 1e-5,
+                       "distal_resistance": 9e3, "pressure": 10}),
+                json!({"type": "resistance", "resistance": 3}),
+            ] {
+                let plain = PlainOutlet::deserialize(&bc).unwrap().spec(units).unwrap();
+                let full = boundary_condition(&Fields::new(bc), units, "x").unwrap();
+                let full: BoundarySpec = serde_json::from_value(full).unwrap();
+                assert_eq!(format!("{plain:?}"), format!("{full:?}"));
+            }
+        }
+    }
+
+    /// Anything not plain is left to the full check (which names the problem).
+    #[test]
+    fn anything_doubtful_is_not_plain() {
+        let base = json!({"name": "a", "from": "in", "to": "j", "length": 5, "radius": 0.3});
+        for (k, x) in [
+            ("radius", json!(-1.0)),
+            ("length", json!("1")),
+            ("segments", json!(0)),
+            ("segments", json!(2.5)),
+            ("radius_in", json!(0.1)),
+            ("wall_thickness", Value::Null),
+            ("lumped", json!({"resistance": 1.0})),
+            ("output", json!("yes")),
+        ] {
+            let mut v = base.clone();
+            v[k] = x;
+            assert!(plain_vessel(&v, Units::Si).is_none(), "{k}");
+        }
+        let rcr = json!({"type": "rcr", "proximal_resistance": 1.0, "capacitance": 1.0,
+                         "distal_resistance": 1.0});
+        for (k, x) in [
+            ("type", json!("RCR")),
+            ("resistance", json!(1.0)),
+            ("pressure", json!({"kind": "constant", "value": 0.0})),
+        ] {
+            let mut bc = rcr.clone();
+            bc[k] = x;
+            let read = PlainOutlet::deserialize(&bc)
+                .ok()
+                .and_then(|p| p.spec(Units::Si));
+            assert!(read.is_none(), "{k}");
+        }
+    }
+}
