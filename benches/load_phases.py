@@ -9,7 +9,7 @@ more than the target's margin).
     python benches/load_phases.py --depths --builtin adan56-st --repeat 2
 
 Phases (the same calls ``load_model`` makes, in its order): ``copy`` (the private copy of the
-user's dict, ``model._copy``) or ``read`` (``--route json|yaml``: the tree written once as a
+user's dict, ``copy_description``) or ``read`` (``--route json|yaml``: the tree written once as a
 native file, read by ``oxyline.io.native.read_mapping``), ``canonical`` (checks and SI
 conversion: ``_core.read_model``, which reads the whole model and the plain vessels and
 outlets straight into the network's parts), ``core`` (``_core.Network.from_parts``: the core assembles the
@@ -62,7 +62,9 @@ def child(depth: int, config: str, route: str) -> dict[str, Any]:
     # the steps of loader.load_model, one by one
     with gc_paused():
         if route == "dict":
-            data = M._copy(dict(user))
+            # the private copy (oxyline.description on this branch, model._copy before)
+            copy = getattr(M, "_copy", None) or M.copy_description
+            data = copy(dict(user))
         else:  # a file the parent wrote: read_mapping is load_model's reader
             data = read_mapping(_file(depth, config, route))
     mark("copy" if route == "dict" else "read")

@@ -128,6 +128,8 @@ def test_the_dict_handover_builds_the_network_the_json_text_builds() -> None:
     ({"radius_in": 1.0}, "vessel 'a': unknown field `radius_in`"),
     ({"segments": -1}, "vessel 'a': 'segments' must be an integer"),
     ({"name": 3}, "'name' must be a string"),
+    ({"geometry": {"length": "1", "radius_in": 1e-3, "radius_out": 1e-3}},
+     r"vessel 'a': 'geometry.length' must be a number, got '1'"),
 ])
 def test_a_bad_canonical_vessel_dict_is_a_model_error_naming_it(edit: dict[str, Any],
                                                                  message: str) -> None:
@@ -137,6 +139,23 @@ def test_a_bad_canonical_vessel_dict_is_a_model_error_naming_it(edit: dict[str, 
     canon = _handover_model().canonical
     canon["vessels"][0] = {**canon["vessels"][0], **edit}
     with pytest.raises(oxyline.ModelError, match=message):
+        _network(canon)
+
+
+def test_a_bad_canonical_condition_is_a_model_error_naming_it() -> None:
+    """Every canonical condition (tagged by its type) is read by the core from the dict; a
+    bad value is named with its condition (serde reads a tagged variant from its own buffer,
+    so the key is not named)."""
+    from oxyline.model import _network
+
+    canon = _handover_model().canonical
+    canon["boundary_conditions"]["o"] = {**canon["boundary_conditions"]["o"],
+                                         "capacitance": "1e-10"}
+    with pytest.raises(oxyline.ModelError,
+                       match="boundary condition 'o': must be a number, got string \"1e-10\""):
+        _network(canon)
+    canon["boundary_conditions"]["o"] = {"type": "windkessel"}
+    with pytest.raises(oxyline.ModelError, match="boundary condition 'o': .*windkessel"):
         _network(canon)
 
 

@@ -8,7 +8,6 @@ job. The schema is described in docs/schema.md.
 
 from __future__ import annotations
 
-import copy
 import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -97,7 +96,7 @@ class Model:
 
     def to_dict(self) -> dict[str, Any]:
         """The model as a plain dict in the user-facing schema (SI)."""
-        return copy.deepcopy(self.source)
+        return copy_description(self.source)
 
     def __getstate__(self) -> dict[str, Any]:
         return dict(self.__dict__, _network=None)

@@ -56,14 +56,27 @@ impl de::Error for DeError {
         }
     }
     fn invalid_type(unexp: de::Unexpected<'_>, exp: &dyn de::Expected) -> Self {
-        Self::custom(format_args!("must be {exp}, got {unexp}"))
+        Self::custom(format_args!("must be {}, got {unexp}", expected(exp)))
     }
     fn invalid_value(unexp: de::Unexpected<'_>, exp: &dyn de::Expected) -> Self {
-        Self::custom(format_args!("must be {exp}, got {unexp}"))
+        Self::custom(format_args!("must be {}, got {unexp}", expected(exp)))
     }
 }
 
 type Res<T> = Result<T, DeError>;
+
+/// serde's name of an expected primitive in the schema's words (a value read from serde's
+/// buffer of a tagged variant is checked by serde's own visitors).
+fn expected(exp: &dyn de::Expected) -> String {
+    let name = exp.to_string();
+    match name.as_str() {
+        "f64" | "f32" => "a number".into(),
+        "u8" | "u16" | "u32" | "u64" | "usize" => "an integer >= 0".into(),
+        "i8" | "i16" | "i32" | "i64" | "isize" => "an integer".into(),
+        "a boolean" => "a bool".into(),
+        _ => name,
+    }
+}
 
 /// Python's `repr` of a value (for messages).
 fn repr(o: &Bound<'_, PyAny>) -> String {
