@@ -89,23 +89,8 @@ pub(crate) fn check_periods(
     mut periods: Periods,
     vessels: Option<Bound<'_, PyList>>,
 ) -> PyResult<Option<f64>> {
-    for v in vessels.iter().flat_map(|l| l.iter()) {
-        let Ok(v) = v.cast_into::<PyDict>() else {
-            continue;
-        };
-        for kind in ["chamber", "heart_pulmonary"] {
-            let p = v.get_item(kind)?.and_then(|s| s.cast_into::<PyDict>().ok());
-            if let Some(p) = p.and_then(|s| s.get_item("period").ok().flatten()) {
-                let name: String = v
-                    .get_item("name")?
-                    .map_or(Ok(String::new()), |n| n.extract())?;
-                periods.push((
-                    p.extract()?,
-                    format!("vessel '{name}' {kind} (its activation)"),
-                ));
-            }
-        }
-    }
+    let vessels: Vec<PyNode<'_>> = vessels.iter().flat_map(|l| l.iter()).map(PyNode).collect();
+    periods.extend(native::element_periods(&vessels));
     let period = native::period(&PyNode(data)).map_err(to_py)?;
     native::check_periods(period, &periods).map_err(to_py)
 }

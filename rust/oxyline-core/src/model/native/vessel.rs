@@ -716,16 +716,16 @@ fn chamber_extras<N: Node>(spec: &N, out: &mut Map<String, Value>, el: &str) -> 
 /// block) among canonical vessels, with the element: like a waveform's, each must equal the
 /// model period, or the chamber would beat out of step with the cycles that are run, output
 /// and tested for periodicity (docs/physics.md §1.8).
-pub fn element_periods(vessels: &[Value]) -> Vec<(f64, String)> {
+pub fn element_periods<N: Node>(vessels: &[N]) -> Vec<(f64, String)> {
     let mut out = Vec::new();
     for v in vessels {
         for kind in ["chamber", "heart_pulmonary"] {
             if let Some(p) = v
                 .get(kind)
                 .and_then(|s| s.get("period"))
-                .and_then(Value::as_f64)
+                .and_then(|p| p.number())
             {
-                let name = v.get("name").and_then(Value::as_str).unwrap_or_default();
+                let name = v.get("name").and_then(|n| n.text()).unwrap_or_default();
                 out.push((p, format!("vessel '{name}' {kind} (its activation)")));
             }
         }
