@@ -317,9 +317,9 @@ impl<'a> Stamping<'a> {
 
     /// One stamp per boundary condition (`boundary`, one file per type).
     fn boundary_conditions(&mut self) -> Result<()> {
-        for (node, bc) in &self.spec.boundary_conditions {
-            let k = self.graph.index[node.as_str()];
-            let inlet = self.graph.ends[k][0].1;
+        let conditions = self.spec.boundary_conditions.iter();
+        for ((node, bc), &k) in conditions.zip(&self.graph.condition_nodes) {
+            let inlet = self.graph.ends(k)[0].1;
             let c = boundary::stamp(&mut self.circuit, node, k, inlet, bc)?;
             self.summary.total_compliance += c;
             self.summary.inlets += usize::from(inlet);
