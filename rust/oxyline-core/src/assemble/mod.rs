@@ -177,6 +177,7 @@ impl<'a> Stamping<'a> {
             segments + 2 * bcs,
             segments,
         )?;
+        circuit.reserve_names(graph.names.len(), spec.vessels.len());
         for name in &graph.names {
             circuit.add_node(*name, 0.0, 0.0);
         }
@@ -366,7 +367,7 @@ fn record_start(
     chain: &vessel::Chain,
     interior: initial::Interior,
 ) {
-    let q0 = v.initial.and_then(|x| x.flow_in);
+    let q0 = v.initial.as_ref().and_then(|x| x.flow_in);
     if let Some(values) = &v.initial {
         initial::record(circuit, chain, values, interior, false, q0);
     }
@@ -416,7 +417,7 @@ fn heart_element(
         let chain = heart::stamp_coronary(circuit, &v.name, s, ends)?;
         links
             .beds
-            .push((circuit.elements.len() - 1, v.name.clone(), s.clone()));
+            .push((circuit.elements.len() - 1, v.name.clone(), (**s).clone()));
         return Ok(chain);
     }
     if let Some(s) = &v.chamber_sphere {
