@@ -31,7 +31,10 @@ impl Graph<'_> {
     }
     /// Nodes where three or more vessel ends meet.
     pub fn junctions(&self) -> usize {
-        self.end_start.windows(2).filter(|w| w[1] - w[0] >= 3).count()
+        self.end_start
+            .windows(2)
+            .filter(|w| w[1] - w[0] >= 3)
+            .count()
     }
 }
 

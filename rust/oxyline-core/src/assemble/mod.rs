@@ -143,6 +143,8 @@ struct Stamping<'a> {
     hearts: Vec<(String, usize)>,
     /// The `segments: auto` rule (None: no vessel asks for it).
     auto: Option<auto_segments::AutoRule>,
+    /// The points and branches of the vessel being stamped (one buffer for all).
+    chain: vessel::Chain,
 }
 
 impl<'a> Stamping<'a> {
@@ -206,6 +208,7 @@ impl<'a> Stamping<'a> {
             links: HeartLinks::default(),
             hearts: Vec::new(),
             auto,
+            chain: vessel::Chain::default(),
         })
     }
 
@@ -288,7 +291,8 @@ impl<'a> Stamping<'a> {
             .and_then(|g| g.youngs_modulus.map(|e| g.wall_viscosity / e))
             .unwrap_or(0.0);
         let physics = (arrangement, form, friction, relaxation);
-        let chain = vessel::stamp(circuit, &v.name, &segs, physics, ends);
+        let chain = &mut self.chain;
+        vessel::stamp(circuit, &v.name, &segs, physics, ends, chain);
         let interior = match arrangement {
             Arrangement::Rcl => initial::Interior::Rcl {
                 resistance: segs[0].resistance,
@@ -296,12 +300,12 @@ impl<'a> Stamping<'a> {
             },
             _ => initial::Interior::Linear,
         };
-        record_start(circuit, v, &chain, interior);
+        record_start(circuit, v, chain, interior);
         if v.output {
             vessel::record_probes(
                 &mut self.probes,
                 &v.name,
-                &chain,
+                chain,
                 &segs,
                 arrangement,
                 spec.output_segments,
