@@ -158,9 +158,9 @@ fn check_boundary_ends(
         has_condition[k] = true;
         g.condition_nodes.push(k);
     }
-    for k in 0..g.names.len() {
+    for (k, &closed) in has_condition.iter().enumerate() {
         let e = g.ends(k);
-        if e.len() == 1 && !has_condition[k] {
+        if e.len() == 1 && !closed {
             let v = &spec.vessels[e[0].0 as usize];
             return Err(Error::model(
                 format!("vessel '{}'", v.name),
