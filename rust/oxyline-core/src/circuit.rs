@@ -650,6 +650,14 @@ impl Circuit {
     pub fn unknown_name(&self, i: usize) -> String {
         self.names.unknown(i)
     }
+    /// Room for `texts` more free-text labels and `vessels` more vessel names (the tables
+    /// grow once, not by doubling).
+    pub fn reserve_names(&mut self, texts: usize, vessels: usize) {
+        self.vessel_names.reserve(vessels);
+        let names = Arc::make_mut(&mut self.names);
+        names.texts.reserve(texts);
+        names.vessels.reserve(vessels);
+    }
     /// Register vessel `name` (in `vessel_names` and the name table); returns its index.
     pub fn add_vessel(&mut self, name: &str) -> usize {
         self.vessel_names.push(name.to_owned());

@@ -143,6 +143,8 @@ struct Stamping<'a> {
     hearts: Vec<(String, usize)>,
     /// The `segments: auto` rule (None: no vessel asks for it).
     auto: Option<auto_segments::AutoRule>,
+    /// The points and branches of the vessel being stamped (one buffer for all).
+    chain: vessel::Chain,
 }
 
 impl<'a> Stamping<'a> {
@@ -177,6 +179,7 @@ impl<'a> Stamping<'a> {
             segments + 2 * bcs,
             segments,
         )?;
+        circuit.reserve_names(graph.names.len(), spec.vessels.len());
         for name in &graph.names {
             circuit.add_node(*name, 0.0, 0.0);
         }
@@ -205,6 +208,7 @@ impl<'a> Stamping<'a> {
             links: HeartLinks::default(),
             hearts: Vec::new(),
             auto,
+            chain: vessel::Chain::default(),
         })
     }
 
@@ -287,7 +291,8 @@ impl<'a> Stamping<'a> {
             .and_then(|g| g.youngs_modulus.map(|e| g.wall_viscosity / e))
             .unwrap_or(0.0);
         let physics = (arrangement, form, friction, relaxation);
-        let chain = vessel::stamp(circuit, &v.name, &segs, physics, ends);
+        let chain = &mut self.chain;
+        vessel::stamp(circuit, &v.name, &segs, physics, ends, chain);
         let interior = match arrangement {
             Arrangement::Rcl => initial::Interior::Rcl {
                 resistance: segs[0].resistance,
@@ -295,12 +300,12 @@ impl<'a> Stamping<'a> {
             },
             _ => initial::Interior::Linear,
         };
-        record_start(circuit, v, &chain, interior);
+        record_start(circuit, v, chain, interior);
         if v.output {
             vessel::record_probes(
                 &mut self.probes,
                 &v.name,
-                &chain,
+                chain,
                 &segs,
                 arrangement,
                 spec.output_segments,
@@ -317,9 +322,9 @@ impl<'a> Stamping<'a> {
 
     /// One stamp per boundary condition (`boundary`, one file per type).
     fn boundary_conditions(&mut self) -> Result<()> {
-        for (node, bc) in &self.spec.boundary_conditions {
-            let k = self.graph.index[node.as_str()];
-            let inlet = self.graph.ends[k][0].1;
+        let conditions = self.spec.boundary_conditions.iter();
+        for ((node, bc), &k) in conditions.zip(&self.graph.condition_nodes) {
+            let inlet = self.graph.ends(k)[0].1;
             let c = boundary::stamp(&mut self.circuit, node, k, inlet, bc)?;
             self.summary.total_compliance += c;
             self.summary.inlets += usize::from(inlet);
@@ -366,7 +371,7 @@ fn record_start(
     chain: &vessel::Chain,
     interior: initial::Interior,
 ) {
-    let q0 = v.initial.and_then(|x| x.flow_in);
+    let q0 = v.initial.as_ref().and_then(|x| x.flow_in);
     if let Some(values) = &v.initial {
         initial::record(circuit, chain, values, interior, false, q0);
     }
@@ -416,7 +421,7 @@ fn heart_element(
         let chain = heart::stamp_coronary(circuit, &v.name, s, ends)?;
         links
             .beds
-            .push((circuit.elements.len() - 1, v.name.clone(), s.clone()));
+            .push((circuit.elements.len() - 1, v.name.clone(), (**s).clone()));
         return Ok(chain);
     }
     if let Some(s) = &v.chamber_sphere {

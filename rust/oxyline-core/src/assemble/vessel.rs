@@ -10,6 +10,7 @@ use crate::output::Probes;
 use crate::segment::WallFriction;
 
 /// The circuit nodes along a vessel (inlet node, interior points, outlet node) and its branches.
+#[derive(Default)]
 pub(crate) struct Chain {
     pub points: Vec<usize>,
     pub branches: Vec<usize>,
@@ -18,14 +19,17 @@ pub(crate) struct Chain {
 /// Stamp vessel `name` (index `vessel` in `circuit.vessel_names`) between graph nodes
 /// `p_from` and `p_to`; `form` says how generalized-α writes an RCL vessel's stenosis,
 /// `friction` whether each segment's branch carries Womersley friction cells, `relaxation`
-/// the wall's η/E (s; 0: elastic, else a Kelvin–Voigt wall behind each capacitance).
+/// the wall's η/E (s; 0: elastic, else a Kelvin–Voigt wall behind each capacitance). The
+/// vessel's points and branches are written into `chain` (cleared first: one buffer serves
+/// every vessel of a network, instead of two small allocations per vessel).
 pub(crate) fn stamp(
     circuit: &mut Circuit,
     name: &str,
     segs: &[SegmentRow],
     (arrangement, form, friction, relaxation): (Arrangement, StenosisForm, WallFriction, f64),
     (p_from, p_to): (usize, usize),
-) -> Chain {
+    chain: &mut Chain,
+) {
     let vessel = circuit.add_vessel(name);
     let n = segs.len();
     // points 0..=n along the vessel; RCL has one interior point
@@ -34,18 +38,20 @@ pub(crate) fn stamp(
     } else {
         n - 1
     };
-    let mut points = Vec::with_capacity(interior + 2);
+    let Chain { points, branches } = chain;
+    points.clear();
+    branches.clear();
     points.push(p_from);
     for k in 0..interior {
         let label = label(vessel, Part::Point, k + 1);
         points.push(circuit.add_node(label, 0.0, 0.0));
     }
     points.push(p_to);
-    let branches = if arrangement == Arrangement::Rcl {
-        stamp_rcl(circuit, vessel, &segs[0], &points, form)
+    if arrangement == Arrangement::Rcl {
+        stamp_rcl(circuit, vessel, &segs[0], points, form, branches);
     } else {
-        stamp_segments(circuit, vessel, segs, arrangement, &points)
-    };
+        stamp_segments(circuit, vessel, segs, arrangement, points, branches);
+    }
     if relaxation > 0.0 && arrangement != Arrangement::Rcl {
         let (cp, cd) = shares(arrangement);
         for (k, s) in segs.iter().enumerate() {
@@ -54,9 +60,8 @@ pub(crate) fn stamp(
         }
     }
     if friction == WallFriction::Womersley && arrangement != Arrangement::Rcl {
-        stamp_friction_cells(circuit, vessel, segs, &branches);
+        stamp_friction_cells(circuit, vessel, segs, branches);
     }
-    Chain { points, branches }
 }
 
 fn label(vessel: usize, part: Part, k: usize) -> Label {
@@ -76,7 +81,8 @@ fn stamp_rcl(
     s: &SegmentRow,
     points: &[usize],
     form: StenosisForm,
-) -> Vec<usize> {
+    branches: &mut Vec<usize>,
+) {
     let b0 = circuit.add_branch(
         label(vessel, Part::Resistance, 0),
         points[0],
@@ -115,7 +121,7 @@ fn stamp_rcl(
         volume: s.volume,
         compliance: s.compliance,
     });
-    vec![b0, b1]
+    branches.extend([b0, b1]);
 }
 
 /// The shares of a segment's C, volume and wall area at its (proximal, distal) node.
@@ -134,10 +140,10 @@ fn stamp_segments(
     segs: &[SegmentRow],
     arrangement: Arrangement,
     points: &[usize],
-) -> Vec<usize> {
+    branches: &mut Vec<usize>,
+) {
     let n = segs.len();
     let (cp, cd) = shares(arrangement);
-    let mut branches = Vec::with_capacity(n);
     for (k, s) in segs.iter().enumerate() {
         let label = if n == 1 {
             label(vessel, Part::Whole, 0)
@@ -172,7 +178,6 @@ fn stamp_segments(
             compliance: s.compliance,
         });
     }
-    branches
 }
 
 /// Womersley friction (`crate::womersley`): each segment's branch gets the flat-profile

@@ -117,6 +117,9 @@ pub enum StenosisForm {
     SvZeroD,
 }
 
+/// The heart elements' sections and the start values are boxed: a structured tree has up to
+/// millions of vessels, nearly all of them geometric, and each box left empty costs 8 bytes
+/// where the value it holds would cost 24–100 (the record is ~200 B instead of ~700 B).
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct VesselSpec {
@@ -142,7 +145,7 @@ pub struct VesselSpec {
     pub output: bool,
     /// A heart valve instead of a vessel (docs/physics.md §1.8).
     #[serde(default)]
-    pub valve: Option<ValveSpec>,
+    pub valve: Option<Box<ValveSpec>>,
     /// The closed-loop heart and pulmonary circulation block instead of a vessel
     /// (docs/physics.md §1.10).
     #[serde(default)]
@@ -150,22 +153,22 @@ pub struct VesselSpec {
     /// A closed-loop coronary bed whose intramyocardial pressure follows a heart block's
     /// ventricle (docs/physics.md §1.10).
     #[serde(default)]
-    pub coronary_bed: Option<CoronaryBedSpec>,
+    pub coronary_bed: Option<Box<CoronaryBedSpec>>,
     /// A heart chamber instead of a vessel (docs/physics.md §1.8).
     #[serde(default)]
-    pub chamber: Option<ChamberSpec>,
+    pub chamber: Option<Box<ChamberSpec>>,
     /// A flow-through R–C element instead of a vessel (docs/physics.md §1.8).
     #[serde(default)]
-    pub through_rc: Option<ThroughRcSpec>,
+    pub through_rc: Option<Box<ThroughRcSpec>>,
     /// A spherical chamber with wall mechanics instead of a vessel (docs/physics.md §1.11).
     #[serde(default)]
-    pub chamber_sphere: Option<ChamberSphereSpec>,
+    pub chamber_sphere: Option<Box<ChamberSphereSpec>>,
     /// Start values of the vessel's end pressures and flows (docs/physics.md §1.9).
     #[serde(default)]
-    pub initial: Option<EndValues>,
+    pub initial: Option<Box<EndValues>>,
     /// Start values of their time derivatives (docs/physics.md §1.9).
     #[serde(default)]
-    pub initial_rate: Option<EndValues>,
+    pub initial_rate: Option<Box<EndValues>>,
 }
 
 impl VesselSpec {

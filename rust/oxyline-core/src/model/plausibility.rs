@@ -358,8 +358,7 @@ pub fn check(spec: &NetworkSpec) -> Vec<Warning> {
     for v in &spec.vessels {
         vessel(&mut f, v);
     }
-    let entered: std::collections::HashSet<&str> =
-        spec.vessels.iter().map(|v| v.to.as_str()).collect();
+    let entered: rustc_hash::FxHashSet<&str> = spec.vessels.iter().map(|v| v.to.as_str()).collect();
     // a model with a heart chamber fills it from its inlet at venous pressure (1-2 mmHg)
     let arterial_inlets = !spec
         .vessels
