@@ -83,7 +83,7 @@ ROLES = (
                        "oxyline.memory")),
     ("physics", ("oxyline.structured_tree", "oxyline.facilitation", "oxyline.pwdb",
                  "oxyline.frequency")),
-    ("svZeroDSolver drop-in runner", ("oxyline.io.svzerod.dropin", "oxyline.io.svzerod.cycles",
+    ("svZeroDSolver drop-in runner", ("oxyline.io.svzerod.dropin",
                                       "oxyline.svzerod")),
     ("results", ("oxyline.result", "oxyline.io.results", "oxyline.io.result_reader",
                  "oxyline.checkpoint")),

@@ -113,7 +113,8 @@ def test_external_flow_table_is_balanced_and_used() -> None:
     rng = np.random.default_rng(1)
     noisy = base * (1 + 1e-4 * rng.standard_normal(base.shape))
     res = closed_loop.simulate_o2(p, flows=noisy)
-    comps, (_, *branches), _ = closed_loop._layout(p)
+    lay, _ = closed_loop._layout(p)
+    comps, branches = lay["compartments"], lay["branches"]
     net = np.zeros(len(comps))
     for b, br in enumerate(branches):
         net[br["from"]] -= res.flow[:, b].sum()

@@ -304,3 +304,32 @@ def test_a_model_with_trees_round_trips_through_the_io_formats(tmp_path) -> None
     back = oxyline.load_model(oio.save_model(m, tmp_path / "st.yaml"))
     assert back.canonical == m.canonical
     assert back.default_output_vessels == ["feed"]  # saved compact: the trees grow again
+
+
+def test_windkessel_replacement_names_the_outlet_key_and_value() -> None:
+    """The root radius and the RCR resistances a replacing tree is matched to are read by the
+    core: a radius that is no number or a missing resistance is a ModelError naming the
+    outlet, the key and the value (not a KeyError)."""
+    from oxyline.structured_tree import replace_windkessels
+
+    def model(radius: object, rcr: dict) -> dict:
+        return {"units": "SI", "vessels": [{"name": "a", "from": "in", "to": "out",
+                                             "length": 0.1, "radius": radius}],
+                "boundary_conditions": {"out": {"type": "rcr", **rcr}}}
+
+    rcr = {"proximal_resistance": 1e7, "distal_resistance": 1e9, "capacitance": 1e-9}
+    with pytest.raises(oxyline.ModelError,
+                       match=r"boundary condition 'out' \(structured-tree\): 'radius' must be "
+                             r"a finite number, got 'wide'"):
+        replace_windkessels(model("wide", rcr))
+    with pytest.raises(oxyline.ModelError, match="RCR condition has no 'distal_resistance'"):
+        replace_windkessels(model(2e-3, {"proximal_resistance": 1e7, "capacitance": 1e-9}))
+    # R_p + R_d kept: the steady pressure drop at 1 mL/s is the Windkessel's (the tree's
+    # terminal resistance bisected to rounding; the vessel 'a' adds its own Poiseuille drop)
+    data = replace_windkessels(model(2e-3, rcr))
+    data["boundary_conditions"]["in"] = {"type": "flow", "value": 1e-6}
+    wk = model(2e-3, rcr)
+    wk["boundary_conditions"]["in"] = {"type": "flow", "value": 1e-6}
+    p_tree, p_wk = (dict(zip(s["nodes"], s["node_pressure"]))["in"]
+                    for s in (oxyline.load_model(d).network.steady_state() for d in (data, wk)))
+    assert abs(p_tree / p_wk - 1.0) < 1e-8

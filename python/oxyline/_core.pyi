@@ -1,6 +1,6 @@
 """Type stubs for the Rust extension module ``oxyline._core``."""
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any, TypedDict
 
 import numpy as np
@@ -18,6 +18,7 @@ BALANCE_VARIABLES: list[str]
 TISSUE_VESSEL_VARIABLES: list[str]
 TISSUE_SEGMENT_VARIABLES: list[str]
 TISSUE_BALANCE_VARIABLES: list[str]
+ML_O2: float
 #: the keywords of RunOptions (rust/oxyline-py/src/settings.rs)
 RUN_SETTINGS: list[str]
 # the run-settings schema (oxyline_core::model::settings)
@@ -169,6 +170,23 @@ class Ensemble:
 
 def closed_loop_o2(spec_json: str, flows: np.ndarray, dt: float, max_cycles: int,
                    tol: float) -> dict[str, Any]: ...
+def closed_loop_layout(params_json: str, table: bool) -> tuple[str, np.ndarray | None]:
+    """The closed loop's SI layout (JSON: compartments, branches, binding, organ_resistances,
+    solubility_per_mmhg, cardiac_output) of a parameter set in its published units and, with
+    ``table``, its prescribed flow table (steps x branches, m^3/s)."""
+def outlet_root_radius(node: str, vessels: list[Any] | None) -> float:
+    """The radius (model units) of the first vessel end at outlet ``node``: a structured
+    tree's default root radius there."""
+def windkessel_tree_match(node: str, rcr: Mapping[str, Any], root_radius: float,
+                          viscosity: float, min_radius: float, tree_fraction: float,
+                          alpha: float, beta: float, length_ratio: float
+                          ) -> tuple[float, float]:
+    """(min_radius, terminal resistance) of the structured tree that keeps the RCR's steady
+    resistance R_p + R_d."""
+def svzerod_output_rows(cycles: int, steps: int, extra: int, interval: int, all_cycles: bool
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """svZeroDSolver's output rows of a run extended by its cycle-to-cycle rule: (global step
+    indices, output times in units of dt)."""
 def chamber_elastance(name: str, chamber_json: str, times: list[float]
                       ) -> tuple[np.ndarray, np.ndarray]:
     """(E(t), V_rest(t)) of a canonical chamber spec (JSON text) at ``times``."""

@@ -18,7 +18,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-MMHG = 133.322368
+from oxyline.units import MMHG
+
 RESULT_SUFFIXES = (".nc", ".zarr", ".csv")
 SUMMARY_SUFFIXES = (".csv", ".tsv", ".parquet")
 

@@ -3,8 +3,10 @@ loop"): heart chambers, systemic arteries, organ beds consuming O2, systemic vei
 as well-mixed compartments joined by the circulation's flows. The physics (compartments,
 Michaelis–Menten VO2, diffusion-limited lung exchange with Hill binding, the periodic steady
 state) lives in the core (``oxyline_core::transport::closed_loop``); this module holds the
-built-in parameter sets ``closed-loop-o2`` and ``closed-loop-o2-tree``, converts them to SI,
-runs the closed-loop heart that drives the flows and summarises the result.
+built-in parameter sets ``closed-loop-o2`` and ``closed-loop-o2-tree``, has the core convert
+them to SI (``oxyline_core::transport::closed_loop_params``: compartments, branches, binding,
+organ resistances, the prescribed flow table), builds the closed-loop heart that drives the
+flows and summarises the result.
 
     from oxyline import closed_loop
     res = closed_loop.simulate_o2("closed-loop-o2")
@@ -22,18 +24,15 @@ import copy
 import json
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from oxyline import _core
 from oxyline.errors import ModelError, ResourceError, core_errors
+from oxyline.units import MMHG
 
-if TYPE_CHECKING:
-    from oxyline.model import Model
-
-MMHG = 133.322368          # Pa per mmHg (docs/physics.md)
-ML_O2 = 1.0 / 22414.0      # mol per mL O2 (STPD; docs/physics.md: 1 mL = 1/22.414 mmol)
+ML_O2: float = _core.ML_O2  # mol per mL O2 (STPD; docs/physics.md: 1 mL = 1/22.414 mmol)
 
 # Resting adult, textbook values (cardiac output 5 L/min at 75 /min; organ shares of the cardiac
 # output and organ VO2 as commonly tabulated for a 70 kg adult at rest, e.g. Guyton & Hall,
@@ -152,73 +151,29 @@ def load(name: str = "closed-loop-o2") -> dict[str, Any]:
     return copy.deepcopy(BUILTINS[name])
 
 
-def _layout(p: dict[str, Any]) -> tuple[list[dict], list[dict], dict[str, int]]:
-    """Compartments (flow order) and branches of the loop, with the branch index by role."""
-    pools, organs = p["pools"], p["organs"]
-    tree = _has_tree(p)
-    comps = [("left_heart", pools["left_heart"])]
-    if not tree:
-        comps.append(("arteries", pools["arteries"]))
-    comps += [(k, o["volume"]) for k, o in organs.items()]
-    comps += [("veins", pools["veins"]), ("right_heart", pools["right_heart"]),
-              ("pulmonary_arteries", pools["pulmonary_arteries"]),
-              ("pulmonary_veins", pools["pulmonary_veins"])]
-    idx = {name: i for i, (name, _) in enumerate(comps)}
-    b = p["blood"]
-    cap = b["hemoglobin"] * b["hufner"] * 1e3 * ML_O2           # mol/m³
-    alpha = b["solubility"] * 10.0 * 1e3 * ML_O2 / MMHG         # mol m⁻³ Pa⁻¹
-    c = []
-    for name, vol in comps:
-        entry: dict[str, Any] = {"name": name, "volume": vol * 1e-3,
-                                 "initial_po2": (95.0 if name in ("left_heart", "arteries",
-                                                                  "pulmonary_veins") else 40.0)
-                                 * MMHG}
-        if name in organs:
-            entry["consumption"] = {"kind": "michaelis-menten",
-                                    "vmax": organs[name]["vo2"] / 60.0 * ML_O2,
-                                    "km": p["km"] * MMHG}
-        c.append(entry)
-    lungs = p["lungs"]
-    br = [] if tree else [("ejection_left", "left_heart", "arteries", None)]
-    br += [] if tree else [(f"{k}_in", "arteries", k, None) for k in organs]
-    br += [(f"{k}_out", k, "veins", None) for k in organs]
-    br += [("venous_return", "veins", "right_heart", None),
-           ("ejection_right", "right_heart", "pulmonary_arteries", None),
-           ("pulmonary_capillaries", "pulmonary_arteries", "pulmonary_veins",
-            {"alveolar_po2": lungs["alveolar_po2"] * MMHG,
-             "diffusing_capacity": lungs["diffusing_capacity"] / 60.0 * ML_O2 / MMHG}),
-           ("shunt", "pulmonary_arteries", "pulmonary_veins", None),
-           ("filling_left", "pulmonary_veins", "left_heart", None)]
-    branches = [{"name": n, "from": idx[f], "to": idx[t], **({"lungs": lg} if lg else {})}
-                for n, f, t, lg in br]
-    spec = {"compartments": c, "branches": branches,
-            "binding": {"kind": "hill", "solubility": alpha, "p50": b["p50"] * MMHG,
-                        "n": b["hill_n"], "capacity": cap}}
-    return spec["compartments"], [spec["binding"], *branches], idx
+def _layout(p: dict[str, Any], table: bool = False) -> tuple[dict[str, Any], np.ndarray | None]:
+    """The loop in SI, as the core converts the parameter set: ``compartments`` (flow order),
+    ``branches`` and ``binding`` of its O2 run, ``organ_resistances`` (Pa s/m³, in organ
+    order), ``solubility_per_mmhg`` and ``cardiac_output`` (m³/s); with ``table`` also the
+    prescribed flow table (:func:`flow_table`)."""
+    with core_errors("closed-loop layout"):
+        text, flows = _core.closed_loop_layout(json.dumps(p), table)
+    return json.loads(text), flows
 
 
 def flow_table(p: dict[str, Any]) -> np.ndarray:
-    """Branch flows (m³/s) for each step of one cycle: half-sine ejections of both ventricles
-    (duration `ejection_time`), steady organ flows, venous return, pulmonary and filling flows.
-    The ejection is scaled so that its discrete cycle mean equals the cardiac output exactly
+    """Branch flows (m³/s) for each step of one cycle, branches in the order of
+    ``result.branches`` (the core's): half-sine ejections of both ventricles (duration
+    `ejection_time`), steady organ flows, venous return, pulmonary and filling flows. The
+    ejection is scaled so that its discrete cycle mean equals the cardiac output exactly
     (periodic chamber volumes, which the core checks)."""
-    steps = round(p["period"] / p["dt"])
-    if not math.isclose(steps * p["dt"], p["period"], rel_tol=1e-12):
-        raise ModelError(f"closed loop: period {p['period']} s is not a whole number of "
-                         f"steps dt = {p['dt']} s")
-    q = p["cardiac_output"] * 1e-3 / 60.0
-    t = (np.arange(steps) + 0.5) * p["dt"]
-    shape = np.where(t < p["ejection_time"], np.sin(np.pi * t / p["ejection_time"]), 0.0)
-    ej = q * shape / shape.mean()
-    organs = p["organs"]
-    frac = np.array([o["flow_fraction"] for o in organs.values()])
-    if not math.isclose(frac.sum(), 1.0, rel_tol=1e-9):
-        raise ModelError(f"closed loop: organ flow fractions sum to {frac.sum()}, not 1")
-    shunt = p["lungs"]["shunt_fraction"]
-    cols = [ej, *[np.full(steps, q * f) for f in frac], *[np.full(steps, q * f) for f in frac],
-            np.full(steps, q), ej, np.full(steps, q * (1 - shunt)), np.full(steps, q * shunt),
-            np.full(steps, q)]
-    return np.column_stack(cols)
+    return np.asarray(_layout(p, table=True)[1])
+
+
+def _organ_resistances(p: dict[str, Any]) -> dict[str, float]:
+    """Each organ bed's resistance (Pa s/m³): the beds share the cardiac output at a mean
+    arterial pressure of 93 mmHg (the core's)."""
+    return dict(zip(p["organs"], _layout(p)[0]["organ_resistances"], strict=True))
 
 
 def heart_model(p: dict[str, Any]) -> dict[str, Any]:
@@ -253,18 +208,15 @@ def _lumped(name: str, a: str, b: str, **values: float) -> dict[str, Any]:
 def _systemic(p: dict[str, Any]) -> list[dict[str, Any]]:
     """From the aorta (``aorta_in``) to the venous return (``venous_return``): arteries,
     organs, veins."""
-    q = p["cardiac_output"] * 1e-3 / 60.0
-    r_sys = 93.0 * MMHG / q
+    beds = _organ_resistances(p)
     if _has_tree(p):
         # the segment-resolved tree in place of the arterial pool; organs at its outlets
         v = tree_vessels(p)
-        v += [_lumped(k, f"{k}_a", "veins_in", resistance=r_sys / o["flow_fraction"])
-              for k, o in p["organs"].items()]
+        v += [_lumped(k, f"{k}_a", "veins_in", resistance=r) for k, r in beds.items()]
     else:
         v = [_lumped("arteries", "aorta_in", "arteries_out", resistance=1e6,
                      capacitance=1.5e-8, inductance=1e5)]
-        v += [_lumped(k, "arteries_out", "veins_in", resistance=r_sys / o["flow_fraction"])
-              for k, o in p["organs"].items()]
+        v += [_lumped(k, "arteries_out", "veins_in", resistance=r) for k, r in beds.items()]
     return v + [_lumped("veins", "veins_in", "venous_return", resistance=1e6,
                         capacitance=7.5e-7)]
 
@@ -349,25 +301,24 @@ def tree_model(p: dict[str, Any], time: np.ndarray | None = None,
     tree's segments obey inside the closed loop. Its `oxygen` section carries the loop's blood
     (Hill binding) and the tree's wall closure; the root's PO2 is replaced step by step by the
     left heart's (`oxyline_core::transport::closed_loop_tree`)."""
+    lay, _ = _layout(p)
     if time is None or inflow is None or venous_pressure is None:
         time = np.array([0.0, p["period"]])
-        inflow = np.full(2, p["cardiac_output"] * 1e-3 / 60.0)
+        inflow = np.full(2, lay["cardiac_output"])
         venous_pressure = np.full(2, 7.0 * MMHG)
     T = p["period"]
-    q = p["cardiac_output"] * 1e-3 / 60.0
-    r_sys = 93.0 * MMHG / q
     b = p["blood"]
     bcs: dict[str, Any] = {"aorta_in": {"type": "flow", "time": list(time),
                                         "flow": list(inflow)}}
-    for k, o in p["organs"].items():
-        bcs[f"{k}_a"] = {"type": "resistance", "resistance": r_sys / o["flow_fraction"],
+    for k, r in zip(p["organs"], lay["organ_resistances"], strict=True):
+        bcs[f"{k}_a"] = {"type": "resistance", "resistance": r,
                          "pressure": {"time": list(time), "pressure": list(venous_pressure)}}
     return {"name": "closed-loop-arterial-tree", "units": "SI", "period": T,
             "vessels": tree_vessels(p), "boundary_conditions": bcs, **_TREE_BLOOD,
             "oxygen": {"inlet": {"po2": 95.0}, "hemoglobin": "hill",
                        "hill": {"p50": b["p50"], "n": b["hill_n"], "hb": b["hemoglobin"],
                                 "huefner": b["hufner"]},
-                       "solubility": b["solubility"] * 10.0 * 1e3 * ML_O2,  # mol m⁻³ mmHg⁻¹
+                       "solubility": lay["solubility_per_mmhg"],  # mol m⁻³ mmHg⁻¹
                        "diffusivity": 2.0e-9, "wall": p["tree"]["wall"],
                        "reference_pressure": 93.0}}
 
@@ -384,77 +335,19 @@ class HeartRun:
     series: dict[str, np.ndarray]
 
 
-def _series(terms: list[tuple[str, float]], valve: tuple[str, str] | None = None
-            ) -> dict[str, Any]:
-    return {"terms": terms, **({"valve": valve} if valve else {})}
-
-
-def _block_series(p: dict[str, Any], model: Model) -> dict[str, dict[str, Any]]:
-    """svZeroDSolver's block, by unknown name: a valve's flow counts only while it is open
-    (docs/physics.md §1.10: closed when the pressure behind does not exceed the pressure in
-    front and its flow is not positive; a closed valve's inductor flow is left out of the
-    volume balances). The lungs: the pulmonary bed's drain through R_pd, (P_pul − P_LA)/R_pd
-    (its capacitor C_p smooths the right ventricle's ejection; over a periodic cycle both
-    carry the same volume). The block's left atrium receives the ejection itself (its
-    bookkeeping, docs/physics.md §1.10); the O2 loop's pulmonary pools are those of the
-    two-ventricle heart."""
-    h = "heart_pulmonary"
-    pr = {k: f"pressure at {h}: {k}" for k in ("right atrium", "right ventricle", "left atrium",
-                                                "left ventricle", "aorta")}
-    pr["pulmonary"] = f"volume of {h}: pulmonary"      # P_pul (Pa), an element unknown
-
-    def valve(name: str, behind: str, front: str) -> dict[str, Any]:
-        return _series([(f"flow in {h}: {name} valve", 1.0)], (pr[behind], pr[front]))
-
-    # R_pd in SI, as the core read it
-    r_pd = next(v["heart_pulmonary"]["pulmonary_resistance"]
-                for v in model.canonical["vessels"] if "heart_pulmonary" in v)
-    return {"aortic": valve("aortic", "left ventricle", "aorta"),
-            "aortic_outflow": _series([(f"flow in {h}: aortic outflow", 1.0)]),
-            "tricuspid": valve("tricuspid", "right atrium", "right ventricle"),
-            "pulmonary": valve("pulmonary", "right ventricle", "pulmonary"),
-            "mitral": valve("mitral", "left atrium", "left ventricle"),
-            "veins": _series([("pressure at veins_in", 1.0)]),
-            "lungs": _series([(pr["pulmonary"], 1.0 / r_pd), (pr["left atrium"], -1.0 / r_pd)]),
-            **{k: _series([(f"flow in vessel '{k}' resistance", 1.0)]) for k in p["organs"]}}
-
-
-def _two_ventricle_series(p: dict[str, Any], model: Model) -> dict[str, dict[str, Any]]:
-    """The native two-ventricle heart, by unknown name: its valves' and resistances' flows."""
-    def q(name: str, part: str = " resistance") -> dict[str, Any]:
-        return _series([(f"flow in vessel '{name}'{part}", 1.0)])
-
-    return {"aortic": q("aortic_valve", ""), "aortic_outflow": q("aortic_valve", ""),
-            "tricuspid": q("tricuspid_valve", ""), "pulmonary": q("pulmonary_valve", ""),
-            "mitral": q("mitral_valve", ""), "lungs": q("lungs"),
-            "veins": _series([("pressure at veins_in", 1.0)]), **{k: q(k) for k in p["organs"]}}
-
-
-def _scaled(series: dict[str, Any], factor: float) -> dict[str, Any]:
-    return {**series, "terms": [(n, c * factor) for n, c in series["terms"]]}
-
-
 def heart_spec(p: dict[str, Any]) -> dict[str, Any]:
     """The core's closed-loop heart run (:func:`heart_model`, 30 cycles, every unknown of the
-    last one recorded) and the O2 loop's branch flows read from it, in branch order: each
-    step's flow is the mean of the recorded intervals it spans; the shunt takes
-    `shunt_fraction` of the lungs' flow. The left heart ejects through the aortic valve into
-    the arterial pool (into the tree: its root's own flow, the aortic outflow)."""
+    last one recorded); the core reads the O2 loop's branch flows from it by unknown name
+    (``oxyline_core::transport::closed_loop_heart_series``: on/off valves gated, the shunt
+    taking `shunt_fraction` of the lungs' flow), each step's flow the mean of the recorded
+    intervals it spans."""
     from oxyline.model import build_model
 
-    model = build_model(heart_model(p))
-    series = (_block_series if p.get("heart", "two-ventricle") == "svzerod-block"
-              else _two_ventricle_series)(p, model)
-    organs = list(p["organs"])
-    shunt = p["lungs"]["shunt_fraction"]
-    arterial = [] if _has_tree(p) else [series["aortic"], *[series[o] for o in organs]]
-    branches = [*arterial, *[series[o] for o in organs], series["tricuspid"],
-                series["pulmonary"], _scaled(series["lungs"], 1 - shunt),
-                _scaled(series["lungs"], shunt), series["mitral"]]
-    return {"model": model.canonical, "dt": p.get("flow_dt", 1e-3), "cycles": 30,
-            "newton_atol": heart_run_options(p).get("newton_atol"), "branches": branches,
-            "record": list(series.items()), "tree_inflow": series["aortic_outflow"],
-            "tree_venous_pressure": series["veins"]}
+    return {"model": build_model(heart_model(p)).canonical, "dt": p.get("flow_dt", 1e-3),
+            "cycles": 30, "newton_atol": heart_run_options(p).get("newton_atol"),
+            "series_of": {"heart": p.get("heart", "two-ventricle"), "organs": list(p["organs"]),
+                          "shunt_fraction": p["lungs"]["shunt_fraction"],
+                          "tree": _has_tree(p)}}
 
 
 @dataclass
@@ -633,11 +526,13 @@ def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int 
     run; the balance holds the tree's own flows as they are."""
     p = load(model) if isinstance(model, str) else model
     _check_times(p, max_cycles, tol)
-    comps, (binding, *branches), idx = _layout(p)
+    lay, _ = _layout(p)
+    comps, branches = lay["compartments"], lay["branches"]
+    idx = {c["name"]: i for i, c in enumerate(comps)}
     if shooting not in ("anderson", "newton"):
         raise ModelError(f"closed loop: shooting must be 'anderson' or 'newton', got {shooting!r}")
-    spec: dict[str, Any] = {"compartments": comps, "branches": branches, "binding": binding,
-                            "shooting": shooting}
+    spec: dict[str, Any] = {"compartments": comps, "branches": branches,
+                            "binding": lay["binding"], "shooting": shooting}
     if _has_tree(p):
         if flows is not None and not (isinstance(flows, str) and flows == "heart"):
             raise ModelError("closed loop: with an arterial tree the flows come from the heart "

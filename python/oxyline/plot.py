@@ -27,7 +27,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from oxyline import plot_oxygen
+from oxyline.io.results import stats as time_stats
 from oxyline.plot_style import STYLES, peak_magnitude, prefixed, same_curves
+from oxyline.units import MMHG
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -35,7 +37,6 @@ if TYPE_CHECKING:
     from oxyline.model import Model
     from oxyline.result import Result
 
-MMHG = 133.322368
 # SI units -> (display units, factor)
 DISPLAY = {
     "Pa": ("mmHg", 1.0 / MMHG),
@@ -416,10 +417,7 @@ def profile_data(result: Result, model: Model | str, outlet: str, quantity: str 
         x0 += length
     a = np.array(series).T  # (time, point)
     t = np.asarray(result.time, dtype=float)
-    if len(t) > 1 and t[-1] > t[0]:
-        mean = np.trapezoid(a, t, axis=0) / (t[-1] - t[0])
-    else:
-        mean = a.mean(axis=0)
+    mean = time_stats(a, t)[0]
     bounds = np.cumsum([0.0] + [1.0 if lumped_path else _vessel_length(vessels[n])
                                 for n in names])
     var = seg_in or seg_mid or _vessel_variable(ds, quantity)
@@ -576,7 +574,7 @@ def _values(model: Model, values: Any, result: Result | None, label: str | None,
         both = var == f"{values}_in" and f"{values}_out" in ds.data_vars
         if both:  # the vessel's mean: average of its two ends
             a = 0.5 * (a + ds[f"{values}_out"].values)
-        mean = np.trapezoid(a, t, axis=0) / (t[-1] - t[0]) if len(t) > 1 else a.mean(axis=0)
+        mean = time_stats(a, t)[0]
         u, k = display(str(ds[var].attrs.get("units", "")), mean)
         by = dict(zip(result.vessels, mean * k))
         return (np.array([by.get(n, math.nan) for n in names]),

@@ -127,20 +127,6 @@ def _paths() -> tuple[tuple[tuple[int, ...], int], tuple[tuple[int, ...], int]]:
     return (AORTA_FEMORAL, FEMORAL_SEGMENT), (AORTA_CAROTID, CAROTID_SEGMENT)
 
 
-def wave_speed(r: np.ndarray | float, k3_cgs: float, rho: float = RHO) -> np.ndarray:
-    """Moens-Korteweg wave speed [m/s] of the wall law at radius ``r`` [m] (the core's):
-    c = sqrt((2/3) (Eh/r0) / rho), Eh/r0 = k1 exp(k2 r0) + k3 (cgs constants)."""
-    r = np.asarray(r, dtype=float)
-    return np.asarray(_core.pwdb_wave_speed(r.ravel().tolist(), k3_cgs, rho)).reshape(r.shape)
-
-
-def theoretical_cf_pwv(geo: list[dict[str, Any]], k3_cgs: float, rho: float = RHO) -> float:
-    """Carotid-femoral PWV [m/s] of the wall law along PWDB's path: path length over the
-    difference of the transit times to mid-femoral and to mid-carotid (PWDB's
-    ``calculate_theoretical_wave_speeds``; computed by the core)."""
-    return _core.pwdb_cf_pwv(_rows(geo), *_paths(), k3_cgs, rho)
-
-
 def fit_k3(geo: list[dict[str, Any]], target_pwv: float) -> float:
     """The wall-law k3 [g s^-2 cm^-1] giving ``target_pwv`` (cf-PWV, m/s) on ``geo`` (the
     core's bisection, to 1e-12 relative)."""

@@ -81,18 +81,8 @@ def _grow(node: str, condition: Mapping[str, Any], root_radius: Any, units: str,
 
 
 def _root_radius(data: Mapping[str, Any], node: str) -> float:
-    """The radius of the vessel end at outlet ``node`` (model units)."""
-    for v in data.get("vessels") or []:
-        if not isinstance(v, Mapping):
-            continue
-        for end, keys in (("to", ("radius_out", "radius")), ("from", ("radius_in", "radius"))):
-            if v.get(end) == node:
-                for k in keys:
-                    if k in v:
-                        return v[k]
-                raise _err(node, f"vessel '{v.get('name')}' at this node has no radius: give "
-                                 f"'root_radius'")
-    raise _err(node, "no vessel ends at this node")
+    """The radius of the vessel end at outlet ``node`` (model units; the core's lookup)."""
+    return _core.outlet_root_radius(node, data.get("vessels"))
 
 
 def has_trees(data: Mapping[str, Any]) -> bool:
@@ -179,17 +169,18 @@ def build_with_trees(data: dict[str, Any], build_native: Callable[..., Any],
 __all__ = ["structured_tree"]
 
 
-def _tree_condition(node: str, r0: float, total: float, mu: float, min_radius: float,
-                    tree_fraction: float, pressure: float,
+def _shape(tree: Mapping[str, Any]) -> tuple[float, float, float]:
+    """(alpha, beta, length_ratio) of the structured-tree parameters ``tree``."""
+    return tree.get("alpha", 0.9), tree.get("beta", 0.6), tree.get("length_ratio", 50.0)
+
+
+def _tree_condition(matched: tuple[float, float], pressure: Any,
                     tree: Mapping[str, Any]) -> dict[str, Any]:
-    """The structured-tree condition at ``node`` (root radius ``r0``) whose steady resistance
-    is ``total`` (SI): min_radius and the leaves' terminal resistance matched by the core
-    (``Shape::matched``: min_radius raised by factors of 1.05 until the tree alone has at
-    most ``tree_fraction`` of ``total``, the terminal resistance by bisection)."""
-    a, b = tree.get("alpha", 0.9), tree.get("beta", 0.6)
-    lrr = tree.get("length_ratio", 50.0)
-    rmin, leaf = _core.match_structured_tree(node, r0, total, mu, min_radius, tree_fraction,
-                                             a, b, lrr)
+    """The structured-tree condition of ``matched`` = (min_radius, the leaves' terminal
+    resistance), as the core matched them to a steady resistance (``Shape::matched``:
+    min_radius raised by factors of 1.05 until the tree alone has at most ``tree_fraction``
+    of it, the terminal resistance by bisection)."""
+    rmin, leaf = matched
     return {"type": TYPE, **tree, "min_radius": rmin,
             "terminal": {"type": "resistance", "resistance": leaf, "pressure": pressure}}
 
@@ -200,16 +191,18 @@ def replace_windkessels(data: Mapping[str, Any], min_radius: float = 1.0e-4,
     same steady resistance R_p + R_d: the tree grows to ``min_radius``, raised per outlet (by
     factors of 1.05) until the tree alone has at most ``tree_fraction`` of that resistance,
     and every leaf ends at one terminal resistance that supplies the rest (solved by
-    bisection). ``tree`` overrides the other structured-tree parameters."""
+    bisection; the core's ``model/structured_tree/windkessel.rs``). ``tree`` overrides the
+    other structured-tree parameters."""
     mu = float((data.get("blood") or {}).get("viscosity", 3.5e-3))
     out = dict(data)
     bcs = dict(out["boundary_conditions"])
     for node, bc in bcs.items():
         if not (isinstance(bc, Mapping) and bc.get("type") == "rcr"):
             continue
-        total = float(bc["proximal_resistance"]) + float(bc["distal_resistance"])
-        bcs[node] = _tree_condition(str(node), float(_root_radius(data, node)), total, mu,
-                                    min_radius, tree_fraction, bc.get("pressure", 0.0), tree)
+        matched = _core.windkessel_tree_match(
+            str(node), bc, _root_radius(data, str(node)), mu, min_radius, tree_fraction,
+            *_shape(tree))
+        bcs[node] = _tree_condition(matched, bc.get("pressure", 0.0), tree)
     out["boundary_conditions"] = bcs
     return out
 
@@ -249,8 +242,10 @@ def replace_terminal_vessels(data: Mapping[str, Any], root_radii: Mapping[str, f
         if "segments" in tree or segments is not None:  # the tree vessels' segmentation
             root["segments"] = tree.get("segments", segments)
         roots[name] = root
-        bcs[node] = _tree_condition(node, r0, total - r_root, mu, min_radius, tree_fraction,
-                                    pressure, tree)
+        # below the root vessel: the resistance it leaves
+        matched = _core.match_structured_tree(node, r0, total - r_root, mu, min_radius,
+                                              tree_fraction, *_shape(tree))
+        bcs[node] = _tree_condition(matched, pressure, tree)
     out["vessels"] = [roots.get(v["name"], v) for v in data["vessels"]
                       if v["name"] not in drop or v["name"] in roots]
     out["boundary_conditions"] = bcs

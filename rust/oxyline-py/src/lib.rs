@@ -13,6 +13,7 @@ mod calibrate;
 mod calibration;
 mod checkpoint;
 mod closed_loop;
+mod closed_loop_params;
 mod ensemble;
 mod errors;
 mod network;
@@ -20,7 +21,9 @@ mod reader;
 mod results;
 mod settings;
 mod svzerod;
+mod svzerod_rows;
 mod trees;
+mod windkessel_trees;
 
 use errors::to_py;
 use results::ArrayPair;
@@ -92,11 +95,17 @@ mod _core {
     #[pymodule_export]
     use super::closed_loop::closed_loop_o2;
     #[pymodule_export]
+    use super::closed_loop_params::closed_loop_layout;
+    #[pymodule_export]
+    use super::svzerod_rows::svzerod_output_rows;
+    #[pymodule_export]
     use super::trees::{
         StructuredTrees, facilitation_factor, grow_structured_tree, linear_facilitation_factor,
         match_structured_tree, poiseuille_resistance, structured_tree_count_bound,
         structured_tree_wall,
     };
+    #[pymodule_export]
+    use super::windkessel_trees::{outlet_root_radius, windkessel_tree_match};
     #[pymodule_export]
     use super::{
         chamber_elastance,
@@ -118,6 +127,8 @@ mod _core {
     #[pymodule_init]
     fn init(m: &pyo3::Bound<'_, pyo3::types::PyModule>) -> pyo3::PyResult<()> {
         m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+        // mol per mL O2 (STPD): the closed loop reports its O2 flows in mL/min
+        m.add("ML_O2", oxyline_core::transport::closed_loop_params::ML_O2)?;
         // the column schema (`oxyline_core::output`): Python names no column itself
         m.add("VESSEL_VARIABLES", super::VESSEL_VARIABLES.to_vec())?;
         m.add("SEGMENT_VARIABLES", super::SEGMENT_VARIABLES.to_vec())?;

@@ -15,7 +15,7 @@ use oxyline_core::segment::WallFriction;
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyMapping, PyString};
 
-fn model_error(node: &str, message: String) -> PyErr {
+pub(crate) fn model_error(node: &str, message: String) -> PyErr {
     crate::to_py(Error::model(st::element(node), message))
 }
 
@@ -24,7 +24,7 @@ fn repr(x: &Bound<'_, PyAny>) -> String {
 }
 
 /// A number as Python's `float()` reads it (int, float, or a numeric string; not bool).
-fn number(node: &str, key: &str, x: &Bound<'_, PyAny>) -> PyResult<f64> {
+pub(crate) fn number(node: &str, key: &str, x: &Bound<'_, PyAny>) -> PyResult<f64> {
     let ok = !x.is_instance_of::<PyBool>()
         && (x.is_instance_of::<PyFloat>()
             || x.is_instance_of::<PyInt>()

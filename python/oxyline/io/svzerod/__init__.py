@@ -3,7 +3,7 @@ configuration to a native model dict (with the element translations of
 :mod:`~oxyline.io.svzerod.heart`, :mod:`~oxyline.io.svzerod.closed_loop`,
 :mod:`~oxyline.io.svzerod.coupling` and :mod:`~oxyline.io.svzerod.initial`),
 :mod:`~oxyline.io.svzerod.writer` exports a model, :mod:`~oxyline.io.svzerod.dropin` runs a
-configuration and returns ``svzerod.simulate``'s DataFrame (with the cycle-to-cycle rule of
-:mod:`~oxyline.io.svzerod.cycles`), :mod:`~oxyline.io.svzerod.calibrator` is
+configuration and returns ``svzerod.simulate``'s DataFrame (the core runs its cycle-to-cycle
+rule and picks its output rows), :mod:`~oxyline.io.svzerod.calibrator` is
 ``svzerod.calibrate``. The public drop-in is :mod:`oxyline.svzerod`.
 """

@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
+from oxyline import _core
 from oxyline.errors import ModelError, ResourceError, core_errors
 from oxyline.io.svzerod import closed_loop as svzerod_closed_loop
-from oxyline.io.svzerod import cycles as svzerod_cycles
 from oxyline.io.svzerod import heart as svzerod_heart
 from oxyline.io.svzerod.reader import (
     FRAME_UNITS,
@@ -424,7 +424,7 @@ def _run_cycle_error(model: Model, native: Mapping[str, Any], s: RunSettings, me
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """svZeroDSolver's extra cycles without RCR: the core runs until its cycle-to-cycle rule
     holds, recording every output step; the rows svZeroDSolver outputs are picked from
-    them (:func:`oxyline.io.svzerod.cycles.output_rows`)."""
+    them (the core's ``svzerod_output_rows``)."""
     steps = s.points_per_cycle - 1
     kw, _ = _core_kwargs(model, native, s, method)
     kw.update(output_all_cycles=True, output_every=s.dt)
@@ -434,8 +434,8 @@ def _run_cycle_error(model: Model, native: Mapping[str, Any], s: RunSettings, me
     if len(t) != steps * (s.cycles + extra) + 1:
         raise ModelError(f"internal error: {len(t)} rows from the core")
     y, yd = _apply(np.asarray(raw["data"]).reshape(len(t), -1), columns, bool(rules["rates"]))
-    rows, times = svzerod_cycles.output_rows(s.cycles, steps, extra, s.output_interval,
-                                             s.output_all_cycles)
+    rows, times = _core.svzerod_output_rows(s.cycles, steps, extra, s.output_interval,
+                                            s.output_all_cycles)
     return s.dt * times, _blocks(y, rows, shape), None if yd is None else _blocks(yd, rows, shape)
 
 

@@ -54,7 +54,6 @@ from oxyline.errors import ModelError, ResourceError, UnsupportedElement
 from oxyline.io.native import read_mapping
 from oxyline.io.svzerod import closed_loop as svzerod_closed_loop
 from oxyline.io.svzerod import coupling as svzerod_coupling
-from oxyline.io.svzerod import cycles as svzerod_cycles
 from oxyline.io.svzerod import heart as svzerod_heart
 from oxyline.io.svzerod import initial as svzerod_initial
 from oxyline.model import Model, _build
@@ -956,7 +955,7 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
     _check_steps(cycles, sim.points, "use_cycle_to_cycle_error" if sim.cycle_error else
                  "number_of_cardiac_cycles")
     # without an RCR, svZeroDSolver runs extra cycles until the caps' means converge
-    # (oxyline.io.svzerod.cycles); the rule needs every step, so it is applied in `simulate`
+    # (`_cycle_error_caps`); the rule needs every step, so the core applies it in its run
 
     ends, used_bcs = _Ends(), {}
     vessels_in = cfg.get("vessels", [])
@@ -997,13 +996,32 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
     svzerod_initial.zero_start_coronaries(bcs, settings.steady_initial)
     if sim.cycle_error and not any(kind == "RCR" for kind, _ in bcs.values()):
         settings.cycle_error = sim.percent / 100.0
-        settings.caps = svzerod_cycles.caps(
+        settings.caps = _cycle_error_caps(
             [v for v in vessels_in if isinstance(v, Mapping)])
     native = _native(system, period, vs.vessels + hidden, bcs, settings)
     # svZeroDSolver's own name for the model (VMR files carry it) names the results
     if isinstance(raw.get("model_name"), str) and raw["model_name"].strip():
         native["name"] = raw["model_name"].strip()
     return native, settings, layout
+
+
+def _cycle_error_caps(vessels: list[Mapping[str, Any]]) -> list[tuple[str, str]]:
+    """The caps svZeroDSolver's ``use_cycle_to_cycle_error`` watches without RCR boundary
+    conditions, (vessel, "in" or "out") in file order: the vessels with a boundary condition,
+    at the outlet node of a vessel with an outlet condition (also one with both), else at the
+    inlet node. svZeroDSolver (``Solver::run_integration``) runs the file's cycles, then extra
+    cycles until at every cap the means of the flow and the pressure over the last cycle differ
+    from those over the cycle before by at most ``sim_cycle_to_cycle_percent_error`` percent;
+    the core runs that rule (``oxyline_core::run::CycleMeanStop``) and picks the rows
+    svZeroDSolver outputs (``svzerod_output_rows``)."""
+    out = []
+    for v in vessels:
+        bc = v.get("boundary_conditions") or {}
+        if "outlet" in bc:  # svZeroDSolver's vessel type: outlet overrides inlet
+            out.append((v["vessel_name"], "out"))
+        elif "inlet" in bc:
+            out.append((v["vessel_name"], "in"))
+    return out
 
 
 def to_oxyline_dict(config: Mapping[str, Any] | str | os.PathLike[str],

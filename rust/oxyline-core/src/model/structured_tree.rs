@@ -414,25 +414,16 @@ pub fn root_radius<'v>(
     node: &str,
     vessels: impl IntoIterator<Item = &'v VesselSpec>,
 ) -> Result<f64> {
-    for v in vessels {
-        for (end, distal) in [(&v.to, true), (&v.from, false)] {
-            if end != node {
-                continue;
-            }
-            return match &v.geometry {
-                Some(g) if distal => Ok(g.radius_out),
-                Some(g) => Ok(g.radius_in),
-                None => Err(err(
-                    node,
-                    format!(
-                        "vessel '{}' at this node has no radius: give 'root_radius'",
-                        v.name
-                    ),
-                )),
-            };
-        }
-    }
-    Err(err(node, "no vessel ends at this node"))
+    end_radius(
+        node,
+        vessels.into_iter().map(|v| VesselEnds {
+            name: &v.name,
+            from: Some(&v.from),
+            to: Some(&v.to),
+            radius_in: v.geometry.as_ref().map(|g| g.radius_in),
+            radius_out: v.geometry.as_ref().map(|g| g.radius_out),
+        }),
+    )
 }
 
 /// A checked structured tree below one outlet node (SI).
@@ -896,6 +887,8 @@ impl Classes {
 }
 
 pub mod terminal;
+pub mod windkessel;
+pub use windkessel::{VesselEnds, end_radius, windkessel_tree};
 
 #[cfg(test)]
 mod tests;

@@ -31,6 +31,7 @@ mod recorder;
 mod resolve; // RK4's step for valves and chambers by step doubling
 mod settings;
 mod svzerod; // svZeroDSolver's output and stop conventions (the drop-in)
+mod svzerod_rows; // its output rows of a run extended by the cycle-to-cycle rule
 mod two_pass;
 
 pub use checkpoint::{CHECKPOINT_VERSION, Checkpoints, Every, Snapshot};
@@ -39,6 +40,7 @@ pub use recorder::{Chunk, OutputSink};
 pub use resolve::{Refinement, rk4_step_refinement};
 pub use settings::{Method, RunSettings, Start};
 pub use svzerod::{CycleMeanStop, Derived, SvZeroDRules};
+pub use svzerod_rows::svzerod_output_rows;
 
 use crate::circuit::Dae;
 use crate::error::Result;

@@ -139,8 +139,14 @@ fn default_flow_cycles() -> usize {
 
 impl ClosedLoopSpec {
     /// Parses the JSON form (the binding's and Python's); a malformed spec is a model error.
+    /// A heart given by its kind has its series derived here.
     pub fn from_json(json: &str) -> Result<Self> {
-        serde_json::from_str(json).map_err(|e| Error::model("closed loop", e.to_string()))
+        let mut spec: Self =
+            serde_json::from_str(json).map_err(|e| Error::model("closed loop", e.to_string()))?;
+        if let Some(heart) = spec.heart.as_mut() {
+            heart.derive_series()?;
+        }
+        Ok(spec)
     }
 }
 

@@ -43,6 +43,7 @@ pub struct HeartSpec {
     #[serde(default)]
     pub newton_atol: Option<f64>,
     /// One series per O2 branch, in the loop's branch order.
+    #[serde(default)]
     pub branches: Vec<Series>,
     /// Named series recorded for the caller (the heart's valves, the venous pressure ...).
     #[serde(default)]
@@ -53,6 +54,10 @@ pub struct HeartSpec {
     pub tree_inflow: Option<Series>,
     #[serde(default)]
     pub tree_venous_pressure: Option<Series>,
+    /// The heart of `oxyline.closed_loop` and its loop: `branches`, `record` and the tree's
+    /// series are derived from it (`closed_loop_heart_series`).
+    #[serde(default)]
+    pub series_of: Option<super::closed_loop_heart_series::SeriesOf>,
 }
 
 fn default_rho() -> f64 {
