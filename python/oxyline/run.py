@@ -60,6 +60,7 @@ def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
     the core's schema: a :class:`ModelError` names the setting, where it came from and the
     value. The output selection and the progress callback are Python's."""
     s = _core.resolve_settings(model.simulation, dict(overrides), model.period)
+    s["step_control"] = _step_control(s, bool(s.pop("rtol_default")))
     out = dict(model.simulation.get("output", {}) or {})
     progress = overrides.get("progress")
     if progress is not None and not isinstance(progress, (bool, np.bool_)) \
@@ -69,6 +70,32 @@ def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
     s["variables"] = output_names(overrides.get("variables", out.get("variables")), "variables")
     s["vessels"] = _vessels(model, overrides.get("vessels", out.get("vessels")))
     return s
+
+
+#: ``settings["step_control"]`` of a run at the default tolerance (neither ``rtol`` nor ``dt``).
+DEFAULT_CONTROL = "error control (default rtol)"
+
+
+def _step_control(s: Mapping[str, Any], default: bool) -> str:
+    """How the run of settings ``s`` chooses its steps, as recorded in ``result.settings``
+    (and the NetCDF attribute ``solver_step_control``): error control, or a fixed step and
+    why."""
+    if s["rtol"] is not None:
+        return DEFAULT_CONTROL if default else "error control (rtol)"
+    if s["dt"] is not None:
+        return "fixed step (dt)"
+    return "fixed step (method rk4 has no error estimate; dopri5 is its error-controlled pair)"
+
+
+def _fixed_for_checkpoints(s: dict[str, Any], overrides: Mapping[str, Any],
+                           resume: Any) -> None:
+    """A checkpointed (or resumed) run at the default tolerance takes the automatic fixed step
+    instead: a checkpoint does not carry the error control's state (step history, peaks). An
+    ``rtol`` or ``atol`` the user gave is left to the core to refuse, naming it."""
+    checkpointed = overrides.get("checkpoint") is not None or resume is not None
+    if checkpointed and s["step_control"] == DEFAULT_CONTROL and s["atol"] is None:
+        s["rtol"] = None
+        s["step_control"] = "fixed step (checkpoints need a fixed step: give dt to choose it)"
 
 
 def _vessels(model: Model, selection: Any) -> list[str] | None:
@@ -287,7 +314,7 @@ def _result(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
 def _run_settings(s: Mapping[str, Any], raw: Mapping[str, Any] | None) -> dict[str, Any]:
     """The settings recorded with a result: the requested ones and, after the run, its facts."""
     settings = {k: s[k] for k in ("period", "cycles", "method", "output_every", "rho_infty",
-                                  "until_periodic", "rtol")}
+                                  "until_periodic", "rtol", "step_control")}
     if raw is not None:
         settings.update(method=raw["method"], dt=raw["dt"], cycles_run=raw["cycles_run"],
                         periodic_error=raw["periodic_error"], rk4_dt_max=raw.get("rk4_dt_max"))
@@ -373,7 +400,8 @@ def _run(model: Model, s: Mapping[str, Any], progress: Any, cancel: Any = None,
                     raise SimulationCancelled("run cancelled")
 
             with core_errors(f"simulate '{model.name}'"):
-                raw = model.network.simulate(progress=check, **s, **core)
+                settings = {k: v for k, v in s.items() if k != "step_control"}
+                raw = model.network.simulate(progress=check, **settings, **core)
         if isinstance(callback, _CycleProgress) and "error" not in raw:
             callback.finish(int(raw["cycles_run"]))
         return raw
@@ -414,12 +442,15 @@ def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     ``progress`` (bool or callback ``f(t, t_end)``), ``threads`` (default: every core; ``1``
     serial; large trees split their elimination over them, with the same bits for any number).
 
-    Error control (docs/physics.md §10): ``rtol`` (0 < rtol < 1) runs generalized-α with a
-    variable step whose estimated error of every unknown stays within ``atol + rtol·|y|``
+    Error control (docs/physics.md §10), the default without ``dt``: ``rtol`` (0 < rtol < 1,
+    default 1e-3) runs generalized-α (or, with ``method`` ``"auto"``/``"dopri5"``, the explicit
+    pair where it is cheaper) with a variable step whose estimated error of every unknown stays
+    within ``atol + rtol·|y|``
     (``atol``: a mapping ``{"pressure": Pa, "flow": m^3/s, "volume": m^3, "species":
     mol/m^3}``, defaults 1 Pa, 1e-9, 1e-9, 1e-6), output from the dense output at every
     ``output_every`` (which then never changes the solution); ``result.error_estimate`` gives
-    the largest estimate per kind. It excludes ``dt`` (a fixed step) and ``method="rk4"``.
+    the largest estimate per kind. A given ``dt`` is a fixed step (as is ``method="rk4"``,
+    and a checkpointed run without ``dt``); ``result.settings["step_control"]`` says which.
     ``estimate_space_error=True`` adds ``result.error_estimate["space"]``: the largest
     relative change of the input impedance at the flow or pressure inlets over the forcing's
     significant harmonics when every vessel's segments are doubled (docs/solvers.md,
@@ -469,6 +500,7 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     space = _space_flag(overrides)
     overrides = {k: v for k, v in overrides.items() if k != "estimate_space_error"}
     s = _settings(model, overrides)
+    _fixed_for_checkpoints(s, overrides, resume)
     _large_model_output(model, s, overrides)
     _check_output_memory(model, s, overrides)
     core = _checkpoints(model, overrides)
