@@ -8,7 +8,7 @@ import os
 import signal
 import threading
 import warnings
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -96,6 +96,14 @@ def _fixed_for_checkpoints(s: dict[str, Any], overrides: Mapping[str, Any],
     if checkpointed and s["step_control"] == DEFAULT_CONTROL and s["atol"] is None:
         s["rtol"] = None
         s["step_control"] = "fixed step (checkpoints need a fixed step: give dt to choose it)"
+
+
+def _note_valves(s: dict[str, Any], valves: Sequence[Any]) -> None:
+    """An error-controlled run of a circuit with valves says that their switches fall inside
+    steps (the controller cuts the step by rejections, no event locates them): the achieved
+    error there can exceed the estimate (docs/physics.md §10, "The default run")."""
+    if valves and s["rtol"] is not None:
+        s["step_control"] += "; valves switch inside steps (no event location)"
 
 
 def _vessels(model: Model, selection: Any) -> list[str] | None:
@@ -507,6 +515,7 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     if resume is not None:
         core["resume"] = resume
     heart = _heart_layout(model)
+    _note_valves(s, heart[1])
     if heart[2]:
         core["extra_columns"] = heart[2]
     try:
@@ -754,6 +763,7 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     empty = _empty_rows(model, s)
     # chamber volumes and valve status, as in simulate(): extra core columns per chunk
     heart = _heart_layout(model)
+    _note_valves(s, heart[1])
     core = {"extra_columns": heart[2]} if heart[2] else {}
     valves_open: dict[str, bool] = {}
 
