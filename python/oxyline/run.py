@@ -8,7 +8,7 @@ import os
 import signal
 import threading
 import warnings
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -59,8 +59,14 @@ def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
     """The run settings of ``model`` with ``overrides``, each checked like the model itself by
     the core's schema: a :class:`ModelError` names the setting, where it came from and the
     value. The output selection and the progress callback are Python's."""
+    return _resolve(model, overrides)[0]
+
+
+def _resolve(model: Model, overrides: Mapping[str, Any]) -> tuple[dict[str, Any], bool]:
+    """:func:`_settings`, and whether its ``rtol`` is the default one (neither ``rtol`` nor a
+    fixed ``dt`` given: the default run is error-controlled)."""
     s = _core.resolve_settings(model.simulation, dict(overrides), model.period)
-    s["step_control"] = _step_control(s, bool(s.pop("rtol_default")))
+    default = bool(s.pop("rtol_default"))
     out = dict(model.simulation.get("output", {}) or {})
     progress = overrides.get("progress")
     if progress is not None and not isinstance(progress, (bool, np.bool_)) \
@@ -69,41 +75,38 @@ def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
                          f"got {progress!r}")
     s["variables"] = output_names(overrides.get("variables", out.get("variables")), "variables")
     s["vessels"] = _vessels(model, overrides.get("vessels", out.get("vessels")))
-    return s
+    return s, default
 
 
-#: ``settings["step_control"]`` of a run at the default tolerance (neither ``rtol`` nor ``dt``).
-DEFAULT_CONTROL = "error control (default rtol)"
+#: ``settings["step_control"]`` of a checkpointed run that gives no ``dt`` (see
+#: :func:`_fixed_for_checkpoints`).
+CHECKPOINT_STEP = "fixed step (checkpoints need a fixed step: give dt to choose it)"
 
 
-def _step_control(s: Mapping[str, Any], default: bool) -> str:
-    """How the run of settings ``s`` chooses its steps, as recorded in ``result.settings``
+def _step_control(s: Mapping[str, Any], valves: bool = False) -> str:
+    """How the run of settings ``s`` chose its steps, as recorded in ``result.settings``
     (and the NetCDF attribute ``solver_step_control``): error control, or a fixed step and
-    why."""
+    why. ``valves``: the circuit has valves, whose switches an error-controlled step does not
+    locate (the controller cuts the step by rejections; the achieved error there can exceed
+    the estimate: docs/physics.md §10, "The default run")."""
     if s["rtol"] is not None:
-        return DEFAULT_CONTROL if default else "error control (rtol)"
+        note = "; valves switch inside steps (no event location)" if valves else ""
+        return f"error control (rtol {s['rtol']:g}){note}"
     if s["dt"] is not None:
         return "fixed step (dt)"
-    return "fixed step (method rk4 has no error estimate; dopri5 is its error-controlled pair)"
+    if s["method"] == "rk4":
+        return "fixed step (method rk4 has no error estimate; dopri5 is its error-controlled pair)"
+    return CHECKPOINT_STEP
 
 
-def _fixed_for_checkpoints(s: dict[str, Any], overrides: Mapping[str, Any],
+def _fixed_for_checkpoints(s: dict[str, Any], default: bool, overrides: Mapping[str, Any],
                            resume: Any) -> None:
     """A checkpointed (or resumed) run at the default tolerance takes the automatic fixed step
     instead: a checkpoint does not carry the error control's state (step history, peaks). An
     ``rtol`` or ``atol`` the user gave is left to the core to refuse, naming it."""
     checkpointed = overrides.get("checkpoint") is not None or resume is not None
-    if checkpointed and s["step_control"] == DEFAULT_CONTROL and s["atol"] is None:
+    if checkpointed and default and s["atol"] is None:
         s["rtol"] = None
-        s["step_control"] = "fixed step (checkpoints need a fixed step: give dt to choose it)"
-
-
-def _note_valves(s: dict[str, Any], valves: Sequence[Any]) -> None:
-    """An error-controlled run of a circuit with valves says that their switches fall inside
-    steps (the controller cuts the step by rejections, no event locates them): the achieved
-    error there can exceed the estimate (docs/physics.md §10, "The default run")."""
-    if valves and s["rtol"] is not None:
-        s["step_control"] += "; valves switch inside steps (no event location)"
 
 
 def _vessels(model: Model, selection: Any) -> list[str] | None:
@@ -319,10 +322,13 @@ def _result(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
     )
 
 
-def _run_settings(s: Mapping[str, Any], raw: Mapping[str, Any] | None) -> dict[str, Any]:
-    """The settings recorded with a result: the requested ones and, after the run, its facts."""
+def _run_settings(s: Mapping[str, Any], raw: Mapping[str, Any] | None,
+                  valves: bool = False) -> dict[str, Any]:
+    """The settings recorded with a result: the requested ones and, after the run, its facts
+    (``valves``: the circuit has valves, see :func:`_step_control`)."""
     settings = {k: s[k] for k in ("period", "cycles", "method", "output_every", "rho_infty",
-                                  "until_periodic", "rtol", "step_control")}
+                                  "until_periodic", "rtol")}
+    settings["step_control"] = _step_control(s, valves)
     if raw is not None:
         settings.update(method=raw["method"], dt=raw["dt"], cycles_run=raw["cycles_run"],
                         periodic_error=raw["periodic_error"], rk4_dt_max=raw.get("rk4_dt_max"))
@@ -408,8 +414,7 @@ def _run(model: Model, s: Mapping[str, Any], progress: Any, cancel: Any = None,
                     raise SimulationCancelled("run cancelled")
 
             with core_errors(f"simulate '{model.name}'"):
-                settings = {k: v for k, v in s.items() if k != "step_control"}
-                raw = model.network.simulate(progress=check, **settings, **core)
+                raw = model.network.simulate(progress=check, **s, **core)
         if isinstance(callback, _CycleProgress) and "error" not in raw:
             callback.finish(int(raw["cycles_run"]))
         return raw
@@ -507,15 +512,14 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     """`simulate` of a loaded model; ``resume``: the core state of a checkpoint."""
     space = _space_flag(overrides)
     overrides = {k: v for k, v in overrides.items() if k != "estimate_space_error"}
-    s = _settings(model, overrides)
-    _fixed_for_checkpoints(s, overrides, resume)
+    s, default = _resolve(model, overrides)
+    _fixed_for_checkpoints(s, default, overrides, resume)
     _large_model_output(model, s, overrides)
     _check_output_memory(model, s, overrides)
     core = _checkpoints(model, overrides)
     if resume is not None:
         core["resume"] = resume
     heart = _heart_layout(model)
-    _note_valves(s, heart[1])
     if heart[2]:
         core["extra_columns"] = heart[2]
     try:
@@ -526,7 +530,8 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
                 from None
         raise
     extra = _split_heart_columns(raw, len(heart[2]))
-    result = _result(model, s, raw, _run_settings(s, raw), complete="error" not in raw)
+    result = _result(model, s, raw, _run_settings(s, raw, bool(heart[1])),
+                     complete="error" not in raw)
     if extra is not None:
         result.chamber_volume, result.valve_status = _heart_outputs(heart, extra)
     _raise_run_error(raw, result)
@@ -763,7 +768,7 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     empty = _empty_rows(model, s)
     # chamber volumes and valve status, as in simulate(): extra core columns per chunk
     heart = _heart_layout(model)
-    _note_valves(s, heart[1])
+    valves = bool(heart[1])
     core = {"extra_columns": heart[2]} if heart[2] else {}
     valves_open: dict[str, bool] = {}
 
@@ -776,8 +781,9 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
         return res
 
     template = dict(empty, data=np.zeros((0, empty["data"].shape[1] + len(heart[2]))))
-    store = ZarrAppender(path, dataset(result_of(dict(template), _run_settings(s, None),
-                                                 False)), time_chunk, overwrite=overwrite)
+    store = ZarrAppender(path, dataset(result_of(dict(template),
+                                                 _run_settings(s, None, valves), False)),
+                         time_chunk, overwrite=overwrite)
 
     # the bounds monitor checks each chunk as it passes (docs/physics.md §2.8)
     monitor = Monitor(model.transport_spec)
@@ -800,7 +806,7 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
         facts["error_estimate_space"] = inlet_space_error(model)
     raw, opened = _close_store(
         store, raw, lambda raw: dataset(result_of(dict(template),
-                                                  {**_run_settings(s, raw), **facts},
+                                                  {**_run_settings(s, raw, valves), **facts},
                                                   "error" not in raw)).attrs)
     _raise_run_error(raw, opened)
     _warn_not_periodic(model.name, _run_settings(s, raw), True)

@@ -454,9 +454,15 @@ mod tests {
     fn a_run_without_dt_is_error_controlled_at_the_default_rtol() {
         let r = |sim: serde_json::Value, o: serde_json::Value| resolve(&sim, &o, None).unwrap();
         // no dt (or dt: auto), any method with an error estimate: the default tolerance
-        for sim in [json!({}), json!({"dt": "auto", "method": "generalized-alpha"})] {
+        for sim in [
+            json!({}),
+            json!({"dt": "auto", "method": "generalized-alpha"}),
+        ] {
             let s = r(sim, json!({}));
-            assert_eq!((s.rtol, s.rtol_default, s.dt), (Some(DEFAULT_RTOL), true, None));
+            assert_eq!(
+                (s.rtol, s.rtol_default, s.dt),
+                (Some(DEFAULT_RTOL), true, None)
+            );
         }
         // a fixed dt (file or keyword) or RK4 (no error estimate): fixed steps as before
         let s = r(json!({"dt": 1e-3}), json!({}));
@@ -471,7 +477,11 @@ mod tests {
         assert_eq!(s.atol, Some(vec![("pressure".to_owned(), 0.5)]));
         // ... but not a fixed step, which has no tolerance to meet
         let e = resolve(&json!({"dt": 1e-3}), &json!({"atol": {"flow": 1e-9}}), None);
-        assert!(e.unwrap_err().to_string().contains("atol needs error control"));
+        assert!(
+            e.unwrap_err()
+                .to_string()
+                .contains("atol needs error control")
+        );
     }
 
     #[test]
