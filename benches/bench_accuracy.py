@@ -28,6 +28,15 @@ picks one of the two by predicted cost; the table names the one it ran).
     python benches/bench_accuracy.py                     # the whole benchmark set
     python benches/bench_accuracy.py --models adan56 --cycles 2
     python benches/bench_accuracy.py --repeat 3          # least CPU of 3 runs each
+
+``--default-table``: the default run (``simulate(model, output_every=...)``, no ``dt`` or
+``rtol``: error control at rtol 1e-3) at output intervals 1, 5, 10, 20 ms beside the previous
+default (a fixed step chosen from the output interval: RK4 at half its stable step when that
+is at least 1/20 of the output interval, else generalized-α with dt = the output interval;
+reproduced here by that rule on the model's RK4 stability limit, exact for a linear model
+without transport), each against generalized-α at dt = 0.1 ms, in the same run:
+
+    python benches/bench_accuracy.py --default-table --models adan56 --repeat 3
 """
 
 from __future__ import annotations
@@ -187,6 +196,41 @@ def controlled(model: Any, name: str, cycles: int, rtol: float, method: str,
               f"{s['dt_min'] * 1e3:.2g}–{s['dt_max'] * 1e3:.2g} ms | {cpu:.3f} s {match}")
 
 
+def old_default(model: Any, every: float) -> dict[str, Any]:
+    """The settings that reproduce the previous default's fixed step at output interval
+    ``every``: RK4's automatic step when half its stable step is at least every/20, else
+    generalized-α at dt = every."""
+    half = 0.5 * model.summary()["rk4_dt_max"]
+    if half >= every / 20:
+        return {"method": "rk4"}
+    return {"method": "generalized-alpha", "dt": every}
+
+
+def default_table(name: str, cycles: int, outputs: tuple[float, ...], ref_dt: float) -> None:
+    """The default run against the previous default, per output interval (module text)."""
+    model = load(name)
+    period = model.period or 1.0
+    ref, ref_cpu = run(model, cycles=cycles, dt=ref_dt, method="generalized-alpha",
+                       output_every=ref_dt)
+    print(f"\n### {name}: the default run ({cycles} cycles; reference generalized-α dt = "
+          f"{ref_dt * 1e3:g} ms, {ref_cpu:.2f} s CPU)\n")
+    print("| output every | default | method, steps | pulse-pressure error | flow error | "
+          "CPU |")
+    print("|---|---|---|---|---|---|")
+    for every in outputs:
+        for label, kw in (("previous (fixed)", old_default(model, every)),
+                          ("new (rtol 1e-3)", {})):
+            res, cpu = run(model, cycles=cycles, output_every=every, **kw)
+            s = res.settings
+            steps = s.get("steps") or round(cycles * period / s["dt"])
+            how = (f"{s['method']}, {steps} steps ({s['rejected_steps']} rejected), "
+                   f"dt {s['dt_min'] * 1e3:.2g}–{s['dt_max'] * 1e3:.2g} ms"
+                   if s.get("steps") else f"{s['method']}, dt {s['dt']:.2g} s, {steps} steps")
+            e = errors(res, ref)
+            print(f"| {every * 1e3:g} ms | {label} | {how} | {fmt(e[0])} | {fmt(e[1])} | "
+                  f"{cpu:.3f} s |")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--models", nargs="+", default=list(MODELS))
@@ -201,8 +245,16 @@ def main() -> None:
                     help="the reference step is the sweep's finest over this")
     ap.add_argument("--repeat", type=int, default=1,
                     help="runs per timing; the least CPU time is reported")
+    ap.add_argument("--default-table", action="store_true",
+                    help="only the default run against the previous default (module text)")
+    ap.add_argument("--ref-dt", type=float, default=1e-4,
+                    help="the reference step of --default-table, s")
     a = ap.parse_args()
     REPEAT[0] = a.repeat
+    if a.default_table:
+        for name in a.models:
+            default_table(name, a.cycles, tuple(a.outputs), a.ref_dt)
+        return
     summary: list[str] = []
     for name in a.models:
         bench(name, a.cycles, tuple(a.rtols), tuple(a.outputs), tuple(sorted(a.sweep)),

@@ -34,7 +34,9 @@ def test_conservation_at_the_junction_and_outlets(result: oxyline.Result) -> Non
     parent, d1, d2 = (result.vessel(n) for n in ("parent", "daughter1", "daughter2"))
     stored = parent.flow_out - d1.flow_in - d2.flow_in
     assert abs(np.trapezoid(stored, result.time)) < 1e-6 * np.trapezoid(parent.flow_in, result.time)
-    assert np.trapezoid(parent.flow_in, result.time) == pytest.approx(6.0e-6, rel=1e-4)
+    # (the inflow is an algebraic unknown of the error-controlled default run: held within
+    # its rtol 1e-3 of its peak, ~4e-4 of the mean here)
+    assert np.trapezoid(parent.flow_in, result.time) == pytest.approx(6.0e-6, rel=1e-3)
     # pressure continuity at the junction node
     np.testing.assert_allclose(parent.pressure_out, d1.pressure_in)
     np.testing.assert_allclose(parent.pressure_out, d2.pressure_in)

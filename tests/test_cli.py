@@ -45,7 +45,9 @@ def test_run_end_to_end_writes_netcdf_summary_and_figures(tmp_path: Path) -> Non
     with xr.open_dataset(tmp_path / "out.nc", engine="h5netcdf") as ds:
         q = ds["flow_in"].sel(vessel="parent").values
         t = ds["time"].values
-        assert np.trapezoid(q, t) / t[-1] == pytest.approx(6e-6, rel=1e-4)  # Fourier mean
+        # the Fourier mean, within the default run's rtol 1e-3 (the inflow is an algebraic
+        # unknown of the error-controlled step)
+        assert np.trapezoid(q, t) / t[-1] == pytest.approx(6e-6, rel=1e-3)
         assert ds.attrs["model"] == "bifurcation" and ds.attrs["solver_cycles"] == 2
     summary = (tmp_path / "summary.csv").read_text()
     assert summary.startswith("vessel,pressure_in_mean [Pa],") and "daughter2," in summary

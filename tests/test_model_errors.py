@@ -273,6 +273,7 @@ def test_cli_run_writes_netcdf(tmp_path: Path) -> None:
         assert set(ds["pressure_in"].dims) == {"time", "vessel"}
         assert list(ds["vessel"].values) == ["parent", "daughter1", "daughter2"]
         assert ds.sizes["time"] == 1001
-        # the mean inflow over the (last) cycle is the inlet condition's 6 mL/s
+        # the mean inflow over the (last) cycle is the inlet condition's 6 mL/s, within the
+        # default run's rtol 1e-3 (the inflow is an algebraic unknown of the controlled step)
         q = ds["flow_in"].sel(vessel="parent").values
-        assert abs(q[:-1].mean() - 6.0e-6) < 1e-9
+        assert abs(q[:-1].mean() - 6.0e-6) < 6e-9

@@ -80,7 +80,9 @@ def test_selection_in_the_model_file_and_streamed_to_zarr(full: oxyline.Result,
                                                           tmp_path: Path) -> None:
     model = catalogue.load("paper-bifurcated").to_dict()
     vessel = full.vessels[0]
-    model["simulation"] = {"output": {"variables": ["flow_in", "concentration_in"],
+    # (a new simulation section keeps the file's paper RK4: the same run as `full`)
+    model["simulation"] = {"method": "rk4",
+                           "output": {"variables": ["flow_in", "concentration_in"],
                                       "vessels": [vessel], "segments": False}}
     res = oxyline.simulate(model, cycles=1)
     assert res.data.shape == (full.time.size, 1)
@@ -104,7 +106,7 @@ def test_unknown_names_are_model_errors(kw: dict, match: str) -> None:
     with pytest.raises(oxyline.ModelError, match=match):
         oxyline.simulate("bifurcation", cycles=1, **kw)
     model = catalogue.load("bifurcation").to_dict()
-    model["simulation"] = {"output": kw}
+    model["simulation"] = {"method": "rk4", "output": kw}
     with pytest.raises(oxyline.ModelError, match=match):  # at load time too
         oxyline.load_model(model)
 
@@ -183,7 +185,7 @@ def test_large_model_default_output(full: oxyline.Result,
         warnings.simplefilter("error", oxyline.OutputSizeWarning)
         every = oxyline.simulate("paper-bifurcated", cycles=1, variables="all")
         model = catalogue.load("paper-bifurcated").to_dict()
-        model["simulation"] = {"output": {"variables": "all"}}
+        model["simulation"] = {"method": "rk4", "output": {"variables": "all"}}
         from_file = oxyline.simulate(model, cycles=1)
     for r in (every, from_file):
         assert np.array_equal(r.data, full.data)

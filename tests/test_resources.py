@@ -138,7 +138,10 @@ def rss(key):
             if line.startswith(key):
                 return float(line.split()[1]) * 1024
 
-oxyline.simulate("bifurcation", cycles=1)  # imports and first-use allocations
+# imports and first-use allocations (of both the default error-controlled run and RK4's
+# step estimate, whose dense scratch the paper's RK4 run needs)
+oxyline.simulate("bifurcation", cycles=1)
+oxyline.simulate("bifurcation", cycles=1, method="rk4")
 base = rss("VmRSS:")
 name, max_length, kw = json.loads(sys.argv[1])
 d = oxyline.load_model(name).to_dict()

@@ -68,18 +68,22 @@ def _reversing_renewal() -> dict[str, Any]:
     }
 
 
+# checkpoints need a fixed step: generalized-α gets its dt (RK4 its automatic fixed step), so
+# that the uninterrupted run (error-controlled by default) is the same fixed-step run
 CASES = [
-    ("reversing-renewal", {"method": "generalized-alpha", "cycles": 3}),
+    ("reversing-renewal", {"method": "generalized-alpha", "dt": 1e-3, "cycles": 3}),
     ("reversing-renewal", {"method": "rk4", "cycles": 3}),
     ("bifurcation", {"method": "rk4", "cycles": 3, "output_cycles": "all"}),
-    ("bifurcation", {"method": "generalized-alpha", "cycles": 3, "output_cycles": "all"}),
+    ("bifurcation", {"method": "generalized-alpha", "dt": 1e-3, "cycles": 3,
+                     "output_cycles": "all"}),
     ("oxygen-hill", {"method": "rk4", "cycles": 3}),
-    ("oxygen-hill", {"method": "generalized-alpha", "cycles": 3, "output_cycles": "all"}),
+    ("oxygen-hill", {"method": "generalized-alpha", "dt": 1e-3, "cycles": 3,
+                     "output_cycles": "all"}),
     # until_periodic: the cycle-to-cycle changes are 4.5e-7, 1.2e-12 (cycles 2, 3) with
     # generalized-α and 2.4e-7, 2.3e-8 (cycles 4, 5) with RK4: the runs stop at cycle 3 and 5,
     # each after the checkpoint of the cycle before
-    ("oxygen-hill", {"method": "generalized-alpha", "cycles": 2, "until_periodic": 1e-9,
-                     "max_cycles": 8}),
+    ("oxygen-hill", {"method": "generalized-alpha", "dt": 1e-3, "cycles": 2,
+                     "until_periodic": 1e-9, "max_cycles": 8}),
     ("oxygen-hill", {"method": "rk4", "cycles": 2, "until_periodic": 1e-7, "max_cycles": 8}),
 ]
 
@@ -109,7 +113,7 @@ def test_a_cancelled_run_resumes_from_its_last_checkpoint(tmp_path: Path) -> Non
     2 exists; the partial result comes with SimulationCancelled, and the resumed run ends as
     the uninterrupted one."""
     d = _oxygen_hill()
-    kw = {"method": "generalized-alpha", "cycles": 5, "output_cycles": "all"}
+    kw = {"method": "generalized-alpha", "dt": 1e-3, "cycles": 5, "output_cycles": "all"}
     whole = oxyline.simulate(d, **kw)
     ck = tmp_path / "run.ckpt"
     stop = threading.Event()
@@ -235,9 +239,12 @@ def test_cli_checkpoint_and_resume_give_the_uninterrupted_file(tmp_path: Path) -
     import xarray as xr
 
     os.chdir(tmp_path)
-    assert cli.main(["run", "bifurcation", "--cycles", "3", "--quiet", "-o", "whole.nc"]) == 0
-    assert cli.main(["run", "bifurcation", "--cycles", "3", "--quiet", "--checkpoint", "run.ckpt",
-                     "--checkpoint-every", "2 cycles", "-o", "first.nc"]) == 0
+    # a fixed step (checkpoints need one): the uninterrupted run is the same fixed-step run
+    step = ["--dt", "1e-3", "--method", "generalized-alpha"]
+    assert cli.main(["run", "bifurcation", "--cycles", "3", "--quiet", *step, "-o",
+                     "whole.nc"]) == 0
+    assert cli.main(["run", "bifurcation", "--cycles", "3", "--quiet", *step, "--checkpoint",
+                     "run.ckpt", "--checkpoint-every", "2 cycles", "-o", "first.nc"]) == 0
     assert cli.main(["run", "--resume", "run.ckpt", "--quiet", "-o", "resumed.nc"]) == 0
     with xr.open_dataset("whole.nc") as a, xr.open_dataset("resumed.nc") as b:
         for name in a.data_vars:

@@ -375,6 +375,8 @@ def _print_table(model: Any, res: Any, stream: bool, rows: int = 20) -> None:
                         if k.startswith("error_estimate_") and k != "error_estimate_space")
         print(f"error control: rtol {s['rtol']:g}, {s['steps']} steps ({s['rejected_steps']} "
               f"rejected), dt {s['dt_min']:.2e} to {s['dt_max']:.2e} s; estimated error {est}")
+    elif s.get("step_control") is not None:
+        print(f"step control: {s['step_control']}: no error estimate")
     if s.get("error_estimate_space") is not None:
         print(f"space: the inlet impedance moves {float(s['error_estimate_space']):.1e} "
               "(relative) when every vessel's segments are doubled")
@@ -585,7 +587,9 @@ def _add_run(p: argparse.ArgumentParser) -> None:
                         "once the new one is complete)")
     p.add_argument("--cycles", type=int, help="cardiac cycles to run (default: the model's "
                                               "simulation.cycles, else 10)")
-    p.add_argument("--dt", type=float, help="time step in s (default: auto)")
+    p.add_argument("--dt", type=float,
+                   help="a fixed time step in s (default: the model's, else error control at "
+                        "--rtol)")
     p.add_argument("--method", choices=["auto", "rk4", "generalized-alpha", "dopri5"],
                    help="time integrator (default: the model's, else auto)")
     p.add_argument("--until-periodic", type=_tolerance_or_none, metavar="TOL",
@@ -596,8 +600,9 @@ def _add_run(p: argparse.ArgumentParser) -> None:
                    help="threads of the run (default: every core; 1: serial); the results are "
                         "the same on any number of threads")
     p.add_argument("--rtol", type=float, metavar="TOL",
-                   help="error control: generalized-alpha with a variable step keeping the "
-                        "estimated error of every unknown within TOL (relative); excludes --dt")
+                   help="error control: a variable step keeping the estimated error of every "
+                        "unknown within TOL (relative; default 1e-3 where no dt is given); "
+                        "excludes --dt")
     p.add_argument("--estimate-space-error", action="store_true",
                    help="also estimate the spatial error: the inlet impedance's change over the "
                         "forcing's significant harmonics when every vessel's segments are "

@@ -17,7 +17,8 @@ class SimulateOptions(TypedDict, total=False):
 
     #: cardiac cycles to run (with ``until_periodic``: at least this many)
     cycles: int
-    #: time step, s, or ``"auto"`` (half the stable RK4 step, or the output interval)
+    #: a fixed time step, s; ``"auto"`` (the default): error control at ``rtol`` (1e-3 unless
+    #: given), or RK4's automatic step (half its stability limit) with ``method="rk4"``
     dt: float | Literal["auto"]
     #: time integrator
     method: Literal["auto", "rk4", "generalized-alpha", "dopri5"]
@@ -57,10 +58,13 @@ class SimulateOptions(TypedDict, total=False):
     #: setting this event stops the run with :class:`~oxyline.SimulationCancelled`
     cancel: threading.Event | None
     #: error control: the relative tolerance of every unknown's local error per step
-    #: (generalized-α with a variable step and dense output; excludes ``dt`` and ``"rk4"``)
+    #: (generalized-α or the explicit pair with a variable step and dense output; excludes
+    #: ``dt`` and ``"rk4"``). Default 1e-3 when no ``dt`` is given (the default run is
+    #: error-controlled; ``result.settings["step_control"]`` says how the steps were chosen)
     rtol: float | None
     #: error control's absolute tolerance per kind of unknown, SI: ``{"pressure": Pa, "flow":
-    #: m^3/s, "volume": m^3, "species": mol/m^3}`` (defaults 1, 1e-9, 1e-9, 1e-6)
+    #: m^3/s, "volume": m^3, "species": mol/m^3}`` (defaults 1, 1e-9, 1e-9, 1e-6; without
+    #: ``rtol`` it joins the default rtol, and is refused with a fixed ``dt``)
     atol: dict[str, float] | None
     #: threads of this run (default: every core; 1: serial); the results are the same bits
     #: on any number of threads (docs/performance.md)

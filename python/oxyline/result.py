@@ -238,8 +238,9 @@ class Result:
 
     @property
     def error_estimate(self) -> dict[str, float]:
-        """An error-controlled run's (``rtol``) largest estimated error per kind of unknown
-        over the run (``pressure``, ``flow``, and ``volume``/``species`` where present),
+        """An error-controlled run's (the default without ``dt``, or ``rtol``) largest
+        estimated error per kind of unknown over the run (``pressure``, ``flow``, and
+        ``volume``/``species`` where present),
         relative to atol/rtol + |y| (docs/physics.md §10): at most ``rtol`` where the step
         control met its tolerance. Empty for a fixed-step run. With
         ``simulate(..., estimate_space_error=True)`` also ``space``: the largest relative

@@ -59,7 +59,14 @@ def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
     """The run settings of ``model`` with ``overrides``, each checked like the model itself by
     the core's schema: a :class:`ModelError` names the setting, where it came from and the
     value. The output selection and the progress callback are Python's."""
+    return _resolve(model, overrides)[0]
+
+
+def _resolve(model: Model, overrides: Mapping[str, Any]) -> tuple[dict[str, Any], bool]:
+    """:func:`_settings`, and whether its ``rtol`` is the default one (neither ``rtol`` nor a
+    fixed ``dt`` given: the default run is error-controlled)."""
     s = _core.resolve_settings(model.simulation, dict(overrides), model.period)
+    default = bool(s.pop("rtol_default"))
     out = dict(model.simulation.get("output", {}) or {})
     progress = overrides.get("progress")
     if progress is not None and not isinstance(progress, (bool, np.bool_)) \
@@ -68,7 +75,38 @@ def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
                          f"got {progress!r}")
     s["variables"] = output_names(overrides.get("variables", out.get("variables")), "variables")
     s["vessels"] = _vessels(model, overrides.get("vessels", out.get("vessels")))
-    return s
+    return s, default
+
+
+#: ``settings["step_control"]`` of a checkpointed run that gives no ``dt`` (see
+#: :func:`_fixed_for_checkpoints`).
+CHECKPOINT_STEP = "fixed step (checkpoints need a fixed step: give dt to choose it)"
+
+
+def _step_control(s: Mapping[str, Any], valves: bool = False) -> str:
+    """How the run of settings ``s`` chose its steps, as recorded in ``result.settings``
+    (and the NetCDF attribute ``solver_step_control``): error control, or a fixed step and
+    why. ``valves``: the circuit has valves, whose switches an error-controlled step does not
+    locate (the controller cuts the step by rejections; the achieved error there can exceed
+    the estimate: docs/physics.md §10, "The default run")."""
+    if s["rtol"] is not None:
+        note = "; valves switch inside steps (no event location)" if valves else ""
+        return f"error control (rtol {s['rtol']:g}){note}"
+    if s["dt"] is not None:
+        return "fixed step (dt)"
+    if s["method"] == "rk4":
+        return "fixed step (method rk4 has no error estimate; dopri5 is its error-controlled pair)"
+    return CHECKPOINT_STEP
+
+
+def _fixed_for_checkpoints(s: dict[str, Any], default: bool, overrides: Mapping[str, Any],
+                           resume: Any) -> None:
+    """A checkpointed (or resumed) run at the default tolerance takes the automatic fixed step
+    instead: a checkpoint does not carry the error control's state (step history, peaks). An
+    ``rtol`` or ``atol`` the user gave is left to the core to refuse, naming it."""
+    checkpointed = overrides.get("checkpoint") is not None or resume is not None
+    if checkpointed and default and s["atol"] is None:
+        s["rtol"] = None
 
 
 def _vessels(model: Model, selection: Any) -> list[str] | None:
@@ -284,10 +322,13 @@ def _result(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
     )
 
 
-def _run_settings(s: Mapping[str, Any], raw: Mapping[str, Any] | None) -> dict[str, Any]:
-    """The settings recorded with a result: the requested ones and, after the run, its facts."""
+def _run_settings(s: Mapping[str, Any], raw: Mapping[str, Any] | None,
+                  valves: bool = False) -> dict[str, Any]:
+    """The settings recorded with a result: the requested ones and, after the run, its facts
+    (``valves``: the circuit has valves, see :func:`_step_control`)."""
     settings = {k: s[k] for k in ("period", "cycles", "method", "output_every", "rho_infty",
                                   "until_periodic", "rtol")}
+    settings["step_control"] = _step_control(s, valves)
     if raw is not None:
         settings.update(method=raw["method"], dt=raw["dt"], cycles_run=raw["cycles_run"],
                         periodic_error=raw["periodic_error"], rk4_dt_max=raw.get("rk4_dt_max"))
@@ -414,12 +455,15 @@ def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     ``progress`` (bool or callback ``f(t, t_end)``), ``threads`` (default: every core; ``1``
     serial; large trees split their elimination over them, with the same bits for any number).
 
-    Error control (docs/physics.md §10): ``rtol`` (0 < rtol < 1) runs generalized-α with a
-    variable step whose estimated error of every unknown stays within ``atol + rtol·|y|``
+    Error control (docs/physics.md §10), the default without ``dt``: ``rtol`` (0 < rtol < 1,
+    default 1e-3) runs generalized-α (or, with ``method`` ``"auto"``/``"dopri5"``, the explicit
+    pair where it is cheaper) with a variable step whose estimated error of every unknown stays
+    within ``atol + rtol·|y|``
     (``atol``: a mapping ``{"pressure": Pa, "flow": m^3/s, "volume": m^3, "species":
     mol/m^3}``, defaults 1 Pa, 1e-9, 1e-9, 1e-6), output from the dense output at every
     ``output_every`` (which then never changes the solution); ``result.error_estimate`` gives
-    the largest estimate per kind. It excludes ``dt`` (a fixed step) and ``method="rk4"``.
+    the largest estimate per kind. A given ``dt`` is a fixed step (as is ``method="rk4"``,
+    and a checkpointed run without ``dt``); ``result.settings["step_control"]`` says which.
     ``estimate_space_error=True`` adds ``result.error_estimate["space"]``: the largest
     relative change of the input impedance at the flow or pressure inlets over the forcing's
     significant harmonics when every vessel's segments are doubled (docs/solvers.md,
@@ -468,7 +512,8 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     """`simulate` of a loaded model; ``resume``: the core state of a checkpoint."""
     space = _space_flag(overrides)
     overrides = {k: v for k, v in overrides.items() if k != "estimate_space_error"}
-    s = _settings(model, overrides)
+    s, default = _resolve(model, overrides)
+    _fixed_for_checkpoints(s, default, overrides, resume)
     _large_model_output(model, s, overrides)
     _check_output_memory(model, s, overrides)
     core = _checkpoints(model, overrides)
@@ -485,7 +530,8 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
                 from None
         raise
     extra = _split_heart_columns(raw, len(heart[2]))
-    result = _result(model, s, raw, _run_settings(s, raw), complete="error" not in raw)
+    result = _result(model, s, raw, _run_settings(s, raw, bool(heart[1])),
+                     complete="error" not in raw)
     if extra is not None:
         result.chamber_volume, result.valve_status = _heart_outputs(heart, extra)
     _raise_run_error(raw, result)
@@ -722,6 +768,7 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     empty = _empty_rows(model, s)
     # chamber volumes and valve status, as in simulate(): extra core columns per chunk
     heart = _heart_layout(model)
+    valves = bool(heart[1])
     core = {"extra_columns": heart[2]} if heart[2] else {}
     valves_open: dict[str, bool] = {}
 
@@ -734,8 +781,9 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
         return res
 
     template = dict(empty, data=np.zeros((0, empty["data"].shape[1] + len(heart[2]))))
-    store = ZarrAppender(path, dataset(result_of(dict(template), _run_settings(s, None),
-                                                 False)), time_chunk, overwrite=overwrite)
+    store = ZarrAppender(path, dataset(result_of(dict(template),
+                                                 _run_settings(s, None, valves), False)),
+                         time_chunk, overwrite=overwrite)
 
     # the bounds monitor checks each chunk as it passes (docs/physics.md §2.8)
     monitor = Monitor(model.transport_spec)
@@ -758,7 +806,7 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
         facts["error_estimate_space"] = inlet_space_error(model)
     raw, opened = _close_store(
         store, raw, lambda raw: dataset(result_of(dict(template),
-                                                  {**_run_settings(s, raw), **facts},
+                                                  {**_run_settings(s, raw, valves), **facts},
                                                   "error" not in raw)).attrs)
     _raise_run_error(raw, opened)
     _warn_not_periodic(model.name, _run_settings(s, raw), True)

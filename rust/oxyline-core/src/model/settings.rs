@@ -62,7 +62,12 @@ pub struct Settings {
     pub max_iterations: i64,
     pub transport: bool,
     /// Error control's relative tolerance (None: fixed steps); the run checks 0 < rtol < 1.
+    /// [`DEFAULT_RTOL`] where neither `rtol` nor a fixed `dt` is given and the method has an
+    /// error estimate (every method but `rk4`).
     pub rtol: Option<f64>,
+    /// `rtol` is the default, not given: a run that cannot be error-controlled (a checkpointed
+    /// one) may fall back to the automatic fixed step, saying so, instead of being refused.
+    pub rtol_default: bool,
     /// Error control's absolute tolerance per kind of unknown (SI); the run names an unknown
     /// kind.
     pub atol: Option<AbsoluteTolerances>,
@@ -256,7 +261,9 @@ pub fn resolve<N: Node>(sim: &N, overrides: &N, period: Option<f64>) -> Result<S
     let transport = flag(&t, &w)?;
     let rtol = get("rtol", Some(sim), "rtol", Val::Null);
     let atol = get("atol", Some(sim), "atol", Val::Null);
-    let (rtol, atol) = tolerances(&rtol, &atol)?;
+    let (given, atol) = tolerances(&rtol, &atol, dt.is_none() && method != "rk4")?;
+    let rtol_default = given.is_none() && dt.is_none() && method != "rk4";
+    let rtol = given.or(Some(DEFAULT_RTOL).filter(|_| rtol_default));
     let (th, w) = get("threads", Some(sim), "threads", Val::Null);
     let threads = match th.kind() {
         Kind::Null => None,
@@ -278,20 +285,28 @@ pub fn resolve<N: Node>(sim: &N, overrides: &N, period: Option<f64>) -> Result<S
         max_iterations,
         transport,
         rtol,
+        rtol_default,
         atol,
         threads,
     })
 }
+
+/// The relative tolerance of a run that gives neither `rtol` nor a fixed `dt`: the default
+/// run is error-controlled, so the output interval never changes its solution
+/// (docs/physics.md §10).
+pub const DEFAULT_RTOL: f64 = 1e-3;
 
 type Tolerance<N> = (Val<N>, String);
 /// Error control's `atol`: (kind, value) pairs.
 type AbsoluteTolerances = Vec<(String, f64)>;
 
 /// Error control's `rtol` (a finite number > 0) and `atol` (a mapping of kind to a finite
-/// number > 0), each named by where it came from.
+/// number > 0), each named by where it came from; `controlled`: the run is error-controlled
+/// without `rtol` (at the default), so `atol` alone is taken.
 fn tolerances<N: Node>(
     rtol: &Tolerance<N>,
     atol: &Tolerance<N>,
+    controlled: bool,
 ) -> Result<(Option<f64>, Option<AbsoluteTolerances>)> {
     let r = match rtol.0.kind() {
         Kind::Null => None,
@@ -318,9 +333,12 @@ fn tolerances<N: Node>(
             ));
         }
     };
-    if r.is_none() && a.is_some() {
+    if r.is_none() && a.is_some() && !controlled {
         // checked here, where every source of settings passes (a checkpoint's stored ones too)
-        return Err(setting(&atol.1, "needs rtol (error control)".to_string()));
+        return Err(setting(
+            &atol.1,
+            "needs error control (rtol, without a fixed dt or method 'rk4')".to_string(),
+        ));
     }
     Ok((r, a))
 }
@@ -430,6 +448,40 @@ mod tests {
         assert_eq!(s.output_every, 0.8 / 1000.0);
         assert_eq!((s.method.as_str(), s.start.as_str()), ("auto", "steady"));
         assert!(s.segments && s.transport && !s.output_all_cycles);
+    }
+
+    #[test]
+    fn a_run_without_dt_is_error_controlled_at_the_default_rtol() {
+        let r = |sim: serde_json::Value, o: serde_json::Value| resolve(&sim, &o, None).unwrap();
+        // no dt (or dt: auto), any method with an error estimate: the default tolerance
+        for sim in [
+            json!({}),
+            json!({"dt": "auto", "method": "generalized-alpha"}),
+        ] {
+            let s = r(sim, json!({}));
+            assert_eq!(
+                (s.rtol, s.rtol_default, s.dt),
+                (Some(DEFAULT_RTOL), true, None)
+            );
+        }
+        // a fixed dt (file or keyword) or RK4 (no error estimate): fixed steps as before
+        let s = r(json!({"dt": 1e-3}), json!({}));
+        assert_eq!((s.rtol, s.rtol_default), (None, false));
+        let s = r(json!({}), json!({"method": "rk4"}));
+        assert_eq!((s.rtol, s.rtol_default), (None, false));
+        // a given rtol is not the default; atol alone joins the default rtol
+        let s = r(json!({"rtol": 1e-4}), json!({}));
+        assert_eq!((s.rtol, s.rtol_default), (Some(1e-4), false));
+        let s = r(json!({}), json!({"atol": {"pressure": 0.5}}));
+        assert_eq!(s.rtol, Some(DEFAULT_RTOL));
+        assert_eq!(s.atol, Some(vec![("pressure".to_owned(), 0.5)]));
+        // ... but not a fixed step, which has no tolerance to meet
+        let e = resolve(&json!({"dt": 1e-3}), &json!({"atol": {"flow": 1e-9}}), None);
+        assert!(
+            e.unwrap_err()
+                .to_string()
+                .contains("atol needs error control")
+        );
     }
 
     #[test]

@@ -6,6 +6,7 @@ use super::adaptive::Adaptive;
 use super::checkpoint::{Checkpoints, Snapshot};
 use super::coupling::State;
 use super::mean_flow::MeanAbs;
+use super::periodic_steps::{NEAR_PERIODIC, PeriodicSteps};
 use super::recorder::Recorder;
 use super::settings::RunSettings;
 use super::svzerod::{CycleMeans, DerivedState};
@@ -34,6 +35,8 @@ pub(super) struct Cycles<'r, 'f> {
     released: bool,
     /// Error control (None: the fixed step).
     pub adaptive: Option<Adaptive>,
+    /// Error control waiting for periodicity: near-periodic cycles replay their steps.
+    periodic_steps: PeriodicSteps,
     /// Error control with the explicit pair.
     pub explicit: Option<super::explicit::Explicit>,
     /// svZeroDSolver's derived columns and cycle means (`RunSettings::svzerod`).
@@ -85,6 +88,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
             obs_row: Vec::new(),
             released: false,
             adaptive: None,
+            periodic_steps: PeriodicSteps::default(),
             explicit: None,
             derived: None,
             cycle_means: None,
@@ -332,16 +336,25 @@ impl<'r, 'f> Cycles<'r, 'f> {
         let n_out = ad.out_per_cycle;
         let mut next_out = 1;
         let mut t = t0;
+        let near = self.s.until_periodic.is_some()
+            && self
+                .s
+                .adaptive()
+                .is_some_and(|tol| self.periodic_error < NEAR_PERIODIC * tol.rtol);
+        self.periodic_steps.start_cycle(near);
         while t < t_end {
             let rem = t_end - t;
             // the last step ends on the cycle's end; a remainder under two steps is halved
-            let h = if ad.h >= rem * (1.0 - 1e-9) {
+            let h = if let Some(h) = self.periodic_steps.step(rem) {
+                h
+            } else if ad.h >= rem * (1.0 - 1e-9) {
                 rem
             } else if ad.h > 0.5 * rem {
                 0.5 * rem
             } else {
                 ad.h
             };
+            let replayed = self.periodic_steps.replaying();
             ad.save_start(&self.state);
             let stepped = self.state.advance_flow(t, h);
             let (err, kinds) = match stepped {
@@ -350,11 +363,13 @@ impl<'r, 'f> Cycles<'r, 'f> {
                 Err(e) if h <= ad.h_min() => return Err(e),
                 Err(_) => (f64::INFINITY, [0.0; 3]),
             };
-            if err > 1.0 && h > ad.h_min() {
+            let kept = replayed && self.periodic_steps.keeps(err);
+            if err > 1.0 && h > ad.h_min() && !kept {
                 ad.restore(&mut self.state);
                 ad.reject(h, err);
                 continue;
             }
+            self.periodic_steps.accepted(h);
             self.state.advance_species(t, h)?;
             ad.after_species(&self.state);
             let t_new = if h == rem { t_end } else { t + h };

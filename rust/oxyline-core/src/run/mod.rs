@@ -26,6 +26,7 @@ mod mean_flow;
 pub mod memory;
 mod outcome;
 mod pass;
+mod periodic_steps; // error control and until_periodic: near-periodic cycles replay their steps
 mod plan;
 mod recorder;
 mod resolve; // RK4's step for valves and chambers by step doubling

@@ -244,6 +244,7 @@ pub(crate) fn resolve_settings<'py>(
     d.set_item("max_iterations", s.max_iterations)?;
     d.set_item("transport", s.transport)?;
     d.set_item("rtol", s.rtol)?;
+    d.set_item("rtol_default", s.rtol_default)?;
     d.set_item("threads", s.threads)?;
     match s.atol {
         Some(atol) => {
