@@ -36,6 +36,8 @@ pub(super) struct Cycles<'r, 'f> {
     pub adaptive: Option<Adaptive>,
     /// Error control with the explicit pair.
     pub explicit: Option<super::explicit::Explicit>,
+    /// The valve events of an error-controlled run (None: no switching element).
+    pub events: Option<super::events::Events>,
     /// svZeroDSolver's derived columns and cycle means (`RunSettings::svzerod`).
     derived: Option<DerivedState>,
     cycle_means: Option<CycleMeans>,
@@ -86,6 +88,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
             released: false,
             adaptive: None,
             explicit: None,
+            events: None,
             derived: None,
             cycle_means: None,
             rate_scratch: Default::default(),
@@ -332,10 +335,15 @@ impl<'r, 'f> Cycles<'r, 'f> {
         let n_out = ad.out_per_cycle;
         let mut next_out = 1;
         let mut t = t0;
+        // a step taken again to end on a valve event: its length, the valve, and the step
+        // the controller had proposed
+        let mut cut: Option<(f64, usize, f64)> = None;
         while t < t_end {
             let rem = t_end - t;
             // the last step ends on the cycle's end; a remainder under two steps is halved
-            let h = if ad.h >= rem * (1.0 - 1e-9) {
+            let h = if let Some((h_cut, ..)) = cut {
+                h_cut
+            } else if ad.h >= rem * (1.0 - 1e-9) {
                 rem
             } else if ad.h > 0.5 * rem {
                 0.5 * rem
@@ -353,8 +361,29 @@ impl<'r, 'f> Cycles<'r, 'f> {
             if err > 1.0 && h > ad.h_min() {
                 ad.restore(&mut self.state);
                 ad.reject(h, err);
+                cut = None;
                 continue;
             }
+            let switch = match (cut.take(), self.events.as_ref()) {
+                (Some((_, k, proposed)), _) => Some((k, proposed)),
+                (None, Some(ev)) => {
+                    let (y, yd) = (&self.state.y, &self.state.yd);
+                    let at = |th: f64| {
+                        let d = ad.dense(th, h, y, yd);
+                        move |i: usize| d.value(i)
+                    };
+                    match ev.locate(&|i| y[i], at, ad.rtol()) {
+                        Some(loc) if loc.theta * h > ad.h_min() && loc.theta < 1.0 - ad.rtol() => {
+                            ad.restore(&mut self.state);
+                            cut = Some((loc.theta * h, loc.switch, ad.h));
+                            continue;
+                        }
+                        Some(loc) => Some((loc.switch, ad.h)),
+                        None => None,
+                    }
+                }
+                (None, None) => None,
+            };
             self.state.advance_species(t, h)?;
             ad.after_species(&self.state);
             let t_new = if h == rem { t_end } else { t + h };
@@ -367,6 +396,14 @@ impl<'r, 'f> Cycles<'r, 'f> {
                 next_out += 1;
             }
             ad.accept(&self.state, h, err, kinds);
+            if let Some((k, proposed)) = switch {
+                self.switch_valves(k, t_new);
+                // the error history straddles the kink: the controller starts again, from
+                // the step it proposed before the event
+                ad.restart(proposed);
+            } else if let Some(ev) = self.events.as_mut() {
+                ev.settle();
+            }
             self.steps += 1;
             t = t_new;
             if ad.steps % 64 == 0 || t == t_end {
@@ -377,6 +414,23 @@ impl<'r, 'f> Cycles<'r, 'f> {
             }
         }
         Ok(())
+    }
+
+    /// Switch valve `k` at `time` (the step just taken ends on its event), and every other
+    /// valve the state there finds switched too.
+    pub(super) fn switch_valves(&mut self, k: usize, time: f64) {
+        let Some(ev) = self.events.as_mut() else {
+            return;
+        };
+        let st = &mut self.state;
+        ev.settle();
+        ev.switch(k, time, &mut st.y, &mut st.yd);
+        let y = &st.y;
+        for other in ev.due_at(&|i| y[i]) {
+            if other != k {
+                ev.switch(other, time, &mut st.y, &mut st.yd);
+            }
+        }
     }
 
     /// The output row at `time`, θ into the step of `h` just taken: the probes from the

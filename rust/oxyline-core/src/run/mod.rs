@@ -19,6 +19,7 @@ mod adaptive; // error control: variable step, dense output (docs/physics.md §1
 pub mod checkpoint;
 mod coupling;
 mod cycle;
+mod events; // valve events of the error-controlled runs (docs/physics.md §10.5)
 mod explicit; // error control with the explicit pair (docs/physics.md §10.4)
 mod flow_harmonics; // inlet renewal: the first pass's flow harmonics
 mod heap; // freed pages back to the OS before a large pass's cycle loop
@@ -33,6 +34,7 @@ mod settings;
 mod svzerod; // svZeroDSolver's output and stop conventions (the drop-in)
 mod two_pass;
 
+pub use events::Event;
 pub use checkpoint::{CHECKPOINT_VERSION, Checkpoints, Every, Snapshot};
 pub use outcome::{ErrorControlOutcome, Outcome, TransportOutcome};
 pub use recorder::{Chunk, OutputSink};
