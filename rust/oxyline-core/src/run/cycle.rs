@@ -5,6 +5,7 @@
 use super::adaptive::Adaptive;
 use super::checkpoint::{Checkpoints, Snapshot};
 use super::coupling::State;
+use super::events::{Cut, Next, decide};
 use super::mean_flow::MeanAbs;
 use super::recorder::Recorder;
 use super::settings::RunSettings;
@@ -335,14 +336,13 @@ impl<'r, 'f> Cycles<'r, 'f> {
         let n_out = ad.out_per_cycle;
         let mut next_out = 1;
         let mut t = t0;
-        // a step taken again to end on a valve event: its length, the valve, and the step
-        // the controller had proposed
-        let mut cut: Option<(f64, usize, f64)> = None;
+        // a step taken again to end on a valve event
+        let mut cut: Option<Cut> = None;
         while t < t_end {
             let rem = t_end - t;
             // the last step ends on the cycle's end; a remainder under two steps is halved
-            let h = if let Some((h_cut, ..)) = cut {
-                h_cut
+            let h = if let Some(c) = cut {
+                c.h
             } else if ad.h >= rem * (1.0 - 1e-9) {
                 rem
             } else if ad.h > 0.5 * rem {
@@ -364,26 +364,23 @@ impl<'r, 'f> Cycles<'r, 'f> {
                 cut = None;
                 continue;
             }
-            let switch = match (cut.take(), self.events.as_ref()) {
-                (Some((_, k, proposed)), _) => Some((k, proposed)),
-                (None, Some(ev)) => {
+            let next = match self.events.as_ref() {
+                Some(ev) => {
                     let (y, yd) = (&self.state.y, &self.state.yd);
                     let at = |th: f64| {
                         let d = ad.dense(th, h, y, yd);
                         move |i: usize| d.value(i)
                     };
-                    match ev.locate(&|i| y[i], at, ad.rtol()) {
-                        Some(loc) if loc.theta * h > ad.h_min() && loc.theta < 1.0 - ad.rtol() => {
-                            ad.restore(&mut self.state);
-                            cut = Some((loc.theta * h, loc.switch, ad.h));
-                            continue;
-                        }
-                        Some(loc) => Some((loc.switch, ad.h)),
-                        None => None,
-                    }
+                    let found = ev.locate(&|i| y[i], at, ad.rtol());
+                    decide(found, (h, ad.h_min(), ad.rtol()), ad.h, cut.take())
                 }
-                (None, None) => None,
+                None => Next::Go,
             };
+            if let Next::Redo(c) = next {
+                ad.restore(&mut self.state);
+                cut = Some(c);
+                continue;
+            }
             self.state.advance_species(t, h)?;
             ad.after_species(&self.state);
             let t_new = if h == rem { t_end } else { t + h };
@@ -396,13 +393,18 @@ impl<'r, 'f> Cycles<'r, 'f> {
                 next_out += 1;
             }
             ad.accept(&self.state, h, err, kinds);
-            if let Some((k, proposed)) = switch {
-                self.switch_valves(k, t_new);
-                // the error history straddles the kink: the controller starts again, from
-                // the step it proposed before the event
-                ad.restart(proposed);
-            } else if let Some(ev) = self.events.as_mut() {
-                ev.settle();
+            match next {
+                Next::Switch(k, proposed) => {
+                    self.switch_valves(k, t_new);
+                    // the error history straddles the kink: the controller starts again,
+                    // from the step it proposed before the event
+                    ad.restart(proposed);
+                }
+                Next::Approach(h_next) => {
+                    ad.h = ad.h.min(h_next);
+                    self.settle_events();
+                }
+                _ => self.settle_events(),
             }
             self.steps += 1;
             t = t_new;
@@ -414,6 +416,13 @@ impl<'r, 'f> Cycles<'r, 'f> {
             }
         }
         Ok(())
+    }
+
+    /// A step without an event was accepted.
+    pub(super) fn settle_events(&mut self) {
+        if let Some(ev) = self.events.as_mut() {
+            ev.settle();
+        }
     }
 
     /// Switch valve `k` at `time` (the step just taken ends on its event), and every other

@@ -44,6 +44,65 @@ pub(super) struct Located {
     pub switch: usize,
 }
 
+/// Re-locations of one event at most (each on a step shorter than the one before).
+const MAX_CUTS: u8 = 4;
+
+/// The share of the step that straddled an event a step is held to when its cut fell short
+/// of the event (the interpolant's root was late): the next step straddles it by a tenth,
+/// where an interpolant across the kink errs a hundredth as much (second order in the step).
+const APPROACH: f64 = 0.1;
+
+/// A step taken again to end on an event: its length, the step the controller had proposed
+/// before, the length of the step that straddled the event, and how many cuts so far.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Cut {
+    pub h: f64,
+    pub proposed: f64,
+    pub straddle: f64,
+    pub tries: u8,
+}
+
+/// What follows an accepted step (see [`decide`]).
+pub(super) enum Next {
+    /// Take the step again, shorter, to end on the event.
+    Redo(Cut),
+    /// Switch the valve at the step's end; the controller goes on from the step it proposed.
+    Switch(usize, f64),
+    /// A cut fell short of its event: the next step is at most this long.
+    Approach(f64),
+    /// No event.
+    Go,
+}
+
+/// The decision after a step of `h` accepted by the error control: an event `found` within
+/// the step is cut to unless it lies within `tol`·h of its end (or a cut would be below
+/// `h_min`, or the event was cut to `MAX_CUTS` times); a cut step is itself searched again,
+/// so an interpolant's root across the kink is refined on shorter steps.
+pub(super) fn decide(
+    found: Option<Located>,
+    (h, h_min, tol): (f64, f64, f64),
+    proposed: f64,
+    cut: Option<Cut>,
+) -> Next {
+    let proposed = cut.map_or(proposed, |c| c.proposed);
+    let tries = cut.map_or(0, |c| c.tries);
+    match found {
+        Some(loc) if loc.theta * h > h_min && loc.theta < 1.0 - tol && tries < MAX_CUTS => {
+            Next::Redo(Cut {
+                h: loc.theta * h,
+                proposed,
+                straddle: h,
+                tries: tries + 1,
+            })
+        }
+        Some(loc) => Next::Switch(loc.switch, proposed),
+        None => match cut {
+            Some(c) => Next::Approach(APPROACH * c.straddle),
+            None => Next::Go,
+        },
+    }
+}
+
 /// The switches of a circuit and their statuses.
 pub(super) struct Events {
     switches: Vec<Switch>,

@@ -9,7 +9,7 @@
 
 use super::adaptive::{ACCUMULATION, FLOW_SHARE_FLOOR, NO_VESSEL, flow_groups};
 use super::coupling::{Flow, State};
-use super::events::{Events, Located};
+use super::events::{Cut, Events, Located, Next, decide};
 use super::cycle::{CycleRows, Cycles};
 use super::settings::{Method, RunSettings};
 use crate::assemble::auto_segments::{UNFORCED_FREQUENCY, waveform_frequency};
@@ -403,13 +403,12 @@ impl Cycles<'_, '_> {
         let mut next_out = 1;
         let mut t = t0;
         ex.start(&self.state);
-        // a step taken again to end on a valve event: its length, the valve, and the step
-        // the controller had proposed
-        let mut cut: Option<(f64, usize, f64)> = None;
+        // a step taken again to end on a valve event
+        let mut cut: Option<Cut> = None;
         while t < t_end {
             let rem = t_end - t;
-            let h = if let Some((h_cut, ..)) = cut {
-                h_cut
+            let h = if let Some(c) = cut {
+                c.h
             } else if ex.h >= rem * (1.0 - 1e-9) {
                 rem
             } else if ex.h > 0.5 * rem {
@@ -438,20 +437,20 @@ impl Cycles<'_, '_> {
                 cut = None;
                 continue;
             }
-            let switch = match (cut.take(), self.events.as_ref()) {
-                (Some((_, k, proposed)), _) => Some((k, proposed)),
-                (None, Some(ev)) => match locate_event(ev, &mut self.state, t, h, ex.tol.rtol) {
-                    Some(loc) if loc.theta * h > ex.h_min && loc.theta < 1.0 - ex.tol.rtol => {
-                        let (dp, y, z) = parts(&mut self.state);
-                        dp.reject(y, z);
-                        cut = Some((loc.theta * h, loc.switch, ex.h));
-                        continue;
-                    }
-                    Some(loc) => Some((loc.switch, ex.h)),
-                    None => None,
-                },
-                (None, None) => None,
+            let rtol = ex.tol.rtol;
+            let next = match self.events.as_ref() {
+                Some(ev) => {
+                    let found = locate_event(ev, &mut self.state, t, h, rtol);
+                    decide(found, (h, ex.h_min, rtol), ex.h, cut.take())
+                }
+                None => Next::Go,
             };
+            if let Next::Redo(c) = next {
+                let (dp, y, z) = parts(&mut self.state);
+                dp.reject(y, z);
+                cut = Some(c);
+                continue;
+            }
             let t_new = if h == rem { t_end } else { t + h };
             while next_out <= n_out {
                 let tau = t0 + period * next_out as f64 / n_out as f64;
@@ -464,14 +463,19 @@ impl Cycles<'_, '_> {
             let (dp, y, z) = parts(&mut self.state);
             ex.accept(y, z, (dp.start_rate(), dp.end_rate()), h, kinds);
             dp.accept();
-            if let Some((k, proposed)) = switch {
-                self.switch_valves(k, t_new);
-                // the pair starts again at the event: a new first stage (the algebraic
-                // unknowns solved with the valves' new state)
-                parts(&mut self.state).0.reset();
-                ex.h = ex.h.max(proposed).min(ex.h_max);
-            } else if let Some(ev) = self.events.as_mut() {
-                ev.settle();
+            match next {
+                Next::Switch(k, proposed) => {
+                    self.switch_valves(k, t_new);
+                    // the pair starts again at the event: a new first stage (the algebraic
+                    // unknowns solved with the valves' new state)
+                    parts(&mut self.state).0.reset();
+                    ex.h = ex.h.max(proposed).min(ex.h_max);
+                }
+                Next::Approach(h_next) => {
+                    ex.h = ex.h.min(h_next);
+                    self.settle_events();
+                }
+                _ => self.settle_events(),
             }
             self.steps += 1;
             t = t_new;
