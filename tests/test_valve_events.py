@@ -138,12 +138,14 @@ def test_heart_valve_status_is_consistent_with_pressure_and_flow_at_every_row(
         rtol: float) -> None:
     """The heart block's four on/off valves under error control: the status the output reads
     from each valve's pressure difference and flow at every row (docs/physics.md §1.10) is
-    the status of the located events, except at rows within the event's tolerance of it."""
+    the status of the located events, except at rows within two output intervals of one:
+    the output's rule reads a valve closed by generalized-α at its Newton-level flow of
+    either sign (docs/physics.md §1.10), the events at the flow tolerance of the control."""
     res = oxyline.simulate(oxyline.load_model(heart()), rtol=rtol, cycles=3,
                            output_every=1e-3, output_cycles="all", method="generalized-alpha")
     assert {v for _, v, _ in res.valve_events} == set(res.valve_status)
     times = np.array([t for t, _, _ in res.valve_events])
-    near = np.min(np.abs(res.time[:, None] - times[None, :]), axis=1) <= 1e-3 * rtol
+    near = np.min(np.abs(res.time[:, None] - times[None, :]), axis=1) <= 2e-3 + 1e-9
     for name, status in res.valve_status.items():
         assert status.min() == 0 and status.max() == 1, name  # it opens and closes
         want = status_from_events(res, name, int(status[0]))

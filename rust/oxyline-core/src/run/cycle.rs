@@ -421,7 +421,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
     /// A step without an event was accepted.
     pub(super) fn settle_events(&mut self) {
         if let Some(ev) = self.events.as_mut() {
-            ev.settle();
+            ev.settle(&self.state.y);
         }
     }
 
@@ -432,7 +432,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
             return;
         };
         let st = &mut self.state;
-        ev.settle();
+        ev.settle(&st.y);
         ev.switch(k, time, &mut st.y, &mut st.yd);
         let y = &st.y;
         for other in ev.due_at(&|i| y[i]) {

@@ -112,6 +112,12 @@ pub(super) struct Events {
     /// still reads the old status at the new step's start is the root's tolerance, not an
     /// event (without this the status would chatter back at the same time).
     fresh: Vec<bool>,
+    /// A flow at most atol + rtol·(the valve's largest flow so far) is no forward flow of an
+    /// on/off valve (the error control's own flow tolerance): generalized-α leaves a valve it
+    /// closed itself at a Newton correction's flow of either sign, which must not hold it
+    /// open.
+    flow_tol: (f64, f64),
+    peak: Vec<f64>,
     pub log: Vec<Event>,
 }
 
@@ -127,7 +133,7 @@ const HEART_VALVES: [&str; 4] = ["tricuspid", "pulmonary", "mitral", "aortic"];
 
 impl Events {
     /// The circuit's switches (None without any), their statuses read at the start `y`.
-    pub fn new(dae: &Dae, y: &[f64]) -> Option<Self> {
+    pub fn new(dae: &Dae, y: &[f64], flow_tol: (f64, f64)) -> Option<Self> {
         let (mut switches, mut names) = (Vec::new(), Vec::new());
         for el in &dae.elements {
             let own = el.switches();
@@ -154,6 +160,8 @@ impl Events {
             .collect();
         Some(Events {
             fresh: vec![false; switches.len()],
+            flow_tol,
+            peak: switches.iter().map(|sw| y[sw.unknowns[2]].abs()).collect(),
             switches,
             names,
             open,
@@ -168,7 +176,10 @@ impl Events {
         let [b, f, q] = sw.unknowns;
         let dp = v(b) - v(f);
         match (self.open[k], sw.on_off) {
-            (true, true) => dp.max(sw.resistance * v(q)),
+            (true, true) => {
+                let tol = self.flow_tol.0 + self.flow_tol.1 * self.peak[k];
+                dp.max(sw.resistance * (v(q) - tol))
+            }
             (true, false) => dp,
             // a closed valve reopens where ΔP turns positive (ΔP = 0 keeps the piecewise
             // law's R_max)
@@ -230,9 +241,13 @@ impl Events {
         false
     }
 
-    /// A step without events was accepted: no switch is fresh any more.
-    pub fn settle(&mut self) {
+    /// A step without events was accepted, ending in `y`: no switch is fresh any more; the
+    /// valves' largest flows so far.
+    pub fn settle(&mut self, y: &[f64]) {
         self.fresh.fill(false);
+        for (p, sw) in self.peak.iter_mut().zip(&self.switches) {
+            *p = p.max(y[sw.unknowns[2]].abs());
+        }
     }
 
     /// The switches whose function at the state `v` says they changed.
@@ -305,6 +320,8 @@ mod tests {
             names: vec!["a".into(), "b".into()],
             open: vec![true, true],
             fresh: vec![false, false],
+            flow_tol: (0.0, 0.0),
+            peak: vec![0.0, 0.0],
             log: Vec::new(),
         };
         // ΔP < 0 with forward flow: the pressure rule closes, the on/off rule stays open
@@ -336,6 +353,8 @@ mod tests {
             names: vec!["a".into(), "b".into()],
             open: vec![true, true],
             fresh: vec![false, false],
+            flow_tol: (0.0, 0.0),
+            peak: vec![0.0, 0.0],
             log: Vec::new(),
         };
         // ΔP_a = 1 − 2θ (root 0.5), ΔP_b = 1 − 4θ (root 0.25)
