@@ -149,7 +149,9 @@ pub fn check_unswitched(dae: &Dae) -> Result<()> {
     match switching {
         Some(el) => Err(Error::model(
             el.name(),
-            format!("'auto' keeps 'generalized-alpha' for switching elements (valves), not '{NAME}'"),
+            format!(
+                "'auto' keeps 'generalized-alpha' for switching elements (valves), not '{NAME}'"
+            ),
         )),
         None => Ok(()),
     }

@@ -9,8 +9,8 @@
 
 use super::adaptive::{ACCUMULATION, FLOW_SHARE_FLOOR, NO_VESSEL, flow_groups};
 use super::coupling::{Flow, State};
-use super::events::{Cut, Events, Located, Next, decide};
 use super::cycle::{CycleRows, Cycles};
+use super::events::{Cut, Events, Located, Next, decide};
 use super::settings::{Method, RunSettings};
 use crate::assemble::auto_segments::{UNFORCED_FREQUENCY, waveform_frequency};
 use crate::circuit::{Dae, Regime};
@@ -536,13 +536,7 @@ impl Cycles<'_, '_> {
 /// The first valve event within the step of `h` from `t` just taken (see
 /// [`Events::locate`]): the switching functions on the continuous extension, the algebraic
 /// unknowns (a valve's node pressures) solved at each θ the root finder asks for.
-fn locate_event(
-    ev: &Events,
-    st: &mut State<'_, '_>,
-    t: f64,
-    h: f64,
-    rtol: f64,
-) -> Option<Located> {
+fn locate_event(ev: &Events, st: &mut State<'_, '_>, t: f64, h: f64, rtol: f64) -> Option<Located> {
     let (dp, y, _) = parts(st);
     let y: &[f64] = y;
     let dense = RefCell::new((dp, Vec::new(), Vec::new(), Vec::new()));

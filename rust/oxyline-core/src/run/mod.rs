@@ -34,8 +34,8 @@ mod settings;
 mod svzerod; // svZeroDSolver's output and stop conventions (the drop-in)
 mod two_pass;
 
-pub use events::Event;
 pub use checkpoint::{CHECKPOINT_VERSION, Checkpoints, Every, Snapshot};
+pub use events::Event;
 pub use outcome::{ErrorControlOutcome, Outcome, TransportOutcome};
 pub use recorder::{Chunk, OutputSink};
 pub use resolve::{Refinement, rk4_step_refinement};
