@@ -6,6 +6,7 @@ of generalized-α."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -41,7 +42,7 @@ def source(t: np.ndarray | float) -> np.ndarray | float:
     return A * np.cos(W * t)
 
 
-def phase(opened: bool, t0: float, p0: float):  # noqa: ANN202 (a closure)
+def phase(opened: bool, t0: float, p0: float) -> Callable[[Any], Any]:
     """The compliance pressure of one phase from (t0, p0): C P' = (P_s − P)/R_k − P/R_out,
     a linear ODE with a sinusoidal source, solved in closed form."""
     r = (R_OPEN if opened else R_CLOSED) + R_SERIES
@@ -69,7 +70,7 @@ def exact_events(p0: float, t_end: float) -> list[tuple[float, bool]]:
         if sign * g[k - 1] <= 0.0:  # switched at the phase's start (a start at P_s = P_c)
             t = t0
         else:
-            t = brentq(lambda s: source(s) - p(s), grid[k - 1], grid[k], xtol=1e-14)
+            t = brentq(lambda s, p=p: source(s) - p(s), grid[k - 1], grid[k], xtol=1e-14)
         opened = not opened
         events.append((t, opened))
         t0, p = t, phase(opened, t, p(t))
