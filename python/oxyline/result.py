@@ -222,6 +222,10 @@ class Result:
     #: ``<vessel>:tricuspid|pulmonary|mitral|aortic`` (its on/off rule: open also while the
     #: flow is positive; docs/physics.md §1.10)
     valve_status: dict[str, np.ndarray] = field(default_factory=dict)
+    #: the valves' status changes an error-controlled run located (docs/physics.md §10.5):
+    #: (run time in s from the run's start, valve name as in ``valve_status``, True for an
+    #: opening), in time order; empty for a fixed step
+    valve_events: list[tuple[float, str, bool]] = field(default_factory=list)
     #: the model it was run from, as JSON in the native schema (SI), so that a result file
     #: rebuilds its model (``oxyline plot`` needs no ``--model``); None above
     #: :data:`MAX_MODEL_JSON` characters (a whole tree), where only the name is kept

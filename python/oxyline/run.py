@@ -534,6 +534,7 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
                      complete="error" not in raw)
     if extra is not None:
         result.chamber_volume, result.valve_status = _heart_outputs(heart, extra)
+    result.valve_events = [(float(t), str(v), bool(o)) for t, v, o in raw.get("valve_events", ())]
     _raise_run_error(raw, result)
     if space:  # one refinement of every vessel: the inlet impedance's change
         from oxyline.convergence import inlet_space_error

@@ -173,6 +173,12 @@ pub(crate) fn outcome_dict(py: Python<'_>, out: Outcome) -> PyResult<Bound<'_, P
         d.set_item("rejected_steps", ec.rejected)?;
         d.set_item("dt_min", ec.dt_min)?;
         d.set_item("dt_max", ec.dt_max)?;
+        let events: Vec<(f64, &str, bool)> = ec
+            .events
+            .iter()
+            .map(|e| (e.time, e.valve.as_str(), e.opened))
+            .collect();
+        d.set_item("valve_events", events)?;
     }
     if let Some(lim) = &out.stability {
         d.set_item("rk4_dt_max", lim.dt_max)?;

@@ -260,6 +260,27 @@ impl Element for HeartPulmonary {
     fn switched_unknowns(&self) -> Vec<usize> {
         self.unknowns.flow.to_vec()
     }
+    /// The four on/off valves (tricuspid, pulmonary, mitral, aortic), read as [`Self::valves`].
+    fn switches(&self) -> Vec<super::Switch> {
+        let (p, q) = (self.unknowns.pressure, self.unknowns.flow);
+        let ends = [
+            (p[RA], p[RV]),
+            (p[RV], self.unknowns.pulmonary),
+            (p[LA], p[LV]),
+            (p[LV], p[AO]),
+        ];
+        (0..4)
+            .map(|k| super::Switch {
+                unknowns: [ends[k].0, ends[k].1, q[k]],
+                on_off: true,
+                resistance: if self.params.valve_resistance[k] > 0.0 {
+                    self.params.valve_resistance[k]
+                } else {
+                    1.0
+                },
+            })
+            .collect()
+    }
     fn is_nonlinear(&self) -> bool {
         true
     }

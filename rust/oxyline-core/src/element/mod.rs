@@ -35,6 +35,20 @@ pub mod valve;
 
 use std::fmt::Debug;
 
+/// A switching law's event inputs (docs/physics.md §10.5): where a valve's status is read.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Switch {
+    /// [pressure behind, pressure in front, flow] unknowns.
+    pub unknowns: [usize; 3],
+    /// The heart block's on/off rule (open also while its flow is forward; a closed valve's
+    /// flow is held at zero); else the pressure rule (open while the pressure behind exceeds
+    /// the pressure in front).
+    pub on_off: bool,
+    /// A resistance turning the flow into a pressure in the closing function of the on/off
+    /// rule, max(ΔP, R Q) (any positive value locates the same root).
+    pub resistance: f64,
+}
+
 /// A circuit element that is nonlinear in the state or varies in time. Row and column indices
 /// are unknowns of the assembled DAE.
 pub trait Element: Debug + Send + Sync {
@@ -104,6 +118,11 @@ pub trait Element: Debug + Send + Sync {
     /// [`Element::valve_branch`]).
     fn valve_flow(&self, _y: &[f64]) -> f64 {
         0.0
+    }
+    /// The element's switches, whose status changes are located as events by the
+    /// error-controlled runs (docs/physics.md §10.5). Default: none.
+    fn switches(&self) -> Vec<Switch> {
+        Vec::new()
     }
     /// c depends on the state other than linearly (Newton refactorises per iteration).
     fn is_nonlinear(&self) -> bool;

@@ -147,6 +147,15 @@ impl Element for Valve {
         let dp = self.state(y).1;
         -dp / self.law.resistance(dp).0
     }
+    /// Open while P_from > P_to (the piecewise law's switch, the tanh law's midpoint).
+    fn switches(&self) -> Vec<super::Switch> {
+        let [(q, _), (_, from), (_, to)] = self.pattern;
+        vec![super::Switch {
+            unknowns: [from, to, q],
+            on_off: false,
+            resistance: self.law.r_min().max(f64::MIN_POSITIVE),
+        }]
+    }
     fn is_nonlinear(&self) -> bool {
         true
     }

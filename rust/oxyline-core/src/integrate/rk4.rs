@@ -341,6 +341,11 @@ impl<'a> Rk4<'a> {
         })
     }
 
+    /// The element index of the first stiff branch's valve (None without one).
+    pub fn stiff_valve(&self) -> Option<usize> {
+        self.stiff.first().map(|b| b.valve)
+    }
+
     /// Number of stiff branches (valves behind inductors, see `stiff`).
     pub fn stiff_branches(&self) -> usize {
         self.stiff.len()

@@ -253,6 +253,20 @@ impl Adaptive {
         }
     }
 
+    /// The relative tolerance.
+    pub fn rtol(&self) -> f64 {
+        self.tol.rtol
+    }
+
+    /// After a valve event at the end of the step just accepted: the estimates start again
+    /// from the event's state (first order, as at the run's start; the extrapolation through
+    /// the last three states would straddle the kink), with the larger of the step the
+    /// controller proposes and `proposed`, its proposal before the event.
+    pub fn restart(&mut self, proposed: f64) {
+        self.history = 0;
+        self.h = self.h.max(proposed).min(self.control.h_max);
+    }
+
     /// The smallest step the controller takes (a step there is accepted whatever its error).
     pub fn h_min(&self) -> f64 {
         self.control.h_min

@@ -5,6 +5,7 @@
 use super::adaptive::Adaptive;
 use super::checkpoint::{Checkpoints, Snapshot};
 use super::coupling::State;
+use super::events::{Cut, Next, decide};
 use super::mean_flow::MeanAbs;
 use super::periodic_steps::{NEAR_PERIODIC, PeriodicSteps};
 use super::recorder::Recorder;
@@ -39,6 +40,8 @@ pub(super) struct Cycles<'r, 'f> {
     periodic_steps: PeriodicSteps,
     /// Error control with the explicit pair.
     pub explicit: Option<super::explicit::Explicit>,
+    /// The valve events of an error-controlled run (None: no switching element).
+    pub events: Option<super::events::Events>,
     /// svZeroDSolver's derived columns and cycle means (`RunSettings::svzerod`).
     derived: Option<DerivedState>,
     cycle_means: Option<CycleMeans>,
@@ -90,6 +93,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
             adaptive: None,
             periodic_steps: PeriodicSteps::default(),
             explicit: None,
+            events: None,
             derived: None,
             cycle_means: None,
             rate_scratch: Default::default(),
@@ -342,10 +346,14 @@ impl<'r, 'f> Cycles<'r, 'f> {
                 .adaptive()
                 .is_some_and(|tol| self.periodic_error < NEAR_PERIODIC * tol.rtol);
         self.periodic_steps.start_cycle(near);
+        // a step taken again to end on a valve event
+        let mut cut: Option<Cut> = None;
         while t < t_end {
             let rem = t_end - t;
             // the last step ends on the cycle's end; a remainder under two steps is halved
-            let h = if let Some(h) = self.periodic_steps.step(rem) {
+            let h = if let Some(c) = cut {
+                c.h
+            } else if let Some(h) = self.periodic_steps.step(rem) {
                 h
             } else if ad.h >= rem * (1.0 - 1e-9) {
                 rem
@@ -367,6 +375,26 @@ impl<'r, 'f> Cycles<'r, 'f> {
             if err > 1.0 && h > ad.h_min() && !kept {
                 ad.restore(&mut self.state);
                 ad.reject(h, err);
+                cut = None;
+                continue;
+            }
+            let next = match self.events.as_ref() {
+                Some(ev) => {
+                    let (y, yd) = (&self.state.y, &self.state.yd);
+                    let at = |th: f64| {
+                        let d = ad.dense(th, h, y, yd);
+                        move |i: usize| d.value(i)
+                    };
+                    let found = ev.locate(&|i| y[i], at, ad.rtol());
+                    decide(found, (h, ad.h_min(), ad.rtol()), ad.h, cut.take())
+                }
+                None => Next::Go,
+            };
+            if let Next::Redo(c) = next {
+                ad.restore(&mut self.state);
+                // an event moves the cycle's steps: the controller takes over from here
+                self.periodic_steps.stop();
+                cut = Some(c);
                 continue;
             }
             self.periodic_steps.accepted(h);
@@ -382,6 +410,19 @@ impl<'r, 'f> Cycles<'r, 'f> {
                 next_out += 1;
             }
             ad.accept(&self.state, h, err, kinds);
+            match next {
+                Next::Switch(k, proposed) => {
+                    self.switch_valves(k, t_new);
+                    // the error history straddles the kink: the controller starts again,
+                    // from the step it proposed before the event
+                    ad.restart(proposed);
+                }
+                Next::Approach(h_next) => {
+                    ad.h = ad.h.min(h_next);
+                    self.settle_events();
+                }
+                _ => self.settle_events(),
+            }
             self.steps += 1;
             t = t_new;
             if ad.steps % 64 == 0 || t == t_end {
@@ -392,6 +433,30 @@ impl<'r, 'f> Cycles<'r, 'f> {
             }
         }
         Ok(())
+    }
+
+    /// A step without an event was accepted.
+    pub(super) fn settle_events(&mut self) {
+        if let Some(ev) = self.events.as_mut() {
+            ev.settle(&self.state.y);
+        }
+    }
+
+    /// Switch valve `k` at `time` (the step just taken ends on its event), and every other
+    /// valve the state there finds switched too.
+    pub(super) fn switch_valves(&mut self, k: usize, time: f64) {
+        let Some(ev) = self.events.as_mut() else {
+            return;
+        };
+        let st = &mut self.state;
+        ev.settle(&st.y);
+        ev.switch(k, time, &mut st.y, &mut st.yd);
+        let y = &st.y;
+        for other in ev.due_at(&|i| y[i]) {
+            if other != k {
+                ev.switch(other, time, &mut st.y, &mut st.yd);
+            }
+        }
     }
 
     /// The output row at `time`, θ into the step of `h` just taken: the probes from the

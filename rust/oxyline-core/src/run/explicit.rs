@@ -10,6 +10,7 @@
 use super::adaptive::{ACCUMULATION, FLOW_SHARE_FLOOR, NO_VESSEL, flow_groups};
 use super::coupling::{Flow, State};
 use super::cycle::{CycleRows, Cycles};
+use super::events::{Cut, Events, Located, Next, decide};
 use super::settings::{Method, RunSettings};
 use crate::assemble::auto_segments::{UNFORCED_FREQUENCY, waveform_frequency};
 use crate::circuit::{Dae, Regime};
@@ -20,6 +21,7 @@ use crate::integrate::rk4::{Rk4, Uncoupled};
 use crate::integrate::stability::{SpectrumMethod, StabilityLimit, rk4_limit_probed};
 use crate::integrate::steady::SteadyCache;
 use nalgebra::Complex;
+use std::cell::RefCell;
 
 /// The largest step of the pair as a fraction of the period: its six stages sample the
 /// forcing 24 times a cycle at the least, and its fifth order needs no finer ceiling (the
@@ -64,7 +66,12 @@ pub(super) fn choose(
         Method::Auto { .. } => false,
         _ => return Ok(None),
     };
-    let supported = explicit_pair::check_supported(dae).and_then(|()| quasi_refused(quasi));
+    let supported = if asked {
+        explicit_pair::check_supported(dae)
+    } else {
+        explicit_pair::check_unswitched(dae)
+    };
+    let supported = supported.and_then(|()| quasi_refused(quasi));
     if let Err(e) = supported {
         return if asked { Err(e) } else { Ok(None) };
     }
@@ -396,9 +403,13 @@ impl Cycles<'_, '_> {
         let mut next_out = 1;
         let mut t = t0;
         ex.start(&self.state);
+        // a step taken again to end on a valve event
+        let mut cut: Option<Cut> = None;
         while t < t_end {
             let rem = t_end - t;
-            let h = if ex.h >= rem * (1.0 - 1e-9) {
+            let h = if let Some(c) = cut {
+                c.h
+            } else if ex.h >= rem * (1.0 - 1e-9) {
                 rem
             } else if ex.h > 0.5 * rem {
                 0.5 * rem
@@ -423,6 +434,21 @@ impl Cycles<'_, '_> {
                 let (dp, y, z) = parts(&mut self.state);
                 dp.reject(y, z);
                 ex.reject(h, err);
+                cut = None;
+                continue;
+            }
+            let rtol = ex.tol.rtol;
+            let next = match self.events.as_ref() {
+                Some(ev) => {
+                    let found = locate_event(ev, &mut self.state, t, h, rtol);
+                    decide(found, (h, ex.h_min, rtol), ex.h, cut.take())
+                }
+                None => Next::Go,
+            };
+            if let Next::Redo(c) = next {
+                let (dp, y, z) = parts(&mut self.state);
+                dp.reject(y, z);
+                cut = Some(c);
                 continue;
             }
             let t_new = if h == rem { t_end } else { t + h };
@@ -437,6 +463,20 @@ impl Cycles<'_, '_> {
             let (dp, y, z) = parts(&mut self.state);
             ex.accept(y, z, (dp.start_rate(), dp.end_rate()), h, kinds);
             dp.accept();
+            match next {
+                Next::Switch(k, proposed) => {
+                    self.switch_valves(k, t_new);
+                    // the pair starts again at the event: a new first stage (the algebraic
+                    // unknowns solved with the valves' new state)
+                    parts(&mut self.state).0.reset();
+                    ex.h = ex.h.max(proposed).min(ex.h_max);
+                }
+                Next::Approach(h_next) => {
+                    ex.h = ex.h.min(h_next);
+                    self.settle_events();
+                }
+                _ => self.settle_events(),
+            }
             self.steps += 1;
             t = t_new;
             if ex.steps % 64 == 0 || t == t_end {
@@ -491,6 +531,26 @@ impl Cycles<'_, '_> {
         }
         Ok(())
     }
+}
+
+/// The first valve event within the step of `h` from `t` just taken (see
+/// [`Events::locate`]): the switching functions on the continuous extension, the algebraic
+/// unknowns (a valve's node pressures) solved at each θ the root finder asks for.
+fn locate_event(ev: &Events, st: &mut State<'_, '_>, t: f64, h: f64, rtol: f64) -> Option<Located> {
+    let (dp, y, _) = parts(st);
+    let y: &[f64] = y;
+    let dense = RefCell::new((dp, Vec::new(), Vec::new(), Vec::new()));
+    let at = |th: f64| {
+        let mut d = dense.borrow_mut();
+        let (dp, yi, ydi, zi) = &mut *d;
+        let v = match dp.dense_state(t + th * h, th, h, (y, &[]), yi, ydi, zi) {
+            Ok(()) => yi.clone(),
+            // no state there: read as switched (the bracket closes in on the step's start)
+            Err(_) => vec![f64::NAN; y.len()],
+        };
+        move |i: usize| v[i]
+    };
+    ev.locate(&|i| y[i], at, rtol)
 }
 
 /// One step of the explicit pair from `t`, the species (if any) in its stages.

@@ -19,6 +19,7 @@ mod adaptive; // error control: variable step, dense output (docs/physics.md §1
 pub mod checkpoint;
 mod coupling;
 mod cycle;
+mod events; // valve events of the error-controlled runs (docs/physics.md §10.5)
 mod explicit; // error control with the explicit pair (docs/physics.md §10.4)
 mod flow_harmonics; // inlet renewal: the first pass's flow harmonics
 mod heap; // freed pages back to the OS before a large pass's cycle loop
@@ -36,6 +37,7 @@ mod svzerod_rows; // its output rows of a run extended by the cycle-to-cycle rul
 mod two_pass;
 
 pub use checkpoint::{CHECKPOINT_VERSION, Checkpoints, Every, Snapshot};
+pub use events::Event;
 pub use outcome::{ErrorControlOutcome, Outcome, TransportOutcome};
 pub use recorder::{Chunk, OutputSink};
 pub use resolve::{Refinement, rk4_step_refinement};

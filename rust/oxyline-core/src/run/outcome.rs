@@ -40,6 +40,9 @@ pub struct ErrorControlOutcome {
     pub rejected: usize,
     pub dt_min: f64,
     pub dt_max: f64,
+    /// The valves' status changes located during the run, in time order (docs/physics.md
+    /// §10.5).
+    pub events: Vec<super::events::Event>,
 }
 
 /// Species outputs, recorded at the same times as the flow probes.
@@ -115,12 +118,14 @@ impl Outcome {
         let period = cycles.s_period();
         let (state, rec) = (cycles.state, cycles.rec);
         let (n_probes, columns_per_species) = (rec.n_probes(), rec.columns_per_species());
+        let events = cycles.events.map(|ev| ev.log).unwrap_or_default();
         let explicit = cycles.explicit.map(|ex| ErrorControlOutcome {
             estimate: ex.estimate,
             steps: ex.steps,
             rejected: ex.rejected,
             dt_min: ex.h_smallest,
             dt_max: ex.h_largest,
+            events: events.clone(),
         });
         let error_control = cycles
             .adaptive
@@ -130,6 +135,7 @@ impl Outcome {
                 rejected: ad.rejected,
                 dt_min: ad.h_smallest,
                 dt_max: ad.h_largest,
+                events,
             })
             .or(explicit);
         // an error-controlled run reports its mean step

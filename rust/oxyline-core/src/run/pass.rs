@@ -106,6 +106,9 @@ pub(super) fn run(
                 tol.map(|tol| Adaptive::new(dae, tol, s.method.rho_inf(), s.period, s.output_every))
         }
     }
+    if let Some(tol) = s.adaptive() {
+        cycles.events = super::events::Events::new(dae, &cycles.state.y, (tol.atol.flow, tol.rtol));
+    }
     cycles.start_svzerod(!plan.use_rk4);
     if let Some(r) = &resume {
         cycles.restore(r)?;

@@ -57,6 +57,11 @@ impl PeriodicSteps {
         self.active
     }
 
+    /// Ends this cycle's replay (a valve event cut a step).
+    pub fn stop(&mut self) {
+        self.active = false;
+    }
+
     pub fn replaying(&self) -> bool {
         self.active
     }

@@ -1,0 +1,366 @@
+//! Valve events of the error-controlled runs (docs/physics.md §10.5): after a step the error
+//! control accepts, every valve's switching function is evaluated on the step's continuous
+//! extension; where one changed sign the first root is found on the interpolant (Illinois),
+//! the step is taken again to end on it, and the valve's status switches there, so that no
+//! step straddles an opening or a closing.
+//!
+//! * **Switching functions.** A valve of the pressure rule (a `valve` element: open while the
+//!   pressure behind exceeds the pressure in front) switches where ΔP = P_behind − P_front
+//!   changes sign. An on/off valve (the heart block's) open while ΔP > 0 or Q > 0 closes where
+//!   max(ΔP, R Q) reaches 0 (the flow's reversal after the pressure's), and once closed only
+//!   ΔP reopens it (its held flow is not read; a generalized-α iterate leaves a closed
+//!   valve's flow at the size of a Newton correction).
+//! * **Root.** The function g(θ) of the interpolated state on θ ∈ [0, 1], g(0) > 0 ≥ g(1): the
+//!   Illinois variant of regula falsi (superlinear, the bracket always kept) until the bracket
+//!   is narrower than rtol·h (the time error of the event then sits below the step's own error
+//!   in the state, g'·rtol·h against rtol·|y|).
+//! * **Switch.** At the event an on/off valve that closes has its flow and its rate set to
+//!   zero (its law's held state); the integrators restart there: the explicit pair with a new
+//!   first stage, generalized-α with its error history cleared (its extrapolation would
+//!   straddle the kink).
+
+use crate::circuit::Dae;
+use crate::element::Switch;
+
+/// The most bisection-free iterations of the root finder (Illinois converges in ~10 for a
+/// smooth g; the bracket test stops it first).
+const MAX_ITERATIONS: usize = 60;
+
+/// One valve's status change.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Event {
+    /// Run time (s).
+    pub time: f64,
+    /// The valve's name (as its status output: the valve vessel, or `<heart>:<valve>`).
+    pub valve: String,
+    /// True for an opening, false for a closing.
+    pub opened: bool,
+}
+
+/// A located event within the step just taken: θ of the root, and which switch.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Located {
+    pub theta: f64,
+    pub switch: usize,
+}
+
+/// Re-locations of one event at most (each on a step shorter than the one before).
+const MAX_CUTS: u8 = 4;
+
+/// The share of the step that straddled an event a step is held to when its cut fell short
+/// of the event (the interpolant's root was late): the next step straddles it by a tenth,
+/// where an interpolant across the kink errs a hundredth as much (second order in the step).
+const APPROACH: f64 = 0.1;
+
+/// A step taken again to end on an event: its length, the step the controller had proposed
+/// before, the length of the step that straddled the event, and how many cuts so far.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Cut {
+    pub h: f64,
+    pub proposed: f64,
+    pub straddle: f64,
+    pub tries: u8,
+}
+
+/// What follows an accepted step (see [`decide`]).
+pub(super) enum Next {
+    /// Take the step again, shorter, to end on the event.
+    Redo(Cut),
+    /// Switch the valve at the step's end; the controller goes on from the step it proposed.
+    Switch(usize, f64),
+    /// A cut fell short of its event: the next step is at most this long.
+    Approach(f64),
+    /// No event.
+    Go,
+}
+
+/// The decision after a step of `h` accepted by the error control: an event `found` within
+/// the step is cut to unless it lies within `tol`·h of its end (or a cut would be below
+/// `h_min`, or the event was cut to `MAX_CUTS` times); a cut step is itself searched again,
+/// so an interpolant's root across the kink is refined on shorter steps.
+pub(super) fn decide(
+    found: Option<Located>,
+    (h, h_min, tol): (f64, f64, f64),
+    proposed: f64,
+    cut: Option<Cut>,
+) -> Next {
+    let proposed = cut.map_or(proposed, |c| c.proposed);
+    let tries = cut.map_or(0, |c| c.tries);
+    match found {
+        Some(loc) if loc.theta * h > h_min && loc.theta < 1.0 - tol && tries < MAX_CUTS => {
+            Next::Redo(Cut {
+                h: loc.theta * h,
+                proposed,
+                straddle: h,
+                tries: tries + 1,
+            })
+        }
+        Some(loc) => Next::Switch(loc.switch, proposed),
+        None => match cut {
+            Some(c) => Next::Approach(APPROACH * c.straddle),
+            None => Next::Go,
+        },
+    }
+}
+
+/// The switches of a circuit and their statuses.
+pub(super) struct Events {
+    switches: Vec<Switch>,
+    names: Vec<String>,
+    open: Vec<bool>,
+    /// Switched at the end of the step before: its event ended that step, so a state that
+    /// still reads the old status at the new step's start is the root's tolerance, not an
+    /// event (without this the status would chatter back at the same time).
+    fresh: Vec<bool>,
+    /// A flow at most atol + rtol·(the valve's largest flow so far) is no forward flow of an
+    /// on/off valve (the error control's own flow tolerance): generalized-α leaves a valve it
+    /// closed itself at a Newton correction's flow of either sign, which must not hold it
+    /// open.
+    flow_tol: (f64, f64),
+    peak: Vec<f64>,
+    pub log: Vec<Event>,
+}
+
+/// The name inside an element's `kind 'name'`.
+fn quoted(element: &str) -> &str {
+    match (element.find('\''), element.rfind('\'')) {
+        (Some(a), Some(b)) if b > a => &element[a + 1..b],
+        _ => element,
+    }
+}
+
+const HEART_VALVES: [&str; 4] = ["tricuspid", "pulmonary", "mitral", "aortic"];
+
+impl Events {
+    /// The circuit's switches (None without any), their statuses read at the start `y`.
+    pub fn new(dae: &Dae, y: &[f64], flow_tol: (f64, f64)) -> Option<Self> {
+        let (mut switches, mut names) = (Vec::new(), Vec::new());
+        for el in &dae.elements {
+            let own = el.switches();
+            let many = own.len() > 1;
+            for (k, sw) in own.into_iter().enumerate() {
+                let name = quoted(el.name());
+                names.push(match (many, HEART_VALVES.get(k)) {
+                    (true, Some(part)) => format!("{name}:{part}"),
+                    (true, None) => format!("{name}:{k}"),
+                    _ => name.to_owned(),
+                });
+                switches.push(sw);
+            }
+        }
+        if switches.is_empty() {
+            return None;
+        }
+        let open = switches
+            .iter()
+            .map(|sw| {
+                let [b, f, q] = sw.unknowns;
+                y[b] > y[f] || (sw.on_off && y[q] > 0.0)
+            })
+            .collect();
+        Some(Events {
+            fresh: vec![false; switches.len()],
+            flow_tol,
+            peak: switches.iter().map(|sw| y[sw.unknowns[2]].abs()).collect(),
+            switches,
+            names,
+            open,
+            log: Vec::new(),
+        })
+    }
+
+    /// Switch `k`'s function at the state `v` (an unknown's value by index), positive while
+    /// it keeps its status.
+    fn keep(&self, k: usize, v: &impl Fn(usize) -> f64) -> f64 {
+        let sw = &self.switches[k];
+        let [b, f, q] = sw.unknowns;
+        let dp = v(b) - v(f);
+        match (self.open[k], sw.on_off) {
+            (true, true) => {
+                let tol = self.flow_tol.0 + self.flow_tol.1 * self.peak[k];
+                dp.max(sw.resistance * (v(q) - tol))
+            }
+            (true, false) => dp,
+            // a closed valve reopens where ΔP turns positive (ΔP = 0 keeps the piecewise
+            // law's R_max)
+            (false, _) => -dp,
+        }
+    }
+
+    /// The first switch within the step whose state at θ ∈ [0, 1) is `at(θ)` and whose end
+    /// state is `end`, to within `tol_theta`. None when every valve keeps its status at the
+    /// step's end; θ = 0 for a switch already due at its start.
+    pub fn locate<E, F, V>(&self, end: &E, at: F, tol_theta: f64) -> Option<Located>
+    where
+        E: Fn(usize) -> f64,
+        F: Fn(f64) -> V,
+        V: Fn(usize) -> f64,
+    {
+        let due = self.due_at(end);
+        if due.is_empty() {
+            return None;
+        }
+        let start = at(0.0);
+        let mut first: Option<Located> = None;
+        for k in due {
+            let g0 = self.keep(k, &start);
+            let theta = if g0 > 0.0 {
+                let g1 = self.keep(k, end);
+                let g = |th: f64| if th >= 1.0 { g1 } else { self.keep(k, &at(th)) };
+                illinois(g, (0.0, g0), (1.0, g1), tol_theta)
+            } else if self.fresh[k] {
+                // switched at the start and back by its end: a new event there
+                1.0
+            } else {
+                0.0
+            };
+            if first.is_none_or(|f| theta < f.theta) {
+                first = Some(Located { theta, switch: k });
+            }
+        }
+        first
+    }
+
+    /// Switch `k`'s status at `time`, logged; a closing on/off valve's flow and rate are
+    /// set to zero in (y, ẏ). True when the state changed.
+    pub fn switch(&mut self, k: usize, time: f64, y: &mut [f64], yd: &mut [f64]) -> bool {
+        self.open[k] = !self.open[k];
+        self.fresh[k] = true;
+        self.log.push(Event {
+            time,
+            valve: self.names[k].clone(),
+            opened: self.open[k],
+        });
+        let sw = &self.switches[k];
+        if sw.on_off && !self.open[k] {
+            let q = sw.unknowns[2];
+            y[q] = 0.0;
+            yd[q] = 0.0;
+            return true;
+        }
+        false
+    }
+
+    /// A step without events was accepted, ending in `y`: no switch is fresh any more; the
+    /// valves' largest flows so far.
+    pub fn settle(&mut self, y: &[f64]) {
+        self.fresh.fill(false);
+        for (p, sw) in self.peak.iter_mut().zip(&self.switches) {
+            *p = p.max(y[sw.unknowns[2]].abs());
+        }
+    }
+
+    /// The switches whose function at the state `v` says they changed.
+    pub fn due_at(&self, v: &impl Fn(usize) -> f64) -> Vec<usize> {
+        (0..self.switches.len())
+            .filter(|&k| self.keep(k, v) <= 0.0)
+            .collect()
+    }
+}
+
+/// The root of g on [a, b] with g(a) > 0 ≥ g(b) by the Illinois method, to a bracket of
+/// `tol`: the right end of the final bracket (where g ≤ 0: the event has happened).
+fn illinois(g: impl Fn(f64) -> f64, a: (f64, f64), b: (f64, f64), tol: f64) -> f64 {
+    let ((mut xa, mut ga), (mut xb, mut gb)) = (a, b);
+    // the side kept twice in a row has its value halved (Illinois)
+    let mut side = 0i8;
+    for _ in 0..MAX_ITERATIONS {
+        if xb - xa <= tol {
+            break;
+        }
+        let x = (xb - gb * (xb - xa) / (gb - ga)).clamp(xa, xb);
+        // a secant point on a bracket end (round-off) is moved in by the tolerance
+        let x = x.clamp(xa + 0.5 * tol, xb - 0.5 * tol);
+        let gx = g(x);
+        if gx > 0.0 {
+            (xa, ga) = (x, gx);
+            if side == 1 {
+                gb *= 0.5;
+            }
+            side = 1;
+        } else {
+            (xb, gb) = (x, gx);
+            if side == -1 {
+                ga *= 0.5;
+            }
+            side = -1;
+        }
+    }
+    xb
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn illinois_brackets_the_root_to_the_tolerance() {
+        // g = cos(3θ) − 0.2: root at acos(0.2)/3 = 0.45667...
+        let root = 0.2f64.acos() / 3.0;
+        let g = |x: f64| (3.0 * x).cos() - 0.2;
+        for tol in [1e-3, 1e-6, 1e-10] {
+            let x = illinois(g, (0.0, g(0.0)), (1.0, g(1.0)), tol);
+            assert!(x >= root && x - root <= tol, "{tol}: {x} vs {root}");
+        }
+    }
+
+    #[test]
+    fn switching_functions_follow_the_valve_rules() {
+        let pressure = Switch {
+            unknowns: [0, 1, 2],
+            on_off: false,
+            resistance: 1.0,
+        };
+        let on_off = Switch {
+            on_off: true,
+            ..pressure
+        };
+        let mut ev = Events {
+            switches: vec![pressure, on_off],
+            names: vec!["a".into(), "b".into()],
+            open: vec![true, true],
+            fresh: vec![false, false],
+            flow_tol: (0.0, 0.0),
+            peak: vec![0.0, 0.0],
+            log: Vec::new(),
+        };
+        // ΔP < 0 with forward flow: the pressure rule closes, the on/off rule stays open
+        let y = [1.0, 2.0, 3.0];
+        let v = |i: usize| y[i];
+        assert!(ev.keep(0, &v) < 0.0 && ev.keep(1, &v) > 0.0);
+        // closing the on/off valve clamps its flow and rate
+        let (mut y, mut yd) = ([1.0, 2.0, 3.0], [0.0, 0.0, 5.0]);
+        assert!(ev.switch(1, 0.5, &mut y, &mut yd));
+        assert_eq!((y[2], yd[2]), (0.0, 0.0));
+        // closed: a small positive flow does not reopen it, a positive ΔP does
+        let y = [1.0, 2.0, 1e-9];
+        assert!(ev.keep(1, &|i| y[i]) > 0.0);
+        let y = [2.5, 2.0, 0.0];
+        assert!(ev.keep(1, &|i| y[i]) < 0.0);
+        assert_eq!(ev.log[0].valve, "b");
+        assert!(!ev.log[0].opened);
+    }
+
+    #[test]
+    fn the_first_root_of_several_is_located() {
+        let sw = |b, f| Switch {
+            unknowns: [b, f, 0],
+            on_off: false,
+            resistance: 1.0,
+        };
+        let ev = Events {
+            switches: vec![sw(1, 2), sw(3, 4)],
+            names: vec!["a".into(), "b".into()],
+            open: vec![true, true],
+            fresh: vec![false, false],
+            flow_tol: (0.0, 0.0),
+            peak: vec![0.0, 0.0],
+            log: Vec::new(),
+        };
+        // ΔP_a = 1 − 2θ (root 0.5), ΔP_b = 1 − 4θ (root 0.25)
+        let at = |th: f64| move |i: usize| [0.0, 1.0 - 2.0 * th, 0.0, 1.0 - 4.0 * th, 0.0][i];
+        let found = ev.locate(&at(1.0), at, 1e-9).expect("an event");
+        assert_eq!(found.switch, 1);
+        assert!((found.theta - 0.25).abs() < 1e-9);
+    }
+}
