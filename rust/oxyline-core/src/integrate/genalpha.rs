@@ -7,7 +7,7 @@
 
 use super::leaves::Leaves;
 use super::newton::{self, Magnitude, NewtonProblem, jacobian_stamps, jacobian_values};
-use crate::circuit::{Dae, Regime};
+use crate::circuit::{Csr, Dae, Regime};
 use crate::error::{Error, Result};
 use crate::sparse::SparseLu;
 use rayon::prelude::*;
@@ -113,6 +113,8 @@ impl<'a> GenAlpha<'a> {
             Some((leaves, lu)) => (Some(leaves), lu),
             None => (None, SparseLu::analyse(dae.n, &stamps)?),
         };
+        // (a condensed step's residual holds the reduced system's rows alone)
+        let reduced_n = leaves.as_ref().map_or(n, |l| l.start);
         Ok(GenAlpha {
             dae,
             e,
@@ -129,7 +131,7 @@ impl<'a> GenAlpha<'a> {
             factored: false,
             f: vec![0.0; nonlinear],
             forcing: SparseForcing::new(dae),
-            r: vec![0.0; n],
+            r: vec![0.0; reduced_n],
             y_new: vec![0.0; nonlinear],
             yd_new: vec![0.0; nonlinear],
             y_af: vec![0.0; nonlinear],
@@ -165,7 +167,7 @@ impl<'a> GenAlpha<'a> {
         // (ẏ's weight in a linear step's residual, `step_linear`)
         let c_am = 1.0 + self.am * ((self.gamma - 1.0) / self.gamma - 1.0);
         match &mut self.leaves {
-            Some(leaves) => leaves.factor(&mut self.lu, &kvals, c_am),
+            Some(leaves) => leaves.factor(&mut self.lu, &kvals, (self.am, c, c_am)),
             None => self.lu.factor(&kvals),
         }
         .map_err(|m| singular(time, &m))?;
@@ -351,22 +353,21 @@ impl GenAlpha<'_> {
         // with y_new = y and ẏ_new = pred·ẏ: y_αf = y, ẏ_αm = ẏ (1 + αm (pred − 1))
         let c_am = 1.0 + am * (pred - 1.0);
         let start = self.leaves.as_ref().map_or(self.r.len(), |l| l.start);
-        // each row's F entries (a branch's without its condensed cells', `Leaves::row_end`,
-        // unless an absolute tolerance judges the whole rows' residuals)
+        // F without the condensed cells' columns (`Leaves::reduced_f`), unless an absolute
+        // tolerance judges the whole rows' residuals
         let with_max = self.control.atol.is_some();
-        let row_end = match &self.leaves {
-            Some(l) if !with_max => &l.row_end[..],
-            _ => &self.dae.f.ptr[1..],
+        let f = match &self.leaves {
+            Some(l) if !with_max => &l.reduced_f,
+            _ => &self.dae.f,
         };
         let pool = crate::threads::pool().filter(|_| start >= PARALLEL_ROWS);
         let residual = LinearResidual {
-            dae: self.dae,
             e: &self.e,
             forcing: &self.forcing,
             y,
             yd,
             c_am,
-            row_end,
+            f,
         };
         let head = &mut self.r[..start];
         // each row is independent, and the largest |r| is the same in any grouping: the same
@@ -381,7 +382,7 @@ impl GenAlpha<'_> {
             None => residual.rows(0, head),
         };
         if let Some(leaves) = &self.leaves {
-            rmax = rmax.max(leaves.residual_and_fold(y, yd, &mut self.r, with_max));
+            rmax = rmax.max(leaves.residual_and_fold(y, yd, &mut self.r[..start], with_max));
         }
         if let Some(atol) = self.control.atol {
             if rmax < atol {
@@ -394,7 +395,7 @@ impl GenAlpha<'_> {
         }
         let gdt = gamma * dt;
         if let Some(leaves) = &self.leaves {
-            if !leaves.back_substitute_and_update(&self.r, y, yd, gdt, pred) {
+            if !leaves.back_substitute_and_update(&self.r[..start], y, yd, gdt, pred) {
                 return Err(singular(t_af, "non-finite solution"));
             }
         }
@@ -424,20 +425,19 @@ const PARALLEL_ROWS: usize = 1 << 15;
 
 /// The residual of a linear step at its predictor (see `step_linear`).
 struct LinearResidual<'r> {
-    dae: &'r Dae,
     e: &'r [f64],
     forcing: &'r SparseForcing,
     y: &'r [f64],
     yd: &'r [f64],
     c_am: f64,
-    /// the end of each row's F entries (`Dae::f.ptr[1..]`, or without condensed cells)
-    row_end: &'r [usize],
+    /// F's rows (`Dae::f`, or without the condensed cells' columns)
+    f: &'r Csr,
 }
 
 impl LinearResidual<'_> {
     /// The rows `first..first + r.len()` into `r`; the largest |r|.
     fn rows(&self, first: usize, r: &mut [f64]) -> f64 {
-        let (f, y, yd) = (&self.dae.f, self.y, self.yd);
+        let (f, y, yd) = (self.f, self.y, self.yd);
         let (rows, values) = (&self.forcing.rows, &self.forcing.values);
         let mut next = rows.partition_point(|&row| (row as usize) < first);
         let mut next_row = rows.get(next).map_or(usize::MAX, |&r| r as usize);
@@ -452,7 +452,7 @@ impl LinearResidual<'_> {
                 0.0
             };
             let mut v = fi - self.e[i] * yd[i] * self.c_am;
-            for k in f.ptr[i]..self.row_end[i] {
+            for k in f.ptr[i]..f.ptr[i + 1] {
                 v -= f.val[k] * y[f.col[k] as usize];
             }
             rmax = rmax.max(v.abs());
