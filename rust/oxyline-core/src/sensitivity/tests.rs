@@ -572,3 +572,114 @@ fn bad_heart_paths_name_themselves() {
     let e = err("vessels.mitral.valve.width");
     assert!(e.contains("'vessels.mitral.valve.width'"), "{e}");
 }
+
+/// The chamber value `key` of `e` (None: its law has no such value), for a test to change.
+fn chamber_value_mut<'e>(
+    e: &'e mut crate::element::chamber::Elastance,
+    key: &str,
+) -> Option<&'e mut f64> {
+    use crate::element::activation::Activation;
+    use crate::element::chamber::ElastanceLaw as L;
+    let Activation::HalfCosine { t_active, t_twitch } = &mut e.activation else {
+        return None;
+    };
+    match (&mut e.law, key) {
+        (_, "activation.t_active") => Some(t_active),
+        (_, "activation.t_twitch") => Some(t_twitch),
+        (L::ElastanceInductor { e_max, .. }, "max_elastance")
+        | (L::Linear { e_max, .. }, "max_elastance")
+        | (L::Exponential { e_max, .. }, "max_elastance") => Some(e_max),
+        (L::ElastanceInductor { e_min, .. }, "min_elastance") => Some(e_min),
+        (
+            L::ElastanceInductor {
+                v_rest_diastole, ..
+            },
+            "rest_volume_diastole",
+        ) => Some(v_rest_diastole),
+        (L::ElastanceInductor { v_rest_systole, .. }, "rest_volume_systole") => {
+            Some(v_rest_systole)
+        }
+        (L::Linear { e_pass, .. }, "passive_elastance") => Some(e_pass),
+        (L::Linear { v_rest, .. }, "rest_volume")
+        | (L::Exponential { v_aso: v_rest, .. }, "rest_volume") => Some(v_rest),
+        (L::Exponential { k_pressure, .. }, "passive_pressure") => Some(k_pressure),
+        (L::Exponential { k_volume, .. }, "passive_volume_coefficient") => Some(k_volume),
+        _ => None,
+    }
+}
+
+/// Every chamber law's ∂P/∂θ (the tangent's element source) against central differences of
+/// P(V, t) in θ (relative step 1e-6: truncation O(h²) and rounding ~1e-16/h, both far below
+/// 1e-7 of the derivative), at times before, during and after the twitch.
+#[test]
+fn chamber_pressure_derivatives_of_every_law() {
+    use crate::element::activation::Activation;
+    use crate::element::chamber::{Elastance, ElastanceLaw};
+    let laws = [
+        ElastanceLaw::ElastanceInductor {
+            e_max: 3e8,
+            e_min: 1.3e7,
+            v_rest_diastole: 2e-5,
+            v_rest_systole: 1e-5,
+        },
+        ElastanceLaw::Linear {
+            e_max: 3e8,
+            e_pass: 1.2e7,
+            v_rest: 1.5e-5,
+        },
+        ElastanceLaw::Exponential {
+            e_max: 2e7,
+            k_pressure: 50.0,
+            k_volume: 3e4,
+            v_aso: 1e-5,
+        },
+    ];
+    let keys = [
+        "max_elastance",
+        "min_elastance",
+        "rest_volume_diastole",
+        "rest_volume_systole",
+        "passive_elastance",
+        "rest_volume",
+        "passive_pressure",
+        "passive_volume_coefficient",
+        "activation.t_active",
+        "activation.t_twitch",
+    ];
+    let mut checked = 0;
+    for law in laws {
+        let mut base = Elastance {
+            law,
+            activation: Activation::HalfCosine {
+                t_active: 0.1,
+                t_twitch: 0.35,
+            },
+            period: 0.8,
+        };
+        for key in keys {
+            for (t, v) in [(0.05, 1.1e-4), (0.2, 9e-5), (0.37, 6e-5), (0.7, 1.2e-4)] {
+                let exact = base.pressure_derivative(key, t, v);
+                let Some(x0) = chamber_value_mut(&mut base, key).map(|x| *x) else {
+                    assert!(exact.is_none(), "{key}: a law without it");
+                    continue;
+                };
+                let h = 1e-6 * x0.abs();
+                let at = |x: f64| {
+                    let mut e = base.clone();
+                    *chamber_value_mut(&mut e, key).unwrap() = x;
+                    e.pressure(t, v).0
+                };
+                let fd = (at(x0 + h) - at(x0 - h)) / (2.0 * h);
+                let d = exact.unwrap_or_else(|| panic!("{key} at {t}"));
+                // the response to a 100 % change, floored by the pressure's own size
+                let scale = (x0 * d).abs().max(1e-6 * base.pressure(t, v).0.abs());
+                assert!(
+                    ((d - fd) * x0).abs() <= 1e-7 * scale,
+                    "{key} at t {t}: {d:e} vs {fd:e}"
+                );
+                checked += 1;
+            }
+        }
+    }
+    assert_eq!(checked, 4 * (6 + 5 + 6));
+}
