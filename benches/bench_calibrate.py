@@ -10,7 +10,10 @@
 3. Adjoint: the same outputs' gradients by ``mode="adjoint"`` (one backward sweep per output,
    whatever the parameter count) for 1, 10, 100 parameters (and all the model has), relative
    to the forward run alone, against the forward tangents' time.
-4. Calibration: the bifurcation's two outlet resistances and the parent's stiffness fitted to
+4. Heart chambers and valves: a left heart (tanh valves, an elastance-inductor chamber)
+   into a Windkessel, its nine chamber/valve parameters by forward tangents and by the adjoint
+   (three outputs), relative to the forward run alone (best of 3 in the same process).
+5. Calibration: the bifurcation's two outlet resistances and the parent's stiffness fitted to
    synthetic targets from known values, by ``least_squares`` (trf) with the core's Jacobian and
    with scipy's forward differences ("2-point"): wall time, evaluations, final cost.
 
@@ -126,6 +129,52 @@ def adjoint_cost(name: str, counts: list[int], steps: int, tol: float) -> None:
               f"{tt * 1e3:>14.0f} {tt / t0:>10.2f}")
 
 
+#: the left heart of tests/test_sensitivity_heart.py (SI)
+_VALVE = {"law": "tanh", "min_resistance": 3e6, "max_resistance": 1e10, "steepness": 5e-3}
+HEART = {
+    "name": "left-heart", "units": "SI", "period": 0.8,
+    "vessels": [
+        {"name": "mitral", "from": "ven", "to": "mv_out", "valve": dict(_VALVE)},
+        {"name": "lv", "from": "mv_out", "to": "lv_out", "chamber": {
+            "law": "elastance-inductor", "max_elastance": 3.0e8, "min_elastance": 1.3e7,
+            "rest_volume_diastole": 2e-5, "rest_volume_systole": 1e-5, "period": 0.8,
+            "inductance": 1e5, "initial_volume": 1.2e-4,
+            "activation": {"kind": "half-cosine", "t_active": 0.1, "t_twitch": 0.35}}},
+        {"name": "aortic", "from": "lv_out", "to": "ao", "valve": dict(_VALVE)},
+        {"name": "aorta", "from": "ao", "to": "out",
+         "lumped": {"resistance": 5e6, "inductance": 1e5, "capacitance": 3e-9}},
+    ],
+    "boundary_conditions": {
+        "ven": {"type": "pressure", "value": 1200.0},
+        "out": {"type": "rcr", "proximal_resistance": 1e7, "capacitance": 1.2e-8,
+                "distal_resistance": 1.3e8},
+    },
+}
+HEART_PARAMETERS = [
+    "vessels.lv.chamber.max_elastance", "vessels.lv.chamber.min_elastance",
+    "vessels.lv.chamber.rest_volume_diastole", "vessels.lv.chamber.rest_volume_systole",
+    "vessels.lv.chamber.activation.t_active", "vessels.lv.chamber.activation.t_twitch",
+    "vessels.aortic.valve.min_resistance", "vessels.aortic.valve.max_resistance",
+    "vessels.mitral.valve.min_resistance"]
+
+
+def heart_cost(steps: int, tol: float) -> None:
+    outputs = ["lv.pressure_in.max", "aortic.flow_in.mean", "aorta.pressure_out.pulse"]
+    kw = {"steps_per_cycle": steps, "tol": tol}
+    model = oxyline.load_model(HEART)
+    t0, s0 = _timed(lambda: oxyline.sensitivities(model, [], outputs, **kw), 3)
+    print(f"\nleft heart, {steps} steps a cycle: forward run alone {t0 * 1e3:.1f} ms "
+          f"({s0.cycles} cycles)")
+    print(f"{'mode':>8} {'parameters':>10} {'time (ms)':>10} {'x forward':>10} "
+          f"{'x forward per parameter':>24}")
+    for mode in ("forward", "adjoint"):
+        for n in (1, len(HEART_PARAMETERS)):
+            p = HEART_PARAMETERS[:n]
+            t, _ = _timed(lambda p=p, m=mode: oxyline.sensitivities(model, p, outputs, mode=m,
+                                                                    **kw), 3)
+            print(f"{mode:>8} {n:>10} {t * 1e3:>10.1f} {t / t0:>10.2f} {t / t0 / n:>24.3f}")
+
+
 def calibration_speedup() -> None:
     import scipy.optimize  # noqa: F401 — its import (~1 s) is not the fit's time
 
@@ -158,6 +207,9 @@ def main() -> None:
     ap.add_argument("--tol", type=float, default=1e-8, help="periodic-state tolerance")
     ap.add_argument("--stenoses", type=int, nargs="*", default=[1, 3, 6])
     ap.add_argument("--adjoint", type=int, nargs="*", default=[1, 10, 100])
+    ap.add_argument("--heart", type=int, default=400, help="steps per cycle of the heart "
+                    "section (0: skip it)")
+    ap.add_argument("--skip-calibration", action="store_true")
     args = ap.parse_args()
     if args.counts:
         gradient_cost(args.model, args.counts, args.steps, args.tol)
@@ -165,7 +217,10 @@ def main() -> None:
         stenosis_cost(args.model, args.stenoses, args.steps, args.tol)
     if args.adjoint:
         adjoint_cost(args.model, args.adjoint, args.steps, args.tol)
-    calibration_speedup()
+    if args.heart:
+        heart_cost(args.heart, args.tol)
+    if not args.skip_calibration:
+        calibration_speedup()
 
 
 if __name__ == "__main__":

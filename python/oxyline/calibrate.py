@@ -278,10 +278,13 @@ def native_model(source: Mapping[str, Any], parameters: Sequence[str],
     a scale to its factor)."""
     patch: dict[str, Any] = {}
     inflow = None
+    heart: list[tuple[list[str], float]] = []
     for path, x in zip(parameters, values, strict=True):
         parts = path.split(".")
         if path == "scale.inflow":
             inflow = float(x)
+        elif parts[0] == "vessels" and parts[2:3] in (["chamber"], ["valve"]):
+            heart.append((parts, float(x)))
         elif parts[0] == "scale":
             patch.setdefault("scale", {})[parts[1]] = float(x)
         elif parts[0] == "vessels":
@@ -297,6 +300,13 @@ def native_model(source: Mapping[str, Any], parameters: Sequence[str],
     data = apply_patch(dict(source), patch) if patch else copy.deepcopy(dict(source))
     if inflow is not None:
         _scale_inflow(data, inflow)
+    if heart:  # a chamber's or valve's value, set where the element holds it
+        data = copy.deepcopy(data)
+        for parts, x in heart:
+            node: Any = _vessel(data, parts[1], ".".join(parts))
+            for key in parts[2:-1]:
+                node = node[key]
+            node[parts[-1]] = x
     return data
 
 

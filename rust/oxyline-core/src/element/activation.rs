@@ -192,6 +192,28 @@ impl Activation {
         }
     }
 
+    /// ∂φ/∂θ at time t for the timing `key` of a half-cosine activation (`t_active`,
+    /// `t_twitch`): φ = ½ (1 − cos θ), θ = 2π (t − t_active)/t_twitch during the twitch, so
+    /// the derivative is ½ sin θ ∂θ/∂key there and 0 outside it (continuous at both ends,
+    /// where sin θ = 0). None for any other activation or key.
+    pub fn derivative(&self, key: &str, t: f64, period: f64) -> Option<f64> {
+        let Activation::HalfCosine { t_active, t_twitch } = *self else {
+            return None;
+        };
+        let contract = in_cycle(t, period) - t_active;
+        let twitch = contract > 0.0 && contract <= t_twitch;
+        let half_sin = if twitch {
+            0.5 * (2.0 * PI * contract / t_twitch).sin()
+        } else {
+            0.0
+        };
+        match key {
+            "t_active" => Some(-half_sin * 2.0 * PI / t_twitch),
+            "t_twitch" => Some(-half_sin * 2.0 * PI * contract / (t_twitch * t_twitch)),
+            _ => None,
+        }
+    }
+
     /// Phase ends within the cycle (for RK4's stability sampling).
     pub fn breakpoints(&self) -> Vec<f64> {
         match *self {

@@ -90,6 +90,88 @@ impl Elastance {
     }
 }
 
+impl Elastance {
+    /// ∂P/∂θ at (t, V) for the chamber's parameter `key` (its model key: `max_elastance`,
+    /// `min_elastance`, `passive_elastance`, the rest volumes, the exponential law's passive
+    /// coefficients, or `activation.<timing>` of a differentiable activation, through ∂P/∂φ);
+    /// None for a key the chamber's law does not have.
+    pub fn pressure_derivative(&self, key: &str, t: f64, v: f64) -> Option<f64> {
+        let phi = self.activation.eval(t, self.period);
+        if let Some(timing) = key.strip_prefix("activation.") {
+            let dphi = self.activation.derivative(timing, t, self.period)?;
+            return Some(self.pressure_by_activation(phi, v) * dphi);
+        }
+        match self.law {
+            ElastanceLaw::ElastanceInductor {
+                e_max,
+                e_min,
+                v_rest_diastole,
+                v_rest_systole,
+            } => {
+                let e = (e_max - e_min) * phi + e_min;
+                let vr = (1.0 - phi) * (v_rest_diastole - v_rest_systole) + v_rest_systole;
+                match key {
+                    "max_elastance" => Some(phi * (v - vr)),
+                    "min_elastance" => Some((1.0 - phi) * (v - vr)),
+                    "rest_volume_diastole" => Some(-e * (1.0 - phi)),
+                    "rest_volume_systole" => Some(-e * phi),
+                    _ => None,
+                }
+            }
+            ElastanceLaw::Linear {
+                e_max,
+                e_pass,
+                v_rest,
+            } => match key {
+                "max_elastance" => Some(phi * (v - v_rest)),
+                "passive_elastance" => Some(v - v_rest),
+                "rest_volume" => Some(-(e_pass + e_max * phi)),
+                _ => None,
+            },
+            ElastanceLaw::Exponential {
+                e_max,
+                k_pressure,
+                k_volume,
+                v_aso,
+            } => {
+                let ex = (k_volume * (v - v_aso)).exp();
+                match key {
+                    "max_elastance" => Some(phi * (v - v_aso)),
+                    "passive_pressure" => Some(-(ex - 1.0) * (phi - 1.0)),
+                    "passive_volume_coefficient" => {
+                        Some(-k_pressure * (v - v_aso) * ex * (phi - 1.0))
+                    }
+                    "rest_volume" => Some(-phi * e_max + k_pressure * k_volume * ex * (phi - 1.0)),
+                    _ => None,
+                }
+            }
+        }
+    }
+
+    /// ∂P/∂φ at activation φ and volume V.
+    fn pressure_by_activation(&self, phi: f64, v: f64) -> f64 {
+        match self.law {
+            ElastanceLaw::ElastanceInductor {
+                e_max,
+                e_min,
+                v_rest_diastole,
+                v_rest_systole,
+            } => {
+                let e = (e_max - e_min) * phi + e_min;
+                let vr = (1.0 - phi) * (v_rest_diastole - v_rest_systole) + v_rest_systole;
+                (e_max - e_min) * (v - vr) + e * (v_rest_diastole - v_rest_systole)
+            }
+            ElastanceLaw::Linear { e_max, v_rest, .. } => e_max * (v - v_rest),
+            ElastanceLaw::Exponential {
+                e_max,
+                k_pressure,
+                k_volume,
+                v_aso,
+            } => e_max * (v - v_aso) - k_pressure * ((k_volume * (v - v_aso)).exp() - 1.0),
+        }
+    }
+}
+
 /// The chamber's pressure row: unknowns `pressure` (the chamber node) and `volume`.
 #[derive(Debug, Clone)]
 pub struct Chamber {
@@ -117,6 +199,16 @@ impl Element for Chamber {
     }
     fn jacobian(&self, t: f64, y: &[f64], j: &mut [f64]) {
         j[0] = -self.elastance.pressure(t, y[self.pattern[0].1]).1;
+    }
+    fn parameter_derivative(&self, key: &str, t: f64, y: &[f64], dc: &mut [f64]) -> bool {
+        let v = y[self.pattern[0].1];
+        match self.elastance.pressure_derivative(key, t, v) {
+            Some(dp) => {
+                dc[0] = -dp;
+                true
+            }
+            None => false,
+        }
     }
     fn is_nonlinear(&self) -> bool {
         matches!(self.elastance.law, ElastanceLaw::Exponential { .. })

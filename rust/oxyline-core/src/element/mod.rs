@@ -124,6 +124,13 @@ pub trait Element: Debug + Send + Sync {
     fn switches(&self) -> Vec<Switch> {
         Vec::new()
     }
+    /// ∂c/∂θ at (y, t) for the element's parameter `key` (its model key, e.g. a valve's
+    /// `max_resistance`), one value per row of [`Element::rows`]: the source of a parameter
+    /// sensitivity (`crate::sensitivity`). False when `key` names no parameter the element
+    /// differentiates (the default: none).
+    fn parameter_derivative(&self, _key: &str, _t: f64, _y: &[f64], _dc: &mut [f64]) -> bool {
+        false
+    }
     /// c depends on the state other than linearly (Newton refactorises per iteration).
     fn is_nonlinear(&self) -> bool;
     /// The period of c's time dependence (None: c does not depend on time).

@@ -56,6 +56,35 @@ impl ValveLaw {
             }
         }
     }
+    /// ∂R/∂θ at `dp` = P_to − P_from for the law's parameter `key` (`min_resistance`,
+    /// `max_resistance`, the tanh law's `steepness`); None for a key the law does not have.
+    /// The piecewise law's switch is a step: away from it R is R_min or R_max itself.
+    pub fn parameter_derivative(&self, key: &str, dp: f64) -> Option<f64> {
+        match *self {
+            ValveLaw::Tanh {
+                r_min,
+                r_max,
+                steepness,
+                ..
+            } => {
+                let th = (steepness * dp).tanh();
+                match key {
+                    "min_resistance" => Some(0.5 * (1.0 - th)),
+                    "max_resistance" => Some(0.5 * (1.0 + th)),
+                    "steepness" => Some(0.5 * (r_max - r_min) * dp * (1.0 - th * th)),
+                    _ => None,
+                }
+            }
+            ValveLaw::Piecewise { .. } => {
+                let open = f64::from(u8::from(dp < 0.0));
+                match key {
+                    "min_resistance" => Some(open),
+                    "max_resistance" => Some(1.0 - open),
+                    _ => None,
+                }
+            }
+        }
+    }
     pub fn r_min(&self) -> f64 {
         match *self {
             ValveLaw::Tanh { r_min, .. } | ValveLaw::Piecewise { r_min, .. } => r_min,
@@ -100,6 +129,16 @@ impl Element for Valve {
         j[0] = r;
         j[1] = -q * dr;
         j[2] = q * dr;
+    }
+    fn parameter_derivative(&self, key: &str, _t: f64, y: &[f64], dc: &mut [f64]) -> bool {
+        let (q, dp) = self.state(y);
+        match self.law.parameter_derivative(key, dp) {
+            Some(dr) => {
+                dc[0] = dr * q;
+                true
+            }
+            None => false,
+        }
     }
     /// With an inductor (a chamber's outlet) fixing the valve's flow Q, RK4's elimination
     /// solves the valve row for the pressure difference ΔP = P_to − P_from: its derivative

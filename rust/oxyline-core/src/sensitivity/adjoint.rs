@@ -33,8 +33,6 @@ pub struct PeriodicAdjoint {
 /// Kᵀ of the cycle's steps: one factorisation for a linear circuit, else one per step.
 struct Transposed {
     base: Vec<f64>,
-    diag: Vec<usize>,
-    a: f64,
     lu: SparseLu,
     varying: bool,
 }
@@ -42,15 +40,12 @@ struct Transposed {
 impl Transposed {
     fn of(pr: &Primal) -> Result<Transposed> {
         let dae = pr.dae;
-        let nf = dae.f.val.len();
         let stamps: Vec<(usize, usize)> = jacobian_stamps(dae)
             .into_iter()
             .map(|(i, j)| (j, i))
             .collect();
         let mut t = Transposed {
             base: pr.base_values(),
-            diag: dae.stenosis.iter().map(|&(i, _)| nf + i).collect(),
-            a: pr.scheme.af * pr.scheme.gamma * pr.scheme.dt,
             lu: SparseLu::analyse(dae.n, &stamps)?,
             varying: pr.newton.is_some(),
         };
@@ -63,11 +58,7 @@ impl Transposed {
     /// Kᵀ of step k, factorised when it varies along the cycle.
     fn at(&mut self, pr: &Primal, k: usize) -> Result<&SparseLu> {
         if self.varying {
-            let m = self.diag.len();
-            let mut vals = self.base.clone();
-            for (&d, slope) in self.diag.iter().zip(&pr.slopes[k * m..(k + 1) * m]) {
-                vals[d] += self.a * slope;
-            }
+            let vals = pr.step_values(&self.base, k);
             let t = k as f64 * pr.scheme.dt;
             self.lu.factor(&vals).map_err(|msg| singular(t, &msg))?;
         }
@@ -99,9 +90,9 @@ fn recorded_cycle<'a>(
     for k in 0..ns {
         pr.increment(k as f64 * dt)?;
         for src in &mut sources {
-            src.capture(&pr.scheme, pr.c, (&pr.y, &pr.yd, &pr.r), &pr.forcing);
+            src.capture(&pr, k as f64 * dt);
         }
-        pr.record_slopes();
+        pr.record_slopes(k as f64 * dt);
         pr.advance();
         values.extend(signals.iter().map(|&u| pr.y[u]));
     }
@@ -239,7 +230,7 @@ fn backward_cycle(
     grad: &mut [f64],
 ) -> Result<()> {
     let dae = pr.dae;
-    let (n, nsig, m) = (dae.n, signals.len(), dae.stenosis.len());
+    let (n, nsig) = (dae.n, signals.len());
     let sc = &pr.scheme;
     let (gdt, pred) = (sc.gamma * sc.dt, (sc.gamma - 1.0) / sc.gamma);
     let (a, b) = lambda.split_at_mut(n);
@@ -264,9 +255,7 @@ fn backward_cycle(
                 a[dae.f.col[q] as usize] -= dae.f.val[q] * ui;
             }
         }
-        for (&(i, _), slope) in dae.stenosis.iter().zip(&pr.slopes[k * m..(k + 1) * m]) {
-            a[i] -= slope * u[i];
-        }
+        pr.local_apply(k, &u, a, true);
         for ((bi, ui), ei) in b.iter_mut().zip(&u).zip(&dae.e) {
             *bi = pred * *bi - pr.c * ei * ui;
         }

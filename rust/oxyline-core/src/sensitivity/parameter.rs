@@ -14,10 +14,19 @@
 //! A stenosis adds the nonlinear term c_i(y) = S |Q| Q to its branch row (S split evenly
 //! over a lumped vessel's segments); its derivative with respect to S is |Q| Q at the step's
 //! α_f level, recorded here as dS/dp per branch unknown ([`DaeTangent::dstenosis`]).
+//!
+//! Heart chambers and valves add element terms c_el(y, t) to their rows (`crate::element`):
+//! a chamber's −P(V, t) (elastances, rest volumes, the half-cosine activation's timing), a
+//! valve's R(ΔP) Q (its R_min, R_max and tanh steepness). Their derivative ∂c_el/∂θ is the
+//! element's own ([`crate::element::Element::parameter_derivative`]), evaluated at each
+//! step's α_f state ([`DaeTangent::delements`]).
 
+use crate::circuit::CircuitElement;
 use crate::circuit::{Circuit, Dae};
 use crate::error::{Error, Result};
-use crate::model::{Arrangement, BoundarySpec, NetworkSpec};
+use crate::model::{
+    ActivationSpec, Arrangement, BoundarySpec, ChamberLawSpec, ChamberSpec, NetworkSpec, ValveSpec,
+};
 use crate::segment::WallModel;
 
 /// What a parameter path names.
@@ -39,6 +48,13 @@ pub enum Parameter {
     ComplianceScale,
     /// `scale.inflow`: every flow condition's waveform.
     InflowScale,
+    /// `vessels.<name>.chamber.<key>` / `vessels.<name>.valve.<key>`: a heart element's
+    /// value, `key` as the element's model key (`activation.t_active`, …) and its SI value.
+    Element {
+        element: String,
+        key: String,
+        value: f64,
+    },
 }
 
 /// The derivative of the DAE with respect to one parameter, at the parameter's value.
@@ -56,6 +72,8 @@ pub struct DaeTangent {
     pub dforcing: Vec<(usize, f64)>,
     /// (branch unknown i, dS_i/dp): the stenosis term S_i |y_i| y_i's coefficient.
     pub dstenosis: Vec<(usize, f64)>,
+    /// (index into `Dae::elements`, key): ∂c_el/∂p is the element's derivative by its key.
+    pub delements: Vec<(usize, String)>,
 }
 
 fn unknown(path: &str, why: impl Into<String>) -> Error {
@@ -71,12 +89,119 @@ impl Parameter {
             ["scale", "compliance"] => Ok(Parameter::ComplianceScale),
             ["scale", "inflow"] => Ok(Parameter::InflowScale),
             ["boundary_conditions", node, key] => condition(spec, path, node, key),
+            ["vessels", name, "chamber" | "valve", ..] => {
+                heart_element(spec, path, name, &parts[2..])
+            }
             ["vessels", name, rest @ ..] if !rest.is_empty() => vessel(spec, path, name, rest),
             _ => Err(unknown(
                 path,
-                "not a parameter path (vessels.<name>.<length|radius|youngs_modulus|lumped.resistance|lumped.capacitance|lumped.inductance|lumped.stenosis_coefficient>, boundary_conditions.<node>.<resistance|proximal_resistance|distal_resistance|capacitance>, scale.<resistance|compliance|inflow>)",
+                "not a parameter path (vessels.<name>.<length|radius|youngs_modulus|lumped.resistance|lumped.capacitance|lumped.inductance|lumped.stenosis_coefficient|chamber.<key>|valve.<key>>, boundary_conditions.<node>.<resistance|proximal_resistance|distal_resistance|capacitance>, scale.<resistance|compliance|inflow>)",
             )),
         }
+    }
+}
+
+/// `vessels.<name>.chamber.<key>` or `vessels.<name>.valve.<key>` (`rest` after the name):
+/// the element's SI value of a key its law has.
+fn heart_element(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<Parameter> {
+    let v = spec
+        .vessels
+        .iter()
+        .find(|v| v.name == name)
+        .ok_or_else(|| {
+            unknown(
+                path,
+                format!("no vessel named '{name}' in model '{}'", spec.name),
+            )
+        })?;
+    let key = rest[1..].join(".");
+    let value = match (rest[0], &v.chamber, &v.valve) {
+        ("chamber", Some(c), _) => chamber_value(c, &key),
+        ("valve", _, Some(law)) => valve_value(law, &key),
+        (kind, ..) => {
+            return Err(unknown(path, format!("vessel '{name}' is not a {kind}")));
+        }
+    };
+    let value = value.ok_or_else(|| {
+        unknown(
+            path,
+            format!(
+                "the {} '{name}' has no differentiable value '{key}'",
+                rest[0]
+            ),
+        )
+    })?;
+    Ok(Parameter::Element {
+        element: format!("{} '{name}'", rest[0]),
+        key,
+        value,
+    })
+}
+
+/// A chamber's value by key: its law's elastances and volumes, and the half-cosine
+/// activation's timing (the other activations' shapes are not differentiated).
+fn chamber_value(c: &ChamberSpec, key: &str) -> Option<f64> {
+    use ChamberLawSpec as L;
+    if let Some(timing) = key.strip_prefix("activation.") {
+        return match (&c.activation, timing) {
+            (ActivationSpec::HalfCosine { t_active, .. }, "t_active") => Some(*t_active),
+            (ActivationSpec::HalfCosine { t_twitch, .. }, "t_twitch") => Some(*t_twitch),
+            _ => None,
+        };
+    }
+    match (&c.law, key) {
+        (L::ElastanceInductor { max_elastance, .. }, "max_elastance")
+        | (L::Linear { max_elastance, .. }, "max_elastance")
+        | (L::Exponential { max_elastance, .. }, "max_elastance") => Some(*max_elastance),
+        (L::ElastanceInductor { min_elastance, .. }, "min_elastance") => Some(*min_elastance),
+        (
+            L::ElastanceInductor {
+                rest_volume_diastole,
+                ..
+            },
+            "rest_volume_diastole",
+        ) => Some(*rest_volume_diastole),
+        (
+            L::ElastanceInductor {
+                rest_volume_systole,
+                ..
+            },
+            "rest_volume_systole",
+        ) => Some(*rest_volume_systole),
+        (
+            L::Linear {
+                passive_elastance, ..
+            },
+            "passive_elastance",
+        ) => Some(*passive_elastance),
+        (L::Linear { rest_volume, .. }, "rest_volume")
+        | (L::Exponential { rest_volume, .. }, "rest_volume") => Some(*rest_volume),
+        (
+            L::Exponential {
+                passive_pressure, ..
+            },
+            "passive_pressure",
+        ) => Some(*passive_pressure),
+        (
+            L::Exponential {
+                passive_volume_coefficient,
+                ..
+            },
+            "passive_volume_coefficient",
+        ) => Some(*passive_volume_coefficient),
+        _ => None,
+    }
+}
+
+/// A valve's value by key.
+fn valve_value(law: &ValveSpec, key: &str) -> Option<f64> {
+    match (law, key) {
+        (ValveSpec::Tanh { min_resistance, .. }, "min_resistance")
+        | (ValveSpec::Piecewise { min_resistance, .. }, "min_resistance") => Some(*min_resistance),
+        (ValveSpec::Tanh { max_resistance, .. }, "max_resistance")
+        | (ValveSpec::Piecewise { max_resistance, .. }, "max_resistance") => Some(*max_resistance),
+        (ValveSpec::Tanh { steepness, .. }, "steepness") => Some(*steepness),
+        _ => None,
     }
 }
 
@@ -164,18 +289,27 @@ fn vessel(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<P
     Ok(p)
 }
 
-/// Refuse what the tangent does not cover: time-varying or element terms, rows that were
-/// moved (heart elements), and svZeroDSolver-form stenoses (chain-rule capacitor rows).
-/// Branch-form stenoses are covered (their S |Q| Q term is differentiated exactly).
+/// Refuse what the tangent does not cover: time-varying resistances, the closed-loop heart
+/// block, coronary beds and spherical chambers (element terms without parameter
+/// derivatives; the heart block also resets its closed valves' flows inside Newton's
+/// iteration, which is not the derivative of a step equation), and svZeroDSolver-form
+/// stenoses (chain-rule capacitor rows). Branch-form stenoses, chambers and valves are
+/// covered (their terms are differentiated exactly).
 pub fn check_supported(circuit: &Circuit, dae: &Dae) -> Result<()> {
+    let other = circuit.elements.iter().find_map(|e| match e {
+        CircuitElement::Valve { .. } | CircuitElement::Chamber { .. } => None,
+        CircuitElement::Heart { name, .. } => Some(format!("the closed-loop heart block {name}")),
+        CircuitElement::Coronary { name, .. } => Some(format!("the coronary bed {name}")),
+        CircuitElement::Sphere { name, .. } => Some(format!("the spherical chamber {name}")),
+    });
     let why = if !dae.chain_rule.is_empty() {
-        Some("svZeroDSolver-form stenoses (stenosis_form: svzerod)")
-    } else if !dae.elements.is_empty() || !circuit.moved_rows.is_empty() {
-        Some("heart elements")
+        Some("svZeroDSolver-form stenoses (stenosis_form: svzerod)".to_owned())
+    } else if let Some(e) = other {
+        Some(e)
     } else if !circuit.swapped_rows.is_empty() {
-        Some("through_rc elements")
+        Some("through_rc elements".to_owned())
     } else if !dae.varying.is_empty() {
-        Some("time-varying resistances")
+        Some("time-varying resistances".to_owned())
     } else {
         None
     };
@@ -222,6 +356,7 @@ impl<'a> Stamps<'a> {
             df: vec![0.0; self.dae.f.val.len()],
             dforcing: Vec::new(),
             dstenosis: Vec::new(),
+            delements: Vec::new(),
         }
     }
 
@@ -310,6 +445,17 @@ impl<'a> Stamps<'a> {
                 for i in 0..nn {
                     t.de[i] = self.node_c(i);
                 }
+            }
+            Parameter::Element {
+                element,
+                key,
+                value,
+            } => {
+                t = self.blank(path, *value);
+                let e = (self.dae.elements.iter())
+                    .position(|e| e.name() == element)
+                    .ok_or_else(missing)?;
+                t.delements.push((e, key.clone()));
             }
             Parameter::InflowScale => {
                 t = self.blank(path, 1.0);

@@ -33,6 +33,11 @@
 //! is the linearised monodromy), so the fixed-point iteration is unchanged; only K_k varies
 //! along the cycle, so each tangent cycle refactorises once per step (the slopes 2 S |Q_αf|
 //! are recorded with the sources) and solves every active parameter on that factorisation.
+//!
+//! Heart chambers and valves add c_el(y, t) the same way: J_k gains their Jacobian
+//! ∂c_el/∂y at (y_αf, t_αf) of step k (recorded with the slopes), and a parameter of an
+//! element adds −∂c_el/∂θ (y_αf, t_αf) to its source. A chamber's elastance varies in time,
+//! so K_k varies along the cycle even for a linear chamber.
 
 #[path = "adjoint.rs"]
 mod adjoint;
@@ -149,6 +154,8 @@ struct Source {
     forcing: Vec<(usize, usize, f64)>,
     /// (position in `rows`, branch unknown i, dS_i/dp)
     sten: Vec<(usize, usize, f64)>,
+    /// (element index, key, position in `rows` of each of its rows)
+    elem: Vec<(usize, String, Vec<usize>)>,
     /// step k's values on `rows` at k·rows.len()
     vals: Vec<f64>,
     /// steps captured
@@ -184,6 +191,12 @@ impl Source {
             .map(|&(k, factor)| (at(dae.forcing[k].0), k, factor))
             .collect();
         let sten = t.dstenosis.iter().map(|&(i, d)| (at(i), i, d)).collect();
+        let elem = (t.delements.iter())
+            .map(|(el, key)| {
+                let pos = dae.elements[*el].rows().iter().map(|&r| at(r)).collect();
+                (*el, key.clone(), pos)
+            })
+            .collect();
         let vals = Vec::with_capacity(steps * rows.len());
         Source {
             rows,
@@ -191,14 +204,17 @@ impl Source {
             f,
             forcing,
             sten,
+            elem,
             vals,
             steps: 0,
         }
     }
 
-    /// Append one step's source, from the primal's pre-step state, increment and forcing.
-    fn capture(&mut self, s: &Scheme, c: f64, pre: (&[f64], &[f64], &[f64]), forcing: &[f64]) {
-        let (y, yd, delta) = pre;
+    /// Append one step's source, from the primal's pre-step state, increment and forcing,
+    /// the step starting at `time` (its α_f level y_αf for the element terms).
+    fn capture(&mut self, pr: &Primal, time: f64) {
+        let (s, c, forcing) = (&pr.scheme, pr.c, &pr.forcing);
+        let (y, yd, delta) = (&pr.y, &pr.yd, &pr.r);
         self.steps += 1;
         let base = self.vals.len();
         self.vals.resize(base + self.rows.len(), 0.0);
@@ -216,6 +232,20 @@ impl Source {
         for &(at, i, ds) in &self.sten {
             let q = y[i] + gdt * delta[i];
             v[at] -= ds * q.abs() * q;
+        }
+        if !self.elem.is_empty() {
+            let y_af: Vec<f64> = y.iter().zip(delta).map(|(a, d)| a + gdt * d).collect();
+            let t_af = time + s.af * s.dt;
+            let mut dc = Vec::new();
+            for (el, key, pos) in &self.elem {
+                dc.clear();
+                dc.resize(pos.len(), 0.0);
+                // (the key was resolved against the element's law when the path was parsed)
+                pr.dae.elements[*el].parameter_derivative(key, t_af, &y_af, &mut dc);
+                for (&at, d) in pos.iter().zip(&dc) {
+                    v[at] -= d;
+                }
+            }
         }
     }
 
@@ -256,6 +286,10 @@ struct Primal<'a> {
     next: (Vec<f64>, Vec<f64>),
     /// 2 S |Q_αf| of each `Dae::stenosis` entry at each recorded step (`record_slopes`).
     slopes: Vec<f64>,
+    /// ∂c_el/∂y at (y_αf, t_αf) of each recorded step, `Dae::element_pattern` order.
+    element_jac: Vec<f64>,
+    /// The elements' Jacobian entries (row, column).
+    element_pattern: Vec<(usize, usize)>,
 }
 
 impl<'a> Primal<'a> {
@@ -267,7 +301,7 @@ impl<'a> Primal<'a> {
         let mut kvals = vec![0.0; stamps.len()];
         let a = scheme.af * scheme.gamma * scheme.dt;
         jacobian_values(dae, a, &am_e, &vec![0.0; n], 0.0, &mut kvals);
-        let newton = if dae.stenosis.is_empty() {
+        let newton = if dae.stenosis.is_empty() && dae.elements.is_empty() {
             lu.factor(&kvals).map_err(|m| singular(0.0, &m))?;
             None
         } else {
@@ -293,26 +327,82 @@ impl<'a> Primal<'a> {
             newton,
             next: (Vec::new(), Vec::new()),
             slopes: Vec::new(),
+            element_jac: Vec::new(),
+            element_pattern: dae.element_pattern(),
         })
     }
 
-    /// The iteration matrix's values without the stenosis slopes (in `jacobian_stamps`
-    /// order): a step's matrix adds α_f γ Δt · 2 S |Q_αf| on the stenosis diagonals.
+    /// The iteration matrix's values without the stenosis slopes and element Jacobians (in
+    /// `jacobian_stamps` order): a step's matrix adds α_f γ Δt · 2 S |Q_αf| on the stenosis
+    /// diagonals and α_f γ Δt · ∂c_el/∂y on the elements' entries.
     fn base_values(&self) -> Vec<f64> {
         let (dae, sc) = (self.dae, &self.scheme);
         let am_e: Vec<f64> = dae.e.iter().map(|e| sc.am * e).collect();
         let mut kvals = vec![0.0; jacobian_stamps(dae).len()];
         let a = sc.af * sc.gamma * sc.dt;
         jacobian_values(dae, a, &am_e, &vec![0.0; dae.n], 0.0, &mut kvals);
+        kvals[dae.f.val.len() + dae.n..].fill(0.0);
         kvals
     }
 
-    /// Append this step's stenosis slopes 2 S |Q_αf| (after `increment`).
-    fn record_slopes(&mut self) {
+    /// Append this step's stenosis slopes 2 S |Q_αf| and element Jacobian at (y_αf, t_αf)
+    /// (after `increment` of the step from `time`).
+    fn record_slopes(&mut self, time: f64) {
         let gdt = self.scheme.af * self.scheme.gamma * self.scheme.dt;
         for &(i, s) in &self.dae.stenosis {
             let q = self.y[i] + gdt * self.r[i];
             self.slopes.push(2.0 * s * q.abs());
+        }
+        if !self.element_pattern.is_empty() {
+            let y_af: Vec<f64> = (self.y.iter().zip(&self.r))
+                .map(|(a, d)| a + gdt * d)
+                .collect();
+            let t_af = time + self.scheme.af * self.scheme.dt;
+            let base = self.element_jac.len();
+            self.element_jac
+                .resize(base + self.element_pattern.len(), 0.0);
+            let out = &mut self.element_jac[base..];
+            self.dae
+                .element_jacobian(1.0, t_af, &y_af, out, crate::circuit::JacobianKind::Exact);
+        }
+    }
+
+    /// Step k's local Jacobian J_k beyond F: (stenosis slopes, element Jacobian).
+    fn local(&self, k: usize) -> (&[f64], &[f64]) {
+        let (m, e) = (self.dae.stenosis.len(), self.element_pattern.len());
+        (
+            self.slopes.get(k * m..(k + 1) * m).unwrap_or(&[]),
+            self.element_jac.get(k * e..(k + 1) * e).unwrap_or(&[]),
+        )
+    }
+
+    /// The iteration matrix's values of step k: `base` plus α_f γ Δt J_k.
+    fn step_values(&self, base: &[f64], k: usize) -> Vec<f64> {
+        let a = self.scheme.af * self.scheme.gamma * self.scheme.dt;
+        let (nf, n) = (self.dae.f.val.len(), self.dae.n);
+        let (slopes, jac) = self.local(k);
+        let mut vals = base.to_vec();
+        for (&(i, _), slope) in self.dae.stenosis.iter().zip(slopes) {
+            vals[nf + i] += a * slope;
+        }
+        for (v, j) in vals[nf + n..].iter_mut().zip(jac) {
+            *v += a * j;
+        }
+        vals
+    }
+
+    /// r −= J_k x (transposed: Jᵀ_k x), J_k beyond F at step k.
+    fn local_apply(&self, k: usize, x: &[f64], r: &mut [f64], transposed: bool) {
+        let (slopes, jac) = self.local(k);
+        for (&(i, _), slope) in self.dae.stenosis.iter().zip(slopes) {
+            r[i] -= slope * x[i];
+        }
+        for (&(row, col), j) in self.element_pattern.iter().zip(jac) {
+            if transposed {
+                r[col] -= j * x[row];
+            } else {
+                r[row] -= j * x[col];
+            }
         }
     }
 
@@ -369,8 +459,8 @@ impl<'a> Primal<'a> {
 /// The tangents' iteration matrices along the periodic cycle: the primal's one factorisation
 /// for a linear circuit, else one per step from the recorded stenosis slopes.
 struct StepMatrices {
-    /// (stamps without the slopes, value index of each stenosis diagonal, a = α_f γ Δt, LU)
-    varying: Option<(Vec<f64>, Vec<usize>, f64, SparseLu)>,
+    /// (stamps without the local Jacobians, LU)
+    varying: Option<(Vec<f64>, SparseLu)>,
 }
 
 impl StepMatrices {
@@ -379,25 +469,18 @@ impl StepMatrices {
             return Ok(StepMatrices { varying: None });
         }
         let dae = pr.dae;
-        let nf = dae.f.val.len();
-        let diag = dae.stenosis.iter().map(|&(i, _)| nf + i).collect();
-        let a = pr.scheme.af * pr.scheme.gamma * pr.scheme.dt;
         let lu = SparseLu::analyse(dae.n, &jacobian_stamps(dae))?;
         Ok(StepMatrices {
-            varying: Some((pr.base_values(), diag, a, lu)),
+            varying: Some((pr.base_values(), lu)),
         })
     }
 
     /// The matrix of step k (refactorised when it varies), to solve with.
     fn at<'m>(&'m mut self, pr: &'m Primal, k: usize) -> Result<&'m SparseLu> {
-        let Some((base, diag, a, lu)) = &mut self.varying else {
+        let Some((base, lu)) = &mut self.varying else {
             return Ok(&pr.lu);
         };
-        let m = diag.len();
-        let mut vals = base.clone();
-        for (&d, slope) in diag.iter().zip(&pr.slopes[k * m..(k + 1) * m]) {
-            vals[d] += *a * slope;
-        }
+        let vals = pr.step_values(base, k);
         let t = k as f64 * pr.scheme.dt;
         lu.factor(&vals).map_err(|msg| singular(t, &msg))?;
         Ok(lu)
@@ -415,19 +498,15 @@ fn tangent_cycles(
     signals: &[usize],
 ) -> Result<()> {
     let (dae, n, nsig) = (pr.dae, pr.dae.n, signals.len());
-    let m = dae.stenosis.len();
     let mut rs = vec![0.0; n];
     for k in 0..sources.first().map_or(0, |s| s.steps) {
         let lu = mats.at(pr, k)?;
-        let slopes = pr.slopes.get(k * m..(k + 1) * m).unwrap_or(&[]);
         for (p, x, rec) in jobs.iter_mut() {
             let (s, sd) = x.split_at_mut(n);
             rs.iter_mut().for_each(|v| *v = 0.0);
             residual(dae, pr.c, s, sd, &mut rs);
-            // −J_k s: the stenosis slopes at this step
-            for (&(i, _), slope) in dae.stenosis.iter().zip(slopes) {
-                rs[i] -= slope * s[i];
-            }
+            // −J_k s: the stenosis slopes and element Jacobian at this step
+            pr.local_apply(k, s, &mut rs, false);
             sources[*p].add(k, &mut rs);
             if !lu.solve_in_place(&mut rs) {
                 return Err(singular(k as f64 * pr.scheme.dt, "non-finite tangent"));
@@ -490,9 +569,9 @@ pub fn periodic_tangent(
     for k in 0..ns {
         pr.increment(k as f64 * dt)?;
         for src in &mut sources {
-            src.capture(&pr.scheme, pr.c, (&pr.y, &pr.yd, &pr.r), &pr.forcing);
+            src.capture(&pr, k as f64 * dt);
         }
-        pr.record_slopes();
+        pr.record_slopes(k as f64 * dt);
         pr.advance();
         rec.values.extend(signals.iter().map(|&u| pr.y[u]));
         let kn = dae.n_nodes.min(n);

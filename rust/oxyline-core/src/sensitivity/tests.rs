@@ -323,8 +323,12 @@ fn bad_paths_name_themselves() {
 /// points' tolerances (1e-13 of the scale) and rounding, so 1e-8 relative tells a wrong
 /// transpose, source or periodic coupling.
 fn check_adjoint(base: &NetworkSpec, paths: &[&str]) {
+    check_adjoint_of(base, paths, &SIGNALS);
+}
+
+fn check_adjoint_of(base: &NetworkSpec, paths: &[&str], signals: &[(&str, &str)]) {
     let ns = settings().steps_per_cycle;
-    let nsig = SIGNALS.len();
+    let nsig = signals.len();
     let mut w = vec![0.0; 2 * ns * nsig];
     for k in 0..ns {
         w[k * nsig] = 1.0 / ns as f64; // mean inlet pressure
@@ -333,12 +337,12 @@ fn check_adjoint(base: &NetworkSpec, paths: &[&str]) {
     w[ns * nsig + 37 * nsig + 1] = 1.0; // d1's outflow at step 37
     w[ns * nsig + 120 * nsig + 3] = -0.5; // minus half d1's outlet pressure at step 120
     let owned: Vec<String> = paths.iter().map(|p| p.to_string()).collect();
-    let sig: Vec<(String, String)> = SIGNALS
+    let sig: Vec<(String, String)> = signals
         .iter()
         .map(|(a, b)| (a.to_string(), b.to_string()))
         .collect();
     let (_, adj) = adjoint(base, &owned, &sig, &w, settings()).unwrap();
-    let fwd = run(base, paths);
+    let fwd = sensitivities(base, &owned, &sig, settings()).unwrap();
     let np = paths.len();
     for f in 0..2 {
         let wf = &w[f * ns * nsig..(f + 1) * ns * nsig];
@@ -383,4 +387,299 @@ fn adjoint_gradients_are_the_tangents() {
     let mut stenosed_paths = all.to_vec();
     stenosed_paths.push("vessels.d2.lumped.stenosis_coefficient");
     check_adjoint(&stenosed(), &stenosed_paths);
+}
+
+/// A left heart between a venous pressure and a Windkessel: a tanh mitral valve, an
+/// elastance-inductor chamber with a half-cosine activation, a tanh aortic valve and a
+/// lumped aorta. The valves switch over ~1/k = 200 Pa (smooth on the step grid), so central
+/// differences with h = 1e-4 resolve their derivatives like any other kind's.
+const HEART: &str = r#"{
+  "name": "left-heart",
+  "vessels": [
+    {"name": "mitral", "from": "ven", "to": "mv_out",
+     "valve": {"law": "tanh", "min_resistance": 2e6, "max_resistance": 1e10, "steepness": 5e-3}},
+    {"name": "lv", "from": "mv_out", "to": "lv_out",
+     "chamber": {"law": "elastance-inductor", "max_elastance": 3.0e8, "min_elastance": 1.3e7,
+                 "rest_volume_diastole": 2e-5, "rest_volume_systole": 1e-5,
+                 "activation": {"kind": "half-cosine", "t_active": 0.1, "t_twitch": 0.35},
+                 "period": 0.8, "inductance": 1e5, "initial_volume": 1.2e-4}},
+    {"name": "aortic", "from": "lv_out", "to": "ao",
+     "valve": {"law": "tanh", "min_resistance": 3e6, "max_resistance": 1e10, "steepness": 5e-3}},
+    {"name": "aorta", "from": "ao", "to": "out",
+     "lumped": {"resistance": 5e6, "inductance": 1e5, "capacitance": 3e-9}}
+  ],
+  "boundary_conditions": {
+    "ven": {"type": "pressure", "pressure": {"kind": "fourier", "period": 0.8, "mean": 1200.0,
+                                             "cos": [], "sin": []}},
+    "out": {"type": "rcr", "proximal_resistance": 1e7, "capacitance": 1.2e-8,
+            "distal_resistance": 1.3e8}
+  }
+}"#;
+
+const HEART_SIGNALS: [(&str, &str); 4] = [
+    ("lv", "pressure_in"),
+    ("aortic", "flow_in"),
+    ("aorta", "pressure_out"),
+    ("mitral", "flow_in"),
+];
+
+/// `spec` with the heart parameter `path` multiplied by `f`.
+fn heart_scaled(mut s: NetworkSpec, path: &str, f: f64) -> NetworkSpec {
+    use crate::model::{ActivationSpec, ChamberLawSpec, ValveSpec};
+    let parts: Vec<&str> = path.split('.').collect();
+    let v = s.vessels.iter_mut().find(|v| v.name == parts[1]).unwrap();
+    match (parts[2], v.chamber.as_mut(), v.valve.as_mut()) {
+        (
+            "valve",
+            _,
+            Some(ValveSpec::Tanh {
+                min_resistance,
+                max_resistance,
+                steepness,
+            }),
+        ) => match parts[3] {
+            "min_resistance" => *min_resistance *= f,
+            "max_resistance" => *max_resistance *= f,
+            _ => *steepness *= f,
+        },
+        ("chamber", Some(c), _) => match (&mut c.law, &mut c.activation, parts[3]) {
+            (_, ActivationSpec::HalfCosine { t_active, t_twitch }, "activation") => {
+                match parts[4] {
+                    "t_active" => *t_active *= f,
+                    _ => *t_twitch *= f,
+                }
+            }
+            (
+                ChamberLawSpec::ElastanceInductor {
+                    max_elastance,
+                    min_elastance,
+                    rest_volume_diastole,
+                    rest_volume_systole,
+                },
+                _,
+                key,
+            ) => match key {
+                "max_elastance" => *max_elastance *= f,
+                "min_elastance" => *min_elastance *= f,
+                "rest_volume_diastole" => *rest_volume_diastole *= f,
+                _ => *rest_volume_systole *= f,
+            },
+            _ => unreachable!("{path}"),
+        },
+        _ => unreachable!("{path}"),
+    }
+    s
+}
+
+fn heart_run(spec: &NetworkSpec, paths: &[&str]) -> Sensitivities {
+    let paths: Vec<String> = paths.iter().map(|p| p.to_string()).collect();
+    let signals: Vec<(String, String)> = HEART_SIGNALS
+        .iter()
+        .map(|(a, b)| (a.to_string(), b.to_string()))
+        .collect();
+    sensitivities(spec, &paths, &signals, settings()).unwrap()
+}
+
+/// Tangent vs central differences (as [`check_on`]) on the heart model, per kind.
+fn check_heart(path: &str) {
+    let base = parse(HEART).unwrap();
+    let exact = heart_run(&base, &[path]);
+    // φ is C¹ but not C² in the activation's timing (its square-law ends move across the
+    // step grid): the difference quotient's error is O(h), not O(h²), so a smaller step
+    let h = if path.contains(".activation.") {
+        1e-5
+    } else {
+        1e-4
+    };
+    let up = heart_run(&heart_scaled(base.clone(), path, 1.0 + h), &[]);
+    let down = heart_run(&heart_scaled(base.clone(), path, 1.0 - h), &[]);
+    let p = exact.values[0];
+    let c = &exact.cycle;
+    assert!(c.periodic_change <= 1e-11, "{path}: {}", c.periodic_change);
+    let nsig = HEART_SIGNALS.len();
+    for (j, signal) in HEART_SIGNALS.iter().enumerate() {
+        let col = |v: &[f64]| -> Vec<f64> { v.iter().skip(j).step_by(nsig).copied().collect() };
+        let (d, u, w) = (
+            col(&c.derivs),
+            col(&up.cycle.values),
+            col(&down.cycle.values),
+        );
+        let scale = d.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        assert!(scale > 0.0, "{path}: zero derivative of {signal:?}");
+        let worst = d
+            .iter()
+            .zip(u.iter().zip(&w))
+            .map(|(dk, (uk, wk))| (dk - (uk - wk) / (2.0 * h * p)).abs())
+            .fold(0.0f64, f64::max);
+        eprintln!("{path} {signal:?}: {:.2e}", worst / scale);
+        assert!(
+            worst <= 1e-6 * scale,
+            "{path} {signal:?}: {worst:e} vs scale {scale:e}"
+        );
+    }
+}
+
+#[test]
+fn heart_chamber_parameters() {
+    check_heart("vessels.lv.chamber.max_elastance");
+    check_heart("vessels.lv.chamber.min_elastance");
+    check_heart("vessels.lv.chamber.rest_volume_diastole");
+    check_heart("vessels.lv.chamber.rest_volume_systole");
+    check_heart("vessels.lv.chamber.activation.t_active");
+    check_heart("vessels.lv.chamber.activation.t_twitch");
+}
+
+#[test]
+fn heart_valve_coefficients() {
+    check_heart("vessels.aortic.valve.min_resistance");
+    check_heart("vessels.aortic.valve.max_resistance");
+    check_heart("vessels.aortic.valve.steepness");
+    check_heart("vessels.mitral.valve.min_resistance");
+}
+
+#[test]
+fn heart_adjoint_gradients_are_the_tangents() {
+    let paths = [
+        "vessels.lv.chamber.max_elastance",
+        "vessels.lv.chamber.min_elastance",
+        "vessels.lv.chamber.activation.t_twitch",
+        "vessels.aortic.valve.min_resistance",
+        "vessels.mitral.valve.steepness",
+        "boundary_conditions.out.distal_resistance",
+        "vessels.aorta.lumped.capacitance",
+    ];
+    check_adjoint_of(&parse(HEART).unwrap(), &paths, &HEART_SIGNALS);
+}
+
+#[test]
+fn bad_heart_paths_name_themselves() {
+    let base = parse(HEART).unwrap();
+    let err = |p: &str| {
+        sensitivities(&base, &[p.to_owned()], &[], settings())
+            .err()
+            .unwrap()
+            .to_string()
+    };
+    let e = err("vessels.lv.chamber.passive_elastance");
+    assert!(
+        e.contains("'vessels.lv.chamber.passive_elastance'") && e.contains("no differentiable"),
+        "{e}"
+    );
+    let e = err("vessels.aorta.valve.min_resistance");
+    assert!(e.contains("is not a valve"), "{e}");
+    let e = err("vessels.lv.chamber.activation.t_shift");
+    assert!(e.contains("'activation.t_shift'"), "{e}");
+    let e = err("vessels.mitral.valve.width");
+    assert!(e.contains("'vessels.mitral.valve.width'"), "{e}");
+}
+
+/// The chamber value `key` of `e` (None: its law has no such value), for a test to change.
+fn chamber_value_mut<'e>(
+    e: &'e mut crate::element::chamber::Elastance,
+    key: &str,
+) -> Option<&'e mut f64> {
+    use crate::element::activation::Activation;
+    use crate::element::chamber::ElastanceLaw as L;
+    let Activation::HalfCosine { t_active, t_twitch } = &mut e.activation else {
+        return None;
+    };
+    match (&mut e.law, key) {
+        (_, "activation.t_active") => Some(t_active),
+        (_, "activation.t_twitch") => Some(t_twitch),
+        (L::ElastanceInductor { e_max, .. }, "max_elastance")
+        | (L::Linear { e_max, .. }, "max_elastance")
+        | (L::Exponential { e_max, .. }, "max_elastance") => Some(e_max),
+        (L::ElastanceInductor { e_min, .. }, "min_elastance") => Some(e_min),
+        (
+            L::ElastanceInductor {
+                v_rest_diastole, ..
+            },
+            "rest_volume_diastole",
+        ) => Some(v_rest_diastole),
+        (L::ElastanceInductor { v_rest_systole, .. }, "rest_volume_systole") => {
+            Some(v_rest_systole)
+        }
+        (L::Linear { e_pass, .. }, "passive_elastance") => Some(e_pass),
+        (L::Linear { v_rest, .. }, "rest_volume")
+        | (L::Exponential { v_aso: v_rest, .. }, "rest_volume") => Some(v_rest),
+        (L::Exponential { k_pressure, .. }, "passive_pressure") => Some(k_pressure),
+        (L::Exponential { k_volume, .. }, "passive_volume_coefficient") => Some(k_volume),
+        _ => None,
+    }
+}
+
+/// Every chamber law's ∂P/∂θ (the tangent's element source) against central differences of
+/// P(V, t) in θ (relative step 1e-6: truncation O(h²) and rounding ~1e-16/h, both far below
+/// 1e-7 of the derivative), at times before, during and after the twitch.
+#[test]
+fn chamber_pressure_derivatives_of_every_law() {
+    use crate::element::activation::Activation;
+    use crate::element::chamber::{Elastance, ElastanceLaw};
+    let laws = [
+        ElastanceLaw::ElastanceInductor {
+            e_max: 3e8,
+            e_min: 1.3e7,
+            v_rest_diastole: 2e-5,
+            v_rest_systole: 1e-5,
+        },
+        ElastanceLaw::Linear {
+            e_max: 3e8,
+            e_pass: 1.2e7,
+            v_rest: 1.5e-5,
+        },
+        ElastanceLaw::Exponential {
+            e_max: 2e7,
+            k_pressure: 50.0,
+            k_volume: 3e4,
+            v_aso: 1e-5,
+        },
+    ];
+    let keys = [
+        "max_elastance",
+        "min_elastance",
+        "rest_volume_diastole",
+        "rest_volume_systole",
+        "passive_elastance",
+        "rest_volume",
+        "passive_pressure",
+        "passive_volume_coefficient",
+        "activation.t_active",
+        "activation.t_twitch",
+    ];
+    let mut checked = 0;
+    for law in laws {
+        let mut base = Elastance {
+            law,
+            activation: Activation::HalfCosine {
+                t_active: 0.1,
+                t_twitch: 0.35,
+            },
+            period: 0.8,
+        };
+        for key in keys {
+            for (t, v) in [(0.05, 1.1e-4), (0.2, 9e-5), (0.37, 6e-5), (0.7, 1.2e-4)] {
+                let exact = base.pressure_derivative(key, t, v);
+                let Some(x0) = chamber_value_mut(&mut base, key).map(|x| *x) else {
+                    assert!(exact.is_none(), "{key}: a law without it");
+                    continue;
+                };
+                let h = 1e-6 * x0.abs();
+                let at = |x: f64| {
+                    let mut e = base.clone();
+                    *chamber_value_mut(&mut e, key).unwrap() = x;
+                    e.pressure(t, v).0
+                };
+                let fd = (at(x0 + h) - at(x0 - h)) / (2.0 * h);
+                let d = exact.unwrap_or_else(|| panic!("{key} at {t}"));
+                // the response to a 100 % change, floored by the pressure's own size
+                let scale = (x0 * d).abs().max(1e-6 * base.pressure(t, v).0.abs());
+                assert!(
+                    ((d - fd) * x0).abs() <= 1e-7 * scale,
+                    "{key} at t {t}: {d:e} vs {fd:e}"
+                );
+                checked += 1;
+            }
+        }
+    }
+    assert_eq!(checked, 4 * (6 + 5 + 6));
 }
