@@ -161,13 +161,13 @@ def adjoint_cost(name: str, counts: list[int], steps: int, tol: float,
         print(f"{n:>10} {ta * 1e3:>13.0f} {ta / t0:>10.2f} {sa.tangent_cycles:>16} {tcol}")
 
 
-#: adan56's regions, by the words of its vessels' names (the first that matches)
+#: adan56's regions, by the words of its vessels' names (the first that matches): the aorta
+#: with its short trunk branches (alone, their stiffness moves no target measurably)
 REGIONS = {"head_neck": ("carotid", "vertebral", "brachiocephalic"),
            "arms": ("subclavian", "axillary", "brachial", "radial", "ulnar", "interosseous"),
-           "aorta": ("aort",),
-           "trunk": ("intercostal", "celiac", "hepatic", "splenic", "gastric", "mesenteric",
-                     "renal"),
-           "legs": ("iliac", "femoral", "popliteal", "tibial", "tibiofibular")}
+           "aorta_trunk": ("aort", "intercostal", "celiac", "hepatic", "splenic", "gastric",
+                           "mesenteric", "renal"),
+           "legs": ("iliac", "femor", "popliteal", "tibial", "tibiofibular")}
 
 
 def adan56_problem() -> tuple[oxyline.Model, list[str], dict[str, list[str]], list[str]]:
@@ -188,9 +188,8 @@ def adan56_problem() -> tuple[oxyline.Model, list[str], dict[str, list[str]], li
     outputs = [f"{v}.flow_out.{s}" for v in terminal for s in ("mean", "pulse")]
     outputs += ["aortic_arch_I.pressure_in.max", "aortic_arch_I.pressure_in.min",
                 "internal_carotid_R.pressure_out.pulse", "radial_R.pressure_out.pulse",
-                "abdominal_aorta_V.pressure_out.pulse", "renal_L.pressure_out.pulse",
-                "posterior_tibial_R.pressure_out.pulse", "pwv.aortic_arch_I.abdominal_aorta_V",
-                "cardiac_output"]
+                "abdominal_aorta_V.pressure_out.pulse", "posterior_tibial_R.pressure_out.pulse",
+                "pwv.aortic_arch_I.abdominal_aorta_V", "cardiac_output"]
     return model, params, groups, outputs
 
 
@@ -198,7 +197,8 @@ def adan56_identifiability(steps: int, tol: float, fd: bool) -> None:
     """Synthetic data from known values (each factor drawn in [0.7, 1.4]), without and with
     2 % noise: the fit's time, evaluations and the recovery (largest relative error; how
     many true values lie inside the reported 95 % intervals); then the same noisy fit with
-    scipy's forward differences (same optimiser) for the speed-up."""
+    scipy's forward differences (same optimiser, trf, every variable bounded to a factor of 4
+    of its start) for the speed-up. Wall and process CPU time: the machine is shared."""
     model, params, groups, outputs = adan56_problem()
     names = params + list(groups)
     rng = np.random.default_rng(2026)
@@ -217,9 +217,12 @@ def adan56_identifiability(steps: int, tol: float, fd: bool) -> None:
                             *factors[len(params):]], strict=True))
     print(f"\nadan56: {len(names)} parameters ({len(params)} terminal R/C and inflow scale, "
           f"{len(groups)} regional stiffness factors over {len(paths) - len(params)} vessels), "
-          f"{len(outputs)} targets, lm")
-    print(f"{'data':>10} {'Jacobian':>9} {'time (s)':>9} {'evals':>6} {'cost':>9} "
-          f"{'max rel err':>12} {'in 95 % CI':>11} {'success':>8}")
+          f"{len(outputs)} targets, trf")
+    # every variable within a factor of 4 of its start (the truth is within 0.7-1.4)
+    bounds = {p: (x / 4, x * 4) for p, x in zip(
+        names, [*base[:len(params)], *np.ones(len(groups))], strict=True)}
+    print(f"{'data':>10} {'Jacobian':>9} {'wall (s)':>9} {'CPU (s)':>8} {'iters':>6} {'runs':>6} "
+          f"{'cost':>9} {'max rel err':>12} {'in 95 % CI':>11} {'success':>8}")
     runs = [("exact", 0.0), ("exact", 0.02)] + ([("2-point", 0.02)] if fd else [])
     times = {}
     for jac, noise in runs:
@@ -228,17 +231,20 @@ def adan56_identifiability(steps: int, tol: float, fd: bool) -> None:
             len(values))
         targets = {o: {"value": float(d), "sigma": float(s)}
                    for o, d, s in zip(outputs, data, sigma, strict=True)}
+        c0 = time.process_time()
         t, fit = _timed(lambda tg=targets, j=jac: oxyline.calibrate(
-            model, tg, params, groups=groups, method="lm", jacobian=j,
+            model, tg, params, groups=groups, method="trf", bounds=bounds, jacobian=j,
             max_evaluations=200, **kw), 1)
-        times[(jac, noise)] = t
+        cpu = time.process_time() - c0
+        times[(jac, noise)] = cpu
         err = max(abs(fit.parameters[p] / v - 1) for p, v in true.items())
         inside = sum(fit.intervals[p][0] <= v <= fit.intervals[p][1] for p, v in true.items())
-        print(f"{f'{noise:.0%} noise':>10} {jac:>9} {t:>9.1f} {fit.report['evaluations']:>6} "
+        print(f"{f'{noise:.0%} noise':>10} {jac:>9} {t:>9.1f} {cpu:>8.1f} "
+              f"{fit.report.get('nfev', 0):>6} {fit.report['evaluations']:>6} "
               f"{fit.cost:>9.2e} {err:>12.2e} {f'{inside}/{len(true)}':>11} "
               f"{fit.success!s:>8}  ({fit.report['gradient']})")
     if fd:
-        print(f"speed-up of the exact Jacobian at 2 % noise: "
+        print(f"speed-up of the exact Jacobian at 2 % noise (CPU time): "
               f"{times[('2-point', 0.02)] / times[('exact', 0.02)]:.1f}x")
 
 

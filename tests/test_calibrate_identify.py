@@ -119,3 +119,41 @@ def test_bad_groups_are_named(groups: object, match: str) -> None:
 def test_bad_gradient_is_named() -> None:
     with pytest.raises(CalibrationError, match="gradient"):
         oxyline.calibrate(MODEL, _targets(0.0), PATHS, gradient="reverse")
+
+
+def test_the_adjoint_weights_come_from_the_one_primal_run() -> None:
+    """The core calls ``weights_of`` once with the periodic cycle's step times and signals
+    (the same cycle the forward tangents record), raises what it raises, and names a weight
+    vector of the wrong size."""
+    import json
+
+    from oxyline import ModelError, _core
+
+    model = oxyline.load_model(MODEL)
+    signals = [("parent", "pressure_in")]
+    fwd = oxyline.sensitivities(model, [], ["parent.pressure_in.series"])
+    seen = []
+
+    def weights_of(times: np.ndarray, sig: np.ndarray) -> np.ndarray:
+        seen.append((times.copy(), sig.copy()))
+        return np.full(sig.size, 1.0 / sig.size)
+
+    period = model.period
+    steps = len(fwd.values)
+    out = _core.adjoint_gradients(json.dumps(model.canonical), ["scale.inflow"], signals,
+                                  weights_of, period, steps)
+    assert len(seen) == 1
+    times, sig = seen[0]
+    np.testing.assert_allclose(times, np.arange(1, steps + 1) * (period / steps), rtol=1e-14)
+    # the same periodic cycle as the tangents' run, to the periodic tolerance (1e-12)
+    np.testing.assert_allclose(sig[:, 0], fwd.values, rtol=1e-9)
+    assert out["functionals"][0] == pytest.approx(fwd.values.mean(), rel=1e-9)
+
+    def raises(times: np.ndarray, sig: np.ndarray) -> np.ndarray:
+        raise ValueError("no weights here")
+
+    with pytest.raises(ValueError, match="no weights here"):
+        _core.adjoint_gradients(json.dumps(model.canonical), [], signals, raises, period, steps)
+    with pytest.raises(ModelError, match="weights"):
+        _core.adjoint_gradients(json.dumps(model.canonical), [], signals,
+                                lambda t, s: np.ones(3), period, steps)
