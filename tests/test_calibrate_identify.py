@@ -157,3 +157,19 @@ def test_the_adjoint_weights_come_from_the_one_primal_run() -> None:
     with pytest.raises(ModelError, match="weights"):
         _core.adjoint_gradients(json.dumps(model.canonical), [], signals,
                                 lambda t, s: np.ones(3), period, steps)
+
+
+def test_a_problem_file_reads_groups_and_gradient(tmp_path) -> None:
+    from oxyline.calibrate import read_problem
+
+    f = tmp_path / "problem.yaml"
+    f.write_text("parameters: [scale.inflow]\n"
+                 "groups: {stiffness: [vessels.d1.youngs_modulus, vessels.d2.youngs_modulus]}\n"
+                 "gradient: adjoint\ntargets: {cardiac_output: 1.0e-4}\n")
+    p = read_problem(str(f))
+    assert p["groups"] == {"stiffness": ["vessels.d1.youngs_modulus",
+                                         "vessels.d2.youngs_modulus"]}
+    assert p["gradient"] == "adjoint"
+    f.write_text("parameters: [scale.inflow]\ntargets: {cardiac_output: 1.0e-4}\nweights: 1\n")
+    with pytest.raises(CalibrationError, match="weights"):
+        read_problem(str(f))

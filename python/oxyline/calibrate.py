@@ -621,7 +621,7 @@ def _result(problem: _Problem, theta: np.ndarray, r: np.ndarray, j: np.ndarray,
 def read_problem(path: str) -> dict[str, Any]:
     """A calibration problem file (YAML or JSON): ``parameters`` (a list of paths, or a
     mapping {path: {bounds: [low, high]}}), ``targets`` (as :func:`calibrate` takes them) and
-    optionally ``method``."""
+    optionally ``method``, ``groups`` ({name: [paths]}) and ``gradient``."""
     import yaml
 
     try:
@@ -631,10 +631,11 @@ def read_problem(path: str) -> dict[str, Any]:
         raise CalibrationError(f"{path}: not a YAML or JSON file ({e})") from None
     if not isinstance(data, Mapping):
         raise CalibrationError(f"{path}: expected a mapping with 'parameters' and 'targets'")
-    unknown = set(data) - {"parameters", "targets", "method"}
+    unknown = set(data) - {"parameters", "targets", "method", "groups", "gradient"}
     if unknown or not {"parameters", "targets"} <= set(data):
         raise CalibrationError(f"{path}: needs 'parameters' and 'targets' (and optionally "
-                               f"'method'); unknown keys {sorted(unknown)}")
+                               f"'method', 'groups', 'gradient'); unknown keys "
+                               f"{sorted(unknown)}")
     params = data["parameters"]
     bounds: dict[str, Any] = {}
     if isinstance(params, Mapping):
@@ -644,7 +645,8 @@ def read_problem(path: str) -> dict[str, Any]:
         params = list(params)
     method = str(data.get("method", "trf" if bounds else "lm"))
     return {"parameters": list(params), "targets": data["targets"],
-            "bounds": bounds or None, "method": method}
+            "bounds": bounds or None, "method": method, "groups": data.get("groups"),
+            "gradient": str(data.get("gradient", "auto"))}
 
 
 def main_cli(model: str, problem_file: str, output: str, quiet: bool = False) -> int:
@@ -655,7 +657,8 @@ def main_cli(model: str, problem_file: str, output: str, quiet: bool = False) ->
 
     problem = read_problem(problem_file)
     res = calibrate(model, problem["targets"], problem["parameters"],
-                    bounds=problem["bounds"], method=problem["method"])
+                    bounds=problem["bounds"], method=problem["method"],
+                    groups=problem["groups"], gradient=problem["gradient"])
     path = dump_native(res.model, output)
     if not quiet:
         for p, v in res.parameters.items():
