@@ -28,6 +28,7 @@ import time
 import numpy as np
 
 import oxyline
+from oxyline import population_fit as F
 from oxyline import populations as P
 
 TARGET_S = 600.0
@@ -130,11 +131,11 @@ def calibrated_decades(ages: list[float], subset: int) -> None:
     print("\nbaseline subjects fitted to McEniery 2005 (men and women pooled); mmHg, L/min")
     for age in ages:
         t0 = time.perf_counter()
-        out = P.calibrate_baseline(age)
+        out = F.calibrate_baseline(age)
         factors[age] = out["factors"]
         fit = out["fit"]
         summ = {}
-        for when, model in (("before", P.baseline_subject(age)[1]), ("after", fit.model)):
+        for when, model in (("before", F.baseline_subject(age)[1]), ("after", fit.model)):
             res = oxyline.simulate(model, until_periodic=1e-4, vessels=P.summary_vessels(),
                                    variables=VARIABLES, progress=False)
             summ[when] = P.subject_summary(res)["cf_pwv"]
@@ -144,7 +145,7 @@ def calibrated_decades(ages: list[float], subset: int) -> None:
         for k in ("brachial_sbp", "brachial_dbp", "brachial_pp", "aortic_sbp", "aortic_dbp",
                   "aortic_pp", "pp_amplification", "co"):
             rows.append((age, k, out["target"][k], out["before"][k], out["after"][k]))
-        row = P.baseline_subject(age)[0]
+        row = F.baseline_subject(age)[0]
         rows.append((age, "cf_pwv", row["pwv"], summ["before"], summ["after"]))
     print("\n| age | characteristic | target | before | after |\n|---|---|---|---|---|")
     for age, k, t, b, a in rows:
@@ -159,7 +160,7 @@ def calibrated_decades(ages: list[float], subset: int) -> None:
         age = float(table.iloc[i]["age"])
         ranges = P.plausible_ranges(age)
         for when, patch in (("before", patches[i]),
-                            ("after", P.apply_factors(patches[i], factors[age]))):
+                            ("after", F.apply_factors(patches[i], factors[age]))):
             res = oxyline.simulate(P.patched(P.base_model(), patch), until_periodic=1e-4,
                                    vessels=P.summary_vessels(), variables=VARIABLES,
                                    progress=False)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from oxyline import ModelError
+from oxyline import population_fit as F
 from oxyline import populations as P
 
 
@@ -43,17 +44,17 @@ def test_in_vivo_interpolates_between_decades_and_ranges_are_99_percent() -> Non
 
 
 def test_factors_scale_every_outlet_and_the_inflow() -> None:
-    row, _ = P.baseline_subject(45)
+    row, _ = F.baseline_subject(45)
     patch = P.subject_patch(row)
     f = {"distal_resistance": 1.1, "proximal_resistance": 0.9, "capacitance": 1.3,
          "inflow": 1.05}
-    out = P.apply_factors(patch, f)
+    out = F.apply_factors(patch, f)
     for node, bc in patch["boundary_conditions"].items():
         if node == "n1":
             np.testing.assert_allclose(out["boundary_conditions"][node]["flow"],
                                        np.asarray(bc["flow"]) * 1.05, rtol=1e-15)
             continue
-        for k in P.FACTORS:
+        for k in F.FACTORS:
             assert out["boundary_conditions"][node][k] == pytest.approx(bc[k] * f[k],
                                                                         rel=1e-15)
     assert patch["boundary_conditions"]["n1"]["flow"] is not \

@@ -509,17 +509,22 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
         theta, success = problem.best[1], False
         report.update(status=-1, message="an evaluation failed; the best point reached is "
                       "returned", error=problem.error)
+    r, j = _end_point(problem, theta)
+    return _result(problem, theta, r, j, success, report)
+
+
+def _end_point(problem: _Problem, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The residuals and exact Jacobian (the covariance's) at the fit's end point, NaN if they
+    cannot be had."""
     best = problem.best
     if best is not None and best[1].tobytes() == theta.tobytes() and best[3].shape[1]:
-        r, j = best[2], best[3]
-    else:  # the end point's exact Jacobian (the covariance's), unless it cannot be had
-        problem.exact, problem.cache = True, None
-        try:
-            r, j = problem._eval(theta)
-        except _Stop:
-            r = best[2] if best is not None else np.full(len(problem.data), np.nan)
-            j = np.full((len(r), len(params)), np.nan)
-    return _result(problem, theta, r, j, success, report)
+        return best[2], best[3]
+    problem.exact, problem.cache = True, None
+    try:
+        return problem._eval(theta)
+    except _Stop:
+        r = best[2] if best is not None else np.full(len(problem.data), np.nan)
+        return r, np.full((len(r), len(problem.parameters)), np.nan)
 
 
 def _groups(parameters: Sequence[str], groups: Any) -> dict[str, list[str]]:
