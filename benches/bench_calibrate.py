@@ -26,6 +26,8 @@ from __future__ import annotations
 import argparse
 import time
 
+import numpy as np
+
 import oxyline
 from oxyline.calibrate import _base_value, native_model
 
@@ -111,22 +113,145 @@ def stenosis_cost(name: str, counts: list[int], steps: int, tol: float) -> None:
               f"{s.tangent_cycles:>15} {t * 1e3:>10.0f} {(t / t0 - 1) / n:>20.3f}")
 
 
-def adjoint_cost(name: str, counts: list[int], steps: int, tol: float) -> None:
-    model = oxyline.load_model(name)
+def tree(depth: int) -> dict:
+    """A symmetric binary tree of ``depth`` generations (2^depth − 1 vessels of two segments,
+    radius × 0.8 per generation, RCR outlets sized for ~100/70 mmHg): a model with more than
+    a thousand parameters for the adjoint's cost."""
+    import math
+
+    vessels, bcs = [], {}
+    n_out = 2 ** (depth - 1)
+    r_total = 1.3e8  # Pa s/m^3: 90 mmHg mean over 5.5 l/min
+    for k in range(1, 2 ** depth):
+        gen = int(math.log2(k))
+        r = 0.012 * 0.8 ** gen
+        vessels.append({"name": f"v{k}", "from": f"n{k // 2}" if k > 1 else "in",
+                        "to": f"n{k}", "segments": 2, "length": 0.05, "radius": r,
+                        "wall_thickness": 0.1 * r, "youngs_modulus": 4e5})
+        if gen == depth - 1:
+            bcs[f"n{k}"] = {"type": "rcr", "proximal_resistance": 0.1 * r_total * n_out,
+                            "distal_resistance": 0.9 * r_total * n_out,
+                            "capacitance": 1e-8 / n_out}
+    bcs["in"] = {"type": "flow", "fourier": {"period": 1.0, "mean": 9e-5,
+                                             "cos": [-4e-5, -4e-5, 1e-5],
+                                             "sin": [1.2e-4, -2e-5, -2e-5]}}
+    return {"name": f"tree{depth}", "units": "SI", "period": 1.0, "vessels": vessels,
+            "boundary_conditions": bcs}
+
+
+def adjoint_cost(name: str, counts: list[int], steps: int, tol: float,
+                 tangent_max: int) -> None:
+    """The gradient of one output by the adjoint and by the forward tangents, relative to
+    the forward run alone (best of 2 and 1), for each parameter count; tangents above
+    ``tangent_max`` parameters are not run (their cost per parameter is the table above)."""
+    model = oxyline.load_model(tree(10) if name == "tree" else name)
     outputs = [f"{model.vessel_names[0]}.pressure_in.mean"]
     kw = {"steps_per_cycle": steps, "tol": tol}
     t0, s0 = _timed(lambda: oxyline.sensitivities(model, [], outputs, **kw), 3)
-    print(f"\n{name}: adjoint of 1 output (forward run alone {t0 * 1e3:.0f} ms, "
-          f"{s0.cycles} cycles)")
+    print(f"\n{model.name}: adjoint of 1 output (forward run alone {t0 * 1e3:.0f} ms, "
+          f"{s0.cycles} cycles; {len(model.vessel_names)} vessels)")
     print(f"{'parameters':>10} {'adjoint (ms)':>13} {'x forward':>10} {'backward cycles':>16} "
           f"{'tangents (ms)':>14} {'x forward':>10}")
     for n in counts:
         params = _parameters(model, n)
         ta, sa = _timed(lambda p=params: oxyline.sensitivities(model, p, outputs, mode="adjoint",
                                                               **kw), 2)
-        tt, _ = _timed(lambda p=params: oxyline.sensitivities(model, p, outputs, **kw), 1)
-        print(f"{n:>10} {ta * 1e3:>13.0f} {ta / t0:>10.2f} {sa.tangent_cycles:>16} "
-              f"{tt * 1e3:>14.0f} {tt / t0:>10.2f}")
+        if n <= tangent_max:
+            tt, _ = _timed(lambda p=params: oxyline.sensitivities(model, p, outputs, **kw), 1)
+            tcol = f"{tt * 1e3:>14.0f} {tt / t0:>10.2f}"
+        else:
+            tcol = f"{'not run':>14} {'':>10}"
+        print(f"{n:>10} {ta * 1e3:>13.0f} {ta / t0:>10.2f} {sa.tangent_cycles:>16} {tcol}")
+
+
+#: adan56's regions, by the words of its vessels' names (the first that matches): the aorta
+#: with its short trunk branches (alone, their stiffness moves no target measurably)
+REGIONS = {"head_neck": ("carotid", "vertebral", "brachiocephalic"),
+           "arms": ("subclavian", "axillary", "brachial", "radial", "ulnar", "interosseous"),
+           "aorta_trunk": ("aort", "intercostal", "celiac", "hepatic", "splenic", "gastric",
+                           "mesenteric", "renal"),
+           "legs": ("iliac", "femor", "popliteal", "tibial", "tibiofibular")}
+
+
+def adan56_problem() -> tuple[oxyline.Model, list[str], dict[str, list[str]], list[str]]:
+    """adan56's calibration problem: every terminal R (distal) and C, the inflow scale and a
+    wall-stiffness factor per region (parameters, groups), and its outputs: each terminal's
+    mean and pulsatile outflow, the aortic root's systolic and diastolic pressure, a pressure
+    pulse per region, the aortic PWV and the cardiac output."""
+    model = oxyline.load_model("adan56")
+    bcs = model.source["boundary_conditions"]
+    outlets = [n for n, bc in bcs.items() if bc.get("type") == "rcr"]
+    params = [f"boundary_conditions.{n}.{k}" for n in outlets
+              for k in ("distal_resistance", "capacitance")] + ["scale.inflow"]
+    groups: dict[str, list[str]] = {f"stiffness.{r}": [] for r in REGIONS}
+    for v in model.source["vessels"]:
+        region = next(r for r, words in REGIONS.items() if any(w in v["name"] for w in words))
+        groups[f"stiffness.{region}"].append(f"vessels.{v['name']}.youngs_modulus")
+    terminal = [str(v["name"]) for v in model.source["vessels"] if v["to"] in outlets]
+    outputs = [f"{v}.flow_out.{s}" for v in terminal for s in ("mean", "pulse")]
+    outputs += ["aortic_arch_I.pressure_in.max", "aortic_arch_I.pressure_in.min",
+                "internal_carotid_R.pressure_out.pulse", "radial_R.pressure_out.pulse",
+                "abdominal_aorta_V.pressure_out.pulse", "posterior_tibial_R.pressure_out.pulse",
+                "pwv.aortic_arch_I.abdominal_aorta_V", "cardiac_output"]
+    return model, params, groups, outputs
+
+
+def adan56_identifiability(steps: int, tol: float, fd: bool, noises: list[float],
+                           fd_noise: float) -> None:
+    """Synthetic data from known values (each factor drawn in [0.7, 1.4]), without and with
+    2 % noise: the fit's time, evaluations and the recovery (largest relative error; how
+    many true values lie inside the reported 95 % intervals); then the same noisy fit with
+    scipy's forward differences (same optimiser, trf, every variable bounded to a factor of 4
+    of its start) for the speed-up. Wall and process CPU time: the machine is shared."""
+    model, params, groups, outputs = adan56_problem()
+    names = params + list(groups)
+    rng = np.random.default_rng(2026)
+    factors = rng.uniform(0.7, 1.4, len(names))
+    paths = params + [q for g in groups.values() for q in g]
+    base = np.array([1.0 if p.startswith("scale.") else _base_value(model.source, p)
+                     for p in paths])
+    fpath = np.concatenate([factors[:len(params)]] +
+                           [np.full(len(g), f) for g, f in zip(groups.values(),
+                                                               factors[len(params):],
+                                                               strict=True)])
+    truth = native_model(model.source, paths, base * fpath)
+    kw = {"steps_per_cycle": steps, "tol": tol}
+    values = oxyline.sensitivities(truth, [], outputs, **kw).values
+    true = dict(zip(names, [*(base[:len(params)] * factors[:len(params)]),
+                            *factors[len(params):]], strict=True))
+    print(f"\nadan56: {len(names)} parameters ({len(params)} terminal R/C and inflow scale, "
+          f"{len(groups)} regional stiffness factors over {len(paths) - len(params)} vessels), "
+          f"{len(outputs)} targets, trf")
+    # every variable within a factor of 4 of its start (the truth is within 0.7-1.4)
+    bounds = {p: (x / 4, x * 4) for p, x in zip(
+        names, [*base[:len(params)], *np.ones(len(groups))], strict=True)}
+    print(f"{'data':>10} {'Jacobian':>9} {'wall (s)':>9} {'CPU (s)':>8} {'iters':>6} {'runs':>6} "
+          f"{'cost':>9} {'max rel err':>12} {'in 95 % CI':>11} {'success':>8}")
+    runs = [("exact", n) for n in noises] + ([("2-point", fd_noise)] if fd else [])
+    times = {}
+    for jac, noise in runs:
+        sigma = 0.02 * np.abs(values)
+        data = values + noise / 0.02 * sigma * np.random.default_rng(5).standard_normal(
+            len(values))
+        targets = {o: {"value": float(d), "sigma": float(s)}
+                   for o, d, s in zip(outputs, data, sigma, strict=True)}
+        c0 = time.process_time()
+        t, fit = _timed(lambda tg=targets, j=jac: oxyline.calibrate(
+            model, tg, params, groups=groups, method="trf", bounds=bounds, jacobian=j,
+            max_evaluations=200, **kw), 1)
+        cpu = time.process_time() - c0
+        times[(jac, noise)] = cpu
+        err = max(abs(fit.parameters[p] / v - 1) for p, v in true.items())
+        inside = sum(fit.intervals[p][0] <= v <= fit.intervals[p][1] for p, v in true.items())
+        print(f"{f'{noise:.0%} noise':>10} {jac:>9} {t:>9.1f} {cpu:>8.1f} "
+              f"{fit.report.get('nfev', 0):>6} {fit.report['evaluations']:>6} "
+              f"{fit.cost:>9.2e} {err:>12.2e} {f'{inside}/{len(true)}':>11} "
+              f"{fit.success!s:>8}  ({fit.report['gradient']})")
+    if fd:
+        exact = times.get(("exact", fd_noise))
+        if exact:
+            print(f"speed-up of the exact Jacobian at {fd_noise:.0%} noise (CPU time): "
+                  f"{times[('2-point', fd_noise)] / exact:.1f}x")
 
 
 #: the left heart of tests/test_sensitivity_heart.py (SI)
@@ -210,13 +335,29 @@ def main() -> None:
     ap.add_argument("--heart", type=int, default=400, help="steps per cycle of the heart "
                     "section (0: skip it)")
     ap.add_argument("--skip-calibration", action="store_true")
+    ap.add_argument("--tree", type=int, nargs="*", default=[1, 10, 100, 1000],
+                    help="adjoint cost on a 1023-vessel tree for these parameter counts")
+    ap.add_argument("--tangent-max", type=int, default=100,
+                    help="run the forward tangents up to this many parameters")
+    ap.add_argument("--identify", action=argparse.BooleanOptionalAction, default=True,
+                    help="adan56 identifiability (68 parameters)")
+    ap.add_argument("--fd", action=argparse.BooleanOptionalAction, default=True,
+                    help="also the finite-difference fit of adan56")
+    ap.add_argument("--noise", type=float, nargs="*", default=[0.0, 0.02],
+                    help="noise levels of the exact adan56 fits (relative SD)")
+    ap.add_argument("--fd-noise", type=float, default=0.0,
+                    help="noise level of the finite-difference adan56 fit")
     args = ap.parse_args()
     if args.counts:
         gradient_cost(args.model, args.counts, args.steps, args.tol)
     if args.stenoses:
         stenosis_cost(args.model, args.stenoses, args.steps, args.tol)
     if args.adjoint:
-        adjoint_cost(args.model, args.adjoint, args.steps, args.tol)
+        adjoint_cost(args.model, args.adjoint, args.steps, args.tol, args.tangent_max)
+    if args.tree:
+        adjoint_cost("tree", args.tree, args.steps, args.tol, args.tangent_max)
+    if args.identify:
+        adan56_identifiability(args.steps, args.tol, args.fd, args.noise, args.fd_noise)
     if args.heart:
         heart_cost(args.heart, args.tol)
     if not args.skip_calibration:

@@ -28,6 +28,7 @@ import time
 import numpy as np
 
 import oxyline
+from oxyline import population_fit as F
 from oxyline import populations as P
 
 TARGET_S = 600.0
@@ -112,6 +113,68 @@ def compare_starts(patches: list[dict], subset: int) -> None:
               f"periodic state (1e-9) {worst[0]:.1e} ({worst[1]})")
 
 
+#: the characteristics PWDB checks against McEniery 2005, from a subject summary
+def _pwdb_characteristics(s: dict[str, float]) -> dict[str, float]:
+    pp_b = s["brachial_sbp"] - s["brachial_dbp"]
+    pp_a = s["aortic_root_sbp"] - s["aortic_root_dbp"]
+    return {"brachial_sbp": s["brachial_sbp"], "brachial_dbp": s["brachial_dbp"],
+            "brachial_pp": pp_b, "brachial_map": s["brachial_map"],
+            "aortic_sbp": s["aortic_root_sbp"], "aortic_pp": pp_a, "pp_amplification": pp_b / pp_a}
+
+
+def calibrated_decades(ages: list[float], subset: int) -> None:
+    """Each decade's baseline subject fitted to McEniery 2005 (target, before, after), then
+    ``subset`` subjects spread over the population with their decade's factors: how many of
+    them fall outside PWDB's 99 % plausibility ranges, before and after."""
+    factors = {}
+    rows = []
+    print("\nbaseline subjects fitted to McEniery 2005 (men and women pooled); mmHg, L/min")
+    for age in ages:
+        t0 = time.perf_counter()
+        out = F.calibrate_baseline(age)
+        factors[age] = out["factors"]
+        fit = out["fit"]
+        summ = {}
+        for when, model in (("before", F.baseline_subject(age)[1]), ("after", fit.model)):
+            res = oxyline.simulate(model, until_periodic=1e-4, vessels=P.summary_vessels(),
+                                   variables=VARIABLES, progress=False)
+            summ[when] = P.subject_summary(res)["cf_pwv"]
+        print(f"age {age:g}: {time.perf_counter() - t0:.1f} s, {fit.report['evaluations']} "
+              f"evaluations ({fit.report['gradient']}), {fit.report['message']}; factors "
+              + ", ".join(f"{k} {v:.3f}" for k, v in out["factors"].items()))
+        for k in ("brachial_sbp", "brachial_dbp", "brachial_pp", "aortic_sbp", "aortic_dbp",
+                  "aortic_pp", "pp_amplification", "co"):
+            rows.append((age, k, out["target"][k], out["before"][k], out["after"][k]))
+        row = F.baseline_subject(age)[0]
+        rows.append((age, "cf_pwv", row["pwv"], summ["before"], summ["after"]))
+    print("\n| age | characteristic | target | before | after |\n|---|---|---|---|---|")
+    for age, k, t, b, a in rows:
+        print(f"| {age:g} | {k} | {t:.2f} | {b:.2f} | {a:.2f} |")
+    if not subset:
+        return
+    table = P.parameters(tuple(ages))
+    patches = P.pwdb_like(tuple(ages))
+    picks = np.linspace(0, len(patches) - 1, subset).round().astype(int)
+    outside = {"before": 0, "after": 0}
+    for i in picks:
+        age = float(table.iloc[i]["age"])
+        ranges = P.plausible_ranges(age)
+        for when, patch in (("before", patches[i]),
+                            ("after", F.apply_factors(patches[i], factors[age]))):
+            res = oxyline.simulate(P.patched(P.base_model(), patch), until_periodic=1e-4,
+                                   vessels=P.summary_vessels(), variables=VARIABLES,
+                                   progress=False)
+            c = _pwdb_characteristics(P.subject_summary(res))
+            bad = [k for k, (lo, hi) in ranges.items() if not lo <= c[k] <= hi]
+            outside[when] += bool(bad)
+            if bad:
+                print(f"  subject {i} (age {age:g}) {when}: outside on "
+                      + ", ".join(f"{k} {c[k]:.2f} ({ranges[k][0]:.2f}-{ranges[k][1]:.2f})"
+                                  for k in bad))
+    print(f"{subset} subjects spread over the population: outside PWDB's 99 % ranges "
+          f"{outside['before']} before, {outside['after']} after the decade's factors")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--serial", action="store_true", help="loop simulate() over a subset")
@@ -123,8 +186,14 @@ def main() -> None:
                     help="each subject's start (default: its periodic state)")
     ap.add_argument("--compare-starts", type=int, default=0, metavar="N",
                     help="N subjects from both starts: cycles and summary difference")
+    ap.add_argument("--calibrate", type=float, nargs="*", default=None, metavar="AGE",
+                    help="fit the baseline subject of these ages to McEniery 2005 (no ages: "
+                         "25 35 45 55 65 75), then check --subset subjects (default 0)")
     args = ap.parse_args()
     print(f"load average {os.getloadavg()}, {os.cpu_count()} cores")
+    if args.calibrate is not None:
+        calibrated_decades(args.calibrate or [25, 35, 45, 55, 65, 75], args.subset or 0)
+        return
     t0 = time.perf_counter()
     table = P.parameters()
     patches = P.pwdb_like()

@@ -127,44 +127,56 @@ def _evaluate(model: Model, parameters: Sequence[str], targets: Sequence[Target]
 
 
 def _adjoint(m: Model, parameters: Sequence[str], targets: Sequence[Target],
-             steps_per_cycle: int | None, tol: float, max_cycles: int
+             steps_per_cycle: int | None, tol: float, max_cycles: int, series_at_steps: bool
              ) -> tuple[list[np.ndarray], list[np.ndarray], dict[str, Any]]:
-    """The outputs and their Jacobian rows by the core's adjoint: a primal run gives the
-    signals, each output's derivative is a fixed linear functional of the signals' derivatives
-    there (:func:`~oxyline.targets.combine` applied to a unit basis gives its weights), and one
-    backward sweep per output row gives its gradient for every parameter."""
+    """The outputs and their Jacobian rows by the core's adjoint, in one primal run: the core
+    hands the periodic cycle's signals to ``weights_of``, where each output's derivative is a
+    fixed linear functional of the signals' derivatives (:func:`~oxyline.targets.combine`
+    applied to a unit basis gives its weights), and one backward sweep per output row gives
+    its gradient for every parameter. ``series_at_steps``: a series is read at the cycle's
+    steps (:func:`sensitivities`), else at its target's times (:func:`calibrate`)."""
     from oxyline import _core
     from oxyline.errors import core_errors
 
     signals = sorted({s for t in targets for s in t.signals})
-    raw = _tangent(m, [], signals, steps_per_cycle, tol, max_cycles)
-    ns, nsig = raw["signals"].shape
-    basis = np.eye(ns * nsig).reshape(ns * nsig, ns, nsig)
-    values, weights, paths = [], [], []
-    for t in targets:
-        cols = [signals.index(s) for s in t.signals]
-        path = path_of(t.output, m, parameters)
-        v, w = combine(t.output, raw["times"], raw["signals"][:, cols], basis[:, :, cols],
-                       raw["times"], None if path is None else (path[0], np.zeros(ns * nsig)))
-        values.append(v)
-        weights.append(w.reshape(len(v), ns * nsig))
-        paths.append((path, v))
     period, steps, rho = _settings(m, steps_per_cycle)
+    _check_controls([], signals, steps, tol, max_cycles)
+    values: list[np.ndarray] = []
+    paths: list[Any] = []
+
+    def weights_of(times: np.ndarray, sig: np.ndarray) -> np.ndarray:
+        ns, nsig = sig.shape
+        weights = []
+        for t in targets:
+            cols = [signals.index(s) for s in t.signals]
+            # the unit basis over this output's own signals only (its rows elsewhere are 0)
+            k = len(cols)
+            basis = np.eye(ns * k).reshape(ns * k, ns, k)
+            path = path_of(t.output, m, parameters)
+            at = times if series_at_steps or t.times is None else t.times
+            v, w = combine(t.output, times, sig[:, cols], basis, at,
+                           None if path is None else (path[0], np.zeros(ns * k)))
+            full = np.zeros((len(v), ns, nsig))
+            for i, c in enumerate(cols):  # (a signal read twice adds up)
+                full[:, :, c] += w.reshape(len(v), ns, k)[:, :, i]
+            values.append(v)
+            weights.append(full.reshape(len(v), ns * nsig))
+            paths.append(path)
+        return np.ascontiguousarray(np.concatenate(weights).ravel(), dtype=float)
+
     with core_errors(f"model '{m.name}'"):
         out = _core.adjoint_gradients(json.dumps(m.canonical), list(parameters), signals,
-                                      np.ascontiguousarray(np.concatenate(weights).ravel()),
-                                      period, steps, rho, max_cycles, tol)
+                                      weights_of, period, steps, rho, max_cycles, tol)
     jac, start = [], 0
-    for path, v in paths:
+    for path, v in zip(paths, values, strict=True):
         j = np.asarray(out["gradients"][start:start + len(v)])
         if path is not None:  # a pulse-wave velocity L/τ: its path length's own term, v/L
             j = j + (v / path[0])[:, None] * path[1][None, :]
         jac.append(j)
         start += len(v)
-    raw = {**raw, "values": out["values"], "tangent_cycles": max(out["adjoint_cycles"],
-                                                                 default=0),
-           "periodic_change": max(float(raw["periodic_change"]),
-                                  float(out["periodic_change"]))}
+    raw = {"values": out["values"], "cycles": out["cycles"],
+           "tangent_cycles": max(out["adjoint_cycles"], default=0),
+           "periodic_change": float(out["periodic_change"])}
     return values, jac, raw
 
 
@@ -193,7 +205,8 @@ def sensitivities(model: Model | Mapping[str, Any] | str, parameters: Sequence[s
         raise CalibrationError(f"mode: expected 'forward' or 'adjoint', got {mode!r}")
     targets = [Target(o, None, signals=signals_of(o, m)) for o in outputs]
     if mode == "adjoint":
-        values, jac, raw = _adjoint(m, parameters, targets, steps_per_cycle, tol, max_cycles)
+        values, jac, raw = _adjoint(m, parameters, targets, steps_per_cycle, tol, max_cycles,
+                                    series_at_steps=True)
         rows, start = {}, 0
         for t, v in zip(targets, values, strict=True):
             rows[t.output] = slice(start, start + len(v))
@@ -366,13 +379,25 @@ class _Stop(Exception):
 
 class _Problem:
     """The weighted residuals and their Jacobian in the log factors, cached per point (scipy
-    asks for them separately) and the best point reached."""
+    asks for them separately) and the best point reached. A fit variable is a path, or a
+    group's name: one factor on every path of the group (their ratios kept)."""
 
     def __init__(self, source: dict[str, Any], parameters: list[str], start: np.ndarray,
-                 targets: list[Target], options: dict[str, Any], exact: bool = True) -> None:
+                 targets: list[Target], options: dict[str, Any], exact: bool = True,
+                 groups: Mapping[str, Sequence[str]] | None = None,
+                 gradient: str = "forward") -> None:
         self.source, self.parameters, self.start = source, parameters, start
-        self.exact = exact
+        self.exact, self.gradient = exact, gradient
         self.targets, self.options = targets, options
+        groups = groups or {}
+        # the model's paths the variables move, and which variable moves each
+        self.paths = [p for p in parameters if p not in groups] + \
+            [q for g in parameters if g in groups for q in groups[g]]
+        self.members = np.zeros((len(self.paths), len(parameters)))
+        for k, name in enumerate(parameters):
+            for q in groups.get(name, [name]):
+                self.members[self.paths.index(q), k] = 1.0
+        self.path_start = np.array([_base_value(source, q) for q in self.paths])
         self.data = np.concatenate([t.value for t in targets])
         self.sigma = np.concatenate([t.sigma for t in targets])
         self.cache: tuple[bytes, np.ndarray, np.ndarray] | None = None
@@ -384,24 +409,31 @@ class _Problem:
         return self.start * np.exp(theta)
 
     def model(self, theta: np.ndarray) -> dict[str, Any]:
-        return native_model(self.source, self.parameters, self.values(theta))
+        return native_model(self.source, self.paths,
+                            self.path_start * np.exp(self.members @ theta))
+
+    def _outputs(self, m: Model) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+        """The targets' values and their Jacobian by the model's paths (SI) at ``m``."""
+        if self.exact and self.gradient == "adjoint":
+            v, j, raw = _adjoint(m, self.paths, self.targets, series_at_steps=False,
+                                 **self.options)
+            return np.concatenate(v), np.concatenate(j), raw
+        # without the exact Jacobian the core runs the primal only
+        return _evaluate(m, self.paths if self.exact else [], self.targets, **self.options)
 
     def _eval(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         key = theta.tobytes()
         if self.cache is None or self.cache[0] != key:
             try:
-                m = build_model(self.model(theta))
-                # without the exact Jacobian the core runs the primal only
-                params = self.parameters if self.exact else []
-                v, j_si, raw = _evaluate(m, params, self.targets, **self.options)
+                v, j_si, raw = self._outputs(build_model(self.model(theta)))
             except Exception as e:
                 self.error = f"{type(e).__name__}: {e}"
                 raise _Stop from e
             self.evaluations += 1
             r = (v - self.data) / self.sigma
-            # d r / d log(p) = d r / d p · p (p in SI: the core's values)
-            j = j_si * np.asarray(raw["values"])[None, :] / self.sigma[:, None] if self.exact \
-                else np.zeros((len(r), 0))
+            # d r / d log(p) = d r / d p · p (p in SI: the core's values), then by variable
+            j = (j_si * np.asarray(raw["values"])[None, :] / self.sigma[:, None]) \
+                @ self.members if self.exact else np.zeros((len(r), 0))
             self.cache = (key, r, j)
             cost = 0.5 * float(r @ r)
             if self.best is None or cost < self.best[0]:
@@ -420,7 +452,8 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
               method: str = "lm", max_evaluations: int = 100, xtol: float = 1e-10,
               jacobian: str = "exact", posterior: Mapping[str, Any] | None = None,
               steps_per_cycle: int | None = None, tol: float = 1e-12,
-              max_cycles: int = 2000) -> CalibrationResult:
+              max_cycles: int = 2000, gradient: str = "auto",
+              groups: Mapping[str, Sequence[str]] | None = None) -> CalibrationResult:
     """Fit ``parameters`` (patch paths) of ``model`` to ``targets`` (see
     :func:`oxyline.targets.parse_targets`) by ``scipy.optimize.least_squares`` with the
     core's exact Jacobian: ``method="lm"`` (Levenberg–Marquardt, no bounds) or ``"trf"``
@@ -435,6 +468,14 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
     ``jacobian="2-point"`` lets scipy estimate the Jacobian by forward differences instead
     (for comparison: docs/calibration.md, "Cost"; the covariance is still the exact one
     at the end point).
+
+    ``gradient``: how the core computes the exact Jacobian: ``"forward"`` (one tangent per
+    parameter), ``"adjoint"`` (one backward sweep per target value, whatever the number of
+    parameters) or ``"auto"`` (the adjoint when the parameters outnumber the target values).
+
+    ``groups`` {name: [paths]}: each name is one more fitted variable, a factor (starting at
+    1) on every path of the group at once (their ratios kept: e.g. the wall stiffness of a
+    region's vessels); its bounds, value and interval are the factor's.
 
     A fit that fails at a trial point (a model the core refuses, a diverged run) returns the
     best point reached with ``success=False`` and the failure in ``report["error"]``.
@@ -456,14 +497,14 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
         raise CalibrationError(f"xtol: expected a number in (0, 1), got {xtol!r}")
     if method == "bayes":
         return _bayes(model, targets, parameters, bounds, max_evaluations, xtol, jacobian,
-                      steps_per_cycle, tol, max_cycles, posterior)
+                      steps_per_cycle, tol, max_cycles, posterior, gradient, groups)
     if jacobian not in ("exact", "2-point"):
         raise CalibrationError(f"jacobian: expected 'exact' or '2-point', got {jacobian!r}")
     problem, (lo, hi) = _problem(model, targets, parameters, bounds, method, jacobian,
                                  {"steps_per_cycle": steps_per_cycle, "tol": tol,
-                                  "max_cycles": max_cycles})
+                                  "max_cycles": max_cycles}, gradient, groups)
     params = problem.parameters
-    report: dict[str, Any] = {"method": method}
+    report: dict[str, Any] = {"method": method, "gradient": problem.gradient}
     try:
         fit = least_squares(problem.fun, np.zeros(len(params)),
                             jac=problem.jac if problem.exact else "2-point",
@@ -478,40 +519,78 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
         theta, success = problem.best[1], False
         report.update(status=-1, message="an evaluation failed; the best point reached is "
                       "returned", error=problem.error)
+    r, j = _end_point(problem, theta)
+    return _result(problem, theta, r, j, success, report)
+
+
+def _end_point(problem: _Problem, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The residuals and exact Jacobian (the covariance's) at the fit's end point, NaN if they
+    cannot be had."""
     best = problem.best
     if best is not None and best[1].tobytes() == theta.tobytes() and best[3].shape[1]:
-        r, j = best[2], best[3]
-    else:  # the end point's exact Jacobian (the covariance's), unless it cannot be had
-        problem.exact, problem.cache = True, None
-        try:
-            r, j = problem._eval(theta)
-        except _Stop:
-            r = best[2] if best is not None else np.full(len(problem.data), np.nan)
-            j = np.full((len(r), len(params)), np.nan)
-    return _result(problem, theta, r, j, success, report)
+        return best[2], best[3]
+    problem.exact, problem.cache = True, None
+    try:
+        return problem._eval(theta)
+    except _Stop:
+        r = best[2] if best is not None else np.full(len(problem.data), np.nan)
+        return r, np.full((len(r), len(problem.parameters)), np.nan)
+
+
+def _groups(parameters: Sequence[str], groups: Any) -> dict[str, list[str]]:
+    """The groups {name: [paths]}, checked: a name is no path, a path in one place only."""
+    if isinstance(parameters, str):
+        raise CalibrationError("parameters: expected a list of parameter paths")
+    if groups is None:
+        return {}
+    if not isinstance(groups, Mapping):
+        raise CalibrationError(f"groups: expected a mapping {{name: [paths]}}, got {groups!r}")
+    out: dict[str, list[str]] = {}
+    seen = set(parameters)
+    for name, paths in groups.items():
+        if isinstance(paths, str) or not isinstance(paths, Sequence) or not paths:
+            raise CalibrationError(f"group {name!r}: expected a non-empty list of paths, got "
+                                   f"{paths!r}")
+        twice = [q for q in paths if q in seen or q == name]
+        if twice or name in seen:
+            raise CalibrationError(f"group {name!r}: {twice[0] if twice else name!r} is "
+                                   "already a parameter or in another group")
+        seen.update(paths)
+        out[str(name)] = [str(q) for q in paths]
+    return out
 
 
 def _problem(model: Model | Mapping[str, Any] | str, targets: Any, parameters: Sequence[str],
              bounds: Mapping[str, Any] | None, method: str, jacobian: str,
-             options: dict[str, Any]) -> tuple[_Problem, tuple[np.ndarray, np.ndarray]]:
+             options: dict[str, Any], gradient: str = "auto", groups: Any = None
+             ) -> tuple[_Problem, tuple[np.ndarray, np.ndarray]]:
     """The least-squares problem of :func:`calibrate` and its bounds in log space, every input
     checked (paths, targets, start, bounds, sizes) before the fit starts."""
     base = load_model(model)
-    params = list(parameters)
-    if not params or isinstance(parameters, str):
+    grouped = _groups(parameters, groups)
+    params = list(parameters) + list(grouped)
+    if not params:
         raise CalibrationError("parameters: expected a non-empty list of parameter paths")
     if len(set(params)) != len(params):
         raise CalibrationError(f"parameters: given twice in {params}")
+    if gradient not in ("auto", "forward", "adjoint"):
+        raise CalibrationError(f"gradient: expected 'auto', 'forward' or 'adjoint', got "
+                               f"{gradient!r}")
     tlist = parse_targets(targets, base)
-    start = np.array([_base_value(base.source, p) for p in params])
-    bad = [p for p, x in zip(params, start, strict=True) if not x > 0]
+    start = np.array([1.0 if p in grouped else _base_value(base.source, p) for p in params])
+    starts = [(q, _base_value(base.source, q)) for p in params for q in grouped.get(p, [p])]
+    bad = [q for q, x in starts if not x > 0]
     if bad:
         raise CalibrationError(f"parameter '{bad[0]}': the start must be positive (fitted in "
                                "log space)")
     lo, hi = _bounds(params, start, bounds)
     if method == "lm" and (np.isfinite(lo).any() or np.isfinite(hi).any()):
         raise CalibrationError("method 'lm' takes no bounds: use method='trf'")
-    problem = _Problem(copy.deepcopy(base.source), params, start, tlist, options)
+    if gradient == "auto":  # one sweep per target value, or one tangent per parameter
+        rows = sum(t.size for t in tlist)
+        gradient = "adjoint" if len(starts) > rows else "forward"
+    problem = _Problem(copy.deepcopy(base.source), params, start, tlist, options,
+                       groups=grouped, gradient=gradient)
     problem.jac(np.zeros(len(params)))  # paths and targets are checked here, before the fit
     if jacobian != "exact":
         problem.exact, problem.cache = False, None
@@ -557,7 +636,7 @@ def _result(problem: _Problem, theta: np.ndarray, r: np.ndarray, j: np.ndarray,
 def read_problem(path: str) -> dict[str, Any]:
     """A calibration problem file (YAML or JSON): ``parameters`` (a list of paths, or a
     mapping {path: {bounds: [low, high]}}), ``targets`` (as :func:`calibrate` takes them) and
-    optionally ``method``."""
+    optionally ``method``, ``groups`` ({name: [paths]}) and ``gradient``."""
     import yaml
 
     try:
@@ -567,10 +646,11 @@ def read_problem(path: str) -> dict[str, Any]:
         raise CalibrationError(f"{path}: not a YAML or JSON file ({e})") from None
     if not isinstance(data, Mapping):
         raise CalibrationError(f"{path}: expected a mapping with 'parameters' and 'targets'")
-    unknown = set(data) - {"parameters", "targets", "method"}
+    unknown = set(data) - {"parameters", "targets", "method", "groups", "gradient"}
     if unknown or not {"parameters", "targets"} <= set(data):
         raise CalibrationError(f"{path}: needs 'parameters' and 'targets' (and optionally "
-                               f"'method'); unknown keys {sorted(unknown)}")
+                               f"'method', 'groups', 'gradient'); unknown keys "
+                               f"{sorted(unknown)}")
     params = data["parameters"]
     bounds: dict[str, Any] = {}
     if isinstance(params, Mapping):
@@ -580,7 +660,8 @@ def read_problem(path: str) -> dict[str, Any]:
         params = list(params)
     method = str(data.get("method", "trf" if bounds else "lm"))
     return {"parameters": list(params), "targets": data["targets"],
-            "bounds": bounds or None, "method": method}
+            "bounds": bounds or None, "method": method, "groups": data.get("groups"),
+            "gradient": str(data.get("gradient", "auto"))}
 
 
 def main_cli(model: str, problem_file: str, output: str, quiet: bool = False) -> int:
@@ -591,7 +672,8 @@ def main_cli(model: str, problem_file: str, output: str, quiet: bool = False) ->
 
     problem = read_problem(problem_file)
     res = calibrate(model, problem["targets"], problem["parameters"],
-                    bounds=problem["bounds"], method=problem["method"])
+                    bounds=problem["bounds"], method=problem["method"],
+                    groups=problem["groups"], gradient=problem["gradient"])
     path = dump_native(res.model, output)
     if not quiet:
         for p, v in res.parameters.items():
@@ -605,15 +687,15 @@ def main_cli(model: str, problem_file: str, output: str, quiet: bool = False) ->
 
 def _bayes(model: Any, targets: Any, parameters: Sequence[str], bounds: Any,
            max_evaluations: int, xtol: float, jacobian: str, steps_per_cycle: int | None,
-           tol: float, max_cycles: int, posterior: Mapping[str, Any] | None
-           ) -> CalibrationResult:
+           tol: float, max_cycles: int, posterior: Mapping[str, Any] | None,
+           gradient: str = "auto", groups: Any = None) -> CalibrationResult:
     """``method="bayes"``: the gradient fit, then emcee from around it (see :func:`calibrate`)."""
     try:
         import emcee
     except ImportError:
         raise CalibrationError("method 'bayes' needs emcee: pip install oxyline[bayes]"
                                ) from None
-    opts = {"walkers": max(8, 4 * len(parameters)), "steps": 500, "burn": None, "seed": 0,
+    opts = {"walkers": max(8, 4 * (len(parameters) + len(groups or {}))), "steps": 500, "burn": None, "seed": 0,
             **(posterior or {})}
     unknown = set(opts) - {"walkers", "steps", "burn", "seed"}
     if unknown:
@@ -621,15 +703,16 @@ def _bayes(model: Any, targets: Any, parameters: Sequence[str], bounds: Any,
     fit = calibrate(model, targets, parameters, bounds=bounds,
                     method="trf" if bounds else "lm", max_evaluations=max_evaluations,
                     xtol=xtol, jacobian=jacobian, steps_per_cycle=steps_per_cycle, tol=tol,
-                    max_cycles=max_cycles)
-    params = list(parameters)
+                    max_cycles=max_cycles, gradient=gradient, groups=groups)
+    grouped = _groups(parameters, groups)
+    params = list(parameters) + list(grouped)
     start = np.array([fit.start[p] for p in params])
     lo, hi = _bounds(params, start, bounds)
     base = load_model(model)
     problem = _Problem(copy.deepcopy(base.source), params, start,
                        parse_targets(targets, base),
                        {"steps_per_cycle": steps_per_cycle, "tol": tol,
-                        "max_cycles": max_cycles}, exact=False)
+                        "max_cycles": max_cycles}, exact=False, groups=grouped)
 
     def log_prob(theta: np.ndarray) -> float:
         if (theta < lo).any() or (theta > hi).any():

@@ -3,8 +3,9 @@
 
 use crate::errors::to_py;
 use numpy::{IntoPyArray, PyArrayMethods, PyReadonlyArray1};
+use oxyline_core::error::Error;
 use oxyline_core::model::parse;
-use oxyline_core::sensitivity::{TangentSettings, adjoint, sensitivities};
+use oxyline_core::sensitivity::{TangentSettings, adjoint_with, sensitivities};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -61,12 +62,15 @@ pub fn tangent_sensitivities<'py>(
 
 /// The gradients of functionals J_f = Σ_kj weights[f, k, j] · signal j after step k of the
 /// periodic cycle of `model_json` by the adjoint (one backward sweep per functional, whatever
-/// the number of parameters): a dict of `values` (SI value of each parameter), `functionals`
-/// (J_f), `gradients` (n_functionals × n_params), `cycles`, `adjoint_cycles` (per
-/// functional) and `periodic_change`. `weights` is flat, n_functionals × n_steps × n_signals.
+/// the number of parameters). `weights_of(times, signals)` is called once with the step end
+/// times (n_steps) and the signals (n_steps × n_signals) of the one primal run and returns
+/// the weights, flat n_functionals × n_steps × n_signals (chosen from the cycle: no second
+/// forward run). A dict of `values` (SI value of each parameter), `functionals` (J_f),
+/// `gradients` (n_functionals × n_params), `cycles`, `adjoint_cycles` (per functional) and
+/// `periodic_change`; an exception of `weights_of` is raised as it is.
 #[oxyline_py_guard::guard]
 #[pyfunction]
-#[pyo3(signature = (model_json, paths, signals, weights, period, steps_per_cycle,
+#[pyo3(signature = (model_json, paths, signals, weights_of, period, steps_per_cycle,
                     rho_infty = 0.5, max_cycles = 2000, tol = 1e-12))]
 #[allow(clippy::too_many_arguments)]
 pub fn adjoint_gradients<'py>(
@@ -74,7 +78,7 @@ pub fn adjoint_gradients<'py>(
     model_json: &str,
     paths: Vec<String>,
     signals: Vec<(String, String)>,
-    weights: PyReadonlyArray1<'py, f64>,
+    weights_of: Py<PyAny>,
     period: f64,
     steps_per_cycle: usize,
     rho_infty: f64,
@@ -88,14 +92,22 @@ pub fn adjoint_gradients<'py>(
         max_cycles,
         tol,
     };
-    let weights = weights.as_slice()?.to_vec();
-    let np = paths.len();
-    let (values, out) = py
-        .detach(move || {
-            let spec = parse(model_json)?;
-            adjoint(&spec, &paths, &signals, &weights, settings)
-        })
-        .map_err(to_py)?;
+    let (np, nsig) = (paths.len(), signals.len());
+    let mut raised: Option<PyErr> = None;
+    let result = py.detach(|| {
+        let spec = parse(model_json)?;
+        let weights = |times: &[f64], values: &[f64]| {
+            Python::attach(|py| call_weights(py, &weights_of, times, values, nsig)).map_err(|e| {
+                raised = Some(e);
+                Error::model("adjoint", "weights_of raised")
+            })
+        };
+        adjoint_with(&spec, &paths, &signals, weights, settings)
+    });
+    if let Some(e) = raised {
+        return Err(e);
+    }
+    let (values, out) = result.map_err(to_py)?;
     let nf = out.values.len();
     let d = PyDict::new(py);
     d.set_item("values", values.into_pyarray(py))?;
@@ -108,4 +120,22 @@ pub fn adjoint_gradients<'py>(
     d.set_item("adjoint_cycles", out.adjoint_cycles)?;
     d.set_item("periodic_change", out.periodic_change)?;
     Ok(d)
+}
+
+/// `weights_of(times, signals)`: the weights as a flat float64 vector.
+fn call_weights(
+    py: Python<'_>,
+    weights_of: &Py<PyAny>,
+    times: &[f64],
+    values: &[f64],
+    nsig: usize,
+) -> PyResult<Vec<f64>> {
+    let times = times.to_vec().into_pyarray(py);
+    let sig = values
+        .to_vec()
+        .into_pyarray(py)
+        .reshape([values.len() / nsig.max(1), nsig])?;
+    let w = weights_of.call1(py, (times, sig))?;
+    let w: PyReadonlyArray1<f64> = w.bind(py).extract()?;
+    Ok(w.as_slice()?.to_vec())
 }

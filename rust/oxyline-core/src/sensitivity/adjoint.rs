@@ -110,10 +110,37 @@ pub fn periodic_adjoint(
     weights: &[f64],
     set: TangentSettings,
 ) -> Result<PeriodicAdjoint> {
+    periodic_adjoint_with(dae, params, signals, |_, _| Ok(weights.to_vec()), set)
+}
+
+/// [`periodic_adjoint`] with the weights chosen from the periodic cycle itself:
+/// `weights_of(times, values)` gets the step end times (Δt … T) and the recorded signals
+/// (n_steps × signals) of the one primal run and returns the weights. An output whose
+/// derivative depends on the cycle (a maximum's step, a foot's samples) is linearised there
+/// without a second forward run to the periodic state.
+pub fn periodic_adjoint_with<W>(
+    dae: &Dae,
+    params: &[DaeTangent],
+    signals: &[usize],
+    weights_of: W,
+    set: TangentSettings,
+) -> Result<PeriodicAdjoint>
+where
+    W: FnOnce(&[f64], &[f64]) -> Result<Vec<f64>>,
+{
     set.check()?;
     let (ns, nsig) = (set.steps_per_cycle.max(1), signals.len());
     let block = ns * nsig;
-    if block == 0 || weights.len() % block != 0 {
+    if block == 0 {
+        return Err(Error::model(
+            "adjoint",
+            "no signals to take the gradient of",
+        ));
+    }
+    let (pr, sources, values, cycles, change) = recorded_cycle(dae, params, signals, &set)?;
+    let times: Vec<f64> = (1..=ns).map(|k| k as f64 * pr.scheme.dt).collect();
+    let weights = weights_of(&times, &values)?;
+    if weights.len() % block != 0 {
         return Err(Error::model(
             "adjoint",
             format!(
@@ -122,7 +149,6 @@ pub fn periodic_adjoint(
             ),
         ));
     }
-    let (pr, sources, values, cycles, change) = recorded_cycle(dae, params, signals, &set)?;
     let mut kt = Transposed::of(&pr)?;
     let mut out = PeriodicAdjoint {
         values: Vec::new(),

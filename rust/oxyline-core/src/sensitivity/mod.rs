@@ -13,7 +13,8 @@ use crate::model::NetworkSpec;
 use crate::output::VESSEL_VARIABLES;
 pub use parameter::{DaeTangent, Parameter};
 pub use tangent::{
-    PeriodicAdjoint, PeriodicTangent, TangentSettings, periodic_adjoint, periodic_tangent,
+    PeriodicAdjoint, PeriodicTangent, TangentSettings, periodic_adjoint, periodic_adjoint_with,
+    periodic_tangent,
 };
 
 /// The result of [`sensitivities`]: the parameters' SI values and the signals over the
@@ -50,8 +51,24 @@ pub fn adjoint(
     weights: &[f64],
     settings: TangentSettings,
 ) -> Result<(Vec<f64>, PeriodicAdjoint)> {
+    adjoint_with(spec, paths, signals, |_, _| Ok(weights.to_vec()), settings)
+}
+
+/// [`adjoint`] with the weights chosen from the one primal run's periodic cycle:
+/// `weights_of(times, values)` gets the step end times and the signals (n_steps × signals)
+/// and returns the weights ([`tangent::periodic_adjoint_with`]).
+pub fn adjoint_with<W>(
+    spec: &NetworkSpec,
+    paths: &[String],
+    signals: &[(String, String)],
+    weights_of: W,
+    settings: TangentSettings,
+) -> Result<(Vec<f64>, PeriodicAdjoint)>
+where
+    W: FnOnce(&[f64], &[f64]) -> Result<Vec<f64>>,
+{
     let (dae, tangents, unknowns) = prepare(spec, paths, signals)?;
-    let out = periodic_adjoint(&dae, &tangents, &unknowns, weights, settings)?;
+    let out = periodic_adjoint_with(&dae, &tangents, &unknowns, weights_of, settings)?;
     Ok((tangents.iter().map(|t| t.value).collect(), out))
 }
 

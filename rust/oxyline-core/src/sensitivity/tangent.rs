@@ -41,7 +41,7 @@
 
 #[path = "adjoint.rs"]
 mod adjoint;
-pub use adjoint::{PeriodicAdjoint, periodic_adjoint};
+pub use adjoint::{PeriodicAdjoint, periodic_adjoint, periodic_adjoint_with};
 
 use super::krylov::Subspace;
 use super::parameter::DaeTangent;
