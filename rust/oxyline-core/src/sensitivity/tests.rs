@@ -428,7 +428,7 @@ fn heart_scaled(mut s: NetworkSpec, path: &str, f: f64) -> NetworkSpec {
     use crate::model::{ActivationSpec, ChamberLawSpec, ValveSpec};
     let parts: Vec<&str> = path.split('.').collect();
     let v = s.vessels.iter_mut().find(|v| v.name == parts[1]).unwrap();
-    match (parts[2], v.chamber.as_mut(), v.valve.as_mut()) {
+    match (parts[2], v.chamber.as_deref_mut(), v.valve.as_deref_mut()) {
         (
             "valve",
             _,
