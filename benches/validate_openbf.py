@@ -233,11 +233,14 @@ def per_vessel(rows: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
     return out
 
 
-FRICTIONS = {"Poiseuille": {}, "Womersley": {"wall_friction": "womersley"}}
+FRICTIONS = {"Poiseuille": {}, "Womersley": {"wall_friction": "womersley"},
+             # openBF's own viscoelastic wall law on every vessel (its stored results are elastic)
+             "Womersley + viscoelastic": {"wall_friction": "womersley", "viscoelastic": True}}
 
 
 def friction_comparison(models: tuple[str, ...] = ("adan56", "circle_of_willis")) -> str:
-    """Poiseuille vs Womersley segments against openBF, per model and per vessel (markdown)."""
+    """Poiseuille, Womersley and Womersley + viscoelastic segments against openBF, per model;
+    Poiseuille vs Womersley per vessel (markdown)."""
     runs: dict[str, dict[str, list[dict[str, Any]]]] = {}
     for name in models:
         runs[name] = {}

@@ -297,7 +297,7 @@ def test_a_checkpointed_default_run_takes_the_automatic_fixed_step(tmp_path: Any
     ck = tmp_path / "run.ckpt"
     res = oxyline.simulate("bifurcation", cycles=2, output_every=0.01, checkpoint=ck,
                            checkpoint_every="1 cycle")
-    assert res.settings["step_control"].startswith("fixed step (checkpoints")
+    assert res.settings["step_control"].startswith("fixed step (automatic")
     assert res.settings["rtol"] is None and res.settings["dt"] == pytest.approx(0.01)
     resumed = oxyline.resume(ck)
     assert resumed.settings["step_control"] == res.settings["step_control"]
@@ -329,3 +329,32 @@ def test_the_default_run_reaches_a_tight_periodicity() -> None:
     truth = oxyline.simulate(m, start="periodic", cycles=1, method="rk4", **kw)
     p, want = res.pressure_in, truth.pressure_in
     assert np.max(np.abs(p - want)) <= 2e-3 * np.max(np.abs(want))
+
+
+def _steady_tube() -> dict[str, Any]:
+    """A rigid tube with a constant inflow carrying a decaying solute: its cumulative inflow
+    of solute grows exactly linearly in time (Q·c_in·t)."""
+    return {"period": 1.0,
+            "vessels": [{"name": "tube", "from": "in", "to": "out", "segments": 5,
+                         "length": 0.1, "radius": 3e-3}],
+            "boundary_conditions": {"in": {"type": "flow", "value": 2e-6},
+                                    "out": {"type": "resistance", "resistance": 1e8}},
+            "species": [{"name": "drug", "decay": 0.5, "inlet": {"concentration": 1.0},
+                         "initial": 1.0}],
+            "simulation": {"cycles": 2, "output": {"every": 0.01}}}
+
+
+def test_runs_with_species_keep_the_fixed_step_by_default() -> None:
+    res = oxyline.simulate(_steady_tube())
+    assert res.settings["step_control"].startswith("fixed step (automatic")
+    inflow = res.species["drug"].mass_balance["inflow"]
+    # Q·c_in·Δt between rows (the inflow is a prescribed constant; 1e-9: the sums' rounding)
+    np.testing.assert_allclose(np.diff(inflow), 2e-6 * 1.0 * np.diff(res.time), rtol=1e-9)
+
+
+@pytest.mark.xfail(strict=True, reason="known defect: the cumulative balance columns are not "
+                   "interpolated correctly at output rows between error-controlled steps")
+def test_species_balance_rows_under_error_control() -> None:
+    res = oxyline.simulate(_steady_tube(), rtol=1e-3)
+    inflow = res.species["drug"].mass_balance["inflow"]
+    np.testing.assert_allclose(np.diff(inflow), 2e-6 * 1.0 * np.diff(res.time), rtol=1e-6)

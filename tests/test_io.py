@@ -402,8 +402,10 @@ def test_summary_table_and_files(tmp_path: Path, result: oxyline.Result) -> None
     v = result.vessel("daughter2")
     assert df.loc["daughter2", "pressure_out_max"] == v.pressure_out.max()
     assert df.loc["daughter2", "flow_in_min"] == v.flow_in.min()
-    # the inflow's mean is the Fourier mean, 6 mL/s
-    assert df.loc["parent", "flow_in_mean"] == pytest.approx(6e-6, rel=1e-4)
+    # the inflow's mean is the Fourier mean, 6 mL/s, within the default run's rtol 1e-3 (the
+    # parent's first branch flow follows the prescribed inflow within the controlled step's
+    # error, and the table's mean is over the recorded rows)
+    assert df.loc["parent", "flow_in_mean"] == pytest.approx(6e-6, rel=1e-3)
     assert df.attrs["units"]["pressure_in_mean"] == "Pa"
     back = pd.read_csv(result.to_csv(tmp_path / "s.csv"), index_col="vessel")  # as it is
     np.testing.assert_allclose(back.to_numpy(), df.to_numpy(), rtol=1e-15)
