@@ -775,9 +775,8 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     empty = _empty_rows(model, s)
     # chamber volumes and valve status, as in simulate(): extra core columns per chunk
     heart = _heart_layout(model)
-    valves = bool(heart[1])
+    valves, valves_open = bool(heart[1]), {}
     core = {"extra_columns": heart[2]} if heart[2] else {}
-    valves_open: dict[str, bool] = {}
 
     def result_of(rows: dict[str, Any], settings: dict[str, Any], complete: bool) -> Result:
         # (``rows``' data loses the extra columns: a copy of the dict of rows)
@@ -788,9 +787,8 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
         return res
 
     template = dict(empty, data=np.zeros((0, empty["data"].shape[1] + len(heart[2]))))
-    store = ZarrAppender(path, dataset(result_of(dict(template),
-                                                 _run_settings(s, None, valves), False)),
-                         time_chunk, overwrite=overwrite)
+    head = result_of(dict(template), _run_settings(s, None, valves), False)
+    store = ZarrAppender(path, dataset(head), time_chunk, overwrite=overwrite)
 
     # the bounds monitor checks each chunk as it passes (docs/physics.md §2.8)
     monitor = Monitor(model.transport_spec)
