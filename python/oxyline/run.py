@@ -67,11 +67,6 @@ def _resolve(model: Model, overrides: Mapping[str, Any]) -> tuple[dict[str, Any]
     fixed ``dt`` given: the default run is error-controlled)."""
     s = _core.resolve_settings(model.simulation, dict(overrides), model.period)
     default = bool(s.pop("rtol_default"))
-    if default and s["atol"] is None and model.transport_spec is not None:
-        # runs with species keep the automatic fixed step unless rtol is given: their
-        # cumulative balance columns (mass_balance) are not yet interpolated correctly at the
-        # output rows between error-controlled steps (docs/physics.md §10, "The default run")
-        s["rtol"] = None
     out = dict(model.simulation.get("output", {}) or {})
     progress = overrides.get("progress")
     if progress is not None and not isinstance(progress, (bool, np.bool_)) \
@@ -83,10 +78,9 @@ def _resolve(model: Model, overrides: Mapping[str, Any]) -> tuple[dict[str, Any]
     return s, default
 
 
-#: ``settings["step_control"]`` of a run at the default tolerance that takes the automatic
-#: fixed step instead (see :func:`_resolve` and :func:`_fixed_for_checkpoints`)
-CHECKPOINT_STEP = ("fixed step (automatic: checkpointed runs and runs with species take it unless "
-                   "rtol or dt is given)")
+#: ``settings["step_control"]`` of a checkpointed run that gives no ``dt`` (see
+#: :func:`_fixed_for_checkpoints`).
+CHECKPOINT_STEP = "fixed step (checkpoints need a fixed step: give dt to choose it)"
 
 
 def _step_control(s: Mapping[str, Any], valves: bool = False) -> str:

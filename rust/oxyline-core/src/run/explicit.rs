@@ -518,6 +518,9 @@ impl Cycles<'_, '_> {
                     .check_finite(&ex.zi, time, &|v| names.vessel(v).map(str::to_owned))?;
                 // what the transport carries between steps is put back (as `observe_at`)
                 let carried = sp.tr.carried();
+                // `observe` appends: one row per call (a row left in the buffer would be
+                // recorded again in front of this one)
+                ex.obs.clear();
                 let seen = sp
                     .tr
                     .observe(time, &ex.yi, Some(&ex.ydi), &ex.zi, false, &mut ex.obs);
