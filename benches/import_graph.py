@@ -81,7 +81,7 @@ def long_functions(tree: ast.Module, mod: str, limit: int = 80):
 ROLES = (
     ("schema checks", ("oxyline.model", "oxyline.transport", "oxyline.units", "oxyline.errors",
                        "oxyline.memory")),
-    ("physics", ("oxyline.structured_tree", "oxyline.facilitation", "oxyline.pwdb",
+    ("physics", ("oxyline.structured_tree", "oxyline.pwdb",
                  "oxyline.frequency")),
     ("svZeroDSolver drop-in runner", ("oxyline.io.svzerod.dropin",
                                       "oxyline.svzerod")),

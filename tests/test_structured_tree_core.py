@@ -11,7 +11,7 @@ import time
 import pytest
 
 import oxyline
-from oxyline import facilitation
+from oxyline import _core
 
 FEED = {"name": "feed", "from": "in", "to": "out", "length": 0.05, "radius": 1e-3,
         "wall_thickness": 1e-4, "youngs_modulus": 1e6}
@@ -61,10 +61,10 @@ def test_linearized_factor_is_the_closed_form_with_the_hill_secant() -> None:
     for p_in, p_w in ((95.0, 60.0), (85.0, 48.0)):
         k = cap * (s(p_in) - s(p_w)) / (alpha * (p_in - p_w))
         exact = (1 + k) ** (1 / 3) * (1 + k * d_hb / d) ** (2 / 3)
-        got = facilitation.secant_factor(p_in, p_w, alpha, d, d_hb, cap, p50, n)
+        got = _core.facilitation_factor(p_in, p_w, alpha, d, d_hb, cap, p50, n, True)
         assert got == pytest.approx(exact, rel=1e-13)  # two evaluations of the same formula
-        assert facilitation.linear_factor(k, d, d_hb) == pytest.approx(exact, rel=1e-14)
+        assert _core.linear_facilitation_factor(k, d, d_hb) == pytest.approx(exact, rel=1e-14)
     # the nonlinear factor lies below the secant one (docs/validation-oxygen.md §7)
-    hill = facilitation.hill_factor(85.0, 48.0, alpha, d, d_hb, cap, p50, n)
-    assert 1.0 < hill < facilitation.secant_factor(85.0, 48.0, alpha, d, d_hb, cap, p50, n)
+    hill = _core.facilitation_factor(85.0, 48.0, alpha, d, d_hb, cap, p50, n, False)
+    assert 1.0 < hill < _core.facilitation_factor(85.0, 48.0, alpha, d, d_hb, cap, p50, n, True)
     assert math.isfinite(hill)

@@ -14,16 +14,19 @@ Sources, each value's provenance in ``docs/populations.md``:
 * 16 vascular beds (R, C) shared among their terminal segments by outlet area, R1 = the
   terminal segment's characteristic impedance, R2 = the bed's share x one factor calibrated to
   the mean aortic root pressure, outflow pressure 33.2 mmHg (the core's ``model/pwdb/beds.rs``,
-  on its steady solve of the network);
+  with PWDB's bed table, on its steady solve of the network);
+* a subject's geometry changes (the core's ``model/pwdb/geometry.rs``) and its aortic inflow,
+  the Mynard & Smolich 2015 template's systole scaled to the subject's ejection time and stroke
+  volume (``model/pwdb/inflow.rs``);
 * age-specific means and SDs: the literature data and fits of PWDB's
   ``calculate_pwdb_input_parameters.m`` (MIT), recomputed here (``docs/populations.md``).
 
-All functions take and return SI units unless their name says otherwise.
+All functions take and return SI units unless their name says otherwise. This module reads
+PWDB's files and holds its measurement sites; every formula is the core's.
 """
 
 from __future__ import annotations
 
-import math
 import re
 from functools import lru_cache
 from importlib import resources
@@ -39,9 +42,8 @@ RHO = _core.PWDB_DENSITY           # blood density [kg/m^3] (PWDB)
 MU = _core.PWDB_VISCOSITY          # blood viscosity [Pa s] (PWDB)
 P_OUT = _core.PWDB_OUTFLOW_PRESSURE  # Windkessel outflow pressure [Pa] (PWDB, Parazynski 1993)
 POISSON = _core.PWDB_POISSON_RATIO   # makes the thin-wall c^2 PWDB's (2/3)(Eh/r)/rho
-#: the segments whose diameter PWDB's "large-artery diameter" scales: mean radius >= this
-LARGE_ARTERY_RADIUS = 0.003462 * math.sqrt(1.5)
-PROXIMAL_AORTA = (1, 2)       # segments whose length PWDB's aortic length changes
+#: segments whose length PWDB's aortic length changes
+PROXIMAL_AORTA = tuple(_core.PWDB_PROXIMAL_AORTA)
 #: PWDB's carotid-femoral path (segment numbers): femoral site = mid segment 46, carotid site =
 #: mid segment 15; the path runs from the aortic root through these segments
 AORTA_FEMORAL = (1, 2, 14, 18, 27, 28, 35, 37, 39, 41, 42, 44)
@@ -52,26 +54,6 @@ SITES = {"aortic_root": (1, 0.0), "carotid": (15, 0.5), "brachial": (21, 1.0),
          "radial": (22, 0.5), "femoral": (46, 0.5)}
 ICA_SEGMENT = 16              # left internal carotid: its outlet is the "ICA outlet"
 
-#: PWDB's 16 vascular beds: name, terminal segments, R [mmHg s/mL], C [mL/mmHg]
-#: (``add_wk_vascular_bed_parameters`` / ``calc_outflow`` of PWDB, segment lists verbatim)
-VASCULAR_BEDS: tuple[tuple[str, tuple[int, ...], float, float], ...] = (
-    ("brain", (62, 63, 69, 70, 72, 73, 74, 76, 93, 95), 6.9040, 0.021726),
-    ("face_neck", (78, 80, 82, 84, 86, 88, 89, 90, 91, 92), 20.755, 0.026499),
-    ("right_shoulder_arm", (10, 102, 103, 104, 105), 16.852, 0.032637),
-    ("left_shoulder_arm", (24, 112, 113, 114, 115), 16.852, 0.032637),
-    ("chest", (26,), 10.824, 0.050811),
-    ("right_kidney", (36,), 8.368, 0.065727),
-    ("left_kidney", (38,), 8.368, 0.065727),
-    ("liver", (32,), 21.252, 0.02606),
-    ("spleen", (33,), 27.832, 0.019761),
-    ("stomach", (31,), 54.084, 0.010169),
-    ("intestines", (34, 40), 10.374, 0.053018),
-    ("pelvis", (45, 51), 26.119, 0.021057),
-    ("right_upper_leg", (53,), 32.29, 0.017033),
-    ("left_upper_leg", (47,), 32.29, 0.017033),
-    ("right_lower_leg", (54, 55), 14.786, 0.037197),
-    ("left_lower_leg", (48, 49), 14.824, 0.037102),
-)
 INLET_NODE = "n1"
 TEMPLATE = "mynard2015_aortic_flow_template.csv"
 ZERO_HEAD, LAST_SYSTOLE = 52, 361     # PWDB keeps samples 53..361 (1-based) of the template
@@ -147,80 +129,40 @@ def mynard_systole() -> np.ndarray:
 
 def template_lvet() -> float:
     """Ejection time of the template [s]: from t = 0 to the first zero crossing after the
-    peak (the forward ejection; the closing backflow after it is kept and scaled with it)."""
-    q = mynard_systole()
-    k = int(np.argmax(q))
-    j = k + int(np.argmax(q[k:] <= 0))
-    return 1e-3 * (j - 1 + q[j - 1] / (q[j - 1] - q[j]))   # linear zero crossing
+    peak (the core's)."""
+    return _core.pwdb_template_lvet(mynard_systole().tolist())
 
 
 def aortic_inflow(hr: float, sv: float, lvet: float) -> tuple[list[float], list[float]]:
     """Aortic root flow table for heart rate ``hr`` [1/min], stroke volume ``sv`` [m^3] and
     ejection time ``lvet`` [s]: the Mynard template's systole stretched in time by
     lvet / template_lvet(), scaled so that its net volume is ``sv``, zero flow until the period
-    60/hr. Returns (time [s], flow [m^3/s]) for a periodic ``linear`` table."""
-    q = mynard_systole()
-    scale_t = lvet / template_lvet()
-    t = np.arange(len(q)) * 1e-3 * scale_t
-    period = 60.0 / hr
-    if t[-1] + 1e-3 * scale_t >= period:
-        raise ModelError(f"heart rate {hr:g}/min: period {period:g} s is shorter than the "
-                         f"systole ({t[-1]:g} s at LVET {lvet * 1e3:g} ms)")
-    dt = 1e-3 * scale_t
-    time = np.concatenate([t, [t[-1] + dt, period]])
-    flow = np.concatenate([q, [0.0, q[0]]])
-    flow *= sv / np.trapezoid(flow, time)
-    return time.tolist(), flow.tolist()
+    60/hr (the core's). Returns (time [s], flow [m^3/s]) for a periodic ``linear`` table."""
+    return _core.pwdb_aortic_inflow(mynard_systole().tolist(), hr, sv, lvet)
 
 
 # ---------------------------------------------------------------- network
 
 
-def _beds() -> list[tuple[list[int], float, float]]:
-    """The vascular beds as the core takes them: (terminal segments, R [Pa s/m^3],
-    C [m^3/Pa])."""
-    return [(list(segs), r_bed * MMHG * 1e6, c_bed / MMHG / 1e6)
-            for _bed, segs, r_bed, c_bed in VASCULAR_BEDS]
-
-
 def check_terminals(geo: list[dict[str, Any]]) -> None:
-    inlets = {g["inlet"] for g in geo}
-    free = {g["seg"] for g in geo if g["outlet"] not in inlets
-            and sum(h["outlet"] == g["outlet"] for h in geo) == 1}
-    beds = {s for _bed, segs, _r, _c in VASCULAR_BEDS for s in segs}
-    if free != beds:
-        raise ModelError(f"PWDB network: terminal segments {sorted(free ^ beds)} do not match "
-                         f"the vascular beds")
-
-
-def _large_arteries(base: list[dict[str, Any]]) -> tuple[set[int], set[int]]:
-    big = {g["seg"] for g in base
-           if (g["radius_in"] + g["radius_out"]) / 2 >= LARGE_ARTERY_RADIUS}
-    fed = {g["outlet"] for g in base if g["seg"] in big}
-    return big, {g["seg"] for g in base if g["seg"] in big or g["inlet"] in fed}
+    """Refuses a network whose terminal segments are not PWDB's vascular beds' (the core's
+    check, naming the segments that differ)."""
+    _core.pwdb_check_terminals(_rows(geo))
 
 
 def diameter_segments(base: list[dict[str, Any]]) -> set[int]:
     """Segments with a radius that PWDB's large-artery diameter changes."""
-    big, inlets = _large_arteries(base)
-    return big | inlets
+    return set(_core.pwdb_diameter_segments(_rows(base)))
 
 
 def subject_geometry(base: list[dict[str, Any]], dia: float = 1.0, length: float = 1.0
                      ) -> list[dict[str, Any]]:
-    """PWDB's geometry changes: radii of the large arteries (mean radius >= 4.24 mm, and the
-    inlet radius of the segments they feed) x ``dia``, lengths of the proximal aorta x
-    ``length``."""
-    geo = [dict(g) for g in base]
-    big, inlets = _large_arteries(base)
-    for g in geo:
-        if g["seg"] in big:
-            g["radius_out"] *= dia
-        if g["seg"] in inlets:
-            g["radius_in"] *= dia
-        if g["seg"] in PROXIMAL_AORTA:
-            g["length"] *= length
-    return geo
+    """PWDB's geometry changes (the core's): radii of the large arteries (mean radius >= 4.24
+    mm, and the inlet radius of the segments they feed) x ``dia``, lengths of the proximal
+    aorta x ``length``."""
+    rows = _core.pwdb_subject_geometry(_rows(base), dia, length)
+    return [{**g, "length": n, "radius_in": a, "radius_out": b}
+            for g, (_i, _o, n, a, b) in zip(base, rows, strict=True)]
 
 
 def vessel_properties(base: list[dict[str, Any]], geo: list[dict[str, Any]], k3_cgs: float
@@ -242,7 +184,7 @@ def outlet_conditions(geo: list[dict[str, Any]], k3_cgs: float, pvc: float, q_me
     network is ``mbp`` (PWDB scales Z + share, which can make R2 < 0 at small s). Returns
     (node -> condition, s)."""
     inlet = int(INLET_NODE[1:])
-    rows, s = _core.pwdb_outlets(_rows(geo), _beds(), k3_cgs, pvc, inlet, q_mean, mbp)
+    rows, s = _core.pwdb_outlets(_rows(geo), k3_cgs, pvc, inlet, q_mean, mbp)
     out = {}
     for seg, z, r2, c in rows:
         out[node(geo[seg - 1]["outlet"])] = {

@@ -63,6 +63,7 @@ from typing import Any
 
 import numpy as np
 
+from oxyline import _core
 from oxyline.errors import ModelError
 from oxyline.io._common import build
 from oxyline.model import Model, _build
@@ -506,7 +507,8 @@ def _with_wall_viscosity(vessels: list[dict[str, Any]], bcs: dict[str, dict[str,
             new_bcs[f"{mid}.outlet"] = {"type": "pressure", "value": bcs[mid]["pressure"]}
             continue
         r, length = v["radius"], v["length"]
-        C = 2 * math.pi * r**3 * length / (v["youngs_modulus"] * v["wall_thickness"])
+        C = _core.thin_wall_compliance(r, length, v["youngs_modulus"], v["wall_thickness"],
+                                       v["poisson_ratio"])  # the vessel's own C
         if v["arrangement"] == "L":
             out.append({**rigid(v["name"], v["from"], v["to"], v, 1.0), **desc})
             wall(v["to"], C)

@@ -86,6 +86,7 @@ from typing import Any
 
 import numpy as np
 
+from oxyline import _core
 from oxyline.errors import ModelError, UnsupportedElement
 from oxyline.io._common import build
 from oxyline.io.native import read_mapping  # YAML 1.2, duplicate keys and bombs refused
@@ -93,13 +94,13 @@ from oxyline.model import Model, build_model
 
 PathLike = str | os.PathLike[str]
 
-POISSON = 0.5  # openBF's sigma
+POISSON = _core.OPENBF_POISSON_RATIO  # openBF's sigma
 # ADAN56 inflow: the two corrupted rows of the openBF copy and the clean STARFiSh/pylsewave values
 ADAN56_INLET_REPAIR = {0.437555: (-2.10178e-55, -2.10178e-05), 0.515992: (5.25444e-66, 5.25444e-06)}
 
 # openBF v2's wall viscosity law Gamma = b0 + b1/(2 R0) [kg/s] (Mynard & Smolich 2015)
-VISCO_B0 = 0.6
-VISCO_B1 = 1.5e-3
+VISCO_B0 = _core.OPENBF_VISCO_B0
+VISCO_B1 = _core.OPENBF_VISCO_B1
 
 VESSEL_KEYS = {
     "label", "sn", "tn", "L", "M", "R0", "Rp", "Rd", "E", "h0", "Pext", "Pout", "gamma_profile",
@@ -124,7 +125,7 @@ def adan_wall_thickness(radius: float | np.ndarray) -> float | np.ndarray:
     1.2023
     """
     r = np.asarray(radius, dtype=float)
-    h = r * (0.2802 * np.exp(-505.3 * r) + 0.1324 * np.exp(-11.14 * r))
+    h = np.asarray(_core.openbf_wall_thickness(r.ravel().tolist())).reshape(r.shape)
     return float(h) if h.ndim == 0 else h
 
 
@@ -275,22 +276,19 @@ class _Vessel:
                              f"{self.pext:.4g} Pa)")
         return s
 
+    def _wall(self) -> tuple[float, float, float, float, float | None]:
+        return self.length, self.r0[0], self.r0[1], self.E, self.h0_given
+
     def z0(self) -> float:
-        """Characteristic impedance rho c0 / A0 of the last cell (openBF's WK2 correction)."""
-        x = np.array(self.length)
-        c0 = math.sqrt(float(self.beta(x)) / (2.0 * self.rho))
-        return self.rho * c0 / (math.pi * float(self.R0(x)) ** 2)
+        """Characteristic impedance rho c0 / A0 of the last cell (openBF's WK2 correction),
+        the core's."""
+        return _core.openbf_characteristic_impedance(*self._wall(), self.rho)
 
     def wall_viscosity(self) -> float:
-        """Kelvin-Voigt viscosity eta [Pa s] of openBF's viscoelastic wall: E times the
-        compliance-weighted mean of tau = 2 Gamma/(beta' sqrt(A0)) along the vessel."""
-        x = 0.5 * self.length * (_GL_X + 1.0)
-        r0 = self.R0(x)
-        gamma = VISCO_B0 + VISCO_B1 / (2.0 * r0)
-        beta = self.beta(x)
-        tau = 2.0 * gamma / (beta * math.sqrt(math.pi) * r0)
-        weight = _GL_W * r0**2 / beta  # dA/dP = 2 A0/beta' (the common factor 2 pi dropped)
-        return float(self.E * np.sum(weight * tau) / np.sum(weight))
+        """Kelvin-Voigt viscosity eta [Pa s] of openBF's viscoelastic wall (the core's): E
+        times the compliance-weighted mean of tau = 2 Gamma/(beta' sqrt(A0)) along the
+        vessel."""
+        return _core.openbf_wall_viscosity(*self._wall())
 
     def linearised(self, p_in: float, p_out: float) -> tuple[float, float, float]:
         """(r_in, r_out, compliance-equivalent wall thickness) at pressures p_in -> p_out."""
@@ -570,7 +568,7 @@ def to_native_dict(path: PathLike, *, linearize: str | float = "mean", taper: st
     period = float(t[-1] - t[0])
     q_mean = float(np.trapezoid(q, t) / period)
     gamma = _gamma(vessels, p)
-    mu_eff = mu * (gamma + 2.0) / 4.0  # openBF's friction 2 (gamma + 2) pi mu
+    mu_eff = _core.openbf_friction_viscosity(mu, gamma)  # openBF's friction 2 (gamma + 2) pi mu
     outlets, terminal_resistance = _outlets(vessels, raw, wk2)
 
     # linearisation pressures at the vessel ends

@@ -64,6 +64,21 @@ const GAUSS5: [(f64, f64); 5] = [
     (0.906_179_845_938_664, 0.236_926_885_056_189_1),
 ];
 
+/// Thin-wall compliance C = 2π r³ (1 − ν²) L / (E h) [m³/Pa] of a uniform tube of radius
+/// `radius` and length `length` (the per-length law of [`segment_rlc`] for a whole vessel;
+/// r³ as `powf`, the bits an importer that re-expresses a vessel's compliance as a lumped
+/// capacitor wrote before).
+pub fn thin_wall_compliance(
+    radius: f64,
+    length: f64,
+    youngs_modulus: f64,
+    wall_thickness: f64,
+    poisson_ratio: f64,
+) -> f64 {
+    2.0 * std::f64::consts::PI * radius.powf(3.0) * (1.0 - poisson_ratio * poisson_ratio) * length
+        / (youngs_modulus * wall_thickness)
+}
+
 /// Segment of length `dx` whose radius goes linearly from `r0` to `r1`.
 pub fn segment_rlc(
     dx: f64,

@@ -1,12 +1,15 @@
-//! Binding of the core's arterial laws that the front end's model builders use: PWDB's wall
-//! law, wave speed and Windkessels with their steady calibration (`model::pwdb`), and the
-//! replacement of terminal elements by structured trees (`model::structured_tree::terminal`).
-//! A PWDB segment crosses as (inlet node, outlet node, length, inlet radius, outlet radius).
+//! Binding of the core's arterial laws that the front end's model builders and importers use:
+//! PWDB's wall law, geometry changes, inflow and Windkessels with their steady calibration
+//! (`model::pwdb`), openBF's vessel laws (`model::openbf`), a vessel's thin-wall compliance,
+//! and the replacement of terminal elements by structured trees
+//! (`model::structured_tree::terminal`). A PWDB segment crosses as (inlet node, outlet node,
+//! length, inlet radius, outlet radius).
 
 use crate::to_py;
-use oxyline_core::model::pwdb::beds::{self, Bed};
+use oxyline_core::model::openbf;
+use oxyline_core::model::pwdb::beds;
 use oxyline_core::model::pwdb::wall::{self, SitePath};
-use oxyline_core::model::pwdb::{DENSITY, Segment};
+use oxyline_core::model::pwdb::{DENSITY, Segment, geometry, inflow};
 use oxyline_core::model::structured_tree::terminal::{self, End, Link};
 use oxyline_core::model::structured_tree::{self as st, Stiffness};
 use pyo3::prelude::*;
@@ -38,24 +41,6 @@ fn path(p: &PathRow) -> SitePath<'_> {
     }
 }
 
-/// E h/r₀ [Pa] of PWDB's wall law at each radius [m] (k3 in g s⁻² cm⁻¹).
-#[oxyline_py_guard::guard]
-#[pyfunction]
-pub fn pwdb_eh_over_r(radii: Vec<f64>, k3_cgs: f64) -> Vec<f64> {
-    radii.iter().map(|&r| wall::eh_over_r(r, k3_cgs)).collect()
-}
-
-/// Moens–Korteweg wave speed [m/s] of PWDB's wall law at each radius [m].
-#[oxyline_py_guard::guard]
-#[pyfunction]
-#[pyo3(signature = (radii, k3_cgs, density = DENSITY))]
-pub fn pwdb_wave_speed(radii: Vec<f64>, k3_cgs: f64, density: f64) -> Vec<f64> {
-    radii
-        .iter()
-        .map(|&r| wall::wave_speed(r, k3_cgs, density))
-        .collect()
-}
-
 /// (wall thickness, Young's modulus) [m, Pa] of each segment of `subject`: h at the `base`
 /// segment's mean radius, E from the wall law at the subject's.
 #[oxyline_py_guard::guard]
@@ -66,27 +51,6 @@ pub fn pwdb_wall_properties(
     k3_cgs: f64,
 ) -> Vec<(f64, f64)> {
     wall::wall_properties(&segments(base), &segments(subject), k3_cgs)
-}
-
-/// Theoretical carotid-femoral PWV [m/s] of the wall law along the two paths.
-#[oxyline_py_guard::guard]
-#[pyfunction]
-#[pyo3(signature = (geometry, femoral, carotid, k3_cgs, density = DENSITY))]
-pub fn pwdb_cf_pwv(
-    geometry: Vec<SegmentRow>,
-    femoral: PathRow,
-    carotid: PathRow,
-    k3_cgs: f64,
-    density: f64,
-) -> PyResult<f64> {
-    wall::cf_pwv(
-        &segments(geometry),
-        path(&femoral),
-        path(&carotid),
-        k3_cgs,
-        density,
-    )
-    .map_err(to_py)
 }
 
 /// The wall-law k3 [g s⁻² cm⁻¹] whose cf-PWV along the two paths is `target` [m/s].
@@ -110,16 +74,13 @@ pub fn pwdb_fit_k3(
     .map_err(to_py)
 }
 
-/// The calibrated terminal Windkessels: `beds` as (terminal segments, R [Pa s/m³], C [m³/Pa]);
-/// returns ([(segment, R1, R2, C)] by segment, the calibration factor s) such that the steady
+/// The calibrated terminal Windkessels of PWDB's vascular beds; returns ([(segment, R1, R2, C)] by segment, the calibration factor s) such that the steady
 /// pressure at node `n<inlet>` is `target` [Pa] at inflow `inflow` [m³/s].
 #[oxyline_py_guard::guard]
 #[pyfunction]
-#[allow(clippy::too_many_arguments)]
 pub fn pwdb_outlets(
     py: Python<'_>,
     geometry: Vec<SegmentRow>,
-    beds: Vec<(Vec<usize>, f64, f64)>,
     k3_cgs: f64,
     pvc: f64,
     inlet: usize,
@@ -127,14 +88,7 @@ pub fn pwdb_outlets(
     target: f64,
 ) -> PyResult<(Vec<OutletRow>, f64)> {
     let geo = segments(geometry);
-    let beds: Vec<Bed> = beds
-        .into_iter()
-        .map(|(segments, resistance, compliance)| Bed {
-            segments,
-            resistance,
-            compliance,
-        })
-        .collect();
+    let beds = beds::vascular_beds();
     py.detach(|| {
         let wks = beds::windkessels(&geo, &beds, k3_cgs, pvc)?;
         let walls = wall::wall_properties(&geo, &geo, k3_cgs);
@@ -147,6 +101,146 @@ pub fn pwdb_outlets(
         Ok((out, s))
     })
     .map_err(to_py)
+}
+
+fn rows(geo: &[Segment]) -> Vec<SegmentRow> {
+    geo.iter()
+        .map(|g| (g.inlet, g.outlet, g.length, g.radius_in, g.radius_out))
+        .collect()
+}
+
+/// PWDB's geometry changes of a subject: large-artery radii × `dia`, proximal aortic
+/// lengths × `length`.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn pwdb_subject_geometry(base: Vec<SegmentRow>, dia: f64, length: f64) -> Vec<SegmentRow> {
+    rows(&geometry::subject_geometry(&segments(base), dia, length))
+}
+
+/// The segments (from 1) whose radius PWDB's large-artery diameter changes.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn pwdb_diameter_segments(base: Vec<SegmentRow>) -> Vec<usize> {
+    geometry::diameter_segments(&segments(base))
+        .into_iter()
+        .collect()
+}
+
+/// Refuses a network whose terminal segments are not PWDB's vascular beds'.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn pwdb_check_terminals(geometry: Vec<SegmentRow>) -> PyResult<()> {
+    beds::check_terminals(&segments(geometry)).map_err(to_py)
+}
+
+/// Ejection time [s] of the aortic flow template's systole `q` (1 kHz from t = 0).
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn pwdb_template_lvet(q: Vec<f64>) -> PyResult<f64> {
+    inflow::template_lvet(&q).map_err(to_py)
+}
+
+/// The aortic root flow table (time [s], flow [m³/s]) of the template systole `q` for heart
+/// rate `hr` [1/min], stroke volume `sv` [m³] and ejection time `lvet` [s].
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn pwdb_aortic_inflow(
+    q: Vec<f64>,
+    hr: f64,
+    sv: f64,
+    lvet: f64,
+) -> PyResult<(Vec<f64>, Vec<f64>)> {
+    inflow::aortic_inflow(&q, hr, sv, lvet).map_err(to_py)
+}
+
+fn openbf_wall(
+    length: f64,
+    radius_in: f64,
+    radius_out: f64,
+    youngs_modulus: f64,
+    wall_thickness: Option<f64>,
+) -> openbf::Wall {
+    openbf::Wall {
+        length,
+        radius: (radius_in, radius_out),
+        youngs_modulus,
+        wall_thickness,
+    }
+}
+
+/// Characteristic impedance ρ c₀ / A₀ [Pa s/m³] at the outlet of an openBF vessel (R₀ from
+/// `radius_in` to `radius_out`, h₀ = `wall_thickness` or openBF's ADAN law).
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn openbf_characteristic_impedance(
+    length: f64,
+    radius_in: f64,
+    radius_out: f64,
+    youngs_modulus: f64,
+    wall_thickness: Option<f64>,
+    density: f64,
+) -> f64 {
+    openbf_wall(
+        length,
+        radius_in,
+        radius_out,
+        youngs_modulus,
+        wall_thickness,
+    )
+    .characteristic_impedance(density)
+}
+
+/// Kelvin–Voigt wall viscosity η [Pa s] of openBF's visco-elastic wall on that vessel.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn openbf_wall_viscosity(
+    length: f64,
+    radius_in: f64,
+    radius_out: f64,
+    youngs_modulus: f64,
+    wall_thickness: Option<f64>,
+) -> f64 {
+    openbf_wall(
+        length,
+        radius_in,
+        radius_out,
+        youngs_modulus,
+        wall_thickness,
+    )
+    .kelvin_voigt_viscosity()
+}
+
+/// The model viscosity [Pa s] of openBF's friction with velocity profile `gamma_profile`.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn openbf_friction_viscosity(viscosity: f64, gamma_profile: f64) -> f64 {
+    openbf::friction_viscosity(viscosity, gamma_profile)
+}
+
+/// Wall thickness [m] of openBF's ADAN law at each lumen radius [m].
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn openbf_wall_thickness(radii: Vec<f64>) -> Vec<f64> {
+    radii.into_iter().map(openbf::adan_wall_thickness).collect()
+}
+
+/// Thin-wall compliance [m³/Pa] of a uniform vessel (SI).
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn thin_wall_compliance(
+    radius: f64,
+    length: f64,
+    youngs_modulus: f64,
+    wall_thickness: f64,
+    poisson_ratio: f64,
+) -> f64 {
+    oxyline_core::segment::thin_wall_compliance(
+        radius,
+        length,
+        youngs_modulus,
+        wall_thickness,
+        poisson_ratio,
+    )
 }
 
 /// The condition at a node of a terminal compartment (None: no condition).

@@ -85,8 +85,11 @@ fn model_bytes(segments: usize, elements: usize, cells: f64, species: usize) -> 
 mod _core {
     #[pymodule_export]
     use super::arterial_laws::{
-        murray_radius, pwdb_cf_pwv, pwdb_eh_over_r, pwdb_fit_k3, pwdb_outlets,
-        pwdb_wall_properties, pwdb_wave_speed, structured_tree_root, terminal_compartment,
+        murray_radius, openbf_characteristic_impedance, openbf_friction_viscosity,
+        openbf_wall_thickness, openbf_wall_viscosity, pwdb_aortic_inflow, pwdb_check_terminals,
+        pwdb_diameter_segments, pwdb_fit_k3, pwdb_outlets, pwdb_subject_geometry,
+        pwdb_template_lvet, pwdb_wall_properties, structured_tree_root, terminal_compartment,
+        thin_wall_compliance,
     };
     #[pymodule_export]
     use super::calibrate::{adjoint_gradients, tangent_sensitivities};
@@ -101,8 +104,7 @@ mod _core {
     #[pymodule_export]
     use super::trees::{
         StructuredTrees, facilitation_factor, grow_structured_tree, linear_facilitation_factor,
-        match_structured_tree, poiseuille_resistance, structured_tree_count_bound,
-        structured_tree_wall,
+        match_structured_tree, structured_tree_count_bound, structured_tree_wall,
     };
     #[pymodule_export]
     use super::windkessel_trees::{outlet_root_radius, windkessel_tree_match};
@@ -149,6 +151,14 @@ mod _core {
             m.add("PWDB_VISCOSITY", pwdb::VISCOSITY)?;
             m.add("PWDB_OUTFLOW_PRESSURE", pwdb::OUTFLOW_PRESSURE)?;
             m.add("PWDB_POISSON_RATIO", pwdb::POISSON_RATIO)?;
+            m.add(
+                "PWDB_PROXIMAL_AORTA",
+                pwdb::geometry::PROXIMAL_AORTA.to_vec(),
+            )?;
+            use oxyline_core::model::openbf;
+            m.add("OPENBF_POISSON_RATIO", openbf::POISSON_RATIO)?;
+            m.add("OPENBF_VISCO_B0", openbf::VISCO_B0)?;
+            m.add("OPENBF_VISCO_B1", openbf::VISCO_B1)?;
         }
         // the run settings' names and the transport sections' key sets (`oxyline_core::model`)
         {

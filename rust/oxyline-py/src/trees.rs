@@ -401,13 +401,6 @@ pub fn structured_tree_count_bound(
     st::vessel_count_bound(alpha, beta, root_radius, min_radius)
 }
 
-/// Steady Poiseuille resistance of a tube tapered linearly from `r_in` to `r_out` (SI).
-#[oxyline_py_guard::guard]
-#[pyfunction]
-pub fn poiseuille_resistance(length: f64, r_in: f64, r_out: f64, viscosity: f64) -> f64 {
-    st::poiseuille_resistance(length, r_in, r_out, viscosity)
-}
-
 /// The haemoglobin facilitation factor E_Hb of the wall layer between inlet PO2 `p_in` and
 /// wall PO2 `p_w`: the nonlinear Lévêque layer of Hill binding, or (`linearized`) the closed
 /// form with the Hill secant over [p_w, p_in].

@@ -16,12 +16,14 @@ use crate::error::{Error, Result};
 pub mod facilitation;
 pub mod native;
 pub mod node;
+pub mod openbf;
 pub mod patch;
 pub mod plausibility;
 pub mod pwdb;
 pub mod settings;
 pub mod species;
 pub mod structured_tree;
+pub mod sum;
 pub mod transport;
 pub mod units;
 

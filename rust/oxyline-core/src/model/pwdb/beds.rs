@@ -4,12 +4,12 @@
 //! found on the network's steady circuit (the core's steady solve of the assembled model).
 
 use super::wall::wave_speed;
-use super::{DENSITY, ELEMENT, OUTFLOW_PRESSURE, POISSON_RATIO, Segment, VISCOSITY};
+use super::{DENSITY, ELEMENT, MMHG, OUTFLOW_PRESSURE, POISSON_RATIO, Segment, VISCOSITY};
 use crate::error::{Error, Result};
 use crate::model::structured_tree::fmt_g;
 use crate::model::{BloodSpec, BoundarySpec, GeometrySpec, NetworkSpec, VesselSpec};
 use crate::waveform::WaveformSpec;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 /// A vascular bed: its terminal segments (numbers from 1), resistance [Pa s/m³] and
 /// compliance [m³/Pa].
@@ -18,6 +18,83 @@ pub struct Bed {
     pub segments: Vec<usize>,
     pub resistance: f64,
     pub compliance: f64,
+}
+
+/// PWDB's 16 vascular beds: name, terminal segments, R [mmHg s/mL], C [mL/mmHg]
+/// (`add_wk_vascular_bed_parameters` / `calc_outflow` of PWDB, segment lists verbatim).
+pub const VASCULAR_BEDS: [(&str, &[usize], f64, f64); 16] = [
+    (
+        "brain",
+        &[62, 63, 69, 70, 72, 73, 74, 76, 93, 95],
+        6.9040,
+        0.021726,
+    ),
+    (
+        "face_neck",
+        &[78, 80, 82, 84, 86, 88, 89, 90, 91, 92],
+        20.755,
+        0.026499,
+    ),
+    (
+        "right_shoulder_arm",
+        &[10, 102, 103, 104, 105],
+        16.852,
+        0.032637,
+    ),
+    (
+        "left_shoulder_arm",
+        &[24, 112, 113, 114, 115],
+        16.852,
+        0.032637,
+    ),
+    ("chest", &[26], 10.824, 0.050811),
+    ("right_kidney", &[36], 8.368, 0.065727),
+    ("left_kidney", &[38], 8.368, 0.065727),
+    ("liver", &[32], 21.252, 0.02606),
+    ("spleen", &[33], 27.832, 0.019761),
+    ("stomach", &[31], 54.084, 0.010169),
+    ("intestines", &[34, 40], 10.374, 0.053018),
+    ("pelvis", &[45, 51], 26.119, 0.021057),
+    ("right_upper_leg", &[53], 32.29, 0.017033),
+    ("left_upper_leg", &[47], 32.29, 0.017033),
+    ("right_lower_leg", &[54, 55], 14.786, 0.037197),
+    ("left_lower_leg", &[48, 49], 14.824, 0.037102),
+];
+
+/// PWDB's vascular beds in SI: R [mmHg s/mL] → [Pa s/m³], C [mL/mmHg] → [m³/Pa].
+pub fn vascular_beds() -> Vec<Bed> {
+    VASCULAR_BEDS
+        .iter()
+        .map(|&(_name, segments, r, c)| Bed {
+            segments: segments.to_vec(),
+            resistance: r * MMHG * 1e6,
+            compliance: c / MMHG / 1e6,
+        })
+        .collect()
+}
+
+/// Refuses a network whose terminal segments (outlet node feeding no segment and ending no
+/// other) are not exactly the vascular beds' segments, naming the ones that differ.
+pub fn check_terminals(geo: &[Segment]) -> Result<()> {
+    let inlets: BTreeSet<usize> = geo.iter().map(|g| g.inlet).collect();
+    let free: BTreeSet<usize> = (1..=geo.len())
+        .filter(|&s| {
+            let out = geo[s - 1].outlet;
+            !inlets.contains(&out) && geo.iter().filter(|h| h.outlet == out).count() == 1
+        })
+        .collect();
+    let beds: BTreeSet<usize> = VASCULAR_BEDS
+        .iter()
+        .flat_map(|b| b.1.iter().copied())
+        .collect();
+    let odd: Vec<usize> = free.symmetric_difference(&beds).copied().collect();
+    if odd.is_empty() {
+        return Ok(());
+    }
+    Err(Error::model(
+        ELEMENT,
+        format!("terminal segments {odd:?} do not match the vascular beds"),
+    ))
 }
 
 /// One terminal segment's Windkessel before calibration.

@@ -1,13 +1,16 @@
 //! The Pulse Wave DataBase's arterial laws (Charlton et al. 2019, Am J Physiol Heart Circ
 //! Physiol 317:H1062; geometry of Mynard & Smolich 2015): the wall law and its wave speed
 //! (`wall`), and the vascular beds' Windkessels calibrated on the network's steady circuit
-//! (`beds`). The front end reads PWDB's segment table and names the subjects; the formulas
-//! are here (docs/populations.md).
+//! (`beds`, with PWDB's bed table), a subject's geometry changes (`geometry`) and its aortic
+//! inflow from the Mynard template (`inflow`). The front end reads PWDB's segment table and
+//! the template and names the subjects; the formulas are here (docs/populations.md).
 //!
 //! Units: SI, except the wall-law constants, which PWDB gives in cgs (1 g s⁻² cm⁻¹ = 0.1 Pa,
 //! radii in the exponent in cm).
 
 pub mod beds;
+pub mod geometry;
+pub mod inflow;
 pub mod wall;
 
 #[cfg(test)]

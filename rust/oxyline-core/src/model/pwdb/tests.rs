@@ -127,3 +127,71 @@ fn calibration_of_one_segment_matches_poiseuille_in_series() {
     let low = beds::calibrate_scale(&geo, &walls, 1, &wks, q, below).unwrap_err();
     assert!(low.to_string().contains("out of reach"), "{low}");
 }
+
+#[test]
+fn template_lvet_is_the_linear_zero_crossing_after_the_peak() {
+    // a triangle up to 3 at sample 3, down through zero between samples 5 (1) and 6 (−1):
+    // crossing at 5.5 ms; the negative sample before the peak does not count
+    let q = [-0.5, 1.0, 2.0, 3.0, 2.0, 1.0, -1.0, -0.5];
+    let lvet = super::inflow::template_lvet(&q).unwrap();
+    assert!(close(lvet, 5.5e-3, 1e-15), "{lvet}");
+    assert!(super::inflow::template_lvet(&[0.0, 1.0, 2.0]).is_err());
+}
+
+#[test]
+fn aortic_inflow_stretches_the_systole_and_keeps_the_stroke_volume() {
+    // a sine over 320 samples, positive for its first 299 ms: template LVET ≈ 0.299 s
+    let q: Vec<f64> = (0..320).map(|k| (PI * k as f64 / 299.0).sin()).collect();
+    let (hr, sv, lvet) = (60.0, 70e-6, 0.4);
+    let (t, f) = super::inflow::aortic_inflow(&q, hr, sv, lvet).unwrap();
+    assert_eq!(t.len(), q.len() + 2);
+    assert_eq!(*t.last().unwrap(), 1.0); // the period 60/hr
+    let t_lvet = super::inflow::template_lvet(&q).unwrap();
+    assert!(close(t[299], 0.299 * lvet / t_lvet, 1e-14));
+    // the net volume by the trapezoid rule, summed here left to right (order: 1e-15)
+    let v: f64 = t
+        .windows(2)
+        .zip(f.windows(2))
+        .map(|(t, f)| (t[1] - t[0]) * (f[0] + f[1]) / 2.0)
+        .sum();
+    assert!(close(v, sv, 1e-14), "{v}");
+    // flow ∝ the template: the shape is kept
+    assert!(close(f[150] / f[75], q[150] / q[75], 1e-14));
+    // a heart period shorter than the stretched systole is refused, naming both
+    let err = super::inflow::aortic_inflow(&q, 200.0, sv, lvet).unwrap_err();
+    assert!(err.to_string().contains("heart rate 200/min"), "{err}");
+}
+
+#[test]
+fn subject_geometry_scales_the_large_arteries_and_the_proximal_aorta() {
+    // 1 → 2 → 3 (large, 5 mm), 3 → 4 small (1 mm): segments 1, 2 large, segment 3 fed by 2
+    let mut geo = uniform(3, 5e-3, 0.1);
+    geo[2].radius_in = 1e-3;
+    geo[2].radius_out = 1e-3;
+    let sub = super::geometry::subject_geometry(&geo, 1.1, 0.8);
+    assert_eq!(sub[0].radius_in, 5e-3 * 1.1);
+    assert_eq!(sub[1].radius_out, 5e-3 * 1.1);
+    assert_eq!(sub[2].radius_in, 1e-3 * 1.1); // its inlet is fed by a large artery
+    assert_eq!(sub[2].radius_out, 1e-3); // its outlet is not large
+    assert_eq!(sub[0].length, 0.1 * 0.8);
+    assert_eq!(sub[1].length, 0.1 * 0.8);
+    assert_eq!(sub[2].length, 0.1);
+    let d: Vec<usize> = super::geometry::diameter_segments(&geo)
+        .into_iter()
+        .collect();
+    assert_eq!(d, [1, 2, 3]);
+}
+
+#[test]
+fn the_beds_are_in_si_and_a_network_must_end_in_them() {
+    // brain: 6.904 mmHg s/mL = 6.904 · 133.33 · 1e6 Pa s/m³
+    let beds = beds::vascular_beds();
+    assert_eq!(beds.len(), 16);
+    assert!(close(beds[0].resistance, 6.904 * 133.33e6, 1e-15));
+    assert!(close(beds[0].compliance, 0.021726 / 133.33e6, 1e-15));
+    let err = beds::check_terminals(&uniform(3, 1e-3, 0.1)).unwrap_err();
+    assert!(
+        err.to_string().contains("terminal segments [3, 10,"),
+        "{err}"
+    );
+}
