@@ -175,12 +175,13 @@ def _value(params: dict[str, tuple[float, str, str]], key: str, unit: str, where
 
 
 def wall_thickness(r: float, params: dict[str, tuple[float, str, str]]) -> float:
-    """circulatory_autogen's h(r) = r (a e^(b r) + c e^(d r)) with the file's global constants."""
+    """circulatory_autogen's h(r) = r (a e^(b r) + c e^(d r)) with the file's global constants
+    (the core's law)."""
     a = _value(params, "a_vessel", "dimensionless", "global")
     b = _value(params, "b_vessel", "per_m", "global")
     c = _value(params, "c_vessel", "dimensionless", "global")
     d = _value(params, "d_vessel", "per_m", "global")
-    return r * (a * math.exp(b * r) + c * math.exp(d * r))
+    return _core.wall_thickness_law(r, a, b, c, d)
 
 
 def _warn(msg: str) -> None:

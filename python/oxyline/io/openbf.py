@@ -216,9 +216,6 @@ def _cells(v: Mapping[str, Any], length: float) -> int:
     return max(m, 5, math.ceil(length * 1e3))
 
 
-_GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
-
-
 class _Vessel:
     """openBF vessel parameters and its tube law, along x in [0, L]."""
 
@@ -263,19 +260,6 @@ class _Vessel:
             return np.full_like(np.asarray(x, dtype=float), self.h0_given)
         return np.asarray(adan_wall_thickness(self.R0(x)))
 
-    def beta(self, x: np.ndarray) -> np.ndarray:
-        """openBF's beta' [Pa]: P = Pext + beta' (sqrt(A/A0) - 1)."""
-        return self.E * self.h0(x) / ((1.0 - POISSON**2) * self.R0(x))
-
-    def stretch(self, x: np.ndarray, p: np.ndarray) -> np.ndarray:
-        """r/R0 = sqrt(A/A0) at pressure p."""
-        s = 1.0 + (p - self.pext) / self.beta(x)
-        if np.any(s <= 0.05):
-            raise ModelError(f"{self.where}: the tube law collapses the vessel at the "
-                             f"linearisation pressure ({float(np.min(p)):.4g} Pa, Pext "
-                             f"{self.pext:.4g} Pa)")
-        return s
-
     def _wall(self) -> tuple[float, float, float, float, float | None]:
         return self.length, self.r0[0], self.r0[1], self.E, self.h0_given
 
@@ -291,21 +275,15 @@ class _Vessel:
         return _core.openbf_wall_viscosity(*self._wall())
 
     def linearised(self, p_in: float, p_out: float) -> tuple[float, float, float]:
-        """(r_in, r_out, compliance-equivalent wall thickness) at pressures p_in -> p_out."""
-        L = self.length
-        x = 0.5 * L * (_GL_X + 1.0)
-        w = 0.5 * L * _GL_W
-        p = p_in + (p_out - p_in) * x / L
-        ends = np.array([0.0, L])
-        s_end = self.stretch(ends, np.array([p_in, p_out]))
-        r_in, r_out = (self.R0(ends) * s_end).tolist()
-        # target: openBF's tangent compliance dA/dP = 2 pi R0^3 (1-nu^2)/(E h0) * s
-        s = self.stretch(x, p)
-        c_target = np.sum(w * 2 * math.pi * self.R0(x) ** 3 * (1 - POISSON**2) * s
-                          / (self.E * self.h0(x)))
-        r_lin = r_in + (r_out - r_in) * x / L
-        h_eff = np.sum(w * 2 * math.pi * r_lin**3 * (1 - POISSON**2) / self.E) / c_target
-        return r_in, r_out, float(h_eff)
+        """(r_in, r_out, compliance-equivalent wall thickness) at pressures p_in -> p_out on
+        openBF's tube law (the core's): the thin-wall C of the linear taper equals openBF's
+        tangent compliance integrated over the vessel."""
+        got, p_low = _core.openbf_linearised(*self._wall(), self.pext, p_in, p_out)
+        if got is None:
+            raise ModelError(f"{self.where}: the tube law collapses the vessel at the "
+                             f"linearisation pressure ({p_low:.4g} Pa, Pext "
+                             f"{self.pext:.4g} Pa)")
+        return got
 
 
 def _load_yaml(p: Path) -> dict[str, Any]:

@@ -64,6 +64,13 @@ const GAUSS5: [(f64, f64); 5] = [
     (0.906_179_845_938_664, 0.236_926_885_056_189_1),
 ];
 
+/// Wall thickness h = r (a e^(b r) + c e^(d r)) [m] at lumen radius `radius` [m] of the
+/// exponential thickness law `[a, b, c, d]` (b, d per metre): the ADAN/openBF law and
+/// circulatory_autogen's, each with its constants.
+pub fn wall_thickness_law(radius: f64, [a, b, c, d]: [f64; 4]) -> f64 {
+    radius * (a * (b * radius).exp() + c * (d * radius).exp())
+}
+
 /// Thin-wall compliance C = 2π r³ (1 − ν²) L / (E h) [m³/Pa] of a uniform tube of radius
 /// `radius` and length `length` (the per-length law of [`segment_rlc`] for a whole vessel;
 /// r³ as `powf`, the bits an importer that re-expresses a vessel's compliance as a lumped

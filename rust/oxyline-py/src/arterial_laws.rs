@@ -210,6 +210,36 @@ pub fn openbf_wall_viscosity(
     .kelvin_voigt_viscosity()
 }
 
+/// The linear model's (r_in, r_out, compliance-equivalent wall thickness) of an openBF
+/// vessel at end pressures `p_in` → `p_out` (external pressure `pext`), or None and the
+/// lowest pressure checked when the tube law collapses the vessel there.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+pub fn openbf_linearised(
+    length: f64,
+    radius_in: f64,
+    radius_out: f64,
+    youngs_modulus: f64,
+    wall_thickness: Option<f64>,
+    pext: f64,
+    p_in: f64,
+    p_out: f64,
+) -> (Option<(f64, f64, f64)>, f64) {
+    match openbf_wall(
+        length,
+        radius_in,
+        radius_out,
+        youngs_modulus,
+        wall_thickness,
+    )
+    .linearised(p_in, p_out, pext)
+    {
+        Ok(v) => (Some(v), f64::NAN),
+        Err(p) => (None, p),
+    }
+}
+
 /// The model viscosity [Pa s] of openBF's friction with velocity profile `gamma_profile`.
 #[oxyline_py_guard::guard]
 #[pyfunction]
@@ -222,6 +252,13 @@ pub fn openbf_friction_viscosity(viscosity: f64, gamma_profile: f64) -> f64 {
 #[pyfunction]
 pub fn openbf_wall_thickness(radii: Vec<f64>) -> Vec<f64> {
     radii.into_iter().map(openbf::adan_wall_thickness).collect()
+}
+
+/// Wall thickness [m] of the exponential law h = r (a e^(b r) + c e^(d r)) at `radius` [m].
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn wall_thickness_law(radius: f64, a: f64, b: f64, c: f64, d: f64) -> f64 {
+    oxyline_core::segment::wall_thickness_law(radius, [a, b, c, d])
 }
 
 /// Thin-wall compliance [m³/Pa] of a uniform vessel (SI).

@@ -86,10 +86,10 @@ mod _core {
     #[pymodule_export]
     use super::arterial_laws::{
         murray_radius, openbf_characteristic_impedance, openbf_friction_viscosity,
-        openbf_wall_thickness, openbf_wall_viscosity, pwdb_aortic_inflow, pwdb_check_terminals,
-        pwdb_diameter_segments, pwdb_fit_k3, pwdb_outlets, pwdb_subject_geometry,
-        pwdb_template_lvet, pwdb_wall_properties, structured_tree_root, terminal_compartment,
-        thin_wall_compliance,
+        openbf_linearised, openbf_wall_thickness, openbf_wall_viscosity, pwdb_aortic_inflow,
+        pwdb_check_terminals, pwdb_diameter_segments, pwdb_fit_k3, pwdb_outlets,
+        pwdb_subject_geometry, pwdb_template_lvet, pwdb_wall_properties, structured_tree_root,
+        terminal_compartment, thin_wall_compliance, wall_thickness_law,
     };
     #[pymodule_export]
     use super::calibrate::{adjoint_gradients, tangent_sensitivities};

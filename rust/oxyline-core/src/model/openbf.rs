@@ -39,8 +39,12 @@ const GL_W: [f64; 8] = [
 /// Wall thickness [m] of the ADAN/openBF law h = R (0.2802 e^(−5.053 R[cm]) + 0.1324
 /// e^(−0.1114 R[cm])) at lumen radius `r` [m].
 pub fn adan_wall_thickness(r: f64) -> f64 {
-    r * (0.2802 * (-505.3 * r).exp() + 0.1324 * (-11.14 * r).exp())
+    crate::segment::wall_thickness_law(r, ADAN_THICKNESS)
 }
+
+/// The ADAN thickness law's [a, b, c, d] of [`crate::segment::wall_thickness_law`] (b, d
+/// per metre).
+pub const ADAN_THICKNESS: [f64; 4] = [0.2802, -505.3, 0.1324, -11.14];
 
 /// The model viscosity [Pa s] that gives openBF's friction 2 (γ + 2) π μ Q / A² per unit
 /// length with the linear model's Poiseuille resistance 8 μ dx / (π r⁴): μ (γ + 2) / 4.
@@ -83,6 +87,52 @@ impl Wall {
         density * c0 / (PI * self.r0(x).powi(2))
     }
 
+    /// r/R₀ = √(A/A₀) = 1 + (p − Pext)/β′ at `x` and pressure `p` (the tube law).
+    pub fn stretch(&self, x: f64, p: f64, external_pressure: f64) -> f64 {
+        1.0 + (p - external_pressure) / self.beta(x)
+    }
+
+    /// The linear model's vessel at end pressures `p_in` → `p_out` (linear along x): the
+    /// radii r = R₀ s at the ends and the wall thickness h for which the thin-wall compliance
+    /// of the linear taper (ν = [`POISSON_RATIO`]) equals openBF's tangent compliance
+    /// dA/dP = 2π R₀³ (1 − ν²)/(E h₀) s integrated over the vessel (8-point rule). Err: the
+    /// tube law collapses the vessel (s ≤ 0.05), with the lowest pressure of the points
+    /// checked (the ends, else the rule's nodes).
+    pub fn linearised(
+        &self,
+        p_in: f64,
+        p_out: f64,
+        external_pressure: f64,
+    ) -> std::result::Result<(f64, f64, f64), f64> {
+        let l = self.length;
+        let collapsed = |ps: &[f64]| ps.iter().fold(f64::INFINITY, |a, &b| a.min(b));
+        let ends = [(0.0, p_in), (l, p_out)];
+        let s_end = ends.map(|(x, p)| self.stretch(x, p, external_pressure));
+        if s_end.iter().any(|&s| s <= 0.05) {
+            return Err(collapsed(&[p_in, p_out]));
+        }
+        let r_in = self.r0(0.0) * s_end[0];
+        let r_out = self.r0(l) * s_end[1];
+        let nu2 = 1.0 - POISSON_RATIO.powi(2);
+        let mut target = [0.0; 8];
+        let mut linear = [0.0; 8];
+        for k in 0..8 {
+            let x = 0.5 * l * (GL_X[k] + 1.0);
+            let w = 0.5 * l * GL_W[k];
+            let p = p_in + (p_out - p_in) * x / l;
+            let s = self.stretch(x, p, external_pressure);
+            if s <= 0.05 {
+                return Err(collapsed(&pressures_at(p_in, p_out, l)));
+            }
+            target[k] =
+                w * 2.0 * PI * self.r0(x).powf(3.0) * nu2 * s / (self.youngs_modulus * self.h0(x));
+            let r_lin = r_in + (r_out - r_in) * x / l;
+            linear[k] = w * 2.0 * PI * r_lin.powf(3.0) * nu2 / self.youngs_modulus;
+        }
+        let h = sum::pairwise(&linear) / sum::pairwise(&target);
+        Ok((r_in, r_out, h))
+    }
+
     /// The Kelvin–Voigt viscosity η [Pa s] of openBF's visco-elastic wall: E times the
     /// compliance-weighted mean of τ = 2 Γ/(β′ √A₀) along the vessel (weights dA/dP ∝ R₀²/β′,
     /// the rule of a junction where shares of different τ meet), by the 8-point rule.
@@ -100,6 +150,12 @@ impl Wall {
         }
         self.youngs_modulus * sum::pairwise(&weighted) / sum::pairwise(&weights)
     }
+}
+
+/// The pressures at the 8-point rule's nodes of a vessel of length `l` at end pressures
+/// `p_in` → `p_out`.
+fn pressures_at(p_in: f64, p_out: f64, l: f64) -> [f64; 8] {
+    GL_X.map(|g| p_in + (p_out - p_in) * (0.5 * l * (g + 1.0)) / l)
 }
 
 #[cfg(test)]
@@ -147,6 +203,24 @@ mod tests {
         let i: f64 = GL_X.iter().zip(GL_W).map(|(x, w)| w * x.powi(14)).sum();
         assert!((i - 2.0 / 15.0).abs() < 1e-15);
         assert!((GL_W.iter().sum::<f64>() - 2.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn a_uniform_wall_linearised_keeps_its_compliance() {
+        // uniform R₀, h₀ and pressure: s constant, r = R₀ s, and C' = 2π r³ (1 − ν²)/(E h)
+        // must equal openBF's 2π R₀³ (1 − ν²) s/(E h₀): h = h₀ s²
+        let w = Wall {
+            radius: (3e-3, 3e-3),
+            ..wall(Some(3e-4))
+        };
+        let beta = 4e5 * 3e-4 / (0.75 * 3e-3);
+        let s = 1.0 + (1.2e4 - 2e3) / beta;
+        let (r_in, r_out, h) = w.linearised(1.2e4, 1.2e4, 2e3).unwrap();
+        assert!((r_in / (3e-3 * s) - 1.0).abs() < 1e-15);
+        assert!((r_out / r_in - 1.0).abs() < 1e-15);
+        assert!((h / (3e-4 * s * s) - 1.0).abs() < 1e-14, "{h}");
+        // a pressure far below Pext collapses the tube: the lower end pressure is named
+        assert_eq!(w.linearised(-1e6, -2e6, 0.0), Err(-2e6));
     }
 
     #[test]
