@@ -100,7 +100,7 @@ mod _core {
     #[pymodule_export]
     use super::closed_loop_params::closed_loop_layout;
     #[pymodule_export]
-    use super::svzerod_rows::svzerod_output_rows;
+    use super::svzerod_rows::{svzerod_output_rows, svzerod_rcr_cycles};
     #[pymodule_export]
     use super::trees::{
         StructuredTrees, facilitation_factor, grow_structured_tree, linear_facilitation_factor,

@@ -49,6 +49,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from oxyline import _core
 from oxyline.description import copy_description
 from oxyline.errors import ModelError, ResourceError, UnsupportedElement
 from oxyline.io.native import read_mapping
@@ -741,9 +742,9 @@ def _rcr_cycles(bcs: Mapping[str, tuple[str, dict[str, Any]]], period: float,
                 percent: float) -> int:
     """``use_cycle_to_cycle_error`` with RCR outlets: the cycles of Pfaller et al. 2021,
     eq. 21, as in svZeroDSolver's Solver.cpp."""
-    tau = max(n["capacitance"] * n["distal_resistance"]
-              for kind, n in bcs.values() if kind == "RCR")
-    need = -tau / period * math.log(percent / 100.0)
+    need, tau = _core.svzerod_rcr_cycles(
+        [(n["capacitance"], n["distal_resistance"]) for kind, n in bcs.values() if kind == "RCR"],
+        period, percent)
     if not need <= MAX_COUNT:  # also NaN/inf of extreme time constants
         raise ResourceError(f"simulation_parameters: use_cycle_to_cycle_error gives "
                             f"{need:.3g} cycles (largest RCR time constant {tau:.3g} s), "

@@ -42,7 +42,7 @@ pub use outcome::{ErrorControlOutcome, Outcome, TransportOutcome};
 pub use recorder::{Chunk, OutputSink};
 pub use resolve::{Refinement, rk4_step_refinement};
 pub use settings::{Method, RunSettings, Start};
-pub use svzerod::{CycleMeanStop, Derived, SvZeroDRules};
+pub use svzerod::{CycleMeanStop, Derived, SvZeroDRules, rcr_cycles as svzerod_rcr_cycles};
 pub use svzerod_rows::svzerod_output_rows;
 
 use crate::circuit::Dae;

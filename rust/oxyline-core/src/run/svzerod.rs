@@ -26,6 +26,18 @@ pub enum Derived {
     FromStart { unknown: usize, scale: f64 },
 }
 
+/// svZeroDSolver's number of cycles to periodicity with RCR outlets (`use_cycle_to_cycle_error`;
+/// Pfaller et al. 2021, eq. 21, as its `Solver.cpp`): −τ/T ln(ε/100) with τ the largest RCR
+/// time constant R_d C of `outlets` (capacitance, distal resistance), T the period and ε the
+/// percent error. Returns (cycles before rounding up, τ).
+pub fn rcr_cycles(outlets: &[(f64, f64)], period: f64, percent: f64) -> (f64, f64) {
+    let tau = outlets
+        .iter()
+        .map(|&(c, rd)| c * rd)
+        .fold(f64::NEG_INFINITY, f64::max);
+    (-tau / period * (percent / 100.0).ln(), tau)
+}
+
 /// svZeroDSolver's cycle-to-cycle rule without RCR (`Solver::run_integration`): after the
 /// requested cycles, further cycles run until at every cap the mean over the last cycle of
 /// each unknown in `caps` (its points, both ends included) differs from the mean over the
@@ -244,6 +256,15 @@ impl CycleMeans {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn rcr_cycles_is_the_decay_of_the_slowest_outlet() {
+        // e^(−n T/τ) = ε/100: with τ = 2 s (the larger R_d C), T = 1 s, ε = 1 %:
+        // n = 2 ln 100 = 9.21 cycles
+        let (n, tau) = rcr_cycles(&[(1e-3, 1000.0), (2e-3, 1000.0)], 1.0, 1.0);
+        assert_eq!(tau, 2.0);
+        assert!((n - 2.0 * 100f64.ln()).abs() < 1e-14, "{n}");
+    }
 
     #[test]
     fn valve_status_follows_the_alpha_f_stage() {
