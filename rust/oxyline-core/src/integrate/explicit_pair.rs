@@ -139,24 +139,6 @@ pub fn check_supported(dae: &Dae) -> Result<()> {
     }
 }
 
-/// Whether `method: auto` may choose the pair: no switching element (a circuit with valves
-/// keeps generalized-α unless the pair is asked for).
-pub fn check_unswitched(dae: &Dae) -> Result<()> {
-    let switching = dae
-        .elements
-        .iter()
-        .find(|el| el.has_closed_state() || !el.switched_unknowns().is_empty());
-    match switching {
-        Some(el) => Err(Error::model(
-            el.name(),
-            format!(
-                "'auto' keeps 'generalized-alpha' for switching elements (valves), not '{NAME}'"
-            ),
-        )),
-        None => Ok(()),
-    }
-}
-
 /// Stage storage of one state (flow or coupled): the stage rates, the stage state, the start.
 #[derive(Debug, Default)]
 struct Stages {

@@ -118,6 +118,15 @@ pub(super) struct Events {
     /// open.
     flow_tol: (f64, f64),
     peak: Vec<f64>,
+    /// The pressure's absolute tolerance: with rtol·(the larger of the valve's two largest
+    /// pressures so far) the band of ΔP an open on/off valve must leave downwards to close
+    /// (the hysteresis of the module text).
+    pressure_atol: f64,
+    pressure_peak: Vec<f64>,
+    /// An open on/off valve's forward flow has exceeded the flow tolerance since it opened:
+    /// until then its closing needs ΔP below the band (an opening's start has Q = 0 and
+    /// ΔP = 0 within the root's tolerance, where ΔP's sign is not resolved).
+    flowing: Vec<bool>,
     pub log: Vec<Event>,
 }
 
@@ -133,7 +142,7 @@ const HEART_VALVES: [&str; 4] = ["tricuspid", "pulmonary", "mitral", "aortic"];
 
 impl Events {
     /// The circuit's switches (None without any), their statuses read at the start `y`.
-    pub fn new(dae: &Dae, y: &[f64], flow_tol: (f64, f64)) -> Option<Self> {
+    pub fn new(dae: &Dae, y: &[f64], flow_tol: (f64, f64), pressure_atol: f64) -> Option<Self> {
         let (mut switches, mut names) = (Vec::new(), Vec::new());
         for el in &dae.elements {
             let own = el.switches();
@@ -162,6 +171,12 @@ impl Events {
             fresh: vec![false; switches.len()],
             flow_tol,
             peak: switches.iter().map(|sw| y[sw.unknowns[2]].abs()).collect(),
+            pressure_atol,
+            pressure_peak: switches.iter().map(|sw| pressure_scale(sw, y)).collect(),
+            flowing: switches
+                .iter()
+                .map(|sw| y[sw.unknowns[2]] > flow_tol.0)
+                .collect(),
             switches,
             names,
             open,
@@ -178,7 +193,12 @@ impl Events {
         match (self.open[k], sw.on_off) {
             (true, true) => {
                 let tol = self.flow_tol.0 + self.flow_tol.1 * self.peak[k];
-                dp.max(sw.resistance * (v(q) - tol))
+                let band = if self.flowing[k] {
+                    0.0
+                } else {
+                    self.pressure_atol + self.flow_tol.1 * self.pressure_peak[k]
+                };
+                (dp + band).max(sw.resistance * (v(q) - tol))
             }
             (true, false) => dp,
             // a closed valve reopens where ΔP turns positive (ΔP = 0 keeps the piecewise
@@ -226,6 +246,7 @@ impl Events {
     pub fn switch(&mut self, k: usize, time: f64, y: &mut [f64], yd: &mut [f64]) -> bool {
         self.open[k] = !self.open[k];
         self.fresh[k] = true;
+        self.flowing[k] = false;
         self.log.push(Event {
             time,
             valve: self.names[k].clone(),
@@ -245,8 +266,12 @@ impl Events {
     /// valves' largest flows so far.
     pub fn settle(&mut self, y: &[f64]) {
         self.fresh.fill(false);
-        for (p, sw) in self.peak.iter_mut().zip(&self.switches) {
-            *p = p.max(y[sw.unknowns[2]].abs());
+        for (k, sw) in self.switches.iter().enumerate() {
+            let q = y[sw.unknowns[2]];
+            let tol = self.flow_tol.0 + self.flow_tol.1 * self.peak[k];
+            self.flowing[k] |= self.open[k] && q > tol;
+            self.peak[k] = self.peak[k].max(q.abs());
+            self.pressure_peak[k] = self.pressure_peak[k].max(pressure_scale(sw, y));
         }
     }
 
@@ -256,6 +281,11 @@ impl Events {
             .filter(|&k| self.keep(k, v) <= 0.0)
             .collect()
     }
+}
+
+/// The larger magnitude of a switch's two pressures at `y`.
+fn pressure_scale(sw: &Switch, y: &[f64]) -> f64 {
+    y[sw.unknowns[0]].abs().max(y[sw.unknowns[1]].abs())
 }
 
 /// The root of g on [a, b] with g(a) > 0 ≥ g(b) by the Illinois method, to a bracket of
@@ -322,6 +352,9 @@ mod tests {
             fresh: vec![false, false],
             flow_tol: (0.0, 0.0),
             peak: vec![0.0, 0.0],
+            pressure_atol: 0.0,
+            pressure_peak: vec![0.0, 0.0],
+            flowing: vec![true, true],
             log: Vec::new(),
         };
         // ΔP < 0 with forward flow: the pressure rule closes, the on/off rule stays open
@@ -355,6 +388,9 @@ mod tests {
             fresh: vec![false, false],
             flow_tol: (0.0, 0.0),
             peak: vec![0.0, 0.0],
+            pressure_atol: 0.0,
+            pressure_peak: vec![0.0, 0.0],
+            flowing: vec![true, true],
             log: Vec::new(),
         };
         // ΔP_a = 1 − 2θ (root 0.5), ΔP_b = 1 − 4θ (root 0.25)
