@@ -123,10 +123,11 @@ pub(super) struct Events {
     /// (the hysteresis of the module text).
     pressure_atol: f64,
     pressure_peak: Vec<f64>,
-    /// An open on/off valve's forward flow has exceeded the flow tolerance since it opened:
-    /// until then its closing needs ΔP below the band (an opening's start has Q = 0 and
-    /// ΔP = 0 within the root's tolerance, where ΔP's sign is not resolved).
-    flowing: Vec<bool>,
+    /// The switch's function has left the band (above) since its last event: until then a
+    /// switch back needs its function below minus the band (hysteresis: at an event ΔP = 0
+    /// (and an opening on/off valve's Q = 0) within the root's tolerance, where the sign of ΔP
+    /// is not resolved by the solution).
+    armed: Vec<bool>,
     pub log: Vec<Event>,
 }
 
@@ -173,10 +174,7 @@ impl Events {
             peak: switches.iter().map(|sw| y[sw.unknowns[2]].abs()).collect(),
             pressure_atol,
             pressure_peak: switches.iter().map(|sw| pressure_scale(sw, y)).collect(),
-            flowing: switches
-                .iter()
-                .map(|sw| y[sw.unknowns[2]] > flow_tol.0)
-                .collect(),
+            armed: vec![true; switches.len()],
             switches,
             names,
             open,
@@ -187,18 +185,25 @@ impl Events {
     /// Switch `k`'s function at the state `v` (an unknown's value by index), positive while
     /// it keeps its status.
     fn keep(&self, k: usize, v: &impl Fn(usize) -> f64) -> f64 {
+        let band = if self.armed[k] { 0.0 } else { self.band(k) };
+        self.rule(k, v) + band
+    }
+
+    /// The band of ΔP within which a sign is not resolved: the error control's pressure
+    /// tolerance at the larger of the valve's two largest pressures so far.
+    fn band(&self, k: usize) -> f64 {
+        self.pressure_atol + self.flow_tol.1 * self.pressure_peak[k]
+    }
+
+    /// Switch `k`'s rule at the state `v`, without the band.
+    fn rule(&self, k: usize, v: &impl Fn(usize) -> f64) -> f64 {
         let sw = &self.switches[k];
         let [b, f, q] = sw.unknowns;
         let dp = v(b) - v(f);
         match (self.open[k], sw.on_off) {
             (true, true) => {
                 let tol = self.flow_tol.0 + self.flow_tol.1 * self.peak[k];
-                let band = if self.flowing[k] {
-                    0.0
-                } else {
-                    self.pressure_atol + self.flow_tol.1 * self.pressure_peak[k]
-                };
-                (dp + band).max(sw.resistance * (v(q) - tol))
+                dp.max(sw.resistance * (v(q) - tol))
             }
             (true, false) => dp,
             // a closed valve reopens where ΔP turns positive (ΔP = 0 keeps the piecewise
@@ -246,7 +251,7 @@ impl Events {
     pub fn switch(&mut self, k: usize, time: f64, y: &mut [f64], yd: &mut [f64]) -> bool {
         self.open[k] = !self.open[k];
         self.fresh[k] = true;
-        self.flowing[k] = false;
+        self.armed[k] = false;
         self.log.push(Event {
             time,
             valve: self.names[k].clone(),
@@ -267,11 +272,11 @@ impl Events {
     pub fn settle(&mut self, y: &[f64]) {
         self.fresh.fill(false);
         for (k, sw) in self.switches.iter().enumerate() {
-            let q = y[sw.unknowns[2]];
-            let tol = self.flow_tol.0 + self.flow_tol.1 * self.peak[k];
-            self.flowing[k] |= self.open[k] && q > tol;
-            self.peak[k] = self.peak[k].max(q.abs());
+            self.peak[k] = self.peak[k].max(y[sw.unknowns[2]].abs());
             self.pressure_peak[k] = self.pressure_peak[k].max(pressure_scale(sw, y));
+        }
+        for k in 0..self.switches.len() {
+            self.armed[k] |= self.rule(k, &|i| y[i]) > self.band(k);
         }
     }
 
@@ -354,7 +359,7 @@ mod tests {
             peak: vec![0.0, 0.0],
             pressure_atol: 0.0,
             pressure_peak: vec![0.0, 0.0],
-            flowing: vec![true, true],
+            armed: vec![true, true],
             log: Vec::new(),
         };
         // ΔP < 0 with forward flow: the pressure rule closes, the on/off rule stays open
@@ -390,7 +395,7 @@ mod tests {
             peak: vec![0.0, 0.0],
             pressure_atol: 0.0,
             pressure_peak: vec![0.0, 0.0],
-            flowing: vec![true, true],
+            armed: vec![true, true],
             log: Vec::new(),
         };
         // ΔP_a = 1 − 2θ (root 0.5), ΔP_b = 1 − 4θ (root 0.25)
