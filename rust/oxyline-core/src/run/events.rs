@@ -380,6 +380,40 @@ mod tests {
     }
 
     #[test]
+    fn a_switch_back_within_the_pressure_band_is_no_event() {
+        // a pressure-rule valve with a 2 Pa band (atol 1 Pa + rtol 0.1 × peak 10 Pa)
+        let sw = Switch {
+            unknowns: [0, 1, 2],
+            on_off: false,
+            resistance: 1.0,
+        };
+        let mut ev = Events {
+            switches: vec![sw],
+            names: vec!["a".into()],
+            open: vec![false],
+            fresh: vec![false],
+            flow_tol: (0.0, 0.1),
+            peak: vec![0.0],
+            pressure_atol: 1.0,
+            pressure_peak: vec![10.0],
+            armed: vec![true],
+            log: Vec::new(),
+        };
+        let (mut y, mut yd) = ([10.0, 10.0, 0.0], [0.0; 3]);
+        ev.switch(0, 0.0, &mut y, &mut yd); // opened at ΔP = 0
+        // ΔP = −1 Pa after the opening: within the band, not a closing
+        let y = [9.0, 10.0, 0.0];
+        assert!(ev.due_at(&|i| y[i]).is_empty());
+        // below the band: a closing
+        let y = [7.5, 10.0, 0.0];
+        assert_eq!(ev.due_at(&|i| y[i]), vec![0]);
+        // once ΔP has left the band upwards, any ΔP ≤ 0 closes it again
+        ev.settle(&[13.0, 10.0, 0.0]);
+        let y = [9.9, 10.0, 0.0];
+        assert_eq!(ev.due_at(&|i| y[i]), vec![0]);
+    }
+
+    #[test]
     fn the_first_root_of_several_is_located() {
         let sw = |b, f| Switch {
             unknowns: [b, f, 0],
