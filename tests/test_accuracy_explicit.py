@@ -155,3 +155,20 @@ def test_bad_explicit_settings_name_the_setting(model: str, settings: dict[str, 
                                                 message: str) -> None:
     with pytest.raises(oxyline.ModelError, match=message):
         oxyline.simulate(model, cycles=1, **settings)
+
+
+def test_the_low_level_network_run_defaults_to_error_control() -> None:
+    """``Network.simulate`` without ``rtol`` or ``dt`` runs as ``oxyline.simulate`` does
+    (error control at rtol 1e-3, docs/solvers.md), and ``rtol=None`` keeps the automatic fixed
+    step: the controlled run's rows match the fixed 0.1 ms step's to 1 % of the range (the
+    tolerance's order), the fixed run reports no error estimate."""
+    model = oxyline.load_model("bifurcation")
+    net = model.network
+    kw = {"period": model.period, "output_every": 1e-2, "cycles": 2, "until_periodic": None}
+    default = net.simulate(**kw)
+    fixed = net.simulate(**kw, rtol=None)
+    fine = net.simulate(**kw, dt=1e-4, method="generalized-alpha")
+    assert "error_estimate" in default and "error_estimate" not in fixed
+    ref = np.asarray(fine["data"])
+    np.testing.assert_allclose(np.asarray(default["data"]), ref, rtol=0,
+                               atol=1e-2 * float(np.ptp(ref)))
