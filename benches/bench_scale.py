@@ -33,6 +33,8 @@ times in brackets —
         --methods generalized-alpha        # the scale targets: slopes 1e3-1e6 (and >= 1e4)
     python benches/bench_scale.py --depths 18 --configs flow o2-k     # the 1e6-segment run
     python benches/bench_scale.py --depths 18 --configs o2-k --zarr   # ... streamed to Zarr
+    python benches/bench_scale.py --depths 18 --configs o2-k --methods default
+        # ... the default run (auto, error control at rtol 1e-3), opt-in
     python benches/bench_scale.py --depths 18 --configs o2-k --variables flow_in concentration_in
     python benches/bench_scale.py --depths 12 14 16 --methods rk4 --rk4-max-depth 16 \
         --rk4-fraction 0.01 --baseline /path/to/old        # before/after in the same run
@@ -65,6 +67,8 @@ import threading
 import time
 from typing import Any
 
+#: the method label of oxyline.simulate's default run (no method, no dt)
+DEFAULT_RUN = "default"
 K1, K2, K3 = 2.0e6, -2253.0, 8.65e4  # Olufsen 2000, Eh/r in Pa with r in m
 R_ROOT = 0.01  # m
 LENGTH_PER_RADIUS = 10.0
@@ -141,6 +145,8 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
         kw["variables"] = "all" if spec["variables"] == ["all"] else spec["variables"]
     if spec["method"] == "generalized-alpha":
         kw["dt"] = 1e-3
+    elif spec["method"] == DEFAULT_RUN:
+        del kw["method"]  # oxyline.simulate's default: auto, error control at rtol 1e-3
     fraction = spec.get("fraction", 1.0)
     # (simulated time, CPU time, wall time) at progress checks
     marks: list[tuple[float, float, float]] = []
@@ -181,11 +187,14 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
                 res = exc.result
             settings = res.settings
         c2, w2 = time.process_time(), time.perf_counter()
-        dt = float(settings["dt"])
+        dt = float(settings["dt"]) if settings.get("dt") else None
         out = {"load_cpu": c1 - c0, "load_wall": w1 - w0, "run_cpu": c2 - c1,
                "run_wall": w2 - w1, "segments": int(m.network.summary()["segments"]),
                "dt": dt, "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
-        if len(marks) > 1:
+        if settings.get("steps"):  # an error-controlled run: its accepted steps
+            out["steps"] = int(settings["steps"])
+            out["ran"] = f"{settings['method']}, {settings.get('step_control', '')}"
+        if len(marks) > 1 and dt:
             # the main pass's steps between its first and last progress checks
             out["main_steps"] = round((marks[-1][0] - marks[0][0]) / dt)
             out["main_cpu"] = marks[-1][1] - marks[0][1]
@@ -334,7 +343,9 @@ def main() -> None:
     ap.add_argument("--per-vessel", type=int, default=4)
     ap.add_argument("--configs", nargs="+", default=CONFIGS, choices=CONFIGS)
     ap.add_argument("--methods", nargs="+", default=["generalized-alpha", "rk4"],
-                    choices=["generalized-alpha", "rk4"])
+                    choices=["generalized-alpha", "rk4", DEFAULT_RUN],
+                    help=f"'{DEFAULT_RUN}' (opt-in): oxyline.simulate's default run, no method "
+                         "and no dt (auto, error control at rtol 1e-3)")
     ap.add_argument("--rk4-max-depth", type=int, default=12,
                     help="largest tree run with RK4 (its stable dt shrinks with the vessels)")
     ap.add_argument("--fit-min-segments", type=float, nargs="+", default=[1e3, 1e4],
@@ -418,6 +429,8 @@ def main() -> None:
                         flows[build] = r
                     print(row(label, config, r, flows.get(build))
                           + thread_cells(r, first, copy), flush=True)
+                    if "ran" in r:
+                        print(f"|   ran: {r['ran']} |", flush=True)
                     if threads == a.threads[0]:
                         rows.setdefault((label, config), []).append(r)
     if skipped:

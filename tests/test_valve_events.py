@@ -1,6 +1,7 @@
 """Valve events of the error-controlled runs (docs/physics.md §10.5): the opening and closing
 times of a diode charging a compliance against the closed form, over rtol 1e-3 … 1e-6 and for
-both controlled integrators; a closed-loop heart's valve status consistent with its pressures
+both controlled integrators; a closed-loop heart's switches against a small fixed step, and its valve
+status consistent with its pressures
 and flows at every output row; the explicit pair on a valve model against a small fixed step
 of generalized-α."""
 
@@ -134,22 +135,71 @@ def status_from_events(res: oxyline.Result, name: str, start: int) -> np.ndarray
     return status
 
 
-@pytest.mark.parametrize("rtol", [1e-3])
-def test_heart_valve_status_is_consistent_with_pressure_and_flow_at_every_row(
-        rtol: float) -> None:
-    """The heart block's four on/off valves under error control: the status the output reads
-    from each valve's pressure difference and flow at every row (docs/physics.md §1.10) is
-    the status of the located events, except at rows within two output intervals of one:
-    the output's rule reads a valve closed by generalized-α at its Newton-level flow of
-    either sign (docs/physics.md §1.10), the events at the flow tolerance of the control."""
-    res = oxyline.simulate(oxyline.load_model(heart()), rtol=rtol, cycles=3,
-                           output_every=1e-3, output_cycles="all", method="generalized-alpha")
+def fixed_step_switches(dt: float = 1e-5) -> dict[str, list[tuple[float, bool]]]:
+    """The independent truth of the heart's switches: generalized-α at a fixed step of 10 µs
+    (its valve law read from each Newton iterate, svZeroDSolver's), each valve's status
+    flips at every step, as (time, opened)."""
+    m = closed_loop.heart_model(closed_loop.load("closed-loop-o2"))
+    m["simulation"]["dt"] = dt
+    ref = oxyline.simulate(oxyline.load_model(m), cycles=3, output_every=dt,
+                           output_cycles="all", method="generalized-alpha")
+    flips = {}
+    for name, st in ref.valve_status.items():
+        st = np.asarray(st).astype(int)
+        at = np.nonzero(np.diff(st))[0] + 1
+        flips[name] = [(float(ref.time[i]), bool(st[i])) for i in at]
+    return flips
+
+
+@pytest.fixture(scope="module")
+def switches() -> dict[str, list[tuple[float, bool]]]:
+    return fixed_step_switches()
+
+
+def heart_run(rtol: float) -> oxyline.Result:
+    return oxyline.simulate(oxyline.load_model(heart()), rtol=rtol, cycles=3,
+                            output_every=1e-3, output_cycles="all", method="generalized-alpha")
+
+
+#: the largest event-time error allowed, per rtol (s). Measured against the 10 µs fixed step:
+#: 3.9e-2 s at rtol 1e-3, 1.5e-3 s at 1e-4 — both at the mitral valve's closing or opening
+#: in diastasis (between the E and A waves), where ΔP crosses zero slowly, so that the
+#: pressure's error (held to rtol) over ΔP's slope is a long time; elsewhere below 1e-3 s.
+EVENT_TIME_TOL = {1e-3: 8e-2, 1e-4: 5e-3}
+
+
+@pytest.mark.parametrize("rtol", [1e-3, 1e-4])
+def test_heart_events_are_the_switches_of_a_small_fixed_step(
+        rtol: float, switches: dict[str, list[tuple[float, bool]]]) -> None:
+    """Every valve switches as often, in the same order, as the fixed 10 µs step reads it:
+    no chatter where a valve opens at ΔP = 0 and Q = 0 (28 switches in 3 cycles: the
+    tricuspid closed through the start's transient, the mitral twice open per cycle, for
+    its E and A waves; 44 events before the band of docs/physics.md §10.5)."""
+    res = heart_run(rtol)
+    assert len(res.valve_events) == sum(len(f) for f in switches.values()) == 28
+    for name, want in switches.items():
+        got = [(t, o) for t, v, o in res.valve_events if v == name]
+        assert [o for _, o in got] == [o for _, o in want], (name, got, want)
+        # (a switch at the start: the reference reads it after its first step)
+        err = max(abs(max(a, 1e-5) - b) for (a, _), (b, _) in zip(got, want, strict=True))
+        assert err <= EVENT_TIME_TOL[rtol], (name, err)
+
+
+def test_heart_valve_status_is_consistent_with_pressure_and_flow_at_every_row() -> None:
+    """The heart block's four on/off valves under error control (rtol 1e-4): the status the
+    output reads from each valve's pressure difference and flow at every row (open while
+    ΔP > 0 or Q > 0; docs/physics.md §1.10) is the status of the located events at every
+    row, the start's transient included, except rows within 2 ms after a closing: there the
+    output's rule reads the closed valve's held flow, which generalized-α leaves at the size
+    of its last Newton correction, of either sign (1-3 rows measured). At rtol 1e-3 the
+    diastolic mitral events err by up to 39 ms (above), and the rows between disagree."""
+    res = heart_run(1e-4)
     assert {v for _, v, _ in res.valve_events} == set(res.valve_status)
-    times = np.array([t for t, _, _ in res.valve_events])
-    near = np.min(np.abs(res.time[:, None] - times[None, :]), axis=1) <= 2e-3 + 1e-9
+    closings = np.array([t for t, _, opened in res.valve_events if not opened])
+    after = (res.time[:, None] - closings[None, :])
+    held = np.any((after >= 0) & (after <= 2e-3 + 1e-9), axis=1)
     for name, status in res.valve_status.items():
         assert status.min() == 0 and status.max() == 1, name  # it opens and closes
         want = status_from_events(res, name, int(status[0]))
-        # past the first cycle (the start's transient, where the chambers fill from rest)
-        bad = (status != want) & ~near & (res.time >= 0.8)
+        bad = (status != want) & ~held
         assert not bad.any(), (name, res.time[bad][:5])

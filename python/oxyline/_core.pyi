@@ -134,7 +134,11 @@ class Network:
         returned. An exception from ``chunk_sink`` stops the run and is returned as ``error``;
         ``max_buffered_rows`` is the most output rows the core held at once. With last-cycle
         output, ``keep_current_cycle=False`` records nothing before the last cycle (a streaming
-        run then holds at most one chunk; a run stopped earlier returns no rows)."""
+        run then holds at most one chunk; a run stopped earlier returns no rows).
+
+        The step control defaults as in ``oxyline.simulate``: without ``rtol``, ``dt`` and
+        checkpoints and with a method other than ``rk4`` the run is error-controlled at rtol
+        1e-3; ``rtol=None`` keeps the automatic fixed step."""
 
 class Ensemble:
     """A parsed base model whose variants run in parallel on the core's threads."""

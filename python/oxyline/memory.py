@@ -13,7 +13,8 @@ model file (which also applies when the model is assembled), else the environmen
 process's address-space limit (``ulimit -v``) if one is set.
 
 The model estimate (`oxyline_core::run::memory`) counts measured peak bytes per segment, per
-transport cell and species, and per vessel; the output estimate counts the rows and columns
+transport cell and species, and per vessel; an error-controlled run adds its controller's state
+per unknown and per transport cell (:func:`controlled_estimate`); the output estimate counts the rows and columns
 the run will hold (8 bytes each). ``benches/bench_memory.py`` compares both with the measured
 peak resident memory.
 """
@@ -25,7 +26,7 @@ import gc
 import math
 import os
 import re
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from typing import Any
 
 from oxyline import _core
@@ -122,6 +123,23 @@ def model_estimate(summary: dict[str, Any], canonical: dict[str, Any]) -> float:
     cells = max(1.0, float(tr.get("cells_per_segment", 1.0))) if species else 0.0
     elements = summary["vessels"] + len(canonical.get("boundary_conditions") or {})
     return _core.model_bytes(summary["segments"], elements, cells, species)
+
+
+def controlled_estimate(summary: dict[str, Any], canonical: dict[str, Any],
+                        settings: Mapping[str, Any]) -> float:
+    """Estimated bytes of the error control's own state of a run with ``settings`` (0 for a
+    fixed step): per circuit unknown and per transport cell and species, the integrator's
+    vectors (error estimate, the states its extrapolation or dense output needs, the explicit
+    pair's seven stages; ``oxyline_core::run::memory::controlled_bytes``). ``auto`` may pick
+    either integrator: the larger (the explicit pair's) is counted."""
+    if settings.get("rtol") is None:
+        return 0.0
+    tr = canonical.get("transport") or {}
+    species = len(tr.get("species") or ()) if settings.get("transport", True) else 0
+    cells = max(1.0, float(tr.get("cells_per_segment", 1.0))) if species else 0.0
+    explicit = settings.get("method") in ("dopri5", "auto")
+    return _core.controlled_bytes(int(summary["unknowns"]),
+                                  summary["segments"] * cells * species, explicit)
 
 
 def output_estimate(layout: dict[str, Any], period: float, every: float, cycles: int,

@@ -81,6 +81,21 @@ fn model_bytes(segments: usize, elements: usize, cells: f64, species: usize) -> 
     oxyline_core::run::memory::model_bytes(segments, elements, cells, species)
 }
 
+/// Bytes of the error control's state (`oxyline_core::run::memory::controlled_bytes`):
+/// `unknowns` circuit unknowns, `species_cells` transport cells × species, and whether the
+/// integrator is the explicit pair (`dopri5`) rather than generalized-α.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+fn controlled_bytes(unknowns: usize, species_cells: f64, explicit: bool) -> f64 {
+    use oxyline_core::run::memory::{Controlled, controlled_bytes};
+    let integrator = if explicit {
+        Controlled::ExplicitPair
+    } else {
+        Controlled::GeneralizedAlpha
+    };
+    controlled_bytes(unknowns, species_cells, integrator)
+}
+
 #[pymodule]
 mod _core {
     #[pymodule_export]
@@ -110,7 +125,7 @@ mod _core {
     use super::windkessel_trees::{outlet_root_radius, windkessel_tree_match};
     #[pymodule_export]
     use super::{
-        chamber_elastance,
+        chamber_elastance, controlled_bytes,
         ensemble::{Ensemble, merge_patch},
         errors::{_panic_probe, ModelError, ResourceError, SolverError, UnstableTimeStep},
         model_bytes,

@@ -553,7 +553,9 @@ impl Network {
     /// columns, rates, the cycle-to-cycle rule; see `svzerod.rs`), recorded after the columns.
     ///
     /// `settings`: the run settings shared with `Ensemble.run` (`settings::KEYS`: cycles,
-    /// method, dt, ..., the output selection).
+    /// method, dt, ..., the output selection). The step control defaults as in
+    /// `oxyline.simulate` ([`settings::Shared::default_step_control`]): error control at rtol
+    /// 1e-3 without `rtol`, `dt` or checkpoints; `rtol = None` keeps the fixed step.
     #[pyo3(signature = (*, period, output_every, all_unknowns = false, extra_columns = None,
         progress = None,
         chunk_sink = None, chunk_rows = 1024, keep_current_cycle = true, checkpoint_sink = None,
@@ -578,13 +580,14 @@ impl Network {
         svzerod: Option<Bound<'py, PyDict>>,
         settings: Option<Bound<'py, PyDict>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let shared = settings::Shared::from_kwargs(settings.as_ref())?;
+        let mut shared = settings::Shared::from_kwargs(settings.as_ref())?;
         if chunk_rows == 0 {
             return Err(ModelError::new_err("simulation: chunk_rows must be >= 1"));
         }
         let every = checkpoint_every(checkpoint_every_cycles, checkpoint_every_seconds)?;
         let resume = resume.map(|d| checkpoint::from_dict(&d)).transpose()?;
         let checkpointing = checkpoint_sink.is_some() || resume.is_some();
+        shared.default_step_control(checkpointing);
         let transport_on = shared.transport;
         let mut settings = shared.run_settings(period, output_every, keep_current_cycle)?;
         let threads = shared.threads;

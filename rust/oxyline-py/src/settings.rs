@@ -56,6 +56,8 @@ pub(crate) struct Shared {
     /// Error control (docs/physics.md §10): the relative tolerance, and absolute ones by kind
     /// (`oxyline_core::integrate::adaptive::KINDS`; absent kinds keep the core's defaults).
     rtol: Option<f64>,
+    /// `rtol` was among the keywords (also as None: a fixed step asked for).
+    rtol_given: bool,
     atol: Option<HashMap<String, f64>>,
     /// Threads of a single run (None: every core; see `oxyline_core::threads`). An ensemble
     /// runs its variants one per thread and each variant serially.
@@ -80,6 +82,7 @@ impl Default for Shared {
             variables: None,
             vessels: None,
             rtol: None,
+            rtol_given: false,
             atol: None,
             threads: None,
         }
@@ -116,7 +119,10 @@ impl Shared {
                 "transport" => s.transport = arg(&key, &v)?,
                 "variables" => s.variables = arg(&key, &v)?,
                 "vessels" => s.vessels = arg(&key, &v)?,
-                "rtol" => s.rtol = arg(&key, &v)?,
+                "rtol" => {
+                    s.rtol = arg(&key, &v)?;
+                    s.rtol_given = true;
+                }
                 "atol" => s.atol = atol_arg(&v)?,
                 "threads" => s.threads = arg(&key, &v)?,
                 _ => {
@@ -127,6 +133,17 @@ impl Shared {
             }
         }
         Ok(s)
+    }
+
+    /// `oxyline.simulate`'s default step control (`model::settings::DEFAULT_RTOL`) where the
+    /// keywords choose none: no `rtol` keyword (an explicit None keeps the fixed step), no
+    /// `dt`, a method with an error estimate (not `rk4`), and no checkpoints (`checkpointing`:
+    /// a checkpoint does not carry the controller's state, so such a run keeps the automatic
+    /// fixed step, as `oxyline.simulate` does).
+    pub fn default_step_control(&mut self, checkpointing: bool) {
+        if !self.rtol_given && self.dt.is_none() && self.method != "rk4" && !checkpointing {
+            self.rtol = Some(oxyline_core::model::settings::DEFAULT_RTOL);
+        }
     }
 
     /// The core's settings of a run with these settings over `period`, recording every

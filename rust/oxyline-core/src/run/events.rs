@@ -118,6 +118,16 @@ pub(super) struct Events {
     /// open.
     flow_tol: (f64, f64),
     peak: Vec<f64>,
+    /// The pressure's absolute tolerance: with rtol·(the larger of the valve's two largest
+    /// pressures so far) the band of ΔP an open on/off valve must leave downwards to close
+    /// (the hysteresis of the module text).
+    pressure_atol: f64,
+    pressure_peak: Vec<f64>,
+    /// The switch's function has left the band (above) since its last event: until then a
+    /// switch back needs its function below minus the band (hysteresis: at an event ΔP = 0
+    /// (and an opening on/off valve's Q = 0) within the root's tolerance, where the sign of ΔP
+    /// is not resolved by the solution).
+    armed: Vec<bool>,
     pub log: Vec<Event>,
 }
 
@@ -133,7 +143,7 @@ const HEART_VALVES: [&str; 4] = ["tricuspid", "pulmonary", "mitral", "aortic"];
 
 impl Events {
     /// The circuit's switches (None without any), their statuses read at the start `y`.
-    pub fn new(dae: &Dae, y: &[f64], flow_tol: (f64, f64)) -> Option<Self> {
+    pub fn new(dae: &Dae, y: &[f64], flow_tol: (f64, f64), pressure_atol: f64) -> Option<Self> {
         let (mut switches, mut names) = (Vec::new(), Vec::new());
         for el in &dae.elements {
             let own = el.switches();
@@ -162,6 +172,9 @@ impl Events {
             fresh: vec![false; switches.len()],
             flow_tol,
             peak: switches.iter().map(|sw| y[sw.unknowns[2]].abs()).collect(),
+            pressure_atol,
+            pressure_peak: switches.iter().map(|sw| pressure_scale(sw, y)).collect(),
+            armed: vec![true; switches.len()],
             switches,
             names,
             open,
@@ -172,6 +185,18 @@ impl Events {
     /// Switch `k`'s function at the state `v` (an unknown's value by index), positive while
     /// it keeps its status.
     fn keep(&self, k: usize, v: &impl Fn(usize) -> f64) -> f64 {
+        let band = if self.armed[k] { 0.0 } else { self.band(k) };
+        self.rule(k, v) + band
+    }
+
+    /// The band of ΔP within which a sign is not resolved: the error control's pressure
+    /// tolerance at the larger of the valve's two largest pressures so far.
+    fn band(&self, k: usize) -> f64 {
+        self.pressure_atol + self.flow_tol.1 * self.pressure_peak[k]
+    }
+
+    /// Switch `k`'s rule at the state `v`, without the band.
+    fn rule(&self, k: usize, v: &impl Fn(usize) -> f64) -> f64 {
         let sw = &self.switches[k];
         let [b, f, q] = sw.unknowns;
         let dp = v(b) - v(f);
@@ -226,6 +251,7 @@ impl Events {
     pub fn switch(&mut self, k: usize, time: f64, y: &mut [f64], yd: &mut [f64]) -> bool {
         self.open[k] = !self.open[k];
         self.fresh[k] = true;
+        self.armed[k] = false;
         self.log.push(Event {
             time,
             valve: self.names[k].clone(),
@@ -245,8 +271,12 @@ impl Events {
     /// valves' largest flows so far.
     pub fn settle(&mut self, y: &[f64]) {
         self.fresh.fill(false);
-        for (p, sw) in self.peak.iter_mut().zip(&self.switches) {
-            *p = p.max(y[sw.unknowns[2]].abs());
+        for (k, sw) in self.switches.iter().enumerate() {
+            self.peak[k] = self.peak[k].max(y[sw.unknowns[2]].abs());
+            self.pressure_peak[k] = self.pressure_peak[k].max(pressure_scale(sw, y));
+        }
+        for k in 0..self.switches.len() {
+            self.armed[k] |= self.rule(k, &|i| y[i]) > self.band(k);
         }
     }
 
@@ -256,6 +286,11 @@ impl Events {
             .filter(|&k| self.keep(k, v) <= 0.0)
             .collect()
     }
+}
+
+/// The larger magnitude of a switch's two pressures at `y`.
+fn pressure_scale(sw: &Switch, y: &[f64]) -> f64 {
+    y[sw.unknowns[0]].abs().max(y[sw.unknowns[1]].abs())
 }
 
 /// The root of g on [a, b] with g(a) > 0 ≥ g(b) by the Illinois method, to a bracket of
@@ -322,6 +357,9 @@ mod tests {
             fresh: vec![false, false],
             flow_tol: (0.0, 0.0),
             peak: vec![0.0, 0.0],
+            pressure_atol: 0.0,
+            pressure_peak: vec![0.0, 0.0],
+            armed: vec![true, true],
             log: Vec::new(),
         };
         // ΔP < 0 with forward flow: the pressure rule closes, the on/off rule stays open
@@ -342,6 +380,40 @@ mod tests {
     }
 
     #[test]
+    fn a_switch_back_within_the_pressure_band_is_no_event() {
+        // a pressure-rule valve with a 2 Pa band (atol 1 Pa + rtol 0.1 × peak 10 Pa)
+        let sw = Switch {
+            unknowns: [0, 1, 2],
+            on_off: false,
+            resistance: 1.0,
+        };
+        let mut ev = Events {
+            switches: vec![sw],
+            names: vec!["a".into()],
+            open: vec![false],
+            fresh: vec![false],
+            flow_tol: (0.0, 0.1),
+            peak: vec![0.0],
+            pressure_atol: 1.0,
+            pressure_peak: vec![10.0],
+            armed: vec![true],
+            log: Vec::new(),
+        };
+        let (mut y, mut yd) = ([10.0, 10.0, 0.0], [0.0; 3]);
+        ev.switch(0, 0.0, &mut y, &mut yd); // opened at ΔP = 0
+        // ΔP = −1 Pa after the opening: within the band, not a closing
+        let y = [9.0, 10.0, 0.0];
+        assert!(ev.due_at(&|i| y[i]).is_empty());
+        // below the band: a closing
+        let y = [7.5, 10.0, 0.0];
+        assert_eq!(ev.due_at(&|i| y[i]), vec![0]);
+        // once ΔP has left the band upwards, any ΔP ≤ 0 closes it again
+        ev.settle(&[13.0, 10.0, 0.0]);
+        let y = [9.9, 10.0, 0.0];
+        assert_eq!(ev.due_at(&|i| y[i]), vec![0]);
+    }
+
+    #[test]
     fn the_first_root_of_several_is_located() {
         let sw = |b, f| Switch {
             unknowns: [b, f, 0],
@@ -355,6 +427,9 @@ mod tests {
             fresh: vec![false, false],
             flow_tol: (0.0, 0.0),
             peak: vec![0.0, 0.0],
+            pressure_atol: 0.0,
+            pressure_peak: vec![0.0, 0.0],
+            armed: vec![true, true],
             log: Vec::new(),
         };
         // ΔP_a = 1 − 2θ (root 0.5), ΔP_b = 1 − 4θ (root 0.25)

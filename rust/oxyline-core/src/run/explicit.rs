@@ -66,12 +66,9 @@ pub(super) fn choose(
         Method::Auto { .. } => false,
         _ => return Ok(None),
     };
-    let supported = if asked {
-        explicit_pair::check_supported(dae)
-    } else {
-        explicit_pair::check_unswitched(dae)
-    };
-    let supported = supported.and_then(|()| quasi_refused(quasi));
+    // valves are events for both integrators: `auto` weighs the pair's cost for them too,
+    // unless it cannot step the circuit (then generalized-α, without an error)
+    let supported = explicit_pair::check_supported(dae).and_then(|()| quasi_refused(quasi));
     if let Err(e) = supported {
         return if asked { Err(e) } else { Ok(None) };
     }

@@ -29,6 +29,44 @@ pub fn model_bytes(segments: usize, elements: usize, cells: f64, species: usize)
         + elements as f64 * BYTES_PER_ELEMENT
 }
 
+/// The error-controlled integrators' state per circuit unknown (bytes), beyond the fixed-step
+/// state [`FLOW_BYTES_PER_SEGMENT`] measured: counted from their vectors.
+///
+/// * generalized-α (`run::adaptive::Adaptive`): the start state and rate, the two accepted
+///   states before it (the error estimate's extrapolation), the local error, the peaks of
+///   |y|, |ẏ|, |ÿ|, the accumulation frequency, atol, scale and error weight: 12 f64; the
+///   algebraic flag, flow group and algebraic index: 9 bytes.
+/// * the explicit pair (`integrate::explicit_pair::Stages`, `run::explicit::Explicit`): seven
+///   stage rates (the dense output's coefficients are formed from them), the stage, the start
+///   and the error estimate, the peaks of |y|, |ẏ|, |ÿ|, the accumulation frequency, atol and
+///   scale: 16 f64; the differential flag and flow group: 5 bytes.
+pub const CONTROLLED_BYTES_PER_UNKNOWN: [f64; 2] = [12.0 * 8.0 + 9.0, 16.0 * 8.0 + 5.0];
+/// The same per transport cell and species (each one amount unknown).
+///
+/// * generalized-α: the amounts at the step's start, the concentrations at the start, before
+///   and at the end, their peaks, the cells' volumes at the start; the interpolated amounts and
+///   volumes of species output rows: 8 f64.
+/// * the explicit pair: the species' seven stage rates, stage, start and error, atol and
+///   peak: 12 f64.
+pub const CONTROLLED_BYTES_PER_CELL: [f64; 2] = [8.0 * 8.0, 12.0 * 8.0];
+
+/// The integrator of an error-controlled run, for [`controlled_bytes`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Controlled {
+    GeneralizedAlpha,
+    ExplicitPair,
+}
+
+/// Bytes of the error control's state of a run with `unknowns` circuit unknowns and
+/// `species_cells` transport cells × species (0 without transport), for `integrator`.
+pub fn controlled_bytes(unknowns: usize, species_cells: f64, integrator: Controlled) -> f64 {
+    let k = match integrator {
+        Controlled::GeneralizedAlpha => 0,
+        Controlled::ExplicitPair => 1,
+    };
+    unknowns as f64 * CONTROLLED_BYTES_PER_UNKNOWN[k] + species_cells * CONTROLLED_BYTES_PER_CELL[k]
+}
+
 /// What the user can change when a model is too large.
 pub const MODEL_ADVICE: &str = "use fewer segments (segmentation max_length, a vessel's \
 segments) or raise the limit (simulation: max_memory in the model, the environment variable \
@@ -139,6 +177,15 @@ mod tests {
         assert!(msg.contains("max_memory = 8.000 GB") && msg.contains("max_length"));
         assert!(check_model("small", 1000, 3, Some((1.0, 1)), Some(8e9)).is_ok());
         assert!(check_model("any", usize::MAX / 2, 3, None, None).is_ok());
+    }
+
+    #[test]
+    fn the_controlled_state_counts_the_pair_above_generalized_alpha() {
+        let ga = controlled_bytes(1000, 10.0, Controlled::GeneralizedAlpha);
+        let dp = controlled_bytes(1000, 10.0, Controlled::ExplicitPair);
+        assert_eq!(ga, 1000.0 * 105.0 + 10.0 * 64.0);
+        assert_eq!(dp, 1000.0 * 133.0 + 10.0 * 96.0);
+        assert_eq!(controlled_bytes(0, 0.0, Controlled::ExplicitPair), 0.0);
     }
 
     #[test]

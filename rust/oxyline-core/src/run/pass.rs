@@ -107,7 +107,12 @@ pub(super) fn run(
         }
     }
     if let Some(tol) = s.adaptive() {
-        cycles.events = super::events::Events::new(dae, &cycles.state.y, (tol.atol.flow, tol.rtol));
+        cycles.events = super::events::Events::new(
+            dae,
+            &cycles.state.y,
+            (tol.atol.flow, tol.rtol),
+            tol.atol.pressure,
+        );
     }
     cycles.start_svzerod(!plan.use_rk4);
     if let Some(r) = &resume {
