@@ -89,7 +89,7 @@ mod _core {
         pwdb_wall_properties, pwdb_wave_speed, structured_tree_root, terminal_compartment,
     };
     #[pymodule_export]
-    use super::calibrate::{adjoint_gradients, tangent_sensitivities};
+    use super::calibrate::{adjoint_gradients, species_sensitivities, tangent_sensitivities};
     #[pymodule_export]
     use super::calibration::CalibrationProblem;
     #[pymodule_export]
