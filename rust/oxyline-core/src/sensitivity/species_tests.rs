@@ -11,7 +11,9 @@ use crate::model::parse;
 /// A pulsatile inflow (no backflow) into an elastic parent that splits into an elastic
 /// daughter ending in an RCR and a lumped one ending in a resistance; oxygen with Hill's
 /// law and a mass-transfer wall (SI: α = 1e-5 mol m⁻³ Pa⁻¹, P50 = 26.8 mmHg, an inlet PO2 of
-/// 85 mmHg, a wall PO2 of 40 mmHg).
+/// 85 mmHg, a wall PO2 of 40 mmHg). k (and the consumption flux below) are far above an
+/// artery's, so that the wall takes a few per cent of the oxygen delivered and the signals
+/// move well above the difference quotients' rounding.
 const MODEL: &str = r#"{
   "name": "y",
   "vessels": [
@@ -36,7 +38,7 @@ const MODEL: &str = r#"{
     "binding": {"kind": "hill", "solubility": 1e-5, "p50": 3573.04, "n": 2.7,
                 "capacity": 9.0},
     "inlet": {"kind": "constant", "value": 0.113324},
-    "wall": {"model": "mass-transfer", "k": 2e-4, "wall_concentration": 0.0533288}
+    "wall": {"model": "mass-transfer", "k": 5e-3, "wall_concentration": 0.0533288}
   }]}
 }"#;
 
@@ -132,7 +134,7 @@ fn p50_against_central_differences() {
 fn consuming() -> NetworkSpec {
     let mut s = parse(MODEL).unwrap();
     oxygen(&mut s).wall = WallSpec::Flux {
-        flux: FluxSpec::Constant(2e-7),
+        flux: FluxSpec::Constant(1.5e-4),
     };
     s
 }
