@@ -63,13 +63,22 @@ def consuming() -> dict[str, Any]:
     return m
 
 
+def per_vessel() -> dict[str, Any]:
+    """:data:`Y` with a wall of d1's own (the section's wall stays on the others)."""
+    m = copy.deepcopy(Y)
+    m["oxygen"]["per_vessel"] = {"d1": {"wall": {"model": "mass-transfer", "k": 3e-3,
+                                                 "po2": 30.0}}}
+    return m
+
+
 def values(model: dict[str, Any], outputs: list[str]) -> np.ndarray:
     return oxyline.sensitivities(model, [], outputs).values
 
 
 @pytest.mark.parametrize(("model", "path"), [
     (Y, "oxygen.wall.k"), (Y, "oxygen.wall.po2"), (Y, "oxygen.hill.p50"),
-    (consuming(), "oxygen.wall.flux"),
+    (consuming(), "oxygen.wall.flux"), (per_vessel(), "oxygen.wall.k"),
+    (per_vessel(), "oxygen.per_vessel.d1.wall.k"), (per_vessel(), "oxygen.per_vessel.d1.wall.po2"),
 ])
 def test_oxygen_outputs_against_central_differences(model: dict[str, Any], path: str
                                                     ) -> None:
@@ -116,6 +125,7 @@ def test_p50_and_consumption_recovered_from_svo2_and_vo2() -> None:
     (["vessels.parent.length"], ["SvO2.d1"], "vessels.parent.length"),
     (["oxygen.wall.k"], ["SvO2.nope"], "nope"),
     (["oxygen.wall.k"], ["d1.po2_out.median"], "median"),
+    (["oxygen.per_vessel.d2.wall.k"], ["VO2"], "oxygen.per_vessel.d2.wall.k"),
 ])
 def test_bad_oxygen_paths_and_outputs_are_model_errors(parameters: list[str],
                                                        outputs: list[str], named: str) -> None:

@@ -15,13 +15,13 @@ use super::tangent::TangentSettings;
 use crate::circuit::{Dae, Regime};
 use crate::closure::{FluxSpec, WallSpec};
 use crate::error::{Error, Result};
-use crate::hemoglobin::BindingSpec;
+use crate::hemoglobin::{BindingSpec, HillAnchor};
 use crate::integrate::{GenAlpha, NewtonControl};
 use crate::model::NetworkSpec;
-use crate::transport::{SpeciesSpec, Transport};
 use crate::transport::tangent::{
     SpeciesDerivative, SpeciesParameterKind, SpeciesTangent, VesselSpeciesSignal,
 };
+use crate::transport::{SpeciesSpec, Transport};
 
 /// Per-vessel species signals by name.
 pub const SPECIES_VESSEL_SIGNALS: &[&str] = &[
@@ -69,34 +69,57 @@ fn oxygen_species(spec: &NetworkSpec) -> Result<SpeciesSpec> {
     })?;
     match t.species.as_slice() {
         [one] => Ok(one.clone()),
-        many => many.iter().find(|s| s.name == "o2").cloned().ok_or_else(|| {
-            Error::model("sensitivities", "no species named 'o2' among several")
-        }),
+        many => many
+            .iter()
+            .find(|s| s.name == "o2")
+            .cloned()
+            .ok_or_else(|| Error::model("sensitivities", "no species named 'o2' among several")),
     }
 }
 
-/// An oxygen parameter path's kind and SI value; None for a path outside `oxygen.`.
-pub fn oxygen_parameter(
-    sp: &SpeciesSpec,
-    path: &str,
-) -> Result<Option<(SpeciesParameterKind, f64)>> {
-    let parts: Vec<&str> = path.split('.').collect();
+/// An oxygen parameter: what it changes, its SI value, and the vessel whose own wall
+/// (`per_vessel`) it belongs to (None: the section's wall, on every vessel without its own,
+/// or the binding).
+#[derive(Debug, Clone, PartialEq)]
+pub struct OxygenParameter {
+    pub kind: SpeciesParameterKind,
+    pub value: f64,
+    pub vessel: Option<String>,
+}
+
+/// An oxygen parameter path's kind, SI value and scope; None for a path outside `oxygen.`.
+/// `oxygen.per_vessel.<vessel>.wall.<key>` names a vessel's own wall.
+pub fn oxygen_parameter(sp: &SpeciesSpec, path: &str) -> Result<Option<OxygenParameter>> {
+    let mut parts: Vec<&str> = path.split('.').collect();
     if parts.first() != Some(&"oxygen") {
         return Ok(None);
     }
     let fail = |why: String| Error::model(format!("parameter '{path}'"), why);
-    let wall_path = matches!(parts.as_slice(), ["oxygen", "wall", _]);
-    if wall_path && !sp.per_vessel.is_empty() {
-        return Err(fail("per-vessel walls: the wall's parameters are not differentiated yet".into()));
-    }
+    let scoped = match parts.as_slice() {
+        ["oxygen", "per_vessel", name, "wall", key] => Some((name.to_string(), *key)),
+        _ => None,
+    };
+    let (wall, vessel) = match scoped {
+        Some((name, key)) => {
+            let w = sp
+                .per_vessel
+                .get(&name)
+                .ok_or_else(|| fail(format!("no per-vessel wall of a vessel named '{name}'")))?;
+            parts = vec!["oxygen", "wall", key];
+            (w, Some(name))
+        }
+        None => (&sp.wall, None),
+    };
     let nonzero = |v: f64| {
         if v != 0.0 && v.is_finite() {
             Ok(v)
         } else {
-            Err(fail(format!("the value is {v}: its derivative scales a coefficient by 1/value")))
+            Err(fail(format!(
+                "the value is {v}: its derivative scales a coefficient by 1/value"
+            )))
         }
     };
-    let (kind, value) = match (parts.as_slice(), &sp.wall, &sp.binding) {
+    let (kind, value) = match (parts.as_slice(), wall, &sp.binding) {
         (
             ["oxygen", "wall", "k"],
             WallSpec::MassTransfer {
@@ -109,8 +132,7 @@ pub fn oxygen_parameter(
         (
             ["oxygen", "wall", key @ ("po2" | "concentration")],
             WallSpec::MassTransfer {
-                wall_concentration,
-                ..
+                wall_concentration, ..
             },
             b,
         ) => {
@@ -120,17 +142,28 @@ pub fn oxygen_parameter(
                 (_, BindingSpec::Hill { solubility, .. }) => {
                     (SpeciesParameterKind::WallConcentration, cw / solubility)
                 }
-                _ => return Err(fail("a wall PO2 needs haemoglobin (hemoglobin: hill)".into())),
+                _ => {
+                    return Err(fail(
+                        "a wall PO2 needs haemoglobin (hemoglobin: hill)".into(),
+                    ));
+                }
             }
         }
-        (["oxygen", "wall", "flux"], WallSpec::Flux { flux: FluxSpec::Constant(q) }, _) => {
-            (SpeciesParameterKind::Flux, nonzero(*q)?)
-        }
+        (
+            ["oxygen", "wall", "flux"],
+            WallSpec::Flux {
+                flux: FluxSpec::Constant(q),
+            },
+            _,
+        ) => (SpeciesParameterKind::Flux, nonzero(*q)?),
         (["oxygen", "hill", "p50"], w, BindingSpec::Hill { p50, .. }) => {
             let facilitated = matches!(w, WallSpec::Leveque { .. } | WallSpec::Graetz { .. });
-            if facilitated || sp.per_vessel.values().any(|w| {
-                matches!(w, WallSpec::Leveque { .. } | WallSpec::Graetz { .. })
-            }) {
+            if facilitated
+                || sp
+                    .per_vessel
+                    .values()
+                    .any(|w| matches!(w, WallSpec::Leveque { .. } | WallSpec::Graetz { .. }))
+            {
                 return Err(fail(
                     "P50 with a Lévêque or Graetz wall (its haemoglobin facilitation reads \
                      the Hill law) is not differentiated yet"
@@ -147,17 +180,24 @@ pub fn oxygen_parameter(
             )));
         }
         (["oxygen", "hill", "p50"], _, _) => {
-            return Err(fail("P50 needs haemoglobin with Hill's law (hemoglobin: hill)".into()));
+            return Err(fail(
+                "P50 needs haemoglobin with Hill's law (hemoglobin: hill)".into(),
+            ));
         }
         _ => {
             return Err(fail(
                 "not an oxygen parameter (oxygen.wall.k, oxygen.wall.po2, \
-                 oxygen.wall.concentration, oxygen.wall.flux, oxygen.hill.p50)"
+                 oxygen.wall.concentration, oxygen.wall.flux, oxygen.hill.p50, or \
+                 oxygen.per_vessel.<vessel>.wall.<key>)"
                     .into(),
             ));
         }
     };
-    Ok(Some((kind, value)))
+    Ok(Some(OxygenParameter {
+        kind,
+        value,
+        vessel,
+    }))
 }
 
 fn wall_name(w: &WallSpec) -> &'static str {
@@ -177,7 +217,7 @@ fn parameters(
     spec: &NetworkSpec,
     sp: &SpeciesSpec,
     paths: &[String],
-) -> Result<Vec<(SpeciesParameterKind, f64)>> {
+) -> Result<Vec<OxygenParameter>> {
     let mut out = Vec::with_capacity(paths.len());
     for path in paths {
         match oxygen_parameter(sp, path)? {
@@ -238,7 +278,10 @@ fn resolve(vessels: &[String], signals: &[(String, String)]) -> Result<Vec<Signa
 /// The largest change of `b` against `a` relative to `scale` (or to |b| when larger).
 fn change(a: &[f64], b: &[f64], scale: f64) -> f64 {
     let s = b.iter().fold(scale, |m, v| m.max(v.abs()));
-    let d = a.iter().zip(b).fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
+    let d = a
+        .iter()
+        .zip(b)
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()));
     if s > 0.0 { d / s } else { d }
 }
 
@@ -266,7 +309,10 @@ fn periodic_flow(dae: &Dae, set: &TangentSettings) -> Result<(Vec<Vec<f64>>, usi
     }
     Err(Error::model(
         "sensitivities",
-        format!("the flow is not periodic after max_cycles = {}", set.max_cycles),
+        format!(
+            "the flow is not periodic after max_cycles = {}",
+            set.max_cycles
+        ),
     ))
 }
 
@@ -285,7 +331,10 @@ pub fn species_sensitivities(
     let sp = oxygen_species(&spec)?;
     let params = parameters(&spec, &sp, paths)?;
     let tspec = spec.transport.clone().expect("checked by oxygen_species");
-    if std::iter::once(&sp.wall).chain(sp.per_vessel.values()).any(WallSpec::needs_mean_flow) {
+    if std::iter::once(&sp.wall)
+        .chain(sp.per_vessel.values())
+        .any(WallSpec::needs_mean_flow)
+    {
         return Err(Error::model(
             "sensitivities",
             "oxygen sensitivities with a wall that reads the cycle-mean flow (Graetz) are not \
@@ -299,13 +348,14 @@ pub fn species_sensitivities(
     tr.check_species_tangent(s, "sensitivities")?;
     let sigs = resolve(&assembled.probes.vessels, signals)?;
     let (ys, cycles, af) = periodic_flow(&dae, &settings)?;
-    let mut run = TransportRun::new(&mut tr, s, &params, &ys[0])?;
+    let names = &assembled.circuit.vessel_names;
+    let mut run = TransportRun::new(&mut tr, s, &params, &sp, names, &ys[0])?;
     let (transport_cycles, periodic_change, (sig_values, sig_derivs)) =
         run.to_periodic(&ys, af, &settings, signals, &sigs)?;
     let ns = settings.steps_per_cycle;
     let dt = settings.period / ns as f64;
     Ok(SpeciesSensitivities {
-        values: params.iter().map(|p| p.1).collect(),
+        values: params.iter().map(|p| p.value).collect(),
         times: (1..=ns).map(|k| k as f64 * dt).collect(),
         signals: sig_values,
         derivs: sig_derivs,
@@ -323,19 +373,32 @@ struct TransportRun<'t> {
     derivs: Vec<SpeciesDerivative>,
     tangents: Vec<SpeciesTangent>,
     values: Vec<f64>,
+    anchors: Vec<HillAnchor>,
 }
 
 impl<'t> TransportRun<'t> {
     fn new(
         tr: &'t mut Transport,
         s: usize,
-        params: &[(SpeciesParameterKind, f64)],
+        params: &[OxygenParameter],
+        sp: &SpeciesSpec,
+        vessel_names: &[String],
         y0: &[f64],
     ) -> Result<Self> {
         let z = tr.initial_state(y0)?;
+        // the vessels each parameter's wall is on
+        let on = |p: &OxygenParameter| -> Vec<bool> {
+            vessel_names
+                .iter()
+                .map(|v| match &p.vessel {
+                    Some(own) => own == v,
+                    None => !sp.per_vessel.contains_key(v),
+                })
+                .collect()
+        };
         let derivs = params
             .iter()
-            .map(|&(kind, value)| tr.species_derivative(s, kind, value))
+            .map(|p| tr.species_derivative(s, p.kind, p.value, &on(p)))
             .collect();
         let tangents = vec![tr.species_tangent_start(); params.len()];
         Ok(TransportRun {
@@ -344,7 +407,8 @@ impl<'t> TransportRun<'t> {
             z,
             derivs,
             tangents,
-            values: params.iter().map(|p| p.1).collect(),
+            values: params.iter().map(|p| p.value).collect(),
+            anchors: Vec::new(),
         })
     }
 
@@ -409,17 +473,21 @@ impl<'t> TransportRun<'t> {
             let z_old = self.z.clone();
             let w_old = self.tr.cell_volumes().to_vec();
             let dacc_old: Vec<[f64; 4]> = self.tangents.iter().map(|t| t.dacc).collect();
-            self.tr.implicit_step(t, dt, af, &ys[k], &ys[k + 1], &mut self.z)?;
-            self.tr.species_tangent_step(
-                s,
-                t + af * dt,
-                dt,
-                &z_old,
-                &w_old,
-                &self.z,
-                &self.derivs,
-                &mut self.tangents,
-            )?;
+            self.tr
+                .implicit_step(t, dt, af, &ys[k], &ys[k + 1], &mut self.z)?;
+            if !self.tangents.is_empty() {
+                self.tr.species_tangent_step(
+                    s,
+                    t + af * dt,
+                    dt,
+                    &z_old,
+                    &w_old,
+                    &self.z,
+                    &self.derivs,
+                    &mut self.tangents,
+                    &mut self.anchors,
+                )?;
+            }
             for (j, sig) in sigs.iter().enumerate() {
                 let (v, d) = match *sig {
                     Signal::Network(a) => (

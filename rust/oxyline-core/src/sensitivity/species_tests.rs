@@ -8,8 +8,8 @@ use super::*;
 use crate::hemoglobin::BindingSpec;
 use crate::model::parse;
 
-/// A pulsatile inflow (no backflow) into an elastic parent that splits into an elastic
-/// daughter ending in an RCR and a lumped one ending in a resistance; oxygen with Hill's
+/// A pulsatile inflow (no backflow) into an elastic parent that splits into elastic
+/// daughters ending in an RCR and a resistance; oxygen with Hill's
 /// law and a mass-transfer wall (SI: α = 1e-5 mol m⁻³ Pa⁻¹, P50 = 26.8 mmHg, an inlet PO2 of
 /// 85 mmHg, a wall PO2 of 40 mmHg). k (and the consumption flux below) are far above an
 /// artery's, so that the wall takes a few per cent of the oxygen delivered and the signals
@@ -24,7 +24,8 @@ const MODEL: &str = r#"{
      "geometry": {"length": 0.08, "radius_in": 0.003, "radius_out": 0.0025,
                   "wall_thickness": 0.0005, "youngs_modulus": 6e5}},
     {"name": "d2", "from": "j", "to": "o2", "segments": 2,
-     "lumped": {"resistance": 3e7, "inductance": 1e5, "capacitance": 2e-10}}
+     "geometry": {"length": 0.05, "radius_in": 0.002, "radius_out": 0.002,
+                  "wall_thickness": 0.0004, "youngs_modulus": 6e5}}
   ],
   "boundary_conditions": {
     "in": {"type": "flow", "flow": {"kind": "fourier", "period": 0.8, "mean": 3e-6,
@@ -81,10 +82,20 @@ fn scaled(mut s: NetworkSpec, path: &str, f: f64) -> NetworkSpec {
     let sp = oxygen(&mut s);
     match (path, &mut sp.wall, &mut sp.binding) {
         ("oxygen.wall.k", WallSpec::MassTransfer { k, .. }, _) => *k *= f,
-        ("oxygen.wall.po2", WallSpec::MassTransfer { wall_concentration, .. }, _) => {
-            *wall_concentration *= f
-        }
-        ("oxygen.wall.flux", WallSpec::Flux { flux: FluxSpec::Constant(q) }, _) => *q *= f,
+        (
+            "oxygen.wall.po2",
+            WallSpec::MassTransfer {
+                wall_concentration, ..
+            },
+            _,
+        ) => *wall_concentration *= f,
+        (
+            "oxygen.wall.flux",
+            WallSpec::Flux {
+                flux: FluxSpec::Constant(q),
+            },
+            _,
+        ) => *q *= f,
         ("oxygen.hill.p50", _, BindingSpec::Hill { p50, .. }) => *p50 *= f,
         _ => panic!("no such parameter in the test model: {path}"),
     }
@@ -155,14 +166,19 @@ fn consumption_balances_inflow_minus_outflow() {
     );
     let (nt, nsig) = (s.times.len(), signals().len());
     let mean = |p: usize, j: usize| -> f64 {
-        (0..nt).map(|k| s.derivs[(p * nt + k) * nsig + j]).sum::<f64>() / nt as f64
+        (0..nt)
+            .map(|k| s.derivs[(p * nt + k) * nsig + j])
+            .sum::<f64>()
+            / nt as f64
     };
     for p in 0..3 {
         let (wall, inflow, outflow) = (mean(p, 4), mean(p, 5), mean(p, 6));
         let scale = wall.abs().max(inflow.abs()).max(outflow.abs());
         let err = (wall - (inflow - outflow)).abs() / scale;
-        eprintln!("parameter {p}: d consumption {wall:.6e}, d(in - out) {:.6e}, {err:.1e}",
-                  inflow - outflow);
+        eprintln!(
+            "parameter {p}: d consumption {wall:.6e}, d(in - out) {:.6e}, {err:.1e}",
+            inflow - outflow
+        );
         assert!(err < 1e-8, "parameter {p}: {err:e}");
     }
 }
@@ -176,12 +192,20 @@ fn bad_paths_are_model_errors_naming_them() {
             .unwrap_err()
             .to_string()
     };
-    for path in ["oxygen.wall.kk", "oxygen.wall.flux", "oxygen.colour", "vessels.nope.length"] {
+    for path in [
+        "oxygen.wall.kk",
+        "oxygen.wall.flux",
+        "oxygen.colour",
+        "vessels.nope.length",
+    ] {
         let m = msg(path);
         assert!(m.contains(path) || m.contains("nope"), "{path}: {m}");
     }
     let m = msg("vessels.parent.length");
-    assert!(m.contains("vessels.parent.length") && m.contains("flow parameter"), "{m}");
+    assert!(
+        m.contains("vessels.parent.length") && m.contains("flow parameter"),
+        "{m}"
+    );
     let bad = [("nope".to_string(), "po2_out".to_string())];
     let m = species_sensitivities(&spec, &["oxygen.wall.k".into()], &bad, settings())
         .unwrap_err()

@@ -24,7 +24,6 @@
 
 #[allow(unused_imports)]
 use super::*;
-use crate::hemoglobin::hill;
 
 /// What an oxygen parameter changes in the step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -54,10 +53,17 @@ pub(crate) struct BindingPoint {
     pub s_p50: f64,
 }
 
-/// [`BindingPoint`] of `binding` at the total `ct` (`guess`: warm start of the inversion).
-/// Hill: C_t = c + H S(c/α), S_P = n S (1 − S)/P, S_PP = S_P (n (1 − 2S) − 1)/P,
-/// ∂S/∂P50 = −(P/P50) S_P, ∂S_P/∂P50 = −(P S_PP + S_P)/P50.
-pub(crate) fn binding_point(binding: &Binding, ct: f64, guess: f64) -> BindingPoint {
+/// [`BindingPoint`] of `binding` at the total `ct` (`guess`: warm start of the inversion;
+/// `anchor`: the node's local series inverse, as the run's own step inverts, else the exact
+/// Newton solve). Hill: C_t = c + H S(c/α), so S = (C_t − c)/H at the free c, and
+/// S_P = n S (1 − S)/P, S_PP = S_P (n (1 − 2S) − 1)/P, ∂S/∂P50 = −(P/P50) S_P,
+/// ∂S_P/∂P50 = −(P S_PP + S_P)/P50: no further power of P after the inversion.
+pub(crate) fn binding_point(
+    binding: &Binding,
+    ct: f64,
+    guess: f64,
+    anchor: Option<&mut HillAnchor>,
+) -> BindingPoint {
     match *binding {
         Binding::None => BindingPoint {
             f: ct,
@@ -75,13 +81,17 @@ pub(crate) fn binding_point(binding: &Binding, ct: f64, guess: f64) -> BindingPo
             n,
             capacity,
         } => {
-            let f = binding.free(ct, guess);
+            let f = match anchor {
+                Some(a) => binding.free_anchored(ct, guess, a),
+                None => binding.free(ct, guess),
+            };
             let p = f / alpha;
-            let (s, s_p) = hill(p, p50, n);
-            let s_pp = if p > 0.0 {
-                s_p * (n * (1.0 - 2.0 * s) - 1.0) / p
+            let (s, s_p, s_pp) = if p > 0.0 {
+                let s = ((ct - f) / capacity).clamp(0.0, 1.0);
+                let s_p = n * s * (1.0 - s) / p;
+                (s, s_p, s_p * (n * (1.0 - 2.0 * s) - 1.0) / p)
             } else {
-                0.0
+                (0.0, 0.0, 0.0)
             };
             let sigma = 1.0 / (1.0 + capacity * s_p / alpha);
             let sigma_c = -sigma.powi(3) * capacity * s_pp / (alpha * alpha);
@@ -140,8 +150,7 @@ impl Transport {
             Some("the tl-quasisteady formulation")
         } else if !self.plan.tissue.is_empty() {
             Some("a tissue wall")
-        } else if !self.species[s].laws.dynamic.is_empty()
-            || !self.species[s].laws.relax.is_empty()
+        } else if !self.species[s].laws.dynamic.is_empty() || !self.species[s].laws.relax.is_empty()
         {
             Some("a shear-dependent (instantaneous or relaxed) wall")
         } else if self.species[s].laws.flux_tables.is_some() {
@@ -173,12 +182,14 @@ impl Transport {
     /// The derivative of the wall laws of species `s` by a parameter of `kind` and SI value
     /// `value` that scales every fixed law's coefficient it names (conductance: g, g c_w;
     /// wall concentration: g c_w; flux: q; the laws are linear in them, so the derivative is
-    /// the coefficient over `value`). P50 leaves the laws alone.
+    /// the coefficient over `value`) on the pieces of the vessels `on` (by circuit vessel
+    /// index: those whose wall the parameter is). P50 leaves the laws alone.
     pub fn species_derivative(
         &self,
         s: usize,
         kind: SpeciesParameterKind,
         value: f64,
+        on: &[bool],
     ) -> SpeciesDerivative {
         let laws = &self.species[s].laws;
         let nc = self.plan.cells.len();
@@ -188,6 +199,10 @@ impl Transport {
             let SegmentLaw::Fixed { g, cw, q } = *law else {
                 continue;
             };
+            let vessel = self.plan.segment_vessels[pc.seg as usize] as usize;
+            if !on.get(vessel).copied().unwrap_or(false) {
+                continue;
+            }
             let d = match kind {
                 SpeciesParameterKind::Conductance => [g / value, g * cw / value, 0.0],
                 SpeciesParameterKind::WallConcentration => [0.0, g * cw / value, 0.0],
@@ -213,7 +228,8 @@ impl Transport {
 
     /// Advance the tangents of species `s` over the step [t, t + Δt] the primal just took
     /// (`implicit_step`, not carried: its face flows are loaded), from its start amounts
-    /// `z_old` and volumes `w_old`; `z` holds the new amounts.
+    /// `z_old` and volumes `w_old`; `z` holds the new amounts. `anchors`: the tangent's own
+    /// series inverses of the binding per node (kept from step to step).
     #[allow(clippy::too_many_arguments)]
     pub fn species_tangent_step(
         &mut self,
@@ -225,13 +241,22 @@ impl Transport {
         z: &[f64],
         derivs: &[SpeciesDerivative],
         tangents: &mut [SpeciesTangent],
+        anchors: &mut Vec<HillAnchor>,
     ) -> Result<()> {
         let nc = self.plan.cells.len();
         let binding = self.plan.species[s].binding;
         let zs_old = &z_old[s * nc..(s + 1) * nc];
         let zs = &z[s * nc..(s + 1) * nc];
         let free = &self.species[s].free;
-        let guess = |n: usize| free.get(n).copied().filter(|f| f.is_finite()).unwrap_or(0.0);
+        let guess = |n: usize| {
+            free.get(n)
+                .copied()
+                .filter(|f| f.is_finite())
+                .unwrap_or(0.0)
+        };
+        if anchors.len() != self.plan.kind.len() {
+            anchors.resize(self.plan.kind.len(), HillAnchor::default());
+        }
         let mut primal = StepPrimal {
             w: w_old[..nc].to_vec(),
             c: Vec::with_capacity(nc),
@@ -240,7 +265,10 @@ impl Transport {
         };
         for (i, &n) in self.plan.cells.iter().enumerate() {
             let c = zs_old[i] / w_old[i];
-            primal.point.push(binding_point(&binding, c, guess(n)));
+            let g = guess(n);
+            primal
+                .point
+                .push(binding_point(&binding, c, g, Some(&mut anchors[n])));
             primal.c.push(c);
             primal.x.push(zs[i] / self.wvol[i]);
         }
@@ -260,7 +288,7 @@ impl Transport {
             .map(|b| {
                 b.map(|total| match (d.kind, binding) {
                     (SpeciesParameterKind::P50, Binding::Hill { capacity, .. }) => {
-                        capacity * binding_point(&binding, total, total).s_p50
+                        capacity * binding_point(&binding, total, total, None).s_p50
                     }
                     _ => 0.0,
                 })
@@ -398,7 +426,7 @@ impl Transport {
         let i = self.plan.node_cell[n];
         let x = z[s * nc + i] / self.wvol[i];
         let guess = self.species[s].free.get(n).copied().unwrap_or(0.0);
-        let pt = binding_point(&self.plan.species[s].binding, x, guess);
+        let pt = binding_point(&self.plan.species[s].binding, x, guess, None);
         (pt, tangents.iter().map(|t| t.xt[n]).collect())
     }
 
@@ -443,7 +471,9 @@ impl Transport {
                 };
                 Ok(match signal {
                     VesselSpeciesSignal::Concentration => (pt.f, dfs),
-                    VesselSpeciesSignal::Po2 => (pt.f / alpha, dfs.iter().map(|d| d / alpha).collect()),
+                    VesselSpeciesSignal::Po2 => {
+                        (pt.f / alpha, dfs.iter().map(|d| d / alpha).collect())
+                    }
                     _ => {
                         let ds = derivs.iter().zip(&dfs).map(|(d, df)| {
                             pt.s_p * df / alpha + if p50(d) { pt.s_p50 } else { 0.0 }
