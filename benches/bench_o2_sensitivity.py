@@ -21,7 +21,7 @@ from pathlib import Path
 import oxyline
 
 sys.path.insert(0, str(Path(__file__).parent))
-from bench_oxygen import tree  # noqa: E402
+from bench_oxygen import tree
 
 PARAMETERS = ["oxygen.wall.k", "oxygen.wall.po2", "oxygen.hill.p50"]
 

@@ -246,6 +246,11 @@ def sensitivities(model: Model | Mapping[str, Any] | str, parameters: Sequence[s
     generalized-α discretisation (the model's ``dt``, or 400 steps a cycle). A ``series``
     output has one row per step of the cycle.
 
+    Oxygen outputs (``SvO2.<vessel>``, ``VO2``, ``<vessel>.po2_out.<statistic>``, …) are
+    differentiated by oxygen parameters (``oxygen.wall.k``, ``oxygen.hill.p50``, …) through
+    the species transport's tangent (docs/calibration.md, "Oxygen"); oxygen parameters leave
+    flow outputs unchanged (zero rows), and a flow parameter with an oxygen output is refused.
+
     ``mode="forward"``: tangents, one per parameter (few parameters); ``"adjoint"``: one
     backward sweep per output row, whatever the number of parameters (many parameters, few
     outputs). Both give the same Jacobian (to the periodic tolerance); ``tangent_cycles``
