@@ -351,7 +351,7 @@ pub fn species_sensitivities(
     let names = &assembled.circuit.vessel_names;
     let mut run = TransportRun::new(&mut tr, s, &params, &sp, names, &ys[0])?;
     let (transport_cycles, periodic_change, (sig_values, sig_derivs)) =
-        run.to_periodic(&ys, af, &settings, signals, &sigs)?;
+        run.run_to_periodic(&ys, af, &settings, signals, &sigs)?;
     let ns = settings.steps_per_cycle;
     let dt = settings.period / ns as f64;
     Ok(SpeciesSensitivities {
@@ -364,6 +364,10 @@ pub fn species_sensitivities(
         periodic_change,
     })
 }
+
+/// One cycle's signals (n_steps × n_signals) and their derivatives (n_params × n_steps ×
+/// n_signals).
+type Cycle = (Vec<f64>, Vec<f64>);
 
 /// The transport's run with its tangents over a recorded flow cycle.
 struct TransportRun<'t> {
@@ -415,14 +419,14 @@ impl<'t> TransportRun<'t> {
     /// Cycles over the recorded flow `ys` until the amounts and tangents repeat to the
     /// tolerance; the cycles, the last change and the last cycle's signals (values
     /// n_steps × n_signals, derivatives n_params × n_steps × n_signals).
-    fn to_periodic(
+    fn run_to_periodic(
         &mut self,
         ys: &[Vec<f64>],
         af: f64,
         set: &TangentSettings,
         names: &[(String, String)],
         sigs: &[Signal],
-    ) -> Result<(usize, f64, (Vec<f64>, Vec<f64>))> {
+    ) -> Result<(usize, f64, Cycle)> {
         let (nc, s) = (self.tr.n_cells(), self.s);
         let mut last = f64::INFINITY;
         for cycle in 1..=set.max_cycles {
