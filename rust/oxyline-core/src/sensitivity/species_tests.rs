@@ -130,7 +130,8 @@ fn check(spec: &NetworkSpec, path: &str) -> f64 {
             worst = worst.max((exact.derivs[k * nsig + j] - d).abs() / scale);
         }
     }
-    assert!(moved >= 5, "{path}: only {moved} signals move");
+    // (with a prescribed flux, P50 moves only the outlet values and the boundary fluxes)
+    assert!(moved >= 4, "{path}: only {moved} signals move");
     eprintln!("{path}: worst relative difference {worst:.2e}");
     worst
 }
