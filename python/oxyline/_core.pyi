@@ -199,6 +199,12 @@ def tangent_sensitivities(model_json: str, paths: list[str], signals: list[tuple
                           max_cycles: int = 2000, tol: float = 1e-12) -> dict[str, Any]:
     """The (vessel, variable) signals over the periodic cycle of a canonical model and their
     exact derivatives with respect to the parameter ``paths`` (oxyline.calibrate)."""
+def species_sensitivities(model_json: str, paths: list[str], signals: list[tuple[str, str]],
+                          period: float, steps_per_cycle: int, rho_infty: float = 0.5,
+                          max_cycles: int = 2000, tol: float = 1e-12) -> dict[str, Any]:
+    """The oxygen signals (vessel, name; vessel "" for the network's balance fluxes) over
+    the periodic cycle of a canonical model and their exact derivatives with respect to the
+    oxygen parameter ``paths`` (oxyline.calibrate)."""
 
 class CalibrationProblem:
     """svZeroDSolver's calibration residual (oxyline_core::calibration): RCL vessels

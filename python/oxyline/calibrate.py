@@ -24,7 +24,15 @@ from oxyline.ensemble.patch import apply_patch
 from oxyline.errors import ResourceError
 from oxyline.loader import load_model
 from oxyline.model import Model, build_model
-from oxyline.targets import CalibrationError, Target, combine, parse_targets, path_of, signals_of
+from oxyline.targets import (
+    CalibrationError,
+    Target,
+    combine,
+    is_oxygen_signal,
+    parse_targets,
+    path_of,
+    signals_of,
+)
 
 __all__ = ["CalibrationError", "CalibrationResult", "Sensitivities", "calibrate",
            "sensitivities"]
@@ -104,9 +112,58 @@ def _tangent(model: Model, parameters: Sequence[str], signals: list[tuple[str, s
 
     period, steps, rho = _settings(model, steps_per_cycle)
     _check_controls(parameters, signals, steps, tol, max_cycles)
+    args = (period, steps, rho, max_cycles, tol)
     with core_errors(f"model '{model.name}'"):
-        return _core.tangent_sensitivities(json.dumps(model.canonical), list(parameters),
-                                           signals, period, steps, rho, max_cycles, tol)
+        if not _involves_oxygen(parameters, signals):
+            return _core.tangent_sensitivities(json.dumps(model.canonical), list(parameters),
+                                               signals, *args)
+        return _with_oxygen(model, parameters, signals, args)
+
+
+def _is_oxygen_path(path: str) -> bool:
+    return path.split(".")[0] == "oxygen"
+
+
+def _involves_oxygen(parameters: Sequence[str], signals: Sequence[tuple[str, str]]) -> bool:
+    return any(map(_is_oxygen_path, parameters)) or any(map(is_oxygen_signal, signals))
+
+
+def _with_oxygen(model: Model, parameters: Sequence[str], signals: list[tuple[str, str]],
+                 args: tuple[Any, ...]) -> dict[str, Any]:
+    """The raw tangent of signals and parameters that involve oxygen: the oxygen signals by
+    the core's species tangent (by oxygen parameters; a flow parameter there is refused by
+    the core, naming it), the flow signals by the flow tangent (by flow parameters; oxygen
+    parameters do not change the flow: their rows are 0)."""
+    from oxyline import _core
+
+    text = json.dumps(model.canonical)
+    o2_cols = [k for k, s in enumerate(signals) if is_oxygen_signal(s)]
+    flow_cols = [k for k in range(len(signals)) if k not in o2_cols]
+    o2_rows = [k for k, p in enumerate(parameters) if _is_oxygen_path(p)]
+    flow_rows = [k for k in range(len(parameters)) if k not in o2_rows]
+    species = _core.species_sensitivities(
+        text, list(parameters) if o2_cols else [parameters[k] for k in o2_rows],
+        [signals[k] for k in o2_cols], *args)
+    times = species["times"]
+    values = np.zeros(len(parameters))
+    values[o2_rows] = species["values"]
+    sig = np.zeros((len(times), len(signals)))
+    der = np.zeros((len(parameters), len(times), len(signals)))
+    sig[:, o2_cols] = species["signals"]
+    if o2_cols:
+        der[np.ix_(o2_rows, range(len(times)), o2_cols)] = species["derivatives"]
+    out = {"times": times, "values": values, "cycles": species["cycles"],
+           "tangent_cycles": species["tangent_cycles"],
+           "periodic_change": species["periodic_change"]}
+    if flow_cols:
+        flow = _core.tangent_sensitivities(text, [parameters[k] for k in flow_rows],
+                                           [signals[k] for k in flow_cols], *args)
+        sig[:, flow_cols] = flow["signals"]
+        der[np.ix_(flow_rows, range(len(times)), flow_cols)] = flow["derivatives"]
+        values[flow_rows] = flow["values"]
+        out["tangent_cycles"] = max(out["tangent_cycles"], flow["tangent_cycles"])
+        out["periodic_change"] = max(out["periodic_change"], flow["periodic_change"])
+    return {**out, "signals": sig, "derivatives": der}
 
 
 def _evaluate(model: Model, parameters: Sequence[str], targets: Sequence[Target],
@@ -189,6 +246,11 @@ def sensitivities(model: Model | Mapping[str, Any] | str, parameters: Sequence[s
     generalized-α discretisation (the model's ``dt``, or 400 steps a cycle). A ``series``
     output has one row per step of the cycle.
 
+    Oxygen outputs (``SvO2.<vessel>``, ``VO2``, ``<vessel>.po2_out.<statistic>``, …) are
+    differentiated by oxygen parameters (``oxygen.wall.k``, ``oxygen.hill.p50``, …) through
+    the species transport's tangent (docs/calibration.md, "Oxygen"); oxygen parameters leave
+    flow outputs unchanged (zero rows), and a flow parameter with an oxygen output is refused.
+
     ``mode="forward"``: tangents, one per parameter (few parameters); ``"adjoint"``: one
     backward sweep per output row, whatever the number of parameters (many parameters, few
     outputs). Both give the same Jacobian (to the periodic tolerance); ``tangent_cycles``
@@ -204,6 +266,10 @@ def sensitivities(model: Model | Mapping[str, Any] | str, parameters: Sequence[s
     if mode not in ("forward", "adjoint"):
         raise CalibrationError(f"mode: expected 'forward' or 'adjoint', got {mode!r}")
     targets = [Target(o, None, signals=signals_of(o, m)) for o in outputs]
+    if mode == "adjoint" and _involves_oxygen(parameters, [s for t in targets
+                                                           for s in t.signals]):
+        raise CalibrationError("mode 'adjoint': oxygen outputs and parameters have forward "
+                               "tangents only (use mode='forward')")
     if mode == "adjoint":
         values, jac, raw = _adjoint(m, parameters, targets, steps_per_cycle, tol, max_cycles,
                                     series_at_steps=True)
@@ -260,6 +326,11 @@ def _base_value(source: Mapping[str, Any], path: str) -> float:
             return float(node)
         if parts[0] == "boundary_conditions":
             return float(source["boundary_conditions"][parts[1]][parts[2]])
+        if parts[0] == "oxygen":  # as written in the model (a default is not read here)
+            node = source["oxygen"]
+            for key in parts[1:]:
+                node = node[key]
+            return float(node)
     except (KeyError, IndexError, TypeError, ValueError):
         pass
     raise CalibrationError(f"parameter '{path}': no such number in the model")
@@ -300,6 +371,11 @@ def native_model(source: Mapping[str, Any], parameters: Sequence[str],
             heart.append((parts, float(x)))
         elif parts[0] == "scale":
             patch.setdefault("scale", {})[parts[1]] = float(x)
+        elif parts[0] == "oxygen":
+            node = patch
+            for key in parts[:-1]:
+                node = node.setdefault(key, {})
+            node[parts[-1]] = float(x)
         elif parts[0] == "vessels":
             props = patch.setdefault("vessels", {}).setdefault(parts[1], {})
             if len(parts) == 4:  # vessels.<name>.lumped.<key>
@@ -414,7 +490,8 @@ class _Problem:
 
     def _outputs(self, m: Model) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
         """The targets' values and their Jacobian by the model's paths (SI) at ``m``."""
-        if self.exact and self.gradient == "adjoint":
+        oxygen = _involves_oxygen(self.paths, [s for t in self.targets for s in t.signals])
+        if self.exact and self.gradient == "adjoint" and not oxygen:
             v, j, raw = _adjoint(m, self.paths, self.targets, series_at_steps=False,
                                  **self.options)
             return np.concatenate(v), np.concatenate(j), raw

@@ -14,6 +14,17 @@ An output names a quantity of the periodic cycle:
 * ``"<vessel>.<variable>.series"``: the signal over the cycle, compared with data at given
   times (targets only).
 
+Oxygen outputs (a model with an ``oxygen`` section; derivatives by the oxygen parameters,
+:func:`oxyline._core.species_sensitivities`):
+
+* ``"<vessel>.<variable>.<statistic>"`` with ``variable`` one of ``po2_out`` (Pa),
+  ``saturation_out`` (haemoglobin saturation, 0–1) and ``wall_uptake`` (mol/s through the
+  vessel's wall, positive out of the blood);
+* ``"SvO2.<vessel>"``: the outflow saturation of a vessel (a bed's or terminal's venous
+  saturation), flow-weighted over the cycle, Σ Q S / Σ Q;
+* ``"VO2"``: the network's oxygen consumption, the cycle mean of its total wall uptake
+  (mol/s); ``"VO2.<vessel>[.<vessel>...]"``: that of the named vessels (an organ or region).
+
 The core (:func:`oxyline._core.tangent_sensitivities`) gives the signals over the periodic
 cycle and their exact derivatives; here they are only combined: a mean is the mean of the
 derivatives, a maximum the derivative at the step of the maximum (the derivative of the
@@ -34,6 +45,10 @@ import numpy as np
 from oxyline.errors import ModelError
 
 VARIABLES = ("pressure_in", "pressure_out", "flow_in", "flow_out")
+#: a vessel's oxygen signals (the core's species tangent)
+O2_VARIABLES = ("po2_out", "saturation_out", "wall_uptake")
+#: the network's oxygen consumption signal (vessel "")
+O2_NETWORK = ("", "consumption")
 STATISTICS = ("min", "max", "mean", "pulse", "series")
 
 
@@ -69,6 +84,8 @@ def signals_of(output: str, model: Any, error: type[ModelError] = ModelError
     variable or statistic does not exist in ``model`` (a :class:`~oxyline.Model`)."""
     names = set(model.vessel_names)
     parts = output.split(".")
+    if parts[0] in ("SvO2", "VO2") or (len(parts) == 3 and parts[1] in O2_VARIABLES):
+        return _oxygen_signals(output, parts, model, error)
     if output == "cardiac_output":
         inlets = _inlet_vessels(model)
         if not inlets:
@@ -93,12 +110,40 @@ def signals_of(output: str, model: Any, error: type[ModelError] = ModelError
     if vessel not in names:
         raise _fail(output, f"no vessel named {vessel!r} in model '{model.name}'", error)
     if variable not in VARIABLES:
-        raise _fail(output, f"unknown variable {variable!r} (one of {', '.join(VARIABLES)})",
-                    error)
+        raise _fail(output, f"unknown variable {variable!r} (one of "
+                    f"{', '.join(VARIABLES + O2_VARIABLES)})", error)
     if stat not in STATISTICS:
         raise _fail(output, f"unknown statistic {stat!r} (one of {', '.join(STATISTICS)})",
                     error)
     return [(vessel, variable)]
+
+
+def _oxygen_signals(output: str, parts: list[str], model: Any, error: type[ModelError]
+                    ) -> list[tuple[str, str]]:
+    """The signals of an oxygen output (``SvO2.<vessel>``, ``VO2[.<vessel>...]``,
+    ``<vessel>.<oxygen variable>.<statistic>``)."""
+    if not (model.canonical.get("transport") or {}).get("species"):
+        raise _fail(output, f"model '{model.name}' has no oxygen section", error)
+    names = set(model.vessel_names)
+    vessels = parts[1:] if parts[0] in ("SvO2", "VO2") else parts[:1]
+    for v in vessels:
+        if v not in names:
+            raise _fail(output, f"no vessel named {v!r} in model '{model.name}'", error)
+    if parts[0] == "SvO2":
+        if len(parts) != 2:
+            raise _fail(output, "expected SvO2.<vessel>", error)
+        return [(parts[1], "saturation_out"), (parts[1], "flow_out")]
+    if parts[0] == "VO2":
+        return [(v, "wall_uptake") for v in parts[1:]] or [O2_NETWORK]
+    if parts[2] not in STATISTICS:
+        raise _fail(output, f"unknown statistic {parts[2]!r} (one of {', '.join(STATISTICS)})",
+                    error)
+    return [(parts[0], parts[1])]
+
+
+def is_oxygen_signal(signal: tuple[str, str]) -> bool:
+    """Whether the core's species tangent gives ``signal`` (else the flow tangent)."""
+    return signal[1] in O2_VARIABLES or signal == O2_NETWORK
 
 
 def pwv_path(output: str, model: Any, error: type[ModelError] = ModelError
@@ -186,8 +231,15 @@ def combine(output: str, times: np.ndarray, values: np.ndarray, derivs: np.ndarr
         length, dlength = path if path is not None else (math.nan, np.zeros(len(derivs)))
         v, j = pulse_wave_velocity(times, values, derivs, length, dlength)
         return np.atleast_1d(v), j[None]
-    if output == "cardiac_output":
+    if output == "cardiac_output" or output.split(".")[0] == "VO2":
         return np.atleast_1d(values.sum(axis=1).mean()), derivs.sum(axis=2).mean(axis=1)[None]
+    if output.startswith("SvO2."):  # Σ Q S / Σ Q (no oxygen parameter changes Q)
+        sat, q, dsat = values[:, 0], values[:, 1], derivs[:, :, 0]
+        dq = derivs[:, :, 1]
+        total = q.sum()
+        value = (q * sat).sum() / total
+        return np.atleast_1d(value), (((dsat * q + dq * sat).sum(axis=1)
+                                       - value * dq.sum(axis=1)) / total)[None]
     if output.startswith("flow_split."):
         q, p = values[:, 0].mean(), values[:, 1].mean()
         dq, dp = derivs[:, :, 0].mean(axis=1), derivs[:, :, 1].mean(axis=1)

@@ -5,7 +5,9 @@ use crate::errors::to_py;
 use numpy::{IntoPyArray, PyArrayMethods, PyReadonlyArray1};
 use oxyline_core::error::Error;
 use oxyline_core::model::parse;
-use oxyline_core::sensitivity::{TangentSettings, adjoint_with, sensitivities};
+use oxyline_core::sensitivity::{
+    TangentSettings, adjoint_with, sensitivities, species_sensitivities as species,
+};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -57,6 +59,56 @@ pub fn tangent_sensitivities<'py>(
     d.set_item("cycles", c.cycles)?;
     d.set_item("periodic_change", c.periodic_change)?;
     d.set_item("tangent_cycles", c.tangent_cycles)?;
+    Ok(d)
+}
+
+/// The oxygen signals (vessel, name) over the periodic cycle of `model_json` and their
+/// derivatives by the oxygen parameters `paths` (`oxyline_core::sensitivity::species`): a
+/// dict of `values`, `times`, `signals` (n_steps × n_signals), `derivatives` (n_params ×
+/// n_steps × n_signals), `cycles` (the flow's), `tangent_cycles` (the transport's, with its
+/// tangents) and `periodic_change`.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+#[pyo3(signature = (model_json, paths, signals, period, steps_per_cycle, rho_infty = 0.5,
+                    max_cycles = 2000, tol = 1e-12))]
+#[allow(clippy::too_many_arguments)]
+pub fn species_sensitivities<'py>(
+    py: Python<'py>,
+    model_json: &str,
+    paths: Vec<String>,
+    signals: Vec<(String, String)>,
+    period: f64,
+    steps_per_cycle: usize,
+    rho_infty: f64,
+    max_cycles: usize,
+    tol: f64,
+) -> PyResult<Bound<'py, PyDict>> {
+    let settings = TangentSettings {
+        period,
+        steps_per_cycle,
+        rho_infty,
+        max_cycles,
+        tol,
+    };
+    let (np, nsig) = (paths.len(), signals.len());
+    let out = py
+        .detach(move || {
+            let spec = parse(model_json)?;
+            species(&spec, &paths, &signals, settings)
+        })
+        .map_err(to_py)?;
+    let nt = out.times.len();
+    let d = PyDict::new(py);
+    d.set_item("values", out.values.into_pyarray(py))?;
+    d.set_item("times", out.times.into_pyarray(py))?;
+    d.set_item("signals", out.signals.into_pyarray(py).reshape([nt, nsig])?)?;
+    d.set_item(
+        "derivatives",
+        out.derivs.into_pyarray(py).reshape([np, nt, nsig])?,
+    )?;
+    d.set_item("cycles", out.cycles)?;
+    d.set_item("tangent_cycles", out.transport_cycles)?;
+    d.set_item("periodic_change", out.periodic_change)?;
     Ok(d)
 }
 

@@ -5,6 +5,7 @@
 
 pub mod krylov;
 pub mod parameter;
+pub mod species;
 pub mod tangent;
 
 use crate::circuit::Dae;
@@ -12,6 +13,7 @@ use crate::error::{Error, Result};
 use crate::model::NetworkSpec;
 use crate::output::VESSEL_VARIABLES;
 pub use parameter::{DaeTangent, Parameter};
+pub use species::{SpeciesSensitivities, species_sensitivities};
 pub use tangent::{
     PeriodicAdjoint, PeriodicTangent, TangentSettings, periodic_adjoint, periodic_adjoint_with,
     periodic_tangent,

@@ -48,6 +48,7 @@ pub mod renewal; // inlet renewal's per-vessel flows and factors
 mod rhs;
 mod state;
 mod stiffness;
+pub mod tangent; // the species step's tangent by oxygen parameters
 mod tissue; // wall/tissue compartment
 mod wall_flux;
 pub use stiffness::ReactionRate;

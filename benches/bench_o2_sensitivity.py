@@ -1,0 +1,65 @@
+"""Cost of exact oxygen sensitivities relative to the run they differentiate.
+
+A binary tree of 2^depth - 1 compliant vessels (`bench_oxygen.tree`: 3 segments each,
+pulsatile inflow, RCR outlets) with Hill's law and a mass-transfer wall. The same call of
+`oxyline.sensitivities` with no parameter (the primal alone: the flow to its periodic state,
+then the oxygen field over that cycle to its own) and with the tangents of 1 and 3 oxygen
+parameters (wall k, wall PO2, P50), best of `--repeat` in one process (CPU time: the
+machine is shared); and `oxyline.simulate` of the same model (flow and oxygen together) for
+as many cycles as the oxygen field needs to be periodic.
+
+    python benches/bench_o2_sensitivity.py [--depth 6] [--repeat 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import oxyline
+
+sys.path.insert(0, str(Path(__file__).parent))
+from bench_oxygen import tree
+
+PARAMETERS = ["oxygen.wall.k", "oxygen.wall.po2", "oxygen.hill.p50"]
+
+
+def best(f: object, repeat: int) -> float:
+    times = []
+    for _ in range(repeat):
+        t = time.process_time()
+        f()  # type: ignore[operator]
+        times.append(time.process_time() - t)
+    return min(times)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--depth", type=int, default=6)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--steps", type=int, default=200)
+    a = ap.parse_args()
+    m = tree(a.depth, {"model": "mass-transfer", "k": 1e-4, "po2": 60.0}, "hill")
+    m["oxygen"]["hill"] = {"p50": 26.8}
+    m["simulation"] = {"dt": 1.0 / a.steps, "method": "generalized-alpha"}
+    model = oxyline.load_model(m)
+    outputs = ["VO2", "VO2.v", "v.wall_uptake.max"]
+    run = oxyline.sensitivities(model, [], outputs)
+    print(f"tree depth {a.depth}: {len(m['vessels'])} vessels, {a.steps} steps a cycle, "
+          f"{run.cycles} flow cycles, {run.tangent_cycles} oxygen cycles to 1e-12")
+    base = best(lambda: oxyline.sensitivities(model, [], outputs), a.repeat)
+    sim = best(lambda: oxyline.simulate(model, cycles=run.tangent_cycles, progress=False),
+               a.repeat)
+    print(f"{'call':<34}{'CPU s':>9}{'/ primal':>10}")
+    print(f"{f'simulate, {run.tangent_cycles} cycles':<34}{sim:>9.3f}{sim / base:>10.2f}")
+    print(f"{'primal (no parameter)':<34}{base:>9.3f}{1.0:>10.2f}")
+    for n in (1, 3):
+        t = best(lambda n=n: oxyline.sensitivities(model, PARAMETERS[:n], outputs), a.repeat)
+        print(f"{f'tangents of {n} parameter(s)':<34}{t:>9.3f}{t / base:>10.2f}"
+              f"   ({(t - base) / base / n:.2f} primal per parameter)")
+
+
+if __name__ == "__main__":
+    main()

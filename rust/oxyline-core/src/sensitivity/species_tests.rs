@@ -1,0 +1,224 @@
+//! Oxygen sensitivities against central differences of the same periodic run, one test per
+//! parameter kind, and the balance they must keep. With a relative step h = 1e-4 the
+//! difference quotient's truncation (O(h²)) and the rounding of the binding's inversion
+//! (1e-10 mmHg on ~50 mmHg, over h) are both below 1e-7 of the derivative's scale, so
+//! agreement to 1e-6 relative tells a wrong tangent from a right one.
+
+use super::*;
+use crate::hemoglobin::BindingSpec;
+use crate::model::parse;
+
+/// A pulsatile inflow (no backflow) into an elastic parent that splits into elastic
+/// daughters ending in an RCR and a resistance; oxygen with Hill's
+/// law and a mass-transfer wall (SI: α = 1e-5 mol m⁻³ Pa⁻¹, P50 = 26.8 mmHg, an inlet PO2 of
+/// 85 mmHg, a wall PO2 of 40 mmHg). k (and the consumption flux below) are far above an
+/// artery's, so that the wall takes a few per cent of the oxygen delivered and the signals
+/// move well above the difference quotients' rounding.
+const MODEL: &str = r#"{
+  "name": "y",
+  "vessels": [
+    {"name": "parent", "from": "in", "to": "j", "segments": 3,
+     "geometry": {"length": 0.1, "radius_in": 0.004, "radius_out": 0.004,
+                  "wall_thickness": 0.0006, "youngs_modulus": 4e5}},
+    {"name": "d1", "from": "j", "to": "o1", "segments": 4,
+     "geometry": {"length": 0.08, "radius_in": 0.003, "radius_out": 0.0025,
+                  "wall_thickness": 0.0005, "youngs_modulus": 6e5}},
+    {"name": "d2", "from": "j", "to": "o2", "segments": 2,
+     "geometry": {"length": 0.05, "radius_in": 0.002, "radius_out": 0.002,
+                  "wall_thickness": 0.0004, "youngs_modulus": 6e5}}
+  ],
+  "boundary_conditions": {
+    "in": {"type": "flow", "flow": {"kind": "fourier", "period": 0.8, "mean": 3e-6,
+                                    "cos": [1e-6, -0.4e-6], "sin": [1.2e-6, 0.3e-6]}},
+    "o1": {"type": "rcr", "proximal_resistance": 1.5e8, "capacitance": 6e-10,
+           "distal_resistance": 1.2e9},
+    "o2": {"type": "resistance", "resistance": 1.6e9}
+  },
+  "transport": {"species": [{
+    "name": "o2", "diffusivity": 1.5e-9,
+    "binding": {"kind": "hill", "solubility": 1e-5, "p50": 3573.04, "n": 2.7,
+                "capacity": 9.0},
+    "inlet": {"kind": "constant", "value": 0.113324},
+    "wall": {"model": "mass-transfer", "k": 5e-3, "wall_concentration": 0.0533288}
+  }]}
+}"#;
+
+fn signals() -> Vec<(String, String)> {
+    [
+        ("d1", "po2_out"),
+        ("d1", "saturation_out"),
+        ("parent", "wall_uptake"),
+        ("d1", "wall_uptake"),
+        ("", "consumption"),
+        ("", "inflow"),
+        ("", "outflow"),
+    ]
+    .iter()
+    .map(|(a, b)| (a.to_string(), b.to_string()))
+    .collect()
+}
+
+fn settings() -> TangentSettings {
+    TangentSettings {
+        period: 0.8,
+        steps_per_cycle: 160,
+        rho_infty: 0.5,
+        max_cycles: 2000,
+        tol: 1e-13,
+    }
+}
+
+fn run(spec: &NetworkSpec, paths: &[&str]) -> SpeciesSensitivities {
+    let paths: Vec<String> = paths.iter().map(|p| p.to_string()).collect();
+    species_sensitivities(spec, &paths, &signals(), settings()).unwrap()
+}
+
+fn oxygen(s: &mut NetworkSpec) -> &mut SpeciesSpec {
+    &mut s.transport.as_mut().unwrap().species[0]
+}
+
+/// `s` with the oxygen parameter `path` multiplied by `f`, written into the spec directly.
+fn scaled(mut s: NetworkSpec, path: &str, f: f64) -> NetworkSpec {
+    let sp = oxygen(&mut s);
+    match (path, &mut sp.wall, &mut sp.binding) {
+        ("oxygen.wall.k", WallSpec::MassTransfer { k, .. }, _) => *k *= f,
+        (
+            "oxygen.wall.po2",
+            WallSpec::MassTransfer {
+                wall_concentration, ..
+            },
+            _,
+        ) => *wall_concentration *= f,
+        (
+            "oxygen.wall.flux",
+            WallSpec::Flux {
+                flux: FluxSpec::Constant(q),
+            },
+            _,
+        ) => *q *= f,
+        ("oxygen.hill.p50", _, BindingSpec::Hill { p50, .. }) => *p50 *= f,
+        _ => panic!("no such parameter in the test model: {path}"),
+    }
+    s
+}
+
+/// The tangent of `path` against the central difference of the periodic signals, per
+/// signal relative to the largest difference quotient of that signal over the cycle.
+fn check(spec: &NetworkSpec, path: &str) -> f64 {
+    let h = 1e-4;
+    let exact = run(spec, &[path]);
+    let p = exact.values[0];
+    let up = run(&scaled(spec.clone(), path, 1.0 + h), &[]);
+    let down = run(&scaled(spec.clone(), path, 1.0 - h), &[]);
+    let nsig = signals().len();
+    let (mut worst, mut moved) = (0.0f64, 0);
+    for j in 0..nsig {
+        let fd: Vec<f64> = (0..exact.times.len())
+            .map(|k| (up.signals[k * nsig + j] - down.signals[k * nsig + j]) / (2.0 * h * p))
+            .collect();
+        let scale = fd.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        if scale == 0.0 {
+            // (the inflow of a prescribed inlet by a wall parameter): exactly no derivative
+            assert!(
+                (0..fd.len()).all(|k| exact.derivs[k * nsig + j] == 0.0),
+                "{path}: {j}"
+            );
+            continue;
+        }
+        moved += 1;
+        for (k, d) in fd.iter().enumerate() {
+            worst = worst.max((exact.derivs[k * nsig + j] - d).abs() / scale);
+        }
+    }
+    // (with a prescribed flux, P50 moves only the outlet values and the boundary fluxes)
+    assert!(moved >= 4, "{path}: only {moved} signals move");
+    eprintln!("{path}: worst relative difference {worst:.2e}");
+    worst
+}
+
+#[test]
+fn wall_conductance_against_central_differences() {
+    assert!(check(&parse(MODEL).unwrap(), "oxygen.wall.k") < 1e-6);
+}
+
+#[test]
+fn wall_po2_against_central_differences() {
+    assert!(check(&parse(MODEL).unwrap(), "oxygen.wall.po2") < 1e-6);
+}
+
+#[test]
+fn p50_against_central_differences() {
+    assert!(check(&parse(MODEL).unwrap(), "oxygen.hill.p50") < 1e-6);
+}
+
+/// A prescribed consumption flux (mol m⁻² s⁻¹) instead of the mass-transfer wall.
+fn consuming() -> NetworkSpec {
+    let mut s = parse(MODEL).unwrap();
+    oxygen(&mut s).wall = WallSpec::Flux {
+        flux: FluxSpec::Constant(1.5e-4),
+    };
+    s
+}
+
+#[test]
+fn wall_flux_against_central_differences() {
+    assert!(check(&consuming(), "oxygen.wall.flux") < 1e-6);
+    assert!(check(&consuming(), "oxygen.hill.p50") < 1e-6);
+}
+
+/// At the periodic state the stored oxygen repeats, so over a cycle the consumption equals
+/// inflow − outflow, and so do their derivatives (the tangent keeps the same balance).
+#[test]
+fn consumption_balances_inflow_minus_outflow() {
+    let s = run(
+        &parse(MODEL).unwrap(),
+        &["oxygen.wall.k", "oxygen.hill.p50", "oxygen.wall.po2"],
+    );
+    let (nt, nsig) = (s.times.len(), signals().len());
+    let mean = |p: usize, j: usize| -> f64 {
+        (0..nt)
+            .map(|k| s.derivs[(p * nt + k) * nsig + j])
+            .sum::<f64>()
+            / nt as f64
+    };
+    for p in 0..3 {
+        let (wall, inflow, outflow) = (mean(p, 4), mean(p, 5), mean(p, 6));
+        let scale = wall.abs().max(inflow.abs()).max(outflow.abs());
+        let err = (wall - (inflow - outflow)).abs() / scale;
+        eprintln!(
+            "parameter {p}: d consumption {wall:.6e}, d(in - out) {:.6e}, {err:.1e}",
+            inflow - outflow
+        );
+        assert!(err < 1e-8, "parameter {p}: {err:e}");
+    }
+}
+
+#[test]
+fn bad_paths_are_model_errors_naming_them() {
+    let spec = parse(MODEL).unwrap();
+    let sig = signals();
+    let msg = |path: &str| {
+        species_sensitivities(&spec, &[path.to_string()], &sig, settings())
+            .unwrap_err()
+            .to_string()
+    };
+    for path in [
+        "oxygen.wall.kk",
+        "oxygen.wall.flux",
+        "oxygen.colour",
+        "vessels.nope.length",
+    ] {
+        let m = msg(path);
+        assert!(m.contains(path) || m.contains("nope"), "{path}: {m}");
+    }
+    let m = msg("vessels.parent.length");
+    assert!(
+        m.contains("vessels.parent.length") && m.contains("flow parameter"),
+        "{m}"
+    );
+    let bad = [("nope".to_string(), "po2_out".to_string())];
+    let m = species_sensitivities(&spec, &["oxygen.wall.k".into()], &bad, settings())
+        .unwrap_err()
+        .to_string();
+    assert!(m.contains("nope"), "{m}");
+}

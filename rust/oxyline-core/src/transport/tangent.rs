@@ -1,0 +1,531 @@
+//! Tangent-linear species step: the derivative of the backward-Euler transport step
+//! (`implicit_step`) with respect to an oxygen parameter, over a given flow.
+//!
+//! Oxygen parameters (wall conductance, wall concentration, prescribed wall flux, Hill's P50)
+//! do not change the flow, so the step's face flows, volumes W, W' and the upwind matrix are
+//! the primal's. The step (binding rows, docs/physics.md §4) solves
+//!
+//!   A x = z/Δt − w_c,   A = diag(W'(1/Δt + λ) + w_l) + upwind flows,
+//!
+//! with the wall uptake G f − GC_w + Q linearised in the total concentration about the old
+//! state c = z/W: w_l = G σ, w_c = G f − GC_w + Q − w_l c (f the free concentration,
+//! σ = df/dC_t). Differentiating (′ = d/dθ, with c′ = z′/W):
+//!
+//!   A x′ = z′/Δt − w_c′ − w_l′ x,   w_l′ = G′σ + G σ′,
+//!   w_c′ = G′f + G f′ − (GC_w)′ + Q′ − w_l′ c − w_l c′,
+//!   f′ = σ c′ + ∂f/∂θ,   σ′ = (dσ/dC_t) c′ + ∂σ/∂θ,
+//!
+//! the same matrix A, so each parameter costs one more solve per step on the primal's tree
+//! elimination (or flow-order sweep); the inflow of a prescribed boundary carries the
+//! derivative of its total concentration (P50 changes the bound part of a given inlet PO2),
+//! a zero-gradient one the tangent of its neighbour. The free concentration and its slopes
+//! are those of the exact inversion of the binding (the primal's anchored series agrees with
+//! it to its 1e-12 mmHg tolerance).
+
+#[allow(unused_imports)]
+use super::*;
+
+/// What an oxygen parameter changes in the step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SpeciesParameterKind {
+    /// A wall's conductance factor (mass-transfer k): g and g c_w ∝ θ.
+    Conductance,
+    /// A wall's concentration (or its PO2): g c_w ∝ θ.
+    WallConcentration,
+    /// A prescribed wall flux: q ∝ θ.
+    Flux,
+    /// Hill's P50 (the binding, and so the inlets' total concentration).
+    P50,
+}
+
+/// The binding at a total concentration: free concentration f, σ = df/dC_t, dσ/dC_t, and
+/// the partial derivatives ∂f/∂θ, ∂σ/∂θ by P50 at fixed C_t (zero for other parameters).
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct BindingPoint {
+    pub f: f64,
+    pub sigma: f64,
+    pub sigma_c: f64,
+    pub f_p50: f64,
+    pub sigma_p50: f64,
+    /// Hill's saturation S and its derivatives dS/dP, ∂S/∂P50 (0 without Hill).
+    pub s: f64,
+    pub s_p: f64,
+    pub s_p50: f64,
+}
+
+/// [`BindingPoint`] of `binding` at the total `ct` (`guess`: warm start of the inversion;
+/// `anchor`: the node's local series inverse, as the run's own step inverts, else the exact
+/// Newton solve). Hill: C_t = c + H S(c/α), so S = (C_t − c)/H at the free c, and
+/// S_P = n S (1 − S)/P, S_PP = S_P (n (1 − 2S) − 1)/P, ∂S/∂P50 = −(P/P50) S_P,
+/// ∂S_P/∂P50 = −(P S_PP + S_P)/P50: no further power of P after the inversion.
+pub(crate) fn binding_point(
+    binding: &Binding,
+    ct: f64,
+    guess: f64,
+    anchor: Option<&mut HillAnchor>,
+) -> BindingPoint {
+    match *binding {
+        Binding::None => BindingPoint {
+            f: ct,
+            sigma: 1.0,
+            ..BindingPoint::default()
+        },
+        Binding::Affine { slope, .. } => BindingPoint {
+            f: binding.free(ct, guess),
+            sigma: 1.0 / slope,
+            ..BindingPoint::default()
+        },
+        Binding::Hill {
+            alpha,
+            p50,
+            n,
+            capacity,
+        } => {
+            let f = match anchor {
+                Some(a) => binding.free_anchored(ct, guess, a),
+                None => binding.free(ct, guess),
+            };
+            let p = f / alpha;
+            let (s, s_p, s_pp) = if p > 0.0 {
+                let s = ((ct - f) / capacity).clamp(0.0, 1.0);
+                let s_p = n * s * (1.0 - s) / p;
+                (s, s_p, s_p * (n * (1.0 - 2.0 * s) - 1.0) / p)
+            } else {
+                (0.0, 0.0, 0.0)
+            };
+            let sigma = 1.0 / (1.0 + capacity * s_p / alpha);
+            let sigma_c = -sigma.powi(3) * capacity * s_pp / (alpha * alpha);
+            let s_p50 = -(p / p50) * s_p;
+            let sp_p50 = -(p * s_pp + s_p) / p50;
+            let f_p50 = -sigma * capacity * s_p50;
+            let sigma_p50 = -sigma * sigma * (capacity / alpha) * (s_pp * f_p50 / alpha + sp_p50);
+            BindingPoint {
+                f,
+                sigma,
+                sigma_c,
+                f_p50,
+                sigma_p50,
+                s,
+                s_p,
+                s_p50,
+            }
+        }
+    }
+}
+
+/// The derivative of the wall laws of one species by one parameter: per wall piece
+/// (dg, d(g c_w), dq) and summed per cell (dG, d(GC_w), dQ).
+#[derive(Debug, Clone)]
+pub struct SpeciesDerivative {
+    pub kind: SpeciesParameterKind,
+    piece: Vec<[f64; 3]>,
+    cell: Vec<[f64; 3]>,
+}
+
+/// The tangent of one parameter carried from step to step: amounts z′ of the species' cells,
+/// its accumulators' (inflow, outflow, wall, decay) and the total concentration of every node
+/// (the lagged values of mixing points and zero-gradient boundaries).
+#[derive(Debug, Clone)]
+pub struct SpeciesTangent {
+    pub dz: Vec<f64>,
+    pub dacc: [f64; 4],
+    xt: Vec<f64>,
+}
+
+/// One step's primal values of the species' cells the tangent reads.
+struct StepPrimal {
+    /// old volume, old total concentration and its binding, new total concentration, per cell
+    w: Vec<f64>,
+    c: Vec<f64>,
+    point: Vec<BindingPoint>,
+    x: Vec<f64>,
+}
+
+impl Transport {
+    /// Refuse what the species tangent does not follow: the quasi-steady formulation, tissue
+    /// walls, shear-dependent or tabulated walls, a closed-loop inflow (`element`: the
+    /// sensitivity asked for, for the message).
+    pub fn check_species_tangent(&self, s: usize, element: &str) -> Result<()> {
+        let why = if self.plan.formulation != Formulation::Conservative {
+            Some("the tl-quasisteady formulation")
+        } else if !self.plan.tissue.is_empty() {
+            Some("a tissue wall")
+        } else if !self.species[s].laws.dynamic.is_empty() || !self.species[s].laws.relax.is_empty()
+        {
+            Some("a shear-dependent (instantaneous or relaxed) wall")
+        } else if self.species[s].laws.flux_tables.is_some() {
+            Some("a wall flux tabulated in time")
+        } else if self.inflow_override.is_some() {
+            Some("a closed circulation")
+        } else {
+            None
+        };
+        match why {
+            Some(w) => Err(Error::model(
+                element,
+                format!("oxygen sensitivities do not follow {w} yet"),
+            )),
+            None => Ok(()),
+        }
+    }
+
+    /// The index of the species named `name`.
+    pub fn species_index(&self, name: &str) -> Option<usize> {
+        self.plan.species.iter().position(|sp| sp.name == name)
+    }
+
+    /// The binding law of species `s`.
+    pub fn species_binding(&self, s: usize) -> Binding {
+        self.plan.species[s].binding
+    }
+
+    /// The derivative of the wall laws of species `s` by a parameter of `kind` and SI value
+    /// `value` that scales every fixed law's coefficient it names (conductance: g, g c_w;
+    /// wall concentration: g c_w; flux: q; the laws are linear in them, so the derivative is
+    /// the coefficient over `value`) on the pieces of the vessels `on` (by circuit vessel
+    /// index: those whose wall the parameter is). P50 leaves the laws alone.
+    pub fn species_derivative(
+        &self,
+        s: usize,
+        kind: SpeciesParameterKind,
+        value: f64,
+        on: &[bool],
+    ) -> SpeciesDerivative {
+        let laws = &self.species[s].laws;
+        let nc = self.plan.cells.len();
+        let mut piece = vec![[0.0; 3]; laws.laws.len()];
+        let mut cell = vec![[0.0; 3]; nc];
+        for (p, (law, pc)) in laws.laws.iter().zip(&self.plan.pieces).enumerate() {
+            let SegmentLaw::Fixed { g, cw, q } = *law else {
+                continue;
+            };
+            let vessel = self.plan.segment_vessels[pc.seg as usize] as usize;
+            if !on.get(vessel).copied().unwrap_or(false) {
+                continue;
+            }
+            let d = match kind {
+                SpeciesParameterKind::Conductance => [g / value, g * cw / value, 0.0],
+                SpeciesParameterKind::WallConcentration => [0.0, g * cw / value, 0.0],
+                SpeciesParameterKind::Flux => [0.0, 0.0, q / value],
+                SpeciesParameterKind::P50 => [0.0; 3],
+            };
+            piece[p] = d;
+            for (c, dk) in cell[pc.cell as usize].iter_mut().zip(d) {
+                *c += pc.share * dk;
+            }
+        }
+        SpeciesDerivative { kind, piece, cell }
+    }
+
+    /// A zero tangent of species `s` (the periodic fixed point is found from there).
+    pub fn species_tangent_start(&self) -> SpeciesTangent {
+        SpeciesTangent {
+            dz: vec![0.0; self.plan.cells.len()],
+            dacc: [0.0; 4],
+            xt: vec![0.0; self.plan.kind.len()],
+        }
+    }
+
+    /// Advance the tangents of species `s` over the step [t, t + Δt] the primal just took
+    /// (`implicit_step`, not carried: its face flows are loaded), from its start amounts
+    /// `z_old` and volumes `w_old`; `z` holds the new amounts. `anchors`: the tangent's own
+    /// series inverses of the binding per node (kept from step to step).
+    #[allow(clippy::too_many_arguments)]
+    pub fn species_tangent_step(
+        &mut self,
+        s: usize,
+        t_af: f64,
+        dt: f64,
+        z_old: &[f64],
+        w_old: &[f64],
+        z: &[f64],
+        derivs: &[SpeciesDerivative],
+        tangents: &mut [SpeciesTangent],
+        anchors: &mut Vec<HillAnchor>,
+    ) -> Result<()> {
+        let nc = self.plan.cells.len();
+        let binding = self.plan.species[s].binding;
+        let zs_old = &z_old[s * nc..(s + 1) * nc];
+        let zs = &z[s * nc..(s + 1) * nc];
+        let free = &self.species[s].free;
+        let guess = |n: usize| {
+            free.get(n)
+                .copied()
+                .filter(|f| f.is_finite())
+                .unwrap_or(0.0)
+        };
+        if anchors.len() != self.plan.kind.len() {
+            anchors.resize(self.plan.kind.len(), HillAnchor::default());
+        }
+        let mut primal = StepPrimal {
+            w: w_old[..nc].to_vec(),
+            c: Vec::with_capacity(nc),
+            point: Vec::with_capacity(nc),
+            x: Vec::with_capacity(nc),
+        };
+        for (i, &n) in self.plan.cells.iter().enumerate() {
+            let c = zs_old[i] / w_old[i];
+            let g = guess(n);
+            primal
+                .point
+                .push(binding_point(&binding, c, g, Some(&mut anchors[n])));
+            primal.c.push(c);
+            primal.x.push(zs[i] / self.wvol[i]);
+        }
+        self.load_boundary(s, t_af);
+        for (d, t) in derivs.iter().zip(tangents.iter_mut()) {
+            self.tangent_solve(s, dt, &primal, d, t)?;
+        }
+        Ok(())
+    }
+
+    /// The inflow values of the tangent of parameter `d`: prescribed totals' derivatives,
+    /// zero-gradient boundaries as they are (None).
+    fn tangent_boundary(&self, s: usize, d: &SpeciesDerivative) -> Vec<Option<f64>> {
+        let binding = self.plan.species[s].binding;
+        self.bval
+            .iter()
+            .map(|b| {
+                b.map(|total| match (d.kind, binding) {
+                    (SpeciesParameterKind::P50, Binding::Hill { capacity, .. }) => {
+                        capacity * binding_point(&binding, total, total, None).s_p50
+                    }
+                    _ => 0.0,
+                })
+            })
+            .collect()
+    }
+
+    /// One parameter's tangent over the step (see the module doc).
+    fn tangent_solve(
+        &mut self,
+        s: usize,
+        dt: f64,
+        primal: &StepPrimal,
+        d: &SpeciesDerivative,
+        t: &mut SpeciesTangent,
+    ) -> Result<()> {
+        let laws = Arc::clone(&self.species[s].laws);
+        let rate = 1.0 / dt + self.plan.species[s].decay;
+        let p50 = d.kind == SpeciesParameterKind::P50;
+        let mut wall = 0.0;
+        let plan = Arc::clone(&self.plan);
+        for (i, &n) in plan.cells.iter().enumerate() {
+            let g = laws.cell_g[i];
+            let [dg, dgcw, dq] = d.cell[i];
+            let pt = &primal.point[i];
+            let dc = t.dz[i] / primal.w[i];
+            let (fd, sd) = if p50 {
+                (pt.f_p50, pt.sigma_p50)
+            } else {
+                (0.0, 0.0)
+            };
+            let df = pt.sigma * dc + fd;
+            let dsigma = pt.sigma_c * dc + sd;
+            let wl = g * pt.sigma;
+            let dwl = dg * pt.sigma + g * dsigma;
+            let dwc = dg * pt.f + g * df - dgcw + dq - dwl * primal.c[i] - wl * dc;
+            self.sweep.den[n] = self.wvol[i] * rate + wl;
+            self.sweep.num[n] = t.dz[i] / dt - dwc - dwl * primal.x[i];
+            t.xt[n] = dc;
+            wall += dwl * primal.x[i] + dwc; // (+ w_l x′ after the solve)
+        }
+        for &m in &plan.mixing {
+            let sw = &mut self.sweep;
+            (sw.den[m], sw.num[m], sw.lag[m]) = (0.0, 0.0, t.xt[m]);
+        }
+        let mut bval = self.tangent_boundary(s, d);
+        std::mem::swap(&mut self.bval, &mut bval);
+        let mut xt = std::mem::take(&mut t.xt);
+        let res = if plan.tree.is_some() {
+            self.tree_solve(&mut xt);
+            Ok(())
+        } else {
+            let (den, num) = (self.sweep.den.clone(), self.sweep.num.clone());
+            self.sweep_solve(&plan.domain, &den, &num, &mut xt)
+        };
+        // the boundary fluxes of the tangent: the same upwind rule on x′ and the inflows′
+        std::mem::swap(&mut self.conc, &mut xt);
+        let (d_in, d_out) = self.implicit_boundary_fluxes();
+        std::mem::swap(&mut self.conc, &mut xt);
+        std::mem::swap(&mut self.bval, &mut bval);
+        res?;
+        let lambda = self.plan.species[s].decay;
+        let mut decay = 0.0;
+        for (i, &n) in plan.cells.iter().enumerate() {
+            let wl = laws.cell_g[i] * primal.point[i].sigma;
+            wall += wl * xt[n];
+            decay += lambda * self.wvol[i] * xt[n];
+            t.dz[i] = self.wvol[i] * xt[n];
+        }
+        t.xt = xt;
+        for (a, v) in t.dacc.iter_mut().zip([d_in, d_out, wall, decay]) {
+            *a += dt * v;
+        }
+        Ok(())
+    }
+}
+
+/// A vessel's species signal the tangent reports (at the end of each step).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum VesselSpeciesSignal {
+    /// Free concentration at the outlet (mol/m³).
+    Concentration,
+    /// PO2 at the outlet (Pa; Hill binding).
+    Po2,
+    /// Haemoglobin saturation at the outlet (Hill binding).
+    Saturation,
+    /// The step's flow through the outlet face (m³/s; no parameter here changes it).
+    Flow,
+    /// Wall uptake of the vessel's segments (mol/s).
+    WallUptake,
+}
+
+impl Transport {
+    /// The domain node whose value leaves output vessel `k` (named `name`) at forward flow:
+    /// its last cell, or the upwind node of its last face; an error at backflow (the value
+    /// carried into the outlet is not differentiated).
+    fn outlet_node(&self, k: usize, name: &str) -> Result<usize> {
+        let v = &self.plan.out_vessels[k];
+        let refuse = |why: &str| {
+            Error::model(
+                format!("output '{name}'"),
+                format!("oxygen sensitivities at this outlet: {why}"),
+            )
+        };
+        if v.last >= self.plan.faces.len() {
+            return Err(refuse("the vessel has no outlet face"));
+        }
+        if self.qf[v.last] < 0.0 {
+            return Err(refuse("backflow through it is not differentiated yet"));
+        }
+        let n = if v.outlet_cell != u32::MAX {
+            self.plan.last_sub(v.outlet_cell as usize)
+        } else {
+            match oriented(&self.plan.faces, &self.qf, v.last).1 {
+                End::Node(n) => n,
+                End::Boundary(_) => return Err(refuse("no cell upstream of it")),
+            }
+        };
+        match self.plan.node_cell.get(n) {
+            Some(&i) if i != usize::MAX => Ok(n),
+            _ => Err(refuse("no cell upstream of it")),
+        }
+    }
+
+    /// Total concentration, its tangents and the binding of domain node `n` of species `s`
+    /// at the end of a step (amounts `z`).
+    fn node_state(
+        &self,
+        s: usize,
+        n: usize,
+        z: &[f64],
+        tangents: &[SpeciesTangent],
+    ) -> (BindingPoint, Vec<f64>) {
+        let nc = self.plan.cells.len();
+        let i = self.plan.node_cell[n];
+        let x = z[s * nc + i] / self.wvol[i];
+        let guess = self.species[s].free.get(n).copied().unwrap_or(0.0);
+        let pt = binding_point(&self.plan.species[s].binding, x, guess, None);
+        (pt, tangents.iter().map(|t| t.xt[n]).collect())
+    }
+
+    /// The value of `signal` of output vessel `k` (named `name`) of species `s` after the
+    /// step the tangents just took, and its derivative by each parameter.
+    #[allow(clippy::too_many_arguments)]
+    pub fn species_vessel_signal(
+        &self,
+        s: usize,
+        k: usize,
+        name: &str,
+        signal: VesselSpeciesSignal,
+        z: &[f64],
+        derivs: &[SpeciesDerivative],
+        tangents: &[SpeciesTangent],
+    ) -> Result<(f64, Vec<f64>)> {
+        let binding = self.plan.species[s].binding;
+        let p50 = |d: &SpeciesDerivative| d.kind == SpeciesParameterKind::P50;
+        match signal {
+            VesselSpeciesSignal::Flow => {
+                let v = &self.plan.out_vessels[k];
+                let q = self.qf.get(v.last).copied().unwrap_or(f64::NAN);
+                Ok((q, vec![0.0; derivs.len()]))
+            }
+            VesselSpeciesSignal::WallUptake => Ok(self.vessel_uptake(s, k, z, derivs, tangents)),
+            _ => {
+                let n = self.outlet_node(k, name)?;
+                let (pt, xt) = self.node_state(s, n, z, tangents);
+                let df = |(d, x): (&SpeciesDerivative, &f64)| {
+                    pt.sigma * x + if p50(d) { pt.f_p50 } else { 0.0 }
+                };
+                let dfs: Vec<f64> = derivs.iter().zip(&xt).map(df).collect();
+                let alpha = match binding {
+                    Binding::Hill { alpha, .. } => alpha,
+                    _ if signal == VesselSpeciesSignal::Concentration => 1.0,
+                    _ => {
+                        return Err(Error::model(
+                            format!("output '{name}'"),
+                            "PO2 and saturation need haemoglobin (a Hill binding)",
+                        ));
+                    }
+                };
+                Ok(match signal {
+                    VesselSpeciesSignal::Concentration => (pt.f, dfs),
+                    VesselSpeciesSignal::Po2 => {
+                        (pt.f / alpha, dfs.iter().map(|d| d / alpha).collect())
+                    }
+                    _ => {
+                        let ds = derivs.iter().zip(&dfs).map(|(d, df)| {
+                            pt.s_p * df / alpha + if p50(d) { pt.s_p50 } else { 0.0 }
+                        });
+                        (pt.s, ds.collect())
+                    }
+                })
+            }
+        }
+    }
+
+    /// Wall uptake of output vessel `k`'s segments, Σ share (g (f − c_w) + q) over their
+    /// pieces at the end-of-step free concentrations, and its derivatives.
+    fn vessel_uptake(
+        &self,
+        s: usize,
+        k: usize,
+        z: &[f64],
+        derivs: &[SpeciesDerivative],
+        tangents: &[SpeciesTangent],
+    ) -> (f64, Vec<f64>) {
+        let laws = &self.species[s].laws;
+        let v = &self.plan.out_vessels[k];
+        let (mut w, mut dw) = (0.0, vec![0.0; derivs.len()]);
+        for &j in &self.plan.out_segments[v.segs.clone()] {
+            for p in self.plan.seg_pieces(j) {
+                let pc = &self.plan.pieces[p];
+                let SegmentLaw::Fixed { g, cw, q } = laws.laws[p] else {
+                    continue;
+                };
+                let n = pc.node as usize;
+                let (pt, xt) = self.node_state(s, n, z, tangents);
+                w += pc.share * (g * (pt.f - cw) + q);
+                for ((dw, d), x) in dw.iter_mut().zip(derivs).zip(&xt) {
+                    let [dg, dgcw, dq] = d.piece[p];
+                    let p50 = if d.kind == SpeciesParameterKind::P50 {
+                        pt.f_p50
+                    } else {
+                        0.0
+                    };
+                    let df = pt.sigma * x + p50;
+                    *dw += pc.share * (dg * pt.f + g * df - dgcw + dq);
+                }
+            }
+        }
+        (w, dw)
+    }
+}
+
+impl Transport {
+    /// The transport volumes W of the cells (m³) after the last implicit step.
+    pub fn cell_volumes(&self) -> &[f64] {
+        &self.wvol
+    }
+}

@@ -1,0 +1,159 @@
+"""Exact sensitivities of oxygen outputs by oxygen parameters (``oxyline.sensitivities``).
+
+* The outlet PO2 and saturation, the flow-weighted outflow saturation (SvO2) and the wall
+  uptake of a vessel, a region and the whole network (VO2), by the wall's mass-transfer
+  coefficient and PO2, Hill's P50 and a prescribed consumption flux, against central
+  differences of the same periodic runs (relative step 1e-4: the truncation, O(h²), and
+  the rounding of the binding's inversion, 1e-10 mmHg over h, stay below 1e-7 of the
+  derivative, so 1e-6 relative tells a wrong derivative).
+* A P50 and a consumption flux recovered from synthetic SvO2 / VO2 targets.
+* Paths and outputs the oxygen tangent does not cover are ModelErrors naming them.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+from typing import Any
+
+import numpy as np
+import pytest
+
+import oxyline
+from oxyline import ModelError
+from oxyline.calibrate import _base_value, native_model
+
+pytest.importorskip("scipy")
+
+T = 0.8  # s
+#: an inflow without backflow into an elastic parent and two daughters (SI); oxygen with
+#: Hill's law and a mass-transfer wall. Its k (and the consumption flux below) are far above
+#: an artery's, so that the wall takes a few per cent of the oxygen delivered and the
+#: outputs move well above the difference quotients' rounding (1e-12 of a PO2 over h)
+Y: dict[str, Any] = {
+    "name": "y-o2", "units": "SI", "period": T,
+    "vessels": [
+        {"name": "parent", "from": "in", "to": "j", "length": 0.1, "radius": 0.004,
+         "wall_thickness": 6e-4, "youngs_modulus": 4e5, "segments": 3},
+        {"name": "d1", "from": "j", "to": "o1", "length": 0.08, "radius": 0.003,
+         "wall_thickness": 5e-4, "youngs_modulus": 6e5, "segments": 4},
+        {"name": "d2", "from": "j", "to": "o2", "length": 0.05, "radius": 0.002,
+         "wall_thickness": 4e-4, "youngs_modulus": 6e5, "segments": 2},
+    ],
+    "boundary_conditions": {
+        "in": {"type": "flow", "fourier": {"period": T, "mean": 3e-6, "cos": [1e-6, -0.4e-6],
+                                           "sin": [1.2e-6, 0.3e-6]}},
+        "o1": {"type": "rcr", "proximal_resistance": 1.5e8, "capacitance": 6e-10,
+               "distal_resistance": 1.2e9},
+        "o2": {"type": "resistance", "resistance": 1.6e9},
+    },
+    "simulation": {"dt": T / 160, "method": "generalized-alpha"},
+    "oxygen": {"inlet": {"po2": 85.0}, "hemoglobin": "hill",
+               "hill": {"p50": 26.8, "n": 2.7},
+               "wall": {"model": "mass-transfer", "k": 5e-3, "po2": 40.0}},
+}
+OUTPUTS = ["d1.po2_out.mean", "d1.saturation_out.min", "SvO2.d1", "VO2", "VO2.parent.d1",
+           "parent.wall_uptake.max"]
+
+
+def consuming() -> dict[str, Any]:
+    """:data:`Y` with a prescribed consumption flux (mol m⁻² s⁻¹) instead of the wall law."""
+    m = copy.deepcopy(Y)
+    m["oxygen"]["wall"] = {"model": "flux", "flux": 1.5e-4}
+    return m
+
+
+def per_vessel() -> dict[str, Any]:
+    """:data:`Y` with a wall of d1's own (the section's wall stays on the others)."""
+    m = copy.deepcopy(Y)
+    m["oxygen"]["per_vessel"] = {"d1": {"wall": {"model": "mass-transfer", "k": 3e-3,
+                                                 "po2": 30.0}}}
+    return m
+
+
+def values(model: dict[str, Any], outputs: list[str]) -> np.ndarray:
+    return oxyline.sensitivities(model, [], outputs).values
+
+
+@pytest.mark.parametrize(("model", "path"), [
+    (Y, "oxygen.wall.k"), (Y, "oxygen.wall.po2"), (Y, "oxygen.hill.p50"),
+    (consuming(), "oxygen.wall.flux"), (per_vessel(), "oxygen.wall.k"),
+    (per_vessel(), "oxygen.per_vessel.d1.wall.k"), (per_vessel(), "oxygen.per_vessel.d1.wall.po2"),
+])
+def test_oxygen_outputs_against_central_differences(model: dict[str, Any], path: str
+                                                    ) -> None:
+    s = oxyline.sensitivities(model, [path], OUTPUTS)
+    x0, h = _base_value(model, path), 1e-4
+    up = values(native_model(model, [path], [x0 * (1 + h)]), OUTPUTS)
+    down = values(native_model(model, [path], [x0 * (1 - h)]), OUTPUTS)
+    # d/d log θ: unit-free, whatever units the model writes θ in
+    fd = (up - down) / (2 * h)
+    exact = s.jacobian[:, 0] * s.parameter_values[0]
+    moved = np.abs(fd) > 1e-12 * np.abs(s.values)
+    assert moved.sum() >= 4, (path, fd)
+    np.testing.assert_allclose(exact[moved], fd[moved], rtol=1e-6,
+                               atol=1e-9 * np.abs(fd).max())
+
+
+def test_consumption_balances_inflow_minus_outflow() -> None:
+    """At the periodic state the stored oxygen repeats: d VO2 = d(inflow − outflow) of O2."""
+    from oxyline import _core
+    from oxyline.model import build_model
+
+    raw = _core.species_sensitivities(
+        json.dumps(build_model(Y).canonical), ["oxygen.wall.k", "oxygen.hill.p50"],
+        [("", "consumption"), ("", "inflow"), ("", "outflow")], T, 160, 0.5, 2000, 1e-13)
+    d = raw["derivatives"].mean(axis=1)  # (parameter, signal)
+    # the stored oxygen's derivative repeats to the periodic tolerance (1e-13 of the field)
+    np.testing.assert_allclose(d[:, 0], d[:, 1] - d[:, 2], rtol=1e-8)
+    assert np.abs(d[:, 0]).min() > 0
+
+
+def test_p50_and_consumption_recovered_from_svo2_and_vo2() -> None:
+    truth = native_model(consuming(), ["oxygen.hill.p50", "oxygen.wall.flux"], [29.5, 1.7e-4])
+    target = values(truth, ["SvO2.d1", "VO2"])
+    fit = oxyline.calibrate(consuming(), {"SvO2.d1": target[0], "VO2": target[1]},
+                            ["oxygen.hill.p50", "oxygen.wall.flux"], method="lm")
+    assert fit.success
+    assert fit.parameters["oxygen.hill.p50"] == pytest.approx(29.5, rel=1e-6)
+    assert fit.parameters["oxygen.wall.flux"] == pytest.approx(1.7e-4, rel=1e-6)
+
+
+@pytest.mark.parametrize(("parameters", "outputs", "named"), [
+    (["oxygen.wall.kk"], ["VO2"], "oxygen.wall.kk"),
+    (["oxygen.wall.flux"], ["VO2"], "oxygen.wall.flux"),
+    (["vessels.parent.length"], ["SvO2.d1"], "vessels.parent.length"),
+    (["oxygen.wall.k"], ["SvO2.nope"], "nope"),
+    (["oxygen.wall.k"], ["d1.po2_out.median"], "median"),
+    (["oxygen.per_vessel.d2.wall.k"], ["VO2"], "oxygen.per_vessel.d2.wall.k"),
+])
+def test_bad_oxygen_paths_and_outputs_are_model_errors(parameters: list[str],
+                                                       outputs: list[str], named: str) -> None:
+    with pytest.raises(ModelError, match=named.replace(".", r"\.")):
+        oxyline.sensitivities(Y, parameters, outputs)
+
+
+def test_oxygen_needs_an_oxygen_model_and_forward_tangents() -> None:
+    flow_only = {k: v for k, v in Y.items() if k != "oxygen"}
+    with pytest.raises(ModelError, match="no oxygen section"):
+        oxyline.sensitivities(flow_only, [], ["VO2"])
+    with pytest.raises(ModelError, match="adjoint"):
+        oxyline.sensitivities(Y, ["oxygen.wall.k"], ["VO2"], mode="adjoint")
+
+
+def test_oxygen_parameters_leave_flow_outputs_alone() -> None:
+    s = oxyline.sensitivities(Y, ["oxygen.wall.k", "scale.resistance"],
+                              ["parent.pressure_in.mean"])
+    assert s.jacobian[0, 0] == 0.0
+    assert s.jacobian[0, 1] > 0.0
+
+
+def test_the_differentiated_cycle_is_the_runs() -> None:
+    """The values the tangents differentiate are those of ``simulate``'s generalized-α run
+    at its periodic state (its recorder, PO2 in mmHg, read at every step of the last cycle)."""
+    s = oxyline.sensitivities(Y, [], ["d1.po2_out.mean", "d1.po2_out.max"])
+    res = oxyline.simulate(Y, cycles=40, progress=False, output_every=T / 160)
+    po2 = res.po2_out[-160:, list(res.vessels).index("d1")] * 133.322368  # mmHg → Pa
+    # measured: the mean within 7e-9, the maximum within 1.7e-7 (40 cycles of the run, its
+    # own start and step control, against the tangent's cycle periodic to 1e-12)
+    np.testing.assert_allclose(s.values, [po2.mean(), po2.max()], rtol=1e-6)
