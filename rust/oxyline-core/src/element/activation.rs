@@ -263,9 +263,9 @@ impl Activation {
                 let half_sin = 0.5 * (2.0 * PI * (1.0 + u / tsa)).sin();
                 match key {
                     "systole_fraction" => Some(-half_sin * 2.0 * PI * u * period / (tsa * tsa)),
-                    "p_wave_divisor" => Some(
-                        half_sin * 2.0 * PI * period / (p_wave_divisor * p_wave_divisor * tsa),
-                    ),
+                    "p_wave_divisor" => {
+                        Some(half_sin * 2.0 * PI * period / (p_wave_divisor * p_wave_divisor * tsa))
+                    }
                     _ => None,
                 }
             }

@@ -228,7 +228,8 @@ impl Element for ChamberSphere {
                     - 2.0 * big_r * (q.thickness * stress - p * big_r) / (r02 * r0);
                 // C = (R/r₀)²: dC/dr₀ = 2R(r₀ − R)/r₀³; the stress's derivative in C
                 let dc_dr0 = 2.0 * big_r * (r0 - big_r) / (r02 * r0);
-                let ds_dc = 4.0 * (3.0 * c.powi(-4) * (q.w1 + c * q.w2) + (1.0 - c.powi(-3)) * q.w2);
+                let ds_dc =
+                    4.0 * (3.0 * c.powi(-4) * (q.w1 + c * q.w2) + (1.0 - c.powi(-3)) * q.w2);
                 // g = 2R/r₀² + 4 r₀¹⁰ R⁻¹¹
                 let dg = 2.0 / r02 - 4.0 * big_r / (r02 * r0) + 40.0 * r0.powi(9) * big_r.powi(-11)
                     - 44.0 * r0.powi(10) * big_r.powi(-12);

@@ -96,9 +96,12 @@ impl Parameter {
             ["scale", "compliance"] => Ok(Parameter::ComplianceScale),
             ["scale", "inflow"] => Ok(Parameter::InflowScale),
             ["boundary_conditions", node, key] => condition(spec, path, node, key),
-            ["boundary_conditions", node, "intramyocardial_pressure", "scale"] => {
-                condition(spec, path, node, PIM_SCALE)
-            }
+            [
+                "boundary_conditions",
+                node,
+                "intramyocardial_pressure",
+                "scale",
+            ] => condition(spec, path, node, PIM_SCALE),
             ["vessels", name, "chamber" | "valve" | "chamber_sphere", ..] => {
                 heart_element(spec, path, name, &parts[2..])
             }
