@@ -325,7 +325,11 @@ def _base_value(source: Mapping[str, Any], path: str) -> float:
                 node = node[key]
             return float(node)
         if parts[0] == "boundary_conditions":
-            return float(source["boundary_conditions"][parts[1]][parts[2]])
+            bc = source["boundary_conditions"][parts[1]]
+            if parts[2:] == ["intramyocardial_pressure", "scale"] and \
+                    "intramyocardial_pressure" in bc:
+                return 1.0
+            return float(bc[parts[2]])
         if parts[0] == "oxygen":  # as written in the model (a default is not read here)
             node = source["oxygen"]
             for key in parts[1:]:
@@ -356,6 +360,22 @@ def _scale_inflow(data: dict[str, Any], factor: float) -> None:
             bc["fourier"] = f
 
 
+def _scale_pressure(w: Any, factor: float) -> Any:
+    """A native pressure waveform (a number, or ``value``, ``time`` + ``pressure`` tables or
+    ``fourier``) times ``factor``."""
+    if not isinstance(w, Mapping):
+        return float(w) * factor
+    out = dict(w)
+    for k in ("value", "pressure"):
+        if k in out:
+            out[k] = (np.asarray(out[k], dtype=float) * factor).tolist()
+    if isinstance(out.get("fourier"), Mapping):
+        out["fourier"] = {k: (np.asarray(v, dtype=float) * factor).tolist()
+                          if k in ("mean", "cos", "sin") else v
+                          for k, v in out["fourier"].items()}
+    return out
+
+
 def native_model(source: Mapping[str, Any], parameters: Sequence[str],
                  values: Sequence[float]) -> dict[str, Any]:
     """The native model dict ``source`` with each parameter set to its value (native units;
@@ -363,11 +383,16 @@ def native_model(source: Mapping[str, Any], parameters: Sequence[str],
     patch: dict[str, Any] = {}
     inflow = None
     heart: list[tuple[list[str], float]] = []
+    squeeze: dict[str, float] = {}  # a coronary outlet's intramyocardial pressure factor
     for path, x in zip(parameters, values, strict=True):
         parts = path.split(".")
         if path == "scale.inflow":
             inflow = float(x)
-        elif parts[0] == "vessels" and parts[2:3] in (["chamber"], ["valve"]):
+        elif parts[0] == "boundary_conditions" and parts[2:] == ["intramyocardial_pressure",
+                                                                  "scale"]:
+            squeeze[parts[1]] = float(x)
+        elif parts[0] == "vessels" and parts[2:3] in (["chamber"], ["valve"],
+                                                      ["chamber_sphere"]):
             heart.append((parts, float(x)))
         elif parts[0] == "scale":
             patch.setdefault("scale", {})[parts[1]] = float(x)
@@ -389,6 +414,11 @@ def native_model(source: Mapping[str, Any], parameters: Sequence[str],
     data = apply_patch(dict(source), patch) if patch else copy.deepcopy(dict(source))
     if inflow is not None:
         _scale_inflow(data, inflow)
+    if squeeze:
+        data = copy.deepcopy(data)
+        for node, f in squeeze.items():
+            bc = data["boundary_conditions"][node]
+            bc["intramyocardial_pressure"] = _scale_pressure(bc["intramyocardial_pressure"], f)
     if heart:  # a chamber's or valve's value, set where the element holds it
         data = copy.deepcopy(data)
         for parts, x in heart:

@@ -27,6 +27,8 @@ pub enum Activation {
         m2: f64,
         /// 1 / (the peak), found as svZeroDSolver does (grid of 1e-5 s over the period).
         norm: f64,
+        /// The grid time of that peak (the normalisation's derivative is the shape's there).
+        peak_time: f64,
     },
     /// The atrial activation of Sankaran et al. 2012: a cosine of duration T_sa = f·T that
     /// wraps across the cycle's end and ends at the P-wave time T/d.
@@ -89,10 +91,13 @@ impl Activation {
             g1 / (1.0 + g1) / (1.0 + g2)
         };
         // svZeroDSolver's grid: t = 0, 1e-5, ... < period (accumulated as it does)
-        let mut peak = 0.0f64;
+        let (mut peak, mut peak_time) = (0.0f64, 0.0);
         let mut t = 0.0;
         while t < period {
-            peak = peak.max(raw(t));
+            let r = raw(t);
+            if r > peak {
+                (peak, peak_time) = (r, t);
+            }
             t += 1e-5;
         }
         if !(peak > 0.0 && peak.is_finite()) {
@@ -108,6 +113,7 @@ impl Activation {
             m1,
             m2,
             norm: 1.0 / peak,
+            peak_time,
         })
     }
 
@@ -161,6 +167,7 @@ impl Activation {
                 m1,
                 m2,
                 norm,
+                ..
             } => {
                 let tc = in_cycle(t, period);
                 let mut ts = (tc - t_shift) % period;
@@ -192,26 +199,140 @@ impl Activation {
         }
     }
 
-    /// ∂φ/∂θ at time t for the timing `key` of a half-cosine activation (`t_active`,
-    /// `t_twitch`): φ = ½ (1 − cos θ), θ = 2π (t − t_active)/t_twitch during the twitch, so
-    /// the derivative is ½ sin θ ∂θ/∂key there and 0 outside it (continuous at both ends,
-    /// where sin θ = 0). None for any other activation or key.
+    /// ∂φ/∂θ at time t for the timing or shape parameter `key` (its model key) of the
+    /// activation: every law but the parameter-free Fourier series. Each law is a cosine or
+    /// Hill shape of the time within the cycle, differentiated in closed form on the branch
+    /// that holds time t (a law's jumps between branches move with the timing, which the
+    /// discrete run only sees when a step time crosses them). None for a key the law lacks.
     pub fn derivative(&self, key: &str, t: f64, period: f64) -> Option<f64> {
-        let Activation::HalfCosine { t_active, t_twitch } = *self else {
+        match *self {
+            Activation::HalfCosine { t_active, t_twitch } => {
+                half_cosine_derivative(key, in_cycle(t, period) - t_active, t_twitch)
+            }
+            Activation::PiecewiseCosine {
+                contract_start,
+                relax_start,
+                contract_duration,
+                relax_duration,
+            } => {
+                if !matches!(
+                    key,
+                    "contract_start" | "relax_start" | "contract_duration" | "relax_duration"
+                ) {
+                    return None;
+                }
+                let c = (t - contract_start) % period;
+                if (0.0..contract_duration).contains(&c) {
+                    // φ = ½(1 − cos(π c/d)): ∂φ/∂c = ½ (π/d) sin(π c/d)
+                    let h = 0.5 * PI / contract_duration * (PI * c / contract_duration).sin();
+                    return Some(match key {
+                        "contract_start" => -h,
+                        "contract_duration" => -h * c / contract_duration,
+                        _ => 0.0,
+                    });
+                }
+                let r = (t - relax_start) % period;
+                if (0.0..relax_duration).contains(&r) {
+                    // φ = ½(1 + cos(π r/d)): ∂φ/∂r = −½ (π/d) sin(π r/d)
+                    let h = -0.5 * PI / relax_duration * (PI * r / relax_duration).sin();
+                    return Some(match key {
+                        "relax_start" => -h,
+                        "relax_duration" => -h * r / relax_duration,
+                        _ => 0.0,
+                    });
+                }
+                Some(0.0)
+            }
+            Activation::TwoHill { .. } => self.two_hill_derivative(key, t, period),
+            Activation::WrappingCosine {
+                systole_fraction,
+                p_wave_divisor,
+            } => {
+                // φ = ½(1 − cos θ), θ = 2π (1 + u/T_sa), T_sa = f T, u = t_c − T/d on the
+                // branch before the P wave and t_c − T/d − T on the one wrapping from the end
+                let tsa = period * systole_fraction;
+                let tp = period / p_wave_divisor;
+                let tc = in_cycle(t, period);
+                let u = if tc <= tp {
+                    tc - tp
+                } else if tc >= (period - tsa) + tp && tc < period {
+                    tc - tp - period
+                } else {
+                    return matches!(key, "systole_fraction" | "p_wave_divisor").then_some(0.0);
+                };
+                let half_sin = 0.5 * (2.0 * PI * (1.0 + u / tsa)).sin();
+                match key {
+                    "systole_fraction" => Some(-half_sin * 2.0 * PI * u * period / (tsa * tsa)),
+                    "p_wave_divisor" => {
+                        Some(half_sin * 2.0 * PI * period / (p_wave_divisor * p_wave_divisor * tsa))
+                    }
+                    _ => None,
+                }
+            }
+            Activation::Fourier { .. } => None,
+        }
+    }
+
+    /// ∂φ/∂θ of the two-Hill law φ = raw(t_s)/raw(t*), raw = g₁/(1 + g₁) · 1/(1 + g₂),
+    /// g_i = (t_s/τ_i)^{m_i}: the normalising peak raw(t*) is a maximum over a fixed grid, so
+    /// its derivative is raw's own at the grid point t* that holds it (the shift moves only
+    /// t_s, not the peak).
+    fn two_hill_derivative(&self, key: &str, t: f64, period: f64) -> Option<f64> {
+        let Activation::TwoHill {
+            t_shift,
+            tau_1,
+            tau_2,
+            m1,
+            m2,
+            norm,
+            peak_time,
+        } = *self
+        else {
             return None;
         };
-        let contract = in_cycle(t, period) - t_active;
-        let twitch = contract > 0.0 && contract <= t_twitch;
-        let half_sin = if twitch {
-            0.5 * (2.0 * PI * contract / t_twitch).sin()
-        } else {
-            0.0
+        // (raw, ∂raw/∂t_s, ∂raw/∂τ₁, ∂raw/∂τ₂, ∂raw/∂m₁, ∂raw/∂m₂) at t_s
+        let parts = |ts: f64| {
+            let g1 = (ts / tau_1).powf(m1);
+            let g2 = (ts / tau_2).powf(m2);
+            let d1 = 1.0 / ((1.0 + g1) * (1.0 + g1) * (1.0 + g2));
+            let d2 = -g1 / ((1.0 + g1) * (1.0 + g2) * (1.0 + g2));
+            // g ln(t_s/τ) → 0 as t_s → 0 (g vanishes faster than the logarithm grows)
+            let log = |g: f64, tau: f64| if g > 0.0 { g * (ts / tau).ln() } else { 0.0 };
+            let dts = if ts > 0.0 {
+                d1 * m1 * g1 / ts + d2 * m2 * g2 / ts
+            } else {
+                0.0
+            };
+            let raw = g1 / (1.0 + g1) / (1.0 + g2);
+            [
+                raw,
+                dts,
+                -d1 * m1 * g1 / tau_1,
+                -d2 * m2 * g2 / tau_2,
+                d1 * log(g1, tau_1),
+                d2 * log(g2, tau_2),
+            ]
         };
-        match key {
-            "t_active" => Some(-half_sin * 2.0 * PI / t_twitch),
-            "t_twitch" => Some(-half_sin * 2.0 * PI * contract / (t_twitch * t_twitch)),
-            _ => None,
+        let k = match key {
+            "t_shift" => 1,
+            "tau_1" => 2,
+            "tau_2" => 3,
+            "m1" => 4,
+            "m2" => 5,
+            _ => return None,
+        };
+        let tc = in_cycle(t, period);
+        let mut ts = (tc - t_shift) % period;
+        if ts < 0.0 {
+            ts += period;
         }
+        let here = parts(ts);
+        if k == 1 {
+            return Some(-norm * here[1]);
+        }
+        // φ = raw/peak: ∂φ = (∂raw − φ ∂peak)/peak
+        let peak = parts(peak_time);
+        Some(norm * (here[k] - norm * here[0] * peak[k]))
     }
 
     /// Phase ends within the cycle (for RK4's stability sampling).
@@ -234,6 +355,23 @@ impl Activation {
             Activation::TwoHill { t_shift, .. } => vec![t_shift],
             Activation::WrappingCosine { .. } | Activation::Fourier { .. } => Vec::new(),
         }
+    }
+}
+
+/// ∂φ/∂θ of the half-cosine law for `key` (`t_active`, `t_twitch`) at `contract` = t_c −
+/// t_active: φ = ½ (1 − cos θ), θ = 2π contract/t_twitch during the twitch, so the derivative
+/// is ½ sin θ ∂θ/∂key there and 0 outside it (continuous at both ends, where sin θ = 0).
+fn half_cosine_derivative(key: &str, contract: f64, t_twitch: f64) -> Option<f64> {
+    let twitch = contract > 0.0 && contract <= t_twitch;
+    let half_sin = if twitch {
+        0.5 * (2.0 * PI * contract / t_twitch).sin()
+    } else {
+        0.0
+    };
+    match key {
+        "t_active" => Some(-half_sin * 2.0 * PI / t_twitch),
+        "t_twitch" => Some(-half_sin * 2.0 * PI * contract / (t_twitch * t_twitch)),
+        _ => None,
     }
 }
 
@@ -267,5 +405,82 @@ mod tests {
             // the 1e-4 s sampling misses the peak by at most O((1e-4/width)²)
             assert!((max - 1.0).abs() < 1e-3, "{a:?}: {max}");
         }
+    }
+
+    /// Each law's ∂φ/∂θ against central differences of φ in θ (relative step 1e-6: the
+    /// truncation O(h²) and the rounding ~1e-16/h stay below 1e-7 of the slope scale), at
+    /// times inside every branch of the law.
+    #[test]
+    fn activation_derivatives_match_central_differences() {
+        let period = 0.8;
+        type Build = fn(&[f64]) -> Activation;
+        let cases: [(Build, Vec<f64>, [&str; 5]); 4] = [
+            (
+                |p| Activation::HalfCosine {
+                    t_active: p[0],
+                    t_twitch: p[1],
+                },
+                vec![0.1, 0.35],
+                ["t_active", "t_twitch", "", "", ""],
+            ),
+            (
+                |p| Activation::PiecewiseCosine {
+                    contract_start: p[0],
+                    relax_start: p[1],
+                    contract_duration: p[2],
+                    relax_duration: p[3],
+                },
+                vec![0.05, 0.3, 0.2, 0.25],
+                [
+                    "contract_start",
+                    "relax_start",
+                    "contract_duration",
+                    "relax_duration",
+                    "",
+                ],
+            ),
+            (
+                |p| Activation::two_hill("a", 0.8, [p[0], p[1], p[2], p[3], p[4]]).unwrap(),
+                vec![0.05, 0.18, 0.31, 1.32, 27.4],
+                ["t_shift", "tau_1", "tau_2", "m1", "m2"],
+            ),
+            (
+                |p| Activation::WrappingCosine {
+                    systole_fraction: p[0],
+                    p_wave_divisor: p[1],
+                },
+                vec![0.17, 9.0],
+                ["systole_fraction", "p_wave_divisor", "", "", ""],
+            ),
+        ];
+        for (build, p, keys) in &cases {
+            let base = build(p);
+            for (k, key) in keys.iter().enumerate().filter(|(_, k)| !k.is_empty()) {
+                let h = 1e-6 * p[k];
+                let (mut up, mut down) = (p.clone(), p.clone());
+                up[k] += h;
+                down[k] -= h;
+                let (a, b) = (build(&up), build(&down));
+                // the two-Hill peak's grid point must not move between the two evaluations
+                let times = (0..80).map(|j| 0.0037 + j as f64 * 0.01);
+                let mut scale = 0.0f64;
+                let mut rows = Vec::new();
+                for t in times {
+                    let fd = (a.eval(t, period) - b.eval(t, period)) / (2.0 * h);
+                    let exact = base.derivative(key, t, period).unwrap();
+                    scale = scale.max(exact.abs());
+                    rows.push((t, fd, exact));
+                }
+                assert!(scale > 0.0, "{key}");
+                for (t, fd, exact) in rows {
+                    assert!(
+                        (fd - exact).abs() <= 1e-6 * scale,
+                        "{key} at {t}: {fd} vs {exact}"
+                    );
+                }
+            }
+        }
+        let fourier = Activation::fourier(period);
+        assert_eq!(fourier.derivative("t_active", 0.1, period), None);
     }
 }

@@ -57,6 +57,27 @@ impl SphereParams {
         (a.abs(), a.max(0.0))
     }
 
+    /// ∂a/∂θ of the activation rate a(t) for the activation key `key` (None: not one).
+    fn activation_derivative(&self, key: &str, t: f64) -> Option<f64> {
+        let tc = in_cycle(t, self.period);
+        let g = self.steepness;
+        let (zp, zm) = ((tc - self.t_systole) / g, (tc - self.t_diastole) / g);
+        let s_plus = 0.5 * (1.0 + zp.tanh());
+        let s_minus = 0.5 * (1.0 - zm.tanh());
+        let f = s_plus * s_minus;
+        // ∂S₊/∂z₊ = ½ sech² z₊, ∂S₋/∂z₋ = −½ sech² z₋
+        let (dsp, dsm) = (0.5 / zp.cosh().powi(2), -0.5 / zm.cosh().powi(2));
+        let df = match key {
+            "max_activation_rate" => return Some(f),
+            "min_activation_rate" => return Some(1.0 - f),
+            "systole_start" => -dsp / g * s_minus,
+            "diastole_start" => -dsm / g * s_plus,
+            "activation_steepness" => -(dsp * zp * s_minus + dsm * zm * s_plus) / g,
+            _ => return None,
+        };
+        Some((self.alpha_max - self.alpha_min) * df)
+    }
+
     /// The passive stress 4(1 − C⁻³)(W₁ + C W₂) and its derivative in R.
     fn elastic(&self, big_r: f64) -> (f64, f64) {
         let r0 = self.radius;
@@ -175,6 +196,67 @@ impl Element for ChamberSphere {
         j[11] = -dgrowth[0];
         j[12] = -dgrowth[1];
     }
+    /// ∂c/∂θ for the wall's and the activation's constants (model keys of
+    /// `chamber_sphere`); the density enters only the mass matrix (ρ d₀ on the velocity row,
+    /// differentiated by the sensitivity's mass term), so its element term is zero.
+    fn parameter_derivative(&self, key: &str, t: f64, y: &[f64], dc: &mut [f64]) -> bool {
+        let (q, u) = (&self.params, &self.u);
+        let (r0, x) = (q.radius, y[u.displacement]);
+        let big_r = r0 + x;
+        let (vel, stress, tau, p) = (
+            y[u.velocity],
+            y[u.stress],
+            y[u.active_stress],
+            y[u.pressure],
+        );
+        dc.iter_mut().for_each(|d| *d = 0.0);
+        let r02 = r0 * r0;
+        let c = (big_r / r0).powi(2);
+        match key {
+            "density" => {}
+            "wall_thickness" => dc[2] = big_r * stress / r02,
+            "w1" => dc[3] = 4.0 * (1.0 - c.powi(-3)),
+            "w2" => dc[3] = 4.0 * (1.0 - c.powi(-3)) * c,
+            "viscosity" => dc[3] = q.viscous(big_r).0 * vel,
+            "max_active_stress" => dc[4] = -q.activation(t).1,
+            "reference_radius" => {
+                // R = r₀ + x moves with r₀ (the displacement x is the unknown)
+                let growth = 8.0 * PI * vel * big_r;
+                dc[0] = growth;
+                dc[5] = -growth;
+                dc[2] = (q.thickness * stress - 2.0 * p * big_r) / r02
+                    - 2.0 * big_r * (q.thickness * stress - p * big_r) / (r02 * r0);
+                // C = (R/r₀)²: dC/dr₀ = 2R(r₀ − R)/r₀³; the stress's derivative in C
+                let dc_dr0 = 2.0 * big_r * (r0 - big_r) / (r02 * r0);
+                let ds_dc =
+                    4.0 * (3.0 * c.powi(-4) * (q.w1 + c * q.w2) + (1.0 - c.powi(-3)) * q.w2);
+                // g = 2R/r₀² + 4 r₀¹⁰ R⁻¹¹
+                let dg = 2.0 / r02 - 4.0 * big_r / (r02 * r0) + 40.0 * r0.powi(9) * big_r.powi(-11)
+                    - 44.0 * r0.powi(10) * big_r.powi(-12);
+                dc[3] = ds_dc * dc_dr0 + q.viscosity * dg * vel;
+            }
+            _ => {
+                let Some(da) = q.activation_derivative(key, t) else {
+                    return false;
+                };
+                let tc = in_cycle(t, q.period);
+                let zp = (tc - q.t_systole) / q.steepness;
+                let zm = (tc - q.t_diastole) / q.steepness;
+                let f = 0.25 * (1.0 + zp.tanh()) * (1.0 - zm.tanh());
+                let a = q.alpha_max * f + q.alpha_min * (1.0 - f);
+                // c₄ = |a| τ − σ_max max(a, 0): ∂c₄/∂a = sign(a) τ − σ_max [a > 0]
+                let dc_da = if a > 0.0 {
+                    tau - q.max_active_stress
+                } else if a < 0.0 {
+                    -tau
+                } else {
+                    0.0
+                };
+                dc[4] = dc_da * da;
+            }
+        }
+        true
+    }
     fn is_nonlinear(&self) -> bool {
         true
     }
@@ -254,5 +336,81 @@ mod tests {
         assert!((abs_a - 30.0).abs() < 1e-9 && (pos_a - 30.0).abs() < 1e-9);
         // one period later the same (up to the round-off of the time within the cycle)
         assert!((q.activation(1.3).0 - q.activation(0.3).0).abs() < 1e-9);
+    }
+
+    /// ∂c/∂θ of every constant against central differences of the residual in θ (relative
+    /// step 1e-6: O(h²) truncation), in systole, in diastole and inside both switches.
+    #[test]
+    fn parameter_derivatives_match_central_differences() {
+        let u = SphereUnknowns {
+            pressure: 0,
+            displacement: 1,
+            velocity: 2,
+            stress: 3,
+            active_stress: 4,
+            volume: 5,
+        };
+        let y = [9e3, 0.004, -0.03, 2.5e4, 3e4, 1e-5];
+        let keys = [
+            "density",
+            "wall_thickness",
+            "reference_radius",
+            "w1",
+            "w2",
+            "viscosity",
+            "max_active_stress",
+            "max_activation_rate",
+            "min_activation_rate",
+            "systole_start",
+            "diastole_start",
+            "activation_steepness",
+        ];
+        // the constant k of `keys`, by field
+        fn field(p: &mut SphereParams, k: usize) -> &mut f64 {
+            match k {
+                0 => &mut p.density,
+                1 => &mut p.thickness,
+                2 => &mut p.radius,
+                3 => &mut p.w1,
+                4 => &mut p.w2,
+                5 => &mut p.viscosity,
+                6 => &mut p.max_active_stress,
+                7 => &mut p.alpha_max,
+                8 => &mut p.alpha_min,
+                9 => &mut p.t_systole,
+                10 => &mut p.t_diastole,
+                _ => &mut p.steepness,
+            }
+        }
+        for (k, key) in keys.iter().enumerate() {
+            // (exact, difference) of every row at every time; compared on the key's scale
+            let mut pairs = Vec::new();
+            for t in [0.05, 0.168, 0.3, 0.487] {
+                let base = ChamberSphere::new("s".into(), params(), u);
+                let mut dc = [0.0; 6];
+                assert!(base.parameter_derivative(key, t, &y, &mut dc), "{key}");
+                let mut res = [[0.0; 6]; 2];
+                let mut step = 0.0;
+                for (side, sign) in [1.0, -1.0].into_iter().enumerate() {
+                    let mut p = params();
+                    let x = field(&mut p, k);
+                    step = 1e-6 * x.abs();
+                    *x += sign * step;
+                    ChamberSphere::new("s".into(), p, u).residual(t, &y, &mut res[side]);
+                }
+                for i in 0..6 {
+                    pairs.push((t, i, dc[i], (res[0][i] - res[1][i]) / (2.0 * step)));
+                }
+            }
+            let scale = pairs.iter().fold(0.0f64, |m, p| m.max(p.2.abs()));
+            // the density enters only the mass matrix: its element term is zero
+            assert!(scale > 0.0 || *key == "density", "{key}");
+            for (t, i, exact, fd) in pairs {
+                assert!(
+                    (fd - exact).abs() <= 1e-6 * scale,
+                    "{key} row {i} at {t}: {fd} vs {exact}"
+                );
+            }
+        }
     }
 }

@@ -16,7 +16,7 @@
 //! α_f level, recorded here as dS/dp per branch unknown ([`DaeTangent::dstenosis`]).
 //!
 //! Heart chambers and valves add element terms c_el(y, t) to their rows (`crate::element`):
-//! a chamber's −P(V, t) (elastances, rest volumes, the half-cosine activation's timing), a
+//! a chamber's −P(V, t) (elastances, rest volumes, its activation's timing and shape), a
 //! valve's R(ΔP) Q (its R_min, R_max and tanh steepness). Their derivative ∂c_el/∂θ is the
 //! element's own ([`crate::element::Element::parameter_derivative`]), evaluated at each
 //! step's α_f state ([`DaeTangent::delements`]).
@@ -25,14 +25,18 @@ use crate::circuit::CircuitElement;
 use crate::circuit::{Circuit, Dae};
 use crate::error::{Error, Result};
 use crate::model::{
-    ActivationSpec, Arrangement, BoundarySpec, ChamberLawSpec, ChamberSpec, NetworkSpec, ValveSpec,
+    ActivationSpec, Arrangement, BoundarySpec, ChamberLawSpec, ChamberSpec, ChamberSphereSpec,
+    NetworkSpec, ValveSpec,
 };
 use crate::segment::WallModel;
 
 /// What a parameter path names.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Parameter {
-    /// `boundary_conditions.<node>.<resistance|proximal_resistance|distal_resistance|capacitance>`
+    /// `boundary_conditions.<node>.<resistance|proximal_resistance|distal_resistance|capacitance>`,
+    /// a coronary outlet's `arterial_resistance`, `microvascular_resistance`,
+    /// `venous_resistance`, `arterial_capacitance`, `intramyocardial_capacitance` and
+    /// `intramyocardial_pressure.scale` (a factor on its intramyocardial pressure waveform).
     Condition { node: String, key: String },
     /// `vessels.<name>.length`
     Length(usize),
@@ -48,12 +52,15 @@ pub enum Parameter {
     ComplianceScale,
     /// `scale.inflow`: every flow condition's waveform.
     InflowScale,
-    /// `vessels.<name>.chamber.<key>` / `vessels.<name>.valve.<key>`: a heart element's
-    /// value, `key` as the element's model key (`activation.t_active`, …) and its SI value.
+    /// `vessels.<name>.chamber.<key>` / `vessels.<name>.valve.<key>` /
+    /// `vessels.<name>.chamber_sphere.<key>`: a heart element's value, `key` as the element's
+    /// model key (`activation.t_active`, …) and its SI value; `mass`: the derivative of the
+    /// element's mass-matrix entry (a spherical chamber's wall mass ρ d₀), if it has one.
     Element {
         element: String,
         key: String,
         value: f64,
+        mass: Option<f64>,
     },
 }
 
@@ -89,13 +96,19 @@ impl Parameter {
             ["scale", "compliance"] => Ok(Parameter::ComplianceScale),
             ["scale", "inflow"] => Ok(Parameter::InflowScale),
             ["boundary_conditions", node, key] => condition(spec, path, node, key),
-            ["vessels", name, "chamber" | "valve", ..] => {
+            [
+                "boundary_conditions",
+                node,
+                "intramyocardial_pressure",
+                "scale",
+            ] => condition(spec, path, node, PIM_SCALE),
+            ["vessels", name, "chamber" | "valve" | "chamber_sphere", ..] => {
                 heart_element(spec, path, name, &parts[2..])
             }
             ["vessels", name, rest @ ..] if !rest.is_empty() => vessel(spec, path, name, rest),
             _ => Err(unknown(
                 path,
-                "not a parameter path (vessels.<name>.<length|radius|youngs_modulus|lumped.resistance|lumped.capacitance|lumped.inductance|lumped.stenosis_coefficient|chamber.<key>|valve.<key>>, boundary_conditions.<node>.<resistance|proximal_resistance|distal_resistance|capacitance>, scale.<resistance|compliance|inflow>)",
+                "not a parameter path (vessels.<name>.<length|radius|youngs_modulus|lumped.resistance|lumped.capacitance|lumped.inductance|lumped.stenosis_coefficient|chamber.<key>|valve.<key>|chamber_sphere.<key>>, boundary_conditions.<node>.<resistance|proximal_resistance|distal_resistance|capacitance|arterial_resistance|microvascular_resistance|venous_resistance|arterial_capacitance|intramyocardial_capacitance|intramyocardial_pressure.scale>, scale.<resistance|compliance|inflow>)",
             )),
         }
     }
@@ -115,9 +128,19 @@ fn heart_element(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> R
             )
         })?;
     let key = rest[1..].join(".");
-    let value = match (rest[0], &v.chamber, &v.valve) {
-        ("chamber", Some(c), _) => chamber_value(c, &key),
-        ("valve", _, Some(law)) => valve_value(law, &key),
+    let mut mass = None;
+    let value = match (rest[0], &v.chamber, &v.valve, &v.chamber_sphere) {
+        ("chamber", Some(c), ..) => chamber_value(c, &key),
+        ("valve", _, Some(law), _) => valve_value(law, &key),
+        ("chamber_sphere", .., Some(s)) => {
+            // the wall's mass ρ d₀ on the velocity row: d/dρ = d₀, d/dd₀ = ρ
+            mass = match key.as_str() {
+                "density" => Some(s.wall_thickness),
+                "wall_thickness" => Some(s.density),
+                _ => None,
+            };
+            sphere_value(s, &key)
+        }
         (kind, ..) => {
             return Err(unknown(path, format!("vessel '{name}' is not a {kind}")));
         }
@@ -135,19 +158,16 @@ fn heart_element(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> R
         element: format!("{} '{name}'", rest[0]),
         key,
         value,
+        mass,
     })
 }
 
-/// A chamber's value by key: its law's elastances and volumes, and the half-cosine
-/// activation's timing (the other activations' shapes are not differentiated).
+/// A chamber's value by key: its law's elastances and volumes, and its activation's timing
+/// and shape parameters (every law but the parameter-free Fourier series).
 fn chamber_value(c: &ChamberSpec, key: &str) -> Option<f64> {
     use ChamberLawSpec as L;
     if let Some(timing) = key.strip_prefix("activation.") {
-        return match (&c.activation, timing) {
-            (ActivationSpec::HalfCosine { t_active, .. }, "t_active") => Some(*t_active),
-            (ActivationSpec::HalfCosine { t_twitch, .. }, "t_twitch") => Some(*t_twitch),
-            _ => None,
-        };
+        return activation_value(&c.activation, timing);
     }
     match (&c.law, key) {
         (L::ElastanceInductor { max_elastance, .. }, "max_elastance")
@@ -193,6 +213,57 @@ fn chamber_value(c: &ChamberSpec, key: &str) -> Option<f64> {
     }
 }
 
+/// A spherical chamber's constant by its model key (every one but the period).
+fn sphere_value(s: &ChamberSphereSpec, key: &str) -> Option<f64> {
+    Some(match key {
+        "density" => s.density,
+        "wall_thickness" => s.wall_thickness,
+        "reference_radius" => s.reference_radius,
+        "w1" => s.w1,
+        "w2" => s.w2,
+        "viscosity" => s.viscosity,
+        "max_active_stress" => s.max_active_stress,
+        "max_activation_rate" => s.max_activation_rate,
+        "min_activation_rate" => s.min_activation_rate,
+        "systole_start" => s.systole_start,
+        "diastole_start" => s.diastole_start,
+        "activation_steepness" => s.activation_steepness,
+        _ => return None,
+    })
+}
+
+/// An activation's parameter by its model key.
+fn activation_value(a: &ActivationSpec, key: &str) -> Option<f64> {
+    use ActivationSpec as A;
+    let x = match (a, key) {
+        (A::HalfCosine { t_active, .. }, "t_active") => t_active,
+        (A::HalfCosine { t_twitch, .. }, "t_twitch") => t_twitch,
+        (A::PiecewiseCosine { contract_start, .. }, "contract_start") => contract_start,
+        (A::PiecewiseCosine { relax_start, .. }, "relax_start") => relax_start,
+        (
+            A::PiecewiseCosine {
+                contract_duration, ..
+            },
+            "contract_duration",
+        ) => contract_duration,
+        (A::PiecewiseCosine { relax_duration, .. }, "relax_duration") => relax_duration,
+        (A::TwoHill { t_shift, .. }, "t_shift") => t_shift,
+        (A::TwoHill { tau_1, .. }, "tau_1") => tau_1,
+        (A::TwoHill { tau_2, .. }, "tau_2") => tau_2,
+        (A::TwoHill { m1, .. }, "m1") => m1,
+        (A::TwoHill { m2, .. }, "m2") => m2,
+        (
+            A::WrappingCosine {
+                systole_fraction, ..
+            },
+            "systole_fraction",
+        ) => systole_fraction,
+        (A::WrappingCosine { p_wave_divisor, .. }, "p_wave_divisor") => p_wave_divisor,
+        _ => return None,
+    };
+    Some(*x)
+}
+
 /// A valve's value by key.
 fn valve_value(law: &ValveSpec, key: &str) -> Option<f64> {
     match (law, key) {
@@ -215,15 +286,7 @@ fn condition(spec: &NetworkSpec, path: &str, node: &str, key: &str) -> Result<Pa
             ),
         )
     })?;
-    let ok = matches!(
-        (bc, key),
-        (BoundarySpec::Resistance { .. }, "resistance")
-            | (
-                BoundarySpec::Rcr { .. },
-                "proximal_resistance" | "distal_resistance" | "capacitance"
-            )
-    );
-    if !ok {
+    if condition_value(bc, key).is_none() {
         return Err(unknown(
             path,
             format!("the condition at node '{node}' has no differentiable value '{key}'"),
@@ -233,6 +296,51 @@ fn condition(spec: &NetworkSpec, path: &str, node: &str, key: &str) -> Result<Pa
         node: node.to_owned(),
         key: key.to_owned(),
     })
+}
+
+/// The intramyocardial pressure's factor of a coronary outlet (1 at the model's waveform).
+const PIM_SCALE: &str = "intramyocardial_pressure.scale";
+
+/// A condition's differentiable value by key: its SI value and the label of the circuit part
+/// that holds it (a branch's resistance, or a node's capacitance: see [`is_node_label`]; None
+/// for the intramyocardial pressure's factor, a forcing) — None for a key it does not have.
+fn condition_value(bc: &BoundarySpec, key: &str) -> Option<(f64, Option<&'static str>)> {
+    let r = |x: f64, label| Some((x, Some(label)));
+    match (bc, key) {
+        (BoundarySpec::Resistance { resistance, .. }, "resistance") => r(*resistance, "resistance"),
+        (
+            BoundarySpec::Rcr {
+                proximal_resistance: x,
+                ..
+            },
+            "proximal_resistance",
+        ) => r(*x, "proximal resistance"),
+        (
+            BoundarySpec::Rcr {
+                distal_resistance: x,
+                ..
+            },
+            "distal_resistance",
+        ) => r(*x, "distal resistance"),
+        (BoundarySpec::Rcr { capacitance: x, .. }, "capacitance") => r(*x, "capacitor"),
+        (BoundarySpec::Coronary(c), _) => match key {
+            "arterial_resistance" => r(c.arterial_resistance, "proximal resistance"),
+            "microvascular_resistance" => r(c.microvascular_resistance, "microvascular resistance"),
+            "venous_resistance" => r(c.venous_resistance, "distal resistance"),
+            "arterial_capacitance" => r(c.arterial_capacitance, "capacitor"),
+            "intramyocardial_capacitance" => {
+                r(c.intramyocardial_capacitance, "intramyocardial compartment")
+            }
+            PIM_SCALE => Some((1.0, None)),
+            _ => None,
+        },
+        _ => None,
+    }
+}
+
+/// Whether a condition's part label names a node (a capacitor) rather than a branch.
+fn is_node_label(label: &str) -> bool {
+    matches!(label, "capacitor" | "intramyocardial compartment")
 }
 
 fn vessel(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<Parameter> {
@@ -289,18 +397,20 @@ fn vessel(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<P
     Ok(p)
 }
 
-/// Refuse what the tangent does not cover: time-varying resistances, the closed-loop heart
-/// block, coronary beds and spherical chambers (element terms without parameter
-/// derivatives; the heart block also resets its closed valves' flows inside Newton's
-/// iteration, which is not the derivative of a step equation), and svZeroDSolver-form
-/// stenoses (chain-rule capacitor rows). Branch-form stenoses, chambers and valves are
-/// covered (their terms are differentiated exactly).
+/// Refuse what the tangent does not cover: time-varying resistances (a varying coronary
+/// microvascular resistance among them), the closed-loop heart block and its coronary beds
+/// (the block resets its closed valves' flows inside Newton's iteration, which is not the
+/// derivative of a step equation, and the beds' iteration matrix leaves out their ventricle
+/// coupling on purpose), and svZeroDSolver-form stenoses (chain-rule capacitor rows).
+/// Branch-form stenoses, chambers, spherical chambers and valves are covered (their terms
+/// are differentiated exactly), as are coronary outlets (constant circuit parts and forcing).
 pub fn check_supported(circuit: &Circuit, dae: &Dae) -> Result<()> {
     let other = circuit.elements.iter().find_map(|e| match e {
-        CircuitElement::Valve { .. } | CircuitElement::Chamber { .. } => None,
+        CircuitElement::Valve { .. }
+        | CircuitElement::Chamber { .. }
+        | CircuitElement::Sphere { .. } => None,
         CircuitElement::Heart { name, .. } => Some(format!("the closed-loop heart block {name}")),
         CircuitElement::Coronary { name, .. } => Some(format!("the coronary bed {name}")),
-        CircuitElement::Sphere { name, .. } => Some(format!("the spherical chamber {name}")),
     });
     let why = if !dae.chain_rule.is_empty() {
         Some("svZeroDSolver-form stenoses (stenosis_form: svzerod)".to_owned())
@@ -381,32 +491,28 @@ impl<'a> Stamps<'a> {
         match p {
             Parameter::Condition { node, key } => {
                 let bc = &spec.boundary_conditions[node];
-                let (value, label) = match (bc, key.as_str()) {
-                    (BoundarySpec::Resistance { resistance, .. }, _) => (*resistance, "resistance"),
-                    (
-                        BoundarySpec::Rcr {
-                            proximal_resistance,
-                            ..
-                        },
-                        "proximal_resistance",
-                    ) => (*proximal_resistance, "proximal resistance"),
-                    (
-                        BoundarySpec::Rcr {
-                            distal_resistance, ..
-                        },
-                        "distal_resistance",
-                    ) => (*distal_resistance, "distal resistance"),
-                    (BoundarySpec::Rcr { capacitance, .. }, _) => (*capacitance, "capacitor"),
-                    _ => return Err(missing()),
-                };
+                let (value, label) = condition_value(bc, key).ok_or_else(missing)?;
                 t = self.blank(path, value);
-                let name = format!("boundary condition '{node}' {label}");
-                if label == "capacitor" {
-                    let i = self.node_named(&name).ok_or_else(missing)?;
-                    t.de[i] = 1.0;
-                } else {
-                    let b = self.branch_named(&name).ok_or_else(missing)?;
-                    t.df[self.branch_r[b]] = 1.0;
+                let name = |l: &str| format!("boundary condition '{node}' {l}");
+                match label {
+                    Some(l) if is_node_label(l) => {
+                        t.de[self.node_named(&name(l)).ok_or_else(missing)?] = 1.0;
+                    }
+                    Some(l) => {
+                        let b = self.branch_named(&name(l)).ok_or_else(missing)?;
+                        t.df[self.branch_r[b]] = 1.0;
+                    }
+                    // P_im is the series source of the microvascular and venous branches
+                    None => {
+                        for l in ["microvascular resistance", "distal resistance"] {
+                            let b = self.branch_named(&name(l)).ok_or_else(missing)?;
+                            let row = nn + b;
+                            let k = (self.dae.forcing.iter())
+                                .position(|(r, _)| *r == row)
+                                .ok_or_else(missing)?;
+                            t.dforcing.push((k, 1.0));
+                        }
+                    }
                 }
             }
             Parameter::Length(vi) | Parameter::Radius(vi) | Parameter::YoungsModulus(vi) => {
@@ -445,17 +551,33 @@ impl<'a> Stamps<'a> {
                 for i in 0..nn {
                     t.de[i] = self.node_c(i);
                 }
+                // the patch leaves a coronary bed's capacitors as they are
+                for (node, bc) in &spec.boundary_conditions {
+                    if matches!(bc, BoundarySpec::Coronary(_)) {
+                        for l in ["capacitor", "intramyocardial compartment"] {
+                            let name = format!("boundary condition '{node}' {l}");
+                            if let Some(i) = self.node_named(&name) {
+                                t.de[i] = 0.0;
+                            }
+                        }
+                    }
+                }
             }
             Parameter::Element {
                 element,
                 key,
                 value,
+                mass,
             } => {
                 t = self.blank(path, *value);
                 let e = (self.dae.elements.iter())
                     .position(|e| e.name() == element)
                     .ok_or_else(missing)?;
                 t.delements.push((e, key.clone()));
+                if let Some(dm) = mass {
+                    // a spherical chamber's rows: pressure, displacement, velocity, …
+                    t.de[self.dae.elements[e].rows()[2]] = *dm;
+                }
             }
             Parameter::InflowScale => {
                 t = self.blank(path, 1.0);
@@ -537,6 +659,10 @@ impl<'a> Stamps<'a> {
         for v in spec.vessels.iter().filter(|v| v.lumped.is_some()) {
             for s in self.segments_of(&v.name) {
                 t.df[self.branch_r[s.branch]] += self.circuit.branches[s.branch].resistance;
+            }
+            // an RCL vessel holds its R on a branch of its own (its segment's is the L)
+            if let Some(b) = self.branch_named(&format!("vessel '{}' resistance", v.name)) {
+                t.df[self.branch_r[b]] += self.circuit.branches[b].resistance;
             }
         }
     }
