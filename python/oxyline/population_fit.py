@@ -25,9 +25,18 @@ import numpy as np
 
 from oxyline import pwdb
 from oxyline.calibrate import sensitivities as exact
+from oxyline.populations import (
+    VARIED,
+    _base,
+    base_model,
+    cf_pwv,
+    in_vivo,
+    parameters,
+    patched,
+    plausible_ranges,
+    subject_patch,
+)
 from oxyline.targets import CalibrationError
-from oxyline.populations import (VARIED, _base, base_model, cf_pwv, in_vivo, parameters,
-                                 patched, plausible_ranges, subject_patch)
 
 #: the fitted characteristics, in this order: McEniery 2005's aortic SBP and PP, brachial SBP
 #: and DBP and PP amplification [mmHg, ratio], the subject's cf-PWV [m/s] (the wall law's
