@@ -137,7 +137,7 @@ def calibrated_decades(ages: list[float], subset: int) -> None:
     for age, k, t, sd, b, a in rows:
         print(f"| {age:g} | {k} | {t:.2f} ({sd:.2f}) | {b:.2f} | {a:.2f} |")
     print("\nd PP amplification / d log factor at the start (the baseline subject):")
-    print("| age | " + " | ".join(F.VARIABLES) + " |\n|---" * (len(F.VARIABLES) + 1) + "|")
+    print("| age | " + " | ".join(F.VARIABLES) + " |\n" + "|---" * (len(F.VARIABLES) + 1) + "|")
     for age, j in sens:
         print(f"| {age:g} | " + " | ".join(f"{j[k]:+.3f}" for k in F.VARIABLES) + " |")
     if not subset:
