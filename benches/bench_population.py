@@ -144,7 +144,9 @@ def calibrated_decades(ages: list[float], subset: int) -> None:
         return
     picks = np.linspace(0, len(P.parameters(tuple(ages))) - 1, subset).round().astype(int)
     counts = {}
-    for label, fac in (("population's own", None), ("decade's factors", factors)):
+    arms = {a: {"arm_stiffness": f["arm_stiffness"]} for a, f in factors.items()}
+    for label, fac in (("population's own", None), ("decade's factors", factors),
+                       ("arm stiffness factor alone", arms)):
         c0 = time.process_time()
         pop = F.population(tuple(ages), subjects=picks, factors=fac)
         ex = pop.excluded
