@@ -224,6 +224,7 @@ def calibrate_baseline(age: float, tol: float = 1e-8, xtol: float = 1e-6,
     fit = _Fit(row, target, sigma, {"tol": tol})
     start = np.zeros(len(VARIABLES))
     before, jac0 = fit.evaluate(start)
+    assert jac0 is not None   # evaluate() with its default gradient=True
     res = least_squares(fit.fun, start, jac=fit.jac, method="lm", x_scale=1.0, xtol=xtol,
                         ftol=1e-10, gtol=1e-10, max_nfev=max_evaluations)
     after = fit.evaluate(res.x)[0]
