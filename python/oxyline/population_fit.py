@@ -150,59 +150,49 @@ def targets_of(age: float, row: Mapping[str, float]) -> tuple[np.ndarray, np.nda
 
 @dataclass
 class _Fit:
-    """Residuals and their Jacobian in the log factors, cached per point. scipy asks for the
-    Jacobian only at accepted points: a trial point costs the primal run alone, the adjoint
-    sweeps are run when the Jacobian is asked for."""
+    """Residuals and their Jacobian in the log factors, cached per point. Both come from one
+    run (the primal and the adjoint sweeps): Levenberg-Marquardt accepts nearly every trial
+    point here and then asks for its Jacobian, so a primal-only trial run would be repeated
+    (measured: 47 runs instead of 24 at 25 y, 20 % more CPU time)."""
 
     row: dict[str, float]
     target: np.ndarray
     sigma: np.ndarray
     options: dict[str, Any]
     evaluations: int = 0
-    gradients: int = 0
-    cache: dict[tuple[bytes, bool], tuple[np.ndarray, np.ndarray | None]] = \
-        field(default_factory=dict)
+    cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
 
-    def evaluate(self, theta: np.ndarray, gradient: bool = True
-                 ) -> tuple[np.ndarray, np.ndarray | None]:
-        """The characteristics at ``theta`` and (``gradient``) their Jacobian by the log
-        factors."""
+    def evaluate(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The characteristics at ``theta`` and their Jacobian by the log factors."""
         key = theta.tobytes()
-        if (key, True) in self.cache:
-            return self.cache[(key, True)]
-        if not gradient and (key, False) in self.cache:
-            return self.cache[(key, False)]
+        if key in self.cache:
+            return self.cache[key]
         factors = dict(zip(VARIABLES, np.exp(theta), strict=True))
         model = patched(base_model(), apply_factors(subject_patch(self.row), factors))
         groups = _group_paths(model)
-        paths = [p for g in VARIABLES for p in groups[g]] if gradient else []
-        # many paths, nine outputs: one backward sweep per output (none for the primal)
-        s = exact(model, paths, list(_outputs().values()),
-                  mode="adjoint" if gradient else "forward", **self.options)
+        paths = [p for g in VARIABLES for p in groups[g]]
+        # many paths, nine outputs: one backward sweep per output
+        s = exact(model, paths, list(_outputs().values()), mode="adjoint", **self.options)
         lengths = _path_lengths(model)
+        # d output / d log(path) = d output / d path · path, summed over each group
+        members = np.zeros((len(paths), len(VARIABLES)))
+        start = 0
+        for k, g in enumerate(VARIABLES):
+            members[start:start + len(groups[g]), k] = 1.0
+            start += len(groups[g])
+        jp = s.jacobian * s.parameter_values[None, :]
+        jac = _characteristics_jacobian(s.values, lengths) @ (jp @ members)
+        self.cache = {key: (characteristics(s.values, lengths).real, jac)}
         self.evaluations += 1
-        jac = None
-        if gradient:
-            self.gradients += 1
-            # d output / d log(path) = d output / d path · path, summed over each group
-            members = np.zeros((len(paths), len(VARIABLES)))
-            start = 0
-            for k, g in enumerate(VARIABLES):
-                members[start:start + len(groups[g]), k] = 1.0
-                start += len(groups[g])
-            jp = s.jacobian * s.parameter_values[None, :]
-            jac = _characteristics_jacobian(s.values, lengths) @ (jp @ members)
-        self.cache = {(key, gradient): (characteristics(s.values, lengths).real, jac)}
-        return self.cache[(key, gradient)]
+        return self.cache[key]
 
     def fun(self, theta: np.ndarray) -> np.ndarray:
-        return np.concatenate([(self.evaluate(theta, False)[0] - self.target) / self.sigma,
+        return np.concatenate([(self.evaluate(theta)[0] - self.target) / self.sigma,
                                theta / PRIOR_SIGMA])
 
     def jac(self, theta: np.ndarray) -> np.ndarray:
-        j = self.evaluate(theta)[1]
-        assert j is not None
-        return np.vstack([j / self.sigma[:, None], np.eye(len(theta)) / PRIOR_SIGMA])
+        return np.vstack([self.evaluate(theta)[1] / self.sigma[:, None],
+                          np.eye(len(theta)) / PRIOR_SIGMA])
 
 
 def calibrate_baseline(age: float, tol: float = 1e-8, xtol: float = 1e-6,
@@ -224,7 +214,6 @@ def calibrate_baseline(age: float, tol: float = 1e-8, xtol: float = 1e-6,
     fit = _Fit(row, target, sigma, {"tol": tol})
     start = np.zeros(len(VARIABLES))
     before, jac0 = fit.evaluate(start)
-    assert jac0 is not None   # evaluate() with its default gradient=True
     res = least_squares(fit.fun, start, jac=fit.jac, method="lm", x_scale=1.0, xtol=xtol,
                         ftol=1e-10, gtol=1e-10, max_nfev=max_evaluations)
     after = fit.evaluate(res.x)[0]
@@ -238,8 +227,7 @@ def calibrate_baseline(age: float, tol: float = 1e-8, xtol: float = 1e-6,
             "jacobian": {c: dict(zip(VARIABLES, map(float, jac0[i]), strict=True))
                          for i, c in enumerate(CHARACTERISTICS)},
             "report": {"success": bool(res.success), "message": str(res.message),
-                       "evaluations": fit.evaluations, "gradients": fit.gradients,
-                       "cost": float(res.cost)}}
+                       "evaluations": fit.evaluations, "cost": float(res.cost)}}
 
 
 def apply_factors(patch: Mapping[str, Any], factors: Mapping[str, float]) -> dict[str, Any]:
