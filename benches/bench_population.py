@@ -113,66 +113,55 @@ def compare_starts(patches: list[dict], subset: int) -> None:
               f"periodic state (1e-9) {worst[0]:.1e} ({worst[1]})")
 
 
-#: the characteristics PWDB checks against McEniery 2005, from a subject summary
-def _pwdb_characteristics(s: dict[str, float]) -> dict[str, float]:
-    pp_b = s["brachial_sbp"] - s["brachial_dbp"]
-    pp_a = s["aortic_root_sbp"] - s["aortic_root_dbp"]
-    return {"brachial_sbp": s["brachial_sbp"], "brachial_dbp": s["brachial_dbp"],
-            "brachial_pp": pp_b, "brachial_map": s["brachial_map"],
-            "aortic_sbp": s["aortic_root_sbp"], "aortic_pp": pp_a, "pp_amplification": pp_b / pp_a}
-
-
 def calibrated_decades(ages: list[float], subset: int) -> None:
-    """Each decade's baseline subject fitted to McEniery 2005 (target, before, after), then
-    ``subset`` subjects spread over the population with their decade's factors: how many of
-    them fall outside PWDB's 99 % plausibility ranges, before and after."""
-    factors = {}
-    rows = []
-    print("\nbaseline subjects fitted to McEniery 2005 (men and women pooled); mmHg, L/min")
+    """Each decade's baseline subject fitted to McEniery 2005 and its cf-PWV target (target,
+    before, after; and what moves the PP amplification: d characteristic / d log factor at
+    the start), then ``subset`` subjects spread over the population without and with their
+    decade's factors: how many fall outside PWDB's 99 % plausibility ranges, each listed
+    with the characteristic and value that failed (PWDB's exclusion rule)."""
+    factors, rows, sens = {}, [], []
+    print("\nbaseline subjects fitted to McEniery 2005 (men and women pooled); mmHg, m/s, L/min")
     for age in ages:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         out = F.calibrate_baseline(age)
         factors[age] = out["factors"]
-        fit = out["fit"]
-        summ = {}
-        for when, model in (("before", F.baseline_subject(age)[1]), ("after", fit.model)):
-            res = oxyline.simulate(model, until_periodic=1e-4, vessels=P.summary_vessels(),
-                                   variables=VARIABLES, progress=False)
-            summ[when] = P.subject_summary(res)["cf_pwv"]
-        print(f"age {age:g}: {time.perf_counter() - t0:.1f} s, {fit.report['evaluations']} "
-              f"evaluations ({fit.report['gradient']}), {fit.report['message']}; factors "
+        rep = out["report"]
+        print(f"age {age:g}: {time.perf_counter() - t0:.1f} s ({time.process_time() - c0:.1f} "
+              f"s CPU), {rep['evaluations']} evaluations, {rep['message']}; factors "
               + ", ".join(f"{k} {v:.3f}" for k, v in out["factors"].items()))
-        for k in ("brachial_sbp", "brachial_dbp", "brachial_pp", "aortic_sbp", "aortic_dbp",
-                  "aortic_pp", "pp_amplification", "co"):
-            rows.append((age, k, out["target"][k], out["before"][k], out["after"][k]))
-        row = F.baseline_subject(age)[0]
-        rows.append((age, "cf_pwv", row["pwv"], summ["before"], summ["after"]))
-    print("\n| age | characteristic | target | before | after |\n|---|---|---|---|---|")
-    for age, k, t, b, a in rows:
-        print(f"| {age:g} | {k} | {t:.2f} | {b:.2f} | {a:.2f} |")
+        for k in F.CHARACTERISTICS:
+            rows.append((age, k, out["target"][k], out["sigma"][k], out["before"][k],
+                         out["after"][k]))
+        sens.append((age, out["jacobian"]["pp_amplification"]))
+    print("\n| age | characteristic | target (SD) | before | after |\n|---|---|---|---|---|")
+    for age, k, t, sd, b, a in rows:
+        print(f"| {age:g} | {k} | {t:.2f} ({sd:.2f}) | {b:.2f} | {a:.2f} |")
+    print("\nd PP amplification / d log factor at the start (the baseline subject):")
+    print("| age | " + " | ".join(F.VARIABLES) + " |\n" + "|---" * (len(F.VARIABLES) + 1) + "|")
+    for age, j in sens:
+        print(f"| {age:g} | " + " | ".join(f"{j[k]:+.3f}" for k in F.VARIABLES) + " |")
     if not subset:
         return
-    table = P.parameters(tuple(ages))
-    patches = P.pwdb_like(tuple(ages))
-    picks = np.linspace(0, len(patches) - 1, subset).round().astype(int)
-    outside = {"before": 0, "after": 0}
-    for i in picks:
-        age = float(table.iloc[i]["age"])
-        ranges = P.plausible_ranges(age)
-        for when, patch in (("before", patches[i]),
-                            ("after", F.apply_factors(patches[i], factors[age]))):
-            res = oxyline.simulate(P.patched(P.base_model(), patch), until_periodic=1e-4,
-                                   vessels=P.summary_vessels(), variables=VARIABLES,
-                                   progress=False)
-            c = _pwdb_characteristics(P.subject_summary(res))
-            bad = [k for k, (lo, hi) in ranges.items() if not lo <= c[k] <= hi]
-            outside[when] += bool(bad)
-            if bad:
-                print(f"  subject {i} (age {age:g}) {when}: outside on "
-                      + ", ".join(f"{k} {c[k]:.2f} ({ranges[k][0]:.2f}-{ranges[k][1]:.2f})"
-                                  for k in bad))
-    print(f"{subset} subjects spread over the population: outside PWDB's 99 % ranges "
-          f"{outside['before']} before, {outside['after']} after the decade's factors")
+    picks = np.linspace(0, len(P.parameters(tuple(ages))) - 1, subset).round().astype(int)
+    counts = {}
+    arms = {a: {"arm_stiffness": f["arm_stiffness"]} for a, f in factors.items()}
+    for label, fac in (("population's own", None), ("decade's factors", factors),
+                       ("arm stiffness factor alone", arms)):
+        c0 = time.process_time()
+        pop = F.population(tuple(ages), subjects=picks, factors=fac)
+        ex = pop.excluded
+        counts[label] = ex["subject"].nunique()
+        print(f"\n{label}: {subset} subjects, {counts[label]} outside PWDB's 99 % ranges "
+              f"({time.process_time() - c0:.0f} s CPU)")
+        for (i, age), grp in ex.groupby(["subject", "age"]):
+            print(f"  subject {i} (age {age:g}): " + ", ".join(
+                f"{r.characteristic} {r.value:.2f} ({r.low:.2f}-{r.high:.2f})"
+                for r in grp.itertuples()))
+        by_age = ex.groupby("age")["subject"].nunique()
+        print("  outside by decade: " + ", ".join(f"{a:g} y {int(by_age.get(a, 0))}"
+                                                  for a in ages))
+    print(f"\n{subset} subjects: outside PWDB's 99 % ranges "
+          + ", ".join(f"{k} {v}" for k, v in counts.items()))
 
 
 def main() -> None:

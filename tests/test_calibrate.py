@@ -152,6 +152,8 @@ def test_bad_input_names_what_is_wrong() -> None:
                           method="trf")
     with pytest.raises(CalibrationError, match="non-finite value nan"):
         oxyline.calibrate(MODEL, {"parent.pressure_in.mean": float("nan")}, list(TRUE))
+    with pytest.raises(CalibrationError, match="ftol: expected a number in \\(0, 1\\), got 0"):
+        oxyline.calibrate(MODEL, good, list(TRUE), ftol=0)
     bad_series = {"d1.flow_out.series": {"value": [1.0, float("inf")], "times": [0.1, 0.2]}}
     with pytest.raises(CalibrationError, match="d1.flow_out.series.*non-finite"):
         oxyline.calibrate(MODEL, bad_series, list(TRUE))

@@ -4,6 +4,8 @@ a subject's patch."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -59,3 +61,111 @@ def test_factors_scale_every_outlet_and_the_inflow() -> None:
                                                                         rel=1e-15)
     assert patch["boundary_conditions"]["n1"]["flow"] is not \
         out["boundary_conditions"]["n1"]["flow"]
+
+
+def test_characteristics_and_their_jacobian_from_known_pressures_and_feet() -> None:
+    """Outputs made from known pressures and root-to-site transit times: the amplification is
+    brachial PP over aortic PP, the cf-PWV the aorta-femoral minus aorta-carotid length over
+    the difference of the mid-site transit times (PWDB's convention), and the complex-step
+    Jacobian equals the analytic one (1e-12: both exact, rounding only)."""
+    mm = 133.322387415
+    lengths = np.array([0.08, 0.15, 0.60, 1.04])          # carotid in/out, femoral in/out
+    times = np.array([0.010, 0.030, 0.070, 0.120])        # root-to-site feet [s]
+    values = np.array([110 * mm, 32 * mm, 122 * mm, 76 * mm, 1e-4, *(lengths / times)])
+    c = dict(zip(F.CHARACTERISTICS, F.characteristics(values, lengths), strict=True))
+    assert c["pp_amplification"] == pytest.approx((122 - 76) / 32, rel=1e-14)
+    cf = ((0.60 + 1.04) / 2 - (0.08 + 0.15) / 2) / ((0.070 + 0.120) / 2 - (0.010 + 0.030) / 2)
+    assert c["cf_pwv"] == pytest.approx(cf, rel=1e-14)
+    assert c["co"] == pytest.approx(6.0, rel=1e-14)
+    jac = F._characteristics_jacobian(values, lengths)
+    amp = F.CHARACTERISTICS.index("pp_amplification")
+    expect = np.zeros(len(values))
+    expect[[1, 2, 3]] = [-(122 - 76) / 32**2 / mm, 1 / 32 / mm, -1 / 32 / mm]
+    np.testing.assert_allclose(jac[amp], expect, rtol=1e-12, atol=1e-20)
+    # d cf / d pwv_k: t_k = L_k / v_k, dt_k / dv_k = -t_k / v_k; d cf / d t = -cf / Δt (±1/2)
+    dt = (0.070 + 0.120) / 2 - (0.010 + 0.030) / 2
+    signs = np.array([-0.5, -0.5, 0.5, 0.5])
+    d_pwv = -cf / dt * signs * (-times / values[5:])
+    np.testing.assert_allclose(jac[F.CHARACTERISTICS.index("cf_pwv"), 5:], d_pwv, rtol=1e-12)
+
+
+def test_stiffness_factors_scale_the_arm_and_aortic_walls_only() -> None:
+    row, _ = F.baseline_subject(55)
+    patch = P.subject_patch(row)
+    out = F.apply_factors(patch, {"arm_stiffness": 1.5, "aortic_stiffness": 0.8})
+    for name, v in patch["vessels"].items():
+        f = 1.5 if ("brachial" in name or "radial" in name or "digital" in name) else \
+            0.8 if name.startswith(("ascending_aorta", "abdominal_aorta", "descending")) \
+            else None
+        if f is None and ("carotid" in name or "femoral" in name or "iliac" in name):
+            f = 1.0
+        if f is not None:
+            assert out["vessels"][name]["youngs_modulus"] == pytest.approx(
+                v["youngs_modulus"] * f, rel=1e-15), name
+    with pytest.raises(ModelError, match="unknown factors.*leg_stiffness"):
+        F.apply_factors(patch, {"leg_stiffness": 1.1})
+
+
+def _summary(amp: float, pp_a: float = 33.0) -> dict[str, float]:
+    """A subject summary with aortic PP ``pp_a`` and amplification ``amp`` around the 45-y
+    means (brachial DBP 77, MAP 94)."""
+    return {"aortic_root_sbp": 78.0 + pp_a, "aortic_root_dbp": 78.0,
+            "brachial_sbp": 77.0 + amp * pp_a, "brachial_dbp": 77.0, "brachial_map": 94.0}
+
+
+def test_implausible_names_the_characteristic_value_and_range() -> None:
+    """Inside every 99 % range: nothing; an amplification of 2.0 at 45 y (range 1.34 ± 2.575
+    x 0.16, up to ~1.76): the one record, with its value and PWDB's range."""
+    assert F.implausible(45, _summary(1.35)) == []
+    bad = F.implausible(45, _summary(2.0))
+    names = [b["characteristic"] for b in bad]
+    assert "pp_amplification" in names
+    rec = bad[names.index("pp_amplification")]
+    lo, hi = P.plausible_ranges(45)["pp_amplification"]
+    assert rec["value"] == pytest.approx(2.0) and (rec["low"], rec["high"]) == (lo, hi)
+    assert rec["value"] > hi
+
+
+def test_population_excludes_the_implausible_and_lists_them() -> None:
+    """PWDB's rule on a stand-in run (no simulation; subjects run in the given order, the
+    2nd and 4th given an implausible amplification): ``plausible_only`` drops exactly those
+    from the table and lists each with its value; without it every subject is kept and the
+    same ones are listed."""
+    picks = [0, 1, 2, 300, 728]
+    high = {picks[1], picks[3]}
+
+    def stand_in() -> Any:
+        calls = iter(range(len(picks)))
+
+        def run(model: dict) -> dict[str, float]:
+            assert model["boundary_conditions"]["n1"]["flow"]   # a subject's model dict
+            return _summary(2.0 if next(calls) in (1, 3) else 1.35)
+        return run
+
+    kept = F.population((45,), subjects=picks, plausible_only=True, run=stand_in())
+    assert set(kept.excluded["subject"]) == high
+    assert list(kept.table.index) == [i for i in picks if i not in high]
+    assert len(kept.summaries) == len(kept.patches) == len(picks) - len(high)
+    amp = kept.excluded[kept.excluded["characteristic"] == "pp_amplification"]
+    np.testing.assert_allclose(amp["value"], 2.0)
+    every = F.population((45,), subjects=picks, run=stand_in())
+    assert len(every.table) == len(picks)
+    assert set(every.excluded["subject"]) == high
+    with pytest.raises(ModelError, match="subject 729"):
+        F.population((45,), subjects=[729], run=stand_in())
+
+
+@pytest.mark.slow
+def test_baseline_fit_brings_amplification_to_the_in_vivo_mean() -> None:
+    """45 y (the baseline's amplification 1.53 against McEniery's 1.34 ± 0.16): after the
+    fit every characteristic is within 0.5 in-vivo SD of its target (the prior lets none be
+    exact), the amplification closer than before, by stiffer arms (the factor with the
+    largest effect on it), and the cardiac output held to 1 %."""
+    out = F.calibrate_baseline(45)
+    for k in F.CHARACTERISTICS:
+        assert abs(out["after"][k] - out["target"][k]) < 0.5 * out["sigma"][k], k
+    amp = "pp_amplification"
+    assert abs(out["after"][amp] - out["target"][amp]) < \
+        0.5 * abs(out["before"][amp] - out["target"][amp])
+    assert out["factors"]["arm_stiffness"] > 1.1
+    assert out["after"]["co"] == pytest.approx(out["target"]["co"], rel=0.01)

@@ -560,7 +560,8 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
               jacobian: str = "exact", posterior: Mapping[str, Any] | None = None,
               steps_per_cycle: int | None = None, tol: float = 1e-12,
               max_cycles: int = 2000, gradient: str = "auto",
-              groups: Mapping[str, Sequence[str]] | None = None) -> CalibrationResult:
+              groups: Mapping[str, Sequence[str]] | None = None,
+              ftol: float = 1e-12) -> CalibrationResult:
     """Fit ``parameters`` (patch paths) of ``model`` to ``targets`` (see
     :func:`oxyline.targets.parse_targets`) by ``scipy.optimize.least_squares`` with the
     core's exact Jacobian: ``method="lm"`` (Levenberg–Marquardt, no bounds) or ``"trf"``
@@ -579,6 +580,11 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
     ``gradient``: how the core computes the exact Jacobian: ``"forward"`` (one tangent per
     parameter), ``"adjoint"`` (one backward sweep per target value, whatever the number of
     parameters) or ``"auto"`` (the adjoint when the parameters outnumber the target values).
+
+    ``xtol`` and ``ftol``: least_squares' relative tolerances on the step and on the cost's
+    decrease. With noisy data the cost's last digits fall slowly (Gauss-Newton converges
+    linearly where the residuals are not zero): an ``ftol`` of 1e-8 stops where a further
+    step would move the parameters by a small fraction of their standard errors.
 
     ``groups`` {name: [paths]}: each name is one more fitted variable, a factor (starting at
     1) on every path of the group at once (their ratios kept: e.g. the wall stiffness of a
@@ -602,6 +608,8 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
     _count("max_evaluations", max_evaluations)
     if isinstance(xtol, bool) or not isinstance(xtol, (int, float)) or not 0.0 < xtol < 1.0:
         raise CalibrationError(f"xtol: expected a number in (0, 1), got {xtol!r}")
+    if isinstance(ftol, bool) or not isinstance(ftol, (int, float)) or not 0.0 < ftol < 1.0:
+        raise CalibrationError(f"ftol: expected a number in (0, 1), got {ftol!r}")
     if method == "bayes":
         return _bayes(model, targets, parameters, bounds, max_evaluations, xtol, jacobian,
                       steps_per_cycle, tol, max_cycles, posterior, gradient, groups)
@@ -616,7 +624,7 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
         fit = least_squares(problem.fun, np.zeros(len(params)),
                             jac=problem.jac if problem.exact else "2-point",
                             bounds=(lo, hi) if method == "trf" else (-np.inf, np.inf),
-                            method=method, x_scale=1.0, xtol=xtol, ftol=1e-12, gtol=1e-12,
+                            method=method, x_scale=1.0, xtol=xtol, ftol=ftol, gtol=1e-12,
                             max_nfev=max_evaluations)
         theta, success = fit.x, bool(fit.success)
         report.update(status=int(fit.status), message=str(fit.message), nfev=int(fit.nfev),

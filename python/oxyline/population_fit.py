@@ -1,11 +1,13 @@
-"""A PWDB-like population's baseline subjects calibrated to in-vivo data (docs/populations.md,
-"Calibration to in-vivo data"): :func:`calibrate_baseline` fits a decade's baseline subject
-of :mod:`oxyline.populations` to McEniery 2005 (:func:`oxyline.populations.in_vivo`) with
-:func:`oxyline.calibrate`, and :func:`apply_factors` carries its factors to any subject.
+"""A PWDB-like population calibrated to in-vivo data (docs/populations.md, "Calibration to
+in-vivo data"): :func:`calibrate_baseline` fits a decade's baseline subject of
+:mod:`oxyline.populations` to McEniery 2005 (:func:`oxyline.populations.in_vivo`) and its
+cf-PWV target with the core's exact sensitivities, :func:`apply_factors` carries the factors
+to any subject, and :func:`population` runs subjects and applies PWDB's exclusion rule (the
+subjects outside the 99 % plausibility ranges listed with the value that failed).
 
 >>> from oxyline import population_fit, populations
 >>> f = {"distal_resistance": 1.1, "proximal_resistance": 1.0, "capacitance": 0.8,
-...      "inflow": 1.0}
+...      "inflow": 1.0, "arm_stiffness": 1.2, "aortic_stiffness": 1.0}
 >>> row, _ = population_fit.baseline_subject(45)
 >>> patch = population_fit.apply_factors(populations.subject_patch(row), f)
 >>> bool(patch["boundary_conditions"]["n11"]["capacitance"] > 0)
@@ -15,35 +17,102 @@ True
 from __future__ import annotations
 
 import copy
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
-from oxyline import pwdb
-from oxyline.calibrate import calibrate
-from oxyline.calibrate import sensitivities as exact
-from oxyline.populations import VARIED, base_model, in_vivo, parameters, patched, subject_patch
+import numpy as np
 
-#: the outputs of the calibration (names of :mod:`oxyline.targets`) and what they measure:
-#: the aortic root (inlet of the ascending aorta) and the brachial site (end of the left
-#: brachial artery, :data:`oxyline.pwdb.SITES`), and the cardiac output
-_OUTPUTS = {"aortic_sbp": "ascending_aorta.pressure_in.max",
-            "aortic_pp": "ascending_aorta.pressure_in.pulse",
-            "brachial_sbp": "left_brachial_artery.pressure_out.max",
-            "brachial_dbp": "left_brachial_artery.pressure_out.min",
-            "co": "cardiac_output"}
-#: the fitted variables: one factor on every outlet's distal resistance, proximal resistance
-#: and capacitance (groups of :func:`oxyline.calibrate`), and the inflow scale
+from oxyline import pwdb
+from oxyline.calibrate import sensitivities as exact
+from oxyline.populations import (
+    VARIED,
+    _base,
+    base_model,
+    cf_pwv,
+    in_vivo,
+    parameters,
+    patched,
+    plausible_ranges,
+    subject_patch,
+)
+from oxyline.targets import CalibrationError
+
+#: the fitted characteristics, in this order: McEniery 2005's aortic SBP and PP, brachial SBP
+#: and DBP and PP amplification [mmHg, ratio], the subject's cf-PWV [m/s] (the wall law's
+#: target, Mattace-Raso 2010) and cardiac output [L/min] (HR x SV)
+CHARACTERISTICS = ("aortic_sbp", "aortic_pp", "brachial_sbp", "brachial_dbp",
+                   "pp_amplification", "cf_pwv", "co")
+#: the outlet groups: one factor on every outlet's distal resistance, proximal resistance
+#: and capacitance
 FACTORS = ("distal_resistance", "proximal_resistance", "capacitance")
+#: the wall-stiffness groups: one factor on the Young's modulus of every vessel whose name
+#: holds one of the words (the arms from the subclavians to the digital arteries; the aorta)
+STIFFNESS = {"arm_stiffness": ("subclavian", "brachial", "radial", "ulnar", "interosseous",
+                               "palmar", "digital"),
+             "aortic_stiffness": ("aort",)}
+#: every fitted variable (a factor, 1 = the population's own value)
+VARIABLES = (*FACTORS, "inflow", *STIFFNESS)
 #: the cardiac output is the subject's own design value (HR x SV): held to 1 %
 CO_SIGMA = 0.01
+#: the prior SD of every log factor: a factor of 2 either way is one SD. The seven
+#: characteristics nearly determine the six factors, and without a prior the fit buys the
+#: last mmHg with unphysical factors (the outlet capacitance x 34 at 45 y); with it, a factor
+#: moves only as far as the in-vivo data ask
+PRIOR_SIGMA = float(np.log(2.0))
 
 
-def characteristics(values: Mapping[str, float]) -> dict[str, float]:
-    """The compared characteristics [mmHg; L/min] from the outputs' values (SI)."""
-    mm = {k: values[k] / pwdb.MMHG for k in _OUTPUTS if k != "co"}
-    pp_b = mm["brachial_sbp"] - mm["brachial_dbp"]
-    return {**mm, "brachial_pp": pp_b, "aortic_dbp": mm["aortic_sbp"] - mm["aortic_pp"],
-            "pp_amplification": pp_b / mm["aortic_pp"], "co": values["co"] * 60000.0}
+def _seg(s: int) -> str:
+    return str(_base()[0][s - 1]["name"])
+
+
+def _outputs() -> dict[str, str]:
+    """The core's outputs the characteristics are made of (names of :mod:`oxyline.targets`):
+    the aortic root (inlet of the ascending aorta), the brachial site (end of the left
+    brachial), the cardiac output, and four pulse-wave velocities from the aortic root to
+    the inlets and outlets of PWDB's carotid and femoral segments (:data:`oxyline.pwdb.SITES`)."""
+    root, brachial = _seg(1), _seg(pwdb.SITES["brachial"][0])
+    return {"aortic_sbp": f"{root}.pressure_in.max", "aortic_pp": f"{root}.pressure_in.pulse",
+            "brachial_sbp": f"{brachial}.pressure_out.max",
+            "brachial_dbp": f"{brachial}.pressure_out.min", "co": "cardiac_output",
+            "carotid_in": f"pwv.{root}.{_seg(pwdb.AORTA_CAROTID[-1])}",
+            "carotid_out": f"pwv.{root}.{_seg(pwdb.CAROTID_SEGMENT)}",
+            "femoral_in": f"pwv.{root}.{_seg(pwdb.AORTA_FEMORAL[-1])}",
+            "femoral_out": f"pwv.{root}.{_seg(pwdb.FEMORAL_SEGMENT)}"}
+
+
+def _path_lengths(model: Mapping[str, Any]) -> np.ndarray:
+    """Lengths [m] from the aortic root to the four pulse-wave sites of :func:`_outputs`."""
+    length = {str(v["name"]): float(v["length"]) for v in model["vessels"]}
+    af, ac = pwdb.AORTA_FEMORAL, pwdb.AORTA_CAROTID
+    to = [sum(length[_seg(s)] for s in path) for path in
+          (ac, (*ac, pwdb.CAROTID_SEGMENT), af, (*af, pwdb.FEMORAL_SEGMENT))]
+    return np.array(to)
+
+
+def characteristics(values: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """The :data:`CHARACTERISTICS` from the values of :func:`_outputs` (SI, in its order) and
+    :func:`_path_lengths`. cf-PWV by PWDB's path convention (aorta-femoral path minus
+    aorta-carotid path) with mid-segment sites: the mean of the inlet and outlet sites'
+    transit times and lengths. Written for complex values too (complex-step derivatives)."""
+    sbp_a, pp_a, sbp_b, dbp_b = (values[k] / pwdb.MMHG for k in range(4))
+    co = values[4] * 60000.0
+    transit = lengths / values[5:9]          # root-to-site foot-to-foot times
+    cf_len = (lengths[2] + lengths[3] - lengths[0] - lengths[1]) / 2
+    cf_time = (transit[2] + transit[3] - transit[0] - transit[1]) / 2
+    return np.array([sbp_a, pp_a, sbp_b, dbp_b, (sbp_b - dbp_b) / pp_a, cf_len / cf_time, co])
+
+
+def _characteristics_jacobian(values: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """d characteristics / d outputs, exact by complex step (the characteristics are
+    rational functions of the outputs)."""
+    h = 1e-30 * np.maximum(np.abs(values), 1e-300)
+    cols = []
+    for k in range(len(values)):
+        z = values.astype(complex)
+        z[k] += 1j * h[k]
+        cols.append(characteristics(z, lengths).imag / h[k])
+    return np.column_stack(cols)
 
 
 def baseline_subject(age: float) -> tuple[dict[str, float], dict[str, Any]]:
@@ -54,49 +123,224 @@ def baseline_subject(age: float) -> tuple[dict[str, float], dict[str, Any]]:
     return row, patched(base_model(), subject_patch(row))
 
 
-def calibrate_baseline(age: float, tol: float = 1e-8, **options: Any) -> dict[str, Any]:
-    """Fit the baseline subject of ``age`` to McEniery 2005 (:func:`in_vivo`): aortic SBP and
-    PP and brachial SBP and DBP weighed by their in-vivo SDs, and the subject's cardiac output
-    (to :data:`CO_SIGMA`), by one factor on all outlets' distal and on all proximal
-    resistances and capacitances and the inflow scale (:func:`oxyline.calibrate`; the wall
-    stiffness stays the wall law's for the subject's cf-PWV). Returns the ``target``,
-    ``before`` and ``after`` :func:`characteristics`, the ``factors`` and the ``fit``."""
-    row, model = baseline_subject(age)
-    stats = in_vivo(age)
-    target = {k: stats[k][0] for k in ("aortic_sbp", "aortic_pp", "brachial_sbp",
-                                       "brachial_dbp")}
-    targets = {_OUTPUTS[k]: {"value": v * pwdb.MMHG, "sigma": stats[k][1] * pwdb.MMHG}
-               for k, v in target.items()}
-    co = float(row["co"]) / 60000.0
-    targets[_OUTPUTS["co"]] = {"value": co, "sigma": CO_SIGMA * co}
+def _group_paths(model: Mapping[str, Any]) -> dict[str, list[str]]:
+    """The model paths each :data:`VARIABLES` factor moves."""
     outlets = [n for n, bc in model["boundary_conditions"].items()
                if str(bc.get("type")) == "rcr"]
-    groups = {f"outlets.{k}": [f"boundary_conditions.{n}.{k}" for n in outlets]
-              for k in FACTORS}
-    # the data are known to ~1 mmHg: a relative step of 1e-6 in the factors is plenty
-    options = {"xtol": 1e-6, **options}
-    fit = calibrate(model, targets, ["scale.inflow"], groups=groups, method="lm", tol=tol,
-                    **options)
-    names = list(_OUTPUTS)
-    before = exact(model, [], [_OUTPUTS[k] for k in names], tol=tol).values
-    after = exact(fit.model, [], [_OUTPUTS[k] for k in names], tol=tol).values
-    target_all = {**{k: v * pwdb.MMHG for k, v in target.items()}, "co": co}
-    return {"age": age, "target": characteristics(target_all),
-            "before": characteristics(dict(zip(names, before, strict=True))),
-            "after": characteristics(dict(zip(names, after, strict=True))),
-            "factors": {**{k: fit.parameters[f"outlets.{k}"] for k in FACTORS},
-                        "inflow": fit.parameters["scale.inflow"]},
-            "fit": fit}
+    out = {k: [f"boundary_conditions.{n}.{k}" for n in outlets] for k in FACTORS}
+    out["inflow"] = ["scale.inflow"]
+    for g, words in STIFFNESS.items():
+        out[g] = [f"vessels.{v['name']}.youngs_modulus" for v in model["vessels"]
+                  if any(w in str(v["name"]) for w in words)]
+    return out
+
+
+def targets_of(age: float, row: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray]:
+    """The :data:`CHARACTERISTICS`' targets and SDs at ``age`` for the subject ``row``:
+    McEniery 2005 (pooled, :func:`in_vivo`); cf-PWV the subject's own target with the half
+    width of its ±1 SD (:func:`oxyline.populations.cf_pwv`); the cardiac output HR x SV to
+    :data:`CO_SIGMA`."""
+    st = in_vivo(age)
+    pwv_sd = (cf_pwv(float(age), float(row["mbp"]), 1.0)
+              - cf_pwv(float(age), float(row["mbp"]), -1.0)) / 2
+    mean = [*(st[k][0] for k in CHARACTERISTICS[:5]), float(row["pwv"]), float(row["co"])]
+    sd = [*(st[k][1] for k in CHARACTERISTICS[:5]), pwv_sd, CO_SIGMA * float(row["co"])]
+    return np.array(mean), np.array(sd)
+
+
+@dataclass
+class _Fit:
+    """Residuals and their Jacobian in the log factors, cached per point. Both come from one
+    run (the primal and the adjoint sweeps): Levenberg-Marquardt accepts nearly every trial
+    point here and then asks for its Jacobian, so a primal-only trial run would be repeated
+    (measured: 47 runs instead of 24 at 25 y, 20 % more CPU time)."""
+
+    row: dict[str, float]
+    target: np.ndarray
+    sigma: np.ndarray
+    options: dict[str, Any]
+    evaluations: int = 0
+    cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+
+    def evaluate(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The characteristics at ``theta`` and their Jacobian by the log factors."""
+        key = theta.tobytes()
+        if key in self.cache:
+            return self.cache[key]
+        factors = dict(zip(VARIABLES, np.exp(theta), strict=True))
+        model = patched(base_model(), apply_factors(subject_patch(self.row), factors))
+        groups = _group_paths(model)
+        paths = [p for g in VARIABLES for p in groups[g]]
+        # many paths, nine outputs: one backward sweep per output
+        s = exact(model, paths, list(_outputs().values()), mode="adjoint", **self.options)
+        lengths = _path_lengths(model)
+        # d output / d log(path) = d output / d path · path, summed over each group
+        members = np.zeros((len(paths), len(VARIABLES)))
+        start = 0
+        for k, g in enumerate(VARIABLES):
+            members[start:start + len(groups[g]), k] = 1.0
+            start += len(groups[g])
+        jp = s.jacobian * s.parameter_values[None, :]
+        jac = _characteristics_jacobian(s.values, lengths) @ (jp @ members)
+        self.cache = {key: (characteristics(s.values, lengths).real, jac)}
+        self.evaluations += 1
+        return self.cache[key]
+
+    def fun(self, theta: np.ndarray) -> np.ndarray:
+        return np.concatenate([(self.evaluate(theta)[0] - self.target) / self.sigma,
+                               theta / PRIOR_SIGMA])
+
+    def jac(self, theta: np.ndarray) -> np.ndarray:
+        return np.vstack([self.evaluate(theta)[1] / self.sigma[:, None],
+                          np.eye(len(theta)) / PRIOR_SIGMA])
+
+
+def calibrate_baseline(age: float, tol: float = 1e-8, xtol: float = 1e-6,
+                       max_evaluations: int = 60) -> dict[str, Any]:
+    """Fit the baseline subject of ``age`` to its :func:`targets_of` (McEniery 2005's aortic
+    SBP and PP, brachial SBP and DBP and PP amplification, the subject's cf-PWV and cardiac
+    output, each weighed by its SD) by one factor on all outlets' distal resistances, one on
+    all proximal resistances, one on all capacitances, the inflow scale, and one factor on
+    the Young's modulus of the arm and one of the aortic vessels (:data:`STIFFNESS`):
+    Levenberg-Marquardt on the log factors with the core's exact adjoint Jacobian and a
+    prior on each log factor (:data:`PRIOR_SIGMA`; the default xtol of 1e-6: the data are
+    known to a few per cent). Returns the ``target``,
+    ``sigma``, ``before`` and ``after`` characteristics (dicts by name), the ``factors``,
+    the ``jacobian`` (d characteristic / d log factor at the start) and the ``report``."""
+    from scipy.optimize import least_squares
+
+    row, _model = baseline_subject(age)
+    target, sigma = targets_of(age, row)
+    fit = _Fit(row, target, sigma, {"tol": tol})
+    start = np.zeros(len(VARIABLES))
+    before, jac0 = fit.evaluate(start)
+    res = least_squares(fit.fun, start, jac=fit.jac, method="lm", x_scale=1.0, xtol=xtol,
+                        ftol=1e-10, gtol=1e-10, max_nfev=max_evaluations)
+    after = fit.evaluate(res.x)[0]
+
+    def named(v: np.ndarray) -> dict[str, float]:
+        return dict(zip(CHARACTERISTICS, map(float, v), strict=True))
+
+    return {"age": age, "target": named(target), "sigma": named(sigma),
+            "before": named(before), "after": named(after),
+            "factors": dict(zip(VARIABLES, map(float, np.exp(res.x)), strict=True)),
+            "jacobian": {c: dict(zip(VARIABLES, map(float, jac0[i]), strict=True))
+                         for i, c in enumerate(CHARACTERISTICS)},
+            "report": {"success": bool(res.success), "message": str(res.message),
+                       "evaluations": fit.evaluations, "cost": float(res.cost)}}
 
 
 def apply_factors(patch: Mapping[str, Any], factors: Mapping[str, float]) -> dict[str, Any]:
     """A subject's patch with a decade's calibrated ``factors`` (:func:`calibrate_baseline`)
-    applied: every outlet's R1, R2 and C and the inflow table's flow scaled."""
+    applied: every outlet's R1, R2 and C, the inflow table's flow and the Young's modulus of
+    the :data:`STIFFNESS` groups' vessels scaled (a factor not given is 1)."""
+    unknown = set(factors) - set(VARIABLES)
+    if unknown:
+        raise CalibrationError(f"apply_factors: unknown factors {sorted(unknown)} (expected "
+                               f"some of {list(VARIABLES)})")
+    f = {k: float(factors.get(k, 1.0)) for k in VARIABLES}
     out = copy.deepcopy(dict(patch))
     for node, bc in out["boundary_conditions"].items():
         if node == pwdb.INLET_NODE:
-            bc["flow"] = [q * factors["inflow"] for q in bc["flow"]]
+            bc["flow"] = [q * f["inflow"] for q in bc["flow"]]
             continue
         for k in FACTORS:
-            bc[k] = bc[k] * factors[k]
+            bc[k] = bc[k] * f[k]
+    for name, v in out.get("vessels", {}).items():
+        for g, words in STIFFNESS.items():
+            if "youngs_modulus" in v and any(w in name for w in words):
+                v["youngs_modulus"] = v["youngs_modulus"] * f[g]
     return out
+
+
+# ------------------------------------------------------------- PWDB's exclusion rule
+
+
+def pwdb_characteristics(summary: Mapping[str, float]) -> dict[str, float]:
+    """The characteristics PWDB checks against McEniery 2005 (those of
+    :func:`oxyline.populations.plausible_ranges`) from a :func:`~oxyline.populations.
+    subject_summary`."""
+    pp_b = summary["brachial_sbp"] - summary["brachial_dbp"]
+    pp_a = summary["aortic_root_sbp"] - summary["aortic_root_dbp"]
+    return {"brachial_sbp": summary["brachial_sbp"], "brachial_dbp": summary["brachial_dbp"],
+            "brachial_pp": pp_b, "brachial_map": summary["brachial_map"],
+            "aortic_sbp": summary["aortic_root_sbp"], "aortic_pp": pp_a,
+            "pp_amplification": pp_b / pp_a}
+
+
+def implausible(age: float, summary: Mapping[str, float]) -> list[dict[str, Any]]:
+    """The characteristics of a subject of ``age`` outside PWDB's 99 % ranges: one record
+    (``characteristic``, ``value``, ``low``, ``high``) each; empty if it is plausible."""
+    c = pwdb_characteristics(summary)
+    return [{"characteristic": k, "value": c[k], "low": lo, "high": hi}
+            for k, (lo, hi) in plausible_ranges(age).items() if not lo <= c[k] <= hi]
+
+
+@dataclass
+class Population:
+    """Subjects run and screened: ``table`` (their :func:`~oxyline.populations.parameters`
+    rows, kept ones only when screened), ``summaries`` (one
+    :func:`~oxyline.populations.subject_summary` per row of ``table``), ``patches``, and
+    ``excluded``: one row per failed characteristic of every excluded subject (``subject``,
+    ``age``, ``characteristic``, ``value``, ``low``, ``high``)."""
+
+    table: Any
+    summaries: Any
+    patches: list[dict[str, Any]]
+    excluded: Any
+
+
+def population(ages: Sequence[float] = (25, 35, 45, 55, 65, 75), levels: int = 3, *,
+               subjects: Sequence[int] | None = None,
+               factors: Mapping[float, Mapping[str, float]] | None = None,
+               plausible_only: bool = False,
+               run: Callable[[dict[str, Any]], Mapping[str, float]] | None = None
+               ) -> Population:
+    """Run the PWDB-like subjects of ``ages`` (``subjects``: their row numbers in
+    :func:`~oxyline.populations.parameters`, default all), with each age's calibrated
+    ``factors`` ({age: factors of :func:`calibrate_baseline`}) if given, and summarise each.
+    ``plausible_only``: PWDB's rule (Charlton et al. 2019), the subjects with a
+    characteristic outside McEniery 2005's 99 % range are excluded from ``table``; whether
+    or not, ``excluded`` lists every subject outside with each characteristic and value that
+    failed. ``run``: model dict -> summary (default: :func:`oxyline.simulate` to periodicity
+    1e-4 and :func:`~oxyline.populations.subject_summary`)."""
+    import pandas as pd
+
+    table = parameters(tuple(ages), levels)
+    picks = list(range(len(table))) if subjects is None else [int(i) for i in subjects]
+    bad_pick = [i for i in picks if not 0 <= i < len(table)]
+    if bad_pick:
+        raise CalibrationError(f"population: subject {bad_pick[0]} is not one of the "
+                               f"{len(table)} subjects of ages {list(ages)}")
+    run = run or _simulate
+    kept, summaries, used, failed = [], [], [], []
+    for i in picks:
+        age = float(table.iloc[i]["age"])
+        patch = subject_patch(table.iloc[i])
+        if factors is not None:
+            if age not in factors:
+                raise CalibrationError(f"population: no calibrated factors for age {age:g} "
+                                       f"(have {sorted(factors)})")
+            patch = apply_factors(patch, factors[age])
+        summary = dict(run(patched(base_model(), patch)))
+        bad = implausible(age, summary)
+        failed += [{"subject": i, "age": age, **b} for b in bad]
+        if plausible_only and bad:
+            continue
+        kept.append(i)
+        summaries.append(summary)
+        used.append(patch)
+    excluded = pd.DataFrame(failed, columns=["subject", "age", "characteristic", "value",
+                                             "low", "high"])
+    return Population(table.iloc[kept], pd.DataFrame(summaries, index=table.index[kept]),
+                      used, excluded)
+
+
+def _simulate(model: dict[str, Any]) -> Mapping[str, float]:
+    import oxyline
+    from oxyline.populations import subject_summary, summary_vessels
+
+    res = oxyline.simulate(model, until_periodic=1e-4, vessels=summary_vessels(),
+                           variables=["pressure_in", "pressure_out", "segment_pressure_in"],
+                           progress=False)
+    return subject_summary(res)
