@@ -108,9 +108,8 @@ impl StepControl {
     /// The next step after an accepted step of `h` with the scaled errors (≤ 1 meets the
     /// tolerance), `err_old` the flow error of the accepted step before it.
     pub fn next(&self, h: f64, flow_err: f64, err_old: f64, species_err: f64) -> f64 {
-        let mut factor = SAFETY
-            * flow_err.max(ERR_FLOOR).powf(-PI_ERR)
-            * err_old.max(ERR_FLOOR).powf(PI_OLD);
+        let mut factor =
+            SAFETY * flow_err.max(ERR_FLOOR).powf(-PI_ERR) * err_old.max(ERR_FLOOR).powf(PI_OLD);
         if species_err > 0.0 {
             factor = factor.min(SAFETY / species_err);
         }
@@ -118,7 +117,11 @@ impl StepControl {
         // (a step that missed a tolerance, kept at the smallest step or a species error
         // judged after the fact, still shrinks)
         let met = flow_err <= 1.0 && species_err <= 1.0;
-        let factor = if met && factor < KEEP_BELOW { 1.0 } else { factor };
+        let factor = if met && factor < KEEP_BELOW {
+            1.0
+        } else {
+            factor
+        };
         (h * factor).clamp(self.h_min, self.h_max)
     }
 

@@ -6,8 +6,7 @@
 use super::coupling::State;
 use crate::circuit::Dae;
 use crate::integrate::adaptive::{
-    StepControl, Tolerances, hermite, local_error_constant, quadratic_extrapolation,
-    rate_shift,
+    StepControl, Tolerances, hermite, local_error_constant, quadratic_extrapolation, rate_shift,
 };
 
 /// The local errors of a forced periodic response's harmonic at ω accumulate over 1/ω
