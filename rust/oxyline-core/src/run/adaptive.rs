@@ -6,8 +6,7 @@
 use super::coupling::State;
 use crate::circuit::Dae;
 use crate::integrate::adaptive::{
-    GROW, SAFETY, StepControl, Tolerances, hermite, local_error_constant, quadratic_extrapolation,
-    rate_shift,
+    StepControl, Tolerances, hermite, local_error_constant, quadratic_extrapolation, rate_shift,
 };
 
 /// The local errors of a forced periodic response's harmonic at ω accumulate over 1/ω
@@ -32,9 +31,6 @@ pub(super) const NO_VESSEL: u32 = u32::MAX;
 
 /// The growth of a flow group's amplitude (relative) that renews the flows' scales.
 const RESCALE: f64 = 0.01;
-
-/// Accepted steps after a rejection during which the step does not grow.
-const HOLD_AFTER_REJECTION: usize = 8;
 
 /// The carried state of an error-controlled run.
 pub(super) struct Adaptive {
@@ -111,10 +107,8 @@ pub(super) struct Adaptive {
     pub estimate: [f64; 4],
     pub steps: usize,
     pub rejected: usize,
-    /// Accepted steps left that may not grow the step (set by a rejection: a rejected growth
-    /// would otherwise be retried at once, the history's uneven spacing being part of the
-    /// error it sees).
-    hold: usize,
+    /// The flow error of the last accepted step (the PI controller's memory).
+    err_old: f64,
     pub h_smallest: f64,
     pub h_largest: f64,
     /// Interpolated (y, ẏ, z) of species output rows (sized on first use).
@@ -242,7 +236,7 @@ impl Adaptive {
             estimate: [0.0; 4],
             steps: 0,
             rejected: 0,
-            hold: 0,
+            err_old: 1.0,
             h_smallest: f64::INFINITY,
             h_largest: 0.0,
             yi: Vec::new(),
@@ -312,12 +306,7 @@ impl Adaptive {
     /// A rejected step (or a failed Newton iteration): the step to try instead.
     pub fn reject(&mut self, h: f64, err: f64) {
         self.rejected += 1;
-        self.hold = HOLD_AFTER_REJECTION;
-        self.h = self
-            .control
-            .next(h, err, 0.0)
-            .min(0.5 * h)
-            .max(self.control.h_min);
+        self.h = self.control.after_rejection(h, err);
     }
 
     /// The scaled error of the flow step of `h` that ended in `y` (≤ 1 meets the tolerances).
@@ -328,18 +317,14 @@ impl Adaptive {
     /// level, so their error does not accumulate: it is the fixed point ρ∞/(1 + ρ∞)² · h² y''/2
     /// of one step's, y'' from the last three states (none at the first step).
     ///
-    /// The filter costs a solve: it is skipped where the unfiltered estimate (a valid, usually
-    /// larger one) already lets the controller take its largest growth (or keep the step while
-    /// a rejection holds it).
+    /// The filter costs a solve (as much as the step's own): it is skipped where the unfiltered
+    /// estimate (a valid, usually larger one) already accepts the step, which is most steps;
+    /// the controller then proposes the next step from that larger estimate (on adan56 at
+    /// rtol 1e-3: 16 % less CPU at the same error).
     fn flow_error(&mut self, st: &mut State<'_, '_>, h: f64) -> FlowError {
         self.local_errors(&st.y, h);
         let raw = self.scaled_errors(&st.y, h);
-        let needless = if self.hold > 0 {
-            SAFETY * SAFETY
-        } else {
-            (SAFETY / GROW).powi(2)
-        };
-        if raw.max <= needless {
+        if raw.max <= 1.0 {
             return raw;
         }
         st.flow.integrator().filter_error(&mut self.le);
@@ -475,9 +460,8 @@ impl Adaptive {
         }
         (self.h2, self.h1) = (self.h1, h);
         self.history += 1;
-        let next = self.control.next(h, flow, species);
-        self.h = if self.hold > 0 { next.min(h) } else { next };
-        self.hold = self.hold.saturating_sub(1);
+        self.h = self.control.next(h, flow, self.err_old, species);
+        self.err_old = flow;
     }
 
     /// Every group's flow amplitude from the flows of `y`, and (when a peak of `y` grew) the
