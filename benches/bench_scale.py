@@ -315,7 +315,8 @@ def row(method: str, config: str, r: dict[str, Any], flow: dict[str, Any] | None
     res = f"{r['residual']:.1e}" if "residual" in r else "–"
     return (f"| {method} | {config} | {r['segments']} | {steps} | {r['load_cpu']:.2f} "
             f"({r['load_wall']:.2f}) | {r['run_cpu']:.2f} ({r['run_wall']:.2f}) | {ns:.1f} | "
-            f"{ns_main} | {r['peak_mb']:.0f} | {ratio} | {ratio_main} | "
+            f"{ns_main} | {r['peak_mb']:.0f} | {r['peak_mb'] * 1048576 / r['segments']:.0f} | "
+            f"{ratio} | {ratio_main} | "
             f"{1e6 * r['load_cpu'] / r['segments']:.2f} | {res} |")
 
 
@@ -397,9 +398,10 @@ def main() -> None:
     copy = copy_ns()
     print(f"STREAM-like copy: {copy:.2f} ns per double (256 MB array, one thread)")
     print("| method | config | segments | steps | load s | run s | ns/seg-step run "
-          "| ns/seg-step main pass | peak MB | O2/flow run | O2/flow step (main pass) "
+          "| ns/seg-step main pass | peak MB | peak B/seg | O2/flow run "
+          "| O2/flow step (main pass) "
           "| load µs/seg | mass residual | threads | wall 1/N | copies/seg-step |")
-    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     rows: dict[tuple[str, str], list[dict[str, Any]]] = {}
     skipped: list[str] = []
     for method in a.methods:

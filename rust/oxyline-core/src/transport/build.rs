@@ -172,7 +172,7 @@ impl Transport {
         let refined = Refined::new(&mut kind, &mut faces, &sources, &m_node);
         let layout = CellLayout::new(&volume, dae, &kind, &m_node, &refined.first_extra);
         let segments = segments(circuit, &face_of_unknown, &shares);
-        let (pieces, seg_pieces) =
+        let (pieces, seg_pieces, sub_walls) =
             wall_pieces(&segments, &m_node, &layout.node_cell, &refined.first_extra);
         let species = species_plans(spec, circuit)?;
         let segment_vessels: Vec<u32> = circuit.segments.iter().map(|s| s.vessel as u32).collect();
@@ -183,8 +183,7 @@ impl Transport {
             &circuit.vessel_names,
             &segments,
             &segment_vessels,
-            &pieces,
-            &seg_pieces,
+            (&pieces, &seg_pieces, &sub_walls),
         )?;
         let (mut out_vessels, out_segments) = output_layout(circuit, probes, &face_of_unknown);
         end_cells(&mut out_vessels, &out_segments, &segments, &kind);
@@ -221,6 +220,7 @@ impl Transport {
             last_sub,
             pieces,
             seg_pieces,
+            sub_walls,
             formulation: spec.formulation,
             v_eps: spec.velocity_threshold,
             out_vessels,
@@ -676,15 +676,17 @@ fn end_cells(
 /// (for a node at the segment's start [x0, x0 + share dx], at its end
 /// [x1 − share dx, x1]) is split into m equal sub-intervals in flow order, with the law
 /// integrated over each (exact for Lévêque's x^{-1/3}, by area for constant laws). Returns
-/// the pieces, contiguous per segment, and the CSR offsets of every segment's pieces.
+/// the pieces, contiguous per segment, the CSR offsets of every segment's pieces and the
+/// walls of the refined pieces (the others read their segment's: `Piece::sub`).
 fn wall_pieces(
     segments: &[Segment],
     m_node: &[usize],
     node_cell: &[usize],
     first_extra: &[usize],
-) -> (Vec<Piece>, Vec<u32>) {
+) -> (Vec<Piece>, Vec<u32>, Vec<SegmentWall>) {
     let mut pieces = Vec::with_capacity(2 * segments.len());
     let mut seg_pieces = Vec::with_capacity(segments.len() + 1);
+    let mut sub_walls = Vec::new();
     seg_pieces.push(0);
     for (j, sg) in segments.iter().enumerate() {
         for (end, (n, share)) in sg.node_shares().into_iter().enumerate() {
@@ -692,16 +694,16 @@ fn wall_pieces(
                 continue;
             }
             let m = m_node[n];
-            let piece = |c: usize, share: f64, wall: SegmentWall| Piece {
+            let piece = |c: usize, share: f64, sub: u32| Piece {
                 seg: j as u32,
                 node: c as u32,
                 cell: node_cell[c] as u32,
+                sub,
                 share,
-                wall,
             };
             if m == 1 {
                 // unrefined: the whole segment's law times the share (as before refinement)
-                pieces.push(piece(n, share, sg.wall));
+                pieces.push(piece(n, share, Piece::OWN_WALL));
                 continue;
             }
             let w = sg.wall;
@@ -724,13 +726,15 @@ fn wall_pieces(
                     x0: xa,
                     x1: xb,
                 };
-                pieces.push(piece(c, 1.0, wall));
+                sub_walls.push(wall);
+                pieces.push(piece(c, 1.0, (sub_walls.len() - 1) as u32));
             }
         }
         seg_pieces.push(pieces.len() as u32);
     }
     pieces.shrink_to_fit();
-    (pieces, seg_pieces)
+    sub_walls.shrink_to_fit();
+    (pieces, seg_pieces, sub_walls)
 }
 
 /// Section-wide settings: at least one species, a finite reference pressure, a valid velocity

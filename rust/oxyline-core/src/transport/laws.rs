@@ -113,7 +113,7 @@ impl Laws {
             let vessel_wall = &sp.walls[vessel];
             if let WallSpec::Flux { flux } = vessel_wall {
                 if has_area(seg) && flux.table().is_some() {
-                    tables.add(vessel, flux, p, piece, index[j]);
+                    tables.add(vessel, flux, (p, piece, plan.piece_wall(piece)), index[j]);
                 }
             }
             let law = if !has_area(seg) || (vessel_wall.needs_mean_flow() && !final_pass) {
@@ -125,7 +125,7 @@ impl Laws {
             } else {
                 let (q_mean, scale) = closure_mean_flow(vessel_wall, j, mean, renewal);
                 vessel_wall.segment_law_scaled(
-                    &piece.wall,
+                    &plan.piece_wall(piece),
                     index[j],
                     sp.diffusivity,
                     q_mean,

@@ -29,6 +29,7 @@ impl Flat for Link {}
 impl Flat for SegmentLaw {}
 impl Flat for HillAnchor {}
 impl Flat for [f64; 3] {}
+impl Flat for SegmentWall {}
 impl Flat for BoundaryLink {}
 impl Flat for Option<f64> {}
 impl Flat for [u32; 3] {}
@@ -76,7 +77,10 @@ impl Plan {
                 self.cell_node.heap() + self.volume_unknown.heap(),
             ),
             ("last_sub", self.last_sub.heap()),
-            ("pieces", self.pieces.heap() + self.seg_pieces.heap()),
+            (
+                "pieces",
+                self.pieces.heap() + self.seg_pieces.heap() + self.sub_walls.heap(),
+            ),
             (
                 "outputs",
                 self.out_vessels.heap() + self.out_segments.heap() + self.segment_vessels.heap(),

@@ -98,13 +98,21 @@ struct Chain {
 }
 
 /// Part of a flow segment's wall seen by one cell: the cell's uptake is share × law(wall).
+/// The wall is the segment's own (`sub == Piece::OWN_WALL`), or for a refined node's
+/// sub-cell the sub-interval `Plan::sub_walls[sub]`: 24 bytes a piece instead of 48 with a
+/// copy of the segment's wall in every piece (`plan::piece_wall`).
 #[derive(Debug, Clone)]
 struct Piece {
     seg: u32,
     node: u32,
     cell: u32,
+    sub: u32,
     share: f64,
-    wall: SegmentWall,
+}
+
+impl Piece {
+    /// `sub` of a piece on its segment's own wall.
+    const OWN_WALL: u32 = u32::MAX;
 }
 
 #[derive(Debug, Clone)]

@@ -222,6 +222,19 @@ pub(super) fn internal_from(internal: &[[u32; 3]], f: u32) -> u32 {
     internal[k][1]
 }
 
+/// The wall of piece `pc`: its segment's own, or its refined sub-interval in `sub_walls`.
+#[inline]
+pub(super) fn piece_wall(
+    segments: &[Segment],
+    sub_walls: &[SegmentWall],
+    pc: &Piece,
+) -> SegmentWall {
+    match sub_walls.get(pc.sub as usize) {
+        Some(&w) => w,
+        None => segments[pc.seg as usize].wall,
+    }
+}
+
 /// Topology, layout and species settings of a transport model; never changed after
 /// `Transport::build`.
 #[derive(Debug)]
@@ -258,6 +271,9 @@ pub struct Plan {
     /// Wall pieces, contiguous per segment (`seg_pieces[j]..seg_pieces[j + 1]`).
     pub(super) pieces: Vec<Piece>,
     pub(super) seg_pieces: Vec<u32>,
+    /// The walls of the pieces of refined nodes' sub-cells (a sub-interval of their
+    /// segment's wall); the other pieces read their segment's (`piece_wall`).
+    pub(super) sub_walls: Vec<SegmentWall>,
     pub(super) formulation: Formulation,
     pub(super) v_eps: f64,
     pub(super) out_vessels: Vec<OutVessel>,
@@ -311,6 +327,12 @@ impl Plan {
     #[inline]
     pub(super) fn node_sources(&self, n: usize) -> &[u32] {
         &self.source_list[self.source_ptr[n] as usize..self.source_ptr[n + 1] as usize]
+    }
+
+    /// The wall of piece `pc` (see [`piece_wall`]).
+    #[inline]
+    pub(super) fn piece_wall(&self, pc: &Piece) -> SegmentWall {
+        piece_wall(&self.segments, &self.sub_walls, pc)
     }
 
     /// Wall pieces of segment `j`.

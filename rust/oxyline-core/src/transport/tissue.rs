@@ -225,8 +225,7 @@ pub(super) fn plans(
     vessel_names: &[String],
     segments: &[Segment],
     segment_vessels: &[u32],
-    pieces: &[Piece],
-    seg_pieces: &[u32],
+    (pieces, seg_pieces, sub_walls): (&[Piece], &[u32], &[SegmentWall]),
 ) -> Result<Vec<Option<TissuePlan>>> {
     if spec
         .species
@@ -240,6 +239,7 @@ pub(super) fn plans(
         segment_vessels,
         pieces,
         seg_pieces,
+        sub_walls,
     };
     spec.species
         .iter()
@@ -253,6 +253,7 @@ struct Geometry<'a> {
     segment_vessels: &'a [u32],
     pieces: &'a [Piece],
     seg_pieces: &'a [u32],
+    sub_walls: &'a [SegmentWall],
 }
 
 /// The tissue wall of one species: its kind per vessel (None: no tissue there), and a radial
@@ -326,7 +327,9 @@ fn species_plan(
             let (h, d, n) = geo_of_kind[k as usize];
             let pieces = geo.seg_pieces[j] as usize..geo.seg_pieces[j + 1] as usize;
             for p in pieces {
-                tp.push_column(p, &geo.pieces[p], k, (h, d, n), developing);
+                let pc = &geo.pieces[p];
+                let wall = piece_wall(geo.segments, geo.sub_walls, pc);
+                tp.push_column(p, (pc, wall), k, (h, d, n), developing);
             }
         }
         tp.seg_cols.push(tp.columns.len() as u32);
@@ -343,12 +346,12 @@ impl TissuePlan {
     fn push_column(
         &mut self,
         p: usize,
-        pc: &Piece,
+        (pc, wall): (&Piece, SegmentWall),
         kind: u32,
         (h, d, n): (f64, f64, usize),
         developing: bool,
     ) {
-        let (ri, len) = (pc.wall.radius, pc.share * (pc.wall.x1 - pc.wall.x0));
+        let (ri, len) = (wall.radius, pc.share * (wall.x1 - wall.x0));
         if !(ri > 0.0 && len > 0.0) {
             return;
         }
@@ -850,14 +853,15 @@ mod tests {
             seg: 0,
             node: 0,
             cell: 0,
+            sub: Piece::OWN_WALL,
             share: 1.0,
-            wall: SegmentWall {
-                radius: ri,
-                x0: 0.0,
-                x1: 1.0,
-            },
         };
-        tp.push_column(0, &piece, 0, (h, d, n), false);
+        let wall = SegmentWall {
+            radius: ri,
+            x0: 0.0,
+            x1: 1.0,
+        };
+        tp.push_column(0, (&piece, wall), 0, (h, d, n), false);
         tp
     }
 

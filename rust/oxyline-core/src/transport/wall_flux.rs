@@ -53,14 +53,13 @@ impl TableBuilder {
         }
     }
 
-    /// Wall piece `p` of `vessel` on segment `index` of the vessel; `flux` holds a table
-    /// (validated: width 1 or the vessel's segment count).
+    /// Wall piece `p` (with its wall) of `vessel` on segment `index` of the vessel; `flux`
+    /// holds a table (validated: width 1 or the vessel's segment count).
     pub(super) fn add(
         &mut self,
         vessel: usize,
         flux: &FluxSpec,
-        p: usize,
-        piece: &Piece,
+        (p, piece, wall): (usize, &Piece, SegmentWall),
         index: usize,
     ) {
         let Some((time, values)) = flux.table() else {
@@ -80,7 +79,7 @@ impl TableBuilder {
             piece: p as u32,
             cell: piece.cell,
             share: piece.share,
-            area: piece.wall.area(),
+            area: wall.area(),
             column: flux.column(index) as u32,
         });
     }
