@@ -30,10 +30,13 @@ def test_result_arrays_are_views_of_the_core_buffer(result: oxyline.Result) -> N
 
 def test_conservation_at_the_junction_and_outlets(result: oxyline.Result) -> None:
     # inverted-L: the junction node stores volume, so parent outflow - daughters' inflow must
-    # average to zero over a periodic cycle (mass conservation), and the inflow mean is the BC's
+    # average to zero over a periodic cycle (mass conservation), and the inflow mean is the BC's.
+    # Tolerance 2e-5 of the cycle's inflow volume: the run is error-controlled at rtol 1e-3
+    # (the default) and its rows are the steps' continuous extension, so the trapezoid of the
+    # rows conserves to the interpolant's error, not to rounding (measured 5.6e-6)
     parent, d1, d2 = (result.vessel(n) for n in ("parent", "daughter1", "daughter2"))
     stored = parent.flow_out - d1.flow_in - d2.flow_in
-    assert abs(np.trapezoid(stored, result.time)) < 1e-6 * np.trapezoid(parent.flow_in, result.time)
+    assert abs(np.trapezoid(stored, result.time)) < 2e-5 * np.trapezoid(parent.flow_in, result.time)
     # (the inflow is an algebraic unknown of the error-controlled default run: held within
     # its rtol 1e-3 of its peak, ~4e-4 of the mean here)
     assert np.trapezoid(parent.flow_in, result.time) == pytest.approx(6.0e-6, rel=1e-3)

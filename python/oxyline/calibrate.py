@@ -573,18 +573,16 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
     bounds; ``posterior`` sets ``walkers`` (default 4 per parameter, at least 8), ``steps``
     (500), ``burn`` (half) and ``seed`` (0). ``samples`` holds the draws after the burn-in.
 
-    ``jacobian="2-point"`` lets scipy estimate the Jacobian by forward differences instead
-    (for comparison: docs/calibration.md, "Cost"; the covariance is still the exact one
-    at the end point).
+    ``jacobian="2-point"``: scipy's forward differences instead, for comparison
+    (docs/calibration.md, "Cost"; the covariance is still the exact one at the end point).
 
     ``gradient``: how the core computes the exact Jacobian: ``"forward"`` (one tangent per
     parameter), ``"adjoint"`` (one backward sweep per target value, whatever the number of
     parameters) or ``"auto"`` (the adjoint when the parameters outnumber the target values).
 
-    ``xtol`` and ``ftol``: least_squares' relative tolerances on the step and on the cost's
-    decrease. With noisy data the cost's last digits fall slowly (Gauss-Newton converges
-    linearly where the residuals are not zero): an ``ftol`` of 1e-8 stops where a further
-    step would move the parameters by a small fraction of their standard errors.
+    ``xtol``, ``ftol``: least_squares' relative tolerances on the step and the cost. With noisy
+    data (Gauss-Newton converges linearly where residuals are not zero) an ``ftol`` of 1e-8
+    stops where a further step moves the parameters by a small fraction of their errors.
 
     ``groups`` {name: [paths]}: each name is one more fitted variable, a factor (starting at
     1) on every path of the group at once (their ratios kept: e.g. the wall stiffness of a
@@ -606,10 +604,10 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
     if method not in ("lm", "trf", "bayes"):
         raise CalibrationError(f"method: expected 'lm', 'trf' or 'bayes', got {method!r}")
     _count("max_evaluations", max_evaluations)
-    if isinstance(xtol, bool) or not isinstance(xtol, (int, float)) or not 0.0 < xtol < 1.0:
-        raise CalibrationError(f"xtol: expected a number in (0, 1), got {xtol!r}")
-    if isinstance(ftol, bool) or not isinstance(ftol, (int, float)) or not 0.0 < ftol < 1.0:
-        raise CalibrationError(f"ftol: expected a number in (0, 1), got {ftol!r}")
+    for key, value in (("xtol", xtol), ("ftol", ftol)):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                or not 0.0 < value < 1.0:
+            raise CalibrationError(f"{key}: expected a number in (0, 1), got {value!r}")
     if method == "bayes":
         return _bayes(model, targets, parameters, bounds, max_evaluations, xtol, jacobian,
                       steps_per_cycle, tol, max_cycles, posterior, gradient, groups)
