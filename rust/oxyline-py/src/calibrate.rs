@@ -47,11 +47,37 @@ pub fn tangent_sensitivities<'py>(
         })
         .map_err(to_py)?;
     let c = out.cycle;
+    let cycle = Cycle {
+        values: out.values,
+        times: c.times,
+        signals: c.values,
+        derivs: c.derivs,
+        cycles: c.cycles,
+        tangent_cycles: c.tangent_cycles,
+        periodic_change: c.periodic_change,
+    };
+    cycle_dict(py, cycle, np, nsig)
+}
+
+/// The periodic cycle's signals and their derivatives, as both tangent bindings return them.
+struct Cycle {
+    values: Vec<f64>,
+    times: Vec<f64>,
+    signals: Vec<f64>,
+    derivs: Vec<f64>,
+    cycles: usize,
+    tangent_cycles: usize,
+    periodic_change: f64,
+}
+
+/// `c` as the dict of the tangent bindings (signals n_steps × n_signals, derivatives
+/// n_params × n_steps × n_signals).
+fn cycle_dict(py: Python<'_>, c: Cycle, np: usize, nsig: usize) -> PyResult<Bound<'_, PyDict>> {
     let nt = c.times.len();
     let d = PyDict::new(py);
-    d.set_item("values", out.values.into_pyarray(py))?;
+    d.set_item("values", c.values.into_pyarray(py))?;
     d.set_item("times", c.times.into_pyarray(py))?;
-    d.set_item("signals", c.values.into_pyarray(py).reshape([nt, nsig])?)?;
+    d.set_item("signals", c.signals.into_pyarray(py).reshape([nt, nsig])?)?;
     d.set_item(
         "derivatives",
         c.derivs.into_pyarray(py).reshape([np, nt, nsig])?,
@@ -97,19 +123,16 @@ pub fn species_sensitivities<'py>(
             species(&spec, &paths, &signals, settings)
         })
         .map_err(to_py)?;
-    let nt = out.times.len();
-    let d = PyDict::new(py);
-    d.set_item("values", out.values.into_pyarray(py))?;
-    d.set_item("times", out.times.into_pyarray(py))?;
-    d.set_item("signals", out.signals.into_pyarray(py).reshape([nt, nsig])?)?;
-    d.set_item(
-        "derivatives",
-        out.derivs.into_pyarray(py).reshape([np, nt, nsig])?,
-    )?;
-    d.set_item("cycles", out.cycles)?;
-    d.set_item("tangent_cycles", out.transport_cycles)?;
-    d.set_item("periodic_change", out.periodic_change)?;
-    Ok(d)
+    let cycle = Cycle {
+        values: out.values,
+        times: out.times,
+        signals: out.signals,
+        derivs: out.derivs,
+        cycles: out.cycles,
+        tangent_cycles: out.transport_cycles,
+        periodic_change: out.periodic_change,
+    };
+    cycle_dict(py, cycle, np, nsig)
 }
 
 /// The gradients of functionals J_f = Σ_kj weights[f, k, j] · signal j after step k of the
