@@ -383,3 +383,17 @@ def test_builtin_adan56_runs() -> None:
     res = oxyline.simulate("adan56", cycles=2, output_every=2e-3)
     p = res.vessel("aortic_arch_I").pressure_in / 133.322
     assert 40 < p.min() < p.max() < 200  # mmHg, a physiological range
+
+
+@pytest.mark.parametrize("n", [2, 7, 9, 129, 310, 1000])
+def test_the_mean_inflow_is_numpys_trapezoid_to_the_bit(n: int) -> None:
+    """The importer's mean inflow is the core's cycle mean (``oxyline_core::model::sum``):
+    the same operations in numpy's pairwise order, so the same bits as
+    ``np.trapezoid(q, t) / (t[-1] - t[0])`` (the independent reference) at sizes on both
+    sides of numpy's 8- and 128-term blocks; a ragged table is a ModelError."""
+    rng = np.random.default_rng(n)
+    t = np.cumsum(rng.uniform(1e-3, 2e-3, n))
+    q = rng.normal(1e-4, 5e-5, n)
+    assert oxyline._core.cycle_mean(t.tolist(), q.tolist()) == np.trapezoid(q, t) / (t[-1] - t[0])
+    with pytest.raises(oxyline.ModelError, match="one value per time"):
+        oxyline._core.cycle_mean(t.tolist(), q[:-1].tolist())

@@ -36,13 +36,12 @@ They were converted with :func:`oxyline.io.openbf.to_native_dict` (default optio
 from __future__ import annotations
 
 import builtins
-import math
 import re
 from collections.abc import Callable
 from importlib import resources
 from typing import Any
 
-from oxyline import examples
+from oxyline import _core, examples
 from oxyline.errors import ModelError
 from oxyline.memory import gc_paused
 from oxyline.model import Model, build_model
@@ -164,9 +163,9 @@ def _compliant_arteries(data: dict[str, Any]) -> dict[str, Any]:
             half = vessels.pop(f"{name}.distal_half")
             v.update({"to": half["to"], "segments": 2, "length": v["length"] + half["length"]})
             arrangement = "pi"
-        # the branches hold the source's C = 2 pi r^3 l / (E h) (Poisson ratio 0): E from C
-        # keeps C exact; the description's E (6 digits) only checks that it is this vessel's
-        exact = 2 * math.pi * v["radius"] ** 3 * v["length"] / (c * h)
+        # the branches hold the source's C (its wall law, Poisson ratio 0): E from C keeps C
+        # exact; the description's E (6 digits) only checks that it is this vessel's
+        exact = _core.circulatory_autogen_youngs_modulus(v["radius"], v["length"], c, h)
         if abs(exact / e - 1.0) > 1e-5:
             raise ModelError(f"whole-body-140 vessel '{name}': its wall branches give "
                              f"E = {exact:g} Pa, its description {e:g} Pa")
@@ -297,6 +296,16 @@ def _shipped_yaml(text: str) -> Any:
             re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
             "-+0123456789.")
     return yaml.load(text, Loader=_LOADER)  # a safe loader with one more resolver
+
+
+def shipped_data(filename: str) -> Any:
+    """A data file shipped in ``oxyline/models_data`` (a built-in parameter set or table).
+
+    >>> import oxyline
+    >>> oxyline.catalogue.shipped_data("closed-loop-o2.yaml")["standard"]["period"]
+    0.8
+    """
+    return _shipped_yaml((resources.files(_DATA) / filename).read_text())
 
 
 def load_dict(name: str) -> dict[str, Any]:

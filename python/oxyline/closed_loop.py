@@ -29,109 +29,24 @@ from typing import Any
 import numpy as np
 
 from oxyline import _core
+from oxyline.catalogue import shipped_data
 from oxyline.errors import ModelError, ResourceError, core_errors
+from oxyline.model import build_model
 from oxyline.units import MMHG
 
 ML_O2: float = _core.ML_O2  # mol per mL O2 (STPD; docs/physics.md: 1 mL = 1/22.414 mmol)
 
-# Resting adult, textbook values (cardiac output 5 L/min at 75 /min; organ shares of the cardiac
-# output and organ VO2 as commonly tabulated for a 70 kg adult at rest, e.g. Guyton & Hall,
-# Textbook of Medical Physiology, "blood flow to different organs"; coronary venous saturation
-# ~40 % follows from the heart's high extraction). Units in the dict: L, L/min, mL/min, mmHg.
-STANDARD: dict[str, Any] = {
-    "name": "closed-loop-o2",
-    "period": 0.8,                       # s (75 beats/min)
-    # the flows: "heart" = a closed-loop heart run (`heart`), "table" = the prescribed
-    # half-sine table of `flow_table`
-    "flows": "heart",
-    # "svzerod-block": svZeroDSolver's ClosedLoopHeartAndPulmonary (`SVZEROD_HEART`);
-    # "two-ventricle": the native chambers and tanh valves of `heart_model`
-    "heart": "svzerod-block",
-    "stressed_volume": 1350.0,           # mL (svzerod-block: 5.0 L/min, see `_block_heart`)
-    "dt": 1e-3,                          # s
-    "cardiac_output": 5.0,               # L/min
-    "ejection_time": 0.3,                # s, both ventricles (half-sine ejection)
-    "blood": {"solubility": 0.003,       # mL O2 dL⁻¹ mmHg⁻¹
-              "hemoglobin": 150.0,       # g/L
-              "hufner": 1.34,            # mL O2 per g Hb
-              "p50": 26.8, "hill_n": 2.7},
-    "lungs": {"alveolar_po2": 100.0,     # mmHg
-              "diffusing_capacity": 21.0,  # mL O2 min⁻¹ mmHg⁻¹ (resting D_LO2)
-              "shunt_fraction": 0.02},   # bronchial + Thebesian venous admixture
-    # volumes (L) of the mixing pools: left/right heart, systemic arteries and veins,
-    # pulmonary arteries and veins
-    "pools": {"left_heart": 0.15, "arteries": 0.75, "veins": 3.0, "right_heart": 0.15,
-              "pulmonary_arteries": 0.15, "pulmonary_veins": 0.3},
-    # organ beds: share of the cardiac output, resting VO2 (mL/min), exchange volume (L);
-    # Michaelis–Menten km (mmHg) for every organ: nearly zero-order above a few mmHg
-    "km": 1.0,
-    "organs": {
-        "brain": {"flow_fraction": 0.15, "vo2": 50.0, "volume": 0.075},
-        "heart": {"flow_fraction": 0.05, "vo2": 29.0, "volume": 0.02},
-        "kidneys": {"flow_fraction": 0.20, "vo2": 18.0, "volume": 0.05},
-        "splanchnic": {"flow_fraction": 0.25, "vo2": 58.0, "volume": 0.3},
-        "muscle": {"flow_fraction": 0.20, "vo2": 50.0, "volume": 0.2},
-        "skin_other": {"flow_fraction": 0.15, "vo2": 45.0, "volume": 0.1},
-    },
-}
-
-# A systemic arterial trunk ("e.g. the bifurcation or the ADAN56 trunk"): the
-# aorta of ADAN56 (ascending, arch, thoracic, abdominal; radii and lengths rounded from
-# models_data/adan56.yaml) with one equivalent artery per organ bed, whose area is the sum of
-# the bed's feeding arteries there (coronaries; carotids + vertebrals; subclavians;
-# celiac + mesenterics; renals; common iliacs). Wall: h = 0.1 r, E 0.25 MPa (ADAN56: 0.225 MPa),
-# which gives the pool model's arterial compliance (~1.5 mL/mmHg with the beds). Lengths and
-# radii in m. The outlets are the organ beds (node = organ name + "_a").
-TREE: dict[str, Any] = {
-    "youngs_modulus": 2.5e5,              # Pa
-    "wall_ratio": 0.1,                    # h / r
-    "max_segment_length": 0.02,           # m (segments per vessel = ceil(length / this))
-    "flow_cycles": 100,                   # tree flow cycles (its RC time ~2.5 cycles)
-    # the tree's wall: Graetz closure (docs/oxygen.md) against a medial PO2 of 60 mmHg
-    # (arterial media ~40–70 mmHg); "none" gives the zero-uptake limit
-    "wall": {"model": "graetz", "po2": 60.0},
-    "vessels": [
-        # name, from, to, length, radius
-        ("aortic_root", "aorta_in", "sinus", 0.02, 0.0145),
-        ("ascending_aorta", "sinus", "arch", 0.04, 0.0145),
-        ("coronary", "sinus", "heart_a", 0.08, 0.0025),
-        ("aortic_arch", "arch", "descending", 0.08, 0.013),
-        ("supra_aortic", "arch", "brain_a", 0.15, 0.0055),
-        ("subclavian", "arch", "skin_other_a", 0.15, 0.0045),
-        ("thoracic_aorta", "descending", "abdominal", 0.2, 0.011),
-        ("visceral", "abdominal", "splanchnic_a", 0.1, 0.0048),
-        ("renal", "abdominal", "kidneys_a", 0.04, 0.0042),
-        ("abdominal_aorta", "abdominal", "bifurcation", 0.12, 0.008),
-        ("iliac", "bifurcation", "muscle_a", 0.3, 0.0062),
-    ],
-}
-
-# svZeroDSolver's ClosedLoopHeartAndPulmonary block (docs/physics.md §1.10) with the parameters
-# of its closedLoopHeart cases (closedLoopHeart_singleVessel / _withCoronaries; Sankaran et al.
-# 2012, Menon et al. 2023), in their units: pressure mmHg, volume mL, time s (elastance mmHg/mL,
-# resistance mmHg s/mL, inductance mmHg s²/mL, capacitance mL/mmHg, K_v 1/mL). Those cases beat
-# at 59 /min (period 1.0169 s); here the block beats at the loop's `period` (75 /min: its
-# activations are fractions of the period) and its start volumes are the cases' own; the
-# stressed blood volume that sets the cardiac output is the systemic veins' start pressure
-# `venous_start_pressure` (mmHg; 5 L/min at rest, see `heart_model`).
-SVZEROD_HEART: dict[str, float] = {
-    "atrial_systole_fraction": 0.40742, "p_wave_divisor": 8.976868,
-    "right_ventricle_elastance": 2.125279, "left_ventricle_elastance": 3.125202,
-    "right_ventricle_rest_volume": 9.424629, "left_ventricle_rest_volume": 5.606007,
-    "pulmonary_valve_inductance": 0.000186865, "pulmonary_valve_resistance": 0.035061704,
-    "tricuspid_inductance": 0.000217032, "tricuspid_resistance": 0.007887459,
-    "mitral_inductance": 0.000351787, "mitral_resistance": 0.005310825,
-    "aortic_valve_resistance": 0.034320234, "aortic_valve_inductance": 0.000110776,
-    "pulmonary_resistance": 0.098865401, "pulmonary_capacitance": 1.090989,
-    "aortic_capacitance": 0.556854,
-    "right_atrium_passive_pressure": 9.22244, "right_atrium_passive_volume_coefficient": 0.004837,
-    "right_atrium_elastance": 0.208858, "right_atrium_rest_volume": 4.848742,
-    "left_atrium_passive_pressure": 9.194992, "left_atrium_passive_volume_coefficient": 0.008067,
-    "left_atrium_elastance": 0.303119, "left_atrium_rest_volume": 9.355754,
-    "initial_right_atrium_volume": 38.43, "initial_right_ventricle_volume": 96.07,
-    "initial_left_atrium_volume": 38.43, "initial_left_ventricle_volume": 96.07,
-    "initial_pulmonary_pressure": 8.0,
-}
+_DATA = shipped_data("closed-loop-o2.yaml")
+#: ``closed-loop-o2``: a resting adult (textbook values; units L, L/min, mL/min, mmHg; each
+#: value's source and unit in ``models_data/closed-loop-o2.yaml``)
+STANDARD: dict[str, Any] = _DATA["standard"]
+#: the systemic arterial trunk of ``closed-loop-o2-tree`` (ADAN56's aorta and one equivalent
+#: artery per organ bed; SI): vessels (name, from, to, length, radius)
+TREE: dict[str, Any] = _DATA["tree"]
+#: svZeroDSolver's ClosedLoopHeartAndPulmonary block (docs/physics.md §1.10) with the
+#: parameters of its closedLoopHeart cases, in their units (mmHg, mL, s: the core converts
+#: them); the block beats at the loop's `period`
+SVZEROD_HEART: dict[str, float] = _DATA["svzerod_heart"]
 
 STANDARD_TREE: dict[str, Any] = {**copy.deepcopy(STANDARD), "name": "closed-loop-o2-tree",
                                  "arteries": "tree", "tree": TREE}
@@ -341,8 +256,6 @@ def heart_spec(p: dict[str, Any]) -> dict[str, Any]:
     (``oxyline_core::transport::closed_loop_heart_series``: on/off valves gated, the shunt
     taking `shunt_fraction` of the lungs' flow), each step's flow the mean of the recorded
     intervals it spans."""
-    from oxyline.model import build_model
-
     return {"model": build_model(heart_model(p)).canonical, "dt": p.get("flow_dt", 1e-3),
             "cycles": 30, "newton_atol": heart_run_options(p).get("newton_atol"),
             "series_of": {"heart": p.get("heart", "two-ventricle"), "organs": list(p["organs"]),
@@ -475,8 +388,6 @@ class ClosedLoopO2Result:
 def _tree_spec(p: dict[str, Any], idx: dict[str, int]) -> dict[str, Any]:
     """The arterial tree of the core's loop: its model's inlet and outlet tables are those of
     the core's heart run."""
-    from oxyline.model import build_model
-
     canonical = build_model(tree_model(p)).canonical
     return {"model": json.dumps(canonical), "inlet": "aorta_in",
             "from": idx["left_heart"], "flow_cycles": int(p["tree"]["flow_cycles"]),

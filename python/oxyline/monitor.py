@@ -13,8 +13,8 @@ few numbers between chunks, not the output), and on every finished variant of
   over the recorded window beyond :data:`BALANCE_RTOL` of the window's throughput (network-wide)
   warns likewise.
 * **``formulation: tl-quasisteady``** (the paper read literally, docs/physics.md §2.7) also
-  reports when the run leaves the range where a quasi-steady line holds (see
-  :func:`quasisteady_validity`).
+  reports when the run leaves the range where a quasi-steady line holds (its criteria in
+  docs/physics.md §2.7; :meth:`Monitor.validity_message`).
 """
 
 from __future__ import annotations
@@ -147,32 +147,6 @@ def _bounds_message(name: str, sp: Any, lo: float, hi: float,
             f"{v * scale:.6g} {unit}, outside the physical range [{lo * scale:.6g}, "
             f"{hi * scale:.6g}] {unit} of its inlet, initial and wall values (maximum "
             f"principle, tolerance {BOUNDS_RTOL:g} of the range)")
-
-
-def check_bounds(result: Any, name: str, spec: Mapping[str, Any]) -> str | None:
-    """Why species ``name`` of ``result`` leaves its maximum-principle range (the worst
-    recorded value), or None."""
-    m = Monitor({"species": [spec]})
-    m.update(result)
-    return m.bounds_messages().get(name)
-
-
-def check_balance(result: Any, name: str) -> str | None:
-    """Why species ``name`` breaks its mass balance by more than BALANCE_RTOL, or None."""
-    m = Monitor({"species": [{"name": name, "inlet": {}}]}, bounds=False)
-    m.update(result)
-    return m.balance_messages().get(name)
-
-
-def quasisteady_validity(result: Any) -> str | None:
-    """Why a ``tl-quasisteady`` run is outside the range where the quasi-steady line holds, or
-    None. Criteria, in order (docs/physics.md §2.7): (1) no flow reversal or near-zero flow
-    (the literal form is singular at v = 0); (2) compliant storage: |Q_in − Q_out| of a vessel
-    ≤ QS_STORAGE |Q| (the literal form has no storage term); (3) |R_i| = |dL_i/dt| ≤
-    QS_TRANSIT_RATE (the segment transit time changes slowly)."""
-    m = Monitor({"species": [], "formulation": "tl-quasisteady"})
-    m.update(result)
-    return m.validity_message()
 
 
 class Monitor:

@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from oxyline import pwdb
+from oxyline.catalogue import shipped_data
 from oxyline.errors import ModelError
 
 MODEL = "pwdb-116"
@@ -489,31 +490,15 @@ def subject_summary(result: Any) -> dict[str, float]:
 
 # ------------------------------------------------------------- calibration to in-vivo data
 
-#: McEniery et al. 2005 (J Am Coll Cardiol 46:1753, the Anglo-Cardiff Collaborative Trial),
-#: Table 1, per decade (mid-ages 15…85 y): (men mean, men SD, women mean, women SD) of brachial
-#: SBP/DBP/PP/MBP, aortic SBP/PP [mmHg] and pulse-pressure amplification (brachial PP over
-#: aortic PP), as PWDB's plausibility check (its export script) holds them; docs/populations.md
-MCENIERY_AGES = (15, 25, 35, 45, 55, 65, 75, 85)
-MCENIERY_N = ((172, 178, 183, 258, 429, 430, 280, 39), (133, 101, 165, 301, 495, 509, 290, 38))
-MCENIERY = {
-    "brachial_sbp": ((123, 124, 123, 125, 125, 126, 127, 130), (10, 10, 9, 9, 9, 9, 9, 8),
-                     (113, 115, 115, 118, 122, 126, 127, 128), (10, 10, 12, 11, 11, 10, 10, 10)),
-    "brachial_dbp": ((73, 75, 77, 79, 79, 78, 76, 75), (8, 10, 9, 9, 9, 9, 9, 8),
-                     (72, 73, 74, 75, 75, 74, 72, 70), (8, 8, 9, 8, 7, 7, 8, 9)),
-    "brachial_pp": ((50, 49, 47, 46, 46, 49, 51, 55), (9, 9, 8, 7, 8, 8, 8, 9),
-                    (41, 43, 41, 43, 46, 51, 54, 57), (8, 7, 9, 9, 9, 8, 9, 11)),
-    "brachial_map": ((88, 89, 92, 95, 95, 94, 93, 92), (8, 8, 8, 7, 7, 7, 7, 8),
-                     (86, 86, 88, 90, 93, 93, 92, 90), (8, 8, 9, 9, 8, 8, 8, 8)),
-    "aortic_sbp": ((103, 105, 109, 113, 115, 117, 118, 120), (8, 8, 9, 9, 9, 9, 9, 8),
-                   (98, 101, 105, 109, 115, 118, 119, 120), (9, 9, 11, 11, 11, 10, 9, 11)),
-    # (women 75 y: 56 as PWDB's script has it, out of line with 49 at 85 y: kept as used)
-    "aortic_pp": ((29, 30, 31, 34, 35, 39, 42, 45), (5, 6, 6, 6, 7, 7, 7, 9),
-                  (25, 27, 30, 33, 38, 43, 56, 49), (6, 7, 8, 8, 8, 8, 8, 12)),
-    "pp_amplification": ((1.72, 1.7, 1.50, 1.39, 1.33, 1.26, 1.24, 1.25),
-                         (0.11, 0.14, 0.18, 0.15, 0.16, 0.13, 0.12, 0.15),
-                         (1.67, 1.59, 1.41, 1.29, 1.22, 1.21, 1.19, 1.18),
-                         (0.15, 0.2, 0.18, 0.15, 0.11, 0.10, 0.10, 0.11)),
-}
+#: McEniery et al. 2005 (J Am Coll Cardiol 46:1753), Table 1 per decade (mid-ages 15…85 y):
+#: (men mean, men SD, women mean, women SD) of each characteristic [mmHg; amplification a
+#: ratio], as PWDB's plausibility check holds them (``models_data/mceniery2005.yaml``,
+#: docs/populations.md)
+_MCENIERY = shipped_data("mceniery2005.yaml")
+MCENIERY_AGES = tuple(_MCENIERY["ages"])
+MCENIERY_N = (tuple(_MCENIERY["n"]["men"]), tuple(_MCENIERY["n"]["women"]))
+MCENIERY = {k: tuple(tuple(v[c]) for c in ("men_mean", "men_sd", "women_mean", "women_sd"))
+            for k, v in _MCENIERY["characteristics"].items()}
 #: PWDB's 99 % plausibility range: mean ± 2.575 SD of the pooled men and women
 Z99 = 2.575
 

@@ -127,16 +127,10 @@ def mynard_systole() -> np.ndarray:
     return q[ZERO_HEAD:LAST_SYSTOLE] * 1e-6
 
 
-def template_lvet() -> float:
-    """Ejection time of the template [s]: from t = 0 to the first zero crossing after the
-    peak (the core's)."""
-    return _core.pwdb_template_lvet(mynard_systole().tolist())
-
-
 def aortic_inflow(hr: float, sv: float, lvet: float) -> tuple[list[float], list[float]]:
     """Aortic root flow table for heart rate ``hr`` [1/min], stroke volume ``sv`` [m^3] and
     ejection time ``lvet`` [s]: the Mynard template's systole stretched in time by
-    lvet / template_lvet(), scaled so that its net volume is ``sv``, zero flow until the period
+    lvet / the template's ejection time, scaled so that its net volume is ``sv``, zero flow until the period
     60/hr (the core's). Returns (time [s], flow [m^3/s]) for a periodic ``linear`` table."""
     return _core.pwdb_aortic_inflow(mynard_systole().tolist(), hr, sv, lvet)
 

@@ -163,28 +163,14 @@ def _put(patch: dict[str, Any], path: Sequence[str], value: Any) -> None:
     node[path[-1]] = value
 
 
-def dotted_patch(row: Mapping[str, Any], vessel_names: Iterable[str], nodes: Iterable[str],
-                 k: int = 0) -> dict[str, Any]:
-    """The patch of one row of dotted-path columns (``vessels.CCA.radius``,
-    ``boundary_conditions.ica_out.resistance``, ``blood.viscosity``, ``scale.resistance``).
-    A vessel or node name may itself contain dots: the longest known name wins. An empty
-    (NaN) cell leaves the base model's value."""
-    names = {"vessels": set(vessel_names), "boundary_conditions": set(nodes)}
-    patch: dict[str, Any] = {}
-    for column, value in row.items():
-        keep, value = _cell(value)
-        if keep:
-            _put(patch, _column_path(column, names, k), value)
-    return patch
-
-
 def frame_patches(frame: Any, vessel_names: Iterable[str], nodes: Iterable[str]
                   ) -> list[dict[str, Any]]:
-    """The patches of a DataFrame's rows (see :func:`dotted_patch`): each column's path is
-    resolved once (not once per cell) and its values read as one list, so a wide frame of
-    many rows (a sensitivity design, a population table) costs the calling thread a dict
-    insertion per cell. The same patches as :func:`dotted_patch` of each row, with the
-    same key order (the columns')."""
+    """The patches of a DataFrame's rows of dotted-path columns (``vessels.CCA.radius``,
+    ``boundary_conditions.ica_out.resistance``, ``blood.viscosity``, ``scale.resistance``; a
+    name may itself contain dots: the longest known name wins; an empty (NaN) cell leaves the
+    base model's value): each column's path is resolved once (not once per cell) and its
+    values read as one list, so a wide frame of many rows (a sensitivity design, a population
+    table) costs the calling thread a dict insertion per cell; keys in the columns' order."""
     names = {"vessels": set(vessel_names), "boundary_conditions": set(nodes)}
     patches: list[dict[str, Any]] = [{} for _ in range(len(frame))]
     for c, column in enumerate(frame.columns):

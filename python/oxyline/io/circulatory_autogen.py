@@ -1,49 +1,15 @@
 """Import circulatory_autogen 0-D networks (``<model>_vessel_array.csv`` + ``<model>_parameters.csv``).
 
 circulatory_autogen (F. Argus et al., https://github.com/FinbarArgus/circulatory_autogen,
-Apache-2.0) generates CellML models from a vessel array: each row is a 0-D *module* whose
-equations are fixed by its ``vessel_type`` and ``BC_type`` (``src/generators/resources/
-module_config.json`` and ``BG_modules.cellml`` upstream). Read from those files:
-
-* geometric modules (``arterial``, ``split_junction``, ``merge_junction``, ``2in2out_junction``)
-  compute, from ``r_0_<name>`` [m], ``l_<name>`` [m], ``E_<name>`` [Pa] and the global ``rho``,
-  ``mu`` and wall law h = r (a e^(b r) + c e^(d r)) (globals ``a_vessel`` ... ``d_vessel``),
-  R = 8 mu l/(pi r^4), I = rho l/(pi r^2), C = 2 pi r^3 l/(E h). This is oxyline's geometric
-  segment with Poisson ratio 0 and the flat inertance profile, so they become geometric vessels
-  (``radius``, ``length``, ``wall_thickness`` = h(r), ``youngs_modulus``, ``poisson_ratio: 0``);
-* the ``BC_type`` fixes where C sits: ``pv`` (``pv_type``, ``pv_split_type``): R-I then C at
-  the distal node = oxyline ``L``; ``vp``: C at the proximal node then R-I = ``inverted-L``;
-  ``vv`` (``vv_type``, ``vv_2in2out_type``): C/2 - R-I - C/2 = ``pi``; ``pp`` (``pp_type``):
-  R/2, I/2 - C - R/2, I/2 (a T), which oxyline has no single-segment form for; it becomes ``pi``
-  with 2 segments (R, I exact; C/4 - C/2 - C/4 instead of 0 - C - 0);
-* ``*_simple`` modules take ``R_<name>``, ``C_<name>``, ``I_<name>`` directly: lumped vessels;
-* ``terminal`` with ``BC_type pp`` (``pp_T_fixed_I_type``): R_T/2 - C_T - R_T/2 to the venous
-  pressure (with a fixed I_T = 1e-6 Pa s^2 m^-3 in each half, dropped: time constant I_T/R_T
-  ~ 1e-15 s). Each terminal becomes a lumped vessel named after it (R_T/2, C_T at its distal
-  node, ``L``) closed by a ``resistance`` outlet R_T/2 to ``venous_pressure``, which is the
-  source circuit exactly and keeps every terminal's flow in the results.
-
-Dropped by default, with the reason: the wall-viscosity resistor R_v = 0.01 s / C in series with
-every capacitor of the stored upstream ``BG_modules.cellml`` (oxyline capacitors have no series
-resistance; R_v does not change mean values, but without it the circuit rings at ~50 Hz:
-``wall_viscosity=True`` keeps it as one dead-end branch per capacitor, as the built-in
-``whole-body-140`` does; see ``docs/models.md``), gravity (``beta_g`` = 0 in the source files) and
-``u_ext`` (0 in the FinalModel except 1e-6 Pa at one terminal; larger values warn), the
-reference pressure ``u_0`` (unused by the linear modules).
-
-The heart, veins and pulmonary circulation are not imported: the arterial tree is fed at the
-aortic root (the inlet of the vessel the ``heart`` module feeds) by a flow waveform. The FinalModel
-has no aortic flow data, so the default is the Mynard & Smolich 2015 aortic flow template
-(``../shared/networks/pwdb/Mynard2015_aortic_flow_template.csv``, as processed by PWDB: systole
-starts at t = 0, late-diastolic samples zeroed), diastole padded with zero flow to the model period
-``T`` and scaled to the cardiac output = the sum of the mean terminal-region flows in
-``<model>_obs_data.json`` (FinalModel: 69.66 mL/s = 4.18 L/min).
-
-The FinalModel's terminal resistances are uncalibrated (1.73 kPa mean aortic pressure at that flow
-instead of the observed 12.0 kPa): ``terminal_resistance_scale="calibrate"`` multiplies every R_T
-by the one factor (7.67) that makes the mean pressure at the observed module equal the observation
-(:func:`calibrate_terminal_resistance_scale`, on the steady resistive solution
-:func:`steady_pressures`, which equals the cycle means of the linear circuit).
+Apache-2.0) generates CellML models from a vessel array whose rows are 0-D modules, each
+module's circuit fixed by its ``vessel_type`` and ``BC_type``. The arterial tree is imported
+(geometric modules as geometric vessels with Poisson ratio 0, ``*_simple`` and terminal
+modules as lumped vessels; the ``BC_type`` picks the arrangement); the heart, veins and lungs
+are replaced by an aortic inflow (the Mynard & Smolich 2015 template by default) scaled to the
+cardiac output of ``<model>_obs_data.json``. The module-by-module mapping, what is dropped and
+why, the inflow and the terminal-resistance calibration (``terminal_resistance_scale=
+"calibrate"``, :func:`calibrate_terminal_resistance_scale`) are in docs/models.md
+("whole-body-140").
 
 >>> from oxyline.io.circulatory_autogen import read_circulatory_autogen  # doctest: +SKIP
 >>> m = read_circulatory_autogen("FinalModel_vessel_array.csv", "FinalModel_parameters.csv",
@@ -148,7 +114,7 @@ def mynard_aortic_flow(template_csv: PathLike, period: float) -> tuple[np.ndarra
 
 
 def _cycle_mean(time: np.ndarray, flow: np.ndarray) -> float:
-    return float(np.trapezoid(flow, time) / (time[-1] - time[0]))
+    return _core.cycle_mean(np.asarray(time, float).tolist(), np.asarray(flow, float).tolist())
 
 
 def cardiac_output_from_obs(obs_data_json: PathLike) -> float:
@@ -346,7 +312,8 @@ def _scaled_inflow(t_in: np.ndarray, q_in: np.ndarray, cardiac_output: float | N
     elif cardiac_output is not None:
         co_source = "given"
     if cardiac_output is not None:
-        q_in = q_in * (float(cardiac_output) / _cycle_mean(t_in, q_in))
+        q_in = np.asarray(_core.circulatory_autogen_inflow(t_in.tolist(), q_in.tolist(),
+                                                          float(cardiac_output)))
     return q_in, co_source
 
 

@@ -1,77 +1,17 @@
 """Import openBF network files (YAML ``network:`` list + inlet ``.dat`` table).
 
-openBF (INSIGNEO, https://github.com/INSIGNEO/openBF) solves the nonlinear 1-D equations. This
-module turns its input into an oxyline native model (a linear R-L-C network, inverted-L segments
-of at most 1 cm by default):
-
-``sn``/``tn``
-    node ids become node names ``n<id>``; node 1 (or the only node that starts vessels and ends
-    none) is the inlet. ``label`` is the vessel name (repeated labels get ``_2``, ``_3``...).
-``L``, ``R0`` or ``Rp``/``Rd``, ``E``, ``h0``
-    length, lumen radius (linear taper), Young's modulus, wall thickness. Without ``h0`` the
-    ADAN/openBF thickness law h = R (0.2802 e^(-5.053 R[cm]) + 0.1324 e^(-0.1114 R[cm])) is used.
-    The Poisson ratio is 0.5, as in openBF, so oxyline's C = 2 pi r^3 (1 - nu^2)/(E h) per unit
-    length equals openBF's tangent compliance dA/dP = 2 A0 / beta' at A = A0
-    (beta' = E h0 / ((1 - nu^2) R0), P = Pext + beta' (sqrt(A/A0) - 1)).
-``Pext``
-    openBF's tube law gives A = A0 at P = Pext. Outlet Windkessels work on the full pressure P
-    and drain to Pout = 0, so ``Pext`` does **not** offset any pressure in a linear model (the
-    openBF reference confirms mean P / mean Q = R1 + R2 at every ADAN56 outlet although
-    Pext = 10 kPa). What it sets is the *operating point*: a linear model must use the radius
-    and compliance of the vessel at the pressure it actually works at. ``linearize`` chooses that
-    pressure: ``"mean"`` (default) solves the steady (mean-flow) network and evaluates every
-    vessel end at its own mean pressure; ``"pext"`` keeps the file's radii (A = A0); a number
-    (Pa) uses that pressure everywhere. At pressure P the tube law gives
-    r = R0 (1 + (P - Pext)/beta') and C' = (2 pi R0^3 (1 - nu^2)/(E h0)) r/R0; the native model
-    gets these radii and a compliance-equivalent wall thickness (so that its thin-wall C equals
-    openBF's tangent compliance integrated over the vessel); the file's values are kept in each
-    vessel's ``description``.
-``gamma_profile``
-    openBF's friction term is 2 (gamma + 2) pi mu Q / A^2 per unit length, i.e.
-    (gamma + 2)/4 times Poiseuille's 8 pi mu Q / A^2 (gamma = 2 is Poiseuille; openBF's default
-    is 2). oxyline's resistance is 8 mu dx/(pi r^4) with the model's blood viscosity, so the
-    model viscosity is mu (gamma + 2)/4. This is exact when all vessels share gamma; with mixed
-    values the most common one is used and a warning names the others. The inertance rho/A is
-    openBF's (flat profile); the convective term is dropped (linear model).
-outlets
-    ``R1``, ``R2``, ``Cc``: three-element Windkessel -> ``rcr`` (proximal R1, C = Cc, distal R2,
-    distal pressure ``Pout``, default 0). ``R1``, ``Cc`` without ``R2``: two-element Windkessel,
-    R1 in parallel with Cc -> ``rcr`` with zero proximal resistance (``wk2="parallel"``). openBF
-    v2 itself does something else: it sets R2 = R1 - Z0 (Z0 = rho c0 / A0, the characteristic
-    impedance of the last cell) and keeps R1 proximal, so its total resistance is 2 R1 - Z0 (the
-    openBF circle-of-Willis reference results show exactly this ratio); ``wk2="openbf"``
-    reproduces it. ``Rt`` (reflection coefficient) outlets raise
-    :class:`oxyline.UnsupportedElement`.
-inlet
-    ``inlet_file`` (two columns: time [s], flow [m^3/s], one cycle): a ``flow`` condition with
-    periodic linear interpolation (openBF's), period = last time. The openBF copy of the ADAN56
-    inflow has two corrupted exponents; it is recognised and repaired with the STARFiSh/pylsewave
-    values (with a warning) unless ``repair_inlet=False``.
-
-``visco-elastic: true``
-    openBF v2's Kelvin-Voigt wall: P = Pext + beta' (sqrt(A/A0) - 1) + Gamma/(A0 sqrt(A)) dA/dt
-    with Gamma = b0 + b1/(2 R0), b0 = 0.6 kg/s, b1 = 1.5e-3 kg m/s (its built-in law, the
-    parameters of Mynard & Smolich 2015), which openBF solves as the momentum diffusion
-    dQ/dt = Cv d2Q/dx2, Cv = Gamma/(rho sqrt(A0)). oxyline's ``wall_viscosity`` eta puts
-    R_v = (eta/E)/C behind each segment's compliance (docs/physics.md section 1.13): the shunt
-    admittance i w C'/(1 + i w tau). Both give the same linear wave number when
-    tau = eta/E = Cv rho C'/A0 = 2 Gamma/(beta' sqrt(A0)), i.e. eta = 2 Gamma (1 - nu^2)/(sqrt(pi)
-    h0) (independent of the linearisation pressure: C' and Gamma/(A0 sqrt(A)) scale alike).
-    Along a taper tau is averaged with the compliance as weight (the rule of a junction, where
-    shares of different tau meet). ``viscoelastic=True`` applies openBF's law to every vessel,
-    ``False`` ignores the key (elastic walls).
-``wall_friction``
-    ``"poiseuille"`` (default: openBF's quasi-steady friction) or ``"womersley"`` (oxyline's
-    frequency-dependent friction and inertia, docs/physics.md section 1.12; not openBF's).
-
-``taper="openbf"`` reproduces another openBF v2 behaviour: its radius along a tapered vessel is
-R0_i = Rp + (Rd - Rp)/(M - 1) * (i - 1) * dx (a per-cell slope multiplied by a length in metres),
-so the vessel keeps R0 ~= Rp over its whole length (the openBF ADAN56 reference areas confirm
-R0 = Rp at x = 0.25...1). The default ``taper="linear"`` uses the file's intent, Rp -> Rd.
-Finally, openBF reads only ``gamma_profile``; a ``gamma profile`` key (with a space, as in the
-shipped circle-of-Willis and in-vitro files) is ignored by openBF. Here it is honoured with a
-warning, unless ``openbf_compat=True``, which selects all of openBF v2's behaviours at once
-(``taper="openbf"``, ``wk2="openbf"``, ``gamma profile`` ignored) to compare with openBF results.
+openBF (INSIGNEO, https://github.com/INSIGNEO/openBF) solves the nonlinear 1-D equations; this
+module turns its input into an oxyline native model (a linear R-L-C network, inverted-L
+segments of at most 1 cm by default). The key-by-key mapping and the reason for each choice
+are in docs/validation.md ("Method" and "Findings"); the tube-law formulas are the core's
+(``oxyline_core::model::openbf``). In short: nodes ``sn``/``tn`` become ``n<id>`` (node 1, or
+the only node that starts vessels and ends none, is the inlet; a repeated ``label`` gets
+``_2``, ``_3``...); ``linearize`` picks the pressure at which each vessel's radius and
+compliance are taken from openBF's tube law (``"mean"``: the steady mean-flow network, the
+default; ``"pext"``: the file's radii; or a pressure in Pa); ``taper``, ``wk2`` and
+``openbf_compat`` choose between the file's intent and what openBF v2 actually computes;
+``viscoelastic`` and ``wall_friction`` pick the wall and friction laws; a corrupted ADAN56
+inflow is repaired unless ``repair_inlet=False``.
 """
 
 from __future__ import annotations
@@ -210,10 +150,10 @@ def _radii(v: Mapping[str, Any], where: str) -> tuple[float, float]:
     return rp, rd
 
 
-def _cells(v: Mapping[str, Any], length: float) -> int:
-    """openBF's number of cells: max(M, 5, ceil(L [mm]))."""
-    m = int(v.get("M", 5)) if not isinstance(v.get("M", 5), bool) else 5
-    return max(m, 5, math.ceil(length * 1e3))
+def _file_cells(v: Mapping[str, Any]) -> float:
+    """The file's ``M`` (openBF's cells; 5 when absent): the core takes max(M, 5, ceil(L mm))."""
+    m = v.get("M", 5)
+    return 5.0 if isinstance(m, bool) else float(int(m))
 
 
 class _Vessel:
@@ -234,9 +174,8 @@ class _Vessel:
             raise ModelError(f"{where}: 'E' must be > 0, got {self.E}")
         rp, rd = _radii(v, where)
         self.rp_file, self.rd_file = rp, rd
-        if taper == "openbf" and rd != rp:
-            m = _cells(v, self.length)
-            rd = rp + (rd - rp) / (m - 1) * self.length  # openBF v2's R0_i at x = L
+        if taper == "openbf" and rd != rp:  # openBF v2's R0_i at x = L (the core's)
+            rd = _core.openbf_taper_distal_radius(rp, rd, self.length, _file_cells(v))
         self.r0 = (rp, rd)
         self.h0_given = _num(v["h0"], where, "h0") if "h0" in v else None
         if self.h0_given is not None and self.h0_given <= 0:
@@ -544,7 +483,7 @@ def to_native_dict(path: PathLike, *, linearize: str | float = "mean", taper: st
     inlet_node = _inlet_node(vessels, p)
     t, q = _inlet_table(data, raw, p, repair_inlet)
     period = float(t[-1] - t[0])
-    q_mean = float(np.trapezoid(q, t) / period)
+    q_mean = _core.cycle_mean(t.tolist(), q.tolist())
     gamma = _gamma(vessels, p)
     mu_eff = _core.openbf_friction_viscosity(mu, gamma)  # openBF's friction 2 (gamma + 2) pi mu
     outlets, terminal_resistance = _outlets(vessels, raw, wk2)

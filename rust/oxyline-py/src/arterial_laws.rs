@@ -5,13 +5,14 @@
 //! (`model::structured_tree::terminal`). A PWDB segment crosses as (inlet node, outlet node,
 //! length, inlet radius, outlet radius).
 
+use crate::errors::ModelError;
 use crate::to_py;
-use oxyline_core::model::openbf;
 use oxyline_core::model::pwdb::beds;
 use oxyline_core::model::pwdb::wall::{self, SitePath};
 use oxyline_core::model::pwdb::{DENSITY, Segment, geometry, inflow};
 use oxyline_core::model::structured_tree::terminal::{self, End, Link};
 use oxyline_core::model::structured_tree::{self as st, Stiffness};
+use oxyline_core::model::{circulatory_autogen, openbf, sum};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyMapping};
 
@@ -133,13 +134,6 @@ pub fn pwdb_check_terminals(geometry: Vec<SegmentRow>) -> PyResult<()> {
     beds::check_terminals(&segments(geometry)).map_err(to_py)
 }
 
-/// Ejection time [s] of the aortic flow template's systole `q` (1 kHz from t = 0).
-#[oxyline_py_guard::guard]
-#[pyfunction]
-pub fn pwdb_template_lvet(q: Vec<f64>) -> PyResult<f64> {
-    inflow::template_lvet(&q).map_err(to_py)
-}
-
 /// The aortic root flow table (time [s], flow [m³/s]) of the template systole `q` for heart
 /// rate `hr` [1/min], stroke volume `sv` [m³] and ejection time `lvet` [s].
 #[oxyline_py_guard::guard]
@@ -245,6 +239,65 @@ pub fn openbf_linearised(
 #[pyfunction]
 pub fn openbf_friction_viscosity(viscosity: f64, gamma_profile: f64) -> f64 {
     openbf::friction_viscosity(viscosity, gamma_profile)
+}
+
+/// The distal radius [m] openBF v2 uses along a tapered vessel (its importer's
+/// `taper="openbf"`): Rp + (Rd − Rp) L / (max(M, 5, ⌈L mm⌉) − 1), `m` the file's `M`.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn openbf_taper_distal_radius(rp: f64, rd: f64, length: f64, m: f64) -> f64 {
+    openbf::taper_quirk_distal_radius(rp, rd, length, m)
+}
+
+/// A table's mean over its span, np.trapezoid(values, time) / (time[-1] − time[0]) in
+/// numpy's summation order (an inflow table's cycle mean).
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn cycle_mean(time: Vec<f64>, values: Vec<f64>) -> PyResult<f64> {
+    same_length(&time, &values)?;
+    Ok(sum::cycle_mean(&time, &values))
+}
+
+/// circulatory_autogen's inflow `flow` [m³/s] scaled so that its cycle mean over `time` is
+/// `cardiac_output` [m³/s].
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn circulatory_autogen_inflow(
+    time: Vec<f64>,
+    flow: Vec<f64>,
+    cardiac_output: f64,
+) -> PyResult<Vec<f64>> {
+    same_length(&time, &flow)?;
+    Ok(circulatory_autogen::inflow_at_cardiac_output(
+        &time,
+        &flow,
+        cardiac_output,
+    ))
+}
+
+/// The Young's modulus [Pa] of circulatory_autogen's wall law C = 2π r³ l/(E h) that gives a
+/// vessel (`radius`, `length`, `thickness` [m]) the capacitance `capacitance` [m³/Pa].
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn circulatory_autogen_youngs_modulus(
+    radius: f64,
+    length: f64,
+    capacitance: f64,
+    thickness: f64,
+) -> f64 {
+    circulatory_autogen::youngs_modulus_of_capacitance(radius, length, capacitance, thickness)
+}
+
+fn same_length(time: &[f64], values: &[f64]) -> PyResult<()> {
+    if time.len() < 2 || time.len() != values.len() {
+        return Err(ModelError::new_err(format!(
+            "a table needs two or more times and one value per time, got {} times and {} \
+             values",
+            time.len(),
+            values.len()
+        )));
+    }
+    Ok(())
 }
 
 /// Wall thickness [m] of openBF's ADAN law at each lumen radius [m].

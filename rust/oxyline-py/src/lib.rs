@@ -100,10 +100,11 @@ fn controlled_bytes(unknowns: usize, species_cells: f64, explicit: bool) -> f64 
 mod _core {
     #[pymodule_export]
     use super::arterial_laws::{
-        murray_radius, openbf_characteristic_impedance, openbf_friction_viscosity,
-        openbf_linearised, openbf_wall_thickness, openbf_wall_viscosity, pwdb_aortic_inflow,
-        pwdb_check_terminals, pwdb_diameter_segments, pwdb_fit_k3, pwdb_outlets,
-        pwdb_subject_geometry, pwdb_template_lvet, pwdb_wall_properties, structured_tree_root,
+        circulatory_autogen_inflow, circulatory_autogen_youngs_modulus, cycle_mean, murray_radius,
+        openbf_characteristic_impedance, openbf_friction_viscosity, openbf_linearised,
+        openbf_taper_distal_radius, openbf_wall_thickness, openbf_wall_viscosity,
+        pwdb_aortic_inflow, pwdb_check_terminals, pwdb_diameter_segments, pwdb_fit_k3,
+        pwdb_outlets, pwdb_subject_geometry, pwdb_wall_properties, structured_tree_root,
         terminal_compartment, thin_wall_compliance, wall_thickness_law,
     };
     #[pymodule_export]

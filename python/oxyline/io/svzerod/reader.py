@@ -1,44 +1,12 @@
-"""svZeroDSolver drop-in: run svZeroDSolver JSON inputs with oxyline's core.
+"""svZeroDSolver reader: an svZeroDSolver JSON configuration (a dict or a path) -> an oxyline
+native model dict and the run settings of the drop-in (:class:`RunSettings`).
 
-:func:`simulate` takes an svZeroDSolver configuration (a dict or a path to a JSON file) and
-returns the same pandas DataFrame as ``svzerod.simulate``: for vessel-based output columns
-``name, time, flow_in, flow_out, pressure_in, pressure_out`` (and ``d_*`` with
-``output_derivative``), rows grouped by vessel in file order; with ``output_variable_based``
-columns ``name, time, y`` (and ``ydot``), rows grouped by svZeroDSolver variable. The frame holds the file's own numbers, as svZeroDSolver's does (the equations are
-unit-agnostic), and names their units in ``df.attrs["units"]``: cgs (cm, dyn/cm², mL/s), the
-svZeroDSolver convention, unless the file has a top-level ``"units": "SI"`` (oxyline's exporter
-writes it; svZeroDSolver ignores it) or ``units="SI"`` is passed. :func:`to_model` (and
-``oxyline.load_model``/``oxyline run`` on such a file) converts to SI like any oxyline model,
-so results, files, the console table and plots are in the units they say. With the default ``method="generalized-alpha"`` the time stepping, the steady
-initialisation and the Newton stopping rule are svZeroDSolver's, so results agree with the
-peer's to round-off.
-
-Every svZeroDSolver element and option (details and measured errors in ``docs/svzerod.md``):
-
-======================================================  ===========  ===================
-Example::
-
-    import oxyline.svzerod as svz
-
-    config = {
-        "simulation_parameters": {"number_of_cardiac_cycles": 2,
-                                  "number_of_time_pts_per_cardiac_cycle": 5},
-        "boundary_conditions": [
-            {"bc_name": "INFLOW", "bc_type": "FLOW", "bc_values": {"Q": [5.0, 5.0], "t": [0.0, 1.0]}},
-            {"bc_name": "OUT", "bc_type": "RESISTANCE", "bc_values": {"R": 100.0, "Pd": 100.0}},
-        ],
-        "vessels": [
-            {"vessel_id": 0, "vessel_name": "aorta", "zero_d_element_type": "BloodVessel",
-             "zero_d_element_values": {"R_poiseuille": 100.0, "C": 1e-4},
-             "boundary_conditions": {"inlet": "INFLOW", "outlet": "OUT"}},
-        ],
-    }
-    df = svz.simulate(config)                 # same frame as svzerod.simulate(config)
-    print(df.round(6).iloc[0].to_dict())
-    # {'name': 'aorta', 'time': 0.0, 'flow_in': 5.0, 'flow_out': 5.0,
-    #  'pressure_in': 1100.0, 'pressure_out': 600.0}
-    df_rk4 = svz.simulate(config, method="rk4")   # explicit RK4, same output times
-    model = svz.to_model(config)              # an oxyline.Model, for oxyline.simulate etc.
+The file's own keys are checked here, so that an error names them as the user wrote them
+(``R_poiseuille``, ``bc_values``, ``t``): the core sees the translated model. Values stay in
+the file's units (cgs unless a top-level ``"units": "SI"`` or ``units="SI"``); the model
+names them and the core converts. Every element and option, the units and measured errors
+against svZeroDSolver: docs/svzerod.md ("What is supported", "Peer cases"); the drop-in
+:func:`oxyline.svzerod.simulate` that runs it: ``io/svzerod/dropin.py``.
 """
 
 from __future__ import annotations

@@ -13,6 +13,7 @@ use std::collections::BTreeMap;
 
 use crate::error::{Error, Result};
 
+pub mod circulatory_autogen;
 pub mod facilitation;
 pub mod native;
 pub mod node;

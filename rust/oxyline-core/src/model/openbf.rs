@@ -52,6 +52,18 @@ pub fn friction_viscosity(viscosity: f64, gamma_profile: f64) -> f64 {
     viscosity * (gamma_profile + 2.0) / 4.0
 }
 
+/// openBF v2's number of cells along a vessel: max(M, 5, ⌈L [mm]⌉), `m` the file's `M`.
+pub fn cells(m: f64, length: f64) -> f64 {
+    m.max(5.0).max((length * 1e3).ceil())
+}
+
+/// The distal radius [m] that openBF v2 actually uses along a tapered vessel: its R₀ at cell
+/// i is Rp + (Rd − Rp) xᵢ/(M − 1) with xᵢ in metres, so at x = L it reaches
+/// Rp + (Rd − Rp) L/(M − 1), not Rd (the importer's `taper="openbf"`; `m` the file's `M`).
+pub fn taper_quirk_distal_radius(rp: f64, rd: f64, length: f64, m: f64) -> f64 {
+    rp + (rd - rp) / (cells(m, length) - 1.0) * length
+}
+
 /// One openBF vessel's wall along x ∈ [0, L]: reference radius R₀ linear from `radius.0`
 /// to `radius.1`, Young's modulus, wall thickness h₀ (None: [`adan_wall_thickness`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -221,6 +233,20 @@ mod tests {
         assert!((h / (3e-4 * s * s) - 1.0).abs() < 1e-14, "{h}");
         // a pressure far below Pext collapses the tube: the lower end pressure is named
         assert_eq!(w.linearised(-1e6, -2e6, 0.0), Err(-2e6));
+    }
+
+    #[test]
+    fn the_taper_quirk_reaches_rd_only_where_l_equals_m_minus_one() {
+        // 10 cells (M = 10 > 5 and > ⌈L mm⌉ = 5): R₀(L) = Rp + (Rd − Rp) L / 9
+        let (rp, rd, l) = (4e-3, 2e-3, 5e-3);
+        assert_eq!(cells(10.0, l), 10.0);
+        assert_eq!(cells(2.0, l), 5.0);
+        assert_eq!(cells(2.0, 0.0123), 13.0);
+        let r = taper_quirk_distal_radius(rp, rd, l, 10.0);
+        // within an ulp of the closed form (the same operations in another order)
+        assert!((r - (4e-3 - 2e-3 * 5e-3 / 9.0)).abs() < 1e-17, "{r}");
+        // a length of M − 1 metres: the file's Rd exactly
+        assert!((taper_quirk_distal_radius(rp, rd, 9.0, 10.0) - rd).abs() < 1e-17);
     }
 
     #[test]
