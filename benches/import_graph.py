@@ -121,6 +121,21 @@ def data_table_lines(tree: ast.Module) -> set[int]:
     return out
 
 
+def formula_sites(tree: ast.Module) -> list[int]:
+    """Lines of code that look like a physics formula: π, a cube or fourth power, a square
+    root, an exponential or a trapezoid integral (the core's job; a hit is a place to look)."""
+    out = []
+    for node in ast.walk(tree):
+        name = (node.attr if isinstance(node, ast.Attribute)
+                else node.func.attr if isinstance(node, ast.Call)
+                and isinstance(node.func, ast.Attribute) else None)
+        power = (isinstance(node, ast.BinOp) and isinstance(node.op, ast.Pow)
+                 and isinstance(node.right, ast.Constant) and node.right.value in (3, 4))
+        if power or name in ("pi", "sqrt", "exp", "trapezoid", "trapz"):
+            out.append(node.lineno)
+    return sorted(set(out))
+
+
 def docstring_lines(tree: ast.Module) -> int:
     n = 0
     for node in ast.walk(tree):
@@ -161,6 +176,7 @@ def main(root: Path) -> None:
         print(f"  {n:4d}  {name}")
     lines: dict[str, int] = {}
     docs = 0
+    formulas: dict[str, list[int]] = {}
     for mod, path in files.items():
         text = path.read_text()
         tree = ast.parse(text, str(path))
@@ -168,9 +184,15 @@ def main(root: Path) -> None:
         lines["data tables"] = lines.get("data tables", 0) + data
         lines[role(mod)] = lines.get(role(mod), 0) + len(text.splitlines()) - data
         docs += docstring_lines(tree)
+        if hits := formula_sites(tree):
+            formulas[mod] = hits
     print(f"lines: {sum(lines.values())} (of them docstrings: {docs})")
     for name, n in sorted(lines.items(), key=lambda x: -x[1]):
         print(f"  {n:6d}  {name}")
+    print(f"lines that look like a formula (pi, x**3, x**4, sqrt, exp, trapezoid): "
+          f"{sum(map(len, formulas.values()))}")
+    for mod, hits in sorted(formulas.items()):
+        print(f"  {mod}: {', '.join(map(str, hits))}")
 
 if __name__ == "__main__":
     main(Path(sys.argv[1] if len(sys.argv) > 1 else "python/oxyline"))
