@@ -236,17 +236,19 @@ mod tests {
     }
 
     #[test]
-    fn the_taper_quirk_reaches_rd_only_where_l_equals_m_minus_one() {
-        // 10 cells (M = 10 > 5 and > ⌈L mm⌉ = 5): R₀(L) = Rp + (Rd − Rp) L / 9
+    fn the_taper_quirk_slope_is_per_cell_times_metres() {
+        // 10 cells (M = 10 > 5 and > ⌈L mm⌉ = 5): R₀(L) = Rp + (Rd − Rp) L / 9, ~Rp
         let (rp, rd, l) = (4e-3, 2e-3, 5e-3);
         assert_eq!(cells(10.0, l), 10.0);
         assert_eq!(cells(2.0, l), 5.0);
         assert_eq!(cells(2.0, 0.0123), 13.0);
-        let r = taper_quirk_distal_radius(rp, rd, l, 10.0);
         // within an ulp of the closed form (the same operations in another order)
+        let r = taper_quirk_distal_radius(rp, rd, l, 10.0);
         assert!((r - (4e-3 - 2e-3 * 5e-3 / 9.0)).abs() < 1e-17, "{r}");
-        // a length of M − 1 metres: the file's Rd exactly
-        assert!((taper_quirk_distal_radius(rp, rd, 9.0, 10.0) - rd).abs() < 1e-17);
+        // a 12.3 mm vessel without M: ⌈12.3⌉ = 13 cells, slope (Rd − Rp)/12 per metre
+        let r = taper_quirk_distal_radius(rp, rd, 0.0123, 5.0);
+        assert!((r - (4e-3 - 2e-3 * 0.0123 / 12.0)).abs() < 1e-17, "{r}");
+        assert!((r - rp).abs() < 1e-2 * (rd - rp).abs());
     }
 
     #[test]
