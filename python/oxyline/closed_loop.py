@@ -2,8 +2,9 @@
 loop"): heart chambers, systemic arteries, organ beds consuming O2, systemic veins and the lungs
 as well-mixed compartments joined by the circulation's flows. The physics (compartments,
 Michaelis–Menten VO2, diffusion-limited lung exchange with Hill binding, the periodic steady
-state) lives in the core (``oxyline_core::transport::closed_loop``); this module holds the
-built-in parameter sets ``closed-loop-o2`` and ``closed-loop-o2-tree``, has the core convert
+state) lives in the core (``oxyline_core::transport::closed_loop``); this module loads the
+built-in parameter sets ``closed-loop-o2`` and ``closed-loop-o2-tree`` (the data file
+``models_data/closed-loop-o2.yaml``), has the core convert
 them to SI (``oxyline_core::transport::closed_loop_params``: compartments, branches, binding,
 organ resistances, the prescribed flow table), builds the closed-loop heart that drives the
 flows and summarises the result.
