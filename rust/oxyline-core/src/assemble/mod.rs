@@ -36,6 +36,13 @@ pub use segments::SegmentRow;
 pub struct Summary {
     pub vessels: usize,
     pub segments: usize,
+    /// Of those, the segments of vessels cut by the `auto` rule (the rest: counts the model
+    /// states, `segments` or `max_length`, and one per lumped element).
+    pub auto_segments: usize,
+    /// The vessels cut by the `auto` rule.
+    pub auto_vessels: usize,
+    /// The `auto` rule's tolerance (None: no vessel is cut by it).
+    pub auto_rtol: Option<f64>,
     pub nodes: usize,
     pub junctions: usize,
     pub inlets: usize,
@@ -196,6 +203,7 @@ impl<'a> Stamping<'a> {
             vessels: spec.vessels.len(),
             nodes: graph.names.len(),
             junctions: graph.junctions(),
+            auto_rtol: auto.map(|rule| rule.rtol),
             ..Default::default()
         };
         Ok(Stamping {
@@ -312,6 +320,10 @@ impl<'a> Stamping<'a> {
             );
         }
         self.summary.segments += segs.len();
+        if self.auto.is_some() && segments::is_auto(spec, v) {
+            self.summary.auto_segments += segs.len();
+            self.summary.auto_vessels += 1;
+        }
         for s in &segs {
             self.summary.total_compliance += s.compliance;
             self.summary.total_volume += s.volume;
