@@ -491,4 +491,38 @@ mod tests {
             (1, 2, 1)
         );
     }
+
+    /// The default segmentation: a compliant geometric vessel that states no `segments` is cut
+    /// by the `auto` rule (more than one segment: a 0.3 m artery at the 10 Hz of a model forced
+    /// by a constant), a lumped one stays one segment, and a model-wide `max_length` (or the
+    /// vessel's own `segments`) keeps the count it states.
+    #[test]
+    fn vessels_that_state_no_segments_are_cut_by_the_auto_rule() {
+        let model = |seg: &str, own: &str| {
+            format!(
+                r#"{{"vessels": [
+                {{"name": "g", "from": "in", "to": "j" {own},
+                 "geometry": {{"length": 0.3, "radius_in": 0.004, "radius_out": 0.004,
+                              "wall_thickness": 4e-4, "youngs_modulus": 4e5}}}},
+                {{"name": "l", "from": "j", "to": "out",
+                 "lumped": {{"resistance": 3e8, "inductance": 3e6, "capacitance": 3e-10}}}}],
+                "boundary_conditions": {{
+                    "in": {{"type": "flow", "flow": {{"kind": "constant", "value": 1e-6}}}},
+                    "out": {{"type": "resistance", "resistance": 1e9}}}} {seg}}}"#
+            )
+        };
+        let counts = |text: String| {
+            let a = parse(&text).unwrap().assemble().unwrap();
+            let per = |v: u32| a.segments.iter().filter(|s| s.vessel == v).count();
+            (per(0), per(1), a.summary.auto_segments, a.summary.auto_rtol)
+        };
+        let (g, l, auto, rtol) = counts(model("", ""));
+        assert!(g > 1 && l == 1 && auto == g, "{g} {l} {auto}");
+        assert_eq!(rtol, Some(super::auto_segments::DEFAULT_RTOL));
+        assert_eq!(
+            counts(model(r#", "max_segment_length": 0.1"#, "")),
+            (3, 1, 0, None)
+        );
+        assert_eq!(counts(model("", r#", "segments": 2"#)), (2, 1, 0, None));
+    }
 }
