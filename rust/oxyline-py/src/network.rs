@@ -179,6 +179,9 @@ impl Network {
         let d = PyDict::new(py);
         d.set_item("vessels", s.vessels)?;
         d.set_item("segments", s.segments)?;
+        d.set_item("auto_segments", s.auto_segments)?;
+        d.set_item("auto_vessels", s.auto_vessels)?;
+        d.set_item("auto_rtol", s.auto_rtol)?;
         d.set_item("nodes", s.nodes)?;
         d.set_item("junctions", s.junctions)?;
         d.set_item("inlets", s.inlets)?;

@@ -36,6 +36,13 @@ pub use segments::SegmentRow;
 pub struct Summary {
     pub vessels: usize,
     pub segments: usize,
+    /// Of those, the segments of vessels cut by the `auto` rule (the rest: counts the model
+    /// states, `segments` or `max_length`, and one per lumped element).
+    pub auto_segments: usize,
+    /// The vessels cut by the `auto` rule.
+    pub auto_vessels: usize,
+    /// The `auto` rule's tolerance (None: no vessel is cut by it).
+    pub auto_rtol: Option<f64>,
     pub nodes: usize,
     pub junctions: usize,
     pub inlets: usize,
@@ -196,6 +203,7 @@ impl<'a> Stamping<'a> {
             vessels: spec.vessels.len(),
             nodes: graph.names.len(),
             junctions: graph.junctions(),
+            auto_rtol: auto.map(|rule| rule.rtol),
             ..Default::default()
         };
         Ok(Stamping {
@@ -312,6 +320,10 @@ impl<'a> Stamping<'a> {
             );
         }
         self.summary.segments += segs.len();
+        if self.auto.is_some() && segments::is_auto(spec, v) {
+            self.summary.auto_segments += segs.len();
+            self.summary.auto_vessels += 1;
+        }
         for s in &segs {
             self.summary.total_compliance += s.compliance;
             self.summary.total_volume += s.volume;
@@ -478,5 +490,39 @@ mod tests {
             (a.summary.inlets, a.summary.outlets, a.summary.junctions),
             (1, 2, 1)
         );
+    }
+
+    /// The default segmentation: a compliant geometric vessel that states no `segments` is cut
+    /// by the `auto` rule (more than one segment: a 0.3 m artery at the 10 Hz of a model forced
+    /// by a constant), a lumped one stays one segment, and a model-wide `max_length` (or the
+    /// vessel's own `segments`) keeps the count it states.
+    #[test]
+    fn vessels_that_state_no_segments_are_cut_by_the_auto_rule() {
+        let model = |seg: &str, own: &str| {
+            format!(
+                r#"{{"vessels": [
+                {{"name": "g", "from": "in", "to": "j" {own},
+                 "geometry": {{"length": 0.3, "radius_in": 0.004, "radius_out": 0.004,
+                              "wall_thickness": 4e-4, "youngs_modulus": 4e5}}}},
+                {{"name": "l", "from": "j", "to": "out",
+                 "lumped": {{"resistance": 3e8, "inductance": 3e6, "capacitance": 3e-10}}}}],
+                "boundary_conditions": {{
+                    "in": {{"type": "flow", "flow": {{"kind": "constant", "value": 1e-6}}}},
+                    "out": {{"type": "resistance", "resistance": 1e9}}}} {seg}}}"#
+            )
+        };
+        let counts = |text: String| {
+            let a = parse(&text).unwrap().assemble().unwrap();
+            let per = |v: u32| a.segments.iter().filter(|s| s.vessel == v).count();
+            (per(0), per(1), a.summary.auto_segments, a.summary.auto_rtol)
+        };
+        let (g, l, auto, rtol) = counts(model("", ""));
+        assert!(g > 1 && l == 1 && auto == g, "{g} {l} {auto}");
+        assert_eq!(rtol, Some(super::auto_segments::DEFAULT_RTOL));
+        assert_eq!(
+            counts(model(r#", "max_segment_length": 0.1"#, "")),
+            (3, 1, 0, None)
+        );
+        assert_eq!(counts(model("", r#", "segments": 2"#)), (2, 1, 0, None));
     }
 }

@@ -66,11 +66,13 @@ pub(crate) fn count(spec: &NetworkSpec, v: &VesselSpec, auto: Option<&AutoRule>)
     .max(1)
 }
 
-/// Whether vessel `v` is cut by the `auto` rule: its own `segments: auto`, or the model's
-/// for a geometric vessel without its own `segments` (a lumped vessel is an element its
-/// author sized, split only when it says `segments: auto` itself).
+/// Whether vessel `v` is cut by the `auto` rule: its own `segments: auto`, else any geometric
+/// vessel without its own `segments` unless the model gives a `max_length` (the default, as
+/// `segmentation: {segments: auto}` says explicitly). A lumped vessel is an element its author
+/// sized (svZeroDSolver's blocks): split only when it says `segments: auto` itself.
 pub(crate) fn is_auto(spec: &NetworkSpec, v: &VesselSpec) -> bool {
-    v.segments_auto || (spec.segments_auto && v.segments.is_none() && v.geometry.is_some())
+    let by_model = spec.segments_auto || spec.max_segment_length.is_none();
+    v.segments_auto || (by_model && v.segments.is_none() && v.geometry.is_some())
 }
 
 /// The `auto` count of vessel `v` from its whole length's R, L, C (None: a value the
