@@ -29,7 +29,7 @@ const HEART_CHAMBERS: [&str; 4] = [
     "left_ventricle",
 ];
 pub use chamber::chamber_elastance;
-pub use segments::SegmentRow;
+pub use segments::{SegmentRow, arrangement};
 
 /// Summary figures for `oxyline validate`.
 #[derive(Debug, Clone, Default)]
@@ -282,7 +282,7 @@ impl<'a> Stamping<'a> {
     /// to the segment table.
     fn segmented_vessel(&mut self, vi: usize, blood: Blood) -> Result<()> {
         let (spec, v) = (self.spec, &self.spec.vessels[vi]);
-        let arrangement = v.arrangement.unwrap_or(spec.arrangement);
+        let arrangement = segments::arrangement(spec, v);
         let segs = segments::discretise(spec, vi, blood, arrangement, self.auto.as_ref())?;
         let ends = self.graph.vessel_ends[vi];
         let form = v
@@ -524,5 +524,35 @@ mod tests {
             (3, 1, 0, None)
         );
         assert_eq!(counts(model("", r#", "segments": 2"#)), (2, 1, 0, None));
+    }
+
+    /// The arrangement of a vessel that states none: π where the `auto` rule cuts it and the
+    /// model states none either (the π ladder's count is about the square root of the
+    /// inverted-L one at the same tolerance), inverted-L where it states its segments, and a
+    /// stated arrangement (the model's or its own) is kept.
+    #[test]
+    fn auto_vessels_without_a_stated_arrangement_are_pi_ladders() {
+        use crate::model::Arrangement::{InvertedL, L, Pi};
+        let model = |top: &str, own: &str| {
+            format!(
+                r#"{{"vessels": [{{"name": "g", "from": "in", "to": "out" {own},
+                 "geometry": {{"length": 0.3, "radius_in": 0.004, "radius_out": 0.004,
+                              "wall_thickness": 4e-4, "youngs_modulus": 4e5}}}}],
+                "boundary_conditions": {{
+                    "in": {{"type": "flow", "flow": {{"kind": "constant", "value": 1e-6}}}},
+                    "out": {{"type": "resistance", "resistance": 1e9}}}} {top}}}"#
+            )
+        };
+        let of = |top: &str, own: &str| {
+            let spec = parse(&model(top, own)).unwrap();
+            let n = spec.assemble().unwrap().segments.len();
+            (super::segments::arrangement(&spec, &spec.vessels[0]), n)
+        };
+        let (pi, n_pi) = of("", "");
+        let (inv, n_inv) = of(r#", "arrangement": "inverted-L""#, "");
+        assert_eq!((pi, inv), (Pi, InvertedL));
+        assert!(n_pi * n_pi < 4 * n_inv && n_pi > 1, "{n_pi} {n_inv}");
+        assert_eq!(of("", r#", "arrangement": "L""#).0, L);
+        assert_eq!(of("", r#", "segments": 3"#), (InvertedL, 3));
     }
 }

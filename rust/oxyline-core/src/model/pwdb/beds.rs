@@ -208,7 +208,7 @@ fn steady_network(
             density: DENSITY,
             viscosity: VISCOSITY,
         },
-        arrangement: Default::default(),
+        arrangement: None,
         wall_model: Default::default(),
         inertance_profile: Default::default(),
         wall_friction: Default::default(),
