@@ -231,6 +231,39 @@ def test_explicit_one_segment_is_the_single_pi_section() -> None:
         assert s["segments"] == 1 and s["auto_segments"] == 0, arrangement
 
 
+def test_a_model_without_any_key_is_a_pi_ladder_within_rtol_and_one_segment_is_unchanged(
+        ) -> None:
+    """No segmentation and no arrangement key: the tube is cut by the rule in π sections
+    (the order-2 arrangement; the default where nothing is stated) and is within the default
+    rtol of the exact line at every kept harmonic, with fewer segments than the inverted-L
+    ladder the same rule gives when that arrangement is stated (first order: ~the square of
+    the count). An explicit ``segments: 1`` without an arrangement keeps the one inverted-L
+    section (C at the inlet, then R + iωL into Z_T): its closed form to rounding."""
+    bare = without_segmentation(tube("pi", 1e-3))
+    bare.pop("arrangement")
+    f = oxyline.forcing_harmonics(bare)
+    m = oxyline.load_model(bare)
+    n_pi = m.summary()["segments"]
+    assert m.summary()["auto_segments"] == n_pi > 1
+    err = np.abs(oxyline.impedance(m, "in", f) / exact_tube(f) - 1.0).max()
+    assert err <= 1e-3, err
+    # the same count as the π ladder stated explicitly: the arrangement, not the rule, moved
+    assert oxyline.load_model(without_segmentation(tube("pi", 1e-3))).summary()[
+        "segments"] == n_pi
+    n_inv = oxyline.load_model(without_segmentation(tube("inverted-L", 1e-3))).summary()[
+        "segments"]
+    assert n_pi**2 < 4 * n_inv, (n_pi, n_inv)
+    one = {**bare, "vessels": [{**bare["vessels"][0], "segments": 1}]}
+    w = 2 * np.pi * f
+    r = 8 * MU * LENGTH / (np.pi * RADIUS**4)
+    ell = RHO * LENGTH / (np.pi * RADIUS**2)
+    c = 2 * np.pi * RADIUS**3 * 0.75 * LENGTH / (E * H)
+    z_in = 1.0 / (1j * w * c + 1.0 / (r + 1j * w * ell + Z_T))
+    assert oxyline.load_model(one).summary()["auto_segments"] == 0
+    # 1e-9: the core's segment integral of a uniform tube and these products differ in rounding
+    np.testing.assert_allclose(oxyline.impedance(one, "in", f), z_in, rtol=1e-9)
+
+
 def test_the_memory_limit_sees_the_auto_count_before_assembly() -> None:
     """A limit between the bytes of one segment and of the auto count refuses the default
     model (ResourceError naming max_memory) and lets the one-segment model load."""

@@ -59,6 +59,10 @@ pub struct Assembled {
     pub summary: Summary,
     /// Every flow segment of every vessel, in model order (the segment table).
     pub segments: Vec<SegmentRow>,
+    /// Each vessel's arrangement as assembled (stated, or resolved by
+    /// [`segments::arrangement`]), in `circuit.vessel_names` order (a heart element's names
+    /// take its entry's): what a writer of the circuit reads.
+    pub arrangements: Vec<crate::model::Arrangement>,
 }
 
 impl NetworkSpec {
@@ -74,6 +78,8 @@ impl NetworkSpec {
             } else {
                 st.segmented_vessel(vi, blood)?;
             }
+            let a = segments::arrangement(self, &self.vessels[vi]);
+            st.arrangements.resize(st.circuit.vessel_names.len(), a);
         }
         heart::resolve(&mut st.circuit, &st.links.hearts, &st.links.beds)?;
         st.boundary_conditions()?;
@@ -152,6 +158,8 @@ struct Stamping<'a> {
     auto: Option<auto_segments::AutoRule>,
     /// The points and branches of the vessel being stamped (one buffer for all).
     chain: vessel::Chain,
+    /// `Assembled::arrangements`.
+    arrangements: Vec<crate::model::Arrangement>,
 }
 
 impl<'a> Stamping<'a> {
@@ -217,6 +225,7 @@ impl<'a> Stamping<'a> {
             hearts: Vec::new(),
             auto,
             chain: vessel::Chain::default(),
+            arrangements: Vec::with_capacity(spec.vessels.len()),
         })
     }
 
@@ -348,6 +357,7 @@ impl<'a> Stamping<'a> {
     /// The probes moved to DAE unknowns, the valves recorded, storage trimmed.
     fn finish(self) -> Assembled {
         let Stamping {
+            arrangements,
             mut circuit,
             mut probes,
             mut summary,
@@ -372,6 +382,7 @@ impl<'a> Stamping<'a> {
             probes,
             summary,
             segments: table,
+            arrangements,
         }
     }
 }
