@@ -14,7 +14,7 @@ import json
 import os
 import sys
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -377,6 +377,8 @@ def _print_table(model: Any, res: Any, stream: bool, rows: int = 20) -> None:
               f"rejected), dt {s['dt_min']:.2e} to {s['dt_max']:.2e} s; estimated error {est}")
     elif s.get("step_control") is not None:
         print(f"step control: {s['step_control']}: no error estimate")
+    if s.get("segments_total") is not None:
+        print(_segmentation_line(s))
     if s.get("error_estimate_space") is not None:
         print(f"space: the inlet impedance moves {float(s['error_estimate_space']):.1e} "
               "(relative) when every vessel's segments are doubled")
@@ -392,6 +394,17 @@ def _print_table(model: Any, res: Any, stream: bool, rows: int = 20) -> None:
     if more > 0 or hidden:
         print(f"... {more} more vessels" + (f" and {hidden} internal branches (e.g. wall "
                                              "viscosity) not shown" if hidden else ""))
+
+
+def _segmentation_line(s: Mapping[str, Any]) -> str:
+    """How many segments and how they were chosen (run settings or a model summary)."""
+    total, auto = int(s["segments_total"]), int(s["segments_auto"])
+    if auto == 0:
+        return f"segments: {total}, as the model states them"
+    rule = f"by the auto rule (rtol {float(s['segmentation_rtol']):g})"
+    if auto == total:
+        return f"segments: {total}, all {rule}"
+    return f"segments: {total}, {auto} {rule}, {total - auto} as the model states them"
 
 
 def _cmd_plot(args: argparse.Namespace) -> int:
@@ -459,6 +472,9 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     print(f"model            {s['name']}")
     for key in ("vessels", "segments", "nodes", "junctions", "inlets", "outlets", "unknowns"):
         print(f"{key:<17}{s[key]}")
+    from oxyline.run import segmentation_facts
+
+    print(f"{'':<17}{_segmentation_line(segmentation_facts(model))}")
     print(f"total compliance {s['total_compliance']:.4e} m^3/Pa")
     print(_volume_line(model, s["total_volume"]))
     print(f"period           {s['period']} s")

@@ -322,6 +322,19 @@ def _result(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
     )
 
 
+def segmentation_facts(model: Model) -> dict[str, Any]:
+    """How the model's vessels were cut (recorded with a result, printed by the CLI):
+    ``segments_total``, ``segments_auto`` (those of vessels cut by the ``auto`` rule, the
+    default where a vessel states no ``segments`` and the model no ``max_length``),
+    ``segmentation`` ("auto", "explicit" or "auto+explicit") and the rule's
+    ``segmentation_rtol`` (None when no vessel is cut by it)."""
+    s = model.network.summary()
+    total, auto = int(s["segments"]), int(s["auto_segments"])
+    how = "explicit" if auto == 0 else "auto" if auto == total else "auto+explicit"
+    return {"segments_total": total, "segments_auto": auto, "segmentation": how,
+            "segmentation_rtol": s["auto_rtol"]}
+
+
 def _run_settings(s: Mapping[str, Any], raw: Mapping[str, Any] | None,
                   valves: bool = False) -> dict[str, Any]:
     """The settings recorded with a result: the requested ones and, after the run, its facts
@@ -530,7 +543,8 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
                 from None
         raise
     extra = _split_heart_columns(raw, len(heart[2]))
-    result = _result(model, s, raw, _run_settings(s, raw, bool(heart[1])),
+    result = _result(model, s, raw,
+                     {**_run_settings(s, raw, bool(heart[1])), **segmentation_facts(model)},
                      complete="error" not in raw)
     if extra is not None:
         result.chamber_volume, result.valve_status = _heart_outputs(heart, extra)
@@ -799,7 +813,7 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     except BaseException:
         store.remove()  # refused before the first step (e.g. an unstable dt): no output at all
         raise
-    facts: dict[str, Any] = {}
+    facts: dict[str, Any] = segmentation_facts(model)
     if space and "error" not in raw:  # the estimate is a store attribute, as in a NetCDF file
         from oxyline.convergence import inlet_space_error
 

@@ -179,6 +179,9 @@ impl Network {
         let d = PyDict::new(py);
         d.set_item("vessels", s.vessels)?;
         d.set_item("segments", s.segments)?;
+        d.set_item("auto_segments", s.auto_segments)?;
+        d.set_item("auto_vessels", s.auto_vessels)?;
+        d.set_item("auto_rtol", s.auto_rtol)?;
         d.set_item("nodes", s.nodes)?;
         d.set_item("junctions", s.junctions)?;
         d.set_item("inlets", s.inlets)?;
@@ -271,6 +274,17 @@ impl Network {
         };
         let d = PyDict::new(py);
         d.set_item("vessel_names", a.circuit.vessel_names.clone())?;
+        // per vessel: the arrangement its segments were stamped in (stated or resolved)
+        let arrangement = |x: &oxyline_core::model::Arrangement| match x {
+            oxyline_core::model::Arrangement::InvertedL => "inverted-L",
+            oxyline_core::model::Arrangement::L => "L",
+            oxyline_core::model::Arrangement::Pi => "pi",
+            oxyline_core::model::Arrangement::Rcl => "RCL",
+        };
+        d.set_item(
+            "vessel_arrangements",
+            a.arrangements.iter().map(arrangement).collect::<Vec<_>>(),
+        )?;
         d.set_item(
             "vessel",
             t.iter()

@@ -51,12 +51,15 @@ def vessel_blocks(model: Model) -> dict[str, list[dict[str, float]]]:
     """Per vessel, the svZeroDSolver BloodVessels (SI ``R``, ``C``, ``L``, ``S``, ``length``)
     that reproduce its chain of segments exactly (see the module docstring)."""
     canon = model.canonical
-    default = canon.get("arrangement", "inverted-L")
+    # each vessel's arrangement as the core assembled it (a vessel that states none is a π
+    # ladder where `auto` cut it, else inverted-L: the core's rule, not re-derived here)
+    t = model.network.segment_table()
+    arrangements = dict(zip(t["vessel_names"], t["vessel_arrangements"], strict=True))
     out: dict[str, list[dict[str, float]]] = {}
     segs_by_vessel = vessel_segments(model)
     for v in canon["vessels"]:
         segs = segs_by_vessel[v["name"]]
-        arrangement = v.get("arrangement", default)
+        arrangement = arrangements[v["name"]]
         if arrangement == "RCL":  # one R-C-L, the BloodVessel itself
             s0 = segs[0]
             out[v["name"]] = [{"R": s0["R"], "C": s0["C"], "L": s0["L"], "S": s0["S"],

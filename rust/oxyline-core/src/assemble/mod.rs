@@ -29,13 +29,20 @@ const HEART_CHAMBERS: [&str; 4] = [
     "left_ventricle",
 ];
 pub use chamber::chamber_elastance;
-pub use segments::SegmentRow;
+pub use segments::{SegmentRow, arrangement};
 
 /// Summary figures for `oxyline validate`.
 #[derive(Debug, Clone, Default)]
 pub struct Summary {
     pub vessels: usize,
     pub segments: usize,
+    /// Of those, the segments of vessels cut by the `auto` rule (the rest: counts the model
+    /// states, `segments` or `max_length`, and one per lumped element).
+    pub auto_segments: usize,
+    /// The vessels cut by the `auto` rule.
+    pub auto_vessels: usize,
+    /// The `auto` rule's tolerance (None: no vessel is cut by it).
+    pub auto_rtol: Option<f64>,
     pub nodes: usize,
     pub junctions: usize,
     pub inlets: usize,
@@ -52,6 +59,10 @@ pub struct Assembled {
     pub summary: Summary,
     /// Every flow segment of every vessel, in model order (the segment table).
     pub segments: Vec<SegmentRow>,
+    /// Each vessel's arrangement as assembled (stated, or resolved by
+    /// [`segments::arrangement`]), in `circuit.vessel_names` order (a heart element's names
+    /// take its entry's): what a writer of the circuit reads.
+    pub arrangements: Vec<crate::model::Arrangement>,
 }
 
 impl NetworkSpec {
@@ -67,6 +78,8 @@ impl NetworkSpec {
             } else {
                 st.segmented_vessel(vi, blood)?;
             }
+            let a = segments::arrangement(self, &self.vessels[vi]);
+            st.arrangements.resize(st.circuit.vessel_names.len(), a);
         }
         heart::resolve(&mut st.circuit, &st.links.hearts, &st.links.beds)?;
         st.boundary_conditions()?;
@@ -145,6 +158,8 @@ struct Stamping<'a> {
     auto: Option<auto_segments::AutoRule>,
     /// The points and branches of the vessel being stamped (one buffer for all).
     chain: vessel::Chain,
+    /// `Assembled::arrangements`.
+    arrangements: Vec<crate::model::Arrangement>,
 }
 
 impl<'a> Stamping<'a> {
@@ -196,6 +211,7 @@ impl<'a> Stamping<'a> {
             vessels: spec.vessels.len(),
             nodes: graph.names.len(),
             junctions: graph.junctions(),
+            auto_rtol: auto.map(|rule| rule.rtol),
             ..Default::default()
         };
         Ok(Stamping {
@@ -209,6 +225,7 @@ impl<'a> Stamping<'a> {
             hearts: Vec::new(),
             auto,
             chain: vessel::Chain::default(),
+            arrangements: Vec::with_capacity(spec.vessels.len()),
         })
     }
 
@@ -274,7 +291,7 @@ impl<'a> Stamping<'a> {
     /// to the segment table.
     fn segmented_vessel(&mut self, vi: usize, blood: Blood) -> Result<()> {
         let (spec, v) = (self.spec, &self.spec.vessels[vi]);
-        let arrangement = v.arrangement.unwrap_or(spec.arrangement);
+        let arrangement = segments::arrangement(spec, v);
         let segs = segments::discretise(spec, vi, blood, arrangement, self.auto.as_ref())?;
         let ends = self.graph.vessel_ends[vi];
         let form = v
@@ -312,6 +329,10 @@ impl<'a> Stamping<'a> {
             );
         }
         self.summary.segments += segs.len();
+        if self.auto.is_some() && segments::is_auto(spec, v) {
+            self.summary.auto_segments += segs.len();
+            self.summary.auto_vessels += 1;
+        }
         for s in &segs {
             self.summary.total_compliance += s.compliance;
             self.summary.total_volume += s.volume;
@@ -336,6 +357,7 @@ impl<'a> Stamping<'a> {
     /// The probes moved to DAE unknowns, the valves recorded, storage trimmed.
     fn finish(self) -> Assembled {
         let Stamping {
+            arrangements,
             mut circuit,
             mut probes,
             mut summary,
@@ -360,6 +382,7 @@ impl<'a> Stamping<'a> {
             probes,
             summary,
             segments: table,
+            arrangements,
         }
     }
 }
@@ -478,5 +501,69 @@ mod tests {
             (a.summary.inlets, a.summary.outlets, a.summary.junctions),
             (1, 2, 1)
         );
+    }
+
+    /// The default segmentation: a compliant geometric vessel that states no `segments` is cut
+    /// by the `auto` rule (more than one segment: a 0.3 m artery at the 10 Hz of a model forced
+    /// by a constant), a lumped one stays one segment, and a model-wide `max_length` (or the
+    /// vessel's own `segments`) keeps the count it states.
+    #[test]
+    fn vessels_that_state_no_segments_are_cut_by_the_auto_rule() {
+        let model = |seg: &str, own: &str| {
+            format!(
+                r#"{{"vessels": [
+                {{"name": "g", "from": "in", "to": "j" {own},
+                 "geometry": {{"length": 0.3, "radius_in": 0.004, "radius_out": 0.004,
+                              "wall_thickness": 4e-4, "youngs_modulus": 4e5}}}},
+                {{"name": "l", "from": "j", "to": "out",
+                 "lumped": {{"resistance": 3e8, "inductance": 3e6, "capacitance": 3e-10}}}}],
+                "boundary_conditions": {{
+                    "in": {{"type": "flow", "flow": {{"kind": "constant", "value": 1e-6}}}},
+                    "out": {{"type": "resistance", "resistance": 1e9}}}} {seg}}}"#
+            )
+        };
+        let counts = |text: String| {
+            let a = parse(&text).unwrap().assemble().unwrap();
+            let per = |v: u32| a.segments.iter().filter(|s| s.vessel == v).count();
+            (per(0), per(1), a.summary.auto_segments, a.summary.auto_rtol)
+        };
+        let (g, l, auto, rtol) = counts(model("", ""));
+        assert!(g > 1 && l == 1 && auto == g, "{g} {l} {auto}");
+        assert_eq!(rtol, Some(super::auto_segments::DEFAULT_RTOL));
+        assert_eq!(
+            counts(model(r#", "max_segment_length": 0.1"#, "")),
+            (3, 1, 0, None)
+        );
+        assert_eq!(counts(model("", r#", "segments": 2"#)), (2, 1, 0, None));
+    }
+
+    /// The arrangement of a vessel that states none: π where the `auto` rule cuts it and the
+    /// model states none either (the π ladder's count is about the square root of the
+    /// inverted-L one at the same tolerance), inverted-L where it states its segments, and a
+    /// stated arrangement (the model's or its own) is kept.
+    #[test]
+    fn auto_vessels_without_a_stated_arrangement_are_pi_ladders() {
+        use crate::model::Arrangement::{InvertedL, L, Pi};
+        let model = |top: &str, own: &str| {
+            format!(
+                r#"{{"vessels": [{{"name": "g", "from": "in", "to": "out" {own},
+                 "geometry": {{"length": 0.3, "radius_in": 0.004, "radius_out": 0.004,
+                              "wall_thickness": 4e-4, "youngs_modulus": 4e5}}}}],
+                "boundary_conditions": {{
+                    "in": {{"type": "flow", "flow": {{"kind": "constant", "value": 1e-6}}}},
+                    "out": {{"type": "resistance", "resistance": 1e9}}}} {top}}}"#
+            )
+        };
+        let of = |top: &str, own: &str| {
+            let spec = parse(&model(top, own)).unwrap();
+            let n = spec.assemble().unwrap().segments.len();
+            (super::segments::arrangement(&spec, &spec.vessels[0]), n)
+        };
+        let (pi, n_pi) = of("", "");
+        let (inv, n_inv) = of(r#", "arrangement": "inverted-L""#, "");
+        assert_eq!((pi, inv), (Pi, InvertedL));
+        assert!(n_pi * n_pi < 4 * n_inv && n_pi > 1, "{n_pi} {n_inv}");
+        assert_eq!(of("", r#", "arrangement": "L""#).0, L);
+        assert_eq!(of("", r#", "segments": 3"#), (InvertedL, 3));
     }
 }

@@ -48,7 +48,7 @@ impl SegmentRow {
 /// How many segments vessel `v` gets (as [`discretise`] decides, for a valid vessel): used to
 /// size the circuit's tables before stamping, so that they are allocated once.
 pub(crate) fn count(spec: &NetworkSpec, v: &VesselSpec, auto: Option<&AutoRule>) -> usize {
-    let arrangement = v.arrangement.unwrap_or(spec.arrangement);
+    let arrangement = arrangement(spec, v);
     if let (Some(rule), true) = (auto, is_auto(spec, v)) {
         return auto_count(spec, v, rule, arrangement).unwrap_or(1);
     }
@@ -66,11 +66,24 @@ pub(crate) fn count(spec: &NetworkSpec, v: &VesselSpec, auto: Option<&AutoRule>)
     .max(1)
 }
 
-/// Whether vessel `v` is cut by the `auto` rule: its own `segments: auto`, or the model's
-/// for a geometric vessel without its own `segments` (a lumped vessel is an element its
-/// author sized, split only when it says `segments: auto` itself).
+/// Whether vessel `v` is cut by the `auto` rule: its own `segments: auto`, else any geometric
+/// vessel without its own `segments` unless the model gives a `max_length` (the default, as
+/// `segmentation: {segments: auto}` says explicitly). A lumped vessel is an element its author
+/// sized (svZeroDSolver's blocks): split only when it says `segments: auto` itself.
 pub(crate) fn is_auto(spec: &NetworkSpec, v: &VesselSpec) -> bool {
-    v.segments_auto || (spec.segments_auto && v.segments.is_none() && v.geometry.is_some())
+    let by_model = spec.segments_auto || spec.max_segment_length.is_none();
+    v.segments_auto || (by_model && v.segments.is_none() && v.geometry.is_some())
+}
+
+/// Vessel `v`'s arrangement: its own, else the model's, else π where the `auto` rule cuts it
+/// (second order: the tolerance at about the square root of a first-order ladder's count,
+/// docs/solvers.md "Space"), else inverted-L (the seed paper's section).
+pub fn arrangement(spec: &NetworkSpec, v: &VesselSpec) -> Arrangement {
+    match v.arrangement.or(spec.arrangement) {
+        Some(a) => a,
+        None if is_auto(spec, v) => Arrangement::Pi,
+        None => Arrangement::InvertedL,
+    }
 }
 
 /// The `auto` count of vessel `v` from its whole length's R, L, C (None: a value the

@@ -503,8 +503,11 @@ pub struct NetworkSpec {
     pub name: String,
     #[serde(default)]
     pub blood: BloodSpec,
+    /// The model-wide arrangement (None: not stated; a vessel's own wins, and a vessel that
+    /// states none is cut as `assemble::segments::arrangement` says: π where the `auto` rule
+    /// cuts it, else inverted-L).
     #[serde(default)]
-    pub arrangement: Arrangement,
+    pub arrangement: Option<Arrangement>,
     #[serde(default)]
     pub wall_model: WallModel,
     #[serde(default)]

@@ -355,7 +355,7 @@ fn vessel(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<P
             )
         })?;
     let v = &spec.vessels[vi];
-    let arrangement = v.arrangement.unwrap_or(spec.arrangement);
+    let arrangement = crate::assemble::arrangement(spec, v);
     let p = match (rest, &v.geometry, &v.lumped) {
         (["length"], Some(_), _) => Parameter::Length(vi),
         (["youngs_modulus"], Some(g), _) if g.youngs_modulus.is_some() => {

@@ -218,10 +218,10 @@ pub fn header<N: Node>(data: &N) -> Result<Header> {
     let mut canon = Map::new();
     canon.insert("name".into(), json!(name));
     canon.insert("blood".into(), blood(data.get("blood"), units)?);
-    canon.insert(
-        "arrangement".into(),
-        json!(arrangement(data.get("arrangement"))?),
-    );
+    // written only when stated: an unstated arrangement lets `auto` cut in π sections
+    if let Some(a) = data.get("arrangement") {
+        canon.insert("arrangement".into(), json!(arrangement(a)?));
+    }
     let seg = data.get("segmentation").filter(Node::truthy);
     if let Some(seg) = &seg {
         check_keys(seg, &["max_length", "segments", "rtol"], "segmentation")?;
@@ -320,10 +320,7 @@ fn blood<N: Node>(value: Option<N>, units: Units) -> Result<Value> {
     Ok(json!({"density": rho * density, "viscosity": mu * viscosity}))
 }
 
-fn arrangement<N: Node>(value: Option<N>) -> Result<String> {
-    let Some(v) = value else {
-        return Ok("inverted-L".into());
-    };
+fn arrangement<N: Node>(v: N) -> Result<String> {
     match v.text() {
         Some(t) if ["inverted-L", "L", "pi"].contains(&t.as_str()) => Ok(t),
         _ => Err(err(

@@ -171,6 +171,8 @@ fn steady_network(
             v.name = format!("segment {}", i + 1);
             v.from = node(g.inlet);
             v.to = node(g.outlet);
+            // a steady state sees each vessel's total resistance only: one segment is exact
+            v.segments = Some(1);
             v.geometry = Some(GeometrySpec {
                 length: g.length,
                 radius_in: g.radius_in,
@@ -206,7 +208,7 @@ fn steady_network(
             density: DENSITY,
             viscosity: VISCOSITY,
         },
-        arrangement: Default::default(),
+        arrangement: None,
         wall_model: Default::default(),
         inertance_profile: Default::default(),
         wall_friction: Default::default(),
