@@ -19,9 +19,10 @@ cheapest fixed step of the sweep whose three errors are all at most the error-co
 run's (at 1 ms output), and the CPU ratio of the error-controlled run to it, the
 error-controlled run writing its rows as often as that fixed step did (its solution does not
 depend on the output interval; a fixed step writes a row per step at most). "ratio,
-interpolated": the same run's CPU (1 ms rows) over the fixed step's CPU interpolated in the
-sweep at equal error (log-log, the binding error kind; the sweep's factor-2 steps otherwise
-make the ratio jump with the side of a sweep step an error falls on). All runs take
+interpolated": the run's CPU (rows every 1 ms, or every that step if longer) over the fixed
+step's CPU interpolated in the sweep at equal error (log-log, the binding error kind; the
+sweep's factor-2 steps otherwise make the ratio jump with the side of a sweep step an error
+falls on). All runs take
 exactly ``cycles`` cycles (``until_periodic=None``).
 
 Methods (``--methods``): the error-controlled runs of each rtol with generalized-α, the explicit
@@ -141,11 +142,12 @@ def loglog(x: float, x0: float, x1: float, y0: float, y1: float) -> float:
     return float(np.exp(np.log(y0) + f * np.log(y1 / y0)))
 
 
-def sweep_interpolated(fixed: list[Any], e: tuple[float, float, float]) -> float | None:
+def sweep_interpolated(fixed: list[Any], e: tuple[float, float, float]
+                       ) -> tuple[float, float] | None:
     """The fixed step's CPU at equal error, interpolated in the sweep: per error kind the
     largest dt whose error is ``e``'s (log-log between the two sweep steps around it, every
     finer step of the sweep within it), the smallest of these dt, and the CPU there (log-log
-    between its neighbours). None when ``e`` is below the finest step's error."""
+    between its neighbours): (dt, CPU). None when ``e`` is below the finest step's error."""
     runs = sorted(fixed, key=lambda r: r[0])
     dts = [r[0] for r in runs]
     dt_eq = dts[-1]
@@ -162,7 +164,7 @@ def sweep_interpolated(fixed: list[Any], e: tuple[float, float, float]) -> float
                                                           dts[j], dts[j + 1])
         dt_eq = min(dt_eq, dt_k)
     i = max(0, min(int(np.searchsorted(dts, dt_eq)) - 1, len(runs) - 2))
-    return loglog(dt_eq, dts[i], dts[i + 1], runs[i][1], runs[i + 1][1])
+    return dt_eq, loglog(dt_eq, dts[i], dts[i + 1], runs[i][1], runs[i + 1][1])
 
 
 def bench(name: str, cycles: int, rtols: tuple[float, ...], outputs: tuple[float, ...],
@@ -222,8 +224,14 @@ def controlled(model: Any, name: str, cycles: int, rtol: float, method: str,
             ratio = f"{cpu_eq / m[0]:.2f}" if m else "— (finer than the sweep)"
             # the sweep's steps are a factor 2 apart: the ratio to the CPU interpolated at
             # equal error does not jump with which side of a sweep step an error falls
-            c_eq = sweep_interpolated(fixed, e)
-            ratio_i = f"{cpu / c_eq:.2f}" if c_eq else "—"
+            eq = sweep_interpolated(fixed, e)
+            ratio_i = "—"
+            if eq:
+                # rows as often as that fixed step writes them (1 ms, or a row per step)
+                every_eq = max(eq[0], outputs[0])
+                cpu_i = cpu if every_eq == outputs[0] else run(model, output_every=every_eq,
+                                                                **kw)[1]
+                ratio_i = f"{cpu_i / eq[1]:.2f}"
             summary.append(f"| {name} | rtol {rtol:g}, {ran} | {fmt(e[0])} / {fmt(e[1])} / "
                            f"{fmt(e[2])} | {s['steps']} | {cpu:.3f} s ({cpu_eq:.3f} s) | "
                            f"{f'{m[1] * 1e3:.3g} ms, {m[0]:.3f} s' if m else '—'} "
