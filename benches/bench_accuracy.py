@@ -18,7 +18,11 @@ CPU: ``time.process_time`` of the ``simulate`` call (loading excluded). "fixed m
 cheapest fixed step of the sweep whose three errors are all at most the error-controlled
 run's (at 1 ms output), and the CPU ratio of the error-controlled run to it, the
 error-controlled run writing its rows as often as that fixed step did (its solution does not
-depend on the output interval; a fixed step writes a row per step at most). All runs take
+depend on the output interval; a fixed step writes a row per step at most). "ratio,
+interpolated": the run's CPU (rows every 1 ms, or every that step if longer) over the fixed
+step's CPU interpolated in the sweep at equal error (log-log, the binding error kind; the
+sweep's factor-2 steps otherwise make the ratio jump with the side of a sweep step an error
+falls on). All runs take
 exactly ``cycles`` cycles (``until_periodic=None``).
 
 Methods (``--methods``): the error-controlled runs of each rtol with generalized-α, the explicit
@@ -130,6 +134,39 @@ def sweep_match(fixed: list[Any], e: tuple[float, float, float]
     return min(ok) if ok else None
 
 
+def loglog(x: float, x0: float, x1: float, y0: float, y1: float) -> float:
+    """y at x on the straight line through (x0, y0), (x1, y1) in log-log."""
+    if x1 == x0 or min(x0, x1, y0, y1) <= 0:
+        return y0
+    f = np.log(x / x0) / np.log(x1 / x0)
+    return float(np.exp(np.log(y0) + f * np.log(y1 / y0)))
+
+
+def sweep_interpolated(fixed: list[Any], e: tuple[float, float, float]
+                       ) -> tuple[float, float] | None:
+    """The fixed step's CPU at equal error, interpolated in the sweep: per error kind the
+    largest dt whose error is ``e``'s (log-log between the two sweep steps around it, every
+    finer step of the sweep within it), the smallest of these dt, and the CPU there (log-log
+    between its neighbours): (dt, CPU). None when ``e`` is below the finest step's error."""
+    runs = sorted(fixed, key=lambda r: r[0])
+    dts = [r[0] for r in runs]
+    dt_eq = dts[-1]
+    for k, target in enumerate(e):
+        errs = [r[2][k] for r in runs]
+        if np.isnan(target) or np.isnan(errs[0]):
+            continue
+        if errs[0] > target:
+            return None
+        j = 0
+        while j + 1 < len(runs) and errs[j + 1] <= target:
+            j += 1
+        dt_k = dts[j] if j + 1 == len(runs) else loglog(target, errs[j], errs[j + 1],
+                                                          dts[j], dts[j + 1])
+        dt_eq = min(dt_eq, dt_k)
+    i = max(0, min(int(np.searchsorted(dts, dt_eq)) - 1, len(runs) - 2))
+    return dt_eq, loglog(dt_eq, dts[i], dts[i + 1], runs[i][1], runs[i + 1][1])
+
+
 def bench(name: str, cycles: int, rtols: tuple[float, ...], outputs: tuple[float, ...],
           sweep: tuple[int, ...], ref_factor: int, summary: list[str],
           methods: tuple[str, ...] = METHODS) -> None:
@@ -185,10 +222,20 @@ def controlled(model: Any, name: str, cycles: int, rtol: float, method: str,
             match = (f"| {m[1] * 1e3:.3g} ms, {m[0]:.3f} s | {cpu_eq / m[0]:.2f} |" if m
                      else "| none of the sweep | — |")
             ratio = f"{cpu_eq / m[0]:.2f}" if m else "— (finer than the sweep)"
+            # the sweep's steps are a factor 2 apart: the ratio to the CPU interpolated at
+            # equal error does not jump with which side of a sweep step an error falls
+            eq = sweep_interpolated(fixed, e)
+            ratio_i = "—"
+            if eq:
+                # rows as often as that fixed step writes them (1 ms, or a row per step)
+                every_eq = max(eq[0], outputs[0])
+                cpu_i = cpu if every_eq == outputs[0] else run(model, output_every=every_eq,
+                                                                **kw)[1]
+                ratio_i = f"{cpu_i / eq[1]:.2f}"
             summary.append(f"| {name} | rtol {rtol:g}, {ran} | {fmt(e[0])} / {fmt(e[1])} / "
-                           f"{fmt(e[2])} | {cpu:.3f} s ({cpu_eq:.3f} s) | "
+                           f"{fmt(e[2])} | {s['steps']} | {cpu:.3f} s ({cpu_eq:.3f} s) | "
                            f"{f'{m[1] * 1e3:.3g} ms, {m[0]:.3f} s' if m else '—'} "
-                           f"| {ratio} |")
+                           f"| {ratio} | {ratio_i} |")
         est_s = " / ".join(f"{est.get(k, float('nan')):.1e}"
                            for k in ("pressure", "flow", "species"))
         print(f"| {rtol:g} | {ran} | {every * 1e3:g} ms | {fmt(e[0])} | {fmt(e[1])} | {fmt(e[2])} "
@@ -261,10 +308,10 @@ def main() -> None:
               a.ref_factor, summary, tuple(a.methods))
     print("\n## Summary (errors: pulse pressure / flow / PO2; ratio: CPU of the "
           "error-controlled run over the cheapest fixed step of equal error)\n")
-    print("| model | method | error vs reference | CPU at 1 ms output (at the fixed step's) | "
-          "cheapest fixed step of equal error "
-          "(dt, CPU) | ratio |")
-    print("|---|---|---|---|---|---|")
+    print("| model | method | error vs reference | steps | CPU at 1 ms output (at the fixed "
+          "step's) | cheapest fixed step of equal error (dt, CPU) | ratio | ratio, "
+          "interpolated |")
+    print("|---|---|---|---|---|---|---|---|")
     print("\n".join(summary))
 
 

@@ -29,6 +29,10 @@ pub(super) const FLOW_SHARE_FLOOR: f64 = 1e-4;
 /// The flow group of a branch that is no vessel's.
 pub(super) const NO_VESSEL: u32 = u32::MAX;
 
+/// Fixed steps of the scout pass over the first cycle (see `Adaptive::scout`): ~10 % of a
+/// controlled cycle's steps at rtol 1e-3, each cheaper (no estimate).
+pub(super) const SCOUT_STEPS: usize = 128;
+
 /// The growth of a flow group's amplitude (relative) that renews the flows' scales.
 const RESCALE: f64 = 0.01;
 
@@ -75,6 +79,13 @@ pub(super) struct Adaptive {
     /// (the step's own |y| loosened it only while a peak grows; without it the estimate is
     /// one multiplication per unknown).
     inv_weight: Vec<f64>,
+    /// A differential unknown's weights of its local error in one pass (0 for an algebraic
+    /// unknown, judged apart): `inv_weight`, and `inv_weight`·`inv_omega` (per unit step).
+    w_step: Vec<f64>,
+    w_unit: Vec<f64>,
+    /// Whether the step just judged may grow a peak (of |y|, |ẏ| or |ÿ|): the estimate's
+    /// pass finds out, and an accepted step that grows none skips the tracking pass.
+    may_grow: bool,
     /// The differential unknowns' local error estimate of the current step (scratch).
     le: Vec<f64>,
     /// Output rows per cycle.
@@ -134,22 +145,23 @@ pub(super) struct Dense<'s> {
     s0: f64,
     s1: f64,
     inv_span: f64,
+    /// A value's weights of (y₀, y₁, ẏ₀, ẏ₁) with the rate shifts folded in (see `value`).
+    w: [f64; 4],
+    /// Whether algebraic unknowns take their quadratic (the step has a step before it).
+    quadratic: bool,
 }
 
 impl Dense<'_> {
-    /// The interpolated value of unknown `i`.
+    /// The interpolated value of unknown `i`: the Hermite cubic b₀y₀ + b₁h d₀ + b₂y₁ + b₃h d₁
+    /// with the shifted rates d = ẏ + s (ẏ₁ − ẏ₀)/span, its weights gathered per row (one
+    /// value is four products: a 1 ms output of a fast run writes a row every step or two).
     #[inline]
     pub fn value(&self, i: usize) -> f64 {
-        let ad = self.ad;
-        if ad.algebraic[i] && ad.history > 0 {
+        if self.quadratic && self.ad.algebraic[i] {
             return self.algebraic(i).0;
         }
-        let (y0, y1, h) = (ad.y0[i], self.y[i], self.h);
-        let ydd = (self.yd[i] - ad.yd0[i]) * self.inv_span;
-        let d0 = ad.yd0[i] + self.s0 * ydd;
-        let d1 = self.yd[i] + self.s1 * ydd;
-        let b = &self.b;
-        b[0] * y0 + b[1] * h * d0 + b[2] * y1 + b[3] * h * d1
+        let w = &self.w;
+        w[0] * self.ad.y0[i] + w[1] * self.y[i] + w[2] * self.ad.yd0[i] + w[3] * self.yd[i]
     }
 
     /// The interpolated value and rate of unknown `i`.
@@ -215,6 +227,9 @@ impl Adaptive {
             atol: Vec::new(),
             scale: Vec::new(),
             inv_weight: Vec::new(),
+            w_step: Vec::new(),
+            w_unit: Vec::new(),
+            may_grow: true,
             le: Vec::new(),
             delta: rate_shift(rho_inf),
             out_per_cycle,
@@ -266,24 +281,78 @@ impl Adaptive {
         self.control.h_min
     }
 
+    /// Before the first cycle of a run without valves (whose statuses a pass of fixed steps
+    /// would not follow): a scout pass of `SCOUT_STEPS` fixed steps over one cycle from the
+    /// start state seeds every unknown's peaks of |y|, |ẏ| and |ÿ|, hence its scale and signal
+    /// frequency, which the controlled run otherwise learns during its first cycle, judging the
+    /// flows before their systolic peak against a smaller amplitude and every unknown against
+    /// the fundamental's frequency (the first cycle took 2.5× the steps of the later ones). The
+    /// coarse pass underestimates peaks (its divided differences smooth them): the stricter
+    /// side; the run goes on learning from its own steps. The run's state and the integrator's
+    /// carried state are left as they were.
+    pub fn scout(&mut self, st: &mut State<'_, '_>, t0: f64, period: f64) {
+        if !self.peak.is_empty() {
+            return;
+        }
+        self.init_scales(&st.y);
+        let h = period / SCOUT_STEPS as f64;
+        let ig = st.flow.integrator();
+        let carried = ig.carried();
+        ig.set_dt(h);
+        // the history buffers (allocated for the run anyway) hold the pass's states
+        let mut y = std::mem::take(&mut self.ym2);
+        let mut yd = std::mem::take(&mut self.yd0);
+        y.clone_from(&st.y);
+        yd.clone_from(&st.yd);
+        self.y0.clone_from(&st.y);
+        self.ym1.clone_from(&st.y);
+        self.h1 = h;
+        for k in 0..SCOUT_STEPS {
+            if ig.step(t0 + k as f64 * h, &mut y, &mut yd).is_err() {
+                break;
+            }
+            // rates from the second step on (the first has no step before it)
+            self.history = usize::from(k > 0);
+            let grown = self.track_peaks(&y, h);
+            self.track_flow_peaks(&y, grown);
+            std::mem::swap(&mut self.ym1, &mut self.y0);
+            self.y0.clone_from(&y);
+        }
+        // (a carried state the integrator gave out restores)
+        let _ = ig.restore_carried(&carried);
+        (self.ym2, self.yd0) = (y, yd);
+        (self.history, self.h1) = (0, 0.0);
+    }
+
+    /// Every unknown's peaks, scales and weights from the start state `y`.
+    fn init_scales(&mut self, y: &[f64]) {
+        self.peak = y.iter().map(|v| v.abs()).collect();
+        self.rate_peak = vec![0.0; y.len()];
+        self.accel_peak = vec![0.0; y.len()];
+        self.inv_omega = vec![1.0 / self.omega; y.len()];
+        let a = self.tol.atol.as_array();
+        self.atol = (0..y.len()).map(|i| a[self.kind_of(i)]).collect();
+        self.scale.clone_from(&self.peak);
+        self.inv_weight = vec![0.0; y.len()];
+        self.w_step = vec![0.0; y.len()];
+        self.w_unit = vec![0.0; y.len()];
+        self.track_flow_peaks(y, true);
+        let rtol = self.tol.rtol;
+        let weights = self.atol.iter().zip(&self.scale);
+        for (w, (&a, &s)) in self.inv_weight.iter_mut().zip(weights) {
+            *w = 1.0 / (a + rtol * s);
+        }
+        for i in 0..y.len() {
+            self.reweigh(i);
+        }
+    }
+
     /// Keep the state at the start of a step.
     pub fn save_start(&mut self, st: &State<'_, '_>) {
         if self.peak.is_empty() {
-            self.peak = st.y.iter().map(|v| v.abs()).collect();
-            self.rate_peak = vec![0.0; st.y.len()];
-            self.accel_peak = vec![0.0; st.y.len()];
-            self.inv_omega = vec![1.0 / self.omega; st.y.len()];
-            let a = self.tol.atol.as_array();
-            self.atol = (0..st.y.len()).map(|i| a[self.kind_of(i)]).collect();
-            self.scale.clone_from(&self.peak);
-            self.inv_weight = vec![0.0; st.y.len()];
-            self.track_flow_peaks(&st.y, true);
-            let rtol = self.tol.rtol;
-            let weights = self.atol.iter().zip(&self.scale);
-            for (w, (&a, &s)) in self.inv_weight.iter_mut().zip(weights) {
-                *w = 1.0 / (a + rtol * s);
-            }
+            self.init_scales(&st.y);
         }
+        self.may_grow = true;
         self.y0.clone_from(&st.y);
         self.yd0.clone_from(&st.yd);
         if let Some(sp) = st.species.as_ref() {
@@ -322,10 +391,18 @@ impl Adaptive {
     /// the controller then proposes the next step from that larger estimate (on adan56 at
     /// rtol 1e-3: 16 % less CPU at the same error).
     fn flow_error(&mut self, st: &mut State<'_, '_>, h: f64) -> FlowError {
-        self.local_errors(&st.y, h);
-        let raw = self.scaled_errors(&st.y, h);
+        let raw = if self.history >= 2 {
+            self.fused_errors(&st.y, h)
+        } else {
+            self.may_grow = true;
+            self.local_errors(&st.y, h);
+            self.scaled_errors(&st.y, h)
+        };
         if raw.max <= 1.0 {
             return raw;
+        }
+        if self.history >= 2 {
+            self.local_errors(&st.y, h);
         }
         st.flow.integrator().filter_error(&mut self.le);
         self.zero_algebraic();
@@ -371,37 +448,81 @@ impl Adaptive {
 
     /// The largest scaled error per kind of the local errors in `le` (see `flow_error`),
     /// each unknown weighted by its absolute tolerance plus rtol of its scale. One branch-free
-    /// pass per kind over the differential unknowns (the algebraic ones' `le` is 0), then the
-    /// few algebraic unknowns by their index.
+    /// pass per kind over the differential unknowns (the algebraic ones' weights are 0), then
+    /// the few algebraic unknowns by their index.
     fn scaled_errors(&self, y: &[f64], h: f64) -> FlowError {
         // accumulated over 1/ω_i, and over one step at the least; the first two steps'
         // estimates are first order: judged as they are, one step's error, or the start
-        // would crawl (a zero 1/h makes the factor 1)
+        // would crawl (a zero 1/h leaves the step's weight)
         let inv_h = if self.history < 2 { 0.0 } else { 1.0 / h };
         let mut kinds = [0.0f64; 3];
         let ends = [0, self.kind_end[0], self.kind_end[1], y.len()];
         for (k, worst) in kinds.iter_mut().enumerate() {
             let r = ends[k]..ends[k + 1];
-            let unknowns = self.le[r.clone()].iter().zip(&self.inv_omega[r.clone()]);
-            *worst = unknowns
-                .zip(&self.inv_weight[r])
-                .fold(0.0f64, |m, ((&e, &w), &iw)| {
-                    m.max(e.abs() * (w * inv_h).max(1.0) * iw)
+            let weights = self.w_unit[r.clone()].iter().zip(&self.w_step[r.clone()]);
+            *worst = self.le[r]
+                .iter()
+                .zip(weights)
+                .fold(0.0f64, |m, (&e, (&wu, &ws))| {
+                    m.max(e.abs() * (wu * inv_h).max(ws))
                 });
         }
-        if self.history > 0 {
-            let (h1, alg) = (self.h1, self.c_algebraic);
-            for &i in &self.algebraic_index {
-                let i = i as usize;
-                let (a, b, c) = (self.ym1[i], self.y0[i], y[i]);
-                let curvature = 2.0 * ((c - b) / h - (b - a) / h1) / (h + h1);
-                let k = &mut kinds[self.kind_of(i)];
-                *k = k.max(alg * h * h * curvature.abs() * self.inv_weight[i]);
-            }
-        }
+        self.algebraic_errors(y, h, &mut kinds);
         FlowError {
             max: kinds.iter().fold(0.0f64, |m, &e| m.max(e)),
             kinds,
+        }
+    }
+
+    /// `local_errors` and `scaled_errors` in one pass from the third step on (Milne's device on
+    /// the last three states), the estimate not stored: the pass also finds whether the step
+    /// would grow one of the peaks `track_peaks` follows (the same comparisons), so that an
+    /// accepted step growing none skips that pass. (The estimate, the peak test and a fixed
+    /// step's own work each read every unknown once: apart they were a third of a step.)
+    // (one index into nine vectors of the same length: a zip of nine is no clearer)
+    #[allow(clippy::needless_range_loop)]
+    fn fused_errors(&mut self, y: &[f64], h: f64) -> FlowError {
+        let n = y.len();
+        let ([la, lb, lc], f) = quadratic_extrapolation(h, self.h1, self.h2, self.c_local);
+        let (inv_h, inv_h1, inv_span) = (1.0 / h, 1.0 / self.h1, 2.0 / (h + self.h1));
+        let (a, b, c) = (&self.ym2[..n], &self.ym1[..n], &self.y0[..n]);
+        let (wu, ws) = (&self.w_unit[..n], &self.w_step[..n]);
+        let (pk, rp, ap) = (&self.peak[..n], &self.rate_peak[..n], &self.accel_peak[..n]);
+        let mut kinds = [0.0f64; 3];
+        let mut grows = false;
+        let ends = [0, self.kind_end[0], self.kind_end[1], n];
+        for (k, worst) in kinds.iter_mut().enumerate() {
+            let mut m = 0.0f64;
+            for i in ends[k]..ends[k + 1] {
+                let (y1, y0, ym) = (y[i], c[i], b[i]);
+                let e = f * (y1 - (la * a[i] + lb * ym + lc * y0));
+                m = m.max(e.abs() * (wu[i] * inv_h).max(ws[i]));
+                let (s1, s0) = ((y1 - y0) * inv_h, (y0 - ym) * inv_h1);
+                let accel = ((s1 - s0) * inv_span).abs();
+                grows |= (y1.abs() > pk[i]) | (s1.abs() > rp[i]) | (accel > ap[i]);
+            }
+            *worst = m;
+        }
+        self.may_grow = grows;
+        self.algebraic_errors(y, h, &mut kinds);
+        FlowError {
+            max: kinds.iter().fold(0.0f64, |m, &e| m.max(e)),
+            kinds,
+        }
+    }
+
+    /// The algebraic unknowns' errors into `kinds` (see `flow_error`; none at the first step).
+    fn algebraic_errors(&self, y: &[f64], h: f64, kinds: &mut [f64; 3]) {
+        if self.history == 0 {
+            return;
+        }
+        let (h1, alg) = (self.h1, self.c_algebraic);
+        for &i in &self.algebraic_index {
+            let i = i as usize;
+            let (a, b, c) = (self.ym1[i], self.y0[i], y[i]);
+            let curvature = 2.0 * ((c - b) / h - (b - a) / h1) / (h + h1);
+            let k = &mut kinds[self.kind_of(i)];
+            *k = k.max(alg * h * h * curvature.abs() * self.inv_weight[i]);
         }
     }
 
@@ -444,7 +565,8 @@ impl Adaptive {
         for (e, k) in self.estimate.iter_mut().zip(kinds.iter().chain([&species])) {
             *e = e.max(k * rtol);
         }
-        let grown = self.track_peaks(&st.y, h);
+        // (a step that grows no peak leaves the peaks, scales and weights as they are)
+        let grown = self.may_grow && self.track_peaks(&st.y, h);
         self.track_flow_peaks(&st.y, grown);
         self.steps += 1;
         self.h_smallest = self.h_smallest.min(h);
@@ -516,6 +638,20 @@ impl Adaptive {
             };
             *w = 1.0 / (*t + rtol * *s);
         }
+        for i in n0..n1 {
+            self.reweigh(i);
+        }
+    }
+
+    /// The local error weights of unknown `i` from its tolerance and signal frequency.
+    fn reweigh(&mut self, i: usize) {
+        let w = if self.algebraic[i] {
+            0.0
+        } else {
+            self.inv_weight[i]
+        };
+        self.w_step[i] = w;
+        self.w_unit[i] = w * self.inv_omega[i];
     }
 
     /// The kind of unknown `i` (0 pressure, 1 flow, 2 volume: the index into `Atol`).
@@ -548,6 +684,7 @@ impl Adaptive {
                 if !(n0..n1).contains(&i) || self.flow_group[i - n0] == NO_VESSEL {
                     self.scale[i] = v;
                     self.inv_weight[i] = 1.0 / (self.atol[i] + self.tol.rtol * v);
+                    self.reweigh(i);
                 }
             }
             if !rates {
@@ -567,6 +704,7 @@ impl Adaptive {
                 } else {
                     1.0 / omega1
                 };
+                self.reweigh(i);
             }
         }
         grown
@@ -589,6 +727,8 @@ impl Adaptive {
     pub fn dense<'s>(&'s self, theta: f64, h: f64, y: &'s [f64], yd: &'s [f64]) -> Dense<'s> {
         let (s0, s1) = self.shifts(h);
         let (b, db) = hermite(theta);
+        let inv_span = 1.0 / (h - s1 + s0);
+        let k = h * (b[1] * s0 + b[3] * s1) * inv_span;
         Dense {
             ad: self,
             y,
@@ -599,7 +739,9 @@ impl Adaptive {
             db,
             s0,
             s1,
-            inv_span: 1.0 / (h - s1 + s0),
+            inv_span,
+            w: [b[0], b[2], h * b[1] - k, h * b[3] + k],
+            quadratic: self.history > 0,
         }
     }
 

@@ -346,6 +346,9 @@ impl<'r, 'f> Cycles<'r, 'f> {
                 .adaptive()
                 .is_some_and(|tol| self.periodic_error < NEAR_PERIODIC * tol.rtol);
         self.periodic_steps.start_cycle(near);
+        if self.events.is_none() {
+            ad.scout(&mut self.state, t0, period);
+        }
         // a step taken again to end on a valve event
         let mut cut: Option<Cut> = None;
         while t < t_end {
