@@ -143,6 +143,9 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
     if spec.get("variables"):
         # "all": every variable, also above the large-model threshold (oxyline.run)
         kw["variables"] = "all" if spec["variables"] == ["all"] else spec["variables"]
+    if spec.get("segment_variables"):  # these segment variables too (with the vessel selection)
+        kw["segments"] = True
+        kw["variables"] = [*(spec.get("variables") or []), *spec["segment_variables"]]
     if spec["method"] == "generalized-alpha":
         kw["dt"] = 1e-3
     elif spec["method"] == DEFAULT_RUN:
@@ -367,6 +370,9 @@ def main() -> None:
                          "e.g. pressure_in flow_in concentration_in concentration_out; "
                          "'all': every variable); default: the simulate() default (above "
                          "oxyline.run.LARGE_MODEL_SEGMENTS the large-model subset)")
+    ap.add_argument("--segment-variables", nargs="+",
+                    help="also output these segment variables (segments=True), e.g. "
+                         "segment_wall_flux: the run's output grows by a column per segment")
     ap.add_argument("--rk4-fraction", type=float, default=1.0,
                     help="RK4 runs stop this fraction into the cycle (its automatic dt makes "
                          "a whole cycle of a 65 k-segment tree take minutes); O2/flow is then "
@@ -389,6 +395,8 @@ def main() -> None:
            else "kept in memory")
     if a.variables:
         out += f", variables {' '.join(a.variables)}"
+    if a.segment_variables:
+        out += f", segment variables {' '.join(a.segment_variables)}"
     print(f"# binary trees, {a.per_vessel} segments per vessel, one cycle, vessel output every "
           f"10 ms {out}; CPU s (wall s), best of {a.repeat}; peak RSS of a fresh process; "
           f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f}"
@@ -417,6 +425,7 @@ def main() -> None:
                                        for b in ([None, a.baseline] if a.baseline else [None])]:
                     spec = {"depth": depth, "per_vessel": a.per_vessel, "config": config,
                             "method": method, "repeat": a.repeat, "zarr": a.zarr,
+                            "segment_variables": a.segment_variables,
                             "fraction": a.rk4_fraction if method == "rk4" else 1.0,
                             "time_chunk": a.time_chunk, "variables": a.variables,
                             "threads": threads}

@@ -746,9 +746,13 @@ def _output_size(model: Model, s: Mapping[str, Any]) -> tuple[float, int, int]:
                                    s["output_all_cycles"])
 
 
+#: vessels or segments per chunk of a streamed store (a row of a chunk: 512 KiB of float64)
+SEGMENT_CHUNK = 65536
+
+
 def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
                      path: str | os.PathLike[str], *, time_chunk: int = 1024,
-                     overwrite: bool = False,
+                     segment_chunk: int = SEGMENT_CHUNK, overwrite: bool = False,
                      **overrides: Unpack[SimulateOptions]) -> Any:
     """Run a network, writing its output to a Zarr store *during* the run, and return the store
     opened lazily as an ``xarray.Dataset``.
@@ -757,7 +761,9 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     variables, dims, coordinates, units and attributes, Zarr format 2), but the core hands its
     output over every ``time_chunk`` rows, each chunk is appended along ``time`` at once, and
     neither the core nor Python keep more than one chunk: memory stays bounded however many
-    cycles are output (``output_cycles="all"``). The store is created before the run starts
+    cycles are output (``output_cycles="all"``). Every array is also chunked along ``vessel``
+    and ``segment``, ``segment_chunk`` vessels or segments per chunk (default 65 536), so a
+    lazy read of one region (``xr.open_zarr(path, chunks={})``) reads only its chunks. The store is created before the run starts
     and is a valid store after every chunk; its attribute ``complete`` is 1 once the run has
     finished. If the run stops early (Ctrl-C, a solver failure), the rows computed until then
     are written and the exception is raised with the opened store as ``exc.result``
@@ -777,6 +783,9 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
 
     if isinstance(time_chunk, bool) or not isinstance(time_chunk, int) or time_chunk < 1:
         raise ModelError(f"simulate_to_zarr: time_chunk must be an integer >= 1, got {time_chunk!r}")
+    if isinstance(segment_chunk, bool) or not isinstance(segment_chunk, int) or segment_chunk < 1:
+        raise ModelError("simulate_to_zarr: segment_chunk must be an integer >= 1, got "
+                         f"{segment_chunk!r}")
     model = load_model(model)
     space = _space_flag(overrides)
     overrides = {k: v for k, v in overrides.items() if k != "estimate_space_error"}
@@ -797,7 +806,8 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
 
     template = dict(empty, data=np.zeros((0, empty["data"].shape[1] + len(heart[2]))))
     head = result_of(dict(template), _run_settings(s, None, valves), False)
-    store = ZarrAppender(path, dataset(head), time_chunk, overwrite=overwrite)
+    store = ZarrAppender(path, dataset(head), time_chunk, overwrite=overwrite,
+                         space_chunk=segment_chunk)
 
     # the bounds monitor checks each chunk as it passes (docs/physics.md §2.8)
     monitor = Monitor(model.transport_spec)

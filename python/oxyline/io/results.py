@@ -130,13 +130,19 @@ def _zarr() -> Any:
     return zarr
 
 
-def _write_zarr(ds: Any, path: Path, time_chunk: int) -> None:
-    """Write ``ds`` as a new Zarr store with ``time_chunk`` rows per chunk along ``time``."""
+#: the dims a store may chunk besides ``time`` (``space_chunk`` entries per chunk)
+SPACE_DIMS = ("vessel", "segment")
+
+
+def _write_zarr(ds: Any, path: Path, time_chunk: int, space_chunk: int | None = None) -> None:
+    """Write ``ds`` as a new Zarr store with ``time_chunk`` rows per chunk along ``time`` and,
+    with ``space_chunk``, that many vessels or segments per chunk along ``vessel``/``segment``
+    (so reading one region's segments reads only the chunks that hold them)."""
     zarr = _zarr()
     encoding = {}
     for name, var in ds.variables.items():
-        if "time" in var.dims:
-            encoding[name] = {"chunks": tuple(max(1, time_chunk if d == "time" else n)
+        if "time" in var.dims or (space_chunk and set(var.dims) & set(SPACE_DIMS)):
+            encoding[name] = {"chunks": tuple(max(1, _chunk(d, n, time_chunk, space_chunk))
                                               for d, n in zip(var.dims, var.shape))}
     import warnings
 
@@ -147,6 +153,12 @@ def _write_zarr(ds: Any, path: Path, time_chunk: int) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         ds.to_zarr(path, mode="w", encoding=encoding, **kwargs)
+
+
+def _chunk(dim: str, n: int, time_chunk: int, space_chunk: int | None) -> int:
+    if dim == "time":
+        return time_chunk
+    return min(n, space_chunk) if space_chunk and dim in SPACE_DIMS else n
 
 
 def _why(exc: BaseException) -> str:
@@ -226,7 +238,8 @@ class _StoreLock:
 
 class ZarrAppender:
     """A Zarr store created from a zero-row template dataset (the variables, coordinates and
-    attributes of :func:`dataset`) and grown along ``time`` chunk by chunk.
+    attributes of :func:`dataset`) and grown along ``time`` chunk by chunk. Its arrays are
+    chunked by ``time_chunk`` rows and, with ``space_chunk``, by that many vessels or segments.
 
     The store is created under a temporary name and renamed into place. The consolidated
     metadata that ``xarray.open_zarr`` reads is the store's commit record: it is rewritten
@@ -238,14 +251,15 @@ class ZarrAppender:
     """
 
     def __init__(self, path: PathLike, template: Any, time_chunk: int,
-                 overwrite: bool = False) -> None:
+                 overwrite: bool = False, space_chunk: int | None = None) -> None:
         self.path = Path(path)
         self.rows = 0
         self._zarr = _zarr()
         self._lock = _StoreLock(self.path)
         try:
             _refuse_existing(self.path, overwrite)
-            replace_atomically(self.path, lambda tmp: _write_zarr(template, tmp, time_chunk),
+            replace_atomically(self.path, lambda tmp: _write_zarr(template, tmp, time_chunk,
+                                                                 space_chunk),
                                sync=False)
             # the metadata of every array as stored, not the consolidated copy (stale once grown)
             self._group = self._zarr.open_group(self.path, mode="r+", zarr_format=2,
