@@ -7,8 +7,8 @@
 * The adjoint against the forward tangents (1e-8: only the fixed points' tolerance and
   rounding separate them).
 * A chamber's maximal elastance and a valve's open resistance recovered from synthetic data.
-* Paths that name nothing differentiable, and elements the tangent does not cover, are
-  ModelErrors naming the path or the element.
+* Paths that name nothing differentiable are ModelErrors naming the path (the closed-loop
+  heart block: tests/test_sensitivity_heart_loop.py).
 """
 
 from __future__ import annotations
@@ -125,16 +125,3 @@ def test_bad_heart_paths_name_themselves(path: str, words: list[str]) -> None:
         oxyline.sensitivities(HEART, [path], ["lv.pressure_in.max"])
     for w in words:
         assert w in str(err.value), (w, str(err.value))
-
-
-def test_the_closed_loop_heart_block_is_refused_naming_it() -> None:
-    """svZeroDSolver's closed-loop heart block resets its closed valves' flows inside
-    Newton's iteration (not a step equation the tangent can differentiate): refused."""
-    from oxyline import svzerod as svz
-    from tests.conftest import data_path
-
-    model = svz.to_oxyline_dict(str(data_path("svzerod", "cases",
-                                              "closedLoopHeart_singleVessel.json")))
-    vessel = model["vessels"][0]["name"]
-    with pytest.raises(ModelError, match="closed-loop heart block"):
-        oxyline.sensitivities(model, [], [f"{vessel}.pressure_in.mean"])

@@ -392,7 +392,8 @@ def native_model(source: Mapping[str, Any], parameters: Sequence[str],
                                                                   "scale"]:
             squeeze[parts[1]] = float(x)
         elif parts[0] == "vessels" and parts[2:3] in (["chamber"], ["valve"],
-                                                      ["chamber_sphere"]):
+                                                      ["chamber_sphere"],
+                                                      ["heart_pulmonary"]):
             heart.append((parts, float(x)))
         elif parts[0] == "scale":
             patch.setdefault("scale", {})[parts[1]] = float(x)

@@ -7,7 +7,12 @@ An output names a quantity of the periodic cycle:
   ``mean``, ``pulse`` (max − min);
 * ``"flow_split.<vessel>.<parent>"``: mean flow into ``vessel`` over mean flow into ``parent``;
 * ``"cardiac_output"``: the mean inflow of the model's flow conditions (through the vessels
-  that start at them);
+  that start at them), or in a closed loop the mean flow through its heart blocks' aortic
+  valves;
+* ``"<vessel>:<valve>.<variable>.<statistic>"``: a ``heart_pulmonary`` block's valve
+  (``tricuspid``, ``pulmonary``, ``mitral``, ``aortic``): ``pressure_in`` behind it,
+  ``pressure_out`` in front, ``flow_in``/``flow_out`` its flow (``CLH:aortic.pressure_in.max``
+  is the left ventricle's peak pressure);
 * ``"pwv.<proximal>.<distal>"``: pulse-wave velocity from the inlet of ``proximal`` to the
   outlet of ``distal`` (downstream of it): the path length over the foot-to-foot transit
   time (feet by intersecting tangents, :func:`oxyline.populations.foot_time`);
@@ -82,14 +87,16 @@ def signals_of(output: str, model: Any, error: type[ModelError] = ModelError
                ) -> list[tuple[str, str]]:
     """The (vessel, variable) signals ``output`` reads; an error naming it if the vessel,
     variable or statistic does not exist in ``model`` (a :class:`~oxyline.Model`)."""
-    names = set(model.vessel_names)
+    names = set(model.vessel_names) | set(_heart_valves(model))
     parts = output.split(".")
     if parts[0] in ("SvO2", "VO2") or (len(parts) == 3 and parts[1] in O2_VARIABLES):
         return _oxygen_signals(output, parts, model, error)
     if output == "cardiac_output":
         inlets = _inlet_vessels(model)
+        if not inlets:  # a closed loop: the flow through its heart blocks' aortic valves
+            inlets = [v for v in _heart_valves(model) if v.endswith(":aortic")]
         if not inlets:
-            raise _fail(output, "the model has no flow condition", error)
+            raise _fail(output, "the model has no flow condition or heart block", error)
         return [(v, "flow_in") for v in inlets]
     if parts[0] == "pwv":
         if len(parts) != 3:
@@ -116,6 +123,16 @@ def signals_of(output: str, model: Any, error: type[ModelError] = ModelError
         raise _fail(output, f"unknown statistic {stat!r} (one of {', '.join(STATISTICS)})",
                     error)
     return [(vessel, variable)]
+
+
+def _heart_valves(model: Any) -> list[str]:
+    """A heart block's valves ``<vessel>:<tricuspid|pulmonary|mitral|aortic>``: outputs read
+    the pressures behind (``pressure_in``) and in front (``pressure_out``) of each and its
+    flow, so ``<vessel>:aortic.pressure_in.max`` is the left ventricle's peak pressure."""
+    if not any("heart_pulmonary" in v for v in model.canonical.get("vessels", ())):
+        return []
+    return [str(v[0]) for v in model.network.unknown_layout().get("valves", ())
+            if ":" in str(v[0])]
 
 
 def _oxygen_signals(output: str, parts: list[str], model: Any, error: type[ModelError]

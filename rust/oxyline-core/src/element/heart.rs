@@ -49,6 +49,27 @@ impl Atrium {
             a * self.max_elastance - dpsi * (a - 1.0),
         )
     }
+
+    /// ∂P/∂θ at activation `a` and volume `v` for the law's model key (`elastance`,
+    /// `passive_pressure`, `passive_volume_coefficient`, `rest_volume`), and ∂P/∂a.
+    fn pressure_derivative(&self, key: &str, a: f64, v: f64) -> Option<f64> {
+        let (e, kp, kv) = (
+            self.max_elastance,
+            self.passive_pressure,
+            self.passive_volume_coefficient,
+        );
+        let x = v - self.rest_volume;
+        let ex = (kv * x).exp();
+        // P = a E x − (a − 1) ψ, ψ = K_p (e^{K_v x} − 1)
+        Some(match key {
+            "elastance" => a * x,
+            "passive_pressure" => -(a - 1.0) * (ex - 1.0),
+            "passive_volume_coefficient" => -(a - 1.0) * kp * x * ex,
+            "rest_volume" => -a * e + (a - 1.0) * kp * kv * ex,
+            "activation" => e * x - kp * (ex - 1.0),
+            _ => return None,
+        })
+    }
 }
 
 /// The block's parameters (SI).
@@ -281,6 +302,61 @@ impl Element for HeartPulmonary {
             })
             .collect()
     }
+    /// ∂c/∂θ by the block's model key (`heart_pulmonary.<key>`): the chambers' laws
+    /// (`right_atrium_elastance`, `left_ventricle_rest_volume`, …), the atrial timing
+    /// (`atrial_systole_fraction`, `p_wave_divisor`), the open-valve resistances and the
+    /// pulmonary drain resistance, with the valve positions read at `y` as in the residual
+    /// (a closed valve's resistance has no term). Inductances and capacitances sit on the
+    /// circuit's E and are no element term.
+    fn parameter_derivative(&self, key: &str, t: f64, y: &[f64], dc: &mut [f64]) -> bool {
+        let (u, pr) = (&self.unknowns, &self.params);
+        let (a, e) = self.activation(t);
+        dc.iter_mut().for_each(|d| *d = 0.0);
+        if let Some((side, rest)) = key.split_once("_atrium_") {
+            let (k, law) = match side {
+                "right" => (0, &pr.right_atrium),
+                "left" => (2, &pr.left_atrium),
+                _ => return false,
+            };
+            let Some(dp) = law.pressure_derivative(rest, a, y[u.volume[k]]) else {
+                return false;
+            };
+            dc[k] = -dp;
+            return true;
+        }
+        let valve = ["tricuspid", "pulmonary_valve", "mitral", "aortic_valve"];
+        if let Some(k) = valve.iter().position(|v| key == format!("{v}_resistance")) {
+            dc[4 + k] = self.valves(y)[k] * y[u.flow[k]];
+            return true;
+        }
+        match key {
+            "right_ventricle_elastance" | "left_ventricle_elastance" => {
+                let k = usize::from(key.starts_with("left"));
+                let vol = y[u.volume[2 * k + 1]];
+                dc[2 * k + 1] = -e * (vol - pr.ventricle_rest_volume[k]);
+            }
+            "right_ventricle_rest_volume" | "left_ventricle_rest_volume" => {
+                let k = usize::from(key.starts_with("left"));
+                dc[2 * k + 1] = e * pr.ventricle_elastance[k];
+            }
+            "pulmonary_resistance" => {
+                let r = pr.pulmonary_resistance;
+                dc[10] = -(y[u.pulmonary] - y[u.pressure[LA]]) / (r * r);
+            }
+            "atrial_systole_fraction" | "p_wave_divisor" => {
+                let law_key = key.trim_start_matches("atrial_");
+                let Some(da) = (pr.atrial_activation).derivative(law_key, t, pr.period) else {
+                    return false;
+                };
+                for (k, law) in [(0, &pr.right_atrium), (2, &pr.left_atrium)] {
+                    let dp = law.pressure_derivative("activation", a, y[u.volume[k]]);
+                    dc[k] = -dp.unwrap_or(0.0) * da;
+                }
+            }
+            _ => return false,
+        }
+        true
+    }
     fn is_nonlinear(&self) -> bool {
         true
     }
@@ -352,6 +428,85 @@ mod tests {
                 j[k]
             );
         }
+    }
+
+    /// Set the block's parameter `key` to `x` (the model keys of `parameter_derivative`).
+    fn with(mut h: HeartPulmonary, key: &str, x: f64) -> HeartPulmonary {
+        let p = &mut h.params;
+        let slot: &mut f64 = match key {
+            "right_atrium_elastance" => &mut p.right_atrium.max_elastance,
+            "left_atrium_passive_pressure" => &mut p.left_atrium.passive_pressure,
+            "right_atrium_passive_volume_coefficient" => {
+                &mut p.right_atrium.passive_volume_coefficient
+            }
+            "left_atrium_rest_volume" => &mut p.left_atrium.rest_volume,
+            "right_ventricle_elastance" => &mut p.ventricle_elastance[0],
+            "left_ventricle_elastance" => &mut p.ventricle_elastance[1],
+            "left_ventricle_rest_volume" => &mut p.ventricle_rest_volume[1],
+            "tricuspid_resistance" => &mut p.valve_resistance[0],
+            "aortic_valve_resistance" => &mut p.valve_resistance[3],
+            "pulmonary_resistance" => &mut p.pulmonary_resistance,
+            _ => match &mut p.atrial_activation {
+                Activation::WrappingCosine {
+                    systole_fraction,
+                    p_wave_divisor,
+                } => {
+                    if key == "atrial_systole_fraction" {
+                        systole_fraction
+                    } else {
+                        p_wave_divisor
+                    }
+                }
+                _ => unreachable!(),
+            },
+        };
+        *slot = x;
+        h
+    }
+
+    #[test]
+    fn parameter_derivatives_are_the_residuals_central_differences() {
+        // valves held (tricuspid and aortic open), inside the atrial contraction
+        let y = [
+            1500.0, 900.0, 2000.0, 12000.0, 11000.0, 2e-5, -1e-7, -2e-7, 3e-4, 4e-5, 1.2e-4, 3e-5,
+            1e-4, 1400.0,
+        ];
+        let t = 0.95;
+        let values = [
+            ("right_atrium_elastance", 2e7),
+            ("left_atrium_passive_pressure", 900.0),
+            ("right_atrium_passive_volume_coefficient", 5e3),
+            ("left_atrium_rest_volume", 5e-6),
+            ("right_ventricle_elastance", 2e7),
+            ("left_ventricle_elastance", 3e7),
+            ("left_ventricle_rest_volume", 5e-6),
+            ("tricuspid_resistance", 8e5),
+            ("aortic_valve_resistance", 3e6),
+            ("pulmonary_resistance", 1e7),
+            ("atrial_systole_fraction", 0.4),
+            ("p_wave_divisor", 9.0),
+        ];
+        for (key, x) in values {
+            let mut dc = [0.0; 14];
+            assert!(block().parameter_derivative(key, t, &y, &mut dc), "{key}");
+            let h = 1e-5 * x;
+            let (mut ca, mut cb) = ([0.0; 14], [0.0; 14]);
+            with(block(), key, x + h).residual(t, &y, &mut ca);
+            with(block(), key, x - h).residual(t, &y, &mut cb);
+            for r in 0..14 {
+                let fd = (ca[r] - cb[r]) / (2.0 * h);
+                // O(h²) truncation of the exponential and cosine laws, and round-off of
+                // residuals up to ~1e4 Pa differenced over h
+                let tol = 1e-7 * (dc[r].abs() + ca[r].abs() / x);
+                assert!(
+                    (fd - dc[r]).abs() <= tol,
+                    "{key} row {r}: {fd} vs {}",
+                    dc[r]
+                );
+            }
+        }
+        let mut dc = [0.0; 14];
+        assert!(!block().parameter_derivative("period", t, &y, &mut dc));
     }
 
     #[test]

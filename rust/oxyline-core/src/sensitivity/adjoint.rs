@@ -266,6 +266,10 @@ fn backward_cycle(
         for (&s, wk) in signals.iter().zip(&w[k * nsig..(k + 1) * nsig]) {
             a[s] += wk;
         }
+        // the transpose of the tangent's reset rows (s_i ← 0 at the step's end)
+        for &i in pr.held(k) {
+            a[i] = 0.0;
+        }
         for ((ui, ai), bi) in u.iter_mut().zip(a.iter()).zip(b.iter()) {
             *ui = gdt * ai + bi;
         }

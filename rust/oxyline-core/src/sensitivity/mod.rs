@@ -85,6 +85,7 @@ fn prepare(
     for v in &mut spec.vessels {
         v.output = true;
     }
+    parameter::check_closed_loop(&spec)?;
     let params = paths
         .iter()
         .map(|p| Parameter::parse(&spec, p))
@@ -107,16 +108,6 @@ fn prepare(
     let unknowns = signals
         .iter()
         .map(|(vessel, var)| {
-            let vi = probes
-                .vessels
-                .iter()
-                .position(|v| v == vessel)
-                .ok_or_else(|| {
-                    Error::model(
-                        format!("output '{vessel}:{var}'"),
-                        format!("no vessel named '{vessel}' in model '{}'", spec.name),
-                    )
-                })?;
             let k = VESSEL_VARIABLES
                 .iter()
                 .position(|v| v == var)
@@ -126,7 +117,19 @@ fn prepare(
                         format!("unknown variable '{var}' (one of {VESSEL_VARIABLES:?})"),
                     )
                 })?;
-            Ok(probes.vessel_unknowns[4 * vi + k])
+            if let Some(vi) = probes.vessels.iter().position(|v| v == vessel) {
+                return Ok(probes.vessel_unknowns[4 * vi + k]);
+            }
+            // a heart block's valve `<vessel>:<valve>`: the pressures behind (in) and in
+            // front of it (out) and its flow (the left ventricle is `<vessel>:aortic`'s in)
+            let valve = probes.valves.iter().find(|v| v.name == *vessel);
+            let valve = valve.ok_or_else(|| {
+                Error::model(
+                    format!("output '{vessel}:{var}'"),
+                    format!("no vessel named '{vessel}' in model '{}'", spec.name),
+                )
+            })?;
+            Ok(valve.unknowns[k.min(2)])
         })
         .collect::<Result<Vec<_>>>()?;
     Ok((dae, tangents, unknowns))

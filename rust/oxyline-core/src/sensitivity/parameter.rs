@@ -26,7 +26,7 @@ use crate::circuit::{Circuit, Dae};
 use crate::error::{Error, Result};
 use crate::model::{
     ActivationSpec, Arrangement, BoundarySpec, ChamberLawSpec, ChamberSpec, ChamberSphereSpec,
-    NetworkSpec, ValveSpec,
+    HeartPulmonarySpec, NetworkSpec, ValveSpec,
 };
 use crate::segment::WallModel;
 
@@ -53,14 +53,16 @@ pub enum Parameter {
     /// `scale.inflow`: every flow condition's waveform.
     InflowScale,
     /// `vessels.<name>.chamber.<key>` / `vessels.<name>.valve.<key>` /
-    /// `vessels.<name>.chamber_sphere.<key>`: a heart element's value, `key` as the element's
-    /// model key (`activation.t_active`, …) and its SI value; `mass`: the derivative of the
-    /// element's mass-matrix entry (a spherical chamber's wall mass ρ d₀), if it has one.
+    /// `vessels.<name>.chamber_sphere.<key>` / `vessels.<name>.heart_pulmonary.<key>`: a heart
+    /// element's value, `key` as the element's model key (`activation.t_active`, …) and its
+    /// SI value; `mass`: (position in the element's rows, derivative) of a mass-matrix entry
+    /// the value sets (a spherical chamber's wall mass ρ d₀, a heart block's valve inductance
+    /// or capacitor), if it sets one.
     Element {
         element: String,
         key: String,
         value: f64,
-        mass: Option<f64>,
+        mass: Option<(usize, f64)>,
     },
 }
 
@@ -102,13 +104,16 @@ impl Parameter {
                 "intramyocardial_pressure",
                 "scale",
             ] => condition(spec, path, node, PIM_SCALE),
-            ["vessels", name, "chamber" | "valve" | "chamber_sphere", ..] => {
-                heart_element(spec, path, name, &parts[2..])
-            }
+            [
+                "vessels",
+                name,
+                "chamber" | "valve" | "chamber_sphere" | "heart_pulmonary",
+                ..,
+            ] => heart_element(spec, path, name, &parts[2..]),
             ["vessels", name, rest @ ..] if !rest.is_empty() => vessel(spec, path, name, rest),
             _ => Err(unknown(
                 path,
-                "not a parameter path (vessels.<name>.<length|radius|youngs_modulus|lumped.resistance|lumped.capacitance|lumped.inductance|lumped.stenosis_coefficient|chamber.<key>|valve.<key>|chamber_sphere.<key>>, boundary_conditions.<node>.<resistance|proximal_resistance|distal_resistance|capacitance|arterial_resistance|microvascular_resistance|venous_resistance|arterial_capacitance|intramyocardial_capacitance|intramyocardial_pressure.scale>, scale.<resistance|compliance|inflow>)",
+                "not a parameter path (vessels.<name>.<length|radius|youngs_modulus|lumped.resistance|lumped.capacitance|lumped.inductance|lumped.stenosis_coefficient|chamber.<key>|valve.<key>|chamber_sphere.<key>|heart_pulmonary.<key>>, boundary_conditions.<node>.<resistance|proximal_resistance|distal_resistance|capacitance|arterial_resistance|microvascular_resistance|venous_resistance|arterial_capacitance|intramyocardial_capacitance|intramyocardial_pressure.scale>, scale.<resistance|compliance|inflow>)",
             )),
         }
     }
@@ -135,11 +140,16 @@ fn heart_element(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> R
         ("chamber_sphere", .., Some(s)) => {
             // the wall's mass ρ d₀ on the velocity row: d/dρ = d₀, d/dd₀ = ρ
             mass = match key.as_str() {
-                "density" => Some(s.wall_thickness),
-                "wall_thickness" => Some(s.density),
+                "density" => Some((2, s.wall_thickness)),
+                "wall_thickness" => Some((2, s.density)),
                 _ => None,
             };
             sphere_value(s, &key)
+        }
+        ("heart_pulmonary", ..) if v.heart_pulmonary.is_some() => {
+            let h = v.heart_pulmonary.as_deref().expect("checked");
+            mass = heart_mass(&key);
+            heart_value(h, &key)
         }
         (kind, ..) => {
             return Err(unknown(path, format!("vessel '{name}' is not a {kind}")));
@@ -211,6 +221,55 @@ fn chamber_value(c: &ChamberSpec, key: &str) -> Option<f64> {
         ) => Some(*passive_volume_coefficient),
         _ => None,
     }
+}
+
+/// A heart block's value by its model key: every key but the period and the start values.
+/// Inductances and capacitances are the circuit's (E), the rest the element's law.
+fn heart_value(h: &HeartPulmonarySpec, key: &str) -> Option<f64> {
+    Some(match key {
+        "atrial_systole_fraction" => h.atrial_systole_fraction,
+        "p_wave_divisor" => h.p_wave_divisor,
+        "right_ventricle_elastance" => h.right_ventricle_elastance,
+        "left_ventricle_elastance" => h.left_ventricle_elastance,
+        "right_ventricle_rest_volume" => h.right_ventricle_rest_volume,
+        "left_ventricle_rest_volume" => h.left_ventricle_rest_volume,
+        "right_atrium_elastance" => h.right_atrium_elastance,
+        "left_atrium_elastance" => h.left_atrium_elastance,
+        "right_atrium_passive_pressure" => h.right_atrium_passive_pressure,
+        "left_atrium_passive_pressure" => h.left_atrium_passive_pressure,
+        "right_atrium_passive_volume_coefficient" => h.right_atrium_passive_volume_coefficient,
+        "left_atrium_passive_volume_coefficient" => h.left_atrium_passive_volume_coefficient,
+        "right_atrium_rest_volume" => h.right_atrium_rest_volume,
+        "left_atrium_rest_volume" => h.left_atrium_rest_volume,
+        "tricuspid_resistance" => h.tricuspid_resistance,
+        "tricuspid_inductance" => h.tricuspid_inductance,
+        "pulmonary_valve_resistance" => h.pulmonary_valve_resistance,
+        "pulmonary_valve_inductance" => h.pulmonary_valve_inductance,
+        "mitral_resistance" => h.mitral_resistance,
+        "mitral_inductance" => h.mitral_inductance,
+        "aortic_valve_resistance" => h.aortic_valve_resistance,
+        "aortic_valve_inductance" => h.aortic_valve_inductance,
+        "pulmonary_resistance" => h.pulmonary_resistance,
+        "pulmonary_capacitance" => h.pulmonary_capacitance,
+        "aortic_capacitance" => h.aortic_capacitance,
+        _ => return None,
+    })
+}
+
+/// The block's E entry a key sets (dE = 1 at that row): the valve inductances on the
+/// valves' flow rows, the pulmonary capacitor on its pressure row and the aortic one on the
+/// aorta's node, by their positions in the element's rows (`crate::element::heart`).
+fn heart_mass(key: &str) -> Option<(usize, f64)> {
+    let at = match key {
+        "tricuspid_inductance" => 4,
+        "pulmonary_valve_inductance" => 5,
+        "mitral_inductance" => 6,
+        "aortic_valve_inductance" => 7,
+        "pulmonary_capacitance" => 10,
+        "aortic_capacitance" => 13,
+        _ => return None,
+    };
+    Some((at, 1.0))
 }
 
 /// A spherical chamber's constant by its model key (every one but the period).
@@ -398,19 +457,22 @@ fn vessel(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<P
 }
 
 /// Refuse what the tangent does not cover: time-varying resistances (a varying coronary
-/// microvascular resistance among them), the closed-loop heart block and its coronary beds
-/// (the block resets its closed valves' flows inside Newton's iteration, which is not the
-/// derivative of a step equation, and the beds' iteration matrix leaves out their ventricle
-/// coupling on purpose), and svZeroDSolver-form stenoses (chain-rule capacitor rows).
-/// Branch-form stenoses, chambers, spherical chambers and valves are covered (their terms
-/// are differentiated exactly), as are coronary outlets (constant circuit parts and forcing).
+/// microvascular resistance among them), the closed-loop heart block's coronary beds (their
+/// iteration matrix leaves out the ventricle coupling on purpose), and svZeroDSolver-form
+/// stenoses (chain-rule capacitor rows). Branch-form stenoses, chambers, spherical chambers,
+/// valves and the closed-loop heart block are covered (their terms are differentiated
+/// exactly; the block's reset flows by a zero tangent row, `super::tangent`), as are coronary
+/// outlets (constant circuit parts and forcing).
 pub fn check_supported(circuit: &Circuit, dae: &Dae) -> Result<()> {
     let other = circuit.elements.iter().find_map(|e| match e {
         CircuitElement::Valve { .. }
         | CircuitElement::Chamber { .. }
-        | CircuitElement::Sphere { .. } => None,
-        CircuitElement::Heart { name, .. } => Some(format!("the closed-loop heart block {name}")),
-        CircuitElement::Coronary { name, .. } => Some(format!("the coronary bed {name}")),
+        | CircuitElement::Sphere { .. }
+        | CircuitElement::Heart { .. } => None,
+        CircuitElement::Coronary { name, .. } => Some(format!(
+            "the closed-loop coronary bed {name} (the tangent needs its exact Jacobian, and \
+             the bed's leaves out its coupling to the ventricle pressure on purpose)"
+        )),
     });
     let why = if !dae.chain_rule.is_empty() {
         Some("svZeroDSolver-form stenoses (stenosis_form: svzerod)".to_owned())
@@ -429,6 +491,28 @@ pub fn check_supported(circuit: &Circuit, dae: &Dae) -> Result<()> {
             format!("do not cover models with {w}"),
         )),
         None => Ok(()),
+    }
+}
+
+/// Refuse a closed loop (a model with the closed-loop heart block and no boundary
+/// condition): the loop conserves the blood volume Σ C P + Σ V its start values hold, a
+/// neutral mode of the cycle map (eigenvalue 1), so the periodic tangent's and the adjoint's
+/// fixed points are not determined by the periodic cycle (on svZeroDSolver's
+/// closedLoopHeart_singleVessel the two differ by up to 0.3 of an output's scale). The block
+/// between boundary conditions (an open model) is differentiated.
+pub fn check_closed_loop(spec: &NetworkSpec) -> Result<()> {
+    let heart = spec.vessels.iter().find(|v| v.heart_pulmonary.is_some());
+    match heart {
+        Some(v) if spec.boundary_conditions.is_empty() => Err(Error::model(
+            "sensitivities",
+            format!(
+                "do not cover closed loops (the heart_pulmonary block '{}' without a boundary \
+                 condition): the loop conserves the blood volume its start values hold, a \
+                 neutral mode that leaves the periodic tangent undetermined",
+                v.name
+            ),
+        )),
+        _ => Ok(()),
     }
 }
 
@@ -573,10 +657,16 @@ impl<'a> Stamps<'a> {
                 let e = (self.dae.elements.iter())
                     .position(|e| e.name() == element)
                     .ok_or_else(missing)?;
-                t.delements.push((e, key.clone()));
-                if let Some(dm) = mass {
+                match mass {
+                    // an E entry only (a heart block's inductance or capacitor)
+                    Some((at, dm)) if element.starts_with("heart_pulmonary") => {
+                        t.de[self.dae.elements[e].rows()[*at]] = *dm;
+                    }
+                    _ => t.delements.push((e, key.clone())),
+                }
+                if let (Some((at, dm)), true) = (mass, element.starts_with("chamber_sphere")) {
                     // a spherical chamber's rows: pressure, displacement, velocity, …
-                    t.de[self.dae.elements[e].rows()[2]] = *dm;
+                    t.de[self.dae.elements[e].rows()[*at]] = *dm;
                 }
             }
             Parameter::InflowScale => {

@@ -290,6 +290,13 @@ struct Primal<'a> {
     element_jac: Vec<f64>,
     /// The elements' Jacobian entries (row, column).
     element_pattern: Vec<(usize, usize)>,
+    /// The unknowns an element resets after each Newton correction (a closed valve's flow
+    /// of the heart block) at each recorded step: step k's at `held_rows[held_at[k]..held_at[k + 1]]`.
+    held_rows: Vec<usize>,
+    held_at: Vec<usize>,
+    /// The elements that may reset unknowns, and a scratch state of ones to find them.
+    resetting: Vec<usize>,
+    marker: Vec<f64>,
 }
 
 impl<'a> Primal<'a> {
@@ -329,6 +336,12 @@ impl<'a> Primal<'a> {
             slopes: Vec::new(),
             element_jac: Vec::new(),
             element_pattern: dae.element_pattern(),
+            held_rows: Vec::new(),
+            held_at: vec![0],
+            resetting: (0..dae.elements.len())
+                .filter(|&e| !dae.elements[e].switched_unknowns().is_empty())
+                .collect(),
+            marker: vec![1.0; n],
         })
     }
 
@@ -364,6 +377,34 @@ impl<'a> Primal<'a> {
             let out = &mut self.element_jac[base..];
             self.dae
                 .element_jacobian(1.0, t_af, &y_af, out, crate::circuit::JacobianKind::Exact);
+            self.record_held(&y_af);
+        }
+        self.held_at.push(self.held_rows.len());
+    }
+
+    /// The unknowns the elements reset at this step's α_f level: a closed valve's flow is
+    /// set to zero after every Newton correction, so the converged step's flow is zero
+    /// whatever the parameters and its tangent row is zero too. The level is y + α_f γ Δt Δ
+    /// (Δ from ẏ, which the reset leaves alone): the iterate of the last residual, whose
+    /// valve positions the converged step's equations hold, as the recorded Jacobian does.
+    fn record_held(&mut self, y_af: &[f64]) {
+        for &e in &self.resetting {
+            let el = &self.dae.elements[e];
+            el.after_correction(y_af, &mut self.marker);
+            for i in el.switched_unknowns() {
+                if self.marker[i] == 0.0 {
+                    self.held_rows.push(i);
+                    self.marker[i] = 1.0;
+                }
+            }
+        }
+    }
+
+    /// The unknowns held at zero after step k (see [`Primal::record_held`]).
+    fn held(&self, k: usize) -> &[usize] {
+        match (self.held_at.get(k), self.held_at.get(k + 1)) {
+            (Some(&a), Some(&b)) => &self.held_rows[a..b],
+            _ => &[],
         }
     }
 
@@ -512,6 +553,10 @@ fn tangent_cycles(
                 return Err(singular(k as f64 * pr.scheme.dt, "non-finite tangent"));
             }
             advance(&pr.scheme, s, sd, &rs);
+            // a reset flow's row: the converged step sets it to zero (ṡ is left, as is ẏ)
+            for &i in pr.held(k) {
+                s[i] = 0.0;
+            }
             for (o, &u) in rec[k * nsig..(k + 1) * nsig].iter_mut().zip(signals) {
                 *o = s[u];
             }
