@@ -16,9 +16,9 @@
 //! all. The sums at a junction (a node with several children) add in another order than the
 //! general path's, so results agree with it to round-off.
 
+use super::parallel::{SharedBackward, SharedForward, SharedMut, TreePartition};
 #[allow(unused_imports)]
 use super::*;
-use super::parallel::{SharedBackward, SharedForward, SharedMut, TreePartition};
 
 /// A cell's row with its wall linear in C_t, W = wl·C_t + wc (see `fixed_rows`): the laws'
 /// (g, q − g c_w) of a wall without binding, or a binding's wall linearised about the old
@@ -365,12 +365,7 @@ impl Forward<'_> {
             let shared = SharedForward::new(acc, beta, x, wnew);
             return pool.install(|| part.forward(tree, &node, shared, flows));
         }
-        let mut a = ForwardSlices {
-            acc,
-            beta,
-            x,
-            wnew,
-        };
+        let mut a = ForwardSlices { acc, beta, x, wnew };
         let mut positive = true;
         // the terms a node leaves in the row of its parent when that parent is eliminated
         // next (`Link::parent_is_next`): in registers, not in the parent's accumulator
@@ -591,7 +586,11 @@ impl Transport {
         if sw.acc.len() != nn {
             sw.acc = vec![[0.0; 3]; nn];
             // large trees: the blocks of the passes on the run's threads (`parallel`)
-            sw.partition = self.plan.tree.as_deref().and_then(|t| TreePartition::of(t, nn));
+            sw.partition = self
+                .plan
+                .tree
+                .as_deref()
+                .and_then(|t| TreePartition::of(t, nn));
         }
         sw.beta.resize(ntree, 0.0);
         sw.wnew.resize(nc, 0.0);
@@ -673,7 +672,8 @@ impl Transport {
         if let Some(part) = sw.partition.as_deref() {
             // in fixed chunks of cells, Σ wconst chunk by chunk (the same bits on any
             // number of threads)
-            sw.wc_sum = part.linearise_chunks(cells, binding, &sp.free, &mut sp.anchors, wlin, wconst);
+            sw.wc_sum =
+                part.linearise_chunks(cells, binding, &sp.free, &mut sp.anchors, wlin, wconst);
             return;
         }
         sw.wc_sum = if matches!(binding, Binding::Hill { .. }) {

@@ -14,8 +14,8 @@
 //! (they differ from a pass without a partition in the last bits of those two sums only).
 
 use super::fused::{
-    BackwardArrays, Cells, Exact, FaceFlows, ForwardArrays, Inversion, NodeBack,
-    NodeRows, ParentTerms,
+    BackwardArrays, Cells, Exact, FaceFlows, ForwardArrays, Inversion, NodeBack, NodeRows,
+    ParentTerms,
 };
 use super::plan::Link;
 use crate::hemoglobin::{Binding, HillAnchor};
@@ -186,7 +186,16 @@ impl TreePartition {
                 let (mut a, mut flows) = (shared, flows.clone());
                 let mut positive = true;
                 let roots = (b0..b1)
-                    .map(|b| self.forward_block(b as usize, tree, node, &mut a, &mut flows, &mut positive))
+                    .map(|b| {
+                        self.forward_block(
+                            b as usize,
+                            tree,
+                            node,
+                            &mut a,
+                            &mut flows,
+                            &mut positive,
+                        )
+                    })
                     .collect();
                 (positive, roots)
             })
@@ -198,11 +207,17 @@ impl TreePartition {
         for &item in &self.serial {
             let (k, terms) = if item & ROOT != 0 {
                 let b = (item & !ROOT) as usize;
-                (self.block(b).last().copied().unwrap_or(0) as usize, roots[b])
+                (
+                    self.block(b).last().copied().unwrap_or(0) as usize,
+                    roots[b],
+                )
             } else {
                 let k = item as usize;
                 let carried = std::mem::take(&mut carry);
-                (k, node.eliminate(&mut a, &mut flows, (k, &tree[k]), carried, &mut positive))
+                (
+                    k,
+                    node.eliminate(&mut a, &mut flows, (k, &tree[k]), carried, &mut positive),
+                )
             };
             let l = &tree[k];
             if let Some(t) = terms {
@@ -309,7 +324,15 @@ impl TreePartition {
                 laws: cells.laws,
             };
             if hill {
-                part.linearise(SharedAnchored { binding, free, anchors }, wl, wc)
+                part.linearise(
+                    SharedAnchored {
+                        binding,
+                        free,
+                        anchors,
+                    },
+                    wl,
+                    wc,
+                )
             } else {
                 part.linearise(Exact { binding, free }, wl, wc)
             }
@@ -500,5 +523,204 @@ impl BackwardArrays for SharedBackward<'_> {
     #[inline(always)]
     fn set_z(&mut self, cell: usize, v: f64) {
         unsafe { *self.zs.get_mut(cell) = v };
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::transport::Transport;
+
+    /// A random tree of `vessels` vessels (1–4 segments each, up to three children per
+    /// junction: mixing points), a pulsatile-free flow inlet and a resistance per leaf, with
+    /// oxygen bound to haemoglobin (Hill) and a constant-k wall.
+    fn random_tree(vessels: usize, seed: &mut u64) -> String {
+        let mut rnd = || {
+            *seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((*seed >> 33) as f64) / (1u64 << 31) as f64
+        };
+        let mut children = vec![0usize; vessels];
+        let mut list = Vec::new();
+        for i in 0..vessels {
+            let from = if i == 0 {
+                "in".to_owned()
+            } else {
+                // a parent with fewer than three children
+                let mut p = (rnd() * i as f64) as usize;
+                while children[p] >= 3 {
+                    p = (p + 1) % i;
+                }
+                children[p] += 1;
+                format!("n{p}")
+            };
+            let r = 2e-3 * (0.5 + rnd());
+            list.push(format!(
+                r#"{{"name": "v{i}", "from": "{from}", "to": "n{i}", "segments": {},
+                    "geometry": {{"length": 0.02, "radius_in": {r}, "radius_out": {r},
+                    "wall_thickness": 3e-4, "youngs_modulus": 4e5}}}}"#,
+                1 + (rnd() * 4.0) as usize
+            ));
+        }
+        let mut bcs = vec![
+            r#""in": {"type": "flow", "flow": {"kind": "constant", "value": 2e-6}}"#.to_owned(),
+        ];
+        for (i, _) in children.iter().enumerate().filter(|(_, c)| **c == 0) {
+            bcs.push(format!(
+                r#""n{i}": {{"type": "resistance", "resistance": 1e9}}"#
+            ));
+        }
+        format!(
+            r#"{{"vessels": [{}], "boundary_conditions": {{{}}},
+                "transport": {{"species": [{{"name": "o2",
+                    "inlet": {{"kind": "constant", "value": 0.127}}, "initial": 0.1,
+                    "binding": {{"kind": "hill", "solubility": 1e-5, "p50": 3573.0, "n": 2.7,
+                                 "capacity": 8.9}},
+                    "wall": {{"model": "mass-transfer", "k": 1e-5,
+                              "wall_concentration": 0.04}}}}]}}}}"#,
+            list.join(","),
+            bcs.join(",")
+        )
+    }
+
+    struct Case {
+        transport: Transport,
+        /// The flow states at the steps' ends.
+        states: Vec<Vec<f64>>,
+    }
+
+    fn case(json: &str, seed: &mut u64) -> Case {
+        let spec = crate::model::parse(json).unwrap();
+        let assembled = spec.assemble().unwrap();
+        let dae = assembled.circuit.assemble().unwrap();
+        let transport = Transport::build(
+            spec.transport.as_ref().unwrap(),
+            &assembled.circuit,
+            &dae,
+            &assembled.probes,
+        )
+        .unwrap();
+        // flows of either sign (reversals at junctions), pressures irrelevant
+        let mut states = Vec::new();
+        for _ in 0..12 {
+            let y: Vec<f64> = (0..dae.n)
+                .map(|_| {
+                    *seed = seed
+                        .wrapping_mul(6364136223846793005)
+                        .wrapping_add(1442695040888963407);
+                    let u = ((*seed >> 33) as f64) / (1u64 << 31) as f64;
+                    2e-6 * (u - 0.3)
+                })
+                .collect();
+            states.push(y);
+        }
+        Case { transport, states }
+    }
+
+    /// Run the steps (carried start flows, and the loaded-flows path on every third step)
+    /// with the partition `part` (None: the serial pass) on `threads` threads; the state z.
+    fn run(c: &mut Case, part: Option<TreePartition>, threads: usize) -> Vec<f64> {
+        let t = &mut c.transport;
+        let mut z = t.initial_state(&c.states[0]).unwrap();
+        t.set_step_start(&c.states[0]);
+        if let Some(part) = part {
+            // (sized as `fused_tree_step` would, so that it keeps this partition)
+            t.sweep.acc = vec![[0.0; 3]; t.plan.kind.len()];
+            t.sweep.partition = Some(Arc::new(part));
+        }
+        let dt = 2e-3;
+        crate::threads::with_threads(Some(threads), || {
+            for (k, w) in c.states.windows(2).enumerate() {
+                let time = k as f64 * dt;
+                if k % 3 == 2 {
+                    t.implicit_step(time, dt, 0.6, &w[0], &w[1], &mut z)
+                        .unwrap();
+                    t.set_step_start(&w[1]);
+                } else {
+                    t.implicit_step_carried(time, dt, 0.6, &w[1], &mut z)
+                        .unwrap();
+                }
+            }
+        })
+        .unwrap();
+        z
+    }
+
+    /// The blocks of a random tree (small blocks, so that a small tree has many) against the
+    /// serial pass: the same amounts bit for bit on 1 and 3 threads, the fluxes' sums the
+    /// same bits on any number of threads and the serial sums' to round-off, and the oxygen
+    /// balance of the steps (Σ N moved by exactly the integrated boundary, wall and decay
+    /// fluxes) closed.
+    #[test]
+    fn the_blocks_give_the_serial_sweep() {
+        let mut seed = 7u64;
+        for vessels in [40, 400] {
+            let json = random_tree(vessels, &mut seed);
+            let s0 = seed;
+            let make = || case(&json, &mut s0.clone());
+            let mut serial = make();
+            assert!(serial.transport.fused_applies() && serial.transport.gathers_in_forward());
+            let tree = serial.transport.plan.tree.clone().unwrap();
+            let nn = serial.transport.plan.kind.len();
+            let part = || TreePartition::new(&tree, nn, 8, 16, 32);
+            check_partition(&part(), &tree);
+            let z_serial = run(&mut serial, None, 1);
+            let z_one = run(&mut make(), Some(part()), 1);
+            let z_three = run(&mut make(), Some(part()), 3);
+            let nc = serial.transport.plan.cells.len();
+            assert_eq!(z_one[..nc], z_serial[..nc], "amounts, {vessels} vessels");
+            assert_eq!(z_three, z_one, "state on 3 threads, {vessels} vessels");
+            let (acc_s, acc_p) = (&z_serial[nc..nc + 4], &z_one[nc..nc + 4]);
+            for (a, b) in acc_s.iter().zip(acc_p) {
+                assert!((a - b).abs() <= 1e-12 * a.abs().max(1e-30), "{a} vs {b}");
+            }
+            // the balance: the amounts' change is the integrated in − out − wall − decay
+            let z0 = make().transport.initial_state(&serial.states[0]).unwrap();
+            let change: f64 = z_one[..nc].iter().sum::<f64>() - z0[..nc].iter().sum::<f64>();
+            let [i_in, i_out, i_wall, i_decay] = [acc_p[0], acc_p[1], acc_p[2], acc_p[3]];
+            let flux = i_in - i_out - i_wall - i_decay;
+            let scale = i_in.abs() + i_out.abs() + i_wall.abs();
+            assert!(
+                scale > 0.0 && (change - flux).abs() <= 1e-10 * scale,
+                "{change} {flux}"
+            );
+        }
+    }
+
+    /// Every position once, blocks whole subtrees below the top tree, the serial items in
+    /// elimination order.
+    fn check_partition(p: &TreePartition, tree: &[Link]) {
+        let n = tree.len();
+        let mut seen = vec![false; n];
+        let mut block_of = vec![usize::MAX; n];
+        for b in 0..p.ends.len() - 1 {
+            for &k in p.block(b) {
+                assert!(!seen[k as usize]);
+                (seen[k as usize], block_of[k as usize]) = (true, b);
+            }
+        }
+        assert!(p.ends.len() > 10, "a few blocks");
+        let mut last = None;
+        for &item in &p.serial {
+            let k = if item & ROOT != 0 {
+                *p.block((item & !ROOT) as usize).last().unwrap() as usize
+            } else {
+                assert!(!seen[item as usize]);
+                seen[item as usize] = true;
+                item as usize
+            };
+            assert!(last.is_none_or(|l| l < k));
+            last = Some(k);
+        }
+        assert!(seen.iter().all(|&s| s));
+        let pos = |node: u32| tree.iter().position(|l| l.node == node).unwrap();
+        for b in 0..p.ends.len() - 1 {
+            let ps = p.block(b);
+            for &k in &ps[..ps.len() - 1] {
+                let parent = pos(tree[k as usize].parent);
+                assert_eq!(block_of[parent], b, "a block is a whole subtree");
+            }
+        }
     }
 }
