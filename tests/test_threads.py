@@ -41,7 +41,7 @@ def binary_tree(depth: int, per_vessel: int) -> dict[str, Any]:
 
 def random_tree_with_loops(vessels: int, loops: int, seed: int) -> dict[str, Any]:
     """A random tree (up to three children per junction, 1-6 segments per vessel) whose
-    ``loops`` extra vessels join random pairs of junctions (anastomoses), with oxygen: the
+    ``loops`` extra vessels join random pairs of inner junctions (anastomoses), with oxygen: the
     flow solve takes the general sparse LU and the transport the flow-order sweep."""
     rng = np.random.default_rng(seed)
     children = [0] * vessels
@@ -59,8 +59,9 @@ def random_tree_with_loops(vessels: int, loops: int, seed: int) -> dict[str, Any
         vessels_.append({"name": f"v{i}", "from": parent, "to": f"n{i}", "length": 0.02,
                          "radius": r, "wall_thickness": 0.1 * r, "youngs_modulus": 4e5,
                          "segments": int(rng.integers(1, 7))})
+    junctions = [i for i in range(vessels) if children[i] > 0]
     for k in range(loops):
-        a, b = rng.choice(vessels, size=2, replace=False)
+        a, b = rng.choice(junctions, size=2, replace=False)
         vessels_.append({"name": f"loop{k}", "from": f"n{a}", "to": f"n{b}", "length": 0.03,
                          "radius": 1e-3, "wall_thickness": 1e-4, "youngs_modulus": 4e5,
                          "segments": 3})
@@ -102,8 +103,9 @@ def assert_same_bits(runs: dict[int, oxyline.Result]) -> None:
         assert np.array_equal(other.data, serial.data), f"{n} threads"
         for species, res in serial.species.items():
             for part in ("vessel_data", "segment_data", "balance_data"):
+                # (columns not recorded are NaN in every run)
                 assert np.array_equal(getattr(other.species[species], part),
-                                      getattr(res, part)), f"{part}, {n} threads"
+                                      getattr(res, part), equal_nan=True), f"{part}, {n} threads"
 
 
 def test_any_number_of_threads_gives_the_same_bits(runs: dict[int, oxyline.Result]) -> None:
