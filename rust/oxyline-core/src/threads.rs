@@ -92,3 +92,47 @@ pub fn with_threads<R>(threads: Option<usize>, f: impl FnOnce() -> R) -> Result<
 pub fn pool() -> Option<Arc<ThreadPool>> {
     POOL.with(|p| p.borrow().clone())
 }
+
+/// Elements per task of the run loop's element-wise passes ([`max_over`], [`for_chunks`]),
+/// and half the least length for which they are split at all.
+pub const CHUNK: usize = 1 << 15;
+
+/// The run's pool if a pass over `len` elements is worth splitting over it.
+fn pool_for(len: usize) -> Option<Arc<ThreadPool>> {
+    if len >= 2 * CHUNK { pool() } else { None }
+}
+
+/// The largest of `f` over the ranges of `CHUNK` elements of `0..len` (on the run's threads
+/// for a long pass): the same number on any number of threads (a maximum is exact).
+pub fn max_over(len: usize, f: impl Fn(std::ops::Range<usize>) -> f64 + Sync + Send) -> f64 {
+    use rayon::prelude::*;
+    let range = |c: usize| c * CHUNK..((c + 1) * CHUNK).min(len);
+    let chunks = len.div_ceil(CHUNK);
+    match pool_for(len) {
+        Some(pool) => pool.install(|| {
+            (0..chunks)
+                .into_par_iter()
+                .map(|c| f(range(c)))
+                .reduce(|| 0.0, f64::max)
+        }),
+        None => (0..chunks).map(|c| f(range(c))).fold(0.0, f64::max),
+    }
+}
+
+/// `f(first, chunk)` for the chunks of `CHUNK` elements of `v` (on the run's threads for a
+/// long pass); each element is written by one call, so the result is the same on any number
+/// of threads.
+pub fn for_chunks<T: Send>(v: &mut [T], f: impl Fn(usize, &mut [T]) + Sync + Send) {
+    use rayon::prelude::*;
+    match pool_for(v.len()) {
+        Some(pool) => pool.install(|| {
+            v.par_chunks_mut(CHUNK)
+                .enumerate()
+                .for_each(|(c, s)| f(c * CHUNK, s))
+        }),
+        None => v
+            .chunks_mut(CHUNK)
+            .enumerate()
+            .for_each(|(c, s)| f(c * CHUNK, s)),
+    }
+}

@@ -412,30 +412,37 @@ impl Adaptive {
     /// The differential unknowns' local errors of the step of `h` that ended in `y` into
     /// `le` (0 for algebraic unknowns).
     fn local_errors(&mut self, y: &[f64], h: f64) {
-        let (h1, h2) = (self.h1, self.h2);
-        self.le.clear();
-        match self.history {
-            0 => {
-                let start = y.iter().zip(&self.y0).zip(&self.yd0);
-                self.le
-                    .extend(start.map(|((&y1, &y0), &d0)| y1 - y0 - h * d0));
+        let (h1, h2, history) = (self.h1, self.h2, self.history);
+        self.le.resize(y.len(), 0.0);
+        let (y0, yd0, ym1, ym2) = (&self.y0, &self.yd0, &self.ym1, &self.ym2);
+        let extrapolation = quadratic_extrapolation(h, h1, h2, self.c_local);
+        // (in chunks on the run's threads: each entry its own)
+        crate::threads::for_chunks(&mut self.le, |a, le| {
+            let r = a..a + le.len();
+            let (y, y0) = (&y[r.clone()], &y0[r.clone()]);
+            match history {
+                0 => {
+                    let start = y.iter().zip(y0).zip(&yd0[r]);
+                    for (e, ((&y1, &y0), &d0)) in le.iter_mut().zip(start) {
+                        *e = y1 - y0 - h * d0;
+                    }
+                }
+                1 => {
+                    let r_h = h / h1;
+                    let past = y.iter().zip(y0).zip(&ym1[r]);
+                    for (e, ((&y1, &y0), &ym)) in le.iter_mut().zip(past) {
+                        *e = y1 - y0 - r_h * (y0 - ym);
+                    }
+                }
+                _ => {
+                    let ([la, lb, lc], f) = extrapolation;
+                    let past = ym2[r.clone()].iter().zip(&ym1[r]).zip(y0);
+                    for (e, (&y1, ((&a, &b), &c))) in le.iter_mut().zip(y.iter().zip(past)) {
+                        *e = f * (y1 - (la * a + lb * b + lc * c));
+                    }
+                }
             }
-            1 => {
-                let r = h / h1;
-                let past = y.iter().zip(&self.y0).zip(&self.ym1);
-                self.le
-                    .extend(past.map(|((&y1, &y0), &ym)| y1 - y0 - r * (y0 - ym)));
-            }
-            _ => {
-                let ([la, lb, lc], f) = quadratic_extrapolation(h, h1, h2, self.c_local);
-                let past = self.ym2.iter().zip(&self.ym1).zip(&self.y0);
-                self.le.extend(
-                    y.iter()
-                        .zip(past)
-                        .map(|(&y1, ((&a, &b), &c))| f * (y1 - (la * a + lb * b + lc * c))),
-                );
-            }
-        }
+        });
         self.zero_algebraic();
     }
 
@@ -458,14 +465,18 @@ impl Adaptive {
         let mut kinds = [0.0f64; 3];
         let ends = [0, self.kind_end[0], self.kind_end[1], y.len()];
         for (k, worst) in kinds.iter_mut().enumerate() {
-            let r = ends[k]..ends[k + 1];
-            let weights = self.w_unit[r.clone()].iter().zip(&self.w_step[r.clone()]);
-            *worst = self.le[r]
-                .iter()
-                .zip(weights)
-                .fold(0.0f64, |m, (&e, (&wu, &ws))| {
-                    m.max(e.abs() * (wu * inv_h).max(ws))
-                });
+            // (in chunks on the run's threads: a maximum is the same in any grouping)
+            let first = ends[k];
+            *worst = crate::threads::max_over(ends[k + 1] - first, |c| {
+                let r = first + c.start..first + c.end;
+                let weights = self.w_unit[r.clone()].iter().zip(&self.w_step[r.clone()]);
+                self.le[r]
+                    .iter()
+                    .zip(weights)
+                    .fold(0.0f64, |m, (&e, (&wu, &ws))| {
+                        m.max(e.abs() * (wu * inv_h).max(ws))
+                    })
+            });
         }
         self.algebraic_errors(y, h, &mut kinds);
         FlowError {
@@ -537,13 +548,16 @@ impl Adaptive {
         let (rtol, atol) = (self.tol.rtol, self.tol.atol.species);
         let (r, f) = (h / self.h1, h / (2.0 * h + self.h1));
         let per_step = self.omega * h;
-        let mut worst = 0.0f64;
-        let past = self.c0.iter().zip(&self.cm1).zip(&self.c_peak);
-        for (&c1, ((&c0, &cm), &peak)) in self.c1.iter().zip(past) {
-            let le = f * (c1 - c0 - r * (c0 - cm));
-            worst = worst.max(le.abs() / (per_step * (atol + rtol * peak.max(c1.abs()))));
-        }
-        worst
+        crate::threads::max_over(self.c1.len(), |k| {
+            let mut worst = 0.0f64;
+            let past = self.c0[k.clone()].iter().zip(&self.cm1[k.clone()]);
+            let past = past.zip(&self.c_peak[k.clone()]);
+            for (&c1, ((&c0, &cm), &peak)) in self.c1[k].iter().zip(past) {
+                let le = f * (c1 - c0 - r * (c0 - cm));
+                worst = worst.max(le.abs() / (per_step * (atol + rtol * peak.max(c1.abs()))));
+            }
+            worst
+        })
     }
 
     /// After the species step: its cells' concentrations (for the estimate and the dense
@@ -800,5 +814,10 @@ fn concentrations(st: &State<'_, '_>, out: &mut Vec<f64>) {
     let vol = sp.tr.cell_transport_volumes();
     let nc = vol.len();
     let n = nc * sp.tr.species_names().len();
-    out.extend(sp.z[..n].iter().enumerate().map(|(k, &z)| z / vol[k % nc]));
+    out.resize(n, 0.0);
+    crate::threads::for_chunks(out, |a, c| {
+        for (k, (c, &z)) in (a..).zip(c.iter_mut().zip(&sp.z[a..])) {
+            *c = z / vol[k % nc];
+        }
+    });
 }

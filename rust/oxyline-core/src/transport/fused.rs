@@ -16,6 +16,7 @@
 //! all. The sums at a junction (a node with several children) add in another order than the
 //! general path's, so results agree with it to round-off.
 
+use super::parallel::{SharedBackward, SharedForward, SharedMut, TreePartition};
 #[allow(unused_imports)]
 use super::*;
 
@@ -39,16 +40,16 @@ impl LinearRows<'_> {
 }
 
 /// The free concentration of node `n` at total `c` and dc/dC_t there.
-trait Inversion {
+pub(super) trait Inversion {
     fn free_and_inv_slope(&mut self, n: usize, c: f64) -> (f64, f64);
 }
 
 /// Hill's law: the node's anchored series (every Hill node has an anchor), the exact
 /// inversion only when the series is out of its tolerance.
-struct Anchored<'a> {
-    binding: Binding,
-    free: &'a [f64],
-    anchors: &'a mut [HillAnchor],
+pub(super) struct Anchored<'a> {
+    pub(super) binding: Binding,
+    pub(super) free: &'a [f64],
+    pub(super) anchors: &'a mut [HillAnchor],
 }
 
 impl Inversion for Anchored<'_> {
@@ -60,9 +61,10 @@ impl Inversion for Anchored<'_> {
 }
 
 /// Any other binding (affine: closed form), by the exact inversion.
-struct Exact<'a> {
-    binding: Binding,
-    free: &'a [f64],
+#[derive(Clone, Copy)]
+pub(super) struct Exact<'a> {
+    pub(super) binding: Binding,
+    pub(super) free: &'a [f64],
 }
 
 impl Inversion for Exact<'_> {
@@ -73,12 +75,15 @@ impl Inversion for Exact<'_> {
     }
 }
 
-/// What the linearisation of a binding's wall reads per cell.
-struct Cells<'a> {
-    cells: &'a [usize],
-    zs: &'a [f64],
-    wvol: &'a [f64],
-    laws: &'a Laws,
+/// What the linearisation of a binding's wall reads per cell: the cells `first..` (a chunk
+/// of them on several threads, `parallel::linearise_chunks`).
+#[derive(Clone, Copy)]
+pub(super) struct Cells<'a> {
+    pub(super) first: usize,
+    pub(super) cells: &'a [usize],
+    pub(super) zs: &'a [f64],
+    pub(super) wvol: &'a [f64],
+    pub(super) laws: &'a Laws,
 }
 
 impl Cells<'_> {
@@ -86,7 +91,7 @@ impl Cells<'_> {
     /// `inversion`, and the wall's linearisation (`Laws::linearised_uptake`) into `wlin`,
     /// `wconst`; returns Σ wconst.
     #[inline(always)]
-    fn linearise<I: Inversion>(
+    pub(super) fn linearise<I: Inversion>(
         self,
         mut inversion: I,
         wlin: &mut [f64],
@@ -103,7 +108,7 @@ impl Cells<'_> {
         {
             let c = zi / v;
             let (f, inv_slope) = inversion.free_and_inv_slope(n, c);
-            (*wl, *wc) = self.laws.linearised_uptake(i, f, inv_slope, c);
+            (*wl, *wc) = self.laws.linearised_uptake(self.first + i, f, inv_slope, c);
             sum += *wc;
         }
         sum
@@ -111,12 +116,13 @@ impl Cells<'_> {
 }
 
 /// Where the forward pass takes the flow of a tree face.
-trait FaceFlows {
+pub(super) trait FaceFlows {
     fn flow(&mut self, face: usize) -> f64;
 }
 
 /// The face flows as loaded (`Transport::qf`).
-struct Loaded<'a>(&'a [f64]);
+#[derive(Clone, Copy)]
+pub(super) struct Loaded<'a>(pub(super) &'a [f64]);
 
 impl FaceFlows for Loaded<'_> {
     #[inline(always)]
@@ -129,20 +135,60 @@ impl FaceFlows for Loaded<'_> {
 /// its start flow carried in `q0`, which becomes the end flow (the gather of
 /// `Transport::implicit_step_carried`, done where the forward pass reads the face, so that
 /// no pass writes the tree faces' flows and another reads them back).
+///
+/// The start flows are shared by the threads of a parallel forward pass: each tree face is
+/// the face of one node to its parent, read and written only where that node is eliminated.
+#[derive(Clone, Copy)]
 struct Carried<'a> {
     y1: &'a [f64],
     unknowns: &'a [u32],
-    q0: &'a mut [f64],
+    q0: SharedMut<'a, f64>,
     alpha_f: f64,
 }
 
 impl FaceFlows for Carried<'_> {
     #[inline(always)]
     fn flow(&mut self, face: usize) -> f64 {
-        let (q0, q1) = (self.q0[face], self.y1[self.unknowns[face] as usize]);
-        self.q0[face] = q1;
+        let q1 = self.y1[self.unknowns[face] as usize];
+        // SAFETY: only the node whose link to its parent is `face` reads and writes it (see
+        // above); `SharedMut` checks the index
+        let q0 = unsafe { self.q0.replace(face, q1) };
         q0 + self.alpha_f * (q1 - q0)
     }
+}
+
+/// What a node leaves in its parent's row: the net-inflow, d and b terms, and whether the
+/// node is upwind of its parent (its term goes into b, else its outflow into d).
+#[derive(Clone, Copy)]
+pub(super) struct ParentTerms {
+    pub(super) terms: [f64; 3],
+    to_parent: bool,
+}
+
+impl ParentTerms {
+    /// Into the parent's accumulator (a[0] + (−q_in) is the same number as a[0] − q_in).
+    #[inline(always)]
+    pub(super) fn add_to(&self, a: &mut [f64; 3]) {
+        a[0] += self.terms[0];
+        if self.to_parent {
+            a[2] += self.terms[2];
+        } else {
+            a[1] += self.terms[1];
+        }
+    }
+}
+
+/// The per-node arrays the forward pass writes: slices on one thread, the shared arrays of
+/// the blocks on several (`parallel::SharedForward`).
+pub(super) trait ForwardArrays {
+    /// Node `n`'s accumulator, zeroed.
+    fn take_acc(&mut self, n: usize) -> [f64; 3];
+    fn add_to_acc(&mut self, n: usize, t: &ParentTerms);
+    fn set_beta(&mut self, k: usize, v: f64);
+    fn x(&self, n: usize) -> f64;
+    fn set_x(&mut self, n: usize, v: f64);
+    fn wnew(&self, cell: usize) -> f64;
+    fn set_wnew(&mut self, cell: usize, v: f64);
 }
 
 /// The slices the forward pass reads and writes (split from `Transport` so that the row
@@ -158,10 +204,146 @@ struct Forward<'a> {
     dt: f64,
 }
 
+/// The forward pass's arrays as slices (one thread).
+struct ForwardSlices<'a> {
+    acc: &'a mut [[f64; 3]],
+    beta: &'a mut [f64],
+    x: &'a mut [f64],
+    wnew: &'a mut [f64],
+}
+
+impl ForwardArrays for ForwardSlices<'_> {
+    #[inline(always)]
+    fn take_acc(&mut self, n: usize) -> [f64; 3] {
+        std::mem::take(&mut self.acc[n])
+    }
+    #[inline(always)]
+    fn add_to_acc(&mut self, n: usize, t: &ParentTerms) {
+        t.add_to(&mut self.acc[n]);
+    }
+    #[inline(always)]
+    fn set_beta(&mut self, k: usize, v: f64) {
+        self.beta[k] = v;
+    }
+    #[inline(always)]
+    fn x(&self, n: usize) -> f64 {
+        self.x[n]
+    }
+    #[inline(always)]
+    fn set_x(&mut self, n: usize, v: f64) {
+        self.x[n] = v;
+    }
+    #[inline(always)]
+    fn wnew(&self, cell: usize) -> f64 {
+        self.wnew[cell]
+    }
+    #[inline(always)]
+    fn set_wnew(&mut self, cell: usize, v: f64) {
+        self.wnew[cell] = v;
+    }
+}
+
+/// One node's elimination in the forward pass (see the module doc), the same on one thread
+/// and on several.
+pub(super) struct NodeRows<'r, 'a> {
+    rows: &'r LinearRows<'a>,
+    wvol: &'a [f64],
+    zs: &'a [f64],
+    dt: f64,
+    /// Species 0: the new volumes W' = W + dt·(net inflow) into `wnew` (else read from it).
+    first: bool,
+}
+
+impl NodeRows<'_, '_> {
+    /// Eliminate the node at position `k` (link `l`), with the terms its previous sibling in
+    /// the chain handed over in `carried`; the terms it leaves in its parent's row (None for
+    /// a root). `positive` turns false at a new volume that is not.
+    #[inline(always)]
+    pub(super) fn eliminate<A: ForwardArrays, F: FaceFlows>(
+        &self,
+        a: &mut A,
+        flows: &mut F,
+        (k, l): (usize, &Link),
+        carried: [f64; 3],
+        positive: &mut bool,
+    ) -> Option<ParentTerms> {
+        let n = l.node as usize;
+        // (a + carried: the same sums, in the same order, as the terms added to `acc`)
+        let [mut net, acc_d, acc_b] = if l.reads_acc() {
+            let s = a.take_acc(n);
+            [s[0] + carried[0], s[1] + carried[1], s[2] + carried[2]]
+        } else {
+            carried
+        };
+        let (mut q_in, mut aq, mut to_parent) = (0.0, 0.0, false);
+        let has_parent = l.parent != u32::MAX;
+        if has_parent {
+            let q = flows.flow(l.face() as usize);
+            // inflow into n through the face to the parent
+            q_in = if l.face_from_child() { -q } else { q };
+            net += q_in;
+            aq = q.abs();
+            to_parent = (q >= 0.0) == l.face_from_child();
+        }
+        let (mut d, b);
+        let cell = l.cell as usize;
+        if l.cell != u32::MAX {
+            let w = if self.first {
+                let w = self.wvol[cell] + self.dt * net;
+                // (NaN fails the test too)
+                *positive &= w > 0.0;
+                a.set_wnew(cell, w);
+                w
+            } else {
+                a.wnew(cell)
+            };
+            let (d0, b0) = self.rows.row(cell, self.zs[cell], w);
+            (d, b) = (d0 + acc_d, b0 + acc_b);
+        } else {
+            // a mixing point: no storage
+            (d, b) = (acc_d, acc_b);
+        }
+        if to_parent {
+            d += aq;
+        }
+        // one division per node (the divider, not the memory, bounds this loop): x and β
+        // use 1/d; without outflow or storage the node keeps its old value (a mixing
+        // point its restored lagged value)
+        let (xn, inv_d) = if d > 1e-300 {
+            let inv_d = 1.0 / d;
+            (b * inv_d, inv_d)
+        } else if l.cell != u32::MAX {
+            (self.zs[cell] / self.wvol[cell], 0.0)
+        } else {
+            (a.x(n), 0.0)
+        };
+        a.set_x(n, xn);
+        a.set_beta(k, if to_parent { 0.0 } else { aq * inv_d });
+        // the parent's row: net inflow, and the outflow into d (parent upwind) or the inflow
+        // into b (n upwind)
+        has_parent.then(|| ParentTerms {
+            terms: if to_parent {
+                [-q_in, 0.0, aq * xn]
+            } else {
+                [-q_in, aq, 0.0]
+            },
+            to_parent,
+        })
+    }
+}
+
 impl Forward<'_> {
     /// The forward pass (see the module doc); with `first` the new volumes W' = W + dt·(net
     /// inflow) into `wnew` (else read from it). Returns whether every new volume is positive.
-    fn run<F: FaceFlows>(self, rows: &LinearRows, flows: &mut F, first: bool) -> bool {
+    /// With a partition of the tree and the run's threads, its blocks in parallel
+    /// (`parallel`: the same operations on every value, so the same bits).
+    fn run<F: FaceFlows + Clone + Send + Sync>(
+        self,
+        rows: &LinearRows,
+        flows: &mut F,
+        first: bool,
+        part: Option<&TreePartition>,
+    ) -> bool {
         let Forward {
             tree,
             acc,
@@ -172,82 +354,29 @@ impl Forward<'_> {
             zs,
             dt,
         } = self;
-        // (NaN fails the test too)
+        let node = NodeRows {
+            rows,
+            wvol,
+            zs,
+            dt,
+            first,
+        };
+        if let Some((part, pool)) = part.and_then(|p| p.pool().map(|pool| (p, pool))) {
+            let shared = SharedForward::new(acc, beta, x, wnew);
+            return pool.install(|| part.forward(tree, &node, shared, flows));
+        }
+        let mut a = ForwardSlices { acc, beta, x, wnew };
         let mut positive = true;
         // the terms a node leaves in the row of its parent when that parent is eliminated
         // next (`Link::parent_is_next`): in registers, not in the parent's accumulator
         let mut carry = [0.0; 3];
-        for (l, beta) in tree.iter().zip(beta.iter_mut()) {
-            let n = l.node as usize;
+        for (k, l) in tree.iter().enumerate() {
             let carried = std::mem::take(&mut carry);
-            // (a + carried: the same sums, in the same order, as the terms added to `acc`)
-            let [mut net, acc_d, acc_b] = if l.reads_acc() {
-                let a = std::mem::take(&mut acc[n]);
-                [a[0] + carried[0], a[1] + carried[1], a[2] + carried[2]]
-            } else {
-                carried
-            };
-            let (mut q_in, mut aq, mut to_parent) = (0.0, 0.0, false);
-            let has_parent = l.parent != u32::MAX;
-            if has_parent {
-                let q = flows.flow(l.face() as usize);
-                // inflow into n through the face to the parent
-                q_in = if l.face_from_child() { -q } else { q };
-                net += q_in;
-                aq = q.abs();
-                to_parent = (q >= 0.0) == l.face_from_child();
-            }
-            let (mut d, b);
-            let cell = l.cell as usize;
-            if l.cell != u32::MAX {
-                let w = if first {
-                    let w = wvol[cell] + dt * net;
-                    positive &= w > 0.0;
-                    wnew[cell] = w;
-                    w
-                } else {
-                    wnew[cell]
-                };
-                let (d0, b0) = rows.row(cell, zs[cell], w);
-                (d, b) = (d0 + acc_d, b0 + acc_b);
-            } else {
-                // a mixing point: no storage
-                (d, b) = (acc_d, acc_b);
-            }
-            if to_parent {
-                d += aq;
-            }
-            // one division per node (the divider, not the memory, bounds this loop): x and β
-            // use 1/d; without outflow or storage the node keeps its old value (a mixing
-            // point its restored lagged value)
-            let (xn, inv_d) = if d > 1e-300 {
-                let inv_d = 1.0 / d;
-                (b * inv_d, inv_d)
-            } else if l.cell != u32::MAX {
-                (zs[cell] / wvol[cell], 0.0)
-            } else {
-                (x[n], 0.0)
-            };
-            x[n] = xn;
-            *beta = if to_parent { 0.0 } else { aq * inv_d };
-            if has_parent {
-                // the parent's row: net inflow, and the outflow into d (parent upwind) or
-                // the inflow into b (n upwind)
-                let terms = if to_parent {
-                    [-q_in, 0.0, aq * xn]
-                } else {
-                    [-q_in, aq, 0.0]
-                };
+            if let Some(t) = node.eliminate(&mut a, flows, (k, l), carried, &mut positive) {
                 if l.parent_is_next() {
-                    carry = terms;
+                    carry = t.terms;
                 } else {
-                    let a = &mut acc[l.parent as usize];
-                    a[0] -= q_in;
-                    if to_parent {
-                        a[2] += terms[2];
-                    } else {
-                        a[1] += aq;
-                    }
+                    a.add_to_acc(l.parent as usize, &t);
                 }
             }
         }
@@ -268,7 +397,13 @@ struct RowState<'a> {
 impl RowState<'_> {
     /// The forward pass with this species' rows: W = wl·C_t + wc with (wl, wc) the laws'
     /// (g, q − g c_w) of a wall linear in C_t, or a binding's linearisation.
-    fn forward<F: FaceFlows>(self, fwd: Forward, flows: &mut F, first: bool) -> bool {
+    fn forward<F: FaceFlows + Clone + Send + Sync>(
+        self,
+        fwd: Forward,
+        flows: &mut F,
+        first: bool,
+        part: Option<&TreePartition>,
+    ) -> bool {
         let RowState {
             set,
             laws,
@@ -284,7 +419,73 @@ impl RowState<'_> {
             rate: inv_dt + set.decay,
             inv_dt,
         };
-        fwd.run(&rows, flows, first)
+        fwd.run(&rows, flows, first, part)
+    }
+}
+
+/// The per-node arrays the backward pass writes: slices on one thread, shared on several.
+pub(super) trait BackwardArrays {
+    fn x(&self, n: usize) -> f64;
+    fn set_x(&mut self, n: usize, v: f64);
+    fn set_z(&mut self, cell: usize, v: f64);
+}
+
+struct BackwardSlices<'a> {
+    x: &'a mut [f64],
+    zs: &'a mut [f64],
+}
+
+impl BackwardArrays for BackwardSlices<'_> {
+    #[inline(always)]
+    fn x(&self, n: usize) -> f64 {
+        self.x[n]
+    }
+    #[inline(always)]
+    fn set_x(&mut self, n: usize, v: f64) {
+        self.x[n] = v;
+    }
+    #[inline(always)]
+    fn set_z(&mut self, cell: usize, v: f64) {
+        self.zs[cell] = v;
+    }
+}
+
+/// One node's back-substitution (see `Backward`), the same on one thread and on several.
+pub(super) struct NodeBack<'a> {
+    beta: &'a [f64],
+    wnew: &'a [f64],
+    wl: &'a [f64],
+    wc: Option<&'a [f64]>,
+    lambda: f64,
+}
+
+impl NodeBack<'_> {
+    /// Back-substitute the node at position `k` after its parent; its wall and decay fluxes
+    /// (0 for a mixing point) added to `sums`.
+    #[inline(always)]
+    pub(super) fn substitute<A: BackwardArrays>(
+        &self,
+        a: &mut A,
+        (k, l): (usize, &Link),
+        sums: &mut (f64, f64),
+    ) {
+        let n = l.node as usize;
+        let beta = self.beta[k];
+        let mut xn = a.x(n);
+        if beta != 0.0 {
+            xn += beta * a.x(l.parent as usize);
+            a.set_x(n, xn);
+        }
+        if l.cell != u32::MAX {
+            let i = l.cell as usize;
+            let w = self.wnew[i];
+            sums.0 += match self.wc {
+                Some(wc) => self.wl[i] * xn + wc[i],
+                None => self.wl[i] * xn,
+            };
+            sums.1 += self.lambda * w * xn;
+            a.set_z(i, w * xn);
+        }
     }
 }
 
@@ -300,9 +501,11 @@ struct Backward<'a> {
 
 impl Backward<'_> {
     /// Back-substitution parents first and N = W' x; returns the wall flux Σ (wl x + wc)
-    /// (wc per cell, or left to the caller: `None`) and the decay flux Σ λ W' x.
+    /// (wc per cell, or left to the caller: `None`) and the decay flux Σ λ W' x. With a
+    /// partition, the sums are taken block by block in the partition's order, whether on
+    /// one thread or several (`parallel`).
     #[inline(always)]
-    fn run(self, wl: &[f64], wc: Option<&[f64]>) -> (f64, f64) {
+    fn run(self, wl: &[f64], wc: Option<&[f64]>, part: Option<&TreePartition>) -> (f64, f64) {
         let Backward {
             tree,
             beta,
@@ -311,26 +514,26 @@ impl Backward<'_> {
             zs,
             lambda,
         } = self;
-        let (mut i_wall, mut i_decay) = (0.0, 0.0);
-        for (l, &beta) in tree.iter().zip(beta).rev() {
-            let n = l.node as usize;
-            let mut xn = x[n];
-            if beta != 0.0 {
-                xn += beta * x[l.parent as usize];
-                x[n] = xn;
-            }
-            if l.cell != u32::MAX {
-                let i = l.cell as usize;
-                let w = wnew[i];
-                i_wall += match wc {
-                    Some(wc) => wl[i] * xn + wc[i],
-                    None => wl[i] * xn,
-                };
-                i_decay += lambda * w * xn;
-                zs[i] = w * xn;
-            }
+        let node = NodeBack {
+            beta,
+            wnew,
+            wl,
+            wc,
+            lambda,
+        };
+        if let Some(part) = part {
+            let shared = SharedBackward::new(x, zs);
+            return match part.pool() {
+                Some(pool) => pool.install(|| part.backward(tree, &node, shared)),
+                None => part.backward(tree, &node, shared),
+            };
         }
-        (i_wall, i_decay)
+        let mut a = BackwardSlices { x, zs };
+        let mut sums = (0.0, 0.0);
+        for (k, l) in tree.iter().enumerate().rev() {
+            node.substitute(&mut a, (k, l), &mut sums);
+        }
+        sums
     }
 }
 
@@ -382,6 +585,12 @@ impl Transport {
         let sw = &mut self.sweep;
         if sw.acc.len() != nn {
             sw.acc = vec![[0.0; 3]; nn];
+            // large trees: the blocks of the passes on the run's threads (`parallel`)
+            sw.partition = self
+                .plan
+                .tree
+                .as_deref()
+                .and_then(|t| TreePartition::of(t, nn));
         }
         sw.beta.resize(ntree, 0.0);
         sw.wnew.resize(nc, 0.0);
@@ -452,6 +661,7 @@ impl Transport {
         let binding = self.plan.species[s].binding;
         let sp = &mut self.species[s];
         let cells = Cells {
+            first: 0,
             cells: &self.plan.cells,
             zs: &z[s * nc..(s + 1) * nc],
             wvol: &self.wvol[..nc],
@@ -459,6 +669,13 @@ impl Transport {
         };
         let sw = &mut self.sweep;
         let (wlin, wconst) = (&mut sw.wlin[..nc], &mut sw.wconst[..nc]);
+        if let Some(part) = sw.partition.as_deref() {
+            // in fixed chunks of cells, Σ wconst chunk by chunk (the same bits on any
+            // number of threads)
+            sw.wc_sum =
+                part.linearise_chunks(cells, binding, &sp.free, &mut sp.anchors, wlin, wconst);
+            return;
+        }
         sw.wc_sum = if matches!(binding, Binding::Hill { .. }) {
             let inversion = Anchored {
                 binding,
@@ -485,6 +702,7 @@ impl Transport {
         };
         let fixed = self.fixed_rows_of(s);
         let sw = &mut self.sweep;
+        let part = sw.partition.as_deref();
         let fwd = Forward {
             tree,
             acc: &mut sw.acc,
@@ -505,15 +723,15 @@ impl Transport {
             dt,
         };
         match flows {
-            StepFlows::Loaded => rows.forward(fwd, &mut Loaded(&self.qf), s == 0),
+            StepFlows::Loaded => rows.forward(fwd, &mut Loaded(&self.qf), s == 0, part),
             StepFlows::Carried { y1, alpha_f } => {
                 let mut carried = Carried {
                     y1,
                     unknowns: &plan.face_unknowns,
-                    q0: &mut sw.q_start,
+                    q0: SharedMut::new(&mut sw.q_start),
                     alpha_f,
                 };
-                rows.forward(fwd, &mut carried, s == 0)
+                rows.forward(fwd, &mut carried, s == 0, part)
             }
         }
     }
@@ -530,6 +748,7 @@ impl Transport {
         let laws = &*self.species[s].laws;
         let fixed = self.fixed_rows_of(s);
         let sw = &self.sweep;
+        let part = sw.partition.as_deref();
         let pass = Backward {
             tree,
             beta: &sw.beta,
@@ -540,9 +759,9 @@ impl Transport {
         };
         // fixed rows: the per-cell wc of the laws; a binding: wc summed by the forward pass
         let (i_wall, i_decay) = if fixed {
-            pass.run(&laws.cell_g[..nc], Some(&laws.cell_wc[..nc]))
+            pass.run(&laws.cell_g[..nc], Some(&laws.cell_wc[..nc]), part)
         } else {
-            let (i_wall, i_decay) = pass.run(&sw.wlin[..nc], None);
+            let (i_wall, i_decay) = pass.run(&sw.wlin[..nc], None, part);
             (i_wall + sw.wc_sum, i_decay)
         };
         let (i_in, i_out) = self.implicit_boundary_fluxes();

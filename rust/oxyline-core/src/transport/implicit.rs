@@ -768,6 +768,8 @@ pub(super) struct Sweep {
     pub(super) q_start: Vec<f64>,
     /// Fused tree step with a binding: Σ wc of the cells' linearised walls (`fused.rs`).
     pub(super) wc_sum: f64,
+    /// Fused tree step of a large tree: its blocks for the run's threads (`parallel`).
+    pub(super) partition: Option<Arc<super::parallel::TreePartition>>,
 }
 
 impl Sweep {

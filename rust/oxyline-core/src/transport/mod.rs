@@ -43,6 +43,7 @@ mod laws;
 pub mod lung;
 mod memory;
 mod observe;
+mod parallel; // the fused tree step on the run's threads
 mod plan;
 pub mod renewal; // inlet renewal's per-vessel flows and factors
 mod rhs;

@@ -1,0 +1,726 @@
+//! The fused tree step (`fused.rs`) on the run's threads: the partition of a tree solve
+//! (as the flow's tree elimination, `sparse::parallel`). The tree is cut into blocks —
+//! subtrees of at most `BLOCK` nodes — which share no node, cell or face, so the forward and
+//! backward passes eliminate and substitute them in parallel; the few nodes above them (the
+//! top tree) and the terms each block root leaves in its parent's row are done serially, in
+//! elimination order.
+//!
+//! A block's nodes are taken in elimination order, so every node's row receives its
+//! children's terms in the serial pass's order, whichever thread eliminated them: the
+//! concentrations and amounts are bit-identical to the serial pass's. The step's wall and
+//! decay fluxes are sums over the cells: with a partition they are summed block by block (and
+//! Σ wconst of a binding's linearisation chunk by chunk) in the partition's fixed order, on
+//! one thread as on several, so a run's results are bit-identical for any number of threads
+//! (they differ from a pass without a partition in the last bits of those two sums only).
+
+use super::fused::{
+    BackwardArrays, Cells, Exact, FaceFlows, ForwardArrays, Inversion, NodeBack, NodeRows,
+    ParentTerms,
+};
+use super::plan::Link;
+use crate::hemoglobin::{Binding, HillAnchor};
+use rayon::ThreadPool;
+use rayon::prelude::*;
+use std::marker::PhantomData;
+use std::sync::Arc;
+
+/// Largest block: its nodes' rows stay in L2 between a node and its parent.
+const BLOCK: usize = 2048;
+/// Least number of tree nodes for a partition: below it a pass takes tens of microseconds
+/// and the threads' start costs more than they save.
+const PARALLEL_MIN: usize = 1 << 14;
+/// Least number of nodes (or cells) one task takes (several small blocks go to one thread).
+const TASK_MIN: usize = 1 << 13;
+/// Cells per chunk of the binding's linearisation (each chunk's Σ wconst in cell order).
+const CHUNK: usize = 4096;
+
+/// Tag of a block root in `TreePartition::serial` (positions are below 2³¹).
+const ROOT: u32 = 1 << 31;
+
+/// The blocks of a tree's elimination order (`Plan::tree`) and its serial remainder.
+#[derive(Debug)]
+pub(super) struct TreePartition {
+    /// The positions of every block, block after block, each block's increasing.
+    positions: Vec<u32>,
+    /// Block b is `positions[ends[b]..ends[b + 1]]`; its root is its last position.
+    ends: Vec<u32>,
+    /// Runs of whole blocks of at least `task_min` positions (half-open block ranges).
+    tasks: Vec<(u32, u32)>,
+    /// In elimination order: the top tree's positions, and the block roots that have a
+    /// parent (tagged `ROOT`, by block index), whose terms are added to it serially.
+    serial: Vec<u32>,
+    /// Cells per chunk of the linearisation.
+    chunk: usize,
+}
+
+impl TreePartition {
+    /// The partition of a tree of `nodes` domain nodes with blocks of at most `BLOCK` nodes,
+    /// if it is large enough to be split at all.
+    pub(super) fn of(tree: &[Link], nodes: usize) -> Option<Arc<Self>> {
+        (tree.len() >= PARALLEL_MIN && tree.len() < ROOT as usize)
+            .then(|| Arc::new(Self::new(tree, nodes, BLOCK, TASK_MIN, CHUNK)))
+    }
+
+    /// The partition into blocks of at most `block` nodes (a smaller one for tests).
+    pub(super) fn new(
+        tree: &[Link],
+        nodes: usize,
+        block: usize,
+        task_min: usize,
+        chunk: usize,
+    ) -> Self {
+        const NONE: u32 = u32::MAX;
+        let n = tree.len();
+        let mut pos = vec![NONE; nodes];
+        for (k, l) in tree.iter().enumerate() {
+            pos[l.node as usize] = k as u32;
+        }
+        let parent_pos: Vec<u32> = tree
+            .iter()
+            .map(|l| {
+                if l.parent == u32::MAX {
+                    NONE
+                } else {
+                    pos[l.parent as usize]
+                }
+            })
+            .collect();
+        drop(pos);
+        // subtree sizes, children first
+        let mut size = vec![1u32; n];
+        for k in 0..n {
+            if parent_pos[k] != NONE {
+                size[parent_pos[k] as usize] += size[k];
+            }
+        }
+        // block of every position, parents first (NONE: the top tree)
+        let in_block = |k: usize| size[k] as usize <= block;
+        let mut block_of = vec![NONE; n];
+        let mut roots = 0u32;
+        for k in (0..n).rev() {
+            if !in_block(k) {
+                continue;
+            }
+            let p = parent_pos[k];
+            block_of[k] = if p != NONE && in_block(p as usize) {
+                block_of[p as usize]
+            } else {
+                roots += 1;
+                roots - 1
+            };
+        }
+        // blocks numbered by their roots' positions, increasing (roots were met decreasing)
+        for b in block_of.iter_mut().filter(|b| **b != NONE) {
+            *b = roots - 1 - *b;
+        }
+        let mut ends = vec![0u32; roots as usize + 1];
+        for &b in block_of.iter().filter(|&&b| b != NONE) {
+            ends[b as usize + 1] += 1;
+        }
+        for b in 0..roots as usize {
+            ends[b + 1] += ends[b];
+        }
+        let mut fill = ends.clone();
+        let mut positions = vec![0u32; ends[roots as usize] as usize];
+        let mut serial = Vec::new();
+        for k in 0..n {
+            match block_of[k] {
+                NONE => serial.push(k as u32),
+                b => {
+                    positions[fill[b as usize] as usize] = k as u32;
+                    fill[b as usize] += 1;
+                    // (the last position of a block is its root)
+                    if fill[b as usize] == ends[b as usize + 1] && parent_pos[k] != NONE {
+                        serial.push(b | ROOT);
+                    }
+                }
+            }
+        }
+        let mut tasks = Vec::new();
+        let mut first = 0u32;
+        for b in 0..roots {
+            if (ends[b as usize + 1] - ends[first as usize]) as usize >= task_min {
+                tasks.push((first, b + 1));
+                first = b + 1;
+            }
+        }
+        if first < roots {
+            tasks.push((first, roots));
+        }
+        TreePartition {
+            positions,
+            ends,
+            tasks,
+            serial,
+            chunk,
+        }
+    }
+
+    /// The run's pool (`crate::threads`), if it has more than one thread and the tree more
+    /// than one task.
+    pub(super) fn pool(&self) -> Option<Arc<ThreadPool>> {
+        if self.tasks.len() > 1 {
+            crate::threads::pool()
+        } else {
+            None
+        }
+    }
+
+    fn block(&self, b: usize) -> &[u32] {
+        &self.positions[self.ends[b] as usize..self.ends[b + 1] as usize]
+    }
+
+    /// The forward pass: the blocks in parallel (each root's terms kept), then the top tree
+    /// and the roots' terms in elimination order. Whether every new volume is positive.
+    pub(super) fn forward<F: FaceFlows + Clone + Send + Sync>(
+        &self,
+        tree: &[Link],
+        node: &NodeRows,
+        shared: SharedForward,
+        flows: &F,
+    ) -> bool {
+        let blocks: Vec<(bool, Vec<Option<ParentTerms>>)> = self
+            .tasks
+            .par_iter()
+            .map(|&(b0, b1)| {
+                let (mut a, mut flows) = (shared, flows.clone());
+                let mut positive = true;
+                let roots = (b0..b1)
+                    .map(|b| {
+                        self.forward_block(
+                            b as usize,
+                            tree,
+                            node,
+                            &mut a,
+                            &mut flows,
+                            &mut positive,
+                        )
+                    })
+                    .collect();
+                (positive, roots)
+            })
+            .collect();
+        let mut positive = blocks.iter().all(|b| b.0);
+        let roots: Vec<Option<ParentTerms>> = blocks.into_iter().flat_map(|b| b.1).collect();
+        let (mut a, mut flows) = (shared, flows.clone());
+        let mut carry = [0.0; 3];
+        for &item in &self.serial {
+            let (k, terms) = if item & ROOT != 0 {
+                let b = (item & !ROOT) as usize;
+                (
+                    self.block(b).last().copied().unwrap_or(0) as usize,
+                    roots[b],
+                )
+            } else {
+                let k = item as usize;
+                let carried = std::mem::take(&mut carry);
+                (
+                    k,
+                    node.eliminate(&mut a, &mut flows, (k, &tree[k]), carried, &mut positive),
+                )
+            };
+            let l = &tree[k];
+            if let Some(t) = terms {
+                if l.parent_is_next() {
+                    carry = t.terms;
+                } else {
+                    a.add_to_acc(l.parent as usize, &t);
+                }
+            }
+        }
+        positive
+    }
+
+    /// One block's forward elimination; the terms its root leaves in its parent's row.
+    fn forward_block<F: FaceFlows>(
+        &self,
+        b: usize,
+        tree: &[Link],
+        node: &NodeRows,
+        a: &mut SharedForward,
+        flows: &mut F,
+        positive: &mut bool,
+    ) -> Option<ParentTerms> {
+        let ps = self.block(b);
+        let mut carry = [0.0; 3];
+        for (j, &k) in ps.iter().enumerate() {
+            let (k, l) = (k as usize, &tree[k as usize]);
+            let carried = std::mem::take(&mut carry);
+            if let Some(t) = node.eliminate(a, flows, (k, l), carried, positive) {
+                if j + 1 == ps.len() {
+                    return Some(t);
+                }
+                // (a parent in the block; the next position is the parent's if it is next)
+                if l.parent_is_next() {
+                    carry = t.terms;
+                } else {
+                    a.add_to_acc(l.parent as usize, &t);
+                }
+            }
+        }
+        None
+    }
+
+    /// The backward pass: the top tree parents first, then the blocks in parallel; the wall
+    /// and decay fluxes summed top tree first, then block by block in order.
+    pub(super) fn backward(
+        &self,
+        tree: &[Link],
+        node: &NodeBack,
+        mut shared: SharedBackward,
+    ) -> (f64, f64) {
+        let mut sums = (0.0, 0.0);
+        for &item in self.serial.iter().rev() {
+            if item & ROOT == 0 {
+                let k = item as usize;
+                node.substitute(&mut shared, (k, &tree[k]), &mut sums);
+            }
+        }
+        let blocks: Vec<Vec<(f64, f64)>> = self
+            .tasks
+            .par_iter()
+            .map(|&(b0, b1)| {
+                let mut a = shared;
+                (b0..b1)
+                    .map(|b| {
+                        let mut s = (0.0, 0.0);
+                        for &k in self.block(b as usize).iter().rev() {
+                            node.substitute(&mut a, (k as usize, &tree[k as usize]), &mut s);
+                        }
+                        s
+                    })
+                    .collect()
+            })
+            .collect();
+        for s in blocks.iter().flatten() {
+            sums.0 += s.0;
+            sums.1 += s.1;
+        }
+        sums
+    }
+
+    /// A binding's wall linearised in chunks of cells (on the run's threads when it has
+    /// them); Σ wconst summed chunk by chunk in order.
+    pub(super) fn linearise_chunks(
+        &self,
+        cells: Cells,
+        binding: Binding,
+        free: &[f64],
+        anchors: &mut [HillAnchor],
+        wlin: &mut [f64],
+        wconst: &mut [f64],
+    ) -> f64 {
+        let nc = cells.cells.len();
+        let chunk = self.chunk;
+        let anchors = SharedMut::new(anchors);
+        let hill = matches!(binding, Binding::Hill { .. });
+        let one = |(c, (wl, wc)): (usize, (&mut [f64], &mut [f64]))| {
+            let (a, e) = (c * chunk, (c * chunk + wl.len()).min(nc));
+            let part = Cells {
+                first: a,
+                cells: &cells.cells[a..e],
+                zs: &cells.zs[a..e],
+                wvol: &cells.wvol[a..e],
+                laws: cells.laws,
+            };
+            if hill {
+                part.linearise(
+                    SharedAnchored {
+                        binding,
+                        free,
+                        anchors,
+                    },
+                    wl,
+                    wc,
+                )
+            } else {
+                part.linearise(Exact { binding, free }, wl, wc)
+            }
+        };
+        let per_task = TASK_MIN.div_ceil(chunk).max(1);
+        let sums: Vec<f64> = match self.pool() {
+            Some(pool) => pool.install(|| {
+                wlin.par_chunks_mut(chunk)
+                    .zip(wconst.par_chunks_mut(chunk))
+                    .enumerate()
+                    .with_min_len(per_task)
+                    .map(one)
+                    .collect()
+            }),
+            None => wlin
+                .chunks_mut(chunk)
+                .zip(wconst.chunks_mut(chunk))
+                .enumerate()
+                .map(one)
+                .collect(),
+        };
+        sums.iter().fold(0.0, |s, &c| s + c)
+    }
+}
+
+/// Hill's law with the anchors shared by the chunks of cells (each cell's node is its own).
+struct SharedAnchored<'a> {
+    binding: Binding,
+    free: &'a [f64],
+    anchors: SharedMut<'a, HillAnchor>,
+}
+
+impl Inversion for SharedAnchored<'_> {
+    #[inline(always)]
+    fn free_and_inv_slope(&mut self, n: usize, c: f64) -> (f64, f64) {
+        // SAFETY: node n is one cell's, and each cell is in one chunk
+        let anchor = unsafe { self.anchors.get_mut(n) };
+        self.binding
+            .free_and_inv_slope_anchored(c, self.free[n], anchor)
+    }
+}
+
+/// A slice shared by the threads of one pass, each of which reads and writes its own
+/// elements only (the nodes, cells or faces of its blocks). Indices are checked.
+pub(super) struct SharedMut<'a, T> {
+    ptr: *mut T,
+    len: usize,
+    _slice: PhantomData<&'a mut [T]>,
+}
+
+impl<T> Clone for SharedMut<'_, T> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<T> Copy for SharedMut<'_, T> {}
+
+// SAFETY: the threads of a pass touch disjoint elements (see the users); T is plain data
+unsafe impl<T: Send> Send for SharedMut<'_, T> {}
+unsafe impl<T: Send> Sync for SharedMut<'_, T> {}
+
+impl<'a, T> SharedMut<'a, T> {
+    pub(super) fn new(s: &'a mut [T]) -> Self {
+        SharedMut {
+            ptr: s.as_mut_ptr(),
+            len: s.len(),
+            _slice: PhantomData,
+        }
+    }
+
+    /// # Safety
+    /// No other thread touches element `i` meanwhile.
+    #[inline(always)]
+    pub(super) unsafe fn get_mut(&self, i: usize) -> &'a mut T {
+        assert!(i < self.len);
+        // SAFETY: in bounds; exclusive by the caller's contract
+        unsafe { &mut *self.ptr.add(i) }
+    }
+
+    /// # Safety
+    /// No other thread writes element `i` meanwhile.
+    #[inline(always)]
+    pub(super) unsafe fn read(&self, i: usize) -> T
+    where
+        T: Copy,
+    {
+        assert!(i < self.len);
+        // SAFETY: in bounds; not written meanwhile by the caller's contract
+        unsafe { self.ptr.add(i).read() }
+    }
+
+    /// # Safety
+    /// As `get_mut`.
+    #[inline(always)]
+    pub(super) unsafe fn replace(&self, i: usize, v: T) -> T {
+        // SAFETY: the caller's
+        std::mem::replace(unsafe { self.get_mut(i) }, v)
+    }
+}
+
+/// The forward pass's arrays shared by the blocks' threads (node-, position- and
+/// cell-indexed: a block's nodes, positions and cells are its own).
+#[derive(Clone, Copy)]
+pub(super) struct SharedForward<'a> {
+    acc: SharedMut<'a, [f64; 3]>,
+    beta: SharedMut<'a, f64>,
+    x: SharedMut<'a, f64>,
+    wnew: SharedMut<'a, f64>,
+}
+
+impl<'a> SharedForward<'a> {
+    pub(super) fn new(
+        acc: &'a mut [[f64; 3]],
+        beta: &'a mut [f64],
+        x: &'a mut [f64],
+        wnew: &'a mut [f64],
+    ) -> Self {
+        SharedForward {
+            acc: SharedMut::new(acc),
+            beta: SharedMut::new(beta),
+            x: SharedMut::new(x),
+            wnew: SharedMut::new(wnew),
+        }
+    }
+}
+
+// SAFETY (every method): a block's thread passes its own nodes, positions and cells, or
+// (for a parent's accumulator) a node of its block; the serial phases run alone
+impl ForwardArrays for SharedForward<'_> {
+    #[inline(always)]
+    fn take_acc(&mut self, n: usize) -> [f64; 3] {
+        unsafe { self.acc.replace(n, [0.0; 3]) }
+    }
+    #[inline(always)]
+    fn add_to_acc(&mut self, n: usize, t: &ParentTerms) {
+        t.add_to(unsafe { self.acc.get_mut(n) });
+    }
+    #[inline(always)]
+    fn set_beta(&mut self, k: usize, v: f64) {
+        unsafe { *self.beta.get_mut(k) = v };
+    }
+    #[inline(always)]
+    fn x(&self, n: usize) -> f64 {
+        unsafe { self.x.read(n) }
+    }
+    #[inline(always)]
+    fn set_x(&mut self, n: usize, v: f64) {
+        unsafe { *self.x.get_mut(n) = v };
+    }
+    #[inline(always)]
+    fn wnew(&self, cell: usize) -> f64 {
+        unsafe { self.wnew.read(cell) }
+    }
+    #[inline(always)]
+    fn set_wnew(&mut self, cell: usize, v: f64) {
+        unsafe { *self.wnew.get_mut(cell) = v };
+    }
+}
+
+/// The backward pass's arrays shared by the blocks' threads (a block reads its root's
+/// parent, a top-tree node no thread writes in the parallel phase).
+#[derive(Clone, Copy)]
+pub(super) struct SharedBackward<'a> {
+    x: SharedMut<'a, f64>,
+    zs: SharedMut<'a, f64>,
+}
+
+impl<'a> SharedBackward<'a> {
+    pub(super) fn new(x: &'a mut [f64], zs: &'a mut [f64]) -> Self {
+        SharedBackward {
+            x: SharedMut::new(x),
+            zs: SharedMut::new(zs),
+        }
+    }
+}
+
+// SAFETY (every method): as for `SharedForward`
+impl BackwardArrays for SharedBackward<'_> {
+    #[inline(always)]
+    fn x(&self, n: usize) -> f64 {
+        unsafe { self.x.read(n) }
+    }
+    #[inline(always)]
+    fn set_x(&mut self, n: usize, v: f64) {
+        unsafe { *self.x.get_mut(n) = v };
+    }
+    #[inline(always)]
+    fn set_z(&mut self, cell: usize, v: f64) {
+        unsafe { *self.zs.get_mut(cell) = v };
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::transport::Transport;
+
+    /// A random tree of `vessels` vessels (1–4 segments each, up to three children per
+    /// junction: mixing points), a pulsatile-free flow inlet and a resistance per leaf, with
+    /// oxygen bound to haemoglobin (Hill) and a constant-k wall.
+    fn random_tree(vessels: usize, seed: &mut u64) -> String {
+        let mut rnd = || {
+            *seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((*seed >> 33) as f64) / (1u64 << 31) as f64
+        };
+        let mut children = vec![0usize; vessels];
+        let mut list = Vec::new();
+        for i in 0..vessels {
+            let from = if i == 0 {
+                "in".to_owned()
+            } else {
+                // a parent with fewer than three children
+                let mut p = (rnd() * i as f64) as usize;
+                while children[p] >= 3 {
+                    p = (p + 1) % i;
+                }
+                children[p] += 1;
+                format!("n{p}")
+            };
+            let r = 2e-3 * (0.5 + rnd());
+            list.push(format!(
+                r#"{{"name": "v{i}", "from": "{from}", "to": "n{i}", "segments": {},
+                    "geometry": {{"length": 0.02, "radius_in": {r}, "radius_out": {r},
+                    "wall_thickness": 3e-4, "youngs_modulus": 4e5}}}}"#,
+                1 + (rnd() * 4.0) as usize
+            ));
+        }
+        let mut bcs = vec![
+            r#""in": {"type": "flow", "flow": {"kind": "constant", "value": 2e-6}}"#.to_owned(),
+        ];
+        for (i, _) in children.iter().enumerate().filter(|(_, c)| **c == 0) {
+            bcs.push(format!(
+                r#""n{i}": {{"type": "resistance", "resistance": 1e9}}"#
+            ));
+        }
+        format!(
+            r#"{{"vessels": [{}], "boundary_conditions": {{{}}},
+                "transport": {{"species": [{{"name": "o2",
+                    "inlet": {{"kind": "constant", "value": 0.127}}, "initial": 0.1,
+                    "binding": {{"kind": "hill", "solubility": 1e-5, "p50": 3573.0, "n": 2.7,
+                                 "capacity": 8.9}},
+                    "wall": {{"model": "mass-transfer", "k": 1e-5,
+                              "wall_concentration": 0.04}}}}]}}}}"#,
+            list.join(","),
+            bcs.join(",")
+        )
+    }
+
+    struct Case {
+        transport: Transport,
+        /// The flow states at the steps' ends.
+        states: Vec<Vec<f64>>,
+    }
+
+    fn case(json: &str, seed: &mut u64) -> Case {
+        let spec = crate::model::parse(json).unwrap();
+        let assembled = spec.assemble().unwrap();
+        let dae = assembled.circuit.assemble().unwrap();
+        let transport = Transport::build(
+            spec.transport.as_ref().unwrap(),
+            &assembled.circuit,
+            &dae,
+            &assembled.probes,
+        )
+        .unwrap();
+        // flows of either sign (reversals at junctions), pressures irrelevant
+        let mut states = Vec::new();
+        for _ in 0..12 {
+            let y: Vec<f64> = (0..dae.n)
+                .map(|_| {
+                    *seed = seed
+                        .wrapping_mul(6364136223846793005)
+                        .wrapping_add(1442695040888963407);
+                    let u = ((*seed >> 33) as f64) / (1u64 << 31) as f64;
+                    2e-6 * (u - 0.3)
+                })
+                .collect();
+            states.push(y);
+        }
+        Case { transport, states }
+    }
+
+    /// Run the steps (carried start flows, and the loaded-flows path on every third step)
+    /// with the partition `part` (None: the serial pass) on `threads` threads; the state z.
+    fn run(c: &mut Case, part: Option<TreePartition>, threads: usize) -> Vec<f64> {
+        let t = &mut c.transport;
+        let mut z = t.initial_state(&c.states[0]).unwrap();
+        t.set_step_start(&c.states[0]);
+        if let Some(part) = part {
+            // (sized as `fused_tree_step` would, so that it keeps this partition)
+            t.sweep.acc = vec![[0.0; 3]; t.plan.kind.len()];
+            t.sweep.partition = Some(Arc::new(part));
+        }
+        let dt = 2e-3;
+        crate::threads::with_threads(Some(threads), || {
+            for (k, w) in c.states.windows(2).enumerate() {
+                let time = k as f64 * dt;
+                if k % 3 == 2 {
+                    t.implicit_step(time, dt, 0.6, &w[0], &w[1], &mut z)
+                        .unwrap();
+                    t.set_step_start(&w[1]);
+                } else {
+                    t.implicit_step_carried(time, dt, 0.6, &w[1], &mut z)
+                        .unwrap();
+                }
+            }
+        })
+        .unwrap();
+        z
+    }
+
+    /// The blocks of a random tree (small blocks, so that a small tree has many) against the
+    /// serial pass: the same amounts bit for bit on 1 and 3 threads, the fluxes' sums the
+    /// same bits on any number of threads and the serial sums' to round-off, and the oxygen
+    /// balance of the steps (Σ N moved by exactly the integrated boundary, wall and decay
+    /// fluxes) closed.
+    #[test]
+    fn the_blocks_give_the_serial_sweep() {
+        let mut seed = 7u64;
+        for vessels in [40, 400] {
+            let json = random_tree(vessels, &mut seed);
+            let s0 = seed;
+            let make = || case(&json, &mut s0.clone());
+            let mut serial = make();
+            assert!(serial.transport.fused_applies() && serial.transport.gathers_in_forward());
+            let tree = serial.transport.plan.tree.clone().unwrap();
+            let nn = serial.transport.plan.kind.len();
+            let part = || TreePartition::new(&tree, nn, 8, 16, 32);
+            check_partition(&part(), &tree);
+            let z_serial = run(&mut serial, None, 1);
+            let z_one = run(&mut make(), Some(part()), 1);
+            let z_three = run(&mut make(), Some(part()), 3);
+            let nc = serial.transport.plan.cells.len();
+            assert_eq!(z_one[..nc], z_serial[..nc], "amounts, {vessels} vessels");
+            assert_eq!(z_three, z_one, "state on 3 threads, {vessels} vessels");
+            let (acc_s, acc_p) = (&z_serial[nc..nc + 4], &z_one[nc..nc + 4]);
+            for (a, b) in acc_s.iter().zip(acc_p) {
+                assert!((a - b).abs() <= 1e-12 * a.abs().max(1e-30), "{a} vs {b}");
+            }
+            // the balance: the amounts' change is the integrated in − out − wall − decay
+            let z0 = make().transport.initial_state(&serial.states[0]).unwrap();
+            let change: f64 = z_one[..nc].iter().sum::<f64>() - z0[..nc].iter().sum::<f64>();
+            let [i_in, i_out, i_wall, i_decay] = [acc_p[0], acc_p[1], acc_p[2], acc_p[3]];
+            let flux = i_in - i_out - i_wall - i_decay;
+            let scale = i_in.abs() + i_out.abs() + i_wall.abs();
+            assert!(
+                scale > 0.0 && (change - flux).abs() <= 1e-10 * scale,
+                "{change} {flux}"
+            );
+        }
+    }
+
+    /// Every position once, blocks whole subtrees below the top tree, the serial items in
+    /// elimination order.
+    fn check_partition(p: &TreePartition, tree: &[Link]) {
+        let n = tree.len();
+        let mut seen = vec![false; n];
+        let mut block_of = vec![usize::MAX; n];
+        for b in 0..p.ends.len() - 1 {
+            for &k in p.block(b) {
+                assert!(!seen[k as usize]);
+                (seen[k as usize], block_of[k as usize]) = (true, b);
+            }
+        }
+        assert!(p.ends.len() > 10, "a few blocks");
+        let mut last = None;
+        for &item in &p.serial {
+            let k = if item & ROOT != 0 {
+                *p.block((item & !ROOT) as usize).last().unwrap() as usize
+            } else {
+                assert!(!seen[item as usize]);
+                seen[item as usize] = true;
+                item as usize
+            };
+            assert!(last.is_none_or(|l| l < k));
+            last = Some(k);
+        }
+        assert!(seen.iter().all(|&s| s));
+        let pos = |node: u32| tree.iter().position(|l| l.node == node).unwrap();
+        for b in 0..p.ends.len() - 1 {
+            let ps = p.block(b);
+            for &k in &ps[..ps.len() - 1] {
+                let parent = pos(tree[k as usize].parent);
+                assert_eq!(block_of[parent], b, "a block is a whole subtree");
+            }
+        }
+    }
+}
