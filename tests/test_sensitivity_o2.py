@@ -122,7 +122,7 @@ def test_p50_and_consumption_recovered_from_svo2_and_vo2() -> None:
 @pytest.mark.parametrize(("parameters", "outputs", "named"), [
     (["oxygen.wall.kk"], ["VO2"], "oxygen.wall.kk"),
     (["oxygen.wall.flux"], ["VO2"], "oxygen.wall.flux"),
-    (["vessels.parent.length"], ["SvO2.d1"], "vessels.parent.length"),
+    (["vessels.parent.colour"], ["SvO2.d1"], "vessels.parent.colour"),
     (["oxygen.wall.k"], ["SvO2.nope"], "nope"),
     (["oxygen.wall.k"], ["d1.po2_out.median"], "median"),
     (["oxygen.per_vessel.d2.wall.k"], ["VO2"], "oxygen.per_vessel.d2.wall.k"),
