@@ -1,4 +1,5 @@
-"""Exact sensitivities of oxygen outputs by oxygen parameters (``oxyline.sensitivities``).
+"""Exact sensitivities of oxygen outputs by oxygen and flow parameters
+(``oxyline.sensitivities``).
 
 * The outlet PO2 and saturation, the flow-weighted outflow saturation (SvO2) and the wall
   uptake of a vessel, a region and the whole network (VO2), by the wall's mass-transfer
@@ -6,7 +7,10 @@
   differences of the same periodic runs (relative step 1e-4: the truncation, O(h²), and
   the rounding of the binding's inversion, 1e-10 mmHg over h, stay below 1e-7 of the
   derivative, so 1e-6 relative tells a wrong derivative).
-* A P50 and a consumption flux recovered from synthetic SvO2 / VO2 targets.
+* The same outputs by a radius, a length, a Windkessel resistance and the inflow scale
+  (through the flow's tangent), against central differences likewise.
+* A P50 and a consumption flux recovered from synthetic SvO2 / VO2 targets, a Windkessel
+  resistance from synthetic SvO2 / PO2 targets.
 * Paths and outputs the oxygen tangent does not cover are ModelErrors naming them.
 """
 
@@ -93,6 +97,33 @@ def test_oxygen_outputs_against_central_differences(model: dict[str, Any], path:
     assert moved.sum() >= 4, (path, fd)
     np.testing.assert_allclose(exact[moved], fd[moved], rtol=1e-6,
                                atol=1e-9 * np.abs(fd).max())
+
+
+@pytest.mark.parametrize("path", ["vessels.parent.radius", "vessels.d2.length",
+                                  "boundary_conditions.o1.distal_resistance", "scale.inflow"])
+def test_oxygen_outputs_by_flow_parameters_against_central_differences(path: str) -> None:
+    """A flow parameter reaches the oxygen through the face flows and transport volumes of
+    every step (and a radius or length through the lumen volumes and wall areas). An output
+    the 1e-4 step moves by less than 1e-10 of its value is rounding, not derivative."""
+    s = oxyline.sensitivities(Y, [path], OUTPUTS)
+    x0, h = _base_value(Y, path), 1e-4
+    up = values(native_model(Y, [path], [x0 * (1 + h)]), OUTPUTS)
+    down = values(native_model(Y, [path], [x0 * (1 - h)]), OUTPUTS)
+    fd = (up - down) / (2 * h)
+    exact = s.jacobian[:, 0] * s.parameter_values[0]
+    moved = np.abs(fd) > 1e-6 * np.abs(s.values)
+    assert moved.sum() >= 2, (path, fd)
+    np.testing.assert_allclose(exact[moved], fd[moved], rtol=1e-6)
+
+
+def test_windkessel_resistance_recovered_from_po2_and_svo2() -> None:
+    path = "boundary_conditions.o1.distal_resistance"
+    truth = native_model(Y, [path], [1.5e9])
+    outputs = ["SvO2.d1", "d1.po2_out.mean"]
+    target = values(truth, outputs)
+    fit = oxyline.calibrate(Y, dict(zip(outputs, target, strict=True)), [path], method="lm")
+    assert fit.success
+    assert fit.parameters[path] == pytest.approx(1.5e9, rel=1e-6)
 
 
 def test_consumption_balances_inflow_minus_outflow() -> None:

@@ -21,6 +21,9 @@
 //! a zero-gradient one the tangent of its neighbour. The free concentration and its slopes
 //! are those of the exact inversion of the binding (the primal's anchored series agrees with
 //! it to its 1e-12 mmHg tolerance).
+//!
+//! A flow parameter changes the face flows, the transport volumes and (a vessel's geometry)
+//! its walls: its extra terms on the same matrix are in `tangent_flow.rs`.
 
 #[allow(unused_imports)]
 use super::*;
