@@ -24,6 +24,8 @@ sys.path.insert(0, str(Path(__file__).parent))
 from bench_oxygen import tree
 
 PARAMETERS = ["oxygen.wall.k", "oxygen.wall.po2", "oxygen.hill.p50"]
+#: flow parameters: through the flow's own tangent, the face flows and transport volumes
+FLOW_PARAMETERS = ["scale.resistance", "scale.inflow", "scale.compliance"]
 
 
 def best(f: object, repeat: int) -> float:
@@ -55,10 +57,12 @@ def main() -> None:
     print(f"{'call':<34}{'CPU s':>9}{'/ primal':>10}")
     print(f"{f'simulate, {run.tangent_cycles} cycles':<34}{sim:>9.3f}{sim / base:>10.2f}")
     print(f"{'primal (no parameter)':<34}{base:>9.3f}{1.0:>10.2f}")
-    for n in (1, 3):
-        t = best(lambda n=n: oxyline.sensitivities(model, PARAMETERS[:n], outputs), a.repeat)
-        print(f"{f'tangents of {n} parameter(s)':<34}{t:>9.3f}{t / base:>10.2f}"
-              f"   ({(t - base) / base / n:.2f} primal per parameter)")
+    for kind, paths in (("oxygen", PARAMETERS), ("flow", FLOW_PARAMETERS)):
+        for n in (1, 3):
+            t = best(lambda n=n, p=paths: oxyline.sensitivities(model, p[:n], outputs),
+                     a.repeat)
+            print(f"{f'tangents of {n} {kind} parameter(s)':<34}{t:>9.3f}{t / base:>10.2f}"
+                  f"   ({(t - base) / base / n:.2f} primal per parameter)")
 
 
 if __name__ == "__main__":

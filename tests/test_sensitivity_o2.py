@@ -1,4 +1,5 @@
-"""Exact sensitivities of oxygen outputs by oxygen parameters (``oxyline.sensitivities``).
+"""Exact sensitivities of oxygen outputs by oxygen and flow parameters
+(``oxyline.sensitivities``).
 
 * The outlet PO2 and saturation, the flow-weighted outflow saturation (SvO2) and the wall
   uptake of a vessel, a region and the whole network (VO2), by the wall's mass-transfer
@@ -6,7 +7,10 @@
   differences of the same periodic runs (relative step 1e-4: the truncation, O(h²), and
   the rounding of the binding's inversion, 1e-10 mmHg over h, stay below 1e-7 of the
   derivative, so 1e-6 relative tells a wrong derivative).
-* A P50 and a consumption flux recovered from synthetic SvO2 / VO2 targets.
+* The same outputs by a radius, a length, a Windkessel resistance and the inflow scale
+  (through the flow's tangent), against central differences likewise.
+* A P50 and a consumption flux recovered from synthetic SvO2 / VO2 targets, a Windkessel
+  resistance from synthetic SvO2 / PO2 targets.
 * Paths and outputs the oxygen tangent does not cover are ModelErrors naming them.
 """
 
@@ -95,6 +99,35 @@ def test_oxygen_outputs_against_central_differences(model: dict[str, Any], path:
                                atol=1e-9 * np.abs(fd).max())
 
 
+@pytest.mark.parametrize("path", ["vessels.parent.radius", "vessels.d2.length",
+                                  "boundary_conditions.o1.distal_resistance", "scale.inflow"])
+def test_oxygen_outputs_by_flow_parameters_against_central_differences(path: str) -> None:
+    """A flow parameter reaches the oxygen through the face flows and transport volumes of
+    every step (and a radius or length through the lumen volumes and wall areas). The
+    outputs carry ~1e-12 of their value in rounding, so the quotient is judged to 1e-6 of
+    itself plus that rounding over h (a far vessel's wall by a length moves by less)."""
+    s = oxyline.sensitivities(Y, [path], OUTPUTS)
+    x0, h = _base_value(Y, path), 1e-4
+    up = values(native_model(Y, [path], [x0 * (1 + h)]), OUTPUTS)
+    down = values(native_model(Y, [path], [x0 * (1 - h)]), OUTPUTS)
+    fd = (up - down) / (2 * h)
+    exact = s.jacobian[:, 0] * s.parameter_values[0]
+    rounding = 1e-12 * np.abs(s.values) / h
+    assert (np.abs(fd) > 1e4 * rounding).sum() >= 2, (path, fd)
+    err = np.abs(exact - fd)
+    assert np.all(err <= 1e-6 * np.abs(fd) + rounding), (path, err / np.abs(fd))
+
+
+def test_windkessel_resistance_recovered_from_po2_and_svo2() -> None:
+    path = "boundary_conditions.o1.distal_resistance"
+    truth = native_model(Y, [path], [1.5e9])
+    outputs = ["SvO2.d1", "d1.po2_out.mean"]
+    target = values(truth, outputs)
+    fit = oxyline.calibrate(Y, dict(zip(outputs, target, strict=True)), [path], method="lm")
+    assert fit.success
+    assert fit.parameters[path] == pytest.approx(1.5e9, rel=1e-6)
+
+
 def test_consumption_balances_inflow_minus_outflow() -> None:
     """At the periodic state the stored oxygen repeats: d VO2 = d(inflow − outflow) of O2."""
     from oxyline import _core
@@ -122,7 +155,7 @@ def test_p50_and_consumption_recovered_from_svo2_and_vo2() -> None:
 @pytest.mark.parametrize(("parameters", "outputs", "named"), [
     (["oxygen.wall.kk"], ["VO2"], "oxygen.wall.kk"),
     (["oxygen.wall.flux"], ["VO2"], "oxygen.wall.flux"),
-    (["vessels.parent.length"], ["SvO2.d1"], "vessels.parent.length"),
+    (["vessels.parent.colour"], ["SvO2.d1"], "vessels.parent.colour"),
     (["oxygen.wall.k"], ["SvO2.nope"], "nope"),
     (["oxygen.wall.k"], ["d1.po2_out.median"], "median"),
     (["oxygen.per_vessel.d2.wall.k"], ["VO2"], "oxygen.per_vessel.d2.wall.k"),

@@ -131,9 +131,9 @@ def _involves_oxygen(parameters: Sequence[str], signals: Sequence[tuple[str, str
 def _with_oxygen(model: Model, parameters: Sequence[str], signals: list[tuple[str, str]],
                  args: tuple[Any, ...]) -> dict[str, Any]:
     """The raw tangent of signals and parameters that involve oxygen: the oxygen signals by
-    the core's species tangent (by oxygen parameters; a flow parameter there is refused by
-    the core, naming it), the flow signals by the flow tangent (by flow parameters; oxygen
-    parameters do not change the flow: their rows are 0)."""
+    the core's species tangent (by oxygen and flow parameters alike: a flow parameter
+    reaches the oxygen through the flow's own tangent), the flow signals by the flow tangent
+    (by flow parameters; oxygen parameters do not change the flow: their rows are 0)."""
     from oxyline import _core
 
     text = json.dumps(model.canonical)
@@ -141,17 +141,19 @@ def _with_oxygen(model: Model, parameters: Sequence[str], signals: list[tuple[st
     flow_cols = [k for k in range(len(signals)) if k not in o2_cols]
     o2_rows = [k for k, p in enumerate(parameters) if _is_oxygen_path(p)]
     flow_rows = [k for k in range(len(parameters)) if k not in o2_rows]
+    # with oxygen signals the species tangent takes every parameter, else the oxygen ones
+    # (for their values; their flow rows are 0)
+    rows = list(range(len(parameters))) if o2_cols else o2_rows
     species = _core.species_sensitivities(
-        text, list(parameters) if o2_cols else [parameters[k] for k in o2_rows],
-        [signals[k] for k in o2_cols], *args)
+        text, [parameters[k] for k in rows], [signals[k] for k in o2_cols], *args)
     times = species["times"]
     values = np.zeros(len(parameters))
-    values[o2_rows] = species["values"]
+    values[rows] = species["values"]
     sig = np.zeros((len(times), len(signals)))
     der = np.zeros((len(parameters), len(times), len(signals)))
     sig[:, o2_cols] = species["signals"]
     if o2_cols:
-        der[np.ix_(o2_rows, range(len(times)), o2_cols)] = species["derivatives"]
+        der[np.ix_(rows, range(len(times)), o2_cols)] = species["derivatives"]
     out = {"times": times, "values": values, "cycles": species["cycles"],
            "tangent_cycles": species["tangent_cycles"],
            "periodic_change": species["periodic_change"]}

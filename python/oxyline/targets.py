@@ -19,8 +19,8 @@ An output names a quantity of the periodic cycle:
 * ``"<vessel>.<variable>.series"``: the signal over the cycle, compared with data at given
   times (targets only).
 
-Oxygen outputs (a model with an ``oxygen`` section; derivatives by the oxygen parameters,
-:func:`oxyline._core.species_sensitivities`):
+Oxygen outputs (a model with an ``oxygen`` section; derivatives by the oxygen parameters
+and by the flow parameters, :func:`oxyline._core.species_sensitivities`):
 
 * ``"<vessel>.<variable>.<statistic>"`` with ``variable`` one of ``po2_out`` (Pa),
   ``saturation_out`` (haemoglobin saturation, 0–1) and ``wall_uptake`` (mol/s through the
@@ -250,7 +250,7 @@ def combine(output: str, times: np.ndarray, values: np.ndarray, derivs: np.ndarr
         return np.atleast_1d(v), j[None]
     if output == "cardiac_output" or output.split(".")[0] == "VO2":
         return np.atleast_1d(values.sum(axis=1).mean()), derivs.sum(axis=2).mean(axis=1)[None]
-    if output.startswith("SvO2."):  # Σ Q S / Σ Q (no oxygen parameter changes Q)
+    if output.startswith("SvO2."):  # Σ Q S / Σ Q (Q by the flow tangent)
         sat, q, dsat = values[:, 0], values[:, 1], derivs[:, :, 0]
         dq = derivs[:, :, 1]
         total = q.sum()

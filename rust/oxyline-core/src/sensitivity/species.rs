@@ -1,7 +1,11 @@
-//! Exact sensitivities of the oxygen outputs by the oxygen parameters at the periodic state:
-//! the flow runs to its periodic state by generalized-α (oxygen parameters do not change
-//! it), then the species transport and its tangents ([`crate::transport::tangent`]) repeat
-//! that cycle's recorded flow until both the amounts and every tangent are periodic.
+//! Exact sensitivities of the oxygen outputs by oxygen and flow parameters at the periodic
+//! state: the flow and its tangents by the flow parameters run to their periodic state by
+//! generalized-α ([`super::tangent::periodic_tangent`]; oxygen parameters do not change the
+//! flow), then the species transport and its tangents ([`crate::transport::tangent`]) repeat
+//! that cycle's recorded flow (and flow tangents) until both the amounts and every tangent
+//! are periodic. A flow parameter (any path of [`Parameter`]) reaches the oxygen through the
+//! face flows and transport volumes of every step, and a vessel's radius or length through
+//! its reference volumes and wall coefficients too.
 //!
 //! Parameters (SI values): `oxygen.wall.k` (mass-transfer coefficient, m/s),
 //! `oxygen.wall.po2` (its wall PO2, Pa), `oxygen.wall.concentration` (mol/m³),
@@ -10,16 +14,17 @@
 //! `concentration_out`, `flow_out`, `wall_uptake`; for the whole network (vessel "") the
 //! step's `inflow`, `outflow` and `consumption` (mol/s, the balance's own fluxes).
 
-use super::parameter::Parameter;
-use super::tangent::TangentSettings;
-use crate::circuit::{Dae, Regime};
+use super::parameter::{self, DaeTangent, Parameter};
+use super::tangent::{TangentSettings, periodic_tangent};
+use crate::assemble::Assembled;
+use crate::circuit::Dae;
 use crate::closure::{FluxSpec, WallSpec};
 use crate::error::{Error, Result};
 use crate::hemoglobin::{BindingSpec, HillAnchor};
-use crate::integrate::{GenAlpha, NewtonControl};
 use crate::model::NetworkSpec;
 use crate::transport::tangent::{
-    SpeciesDerivative, SpeciesParameterKind, SpeciesTangent, VesselSpeciesSignal,
+    FlowEffect, FlowGeometry, FlowStep, SpeciesDerivative, SpeciesParameterKind, SpeciesTangent,
+    VesselSpeciesSignal,
 };
 use crate::transport::{SpeciesSpec, Transport};
 
@@ -211,29 +216,99 @@ fn wall_name(w: &WallSpec) -> &'static str {
     }
 }
 
-/// The oxygen parameters of `paths`; a flow parameter is refused by name (the oxygen
-/// outputs' derivative by the flow is not chained yet), a path that resolves to nothing too.
-fn parameters(
+/// A parameter of the oxygen sensitivities: an oxygen parameter, or a flow parameter with
+/// its path.
+#[derive(Debug, Clone)]
+enum Param {
+    Oxygen(OxygenParameter),
+    Flow(Parameter, String),
+}
+
+/// The parameters of `paths`: oxygen paths, else flow parameter paths (a path that resolves
+/// to neither is an error naming it).
+fn parameters(spec: &NetworkSpec, sp: &SpeciesSpec, paths: &[String]) -> Result<Vec<Param>> {
+    paths
+        .iter()
+        .map(|path| {
+            Ok(match oxygen_parameter(sp, path)? {
+                Some(p) => Param::Oxygen(p),
+                None => Param::Flow(Parameter::parse(spec, path)?, path.clone()),
+            })
+        })
+        .collect()
+}
+
+/// The derivative of the DAE by each flow parameter (the oxygen parameters' entries None),
+/// after the circuit is checked against what the flow tangent covers.
+fn flow_tangents(
     spec: &NetworkSpec,
-    sp: &SpeciesSpec,
-    paths: &[String],
-) -> Result<Vec<OxygenParameter>> {
-    let mut out = Vec::with_capacity(paths.len());
-    for path in paths {
-        match oxygen_parameter(sp, path)? {
-            Some(p) => out.push(p),
-            None => {
-                Parameter::parse(spec, path)?;
-                return Err(Error::model(
-                    format!("parameter '{path}'"),
-                    "a flow parameter: the derivative of oxygen outputs by flow parameters \
-                     (through the velocities) is not available yet; ask for flow outputs or \
-                     oxygen parameters",
-                ));
+    assembled: &Assembled,
+    dae: &Dae,
+    params: &[Param],
+) -> Result<Vec<Option<DaeTangent>>> {
+    if params.iter().all(|p| matches!(p, Param::Oxygen(_))) {
+        return Ok(vec![None; params.len()]);
+    }
+    let circuit = &assembled.circuit;
+    parameter::check_supported(circuit, dae)?;
+    let stamps = parameter::Stamps::new(circuit, dae);
+    params
+        .iter()
+        .map(|p| match p {
+            Param::Oxygen(_) => Ok(None),
+            Param::Flow(par, path) => {
+                let mut t = stamps.tangent(spec, par, path)?;
+                // a node whose row a pressure condition took holds no capacitance
+                for (node, _) in &circuit.fixed_pressures {
+                    t.de[*node] = 0.0;
+                }
+                Ok(Some(t))
             }
+        })
+        .collect()
+}
+
+/// What flow parameter `p` (DAE derivative `t`) changes in the transport besides the flows:
+/// a vessel's wall area and lumen volume (radius: ∝ r, r²; length: ∝ L, L), its compliances
+/// (`t.de`), and the flow conditions whose waveform it scales (`t.dforcing` on their rows).
+fn flow_effect<'a>(
+    spec: &NetworkSpec,
+    assembled: &Assembled,
+    dae: &Dae,
+    p: &Parameter,
+    t: &'a DaeTangent,
+    sources: &'a mut Vec<(usize, f64)>,
+) -> FlowEffect<'a> {
+    let circuit = &assembled.circuit;
+    let geometry = match p {
+        Parameter::Radius(vi) | Parameter::Length(vi) => {
+            let name = &spec.vessels[*vi].name;
+            let vessel = circuit.vessel_names.iter().position(|n| n == name);
+            let k = if matches!(p, Parameter::Radius(_)) {
+                2.0
+            } else {
+                1.0
+            };
+            vessel.map(|vessel| FlowGeometry {
+                vessel,
+                area: 1.0 / t.value,
+                volume: k / t.value,
+            })
+        }
+        _ => None,
+    };
+    sources.clear();
+    for &(k, factor) in &t.dforcing {
+        let row = dae.forcing[k].0;
+        if row < circuit.nodes.len() {
+            sources.push((row, factor));
         }
     }
-    Ok(out)
+    FlowEffect {
+        geometry,
+        de: &t.de,
+        sources,
+    }
 }
 
 /// The signals by (vessel, name), resolved against the probes' vessels.
@@ -285,38 +360,69 @@ fn change(a: &[f64], b: &[f64], scale: f64) -> f64 {
     if s > 0.0 { d / s } else { d }
 }
 
-/// The flow's periodic cycle by generalized-α: the states at the cycle's step ends (n + 1,
-/// the first the cycle's start), the cycles run and the method's α_f.
-fn periodic_flow(dae: &Dae, set: &TangentSettings) -> Result<(Vec<Vec<f64>>, usize, f64)> {
-    let ns = set.steps_per_cycle;
-    let dt = set.period / ns as f64;
-    let control = NewtonControl::default();
-    let mut ig = GenAlpha::new(dae, Regime::Transient, dt, set.rho_infty, control)?;
-    let mut y = dae.initial_state();
-    let mut yd = vec![0.0; dae.n];
-    let k = dae.n_nodes.min(dae.n);
-    for cycle in 1..=set.max_cycles {
-        let mut rec = Vec::with_capacity(ns + 1);
-        rec.push(y.clone());
-        for step in 0..ns {
-            ig.step(step as f64 * dt, &mut y, &mut yd)?;
-            rec.push(y.clone());
-        }
-        let c = change(&rec[0][..k], &y[..k], 0.0).max(change(&rec[0][k..], &y[k..], 0.0));
-        if c <= set.tol {
-            return Ok((rec, cycle, ig.alpha_f()));
-        }
-    }
-    Err(Error::model(
-        "sensitivities",
-        format!(
-            "the flow is not periodic after max_cycles = {}",
-            set.max_cycles
-        ),
-    ))
+/// The flow's periodic cycle by generalized-α and its tangents by the flow parameters:
+/// the flow states at the cycle's step ends (n + 1, the first the cycle's start; only the
+/// `unknowns` the transport reads are set), the tangents of those unknowns
+/// (n_flow_params × n_steps × unknowns, after each step), and the cycles run.
+struct FlowCycle {
+    ys: Vec<Vec<f64>>,
+    derivs: Vec<f64>,
+    nu: usize,
+    cycles: usize,
+    change: f64,
 }
 
-/// d(signal)/d(oxygen parameter) over the periodic cycle of `spec` (see the module doc).
+impl FlowCycle {
+    fn run(
+        dae: &Dae,
+        tangents: &[DaeTangent],
+        unknowns: &[usize],
+        set: &TangentSettings,
+    ) -> Result<FlowCycle> {
+        let ns = set.steps_per_cycle;
+        let flow = periodic_tangent(dae, tangents, unknowns, *set)?;
+        if flow.periodic_change > set.tol {
+            return Err(Error::model(
+                "sensitivities",
+                format!(
+                    "the flow (or its tangent) is not periodic after max_cycles = {} (last \
+                     change {:.2e})",
+                    set.max_cycles, flow.periodic_change
+                ),
+            ));
+        }
+        let nu = unknowns.len();
+        // the periodic cycle starts where it ends
+        let ys = (0..=ns)
+            .map(|k| {
+                let mut y = vec![0.0; dae.n];
+                let at = if k == 0 { ns - 1 } else { k - 1 };
+                for (&u, v) in unknowns.iter().zip(&flow.values[at * nu..(at + 1) * nu]) {
+                    y[u] = *v;
+                }
+                y
+            })
+            .collect();
+        Ok(FlowCycle {
+            ys,
+            derivs: flow.derivs,
+            nu,
+            cycles: flow.cycles,
+            change: flow.periodic_change,
+        })
+    }
+
+    /// Flow parameter `p`'s tangent of the unknowns at the end of step `k` (k = 0..n_steps;
+    /// step 0's end is the cycle's start, the last step's end).
+    fn tangent(&self, p: usize, k: usize) -> &[f64] {
+        let ns = self.ys.len() - 1;
+        let at = if k == 0 { ns - 1 } else { k - 1 };
+        let o = (p * ns + at) * self.nu;
+        &self.derivs[o..o + self.nu]
+    }
+}
+
+/// d(signal)/d(parameter) over the periodic cycle of `spec` (see the module doc).
 pub fn species_sensitivities(
     spec: &NetworkSpec,
     paths: &[String],
@@ -347,22 +453,54 @@ pub fn species_sensitivities(
     let s = tr.species_index(&sp.name).expect("the spec's species");
     tr.check_species_tangent(s, "sensitivities")?;
     let sigs = resolve(&assembled.probes.vessels, signals)?;
-    let (ys, cycles, af) = periodic_flow(&dae, &settings)?;
+    let dae_tangents = flow_tangents(&spec, &assembled, &dae, &params)?;
+    let flow_params: Vec<DaeTangent> = dae_tangents.iter().flatten().cloned().collect();
+    let flow = FlowCycle::run(&dae, &flow_params, &tr.flow_tangent_unknowns(), &settings)?;
     let names = &assembled.circuit.vessel_names;
-    let mut run = TransportRun::new(&mut tr, s, &params, &sp, names, &ys[0])?;
+    let mut derivs = Vec::with_capacity(params.len());
+    let mut sources = Vec::new();
+    for (p, t) in params.iter().zip(&dae_tangents) {
+        derivs.push(match (p, t) {
+            (Param::Flow(par, _), Some(t)) => {
+                let e = flow_effect(&spec, &assembled, &dae, par, t, &mut sources);
+                tr.species_flow_derivative(s, &e)
+            }
+            (Param::Oxygen(o), _) => tr.species_derivative(s, o.kind, o.value, &on(o, &sp, names)),
+            (Param::Flow(..), None) => unreachable!("every flow parameter has its tangent"),
+        });
+    }
+    let values = (params.iter().zip(&dae_tangents))
+        .map(|(p, t)| match (p, t) {
+            (Param::Oxygen(o), _) => o.value,
+            (_, t) => t.as_ref().map_or(f64::NAN, |t| t.value),
+        })
+        .collect();
+    let mut run = TransportRun::new(&mut tr, s, derivs, values, &flow)?;
     let (transport_cycles, periodic_change, (sig_values, sig_derivs)) =
-        run.run_to_periodic(&ys, af, &settings, signals, &sigs)?;
+        run.run_to_periodic(&flow, &settings, signals, &sigs)?;
     let ns = settings.steps_per_cycle;
     let dt = settings.period / ns as f64;
     Ok(SpeciesSensitivities {
-        values: params.iter().map(|p| p.value).collect(),
+        values: run.values,
         times: (1..=ns).map(|k| k as f64 * dt).collect(),
         signals: sig_values,
         derivs: sig_derivs,
-        cycles,
+        cycles: flow.cycles,
         transport_cycles,
-        periodic_change,
+        periodic_change: periodic_change.max(flow.change),
     })
+}
+
+/// The vessels (by circuit index) whose wall oxygen parameter `p` is: its own vessel's, or
+/// the section's on every vessel without a wall of its own.
+fn on(p: &OxygenParameter, sp: &SpeciesSpec, vessel_names: &[String]) -> Vec<bool> {
+    vessel_names
+        .iter()
+        .map(|v| match &p.vessel {
+            Some(own) => own == v,
+            None => !sp.per_vessel.contains_key(v),
+        })
+        .collect()
 }
 
 /// One cycle's signals (n_steps × n_signals) and their derivatives (n_params × n_steps ×
@@ -377,6 +515,8 @@ struct TransportRun<'t> {
     derivs: Vec<SpeciesDerivative>,
     tangents: Vec<SpeciesTangent>,
     values: Vec<f64>,
+    /// Per parameter: its index among the flow parameters (None: an oxygen parameter).
+    flow_index: Vec<Option<usize>>,
     anchors: Vec<HillAnchor>,
 }
 
@@ -384,45 +524,45 @@ impl<'t> TransportRun<'t> {
     fn new(
         tr: &'t mut Transport,
         s: usize,
-        params: &[OxygenParameter],
-        sp: &SpeciesSpec,
-        vessel_names: &[String],
-        y0: &[f64],
+        derivs: Vec<SpeciesDerivative>,
+        values: Vec<f64>,
+        flow: &FlowCycle,
     ) -> Result<Self> {
+        let y0 = &flow.ys[0];
         let z = tr.initial_state(y0)?;
-        // the vessels each parameter's wall is on
-        let on = |p: &OxygenParameter| -> Vec<bool> {
-            vessel_names
-                .iter()
-                .map(|v| match &p.vessel {
-                    Some(own) => own == v,
-                    None => !sp.per_vessel.contains_key(v),
+        let mut next = 0;
+        let flow_index: Vec<Option<usize>> = (derivs.iter())
+            .map(|d| {
+                (d.kind == SpeciesParameterKind::Flow).then(|| {
+                    next += 1;
+                    next - 1
                 })
-                .collect()
-        };
-        let derivs = params
-            .iter()
-            .map(|p| tr.species_derivative(s, p.kind, p.value, &on(p)))
+            })
             .collect();
-        let tangents = vec![tr.species_tangent_start(); params.len()];
+        let tangents = (derivs.iter().zip(&flow_index))
+            .map(|(d, f)| match f {
+                Some(p) => tr.species_flow_tangent_start(s, d, y0, flow.tangent(*p, 0), &z),
+                None => tr.species_tangent_start(),
+            })
+            .collect();
         Ok(TransportRun {
             tr,
             s,
             z,
             derivs,
             tangents,
-            values: params.iter().map(|p| p.value).collect(),
+            values,
+            flow_index,
             anchors: Vec::new(),
         })
     }
 
-    /// Cycles over the recorded flow `ys` until the amounts and tangents repeat to the
+    /// Cycles over the recorded flow until the amounts and tangents repeat to the
     /// tolerance; the cycles, the last change and the last cycle's signals (values
     /// n_steps × n_signals, derivatives n_params × n_steps × n_signals).
     fn run_to_periodic(
         &mut self,
-        ys: &[Vec<f64>],
-        af: f64,
+        flow: &FlowCycle,
         set: &TangentSettings,
         names: &[(String, String)],
         sigs: &[Signal],
@@ -432,7 +572,7 @@ impl<'t> TransportRun<'t> {
         for cycle in 1..=set.max_cycles {
             let z0 = self.z[s * nc..(s + 1) * nc].to_vec();
             let dz0: Vec<Vec<f64>> = self.tangents.iter().map(|t| t.dz.clone()).collect();
-            let rec = self.cycle(ys, af, set, names, sigs)?;
+            let rec = self.cycle(flow, set, names, sigs)?;
             let z1 = &self.z[s * nc..(s + 1) * nc];
             let scale = z1.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             last = change(&z0, z1, 0.0);
@@ -458,27 +598,42 @@ impl<'t> TransportRun<'t> {
     /// One cycle of the transport and its tangents, recording the signals.
     fn cycle(
         &mut self,
-        ys: &[Vec<f64>],
-        af: f64,
+        flow: &FlowCycle,
         set: &TangentSettings,
         names: &[(String, String)],
         sigs: &[Signal],
     ) -> Result<(Vec<f64>, Vec<f64>)> {
         let ns = set.steps_per_cycle;
         let dt = set.period / ns as f64;
+        let af = set.alpha_f();
         let (np, nsig) = (self.tangents.len(), sigs.len());
         let (nc, s) = (self.tr.n_cells(), self.s);
         let nsp = self.tr.species_names().len();
         let acc = nsp * nc + 4 * s;
+        let any_flow = self.flow_index.iter().any(Option::is_some);
         let mut values = vec![0.0; ns * nsig];
         let mut derivs = vec![0.0; np * ns * nsig];
         for k in 0..ns {
             let t = k as f64 * dt;
             let z_old = self.z.clone();
             let w_old = self.tr.cell_volumes().to_vec();
+            let x_old = if any_flow {
+                self.tr.species_node_values(s, &self.z)
+            } else {
+                Vec::new()
+            };
             let dacc_old: Vec<[f64; 4]> = self.tangents.iter().map(|t| t.dacc).collect();
-            self.tr
-                .implicit_step(t, dt, af, &ys[k], &ys[k + 1], &mut self.z)?;
+            let (y0, y1) = (&flow.ys[k], &flow.ys[k + 1]);
+            self.tr.implicit_step(t, dt, af, y0, y1, &mut self.z)?;
+            let steps: Vec<Option<FlowStep<'_>>> = (self.flow_index.iter())
+                .map(|f| {
+                    f.map(|p| FlowStep {
+                        start: flow.tangent(p, k),
+                        end: flow.tangent(p, k + 1),
+                        alpha_f: af,
+                    })
+                })
+                .collect();
             if !self.tangents.is_empty() {
                 self.tr.species_tangent_step(
                     s,
@@ -488,6 +643,8 @@ impl<'t> TransportRun<'t> {
                     &w_old,
                     &self.z,
                     &self.derivs,
+                    &steps,
+                    &x_old,
                     &mut self.tangents,
                     &mut self.anchors,
                 )?;

@@ -73,6 +73,11 @@ impl TangentSettings {
         }
         Ok(())
     }
+
+    /// Generalized-α's α_f = 1/(1 + ρ∞): the level a step's face flows are read at.
+    pub(crate) fn alpha_f(&self) -> f64 {
+        1.0 / (1.0 + self.rho_infty)
+    }
 }
 
 /// Values and derivatives of the chosen unknowns over the last (periodic) cycle.

@@ -66,7 +66,7 @@ fn stenosed() -> NetworkSpec {
 }
 
 /// `s` with parameter `path` multiplied by `f`, written into the spec directly.
-fn scaled_from(mut s: NetworkSpec, path: &str, f: f64) -> NetworkSpec {
+pub(super) fn scaled_from(mut s: NetworkSpec, path: &str, f: f64) -> NetworkSpec {
     let vi = |s: &NetworkSpec, n: &str| s.vessels.iter().position(|v| v.name == n).unwrap();
     let parts: Vec<&str> = path.split('.').collect();
     match parts.as_slice() {

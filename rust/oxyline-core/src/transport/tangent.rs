@@ -21,9 +21,17 @@
 //! a zero-gradient one the tangent of its neighbour. The free concentration and its slopes
 //! are those of the exact inversion of the binding (the primal's anchored series agrees with
 //! it to its 1e-12 mmHg tolerance).
+//!
+//! A flow parameter changes the face flows, the transport volumes and (a vessel's geometry)
+//! its walls: its extra terms on the same matrix are in `tangent_flow.rs`.
 
 #[allow(unused_imports)]
 use super::*;
+
+#[path = "tangent_flow.rs"]
+mod flow;
+use flow::{FlowDerivative, FlowStepTerms};
+pub use flow::{FlowEffect, FlowGeometry, FlowStep};
 
 /// What an oxygen parameter changes in the step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -36,6 +44,9 @@ pub enum SpeciesParameterKind {
     Flux,
     /// Hill's P50 (the binding, and so the inlets' total concentration).
     P50,
+    /// A flow parameter: face flows, transport volumes and (geometry) the walls
+    /// (`tangent_flow.rs`).
+    Flow,
 }
 
 /// The binding at a total concentration: free concentration f, σ = df/dC_t, dσ/dC_t, and
@@ -120,16 +131,21 @@ pub struct SpeciesDerivative {
     pub kind: SpeciesParameterKind,
     piece: Vec<[f64; 3]>,
     cell: Vec<[f64; 3]>,
+    /// A flow parameter's volumes and sources (None for an oxygen parameter).
+    flow: Option<FlowDerivative>,
 }
 
 /// The tangent of one parameter carried from step to step: amounts z′ of the species' cells,
 /// its accumulators' (inflow, outflow, wall, decay) and the total concentration of every node
-/// (the lagged values of mixing points and zero-gradient boundaries).
+/// (the lagged values of mixing points and zero-gradient boundaries); for a flow parameter
+/// also the cells' transport volumes W′ and the last step's face flows Q′ (else empty).
 #[derive(Debug, Clone)]
 pub struct SpeciesTangent {
     pub dz: Vec<f64>,
     pub dacc: [f64; 4],
     xt: Vec<f64>,
+    dw: Vec<f64>,
+    dq: Vec<f64>,
 }
 
 /// One step's primal values of the species' cells the tangent reads.
@@ -207,14 +223,19 @@ impl Transport {
                 SpeciesParameterKind::Conductance => [g / value, g * cw / value, 0.0],
                 SpeciesParameterKind::WallConcentration => [0.0, g * cw / value, 0.0],
                 SpeciesParameterKind::Flux => [0.0, 0.0, q / value],
-                SpeciesParameterKind::P50 => [0.0; 3],
+                SpeciesParameterKind::P50 | SpeciesParameterKind::Flow => [0.0; 3],
             };
             piece[p] = d;
             for (c, dk) in cell[pc.cell as usize].iter_mut().zip(d) {
                 *c += pc.share * dk;
             }
         }
-        SpeciesDerivative { kind, piece, cell }
+        SpeciesDerivative {
+            kind,
+            piece,
+            cell,
+            flow: None,
+        }
     }
 
     /// A zero tangent of species `s` (the periodic fixed point is found from there).
@@ -223,13 +244,18 @@ impl Transport {
             dz: vec![0.0; self.plan.cells.len()],
             dacc: [0.0; 4],
             xt: vec![0.0; self.plan.kind.len()],
+            dw: Vec::new(),
+            dq: Vec::new(),
         }
     }
 
     /// Advance the tangents of species `s` over the step [t, t + Δt] the primal just took
     /// (`implicit_step`, not carried: its face flows are loaded), from its start amounts
-    /// `z_old` and volumes `w_old`; `z` holds the new amounts. `anchors`: the tangent's own
-    /// series inverses of the binding per node (kept from step to step).
+    /// `z_old` and volumes `w_old`; `z` holds the new amounts. `flows`: per parameter, a flow
+    /// parameter's flow tangent over the step (None for an oxygen parameter); `x_old`: the
+    /// nodes' values before the step ([`Transport::species_node_values`]; read only with
+    /// flows). `anchors`: the tangent's own series inverses of the binding per node (kept
+    /// from step to step).
     #[allow(clippy::too_many_arguments)]
     pub fn species_tangent_step(
         &mut self,
@@ -240,6 +266,8 @@ impl Transport {
         w_old: &[f64],
         z: &[f64],
         derivs: &[SpeciesDerivative],
+        flows: &[Option<FlowStep<'_>>],
+        x_old: &[f64],
         tangents: &mut [SpeciesTangent],
         anchors: &mut Vec<HillAnchor>,
     ) -> Result<()> {
@@ -273,8 +301,12 @@ impl Transport {
             primal.x.push(zs[i] / self.wvol[i]);
         }
         self.load_boundary(s, t_af);
-        for (d, t) in derivs.iter().zip(tangents.iter_mut()) {
-            self.tangent_solve(s, dt, &primal, d, t)?;
+        for (k, (d, t)) in derivs.iter().zip(tangents.iter_mut()).enumerate() {
+            let terms = match (&d.flow, flows.get(k).copied().flatten()) {
+                (Some(f), Some(step)) => Some(self.flow_step_terms(f, &step, x_old)),
+                _ => None,
+            };
+            self.tangent_solve(s, dt, &primal, d, t, terms)?;
         }
         Ok(())
     }
@@ -296,7 +328,8 @@ impl Transport {
             .collect()
     }
 
-    /// One parameter's tangent over the step (see the module doc).
+    /// One parameter's tangent over the step (see the module doc; a flow parameter's
+    /// `terms`: `tangent_flow.rs`).
     fn tangent_solve(
         &mut self,
         s: usize,
@@ -304,35 +337,25 @@ impl Transport {
         primal: &StepPrimal,
         d: &SpeciesDerivative,
         t: &mut SpeciesTangent,
+        terms: Option<FlowStepTerms>,
     ) -> Result<()> {
-        let laws = Arc::clone(&self.species[s].laws);
-        let rate = 1.0 / dt + self.plan.species[s].decay;
-        let p50 = d.kind == SpeciesParameterKind::P50;
-        let mut wall = 0.0;
         let plan = Arc::clone(&self.plan);
-        for (i, &n) in plan.cells.iter().enumerate() {
-            let g = laws.cell_g[i];
-            let [dg, dgcw, dq] = d.cell[i];
-            let pt = &primal.point[i];
-            let dc = t.dz[i] / primal.w[i];
-            let (fd, sd) = if p50 {
-                (pt.f_p50, pt.sigma_p50)
-            } else {
-                (0.0, 0.0)
-            };
-            let df = pt.sigma * dc + fd;
-            let dsigma = pt.sigma_c * dc + sd;
-            let wl = g * pt.sigma;
-            let dwl = dg * pt.sigma + g * dsigma;
-            let dwc = dg * pt.f + g * df - dgcw + dq - dwl * primal.c[i] - wl * dc;
-            self.sweep.den[n] = self.wvol[i] * rate + wl;
-            self.sweep.num[n] = t.dz[i] / dt - dwc - dwl * primal.x[i];
-            t.xt[n] = dc;
-            wall += dwl * primal.x[i] + dwc; // (+ w_l x′ after the solve)
-        }
+        // the new transport volumes' tangent W'′ = W′ + Δt (net inflow)′
+        let dw_new: Vec<f64> = match &terms {
+            Some(f) => (plan.cells.iter().zip(&t.dw))
+                .map(|(&n, dw)| dw + dt * f.dnet[n])
+                .collect(),
+            None => Vec::new(),
+        };
+        let mut wall = self.tangent_rows(s, dt, primal, d, t, &dw_new);
         for &m in &plan.mixing {
             let sw = &mut self.sweep;
             (sw.den[m], sw.num[m], sw.lag[m]) = (0.0, 0.0, t.xt[m]);
+        }
+        if let Some(f) = &terms {
+            for (b, r) in self.sweep.num.iter_mut().zip(&f.r) {
+                *b += r;
+            }
         }
         let mut bval = self.tangent_boundary(s, d);
         std::mem::swap(&mut self.bval, &mut bval);
@@ -346,23 +369,74 @@ impl Transport {
         };
         // the boundary fluxes of the tangent: the same upwind rule on x′ and the inflows′
         std::mem::swap(&mut self.conc, &mut xt);
-        let (d_in, d_out) = self.implicit_boundary_fluxes();
+        let (mut d_in, mut d_out) = self.implicit_boundary_fluxes();
         std::mem::swap(&mut self.conc, &mut xt);
         std::mem::swap(&mut self.bval, &mut bval);
         res?;
+        let laws = Arc::clone(&self.species[s].laws);
         let lambda = self.plan.species[s].decay;
         let mut decay = 0.0;
         for (i, &n) in plan.cells.iter().enumerate() {
             let wl = laws.cell_g[i] * primal.point[i].sigma;
             wall += wl * xt[n];
-            decay += lambda * self.wvol[i] * xt[n];
-            t.dz[i] = self.wvol[i] * xt[n];
+            // z′ = W' x′ + W'′ x
+            let dz = self.wvol[i] * xt[n] + dw_new.get(i).map_or(0.0, |dw| dw * primal.x[i]);
+            decay += lambda * dz;
+            t.dz[i] = dz;
         }
         t.xt = xt;
+        if let Some(f) = terms {
+            (d_in, d_out) = (d_in + f.d_in, d_out + f.d_out);
+            (t.dw, t.dq) = (dw_new, f.dq);
+        }
         for (a, v) in t.dacc.iter_mut().zip([d_in, d_out, wall, decay]) {
             *a += dt * v;
         }
         Ok(())
+    }
+
+    /// The cells' rows of one parameter's tangent into `sweep.den`, `sweep.num` (the
+    /// primal's matrix, the right side of the module doc; `dw_new`: a flow parameter's new
+    /// volumes' tangent, else empty), the old concentrations' tangent into `t.xt`; returns
+    /// the wall flux's part known before the solve (without w_l x′).
+    fn tangent_rows(
+        &mut self,
+        s: usize,
+        dt: f64,
+        primal: &StepPrimal,
+        d: &SpeciesDerivative,
+        t: &mut SpeciesTangent,
+        dw_new: &[f64],
+    ) -> f64 {
+        let laws = Arc::clone(&self.species[s].laws);
+        let rate = 1.0 / dt + self.plan.species[s].decay;
+        let p50 = d.kind == SpeciesParameterKind::P50;
+        let mut wall = 0.0;
+        let plan = Arc::clone(&self.plan);
+        for (i, &n) in plan.cells.iter().enumerate() {
+            let g = laws.cell_g[i];
+            let [dg, dgcw, dq] = d.cell[i];
+            let pt = &primal.point[i];
+            // c′ = (z′ − c W′)/W
+            let dw_old = t.dw.get(i).copied().unwrap_or(0.0);
+            let dc = (t.dz[i] - primal.c[i] * dw_old) / primal.w[i];
+            let (fd, sd) = if p50 {
+                (pt.f_p50, pt.sigma_p50)
+            } else {
+                (0.0, 0.0)
+            };
+            let df = pt.sigma * dc + fd;
+            let dsigma = pt.sigma_c * dc + sd;
+            let wl = g * pt.sigma;
+            let dwl = dg * pt.sigma + g * dsigma;
+            let dwc = dg * pt.f + g * df - dgcw + dq - dwl * primal.c[i] - wl * dc;
+            let storage = dw_new.get(i).map_or(0.0, |dw| dw * rate * primal.x[i]);
+            self.sweep.den[n] = self.wvol[i] * rate + wl;
+            self.sweep.num[n] = t.dz[i] / dt - dwc - dwl * primal.x[i] - storage;
+            t.xt[n] = dc;
+            wall += dwl * primal.x[i] + dwc; // (+ w_l x′ after the solve)
+        }
+        wall
     }
 }
 
@@ -375,7 +449,7 @@ pub enum VesselSpeciesSignal {
     Po2,
     /// Haemoglobin saturation at the outlet (Hill binding).
     Saturation,
-    /// The step's flow through the outlet face (m³/s; no parameter here changes it).
+    /// The step's flow through the outlet face (m³/s; a flow parameter changes it).
     Flow,
     /// Wall uptake of the vessel's segments (mol/s).
     WallUptake,
@@ -449,7 +523,8 @@ impl Transport {
             VesselSpeciesSignal::Flow => {
                 let v = &self.plan.out_vessels[k];
                 let q = self.qf.get(v.last).copied().unwrap_or(f64::NAN);
-                Ok((q, vec![0.0; derivs.len()]))
+                let dq = |t: &SpeciesTangent| t.dq.get(v.last).copied().unwrap_or(0.0);
+                Ok((q, tangents.iter().map(dq).collect()))
             }
             VesselSpeciesSignal::WallUptake => Ok(self.vessel_uptake(s, k, z, derivs, tangents)),
             _ => {

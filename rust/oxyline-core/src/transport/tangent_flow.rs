@@ -1,0 +1,265 @@
+//! The species step's tangent by a flow parameter (a radius, a length, a wall stiffness, a
+//! Windkessel value, the inflow scale, …): such a parameter changes the face flows the step
+//! reads (the flow's own tangent gives them step by step), the cells' transport volumes W
+//! (V(P₀) = V₀ + C (P₀ − P_ref) at the start, then W' = W + Δt · net inflow), and for a
+//! vessel's geometry its reference volumes and its walls' coefficients (every law the species
+//! tangent follows is proportional to the wall area: g, g c_w and q ∝ 2π r Δx).
+//!
+//! The step's rows (d_n + Σ_out |Q|) x_n − Σ_in |Q| x_up = b_n are linear in the face flows at
+//! fixed upwind directions, so at the primal's solution x the derivative of the residual by
+//! the flows is the divergence of the flux change: a face carrying Φ = |Q| x_up from `up` to
+//! `down` moves d|Q| x_up out of `up`'s row and into `down`'s (x_up a node's new value, or the
+//! value a boundary carries in: prescribed, or zero gradient's lagged old value). With the
+//! volumes' derivative W'′ = W′ + Δt (net inflow)′ and c′ = (z′ − c W′)/W the tangent solves
+//!
+//!   A x′ = z′/Δt − w_c′ − w_l′ x − W'′ (1/Δt + λ) x + (flux divergence)′,
+//!
+//! on the primal's matrix A, and the new amounts' tangent is z′ = W'′ x + W' x′.
+
+use super::*;
+
+/// What a flow parameter changes in the transport besides the face flows, given by the
+/// sensitivity layer from the parameter's derivative of the DAE.
+#[derive(Debug, Clone, Copy)]
+pub struct FlowEffect<'a> {
+    /// The vessel (circuit index) whose geometry the parameter sets, if any.
+    pub geometry: Option<FlowGeometry>,
+    /// dE/dθ of the DAE: the nodes' compliances (the cells' C).
+    pub de: &'a [f64],
+    /// (circuit node, d ln(inflow)/dθ) of flow conditions whose waveform the parameter scales.
+    pub sources: &'a [(usize, f64)],
+}
+
+/// The logarithmic derivatives by the parameter of a vessel's wall area and lumen volume.
+#[derive(Debug, Clone, Copy)]
+pub struct FlowGeometry {
+    pub vessel: usize,
+    pub area: f64,
+    pub volume: f64,
+}
+
+/// A flow parameter's fixed effects per cell and per flow source.
+#[derive(Debug, Clone)]
+pub(crate) struct FlowDerivative {
+    /// d(reference volume V₀) and d(compliance C) per cell.
+    dv0: Vec<f64>,
+    dcap: Vec<f64>,
+    /// d ln(q_s)/dθ per flow source of the plan.
+    source: Vec<f64>,
+}
+
+/// One step of the flow's tangent for one parameter: the derivatives of the flow unknowns
+/// [`Transport::flow_tangent_unknowns`] at the step's start and end, and the level α_f the
+/// step reads its face flows at.
+#[derive(Debug, Clone, Copy)]
+pub struct FlowStep<'a> {
+    pub start: &'a [f64],
+    pub end: &'a [f64],
+    pub alpha_f: f64,
+}
+
+/// A flow parameter's terms in one step: face flows' derivatives (every face), the nodes'
+/// net inflow's and the residual's (the flux divergence), and the boundary fluxes' change
+/// at the primal's concentrations (inflow, outflow).
+pub(super) struct FlowStepTerms {
+    pub(super) dq: Vec<f64>,
+    pub(super) dnet: Vec<f64>,
+    pub(super) r: Vec<f64>,
+    pub(super) d_in: f64,
+    pub(super) d_out: f64,
+}
+
+impl Transport {
+    /// The flow unknowns whose tangent the species tangent of a flow parameter reads: every
+    /// flow face's unknown (in face order), then each cell's volume unknown.
+    pub fn flow_tangent_unknowns(&self) -> Vec<usize> {
+        let p = &self.plan;
+        let faces = p.face_unknowns[..p.n_flow_faces]
+            .iter()
+            .map(|&u| u as usize);
+        faces
+            .chain((0..p.cells.len()).map(|i| p.volume_unknown(i)))
+            .collect()
+    }
+
+    /// The derivative of species `s`'s step by a flow parameter with effects `e`.
+    pub fn species_flow_derivative(&self, s: usize, e: &FlowEffect<'_>) -> SpeciesDerivative {
+        let (plan, laws) = (&*self.plan, &self.species[s].laws);
+        let nc = plan.cells.len();
+        let mut piece = vec![[0.0; 3]; laws.laws.len()];
+        let mut cell = vec![[0.0; 3]; nc];
+        let mut dvol = vec![0.0; plan.kind.len()];
+        if let Some(g) = e.geometry {
+            let of = |seg: usize| plan.segment_vessels[seg] as usize == g.vessel;
+            for (p, (law, pc)) in laws.laws.iter().zip(&plan.pieces).enumerate() {
+                let SegmentLaw::Fixed { g: gl, cw, q } = *law else {
+                    continue;
+                };
+                if of(pc.seg as usize) {
+                    piece[p] = [gl * g.area, gl * cw * g.area, q * g.area];
+                    for (c, dk) in cell[pc.cell as usize].iter_mut().zip(piece[p]) {
+                        *c += pc.share * dk;
+                    }
+                }
+            }
+            for (_, seg) in plan.segments.iter().enumerate().filter(|(j, _)| of(*j)) {
+                for (n, share) in seg.node_shares() {
+                    dvol[n] += share * seg.volume * g.volume;
+                }
+            }
+        }
+        // a node refined into m sub-cells gives each V₀/m and C/m
+        let mut m = vec![0.0f64; plan.kind.len()];
+        for &n in &plan.cell_node {
+            m[n] += 1.0;
+        }
+        let dv0 = plan.cell_node.iter().map(|&n| dvol[n] / m[n]).collect();
+        let dcap = (plan.cell_node.iter().enumerate())
+            .map(|(i, &n)| e.de.get(plan.volume_unknown(i)).copied().unwrap_or(0.0) / m[n])
+            .collect();
+        let source = (plan.sources.iter())
+            .map(|(n, _, _)| e.sources.iter().filter(|(k, _)| k == n).map(|x| x.1).sum())
+            .collect();
+        SpeciesDerivative {
+            kind: SpeciesParameterKind::Flow,
+            piece,
+            cell,
+            flow: Some(FlowDerivative { dv0, dcap, source }),
+        }
+    }
+
+    /// The tangent of a flow parameter at the start of a run from flow state `y0` (its
+    /// tangent `dflow0` over [`Transport::flow_tangent_unknowns`]) and amounts `z` of species
+    /// `s`: the start volumes' derivative dV(P₀) = dV₀ + dC (P₀ − P_ref) + C dP₀, the
+    /// concentrations held.
+    pub fn species_flow_tangent_start(
+        &self,
+        s: usize,
+        d: &SpeciesDerivative,
+        y0: &[f64],
+        dflow0: &[f64],
+        z: &[f64],
+    ) -> SpeciesTangent {
+        let mut t = self.species_tangent_start();
+        let Some(f) = &d.flow else {
+            return t;
+        };
+        let (p, nc) = (&*self.plan, self.plan.cells.len());
+        let nf = p.n_flow_faces;
+        t.dw = (0..nc)
+            .map(|i| {
+                let u = p.volume_unknown(i);
+                f.dv0[i] + f.dcap[i] * (y0[u] - p.p_ref) + p.cap[i] * dflow0[nf + i]
+            })
+            .collect();
+        for (i, dz) in t.dz.iter_mut().enumerate() {
+            *dz = t.dw[i] * z[s * nc + i] / self.wvol[i];
+        }
+        t.dq = vec![0.0; p.faces.len()];
+        t
+    }
+
+    /// The total concentration of every node of species `s` in state `z` before a step: the
+    /// cells' z/W, the mixing points' carried values (the values the step's lagged terms read).
+    pub fn species_node_values(&self, s: usize, z: &[f64]) -> Vec<f64> {
+        let (p, nc) = (&*self.plan, self.plan.cells.len());
+        let mut x = vec![0.0; p.kind.len()];
+        for (i, &n) in p.cells.iter().enumerate() {
+            x[n] = z[s * nc + i] / self.wvol[i];
+        }
+        for (&m, &c) in p.mixing.iter().zip(&self.species[s].mixing_conc) {
+            x[m] = c;
+        }
+        x
+    }
+
+    /// The face flows' tangent of the step (flow faces from the flow's tangent at the α_f
+    /// level, sources scaled, refined cells' interior faces by their rule).
+    fn face_flow_tangent(&self, f: &FlowDerivative, step: &FlowStep<'_>) -> (Vec<f64>, Vec<f64>) {
+        let p = &*self.plan;
+        let mut dq = vec![0.0; p.faces.len()];
+        for (k, d) in dq[..p.n_flow_faces].iter_mut().enumerate() {
+            *d = step.start[k] + step.alpha_f * (step.end[k] - step.start[k]);
+        }
+        let dqs: Vec<f64> = self.qs.iter().zip(&f.source).map(|(q, k)| q * k).collect();
+        for ch in &p.chains {
+            let q_a = ch.in_faces.iter().map(|&f| dq[f]).sum::<f64>()
+                + ch.sources.iter().map(|&k| dqs[k]).sum::<f64>();
+            let q_b: f64 = ch.out_faces.iter().map(|&f| dq[f]).sum();
+            for k in 1..ch.m {
+                dq[ch.first_face + k - 1] = q_a - (k as f64 / ch.m as f64) * (q_a - q_b);
+            }
+        }
+        (dq, dqs)
+    }
+
+    /// A flow parameter's terms of the step species `s` (loaded boundary values) just took,
+    /// `x_old` the nodes' values before it ([`Transport::species_node_values`]).
+    pub(super) fn flow_step_terms(
+        &self,
+        f: &FlowDerivative,
+        step: &FlowStep<'_>,
+        x_old: &[f64],
+    ) -> FlowStepTerms {
+        let p = &*self.plan;
+        let (dq, dqs) = self.face_flow_tangent(f, step);
+        let nn = p.kind.len();
+        let (mut dnet, mut r) = (vec![0.0; nn], vec![0.0; nn]);
+        // the value a face's upwind end carries: a node's new value, or a boundary's
+        let carried = |up: End, down: End| match (up, down) {
+            (End::Node(u), _) => self.conc[u],
+            (End::Boundary(b), End::Node(n)) => inflow_value(self.bval[b], x_old[n]),
+            (End::Boundary(b), End::Boundary(_)) => inflow_value(self.bval[b], 0.0),
+        };
+        let faces = p.internal.iter().map(|e| e[0] as usize);
+        for fi in faces.chain(p.boundary_faces.iter().copied()) {
+            let face = &p.faces[fi];
+            if let End::Node(n) = face.from {
+                dnet[n] -= dq[fi];
+            }
+            if let End::Node(n) = face.to {
+                dnet[n] += dq[fi];
+            }
+            let (q, up, down) = oriented(&p.faces, &self.qf, fi);
+            let flux = if q >= 0.0 { dq[fi] } else { -dq[fi] } * carried(up, down);
+            if let End::Node(u) = up {
+                r[u] -= flux;
+            }
+            if let End::Node(n) = down {
+                r[n] += flux;
+            }
+        }
+        let (mut d_in, mut d_out) = (0.0, 0.0);
+        for ((&(n, _, bb), &q), &dqk) in p.sources.iter().zip(&self.qs).zip(&dqs) {
+            dnet[n] += dqk;
+            let v = if q >= 0.0 {
+                inflow_value(self.bval[bb], x_old[n])
+            } else {
+                self.conc[n]
+            };
+            r[n] += dqk * v;
+            account(p.boundary_inlet[bb], dqk * v, &mut d_in, &mut d_out);
+        }
+        for b in &p.boundary_links {
+            let (n, bb, fi) = (b.node as usize, b.boundary as usize, b.face as usize);
+            let v = if b.boundary_upwind(self.qf[fi]) {
+                inflow_value(self.bval[bb], x_old[n])
+            } else {
+                self.conc[n]
+            };
+            account(
+                p.boundary_inlet[bb],
+                b.inflow(dq[fi]) * v,
+                &mut d_in,
+                &mut d_out,
+            );
+        }
+        FlowStepTerms {
+            dq,
+            dnet,
+            r,
+            d_in,
+            d_out,
+        }
+    }
+}
