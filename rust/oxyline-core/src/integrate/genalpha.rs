@@ -50,6 +50,10 @@ pub struct GenAlpha<'a> {
     magnitude: Magnitude,
     /// The unfiltered estimate of `filter_error` (empty until an error-controlled run).
     filter_scratch: Vec<f64>,
+    /// Newton with the natural-monotonicity line search (see `newton::solve`): set by an
+    /// error-controlled run after a Newton failure (plain Newton cycles around a steep valve
+    /// law's switch whatever the step, as the algebraic rows do not shrink with it).
+    damped: bool,
 }
 
 impl<'a> GenAlpha<'a> {
@@ -137,6 +141,7 @@ impl<'a> GenAlpha<'a> {
             y_af: vec![0.0; nonlinear],
             magnitude: Magnitude::new(dae),
             filter_scratch: Vec::new(),
+            damped: false,
         })
     }
 
@@ -209,6 +214,11 @@ impl<'a> GenAlpha<'a> {
         self.filter_scratch = saved;
     }
 
+    /// Newton with (true) or without the line search of `newton::solve` from the next step.
+    pub fn set_damped(&mut self, on: bool) {
+        self.damped = on;
+    }
+
     /// α_f: the level at which the residual (and so the face flows for transport) is enforced.
     pub fn alpha_f(&self) -> f64 {
         self.af
@@ -242,11 +252,44 @@ impl<'a> GenAlpha<'a> {
             t_af,
         };
         let done = newton::solve(&mut it, &mut r, &control, &mut scale, t_af);
+        if let Err(e) = done {
+            // the failed iterates stay out of the running scale (a retry starts from the
+            // step's start); `r` holds the last correction: name its largest unknown
+            let worst = self.worst_correction(&r, &scale);
+            self.r = r;
+            return Err(match (e, worst) {
+                (Error::Solver { time, message }, Some(i)) => Error::solver(
+                    time,
+                    format!(
+                        "{message} (largest correction at {})",
+                        self.dae.names.unknown(i)
+                    ),
+                ),
+                (e, _) => e,
+            });
+        }
         (self.r, self.magnitude) = (r, scale);
-        done?;
         y.copy_from_slice(&self.y_new);
         yd.copy_from_slice(&self.yd_new);
         Ok(())
+    }
+}
+
+impl GenAlpha<'_> {
+    /// The unknown of the largest correction in `r` relative to its kind's running scale.
+    fn worst_correction(&self, r: &[f64], scale: &Magnitude) -> Option<usize> {
+        let [p, q] = scale.peaks();
+        let nn = self.dae.n_nodes;
+        let rel = |(i, d): (usize, &f64)| {
+            let s = if i < nn { p } else { q };
+            (i, d.abs() / s.max(1e-300))
+        };
+        r.iter()
+            .enumerate()
+            .map(rel)
+            .filter(|(_, v)| v.is_finite())
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(i, _)| i)
     }
 }
 
@@ -334,6 +377,9 @@ impl NewtonProblem for Iterate<'_, '_> {
     }
     fn is_linear(&self) -> bool {
         false
+    }
+    fn backtracks(&self) -> bool {
+        self.ga.damped
     }
 }
 

@@ -59,6 +59,10 @@ pub trait Integrator {
     /// slow against Δt, damped for stiff ones). Integrators without one leave v as it is.
     fn filter_error(&mut self, _v: &mut [f64]) {}
 
+    /// Newton with a line search (true) or plain (false) from the next step: an
+    /// error-controlled run's retry after a Newton failure. Integrators without Newton ignore it.
+    fn set_damped_newton(&mut self, _on: bool) {}
+
     /// Advance (y, ẏ) from `time` to `time + dt` in place. RK4 leaves `yd` untouched.
     fn step(&mut self, time: f64, y: &mut [f64], yd: &mut [f64]) -> Result<()>;
 
@@ -161,6 +165,9 @@ impl Integrator for GenAlpha<'_> {
     }
     fn filter_error(&mut self, v: &mut [f64]) {
         GenAlpha::filter_error(self, v);
+    }
+    fn set_damped_newton(&mut self, on: bool) {
+        GenAlpha::set_damped(self, on);
     }
     fn step(&mut self, time: f64, y: &mut [f64], yd: &mut [f64]) -> Result<()> {
         GenAlpha::step(self, time, y, yd)

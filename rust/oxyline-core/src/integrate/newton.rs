@@ -131,10 +131,11 @@ const MAX_HALVINGS: usize = 30;
 ///
 /// A problem that [`NewtonProblem::backtracks`] takes a correction only when the simplified
 /// correction at the new iterate, J_old⁻¹ r_new, is smaller than the correction itself (both
-/// as scaled increments): Deuflhard's natural monotonicity test, invariant under the scaling
+/// as scaled increments of the solve's own unknowns, before [`NewtonProblem::update`] maps
+/// them to the state): Deuflhard's natural monotonicity test, invariant under the scaling
 /// of the rows (a residual norm would mix Pa and m³/s rows, and a valve's KCL residual of
 /// 1e-6 m³/s would count for nothing against its pressure rows); otherwise the correction is
-/// halved.
+/// halved (half of it is taken back).
 pub fn solve<P: NewtonProblem>(
     problem: &mut P,
     r: &mut [f64],
@@ -145,7 +146,8 @@ pub fn solve<P: NewtonProblem>(
     // the scaled size of the last correction of a backtracking problem, that correction and
     // the simplified correction
     let mut before: Option<f64> = None;
-    let (mut dx, mut simplified): (Vec<f64>, Vec<f64>) = (Vec::new(), Vec::new());
+    let (mut dx, mut simplified, mut back): (Vec<f64>, Vec<f64>, Vec<f64>) =
+        (Vec::new(), Vec::new(), Vec::new());
     let mut halvings = 0;
     let mut it = 0;
     while it < control.max_iter {
@@ -161,13 +163,13 @@ pub fn solve<P: NewtonProblem>(
             // an overflow (NaN) is halved too
             let worse = matches!(now.partial_cmp(&before), Some(Ordering::Greater) | None);
             if worse && halvings < MAX_HALVINGS {
+                // `dx` is the correction as solved (the update maps it to the state)
                 for d in dx.iter_mut() {
-                    *d *= -0.5;
+                    *d *= 0.5;
                 }
-                problem.update(&mut dx);
-                for d in dx.iter_mut() {
-                    *d = -*d;
-                }
+                back.clear();
+                back.extend(dx.iter().map(|d| -d));
+                problem.update(&mut back);
                 halvings += 1;
                 continue;
             }
@@ -186,12 +188,14 @@ pub fn solve<P: NewtonProblem>(
         }
         problem.factor(it - 1)?;
         problem.solve(r)?;
-        problem.update(r);
         if problem.backtracks() {
             dx.clear();
             dx.extend_from_slice(r);
+        }
+        problem.update(r);
+        if problem.backtracks() {
             scale.observe(problem.state());
-            before = Some(scale.increment(problem.unknowns(), r));
+            before = Some(scale.increment(problem.unknowns(), &dx));
         }
         if control.atol.is_none() {
             if problem.is_linear() {

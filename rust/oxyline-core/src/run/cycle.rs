@@ -9,6 +9,7 @@ use super::events::{Cut, Next, decide};
 use super::mean_flow::MeanAbs;
 use super::periodic_steps::{NEAR_PERIODIC, PeriodicSteps};
 use super::recorder::Recorder;
+use super::retry::{OnFailure, Retry, given_up};
 use super::settings::RunSettings;
 use super::svzerod::{CycleMeans, DerivedState};
 use crate::error::{Error, Result};
@@ -351,6 +352,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
         }
         // a step taken again to end on a valve event
         let mut cut: Option<Cut> = None;
+        let mut retry = Retry::default();
         while t < t_end {
             let rem = t_end - t;
             // the last step ends on the cycle's end; a remainder under two steps is halved
@@ -370,9 +372,18 @@ impl<'r, 'f> Cycles<'r, 'f> {
             let stepped = self.state.advance_flow(t, h);
             let (err, kinds) = match stepped {
                 Ok(()) => ad.judge_flow(&mut self.state, h),
-                // a Newton failure at a step above the smallest: try a smaller one
-                Err(e) if h <= ad.h_min() => return Err(e),
-                Err(_) => (f64::INFINITY, [0.0; 3]),
+                Err(e) => match retry.failed(h, ad.h_min()) {
+                    OnFailure::Damp => {
+                        // the same step again, Newton with its line search
+                        ad.restore(&mut self.state);
+                        self.state.flow.integrator().set_damped_newton(true);
+                        ad.rejected += 1;
+                        ad.h = h;
+                        continue;
+                    }
+                    OnFailure::Shrink => (f64::INFINITY, [0.0; 3]),
+                    OnFailure::GiveUp => return Err(given_up(e, ad.h_min(), period)),
+                },
             };
             let kept = replayed && self.periodic_steps.keeps(err);
             if err > 1.0 && h > ad.h_min() && !kept {
@@ -399,6 +410,13 @@ impl<'r, 'f> Cycles<'r, 'f> {
                 self.periodic_steps.stop();
                 cut = Some(c);
                 continue;
+            }
+            if retry.accepted() {
+                self.state.flow.integrator().set_damped_newton(false);
+            }
+            if let Some(ev) = self.events.as_ref() {
+                let st = &mut self.state;
+                ev.hold_closed(&mut st.y, &mut st.yd);
             }
             self.periodic_steps.accepted(h);
             self.state.advance_species(t, h)?;
@@ -434,6 +452,9 @@ impl<'r, 'f> Cycles<'r, 'f> {
             if self.steps % 256 == 0 && !progress(t, self.t_end()) {
                 return Err(Error::Interrupted { time: t });
             }
+        }
+        if retry.damping() {
+            self.state.flow.integrator().set_damped_newton(false);
         }
         Ok(())
     }

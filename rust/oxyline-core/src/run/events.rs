@@ -267,6 +267,21 @@ impl Events {
         false
     }
 
+    /// The step just accepted ends in (y, ẏ): every on/off valve closed through it whose
+    /// pressure difference there does not open it has its flow and rate set to zero, its
+    /// closed law's held state (generalized-α leaves a closed valve's flow at its last Newton
+    /// correction and its rate at ΔP/L, which the dense output between steps would read as
+    /// a flow of either sign through the closed valve).
+    pub fn hold_closed(&self, y: &mut [f64], yd: &mut [f64]) {
+        for (sw, &open) in self.switches.iter().zip(&self.open) {
+            let [b, f, q] = sw.unknowns;
+            if sw.on_off && !open && y[b] <= y[f] {
+                y[q] = 0.0;
+                yd[q] = 0.0;
+            }
+        }
+    }
+
     /// A step without events was accepted, ending in `y`: no switch is fresh any more; the
     /// valves' largest flows so far.
     pub fn settle(&mut self, y: &[f64]) {

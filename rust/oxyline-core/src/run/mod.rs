@@ -31,6 +31,7 @@ mod periodic_steps; // error control and until_periodic: near-periodic cycles re
 mod plan;
 mod recorder;
 mod resolve; // RK4's step for valves and chambers by step doubling
+mod retry; // the error-controlled step after a Newton failure
 mod settings;
 mod svzerod; // svZeroDSolver's output and stop conventions (the drop-in)
 mod svzerod_rows; // its output rows of a run extended by the cycle-to-cycle rule
