@@ -42,6 +42,18 @@ def inlet_vessels(model: Model, vessels: list[str]) -> list[str]:
     return found or vessels[:1]
 
 
+def vessel_arrays(res: Result) -> list[tuple[str, Any, str]]:
+    """(name, (time, vessel) array, units) of every per-vessel variable of ``res``: the
+    variables ``res.to_xarray()`` gives dims (time, vessel), without building the dataset
+    (its vessel index, 262 k names at 1e6 segments, for every chunk)."""
+    from oxyline.result import UNITS
+
+    out = [(name, getattr(res, name), UNITS[name]) for name in res.vessel_variables]
+    out += [(name, arr, unit) for name, (kind, arr, unit) in res.species_variables().items()
+            if kind == "vessel"]
+    return out
+
+
 class SummaryStream:
     """The chunk sink of a summarized run: reduces each chunk of rows (core layout of the
     settings ``s``: every default vessel, no segments) to per-vessel statistics and keeps the
@@ -101,11 +113,8 @@ class SummaryStream:
             self._species.append(tr["data"][:, self._species_cols])
             self._species_names = list(tr["species"])
             self._initial = [float(x) for x in tr["initial_stored"]]
-        ds = self._result_of(dict(rows)).to_xarray()
-        for name, var in ds.data_vars.items():
-            if var.dims == ("time", "vessel"):
-                self._update(str(name), np.asarray(var.values, dtype=float), t,
-                             str(var.attrs.get("units", "")))
+        for name, a, units in vessel_arrays(self._result_of(dict(rows))):
+            self._update(name, np.asarray(a, dtype=float), t, units)
         self._t = [self._t[0] if self._t else float(t[0]), float(t[-1])]
 
     def _update(self, name: str, a: np.ndarray, t: np.ndarray, units: str) -> None:

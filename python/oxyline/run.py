@@ -170,9 +170,11 @@ def _summary_stream(model: Model, s: Mapping[str, Any], extra: int) -> Any:
     """The chunk sink of a summarized large-model run (:mod:`oxyline.large_output`)."""
     from oxyline.large_output import SummaryStream
 
+    layout = model.network.output_layout(**_selection(s))  # once: 262 k names at 1e6
+
     def result_of(rows: dict[str, Any]) -> Result:
         _split_heart_columns(rows, extra)
-        return _result(model, s, rows, {}, False)
+        return _result(model, s, rows, {}, False, layout=dict(layout))
 
     return SummaryStream(model, s, extra, result_of)
 
