@@ -4,20 +4,21 @@
 //! RAM and aborting the process.
 //!
 //! The per-segment figures are peak resident bytes measured for whole runs (load, assembly,
-//! solver factors, run state; `benches/bench_memory.py`: ~1.6 kB per flow segment, ~0.5 kB
-//! more per O2 cell), rounded up: an estimate is meant to be within a small factor of the
-//! real peak, never far below it.
+//! solver factors, run state; `benches/profile_memory.py` at 1.05 M segments with the
+//! large-model default output, a per-vessel summary: ~1.0 kB per flow segment, ~0.75 kB more
+//! per O2 cell, ~0.45 kB per vessel of Python model), rounded up: an estimate is meant to be
+//! within a small factor of the real peak, never far below it.
 
 use crate::error::{Error, Result};
 
 /// Peak bytes per flow segment: circuit, DAE, sparse LU, integrator state, names, the
 /// binding's copy of the model.
-pub const FLOW_BYTES_PER_SEGMENT: f64 = 2500.0;
+pub const FLOW_BYTES_PER_SEGMENT: f64 = 2000.0;
 /// Peak bytes per transport cell and species: plan, laws, per-run state.
 pub const TRANSPORT_BYTES_PER_CELL: f64 = 1000.0;
 /// Bytes per vessel and per boundary condition beyond their segments (names, the model's
 /// dicts on the Python side).
-pub const BYTES_PER_ELEMENT: f64 = 2000.0;
+pub const BYTES_PER_ELEMENT: f64 = 1000.0;
 
 /// Estimated peak bytes of a model with `segments` flow segments, `elements` vessels and
 /// boundary conditions, `cells` transport cells per segment (0 without transport) and
