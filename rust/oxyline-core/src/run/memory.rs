@@ -173,8 +173,8 @@ mod tests {
     fn a_billion_segments_is_refused_with_the_estimate_and_the_setting() {
         let e = check_model("big", 1_000_000_000, 3, None, Some(8e9)).unwrap_err();
         let msg = e.to_string();
-        assert!(matches!(e, Error::Resource { bytes, .. } if bytes == 2_500_000_006_000));
-        assert!(msg.starts_with("model 'big' (1000000000 segments): needs about 2.500 TB"));
+        assert!(matches!(e, Error::Resource { bytes, .. } if bytes == 2_000_000_003_000));
+        assert!(msg.starts_with("model 'big' (1000000000 segments): needs about 2.000 TB"));
         assert!(msg.contains("max_memory = 8.000 GB") && msg.contains("max_length"));
         assert!(check_model("small", 1000, 3, Some((1.0, 1)), Some(8e9)).is_ok());
         assert!(check_model("any", usize::MAX / 2, 3, None, None).is_ok());
