@@ -177,6 +177,7 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
     kw.update(progress=mark, cancel=cancel)
     c0, w0 = time.process_time(), time.perf_counter()
     m = oxyline.load_model(model)
+    del model  # the model crosses once: load_model keeps its own copy
     c1, w1 = time.process_time(), time.perf_counter()
     with tempfile.TemporaryDirectory() as d:
         if spec.get("zarr"):

@@ -4,7 +4,7 @@ and running one tree of ``bench_scale.py``, in one fresh process.
     python benches/profile_memory.py --depth 16 --config o2-k
 
 Stages: the user's model dict (``tree``), the Python copy and checks (``_copy`` + canonical),
-the core network (``_core.Network``: parse, assembly, DAE, transport plan; the JSON text is
+the user's dict dropped (the model crosses once), the core network (``_core.Network``: parse, assembly, DAE, transport plan; the JSON text is
 built and dropped inside), and ``simulate`` (one cycle of generalized-α at 1 ms, vessel output
 every 10 ms). ``rss`` is the resident set after the stage, ``peak`` the high-water mark so far
 (``VmHWM``), both in MB and in bytes per segment.
@@ -33,6 +33,9 @@ def main() -> None:
     ap.add_argument("--depth", type=int, default=14)
     ap.add_argument("--config", default="o2-k")
     ap.add_argument("--no-run", action="store_true")
+    ap.add_argument("--series", action="store_true",
+                    help="record the large-model variables as time series of every vessel "
+                         "(the default before the per-vessel summary) instead of the default")
     ap.add_argument("--large-threshold", type=int, default=None,
                     help="set oxyline.run.LARGE_MODEL_SEGMENTS (e.g. 1 at depth 16: the "
                          "large-model default output on a 262 k-segment tree)")
@@ -58,7 +61,9 @@ def main() -> None:
     model = tree(a.depth, 4, a.config)
     t = mark("user model dict", t)
     m = oxyline.load_model(model)
-    t = mark("load_model (copy, checks, core network)", t)
+    del model  # the model crosses once: load_model keeps its own copy
+    gc.collect()
+    t = mark("load_model (copy, checks, core network), user dict dropped", t)
     if not a.no_run:
         samples: list[tuple[float, float, float, float]] = []  # (t, CPU, rss, peak)
 
@@ -68,8 +73,14 @@ def main() -> None:
             # handed to Python
             samples.append((t, time.process_time(), *rss()))
 
+        kw = {}
+        if a.series:
+            from oxyline import run
+
+            kw["variables"] = list(run.LARGE_MODEL_VARIABLES) + (
+                list(run.LARGE_MODEL_SPECIES_VARIABLES) if m.transport_spec else [])
         res = oxyline.simulate(m, cycles=1, dt=1e-3, output_every=0.01, segments=False,
-                               method="generalized-alpha", progress=progress)
+                               method="generalized-alpha", progress=progress, **kw)
         for label, (tt, cpu, now, peak) in (("run: first progress report", samples[0]),
                                             ("run: last progress report", samples[-1])):
             rows.append((f"{label} (t = {tt:.3f} s)", cpu - t, now, peak))
@@ -78,6 +89,8 @@ def main() -> None:
               *(v for sp in res.species.values() for v in sp.vessel_variables))
         out = res.data.nbytes + sum(sp.vessel_data.base.nbytes if sp.vessel_data.base is not None
                                     else sp.vessel_data.nbytes for sp in res.species.values())
+        if res.vessel_summary is not None:  # the large-model default: per-vessel summary
+            out += int(res.vessel_summary.memory_usage(deep=True).sum())
         del res
         gc.collect()
         t = mark("result dropped", t)

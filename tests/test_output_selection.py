@@ -163,7 +163,7 @@ def test_large_model_default_output(full: oxyline.Result,
     # above it (lowered so that a small model is "large"): the documented subset, said once
     monkeypatch.setattr(run, "LARGE_MODEL_SEGMENTS", segments - 1)
     with pytest.warns(oxyline.OutputSizeWarning, match="variables='all'") as rec:
-        res = oxyline.simulate("paper-bifurcated", cycles=1)
+        res = oxyline.simulate("paper-bifurcated", cycles=1, vessels=full.vessels)
     assert len(rec) == 1 and "no segment output" in str(rec[0].message)
     assert res.vessel_variables == run.LARGE_MODEL_VARIABLES
     sp, fsp = res.species["o2"], full.species["o2"]
@@ -190,3 +190,44 @@ def test_large_model_default_output(full: oxyline.Result,
     for r in (every, from_file):
         assert np.array_equal(r.data, full.data)
         assert np.array_equal(r.species["o2"].vessel_data, fsp.vessel_data)
+
+
+@pytest.mark.parametrize("chunk_bytes", [1, 1 << 24])  # one row a chunk; the whole run at once
+def test_large_model_default_is_a_summary(full: oxyline.Result, chunk_bytes: int,
+                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """Above the threshold, without a selection: every vessel's mean/min/max reduced while the
+    run streams its rows, and the inlet vessels' time series; against the summary of the
+    complete output of the same run (min and max: the same numbers; the mean: a trapezoidal
+    sum run chunk by chunk instead of at once, equal to rounding, 1e-12 relative)."""
+    from oxyline import large_output, run
+
+    segments = int(oxyline.load_model("paper-bifurcated").network.summary()["segments"])
+    monkeypatch.setattr(run, "LARGE_MODEL_SEGMENTS", segments - 1)
+    monkeypatch.setattr(large_output, "CHUNK_BYTES", chunk_bytes)
+    with pytest.warns(oxyline.OutputSizeWarning, match="mean, min and max") as rec:
+        res = oxyline.simulate("paper-bifurcated", cycles=1)
+    assert len(rec) == 1 and "inlet vessels" in str(rec[0].message)
+    model = oxyline.load_model("paper-bifurcated")
+    bcs = model.canonical["boundary_conditions"]
+    inlets = [v["name"] for v in model.canonical["vessels"]
+              if bcs.get(v["from"], {}).get("type") in ("flow", "pressure")]
+    assert res.vessels == inlets and len(inlets) < len(full.vessels)
+    cols = [full.vessels.index(v) for v in inlets]
+    for name in run.LARGE_MODEL_VARIABLES:  # the same run's columns: bit-identical
+        assert np.array_equal(getattr(res, name), getattr(full, name)[:, cols])
+    sp, fsp = res.species["o2"], full.species["o2"]
+    for name in run.LARGE_MODEL_SPECIES_VARIABLES:
+        assert np.array_equal(getattr(sp, name), getattr(fsp, name)[:, cols])
+    assert np.array_equal(sp.balance_data, fsp.balance_data)
+    assert np.array_equal(res.time, full.time)
+    got, want = res.summary(), full.summary()
+    assert list(got.index) == full.vessels
+    assert set(got.columns) < set(want.columns)
+    assert {"flow_in_mean", "po2_out_min", "wall_o2_flux_max"} <= set(got.columns)
+    for c in got.columns:
+        assert got.attrs["units"][c] == want.attrs["units"][c]
+        a, b = got[c].to_numpy(), want[c].to_numpy()
+        if c.endswith("_mean"):
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(b).max())
+        else:
+            assert np.array_equal(a, b)

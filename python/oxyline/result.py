@@ -230,6 +230,10 @@ class Result:
     #: rebuilds its model (``oxyline plot`` needs no ``--model``); None above
     #: :data:`MAX_MODEL_JSON` characters (a whole tree), where only the name is kept
     model_json: str | None = None
+    #: a large model's default run (oxyline.large_output): the per-vessel table of
+    #: :meth:`summary` of every vessel, reduced during the run; the time series above are then
+    #: the inlet vessels' only. None otherwise (:meth:`summary` computes from the output)
+    vessel_summary: Any = None
 
     def __repr__(self) -> str:
         """One line of facts, not the arrays (a notebook echoes a result whole)."""

@@ -131,18 +131,20 @@ LARGE_MODEL_SEGMENT_VARIABLES = ("segment_pressure_in", "segment_flow")
 LARGE_MODEL_SPECIES_SEGMENT_VARIABLES = ("segment_concentration", "segment_wall_flux")
 
 
-def _large_model_output(model: Model, s: dict[str, Any], overrides: Mapping[str, Any]) -> None:
+def _large_model_output(model: Model, s: dict[str, Any], overrides: Mapping[str, Any]) -> bool:
     """Apply the large-model default output to the settings ``s`` of an in-memory run of a
     model above :data:`LARGE_MODEL_SEGMENTS` that selects no ``variables`` (simulate keyword or
     model ``simulation: output:``): fewer vessel variables and, unless ``segments`` is given,
     no segment output, said in one :class:`OutputSizeWarning`. ``variables="all"`` keeps
-    everything. Smaller models keep the complete default."""
+    everything. Smaller models keep the complete default. True when the run is to be
+    summarized (:mod:`oxyline.large_output`): neither ``segments`` nor ``vessels`` given, no
+    tissue wall."""
     out = model.simulation.get("output") or {}
     if "variables" in overrides or "variables" in out:
-        return
+        return False
     segments = int(model.network.summary()["segments"])
     if segments <= LARGE_MODEL_SEGMENTS:
-        return
+        return False
     species = model.transport_spec is not None
     chosen = list(LARGE_MODEL_VARIABLES) + (list(LARGE_MODEL_SPECIES_VARIABLES) if species else [])
     if "segments" not in overrides and "segments" not in out:
@@ -151,10 +153,30 @@ def _large_model_output(model: Model, s: dict[str, Any], overrides: Mapping[str,
         chosen += LARGE_MODEL_SEGMENT_VARIABLES
         chosen += LARGE_MODEL_SPECIES_SEGMENT_VARIABLES if species else ()
     s["variables"] = chosen
+    lay = model.network.output_layout(**_selection(s)).get("transport") or {}
+    summarize = not s["segments"] and "vessels" not in overrides and "vessels" not in out \
+        and not lay.get("tissue_columns")
+    what = ("per-vessel mean, min and max (result.summary()) of " if summarize else "") \
+        + ", ".join(chosen)
+    inlets = " and the time series of the inlet vessels" if summarize else ""
     warnings.warn(f"{segments} segments (> {LARGE_MODEL_SEGMENTS}): recording only "
-                  f"{', '.join(chosen)}{'' if s['segments'] else ' (no segment output)'}; "
+                  f"{what}{inlets}{'' if s['segments'] else ' (no segment output)'}; "
                   "variables='all' (and segments=True) records everything",
                   OutputSizeWarning, stacklevel=4)
+    return summarize
+
+
+def _summary_stream(model: Model, s: Mapping[str, Any], extra: int) -> Any:
+    """The chunk sink of a summarized large-model run (:mod:`oxyline.large_output`)."""
+    from oxyline.large_output import SummaryStream
+
+    layout = model.network.output_layout(**_selection(s))  # once: 262 k names at 1e6
+
+    def result_of(rows: dict[str, Any]) -> Result:
+        _split_heart_columns(rows, extra)
+        return _result(model, s, rows, {}, False, layout=dict(layout))
+
+    return SummaryStream(model, s, extra, result_of)
 
 
 def _selection(s: Mapping[str, Any]) -> dict[str, Any]:
@@ -527,14 +549,19 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     overrides = {k: v for k, v in overrides.items() if k != "estimate_space_error"}
     s, default = _resolve(model, overrides)
     _fixed_for_checkpoints(s, default, overrides, resume)
-    _large_model_output(model, s, overrides)
-    _check_output_memory(model, s, overrides)
+    summarize = _large_model_output(model, s, overrides)
     core = _checkpoints(model, overrides)
     if resume is not None:
         core["resume"] = resume
     heart = _heart_layout(model)
     if heart[2]:
         core["extra_columns"] = heart[2]
+    stream, s_out = None, s
+    if summarize and not core:  # (a checkpointed run keeps its rows: resume rebuilds them)
+        stream = _summary_stream(model, s, len(heart[2]))
+        core.update(chunk_sink=stream.add, chunk_rows=stream.rows)
+        s_out = {**s, "vessels": stream.inlets}  # the time series kept
+    _check_output_memory(model, s_out, overrides, stream.bytes() if stream is not None else 0.0)
     try:
         raw = _run(model, s, overrides.get("progress"), _cancel(overrides), **core)
     except ModelError as exc:
@@ -542,10 +569,14 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
             raise CheckpointError(f"{resume_path}: {str(exc).removeprefix('checkpoint: ')}") \
                 from None
         raise
+    if stream is not None:
+        raw = stream.raw(raw)
     extra = _split_heart_columns(raw, len(heart[2]))
-    result = _result(model, s, raw,
+    result = _result(model, s_out, raw,
                      {**_run_settings(s, raw, bool(heart[1])), **segmentation_facts(model)},
                      complete="error" not in raw)
+    if stream is not None:
+        result.vessel_summary = stream.summary(model.name)
     if extra is not None:
         result.chamber_volume, result.valve_status = _heart_outputs(heart, extra)
     result.valve_events = [(float(t), str(v), bool(o)) for t, v, o in raw.get("valve_events", ())]
@@ -705,11 +736,13 @@ def _core_version() -> str:
 
 
 def _check_output_memory(model: Model, s: Mapping[str, Any],
-                         overrides: Mapping[str, Any]) -> None:
+                         overrides: Mapping[str, Any], reduced: float = 0.0) -> None:
     """Refuse an output the memory allowed cannot hold (:class:`ResourceError` with the
     estimate and the settings to change), and announce a large one
-    (:class:`OutputSizeWarning`), before the run starts."""
+    (:class:`OutputSizeWarning`), before the run starts. ``reduced``: the bytes of a
+    summarized run's reductions and chunk in flight, beside the rows it keeps (``s``)."""
     need, rows, cols = _output_size(model, s)
+    need += reduced
     where = f"{'simulate' if 'max_memory' in overrides else 'simulation'}: max_memory"
     limit = _memory.limit(overrides.get("max_memory", model.simulation.get("max_memory")), where)
     if limit is not None and need > limit:

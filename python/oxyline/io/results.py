@@ -341,10 +341,14 @@ def summary(result: Result | Any) -> Any:
     time averages over the output (trapezoidal rule; equal to the cycle mean for one periodic
     cycle). SI units, listed per column in ``df.attrs["units"]``. ``result`` may also be the
     dataset of a result (e.g. a store opened with ``xarray.open_zarr``): variables are read
-    one at a time."""
+    one at a time. A large model's default result (:mod:`oxyline.large_output`) gives the
+    table of every vessel reduced during its run (a copy)."""
     import numpy as np
     import pandas as pd
 
+    kept = getattr(result, "vessel_summary", None)
+    if kept is not None:  # a large model's run: reduced while it ran (oxyline.large_output)
+        return kept.copy()
     ds = result.to_xarray() if hasattr(result, "to_xarray") else result
     t = np.asarray(ds["time"].values, dtype=float)
     cols: dict[str, Any] = {}

@@ -4,20 +4,21 @@
 //! RAM and aborting the process.
 //!
 //! The per-segment figures are peak resident bytes measured for whole runs (load, assembly,
-//! solver factors, run state; `benches/bench_memory.py`: ~1.6 kB per flow segment, ~0.5 kB
-//! more per O2 cell), rounded up: an estimate is meant to be within a small factor of the
-//! real peak, never far below it.
+//! solver factors, run state; `benches/profile_memory.py` at 1.05 M segments with the
+//! large-model default output, a per-vessel summary: ~1.0 kB per flow segment, ~0.75 kB more
+//! per O2 cell, ~0.45 kB per vessel of Python model), rounded up: an estimate is meant to be
+//! within a small factor of the real peak, never far below it.
 
 use crate::error::{Error, Result};
 
 /// Peak bytes per flow segment: circuit, DAE, sparse LU, integrator state, names, the
 /// binding's copy of the model.
-pub const FLOW_BYTES_PER_SEGMENT: f64 = 2500.0;
+pub const FLOW_BYTES_PER_SEGMENT: f64 = 2000.0;
 /// Peak bytes per transport cell and species: plan, laws, per-run state.
 pub const TRANSPORT_BYTES_PER_CELL: f64 = 1000.0;
 /// Bytes per vessel and per boundary condition beyond their segments (names, the model's
 /// dicts on the Python side).
-pub const BYTES_PER_ELEMENT: f64 = 2000.0;
+pub const BYTES_PER_ELEMENT: f64 = 1000.0;
 
 /// Estimated peak bytes of a model with `segments` flow segments, `elements` vessels and
 /// boundary conditions, `cells` transport cells per segment (0 without transport) and
@@ -172,8 +173,8 @@ mod tests {
     fn a_billion_segments_is_refused_with_the_estimate_and_the_setting() {
         let e = check_model("big", 1_000_000_000, 3, None, Some(8e9)).unwrap_err();
         let msg = e.to_string();
-        assert!(matches!(e, Error::Resource { bytes, .. } if bytes == 2_500_000_006_000));
-        assert!(msg.starts_with("model 'big' (1000000000 segments): needs about 2.500 TB"));
+        assert!(matches!(e, Error::Resource { bytes, .. } if bytes == 2_000_000_003_000));
+        assert!(msg.starts_with("model 'big' (1000000000 segments): needs about 2.000 TB"));
         assert!(msg.contains("max_memory = 8.000 GB") && msg.contains("max_length"));
         assert!(check_model("small", 1000, 3, Some((1.0, 1)), Some(8e9)).is_ok());
         assert!(check_model("any", usize::MAX / 2, 3, None, None).is_ok());
