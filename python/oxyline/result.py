@@ -458,7 +458,7 @@ class Result:
             name: (("time", "vessel"), getattr(self, name), {"units": UNITS[name]})
             for name in self.vessel_variables
         }
-        if self.has_segments:
+        if self.segment_count:  # flow or species segment variables (their coordinates)
             seg_vessel = np.repeat(np.array(self.vessels, dtype=object), self.segment_count)
             seg_index = np.concatenate([np.arange(n) for n in self.segment_count]) \
                 if self.segment_count else np.zeros(0, dtype=int)
@@ -467,8 +467,8 @@ class Result:
             coords["segment_position"] = ("segment", self.segment_position, {"units": "m"})
             for name in self.segment_variables:
                 data_vars[name] = (("time", "segment"), getattr(self, name), {"units": UNITS[name]})
-        n_segments = self._segment_block.shape[1] // self._ks
-        seg_ok = self.has_segments and all(
+        n_segments = int(sum(self.segment_count))
+        seg_ok = n_segments > 0 and all(
             sp.segment_data.shape[1] == n_segments for sp in self.species.values())
         for name, (kind, arr, unit) in self.species_variables().items():
             if kind == "vessel":

@@ -326,11 +326,13 @@ impl Selection {
     }
 
     /// Segments recorded per selected vessel (empty when no segment variable is selected).
+    /// The flow's counts (`species` false) are given when any segment variable is, flow or
+    /// species: the segments' coordinates of a species-only segment output are the flow's.
     pub fn segment_count(&self, counts: &[usize], species: bool) -> Vec<usize> {
         let any = if species {
             !self.species_segment_variables.is_empty()
         } else {
-            !self.segment_variables.is_empty()
+            self.any_segment_variable()
         };
         if !any {
             return Vec::new();
@@ -363,11 +365,17 @@ impl Selection {
         out
     }
 
-    /// Segment positions of the selected vessels' segments.
+    /// Whether any segment variable, flow or species, is selected.
+    fn any_segment_variable(&self) -> bool {
+        !self.segment_variables.is_empty() || !self.species_segment_variables.is_empty()
+    }
+
+    /// Segment positions of the selected vessels' segments (when any segment variable is
+    /// selected, see `segment_count`).
     pub fn segment_position(&self, probes: &Probes) -> Vec<f64> {
         let starts = Probes::starts(&probes.segment_count);
         let mut out = Vec::new();
-        if !self.segment_variables.is_empty() {
+        if self.any_segment_variable() {
             for &v in &self.vessels {
                 out.extend_from_slice(&probes.segment_position[starts[v]..starts[v + 1]]);
             }
