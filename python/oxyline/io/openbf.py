@@ -30,7 +30,7 @@ from oxyline import _core
 from oxyline.errors import ModelError, UnsupportedElement
 from oxyline.io._common import build
 from oxyline.io.native import read_mapping  # YAML 1.2, duplicate keys and bombs refused
-from oxyline.model import Model, build_model
+from oxyline.model import Model
 
 PathLike = str | os.PathLike[str]
 
@@ -523,40 +523,12 @@ def to_native_dict(path: PathLike, *, linearize: str | float = "mean", taper: st
 def _mean_pressures(vessels: list[_Vessel], inlet: Any, q_mean: float,
                     terminals: dict[Any, tuple[float, float]],
                     mu: float) -> dict[int, tuple[float, float]]:
-    """Steady pressures at both ends of every vessel for the mean inflow, iterated because the
-    radii depend on the pressure. Each iterate is the core's exact steady state of the rigid
-    network at the current radii (one segment per vessel: the same exact taper resistance)."""
-    p = {id(v): (v.pext, v.pext) for v in vessels}
-    P: dict[str, float] = {}
-    for _ in range(8):
-        native = {
-            "name": "openbf-steady", "units": "SI", "blood": {"viscosity": mu},
-            "vessels": [],
-            "boundary_conditions": {f"n{inlet}": {"type": "flow", "value": q_mean}},
-        }
-        for k, v in enumerate(vessels):
-            r_in, r_out, _h = v.linearised(*p[id(v)])
-            native["vessels"].append({"name": f"v{k}", "from": f"n{v.sn}", "to": f"n{v.tn}",
-                                      "length": v.length, "radius_in": r_in,
-                                      "radius_out": r_out, "output": False})
-        for node, (r, pout) in terminals.items():
-            native["boundary_conditions"][f"n{node}"] = {"type": "resistance",
-                                                         "resistance": r, "pressure": pout}
-        try:
-            st = build_model(native).network.steady_state()
-        except ModelError as exc:  # name the vessel as the file does (its label)
-            msg = str(exc)
-            for k, v in enumerate(vessels):
-                msg = msg.replace(f"vessel 'v{k}'", f"vessel '{v.label}'")
-            raise ModelError(msg) from None
-        P_new = dict(zip(st["nodes"], st["node_pressure"].tolist(), strict=True))
-        scale = max(1.0, max(abs(x) for x in P_new.values()))
-        done = bool(P) and max(abs(P_new[n] - P[n]) for n in P_new) < 1e-6 * scale
-        P = P_new
-        p = {id(v): (P[f"n{v.sn}"], P[f"n{v.tn}"]) for v in vessels}
-        if done:
-            break
-    return p
+    """Steady pressures at both ends of every vessel for the mean inflow: the core's fixed
+    point of the steady network and the tube law (``oxyline_core::model::openbf::steady``)."""
+    rows = [(f"n{v.sn}", f"n{v.tn}", *v._wall(), v.pext, v.where, v.label) for v in vessels]
+    outlets = [(f"n{node}", r, pout) for node, (r, pout) in terminals.items()]
+    ends = _core.openbf_mean_pressures(rows, f"n{inlet}", q_mean, outlets, mu)
+    return {id(v): (p_in, p_out) for v, (p_in, p_out) in zip(vessels, ends, strict=True)}
 
 
 def read_openbf(path: PathLike, **options: Any) -> Model:

@@ -301,6 +301,52 @@ pub(crate) fn table_locate(t: &[f64], time: f64) -> (usize, f64, f64, f64) {
     (k, (t[k] - rt) / h, (rt - t[k - 1]) / h, h)
 }
 
+/// Why a time table cannot be read as svZeroDSolver reads it ([`fmod_table`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FmodTableFault {
+    /// t[i] ≤ t[i − 1].
+    NotIncreasing(usize),
+    /// The table starts before 0 (svZeroDSolver's lookup is not defined there).
+    StartsBeforeZero,
+}
+
+/// svZeroDSolver's value of the table (`t`, `v`) at `r` in [0, P]: linear between the
+/// samples around `r` (the first with t ≥ r and the one before), the first segment extended
+/// below t₀ and the last above the end.
+fn fmod_lookup(t: &[f64], v: &[f64], r: f64) -> f64 {
+    let k = t.iter().position(|&x| x >= r).unwrap_or(t.len() - 1);
+    let m = if k > 0 { k - 1 } else { 1 };
+    v[m] + (v[k] - v[m]) / (t[k] - t[m]) * (r - t[m])
+}
+
+/// The table over [0, P] that this module's periodic linear table evaluates as svZeroDSolver
+/// evaluates (`t`, `v`) — its value at `fmod(time, P)` with P = t_last − t₀ — at every
+/// time: the samples within [0, P) and both ends, each at svZeroDSolver's value. A table
+/// starting at 0 is already that table (returned as it is).
+pub fn fmod_table(
+    t: &[f64],
+    v: &[f64],
+) -> std::result::Result<(Vec<f64>, Vec<f64>), FmodTableFault> {
+    if t.len() < 2 || v.len() != t.len() {
+        return Ok((t.to_vec(), v.to_vec())); // nothing to look up: the caller checks lengths
+    }
+    if let Some(i) = (1..t.len()).find(|&i| t[i] <= t[i - 1]) {
+        return Err(FmodTableFault::NotIncreasing(i));
+    }
+    if t[0] == 0.0 {
+        return Ok((t.to_vec(), v.to_vec()));
+    }
+    if t[0] < 0.0 {
+        return Err(FmodTableFault::StartsBeforeZero);
+    }
+    let period = t[t.len() - 1] - t[0];
+    let mut times = vec![0.0];
+    times.extend(t.iter().copied().filter(|&x| x < period));
+    times.push(period);
+    let values = times.iter().map(|&r| fmod_lookup(t, v, r)).collect();
+    Ok((times, values))
+}
+
 fn table_mean(t: &[f64], v: &[f64], m: Option<&[f64]>) -> f64 {
     let n = t.len();
     let mut s = 0.0;
@@ -346,6 +392,52 @@ fn periodic_spline_moments(t: &[f64], v: &[f64]) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_svzerod_table_resampled_from_zero_evaluates_as_svzerod_does() {
+        // svZeroDSolver: value at fmod(τ, P), P = t_last − t₀, linear, first segment extended
+        // below t₀. A table on [0.25, 1.25] (P = 1) rising with slope 2 to a kink at 0.75.
+        let t = [0.25, 0.75, 1.25];
+        let v = [3.5, 4.5, 3.5];
+        let (tt, vv) = fmod_table(&t, &v).unwrap();
+        assert_eq!(tt, vec![0.0, 0.25, 0.75, 1.0]);
+        // the lookup by hand: below t₀ the first segment (slope 2), above 0.75 the second (−2)
+        let svzerod = |r: f64| {
+            if r <= 0.75 {
+                3.5 + 2.0 * (r - 0.25)
+            } else {
+                4.5 - 2.0 * (r - 0.75)
+            }
+        };
+        let w = Waveform::from_spec(
+            &WaveformSpec::Table {
+                time: tt,
+                value: vv,
+                interpolation: Interpolation::Linear,
+                steady: None,
+            },
+            "x",
+        )
+        .unwrap();
+        for i in 0..=40 {
+            let time = 0.025 * f64::from(i) + 3.0; // three periods on
+            let r = time % 1.0;
+            assert!((w.eval(time) - svzerod(r)).abs() < 1e-12, "{time}");
+        }
+        // a table from 0 is svZeroDSolver's as it is; the faults name the row
+        assert_eq!(
+            fmod_table(&[0.0, 1.0], &[1.0, 2.0]),
+            Ok((vec![0.0, 1.0], vec![1.0, 2.0]))
+        );
+        assert_eq!(
+            fmod_table(&[0.0, 0.5, 0.5], &[1.0, 2.0, 3.0]),
+            Err(FmodTableFault::NotIncreasing(2))
+        );
+        assert_eq!(
+            fmod_table(&[-0.1, 0.5], &[1.0, 2.0]),
+            Err(FmodTableFault::StartsBeforeZero)
+        );
+    }
 
     #[test]
     fn slope_matches_central_differences_of_every_kind() {

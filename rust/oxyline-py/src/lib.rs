@@ -132,6 +132,7 @@ mod _core {
         model_bytes,
         network::Network,
         reader::NativeParts,
+        reader::formats::{openbf_mean_pressures, svzerod_periodic_table},
         reader::model::{canonical_model, forcing_frequency, read_model},
         reader::schema::{
             check_periods, check_simulation, read_conditions, read_header, read_transport,

@@ -260,25 +260,9 @@ def _check_steps(cycles: int, pts: int, where: str) -> None:
 
 def _periodic_table(t: list[float], v: list[float], element: str) -> tuple[list[float], list[float]]:
     """Time table over [0, P] that reproduces svZeroDSolver's lookup ``fmod(time, P)`` with
-    P = t[-1] - t[0] (linear extrapolation of the first segment below t[0])."""
-    for i in range(1, len(t)):
-        if t[i] <= t[i - 1]:
-            raise ModelError(f"{element}: 't' must be strictly increasing: t[{i}] = {t[i]} <= "
-                             f"t[{i - 1}] = {t[i - 1]}")
-    if t[0] == 0.0:
-        return t, v
-    if t[0] < 0.0:
-        raise UnsupportedElement(f"{element}: a time table starting before 0 (t[0] = {t[0]}) "
-                                 "is not supported")
-    period = t[-1] - t[0]
-
-    def f(r: float) -> float:
-        k = next((i for i, x in enumerate(t) if x >= r), len(t) - 1)
-        m = k - 1 if k else 1
-        return v[m] + (v[k] - v[m]) / (t[k] - t[m]) * (r - t[m])
-
-    times = [0.0] + [x for x in t if x < period] + [period]
-    return times, [f(x) for x in times]
+    P = t[-1] - t[0] (linear extrapolation of the first segment below t[0]): the core's
+    (``oxyline_core::waveform::fmod_table``), which also checks that ``t`` increases."""
+    return _core.svzerod_periodic_table(t, v, element)
 
 
 # ------------------------------------------------------------------------------------------

@@ -153,20 +153,27 @@ pub fn py_repr(x: f64) -> String {
 /// Python's `format(x, "g")`: six significant digits, trailing zeros dropped, exponent
 /// notation below 1e-4 and from 1e6.
 pub fn py_g(x: f64) -> String {
+    py_g_digits(x, 6)
+}
+
+/// Python's `format(x, ".{digits}g")`: `digits` (≥ 1) significant digits, trailing zeros
+/// dropped, exponent notation below 1e-4 and from 10^digits.
+pub fn py_g_digits(x: f64, digits: usize) -> String {
     if x.is_nan() {
         return "nan".into();
     }
     if x.is_infinite() {
         return if x > 0.0 { "inf" } else { "-inf" }.into();
     }
-    let s = format!("{:.5e}", x.abs());
+    let p = digits.max(1);
+    let s = format!("{:.*e}", p - 1, x.abs());
     let (mant, exp) = s.split_once('e').unwrap_or((&s, "0"));
     let exp: i32 = exp.parse().unwrap_or(0);
     let digits: String = mant.chars().filter(|c| c.is_ascii_digit()).collect();
     let digits = digits.trim_end_matches('0');
     let digits = if digits.is_empty() { "0" } else { digits };
     let sign = if x.is_sign_negative() { "-" } else { "" };
-    if (-4..6).contains(&exp) {
+    if (-4..p as i32).contains(&exp) {
         fixed(sign, digits, exp, false)
     } else {
         scientific(sign, digits, exp)
@@ -330,6 +337,17 @@ mod tests {
         for (x, repr, g) in cases {
             assert_eq!(py_repr(x), repr, "repr of {x}");
             assert_eq!(py_g(x), g, "g of {x}");
+        }
+        // `format(x, ".4g")`
+        for (x, g4) in [
+            (-9.995e6, "-9.995e+06"),
+            (12346.0, "1.235e+04"),
+            (0.0, "0"),
+            (1013.25, "1013"),
+            (2.5e-5, "2.5e-05"),
+            (-0.5, "-0.5"),
+        ] {
+            assert_eq!(py_g_digits(x, 4), g4, "{x}");
         }
         assert_eq!(py_repr(f64::NAN), "nan");
         assert_eq!(py_g(f64::NEG_INFINITY), "-inf");

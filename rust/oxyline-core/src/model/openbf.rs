@@ -2,7 +2,10 @@
 //! model: the tube law P = Pext + β′ (√(A/A₀) − 1) with β′ = E h₀ / ((1 − ν²) R₀), the
 //! characteristic impedance ρ c₀ / A₀, the Kelvin–Voigt wall viscosity of its visco-elastic
 //! wall and the friction of its velocity profile (docs/networks.md, the importer's notes).
-//! The importer reads the file; the formulas are here.
+//! The importer reads the file; the formulas are here, and the fixed point of the steady
+//! network and the tube law that gives the linearisation pressures (`steady`).
+
+pub mod steady;
 
 use crate::model::sum;
 use std::f64::consts::PI;

@@ -1,9 +1,11 @@
 //! The one reader of models from Python objects: a native model dict read in one call by the
 //! core's schema (`model`: top level, elements, transport), its plain vessels and outlets read
 //! straight into the network's parts (`native`), the schema's pieces for an ensemble's
-//! variants (`schema`), and canonical dicts read by the core's serde types in place (`de`).
+//! variants (`schema`), canonical dicts read by the core's serde types in place (`de`), and
+//! the importers' calls into the core (`formats`).
 
 pub(crate) mod de;
+pub(crate) mod formats;
 pub(crate) mod model;
 pub(crate) mod native;
 
