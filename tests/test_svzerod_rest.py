@@ -367,3 +367,29 @@ def test_chamber_volumes_are_output(name: str) -> None:
     # the variable table is svZeroDSolver's whole table now, in its order
     assert list(actual["name"].unique()) == list(expected["name"].unique())
     assert max(volumes.values()) <= GEN_ALPHA_TOL, volumes
+
+
+def test_a_time_table_off_zero_is_looked_up_as_svzerod_does() -> None:
+    """svZeroDSolver evaluates a table at fmod(t, P), P = t[-1] - t[0], linearly, with the first
+    segment extended below t[0]: a table on [0.25, 1.25] rising with slope 2 to a kink at 0.75
+    becomes, over [0, 1], the samples 0, 0.25, 0.75 and 1 at that rule's values (by hand:
+    3.5 - 2 * 0.25 at 0, 4.5 - 2 * 0.25 at 1); a table that does not increase or starts
+    before 0 is refused naming its entry."""
+    from oxyline.io.svzerod.reader import to_oxyline_dict
+
+    cfg = config("pulsatileFlow_R_RCR")
+    vals = cfg["boundary_conditions"][0]["bc_values"]
+    vals["t"], vals["Q"] = [0.25, 0.75, 1.25], [3.5, 4.5, 3.5]
+    cfg["simulation_parameters"].pop("cardiac_period", None)
+    bcs = to_oxyline_dict(cfg)["boundary_conditions"]
+    flow = next(bc for bc in bcs.values() if bc["type"] == "flow")
+    assert flow["time"] == [0.0, 0.25, 0.75, 1.0]
+    assert flow["flow"] == pytest.approx([3.0, 3.5, 4.5, 4.0], rel=1e-15)  # one rounding
+    vals["t"] = [0.25, 0.75, 0.75]
+    with pytest.raises(oxyline.ModelError,
+                       match=r"'INFLOW': 't' must be strictly increasing: t\[2\] = 0.75 <= "
+                             r"t\[1\] = 0.75"):
+        to_oxyline_dict(cfg)
+    vals["t"] = [-0.25, 0.25, 0.75]
+    with pytest.raises(oxyline.UnsupportedElement, match=r"starting before 0 \(t\[0\] = -0.25\)"):
+        to_oxyline_dict(cfg)
