@@ -275,9 +275,15 @@ mod tests {
             pressure: 0.0,
         };
         v.wall.length = -0.1;
-        let text = mean_pressures(&[v.clone()], "n1", 5e-6, &[t.clone()], 4e-3)
-            .unwrap_err()
-            .to_string();
+        let text = mean_pressures(
+            std::slice::from_ref(&v),
+            "n1",
+            5e-6,
+            std::slice::from_ref(&t),
+            4e-3,
+        )
+        .unwrap_err()
+        .to_string();
         assert!(text.starts_with("vessel 'left carotid': "), "{text}");
         // a vessel collapsed by the tube law: the file's element and both pressures at 4 digits
         v.wall.length = 0.1;
