@@ -53,6 +53,50 @@ def data_path(*parts: str) -> Path:
     return path
 
 
+def bifurcation(**top: Any) -> dict[str, Any]:
+    """The package's bifurcation example (YAML) as a dict, with the top-level keys ``top``
+    set: the base of the hostile-input tests' models."""
+    import yaml
+
+    import oxyline
+
+    example = Path(oxyline.__file__).parent / "examples" / "bifurcation.yaml"
+    m = yaml.safe_load(example.read_text())
+    m.update(top)
+    return m
+
+
+@contextlib.contextmanager
+def raises(cls: type[BaseException], *names: str) -> Iterator[Any]:
+    """pytest.raises(cls) whose message must name each of ``names``."""
+    with pytest.raises(cls) as info:
+        yield info
+    msg = str(info.value)
+    for n in names:
+        assert n in msg, f"{n!r} not in {msg!r}"
+
+
+def tube(n: int, species: list[dict] | None = None, oxygen: dict | None = None, *,
+         radius: float = 3e-3, length: float = 0.1, flow: float | dict = 2e-6,
+         compliant: bool = False, r_out: float = 1e8, cycles: int = 40) -> dict:
+    """A straight tube of ``n`` segments (rigid unless ``compliant``) between a flow inlet and
+    a resistance, with the ``species`` and ``oxygen`` sections given: the transport tests' model."""
+    vessel = {"name": "tube", "from": "in", "to": "out", "segments": n, "length": length,
+              "radius": radius}
+    if compliant:
+        vessel.update(wall_thickness=5e-4, youngs_modulus=1e6)
+    inflow = {"type": "flow", **(flow if isinstance(flow, dict) else {"value": flow})}
+    m: dict = {"period": 1.0, "vessels": [vessel],
+               "boundary_conditions": {"in": inflow,
+                                       "out": {"type": "resistance", "resistance": r_out}},
+               "simulation": {"cycles": cycles}}
+    if species:
+        m["species"] = species
+    if oxygen:
+        m["oxygen"] = oxygen
+    return m
+
+
 def shared_path(relative: str, why: str) -> Path:
     """A file of ``../shared`` that its licence keeps out of the repository; skips the calling
     test, saying what is missing and why, when ``../shared`` is not beside the repository."""

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from conftest import bifurcation, raises
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -40,31 +41,6 @@ SVZ: dict[str, Any] = {
                  "boundary_conditions": {"inlet": "INFLOW", "outlet": "OUT"}}],
     "junctions": [],
 }
-
-
-def bifurcation() -> dict[str, Any]:
-    import yaml
-
-    return yaml.safe_load(EXAMPLE.read_text())
-
-
-def raises(cls: type[BaseException], *names: str) -> Any:
-    """pytest.raises(cls) whose message must name each of ``names``."""
-
-    class Check:
-        def __enter__(self) -> Any:
-            self.ctx = pytest.raises(cls)
-            self.info = self.ctx.__enter__()
-            return self.info
-
-        def __exit__(self, *exc: object) -> bool:
-            out = self.ctx.__exit__(*exc)
-            msg = str(self.info.value)
-            for n in names:
-                assert n in msg, f"{n!r} not in {msg!r}"
-            return out
-
-    return Check()
 
 
 # ---- durations and counts against representable ranges ------------------------------------
