@@ -97,6 +97,34 @@ def tube(n: int, species: list[dict] | None = None, oxygen: dict | None = None, 
     return m
 
 
+def main_thread_ticks(work: Any) -> int:
+    """Run ``work()`` on another thread and count the main thread's 1 ms ticks until it ends
+    (a call that holds the GIL lets few through); an exception of ``work`` is raised here."""
+    import time
+
+    done = threading.Event()
+    raised: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            work()
+        except BaseException as e:  # noqa: BLE001 (raised again on the main thread)
+            raised.append(e)
+        finally:
+            done.set()
+
+    th = threading.Thread(target=run)
+    th.start()
+    ticks = 0
+    while not done.is_set():
+        ticks += 1
+        time.sleep(0.001)
+    th.join()
+    if raised:
+        raise raised[0]
+    return ticks
+
+
 def shared_path(relative: str, why: str) -> Path:
     """A file of ``../shared`` that its licence keeps out of the repository; skips the calling
     test, saying what is missing and why, when ``../shared`` is not beside the repository."""
