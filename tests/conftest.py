@@ -125,6 +125,19 @@ def main_thread_ticks(work: Any) -> int:
     return ticks
 
 
+def assert_adjoint_is_forward(fwd: Any, adj: Any, where: object = None) -> None:
+    """The adjoint's sensitivities ``adj`` against the forward tangents' ``fwd`` (the same
+    model, parameters and outputs): the values to 1e-12, and each derivative to 1e-8 of its
+    output's largest response to a 100 % change (the two differ only by their fixed points'
+    tolerance, 1e-12, and rounding, so a wrong transpose or weight stands out)."""
+    import numpy as np
+
+    np.testing.assert_allclose(adj.values, fwd.values, rtol=1e-12)
+    scale = np.abs(fwd.jacobian * fwd.parameter_values).max(axis=1)
+    err = np.abs(adj.jacobian - fwd.jacobian) * np.abs(fwd.parameter_values)
+    assert (err <= 1e-8 * scale[:, None]).all(), (where, err / scale[:, None])
+
+
 def shared_path(relative: str, why: str) -> Path:
     """A file of ``../shared`` that its licence keeps out of the repository; skips the calling
     test, saying what is missing and why, when ``../shared`` is not beside the repository."""
