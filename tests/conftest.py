@@ -138,6 +138,23 @@ def assert_adjoint_is_forward(fwd: Any, adj: Any, where: object = None) -> None:
     assert (err <= 1e-8 * scale[:, None]).all(), (where, err / scale[:, None])
 
 
+def stenosed_inductor(coefficient: float) -> dict[str, Any]:
+    """A compliant vessel into a lumped RLC element with a stenosis S |Q| Q of coefficient
+    ``coefficient`` in series with its inertance, a steady inflow of 1e-5 m³/s and an outlet
+    resistance: the stenosis sets RK4's stability limit."""
+    return {
+        "name": "stenosis", "period": 1.0,
+        "vessels": [
+            {"name": "a", "from": "in", "to": "j", "length": 0.0625, "radius": 0.0039,
+             "wall_thickness": 3e-4, "youngs_modulus": 1e6},
+            {"name": "s", "from": "j", "to": "out",
+             "lumped": {"resistance": 1e6, "capacitance": 1e-10, "inductance": 1e4,
+                        "stenosis_coefficient": coefficient}}],
+        "boundary_conditions": {"in": {"type": "flow", "value": 1e-5},
+                                "out": {"type": "resistance", "resistance": 1e7}},
+    }
+
+
 def shared_path(relative: str, why: str) -> Path:
     """A file of ``../shared`` that its licence keeps out of the repository; skips the calling
     test, saying what is missing and why, when ``../shared`` is not beside the repository."""
