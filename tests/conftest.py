@@ -53,6 +53,108 @@ def data_path(*parts: str) -> Path:
     return path
 
 
+def bifurcation(**top: Any) -> dict[str, Any]:
+    """The package's bifurcation example (YAML) as a dict, with the top-level keys ``top``
+    set: the base of the hostile-input tests' models."""
+    import yaml
+
+    import oxyline
+
+    example = Path(oxyline.__file__).parent / "examples" / "bifurcation.yaml"
+    m = yaml.safe_load(example.read_text())
+    m.update(top)
+    return m
+
+
+@contextlib.contextmanager
+def raises(cls: type[BaseException], *names: str) -> Iterator[Any]:
+    """pytest.raises(cls) whose message must name each of ``names``."""
+    with pytest.raises(cls) as info:
+        yield info
+    msg = str(info.value)
+    for n in names:
+        assert n in msg, f"{n!r} not in {msg!r}"
+
+
+def tube(n: int, species: list[dict] | None = None, oxygen: dict | None = None, *,
+         radius: float = 3e-3, length: float = 0.1, flow: float | dict = 2e-6,
+         compliant: bool = False, r_out: float = 1e8, cycles: int = 40) -> dict:
+    """A straight tube of ``n`` segments (rigid unless ``compliant``) between a flow inlet and
+    a resistance, with the ``species`` and ``oxygen`` sections given: the transport tests' model."""
+    vessel = {"name": "tube", "from": "in", "to": "out", "segments": n, "length": length,
+              "radius": radius}
+    if compliant:
+        vessel.update(wall_thickness=5e-4, youngs_modulus=1e6)
+    inflow = {"type": "flow", **(flow if isinstance(flow, dict) else {"value": flow})}
+    m: dict = {"period": 1.0, "vessels": [vessel],
+               "boundary_conditions": {"in": inflow,
+                                       "out": {"type": "resistance", "resistance": r_out}},
+               "simulation": {"cycles": cycles}}
+    if species:
+        m["species"] = species
+    if oxygen:
+        m["oxygen"] = oxygen
+    return m
+
+
+def main_thread_ticks(work: Any) -> int:
+    """Run ``work()`` on another thread and count the main thread's 1 ms ticks until it ends
+    (a call that holds the GIL lets few through); an exception of ``work`` is raised here."""
+    import time
+
+    done = threading.Event()
+    raised: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            work()
+        except BaseException as e:  # noqa: BLE001 (raised again on the main thread)
+            raised.append(e)
+        finally:
+            done.set()
+
+    th = threading.Thread(target=run)
+    th.start()
+    ticks = 0
+    while not done.is_set():
+        ticks += 1
+        time.sleep(0.001)
+    th.join()
+    if raised:
+        raise raised[0]
+    return ticks
+
+
+def assert_adjoint_is_forward(fwd: Any, adj: Any, where: object = None) -> None:
+    """The adjoint's sensitivities ``adj`` against the forward tangents' ``fwd`` (the same
+    model, parameters and outputs): the values to 1e-12, and each derivative to 1e-8 of its
+    output's largest response to a 100 % change (the two differ only by their fixed points'
+    tolerance, 1e-12, and rounding, so a wrong transpose or weight stands out)."""
+    import numpy as np
+
+    np.testing.assert_allclose(adj.values, fwd.values, rtol=1e-12)
+    scale = np.abs(fwd.jacobian * fwd.parameter_values).max(axis=1)
+    err = np.abs(adj.jacobian - fwd.jacobian) * np.abs(fwd.parameter_values)
+    assert (err <= 1e-8 * scale[:, None]).all(), (where, err / scale[:, None])
+
+
+def stenosed_inductor(coefficient: float) -> dict[str, Any]:
+    """A compliant vessel into a lumped RLC element with a stenosis S |Q| Q of coefficient
+    ``coefficient`` in series with its inertance, a steady inflow of 1e-5 m³/s and an outlet
+    resistance: the stenosis sets RK4's stability limit."""
+    return {
+        "name": "stenosis", "period": 1.0,
+        "vessels": [
+            {"name": "a", "from": "in", "to": "j", "length": 0.0625, "radius": 0.0039,
+             "wall_thickness": 3e-4, "youngs_modulus": 1e6},
+            {"name": "s", "from": "j", "to": "out",
+             "lumped": {"resistance": 1e6, "capacitance": 1e-10, "inductance": 1e4,
+                        "stenosis_coefficient": coefficient}}],
+        "boundary_conditions": {"in": {"type": "flow", "value": 1e-5},
+                                "out": {"type": "resistance", "resistance": 1e7}},
+    }
+
+
 def shared_path(relative: str, why: str) -> Path:
     """A file of ``../shared`` that its licence keeps out of the repository; skips the calling
     test, saying what is missing and why, when ``../shared`` is not beside the repository."""

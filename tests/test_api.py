@@ -6,13 +6,11 @@ from __future__ import annotations
 import os
 import pickle
 import signal
-import threading
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import signal_cli_run
+from conftest import main_thread_ticks, signal_cli_run
 
 import oxyline
 
@@ -109,19 +107,8 @@ def test_callback_errors_propagate_unchanged() -> None:
 
 
 def test_gil_is_released_during_integration() -> None:
-    done = threading.Event()
-    ticks = 0
-
-    def run() -> None:
-        oxyline.simulate("bifurcation", cycles=40, method="rk4", segments=False)
-        done.set()
-
-    th = threading.Thread(target=run)
-    th.start()
-    while not done.is_set():
-        ticks += 1
-        time.sleep(0.001)
-    th.join()
+    ticks = main_thread_ticks(
+        lambda: oxyline.simulate("bifurcation", cycles=40, method="rk4", segments=False))
     assert ticks > 20  # the main thread kept running while Rust integrated
 
 

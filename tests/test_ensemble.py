@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 import oxyline
 from oxyline.ensemble import apply_patch
-from tests.conftest import run_child
+from tests.conftest import main_thread_ticks, run_child
 
 # A one-vessel aorta with oxygen transport (fast: one RK4 vessel, 2 cycles in ~0.05 s)
 STRAIGHT = "paper-straight"
@@ -550,25 +550,9 @@ def test_the_gil_is_released_while_the_variants_run() -> None:
     One long variant, so the feeding thread's short GIL holds between variants do not
     count; > 20 ticks of 1 ms out of a run of ~0.5 s or more, as for simulate()
     (tests/test_api.py)."""
-    import threading
-    import time
-
-    done = threading.Event()
-    ticks = 0
-
-    def run() -> None:
-        try:
-            oxyline.simulate_ensemble("bifurcation", [{}], workers=1, cycles=15, method="rk4",
-                                      progress=False)
-        finally:
-            done.set()
-
-    th = threading.Thread(target=run)
-    th.start()
-    while not done.is_set():
-        ticks += 1
-        time.sleep(0.001)
-    th.join()
+    ticks = main_thread_ticks(
+        lambda: oxyline.simulate_ensemble("bifurcation", [{}], workers=1, cycles=15,
+                                          method="rk4", progress=False))
     assert ticks > 20
 
 

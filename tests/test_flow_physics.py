@@ -16,6 +16,7 @@ import re
 
 import numpy as np
 import pytest
+from conftest import stenosed_inductor
 
 import oxyline
 
@@ -550,17 +551,7 @@ def test_rk4_with_a_stenosis_on_an_inductor_is_stable_or_refused() -> None:
     # stenosis S |Q| Q in series with an inertance: its linearisation adds -2 S |Q| / L to the
     # branch eigenvalue (2e3 /s at the mean flow, more in the start-up overshoot); the automatic
     # dt must account for it (the linear circuit alone would give 1.3e-3 s and blow up)
-    model = oxyline.load_model({
-        "name": "stenosis", "period": 1.0,
-        "vessels": [
-            {"name": "a", "from": "in", "to": "j", "length": 0.0625, "radius": 0.0039,
-             "wall_thickness": 3e-4, "youngs_modulus": 1e6},
-            {"name": "s", "from": "j", "to": "out",
-             "lumped": {"resistance": 1e6, "capacitance": 1e-10, "inductance": 1e4,
-                        "stenosis_coefficient": 1e12}}],
-        "boundary_conditions": {"in": {"type": "flow", "value": 1e-5},
-                                "out": {"type": "resistance", "resistance": 1e7}},
-    })
+    model = oxyline.load_model(stenosed_inductor(1e12))
     try:
         res = oxyline.simulate(model, method="rk4", cycles=4, output_every=0.05, start="zero")
     except oxyline.UnstableTimeStep:

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
-from conftest import data_path
+from conftest import bifurcation, data_path, raises
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from test_hostile_runs import _rewrite
@@ -27,36 +27,10 @@ from oxyline import closed_loop
 from oxyline.errors import ModelError, ResourceError
 from oxyline.targets import CalibrationError
 
-EXAMPLE = Path(oxyline.__file__).parent / "examples" / "bifurcation.yaml"
 FAST: dict[str, Any] = {"cycles": 1, "progress": False}
 R_OUT = "boundary_conditions.ica_out.resistance"
 LUMPED = {"name": "lv", "from": "ica_out", "to": "lv_out",
           "lumped": {"resistance": 1e8, "inductance": 1e5, "capacitance": 1e-10}}
-
-
-def bifurcation(**top: Any) -> dict[str, Any]:
-    m = yaml.safe_load(EXAMPLE.read_text())
-    m.update(top)
-    return m
-
-
-def raises(cls: type[BaseException], *names: str) -> Any:
-    """pytest.raises(cls) whose message must name each of ``names``."""
-
-    class Check:
-        def __enter__(self) -> Any:
-            self.ctx = pytest.raises(cls)
-            self.info = self.ctx.__enter__()
-            return self.info
-
-        def __exit__(self, *exc: object) -> bool:
-            out = self.ctx.__exit__(*exc)
-            msg = str(self.info.value)
-            for n in names:
-                assert n in msg, f"{n!r} not in {msg!r}"
-            return out
-
-    return Check()
 
 
 # ---- threads -------------------------------------------------------------------------------

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from conftest import bifurcation, raises, stenosed_inductor
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -40,31 +41,6 @@ SVZ: dict[str, Any] = {
                  "boundary_conditions": {"inlet": "INFLOW", "outlet": "OUT"}}],
     "junctions": [],
 }
-
-
-def bifurcation() -> dict[str, Any]:
-    import yaml
-
-    return yaml.safe_load(EXAMPLE.read_text())
-
-
-def raises(cls: type[BaseException], *names: str) -> Any:
-    """pytest.raises(cls) whose message must name each of ``names``."""
-
-    class Check:
-        def __enter__(self) -> Any:
-            self.ctx = pytest.raises(cls)
-            self.info = self.ctx.__enter__()
-            return self.info
-
-        def __exit__(self, *exc: object) -> bool:
-            out = self.ctx.__exit__(*exc)
-            msg = str(self.info.value)
-            for n in names:
-                assert n in msg, f"{n!r} not in {msg!r}"
-            return out
-
-    return Check()
 
 
 # ---- durations and counts against representable ranges ------------------------------------
@@ -659,17 +635,7 @@ def test_rk4_with_a_negative_stenosis_coefficient_plans_no_endless_run(
         coefficient: float) -> None:
     """A negative stenosis coefficient makes RK4's stability limit ~1e-15 s (before: a run
     of 6e17 steps per cycle started): refused at once, naming the element that sets it."""
-    model = {
-        "name": "stenosis", "period": 1.0,
-        "vessels": [
-            {"name": "a", "from": "in", "to": "j", "length": 0.0625, "radius": 0.0039,
-             "wall_thickness": 3e-4, "youngs_modulus": 1e6},
-            {"name": "s", "from": "j", "to": "out",
-             "lumped": {"resistance": 1e6, "capacitance": 1e-10, "inductance": 1e4,
-                        "stenosis_coefficient": coefficient}}],
-        "boundary_conditions": {"in": {"type": "flow", "value": 1e-5},
-                                "out": {"type": "resistance", "resistance": 1e7}},
-    }
+    model = stenosed_inductor(coefficient)
     with pytest.raises((ResourceError, oxyline.UnstableTimeStep)) as info:
         oxyline.simulate(model, method="rk4", cycles=1, start="zero", progress=False)
     msg = str(info.value)

@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import tube
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.special import gammainc
@@ -20,25 +21,6 @@ from oxyline import catalogue
 
 MMHG = 133.322368
 ALPHA = 1.40e-3  # mol m^-3 mmHg^-1
-
-
-def tube(n: int, species: list[dict] | None = None, oxygen: dict | None = None, *,
-         radius: float = 3e-3, length: float = 0.1, flow: float | dict = 2e-6,
-         compliant: bool = False, r_out: float = 1e8, cycles: int = 40) -> dict:
-    vessel = {"name": "tube", "from": "in", "to": "out", "segments": n, "length": length,
-              "radius": radius}
-    if compliant:
-        vessel.update(wall_thickness=5e-4, youngs_modulus=1e6)
-    inflow = {"type": "flow", **(flow if isinstance(flow, dict) else {"value": flow})}
-    m: dict = {"period": 1.0, "vessels": [vessel],
-               "boundary_conditions": {"in": inflow,
-                                       "out": {"type": "resistance", "resistance": r_out}},
-               "simulation": {"cycles": cycles}}
-    if species:
-        m["species"] = species
-    if oxygen:
-        m["oxygen"] = oxygen
-    return m
 
 
 # ---------------------------------------------------------------------------------------------

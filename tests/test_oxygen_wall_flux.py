@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import tube as tube_model
 
 import oxyline
 
@@ -17,18 +18,8 @@ AREA = 2 * math.pi * R * LENGTH / N  # lumen wall area of one segment
 def tube(species: list[dict] | None = None, oxygen: dict | None = None, *, n: int = N,
          flow: float | dict = 2e-6, cycles: int = 40, length: float = LENGTH,
          radius: float = R) -> dict:
-    inflow = {"type": "flow", **(flow if isinstance(flow, dict) else {"value": flow})}
-    m: dict = {"period": 1.0,
-               "vessels": [{"name": "tube", "from": "in", "to": "out", "segments": n,
-                            "length": length, "radius": radius}],
-               "boundary_conditions": {"in": inflow,
-                                       "out": {"type": "resistance", "resistance": 1e8}},
-               "simulation": {"cycles": cycles}}
-    if species:
-        m["species"] = species
-    if oxygen:
-        m["oxygen"] = oxygen
-    return m
+    return tube_model(n, species, oxygen, radius=radius, length=length, flow=flow,
+                      cycles=cycles)
 
 
 def test_space_varying_flux_in_steady_plug_flow_matches_the_analytic_profile() -> None:

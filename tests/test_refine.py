@@ -11,10 +11,11 @@ import math
 
 import numpy as np
 import pytest
+from conftest import tube
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.special import gammainc
-from test_oxygen import check_mass_balance_and_positivity, networks, tube
+from test_oxygen import check_mass_balance_and_positivity, networks
 
 import oxyline
 from oxyline import catalogue

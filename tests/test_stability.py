@@ -156,14 +156,7 @@ def test_stiff_oxygen_wall_exchange_stays_finite_under_rk4() -> None:
     """k = 30 m/s in a 3 mm tube is an exchange rate 2k/r = 2e4 /s; RK4's
     automatic step (7.7e-4 s from the flow alone) gave NaN O2 columns. The step now keeps that
     rate at half RK4's real-axis limit 2.785, and every O2 output is finite."""
-    model = oxyline.load_model({
-        "name": "stiff", "period": 1.0,
-        "vessels": [{"name": "tube", "from": "in", "to": "out", "segments": 10, "length": 0.1,
-                     "radius": 3e-3, "wall_thickness": 1e-3, "youngs_modulus": 4e5}],
-        "boundary_conditions": {"in": {"type": "flow", "value": 5e-6},
-                                "out": {"type": "resistance", "resistance": 1e8}},
-        "oxygen": {"inlet": {"po2": 85.0},
-                   "wall": {"model": "mass-transfer", "k": 30.0, "po2": 55}}})
+    model = oxyline.load_model(_stiff_tube())
     res = oxyline.simulate(model, method="rk4", cycles=1, output_every=0.01)
     # 1 %: the compliant volumes at the steady pressure differ slightly from pi r^2 dx
     assert res.settings["dt"] <= 0.5 * 2.785 / (2 * 30.0 / 3e-3) * 1.01

@@ -26,6 +26,14 @@ pub mod transport;
 pub mod waveform;
 pub mod womersley;
 
+// The integration tests' fixtures (tests/common), shared with the unit tests: the file names
+// this crate by its package name, as the integration tests see it.
+#[cfg(test)]
+extern crate self as oxyline_core;
+#[cfg(test)]
+#[path = "../tests/common/mod.rs"]
+mod test_common;
+
 pub use assemble::{Assembled, SegmentRow, Summary};
 pub use circuit::{Circuit, Dae, Regime};
 pub use error::{Error, Result};

@@ -393,6 +393,22 @@ fn periodic_spline_moments(t: &[f64], v: &[f64]) -> Vec<f64> {
 mod tests {
     use super::*;
 
+    /// The waveform of a table without a steady value, for element `el`.
+    fn table(
+        time: Vec<f64>,
+        value: Vec<f64>,
+        interpolation: Interpolation,
+        el: &str,
+    ) -> Result<Waveform> {
+        let spec = WaveformSpec::Table {
+            time,
+            value,
+            interpolation,
+            steady: None,
+        };
+        Waveform::from_spec(&spec, el)
+    }
+
     #[test]
     fn an_svzerod_table_resampled_from_zero_evaluates_as_svzerod_does() {
         // svZeroDSolver: value at fmod(τ, P), P = t_last − t₀, linear, first segment extended
@@ -469,13 +485,10 @@ mod tests {
 
     #[test]
     fn linear_table_is_periodic_and_mean_is_exact() {
-        let w = Waveform::from_spec(
-            &WaveformSpec::Table {
-                time: vec![0.0, 0.5, 1.0],
-                value: vec![0.0, 2.0, 0.0],
-                interpolation: Interpolation::Linear,
-                steady: None,
-            },
+        let w = table(
+            vec![0.0, 0.5, 1.0],
+            vec![0.0, 2.0, 0.0],
+            Interpolation::Linear,
             "inlet",
         )
         .unwrap();
@@ -492,16 +505,7 @@ mod tests {
             .iter()
             .map(|t| 3.0 + (2.0 * std::f64::consts::PI * t).sin())
             .collect();
-        let w = Waveform::from_spec(
-            &WaveformSpec::Table {
-                time,
-                value,
-                interpolation: Interpolation::PeriodicCubic,
-                steady: None,
-            },
-            "inlet",
-        )
-        .unwrap();
+        let w = table(time, value, Interpolation::PeriodicCubic, "inlet").unwrap();
         for t in [0.013, 0.37, 0.81, 1.5] {
             let exact = 3.0 + (2.0 * std::f64::consts::PI * t).sin();
             assert!((w.eval(t) - exact).abs() < 1e-6, "{t}");
@@ -511,13 +515,10 @@ mod tests {
 
     #[test]
     fn non_increasing_time_is_rejected_with_context() {
-        let e = Waveform::from_spec(
-            &WaveformSpec::Table {
-                time: vec![0.0, 0.5, 0.5],
-                value: vec![1.0, 2.0, 3.0],
-                interpolation: Interpolation::Linear,
-                steady: None,
-            },
+        let e = table(
+            vec![0.0, 0.5, 0.5],
+            vec![1.0, 2.0, 3.0],
+            Interpolation::Linear,
             "boundary condition 'inlet'",
         )
         .unwrap_err();

@@ -254,6 +254,49 @@ fn settings(method: Method, dt: f64, cycles: usize, probes: Vec<usize>) -> RunSe
     }
 }
 
+/// O2 solubility (mol m⁻³ mmHg⁻¹): the tests' concentrations are PO2s in mmHg times it.
+const ALPHA: f64 = 1.4e-3;
+
+/// A mass-transfer wall (k = 5e-6 m/s) at a wall PO2 of 60 mmHg.
+fn wall_60() -> String {
+    format!(
+        r#"{{"model": "mass-transfer", "k": 5e-6, "wall_concentration": {}}}"#,
+        60.0 * ALPHA
+    )
+}
+
+/// An inlet PO2 of 85 ± 5 mmHg over a 1 s cycle.
+fn pulsatile_inlet() -> String {
+    format!(
+        r#"{{"kind": "fourier", "period": 1.0, "mean": {}, "sin": [{}]}}"#,
+        85.0 * ALPHA,
+        5.0 * ALPHA
+    )
+}
+
+/// Run `b` to the end (flow and transport) without checking the run's own error.
+fn outcome(b: &mut Built, s: &RunSettings) -> oxyline_core::Outcome {
+    simulate_with_transport(&b.dae, Some(&mut b.transport), s, &mut |_, _| true).unwrap()
+}
+
+/// The largest |c/c0 − 1| over the segment concentrations `segments` of every recorded row
+/// (`vessels` vessel column groups first).
+fn free_stream_error(
+    t: &oxyline_core::TransportOutcome,
+    vessels: usize,
+    segments: usize,
+    c0: f64,
+) -> f64 {
+    let mut worst = 0.0f64;
+    for row in t.data.chunks(t.columns_per_species) {
+        for j in 0..segments {
+            let c = row[VESSEL_COLUMNS * vessels + SEGMENT_COLUMNS * j];
+            worst = worst.max((c / c0 - 1.0).abs());
+        }
+    }
+    worst
+}
+
 /// (e2)/(e3): compliant abdominal tube, R_out in series with the last branch, reversing flow.
 fn abdominal(wall: &str, cin: &str) -> Built {
     let sp = format!(
@@ -274,7 +317,7 @@ fn abdominal(wall: &str, cin: &str) -> Built {
 
 /// Run `b` to the end (flow and transport), which must succeed.
 fn run(b: &mut Built, s: &RunSettings) -> oxyline_core::Outcome {
-    let out = simulate_with_transport(&b.dae, Some(&mut b.transport), s, &mut |_, _| true).unwrap();
+    let out = outcome(b, s);
     assert!(out.error.is_none(), "{:?}", out.error);
     out
 }
@@ -293,17 +336,7 @@ fn balance_residual(out: &oxyline_core::Outcome) -> (f64, f64) {
 fn e2_e3_compliant_monolithic_rk4_balance_and_free_stream() {
     let alpha = 1.4e-3;
     for method in [Method::Rk4, Method::GeneralizedAlpha { rho_inf: 0.5 }] {
-        let mut b = abdominal(
-            &format!(
-                r#"{{"model": "mass-transfer", "k": 5e-6, "wall_concentration": {}}}"#,
-                60.0 * alpha
-            ),
-            &format!(
-                r#"{{"kind": "fourier", "period": 1.0, "mean": {}, "sin": [{}]}}"#,
-                85.0 * alpha,
-                5.0 * alpha
-            ),
-        );
+        let mut b = abdominal(&wall_60(), &pulsatile_inlet());
         let out = run(&mut b, &settings(method, 1e-4, 2, vec![]));
         let (res, i_in) = balance_residual(&out);
         assert!(
@@ -317,24 +350,8 @@ fn e2_e3_compliant_monolithic_rk4_balance_and_free_stream() {
             r#"{"model": "none"}"#,
             &format!(r#"{{"kind": "constant", "value": {}}}"#, 85.0 * alpha),
         );
-        let out = simulate_with_transport(
-            &b.dae,
-            Some(&mut b.transport),
-            &settings(method, 1e-4, 2, vec![]),
-            &mut |_, _| true,
-        )
-        .unwrap();
-        let t = out.transport.as_ref().unwrap();
-        let nv = 1;
-        let ns = 10;
-        let cols = t.columns_per_species;
-        let mut worst = 0.0f64;
-        for row in t.data.chunks(cols) {
-            for j in 0..ns {
-                let c = row[VESSEL_COLUMNS * nv + SEGMENT_COLUMNS * j];
-                worst = worst.max((c / (85.0 * alpha) - 1.0).abs());
-            }
-        }
+        let out = outcome(&mut b, &settings(method, 1e-4, 2, vec![]));
+        let worst = free_stream_error(out.transport.as_ref().unwrap(), 1, 10, 85.0 * alpha);
         assert!(worst <= 1e-12, "{method:?}: free-stream error {worst:e}");
     }
 }
@@ -356,42 +373,15 @@ fn e4_coronary_free_stream_with_compliant_volumes() {
         55.6 * MMHG * 1e6,
         &sp,
     ));
-    let out = simulate_with_transport(
-        &b.dae,
-        Some(&mut b.transport),
-        &settings(Method::Rk4, 1e-4, 2, vec![]),
-        &mut |_, _| true,
-    )
-    .unwrap();
-    let t = out.transport.as_ref().unwrap();
-    let cols = t.columns_per_species;
-    let mut worst = 0.0f64;
-    for row in t.data.chunks(cols) {
-        for j in 0..9 {
-            worst =
-                worst.max((row[VESSEL_COLUMNS + SEGMENT_COLUMNS * j] / (85.0 * alpha) - 1.0).abs());
-        }
-    }
+    let out = outcome(&mut b, &settings(Method::Rk4, 1e-4, 2, vec![]));
+    let worst = free_stream_error(out.transport.as_ref().unwrap(), 1, 9, 85.0 * alpha);
     assert!(worst <= 1e-12, "free-stream error {worst:e}");
 }
 
 #[test]
 fn h1_inductor_flux_linkage_equals_minus_the_amount() {
-    let alpha = 1.4e-3;
-    let mut b = abdominal(
-        &format!(
-            r#"{{"model": "mass-transfer", "k": 5e-6, "wall_concentration": {}}}"#,
-            60.0 * alpha
-        ),
-        &format!(
-            r#"{{"kind": "fourier", "period": 1.0, "mean": {}, "sin": [{}]}}"#,
-            85.0 * alpha,
-            5.0 * alpha
-        ),
-    );
-    let s = settings(Method::Rk4, 1e-4, 1, vec![]);
-    let out =
-        simulate_with_transport(&b.dae, Some(&mut b.transport), &s, &mut |_, _| true).unwrap();
+    let mut b = abdominal(&wall_60(), &pulsatile_inlet());
+    let out = outcome(&mut b, &settings(Method::Rk4, 1e-4, 1, vec![]));
     let t = out.transport.as_ref().unwrap();
     let cols = t.columns_per_species;
     let row = &t.data[t.data.len() - cols..];
@@ -445,13 +435,7 @@ fn h3_quasi_steady_equals_conservative_at_steady_state() {
     let mut results = Vec::new();
     for form in ["conservative", "tl-quasisteady"] {
         let mut b = mk(form);
-        let out = simulate_with_transport(
-            &b.dae,
-            Some(&mut b.transport),
-            &settings(Method::Rk4, 1e-4, 3, vec![]),
-            &mut |_, _| true,
-        )
-        .unwrap();
+        let out = outcome(&mut b, &settings(Method::Rk4, 1e-4, 3, vec![]));
         let t = out.transport.as_ref().unwrap();
         let cols = t.columns_per_species;
         let row = t.data[t.data.len() - cols..].to_vec();
@@ -679,10 +663,7 @@ fn refined_y(wall: &str, cin: &str, m: usize) -> Built {
 fn refined_network_balance_is_exact_and_free_stream_is_preserved() {
     let alpha = 1.4e-3;
     let walls = [
-        format!(
-            r#"{{"model": "mass-transfer", "k": 5e-6, "wall_concentration": {}}}"#,
-            60.0 * alpha
-        ),
+        wall_60(),
         // the boundary-layer shear as extra state (enhanced so that the uptake matters)
         format!(
             r#"{{"model": "leveque", "shear": "relaxed", "enhancement": 50, "wall_concentration": {}}}"#,
@@ -697,15 +678,7 @@ fn refined_network_balance_is_exact_and_free_stream_is_preserved() {
         .iter()
         .flat_map(|m| walls.iter().map(move |w| (*m, w)))
     {
-        let mut b = refined_y(
-            wall,
-            &format!(
-                r#"{{"kind": "fourier", "period": 1.0, "mean": {}, "sin": [{}]}}"#,
-                85.0 * alpha,
-                5.0 * alpha
-            ),
-            3,
-        );
+        let mut b = refined_y(wall, &pulsatile_inlet(), 3);
         // inverted-L: p 4 nodes × 3, the junction node (holding d1's and d2's first segments)
         // takes the finer m = 3, then d1 2 × 3 and d2 2 × 2
         assert_eq!(b.transport.n_cells(), 12 + 3 + 6 + 4);
@@ -733,13 +706,7 @@ fn refined_network_balance_is_exact_and_free_stream_is_preserved() {
             &format!(r#"{{"kind": "constant", "value": {c0}}}"#),
             3,
         );
-        let out = simulate_with_transport(
-            &b.dae,
-            Some(&mut b.transport),
-            &settings(method, 1e-4, 2, vec![]),
-            &mut |_, _| true,
-        )
-        .unwrap();
+        let out = outcome(&mut b, &settings(method, 1e-4, 2, vec![]));
         let t = out.transport.as_ref().unwrap();
         let cols = t.columns_per_species;
         let nseg = b.assembled.circuit.segments.len();
@@ -790,8 +757,7 @@ fn refined_leveque_pieces_sum_to_the_segment_law() {
             let mut b = build(&refined(&tube(8e-3, 0.2, 10, "", flow, 1e7, &sp), m));
             let mut s = settings(Method::GeneralizedAlpha { rho_inf: 0.5 }, 1e-3, 1, vec![]);
             s.output_every = 0.5;
-            let out = simulate_with_transport(&b.dae, Some(&mut b.transport), &s, &mut |_, _| true)
-                .unwrap();
+            let out = outcome(&mut b, &s);
             let t = out.transport.as_ref().unwrap();
             (0..10)
                 .map(|j| t.data[VESSEL_COLUMNS + SEGMENT_COLUMNS * j + 2])
@@ -939,13 +905,7 @@ fn relaxed_cycle_mean_and_instantaneous_shear_agree_in_constant_flow() {
                 55.6 * MMHG * 1e6,
                 &sp,
             ));
-            let out = simulate_with_transport(
-                &b.dae,
-                Some(&mut b.transport),
-                &settings(method, 1e-4, 1, vec![]),
-                &mut |_, _| true,
-            )
-            .unwrap();
+            let out = outcome(&mut b, &settings(method, 1e-4, 1, vec![]));
             rows.push(out.transport.unwrap().data);
         }
         for other in &rows[1..] {

@@ -4,7 +4,7 @@
 use crate::errors::to_py;
 use numpy::{IntoPyArray, PyArrayMethods, PyReadonlyArray1};
 use oxyline_core::error::Error;
-use oxyline_core::model::parse;
+use oxyline_core::model::{NetworkSpec, parse};
 use oxyline_core::sensitivity::{
     TangentSettings, adjoint_with, sensitivities, species_sensitivities as species,
 };
@@ -32,30 +32,57 @@ pub fn tangent_sensitivities<'py>(
     max_cycles: usize,
     tol: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let settings = TangentSettings {
+    let settings = cycle_settings(period, steps_per_cycle, rho_infty, max_cycles, tol);
+    tangent_cycle(
+        py,
+        model_json,
+        paths,
+        signals,
+        move |spec, paths, signals| {
+            let out = sensitivities(spec, paths, signals, settings)?;
+            let c = out.cycle;
+            Ok(Cycle {
+                values: out.values,
+                times: c.times,
+                signals: c.values,
+                derivs: c.derivs,
+                cycles: c.cycles,
+                tangent_cycles: c.tangent_cycles,
+                periodic_change: c.periodic_change,
+            })
+        },
+    )
+}
+
+/// The bindings' keyword arguments of the periodic cycle, as the core's settings.
+fn cycle_settings(
+    period: f64,
+    steps_per_cycle: usize,
+    rho_infty: f64,
+    max_cycles: usize,
+    tol: f64,
+) -> TangentSettings {
+    TangentSettings {
         period,
         steps_per_cycle,
         rho_infty,
         max_cycles,
         tol,
-    };
+    }
+}
+
+/// Parse `model_json` and run `solve` on it (without the GIL); its cycle as `cycle_dict`.
+fn tangent_cycle<'py>(
+    py: Python<'py>,
+    model_json: &str,
+    paths: Vec<String>,
+    signals: Vec<(String, String)>,
+    solve: impl FnOnce(&NetworkSpec, &[String], &[(String, String)]) -> Result<Cycle, Error> + Send,
+) -> PyResult<Bound<'py, PyDict>> {
     let (np, nsig) = (paths.len(), signals.len());
-    let out = py
-        .detach(move || {
-            let spec = parse(model_json)?;
-            sensitivities(&spec, &paths, &signals, settings)
-        })
+    let cycle = py
+        .detach(move || solve(&parse(model_json)?, &paths, &signals))
         .map_err(to_py)?;
-    let c = out.cycle;
-    let cycle = Cycle {
-        values: out.values,
-        times: c.times,
-        signals: c.values,
-        derivs: c.derivs,
-        cycles: c.cycles,
-        tangent_cycles: c.tangent_cycles,
-        periodic_change: c.periodic_change,
-    };
     cycle_dict(py, cycle, np, nsig)
 }
 
@@ -109,30 +136,25 @@ pub fn species_sensitivities<'py>(
     max_cycles: usize,
     tol: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let settings = TangentSettings {
-        period,
-        steps_per_cycle,
-        rho_infty,
-        max_cycles,
-        tol,
-    };
-    let (np, nsig) = (paths.len(), signals.len());
-    let out = py
-        .detach(move || {
-            let spec = parse(model_json)?;
-            species(&spec, &paths, &signals, settings)
-        })
-        .map_err(to_py)?;
-    let cycle = Cycle {
-        values: out.values,
-        times: out.times,
-        signals: out.signals,
-        derivs: out.derivs,
-        cycles: out.cycles,
-        tangent_cycles: out.transport_cycles,
-        periodic_change: out.periodic_change,
-    };
-    cycle_dict(py, cycle, np, nsig)
+    let settings = cycle_settings(period, steps_per_cycle, rho_infty, max_cycles, tol);
+    tangent_cycle(
+        py,
+        model_json,
+        paths,
+        signals,
+        move |spec, paths, signals| {
+            let out = species(spec, paths, signals, settings)?;
+            Ok(Cycle {
+                values: out.values,
+                times: out.times,
+                signals: out.signals,
+                derivs: out.derivs,
+                cycles: out.cycles,
+                tangent_cycles: out.transport_cycles,
+                periodic_change: out.periodic_change,
+            })
+        },
+    )
 }
 
 /// The gradients of functionals J_f = Σ_kj weights[f, k, j] · signal j after step k of the
@@ -160,13 +182,7 @@ pub fn adjoint_gradients<'py>(
     max_cycles: usize,
     tol: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let settings = TangentSettings {
-        period,
-        steps_per_cycle,
-        rho_infty,
-        max_cycles,
-        tol,
-    };
+    let settings = cycle_settings(period, steps_per_cycle, rho_infty, max_cycles, tol);
     let (np, nsig) = (paths.len(), signals.len());
     let mut raised: Option<PyErr> = None;
     let result = py.detach(|| {

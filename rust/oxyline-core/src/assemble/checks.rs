@@ -33,3 +33,14 @@ pub(crate) fn check_nonnegative(element: &str, key: &str, v: f64) -> Result<()> 
     }
     Ok(())
 }
+
+/// A value any finite number may take (a volume offset, a time, a coefficient of any sign).
+pub(crate) fn check_finite(element: &str, key: &str, v: f64) -> Result<()> {
+    if !v.is_finite() {
+        return Err(Error::model(
+            element,
+            format!("{key} must be finite, got {v}"),
+        ));
+    }
+    Ok(())
+}

@@ -2,7 +2,7 @@
 //! (`coronary_bed`): their circuit parts plus the elements of `crate::element::heart` and
 //! `crate::element::coronary` (docs/physics.md §1.10).
 
-use super::checks::{check_nonnegative, check_positive};
+use super::checks::{check_finite, check_nonnegative, check_positive};
 use super::vessel::Chain;
 use crate::circuit::{Circuit, CircuitElement};
 use crate::element::activation::Activation;
@@ -57,9 +57,7 @@ fn params(el: &str, s: &HeartPulmonarySpec) -> Result<HeartParams> {
         ("right_atrium_rest_volume", s.right_atrium_rest_volume),
         ("left_atrium_rest_volume", s.left_atrium_rest_volume),
     ] {
-        if !v.is_finite() {
-            return Err(Error::model(el, format!("{k} must be finite, got {v}")));
-        }
+        check_finite(el, k, v)?;
     }
     Ok(HeartParams {
         period: s.period,
@@ -194,15 +192,7 @@ pub(crate) fn stamp_coronary(
         "intramyocardial_capacitance",
         spec.intramyocardial_capacitance,
     )?;
-    if !spec.intramyocardial_factor.is_finite() {
-        return Err(Error::model(
-            &el,
-            format!(
-                "intramyocardial_factor must be finite, got {}",
-                spec.intramyocardial_factor
-            ),
-        ));
-    }
+    check_finite(&el, "intramyocardial_factor", spec.intramyocardial_factor)?;
     circuit.add_vessel(name);
     let a = circuit.add_node(format!("{name}: arterial"), spec.arterial_capacitance, 0.0);
     let m = circuit.add_node(format!("{name}: intramyocardial"), 0.0, 0.0);

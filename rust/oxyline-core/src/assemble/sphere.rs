@@ -3,11 +3,11 @@
 //! unknowns; the node keeps its ordinary flow balance, which the element completes with the
 //! volume the growing sphere takes up (`crate::element::sphere`).
 
-use super::checks::check_positive;
+use super::checks::{check_finite, check_positive};
 use super::vessel::Chain;
 use crate::circuit::{Circuit, CircuitElement, Label, Part};
 use crate::element::sphere::SphereParams;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::model::ChamberSphereSpec;
 
 /// The checked wall parameters of chamber `name`.
@@ -32,9 +32,7 @@ pub fn sphere_params(name: &str, s: &ChamberSphereSpec) -> Result<SphereParams> 
         ("systole_start", s.systole_start),
         ("diastole_start", s.diastole_start),
     ] {
-        if !v.is_finite() {
-            return Err(Error::model(&el, format!("{key} must be finite, got {v}")));
-        }
+        check_finite(&el, key, v)?;
     }
     Ok(SphereParams {
         density: s.density,

@@ -86,8 +86,7 @@ impl Activation {
         [t_shift, tau_1, tau_2, m1, m2]: [f64; 5],
     ) -> Result<Self> {
         let raw = |t: f64| {
-            let g1 = (t / tau_1).powf(m1);
-            let g2 = (t / tau_2).powf(m2);
+            let (g1, g2) = hill_gains(t, [tau_1, tau_2, m1, m2]);
             g1 / (1.0 + g1) / (1.0 + g2)
         };
         // svZeroDSolver's grid: t = 0, 1e-5, ... < period (accumulated as it does)
@@ -148,18 +147,16 @@ impl Activation {
                 relax_start,
                 contract_duration,
                 relax_duration,
-            } => {
-                let c = (t - contract_start) % period;
-                if (0.0..contract_duration).contains(&c) {
-                    return 0.5 * (1.0 - (PI * c / contract_duration).cos());
-                }
-                let r = (t - relax_start) % period;
-                if (0.0..relax_duration).contains(&r) {
-                    0.5 * (1.0 + (PI * r / relax_duration).cos())
-                } else {
-                    0.0
-                }
-            }
+            } => match piecewise_phase(
+                t,
+                period,
+                [contract_start, contract_duration],
+                [relax_start, relax_duration],
+            ) {
+                Piece::Contract(c) => 0.5 * (1.0 - (PI * c / contract_duration).cos()),
+                Piece::Relax(r) => 0.5 * (1.0 + (PI * r / relax_duration).cos()),
+                Piece::Rest => 0.0,
+            },
             Activation::TwoHill {
                 t_shift,
                 tau_1,
@@ -169,28 +166,20 @@ impl Activation {
                 norm,
                 ..
             } => {
-                let tc = in_cycle(t, period);
-                let mut ts = (tc - t_shift) % period;
-                if ts < 0.0 {
-                    ts += period;
-                }
-                let g1 = (ts / tau_1).powf(m1);
-                let g2 = (ts / tau_2).powf(m2);
+                let ts = since_shift(t, t_shift, period);
+                let (g1, g2) = hill_gains(ts, [tau_1, tau_2, m1, m2]);
                 norm * g1 / (1.0 + g1) / (1.0 + g2)
             }
             Activation::WrappingCosine {
                 systole_fraction,
                 p_wave_divisor,
             } => {
-                let tsa = period * systole_fraction;
-                let tp = period / p_wave_divisor;
-                let tc = in_cycle(t, period);
-                if tc <= tp {
-                    0.5 * (1.0 - (2.0 * PI * (tc - tp + tsa) / tsa).cos())
-                } else if tc >= (period - tsa) + tp && tc < period {
-                    0.5 * (1.0 - (2.0 * PI * (tc - tp - (period - tsa)) / tsa).cos())
-                } else {
-                    0.0
+                let (tc, tsa, tp, wrap) =
+                    wrapping_phase(t, period, systole_fraction, p_wave_divisor);
+                match wrap {
+                    Some(false) => 0.5 * (1.0 - (2.0 * PI * (tc - tp + tsa) / tsa).cos()),
+                    Some(true) => 0.5 * (1.0 - (2.0 * PI * (tc - tp - (period - tsa)) / tsa).cos()),
+                    None => 0.0,
                 }
             }
             Activation::Fourier { min, range } => {
@@ -221,27 +210,33 @@ impl Activation {
                 ) {
                     return None;
                 }
-                let c = (t - contract_start) % period;
-                if (0.0..contract_duration).contains(&c) {
-                    // φ = ½(1 − cos(π c/d)): ∂φ/∂c = ½ (π/d) sin(π c/d)
-                    let h = 0.5 * PI / contract_duration * (PI * c / contract_duration).sin();
-                    return Some(match key {
-                        "contract_start" => -h,
-                        "contract_duration" => -h * c / contract_duration,
-                        _ => 0.0,
-                    });
-                }
-                let r = (t - relax_start) % period;
-                if (0.0..relax_duration).contains(&r) {
-                    // φ = ½(1 + cos(π r/d)): ∂φ/∂r = −½ (π/d) sin(π r/d)
-                    let h = -0.5 * PI / relax_duration * (PI * r / relax_duration).sin();
-                    return Some(match key {
-                        "relax_start" => -h,
-                        "relax_duration" => -h * r / relax_duration,
-                        _ => 0.0,
-                    });
-                }
-                Some(0.0)
+                let phase = piecewise_phase(
+                    t,
+                    period,
+                    [contract_start, contract_duration],
+                    [relax_start, relax_duration],
+                );
+                Some(match phase {
+                    Piece::Contract(c) => {
+                        // φ = ½(1 − cos(π c/d)): ∂φ/∂c = ½ (π/d) sin(π c/d)
+                        let h = 0.5 * PI / contract_duration * (PI * c / contract_duration).sin();
+                        match key {
+                            "contract_start" => -h,
+                            "contract_duration" => -h * c / contract_duration,
+                            _ => 0.0,
+                        }
+                    }
+                    Piece::Relax(r) => {
+                        // φ = ½(1 + cos(π r/d)): ∂φ/∂r = −½ (π/d) sin(π r/d)
+                        let h = -0.5 * PI / relax_duration * (PI * r / relax_duration).sin();
+                        match key {
+                            "relax_start" => -h,
+                            "relax_duration" => -h * r / relax_duration,
+                            _ => 0.0,
+                        }
+                    }
+                    Piece::Rest => 0.0,
+                })
             }
             Activation::TwoHill { .. } => self.two_hill_derivative(key, t, period),
             Activation::WrappingCosine {
@@ -250,15 +245,14 @@ impl Activation {
             } => {
                 // φ = ½(1 − cos θ), θ = 2π (1 + u/T_sa), T_sa = f T, u = t_c − T/d on the
                 // branch before the P wave and t_c − T/d − T on the one wrapping from the end
-                let tsa = period * systole_fraction;
-                let tp = period / p_wave_divisor;
-                let tc = in_cycle(t, period);
-                let u = if tc <= tp {
-                    tc - tp
-                } else if tc >= (period - tsa) + tp && tc < period {
-                    tc - tp - period
-                } else {
-                    return matches!(key, "systole_fraction" | "p_wave_divisor").then_some(0.0);
+                let (tc, tsa, tp, wrap) =
+                    wrapping_phase(t, period, systole_fraction, p_wave_divisor);
+                let u = match wrap {
+                    Some(false) => tc - tp,
+                    Some(true) => tc - tp - period,
+                    None => {
+                        return matches!(key, "systole_fraction" | "p_wave_divisor").then_some(0.0);
+                    }
                 };
                 let half_sin = 0.5 * (2.0 * PI * (1.0 + u / tsa)).sin();
                 match key {
@@ -292,8 +286,7 @@ impl Activation {
         };
         // (raw, ∂raw/∂t_s, ∂raw/∂τ₁, ∂raw/∂τ₂, ∂raw/∂m₁, ∂raw/∂m₂) at t_s
         let parts = |ts: f64| {
-            let g1 = (ts / tau_1).powf(m1);
-            let g2 = (ts / tau_2).powf(m2);
+            let (g1, g2) = hill_gains(ts, [tau_1, tau_2, m1, m2]);
             let d1 = 1.0 / ((1.0 + g1) * (1.0 + g1) * (1.0 + g2));
             let d2 = -g1 / ((1.0 + g1) * (1.0 + g2) * (1.0 + g2));
             // g ln(t_s/τ) → 0 as t_s → 0 (g vanishes faster than the logarithm grows)
@@ -321,12 +314,7 @@ impl Activation {
             "m2" => 5,
             _ => return None,
         };
-        let tc = in_cycle(t, period);
-        let mut ts = (tc - t_shift) % period;
-        if ts < 0.0 {
-            ts += period;
-        }
-        let here = parts(ts);
+        let here = parts(since_shift(t, t_shift, period));
         if k == 1 {
             return Some(-norm * here[1]);
         }
@@ -356,6 +344,63 @@ impl Activation {
             Activation::WrappingCosine { .. } | Activation::Fourier { .. } => Vec::new(),
         }
     }
+}
+
+/// The two-Hill law's time since `t_shift` within the cycle, in [0, period).
+fn since_shift(t: f64, t_shift: f64, period: f64) -> f64 {
+    let ts = (in_cycle(t, period) - t_shift) % period;
+    if ts < 0.0 { ts + period } else { ts }
+}
+
+/// The two-Hill law's g₁ = (t_s/τ₁)^{m₁} and g₂ = (t_s/τ₂)^{m₂}.
+fn hill_gains(ts: f64, [tau_1, tau_2, m1, m2]: [f64; 4]) -> (f64, f64) {
+    ((ts / tau_1).powf(m1), (ts / tau_2).powf(m2))
+}
+
+/// Where time t falls in the piecewise-cosine law (`[start, duration]` of the contraction
+/// and of the relaxation, each taken modulo the period as svZeroDSolver does).
+enum Piece {
+    /// Time `c` into the contraction.
+    Contract(f64),
+    /// Time `r` into the relaxation.
+    Relax(f64),
+    /// Neither: φ = 0.
+    Rest,
+}
+
+fn piecewise_phase(t: f64, period: f64, [cs, cd]: [f64; 2], [rs, rd]: [f64; 2]) -> Piece {
+    let c = (t - cs) % period;
+    if (0.0..cd).contains(&c) {
+        return Piece::Contract(c);
+    }
+    let r = (t - rs) % period;
+    if (0.0..rd).contains(&r) {
+        Piece::Relax(r)
+    } else {
+        Piece::Rest
+    }
+}
+
+/// The wrapping cosine at time t: the time within the cycle t_c, T_sa = f T, the P-wave time
+/// T/d, and its branch: Some(false) up to the P wave, Some(true) on the part that wraps from
+/// the cycle's end, None between them (φ = 0).
+fn wrapping_phase(
+    t: f64,
+    period: f64,
+    systole_fraction: f64,
+    p_wave_divisor: f64,
+) -> (f64, f64, f64, Option<bool>) {
+    let tsa = period * systole_fraction;
+    let tp = period / p_wave_divisor;
+    let tc = in_cycle(t, period);
+    let wrap = if tc <= tp {
+        Some(false)
+    } else if tc >= (period - tsa) + tp && tc < period {
+        Some(true)
+    } else {
+        None
+    };
+    (tc, tsa, tp, wrap)
 }
 
 /// ∂φ/∂θ of the half-cosine law for `key` (`t_active`, `t_twitch`) at `contract` = t_c −

@@ -49,7 +49,12 @@ pub struct Elastance {
 impl Elastance {
     /// (E, V_rest) at time t.
     pub fn at(&self, t: f64) -> (f64, f64) {
-        let phi = self.activation.eval(t, self.period);
+        self.at_activation(self.activation.eval(t, self.period))
+    }
+
+    /// (E, V_rest) at activation φ (the exponential law's active part: E = φ E_max about
+    /// V_aso).
+    fn at_activation(&self, phi: f64) -> (f64, f64) {
         match self.law {
             ElastanceLaw::ElastanceInductor {
                 e_max,
@@ -101,47 +106,34 @@ impl Elastance {
             let dphi = self.activation.derivative(timing, t, self.period)?;
             return Some(self.pressure_by_activation(phi, v) * dphi);
         }
+        // P = E (V − V_rest) + the exponential law's passive part: ∂P/∂E_max = φ (V − V_rest)
+        // in every law
+        let (e, vr) = self.at_activation(phi);
+        if key == "max_elastance" {
+            return Some(phi * (v - vr));
+        }
         match self.law {
-            ElastanceLaw::ElastanceInductor {
-                e_max,
-                e_min,
-                v_rest_diastole,
-                v_rest_systole,
-            } => {
-                let e = (e_max - e_min) * phi + e_min;
-                let vr = (1.0 - phi) * (v_rest_diastole - v_rest_systole) + v_rest_systole;
-                match key {
-                    "max_elastance" => Some(phi * (v - vr)),
-                    "min_elastance" => Some((1.0 - phi) * (v - vr)),
-                    "rest_volume_diastole" => Some(-e * (1.0 - phi)),
-                    "rest_volume_systole" => Some(-e * phi),
-                    _ => None,
-                }
-            }
-            ElastanceLaw::Linear {
-                e_max,
-                e_pass,
-                v_rest,
-            } => match key {
-                "max_elastance" => Some(phi * (v - v_rest)),
-                "passive_elastance" => Some(v - v_rest),
-                "rest_volume" => Some(-(e_pass + e_max * phi)),
+            ElastanceLaw::ElastanceInductor { .. } => match key {
+                "min_elastance" => Some((1.0 - phi) * (v - vr)),
+                "rest_volume_diastole" => Some(-e * (1.0 - phi)),
+                "rest_volume_systole" => Some(-e * phi),
+                _ => None,
+            },
+            ElastanceLaw::Linear { .. } => match key {
+                "passive_elastance" => Some(v - vr),
+                "rest_volume" => Some(-e),
                 _ => None,
             },
             ElastanceLaw::Exponential {
-                e_max,
                 k_pressure,
                 k_volume,
-                v_aso,
+                ..
             } => {
-                let ex = (k_volume * (v - v_aso)).exp();
+                let ex = (k_volume * (v - vr)).exp();
                 match key {
-                    "max_elastance" => Some(phi * (v - v_aso)),
                     "passive_pressure" => Some(-(ex - 1.0) * (phi - 1.0)),
-                    "passive_volume_coefficient" => {
-                        Some(-k_pressure * (v - v_aso) * ex * (phi - 1.0))
-                    }
-                    "rest_volume" => Some(-phi * e_max + k_pressure * k_volume * ex * (phi - 1.0)),
+                    "passive_volume_coefficient" => Some(-k_pressure * (v - vr) * ex * (phi - 1.0)),
+                    "rest_volume" => Some(-e + k_pressure * k_volume * ex * (phi - 1.0)),
                     _ => None,
                 }
             }
@@ -150,24 +142,21 @@ impl Elastance {
 
     /// ∂P/∂φ at activation φ and volume V.
     fn pressure_by_activation(&self, phi: f64, v: f64) -> f64 {
+        let (e, vr) = self.at_activation(phi);
         match self.law {
             ElastanceLaw::ElastanceInductor {
                 e_max,
                 e_min,
                 v_rest_diastole,
                 v_rest_systole,
-            } => {
-                let e = (e_max - e_min) * phi + e_min;
-                let vr = (1.0 - phi) * (v_rest_diastole - v_rest_systole) + v_rest_systole;
-                (e_max - e_min) * (v - vr) + e * (v_rest_diastole - v_rest_systole)
-            }
-            ElastanceLaw::Linear { e_max, v_rest, .. } => e_max * (v - v_rest),
+            } => (e_max - e_min) * (v - vr) + e * (v_rest_diastole - v_rest_systole),
+            ElastanceLaw::Linear { e_max, .. } => e_max * (v - vr),
             ElastanceLaw::Exponential {
                 e_max,
                 k_pressure,
                 k_volume,
-                v_aso,
-            } => e_max * (v - v_aso) - k_pressure * ((k_volume * (v - v_aso)).exp() - 1.0),
+                ..
+            } => e_max * (v - vr) - k_pressure * ((k_volume * (v - vr)).exp() - 1.0),
         }
     }
 }

@@ -369,6 +369,13 @@ impl Element for HeartPulmonary {
 mod tests {
     use super::*;
 
+    /// A state with the tricuspid and aortic valves open (forward pressure) and the
+    /// pulmonary and mitral valves closed (backward pressure, backflow).
+    const STATE: [f64; 14] = [
+        1500.0, 900.0, 2000.0, 12000.0, 11000.0, 2e-5, -1e-7, -2e-7, 3e-4, 4e-5, 1.2e-4, 3e-5,
+        1e-4, 1400.0,
+    ];
+
     fn block() -> HeartPulmonary {
         let atrium = Atrium {
             max_elastance: 2e7,
@@ -403,10 +410,7 @@ mod tests {
         // tricuspid and aortic valves open (forward pressure), pulmonary and mitral closed
         // (backward pressure, backflow): central differences with the valve states unchanged
         let h = block();
-        let y = [
-            1500.0, 900.0, 2000.0, 12000.0, 11000.0, 2e-5, -1e-7, -2e-7, 3e-4, 4e-5, 1.2e-4, 3e-5,
-            1e-4, 1400.0,
-        ];
+        let y = STATE;
         assert_eq!(h.valves(&y), [1.0, 0.0, 0.0, 1.0]);
         let t = 0.95; // inside the atrial contraction
         let mut j = vec![0.0; h.pattern().len()];
@@ -467,10 +471,7 @@ mod tests {
     #[test]
     fn parameter_derivatives_are_the_residuals_central_differences() {
         // valves held (tricuspid and aortic open), inside the atrial contraction
-        let y = [
-            1500.0, 900.0, 2000.0, 12000.0, 11000.0, 2e-5, -1e-7, -2e-7, 3e-4, 4e-5, 1.2e-4, 3e-5,
-            1e-4, 1400.0,
-        ];
+        let y = STATE;
         let t = 0.95;
         let values = [
             ("right_atrium_elastance", 2e7),
@@ -512,10 +513,7 @@ mod tests {
     #[test]
     fn closed_valve_flows_are_reset_before_a_correction() {
         let h = block();
-        let y = [
-            1500.0, 900.0, 2000.0, 12000.0, 11000.0, 2e-5, -1e-7, -2e-7, 3e-4, 4e-5, 1.2e-4, 3e-5,
-            1e-4, 1400.0,
-        ];
+        let y = STATE;
         let mut y_new = y;
         h.after_correction(&y, &mut y_new);
         assert_eq!(&y_new[5..9], &[2e-5, 0.0, 0.0, 3e-4]);

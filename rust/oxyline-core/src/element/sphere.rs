@@ -49,22 +49,41 @@ pub struct SphereParams {
 impl SphereParams {
     /// The activation rate a(t): (|a|, max(a, 0)).
     pub fn activation(&self, t: f64) -> (f64, f64) {
-        let tc = in_cycle(t, self.period);
-        let s_plus = 0.5 * (1.0 + ((tc - self.t_systole) / self.steepness).tanh());
-        let s_minus = 0.5 * (1.0 - ((tc - self.t_diastole) / self.steepness).tanh());
-        let f = s_plus * s_minus;
-        let a = self.alpha_max * f + self.alpha_min * (1.0 - f);
+        let a = self.rate(self.switches(t).f);
         (a.abs(), a.max(0.0))
     }
 
-    /// ∂a/∂θ of the activation rate a(t) for the activation key `key` (None: not one).
-    fn activation_derivative(&self, key: &str, t: f64) -> Option<f64> {
+    /// The systole and diastole switches at time t.
+    fn switches(&self, t: f64) -> Switches {
         let tc = in_cycle(t, self.period);
         let g = self.steepness;
         let (zp, zm) = ((tc - self.t_systole) / g, (tc - self.t_diastole) / g);
         let s_plus = 0.5 * (1.0 + zp.tanh());
         let s_minus = 0.5 * (1.0 - zm.tanh());
-        let f = s_plus * s_minus;
+        Switches {
+            zp,
+            zm,
+            s_plus,
+            s_minus,
+            f: s_plus * s_minus,
+        }
+    }
+
+    /// a = α_max f + α_min (1 − f) at the switches' product f.
+    fn rate(&self, f: f64) -> f64 {
+        self.alpha_max * f + self.alpha_min * (1.0 - f)
+    }
+
+    /// ∂a/∂θ of the activation rate a(t) for the activation key `key` (None: not one).
+    fn activation_derivative(&self, key: &str, t: f64) -> Option<f64> {
+        let g = self.steepness;
+        let Switches {
+            zp,
+            zm,
+            s_plus,
+            s_minus,
+            f,
+        } = self.switches(t);
         // ∂S₊/∂z₊ = ½ sech² z₊, ∂S₋/∂z₋ = −½ sech² z₋
         let (dsp, dsm) = (0.5 / zp.cosh().powi(2), -0.5 / zm.cosh().powi(2));
         let df = match key {
@@ -99,6 +118,16 @@ impl SphereParams {
         // d/dR [R + 2 r₀¹² R⁻¹¹] = 1 − 22 r₀¹² R⁻¹²
         (k * big_r * (1.0 + 2.0 * c6), k * (1.0 - 22.0 * c6))
     }
+}
+
+/// The activation's switches at one time: z± = (t_c − t_sys/dias)/γ, S₊ = ½(1 + tanh z₊),
+/// S₋ = ½(1 − tanh z₋) and their product f.
+struct Switches {
+    zp: f64,
+    zm: f64,
+    s_plus: f64,
+    s_minus: f64,
+    f: f64,
 }
 
 /// Unknown indices of a spherical chamber: its pressure node and its five wall unknowns.
@@ -155,17 +184,26 @@ impl ChamberSphere {
     }
 }
 
-impl Element for ChamberSphere {
-    element_fields!();
-    fn residual(&self, t: f64, y: &[f64], c: &mut [f64]) {
-        let (q, u) = (&self.params, &self.u);
-        let big_r = q.radius + y[u.displacement];
-        let (vel, stress, tau, p) = (
+impl ChamberSphere {
+    /// The radius R = r₀ + r, the wall velocity, the stress, the active stress and the
+    /// chamber pressure in state `y`.
+    fn wall_state(&self, y: &[f64]) -> [f64; 5] {
+        let u = &self.u;
+        [
+            self.params.radius + y[u.displacement],
             y[u.velocity],
             y[u.stress],
             y[u.active_stress],
             y[u.pressure],
-        );
+        ]
+    }
+}
+
+impl Element for ChamberSphere {
+    element_fields!();
+    fn residual(&self, t: f64, y: &[f64], c: &mut [f64]) {
+        let q = &self.params;
+        let [big_r, vel, stress, tau, p] = self.wall_state(y);
         let growth = 4.0 * PI * vel * big_r * big_r;
         let (abs_a, pos_a) = q.activation(t);
         c[0] = growth;
@@ -176,9 +214,8 @@ impl Element for ChamberSphere {
         c[5] = -growth;
     }
     fn jacobian(&self, t: f64, y: &[f64], j: &mut [f64]) {
-        let (q, u) = (&self.params, &self.u);
-        let big_r = q.radius + y[u.displacement];
-        let (vel, stress, p) = (y[u.velocity], y[u.stress], y[u.pressure]);
+        let q = &self.params;
+        let [big_r, vel, stress, _, p] = self.wall_state(y);
         let r02 = q.radius * q.radius;
         let (g, dg) = q.viscous(big_r);
         let dgrowth = [8.0 * PI * vel * big_r, 4.0 * PI * big_r * big_r];
@@ -200,15 +237,8 @@ impl Element for ChamberSphere {
     /// `chamber_sphere`); the density enters only the mass matrix (ρ d₀ on the velocity row,
     /// differentiated by the sensitivity's mass term), so its element term is zero.
     fn parameter_derivative(&self, key: &str, t: f64, y: &[f64], dc: &mut [f64]) -> bool {
-        let (q, u) = (&self.params, &self.u);
-        let (r0, x) = (q.radius, y[u.displacement]);
-        let big_r = r0 + x;
-        let (vel, stress, tau, p) = (
-            y[u.velocity],
-            y[u.stress],
-            y[u.active_stress],
-            y[u.pressure],
-        );
+        let (q, r0) = (&self.params, self.params.radius);
+        let [big_r, vel, stress, tau, p] = self.wall_state(y);
         dc.iter_mut().for_each(|d| *d = 0.0);
         let r02 = r0 * r0;
         let c = (big_r / r0).powi(2);
@@ -239,11 +269,7 @@ impl Element for ChamberSphere {
                 let Some(da) = q.activation_derivative(key, t) else {
                     return false;
                 };
-                let tc = in_cycle(t, q.period);
-                let zp = (tc - q.t_systole) / q.steepness;
-                let zm = (tc - q.t_diastole) / q.steepness;
-                let f = 0.25 * (1.0 + zp.tanh()) * (1.0 - zm.tanh());
-                let a = q.alpha_max * f + q.alpha_min * (1.0 - f);
+                let a = q.rate(q.switches(t).f);
                 // c₄ = |a| τ − σ_max max(a, 0): ∂c₄/∂a = sign(a) τ − σ_max [a > 0]
                 let dc_da = if a > 0.0 {
                     tau - q.max_active_stress
@@ -291,16 +317,21 @@ mod tests {
         }
     }
 
-    #[test]
-    fn the_jacobian_is_the_derivative_of_the_residual() {
-        let u = SphereUnknowns {
+    /// The six unknowns in the order of the test states `y`.
+    fn unknowns() -> SphereUnknowns {
+        SphereUnknowns {
             pressure: 0,
             displacement: 1,
             velocity: 2,
             stress: 3,
             active_stress: 4,
             volume: 5,
-        };
+        }
+    }
+
+    #[test]
+    fn the_jacobian_is_the_derivative_of_the_residual() {
+        let u = unknowns();
         let el = ChamberSphere::new("s".into(), params(), u);
         let y = [9e3, 0.004, -0.03, 2.5e4, 3e4, 1e-5];
         let mut j = vec![0.0; el.pattern().len()];
@@ -342,14 +373,7 @@ mod tests {
     /// step 1e-6: O(h²) truncation), in systole, in diastole and inside both switches.
     #[test]
     fn parameter_derivatives_match_central_differences() {
-        let u = SphereUnknowns {
-            pressure: 0,
-            displacement: 1,
-            velocity: 2,
-            stress: 3,
-            active_stress: 4,
-            volume: 5,
-        };
+        let u = unknowns();
         let y = [9e3, 0.004, -0.03, 2.5e4, 3e4, 1e-5];
         let keys = [
             "density",

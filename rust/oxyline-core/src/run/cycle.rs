@@ -66,6 +66,38 @@ impl CycleRows {
     pub(super) fn output_time(&self, time: f64, all_cycles: bool) -> f64 {
         if all_cycles { time } else { time - self.t0 }
     }
+
+    /// The output times of an error-controlled cycle of `n_out` rows that a step ending at
+    /// `t_new` has reached, from row `*next` on (1-based; advanced past each time given).
+    pub(super) fn due<'a>(
+        &self,
+        period: f64,
+        n_out: usize,
+        next: &'a mut usize,
+        t_new: f64,
+    ) -> impl Iterator<Item = f64> + 'a {
+        let t0 = self.t0;
+        std::iter::from_fn(move || {
+            let tau = t0 + period * *next as f64 / n_out as f64;
+            (*next <= n_out && tau <= t_new + 1e-12 * period).then(|| {
+                *next += 1;
+                tau
+            })
+        })
+    }
+}
+
+/// The step of an error-controlled cycle at `rem` before its end, the controller proposing
+/// `h`: the whole remainder when `h` nearly reaches it, half of it when under two steps
+/// are left (no sliver of a last step), else `h`.
+pub(super) fn toward_end(h: f64, rem: f64) -> f64 {
+    if h >= rem * (1.0 - 1e-9) {
+        rem
+    } else if h > 0.5 * rem {
+        0.5 * rem
+    } else {
+        h
+    }
 }
 
 impl<'r, 'f> Cycles<'r, 'f> {
@@ -360,12 +392,8 @@ impl<'r, 'f> Cycles<'r, 'f> {
                 c.h
             } else if let Some(h) = self.periodic_steps.step(rem) {
                 h
-            } else if ad.h >= rem * (1.0 - 1e-9) {
-                rem
-            } else if ad.h > 0.5 * rem {
-                0.5 * rem
             } else {
-                ad.h
+                toward_end(ad.h, rem)
             };
             let replayed = self.periodic_steps.replaying();
             ad.save_start(&self.state);
@@ -422,13 +450,8 @@ impl<'r, 'f> Cycles<'r, 'f> {
             self.state.advance_species(t, h)?;
             ad.after_species(&self.state);
             let t_new = if h == rem { t_end } else { t + h };
-            while next_out <= n_out {
-                let tau = t0 + period * next_out as f64 / n_out as f64;
-                if tau > t_new + 1e-12 * period {
-                    break;
-                }
+            for tau in rows.due(period, n_out, &mut next_out, t_new) {
                 self.dense_row(ad, rows, (tau - t) / h, h, tau)?;
-                next_out += 1;
             }
             ad.accept(&self.state, h, err, kinds);
             match next {

@@ -343,6 +343,26 @@ fn illinois(g: impl Fn(f64) -> f64, a: (f64, f64), b: (f64, f64), tol: f64) -> f
 mod tests {
     use super::*;
 
+    /// The events of `switches` (named a, b, …), every valve open and armed, no tolerances.
+    fn open_events(switches: Vec<Switch>) -> Events {
+        let n = switches.len();
+        Events {
+            switches,
+            names: (b'a'..)
+                .take(n)
+                .map(|c| char::from(c).to_string())
+                .collect(),
+            open: vec![true; n],
+            fresh: vec![false; n],
+            flow_tol: (0.0, 0.0),
+            peak: vec![0.0; n],
+            pressure_atol: 0.0,
+            pressure_peak: vec![0.0; n],
+            armed: vec![true; n],
+            log: Vec::new(),
+        }
+    }
+
     #[test]
     fn illinois_brackets_the_root_to_the_tolerance() {
         // g = cos(3θ) − 0.2: root at acos(0.2)/3 = 0.45667...
@@ -365,18 +385,7 @@ mod tests {
             on_off: true,
             ..pressure
         };
-        let mut ev = Events {
-            switches: vec![pressure, on_off],
-            names: vec!["a".into(), "b".into()],
-            open: vec![true, true],
-            fresh: vec![false, false],
-            flow_tol: (0.0, 0.0),
-            peak: vec![0.0, 0.0],
-            pressure_atol: 0.0,
-            pressure_peak: vec![0.0, 0.0],
-            armed: vec![true, true],
-            log: Vec::new(),
-        };
+        let mut ev = open_events(vec![pressure, on_off]);
         // ΔP < 0 with forward flow: the pressure rule closes, the on/off rule stays open
         let y = [1.0, 2.0, 3.0];
         let v = |i: usize| y[i];
@@ -435,18 +444,7 @@ mod tests {
             on_off: false,
             resistance: 1.0,
         };
-        let ev = Events {
-            switches: vec![sw(1, 2), sw(3, 4)],
-            names: vec!["a".into(), "b".into()],
-            open: vec![true, true],
-            fresh: vec![false, false],
-            flow_tol: (0.0, 0.0),
-            peak: vec![0.0, 0.0],
-            pressure_atol: 0.0,
-            pressure_peak: vec![0.0, 0.0],
-            armed: vec![true, true],
-            log: Vec::new(),
-        };
+        let ev = open_events(vec![sw(1, 2), sw(3, 4)]);
         // ΔP_a = 1 − 2θ (root 0.5), ΔP_b = 1 − 4θ (root 0.25)
         let at = |th: f64| move |i: usize| [0.0, 1.0 - 2.0 * th, 0.0, 1.0 - 4.0 * th, 0.0][i];
         let found = ev.locate(&at(1.0), at, 1e-9).expect("an event");

@@ -9,7 +9,7 @@
 
 use super::adaptive::{ACCUMULATION, FLOW_SHARE_FLOOR, NO_VESSEL, flow_groups};
 use super::coupling::{Flow, State};
-use super::cycle::{CycleRows, Cycles};
+use super::cycle::{CycleRows, Cycles, toward_end};
 use super::events::{Cut, Events, Located, Next, decide};
 use super::settings::{Method, RunSettings};
 use crate::assemble::auto_segments::{UNFORCED_FREQUENCY, waveform_frequency};
@@ -404,14 +404,9 @@ impl Cycles<'_, '_> {
         let mut cut: Option<Cut> = None;
         while t < t_end {
             let rem = t_end - t;
-            let h = if let Some(c) = cut {
-                c.h
-            } else if ex.h >= rem * (1.0 - 1e-9) {
-                rem
-            } else if ex.h > 0.5 * rem {
-                0.5 * rem
-            } else {
-                ex.h
+            let h = match cut {
+                Some(c) => c.h,
+                None => toward_end(ex.h, rem),
             };
             let kinds = match step(&mut self.state, t, h) {
                 Ok(()) => {
@@ -449,13 +444,8 @@ impl Cycles<'_, '_> {
                 continue;
             }
             let t_new = if h == rem { t_end } else { t + h };
-            while next_out <= n_out {
-                let tau = t0 + period * next_out as f64 / n_out as f64;
-                if tau > t_new + 1e-12 * period {
-                    break;
-                }
+            for tau in rows.due(period, n_out, &mut next_out, t_new) {
                 self.explicit_row(ex, rows, ((tau - t) / h).clamp(0.0, 1.0), h, tau)?;
-                next_out += 1;
             }
             let (dp, y, z) = parts(&mut self.state);
             ex.accept(y, z, (dp.start_rate(), dp.end_rate()), h, kinds);

@@ -332,6 +332,57 @@ impl NodeRows<'_, '_> {
     }
 }
 
+/// One step of a forward pass, by position in elimination order.
+#[derive(Clone, Copy)]
+pub(super) enum Step {
+    /// Eliminate the node at this position.
+    Eliminate(usize),
+    /// The node at this position was eliminated elsewhere (a block's root, on the block's
+    /// thread) and left these terms for its parent's row.
+    Eliminated(usize, Option<ParentTerms>),
+}
+
+impl NodeRows<'_, '_> {
+    /// The forward elimination of the nodes of `steps` (in elimination order: the whole tree,
+    /// a block, or the top tree with the blocks' roots), the one loop of the serial pass and
+    /// of the partition's (`parallel`). Each node's terms go to its parent's row: in
+    /// registers when the parent is the next position (`Link::parent_is_next`), else into
+    /// the parent's accumulator; the last node's are returned instead (a block root's, for
+    /// the serial phase; None at a root of the tree).
+    #[inline(always)]
+    pub(super) fn eliminate_run<A: ForwardArrays, F: FaceFlows>(
+        &self,
+        a: &mut A,
+        flows: &mut F,
+        tree: &[Link],
+        steps: impl Iterator<Item = Step>,
+        positive: &mut bool,
+    ) -> Option<ParentTerms> {
+        let mut carry = [0.0; 3];
+        // the previous node's terms and link, handed on before the next node is eliminated
+        let mut pending: Option<(ParentTerms, &Link)> = None;
+        for step in steps {
+            if let Some((t, l)) = pending.take() {
+                if l.parent_is_next() {
+                    carry = t.terms;
+                } else {
+                    a.add_to_acc(l.parent as usize, &t);
+                }
+            }
+            let (k, terms) = match step {
+                Step::Eliminate(k) => {
+                    let carried = std::mem::take(&mut carry);
+                    let terms = self.eliminate(a, flows, (k, &tree[k]), carried, positive);
+                    (k, terms)
+                }
+                Step::Eliminated(k, terms) => (k, terms),
+            };
+            pending = terms.map(|t| (t, &tree[k]));
+        }
+        pending.map(|(t, _)| t)
+    }
+}
+
 impl Forward<'_> {
     /// The forward pass (see the module doc); with `first` the new volumes W' = W + dt·(net
     /// inflow) into `wnew` (else read from it). Returns whether every new volume is positive.
@@ -367,19 +418,10 @@ impl Forward<'_> {
         }
         let mut a = ForwardSlices { acc, beta, x, wnew };
         let mut positive = true;
-        // the terms a node leaves in the row of its parent when that parent is eliminated
-        // next (`Link::parent_is_next`): in registers, not in the parent's accumulator
-        let mut carry = [0.0; 3];
-        for (k, l) in tree.iter().enumerate() {
-            let carried = std::mem::take(&mut carry);
-            if let Some(t) = node.eliminate(&mut a, flows, (k, l), carried, &mut positive) {
-                if l.parent_is_next() {
-                    carry = t.terms;
-                } else {
-                    a.add_to_acc(l.parent as usize, &t);
-                }
-            }
-        }
+        let steps = (0..tree.len()).map(Step::Eliminate);
+        // (the last position is a root: no terms are left over)
+        let left = node.eliminate_run(&mut a, flows, tree, steps, &mut positive);
+        debug_assert!(left.is_none());
         positive
     }
 }

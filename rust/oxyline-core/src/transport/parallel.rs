@@ -15,7 +15,7 @@
 
 use super::fused::{
     BackwardArrays, Cells, Exact, FaceFlows, ForwardArrays, Inversion, NodeBack, NodeRows,
-    ParentTerms,
+    ParentTerms, Step,
 };
 use super::plan::Link;
 use crate::hemoglobin::{Binding, HillAnchor};
@@ -203,31 +203,18 @@ impl TreePartition {
         let mut positive = blocks.iter().all(|b| b.0);
         let roots: Vec<Option<ParentTerms>> = blocks.into_iter().flat_map(|b| b.1).collect();
         let (mut a, mut flows) = (shared, flows.clone());
-        let mut carry = [0.0; 3];
-        for &item in &self.serial {
-            let (k, terms) = if item & ROOT != 0 {
+        let steps = self.serial.iter().map(|&item| {
+            if item & ROOT != 0 {
                 let b = (item & !ROOT) as usize;
-                (
-                    self.block(b).last().copied().unwrap_or(0) as usize,
-                    roots[b],
-                )
+                let k = self.block(b).last().copied().unwrap_or(0) as usize;
+                Step::Eliminated(k, roots[b])
             } else {
-                let k = item as usize;
-                let carried = std::mem::take(&mut carry);
-                (
-                    k,
-                    node.eliminate(&mut a, &mut flows, (k, &tree[k]), carried, &mut positive),
-                )
-            };
-            let l = &tree[k];
-            if let Some(t) = terms {
-                if l.parent_is_next() {
-                    carry = t.terms;
-                } else {
-                    a.add_to_acc(l.parent as usize, &t);
-                }
+                Step::Eliminate(item as usize)
             }
-        }
+        });
+        // (the last item is a root of the tree: no terms are left over)
+        let left = node.eliminate_run(&mut a, &mut flows, tree, steps, &mut positive);
+        debug_assert!(left.is_none());
         positive
     }
 
@@ -241,24 +228,8 @@ impl TreePartition {
         flows: &mut F,
         positive: &mut bool,
     ) -> Option<ParentTerms> {
-        let ps = self.block(b);
-        let mut carry = [0.0; 3];
-        for (j, &k) in ps.iter().enumerate() {
-            let (k, l) = (k as usize, &tree[k as usize]);
-            let carried = std::mem::take(&mut carry);
-            if let Some(t) = node.eliminate(a, flows, (k, l), carried, positive) {
-                if j + 1 == ps.len() {
-                    return Some(t);
-                }
-                // (a parent in the block; the next position is the parent's if it is next)
-                if l.parent_is_next() {
-                    carry = t.terms;
-                } else {
-                    a.add_to_acc(l.parent as usize, &t);
-                }
-            }
-        }
-        None
+        let steps = self.block(b).iter().map(|&k| Step::Eliminate(k as usize));
+        node.eliminate_run(a, flows, tree, steps, positive)
     }
 
     /// The backward pass: the top tree parents first, then the blocks in parallel; the wall
@@ -529,60 +500,8 @@ impl BackwardArrays for SharedBackward<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_common::{Built, build, lcg, random_tree};
     use crate::transport::Transport;
-
-    /// A random tree of `vessels` vessels (1–4 segments each, up to three children per
-    /// junction: mixing points), a pulsatile-free flow inlet and a resistance per leaf, with
-    /// oxygen bound to haemoglobin (Hill) and a constant-k wall.
-    fn random_tree(vessels: usize, seed: &mut u64) -> String {
-        let mut rnd = || {
-            *seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((*seed >> 33) as f64) / (1u64 << 31) as f64
-        };
-        let mut children = vec![0usize; vessels];
-        let mut list = Vec::new();
-        for i in 0..vessels {
-            let from = if i == 0 {
-                "in".to_owned()
-            } else {
-                // a parent with fewer than three children
-                let mut p = (rnd() * i as f64) as usize;
-                while children[p] >= 3 {
-                    p = (p + 1) % i;
-                }
-                children[p] += 1;
-                format!("n{p}")
-            };
-            let r = 2e-3 * (0.5 + rnd());
-            list.push(format!(
-                r#"{{"name": "v{i}", "from": "{from}", "to": "n{i}", "segments": {},
-                    "geometry": {{"length": 0.02, "radius_in": {r}, "radius_out": {r},
-                    "wall_thickness": 3e-4, "youngs_modulus": 4e5}}}}"#,
-                1 + (rnd() * 4.0) as usize
-            ));
-        }
-        let mut bcs = vec![
-            r#""in": {"type": "flow", "flow": {"kind": "constant", "value": 2e-6}}"#.to_owned(),
-        ];
-        for (i, _) in children.iter().enumerate().filter(|(_, c)| **c == 0) {
-            bcs.push(format!(
-                r#""n{i}": {{"type": "resistance", "resistance": 1e9}}"#
-            ));
-        }
-        format!(
-            r#"{{"vessels": [{}], "boundary_conditions": {{{}}},
-                "transport": {{"species": [{{"name": "o2",
-                    "inlet": {{"kind": "constant", "value": 0.127}}, "initial": 0.1,
-                    "binding": {{"kind": "hill", "solubility": 1e-5, "p50": 3573.0, "n": 2.7,
-                                 "capacity": 8.9}},
-                    "wall": {{"model": "mass-transfer", "k": 1e-5,
-                              "wall_concentration": 0.04}}}}]}}}}"#,
-            list.join(","),
-            bcs.join(",")
-        )
-    }
 
     struct Case {
         transport: Transport,
@@ -591,30 +510,11 @@ mod tests {
     }
 
     fn case(json: &str, seed: &mut u64) -> Case {
-        let spec = crate::model::parse(json).unwrap();
-        let assembled = spec.assemble().unwrap();
-        let dae = assembled.circuit.assemble().unwrap();
-        let transport = Transport::build(
-            spec.transport.as_ref().unwrap(),
-            &assembled.circuit,
-            &dae,
-            &assembled.probes,
-        )
-        .unwrap();
+        let Built { dae, transport, .. } = build(json);
         // flows of either sign (reversals at junctions), pressures irrelevant
-        let mut states = Vec::new();
-        for _ in 0..12 {
-            let y: Vec<f64> = (0..dae.n)
-                .map(|_| {
-                    *seed = seed
-                        .wrapping_mul(6364136223846793005)
-                        .wrapping_add(1442695040888963407);
-                    let u = ((*seed >> 33) as f64) / (1u64 << 31) as f64;
-                    2e-6 * (u - 0.3)
-                })
-                .collect();
-            states.push(y);
-        }
+        let states = (0..12)
+            .map(|_| (0..dae.n).map(|_| 2e-6 * (lcg(seed) - 0.3)).collect())
+            .collect();
         Case { transport, states }
     }
 

@@ -1,6 +1,7 @@
-//! The tube fixture shared by the transport and tissue integration tests: one straight vessel
-//! from `in` (a flow inlet) to `out` (a resistance outlet) with a transport section, built
-//! through the same parse → assemble → `Transport::build` path as a run.
+//! The fixtures shared by the transport and tissue integration tests and the core's own unit
+//! tests (the crate includes this file as `test_common`): a tube, one straight vessel from
+//! `in` (a flow inlet) to `out` (a resistance outlet) with a transport section, and a random
+//! tree, built through the same parse → assemble → `Transport::build` path as a run.
 
 // each test crate uses its own part of the fixture
 #![allow(dead_code)]
@@ -63,4 +64,60 @@ pub fn build_error(json: &str) -> String {
         Ok(_) => panic!("the model was accepted"),
         Err(e) => e.to_string(),
     }
+}
+
+/// The next number in [0, 1) of a linear congruential sequence (Knuth's MMIX constants):
+/// reproducible models and states without a random-number crate.
+pub fn lcg(seed: &mut u64) -> f64 {
+    *seed = seed
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
+    ((*seed >> 33) as f64) / (1u64 << 31) as f64
+}
+
+/// A random tree of `vessels` vessels (1–4 segments each, up to three children per
+/// junction: mixing points), a pulsatile-free flow inlet and a resistance per leaf, with
+/// oxygen bound to haemoglobin (Hill) and a constant-k wall.
+pub fn random_tree(vessels: usize, seed: &mut u64) -> String {
+    let mut rnd = || lcg(seed);
+    let mut children = vec![0usize; vessels];
+    let mut list = Vec::new();
+    for i in 0..vessels {
+        let from = if i == 0 {
+            "in".to_owned()
+        } else {
+            // a parent with fewer than three children
+            let mut p = (rnd() * i as f64) as usize;
+            while children[p] >= 3 {
+                p = (p + 1) % i;
+            }
+            children[p] += 1;
+            format!("n{p}")
+        };
+        let r = 2e-3 * (0.5 + rnd());
+        list.push(format!(
+            r#"{{"name": "v{i}", "from": "{from}", "to": "n{i}", "segments": {},
+                "geometry": {{"length": 0.02, "radius_in": {r}, "radius_out": {r},
+                "wall_thickness": 3e-4, "youngs_modulus": 4e5}}}}"#,
+            1 + (rnd() * 4.0) as usize
+        ));
+    }
+    let mut bcs =
+        vec![r#""in": {"type": "flow", "flow": {"kind": "constant", "value": 2e-6}}"#.to_owned()];
+    for (i, _) in children.iter().enumerate().filter(|(_, c)| **c == 0) {
+        bcs.push(format!(
+            r#""n{i}": {{"type": "resistance", "resistance": 1e9}}"#
+        ));
+    }
+    format!(
+        r#"{{"vessels": [{}], "boundary_conditions": {{{}}},
+            "transport": {{"species": [{{"name": "o2",
+                "inlet": {{"kind": "constant", "value": 0.127}}, "initial": 0.1,
+                "binding": {{"kind": "hill", "solubility": 1e-5, "p50": 3573.0, "n": 2.7,
+                             "capacity": 8.9}},
+                "wall": {{"model": "mass-transfer", "k": 1e-5,
+                          "wall_concentration": 0.04}}}}]}}}}"#,
+        list.join(","),
+        bcs.join(",")
+    )
 }

@@ -7,6 +7,21 @@ use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyMapping, PyString, PyTuple};
 use serde_json::Value;
 
+/// `v` as a number, when its kind (the node's) is one.
+fn number(v: &Bound<'_, PyAny>, kind: Kind) -> Option<f64> {
+    match kind {
+        Kind::Int | Kind::Float => v.extract::<f64>().ok(),
+        _ => None,
+    }
+}
+
+/// `v` as an integer, when its kind (the node's) is one.
+fn integer(v: &Bound<'_, PyAny>, kind: Kind) -> Option<i64> {
+    (kind == Kind::Int)
+        .then(|| v.extract::<i64>().ok())
+        .flatten()
+}
+
 /// A Python value of a model description.
 #[derive(Clone)]
 pub(crate) struct PyNode<'py>(pub Bound<'py, PyAny>);
@@ -33,15 +48,10 @@ impl Node for PyNode<'_> {
         }
     }
     fn number(&self) -> Option<f64> {
-        match self.kind() {
-            Kind::Int | Kind::Float => self.0.extract::<f64>().ok(),
-            _ => None,
-        }
+        number(&self.0, self.kind())
     }
     fn integer(&self) -> Option<i64> {
-        (self.kind() == Kind::Int)
-            .then(|| self.0.extract::<i64>().ok())
-            .flatten()
+        integer(&self.0, self.kind())
     }
     fn text(&self) -> Option<String> {
         (self.kind() == Kind::Str)
@@ -177,15 +187,10 @@ impl<'py> Node for PySetting<'py> {
         }
     }
     fn number(&self) -> Option<f64> {
-        match self.kind() {
-            Kind::Int | Kind::Float => self.0.extract::<f64>().ok(),
-            _ => None,
-        }
+        number(&self.0, self.kind())
     }
     fn integer(&self) -> Option<i64> {
-        (self.kind() == Kind::Int)
-            .then(|| self.0.extract::<i64>().ok())
-            .flatten()
+        integer(&self.0, self.kind())
     }
     fn text(&self) -> Option<String> {
         self.node().text()
