@@ -43,9 +43,6 @@ fn assemble(
     }
     let m = oxyline_core::ensemble::Member::build(&spec)?;
     let warnings = plausibility::check(&spec);
-    // the model crossed once: its parsed tables and the build's scratch are garbage now
-    drop(spec);
-    oxyline_core::run::memory::release_after_build(m.dae.n);
     Ok(((m.assembled, m.dae), m.transport, warnings))
 }
 

@@ -68,15 +68,6 @@ pub fn controlled_bytes(unknowns: usize, species_cells: f64, integrator: Control
     unknowns as f64 * CONTROLLED_BYTES_PER_UNKNOWN[k] + species_cells * CONTROLLED_BYTES_PER_CELL[k]
 }
 
-/// After a large network is built: the freed pages of its build (the parsed model, the
-/// assembly's per-vessel rows and the plans' scratch, ~200 B per segment in pieces the
-/// allocator keeps resident) back to the operating system, so that the run's own vectors,
-/// allocated fresh, do not stack on top of them at the peak. Only for circuits of at least
-/// `run::heap::RELEASE_MIN_UNKNOWNS` unknowns (see `run::heap`); values are untouched.
-pub fn release_after_build(unknowns: usize) {
-    super::heap::release_free_pages(unknowns);
-}
-
 /// What the user can change when a model is too large.
 pub const MODEL_ADVICE: &str = "use fewer segments (segmentation max_length, a vessel's \
 segments) or raise the limit (simulation: max_memory in the model, the environment variable \
