@@ -505,6 +505,38 @@ mod tests {
         );
     }
 
+    /// The rows written from the table's recipes tile each vessel: a geometric vessel's
+    /// segments start where the one before ends and end at its length, their end radii follow
+    /// the linear taper, and their volumes add up to the frustum's π L (r₀² + r₀r₁ + r₁²)/3;
+    /// a lumped vessel's values are split evenly (3e8 Pa·s/m³ over 3 segments).
+    #[test]
+    fn rows_written_from_the_recipes_tile_the_vessels() {
+        let a = parse(MODEL).unwrap().assemble().unwrap();
+        assert_eq!(a.segments.len(), 8);
+        let rows: Vec<_> = a.segments.rows().collect();
+        let g: Vec<_> = rows.iter().filter(|s| s.vessel == 0).collect();
+        let (l, r0, r1) = (0.1, 0.003, 0.002);
+        for (k, s) in g.iter().enumerate() {
+            assert_eq!(s.index as usize, k);
+            let x = |k: usize| k as f64 * l / 4.0;
+            assert!((s.x0 - x(k)).abs() <= 1e-15 && (s.x1 - x(k + 1)).abs() <= 1e-15);
+            let taper = |x: f64| r0 + (r1 - r0) * x / l;
+            assert!((s.radius_in - taper(s.x0)).abs() <= 1e-15);
+            assert!((s.radius_out - taper(s.x1)).abs() <= 1e-15);
+        }
+        let volume: f64 = g.iter().map(|s| s.volume).sum();
+        let frustum = std::f64::consts::PI * l * (r0 * r0 + r0 * r1 + r1 * r1) / 3.0;
+        assert!(
+            (volume - frustum).abs() <= 1e-12 * frustum,
+            "{volume} {frustum}"
+        );
+        let lumped: Vec<_> = rows.iter().filter(|s| s.vessel == 1).collect();
+        assert_eq!(lumped.len(), 3);
+        for s in lumped {
+            assert!((s.resistance - 1e8).abs() <= 1e-6 && s.radius_in.is_nan());
+        }
+    }
+
     /// The default segmentation: a compliant geometric vessel that states no `segments` is cut
     /// by the `auto` rule (more than one segment: a 0.3 m artery at the 10 Hz of a model forced
     /// by a constant), a lumped one stays one segment, and a model-wide `max_length` (or the
