@@ -86,7 +86,7 @@ fn report(a: &oxyline_core::assemble::Assembled, dae: &oxyline_core::circuit::Da
         ("circuit.branches", cap(&c.branches, c.branches.capacity())),
         ("circuit.segments", cap(&c.segments, c.segments.capacity())),
         ("circuit.names", c.names.heap_bytes()),
-        ("segment table", cap(&a.segments, a.segments.capacity())),
+        ("segment table", a.segments.heap_bytes()),
         (
             "probes",
             cap(&p.vessel_unknowns, p.vessel_unknowns.capacity())

@@ -243,8 +243,9 @@ pub struct Node {
     /// Lumen (wall) area lumped into this node (m²), with the same shares as `volume`.
     pub wall_area: f64,
     /// Set for nodes that belong to a boundary condition (index into `Circuit::boundaries`):
-    /// they are outside the transport domain.
-    pub boundary: Option<usize>,
+    /// they are outside the transport domain. (u32, as the names' indices: 40 bytes a node,
+    /// not 48.)
+    pub boundary: Option<u32>,
 }
 
 /// The capacitor of an svZeroDSolver-form RCL vessel with a stenosis
@@ -885,6 +886,10 @@ impl Circuit {
             }
             f.ptr.push(f.col.len());
         }
+        // give back the upper bound's unused tail (~90 B per segment of heap the estimate
+        // would otherwise count; a large block shrinks in place, nothing is copied)
+        f.col.shrink_to_fit();
+        f.val.shrink_to_fit();
         f
     }
 

@@ -268,7 +268,8 @@ impl Network {
     /// the R, L, C, stenosis coefficient and volume the core assembled (SI; docs/physics.md §1.1).
     fn segment_table<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let a = &self.inner.0;
-        let t = &a.segments;
+        // the table keeps each vessel's recipe: its rows are written here, once per call
+        let t: Vec<oxyline_core::SegmentRow> = a.segments.rows().collect();
         let col = |f: fn(&oxyline_core::SegmentRow) -> f64| {
             t.iter().map(f).collect::<Vec<_>>().into_pyarray(py)
         };

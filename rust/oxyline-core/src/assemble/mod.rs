@@ -29,7 +29,7 @@ const HEART_CHAMBERS: [&str; 4] = [
     "left_ventricle",
 ];
 pub use chamber::chamber_elastance;
-pub use segments::{SegmentRow, arrangement};
+pub use segments::{SegmentRow, SegmentTable, arrangement};
 
 /// Summary figures for `oxyline validate`.
 #[derive(Debug, Clone, Default)]
@@ -57,8 +57,9 @@ pub struct Assembled {
     pub circuit: Circuit,
     pub probes: Probes,
     pub summary: Summary,
-    /// Every flow segment of every vessel, in model order (the segment table).
-    pub segments: Vec<SegmentRow>,
+    /// Every flow segment of every vessel, in model order (the segment table, its rows
+    /// written on demand).
+    pub segments: SegmentTable,
     /// Each vessel's arrangement as assembled (stated, or resolved by
     /// [`segments::arrangement`]), in `circuit.vessel_names` order (a heart element's names
     /// take its entry's): what a writer of the circuit reads.
@@ -151,7 +152,7 @@ struct Stamping<'a> {
     circuit: Circuit,
     probes: Probes,
     summary: Summary,
-    table: Vec<segments::SegmentRow>,
+    table: SegmentTable,
     links: HeartLinks,
     hearts: Vec<(String, usize)>,
     /// The `segments: auto` rule (None: no vessel asks for it).
@@ -220,7 +221,7 @@ impl<'a> Stamping<'a> {
             circuit,
             probes,
             summary,
-            table: Vec::with_capacity(segments),
+            table: SegmentTable::with_capacity(spec.vessels.len()),
             links: HeartLinks::default(),
             hearts: Vec::new(),
             auto,
@@ -292,7 +293,7 @@ impl<'a> Stamping<'a> {
     fn segmented_vessel(&mut self, vi: usize, blood: Blood) -> Result<()> {
         let (spec, v) = (self.spec, &self.spec.vessels[vi]);
         let arrangement = segments::arrangement(spec, v);
-        let segs = segments::discretise(spec, vi, blood, arrangement, self.auto.as_ref())?;
+        let (made, segs) = segments::discretise(spec, vi, blood, arrangement, self.auto.as_ref())?;
         let ends = self.graph.vessel_ends[vi];
         let form = v
             .lumped
@@ -337,7 +338,7 @@ impl<'a> Stamping<'a> {
             self.summary.total_compliance += s.compliance;
             self.summary.total_volume += s.volume;
         }
-        self.table.extend(segs);
+        self.table.push(made);
         Ok(())
     }
 
@@ -361,7 +362,7 @@ impl<'a> Stamping<'a> {
             mut circuit,
             mut probes,
             mut summary,
-            table,
+            mut table,
             hearts,
             ..
         } = self;
@@ -372,6 +373,7 @@ impl<'a> Stamping<'a> {
         // the capacities above are upper bounds (a vessel's last segment adds no node)
         circuit.shrink_to_fit();
         probes.shrink_to_fit();
+        table.shrink_to_fit();
         summary.period = circuit
             .sources
             .iter()
@@ -482,25 +484,57 @@ mod tests {
     fn the_segment_table_is_the_circuit() {
         let a = parse(MODEL).unwrap().assemble().unwrap();
         let counts: Vec<usize> = (0..3)
-            .map(|v| a.segments.iter().filter(|s| s.vessel as usize == v).count())
+            .map(|v| a.segments.rows().filter(|s| s.vessel as usize == v).count())
             .collect();
         // RCL is svZeroDSolver's one BloodVessel whatever `segments` says
         assert_eq!(counts, vec![4, 3, 1]);
         assert_eq!(a.summary.segments, 8);
         // every segment's R and S is on a circuit branch, its C on a node
         let branch_r: f64 = a.circuit.branches.iter().map(|b| b.resistance).sum();
-        let table_r: f64 = a.segments.iter().map(|s| s.resistance).sum();
+        let table_r: f64 = a.segments.rows().map(|s| s.resistance).sum();
         assert!((branch_r - (table_r + 1e9 + 1e8 + 1e9)).abs() <= 1e-12 * branch_r);
         let s: f64 = a.circuit.branches.iter().map(|b| b.stenosis).sum();
         assert!((s - -3e11).abs() <= 1e-12 * 3e11);
         let node_c: f64 = a.circuit.nodes.iter().map(|n| n.capacitance).sum();
-        let table_c: f64 = a.segments.iter().map(|s| s.compliance).sum();
+        let table_c: f64 = a.segments.rows().map(|s| s.compliance).sum();
         assert!((node_c - table_c - 1e-9).abs() <= 1e-12 * node_c);
         assert!((a.summary.total_compliance - node_c).abs() <= 1e-12 * node_c);
         assert_eq!(
             (a.summary.inlets, a.summary.outlets, a.summary.junctions),
             (1, 2, 1)
         );
+    }
+
+    /// The rows written from the table's recipes tile each vessel: a geometric vessel's
+    /// segments start where the one before ends and end at its length, their end radii follow
+    /// the linear taper, and their volumes add up to the frustum's π L (r₀² + r₀r₁ + r₁²)/3;
+    /// a lumped vessel's values are split evenly (3e8 Pa·s/m³ over 3 segments).
+    #[test]
+    fn rows_written_from_the_recipes_tile_the_vessels() {
+        let a = parse(MODEL).unwrap().assemble().unwrap();
+        assert_eq!(a.segments.len(), 8);
+        let rows: Vec<_> = a.segments.rows().collect();
+        let g: Vec<_> = rows.iter().filter(|s| s.vessel == 0).collect();
+        let (l, r0, r1) = (0.1, 0.003, 0.002);
+        for (k, s) in g.iter().enumerate() {
+            assert_eq!(s.index as usize, k);
+            let x = |k: usize| k as f64 * l / 4.0;
+            assert!((s.x0 - x(k)).abs() <= 1e-15 && (s.x1 - x(k + 1)).abs() <= 1e-15);
+            let taper = |x: f64| r0 + (r1 - r0) * x / l;
+            assert!((s.radius_in - taper(s.x0)).abs() <= 1e-15);
+            assert!((s.radius_out - taper(s.x1)).abs() <= 1e-15);
+        }
+        let volume: f64 = g.iter().map(|s| s.volume).sum();
+        let frustum = std::f64::consts::PI * l * (r0 * r0 + r0 * r1 + r1 * r1) / 3.0;
+        assert!(
+            (volume - frustum).abs() <= 1e-12 * frustum,
+            "{volume} {frustum}"
+        );
+        let lumped: Vec<_> = rows.iter().filter(|s| s.vessel == 1).collect();
+        assert_eq!(lumped.len(), 3);
+        for s in lumped {
+            assert!((s.resistance - 1e8).abs() <= 1e-6 && s.radius_in.is_nan());
+        }
     }
 
     /// The default segmentation: a compliant geometric vessel that states no `segments` is cut
@@ -524,7 +558,7 @@ mod tests {
         };
         let counts = |text: String| {
             let a = parse(&text).unwrap().assemble().unwrap();
-            let per = |v: u32| a.segments.iter().filter(|s| s.vessel == v).count();
+            let per = |v: u32| a.segments.rows().filter(|s| s.vessel == v).count();
             (per(0), per(1), a.summary.auto_segments, a.summary.auto_rtol)
         };
         let (g, l, auto, rtol) = counts(model("", ""));

@@ -45,6 +45,148 @@ impl SegmentRow {
     }
 }
 
+/// How a vessel's segments are made: what the segment table keeps of each vessel.
+#[derive(Debug, Clone, Copy)]
+enum Recipe {
+    /// A linear taper cut into equal lengths (docs/physics.md §1.1).
+    Geometric {
+        length: f64,
+        radius_in: f64,
+        radius_out: f64,
+        blood: Blood,
+        wall: Option<Wall>,
+        profile: InertanceProfile,
+    },
+    /// Lumped values split evenly over the segments.
+    Lumped {
+        resistance: f64,
+        inductance: f64,
+        capacitance: f64,
+        stenosis: f64,
+    },
+}
+
+/// One vessel's segments: `count` rows of `recipe`, written when asked for.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct VesselRows {
+    vessel: u32,
+    count: u32,
+    recipe: Recipe,
+}
+
+impl VesselRows {
+    /// Row `k` (0-based from the inlet): the assembly stamps these very numbers.
+    fn row(&self, k: usize) -> SegmentRow {
+        let n = self.count as usize;
+        let (vessel, index) = (self.vessel, k as u32);
+        match self.recipe {
+            Recipe::Geometric {
+                length,
+                radius_in,
+                radius_out,
+                blood,
+                wall,
+                profile,
+            } => {
+                let dx = length / n as f64;
+                let r0 = radius_in + (radius_out - radius_in) * k as f64 / n as f64;
+                let r1 = radius_in + (radius_out - radius_in) * (k + 1) as f64 / n as f64;
+                let s = segment_rlc(dx, r0, r1, blood, wall, profile);
+                SegmentRow {
+                    vessel,
+                    index,
+                    resistance: s.resistance,
+                    inductance: s.inductance,
+                    compliance: s.compliance,
+                    stenosis: 0.0,
+                    volume: s.volume,
+                    length: dx,
+                    radius_in: r0,
+                    radius_out: r1,
+                    x0: k as f64 * dx,
+                    x1: (k + 1) as f64 * dx,
+                    position: (k as f64 + 0.5) * dx,
+                }
+            }
+            Recipe::Lumped {
+                resistance,
+                inductance,
+                capacitance,
+                stenosis,
+            } => {
+                let nf = n as f64;
+                SegmentRow {
+                    vessel,
+                    index,
+                    resistance: resistance / nf,
+                    inductance: inductance / nf,
+                    compliance: capacitance / nf,
+                    stenosis: stenosis / nf,
+                    volume: 0.0,
+                    length: 0.0,
+                    radius_in: f64::NAN,
+                    radius_out: f64::NAN,
+                    x0: 0.0,
+                    x1: 0.0,
+                    position: f64::NAN,
+                }
+            }
+        }
+    }
+
+    /// The vessel's rows, inlet first.
+    pub(crate) fn rows(&self) -> impl Iterator<Item = SegmentRow> + '_ {
+        (0..self.count as usize).map(|k| self.row(k))
+    }
+}
+
+/// The segment table: every flow segment of every vessel in model order. Kept as each
+/// vessel's recipe (its geometry or lumped values and its count, ~100 bytes a vessel) and
+/// written row by row when asked for, by the formulas the assembly stamped: the same numbers
+/// without 96 bytes a segment held for the whole life of the network.
+#[derive(Debug, Clone, Default)]
+pub struct SegmentTable {
+    vessels: Vec<VesselRows>,
+    len: usize,
+}
+
+impl SegmentTable {
+    pub(crate) fn with_capacity(vessels: usize) -> Self {
+        SegmentTable {
+            vessels: Vec::with_capacity(vessels),
+            len: 0,
+        }
+    }
+
+    pub(crate) fn push(&mut self, v: VesselRows) {
+        self.len += v.count as usize;
+        self.vessels.push(v);
+    }
+
+    pub(crate) fn shrink_to_fit(&mut self) {
+        self.vessels.shrink_to_fit();
+    }
+
+    /// Number of segments.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Every row, in model order.
+    pub fn rows(&self) -> impl Iterator<Item = SegmentRow> + '_ {
+        self.vessels.iter().flat_map(VesselRows::rows)
+    }
+
+    /// Heap bytes held (profiling, `examples/mem_stages`).
+    pub fn heap_bytes(&self) -> usize {
+        self.vessels.capacity() * std::mem::size_of::<VesselRows>()
+    }
+}
+
 /// How many segments vessel `v` gets (as [`discretise`] decides, for a valid vessel): used to
 /// size the circuit's tables before stamping, so that they are allocated once.
 pub(crate) fn count(spec: &NetworkSpec, v: &VesselSpec, auto: Option<&AutoRule>) -> usize {
@@ -126,14 +268,14 @@ pub(crate) fn friction(spec: &NetworkSpec, v: &VesselSpec) -> WallFriction {
     v.wall_friction.unwrap_or(spec.wall_friction)
 }
 
-/// The segments of vessel `vi` of `spec`.
+/// The segments of vessel `vi` of `spec`: the segment table's entry and its rows.
 pub(crate) fn discretise(
     spec: &NetworkSpec,
     vi: usize,
     blood: Blood,
     arrangement: Arrangement,
     auto: Option<&AutoRule>,
-) -> Result<Vec<SegmentRow>> {
+) -> Result<(VesselRows, Vec<SegmentRow>)> {
     // the element's name is written only when a check fails (a structured tree has up to
     // millions of vessels): the checks are run again with it
     discretise_as(spec, vi, blood, arrangement, auto, "").or_else(|_| {
@@ -150,7 +292,7 @@ fn discretise_as(
     arrangement: Arrangement,
     auto: Option<&AutoRule>,
     el: &str,
-) -> Result<Vec<SegmentRow>> {
+) -> Result<(VesselRows, Vec<SegmentRow>)> {
     let v = &spec.vessels[vi];
     match (&v.geometry, &v.lumped) {
         (Some(_), Some(_)) => Err(Error::model(
@@ -162,7 +304,8 @@ fn discretise_as(
             let n = auto
                 .filter(|_| is_auto(spec, v))
                 .map(|_| count(spec, v, auto));
-            lumped(v, vi, l, arrangement, el, n)
+            let made = lumped(v, vi, l, arrangement, el, n)?;
+            Ok((made, made.rows().collect()))
         }
         (Some(g), None) => {
             let n = auto
@@ -181,7 +324,7 @@ fn lumped(
     arrangement: Arrangement,
     el: &str,
     auto: Option<usize>,
-) -> Result<Vec<SegmentRow>> {
+) -> Result<VesselRows> {
     check_nonnegative(el, "resistance", l.resistance)?;
     check_nonnegative(el, "inductance", l.inductance)?;
     check_nonnegative(el, "capacitance", l.capacitance)?;
@@ -203,24 +346,16 @@ fn lumped(
     if n == 0 {
         return Err(Error::model(el, "segments must be >= 1, got 0"));
     }
-    let nf = n as f64;
-    Ok((0..n)
-        .map(|k| SegmentRow {
-            vessel: index32(vi),
-            index: index32(k),
-            resistance: l.resistance / nf,
-            inductance: l.inductance / nf,
-            compliance: l.capacitance / nf,
-            stenosis: l.stenosis_coefficient / nf,
-            volume: 0.0,
-            length: 0.0,
-            radius_in: f64::NAN,
-            radius_out: f64::NAN,
-            x0: 0.0,
-            x1: 0.0,
-            position: f64::NAN,
-        })
-        .collect())
+    Ok(VesselRows {
+        vessel: index32(vi)?,
+        count: index32(n)?,
+        recipe: Recipe::Lumped {
+            resistance: l.resistance,
+            inductance: l.inductance,
+            capacitance: l.capacitance,
+            stenosis: l.stenosis_coefficient,
+        },
+    })
 }
 
 fn wall(spec: &NetworkSpec, g: &GeometrySpec, el: &str) -> Result<Option<Wall>> {
@@ -261,7 +396,7 @@ fn geometric(
     arrangement: Arrangement,
     el: &str,
     auto: Option<usize>,
-) -> Result<Vec<SegmentRow>> {
+) -> Result<(VesselRows, Vec<SegmentRow>)> {
     if arrangement == Arrangement::Rcl {
         return Err(Error::model(el, "the RCL arrangement needs lumped values"));
     }
@@ -275,36 +410,26 @@ fn geometric(
         (None, Some(m)) => ((g.length / m) * (1.0 - 1e-12)).ceil().max(1.0) as usize,
         (None, None) => 1,
     };
-    let dx = g.length / n as f64;
     // a Womersley segment's series inertance is the flat profile's: its cells add the rest
     let profile = match friction(spec, v) {
         WallFriction::Womersley => InertanceProfile::Flat,
         WallFriction::Poiseuille => spec.inertance_profile,
     };
-    let rows: Vec<SegmentRow> = (0..n)
-        .map(|k| {
-            let r0 = g.radius_in + (g.radius_out - g.radius_in) * k as f64 / n as f64;
-            let r1 = g.radius_in + (g.radius_out - g.radius_in) * (k + 1) as f64 / n as f64;
-            let s = segment_rlc(dx, r0, r1, blood, wall, profile);
-            SegmentRow {
-                vessel: index32(vi),
-                index: index32(k),
-                resistance: s.resistance,
-                inductance: s.inductance,
-                compliance: s.compliance,
-                stenosis: 0.0,
-                volume: s.volume,
-                length: dx,
-                radius_in: r0,
-                radius_out: r1,
-                x0: k as f64 * dx,
-                x1: (k + 1) as f64 * dx,
-                position: (k as f64 + 0.5) * dx,
-            }
-        })
-        .collect();
+    let made = VesselRows {
+        vessel: index32(vi)?,
+        count: index32(n)?,
+        recipe: Recipe::Geometric {
+            length: g.length,
+            radius_in: g.radius_in,
+            radius_out: g.radius_out,
+            blood,
+            wall,
+            profile,
+        },
+    };
+    let rows: Vec<SegmentRow> = made.rows().collect();
     check_coefficients(el, g, &rows)?;
-    Ok(rows)
+    Ok((made, rows))
 }
 
 /// Radii or lengths at the ends of the double range (1e-300 m, 1e300 m) give segments whose
@@ -333,6 +458,14 @@ fn check_coefficients(el: &str, g: &GeometrySpec, rows: &[SegmentRow]) -> Result
     }
 }
 
-fn index32(i: usize) -> u32 {
-    u32::try_from(i).expect("more than 2^32 vessels or segments")
+/// A vessel or segment index as u32, the segment table's index type: a model beyond it is
+/// refused with a typed error before anything of its size is allocated.
+fn index32(i: usize) -> Result<u32> {
+    u32::try_from(i).map_err(|_| Error::Resource {
+        what: format!("{i} vessels or segments"),
+        bytes: 0,
+        message: "more than 2^32 vessels, or segments in one vessel, than a network can \
+                  index; use fewer segments (segmentation max_length, a vessel's segments)"
+            .into(),
+    })
 }

@@ -189,7 +189,7 @@ impl Transport {
         end_cells(&mut out_vessels, &out_segments, &segments, &kind);
         drop(face_of_unknown);
         let nn = kind.len();
-        let (node_ptr, node_faces, source_ptr, source_list) = incidence(nn, &faces, &sources);
+        let (node_ptr, node_faces, source_ptr, source_list) = incidence(nn, &faces, &sources)?;
         // the identity without refinement: left empty (see `Plan::last_sub`)
         let last_sub = if refined.chains.is_empty() {
             Vec::new()
@@ -346,7 +346,7 @@ fn flow_faces(
     let nn = circuit.nodes.len();
     let end = |n: usize| -> End {
         match circuit.nodes[n].boundary {
-            Some(b) if kind[n] == Kind::Exterior => End::Boundary(b),
+            Some(b) if kind[n] == Kind::Exterior => End::Boundary(b as usize),
             _ => End::Node(n),
         }
     };
@@ -770,14 +770,24 @@ fn check_settings(spec: &TransportSpec, circuit: &Circuit) -> Result<()> {
     Ok(())
 }
 
-/// CSR node → incident faces, and CSR node → flow sources. Linear time.
+/// CSR node → incident faces, and CSR node → flow sources, with u32 indices (a plan of more
+/// than 2^32 face ends is refused with a typed error). Linear time.
 #[allow(clippy::type_complexity)]
 fn incidence(
     nn: usize,
     faces: &[Face],
     sources: &[(usize, Waveform, usize)],
-) -> (Vec<usize>, Vec<usize>, Vec<u32>, Vec<u32>) {
-    let mut node_ptr = vec![0usize; nn + 1];
+) -> Result<(Vec<u32>, Vec<u32>, Vec<u32>, Vec<u32>)> {
+    if 2 * faces.len() > u32::MAX as usize {
+        return Err(Error::Resource {
+            what: format!("transport plan ({} faces)", faces.len()),
+            bytes: 0,
+            message: "more faces than the plan's 32-bit indices hold; use fewer segments \
+                      (segmentation max_length, a vessel's segments)"
+                .into(),
+        });
+    }
+    let mut node_ptr = vec![0u32; nn + 1];
     for f in faces {
         for e in [f.from, f.to] {
             if let End::Node(n) = e {
@@ -788,12 +798,12 @@ fn incidence(
     for i in 0..nn {
         node_ptr[i + 1] += node_ptr[i];
     }
-    let mut node_faces = vec![0usize; node_ptr[nn]];
+    let mut node_faces = vec![0u32; node_ptr[nn] as usize];
     let mut fill = node_ptr.clone();
     for (fi, f) in faces.iter().enumerate() {
         for e in [f.from, f.to] {
             if let End::Node(n) = e {
-                node_faces[fill[n]] = fi;
+                node_faces[fill[n] as usize] = fi as u32;
                 fill[n] += 1;
             }
         }
@@ -811,7 +821,7 @@ fn incidence(
         source_list[fill[*n] as usize] = k as u32;
         fill[*n] += 1;
     }
-    (node_ptr, node_faces, source_ptr, source_list)
+    Ok((node_ptr, node_faces, source_ptr, source_list))
 }
 
 impl Plan {
@@ -874,13 +884,13 @@ impl Plan {
             }
         }
         for &m in &self.mixing {
-            let faces = &self.node_faces[self.node_ptr[m]..self.node_ptr[m + 1]];
-            let neighbours_known = faces.iter().all(|&fi| {
+            let two = self.faces_at(m).len() == 2;
+            let neighbours_known = self.faces_at(m).all(|fi| {
                 let f = &self.faces[fi];
                 let other = if f.from == End::Node(m) { f.to } else { f.from };
                 !matches!(other, End::Node(o) if self.kind[o] == Kind::Mixing)
             });
-            if faces.len() == 2 && self.node_sources(m).is_empty() && neighbours_known {
+            if two && self.node_sources(m).is_empty() && neighbours_known {
                 self.simple_mixing.push(m);
             } else {
                 self.general_mixing.push(m);

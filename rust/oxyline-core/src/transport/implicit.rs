@@ -631,7 +631,7 @@ impl Transport {
         }
         let plan = &*self.plan;
         for &n in unknowns {
-            for &fi in &plan.node_faces[plan.node_ptr[n]..plan.node_ptr[n + 1]] {
+            for fi in plan.faces_at(n) {
                 let (q, up, down) = oriented(&plan.faces, &self.qf, fi);
                 let aq = q.abs();
                 if up == End::Node(n) {
@@ -675,7 +675,7 @@ impl Transport {
             } else {
                 sw.lag[n]
             };
-            for &fi in &plan.node_faces[plan.node_ptr[n]..plan.node_ptr[n + 1]] {
+            for fi in plan.faces_at(n) {
                 let (q, up, down) = oriented(&plan.faces, &self.qf, fi);
                 if up != End::Node(n) || q == 0.0 {
                     continue;
@@ -709,7 +709,7 @@ impl Transport {
             let mut scale = 0.0f64;
             for &n in &rest {
                 let mut num = sw.num[n];
-                for &fi in &plan.node_faces[plan.node_ptr[n]..plan.node_ptr[n + 1]] {
+                for fi in plan.faces_at(n) {
                     let (q, up, down) = oriented(&plan.faces, &self.qf, fi);
                     if down != End::Node(n) {
                         continue;

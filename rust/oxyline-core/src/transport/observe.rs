@@ -122,7 +122,7 @@ impl Transport {
     fn carried_into(&self, s: usize, n: usize) -> (f64, f64) {
         let p = &self.plan;
         let (mut q_in, mut j_in, mut count, mut free) = (0.0, 0.0, 0usize, f64::NAN);
-        for &fi in &p.node_faces[p.node_ptr[n]..p.node_ptr[n + 1]] {
+        for fi in p.faces_at(n) {
             let (q, up, _) = oriented(&p.faces, &self.qf, fi);
             if fi >= p.n_flow_faces || q == 0.0 || up == End::Node(n) {
                 continue;

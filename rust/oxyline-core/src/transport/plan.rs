@@ -249,9 +249,10 @@ pub struct Plan {
     pub(super) sources: Vec<(usize, Waveform, usize)>,
     pub(super) boundary_inlet: Vec<bool>,
     pub(super) mixing: Vec<usize>,
-    /// CSR node → incident faces, and node → flow sources.
-    pub(super) node_ptr: Vec<usize>,
-    pub(super) node_faces: Vec<usize>,
+    /// CSR node → incident faces, and node → flow sources (u32: a plan of 2^32 faces is
+    /// refused when built).
+    pub(super) node_ptr: Vec<u32>,
+    pub(super) node_faces: Vec<u32>,
     pub(super) source_ptr: Vec<u32>,
     pub(super) source_list: Vec<u32>,
     pub(super) segments: Vec<Segment>,
@@ -321,6 +322,13 @@ impl Plan {
     #[inline]
     pub(super) fn last_sub(&self, n: usize) -> usize {
         self.last_sub.get(n).copied().unwrap_or(n)
+    }
+
+    /// The faces incident to node `n`.
+    #[inline]
+    pub(super) fn faces_at(&self, n: usize) -> impl ExactSizeIterator<Item = usize> + '_ {
+        let faces = &self.node_faces[self.node_ptr[n] as usize..self.node_ptr[n + 1] as usize];
+        faces.iter().map(|&f| f as usize)
     }
 
     /// Flow sources of node `n`.

@@ -205,7 +205,7 @@ impl Transport {
             let lag = self.conc[m];
             self.sweep.lag[m] = lag;
             let (mut num, mut den) = (0.0, 0.0);
-            for &fi in &self.plan.node_faces[self.plan.node_ptr[m]..self.plan.node_ptr[m + 1]] {
+            for fi in self.plan.faces_at(m) {
                 let (q, up, down) = oriented(&self.plan.faces, &self.qf, fi);
                 if up == End::Node(m) {
                     den += q.abs();

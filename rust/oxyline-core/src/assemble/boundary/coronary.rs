@@ -49,7 +49,7 @@ pub(super) fn stamp(circuit: &mut Circuit, site: &Site, c: &CoronarySpec) -> Res
     );
     let g = circuit.add_node(site.label(Part::Distal), 0.0, 0.0);
     for node in [a, m, g] {
-        circuit.nodes[node].boundary = Some(site.tag);
+        circuit.nodes[node].boundary = Some(site.tag as u32);
     }
     // svZeroDSolver's steady start assembles the bed without its capacitors
     circuit.nodes[a].windkessel = true;

@@ -9,6 +9,6 @@ pub(super) fn stamp(circuit: &mut Circuit, site: &Site, pressure: &WaveformSpec)
     circuit
         .fixed_pressures
         .push((site.node, Waveform::from_spec(pressure, &site.element)?));
-    circuit.nodes[site.node].boundary = Some(site.tag);
+    circuit.nodes[site.node].boundary = Some(site.tag as u32);
     Ok(())
 }

@@ -26,9 +26,9 @@ pub(super) fn stamp(
     check_positive(el, "distal_resistance", rcr.distal)?;
     let wk = circuit.add_node(site.label(Part::Capacitor), rcr.capacitance, 0.0);
     circuit.nodes[wk].windkessel = true;
-    circuit.nodes[wk].boundary = Some(site.tag);
+    circuit.nodes[wk].boundary = Some(site.tag as u32);
     let g = circuit.add_node(site.label(Part::Distal), 0.0, 0.0);
-    circuit.nodes[g].boundary = Some(site.tag);
+    circuit.nodes[g].boundary = Some(site.tag as u32);
     circuit.fixed_pressures.push((g, site.waveform(pressure)?));
     let (proximal, distal) = (
         site.label(Part::ProximalResistance),

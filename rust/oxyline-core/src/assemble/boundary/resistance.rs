@@ -15,7 +15,7 @@ pub(super) fn stamp(
     let el = &site.element;
     check_nonnegative(el, "resistance", resistance)?;
     let g = circuit.add_node(site.label(Part::Distal), 0.0, 0.0);
-    circuit.nodes[g].boundary = Some(site.tag);
+    circuit.nodes[g].boundary = Some(site.tag as u32);
     circuit.fixed_pressures.push((g, site.waveform(pressure)?));
     let (a, b) = if site.inlet {
         (g, site.node)

@@ -26,7 +26,7 @@ pub(super) fn stamp(circuit: &mut Circuit, site: &Site, s: &SvzerodInletSpec) ->
         ));
     }
     let g = circuit.add_node(site.label(Part::Distal), 0.0, 0.0);
-    circuit.nodes[g].boundary = Some(site.tag);
+    circuit.nodes[g].boundary = Some(site.tag as u32);
     circuit
         .fixed_pressures
         .push((g, site.waveform(&s.pressure)?));
@@ -46,7 +46,7 @@ pub(super) fn stamp(circuit: &mut Circuit, site: &Site, s: &SvzerodInletSpec) ->
             check_positive(el, "distal_resistance", rd)?;
             let wk = circuit.add_node(site.label(Part::Capacitor), -c, 0.0);
             circuit.nodes[wk].windkessel = true;
-            circuit.nodes[wk].boundary = Some(site.tag);
+            circuit.nodes[wk].boundary = Some(site.tag as u32);
             let distal = site.label(Part::DistalResistance);
             circuit.add_branch(distal, g, wk, -rd, 0.0, 0.0);
             let proximal = site.label(Part::ProximalResistance);
