@@ -4,13 +4,13 @@
 //! and the interpolant are in `integrate::adaptive`; here they meet the run's state.
 
 use super::coupling::State;
-use crate::threads::CHUNK;
-use std::ops::Range;
-use std::sync::atomic::{AtomicBool, Ordering};
 use crate::circuit::Dae;
 use crate::integrate::adaptive::{
     StepControl, Tolerances, hermite, local_error_constant, quadratic_extrapolation, rate_shift,
 };
+use crate::threads::CHUNK;
+use std::ops::Range;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// The local errors of a forced periodic response's harmonic at ω accumulate over 1/ω
 /// (|iω − λ| ≥ ω) for a normal, non-resonant circuit; coupled circuits amplify them more (the
@@ -521,9 +521,18 @@ impl Adaptive {
     #[allow(clippy::needless_range_loop)]
     fn fused_range(&self, r: Range<usize>, y: &[f64], c: &Fused) -> (f64, bool) {
         let ([la, lb, lc], f) = (c.l, c.f);
-        let (y, a, b, y0) = (&y[r.clone()], &self.ym2[r.clone()], &self.ym1[r.clone()], &self.y0[r.clone()]);
+        let (y, a, b, y0) = (
+            &y[r.clone()],
+            &self.ym2[r.clone()],
+            &self.ym1[r.clone()],
+            &self.y0[r.clone()],
+        );
         let (wu, ws) = (&self.w_unit[r.clone()], &self.w_step[r.clone()]);
-        let (pk, rp, ap) = (&self.peak[r.clone()], &self.rate_peak[r.clone()], &self.accel_peak[r]);
+        let (pk, rp, ap) = (
+            &self.peak[r.clone()],
+            &self.rate_peak[r.clone()],
+            &self.accel_peak[r],
+        );
         let (mut m, mut grows) = (0.0f64, false);
         for j in 0..y.len() {
             let (y1, y0, ym) = (y[j], y0[j], b[j]);
@@ -717,7 +726,13 @@ impl Adaptive {
     /// The local error weights of unknown `i` of weight `inv_weight` and peaks |ẏ|, |ÿ| of
     /// `rate_peak`, `accel_peak` (0 for an algebraic unknown, judged apart).
     #[inline]
-    fn weights_from(&self, i: usize, inv_weight: f64, rate_peak: f64, accel_peak: f64) -> (f64, f64) {
+    fn weights_from(
+        &self,
+        i: usize,
+        inv_weight: f64,
+        rate_peak: f64,
+        accel_peak: f64,
+    ) -> (f64, f64) {
         let w = if self.algebraic[i] { 0.0 } else { inv_weight };
         (w, w * inv_omega(rate_peak, accel_peak, self.omega))
     }
@@ -772,7 +787,10 @@ impl Adaptive {
                     }
                 }
                 if rates {
-                    let (s1, s0) = ((yi - this.y0[i]) * inv_h, (this.y0[i] - this.ym1[i]) * inv_h1);
+                    let (s1, s0) = (
+                        (yi - this.y0[i]) * inv_h,
+                        (this.y0[i] - this.ym1[i]) * inv_h1,
+                    );
                     let (r, a) = (s1.abs(), ((s1 - s0) * inv_span).abs());
                     if r > rp[j] || a > ap[j] {
                         rp[j] = rp[j].max(r);
