@@ -35,6 +35,9 @@ times in brackets —
     python benches/bench_scale.py --depths 18 --configs o2-k --zarr   # ... streamed to Zarr
     python benches/bench_scale.py --depths 18 --configs o2-k --methods default
         # ... the default run (auto, error control at rtol 1e-3), opt-in
+    python benches/bench_scale.py --depths 15 --configs o2-k --methods default \
+        generalized-alpha --threads 1 2    # controlled vs fixed step, 1 and 2 threads
+        # (docs/performance.md, "The error control's passes on the threads")
     python benches/bench_scale.py --depths 18 --configs o2-k --variables flow_in concentration_in
     python benches/bench_scale.py --depths 12 14 16 --methods rk4 --rk4-max-depth 16 \
         --rk4-fraction 0.01 --baseline /path/to/old        # before/after in the same run

@@ -120,6 +120,21 @@ def test_the_default_error_controlled_run_gives_the_same_bits(tree: oxyline.Mode
     assert_same_bits(runs)
 
 
+def test_the_error_controls_split_passes_give_the_same_bits() -> None:
+    # ~70 k segments: more than two chunks (32,768 unknowns each) of pressures and of flows,
+    # so that the error control's own passes (the estimate with its peak test, the peak and
+    # flow-scale tracking, the algebraic unknowns' errors, the start-state copies and the
+    # species rows' interpolation) are split over the threads; the step sequence included
+    m = oxyline.load_model(binary_tree(12, 17))
+    runs = {n: oxyline.simulate(m, cycles=1, output_every=0.05, segments=False, threads=n)
+            for n in THREADS}
+    assert runs[1].settings.get("steps") is not None, "an error-controlled run"
+    assert_same_bits(runs)
+    # and an outside check of that run: the tree's O2 balance closes
+    mb = runs[1].o2_mass_balance
+    assert abs(mb["residual"][-1]) <= 1e-6 * abs(mb["inflow"][-1])
+
+
 def test_a_random_tree_with_loops_gives_the_same_bits() -> None:
     m = oxyline.load_model(random_tree_with_loops(400, 12, seed=3))
     runs = {n: oxyline.simulate(m, cycles=1, dt=2e-3, output_every=0.02, segments=True,

@@ -8,6 +8,9 @@ use crate::circuit::Dae;
 use crate::integrate::adaptive::{
     StepControl, Tolerances, hermite, local_error_constant, quadratic_extrapolation, rate_shift,
 };
+use crate::threads::CHUNK;
+use std::ops::Range;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// The local errors of a forced periodic response's harmonic at ω accumulate over 1/ω
 /// (|iω − λ| ≥ ω) for a normal, non-resonant circuit; coupled circuits amplify them more (the
@@ -54,8 +57,6 @@ pub(super) struct Adaptive {
     /// over which its local errors accumulate (see `Adaptive::flow_error`).
     rate_peak: Vec<f64>,
     accel_peak: Vec<f64>,
-    /// ω_i/ACCUMULATION, at least ω₁/ACCUMULATION (`omega`).
-    inv_omega: Vec<f64>,
     /// The largest |y_i| so far: rtol is relative to it (a pulsatile flow is judged against
     /// its peak, not against its zero crossings).
     peak: Vec<f64>,
@@ -70,17 +71,18 @@ pub(super) struct Adaptive {
     group_peak: Vec<f64>,
     group_set: Vec<f64>,
     flow_peak: f64,
-    /// Every unknown's absolute tolerance (a flow's scaled by its group's share of the largest
-    /// amplitude) and the scale s_i rtol is relative to with its value (its largest |y| so
-    /// far, a flow's its group's amplitude), kept up to date as the peaks grow.
-    atol: Vec<f64>,
-    scale: Vec<f64>,
-    /// 1/(atol_i + rtol·s_i): an unknown's error weight, at the scale of the step's start
+    /// 1/(atol_i + rtol·s_i): an unknown's error weight, with its absolute tolerance atol_i
+    /// (a vessel's flow's scaled by its group's share of the largest amplitude) and the scale
+    /// s_i rtol is relative to (its largest |y| so far, a vessel's flow's its group's
+    /// amplitude), at the scale of the step's start
     /// (the step's own |y| loosened it only while a peak grows; without it the estimate is
-    /// one multiplication per unknown).
+    /// one multiplication per unknown). Neither atol_i nor s_i is kept: an unknown that is
+    /// no vessel's flow has its kind's atol and s_i = its peak; a vessel's flow the ones its
+    /// group's amplitude gave at the last renewal (`track_flow_peaks`).
     inv_weight: Vec<f64>,
     /// A differential unknown's weights of its local error in one pass (0 for an algebraic
-    /// unknown, judged apart): `inv_weight`, and `inv_weight`·`inv_omega` (per unit step).
+    /// unknown, judged apart): `inv_weight`, and `inv_weight`/ω_i·ACCUMULATION (per unit
+    /// step, see `inv_omega`).
     w_step: Vec<f64>,
     w_unit: Vec<f64>,
     /// Whether the step just judged may grow a peak (of |y|, |ẏ| or |ÿ|): the estimate's
@@ -219,13 +221,10 @@ impl Adaptive {
             peak: Vec::new(),
             rate_peak: Vec::new(),
             accel_peak: Vec::new(),
-            inv_omega: Vec::new(),
             flow_group: flow_groups(dae),
             group_peak: Vec::new(),
             group_set: Vec::new(),
             flow_peak: 0.0,
-            atol: Vec::new(),
-            scale: Vec::new(),
             inv_weight: Vec::new(),
             w_step: Vec::new(),
             w_unit: Vec::new(),
@@ -316,7 +315,7 @@ impl Adaptive {
             let grown = self.track_peaks(&y, h);
             self.track_flow_peaks(&y, grown);
             std::mem::swap(&mut self.ym1, &mut self.y0);
-            self.y0.clone_from(&y);
+            copy_into(&mut self.y0, &y);
         }
         // (a carried state the integrator gave out restores)
         let _ = ig.restore_carried(&carried);
@@ -326,39 +325,34 @@ impl Adaptive {
 
     /// Every unknown's peaks, scales and weights from the start state `y`.
     fn init_scales(&mut self, y: &[f64]) {
+        let n = y.len();
         self.peak = y.iter().map(|v| v.abs()).collect();
-        self.rate_peak = vec![0.0; y.len()];
-        self.accel_peak = vec![0.0; y.len()];
-        self.inv_omega = vec![1.0 / self.omega; y.len()];
-        let a = self.tol.atol.as_array();
-        self.atol = (0..y.len()).map(|i| a[self.kind_of(i)]).collect();
-        self.scale.clone_from(&self.peak);
-        self.inv_weight = vec![0.0; y.len()];
-        self.w_step = vec![0.0; y.len()];
-        self.w_unit = vec![0.0; y.len()];
+        self.rate_peak = vec![0.0; n];
+        self.accel_peak = vec![0.0; n];
+        let (a, rtol) = (self.tol.atol.as_array(), self.tol.rtol);
+        self.inv_weight = (0..n)
+            .map(|i| 1.0 / (a[self.kind_of(i)] + rtol * self.peak[i]))
+            .collect();
+        self.w_step = vec![0.0; n];
+        self.w_unit = vec![0.0; n];
+        // (the vessels' flows: their groups' scales and tolerances)
         self.track_flow_peaks(y, true);
-        let rtol = self.tol.rtol;
-        let weights = self.atol.iter().zip(&self.scale);
-        for (w, (&a, &s)) in self.inv_weight.iter_mut().zip(weights) {
-            *w = 1.0 / (a + rtol * s);
-        }
-        for i in 0..y.len() {
-            self.reweigh(i);
+        for i in 0..n {
+            (self.w_step[i], self.w_unit[i]) = self.weights_of(i);
         }
     }
 
-    /// Keep the state at the start of a step.
+    /// Keep the state at the start of a step (copied in chunks on the run's threads).
     pub fn save_start(&mut self, st: &State<'_, '_>) {
         if self.peak.is_empty() {
             self.init_scales(&st.y);
         }
         self.may_grow = true;
-        self.y0.clone_from(&st.y);
-        self.yd0.clone_from(&st.yd);
+        copy_into(&mut self.y0, &st.y);
+        copy_into(&mut self.yd0, &st.yd);
         if let Some(sp) = st.species.as_ref() {
-            self.z0.clone_from(&sp.z);
-            self.v0.clear();
-            self.v0.extend_from_slice(sp.tr.cell_transport_volumes());
+            copy_into(&mut self.z0, &sp.z);
+            copy_into(&mut self.v0, sp.tr.cell_transport_volumes());
             if self.c0.is_empty() {
                 concentrations(st, &mut self.c0);
                 self.c_peak = self.c0.iter().map(|c| c.abs()).collect();
@@ -368,8 +362,8 @@ impl Adaptive {
 
     /// Back to the start of a rejected step (the species have not moved yet).
     pub fn restore(&self, st: &mut State<'_, '_>) {
-        st.y.copy_from_slice(&self.y0);
-        st.yd.copy_from_slice(&self.yd0);
+        copy_into(&mut st.y, &self.y0);
+        copy_into(&mut st.yd, &self.yd0);
     }
 
     /// A rejected step (or a failed Newton iteration): the step to try instead.
@@ -490,31 +484,31 @@ impl Adaptive {
     /// would grow one of the peaks `track_peaks` follows (the same comparisons), so that an
     /// accepted step growing none skips that pass. (The estimate, the peak test and a fixed
     /// step's own work each read every unknown once: apart they were a third of a step.)
-    // (one index into nine vectors of the same length: a zip of nine is no clearer)
-    #[allow(clippy::needless_range_loop)]
+    /// In chunks on the run's threads: a maximum and an "any" are the same in any grouping.
     fn fused_errors(&mut self, y: &[f64], h: f64) -> FlowError {
         let n = y.len();
-        let ([la, lb, lc], f) = quadratic_extrapolation(h, self.h1, self.h2, self.c_local);
-        let (inv_h, inv_h1, inv_span) = (1.0 / h, 1.0 / self.h1, 2.0 / (h + self.h1));
-        let (a, b, c) = (&self.ym2[..n], &self.ym1[..n], &self.y0[..n]);
-        let (wu, ws) = (&self.w_unit[..n], &self.w_step[..n]);
-        let (pk, rp, ap) = (&self.peak[..n], &self.rate_peak[..n], &self.accel_peak[..n]);
+        let (l, f) = quadratic_extrapolation(h, self.h1, self.h2, self.c_local);
+        let c = Fused {
+            l,
+            f,
+            inv_h: 1.0 / h,
+            inv_h1: 1.0 / self.h1,
+            inv_span: 2.0 / (h + self.h1),
+        };
         let mut kinds = [0.0f64; 3];
-        let mut grows = false;
+        let grows = AtomicBool::new(false);
         let ends = [0, self.kind_end[0], self.kind_end[1], n];
         for (k, worst) in kinds.iter_mut().enumerate() {
-            let mut m = 0.0f64;
-            for i in ends[k]..ends[k + 1] {
-                let (y1, y0, ym) = (y[i], c[i], b[i]);
-                let e = f * (y1 - (la * a[i] + lb * ym + lc * y0));
-                m = m.max(e.abs() * (wu[i] * inv_h).max(ws[i]));
-                let (s1, s0) = ((y1 - y0) * inv_h, (y0 - ym) * inv_h1);
-                let accel = ((s1 - s0) * inv_span).abs();
-                grows |= (y1.abs() > pk[i]) | (s1.abs() > rp[i]) | (accel > ap[i]);
-            }
-            *worst = m;
+            let first = ends[k];
+            *worst = crate::threads::max_over(ends[k + 1] - first, |r| {
+                let (m, g) = self.fused_range(first + r.start..first + r.end, y, &c);
+                if g {
+                    grows.store(true, Ordering::Relaxed);
+                }
+                m
+            });
         }
-        self.may_grow = grows;
+        self.may_grow = grows.into_inner();
         self.algebraic_errors(y, h, &mut kinds);
         FlowError {
             max: kinds.iter().fold(0.0f64, |m, &e| m.max(e)),
@@ -522,18 +516,58 @@ impl Adaptive {
         }
     }
 
-    /// The algebraic unknowns' errors into `kinds` (see `flow_error`; none at the first step).
+    /// `fused_errors` over the unknowns `r`: the largest scaled error, and whether a peak grows.
+    // (one index into nine slices of the same length: a zip of nine is no clearer)
+    #[allow(clippy::needless_range_loop)]
+    fn fused_range(&self, r: Range<usize>, y: &[f64], c: &Fused) -> (f64, bool) {
+        let ([la, lb, lc], f) = (c.l, c.f);
+        let (y, a, b, y0) = (
+            &y[r.clone()],
+            &self.ym2[r.clone()],
+            &self.ym1[r.clone()],
+            &self.y0[r.clone()],
+        );
+        let (wu, ws) = (&self.w_unit[r.clone()], &self.w_step[r.clone()]);
+        let (pk, rp, ap) = (
+            &self.peak[r.clone()],
+            &self.rate_peak[r.clone()],
+            &self.accel_peak[r],
+        );
+        let (mut m, mut grows) = (0.0f64, false);
+        for j in 0..y.len() {
+            let (y1, y0, ym) = (y[j], y0[j], b[j]);
+            let e = f * (y1 - (la * a[j] + lb * ym + lc * y0));
+            m = m.max(e.abs() * (wu[j] * c.inv_h).max(ws[j]));
+            let (s1, s0) = ((y1 - y0) * c.inv_h, (y0 - ym) * c.inv_h1);
+            let accel = ((s1 - s0) * c.inv_span).abs();
+            grows |= (y1.abs() > pk[j]) | (s1.abs() > rp[j]) | (accel > ap[j]);
+        }
+        (m, grows)
+    }
+
+    /// The algebraic unknowns' errors into `kinds` (see `flow_error`; none at the first step),
+    /// in chunks of their index on the run's threads (maxima: the same in any grouping).
     fn algebraic_errors(&self, y: &[f64], h: f64, kinds: &mut [f64; 3]) {
         if self.history == 0 {
             return;
         }
         let (h1, alg) = (self.h1, self.c_algebraic);
-        for &i in &self.algebraic_index {
-            let i = i as usize;
-            let (a, b, c) = (self.ym1[i], self.y0[i], y[i]);
-            let curvature = 2.0 * ((c - b) / h - (b - a) / h1) / (h + h1);
-            let k = &mut kinds[self.kind_of(i)];
-            *k = k.max(alg * h * h * curvature.abs() * self.inv_weight[i]);
+        let index = &self.algebraic_index;
+        let chunks = map_chunks(index.len(), |r| {
+            let mut worst = [0.0f64; 3];
+            for &i in &index[r] {
+                let i = i as usize;
+                let (a, b, c) = (self.ym1[i], self.y0[i], y[i]);
+                let curvature = 2.0 * ((c - b) / h - (b - a) / h1) / (h + h1);
+                let k = &mut worst[self.kind_of(i)];
+                *k = k.max(alg * h * h * curvature.abs() * self.inv_weight[i]);
+            }
+            worst
+        });
+        for worst in chunks {
+            for (k, w) in kinds.iter_mut().zip(worst) {
+                *k = k.max(w);
+            }
         }
     }
 
@@ -591,9 +625,12 @@ impl Adaptive {
         // c_{n-1} ← c_n ← c_{n+1}
         std::mem::swap(&mut self.cm1, &mut self.c0);
         std::mem::swap(&mut self.c0, &mut self.c1);
-        for (p, c) in self.c_peak.iter_mut().zip(&self.c0) {
-            *p = p.max(c.abs());
-        }
+        let c0 = &self.c0;
+        crate::threads::for_chunks(&mut self.c_peak, |a, p| {
+            for (p, c) in p.iter_mut().zip(&c0[a..]) {
+                *p = p.max(c.abs());
+            }
+        });
         (self.h2, self.h1) = (self.h1, h);
         self.history += 1;
         self.h = self.control.next(h, flow, self.err_old, species);
@@ -606,7 +643,9 @@ impl Adaptive {
     /// tolerances are renewed when some A_g grew by more than `RESCALE` since they were last
     /// set (a pass over every flow per step while the amplitudes still grow cost as much as
     /// the estimate): a flow's scale stays within that share below its amplitude, the
-    /// stricter side.
+    /// stricter side. Both passes go in chunks on the run's threads: the flows above their
+    /// group's amplitude are found chunk by chunk and applied in order (maxima: the same in
+    /// any grouping), the renewal writes each flow's weights from its own values.
     fn track_flow_peaks(&mut self, y: &[f64], grown: bool) {
         if !grown {
             return;
@@ -618,54 +657,84 @@ impl Adaptive {
             self.group_peak = vec![0.0; groups.unwrap_or(0)];
             self.group_set = vec![-1.0; self.group_peak.len()];
         }
+        let (groups, q) = (&self.flow_group, &y[n0..n1]);
+        let peaks = &self.group_peak;
+        let raised = map_chunks(groups.len(), |r| {
+            let members = groups[r.clone()].iter().zip(&q[r]);
+            let members = members.filter(|&(&g, q)| g != NO_VESSEL && q.abs() > peaks[g as usize]);
+            members.map(|(&g, q)| (g, q.abs())).collect::<Vec<_>>()
+        });
         let mut renew = false;
-        for (&g, q) in self.flow_group.iter().zip(&y[n0..n1]) {
-            if g == NO_VESSEL {
-                continue;
-            }
+        for (g, v) in raised.into_iter().flatten() {
             let (p, set) = (&mut self.group_peak[g as usize], self.group_set[g as usize]);
-            if q.abs() > *p {
-                *p = q.abs();
+            if v > *p {
+                *p = v;
                 renew |= *p > set * (1.0 + RESCALE);
             }
         }
-        if !renew {
-            return;
-        }
-        self.group_set.clone_from(&self.group_peak);
-        self.flow_peak = self.group_peak.iter().fold(0.0f64, |m, &p| m.max(p));
-        let (atol, largest) = (self.tol.atol.flow, self.flow_peak);
-        let members = self.flow_group.iter().zip(&self.peak[n0..n1]);
-        let rtol = self.tol.rtol;
-        let flows = self.scale[n0..n1].iter_mut().zip(&mut self.atol[n0..n1]);
-        let flows = flows.zip(&mut self.inv_weight[n0..n1]);
-        for (((s, t), w), (&g, &p)) in flows.zip(members) {
-            if g == NO_VESSEL {
-                continue;
-            }
-            let a = self.group_peak[g as usize];
-            *s = p.max(a);
-            *t = if largest > 0.0 {
-                atol * (a / largest).max(FLOW_SHARE_FLOOR)
-            } else {
-                atol
-            };
-            *w = 1.0 / (*t + rtol * *s);
-        }
-        for i in n0..n1 {
-            self.reweigh(i);
+        if renew {
+            self.renew_flow_weights();
         }
     }
 
-    /// The local error weights of unknown `i` from its tolerance and signal frequency.
-    fn reweigh(&mut self, i: usize) {
-        let w = if self.algebraic[i] {
-            0.0
-        } else {
-            self.inv_weight[i]
+    /// The vessels' flows' weights from their groups' amplitudes (see `track_flow_peaks`).
+    // (one index into several slices of the same length)
+    #[allow(clippy::needless_range_loop)]
+    fn renew_flow_weights(&mut self) {
+        let (n0, n1) = (self.kind_end[0], self.kind_end[1]);
+        self.group_set.clone_from(&self.group_peak);
+        self.flow_peak = self.group_peak.iter().fold(0.0f64, |m, &p| m.max(p));
+        let (atol, largest, rtol) = (self.tol.atol.flow, self.flow_peak, self.tol.rtol);
+        let (mut iw, mut ws, mut wu) = (
+            std::mem::take(&mut self.inv_weight),
+            std::mem::take(&mut self.w_step),
+            std::mem::take(&mut self.w_unit),
+        );
+        let this = &*self;
+        let weights = |i: usize, w: &mut f64| {
+            let g = this.flow_group[i - n0];
+            if g != NO_VESSEL {
+                let a = this.group_peak[g as usize];
+                let s = this.peak[i].max(a);
+                let t = if largest > 0.0 {
+                    atol * (a / largest).max(FLOW_SHARE_FLOOR)
+                } else {
+                    atol
+                };
+                *w = 1.0 / (t + rtol * s);
+            }
         };
-        self.w_step[i] = w;
-        self.w_unit[i] = w * self.inv_omega[i];
+        let mut tasks = chunk_tasks(n0, [&mut iw[n0..n1], &mut ws[n0..n1], &mut wu[n0..n1]]);
+        for_tasks(&mut tasks, |(first, [iw, ws, wu])| {
+            for j in 0..iw.len() {
+                let i = *first + j;
+                weights(i, &mut iw[j]);
+                (ws[j], wu[j]) = this.weights_from(i, iw[j], this.rate_peak[i], this.accel_peak[i]);
+            }
+            false
+        });
+        drop(tasks);
+        (self.inv_weight, self.w_step, self.w_unit) = (iw, ws, wu);
+    }
+
+    /// The local error weights (`w_step`, `w_unit`) of unknown `i` from its current weight and
+    /// signal frequency.
+    fn weights_of(&self, i: usize) -> (f64, f64) {
+        self.weights_from(i, self.inv_weight[i], self.rate_peak[i], self.accel_peak[i])
+    }
+
+    /// The local error weights of unknown `i` of weight `inv_weight` and peaks |ẏ|, |ÿ| of
+    /// `rate_peak`, `accel_peak` (0 for an algebraic unknown, judged apart).
+    #[inline]
+    fn weights_from(
+        &self,
+        i: usize,
+        inv_weight: f64,
+        rate_peak: f64,
+        accel_peak: f64,
+    ) -> (f64, f64) {
+        let w = if self.algebraic[i] { 0.0 } else { inv_weight };
+        (w, w * inv_omega(rate_peak, accel_peak, self.omega))
     }
 
     /// The kind of unknown `i` (0 pressure, 1 flow, 2 volume: the index into `Atol`).
@@ -679,48 +748,66 @@ impl Adaptive {
         }
     }
 
-    /// One pass after an accepted step: every unknown's peak |y| (and its scale and weight,
-    /// for all but the vessels' flows, which `track_flow_peaks` sets), and from the divided
-    /// differences of the last three accepted states (not from the carried rates, which
-    /// follow the damped spurious root at a start) the running peaks of |ẏ| and |ÿ| and the
-    /// signal frequency. True when some peak |y| grew.
+    /// One pass after an accepted step (in chunks on the run's threads, each unknown its own):
+    /// every unknown's peak |y| (and its weight, for all but the vessels' flows, which
+    /// `track_flow_peaks` sets), and from the divided differences of the last three accepted
+    /// states (not from the carried rates, which follow the damped spurious root at a start)
+    /// the running peaks of |ẏ| and |ÿ|, hence the signal frequency. True when some peak |y|
+    /// grew.
+    // (one index into several slices of the same length)
+    #[allow(clippy::needless_range_loop)]
     fn track_peaks(&mut self, y: &[f64], h: f64) -> bool {
-        let (omega1, h1) = (self.omega, self.h1);
+        let h1 = self.h1;
         let (inv_h, inv_h1, inv_span) = (1.0 / h, 1.0 / h1, 2.0 / (h + h1));
         let (n0, n1) = (self.kind_end[0], self.kind_end[1]);
-        let rates = self.history > 0;
-        let mut grown = false;
-        for (i, &yi) in y.iter().enumerate() {
-            let v = yi.abs();
-            if v > self.peak[i] {
-                self.peak[i] = v;
-                grown = true;
-                if !(n0..n1).contains(&i) || self.flow_group[i - n0] == NO_VESSEL {
-                    self.scale[i] = v;
-                    self.inv_weight[i] = 1.0 / (self.atol[i] + self.tol.rtol * v);
-                    self.reweigh(i);
+        let (rates, rtol, atol) = (self.history > 0, self.tol.rtol, self.tol.atol.as_array());
+        let mut v = [
+            std::mem::take(&mut self.peak),
+            std::mem::take(&mut self.rate_peak),
+            std::mem::take(&mut self.accel_peak),
+            std::mem::take(&mut self.inv_weight),
+            std::mem::take(&mut self.w_step),
+            std::mem::take(&mut self.w_unit),
+        ];
+        let this = &*self;
+        let [pk, rp, ap, iw, ws, wu] = &mut v;
+        let mut tasks = chunk_tasks(0, [&mut pk[..], rp, ap, iw, ws, wu]);
+        let grown = for_tasks(&mut tasks, |(first, [pk, rp, ap, iw, ws, wu])| {
+            let mut grown = false;
+            for j in 0..pk.len() {
+                let i = *first + j;
+                let yi = y[i];
+                let mut reweigh = false;
+                if yi.abs() > pk[j] {
+                    pk[j] = yi.abs();
+                    grown = true;
+                    if !(n0..n1).contains(&i) || this.flow_group[i - n0] == NO_VESSEL {
+                        iw[j] = 1.0 / (atol[this.kind_of(i)] + rtol * pk[j]);
+                        reweigh = true;
+                    }
+                }
+                if rates {
+                    let (s1, s0) = (
+                        (yi - this.y0[i]) * inv_h,
+                        (this.y0[i] - this.ym1[i]) * inv_h1,
+                    );
+                    let (r, a) = (s1.abs(), ((s1 - s0) * inv_span).abs());
+                    if r > rp[j] || a > ap[j] {
+                        rp[j] = rp[j].max(r);
+                        ap[j] = ap[j].max(a);
+                        reweigh = true;
+                    }
+                }
+                if reweigh {
+                    (ws[j], wu[j]) = this.weights_from(i, iw[j], rp[j], ap[j]);
                 }
             }
-            if !rates {
-                continue;
-            }
-            let (s1, s0) = (
-                (yi - self.y0[i]) * inv_h,
-                (self.y0[i] - self.ym1[i]) * inv_h1,
-            );
-            let (r, a) = (s1.abs(), ((s1 - s0) * inv_span).abs());
-            let (rp, ap) = (&mut self.rate_peak[i], &mut self.accel_peak[i]);
-            if r > *rp || a > *ap {
-                *rp = rp.max(r);
-                *ap = ap.max(a);
-                self.inv_omega[i] = if *rp > 0.0 {
-                    1.0 / (*ap / *rp / ACCUMULATION).max(omega1)
-                } else {
-                    1.0 / omega1
-                };
-                self.reweigh(i);
-            }
-        }
+            grown
+        });
+        drop(tasks);
+        let [pk, rp, ap, iw, ws, wu] = v;
+        (self.peak, self.rate_peak, self.accel_peak) = (pk, rp, ap);
+        (self.inv_weight, self.w_step, self.w_unit) = (iw, ws, wu);
         grown
     }
 
@@ -772,9 +859,15 @@ impl Adaptive {
         self.ydi.resize(n, 0.0);
         let (mut yi, mut ydi) = (std::mem::take(&mut self.yi), std::mem::take(&mut self.ydi));
         let dense = self.dense(theta, h, &st.y, &st.yd);
-        for ((i, v), d) in yi.iter_mut().enumerate().zip(&mut ydi) {
-            (*v, *d) = dense.value_and_rate(i);
-        }
+        // (in chunks on the run's threads: each value its own)
+        let mut tasks = chunk_tasks(0, [&mut yi[..], &mut ydi[..]]);
+        for_tasks(&mut tasks, |(first, [v, d])| {
+            for (j, (v, d)) in v.iter_mut().zip(d.iter_mut()).enumerate() {
+                (*v, *d) = dense.value_and_rate(*first + j);
+            }
+            false
+        });
+        drop(tasks);
         (self.yi, self.ydi) = (yi, ydi);
         self.zi.clear();
         if let Some(sp) = st.species.as_ref() {
@@ -820,4 +913,82 @@ fn concentrations(st: &State<'_, '_>, out: &mut Vec<f64>) {
             *c = z / vol[k % nc];
         }
     });
+}
+
+/// The signal frequency's 1/ω_i·ACCUMULATION of an unknown with peaks |ẏ| and |ÿ| of
+/// `rate_peak` and `accel_peak` (at least the fundamental's, `omega1` = ω₁/ACCUMULATION).
+#[inline]
+fn inv_omega(rate_peak: f64, accel_peak: f64, omega1: f64) -> f64 {
+    if rate_peak > 0.0 {
+        1.0 / (accel_peak / rate_peak / ACCUMULATION).max(omega1)
+    } else {
+        1.0 / omega1
+    }
+}
+
+/// The constants of one step's fused estimate (see `Adaptive::fused_errors`).
+struct Fused {
+    l: [f64; 3],
+    f: f64,
+    inv_h: f64,
+    inv_h1: f64,
+    inv_span: f64,
+}
+
+/// `dst` = `src` (copied in chunks on the run's threads for a long state).
+fn copy_into(dst: &mut Vec<f64>, src: &[f64]) {
+    if dst.len() != src.len() {
+        dst.clear();
+        dst.extend_from_slice(src);
+        return;
+    }
+    crate::threads::for_chunks(dst, |a, c| c.copy_from_slice(&src[a..a + c.len()]));
+}
+
+/// The run's pool, if a pass over `len` elements is worth splitting over it (as the passes of
+/// `crate::threads`).
+fn pool_for(len: usize) -> Option<std::sync::Arc<rayon::ThreadPool>> {
+    crate::threads::pool().filter(|_| len >= 2 * CHUNK)
+}
+
+/// `f` of the ranges of `CHUNK` elements of `0..len` in order (on the run's threads for a
+/// long pass).
+fn map_chunks<R: Send>(len: usize, f: impl Fn(Range<usize>) -> R + Sync + Send) -> Vec<R> {
+    use rayon::prelude::*;
+    let range = |c: usize| c * CHUNK..((c + 1) * CHUNK).min(len);
+    let chunks = len.div_ceil(CHUNK);
+    match pool_for(len) {
+        Some(pool) => pool.install(|| (0..chunks).into_par_iter().map(|c| f(range(c))).collect()),
+        None => (0..chunks).map(|c| f(range(c))).collect(),
+    }
+}
+
+/// The slices `v` (of one length) cut into chunks of `CHUNK` elements: a task per chunk, with
+/// the index of its first element (`first` that of `v`'s).
+fn chunk_tasks<const K: usize>(first: usize, v: [&mut [f64]; K]) -> Vec<(usize, [&mut [f64]; K])> {
+    let len = v.first().map_or(0, |s| s.len());
+    let mut rest = v;
+    let mut tasks = Vec::with_capacity(len.div_ceil(CHUNK));
+    let mut at = 0;
+    while at < len {
+        let m = CHUNK.min(len - at);
+        let mut head: [&mut [f64]; K] = std::array::from_fn(|_| <&mut [f64]>::default());
+        for (h, r) in head.iter_mut().zip(rest.iter_mut()) {
+            let (a, b) = std::mem::take(r).split_at_mut(m);
+            (*h, *r) = (a, b);
+        }
+        tasks.push((first + at, head));
+        at += m;
+    }
+    tasks
+}
+
+/// `f` of every task (on the run's threads when there are several, each task writing only its
+/// own chunks): whether any returned true (every task runs).
+fn for_tasks<T: Send>(tasks: &mut [T], f: impl Fn(&mut T) -> bool + Sync + Send) -> bool {
+    use rayon::prelude::*;
+    match crate::threads::pool().filter(|_| tasks.len() > 1) {
+        Some(pool) => pool.install(|| tasks.par_iter_mut().map(f).reduce(|| false, |a, b| a | b)),
+        None => tasks.iter_mut().map(f).fold(false, |a, b| a | b),
+    }
 }

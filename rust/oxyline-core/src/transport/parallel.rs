@@ -247,22 +247,25 @@ impl TreePartition {
                 node.substitute(&mut shared, (k, &tree[k]), &mut sums);
             }
         }
-        let blocks: Vec<Vec<(f64, f64)>> = self
-            .tasks
-            .par_iter()
-            .map(|&(b0, b1)| {
-                let mut a = shared;
-                (b0..b1)
-                    .map(|b| {
-                        let mut s = (0.0, 0.0);
-                        for &k in self.block(b as usize).iter().rev() {
-                            node.substitute(&mut a, (k as usize, &tree[k as usize]), &mut s);
-                        }
-                        s
-                    })
-                    .collect()
-            })
-            .collect();
+        let one = |&(b0, b1): &(u32, u32)| {
+            let mut a = shared;
+            (b0..b1)
+                .map(|b| {
+                    let mut s = (0.0, 0.0);
+                    for &k in self.block(b as usize).iter().rev() {
+                        node.substitute(&mut a, (k as usize, &tree[k as usize]), &mut s);
+                    }
+                    s
+                })
+                .collect()
+        };
+        // on the run's pool when called inside it; otherwise (one thread) on this thread, not
+        // on rayon's global pool (which would take every core of a `threads = 1` run)
+        let blocks: Vec<Vec<(f64, f64)>> = if rayon::current_thread_index().is_some() {
+            self.tasks.par_iter().map(one).collect()
+        } else {
+            self.tasks.iter().map(one).collect()
+        };
         for s in blocks.iter().flatten() {
             sums.0 += s.0;
             sums.1 += s.1;
