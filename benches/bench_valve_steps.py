@@ -6,6 +6,7 @@ table (docs/physics.md §10.5). The cardiac output is the mean flow over the las
 the model's outlet valve (or the vessel after a heart block).
 
     python benches/bench_valve_steps.py [--cycles 5] [--repeat 1] [--reference-steps 10000]
+                                        [--models NAME ...]
 
 Models: svZeroDSolver's chamber/valve cases (their fixed ``dt`` dropped), the native left
 heart of tests/test_sensitivity_heart.py, the closed-loop heart of closed-loop-o2 and the
