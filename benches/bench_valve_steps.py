@@ -1,8 +1,12 @@
 """Every heart and valve model of the tests under the default (error-controlled) settings at
-rtol 1e-2, 1e-3 and 1e-4: whether it runs, its steps (rejected), valve events, smallest step
-and CPU time (best of ``--repeat``), as a Markdown table (docs/physics.md §10.5).
+rtol 1e-2, 1e-3 and 1e-4: whether it runs, its steps (rejected), valve events, smallest step,
+CPU time (best of ``--repeat``) and its cardiac output's relative error against a fine fixed
+step (generalized-α at 1/``--reference-steps`` of the period, the same cycles), as a Markdown
+table (docs/physics.md §10.5). The cardiac output is the mean flow over the last cycle through
+the model's outlet valve (or the vessel after a heart block).
 
-    python benches/bench_valve_steps.py [--cycles 5] [--repeat 1]
+    python benches/bench_valve_steps.py [--cycles 5] [--repeat 1] [--reference-steps 10000]
+                                        [--models NAME ...]
 
 Models: svZeroDSolver's chamber/valve cases (their fixed ``dt`` dropped), the native left
 heart of tests/test_sensitivity_heart.py, the closed-loop heart of closed-loop-o2 and the
@@ -18,6 +22,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 import oxyline
 from oxyline import closed_loop
 from oxyline import svzerod as svz
@@ -28,6 +34,25 @@ CASES = ROOT / "tests" / "data" / "svzerod" / "cases"
 SVZ = ["valve_tanh", "piecewise_Chamber_and_Valve", "chamber_elastance_inductor",
        "chamber_sphere", "closedLoopHeart_singleVessel", "closedLoopHeart_withCoronaries",
        "closedLoopHeart_singleVessel_decomposed", "closed_loop_two_hill"]
+
+
+#: the vessel whose mean flow is each model's cardiac output
+OUTPUT_VESSEL = {
+    "valve_tanh": "valve", "piecewise_Chamber_and_Valve": "aortic",
+    "chamber_elastance_inductor": "valve1", "chamber_sphere": "outlet_valve",
+    "closedLoopHeart_singleVessel": "branch0_seg0",
+    "closedLoopHeart_withCoronaries": "branch0_seg0",
+    "closedLoopHeart_singleVessel_decomposed": "AV", "closed_loop_two_hill": "AR_SYS",
+    "left-heart (native)": "aortic", "closed-loop-o2 heart": "arteries",
+    "minimal closed loop": "aortic_valve"}
+
+
+def cardiac_output(res: oxyline.Result, vessel: str, period: float) -> float:
+    """The mean flow through `vessel` over the last cycle (trapezoid over the output rows)."""
+    t, q = np.asarray(res.time), np.asarray(res.vessel(vessel).flow_in)
+    last = t >= t[-1] - period * (1 + 1e-9)
+    t, q = t[last], q[last]
+    return float(np.sum(0.5 * (q[1:] + q[:-1]) * np.diff(t)) / (t[-1] - t[0]))
 
 
 def default_settings(m: dict[str, Any]) -> dict[str, Any]:
@@ -48,7 +73,25 @@ def models() -> dict[str, dict[str, Any]]:
     return {k: default_settings(v) for k, v in out.items()}
 
 
-def run(m: dict[str, Any], rtol: float, cycles: int, repeat: int) -> str:
+def reference(m: dict[str, Any], vessel: str, cycles: int, steps: int) -> tuple[str, float]:
+    """The cardiac output of generalized-α at a fixed step of period/`steps` (or half or
+    twice that where its plain Newton fails at a step); where all three fail, of
+    generalized-α under error control at rtol 1e-6."""
+    model = oxyline.load_model(m)
+    period = model.period
+    common = {"cycles": cycles, "until_periodic": None, "output_every": period / 1000}
+    for n in (steps, 2 * steps, steps // 2):
+        try:
+            res = oxyline.simulate(model, method="generalized-alpha", dt=period / n, **common)
+            return f"GA T/{n}", cardiac_output(res, vessel, period)
+        except oxyline.SolverError:
+            continue
+    res = oxyline.simulate(model, method="generalized-alpha", rtol=1e-6, **common)
+    return "GA rtol 1e-6", cardiac_output(res, vessel, period)
+
+
+def run(m: dict[str, Any], rtol: float, cycles: int, repeat: int,
+        ref: tuple[str, float]) -> str:
     best, res = float("inf"), None
     for _ in range(repeat):
         t = time.process_time()
@@ -56,24 +99,35 @@ def run(m: dict[str, Any], rtol: float, cycles: int, repeat: int) -> str:
             res = oxyline.simulate(oxyline.load_model(m), rtol=rtol, cycles=cycles,
                                    until_periodic=None)
         except oxyline.SolverError as e:
-            return f"fails: {e}"
+            return f"fails: {e} | | | | |"
         best = min(best, time.process_time() - t)
     s = res.settings
-    return (f"{s['steps']} ({s['rejected_steps']}) | {len(res.valve_events)} | "
-            f"{s['dt_min']:.1e} | {best:.3f}")
+    period = oxyline.load_model(m).period
+    err = abs(cardiac_output(res, ref[0], period) - ref[1]) / abs(ref[1])
+    return (f"{s['method']} | {s['steps']} ({s['rejected_steps']}) | {len(res.valve_events)} | "
+            f"{s['dt_min']:.1e} | {best:.3f} | {err:.1e}")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--cycles", type=int, default=5)
     ap.add_argument("--repeat", type=int, default=1)
+    ap.add_argument("--reference-steps", type=int, default=10000)
+    ap.add_argument("--models", nargs="*", help="only these models (default: all)")
     a = ap.parse_args()
-    print(f"{a.cycles} cycles, default settings but rtol; CPU s best of {a.repeat}\n")
-    print("| model | rtol | steps (rejected) | events | smallest step (s) | CPU (s) |")
-    print("|---|---|---|---|---|---|")
+    print(f"{a.cycles} cycles, default settings but rtol; CPU s best of {a.repeat}; cardiac "
+          f"output (CO) against generalized-alpha at period/{a.reference_steps}\n")
+    print("| model | rtol | method | steps (rejected) | events | smallest step (s) | CPU (s) "
+          "| CO error | reference |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for name, m in models().items():
+        if a.models and name not in a.models:
+            continue
+        vessel = OUTPUT_VESSEL[name]
+        how, co = reference(m, vessel, a.cycles, a.reference_steps)
         for rtol in (1e-2, 1e-3, 1e-4):
-            print(f"| {name} | {rtol:g} | {run(m, rtol, a.cycles, a.repeat)} |", flush=True)
+            row = run(m, rtol, a.cycles, a.repeat, (vessel, co))
+            print(f"| {name} | {rtol:g} | {row} | {how} |", flush=True)
 
 
 if __name__ == "__main__":

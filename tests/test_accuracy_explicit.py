@@ -117,13 +117,15 @@ def test_a_given_dt_keeps_the_fixed_step_runs() -> None:
 TOL_PAIR_VALVE = 1e-6
 
 
-def test_the_pair_steps_a_valve_as_a_small_fixed_step_and_auto_chooses_it_by_cost(
+def test_the_pair_steps_a_valve_as_a_small_fixed_step_and_auto_keeps_the_implicit_method(
         ) -> None:
     """A tanh valve in series with a resistor: the pair at rtol 1e-5, its valve events
     located (docs/physics.md §10.5), against generalized-α at dt = 20 µs (second order: its
-    own error ~1e-7 of the flow's range). `auto` weighs the pair for valve circuits too and
-    takes it here (18 steps a run against generalized-α's 287 at rtol 1e-3), at the same
-    accuracy."""
+    own error ~1e-7 of the flow's range). The valve has no inductance: its law sits on an
+    algebraic row, which the pair's stages solve by Newton, so `auto` keeps generalized-α
+    (docs/solvers.md, "`auto`'s rule"): the volume through the valve over the cycle within
+    2x rtol (measured 1.2e-4), the flow within 5 % of its range (measured 2.9 %, at the
+    opening, where the second-order method's event timing errs most)."""
     model = {
         "name": "valve", "units": "SI", "period": 1.0,
         "vessels": [
@@ -141,9 +143,11 @@ def test_the_pair_steps_a_valve_as_a_small_fixed_step_and_auto_chooses_it_by_cos
     q, want = res.vessel("mitral").flow_in, ref.vessel("mitral").flow_in
     np.testing.assert_allclose(q, want, rtol=0, atol=TOL_PAIR_VALVE * np.ptp(want))
     auto = oxyline.simulate(model, cycles=2, rtol=1e-3, output_every=1e-3)
-    assert auto.settings["method"] == "dopri5"
-    np.testing.assert_allclose(auto.vessel("mitral").flow_in, want, rtol=0,
-                               atol=TOL_PAIR_VALVE * np.ptp(want))
+    assert auto.settings["method"] == "generalized-alpha"
+    got, t = auto.vessel("mitral").flow_in, auto.time
+    volume = float(np.trapezoid(np.abs(want), t))
+    assert abs(np.trapezoid(got, t) - np.trapezoid(want, t)) <= 2e-3 * volume
+    np.testing.assert_allclose(got, want, rtol=0, atol=5e-2 * np.ptp(want))
 
 
 @pytest.mark.parametrize(("model", "settings", "message"), [

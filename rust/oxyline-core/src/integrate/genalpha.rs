@@ -6,8 +6,8 @@
 //! make it depend on the iterate.
 
 use super::leaves::Leaves;
-use super::newton::{self, Magnitude, NewtonProblem, jacobian_stamps, jacobian_values};
-use crate::circuit::{Csr, Dae, Regime};
+use super::newton::{self, Magnitude, NewtonProblem, jacobian_stamps, jacobian_values_of};
+use crate::circuit::{Csr, Dae, JacobianKind, Regime};
 use crate::error::{Error, Result};
 use crate::sparse::SparseLu;
 use rayon::prelude::*;
@@ -159,7 +159,15 @@ impl<'a> GenAlpha<'a> {
         let c = self.af * self.gamma * self.dt;
         let am_e: Vec<f64> = self.e.iter().map(|e| self.am * e).collect();
         let mut kvals = vec![0.0; self.n_stamps];
-        jacobian_values(self.dae, c, &am_e, y_af, time, &mut kvals);
+        // the line search's retry (an error-controlled run's answer to a Newton failure) also
+        // takes the safeguarded valve rows: the exact matrix turns singular in backflow
+        // (1 + Q R′ → 0) at iterates away from the solution
+        let kind = if self.damped {
+            JacobianKind::Elimination
+        } else {
+            JacobianKind::Exact
+        };
+        jacobian_values_of(self.dae, (c, &am_e), y_af, time, kind, &mut kvals);
         let nf = self.dae.f.val.len();
         for (cr, &k) in self.dae.chain_rule.iter().zip(&self.chain_flow_entry) {
             let q = y_af[cr.flow];

@@ -230,6 +230,21 @@ pub fn jacobian_stamps(dae: &Dae) -> Vec<(usize, usize)> {
 
 /// Fill `vals` (in [`jacobian_stamps`] order) with a·(F + dc/dy(y, t)) + diag(d).
 pub fn jacobian_values(dae: &Dae, a: f64, diag: &[f64], y: &[f64], t: f64, vals: &mut [f64]) {
+    jacobian_values_of(dae, (a, diag), y, t, JacobianKind::Exact, vals);
+}
+
+/// [`jacobian_values`] with the elements' Jacobian of `kind`: `Elimination` is the
+/// safeguarded one of a valve's row (its 1 + Q R′ held ≥ 1/2, which every solution meets
+/// with room: `element::valve`), the same Newton near the solution and a regular matrix away
+/// from it.
+pub fn jacobian_values_of(
+    dae: &Dae,
+    (a, diag): (f64, &[f64]),
+    y: &[f64],
+    t: f64,
+    kind: JacobianKind,
+    vals: &mut [f64],
+) {
     let nf = dae.f.val.len();
     for (v, fv) in vals[..nf].iter_mut().zip(&dae.f.val) {
         *v = a * fv;
@@ -239,7 +254,7 @@ pub fn jacobian_values(dae: &Dae, a: f64, diag: &[f64], y: &[f64], t: f64, vals:
         vals[nf + i] += a * 2.0 * s * y[i].abs();
     }
     if !dae.elements.is_empty() {
-        dae.element_jacobian(a, t, y, &mut vals[nf + dae.n..], JacobianKind::Exact);
+        dae.element_jacobian(a, t, y, &mut vals[nf + dae.n..], kind);
     }
 }
 

@@ -341,6 +341,12 @@ impl<'a> Rk4<'a> {
         })
     }
 
+    /// Whether the elimination of the algebraic unknowns is nonlinear (a stenosis or a valve
+    /// law on an algebraic row): every stage then runs a Newton iteration.
+    pub fn eliminates_by_newton(&self) -> bool {
+        self.alg.as_ref().is_some_and(|a| !a.is_linear())
+    }
+
     /// The element index of the first stiff branch's valve (None without one).
     pub fn stiff_valve(&self) -> Option<usize> {
         self.stiff.first().map(|b| b.valve)
@@ -729,6 +735,16 @@ impl<'a> Rk4<'a> {
             self.solve_algebraic(y, time + dt)?;
         }
         Ok(())
+    }
+
+    /// The circuit this integrator steps.
+    pub fn dae(&self) -> &'a Dae {
+        self.dae
+    }
+
+    /// The state `linear_operator` linearises at (empty: zero).
+    pub fn linearization_state(&self) -> &[f64] {
+        &self.lin_state
     }
 
     /// E_ii of the differential unknowns, in `diff` order.

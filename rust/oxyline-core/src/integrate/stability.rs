@@ -1,7 +1,9 @@
 //! Largest stable RK4 step of the (linear, time-invariant) flow circuit, and the element
 //! that sets it. Exact from the dense spectrum for small circuits, restarted Arnoldi on the
-//! same operator otherwise (`krylov`).
+//! same operator otherwise (`krylov`). A circuit that may grow (a negative stenosis
+//! coefficient) is refused by name where it has a growing mode (`growth`).
 
+pub mod growth;
 mod krylov;
 
 use super::rk4::Rk4;
@@ -111,6 +113,51 @@ fn interrupted() -> crate::Error {
 
 /// [`rk4_limit_by`], asking `go` between its pieces of work.
 pub fn rk4_limit_probed(
+    rk: &mut Rk4<'_>,
+    names: &Names,
+    method: SpectrumMethod,
+    go: &mut KeepGoing<'_>,
+) -> Result<StabilityLimit> {
+    let limit = limit_stiff_or_not(rk, names, method, go)?;
+    refuse_growth(rk, &limit, go)?;
+    Ok(limit)
+}
+
+/// A growing mode is a model error naming its cause (`growth`): the dense spectrum shows it
+/// as the limiting eigenvalue (Re λ > 0, a vanishing RK4 step); the Krylov estimate seeks the
+/// fastest modes and misses a slow one, so a circuit that may grow is searched for it.
+fn refuse_growth(rk: &Rk4<'_>, limit: &StabilityLimit, go: &mut KeepGoing<'_>) -> Result<()> {
+    let dae = rk.dae();
+    if !growth::may_grow(dae) {
+        return Ok(());
+    }
+    let zero;
+    let y = match rk.linearization_state() {
+        y if y.is_empty() => {
+            zero = vec![0.0; dae.n];
+            &zero[..]
+        }
+        y => y,
+    };
+    let (re, im) = limit.eigenvalue;
+    let lam = Complex::new(re, im);
+    // the dense spectrum's round-off on the energy-scaled operator is ~1e-15 of its norm
+    let mode = if limit.exact {
+        (re > 1e-9 * lam.norm()).then(|| growth::GrowingMode {
+            eigenvalue: lam,
+            unknown: limit.element.clone(),
+        })
+    } else {
+        growth::growing_mode(dae, y, 0.0, lam.norm(), go)?
+    };
+    match mode {
+        Some(m) => Err(growth::growing_error(dae, y, m)),
+        None => Ok(()),
+    }
+}
+
+/// [`rk4_limit_probed`] without the growth check.
+fn limit_stiff_or_not(
     rk: &mut Rk4<'_>,
     names: &Names,
     method: SpectrumMethod,

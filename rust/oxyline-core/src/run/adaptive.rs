@@ -280,6 +280,11 @@ impl Adaptive {
         self.control.h_min
     }
 
+    /// The largest step the controller takes.
+    pub fn h_max(&self) -> f64 {
+        self.control.h_max
+    }
+
     /// Before the first cycle of a run without valves (whose statuses a pass of fixed steps
     /// would not follow): a scout pass of `SCOUT_STEPS` fixed steps over one cycle from the
     /// start state seeds every unknown's peaks of |y|, |ẏ| and |ÿ|, hence its scale and signal

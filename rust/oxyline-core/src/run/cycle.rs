@@ -14,6 +14,7 @@ use super::settings::RunSettings;
 use super::svzerod::{CycleMeans, DerivedState};
 use crate::error::{Error, Result};
 use crate::integrate::newton::scaled_increment;
+use crate::integrate::stability::growth;
 
 /// The running loop. A failed or interrupted run keeps everything recorded so far.
 pub(super) struct Cycles<'r, 'f> {
@@ -273,8 +274,26 @@ impl<'r, 'f> Cycles<'r, 'f> {
         self.rec.restore(snap)
     }
 
-    /// One cycle; Ok(false) when the run is complete.
+    /// One cycle; Ok(false) when the run is complete. A solver failure names its cause where
+    /// the state shows one (a negative incremental resistance: `stability::growth`).
     fn cycle(&mut self, cycle: usize, progress: &mut dyn FnMut(f64, f64) -> bool) -> Result<bool> {
+        self.cycle_steps(cycle, progress).map_err(|e| match e {
+            Error::Solver { time, message } => {
+                let cause = growth::cause_at(self.state.dae, &self.state.y);
+                Error::Solver {
+                    time,
+                    message: message + &cause,
+                }
+            }
+            e => e,
+        })
+    }
+
+    fn cycle_steps(
+        &mut self,
+        cycle: usize,
+        progress: &mut dyn FnMut(f64, f64) -> bool,
+    ) -> Result<bool> {
         let s = self.s;
         let last = cycle + 1 == self.max_cycles;
         // rows certain to be output can go to the sink as they come; a cycle that may still be
@@ -400,7 +419,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
             let stepped = self.state.advance_flow(t, h);
             let (err, kinds) = match stepped {
                 Ok(()) => ad.judge_flow(&mut self.state, h),
-                Err(e) => match retry.failed(h, ad.h_min()) {
+                Err(e) => match retry.failed(h, (ad.h_min(), ad.h_max())) {
                     OnFailure::Damp => {
                         // the same step again, Newton with its line search
                         ad.restore(&mut self.state);
@@ -409,12 +428,22 @@ impl<'r, 'f> Cycles<'r, 'f> {
                         ad.h = h;
                         continue;
                     }
+                    OnFailure::Leap(h_leap) => {
+                        ad.restore(&mut self.state);
+                        ad.rejected += 1;
+                        ad.h = h_leap;
+                        cut = None;
+                        continue;
+                    }
                     OnFailure::Shrink => (f64::INFINITY, [0.0; 3]),
-                    OnFailure::GiveUp => return Err(given_up(e, ad.h_min(), period)),
+                    OnFailure::GiveUp => {
+                        return Err(given_up(e, (ad.h_min(), ad.h_max()), period));
+                    }
                 },
             };
             let kept = replayed && self.periodic_steps.keeps(err);
-            if err > 1.0 && h > ad.h_min() && !kept {
+            let leap = retry.leaping();
+            if err > 1.0 && h > ad.h_min() && !kept && !leap {
                 ad.restore(&mut self.state);
                 ad.reject(h, err);
                 cut = None;
@@ -428,7 +457,12 @@ impl<'r, 'f> Cycles<'r, 'f> {
                         move |i: usize| d.value(i)
                     };
                     let found = ev.locate(&|i| y[i], at, ad.rtol());
-                    decide(found, (h, ad.h_min(), ad.rtol()), ad.h, cut.take())
+                    match found {
+                        // a leap's step is not cut (a shorter one did not converge): its
+                        // valve switches at its end
+                        Some(loc) if leap => Next::Switch(loc.switch, ad.h),
+                        _ => decide(found, (h, ad.h_min(), ad.rtol()), ad.h, cut.take()),
+                    }
                 }
                 None => Next::Go,
             };
@@ -454,6 +488,10 @@ impl<'r, 'f> Cycles<'r, 'f> {
                 self.dense_row(ad, rows, (tau - t) / h, h, tau)?;
             }
             ad.accept(&self.state, h, err, kinds);
+            if leap {
+                // the solution jumped within the leap: the estimates start again after it
+                ad.restart(ad.h.min(h));
+            }
             match next {
                 Next::Switch(k, proposed) => {
                     self.switch_valves(k, t_new);

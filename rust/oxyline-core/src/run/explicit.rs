@@ -5,7 +5,8 @@
 //! 1/ω_i), RK4's spectral bound as the ceiling, and output rows from the continuous extension.
 //!
 //! `method: auto` with a tolerance chooses between this pair and generalized-α by the
-//! predicted cost of a cycle at that tolerance ([`choose`]).
+//! predicted cost of a cycle at that tolerance ([`choose`]), among the methods able to run
+//! the circuit: the pair only where its stages need no Newton iteration.
 
 use super::adaptive::{ACCUMULATION, FLOW_SHARE_FLOOR, NO_VESSEL, flow_groups};
 use super::coupling::{Flow, State};
@@ -18,7 +19,7 @@ use crate::error::{Error, Result};
 use crate::integrate::adaptive::{SAFETY, Tolerances, local_error_constant};
 use crate::integrate::explicit_pair::{self, Dopri5, dp5_step_limit};
 use crate::integrate::rk4::{Rk4, Uncoupled};
-use crate::integrate::stability::{SpectrumMethod, StabilityLimit, rk4_limit_probed};
+use crate::integrate::stability::{SpectrumMethod, StabilityLimit, growth, rk4_limit_probed};
 use crate::integrate::steady::SteadyCache;
 use nalgebra::Complex;
 use std::cell::RefCell;
@@ -51,8 +52,9 @@ pub(super) struct ExplicitPlan {
 }
 
 /// Whether an error-controlled run steps the explicit pair: always for `dopri5` (a circuit
-/// it cannot step is a model error naming the element), by predicted cost for `auto`, never
-/// for `generalized-alpha`. `transport_dt` is the species' explicit step limit, `quasi` a
+/// it cannot step is a model error naming the element), by predicted cost for `auto` where
+/// the pair can run the circuit without a Newton iteration in its stages, never for
+/// `generalized-alpha`. `transport_dt` is the species' explicit step limit, `quasi` a
 /// quasi-steady species field (not an ODE the stages can carry).
 pub(super) fn choose(
     dae: &Dae,
@@ -72,11 +74,19 @@ pub(super) fn choose(
     if let Err(e) = supported {
         return if asked { Err(e) } else { Ok(None) };
     }
-    let stability = match probe(dae, steady, go) {
-        Ok(lim) => lim,
-        Err(e) if asked => return Err(e),
+    let (stability, by_newton) = match probe(dae, steady, go) {
+        Ok(found) => found,
+        // a growing mode: no method runs the circuit
+        Err(e) if asked || growth::is_growing_mode(&e) => return Err(e),
         Err(_) => return Ok(None),
     };
+    // a Newton iteration in every stage (a nonlinear elimination: valve laws or stenoses on
+    // algebraic rows) can fail where no step length helps it (the algebraic rows do not
+    // shrink with the step), and the pair has no other answer to it: `auto` takes the
+    // implicit method, whose failures shrink or damp its step (`retry`)
+    if by_newton && !asked {
+        return Ok(None);
+    }
     let (re, im) = stability.eigenvalue;
     let lambda = Complex::new(re, im);
     // RK4's limit moved to the pair's along the limiting eigenvalue's ray
@@ -105,19 +115,22 @@ fn quasi_refused(quasi: bool) -> Result<()> {
     Ok(())
 }
 
-/// RK4's stability limit (the stenoses linearised at the steady state).
+/// RK4's stability limit (the stenoses linearised at the steady state), and whether the
+/// stages eliminate the algebraic unknowns by Newton.
 fn probe(
     dae: &Dae,
     steady: &SteadyCache<'_>,
     go: &mut dyn FnMut() -> bool,
-) -> Result<StabilityLimit> {
+) -> Result<(StabilityLimit, bool)> {
     let mut rk = Rk4::new(dae, Regime::Transient, 1.0)?;
     if !dae.is_linear() {
         if let Ok(ys) = steady.get() {
             rk.set_linearization(ys)?;
         }
     }
-    rk4_limit_probed(&mut rk, &dae.names, SpectrumMethod::Auto, go)
+    let by_newton = rk.eliminates_by_newton();
+    let limit = rk4_limit_probed(&mut rk, &dae.names, SpectrumMethod::Auto, go)?;
+    Ok((limit, by_newton))
 }
 
 /// The highest significant frequency of the forcing at `rtol` (Hz; the unforced default
