@@ -661,7 +661,15 @@ pub fn periodic_tangent_in(
     let weights = weights(dae, floor, rate_scale);
     let values: Vec<f64> = params.iter().map(|t| t.value).collect();
     let mut sub = Subspace::new(weights, 256);
-    let hold = volume.map(|vol| Hold::of(vol, &pr, params, &start));
+    let mut hold = match volume {
+        Some(vol) => Some(Hold::of(vol, &pr, params, &start)),
+        None => None,
+    };
+    if let Some(h) = &mut hold
+        && params.iter().any(|t| h.vol.moves(&t.de))
+    {
+        h.v = Some(unit_volume_tangent(&pr, h.vol, signals, &set)?.0);
+    }
     let mut run = TangentRun {
         pr: &pr,
         mats: StepMatrices::of(&pr)?,
@@ -701,6 +709,10 @@ struct Hold<'v> {
     k: f64,
     /// each job's ℓ·x
     targets: Vec<f64>,
+    /// The unit-volume tangent v, when some parameter changes the volume (a capacitance):
+    /// its source's ℓ·b = mᵀ dE (w_start − w_end) is the primal cycle's own mismatch, which
+    /// no fixed point can absorb; it is taken out along v, as the adjoint does.
+    v: Option<Vec<f64>>,
 }
 
 impl<'v> Hold<'v> {
@@ -715,11 +727,20 @@ impl<'v> Hold<'v> {
             targets: (params.iter())
                 .map(|t| vol.start_change(&t.de, &y0, start, k))
                 .collect(),
+            v: None,
         }
     }
 
     fn apply(&self, p: usize, x: &mut [f64]) {
         self.vol.hold(x, &self.e, self.k, self.targets[p]);
+    }
+
+    /// g ← g − (ℓ·g − ℓ·x) v: a cycle's end `g` from `x` without its source's volume change.
+    fn settle(&self, x: &[f64], g: &mut [f64]) {
+        if let Some(v) = &self.v {
+            let d = self.vol.dot(g, self.k) - self.vol.dot(x, self.k);
+            g.iter_mut().zip(v).for_each(|(gi, vi)| *gi -= d * vi);
+        }
     }
 }
 
@@ -750,6 +771,7 @@ fn unit_volume_tangent(
             e: vol.unit(),
             k,
             targets: vec![1.0],
+            v: None,
         }),
         starts: Vec::new(),
     };
@@ -823,8 +845,11 @@ impl TangentRun<'_, '_> {
                 self.signals,
             );
             let mut next = Vec::with_capacity(active.len());
-            for ((p, g, rec), xn) in jobs.into_iter().zip(starts) {
+            for ((p, mut g, rec), xn) in jobs.into_iter().zip(starts) {
                 recs[p] = rec;
+                if let Some(h) = &self.hold {
+                    h.settle(&xn, &mut g);
+                }
                 let rn: Vec<f64> = g.iter().zip(&xn).map(|(a, b)| a - b).collect();
                 let p_abs = scale_of(self.values[p]);
                 change[p] = relative_change(&xn[..n], &g[..n], kn, p_abs, self.floor);

@@ -113,6 +113,11 @@ impl ConservedVolume {
             .sum()
     }
 
+    /// A parameter with this dE changes the volume's weights (a capacitance on a balance row).
+    pub(crate) fn moves(&self, de: &[f64]) -> bool {
+        self.m.iter().zip(de).any(|(m, d)| *m != 0.0 && *d != 0.0)
+    }
+
     /// Move `x` along `e` (= [`Self::unit`]) so that ℓ·x = `target` (the rounding of the
     /// fixed-point iteration would otherwise drift along the neutral mode).
     pub(crate) fn hold(&self, x: &mut [f64], e: &[f64], k: f64, target: f64) {
