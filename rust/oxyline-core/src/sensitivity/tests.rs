@@ -687,7 +687,7 @@ fn chamber_pressure_derivatives_of_every_law() {
 /// A closed loop without boundary conditions: a left ventricle between tanh valves, an aorta
 /// and a systemic bed back to the mitral valve; the blood is the ventricle's start volume.
 const CLOSED_LOOP: &str = r#"{
-  "name": "loop", "units": "SI", "period": 0.8,
+  "name": "loop",
   "vessels": [
     {"name": "mitral", "from": "ven", "to": "mv_out", "valve": {"law": "tanh",
      "min_resistance": 3e6, "max_resistance": 1e10, "steepness": 5e-3}},
