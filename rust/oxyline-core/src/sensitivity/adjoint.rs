@@ -156,8 +156,7 @@ where
             "no signals to take the gradient of",
         ));
     }
-    let (pr, sources, values, cycles, change, start) =
-        recorded_cycle(dae, params, signals, &set)?;
+    let (pr, sources, values, cycles, change, start) = recorded_cycle(dae, params, signals, &set)?;
     let times: Vec<f64> = (1..=ns).map(|k| k as f64 * pr.scheme.dt).collect();
     let weights = weights_of(&times, &values)?;
     if weights.len() % block != 0 {
@@ -191,8 +190,7 @@ where
             scales: &scales,
         };
         let mode = neutral.as_ref().map(|nm| (nm, nm.sigma(w)));
-        let (grad, n_cycles, change) =
-            backward(&pr, &mut kt, &sources, signals, &fun, &set, mode)?;
+        let (grad, n_cycles, change) = backward(&pr, &mut kt, &sources, signals, &fun, &set, mode)?;
         out.gradients.extend(grad);
         out.adjoint_cycles.push(n_cycles);
         out.periodic_change = out.periodic_change.max(change);
@@ -235,13 +233,19 @@ impl Neutral {
 
     /// λ ← λ − σ ℓ (the adjoint's forcing made solvable).
     fn shift(&self, sigma: f64, lambda: &mut [f64]) {
-        lambda.iter_mut().zip(&self.row).for_each(|(l, r)| *l -= sigma * r);
+        lambda
+            .iter_mut()
+            .zip(&self.row)
+            .for_each(|(l, r)| *l -= sigma * r);
     }
 
     /// λ ← λ − (v·λ) ℓ: the adjoint's fixed point is set up to ℓ; hold v·λ = 0.
     fn project(&self, lambda: &mut [f64]) {
         let d: f64 = self.v.iter().zip(lambda.iter()).map(|(a, b)| a * b).sum();
-        lambda.iter_mut().zip(&self.row).for_each(|(l, r)| *l -= d * r);
+        lambda
+            .iter_mut()
+            .zip(&self.row)
+            .for_each(|(l, r)| *l -= d * r);
     }
 }
 

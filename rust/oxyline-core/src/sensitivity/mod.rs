@@ -87,11 +87,7 @@ where
 /// The DAE of `spec`, the derivative of it by each parameter, the unknowns of the signals,
 /// and a closed loop's conserved volume; an error naming a path, vessel or variable that does
 /// not resolve.
-fn prepare(
-    spec: &NetworkSpec,
-    paths: &[String],
-    signals: &[(String, String)],
-) -> Result<Prepared> {
+fn prepare(spec: &NetworkSpec, paths: &[String], signals: &[(String, String)]) -> Result<Prepared> {
     let mut spec = spec.clone();
     for v in &mut spec.vessels {
         v.output = true;

@@ -788,3 +788,14 @@ fn scaled_or_heart(spec: &NetworkSpec, path: &str, f: f64) -> NetworkSpec {
         heart_scaled(spec.clone(), path, f)
     }
 }
+
+/// An open model (an inflow, pressure-fixed outlets) has no conserved volume: its tangent is
+/// the plain fixed point.
+#[test]
+fn an_open_model_conserves_no_volume() {
+    for spec in [parse(MODEL).unwrap(), parse(HEART).unwrap()] {
+        let assembled = spec.assemble().unwrap();
+        let dae = assembled.circuit.assemble().unwrap();
+        assert!(ConservedVolume::of(&assembled.circuit, &dae).is_none());
+    }
+}

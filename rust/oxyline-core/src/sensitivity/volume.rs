@@ -129,9 +129,7 @@ impl ConservedVolume {
 }
 
 fn cancels(sum: &[f64], size: &[f64]) -> bool {
-    sum.iter()
-        .zip(size)
-        .all(|(s, z)| s.abs() <= CANCELS * z)
+    sum.iter().zip(size).all(|(s, z)| s.abs() <= CANCELS * z)
 }
 
 /// mᵀ ∂c/∂y = 0 for every element at the start state (valves as found there), with every
