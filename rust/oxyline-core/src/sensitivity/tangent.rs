@@ -661,10 +661,7 @@ pub fn periodic_tangent_in(
     let weights = weights(dae, floor, rate_scale);
     let values: Vec<f64> = params.iter().map(|t| t.value).collect();
     let mut sub = Subspace::new(weights, 256);
-    let mut hold = match volume {
-        Some(vol) => Some(Hold::of(vol, &pr, params, &start)),
-        None => None,
-    };
+    let mut hold = volume.map(|vol| Hold::of(vol, &pr, params, &start));
     if let Some(h) = &mut hold
         && params.iter().any(|t| h.vol.moves(&t.de))
     {
