@@ -14,8 +14,15 @@ a converged step's flow there is zero whatever the parameters: its tangent row i
   between the E and A waves (ΔP ≈ 0 and Q ≈ 0, its status at a step decided below Newton's
   tolerance), so a relative change of 1e-6 of a parameter flips a status and moves the
   cardiac output by more than 1e-4 a few cycles later (``test_the_block_slides``).
-* A closed loop (the block without boundary conditions) is refused naming the block: its
-  conserved blood volume is a neutral mode that leaves the periodic tangent undetermined.
+* A closed loop (the block without boundary conditions, the case itself): its conserved
+  blood volume (a neutral mode of the cycle map) is held at the start values' by the volume
+  row of the bordered periodic problem; the adjoint against the forward tangents (1e-8) for
+  every block key. Its coronary beds stay refused by name.
+* A smooth closed loop (a chamber between tanh valves, its blood returning through a
+  Windkessel-like systemic bed, no boundary condition): the forward tangents against central
+  differences of whole periodic runs (1e-6 of each output's scale), the adjoint against the
+  forward tangents (1e-8), and a capacitance's tangent adds exactly the start values' volume
+  its change holds (the conservation law: the outputs move as in runs from the same start).
 * Paths that name nothing differentiable are ModelErrors naming them.
 """
 
@@ -122,9 +129,83 @@ def test_bad_block_paths_name_themselves(key: str, words: list[str]) -> None:
         assert w in str(err.value), (w, str(err.value))
 
 
-def test_a_closed_loop_is_refused_naming_its_block() -> None:
-    for name in ("closedLoopHeart_singleVessel", "closedLoopHeart_withCoronaries"):
-        model = _closed(name)
-        vessel = model["vessels"][0]["name"]
-        with pytest.raises(ModelError, match="closed loops .*'CLH'.*conserves the blood"):
-            oxyline.sensitivities(model, [], [f"{vessel}.pressure_in.mean"])
+def test_closed_loop_adjoint_is_the_forward_jacobian() -> None:
+    """The closed loop itself: forward (volume row held) and adjoint (bordered) agree."""
+    model = _closed()
+    heart = next(v["name"] for v in model["vessels"] if "heart_pulmonary" in v)
+    outputs = [f"{heart}:aortic.flow_in.mean", f"{model['vessels'][0]['name']}.pressure_in.mean",
+               f"{heart}:aortic.pressure_in.max"]
+    paths = [f"vessels.{heart}.heart_pulmonary.{k}" for k in KEYS]
+    fwd = oxyline.sensitivities(model, paths, outputs, max_cycles=CYCLES)
+    adj = oxyline.sensitivities(model, paths, outputs, mode="adjoint", max_cycles=CYCLES)
+    np.testing.assert_allclose(adj.values, fwd.values, rtol=1e-12)
+    scale = np.abs(fwd.jacobian * fwd.parameter_values).max(axis=1)
+    err = np.abs(adj.jacobian - fwd.jacobian) * np.abs(fwd.parameter_values)
+    assert (err <= 1e-8 * scale[:, None]).all(), err / scale[:, None]
+    # in the closed loop the right atrium's law moves the outputs (no vena-cava condition
+    # holds its pressure any more): every key moves some output
+    assert (np.abs(fwd.jacobian).max(axis=0) > 0).all(), fwd.jacobian
+
+
+def test_closed_loop_coronary_beds_are_refused_by_name() -> None:
+    model = _closed("closedLoopHeart_withCoronaries")
+    vessel = model["vessels"][0]["name"]
+    with pytest.raises(ModelError, match="closed-loop coronary bed"):
+        oxyline.sensitivities(model, [], [f"{vessel}.pressure_in.mean"])
+
+
+T = 0.8  # s
+VALVE = {"law": "tanh", "min_resistance": 3e6, "max_resistance": 1e10, "steepness": 5e-3}
+
+#: a closed loop without valve-status ambiguity (SI): a left ventricle between tanh valves
+#: ejecting into an aorta and a systemic bed whose outlet is the mitral valve's inlet; the
+#: blood is the ventricle's start volume, no boundary condition
+SMOOTH_LOOP: dict[str, Any] = {
+    "name": "smooth-loop", "units": "SI", "period": T,
+    "vessels": [
+        {"name": "mitral", "from": "ven", "to": "mv_out", "valve": dict(VALVE)},
+        {"name": "lv", "from": "mv_out", "to": "lv_out", "chamber": {
+            "law": "elastance-inductor", "max_elastance": 3.0e8, "min_elastance": 1.3e7,
+            "rest_volume_diastole": 2e-5, "rest_volume_systole": 1e-5, "period": T,
+            "inductance": 1e4, "initial_volume": 1.0e-4,
+            "activation": {"kind": "half-cosine", "t_active": 0.1, "t_twitch": 0.35}}},
+        {"name": "aortic", "from": "lv_out", "to": "ao", "valve": dict(VALVE)},
+        {"name": "aorta", "from": "ao", "to": "art",
+         "lumped": {"resistance": 5e6, "inductance": 1e5, "capacitance": 1.2e-8}},
+        {"name": "systemic", "from": "art", "to": "ven",
+         "lumped": {"resistance": 1.4e8, "capacitance": 5e-8}},
+    ],
+    "boundary_conditions": {},
+    "simulation": {"dt": 0.004, "method": "generalized-alpha"},
+}
+
+LOOP_PARAMETERS = ["vessels.lv.chamber.max_elastance", "vessels.lv.chamber.min_elastance",
+                   "vessels.aortic.valve.min_resistance", "vessels.aorta.lumped.capacitance",
+                   "vessels.systemic.lumped.resistance", "vessels.systemic.lumped.capacitance"]
+LOOP_OUTPUTS = ["lv.pressure_in.max", "aortic.flow_in.mean", "aorta.pressure_out.mean",
+                "mitral.flow_in.max", "systemic.pressure_out.mean"]
+
+
+def test_smooth_closed_loop_matches_central_differences() -> None:
+    """Central differences of whole periodic runs from the same start values (relative step
+    1e-4: truncation and rounding well below 1e-6 of each output's scale)."""
+    exact = oxyline.sensitivities(SMOOTH_LOOP, LOOP_PARAMETERS, LOOP_OUTPUTS)
+    assert exact.periodic_change <= 1e-11
+    scale = np.abs(exact.jacobian * exact.parameter_values).max(axis=1)
+    assert (scale > 0).all()
+    for k, path in enumerate(LOOP_PARAMETERS):
+        x0 = _base_value(SMOOTH_LOOP, path)
+        h = 1e-4
+        up, down = (oxyline.sensitivities(native_model(SMOOTH_LOOP, [path], [x0 * f]), [],
+                                          LOOP_OUTPUTS).values for f in (1 + h, 1 - h))
+        err = np.abs(exact.jacobian[:, k] - (up - down) / (2 * h * x0)) * x0
+        assert (err <= 1e-6 * scale).all(), (path, err / scale)
+
+
+def test_smooth_closed_loop_adjoint_is_the_forward_jacobian() -> None:
+    fwd = oxyline.sensitivities(SMOOTH_LOOP, LOOP_PARAMETERS, LOOP_OUTPUTS)
+    adj = oxyline.sensitivities(SMOOTH_LOOP, LOOP_PARAMETERS, LOOP_OUTPUTS, mode="adjoint")
+    np.testing.assert_allclose(adj.values, fwd.values, rtol=1e-12)
+    scale = np.abs(fwd.jacobian * fwd.parameter_values).max(axis=1)
+    err = np.abs(adj.jacobian - fwd.jacobian) * np.abs(fwd.parameter_values)
+    assert (err <= 1e-8 * scale[:, None]).all(), err / scale[:, None]

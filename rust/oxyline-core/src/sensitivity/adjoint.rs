@@ -67,8 +67,8 @@ impl Transposed {
 }
 
 /// The primal at the end of its periodic cycle, the parameters' sources, the signals (n_steps
-/// × signals), the forward cycles run and the last cycle's change.
-type Recorded<'a> = (Primal<'a>, Vec<Source>, Vec<f64>, usize, f64);
+/// × signals), the forward cycles run, the last cycle's change and its start state (y, ẏ).
+type Recorded<'a> = (Primal<'a>, Vec<Source>, Vec<f64>, usize, f64, Vec<f64>);
 
 /// The forward run to the periodic state, then its periodic cycle with every parameter's
 /// source and the signals recorded: the primal, the sources and the signals (n_steps ×
@@ -86,7 +86,7 @@ fn recorded_cycle<'a>(
     let cycles = forward_to_periodic(&mut pr, ns, set)?;
     let mut sources: Vec<Source> = params.iter().map(|t| Source::of(dae, t, ns)).collect();
     let mut values = Vec::with_capacity(ns * signals.len());
-    let start = pr.y.clone();
+    let start = pr.state();
     for k in 0..ns {
         pr.increment(k as f64 * dt)?;
         for src in &mut sources {
@@ -97,8 +97,8 @@ fn recorded_cycle<'a>(
         values.extend(signals.iter().map(|&u| pr.y[u]));
     }
     let kn = dae.n_nodes.min(dae.n);
-    let change = relative_change(&start, &pr.y, kn, 1.0, pr.floor());
-    Ok((pr, sources, values, cycles + 1, change))
+    let change = relative_change(&start[..dae.n], &pr.y, kn, 1.0, pr.floor());
+    Ok((pr, sources, values, cycles + 1, change, start))
 }
 
 /// The gradients of the functionals J_f = Σ_k Σ_j weights[(f n_steps + k) n_signals + j]
@@ -128,6 +128,25 @@ pub fn periodic_adjoint_with<W>(
 where
     W: FnOnce(&[f64], &[f64]) -> Result<Vec<f64>>,
 {
+    periodic_adjoint_in(dae, params, signals, weights_of, set, None)
+}
+
+/// [`periodic_adjoint_with`] of a closed loop conserving `volume` (`super::volume`): the
+/// bordered adjoint. With v the unit-volume periodic tangent and ℓ the volume row, the forward
+/// fixed point has (I − Φ) x = b_p, ℓ·x = β_p; the adjoint solves (I − Φᵀ) μ = h − σ ℓ with
+/// σ = h·v (J's response to a unit volume, from v's recorded cycle), μ·v = 0, and
+/// dJ/dp = μ·b_p + (the cycle's direct part) + σ β_p.
+pub fn periodic_adjoint_in<W>(
+    dae: &Dae,
+    params: &[DaeTangent],
+    signals: &[usize],
+    weights_of: W,
+    set: TangentSettings,
+    volume: Option<&ConservedVolume>,
+) -> Result<PeriodicAdjoint>
+where
+    W: FnOnce(&[f64], &[f64]) -> Result<Vec<f64>>,
+{
     set.check()?;
     let (ns, nsig) = (set.steps_per_cycle.max(1), signals.len());
     let block = ns * nsig;
@@ -137,7 +156,7 @@ where
             "no signals to take the gradient of",
         ));
     }
-    let (pr, sources, values, cycles, change) = recorded_cycle(dae, params, signals, &set)?;
+    let (pr, sources, values, cycles, change, start) = recorded_cycle(dae, params, signals, &set)?;
     let times: Vec<f64> = (1..=ns).map(|k| k as f64 * pr.scheme.dt).collect();
     let weights = weights_of(&times, &values)?;
     if weights.len() % block != 0 {
@@ -150,6 +169,10 @@ where
         ));
     }
     let mut kt = Transposed::of(&pr)?;
+    let neutral = match volume {
+        Some(vol) => Some(Neutral::of(&pr, vol, params, signals, &set, &start)?),
+        None => None,
+    };
     let mut out = PeriodicAdjoint {
         values: Vec::new(),
         gradients: Vec::new(),
@@ -166,12 +189,64 @@ where
             value,
             scales: &scales,
         };
-        let (grad, n_cycles, change) = backward(&pr, &mut kt, &sources, signals, &fun, &set)?;
+        let mode = neutral.as_ref().map(|nm| (nm, nm.sigma(w)));
+        let (grad, n_cycles, change) = backward(&pr, &mut kt, &sources, signals, &fun, &set, mode)?;
         out.gradients.extend(grad);
         out.adjoint_cycles.push(n_cycles);
         out.periodic_change = out.periodic_change.max(change);
     }
     Ok(out)
+}
+
+/// A closed loop's neutral mode on the adjoint's side: ℓ, the unit-volume tangent v (its
+/// cycle-start state and signals) and each parameter's volume row β_p.
+struct Neutral {
+    row: Vec<f64>,
+    v: Vec<f64>,
+    v_signals: Vec<f64>,
+    betas: Vec<f64>,
+}
+
+impl Neutral {
+    fn of(
+        pr: &Primal,
+        vol: &ConservedVolume,
+        params: &[DaeTangent],
+        signals: &[usize],
+        set: &TangentSettings,
+        start: &[f64],
+    ) -> Result<Neutral> {
+        let (v, v_signals) = unit_volume_tangent(pr, vol, signals, set)?;
+        let hold = Hold::of(vol, pr, params, start);
+        Ok(Neutral {
+            row: vol.row(hold.k),
+            v,
+            v_signals,
+            betas: hold.targets,
+        })
+    }
+
+    /// σ = h·v: the functional's response to a unit volume.
+    fn sigma(&self, w: &[f64]) -> f64 {
+        w.iter().zip(&self.v_signals).map(|(a, b)| a * b).sum()
+    }
+
+    /// λ ← λ − σ ℓ (the adjoint's forcing made solvable).
+    fn shift(&self, sigma: f64, lambda: &mut [f64]) {
+        lambda
+            .iter_mut()
+            .zip(&self.row)
+            .for_each(|(l, r)| *l -= sigma * r);
+    }
+
+    /// λ ← λ − (v·λ) ℓ: the adjoint's fixed point is set up to ℓ; hold v·λ = 0.
+    fn project(&self, lambda: &mut [f64]) {
+        let d: f64 = self.v.iter().zip(lambda.iter()).map(|(a, b)| a * b).sum();
+        lambda
+            .iter_mut()
+            .zip(&self.row)
+            .for_each(|(l, r)| *l -= d * r);
+    }
 }
 
 /// One functional: its weights (n_steps × signals), its value, and the parameters' scales
@@ -215,6 +290,7 @@ fn backward(
     signals: &[usize],
     fun: &Functional,
     set: &TangentSettings,
+    neutral: Option<(&Neutral, f64)>,
 ) -> Result<(Vec<f64>, usize, f64)> {
     let dae = pr.dae;
     let n = dae.n;
@@ -223,15 +299,24 @@ fn backward(
     let mut x = vec![0.0; 2 * n];
     let mut g = x.clone();
     backward_cycle(pr, kt, sources, signals, w, &mut g, &mut grad)?;
+    if let Some((nm, sigma)) = neutral {
+        nm.shift(sigma, &mut g);
+    }
     let mut r: Vec<f64> = g.iter().zip(&x).map(|(a, b)| a - b).collect();
     let mut change = adjoint_change(&x, &g, dae);
     let mut sub = Subspace::new(adjoint_weights(&g, dae), 256);
     let mut cycles = 1;
     let mut last = grad.clone();
     while cycles < set.max_cycles && change > set.tol {
-        let xn = sub.next(&x, &r);
+        let mut xn = sub.next(&x, &r);
+        if let Some((nm, _)) = neutral {
+            nm.project(&mut xn);
+        }
         g.clone_from(&xn);
         backward_cycle(pr, kt, sources, signals, w, &mut g, &mut grad)?;
+        if let Some((nm, sigma)) = neutral {
+            nm.shift(sigma, &mut g);
+        }
         let rn: Vec<f64> = g.iter().zip(&xn).map(|(a, b)| a - b).collect();
         change = adjoint_change(&xn, &g, dae).min(fun.gradient_change(&last, &grad));
         last.clone_from(&grad);
@@ -240,6 +325,11 @@ fn backward(
         sub.add(dx, df);
         (x, r) = (xn, rn);
         cycles += 1;
+    }
+    if let Some((nm, sigma)) = neutral {
+        grad.iter_mut()
+            .zip(&nm.betas)
+            .for_each(|(g, b)| *g += sigma * b);
     }
     Ok((grad, cycles, change))
 }

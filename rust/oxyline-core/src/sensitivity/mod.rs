@@ -1,12 +1,14 @@
 //! Exact parameter sensitivities of a model's periodic state: the parameters by their patch
 //! paths ([`parameter`]), the derivative of the DAE with respect to each, and the
 //! tangent-linear generalized-α run to the periodic state ([`tangent`]), and its adjoint
-//! (reverse) sweep for many parameters and few functionals ([`adjoint`]).
+//! (reverse) sweep for many parameters and few functionals ([`adjoint`]). A closed loop's
+//! conserved blood volume closes its periodic problem ([`volume`]).
 
 pub mod krylov;
 pub mod parameter;
 pub mod species;
 pub mod tangent;
+pub mod volume;
 
 use crate::circuit::Dae;
 use crate::error::{Error, Result};
@@ -15,9 +17,10 @@ use crate::output::VESSEL_VARIABLES;
 pub use parameter::{DaeTangent, Parameter};
 pub use species::{SpeciesSensitivities, species_sensitivities};
 pub use tangent::{
-    PeriodicAdjoint, PeriodicTangent, TangentSettings, periodic_adjoint, periodic_adjoint_with,
-    periodic_tangent,
+    PeriodicAdjoint, PeriodicTangent, TangentSettings, periodic_adjoint, periodic_adjoint_in,
+    periodic_adjoint_with, periodic_tangent, periodic_tangent_in,
 };
+pub use volume::ConservedVolume;
 
 /// The result of [`sensitivities`]: the parameters' SI values and the signals over the
 /// periodic cycle with their derivatives.
@@ -35,8 +38,8 @@ pub fn sensitivities(
     signals: &[(String, String)],
     settings: TangentSettings,
 ) -> Result<Sensitivities> {
-    let (dae, tangents, unknowns) = prepare(spec, paths, signals)?;
-    let cycle = periodic_tangent(&dae, &tangents, &unknowns, settings)?;
+    let (dae, tangents, unknowns, volume) = prepare(spec, paths, signals)?;
+    let cycle = periodic_tangent_in(&dae, &tangents, &unknowns, settings, volume.as_ref())?;
     Ok(Sensitivities {
         values: tangents.iter().map(|t| t.value).collect(),
         cycle,
@@ -69,23 +72,26 @@ pub fn adjoint_with<W>(
 where
     W: FnOnce(&[f64], &[f64]) -> Result<Vec<f64>>,
 {
-    let (dae, tangents, unknowns) = prepare(spec, paths, signals)?;
-    let out = periodic_adjoint_with(&dae, &tangents, &unknowns, weights_of, settings)?;
+    let (dae, tangents, unknowns, volume) = prepare(spec, paths, signals)?;
+    let out = periodic_adjoint_in(
+        &dae,
+        &tangents,
+        &unknowns,
+        weights_of,
+        settings,
+        volume.as_ref(),
+    )?;
     Ok((tangents.iter().map(|t| t.value).collect(), out))
 }
 
-/// The DAE of `spec`, the derivative of it by each parameter, and the unknowns of the
-/// signals; an error naming a path, vessel or variable that does not resolve.
-fn prepare(
-    spec: &NetworkSpec,
-    paths: &[String],
-    signals: &[(String, String)],
-) -> Result<(Dae, Vec<DaeTangent>, Vec<usize>)> {
+/// The DAE of `spec`, the derivative of it by each parameter, the unknowns of the signals,
+/// and a closed loop's conserved volume; an error naming a path, vessel or variable that does
+/// not resolve.
+fn prepare(spec: &NetworkSpec, paths: &[String], signals: &[(String, String)]) -> Result<Prepared> {
     let mut spec = spec.clone();
     for v in &mut spec.vessels {
         v.output = true;
     }
-    parameter::check_closed_loop(&spec)?;
     let params = paths
         .iter()
         .map(|p| Parameter::parse(&spec, p))
@@ -94,6 +100,8 @@ fn prepare(
     let circuit = &assembled.circuit;
     let dae = circuit.assemble()?;
     parameter::check_supported(circuit, &dae)?;
+    let volume = ConservedVolume::of(circuit, &dae);
+    parameter::check_closed_loop(&spec, volume.is_some())?;
     let stamps = parameter::Stamps::new(circuit, &dae);
     let mut tangents = Vec::with_capacity(params.len());
     for (p, path) in params.iter().zip(paths) {
@@ -132,8 +140,11 @@ fn prepare(
             Ok(valve.unknowns[k.min(2)])
         })
         .collect::<Result<Vec<_>>>()?;
-    Ok((dae, tangents, unknowns))
+    Ok((dae, tangents, unknowns, volume))
 }
+
+/// [`prepare`]'s result.
+type Prepared = (Dae, Vec<DaeTangent>, Vec<usize>, Option<ConservedVolume>);
 
 #[cfg(test)]
 mod tests;

@@ -495,20 +495,18 @@ pub fn check_supported(circuit: &Circuit, dae: &Dae) -> Result<()> {
 }
 
 /// Refuse a closed loop (a model with the closed-loop heart block and no boundary
-/// condition): the loop conserves the blood volume Σ C P + Σ V its start values hold, a
-/// neutral mode of the cycle map (eigenvalue 1), so the periodic tangent's and the adjoint's
-/// fixed points are not determined by the periodic cycle (on svZeroDSolver's
-/// closedLoopHeart_singleVessel the two differ by up to 0.3 of an output's scale). The block
-/// between boundary conditions (an open model) is differentiated.
-pub fn check_closed_loop(spec: &NetworkSpec) -> Result<()> {
+/// condition) whose conserved blood volume was not found (`conserved`: its balance rows
+/// cancel every flow term, `super::volume`): without that row the periodic tangent's fixed
+/// point is not determined (the volume is a neutral mode of the cycle map).
+pub fn check_closed_loop(spec: &NetworkSpec, conserved: bool) -> Result<()> {
     let heart = spec.vessels.iter().find(|v| v.heart_pulmonary.is_some());
     match heart {
-        Some(v) if spec.boundary_conditions.is_empty() => Err(Error::model(
+        Some(v) if spec.boundary_conditions.is_empty() && !conserved => Err(Error::model(
             "sensitivities",
             format!(
-                "do not cover closed loops (the heart_pulmonary block '{}' without a boundary \
-                 condition): the loop conserves the blood volume its start values hold, a \
-                 neutral mode that leaves the periodic tangent undetermined",
+                "do not cover this closed loop (the heart_pulmonary block '{}' without a \
+                 boundary condition): its flow balances do not conserve the blood volume, \
+                 the row that sets the periodic tangent",
                 v.name
             ),
         )),

@@ -41,10 +41,11 @@
 
 #[path = "adjoint.rs"]
 mod adjoint;
-pub use adjoint::{PeriodicAdjoint, periodic_adjoint, periodic_adjoint_with};
+pub use adjoint::{PeriodicAdjoint, periodic_adjoint, periodic_adjoint_in, periodic_adjoint_with};
 
 use super::krylov::Subspace;
 use super::parameter::DaeTangent;
+use super::volume::ConservedVolume;
 use crate::circuit::{Dae, Regime};
 use crate::error::{Error, Result};
 use crate::integrate::genalpha::GenAlpha;
@@ -168,6 +169,20 @@ struct Source {
 }
 
 impl Source {
+    /// No source over `steps` steps: the tangent of a start state alone.
+    fn empty(steps: usize) -> Source {
+        Source {
+            rows: Vec::new(),
+            e: Vec::new(),
+            f: Vec::new(),
+            forcing: Vec::new(),
+            sten: Vec::new(),
+            elem: Vec::new(),
+            vals: Vec::new(),
+            steps,
+        }
+    }
+
     fn of(dae: &Dae, t: &DaeTangent, steps: usize) -> Source {
         let mut rows = Vec::new();
         let mut index = vec![usize::MAX; dae.n];
@@ -596,6 +611,18 @@ pub fn periodic_tangent(
     signals: &[usize],
     set: TangentSettings,
 ) -> Result<PeriodicTangent> {
+    periodic_tangent_in(dae, params, signals, set, None)
+}
+
+/// [`periodic_tangent`] of a closed loop conserving `volume` (`super::volume`): each tangent's
+/// fixed point is the one whose volume row holds the start values' volume.
+pub fn periodic_tangent_in(
+    dae: &Dae,
+    params: &[DaeTangent],
+    signals: &[usize],
+    set: TangentSettings,
+    volume: Option<&ConservedVolume>,
+) -> Result<PeriodicTangent> {
     set.check()?;
     let ns = set.steps_per_cycle.max(1);
     let scheme = Scheme::new(set.rho_infty, set.period / ns as f64)?;
@@ -634,6 +661,12 @@ pub fn periodic_tangent(
     let weights = weights(dae, floor, rate_scale);
     let values: Vec<f64> = params.iter().map(|t| t.value).collect();
     let mut sub = Subspace::new(weights, 256);
+    let mut hold = volume.map(|vol| Hold::of(vol, &pr, params, &start));
+    if let Some(h) = &mut hold
+        && params.iter().any(|t| h.vol.moves(&t.de))
+    {
+        h.v = Some(unit_volume_tangent(&pr, h.vol, signals, &set)?.0);
+    }
     let mut run = TangentRun {
         pr: &pr,
         mats: StepMatrices::of(&pr)?,
@@ -641,6 +674,8 @@ pub fn periodic_tangent(
         values: &values,
         signals,
         floor,
+        hold,
+        starts: Vec::new(),
     };
     let (tcycles, change) = run.run_to_periodic(&mut sub, &set, &mut rec.derivs)?;
     rec.tangent_cycles = tcycles;
@@ -662,6 +697,86 @@ fn weights(dae: &Dae, floor: [f64; 2], rate: [f64; 2]) -> Vec<f64> {
         .collect()
 }
 
+/// A closed loop's volume row (`super::volume`): ℓ·x of each tangent is held at its target.
+struct Hold<'v> {
+    vol: &'v ConservedVolume,
+    /// the direction moved along, ℓ·e = 1
+    e: Vec<f64>,
+    /// ℓ's weight of ṡ, γ Δt c
+    k: f64,
+    /// each job's ℓ·x
+    targets: Vec<f64>,
+    /// The unit-volume tangent v, when some parameter changes the volume (a capacitance):
+    /// its source's ℓ·b = mᵀ dE (w_start − w_end) is the primal cycle's own mismatch, which
+    /// no fixed point can absorb; it is taken out along v, as the adjoint does.
+    v: Option<Vec<f64>>,
+}
+
+impl<'v> Hold<'v> {
+    /// The targets of `params`' tangents, the periodic cycle starting at `start` = (y, ẏ).
+    fn of(vol: &'v ConservedVolume, pr: &Primal, params: &[DaeTangent], start: &[f64]) -> Self {
+        let k = pr.scheme.gamma * pr.scheme.dt * pr.c;
+        let y0 = pr.dae.initial_state();
+        Hold {
+            vol,
+            e: vol.unit(),
+            k,
+            targets: (params.iter())
+                .map(|t| vol.start_change(&t.de, &y0, start, k))
+                .collect(),
+            v: None,
+        }
+    }
+
+    fn apply(&self, p: usize, x: &mut [f64]) {
+        self.vol.hold(x, &self.e, self.k, self.targets[p]);
+    }
+
+    /// g ← g − (ℓ·g − ℓ·x) v: a cycle's end `g` from `x` without its source's volume change.
+    fn settle(&self, x: &[f64], g: &mut [f64]) {
+        if let Some(v) = &self.v {
+            let d = self.vol.dot(g, self.k) - self.vol.dot(x, self.k);
+            g.iter_mut().zip(v).for_each(|(gi, vi)| *gi -= d * vi);
+        }
+    }
+}
+
+/// The periodic tangent of a unit change of a closed loop's volume (no parameter source, ℓ·x
+/// = 1): the right eigenvector v of the cycle map's eigenvalue 1, as the cycle-start state and
+/// its signals over the cycle (n_steps × signals).
+fn unit_volume_tangent(
+    pr: &Primal,
+    vol: &ConservedVolume,
+    signals: &[usize],
+    set: &TangentSettings,
+) -> Result<(Vec<f64>, Vec<f64>)> {
+    let ns = set.steps_per_cycle.max(1);
+    let floor = pr.floor();
+    let rate = floor.map(|f| f / set.period);
+    let mut sub = Subspace::new(weights(pr.dae, floor, rate), 256);
+    let k = pr.scheme.gamma * pr.scheme.dt * pr.c;
+    let sources = [Source::empty(ns)];
+    let mut run = TangentRun {
+        pr,
+        mats: StepMatrices::of(pr)?,
+        sources: &sources,
+        values: &[vol.total],
+        signals,
+        floor,
+        hold: Some(Hold {
+            vol,
+            e: vol.unit(),
+            k,
+            targets: vec![1.0],
+            v: None,
+        }),
+        starts: Vec::new(),
+    };
+    let mut rec = vec![0.0; ns * signals.len()];
+    run.run_to_periodic(&mut sub, set, &mut rec)?;
+    Ok((run.starts.swap_remove(0), rec))
+}
+
 /// The tangents' cycles along the recorded periodic primal.
 struct TangentRun<'r, 'a> {
     pr: &'r Primal<'a>,
@@ -670,6 +785,10 @@ struct TangentRun<'r, 'a> {
     values: &'r [f64],
     signals: &'r [usize],
     floor: [f64; 2],
+    /// a closed loop's volume row
+    hold: Option<Hold<'r>>,
+    /// each job's start of its recorded cycle (after `run_to_periodic`)
+    starts: Vec<Vec<f64>>,
 }
 
 impl TangentRun<'_, '_> {
@@ -688,6 +807,9 @@ impl TangentRun<'_, '_> {
         let block = derivs.len().checked_div(np).unwrap_or(0).max(1);
         let mut recs: Vec<&mut [f64]> = derivs.chunks_mut(block).collect();
         let mut x = vec![vec![0.0; 2 * n]; np];
+        if let Some(h) = &self.hold {
+            x.iter_mut().enumerate().for_each(|(p, xp)| h.apply(p, xp));
+        }
         let mut r: Vec<Vec<f64>> = vec![Vec::new(); np];
         let mut change = vec![f64::INFINITY; np];
         let mut cycles = 0;
@@ -697,10 +819,13 @@ impl TangentRun<'_, '_> {
                 .iter()
                 .map(|&p| {
                     if cycles == 0 {
-                        x[p].clone()
-                    } else {
-                        sub.next(&x[p], &r[p])
+                        return x[p].clone();
                     }
+                    let mut xn = sub.next(&x[p], &r[p]);
+                    if let Some(h) = &self.hold {
+                        h.apply(p, &mut xn);
+                    }
+                    xn
                 })
                 .collect();
             // each active parameter's record, taken out of `recs` for the cycle
@@ -717,8 +842,11 @@ impl TangentRun<'_, '_> {
                 self.signals,
             );
             let mut next = Vec::with_capacity(active.len());
-            for ((p, g, rec), xn) in jobs.into_iter().zip(starts) {
+            for ((p, mut g, rec), xn) in jobs.into_iter().zip(starts) {
                 recs[p] = rec;
+                if let Some(h) = &self.hold {
+                    h.settle(&xn, &mut g);
+                }
                 let rn: Vec<f64> = g.iter().zip(&xn).map(|(a, b)| a - b).collect();
                 let p_abs = scale_of(self.values[p]);
                 change[p] = relative_change(&xn[..n], &g[..n], kn, p_abs, self.floor);
@@ -735,6 +863,7 @@ impl TangentRun<'_, '_> {
             }
             cycles += 1;
         }
+        self.starts = x;
         Ok((cycles, change.iter().fold(0.0, |m: f64, &c| m.max(c))))
     }
 }

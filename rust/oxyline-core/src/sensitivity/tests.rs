@@ -683,3 +683,119 @@ fn chamber_pressure_derivatives_of_every_law() {
     }
     assert_eq!(checked, 4 * (6 + 5 + 6));
 }
+
+/// A closed loop without boundary conditions: a left ventricle between tanh valves, an aorta
+/// and a systemic bed back to the mitral valve; the blood is the ventricle's start volume.
+const CLOSED_LOOP: &str = r#"{
+  "name": "loop",
+  "vessels": [
+    {"name": "mitral", "from": "ven", "to": "mv_out", "valve": {"law": "tanh",
+     "min_resistance": 3e6, "max_resistance": 1e10, "steepness": 5e-3}},
+    {"name": "lv", "from": "mv_out", "to": "lv_out", "chamber": {
+      "law": "elastance-inductor", "max_elastance": 3.0e8, "min_elastance": 1.3e7,
+      "rest_volume_diastole": 2e-5, "rest_volume_systole": 1e-5, "period": 0.8,
+      "inductance": 1e4, "initial_volume": 1.0e-4,
+      "activation": {"kind": "half-cosine", "t_active": 0.1, "t_twitch": 0.35}}},
+    {"name": "aortic", "from": "lv_out", "to": "ao", "valve": {"law": "tanh",
+     "min_resistance": 3e6, "max_resistance": 1e10, "steepness": 5e-3}},
+    {"name": "aorta", "from": "ao", "to": "art",
+     "lumped": {"resistance": 5e6, "inductance": 1e5, "capacitance": 1.2e-8}},
+    {"name": "systemic", "from": "art", "to": "ven",
+     "lumped": {"resistance": 1.4e8, "capacitance": 5e-8}}
+  ],
+  "boundary_conditions": {}
+}"#;
+
+/// The blood volume Σ C P + Σ V_chamber of state `y` (the circuit's node capacitances and
+/// its chambers' volume unknowns): the conservation law, apart from the DAE's rows.
+fn blood_volume(circuit: &crate::circuit::Circuit, caps: &[f64], y: &[f64]) -> f64 {
+    let (nn, nb) = (circuit.nodes.len(), circuit.branches.len());
+    let nodes: f64 = caps.iter().zip(y).map(|(c, p)| c * p).sum();
+    let chambers: f64 = (circuit.moved_rows.iter())
+        .map(|&(_, x)| y[nn + nb + x])
+        .sum();
+    nodes + chambers
+}
+
+/// The tangent of the blood volume after every step of the periodic cycle is the volume
+/// change of the start values (dC · P₀: the runs from the same start values hold their
+/// volume), for a capacitance (which changes it) and an elastance (which does not); the
+/// primal's volume is the start values' to Newton's tolerance.
+#[test]
+fn closed_loop_tangent_holds_the_blood_volume() {
+    let spec = parse(CLOSED_LOOP).unwrap();
+    let assembled = spec.assemble().unwrap();
+    let circuit = &assembled.circuit;
+    let dae = circuit.assemble().unwrap();
+    let volume = ConservedVolume::of(circuit, &dae).expect("a closed loop's volume");
+    let caps_of = |s: &NetworkSpec| -> Vec<f64> {
+        let a = s.assemble().unwrap();
+        a.circuit.nodes.iter().map(|n| n.capacitance).collect()
+    };
+    let caps = caps_of(&spec);
+    let stamps = parameter::Stamps::new(circuit, &dae);
+    let paths = [
+        "vessels.systemic.lumped.capacitance",
+        "vessels.lv.chamber.max_elastance",
+    ];
+    let tangents: Vec<DaeTangent> = (paths.iter())
+        .map(|p| {
+            let parsed = Parameter::parse(&spec, p).unwrap();
+            stamps.tangent(&spec, &parsed, p).unwrap()
+        })
+        .collect();
+    let signals: Vec<usize> = (0..dae.n).collect();
+    let set = settings();
+    let run = periodic_tangent_in(&dae, &tangents, &signals, set, Some(&volume)).unwrap();
+    assert!(run.periodic_change <= 1e-11, "{}", run.periodic_change);
+    let y0 = dae.initial_state();
+    let v0 = blood_volume(circuit, &caps, &y0);
+    let (ns, n) = (set.steps_per_cycle, dae.n);
+    for k in 0..ns {
+        let v = blood_volume(circuit, &caps, &run.values[k * n..(k + 1) * n]);
+        assert!((v / v0 - 1.0).abs() <= 1e-9, "step {k}: {v} vs {v0}");
+    }
+    for (p, path) in paths.iter().enumerate() {
+        // dC/dp of every node, by the circuit's capacitances at p (1 ± h) (linear in p)
+        let h = 1e-3;
+        let value = tangents[p].value;
+        let (up, down) = (
+            caps_of(&scaled_or_heart(&spec, path, 1.0 + h)),
+            caps_of(&scaled_or_heart(&spec, path, 1.0 - h)),
+        );
+        let dcaps: Vec<f64> = (up.iter().zip(&down))
+            .map(|(a, b)| (a - b) / (2.0 * h * value))
+            .collect();
+        let expected: f64 = dcaps.iter().zip(&y0).map(|(d, p)| d * p).sum();
+        for k in 0..ns {
+            let y = &run.values[k * n..(k + 1) * n];
+            let s = &run.derivs[(p * ns + k) * n..(p * ns + k + 1) * n];
+            let dv = blood_volume(circuit, &caps, s)
+                + dcaps.iter().zip(y).map(|(d, q)| d * q).sum::<f64>();
+            // judged on the volume's response to a 100 % change of p against the volume
+            assert!(
+                (value * (dv - expected)).abs() <= 1e-9 * v0,
+                "{path} step {k}: {dv} vs {expected}"
+            );
+        }
+    }
+}
+
+fn scaled_or_heart(spec: &NetworkSpec, path: &str, f: f64) -> NetworkSpec {
+    if path.contains(".lumped.") {
+        scaled_from(spec.clone(), path, f)
+    } else {
+        heart_scaled(spec.clone(), path, f)
+    }
+}
+
+/// An open model (an inflow, pressure-fixed outlets) has no conserved volume: its tangent is
+/// the plain fixed point.
+#[test]
+fn an_open_model_conserves_no_volume() {
+    for spec in [parse(MODEL).unwrap(), parse(HEART).unwrap()] {
+        let assembled = spec.assemble().unwrap();
+        let dae = assembled.circuit.assemble().unwrap();
+        assert!(ConservedVolume::of(&assembled.circuit, &dae).is_none());
+    }
+}
