@@ -185,6 +185,22 @@ def _evaluate(model: Model, parameters: Sequence[str], targets: Sequence[Target]
     return np.concatenate(values), np.concatenate(jac), raw
 
 
+def _check_oxygen_adjoint(parameters: Sequence[str], signals: Sequence[tuple[str, str]]
+                          ) -> None:
+    """The oxygen adjoint follows oxygen outputs by oxygen parameters: a flow parameter or a
+    flow output beside them is refused by name (their forward tangents cover them)."""
+    flow = [p for p in parameters if not _is_oxygen_path(p)]
+    if flow:
+        raise CalibrationError(f"mode 'adjoint' with oxygen: flow parameter(s) "
+                               f"{', '.join(flow)} have forward tangents only "
+                               "(use mode='forward')")
+    outputs = [f"{v}.{n}" for v, n in signals if not is_oxygen_signal((v, n))]
+    if outputs:
+        raise CalibrationError(f"mode 'adjoint' with oxygen parameters: flow output(s) "
+                               f"{', '.join(outputs)} have forward tangents only (they do not "
+                               "depend on oxygen parameters; use mode='forward')")
+
+
 def _adjoint(m: Model, parameters: Sequence[str], targets: Sequence[Target],
              steps_per_cycle: int | None, tol: float, max_cycles: int, series_at_steps: bool
              ) -> tuple[list[np.ndarray], list[np.ndarray], dict[str, Any]]:
@@ -223,9 +239,13 @@ def _adjoint(m: Model, parameters: Sequence[str], targets: Sequence[Target],
             paths.append(path)
         return np.ascontiguousarray(np.concatenate(weights).ravel(), dtype=float)
 
+    core = _core.adjoint_gradients
+    if _involves_oxygen(parameters, signals):
+        _check_oxygen_adjoint(parameters, signals)
+        core = _core.species_adjoint_gradients
     with core_errors(f"model '{m.name}'"):
-        out = _core.adjoint_gradients(json.dumps(m.canonical), list(parameters), signals,
-                                      weights_of, period, steps, rho, max_cycles, tol)
+        out = core(json.dumps(m.canonical), list(parameters), signals, weights_of, period,
+                   steps, rho, max_cycles, tol)
     jac, start = [], 0
     for path, v in zip(paths, values, strict=True):
         j = np.asarray(out["gradients"][start:start + len(v)])
@@ -250,8 +270,11 @@ def sensitivities(model: Model | Mapping[str, Any] | str, parameters: Sequence[s
 
     Oxygen outputs (``SvO2.<vessel>``, ``VO2``, ``<vessel>.po2_out.<statistic>``, …) are
     differentiated by oxygen parameters (``oxygen.wall.k``, ``oxygen.hill.p50``, …) through
-    the species transport's tangent (docs/calibration.md, "Oxygen"); oxygen parameters leave
-    flow outputs unchanged (zero rows), and a flow parameter with an oxygen output is refused.
+    the species transport's tangent (docs/calibration.md, "Oxygen"), and by flow parameters
+    through the flow's tangent; oxygen parameters leave flow outputs unchanged (zero rows).
+    With ``mode="adjoint"`` oxygen outputs take oxygen parameters only (the species
+    transport's adjoint); a flow parameter or output beside them is a
+    :class:`~oxyline.CalibrationError` naming it.
 
     ``mode="forward"``: tangents, one per parameter (few parameters); ``"adjoint"``: one
     backward sweep per output row, whatever the number of parameters (many parameters, few
@@ -268,10 +291,6 @@ def sensitivities(model: Model | Mapping[str, Any] | str, parameters: Sequence[s
     if mode not in ("forward", "adjoint"):
         raise CalibrationError(f"mode: expected 'forward' or 'adjoint', got {mode!r}")
     targets = [Target(o, None, signals=signals_of(o, m)) for o in outputs]
-    if mode == "adjoint" and _involves_oxygen(parameters, [s for t in targets
-                                                           for s in t.signals]):
-        raise CalibrationError("mode 'adjoint': oxygen outputs and parameters have forward "
-                               "tangents only (use mode='forward')")
     if mode == "adjoint":
         values, jac, raw = _adjoint(m, parameters, targets, steps_per_cycle, tol, max_cycles,
                                     series_at_steps=True)
