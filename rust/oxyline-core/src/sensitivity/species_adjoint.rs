@@ -79,7 +79,9 @@ where
     tr.check_species_adjoint(s, "sensitivities")?;
     let flow = FlowCycle::run(&dae, &[], &tr.flow_tangent_unknowns(), &settings)?;
     let (transport_cycles, change_z, mut z) = primal_to_periodic(&mut tr, s, &flow, &settings)?;
-    let rec = record(&mut tr, s, &flow, &settings, signals, &sigs, &derivs, &mut z)?;
+    let rec = record(
+        &mut tr, s, &flow, &settings, signals, &sigs, &derivs, &mut z,
+    )?;
     let ns = settings.steps_per_cycle;
     let dt = settings.period / ns as f64;
     let times: Vec<f64> = (1..=ns).map(|k| k as f64 * dt).collect();

@@ -28,7 +28,11 @@ fn weights(ns: usize, values: &[f64], sig: &[(String, String)]) -> Vec<f64> {
         }
         w.extend(f);
     }
-    let at = |name: &str| sig.iter().position(|(v, s)| v == "d1" && s == name).unwrap();
+    let at = |name: &str| {
+        sig.iter()
+            .position(|(v, s)| v == "d1" && s == name)
+            .unwrap()
+    };
     let (q, s) = (at("flow_out"), at("saturation_out"));
     let total: f64 = (0..ns).map(|k| values[k * nsig + q]).sum();
     let mut f = vec![0.0; ns * nsig];
@@ -66,9 +70,12 @@ fn adjoint_against_forward(spec: &NetworkSpec, paths: &[&str]) -> f64 {
         let j: f64 = w.iter().zip(&fwd.signals).map(|(a, b)| a * b).sum();
         assert!((adj.functionals[f] - j).abs() <= 1e-9 * j.abs().max(1e-300));
         let g: Vec<f64> = (0..np)
-            .map(|p| (w.iter().zip(&fwd.derivs[p * ns * nsig..(p + 1) * ns * nsig]))
+            .map(|p| {
+                (w.iter()
+                    .zip(&fwd.derivs[p * ns * nsig..(p + 1) * ns * nsig]))
                 .map(|(a, b)| a * b)
-                .sum())
+                .sum()
+            })
             .collect();
         let scale = (g.iter().zip(&values)).fold(0.0f64, |m, (d, v)| m.max((d * v).abs()));
         for p in 0..np {
@@ -84,7 +91,10 @@ fn adjoint_against_forward(spec: &NetworkSpec, paths: &[&str]) -> f64 {
 #[test]
 fn adjoint_equals_forward_on_every_oxygen_parameter_kind() {
     let mt = parse(MODEL).unwrap();
-    let e = adjoint_against_forward(&mt, &["oxygen.wall.k", "oxygen.wall.po2", "oxygen.hill.p50"]);
+    let e = adjoint_against_forward(
+        &mt,
+        &["oxygen.wall.k", "oxygen.wall.po2", "oxygen.hill.p50"],
+    );
     eprintln!("adjoint vs forward, mass-transfer wall: {e:.2e}");
     assert!(e < 1e-8, "mass-transfer wall: {e:.2e}");
     let e = adjoint_against_forward(&consuming(), &["oxygen.wall.flux", "oxygen.hill.p50"]);
@@ -121,7 +131,11 @@ fn adjoint_against_central_differences() {
     let spec = parse(MODEL).unwrap();
     let sig = signals();
     let (ns, nsig) = (settings().steps_per_cycle, sig.len());
-    let at = |name: &str| sig.iter().position(|(v, s)| v == "d1" && s == name).unwrap();
+    let at = |name: &str| {
+        sig.iter()
+            .position(|(v, s)| v == "d1" && s == name)
+            .unwrap()
+    };
     let (po2, sat, q) = (at("po2_out"), at("saturation_out"), at("flow_out"));
     let functionals = |v: &[f64]| {
         let mean = (0..ns).map(|k| v[k * nsig + po2]).sum::<f64>() / ns as f64;
@@ -164,7 +178,10 @@ fn adjoint_against_central_differences() {
 
 #[test]
 fn flow_parameters_are_refused_by_name() {
-    let paths = vec!["oxygen.wall.k".to_string(), "vessels.parent.radius".to_string()];
+    let paths = vec![
+        "oxygen.wall.k".to_string(),
+        "vessels.parent.radius".to_string(),
+    ];
     let e = species_adjoint_with(
         &parse(MODEL).unwrap(),
         &paths,
@@ -174,5 +191,8 @@ fn flow_parameters_are_refused_by_name() {
     )
     .unwrap_err()
     .to_string();
-    assert!(e.contains("vessels.parent.radius") && e.contains("forward"), "{e}");
+    assert!(
+        e.contains("vessels.parent.radius") && e.contains("forward"),
+        "{e}"
+    );
 }

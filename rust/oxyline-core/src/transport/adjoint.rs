@@ -128,7 +128,11 @@ impl Transport {
         );
         for (i, &n) in self.plan.cells.iter().enumerate() {
             let ci = z_old[s * nc + i] / w_old[i];
-            let guess = free.get(n).copied().filter(|f| f.is_finite()).unwrap_or(0.0);
+            let guess = free
+                .get(n)
+                .copied()
+                .filter(|f| f.is_finite())
+                .unwrap_or(0.0);
             point.push(binding_point(&binding, ci, guess, None));
             c.push(ci);
             x.push(z[s * nc + i] / self.wvol[i]);
@@ -345,7 +349,10 @@ impl Transport {
         bd: &[Option<f64>],
     ) -> (Vec<f64>, f64) {
         let plan = &*self.plan;
-        let tree = plan.tree.as_deref().expect("checked by check_species_adjoint");
+        let tree = plan
+            .tree
+            .as_deref()
+            .expect("checked by check_species_adjoint");
         let qf = &self.qf[..];
         // the boundaries' outflows, then the tree faces', into d (as `boundary_rows` and
         // the elimination add them); per link: |Q| and whether it flows to the parent
