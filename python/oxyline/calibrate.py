@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import copy
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -185,20 +185,39 @@ def _evaluate(model: Model, parameters: Sequence[str], targets: Sequence[Target]
     return np.concatenate(values), np.concatenate(jac), raw
 
 
-def _check_oxygen_adjoint(parameters: Sequence[str], signals: Sequence[tuple[str, str]]
-                          ) -> None:
-    """The oxygen adjoint follows oxygen outputs by oxygen parameters: a flow parameter or a
-    flow output beside them is refused by name (their forward tangents cover them)."""
+def _oxygen_adjoint(m: Model, parameters: Sequence[str], signals: list[tuple[str, str]],
+                    weights_of: Callable[[np.ndarray, np.ndarray], np.ndarray],
+                    args: tuple[Any, ...]) -> tuple[Any, list[tuple[str, str]], Any]:
+    """The core's oxygen adjoint, its signals and weights: oxygen outputs by oxygen
+    parameters. A flow parameter is refused by name (forward tangents only); flow signals
+    (an SvO2's outflow) are read from the flow's periodic cycle for the weights, and their
+    columns dropped (oxygen parameters do not change the flow)."""
+    from oxyline import _core
+
     flow = [p for p in parameters if not _is_oxygen_path(p)]
     if flow:
         raise CalibrationError(f"mode 'adjoint' with oxygen: flow parameter(s) "
                                f"{', '.join(flow)} have forward tangents only "
                                "(use mode='forward')")
-    outputs = [f"{v}.{n}" for v, n in signals if not is_oxygen_signal((v, n))]
-    if outputs:
-        raise CalibrationError(f"mode 'adjoint' with oxygen parameters: flow output(s) "
-                               f"{', '.join(outputs)} have forward tangents only (they do not "
-                               "depend on oxygen parameters; use mode='forward')")
+    o2 = [k for k, s in enumerate(signals) if is_oxygen_signal(s)]
+    if not o2:
+        raise CalibrationError("mode 'adjoint': oxygen parameters do not change the flow "
+                               f"outputs {', '.join(f'{v}.{n}' for v, n in signals)} (use "
+                               "mode='forward' for their zero rows)")
+    rest = [k for k in range(len(signals)) if k not in o2]
+    flow_values = None
+    if rest:
+        flow_values = _core.tangent_sensitivities(json.dumps(m.canonical), [],
+                                                  [signals[k] for k in rest], *args)["signals"]
+
+    def weights(times: np.ndarray, sig: np.ndarray) -> np.ndarray:
+        full = np.zeros((len(times), len(signals)))
+        full[:, o2] = sig
+        if rest:
+            full[:, rest] = flow_values
+        w = np.asarray(weights_of(times, full)).reshape(-1, len(times), len(signals))
+        return np.ascontiguousarray(w[:, :, o2].ravel(), dtype=float)
+    return _core.species_adjoint_gradients, [signals[k] for k in o2], weights
 
 
 def _adjoint(m: Model, parameters: Sequence[str], targets: Sequence[Target],
@@ -239,12 +258,12 @@ def _adjoint(m: Model, parameters: Sequence[str], targets: Sequence[Target],
             paths.append(path)
         return np.ascontiguousarray(np.concatenate(weights).ravel(), dtype=float)
 
-    core = _core.adjoint_gradients
-    if _involves_oxygen(parameters, signals):
-        _check_oxygen_adjoint(parameters, signals)
-        core = _core.species_adjoint_gradients
+    core, core_signals, weights = _core.adjoint_gradients, signals, weights_of
     with core_errors(f"model '{m.name}'"):
-        out = core(json.dumps(m.canonical), list(parameters), signals, weights_of, period,
+        if _involves_oxygen(parameters, signals):
+            core, core_signals, weights = _oxygen_adjoint(
+                m, parameters, signals, weights_of, (period, steps, rho, max_cycles, tol))
+        out = core(json.dumps(m.canonical), list(parameters), core_signals, weights, period,
                    steps, rho, max_cycles, tol)
     jac, start = [], 0
     for path, v in zip(paths, values, strict=True):
@@ -273,7 +292,7 @@ def sensitivities(model: Model | Mapping[str, Any] | str, parameters: Sequence[s
     the species transport's tangent (docs/calibration.md, "Oxygen"), and by flow parameters
     through the flow's tangent; oxygen parameters leave flow outputs unchanged (zero rows).
     With ``mode="adjoint"`` oxygen outputs take oxygen parameters only (the species
-    transport's adjoint); a flow parameter or output beside them is a
+    transport's adjoint; flow outputs beside them get zero rows); a flow parameter is a
     :class:`~oxyline.CalibrationError` naming it.
 
     ``mode="forward"``: tangents, one per parameter (few parameters); ``"adjoint"``: one
