@@ -81,7 +81,7 @@ def adjoint(m: dict, a: argparse.Namespace) -> None:
     model = oxyline.load_model(m)
     paths = (["oxygen.wall.k", "oxygen.hill.p50"]
              + [f"oxygen.per_vessel.{v}.wall.k" for v in own])
-    outputs = ["VO2", "SvO2.v", "v.po2_out.mean"]
+    outputs = ["VO2", "VO2.v", "v.wall_uptake.max"]
     base = best(lambda: oxyline.sensitivities(model, [], outputs), a.repeat)
     print(f"tree depth {a.depth}: {len(m['vessels'])} vessels, {a.steps} steps a cycle, "
           f"{len(outputs)} outputs; CPU s, best of {a.repeat}")
