@@ -8,7 +8,11 @@ parameters (wall k, wall PO2, P50), best of `--repeat` in one process (CPU time:
 machine is shared); and `oxyline.simulate` of the same model (flow and oxygen together) for
 as many cycles as the oxygen field needs to be periodic.
 
-    python benches/bench_o2_sensitivity.py [--depth 6] [--repeat 3]
+`--adjoint`: the adjoint (`mode="adjoint"`: one backward sweep per output) against the
+forward tangents for 1 and 10 oxygen parameters (the section's wall k, P50 and the own
+walls' k of vessels given one), in the same run, for the same outputs.
+
+    python benches/bench_o2_sensitivity.py [--depth 6] [--repeat 3] [--adjoint]
 """
 
 from __future__ import annotations
@@ -42,9 +46,12 @@ def main() -> None:
     ap.add_argument("--depth", type=int, default=6)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--steps", type=int, default=200)
+    ap.add_argument("--adjoint", action="store_true")
     a = ap.parse_args()
     m = tree(a.depth, {"model": "mass-transfer", "k": 1e-4, "po2": 60.0}, "hill")
     m["oxygen"]["hill"] = {"p50": 26.8}
+    if a.adjoint:
+        return adjoint(m, a)
     m["simulation"] = {"dt": 1.0 / a.steps, "method": "generalized-alpha"}
     model = oxyline.load_model(m)
     outputs = ["VO2", "VO2.v", "v.wall_uptake.max"]
@@ -63,6 +70,36 @@ def main() -> None:
                      a.repeat)
             print(f"{f'tangents of {n} {kind} parameter(s)':<34}{t:>9.3f}{t / base:>10.2f}"
                   f"   ({(t - base) / base / n:.2f} primal per parameter)")
+
+
+def adjoint(m: dict, a: argparse.Namespace) -> None:
+    """Forward tangents against the adjoint, 1 and 10 oxygen parameters, one process."""
+    own = [v["name"] for v in m["vessels"][1:9]]
+    m["oxygen"]["per_vessel"] = {v: {"wall": {"model": "mass-transfer", "k": 1.5e-4,
+                                              "po2": 50.0}} for v in own}
+    m["simulation"] = {"dt": 1.0 / a.steps, "method": "generalized-alpha"}
+    model = oxyline.load_model(m)
+    paths = (["oxygen.wall.k", "oxygen.hill.p50"]
+             + [f"oxygen.per_vessel.{v}.wall.k" for v in own])
+    outputs = ["VO2", "VO2.v", "v.wall_uptake.max"]
+    base = best(lambda: oxyline.sensitivities(model, [], outputs), a.repeat)
+    print(f"tree depth {a.depth}: {len(m['vessels'])} vessels, {a.steps} steps a cycle, "
+          f"{len(outputs)} outputs; CPU s, best of {a.repeat}")
+    print(f"{'parameters':<12}{'forward':>10}{'adjoint':>10}{'fwd/primal':>12}"
+          f"{'adj/primal':>12}{'max |adj-fwd|/scale':>22}")
+    for n in (1, 10):
+        p = paths[:n]
+        fwd = oxyline.sensitivities(model, p, outputs)
+        adj = oxyline.sensitivities(model, p, outputs, mode="adjoint")
+        f = fwd.jacobian * fwd.parameter_values
+        err = (abs(adj.jacobian * adj.parameter_values - f).max(axis=1)
+               / abs(f).max(axis=1)).max()
+        tf = best(lambda p=p: oxyline.sensitivities(model, p, outputs), a.repeat)
+        ta = best(lambda p=p: oxyline.sensitivities(model, p, outputs, mode="adjoint"),
+                  a.repeat)
+        print(f"{n:<12}{tf:>10.3f}{ta:>10.3f}{tf / base:>12.2f}{ta / base:>12.2f}"
+              f"{err:>22.1e}")
+    print(f"primal (no parameter) {base:.3f} s")
 
 
 if __name__ == "__main__":

@@ -206,6 +206,14 @@ def species_sensitivities(model_json: str, paths: list[str], signals: list[tuple
     the periodic cycle of a canonical model and their exact derivatives with respect to the
     oxygen parameter ``paths`` (oxyline.calibrate)."""
 
+def species_adjoint_gradients(model_json: str, paths: list[str],
+                              signals: list[tuple[str, str]], weights_of: Any, period: float,
+                              steps_per_cycle: int, rho_infty: float = 0.5,
+                              max_cycles: int = 2000, tol: float = 1e-12) -> dict[str, Any]:
+    """The gradients of functionals of the oxygen signals by the oxygen parameter ``paths``
+    by the species transport's adjoint (one backward sweep per functional;
+    oxyline.sensitivities with ``mode="adjoint"``)."""
+
 class CalibrationProblem:
     """svZeroDSolver's calibration residual (oxyline_core::calibration): RCL vessels
     ``(name, (P_in, Q_in, P_out, Q_out) variable indices, (R, C, L, S) slots)`` and junction

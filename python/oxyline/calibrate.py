@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import copy
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -185,6 +185,41 @@ def _evaluate(model: Model, parameters: Sequence[str], targets: Sequence[Target]
     return np.concatenate(values), np.concatenate(jac), raw
 
 
+def _oxygen_adjoint(m: Model, parameters: Sequence[str], signals: list[tuple[str, str]],
+                    weights_of: Callable[[np.ndarray, np.ndarray], np.ndarray],
+                    args: tuple[Any, ...]) -> tuple[Any, list[tuple[str, str]], Any]:
+    """The core's oxygen adjoint, its signals and weights: oxygen outputs by oxygen
+    parameters. A flow parameter is refused by name (forward tangents only); flow signals
+    (an SvO2's outflow) are read from the flow's periodic cycle for the weights, and their
+    columns dropped (oxygen parameters do not change the flow)."""
+    from oxyline import _core
+
+    flow = [p for p in parameters if not _is_oxygen_path(p)]
+    if flow:
+        raise CalibrationError(f"mode 'adjoint' with oxygen: flow parameter(s) "
+                               f"{', '.join(flow)} have forward tangents only "
+                               "(use mode='forward')")
+    o2 = [k for k, s in enumerate(signals) if is_oxygen_signal(s)]
+    if not o2:
+        raise CalibrationError("mode 'adjoint': oxygen parameters do not change the flow "
+                               f"outputs {', '.join(f'{v}.{n}' for v, n in signals)} (use "
+                               "mode='forward' for their zero rows)")
+    rest = [k for k in range(len(signals)) if k not in o2]
+    flow_values = None
+    if rest:
+        flow_values = _core.tangent_sensitivities(json.dumps(m.canonical), [],
+                                                  [signals[k] for k in rest], *args)["signals"]
+
+    def weights(times: np.ndarray, sig: np.ndarray) -> np.ndarray:
+        full = np.zeros((len(times), len(signals)))
+        full[:, o2] = sig
+        if rest:
+            full[:, rest] = flow_values
+        w = np.asarray(weights_of(times, full)).reshape(-1, len(times), len(signals))
+        return np.ascontiguousarray(w[:, :, o2].ravel(), dtype=float)
+    return _core.species_adjoint_gradients, [signals[k] for k in o2], weights
+
+
 def _adjoint(m: Model, parameters: Sequence[str], targets: Sequence[Target],
              steps_per_cycle: int | None, tol: float, max_cycles: int, series_at_steps: bool
              ) -> tuple[list[np.ndarray], list[np.ndarray], dict[str, Any]]:
@@ -223,9 +258,13 @@ def _adjoint(m: Model, parameters: Sequence[str], targets: Sequence[Target],
             paths.append(path)
         return np.ascontiguousarray(np.concatenate(weights).ravel(), dtype=float)
 
+    core, core_signals, weights = _core.adjoint_gradients, signals, weights_of
     with core_errors(f"model '{m.name}'"):
-        out = _core.adjoint_gradients(json.dumps(m.canonical), list(parameters), signals,
-                                      weights_of, period, steps, rho, max_cycles, tol)
+        if _involves_oxygen(parameters, signals):
+            core, core_signals, weights = _oxygen_adjoint(
+                m, parameters, signals, weights_of, (period, steps, rho, max_cycles, tol))
+        out = core(json.dumps(m.canonical), list(parameters), core_signals, weights, period,
+                   steps, rho, max_cycles, tol)
     jac, start = [], 0
     for path, v in zip(paths, values, strict=True):
         j = np.asarray(out["gradients"][start:start + len(v)])
@@ -250,8 +289,11 @@ def sensitivities(model: Model | Mapping[str, Any] | str, parameters: Sequence[s
 
     Oxygen outputs (``SvO2.<vessel>``, ``VO2``, ``<vessel>.po2_out.<statistic>``, …) are
     differentiated by oxygen parameters (``oxygen.wall.k``, ``oxygen.hill.p50``, …) through
-    the species transport's tangent (docs/calibration.md, "Oxygen"); oxygen parameters leave
-    flow outputs unchanged (zero rows), and a flow parameter with an oxygen output is refused.
+    the species transport's tangent (docs/calibration.md, "Oxygen"), and by flow parameters
+    through the flow's tangent; oxygen parameters leave flow outputs unchanged (zero rows).
+    With ``mode="adjoint"`` oxygen outputs take oxygen parameters only (the species
+    transport's adjoint; flow outputs beside them get zero rows); a flow parameter is a
+    :class:`~oxyline.CalibrationError` naming it.
 
     ``mode="forward"``: tangents, one per parameter (few parameters); ``"adjoint"``: one
     backward sweep per output row, whatever the number of parameters (many parameters, few
@@ -268,10 +310,6 @@ def sensitivities(model: Model | Mapping[str, Any] | str, parameters: Sequence[s
     if mode not in ("forward", "adjoint"):
         raise CalibrationError(f"mode: expected 'forward' or 'adjoint', got {mode!r}")
     targets = [Target(o, None, signals=signals_of(o, m)) for o in outputs]
-    if mode == "adjoint" and _involves_oxygen(parameters, [s for t in targets
-                                                           for s in t.signals]):
-        raise CalibrationError("mode 'adjoint': oxygen outputs and parameters have forward "
-                               "tangents only (use mode='forward')")
     if mode == "adjoint":
         values, jac, raw = _adjoint(m, parameters, targets, steps_per_cycle, tol, max_cycles,
                                     series_at_steps=True)

@@ -6,7 +6,8 @@ use numpy::{IntoPyArray, PyArrayMethods, PyReadonlyArray1};
 use oxyline_core::error::Error;
 use oxyline_core::model::{NetworkSpec, parse};
 use oxyline_core::sensitivity::{
-    TangentSettings, adjoint_with, sensitivities, species_sensitivities as species,
+    TangentSettings, adjoint_with, sensitivities, species_adjoint_with,
+    species_sensitivities as species,
 };
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -208,6 +209,65 @@ pub fn adjoint_gradients<'py>(
         out.gradients.into_pyarray(py).reshape([nf, np])?,
     )?;
     d.set_item("cycles", out.cycles)?;
+    d.set_item("adjoint_cycles", out.adjoint_cycles)?;
+    d.set_item("periodic_change", out.periodic_change)?;
+    Ok(d)
+}
+
+/// [`adjoint_gradients`] of oxygen signals (vessel, name; vessel "" for the network's
+/// balance fluxes) by oxygen parameters (`oxyline_core::sensitivity::species_adjoint_with`):
+/// one backward sweep of the species transport per functional. The same dict, with
+/// `tangent_cycles` (the transport's cycles to its periodic state).
+#[oxyline_py_guard::guard]
+#[pyfunction]
+#[pyo3(signature = (model_json, paths, signals, weights_of, period, steps_per_cycle,
+                    rho_infty = 0.5, max_cycles = 2000, tol = 1e-12))]
+#[allow(clippy::too_many_arguments)]
+pub fn species_adjoint_gradients<'py>(
+    py: Python<'py>,
+    model_json: &str,
+    paths: Vec<String>,
+    signals: Vec<(String, String)>,
+    weights_of: Py<PyAny>,
+    period: f64,
+    steps_per_cycle: usize,
+    rho_infty: f64,
+    max_cycles: usize,
+    tol: f64,
+) -> PyResult<Bound<'py, PyDict>> {
+    let settings = TangentSettings {
+        period,
+        steps_per_cycle,
+        rho_infty,
+        max_cycles,
+        tol,
+    };
+    let (np, nsig) = (paths.len(), signals.len());
+    let mut raised: Option<PyErr> = None;
+    let result = py.detach(|| {
+        let spec = parse(model_json)?;
+        let weights = |times: &[f64], values: &[f64]| {
+            Python::attach(|py| call_weights(py, &weights_of, times, values, nsig)).map_err(|e| {
+                raised = Some(e);
+                Error::model("adjoint", "weights_of raised")
+            })
+        };
+        species_adjoint_with(&spec, &paths, &signals, weights, settings)
+    });
+    if let Some(e) = raised {
+        return Err(e);
+    }
+    let (values, out) = result.map_err(to_py)?;
+    let nf = out.functionals.len();
+    let d = PyDict::new(py);
+    d.set_item("values", values.into_pyarray(py))?;
+    d.set_item("functionals", out.functionals.into_pyarray(py))?;
+    d.set_item(
+        "gradients",
+        out.gradients.into_pyarray(py).reshape([nf, np])?,
+    )?;
+    d.set_item("cycles", out.cycles)?;
+    d.set_item("tangent_cycles", out.transport_cycles)?;
     d.set_item("adjoint_cycles", out.adjoint_cycles)?;
     d.set_item("periodic_change", out.periodic_change)?;
     Ok(d)

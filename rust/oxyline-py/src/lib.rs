@@ -108,7 +108,9 @@ mod _core {
         terminal_compartment, thin_wall_compliance, wall_thickness_law,
     };
     #[pymodule_export]
-    use super::calibrate::{adjoint_gradients, species_sensitivities, tangent_sensitivities};
+    use super::calibrate::{
+        adjoint_gradients, species_adjoint_gradients, species_sensitivities, tangent_sensitivities,
+    };
     #[pymodule_export]
     use super::calibration::CalibrationProblem;
     #[pymodule_export]

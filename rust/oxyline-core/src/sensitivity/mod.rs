@@ -15,7 +15,9 @@ use crate::error::{Error, Result};
 use crate::model::NetworkSpec;
 use crate::output::VESSEL_VARIABLES;
 pub use parameter::{DaeTangent, Parameter};
-pub use species::{SpeciesSensitivities, species_sensitivities};
+pub use species::{
+    SpeciesAdjoint, SpeciesSensitivities, species_adjoint_with, species_sensitivities,
+};
 pub use tangent::{
     PeriodicAdjoint, PeriodicTangent, TangentSettings, periodic_adjoint, periodic_adjoint_in,
     periodic_adjoint_with, periodic_tangent, periodic_tangent_in,

@@ -422,6 +422,66 @@ impl FlowCycle {
     }
 }
 
+/// What the oxygen tangent and adjoint share: the model (every vessel an output), its
+/// oxygen species, the parameters, the assembled circuit, its DAE, the transport run and
+/// the resolved signals.
+struct Setup {
+    spec: NetworkSpec,
+    sp: SpeciesSpec,
+    params: Vec<Param>,
+    assembled: Assembled,
+    dae: Dae,
+    tr: Transport,
+    s: usize,
+    sigs: Vec<Signal>,
+}
+
+impl Setup {
+    /// The setup of `spec`, refusing what the species tangent does not follow (an error
+    /// naming the path, output or wall).
+    fn new(
+        spec: &NetworkSpec,
+        paths: &[String],
+        signals: &[(String, String)],
+        settings: &TangentSettings,
+    ) -> Result<Setup> {
+        settings.check()?;
+        let mut spec = spec.clone();
+        for v in &mut spec.vessels {
+            v.output = true;
+        }
+        let sp = oxygen_species(&spec)?;
+        let params = parameters(&spec, &sp, paths)?;
+        let tspec = spec.transport.clone().expect("checked by oxygen_species");
+        if std::iter::once(&sp.wall)
+            .chain(sp.per_vessel.values())
+            .any(WallSpec::needs_mean_flow)
+        {
+            return Err(Error::model(
+                "sensitivities",
+                "oxygen sensitivities with a wall that reads the cycle-mean flow (Graetz) are \
+                 not available yet",
+            ));
+        }
+        let assembled = spec.assemble()?;
+        let dae = assembled.circuit.assemble()?;
+        let tr = Transport::build(&tspec, &assembled.circuit, &dae, &assembled.probes)?.new_run();
+        let s = tr.species_index(&sp.name).expect("the spec's species");
+        tr.check_species_tangent(s, "sensitivities")?;
+        let sigs = resolve(&assembled.probes.vessels, signals)?;
+        Ok(Setup {
+            spec,
+            sp,
+            params,
+            assembled,
+            dae,
+            tr,
+            s,
+            sigs,
+        })
+    }
+}
+
 /// d(signal)/d(parameter) over the periodic cycle of `spec` (see the module doc).
 pub fn species_sensitivities(
     spec: &NetworkSpec,
@@ -429,30 +489,16 @@ pub fn species_sensitivities(
     signals: &[(String, String)],
     settings: TangentSettings,
 ) -> Result<SpeciesSensitivities> {
-    settings.check()?;
-    let mut spec = spec.clone();
-    for v in &mut spec.vessels {
-        v.output = true;
-    }
-    let sp = oxygen_species(&spec)?;
-    let params = parameters(&spec, &sp, paths)?;
-    let tspec = spec.transport.clone().expect("checked by oxygen_species");
-    if std::iter::once(&sp.wall)
-        .chain(sp.per_vessel.values())
-        .any(WallSpec::needs_mean_flow)
-    {
-        return Err(Error::model(
-            "sensitivities",
-            "oxygen sensitivities with a wall that reads the cycle-mean flow (Graetz) are not \
-             available yet",
-        ));
-    }
-    let assembled = spec.assemble()?;
-    let dae = assembled.circuit.assemble()?;
-    let mut tr = Transport::build(&tspec, &assembled.circuit, &dae, &assembled.probes)?.new_run();
-    let s = tr.species_index(&sp.name).expect("the spec's species");
-    tr.check_species_tangent(s, "sensitivities")?;
-    let sigs = resolve(&assembled.probes.vessels, signals)?;
+    let Setup {
+        spec,
+        sp,
+        params,
+        assembled,
+        dae,
+        mut tr,
+        s,
+        sigs,
+    } = Setup::new(spec, paths, signals, &settings)?;
     let dae_tangents = flow_tangents(&spec, &assembled, &dae, &params)?;
     let flow_params: Vec<DaeTangent> = dae_tangents.iter().flatten().cloned().collect();
     let flow = FlowCycle::run(&dae, &flow_params, &tr.flow_tangent_unknowns(), &settings)?;
@@ -678,6 +724,10 @@ impl<'t> TransportRun<'t> {
         Ok((values, derivs))
     }
 }
+
+#[path = "species_adjoint.rs"]
+mod adjoint;
+pub use adjoint::{SpeciesAdjoint, species_adjoint_with};
 
 #[cfg(test)]
 #[path = "species_tests.rs"]

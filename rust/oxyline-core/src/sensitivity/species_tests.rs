@@ -14,7 +14,7 @@ use crate::model::parse;
 /// 85 mmHg, a wall PO2 of 40 mmHg). k (and the consumption flux below) are far above an
 /// artery's, so that the wall takes a few per cent of the oxygen delivered and the signals
 /// move well above the difference quotients' rounding.
-const MODEL: &str = r#"{
+pub(super) const MODEL: &str = r#"{
   "name": "y",
   "vessels": [
     {"name": "parent", "from": "in", "to": "j", "segments": 3,
@@ -43,7 +43,7 @@ const MODEL: &str = r#"{
   }]}
 }"#;
 
-fn signals() -> Vec<(String, String)> {
+pub(super) fn signals() -> Vec<(String, String)> {
     [
         ("d1", "po2_out"),
         ("d1", "saturation_out"),
@@ -59,7 +59,7 @@ fn signals() -> Vec<(String, String)> {
     .collect()
 }
 
-fn settings() -> TangentSettings {
+pub(super) fn settings() -> TangentSettings {
     TangentSettings {
         period: 0.8,
         steps_per_cycle: 160,
@@ -69,17 +69,17 @@ fn settings() -> TangentSettings {
     }
 }
 
-fn run(spec: &NetworkSpec, paths: &[&str]) -> SpeciesSensitivities {
+pub(super) fn run(spec: &NetworkSpec, paths: &[&str]) -> SpeciesSensitivities {
     let paths: Vec<String> = paths.iter().map(|p| p.to_string()).collect();
     species_sensitivities(spec, &paths, &signals(), settings()).unwrap()
 }
 
-fn oxygen(s: &mut NetworkSpec) -> &mut SpeciesSpec {
+pub(super) fn oxygen(s: &mut NetworkSpec) -> &mut SpeciesSpec {
     &mut s.transport.as_mut().unwrap().species[0]
 }
 
 /// `s` with the oxygen parameter `path` multiplied by `f`, written into the spec directly.
-fn scaled(mut s: NetworkSpec, path: &str, f: f64) -> NetworkSpec {
+pub(super) fn scaled(mut s: NetworkSpec, path: &str, f: f64) -> NetworkSpec {
     if !path.starts_with("oxygen.") {
         return crate::sensitivity::tests::scaled_from(s, path, f);
     }
@@ -177,7 +177,7 @@ fn p50_against_central_differences() {
 }
 
 /// A prescribed consumption flux (mol m⁻² s⁻¹) instead of the mass-transfer wall.
-fn consuming() -> NetworkSpec {
+pub(super) fn consuming() -> NetworkSpec {
     let mut s = parse(MODEL).unwrap();
     oxygen(&mut s).wall = WallSpec::Flux {
         flux: FluxSpec::Constant(1.5e-4),

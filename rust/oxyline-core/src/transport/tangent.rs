@@ -28,6 +28,10 @@
 #[allow(unused_imports)]
 use super::*;
 
+#[path = "adjoint.rs"]
+mod adjoint;
+pub use adjoint::{AdjointSums, SignalRow, SpeciesAdjointState, SpeciesStepRecord};
+
 #[path = "tangent_flow.rs"]
 mod flow;
 use flow::{FlowDerivative, FlowStepTerms};
@@ -314,11 +318,17 @@ impl Transport {
     /// The inflow values of the tangent of parameter `d`: prescribed totals' derivatives,
     /// zero-gradient boundaries as they are (None).
     fn tangent_boundary(&self, s: usize, d: &SpeciesDerivative) -> Vec<Option<f64>> {
+        self.boundary_derivative(s, d.kind)
+    }
+
+    /// The inflow values' derivative by a parameter of `kind`: prescribed totals' (P50
+    /// changes the bound part of a given PO2), zero-gradient boundaries None.
+    fn boundary_derivative(&self, s: usize, kind: SpeciesParameterKind) -> Vec<Option<f64>> {
         let binding = self.plan.species[s].binding;
         self.bval
             .iter()
             .map(|b| {
-                b.map(|total| match (d.kind, binding) {
+                b.map(|total| match (kind, binding) {
                     (SpeciesParameterKind::P50, Binding::Hill { capacity, .. }) => {
                         capacity * binding_point(&binding, total, total, None).s_p50
                     }
