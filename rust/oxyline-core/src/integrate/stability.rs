@@ -133,7 +133,7 @@ fn refuse_growth(rk: &Rk4<'_>, limit: &StabilityLimit, go: &mut KeepGoing<'_>) -
     }
     let zero;
     let y = match rk.linearization_state() {
-        y if y.is_empty() => {
+        [] => {
             zero = vec![0.0; dae.n];
             &zero[..]
         }
