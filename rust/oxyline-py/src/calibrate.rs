@@ -185,21 +185,9 @@ pub fn adjoint_gradients<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let settings = cycle_settings(period, steps_per_cycle, rho_infty, max_cycles, tol);
     let (np, nsig) = (paths.len(), signals.len());
-    let mut raised: Option<PyErr> = None;
-    let result = py.detach(|| {
-        let spec = parse(model_json)?;
-        let weights = |times: &[f64], values: &[f64]| {
-            Python::attach(|py| call_weights(py, &weights_of, times, values, nsig)).map_err(|e| {
-                raised = Some(e);
-                Error::model("adjoint", "weights_of raised")
-            })
-        };
-        adjoint_with(&spec, &paths, &signals, weights, settings)
-    });
-    if let Some(e) = raised {
-        return Err(e);
-    }
-    let (values, out) = result.map_err(to_py)?;
+    let (values, out) = detach_with_weights(py, model_json, &weights_of, nsig, |spec, w| {
+        adjoint_with(spec, &paths, &signals, w, settings)
+    })?;
     let nf = out.values.len();
     let d = PyDict::new(py);
     d.set_item("values", values.into_pyarray(py))?;
@@ -235,29 +223,11 @@ pub fn species_adjoint_gradients<'py>(
     max_cycles: usize,
     tol: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let settings = TangentSettings {
-        period,
-        steps_per_cycle,
-        rho_infty,
-        max_cycles,
-        tol,
-    };
+    let settings = cycle_settings(period, steps_per_cycle, rho_infty, max_cycles, tol);
     let (np, nsig) = (paths.len(), signals.len());
-    let mut raised: Option<PyErr> = None;
-    let result = py.detach(|| {
-        let spec = parse(model_json)?;
-        let weights = |times: &[f64], values: &[f64]| {
-            Python::attach(|py| call_weights(py, &weights_of, times, values, nsig)).map_err(|e| {
-                raised = Some(e);
-                Error::model("adjoint", "weights_of raised")
-            })
-        };
-        species_adjoint_with(&spec, &paths, &signals, weights, settings)
-    });
-    if let Some(e) = raised {
-        return Err(e);
-    }
-    let (values, out) = result.map_err(to_py)?;
+    let (values, out) = detach_with_weights(py, model_json, &weights_of, nsig, |spec, w| {
+        species_adjoint_with(spec, &paths, &signals, w, settings)
+    })?;
     let nf = out.functionals.len();
     let d = PyDict::new(py);
     d.set_item("values", values.into_pyarray(py))?;
@@ -271,6 +241,39 @@ pub fn species_adjoint_gradients<'py>(
     d.set_item("adjoint_cycles", out.adjoint_cycles)?;
     d.set_item("periodic_change", out.periodic_change)?;
     Ok(d)
+}
+
+/// The weights callback an adjoint sweep calls once with its signals' series.
+type Weights<'a> = Box<dyn FnOnce(&[f64], &[f64]) -> oxyline_core::error::Result<Vec<f64>> + 'a>;
+
+/// Parses the model and runs an adjoint (`run`) without the GIL, handing it the Python
+/// `weights_of` callback; an exception the callback raised is returned as itself.
+fn detach_with_weights<T, R>(
+    py: Python<'_>,
+    model_json: &str,
+    weights_of: &Py<PyAny>,
+    nsig: usize,
+    run: R,
+) -> PyResult<T>
+where
+    T: Send,
+    R: for<'a> FnOnce(&NetworkSpec, Weights<'a>) -> oxyline_core::error::Result<T> + Send,
+{
+    let mut raised: Option<PyErr> = None;
+    let result = py.detach(|| {
+        let spec = parse(model_json)?;
+        let weights: Weights<'_> = Box::new(|times: &[f64], values: &[f64]| {
+            Python::attach(|py| call_weights(py, weights_of, times, values, nsig)).map_err(|e| {
+                raised = Some(e);
+                Error::model("adjoint", "weights_of raised")
+            })
+        });
+        run(&spec, weights)
+    });
+    if let Some(e) = raised {
+        return Err(e);
+    }
+    result.map_err(to_py)
 }
 
 /// `weights_of(times, signals)`: the weights as a flat float64 vector.
