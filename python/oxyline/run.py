@@ -814,11 +814,8 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     """
     from oxyline.io.results import ZarrAppender, dataset
 
-    if isinstance(time_chunk, bool) or not isinstance(time_chunk, int) or time_chunk < 1:
-        raise ModelError(f"simulate_to_zarr: time_chunk must be an integer >= 1, got {time_chunk!r}")
-    if isinstance(segment_chunk, bool) or not isinstance(segment_chunk, int) or segment_chunk < 1:
-        raise ModelError("simulate_to_zarr: segment_chunk must be an integer >= 1, got "
-                         f"{segment_chunk!r}")
+    _check_chunk("time_chunk", time_chunk)
+    _check_chunk("segment_chunk", segment_chunk)
     model = load_model(model)
     space = _space_flag(overrides)
     overrides = {k: v for k, v in overrides.items() if k != "estimate_space_error"}
@@ -856,11 +853,7 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     except BaseException:
         store.remove()  # refused before the first step (e.g. an unstable dt): no output at all
         raise
-    facts: dict[str, Any] = segmentation_facts(model)
-    if space and "error" not in raw:  # the estimate is a store attribute, as in a NetCDF file
-        from oxyline.convergence import inlet_space_error
-
-        facts["error_estimate_space"] = inlet_space_error(model)
+    facts = _store_facts(model, space and "error" not in raw)
     raw, opened = _close_store(
         store, raw, lambda raw: dataset(result_of(dict(template),
                                                   {**_run_settings(s, raw, valves), **facts},
@@ -869,6 +862,23 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     _warn_not_periodic(model.name, _run_settings(s, raw), True)
     _warn_bounds(monitor.messages())
     return opened
+
+
+def _check_chunk(name: str, value: Any) -> None:
+    """A store's chunk length: an integer >= 1 (a bool is not one)."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ModelError(f"simulate_to_zarr: {name} must be an integer >= 1, got {value!r}")
+
+
+def _store_facts(model: Model, space: bool) -> dict[str, Any]:
+    """The segmentation facts of a streamed run, with the spatial error estimate when asked
+    (a store attribute, as in a NetCDF file)."""
+    facts: dict[str, Any] = segmentation_facts(model)
+    if space:
+        from oxyline.convergence import inlet_space_error
+
+        facts["error_estimate_space"] = inlet_space_error(model)
+    return facts
 
 
 def _zarr_settings(model: Model, path: str | os.PathLike[str], overrides: Mapping[str, Any]
