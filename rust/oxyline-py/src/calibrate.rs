@@ -188,14 +188,7 @@ pub fn adjoint_gradients<'py>(
     let (values, out) = detach_with_weights(py, model_json, &weights_of, nsig, |spec, w| {
         adjoint_with(spec, &paths, &signals, w, settings)
     })?;
-    let nf = out.values.len();
-    let d = PyDict::new(py);
-    d.set_item("values", values.into_pyarray(py))?;
-    d.set_item("functionals", out.values.into_pyarray(py))?;
-    d.set_item(
-        "gradients",
-        out.gradients.into_pyarray(py).reshape([nf, np])?,
-    )?;
+    let d = adjoint_dict(py, values, out.values, out.gradients, np)?;
     d.set_item("cycles", out.cycles)?;
     d.set_item("adjoint_cycles", out.adjoint_cycles)?;
     d.set_item("periodic_change", out.periodic_change)?;
@@ -228,18 +221,28 @@ pub fn species_adjoint_gradients<'py>(
     let (values, out) = detach_with_weights(py, model_json, &weights_of, nsig, |spec, w| {
         species_adjoint_with(spec, &paths, &signals, w, settings)
     })?;
-    let nf = out.functionals.len();
-    let d = PyDict::new(py);
-    d.set_item("values", values.into_pyarray(py))?;
-    d.set_item("functionals", out.functionals.into_pyarray(py))?;
-    d.set_item(
-        "gradients",
-        out.gradients.into_pyarray(py).reshape([nf, np])?,
-    )?;
+    let d = adjoint_dict(py, values, out.functionals, out.gradients, np)?;
     d.set_item("cycles", out.cycles)?;
     d.set_item("tangent_cycles", out.transport_cycles)?;
     d.set_item("adjoint_cycles", out.adjoint_cycles)?;
     d.set_item("periodic_change", out.periodic_change)?;
+    Ok(d)
+}
+
+/// An adjoint's dict: the parameters' SI `values`, the `functionals` and their `gradients`
+/// (n_functionals × `np`); the caller adds its cycle counts.
+fn adjoint_dict<'py>(
+    py: Python<'py>,
+    values: Vec<f64>,
+    functionals: Vec<f64>,
+    gradients: Vec<f64>,
+    np: usize,
+) -> PyResult<Bound<'py, PyDict>> {
+    let nf = functionals.len();
+    let d = PyDict::new(py);
+    d.set_item("values", values.into_pyarray(py))?;
+    d.set_item("functionals", functionals.into_pyarray(py))?;
+    d.set_item("gradients", gradients.into_pyarray(py).reshape([nf, np])?)?;
     Ok(d)
 }
 
