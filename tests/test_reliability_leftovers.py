@@ -195,6 +195,58 @@ def test_dask_ensembles_survive_their_workers_killed_and_can_be_cancelled() -> N
             oxyline.simulate_ensemble(STRAIGHT, variants, client=client, variant_timeout=5)
 
 
+class _FakeFuture:
+    """A Dask future as the ensemble's client loop sees it: a status and a key."""
+
+    def __init__(self, key: str) -> None:
+        self.key, self.status = key, "finished"
+
+
+class _FakeClient:
+    """The calls the ensemble's client loop makes, recorded: no cluster, so the order of
+    Dask's messages (a chunk cancelled before the client hears its model is lost) is set
+    here instead of left to timing."""
+
+    def __init__(self) -> None:
+        self.scattered: list[_FakeFuture] = []
+        self.submitted = 0
+
+    def scatter(self, data: list[Any], broadcast: bool) -> list[_FakeFuture]:
+        self.scattered.append(_FakeFuture("model"))
+        return [self.scattered[-1]]
+
+    def wait_for_workers(self, n: int, timeout: float) -> None:
+        pass
+
+    def submit(self, *args: Any, **kwargs: Any) -> _FakeFuture:
+        self.submitted += 1
+        return _FakeFuture(f"chunk-{self.submitted}")
+
+
+def test_a_chunk_cancelled_for_its_lost_model_scatters_the_model_again() -> None:
+    """Every worker killed: Dask cancels the chunks that need the scattered model, and that
+    cancellation can reach the client before the news that the model's copies are lost (its
+    future still "finished"). The first such chunk scatters the model again and goes out on
+    the new copy; a second chunk cancelled on the old copy goes out without another scatter;
+    a chunk cancelled on the new copy scatters once more."""
+    from concurrent.futures import CancelledError
+
+    from oxyline.ensemble.cluster import _ClientRun
+
+    client = _FakeClient()
+    model = oxyline.load_model(STRAIGHT)
+    run = _ClientRun(client, model, [{}] * 4, _peak, None, {}, collector=None)  # type: ignore[arg-type]
+    run.sent_with = {range(2): 0, range(2, 4): 0}
+    run.pending = set()
+    assert len(client.scattered) == 1 and run.shared.status == "finished"
+    assert run.failed(range(2), CancelledError()) is False
+    assert len(client.scattered) == 2 and run.shared is client.scattered[-1]
+    assert run.failed(range(2, 4), CancelledError()) is False
+    assert len(client.scattered) == 2 and client.submitted == 2
+    assert run.failed(range(2), CancelledError()) is False
+    assert len(client.scattered) == 3 and client.submitted == 3
+
+
 def test_a_dask_variant_that_kills_its_worker_fails_alone() -> None:
     """A variant that kills its worker process (os._exit in its output) fails with that
     error after it killed its worker on its own; the 7 healthy variants, 3 of them in its

@@ -150,15 +150,15 @@ WORKER_WAIT = 120.0
 _SCATTERED: dict[int, tuple[str, Any]] = {}
 
 
-def _scattered(client: Any, model: Model) -> Any:
+def _scattered(client: Any, model: Model, *, again: bool = False) -> Any:
     """``model`` on every worker of ``client``: scattered once, and again only when another
-    model (other pickled bytes) comes. Later ensembles of the same model skip the transfer,
-    and the workers keep the same object, so its base is parsed and prepared once per worker
-    process for all of them (``cached_base``), not once per ensemble. Holds one model per
-    client on its workers."""
+    model (other pickled bytes) comes, or when ``again`` (its copies are known to be lost).
+    Later ensembles of the same model skip the transfer, and the workers keep the same
+    object, so its base is parsed and prepared once per worker process for all of them
+    (``cached_base``), not once per ensemble. Holds one model per client on its workers."""
     digest = hashlib.sha256(pickle.dumps(model, protocol=pickle.HIGHEST_PROTOCOL)).hexdigest()
     hit = _SCATTERED.get(id(client))
-    if hit is not None and hit[0] == digest and hit[1].client is client \
+    if not again and hit is not None and hit[0] == digest and hit[1].client is client \
             and hit[1].status == "finished":
         return hit[1]
     [future] = client.scatter([model], broadcast=True)
@@ -211,7 +211,7 @@ def _scatter_again(client: Any, model: Model) -> Any:
     while True:
         try:
             client.wait_for_workers(1, timeout=max(1.0, deadline - time.monotonic()))
-            return _scattered(client, model)
+            return _scattered(client, model, again=True)
         except Exception:  # a worker that left mid-scatter (TimeoutError,
             # OSError, ValueError "Can not use replicate to delete data"): try again
             if time.monotonic() > deadline:
@@ -240,11 +240,16 @@ class _ClientRun:
         #: as killed by Dask too), and fails only if it kills its worker alone
         self.suspects: list[range] = []
         self.alone: set[range] = set()
+        #: times the model was scattered again, and that count when each chunk was last sent
+        #: (a chunk cancelled on an older copy needs no new one)
+        self.scatters = 0
+        self.sent_with: dict[range, int] = {}
 
     def submit_all(self) -> None:
         """Every chunk, placed by :func:`_plan`."""
         output, workers, overrides = self.args
         chunks, where = _plan(len(self.patches), self.client.nthreads())
+        self.sent_with = dict.fromkeys(chunks, self.scatters)
         parts = [[self.patches[i] for i in c] for c in chunks]
         k = len(chunks)
         if where is None:  # one graph: the scheduler queues the tasks and hands them out
@@ -266,13 +271,20 @@ class _ClientRun:
                                    rows, output, workers, dict(overrides), pure=False,
                                    retries=RETRIES)
         self.futures[again] = rows
+        self.sent_with[rows] = self.scatters
         self.pending.add(again)
 
     def failed(self, rows: range, exc: BaseException) -> bool:
         """Handle a chunk whose task failed; True when its variants are recorded as failed
         (False: they were sent again or set aside)."""
-        if _lost(self.shared):  # every worker that held the model died: scatter again
+        stale = _cancelled(exc) and self.sent_with.get(rows) == self.scatters
+        if _lost(self.shared) or stale:
+            # every worker that held the model died: scatter again. A chunk cancelled by Dask
+            # on the current copy says so too, and may arrive before the client has heard
+            # that the model is lost (its future still "finished"): sent again on that stale
+            # copy it would be cancelled again, until its retries were used up
             self.shared = _scatter_again(self.client, self.model)
+            self.scatters += 1
         if _cancelled(exc) and self.resent.get(rows, 0) <= RETRIES:
             # cancelled by Dask for the lost model, not failed by its variants: sent again as
             # it was (to the restarted workers)
