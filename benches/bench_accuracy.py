@@ -121,6 +121,55 @@ def errors(res: Any, ref: Any) -> tuple[float, float, float]:
     return e_pp, e_q, e_o2
 
 
+def per_vessel(res: Any, ref: Any) -> dict[str, np.ndarray]:
+    """Every output vessel's error per kind against that vessel's own scale, at ``res``'s
+    times: flow max_t |Q − Q_ref| / max_t |Q_ref| (``flow_in``), pressure max_t |P − P_ref| /
+    max_t |P_ref| and its pulse pressure |PP − PP_ref| / PP_ref (``pressure_in``), PO2
+    max_t |PO2 − PO2_ref| / max_t PO2_ref (``po2_out``, models with oxygen)."""
+    t = res.time
+    q, qr = res.flow_in, at(ref, "flow_in", t)
+    p, pr = res.pressure_in, at(ref, "pressure_in", t)
+    pp, ppr = p.max(0) - p.min(0), pr.max(0) - pr.min(0)
+    out = {"flow": np.max(np.abs(q - qr), 0) / np.max(np.abs(qr), 0),
+           "flow_scale": np.max(np.abs(qr), 0),
+           "pressure": np.max(np.abs(p - pr), 0) / np.max(np.abs(pr), 0),
+           "pulse": np.abs(pp - ppr) / ppr}
+    if res.oxygen is not None:
+        o, orf = res.po2_out, at(ref, "po2_out", t)
+        out["po2"] = np.max(np.abs(o - orf), 0) / np.max(np.abs(orf), 0)
+    return out
+
+
+def vessel_table(name: str, cycles: int, rtols: tuple[float, ...], ref_steps: int,
+                 method: str) -> None:
+    """The worst vessel's error per kind against its own scale (``per_vessel``), in units of
+    rtol, with the run's steps and CPU, per rtol (``--vessel-table``)."""
+    model = load(name)
+    period = model.period or 1.0
+    rows = REF_ROWS if ref_steps % REF_ROWS == 0 else ref_steps
+    ref, ref_cpu = run(model, cycles=cycles, dt=period / ref_steps, method="generalized-alpha",
+                       output_every=period / rows)
+    print(f"\n### {name}: worst vessel against its own scale ({cycles} cycles, {method}; "
+          f"reference generalized-α dt = T/{ref_steps}, {ref_cpu:.1f} s CPU)\n")
+    print("| rtol | steps (rejected) | CPU | flow: worst (vessel, its share of the largest "
+          "amplitude), median | pressure vs its peak | pulse pressure | PO2 | estimate "
+          "(p / q / species) |")
+    print("|---|---|---|---|---|---|---|---|")
+    for rtol in rtols:
+        res, cpu = run(model, cycles=cycles, rtol=rtol, dt="auto", method=method,
+                       output_every=1e-3)
+        e, s, est = per_vessel(res, ref), res.settings, res.error_estimate
+        k = int(np.argmax(e["flow"]))
+        share = e["flow_scale"][k] / e["flow_scale"].max()
+        po2 = f"{np.max(e['po2']) / rtol:.2g}" if "po2" in e else "—"
+        est_s = " / ".join(f"{est.get(x, float('nan')) / rtol:.2g}"
+                           for x in ("pressure", "flow", "species"))
+        print(f"| {rtol:g} | {s['steps']} ({s['rejected_steps']}) | {cpu:.3f} s | "
+              f"{e['flow'][k] / rtol:.3g} ({res.vessels[k]}, {share:.1e}), "
+              f"{np.median(e['flow']) / rtol:.2g} | {np.max(e['pressure']) / rtol:.3g} | "
+              f"{np.max(e['pulse']) / rtol:.3g} | {po2} | {est_s} |")
+
+
 def fmt(e: float) -> str:
     return "—" if np.isnan(e) else f"{100 * e:.3g} %"
 
@@ -296,11 +345,19 @@ def main() -> None:
                     help="only the default run against the previous default (module text)")
     ap.add_argument("--ref-dt", type=float, default=1e-4,
                     help="the reference step of --default-table, s")
+    ap.add_argument("--vessel-table", action="store_true",
+                    help="only the worst vessel's error per kind against its own scale, in "
+                         "units of rtol (the first of --methods)")
     a = ap.parse_args()
     REPEAT[0] = a.repeat
     if a.default_table:
         for name in a.models:
             default_table(name, a.cycles, tuple(a.outputs), a.ref_dt)
+        return
+    if a.vessel_table:
+        for name in a.models:
+            vessel_table(name, a.cycles, tuple(a.rtols), a.ref_factor * max(a.sweep),
+                         a.methods[0])
         return
     summary: list[str] = []
     for name in a.models:

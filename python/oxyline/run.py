@@ -495,7 +495,9 @@ def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     pair where it is cheaper) with a variable step whose estimated error of every unknown stays
     within ``atol + rtol·|y|``
     (``atol``: a mapping ``{"pressure": Pa, "flow": m^3/s, "volume": m^3, "species":
-    mol/m^3}``, defaults 1 Pa, 1e-9, 1e-9, 1e-6), output from the dense output at every
+    mol/m^3}``, absolute as given; by default 1 Pa, 1e-9, 1e-9, 1e-6 for each kind's largest
+    unknown and scaled by its share for the others, so every unknown meets rtol of its own
+    scale: docs/solvers.md, "What is controlled"), output from the dense output at every
     ``output_every`` (which then never changes the solution); ``result.error_estimate`` gives
     the largest estimate per kind. A given ``dt`` is a fixed step (as is ``method="rk4"``,
     and a checkpointed run without ``dt``); ``result.settings["step_control"]`` says which.

@@ -189,6 +189,7 @@ impl Shared {
         };
         let mut atol = Atol::default();
         for (kind, &v) in self.atol.iter().flatten() {
+            // (a given kind is absolute as given: `Atol::of`)
             let slot = match kind.as_str() {
                 "pressure" => &mut atol.pressure,
                 "flow" => &mut atol.flow,
@@ -202,6 +203,9 @@ impl Shared {
                 }
             };
             *slot = v;
+            if let Some(k) = KINDS.iter().position(|k| k == kind) {
+                atol.given[k] = true;
+            }
         }
         Ok(Some(Tolerances { rtol, atol }))
     }

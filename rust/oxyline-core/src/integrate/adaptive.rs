@@ -24,7 +24,19 @@
 /// the reported estimate.
 pub const KINDS: [&str; 4] = ["pressure", "flow", "volume", "species"];
 
+/// The smallest share of its kind's largest scale an unknown's default absolute tolerance is
+/// scaled to (see [`Atol::of`]): an unknown that is (nearly) zero so far is not held to a
+/// vanishing tolerance.
+pub const SHARE_FLOOR: f64 = 1e-4;
+
 /// Absolute tolerances per kind, SI.
+///
+/// A kind's default atol belongs to its largest unknown: every other unknown of the kind gets
+/// it scaled by its own scale over that largest one's (at least [`SHARE_FLOOR`]), so that each
+/// is held to rtol of its own size (a small vessel's flow, a low-pressure bed's pressure, a
+/// small concentration) and not to the absolute error the largest one may make. A kind the user
+/// gives (`given`) is absolute as given, the same for every unknown of the kind (as an atol
+/// vector's entries in CVODE).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Atol {
     /// Pa (default 1 Pa = 0.0075 mmHg).
@@ -35,6 +47,8 @@ pub struct Atol {
     pub volume: f64,
     /// mol/m³, species concentration (default 1e-6 mol/m³).
     pub species: f64,
+    /// The kinds (in the order of [`KINDS`]) whose atol the user gave.
+    pub given: [bool; 4],
 }
 
 impl Default for Atol {
@@ -44,6 +58,7 @@ impl Default for Atol {
             flow: 1e-9,
             volume: 1e-9,
             species: 1e-6,
+            given: [false; 4],
         }
     }
 }
@@ -51,6 +66,18 @@ impl Default for Atol {
 impl Atol {
     pub fn as_array(&self) -> [f64; 4] {
         [self.pressure, self.flow, self.volume, self.species]
+    }
+
+    /// The absolute tolerance of an unknown of kind `kind` (index into [`KINDS`]) whose scale
+    /// is `scale`, the largest scale of its kind being `largest`: the given atol as it is, the
+    /// default scaled by scale/largest (in [`SHARE_FLOOR`], 1]; the whole default while the
+    /// kind has no scale yet).
+    pub fn of(&self, kind: usize, scale: f64, largest: f64) -> f64 {
+        let a = self.as_array()[kind];
+        if self.given[kind] || largest <= 0.0 || !largest.is_finite() {
+            return a;
+        }
+        a * (scale / largest).clamp(SHARE_FLOOR, 1.0)
     }
 }
 
@@ -230,6 +257,24 @@ mod tests {
             let t = t0 + theta * h;
             assert!((v - y(t)).abs() < 1e-12 && (dv - d(t)).abs() < 1e-12);
         }
+    }
+
+    #[test]
+    fn a_default_atol_is_scaled_by_the_unknowns_share_and_a_given_one_is_kept() {
+        let d = Atol::default();
+        // the kind's largest unknown keeps the default; a 1e-3 share gets 1e-3 of it; the
+        // floor; no scale yet: the whole default
+        assert_eq!(d.of(1, 5e-4, 5e-4), 1e-9);
+        assert!((d.of(1, 5e-7, 5e-4) - 1e-12).abs() < 1e-24);
+        assert!((d.of(0, 0.0, 1e4) - SHARE_FLOOR).abs() < 1e-18);
+        assert_eq!(d.of(3, 0.0, 0.0), 1e-6);
+        let given = Atol {
+            flow: 1e-8,
+            given: [false, true, false, false],
+            ..d
+        };
+        assert_eq!(given.of(1, 5e-7, 5e-4), 1e-8);
+        assert!((given.of(0, 10.0, 1e4) - 1e-3).abs() < 1e-15);
     }
 
     #[test]

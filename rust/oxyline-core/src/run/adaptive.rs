@@ -25,10 +25,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 /// them set the step.
 pub(super) const ACCUMULATION: f64 = 3.0;
 
-/// The smallest share of the largest flow amplitude a flow group's absolute tolerance is
-/// scaled to (a vessel without flow so far is not held to a vanishing one).
-pub(super) const FLOW_SHARE_FLOOR: f64 = 1e-4;
-
 /// The flow group of a branch that is no vessel's.
 pub(super) const NO_VESSEL: u32 = u32::MAX;
 
@@ -36,7 +32,8 @@ pub(super) const NO_VESSEL: u32 = u32::MAX;
 /// controlled cycle's steps at rtol 1e-3, each cheaper (no estimate).
 pub(super) const SCOUT_STEPS: usize = 128;
 
-/// The growth of a flow group's amplitude (relative) that renews the flows' scales.
+/// The growth of a flow group's amplitude, or of a kind's largest scale (relative), that
+/// renews the scales and absolute tolerances it sets.
 const RESCALE: f64 = 0.01;
 
 /// The carried state of an error-controlled run.
@@ -64,20 +61,25 @@ pub(super) struct Adaptive {
     /// own branch): a vessel's flow is judged against its vessel's amplitude, so a small
     /// vessel's flow meets rtol of its own amplitude (and atol scaled by its share of the
     /// largest), where one flow scale for all vessels let a small vessel's flow err by the
-    /// large vessels' absolute tolerance. Other flows keep atol and their own peak.
+    /// large vessels' absolute tolerance. Other flows are judged against their own peak.
     flow_group: Vec<u32>,
-    /// The largest |Q| so far per group, and over all groups; the groups' largest |Q| when
-    /// the flows' scales were last set (see `track_flow_peaks`).
+    /// The largest |Q| so far per group; the groups' largest |Q| when the flows' scales were
+    /// last set (see `track_flow_peaks`).
     group_peak: Vec<f64>,
     group_set: Vec<f64>,
-    flow_peak: f64,
+    /// The largest scale per kind (pressure, flow, volume) when the absolute tolerances were
+    /// last set: a kind's default atol is its largest unknown's, every other unknown's is
+    /// scaled by its share (`Atol::of`), renewed when the largest grew by more than `RESCALE`.
+    kind_set: [f64; 3],
+    /// Per species, its cells' largest |c| so far (the species' default atol is that cell's).
+    species_largest: Vec<f64>,
     /// 1/(atol_i + rtol·s_i): an unknown's error weight, with its absolute tolerance atol_i
-    /// (a vessel's flow's scaled by its group's share of the largest amplitude) and the scale
-    /// s_i rtol is relative to (its largest |y| so far, a vessel's flow's its group's
-    /// amplitude), at the scale of the step's start
+    /// (the kind's default scaled by the unknown's share of its kind's largest scale, or the
+    /// user's as given: `Atol::of`) and the scale s_i rtol is relative to (its largest |y| so
+    /// far, a vessel's flow's its group's amplitude), at the scale of the step's start
     /// (the step's own |y| loosened it only while a peak grows; without it the estimate is
     /// one multiplication per unknown). Neither atol_i nor s_i is kept: an unknown that is
-    /// no vessel's flow has its kind's atol and s_i = its peak; a vessel's flow the ones its
+    /// no vessel's flow has s_i = its peak; a vessel's flow the scale and tolerance its
     /// group's amplitude gave at the last renewal (`track_flow_peaks`).
     inv_weight: Vec<f64>,
     /// A differential unknown's weights of its local error in one pass (0 for an algebraic
@@ -224,7 +226,8 @@ impl Adaptive {
             flow_group: flow_groups(dae),
             group_peak: Vec::new(),
             group_set: Vec::new(),
-            flow_peak: 0.0,
+            kind_set: [0.0; 3],
+            species_largest: Vec::new(),
             inv_weight: Vec::new(),
             w_step: Vec::new(),
             w_unit: Vec::new(),
@@ -334,17 +337,74 @@ impl Adaptive {
         self.peak = y.iter().map(|v| v.abs()).collect();
         self.rate_peak = vec![0.0; n];
         self.accel_peak = vec![0.0; n];
-        let (a, rtol) = (self.tol.atol.as_array(), self.tol.rtol);
-        self.inv_weight = (0..n)
-            .map(|i| 1.0 / (a[self.kind_of(i)] + rtol * self.peak[i]))
-            .collect();
+        self.inv_weight = vec![0.0; n];
         self.w_step = vec![0.0; n];
         self.w_unit = vec![0.0; n];
-        // (the vessels' flows: their groups' scales and tolerances)
+        // (every unknown's weights, the vessels' flows from their groups' scales)
+        self.renew_kind_scales();
         self.track_flow_peaks(y, true);
-        for i in 0..n {
-            (self.w_step[i], self.w_unit[i]) = self.weights_of(i);
+    }
+
+    /// Every kind's largest scale from the peaks, and every unknown's absolute tolerance and
+    /// weights from it (`Atol::of`; the vessels' flows from their groups' amplitudes): when
+    /// a kind's largest peak grew by more than `RESCALE` since they were last set (an unknown's
+    /// tolerance is then at most that share too tight: the stricter side). In chunks on the
+    /// run's threads, each unknown its own.
+    fn renew_kind_scales(&mut self) {
+        let ends = [0, self.kind_end[0], self.kind_end[1], self.peak.len()];
+        for k in 0..3 {
+            let (peak, first) = (&self.peak, ends[k]);
+            self.kind_set[k] = crate::threads::max_over(ends[k + 1] - first, |r| {
+                let r = first + r.start..first + r.end;
+                peak[r].iter().fold(0.0f64, |m, &p| m.max(p))
+            });
         }
+        let mut v = [
+            std::mem::take(&mut self.inv_weight),
+            std::mem::take(&mut self.w_step),
+            std::mem::take(&mut self.w_unit),
+        ];
+        let this = &*self;
+        let [iw, ws, wu] = &mut v;
+        let mut tasks = chunk_tasks(0, [&mut iw[..], ws, wu]);
+        for_tasks(&mut tasks, |(first, [iw, ws, wu])| {
+            for (j, iw) in iw.iter_mut().enumerate() {
+                let i = *first + j;
+                if !this.is_vessel_flow(i) {
+                    *iw = this.own_weight(i, this.peak[i]);
+                    (ws[j], wu[j]) =
+                        this.weights_from(i, *iw, this.rate_peak[i], this.accel_peak[i]);
+                }
+            }
+            false
+        });
+        drop(tasks);
+        [self.inv_weight, self.w_step, self.w_unit] = v;
+        if !self.group_peak.is_empty() {
+            self.renew_flow_weights();
+        }
+    }
+
+    /// Whether unknown `i` is a vessel's flow (judged against its vessel's amplitude).
+    fn is_vessel_flow(&self, i: usize) -> bool {
+        let (n0, n1) = (self.kind_end[0], self.kind_end[1]);
+        (n0..n1).contains(&i) && self.flow_group[i - n0] != NO_VESSEL
+    }
+
+    /// 1/(atol_i + rtol·peak) of unknown `i` (no vessel's flow) of largest |y| `peak`, its
+    /// atol from its share of its kind's largest scale (`Atol::of`); a flow that is no
+    /// vessel's (a boundary condition's or an element's own branch) keeps the flow atol:
+    /// judged against a share of the largest, a heart circuit's near-zero internal flows held
+    /// the closed loop to three times the steps.
+    #[inline]
+    fn own_weight(&self, i: usize, peak: f64) -> f64 {
+        let k = self.kind_of(i);
+        let atol = if k == 1 {
+            self.tol.atol.flow
+        } else {
+            self.tol.atol.of(k, peak, self.kind_set[k])
+        };
+        1.0 / (atol + self.tol.rtol * peak)
     }
 
     /// Keep the state at the start of a step (copied in chunks on the run's threads).
@@ -361,6 +421,8 @@ impl Adaptive {
             if self.c0.is_empty() {
                 concentrations(st, &mut self.c0);
                 self.c_peak = self.c0.iter().map(|c| c.abs()).collect();
+                self.species_largest = vec![0.0; sp.tr.species_names().len()];
+                self.renew_species_largest();
             }
         }
     }
@@ -579,24 +641,42 @@ impl Adaptive {
     /// The scaled local error of the species step of `h` (backward Euler: h/(2h + h₁) times
     /// the difference to the linear extrapolation), on the cells' concentrations (the amounts
     /// also follow the volume's pulsation, which the flow step carries), weighted by
-    /// atol + rtol·(largest |c| so far).
+    /// atol + rtol·(largest |c| so far), the species' default atol scaled by that over its
+    /// cells' largest (`Atol::of`).
     fn species_error(&self, st: &State<'_, '_>, h: f64) -> f64 {
         if st.species.is_none() || self.history == 0 {
             return 0.0;
         }
-        let (rtol, atol) = (self.tol.rtol, self.tol.atol.species);
+        let (rtol, atol) = (self.tol.rtol, &self.tol.atol);
         let (r, f) = (h / self.h1, h / (2.0 * h + self.h1));
         let per_step = self.omega * h;
+        let cells = self.c1.len() / self.species_largest.len().max(1);
         crate::threads::max_over(self.c1.len(), |k| {
             let mut worst = 0.0f64;
             let past = self.c0[k.clone()].iter().zip(&self.cm1[k.clone()]);
             let past = past.zip(&self.c_peak[k.clone()]);
-            for (&c1, ((&c0, &cm), &peak)) in self.c1[k].iter().zip(past) {
+            for (m, (&c1, ((&c0, &cm), &peak))) in (k.start..).zip(self.c1[k].iter().zip(past)) {
                 let le = f * (c1 - c0 - r * (c0 - cm));
-                worst = worst.max(le.abs() / (per_step * (atol + rtol * peak.max(c1.abs()))));
+                let s = peak.max(c1.abs());
+                let a = atol.of(3, s, self.species_largest[m / cells.max(1)]);
+                worst = worst.max(le.abs() / (per_step * (a + rtol * s)));
             }
             worst
         })
+    }
+
+    /// Every species' largest |c| over its cells (`c_peak` is species-major).
+    fn renew_species_largest(&mut self) {
+        let n = self.species_largest.len();
+        if n == 0 {
+            return;
+        }
+        let cells = self.c_peak.len() / n;
+        for (s, largest) in self.species_largest.iter_mut().enumerate() {
+            let peak = &self.c_peak[s * cells..(s + 1) * cells];
+            *largest =
+                crate::threads::max_over(cells, |r| peak[r].iter().fold(0.0f64, |m, &p| m.max(p)));
+        }
     }
 
     /// After the species step: its cells' concentrations (for the estimate and the dense
@@ -636,6 +716,7 @@ impl Adaptive {
                 *p = p.max(c.abs());
             }
         });
+        self.renew_species_largest();
         (self.h2, self.h1) = (self.h1, h);
         self.history += 1;
         self.h = self.control.next(h, flow, self.err_old, species);
@@ -643,8 +724,9 @@ impl Adaptive {
     }
 
     /// Every group's flow amplitude from the flows of `y`, and (when a peak of `y` grew) the
-    /// flows' scales and absolute tolerances: rtol of the group's amplitude A_g, atol scaled
-    /// by A_g over the largest group's (at least `FLOW_SHARE_FLOOR`). The scales and
+    /// flows' scales and absolute tolerances: rtol of the group's amplitude A_g, the default
+    /// atol scaled by A_g over the largest flow scale (at least `SHARE_FLOOR`; a given atol as
+    /// it is: `Atol::of`). The scales and
     /// tolerances are renewed when some A_g grew by more than `RESCALE` since they were last
     /// set (a pass over every flow per step while the amplitudes still grow cost as much as
     /// the estimate): a flow's scale stays within that share below its amplitude, the
@@ -688,8 +770,12 @@ impl Adaptive {
     fn renew_flow_weights(&mut self) {
         let (n0, n1) = (self.kind_end[0], self.kind_end[1]);
         self.group_set.clone_from(&self.group_peak);
-        self.flow_peak = self.group_peak.iter().fold(0.0f64, |m, &p| m.max(p));
-        let (atol, largest, rtol) = (self.tol.atol.flow, self.flow_peak, self.tol.rtol);
+        let amplitudes = self.group_peak.iter().fold(0.0f64, |m, &p| m.max(p));
+        let (atol, largest, rtol) = (
+            &self.tol.atol,
+            self.kind_set[1].max(amplitudes),
+            self.tol.rtol,
+        );
         let (mut iw, mut ws, mut wu) = (
             std::mem::take(&mut self.inv_weight),
             std::mem::take(&mut self.w_step),
@@ -701,12 +787,7 @@ impl Adaptive {
             if g != NO_VESSEL {
                 let a = this.group_peak[g as usize];
                 let s = this.peak[i].max(a);
-                let t = if largest > 0.0 {
-                    atol * (a / largest).max(FLOW_SHARE_FLOOR)
-                } else {
-                    atol
-                };
-                *w = 1.0 / (t + rtol * s);
+                *w = 1.0 / (atol.of(1, a, largest) + rtol * s);
             }
         };
         let mut tasks = chunk_tasks(n0, [&mut iw[n0..n1], &mut ws[n0..n1], &mut wu[n0..n1]]);
@@ -720,12 +801,6 @@ impl Adaptive {
         });
         drop(tasks);
         (self.inv_weight, self.w_step, self.w_unit) = (iw, ws, wu);
-    }
-
-    /// The local error weights (`w_step`, `w_unit`) of unknown `i` from its current weight and
-    /// signal frequency.
-    fn weights_of(&self, i: usize) -> (f64, f64) {
-        self.weights_from(i, self.inv_weight[i], self.rate_peak[i], self.accel_peak[i])
     }
 
     /// The local error weights of unknown `i` of weight `inv_weight` and peaks |ẏ|, |ÿ| of
@@ -755,7 +830,8 @@ impl Adaptive {
 
     /// One pass after an accepted step (in chunks on the run's threads, each unknown its own):
     /// every unknown's peak |y| (and its weight, for all but the vessels' flows, which
-    /// `track_flow_peaks` sets), and from the divided differences of the last three accepted
+    /// `track_flow_peaks` sets; every weight when a kind's largest scale grew:
+    /// `renew_kind_scales`), and from the divided differences of the last three accepted
     /// states (not from the carried rates, which follow the damped spurious root at a start)
     /// the running peaks of |ẏ| and |ÿ|, hence the signal frequency. True when some peak |y|
     /// grew.
@@ -764,8 +840,8 @@ impl Adaptive {
     fn track_peaks(&mut self, y: &[f64], h: f64) -> bool {
         let h1 = self.h1;
         let (inv_h, inv_h1, inv_span) = (1.0 / h, 1.0 / h1, 2.0 / (h + h1));
-        let (n0, n1) = (self.kind_end[0], self.kind_end[1]);
-        let (rates, rtol, atol) = (self.history > 0, self.tol.rtol, self.tol.atol.as_array());
+        let rates = self.history > 0;
+        let renew = AtomicBool::new(false);
         let mut v = [
             std::mem::take(&mut self.peak),
             std::mem::take(&mut self.rate_peak),
@@ -786,8 +862,11 @@ impl Adaptive {
                 if yi.abs() > pk[j] {
                     pk[j] = yi.abs();
                     grown = true;
-                    if !(n0..n1).contains(&i) || this.flow_group[i - n0] == NO_VESSEL {
-                        iw[j] = 1.0 / (atol[this.kind_of(i)] + rtol * pk[j]);
+                    if pk[j] > this.kind_set[this.kind_of(i)] * (1.0 + RESCALE) {
+                        renew.store(true, Ordering::Relaxed);
+                    }
+                    if !this.is_vessel_flow(i) {
+                        iw[j] = this.own_weight(i, pk[j]);
                         reweigh = true;
                     }
                 }
@@ -813,6 +892,9 @@ impl Adaptive {
         let [pk, rp, ap, iw, ws, wu] = v;
         (self.peak, self.rate_peak, self.accel_peak) = (pk, rp, ap);
         (self.inv_weight, self.w_step, self.w_unit) = (iw, ws, wu);
+        if renew.into_inner() {
+            self.renew_kind_scales();
+        }
         grown
     }
 

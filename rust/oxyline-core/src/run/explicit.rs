@@ -8,7 +8,7 @@
 //! predicted cost of a cycle at that tolerance ([`choose`]), among the methods able to run
 //! the circuit: the pair only where its stages need no Newton iteration.
 
-use super::adaptive::{ACCUMULATION, FLOW_SHARE_FLOOR, NO_VESSEL, flow_groups};
+use super::adaptive::{ACCUMULATION, NO_VESSEL, flow_groups};
 use super::coupling::{Flow, State};
 use super::cycle::{CycleRows, Cycles, toward_end};
 use super::events::{Cut, Events, Located, Next, decide};
@@ -197,11 +197,16 @@ pub(super) struct Explicit {
     scale: Vec<f64>,
     flow_group: Vec<u32>,
     group_peak: Vec<f64>,
-    flow_peak: f64,
-    /// The species cells' amounts: atol·V₀ per cell (a concentration tolerance), the
-    /// largest |N| so far.
+    /// The largest scale per kind (pressure, flow, volume): a kind's default atol is its
+    /// largest unknown's, the others' scaled by their share (`Atol::of`).
+    kind_largest: [f64; 3],
+    /// The species cells' amounts: atol·V₀ per cell (a concentration tolerance, the
+    /// species' default scaled by the cell's largest concentration over the species'
+    /// largest), V₀, the largest |N| so far; the number of species.
     z_atol: Vec<f64>,
+    z_volume: Vec<f64>,
     z_peak: Vec<f64>,
+    n_species: usize,
     /// A step was just rejected: the next may not grow.
     rejected_last: bool,
     pub estimate: [f64; 4],
@@ -237,9 +242,11 @@ impl Explicit {
             scale: Vec::new(),
             flow_group: flow_groups(dae),
             group_peak: Vec::new(),
-            flow_peak: 0.0,
+            kind_largest: [0.0; 3],
             z_atol: Vec::new(),
+            z_volume: Vec::new(),
             z_peak: Vec::new(),
+            n_species: 0,
             rejected_last: false,
             estimate: [0.0; 4],
             steps: 0,
@@ -263,16 +270,31 @@ impl Explicit {
         self.rate_peak = vec![0.0; n];
         self.accel_peak = vec![0.0; n];
         self.inv_omega = vec![1.0 / self.omega; n];
-        let a = self.tol.atol.as_array();
-        self.atol = (0..n).map(|i| a[self.kind_of(i)]).collect();
+        self.atol = vec![0.0; n];
         self.scale.clone_from(&self.peak);
-        self.track_flow_peaks(&st.y);
+        self.set_tolerances(&st.y);
         if let Some(sp) = st.species.as_ref() {
             let vol = sp.tr.cell_transport_volumes();
-            let cells = vol.len() * sp.tr.species_names().len();
-            let atol = self.tol.atol.species;
-            self.z_atol = (0..cells).map(|k| atol * vol[k % vol.len()]).collect();
+            self.n_species = sp.tr.species_names().len();
+            let cells = vol.len() * self.n_species;
+            self.z_volume = (0..cells).map(|k| vol[k % vol.len()]).collect();
+            self.z_atol = vec![0.0; cells];
             self.z_peak = sp.z[..cells].iter().map(|z| z.abs()).collect();
+            self.species_tolerances();
+        }
+    }
+
+    /// The cells' amount tolerances: V₀ times the species' atol of the cell's largest
+    /// concentration |N|/V₀ so far (`Atol::of`, against the species' largest).
+    fn species_tolerances(&mut self) {
+        let cells = self.z_peak.len() / self.n_species.max(1);
+        for s in 0..self.n_species {
+            let r = s * cells..(s + 1) * cells;
+            let conc = self.z_peak[r.clone()].iter().zip(&self.z_volume[r.clone()]);
+            let largest = conc.clone().fold(0.0f64, |m, (&z, &v)| m.max(z / v));
+            for (a, (&z, &v)) in self.z_atol[r].iter_mut().zip(conc) {
+                *a = v * self.tol.atol.of(3, z / v, largest);
+            }
         }
     }
 
@@ -345,11 +367,12 @@ impl Explicit {
             }
         }
         if grown {
-            self.track_flow_peaks(y);
+            self.set_tolerances(y);
         }
         for (p, zk) in self.z_peak.iter_mut().zip(z) {
             *p = p.max(zk.abs());
         }
+        self.species_tolerances();
         self.h = self.next_step(h, err);
         self.rejected_last = false;
     }
@@ -365,10 +388,11 @@ impl Explicit {
         self.rejected_last = true;
     }
 
-    /// Every vessel's flow amplitude, and the flows' scales and absolute tolerances (the
-    /// implicit control's rule: rtol of the vessel's amplitude, atol by its share of the
-    /// largest, at least `FLOW_SHARE_FLOOR`).
-    fn track_flow_peaks(&mut self, y: &[f64]) {
+    /// Every vessel's flow amplitude, every kind's largest scale, and every unknown's scale
+    /// and absolute tolerance (the implicit control's rule: a vessel's flow against the
+    /// vessel's amplitude; the default atol scaled by the unknown's share of its kind's
+    /// largest scale, at least `SHARE_FLOOR`, a given one as it is: `Atol::of`).
+    fn set_tolerances(&mut self, y: &[f64]) {
         let (n0, n1) = (self.kind_end[0], self.kind_end[1]);
         if self.group_peak.is_empty() {
             let vessels = self.flow_group.iter().filter(|&&g| g != NO_VESSEL);
@@ -379,21 +403,32 @@ impl Explicit {
             if g != NO_VESSEL {
                 let p = &mut self.group_peak[g as usize];
                 *p = p.max(q.abs());
-                self.flow_peak = self.flow_peak.max(*p);
             }
         }
-        let (atol, largest) = (self.tol.atol.flow, self.flow_peak);
-        for (j, &g) in self.flow_group.iter().enumerate() {
-            let i = n0 + j;
-            if g == NO_VESSEL {
-                self.scale[i] = self.peak[i];
-                continue;
-            }
-            let a = self.group_peak[g as usize];
+        let ends = [0, n0, n1, self.peak.len()];
+        for k in 0..3 {
+            let peaks = self.peak[ends[k]..ends[k + 1]].iter();
+            self.kind_largest[k] = peaks.fold(0.0f64, |m, &p| m.max(p));
+        }
+        for i in 0..self.peak.len() {
+            let k = self.kind_of(i);
+            let g = if k == 1 {
+                self.flow_group[i - n0]
+            } else {
+                NO_VESSEL
+            };
+            let a = if g == NO_VESSEL {
+                self.peak[i]
+            } else {
+                self.group_peak[g as usize]
+            };
             self.scale[i] = self.peak[i].max(a);
-            if largest > 0.0 {
-                self.atol[i] = atol * (a / largest).max(FLOW_SHARE_FLOOR);
-            }
+            // (a flow that is no vessel's keeps the flow atol, as in the implicit control)
+            self.atol[i] = if k == 1 && g == NO_VESSEL {
+                self.tol.atol.flow
+            } else {
+                self.tol.atol.of(k, a, self.kind_largest[k])
+            };
         }
     }
 }
