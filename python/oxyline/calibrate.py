@@ -269,7 +269,7 @@ def _adjoint(m: Model, parameters: Sequence[str], targets: Sequence[Target],
         return np.ascontiguousarray(np.concatenate(weights).ravel(), dtype=float)
 
     core, core_signals, weights = _core.adjoint_gradients, signals, weights_of
-    complete: Callable[[Any], Any] = lambda out: out  # noqa: E731
+    complete: Callable[[Any], Any] = lambda out: out
     with core_errors(f"model '{m.name}'"):
         if _involves_oxygen(parameters, signals):
             core, core_signals, weights, complete = _oxygen_adjoint(
