@@ -10,7 +10,9 @@ as many cycles as the oxygen field needs to be periodic.
 
 `--adjoint`: the adjoint (`mode="adjoint"`: one backward sweep per output) against the
 forward tangents for 1 and 10 oxygen parameters (the section's wall k, P50 and the own
-walls' k of vessels given one), in the same run, for the same outputs.
+walls' k of vessels given one), and for 10 flow and oxygen parameters (the wall k, P50, the
+inflow, resistance and compliance scales, radii, lengths and a stiffness: the flow's
+tangents forward, the species adjoint backward), in the same run, for the same outputs.
 
     python benches/bench_o2_sensitivity.py [--depth 6] [--repeat 3] [--adjoint]
 """
@@ -81,14 +83,17 @@ def adjoint(m: dict, a: argparse.Namespace) -> None:
     model = oxyline.load_model(m)
     paths = (["oxygen.wall.k", "oxygen.hill.p50"]
              + [f"oxygen.per_vessel.{v}.wall.k" for v in own])
+    mixed = ["oxygen.wall.k", "oxygen.hill.p50", *FLOW_PARAMETERS,
+             f"vessels.{own[0]}.radius", f"vessels.{own[1]}.radius",
+             f"vessels.{own[2]}.length", f"vessels.{own[3]}.length",
+             f"vessels.{own[4]}.youngs_modulus"]
     outputs = ["VO2", "VO2.v", "v.wall_uptake.max"]
     base = best(lambda: oxyline.sensitivities(model, [], outputs), a.repeat)
     print(f"tree depth {a.depth}: {len(m['vessels'])} vessels, {a.steps} steps a cycle, "
           f"{len(outputs)} outputs; CPU s, best of {a.repeat}")
-    print(f"{'parameters':<12}{'forward':>10}{'adjoint':>10}{'fwd/primal':>12}"
+    print(f"{'parameters':<16}{'forward':>10}{'adjoint':>10}{'fwd/primal':>12}"
           f"{'adj/primal':>12}{'max |adj-fwd|/scale':>22}")
-    for n in (1, 10):
-        p = paths[:n]
+    for name, p in (("1 oxygen", paths[:1]), ("10 oxygen", paths), ("10 flow+oxygen", mixed)):
         fwd = oxyline.sensitivities(model, p, outputs)
         adj = oxyline.sensitivities(model, p, outputs, mode="adjoint")
         f = fwd.jacobian * fwd.parameter_values
@@ -97,7 +102,7 @@ def adjoint(m: dict, a: argparse.Namespace) -> None:
         tf = best(lambda p=p: oxyline.sensitivities(model, p, outputs), a.repeat)
         ta = best(lambda p=p: oxyline.sensitivities(model, p, outputs, mode="adjoint"),
                   a.repeat)
-        print(f"{n:<12}{tf:>10.3f}{ta:>10.3f}{tf / base:>12.2f}{ta / base:>12.2f}"
+        print(f"{name:<16}{tf:>10.3f}{ta:>10.3f}{tf / base:>12.2f}{ta / base:>12.2f}"
               f"{err:>22.1e}")
     print(f"primal (no parameter) {base:.3f} s")
 

@@ -187,37 +187,47 @@ def _evaluate(model: Model, parameters: Sequence[str], targets: Sequence[Target]
 
 def _oxygen_adjoint(m: Model, parameters: Sequence[str], signals: list[tuple[str, str]],
                     weights_of: Callable[[np.ndarray, np.ndarray], np.ndarray],
-                    args: tuple[Any, ...]) -> tuple[Any, list[tuple[str, str]], Any]:
-    """The core's oxygen adjoint, its signals and weights: oxygen outputs by oxygen
-    parameters. A flow parameter is refused by name (forward tangents only); flow signals
-    (an SvO2's outflow) are read from the flow's periodic cycle for the weights, and their
-    columns dropped (oxygen parameters do not change the flow)."""
+                    args: tuple[Any, ...]
+                    ) -> tuple[Any, list[tuple[str, str]], Any, Callable[[Any], Any]]:
+    """The core's oxygen adjoint, its signals, weights and the gradients' completion: oxygen
+    outputs by oxygen and flow parameters (a flow parameter's flow tangent forward, the
+    species transport's adjoint backward). Flow signals (an SvO2's outflow) are read from
+    the flow's periodic cycle with their tangents by the flow parameters, for the weights
+    and for their own terms of the gradients (oxygen parameters do not change the flow)."""
     from oxyline import _core
 
-    flow = [p for p in parameters if not _is_oxygen_path(p)]
-    if flow:
-        raise CalibrationError(f"mode 'adjoint' with oxygen: flow parameter(s) "
-                               f"{', '.join(flow)} have forward tangents only "
-                               "(use mode='forward')")
     o2 = [k for k, s in enumerate(signals) if is_oxygen_signal(s)]
     if not o2:
         raise CalibrationError("mode 'adjoint': oxygen parameters do not change the flow "
                                f"outputs {', '.join(f'{v}.{n}' for v, n in signals)} (use "
                                "mode='forward' for their zero rows)")
     rest = [k for k in range(len(signals)) if k not in o2]
-    flow_values = None
+    flow_rows = [k for k, p in enumerate(parameters) if not _is_oxygen_path(p)]
+    flow: dict[str, Any] = {}
     if rest:
-        flow_values = _core.tangent_sensitivities(json.dumps(m.canonical), [],
-                                                  [signals[k] for k in rest], *args)["signals"]
+        flow = _core.tangent_sensitivities(json.dumps(m.canonical),
+                                           [parameters[k] for k in flow_rows],
+                                           [signals[k] for k in rest], *args)
+    rest_weights: list[np.ndarray] = []
 
     def weights(times: np.ndarray, sig: np.ndarray) -> np.ndarray:
         full = np.zeros((len(times), len(signals)))
         full[:, o2] = sig
         if rest:
-            full[:, rest] = flow_values
+            full[:, rest] = flow["signals"]
         w = np.asarray(weights_of(times, full)).reshape(-1, len(times), len(signals))
+        rest_weights.append(w[:, :, rest])
         return np.ascontiguousarray(w[:, :, o2].ravel(), dtype=float)
-    return _core.species_adjoint_gradients, [signals[k] for k in o2], weights
+
+    def complete(out: Any) -> Any:
+        """The flow signals' terms Σ w dQ/dθ of the flow parameters' gradients."""
+        if not (rest and flow_rows):
+            return out
+        grad = np.array(out["gradients"], dtype=float)
+        dflow = np.asarray(flow["derivatives"])  # flow params × steps × flow signals
+        grad[:, flow_rows] += np.einsum("fkj,pkj->fp", rest_weights[0], dflow)
+        return {**out, "gradients": grad}
+    return _core.species_adjoint_gradients, [signals[k] for k in o2], weights, complete
 
 
 def _adjoint(m: Model, parameters: Sequence[str], targets: Sequence[Target],
@@ -259,12 +269,13 @@ def _adjoint(m: Model, parameters: Sequence[str], targets: Sequence[Target],
         return np.ascontiguousarray(np.concatenate(weights).ravel(), dtype=float)
 
     core, core_signals, weights = _core.adjoint_gradients, signals, weights_of
+    complete: Callable[[Any], Any] = lambda out: out
     with core_errors(f"model '{m.name}'"):
         if _involves_oxygen(parameters, signals):
-            core, core_signals, weights = _oxygen_adjoint(
+            core, core_signals, weights, complete = _oxygen_adjoint(
                 m, parameters, signals, weights_of, (period, steps, rho, max_cycles, tol))
-        out = core(json.dumps(m.canonical), list(parameters), core_signals, weights, period,
-                   steps, rho, max_cycles, tol)
+        out = complete(core(json.dumps(m.canonical), list(parameters), core_signals, weights,
+                            period, steps, rho, max_cycles, tol))
     jac, start = [], 0
     for path, v in zip(paths, values, strict=True):
         j = np.asarray(out["gradients"][start:start + len(v)])
@@ -291,9 +302,9 @@ def sensitivities(model: Model | Mapping[str, Any] | str, parameters: Sequence[s
     differentiated by oxygen parameters (``oxygen.wall.k``, ``oxygen.hill.p50``, …) through
     the species transport's tangent (docs/calibration.md, "Oxygen"), and by flow parameters
     through the flow's tangent; oxygen parameters leave flow outputs unchanged (zero rows).
-    With ``mode="adjoint"`` oxygen outputs take oxygen parameters only (the species
-    transport's adjoint; flow outputs beside them get zero rows); a flow parameter is a
-    :class:`~oxyline.CalibrationError` naming it.
+    With ``mode="adjoint"`` oxygen outputs take oxygen and flow parameters alike (the flow's
+    tangent by each flow parameter forward, the species transport's adjoint backward: one
+    sweep per output row); flow outputs beside them take the flow parameters' tangents.
 
     ``mode="forward"``: tangents, one per parameter (few parameters); ``"adjoint"``: one
     backward sweep per output row, whatever the number of parameters (many parameters, few
@@ -561,8 +572,7 @@ class _Problem:
 
     def _outputs(self, m: Model) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
         """The targets' values and their Jacobian by the model's paths (SI) at ``m``."""
-        oxygen = _involves_oxygen(self.paths, [s for t in self.targets for s in t.signals])
-        if self.exact and self.gradient == "adjoint" and not oxygen:
+        if self.exact and self.gradient == "adjoint":
             v, j, raw = _adjoint(m, self.paths, self.targets, series_at_steps=False,
                                  **self.options)
             return np.concatenate(v), np.concatenate(j), raw

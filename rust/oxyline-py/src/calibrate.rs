@@ -196,8 +196,9 @@ pub fn adjoint_gradients<'py>(
 }
 
 /// [`adjoint_gradients`] of oxygen signals (vessel, name; vessel "" for the network's
-/// balance fluxes) by oxygen parameters (`oxyline_core::sensitivity::species_adjoint_with`):
-/// one backward sweep of the species transport per functional. The same dict, with
+/// balance fluxes) by oxygen and flow parameters
+/// (`oxyline_core::sensitivity::species_adjoint_with`): one backward sweep of the species
+/// transport per functional (a flow parameter's flow tangent forward beside the flow). The same dict, with
 /// `tangent_cycles` (the transport's cycles to its periodic state).
 #[oxyline_py_guard::guard]
 #[pyfunction]

@@ -499,28 +499,12 @@ pub fn species_sensitivities(
         s,
         sigs,
     } = Setup::new(spec, paths, signals, &settings)?;
-    let dae_tangents = flow_tangents(&spec, &assembled, &dae, &params)?;
-    let flow_params: Vec<DaeTangent> = dae_tangents.iter().flatten().cloned().collect();
+    let Derivatives {
+        flow_params,
+        derivs,
+        values,
+    } = Derivatives::new(&spec, &sp, &params, &assembled, &dae, &tr, s)?;
     let flow = FlowCycle::run(&dae, &flow_params, &tr.flow_tangent_unknowns(), &settings)?;
-    let names = &assembled.circuit.vessel_names;
-    let mut derivs = Vec::with_capacity(params.len());
-    let mut sources = Vec::new();
-    for (p, t) in params.iter().zip(&dae_tangents) {
-        derivs.push(match (p, t) {
-            (Param::Flow(par, _), Some(t)) => {
-                let e = flow_effect(&spec, &assembled, &dae, par, t, &mut sources);
-                tr.species_flow_derivative(s, &e)
-            }
-            (Param::Oxygen(o), _) => tr.species_derivative(s, o.kind, o.value, &on(o, &sp, names)),
-            (Param::Flow(..), None) => unreachable!("every flow parameter has its tangent"),
-        });
-    }
-    let values = (params.iter().zip(&dae_tangents))
-        .map(|(p, t)| match (p, t) {
-            (Param::Oxygen(o), _) => o.value,
-            (_, t) => t.as_ref().map_or(f64::NAN, |t| t.value),
-        })
-        .collect();
     let mut run = TransportRun::new(&mut tr, s, derivs, values, &flow)?;
     let (transport_cycles, periodic_change, (sig_values, sig_derivs)) =
         run.run_to_periodic(&flow, &settings, signals, &sigs)?;
@@ -535,6 +519,67 @@ pub fn species_sensitivities(
         transport_cycles,
         periodic_change: periodic_change.max(flow.change),
     })
+}
+
+/// The parameters' derivatives: of the DAE by each flow parameter (in their order among
+/// the parameters), of the species step by every parameter, and the parameters' SI values.
+struct Derivatives {
+    flow_params: Vec<DaeTangent>,
+    derivs: Vec<SpeciesDerivative>,
+    values: Vec<f64>,
+}
+
+impl Derivatives {
+    fn new(
+        spec: &NetworkSpec,
+        sp: &SpeciesSpec,
+        params: &[Param],
+        assembled: &Assembled,
+        dae: &Dae,
+        tr: &Transport,
+        s: usize,
+    ) -> Result<Derivatives> {
+        let dae_tangents = flow_tangents(spec, assembled, dae, params)?;
+        let names = &assembled.circuit.vessel_names;
+        let mut derivs = Vec::with_capacity(params.len());
+        let mut sources = Vec::new();
+        for (p, t) in params.iter().zip(&dae_tangents) {
+            derivs.push(match (p, t) {
+                (Param::Flow(par, _), Some(t)) => {
+                    let e = flow_effect(spec, assembled, dae, par, t, &mut sources);
+                    tr.species_flow_derivative(s, &e)
+                }
+                (Param::Oxygen(o), _) => {
+                    tr.species_derivative(s, o.kind, o.value, &on(o, sp, names))
+                }
+                (Param::Flow(..), None) => unreachable!("every flow parameter has its tangent"),
+            });
+        }
+        let values = (params.iter().zip(&dae_tangents))
+            .map(|(p, t)| match (p, t) {
+                (Param::Oxygen(o), _) => o.value,
+                (_, t) => t.as_ref().map_or(f64::NAN, |t| t.value),
+            })
+            .collect();
+        Ok(Derivatives {
+            flow_params: dae_tangents.into_iter().flatten().collect(),
+            derivs,
+            values,
+        })
+    }
+}
+
+/// Per parameter: its index among the flow parameters (None: an oxygen parameter).
+fn flow_indices(derivs: &[SpeciesDerivative]) -> Vec<Option<usize>> {
+    let mut next = 0;
+    (derivs.iter())
+        .map(|d| {
+            (d.kind == SpeciesParameterKind::Flow).then(|| {
+                next += 1;
+                next - 1
+            })
+        })
+        .collect()
 }
 
 /// The vessels (by circuit index) whose wall oxygen parameter `p` is: its own vessel's, or
@@ -576,15 +621,7 @@ impl<'t> TransportRun<'t> {
     ) -> Result<Self> {
         let y0 = &flow.ys[0];
         let z = tr.initial_state(y0)?;
-        let mut next = 0;
-        let flow_index: Vec<Option<usize>> = (derivs.iter())
-            .map(|d| {
-                (d.kind == SpeciesParameterKind::Flow).then(|| {
-                    next += 1;
-                    next - 1
-                })
-            })
-            .collect();
+        let flow_index = flow_indices(&derivs);
         let tangents = (derivs.iter().zip(&flow_index))
             .map(|(d, f)| match f {
                 Some(p) => tr.species_flow_tangent_start(s, d, y0, flow.tangent(*p, 0), &z),

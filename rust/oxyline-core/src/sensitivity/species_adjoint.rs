@@ -1,14 +1,19 @@
-//! The adjoint of the oxygen signals by oxygen parameters at the periodic state: one
-//! backward sweep per functional J = Σ_k Σ_j w_kj · signal_j(step k) gives its derivative
-//! by every oxygen parameter at once (`transport/adjoint.rs` transposes each step). The
-//! flow runs to its periodic state, the transport to its own over that cycle; one more
+//! The adjoint of the oxygen signals at the periodic state: one backward sweep per
+//! functional J = Σ_k Σ_j w_kj · signal_j(step k) gives its derivative by every parameter
+//! at once (`transport/adjoint.rs` transposes each step). The flow and its tangents by the
+//! flow parameters run to their periodic state (one more solve per flow parameter and step
+//! on the flow's own factorisation), the transport to its own over that cycle; one more
 //! cycle is recorded (each step's flows, volumes and binding), then the adjoint runs that
 //! cycle backwards until its state at the cycle's start repeats (the periodic fixed point
-//! of the transposed cycle), and the gradient is that last backward cycle's.
+//! of the transposed cycle), and the gradient is that last backward cycle's. An oxygen
+//! parameter's terms are summed on the way; a flow parameter's (its face flows, transport
+//! volumes and walls, driven by the flow's tangent) are its step forcing contracted with
+//! the adjoint of each step, in one more backward cycle at the fixed point: the flow's
+//! tangents forward, the species' adjoint backward.
 
 use super::*;
 use crate::transport::tangent::{
-    AdjointSums, SignalRow, SpeciesAdjointState, SpeciesDerivative, SpeciesStepRecord,
+    AdjointSums, SignalRow, SpeciesAdjointState, SpeciesDerivative, SpeciesStepRecord, StepDuals,
 };
 
 /// The result of [`species_adjoint_with`].
@@ -35,11 +40,19 @@ struct Recorded {
     values: Vec<f64>,
 }
 
-/// The gradients of functionals of the oxygen signals by the oxygen parameters `paths`:
-/// `weights_of(times, values)` gets the step end times and the signals (n_steps ×
-/// n_signals) of the recorded periodic cycle and returns the weights, flat n_functionals ×
-/// n_steps × n_signals. The parameters' SI values and the result; an error naming a flow
-/// parameter (forward tangents only), or what the species adjoint does not follow.
+/// The flow's periodic cycle with its tangents, and per parameter its index among the flow
+/// parameters (None: an oxygen parameter).
+struct FlowPart<'a> {
+    flow: &'a FlowCycle,
+    index: Vec<Option<usize>>,
+    alpha_f: f64,
+}
+
+/// The gradients of functionals of the oxygen signals by the parameters `paths` (oxygen
+/// and flow parameters): `weights_of(times, values)` gets the step end times and the
+/// signals (n_steps × n_signals) of the recorded periodic cycle and returns the weights,
+/// flat n_functionals × n_steps × n_signals. The parameters' SI values and the result; an
+/// error naming what the species adjoint does not follow.
 pub fn species_adjoint_with<W>(
     spec: &NetworkSpec,
     paths: &[String],
@@ -51,6 +64,7 @@ where
     W: FnOnce(&[f64], &[f64]) -> Result<Vec<f64>>,
 {
     let Setup {
+        spec,
         sp,
         params,
         assembled,
@@ -58,29 +72,23 @@ where
         mut tr,
         s,
         sigs,
-        ..
     } = Setup::new(spec, paths, signals, &settings)?;
-    let names = &assembled.circuit.vessel_names;
-    let mut derivs = Vec::with_capacity(params.len());
-    for p in &params {
-        match p {
-            Param::Oxygen(o) => {
-                derivs.push(tr.species_derivative(s, o.kind, o.value, &on(o, &sp, names)))
-            }
-            Param::Flow(_, path) => {
-                return Err(Error::model(
-                    format!("parameter '{path}'"),
-                    "the oxygen adjoint does not follow flow parameters yet (their oxygen \
-                     derivatives have forward tangents: mode='forward')",
-                ));
-            }
-        }
-    }
+    let Derivatives {
+        flow_params,
+        derivs,
+        values,
+    } = Derivatives::new(&spec, &sp, &params, &assembled, &dae, &tr, s)?;
     tr.check_species_adjoint(s, "sensitivities")?;
-    let flow = FlowCycle::run(&dae, &[], &tr.flow_tangent_unknowns(), &settings)?;
+    let flow = FlowCycle::run(&dae, &flow_params, &tr.flow_tangent_unknowns(), &settings)?;
+    let part = FlowPart {
+        flow: &flow,
+        index: flow_indices(&derivs),
+        alpha_f: settings.alpha_f(),
+    };
     let (transport_cycles, change_z, mut z) = primal_to_periodic(&mut tr, s, &flow, &settings)?;
+    let nodes = !flow_params.is_empty();
     let rec = record(
-        &mut tr, s, &flow, &settings, signals, &sigs, &derivs, &mut z,
+        &mut tr, s, &flow, &settings, signals, &sigs, &derivs, &mut z, nodes,
     )?;
     let ns = settings.steps_per_cycle;
     let dt = settings.period / ns as f64;
@@ -106,21 +114,22 @@ where
         adjoint_cycles: Vec::with_capacity(nf),
         periodic_change: change_z.max(flow.change),
     };
+    let back = Backward {
+        s,
+        dt,
+        rec: &rec,
+        sigs: &sigs,
+        derivs: &derivs,
+        set: &settings,
+        flow: &part,
+    };
     for w in weights.chunks(per) {
         let j: f64 = w.iter().zip(&rec.values).map(|(a, b)| a * b).sum();
-        let (cycles, grad) = backward(&mut tr, s, dt, &rec, &sigs, &derivs, w, &settings)?;
+        let (cycles, grad) = back.run(&mut tr, w)?;
         out.functionals.push(j);
         out.gradients.extend(grad);
         out.adjoint_cycles.push(cycles);
     }
-    let values = derivs
-        .iter()
-        .zip(&params)
-        .map(|(_, p)| match p {
-            Param::Oxygen(o) => o.value,
-            Param::Flow(..) => f64::NAN,
-        })
-        .collect();
     Ok((values, out))
 }
 
@@ -167,6 +176,7 @@ fn record(
     sigs: &[Signal],
     derivs: &[SpeciesDerivative],
     z: &mut [f64],
+    nodes: bool,
 ) -> Result<Recorded> {
     let (ns, nsig, nc) = (set.steps_per_cycle, sigs.len(), tr.n_cells());
     let dt = set.period / ns as f64;
@@ -181,9 +191,14 @@ fn record(
         let t = k as f64 * dt;
         let z_old = z.to_vec();
         let w_old = tr.cell_volumes().to_vec();
+        let x_old = if nodes {
+            tr.species_node_values(s, z)
+        } else {
+            Vec::new()
+        };
         tr.implicit_step(t, dt, af, &flow.ys[k], &flow.ys[k + 1], z)?;
         rec.steps
-            .push(tr.species_step_record(s, t + af * dt, &z_old, &w_old, z));
+            .push(tr.species_step_record(s, t + af * dt, &z_old, &w_old, z, x_old));
         for (j, sig) in sigs.iter().enumerate() {
             let row = match *sig {
                 Signal::Network(a) => {
@@ -202,69 +217,136 @@ fn record(
     Ok(rec)
 }
 
-/// The backward cycles of one functional (weights `w`, n_steps × n_signals) until the
-/// adjoint's state at the cycle's start repeats: the cycles and the gradient.
-#[allow(clippy::too_many_arguments)]
-fn backward(
-    tr: &mut Transport,
+/// The backward sweeps of the recorded cycle (one functional's weights at a time).
+struct Backward<'a> {
     s: usize,
     dt: f64,
-    rec: &Recorded,
-    sigs: &[Signal],
-    derivs: &[SpeciesDerivative],
-    w: &[f64],
-    set: &TangentSettings,
-) -> Result<(usize, Vec<f64>)> {
-    let (ns, nsig, nc) = (set.steps_per_cycle, sigs.len(), tr.n_cells());
-    let mut lam: SpeciesAdjointState = tr.species_adjoint_start();
-    let nn = lam.xt.len();
-    let mut seed = vec![0.0; nn];
-    let mut last = f64::INFINITY;
-    for cycle in 1..=set.max_cycles {
-        let (dz0, xt0) = (lam.dz.clone(), lam.xt.clone());
-        let mut sums = AdjointSums::new(nc);
-        // the signals' direct terms (a P50 in PO2 and saturation, a wall's own uptake)
-        let mut direct = vec![0.0; derivs.len()];
+    rec: &'a Recorded,
+    sigs: &'a [Signal],
+    derivs: &'a [SpeciesDerivative],
+    set: &'a TangentSettings,
+    flow: &'a FlowPart<'a>,
+}
+
+/// One backward cycle's parameter terms: the oxygen parameters' sums, the signals' direct
+/// terms and the flow parameters' contracted forcing (per parameter).
+struct CycleTerms {
+    sums: AdjointSums,
+    direct: Vec<f64>,
+    flow: Vec<f64>,
+}
+
+impl Backward<'_> {
+    /// The backward cycles of one functional (weights `w`, n_steps × n_signals) until the
+    /// adjoint's state at the cycle's start repeats, and one more at that fixed point for
+    /// the flow parameters: the cycles and the gradient.
+    fn run(&self, tr: &mut Transport, w: &[f64]) -> Result<(usize, Vec<f64>)> {
+        let nc = tr.n_cells();
+        let mut lam: SpeciesAdjointState = tr.species_adjoint_start();
+        let mut last = f64::INFINITY;
+        for cycle in 1..=self.set.max_cycles {
+            let (dz0, xt0) = (lam.dz.clone(), lam.xt.clone());
+            let mut terms = self.cycle(tr, w, &mut lam, false, nc);
+            last = change(&dz0, &lam.dz, 0.0).max(change(&xt0, &lam.xt, 0.0));
+            if last <= self.set.tol {
+                let mut cycles = cycle;
+                if self.flow.index.iter().any(Option::is_some) {
+                    terms = self.cycle(tr, w, &mut lam, true, nc);
+                    cycles += 1;
+                }
+                let grad = (self.derivs.iter().enumerate())
+                    .map(|(p, d)| terms.sums.gradient(d) + terms.direct[p] + terms.flow[p])
+                    .collect();
+                return Ok((cycles, grad));
+            }
+        }
+        Err(Error::model(
+            "sensitivities",
+            format!(
+                "the oxygen adjoint is not periodic after max_cycles = {} (last change \
+                 {last:.2e})",
+                self.set.max_cycles
+            ),
+        ))
+    }
+
+    /// One backward cycle from the adjoint state `lam` after the cycle (to the one before
+    /// it); `with_flow`: the flow parameters' forcing contracted on the way.
+    fn cycle(
+        &self,
+        tr: &mut Transport,
+        w: &[f64],
+        lam: &mut SpeciesAdjointState,
+        with_flow: bool,
+        nc: usize,
+    ) -> CycleTerms {
+        let (ns, nsig, np) = (self.set.steps_per_cycle, self.sigs.len(), self.derivs.len());
+        let mut terms = CycleTerms {
+            sums: AdjointSums::new(nc),
+            direct: vec![0.0; np],
+            flow: vec![0.0; np],
+        };
+        let mut seed = vec![0.0; lam.xt.len()];
+        let mut duals = StepDuals::default();
+        let fl = self.flow;
+        // the flow parameters' transport volumes' tangent after the cycle (its start's)
+        let mut dw: Vec<Vec<f64>> = if with_flow {
+            (self.derivs.iter().zip(&fl.index))
+                .map(|(d, i)| match i {
+                    Some(i) => {
+                        let start = fl.flow.tangent(*i, 0);
+                        (tr.flow_volumes_start(d, &fl.flow.ys[0], start)).unwrap_or_default()
+                    }
+                    None => Vec::new(),
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
         for k in (0..ns).rev() {
             seed.iter_mut().for_each(|x| *x = 0.0);
             let mut net = [0.0; 3];
-            for (j, sig) in sigs.iter().enumerate() {
+            let mut faces = Vec::new();
+            for (j, sig) in self.sigs.iter().enumerate() {
                 let wk = w[k * nsig + j];
                 if wk == 0.0 {
                     continue;
                 }
-                match (sig, &rec.rows[k * nsig + j]) {
+                match (sig, &self.rec.rows[k * nsig + j]) {
                     (Signal::Network(a), _) => net[*a] += wk,
                     (_, Some(row)) => {
                         for &(n, c) in &row.nodes {
                             seed[n] += wk * c;
                         }
-                        for (d, r) in direct.iter_mut().zip(&row.direct) {
+                        for (d, r) in terms.direct.iter_mut().zip(&row.direct) {
                             *d += wk * r;
                         }
+                        faces.extend(row.face.map(|f| (f, wk)));
                     }
                     (_, None) => unreachable!("a vessel signal has its row"),
                 }
             }
-            tr.species_adjoint_step(s, dt, &rec.steps[k], &seed, net, &mut lam, &mut sums);
+            let step = &self.rec.steps[k];
+            let du = with_flow.then_some(&mut duals);
+            tr.species_adjoint_step(self.s, self.dt, step, &seed, net, lam, &mut terms.sums, du);
+            if !with_flow {
+                continue;
+            }
+            for (p, i) in fl.index.iter().enumerate() {
+                let Some(i) = *i else { continue };
+                let fs = FlowStep {
+                    start: fl.flow.tangent(i, k),
+                    end: fl.flow.tangent(i, k + 1),
+                    alpha_f: fl.alpha_f,
+                };
+                let d = &self.derivs[p];
+                terms.flow[p] += tr.species_flow_adjoint_step(
+                    self.s, self.dt, step, d, &fs, &mut dw[p], &duals, &faces,
+                );
+            }
         }
-        last = change(&dz0, &lam.dz, 0.0).max(change(&xt0, &lam.xt, 0.0));
-        if last <= set.tol {
-            let grad = derivs
-                .iter()
-                .zip(&direct)
-                .map(|(d, r)| sums.gradient(d) + r)
-                .collect();
-            return Ok((cycle, grad));
-        }
+        terms
     }
-    Err(Error::model(
-        "sensitivities",
-        format!(
-            "the oxygen adjoint is not periodic after max_cycles = {} (last change {last:.2e})",
-            set.max_cycles
-        ),
-    ))
 }
 
 #[cfg(test)]

@@ -13,6 +13,12 @@
 //! (its back substitution first, children before parents, then its elimination, parents
 //! before children), then the rows: λ_z = λ_b/Δt + (λ of c′)/W. The parameters' terms of each
 //! piece are accumulated into the gradient on the way.
+//!
+//! A flow parameter drives the step through its own right-hand side at a zero carried
+//! tangent (`tangent_flow.rs`' [`FlowForcing`]: the face flows', volumes' and geometry's
+//! terms, from the flow's tangent); its derivative is that right-hand side contracted with
+//! the step's adjoint ([`StepDuals`]), summed over the cycle (the mixed mode: the flow
+//! forward, the species backward).
 
 #[allow(unused_imports)]
 use super::*;
@@ -30,6 +36,21 @@ pub struct SpeciesStepRecord {
     c: Vec<f64>,
     point: Vec<BindingPoint>,
     x: Vec<f64>,
+    /// Every node's total concentration before and after the step (a flow parameter's
+    /// forcing reads them; empty without flow parameters).
+    nodes_old: Vec<f64>,
+    nodes_new: Vec<f64>,
+}
+
+/// The adjoint of one step's pieces a flow parameter's forcing enters: of the rows' right
+/// side (per node), of the old concentrations c′ (per cell), of the new amounts z′ (per
+/// cell), and the network fluxes' weights (inflow, outflow, wall).
+#[derive(Debug, Clone, Default)]
+pub struct StepDuals {
+    lnum: Vec<f64>,
+    ldc: Vec<f64>,
+    ldz: Vec<f64>,
+    net: [f64; 3],
 }
 
 /// The adjoint of the carried tangent: of the cells' amounts (per cell) and of the lagged
@@ -47,6 +68,8 @@ pub struct SignalRow {
     pub value: f64,
     pub nodes: Vec<(usize, f64)>,
     pub direct: Vec<f64>,
+    /// A flow signal's face: its derivative by a flow parameter is the face flow's.
+    pub face: Option<usize>,
 }
 
 /// The parameters' terms of the adjoint steps, summed over a cycle: the wall laws'
@@ -109,7 +132,9 @@ impl Transport {
     }
 
     /// The record of the step species `s` just took (`implicit_step` from amounts `z_old`,
-    /// volumes `w_old` to amounts `z`; its flows still loaded).
+    /// volumes `w_old` to amounts `z`; its flows still loaded); `nodes_old`, the nodes'
+    /// values before it ([`Transport::species_node_values`]) when flow parameters will
+    /// read the record, else empty.
     pub fn species_step_record(
         &self,
         s: usize,
@@ -117,6 +142,7 @@ impl Transport {
         z_old: &[f64],
         w_old: &[f64],
         z: &[f64],
+        nodes_old: Vec<f64>,
     ) -> SpeciesStepRecord {
         let nc = self.plan.cells.len();
         let binding = self.plan.species[s].binding;
@@ -146,6 +172,12 @@ impl Transport {
             c,
             point,
             x,
+            nodes_new: if nodes_old.is_empty() {
+                Vec::new()
+            } else {
+                self.conc.clone()
+            },
+            nodes_old,
         }
     }
 
@@ -168,12 +200,15 @@ impl Transport {
             value: 0.0,
             nodes: Vec::new(),
             direct: vec![0.0; np],
+            face: None,
         };
         match signal {
             VesselSpeciesSignal::Flow => {
-                // the flow does not depend on oxygen parameters
+                // the flow does not depend on oxygen parameters; a flow parameter's
+                // derivative is its face's
                 let v = &self.plan.out_vessels[k];
                 row.value = self.qf.get(v.last).copied().unwrap_or(f64::NAN);
+                row.face = (v.last < self.plan.faces.len()).then_some(v.last);
             }
             VesselSpeciesSignal::WallUptake => {
                 let laws = &self.species[s].laws;
@@ -231,7 +266,8 @@ impl Transport {
     /// `lam` holds the adjoint of the tangent after the step, `seed` the weights of this
     /// step's signals on the new total concentrations (per node) and `net` those of its
     /// network fluxes (inflow, outflow, wall uptake); on return `lam` holds the adjoint of
-    /// the tangent before the step, and `sums` has gained the step's parameter terms.
+    /// the tangent before the step, and `sums` has gained the step's parameter terms;
+    /// `duals` (for flow parameters) receives the step's [`StepDuals`].
     #[allow(clippy::too_many_arguments)]
     pub fn species_adjoint_step(
         &mut self,
@@ -242,6 +278,7 @@ impl Transport {
         net: [f64; 3],
         lam: &mut SpeciesAdjointState,
         sums: &mut AdjointSums,
+        mut duals: Option<&mut StepDuals>,
     ) {
         self.ensure_scratch();
         self.qf.copy_from_slice(&rec.qf);
@@ -270,6 +307,11 @@ impl Transport {
         sums.p50 += self.boundary_fluxes_adjoint(net, &bd, &mut lx, &mut lprior);
         let (lnum, p50) = self.tree_solve_adjoint(&mut den, &mut lx, &mut lprior, &bd);
         sums.p50 += p50;
+        if let Some(du) = duals.as_deref_mut() {
+            du.ldz.clone_from(&lam.dz);
+            du.ldc.resize(plan.cells.len(), 0.0);
+            du.net = net;
+        }
         // the rows (`tangent_rows`), transposed
         for (i, &n) in plan.cells.iter().enumerate() {
             let g = laws.cell_g[i];
@@ -281,6 +323,9 @@ impl Transport {
             let ldwl = e * (x - c);
             let ldc = lprior[n] + e * (g * pt.sigma - wl) + ldwl * g * pt.sigma_c;
             lam.dz[i] = lnum[n] / dt + ldc / rec.w_old[i];
+            if let Some(du) = duals.as_deref_mut() {
+                du.ldc[i] = ldc;
+            }
             // w_l′ ∋ dg σ + g ∂σ/∂P50, w_c′ ∋ dg f + g ∂f/∂P50 − d(g c_w) + dq
             sums.a[i] += ldwl * pt.sigma + e * pt.f;
             sums.e[i] += e;
@@ -290,6 +335,47 @@ impl Transport {
             let cell = plan.node_cell.get(n).is_some_and(|&i| i != usize::MAX);
             *l = if cell { 0.0 } else { lprior[n] };
         }
+        if let Some(du) = duals {
+            du.lnum = lnum;
+        }
+    }
+
+    /// Flow parameter `d`'s term of the gradient from the step `rec` of species `s` whose
+    /// adjoint step (`duals`) was just taken (its flows and boundary values still loaded):
+    /// the parameter's forcing of the step ([`FlowForcing`], its flow tangent over the step
+    /// `step`) contracted with the step's adjoint, plus the flow signals' weights `faces`
+    /// (face, weight) on the face flows' tangent. On entry `dw` holds the transport volumes'
+    /// tangent after the step, on return before it.
+    #[allow(clippy::too_many_arguments)]
+    pub fn species_flow_adjoint_step(
+        &mut self,
+        s: usize,
+        dt: f64,
+        rec: &SpeciesStepRecord,
+        d: &SpeciesDerivative,
+        step: &FlowStep<'_>,
+        dw: &mut Vec<f64>,
+        duals: &StepDuals,
+        faces: &[(usize, f64)],
+    ) -> f64 {
+        let Some(f) = &d.flow else {
+            return 0.0;
+        };
+        self.conc.copy_from_slice(&rec.nodes_new);
+        *dw = self.flow_volumes_before(dt, f, step, dw);
+        let cells = CellPrimal {
+            w: &rec.w_old,
+            c: &rec.c,
+            x: &rec.x,
+        };
+        let fc = self.flow_forcing(s, dt, f, step, &rec.nodes_old, cells, dw);
+        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+        dot(&duals.ldc, &fc.dc)
+            + dot(&duals.lnum, &fc.num)
+            + dot(&duals.ldz, &fc.dz)
+            + duals.net[0] * fc.d_in
+            + duals.net[1] * fc.d_out
+            + faces.iter().map(|&(fi, w)| w * fc.dq[fi]).sum::<f64>()
     }
 
     /// The boundary fluxes' part of the accumulators (`implicit_boundary_fluxes` on the

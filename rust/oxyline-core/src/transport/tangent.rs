@@ -30,11 +30,11 @@ use super::*;
 
 #[path = "adjoint.rs"]
 mod adjoint;
-pub use adjoint::{AdjointSums, SignalRow, SpeciesAdjointState, SpeciesStepRecord};
+pub use adjoint::{AdjointSums, SignalRow, SpeciesAdjointState, SpeciesStepRecord, StepDuals};
 
 #[path = "tangent_flow.rs"]
 mod flow;
-use flow::{FlowDerivative, FlowStepTerms};
+use flow::{CellPrimal, FlowDerivative, FlowForcing};
 pub use flow::{FlowEffect, FlowGeometry, FlowStep};
 
 /// What an oxygen parameter changes in the step.
@@ -306,11 +306,18 @@ impl Transport {
         }
         self.load_boundary(s, t_af);
         for (k, (d, t)) in derivs.iter().zip(tangents.iter_mut()).enumerate() {
-            let terms = match (&d.flow, flows.get(k).copied().flatten()) {
-                (Some(f), Some(step)) => Some(self.flow_step_terms(f, &step, x_old)),
+            let forcing = match (&d.flow, flows.get(k).copied().flatten()) {
+                (Some(f), Some(step)) => {
+                    let cells = CellPrimal {
+                        w: &primal.w,
+                        c: &primal.c,
+                        x: &primal.x,
+                    };
+                    Some(self.flow_forcing(s, dt, f, &step, x_old, cells, &t.dw))
+                }
                 _ => None,
             };
-            self.tangent_solve(s, dt, &primal, d, t, terms)?;
+            self.tangent_solve(s, dt, &primal, d, t, forcing)?;
         }
         Ok(())
     }
@@ -339,7 +346,7 @@ impl Transport {
     }
 
     /// One parameter's tangent over the step (see the module doc; a flow parameter's
-    /// `terms`: `tangent_flow.rs`).
+    /// `forcing`: `tangent_flow.rs`).
     fn tangent_solve(
         &mut self,
         s: usize,
@@ -347,23 +354,16 @@ impl Transport {
         primal: &StepPrimal,
         d: &SpeciesDerivative,
         t: &mut SpeciesTangent,
-        terms: Option<FlowStepTerms>,
+        forcing: Option<FlowForcing>,
     ) -> Result<()> {
         let plan = Arc::clone(&self.plan);
-        // the new transport volumes' tangent W'′ = W′ + Δt (net inflow)′
-        let dw_new: Vec<f64> = match &terms {
-            Some(f) => (plan.cells.iter().zip(&t.dw))
-                .map(|(&n, dw)| dw + dt * f.dnet[n])
-                .collect(),
-            None => Vec::new(),
-        };
-        let mut wall = self.tangent_rows(s, dt, primal, d, t, &dw_new);
+        let mut wall = self.tangent_rows(s, dt, primal, d, t, forcing.as_ref());
         for &m in &plan.mixing {
             let sw = &mut self.sweep;
             (sw.den[m], sw.num[m], sw.lag[m]) = (0.0, 0.0, t.xt[m]);
         }
-        if let Some(f) = &terms {
-            for (b, r) in self.sweep.num.iter_mut().zip(&f.r) {
+        if let Some(f) = &forcing {
+            for (b, r) in self.sweep.num.iter_mut().zip(&f.num) {
                 *b += r;
             }
         }
@@ -390,14 +390,14 @@ impl Transport {
             let wl = laws.cell_g[i] * primal.point[i].sigma;
             wall += wl * xt[n];
             // z′ = W' x′ + W'′ x
-            let dz = self.wvol[i] * xt[n] + dw_new.get(i).map_or(0.0, |dw| dw * primal.x[i]);
+            let dz = self.wvol[i] * xt[n] + forcing.as_ref().map_or(0.0, |f| f.dz[i]);
             decay += lambda * dz;
             t.dz[i] = dz;
         }
         t.xt = xt;
-        if let Some(f) = terms {
+        if let Some(f) = forcing {
             (d_in, d_out) = (d_in + f.d_in, d_out + f.d_out);
-            (t.dw, t.dq) = (dw_new, f.dq);
+            (t.dw, t.dq) = (f.dw_new, f.dq);
         }
         for (a, v) in t.dacc.iter_mut().zip([d_in, d_out, wall, decay]) {
             *a += dt * v;
@@ -406,9 +406,10 @@ impl Transport {
     }
 
     /// The cells' rows of one parameter's tangent into `sweep.den`, `sweep.num` (the
-    /// primal's matrix, the right side of the module doc; `dw_new`: a flow parameter's new
-    /// volumes' tangent, else empty), the old concentrations' tangent into `t.xt`; returns
-    /// the wall flux's part known before the solve (without w_l x′).
+    /// primal's matrix, the right side of the module doc without a flow parameter's
+    /// `forcing`, whose old concentrations' part is added here), the old concentrations'
+    /// tangent into `t.xt`; returns the wall flux's part known before the solve (without
+    /// w_l x′).
     fn tangent_rows(
         &mut self,
         s: usize,
@@ -416,7 +417,7 @@ impl Transport {
         primal: &StepPrimal,
         d: &SpeciesDerivative,
         t: &mut SpeciesTangent,
-        dw_new: &[f64],
+        forcing: Option<&FlowForcing>,
     ) -> f64 {
         let laws = Arc::clone(&self.species[s].laws);
         let rate = 1.0 / dt + self.plan.species[s].decay;
@@ -427,9 +428,8 @@ impl Transport {
             let g = laws.cell_g[i];
             let [dg, dgcw, dq] = d.cell[i];
             let pt = &primal.point[i];
-            // c′ = (z′ − c W′)/W
-            let dw_old = t.dw.get(i).copied().unwrap_or(0.0);
-            let dc = (t.dz[i] - primal.c[i] * dw_old) / primal.w[i];
+            // c′ = z′/W − c W′/W
+            let dc = t.dz[i] / primal.w[i] + forcing.map_or(0.0, |f| f.dc[i]);
             let (fd, sd) = if p50 {
                 (pt.f_p50, pt.sigma_p50)
             } else {
@@ -440,9 +440,8 @@ impl Transport {
             let wl = g * pt.sigma;
             let dwl = dg * pt.sigma + g * dsigma;
             let dwc = dg * pt.f + g * df - dgcw + dq - dwl * primal.c[i] - wl * dc;
-            let storage = dw_new.get(i).map_or(0.0, |dw| dw * rate * primal.x[i]);
             self.sweep.den[n] = self.wvol[i] * rate + wl;
-            self.sweep.num[n] = t.dz[i] / dt - dwc - dwl * primal.x[i] - storage;
+            self.sweep.num[n] = t.dz[i] / dt - dwc - dwl * primal.x[i];
             t.xt[n] = dc;
             wall += dwl * primal.x[i] + dwc; // (+ w_l x′ after the solve)
         }

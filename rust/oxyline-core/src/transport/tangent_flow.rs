@@ -61,12 +61,41 @@ pub struct FlowStep<'a> {
 /// A flow parameter's terms in one step: face flows' derivatives (every face), the nodes'
 /// net inflow's and the residual's (the flux divergence), and the boundary fluxes' change
 /// at the primal's concentrations (inflow, outflow).
-pub(super) struct FlowStepTerms {
+struct FlowStepTerms {
+    dq: Vec<f64>,
+    dnet: Vec<f64>,
+    r: Vec<f64>,
+    d_in: f64,
+    d_out: f64,
+}
+
+/// A flow parameter's right-hand side of one species step at a zero carried tangent
+/// (z′ = 0, lagged x′ = 0): what the parameter itself drives. The step's tangent is this
+/// plus the carried tangent's linear part, so the forward tangent adds it to its rows and
+/// the adjoint contracts it with the step's adjoint (`adjoint.rs`).
+#[derive(Debug, Clone)]
+pub(crate) struct FlowForcing {
+    /// The new transport volumes' tangent W'′ = W′ + Δt (net inflow)′, per cell.
+    pub(super) dw_new: Vec<f64>,
+    /// The old concentrations' tangent at z′ = 0, c′ = −c W′/W, per cell.
+    pub(super) dc: Vec<f64>,
+    /// The rows' right side: the flux divergence′ − W'′ (1/Δt + λ) x, per node.
+    pub(super) num: Vec<f64>,
+    /// The new amounts' part W'′ x, per cell.
+    pub(super) dz: Vec<f64>,
+    /// The face flows' tangent (every face), and the boundary fluxes' (inflow, outflow).
     pub(super) dq: Vec<f64>,
-    pub(super) dnet: Vec<f64>,
-    pub(super) r: Vec<f64>,
     pub(super) d_in: f64,
     pub(super) d_out: f64,
+}
+
+/// The primal of one step's cells a flow parameter's forcing reads: old volumes W, old
+/// total concentrations c, new total concentrations x.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct CellPrimal<'a> {
+    pub(super) w: &'a [f64],
+    pub(super) c: &'a [f64],
+    pub(super) x: &'a [f64],
 }
 
 impl Transport {
@@ -141,22 +170,37 @@ impl Transport {
         z: &[f64],
     ) -> SpeciesTangent {
         let mut t = self.species_tangent_start();
-        let Some(f) = &d.flow else {
+        let Some(dw) = self.flow_volumes_start(d, y0, dflow0) else {
             return t;
         };
-        let (p, nc) = (&*self.plan, self.plan.cells.len());
+        let nc = self.plan.cells.len();
+        t.dw = dw;
+        for (i, dz) in t.dz.iter_mut().enumerate() {
+            *dz = t.dw[i] * z[s * nc + i] / self.wvol[i];
+        }
+        t.dq = vec![0.0; self.plan.faces.len()];
+        t
+    }
+
+    /// The transport volumes' tangent of a flow parameter (`d`; None for an oxygen one) at
+    /// flow state `y0` (its tangent `dflow0` over [`Transport::flow_tangent_unknowns`]):
+    /// dV(P₀) = dV₀ + dC (P₀ − P_ref) + C dP₀, per cell.
+    pub fn flow_volumes_start(
+        &self,
+        d: &SpeciesDerivative,
+        y0: &[f64],
+        dflow0: &[f64],
+    ) -> Option<Vec<f64>> {
+        let f = d.flow.as_ref()?;
+        let p = &*self.plan;
         let nf = p.n_flow_faces;
-        t.dw = (0..nc)
+        let dw = (0..p.cells.len())
             .map(|i| {
                 let u = p.volume_unknown(i);
                 f.dv0[i] + f.dcap[i] * (y0[u] - p.p_ref) + p.cap[i] * dflow0[nf + i]
             })
             .collect();
-        for (i, dz) in t.dz.iter_mut().enumerate() {
-            *dz = t.dw[i] * z[s * nc + i] / self.wvol[i];
-        }
-        t.dq = vec![0.0; p.faces.len()];
-        t
+        Some(dw)
     }
 
     /// The total concentration of every node of species `s` in state `z` before a step: the
@@ -193,24 +237,65 @@ impl Transport {
         (dq, dqs)
     }
 
-    /// A flow parameter's terms of the step species `s` (loaded boundary values) just took,
-    /// `x_old` the nodes' values before it ([`Transport::species_node_values`]).
-    pub(super) fn flow_step_terms(
+    /// Flow parameter `f`'s forcing of the step species `s` (loaded face flows, boundary
+    /// values and new node values) just took: `x_old` the nodes' values before it
+    /// ([`Transport::species_node_values`]), `cells` its cells' primal, `dw_old` the old
+    /// transport volumes' tangent W′ (see the module doc).
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn flow_forcing(
         &self,
+        s: usize,
+        dt: f64,
         f: &FlowDerivative,
         step: &FlowStep<'_>,
         x_old: &[f64],
-    ) -> FlowStepTerms {
-        let p = &*self.plan;
-        let (dq, dqs) = self.face_flow_tangent(f, step);
-        let nn = p.kind.len();
-        let (mut dnet, mut r) = (vec![0.0; nn], vec![0.0; nn]);
-        // the value a face's upwind end carries: a node's new value, or a boundary's
-        let carried = |up: End, down: End| match (up, down) {
-            (End::Node(u), _) => self.conc[u],
-            (End::Boundary(b), End::Node(n)) => inflow_value(self.bval[b], x_old[n]),
-            (End::Boundary(b), End::Boundary(_)) => inflow_value(self.bval[b], 0.0),
+        cells: CellPrimal<'_>,
+        dw_old: &[f64],
+    ) -> FlowForcing {
+        let terms = self.flow_step_terms(f, step, x_old);
+        let rate = 1.0 / dt + self.plan.species[s].decay;
+        let plan = &*self.plan;
+        let nc = plan.cells.len();
+        let mut out = FlowForcing {
+            dw_new: Vec::with_capacity(nc),
+            dc: Vec::with_capacity(nc),
+            num: terms.r,
+            dz: Vec::with_capacity(nc),
+            dq: terms.dq,
+            d_in: terms.d_in,
+            d_out: terms.d_out,
         };
+        for (i, &n) in plan.cells.iter().enumerate() {
+            let dw = dw_old.get(i).copied().unwrap_or(0.0);
+            let dw_new = dw + dt * terms.dnet[n];
+            out.dc.push(-cells.c[i] * dw / cells.w[i]);
+            out.num[n] -= dw_new * rate * cells.x[i];
+            out.dz.push(dw_new * cells.x[i]);
+            out.dw_new.push(dw_new);
+        }
+        out
+    }
+
+    /// The old transport volumes' tangent W′ of a step from the new one's (W′ = W'′ − Δt
+    /// (net inflow)′), for the adjoint's sweep backwards over the cycle.
+    pub(super) fn flow_volumes_before(
+        &self,
+        dt: f64,
+        f: &FlowDerivative,
+        step: &FlowStep<'_>,
+        dw_new: &[f64],
+    ) -> Vec<f64> {
+        let (dq, dqs) = self.face_flow_tangent(f, step);
+        let dnet = self.net_inflow_tangent(&dq, &dqs);
+        (self.plan.cells.iter().zip(dw_new))
+            .map(|(&n, dw)| dw - dt * dnet[n])
+            .collect()
+    }
+
+    /// The nodes' net inflow's tangent from the faces' `dq` and the sources' `dqs`.
+    fn net_inflow_tangent(&self, dq: &[f64], dqs: &[f64]) -> Vec<f64> {
+        let p = &*self.plan;
+        let mut dnet = vec![0.0; p.kind.len()];
         let faces = p.internal.iter().map(|e| e[0] as usize);
         for fi in faces.chain(p.boundary_faces.iter().copied()) {
             let face = &p.faces[fi];
@@ -220,6 +305,33 @@ impl Transport {
             if let End::Node(n) = face.to {
                 dnet[n] += dq[fi];
             }
+        }
+        for (&(n, _, _), &dqk) in p.sources.iter().zip(dqs) {
+            dnet[n] += dqk;
+        }
+        dnet
+    }
+
+    /// A flow parameter's terms of the step species `s` (loaded boundary values) just took,
+    /// `x_old` the nodes' values before it ([`Transport::species_node_values`]).
+    fn flow_step_terms(
+        &self,
+        f: &FlowDerivative,
+        step: &FlowStep<'_>,
+        x_old: &[f64],
+    ) -> FlowStepTerms {
+        let p = &*self.plan;
+        let (dq, dqs) = self.face_flow_tangent(f, step);
+        let dnet = self.net_inflow_tangent(&dq, &dqs);
+        let mut r = vec![0.0; p.kind.len()];
+        // the value a face's upwind end carries: a node's new value, or a boundary's
+        let carried = |up: End, down: End| match (up, down) {
+            (End::Node(u), _) => self.conc[u],
+            (End::Boundary(b), End::Node(n)) => inflow_value(self.bval[b], x_old[n]),
+            (End::Boundary(b), End::Boundary(_)) => inflow_value(self.bval[b], 0.0),
+        };
+        let faces = p.internal.iter().map(|e| e[0] as usize);
+        for fi in faces.chain(p.boundary_faces.iter().copied()) {
             let (q, up, down) = oriented(&p.faces, &self.qf, fi);
             let flux = if q >= 0.0 { dq[fi] } else { -dq[fi] } * carried(up, down);
             if let End::Node(u) = up {
@@ -231,7 +343,6 @@ impl Transport {
         }
         let (mut d_in, mut d_out) = (0.0, 0.0);
         for ((&(n, _, bb), &q), &dqk) in p.sources.iter().zip(&self.qs).zip(&dqs) {
-            dnet[n] += dqk;
             let v = if q >= 0.0 {
                 inflow_value(self.bval[bb], x_old[n])
             } else {
