@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from oxyline import _core
 from oxyline.ensemble.patch import apply_patch
 from oxyline.errors import ResourceError
 from oxyline.loader import load_model
@@ -66,8 +67,6 @@ def _settings(model: Model, steps_per_cycle: int | None) -> tuple[float, int, fl
     if period is None:
         raise CalibrationError(f"model '{model.name}': sensitivities need a periodic model "
                                "(a period or periodic waveforms)")
-    from oxyline import _core
-
     # the model's dt and rho_infty with the core's defaults (the run's own settings)
     s = _core.resolve_settings(model.simulation, {}, period)
     if steps_per_cycle is None:  # a fixed dt's steps, else ("auto"): 400 steps a cycle
