@@ -461,8 +461,14 @@ mod tests {
     fn estimate_space_error_is_a_flag_named_when_not_one() {
         let r = |o: serde_json::Value| resolve(&json!({}), &o, None);
         assert!(!r(json!({})).unwrap().estimate_space_error);
-        assert!(r(json!({"estimate_space_error": true})).unwrap().estimate_space_error);
-        let e = r(json!({"estimate_space_error": "yes"})).unwrap_err().to_string();
+        assert!(
+            r(json!({"estimate_space_error": true}))
+                .unwrap()
+                .estimate_space_error
+        );
+        let e = r(json!({"estimate_space_error": "yes"}))
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("simulate: estimate_space_error must be true or false, got 'yes'"),
             "{e}"
