@@ -108,6 +108,20 @@ def test_a_resumed_run_is_bit_identical_to_the_uninterrupted_one(
         assert 2 < whole.settings["cycles_run"] < kw["max_cycles"]
 
 
+def test_a_resumed_run_estimates_the_spatial_error_as_the_run_that_wrote_it(
+        tmp_path: Path) -> None:
+    """estimate_space_error is a stored setting: the resumed run refines the same model once
+    more, so its estimate is the uninterrupted run's (the same arithmetic: bit for bit)."""
+    kw = {"method": "generalized-alpha", "dt": 1e-3, "cycles": 2, "estimate_space_error": True}
+    whole = oxyline.simulate("bifurcation", **kw)
+    ck = tmp_path / "run.ckpt"
+    oxyline.simulate("bifurcation", checkpoint=ck, checkpoint_every="1 cycle", **kw)
+    resumed = oxyline.resume(ck)
+    assert _same(whole, resumed) == []
+    space = whole.settings["error_estimate_space"]
+    assert space > 0 and resumed.settings["error_estimate_space"] == space
+
+
 def test_a_cancelled_run_resumes_from_its_last_checkpoint(tmp_path: Path) -> None:
     """Deterministic stop: the progress callback cancels the run once the checkpoint of cycle
     2 exists; the partial result comes with SimulationCancelled, and the resumed run ends as

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from oxyline import _core
 from oxyline.ensemble.patch import apply_patch
 from oxyline.errors import ResourceError
 from oxyline.loader import load_model
@@ -66,12 +67,11 @@ def _settings(model: Model, steps_per_cycle: int | None) -> tuple[float, int, fl
     if period is None:
         raise CalibrationError(f"model '{model.name}': sensitivities need a periodic model "
                                "(a period or periodic waveforms)")
-    if steps_per_cycle is None:
-        dt = model.simulation.get("dt")
-        # "auto" (or none): 400 steps a cycle
-        steps_per_cycle = round(period / dt) if isinstance(dt, (int, float)) else 400
-    rho = float(model.simulation.get("rho_infty", 0.5))
-    return float(period), _count("steps_per_cycle", steps_per_cycle), rho
+    # the model's dt and rho_infty with the core's defaults (the run's own settings)
+    s = _core.resolve_settings(model.simulation, {}, period)
+    if steps_per_cycle is None:  # a fixed dt's steps, else ("auto"): 400 steps a cycle
+        steps_per_cycle = round(period / s["dt"]) if s["dt"] is not None else 400
+    return float(period), _count("steps_per_cycle", steps_per_cycle), float(s["rho_infty"])
 
 
 #: Most steps per cycle or cycles a tangent run may plan (as many as a run: `simulate`'s plan).

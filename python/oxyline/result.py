@@ -63,6 +63,13 @@ def _not_selected(name: str) -> AttributeError:
                           "(simulation output: variables)")
 
 
+def _column(block: str, name: str) -> property:
+    """A read-only attribute: the output variable ``name`` of every output vessel (``block``
+    ``"_vessel_var"``) or segment (``"_segment_var"``), shape (time, vessel or segment)."""
+    return property(lambda self: getattr(self, block)(name),
+                    doc=f"``{name}``, shape (time, vessel or segment).")
+
+
 @dataclass
 class TissueResult:
     """Wall/tissue compartment of one species (docs/physics.md §3.7), for every output vessel
@@ -395,39 +402,18 @@ class Result:
             raise _not_selected(name)
         return self._segment_block[:, self.segment_variables.index(name)::self._ks]
 
-    # vessel-level arrays, shape (time, vessel)
-    @property
-    def pressure_in(self) -> np.ndarray:
-        return self._vessel_var("pressure_in")
+    # vessel-level arrays, shape (time, vessel); segment-level, shape (time, segment)
+    pressure_in = _column("_vessel_var", "pressure_in")
+    pressure_out = _column("_vessel_var", "pressure_out")
+    flow_in = _column("_vessel_var", "flow_in")
+    flow_out = _column("_vessel_var", "flow_out")
+    segment_pressure_in = _column("_segment_var", "segment_pressure_in")
+    segment_pressure_out = _column("_segment_var", "segment_pressure_out")
+    segment_flow = _column("_segment_var", "segment_flow")
 
-    @property
-    def pressure_out(self) -> np.ndarray:
-        return self._vessel_var("pressure_out")
-
-    @property
-    def flow_in(self) -> np.ndarray:
-        return self._vessel_var("flow_in")
-
-    @property
-    def flow_out(self) -> np.ndarray:
-        return self._vessel_var("flow_out")
-
-    # segment-level arrays, shape (time, segment)
     @property
     def has_segments(self) -> bool:
         return self._segment_block.shape[1] > 0
-
-    @property
-    def segment_pressure_in(self) -> np.ndarray:
-        return self._segment_var("segment_pressure_in")
-
-    @property
-    def segment_pressure_out(self) -> np.ndarray:
-        return self._segment_var("segment_pressure_out")
-
-    @property
-    def segment_flow(self) -> np.ndarray:
-        return self._segment_var("segment_flow")
 
     def vessel(self, name: str) -> VesselResult:
         """All arrays of one vessel."""

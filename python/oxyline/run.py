@@ -62,11 +62,13 @@ def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
     return _resolve(model, overrides)[0]
 
 
-def _resolve(model: Model, overrides: Mapping[str, Any]) -> tuple[dict[str, Any], bool]:
-    """:func:`_settings`, and whether its ``rtol`` is the default one (neither ``rtol`` nor a
-    fixed ``dt`` given: the default run is error-controlled)."""
+def _resolve(model: Model, overrides: Mapping[str, Any]) -> tuple[dict[str, Any], bool, bool]:
+    """:func:`_settings`, whether its ``rtol`` is the default one (neither ``rtol`` nor a
+    fixed ``dt`` given: the default run is error-controlled) and ``estimate_space_error`` (a
+    refinement after the run, not a setting of the core's run)."""
     s = _core.resolve_settings(model.simulation, dict(overrides), model.period)
     default = bool(s.pop("rtol_default"))
+    space = bool(s.pop("estimate_space_error"))
     out = dict(model.simulation.get("output", {}) or {})
     progress = overrides.get("progress")
     if progress is not None and not isinstance(progress, (bool, np.bool_)) \
@@ -75,7 +77,7 @@ def _resolve(model: Model, overrides: Mapping[str, Any]) -> tuple[dict[str, Any]
                          f"got {progress!r}")
     s["variables"] = output_names(overrides.get("variables", out.get("variables")), "variables")
     s["vessels"] = _vessels(model, overrides.get("vessels", out.get("vessels")))
-    return s, default
+    return s, default, space
 
 
 #: ``settings["step_control"]`` of a checkpointed run that gives no ``dt`` (see
@@ -547,9 +549,7 @@ def _refuse_checkpoint_on_input(model: Any, checkpoint: Any) -> None:
 def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
               resume_path: Any = None) -> Result:
     """`simulate` of a loaded model; ``resume``: the core state of a checkpoint."""
-    space = _space_flag(overrides)
-    overrides = {k: v for k, v in overrides.items() if k != "estimate_space_error"}
-    s, default = _resolve(model, overrides)
+    s, default, space = _resolve(model, overrides)
     _fixed_for_checkpoints(s, default, overrides, resume)
     summarize = _large_model_output(model, s, overrides)
     core = _checkpoints(model, overrides)
@@ -596,14 +596,6 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     # physical bounds and mass balance of the recorded species output (warnings only)
     check_result(result, model.transport_spec)
     return result
-
-
-def _space_flag(overrides: Mapping[str, Any]) -> bool:
-    """``estimate_space_error``, checked (a bool)."""
-    flag = overrides.get("estimate_space_error", False)
-    if not isinstance(flag, (bool, np.bool_)):
-        raise ModelError(f"simulate: estimate_space_error must be true or false, got {flag!r}")
-    return bool(flag)
 
 
 def _heart_layout(model: Model) -> tuple[list[Any], list[Any], list[int]]:
@@ -690,9 +682,7 @@ def resume(path: str | os.PathLike[str], **overrides: Any) -> Result:
     except ModelError as exc:
         raise CheckpointError(f"{path}: its model does not load: {exc}") from None
     try:  # every stored setting checked before the run, named as a field of the file
-        _settings(model, {k: v for k, v in meta["settings"].items()
-                          if k != "estimate_space_error"})
-        _space_flag(meta["settings"])
+        _settings(model, meta["settings"])
     except ModelError as exc:
         raise CheckpointError(f"{path}: field 'settings': {exc}") from None
     control = {"checkpoint": os.fspath(path), "checkpoint_every": meta.get("checkpoint_every")}
@@ -819,9 +809,7 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     _check_chunk("time_chunk", time_chunk)
     _check_chunk("segment_chunk", segment_chunk)
     model = load_model(model)
-    space = _space_flag(overrides)
-    overrides = {k: v for k, v in overrides.items() if k != "estimate_space_error"}
-    s = _zarr_settings(model, path, overrides)
+    s, space = _zarr_settings(model, path, overrides)
     empty = _empty_rows(model, s)
     # chamber volumes and valve status, as in simulate(): extra core columns per chunk
     heart = _heart_layout(model)
@@ -884,18 +872,19 @@ def _store_facts(model: Model, space: bool) -> dict[str, Any]:
 
 
 def _zarr_settings(model: Model, path: str | os.PathLike[str], overrides: Mapping[str, Any]
-                   ) -> dict[str, Any]:
-    """The settings of a streamed run (no checkpoints), warning when the store will be large."""
+                   ) -> tuple[dict[str, Any], bool]:
+    """The settings of a streamed run (no checkpoints), warning when the store will be large,
+    and ``estimate_space_error``."""
     if "checkpoint" in overrides or "checkpoint_every" in overrides:
         raise ModelError("simulate_to_zarr: checkpoints are not supported with a streamed "
                          "store; use simulate(..., checkpoint=...)")
-    s = _settings(model, overrides)
+    s, _default, space = _resolve(model, overrides)
     need, rows, cols = _output_size(model, s)
     if need > _memory.WARN_BYTES:  # memory stays bounded, the store does not
         warnings.warn(f"{path}: the output ({rows} rows x {cols} columns) takes about "
                       f"{_memory.human(need)} on disk (before compression)", OutputSizeWarning,
                       stacklevel=3)
-    return s
+    return s, space
 
 
 def _close_store(store: Any, raw: dict[str, Any],

@@ -19,11 +19,13 @@ sampled (``samples`` points per period; svZeroDSolver interpolates linearly).
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
+from oxyline import _core
 from oxyline.errors import UnsupportedElement
 from oxyline.model import Model
 from oxyline.units import CGS_TO_SI
@@ -81,28 +83,19 @@ def vessel_blocks(model: Model) -> dict[str, list[dict[str, float]]]:
     return out
 
 
-def _sample(w: Mapping[str, Any], period: float, samples: int) -> tuple[list[float], list[float]]:
-    """Waveform (canonical, SI) as svZeroDSolver (t, value) lists."""
+def _sample(w: Mapping[str, Any], period: float, samples: int,
+            element: str) -> tuple[list[float], list[float]]:
+    """Waveform (canonical, SI) as svZeroDSolver (t, value) lists: a constant and a linear
+    table as they are, a Fourier series over its period and a periodic-cubic table over its
+    span sampled at ``samples`` points by the core's evaluator (the one the run uses)."""
     kind = w["kind"]
     if kind == "constant":
         return [0.0, period], [w["value"], w["value"]]
     if kind == "table" and w.get("interpolation", "linear") == "linear":
         return list(w["time"]), list(w["value"])
-    t = np.linspace(0.0, period, samples)
-    if kind == "fourier":
-        om = 2 * np.pi / w["period"]
-        y = np.full_like(t, w["mean"])
-        for k, a in enumerate(w.get("cos", []), 1):
-            y += a * np.cos(k * om * t)
-        for k, b in enumerate(w.get("sin", []), 1):
-            y += b * np.sin(k * om * t)
-    else:  # periodic cubic spline through the table
-        from scipy.interpolate import CubicSpline
-
-        tt, vv = np.asarray(w["time"]), np.asarray(w["value"])
-        t = np.linspace(tt[0], tt[-1], samples)
-        y = CubicSpline(tt, vv, bc_type="periodic")(t)
-    return t.tolist(), y.tolist()
+    start, end = (0.0, period) if kind == "fourier" else (w["time"][0], w["time"][-1])
+    t = np.linspace(start, end, samples)
+    return t.tolist(), _core.waveform_values(element, json.dumps(dict(w)), t.tolist()).tolist()
 
 
 def _segment_blocks(model: Model, f: Any, vessels: list[dict[str, Any]],
@@ -188,16 +181,16 @@ def to_svzerod(model: Model, units: str = "cgs", samples: int = 201,
         else:
             raise UnsupportedElement(f"node '{node}': a free vessel end without a boundary "
                                      "condition cannot be exported to svZeroDSolver")
-    sim = model.simulation or {}
-    every = (sim.get("output") or {}).get("every", period / 1000)
-    n_pts = points_per_cycle or max(2, round(period / float(every)) + 1)
+    # the model's output interval and cycles, with the core's defaults
+    sim = _core.resolve_settings(model.simulation or {}, {}, model.period)
+    n_pts = points_per_cycle or max(2, round(period / sim["output_every"]) + 1)
     return {
         "description": {"description of test case":
                         f"{model.name}: exported from oxyline ({units} units)"},
         # read by oxyline's importer (svZeroDSolver ignores it): the numbers' unit system
         "units": "cgs" if cgs else "SI",
         "simulation_parameters": {
-            "number_of_cardiac_cycles": int(cycles or sim.get("cycles", 10)),
+            "number_of_cardiac_cycles": int(cycles or sim["cycles"]),
             "number_of_time_pts_per_cardiac_cycle": int(n_pts),
             "output_all_cycles": False,
             "steady_initial": True,
@@ -220,11 +213,11 @@ def _bc(node: str, bc_name: str, bc: Mapping[str, Any], period: float, samples: 
         return float(w["value"])
 
     if kind == "flow":
-        t, q = _sample(bc["flow"], period, samples)
+        t, q = _sample(bc["flow"], period, samples, el)
         return {"bc_name": bc_name, "bc_type": "FLOW",
                 "bc_values": {"Q": [x * f("flow") for x in q], "t": t}}
     if kind == "pressure":
-        t, p = _sample(bc["pressure"], period, samples)
+        t, p = _sample(bc["pressure"], period, samples, el)
         return {"bc_name": bc_name, "bc_type": "PRESSURE",
                 "bc_values": {"P": [x * f("pressure") for x in p], "t": t}}
     if kind == "resistance":

@@ -32,7 +32,7 @@ pub const OPTIONS: &[&str] = &[
     "rtol",
     "atol",
     "threads",
-    // read by the Python run (one impedance refinement after the run), not by the settings
+    // an impedance refinement after the run (the Python run), checked with the settings
     "estimate_space_error",
 ];
 /// How a run starts.
@@ -73,6 +73,9 @@ pub struct Settings {
     pub atol: Option<AbsoluteTolerances>,
     /// Threads of one run (None: every core; 1: the serial code path; see `crate::threads`).
     pub threads: Option<i64>,
+    /// Estimate the spatial error after the run (the Python run refines every vessel once and
+    /// compares the inlet impedance); not a setting of the core's run.
+    pub estimate_space_error: bool,
 }
 
 /// A setting's value: given (by the caller or the file) or the default.
@@ -264,6 +267,9 @@ pub fn resolve<N: Node>(sim: &N, overrides: &N, period: Option<f64>) -> Result<S
     let (given, atol) = tolerances(&rtol, &atol, dt.is_none() && method != "rk4")?;
     let rtol_default = given.is_none() && dt.is_none() && method != "rk4";
     let rtol = given.or(Some(DEFAULT_RTOL).filter(|_| rtol_default));
+    // read by the Python run (one impedance refinement after it), checked here with the rest
+    let (e, w) = get("estimate_space_error", None, "", Val::Flag(false));
+    let estimate_space_error = flag(&e, &w)?;
     let (th, w) = get("threads", Some(sim), "threads", Val::Null);
     let threads = match th.kind() {
         Kind::Null => None,
@@ -288,6 +294,7 @@ pub fn resolve<N: Node>(sim: &N, overrides: &N, period: Option<f64>) -> Result<S
         rtol_default,
         atol,
         threads,
+        estimate_space_error,
     })
 }
 
@@ -448,6 +455,24 @@ mod tests {
         assert_eq!(s.output_every, 0.8 / 1000.0);
         assert_eq!((s.method.as_str(), s.start.as_str()), ("auto", "steady"));
         assert!(s.segments && s.transport && !s.output_all_cycles);
+    }
+
+    #[test]
+    fn estimate_space_error_is_a_flag_named_when_not_one() {
+        let r = |o: serde_json::Value| resolve(&json!({}), &o, None);
+        assert!(!r(json!({})).unwrap().estimate_space_error);
+        assert!(
+            r(json!({"estimate_space_error": true}))
+                .unwrap()
+                .estimate_space_error
+        );
+        let e = r(json!({"estimate_space_error": "yes"}))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("simulate: estimate_space_error must be true or false, got 'yes'"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -246,6 +246,7 @@ pub(crate) fn resolve_settings<'py>(
     d.set_item("rtol", s.rtol)?;
     d.set_item("rtol_default", s.rtol_default)?;
     d.set_item("threads", s.threads)?;
+    d.set_item("estimate_space_error", s.estimate_space_error)?;
     match s.atol {
         Some(atol) => {
             let a = PyDict::new(py);
