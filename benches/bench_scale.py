@@ -46,7 +46,13 @@ times in brackets —
 
 ``--threads``: each configuration on each thread count (``simulate(threads=N)``); the
 ``wall 1/N`` column is the wall-time speed-up of the run over the same tree on the first
-count. The memory floor of the machine is measured first in the same run: a STREAM-like
+count. With ``--threads 1 N ...`` the ``serial s`` column is the run's serial fraction: the
+CPU time of the calling thread in the N-thread run (the run's time loop, output and
+bookkeeping: everything outside the loops split over the pool, whose threads do those while
+the calling thread waits) over the CPU time of the one-thread run; ``Amdahl`` is
+1/(s + (1 − s)/N) for 2, 16 and 64 cores. CPU times are the process's own threads', so the
+machine's load distorts them far less than the wall ratio (the serial parts done inside the
+pool, the top trees of the eliminations, are counted parallel: a few hundred vertices). The memory floor of the machine is measured first in the same run: a STREAM-like
 copy of a 256 MB array (numpy, one thread), given as ns per 8-byte value copied; the
 ``copies/seg-step`` column is a step's wall time per segment in units of that copy, i.e.
 how many doubles a step could have copied per segment in its time.
@@ -182,6 +188,9 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
     m = oxyline.load_model(model)
     del model  # the model crosses once: load_model keeps its own copy
     c1, w1 = time.process_time(), time.perf_counter()
+    # the calling thread's CPU: with threads > 1 what the run does outside its parallel
+    # loops (they run on the pool's threads while this one waits, without spinning)
+    t1 = time.thread_time()
     with tempfile.TemporaryDirectory() as d:
         if spec.get("zarr"):
             res = oxyline.simulate_to_zarr(m, os.path.join(d, "run.zarr"),
@@ -193,9 +202,10 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
             except oxyline.SimulationCancelled as exc:
                 res = exc.result
             settings = res.settings
-        c2, w2 = time.process_time(), time.perf_counter()
+        c2, w2, t2 = time.process_time(), time.perf_counter(), time.thread_time()
         dt = float(settings["dt"]) if settings.get("dt") else None
         out = {"load_cpu": c1 - c0, "load_wall": w1 - w0, "run_cpu": c2 - c1,
+               "run_main_cpu": t2 - t1,
                "run_wall": w2 - w1, "segments": int(m.network.summary()["segments"]),
                "dt": dt, "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
         if settings.get("steps"):  # an error-controlled run: its accepted steps
@@ -295,15 +305,34 @@ def copy_in_this_process() -> float:
     return 1e9 * best / a.size
 
 
+def serial_fraction(r: dict[str, Any], first: dict[str, Any] | None) -> float | None:
+    """The run's serial fraction s: the calling thread's CPU in a run on several threads
+    (what it does outside the parallel loops) over the whole CPU of the one-thread run of
+    the same tree (``first``). Both are CPU times of this process's own threads, which the
+    machine's load distorts far less than wall times."""
+    if not first or first is r or first.get("threads") != 1 or (r.get("threads") or 0) < 2:
+        return None
+    return r["run_main_cpu"] / first["run_cpu"]
+
+
+def amdahl(s: float, cores: int) -> float:
+    """Amdahl's speed-up on ``cores`` cores of a run with serial fraction ``s``."""
+    return 1.0 / (s + (1.0 - s) / cores)
+
+
 def thread_cells(r: dict[str, Any], first: dict[str, Any] | None, copy: float) -> str:
-    """The threads, wall speed-up over the first thread count's run of the same tree, and the
-    main pass's wall ns per segment-step in copies of one double (see the module doc)."""
+    """The threads, wall speed-up over the first thread count's run of the same tree, the
+    main pass's wall ns per segment-step in copies of one double (see the module doc), and
+    the serial fraction with Amdahl's speed-up from it on 2, 16 and 64 cores."""
     speedup = (f"{(first['run_wall']) / r['run_wall']:.2f}" if first and first is not r
                else "–")
     wall = r.get("main_wall")
     copies = (f"{1e9 * wall / (r['segments'] * r['main_steps']) / copy:.1f}"
               if wall and r.get("main_steps") else "–")
-    return f" {r.get('threads') or 'all'} | {speedup} | {copies} |"
+    s = serial_fraction(r, first)
+    serial = (f"{s:.3f} | " + " / ".join(f"{amdahl(s, n):.2f}" for n in (2, 16, 64))
+              if s is not None else "– | –")
+    return f" {r.get('threads') or 'all'} | {speedup} | {copies} | {serial} |"
 
 
 def row(method: str, config: str, r: dict[str, Any], flow: dict[str, Any] | None) -> str:
@@ -412,8 +441,10 @@ def main() -> None:
     print("| method | config | segments | steps | load s | run s | ns/seg-step run "
           "| ns/seg-step main pass | peak MB | peak B/seg | O2/flow run "
           "| O2/flow step (main pass) "
-          "| load µs/seg | mass residual | threads | wall 1/N | copies/seg-step |")
-    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+          "| load µs/seg | mass residual | threads | wall 1/N | copies/seg-step "
+          "| serial s | Amdahl 2 / 16 / 64 |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:"
+          "|---:|---:|")
     rows: dict[tuple[str, str], list[dict[str, Any]]] = {}
     skipped: list[str] = []
     for method in a.methods:

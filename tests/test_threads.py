@@ -145,6 +145,20 @@ def test_a_random_tree_with_loops_gives_the_same_bits() -> None:
     assert abs(mb["residual"][-1]) <= 1e-6 * abs(mb["inflow"][-1])
 
 
+def test_the_vessel_rows_split_over_the_threads_give_the_same_bits() -> None:
+    # 8 191 vessels: more than two chunks of 2 048 vessels, so each output row's vessel
+    # observation (inlet and outlet concentrations and fluxes, wall uptake) is split over
+    # the threads; the forcing's constant outlet pressures are summed once
+    m = oxyline.load_model(binary_tree(13, 2))
+    runs = {n: oxyline.simulate(m, cycles=1, dt=2e-3, output_every=0.02, segments=False,
+                                threads=n) for n in THREADS}
+    assert runs[1].species["o2"].vessel_data.shape[1] == 8191
+    assert_same_bits(runs)
+    # an outside check of the threaded run: the tree's O2 balance closes
+    mb = runs[3].o2_mass_balance
+    assert abs(mb["residual"][-1]) <= 1e-6 * abs(mb["inflow"][-1])
+
+
 def test_the_threaded_run_conserves_oxygen(runs: dict[int, oxyline.Result]) -> None:
     # an independent check of the threaded run: the O2 balance of the whole tree (inflow =
     # outflow + wall flux + change of stored mass) closes to the transport's own accuracy

@@ -10,6 +10,7 @@ use super::newton::{self, Magnitude, NewtonProblem, jacobian_stamps, jacobian_va
 use crate::circuit::{Csr, Dae, JacobianKind, Regime};
 use crate::error::{Error, Result};
 use crate::sparse::SparseLu;
+use crate::waveform::Waveform;
 use rayon::prelude::*;
 use std::borrow::Cow;
 
@@ -518,13 +519,18 @@ impl LinearResidual<'_> {
 
 /// The forcing rows of a circuit, each with its waveforms, and their values at one time: the
 /// sparse form of `Dae::forcing_into`, summed in the same order (from 0.0, in the order of
-/// `Dae::forcing`), so the same bits.
+/// `Dae::forcing`), so the same bits. A tree's outlets hold constant distal pressures (one row
+/// each, thousands of them): their values are summed once, and a step evaluates the rows with
+/// a waveform that changes in time only (a serial pass over every outlet per step was one of
+/// the run's larger parts outside its parallel loops).
 struct SparseForcing {
     /// Rows with forcing, increasing.
     rows: Vec<u32>,
     /// Row k sums the waveforms `Dae::forcing[entries[ptr[k]..ptr[k + 1]]]`.
     ptr: Vec<usize>,
     entries: Vec<usize>,
+    /// The rows (indices into `rows`) with a waveform that is not constant.
+    varying: Vec<u32>,
     /// The values at the last `eval`, by row.
     values: Vec<f64>,
 }
@@ -545,25 +551,113 @@ impl SparseForcing {
             }
         }
         ptr.push(entries.len());
-        let values = vec![0.0; rows.len()];
-        SparseForcing {
+        let varying = (0..rows.len())
+            .filter(|&k| {
+                entries[ptr[k]..ptr[k + 1]]
+                    .iter()
+                    .any(|&e| !matches!(dae.forcing[e].1, Waveform::Constant(_)))
+            })
+            .map(|k| k as u32)
+            .collect();
+        let mut forcing = SparseForcing {
+            values: vec![0.0; rows.len()],
             rows,
             ptr,
             entries,
-            values,
+            varying,
+        };
+        // a constant's value and mean are the same number: the constant rows hold it for
+        // either regime from here on
+        for k in 0..forcing.rows.len() {
+            forcing.values[k] = forcing.row_value(dae, k, 0.0, Regime::Transient);
         }
+        forcing
+    }
+
+    /// Row k's value at `t`: its waveforms summed from 0.0 in order.
+    #[inline]
+    fn row_value(&self, dae: &Dae, k: usize, t: f64, regime: Regime) -> f64 {
+        let mut value = 0.0;
+        for &e in &self.entries[self.ptr[k]..self.ptr[k + 1]] {
+            let w = &dae.forcing[e].1;
+            value += if regime == Regime::Transient {
+                w.eval(t)
+            } else {
+                w.mean()
+            };
+        }
+        value
     }
 
     fn eval(&mut self, dae: &Dae, t: f64, regime: Regime) {
-        for (k, value) in self.values.iter_mut().enumerate() {
-            *value = 0.0;
-            for &e in &self.entries[self.ptr[k]..self.ptr[k + 1]] {
-                let w = &dae.forcing[e].1;
-                *value += if regime == Regime::Transient {
-                    w.eval(t)
-                } else {
-                    w.mean()
-                };
+        for &k in &self.varying {
+            let k = k as usize;
+            self.values[k] = self.row_value(dae, k, t, regime);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::parse;
+
+    /// Outlets at constant pressures (evaluated once) beside an inlet and an outlet that
+    /// change in time (evaluated every step).
+    const MODEL: &str = r#"{
+        "vessels": [
+            {"name": "a", "from": "in", "to": "j", "segments": 3,
+             "geometry": {"length": 0.1, "radius_in": 0.005, "radius_out": 0.004,
+                          "wall_thickness": 0.0005, "youngs_modulus": 4e5}},
+            {"name": "b", "from": "j", "to": "out", "segments": 2,
+             "geometry": {"length": 0.05, "radius_in": 0.002, "radius_out": 0.002,
+                          "wall_thickness": 0.0003, "youngs_modulus": 4e5}},
+            {"name": "c", "from": "j", "to": "k", "segments": 2,
+             "geometry": {"length": 0.05, "radius_in": 0.002, "radius_out": 0.002,
+                          "wall_thickness": 0.0003, "youngs_modulus": 4e5}},
+            {"name": "d", "from": "k", "to": "out2", "segments": 1,
+             "geometry": {"length": 0.02, "radius_in": 0.001, "radius_out": 0.001,
+                          "wall_thickness": 0.0002, "youngs_modulus": 4e5}},
+            {"name": "e", "from": "k", "to": "out3", "segments": 1,
+             "geometry": {"length": 0.02, "radius_in": 0.001, "radius_out": 0.001,
+                          "wall_thickness": 0.0002, "youngs_modulus": 4e5}}],
+        "boundary_conditions": {
+            "in": {"type": "flow", "flow": {"kind": "fourier", "period": 0.8, "mean": 1e-6,
+                                            "cos": [3e-7], "sin": [2e-7]}},
+            "out": {"type": "pressure", "pressure": {"kind": "constant", "value": 1200.0}},
+            "out2": {"type": "pressure", "pressure": {"kind": "constant", "value": -35.5}},
+            "out3": {"type": "pressure", "pressure": {"kind": "table", "time": [0.0, 0.4, 0.8],
+                                                     "value": [900.0, 1500.0, 900.0]}}}
+    }"#;
+
+    #[test]
+    fn the_linear_steps_forcing_is_the_circuits_at_every_time_and_regime() {
+        let a = parse(MODEL).unwrap().assemble().unwrap();
+        let dae = a.circuit.assemble().unwrap();
+        let mut sparse = SparseForcing::new(&dae);
+        // the model has rows evaluated once and rows evaluated at every step
+        assert!(!sparse.varying.is_empty() && sparse.varying.len() < sparse.rows.len());
+        let mut dense = vec![f64::NAN; dae.n];
+        for (k, &t) in [0.0, 0.13, 0.4, 0.71, 1.9].iter().enumerate() {
+            let regime = if k == 2 {
+                Regime::Steady
+            } else {
+                Regime::Transient
+            };
+            sparse.eval(&dae, t, regime);
+            dae.forcing_into(t, regime, &mut dense);
+            let mut from_sparse = vec![0.0; dae.n];
+            for (&row, &v) in sparse.rows.iter().zip(&sparse.values) {
+                from_sparse[row as usize] = v;
+            }
+            // the same waveforms summed from 0.0 in the same order as the circuit's forcing
+            // vector: the same numbers (the fixed step's results depend on it bit for bit)
+            for i in 0..dae.n {
+                assert_eq!(
+                    from_sparse[i].to_bits(),
+                    dense[i].to_bits(),
+                    "t {t} row {i}"
+                );
             }
         }
     }

@@ -3,6 +3,10 @@
 #[allow(unused_imports)]
 use super::*;
 
+/// Output vessels per task of a row's observation on the run's threads (and half the least
+/// number of vessels for which it is split): a vessel takes ~0.1 µs, a task a few µs to start.
+const OBSERVE_CHUNK: usize = 2048;
+
 impl Transport {
     /// Append the recorded columns of every species at (t, y) to `out`.
     /// `ydot`: flow derivative (for R_i = dL_i/dt); `implicit`: use the transport volumes.
@@ -202,17 +206,43 @@ impl Transport {
         }
     }
 
-    /// Per output vessel: inlet and outlet concentration and flux, wall uptake.
+    /// Per output vessel: inlet and outlet concentration and flux, wall uptake. A large
+    /// tree's vessels go in fixed chunks on the run's threads (`crate::threads`): each
+    /// vessel's five values are computed from the loaded state alone and written to its own
+    /// place in the row, so the row is the same on any number of threads.
     fn observe_vessels(&self, s: usize, out: &mut Vec<f64>) {
-        for v in &self.plan.out_vessels {
-            let (j_in, c_in) = self.vessel_inlet(s, v);
-            let (j_out, c_out) = self.vessel_outlet(s, v);
-            let wall: f64 = self.plan.out_segments[v.segs.clone()]
+        use rayon::prelude::*;
+        let vessels = &self.plan.out_vessels;
+        let start = out.len();
+        out.resize(start + VESSEL_COLUMNS * vessels.len(), 0.0);
+        let rows = &mut out[start..];
+        let chunk = |(c, rows): (usize, &mut [f64])| {
+            let first = c * OBSERVE_CHUNK;
+            for (v, row) in vessels[first..]
                 .iter()
-                .map(|&j| self.segment_wall(s, j))
-                .sum();
-            out.extend([c_in, c_out, j_in, j_out, wall]);
+                .zip(rows.chunks_exact_mut(VESSEL_COLUMNS))
+            {
+                row.copy_from_slice(&self.vessel_values(s, v));
+            }
+        };
+        let width = VESSEL_COLUMNS * OBSERVE_CHUNK;
+        match crate::threads::pool().filter(|_| vessels.len() >= 2 * OBSERVE_CHUNK) {
+            Some(pool) => {
+                pool.install(|| rows.par_chunks_mut(width).enumerate().for_each(chunk));
+            }
+            None => rows.chunks_mut(width).enumerate().for_each(chunk),
         }
+    }
+
+    /// One output vessel's inlet and outlet concentration and flux, and wall uptake.
+    fn vessel_values(&self, s: usize, v: &OutVessel) -> [f64; VESSEL_COLUMNS] {
+        let (j_in, c_in) = self.vessel_inlet(s, v);
+        let (j_out, c_out) = self.vessel_outlet(s, v);
+        let wall: f64 = self.plan.out_segments[v.segs.clone()]
+            .iter()
+            .map(|&j| self.segment_wall(s, j))
+            .sum();
+        [c_in, c_out, j_in, j_out, wall]
     }
 
     /// Per output segment: concentration, flux, wall uptake and the transmission-line
