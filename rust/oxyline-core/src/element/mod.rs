@@ -49,6 +49,26 @@ pub struct Switch {
     pub resistance: f64,
 }
 
+/// A branch whose flow its element's law gives from the pressures at its two ends alone (a
+/// `valve` element): where that flow is an algebraic unknown, the dense output between the
+/// steps of an error-controlled run reads it from the law at the interpolated pressures
+/// (docs/solvers.md, "Dense output").
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FlowLaw {
+    /// [flow, pressure at the branch's start, pressure at its end] unknowns.
+    pub unknowns: [usize; 3],
+    pub law: valve::ValveLaw,
+}
+
+impl FlowLaw {
+    /// The law's flow at the pressures `p_from`, `p_to` of the branch's ends, and its
+    /// derivative in the pressure difference P_to − P_from.
+    pub fn flow(&self, p_from: f64, p_to: f64) -> (f64, f64) {
+        let dp = p_to - p_from;
+        (self.law.flow(dp), self.law.flow_slope(dp))
+    }
+}
+
 /// A circuit element that is nonlinear in the state or varies in time. Row and column indices
 /// are unknowns of the assembled DAE.
 pub trait Element: Debug + Send + Sync {
@@ -118,6 +138,11 @@ pub trait Element: Debug + Send + Sync {
     /// [`Element::valve_branch`]).
     fn valve_flow(&self, _y: &[f64]) -> f64 {
         0.0
+    }
+    /// The branch whose flow the element's law gives from its end pressures alone (see
+    /// [`FlowLaw`]). Default: none.
+    fn flow_law(&self) -> Option<FlowLaw> {
+        None
     }
     /// The element's switches, whose status changes are located as events by the
     /// error-controlled runs (docs/physics.md §10.5). Default: none.

@@ -41,6 +41,16 @@ impl ValveLaw {
             ValveLaw::Piecewise { r_min, r_max } => (if dp < 0.0 { r_min } else { r_max }, 0.0),
         }
     }
+    /// The law's flow at `dp` = P_to − P_from: −ΔP/R(ΔP) (the branch row's solution).
+    pub fn flow(&self, dp: f64) -> f64 {
+        -dp / self.resistance(dp).0
+    }
+    /// dQ/d(ΔP) of the law's flow at `dp` = P_to − P_from: −1/R + ΔP R′/R² (the jump of the
+    /// piecewise law left out, as in its Jacobian).
+    pub fn flow_slope(&self, dp: f64) -> f64 {
+        let (r, dr) = self.resistance(dp);
+        (-r + dp * dr) / (r * r)
+    }
     /// svZeroDSolver's `valve_status` at `dp` = P_to − P_from: the fraction of the way from
     /// R_min to R_max of the law's switch (0 open, 1 closed), 0.5 (1 + tanh(k dp)) for `tanh`
     /// (its `ValveTanh` outputs it as an internal variable) and 0 or 1 for `piecewise`.
@@ -183,8 +193,14 @@ impl Element for Valve {
         self.law.resistance(self.state(y).1 - lift).0
     }
     fn valve_flow(&self, y: &[f64]) -> f64 {
-        let dp = self.state(y).1;
-        -dp / self.law.resistance(dp).0
+        self.law.flow(self.state(y).1)
+    }
+    fn flow_law(&self) -> Option<super::FlowLaw> {
+        let [(q, _), (_, from), (_, to)] = self.pattern;
+        Some(super::FlowLaw {
+            unknowns: [q, from, to],
+            law: self.law,
+        })
     }
     /// Open while P_from > P_to (the piecewise law's switch, the tanh law's midpoint).
     fn switches(&self) -> Vec<super::Switch> {
