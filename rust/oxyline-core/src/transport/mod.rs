@@ -390,12 +390,26 @@ impl Transport {
             + self.tissue_columns() // tissue hook (0 without tissue)
     }
     /// The columns of each species block a run records (None: all). When none of them is a
-    /// per-segment column, `observe` skips computing those (they are NaN in its rows), which
-    /// keeps the observation of large trees cheap.
+    /// per-segment column, `observe` neither computes nor writes those (`unwritten_columns`),
+    /// which keeps the observation of large trees cheap.
     pub fn set_recorded_columns(&mut self, columns: Option<&[usize]>) {
         let seg = VESSEL_COLUMNS * self.plan.out_vessels.len();
         let seg_end = seg + SEGMENT_COLUMNS * self.plan.out_segments.len();
         self.segment_output = columns.is_none_or(|c| c.iter().any(|&k| k >= seg && k < seg_end));
+    }
+    /// The per-segment columns of each species block that `observe` leaves out of its rows,
+    /// as (first column, count): every per-segment column when no run records one
+    /// (`set_recorded_columns`), else none (count 0). Rows stay one `f64` per recorded column
+    /// instead of carrying ~40 B per segment of NaN (a million-segment tree's output row).
+    pub fn unwritten_columns(&self) -> (usize, usize) {
+        if self.segment_output {
+            (0, 0)
+        } else {
+            (
+                VESSEL_COLUMNS * self.plan.out_vessels.len(),
+                SEGMENT_COLUMNS * self.plan.out_segments.len(),
+            )
+        }
     }
     /// Recorded segments of every output vessel.
     pub fn out_segment_counts(&self) -> Vec<usize> {
