@@ -710,6 +710,13 @@ impl Network {
             let out = oxyline_core::threads::with_threads(threads, run).and_then(|o| o);
             (out, pending.into_inner())
         });
+        // the run's state (its transport state here, the integrators in the core) is freed
+        // before Python builds the result, and the allocator's free pages are handed back:
+        // else the result's arrays and tables stack on the run's freed, still resident
+        // memory (the peak of a million-segment run)
+        drop(species);
+        drop(settings);
+        oxyline_core::run::release_free_pages(inner.1.n);
         finished_run(py, outcome, pending)
     }
 }

@@ -83,8 +83,12 @@ pub(super) fn run(
         .as_ref()
         .map(|sp| (sp.tr.species_names().len(), sp.tr.columns_per_species()));
     let columns = s.species_columns.as_deref();
+    let unwritten = species
+        .as_ref()
+        .map_or((0, 0), |sp| sp.tr.unwritten_columns());
     let mut rec = Recorder::new(&s.probes, layout, columns, initial_stored, sink)?
-        .with_extra_columns(s.svzerod.extra_columns(s.probes.len()));
+        .with_extra_columns(s.svzerod.extra_columns(s.probes.len()))
+        .with_unwritten_species_columns(unwritten);
     if !s.output_all_cycles && mean.is_none() {
         // last-cycle output: one cycle's rows and the row at its start
         rec.reserve_rows(plan.steps_per_cycle / plan.stride + 1)?;

@@ -40,6 +40,9 @@ pub(super) struct Recorder<'p, 's, 'f> {
     /// Selected columns of every species block of `block` columns (None: all).
     species_select: Option<&'p [usize]>,
     block: usize,
+    /// Columns of each species block the rows leave out (first, count: the per-segment columns
+    /// nobody records, `Transport::unwritten_columns`): a row's block is `block - count` long.
+    unwritten: (usize, usize),
     /// Σ N of each species at t = 0, handed to the sink with every chunk.
     pub initial_stored: Vec<f64>,
     sink: Option<&'s mut OutputSink<'f>>,
@@ -78,6 +81,7 @@ impl<'p, 's, 'f> Recorder<'p, 's, 'f> {
             transport: Vec::new(),
             species_select,
             block,
+            unwritten: (0, 0),
             initial_stored,
             sink,
             max_rows: 0,
@@ -88,6 +92,15 @@ impl<'p, 's, 'f> Recorder<'p, 's, 'f> {
     /// Record `extra` more columns per row, after the probes (see `record_extra`).
     pub fn with_extra_columns(mut self, extra: usize) -> Self {
         self.extra = extra;
+        self
+    }
+
+    /// The species rows handed to `push_species` leave out `count` columns of each block from
+    /// column `first` on (`Transport::unwritten_columns`); they are recorded as NaN if selected.
+    pub fn with_unwritten_species_columns(mut self, (first, count): (usize, usize)) -> Self {
+        if first + count <= self.block {
+            self.unwritten = (first, count);
+        }
         self
     }
 
@@ -157,13 +170,28 @@ impl<'p, 's, 'f> Recorder<'p, 's, 'f> {
         Ok(())
     }
 
-    /// Keep the selected columns of one `observe` row (all species blocks).
+    /// Keep the selected columns of one `observe` row (all species blocks); the unwritten
+    /// columns read as NaN.
     pub fn push_species(&mut self, row: &[f64]) {
+        let (first, count) = self.unwritten;
+        let written = (self.block - count).max(1);
         match self.species_select {
-            None => self.transport.extend_from_slice(row),
+            None if count == 0 => self.transport.extend_from_slice(row),
+            None => {
+                for b in row.chunks(written) {
+                    self.transport.extend_from_slice(&b[..first]);
+                    self.transport.extend(std::iter::repeat_n(f64::NAN, count));
+                    self.transport.extend_from_slice(&b[first..]);
+                }
+            }
             Some(sel) => {
-                for b in row.chunks(self.block.max(1)) {
-                    self.transport.extend(sel.iter().map(|&c| b[c]));
+                let after = first + count;
+                for b in row.chunks(written) {
+                    self.transport.extend(sel.iter().map(|&c| match c {
+                        c if c < first => b[c],
+                        c if c >= after => b[c - count],
+                        _ => f64::NAN,
+                    }));
                 }
             }
         }
@@ -248,5 +276,45 @@ impl<'p, 's, 'f> Recorder<'p, 's, 'f> {
         self.data.drain(..done * np);
         self.transport.drain(..done * nc);
         self.sink.is_some()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two species blocks of 8 columns, columns 2..6 not written: the rows handed over hold
+    /// 4 values per block. Expected records written out by hand: a selected column reads its
+    /// own value, the unwritten ones NaN, for a selection and for every column.
+    #[test]
+    fn unwritten_species_columns_are_recorded_in_place() {
+        let probes: [usize; 0] = [];
+        // block k: columns 0, 1, 6, 7 hold 10k + column
+        let row = [0.0, 1.0, 6.0, 7.0, 10.0, 11.0, 16.0, 17.0];
+        let sel = [7, 0, 3];
+        let mut rec = Recorder::new(&probes, Some((2, 8)), Some(&sel), Vec::new(), None)
+            .unwrap()
+            .with_unwritten_species_columns((2, 4));
+        rec.push_species(&row);
+        let got = &rec.transport;
+        assert_eq!(got.len(), 6);
+        assert_eq!([got[0], got[1], got[3], got[4]], [7.0, 0.0, 17.0, 10.0]);
+        assert!(got[2].is_nan() && got[5].is_nan());
+
+        let mut all = Recorder::new(&probes, Some((2, 8)), None, Vec::new(), None)
+            .unwrap()
+            .with_unwritten_species_columns((2, 4));
+        all.push_species(&row);
+        let want = [0.0, 1.0, f64::NAN, f64::NAN, f64::NAN, f64::NAN, 6.0, 7.0];
+        for (k, block) in all.transport.chunks(8).enumerate() {
+            for (c, (&g, &w)) in block.iter().zip(&want).enumerate() {
+                let w = if w.is_nan() { w } else { w + 10.0 * k as f64 };
+                assert!(
+                    g == w || (g.is_nan() && w.is_nan()),
+                    "block {k} column {c}: {g}"
+                );
+            }
+        }
+        assert_eq!(all.transport.len(), 16);
     }
 }

@@ -154,7 +154,8 @@ impl Transport {
         probes: &Probes,
     ) -> Result<Self> {
         check_settings(spec, circuit)?;
-        if dae.n >= u32::MAX as usize {
+        // (a face's ends are 31-bit node and boundary indices, its unknown a u32)
+        if dae.n >= Face::BOUNDARY as usize {
             return Err(bad("transport", "network too large".into()));
         }
         let mut kind = exterior_nodes(circuit);
@@ -165,9 +166,14 @@ impl Transport {
         contract_boundary_points(circuit, &mut kind, &mut faces);
         let mut face_of_unknown = vec![u32::MAX; dae.n];
         for (fi, f) in faces.iter().enumerate() {
-            face_of_unknown[f.unknown] = fi as u32;
+            face_of_unknown[f.unknown()] = fi as u32;
         }
         let m_node = refinement(spec, circuit, &kind, &shares)?;
+        // (refined sub-cells are nodes too: their indices must fit a face's 31 bits)
+        let sub_cells: usize = m_node.iter().map(|&m| m - 1).sum();
+        if kind.len() + sub_cells >= Face::BOUNDARY as usize {
+            return Err(bad("transport", "network too large".into()));
+        }
         let n_flow_faces = faces.len();
         let refined = Refined::new(&mut kind, &mut faces, &sources, &m_node);
         let layout = CellLayout::new(&volume, dae, &kind, &m_node, &refined.first_extra);
@@ -366,11 +372,7 @@ fn flow_faces(
                 ));
             }
         }
-        faces.push(Face {
-            unknown: nn + bi,
-            from,
-            to,
-        });
+        faces.push(Face::new(nn + bi, from, to));
     }
     let sources = circuit
         .sources
@@ -393,7 +395,7 @@ fn contract_boundary_points(circuit: &Circuit, kind: &mut [Kind], faces: &mut Ve
     let mut inc = vec![[u32::MAX; 2]; nn];
     let mut deg = vec![0u8; nn];
     for (fi, f) in faces.iter().enumerate() {
-        for e in [f.from, f.to] {
+        for e in [f.tail(), f.head()] {
             if let End::Node(n) = e {
                 if deg[n] < 2 {
                     inc[n][deg[n] as usize] = fi as u32;
@@ -405,7 +407,13 @@ fn contract_boundary_points(circuit: &Circuit, kind: &mut [Kind], faces: &mut Ve
     for ((n, _), _) in circuit.sources.iter().zip(&circuit.source_boundary) {
         deg[*n] = u8::MAX; // a node with a source stays
     }
-    let other = |f: &Face, m: usize| if f.from == End::Node(m) { f.to } else { f.from };
+    let other = |f: &Face, m: usize| {
+        if f.tail() == End::Node(m) {
+            f.head()
+        } else {
+            f.tail()
+        }
+    };
     let mut dropped = vec![false; faces.len()];
     for m in 0..nn {
         if kind[m] != Kind::Mixing || deg[m] != 2 {
@@ -418,10 +426,10 @@ fn contract_boundary_points(circuit: &Circuit, kind: &mut [Kind], faces: &mut Ve
             _ => continue,
         };
         let f = &mut faces[f_net];
-        if f.from == End::Node(m) {
-            f.from = End::Boundary(b);
+        if f.tail() == End::Node(m) {
+            f.set_tail(End::Boundary(b));
         } else {
-            f.to = End::Boundary(b);
+            f.set_head(End::Boundary(b));
         }
         dropped[f_bnd] = true;
         kind[m] = Kind::Exterior;
@@ -491,10 +499,10 @@ impl Refined {
         }
         let (mut ins, mut outs) = (vec![Vec::new(); nn], vec![Vec::new(); nn]);
         for (fi, f) in faces.iter().enumerate() {
-            if let End::Node(n) = f.to {
+            if let End::Node(n) = f.head() {
                 ins[n].push(fi);
             }
-            if let End::Node(n) = f.from {
+            if let End::Node(n) = f.tail() {
                 outs[n].push(fi);
             }
         }
@@ -509,14 +517,12 @@ impl Refined {
             let sub = |k: usize| if k == 0 { n } else { r.first_extra[n] + k - 1 };
             r.last_sub[n] = sub(m - 1);
             for &fi in &outs[n] {
-                faces[fi].from = End::Node(r.last_sub[n]);
+                faces[fi].set_tail(End::Node(r.last_sub[n]));
             }
             let first_face = faces.len();
-            faces.extend((1..m).map(|k| Face {
-                unknown: usize::MAX,
-                from: End::Node(sub(k - 1)),
-                to: End::Node(sub(k)),
-            }));
+            faces.extend(
+                (1..m).map(|k| Face::new(usize::MAX, End::Node(sub(k - 1)), End::Node(sub(k)))),
+            );
             r.chains.push(Chain {
                 in_faces: std::mem::take(&mut ins[n]),
                 out_faces: std::mem::take(&mut outs[n]),
@@ -789,7 +795,7 @@ fn incidence(
     }
     let mut node_ptr = vec![0u32; nn + 1];
     for f in faces {
-        for e in [f.from, f.to] {
+        for e in [f.tail(), f.head()] {
             if let End::Node(n) = e {
                 node_ptr[n + 1] += 1;
             }
@@ -801,7 +807,7 @@ fn incidence(
     let mut node_faces = vec![0u32; node_ptr[nn] as usize];
     let mut fill = node_ptr.clone();
     for (fi, f) in faces.iter().enumerate() {
-        for e in [f.from, f.to] {
+        for e in [f.tail(), f.head()] {
             if let End::Node(n) = e {
                 node_faces[fill[n] as usize] = fi as u32;
                 fill[n] += 1;
@@ -866,17 +872,17 @@ impl Plan {
         // nearly every face is internal: one allocation at the bound, no doubling copies
         self.internal.reserve_exact(self.faces.len());
         for (fi, f) in self.faces.iter().enumerate() {
-            match (f.from, f.to) {
+            match (f.tail(), f.head()) {
                 (End::Node(a), End::Node(b)) => self.internal.push([fi as u32, a as u32, b as u32]),
                 _ => self.boundary_faces.push(fi),
             }
-            match (f.from, f.to) {
+            match (f.tail(), f.head()) {
                 (End::Boundary(b), End::Node(n)) | (End::Node(n), End::Boundary(b)) => {
                     self.boundary_links.push(BoundaryLink {
                         face: fi as u32,
                         node: n as u32,
                         boundary: b as u32,
-                        into_node: matches!(f.from, End::Boundary(_)),
+                        into_node: matches!(f.tail(), End::Boundary(_)),
                     })
                 }
                 // (`flow_faces` drops branches between two exterior nodes)
@@ -887,7 +893,11 @@ impl Plan {
             let two = self.faces_at(m).len() == 2;
             let neighbours_known = self.faces_at(m).all(|fi| {
                 let f = &self.faces[fi];
-                let other = if f.from == End::Node(m) { f.to } else { f.from };
+                let other = if f.tail() == End::Node(m) {
+                    f.head()
+                } else {
+                    f.tail()
+                };
                 !matches!(other, End::Node(o) if self.kind[o] == Kind::Mixing)
             });
             if two && self.node_sources(m).is_empty() && neighbours_known {
@@ -904,7 +914,7 @@ impl Plan {
         self.link_carries();
         self.face_unknowns = self.faces[..self.n_flow_faces]
             .iter()
-            .map(|f| f.unknown as u32)
+            .map(|f| f.unknown)
             .collect();
         // laws that do not need the mean flow are final now
         let zero = vec![0.0; self.segments.len()];

@@ -177,10 +177,10 @@ impl Transport {
         }
         for &fi in &self.plan.boundary_faces {
             let (f, q) = (&self.plan.faces[fi], self.qf[fi]);
-            if let End::Node(n) = f.from {
+            if let End::Node(n) = f.tail() {
                 net[n] -= q;
             }
-            if let End::Node(n) = f.to {
+            if let End::Node(n) = f.head() {
                 net[n] += q;
             }
         }

@@ -74,13 +74,87 @@ enum Kind {
     Exterior,
 }
 
-#[derive(Debug, Clone)]
+/// A face between two ends, oriented `from` → `to`: 12 bytes (a million-segment tree's plan
+/// holds ~1.3 M of them; with `usize` fields it was 40). The flow unknown, and each end as a
+/// node's index or a boundary's with [`Face::BOUNDARY`] set: the plan refuses a network of
+/// 2^31 nodes or more when built (`Transport::build`).
+#[derive(Debug, Clone, Copy)]
 struct Face {
-    /// Flow unknown (index into y); `usize::MAX` for the interior faces of a refined cell,
-    /// whose flows `Chain::flows` derives from the unknowns.
-    unknown: usize,
-    from: End,
-    to: End,
+    unknown: u32,
+    from: u32,
+    to: u32,
+}
+
+impl Face {
+    const BOUNDARY: u32 = 1 << 31;
+    /// The unknown of an interior face of a refined cell, whose flow `Chain::flows` derives
+    /// from the unknowns.
+    const NO_UNKNOWN: u32 = u32::MAX;
+
+    /// The face from `from` to `to` carrying flow unknown `unknown` (`usize::MAX`: none).
+    fn new(unknown: usize, from: End, to: End) -> Face {
+        Face {
+            unknown: if unknown == usize::MAX {
+                Self::NO_UNKNOWN
+            } else {
+                unknown as u32
+            },
+            from: Self::pack(from),
+            to: Self::pack(to),
+        }
+    }
+
+    fn pack(e: End) -> u32 {
+        match e {
+            End::Node(n) => {
+                debug_assert!(n < Self::BOUNDARY as usize);
+                n as u32
+            }
+            End::Boundary(b) => {
+                debug_assert!(b < Self::BOUNDARY as usize);
+                b as u32 | Self::BOUNDARY
+            }
+        }
+    }
+
+    #[inline]
+    fn unpack(x: u32) -> End {
+        if x & Self::BOUNDARY == 0 {
+            End::Node(x as usize)
+        } else {
+            End::Boundary((x & !Self::BOUNDARY) as usize)
+        }
+    }
+
+    /// Flow unknown (index into y); `usize::MAX` for the interior faces of a refined cell.
+    #[inline]
+    fn unknown(&self) -> usize {
+        if self.unknown == Self::NO_UNKNOWN {
+            usize::MAX
+        } else {
+            self.unknown as usize
+        }
+    }
+
+    /// The end the face leaves (positive flow runs from it).
+    #[inline]
+    fn tail(&self) -> End {
+        Self::unpack(self.from)
+    }
+
+    /// The end the face enters.
+    #[inline]
+    fn head(&self) -> End {
+        Self::unpack(self.to)
+    }
+
+    fn set_tail(&mut self, e: End) {
+        self.from = Self::pack(e);
+    }
+
+    fn set_head(&mut self, e: End) {
+        self.to = Self::pack(e);
+    }
 }
 
 /// A volume node refined into m sub-cells in series (sub-cell 0 = the node itself takes the
@@ -390,12 +464,26 @@ impl Transport {
             + self.tissue_columns() // tissue hook (0 without tissue)
     }
     /// The columns of each species block a run records (None: all). When none of them is a
-    /// per-segment column, `observe` skips computing those (they are NaN in its rows), which
-    /// keeps the observation of large trees cheap.
+    /// per-segment column, `observe` neither computes nor writes those (`unwritten_columns`),
+    /// which keeps the observation of large trees cheap.
     pub fn set_recorded_columns(&mut self, columns: Option<&[usize]>) {
         let seg = VESSEL_COLUMNS * self.plan.out_vessels.len();
         let seg_end = seg + SEGMENT_COLUMNS * self.plan.out_segments.len();
         self.segment_output = columns.is_none_or(|c| c.iter().any(|&k| k >= seg && k < seg_end));
+    }
+    /// The per-segment columns of each species block that `observe` leaves out of its rows,
+    /// as (first column, count): every per-segment column when no run records one
+    /// (`set_recorded_columns`), else none (count 0). Rows stay one `f64` per recorded column
+    /// instead of carrying ~40 B per segment of NaN (a million-segment tree's output row).
+    pub fn unwritten_columns(&self) -> (usize, usize) {
+        if self.segment_output {
+            (0, 0)
+        } else {
+            (
+                VESSEL_COLUMNS * self.plan.out_vessels.len(),
+                SEGMENT_COLUMNS * self.plan.out_segments.len(),
+            )
+        }
     }
     /// Recorded segments of every output vessel.
     pub fn out_segment_counts(&self) -> Vec<usize> {
@@ -460,7 +548,7 @@ impl Transport {
         self.load_flows(time, y);
         let mut out = vec![0.0; self.plan.cells.len()];
         for (f, &q) in self.plan.faces.iter().zip(&self.qf) {
-            let up = if q >= 0.0 { f.from } else { f.to };
+            let up = if q >= 0.0 { f.tail() } else { f.head() };
             if let End::Node(n) = up {
                 if self.plan.node_cell[n] != usize::MAX {
                     out[self.plan.node_cell[n]] += q.abs();
@@ -560,8 +648,8 @@ fn oriented(faces: &[Face], qf: &[f64], fi: usize) -> (f64, End, End) {
     let f = &faces[fi];
     let q = qf[fi];
     if q >= 0.0 {
-        (q, f.from, f.to)
+        (q, f.tail(), f.head())
     } else {
-        (q, f.to, f.from)
+        (q, f.head(), f.tail())
     }
 }

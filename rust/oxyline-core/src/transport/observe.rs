@@ -40,12 +40,10 @@ impl Transport {
                 self.tissue_wall_fluxes(s, z); // tissue hook: W − g c per segment
             }
             self.observe_vessels(s, out);
+            // not recorded (see `set_recorded_columns`): neither computed nor written (the
+            // recorder knows the gap: `unwritten_columns`)
             if self.segment_output {
                 self.observe_segments(s, y, ydot, out);
-            } else {
-                // not recorded (see `set_recorded_columns`): not computed
-                let n = SEGMENT_COLUMNS * self.plan.out_segments.len();
-                out.extend(std::iter::repeat_n(f64::NAN, n));
             }
             let stored: f64 = z[s * nc..(s + 1) * nc].iter().sum();
             let acc = &z[nsp * nc + 4 * s..nsp * nc + 4 * s + 4];

@@ -299,10 +299,10 @@ impl Transport {
         let faces = p.internal.iter().map(|e| e[0] as usize);
         for fi in faces.chain(p.boundary_faces.iter().copied()) {
             let face = &p.faces[fi];
-            if let End::Node(n) = face.from {
+            if let End::Node(n) = face.tail() {
                 dnet[n] -= dq[fi];
             }
-            if let End::Node(n) = face.to {
+            if let End::Node(n) = face.head() {
                 dnet[n] += dq[fi];
             }
         }
