@@ -79,6 +79,30 @@ def values(model: dict[str, Any], outputs: list[str]) -> np.ndarray:
     return oxyline.sensitivities(model, [], outputs).values
 
 
+def central_differences(model: dict[str, Any], path: str, outputs: list[str],
+                        h: float = 1e-4) -> np.ndarray:
+    """d outputs / d log θ by central differences of whole periodic runs (relative step h):
+    unit-free, whatever units the model writes θ in."""
+    x0 = _base_value(model, path)
+    up = values(native_model(model, [path], [x0 * (1 + h)]), outputs)
+    down = values(native_model(model, [path], [x0 * (1 - h)]), outputs)
+    return (up - down) / (2 * h)
+
+
+def check_against_central_differences(model: dict[str, Any], path: str, outputs: list[str],
+                                      mode: str = "forward") -> None:
+    """The outputs carry ~1e-12 of their value in rounding, so the quotient is judged to
+    1e-6 of itself plus that rounding over h (h = 1e-4), where at least two outputs move
+    well above it."""
+    s = oxyline.sensitivities(model, [path], outputs, mode=mode)
+    fd = central_differences(model, path, outputs, h=1e-4)
+    exact = s.jacobian[:, 0] * s.parameter_values[0]
+    rounding = 1e-12 * np.abs(s.values) / 1e-4
+    assert (np.abs(fd) > 1e4 * rounding).sum() >= 2, (path, fd)
+    err = np.abs(exact - fd)
+    assert np.all(err <= 1e-6 * np.abs(fd) + rounding), (path, err / np.abs(fd))
+
+
 @pytest.mark.parametrize(("model", "path"), [
     (Y, "oxygen.wall.k"), (Y, "oxygen.wall.po2"), (Y, "oxygen.hill.p50"),
     (consuming(), "oxygen.wall.flux"), (per_vessel(), "oxygen.wall.k"),
@@ -87,11 +111,7 @@ def values(model: dict[str, Any], outputs: list[str]) -> np.ndarray:
 def test_oxygen_outputs_against_central_differences(model: dict[str, Any], path: str
                                                     ) -> None:
     s = oxyline.sensitivities(model, [path], OUTPUTS)
-    x0, h = _base_value(model, path), 1e-4
-    up = values(native_model(model, [path], [x0 * (1 + h)]), OUTPUTS)
-    down = values(native_model(model, [path], [x0 * (1 - h)]), OUTPUTS)
-    # d/d log θ: unit-free, whatever units the model writes θ in
-    fd = (up - down) / (2 * h)
+    fd = central_differences(model, path, OUTPUTS)
     exact = s.jacobian[:, 0] * s.parameter_values[0]
     moved = np.abs(fd) > 1e-12 * np.abs(s.values)
     assert moved.sum() >= 4, (path, fd)
@@ -106,16 +126,7 @@ def test_oxygen_outputs_by_flow_parameters_against_central_differences(path: str
     every step (and a radius or length through the lumen volumes and wall areas). The
     outputs carry ~1e-12 of their value in rounding, so the quotient is judged to 1e-6 of
     itself plus that rounding over h (a far vessel's wall by a length moves by less)."""
-    s = oxyline.sensitivities(Y, [path], OUTPUTS)
-    x0, h = _base_value(Y, path), 1e-4
-    up = values(native_model(Y, [path], [x0 * (1 + h)]), OUTPUTS)
-    down = values(native_model(Y, [path], [x0 * (1 - h)]), OUTPUTS)
-    fd = (up - down) / (2 * h)
-    exact = s.jacobian[:, 0] * s.parameter_values[0]
-    rounding = 1e-12 * np.abs(s.values) / h
-    assert (np.abs(fd) > 1e4 * rounding).sum() >= 2, (path, fd)
-    err = np.abs(exact - fd)
-    assert np.all(err <= 1e-6 * np.abs(fd) + rounding), (path, err / np.abs(fd))
+    check_against_central_differences(Y, path, OUTPUTS)
 
 
 def test_windkessel_resistance_recovered_from_po2_and_svo2() -> None:
