@@ -46,6 +46,22 @@ from oxyline.calibrate import native_model
 pytest.importorskip("scipy")
 
 
+def check_adjoint_equals_forward(model: dict[str, Any], paths: list[str],
+                                 outputs: list[str]) -> None:
+    """Adjoint and forward tangents of the same outputs: d/d log θ, each row against its
+    largest entry (both iterate to a periodic change of 1e-12: ~1e-11 of the row's scale;
+    1e-8 tells a wrong transpose)."""
+    fwd = oxyline.sensitivities(model, paths, outputs)
+    adj = oxyline.sensitivities(model, paths, outputs, mode="adjoint")
+    np.testing.assert_allclose(adj.values, fwd.values, rtol=1e-10)
+    np.testing.assert_allclose(adj.parameter_values, fwd.parameter_values, rtol=1e-14)
+    a = adj.jacobian * adj.parameter_values
+    f = fwd.jacobian * fwd.parameter_values
+    scale = np.abs(f).max(axis=1, keepdims=True)
+    assert np.all(scale > 0)
+    assert np.all(np.abs(a - f) <= 1e-8 * scale), np.abs(a - f) / scale
+
+
 @pytest.mark.parametrize(("model", "paths"), [
     (Y, ["oxygen.wall.k", "oxygen.wall.po2", "oxygen.hill.p50"]),
     (consuming(), ["oxygen.wall.flux", "oxygen.hill.p50"]),
@@ -53,15 +69,7 @@ pytest.importorskip("scipy")
                     "oxygen.wall.k", "oxygen.wall.po2"]),
 ])
 def test_adjoint_equals_forward(model: dict[str, Any], paths: list[str]) -> None:
-    fwd = oxyline.sensitivities(model, paths, OUTPUTS)
-    adj = oxyline.sensitivities(model, paths, OUTPUTS, mode="adjoint")
-    np.testing.assert_allclose(adj.values, fwd.values, rtol=1e-10)
-    # d/d log θ, each row against its largest entry
-    a = adj.jacobian * adj.parameter_values
-    f = fwd.jacobian * fwd.parameter_values
-    scale = np.abs(f).max(axis=1, keepdims=True)
-    assert np.all(scale > 0)
-    assert np.all(np.abs(a - f) <= 1e-8 * scale), np.abs(a - f) / scale
+    check_adjoint_equals_forward(model, paths, OUTPUTS)
 
 
 @pytest.mark.parametrize("path", ["oxygen.wall.k", "oxygen.hill.p50"])
@@ -103,15 +111,7 @@ OUTPUTS_PB = ["ICA.po2_out.mean", "SvO2.ECA", "VO2", "VO2.CCA", "ECA.saturation_
 ], ids=["y-rcr", "paper-bifurcated"])
 def test_adjoint_equals_forward_by_flow_parameters(model: dict[str, Any], paths: list[str],
                                                    outputs: list[str]) -> None:
-    fwd = oxyline.sensitivities(model, paths, outputs)
-    adj = oxyline.sensitivities(model, paths, outputs, mode="adjoint")
-    np.testing.assert_allclose(adj.values, fwd.values, rtol=1e-10)
-    np.testing.assert_allclose(adj.parameter_values, fwd.parameter_values, rtol=1e-14)
-    a = adj.jacobian * adj.parameter_values
-    f = fwd.jacobian * fwd.parameter_values
-    scale = np.abs(f).max(axis=1, keepdims=True)
-    assert np.all(scale > 0)
-    assert np.all(np.abs(a - f) <= 1e-8 * scale), np.abs(a - f) / scale
+    check_adjoint_equals_forward(model, paths, outputs)
 
 
 @pytest.mark.parametrize("path", ["vessels.parent.radius", "boundary_conditions.o1.distal_resistance",
