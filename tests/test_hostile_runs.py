@@ -104,6 +104,14 @@ def test_impedance_frequencies_not_real_numbers_are_model_errors(freq: Any) -> N
         oxyline.impedance("bifurcation", "inlet", freq)
 
 
+@pytest.mark.parametrize(("freq", "shown"), [(-1.0, "-1"), (float("nan"), "NaN"),
+                                             (float("inf"), "inf")])
+def test_impedance_frequencies_outside_zero_to_infinity_are_named_in_hz(freq: float,
+                                                                        shown: str) -> None:
+    with raises(ModelError, "frequencies must be finite and >= 0 Hz", shown):
+        oxyline.impedance("bifurcation", "inlet", [1.0, freq])
+
+
 # ---- svZeroDSolver files ---------------------------------------------------------------------
 
 @pytest.mark.parametrize(("key", "value", "cls"), [

@@ -91,6 +91,28 @@ impl Direction {
     }
 }
 
+/// [`input_impedances_toward`] at frequencies in Hz (the unit users give), each checked to be
+/// finite and >= 0 with the frequency as given in the message.
+pub fn input_impedances_at_hz(
+    circuit: &Circuit,
+    dae: &Dae,
+    node: usize,
+    direction: Direction,
+    frequencies: &[f64],
+) -> Result<Vec<c64>> {
+    if let Some(f) = frequencies.iter().find(|f| !(f.is_finite() && **f >= 0.0)) {
+        return Err(Error::model(
+            "impedance",
+            format!("frequencies must be finite and >= 0 Hz, got {f}"),
+        ));
+    }
+    let omegas: Vec<f64> = frequencies
+        .iter()
+        .map(|f| 2.0 * std::f64::consts::PI * f)
+        .collect();
+    input_impedances_toward(circuit, dae, node, direction, &omegas)
+}
+
 /// Z(ω) seen from circuit node `node` in `direction`, at each angular frequency of `omegas`
 /// (see [`input_impedances`]). `dae` is the circuit's own DAE, used as it is for
 /// [`Direction::Both`]; the other views solve a copy of the circuit in which every branch on

@@ -516,19 +516,19 @@ impl Network {
         Ok((z.re, z.im))
     }
 
-    /// Input impedances (Pa·s/m³) seen from graph node `node` at each angular frequency of
-    /// `omegas` (rad/s) into the network `direction` of it ("downstream", "upstream",
-    /// "both"): (real parts, imaginary parts). O(n) per frequency by the time stepping's
-    /// elimination, with the GIL released.
-    #[pyo3(signature = (node, omegas, direction = "downstream"))]
+    /// Input impedances (Pa·s/m³) seen from graph node `node` at each frequency of
+    /// `frequencies` (Hz; the core checks them) into the network `direction` of it
+    /// ("downstream", "upstream", "both"): (real parts, imaginary parts). O(n) per frequency
+    /// by the time stepping's elimination, with the GIL released.
+    #[pyo3(signature = (node, frequencies, direction = "downstream"))]
     fn input_impedances<'py>(
         &self,
         py: Python<'py>,
         node: &str,
-        omegas: Vec<f64>,
+        frequencies: Vec<f64>,
         direction: &str,
     ) -> PyResult<ArrayPair<'py>> {
-        use oxyline_core::impedance::{Direction, input_impedances_toward};
+        use oxyline_core::impedance::{Direction, input_impedances_at_hz};
         let direction = Direction::parse(direction).map_err(to_py)?;
         let circuit = &self.inner.0.circuit;
         let idx = (0..circuit.nodes.len())
@@ -537,7 +537,7 @@ impl Network {
         let inner = self.inner.clone();
         let z = py
             .detach(move || {
-                input_impedances_toward(&inner.0.circuit, &inner.1, idx, direction, &omegas)
+                input_impedances_at_hz(&inner.0.circuit, &inner.1, idx, direction, &frequencies)
             })
             .map_err(to_py)?;
         let re: Vec<f64> = z.iter().map(|z| z.re).collect();
