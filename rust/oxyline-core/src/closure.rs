@@ -894,7 +894,9 @@ mod tests {
                 x0: 0.5 * x1 * l,
                 x1: x1 * l,
             };
-            let s = wall.mean_flow_law_slopes(&seg(1.0, 1.0), d, q, 1.0).unwrap();
+            let s = wall
+                .mean_flow_law_slopes(&seg(1.0, 1.0), d, q, 1.0)
+                .unwrap();
             let fd_q = (g_of(&wall, &seg(1.0, 1.0), q * (1.0 + h))
                 - g_of(&wall, &seg(1.0, 1.0), q * (1.0 - h)))
                 / (2.0 * h * q);
@@ -909,7 +911,10 @@ mod tests {
                 ("ln L", s.ln_length, fd_l, g),
             ] {
                 let e = (exact - fd).abs() / scale;
-                assert!(e < 1e-7, "{wall:?} x1 {x1} q {q}: {name} {exact:e} vs {fd:e} ({e:e})");
+                assert!(
+                    e < 1e-7,
+                    "{wall:?} x1 {x1} q {q}: {name} {exact:e} vs {fd:e} ({e:e})"
+                );
             }
         }
         // every other wall follows the wall area
@@ -918,6 +923,18 @@ mod tests {
             wall_concentration: 0.05,
             permeability: None,
         };
-        assert!(mt.mean_flow_law_slopes(&SegmentWall { radius: 1e-3, x0: 0.0, x1: 0.01 }, d, 1e-6, 1.0).is_none());
+        assert!(
+            mt.mean_flow_law_slopes(
+                &SegmentWall {
+                    radius: 1e-3,
+                    x0: 0.0,
+                    x1: 0.01
+                },
+                d,
+                1e-6,
+                1.0
+            )
+            .is_none()
+        );
     }
 }

@@ -424,7 +424,11 @@ mod tests {
             let h = 1e-5 * xs;
             let fd = (mixed_cup(xs + h).ln() - mixed_cup(xs - h).ln()) / (2.0 * h);
             let e = (log_mixed_cup_slope(xs) - fd).abs() / fd.abs();
-            assert!(e < 1e-7, "x* {xs}: {} vs {fd} ({e:e})", log_mixed_cup_slope(xs));
+            assert!(
+                e < 1e-7,
+                "x* {xs}: {} vs {fd} ({e:e})",
+                log_mixed_cup_slope(xs)
+            );
         }
     }
 }

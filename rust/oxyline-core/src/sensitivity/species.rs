@@ -23,8 +23,8 @@ use crate::error::{Error, Result};
 use crate::hemoglobin::{BindingSpec, HillAnchor};
 use crate::model::NetworkSpec;
 use crate::transport::tangent::{
-    FlowEffect, FlowGeometry, FlowStep, MeanFlowTangent, SpeciesDerivative, SpeciesParameterKind, SpeciesTangent,
-    VesselSpeciesSignal,
+    FlowEffect, FlowGeometry, FlowStep, MeanFlowTangent, SpeciesDerivative, SpeciesParameterKind,
+    SpeciesTangent, VesselSpeciesSignal,
 };
 use crate::transport::{SpeciesSpec, Transport};
 
@@ -162,7 +162,11 @@ pub fn oxygen_parameter(sp: &SpeciesSpec, path: &str) -> Result<Option<OxygenPar
             _,
         ) => (SpeciesParameterKind::Flux, nonzero(*q)?),
         (
-            ["oxygen", "wall", key @ ("concentration" | "po2" | "enhancement")],
+            [
+                "oxygen",
+                "wall",
+                key @ ("concentration" | "po2" | "enhancement"),
+            ],
             WallSpec::Leveque {
                 wall_concentration,
                 enhancement,
@@ -235,21 +239,27 @@ fn boundary_layer_parameter(
     binding: &BindingSpec,
 ) -> std::result::Result<(SpeciesParameterKind, f64), String> {
     if !matches!(binding, BindingSpec::None | BindingSpec::Linear { .. }) {
-        return Err("a Lévêque or Graetz wall with haemoglobin: its facilitation factor \
+        return Err(
+            "a Lévêque or Graetz wall with haemoglobin: its facilitation factor \
                     (which reads the wall PO2 and P50) is not differentiated yet"
-            .into());
+                .into(),
+        );
     }
     match key {
         "concentration" => Ok((SpeciesParameterKind::WallConcentration, wall_concentration)),
         "enhancement" if permeability.is_none() => {
             Ok((SpeciesParameterKind::Conductance, enhancement))
         }
-        "enhancement" => Err("the enhancement of a wall with a permeability in series (the \
+        "enhancement" => Err(
+            "the enhancement of a wall with a permeability in series (the \
                               conductance is not proportional to it)"
-            .into()),
-        _ => Err("a wall PO2 needs haemoglobin (hemoglobin: hill); without it the wall's \
+                .into(),
+        ),
+        _ => Err(
+            "a wall PO2 needs haemoglobin (hemoglobin: hill); without it the wall's \
                   concentration is the parameter (oxygen.wall.concentration)"
-            .into()),
+                .into(),
+        ),
     }
 }
 
@@ -507,7 +517,9 @@ impl Setup {
         let tspec = spec.transport.clone().expect("checked by oxygen_species");
         if std::iter::once(&sp.wall)
             .chain(sp.per_vessel.values())
-            .any(|w| matches!(w, WallSpec::Graetz { .. }) && w.mean_flow() == MeanFlow::InletRenewal)
+            .any(|w| {
+                matches!(w, WallSpec::Graetz { .. }) && w.mean_flow() == MeanFlow::InletRenewal
+            })
         {
             return Err(Error::model(
                 "sensitivities",
@@ -605,7 +617,17 @@ fn flow_and_derivatives(
         tr.set_mean_flows(&m.abs, &m.forward)?;
         tr.check_species_tangent(s, "sensitivities")?;
     }
-    let d = Derivatives::new(spec, sp, params, assembled, dae, tr, s, dae_tangents, means.as_ref())?;
+    let d = Derivatives::new(
+        spec,
+        sp,
+        params,
+        assembled,
+        dae,
+        tr,
+        s,
+        dae_tangents,
+        means.as_ref(),
+    )?;
     Ok((flow, d))
 }
 
@@ -657,7 +679,11 @@ impl CycleMeans {
             })
             .collect();
         CycleMeans {
-            forward: abs.iter().zip(&signed).map(|(a, s)| forward(*a, *s)).collect(),
+            forward: abs
+                .iter()
+                .zip(&signed)
+                .map(|(a, s)| forward(*a, *s))
+                .collect(),
             abs,
             d_abs,
             d_forward,

@@ -165,8 +165,7 @@ fn cycle_mean_walls_adjoint_equals_forward() {
         }
     }
     let (values, adj) =
-        species_adjoint_with(&spec, &owned, &sig, |_, _| Ok(weights.clone()), settings())
-            .unwrap();
+        species_adjoint_with(&spec, &owned, &sig, |_, _| Ok(weights.clone()), settings()).unwrap();
     let fwd = run_with(&spec, &paths, &sig);
     let np = paths.len();
     let mut worst = 0.0f64;

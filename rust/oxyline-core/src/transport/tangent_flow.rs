@@ -139,7 +139,9 @@ impl Transport {
                 continue;
             };
             let j = pc.seg as usize;
-            let own = e.geometry.filter(|g| plan.segment_vessels[j] as usize == g.vessel);
+            let own = e
+                .geometry
+                .filter(|g| plan.segment_vessels[j] as usize == g.vessel);
             let d = match self.mean_flow_law_derivative(s, p, e, own) {
                 Some(dg) => [dg, dg * cw, 0.0],
                 None => match own {
