@@ -5,10 +5,12 @@ mean flow over the periodic cycle) and with a vessel's length (the layer's devel
 not with the wall area alone.
 
 * paper-bifurcated (the paper's carotid bifurcation, dissolved oxygen, its Graetz wall
-  with the forward-flow mean): the CCA's radius, the ICA's length, the inflow scale and
-  the wall's enhancement, against central differences of whole periodic runs (relative
+  with the forward-flow mean): the CCA's and ECA's radii, the ICA's length, the inflow
+  scale and the wall's enhancement, against central differences of whole periodic runs (relative
   step 1e-4; 1e-6 of the quotient plus the outputs' rounding over h), forward and adjoint;
   the adjoint against the forward tangents to 1e-8 of each row's scale.
+* A Graetz wall facilitated by haemoglobin on the Y network by a radius, a length and the
+  inflow scale (adjoint), against central differences likewise.
 * The Graetz wall's inlet renewal (its default) and the facilitated walls' PO2 and P50
   with haemoglobin stay refused by name.
 """
@@ -37,7 +39,8 @@ def paper_bifurcated() -> dict[str, Any]:
     return m
 
 
-PATHS = ["vessels.CCA.radius", "vessels.ICA.length", "scale.inflow", "oxygen.wall.enhancement"]
+PATHS = ["vessels.CCA.radius", "vessels.ECA.radius", "vessels.ICA.length", "scale.inflow",
+         "oxygen.wall.enhancement"]
 OUTPUTS = ["VO2", "VO2.ICA", "CCA.wall_uptake.max", "ECA.wall_uptake.mean"]
 
 
@@ -49,6 +52,23 @@ def test_paper_bifurcated_against_central_differences(path: str, mode: str) -> N
 
 def test_paper_bifurcated_adjoint_equals_forward() -> None:
     check_adjoint_equals_forward(paper_bifurcated(), PATHS, OUTPUTS)
+
+
+def facilitated_y() -> dict[str, Any]:
+    """The Y network of the other oxygen tests (Hill's law) with a Graetz wall of the
+    forward-flow mean, facilitated by the haemoglobin (E_Hb, fixed by the inlet and wall
+    PO2: the flow parameters leave it alone), ×8 so that the wall takes a few per cent."""
+    m = copy.deepcopy(Y)
+    m["oxygen"]["wall"] = {"model": "graetz", "po2": 40.0, "flow": "forward-mean",
+                           "enhancement": 8.0}
+    return m
+
+
+@pytest.mark.parametrize("path", ["vessels.d2.radius", "vessels.d1.length",
+                                  "scale.inflow"])
+def test_facilitated_graetz_wall_by_flow_parameters(path: str) -> None:
+    outputs = ["d1.po2_out.mean", "SvO2.d1", "VO2", "parent.wall_uptake.mean"]
+    check_against_central_differences(facilitated_y(), path, outputs, mode="adjoint")
 
 
 def test_inlet_renewal_is_refused_by_name() -> None:
