@@ -39,8 +39,13 @@ def paper_bifurcated() -> dict[str, Any]:
     return m
 
 
-PATHS = ["vessels.CCA.radius", "vessels.ECA.radius", "vessels.ICA.length", "scale.inflow",
-         "oxygen.wall.enhancement"]
+PATHS = [
+    "vessels.CCA.radius",
+    "vessels.ECA.radius",
+    "vessels.ICA.length",
+    "scale.inflow",
+    "oxygen.wall.enhancement",
+]
 OUTPUTS = ["VO2", "VO2.ICA", "CCA.wall_uptake.max", "ECA.wall_uptake.mean"]
 
 
@@ -59,13 +64,16 @@ def facilitated_y() -> dict[str, Any]:
     forward-flow mean, facilitated by the haemoglobin (E_Hb, fixed by the inlet and wall
     PO2: the flow parameters leave it alone), ×8 so that the wall takes a few per cent."""
     m = copy.deepcopy(Y)
-    m["oxygen"]["wall"] = {"model": "graetz", "po2": 40.0, "flow": "forward-mean",
-                           "enhancement": 8.0}
+    m["oxygen"]["wall"] = {
+        "model": "graetz",
+        "po2": 40.0,
+        "flow": "forward-mean",
+        "enhancement": 8.0,
+    }
     return m
 
 
-@pytest.mark.parametrize("path", ["vessels.d2.radius", "vessels.d1.length",
-                                  "scale.inflow"])
+@pytest.mark.parametrize("path", ["vessels.d2.radius", "vessels.d1.length", "scale.inflow"])
 def test_facilitated_graetz_wall_by_flow_parameters(path: str) -> None:
     outputs = ["d1.po2_out.mean", "SvO2.d1", "VO2", "parent.wall_uptake.mean"]
     check_against_central_differences(facilitated_y(), path, outputs, mode="adjoint")
