@@ -229,6 +229,35 @@ pub fn graetz_conductance(seg: &SegmentWall, d: f64, q_abs: f64) -> f64 {
     q_abs * (graetz_theta(xs(seg.x0)).ln() - graetz_theta(xs(seg.x1)).ln())
 }
 
+/// The derivatives of [`graetz_conductance`] by |Q| and by the logarithm of the segment's
+/// distances from the inlet (x0, x1 ∝ the vessel's length), (∂G/∂|Q|, ∂G/∂ln x): with
+/// φ = ln θ_m and x* = π D x/(4|Q|), G = |Q| (φ(x*_0) − φ(x*_1)), so ∂G/∂ln x =
+/// |Q| (x*_0 φ′(x*_0) − x*_1 φ′(x*_1)) and |Q| ∂G/∂|Q| = G − ∂G/∂ln x (G is homogeneous of
+/// degree one in |Q| and x). The radius does not enter (nor without flow, where
+/// G = Sh π D Δx).
+pub fn graetz_conductance_slopes(seg: &SegmentWall, d: f64, q_abs: f64) -> (f64, f64) {
+    if q_abs <= 0.0 {
+        return (0.0, graetz_conductance(seg, d, q_abs));
+    }
+    let xs = |x: f64| PI * d * x / (4.0 * q_abs);
+    let (a0, a1) = (xs(seg.x0), xs(seg.x1));
+    let slope = |a: f64| a * crate::graetz::log_mixed_cup_slope(a);
+    let by_length = q_abs * (slope(a0) - slope(a1));
+    let g = graetz_conductance(seg, d, q_abs);
+    ((g - by_length) / q_abs, by_length)
+}
+
+/// The derivatives of a cycle-mean wall law's conductance g (a `Fixed` law of
+/// [`WallSpec::segment_law_scaled`]) by the mean flow it reads and by the logarithms of the
+/// segment's radius and of its distances from the vessel inlet (a vessel's radius and
+/// length move them in proportion).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct LawSlopes {
+    pub mean_flow: f64,
+    pub ln_radius: f64,
+    pub ln_length: f64,
+}
+
 /// `v` if it is a finite number > 0 (or >= 0 with `allow_zero`), else a model error naming
 /// the element, what the value is (e.g. "wall k", "tissue wall thickness") and the value. The
 /// one check of the wall numbers of every closure and of the tissue wall.
@@ -422,6 +451,81 @@ impl WallSpec {
                     q: 0.0,
                 }
             }
+        })
+    }
+}
+
+impl WallSpec {
+    /// [`LawSlopes`] of the law [`WallSpec::segment_law_scaled`] gives a cycle-mean Lévêque
+    /// or a Graetz wall at the same arguments (the renewal factor held: None for the inlet
+    /// renewal, whose factor moves with the flow's harmonics, and for every other wall,
+    /// whose coefficients are proportional to the wall area 2π r Δx).
+    pub fn mean_flow_law_slopes(
+        &self,
+        seg: &SegmentWall,
+        d: f64,
+        q_mean: f64,
+        renewal: f64,
+    ) -> Option<LawSlopes> {
+        // the blood side's conductance and its slopes, then the permeability in series
+        let (g, blood, permeability) = match self {
+            WallSpec::Leveque {
+                shear: Shear::CycleMean,
+                enhancement,
+                permeability,
+                ..
+            } => {
+                let coef = enhancement * leveque_coef(seg, d);
+                let floor = enhancement * SH_GRAETZ * d / (2.0 * seg.radius) * seg.area();
+                let g = coef * q_mean.cbrt();
+                // coef ∝ (x1^{2/3} − x0^{2/3}) and free of r; the floor ∝ Δx
+                if g > floor {
+                    let s = LawSlopes {
+                        mean_flow: g / (3.0 * q_mean),
+                        ln_radius: 0.0,
+                        ln_length: 2.0 * g / 3.0,
+                    };
+                    (g, s, permeability)
+                } else {
+                    let s = LawSlopes {
+                        ln_length: floor,
+                        ..LawSlopes::default()
+                    };
+                    (floor, s, permeability)
+                }
+            }
+            WallSpec::Graetz {
+                flow: MeanFlow::CycleMean | MeanFlow::ForwardMean,
+                enhancement,
+                permeability,
+                ..
+            } => {
+                let f = enhancement * renewal;
+                let (dq, dl) = graetz_conductance_slopes(seg, d, q_mean);
+                let s = LawSlopes {
+                    mean_flow: f * dq,
+                    ln_radius: 0.0,
+                    ln_length: f * dl,
+                };
+                (f * graetz_conductance(seg, d, q_mean), s, permeability)
+            }
+            _ => return None,
+        };
+        let Some(p) = permeability else {
+            return Some(blood);
+        };
+        // g = 1/(1/G + 1/G_p), G_p = P 2π r Δx: dg = (g/G)² dG + (g/G_p)² dG_p
+        let gp = p * seg.area();
+        let total = series(g, gp);
+        let (a, b) = if g > 0.0 {
+            ((total / g).powi(2), (total / gp).powi(2) * gp)
+        } else {
+            (0.0, 0.0)
+        };
+        Some(LawSlopes {
+            mean_flow: a * blood.mean_flow,
+            ln_radius: a * blood.ln_radius + b,
+            ln_length: a * blood.ln_length + b,
         })
     }
 }
@@ -744,5 +848,93 @@ mod tests {
         let k_mean = whole * q.cbrt() / (2.0 * PI * r * l);
         let sh = k_mean * 2.0 * r / d;
         assert!((sh / (1.6150982 * (pe * 2.0 * r / l).cbrt()) - 1.0).abs() < 1e-6);
+    }
+
+    /// The cycle-mean laws' slopes against central differences of the law itself (by the
+    /// mean flow, and by the radius and the distances from the inlet scaled together), for
+    /// a Graetz wall in both of its series' ranges and a Lévêque wall above and at its
+    /// floor, with and without a permeability in series. Relative step 1e-5: the quotient's
+    /// truncation and rounding are ~1e-9 of the slope.
+    #[test]
+    fn cycle_mean_law_slopes_against_central_differences() {
+        let d = 1.5e-9;
+        let g_of = |w: &WallSpec, seg: &SegmentWall, q: f64| match w
+            .segment_law(seg, 1, d, q, "v")
+            .unwrap()
+        {
+            SegmentLaw::Fixed { g, .. } => g,
+            _ => f64::NAN,
+        };
+        let graetz = |p: Option<f64>| WallSpec::Graetz {
+            wall_concentration: 0.05,
+            flow: MeanFlow::ForwardMean,
+            enhancement: 3.0,
+            permeability: p,
+            kinematic_viscosity: 3.3e-6,
+        };
+        let leveque = |p: Option<f64>| WallSpec::Leveque {
+            wall_concentration: 0.05,
+            shear: Shear::CycleMean,
+            enhancement: 3.0,
+            permeability: p,
+        };
+        let h = 1e-5;
+        // (wall, x1 = segment end, q): x* = π D x/(4q) from 1e-6 (series) to 0.05 (eigen)
+        let cases = [
+            (graetz(None), 0.05, 3e-6),
+            (graetz(Some(2e-5)), 0.05, 3e-6),
+            (graetz(None), 0.2, 5e-9),
+            (leveque(None), 0.05, 3e-6),
+            (leveque(Some(2e-5)), 0.05, 3e-6),
+            (leveque(None), 0.05, 1e-16),
+        ];
+        for (wall, x1, q) in cases {
+            let seg = |r: f64, l: f64| SegmentWall {
+                radius: 2e-3 * r,
+                x0: 0.5 * x1 * l,
+                x1: x1 * l,
+            };
+            let s = wall
+                .mean_flow_law_slopes(&seg(1.0, 1.0), d, q, 1.0)
+                .unwrap();
+            let fd_q = (g_of(&wall, &seg(1.0, 1.0), q * (1.0 + h))
+                - g_of(&wall, &seg(1.0, 1.0), q * (1.0 - h)))
+                / (2.0 * h * q);
+            let fd_r = (g_of(&wall, &seg(1.0 + h, 1.0), q) - g_of(&wall, &seg(1.0 - h, 1.0), q))
+                / (2.0 * h);
+            let fd_l = (g_of(&wall, &seg(1.0, 1.0 + h), q) - g_of(&wall, &seg(1.0, 1.0 - h), q))
+                / (2.0 * h);
+            let g = g_of(&wall, &seg(1.0, 1.0), q);
+            for (name, exact, fd, scale) in [
+                ("q", s.mean_flow, fd_q, g / q),
+                ("ln r", s.ln_radius, fd_r, g),
+                ("ln L", s.ln_length, fd_l, g),
+            ] {
+                let e = (exact - fd).abs() / scale;
+                assert!(
+                    e < 1e-7,
+                    "{wall:?} x1 {x1} q {q}: {name} {exact:e} vs {fd:e} ({e:e})"
+                );
+            }
+        }
+        // every other wall follows the wall area
+        let mt = WallSpec::MassTransfer {
+            k: 1e-4,
+            wall_concentration: 0.05,
+            permeability: None,
+        };
+        assert!(
+            mt.mean_flow_law_slopes(
+                &SegmentWall {
+                    radius: 1e-3,
+                    x0: 0.0,
+                    x1: 0.01
+                },
+                d,
+                1e-6,
+                1.0
+            )
+            .is_none()
+        );
     }
 }

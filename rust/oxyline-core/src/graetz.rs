@@ -41,6 +41,36 @@ pub fn mixed_cup(xs: f64) -> f64 {
     }
 }
 
+/// d ln θ_m/dx* of [`mixed_cup`] (0 at x* ≤ 0), from the same two representations term by
+/// term: −Σ b_k (k+1)/3 x*^{(k−2)/3} below `SERIES_BELOW`, −16 Σ G_n e^{−2λ_n² x*}/θ_m above.
+/// The derivative of the Graetz closure by its mean flow and its distances from the inlet.
+pub fn log_mixed_cup_slope(xs: f64) -> f64 {
+    if xs <= 0.0 {
+        return 0.0;
+    }
+    if xs < SERIES_BELOW {
+        let t = xs.cbrt();
+        // Σ b_k (k+1)/3 t^{k+1}, over x*
+        let poly = (LEVEQUE_SERIES.iter().enumerate().rev())
+            .fold(0.0, |acc, (k, b)| acc * t + b * (k + 2) as f64 / 3.0);
+        -(t * t * poly) / xs
+    } else {
+        let first = 2.0 * GRAETZ[0].0 * GRAETZ[0].0 * xs;
+        let (mut sum, mut slope) = (0.0, 0.0);
+        for (l, g) in GRAETZ.iter() {
+            let e = 2.0 * l * l * xs;
+            // e^-60 of the first term, times λ_n²/λ_1² < e^12 for the slope's: far below its last bit
+            if e - first > 72.0 {
+                break;
+            }
+            let w = g * (-e).exp();
+            sum += w / (l * l);
+            slope -= 2.0 * w;
+        }
+        slope / sum
+    }
+}
+
 fn leveque_series(xs: f64) -> f64 {
     let t = xs.cbrt();
     // Horner in t: Σ b_k t^{k+1} = t² (b_1 + t (b_2 + …))
@@ -384,5 +414,21 @@ mod tests {
             assert!((v / expect - 1.0).abs() < 1e-6, "{xs}: {v} vs {expect}");
         }
         assert_eq!(mixed_cup(0.0), 1.0);
+    }
+
+    /// d ln θ_m/dx* against central differences of ln θ_m in both representations (relative
+    /// step 1e-5: truncation and rounding ~1e-9 of the slope).
+    #[test]
+    fn log_slope_against_central_differences() {
+        for xs in [1e-8, 1e-6, 5e-5, 2e-4, 1e-3, 0.02, 0.3] {
+            let h = 1e-5 * xs;
+            let fd = (mixed_cup(xs + h).ln() - mixed_cup(xs - h).ln()) / (2.0 * h);
+            let e = (log_mixed_cup_slope(xs) - fd).abs() / fd.abs();
+            assert!(
+                e < 1e-7,
+                "x* {xs}: {} vs {fd} ({e:e})",
+                log_mixed_cup_slope(xs)
+            );
+        }
     }
 }

@@ -18,13 +18,13 @@ use super::parameter::{self, DaeTangent, Parameter};
 use super::tangent::{TangentSettings, periodic_tangent};
 use crate::assemble::Assembled;
 use crate::circuit::Dae;
-use crate::closure::{FluxSpec, WallSpec};
+use crate::closure::{FluxSpec, MeanFlow, WallSpec};
 use crate::error::{Error, Result};
 use crate::hemoglobin::{BindingSpec, HillAnchor};
 use crate::model::NetworkSpec;
 use crate::transport::tangent::{
-    FlowEffect, FlowGeometry, FlowStep, SpeciesDerivative, SpeciesParameterKind, SpeciesTangent,
-    VesselSpeciesSignal,
+    FlowEffect, FlowGeometry, FlowStep, MeanFlowTangent, SpeciesDerivative, SpeciesParameterKind,
+    SpeciesTangent, VesselSpeciesSignal,
 };
 use crate::transport::{SpeciesSpec, Transport};
 
@@ -161,6 +161,28 @@ pub fn oxygen_parameter(sp: &SpeciesSpec, path: &str) -> Result<Option<OxygenPar
             },
             _,
         ) => (SpeciesParameterKind::Flux, nonzero(*q)?),
+        (
+            [
+                "oxygen",
+                "wall",
+                key @ ("concentration" | "po2" | "enhancement"),
+            ],
+            WallSpec::Leveque {
+                wall_concentration,
+                enhancement,
+                permeability,
+                ..
+            }
+            | WallSpec::Graetz {
+                wall_concentration,
+                enhancement,
+                permeability,
+                ..
+            },
+            b,
+        ) => boundary_layer_parameter(key, *wall_concentration, *enhancement, *permeability, b)
+            .map_err(fail)
+            .and_then(|(kind, v)| Ok((kind, nonzero(v)?)))?,
         (["oxygen", "hill", "p50"], w, BindingSpec::Hill { p50, .. }) => {
             let facilitated = matches!(w, WallSpec::Leveque { .. } | WallSpec::Graetz { .. });
             if facilitated
@@ -203,6 +225,42 @@ pub fn oxygen_parameter(sp: &SpeciesSpec, path: &str) -> Result<Option<OxygenPar
         value,
         vessel,
     }))
+}
+
+/// A Lévêque or Graetz wall's parameter `key`: its concentration (g c_w ∝ it) or its
+/// enhancement (g ∝ it without a permeability in series). With haemoglobin the model's
+/// enhancement holds the facilitation E_Hb, which reads the wall PO2 and the binding, and
+/// is not differentiated: refused (as a PO2, which needs it).
+fn boundary_layer_parameter(
+    key: &str,
+    wall_concentration: f64,
+    enhancement: f64,
+    permeability: Option<f64>,
+    binding: &BindingSpec,
+) -> std::result::Result<(SpeciesParameterKind, f64), String> {
+    if !matches!(binding, BindingSpec::None | BindingSpec::Linear { .. }) {
+        return Err(
+            "a Lévêque or Graetz wall with haemoglobin: its facilitation factor \
+                    (which reads the wall PO2 and P50) is not differentiated yet"
+                .into(),
+        );
+    }
+    match key {
+        "concentration" => Ok((SpeciesParameterKind::WallConcentration, wall_concentration)),
+        "enhancement" if permeability.is_none() => {
+            Ok((SpeciesParameterKind::Conductance, enhancement))
+        }
+        "enhancement" => Err(
+            "the enhancement of a wall with a permeability in series (the \
+                              conductance is not proportional to it)"
+                .into(),
+        ),
+        _ => Err(
+            "a wall PO2 needs haemoglobin (hemoglobin: hill); without it the wall's \
+                  concentration is the parameter (oxygen.wall.concentration)"
+                .into(),
+        ),
+    }
 }
 
 fn wall_name(w: &WallSpec) -> &'static str {
@@ -289,10 +347,13 @@ fn flow_effect<'a>(
             } else {
                 1.0
             };
+            let radius = matches!(p, Parameter::Radius(_));
             vessel.map(|vessel| FlowGeometry {
                 vessel,
                 area: 1.0 / t.value,
                 volume: k / t.value,
+                radius: if radius { 1.0 / t.value } else { 0.0 },
+                length: if radius { 0.0 } else { 1.0 / t.value },
             })
         }
         _ => None,
@@ -308,6 +369,7 @@ fn flow_effect<'a>(
         geometry,
         de: &t.de,
         sources,
+        mean_flows: None,
     }
 }
 
@@ -455,12 +517,15 @@ impl Setup {
         let tspec = spec.transport.clone().expect("checked by oxygen_species");
         if std::iter::once(&sp.wall)
             .chain(sp.per_vessel.values())
-            .any(WallSpec::needs_mean_flow)
+            .any(|w| {
+                matches!(w, WallSpec::Graetz { .. }) && w.mean_flow() == MeanFlow::InletRenewal
+            })
         {
             return Err(Error::model(
                 "sensitivities",
-                "oxygen sensitivities with a wall that reads the cycle-mean flow (Graetz) are \
-                 not available yet",
+                "oxygen sensitivities do not follow a Graetz wall's inlet renewal yet (flow: \
+                 inlet-renewal, the default: it reads the flow's harmonics); the Graetz law of \
+                 flow: forward-mean or cycle-mean is followed",
             ));
         }
         let assembled = spec.assemble()?;
@@ -499,12 +564,8 @@ pub fn species_sensitivities(
         s,
         sigs,
     } = Setup::new(spec, paths, signals, &settings)?;
-    let Derivatives {
-        flow_params,
-        derivs,
-        values,
-    } = Derivatives::new(&spec, &sp, &params, &assembled, &dae, &tr, s)?;
-    let flow = FlowCycle::run(&dae, &flow_params, &tr.flow_tangent_unknowns(), &settings)?;
+    let (flow, Derivatives { derivs, values, .. }) =
+        flow_and_derivatives(&spec, &sp, &params, &assembled, &dae, &mut tr, s, &settings)?;
     let mut run = TransportRun::new(&mut tr, s, derivs, values, &flow)?;
     let (transport_cycles, periodic_change, (sig_values, sig_derivs)) =
         run.run_to_periodic(&flow, &settings, signals, &sigs)?;
@@ -529,7 +590,119 @@ struct Derivatives {
     values: Vec<f64>,
 }
 
+/// The flow's periodic cycle and the parameters' derivatives: the flow and its tangents by
+/// the flow parameters run first; the walls whose law reads the cycle-mean flow take it
+/// from that cycle (and its derivative by each flow parameter from the tangents), then
+/// every parameter's derivative of the species step is taken on those laws.
+#[allow(clippy::too_many_arguments)]
+fn flow_and_derivatives(
+    spec: &NetworkSpec,
+    sp: &SpeciesSpec,
+    params: &[Param],
+    assembled: &Assembled,
+    dae: &Dae,
+    tr: &mut Transport,
+    s: usize,
+    settings: &TangentSettings,
+) -> Result<(FlowCycle, Derivatives)> {
+    let dae_tangents = flow_tangents(spec, assembled, dae, params)?;
+    let flow_params: Vec<DaeTangent> = dae_tangents.iter().flatten().cloned().collect();
+    let mut unknowns = tr.flow_tangent_unknowns();
+    let read = unknowns.len();
+    let mean_unknowns = tr.mean_flow_unknowns();
+    unknowns.extend(&mean_unknowns);
+    let flow = FlowCycle::run(dae, &flow_params, &unknowns, settings)?;
+    let means = (!mean_unknowns.is_empty()).then(|| CycleMeans::of(&flow, read, &mean_unknowns));
+    if let Some(m) = &means {
+        tr.set_mean_flows(&m.abs, &m.forward)?;
+        tr.check_species_tangent(s, "sensitivities")?;
+    }
+    let d = Derivatives::new(
+        spec,
+        sp,
+        params,
+        assembled,
+        dae,
+        tr,
+        s,
+        dae_tangents,
+        means.as_ref(),
+    )?;
+    Ok((flow, d))
+}
+
+/// The segments' cycle means over the flow's periodic cycle (of its step ends, as a run's
+/// first pass takes them: `run::mean_flow`) of |Q| and of the forward flow ⟨max(±Q, 0)⟩ =
+/// (⟨|Q|⟩ + |⟨Q⟩|)/2 (⟨|Q|⟩ itself without reversal), and their derivatives by each flow
+/// parameter (sign(Q) Q′ averaged; per flow parameter, per segment).
+struct CycleMeans {
+    abs: Vec<f64>,
+    forward: Vec<f64>,
+    d_abs: Vec<Vec<f64>>,
+    d_forward: Vec<Vec<f64>>,
+}
+
+impl CycleMeans {
+    /// `unknowns` the segments' flow unknowns, recorded in `flow` from index `from`.
+    fn of(flow: &FlowCycle, from: usize, unknowns: &[usize]) -> CycleMeans {
+        let ns = flow.ys.len() - 1;
+        let np = flow.derivs.len() / (ns * flow.nu).max(1);
+        let n = unknowns.len();
+        let (mut abs, mut signed) = (vec![0.0; n], vec![0.0; n]);
+        let (mut d_abs, mut d_signed) = (vec![vec![0.0; n]; np], vec![vec![0.0; n]; np]);
+        for k in 1..=ns {
+            let y = &flow.ys[k];
+            for (j, &u) in unknowns.iter().enumerate() {
+                let sign = if y[u] < 0.0 { -1.0 } else { 1.0 };
+                abs[j] += y[u].abs() / ns as f64;
+                signed[j] += y[u] / ns as f64;
+                for p in 0..np {
+                    let dy = flow.tangent(p, k)[from + j];
+                    d_abs[p][j] += sign * dy / ns as f64;
+                    d_signed[p][j] += dy / ns as f64;
+                }
+            }
+        }
+        let forward = |a: f64, s: f64| if a == s.abs() { a } else { 0.5 * (a + s.abs()) };
+        let d_forward = (d_abs.iter().zip(&d_signed))
+            .map(|(da, ds)| {
+                (0..n)
+                    .map(|j| {
+                        let (a, s) = (abs[j], signed[j]);
+                        if a == s.abs() {
+                            da[j]
+                        } else {
+                            0.5 * (da[j] + s.signum() * ds[j])
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        CycleMeans {
+            forward: abs
+                .iter()
+                .zip(&signed)
+                .map(|(a, s)| forward(*a, *s))
+                .collect(),
+            abs,
+            d_abs,
+            d_forward,
+        }
+    }
+
+    /// The means and their derivatives by flow parameter `p`.
+    fn tangent(&self, p: usize) -> MeanFlowTangent<'_> {
+        MeanFlowTangent {
+            abs: &self.abs,
+            forward: &self.forward,
+            d_abs: &self.d_abs[p],
+            d_forward: &self.d_forward[p],
+        }
+    }
+}
+
 impl Derivatives {
+    #[allow(clippy::too_many_arguments)]
     fn new(
         spec: &NetworkSpec,
         sp: &SpeciesSpec,
@@ -538,15 +711,19 @@ impl Derivatives {
         dae: &Dae,
         tr: &Transport,
         s: usize,
+        dae_tangents: Vec<Option<DaeTangent>>,
+        means: Option<&CycleMeans>,
     ) -> Result<Derivatives> {
-        let dae_tangents = flow_tangents(spec, assembled, dae, params)?;
         let names = &assembled.circuit.vessel_names;
         let mut derivs = Vec::with_capacity(params.len());
         let mut sources = Vec::new();
+        let mut next_flow = 0;
         for (p, t) in params.iter().zip(&dae_tangents) {
             derivs.push(match (p, t) {
                 (Param::Flow(par, _), Some(t)) => {
-                    let e = flow_effect(spec, assembled, dae, par, t, &mut sources);
+                    let mut e = flow_effect(spec, assembled, dae, par, t, &mut sources);
+                    e.mean_flows = means.map(|m| m.tangent(next_flow));
+                    next_flow += 1;
                     tr.species_flow_derivative(s, &e)
                 }
                 (Param::Oxygen(o), _) => {
@@ -769,3 +946,7 @@ pub use adjoint::{SpeciesAdjoint, species_adjoint_with};
 #[cfg(test)]
 #[path = "species_tests.rs"]
 mod tests;
+
+#[cfg(test)]
+#[path = "species_wall_tests.rs"]
+mod wall_tests;

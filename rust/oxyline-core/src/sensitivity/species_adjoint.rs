@@ -73,13 +73,15 @@ where
         s,
         sigs,
     } = Setup::new(spec, paths, signals, &settings)?;
-    let Derivatives {
-        flow_params,
-        derivs,
-        values,
-    } = Derivatives::new(&spec, &sp, &params, &assembled, &dae, &tr, s)?;
+    let (
+        flow,
+        Derivatives {
+            flow_params,
+            derivs,
+            values,
+        },
+    ) = flow_and_derivatives(&spec, &sp, &params, &assembled, &dae, &mut tr, s, &settings)?;
     tr.check_species_adjoint(s, "sensitivities")?;
-    let flow = FlowCycle::run(&dae, &flow_params, &tr.flow_tangent_unknowns(), &settings)?;
     let part = FlowPart {
         flow: &flow,
         index: flow_indices(&derivs),

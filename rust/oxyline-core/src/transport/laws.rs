@@ -47,7 +47,7 @@ fn relaxed_segments(plan: &Plan, sp: &SpeciesPlan, mean_abs: &[f64]) -> Vec<(usi
 }
 
 /// The mean flow a wall's closure reads at segment `j` and the renewal factor it scales by.
-fn closure_mean_flow(
+pub(super) fn closure_mean_flow(
     wall: &WallSpec,
     j: usize,
     mean: MeanFlows<'_>,

@@ -35,7 +35,7 @@ pub use adjoint::{AdjointSums, SignalRow, SpeciesAdjointState, SpeciesStepRecord
 #[path = "tangent_flow.rs"]
 mod flow;
 use flow::{CellPrimal, FlowDerivative, FlowForcing};
-pub use flow::{FlowEffect, FlowGeometry, FlowStep};
+pub use flow::{FlowEffect, FlowGeometry, FlowStep, MeanFlowTangent};
 
 /// What an oxygen parameter changes in the step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

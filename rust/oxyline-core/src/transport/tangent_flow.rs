@@ -28,14 +28,30 @@ pub struct FlowEffect<'a> {
     pub de: &'a [f64],
     /// (circuit node, d ln(inflow)/dθ) of flow conditions whose waveform the parameter scales.
     pub sources: &'a [(usize, f64)],
+    /// The segments' cycle-mean flows over the periodic cycle and their derivatives by the
+    /// parameter, for the walls whose law reads them (None: no such wall).
+    pub mean_flows: Option<MeanFlowTangent<'a>>,
 }
 
-/// The logarithmic derivatives by the parameter of a vessel's wall area and lumen volume.
+/// The logarithmic derivatives by the parameter of a vessel's wall area and lumen volume,
+/// and of its segments' radius and distances from the inlet (the cycle-mean laws').
 #[derive(Debug, Clone, Copy)]
 pub struct FlowGeometry {
     pub vessel: usize,
     pub area: f64,
     pub volume: f64,
+    pub radius: f64,
+    pub length: f64,
+}
+
+/// Per segment: the cycle means of |Q| and of the forward flow (`laws::MeanFlows`) and
+/// their derivatives by one flow parameter.
+#[derive(Debug, Clone, Copy)]
+pub struct MeanFlowTangent<'a> {
+    pub abs: &'a [f64],
+    pub forward: &'a [f64],
+    pub d_abs: &'a [f64],
+    pub d_forward: &'a [f64],
 }
 
 /// A flow parameter's fixed effects per cell and per flow source.
@@ -118,19 +134,28 @@ impl Transport {
         let mut piece = vec![[0.0; 3]; laws.laws.len()];
         let mut cell = vec![[0.0; 3]; nc];
         let mut dvol = vec![0.0; plan.kind.len()];
+        for (p, (law, pc)) in laws.laws.iter().zip(&plan.pieces).enumerate() {
+            let SegmentLaw::Fixed { g: gl, cw, q } = *law else {
+                continue;
+            };
+            let j = pc.seg as usize;
+            let own = e
+                .geometry
+                .filter(|g| plan.segment_vessels[j] as usize == g.vessel);
+            let d = match self.mean_flow_law_derivative(s, p, e, own) {
+                Some(dg) => [dg, dg * cw, 0.0],
+                None => match own {
+                    Some(g) => [gl * g.area, gl * cw * g.area, q * g.area],
+                    None => continue,
+                },
+            };
+            piece[p] = d;
+            for (c, dk) in cell[pc.cell as usize].iter_mut().zip(d) {
+                *c += pc.share * dk;
+            }
+        }
         if let Some(g) = e.geometry {
             let of = |seg: usize| plan.segment_vessels[seg] as usize == g.vessel;
-            for (p, (law, pc)) in laws.laws.iter().zip(&plan.pieces).enumerate() {
-                let SegmentLaw::Fixed { g: gl, cw, q } = *law else {
-                    continue;
-                };
-                if of(pc.seg as usize) {
-                    piece[p] = [gl * g.area, gl * cw * g.area, q * g.area];
-                    for (c, dk) in cell[pc.cell as usize].iter_mut().zip(piece[p]) {
-                        *c += pc.share * dk;
-                    }
-                }
-            }
             for (_, seg) in plan.segments.iter().enumerate().filter(|(j, _)| of(*j)) {
                 for (n, share) in seg.node_shares() {
                     dvol[n] += share * seg.volume * g.volume;
@@ -155,6 +180,41 @@ impl Transport {
             cell,
             flow: Some(FlowDerivative { dv0, dcap, source }),
         }
+    }
+
+    /// The derivative of wall piece `p`'s conductance (species `s`) when its law reads the
+    /// cycle-mean flow (None otherwise: its coefficients are ∝ the wall area): by the mean
+    /// flow's tangent, and by the segment's radius and length when the parameter sets its
+    /// vessel's geometry (`own`); the law's own slopes (`WallSpec::mean_flow_law_slopes`).
+    fn mean_flow_law_derivative(
+        &self,
+        s: usize,
+        p: usize,
+        e: &FlowEffect<'_>,
+        own: Option<FlowGeometry>,
+    ) -> Option<f64> {
+        let (plan, sp) = (&*self.plan, &self.plan.species[s]);
+        let pc = &plan.pieces[p];
+        let j = pc.seg as usize;
+        let wall = &sp.walls[plan.segment_vessels[j] as usize];
+        if !wall.needs_mean_flow() {
+            return None;
+        }
+        let m = e.mean_flows?;
+        let mean = laws::MeanFlows {
+            abs: m.abs,
+            forward: m.forward,
+            renewal: &[],
+        };
+        let (q_mean, renewal) = laws::closure_mean_flow(wall, j, mean, &[]);
+        let slopes =
+            wall.mean_flow_law_slopes(&plan.piece_wall(pc), sp.diffusivity, q_mean, renewal)?;
+        let d_mean = match wall.mean_flow() {
+            closure::MeanFlow::CycleMean => m.d_abs[j],
+            _ => m.d_forward[j],
+        };
+        let (dr, dl) = own.map_or((0.0, 0.0), |g| (g.radius, g.length));
+        Some(slopes.mean_flow * d_mean + slopes.ln_radius * dr + slopes.ln_length * dl)
     }
 
     /// The tangent of a flow parameter at the start of a run from flow state `y0` (its

@@ -1,0 +1,228 @@
+//! Oxygen sensitivities with boundary-layer walls whose law reads the cycle-mean flow (a
+//! Graetz wall of the forward-flow mean, a cycle-mean Lévêque wall): their conductance moves
+//! with every flow parameter (through the segments' mean flow) and with a vessel's length
+//! (the layer's development along it), not in proportion to the wall area. Against central
+//! differences of whole periodic runs (relative step 1e-4, judged as the other oxygen
+//! sensitivities: 1e-6 of the quotient's largest value over the cycle, or its rounding
+//! floor), and the adjoint against the forward tangents (~1e-11; 1e-8 tells a wrong term).
+
+use super::tests::{compare, run_with, settings};
+use super::*;
+use crate::model::parse;
+
+/// The Y network of the other oxygen tests with dissolved oxygen only (no haemoglobin, so
+/// no facilitation factor rides on the walls' enhancement), a Graetz wall of the
+/// forward-flow mean on every vessel but d2, and a cycle-mean Lévêque wall on d2. The
+/// enhancement (×6) makes the walls take a few per cent of the oxygen delivered, so the
+/// signals move well above the difference quotients' rounding.
+const MODEL: &str = r#"{
+  "name": "y-walls",
+  "vessels": [
+    {"name": "parent", "from": "in", "to": "j", "segments": 3,
+     "geometry": {"length": 0.1, "radius_in": 0.004, "radius_out": 0.004,
+                  "wall_thickness": 0.0006, "youngs_modulus": 4e5}},
+    {"name": "d1", "from": "j", "to": "o1", "segments": 4,
+     "geometry": {"length": 0.08, "radius_in": 0.003, "radius_out": 0.0025,
+                  "wall_thickness": 0.0005, "youngs_modulus": 6e5}},
+    {"name": "d2", "from": "j", "to": "o2", "segments": 2,
+     "geometry": {"length": 0.05, "radius_in": 0.002, "radius_out": 0.002,
+                  "wall_thickness": 0.0004, "youngs_modulus": 6e5}}
+  ],
+  "boundary_conditions": {
+    "in": {"type": "flow", "flow": {"kind": "fourier", "period": 0.8, "mean": 3e-6,
+                                    "cos": [1e-6, -0.4e-6], "sin": [1.2e-6, 0.3e-6]}},
+    "o1": {"type": "rcr", "proximal_resistance": 1.5e8, "capacitance": 6e-10,
+           "distal_resistance": 1.2e9},
+    "o2": {"type": "resistance", "resistance": 1.6e9}
+  },
+  "transport": {"species": [{
+    "name": "o2", "diffusivity": 1.5e-9,
+    "inlet": {"kind": "constant", "value": 0.119},
+    "wall": {"model": "graetz", "wall_concentration": 0.0777, "flow": "forward-mean",
+             "enhancement": 6.0},
+    "per_vessel": {"d2": {"model": "leveque", "wall_concentration": 0.06,
+                          "enhancement": 6.0}}
+  }]}
+}"#;
+
+fn signals() -> Vec<(String, String)> {
+    [
+        ("d1", "concentration_out"),
+        ("d2", "concentration_out"),
+        ("parent", "wall_uptake"),
+        ("d1", "wall_uptake"),
+        ("d2", "wall_uptake"),
+        ("", "consumption"),
+        ("", "inflow"),
+        ("", "outflow"),
+    ]
+    .iter()
+    .map(|(a, b)| (a.to_string(), b.to_string()))
+    .collect()
+}
+
+/// `s` with parameter `path` multiplied by `f` (oxygen keys of the walls here, flow paths
+/// as the other tests scale them).
+fn scaled(mut s: NetworkSpec, path: &str, f: f64) -> NetworkSpec {
+    if !path.starts_with("oxygen.") {
+        return crate::sensitivity::tests::scaled_from(s, path, f);
+    }
+    let sp = &mut s.transport.as_mut().unwrap().species[0];
+    let wall = match path.split('.').nth(1) {
+        Some("per_vessel") => sp.per_vessel.get_mut("d2").unwrap(),
+        _ => &mut sp.wall,
+    };
+    match (path.rsplit('.').next(), wall) {
+        (
+            Some("concentration"),
+            WallSpec::Graetz {
+                wall_concentration, ..
+            }
+            | WallSpec::Leveque {
+                wall_concentration, ..
+            },
+        ) => *wall_concentration *= f,
+        (
+            Some("enhancement"),
+            WallSpec::Graetz { enhancement, .. } | WallSpec::Leveque { enhancement, .. },
+        ) => *enhancement *= f,
+        _ => panic!("no such parameter in the test model: {path}"),
+    }
+    s
+}
+
+fn check(spec: &NetworkSpec, path: &str) -> f64 {
+    let h = 1e-4;
+    let sig = signals();
+    let exact = run_with(spec, &[path], &sig);
+    let up = run_with(&scaled(spec.clone(), path, 1.0 + h), &[], &sig);
+    let down = run_with(&scaled(spec.clone(), path, 1.0 - h), &[], &sig);
+    compare(path, h, &exact, &up, &down)
+}
+
+#[test]
+fn cycle_mean_walls_by_oxygen_parameters_against_central_differences() {
+    let spec = parse(MODEL).unwrap();
+    for path in [
+        "oxygen.wall.concentration",
+        "oxygen.wall.enhancement",
+        "oxygen.per_vessel.d2.wall.concentration",
+        "oxygen.per_vessel.d2.wall.enhancement",
+    ] {
+        assert!(check(&spec, path) < 1e-6, "{path}");
+    }
+}
+
+/// A length of each Graetz vessel, the radius and length of the Lévêque one, a Windkessel's
+/// resistance and the inflow's scale: each moves the walls' mean flows (and a length their
+/// layers' development). (The parent's radius moves the signals by less than the
+/// quotients' rounding: the Graetz law does not read a radius, and the inflow is given.)
+#[test]
+fn cycle_mean_walls_by_flow_parameters_against_central_differences() {
+    let spec = parse(MODEL).unwrap();
+    for path in [
+        "vessels.parent.length",
+        "vessels.d1.length",
+        "vessels.d2.radius",
+        "vessels.d2.length",
+        "boundary_conditions.o1.distal_resistance",
+        "scale.inflow",
+    ] {
+        assert!(check(&spec, path) < 1e-6, "{path}");
+    }
+}
+
+/// The cycle-mean walls' derivatives in the adjoint (their dg per cell, the flow
+/// parameters' through the mean flows) against the forward tangents: the cycle mean of
+/// every signal and a weighted series of each, per functional relative to its largest
+/// |dJ/d ln θ|.
+#[test]
+fn cycle_mean_walls_adjoint_equals_forward() {
+    let spec = parse(MODEL).unwrap();
+    let paths = [
+        "vessels.d2.radius",
+        "vessels.d2.length",
+        "scale.inflow",
+        "oxygen.wall.enhancement",
+        "oxygen.per_vessel.d2.wall.concentration",
+    ];
+    let sig = signals();
+    let owned: Vec<String> = paths.iter().map(|p| p.to_string()).collect();
+    let ns = settings().steps_per_cycle;
+    let nsig = sig.len();
+    let mut weights = Vec::new();
+    for j in 0..nsig {
+        for series in [false, true] {
+            let mut f = vec![0.0; ns * nsig];
+            for k in 0..ns {
+                let w = if series {
+                    0.3 + (k as f64 * 0.37).sin()
+                } else {
+                    1.0
+                };
+                f[k * nsig + j] = w / ns as f64;
+            }
+            weights.extend(f);
+        }
+    }
+    let (values, adj) =
+        species_adjoint_with(&spec, &owned, &sig, |_, _| Ok(weights.clone()), settings()).unwrap();
+    let fwd = run_with(&spec, &paths, &sig);
+    let np = paths.len();
+    let mut worst = 0.0f64;
+    for (f, w) in weights.chunks(ns * nsig).enumerate() {
+        let g: Vec<f64> = (0..np)
+            .map(|p| {
+                let d = &fwd.derivs[p * ns * nsig..(p + 1) * ns * nsig];
+                w.iter().zip(d).map(|(a, b)| a * b).sum()
+            })
+            .collect();
+        let scale = (g.iter().zip(&values)).fold(0.0f64, |m, (d, v)| m.max((d * v).abs()));
+        for p in 0..np {
+            let e = (adj.gradients[f * np + p] - g[p]).abs() * values[p].abs();
+            if scale > 0.0 {
+                worst = worst.max(e / scale);
+            }
+        }
+    }
+    eprintln!("cycle-mean walls: adjoint against forward {worst:.2e}");
+    assert!(worst < 1e-8, "{worst:e}");
+}
+
+/// What stays refused, by name: the Graetz wall's inlet renewal (its default), a relaxed
+/// Lévêque shear, and the facilitated walls' PO2 and P50 with haemoglobin.
+#[test]
+fn inlet_renewal_relaxed_shear_and_facilitated_parameters_are_refused() {
+    let sig = signals();
+    let msg = |spec: &NetworkSpec, path: &str| {
+        species_sensitivities(spec, &[path.to_string()], &sig, settings())
+            .unwrap_err()
+            .to_string()
+    };
+    let mut spec = parse(MODEL).unwrap();
+    let sp = &mut spec.transport.as_mut().unwrap().species[0];
+    if let WallSpec::Graetz { flow, .. } = &mut sp.wall {
+        *flow = MeanFlow::InletRenewal;
+    }
+    let m = msg(&spec, "scale.inflow");
+    assert!(m.contains("inlet renewal"), "{m}");
+    let mut spec = parse(MODEL).unwrap();
+    let sp = &mut spec.transport.as_mut().unwrap().species[0];
+    if let Some(WallSpec::Leveque { shear, .. }) = sp.per_vessel.get_mut("d2") {
+        *shear = crate::closure::Shear::Relaxed;
+    }
+    let m = msg(&spec, "scale.inflow");
+    assert!(m.contains("shear-dependent"), "{m}");
+    let mut spec = parse(super::tests::MODEL).unwrap();
+    spec.transport.as_mut().unwrap().species[0].wall = WallSpec::Graetz {
+        wall_concentration: 0.05,
+        flow: MeanFlow::ForwardMean,
+        enhancement: 1.0,
+        permeability: None,
+        kinematic_viscosity: 3.3e-6,
+    };
+    for path in ["oxygen.wall.po2", "oxygen.hill.p50"] {
+        let m = msg(&spec, path);
+        assert!(m.contains(path) && m.contains("facilitation"), "{m}");
+    }
+}

@@ -1,0 +1,93 @@
+"""Oxygen sensitivities with boundary-layer walls whose law reads the cycle-mean flow
+(``oxyline.sensitivities``): a Graetz wall of the forward-flow mean and a cycle-mean
+Lévêque wall. Their conductance moves with every flow parameter (through each segment's
+mean flow over the periodic cycle) and with a vessel's length (the layer's development),
+not with the wall area alone.
+
+* paper-bifurcated (the paper's carotid bifurcation, dissolved oxygen, its Graetz wall
+  with the forward-flow mean): the CCA's and ECA's radii, the ICA's length, the inflow
+  scale and the wall's enhancement, against central differences of whole periodic runs (relative
+  step 1e-4; 1e-6 of the quotient plus the outputs' rounding over h), forward and adjoint;
+  the adjoint against the forward tangents to 1e-8 of each row's scale.
+* A Graetz wall facilitated by haemoglobin on the Y network by a radius, a length and the
+  inflow scale (adjoint), against central differences likewise.
+* The Graetz wall's inlet renewal (its default) and the facilitated walls' PO2 and P50
+  with haemoglobin stay refused by name.
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Any
+
+import pytest
+from test_sensitivity_o2 import Y, check_against_central_differences
+from test_sensitivity_o2_adjoint import check_adjoint_equals_forward
+
+import oxyline
+from oxyline import ModelError
+
+pytest.importorskip("scipy")
+
+
+def paper_bifurcated() -> dict[str, Any]:
+    """paper-bifurcated as shipped, its Graetz wall reading the forward-flow mean (= the
+    cycle-mean |Q| here: no reversal) and its enhancement written out (1, the default) so
+    that it can be a parameter."""
+    m = copy.deepcopy(oxyline.load_model("paper-bifurcated").source)
+    m["oxygen"]["wall"] = {**m["oxygen"]["wall"], "flow": "forward-mean", "enhancement": 1.0}
+    return m
+
+
+PATHS = [
+    "vessels.CCA.radius",
+    "vessels.ECA.radius",
+    "vessels.ICA.length",
+    "scale.inflow",
+    "oxygen.wall.enhancement",
+]
+OUTPUTS = ["VO2", "VO2.ICA", "CCA.wall_uptake.max", "ECA.wall_uptake.mean"]
+
+
+@pytest.mark.parametrize("mode", ["forward", "adjoint"])
+@pytest.mark.parametrize("path", PATHS)
+def test_paper_bifurcated_against_central_differences(path: str, mode: str) -> None:
+    check_against_central_differences(paper_bifurcated(), path, OUTPUTS, mode=mode)
+
+
+def test_paper_bifurcated_adjoint_equals_forward() -> None:
+    check_adjoint_equals_forward(paper_bifurcated(), PATHS, OUTPUTS)
+
+
+def facilitated_y() -> dict[str, Any]:
+    """The Y network of the other oxygen tests (Hill's law) with a Graetz wall of the
+    forward-flow mean, facilitated by the haemoglobin (E_Hb, fixed by the inlet and wall
+    PO2: the flow parameters leave it alone), ×8 so that the wall takes a few per cent."""
+    m = copy.deepcopy(Y)
+    m["oxygen"]["wall"] = {
+        "model": "graetz",
+        "po2": 40.0,
+        "flow": "forward-mean",
+        "enhancement": 8.0,
+    }
+    return m
+
+
+@pytest.mark.parametrize("path", ["vessels.d2.radius", "vessels.d1.length", "scale.inflow"])
+def test_facilitated_graetz_wall_by_flow_parameters(path: str) -> None:
+    outputs = ["d1.po2_out.mean", "SvO2.d1", "VO2", "parent.wall_uptake.mean"]
+    check_against_central_differences(facilitated_y(), path, outputs, mode="adjoint")
+
+
+def test_inlet_renewal_is_refused_by_name() -> None:
+    m = copy.deepcopy(oxyline.load_model("paper-bifurcated").source)
+    with pytest.raises(ModelError, match="inlet renewal"):
+        oxyline.sensitivities(m, ["vessels.CCA.radius"], ["VO2"])
+
+
+def test_facilitated_wall_parameters_are_refused_by_name() -> None:
+    m = copy.deepcopy(Y)
+    m["oxygen"]["wall"] = {"model": "graetz", "po2": 40.0, "flow": "forward-mean"}
+    for path in ["oxygen.wall.po2", "oxygen.hill.p50"]:
+        with pytest.raises(ModelError, match=path.replace(".", r"\.")):
+            oxyline.sensitivities(m, [path], ["VO2"])
