@@ -3,6 +3,7 @@ same canonical model as the full per-key check, and the loaded model owns its de
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import pytest
@@ -55,6 +56,30 @@ def test_the_model_owns_its_description() -> None:
     d["boundary_conditions"]["o"]["resistance"] = 2.0
     assert m.to_dict()["vessels"][0]["radius"] == 0.003
     assert m.to_dict()["boundary_conditions"]["o"]["resistance"] == 1e9
+
+
+def test_a_large_models_packed_description_reads_back_as_given(monkeypatch: Any) -> None:
+    """Above the packing threshold the model keeps its description packed: every read of it
+    (``source``, ``to_dict``, a pickled copy, a run's recorded description) gives back the
+    dict the user handed over, and an edit of one read does not reach the model."""
+    import pickle
+
+    from oxyline import model as model_module
+
+    monkeypatch.setattr(model_module, "PACKED_SOURCE_SEGMENTS", 3)  # this model: 4 segments
+    d = {"name": "t", "period": 1.0, "vessels": [dict(v) for v in VESSELS],
+         "boundary_conditions": {"in": {"type": "flow", "value": 1e-6},
+                                 "o": {"type": "resistance", "resistance": 1e9}}}
+    m = oxyline.load_model(d)
+    assert m._packed is not None and m._source is None  # packed, no dicts kept
+    assert m.source == d and m.to_dict() == d
+    m.source["vessels"][0]["radius"] = 1.0  # a read is a copy
+    assert m.to_dict()["vessels"][0]["radius"] == 0.003
+    assert pickle.loads(pickle.dumps(m)).to_dict() == d
+    res = oxyline.simulate(m, cycles=1, dt=1e-3)
+    assert res.model_json is not None and json.loads(res.model_json) == d
+    monkeypatch.setattr(model_module, "PACKED_SOURCE_SEGMENTS", 4)  # at the threshold: as is
+    assert oxyline.load_model(d)._packed is None
 
 
 OUTLETS: list[dict[str, Any]] = [

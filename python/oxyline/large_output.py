@@ -32,11 +32,12 @@ def inlet_vessels(model: Model, vessels: list[str]) -> list[str]:
     vessel when none does): the time series a summarized run keeps."""
     # the native description (``canonical`` of a whole tree would be built anew: ~185 B a
     # segment)
-    bcs = model.source.get("boundary_conditions") or {}
+    source = model.source  # (read once: a large model's is unpacked on each read)
+    bcs = source.get("boundary_conditions") or {}
     nodes = {str(n) for n, bc in bcs.items()
              if isinstance(bc, Mapping) and bc.get("type") in ("flow", "pressure")}
     chosen = set(vessels)
-    found = [str(v["name"]) for v in model.source.get("vessels") or ()
+    found = [str(v["name"]) for v in source.get("vessels") or ()
              if isinstance(v, Mapping) and str(v.get("from")) in nodes
              and str(v.get("name")) in chosen]
     return found or vessels[:1]

@@ -9,6 +9,8 @@ job. The schema is described in docs/schema.md.
 from __future__ import annotations
 
 import functools
+import pickle
+import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -20,6 +22,11 @@ from oxyline.errors import core_errors, warn_implausible
 from oxyline.options import output_names, output_vessels
 from oxyline.structured_tree import build_with_trees, expanded, has_trees
 
+#: Above this many segments a model keeps its ``source`` packed (the large-model threshold of
+#: :data:`oxyline.run.LARGE_MODEL_SEGMENTS`): its dicts, ~170 B per segment, are the largest
+#: Python-side part of a whole-tree run's memory, and nothing reads them while the core runs.
+PACKED_SOURCE_SEGMENTS = 500_000
+
 
 @dataclass
 class Model:
@@ -29,6 +36,9 @@ class Model:
     :func:`oxyline.simulate`), ``source`` the native dict it was read from. ``canonical``, the
     JSON-able SI description (the core's input), is written from ``source`` when first asked
     for: a whole tree's canonical vessels cost ~185 B per segment beside the core's own tables.
+    Above :data:`PACKED_SOURCE_SEGMENTS` segments ``source`` is kept packed (pickled and
+    compressed: a few bytes per segment instead of ~170 B of dicts beside the running core)
+    and each read of it returns a fresh copy.
 
     >>> import oxyline
     >>> m = oxyline.load_model("bifurcation")
@@ -39,7 +49,8 @@ class Model:
     name: str
     simulation: dict[str, Any] = field(default_factory=dict)
     period: float | None = None
-    source: dict[str, Any] = field(default_factory=dict)
+    #: the native dict (see ``source``), None while packed in ``_packed``
+    _source: dict[str, Any] | None = field(default_factory=dict)
     #: species transport facts for results: ``species`` (names), ``oxygen`` (name of the O2
     #: species or None), ``solubility`` (O2, mol m^-3 mmHg^-1)
     transport: dict[str, Any] = field(default_factory=dict)
@@ -51,6 +62,35 @@ class Model:
     #: the vessel names and canonical transport section the core read (without ``canonical``)
     _names: list[str] | None = field(default=None, repr=False, compare=False)
     _transport_spec: dict[str, Any] | None = field(default=None, repr=False, compare=False)
+    #: ``source`` pickled and compressed (large models, see :data:`PACKED_SOURCE_SEGMENTS`)
+    _packed: bytes | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def source(self) -> dict[str, Any]:
+        """The native dict the model was read from (a fresh copy when kept packed)."""
+        if self._source is None and self._packed is not None:
+            return pickle.loads(zlib.decompress(self._packed))
+        return self._source if self._source is not None else {}
+
+    @source.setter
+    def source(self, data: dict[str, Any]) -> None:
+        self._source, self._packed = data, None
+        self._pack_source()
+
+    def _pack_source(self) -> None:
+        """Keep ``source`` packed when the assembled network has more than
+        :data:`PACKED_SOURCE_SEGMENTS` segments and the dict pickles (anything else: as is)."""
+        if self._source is None or self._network is None:
+            return
+        if int(self._network.summary()["segments"]) <= PACKED_SOURCE_SEGMENTS:
+            return
+        try:
+            # level 1: the vessels' repeated keys and values compress ~10x at a fraction of
+            # the pickling's cost
+            packed = zlib.compress(pickle.dumps(self._source, protocol=5), 1)
+        except (pickle.PicklingError, TypeError, AttributeError):
+            return
+        self._source, self._packed = None, packed
 
     @property
     def canonical(self) -> dict[str, Any]:
@@ -96,10 +136,18 @@ class Model:
 
     def to_dict(self) -> dict[str, Any]:
         """The model as a plain dict in the user-facing schema (SI)."""
-        return copy_description(self.source)
+        if self._source is None:  # packed: each read is a fresh copy already
+            return self.source
+        return copy_description(self._source)
 
     def __getstate__(self) -> dict[str, Any]:
         return dict(self.__dict__, _network=None)
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        # a model pickled before ``source`` could be packed kept it as a plain attribute
+        if "source" in state:
+            state = dict(state, _source=state.pop("source"), _packed=None)
+        self.__dict__.update(state)
 
 
 def _network(canonical: dict[str, Any], max_memory: Any = None) -> _core.Network:
@@ -135,11 +183,12 @@ def _build_native(data: dict[str, Any], grow: Callable[[Any], Any] | None = None
     if grow is not None:
         grow(parts)
     sim = dict(data.get("simulation") or {})
-    model = Model(name=name, simulation=sim, period=period, source=data, transport=info,
+    model = Model(name=name, simulation=sim, period=period, _source=data, transport=info,
                   _names=parts.names(), _transport_spec=tr)
     limit = _memory.limit(sim.get("max_memory"), "simulation: max_memory")
     with core_errors(f"model '{name}'"):
         model._network = _core.Network.from_parts(parts, limit)
+    model._pack_source()
     if plausibility:
         warn_implausible(model._network.plausibility())
     out = sim.get("output") or {}

@@ -34,6 +34,7 @@ from oxyline.monitor import warn as _warn_bounds
 from oxyline.options import output_names, output_vessels
 from oxyline.result import (
     BALANCE,
+    MAX_MODEL_JSON,
     SEGMENT_VARIABLES,
     SPECIES_SEGMENT,
     Result,
@@ -342,8 +343,19 @@ def _result(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
         species=_species_results(model, raw, layout, empty_segments), oxygen=model.transport.get("oxygen"),
         vessel_variables=tuple(layout["vessel_variables"]),
         segment_variables=tuple(layout["segment_variables"]),
-        model_json=model_json(model.source) if model.source else None,
+        model_json=_model_json(model),
     )
+
+
+def _model_json(model: Model) -> str | None:
+    """The model's description for the result (:func:`oxyline.result.model_json`). A model of
+    more vessels than that description may hold is not read: a large model's ``source`` is
+    unpacked anew on each read (:data:`oxyline.model.PACKED_SOURCE_SEGMENTS`)."""
+    names = model._names
+    if names is not None and len(names) > MAX_MODEL_JSON // 50:
+        return None
+    source = model.source
+    return model_json(source) if source else None
 
 
 def segmentation_facts(model: Model) -> dict[str, Any]:

@@ -229,7 +229,7 @@ def variant_model(data: dict[str, Any],
     tr, info = _core.read_transport(data, period)
     if tr is not None:
         canon["transport"] = tr
-    return Model(name=name, simulation=dict(sim), period=period, source=data, transport=info,
+    return Model(name=name, simulation=dict(sim), period=period, _source=data, transport=info,
                  _canonical=canon)
 
 

@@ -152,7 +152,7 @@ impl Transport {
             Vec::with_capacity(nc),
             Vec::with_capacity(nc),
         );
-        for (i, &n) in self.plan.cells.iter().enumerate() {
+        for (i, n) in self.plan.cells.iter().map(|&n| n as usize).enumerate() {
             let ci = z_old[s * nc + i] / w_old[i];
             let guess = free
                 .get(n)
@@ -213,7 +213,10 @@ impl Transport {
             VesselSpeciesSignal::WallUptake => {
                 let laws = &self.species[s].laws;
                 let v = &self.plan.out_vessels[k];
-                for &j in &self.plan.out_segments[v.segs.clone()] {
+                for j in self.plan.out_segments[v.segs.clone()]
+                    .iter()
+                    .map(|&j| j as usize)
+                {
                     for p in self.plan.seg_pieces(j) {
                         let pc = &self.plan.pieces[p];
                         let SegmentLaw::Fixed { g, cw, q } = laws.laws[p] else {
@@ -292,12 +295,12 @@ impl Transport {
         // λ of x′: the signals, the next step's lagged values, z′_new = W' x′, the wall flux
         let mut lx = seed.to_vec();
         for (n, l) in lx.iter_mut().enumerate() {
-            if plan.node_cell.get(n).is_none_or(|&i| i == usize::MAX) {
+            if plan.node_cell.get(n).is_none_or(|&i| i == u32::MAX) {
                 *l += lam.xt[n];
             }
         }
         let mut den = vec![0.0; nn];
-        for (i, &n) in plan.cells.iter().enumerate() {
+        for (i, n) in plan.cells.iter().map(|&n| n as usize).enumerate() {
             let wl = laws.cell_g[i] * rec.point[i].sigma;
             lx[n] += rec.w_new[i] * lam.dz[i] + net[2] * wl;
             den[n] = rec.w_new[i] * rate + wl;
@@ -313,7 +316,7 @@ impl Transport {
             du.net = net;
         }
         // the rows (`tangent_rows`), transposed
-        for (i, &n) in plan.cells.iter().enumerate() {
+        for (i, n) in plan.cells.iter().map(|&n| n as usize).enumerate() {
             let g = laws.cell_g[i];
             let pt = &rec.point[i];
             let (c, x) = (rec.c[i], rec.x[i]);
@@ -332,7 +335,7 @@ impl Transport {
             sums.p50 += g * (ldwl * pt.sigma_p50 + e * pt.f_p50);
         }
         for (n, l) in lam.xt.iter_mut().enumerate() {
-            let cell = plan.node_cell.get(n).is_some_and(|&i| i != usize::MAX);
+            let cell = plan.node_cell.get(n).is_some_and(|&i| i != u32::MAX);
             *l = if cell { 0.0 } else { lprior[n] };
         }
         if let Some(du) = duals {

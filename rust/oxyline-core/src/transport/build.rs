@@ -538,9 +538,9 @@ impl Refined {
 /// Cells in node order, the sub-cells of a node contiguous (unchanged order when m = 1), with
 /// their circuit node, reference volume and compliance (V_n/m, C_n/m).
 struct CellLayout {
-    cells: Vec<usize>,
-    node_cell: Vec<usize>,
-    cell_node: Vec<usize>,
+    cells: Vec<u32>,
+    node_cell: Vec<u32>,
+    cell_node: Vec<u32>,
     v0: Vec<f64>,
     cap: Vec<f64>,
     /// Per cell: the unknown its volume follows (empty: its node's pressure, as always without
@@ -558,7 +558,7 @@ impl CellLayout {
     ) -> CellLayout {
         let mut l = CellLayout {
             cells: Vec::new(),
-            node_cell: vec![usize::MAX; kind.len()],
+            node_cell: vec![u32::MAX; kind.len()],
             cell_node: Vec::new(),
             v0: Vec::new(),
             cap: Vec::new(),
@@ -571,9 +571,10 @@ impl CellLayout {
             let u = walls.get(&n).copied().unwrap_or(n);
             for k in 0..m {
                 let c = if k == 0 { n } else { first_extra[n] + k - 1 };
-                l.node_cell[c] = l.cells.len();
-                l.cells.push(c);
-                l.cell_node.push(n);
+                // (nodes and cells below 2^31: checked before the layout is made)
+                l.node_cell[c] = l.cells.len() as u32;
+                l.cells.push(c as u32);
+                l.cell_node.push(n as u32);
                 l.v0.push(volume[n] / m as f64);
                 l.cap.push(dae.e[u] / m as f64);
                 if !walls.is_empty() {
@@ -619,7 +620,7 @@ fn output_layout(
     circuit: &Circuit,
     probes: &Probes,
     face_of_unknown: &[u32],
-) -> (Vec<OutVessel>, Vec<usize>) {
+) -> (Vec<OutVessel>, Vec<u32>) {
     let vessel_index: std::collections::HashMap<&str, usize> = circuit
         .vessel_names
         .iter()
@@ -641,7 +642,7 @@ fn output_layout(
     for (k, name) in probes.vessels.iter().enumerate() {
         let start = out_segments.len();
         if let Some(&vi) = vessel_index.get(name.as_str()) {
-            out_segments.extend_from_slice(&segs_of_vessel[vi]);
+            out_segments.extend(segs_of_vessel[vi].iter().map(|&j| j as u32));
         }
         out_vessels.push(OutVessel {
             first: face(probes.vessel_unknowns[4 * k + 2]),
@@ -659,12 +660,12 @@ fn output_layout(
 /// not the one of the vessel's first (last) branch, which lies inside the vessel.
 fn end_cells(
     out_vessels: &mut [OutVessel],
-    out_segments: &[usize],
+    out_segments: &[u32],
     segments: &[Segment],
     kind: &[Kind],
 ) {
-    let cell_with_share = |j: usize, end: usize| {
-        let sg = &segments[j];
+    let cell_with_share = |j: u32, end: usize| {
+        let sg = &segments[j as usize];
         let n = sg.nodes[end];
         if sg.shares[end] > 0.0 && kind[n as usize] == Kind::Cell {
             n
@@ -687,7 +688,7 @@ fn end_cells(
 fn wall_pieces(
     segments: &[Segment],
     m_node: &[usize],
-    node_cell: &[usize],
+    node_cell: &[u32],
     first_extra: &[usize],
 ) -> (Vec<Piece>, Vec<u32>, Vec<SegmentWall>) {
     let mut pieces = Vec::with_capacity(2 * segments.len());
@@ -696,14 +697,14 @@ fn wall_pieces(
     seg_pieces.push(0);
     for (j, sg) in segments.iter().enumerate() {
         for (end, (n, share)) in sg.node_shares().into_iter().enumerate() {
-            if share <= 0.0 || node_cell[n] == usize::MAX {
+            if share <= 0.0 || node_cell[n] == u32::MAX {
                 continue;
             }
             let m = m_node[n];
             let piece = |c: usize, share: f64, sub: u32| Piece {
                 seg: j as u32,
                 node: c as u32,
-                cell: node_cell[c] as u32,
+                cell: node_cell[c],
                 sub,
                 share,
             };
@@ -866,7 +867,9 @@ impl Plan {
         self.domain = (0..nn)
             .filter(|&n| self.kind[n] != Kind::Exterior)
             .collect();
-        if self.faces.len().max(nn).max(self.pieces.len()) >= u32::MAX as usize {
+        // (faces, nodes, cells, segments and pieces are indexed by u32 in the plan)
+        let most = (self.faces.len().max(nn)).max(self.pieces.len().max(self.segments.len()));
+        if most >= u32::MAX as usize {
             return Err(bad("transport", "network too large".into()));
         }
         // nearly every face is internal: one allocation at the bound, no doubling copies
@@ -909,7 +912,7 @@ impl Plan {
         self.tree = tree_order(nn, &self.domain, &self.internal);
         for l in self.tree.iter_mut().flatten() {
             // (cells < nodes < u32::MAX, checked above)
-            l.cell = self.node_cell[l.node as usize] as u32;
+            l.cell = self.node_cell[l.node as usize];
         }
         self.link_carries();
         self.face_unknowns = self.faces[..self.n_flow_faces]

@@ -80,7 +80,7 @@ impl Inversion for Exact<'_> {
 #[derive(Clone, Copy)]
 pub(super) struct Cells<'a> {
     pub(super) first: usize,
-    pub(super) cells: &'a [usize],
+    pub(super) cells: &'a [u32],
     pub(super) zs: &'a [f64],
     pub(super) wvol: &'a [f64],
     pub(super) laws: &'a Laws,
@@ -106,7 +106,7 @@ impl Cells<'_> {
             .zip(rows)
             .enumerate()
         {
-            let c = zi / v;
+            let (n, c) = (n as usize, zi / v);
             let (f, inv_slope) = inversion.free_and_inv_slope(n, c);
             (*wl, *wc) = self.laws.linearised_uptake(self.first + i, f, inv_slope, c);
             sum += *wc;
@@ -666,8 +666,8 @@ impl Transport {
         let plan = &*self.plan;
         let (sw, conc, wvol) = (&mut self.sweep, &self.conc, &self.wvol);
         let old = |n: usize| match plan.node_cell[n] {
-            usize::MAX => conc[n],
-            i => zs[i] / wvol[i],
+            u32::MAX => conc[n],
+            i => zs[i as usize] / wvol[i as usize],
         };
         for b in &plan.boundary_links {
             let (n, q) = (b.node as usize, self.qf[b.face as usize]);

@@ -137,7 +137,7 @@ impl Transport {
         // (NaN fails the test too)
         let mut positive = true;
         for ((w, &n), &w0) in w_new.iter_mut().zip(&self.plan.cells).zip(&self.wvol) {
-            *w = w0 + dt * net[n];
+            *w = w0 + dt * net[n as usize];
             positive &= *w > 0.0;
         }
         self.sweep.dnode = net;
@@ -158,7 +158,7 @@ impl Transport {
             t_af,
             format!(
                 "transport volume of cell '{}' became {:.3e} m³: reduce dt",
-                self.plan.node_name(self.plan.cells[i]),
+                self.plan.node_name(self.plan.cells[i] as usize),
                 w.get(i).copied().unwrap_or(f64::NAN)
             ),
         )
@@ -262,7 +262,7 @@ impl Transport {
         let (mut i_wall, mut i_decay) = (0.0, 0.0);
         let (conc, zs) = (&self.conc[..], &mut z[s * nc..(s + 1) * nc]);
         let (wl, wc, w_new) = (&wl[..nc], &wc[..nc], &w_new[..nc]);
-        for (i, &n) in self.plan.cells.iter().enumerate() {
+        for (i, n) in self.plan.cells.iter().map(|&n| n as usize).enumerate() {
             let x = conc[n];
             i_wall += wl[i] * x + wc[i];
             if !quasi {
@@ -323,7 +323,7 @@ impl Transport {
         let nc = self.plan.cells.len();
         if self.plan.formulation == Formulation::TlQuasisteady {
             let (zs, laws) = (&z[s * nc..(s + 1) * nc], &self.species[s].laws);
-            for (i, &n) in self.plan.cells.iter().enumerate() {
+            for (i, n) in self.plan.cells.iter().map(|&n| n as usize).enumerate() {
                 self.conc[n] = zs[i] / self.wvol[i];
                 (self.sweep.den[n], self.sweep.num[n]) = (laws.cell_g[i], -laws.cell_wc[i]);
             }
@@ -337,7 +337,7 @@ impl Transport {
         let (den, num) = (&mut self.sweep.den[..], &mut self.sweep.num[..]);
         let (g, wc) = (&laws.cell_g[..nc], &laws.cell_wc[..nc]);
         let (wvol, w_new) = (&self.wvol[..nc], &w_new[..nc]);
-        for (i, &n) in self.plan.cells.iter().enumerate() {
+        for (i, n) in self.plan.cells.iter().map(|&n| n as usize).enumerate() {
             conc[n] = zs[i] / wvol[i];
             den[n] = w_new[i] * rate + g[i];
             num[n] = zs[i] / dt - wc[i];
@@ -364,7 +364,7 @@ impl Transport {
         let has_wall = laws.has_wall;
         let zs = &z[s * nc..(s + 1) * nc];
         let sw = &mut self.sweep;
-        for (i, &n) in self.plan.cells.iter().enumerate() {
+        for (i, n) in self.plan.cells.iter().map(|&n| n as usize).enumerate() {
             let c = zs[i] / self.wvol[i];
             self.conc[n] = c;
             let (wl, wc) = if has_wall {
@@ -406,7 +406,7 @@ impl Transport {
     ) {
         let nc = self.plan.cells.len();
         let zs = &z[s * nc..(s + 1) * nc];
-        for (i, &n) in self.plan.cells.iter().enumerate() {
+        for (i, n) in self.plan.cells.iter().map(|&n| n as usize).enumerate() {
             self.conc[n] = zs[i] / self.wvol[i];
         }
         self.load_shear(s, ya, z);
@@ -415,7 +415,7 @@ impl Transport {
         let quasi = self.plan.formulation == Formulation::TlQuasisteady;
         let rate = 1.0 / dt + self.plan.species[s].decay;
         let sw = &mut self.sweep;
-        for (i, &n) in self.plan.cells.iter().enumerate() {
+        for (i, n) in self.plan.cells.iter().map(|&n| n as usize).enumerate() {
             (sw.den[n], sw.num[n]) = if quasi {
                 (wlin[i], -wconst[i])
             } else {
@@ -452,7 +452,7 @@ impl Transport {
         inv_slope.resize(self.plan.cells.len(), 1.0);
         if !binding.is_identity() {
             let sp = &mut self.species[s];
-            for (&n, v) in self.plan.cells.iter().zip(inv_slope.iter_mut()) {
+            for (n, v) in (self.plan.cells.iter().map(|&n| n as usize)).zip(inv_slope.iter_mut()) {
                 let mut scratch = HillAnchor::default();
                 let anchor = sp.anchors.get_mut(n).unwrap_or(&mut scratch);
                 let (f, inv) =
@@ -473,7 +473,7 @@ impl Transport {
             wlin.iter_mut().zip(&inv_slope).for_each(|(w, v)| *w *= v);
         }
         self.sweep.inv_slope = inv_slope;
-        for (i, &n) in self.plan.cells.iter().enumerate() {
+        for (i, n) in self.plan.cells.iter().map(|&n| n as usize).enumerate() {
             wconst[i] -= wlin[i] * self.conc[n];
         }
     }

@@ -550,14 +550,14 @@ impl Transport {
         for (f, &q) in self.plan.faces.iter().zip(&self.qf) {
             let up = if q >= 0.0 { f.tail() } else { f.head() };
             if let End::Node(n) = up {
-                if self.plan.node_cell[n] != usize::MAX {
-                    out[self.plan.node_cell[n]] += q.abs();
+                if self.plan.node_cell[n] != u32::MAX {
+                    out[self.plan.node_cell[n] as usize] += q.abs();
                 }
             }
         }
         for ((n, _, _), &q) in self.plan.sources.iter().zip(&self.qs) {
-            if q < 0.0 && self.plan.node_cell[*n] != usize::MAX {
-                out[self.plan.node_cell[*n]] -= q;
+            if q < 0.0 && self.plan.node_cell[*n] != u32::MAX {
+                out[self.plan.node_cell[*n] as usize] -= q;
             }
         }
         out.iter()
@@ -583,7 +583,7 @@ impl Transport {
             self.plan.node_cell[n],
             self.plan.node_cell[self.plan.last_sub(n)],
         );
-        (a != usize::MAX).then_some(a..b + 1)
+        (a != u32::MAX).then_some(a as usize..b as usize + 1)
     }
 
     /// One classical RK4 step of the species state alone, the flow state being prescribed:

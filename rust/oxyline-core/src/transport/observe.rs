@@ -29,7 +29,7 @@ impl Transport {
         }
         self.load_flows(time, y);
         for s in 0..nsp {
-            for (i, &n) in self.plan.cells.iter().enumerate() {
+            for (i, n) in self.plan.cells.iter().map(|&n| n as usize).enumerate() {
                 self.conc[n] = z[s * nc + i] / self.vol[i];
             }
             self.load_boundary(s, time);
@@ -238,7 +238,7 @@ impl Transport {
         let (j_out, c_out) = self.vessel_outlet(s, v);
         let wall: f64 = self.plan.out_segments[v.segs.clone()]
             .iter()
-            .map(|&j| self.segment_wall(s, j))
+            .map(|&j| self.segment_wall(s, j as usize))
             .sum();
         [c_in, c_out, j_in, j_out, wall]
     }
@@ -246,7 +246,7 @@ impl Transport {
     /// Per output segment: concentration, flux, wall uptake and the transmission-line
     /// elements R_i, L_i.
     fn observe_segments(&self, s: usize, y: &[f64], ydot: Option<&[f64]>, out: &mut Vec<f64>) {
-        for &j in &self.plan.out_segments {
+        for j in self.plan.out_segments.iter().map(|&j| j as usize) {
             let seg = &self.plan.segments[j];
             let (flux, _) = self.face_flux(s, seg.face as usize);
             let (mut c, mut wsum, mut vseg, mut dvseg) = (0.0, 0.0, 0.0, 0.0);

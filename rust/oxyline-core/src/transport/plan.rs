@@ -240,8 +240,10 @@ pub(super) fn piece_wall(
 #[derive(Debug)]
 pub struct Plan {
     pub(super) kind: Vec<Kind>,
-    pub(super) cells: Vec<usize>,
-    pub(super) node_cell: Vec<usize>,
+    /// Per cell its transport node, per transport node its cell (`u32::MAX`: none); u32 as
+    /// every per-node index of the plan (a network of 2^31 nodes is refused when built).
+    pub(super) cells: Vec<u32>,
+    pub(super) node_cell: Vec<u32>,
     pub(super) v0: Vec<f64>,
     pub(super) cap: Vec<f64>,
     pub(super) p_ref: f64,
@@ -262,7 +264,7 @@ pub struct Plan {
     pub(super) face_unknowns: Vec<u32>,
     pub(super) chains: Vec<Chain>,
     /// Per cell: the circuit node whose pressure sets its volume.
-    pub(super) cell_node: Vec<usize>,
+    pub(super) cell_node: Vec<u32>,
     /// Per cell: the unknown setting its volume where that is not `cell_node` (a viscoelastic
     /// wall's elastic pressure); empty when no cell has one.
     pub(super) volume_unknown: Vec<usize>,
@@ -278,7 +280,7 @@ pub struct Plan {
     pub(super) formulation: Formulation,
     pub(super) v_eps: f64,
     pub(super) out_vessels: Vec<OutVessel>,
-    pub(super) out_segments: Vec<usize>,
+    pub(super) out_segments: Vec<u32>,
     pub(super) segment_vessels: Vec<u32>,
     /// Names of the circuit nodes (error messages; refined sub-cells are named after them).
     /// Shared with the circuit and its DAE: a name is written only when a message needs it
@@ -313,7 +315,7 @@ impl Plan {
     pub(super) fn volume_unknown(&self, i: usize) -> usize {
         match self.volume_unknown.get(i) {
             Some(&u) => u,
-            None => self.cell_node[i],
+            None => self.cell_node[i] as usize,
         }
     }
 
@@ -355,11 +357,11 @@ impl Plan {
         let Some(&i) = self.node_cell.get(n) else {
             return format!("node {n}");
         };
-        if n < self.node_names.n_nodes() || i == usize::MAX {
+        if n < self.node_names.n_nodes() || i == u32::MAX {
             return self.circuit_node_name(n);
         }
         // sub-cells of a node are contiguous, sub-cell 0 being the node itself
-        let parent = self.cell_node[i];
+        let parent = self.cell_node[i as usize] as usize;
         let first = self.node_cell[parent];
         let m = self.node_cell[self.last_sub(parent)] - first + 1;
         let name = self.circuit_node_name(parent);

@@ -120,7 +120,7 @@ impl Transport {
         let free = sp.laws.has_wall && !binding.is_identity();
         let (vol, conc) = (&mut self.vol, &mut self.conc);
         let mut bad_volume = false;
-        for (i, &n) in plan.cells.iter().enumerate() {
+        for (i, n) in plan.cells.iter().map(|&n| n as usize).enumerate() {
             let v = if s == 0 {
                 let v = plan.v0[i] + plan.cap[i] * (y[plan.volume_unknown(i)] - plan.p_ref);
                 bad_volume |= v.is_nan() || v <= 0.0;
@@ -214,7 +214,7 @@ impl Transport {
         // a macro, not a shared closure, so that each pass inlines it
         macro_rules! rate {
             ($i:expr, $z:expr) => {{
-                let (i, n) = ($i, cells[$i]);
+                let (i, n) = ($i, cells[$i] as usize);
                 let wall = if has_wall {
                     Some((laws, i, free[n]))
                 } else {

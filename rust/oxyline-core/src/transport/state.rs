@@ -31,7 +31,7 @@ impl Transport {
     }
 
     pub(super) fn volumes(&mut self, y: &[f64], time: f64) -> Result<()> {
-        for (i, &n) in self.plan.cell_node.iter().enumerate() {
+        for (i, n) in self.plan.cell_node.iter().map(|&n| n as usize).enumerate() {
             let v = self.plan.v0[i]
                 + self.plan.cap[i] * (y[self.plan.volume_unknown(i)] - self.plan.p_ref);
             if v.is_nan() || v <= 0.0 {
@@ -145,11 +145,11 @@ impl Transport {
             return;
         }
         if sp.anchors.is_empty() {
-            for &n in &self.plan.cells {
+            for n in self.plan.cells.iter().map(|&n| n as usize) {
                 sp.free[n] = binding.free(self.conc[n], sp.free[n]);
             }
         } else {
-            for &n in &self.plan.cells {
+            for n in self.plan.cells.iter().map(|&n| n as usize) {
                 sp.free[n] = binding.free_anchored(self.conc[n], sp.free[n], &mut sp.anchors[n]);
             }
         }
@@ -161,7 +161,7 @@ impl Transport {
         let sp = &self.species[s];
         let free = self.free_of(s);
         let laws = &sp.laws;
-        for (i, &n) in self.plan.cells.iter().enumerate() {
+        for (i, n) in self.plan.cells.iter().map(|&n| n as usize).enumerate() {
             w[i] = laws.fixed_uptake(i, free[n]);
         }
         for &p in &laws.dynamic {

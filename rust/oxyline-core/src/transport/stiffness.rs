@@ -57,7 +57,7 @@ impl Transport {
             .find(|&j| self.segment_cells(j).is_some_and(|c| c.contains(&cell)))
             .or_else(|| {
                 // a junction cell holds the end shares of several segments
-                let node = *self.plan.cell_node.get(cell)?;
+                let node = *self.plan.cell_node.get(cell)? as usize;
                 self.plan
                     .segments
                     .iter()
@@ -93,7 +93,7 @@ impl Transport {
                          generalized-alpha",
                         sp.name,
                         block[i],
-                        self.plan.circuit_node_name(self.plan.cell_node[i])
+                        self.plan.circuit_node_name(self.plan.cell_node[i] as usize)
                     ),
                 ));
             }

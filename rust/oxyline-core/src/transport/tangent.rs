@@ -295,7 +295,7 @@ impl Transport {
             point: Vec::with_capacity(nc),
             x: Vec::with_capacity(nc),
         };
-        for (i, &n) in self.plan.cells.iter().enumerate() {
+        for (i, n) in self.plan.cells.iter().map(|&n| n as usize).enumerate() {
             let c = zs_old[i] / w_old[i];
             let g = guess(n);
             primal
@@ -386,7 +386,7 @@ impl Transport {
         let laws = Arc::clone(&self.species[s].laws);
         let lambda = self.plan.species[s].decay;
         let mut decay = 0.0;
-        for (i, &n) in plan.cells.iter().enumerate() {
+        for (i, n) in plan.cells.iter().map(|&n| n as usize).enumerate() {
             let wl = laws.cell_g[i] * primal.point[i].sigma;
             wall += wl * xt[n];
             // z′ = W' x′ + W'′ x
@@ -424,7 +424,7 @@ impl Transport {
         let p50 = d.kind == SpeciesParameterKind::P50;
         let mut wall = 0.0;
         let plan = Arc::clone(&self.plan);
-        for (i, &n) in plan.cells.iter().enumerate() {
+        for (i, n) in plan.cells.iter().map(|&n| n as usize).enumerate() {
             let g = laws.cell_g[i];
             let [dg, dgcw, dq] = d.cell[i];
             let pt = &primal.point[i];
@@ -491,7 +491,7 @@ impl Transport {
             }
         };
         match self.plan.node_cell.get(n) {
-            Some(&i) if i != usize::MAX => Ok(n),
+            Some(&i) if i != u32::MAX => Ok(n),
             _ => Err(refuse("no cell upstream of it")),
         }
     }
@@ -506,7 +506,7 @@ impl Transport {
         tangents: &[SpeciesTangent],
     ) -> (BindingPoint, Vec<f64>) {
         let nc = self.plan.cells.len();
-        let i = self.plan.node_cell[n];
+        let i = self.plan.node_cell[n] as usize;
         let x = z[s * nc + i] / self.wvol[i];
         let guess = self.species[s].free.get(n).copied().unwrap_or(0.0);
         let pt = binding_point(&self.plan.species[s].binding, x, guess, None);
@@ -582,7 +582,10 @@ impl Transport {
         let laws = &self.species[s].laws;
         let v = &self.plan.out_vessels[k];
         let (mut w, mut dw) = (0.0, vec![0.0; derivs.len()]);
-        for &j in &self.plan.out_segments[v.segs.clone()] {
+        for j in self.plan.out_segments[v.segs.clone()]
+            .iter()
+            .map(|&j| j as usize)
+        {
             for p in self.plan.seg_pieces(j) {
                 let pc = &self.plan.pieces[p];
                 let SegmentLaw::Fixed { g, cw, q } = laws.laws[p] else {

@@ -164,12 +164,16 @@ impl Transport {
         }
         // a node refined into m sub-cells gives each V₀/m and C/m
         let mut m = vec![0.0f64; plan.kind.len()];
-        for &n in &plan.cell_node {
+        for n in plan.cell_node.iter().map(|&n| n as usize) {
             m[n] += 1.0;
         }
-        let dv0 = plan.cell_node.iter().map(|&n| dvol[n] / m[n]).collect();
+        let dv0 = plan
+            .cell_node
+            .iter()
+            .map(|&n| dvol[n as usize] / m[n as usize])
+            .collect();
         let dcap = (plan.cell_node.iter().enumerate())
-            .map(|(i, &n)| e.de.get(plan.volume_unknown(i)).copied().unwrap_or(0.0) / m[n])
+            .map(|(i, &n)| e.de.get(plan.volume_unknown(i)).copied().unwrap_or(0.0) / m[n as usize])
             .collect();
         let source = (plan.sources.iter())
             .map(|(n, _, _)| e.sources.iter().filter(|(k, _)| k == n).map(|x| x.1).sum())
@@ -268,7 +272,7 @@ impl Transport {
     pub fn species_node_values(&self, s: usize, z: &[f64]) -> Vec<f64> {
         let (p, nc) = (&*self.plan, self.plan.cells.len());
         let mut x = vec![0.0; p.kind.len()];
-        for (i, &n) in p.cells.iter().enumerate() {
+        for (i, n) in p.cells.iter().map(|&n| n as usize).enumerate() {
             x[n] = z[s * nc + i] / self.wvol[i];
         }
         for (&m, &c) in p.mixing.iter().zip(&self.species[s].mixing_conc) {
@@ -325,7 +329,7 @@ impl Transport {
             d_in: terms.d_in,
             d_out: terms.d_out,
         };
-        for (i, &n) in plan.cells.iter().enumerate() {
+        for (i, n) in plan.cells.iter().map(|&n| n as usize).enumerate() {
             let dw = dw_old.get(i).copied().unwrap_or(0.0);
             let dw_new = dw + dt * terms.dnet[n];
             out.dc.push(-cells.c[i] * dw / cells.w[i]);
@@ -348,7 +352,7 @@ impl Transport {
         let (dq, dqs) = self.face_flow_tangent(f, step);
         let dnet = self.net_inflow_tangent(&dq, &dqs);
         (self.plan.cells.iter().zip(dw_new))
-            .map(|(&n, dw)| dw - dt * dnet[n])
+            .map(|(&n, dw)| dw - dt * dnet[n as usize])
             .collect()
     }
 

@@ -703,9 +703,9 @@ impl Transport {
             return;
         };
         let off = self.tissue_offset(s);
-        let stats = |segs: &[usize]| -> [f64; 4] {
+        let stats = |segs: &[u32]| -> [f64; 4] {
             let mut w = WallStats::default();
-            for &j in segs {
+            for j in segs.iter().map(|&j| j as usize) {
                 for ci in tp.seg_cols[j] as usize..tp.seg_cols[j + 1] as usize {
                     w.add(tp, &tp.columns[ci], &z[off..]);
                 }
