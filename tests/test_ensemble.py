@@ -323,12 +323,13 @@ def test_summaries_of_several_vessels_are_those_of_the_plain_result(
 
 # TUBE in cgs units (cm, dyn/cm^2, dyn s/cm^5, cm^5/dyn, cm^3/s): a scale patch's numbers go
 # through a unit factor other than 1, and in the fast path (values per target) they must still
-# be factor * (value * f) as in the patched model
+# be factor * (value * f) as in the patched model; one segment, as TUBE states (the default
+# `auto` cuts it into hundreds for the table inflow, which the patch paths do not need)
 TUBE_CGS: dict[str, Any] = {
     "name": "tube-cgs", "units": "cgs", "period": 1.0,
     "vessels": [
         {"name": "a.b", "from": "in", "to": "j", "length": 10.0, "radius": 0.4,
-         "wall_thickness": 0.05, "youngs_modulus": 4e6},
+         "wall_thickness": 0.05, "youngs_modulus": 4e6, "segments": 1},
         {"name": "c", "from": "j", "to": "out1",
          "lumped": {"resistance": 100.0, "capacitance": 1e-4}},
         {"name": "d", "from": "j", "to": "out2", "lumped": {"resistance": 300.0}}],
