@@ -91,6 +91,11 @@ pub(super) struct Adaptive {
     /// Whether the step just judged may grow a peak (of |y|, |ẏ| or |ÿ|): the estimate's
     /// pass finds out, and an accepted step that grows none skips the tracking pass.
     may_grow: bool,
+    /// Per block of `BLOCK` unknowns, whether the estimate's pass of the step just judged saw
+    /// a peak grow in it; `blocks_known` while that pass's record holds for the state the
+    /// step is accepted with (the tracking pass then visits those blocks only).
+    grow_blocks: Vec<AtomicBool>,
+    blocks_known: bool,
     /// The differential unknowns' local error estimate of the current step (scratch).
     le: Vec<f64>,
     /// Output rows per cycle.
@@ -136,6 +141,9 @@ pub(super) struct Adaptive {
     vi: Vec<f64>,
     /// The valves whose flow is an algebraic unknown, by that unknown (see `Dense::algebraic`).
     flow_laws: Vec<FlowLaw>,
+    /// The positions of the algebraic unknowns among the output's probes (set on the first
+    /// row: a pass records the same probes throughout; see `Dense::row_into`).
+    algebraic_probes: Option<Vec<u32>>,
 }
 
 /// The dense output of one row (see [`Adaptive::dense`]): the Hermite weights at θ and
@@ -168,6 +176,28 @@ impl Dense<'_> {
             return self.algebraic(i).0;
         }
         self.cubic(i)
+    }
+
+    /// A row of the unknowns `probes` appended to `out`, each the value [`Dense::value`]
+    /// gives: every probe's Hermite cubic in one pass without a branch (the four vectors
+    /// indexed once per value), then the algebraic probes, at their positions
+    /// `algebraic_at` in `probes`, over theirs. (A value at a time, with its kind's test and
+    /// its four bounds checks, cost ~42 instructions per value on adan56.)
+    pub fn row_into(&self, probes: &[usize], algebraic_at: &[u32], out: &mut Vec<f64>) {
+        let n = self.y.len();
+        let (y0, y1) = (&self.ad.y0[..n], &self.y[..n]);
+        let (d0, d1) = (&self.ad.yd0[..n], &self.yd[..n]);
+        let w = self.w;
+        let start = out.len();
+        // (the same sum, in the same order, as `cubic`)
+        out.extend(
+            (probes.iter()).map(|&i| w[0] * y0[i] + w[1] * y1[i] + w[2] * d0[i] + w[3] * d1[i]),
+        );
+        let row = &mut out[start..];
+        for &k in algebraic_at {
+            let k = k as usize;
+            row[k] = self.algebraic(probes[k]).0;
+        }
     }
 
     /// The Hermite cubic b₀y₀ + b₁h d₀ + b₂y₁ + b₃h d₁ with the shifted rates d = ẏ + s (ẏ₁ −
@@ -290,6 +320,8 @@ impl Adaptive {
             w_step: Vec::new(),
             w_unit: Vec::new(),
             may_grow: true,
+            grow_blocks: Vec::new(),
+            blocks_known: false,
             le: Vec::new(),
             delta: rate_shift(rho_inf),
             out_per_cycle,
@@ -320,6 +352,7 @@ impl Adaptive {
             v0: Vec::new(),
             vi: Vec::new(),
             flow_laws: algebraic_flow_laws(dae),
+            algebraic_probes: None,
         }
     }
 
@@ -481,7 +514,7 @@ impl Adaptive {
         if self.peak.is_empty() {
             self.init_scales(&st.y);
         }
-        self.may_grow = true;
+        (self.may_grow, self.blocks_known) = (true, false);
         copy_into(&mut self.y0, &st.y);
         copy_into(&mut self.yd0, &st.yd);
         if let Some(sp) = st.species.as_ref() {
@@ -494,6 +527,12 @@ impl Adaptive {
                 self.renew_species_largest();
             }
         }
+    }
+
+    /// The state was changed after its step was judged (a closed valve's flow held): the
+    /// estimate pass's record of where peaks grow no longer holds for it.
+    pub fn state_changed(&mut self) {
+        self.blocks_known = false;
     }
 
     /// Back to the start of a rejected step (the species have not moved yet).
@@ -633,6 +672,15 @@ impl Adaptive {
         };
         let mut kinds = [0.0f64; 3];
         let grows = AtomicBool::new(false);
+        if self.grow_blocks.len() == n.div_ceil(BLOCK) {
+            self.grow_blocks
+                .iter_mut()
+                .for_each(|b| *b.get_mut() = false);
+        } else {
+            self.grow_blocks = (0..n.div_ceil(BLOCK))
+                .map(|_| AtomicBool::new(false))
+                .collect();
+        }
         let ends = [0, self.kind_end[0], self.kind_end[1], n];
         for (k, worst) in kinds.iter_mut().enumerate() {
             let first = ends[k];
@@ -644,7 +692,7 @@ impl Adaptive {
                 m
             });
         }
-        self.may_grow = grows.into_inner();
+        (self.may_grow, self.blocks_known) = (grows.into_inner(), true);
         self.algebraic_errors(y, h, &mut kinds);
         FlowError {
             max: kinds.iter().fold(0.0f64, |m, &e| m.max(e)),
@@ -653,32 +701,55 @@ impl Adaptive {
     }
 
     /// `fused_errors` over the unknowns `r`: the largest scaled error, and whether a peak grows.
-    // (one index into nine slices of the same length: a zip of nine is no clearer)
-    #[allow(clippy::needless_range_loop)]
+    /// In groups of `LANES` unknowns, each lane its own maximum and growth flag (one chain of
+    /// dependent maxima through every unknown otherwise), the maxima as compare-and-select
+    /// (`f64::max` also orders NaNs: no NaN comes here but through a NaN state, which the run
+    /// refuses at its check); a maximum is the same in any grouping, so the result is the same
+    /// number as one running maximum's.
     fn fused_range(&self, r: Range<usize>, y: &[f64], c: &Fused) -> (f64, bool) {
-        let ([la, lb, lc], f) = (c.l, c.f);
-        let (y, a, b, y0) = (
-            &y[r.clone()],
-            &self.ym2[r.clone()],
-            &self.ym1[r.clone()],
-            &self.y0[r.clone()],
-        );
-        let (wu, ws) = (&self.w_unit[r.clone()], &self.w_step[r.clone()]);
-        let (pk, rp, ap) = (
-            &self.peak[r.clone()],
-            &self.rate_peak[r.clone()],
-            &self.accel_peak[r],
-        );
-        let (mut m, mut grows) = (0.0f64, false);
-        for j in 0..y.len() {
-            let (y1, y0, ym) = (y[j], y0[j], b[j]);
-            let e = f * (y1 - (la * a[j] + lb * ym + lc * y0));
-            m = m.max(e.abs() * (wu[j] * c.inv_h).max(ws[j]));
-            let (s1, s0) = ((y1 - y0) * c.inv_h, (y0 - ym) * c.inv_h1);
-            let accel = ((s1 - s0) * c.inv_span).abs();
-            grows |= (y1.abs() > pk[j]) | (s1.abs() > rp[j]) | (accel > ap[j]);
+        let (mut m, mut grows, mut at) = (0.0f64, false, r.start);
+        while at < r.end {
+            let end = ((at / BLOCK + 1) * BLOCK).min(r.end);
+            let (block_max, block_grows) = self.fused_block(at..end, y, c);
+            if block_grows {
+                self.grow_blocks[at / BLOCK].store(true, Ordering::Relaxed);
+            }
+            (m, grows) = (larger(block_max, m), grows | block_grows);
+            at = end;
         }
         (m, grows)
+    }
+
+    /// `fused_range` over the unknowns `r` within one block of `BLOCK`.
+    fn fused_block(&self, r: Range<usize>, y: &[f64], c: &Fused) -> (f64, bool) {
+        let v = FusedSlices {
+            y: &y[r.clone()],
+            ym2: &self.ym2[r.clone()],
+            ym1: &self.ym1[r.clone()],
+            y0: &self.y0[r.clone()],
+            wu: &self.w_unit[r.clone()],
+            ws: &self.w_step[r.clone()],
+            pk: &self.peak[r.clone()],
+            rp: &self.rate_peak[r.clone()],
+            ap: &self.accel_peak[r.clone()],
+        };
+        let n = r.len();
+        let whole = n - n % LANES;
+        let (mut m, mut grows) = ([0.0f64; LANES], [false; LANES]);
+        for j in (0..whole).step_by(LANES) {
+            for k in 0..LANES {
+                let (e, g) = v.term(j + k, c);
+                m[k] = larger(e, m[k]);
+                grows[k] |= g;
+            }
+        }
+        for j in whole..n {
+            let (e, g) = v.term(j, c);
+            m[0] = larger(e, m[0]);
+            grows[0] |= g;
+        }
+        let m = m.iter().fold(0.0f64, |a, &b| larger(b, a));
+        (m, grows.iter().any(|&g| g))
     }
 
     /// The algebraic unknowns' errors into `kinds` (see `flow_error`; none at the first step),
@@ -920,11 +991,19 @@ impl Adaptive {
             std::mem::take(&mut self.w_unit),
         ];
         let this = &*self;
+        // a block where the step's estimate pass saw no peak grow changes nothing here (the
+        // same comparisons): only the others are visited
+        let visit = |b: usize| !this.blocks_known || this.grow_blocks[b].load(Ordering::Relaxed);
         let [pk, rp, ap, iw, ws, wu] = &mut v;
         let mut tasks = chunk_tasks(0, [&mut pk[..], rp, ap, iw, ws, wu]);
         let grown = for_tasks(&mut tasks, |(first, [pk, rp, ap, iw, ws, wu])| {
             let mut grown = false;
-            for j in 0..pk.len() {
+            // (a task's first unknown is a multiple of `CHUNK`, itself one of `BLOCK`)
+            let len = pk.len();
+            let blocks = (0..len)
+                .step_by(BLOCK)
+                .filter(|&b| visit((*first + b) / BLOCK));
+            for j in blocks.flat_map(|b| b..(b + BLOCK).min(len)) {
                 let i = *first + j;
                 let yi = y[i];
                 let mut reweigh = false;
@@ -1000,6 +1079,24 @@ impl Adaptive {
             w: [b[0], b[2], h * b[1] - k, h * b[3] + k],
             quadratic: self.history > 0,
         }
+    }
+
+    /// The output row at θ of the step of `h` from (y0, ẏ0) to (y, ẏ) appended to `out`: the
+    /// values of the unknowns `probes` (see [`Dense::row_into`]).
+    pub fn dense_row(
+        &mut self,
+        (theta, h): (f64, f64),
+        (y, yd): (&[f64], &[f64]),
+        probes: &[usize],
+        out: &mut Vec<f64>,
+    ) {
+        if self.algebraic_probes.is_none() {
+            let at = (probes.iter().enumerate()).filter(|&(_, &i)| self.algebraic[i]);
+            let at = at.map(|(k, _)| u32::try_from(k).expect("2^32 probes"));
+            self.algebraic_probes = Some(at.collect());
+        }
+        let at = self.algebraic_probes.as_deref().unwrap_or_default();
+        self.dense(theta, h, y, yd).row_into(probes, at, out);
     }
 
     /// The whole interpolated state at θ (flow by Hermite, species amounts linearly, as
@@ -1099,6 +1196,51 @@ struct Fused {
     inv_h: f64,
     inv_h1: f64,
     inv_span: f64,
+}
+
+/// Unknowns per group of the estimate's pass (see `Adaptive::fused_range`).
+const LANES: usize = 4;
+
+/// Unknowns per block of the record of where a step grows a peak (see
+/// `Adaptive::grow_blocks`): a divisor of `CHUNK`.
+const BLOCK: usize = 256;
+
+/// The vectors of one range of unknowns that the estimate's pass reads (see
+/// `Adaptive::fused_range`), each the range's own slice.
+struct FusedSlices<'a> {
+    y: &'a [f64],
+    ym2: &'a [f64],
+    ym1: &'a [f64],
+    y0: &'a [f64],
+    wu: &'a [f64],
+    ws: &'a [f64],
+    pk: &'a [f64],
+    rp: &'a [f64],
+    ap: &'a [f64],
+}
+
+impl FusedSlices<'_> {
+    /// Unknown `j`'s scaled local error (Milne's device on the last three states, per unit
+    /// step or per step, the larger) and whether it grows one of the peaks `track_peaks`
+    /// follows (the same comparisons).
+    #[inline(always)]
+    fn term(&self, j: usize, c: &Fused) -> (f64, bool) {
+        let ([la, lb, lc], f) = (c.l, c.f);
+        let (y1, y0, ym) = (self.y[j], self.y0[j], self.ym1[j]);
+        let e = f * (y1 - (la * self.ym2[j] + lb * ym + lc * y0));
+        let scaled = e.abs() * larger(self.wu[j] * c.inv_h, self.ws[j]);
+        let (s1, s0) = ((y1 - y0) * c.inv_h, (y0 - ym) * c.inv_h1);
+        let accel = ((s1 - s0) * c.inv_span).abs();
+        let grows = (y1.abs() > self.pk[j]) | (s1.abs() > self.rp[j]) | (accel > self.ap[j]);
+        (scaled, grows)
+    }
+}
+
+/// The larger of `a` and `b`, `b` when they are unordered (a NaN `a` leaves a running maximum
+/// `b` as `f64::max` does): one compare-and-select.
+#[inline(always)]
+fn larger(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
 }
 
 /// `dst` = `src` (copied in chunks on the run's threads for a long state).

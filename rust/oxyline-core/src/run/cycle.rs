@@ -479,6 +479,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
             if let Some(ev) = self.events.as_ref() {
                 let st = &mut self.state;
                 ev.hold_closed(&mut st.y, &mut st.yd);
+                ad.state_changed();
             }
             self.periodic_steps.accepted(h);
             self.state.advance_species(t, h)?;
@@ -559,8 +560,10 @@ impl<'r, 'f> Cycles<'r, 'f> {
         }
         let t = rows.output_time(time, self.s.output_all_cycles);
         let theta = theta.clamp(0.0, 1.0);
-        let dense = ad.dense(theta, h, &self.state.y, &self.state.yd);
-        self.rec.record_with(t, |i| dense.value(i))?;
+        let (y, yd) = (&self.state.y[..], &self.state.yd[..]);
+        (self.rec).record_row(t, |probes, out| {
+            ad.dense_row((theta, h), (y, yd), probes, out);
+        })?;
         if rows.species && self.state.species.is_some() {
             let (yi, ydi, zi, vi) = ad.interpolate_all(theta, h, &self.state);
             self.state

@@ -170,6 +170,18 @@ impl<'p, 's, 'f> Recorder<'p, 's, 'f> {
         Ok(())
     }
 
+    /// Record one row that `fill` appends to the table from the probes (dense output: the
+    /// interpolant's weights applied to all the probes in one pass).
+    pub fn record_row(&mut self, t: f64, fill: impl FnOnce(&[usize], &mut Vec<f64>)) -> Result<()> {
+        if self.times.len() == self.times.capacity() {
+            self.reserve(self.times.len().max(64))?;
+        }
+        self.times.push(t);
+        fill(self.probes, &mut self.data);
+        self.max_rows = self.max_rows.max(self.times.len());
+        Ok(())
+    }
+
     /// Keep the selected columns of one `observe` row (all species blocks); the unwritten
     /// columns read as NaN.
     pub fn push_species(&mut self, row: &[f64]) {
