@@ -66,13 +66,17 @@ def test_the_decomposed_heart_runs_at_rtol_1e_4() -> None:
     assert err <= 2e-4, err
 
 
-@pytest.mark.parametrize(("case", "vessel"), [
-    ("chamber_elastance_inductor", "valve1"),
-    ("closed_loop_two_hill", "AR_SYS"),
-])
+@pytest.mark.parametrize(
+    ("case", "vessel"),
+    [
+        ("chamber_elastance_inductor", "valve1"),
+        ("closed_loop_two_hill", "AR_SYS"),
+    ],
+)
 @pytest.mark.parametrize("rtol", [1e-3, 1e-4])
-def test_cardiac_output_within_rtol_at_the_models_scale(case: str, vessel: str,
-                                                        rtol: float) -> None:
+def test_cardiac_output_within_rtol_at_the_models_scale(
+    case: str, vessel: str, rtol: float
+) -> None:
     """Largest pressure 8.3 Pa and 1.4 kPa, largest flow 4e-8 and 9e-10 m³/s: the default
     atol (1 Pa, 1e-9 m³/s) let the cardiac output err by 2e-2 (chamber_elastance_inductor at
     every rtol from 1e-2 to 1e-6, its steps barely growing) and by 4.7 rtol
