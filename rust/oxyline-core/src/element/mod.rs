@@ -99,9 +99,10 @@ pub trait Element: Debug + Send + Sync {
     fn flow_form_residual(&self, t: f64, y: &[f64], c: &mut [f64]) {
         self.residual(t, y, c);
     }
-    /// ∂c/∂y of [`Element::flow_form_residual`]. Default: [`Element::jacobian`].
+    /// ∂c/∂y of [`Element::flow_form_residual`]. Default: [`Element::elimination_jacobian`]
+    /// (the safeguarded matrix of a row kept in its own form).
     fn flow_form_jacobian(&self, t: f64, y: &[f64], j: &mut [f64]) {
-        self.jacobian(t, y, j);
+        self.elimination_jacobian(t, y, j);
     }
     /// The Jacobian with every valve closed (RK4's stability bound also takes this state: a
     /// closed valve's R_max behind an inductor sets the R/L rate). Default: the stiffest.

@@ -175,15 +175,23 @@ impl Element for Valve {
     /// (|ΔP R′/R| ≤ 0.28, see `elimination_jacobian`) never vanishes, and its flow −ΔP/R(ΔP)
     /// is convex in ΔP: with an inductor's linear relation between the flow and ΔP, Newton
     /// converges from any iterate. The factor R_min keeps the row in pressure units, equal
-    /// to the pressure form while the valve is open.
-    fn flow_form_residual(&self, _t: f64, y: &[f64], c: &mut [f64]) {
+    /// to the pressure form while the valve is open. A law with R_min = 0 (an open valve
+    /// without resistance: no flow form, its R underflows to 0) keeps the pressure form and
+    /// its safeguarded matrix.
+    fn flow_form_residual(&self, t: f64, y: &[f64], c: &mut [f64]) {
         let (q, dp) = self.state(y);
         let r_min = self.law.r_min();
+        if r_min <= 0.0 {
+            return self.residual(t, y, c);
+        }
         c[0] = r_min * q + dp * (r_min / self.law.resistance(dp).0 - 1.0);
     }
-    fn flow_form_jacobian(&self, _t: f64, y: &[f64], j: &mut [f64]) {
+    fn flow_form_jacobian(&self, t: f64, y: &[f64], j: &mut [f64]) {
         let (_, dp) = self.state(y);
         let r_min = self.law.r_min();
+        if r_min <= 0.0 {
+            return self.elimination_jacobian(t, y, j);
+        }
         let (r, dr) = self.law.resistance(dp);
         let by_dp = r_min * (r - dp * dr) / (r * r) - 1.0;
         j[0] = r_min;
