@@ -1146,6 +1146,10 @@ pub enum JacobianKind {
     Closed,
     /// RK4's elimination of the algebraic unknowns (a safeguarded Newton matrix).
     Elimination,
+    /// The exact Jacobian of the rows in their flow form (see
+    /// [`crate::element::Element::flow_form_residual`]): generalized-α's retry after a
+    /// Newton failure.
+    FlowForm,
 }
 
 impl Dae {
@@ -1200,6 +1204,23 @@ impl Dae {
     /// r −= c_el(y, t): the elements' term.
     pub fn element_residual(&self, t: f64, y: &[f64], r: &mut [f64]) {
         self.element_terms(t, y, |i, c| r[i] -= c);
+    }
+
+    /// [`Dae::element_residual`] with every valve row in its flow form (`flow_form`; see
+    /// [`crate::element::Element::flow_form_residual`]).
+    pub fn element_residual_of(&self, t: f64, y: &[f64], r: &mut [f64], flow_form: bool) {
+        if !flow_form {
+            return self.element_residual(t, y, r);
+        }
+        let mut c = Vec::new();
+        for el in &self.elements {
+            let rows = el.rows();
+            c.resize(rows.len(), 0.0);
+            el.flow_form_residual(t, y, &mut c);
+            for (&i, &ci) in rows.iter().zip(&c) {
+                r[i] -= ci;
+            }
+        }
     }
 
     /// Call `visit(row, c)` for every element term c_el(y, t).
@@ -1260,6 +1281,7 @@ impl Dae {
                 JacobianKind::Stiffest => el.stiffest_jacobian(t, y, out),
                 JacobianKind::Closed => el.closed_jacobian(t, y, out),
                 JacobianKind::Elimination => el.elimination_jacobian(t, y, out),
+                JacobianKind::FlowForm => el.flow_form_jacobian(t, y, out),
             }
             out.iter_mut().for_each(|v| *v *= a);
             k += m;

@@ -93,6 +93,17 @@ pub trait Element: Debug + Send + Sync {
     fn elimination_jacobian(&self, t: f64, y: &[f64], j: &mut [f64]) {
         self.jacobian(t, y, j);
     }
+    /// c(y, t) with the row written so that Newton converges from afar where its own form
+    /// does not: a valve's row in its flow form (see the valve's). The same solutions.
+    /// Default: [`Element::residual`].
+    fn flow_form_residual(&self, t: f64, y: &[f64], c: &mut [f64]) {
+        self.residual(t, y, c);
+    }
+    /// ∂c/∂y of [`Element::flow_form_residual`]. Default: [`Element::elimination_jacobian`]
+    /// (the safeguarded matrix of a row kept in its own form).
+    fn flow_form_jacobian(&self, t: f64, y: &[f64], j: &mut [f64]) {
+        self.elimination_jacobian(t, y, j);
+    }
     /// The Jacobian with every valve closed (RK4's stability bound also takes this state: a
     /// closed valve's R_max behind an inductor sets the R/L rate). Default: the stiffest.
     fn closed_jacobian(&self, t: f64, y: &[f64], j: &mut [f64]) {

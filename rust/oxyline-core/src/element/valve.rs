@@ -163,6 +163,41 @@ impl Element for Valve {
             (j[1], j[2]) = (0.5, -0.5);
         }
     }
+    /// The row in its flow form, R_min (Q + ΔP/R(ΔP)) = 0 (the F part −P_from + P_to = ΔP is
+    /// the circuit's: c = R_min Q + ΔP (R_min/R − 1)): the same solutions as ΔP + R(ΔP) Q = 0,
+    /// but monotone in ΔP. The pressure form's ∂/∂ΔP = 1 + Q R′ changes sign in backflow
+    /// wherever |Q| R′ > 1 — a tanh law of steepness k reaches R′ = k (R_max − R_min)/2 (5e12
+    /// Pa s/m³ per Pa for k = 1e5 /Pa, R_max = 1e8 Pa s/m³: any backflow above 2e-13 m³/s) —
+    /// so Newton's linearisation at an iterate away from the solution points away from it
+    /// (a closing mitral valve behind its atrium's inductor: Newton cycled through four
+    /// iterates at every step length, and the safeguarded matrix gave no descent direction
+    /// for the line search). The flow form's ∂/∂ΔP = R_min (R − ΔP R′)/R² ≥ 0.72 R_min/R
+    /// (|ΔP R′/R| ≤ 0.28, see `elimination_jacobian`) never vanishes, and its flow −ΔP/R(ΔP)
+    /// is convex in ΔP: with an inductor's linear relation between the flow and ΔP, Newton
+    /// converges from any iterate. The factor R_min keeps the row in pressure units, equal
+    /// to the pressure form while the valve is open. A law with R_min = 0 (an open valve
+    /// without resistance: no flow form, its R underflows to 0) keeps the pressure form and
+    /// its safeguarded matrix.
+    fn flow_form_residual(&self, t: f64, y: &[f64], c: &mut [f64]) {
+        let (q, dp) = self.state(y);
+        let r_min = self.law.r_min();
+        if r_min <= 0.0 {
+            return self.residual(t, y, c);
+        }
+        c[0] = r_min * q + dp * (r_min / self.law.resistance(dp).0 - 1.0);
+    }
+    fn flow_form_jacobian(&self, t: f64, y: &[f64], j: &mut [f64]) {
+        let (_, dp) = self.state(y);
+        let r_min = self.law.r_min();
+        if r_min <= 0.0 {
+            return self.elimination_jacobian(t, y, j);
+        }
+        let (r, dr) = self.law.resistance(dp);
+        let by_dp = r_min * (r - dp * dr) / (r * r) - 1.0;
+        j[0] = r_min;
+        j[1] = -by_dp;
+        j[2] = by_dp;
+    }
     /// Fully open (R = R_min), with no switching term: the smallest resistance gives the
     /// fastest R–C time constants of the circuit around it.
     fn stiffest_jacobian(&self, _t: f64, _y: &[f64], j: &mut [f64]) {
@@ -253,6 +288,57 @@ mod tests {
                 (fd - j[k]).abs() <= 1e-6 * j[k].abs().max(1e-3),
                 "{k}: {fd} vs {}",
                 j[k]
+            );
+        }
+    }
+
+    #[test]
+    fn flow_form_has_the_same_solutions_and_its_jacobian_is_its_derivative() {
+        // the row ΔP + c with ΔP = y[1] − y[0]: at Q = the law's flow both forms vanish; the
+        // flow form's ∂row/∂ΔP stays positive in backflow where the pressure form's is
+        // negative (|Q| R′ > 1); central differences, truncation O(h²)
+        let law = ValveLaw::Tanh {
+            r_min: 5e2,
+            r_max: 1e8,
+            steepness: 1e5,
+        };
+        let v = Valve::new("v".into(), law, 0, 1, 2);
+        let row = |y: &[f64; 3], flow_form: bool| {
+            let mut c = [0.0];
+            if flow_form {
+                v.flow_form_residual(0.0, y, &mut c);
+            } else {
+                v.residual(0.0, y, &mut c);
+            }
+            y[1] - y[0] + c[0]
+        };
+        for dp in [-3.0, -1e-5, 2e-6, 1e-5, 0.4] {
+            let y = [1.0, 1.0 + dp, law.flow(dp)];
+            for form in [false, true] {
+                assert!(
+                    row(&y, form).abs() <= 1e-12 * dp.abs().max(1e-9),
+                    "{dp} {form}"
+                );
+            }
+        }
+        let y = [0.0, 2e-6, -1e-7];
+        let (mut jp, mut jf) = ([0.0; 3], [0.0; 3]);
+        v.jacobian(0.0, &y, &mut jp);
+        v.flow_form_jacobian(0.0, &y, &mut jf);
+        assert!(1.0 + jp[2] < 0.0 && 1.0 + jf[2] > 0.0, "{jp:?} {jf:?}");
+        for (k, (_, col)) in v.pattern().iter().enumerate() {
+            let h = [1e-12, 1e-12, 1e-14][*col];
+            let (mut a, mut b) = (y, y);
+            a[*col] += h;
+            b[*col] -= h;
+            let (mut ca, mut cb) = ([0.0], [0.0]);
+            v.flow_form_residual(0.0, &a, &mut ca);
+            v.flow_form_residual(0.0, &b, &mut cb);
+            let fd = (ca[0] - cb[0]) / (2.0 * h);
+            assert!(
+                (fd - jf[k]).abs() <= 1e-4 * jf[k].abs(),
+                "{k}: {fd} vs {}",
+                jf[k]
             );
         }
     }

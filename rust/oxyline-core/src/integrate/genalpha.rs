@@ -160,11 +160,12 @@ impl<'a> GenAlpha<'a> {
         let c = self.af * self.gamma * self.dt;
         let am_e: Vec<f64> = self.e.iter().map(|e| self.am * e).collect();
         let mut kvals = vec![0.0; self.n_stamps];
-        // the line search's retry (an error-controlled run's answer to a Newton failure) also
-        // takes the safeguarded valve rows: the exact matrix turns singular in backflow
-        // (1 + Q R′ → 0) at iterates away from the solution
+        // the line search's retry (an error-controlled run's answer to a Newton failure)
+        // writes the valve rows in their flow form, whose exact matrix stays regular where the
+        // pressure form's turns singular in backflow (1 + Q R′ → 0) at iterates away from the
+        // solution (`element::valve`)
         let kind = if self.damped {
-            JacobianKind::Elimination
+            JacobianKind::FlowForm
         } else {
             JacobianKind::Exact
         };
@@ -320,7 +321,8 @@ impl NewtonProblem for Iterate<'_, '_> {
         }
         ga.dae.static_residual(&ga.y_af, &ga.f, r);
         ga.dae.varying_residual(self.t_af, ga.regime, &ga.y_af, r);
-        ga.dae.element_residual(self.t_af, &ga.y_af, r);
+        ga.dae
+            .element_residual_of(self.t_af, &ga.y_af, r, ga.damped);
         for (i, ri) in r.iter_mut().enumerate() {
             *ri -= ga.e[i] * (self.yd[i] + am * (ga.yd_new[i] - self.yd[i]));
         }
