@@ -2,6 +2,7 @@
 
 #[allow(unused_imports)]
 use super::*;
+use super::parallel::SharedMut;
 
 /// Output vessels per task of a row's observation on the run's threads (and half the least
 /// number of vessels for which it is split): a vessel takes ~0.1 µs, a task a few µs to start.
@@ -29,9 +30,14 @@ impl Transport {
         }
         self.load_flows(time, y);
         for s in 0..nsp {
-            for (i, &n) in self.plan.cells.iter().enumerate() {
-                self.conc[n] = z[s * nc + i] / self.vol[i];
-            }
+            let (cells, vol, zs) = (&self.plan.cells[..], &self.vol[..], &z[s * nc..(s + 1) * nc]);
+            let conc = SharedMut::new(&mut self.conc);
+            crate::threads::for_ranges(nc, |range| {
+                for i in range {
+                    // SAFETY: every cell is its own node, and in this range alone
+                    unsafe { *conc.get_mut(cells[i]) = zs[i] / vol[i] };
+                }
+            });
             self.load_boundary(s, time);
             self.mix(s)?;
             self.free_of_nodes(s);
