@@ -1,8 +1,8 @@
 //! Observation: the recorded species columns.
 
+use super::parallel::SharedMut;
 #[allow(unused_imports)]
 use super::*;
-use super::parallel::SharedMut;
 
 /// Output vessels per task of a row's observation on the run's threads (and half the least
 /// number of vessels for which it is split): a vessel takes ~0.1 µs, a task a few µs to start.
@@ -30,7 +30,11 @@ impl Transport {
         }
         self.load_flows(time, y);
         for s in 0..nsp {
-            let (cells, vol, zs) = (&self.plan.cells[..], &self.vol[..], &z[s * nc..(s + 1) * nc]);
+            let (cells, vol, zs) = (
+                &self.plan.cells[..],
+                &self.vol[..],
+                &z[s * nc..(s + 1) * nc],
+            );
             let conc = SharedMut::new(&mut self.conc);
             crate::threads::for_ranges(nc, |range| {
                 for i in range {

@@ -504,8 +504,8 @@ impl BackwardArrays for SharedBackward<'_> {
 mod tests {
     use super::*;
     use crate::test_common::{Built, build, lcg, random_tree};
-    use crate::transport::boundary_chunks::BoundaryChunks;
     use crate::transport::Transport;
+    use crate::transport::boundary_chunks::BoundaryChunks;
 
     struct Case {
         transport: Transport,
@@ -635,7 +635,10 @@ mod tests {
         let acc = &chunked[nc..nc + 4];
         let flux = acc[0] - acc[1] - acc[2] - acc[3];
         let scale = acc[0].abs() + acc[1].abs() + acc[2].abs();
-        assert!(scale > 0.0 && (change - flux).abs() <= 1e-10 * scale, "{change} {flux}");
+        assert!(
+            scale > 0.0 && (change - flux).abs() <= 1e-10 * scale,
+            "{change} {flux}"
+        );
     }
 
     /// Every position once, blocks whole subtrees below the top tree, the serial items in

@@ -1,8 +1,8 @@
 //! Per-run state updates: wall laws, volumes, face flows, boundary values, mixing points.
 
+use super::parallel::SharedMut;
 #[allow(unused_imports)]
 use super::*;
-use super::parallel::SharedMut;
 
 /// Mixing points per chunk of their passes on the run's threads (a point takes ~1 ns).
 const MIXING_CHUNK: usize = 8192;
