@@ -676,7 +676,7 @@ impl Transport {
         if let Some((chunks, pool)) = boundary_chunks::split(sw.boundary.as_ref()) {
             let links = &plan.boundary_links[..];
             let flows = (&self.qf[..], &self.bval[..]);
-            chunks.terms(&pool, links, flows, &old, &mut sw.acc, &mut sw.lag);
+            chunks.terms(&pool, links, flows, old, &mut sw.acc, &mut sw.lag);
         } else {
             for b in &plan.boundary_links {
                 let (n, q) = (b.node as usize, self.qf[b.face as usize]);
