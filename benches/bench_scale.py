@@ -52,7 +52,11 @@ bookkeeping: everything outside the loops split over the pool, whose threads do 
 the calling thread waits) over the CPU time of the one-thread run; ``Amdahl`` is
 1/(s + (1 − s)/N) for 2, 16 and 64 cores. CPU times are the process's own threads', so the
 machine's load distorts them far less than the wall ratio (the serial parts done inside the
-pool, the top trees of the eliminations, are counted parallel: a few hundred vertices). The memory floor of the machine is measured first in the same run: a STREAM-like
+pool, the top trees of the eliminations, are counted parallel: a few hundred vertices; the
+calling thread's waking of the pool and the sum of the boundary fluxes in face order are
+counted serial). ``--baseline DIR`` with ``--threads 1 2`` gives s before and after in the
+same run (docs/performance.md, "The boundary faces, the mixing points and the output row on
+the threads"). The memory floor of the machine is measured first in the same run: a STREAM-like
 copy of a 256 MB array (numpy, one thread), given as ns per 8-byte value copied; the
 ``copies/seg-step`` column is a step's wall time per segment in units of that copy, i.e.
 how many doubles a step could have copied per segment in its time.

@@ -161,6 +161,21 @@ def test_the_vessel_rows_split_over_the_threads_give_the_same_bits() -> None:
     assert abs(mb["residual"][-1]) <= 1e-6 * abs(mb["inflow"][-1])
 
 
+def test_the_outlets_and_output_rows_split_over_the_threads_give_the_same_bits() -> None:
+    # 8 192 outlets: more than two chunks of 4 096 boundary faces, so every step's boundary
+    # faces (their flows, their terms in their nodes' rows, their O2 fluxes, summed in face
+    # order) are split over the threads; 81 915 cells: more than two chunks of 32 768, so
+    # each output row's cell volumes, face flows and concentrations are too
+    m = oxyline.load_model(binary_tree(14, 5))
+    assert m.network.summary()["segments"] == (2 ** 14 - 1) * 5
+    runs = {n: oxyline.simulate(m, cycles=1, dt=2e-3, output_every=0.05, segments=False,
+                                threads=n) for n in THREADS}
+    assert_same_bits(runs)
+    # an outside check of the threaded run: the tree's O2 balance closes
+    mb = runs[2].o2_mass_balance
+    assert abs(mb["residual"][-1]) <= 1e-6 * abs(mb["inflow"][-1])
+
+
 def test_the_threaded_run_conserves_oxygen(runs: dict[int, oxyline.Result]) -> None:
     # an independent check of the threaded run: the O2 balance of the whole tree (inflow =
     # outflow + wall flux + change of stored mass) closes to the transport's own accuracy

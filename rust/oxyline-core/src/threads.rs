@@ -136,3 +136,21 @@ pub fn for_chunks<T: Send>(v: &mut [T], f: impl Fn(usize, &mut [T]) + Sync + Sen
             .for_each(|(c, s)| f(c * CHUNK, s)),
     }
 }
+
+/// `f` on the ranges of `CHUNK` elements of `0..len` (on the run's threads for a long pass),
+/// for passes in which each element is written by the call of its range alone (through the
+/// caller's shared slices), so the result is the same on any number of threads.
+pub fn for_ranges(len: usize, f: impl Fn(std::ops::Range<usize>) + Sync + Send) {
+    for_ranges_of(len, CHUNK, f);
+}
+
+/// [`for_ranges`] with ranges of `chunk` elements (split from `2 chunk` elements on).
+pub fn for_ranges_of(len: usize, chunk: usize, f: impl Fn(std::ops::Range<usize>) + Sync + Send) {
+    use rayon::prelude::*;
+    let range = |c: usize| c * chunk..((c + 1) * chunk).min(len);
+    let chunks = len.div_ceil(chunk);
+    match pool().filter(|_| len >= 2 * chunk) {
+        Some(pool) => pool.install(|| (0..chunks).into_par_iter().for_each(|c| f(range(c)))),
+        None => (0..chunks).for_each(|c| f(range(c))),
+    }
+}

@@ -16,6 +16,7 @@
 //! all. The sums at a junction (a node with several children) add in another order than the
 //! general path's, so results agree with it to round-off.
 
+use super::boundary_chunks::{self, BoundaryChunks};
 use super::parallel::{SharedBackward, SharedForward, SharedMut, TreePartition};
 #[allow(unused_imports)]
 use super::*;
@@ -633,6 +634,9 @@ impl Transport {
                 .tree
                 .as_deref()
                 .and_then(|t| TreePartition::of(t, nn));
+            // and the boundary faces' chunks (`boundary_chunks`)
+            let p = &*self.plan;
+            sw.boundary = BoundaryChunks::of(&p.boundary_links, nn, &p.boundary_inlet);
         }
         sw.beta.resize(ntree, 0.0);
         sw.wnew.resize(nc, 0.0);
@@ -669,15 +673,21 @@ impl Transport {
             u32::MAX => conc[n],
             i => zs[i as usize] / wvol[i as usize],
         };
-        for b in &plan.boundary_links {
-            let (n, q) = (b.node as usize, self.qf[b.face as usize]);
-            let acc = &mut sw.acc[n];
-            acc[0] += b.inflow(q);
-            if b.boundary_upwind(q) {
-                sw.lag[n] = old(n);
-                acc[2] += q.abs() * inflow_value(self.bval[b.boundary as usize], sw.lag[n]);
-            } else {
-                acc[1] += q.abs();
+        if let Some((chunks, pool)) = boundary_chunks::split(sw.boundary.as_ref()) {
+            let links = &plan.boundary_links[..];
+            let flows = (&self.qf[..], &self.bval[..]);
+            chunks.terms(&pool, links, flows, old, &mut sw.acc, &mut sw.lag);
+        } else {
+            for b in &plan.boundary_links {
+                let (n, q) = (b.node as usize, self.qf[b.face as usize]);
+                let acc = &mut sw.acc[n];
+                acc[0] += b.inflow(q);
+                if b.boundary_upwind(q) {
+                    sw.lag[n] = old(n);
+                    acc[2] += q.abs() * inflow_value(self.bval[b.boundary as usize], sw.lag[n]);
+                } else {
+                    acc[1] += q.abs();
+                }
             }
         }
         for (&(n, _, bb), &q) in plan.sources.iter().zip(&self.qs) {
@@ -806,7 +816,7 @@ impl Transport {
             let (i_wall, i_decay) = pass.run(&sw.wlin[..nc], None, part);
             (i_wall + sw.wc_sum, i_decay)
         };
-        let (i_in, i_out) = self.implicit_boundary_fluxes();
+        let (i_in, i_out) = self.step_boundary_fluxes();
         let acc = &mut z[nsp * nc + 4 * s..nsp * nc + 4 * s + 4];
         for (a, v) in acc.iter_mut().zip([i_in, i_out, i_wall, i_decay]) {
             *a += dt * v;

@@ -1,6 +1,7 @@
 //! Backward-Euler transport step after each generalized-α flow step: tree elimination or
 //! flow-order sweep.
 
+use super::boundary_chunks;
 use super::fused::StepFlows;
 #[allow(unused_imports)]
 use super::*;
@@ -93,9 +94,18 @@ impl Transport {
         };
         if self.gathers_in_forward() {
             // the boundary faces here, the tree faces where the forward pass reads them
-            for b in &self.plan.boundary_links {
-                let f = b.face as usize;
-                gather(&mut self.qf[f], &mut q0[f], unknowns[f]);
+            let links = &self.plan.boundary_links[..];
+            match boundary_chunks::split(self.sweep.boundary.as_ref()) {
+                Some((chunks, pool)) => {
+                    let flows = (y1, unknowns, alpha_f);
+                    chunks.gather(&pool, links, flows, &mut self.qf, &mut q0);
+                }
+                None => {
+                    for b in links {
+                        let f = b.face as usize;
+                        gather(&mut self.qf[f], &mut q0[f], unknowns[f]);
+                    }
+                }
             }
             self.sweep.q_start = q0;
             self.load_source_and_chain_flows(t_af);
@@ -488,6 +498,28 @@ impl Transport {
             let flux_in = b.flux_in(q, conc[n], || self.lagged_boundary(bb, End::Node(n)));
             account(self.plan.boundary_inlet[bb], flux_in, &mut i_in, &mut i_out);
         }
+        self.source_fluxes(i_in, i_out)
+    }
+
+    /// `implicit_boundary_fluxes` with the boundary faces' fluxes in chunks on the run's
+    /// threads (`boundary_chunks`) when the tree has them: the same sums in the same order.
+    pub(super) fn step_boundary_fluxes(&mut self) -> (f64, f64) {
+        let Some((_, pool)) = boundary_chunks::split(self.sweep.boundary.as_ref()) else {
+            return self.implicit_boundary_fluxes();
+        };
+        let (sw, bval) = (&mut self.sweep, &self.bval);
+        let (lag, Some(chunks)) = (&sw.lag, sw.boundary.as_mut()) else {
+            return (0.0, 0.0); // (`pool_for` found the chunks)
+        };
+        let flows = (&self.qf[..], &self.conc[..]);
+        let links = &self.plan.boundary_links[..];
+        let boundary = |bb: usize, n: usize| inflow_value(bval[bb], lag[n]);
+        let (i_in, i_out) = chunks.fluxes(&pool, links, flows, boundary);
+        self.source_fluxes(i_in, i_out)
+    }
+
+    /// The flow sources' fluxes added to the boundary faces' (`i_in`, `i_out`).
+    fn source_fluxes(&self, mut i_in: f64, mut i_out: f64) -> (f64, f64) {
         for ((n, _, bb), &q) in self.plan.sources.iter().zip(&self.qs) {
             let flux_in = upwind_flux_in(q, true, self.conc[*n], || {
                 self.lagged_boundary(*bb, End::Node(*n))
@@ -770,6 +802,9 @@ pub(super) struct Sweep {
     pub(super) wc_sum: f64,
     /// Fused tree step of a large tree: its blocks for the run's threads (`parallel`).
     pub(super) partition: Option<Arc<super::parallel::TreePartition>>,
+    /// Fused tree step of a tree with many outlets: its boundary faces' chunks for the
+    /// run's threads (`boundary_chunks`).
+    pub(super) boundary: Option<super::boundary_chunks::BoundaryChunks>,
 }
 
 impl Sweep {

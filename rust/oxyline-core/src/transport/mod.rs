@@ -29,6 +29,7 @@ use crate::output::Probes;
 use crate::waveform::Waveform;
 use std::sync::Arc;
 
+mod boundary_chunks; // the boundary faces' passes on the run's threads
 mod build;
 pub mod closed_loop; // closed circulation: compartments, lungs
 pub mod closed_loop_balance; // its flow table's periodic volumes

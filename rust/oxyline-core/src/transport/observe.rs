@@ -1,5 +1,6 @@
 //! Observation: the recorded species columns.
 
+use super::parallel::SharedMut;
 #[allow(unused_imports)]
 use super::*;
 
@@ -29,9 +30,18 @@ impl Transport {
         }
         self.load_flows(time, y);
         for s in 0..nsp {
-            for (i, n) in self.plan.cells.iter().map(|&n| n as usize).enumerate() {
-                self.conc[n] = z[s * nc + i] / self.vol[i];
-            }
+            let (cells, vol, zs) = (
+                &self.plan.cells[..],
+                &self.vol[..],
+                &z[s * nc..(s + 1) * nc],
+            );
+            let conc = SharedMut::new(&mut self.conc);
+            crate::threads::for_ranges(nc, |range| {
+                for i in range {
+                    // SAFETY: every cell is its own node, and in this range alone
+                    unsafe { *conc.get_mut(cells[i] as usize) = zs[i] / vol[i] };
+                }
+            });
             self.load_boundary(s, time);
             self.mix(s)?;
             self.free_of_nodes(s);

@@ -1,7 +1,11 @@
 //! Per-run state updates: wall laws, volumes, face flows, boundary values, mixing points.
 
+use super::parallel::SharedMut;
 #[allow(unused_imports)]
 use super::*;
+
+/// Mixing points per chunk of their passes on the run's threads (a point takes ~1 ns).
+const MIXING_CHUNK: usize = 8192;
 
 impl Transport {
     /// Initial state: uniform initial concentration of every species in V(P0).
@@ -30,25 +34,34 @@ impl Transport {
         Ok(z)
     }
 
+    /// The cells' lumen volumes V = V0 + C (P − P_ref) at the flow state `y` into `vol`
+    /// (in chunks on the run's threads: each cell's own value); an error naming the first
+    /// cell whose volume is not positive.
     pub(super) fn volumes(&mut self, y: &[f64], time: f64) -> Result<()> {
-        for (i, n) in self.plan.cell_node.iter().map(|&n| n as usize).enumerate() {
-            let v = self.plan.v0[i]
-                + self.plan.cap[i] * (y[self.plan.volume_unknown(i)] - self.plan.p_ref);
-            if v.is_nan() || v <= 0.0 {
-                return Err(Error::solver(
-                    time,
-                    format!(
-                        "lumen volume of transport cell '{}' is {v:.3e} m³ (V0 {:.3e} m³, pressure {:.1} Pa, reference pressure {:.1} Pa): set oxygen reference_pressure closer to the working pressure",
-                        self.plan.node_name(n),
-                        self.plan.v0[i],
-                        y[n],
-                        self.plan.p_ref
-                    ),
-                ));
+        let plan = &*self.plan;
+        let volume = |i: usize| plan.v0[i] + plan.cap[i] * (y[plan.volume_unknown(i)] - plan.p_ref);
+        let vol = SharedMut::new(&mut self.vol[..plan.cell_node.len()]);
+        crate::threads::for_ranges(plan.cell_node.len(), |cells| {
+            for i in cells {
+                // SAFETY: cell i is in this range alone
+                unsafe { *vol.get_mut(i) = volume(i) };
             }
-            self.vol[i] = v;
-        }
-        Ok(())
+        });
+        let nc = plan.cell_node.len();
+        let Some(i) = self.vol[..nc].iter().position(|v| v.is_nan() || *v <= 0.0) else {
+            return Ok(());
+        };
+        let (v, n) = (self.vol[i], plan.cell_node[i] as usize);
+        Err(Error::solver(
+            time,
+            format!(
+                "lumen volume of transport cell '{}' is {v:.3e} m³ (V0 {:.3e} m³, pressure {:.1} Pa, reference pressure {:.1} Pa): set oxygen reference_pressure closer to the working pressure",
+                plan.node_name(n),
+                plan.v0[i],
+                y[n],
+                plan.p_ref
+            ),
+        ))
     }
 
     pub(super) fn load_flows(&mut self, time: f64, y: &[f64]) {
@@ -62,11 +75,14 @@ impl Transport {
 
     /// Face flows from `flow(unknown)`, source flows at `time`, and the interior faces of
     /// refined cells.
-    pub(super) fn load_flows_with(&mut self, time: f64, flow: impl Fn(usize) -> f64) {
+    pub(super) fn load_flows_with(&mut self, time: f64, flow: impl Fn(usize) -> f64 + Sync + Send) {
         let nf = self.plan.n_flow_faces;
-        for (q, &u) in self.qf[..nf].iter_mut().zip(&self.plan.face_unknowns) {
-            *q = flow(u as usize);
-        }
+        let unknowns = &self.plan.face_unknowns[..nf];
+        crate::threads::for_chunks(&mut self.qf[..nf], |first, qf| {
+            for (q, &u) in qf.iter_mut().zip(&unknowns[first..]) {
+                *q = flow(u as usize);
+            }
+        });
         self.load_source_and_chain_flows(time);
     }
 
@@ -242,20 +258,33 @@ impl Transport {
         res
     }
 
+    /// The mixing points' values of species `s` back into `conc` (in chunks on the run's
+    /// threads: every point its own node).
     pub(super) fn restore_mixing(&mut self, s: usize) {
-        let mc = &self.species[s].mixing_conc;
-        if mc.len() == self.plan.mixing.len() {
-            for (&m, &c) in self.plan.mixing.iter().zip(mc) {
-                self.conc[m] = c;
-            }
+        let (mc, mixing) = (&self.species[s].mixing_conc, &self.plan.mixing);
+        if mc.len() == mixing.len() {
+            let conc = SharedMut::new(&mut self.conc);
+            crate::threads::for_ranges_of(mixing.len(), MIXING_CHUNK, |points| {
+                for k in points {
+                    // SAFETY: each mixing point is its own node, in this range alone
+                    unsafe { *conc.get_mut(mixing[k]) = mc[k] };
+                }
+            });
         }
     }
 
+    /// The mixing points' values of species `s` kept (in chunks on the run's threads).
     pub(super) fn save_mixing(&mut self, s: usize) {
-        let sp = &mut self.species[s];
-        sp.mixing_conc.clear();
-        sp.mixing_conc
-            .extend(self.plan.mixing.iter().map(|&m| self.conc[m]));
+        let (mixing, conc) = (&self.plan.mixing, &self.conc);
+        let mc = &mut self.species[s].mixing_conc;
+        mc.resize(mixing.len(), 0.0);
+        let saved = SharedMut::new(mc);
+        crate::threads::for_ranges_of(mixing.len(), MIXING_CHUNK, |points| {
+            for k in points {
+                // SAFETY: element k is in this range alone
+                unsafe { *saved.get_mut(k) = conc[mixing[k]] };
+            }
+        });
     }
 }
 
