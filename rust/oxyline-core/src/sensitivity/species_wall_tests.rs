@@ -14,28 +14,9 @@ use crate::model::parse;
 /// no facilitation factor rides on the walls' enhancement), a Graetz wall of the
 /// forward-flow mean on every vessel but d2, and a cycle-mean Lévêque wall on d2. The
 /// enhancement (×6) makes the walls take a few per cent of the oxygen delivered, so the
-/// signals move well above the difference quotients' rounding.
-const MODEL: &str = r#"{
-  "name": "y-walls",
-  "vessels": [
-    {"name": "parent", "from": "in", "to": "j", "segments": 3,
-     "geometry": {"length": 0.1, "radius_in": 0.004, "radius_out": 0.004,
-                  "wall_thickness": 0.0006, "youngs_modulus": 4e5}},
-    {"name": "d1", "from": "j", "to": "o1", "segments": 4,
-     "geometry": {"length": 0.08, "radius_in": 0.003, "radius_out": 0.0025,
-                  "wall_thickness": 0.0005, "youngs_modulus": 6e5}},
-    {"name": "d2", "from": "j", "to": "o2", "segments": 2,
-     "geometry": {"length": 0.05, "radius_in": 0.002, "radius_out": 0.002,
-                  "wall_thickness": 0.0004, "youngs_modulus": 6e5}}
-  ],
-  "boundary_conditions": {
-    "in": {"type": "flow", "flow": {"kind": "fourier", "period": 0.8, "mean": 3e-6,
-                                    "cos": [1e-6, -0.4e-6], "sin": [1.2e-6, 0.3e-6]}},
-    "o1": {"type": "rcr", "proximal_resistance": 1.5e8, "capacitance": 6e-10,
-           "distal_resistance": 1.2e9},
-    "o2": {"type": "resistance", "resistance": 1.6e9}
-  },
-  "transport": {"species": [{
+/// signals move well above the difference quotients' rounding. The walls' transport section,
+/// put in place of the Y network's (`model`).
+const TRANSPORT: &str = r#""transport": {"species": [{
     "name": "o2", "diffusivity": 1.5e-9,
     "inlet": {"kind": "constant", "value": 0.119},
     "wall": {"model": "graetz", "wall_concentration": 0.0777, "flow": "forward-mean",
@@ -44,6 +25,15 @@ const MODEL: &str = r#"{
                           "enhancement": 6.0}}
   }]}
 }"#;
+
+/// The Y network (`super::tests::MODEL`) with [`TRANSPORT`] as its transport section.
+fn model() -> String {
+    let y = super::tests::MODEL;
+    let at = y
+        .find(r#""transport""#)
+        .expect("the Y network has a transport section");
+    format!("{}{TRANSPORT}", &y[..at])
+}
 
 fn signals() -> Vec<(String, String)> {
     [
@@ -102,7 +92,7 @@ fn check(spec: &NetworkSpec, path: &str) -> f64 {
 
 #[test]
 fn cycle_mean_walls_by_oxygen_parameters_against_central_differences() {
-    let spec = parse(MODEL).unwrap();
+    let spec = parse(&model()).unwrap();
     for path in [
         "oxygen.wall.concentration",
         "oxygen.wall.enhancement",
@@ -119,7 +109,7 @@ fn cycle_mean_walls_by_oxygen_parameters_against_central_differences() {
 /// quotients' rounding: the Graetz law does not read a radius, and the inflow is given.)
 #[test]
 fn cycle_mean_walls_by_flow_parameters_against_central_differences() {
-    let spec = parse(MODEL).unwrap();
+    let spec = parse(&model()).unwrap();
     for path in [
         "vessels.parent.length",
         "vessels.d1.length",
@@ -138,7 +128,7 @@ fn cycle_mean_walls_by_flow_parameters_against_central_differences() {
 /// |dJ/d ln θ|.
 #[test]
 fn cycle_mean_walls_adjoint_equals_forward() {
-    let spec = parse(MODEL).unwrap();
+    let spec = parse(&model()).unwrap();
     let paths = [
         "vessels.d2.radius",
         "vessels.d2.length",
@@ -199,14 +189,14 @@ fn inlet_renewal_relaxed_shear_and_facilitated_parameters_are_refused() {
             .unwrap_err()
             .to_string()
     };
-    let mut spec = parse(MODEL).unwrap();
+    let mut spec = parse(&model()).unwrap();
     let sp = &mut spec.transport.as_mut().unwrap().species[0];
     if let WallSpec::Graetz { flow, .. } = &mut sp.wall {
         *flow = MeanFlow::InletRenewal;
     }
     let m = msg(&spec, "scale.inflow");
     assert!(m.contains("inlet renewal"), "{m}");
-    let mut spec = parse(MODEL).unwrap();
+    let mut spec = parse(&model()).unwrap();
     let sp = &mut spec.transport.as_mut().unwrap().species[0];
     if let Some(WallSpec::Leveque { shear, .. }) = sp.per_vessel.get_mut("d2") {
         *shear = crate::closure::Shear::Relaxed;
