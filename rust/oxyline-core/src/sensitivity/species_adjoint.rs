@@ -353,4 +353,4 @@ impl Backward<'_> {
 
 #[cfg(test)]
 #[path = "species_adjoint_tests.rs"]
-mod tests;
+pub(super) mod tests;

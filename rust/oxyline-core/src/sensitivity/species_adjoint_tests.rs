@@ -65,21 +65,36 @@ fn adjoint_against_forward(spec: &NetworkSpec, paths: &[&str]) -> f64 {
     .unwrap();
     let fwd = run(spec, paths);
     let (np, nsig) = (paths.len(), sig.len());
-    let mut worst = 0.0f64;
     for (f, w) in w_used.chunks(ns * nsig).enumerate() {
         let j: f64 = w.iter().zip(&fwd.signals).map(|(a, b)| a * b).sum();
         assert!((adj.functionals[f] - j).abs() <= 1e-9 * j.abs().max(1e-300));
+    }
+    worst_against_forward(&w_used, ns * nsig, np, &values, &adj.gradients, &fwd.derivs)
+}
+
+/// The largest difference of the adjoint's gradients (`gradients[f * np + p]`) from the
+/// forward tangents (`derivs[p * block ..]`) contracted with each functional's weights (one
+/// `block` of `weights` per functional), each in units of its functional's largest
+/// |dJ/d ln θ| (the parameter `values` turn derivatives into logarithmic ones).
+pub(crate) fn worst_against_forward(
+    weights: &[f64],
+    block: usize,
+    np: usize,
+    values: &[f64],
+    gradients: &[f64],
+    derivs: &[f64],
+) -> f64 {
+    let mut worst = 0.0f64;
+    for (f, w) in weights.chunks(block).enumerate() {
         let g: Vec<f64> = (0..np)
             .map(|p| {
-                (w.iter()
-                    .zip(&fwd.derivs[p * ns * nsig..(p + 1) * ns * nsig]))
-                .map(|(a, b)| a * b)
-                .sum()
+                let d = &derivs[p * block..(p + 1) * block];
+                w.iter().zip(d).map(|(a, b)| a * b).sum()
             })
             .collect();
-        let scale = (g.iter().zip(&values)).fold(0.0f64, |m, (d, v)| m.max((d * v).abs()));
+        let scale = (g.iter().zip(values)).fold(0.0f64, |m, (d, v)| m.max((d * v).abs()));
         for p in 0..np {
-            let e = (adj.gradients[f * np + p] - g[p]).abs() * values[p].abs();
+            let e = (gradients[f * np + p] - g[p]).abs() * values[p].abs();
             if scale > 0.0 {
                 worst = worst.max(e / scale);
             }

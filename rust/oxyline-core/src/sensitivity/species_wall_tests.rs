@@ -158,23 +158,14 @@ fn cycle_mean_walls_adjoint_equals_forward() {
     let (values, adj) =
         species_adjoint_with(&spec, &owned, &sig, |_, _| Ok(weights.clone()), settings()).unwrap();
     let fwd = run_with(&spec, &paths, &sig);
-    let np = paths.len();
-    let mut worst = 0.0f64;
-    for (f, w) in weights.chunks(ns * nsig).enumerate() {
-        let g: Vec<f64> = (0..np)
-            .map(|p| {
-                let d = &fwd.derivs[p * ns * nsig..(p + 1) * ns * nsig];
-                w.iter().zip(d).map(|(a, b)| a * b).sum()
-            })
-            .collect();
-        let scale = (g.iter().zip(&values)).fold(0.0f64, |m, (d, v)| m.max((d * v).abs()));
-        for p in 0..np {
-            let e = (adj.gradients[f * np + p] - g[p]).abs() * values[p].abs();
-            if scale > 0.0 {
-                worst = worst.max(e / scale);
-            }
-        }
-    }
+    let worst = super::adjoint::tests::worst_against_forward(
+        &weights,
+        ns * nsig,
+        paths.len(),
+        &values,
+        &adj.gradients,
+        &fwd.derivs,
+    );
     eprintln!("cycle-mean walls: adjoint against forward {worst:.2e}");
     assert!(worst < 1e-8, "{worst:e}");
 }
