@@ -15,7 +15,10 @@ import oxyline
 
 T = 1.0
 W = 2 * np.pi / T
-ATOL = {"pressure": 1.0, "flow": 1e-9}  # the core's defaults (Pa, m^3/s)
+ATOL = {"pressure": 1.0, "flow": 1e-9}  # the core's SI defaults (Pa, m^3/s)
+#: a kind's default atol is at most this share of rtol times the kind's largest magnitude
+#: (docs/physics.md §10, "Settings": a model in small units is held to rtol of its own size)
+SCALE_CAP = 0.3
 
 Exact = Callable[[np.ndarray], dict[str, np.ndarray]]
 
@@ -70,14 +73,36 @@ def rlc() -> tuple[dict[str, Any], Exact]:
 
 def achieved(res: oxyline.Result, exact: Exact, rtol: float) -> float:
     """The largest error of every closed-form variable at every output time, relative to
-    atol/rtol + its peak magnitude (the norm the step control works in)."""
+    atol/rtol + its peak magnitude (the norm the step control works in: the default atol of
+    the kind's largest peak, at most SCALE_CAP·rtol of it)."""
     v, want = res.vessel("v"), exact(res.time)
+    peaks = {k: float(np.max(np.abs(e))) for k, e in want.items()}
     worst = 0.0
     for key, e in want.items():
-        atol = ATOL["pressure" if key.startswith("pressure") else "flow"]
+        kind = "pressure" if key.startswith("pressure") else "flow"
+        largest = max(p for k, p in peaks.items() if k.startswith(kind))
+        atol = min(ATOL[kind], SCALE_CAP * rtol * largest)
         worst = max(worst, float(np.max(np.abs(getattr(v, key) - e))
-                                 / (atol / rtol + np.max(np.abs(e)))))
+                                 / (atol / rtol + peaks[key])))
     return worst
+
+
+def scaled(case: Callable[[], tuple[dict[str, Any], Exact]],
+           factor: float) -> tuple[dict[str, Any], Exact]:
+    """The line of `case` with its forcing (a pressure or a flow) times `factor`: R, L, C
+    unchanged, every pressure and flow of the exact response times `factor`."""
+    model, exact = case()
+    fourier = model["boundary_conditions"]["in"]["fourier"]
+    fourier["mean"] *= factor
+    fourier["sin"] = [a * factor for a in fourier["sin"]]
+    return model, lambda t: {k: factor * e for k, e in exact(t).items()}
+
+
+def relative_error(res: oxyline.Result, exact: Exact) -> float:
+    """The largest error of every closed-form variable over its own peak magnitude."""
+    v, want = res.vessel("v"), exact(res.time)
+    return max(float(np.max(np.abs(getattr(v, k) - e)) / np.max(np.abs(e)))
+               for k, e in want.items())
 
 
 @pytest.mark.parametrize("case", [rc, rl, rlc], ids=["rc", "rl", "rlc"])
@@ -96,6 +121,31 @@ def test_achieved_error_is_within_the_tolerance_and_not_far_below(case: Any) -> 
         # the reported estimate is what the controller held: at most rtol, and not vacuous
         assert 0 < max(est.values()) <= rtol * (1 + 1e-9)
         assert res.settings["steps"] > 0 and res.settings["dt_min"] <= res.settings["dt_max"]
+
+
+@pytest.mark.filterwarnings("ignore:boundary condition 'in'")  # 16 Pa, 16 mPa: small units
+@pytest.mark.parametrize("case", [rc, rl, rlc], ids=["rc", "rl", "rlc"])
+def test_a_model_in_small_units_meets_rtol_at_the_default_atol(case: Any) -> None:
+    # every pressure and flow times 1e-3 (12-16 Pa, 1e-7 m^3/s) and 1e-6: within the SI
+    # default atol of 1 Pa and 1e-9 m^3/s, which left the 1e-3 line 1.9-190 rtol off its
+    # closed form over rtol 1e-2...1e-5. The default atol follows the model's own scale, so
+    # each line meets rtol of its own peaks against its closed form (allowed 2 rtol: the
+    # estimate may be off by 2x), and the two small ones, whose defaults are both capped at
+    # 0.3 rtol of their own scale, are the same problem in other units: the same relative
+    # error (measured: equal to 3 digits up to rtol 1e-4, within 7 % at 1e-5, where their
+    # step sequences part by a few steps in 2,600; allowed 25 %). The unscaled
+    # line differs from them by up to 2.1x (rl at 1e-4), where the SI flow default lies
+    # below the cap and holds it tighter.
+    for rtol in (1e-2, 1e-3, 1e-4, 1e-5):
+        errs = []
+        for factor in (1.0, 1e-3, 1e-6):
+            model, exact = scaled(case, factor)
+            res = oxyline.simulate(model, rtol=rtol, cycles=3, start="periodic",
+                                   output_every=1e-3, method="generalized-alpha")
+            errs.append(relative_error(res, exact))
+        assert max(errs) <= 2 * rtol, (rtol, errs)
+        _, small, smaller = errs
+        assert abs(smaller - small) <= 0.25 * small, (rtol, errs)
 
 
 def test_a_small_vessels_flow_meets_rtol_of_its_own_amplitude() -> None:

@@ -25,18 +25,29 @@
 pub const KINDS: [&str; 4] = ["pressure", "flow", "volume", "species"];
 
 /// The smallest share of its kind's largest scale an unknown's default absolute tolerance is
-/// scaled to (see [`Atol::of`]): an unknown that is (nearly) zero so far is not held to a
+/// scaled to (see [`Tolerances::atol_of`]): an unknown that is (nearly) zero so far is not held to a
 /// vanishing tolerance.
 pub const SHARE_FLOOR: f64 = 1e-4;
 
+/// A kind's default absolute tolerance is at most this share of rtol times the kind's
+/// characteristic magnitude (its largest |y| so far; see [`Tolerances::kind_atol`]): the
+/// kind's largest unknown is then held within 1.3 rtol of its own size. Measured on
+/// svZeroDSolver's heart cases in small numbers (cardiac output against a fine fixed step,
+/// rtol 1e-2 … 1e-4): 1.6–2.6 rtol off at a cap of 1, 1.05–1.5 at 0.3, 1.0–1.2 at 0.1; the
+/// physiological models keep their SI defaults at rtol 1e-2 and 1e-3 under any of these, and
+/// at 1e-4 paper-bifurcated takes 1.26× the steps at 0.3, 1.43× at 0.1.
+pub const SCALE_CAP: f64 = 0.3;
+
 /// Absolute tolerances per kind, SI.
 ///
-/// A kind's default atol belongs to its largest unknown: every other unknown of the kind gets
-/// it scaled by its own scale over that largest one's (at least [`SHARE_FLOOR`]), so that each
-/// is held to rtol of its own size (a small vessel's flow, a low-pressure bed's pressure, a
-/// small concentration) and not to the absolute error the largest one may make. A kind the user
-/// gives (`given`) is absolute as given, the same for every unknown of the kind (as an atol
-/// vector's entries in CVODE).
+/// A kind's default atol belongs to its largest unknown, capped at rtol times that unknown's
+/// magnitude (a model in small units is held to rtol as a physiological one is: see
+/// [`Tolerances::kind_atol`]); every other unknown of the kind gets it scaled by its own scale
+/// over that largest one's (at least [`SHARE_FLOOR`]), so that each is held to rtol of its
+/// own size (a small vessel's flow, a low-pressure bed's pressure, a small concentration) and
+/// not to the absolute error the largest one may make. A kind the user gives (`given`) is
+/// absolute as given, the same for every unknown of the kind (as an atol vector's entries in
+/// CVODE).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Atol {
     /// Pa (default 1 Pa = 0.0075 mmHg).
@@ -67,18 +78,6 @@ impl Atol {
     pub fn as_array(&self) -> [f64; 4] {
         [self.pressure, self.flow, self.volume, self.species]
     }
-
-    /// The absolute tolerance of an unknown of kind `kind` (index into [`KINDS`]) whose scale
-    /// is `scale`, the largest scale of its kind being `largest`: the given atol as it is, the
-    /// default scaled by scale/largest (in [`SHARE_FLOOR`], 1]; the whole default while the
-    /// kind has no scale yet).
-    pub fn of(&self, kind: usize, scale: f64, largest: f64) -> f64 {
-        let a = self.as_array()[kind];
-        if self.given[kind] || largest <= 0.0 || !largest.is_finite() {
-            return a;
-        }
-        a * (scale / largest).clamp(SHARE_FLOOR, 1.0)
-    }
 }
 
 /// What an error-controlled run asks for.
@@ -86,6 +85,36 @@ impl Atol {
 pub struct Tolerances {
     pub rtol: f64,
     pub atol: Atol,
+}
+
+impl Tolerances {
+    /// The absolute tolerance of the largest unknown of kind `kind` (index into [`KINDS`]),
+    /// of magnitude `largest` (the kind's characteristic magnitude: its largest |y| so far,
+    /// seeded by the scout pass where there is one): the given atol as it is; the SI default
+    /// capped at `SCALE_CAP`·rtol·largest, so that the kind's largest unknown is held within
+    /// 1.3 rtol of its own size whatever the model's units (svZeroDSolver's cases in small
+    /// numbers read as cgs reach 8 Pa and 4e-8 m³/s, within the SI defaults, which then
+    /// left their signals uncontrolled); the whole default while the kind has no magnitude
+    /// yet. A physiological model keeps the SI default (1 Pa is 7.7e-5 of 13 kPa).
+    pub fn kind_atol(&self, kind: usize, largest: f64) -> f64 {
+        let a = self.atol.as_array()[kind];
+        if self.atol.given[kind] || largest <= 0.0 || !largest.is_finite() {
+            return a;
+        }
+        a.min(SCALE_CAP * self.rtol * largest)
+    }
+
+    /// The absolute tolerance of an unknown of kind `kind` whose scale is `scale`, the
+    /// largest scale of its kind being `largest`: the given atol as it is, the kind's
+    /// ([`Tolerances::kind_atol`]) scaled by scale/largest (in [`SHARE_FLOOR`], 1]; the
+    /// whole default while the kind has no scale yet).
+    pub fn atol_of(&self, kind: usize, scale: f64, largest: f64) -> f64 {
+        let a = self.kind_atol(kind, largest);
+        if self.atol.given[kind] || largest <= 0.0 || !largest.is_finite() {
+            return a;
+        }
+        a * (scale / largest).clamp(SHARE_FLOOR, 1.0)
+    }
 }
 
 /// |C| of generalized-α's local error |C| h³ y''' (see the module comment).
@@ -261,20 +290,52 @@ mod tests {
 
     #[test]
     fn a_default_atol_is_scaled_by_the_unknowns_share_and_a_given_one_is_kept() {
-        let d = Atol::default();
+        let d = Tolerances {
+            rtol: 1e-3,
+            atol: Atol::default(),
+        };
         // the kind's largest unknown keeps the default; a 1e-3 share gets 1e-3 of it; the
         // floor; no scale yet: the whole default
-        assert_eq!(d.of(1, 5e-4, 5e-4), 1e-9);
-        assert!((d.of(1, 5e-7, 5e-4) - 1e-12).abs() < 1e-24);
-        assert!((d.of(0, 0.0, 1e4) - SHARE_FLOOR).abs() < 1e-18);
-        assert_eq!(d.of(3, 0.0, 0.0), 1e-6);
-        let given = Atol {
-            flow: 1e-8,
-            given: [false, true, false, false],
+        assert_eq!(d.atol_of(1, 5e-4, 5e-4), 1e-9);
+        assert!((d.atol_of(1, 5e-7, 5e-4) - 1e-12).abs() < 1e-24);
+        assert!((d.atol_of(0, 0.0, 1e4) - SHARE_FLOOR).abs() < 1e-18);
+        assert_eq!(d.atol_of(3, 0.0, 0.0), 1e-6);
+        let given = Tolerances {
+            atol: Atol {
+                flow: 1e-8,
+                given: [false, true, false, false],
+                ..d.atol
+            },
             ..d
         };
-        assert_eq!(given.of(1, 5e-7, 5e-4), 1e-8);
-        assert!((given.of(0, 10.0, 1e4) - 1e-3).abs() < 1e-15);
+        assert_eq!(given.atol_of(1, 5e-7, 5e-4), 1e-8);
+        assert!((given.atol_of(0, 10.0, 1e4) - 1e-3).abs() < 1e-15);
+        // a given atol is kept below rtol of a small model's scale too
+        assert_eq!(given.atol_of(1, 4e-8, 4e-8), 1e-8);
+    }
+
+    #[test]
+    fn a_default_atol_follows_a_small_models_scale() {
+        let d = Tolerances {
+            rtol: 1e-3,
+            atol: Atol::default(),
+        };
+        // a physiological scale keeps the SI default: 1e-3 of 13 kPa is 13 Pa > 1 Pa
+        assert_eq!(d.kind_atol(0, 1.3e4), 1.0);
+        // a model in small units (8.3 Pa, 4e-8 m³/s): rtol of its largest unknown, where
+        // the SI default (1 Pa, 1e-9 m³/s) was an eighth of its pressures and its cardiac
+        // output
+        let p = d.kind_atol(0, 8.3);
+        assert!((p - SCALE_CAP * 8.3e-3).abs() < 1e-15, "{p}");
+        let q = d.kind_atol(1, 4e-8);
+        assert!((q - SCALE_CAP * 4e-11).abs() < 1e-24, "{q}");
+        // and its smaller unknowns their share of it
+        let q = d.atol_of(1, 4e-9, 4e-8);
+        assert!((q - SCALE_CAP * 4e-12).abs() < 1e-24, "{q}");
+        // the same relative tolerance in any units: a model scaled by 1e-3 is held to 1e-3
+        // of the absolute tolerance
+        let (a, b) = (d.atol_of(0, 2.0, 8.3), d.atol_of(0, 2e-3, 8.3e-3));
+        assert!((b / a - 1e-3).abs() < 1e-12, "{a} {b}");
     }
 
     #[test]

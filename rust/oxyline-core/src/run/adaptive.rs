@@ -69,14 +69,15 @@ pub(super) struct Adaptive {
     group_peak: Vec<f64>,
     group_set: Vec<f64>,
     /// The largest scale per kind (pressure, flow, volume) when the absolute tolerances were
-    /// last set: a kind's default atol is its largest unknown's, every other unknown's is
-    /// scaled by its share (`Atol::of`), renewed when the largest grew by more than `RESCALE`.
+    /// last set: a kind's default atol is its largest unknown's (at most rtol of it), every
+    /// other unknown's is scaled by its share (`Tolerances::atol_of`), renewed when the
+    /// largest grew by more than `RESCALE`.
     kind_set: [f64; 3],
     /// Per species, its cells' largest |c| so far (the species' default atol is that cell's).
     species_largest: Vec<f64>,
     /// 1/(atol_i + rtol·s_i): an unknown's error weight, with its absolute tolerance atol_i
     /// (the kind's default scaled by the unknown's share of its kind's largest scale, or the
-    /// user's as given: `Atol::of`) and the scale s_i rtol is relative to (its largest |y| so
+    /// user's as given: `Tolerances::atol_of`) and the scale s_i rtol is relative to (its largest |y| so
     /// far, a vessel's flow's its group's amplitude), at the scale of the step's start
     /// (the step's own |y| loosened it only while a peak grows; without it the estimate is
     /// one multiplication per unknown). Neither atol_i nor s_i is kept: an unknown that is
@@ -448,7 +449,7 @@ impl Adaptive {
     }
 
     /// Every kind's largest scale from the peaks, and every unknown's absolute tolerance and
-    /// weights from it (`Atol::of`; the vessels' flows from their groups' amplitudes): when
+    /// weights from it (`Tolerances::atol_of`; the vessels' flows from their groups' amplitudes): when
     /// a kind's largest peak grew by more than `RESCALE` since they were last set (an unknown's
     /// tolerance is then at most that share too tight: the stricter side). In chunks on the
     /// run's threads, each unknown its own.
@@ -494,17 +495,17 @@ impl Adaptive {
     }
 
     /// 1/(atol_i + rtol·peak) of unknown `i` (no vessel's flow) of largest |y| `peak`, its
-    /// atol from its share of its kind's largest scale (`Atol::of`); a flow that is no
-    /// vessel's (a boundary condition's or an element's own branch) keeps the flow atol:
-    /// judged against a share of the largest, a heart circuit's near-zero internal flows held
-    /// the closed loop to three times the steps.
+    /// atol from its share of its kind's largest scale (`Tolerances::atol_of`); a flow that is
+    /// no vessel's (a boundary condition's or an element's own branch) keeps the kind's flow
+    /// atol (`Tolerances::kind_atol`): judged against a share of the largest, a heart
+    /// circuit's near-zero internal flows held the closed loop to three times the steps.
     #[inline]
     fn own_weight(&self, i: usize, peak: f64) -> f64 {
         let k = self.kind_of(i);
         let atol = if k == 1 {
-            self.tol.atol.flow
+            self.tol.kind_atol(1, self.kind_set[1])
         } else {
-            self.tol.atol.of(k, peak, self.kind_set[k])
+            self.tol.atol_of(k, peak, self.kind_set[k])
         };
         1.0 / (atol + self.tol.rtol * peak)
     }
@@ -782,12 +783,12 @@ impl Adaptive {
     /// the difference to the linear extrapolation), on the cells' concentrations (the amounts
     /// also follow the volume's pulsation, which the flow step carries), weighted by
     /// atol + rtol·(largest |c| so far), the species' default atol scaled by that over its
-    /// cells' largest (`Atol::of`).
+    /// cells' largest (`Tolerances::atol_of`).
     fn species_error(&self, st: &State<'_, '_>, h: f64) -> f64 {
         if st.species.is_none() || self.history == 0 {
             return 0.0;
         }
-        let (rtol, atol) = (self.tol.rtol, &self.tol.atol);
+        let (rtol, tol) = (self.tol.rtol, &self.tol);
         let (r, f) = (h / self.h1, h / (2.0 * h + self.h1));
         let per_step = self.omega * h;
         let cells = self.c1.len() / self.species_largest.len().max(1);
@@ -798,7 +799,7 @@ impl Adaptive {
             for (m, (&c1, ((&c0, &cm), &peak))) in (k.start..).zip(self.c1[k].iter().zip(past)) {
                 let le = f * (c1 - c0 - r * (c0 - cm));
                 let s = peak.max(c1.abs());
-                let a = atol.of(3, s, self.species_largest[m / cells.max(1)]);
+                let a = tol.atol_of(3, s, self.species_largest[m / cells.max(1)]);
                 worst = worst.max(le.abs() / (per_step * (a + rtol * s)));
             }
             worst
@@ -866,7 +867,7 @@ impl Adaptive {
     /// Every group's flow amplitude from the flows of `y`, and (when a peak of `y` grew) the
     /// flows' scales and absolute tolerances: rtol of the group's amplitude A_g, the default
     /// atol scaled by A_g over the largest flow scale (at least `SHARE_FLOOR`; a given atol as
-    /// it is: `Atol::of`). The scales and
+    /// it is: `Tolerances::atol_of`). The scales and
     /// tolerances are renewed when some A_g grew by more than `RESCALE` since they were last
     /// set (a pass over every flow per step while the amplitudes still grow cost as much as
     /// the estimate): a flow's scale stays within that share below its amplitude, the
@@ -911,11 +912,7 @@ impl Adaptive {
         let (n0, n1) = (self.kind_end[0], self.kind_end[1]);
         self.group_set.clone_from(&self.group_peak);
         let amplitudes = self.group_peak.iter().fold(0.0f64, |m, &p| m.max(p));
-        let (atol, largest, rtol) = (
-            &self.tol.atol,
-            self.kind_set[1].max(amplitudes),
-            self.tol.rtol,
-        );
+        let (tol, largest, rtol) = (&self.tol, self.kind_set[1].max(amplitudes), self.tol.rtol);
         let (mut iw, mut ws, mut wu) = (
             std::mem::take(&mut self.inv_weight),
             std::mem::take(&mut self.w_step),
@@ -927,7 +924,7 @@ impl Adaptive {
             if g != NO_VESSEL {
                 let a = this.group_peak[g as usize];
                 let s = this.peak[i].max(a);
-                *w = 1.0 / (atol.of(1, a, largest) + rtol * s);
+                *w = 1.0 / (tol.atol_of(1, a, largest) + rtol * s);
             }
         };
         let mut tasks = chunk_tasks(n0, [&mut iw[n0..n1], &mut ws[n0..n1], &mut wu[n0..n1]]);
@@ -957,7 +954,7 @@ impl Adaptive {
         (w, w * inv_omega(rate_peak, accel_peak, self.omega))
     }
 
-    /// The kind of unknown `i` (0 pressure, 1 flow, 2 volume: the index into `Atol`).
+    /// The kind of unknown `i` (0 pressure, 1 flow, 2 volume: the index into `KINDS`).
     fn kind_of(&self, i: usize) -> usize {
         if i < self.kind_end[0] {
             0

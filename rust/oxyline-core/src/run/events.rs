@@ -21,6 +21,7 @@
 
 use crate::circuit::Dae;
 use crate::element::Switch;
+use crate::integrate::adaptive::Tolerances;
 
 /// The most bisection-free iterations of the root finder (Illinois converges in ~10 for a
 /// smooth g; the bracket test stops it first).
@@ -117,6 +118,11 @@ pub(super) struct Events {
     /// closed itself at a Newton correction's flow of either sign, which must not hold it
     /// open.
     flow_tol: (f64, f64),
+    /// The run's tolerances: the flow atol above and the pressure atol below are their kinds'
+    /// at the valves' largest flow and pressure so far (`Tolerances::kind_atol`: at most rtol
+    /// of them, so that a model in small units has a band at its own scale), renewed as those
+    /// grow.
+    tol: Option<Tolerances>,
     peak: Vec<f64>,
     /// The pressure's absolute tolerance: with rtol·(the larger of the valve's two largest
     /// pressures so far) the band of ΔP an open on/off valve must leave downwards to close
@@ -143,7 +149,7 @@ const HEART_VALVES: [&str; 4] = ["tricuspid", "pulmonary", "mitral", "aortic"];
 
 impl Events {
     /// The circuit's switches (None without any), their statuses read at the start `y`.
-    pub fn new(dae: &Dae, y: &[f64], flow_tol: (f64, f64), pressure_atol: f64) -> Option<Self> {
+    pub fn new(dae: &Dae, y: &[f64], tol: Tolerances) -> Option<Self> {
         let (mut switches, mut names) = (Vec::new(), Vec::new());
         for el in &dae.elements {
             let own = el.switches();
@@ -168,18 +174,30 @@ impl Events {
                 y[b] > y[f] || (sw.on_off && y[q] > 0.0)
             })
             .collect();
-        Some(Events {
+        let mut events = Events {
             fresh: vec![false; switches.len()],
-            flow_tol,
+            flow_tol: (tol.atol.flow, tol.rtol),
+            tol: Some(tol),
             peak: switches.iter().map(|sw| y[sw.unknowns[2]].abs()).collect(),
-            pressure_atol,
+            pressure_atol: tol.atol.pressure,
             pressure_peak: switches.iter().map(|sw| pressure_scale(sw, y)).collect(),
             armed: vec![true; switches.len()],
             switches,
             names,
             open,
             log: Vec::new(),
-        })
+        };
+        events.renew_atol();
+        Some(events)
+    }
+
+    /// The flow and pressure atol of the valves' largest flow and pressure so far.
+    fn renew_atol(&mut self) {
+        if let Some(tol) = self.tol {
+            let largest = |v: &[f64]| v.iter().fold(0.0f64, |m, &p| m.max(p));
+            self.flow_tol.0 = tol.kind_atol(1, largest(&self.peak));
+            self.pressure_atol = tol.kind_atol(0, largest(&self.pressure_peak));
+        }
     }
 
     /// Switch `k`'s function at the state `v` (an unknown's value by index), positive while
@@ -290,6 +308,7 @@ impl Events {
             self.peak[k] = self.peak[k].max(y[sw.unknowns[2]].abs());
             self.pressure_peak[k] = self.pressure_peak[k].max(pressure_scale(sw, y));
         }
+        self.renew_atol();
         for k in 0..self.switches.len() {
             self.armed[k] |= self.rule(k, &|i| y[i]) > self.band(k);
         }
@@ -355,6 +374,7 @@ mod tests {
             open: vec![true; n],
             fresh: vec![false; n],
             flow_tol: (0.0, 0.0),
+            tol: None,
             peak: vec![0.0; n],
             pressure_atol: 0.0,
             pressure_peak: vec![0.0; n],
@@ -417,6 +437,7 @@ mod tests {
             open: vec![false],
             fresh: vec![false],
             flow_tol: (0.0, 0.1),
+            tol: None,
             peak: vec![0.0],
             pressure_atol: 1.0,
             pressure_peak: vec![10.0],

@@ -198,7 +198,7 @@ pub(super) struct Explicit {
     flow_group: Vec<u32>,
     group_peak: Vec<f64>,
     /// The largest scale per kind (pressure, flow, volume): a kind's default atol is its
-    /// largest unknown's, the others' scaled by their share (`Atol::of`).
+    /// largest unknown's, the others' scaled by their share (`Tolerances::atol_of`).
     kind_largest: [f64; 3],
     /// The species cells' amounts: atol·V₀ per cell (a concentration tolerance, the
     /// species' default scaled by the cell's largest concentration over the species'
@@ -285,7 +285,7 @@ impl Explicit {
     }
 
     /// The cells' amount tolerances: V₀ times the species' atol of the cell's largest
-    /// concentration |N|/V₀ so far (`Atol::of`, against the species' largest).
+    /// concentration |N|/V₀ so far (`Tolerances::atol_of`, against the species' largest).
     fn species_tolerances(&mut self) {
         let cells = self.z_peak.len() / self.n_species.max(1);
         for s in 0..self.n_species {
@@ -293,7 +293,7 @@ impl Explicit {
             let conc = self.z_peak[r.clone()].iter().zip(&self.z_volume[r.clone()]);
             let largest = conc.clone().fold(0.0f64, |m, (&z, &v)| m.max(z / v));
             for (a, (&z, &v)) in self.z_atol[r].iter_mut().zip(conc) {
-                *a = v * self.tol.atol.of(3, z / v, largest);
+                *a = v * self.tol.atol_of(3, z / v, largest);
             }
         }
     }
@@ -391,7 +391,7 @@ impl Explicit {
     /// Every vessel's flow amplitude, every kind's largest scale, and every unknown's scale
     /// and absolute tolerance (the implicit control's rule: a vessel's flow against the
     /// vessel's amplitude; the default atol scaled by the unknown's share of its kind's
-    /// largest scale, at least `SHARE_FLOOR`, a given one as it is: `Atol::of`).
+    /// largest scale, at least `SHARE_FLOOR`, a given one as it is: `Tolerances::atol_of`).
     fn set_tolerances(&mut self, y: &[f64]) {
         let (n0, n1) = (self.kind_end[0], self.kind_end[1]);
         if self.group_peak.is_empty() {
@@ -423,11 +423,12 @@ impl Explicit {
                 self.group_peak[g as usize]
             };
             self.scale[i] = self.peak[i].max(a);
-            // (a flow that is no vessel's keeps the flow atol, as in the implicit control)
+            // (a flow that is no vessel's keeps the kind's flow atol, as in the implicit
+            // control)
             self.atol[i] = if k == 1 && g == NO_VESSEL {
-                self.tol.atol.flow
+                self.tol.kind_atol(1, self.kind_largest[1])
             } else {
-                self.tol.atol.of(k, a, self.kind_largest[k])
+                self.tol.atol_of(k, a, self.kind_largest[k])
             };
         }
     }

@@ -111,12 +111,7 @@ pub(super) fn run(
         }
     }
     if let Some(tol) = s.adaptive() {
-        cycles.events = super::events::Events::new(
-            dae,
-            &cycles.state.y,
-            (tol.atol.flow, tol.rtol),
-            tol.atol.pressure,
-        );
+        cycles.events = super::events::Events::new(dae, &cycles.state.y, tol);
     }
     cycles.start_svzerod(!plan.use_rk4);
     if let Some(r) = &resume {
