@@ -119,9 +119,9 @@ pub(super) struct Events {
     /// open.
     flow_tol: (f64, f64),
     /// The run's tolerances: the flow atol above and the pressure atol below are their kinds'
-    /// at the valves' largest flow and pressure so far (`Tolerances::kind_atol`: at most rtol
-    /// of them, so that a model in small units has a band at its own scale), renewed as those
-    /// grow.
+    /// at the valves' largest flow and pressure so far (`Tolerances::kind_atol`: at most 0.3
+    /// rtol of them, so that a model in small units has a band at its own scale), renewed as
+    /// those grow.
     tol: Option<Tolerances>,
     peak: Vec<f64>,
     /// The pressure's absolute tolerance: with rtol·(the larger of the valve's two largest
