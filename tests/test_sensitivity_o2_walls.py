@@ -118,8 +118,9 @@ RENEWAL_PATHS = [
 @pytest.mark.parametrize("renews", [False, True], ids=["as-shipped", "renewing"])
 def test_inlet_renewal_against_central_differences(path: str, mode: str, renews: bool) -> None:
     model = paper_bifurcated_as_shipped(enhancement=path.startswith("oxygen."))
-    check_against_central_differences(renewing(model) if renews else model, path, OUTPUTS,
-                                      mode=mode)
+    check_against_central_differences(
+        renewing(model) if renews else model, path, OUTPUTS, mode=mode
+    )
 
 
 @pytest.mark.parametrize("renews", [False, True], ids=["as-shipped", "renewing"])
