@@ -11,9 +11,8 @@ mode="adjoint")``): one backward sweep of the species transport per output row.
   outlet resistance, the inflow scale) beside oxygen ones: the flow's tangent forward, the
   species adjoint backward, against the forward tangents (1e-8 of a row's scale, as
   above) on the Y network with its RCR and on paper-bifurcated (with a mass-transfer wall
-  and haemoglobin: its Graetz wall's inlet renewal is not followed yet, and with
-  haemoglobin a Graetz wall's facilitation reads P50; its Graetz wall of the forward-flow
-  mean: test_sensitivity_o2_walls.py), and against central differences (relative step
+  and haemoglobin: with haemoglobin a Graetz wall's facilitation reads P50; its Graetz
+  wall's own laws: test_sensitivity_o2_walls.py), and against central differences (relative step
   1e-4; 1e-6 of the quotient plus the outputs' rounding over h).
 * ``calibrate(gradient="adjoint")`` with oxygen targets and flow parameters uses the
   adjoint (no forward tangent runs).

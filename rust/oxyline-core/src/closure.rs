@@ -256,6 +256,8 @@ pub struct LawSlopes {
     pub mean_flow: f64,
     pub ln_radius: f64,
     pub ln_length: f64,
+    /// By the logarithm of the inlet renewal's factor (Graetz walls; 0 for the others).
+    pub ln_renewal: f64,
 }
 
 /// `v` if it is a finite number > 0 (or >= 0 with `allow_zero`), else a model error naming
@@ -457,9 +459,9 @@ impl WallSpec {
 
 impl WallSpec {
     /// [`LawSlopes`] of the law [`WallSpec::segment_law_scaled`] gives a cycle-mean Lévêque
-    /// or a Graetz wall at the same arguments (the renewal factor held: None for the inlet
-    /// renewal, whose factor moves with the flow's harmonics, and for every other wall,
-    /// whose coefficients are proportional to the wall area 2π r Δx).
+    /// or a Graetz wall at the same arguments (the inlet renewal's factor `renewal` held;
+    /// its own derivative is `renewal::tangent`'s, taken by `ln_renewal`). None for every
+    /// other wall, whose coefficients are proportional to the wall area 2π r Δx.
     pub fn mean_flow_law_slopes(
         &self,
         seg: &SegmentWall,
@@ -482,8 +484,8 @@ impl WallSpec {
                 if g > floor {
                     let s = LawSlopes {
                         mean_flow: g / (3.0 * q_mean),
-                        ln_radius: 0.0,
                         ln_length: 2.0 * g / 3.0,
+                        ..LawSlopes::default()
                     };
                     (g, s, permeability)
                 } else {
@@ -495,19 +497,20 @@ impl WallSpec {
                 }
             }
             WallSpec::Graetz {
-                flow: MeanFlow::CycleMean | MeanFlow::ForwardMean,
                 enhancement,
                 permeability,
                 ..
             } => {
                 let f = enhancement * renewal;
                 let (dq, dl) = graetz_conductance_slopes(seg, d, q_mean);
+                let g = f * graetz_conductance(seg, d, q_mean);
                 let s = LawSlopes {
                     mean_flow: f * dq,
                     ln_radius: 0.0,
                     ln_length: f * dl,
+                    ln_renewal: g,
                 };
-                (f * graetz_conductance(seg, d, q_mean), s, permeability)
+                (g, s, permeability)
             }
             _ => return None,
         };
@@ -526,6 +529,7 @@ impl WallSpec {
             mean_flow: a * blood.mean_flow,
             ln_radius: a * blood.ln_radius + b,
             ln_length: a * blood.ln_length + b,
+            ln_renewal: a * blood.ln_renewal,
         })
     }
 }

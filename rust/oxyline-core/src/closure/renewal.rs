@@ -20,6 +20,8 @@ use crate::error::{Error, Result};
 use nalgebra::Complex;
 use std::f64::consts::PI;
 
+pub mod tangent; // the law's derivative (oxygen sensitivities)
+
 /// The inlet-renewal constant A (docs/validation-oxygen.md §12; `INLET_RENEWAL_A` of
 /// `oxyline.reference.validation`).
 pub const INLET_RENEWAL_A: f64 = 0.329;
@@ -131,6 +133,22 @@ pub fn wall_shear_rate(
 /// it replaces cost ~12 ms per vessel: 50 min for a 1e6-segment tree's first pass; the direct
 /// sum over the samples after it, O(16 H²), ~50 µs).
 pub fn backward_wall_strain(flow: &PeriodicFlow, radius: f64, density: f64, viscosity: f64) -> f64 {
+    let mut b = 0.0;
+    backward_arcs(flow, radius, density, viscosity, |shear, start, end| {
+        b += shear.primitive(end) - shear.primitive(start);
+    });
+    b
+}
+
+/// The backward arcs [start, end] of one period (an arc through t = 0 in two pieces) of the
+/// backward wall shear of [`backward_wall_strain`], each given to `arc` with that shear.
+fn backward_arcs(
+    flow: &PeriodicFlow,
+    radius: f64,
+    density: f64,
+    viscosity: f64,
+    mut arc: impl FnMut(&BackwardShear<'_>, f64, f64),
+) {
     let sign = if flow.mean < 0.0 { -1.0 } else { 1.0 };
     // f(t) = −sign γ_w(t) = f0 + Re Σ_k c_k e^{ikωt}: the backward shear
     let scale = 1.0 / (PI * radius.powi(3));
@@ -151,7 +169,6 @@ pub fn backward_wall_strain(flow: &PeriodicFlow, radius: f64, density: f64, visc
         fft.sample(f0, c, m, values);
         let dt = flow.period / m as f64;
         let mut arc_start = (values[0] > 0.0).then_some(0.0);
-        let mut b = 0.0;
         for j in 0..m {
             let (fa, fb) = (values[j], values[(j + 1) % m]);
             if (fa > 0.0) == (fb > 0.0) {
@@ -159,14 +176,13 @@ pub fn backward_wall_strain(flow: &PeriodicFlow, radius: f64, density: f64, visc
             }
             let root = shear.crossing(j as f64 * dt, (j + 1) as f64 * dt, fa, fb);
             match arc_start.take() {
-                Some(s) => b += shear.primitive(root) - shear.primitive(s),
+                Some(s) => arc(&shear, s, root),
                 None => arc_start = Some(root),
             }
         }
         if let Some(s) = arc_start {
-            b += shear.primitive(flow.period) - shear.primitive(s);
+            arc(&shear, s, flow.period);
         }
-        b
     })
 }
 

@@ -22,7 +22,7 @@ const BLOCK: usize = 16;
 
 /// The running Fourier sums of the tracked flows over the current cycle (steps equally
 /// spaced in a cycle), and after [`FlowHarmonics::end_cycle`] the harmonics of that cycle.
-pub(super) struct FlowHarmonics {
+pub(crate) struct FlowHarmonics {
     vessels: Vec<usize>,
     unknowns: Vec<usize>,
     /// Steps of the current cycle, and how many were accumulated.
@@ -50,7 +50,10 @@ impl FlowHarmonics {
         (!inlets.is_empty()).then(|| Self::new(inlets))
     }
 
-    fn new(inlets: Vec<(usize, usize)>) -> Self {
+    /// The accumulator of the flows `y[unknown]` of `inlets` (vessel, unknown): the samples
+    /// may be any vector linear in the flow (a tangent's harmonics are the same sums of the
+    /// tangent's samples).
+    pub(crate) fn new(inlets: Vec<(usize, usize)>) -> Self {
         FlowHarmonics {
             vessels: inlets.iter().map(|p| p.0).collect(),
             unknowns: inlets.iter().map(|p| p.1).collect(),

@@ -21,7 +21,7 @@ mod coupling;
 mod cycle;
 mod events; // valve events of the error-controlled runs (docs/physics.md §10.5)
 mod explicit; // error control with the explicit pair (docs/physics.md §10.4)
-mod flow_harmonics; // inlet renewal: the first pass's flow harmonics
+pub(crate) mod flow_harmonics; // inlet renewal: the first pass's flow harmonics (and their tangents)
 mod heap; // freed pages back to the OS before a large pass's cycle loop
 mod mean_flow;
 pub mod memory;

@@ -18,10 +18,11 @@ use super::parameter::{self, DaeTangent, Parameter};
 use super::tangent::{TangentSettings, periodic_tangent};
 use crate::assemble::Assembled;
 use crate::circuit::Dae;
-use crate::closure::{FluxSpec, MeanFlow, WallSpec};
+use crate::closure::{FluxSpec, WallSpec};
 use crate::error::{Error, Result};
 use crate::hemoglobin::{BindingSpec, HillAnchor};
 use crate::model::NetworkSpec;
+use crate::run::flow_harmonics::FlowHarmonics;
 use crate::transport::tangent::{
     FlowEffect, FlowGeometry, FlowStep, MeanFlowTangent, SpeciesDerivative, SpeciesParameterKind,
     SpeciesTangent, VesselSpeciesSignal,
@@ -515,19 +516,6 @@ impl Setup {
         let sp = oxygen_species(&spec)?;
         let params = parameters(&spec, &sp, paths)?;
         let tspec = spec.transport.clone().expect("checked by oxygen_species");
-        if std::iter::once(&sp.wall)
-            .chain(sp.per_vessel.values())
-            .any(|w| {
-                matches!(w, WallSpec::Graetz { .. }) && w.mean_flow() == MeanFlow::InletRenewal
-            })
-        {
-            return Err(Error::model(
-                "sensitivities",
-                "oxygen sensitivities do not follow a Graetz wall's inlet renewal yet (flow: \
-                 inlet-renewal, the default: it reads the flow's harmonics); the Graetz law of \
-                 flow: forward-mean or cycle-mean is followed",
-            ));
-        }
         let assembled = spec.assemble()?;
         let dae = assembled.circuit.assemble()?;
         let tr = Transport::build(&tspec, &assembled.circuit, &dae, &assembled.probes)?.new_run();
@@ -611,24 +599,73 @@ fn flow_and_derivatives(
     let read = unknowns.len();
     let mean_unknowns = tr.mean_flow_unknowns();
     unknowns.extend(&mean_unknowns);
+    let inlets = tr.renewal_inlets();
+    let inlets_from = unknowns.len();
+    unknowns.extend(inlets.iter().map(|i| i.1));
     let flow = FlowCycle::run(dae, &flow_params, &unknowns, settings)?;
-    let means = (!mean_unknowns.is_empty()).then(|| CycleMeans::of(&flow, read, &mean_unknowns));
-    if let Some(m) = &means {
-        tr.set_mean_flows(&m.abs, &m.forward)?;
+    let mut means =
+        (!mean_unknowns.is_empty()).then(|| CycleMeans::of(&flow, read, &mean_unknowns));
+    let renewal = (!inlets.is_empty()).then(|| InletHarmonics::of(&flow, inlets_from, &inlets));
+    if let Some(m) = &mut means {
+        match renewal.as_ref().and_then(|r| r.primal.flows()) {
+            Some(flows) => {
+                m.renewal = tr.renewal_factors(&m.abs, &m.forward, settings.period, flows)?;
+                tr.set_mean_flows_with_renewal(&m.abs, &m.forward, &m.renewal)?;
+            }
+            None => tr.set_mean_flows(&m.abs, &m.forward)?,
+        }
         tr.check_species_tangent(s, "sensitivities")?;
     }
     let d = Derivatives::new(
         spec,
         sp,
         params,
-        assembled,
-        dae,
+        (assembled, dae),
         tr,
         s,
         dae_tangents,
-        means.as_ref(),
+        means
+            .as_ref()
+            .map(|m| (m, renewal.as_ref(), settings.period)),
     )?;
     Ok((flow, d))
+}
+
+/// The inlet renewal's inlet flows over the flow's periodic cycle: their harmonics (as a
+/// run's first pass takes them from its step ends, `run::flow_harmonics`) and, per flow
+/// parameter, the harmonics of their tangents (the same sums of the tangent's samples).
+struct InletHarmonics {
+    primal: FlowHarmonics,
+    tangents: Vec<FlowHarmonics>,
+}
+
+impl InletHarmonics {
+    /// `inlets` (vessel, flow unknown) recorded in `flow` from index `from`.
+    fn of(flow: &FlowCycle, from: usize, inlets: &[(usize, usize)]) -> InletHarmonics {
+        let ns = flow.ys.len() - 1;
+        let np = flow.derivs.len() / (ns * flow.nu).max(1);
+        let mut primal = FlowHarmonics::new(inlets.to_vec());
+        primal.start_cycle(ns);
+        for y in &flow.ys[1..] {
+            primal.accumulate(y);
+        }
+        primal.end_cycle();
+        let in_record: Vec<(usize, usize)> = (inlets.iter().enumerate())
+            .map(|(i, &(v, _))| (v, from + i))
+            .collect();
+        let tangents = (0..np)
+            .map(|p| {
+                let mut h = FlowHarmonics::new(in_record.clone());
+                h.start_cycle(ns);
+                for k in 1..=ns {
+                    h.accumulate(flow.tangent(p, k));
+                }
+                h.end_cycle();
+                h
+            })
+            .collect();
+        InletHarmonics { primal, tangents }
+    }
 }
 
 /// The segments' cycle means over the flow's periodic cycle (of its step ends, as a run's
@@ -640,6 +677,8 @@ struct CycleMeans {
     forward: Vec<f64>,
     d_abs: Vec<Vec<f64>>,
     d_forward: Vec<Vec<f64>>,
+    /// Per species, per segment: the inlet renewal's factors (empty without renewal).
+    renewal: Vec<Vec<f64>>,
 }
 
 impl CycleMeans {
@@ -687,16 +726,20 @@ impl CycleMeans {
             abs,
             d_abs,
             d_forward,
+            renewal: Vec::new(),
         }
     }
 
-    /// The means and their derivatives by flow parameter `p`.
-    fn tangent(&self, p: usize) -> MeanFlowTangent<'_> {
+    /// The means and their derivatives by flow parameter `p` (with the renewal factors,
+    /// their tangent `d_ln_renewal`).
+    fn tangent<'a>(&'a self, p: usize, d_ln_renewal: &'a [Vec<f64>]) -> MeanFlowTangent<'a> {
         MeanFlowTangent {
             abs: &self.abs,
             forward: &self.forward,
             d_abs: &self.d_abs[p],
             d_forward: &self.d_forward[p],
+            renewal: &self.renewal,
+            d_ln_renewal,
         }
     }
 }
@@ -707,12 +750,11 @@ impl Derivatives {
         spec: &NetworkSpec,
         sp: &SpeciesSpec,
         params: &[Param],
-        assembled: &Assembled,
-        dae: &Dae,
+        (assembled, dae): (&Assembled, &Dae),
         tr: &Transport,
         s: usize,
         dae_tangents: Vec<Option<DaeTangent>>,
-        means: Option<&CycleMeans>,
+        means: Option<(&CycleMeans, Option<&InletHarmonics>, f64)>,
     ) -> Result<Derivatives> {
         let names = &assembled.circuit.vessel_names;
         let mut derivs = Vec::with_capacity(params.len());
@@ -722,7 +764,10 @@ impl Derivatives {
             derivs.push(match (p, t) {
                 (Param::Flow(par, _), Some(t)) => {
                     let mut e = flow_effect(spec, assembled, dae, par, t, &mut sources);
-                    e.mean_flows = means.map(|m| m.tangent(next_flow));
+                    let d_ln_renewal = means
+                        .map(|m| renewal_tangent(tr, m, next_flow, e.geometry))
+                        .unwrap_or_default();
+                    e.mean_flows = means.map(|m| m.0.tangent(next_flow, &d_ln_renewal));
                     next_flow += 1;
                     tr.species_flow_derivative(s, &e)
                 }
@@ -743,6 +788,25 @@ impl Derivatives {
             derivs,
             values,
         })
+    }
+}
+
+/// Per species, per segment: d ln(inlet renewal factor) by flow parameter `p` (empty
+/// without the renewal's harmonics).
+fn renewal_tangent(
+    tr: &Transport,
+    (means, harmonics, period): (&CycleMeans, Option<&InletHarmonics>, f64),
+    p: usize,
+    geometry: Option<FlowGeometry>,
+) -> Vec<Vec<f64>> {
+    let Some(h) = harmonics else {
+        return Vec::new();
+    };
+    match (h.primal.flows(), h.tangents[p].flows()) {
+        (Some(flows), Some(dflows)) if !means.renewal.is_empty() => {
+            tr.renewal_factor_tangents(means.tangent(p, &[]), period, flows, dflows, geometry)
+        }
+        _ => Vec::new(),
     }
 }
 
@@ -950,3 +1014,7 @@ mod tests;
 #[cfg(test)]
 #[path = "species_wall_tests.rs"]
 mod wall_tests;
+
+#[cfg(test)]
+#[path = "species_renewal_tests.rs"]
+mod renewal_tests;

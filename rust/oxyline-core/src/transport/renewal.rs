@@ -3,7 +3,12 @@
 //! the per-segment factors it gives once their harmonics are known (`run::flow_harmonics`).
 
 use super::laws::MeanFlows;
+use super::tangent::{FlowGeometry, MeanFlowTangent};
 use super::*;
+use crate::closure::renewal::tangent::{
+    GeometryTangent, PeriodicFlowTangent, SegmentMeans, net_mean_tangent,
+    segment_factor_tangents_into,
+};
 use crate::closure::renewal::{PeriodicFlow, net_mean, segment_factors_into};
 use nalgebra::Complex;
 
@@ -66,16 +71,27 @@ impl Transport {
         flows: VesselFlows<'_>,
     ) -> Result<()> {
         let renewal = self.renewal_factors(mean_abs, mean_forward, period, flows)?;
+        self.set_mean_flows_with_renewal(mean_abs, mean_forward, &renewal)
+    }
+
+    /// The laws of the cycle means with the renewal factors `renewal` (per species, per
+    /// segment: [`Transport::renewal_factors`]), as [`Transport::set_mean_flows_renewed`].
+    pub fn set_mean_flows_with_renewal(
+        &mut self,
+        mean_abs: &[f64],
+        mean_forward: &[f64],
+        renewal: &[Vec<f64>],
+    ) -> Result<()> {
         self.set_laws(MeanFlows {
             abs: mean_abs,
             forward: mean_forward,
-            renewal: &renewal,
+            renewal,
         })
     }
 
     /// Per species, per segment: the renewal factor (1 where the wall does not renew). The
     /// vessels' segment lists, walls and means live in buffers reused from vessel to vessel.
-    fn renewal_factors(
+    pub fn renewal_factors(
         &self,
         mean_abs: &[f64],
         mean_forward: &[f64],
@@ -93,12 +109,7 @@ impl Transport {
         for sp in &p.species {
             let mut factors = vec![1.0; p.segments.len()];
             for (i, &vessel) in flows.vessels.iter().enumerate() {
-                let WallSpec::Graetz {
-                    flow: closure::MeanFlow::InletRenewal,
-                    kinematic_viscosity,
-                    ..
-                } = sp.walls[vessel]
-                else {
+                let Some(nu) = renewal_viscosity(&sp.walls[vessel]) else {
                     continue;
                 };
                 let js = &list[start[vessel]..start[vessel + 1]];
@@ -118,7 +129,7 @@ impl Transport {
                     &net,
                     &abs,
                     &flows.flow(i, period),
-                    kinematic_viscosity,
+                    nu,
                     sp.diffusivity,
                     &mut fs,
                 )?;
@@ -129,6 +140,101 @@ impl Transport {
             all.push(factors);
         }
         Ok(all)
+    }
+
+    /// Per species, per segment: d ln(renewal factor) by one flow parameter (0 where the
+    /// wall does not renew), from the cycle means' tangent `means`, the inlet flows'
+    /// harmonics `flows` and their tangent `dflows` (same layout: d means, d harmonics), and
+    /// the vessel geometry the parameter sets (`closure::renewal::tangent`). The primal
+    /// factors were computed on the same arguments ([`Transport::renewal_factors`]), which
+    /// checked them.
+    pub fn renewal_factor_tangents(
+        &self,
+        means: MeanFlowTangent<'_>,
+        period: f64,
+        flows: VesselFlows<'_>,
+        dflows: VesselFlows<'_>,
+        geometry: Option<FlowGeometry>,
+    ) -> Vec<Vec<f64>> {
+        let p = &self.plan;
+        let (start, list) = segments_by_vessel(
+            &p.segment_vessels,
+            p.species.first().map_or(0, |s| s.walls.len()),
+        );
+        let mut all = Vec::with_capacity(p.species.len());
+        let mut out = Vec::new();
+        for sp in &p.species {
+            let mut d_ln = vec![0.0; p.segments.len()];
+            for (i, &vessel) in flows.vessels.iter().enumerate() {
+                let Some(nu) = renewal_viscosity(&sp.walls[vessel]) else {
+                    continue;
+                };
+                let js: Vec<usize> = list[start[vessel]..start[vessel + 1]]
+                    .iter()
+                    .map(|&j| j as usize)
+                    .collect();
+                let walls: Vec<_> = js.iter().map(|&j| p.segments[j].wall).collect();
+                let net: Vec<f64> = (js.iter())
+                    .map(|&j| net_mean(means.abs[j], means.forward[j]))
+                    .collect();
+                let d_net: Vec<f64> = (js.iter())
+                    .map(|&j| {
+                        net_mean_tangent(
+                            means.abs[j],
+                            means.forward[j],
+                            means.d_abs[j],
+                            means.d_forward[j],
+                        )
+                    })
+                    .collect();
+                let abs: Vec<f64> = js.iter().map(|&j| means.abs[j]).collect();
+                let d_abs: Vec<f64> = js.iter().map(|&j| means.d_abs[j]).collect();
+                let dflow = dflows.flow(i, period);
+                let own = geometry.filter(|g| g.vessel == vessel).map_or(
+                    GeometryTangent::default(),
+                    |g| GeometryTangent {
+                        ln_radius: g.radius,
+                        ln_length: g.length,
+                    },
+                );
+                let seg_means = SegmentMeans {
+                    net: &net,
+                    abs: &abs,
+                    d_net: &d_net,
+                    d_abs: &d_abs,
+                };
+                segment_factor_tangents_into(
+                    &walls,
+                    seg_means,
+                    &flows.flow(i, period),
+                    &PeriodicFlowTangent {
+                        mean: dflow.mean,
+                        harmonics: dflow.harmonics,
+                    },
+                    own,
+                    nu,
+                    sp.diffusivity,
+                    &mut out,
+                );
+                for (&j, &v) in js.iter().zip(&out) {
+                    d_ln[j] = v;
+                }
+            }
+            all.push(d_ln);
+        }
+        all
+    }
+}
+
+/// The kinematic viscosity of a wall that renews at its inlet (None: any other wall).
+fn renewal_viscosity(wall: &WallSpec) -> Option<f64> {
+    match wall {
+        WallSpec::Graetz {
+            flow: closure::MeanFlow::InletRenewal,
+            kinematic_viscosity,
+            ..
+        } => Some(*kinematic_viscosity),
+        _ => None,
     }
 }
 

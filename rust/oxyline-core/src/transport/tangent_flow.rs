@@ -17,6 +17,7 @@
 //! on the primal's matrix A, and the new amounts' tangent is z′ = W'′ x + W' x′.
 
 use super::*;
+use crate::closure::renewal::tangent::net_mean_tangent;
 
 /// What a flow parameter changes in the transport besides the face flows, given by the
 /// sensitivity layer from the parameter's derivative of the DAE.
@@ -45,13 +46,17 @@ pub struct FlowGeometry {
 }
 
 /// Per segment: the cycle means of |Q| and of the forward flow (`laws::MeanFlows`) and
-/// their derivatives by one flow parameter.
+/// their derivatives by one flow parameter; per species and segment, the inlet renewal's
+/// factors (`laws::MeanFlows::renewal`; empty without them) and their d ln by the parameter
+/// (`Transport::renewal_factor_tangents`; empty: held).
 #[derive(Debug, Clone, Copy)]
 pub struct MeanFlowTangent<'a> {
     pub abs: &'a [f64],
     pub forward: &'a [f64],
     pub d_abs: &'a [f64],
     pub d_forward: &'a [f64],
+    pub renewal: &'a [Vec<f64>],
+    pub d_ln_renewal: &'a [Vec<f64>],
 }
 
 /// A flow parameter's fixed effects per cell and per flow source.
@@ -208,17 +213,31 @@ impl Transport {
         let mean = laws::MeanFlows {
             abs: m.abs,
             forward: m.forward,
-            renewal: &[],
+            renewal: m.renewal,
         };
-        let (q_mean, renewal) = laws::closure_mean_flow(wall, j, mean, &[]);
+        let factors = m.renewal.get(s).map_or(&[][..], |r| &r[..]);
+        let (q_mean, renewal) = laws::closure_mean_flow(wall, j, mean, factors);
         let slopes =
             wall.mean_flow_law_slopes(&plan.piece_wall(pc), sp.diffusivity, q_mean, renewal)?;
         let d_mean = match wall.mean_flow() {
             closure::MeanFlow::CycleMean => m.d_abs[j],
+            // the net mean |⟨Q⟩| (`laws::closure_mean_flow`)
+            closure::MeanFlow::InletRenewal if !factors.is_empty() => {
+                net_mean_tangent(m.abs[j], m.forward[j], m.d_abs[j], m.d_forward[j])
+            }
             _ => m.d_forward[j],
         };
+        let d_ln_renewal = (m.d_ln_renewal.get(s))
+            .and_then(|d| d.get(j))
+            .copied()
+            .unwrap_or(0.0);
         let (dr, dl) = own.map_or((0.0, 0.0), |g| (g.radius, g.length));
-        Some(slopes.mean_flow * d_mean + slopes.ln_radius * dr + slopes.ln_length * dl)
+        Some(
+            slopes.mean_flow * d_mean
+                + slopes.ln_radius * dr
+                + slopes.ln_length * dl
+                + slopes.ln_renewal * d_ln_renewal,
+        )
     }
 
     /// The tangent of a flow parameter at the start of a run from flow state `y0` (its
