@@ -34,24 +34,21 @@ pub const TRANSPORT_RUN_PER_CELL: f64 = 108.0;
 /// The core's bytes per vessel and per boundary condition beyond their segments: the segment
 /// recipe, names, the boundary's law and rows.
 pub const CORE_PER_ELEMENT: f64 = 150.0;
-/// The Python model's description per vessel and per boundary condition (its dicts, the
-/// user's and the model's copy), held while the model loads and runs; a model above
-/// [`PACKED_DESCRIPTION_SEGMENTS`] segments keeps it packed (a few bytes per segment).
-pub const DESCRIPTION_PER_ELEMENT: f64 = 1800.0;
+/// The user's own description per vessel and per boundary condition (their dicts), alive
+/// while the model loads: a flow-only run of a large model peaks then.
+pub const LOAD_PER_ELEMENT: f64 = 400.0;
+/// The Python model's copy of the description per vessel and per boundary condition, held
+/// while it runs; a model above [`PACKED_DESCRIPTION_SEGMENTS`] segments keeps it packed (a
+/// few bytes per segment).
+pub const DESCRIPTION_PER_ELEMENT: f64 = 1500.0;
 /// Models above this many segments keep their description packed (`oxyline.model`).
 pub const PACKED_DESCRIPTION_SEGMENTS: usize = 500_000;
 /// Resident bytes per segment beyond the layout at a whole run's peak: the load's freed pages
 /// (the parsed model, the assembly's rows, the JSON text) stay resident under the run's state,
 /// and the run's setup (steady start, factors, first steps) peaks on top of it. Measured:
-/// `benches/profile_memory.py` (1.05 M segments) against the layout's sum.
-pub const RESIDENT_PER_SEGMENT: f64 = 300.0;
-/// Resident bytes of the error control's state per byte of its vectors (the copies its
-/// rejected steps and dense output make): measured at 131 k segments.
-pub const CONTROLLED_RESIDENT: f64 = 1.5;
-/// A run's own fixed bytes whatever its size (the worker threads' stacks and allocator
-/// arenas, the result's Python objects): measured on ~10 000-segment models, whose peak per
-/// segment is above a million-segment model's by about this much in all.
-pub const RUN_FIXED_BYTES: f64 = 4e6;
+/// ~10 000-segment models and `benches/profile_memory.py` (1.05 M segments) against the
+/// layout's sum.
+pub const RESIDENT_PER_SEGMENT: f64 = 165.0;
 
 /// Peak bytes per flow segment: circuit, DAE, tables, run state, and what stays resident.
 pub const FLOW_BYTES_PER_SEGMENT: f64 = CIRCUIT_PER_SEGMENT
@@ -60,14 +57,14 @@ pub const FLOW_BYTES_PER_SEGMENT: f64 = CIRCUIT_PER_SEGMENT
     + RUN_PER_SEGMENT
     + RESIDENT_PER_SEGMENT;
 /// Peak bytes per transport cell and species, measured (the peak's increment over a
-/// flow-only run of the same network: ~220 B at 10 000 segments, ~190-340 at 131 k, ~280 at
-/// 1.05 M): below the plan's and the transport state's heap ([`PLAN_PER_CELL`] +
-/// [`TRANSPORT_RUN_PER_CELL`]), because a flow-only run peaks while it loads and the plan and
-/// the state fill part of the room the load leaves behind.
-pub const TRANSPORT_BYTES_PER_CELL: f64 = 340.0;
+/// flow-only run of the same network: ~280 B at 10 000 segments and at 1.05 M): below the
+/// plan's and the transport state's heap ([`PLAN_PER_CELL`] + [`TRANSPORT_RUN_PER_CELL`]),
+/// because a flow-only run peaks while it loads and the plan and the state fill part of the
+/// room the load leaves behind.
+pub const TRANSPORT_BYTES_PER_CELL: f64 = 300.0;
 /// Peak bytes per vessel and per boundary condition beyond their segments, of a model whose
 /// description is not packed.
-pub const BYTES_PER_ELEMENT: f64 = CORE_PER_ELEMENT + DESCRIPTION_PER_ELEMENT;
+pub const BYTES_PER_ELEMENT: f64 = CORE_PER_ELEMENT + LOAD_PER_ELEMENT + DESCRIPTION_PER_ELEMENT;
 
 /// Estimated peak bytes of a model with `segments` flow segments, `elements` vessels and
 /// boundary conditions, `cells` transport cells per segment (0 without transport) and
@@ -75,7 +72,7 @@ pub const BYTES_PER_ELEMENT: f64 = CORE_PER_ELEMENT + DESCRIPTION_PER_ELEMENT;
 pub fn model_bytes(segments: usize, elements: usize, cells: f64, species: usize) -> f64 {
     let s = segments as f64;
     let per_element = if segments > PACKED_DESCRIPTION_SEGMENTS {
-        CORE_PER_ELEMENT
+        CORE_PER_ELEMENT + LOAD_PER_ELEMENT
     } else {
         BYTES_PER_ELEMENT
     };
@@ -119,9 +116,7 @@ pub fn controlled_bytes(unknowns: usize, species_cells: f64, integrator: Control
         Controlled::GeneralizedAlpha => 0,
         Controlled::ExplicitPair => 1,
     };
-    CONTROLLED_RESIDENT
-        * (unknowns as f64 * CONTROLLED_BYTES_PER_UNKNOWN[k]
-            + species_cells * CONTROLLED_BYTES_PER_CELL[k])
+    unknowns as f64 * CONTROLLED_BYTES_PER_UNKNOWN[k] + species_cells * CONTROLLED_BYTES_PER_CELL[k]
 }
 
 /// Estimated peak bytes of a run of an assembled network: its model ([`model_bytes`], from
@@ -140,8 +135,7 @@ pub fn run_bytes(
     } else {
         0.0
     };
-    RUN_FIXED_BYTES
-        + model_bytes(segments, elements, per_segment, 1)
+    model_bytes(segments, elements, per_segment, 1)
         + controlled.map_or(0.0, |c| controlled_bytes(unknowns, species_cells, c))
 }
 
@@ -251,7 +245,7 @@ mod tests {
         let e = check_model("big", 1_000_000_000, 3, None, Some(8e9)).unwrap_err();
         let msg = e.to_string();
         // a packed description above 500 000 segments: the core's bytes per element only
-        let need = 1e9 * FLOW_BYTES_PER_SEGMENT + 3.0 * CORE_PER_ELEMENT;
+        let need = 1e9 * FLOW_BYTES_PER_SEGMENT + 3.0 * (CORE_PER_ELEMENT + LOAD_PER_ELEMENT);
         assert!(matches!(e, Error::Resource { bytes, .. } if bytes == need as u64));
         let told = format!("needs about {}", crate::error::human_bytes(need));
         assert!(msg.starts_with(&format!("model 'big' (1000000000 segments): {told}")));
@@ -264,10 +258,8 @@ mod tests {
     fn the_controlled_state_counts_the_pair_above_generalized_alpha() {
         let ga = controlled_bytes(1000, 10.0, Controlled::GeneralizedAlpha);
         let dp = controlled_bytes(1000, 10.0, Controlled::ExplicitPair);
-        // the integrators' vectors (105 and 133 bytes per unknown, 64 and 96 per cell) times
-        // their resident share (the same product: exact)
-        assert_eq!(ga, CONTROLLED_RESIDENT * (1000.0 * 105.0 + 10.0 * 64.0));
-        assert_eq!(dp, CONTROLLED_RESIDENT * (1000.0 * 133.0 + 10.0 * 96.0));
+        assert_eq!(ga, 1000.0 * 105.0 + 10.0 * 64.0);
+        assert_eq!(dp, 1000.0 * 133.0 + 10.0 * 96.0);
         assert_eq!(controlled_bytes(0, 0.0, Controlled::ExplicitPair), 0.0);
     }
 
