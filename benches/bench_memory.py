@@ -36,8 +36,9 @@ CHILD = textwrap.dedent("""
     if hb:
         d["oxygen"]["hemoglobin"] = hb
     m = oxyline.load_model(d)
-    model = memory.model_estimate(m.summary(), m.canonical)
-    output = _output_size(m, _settings(m, kw))[0]
+    s = _settings(m, kw)
+    model = memory.run_estimate(m.network, s)
+    output = _output_size(m, s)[0]
     oxyline.simulate(m, **kw)
     print(json.dumps([m.summary()["segments"], model, output, rss("VmHWM:") - base]))
 """)

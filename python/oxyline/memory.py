@@ -12,11 +12,12 @@ model file (which also applies when the model is assembled), else the environmen
 (``MemAvailable`` of ``/proc/meminfo``, else ``os.sysconf``), and at most 80 % of the
 process's address-space limit (``ulimit -v``) if one is set.
 
-The model estimate (`oxyline_core::run::memory`) counts measured peak bytes per segment, per
-transport cell and species, and per vessel; an error-controlled run adds its controller's state
-per unknown and per transport cell (:func:`controlled_estimate`); the output estimate counts the rows and columns
-the run will hold (8 bytes each). ``benches/bench_memory.py`` compares both with the measured
-peak resident memory.
+The model estimate is the core's (`oxyline_core::run::memory`): the bytes its layout allocates
+per segment, per transport cell and species, and per vessel and boundary condition, times the
+resident share measured at a whole run's peak; an error-controlled run adds its controller's
+state per unknown and per transport cell (:func:`run_estimate`). Python only compares it with
+the limit. The output estimate counts the rows and columns the run will hold (8 bytes each).
+``benches/bench_memory.py`` compares both with the measured peak resident memory.
 """
 
 from __future__ import annotations
@@ -29,7 +30,6 @@ import re
 from collections.abc import Iterator, Mapping
 from typing import Any
 
-from oxyline import _core
 from oxyline.errors import ModelError
 
 #: share of the available memory a run may take by default
@@ -115,31 +115,16 @@ def limit(value: Any, where: str) -> float | None:
     return default_limit() if value is None else parse(value, where)
 
 
-def model_estimate(summary: dict[str, Any], canonical: dict[str, Any]) -> float:
-    """Estimated peak bytes of a model (``Model.summary()`` and its canonical form): the same
-    formula the core applies before it assembles the model."""
-    tr = canonical.get("transport") or {}
-    species = len(tr.get("species") or ())
-    cells = max(1.0, float(tr.get("cells_per_segment", 1.0))) if species else 0.0
-    elements = summary["vessels"] + len(canonical.get("boundary_conditions") or {})
-    return _core.model_bytes(summary["segments"], elements, cells, species)
-
-
-def controlled_estimate(summary: dict[str, Any], canonical: dict[str, Any],
-                        settings: Mapping[str, Any]) -> float:
-    """Estimated bytes of the error control's own state of a run with ``settings`` (0 for a
-    fixed step): per circuit unknown and per transport cell and species, the integrator's
-    vectors (error estimate, the states its extrapolation or dense output needs, the explicit
-    pair's seven stages; ``oxyline_core::run::memory::controlled_bytes``). ``auto`` may pick
-    either integrator: the larger (the explicit pair's) is counted."""
-    if settings.get("rtol") is None:
-        return 0.0
-    tr = canonical.get("transport") or {}
-    species = len(tr.get("species") or ()) if settings.get("transport", True) else 0
-    cells = max(1.0, float(tr.get("cells_per_segment", 1.0))) if species else 0.0
-    explicit = settings.get("method") in ("dopri5", "auto")
-    return _core.controlled_bytes(int(summary["unknowns"]),
-                                  summary["segments"] * cells * species, explicit)
+def run_estimate(network: Any, settings: Mapping[str, Any]) -> float:
+    """Estimated peak bytes of a run of ``network`` (a ``_core.Network``) with ``settings``,
+    its output aside: the core's count from the sizes it allocated (segments, vessels and
+    boundary conditions, transport cells and species, and for an error-controlled run its
+    controller's state per unknown and cell; ``oxyline_core::run::memory::run_bytes``).
+    ``auto`` may pick either integrator: the larger (the explicit pair's) is counted."""
+    controlled = None if settings.get("rtol") is None \
+        else settings.get("method") in ("dopri5", "auto")
+    return float(network.memory_estimate(transport=bool(settings.get("transport", True)),
+                                         controlled=controlled))
 
 
 def output_estimate(layout: dict[str, Any], period: float, every: float, cycles: int,

@@ -25,7 +25,7 @@ from oxyline.structured_tree import build_with_trees, expanded, has_trees
 #: Above this many segments a model keeps its ``source`` packed (the large-model threshold of
 #: :data:`oxyline.run.LARGE_MODEL_SEGMENTS`): its dicts, ~170 B per segment, are the largest
 #: Python-side part of a whole-tree run's memory, and nothing reads them while the core runs.
-PACKED_SOURCE_SEGMENTS = 500_000
+PACKED_SOURCE_SEGMENTS = _core.PACKED_DESCRIPTION_SEGMENTS
 
 
 @dataclass

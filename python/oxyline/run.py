@@ -759,9 +759,7 @@ def _check_output_memory(model: Model, s: Mapping[str, Any],
     if limit is not None and "max_memory" in overrides:
         # a max_memory given to this run bounds the whole run: the model's state too (the
         # model was assembled under its own file's limit)
-        counts = model.network.summary()
-        state = _memory.model_estimate(counts, model.canonical) \
-            + _memory.controlled_estimate(counts, model.canonical, s)
+        state = _memory.run_estimate(model.network, s)
         if state + need > limit:
             raise ResourceError(
                 f"simulate: the run needs about {_memory.human(state + need)} of memory "

@@ -205,6 +205,10 @@ mod _core {
             m.add("FLOW_BYTES_PER_SEGMENT", mem::FLOW_BYTES_PER_SEGMENT)?;
             m.add("TRANSPORT_BYTES_PER_CELL", mem::TRANSPORT_BYTES_PER_CELL)?;
             m.add("BYTES_PER_ELEMENT", mem::BYTES_PER_ELEMENT)?;
+            m.add(
+                "PACKED_DESCRIPTION_SEGMENTS",
+                mem::PACKED_DESCRIPTION_SEGMENTS,
+            )?;
         }
         m.add(
             "TISSUE_VESSEL_VARIABLES",

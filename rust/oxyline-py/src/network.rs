@@ -197,6 +197,35 @@ impl Network {
         Ok(d)
     }
 
+    /// Estimated peak bytes of a run (`oxyline_core::run::memory::run_bytes`), from the sizes
+    /// this network allocated: its segments, vessels and boundary conditions, transport cells
+    /// × species (when `transport`), and the error control's state of its unknowns
+    /// (`controlled`: None for a fixed step, else whether the explicit pair may run).
+    #[pyo3(signature = (*, transport = true, controlled = None))]
+    fn memory_estimate(&self, transport: bool, controlled: Option<bool>) -> f64 {
+        use oxyline_core::run::memory::{Controlled, run_bytes};
+        let (a, dae) = &*self.inner;
+        let s = &a.summary;
+        let species_cells = match (&self.transport, transport) {
+            (Some(t), true) => (t.n_cells() * t.species_names().len()) as f64,
+            _ => 0.0,
+        };
+        let controlled = controlled.map(|explicit| {
+            if explicit {
+                Controlled::ExplicitPair
+            } else {
+                Controlled::GeneralizedAlpha
+            }
+        });
+        run_bytes(
+            s.segments,
+            s.vessels + s.boundary_conditions,
+            species_cells,
+            dae.n,
+            controlled,
+        )
+    }
+
     /// Output layout: vessel names, segment counts and positions.
     fn layout<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let p = &self.inner.0.probes;

@@ -45,6 +45,8 @@ pub struct Summary {
     pub auto_rtol: Option<f64>,
     pub nodes: usize,
     pub junctions: usize,
+    /// The model's boundary conditions (the memory estimate counts them as elements).
+    pub boundary_conditions: usize,
     pub inlets: usize,
     pub outlets: usize,
     pub total_compliance: f64,
@@ -212,6 +214,7 @@ impl<'a> Stamping<'a> {
             vessels: spec.vessels.len(),
             nodes: graph.names.len(),
             junctions: graph.junctions(),
+            boundary_conditions: bcs,
             auto_rtol: auto.map(|rule| rule.rtol),
             ..Default::default()
         };

@@ -3,31 +3,82 @@
 //! [`Error::Resource`] giving the estimate and the setting to change, instead of taking all
 //! RAM and aborting the process.
 //!
-//! The per-segment figures are peak resident bytes measured for whole runs (load, assembly,
-//! solver factors, run state; `benches/profile_memory.py` at 1.05 M segments with the
-//! large-model default output, a per-vessel summary: ~1.0 kB per flow segment, ~0.75 kB more
-//! per O2 cell, ~0.45 kB per vessel of Python model), rounded up: an estimate is meant to be
-//! within a small factor of the real peak, never far below it.
+//! The estimate is the core's own layout: the bytes each owner allocates per flow segment, per
+//! transport cell and species and per vessel or boundary condition (heap capacities counted
+//! with a counting allocator, `examples/mem_stages.rs` and `examples/transport_memory.rs`;
+//! `tests/memory_layout.rs` checks the plan's, the transport state's and the circuit's against
+//! the heap they hold), plus what stays resident beyond it at a whole run's peak, measured
+//! with `benches/profile_memory.py`. It is meant to be at or somewhat above the real peak
+//! (`tests/test_resources.py` states the factor), never far below it.
 
 use crate::error::{Error, Result};
 
-/// Peak bytes per flow segment: circuit, DAE, sparse LU, integrator state, names, the
-/// binding's copy of the model.
-pub const FLOW_BYTES_PER_SEGMENT: f64 = 2000.0;
-/// Peak bytes per transport cell and species: plan, laws, per-run state.
-pub const TRANSPORT_BYTES_PER_CELL: f64 = 1000.0;
-/// Bytes per vessel and per boundary condition beyond their segments (names, the model's
-/// dicts on the Python side).
-pub const BYTES_PER_ELEMENT: f64 = 1000.0;
+/// Circuit per flow segment: its node (40 bytes), its branch (~50) and their labels (~60),
+/// kept beside the DAE for the impedance and `circuit()` reads.
+pub const CIRCUIT_PER_SEGMENT: f64 = 150.0;
+/// DAE per flow segment: the mass diagonal (~23 bytes) and the flow matrix F in CSR (~95).
+pub const DAE_PER_SEGMENT: f64 = 118.0;
+/// Output probes (the segments' unknowns) and the other tables per segment: DAE elements,
+/// forcing, boundary rows (~37 + ~90 bytes).
+pub const TABLES_PER_SEGMENT: f64 = 127.0;
+/// The run's state per flow segment (two unknowns each): the tree LU's arrays, y, ẏ and the
+/// cycle-end copy, the generalized-α residual and the recorder's row in flight.
+pub const RUN_PER_SEGMENT: f64 = 290.0;
+/// The transport plan per cell and species: its segment with wall and volume (72 bytes), the
+/// wall law (68), faces and their incidence (~25), wall pieces (28), output layout (22), the
+/// 32-bit cell and node maps, volumes and sources (~110).
+pub const PLAN_PER_CELL: f64 = 326.0;
+/// The transport run's state per cell and species: the sweep's node arrays, the amounts and
+/// concentrations and the species' output row.
+pub const TRANSPORT_RUN_PER_CELL: f64 = 108.0;
+/// The core's bytes per vessel and per boundary condition beyond their segments: the segment
+/// recipe, names, the boundary's law and rows.
+pub const CORE_PER_ELEMENT: f64 = 150.0;
+/// The user's own description per vessel and per boundary condition (their dicts), alive
+/// while the model loads: a flow-only run of a large model peaks then.
+pub const LOAD_PER_ELEMENT: f64 = 400.0;
+/// The Python model's copy of the description per vessel and per boundary condition, held
+/// while it runs; a model above [`PACKED_DESCRIPTION_SEGMENTS`] segments keeps it packed (a
+/// few bytes per segment).
+pub const DESCRIPTION_PER_ELEMENT: f64 = 1500.0;
+/// Models above this many segments keep their description packed (`oxyline.model`).
+pub const PACKED_DESCRIPTION_SEGMENTS: usize = 500_000;
+/// Resident bytes per segment beyond the layout at a whole run's peak: the load's freed pages
+/// (the parsed model, the assembly's rows, the JSON text) stay resident under the run's state,
+/// and the run's setup (steady start, factors, first steps) peaks on top of it. Measured:
+/// ~10 000-segment models and `benches/profile_memory.py` (1.05 M segments) against the
+/// layout's sum.
+pub const RESIDENT_PER_SEGMENT: f64 = 165.0;
+
+/// Peak bytes per flow segment: circuit, DAE, tables, run state, and what stays resident.
+pub const FLOW_BYTES_PER_SEGMENT: f64 = CIRCUIT_PER_SEGMENT
+    + DAE_PER_SEGMENT
+    + TABLES_PER_SEGMENT
+    + RUN_PER_SEGMENT
+    + RESIDENT_PER_SEGMENT;
+/// Peak bytes per transport cell and species, measured (the peak's increment over a
+/// flow-only run of the same network: ~280 B at 10 000 segments and at 1.05 M): below the
+/// plan's and the transport state's heap ([`PLAN_PER_CELL`] + [`TRANSPORT_RUN_PER_CELL`]),
+/// because a flow-only run peaks while it loads and the plan and the state fill part of the
+/// room the load leaves behind.
+pub const TRANSPORT_BYTES_PER_CELL: f64 = 300.0;
+/// Peak bytes per vessel and per boundary condition beyond their segments, of a model whose
+/// description is not packed.
+pub const BYTES_PER_ELEMENT: f64 = CORE_PER_ELEMENT + LOAD_PER_ELEMENT + DESCRIPTION_PER_ELEMENT;
 
 /// Estimated peak bytes of a model with `segments` flow segments, `elements` vessels and
 /// boundary conditions, `cells` transport cells per segment (0 without transport) and
 /// `species` species.
 pub fn model_bytes(segments: usize, elements: usize, cells: f64, species: usize) -> f64 {
     let s = segments as f64;
+    let per_element = if segments > PACKED_DESCRIPTION_SEGMENTS {
+        CORE_PER_ELEMENT + LOAD_PER_ELEMENT
+    } else {
+        BYTES_PER_ELEMENT
+    };
     s * FLOW_BYTES_PER_SEGMENT
         + s * cells * species as f64 * TRANSPORT_BYTES_PER_CELL
-        + elements as f64 * BYTES_PER_ELEMENT
+        + elements as f64 * per_element
 }
 
 /// The error-controlled integrators' state per circuit unknown (bytes), beyond the fixed-step
@@ -66,6 +117,26 @@ pub fn controlled_bytes(unknowns: usize, species_cells: f64, integrator: Control
         Controlled::ExplicitPair => 1,
     };
     unknowns as f64 * CONTROLLED_BYTES_PER_UNKNOWN[k] + species_cells * CONTROLLED_BYTES_PER_CELL[k]
+}
+
+/// Estimated peak bytes of a run of an assembled network: its model ([`model_bytes`], from
+/// the sizes the core allocated: `segments`, `elements` vessels and boundary conditions,
+/// `species_cells` transport cells × species, 0 without transport) and the error control's
+/// state ([`controlled_bytes`] of its `unknowns`; None: a fixed step).
+pub fn run_bytes(
+    segments: usize,
+    elements: usize,
+    species_cells: f64,
+    unknowns: usize,
+    controlled: Option<Controlled>,
+) -> f64 {
+    let per_segment = if segments > 0 {
+        species_cells / segments as f64
+    } else {
+        0.0
+    };
+    model_bytes(segments, elements, per_segment, 1)
+        + controlled.map_or(0.0, |c| controlled_bytes(unknowns, species_cells, c))
 }
 
 /// What the user can change when a model is too large.
@@ -173,8 +244,11 @@ mod tests {
     fn a_billion_segments_is_refused_with_the_estimate_and_the_setting() {
         let e = check_model("big", 1_000_000_000, 3, None, Some(8e9)).unwrap_err();
         let msg = e.to_string();
-        assert!(matches!(e, Error::Resource { bytes, .. } if bytes == 2_000_000_003_000));
-        assert!(msg.starts_with("model 'big' (1000000000 segments): needs about 2.000 TB"));
+        // a packed description above 500 000 segments: the core's bytes per element only
+        let need = 1e9 * FLOW_BYTES_PER_SEGMENT + 3.0 * (CORE_PER_ELEMENT + LOAD_PER_ELEMENT);
+        assert!(matches!(e, Error::Resource { bytes, .. } if bytes == need as u64));
+        let told = format!("needs about {}", crate::error::human_bytes(need));
+        assert!(msg.starts_with(&format!("model 'big' (1000000000 segments): {told}")));
         assert!(msg.contains("max_memory = 8.000 GB") && msg.contains("max_length"));
         assert!(check_model("small", 1000, 3, Some((1.0, 1)), Some(8e9)).is_ok());
         assert!(check_model("any", usize::MAX / 2, 3, None, None).is_ok());
