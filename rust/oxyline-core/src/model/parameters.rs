@@ -318,10 +318,8 @@ fn scale_inflow<N: Node + Clone>(source: &N, p: &mut Patched<N>, factor: f64) ->
         let Some(bc) = condition_at(source, p, &node) else {
             continue;
         };
-        if !bc
-            .get("type")
-            .is_some_and(|t| t.show().to_lowercase() == "flow")
-        {
+        let flow = bc.get("type").map(|t| t.show().to_lowercase());
+        if flow.as_deref() != Some("flow") {
             continue;
         }
         let entries = bc.into_entries().unwrap_or_default();
