@@ -12,17 +12,19 @@ paths (docs/calibration.md).
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import json
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from oxyline import _core
-from oxyline.ensemble.patch import apply_patch
-from oxyline.errors import ResourceError
+from oxyline import _core, memory
+from oxyline.description import copy_description
+from oxyline.errors import ModelError, ResourceError, core_errors
+from oxyline.io import dump_native
 from oxyline.loader import load_model
 from oxyline.model import Model, build_model
 from oxyline.targets import (
@@ -90,8 +92,6 @@ def _count(name: str, value: Any) -> int:
 def _check_controls(parameters: Sequence[str], signals: Sequence[Any], steps: int, tol: Any,
                     max_cycles: Any) -> None:
     """The tangent run's controls, and its stored derivatives against the memory allowed."""
-    from oxyline import memory
-
     if isinstance(tol, bool) or not isinstance(tol, (int, float, np.floating)) \
             or not 0.0 < float(tol) < 1.0:
         raise CalibrationError(f"tol: expected a number in (0, 1), got {tol!r}")
@@ -107,9 +107,6 @@ def _check_controls(parameters: Sequence[str], signals: Sequence[Any], steps: in
 
 def _tangent(model: Model, parameters: Sequence[str], signals: list[tuple[str, str]],
              steps_per_cycle: int | None, tol: float, max_cycles: int) -> dict[str, Any]:
-    from oxyline import _core
-    from oxyline.errors import core_errors
-
     period, steps, rho = _settings(model, steps_per_cycle)
     _check_controls(parameters, signals, steps, tol, max_cycles)
     args = (period, steps, rho, max_cycles, tol)
@@ -134,8 +131,6 @@ def _with_oxygen(model: Model, parameters: Sequence[str], signals: list[tuple[st
     the core's species tangent (by oxygen and flow parameters alike: a flow parameter
     reaches the oxygen through the flow's own tangent), the flow signals by the flow tangent
     (by flow parameters; oxygen parameters do not change the flow: their rows are 0)."""
-    from oxyline import _core
-
     text = json.dumps(model.canonical)
     o2_cols = [k for k, s in enumerate(signals) if is_oxygen_signal(s)]
     flow_cols = [k for k in range(len(signals)) if k not in o2_cols]
@@ -194,8 +189,6 @@ def _oxygen_adjoint(m: Model, parameters: Sequence[str], signals: list[tuple[str
     species transport's adjoint backward). Flow signals (an SvO2's outflow) are read from
     the flow's periodic cycle with their tangents by the flow parameters, for the weights
     and for their own terms of the gradients (oxygen parameters do not change the flow)."""
-    from oxyline import _core
-
     o2 = [k for k, s in enumerate(signals) if is_oxygen_signal(s)]
     if not o2:
         raise CalibrationError("mode 'adjoint': oxygen parameters do not change the flow "
@@ -239,9 +232,6 @@ def _adjoint(m: Model, parameters: Sequence[str], targets: Sequence[Target],
     applied to a unit basis gives its weights), and one backward sweep per output row gives
     its gradient for every parameter. ``series_at_steps``: a series is read at the cycle's
     steps (:func:`sensitivities`), else at its target's times (:func:`calibrate`)."""
-    from oxyline import _core
-    from oxyline.errors import core_errors
-
     signals = sorted({s for t in targets for s in t.signals})
     period, steps, rho = _settings(m, steps_per_cycle)
     _check_controls([], signals, steps, tol, max_cycles)
@@ -351,134 +341,33 @@ def sensitivities(model: Model | Mapping[str, Any] | str, parameters: Sequence[s
 
 # ---- the native model at a parameter point --------------------------------------------------
 
-def _vessel(source: Mapping[str, Any], name: str, path: str) -> Mapping[str, Any]:
-    for v in source.get("vessels", []):
-        if v.get("name") == name:
-            return v
-    raise CalibrationError(f"parameter '{path}': no vessel named {name!r}")
+@contextlib.contextmanager
+def _parameter_errors() -> Iterator[None]:
+    """A parameter path the core cannot resolve or set, as :class:`CalibrationError`."""
+    try:
+        yield
+    except ModelError as e:
+        raise CalibrationError(str(e)) from None
 
 
 def _base_value(source: Mapping[str, Any], path: str) -> float:
-    """The number ``path`` names in the native dict (in its own units; 1 for a scale)."""
-    parts = path.split(".")
-    try:
-        if parts[0] == "scale":
-            return 1.0
-        if parts[0] == "vessels":
-            v = _vessel(source, parts[1], path)
-            if parts[2:] == ["radius"] and "radius" not in v:
-                return float(v["radius_in"])
-            if parts[2:] == ["lumped", "stenosis_coefficient"] and isinstance(
-                    v.get("lumped"), Mapping):  # a lumped vessel without one: S = 0
-                return float(v["lumped"].get("stenosis_coefficient", 0.0))
-            node: Any = v
-            for key in parts[2:]:
-                node = node[key]
-            return float(node)
-        if parts[0] == "boundary_conditions":
-            bc = source["boundary_conditions"][parts[1]]
-            if parts[2:] == ["intramyocardial_pressure", "scale"] and \
-                    "intramyocardial_pressure" in bc:
-                return 1.0
-            return float(bc[parts[2]])
-        if parts[0] == "oxygen":  # as written in the model (a default is not read here)
-            node = source["oxygen"]
-            for key in parts[1:]:
-                node = node[key]
-            return float(node)
-    except (KeyError, IndexError, TypeError, ValueError):
-        pass
-    raise CalibrationError(f"parameter '{path}': no such number in the model")
-
-
-def _scale_inflow(data: dict[str, Any], factor: float) -> None:
-    """Multiply every flow condition's waveform (``value``, ``flow`` or ``fourier``) by
-    ``factor``."""
-    for node, bc in (data.get("boundary_conditions") or {}).items():
-        if str(bc.get("type", "")).lower() != "flow":
-            continue
-        keys = [k for k in ("value", "flow") if k in bc]
-        if not keys and not isinstance(bc.get("fourier"), Mapping):
-            raise CalibrationError(f"parameter 'scale.inflow': the flow condition at {node!r} "
-                                   "has no 'value', 'flow' or 'fourier' to scale")
-        for k in keys:
-            bc[k] = (np.asarray(bc[k], dtype=float) * factor).tolist()
-        if isinstance(bc.get("fourier"), Mapping):
-            f = dict(bc["fourier"])
-            for k in ("mean", "cos", "sin"):
-                if k in f:
-                    f[k] = (np.asarray(f[k], dtype=float) * factor).tolist()
-            bc["fourier"] = f
-
-
-def _scale_pressure(w: Any, factor: float) -> Any:
-    """A native pressure waveform (a number, or ``value``, ``time`` + ``pressure`` tables or
-    ``fourier``) times ``factor``."""
-    if not isinstance(w, Mapping):
-        return float(w) * factor
-    out = dict(w)
-    for k in ("value", "pressure"):
-        if k in out:
-            out[k] = (np.asarray(out[k], dtype=float) * factor).tolist()
-    if isinstance(out.get("fourier"), Mapping):
-        out["fourier"] = {k: (np.asarray(v, dtype=float) * factor).tolist()
-                          if k in ("mean", "cos", "sin") else v
-                          for k, v in out["fourier"].items()}
-    return out
+    """The number ``path`` names in the native dict (in its own units; 1 for a scale): the
+    core's reading (``oxyline_core::model::parameters``)."""
+    with _parameter_errors():
+        return float(_core.parameter_value(source, path))
 
 
 def native_model(source: Mapping[str, Any], parameters: Sequence[str],
                  values: Sequence[float]) -> dict[str, Any]:
     """The native model dict ``source`` with each parameter set to its value (native units;
-    a scale to its factor)."""
-    patch: dict[str, Any] = {}
-    inflow = None
-    heart: list[tuple[list[str], float]] = []
-    squeeze: dict[str, float] = {}  # a coronary outlet's intramyocardial pressure factor
-    for path, x in zip(parameters, values, strict=True):
-        parts = path.split(".")
-        if path == "scale.inflow":
-            inflow = float(x)
-        elif parts[0] == "boundary_conditions" and parts[2:] == ["intramyocardial_pressure",
-                                                                  "scale"]:
-            squeeze[parts[1]] = float(x)
-        elif parts[0] == "vessels" and parts[2:3] in (["chamber"], ["valve"],
-                                                      ["chamber_sphere"],
-                                                      ["heart_pulmonary"]):
-            heart.append((parts, float(x)))
-        elif parts[0] == "scale":
-            patch.setdefault("scale", {})[parts[1]] = float(x)
-        elif parts[0] == "oxygen":
-            node = patch
-            for key in parts[:-1]:
-                node = node.setdefault(key, {})
-            node[parts[-1]] = float(x)
-        elif parts[0] == "vessels":
-            props = patch.setdefault("vessels", {}).setdefault(parts[1], {})
-            if len(parts) == 4:  # vessels.<name>.lumped.<key>
-                lumped = dict(_vessel(source, parts[1], path).get("lumped", {}))
-                props["lumped"] = {**lumped, **props.get("lumped", {}), parts[3]: float(x)}
-            else:
-                props[parts[2]] = float(x)
-        else:
-            patch.setdefault("boundary_conditions", {}).setdefault(parts[1], {})[parts[2]] = \
-                float(x)
-    data = apply_patch(dict(source), patch) if patch else copy.deepcopy(dict(source))
-    if inflow is not None:
-        _scale_inflow(data, inflow)
-    if squeeze:
-        data = copy.deepcopy(data)
-        for node, f in squeeze.items():
-            bc = data["boundary_conditions"][node]
-            bc["intramyocardial_pressure"] = _scale_pressure(bc["intramyocardial_pressure"], f)
-    if heart:  # a chamber's or valve's value, set where the element holds it
-        data = copy.deepcopy(data)
-        for parts, x in heart:
-            node: Any = _vessel(data, parts[1], ".".join(parts))
-            for key in parts[2:-1]:
-                node = node[key]
-            node[parts[-1]] = x
-    return data
+    a scale to its factor), set by the core (``oxyline_core::model::parameters``:
+    ``scale.inflow`` scales the flow waveforms, an intramyocardial pressure's ``scale`` its
+    waveform, a heart element's value is set where the element holds it, every other path as
+    an ensemble patch's)."""
+    with _parameter_errors():
+        data = _core.set_parameters(dict(source), list(parameters),
+                                    [float(x) for x in values])
+    return copy_description(data)
 
 
 # ---- calibration ----------------------------------------------------------------------------
@@ -832,8 +721,6 @@ def main_cli(model: str, problem_file: str, output: str, quiet: bool = False) ->
     """``oxyline calibrate MODEL TARGETS.yaml -o OUT``: fit, write the calibrated model, print
     the parameters with their 95 % intervals and the report. Exit 0 on convergence, 1 if the
     fit failed (the best point is written all the same)."""
-    from oxyline.io import dump_native
-
     problem = read_problem(problem_file)
     res = calibrate(model, problem["targets"], problem["parameters"],
                     bounds=problem["bounds"], method=problem["method"],

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+import oxyline
 from oxyline import pwdb
 from oxyline.calibrate import sensitivities as exact
 from oxyline.populations import (
@@ -35,6 +36,8 @@ from oxyline.populations import (
     patched,
     plausible_ranges,
     subject_patch,
+    subject_summary,
+    summary_vessels,
 )
 from oxyline.targets import CalibrationError
 
@@ -337,9 +340,6 @@ def population(ages: Sequence[float] = (25, 35, 45, 55, 65, 75), levels: int = 3
 
 
 def _simulate(model: dict[str, Any]) -> Mapping[str, float]:
-    import oxyline
-    from oxyline.populations import subject_summary, summary_vessels
-
     res = oxyline.simulate(model, until_periodic=1e-4, vessels=summary_vessels(),
                            variables=["pressure_in", "pressure_out", "segment_pressure_in"],
                            progress=False)

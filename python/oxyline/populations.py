@@ -35,8 +35,9 @@ from typing import Any
 
 import numpy as np
 
-from oxyline import pwdb
+from oxyline import catalogue, pwdb
 from oxyline.catalogue import shipped_data
+from oxyline.ensemble import apply_patch
 from oxyline.errors import ModelError
 
 MODEL = "pwdb-116"
@@ -263,8 +264,6 @@ def parameters(ages: Sequence[float] = (25, 35, 45, 55, 65, 75), levels: int = 3
 @lru_cache(maxsize=1)
 def _base() -> tuple[list[dict[str, Any]]]:
     """The built-in's segment table (cached; callers copy before changing it)."""
-    from oxyline import catalogue
-
     return (pwdb.geometry_of(catalogue.load_dict(MODEL)),)
 
 
@@ -309,8 +308,6 @@ def subject_patch(row: Mapping[str, float], base: list[dict[str, Any]] | None = 
 def base_model(oxygen: bool = False) -> dict[str, Any]:
     """The native dict of ``pwdb-116`` (the population's base model), with the :data:`OXYGEN`
     section when ``oxygen`` (then :func:`subject_summary` reports ``ica_po2``)."""
-    from oxyline import catalogue
-
     data = catalogue.load_dict(MODEL)
     if oxygen:
         data["oxygen"] = copy.deepcopy(OXYGEN)
@@ -342,8 +339,6 @@ def patched(model: Any, patch: Mapping[str, Any]) -> dict[str, Any]:
     """A native model dict with ``patch`` deep-merged: :func:`oxyline.ensemble.apply_patch`
     (the patch semantics of :func:`oxyline.simulate_ensemble`, kept here under the name the
     population examples use)."""
-    from oxyline.ensemble import apply_patch
-
     return apply_patch(model, patch)
 
 

@@ -1,10 +1,12 @@
 //! Exact parameter sensitivities of a model's periodic state (`oxyline_core::sensitivity`):
 //! the binding of `oxyline.sensitivities` and `oxyline.calibrate`.
 
+use crate::ensemble::patched_model;
 use crate::errors::to_py;
+use crate::reader::node::PyNode;
 use numpy::{IntoPyArray, PyArrayMethods, PyReadonlyArray1};
 use oxyline_core::error::Error;
-use oxyline_core::model::{NetworkSpec, parse};
+use oxyline_core::model::{NetworkSpec, parameters, parse};
 use oxyline_core::sensitivity::{
     TangentSettings, adjoint_with, sensitivities, species_adjoint_with,
     species_sensitivities as species,
@@ -296,4 +298,28 @@ fn call_weights(
     let w = weights_of.call1(py, (times, sig))?;
     let w: PyReadonlyArray1<f64> = w.bind(py).extract()?;
     Ok(w.as_slice()?.to_vec())
+}
+
+/// `parameter_value(source, path)`: the number the parameter path names in the native model
+/// dict `source`, in the model's units (1 for a scale; `oxyline_core::model::parameters`).
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn parameter_value(source: Bound<'_, PyAny>, path: &str) -> PyResult<f64> {
+    parameters::base_value(&PyNode(source), path).map_err(to_py)
+}
+
+/// `set_parameters(source, paths, values)`: the native model dict `source` with each
+/// parameter path set to its value (the model's units; a scale to its factor), sharing every
+/// element the values leave alone (`oxyline_core::model::parameters::set_values`).
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn set_parameters<'py>(
+    py: Python<'py>,
+    source: Bound<'py, PyDict>,
+    paths: Vec<String>,
+    values: Vec<f64>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let base = PyNode(source.clone().into_any());
+    let patched = parameters::set_values(&base, &paths, &values).map_err(to_py)?;
+    patched_model(py, &source, &patched)
 }

@@ -13,7 +13,7 @@ use oxyline_core::ensemble::{
     ColumnStats, ConditionValue, Member, SpecPatch, StatsFold, TableValues, Target, Targets,
     column_stats, run_fed, worker_count,
 };
-use oxyline_core::model::patch::{self, Merged, PatchError};
+use oxyline_core::model::patch::{self, Merged, PatchError, Patched};
 use oxyline_core::model::{BoundarySpec, NetworkSpec, VesselSpec, parse};
 use oxyline_core::{Chunk, Error, Outcome, OutputSink, RunSettings, Selection, Transport};
 use pyo3::exceptions::PyKeyboardInterrupt;
@@ -585,6 +585,7 @@ fn merged_to_python<'py>(py: Python<'py>, m: &Merged<PyNode<'py>>) -> PyResult<B
     Ok(match m {
         Merged::Node(n) => n.0.clone(),
         Merged::Number(x) => PyFloat::new(py, *x).into_any(),
+        Merged::Numbers(v) => PyList::new(py, v)?.into_any(),
         Merged::Map(entries) => {
             let d = PyDict::new(py);
             for (k, v) in entries {
@@ -593,6 +594,43 @@ fn merged_to_python<'py>(py: Python<'py>, m: &Merged<PyNode<'py>>) -> PyResult<B
             d.into_any()
         }
     })
+}
+
+/// The model dict of a patched model (`oxyline_core::model::patch::Patched`): `source`'s
+/// entries, its vessel list and condition dict rebuilt where the patch replaced any, sharing
+/// every element it leaves alone.
+pub(crate) fn patched_model<'py>(
+    py: Python<'py>,
+    source: &Bound<'py, PyDict>,
+    patched: &Patched<PyNode<'py>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let data = source.copy()?;
+    if patched.has_vessels {
+        let list = PyList::new(
+            py,
+            source.get_item("vessels")?.map_or(Ok(Vec::new()), |v| {
+                v.try_iter()?.collect::<PyResult<Vec<_>>>()
+            })?,
+        )?;
+        for (i, v) in &patched.vessels {
+            list.set_item(*i, merged_to_python(py, v)?)?;
+        }
+        data.set_item("vessels", list)?;
+    }
+    if patched.has_conditions {
+        let bcs = PyDict::new(py);
+        if let Some(old) = source.get_item("boundary_conditions")? {
+            bcs.update(old.cast::<PyMapping>()?)?;
+        }
+        for (node, bc) in &patched.conditions {
+            bcs.set_item(node, merged_to_python(py, bc)?)?;
+        }
+        data.set_item("boundary_conditions", bcs)?;
+    }
+    for (key, value) in &patched.sections {
+        data.set_item(key, merged_to_python(py, value)?)?;
+    }
+    Ok(data)
 }
 
 /// What `merge_patch` returns (see there).
@@ -634,32 +672,7 @@ pub(crate) fn merge_patch<'py>(
             ));
         }
     };
-    let data = source.copy()?;
-    if patched.has_vessels {
-        let list = PyList::new(
-            py,
-            source.get_item("vessels")?.map_or(Ok(Vec::new()), |v| {
-                v.try_iter()?.collect::<PyResult<Vec<_>>>()
-            })?,
-        )?;
-        for (i, v) in &patched.vessels {
-            list.set_item(*i, merged_to_python(py, v)?)?;
-        }
-        data.set_item("vessels", list)?;
-    }
-    if patched.has_conditions {
-        let bcs = PyDict::new(py);
-        if let Some(old) = source.get_item("boundary_conditions")? {
-            bcs.update(old.cast::<PyMapping>()?)?;
-        }
-        for (node, bc) in &patched.conditions {
-            bcs.set_item(node, merged_to_python(py, bc)?)?;
-        }
-        data.set_item("boundary_conditions", bcs)?;
-    }
-    for (key, value) in &patched.sections {
-        data.set_item(key, merged_to_python(py, value)?)?;
-    }
+    let data = patched_model(py, &source, &patched)?;
     let paths = PyDict::new(py);
     for (i, p) in &patched.vessel_paths {
         paths.set_item(("vessel", *i), p)?;

@@ -18,6 +18,7 @@ pub mod facilitation;
 pub mod native;
 pub mod node;
 pub mod openbf;
+pub mod parameters;
 pub mod patch;
 pub mod plausibility;
 pub mod pwdb;

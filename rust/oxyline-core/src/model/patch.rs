@@ -92,17 +92,19 @@ impl PatchError {
 type Res<T> = std::result::Result<T, PatchError>;
 
 /// A value of the patched model: a value of the base model or of the patch as it is, a
-/// mapping rebuilt from both, or a number computed by `scale`.
+/// mapping rebuilt from both, a number computed by `scale`, or a table of numbers computed
+/// by a parameter (a scaled waveform, `super::parameters`).
 #[derive(Clone)]
 pub enum Merged<N> {
     Node(N),
     Map(Vec<(String, Merged<N>)>),
     Number(f64),
+    Numbers(Vec<f64>),
 }
 
 impl<N: Node + Clone> Merged<N> {
     /// The entries of a mapping (a node's read once), or None for anything else.
-    fn into_entries(self) -> Option<Vec<(String, Merged<N>)>> {
+    pub(super) fn into_entries(self) -> Option<Vec<(String, Merged<N>)>> {
         match self {
             Merged::Map(e) => Some(e),
             Merged::Node(n) if n.is_map() => Some(
@@ -115,16 +117,16 @@ impl<N: Node + Clone> Merged<N> {
         }
     }
 
-    fn get(&self, key: &str) -> Option<Merged<N>> {
+    pub(super) fn get(&self, key: &str) -> Option<Merged<N>> {
         match self {
             Merged::Map(e) => e.iter().find(|(k, _)| k == key).map(|(_, v)| v.clone()),
             Merged::Node(n) => n.get(key).map(Merged::Node),
-            Merged::Number(_) => None,
+            Merged::Number(_) | Merged::Numbers(_) => None,
         }
     }
 }
 
-fn set<N>(entries: &mut Vec<(String, Merged<N>)>, key: &str, value: Merged<N>) {
+pub(super) fn set<N>(entries: &mut Vec<(String, Merged<N>)>, key: &str, value: Merged<N>) {
     match entries.iter_mut().find(|(k, _)| k == key) {
         Some(slot) => slot.1 = value,
         None => entries.push((key.to_owned(), value)),
@@ -297,7 +299,7 @@ fn text_of<N: Node>(m: &Merged<N>) -> String {
     match m {
         Merged::Node(n) => n.show(),
         Merged::Number(x) => py_repr(*x),
-        Merged::Map(_) => String::new(),
+        Merged::Map(_) | Merged::Numbers(_) => String::new(),
     }
 }
 
@@ -458,6 +460,7 @@ fn scale_base<N: Node>(x: Option<&Merged<N>>, k: usize, path: &str) -> Res<f64> 
         let shown = match x {
             Some(Merged::Node(n)) => n.repr(),
             Some(Merged::Map(_)) => "a mapping".to_owned(),
+            Some(Merged::Numbers(_)) => "a table".to_owned(),
             _ => "None".to_owned(),
         };
         PatchError::Value(Error::model(
@@ -595,7 +598,7 @@ impl<N: Node + Clone> Work<'_, N> {
     }
 }
 
-fn set_at<K: PartialEq, V>(items: &mut Vec<(K, V)>, key: K, value: V) {
+pub(super) fn set_at<K: PartialEq, V>(items: &mut Vec<(K, V)>, key: K, value: V) {
     match items.iter_mut().find(|(k, _)| *k == key) {
         Some(slot) => slot.1 = value,
         None => items.push((key, value)),

@@ -28,6 +28,7 @@ fn plain(m: &Merged<Value>) -> Value {
     match m {
         Merged::Node(n) => n.clone(),
         Merged::Number(x) => json!(x),
+        Merged::Numbers(v) => json!(v),
         Merged::Map(e) => Value::Object(e.iter().map(|(k, v)| (k.clone(), plain(v))).collect()),
     }
 }
