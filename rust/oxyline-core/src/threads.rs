@@ -224,7 +224,12 @@ mod tests {
             let (inside, index, has_pool, sum) = in_pool(|| {
                 let sum = chunked_sum_of_squares(len);
                 let has = pool().is_some();
-                (std::thread::current().id(), rayon::current_thread_index(), has, sum)
+                (
+                    std::thread::current().id(),
+                    rayon::current_thread_index(),
+                    has,
+                    sum,
+                )
             });
             assert_ne!(inside, outside, "the phase runs on a pool thread");
             assert!(index.is_some());
@@ -242,7 +247,8 @@ mod tests {
     fn without_a_pool_a_phase_runs_on_the_calling_thread() {
         with_threads(Some(1), || {
             let here = std::thread::current().id();
-            let (there, index) = in_pool(|| (std::thread::current().id(), rayon::current_thread_index()));
+            let (there, index) =
+                in_pool(|| (std::thread::current().id(), rayon::current_thread_index()));
             assert_eq!(there, here);
             assert!(index.is_none());
         })

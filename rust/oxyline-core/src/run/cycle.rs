@@ -575,9 +575,12 @@ impl<'r, 'f> Cycles<'r, 'f> {
             ad.dense_row((theta, h), (y, yd), probes, out);
         })?;
         if rows.species && self.state.species.is_some() {
-            let (yi, ydi, zi, vi) = ad.interpolate_all(theta, h, &self.state);
-            self.state
-                .observe_at(time, yi, ydi, zi, vi, &mut self.obs_row)?;
+            // the interpolation and the observation in one entry of the run's pool
+            let (state, row) = (&mut self.state, &mut self.obs_row);
+            crate::threads::in_pool(|| {
+                let (yi, ydi, zi, vi) = ad.interpolate_all(theta, h, state);
+                state.observe_at(time, yi, ydi, zi, vi, row)
+            })?;
             self.obs_row.shrink_to_fit();
             self.rec.push_species(&self.obs_row);
         }
@@ -598,7 +601,9 @@ impl<'r, 'f> Cycles<'r, 'f> {
             self.record_rates(time)?;
         }
         if species && self.state.species.is_some() {
-            self.state.observe(time, &mut self.obs_row)?;
+            // the row's observation passes in one entry of the run's pool
+            let (state, row) = (&mut self.state, &mut self.obs_row);
+            crate::threads::in_pool(|| state.observe(time, row))?;
             // the first row grew the buffer by doubling: keep only its length (a row holds
             // every species column of every output vessel and segment, ~50 B per segment)
             self.obs_row.shrink_to_fit();
