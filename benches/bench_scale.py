@@ -46,19 +46,19 @@ times in brackets —
 
 ``--threads``: each configuration on each thread count (``simulate(threads=N)``); the
 ``wall 1/N`` column is the wall-time speed-up of the run over the same tree on the first
-count. With ``--threads 1 N ...`` the ``serial s`` column is the run's serial fraction: the
-CPU time of the calling thread in the N-thread run (the run's time loop, output and
-bookkeeping: everything outside the loops split over the pool, whose threads do those while
-the calling thread waits) over the CPU time of the one-thread run; ``Amdahl`` is
+count. With ``--threads 1 N ...`` the ``serial s`` column is the CPU time of the calling
+thread in the N-thread run over the CPU time of the one-thread run; ``Amdahl`` is
 1/(s + (1 − s)/N) for 2, 16 and 64 cores. CPU times are the process's own threads', so the
-machine's load distorts them far less than the wall ratio (the serial parts done inside the
-pool, the top trees of the eliminations, are counted parallel: a few hundred vertices; the
-calling thread's waking of the pool and the sum of the boundary fluxes in face order are
-counted serial). With several threads the calling thread's sleeps per step (its voluntary context switches:
-one per entry of the run's pool) are printed under the row. ``--baseline DIR`` with
-``--threads 1 2`` gives s before and after in the same run (docs/performance.md, "The boundary faces, the mixing points and the output row on
-the threads"). The memory floor of the machine is measured first in the same run: a STREAM-like
-copy of a 256 MB array (numpy, one thread), given as ns per 8-byte value copied; the
+machine's load distorts them far less than the wall ratio. Each phase of a step runs as one
+entry of the run's pool, its serial parts (the top trees of the eliminations, the boundary
+fluxes' sum in face order, the Newton bookkeeping) on a pool thread, so the calling thread's
+CPU (the time loop, the rows' recording, its waking of the pool) is a lower bound of the
+serial fraction; the wall ratio gives s = (N / S − 1) / (N − 1) on a free machine. With
+several threads the calling thread's sleeps per step (its voluntary context switches: one
+per entry of the run's pool) are printed under the row. ``--baseline DIR`` with
+``--threads 1 2`` gives both before and after in the same run (docs/performance.md, "One pool
+entry per step"). The memory floor of the machine is measured first in the same run: a
+STREAM-like copy of a 256 MB array (numpy, one thread), given as ns per 8-byte value copied; the
 ``copies/seg-step`` column is a step's wall time per segment in units of that copy, i.e.
 how many doubles a step could have copied per segment in its time.
 
