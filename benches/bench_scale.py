@@ -46,18 +46,19 @@ times in brackets —
 
 ``--threads``: each configuration on each thread count (``simulate(threads=N)``); the
 ``wall 1/N`` column is the wall-time speed-up of the run over the same tree on the first
-count. With ``--threads 1 N ...`` the ``serial s`` column is the run's serial fraction: the
-CPU time of the calling thread in the N-thread run (the run's time loop, output and
-bookkeeping: everything outside the loops split over the pool, whose threads do those while
-the calling thread waits) over the CPU time of the one-thread run; ``Amdahl`` is
+count. With ``--threads 1 N ...`` the ``serial s`` column is the CPU time of the calling
+thread in the N-thread run over the CPU time of the one-thread run; ``Amdahl`` is
 1/(s + (1 − s)/N) for 2, 16 and 64 cores. CPU times are the process's own threads', so the
-machine's load distorts them far less than the wall ratio (the serial parts done inside the
-pool, the top trees of the eliminations, are counted parallel: a few hundred vertices; the
-calling thread's waking of the pool and the sum of the boundary fluxes in face order are
-counted serial). ``--baseline DIR`` with ``--threads 1 2`` gives s before and after in the
-same run (docs/performance.md, "The boundary faces, the mixing points and the output row on
-the threads"). The memory floor of the machine is measured first in the same run: a STREAM-like
-copy of a 256 MB array (numpy, one thread), given as ns per 8-byte value copied; the
+machine's load distorts them far less than the wall ratio. Each phase of a step runs as one
+entry of the run's pool, its serial parts (the top trees of the eliminations, the boundary
+fluxes' sum in face order, the Newton bookkeeping) on a pool thread, so the calling thread's
+CPU (the time loop, the rows' recording, its waking of the pool) is a lower bound of the
+serial fraction; the wall ratio gives s = (N / S − 1) / (N − 1) on a free machine. With
+several threads the calling thread's sleeps per step (its voluntary context switches: one
+per entry of the run's pool) are printed under the row. ``--baseline DIR`` with
+``--threads 1 2`` gives both before and after in the same run (docs/performance.md, "One pool
+entry per step"). The memory floor of the machine is measured first in the same run: a
+STREAM-like copy of a 256 MB array (numpy, one thread), given as ns per 8-byte value copied; the
 ``copies/seg-step`` column is a step's wall time per segment in units of that copy, i.e.
 how many doubles a step could have copied per segment in its time.
 
@@ -195,6 +196,7 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
     # the calling thread's CPU: with threads > 1 what the run does outside its parallel
     # loops (they run on the pool's threads while this one waits, without spinning)
     t1 = time.thread_time()
+    s1 = thread_sleeps()
     with tempfile.TemporaryDirectory() as d:
         if spec.get("zarr"):
             res = oxyline.simulate_to_zarr(m, os.path.join(d, "run.zarr"),
@@ -207,11 +209,14 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
                 res = exc.result
             settings = res.settings
         c2, w2, t2 = time.process_time(), time.perf_counter(), time.thread_time()
+        sleeps = thread_sleeps() - s1 if s1 is not None else None
         dt = float(settings["dt"]) if settings.get("dt") else None
         out = {"load_cpu": c1 - c0, "load_wall": w1 - w0, "run_cpu": c2 - c1,
                "run_main_cpu": t2 - t1,
                "run_wall": w2 - w1, "segments": int(m.network.summary()["segments"]),
                "dt": dt, "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
+        if sleeps is not None:
+            out["sleeps"] = sleeps
         if settings.get("steps"):  # an error-controlled run: its accepted steps
             out["steps"] = int(settings["steps"])
             out["ran"] = f"{settings['method']}, {settings.get('step_control', '')}"
@@ -307,6 +312,19 @@ def copy_in_this_process() -> float:
         np.copyto(b, a)
         best = min(best, time.perf_counter() - t0)
     return 1e9 * best / a.size
+
+
+def thread_sleeps() -> int | None:
+    """The calling thread's voluntary context switches so far (Linux; None elsewhere): with
+    threads > 1 one per entry of the run's pool (the thread sleeps until the pool is done)."""
+    try:
+        with open("/proc/thread-self/status") as f:
+            for line in f:
+                if line.startswith("voluntary_ctxt_switches:"):
+                    return int(line.split()[1])
+    except OSError:
+        pass
+    return None
 
 
 def serial_fraction(r: dict[str, Any], first: dict[str, Any] | None) -> float | None:
@@ -481,6 +499,10 @@ def main() -> None:
                           + thread_cells(r, first, copy), flush=True)
                     if "ran" in r:
                         print(f"|   ran: {r['ran']} |", flush=True)
+                    if threads != 1 and r.get("sleeps") is not None:
+                        steps = r.get("steps", round(PERIOD / r["dt"]))
+                        print(f"|   calling thread: {r['sleeps'] / steps:.1f} sleeps per step "
+                              "(entries of the run's pool) |", flush=True)
                     if threads == a.threads[0]:
                         rows.setdefault((label, config), []).append(r)
     if skipped:

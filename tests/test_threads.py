@@ -4,6 +4,7 @@ mass balance of the run kept, and a bad thread count refused naming the setting.
 from __future__ import annotations
 
 import math
+import threading
 from typing import Any
 
 import numpy as np
@@ -181,6 +182,20 @@ def test_the_threaded_run_conserves_oxygen(runs: dict[int, oxyline.Result]) -> N
     # outflow + wall flux + change of stored mass) closes to the transport's own accuracy
     mb = runs[2].o2_mass_balance
     assert abs(mb["residual"][-1]) <= 1e-6 * abs(mb["inflow"][-1])
+
+
+@pytest.mark.parametrize("controlled", [False, True])
+def test_the_steps_on_the_pool_leave_the_callbacks_on_the_calling_thread(
+        tree: oxyline.Model, controlled: bool) -> None:
+    # each step's passes run as one entry of the run's pool, on a pool thread; the progress
+    # callback (and with it Ctrl-C and cancel) stays on the thread that called simulate
+    seen: list[int] = []
+    dt = {} if controlled else {"dt": 2e-3}
+    res = oxyline.simulate(tree, cycles=1, output_every=0.05, segments=False, threads=2,
+                           progress=lambda t, t_end: seen.append(threading.get_ident()), **dt)
+    assert (res.settings.get("steps") is not None) == controlled
+    assert seen, "the progress callback was called"
+    assert set(seen) == {threading.get_ident()}
 
 
 @pytest.mark.parametrize("bad", [0, -2, 1.5, "two"])

@@ -33,6 +33,9 @@ fn pool_of(threads: usize) -> Result<Arc<ThreadPool>> {
     let pool = ThreadPoolBuilder::new()
         .num_threads(threads)
         .thread_name(|i| format!("oxyline-run-{i}"))
+        // a step's serial parts run on a pool thread too (`in_pool`): the stack of a main
+        // thread, not the 2 MiB default of spawned ones
+        .stack_size(STACK_BYTES)
         .build()
         .map_err(|e| Error::Resource {
             what: "simulation: threads".to_owned(),
@@ -45,6 +48,9 @@ fn pool_of(threads: usize) -> Result<Arc<ThreadPool>> {
     pools.insert(threads, pool.clone());
     Ok(pool)
 }
+
+/// The stack of a run pool's thread (the usual main thread's; reserved, touched as used).
+const STACK_BYTES: usize = 8 << 20;
 
 /// Most threads a run may ask for.
 pub const MAX_THREADS: usize = 4096;
@@ -76,14 +82,7 @@ pub fn with_threads<R>(threads: Option<usize>, f: impl FnOnce() -> R) -> Result<
         (true, None) => pool_of(n).ok(),
     };
     let previous = POOL.with(|p| p.replace(pool));
-    // restored also if `f` panics (the binding turns a panic into an error and goes on)
-    struct Restore(Option<Option<Arc<ThreadPool>>>);
-    impl Drop for Restore {
-        fn drop(&mut self) {
-            let previous = self.0.take().flatten();
-            POOL.with(|p| *p.borrow_mut() = previous);
-        }
-    }
+    // restored also if `f` panics
     let _restore = Restore(Some(previous));
     Ok(f())
 }
@@ -91,6 +90,48 @@ pub fn with_threads<R>(threads: Option<usize>, f: impl FnOnce() -> R) -> Result<
 /// The run pool of this thread, if it has more than one thread.
 pub fn pool() -> Option<Arc<ThreadPool>> {
     POOL.with(|p| p.borrow().clone())
+}
+
+/// `f` run as one entry of the run's pool, with that pool set for the pool thread that runs
+/// it, so that every split pass inside `f` starts from a pool thread (rayon runs a pool
+/// thread's `install` of its own pool in place and hands its tasks to the idle threads):
+/// the calling thread wakes the pool and sleeps once for all of `f` instead of once per pass.
+/// The passes take the same paths and partitions as from the calling thread, so the results
+/// are the same bits. Without a pool (one thread), or already on a pool thread, `f` runs here.
+///
+/// `f` need not be `Send`: it runs on one pool thread while the calling thread blocks until
+/// it returns (a scoped thread), and the run's state it touches has no tie to a thread (no
+/// `Rc`, no callbacks into Python; the thread-locals are per-thread scratch, and this pool).
+pub fn in_pool<R>(f: impl FnOnce() -> R) -> R {
+    let Some(pool) = pool() else {
+        return f();
+    };
+    if pool.current_thread_index().is_some() {
+        return f();
+    }
+    struct Crossing<T>(T);
+    // SAFETY: see the doc above: one thread at a time touches `f`, its captures and `R`,
+    // the calling thread blocked in `install` meanwhile
+    unsafe impl<T> Send for Crossing<T> {}
+    let (run, inner) = (Crossing(f), Crossing(pool.clone()));
+    let out = pool.install(move || {
+        let (Crossing(f), Crossing(pool)) = (run, inner);
+        let previous = POOL.with(|p| p.replace(Some(pool)));
+        let _restore = Restore(Some(previous));
+        Crossing(f())
+    });
+    out.0
+}
+
+/// Puts a thread's previous run pool back when dropped (also when the run panics: the
+/// binding turns a panic into an error and goes on).
+struct Restore(Option<Option<Arc<ThreadPool>>>);
+
+impl Drop for Restore {
+    fn drop(&mut self) {
+        let previous = self.0.take().flatten();
+        POOL.with(|p| *p.borrow_mut() = previous);
+    }
 }
 
 /// Elements per task of the run loop's element-wise passes ([`max_over`], [`for_chunks`]),
@@ -152,5 +193,81 @@ pub fn for_ranges_of(len: usize, chunk: usize, f: impl Fn(std::ops::Range<usize>
     match pool().filter(|_| len >= 2 * chunk) {
         Some(pool) => pool.install(|| (0..chunks).into_par_iter().for_each(|c| f(range(c)))),
         None => (0..chunks).for_each(|c| f(range(c))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Σ i² over 0..len by a split pass (each element written by its chunk's call), then
+    /// summed in order.
+    fn chunked_sum_of_squares(len: usize) -> u64 {
+        let mut values = vec![0u64; len];
+        for_chunks(&mut values, |first, v| {
+            for (i, x) in v.iter_mut().enumerate() {
+                *x = ((first + i) as u64).pow(2);
+            }
+        });
+        values.iter().sum()
+    }
+
+    #[test]
+    fn a_phase_runs_on_one_pool_thread_with_the_pool_set() {
+        let len = 5 * CHUNK + 17;
+        // the closed form n(n-1)(2n-1)/6 of Σ_{i<n} i²
+        let n = len as u64;
+        let truth = n * (n - 1) * (2 * n - 1) / 6;
+        with_threads(Some(2), || {
+            assert!(pool().is_some());
+            let outside = std::thread::current().id();
+            let (inside, index, has_pool, sum) = in_pool(|| {
+                let sum = chunked_sum_of_squares(len);
+                let has = pool().is_some();
+                (
+                    std::thread::current().id(),
+                    rayon::current_thread_index(),
+                    has,
+                    sum,
+                )
+            });
+            assert_ne!(inside, outside, "the phase runs on a pool thread");
+            assert!(index.is_some());
+            assert!(has_pool, "the passes inside see the run's pool");
+            assert_eq!(sum, truth);
+            // a nested phase runs in place; the calling thread keeps its pool afterwards
+            let nested = in_pool(|| in_pool(rayon::current_thread_index));
+            assert!(nested.is_some());
+            assert!(pool().is_some());
+        })
+        .unwrap();
+    }
+
+    #[test]
+    fn without_a_pool_a_phase_runs_on_the_calling_thread() {
+        with_threads(Some(1), || {
+            let here = std::thread::current().id();
+            let (there, index) =
+                in_pool(|| (std::thread::current().id(), rayon::current_thread_index()));
+            assert_eq!(there, here);
+            assert!(index.is_none());
+        })
+        .unwrap();
+    }
+
+    #[test]
+    fn a_panic_in_a_phase_reaches_the_caller_and_leaves_the_pool_thread_serial() {
+        with_threads(Some(2), || {
+            let caught = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                in_pool(|| panic!("a failing step"))
+            }));
+            assert!(caught.is_err());
+            assert!(pool().is_some(), "the calling thread keeps its pool");
+            // the pool's threads have no run pool of their own outside a phase
+            let p = pool().unwrap();
+            let seen: Vec<bool> = p.broadcast(|_| super::pool().is_none());
+            assert!(seen.iter().all(|&none| none));
+        })
+        .unwrap();
     }
 }

@@ -341,7 +341,9 @@ impl<'r, 'f> Cycles<'r, 'f> {
         progress: &mut dyn FnMut(f64, f64) -> bool,
     ) -> Result<()> {
         let dt = self.state.dt;
-        let done = self.state.advance(self.steps as f64 * dt);
+        // the flow and species passes of the step in one entry of the run's pool
+        let t = self.steps as f64 * dt;
+        let done = crate::threads::in_pool(|| self.state.advance(t));
         self.steps += 1;
         let t_new = self.steps as f64 * dt;
         done?;
@@ -415,10 +417,14 @@ impl<'r, 'f> Cycles<'r, 'f> {
                 toward_end(ad.h, rem)
             };
             let replayed = self.periodic_steps.replaying();
-            ad.save_start(&self.state);
-            let stepped = self.state.advance_flow(t, h);
+            // the flow step and its estimate in one entry of the run's pool
+            let stepped = crate::threads::in_pool(|| {
+                ad.save_start(&self.state);
+                let stepped = self.state.advance_flow(t, h);
+                stepped.map(|()| ad.judge_flow(&mut self.state, h))
+            });
             let (err, kinds) = match stepped {
-                Ok(()) => ad.judge_flow(&mut self.state, h),
+                Ok(judged) => judged,
                 Err(e) => match retry.failed(h, (ad.h_min(), ad.h_max())) {
                     OnFailure::Damp => {
                         // the same step again, Newton with its line search
@@ -482,13 +488,17 @@ impl<'r, 'f> Cycles<'r, 'f> {
                 ad.state_changed();
             }
             self.periodic_steps.accepted(h);
-            self.state.advance_species(t, h)?;
-            ad.after_species(&self.state);
+            crate::threads::in_pool(|| {
+                self.state.advance_species(t, h)?;
+                ad.after_species(&self.state);
+                Ok::<(), Error>(())
+            })?;
             let t_new = if h == rem { t_end } else { t + h };
             for tau in rows.due(period, n_out, &mut next_out, t_new) {
                 self.dense_row(ad, rows, (tau - t) / h, h, tau)?;
             }
-            ad.accept(&self.state, h, err, kinds);
+            // the estimates and the next step's size in one entry of the run's pool
+            crate::threads::in_pool(|| ad.accept(&self.state, h, err, kinds));
             if leap {
                 // the solution jumped within the leap: the estimates start again after it
                 ad.restart(ad.h.min(h));
@@ -565,9 +575,12 @@ impl<'r, 'f> Cycles<'r, 'f> {
             ad.dense_row((theta, h), (y, yd), probes, out);
         })?;
         if rows.species && self.state.species.is_some() {
-            let (yi, ydi, zi, vi) = ad.interpolate_all(theta, h, &self.state);
-            self.state
-                .observe_at(time, yi, ydi, zi, vi, &mut self.obs_row)?;
+            // the interpolation and the observation in one entry of the run's pool
+            let (state, row) = (&mut self.state, &mut self.obs_row);
+            crate::threads::in_pool(|| {
+                let (yi, ydi, zi, vi) = ad.interpolate_all(theta, h, state);
+                state.observe_at(time, yi, ydi, zi, vi, row)
+            })?;
             self.obs_row.shrink_to_fit();
             self.rec.push_species(&self.obs_row);
         }
@@ -588,7 +601,9 @@ impl<'r, 'f> Cycles<'r, 'f> {
             self.record_rates(time)?;
         }
         if species && self.state.species.is_some() {
-            self.state.observe(time, &mut self.obs_row)?;
+            // the row's observation passes in one entry of the run's pool
+            let (state, row) = (&mut self.state, &mut self.obs_row);
+            crate::threads::in_pool(|| state.observe(time, row))?;
             // the first row grew the buffer by doubling: keep only its length (a row holds
             // every species column of every output vessel and segment, ~50 B per segment)
             self.obs_row.shrink_to_fit();
