@@ -482,9 +482,16 @@ impl<'r, 'f> Cycles<'r, 'f> {
                 ad.state_changed();
             }
             self.periodic_steps.accepted(h);
-            self.state.advance_species(t, h)?;
-            ad.after_species(&self.state);
             let t_new = if h == rem { t_end } else { t + h };
+            let mut peek = next_out;
+            if rows.recorded
+                && rows.species
+                && rows.due(period, n_out, &mut peek, t_new).count() > 0
+            {
+                ad.keep_species_start(&self.state);
+            }
+            self.state.advance_species(t, h)?;
+            ad.after_species(&self.state, h);
             for tau in rows.due(period, n_out, &mut next_out, t_new) {
                 self.dense_row(ad, rows, (tau - t) / h, h, tau)?;
             }
