@@ -75,6 +75,8 @@ pub(super) struct Adaptive {
     kind_set: [f64; 3],
     /// Per species, its cells' largest |c| so far (the species' default atol is that cell's).
     species_largest: Vec<f64>,
+    /// The scaled local error of the species step just taken (see `after_species`).
+    species_step_error: f64,
     /// 1/(atol_i + rtol·s_i): an unknown's error weight, with its absolute tolerance atol_i
     /// (the kind's default scaled by the unknown's share of its kind's largest scale, or the
     /// user's as given: `Tolerances::atol_of`) and the scale s_i rtol is relative to (its largest |y| so
@@ -317,6 +319,7 @@ impl Adaptive {
             group_set: Vec::new(),
             kind_set: [0.0; 3],
             species_largest: Vec::new(),
+            species_step_error: 0.0,
             inv_weight: Vec::new(),
             w_step: Vec::new(),
             w_unit: Vec::new(),
@@ -519,14 +522,22 @@ impl Adaptive {
         copy_into(&mut self.y0, &st.y);
         copy_into(&mut self.yd0, &st.yd);
         if let Some(sp) = st.species.as_ref() {
-            copy_into(&mut self.z0, &sp.z);
-            copy_into(&mut self.v0, sp.tr.cell_transport_volumes());
             if self.c0.is_empty() {
                 concentrations(st, &mut self.c0);
                 self.c_peak = self.c0.iter().map(|c| c.abs()).collect();
                 self.species_largest = vec![0.0; sp.tr.species_names().len()];
                 self.renew_species_largest();
             }
+        }
+    }
+
+    /// Keep the species amounts and the cells' transport volumes before the species step about
+    /// to be taken: only a step with a species output row needs them (its dense output
+    /// interpolates from them to the step's end), so the other steps skip the copies.
+    pub fn keep_species_start(&mut self, st: &State<'_, '_>) {
+        if let Some(sp) = st.species.as_ref() {
+            copy_into(&mut self.z0, &sp.z);
+            copy_into(&mut self.v0, sp.tr.cell_transport_volumes());
         }
     }
 
@@ -779,33 +790,6 @@ impl Adaptive {
         }
     }
 
-    /// The scaled local error of the species step of `h` (backward Euler: h/(2h + h₁) times
-    /// the difference to the linear extrapolation), on the cells' concentrations (the amounts
-    /// also follow the volume's pulsation, which the flow step carries), weighted by
-    /// atol + rtol·(largest |c| so far), the species' default atol scaled by that over its
-    /// cells' largest (`Tolerances::atol_of`).
-    fn species_error(&self, st: &State<'_, '_>, h: f64) -> f64 {
-        if st.species.is_none() || self.history == 0 {
-            return 0.0;
-        }
-        let (rtol, tol) = (self.tol.rtol, &self.tol);
-        let (r, f) = (h / self.h1, h / (2.0 * h + self.h1));
-        let per_step = self.omega * h;
-        let cells = self.c1.len() / self.species_largest.len().max(1);
-        crate::threads::max_over(self.c1.len(), |k| {
-            let mut worst = 0.0f64;
-            let past = self.c0[k.clone()].iter().zip(&self.cm1[k.clone()]);
-            let past = past.zip(&self.c_peak[k.clone()]);
-            for (m, (&c1, ((&c0, &cm), &peak))) in (k.start..).zip(self.c1[k].iter().zip(past)) {
-                let le = f * (c1 - c0 - r * (c0 - cm));
-                let s = peak.max(c1.abs());
-                let a = tol.atol_of(3, s, self.species_largest[m / cells.max(1)]);
-                worst = worst.max(le.abs() / (per_step * (a + rtol * s)));
-            }
-            worst
-        })
-    }
-
     /// Every species' largest |c| over its cells (`c_peak` is species-major).
     fn renew_species_largest(&mut self) {
         let n = self.species_largest.len();
@@ -820,10 +804,65 @@ impl Adaptive {
         }
     }
 
-    /// After the species step: its cells' concentrations (for the estimate and the dense
-    /// output of the step).
-    pub fn after_species(&mut self, st: &State<'_, '_>) {
-        concentrations(st, &mut self.c1);
+    /// After the accepted species step of `h`, in one pass over the cells (species by species,
+    /// in chunks on the run's threads): the cells' concentrations at its end (amount over
+    /// transport volume, species-major), the step's scaled local error, and every cell's
+    /// largest |c| and every species' largest over its cells renewed with them. Called before
+    /// the step's dense rows, which move the transport volumes (and put them back).
+    ///
+    /// The local error of the species step (backward Euler) is h/(2h + h₁) times the
+    /// difference to the linear extrapolation, on the cells' concentrations (the amounts also
+    /// follow the volume's pulsation, which the flow step carries), weighted by
+    /// atol + rtol·(largest |c| so far), the species' default atol scaled by that over its
+    /// cells' largest before the step (`Tolerances::atol_of`).
+    pub fn after_species(&mut self, st: &State<'_, '_>, h: f64) {
+        self.species_step_error = 0.0;
+        let Some(sp) = st.species.as_ref() else {
+            return;
+        };
+        let vol = sp.tr.cell_transport_volumes();
+        let nc = vol.len();
+        // (every value is written below: a buffer of the right length is not cleared first)
+        self.c1.resize(self.c_peak.len(), 0.0);
+        let judged = self.history > 0;
+        let (rtol, tol) = (self.tol.rtol, &self.tol);
+        let (r, f) = (h / self.h1, h / (2.0 * h + self.h1));
+        let per_step = self.omega * h;
+        let (mut c1, mut c_peak) = (
+            std::mem::take(&mut self.c1),
+            std::mem::take(&mut self.c_peak),
+        );
+        let mut worst = 0.0f64;
+        for (s, largest) in self.species_largest.iter_mut().enumerate() {
+            let cells = s * nc..(s + 1) * nc;
+            let (z, c0, cm1) = (&sp.z[cells.clone()], &self.c0[cells.clone()], &self.cm1[..]);
+            let cm1 = if judged { &cm1[cells.clone()] } else { &[][..] };
+            let old_largest = *largest;
+            let mut tasks = chunk_tasks(0, [&mut c1[cells.clone()], &mut c_peak[cells]]);
+            let (e, l) = fold_tasks(&mut tasks, |(first, [c1, pk])| {
+                let (mut e, mut l) = (0.0f64, 0.0f64);
+                let k = *first..*first + c1.len();
+                for (j, (c, p)) in k.clone().zip(c1.iter_mut().zip(pk.iter_mut())) {
+                    *c = z[j] / vol[j];
+                    // (the same expressions as when the error and the peaks were passes of
+                    // their own: `species_error`)
+                    let s = p.max(c.abs());
+                    if judged {
+                        let le = f * (*c - c0[j] - r * (c0[j] - cm1[j]));
+                        let a = tol.atol_of(3, s, old_largest);
+                        e = e.max(le.abs() / (per_step * (a + rtol * s)));
+                    }
+                    *p = s;
+                    l = l.max(s);
+                }
+                (e, l)
+            });
+            drop(tasks);
+            worst = worst.max(e);
+            *largest = l;
+        }
+        (self.c1, self.c_peak) = (c1, c_peak);
+        self.species_step_error = worst;
     }
 
     /// The errors of the flow step just taken (before the species follow it).
@@ -834,7 +873,7 @@ impl Adaptive {
 
     /// An accepted step of `h`: record its estimates, shift the history, propose the next step.
     pub fn accept(&mut self, st: &State<'_, '_>, h: f64, flow: f64, kinds: [f64; 3]) {
-        let species = self.species_error(st, h);
+        let species = self.species_step_error;
         let rtol = self.tol.rtol;
         for (e, k) in self.estimate.iter_mut().zip(kinds.iter().chain([&species])) {
             *e = e.max(k * rtol);
@@ -851,13 +890,6 @@ impl Adaptive {
         // c_{n-1} ← c_n ← c_{n+1}
         std::mem::swap(&mut self.cm1, &mut self.c0);
         std::mem::swap(&mut self.c0, &mut self.c1);
-        let c0 = &self.c0;
-        crate::threads::for_chunks(&mut self.c_peak, |a, p| {
-            for (p, c) in p.iter_mut().zip(&c0[a..]) {
-                *p = p.max(c.abs());
-            }
-        });
-        self.renew_species_largest();
         (self.h2, self.h1) = (self.h1, h);
         self.history += 1;
         self.h = self.control.next(h, flow, self.err_old, species);
@@ -1286,6 +1318,21 @@ fn chunk_tasks<const K: usize>(first: usize, v: [&mut [f64]; K]) -> Vec<(usize, 
         at += m;
     }
     tasks
+}
+
+/// The largest of each of the two values `f` returns for every task (on the run's threads
+/// when there are several, each task writing only its own chunks; maxima: the same in any
+/// grouping).
+fn fold_tasks<T: Send>(
+    tasks: &mut [T],
+    f: impl Fn(&mut T) -> (f64, f64) + Sync + Send,
+) -> (f64, f64) {
+    use rayon::prelude::*;
+    let larger = |a: (f64, f64), b: (f64, f64)| (a.0.max(b.0), a.1.max(b.1));
+    match crate::threads::pool().filter(|_| tasks.len() > 1) {
+        Some(pool) => pool.install(|| tasks.par_iter_mut().map(f).reduce(|| (0.0, 0.0), larger)),
+        None => tasks.iter_mut().map(f).fold((0.0, 0.0), larger),
+    }
 }
 
 /// `f` of every task (on the run's threads when there are several, each task writing only its

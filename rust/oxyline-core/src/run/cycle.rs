@@ -488,12 +488,19 @@ impl<'r, 'f> Cycles<'r, 'f> {
                 ad.state_changed();
             }
             self.periodic_steps.accepted(h);
+            let t_new = if h == rem { t_end } else { t + h };
+            let mut peek = next_out;
+            if rows.recorded
+                && rows.species
+                && rows.due(period, n_out, &mut peek, t_new).count() > 0
+            {
+                ad.keep_species_start(&self.state);
+            }
             crate::threads::in_pool(|| {
                 self.state.advance_species(t, h)?;
-                ad.after_species(&self.state);
+                ad.after_species(&self.state, h);
                 Ok::<(), Error>(())
             })?;
-            let t_new = if h == rem { t_end } else { t + h };
             for tau in rows.due(period, n_out, &mut next_out, t_new) {
                 self.dense_row(ad, rows, (tau - t) / h, h, tau)?;
             }

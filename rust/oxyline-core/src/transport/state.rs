@@ -311,7 +311,7 @@ impl Transport {
     /// Restore [`Transport::carried`] into a run started with the same model and settings
     /// (its buffers then have the lengths the checkpoint's had).
     pub fn restore_carried(&mut self, carried: &[f64]) -> Result<()> {
-        let expected = self.carried().len();
+        let expected = self.carried_len();
         if carried.len() != expected {
             return Err(Error::model(
                 "checkpoint",
@@ -323,24 +323,39 @@ impl Transport {
             ));
         }
         let mut rest = carried;
-        let mut take = |dst: &mut [f64]| {
-            let (head, tail) = rest.split_at(dst.len());
-            dst.copy_from_slice(head);
-            rest = tail;
-        };
-        take(&mut self.vol);
-        take(&mut self.wvol);
-        take(&mut self.conc);
-        take(&mut self.sweep.lag);
+        let fill = |rest: &mut &[f64], dst: &mut [f64]| dst.copy_from_slice(next(rest, dst.len()));
+        fill(&mut rest, &mut self.vol);
+        fill(&mut rest, &mut self.wvol);
+        fill(&mut rest, &mut self.conc);
+        fill(&mut rest, &mut self.sweep.lag);
         for sp in &mut self.species {
-            take(&mut sp.free);
-            take(&mut sp.mixing_conc);
-            let mut flat = vec![0.0; sp.anchors.len() * HillAnchor::CARRIED];
-            take(&mut flat);
+            fill(&mut rest, &mut sp.free);
+            fill(&mut rest, &mut sp.mixing_conc);
+            let flat = next(&mut rest, sp.anchors.len() * HillAnchor::CARRIED);
             for (a, v) in sp.anchors.iter_mut().zip(flat.chunks(HillAnchor::CARRIED)) {
                 *a = HillAnchor::from_array(v);
             }
         }
         Ok(())
     }
+
+    /// The length of [`Transport::carried`] (without building it: an error-controlled run
+    /// restores the carried state after every species output row).
+    fn carried_len(&self) -> usize {
+        let species = self.species.iter().map(|sp| {
+            sp.free.len() + sp.mixing_conc.len() + sp.anchors.len() * HillAnchor::CARRIED
+        });
+        self.vol.len()
+            + self.wvol.len()
+            + self.conc.len()
+            + self.sweep.lag.len()
+            + species.sum::<usize>()
+    }
+}
+
+/// The first `n` values of `rest`, which moves past them.
+fn next<'a>(rest: &mut &'a [f64], n: usize) -> &'a [f64] {
+    let (head, tail) = rest.split_at(n);
+    *rest = tail;
+    head
 }
