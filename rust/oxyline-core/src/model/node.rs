@@ -224,6 +224,19 @@ pub fn py_quote(s: &str) -> String {
     }
 }
 
+/// A Python-style list of already formatted items: `[a, b]`.
+pub fn py_list(items: impl Iterator<Item = String>) -> String {
+    format!("[{}]", items.collect::<Vec<_>>().join(", "))
+}
+
+/// A Python-style dict of (key, formatted value) pairs: `{'k': v}`.
+pub fn py_dict<'a>(items: impl Iterator<Item = (&'a String, String)>) -> String {
+    let items: Vec<String> = items
+        .map(|(k, v)| format!("{}: {}", py_quote(k), v))
+        .collect();
+    format!("{{{}}}", items.join(", "))
+}
+
 impl Node for Value {
     fn kind(&self) -> Kind {
         match self {
@@ -269,17 +282,8 @@ impl Node for Value {
             Value::Number(n) if n.is_f64() => py_repr(n.as_f64().unwrap_or(f64::NAN)),
             Value::Number(n) => n.to_string(),
             Value::String(s) => py_quote(s),
-            Value::Array(a) => {
-                let items: Vec<String> = a.iter().map(Node::repr).collect();
-                format!("[{}]", items.join(", "))
-            }
-            Value::Object(m) => {
-                let items: Vec<String> = m
-                    .iter()
-                    .map(|(k, v)| format!("{}: {}", py_quote(k), v.repr()))
-                    .collect();
-                format!("{{{}}}", items.join(", "))
-            }
+            Value::Array(a) => py_list(a.iter().map(Node::repr)),
+            Value::Object(m) => py_dict(m.iter().map(|(k, v)| (k, v.repr()))),
         }
     }
     fn show(&self) -> String {

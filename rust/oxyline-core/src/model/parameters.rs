@@ -20,7 +20,7 @@
 //! the parameter path.
 
 use super::native::py_float;
-use super::node::{Kind, Node, py_quote, py_repr};
+use super::node::{Kind, Node, py_dict, py_list, py_quote, py_repr};
 use super::patch::{Merged, PatchError, Patched, merge, set, set_at};
 use crate::error::{Error, Result};
 
@@ -475,17 +475,8 @@ impl<N: Node + Clone> Node for Merged<N> {
         match self {
             Merged::Node(n) => n.repr(),
             Merged::Number(x) => py_repr(*x),
-            Merged::Numbers(v) => {
-                let items: Vec<String> = v.iter().map(|x| py_repr(*x)).collect();
-                format!("[{}]", items.join(", "))
-            }
-            Merged::Map(e) => {
-                let items: Vec<String> = e
-                    .iter()
-                    .map(|(k, v)| format!("{}: {}", py_quote(k), v.repr()))
-                    .collect();
-                format!("{{{}}}", items.join(", "))
-            }
+            Merged::Numbers(v) => py_list(v.iter().map(|x| py_repr(*x))),
+            Merged::Map(e) => py_dict(e.iter().map(|(k, v)| (k, v.repr()))),
         }
     }
     fn show(&self) -> String {

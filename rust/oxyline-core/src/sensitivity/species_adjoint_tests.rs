@@ -15,19 +15,7 @@ use crate::model::parse;
 /// from the cycle's values, as a target's are).
 fn weights(ns: usize, values: &[f64], sig: &[(String, String)]) -> Vec<f64> {
     let nsig = sig.len();
-    let mut w = Vec::new();
-    for j in 0..nsig {
-        let mut f = vec![0.0; ns * nsig];
-        for k in 0..ns {
-            f[k * nsig + j] = 1.0 / ns as f64;
-        }
-        w.extend(f);
-        let mut f = vec![0.0; ns * nsig];
-        for k in 0..ns {
-            f[k * nsig + j] = (0.3 + (k as f64 * 0.37).sin()) / ns as f64;
-        }
-        w.extend(f);
-    }
+    let mut w = mean_and_series_weights(ns, nsig);
     let at = |name: &str| {
         sig.iter()
             .position(|(v, s)| v == "d1" && s == name)
@@ -41,6 +29,28 @@ fn weights(ns: usize, values: &[f64], sig: &[(String, String)]) -> Vec<f64> {
         f[k * nsig + s] = values[k * nsig + q] / total;
     }
     w.extend(f);
+    w
+}
+
+/// Two functionals per signal, one block of `ns * nsig` weights each: its cycle mean, and a
+/// series weighted by 0.3 + sin(0.37 k) over the cycle (so that a step's own derivative
+/// counts).
+pub(crate) fn mean_and_series_weights(ns: usize, nsig: usize) -> Vec<f64> {
+    let mut w = Vec::new();
+    for j in 0..nsig {
+        for series in [false, true] {
+            let mut f = vec![0.0; ns * nsig];
+            for k in 0..ns {
+                let weight = if series {
+                    0.3 + (k as f64 * 0.37).sin()
+                } else {
+                    1.0
+                };
+                f[k * nsig + j] = weight / ns as f64;
+            }
+            w.extend(f);
+        }
+    }
     w
 }
 

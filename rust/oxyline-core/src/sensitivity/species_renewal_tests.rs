@@ -6,7 +6,7 @@
 //! largest value over the cycle, or its rounding floor), and the adjoint against the forward
 //! tangents (1e-8 tells a wrong term).
 
-use super::adjoint::tests::worst_against_forward;
+use super::adjoint::tests::{mean_and_series_weights, worst_against_forward};
 use super::tests::{run_with, settings};
 use super::wall_tests::{check, model, signals};
 use super::*;
@@ -119,21 +119,7 @@ fn inlet_renewal_adjoint_equals_forward() {
     let owned: Vec<String> = paths.iter().map(|p| p.to_string()).collect();
     let ns = settings().steps_per_cycle;
     let nsig = sig.len();
-    let mut weights = Vec::new();
-    for j in 0..nsig {
-        for series in [false, true] {
-            let mut f = vec![0.0; ns * nsig];
-            for k in 0..ns {
-                let w = if series {
-                    0.3 + (k as f64 * 0.37).sin()
-                } else {
-                    1.0
-                };
-                f[k * nsig + j] = w / ns as f64;
-            }
-            weights.extend(f);
-        }
-    }
+    let weights = mean_and_series_weights(ns, nsig);
     let (values, adj) =
         species_adjoint_with(&spec, &owned, &sig, |_, _| Ok(weights.clone()), settings()).unwrap();
     let fwd = run_with(&spec, &paths, &sig);
