@@ -257,3 +257,46 @@ def test_species_segment_output_alone_reaches_the_files(tmp_path: Path) -> None:
     store = oxyline.simulate_to_zarr("paper-bifurcated", tmp_path / "alone.zarr",
                                      variables=["flow_in", "segment_wall_flux"], **kw)
     np.testing.assert_array_equal(store["segment_wall_o2_flux"].values, want)
+
+
+class _CountingNetwork:
+    """A network that counts its output-layout resolutions (the core resolves a selection
+    against every vessel's name: ~2 s per million vessels)."""
+
+    def __init__(self, network: object) -> None:
+        self._network, self.layouts = network, 0
+
+    def output_layout(self, **kw: object) -> dict:
+        self.layouts += 1
+        return self._network.output_layout(**kw)
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self._network, name)
+
+
+def test_a_run_resolves_its_output_selection_once(full: oxyline.Result,
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """A summarized large-model run asks for its layout in five places (the default, its size,
+    the summary stream, the chunks' and the final result): the core resolves it once per
+    selection. The same model then run with other selections records exactly those (the
+    reused layout is a copy: the result's own edits do not reach the next run)."""
+    from oxyline import run
+
+    model = oxyline.load_model("paper-bifurcated")
+    segments = int(model.network.summary()["segments"])
+    counting = _CountingNetwork(model.network)
+    model._network = counting
+    monkeypatch.setattr(run, "LARGE_MODEL_SEGMENTS", segments - 1)
+    with pytest.warns(oxyline.OutputSizeWarning, match="mean, min and max"):
+        summarized = oxyline.simulate(model, cycles=1)
+    # the run's selection, and the inlet vessels' time series the result keeps
+    assert counting.layouts == 2
+    assert summarized.vessel_variables == run.LARGE_MODEL_VARIABLES
+    monkeypatch.setattr(run, "LARGE_MODEL_SEGMENTS", 10 * segments)
+    flows = oxyline.simulate(model, cycles=1, variables=["flow_in"], segments=False)
+    every = oxyline.simulate(model, cycles=1)
+    assert flows.vessel_variables == ("flow_in",) and not flows.has_segments
+    assert np.array_equal(flows.flow_in, full.flow_in)  # same run, a subset: bit-identical
+    assert every.vessel_variables == full.vessel_variables and every.has_segments
+    assert np.array_equal(every.data, full.data)
+    assert set(every.species) == set(full.species)

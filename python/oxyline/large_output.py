@@ -63,8 +63,9 @@ class SummaryStream:
     def __init__(self, model: Model, s: Mapping[str, Any], extra: int,
                  result_of: Any) -> None:
         self._result_of = result_of  # rows (core layout of s) -> Result
-        lay = model.network.output_layout(variables=s["variables"], vessels=s["vessels"],
-                                          segments=False)
+        from oxyline.run import _output_layout
+
+        lay = _output_layout(model, {**s, "segments": False})
         self.vessels = [str(v) for v in lay["vessels"]]
         self.inlets = inlet_vessels(model, self.vessels)
         index = {v: i for i, v in enumerate(self.vessels)}

@@ -156,7 +156,7 @@ def _large_model_output(model: Model, s: dict[str, Any], overrides: Mapping[str,
         chosen += LARGE_MODEL_SEGMENT_VARIABLES
         chosen += LARGE_MODEL_SPECIES_SEGMENT_VARIABLES if species else ()
     s["variables"] = chosen
-    lay = model.network.output_layout(**_selection(s)).get("transport") or {}
+    lay = _output_layout(model, s).get("transport") or {}
     summarize = not s["segments"] and "vessels" not in overrides and "vessels" not in out \
         and not lay.get("tissue_columns")
     what = ("per-vessel mean, min and max (result.summary()) of " if summarize else "") \
@@ -173,7 +173,7 @@ def _summary_stream(model: Model, s: Mapping[str, Any], extra: int) -> Any:
     """The chunk sink of a summarized large-model run (:mod:`oxyline.large_output`)."""
     from oxyline.large_output import SummaryStream
 
-    layout = model.network.output_layout(**_selection(s))  # once: 262 k names at 1e6
+    layout = _output_layout(model, s)  # once: 262 k names at 1e6
 
     def result_of(rows: dict[str, Any]) -> Result:
         _split_heart_columns(rows, extra)
@@ -185,6 +185,26 @@ def _summary_stream(model: Model, s: Mapping[str, Any], extra: int) -> Any:
 def _selection(s: Mapping[str, Any]) -> dict[str, Any]:
     """The core's output-selection keywords of settings ``s``."""
     return {"variables": s["variables"], "vessels": s["vessels"], "segments": s["segments"]}
+
+
+def _output_layout(model: Model, s: Mapping[str, Any]) -> dict[str, Any]:
+    """``model.network.output_layout`` of the selection of settings ``s`` (a fresh top-level
+    dict: callers pop and set keys). The core resolves a selection against every vessel's
+    name (~2 s per million vessels): a run asks for the same layout up to five times (the
+    large-model default, the output's size, the summary stream, the result), so the last
+    selection's layout is kept on the model. The layout lists the output vessels only (a
+    structured tree's vessels are not output by default), so it is small beside the model."""
+    sel = _selection(s)
+    key = tuple((k, tuple(v) if isinstance(v, (list, tuple)) else v) for k, v in sel.items())
+    network = model.network
+    cached = model.__dict__.get("_layout_cache")
+    if cached is None or cached[0] is not network or cached[1] != key:
+        cached = (network, key, network.output_layout(**sel))
+        model.__dict__["_layout_cache"] = cached
+    layout = dict(cached[2])
+    if isinstance(layout.get("transport"), dict):
+        layout["transport"] = dict(layout["transport"])
+    return layout
 
 
 class _CycleProgress:
@@ -327,7 +347,7 @@ def _result(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
     """A :class:`Result` of output rows in the core's layout (a whole run, or one chunk);
     ``layout``: the run's output layout if not the model network's (an ensemble variant)."""
     if layout is None:
-        layout = model.network.output_layout(**_selection(s))
+        layout = _output_layout(model, s)
     if not s["transport"]:
         layout.pop("transport", None)
     empty_segments = not s["segments"] and s["variables"] is None
@@ -773,7 +793,7 @@ def _check_output_memory(model: Model, s: Mapping[str, Any],
 
 
 def _output_size(model: Model, s: Mapping[str, Any]) -> tuple[float, int, int]:
-    layout = model.network.output_layout(**_selection(s))
+    layout = _output_layout(model, s)
     if not s["transport"]:
         layout.pop("transport", None)
     cycles = s["max_cycles"] if s["until_periodic"] is not None else s["cycles"]
@@ -926,7 +946,7 @@ def _empty_rows(model: Model, s: Mapping[str, Any]) -> dict[str, Any]:
     """Zero output rows in the core's layout: the template of a store's variables."""
     import numpy as np
 
-    lay = model.network.output_layout(**_selection(s))
+    lay = _output_layout(model, s)
     raw: dict[str, Any] = {"times": np.zeros(0), "data": np.zeros((0, lay["n_columns"]))}
     tl = lay.get("transport") if s["transport"] else None
     if tl is not None:
