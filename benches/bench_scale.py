@@ -43,6 +43,18 @@ times in brackets —
         --rk4-fraction 0.01 --baseline /path/to/old        # before/after in the same run
     python benches/bench_scale.py --depths 16 18 --configs flow o2-k \
         --methods generalized-alpha --threads 1 2          # one run on 1 and 2 threads
+    python benches/bench_scale.py --whole-body-st 1e-4 6e-5 --configs o2-k \
+        --methods generalized-alpha --threads 2    # whole-body-140-st grown to min_radius
+    python benches/bench_scale.py --whole-body-st 3.2e-5 --configs o2-k \
+        --methods generalized-alpha --threads 2 --fraction 0.3  # 5.8 M segments, ~13 GB
+
+``--whole-body-st MIN_RADIUS ...``: instead of the binary trees, the built-in
+``whole-body-140-st`` with every structured-tree outlet grown down to ``MIN_RADIUS`` (m; one
+segment per tree vessel, so ~one vessel per segment, and the base model's loops: the flow
+solve takes the general sparse LU and the transport the flow-order sweep instead of the tree
+eliminations, docs/performance.md "Whole body down to 32 µm"). 1e-4: 306 k segments, 6e-5:
+1.08 M, 3.2e-5: 5.79 M. ``--fraction F`` stops those runs F into the cycle (the steps are timed
+between progress checks, as RK4's partial cycles).
 
 ``--threads``: each configuration on each thread count (``simulate(threads=N)``); the
 ``wall 1/N`` column is the wall-time speed-up of the run over the same tree on the first
@@ -142,6 +154,23 @@ def tree(depth: int, per_vessel: int, config: str) -> dict[str, Any]:
     return m
 
 
+def whole_body_st(min_radius: float, config: str) -> dict[str, Any]:
+    """The built-in ``whole-body-140-st`` (native dict) with every structured-tree outlet's
+    ``min_radius`` set to ``min_radius`` (m), with the ``config``'s oxygen section."""
+    import oxyline
+
+    m: dict[str, Any] = oxyline.catalogue.load_dict("whole-body-140-st")
+    for bc in m["boundary_conditions"].values():
+        if isinstance(bc, dict) and bc.get("type") == "structured-tree":
+            bc["min_radius"] = min_radius
+    m["name"] = f"whole-body-140-st-{min_radius:g}"
+    if config in WALLS:
+        wall, hb = WALLS[config]
+        m["oxygen"] = {"inlet": {"po2": 95.0}, "wall": wall, "hemoglobin": hb,
+                       "reference_pressure": 85.0}
+    return m
+
+
 def child(spec: dict[str, Any]) -> dict[str, Any]:
     """One configuration, measured in this (fresh) process. ``spec["zarr"]``: stream the output
     to a Zarr store (``simulate_to_zarr``, ``time_chunk`` rows at a time) instead of keeping it."""
@@ -149,7 +178,8 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
 
     import oxyline
 
-    model = tree(spec["depth"], spec["per_vessel"], spec["config"])
+    model = (whole_body_st(spec["whole_body_st"], spec["config"]) if spec.get("whole_body_st")
+             else tree(spec["depth"], spec["per_vessel"], spec["config"]))
     kw: dict[str, Any] = {"cycles": 1, "output_every": 0.01, "segments": False,
                           "method": spec["method"]}
     if spec.get("threads"):
@@ -182,6 +212,10 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
             marks.clear()  # the main pass after a first pass
             passes.append(t)
         marks.append((t, time.process_time(), time.perf_counter()))
+        if spec.get("verbose"):  # a long run: its progress and peak so far, as it goes
+            print(f"t = {t:.3f} s: CPU {marks[-1][1]:.1f} s, wall {marks[-1][2] - w0:.1f} s, "
+                  f"peak {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB",
+                  file=sys.stderr, flush=True)
         # (the RK4 pass only, not the generalized-alpha first pass of a closure that needs
         # the mean flow)
         main = bool(passes) or spec["config"] not in FIRST_PASS
@@ -432,6 +466,11 @@ def main() -> None:
                     help="RK4 runs stop this fraction into the cycle (its automatic dt makes "
                          "a whole cycle of a 65 k-segment tree take minutes); O2/flow is then "
                          "per step")
+    ap.add_argument("--whole-body-st", type=float, nargs="+", metavar="MIN_RADIUS",
+                    help="run whole-body-140-st grown to these structured-tree min_radius "
+                         "(m) instead of the binary trees (e.g. 3.2e-5: 5.8 M segments)")
+    ap.add_argument("--fraction", type=float, default=1.0,
+                    help="--whole-body-st runs stop this fraction into the cycle")
     ap.add_argument("--baseline", metavar="DIR",
                     help="also run every configuration with the oxyline package in DIR "
                          "(rows marked 'baseline', right after this build's)")
@@ -469,6 +508,9 @@ def main() -> None:
           "|---:|---:|")
     rows: dict[tuple[str, str], list[dict[str, Any]]] = {}
     skipped: list[str] = []
+    if a.whole_body_st:
+        whole_body_rows(a, copy)
+        return
     for method in a.methods:
         for depth in a.depths:
             flows: dict[str | None, dict[str, Any]] = {}
@@ -511,6 +553,31 @@ def main() -> None:
               + ", ".join(skipped))
     for min_segments in a.fit_min_segments:
         print_slopes(rows, min_segments)
+
+
+def whole_body_rows(a: argparse.Namespace, copy: float) -> None:
+    """The table's rows of ``whole-body-140-st`` grown to each ``--whole-body-st`` radius."""
+    for method in a.methods:
+        for min_radius in a.whole_body_st:
+            flows: dict[str, Any] = {}
+            for config in a.configs:
+                first: dict[str, Any] | None = None
+                for threads in a.threads:
+                    spec = {"whole_body_st": min_radius, "depth": 0, "per_vessel": 1,
+                            "config": config, "method": method, "repeat": a.repeat,
+                            "fraction": a.fraction, "variables": a.variables,
+                            "threads": threads}
+                    label = f"{method}, whole-body-140-st {min_radius:g} m"
+                    r = measure(spec)
+                    if "error" in r:
+                        print(f"| {label} | {config} | failed: {r['error']} |")
+                        continue
+                    r["threads"] = threads
+                    first = first or r
+                    if config == "flow":
+                        flows = r
+                    print(row(label, config, r, flows or None) + thread_cells(r, first, copy),
+                          flush=True)
 
 
 if __name__ == "__main__":
