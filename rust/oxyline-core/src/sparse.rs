@@ -464,19 +464,22 @@ struct Simplicial<T: Scalar> {
 
 /// A permutation `x_new[i] = x[p[i]]` as its cycles: each cycle `c0 c1 ... ck` (with
 /// `p[c_m] = c_{m+1}`, `p[c_k] = c0`) moves `x[c1]` to `c0`, ..., `x[c0]` to `ck`. Fixed points
-/// are left out.
+/// are left out. 32-bit indices (the circuit refuses more than 2^32 unknowns) held at their
+/// exact size: a network with loops keeps two of these beside its factors, one index per
+/// moved unknown each (16 instead of up to 32 bytes per unknown grown by doubling).
 #[derive(Default)]
 struct Cycles {
-    ptr: Vec<usize>,
-    idx: Vec<usize>,
+    ptr: Vec<u32>,
+    idx: Vec<u32>,
 }
 
 impl Cycles {
     fn of(p: &[usize]) -> Cycles {
         let mut seen = vec![false; p.len()];
+        let moved = p.iter().enumerate().filter(|&(i, &j)| i != j).count();
         let mut c = Cycles {
             ptr: vec![0],
-            idx: Vec::new(),
+            idx: Vec::with_capacity(moved),
         };
         for s in 0..p.len() {
             if seen[s] || p[s] == s {
@@ -485,22 +488,23 @@ impl Cycles {
             let mut i = s;
             while !seen[i] {
                 seen[i] = true;
-                c.idx.push(i);
+                c.idx.push(i as u32);
                 i = p[i];
             }
-            c.ptr.push(c.idx.len());
+            c.ptr.push(c.idx.len() as u32);
         }
+        c.ptr.shrink_to_fit();
         c
     }
 
     fn apply<T: Copy>(&self, x: &mut [T]) {
         for w in self.ptr.windows(2) {
-            let cyc = &self.idx[w[0]..w[1]];
-            let first = x[cyc[0]];
+            let cyc = &self.idx[w[0] as usize..w[1] as usize];
+            let first = x[cyc[0] as usize];
             for m in 1..cyc.len() {
-                x[cyc[m - 1]] = x[cyc[m]];
+                x[cyc[m - 1] as usize] = x[cyc[m] as usize];
             }
-            x[cyc[cyc.len() - 1]] = first;
+            x[cyc[cyc.len() - 1] as usize] = first;
         }
     }
 }
