@@ -386,21 +386,33 @@ pub struct Branch {
     pub stenosis: f64,
 }
 
-/// Compressed sparse rows. Column indices are u32 (a circuit of more than 2^32 unknowns is
-/// refused at assembly): the per-step residual pass reads every entry, so 4-byte indices cut
-/// its memory traffic and the matrix's size by a sixth.
+/// Compressed sparse rows. Column indices and row starts are u32 (a circuit of more than
+/// 2^32 unknowns or matrix entries is refused at assembly): the per-step residual pass reads
+/// every entry, so 4-byte indices cut its memory traffic and the matrix's size by a sixth,
+/// and 4-byte row starts save 4 bytes per unknown.
 #[derive(Debug, Clone, Default)]
 pub struct Csr {
-    pub ptr: Vec<usize>,
+    pub ptr: Vec<u32>,
     pub col: Vec<u32>,
     pub val: Vec<f64>,
 }
 
 impl Csr {
+    /// The entries of row `i` (indices into `col` and `val`).
+    #[inline]
+    pub fn row(&self, i: usize) -> std::ops::Range<usize> {
+        self.ptr[i] as usize..self.ptr[i + 1] as usize
+    }
+    /// Close the current row: its end is the number of entries pushed so far (below 2^32:
+    /// the matrix's upper bound is checked before it is built).
+    #[inline]
+    pub fn end_row(&mut self) {
+        self.ptr.push(self.col.len() as u32);
+    }
     #[inline]
     pub fn row_dot(&self, i: usize, y: &[f64]) -> f64 {
         let mut s = 0.0;
-        for k in self.ptr[i]..self.ptr[i + 1] {
+        for k in self.row(i) {
             s += self.val[k] * y[self.col[k] as usize];
         }
         s
@@ -408,6 +420,18 @@ impl Csr {
     pub fn nrows(&self) -> usize {
         self.ptr.len() - 1
     }
+}
+
+/// The flow matrix's row starts are u32: a circuit whose matrix may hold 2^32 entries or more
+/// (`nnz`, its upper bound) is refused, never wrapped.
+fn flow_matrix_fits(nnz: usize) -> Result<()> {
+    if u32::try_from(nnz).is_err() {
+        return Err(Error::model(
+            "circuit",
+            format!("has up to {nnz} flow-matrix entries, more than 2^32"),
+        ));
+    }
+    Ok(())
 }
 
 /// A node pressure or a branch flow of the circuit.
@@ -678,7 +702,7 @@ impl Circuit {
         let rows = self.row_owners()?;
         let incidence = Incidence::of(self);
         let walls = self.active_walls(&rows);
-        let f = self.flow_matrix(&rows, &incidence, &walls);
+        let f = self.flow_matrix(&rows, &incidence, &walls)?;
         let (e, windkessel) = self.mass_diagonal(&rows, &walls);
         let (nn, nb) = (self.nodes.len(), self.branches.len());
         let wall_unknowns = walls
@@ -787,7 +811,7 @@ impl Circuit {
         rows: &RowOwners,
         incidence: &Incidence,
         walls: &[(ViscousWall, f64, f64)],
-    ) -> Csr {
+    ) -> Result<Csr> {
         let (nn, nb) = (self.nodes.len(), self.branches.len());
         let n = self.n_unknowns();
         // a node row holds its incidences (or 1–3 entries), a branch row 3 (or a node's
@@ -798,6 +822,7 @@ impl Circuit {
             + self.extras.len()
             + 3 * self.friction_cells.len()
             + 4 * walls.len();
+        flow_matrix_fits(nnz)?;
         // per node: its viscoelastic wall's unknown and 1/R_v (none for most circuits)
         let mut wall_at: Vec<Option<(u32, f64)>> = Vec::new();
         if !walls.is_empty() {
@@ -836,7 +861,7 @@ impl Circuit {
                     f.val.extend([g, -g]);
                 }
             }
-            f.ptr.push(f.col.len());
+            f.end_row();
         }
         // the cells of each branch (pushed in branch order, so one cursor walks them)
         let mut cell = 0;
@@ -858,7 +883,7 @@ impl Circuit {
                     f.val.push(-c.resistance);
                 }
             }
-            f.ptr.push(f.col.len());
+            f.end_row();
         }
         let mut owner = vec![Owner::None; self.extras.len()];
         for &(node, x) in &self.moved_rows {
@@ -884,13 +909,13 @@ impl Circuit {
                 }
                 Owner::None => {}
             }
-            f.ptr.push(f.col.len());
+            f.end_row();
         }
         // give back the upper bound's unused tail (~90 B per segment of heap the estimate
         // would otherwise count; a large block shrinks in place, nothing is copied)
         f.col.shrink_to_fit();
         f.val.shrink_to_fit();
-        f
+        Ok(f)
     }
 
     /// The mass diagonal E (node capacitances, branch inductances, element unknowns' E_ii) and
@@ -1334,5 +1359,23 @@ impl Dae {
             .iter()
             .filter_map(|(_, w)| w.period())
             .reduce(f64::max)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The flow matrix's u32 row starts hold up to 2^32 - 1 entries; one more is a typed
+    /// error naming the circuit and the count, not a wrapped index.
+    #[test]
+    fn a_flow_matrix_beyond_32_bit_row_starts_is_refused() {
+        assert!(flow_matrix_fits(u32::MAX as usize).is_ok());
+        let e = flow_matrix_fits(u32::MAX as usize + 1).unwrap_err();
+        assert!(matches!(e, Error::Model { .. }), "{e}");
+        assert!(
+            e.to_string().contains("4294967296 flow-matrix entries"),
+            "{e}"
+        );
     }
 }

@@ -16,7 +16,7 @@ pub fn input_impedance(dae: &Dae, node: usize, omega: f64) -> Result<Complex<f64
     }
     let mut a = DMatrix::<Complex<f64>>::zeros(n, n);
     for i in 0..n {
-        for k in dae.f.ptr[i]..dae.f.ptr[i + 1] {
+        for k in dae.f.row(i) {
             a[(i, dae.f.col[k] as usize)] += Complex::new(dae.f.val[k], 0.0);
         }
         a[(i, i)] += Complex::new(0.0, omega * dae.e[i]);

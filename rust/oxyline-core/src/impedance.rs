@@ -242,10 +242,10 @@ pub(crate) struct FrequencySystem {
 impl FrequencySystem {
     pub fn new(dae: &Dae) -> Self {
         let n = dae.n;
-        let nnz = dae.f.ptr[n];
+        let nnz = dae.f.ptr[n] as usize;
         let mut stamps: Vec<(usize, usize)> = Vec::with_capacity(nnz + n);
         for i in 0..n {
-            for k in dae.f.ptr[i]..dae.f.ptr[i + 1] {
+            for k in dae.f.row(i) {
                 stamps.push((i, dae.f.col[k] as usize));
             }
         }

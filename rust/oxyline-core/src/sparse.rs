@@ -155,31 +155,36 @@ const BLOCK: usize = 2048;
 
 /// The undirected adjacency (CSR: start, neighbours) of the off-diagonal pattern, or None if
 /// it has at least as many edges as vertices (then it cannot be a forest).
-fn adjacency(n: usize, stamps: &[(usize, usize)]) -> Option<(Vec<usize>, Vec<u32>)> {
-    let mut edges: Vec<(usize, usize)> = stamps
+///
+/// The edges and starts are u32 (a tree's `analyse` takes fewer than 2^30 vertices, so fewer
+/// than 2^31 edge ends): this runs while a run sets up, beside the stamps, and its 16-byte
+/// edges were ~80 bytes per segment of the setup's peak at a million segments.
+fn adjacency(n: usize, stamps: &[(usize, usize)]) -> Option<(Vec<u32>, Vec<u32>)> {
+    let mut edges: Vec<(u32, u32)> = stamps
         .iter()
         .filter(|(r, c)| r != c)
-        .map(|&(r, c)| (r.min(c), r.max(c)))
+        .map(|&(r, c)| (r.min(c) as u32, r.max(c) as u32))
         .collect();
     edges.sort_unstable();
     edges.dedup();
     if edges.len() >= n {
         return None;
     }
-    let mut start = vec![0usize; n + 1];
+    let mut start = vec![0u32; n + 1];
     for &(a, b) in &edges {
-        start[a + 1] += 1;
-        start[b + 1] += 1;
+        start[a as usize + 1] += 1;
+        start[b as usize + 1] += 1;
     }
     for i in 0..n {
         start[i + 1] += start[i];
     }
-    let mut adj = vec![0u32; start[n]];
+    let mut adj = vec![0u32; start[n] as usize];
     let mut fill = start.clone();
     for &(a, b) in &edges {
-        adj[fill[a]] = b as u32;
+        let (a, b) = (a as usize, b as usize);
+        adj[fill[a] as usize] = b as u32;
         fill[a] += 1;
-        adj[fill[b]] = a as u32;
+        adj[fill[b] as usize] = a as u32;
         fill[b] += 1;
     }
     Some((start, adj))
@@ -189,13 +194,14 @@ fn adjacency(n: usize, stamps: &[(usize, usize)]) -> Option<(Vec<usize>, Vec<u32
 /// order, children in adjacency order) and the vertices above them, in the depth-first
 /// post-order `post` (see `TreeLu`); with the blocks' position ranges.
 fn blocked_order(
-    start: &[usize],
+    start: &[u32],
     adj: &[u32],
     post: &[u32],
     parent: &[u32],
 ) -> (Vec<u32>, Vec<(u32, u32)>) {
     let n = post.len();
-    let mut size = vec![1usize; n];
+    // subtree sizes (below 2^30 vertices: u32, as every per-vertex index here)
+    let mut size = vec![1u32; n];
     for &v in post {
         let p = parent[v as usize];
         if p != NONE {
@@ -207,10 +213,10 @@ fn blocked_order(
     let mut bfs: Vec<u32> = Vec::with_capacity(BLOCK);
     for &v in post {
         let p = parent[v as usize];
-        let in_block = size[v as usize] <= BLOCK;
+        let in_block = size[v as usize] as usize <= BLOCK;
         if !in_block {
             order.push(v);
-        } else if p == NONE || size[p as usize] > BLOCK {
+        } else if p == NONE || size[p as usize] as usize > BLOCK {
             // a block root: its subtree breadth-first, reversed
             bfs.clear();
             bfs.push(v);
@@ -218,7 +224,7 @@ fn blocked_order(
             while head < bfs.len() {
                 let u = bfs[head] as usize;
                 head += 1;
-                for &w in &adj[start[u]..start[u + 1]] {
+                for &w in &adj[start[u] as usize..start[u + 1] as usize] {
                     if w != parent[u] {
                         bfs.push(w);
                     }
@@ -236,7 +242,7 @@ fn blocked_order(
 /// increasing order), each vertex's children taken in reverse adjacency order; with the parent
 /// of every vertex. None if the graph has a loop (an edge to a visited vertex other than the
 /// parent).
-fn post_order(n: usize, start: &[usize], adj: &[u32]) -> Option<(Vec<u32>, Vec<u32>)> {
+fn post_order(n: usize, start: &[u32], adj: &[u32]) -> Option<(Vec<u32>, Vec<u32>)> {
     let mut parent = vec![NONE; n];
     let mut seen = vec![false; n];
     let mut order: Vec<u32> = Vec::with_capacity(n);
@@ -247,7 +253,7 @@ fn post_order(n: usize, start: &[usize], adj: &[u32]) -> Option<(Vec<u32>, Vec<u
             continue;
         }
         seen[root] = true;
-        stack.push((root as u32, start[root + 1] - start[root]));
+        stack.push((root as u32, (start[root + 1] - start[root]) as usize));
         while let Some(top) = stack.last_mut() {
             let v = top.0 as usize;
             if top.1 == 0 {
@@ -256,7 +262,7 @@ fn post_order(n: usize, start: &[usize], adj: &[u32]) -> Option<(Vec<u32>, Vec<u
                 continue;
             }
             top.1 -= 1;
-            let w = adj[start[v] + top.1] as usize;
+            let w = adj[start[v] as usize + top.1] as usize;
             if w as u32 == parent[v] {
                 continue;
             }
@@ -265,7 +271,7 @@ fn post_order(n: usize, start: &[usize], adj: &[u32]) -> Option<(Vec<u32>, Vec<u
             }
             seen[w] = true;
             parent[w] = v as u32;
-            stack.push((w as u32, start[w + 1] - start[w]));
+            stack.push((w as u32, (start[w + 1] - start[w]) as usize));
         }
     }
     Some((order, parent))

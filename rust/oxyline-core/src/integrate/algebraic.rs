@@ -46,7 +46,8 @@ pub(super) fn reduce_prescribed_inductors(dae: &Dae, regime: Regime) -> Reductio
         row_forcing[*row].push(k);
     }
     let entries = |r: usize| {
-        (dae.f.ptr[r]..dae.f.ptr[r + 1])
+        dae.f
+            .row(r)
             .map(|k| (dae.f.col[k] as usize, dae.f.val[k]))
             .filter(|&(_, v)| v != 0.0)
     };
@@ -134,7 +135,7 @@ impl Algebraic {
         let mut stamps = Vec::new();
         let mut stamps_src = Vec::new();
         for (l, &g) in rows.iter().enumerate() {
-            for k in dae.f.ptr[g]..dae.f.ptr[g + 1] {
+            for k in dae.f.row(g) {
                 let c = dae.f.col[k] as usize;
                 if local[c] != usize::MAX {
                     stamps.push((l, local[c]));

@@ -89,7 +89,8 @@ impl<'a> GenAlpha<'a> {
             .chain_rule
             .iter()
             .map(|c| {
-                (dae.f.ptr[c.node]..dae.f.ptr[c.node + 1])
+                dae.f
+                    .row(c.node)
                     .find(|&k| dae.f.col[k] as usize == c.flow)
                     .expect("a capacitor node's row holds its inflow")
             })
@@ -120,6 +121,9 @@ impl<'a> GenAlpha<'a> {
         };
         // (a condensed step's residual holds the reduced system's rows alone)
         let reduced_n = leaves.as_ref().map_or(n, |l| l.start);
+        // the pattern was needed to analyse it: gone before the step's vectors are allocated
+        let n_stamps = stamps.len();
+        drop(stamps);
         Ok(GenAlpha {
             dae,
             e,
@@ -131,7 +135,7 @@ impl<'a> GenAlpha<'a> {
             control,
             lu,
             leaves,
-            n_stamps: stamps.len(),
+            n_stamps,
             chain_flow_entry,
             factored: false,
             f: vec![0.0; nonlinear],
@@ -509,7 +513,7 @@ impl LinearResidual<'_> {
                 0.0
             };
             let mut v = fi - self.e[i] * yd[i] * self.c_am;
-            for k in f.ptr[i]..f.ptr[i + 1] {
+            for k in f.row(i) {
                 v -= f.val[k] * y[f.col[k] as usize];
             }
             rmax = rmax.max(v.abs());

@@ -82,7 +82,7 @@ impl Leaves {
         let m = n - start;
         let (mut parent, mut b, mut own) = (vec![0u32; m], vec![0.0; m], vec![0.0; m]);
         for j in start..n {
-            for k in dae.f.ptr[j]..dae.f.ptr[j + 1] {
+            for k in dae.f.row(j) {
                 let c = dae.f.col[k] as usize;
                 if c == j {
                     own[j - start] = dae.f.val[k];
@@ -101,7 +101,7 @@ impl Leaves {
         };
         reduced_f.ptr.push(0);
         for i in 0..start {
-            for k in dae.f.ptr[i]..dae.f.ptr[i + 1] {
+            for k in dae.f.row(i) {
                 let c = dae.f.col[k] as usize;
                 if c >= start {
                     f_pj[c - start] = dae.f.val[k];
@@ -110,7 +110,7 @@ impl Leaves {
                     reduced_f.val.push(dae.f.val[k]);
                 }
             }
-            reduced_f.ptr.push(reduced_f.col.len());
+            reduced_f.end_row();
         }
         let symmetric = (0..m).all(|j| own[j] == -b[j] && f_pj[j] == b[j] && b[j] != 0.0);
         if !symmetric {
@@ -325,7 +325,7 @@ fn leaf_start(dae: &Dae) -> usize {
     let mut start = n;
     while start > 0 {
         let j = start - 1;
-        let (lo, hi) = (dae.f.ptr[j], dae.f.ptr[j + 1]);
+        let (lo, hi) = (dae.f.row(j).start, dae.f.row(j).end);
         let ok = !forced[j]
             && hi - lo == 2
             && uses[j] == 2
@@ -338,7 +338,8 @@ fn leaf_start(dae: &Dae) -> usize {
     }
     // every parent must be in the reduced system
     let parent_of = |j: usize| {
-        (dae.f.ptr[j]..dae.f.ptr[j + 1])
+        dae.f
+            .row(j)
             .map(|k| dae.f.col[k] as usize)
             .find(|&c| c != j)
             .expect("a leaf row has its parent")

@@ -219,7 +219,7 @@ pub fn solve<P: NewtonProblem>(
 pub fn jacobian_stamps(dae: &Dae) -> Vec<(usize, usize)> {
     let mut stamps = Vec::with_capacity(dae.f.val.len() + dae.n);
     for i in 0..dae.n {
-        for k in dae.f.ptr[i]..dae.f.ptr[i + 1] {
+        for k in dae.f.row(i) {
             stamps.push((i, dae.f.col[k] as usize));
         }
     }

@@ -568,7 +568,7 @@ impl<'a> Rk4<'a> {
         let mut local = vec![usize::MAX; dae.n];
         for (l, &g) in alg.rows.iter().enumerate() {
             local[g] = l;
-            for k in dae.f.ptr[g]..dae.f.ptr[g + 1] {
+            for k in dae.f.row(g) {
                 let c = dae.f.col[k] as usize;
                 if e[c] != 0.0 {
                     r[l] -= dae.f.val[k] * yd[c];

@@ -68,11 +68,16 @@ impl NewtonProblem for Steady<'_> {
 /// Exact steady state: F y + c(y) = f̄ (Newton when stenoses are present).
 pub fn steady_state(dae: &Dae) -> Result<Vec<f64>> {
     let n = dae.n;
-    let stamps = jacobian_stamps(dae);
+    // the pattern is needed only to analyse it: dropped before the values and the Newton's
+    // vectors are allocated (16 bytes a stamp, ~110 per segment, was held through the solve)
+    let (lu, n_stamps) = {
+        let stamps = jacobian_stamps(dae);
+        (SparseLu::analyse(n, &stamps)?, stamps.len())
+    };
     let mut p = Steady {
         dae,
-        lu: SparseLu::analyse(n, &stamps)?,
-        vals: vec![0.0; stamps.len()],
+        lu,
+        vals: vec![0.0; n_stamps],
         f: vec![0.0; n],
         y: vec![0.0; n],
         zero: vec![0.0; n],

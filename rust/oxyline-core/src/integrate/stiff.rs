@@ -36,7 +36,9 @@ impl StiffBranch {
     /// rejects at every halving.
     pub(super) fn quasi_steady(&self, dae: &Dae, f: &[f64], y: &mut [f64]) {
         let j = self.inductor;
-        let Some(c) = (dae.f.ptr[j]..dae.f.ptr[j + 1])
+        let Some(c) = dae
+            .f
+            .row(j)
             .find(|&k| dae.f.col[k] as usize == self.node)
             .map(|k| dae.f.val[k])
             .filter(|&c| c != 0.0)
@@ -79,7 +81,9 @@ pub(super) fn find(dae: &Dae, e: &[f64]) -> Vec<StiffBranch> {
     }
     let mut out = Vec::new();
     for r in (0..dae.n_nodes).filter(|&r| e[r] == 0.0 && !element_row[r]) {
-        let cols: Vec<(usize, f64)> = (dae.f.ptr[r]..dae.f.ptr[r + 1])
+        let cols: Vec<(usize, f64)> = dae
+            .f
+            .row(r)
             .filter(|&k| dae.f.val[k] != 0.0)
             .map(|k| (dae.f.col[k] as usize, dae.f.val[k]))
             .collect();

@@ -16,8 +16,9 @@ use crate::error::{Error, Result};
 /// Circuit per flow segment: its node (40 bytes), its branch (~50) and their labels (~60),
 /// kept beside the DAE for the impedance and `circuit()` reads.
 pub const CIRCUIT_PER_SEGMENT: f64 = 150.0;
-/// DAE per flow segment: the mass diagonal (~23 bytes) and the flow matrix F in CSR (~95).
-pub const DAE_PER_SEGMENT: f64 = 118.0;
+/// DAE per flow segment: the mass diagonal (~23 bytes) and the flow matrix F in CSR (~87,
+/// with 32-bit row starts).
+pub const DAE_PER_SEGMENT: f64 = 110.0;
 /// Output probes (the segments' unknowns) and the other tables per segment: DAE elements,
 /// forcing, boundary rows (~37 + ~90 bytes).
 pub const TABLES_PER_SEGMENT: f64 = 127.0;
@@ -26,8 +27,8 @@ pub const TABLES_PER_SEGMENT: f64 = 127.0;
 pub const RUN_PER_SEGMENT: f64 = 290.0;
 /// The transport plan per cell and species: its segment with wall and volume (72 bytes), the
 /// wall law (68), faces and their incidence (~25), wall pieces (28), output layout (22), the
-/// 32-bit cell and node maps, volumes and sources (~110).
-pub const PLAN_PER_CELL: f64 = 326.0;
+/// 32-bit cell and node maps, volumes and sources (~102; a tree keeps no domain list).
+pub const PLAN_PER_CELL: f64 = 318.0;
 /// The transport run's state per cell and species: the sweep's node arrays, the amounts and
 /// concentrations and the species' output row.
 pub const TRANSPORT_RUN_PER_CELL: f64 = 108.0;

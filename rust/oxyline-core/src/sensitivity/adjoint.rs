@@ -371,7 +371,7 @@ fn backward_cycle(
         }
         // a ← a − (F + J_k)ᵀ u, b ← pred b − c E u
         for (i, &ui) in u.iter().enumerate() {
-            for q in dae.f.ptr[i]..dae.f.ptr[i + 1] {
+            for q in dae.f.row(i) {
                 a[dae.f.col[q] as usize] -= dae.f.val[q] * ui;
             }
         }

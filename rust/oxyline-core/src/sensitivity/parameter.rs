@@ -528,7 +528,8 @@ impl<'a> Stamps<'a> {
         let branch_r = (0..circuit.branches.len())
             .map(|b| {
                 let row = nn + b;
-                (dae.f.ptr[row]..dae.f.ptr[row + 1])
+                dae.f
+                    .row(row)
                     .find(|&k| dae.f.col[k] as usize == row)
                     .expect("a branch row holds its resistance")
             })

@@ -140,7 +140,7 @@ fn residual(dae: &Dae, c: f64, y: &[f64], yd: &[f64], r: &mut [f64]) {
     let f = &dae.f;
     for (i, ri) in r.iter_mut().enumerate() {
         let mut v = *ri - c * dae.e[i] * yd[i];
-        for k in f.ptr[i]..f.ptr[i + 1] {
+        for k in f.row(i) {
             v -= f.val[k] * y[f.col[k] as usize];
         }
         *ri = v;
@@ -199,7 +199,7 @@ impl Source {
         }
         let mut f = Vec::new();
         for i in 0..dae.n {
-            for k in dae.f.ptr[i]..dae.f.ptr[i + 1] {
+            for k in dae.f.row(i) {
                 if t.df[k] != 0.0 {
                     f.push((at(i), dae.f.col[k] as usize, t.df[k]));
                 }

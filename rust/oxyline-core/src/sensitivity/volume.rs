@@ -64,7 +64,7 @@ impl ConservedVolume {
         }
         let (mut sum, mut size) = (vec![0.0; n], vec![0.0; n]);
         for i in (0..n).filter(|&i| m[i] != 0.0) {
-            for k in dae.f.ptr[i]..dae.f.ptr[i + 1] {
+            for k in dae.f.row(i) {
                 let j = dae.f.col[k] as usize;
                 sum[j] += dae.f.val[k];
                 size[j] += dae.f.val[k].abs();

@@ -910,6 +910,11 @@ impl Plan {
             }
         }
         self.tree = tree_order(nn, &self.domain, &self.internal);
+        if self.tree.is_some() {
+            // a forest is solved in `tree` order; the domain list is read only by the
+            // flow-order sweep of a network with loops (8 bytes per cell kept for nothing)
+            self.domain = Vec::new();
+        }
         for l in self.tree.iter_mut().flatten() {
             // (cells < nodes < u32::MAX, checked above)
             l.cell = self.node_cell[l.node as usize];

@@ -286,7 +286,8 @@ pub struct Plan {
     /// Shared with the circuit and its DAE: a name is written only when a message needs it
     /// (a copy of every node's name cost 40 B per segment and ~0.1 µs per segment to write).
     pub(super) node_names: Arc<crate::circuit::Names>,
-    /// Nodes solved by the implicit sweep (cells and mixing points).
+    /// Nodes solved by the implicit sweep (cells and mixing points); empty when `tree` is
+    /// set (a forest is solved in that order).
     pub(super) domain: Vec<usize>,
     /// Faces between two domain nodes as [face, from node, to node], and the other faces.
     pub(super) internal: Vec<[u32; 3]>,

@@ -62,7 +62,9 @@ pub fn negative_resistance(dae: &Dae, y: &[f64]) -> Option<NegativeResistance> {
         .iter()
         .filter(|&&(i, _)| i < y.len())
         .map(|&(i, s)| {
-            let diagonal = (dae.f.ptr[i]..dae.f.ptr[i + 1])
+            let diagonal = dae
+                .f
+                .row(i)
                 .filter(|&k| dae.f.col[k] as usize == i)
                 .map(|k| dae.f.val[k])
                 .sum::<f64>();
