@@ -231,6 +231,7 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
     # loops (they run on the pool's threads while this one waits, without spinning)
     t1 = time.thread_time()
     s1 = thread_sleeps()
+    p1 = pool_threads()
     with tempfile.TemporaryDirectory() as d:
         if spec.get("zarr"):
             res = oxyline.simulate_to_zarr(m, os.path.join(d, "run.zarr"),
@@ -244,6 +245,7 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
             settings = res.settings
         c2, w2, t2 = time.process_time(), time.perf_counter(), time.thread_time()
         sleeps = thread_sleeps() - s1 if s1 is not None else None
+        p2 = pool_threads()
         dt = float(settings["dt"]) if settings.get("dt") else None
         out = {"load_cpu": c1 - c0, "load_wall": w1 - w0, "run_cpu": c2 - c1,
                "run_main_cpu": t2 - t1,
@@ -251,6 +253,10 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
                "dt": dt, "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0}
         if sleeps is not None:
             out["sleeps"] = sleeps
+        if p2:
+            # the run pool's threads: their CPU and sleeps during this run
+            out["pool_cpu"] = sum(c - p1.get(t, (0.0, 0))[0] for t, (c, _) in p2.items())
+            out["pool_sleeps"] = sum(n - p1.get(t, (0.0, 0))[1] for t, (_, n) in p2.items())
         if settings.get("steps"):  # an error-controlled run: its accepted steps
             out["steps"] = int(settings["steps"])
             out["ran"] = f"{settings['method']}, {settings.get('step_control', '')}"
@@ -324,17 +330,19 @@ def main_step_cpu(r: dict[str, Any]) -> float | None:
     return r["main_cpu"] / r["main_steps"] if r.get("main_steps") else None
 
 
-def copy_ns() -> float:
+def copy_ns() -> tuple[float, float, float]:
     """A STREAM-like copy on this machine, now: ns per 8-byte value of copying a 256 MB array
     into another (read + write, numpy, one thread; best of 5), measured in a child process
     (Linux keeps a process's peak RSS across fork and exec: measured here, the 512 MB would
-    become every later child's peak)."""
+    become every later child's peak); with the copy's CPU ns per value of one thread alone and
+    of each of two threads copying a half at once (`copy_cpu`)."""
     p = subprocess.run([sys.executable, __file__, "--copy"], capture_output=True, text=True,
                        check=True)
-    return float(p.stdout.strip().splitlines()[-1])
+    wall, alone, both = json.loads(p.stdout.strip().splitlines()[-1])
+    return wall, alone, both
 
 
-def copy_in_this_process() -> float:
+def copy_in_this_process() -> tuple[float, float, float]:
     """`copy_ns`'s measurement."""
     import numpy as np
 
@@ -345,7 +353,39 @@ def copy_in_this_process() -> float:
         t0 = time.perf_counter()
         np.copyto(b, a)
         best = min(best, time.perf_counter() - t0)
-    return 1e9 * best / a.size
+    return 1e9 * best / a.size, copy_cpu(a, b, 1), copy_cpu(a, b, 2)
+
+
+def copy_cpu(a: Any, b: Any, threads: int, rounds: int = 8) -> float:
+    """CPU ns per value of copying ``a`` into ``b`` on ``threads`` threads at once, each its
+    own part (numpy releases the GIL), best of ``rounds``; the slower thread's. A thread's CPU
+    time counts only while it runs, so the machine's load does not inflate it as it does the
+    wall time: if each of two threads copying at once takes longer per value than one alone,
+    they share the memory's bandwidth, and a memory-bound pass cannot run 2× as fast on two
+    threads (at most alone / both × 2)."""
+    import numpy as np
+
+    cut = np.linspace(0, a.size, threads + 1).astype(int)
+    best = math.inf
+    for _ in range(rounds):
+        start = threading.Barrier(threads)
+        took = [0.0] * threads
+
+        def part(i: int, start: threading.Barrier, took: list[float]) -> None:
+            lo, hi = cut[i], cut[i + 1]
+            start.wait()
+            c0 = time.thread_time()
+            np.copyto(b[lo:hi], a[lo:hi])
+            took[i] = 1e9 * (time.thread_time() - c0) / (hi - lo)
+
+        workers = [threading.Thread(target=part, args=(i, start, took))
+                   for i in range(threads)]
+        for w in workers:
+            w.start()
+        for w in workers:
+            w.join()
+        best = min(best, max(took))
+    return best
 
 
 def thread_sleeps() -> int | None:
@@ -359,6 +399,31 @@ def thread_sleeps() -> int | None:
     except OSError:
         pass
     return None
+
+
+def pool_threads() -> dict[str, tuple[float, int]]:
+    """CPU seconds and voluntary context switches (sleeps) of each of the run pools' threads
+    (``oxyline-run-N``) so far (Linux; empty elsewhere)."""
+    out: dict[str, tuple[float, int]] = {}
+    try:
+        tids = os.listdir("/proc/self/task")
+    except OSError:
+        return out
+    tick = os.sysconf("SC_CLK_TCK")
+    for tid in tids:
+        try:
+            with open(f"/proc/self/task/{tid}/stat") as f:
+                stat = f.read()
+            with open(f"/proc/self/task/{tid}/status") as f:
+                status = f.read()
+        except OSError:
+            continue
+        if not stat[stat.index("(") + 1:stat.rindex(")")].startswith("oxyline-run-"):
+            continue
+        fields = stat[stat.rindex(")") + 2:].split()
+        sleeps = int(status.split("\nvoluntary_ctxt_switches:")[1].split()[0])
+        out[tid] = ((int(fields[11]) + int(fields[12])) / tick, sleeps)
+    return out
 
 
 def serial_fraction(r: dict[str, Any], first: dict[str, Any] | None) -> float | None:
@@ -479,7 +544,7 @@ def main() -> None:
         print(json.dumps(child(json.loads(a.child))))
         return
     if a.copy:
-        print(copy_in_this_process())
+        print(json.dumps(copy_in_this_process()))
         return
     max_depth: dict[str, int] = {}
     if a.quick:
@@ -497,8 +562,10 @@ def main() -> None:
           + (f"; RK4 runs stop {a.rk4_fraction:g} into the cycle (ns/seg-step and O2/flow "
              "over the steps between the first progress check and the stop)"
              if a.rk4_fraction < 1.0 and "rk4" in a.methods else ""))
-    copy = copy_ns()
-    print(f"STREAM-like copy: {copy:.2f} ns per double (256 MB array, one thread)")
+    copy, alone, both = copy_ns()
+    print(f"STREAM-like copy: {copy:.2f} ns per double (256 MB array, one thread); its CPU "
+          f"per double {alone:.2f} ns alone, {both:.2f} ns each of 2 threads at once: "
+          f"2 threads copy at most {2.0 * alone / both:.2f}× as fast as one")
     print("| method | config | segments | steps | load s | run s | ns/seg-step run "
           "| ns/seg-step main pass | peak MB | peak B/seg | O2/flow run "
           "| O2/flow step (main pass) "
@@ -541,10 +608,16 @@ def main() -> None:
                           + thread_cells(r, first, copy), flush=True)
                     if "ran" in r:
                         print(f"|   ran: {r['ran']} |", flush=True)
+                    steps = r.get("steps", round(PERIOD / r["dt"])) if r.get("dt") else 1
                     if threads != 1 and r.get("sleeps") is not None:
-                        steps = r.get("steps", round(PERIOD / r["dt"]))
                         print(f"|   calling thread: {r['sleeps'] / steps:.1f} sleeps per step "
                               "(entries of the run's pool) |", flush=True)
+                    if threads != 1 and "pool_cpu" in r:
+                        more = (f", {r['run_cpu'] / first['run_cpu']:.2f}× the one-thread run's "
+                                "CPU" if first is not r and first.get("threads") == 1 else "")
+                        print(f"|   pool threads: {r['pool_cpu']:.2f} CPU s, "
+                              f"{r['pool_sleeps'] / steps:.2f} sleeps per step{more} |",
+                              flush=True)
                     if threads == a.threads[0]:
                         rows.setdefault((label, config), []).append(r)
     if skipped:

@@ -739,6 +739,28 @@ mod tests {
         }
     }
 
+    /// The tasks the threads take: every range once and in order, each task (but the last)
+    /// at least `TASK_MIN` vertices and less than that plus its last range, so that the
+    /// thread that finishes a pass first waits for at most about one task of the other.
+    fn check_tasks(p: &parallel::Partition) {
+        let tasks = p.tasks();
+        let flat: Vec<(u32, u32)> = tasks.iter().flat_map(|t| t.iter().copied()).collect();
+        assert_eq!(flat, p.ranges, "the tasks are the ranges in order");
+        let size = |r: &[(u32, u32)]| r.iter().map(|&(a, b)| (b - a) as usize).sum::<usize>();
+        assert!(
+            tasks.len() > 2 * 4,
+            "{} tasks: several for each of 4 threads",
+            tasks.len()
+        );
+        for t in &tasks[..tasks.len() - 1] {
+            let (n, last) = (size(t), size(&t[t.len() - 1..]));
+            assert!(
+                n >= parallel::TASK_MIN && n < parallel::TASK_MIN + last,
+                "{n}"
+            );
+        }
+    }
+
     /// A random recursive tree (`fan` 0) or a binary heap (`fan` 2) of `n` vertices.
     fn threads_case(n: usize, fan: usize) {
         let mut seed = 7u64;
@@ -775,6 +797,7 @@ mod tests {
                 };
                 assert_eq!(t.partition.pool().is_some(), threads > 1);
                 assert!(t.partition.ranges.len() > 10);
+                check_tasks(&t.partition);
                 lu.factor(&vals).unwrap();
                 let mut out = b.clone();
                 assert!(lu.solve_in_place(&mut out));

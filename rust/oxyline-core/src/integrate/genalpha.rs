@@ -435,9 +435,9 @@ impl GenAlpha<'_> {
         // bits on any number of threads
         let mut rmax = match &pool {
             Some(pool) => pool.install(|| {
-                head.par_chunks_mut(PARALLEL_ROWS)
+                head.par_chunks_mut(ROWS_PER_TASK)
                     .enumerate()
-                    .map(|(c, r)| residual.rows(c * PARALLEL_ROWS, r))
+                    .map(|(c, r)| residual.rows(c * ROWS_PER_TASK, r))
                     .reduce(|| 0.0, f64::max)
             }),
             None => residual.rows(0, head),
@@ -469,9 +469,9 @@ impl GenAlpha<'_> {
         let (y, yd, r) = (&mut y[..start], &mut yd[..start], &self.r[..start]);
         match &pool {
             Some(pool) => pool.install(|| {
-                y.par_chunks_mut(PARALLEL_ROWS)
-                    .zip(yd.par_chunks_mut(PARALLEL_ROWS))
-                    .zip(r.par_chunks(PARALLEL_ROWS))
+                y.par_chunks_mut(ROWS_PER_TASK)
+                    .zip(yd.par_chunks_mut(ROWS_PER_TASK))
+                    .zip(r.par_chunks(ROWS_PER_TASK))
                     .for_each(|((y, yd), r)| update(y, yd, r))
             }),
             None => update(y, yd, r),
@@ -480,9 +480,15 @@ impl GenAlpha<'_> {
     }
 }
 
-/// Rows per task of a linear step's residual and update on the run's threads (and the least
-/// number of unknowns for which they are split at all).
+/// The least number of unknowns for which a linear step's residual and update are split over
+/// the run's threads.
 const PARALLEL_ROWS: usize = 1 << 15;
+
+/// Rows per task of a linear step's residual and update on the run's threads. Small against
+/// a pass (~20 µs of work): a pass ends when its last task does, and with tasks of 32 768 rows
+/// (~0.15 ms) the thread that finished first waited up to one of them at the end of each
+/// pass. Each row is independent, so the task size does not change a value.
+const ROWS_PER_TASK: usize = 1 << 12;
 
 /// The residual of a linear step at its predictor (see `step_linear`).
 struct LinearResidual<'r> {

@@ -17,8 +17,12 @@ use std::sync::Arc;
 /// microseconds and the threads' start costs more than they save.
 const PARALLEL_MIN: usize = 1 << 14;
 
-/// Least number of vertices one task eliminates (several small ranges go to one thread).
-const TASK_MIN: usize = 1 << 13;
+/// Least number of vertices one task eliminates (several small ranges go to one thread). Half
+/// a block (a task of about one block, ~20 µs a pass): a pass ends with its last task, so the
+/// thread that finished first waits up to one task; with tasks of four blocks that wait was
+/// up to a tenth of a 131 k-segment tree's pass on two threads. Tasks group whole ranges, so
+/// their size changes no value.
+pub(super) const TASK_MIN: usize = super::BLOCK / 2;
 
 /// The partition of the elimination order into parallel ranges and the serial remainder.
 pub(super) struct Partition {
@@ -71,7 +75,7 @@ impl Partition {
     }
 
     /// The ranges grouped into tasks of at least `TASK_MIN` vertices (in order).
-    fn tasks(&self) -> Vec<&[(u32, u32)]> {
+    pub(super) fn tasks(&self) -> Vec<&[(u32, u32)]> {
         let mut tasks = Vec::new();
         let (mut first, mut size) = (0, 0usize);
         for (i, &(a, b)) in self.ranges.iter().enumerate() {

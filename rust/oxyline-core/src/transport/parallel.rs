@@ -30,7 +30,10 @@ const BLOCK: usize = 2048;
 /// and the threads' start costs more than they save.
 const PARALLEL_MIN: usize = 1 << 14;
 /// Least number of nodes (or cells) one task takes (several small blocks go to one thread).
-const TASK_MIN: usize = 1 << 13;
+/// Half a block (a task of about one block): the pass ends with its last task, and the other
+/// thread waits for it (as the flow's tree elimination, `sparse::parallel`). Tasks group whole
+/// blocks, whose sums are added block by block in order, so the task size changes no value.
+const TASK_MIN: usize = BLOCK / 2;
 /// Cells per chunk of the binding's linearisation (each chunk's Σ wconst in cell order).
 const CHUNK: usize = 4096;
 
@@ -641,6 +644,37 @@ mod tests {
             scale > 0.0 && (change - flux).abs() <= 1e-10 * scale,
             "{change} {flux}"
         );
+    }
+
+    /// The tasks of a partition (the units the threads take): whole blocks in order, every
+    /// block in exactly one task, each task at least `task_min` nodes (the last may be less)
+    /// and less than `task_min` plus one block, so the thread that finishes a pass first
+    /// waits at most about one block for the other. The run's tasks are about one block.
+    #[test]
+    fn the_tasks_are_whole_blocks_of_about_the_least_size() {
+        const { assert!(TASK_MIN <= BLOCK && TASK_MIN >= BLOCK / 4) };
+        let mut seed = 5u64;
+        let json = random_tree(400, &mut seed);
+        let c = case(&json, &mut seed);
+        let tree = c.transport.plan.tree.clone().unwrap();
+        let nn = c.transport.plan.kind.len();
+        for (block, task_min) in [(8, 4), (8, 16), (16, 8), (32, 100)] {
+            let p = TreePartition::new(&tree, nn, block, task_min, 32);
+            let nodes = |&(b0, b1): &(u32, u32)| p.ends[b1 as usize] - p.ends[b0 as usize];
+            assert!(p.tasks.len() > 2, "{} tasks", p.tasks.len());
+            assert_eq!(p.tasks[0].0, 0);
+            for w in p.tasks.windows(2) {
+                assert_eq!(w[0].1, w[1].0, "tasks follow each other");
+            }
+            assert_eq!(p.tasks.last().unwrap().1 as usize, p.ends.len() - 1);
+            for t in &p.tasks[..p.tasks.len() - 1] {
+                let n = nodes(t) as usize;
+                assert!(
+                    n >= task_min && n < task_min + block,
+                    "{n} nodes, {block} {task_min}"
+                );
+            }
+        }
     }
 
     /// Every position once, blocks whole subtrees below the top tree, the serial items in
