@@ -547,4 +547,30 @@ mod tests {
         assert_eq!(found.switch, 1);
         assert!((found.theta - 0.25).abs() < 1e-9);
     }
+
+    #[test]
+    fn an_on_off_valve_closes_where_its_flow_reverses() {
+        // ΔP = −1 throughout; flow Q(θ) = 0.5 − θ: reverses at θ = 0.5, while the flow
+        // tolerance 0.2 (rtol 0.1 × peak 2) is reached at θ = 0.3
+        let sw = Switch {
+            unknowns: [0, 1, 2],
+            on_off: true,
+            resistance: 1.0,
+        };
+        let mut ev = open_events(vec![sw]);
+        ev.flow_tol = (0.0, 0.1);
+        ev.peak = vec![2.0];
+        let at = |th: f64| move |i: usize| [0.0, 1.0, 0.5 - th][i];
+        let found = ev.locate(&at(1.0), at, 1e-9).expect("a closing");
+        assert!((found.theta - 0.5).abs() < 1e-6, "{}", found.theta);
+        // a step ending at θ = 0.4 (Q = 0.1, within the tolerance, still falling): no event
+        // yet, the reversal is the next step's
+        let short = |th: f64| move |i: usize| [0.0, 1.0, 0.5 - 0.4 * th][i];
+        assert!(ev.locate(&short(1.0), short, 1e-9).is_none());
+        // a flow that ends within its tolerance rising (not the open law's: a Newton
+        // correction's flow through a valve the step closed): the valve closes at the end
+        let rising = |th: f64| move |i: usize| [0.0, 1.0, 0.3 - 0.5 * th + 0.3 * th * th][i];
+        let found = ev.locate(&rising(1.0), rising, 1e-9).expect("a closing");
+        assert_eq!(found.theta, 1.0);
+    }
 }
