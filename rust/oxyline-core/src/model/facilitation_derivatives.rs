@@ -78,9 +78,9 @@ impl Layer {
             let k2 = self.augmented_rates(z + h / 2.0, &axpy(&y, h / 2.0, &k1));
             let k3 = self.augmented_rates(z + h / 2.0, &axpy(&y, h / 2.0, &k2));
             let k4 = self.augmented_rates(z + h, &axpy(&y, h, &k3));
-            for i in 0..8 {
-                y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-            }
+            y = std::array::from_fn(|i| {
+                y[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+            });
             z += h;
         }
         [y[2], y[4], y[6]]
