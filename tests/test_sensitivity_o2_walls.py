@@ -15,7 +15,8 @@ not with the wall area alone.
   factor reads the inlet flow's harmonics, by the same parameters and the ICA's outlet
   resistance, forward and adjoint, against central differences likewise; the adjoint
   against the forward tangents.
-* The facilitated walls' PO2 and P50 with haemoglobin stay refused by name.
+* A facilitated wall's PO2 and P50 with a permeability in series stay refused by name
+  (without one: test_sensitivity_o2_facilitation.py).
 """
 
 from __future__ import annotations
@@ -141,9 +142,14 @@ def test_inlet_renewal_is_at_work_in_the_renewing_model() -> None:
     assert renewed[2] / plain[2] > 1.01, (renewed, plain)
 
 
-def test_facilitated_wall_parameters_are_refused_by_name() -> None:
+def test_facilitated_wall_with_a_permeability_is_refused_by_name() -> None:
     m = copy.deepcopy(Y)
-    m["oxygen"]["wall"] = {"model": "graetz", "po2": 40.0, "flow": "forward-mean"}
+    m["oxygen"]["wall"] = {
+        "model": "graetz",
+        "po2": 40.0,
+        "flow": "forward-mean",
+        "permeability": 1e-4,
+    }
     for path in ["oxygen.wall.po2", "oxygen.hill.p50"]:
         with pytest.raises(ModelError, match=path.replace(".", r"\.")):
             oxyline.sensitivities(m, [path], ["VO2"])

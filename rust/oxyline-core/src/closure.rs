@@ -95,6 +95,9 @@ pub enum WallSpec {
         enhancement: f64,
         #[serde(default)]
         permeability: Option<f64>,
+        /// The facilitation E_Hb included in `enhancement` (None: none).
+        #[serde(default)]
+        facilitation: Option<Facilitation>,
     },
     /// C6: exact Graetz series (Poiseuille, constant c_w) with a cycle-mean flow (`flow`:
     /// the forward-flow mean by default, docs/physics.md §3.6).
@@ -106,6 +109,9 @@ pub enum WallSpec {
         enhancement: f64,
         #[serde(default)]
         permeability: Option<f64>,
+        /// The facilitation E_Hb included in `enhancement` (None: none).
+        #[serde(default)]
+        facilitation: Option<Facilitation>,
         /// Blood kinematic viscosity μ/ρ (m²/s) for the Womersley numbers of the inlet renewal
         /// (the Python layer passes the model's blood; default the default blood's).
         #[serde(default = "default_kinematic_viscosity")]
@@ -117,6 +123,22 @@ pub enum WallSpec {
         tissue_concentration: f64,
     },
 }
+
+/// The haemoglobin facilitation factor E_Hb (docs/physics.md §3.4) that a Lévêque or Graetz
+/// wall's `enhancement` includes, with what it was computed from besides the species'
+/// binding, diffusivity and the wall concentration: the oxygen sensitivities differentiate it
+/// (`model::facilitation`).
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Facilitation {
+    /// E_Hb (a factor of the wall's `enhancement`).
+    pub factor: f64,
+    /// The free concentration α P_in of the inlet PO2 the factor was taken at (mol/m³).
+    pub inlet_concentration: f64,
+    /// Oxyhaemoglobin diffusivity D_Hb (m²/s).
+    pub d_hb: f64,
+}
+
 fn one() -> f64 {
     1.0
 }
@@ -323,14 +345,21 @@ impl WallSpec {
                 wall_concentration,
                 enhancement,
                 permeability,
+                facilitation,
                 ..
             }
             | WallSpec::Graetz {
                 wall_concentration,
                 enhancement,
                 permeability,
+                facilitation,
                 ..
             } => {
+                if let Some(f) = facilitation {
+                    check(element, "facilitation factor", f.factor, false)?;
+                    check(element, "facilitation inlet", f.inlet_concentration, true)?;
+                    check(element, "facilitation d_hb", f.d_hb, true)?;
+                }
                 if let WallSpec::Graetz {
                     kinematic_viscosity,
                     ..
@@ -432,6 +461,7 @@ impl WallSpec {
                 shear,
                 enhancement,
                 permeability,
+                ..
             } => {
                 need_d()?;
                 let (gp, cw) = (gp(permeability), *wall_concentration);
@@ -874,6 +904,7 @@ mod tests {
             flow: MeanFlow::ForwardMean,
             enhancement: 3.0,
             permeability: p,
+            facilitation: None,
             kinematic_viscosity: 3.3e-6,
         };
         let leveque = |p: Option<f64>| WallSpec::Leveque {
@@ -881,6 +912,7 @@ mod tests {
             shear: Shear::CycleMean,
             enhancement: 3.0,
             permeability: p,
+            facilitation: None,
         };
         let h = 1e-5;
         // (wall, x1 = segment end, q): x* = π D x/(4q) from 1e-6 (series) to 0.05 (eigen)

@@ -96,6 +96,15 @@ impl Layer {
     }
 }
 
+/// The shooting solve of the Hill layer: the wall flux Φ'F'(0) that reaches P_in, the
+/// dissolved layer's flux, and the integration range and steps it was found with.
+struct Shot {
+    g0: f64,
+    dissolved: f64,
+    zeta_end: f64,
+    steps: usize,
+}
+
 /// E_Hb of Hill binding: the nonlinear Lévêque layer's wall flux over the dissolved one (1
 /// when P_in = P_w: no layer). F(ζ_max) increases monotonically and smoothly with the wall
 /// flux: Illinois regula falsi on it, to 1e-10 of P_in − P_w.
@@ -103,6 +112,11 @@ pub fn hill_factor(p_in: f64, p_w: f64, layer: &Layer) -> f64 {
     if p_in == p_w {
         return 1.0;
     }
+    let shot = shoot(p_in, p_w, layer);
+    shot.g0 / shot.dissolved
+}
+
+fn shoot(p_in: f64, p_w: f64, layer: &Layer) -> Shot {
     let (d, d_hb) = (layer.d, layer.d_hb);
     let dissolved = layer.alpha * d * (p_in - p_w) / GAMMA_4_3;
     // the flux lies between the dissolved value scaled by the smallest and largest linear
@@ -144,8 +158,17 @@ pub fn hill_factor(p_in: f64, p_w: f64, layer: &Layer) -> f64 {
             side = 1;
         }
     }
-    c / dissolved
+    Shot {
+        g0: c,
+        dissolved,
+        zeta_end,
+        steps,
+    }
 }
+
+#[path = "facilitation_derivatives.rs"]
+mod derivatives;
+pub use derivatives::{FactorDerivatives, hill_factor_derivatives, secant_factor_derivatives};
 
 #[cfg(test)]
 mod tests {

@@ -922,6 +922,12 @@ mod tests {
             .unwrap();
         assert!(e > 1.5 && e < 5.0, "E_Hb = {e}");
         assert!(on.warnings.is_empty());
+        // the factor is recorded with what it was taken at (α P_in, the default D_Hb)
+        let record = &on.section["species"][0]["wall"]["facilitation"];
+        assert_eq!(record["factor"].as_f64(), Some(e));
+        let c_in = record["inlet_concentration"].as_f64().unwrap();
+        assert!((c_in / (1.40e-3 * 85.0) - 1.0).abs() < 1e-14, "{c_in}");
+        assert_eq!(record["d_hb"].as_f64(), Some(D_HB_DEFAULT));
         let off = read_json(
             json!({"oxygen": {"inlet": {"po2": 85.0}, "hemoglobin": "hill",
             "wall": {"model": "leveque", "po2": 60.0, "hb_facilitation": false}}}),
@@ -933,6 +939,11 @@ mod tests {
             Some(1.0)
         );
         assert!(off.warnings[0].contains("dissolved O2 only"));
+        assert!(
+            off.section["species"][0]["wall"]
+                .get("facilitation")
+                .is_none()
+        );
     }
 
     /// Messages name the section, the key and the value as the user wrote them.

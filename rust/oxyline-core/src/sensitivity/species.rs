@@ -28,6 +28,7 @@ use crate::transport::tangent::{
     SpeciesTangent, VesselSpeciesSignal,
 };
 use crate::transport::{SpeciesSpec, Transport};
+use facilitation::By;
 
 /// Per-vessel species signals by name.
 pub const SPECIES_VESSEL_SIGNALS: &[&str] = &[
@@ -91,6 +92,10 @@ pub struct OxygenParameter {
     pub kind: SpeciesParameterKind,
     pub value: f64,
     pub vessel: Option<String>,
+    /// d ln g/dθ of the walls whose conductance the parameter moves through their
+    /// haemoglobin facilitation (`species_facilitation`): (None: the section's wall,
+    /// Some(vessel): that vessel's own wall; the slope per SI unit of the parameter).
+    pub ln_conductance: Vec<(Option<String>, f64)>,
 }
 
 /// An oxygen parameter path's kind, SI value and scope; None for a path outside `oxygen.`.
@@ -125,6 +130,7 @@ pub fn oxygen_parameter(sp: &SpeciesSpec, path: &str) -> Result<Option<OxygenPar
             )))
         }
     };
+    let mut ln_conductance = Vec::new();
     let (kind, value) = match (parts.as_slice(), wall, &sp.binding) {
         (
             ["oxygen", "wall", "k"],
@@ -168,36 +174,17 @@ pub fn oxygen_parameter(sp: &SpeciesSpec, path: &str) -> Result<Option<OxygenPar
                 "wall",
                 key @ ("concentration" | "po2" | "enhancement"),
             ],
-            WallSpec::Leveque {
-                wall_concentration,
-                enhancement,
-                permeability,
-                ..
-            }
-            | WallSpec::Graetz {
-                wall_concentration,
-                enhancement,
-                permeability,
-                ..
-            },
+            w @ (WallSpec::Leveque { .. } | WallSpec::Graetz { .. }),
             b,
-        ) => boundary_layer_parameter(key, *wall_concentration, *enhancement, *permeability, b)
-            .map_err(fail)
-            .and_then(|(kind, v)| Ok((kind, nonzero(v)?)))?,
-        (["oxygen", "hill", "p50"], w, BindingSpec::Hill { p50, .. }) => {
-            let facilitated = matches!(w, WallSpec::Leveque { .. } | WallSpec::Graetz { .. });
-            if facilitated
-                || sp
-                    .per_vessel
-                    .values()
-                    .any(|w| matches!(w, WallSpec::Leveque { .. } | WallSpec::Graetz { .. }))
-            {
-                return Err(fail(
-                    "P50 with a Lévêque or Graetz wall (its haemoglobin facilitation reads \
-                     the Hill law) is not differentiated yet"
-                        .into(),
-                ));
-            }
+        ) => {
+            let (kind, v, slope) = boundary_layer_parameter(sp, key, w, b).map_err(fail)?;
+            let scope = vessel.clone();
+            ln_conductance.extend(slope.map(|a| (scope, a)));
+            (kind, nonzero(v)?)
+        }
+        (["oxygen", "hill", "p50"], _, BindingSpec::Hill { p50, .. }) => {
+            ln_conductance = facilitation::p50_slopes(sp)
+                .map_err(|why| fail(format!("P50 through the haemoglobin facilitation: {why}")))?;
             (SpeciesParameterKind::P50, nonzero(*p50)?)
         }
         (["oxygen", "wall", key], w, _) => {
@@ -225,37 +212,61 @@ pub fn oxygen_parameter(sp: &SpeciesSpec, path: &str) -> Result<Option<OxygenPar
         kind,
         value,
         vessel,
+        ln_conductance,
     }))
 }
 
-/// A Lévêque or Graetz wall's parameter `key`: its concentration (g c_w ∝ it) or its
-/// enhancement (g ∝ it without a permeability in series). With haemoglobin the model's
-/// enhancement holds the facilitation E_Hb, which reads the wall PO2 and the binding, and
-/// is not differentiated: refused (as a PO2, which needs it).
+/// A Lévêque or Graetz wall's parameter `key`: its concentration or PO2 (g c_w ∝ it; with
+/// haemoglobin facilitation g moves too, by the slope returned) or the enhancement it was
+/// given (g ∝ it without a permeability in series): the kind, SI value and d ln g/dθ.
 fn boundary_layer_parameter(
+    sp: &SpeciesSpec,
     key: &str,
-    wall_concentration: f64,
-    enhancement: f64,
-    permeability: Option<f64>,
+    wall: &WallSpec,
     binding: &BindingSpec,
-) -> std::result::Result<(SpeciesParameterKind, f64), String> {
-    if !matches!(binding, BindingSpec::None | BindingSpec::Linear { .. }) {
-        return Err(
-            "a Lévêque or Graetz wall with haemoglobin: its facilitation factor \
-                    (which reads the wall PO2 and P50) is not differentiated yet"
-                .into(),
-        );
+) -> std::result::Result<(SpeciesParameterKind, f64, Option<f64>), String> {
+    let (WallSpec::Leveque {
+        wall_concentration,
+        enhancement,
+        permeability,
+        ..
     }
-    match key {
-        "concentration" => Ok((SpeciesParameterKind::WallConcentration, wall_concentration)),
-        "enhancement" if permeability.is_none() => {
-            Ok((SpeciesParameterKind::Conductance, enhancement))
+    | WallSpec::Graetz {
+        wall_concentration,
+        enhancement,
+        permeability,
+        ..
+    }) = wall
+    else {
+        unreachable!("a boundary-layer wall");
+    };
+    match (key, binding) {
+        ("concentration", _) => {
+            let slope = facilitation::ln_conductance_slope(sp, wall, By::WallConcentration)?;
+            Ok((
+                SpeciesParameterKind::WallConcentration,
+                *wall_concentration,
+                slope,
+            ))
         }
-        "enhancement" => Err(
+        ("enhancement", _) if permeability.is_none() => Ok((
+            SpeciesParameterKind::Conductance,
+            facilitation::given_enhancement(wall, *enhancement),
+            None,
+        )),
+        ("enhancement", _) => Err(
             "the enhancement of a wall with a permeability in series (the \
                               conductance is not proportional to it)"
                 .into(),
         ),
+        (_, BindingSpec::Hill { solubility, .. }) => {
+            let slope = facilitation::ln_conductance_slope(sp, wall, By::WallPo2)?;
+            Ok((
+                SpeciesParameterKind::WallConcentration,
+                wall_concentration / solubility,
+                slope,
+            ))
+        }
         _ => Err(
             "a wall PO2 needs haemoglobin (hemoglobin: hill); without it the wall's \
                   concentration is the parameter (oxygen.wall.concentration)"
@@ -772,7 +783,12 @@ impl Derivatives {
                     tr.species_flow_derivative(s, &e)
                 }
                 (Param::Oxygen(o), _) => {
-                    tr.species_derivative(s, o.kind, o.value, &on(o, sp, names))
+                    let mut d = tr.species_derivative(s, o.kind, o.value, &on(o, sp, names));
+                    if !o.ln_conductance.is_empty() {
+                        let slopes = facilitation::per_vessel_slopes(&o.ln_conductance, sp, names);
+                        tr.add_conductance_slopes(s, &mut d, &slopes);
+                    }
+                    d
                 }
                 (Param::Flow(..), None) => unreachable!("every flow parameter has its tangent"),
             });
@@ -1003,6 +1019,9 @@ impl<'t> TransportRun<'t> {
     }
 }
 
+#[path = "species_facilitation.rs"]
+mod facilitation;
+
 #[path = "species_adjoint.rs"]
 mod adjoint;
 pub use adjoint::{SpeciesAdjoint, species_adjoint_with};
@@ -1018,3 +1037,7 @@ mod wall_tests;
 #[cfg(test)]
 #[path = "species_renewal_tests.rs"]
 mod renewal_tests;
+
+#[cfg(test)]
+#[path = "species_facilitation_tests.rs"]
+mod facilitation_tests;

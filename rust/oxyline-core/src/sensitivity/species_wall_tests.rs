@@ -156,33 +156,18 @@ fn cycle_mean_walls_adjoint_equals_forward() {
     assert!(worst < 1e-8, "{worst:e}");
 }
 
-/// What stays refused, by name: a relaxed Lévêque shear, and the facilitated walls' PO2
-/// and P50 with haemoglobin.
+/// What stays refused, by name: a relaxed Lévêque shear (the facilitated walls' refusals:
+/// `species_facilitation_tests.rs`).
 #[test]
-fn relaxed_shear_and_facilitated_parameters_are_refused() {
+fn relaxed_shear_is_refused() {
     let sig = signals();
-    let msg = |spec: &NetworkSpec, path: &str| {
-        species_sensitivities(spec, &[path.to_string()], &sig, settings())
-            .unwrap_err()
-            .to_string()
-    };
     let mut spec = parse(&model()).unwrap();
     let sp = &mut spec.transport.as_mut().unwrap().species[0];
     if let Some(WallSpec::Leveque { shear, .. }) = sp.per_vessel.get_mut("d2") {
         *shear = crate::closure::Shear::Relaxed;
     }
-    let m = msg(&spec, "scale.inflow");
+    let m = species_sensitivities(&spec, &["scale.inflow".to_string()], &sig, settings())
+        .unwrap_err()
+        .to_string();
     assert!(m.contains("shear-dependent"), "{m}");
-    let mut spec = parse(super::tests::MODEL).unwrap();
-    spec.transport.as_mut().unwrap().species[0].wall = WallSpec::Graetz {
-        wall_concentration: 0.05,
-        flow: crate::closure::MeanFlow::ForwardMean,
-        enhancement: 1.0,
-        permeability: None,
-        kinematic_viscosity: 3.3e-6,
-    };
-    for path in ["oxygen.wall.po2", "oxygen.hill.p50"] {
-        let m = msg(&spec, path);
-        assert!(m.contains(path) && m.contains("facilitation"), "{m}");
-    }
 }

@@ -242,6 +242,29 @@ impl Transport {
         }
     }
 
+    /// Add to `d` the derivative of the fixed laws whose conductance the parameter moves in
+    /// proportion: on the pieces of vessel v (by circuit index), with a = `ln_slope[v]` =
+    /// d ln g/dθ (a boundary layer's haemoglobin facilitation), dg = a g and d(g c_w) =
+    /// a g c_w.
+    pub fn add_conductance_slopes(&self, s: usize, d: &mut SpeciesDerivative, ln_slope: &[f64]) {
+        let laws = &self.species[s].laws;
+        for (p, (law, pc)) in laws.laws.iter().zip(&self.plan.pieces).enumerate() {
+            let SegmentLaw::Fixed { g, cw, .. } = *law else {
+                continue;
+            };
+            let vessel = self.plan.segment_vessels[pc.seg as usize] as usize;
+            let a = ln_slope.get(vessel).copied().unwrap_or(0.0);
+            if a == 0.0 {
+                continue;
+            }
+            let add = [a * g, a * g * cw, 0.0];
+            for (k, v) in add.iter().enumerate() {
+                d.piece[p][k] += v;
+                d.cell[pc.cell as usize][k] += pc.share * v;
+            }
+        }
+    }
+
     /// A zero tangent of species `s` (the periodic fixed point is found from there).
     pub fn species_tangent_start(&self) -> SpeciesTangent {
         SpeciesTangent {

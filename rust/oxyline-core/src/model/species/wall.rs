@@ -6,7 +6,8 @@
 use super::*;
 
 /// E_Hb of the wall layer between inlet PO2 `p_in` and wall PO2 `p_w` (docs/physics.md §3.4):
-/// the secant factor for linearised binding, the nonlinear Lévêque layer's for Hill binding.
+/// the secant factor for linearised binding, the nonlinear Lévêque layer's for Hill binding;
+/// its canonical record (`closure::Facilitation`: the factor, α P_in and D_Hb) beside it.
 fn facilitation<N: Node>(
     spec: &N,
     h: Option<Hill>,
@@ -14,7 +15,7 @@ fn facilitation<N: Node>(
     p_in: f64,
     p_w: f64,
     el: &str,
-) -> Result<f64> {
+) -> Result<(f64, Value)> {
     let Some(h) = h else {
         return Err(err(
             el,
@@ -36,11 +37,13 @@ fn facilitation<N: Node>(
         p50: h.p50,
         n: h.n,
     };
-    Ok(if h.linearized {
+    let factor = if h.linearized {
         facilitation::secant_factor(p_in, p_w, &layer)
     } else {
         facilitation::hill_factor(p_in, p_w, &layer)
-    })
+    };
+    let record = json!({"factor": factor, "inlet_concentration": h.alpha * p_in, "d_hb": d_hb});
+    Ok((factor, record))
 }
 
 /// One row of a prescribed wall flux: a number, or one value per segment.
@@ -271,15 +274,18 @@ pub(super) fn wall_of<N: Node>(
         out.insert("k".into(), json!(k));
         return Ok(Value::Object(out));
     }
-    let enh = enhancement(spec, &model, cw, el, w, warnings)?;
+    let (enh, record) = enhancement(spec, &model, cw, el, w, warnings)?;
     out.insert("enhancement".into(), json!(enh));
+    if let Some(r) = record {
+        out.insert("facilitation".into(), r);
+    }
     layer_options(spec, &model, el, ctx, &mut out)?;
     Ok(Value::Object(out))
 }
 
 /// The enhancement of a Lévêque or Graetz wall: the given factor times the haemoglobin
 /// facilitation E_Hb (on by default with haemoglobin, docs/physics.md §3.4; switched off, a
-/// warning) at wall concentration `cw`.
+/// warning) at wall concentration `cw`, and the facilitation's record when it is on.
 fn enhancement<N: Node>(
     spec: &N,
     model: &str,
@@ -287,7 +293,7 @@ fn enhancement<N: Node>(
     el: &str,
     w: &WallContext,
     warnings: &mut Vec<String>,
-) -> Result<f64> {
+) -> Result<(f64, Option<Value>)> {
     let enh = num_or(
         spec,
         "enhancement",
@@ -320,13 +326,13 @@ fn enhancement<N: Node>(
         };
         let p_w = w.hill.map_or(0.0, |h| cw / h.alpha);
         let empty = json!({});
-        return Ok(enh
-            * match f {
-                Some(f) => facilitation(f, w.hill, w.diffusivity, p_in, p_w, el)?,
-                None => facilitation(&empty, w.hill, w.diffusivity, p_in, p_w, el)?,
-            });
+        let (factor, record) = match f {
+            Some(f) => facilitation(f, w.hill, w.diffusivity, p_in, p_w, el)?,
+            None => facilitation(&empty, w.hill, w.diffusivity, p_in, p_w, el)?,
+        };
+        return Ok((enh * factor, Some(record)));
     }
-    Ok(enh)
+    Ok((enh, None))
 }
 
 /// A Graetz wall's mean flow and the blood's kinematic viscosity; a Lévêque wall's shear.
