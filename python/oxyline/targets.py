@@ -42,6 +42,7 @@ checked against the model and the user's targets read.
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -169,28 +170,12 @@ def is_oxygen_signal(signal: tuple[str, str]) -> bool:
 def pwv_path(output: str, model: Any, error: type[ModelError] = ModelError
              ) -> list[tuple[str, float]]:
     """The vessels from the inlet of ``pwv.<proximal>.<distal>``'s proximal vessel to the
-    outlet of its distal one, with their lengths (m), walking upstream from the distal one."""
-    _, proximal, distal = output.split(".")
-    vessels = {str(v["name"]): v for v in model.canonical["vessels"]}
-    for v in (proximal, distal):
-        if v not in vessels:
-            raise _fail(output, f"no vessel named {v!r} in model '{model.name}'", error)
-    into: dict[str, list[str]] = {}
-    for name, v in vessels.items():
-        into.setdefault(str(v["to"]), []).append(name)
-    path, at = [], distal
-    while True:
-        geometry = vessels[at].get("geometry")
-        if not geometry:
-            raise _fail(output, f"vessel {at!r} on the path has no length (lumped)", error)
-        path.append((at, float(geometry["length"])))
-        if at == proximal:
-            return path[::-1]
-        up = into.get(str(vessels[at]["from"]), [])
-        if len(up) != 1 or len(path) > len(vessels):
-            raise _fail(output, f"vessel {distal!r} is not downstream of {proximal!r} along "
-                        "one path", error)
-        at = up[0]
+    outlet of its distal one, with their lengths (m), by the core
+    (:func:`oxyline._core.pulse_wave_path`); an error naming the output if there is none."""
+    try:
+        return _core.pulse_wave_path(json.dumps(model.canonical), output)
+    except ModelError as e:
+        raise error(str(e)) from None
 
 
 def _inlet_vessels(model: Any) -> list[str]:

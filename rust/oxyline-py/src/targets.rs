@@ -5,6 +5,7 @@ use crate::errors::to_py;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1};
 use numpy::{PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
 use oxyline_core::error::Error;
+use oxyline_core::model::parse;
 use oxyline_core::sensitivity::targets::{self, CycleSignals, PathLength};
 use pyo3::prelude::*;
 
@@ -86,4 +87,14 @@ pub fn transit_time(
 ) -> PyResult<f64> {
     let [t, p, d] = [time, proximal, distal].map(|a| a.as_array().to_vec());
     targets::transit_time(&t, &p, &d).map_err(to_py)
+}
+
+/// The vessels on the path of the pulse-wave velocity `output` (`pwv.<proximal>.<distal>`)
+/// in the canonical model `model_json`, from the proximal one's inlet to the distal one's
+/// outlet, with their lengths (m).
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn pulse_wave_path(model_json: &str, output: &str) -> PyResult<Vec<(String, f64)>> {
+    let spec = parse(model_json).map_err(to_py)?;
+    targets::pulse_wave_path(&spec, output).map_err(to_py)
 }

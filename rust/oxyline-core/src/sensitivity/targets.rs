@@ -13,6 +13,8 @@
 //! diastolic minimum), which stay the same samples under a small change.
 
 use crate::error::{Error, Result};
+use crate::model::NetworkSpec;
+use std::collections::HashMap;
 
 /// What an output computes from its signals over the cycle.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -415,6 +417,54 @@ fn pulse_wave_velocity(cycle: &CycleSignals, path: PathLength) -> Result<TargetV
         .map(|p| path.dlength[p] / transit - length * (d1[p] - d0[p]) / (transit * transit))
         .collect();
     Ok(TargetValue::one(length / transit, rows))
+}
+
+/// The path of `pwv.<proximal>.<distal>`: the vessels from the inlet of `proximal` to the
+/// outlet of `distal` with their lengths (m), found walking upstream from `distal` (one
+/// vessel into each node on the way); an error naming the output if a vessel is missing,
+/// has no length (lumped) or `distal` is not downstream of `proximal` along one path.
+pub fn pulse_wave_path(spec: &NetworkSpec, output: &str) -> Result<Vec<(String, f64)>> {
+    let fail = |why: String| Error::model(format!("output '{output}'"), why);
+    let parts: Vec<&str> = output.split('.').collect();
+    let [_, proximal, distal] = parts[..] else {
+        return Err(fail(
+            "expected pwv.<proximal vessel>.<distal vessel>".into(),
+        ));
+    };
+    let vessels: HashMap<&str, _> = spec.vessels.iter().map(|v| (v.name.as_str(), v)).collect();
+    for name in [proximal, distal] {
+        if !vessels.contains_key(name) {
+            return Err(fail(format!(
+                "no vessel named '{name}' in model '{}'",
+                spec.name
+            )));
+        }
+    }
+    let mut into: HashMap<&str, Vec<&str>> = HashMap::new();
+    for v in &spec.vessels {
+        into.entry(v.to.as_str()).or_default().push(v.name.as_str());
+    }
+    let (mut path, mut at) = (Vec::new(), distal);
+    loop {
+        let Some(geometry) = vessels[at].geometry.as_ref() else {
+            return Err(fail(format!(
+                "vessel '{at}' on the path has no length (lumped)"
+            )));
+        };
+        path.push((at.to_string(), geometry.length));
+        if at == proximal {
+            path.reverse();
+            return Ok(path);
+        }
+        match into.get(vessels[at].from.as_str()).map(Vec::as_slice) {
+            Some([up]) if path.len() <= spec.vessels.len() => at = up,
+            _ => {
+                return Err(fail(format!(
+                    "vessel '{distal}' is not downstream of '{proximal}' along one path"
+                )));
+            }
+        }
+    }
 }
 
 #[cfg(test)]

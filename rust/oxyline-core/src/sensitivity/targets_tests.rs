@@ -246,3 +246,50 @@ fn a_name_it_cannot_read_or_signals_that_do_not_fit_are_errors_naming_the_output
     let e = evaluate("pwv.a.b", &two, None, Some(path)).unwrap_err();
     assert!(e.to_string().contains("same sample"), "{e}");
 }
+
+/// parent → d1 (a tube), parent → d2 (lumped), d1 → g (a tube) at a second junction.
+const TREE: &str = r#"{
+  "name": "y",
+  "vessels": [
+    {"name": "parent", "from": "in", "to": "j", "segments": 3,
+     "geometry": {"length": 0.1, "radius_in": 0.004, "radius_out": 0.004,
+                  "wall_thickness": 0.0006, "youngs_modulus": 4e5}},
+    {"name": "d1", "from": "j", "to": "k", "segments": 2,
+     "geometry": {"length": 0.08, "radius_in": 0.003, "radius_out": 0.0025,
+                  "wall_thickness": 0.0005, "youngs_modulus": 6e5}},
+    {"name": "d2", "from": "j", "to": "o2", "segments": 2,
+     "lumped": {"resistance": 3e7, "inductance": 1e5, "capacitance": 2e-10}},
+    {"name": "g", "from": "k", "to": "o1", "segments": 2,
+     "geometry": {"length": 0.05, "radius_in": 0.0025, "radius_out": 0.0025,
+                  "wall_thickness": 0.0005, "youngs_modulus": 6e5}}
+  ],
+  "boundary_conditions": {
+    "in": {"type": "flow", "flow": {"kind": "fourier", "period": 0.8, "mean": 5e-6,
+                                    "cos": [3e-6], "sin": [4e-6]}},
+    "o1": {"type": "resistance", "resistance": 1.6e9},
+    "o2": {"type": "resistance", "resistance": 1.6e9}
+  }
+}"#;
+
+#[test]
+fn a_pulse_wave_path_runs_downstream_through_the_named_vessels_with_their_lengths() {
+    let spec = crate::model::parse(TREE).unwrap();
+    let path = pulse_wave_path(&spec, "pwv.parent.g").unwrap();
+    let names: Vec<&str> = path.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(names, ["parent", "d1", "g"]);
+    close_all(
+        &path.iter().map(|(_, l)| *l).collect::<Vec<_>>(),
+        &[0.1, 0.08, 0.05],
+        0.0,
+    );
+    assert_eq!(pulse_wave_path(&spec, "pwv.d1.d1").unwrap().len(), 1);
+    for (output, why) in [
+        ("pwv.d1.parent", "not downstream"),
+        ("pwv.parent.zz", "no vessel named 'zz' in model 'y'"),
+        ("pwv.parent.d2", "'d2' on the path has no length"),
+        ("pwv.parent", "expected pwv."),
+    ] {
+        let e = pulse_wave_path(&spec, output).unwrap_err().to_string();
+        assert!(e.contains(why) && e.contains(output), "{output}: {e}");
+    }
+}
