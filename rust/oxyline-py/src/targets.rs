@@ -9,6 +9,9 @@ use oxyline_core::model::parse;
 use oxyline_core::sensitivity::targets::{self, CycleSignals, PathLength};
 use pyo3::prelude::*;
 
+/// An output's values (m) and Jacobian (m × n_params).
+type ValuesAndJacobian<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray2<f64>>);
+
 /// The value(s) and Jacobian of the output named `output` from its signals over the periodic
 /// cycle: `times` (the step end times Δt … T), `signals` (n_steps × n_signals),
 /// `derivatives` (n_params × n_steps × n_signals); `at`, a series' times (s from the cycle's
@@ -25,7 +28,7 @@ pub fn target_value<'py>(
     derivatives: PyReadonlyArray3<'py, f64>,
     at: Option<PyReadonlyArray1<'py, f64>>,
     path: Option<(f64, PyReadonlyArray1<'py, f64>)>,
-) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray2<f64>>)> {
+) -> PyResult<ValuesAndJacobian<'py>> {
     let (ns, nsig) = (signals.shape()[0], signals.shape()[1]);
     let [np, dns, dnsig] = [0, 1, 2].map(|k| derivatives.shape()[k]);
     if times.len() != ns || dns != ns || dnsig != nsig {
