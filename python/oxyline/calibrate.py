@@ -1,8 +1,8 @@
 """Exact parameter sensitivities of a model's periodic state, and calibration to targets.
 
 :func:`sensitivities` asks the core for the tangent-linear generalized-α run to the periodic
-state (one extra solve per parameter and step on the run's own factorisation) and combines
-the signals into the named outputs of :mod:`oxyline.targets`. :func:`calibrate` fits
+state (one extra solve per parameter and step on the run's own factorisation) and reduces
+the signals to the named outputs of :mod:`oxyline.targets`. :func:`calibrate` fits
 parameters to targets with ``scipy.optimize.least_squares`` on that Jacobian, each parameter
 as the logarithm of its factor over the start (so positive parameters stay positive and
 their steps are relative), and returns the calibrated native model dict with the
@@ -30,7 +30,7 @@ from oxyline.model import Model, build_model
 from oxyline.targets import (
     CalibrationError,
     Target,
-    combine,
+    evaluate,
     is_oxygen_signal,
     parse_targets,
     path_of,
@@ -172,7 +172,7 @@ def _evaluate(model: Model, parameters: Sequence[str], targets: Sequence[Target]
     values, jac = [], []
     for t in targets:
         cols = [signals.index(s) for s in t.signals]
-        v, j = combine(t.output, raw["times"], raw["signals"][:, cols],
+        v, j = evaluate(t.output, raw["times"], raw["signals"][:, cols],
                        raw["derivatives"][:, :, cols], t.times,
                        path_of(t.output, model, parameters))
         values.append(v)
@@ -228,7 +228,7 @@ def _adjoint(m: Model, parameters: Sequence[str], targets: Sequence[Target],
              ) -> tuple[list[np.ndarray], list[np.ndarray], dict[str, Any]]:
     """The outputs and their Jacobian rows by the core's adjoint, in one primal run: the core
     hands the periodic cycle's signals to ``weights_of``, where each output's derivative is a
-    fixed linear functional of the signals' derivatives (:func:`~oxyline.targets.combine`
+    fixed linear functional of the signals' derivatives (:func:`~oxyline.targets.evaluate`
     applied to a unit basis gives its weights), and one backward sweep per output row gives
     its gradient for every parameter. ``series_at_steps``: a series is read at the cycle's
     steps (:func:`sensitivities`), else at its target's times (:func:`calibrate`)."""
@@ -248,7 +248,7 @@ def _adjoint(m: Model, parameters: Sequence[str], targets: Sequence[Target],
             basis = np.eye(ns * k).reshape(ns * k, ns, k)
             path = path_of(t.output, m, parameters)
             at = times if series_at_steps or t.times is None else t.times
-            v, w = combine(t.output, times, sig[:, cols], basis, at,
+            v, w = evaluate(t.output, times, sig[:, cols], basis, at,
                            None if path is None else (path[0], np.zeros(ns * k)))
             full = np.zeros((len(v), ns, nsig))
             for i, c in enumerate(cols):  # (a signal read twice adds up)
@@ -327,7 +327,7 @@ def sensitivities(model: Model | Mapping[str, Any] | str, parameters: Sequence[s
     values, jac, rows, start = [], [], {}, 0
     for t in targets:
         cols = [signals.index(s) for s in t.signals]
-        v, j = combine(t.output, raw["times"], raw["signals"][:, cols],
+        v, j = evaluate(t.output, raw["times"], raw["signals"][:, cols],
                        raw["derivatives"][:, :, cols], raw["times"],
                        path_of(t.output, m, parameters))
         values.append(v)

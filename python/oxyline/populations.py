@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from oxyline import catalogue, pwdb
+from oxyline import _core, catalogue, pwdb
 from oxyline.catalogue import shipped_data
 from oxyline.ensemble import apply_patch
 from oxyline.errors import ModelError
@@ -399,32 +399,22 @@ def _describe(row: Mapping[str, float]) -> str:
 
 
 def foot_time(time: Any, pressure: Any) -> float:
-    """Foot of a periodic pressure wave by the intersecting-tangent method: the intersection of
-    the tangent at the steepest upstroke (largest forward difference, taken at the midpoint of
-    its two samples) with the horizontal through the diastolic minimum (the lowest sample in
-    the half period before the upstroke). ``time``/``pressure``: one cycle of uniform samples
-    with both ends (t = 0 and t = T, as a result's last cycle; the t = T sample is dropped and
-    the cycle is treated as periodic). Returns the foot time in [0, T)."""
-    t_all, p_all = np.asarray(time, float), np.asarray(pressure, float)
-    t, p = t_all[:-1], p_all[:-1]
-    dt = t[1] - t[0]
-    period = len(t) * dt
-    n = len(p)
-    # differences to the genuine next sample (the t = T one for the last): no artificial jump
-    # at the wrap when the cycle is not yet periodic
-    slope = np.diff(p_all) / dt
-    k = int(np.argmax(slope))
-    window = (k - np.arange(n // 2)) % n
-    p_min = float(p[window].min())
-    t_mid, p_mid = t[k] + dt / 2, (p_all[k] + p_all[k + 1]) / 2
-    return float((t_mid - (p_mid - p_min) / slope[k] - t[0]) % period + t[0])
+    """Foot of a periodic pressure wave by the intersecting-tangent method
+    (:func:`oxyline._core.foot_time`, the feet of the ``pwv`` calibration outputs too): the
+    intersection of the tangent at the steepest upstroke (largest forward difference, taken at
+    the midpoint of its two samples) with the horizontal through the diastolic minimum (the
+    lowest sample in the half period before the upstroke). ``time``/``pressure``: one cycle of
+    uniform samples with both ends (t = 0 and t = T, as a result's last cycle; the t = T sample
+    only closes the last difference). Returns the foot time in [0, T)."""
+    return _core.foot_time(np.ascontiguousarray(time, dtype=float),
+                           np.ascontiguousarray(pressure, dtype=float))
 
 
 def transit_time(time: Any, proximal: Any, distal: Any) -> float:
     """Foot-to-foot transit time [s] from ``proximal`` to ``distal`` (one periodic cycle each),
     in [0, T)."""
-    t = np.asarray(time, float)
-    return float((foot_time(t, distal) - foot_time(t, proximal)) % (t[-1] - t[0]))
+    return _core.transit_time(*(np.ascontiguousarray(a, dtype=float)
+                                for a in (time, proximal, distal)))
 
 
 def _site(result: Any, seg: int, frac: float) -> tuple[np.ndarray, float]:

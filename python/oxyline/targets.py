@@ -15,7 +15,7 @@ An output names a quantity of the periodic cycle:
   is the left ventricle's peak pressure);
 * ``"pwv.<proximal>.<distal>"``: pulse-wave velocity from the inlet of ``proximal`` to the
   outlet of ``distal`` (downstream of it): the path length over the foot-to-foot transit
-  time (feet by intersecting tangents, :func:`oxyline.populations.foot_time`);
+  time (feet by intersecting tangents, :func:`oxyline._core.foot_time`);
 * ``"<vessel>.<variable>.series"``: the signal over the cycle, compared with data at given
   times (targets only).
 
@@ -31,15 +31,18 @@ and by the flow parameters, :func:`oxyline._core.species_sensitivities`):
   (mol/s); ``"VO2.<vessel>[.<vessel>...]"``: that of the named vessels (an organ or region).
 
 The core (:func:`oxyline._core.tangent_sensitivities`) gives the signals over the periodic
-cycle and their exact derivatives; here they are only combined: a mean is the mean of the
-derivatives, a maximum the derivative at the step of the maximum (the derivative of the
-discrete maximum, exact wherever the maximum is unique). A pulse-wave velocity's feet are
-differentiated likewise at their samples (the steepest upstroke and the diastolic minimum),
-and its path length by the lengths of the vessels on the path.
+cycle and their exact derivatives, and reduces them to each output's value and derivatives
+(:func:`oxyline._core.target_value`, ``oxyline_core::sensitivity::targets``): a mean is the
+mean of the derivatives, a maximum the derivative at the step of the maximum (the derivative
+of the discrete maximum, exact wherever the maximum is unique). A pulse-wave velocity's feet
+are differentiated likewise at their samples (the steepest upstroke and the diastolic
+minimum), and its path length by the lengths of the vessels on the path. Here the names are
+checked against the model and the user's targets read.
 """
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -47,6 +50,7 @@ from typing import Any
 
 import numpy as np
 
+from oxyline import _core
 from oxyline.errors import ModelError
 
 VARIABLES = ("pressure_in", "pressure_out", "flow_in", "flow_out")
@@ -166,28 +170,12 @@ def is_oxygen_signal(signal: tuple[str, str]) -> bool:
 def pwv_path(output: str, model: Any, error: type[ModelError] = ModelError
              ) -> list[tuple[str, float]]:
     """The vessels from the inlet of ``pwv.<proximal>.<distal>``'s proximal vessel to the
-    outlet of its distal one, with their lengths (m), walking upstream from the distal one."""
-    _, proximal, distal = output.split(".")
-    vessels = {str(v["name"]): v for v in model.canonical["vessels"]}
-    for v in (proximal, distal):
-        if v not in vessels:
-            raise _fail(output, f"no vessel named {v!r} in model '{model.name}'", error)
-    into: dict[str, list[str]] = {}
-    for name, v in vessels.items():
-        into.setdefault(str(v["to"]), []).append(name)
-    path, at = [], distal
-    while True:
-        geometry = vessels[at].get("geometry")
-        if not geometry:
-            raise _fail(output, f"vessel {at!r} on the path has no length (lumped)", error)
-        path.append((at, float(geometry["length"])))
-        if at == proximal:
-            return path[::-1]
-        up = into.get(str(vessels[at]["from"]), [])
-        if len(up) != 1 or len(path) > len(vessels):
-            raise _fail(output, f"vessel {distal!r} is not downstream of {proximal!r} along "
-                        "one path", error)
-        at = up[0]
+    outlet of its distal one, with their lengths (m), by the core
+    (:func:`oxyline._core.pulse_wave_path`); an error naming the output if there is none."""
+    try:
+        return _core.pulse_wave_path(json.dumps(model.canonical), output)
+    except ModelError as e:
+        raise error(str(e)) from None
 
 
 def _inlet_vessels(model: Any) -> list[str]:
@@ -196,91 +184,18 @@ def _inlet_vessels(model: Any) -> list[str]:
     return [str(v["name"]) for v in model.source["vessels"] if str(v.get("from")) in inflow]
 
 
-def _foot(times: np.ndarray, x: np.ndarray, dx: np.ndarray) -> tuple[float, np.ndarray]:
-    """The foot time of the periodic signal ``x`` at the step end ``times`` (Δt … T) by
-    :func:`~oxyline.populations.foot_time`, and its derivatives from ``dx`` (n_params ×
-    n_steps): the foot t_mid − (p_mid − p_min)/slope is a smooth function of the samples at
-    the steepest upstroke and the diastolic minimum, which stay the same samples."""
-    from oxyline.populations import foot_time
-
-    dt = times[0]
-    t_all = np.concatenate(([0.0], times))
-    p_all = np.concatenate(([x[-1]], x))
-    d_all = np.concatenate((dx[:, -1:], dx), axis=1)
-    foot = foot_time(t_all, p_all)
-    # the samples foot_time used (the same choices: largest forward difference, lowest sample
-    # in the half period before it)
-    n = len(x)
-    k = int(np.argmax(np.diff(p_all)))
-    window = (k - np.arange(n // 2)) % n
-    m = int(window[np.argmin(p_all[:-1][window])])
-    slope = (p_all[k + 1] - p_all[k]) / dt
-    dslope = (d_all[:, k + 1] - d_all[:, k]) / dt
-    rise = (p_all[k] + p_all[k + 1]) / 2 - p_all[m]
-    drise = (d_all[:, k] + d_all[:, k + 1]) / 2 - d_all[:, m]
-    return foot, -drise / slope + rise * dslope / slope**2
-
-
-def pulse_wave_velocity(times: np.ndarray, values: np.ndarray, derivs: np.ndarray,
-                        length: float, dlength: np.ndarray) -> tuple[float, np.ndarray]:
-    """Path length over the foot-to-foot transit time of the proximal (column 0) and distal
-    (column 1) pressures, and its derivatives (``dlength``: d length / d parameter)."""
-    period = times[-1]
-    f0, d0 = _foot(times, values[:, 0], derivs[:, :, 0])
-    f1, d1 = _foot(times, values[:, 1], derivs[:, :, 1])
-    transit = (f1 - f0) % period
-    if transit <= 0:
-        raise ModelError("pulse-wave velocity: both feet fall on the same sample (the path "
-                         "is shorter than one step of the wave)")
-    dtransit = d1 - d0
-    return length / transit, dlength / transit - length * dtransit / transit**2
-
-
-def combine(output: str, times: np.ndarray, values: np.ndarray, derivs: np.ndarray,
-            at: Any = None, path: tuple[float, np.ndarray] | None = None
-            ) -> tuple[np.ndarray, np.ndarray]:
-    """The output's value(s) and derivatives from its signals over the cycle: ``values``
-    (n_steps × n_signals), ``derivs`` (n_params × n_steps × n_signals); ``path``, a
-    pulse-wave velocity's length and its derivatives. Returns (value (m,), jacobian
-    (m × n_params))."""
-    stat = output.split(".")[-1]
-    if output.startswith("pwv."):
-        length, dlength = path if path is not None else (math.nan, np.zeros(len(derivs)))
-        v, j = pulse_wave_velocity(times, values, derivs, length, dlength)
-        return np.atleast_1d(v), j[None]
-    if output == "cardiac_output" or output.split(".")[0] == "VO2":
-        return np.atleast_1d(values.sum(axis=1).mean()), derivs.sum(axis=2).mean(axis=1)[None]
-    if output.startswith("SvO2."):  # Σ Q S / Σ Q (Q by the flow tangent)
-        sat, q, dsat = values[:, 0], values[:, 1], derivs[:, :, 0]
-        dq = derivs[:, :, 1]
-        total = q.sum()
-        value = (q * sat).sum() / total
-        return np.atleast_1d(value), (((dsat * q + dq * sat).sum(axis=1)
-                                       - value * dq.sum(axis=1)) / total)[None]
-    if output.startswith("flow_split."):
-        q, p = values[:, 0].mean(), values[:, 1].mean()
-        dq, dp = derivs[:, :, 0].mean(axis=1), derivs[:, :, 1].mean(axis=1)
-        return np.atleast_1d(q / p), ((dq * p - q * dp) / p**2)[None]
-    x, dx = values[:, 0], derivs[:, :, 0]
-    if stat == "mean":
-        return np.atleast_1d(x.mean()), dx.mean(axis=1)[None]
-    hi, lo = int(np.argmax(x)), int(np.argmin(x))
-    if stat == "max":
-        return np.atleast_1d(x[hi]), dx[:, hi][None]
-    if stat == "min":
-        return np.atleast_1d(x[lo]), dx[:, lo][None]
-    if stat == "pulse":
-        return np.atleast_1d(x[hi] - x[lo]), (dx[:, hi] - dx[:, lo])[None]
-    # a series, linearly interpolated at the data's times (periodic in the cycle)
-    period = times[-1]
-    tt = np.concatenate(([0.0], times))
-    xx = np.concatenate(([x[-1]], x))
-    dd = np.concatenate((dx[:, -1:], dx), axis=1)
-    t = np.mod(np.asarray(at, dtype=float), period)
-    val = np.interp(t, tt, xx)
-    jac = np.stack([np.interp(t, tt, row) for row in dd], axis=1) if len(dd) \
-        else np.zeros((t.size, 0))
-    return val, jac
+def evaluate(output: str, times: np.ndarray, values: np.ndarray, derivs: np.ndarray,
+             at: Any = None, path: tuple[float, np.ndarray] | None = None
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """The output's value(s) and derivatives from its signals over the cycle, by the core
+    (:func:`oxyline._core.target_value`): ``values`` (n_steps × n_signals), ``derivs``
+    (n_params × n_steps × n_signals); ``at``, a series' times; ``path``, a pulse-wave
+    velocity's length and its derivatives. Returns (value (m,), jacobian (m × n_params))."""
+    return _core.target_value(
+        output, np.ascontiguousarray(times, dtype=float),
+        np.ascontiguousarray(values, dtype=float), np.ascontiguousarray(derivs, dtype=float),
+        None if at is None else np.ascontiguousarray(np.atleast_1d(at), dtype=float),
+        None if path is None else (float(path[0]), np.ascontiguousarray(path[1], dtype=float)))
 
 
 def path_of(output: str, model: Any, parameters: Sequence[str]

@@ -22,6 +22,7 @@ mod results;
 mod settings;
 mod svzerod;
 mod svzerod_rows;
+mod targets;
 mod trees;
 mod windkessel_trees;
 
@@ -120,6 +121,8 @@ mod _core {
     use super::closed_loop_params::closed_loop_layout;
     #[pymodule_export]
     use super::svzerod_rows::{svzerod_output_rows, svzerod_rcr_cycles};
+    #[pymodule_export]
+    use super::targets::{foot_time, pulse_wave_path, target_value, transit_time};
     #[pymodule_export]
     use super::trees::{
         StructuredTrees, facilitation_factor, grow_structured_tree, linear_facilitation_factor,

@@ -2,12 +2,14 @@
 //! paths ([`parameter`]), the derivative of the DAE with respect to each, and the
 //! tangent-linear generalized-α run to the periodic state ([`tangent`]), and its adjoint
 //! (reverse) sweep for many parameters and few functionals ([`adjoint`]). A closed loop's
-//! conserved blood volume closes its periodic problem ([`volume`]).
+//! conserved blood volume closes its periodic problem ([`volume`]). Calibration targets (an
+//! output by name, its value and derivatives from the signals' tangents) in [`targets`].
 
 pub mod krylov;
 pub mod parameter;
 pub mod species;
 pub mod tangent;
+pub mod targets;
 pub mod volume;
 
 use crate::circuit::Dae;
