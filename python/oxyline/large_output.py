@@ -58,14 +58,14 @@ def vessel_arrays(res: Result) -> list[tuple[str, Any, str]]:
 class SummaryStream:
     """The chunk sink of a summarized run: reduces each chunk of rows (core layout of the
     settings ``s``: every default vessel, no segments) to per-vessel statistics and keeps the
-    inlet vessels' columns (and ``extra`` trailing core columns) of every row."""
+    inlet vessels' columns (and ``extra`` trailing core columns) of every row. ``layout``:
+    the core's output layout of ``s`` (the caller resolves it once per run), without its
+    ``transport`` part when the run has no transport."""
 
-    def __init__(self, model: Model, s: Mapping[str, Any], extra: int,
+    def __init__(self, model: Model, layout: Mapping[str, Any], extra: int,
                  result_of: Any) -> None:
         self._result_of = result_of  # rows (core layout of s) -> Result
-        from oxyline.run import _output_layout
-
-        lay = _output_layout(model, {**s, "segments": False})
+        lay = layout
         self.vessels = [str(v) for v in lay["vessels"]]
         self.inlets = inlet_vessels(model, self.vessels)
         index = {v: i for i, v in enumerate(self.vessels)}
@@ -73,7 +73,7 @@ class SummaryStream:
         width = int(lay["n_columns"])
         keep = [i * kv + j for v in self.inlets for j in range(kv) for i in (index[v],)]
         self._flow_cols = np.array(keep + list(range(width, width + extra)), dtype=np.intp)
-        tl = lay.get("transport") if s["transport"] else None
+        tl = lay.get("transport")
         self._species_cols = None
         species_width = 0
         if tl is not None:

@@ -174,12 +174,14 @@ def _summary_stream(model: Model, s: Mapping[str, Any], extra: int) -> Any:
     from oxyline.large_output import SummaryStream
 
     layout = _output_layout(model, s)  # once: 262 k names at 1e6
+    if not s["transport"]:
+        layout.pop("transport", None)
 
     def result_of(rows: dict[str, Any]) -> Result:
         _split_heart_columns(rows, extra)
         return _result(model, s, rows, {}, False, layout=dict(layout))
 
-    return SummaryStream(model, s, extra, result_of)
+    return SummaryStream(model, layout, extra, result_of)
 
 
 def _selection(s: Mapping[str, Any]) -> dict[str, Any]:
