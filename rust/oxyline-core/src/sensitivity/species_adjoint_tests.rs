@@ -82,6 +82,30 @@ fn adjoint_against_forward(spec: &NetworkSpec, paths: &[&str]) -> f64 {
     worst_against_forward(&w_used, ns * nsig, np, &values, &adj.gradients, &fwd.derivs)
 }
 
+/// The adjoint's gradients of the mean-and-series functionals of `sig` against the forward
+/// tangents of the same signals: the worst difference, in units of each functional's largest
+/// |dJ/d ln θ| ([`worst_against_forward`]).
+pub(crate) fn mean_and_series_adjoint_worst(
+    spec: &NetworkSpec,
+    paths: &[&str],
+    sig: &[(String, String)],
+) -> f64 {
+    let owned: Vec<String> = paths.iter().map(|p| p.to_string()).collect();
+    let ns = settings().steps_per_cycle;
+    let weights = mean_and_series_weights(ns, sig.len());
+    let (values, adj) =
+        species_adjoint_with(spec, &owned, sig, |_, _| Ok(weights.clone()), settings()).unwrap();
+    let fwd = super::super::tests::run_with(spec, paths, sig);
+    worst_against_forward(
+        &weights,
+        ns * sig.len(),
+        paths.len(),
+        &values,
+        &adj.gradients,
+        &fwd.derivs,
+    )
+}
+
 /// The largest difference of the adjoint's gradients (`gradients[f * np + p]`) from the
 /// forward tangents (`derivs[p * block ..]`) contracted with each functional's weights (one
 /// `block` of `weights` per functional), each in units of its functional's largest

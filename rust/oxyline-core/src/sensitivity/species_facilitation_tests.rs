@@ -185,21 +185,7 @@ fn facilitated_inlet_renewal_wall_against_central_differences() {
 fn facilitated_walls_adjoint_equals_forward() {
     let spec = model();
     let sig = signals();
-    let owned: Vec<String> = PATHS.iter().map(|p| p.to_string()).collect();
-    let ns = settings().steps_per_cycle;
-    let nsig = sig.len();
-    let weights = super::adjoint::tests::mean_and_series_weights(ns, nsig);
-    let (values, adj) =
-        species_adjoint_with(&spec, &owned, &sig, |_, _| Ok(weights.clone()), settings()).unwrap();
-    let fwd = run_with(&spec, &PATHS, &sig);
-    let worst = super::adjoint::tests::worst_against_forward(
-        &weights,
-        ns * nsig,
-        PATHS.len(),
-        &values,
-        &adj.gradients,
-        &fwd.derivs,
-    );
+    let worst = super::adjoint::tests::mean_and_series_adjoint_worst(&spec, &PATHS, &sig);
     eprintln!("facilitated walls: adjoint against forward {worst:.2e}");
     assert!(worst < 1e-8, "{worst:e}");
 }

@@ -137,21 +137,7 @@ fn cycle_mean_walls_adjoint_equals_forward() {
         "oxygen.per_vessel.d2.wall.concentration",
     ];
     let sig = signals();
-    let owned: Vec<String> = paths.iter().map(|p| p.to_string()).collect();
-    let ns = settings().steps_per_cycle;
-    let nsig = sig.len();
-    let weights = super::adjoint::tests::mean_and_series_weights(ns, nsig);
-    let (values, adj) =
-        species_adjoint_with(&spec, &owned, &sig, |_, _| Ok(weights.clone()), settings()).unwrap();
-    let fwd = run_with(&spec, &paths, &sig);
-    let worst = super::adjoint::tests::worst_against_forward(
-        &weights,
-        ns * nsig,
-        paths.len(),
-        &values,
-        &adj.gradients,
-        &fwd.derivs,
-    );
+    let worst = super::adjoint::tests::mean_and_series_adjoint_worst(&spec, &paths, &sig);
     eprintln!("cycle-mean walls: adjoint against forward {worst:.2e}");
     assert!(worst < 1e-8, "{worst:e}");
 }
