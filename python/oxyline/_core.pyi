@@ -172,8 +172,14 @@ class Ensemble:
         error_kind, error)`` is called on this thread as each finishes. False if Ctrl-C
         stopped it."""
 
-def closed_loop_o2(spec_json: str, flows: np.ndarray, dt: float, max_cycles: int,
-                   tol: float) -> dict[str, Any]: ...
+def closed_loop_run(params: dict[str, Any], flows: Any, max_cycles: Any, tol: Any,
+                    shooting: Any) -> dict[str, Any]:
+    """The closed loop of a parameter set (published units) run in one call: settings checked,
+    circulation built, heart run when it gives the flows (None: the set's `flows`; "table",
+    "heart" or a steps x branches table), O2 to the periodic state; flat arrays out, with the
+    compartments' and branches' names."""
+def closed_loop_heart_model(params_json: str) -> dict[str, Any]:
+    """The native model dict of a parameter set's closed-loop heart circulation."""
 def closed_loop_layout(params_json: str, table: bool) -> tuple[str, np.ndarray | None]:
     """The closed loop's SI layout (JSON: compartments, branches, binding, organ_resistances,
     solubility_per_mmhg, cardiac_output) of a parameter set in its published units and, with

@@ -1,30 +1,89 @@
-//! Binding of the closed-loop O2 run (`oxyline_core::transport::closed_loop`): JSON spec and a
-//! flat flow table in (balanced by the core with `balance`), the recorded last cycle and the
-//! table used out (flat arrays; Python reshapes them). With a `heart` in the spec the core runs
-//! the closed-loop heart first and reads the flows from it (the table passed is then empty).
+//! Binding of the closed loop (`oxyline_core::transport::closed_loop_run`): the parameter set
+//! (a dict in its published units), the caller's flows and run controls in; the core checks
+//! them, builds the circulation, runs the closed-loop heart when it gives the flows and the O2
+//! loop to its periodic state in one call. Out: the recorded last cycle as flat arrays (Python
+//! reshapes them) with the names of the compartments and branches, and the table used.
 
 use crate::errors::to_py;
-use numpy::{PyArray1, PyReadonlyArray1};
-use oxyline_core::transport::closed_loop::{ClosedLoopSpec, run_periodic};
+use crate::reader::node::{PyNode, to_python};
+use numpy::{PyArray1, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use oxyline_core::transport::closed_loop::ClosedLoopRun;
+use oxyline_core::transport::closed_loop_run::{
+    Flows, RunSettings, check_times, heart_model_of, simulate,
+};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyString};
+
+/// The caller's flows: None (the set's own choice), a name, or a table (any array-like).
+fn flows_of<'py>(py: Python<'py>, flows: &Bound<'py, PyAny>) -> PyResult<Flows> {
+    if flows.is_none() {
+        return Ok(Flows::Default);
+    }
+    if let Ok(name) = flows.cast::<PyString>() {
+        return Ok(Flows::Named(name.to_str()?.to_owned()));
+    }
+    let table = py
+        .import("numpy")?
+        .call_method1("asarray", (flows, "float64"))?;
+    let table: PyReadonlyArrayDyn<'py, f64> = table.extract()?;
+    Ok(Flows::Table {
+        shape: table.shape().to_vec(),
+        values: table.as_array().iter().copied().collect(),
+    })
+}
 
 #[oxyline_py_guard::guard]
 #[pyfunction]
-#[pyo3(signature = (spec_json, flows, dt, max_cycles, tol))]
-pub fn closed_loop_o2<'py>(
+#[pyo3(signature = (params, flows, max_cycles, tol, shooting))]
+pub fn closed_loop_run<'py>(
     py: Python<'py>,
-    spec_json: &str,
-    flows: PyReadonlyArray1<'py, f64>,
-    dt: f64,
-    max_cycles: usize,
-    tol: f64,
+    params: Bound<'py, PyAny>,
+    flows: Bound<'py, PyAny>,
+    max_cycles: Bound<'py, PyAny>,
+    tol: Bound<'py, PyAny>,
+    shooting: Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let spec = ClosedLoopSpec::from_json(spec_json).map_err(to_py)?;
-    let flows = flows.as_slice()?.to_vec();
-    let run = py
-        .detach(move || run_periodic(&spec, &flows, dt, max_cycles, tol))
+    // the values as the caller wrote them (a NaN period is named, not lost to JSON)
+    check_times(&PyNode(params.clone())).map_err(to_py)?;
+    let settings =
+        RunSettings::read(&PyNode(max_cycles), &PyNode(tol), &PyNode(shooting)).map_err(to_py)?;
+    let flows = flows_of(py, &flows)?;
+    let json: String = py
+        .import("json")?
+        .call_method1("dumps", (&params,))?
+        .extract()?;
+    let out = py
+        .detach(move || simulate(&json, flows, &settings))
         .map_err(to_py)?;
+    if !out.warnings.is_empty() {
+        let category = py
+            .import("oxyline.transport")?
+            .getattr("HemoglobinFacilitationWarning")?;
+        for w in &out.warnings {
+            let text = std::ffi::CString::new(w.as_str()).unwrap_or_default();
+            PyErr::warn(py, &category, &text, 2)?;
+        }
+    }
+    let d = record(py, &out.run)?;
+    d.set_item("compartments", &out.compartments)?;
+    d.set_item("branches", &out.branches)?;
+    Ok(d)
+}
+
+/// The native model dict of the parameter set's closed-loop heart (SI; the heart block's
+/// values in mmHg and mL).
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn closed_loop_heart_model<'py>(
+    py: Python<'py>,
+    params_json: &str,
+) -> PyResult<Bound<'py, PyAny>> {
+    let model = heart_model_of(params_json).map_err(to_py)?;
+    to_python(py, &model)
+}
+
+/// A run's record as a dict of flat arrays.
+fn record<'py>(py: Python<'py>, run: &ClosedLoopRun) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     d.set_item("cycles", run.cycles)?;
     d.set_item("periodic_error", run.periodic_error)?;

@@ -144,7 +144,7 @@ impl LoopParams {
         serde_json::from_str(json).map_err(|e| Error::model("closed loop", e.to_string()))
     }
 
-    fn has_tree(&self) -> bool {
+    pub fn has_tree(&self) -> bool {
         self.arteries == "tree"
     }
 

@@ -33,9 +33,11 @@ mod boundary_chunks; // the boundary faces' passes on the run's threads
 mod build;
 pub mod closed_loop; // closed circulation: compartments, lungs
 pub mod closed_loop_balance; // its flow table's periodic volumes
+pub mod closed_loop_circulation; // its circulation, built from the parameter set
 pub mod closed_loop_heart; // the heart run that drives its flows
 pub mod closed_loop_heart_series; // what the loop reads from that run, by name
 pub mod closed_loop_params; // its parameter set in published units, to SI
+pub mod closed_loop_run; // the whole run in one call: settings, heart, O2
 pub mod closed_loop_tree; // its segment-resolved arterial tree
 pub mod compartment;
 mod fused;

@@ -5,7 +5,7 @@
 use super::node::{PyNode, to_python};
 use crate::errors::to_py;
 use oxyline_core::Error;
-use oxyline_core::model::node::{Fields, Kind, Node};
+use oxyline_core::model::node::{Fields, Node};
 use oxyline_core::model::units::{Quantity, Units};
 use oxyline_core::model::{native, species};
 use pyo3::prelude::*;
@@ -185,28 +185,8 @@ pub(crate) fn transport<'py>(
     Ok((Some(tr.section), info))
 }
 
-/// The run's duration (s) a callable wall flux and a bolus are sampled over: the model period
-/// (1 s when none) times the file's `cycles` (`max_cycles` when `until_periodic`); None when
-/// the count is no number.
-pub(crate) fn duration<N: Node>(data: &N, period: Option<f64>) -> Option<f64> {
-    let sim = data.get("simulation").filter(Node::truthy);
-    let get = |k: &str| sim.as_ref().and_then(|s| s.get(k));
-    let periodic = get("until_periodic").is_some_and(|u| u.truthy());
-    let (key, default) = if periodic {
-        ("max_cycles", 100.0)
-    } else {
-        ("cycles", 10.0)
-    };
-    let cycles = match get(key) {
-        None => Some(default),
-        Some(c) => match c.kind() {
-            Kind::Bool => Some(if c.truthy() { 1.0 } else { 0.0 }),
-            Kind::Int | Kind::Float => c.number(),
-            _ => None,
-        },
-    };
-    cycles.map(|c| period.unwrap_or(1.0) * c)
-}
+/// The run's duration a callable wall flux and a bolus are sampled over (the core's).
+pub(crate) use oxyline_core::model::native::duration;
 
 /// The keys of a model's `simulation` section and its method.
 #[oxyline_py_guard::guard]

@@ -12,10 +12,12 @@ use crate::error::{Error, Result};
 use serde_json::{Map, Value, json};
 
 pub mod boundary;
+pub mod canonical;
 pub mod plain;
 pub mod vessel;
 
 pub use boundary::{boundary_condition, condition_periods};
+pub use canonical::{canonical, duration};
 pub use vessel::{element_periods, vessel};
 
 pub const TOP_KEYS: &[&str] = &[
