@@ -262,7 +262,7 @@ fn pulse_of(cycle: &CycleSignals, j: usize) -> (f64, Vec<f64>) {
 fn amplification(cycle: &CycleSignals) -> std::result::Result<TargetValue, String> {
     let (central, dcentral) = pulse_of(cycle, 0);
     let (peripheral, dperipheral) = pulse_of(cycle, 1);
-    if !(central > 0.0) {
+    if !central.is_finite() || central <= 0.0 {
         return Err(format!(
             "the central pulse pressure is {central} Pa (a flat pressure has no amplification)"
         ));
@@ -332,7 +332,7 @@ fn augmentation_index(cycle: &CycleSignals) -> std::result::Result<TargetValue, 
     let x = cycle.signal(0);
     let n = x.len();
     let pulse = x[extreme(&x, 1.0)] - x[extreme(&x, -1.0)];
-    if !(pulse > 0.0) {
+    if !pulse.is_finite() || pulse <= 0.0 {
         return Err(format!(
             "the pulse pressure is {pulse} Pa (a flat pressure has no augmentation index)"
         ));
