@@ -45,6 +45,38 @@ def test_in_vivo_interpolates_between_decades_and_ranges_are_99_percent() -> Non
         P.in_vivo(90)
 
 
+def _contradictions(table: dict) -> list[tuple[str, int, float, float]]:
+    """The groups whose aortic PP differs by more than 2 mmHg from their own brachial PP over
+    amplification or aortic SBP minus brachial DBP (aortic and brachial DBP agree within
+    ~1 mmHg: the pressure's mean and diastole change little along the large arteries)."""
+    out = []
+    for g, sex in ((0, "men"), (2, "women")):
+        for i, age in enumerate(P.MCENIERY_AGES):
+            app = table["aortic_pp"][g][i]
+            by_amp = table["brachial_pp"][g][i] / table["pp_amplification"][g][i]
+            by_dbp = table["aortic_sbp"][g][i] - table["brachial_dbp"][g][i]
+            if max(abs(app - by_amp), abs(app - by_dbp)) > 2.0:
+                out.append((sex, age, by_amp, by_dbp))
+    return out
+
+
+def test_the_fit_table_agrees_with_each_groups_other_characteristics() -> None:
+    """The transcribed table contradicts itself in one group (women, 75 y: 56 against 45.4
+    and 47); the fit's table (``in_vivo(age, fit=True)``) in none, and differs from it only
+    there; the 99 % ranges keep PWDB's value."""
+    bad = _contradictions(P.MCENIERY)
+    assert [(s, a) for s, a, *_ in bad] == [("women", 75)]
+    assert bad[0][2] == pytest.approx(45.4, abs=0.05) and bad[0][3] == 47
+    assert _contradictions(P.MCENIERY_FIT) == []
+    n_m, n_w = P.MCENIERY_N[0][6], P.MCENIERY_N[1][6]
+    assert P.in_vivo(75, fit=True)["aortic_pp"][0] == pytest.approx(
+        (42 * n_m + 46 * n_w) / (n_m + n_w))
+    assert P.in_vivo(75)["aortic_pp"][0] == pytest.approx((42 * n_m + 56 * n_w) / (n_m + n_w))
+    for age in (25, 65, 85):
+        assert P.in_vivo(age, fit=True) == P.in_vivo(age)
+    assert P.plausible_ranges(75)["aortic_pp"][1] > 60  # PWDB's, with the transcribed 56
+
+
 def test_factors_scale_every_outlet_and_the_inflow() -> None:
     row, _ = F.baseline_subject(45)
     patch = P.subject_patch(row)

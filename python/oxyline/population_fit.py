@@ -140,10 +140,12 @@ def _group_paths(model: Mapping[str, Any]) -> dict[str, list[str]]:
 
 def targets_of(age: float, row: Mapping[str, float]) -> tuple[np.ndarray, np.ndarray]:
     """The :data:`CHARACTERISTICS`' targets and SDs at ``age`` for the subject ``row``:
-    McEniery 2005 (pooled, :func:`in_vivo`); cf-PWV the subject's own target with the half
+    McEniery 2005 (pooled, :func:`in_vivo` with the fit's values: the women's aortic PP at
+    75 y 46 mmHg, the value their other characteristics give, not the transcribed 56, which
+    no model can meet together with the brachial PP and the amplification); cf-PWV the subject's own target with the half
     width of its ±1 SD (:func:`oxyline.populations.cf_pwv`); the cardiac output HR x SV to
     :data:`CO_SIGMA`."""
-    st = in_vivo(age)
+    st = in_vivo(age, fit=True)
     pwv_sd = (cf_pwv(float(age), float(row["mbp"]), 1.0)
               - cf_pwv(float(age), float(row["mbp"]), -1.0)) / 2
     mean = [*(st[k][0] for k in CHARACTERISTICS[:5]), float(row["pwv"]), float(row["co"])]

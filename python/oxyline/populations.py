@@ -484,6 +484,13 @@ MCENIERY_AGES = tuple(_MCENIERY["ages"])
 MCENIERY_N = (tuple(_MCENIERY["n"]["men"]), tuple(_MCENIERY["n"]["women"]))
 MCENIERY = {k: tuple(tuple(v[c]) for c in ("men_mean", "men_sd", "women_mean", "women_sd"))
             for k, v in _MCENIERY["characteristics"].items()}
+_COLUMNS = ("men_mean", "men_sd", "women_mean", "women_sd")
+#: the table with the values the calibration's targets take in place of a transcribed value
+#: that contradicts its group's other characteristics (the data file's ``fit_values``)
+MCENIERY_FIT = {k: tuple(tuple(float(_MCENIERY["fit_values"].get(k, {}).get(c, {}).get(a, x))
+                               for a, x in zip(MCENIERY_AGES, col, strict=True))
+                         for c, col in zip(_COLUMNS, cols, strict=True))
+                for k, cols in MCENIERY.items()}
 #: PWDB's 99 % plausibility range: mean ± 2.575 SD of the pooled men and women
 Z99 = 2.575
 
@@ -496,13 +503,14 @@ def _pooled(m: tuple[float, float, int], f: tuple[float, float, int]) -> tuple[f
     return sx / n, math.sqrt((sxx - sx**2 / n) / (n - 1))
 
 
-def in_vivo(age: float) -> dict[str, tuple[float, float]]:
+def in_vivo(age: float, fit: bool = False) -> dict[str, tuple[float, float]]:
     """McEniery 2005's mean and SD of each characteristic at ``age`` (15-85 y), men and women
-    pooled per decade and interpolated linearly between decades (as PWDB's check does)."""
+    pooled per decade and interpolated linearly between decades (as PWDB's check does);
+    ``fit``: with the calibration's corrected values (:data:`MCENIERY_FIT`)."""
     if not MCENIERY_AGES[0] <= age <= MCENIERY_AGES[-1]:
         raise ModelError(f"age {age}: McEniery 2005's decades cover 15-85 years")
     out = {}
-    for name, (mm, ms, fm, fs) in MCENIERY.items():
+    for name, (mm, ms, fm, fs) in (MCENIERY_FIT if fit else MCENIERY).items():
         stats = [_pooled((a, b, n), (c, d, k)) for a, b, n, c, d, k in
                  zip(mm, ms, MCENIERY_N[0], fm, fs, MCENIERY_N[1], strict=True)]
         out[name] = (float(np.interp(age, MCENIERY_AGES, [s[0] for s in stats])),

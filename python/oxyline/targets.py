@@ -16,6 +16,11 @@ An output names a quantity of the periodic cycle:
 * ``"pwv.<proximal>.<distal>"``: pulse-wave velocity from the inlet of ``proximal`` to the
   outlet of ``distal`` (downstream of it): the path length over the foot-to-foot transit
   time (feet by intersecting tangents, :func:`oxyline._core.foot_time`);
+* ``"amplification.<central>.<peripheral>"``: pulse-pressure amplification, the pulse
+  pressure at the outlet of ``peripheral`` over that at the inlet of ``central``;
+* ``"augmentation_index.<vessel>"``: the augmentation index at the inlet of ``vessel``,
+  (P_sys − P_i)/PP with P_i the pressure at the inflection of the systolic upstroke
+  (the first local minimum of its slope after the diastolic minimum, found by the core);
 * ``"<vessel>.<variable>.series"``: the signal over the cycle, compared with data at given
   times (targets only).
 
@@ -107,6 +112,8 @@ def signals_of(output: str, model: Any, error: type[ModelError] = ModelError
             raise _fail(output, "expected pwv.<proximal vessel>.<distal vessel>", error)
         pwv_path(output, model, error)
         return [(parts[1], "pressure_in"), (parts[2], "pressure_out")]
+    if parts[0] in ("amplification", "augmentation_index"):
+        return _shape_signals(output, parts, names, model.name, error)
     if parts[0] == "flow_split":
         if len(parts) != 3:
             raise _fail(output, "expected flow_split.<vessel>.<parent>", error)
@@ -116,7 +123,8 @@ def signals_of(output: str, model: Any, error: type[ModelError] = ModelError
         return [(parts[1], "flow_in"), (parts[2], "flow_in")]
     if len(parts) != 3:
         raise _fail(output, "expected <vessel>.<variable>.<statistic>, flow_split.<vessel>."
-                    "<parent>, pwv.<proximal>.<distal> or cardiac_output", error)
+                    "<parent>, pwv.<proximal>.<distal>, amplification.<central>.<peripheral>, "
+                    "augmentation_index.<vessel> or cardiac_output", error)
     vessel, variable, stat = parts
     if vessel not in names:
         raise _fail(output, f"no vessel named {vessel!r} in model '{model.name}'", error)
@@ -127,6 +135,22 @@ def signals_of(output: str, model: Any, error: type[ModelError] = ModelError
         raise _fail(output, f"unknown statistic {stat!r} (one of {', '.join(STATISTICS)})",
                     error)
     return [(vessel, variable)]
+
+
+def _shape_signals(output: str, parts: list[str], names: set[str], model_name: str,
+                   error: type[ModelError]) -> list[tuple[str, str]]:
+    """The pressures of ``amplification.<central>.<peripheral>`` (the inlet of ``central``,
+    the outlet of ``peripheral``) or ``augmentation_index.<vessel>`` (its inlet)."""
+    amplification = parts[0] == "amplification"
+    if len(parts) != (3 if amplification else 2):
+        raise _fail(output, "expected amplification.<central vessel>.<peripheral vessel>"
+                    if amplification else "expected augmentation_index.<vessel>", error)
+    for v in parts[1:]:
+        if v not in names:
+            raise _fail(output, f"no vessel named {v!r} in model '{model_name}'", error)
+    if amplification:
+        return [(parts[1], "pressure_in"), (parts[2], "pressure_out")]
+    return [(parts[1], "pressure_in")]
 
 
 def _heart_valves(model: Any) -> list[str]:

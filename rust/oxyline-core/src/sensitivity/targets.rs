@@ -6,11 +6,16 @@
 //! statistic (`min`, `max`, `mean`, `pulse` = max − min) or a `series` of one signal, a flow
 //! split (mean flow into a vessel over that into its parent), a cycle-mean total (cardiac
 //! output, VO2), a flow-weighted outflow saturation (SvO2 = Σ Q S / Σ Q) or a pulse-wave
-//! velocity (path length over the foot-to-foot transit time). A mean's derivative is the
+//! velocity (path length over the foot-to-foot transit time), a pulse-pressure
+//! amplification (the pulse at a peripheral site over that at a central one) or an
+//! augmentation index ((P_sys − P_i)/PP, P_i at the inflection of the systolic upstroke). A
+//! mean's derivative is the
 //! mean of the derivatives; a maximum's the derivative at the step of the maximum (the
 //! derivative of the discrete maximum, exact wherever the maximum is unique); a foot's is
 //! that of the foot's smooth formula in the samples it used (the steepest upstroke and the
-//! diastolic minimum), which stay the same samples under a small change.
+//! diastolic minimum), which stay the same samples under a small change; an inflection's
+//! likewise through the samples of the second differences whose sign change it
+//! interpolates.
 
 use crate::error::{Error, Result};
 use crate::model::NetworkSpec;
@@ -35,16 +40,25 @@ pub enum Reduction {
     /// path length over the foot-to-foot transit time of the proximal (signal 0) and distal
     /// (signal 1) pressures
     PulseWaveVelocity,
+    /// pulse (max − min) of the peripheral (signal 1) over that of the central (signal 0)
+    /// pressure
+    Amplification,
+    /// (P_sys − P_i)/(P_sys − P_dia) of signal 0, P_i the pressure at the inflection of the
+    /// systolic upstroke ([`inflection`])
+    AugmentationIndex,
 }
 
 impl Reduction {
     /// The reduction an output's name asks for: `pwv.<proximal>.<distal>`,
+    /// `amplification.<central>.<peripheral>`, `augmentation_index.<vessel>`,
     /// `flow_split.<vessel>.<parent>`, `cardiac_output`, `VO2[.<vessel>...]`,
     /// `SvO2.<vessel>` or `<signal>.<statistic>`.
     pub fn of(output: &str) -> Result<Reduction> {
         let first = output.split('.').next().unwrap_or("");
         Ok(match first {
             "pwv" => Reduction::PulseWaveVelocity,
+            "amplification" => Reduction::Amplification,
+            "augmentation_index" => Reduction::AugmentationIndex,
             _ if output == "cardiac_output" || first == "VO2" => Reduction::MeanTotal,
             "SvO2" => Reduction::FlowWeighted,
             "flow_split" => Reduction::FlowSplit,
@@ -69,9 +83,10 @@ impl Reduction {
     /// How many signals the reduction reads (None: one or more).
     fn signals(self) -> Option<usize> {
         match self {
-            Reduction::FlowSplit | Reduction::FlowWeighted | Reduction::PulseWaveVelocity => {
-                Some(2)
-            }
+            Reduction::FlowSplit
+            | Reduction::FlowWeighted
+            | Reduction::PulseWaveVelocity
+            | Reduction::Amplification => Some(2),
             Reduction::MeanTotal => None,
             _ => Some(1),
         }
@@ -193,6 +208,8 @@ pub fn evaluate(
             }
             pulse_wave_velocity(cycle, path)?
         }
+        Reduction::Amplification => amplification(cycle).map_err(|why| fail(&why))?,
+        Reduction::AugmentationIndex => augmentation_index(cycle).map_err(|why| fail(&why))?,
         Reduction::MeanTotal => mean_total(cycle),
         Reduction::FlowWeighted => flow_weighted(cycle),
         Reduction::FlowSplit => flow_split(cycle),
@@ -231,6 +248,117 @@ fn statistic(cycle: &CycleSignals, stat: Reduction) -> TargetValue {
         Reduction::Min => TargetValue::one(x[lo], cycle.deriv_rows(0, |d| d[lo])),
         _ => TargetValue::one(x[hi] - x[lo], cycle.deriv_rows(0, |d| d[hi] - d[lo])),
     }
+}
+
+/// The pulse (max − min) of signal `j` and its derivative by each parameter.
+fn pulse_of(cycle: &CycleSignals, j: usize) -> (f64, Vec<f64>) {
+    let x = cycle.signal(j);
+    let (hi, lo) = (extreme(&x, 1.0), extreme(&x, -1.0));
+    (x[hi] - x[lo], cycle.deriv_rows(j, |d| d[hi] - d[lo]))
+}
+
+/// The pulse of the peripheral pressure (signal 1) over that of the central one (signal 0);
+/// the reason if the central pressure has no pulse.
+fn amplification(cycle: &CycleSignals) -> std::result::Result<TargetValue, String> {
+    let (central, dcentral) = pulse_of(cycle, 0);
+    let (peripheral, dperipheral) = pulse_of(cycle, 1);
+    if !central.is_finite() || central <= 0.0 {
+        return Err(format!(
+            "the central pulse pressure is {central} Pa (a flat pressure has no amplification)"
+        ));
+    }
+    let value = peripheral / central;
+    let rows = dcentral
+        .iter()
+        .zip(&dperipheral)
+        .map(|(dc, dp)| (dp - value * dc) / central)
+        .collect();
+    Ok(TargetValue::one(value, rows))
+}
+
+/// The inflection of a periodic wave's systolic upstroke, between samples `step` and
+/// `step + 1` (indices modulo the cycle's length).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Inflection {
+    /// the sample before the inflection
+    pub step: usize,
+    /// where between `step` (0) and `step + 1` (1) the second difference changes sign
+    pub fraction: f64,
+    /// the systolic peak's sample
+    pub peak: usize,
+    /// the diastolic minimum's sample
+    pub minimum: usize,
+}
+
+/// The second difference x[i+1] − 2 x[i] + x[i−1] of the periodic samples `x` at `i` (any
+/// index, taken modulo the length).
+fn curvature(x: &[f64], i: usize) -> f64 {
+    let n = x.len();
+    x[(i + 1) % n] - 2.0 * x[i % n] + x[(i + n - 1) % n]
+}
+
+/// The inflection point of the systolic upstroke of one cycle of periodic uniform samples
+/// `x` (the shoulder of a wave whose reflection arrives before its peak): the first local
+/// minimum of the slope after the diastolic minimum (the lowest sample), where the second
+/// difference changes sign from negative to non-negative, before the systolic peak (the
+/// highest sample); the zero crossing is interpolated linearly between its two samples
+/// (the pressure's own curvature is zero there, so a chord reads the pressure to second
+/// order). None if the slope has no such minimum (a wave rising convexly, then concavely,
+/// straight to its peak: its shoulder, if any, comes after the peak).
+pub fn inflection(x: &[f64]) -> Option<Inflection> {
+    let n = x.len();
+    if n < 4 {
+        return None;
+    }
+    let (peak, minimum) = (extreme(x, 1.0), extreme(x, -1.0));
+    // the peak's index unwrapped to follow the minimum
+    let top = if peak > minimum { peak } else { peak + n };
+    (minimum + 1..top.saturating_sub(1)).find_map(|j| {
+        let (c0, c1) = (curvature(x, j), curvature(x, j + 1));
+        (c0 < 0.0 && c1 >= 0.0).then(|| Inflection {
+            step: j % n,
+            fraction: c0 / (c0 - c1),
+            peak,
+            minimum,
+        })
+    })
+}
+
+/// The augmentation index (P_sys − P_i)/(P_sys − P_dia) of signal 0, P_i the pressure at
+/// the inflection of its systolic upstroke ([`inflection`]), and its derivatives through
+/// the samples of the peak, the minimum and the inflection's crossing; the reason if there
+/// is no pulse or no inflection.
+fn augmentation_index(cycle: &CycleSignals) -> std::result::Result<TargetValue, String> {
+    let x = cycle.signal(0);
+    let n = x.len();
+    let pulse = x[extreme(&x, 1.0)] - x[extreme(&x, -1.0)];
+    if !pulse.is_finite() || pulse <= 0.0 {
+        return Err(format!(
+            "the pulse pressure is {pulse} Pa (a flat pressure has no augmentation index)"
+        ));
+    }
+    let Some(at) = inflection(&x) else {
+        return Err(
+            "no inflection on the systolic upstroke (the slope has no local minimum \
+                    between the diastolic minimum and the systolic peak)"
+                .into(),
+        );
+    };
+    let (j, w, hi, lo) = (at.step, at.fraction, at.peak, at.minimum);
+    let (c0, c1) = (curvature(&x, j), curvature(&x, j + 1));
+    let (p0, p1) = (x[j], x[(j + 1) % n]);
+    let shoulder = p0 + w * (p1 - p0);
+    let value = (x[hi] - shoulder) / pulse;
+    let rows = (0..cycle.n_params())
+        .map(|p| {
+            let d = cycle.deriv(p, 0);
+            let (dc0, dc1) = (curvature(&d, j), curvature(&d, j + 1));
+            let dw = (c0 * dc1 - c1 * dc0) / ((c0 - c1) * (c0 - c1));
+            let dshoulder = d[j] + w * (d[(j + 1) % n] - d[j]) + dw * (p1 - p0);
+            ((d[hi] - dshoulder) - value * (d[hi] - d[lo])) / pulse
+        })
+        .collect();
+    Ok(TargetValue::one(value, rows))
 }
 
 /// The cycle mean of the signals' sum (per step, then over the cycle).
@@ -470,3 +598,7 @@ pub fn pulse_wave_path(spec: &NetworkSpec, output: &str) -> Result<Vec<(String, 
 #[cfg(test)]
 #[path = "targets_tests.rs"]
 mod tests;
+
+#[cfg(test)]
+#[path = "targets_shape_tests.rs"]
+mod shape_tests;

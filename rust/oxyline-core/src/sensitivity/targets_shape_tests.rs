@@ -1,0 +1,168 @@
+//! The waveform-shape targets against closed forms: the pulse-pressure amplification of two
+//! sinusoids, and the inflection and augmentation index of a two-harmonic pressure, with
+//! their derivatives by the waves' own parameters.
+
+use super::*;
+use std::f64::consts::PI;
+
+/// `steps` uniform step end times T/steps … T of a cycle of `period`.
+fn times(steps: usize, period: f64) -> Vec<f64> {
+    (1..=steps)
+        .map(|k| k as f64 * period / steps as f64)
+        .collect()
+}
+
+/// Row-major signals (n_steps × signals) and derivatives (parameter × n_steps × signals)
+/// of `wave(t) -> (values, derivatives[parameter][signal])` at `t`.
+fn sample(t: &[f64], wave: impl Fn(f64) -> (Vec<f64>, Vec<Vec<f64>>)) -> (Vec<f64>, Vec<f64>) {
+    let at: Vec<_> = t.iter().map(|&t| wave(t)).collect();
+    let values = at.iter().flat_map(|(v, _)| v.clone()).collect();
+    let np = at[0].1.len();
+    let derivs = (0..np)
+        .flat_map(|p| at.iter().flat_map(move |(_, d)| d[p].clone()))
+        .collect();
+    (values, derivs)
+}
+
+fn eval(
+    output: &str,
+    t: &[f64],
+    nsig: usize,
+    (values, derivs): &(Vec<f64>, Vec<f64>),
+) -> Result<TargetValue> {
+    let cycle = CycleSignals {
+        times: t,
+        values,
+        derivs,
+        n_signals: nsig,
+    };
+    evaluate(output, &cycle, None, None)
+}
+
+const PERIOD: f64 = 0.8;
+
+#[test]
+fn the_amplification_of_two_sinusoids_is_the_ratio_of_their_amplitudes() {
+    // central p0 + a sin ωt, peripheral p1 + b sin(ωt − φ); parameters a and b. 400 steps
+    // and a lag of 20 steps: every extreme falls on a sample, so PP = 2a and 2b exactly
+    let (a, b) = (1.6e3, 2.3e3);
+    let w = 2.0 * PI / PERIOD;
+    let lag = 2.0 * PI * 20.0 / 400.0;
+    let t = times(400, PERIOD);
+    let s = sample(&t, |t| {
+        let (c, p) = ((w * t).sin(), (w * t - lag).sin());
+        (
+            vec![1.1e4 + a * c, 1.0e4 + b * p],
+            vec![vec![c, 0.0], vec![0.0, p]],
+        )
+    });
+    let out = eval("amplification.aorta.radial", &t, 2, &s).unwrap();
+    let tol = 1e-12;
+    assert!((out.values[0] - b / a).abs() <= tol, "{:?}", out.values);
+    // d(b/a)/da = −b/a², d(b/a)/db = 1/a
+    assert!((out.jacobian[0] + b / (a * a)).abs() <= tol / a);
+    assert!((out.jacobian[1] - 1.0 / a).abs() <= tol / a);
+}
+
+// P = p0 + s (f(θ) + ε cos 2θ), f = −cos θ + β cos 3θ, θ = ωt + θ₀; parameters s and ε (at 0).
+// For −1/3 < β < −1/27, f rises monotonically from its minimum at θ = 0 to its peak at π
+// (f' = sin θ (1 − 3β(3 − 4 sin²θ)) > 0) and its slope has one local minimum between them,
+// at θ = π/2 (f'' = cos θ − 9β cos 3θ = 0, f''' = −1 − 27β > 0), where f = 0: the
+// inflection of the upstroke is at π/2 and AIx = (f(π) − 0)/(f(π) − f(0)) = 1/2 for every β.
+const BETA: f64 = -0.1;
+const P0: f64 = 1.0e4;
+const SCALE: f64 = 2.0e3;
+
+/// The two-harmonic pressure over `steps` steps, its samples off the peak, minimum and
+/// inflection by θ₀ (0.37 step); `eps` its cos 2θ part.
+fn two_harmonic(steps: usize, eps: f64) -> (Vec<f64>, (Vec<f64>, Vec<f64>)) {
+    let w = 2.0 * PI / PERIOD;
+    let theta0 = 0.37 * 2.0 * PI / steps as f64;
+    let t = times(steps, PERIOD);
+    let s = sample(&t, |t| {
+        let th = w * t + theta0;
+        let f = -th.cos() + BETA * (3.0 * th).cos();
+        let e = (2.0 * th).cos();
+        (
+            vec![P0 + SCALE * (f + eps * e)],
+            vec![vec![f + eps * e], vec![SCALE * e]],
+        )
+    });
+    (t, s)
+}
+
+#[test]
+fn a_two_harmonic_pressures_inflection_and_augmentation_index_are_the_closed_forms() {
+    let steps = 4000;
+    let (t, s) = two_harmonic(steps, 0.0);
+    // the inflection at θ = π/2: the step whose interval holds it
+    let at = inflection(&s.0).unwrap();
+    let w = 2.0 * PI / PERIOD;
+    let theta0 = 0.37 * 2.0 * PI / steps as f64;
+    let dt = PERIOD / steps as f64;
+    let theta_i = w * (t[at.step] + at.fraction * dt) + theta0;
+    // the sign change of second differences interpolated linearly: O(Δθ²) from π/2
+    let dtheta = 2.0 * PI / steps as f64;
+    assert!((theta_i - PI / 2.0).abs() <= dtheta * dtheta, "{theta_i}");
+    let out = eval("augmentation_index.aorta", &t, 1, &s).unwrap();
+    // the samples' peak and minimum are off the extremes by under a step: PP and P_sys low
+    // by O(f'' Δθ²) ~ 1e-6 of the pulse, the shoulder's chord by O(f''' Δθ³)
+    assert!((out.values[0] - 0.5).abs() <= 1e-5, "{:?}", out.values);
+    // d AIx / d s = 0: a scaled wave has the same index (the same samples, in ratio)
+    assert!(out.jacobian[0].abs() <= 1e-12, "{:?}", out.jacobian);
+    // d AIx / d ε, e = cos 2θ: the peak and minimum move by e(π) and e(0) (envelope), the
+    // inflection by dθ = −e''/f''' at π/2, the shoulder by f' dθ + e, all over PP = f(π) − f(0):
+    // (e(π) − e(π/2) + f'(π/2) e''(π/2)/f'''(π/2) − AIx (e(π) − e(0))) / PP
+    let (fp, fppp) = (1.0 + 3.0 * BETA, -1.0 - 27.0 * BETA);
+    let pp = 2.0 * (1.0 - BETA);
+    let exact = (1.0 - (-1.0) + fp * 4.0 / fppp - 0.5 * 0.0) / pp;
+    // the discrete crossing's derivative converges at O(Δθ): 1e-3 relative at 4000 steps
+    let rel = (out.jacobian[1] - exact).abs() / exact;
+    assert!(rel <= 1e-3, "{} vs {exact} ({rel})", out.jacobian[1]);
+}
+
+#[test]
+fn the_augmentation_indexs_derivative_is_that_of_its_samples() {
+    // against central differences of the index of the perturbed samples themselves (h
+    // 1e-6 of ε: truncation O(h²) and rounding ~1e-16/h of the index ~1e-10, so 1e-7
+    // relative tells a wrong derivative); the samples of the crossing stay the same
+    let steps = 400;
+    let (t, s) = two_harmonic(steps, 0.0);
+    let out = eval("augmentation_index.aorta", &t, 1, &s).unwrap();
+    let h = 1e-6;
+    let at = |eps: f64| {
+        let (t, s) = two_harmonic(steps, eps);
+        eval("augmentation_index.aorta", &t, 1, &s).unwrap().values[0]
+    };
+    let fd = (at(h) - at(-h)) / (2.0 * h);
+    let rel = (out.jacobian[1] - fd).abs() / fd.abs();
+    assert!(rel <= 1e-7, "{} vs {fd} ({rel})", out.jacobian[1]);
+}
+
+#[test]
+fn a_wave_without_an_inflection_or_a_pulse_is_an_error_naming_the_output() {
+    let w = 2.0 * PI / PERIOD;
+    let t = times(400, PERIOD);
+    // a sinusoid: its slope falls from the steepest rise straight to the peak
+    let sine = sample(&t, |t| (vec![1e4 + 2e3 * (w * t).sin()], vec![]));
+    let e = eval("augmentation_index.aorta", &t, 1, &sine).unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        msg.contains("augmentation_index.aorta") && msg.contains("no inflection"),
+        "{msg}"
+    );
+    let flat = sample(&t, |_| (vec![1e4], vec![]));
+    let e = eval("augmentation_index.aorta", &t, 1, &flat).unwrap_err();
+    assert!(e.to_string().contains("pulse pressure is 0"), "{e}");
+    // a flat central pressure: no amplification
+    let two = sample(&t, |t| (vec![1e4, 1e4 + 2e3 * (w * t).sin()], vec![]));
+    let e = eval("amplification.aorta.radial", &t, 2, &two).unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        msg.contains("amplification.aorta.radial") && msg.contains("central pulse pressure is 0"),
+        "{msg}"
+    );
+    // one signal for two
+    let e = eval("amplification.aorta.radial", &t, 1, &sine).unwrap_err();
+    assert!(e.to_string().contains("reads 2"), "{e}");
+}
