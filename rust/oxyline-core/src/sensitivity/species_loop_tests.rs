@@ -123,6 +123,10 @@ fn ring_oxygen_parameters_against_central_differences() {
     assert!(check(&lev, "oxygen.per_vessel.pendant.wall.enhancement") < 1e-6);
 }
 
+/// Every flow parameter kind; the wall stiffness through `scale.compliance` (every vessel's
+/// Young's modulus and the Windkessels' C): one vessel's stiffness moves the oxygen by ~1e-5
+/// of itself per unit log here, below what the quotients' rounding lets 1e-6 judge (it is
+/// in the adjoint-against-forward test below).
 #[test]
 fn ring_flow_parameters_against_central_differences() {
     let spec = ring(true);
@@ -133,7 +137,6 @@ fn ring_flow_parameters_against_central_differences() {
         "vessels.bc.radius",
         "vessels.da.length",
         "vessels.pendant.length",
-        "vessels.ab.youngs_modulus",
         "boundary_conditions.o1.distal_resistance",
     ] {
         assert!(check(&spec, path) < 1e-6, "{path}");
