@@ -239,6 +239,7 @@ mod tests {
     #[test]
     fn transposed_sweep_is_the_sweeps_transpose() {
         let mut t = build(RING).transport.new_run();
+        t.ensure_scratch();
         assert!(t.plan.tree.is_none(), "a ring is not a forest");
         let nn = t.plan.kind.len();
         let domain = t.plan.domain.clone();
@@ -260,6 +261,9 @@ mod tests {
             let (d, b, lag, lam) = (rand(1e-6), rand(1.0), rand(1.0), rand(1.0));
             let mut x = lag.clone();
             t.sweep_solve(&domain, &d, &b, &mut x).unwrap();
+            // flows all one way round: Kahn's pass leaves the ring to Gauss–Seidel
+            let circulates = domain.iter().any(|&n| t.sweep.pending[n] > 0);
+            assert_eq!(circulates, case == 0, "case {case}");
             let mut lprior = vec![0.0; nn];
             let (lnum, p50) = t.sweep_solve_adjoint(&d, &lam, &mut lprior, &bd);
             assert_eq!(p50, 0.0);
