@@ -11,7 +11,8 @@
 //! The adjoint runs each piece transposed in reverse order: the signals' and the
 //! accumulators' weights seed λ_x (the adjoint of x′), the tree elimination is transposed
 //! (its back substitution first, children before parents, then its elimination, parents
-//! before children), then the rows: λ_z = λ_b/Δt + (λ of c′)/W. The parameters' terms of each
+//! before children; on a network with loops the flow-order sweep's system instead,
+//! `sweep_adjoint.rs`), then the rows: λ_z = λ_b/Δt + (λ of c′)/W. The parameters' terms of each
 //! piece are accumulated into the gradient on the way.
 //!
 //! A flow parameter drives the step through its own right-hand side at a zero carried
