@@ -9,10 +9,12 @@ solved by the flow-order sweep, and the adjoint transposes that sweep's system).
   1e-4; 1e-6 of the quotient plus the outputs' rounding over h).
 * ``calibrate(gradient="adjoint")`` recovers an outlet resistance and P50 on the ring from
   synthetic SvO2 / PO2 / VO2 targets.
+* Still refused by name, in both modes: an outlet value while flow runs back through it.
 """
 
 from __future__ import annotations
 
+import copy
 from typing import Any
 
 import pytest
@@ -20,6 +22,7 @@ from test_sensitivity_o2 import check_against_central_differences, values
 from test_sensitivity_o2_adjoint import check_adjoint_equals_forward
 
 import oxyline
+from oxyline import ModelError
 from oxyline.calibrate import native_model
 
 pytest.importorskip("scipy")
@@ -86,3 +89,14 @@ def test_ring_calibrated_by_adjoint() -> None:
     assert fit.success
     assert fit.parameters[paths[0]] == pytest.approx(1.4e9, rel=1e-6)
     assert fit.parameters[paths[1]] == pytest.approx(28.0, rel=1e-6)
+
+
+@pytest.mark.parametrize("mode", ["forward", "adjoint"])
+def test_outlet_value_at_backflow_is_refused_by_name(mode: str) -> None:
+    """Still refused: an outlet value while flow runs back through it (the value carried
+    back into the outlet is not differentiated), here the parent's under a reversing
+    inflow."""
+    m = copy.deepcopy(RING)
+    m["boundary_conditions"]["in"]["fourier"]["cos"] = [6e-6, -0.4e-6]
+    with pytest.raises(ModelError, match=r"parent.*backflow"):
+        oxyline.sensitivities(m, ["oxygen.hill.p50"], ["parent.po2_out.mean"], mode=mode)
