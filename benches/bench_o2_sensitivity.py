@@ -14,7 +14,11 @@ walls' k of vessels given one), and for 10 flow and oxygen parameters (the wall 
 inflow, resistance and compliance scales, radii, lengths and a stiffness: the flow's
 tangents forward, the species adjoint backward), in the same run, for the same outputs.
 
-    python benches/bench_o2_sensitivity.py [--depth 6] [--repeat 3] [--adjoint]
+`--loops N`: N anastomoses between sibling vessels' far ends one level above the outlets
+(a network whose flow graph has loops: the species step takes the flow-order sweep, and
+the adjoint transposes that sweep's system).
+
+    python benches/bench_o2_sensitivity.py [--depth 6] [--repeat 3] [--adjoint] [--loops 0]
 """
 
 from __future__ import annotations
@@ -43,14 +47,29 @@ def best(f: object, repeat: int) -> float:
     return min(times)
 
 
+def add_loops(m: dict, n: int, depth: int) -> None:
+    """Join the far ends of `n` pairs of sibling vessels one level above the outlets by an
+    anastomosis (half their radius, as long as they are)."""
+    pairs = [v for v in m["vessels"] if len(v["name"]) == depth - 1 and v["name"][-1] == "a"]
+    if n > len(pairs):
+        raise SystemExit(f"--loops: at most {len(pairs)} at depth {depth}")
+    for v in pairs[:n]:
+        sibling = v["name"][:-1] + "b"
+        m["vessels"].append({**v, "name": f"{v['name']}_{sibling}", "from": f"{v['name']}_end",
+                             "to": f"{sibling}_end", "radius": 0.5 * v["radius"],
+                             "wall_thickness": 0.5 * v["wall_thickness"]})
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--depth", type=int, default=6)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--steps", type=int, default=200)
     ap.add_argument("--adjoint", action="store_true")
+    ap.add_argument("--loops", type=int, default=0)
     a = ap.parse_args()
     m = tree(a.depth, {"model": "mass-transfer", "k": 1e-4, "po2": 60.0}, "hill")
+    add_loops(m, a.loops, a.depth)
     m["oxygen"]["hill"] = {"p50": 26.8}
     if a.adjoint:
         return adjoint(m, a)
@@ -89,8 +108,8 @@ def adjoint(m: dict, a: argparse.Namespace) -> None:
              f"vessels.{own[4]}.youngs_modulus"]
     outputs = ["VO2", "VO2.v", "v.wall_uptake.max"]
     base = best(lambda: oxyline.sensitivities(model, [], outputs), a.repeat)
-    print(f"tree depth {a.depth}: {len(m['vessels'])} vessels, {a.steps} steps a cycle, "
-          f"{len(outputs)} outputs; CPU s, best of {a.repeat}")
+    print(f"tree depth {a.depth}, {a.loops} loops: {len(m['vessels'])} vessels, {a.steps} "
+          f"steps a cycle, {len(outputs)} outputs; CPU s, best of {a.repeat}")
     print(f"{'parameters':<16}{'forward':>10}{'adjoint':>10}{'fwd/primal':>12}"
           f"{'adj/primal':>12}{'max |adj-fwd|/scale':>22}")
     for name, p in (("1 oxygen", paths[:1]), ("10 oxygen", paths), ("10 flow+oxygen", mixed)):

@@ -1041,3 +1041,7 @@ mod renewal_tests;
 #[cfg(test)]
 #[path = "species_facilitation_tests.rs"]
 mod facilitation_tests;
+
+#[cfg(test)]
+#[path = "species_loop_tests.rs"]
+mod loop_tests;

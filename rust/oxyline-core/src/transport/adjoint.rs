@@ -11,7 +11,8 @@
 //! The adjoint runs each piece transposed in reverse order: the signals' and the
 //! accumulators' weights seed λ_x (the adjoint of x′), the tree elimination is transposed
 //! (its back substitution first, children before parents, then its elimination, parents
-//! before children), then the rows: λ_z = λ_b/Δt + (λ of c′)/W. The parameters' terms of each
+//! before children; on a network with loops the flow-order sweep's system instead,
+//! `sweep_adjoint.rs`), then the rows: λ_z = λ_b/Δt + (λ of c′)/W. The parameters' terms of each
 //! piece are accumulated into the gradient on the way.
 //!
 //! A flow parameter drives the step through its own right-hand side at a zero carried
@@ -22,6 +23,9 @@
 
 #[allow(unused_imports)]
 use super::*;
+
+#[path = "sweep_adjoint.rs"]
+mod sweep;
 
 /// The primal of one step, as the adjoint reads it back: the step's loaded face and source
 /// flows, the cells' old volumes, old total concentrations and their binding, and new
@@ -108,19 +112,11 @@ impl AdjointSums {
 }
 
 impl Transport {
-    /// Refuse what the species adjoint does not follow (besides [`Transport::
-    /// check_species_tangent`]): a network whose flow graph has loops (its flow-order sweep
-    /// is not transposed).
+    /// Refuse what the species adjoint does not follow: what the tangent does not
+    /// ([`Transport::check_species_tangent`]; a network with loops is followed through its
+    /// flow-order sweep's system transposed, `sweep_adjoint.rs`).
     pub fn check_species_adjoint(&self, s: usize, element: &str) -> Result<()> {
-        self.check_species_tangent(s, element)?;
-        if self.plan.tree.is_none() {
-            return Err(Error::model(
-                element,
-                "the oxygen adjoint does not follow a network with loops (its flow-order \
-                 sweep) yet: use mode='forward'",
-            ));
-        }
-        Ok(())
+        self.check_species_tangent(s, element)
     }
 
     /// A zero adjoint state of species `s`'s tangent.
@@ -308,7 +304,11 @@ impl Transport {
         let bd = self.boundary_derivative(s, SpeciesParameterKind::P50);
         let mut lprior = vec![0.0; nn];
         sums.p50 += self.boundary_fluxes_adjoint(net, &bd, &mut lx, &mut lprior);
-        let (lnum, p50) = self.tree_solve_adjoint(&mut den, &mut lx, &mut lprior, &bd);
+        let (lnum, p50) = if plan.tree.is_some() {
+            self.tree_solve_adjoint(&mut den, &mut lx, &mut lprior, &bd)
+        } else {
+            self.sweep_solve_adjoint(&den, &lx, &mut lprior, &bd)
+        };
         sums.p50 += p50;
         if let Some(du) = duals.as_deref_mut() {
             du.ldz.clone_from(&lam.dz);
@@ -441,7 +441,7 @@ impl Transport {
         let tree = plan
             .tree
             .as_deref()
-            .expect("checked by check_species_adjoint");
+            .expect("a forest: `species_adjoint_step` sends loops to the sweep's transpose");
         let qf = &self.qf[..];
         // the boundaries' outflows, then the tree faces', into d (as `boundary_rows` and
         // the elimination add them); per link: |Q| and whether it flows to the parent
