@@ -145,6 +145,9 @@ pub struct TreeLu<T: Scalar = f64> {
     parent_pos: Vec<u32>,
     /// The blocks solved in parallel and the top tree solved serially (see `parallel`).
     partition: Box<parallel::Partition>,
+    /// `factor`'s per-vertex magnitudes, kept from one factorisation to the next (an
+    /// error-controlled run refactorises at nearly every step).
+    magnitude: Vec<f64>,
 }
 
 const NONE: u32 = u32::MAX;
@@ -319,6 +322,7 @@ impl<T: Scalar> TreeLu<T> {
             pivot: vec![T::ZERO; n],
             parent_pos,
             partition,
+            magnitude: Vec::new(),
         })
     }
 
@@ -353,21 +357,18 @@ impl<T: Scalar> TreeLu<T> {
         }
         // per-vertex magnitude: the units of pressure and flow rows differ by many decades, so a
         // pivot is judged against the terms that formed it, not a global scale
-        let mut magnitude: Vec<f64> = self.pivot.iter().map(|d| d.modulus()).collect();
-        if let Some(pool) = self.partition.pool() {
-            if !pool.install(|| self.eliminate_parallel(&mut magnitude)) {
-                return false;
-            }
+        let mut magnitude = std::mem::take(&mut self.magnitude);
+        magnitude.clear();
+        magnitude.extend(self.pivot.iter().map(|d| d.modulus()));
+        let eliminated = match self.partition.pool() {
+            Some(pool) => pool.install(|| self.eliminate_parallel(&mut magnitude)),
+            None => (0..self.n).all(|k| self.eliminate_into_parent(k, &mut magnitude, true)),
+        };
+        self.magnitude = magnitude;
+        if eliminated {
             self.invert_pivots();
-            return true;
         }
-        for k in 0..self.n {
-            if !self.eliminate_into_parent(k, &mut magnitude, true) {
-                return false;
-            }
-        }
-        self.invert_pivots();
-        true
+        eliminated
     }
 
     /// Store the multipliers and reciprocal pivots so that solves only multiply.

@@ -51,6 +51,13 @@ pub struct GenAlpha<'a> {
     magnitude: Magnitude,
     /// The unfiltered estimate of `filter_error` (empty until an error-controlled run).
     filter_scratch: Vec<f64>,
+    /// The iteration matrix's values and α_m E of the last factorisation, kept for the next
+    /// once the step has changed (an error-controlled run refactorises at nearly every step:
+    /// fresh vectors of a million-segment circuit's ~7 million values were pages to fault in
+    /// and zero at each); empty while the step stays fixed (one factorisation).
+    factor_scratch: (Vec<f64>, Vec<f64>),
+    /// The step has changed since the start (see `factor_scratch`).
+    dt_changed: bool,
     /// Newton with the natural-monotonicity line search (see `newton::solve`): set by an
     /// error-controlled run after a Newton failure (plain Newton cycles around a steep valve
     /// law's switch whatever the step, as the algebraic rows do not shrink with it).
@@ -146,6 +153,8 @@ impl<'a> GenAlpha<'a> {
             y_af: vec![0.0; nonlinear],
             magnitude: Magnitude::new(dae),
             filter_scratch: Vec::new(),
+            factor_scratch: Default::default(),
+            dt_changed: false,
             damped: false,
         })
     }
@@ -162,8 +171,14 @@ impl<'a> GenAlpha<'a> {
     /// −α_f γ Δt (1 + 2CS sgn(Q) ẏ_Q) at the flow (see `Iterate::solve` for the right side).
     fn factor(&mut self, time: f64, y_af: &[f64], yd_am: &[f64]) -> Result<()> {
         let c = self.af * self.gamma * self.dt;
-        let am_e: Vec<f64> = self.e.iter().map(|e| self.am * e).collect();
-        let mut kvals = vec![0.0; self.n_stamps];
+        let (mut kvals, mut am_e) = std::mem::take(&mut self.factor_scratch);
+        am_e.clear();
+        am_e.extend(self.e.iter().map(|e| self.am * e));
+        // (the values before the elements' are all written below: only the elements' are
+        // zeroed, as a fresh vector's)
+        let nf = self.dae.f.val.len();
+        kvals.resize(self.n_stamps, 0.0);
+        kvals[nf + self.dae.n..].fill(0.0);
         // the line search's retry (an error-controlled run's answer to a Newton failure)
         // writes the valve rows in their flow form, whose exact matrix stays regular where the
         // pressure form's turns singular in backflow (1 + Q R′ → 0) at iterates away from the
@@ -174,7 +189,6 @@ impl<'a> GenAlpha<'a> {
             JacobianKind::Exact
         };
         jacobian_values_of(self.dae, (c, &am_e), y_af, time, kind, &mut kvals);
-        let nf = self.dae.f.val.len();
         for (cr, &k) in self.dae.chain_rule.iter().zip(&self.chain_flow_entry) {
             let q = y_af[cr.flow];
             let sign = f64::from(i8::from(q > 0.0) - i8::from(q < 0.0));
@@ -185,11 +199,14 @@ impl<'a> GenAlpha<'a> {
             .varying_jacobian(c, time, self.regime, &mut kvals[nf..nf + self.dae.n]);
         // (ẏ's weight in a linear step's residual, `step_linear`)
         let c_am = 1.0 + self.am * ((self.gamma - 1.0) / self.gamma - 1.0);
-        match &mut self.leaves {
+        let factored = match &mut self.leaves {
             Some(leaves) => leaves.factor(&mut self.lu, &kvals, (self.am, c, c_am)),
             None => self.lu.factor(&kvals),
+        };
+        if self.dt_changed {
+            self.factor_scratch = (kvals, am_e);
         }
-        .map_err(|m| singular(time, &m))?;
+        factored.map_err(|m| singular(time, &m))?;
         self.factored = true;
         Ok(())
     }
@@ -200,6 +217,7 @@ impl<'a> GenAlpha<'a> {
         if dt.to_bits() != self.dt.to_bits() {
             self.dt = dt;
             self.factored = false;
+            self.dt_changed = true;
         }
     }
 

@@ -56,6 +56,9 @@ pub struct Leaves {
     n_reduced_stamps: usize,
     /// Scratch of the reduced values.
     vals: Vec<f64>,
+    /// Scratch of the leaves' entries M_jj, M_jp, M_pj (kept: an error-controlled run
+    /// refactorises at nearly every step).
+    entries: Vec<[f64; 3]>,
 }
 
 const NONE: u32 = u32::MAX;
@@ -156,6 +159,7 @@ impl Leaves {
             parent_diag,
             n_reduced_stamps: reduced.len(),
             vals: Vec::new(),
+            entries: Vec::new(),
         };
         Some((leaves, lu))
     }
@@ -178,7 +182,9 @@ impl Leaves {
                 vals[slot as usize] += v;
             }
         }
-        let mut entries = vec![[0.0; 3]; m];
+        let mut entries = std::mem::take(&mut self.entries);
+        entries.clear();
+        entries.resize(m, [0.0; 3]);
         for &(s, code) in &self.leaf_stamps {
             entries[(code >> 2) as usize][(code & 3) as usize] += kvals[s as usize];
         }
@@ -194,6 +200,7 @@ impl Leaves {
             vals[self.parent_diag[j] as usize] -= (mpj / mjj) * mjp;
         }
         (self.am, self.c, self.c_am) = (am, c, c_am);
+        self.entries = entries;
         let done = lu.factor(&vals);
         self.vals = vals;
         done
