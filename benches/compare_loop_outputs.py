@@ -35,14 +35,23 @@ def with_oxygen(name: str) -> dict[str, Any]:
 
     m: dict[str, Any] = oxyline.catalogue.load_dict(name)
     wall, hb = WALLS["o2-k"]
-    m["oxygen"] = {"inlet": {"po2": 95.0}, "wall": wall, "hemoglobin": hb,
-                   "reference_pressure": 85.0}
+    m["oxygen"] = {
+        "inlet": {"po2": 95.0},
+        "wall": wall,
+        "hemoglobin": hb,
+        "reference_pressure": 85.0,
+    }
     return m
 
 
 #: (model, with oxygen): whole-body-140's lumped aortic root has no lumen volume for transport
-CASES = [("circle-of-willis", False), ("circle-of-willis", True), ("whole-body-140", False),
-         ("whole-body-140-st", False), ("whole-body-140-st", True)]
+CASES = [
+    ("circle-of-willis", False),
+    ("circle-of-willis", True),
+    ("whole-body-140", False),
+    ("whole-body-140-st", False),
+    ("whole-body-140-st", True),
+]
 
 
 def main() -> None:
@@ -78,8 +87,10 @@ def main() -> None:
         worst = max(worst, rel)
         if rel > a.rtol or not same_nan:
             bad.append(f"{k}: {rel:.2e}")
-    print(f"{len(ref.files)} arrays compared: worst relative difference {worst:.2e}, "
-          f"{len(bad)} beyond {a.rtol:g}")
+    print(
+        f"{len(ref.files)} arrays compared: worst relative difference {worst:.2e}, "
+        f"{len(bad)} beyond {a.rtol:g}"
+    )
     for b in bad:
         print("  ", b)
     sys.exit(1 if bad else 0)

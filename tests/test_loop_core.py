@@ -34,8 +34,10 @@ def test_a_large_network_with_loops_gives_the_same_bits_on_any_number_of_threads
     # more than 16 k unknowns), the core is solved serially; exact equality is the claim
     m = oxyline.load_model(random_tree_with_loops(5000, 3, seed=5))
     assert m.network.summary()["segments"] > 15_000
-    runs = {n: oxyline.simulate(m, cycles=1, dt=2e-3, output_every=0.02, segments=False,
-                                threads=n) for n in (1, 2, 3)}
+    runs = {
+        n: oxyline.simulate(m, cycles=1, dt=2e-3, output_every=0.02, segments=False, threads=n)
+        for n in (1, 2, 3)
+    }
     assert_same_bits(runs)
     mb = runs[3].o2_mass_balance
     assert np.abs(mb["residual"]).max() <= 1e-9 * np.abs(mb["inflow"]).max()

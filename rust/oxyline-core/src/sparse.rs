@@ -283,12 +283,7 @@ fn blocked_order(
 /// `roots` first, then the others in increasing order), each vertex's children taken in
 /// reverse adjacency order; with the parent of every vertex. None if the graph has a loop (an
 /// edge to a visited vertex other than the parent).
-fn post_order(
-    n: usize,
-    start: &[u32],
-    adj: &[u32],
-    roots: &[u32],
-) -> Option<(Vec<u32>, Vec<u32>)> {
+fn post_order(n: usize, start: &[u32], adj: &[u32], roots: &[u32]) -> Option<(Vec<u32>, Vec<u32>)> {
     let mut parent = vec![NONE; n];
     let mut seen = vec![false; n];
     let mut order: Vec<u32> = Vec::with_capacity(n);
