@@ -10,7 +10,11 @@ output array (``compare_load_outputs.arrays``) in a local ``.npz``; ``check`` ru
 the installed package and reports, per array, max|new − old| / max|old| (0 where the array is
 all zero), failing above ``--rtol`` (default 1e-10: a solve's rounding, ~1e-16 relative,
 carried over a cycle's 1000 steps through well-damped systems stays many decades below it,
-while any change of the discretisation or a lost term moves results by 1e-6 or more).
+while any change of the discretisation or a lost term moves results by 1e-6 or more). The
+species' per-segment transmission-line resistance and inductance (``tl_*``, which grow without
+bound where a segment's flow crosses zero: scales of 1e10) amplify the flows' rounding near
+those crossings, so they are held to ``--rtol-tl`` (default 1e-8) instead; measured 4.7e-9
+on circle-of-willis with O2, with its flows within 3e-15.
 
     python benches/compare_loop_outputs.py save /tmp/loops-before.npz     # old build
     python benches/compare_loop_outputs.py check /tmp/loops-before.npz    # new build
@@ -54,11 +58,21 @@ CASES = [
 ]
 
 
+def compare(old: np.ndarray, new: np.ndarray) -> float:
+    """max|new - old| / max|old| (the difference itself where ``old`` is all zero)."""
+    if not old.size:
+        return 0.0
+    scale = np.nanmax(np.abs(old))
+    diff = np.nanmax(np.abs(new - old))
+    return float(diff / scale if scale > 0 else diff)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("mode", choices=["save", "check"])
     ap.add_argument("path")
     ap.add_argument("--rtol", type=float, default=1e-10)
+    ap.add_argument("--rtol-tl", type=float, default=1e-8)
     a = ap.parse_args()
     got: dict[str, np.ndarray] = {}
     for name, o2 in CASES:
@@ -73,6 +87,12 @@ def main() -> None:
     worst, bad = 0.0, []
     for k in ref.files:
         old, new = ref[k], got.get(k)
+        if k.endswith("/segment_data") and new is not None and old.shape == new.shape:
+            # the last axis: concentration, flux, wall flux, then the two tl_* columns
+            tl = compare(old[..., 3:], new[..., 3:])
+            if tl > a.rtol_tl:
+                bad.append(f"{k} tl_*: {tl:.2e}")
+            old, new = old[..., :3], new[..., :3]
         if new is None or old.shape != new.shape:
             bad.append(f"{k}: missing or reshaped")
             continue
@@ -80,9 +100,7 @@ def main() -> None:
             if old.tobytes() != new.tobytes():
                 bad.append(f"{k}: differs")
             continue
-        scale = np.nanmax(np.abs(old)) if old.size else 0.0
-        diff = np.nanmax(np.abs(new - old)) if old.size else 0.0
-        rel = diff / scale if scale > 0 else diff
+        rel = compare(old, new)
         same_nan = np.array_equal(np.isnan(old), np.isnan(new))
         worst = max(worst, rel)
         if rel > a.rtol or not same_nan:
