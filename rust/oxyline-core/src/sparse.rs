@@ -13,6 +13,7 @@ use faer::sparse::linalg::solvers::{Lu, SymbolicLu};
 use faer::sparse::{Argsort, Pair, SparseColMat, SparseColMatRef, SymbolicSparseColMat};
 use std::ops::{AddAssign, Div, Mul, MulAssign, Sub, SubAssign};
 
+mod core;
 mod parallel;
 
 /// Entries of the matrices solved here: real for the time stepping, complex for the frequency
@@ -56,17 +57,26 @@ impl Scalar for faer::c64 {
 }
 
 /// Which elimination a matrix pattern gets.
+// (one per run or per frequency: the tree's inline 232 bytes cost nothing, and the tree
+// elimination, the common path, is reached without an indirection)
+#[allow(clippy::large_enum_variant)]
 pub enum SparseLu<T: Scalar = f64> {
     Tree(TreeLu<T>),
+    /// Pendant trees eliminated onto a small core with loops (see [`core::CoreLu`]).
+    Core(Box<core::CoreLu<T>>),
     General(Box<GeneralLu<T>>),
 }
 
 impl<T: Scalar> SparseLu<T> {
     /// `stamps` are the (row, col) positions of the values later passed to `factor`, in order;
-    /// duplicates are summed. A forest pattern gets the O(n) tree elimination.
+    /// duplicates are summed. A forest pattern gets the O(n) tree elimination; a pattern with
+    /// loops gets it on its pendant trees and the general LU on its loop-carrying core alone.
     pub fn analyse(n: usize, stamps: &[(usize, usize)]) -> Result<Self> {
-        match TreeLu::analyse(n, stamps) {
-            Some(t) => Ok(SparseLu::Tree(t)),
+        if let Some(t) = TreeLu::analyse(n, stamps) {
+            return Ok(SparseLu::Tree(t));
+        }
+        match core::CoreLu::analyse(n, stamps)? {
+            Some(c) => Ok(SparseLu::Core(Box::new(c))),
             None => Ok(SparseLu::General(Box::new(GeneralLu::analyse(n, stamps)?))),
         }
     }
@@ -84,6 +94,16 @@ impl<T: Scalar> SparseLu<T> {
                 *self = SparseLu::General(Box::new(g));
                 Ok(())
             }
+            SparseLu::Core(c) => {
+                if c.factor(vals)? {
+                    return Ok(());
+                }
+                // a (near-)zero pivot in a pendant tree: as for a tree
+                let mut g = GeneralLu::analyse(c.n(), &c.stamps()).map_err(|e| e.to_string())?;
+                g.factor(vals)?;
+                *self = SparseLu::General(Box::new(g));
+                Ok(())
+            }
             SparseLu::General(g) => g.factor(vals),
         }
     }
@@ -92,6 +112,7 @@ impl<T: Scalar> SparseLu<T> {
     pub fn solve_in_place(&self, rhs: &mut [T]) -> bool {
         match self {
             SparseLu::Tree(t) => t.solve_in_place(rhs),
+            SparseLu::Core(c) => c.solve_in_place(rhs),
             SparseLu::General(g) => g.solve_in_place(rhs),
         }
     }
@@ -108,6 +129,9 @@ const DIAG: u32 = 0;
 const UP: u32 = 1;
 /// K[parent(v), v]
 const DOWN: u32 = 2;
+/// A stamp outside the tree: a coupling between two vertices of the loop-carrying core, which
+/// the core's own LU takes (see [`core::CoreLu`]).
+const SKIP: u32 = 3;
 
 /// Gaussian elimination without pivoting in post-order of a spanning forest of the matrix graph.
 /// Stable here because the circuit matrices are diagonal-positive with skew-symmetric couplings
@@ -148,9 +172,18 @@ pub struct TreeLu<T: Scalar = f64> {
     /// `factor`'s per-vertex magnitudes, kept from one factorisation to the next (an
     /// error-controlled run refactorises at nearly every step).
     magnitude: Vec<f64>,
+    /// Positions (increasing) of the roots that are held, not eliminated: the vertices of a
+    /// loop-carrying core, whose Schur-complemented pivots and right sides the core's LU takes
+    /// between the forward and the backward pass. Empty for a forest.
+    held: Vec<u32>,
 }
 
 const NONE: u32 = u32::MAX;
+
+/// Whether position `k` is among the `held` positions (increasing; a core's few vertices).
+fn is_held(held: &[u32], k: usize) -> bool {
+    !held.is_empty() && held.binary_search(&(k as u32)).is_ok()
+}
 
 /// Largest subtree eliminated breadth-first as one block: its right side and factors (~50 B
 /// per vertex) stay in L2 between the vertices of a level and their parents.
@@ -163,18 +196,29 @@ const BLOCK: usize = 2048;
 /// than 2^31 edge ends): this runs while a run sets up, beside the stamps, and its 16-byte
 /// edges were ~80 bytes per segment of the setup's peak at a million segments.
 fn adjacency(n: usize, stamps: &[(usize, usize)]) -> Option<(Vec<u32>, Vec<u32>)> {
+    let edges = edges(stamps, |_, _| true);
+    if edges.len() >= n {
+        return None;
+    }
+    Some(csr(n, &edges))
+}
+
+/// The distinct undirected off-diagonal edges (low, high) of the stamps that `keep` accepts.
+fn edges(stamps: &[(usize, usize)], keep: impl Fn(usize, usize) -> bool) -> Vec<(u32, u32)> {
     let mut edges: Vec<(u32, u32)> = stamps
         .iter()
-        .filter(|(r, c)| r != c)
+        .filter(|&&(r, c)| r != c && keep(r, c))
         .map(|&(r, c)| (r.min(c) as u32, r.max(c) as u32))
         .collect();
     edges.sort_unstable();
     edges.dedup();
-    if edges.len() >= n {
-        return None;
-    }
+    edges
+}
+
+/// The adjacency (CSR: start, neighbours) of `n` vertices joined by `edges`.
+fn csr(n: usize, edges: &[(u32, u32)]) -> (Vec<u32>, Vec<u32>) {
     let mut start = vec![0u32; n + 1];
-    for &(a, b) in &edges {
+    for &(a, b) in edges {
         start[a as usize + 1] += 1;
         start[b as usize + 1] += 1;
     }
@@ -183,14 +227,14 @@ fn adjacency(n: usize, stamps: &[(usize, usize)]) -> Option<(Vec<u32>, Vec<u32>)
     }
     let mut adj = vec![0u32; start[n] as usize];
     let mut fill = start.clone();
-    for &(a, b) in &edges {
+    for &(a, b) in edges {
         let (a, b) = (a as usize, b as usize);
         adj[fill[a] as usize] = b as u32;
         fill[a] += 1;
         adj[fill[b] as usize] = a as u32;
         fill[b] += 1;
     }
-    Some((start, adj))
+    (start, adj)
 }
 
 /// The elimination order: blocks of at most `BLOCK` vertices (each in reverse breadth-first
@@ -241,17 +285,17 @@ fn blocked_order(
     (order, blocks)
 }
 
-/// Depth-first post-order of the forest from every unvisited vertex in turn (roots in
-/// increasing order), each vertex's children taken in reverse adjacency order; with the parent
-/// of every vertex. None if the graph has a loop (an edge to a visited vertex other than the
-/// parent).
-fn post_order(n: usize, start: &[u32], adj: &[u32]) -> Option<(Vec<u32>, Vec<u32>)> {
+/// Depth-first post-order of the forest from every unvisited vertex in turn (the vertices
+/// `roots` first, then the others in increasing order), each vertex's children taken in
+/// reverse adjacency order; with the parent of every vertex. None if the graph has a loop (an
+/// edge to a visited vertex other than the parent).
+fn post_order(n: usize, start: &[u32], adj: &[u32], roots: &[u32]) -> Option<(Vec<u32>, Vec<u32>)> {
     let mut parent = vec![NONE; n];
     let mut seen = vec![false; n];
     let mut order: Vec<u32> = Vec::with_capacity(n);
     // (vertex, number of its neighbours still to visit, counted from the end of its list)
     let mut stack: Vec<(u32, usize)> = Vec::new();
-    for root in 0..n {
+    for root in roots.iter().map(|&r| r as usize).chain(0..n) {
         if seen[root] {
             continue;
         }
@@ -287,7 +331,21 @@ impl<T: Scalar> TreeLu<T> {
             return None;
         }
         let (start, adj) = adjacency(n, stamps)?;
-        let (post, parent_of) = post_order(n, &start, &adj)?;
+        Self::analyse_forest(n, stamps, (start, adj), None)
+    }
+
+    /// The elimination of the forest `(start, adj)` (the stamps' graph, or the part of it
+    /// outside a loop-carrying core). With `core` (per vertex: in the core), the core's vertices
+    /// are the forest's held roots and the stamps joining two of them are left out (`SKIP`).
+    fn analyse_forest(
+        n: usize,
+        stamps: &[(usize, usize)],
+        (start, adj): (Vec<u32>, Vec<u32>),
+        core: Option<&[bool]>,
+    ) -> Option<Self> {
+        let in_core = |v: usize| core.is_some_and(|c| c[v]);
+        let roots: Vec<u32> = (0..n as u32).filter(|&v| in_core(v as usize)).collect();
+        let (post, parent_of) = post_order(n, &start, &adj, &roots)?;
         let (vertex, blocks) = blocked_order(&start, &adj, &post, &parent_of);
         drop((start, adj, post));
         let mut pos = vec![0u32; n];
@@ -305,6 +363,8 @@ impl<T: Scalar> TreeLu<T> {
             .map(|&(r, c)| {
                 if r == c {
                     pos[r] << 2 | DIAG
+                } else if in_core(r) && in_core(c) {
+                    SKIP
                 } else if parent_of[r] == c as u32 {
                     pos[r] << 2 | UP
                 } else {
@@ -312,6 +372,8 @@ impl<T: Scalar> TreeLu<T> {
                 }
             })
             .collect();
+        let mut held: Vec<u32> = roots.iter().map(|&v| pos[v as usize]).collect();
+        held.sort_unstable();
         Some(TreeLu {
             n,
             slots,
@@ -323,17 +385,27 @@ impl<T: Scalar> TreeLu<T> {
             parent_pos,
             partition,
             magnitude: Vec::new(),
+            held,
         })
+    }
+
+    /// Whether the root at position `k` is held for a core's LU.
+    fn is_held(&self, k: usize) -> bool {
+        is_held(&self.held, k)
     }
 
     /// Vertex `k`'s pivot (judged against its `magnitude` when `check`) eliminated into its
     /// parent's: the one step of the tree factorisation, serial or in the top tree.
     fn eliminate_into_parent(&mut self, k: usize, magnitude: &mut [f64], check: bool) -> bool {
         let d = self.pivot[k];
+        let p = self.parent_pos[k];
+        // a held root's pivot is a core's diagonal, judged by the core's pivoting LU
+        if p == NONE && self.is_held(k) {
+            return true;
+        }
         if check && (d.modulus() <= 1e-12 * magnitude[k] || !d.finite()) {
             return false;
         }
-        let p = self.parent_pos[k];
         if p != NONE {
             let p = p as usize;
             let update = self.down[k] * self.up[k] / d;
@@ -344,6 +416,16 @@ impl<T: Scalar> TreeLu<T> {
     }
 
     fn factor(&mut self, vals: &[T]) -> bool {
+        if !self.eliminate(vals) {
+            return false;
+        }
+        self.invert_pivots();
+        true
+    }
+
+    /// The stamps summed and the elimination leaves-to-roots (pivots not yet inverted); false
+    /// at a (near-)zero pivot.
+    fn eliminate(&mut self, vals: &[T]) -> bool {
         self.pivot.iter_mut().for_each(|x| *x = T::ZERO);
         self.up.iter_mut().for_each(|x| *x = T::ZERO);
         self.down.iter_mut().for_each(|x| *x = T::ZERO);
@@ -352,7 +434,8 @@ impl<T: Scalar> TreeLu<T> {
             match slot & 3 {
                 DIAG => self.pivot[k] += v,
                 UP => self.up[k] += v,
-                _ => self.down[k] += v,
+                DOWN => self.down[k] += v,
+                _ => {}
             }
         }
         // per-vertex magnitude: the units of pressure and flow rows differ by many decades, so a
@@ -365,9 +448,6 @@ impl<T: Scalar> TreeLu<T> {
             None => (0..self.n).all(|k| self.eliminate_into_parent(k, &mut magnitude, true)),
         };
         self.magnitude = magnitude;
-        if eliminated {
-            self.invert_pivots();
-        }
         eliminated
     }
 
@@ -386,11 +466,21 @@ impl<T: Scalar> TreeLu<T> {
         if let Some(pool) = self.partition.pool() {
             return pool.install(|| self.solve_parallel(b));
         }
+        self.forward(b);
+        self.backward(b)
+    }
+
+    /// The forward pass of a serial solve: every vertex's right side folded into its parent's.
+    fn forward(&self, b: &mut [T]) {
         for ((&v, &p), &down) in self.vertex.iter().zip(&self.parent).zip(&self.down) {
             if p != NONE {
                 b[p as usize] -= down * b[v as usize];
             }
         }
+    }
+
+    /// The back substitution of a serial solve, roots to leaves; whether it is finite.
+    fn backward(&self, b: &mut [T]) -> bool {
         let mut finite = true;
         for (((&v, &p), &up), &pivot) in self
             .vertex
@@ -414,18 +504,18 @@ impl<T: Scalar> TreeLu<T> {
 
     /// The (row, col) stamps the slots were made from, in order (for the pivoting fallback).
     fn stamps(&self) -> Vec<(usize, usize)> {
-        self.slots
-            .iter()
-            .map(|&slot| {
-                let k = (slot >> 2) as usize;
-                let (v, p) = (self.vertex[k] as usize, self.parent[k] as usize);
-                match slot & 3 {
-                    DIAG => (v, v),
-                    UP => (v, p),
-                    _ => (p, v),
-                }
-            })
-            .collect()
+        self.slots.iter().map(|&slot| self.stamp_of(slot)).collect()
+    }
+
+    /// The (row, col) of a tree slot (not a `SKIP` one).
+    fn stamp_of(&self, slot: u32) -> (usize, usize) {
+        let k = (slot >> 2) as usize;
+        let (v, p) = (self.vertex[k] as usize, self.parent[k] as usize);
+        match slot & 3 {
+            DIAG => (v, v),
+            UP => (v, p),
+            _ => (p, v),
+        }
     }
 }
 

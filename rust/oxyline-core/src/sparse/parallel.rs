@@ -8,7 +8,7 @@
 //! (a vertex's pivot and right side are updated by its children in elimination order, whichever
 //! thread eliminated the children), so the results are bit-identical for any number of threads.
 
-use super::{NONE, Scalar, TreeLu};
+use super::{NONE, Scalar, TreeLu, is_held};
 use rayon::ThreadPool;
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -123,6 +123,7 @@ impl<T: Scalar> TreeLu<T> {
             at = b;
         }
         let (up, down, parent_pos) = (&self.up, &self.down, &self.parent_pos);
+        let held = &self.held;
         let ok = pieces
             .into_par_iter()
             .with_min_len(TASK_MIN / super::BLOCK)
@@ -130,6 +131,10 @@ impl<T: Scalar> TreeLu<T> {
                 let end = a + pivot.len();
                 for k in a..end {
                     let d = pivot[k - a];
+                    // a held root (see `TreeLu::held`): left to the core's LU
+                    if parent_pos[k] == NONE && is_held(held, k) {
+                        continue;
+                    }
                     if d.modulus() <= 1e-12 * mag[k - a] || !d.finite() {
                         return false;
                     }
@@ -159,6 +164,12 @@ impl<T: Scalar> TreeLu<T> {
     /// `solve_in_place` with the blocks in parallel: the same operations on every value in the
     /// same order, so the same bits.
     pub(super) fn solve_parallel(&self, b: &mut [T]) -> bool {
+        self.forward_parallel(b);
+        self.backward_parallel(b)
+    }
+
+    /// The forward pass of `solve_parallel`.
+    pub(super) fn forward_parallel(&self, b: &mut [T]) {
         let part = &self.partition;
         let tasks = part.tasks();
         let shared = Shared(b.as_mut_ptr());
@@ -178,7 +189,13 @@ impl<T: Scalar> TreeLu<T> {
                 b[p as usize] -= self.down[k] * b[self.vertex[k] as usize];
             }
         }
-        // backward: the top tree from its roots, then the blocks
+    }
+
+    /// The back substitution of `solve_parallel`: the top tree from its roots, then the blocks;
+    /// whether the solution is finite.
+    pub(super) fn backward_parallel(&self, b: &mut [T]) -> bool {
+        let part = &self.partition;
+        let tasks = part.tasks();
         let mut finite = true;
         for &item in part.serial.iter().rev() {
             if item & ROOT != 0 {

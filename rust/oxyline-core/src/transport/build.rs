@@ -240,6 +240,7 @@ impl Transport {
             simple_mixing: Vec::new(),
             general_mixing: Vec::new(),
             tree: None,
+            core: None,
             species,
             base_laws: Vec::new(),
             tissue,
@@ -910,6 +911,9 @@ impl Plan {
             }
         }
         self.tree = tree_order(nn, &self.domain, &self.internal);
+        if self.tree.is_none() {
+            self.core = CoreOrder::of(nn, &self.domain, &self.internal);
+        }
         if self.tree.is_some() {
             // a forest is solved in `tree` order; the domain list is read only by the
             // flow-order sweep of a network with loops (8 bytes per cell kept for nothing)

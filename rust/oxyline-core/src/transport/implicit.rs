@@ -230,6 +230,9 @@ impl Transport {
             let mut x = std::mem::take(&mut self.conc);
             if self.plan.tree.is_some() {
                 self.tree_solve(&mut x);
+            } else if self.plan.core.is_some() {
+                let plan = Arc::clone(&self.plan);
+                res = self.core_solve(plan.core.as_ref().expect("checked"), &mut x);
             } else {
                 // the plan is shared, so hold it by its own handle while `self` is mutated
                 let plan = Arc::clone(&self.plan);
@@ -559,44 +562,13 @@ impl Transport {
         let Some(tree) = self.plan.tree.as_deref() else {
             return;
         };
-        let sw = &mut self.sweep;
-        sw.beta.resize(tree.len(), 0.0);
-        // local slices: the loops keep their pointers in registers
-        let (num, den, qf) = (&mut sw.num[..], &mut sw.den[..], &self.qf[..]);
-        for (l, beta) in tree.iter().zip(sw.beta.iter_mut()) {
-            let n = l.node as usize;
-            let (mut aq, mut to_parent) = (0.0, false);
-            if l.parent != u32::MAX {
-                let q = qf[l.face() as usize];
-                aq = q.abs();
-                to_parent = (q >= 0.0) == l.face_from_child();
-                if to_parent {
-                    den[n] += aq;
-                } else {
-                    den[l.parent as usize] += aq;
-                }
-            }
-            let d = den[n];
-            let solvable = d > 1e-300;
-            let xn = if solvable { num[n] / d } else { x[n] };
-            x[n] = xn;
-            *beta = 0.0;
-            if to_parent {
-                num[l.parent as usize] += aq * xn;
-            } else if solvable && aq != 0.0 {
-                *beta = aq / d;
-            }
-        }
-        for (l, &beta) in tree.iter().zip(&sw.beta).rev() {
-            if beta != 0.0 {
-                x[l.node as usize] += beta * x[l.parent as usize];
-            }
-        }
+        tree_forward(&mut self.sweep, &self.qf, tree, x, false);
+        tree_backward(&self.sweep, tree, x);
     }
 
     /// The boundary faces' and sources' terms of the tree solve's rows: outflow into d, inflow
     /// (prescribed or the node's lagged value `x`, recorded in `lag`) into b.
-    fn boundary_rows(&mut self, x: &[f64]) {
+    pub(super) fn boundary_rows(&mut self, x: &[f64]) {
         let sw = &mut self.sweep;
         for &fi in &self.plan.boundary_faces {
             let (q, up, down) = oriented(&self.plan.faces, &self.qf, fi);
@@ -633,7 +605,15 @@ impl Transport {
         b: &[f64],
         x: &mut [f64],
     ) -> Result<()> {
-        self.sweep_rows(unknowns, d, b, x);
+        for &n in unknowns {
+            (self.sweep.num[n], self.sweep.den[n]) = (b[n], d[n]);
+        }
+        self.sweep_solve_loaded(unknowns, x)
+    }
+
+    /// `sweep_solve` with d and b of the unknowns already in `sweep.den` and `sweep.num`.
+    pub(super) fn sweep_solve_loaded(&mut self, unknowns: &[usize], x: &mut [f64]) -> Result<()> {
+        self.sweep_rows(unknowns, x);
         let solved = self.kahn(unknowns, x);
         let result = if solved < unknowns.len() {
             self.gauss_seidel(unknowns, x)
@@ -647,8 +627,9 @@ impl Transport {
     }
 
     /// The rows of `sweep_solve`: marks, lagged values, pending upwind counts, denominators,
-    /// and the inflows from known nodes, boundaries and sources.
-    fn sweep_rows(&mut self, unknowns: &[usize], d: &[f64], b: &[f64], x: &[f64]) {
+    /// and the inflows from known nodes, boundaries and sources (d and b of the unknowns in
+    /// `sweep.den` and `sweep.num`).
+    fn sweep_rows(&mut self, unknowns: &[usize], x: &[f64]) {
         let nn = self.plan.kind.len();
         let sw = &mut self.sweep;
         if sw.mark.len() != nn {
@@ -658,8 +639,6 @@ impl Transport {
             sw.mark[n] = true;
             sw.lag[n] = x[n];
             sw.pending[n] = 0;
-            sw.num[n] = b[n];
-            sw.den[n] = d[n];
         }
         let plan = &*self.plan;
         for &n in unknowns {

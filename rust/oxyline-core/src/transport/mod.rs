@@ -40,6 +40,7 @@ pub mod closed_loop_params; // its parameter set in published units, to SI
 pub mod closed_loop_run; // the whole run in one call: settings, heart, O2
 pub mod closed_loop_tree; // its segment-resolved arterial tree
 pub mod compartment;
+mod core; // the implicit solve of a domain with loops
 mod fused;
 mod implicit;
 mod laws;
@@ -62,7 +63,7 @@ pub use plan::Plan;
 #[allow(unused_imports)]
 use plan::*;
 #[allow(unused_imports)]
-use {build::*, implicit::*, laws::*, observe::*, rhs::*, state::*};
+use {build::*, core::*, implicit::*, laws::*, observe::*, rhs::*, state::*};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum End {

@@ -136,12 +136,27 @@ pub(super) fn upwind_flux_in(
 /// faces is a forest (no loops, no parallel faces): then the upwind system can be eliminated
 /// leaves first for any flow directions (`Transport::tree_solve`). None otherwise. Linear time.
 pub(super) fn tree_order(nt: usize, domain: &[usize], internal: &[[u32; 3]]) -> Option<Vec<Link>> {
+    tree_order_held(nt, domain, internal, &[], &[])
+}
+
+/// [`tree_order`] of the forest left when the faces between two nodes of a loop-carrying core
+/// (`in_core`, per node; empty: none) are taken out, with the core's `roots` first, each the
+/// root of its pendant trees (`core::CoreOrder`).
+pub(super) fn tree_order_held(
+    nt: usize,
+    domain: &[usize],
+    internal: &[[u32; 3]],
+    roots: &[usize],
+    in_core: &[bool],
+) -> Option<Vec<Link>> {
     // (a face index must fit a link's 29 bits; beyond, the general sweep takes over)
     if internal.iter().any(|e| e[0] >= Link::NO_FACE) {
         return None;
     }
+    let held = |a: u32, b: u32| !in_core.is_empty() && in_core[a as usize] && in_core[b as usize];
+    let forest = || internal.iter().filter(|e| !held(e[1], e[2]));
     let mut ptr = vec![0u32; nt + 1];
-    for &[_, a, b] in internal {
+    for &[_, a, b] in forest() {
         ptr[a as usize + 1] += 1;
         ptr[b as usize + 1] += 1;
     }
@@ -150,7 +165,7 @@ pub(super) fn tree_order(nt: usize, domain: &[usize], internal: &[[u32; 3]]) -> 
     }
     let mut fill = ptr.clone();
     let mut adj = vec![(0u32, 0u32); ptr[nt] as usize];
-    for &[f, a, b] in internal {
+    for &[f, a, b] in forest() {
         adj[fill[a as usize] as usize] = (f, b);
         fill[a as usize] += 1;
         adj[fill[b as usize] as usize] = (f, a);
@@ -172,7 +187,7 @@ pub(super) fn tree_order(nt: usize, domain: &[usize], internal: &[[u32; 3]]) -> 
     // at every vessel.
     let mut order: Vec<Link> = Vec::with_capacity(domain.len());
     let mut heads: Vec<Link> = Vec::new();
-    for &r in domain {
+    for &r in roots.iter().chain(domain) {
         if seen[r] {
             continue;
         }
@@ -301,6 +316,9 @@ pub struct Plan {
     /// Elimination order of the implicit solve when the domain graph is a forest (always on
     /// trees): None sends it to the flow-order sweep, which also handles loops.
     pub(super) tree: Option<Vec<Link>>,
+    /// A domain with loops: its pendant trees' elimination around its loop-carrying core
+    /// (`core::CoreOrder`); None for a forest or a domain that is all core.
+    pub(super) core: Option<CoreOrder>,
     /// Species settings, and their wall laws as built (final unless a closure needs the
     /// cycle-mean flow, which a run then sets with `set_mean_flow`).
     pub(super) species: Vec<SpeciesPlan>,
