@@ -41,45 +41,12 @@ impl CoreOrder {
 /// Per node: whether it is in the 2-core of the graph of the internal faces (nodes outside
 /// `domain` are never peeled).
 fn two_core(nt: usize, domain: &[usize], internal: &[[u32; 3]]) -> Vec<bool> {
-    let mut ptr = vec![0u32; nt + 1];
-    for &[_, a, b] in internal {
-        ptr[a as usize + 1] += 1;
-        ptr[b as usize + 1] += 1;
-    }
-    for i in 0..nt {
-        ptr[i + 1] += ptr[i];
-    }
-    let mut fill = ptr.clone();
-    let mut adj = vec![0u32; ptr[nt] as usize];
-    for &[_, a, b] in internal {
-        adj[fill[a as usize] as usize] = b;
-        fill[a as usize] += 1;
-        adj[fill[b as usize] as usize] = a;
-        fill[b as usize] += 1;
-    }
-    let mut degree: Vec<u32> = (0..nt).map(|n| ptr[n + 1] - ptr[n]).collect();
-    let mut in_core = vec![true; nt];
-    let mut peel: Vec<usize> = domain.iter().copied().filter(|&n| degree[n] <= 1).collect();
     let mut in_domain = vec![false; nt];
     for &n in domain {
         in_domain[n] = true;
     }
-    while let Some(n) = peel.pop() {
-        if !in_core[n] {
-            continue;
-        }
-        in_core[n] = false;
-        for &m in &adj[ptr[n] as usize..ptr[n + 1] as usize] {
-            let m = m as usize;
-            if in_core[m] {
-                degree[m] -= 1;
-                if degree[m] == 1 && in_domain[m] {
-                    peel.push(m);
-                }
-            }
-        }
-    }
-    in_core
+    let faces: Vec<(u32, u32)> = internal.iter().map(|&[_, a, b]| (a, b)).collect();
+    crate::sparse::two_core(nt, &faces, |n| in_domain[n])
 }
 
 impl Transport {
