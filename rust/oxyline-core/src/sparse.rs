@@ -780,12 +780,7 @@ mod tests {
         let mut stamps = Vec::new();
         let mut vals = Vec::new();
         let mut seed = 12345u64;
-        let mut rnd = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 33) as f64) / (1u64 << 31) as f64
-        };
+        let mut rnd = || crate::test_common::lcg(&mut seed);
         for i in 0..n {
             stamps.push((i, i));
             vals.push(0.1 + rnd());
@@ -856,12 +851,7 @@ mod tests {
     /// A random recursive tree (`fan` 0) or a binary heap (`fan` 2) of `n` vertices.
     fn threads_case(n: usize, fan: usize) {
         let mut seed = 7u64;
-        let mut rnd = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 33) as f64) / (1u64 << 31) as f64
-        };
+        let mut rnd = || crate::test_common::lcg(&mut seed);
         let (mut stamps, mut vals) = (Vec::new(), Vec::new());
         for i in 0..n {
             stamps.push((i, i));
@@ -923,12 +913,7 @@ mod tests {
     /// well-conditioned, diagonally dominant entries of order 1).
     fn looped_solve_matches_faer<T: Scalar>(entry: impl Fn(f64, f64) -> T, n: usize) {
         let mut seed = 987654321u64;
-        let mut rnd = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 33) as f64) / (1u64 << 31) as f64
-        };
+        let mut rnd = || crate::test_common::lcg(&mut seed);
         let mut stamps = Vec::new();
         let mut vals = Vec::new();
         for i in 0..n {

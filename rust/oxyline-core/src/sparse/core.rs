@@ -207,12 +207,7 @@ mod tests {
         seed: u64,
     ) -> (Vec<(usize, usize)>, Vec<f64>, Vec<f64>, Vec<f64>) {
         let mut seed = seed;
-        let mut rnd = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 33) as f64) / (1u64 << 31) as f64
-        };
+        let mut rnd = || crate::test_common::lcg(&mut seed);
         let (mut stamps, mut vals) = (Vec::new(), Vec::new());
         for i in 0..n {
             stamps.push((i, i));
