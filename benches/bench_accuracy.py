@@ -81,6 +81,10 @@ def load(name: str) -> Any:
     return oxyline.load_model(name)
 
 
+#: the step-size history lines of the summary (`phases`), one per error-controlled run matched
+#: with the sweep
+STEP_HISTORY: list[str] = []
+
 REPEAT = [1]  # runs per timing (``--repeat``): the least CPU of them is reported
 
 
@@ -168,6 +172,32 @@ def vessel_table(name: str, cycles: int, rtols: tuple[float, ...], ref_steps: in
               f"{e['flow'][k] / rtol:.3g} ({res.vessels[k]}, {share:.1e}), "
               f"{np.median(e['flow']) / rtol:.2g} | {np.max(e['pressure']) / rtol:.3g} | "
               f"{np.max(e['pulse']) / rtol:.3g} | {po2} | {est_s} |")
+
+
+def phases(res: Any, ref: Any, dt_eq: float) -> str:
+    """Where the last cycle's accepted steps (``Result.step_times``/``step_sizes``) are larger
+    than the fixed step of equal error ``dt_eq``: per phase, the share of the phase's time
+    covered by such steps and the phase's mean step. Systole: where the model's inlet
+    vessel's reference inflow (``flow_in`` of the first vessel) is above its cycle mean;
+    diastole: the rest."""
+    h, t0 = res.step_sizes, res.step_times
+    if h.size == 0:
+        return "no step history"
+    period = float(np.sum(h))
+    # the reference's last cycle (its rows run over every cycle), time into that cycle
+    tr = ref.time - (ref.time[-1] - period)
+    keep = tr >= -1e-12
+    q = ref.flow_in[keep, 0]
+    systole = np.interp(t0 + 0.5 * h, tr[keep], (q > q.mean()).astype(float)) > 0.5
+    parts = []
+    for label, sel in (("systole", systole), ("diastole", ~systole)):
+        span = float(np.sum(h[sel]))
+        if span <= 0:
+            continue
+        larger = float(np.sum(h[sel & (h > dt_eq)])) / span
+        parts.append(f"{label} {100 * larger:.0f} % of {span * 1e3:.0f} ms "
+                     f"(mean step {span / max(int(np.sum(sel)), 1) * 1e3:.2g} ms)")
+    return f"steps > {dt_eq * 1e3:.3g} ms: " + ", ".join(parts)
 
 
 def fmt(e: float) -> str:
@@ -281,6 +311,9 @@ def controlled(model: Any, name: str, cycles: int, rtol: float, method: str,
                 cpu_i = cpu if every_eq == outputs[0] else run(model, output_every=every_eq,
                                                                 **kw)[1]
                 ratio_i = f"{cpu_i / eq[1]:.2f}"
+            if eq:
+                STEP_HISTORY.append(f"| {name} | rtol {rtol:g}, {ran} | "
+                                  f"{phases(res, ref, eq[0])} |")
             summary.append(f"| {name} | rtol {rtol:g}, {ran} | {fmt(e[0])} / {fmt(e[1])} / "
                            f"{fmt(e[2])} | {s['steps']} | {cpu:.3f} s ({cpu_eq:.3f} s) | "
                            f"{f'{m[1] * 1e3:.3g} ms, {m[0]:.3f} s' if m else '—'} "
@@ -370,6 +403,12 @@ def main() -> None:
           "interpolated |")
     print("|---|---|---|---|---|---|---|---|")
     print("\n".join(summary))
+    print("\n## Step-size history (the last cycle's accepted steps against the fixed step of "
+          "equal error, interpolated in the sweep; systole: the inlet vessel's inflow above its "
+          "cycle mean)\n")
+    print("| model | method | where the steps are larger than the fixed step of equal error |")
+    print("|---|---|---|")
+    print("\n".join(STEP_HISTORY))
 
 
 if __name__ == "__main__":

@@ -616,6 +616,9 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     if extra is not None:
         result.chamber_volume, result.valve_status = _heart_outputs(heart, extra)
     result.valve_events = [(float(t), str(v), bool(o)) for t, v, o in raw.get("valve_events", ())]
+    if "last_cycle_steps" in raw:  # error control: the last cycle's accepted steps
+        result.step_sizes = np.asarray(raw["last_cycle_steps"], dtype=float)
+        result.step_times = np.concatenate(([0.0], np.cumsum(result.step_sizes)[:-1]))
     _raise_run_error(raw, result)
     if space:  # one refinement of every vessel: the inlet impedance's change
         from oxyline.convergence import inlet_space_error

@@ -185,6 +185,9 @@ def _result_from_dataset(ds: Any, label: str) -> Result:
         if var in ds.variables:
             values = need(var, ("time", dim))
             field.update({str(n): values[:, k].copy() for k, n in enumerate(need(dim))})
+    if "step_size" in ds.variables:  # an error-controlled run's step-size history
+        result.step_sizes = need("step_size", ("step_time",)).astype(np.float64)
+        result.step_times = need("step_time").astype(np.float64)
     return result
 
 

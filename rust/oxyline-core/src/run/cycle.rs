@@ -38,8 +38,11 @@ pub(super) struct Cycles<'r, 'f> {
     released: bool,
     /// Error control (None: the fixed step).
     pub adaptive: Option<Adaptive>,
-    /// Error control waiting for periodicity: near-periodic cycles replay their steps.
-    periodic_steps: PeriodicSteps,
+    /// Error control's accepted steps of the cycle being run (near-periodic cycles waiting for
+    /// periodicity replay them; the last cycle's are the reported step-size history).
+    pub(super) periodic_steps: PeriodicSteps,
+    /// The start time of the cycle being run (of the last cycle, once the run ended).
+    pub(super) cycle_start: f64,
     /// Error control with the explicit pair.
     pub explicit: Option<super::explicit::Explicit>,
     /// The valve events of an error-controlled run (None: no switching element).
@@ -126,6 +129,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
             released: false,
             adaptive: None,
             periodic_steps: PeriodicSteps::default(),
+            cycle_start: 0.0,
             explicit: None,
             events: None,
             derived: None,
@@ -400,6 +404,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
                 .adaptive()
                 .is_some_and(|tol| self.periodic_error < NEAR_PERIODIC * tol.rtol);
         self.periodic_steps.start_cycle(near);
+        self.cycle_start = t0;
         if self.events.is_none() {
             ad.scout(&mut self.state, t0, period);
         }

@@ -449,6 +449,9 @@ impl Cycles<'_, '_> {
         let mut next_out = 1;
         let mut t = t0;
         ex.start(&self.state);
+        // (the pair replays no steps: its accepted steps are the step-size history only)
+        self.periodic_steps.start_cycle(false);
+        self.cycle_start = t0;
         // a step taken again to end on a valve event
         let mut cut: Option<Cut> = None;
         while t < t_end {
@@ -499,6 +502,7 @@ impl Cycles<'_, '_> {
             let (dp, y, z) = parts(&mut self.state);
             ex.accept(y, z, (dp.start_rate(), dp.end_rate()), h, kinds);
             dp.accept();
+            self.periodic_steps.accepted(h);
             match next {
                 Next::Switch(k, proposed) => {
                     self.switch_valves(k, t_new);

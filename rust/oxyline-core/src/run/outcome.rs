@@ -43,6 +43,11 @@ pub struct ErrorControlOutcome {
     /// The valves' status changes located during the run, in time order (docs/physics.md
     /// §10.5).
     pub events: Vec<super::events::Event>,
+    /// The step-size history of the last cycle run (docs/solvers.md, "Step-size history"):
+    /// its start time (run time, s) and its accepted steps in order (s), each step starting
+    /// where the ones before it end (a run stopped early: the steps of its last cycle so far).
+    pub last_cycle_start: f64,
+    pub last_cycle_steps: Vec<f64>,
 }
 
 /// Species outputs, recorded at the same times as the flow probes.
@@ -119,6 +124,8 @@ impl Outcome {
         let (state, rec) = (cycles.state, cycles.rec);
         let (n_probes, columns_per_species) = (rec.n_probes(), rec.columns_per_species());
         let events = cycles.events.map(|ev| ev.log).unwrap_or_default();
+        let (last_cycle_start, last_cycle_steps) =
+            (cycles.cycle_start, cycles.periodic_steps.taken().to_vec());
         let explicit = cycles.explicit.map(|ex| ErrorControlOutcome {
             estimate: ex.estimate,
             steps: ex.steps,
@@ -126,6 +133,8 @@ impl Outcome {
             dt_min: ex.h_smallest,
             dt_max: ex.h_largest,
             events: events.clone(),
+            last_cycle_start,
+            last_cycle_steps: last_cycle_steps.clone(),
         });
         let error_control = cycles
             .adaptive
@@ -136,6 +145,8 @@ impl Outcome {
                 dt_min: ad.h_smallest,
                 dt_max: ad.h_largest,
                 events,
+                last_cycle_start,
+                last_cycle_steps,
             })
             .or(explicit);
         // an error-controlled run reports its mean step

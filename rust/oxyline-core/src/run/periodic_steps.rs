@@ -66,6 +66,12 @@ impl PeriodicSteps {
         self.active
     }
 
+    /// The accepted steps of the cycle being run (of the last cycle, once the run ended), in
+    /// order: the step-size history an error-controlled run reports.
+    pub fn taken(&self) -> &[f64] {
+        &self.taken
+    }
+
     /// A step of `h` was accepted.
     pub fn accepted(&mut self, h: f64) {
         self.taken.push(h);
