@@ -85,6 +85,9 @@ def load(name: str) -> Any:
 #: with the sweep
 STEP_HISTORY: list[str] = []
 
+#: the rows of the `--time-error` table's runs at `rtol_to_meet()`
+MEET: list[str] = []
+
 REPEAT = [1]  # runs per timing (``--repeat``): the least CPU of them is reported
 
 
@@ -198,6 +201,59 @@ def phases(res: Any, ref: Any, dt_eq: float) -> str:
         parts.append(f"{label} {100 * larger:.0f} % of {span * 1e3:.0f} ms "
                      f"(mean step {span / max(int(np.sum(sel)), 1) * 1e3:.2g} ms)")
     return f"steps > {dt_eq * 1e3:.3g} ms: " + ", ".join(parts)
+
+
+def time_error_table(name: str, cycles: int, rtols: tuple[float, ...], ref_steps: int,
+                     method: str) -> None:
+    """The worst vessel's achieved error per kind (``per_vessel``) beside what the run reports
+    (the step control's ``error_estimate``, a local target) and ``estimate_time_error``'s
+    estimate from a second run at rtol/4, in units of rtol, with both runs' CPU
+    (``--time-error``)."""
+    model = load(name)
+    period = model.period or 1.0
+    rows = REF_ROWS if ref_steps % REF_ROWS == 0 else ref_steps
+    ref, ref_cpu = run(model, cycles=cycles, dt=period / ref_steps, method="generalized-alpha",
+                       output_every=period / rows)
+    print(f"\n### {name}: achieved error against the reported ones ({cycles} cycles, {method}; "
+          f"reference generalized-α dt = T/{ref_steps}, {ref_cpu:.1f} s CPU), in units of "
+          "rtol\n")
+    print("| rtol | flow: achieved (vessel) / step control's estimate / estimate_time_error | "
+          "pressure vs its peak: the three | pulse pressure: achieved / estimate_time_error | "
+          "PO2: achieved / estimate_time_error | CPU: the run / the estimate's second run |")
+    print("|---|---|---|---|---|---|")
+    for rtol in rtols:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            t0 = time.process_time()
+            est = oxyline.estimate_time_error(model, rtol=rtol, cycles=cycles,
+                                              until_periodic=None, method=method,
+                                              output_every=1e-3, progress=False)
+            cpu_both = time.process_time() - t0
+        t0 = time.process_time()
+        run(model, cycles=cycles, rtol=rtol, dt="auto", method=method, output_every=1e-3)
+        cpu = time.process_time() - t0
+        e, rep, w = per_vessel(est.result, ref), est.result.error_estimate, est.worst
+        k = int(np.argmax(e["flow"]))
+        po2 = (f"{np.max(e['po2']) / rtol:.2g} / {w['po2'][0] / rtol:.2g}" if "po2" in e
+               else "—")
+        # the run at the rtol estimated to meet rtol in every vessel, and its achieved error
+        r_meet = est.rtol_to_meet()
+        met, cpu_met = run(model, cycles=cycles, rtol=r_meet, dt="auto", method=method,
+                           output_every=1e-3)
+        em = per_vessel(met, ref)
+        worst_met = max(float(np.max(em[x])) for x in ("flow", "pressure", "pulse", "po2")
+                        if x in em)
+        MEET.append(f"| {name} | {rtol:g} | {r_meet:.2g} | {met.settings['steps']} "
+                    f"({est.result.settings['steps']} at rtol) | {worst_met / rtol:.2f} "
+                    f"(flow {np.max(em['flow']) / rtol:.2f}, pulse pressure "
+                    f"{np.max(em['pulse']) / rtol:.2f}) | {cpu_met:.2f} s ({cpu:.2f} s at "
+                    f"rtol) |")
+        print(f"| {rtol:g} | {e['flow'][k] / rtol:.3g} ({est.result.vessels[k]}) / "
+              f"{rep['flow'] / rtol:.2g} / {w['flow'][0] / rtol:.3g} | "
+              f"{np.max(e['pressure']) / rtol:.3g} / {rep['pressure'] / rtol:.2g} / "
+              f"{w['pressure'][0] / rtol:.3g} | {np.max(e['pulse']) / rtol:.3g} / "
+              f"{w['pulse_pressure'][0] / rtol:.3g} | {po2} | {cpu:.2f} s / "
+              f"{max(cpu_both - cpu, 0.0):.2f} s |")
 
 
 def fmt(e: float) -> str:
@@ -381,6 +437,9 @@ def main() -> None:
     ap.add_argument("--vessel-table", action="store_true",
                     help="only the worst vessel's error per kind against its own scale, in "
                          "units of rtol (the first of --methods)")
+    ap.add_argument("--time-error", action="store_true",
+                    help="only the achieved error against the step control's estimate and "
+                         "estimate_time_error's, in units of rtol (the first of --methods)")
     a = ap.parse_args()
     REPEAT[0] = a.repeat
     if a.default_table:
@@ -391,6 +450,16 @@ def main() -> None:
         for name in a.models:
             vessel_table(name, a.cycles, tuple(a.rtols), a.ref_factor * max(a.sweep),
                          a.methods[0])
+        return
+    if a.time_error:
+        for name in a.models:
+            time_error_table(name, a.cycles, tuple(a.rtols), a.ref_factor * max(a.sweep),
+                             a.methods[0])
+        print("\n### Runs at `rtol_to_meet()`: the worst vessel's achieved error of every "
+              "kind, in units of the rtol asked for\n")
+        print("| model | rtol asked | rtol run | steps | achieved worst / rtol asked | CPU |")
+        print("|---|---|---|---|---|---|")
+        print("\n".join(MEET))
         return
     summary: list[str] = []
     for name in a.models:

@@ -24,6 +24,7 @@ from oxyline.monitor import PhysicalBoundsWarning
 from oxyline.result import Result, VesselResult
 from oxyline.run import resume, simulate, simulate_to_zarr
 from oxyline.structured_tree import structured_tree
+from oxyline.time_error import TimeErrorEstimate, estimate_time_error
 from oxyline.transport import HemoglobinFacilitationWarning
 
 __version__: str = _core.__version__
@@ -34,12 +35,14 @@ __all__ = [
     "Model",
     "PhysicalBoundsWarning",
     "Result",
+    "TimeErrorEstimate",
     "VesselResult",
     "__version__",
     "calibrate",
     "catalogue",
     "convergence",
     "estimate_space_error",
+    "estimate_time_error",
     "forcing_harmonics",
     "impedance",
     "load_model",

@@ -1,0 +1,124 @@
+"""Time-integration error of an error-controlled run, as a user reads it: every vessel's
+pressure and flow against its own scale (docs/solvers.md, "Honesty").
+
+The step control holds each unknown's *local* error per unit step within rtol of its scale
+(``result.error_estimate``). On networks with lightly damped wave reflections the local errors
+of the large vessels' flows accumulate through the pressures into the small vessels' flows,
+which then miss rtol of their own amplitude by far more (adan56 at rtol 1e-3: 27 rtol, the left
+gastric's flow, while no step's estimate exceeded rtol). That accumulated (global) error is what
+:func:`estimate_time_error` measures: it runs the model again at ``rtol/factor`` and takes the
+difference of the two runs per vessel. The achieved error of an error-controlled run is
+proportional to rtol (measured: adan56 27–47 rtol over rtol 1e-2 … 1e-4), so the difference is
+``(1 − 1/factor)`` of the coarser run's error, and the estimate is the difference over that.
+Cost: one more run at rtol/factor (about factor^½ times the steps).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from oxyline.errors import ModelError
+from oxyline.loader import load_model
+from oxyline.model import Model
+from oxyline.result import Result
+
+#: the tolerance of the second run is rtol over this
+FACTOR = 4.0
+
+
+@dataclass(frozen=True)
+class TimeErrorEstimate:
+    """The estimated time-integration error of ``result`` (the run at ``rtol``), per vessel
+    against its own scale, from the run at ``rtol/factor`` (``finer``)."""
+
+    rtol: float
+    factor: float
+    result: Result
+    finer: Result
+    #: per vessel (``result.vessels``): flow max_t |ΔQ| / max_t |Q| (``flow_in``); pressure
+    #: max_t |ΔP| / max_t |P| (``pressure_in``); pulse pressure |ΔPP| / PP (``pressure_in``);
+    #: PO2 max_t |ΔPO2| / max_t PO2 (``po2_out``, models with oxygen), each the two runs'
+    #: difference over (1 − 1/factor)
+    per_vessel: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def rtol_to_meet(self, target: float | None = None, kinds: tuple[str, ...] = ()) -> float:
+        """The rtol whose run is estimated to meet ``target`` (default: ``rtol``) in every
+        vessel for ``kinds`` (default: every kind estimated): the achieved error is
+        proportional to rtol (module text), so rtol × target / the worst estimate, at most
+        ``rtol``. Run the model at it for an error within ``target`` of every vessel's own
+        scale (measured on adan56 and paper-bifurcated: docs/solvers.md, "Honesty")."""
+        goal = self.rtol if target is None else float(target)
+        if not goal > 0:
+            raise ModelError(f"rtol_to_meet: target must be > 0, got {target!r}")
+        worst = max((w for k, (w, _) in self.worst.items() if not kinds or k in kinds), default=0.0)
+        return self.rtol if worst <= goal else self.rtol * goal / worst
+
+    @property
+    def worst(self) -> dict[str, tuple[float, str]]:
+        """Per kind, the largest estimated error over the vessels and that vessel."""
+        names = self.result.vessels
+        return {
+            k: (float(np.max(e)), names[int(np.argmax(e))])
+            for k, e in self.per_vessel.items()
+            if e.size
+        }
+
+
+def _differences(a: Result, b: Result) -> dict[str, np.ndarray]:
+    """Every vessel's difference of ``a`` from ``b`` against ``b``'s own scale (the kinds of
+    :attr:`TimeErrorEstimate.per_vessel`); the runs share their output times."""
+    p, pb = a.pressure_in, b.pressure_in
+    pulse, pulse_b = np.ptp(p, axis=0), np.ptp(pb, axis=0)
+    out = {
+        "flow": np.max(np.abs(a.flow_in - b.flow_in), 0) / np.max(np.abs(b.flow_in), 0),
+        "pressure": np.max(np.abs(p - pb), 0) / np.max(np.abs(pb), 0),
+        "pulse_pressure": np.abs(pulse - pulse_b) / pulse_b,
+    }
+    if a.oxygen is not None and b.oxygen is not None:
+        o, ob = a.po2_out, b.po2_out
+        out["po2"] = np.max(np.abs(o - ob), 0) / np.max(np.abs(ob), 0)
+    return out
+
+
+def estimate_time_error(
+    model: Model | str | os.PathLike[str] | Mapping[str, Any],
+    rtol: float = 1e-3,
+    factor: float = FACTOR,
+    **overrides: Any,
+) -> TimeErrorEstimate:
+    """Run ``model`` at ``rtol`` (error control, ``overrides`` as for
+    :func:`oxyline.simulate`, no ``dt``) and again at ``rtol/factor``, and estimate the first
+    run's error per vessel against each vessel's own scale (module text).
+
+    >>> import oxyline
+    >>> est = oxyline.estimate_time_error("bifurcation", rtol=1e-2, cycles=2)
+    >>> sorted(est.worst)
+    ['flow', 'pressure', 'pulse_pressure']
+    """
+    from oxyline.run import simulate
+
+    if not (isinstance(factor, (int, float)) and factor > 1 and np.isfinite(factor)):
+        raise ModelError(f"estimate_time_error: factor must be a number > 1, got {factor!r}")
+    if overrides.get("dt") not in (None, "auto"):
+        raise ModelError(
+            f"estimate_time_error: dt = {overrides['dt']!r} is a fixed step; "
+            "the estimate is of an error-controlled run (no dt)"
+        )
+    m = load_model(model)
+    kw = {"progress": False, **overrides, "dt": "auto"}
+    coarse = simulate(m, rtol=rtol, **kw)
+    # the same cycles from the same start: the second run takes exactly the first's cycles
+    kw.update(cycles=int(coarse.settings["cycles_run"]), until_periodic=None)
+    finer = simulate(m, rtol=rtol / factor, **kw)
+    if coarse.time.shape != finer.time.shape or not np.allclose(coarse.time, finer.time):
+        raise ModelError("estimate_time_error: the two runs recorded different output times")
+    scale = 1.0 / (1.0 - 1.0 / factor)
+    diff = {k: v * scale for k, v in _differences(coarse, finer).items()}
+    return TimeErrorEstimate(
+        rtol=rtol, factor=float(factor), result=coarse, finer=finer, per_vessel=diff
+    )
