@@ -180,7 +180,10 @@ pub(crate) fn outcome_dict(py: Python<'_>, out: Outcome) -> PyResult<Bound<'_, P
             .collect();
         d.set_item("valve_events", events)?;
         d.set_item("last_cycle_start", ec.last_cycle_start)?;
-        d.set_item("last_cycle_steps", ec.last_cycle_steps.clone().into_pyarray(py))?;
+        d.set_item(
+            "last_cycle_steps",
+            ec.last_cycle_steps.clone().into_pyarray(py),
+        )?;
     }
     if let Some(lim) = &out.stability {
         d.set_item("rk4_dt_max", lim.dt_max)?;

@@ -98,6 +98,8 @@ mod tests {
         for h in [0.5, 0.3, 0.2] {
             p.accepted(h);
         }
+        // the cycle's accepted steps, in order: the step-size history a run reports
+        assert_eq!(p.taken(), &[0.5, 0.3, 0.2]);
         p.start_cycle(true);
         assert_eq!(p.step(1.0), Some(0.5));
         assert!(p.keeps(1.5));
