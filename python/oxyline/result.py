@@ -236,7 +236,8 @@ class Result:
     #: an error-controlled run's step-size history (docs/solvers.md, "Step-size history"):
     #: the accepted steps of its last cycle, each step's start as time into that cycle (s,
     #: 0 … period, as :attr:`time` of a last-cycle output) and its size (s); empty for a fixed
-    #: step. Stored in a file as the variable ``step_size`` over ``step_time``.
+    #: step. A file (NetCDF, Zarr) keeps them as the variable ``step_size`` over its own
+    #: dimension ``step_time`` (:meth:`to_xarray` leaves them out: its dims are the output's).
     step_times: np.ndarray = field(default_factory=lambda: np.zeros(0))
     step_sizes: np.ndarray = field(default_factory=lambda: np.zeros(0))
     #: the model it was run from, as JSON in the native schema (SI), so that a result file
@@ -486,12 +487,6 @@ class Result:
             data_vars["valve_status"] = (
                 ("time", "valve"), np.column_stack(list(self.valve_status.values())),
                 {"units": "1", "description": "1 open, 0 closed"})
-        if self.step_sizes.size:
-            # the last cycle's step-size history: its own dimension (not the output's times)
-            coords["step_time"] = ("step_time", self.step_times, {"units": "s"})
-            data_vars["step_size"] = (("step_time",), self.step_sizes, {
-                "units": "s", "description": "accepted steps of the last cycle (error "
-                "control), at their start time into that cycle"})
         attrs: dict[str, Any] = {"model": self.model_name, "oxyline_version": __version__,
                                  "complete": int(self.complete)}
         if self.model_json is not None:

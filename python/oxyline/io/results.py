@@ -32,6 +32,12 @@ def dataset(result: Result) -> Any:
     ds.attrs.setdefault("title", f"oxyline results for model '{result.model_name}'")
     ds.attrs["units_system"] = "SI (each variable's units in its 'units' attribute)"
     ds.attrs["source"] = "oxyline"
+    if result.step_sizes.size:
+        # the last cycle's step-size history, over its own dimension (not the output's times)
+        ds = ds.assign_coords(step_time=("step_time", result.step_times, {"units": "s"}))
+        ds["step_size"] = (("step_time",), result.step_sizes, {
+            "units": "s", "description": "accepted steps of the last cycle (error control), "
+            "at their start time into that cycle"})
     for name in ds.variables:
         if ds[name].dtype == object:  # vessel names: plain strings for netCDF/zarr readers
             ds[name] = ds[name].astype(str)
