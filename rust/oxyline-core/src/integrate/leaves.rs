@@ -289,10 +289,12 @@ impl Leaves {
 
     /// After the reduced solve of `r_head` (the increments Δ of the other unknowns, whose
     /// values `y[..start]` must still be the step's start): each leaf's increment Δ_j, and
-    /// its update y_j += gdt Δ_j, ẏ_j ← pred ẏ_j + Δ_j (generalized-α's).
+    /// its update y_j += gdt Δ_j, ẏ_j ← pred ẏ_j + Δ_j (generalized-α's). With `from`, the
+    /// step's start is read there (and `y`, `yd` only written).
     pub fn back_substitute_and_update(
         &self,
         r_head: &[f64],
+        from: Option<(&[f64], &[f64])>,
         y: &mut [f64],
         yd: &mut [f64],
         gdt: f64,
@@ -303,13 +305,31 @@ impl Leaves {
         let (c, h0) = (self.c, self.c_am / self.am);
         let h1 = c * h0;
         let mut finite = true;
-        for (((&p, &g), yj), ydj) in self.parent.iter().zip(&self.g).zip(yl).zip(ydl) {
-            let p = p as usize;
-            let w = g * (*yj - head_y[p]) - (h0 + h1 * g) * *ydj;
-            let d = w - c * g * r_head[p];
-            finite &= d.is_finite();
-            *yj += gdt * d;
-            *ydj = pred * *ydj + d;
+        let cells = self.parent.iter().zip(&self.g);
+        match from {
+            None => {
+                for (((&p, &g), yj), ydj) in cells.zip(yl).zip(ydl) {
+                    let p = p as usize;
+                    let w = g * (*yj - head_y[p]) - (h0 + h1 * g) * *ydj;
+                    let d = w - c * g * r_head[p];
+                    finite &= d.is_finite();
+                    *yj += gdt * d;
+                    *ydj = pred * *ydj + d;
+                }
+            }
+            // (the step's start read from `from`, its end written into `y`, `yd`: the same
+            // expressions)
+            Some((y0, yd0)) => {
+                let start = y0[self.start..].iter().zip(&yd0[self.start..]);
+                for ((((&p, &g), yj), ydj), (&y0j, &yd0j)) in cells.zip(yl).zip(ydl).zip(start) {
+                    let p = p as usize;
+                    let w = g * (y0j - y0[p]) - (h0 + h1 * g) * yd0j;
+                    let d = w - c * g * r_head[p];
+                    finite &= d.is_finite();
+                    *yj = y0j + gdt * d;
+                    *ydj = pred * yd0j + d;
+                }
+            }
         }
         finite
     }
