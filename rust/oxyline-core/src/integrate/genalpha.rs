@@ -493,16 +493,19 @@ impl GenAlpha<'_> {
         let from = from.map(|(y0, yd0)| (&y0[..start], &yd0[..start]));
         match &pool {
             Some(pool) => pool.install(|| {
-                let tasks = y.par_chunks_mut(ROWS_PER_TASK).zip(yd.par_chunks_mut(ROWS_PER_TASK));
-                tasks.zip(r.par_chunks(ROWS_PER_TASK)).enumerate().for_each(
-                    |(c, ((y, yd), r))| {
+                let tasks = y
+                    .par_chunks_mut(ROWS_PER_TASK)
+                    .zip(yd.par_chunks_mut(ROWS_PER_TASK));
+                tasks
+                    .zip(r.par_chunks(ROWS_PER_TASK))
+                    .enumerate()
+                    .for_each(|(c, ((y, yd), r))| {
                         let from = from.map(|(y0, yd0)| {
                             let k = c * ROWS_PER_TASK..c * ROWS_PER_TASK + y.len();
                             (&y0[k.clone()], &yd0[k])
                         });
                         linear_update(y, yd, from, r, gdt, pred);
-                    },
-                )
+                    })
             }),
             None => linear_update(y, yd, from, r, gdt, pred),
         }

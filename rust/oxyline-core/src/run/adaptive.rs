@@ -829,8 +829,11 @@ impl Adaptive {
         let whole = n - n % LANES;
         let (mut m, mut grows) = ([0.0f64; LANES], [false; LANES]);
         for j in (0..whole).step_by(LANES) {
+            // (a group's own slices, of `LANES` values: its values are read without a bounds
+            // check each, 9 a value before)
+            let group = v.sub(j..j + LANES);
             for k in 0..LANES {
-                let (e, g) = v.term(j + k, c);
+                let (e, g) = group.term(k, c);
                 m[k] = larger(e, m[k]);
                 grows[k] |= g;
             }
@@ -1311,8 +1314,10 @@ struct Fused {
 const LANES: usize = 4;
 
 /// Unknowns per block of the record of where a step grows a peak (see
-/// `Adaptive::grow_blocks`): a divisor of `CHUNK`.
-const BLOCK: usize = 256;
+/// `Adaptive::grow_blocks`): a divisor of `CHUNK`, and a multiple of `LANES`. Small: the
+/// tracking pass visits every unknown of a block where one grew (blocks of 256 sent it over
+/// nearly every unknown of adan56's 1 987 in its first cycle, 6 % of that run's instructions).
+const BLOCK: usize = 32;
 
 /// The vectors of one range of unknowns that the estimate's pass reads (see
 /// `Adaptive::fused_range`), each the range's own slice.
@@ -1329,6 +1334,22 @@ struct FusedSlices<'a> {
 }
 
 impl FusedSlices<'_> {
+    /// The unknowns `r` of the range.
+    #[inline(always)]
+    fn sub(&self, r: Range<usize>) -> FusedSlices<'_> {
+        FusedSlices {
+            y: &self.y[r.clone()],
+            ym2: &self.ym2[r.clone()],
+            ym1: &self.ym1[r.clone()],
+            y0: &self.y0[r.clone()],
+            wu: &self.wu[r.clone()],
+            ws: &self.ws[r.clone()],
+            pk: &self.pk[r.clone()],
+            rp: &self.rp[r.clone()],
+            ap: &self.ap[r],
+        }
+    }
+
     /// Unknown `j`'s scaled local error (Milne's device on the last three states, per unit
     /// step or per step, the larger) and whether it grows one of the peaks `track_peaks`
     /// follows (the same comparisons).

@@ -28,7 +28,17 @@ pub(super) fn run_two_pass(
     // needs it first
     let mut steady = SteadyCache::new(dae);
     let Some(tr) = transport else {
-        let out = run(dae, &mut steady, s, None, None, None, sink, progress, checkpoints);
+        let out = run(
+            dae,
+            &mut steady,
+            s,
+            None,
+            None,
+            None,
+            sink,
+            progress,
+            checkpoints,
+        );
         return keep_interrupted(out, s, None);
     };
     let unknowns = tr.mean_flow_unknowns();
@@ -42,8 +52,10 @@ pub(super) fn run_two_pass(
     if !unknowns.is_empty() {
         let mut mean = MeanAbs::new(unknowns);
         mean.harmonics = FlowHarmonics::for_transport(tr);
-        // an error-controlled run's scout pass from the same first cycle's steps
-        mean.scout = s.adaptive().map(|tol| {
+        // an error-controlled run's scout pass from the same first cycle's steps (a run with
+        // valves takes none: see `Adaptive::scout`)
+        let valves = dae.elements.iter().any(|el| !el.switches().is_empty());
+        mean.scout = s.adaptive().filter(|_| !valves).map(|tol| {
             let rho_inf = s.method.rho_inf();
             Scouted::new(Adaptive::new(dae, tol, rho_inf, s.period, s.output_every))
         });
