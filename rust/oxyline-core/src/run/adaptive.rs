@@ -1316,7 +1316,7 @@ const LANES: usize = 4;
 /// Unknowns per block of the record of where a step grows a peak (see
 /// `Adaptive::grow_blocks`): a divisor of `CHUNK`, and a multiple of `LANES`. Small: the
 /// tracking pass visits every unknown of a block where one grew (blocks of 256 sent it over
-/// nearly every unknown of adan56's 1 987 in its first cycle, 6 % of that run's instructions).
+/// nearly every unknown of adan56's 1 987 in its first cycle, 12 % of that run's instructions).
 const BLOCK: usize = 32;
 
 /// The vectors of one range of unknowns that the estimate's pass reads (see
