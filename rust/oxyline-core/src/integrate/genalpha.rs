@@ -259,8 +259,33 @@ impl<'a> GenAlpha<'a> {
     /// Advance (y, ẏ) from `time` to `time + dt` in place.
     pub fn step(&mut self, time: f64, y: &mut [f64], yd: &mut [f64]) -> Result<()> {
         if self.dae.is_linear() && self.dae.is_constant(self.regime) {
-            return self.step_linear(time, y, yd);
+            return self.step_linear(time, None, y, yd);
         }
+        self.step_nonlinear(time, y, yd)
+    }
+
+    /// Advance from the state `start` = (y, ẏ) at `time` to (y, ẏ) at `time + dt`, written
+    /// into `y` and `yd` (whatever they held): the same values as [`GenAlpha::step`] from
+    /// `start`. A linear step reads the start and writes the end in its own passes, so an
+    /// error-controlled run, which keeps the step's start anyway, exchanges buffers instead
+    /// of copying the state before each step; a nonlinear step starts from a copy.
+    pub fn step_from(
+        &mut self,
+        time: f64,
+        start: (&[f64], &[f64]),
+        y: &mut [f64],
+        yd: &mut [f64],
+    ) -> Result<()> {
+        if self.dae.is_linear() && self.dae.is_constant(self.regime) {
+            return self.step_linear(time, Some(start), y, yd);
+        }
+        y.copy_from_slice(start.0);
+        yd.copy_from_slice(start.1);
+        self.step_nonlinear(time, y, yd)
+    }
+
+    /// A nonlinear (or time-varying) circuit's step in place: Newton on ẏ_{n+1}.
+    fn step_nonlinear(&mut self, time: f64, y: &mut [f64], yd: &mut [f64]) -> Result<()> {
         let pred = (self.gamma - 1.0) / self.gamma;
         for (((ydn, yn), &ydi), &yi) in self
             .yd_new
@@ -421,17 +446,86 @@ impl GenAlpha<'_> {
     /// one solve with the matrix factorised once, and one update pass. With svZeroDSolver's
     /// absolute tolerance the step is skipped when the predictor already satisfies it, exactly
     /// as svZeroDSolver does; its post-solve check always passes for a linear system.
-    fn step_linear(&mut self, time: f64, y: &mut [f64], yd: &mut [f64]) -> Result<()> {
-        let (am, af, gamma, dt) = (self.am, self.af, self.gamma, self.dt);
+    ///
+    /// `from`: the step's start (y, ẏ), the end written into `y`, `yd`; None: in place (the
+    /// same sums either way, so the same bits).
+    fn step_linear(
+        &mut self,
+        time: f64,
+        from: Option<(&[f64], &[f64])>,
+        y: &mut [f64],
+        yd: &mut [f64],
+    ) -> Result<()> {
+        let (af, gamma, dt) = (self.af, self.gamma, self.dt);
         let pred = (gamma - 1.0) / gamma;
         let t_af = time + af * dt;
         self.forcing.eval(self.dae, t_af, self.regime);
-        if !self.factored {
-            self.factor(t_af, y, &[])?;
+        let start = self.leaves.as_ref().map_or(self.r.len(), |l| l.start);
+        let pool = crate::threads::pool().filter(|_| start >= PARALLEL_ROWS);
+        // the residual at the predictor, from the step's start
+        let rmax = {
+            let (y0, yd0) = from.unwrap_or((&*y, &*yd));
+            if !self.factored {
+                self.factor(t_af, y0, &[])?;
+            }
+            self.linear_residual(y0, yd0, start, pool.as_ref())
+        };
+        if let Some(atol) = self.control.atol {
+            if rmax < atol {
+                if let Some((y0, yd0)) = from {
+                    y.copy_from_slice(y0);
+                    yd.copy_from_slice(yd0);
+                }
+                yd.iter_mut().for_each(|v| *v *= pred);
+                return Ok(());
+            }
         }
+        if !self.lu.solve_in_place(&mut self.r[..start]) {
+            return Err(singular(t_af, "non-finite solution"));
+        }
+        let gdt = gamma * dt;
+        if let Some(leaves) = &self.leaves {
+            if !leaves.back_substitute_and_update(&self.r[..start], from, y, yd, gdt, pred) {
+                return Err(singular(t_af, "non-finite solution"));
+            }
+        }
+        let (y, yd, r) = (&mut y[..start], &mut yd[..start], &self.r[..start]);
+        let from = from.map(|(y0, yd0)| (&y0[..start], &yd0[..start]));
+        match &pool {
+            Some(pool) => pool.install(|| {
+                let tasks = y
+                    .par_chunks_mut(ROWS_PER_TASK)
+                    .zip(yd.par_chunks_mut(ROWS_PER_TASK));
+                tasks
+                    .zip(r.par_chunks(ROWS_PER_TASK))
+                    .enumerate()
+                    .for_each(|(c, ((y, yd), r))| {
+                        let from = from.map(|(y0, yd0)| {
+                            let k = c * ROWS_PER_TASK..c * ROWS_PER_TASK + y.len();
+                            (&y0[k.clone()], &yd0[k])
+                        });
+                        linear_update(y, yd, from, r, gdt, pred);
+                    })
+            }),
+            None => linear_update(y, yd, from, r, gdt, pred),
+        }
+        Ok(())
+    }
+
+    /// The residual of a linear step at its predictor from the start (y, ẏ) into the rows
+    /// `..start` of `r` (the condensed leaves folded into their parents' rows); the largest
+    /// |r| where an absolute tolerance judges it.
+    fn linear_residual(
+        &mut self,
+        y: &[f64],
+        yd: &[f64],
+        start: usize,
+        pool: Option<&std::sync::Arc<rayon::ThreadPool>>,
+    ) -> f64 {
+        let (am, gamma) = (self.am, self.gamma);
+        let pred = (gamma - 1.0) / gamma;
         // with y_new = y and ẏ_new = pred·ẏ: y_αf = y, ẏ_αm = ẏ (1 + αm (pred − 1))
         let c_am = 1.0 + am * (pred - 1.0);
-        let start = self.leaves.as_ref().map_or(self.r.len(), |l| l.start);
         // F without the condensed cells' columns (`Leaves::reduced_f`), unless an absolute
         // tolerance judges the whole rows' residuals
         let with_max = self.control.atol.is_some();
@@ -439,7 +533,6 @@ impl GenAlpha<'_> {
             Some(l) if !with_max => &l.reduced_f,
             _ => &self.dae.f,
         };
-        let pool = crate::threads::pool().filter(|_| start >= PARALLEL_ROWS);
         let residual = LinearResidual {
             e: &self.e,
             forcing: &self.forcing,
@@ -451,7 +544,7 @@ impl GenAlpha<'_> {
         let head = &mut self.r[..start];
         // each row is independent, and the largest |r| is the same in any grouping: the same
         // bits on any number of threads
-        let mut rmax = match &pool {
+        let mut rmax = match pool {
             Some(pool) => pool.install(|| {
                 head.par_chunks_mut(ROWS_PER_TASK)
                     .enumerate()
@@ -463,38 +556,35 @@ impl GenAlpha<'_> {
         if let Some(leaves) = &self.leaves {
             rmax = rmax.max(leaves.residual_and_fold(y, yd, &mut self.r[..start], with_max));
         }
-        if let Some(atol) = self.control.atol {
-            if rmax < atol {
-                yd.iter_mut().for_each(|v| *v *= pred);
-                return Ok(());
-            }
-        }
-        if !self.lu.solve_in_place(&mut self.r[..start]) {
-            return Err(singular(t_af, "non-finite solution"));
-        }
-        let gdt = gamma * dt;
-        if let Some(leaves) = &self.leaves {
-            if !leaves.back_substitute_and_update(&self.r[..start], y, yd, gdt, pred) {
-                return Err(singular(t_af, "non-finite solution"));
-            }
-        }
-        let update = |y: &mut [f64], yd: &mut [f64], r: &[f64]| {
+        rmax
+    }
+}
+
+/// A linear step's update of the rows of `y`, `yd` from the solve's `r`: y + γΔt r and
+/// pred·ẏ + r, of the start `from` (None: of `y`, `yd` themselves).
+fn linear_update(
+    y: &mut [f64],
+    yd: &mut [f64],
+    from: Option<(&[f64], &[f64])>,
+    r: &[f64],
+    gdt: f64,
+    pred: f64,
+) {
+    match from {
+        None => {
             for ((yi, ydi), ri) in y.iter_mut().zip(yd.iter_mut()).zip(r) {
                 *yi += gdt * ri;
                 *ydi = pred * *ydi + ri;
             }
-        };
-        let (y, yd, r) = (&mut y[..start], &mut yd[..start], &self.r[..start]);
-        match &pool {
-            Some(pool) => pool.install(|| {
-                y.par_chunks_mut(ROWS_PER_TASK)
-                    .zip(yd.par_chunks_mut(ROWS_PER_TASK))
-                    .zip(r.par_chunks(ROWS_PER_TASK))
-                    .for_each(|((y, yd), r)| update(y, yd, r))
-            }),
-            None => update(y, yd, r),
         }
-        Ok(())
+        Some((y0, yd0)) => {
+            let start = y0.iter().zip(yd0);
+            for (((yi, ydi), ri), (&y0, &yd0)) in y.iter_mut().zip(yd.iter_mut()).zip(r).zip(start)
+            {
+                *yi = y0 + gdt * ri;
+                *ydi = pred * yd0 + ri;
+            }
+        }
     }
 }
 

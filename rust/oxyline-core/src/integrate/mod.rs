@@ -66,6 +66,22 @@ pub trait Integrator {
     /// Advance (y, ẏ) from `time` to `time + dt` in place. RK4 leaves `yd` untouched.
     fn step(&mut self, time: f64, y: &mut [f64], yd: &mut [f64]) -> Result<()>;
 
+    /// [`Integrator::step`] from the state `start` = (y, ẏ), the step's end written into `y`
+    /// and `yd` (whatever they held): for a caller that keeps the start anyway (an
+    /// error-controlled run, to go back on a rejection) and so exchanges buffers instead of
+    /// copying. By default the start is copied and stepped in place.
+    fn step_from(
+        &mut self,
+        time: f64,
+        start: (&[f64], &[f64]),
+        y: &mut [f64],
+        yd: &mut [f64],
+    ) -> Result<()> {
+        y.copy_from_slice(start.0);
+        yd.copy_from_slice(start.1);
+        self.step(time, y, yd)
+    }
+
     /// The rate ẏ that goes with `y` at `time`, e.g. for outputs that need dV/dt. RK4 makes the
     /// algebraic unknowns of `y` consistent with the forcing and evaluates ẏ into `yd`;
     /// generalized-α's carried ẏ is already that rate, so (y, ẏ) are left as they are.
@@ -171,6 +187,15 @@ impl Integrator for GenAlpha<'_> {
     }
     fn step(&mut self, time: f64, y: &mut [f64], yd: &mut [f64]) -> Result<()> {
         GenAlpha::step(self, time, y, yd)
+    }
+    fn step_from(
+        &mut self,
+        time: f64,
+        start: (&[f64], &[f64]),
+        y: &mut [f64],
+        yd: &mut [f64],
+    ) -> Result<()> {
+        GenAlpha::step_from(self, time, start, y, yd)
     }
     fn rate(&mut self, _time: f64, _y: &mut [f64], _yd: &mut [f64]) -> Result<()> {
         Ok(())

@@ -287,6 +287,63 @@ impl Dense<'_> {
     }
 }
 
+/// The scout pass of an error-controlled run taken from another pass's fixed steps over the
+/// same first cycle from the same start: a transport run's flow-only first pass (the cycle-mean
+/// flows of the closures, `two_pass`) steps the flow at period/125 from the state the
+/// controlled run starts from, which is what the scout's 128 steps would do again. Its peaks
+/// seed the run's error control (see [`Scouted::seeded`]); the run then takes no scout pass.
+pub(super) struct Scouted {
+    ad: Adaptive,
+    /// The state (y, ẏ) the pass started from: a run from another start is not seeded.
+    start: (Vec<f64>, Vec<f64>),
+    /// The steps taken and the steps of the first cycle.
+    taken: usize,
+    steps: usize,
+}
+
+impl Scouted {
+    /// `ad`: the error control of the run to seed, as that run creates it.
+    pub fn new(ad: Adaptive) -> Self {
+        Scouted {
+            ad,
+            start: (Vec::new(), Vec::new()),
+            taken: 0,
+            steps: 0,
+        }
+    }
+
+    /// The pass's first cycle of `steps` steps of `h` starts at (y, ẏ).
+    pub fn start(&mut self, y: &[f64], yd: &[f64], h: f64, steps: usize) {
+        self.ad.scout_start(y, h);
+        self.start = (y.to_vec(), yd.to_vec());
+        (self.taken, self.steps) = (0, steps);
+    }
+
+    /// The pass's next step ended in `y` (after its first cycle: nothing).
+    pub fn step(&mut self, y: &[f64]) {
+        if self.taken < self.steps {
+            self.ad.scout_step(y, self.taken);
+            self.taken += 1;
+        }
+    }
+
+    /// The seeded error control for a run that starts from (y, ẏ), as after its own scout
+    /// pass; None if the pass did not complete its first cycle or started elsewhere (the
+    /// run then scouts for itself).
+    pub fn seeded(self, y: &[f64], yd: &[f64]) -> Option<Adaptive> {
+        let same = |a: &[f64], b: &[f64]| {
+            a.len() == b.len() && a.iter().zip(b).all(|(u, v)| u.to_bits() == v.to_bits())
+        };
+        let complete = self.steps > 0 && self.taken == self.steps;
+        if !complete || !same(&self.start.0, y) || !same(&self.start.1, yd) {
+            return None;
+        }
+        let mut ad = self.ad;
+        (ad.history, ad.h1) = (0, 0.0);
+        Some(ad)
+    }
+}
+
 /// What one flow step's estimate found: the largest scaled error and its value per kind.
 struct FlowError {
     max: f64,
@@ -407,8 +464,8 @@ impl Adaptive {
         if !self.peak.is_empty() {
             return;
         }
-        self.init_scales(&st.y);
         let h = period / SCOUT_STEPS as f64;
+        self.scout_start(&st.y, h);
         let ig = st.flow.integrator();
         let carried = ig.carried();
         ig.set_dt(h);
@@ -417,24 +474,34 @@ impl Adaptive {
         let mut yd = std::mem::take(&mut self.yd0);
         y.clone_from(&st.y);
         yd.clone_from(&st.yd);
-        self.y0.clone_from(&st.y);
-        self.ym1.clone_from(&st.y);
-        self.h1 = h;
         for k in 0..SCOUT_STEPS {
             if ig.step(t0 + k as f64 * h, &mut y, &mut yd).is_err() {
                 break;
             }
-            // rates from the second step on (the first has no step before it)
-            self.history = usize::from(k > 0);
-            let grown = self.track_peaks(&y, h);
-            self.track_flow_peaks(&y, grown);
-            std::mem::swap(&mut self.ym1, &mut self.y0);
-            copy_into(&mut self.y0, &y);
+            self.scout_step(&y, k);
         }
         // (a carried state the integrator gave out restores)
         let _ = ig.restore_carried(&carried);
         (self.ym2, self.yd0) = (y, yd);
         (self.history, self.h1) = (0, 0.0);
+    }
+
+    /// A scout pass of steps of `h` begins at the start state `y` (see `Adaptive::scout`).
+    fn scout_start(&mut self, y: &[f64], h: f64) {
+        self.init_scales(y);
+        copy_into(&mut self.y0, y);
+        copy_into(&mut self.ym1, y);
+        self.h1 = h;
+    }
+
+    /// The scout pass's step `k` (from 0) ended in `y`: the peaks it grows.
+    fn scout_step(&mut self, y: &[f64], k: usize) {
+        // rates from the second step on (the first has no step before it)
+        self.history = usize::from(k > 0);
+        let grown = self.track_peaks(y, self.h1);
+        self.track_flow_peaks(y, grown);
+        std::mem::swap(&mut self.ym1, &mut self.y0);
+        copy_into(&mut self.y0, y);
     }
 
     /// Every unknown's peaks, scales and weights from the start state `y`.
@@ -513,14 +580,21 @@ impl Adaptive {
         1.0 / (atol + self.tol.rtol * peak)
     }
 
-    /// Keep the state at the start of a step (copied in chunks on the run's threads).
-    pub fn save_start(&mut self, st: &State<'_, '_>) {
+    /// Keep the state at the start of a step: the state's vectors are exchanged with the
+    /// buffers of the start (y0, ẏ0), no copy; the step then reads its start from
+    /// [`Adaptive::start`] and writes its end into the state's vectors
+    /// (`State::advance_flow`).
+    pub fn save_start(&mut self, st: &mut State<'_, '_>) {
         if self.peak.is_empty() {
             self.init_scales(&st.y);
         }
         (self.may_grow, self.blocks_known) = (true, false);
-        copy_into(&mut self.y0, &st.y);
-        copy_into(&mut self.yd0, &st.yd);
+        let n = st.y.len();
+        // (the first step's buffers; afterwards they keep their length)
+        self.y0.resize(n, 0.0);
+        self.yd0.resize(n, 0.0);
+        std::mem::swap(&mut self.y0, &mut st.y);
+        std::mem::swap(&mut self.yd0, &mut st.yd);
         if let Some(sp) = st.species.as_ref() {
             if self.c0.is_empty() {
                 concentrations(st, &mut self.c0);
@@ -547,10 +621,16 @@ impl Adaptive {
         self.blocks_known = false;
     }
 
-    /// Back to the start of a rejected step (the species have not moved yet).
-    pub fn restore(&self, st: &mut State<'_, '_>) {
-        copy_into(&mut st.y, &self.y0);
-        copy_into(&mut st.yd, &self.yd0);
+    /// The start (y, ẏ) of the step being taken (see [`Adaptive::save_start`]).
+    pub fn start(&self) -> (&[f64], &[f64]) {
+        (&self.y0, &self.yd0)
+    }
+
+    /// Back to the start of a rejected step (the species have not moved yet): the buffers
+    /// exchanged back (the next `save_start` exchanges them again).
+    pub fn restore(&mut self, st: &mut State<'_, '_>) {
+        std::mem::swap(&mut self.y0, &mut st.y);
+        std::mem::swap(&mut self.yd0, &mut st.yd);
     }
 
     /// A rejected step (or a failed Newton iteration): the step to try instead.
@@ -749,8 +829,11 @@ impl Adaptive {
         let whole = n - n % LANES;
         let (mut m, mut grows) = ([0.0f64; LANES], [false; LANES]);
         for j in (0..whole).step_by(LANES) {
+            // (a group's own slices, of `LANES` values: its values are read without a bounds
+            // check each, 9 a value before)
+            let group = v.sub(j..j + LANES);
             for k in 0..LANES {
-                let (e, g) = v.term(j + k, c);
+                let (e, g) = group.term(k, c);
                 m[k] = larger(e, m[k]);
                 grows[k] |= g;
             }
@@ -1231,8 +1314,10 @@ struct Fused {
 const LANES: usize = 4;
 
 /// Unknowns per block of the record of where a step grows a peak (see
-/// `Adaptive::grow_blocks`): a divisor of `CHUNK`.
-const BLOCK: usize = 256;
+/// `Adaptive::grow_blocks`): a divisor of `CHUNK`, and a multiple of `LANES`. Small: the
+/// tracking pass visits every unknown of a block where one grew (blocks of 256 sent it over
+/// nearly every unknown of adan56's 1 987 in its first cycle, 12 % of that run's instructions).
+const BLOCK: usize = 32;
 
 /// The vectors of one range of unknowns that the estimate's pass reads (see
 /// `Adaptive::fused_range`), each the range's own slice.
@@ -1249,6 +1334,22 @@ struct FusedSlices<'a> {
 }
 
 impl FusedSlices<'_> {
+    /// The unknowns `r` of the range.
+    #[inline(always)]
+    fn sub(&self, r: Range<usize>) -> FusedSlices<'_> {
+        FusedSlices {
+            y: &self.y[r.clone()],
+            ym2: &self.ym2[r.clone()],
+            ym1: &self.ym1[r.clone()],
+            y0: &self.y0[r.clone()],
+            wu: &self.wu[r.clone()],
+            ws: &self.ws[r.clone()],
+            pk: &self.pk[r.clone()],
+            rp: &self.rp[r.clone()],
+            ap: &self.ap[r],
+        }
+    }
+
     /// Unknown `j`'s scaled local error (Milne's device on the last three states, per unit
     /// step or per step, the larger) and whether it grows one of the peaks `track_peaks`
     /// follows (the same comparisons).

@@ -211,14 +211,16 @@ impl State<'_, '_> {
 
     /// The flow part of one split step of `h` from `t` (error-controlled runs, which judge the
     /// flow step before the species follow it): the transport's start flows are set first.
-    pub fn advance_flow(&mut self, t: f64, h: f64) -> Result<()> {
+    /// The step starts from (y, ẏ) = `start` (the state the run keeps to go back to on a
+    /// rejection), and its end is written into the state's vectors, whatever they held.
+    pub fn advance_flow(&mut self, t: f64, h: f64, start: (&[f64], &[f64])) -> Result<()> {
         if let Some(sp) = self.species.as_mut() {
-            sp.before_flow_step(&self.y);
+            sp.before_flow_step(start.0);
         }
         self.dt = h;
         let ig = self.flow.integrator();
         ig.set_dt(h);
-        ig.step(t, &mut self.y, &mut self.yd)
+        ig.step_from(t, start, &mut self.y, &mut self.yd)
     }
 
     /// The species part of the split step of `h` from `t` that [`State::advance_flow`] began.

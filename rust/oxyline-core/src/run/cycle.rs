@@ -315,6 +315,10 @@ impl<'r, 'f> Cycles<'r, 'f> {
         }
         if let Some(m) = self.mean.as_deref_mut() {
             m.start_cycle(self.steps_per_cycle);
+            if let Some(scout) = m.scout.as_mut().filter(|_| cycle == 0) {
+                let st = &self.state;
+                scout.start(&st.y, &st.yd, st.dt, self.steps_per_cycle);
+            }
         }
         if rows.recorded && (!s.output_all_cycles || cycle == 0) {
             let t = rows.output_time(rows.t0, s.output_all_cycles);
@@ -424,8 +428,8 @@ impl<'r, 'f> Cycles<'r, 'f> {
             let replayed = self.periodic_steps.replaying();
             // the flow step and its estimate in one entry of the run's pool
             let stepped = crate::threads::in_pool(|| {
-                ad.save_start(&self.state);
-                let stepped = self.state.advance_flow(t, h);
+                ad.save_start(&mut self.state);
+                let stepped = self.state.advance_flow(t, h, ad.start());
                 stepped.map(|()| ad.judge_flow(&mut self.state, h))
             });
             let (err, kinds) = match stepped {

@@ -16,6 +16,16 @@ use std::f64::consts::PI;
 /// waveform's sharp features; the wall shear's backward part comes from the first few).
 const MAX_HARMONICS: usize = 32;
 
+/// The most steps per cycle whose roots of unity are tabulated (256 KiB); a finer cycle's
+/// phases are computed per sample and harmonic (the same values).
+const MAX_ROOTS: usize = 1 << 14;
+
+/// e^{−2πim/N}, the phase of the residue `m` of a cycle of `n` steps (the one expression of
+/// every phase: the same bits tabulated or not).
+fn phase(m: usize, n: usize) -> Complex<f64> {
+    Complex::from_polar(1.0, -2.0 * PI * m as f64 / n as f64)
+}
+
 /// Steps of samples held before they are folded into the sums: each fold reads and writes
 /// every vessel's sums once, so the sums' memory traffic is 1/`BLOCK` of a fold per step.
 const BLOCK: usize = 16;
@@ -39,6 +49,11 @@ pub(crate) struct FlowHarmonics {
     block: Vec<f64>,
     /// The phases of the block's steps, e^{−2πiks/N}, `per_vessel` per step.
     phases: Vec<Complex<f64>>,
+    /// The cycle's N roots e^{−2πim/N} (m = 0..N; empty for N above `MAX_ROOTS`): the phase
+    /// of sample s and harmonic k is the root m = ks mod N, one `from_polar` per root and
+    /// cycle instead of one per sample and harmonic (those were a quarter of an O2 run's
+    /// instructions on paper-bifurcated).
+    roots: Vec<Complex<f64>>,
     /// Whether `sums` and `means` hold the harmonics of a completed cycle.
     complete: bool,
 }
@@ -64,6 +79,7 @@ impl FlowHarmonics {
             means: Vec::new(),
             block: Vec::new(),
             phases: Vec::new(),
+            roots: Vec::new(),
             complete: false,
         }
     }
@@ -86,6 +102,10 @@ impl FlowHarmonics {
         self.means.resize(m, 0.0);
         self.block.clear();
         self.block.reserve_exact(m * BLOCK);
+        self.roots.clear();
+        if self.per_vessel > 0 && steps <= MAX_ROOTS {
+            self.roots.extend((0..steps).map(|m| phase(m, steps)));
+        }
     }
 
     pub fn accumulate(&mut self, y: &[f64]) {
@@ -105,10 +125,12 @@ impl FlowHarmonics {
         let first = self.count - rows + 1; // the block's first sample index s
         let n = self.steps.max(1);
         self.phases.clear();
+        let roots = &self.roots;
         for s in first..first + rows {
             self.phases
-                .extend((1..=h).map(|k| {
-                    Complex::from_polar(1.0, -2.0 * PI * ((k * s) % n) as f64 / n as f64)
+                .extend((1..=h).map(|k| match roots.get((k * s) % n) {
+                    Some(&root) => root,
+                    None => phase((k * s) % n, n),
                 }));
         }
         for (u, (mean, sums)) in self
@@ -144,6 +166,7 @@ impl FlowHarmonics {
         // the block is not needed again this pass
         self.block = Vec::new();
         self.phases = Vec::new();
+        self.roots = Vec::new();
     }
 
     /// The harmonics of the last completed cycle (None before one completes).

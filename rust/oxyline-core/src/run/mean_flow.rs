@@ -1,6 +1,7 @@
 //! The cycle-mean |Q| and signed Q of the segments, accumulated during the flow-only first
 //! pass of a transport run (see `two_pass`).
 
+use super::adaptive::Scouted;
 use super::flow_harmonics::FlowHarmonics;
 use crate::error::Result;
 use crate::transport::Transport;
@@ -18,6 +19,9 @@ pub(super) struct MeanAbs {
     count: usize,
     /// The inlet renewal's flow harmonics, fed with the same steps (None: not needed).
     pub harmonics: Option<FlowHarmonics>,
+    /// An error-controlled run's scout pass, fed with the first cycle's steps (None: the run
+    /// has a fixed step).
+    pub scout: Option<Scouted>,
 }
 
 /// The flow-only first pass stops once the cycle-mean |Q| of every segment changes by less
@@ -37,6 +41,7 @@ impl MeanAbs {
             prev: vec![f64::INFINITY; n],
             count: 0,
             harmonics: None,
+            scout: None,
         }
     }
 
@@ -63,6 +68,9 @@ impl MeanAbs {
         self.count += 1;
         if let Some(h) = self.harmonics.as_mut() {
             h.accumulate(y);
+        }
+        if let Some(s) = self.scout.as_mut() {
+            s.step(y);
         }
     }
 

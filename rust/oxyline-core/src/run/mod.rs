@@ -67,6 +67,7 @@ pub fn simulate(
         None,
         None,
         None,
+        None,
         progress,
         None,
     )

@@ -1,6 +1,6 @@
 //! One pass of a run: settings → plan → initial state → cycle loop → outcome.
 
-use super::adaptive::Adaptive;
+use super::adaptive::{Adaptive, Scouted};
 use super::checkpoint::{Checkpoints, Snapshot};
 use super::coupling::{Species, State};
 use super::cycle::Cycles;
@@ -16,7 +16,8 @@ use crate::integrate::steady::SteadyCache;
 use crate::transport::{Formulation, Transport};
 
 /// One pass: settings → plan → initial state → cycle loop → outcome. `mean` collects the
-/// cycle-mean |Q| of a flow-only first pass. `checkpoints` saves snapshots at cycle ends and,
+/// cycle-mean |Q| of a flow-only first pass; `scouted`, that pass's scout of an
+/// error-controlled run (see `Scouted`). `checkpoints` saves snapshots at cycle ends and,
 /// with a snapshot to resume from, starts there instead of at the initial state.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn run(
@@ -25,6 +26,7 @@ pub(super) fn run(
     s: &RunSettings,
     mut transport: Option<&mut Transport>,
     mean: Option<&mut MeanAbs>,
+    scouted: Option<Scouted>,
     sink: Option<&mut OutputSink<'_>>,
     progress: &mut dyn FnMut(f64, f64) -> bool,
     mut checkpoints: Option<&mut Checkpoints<'_>>,
@@ -112,6 +114,13 @@ pub(super) fn run(
     }
     if let Some(tol) = s.adaptive() {
         cycles.events = super::events::Events::new(dae, &cycles.state.y, tol);
+    }
+    // (a run with valves takes no scout pass: see `Adaptive::scout`)
+    if cycles.adaptive.is_some() && cycles.events.is_none() {
+        let st = &cycles.state;
+        if let Some(ad) = scouted.and_then(|sc| sc.seeded(&st.y, &st.yd)) {
+            cycles.adaptive = Some(ad);
+        }
     }
     cycles.start_svzerod(!plan.use_rk4);
     if let Some(r) = &resume {

@@ -3,6 +3,7 @@
 //! the coupled run then starts again from the same initial state. Both passes share one
 //! steady state.
 
+use super::adaptive::{Adaptive, Scouted};
 use super::checkpoint::Checkpoints;
 use super::flow_harmonics::FlowHarmonics;
 use super::mean_flow::{self, MeanAbs};
@@ -27,11 +28,22 @@ pub(super) fn run_two_pass(
     // needs it first
     let mut steady = SteadyCache::new(dae);
     let Some(tr) = transport else {
-        let out = run(dae, &mut steady, s, None, None, sink, progress, checkpoints);
+        let out = run(
+            dae,
+            &mut steady,
+            s,
+            None,
+            None,
+            None,
+            sink,
+            progress,
+            checkpoints,
+        );
         return keep_interrupted(out, s, None);
     };
     let unknowns = tr.mean_flow_unknowns();
     let mut mean_abs_flow = Vec::new();
+    let mut scouted = None;
     // A resumed run repeats the first pass (it starts from the initial state, not from the
     // snapshot, so it is the same pass): the laws also need the forward-flow means and the
     // inlet-renewal harmonics, which the checkpoint's mean |Q| alone does not give, and the
@@ -40,6 +52,13 @@ pub(super) fn run_two_pass(
     if !unknowns.is_empty() {
         let mut mean = MeanAbs::new(unknowns);
         mean.harmonics = FlowHarmonics::for_transport(tr);
+        // an error-controlled run's scout pass from the same first cycle's steps (a run with
+        // valves takes none: see `Adaptive::scout`)
+        let valves = dae.elements.iter().any(|el| !el.switches().is_empty());
+        mean.scout = s.adaptive().filter(|_| !valves).map(|tol| {
+            let rho_inf = s.method.rho_inf();
+            Scouted::new(Adaptive::new(dae, tol, rho_inf, s.period, s.output_every))
+        });
         // the first pass records nothing: no sink
         let first = run(
             dae,
@@ -47,6 +66,7 @@ pub(super) fn run_two_pass(
             &mean_flow_pass(s),
             None,
             Some(&mut mean),
+            None,
             None,
             progress,
             None,
@@ -62,6 +82,7 @@ pub(super) fn run_two_pass(
             Ok(_) => {}
         }
         mean_flow::set_mean_flows(tr, &mean, s.period)?;
+        scouted = mean.scout.take();
         mean_abs_flow = mean.last;
     }
     if let Some(c) = checkpoints.as_deref_mut() {
@@ -73,6 +94,7 @@ pub(super) fn run_two_pass(
         s,
         Some(&mut *tr),
         None,
+        scouted,
         sink,
         progress,
         checkpoints,
