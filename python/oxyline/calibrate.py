@@ -34,7 +34,7 @@ from oxyline.targets import (
     is_oxygen_signal,
     parse_targets,
     path_of,
-    signals_of,
+    signals_for,
 )
 
 __all__ = ["CalibrationError", "CalibrationResult", "Sensitivities", "calibrate",
@@ -310,7 +310,8 @@ def sensitivities(model: Model | Mapping[str, Any] | str, parameters: Sequence[s
         raise CalibrationError("parameters and outputs: expected lists of names")
     if mode not in ("forward", "adjoint"):
         raise CalibrationError(f"mode: expected 'forward' or 'adjoint', got {mode!r}")
-    targets = [Target(o, None, signals=signals_of(o, m)) for o in outputs]
+    targets = [Target(o, None, signals=s)
+               for o, s in zip(outputs, signals_for(outputs, m), strict=True)]
     if mode == "adjoint":
         values, jac, raw = _adjoint(m, parameters, targets, steps_per_cycle, tol, max_cycles,
                                     series_at_steps=True)

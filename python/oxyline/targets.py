@@ -41,8 +41,9 @@ cycle and their exact derivatives, and reduces them to each output's value and d
 mean of the derivatives, a maximum the derivative at the step of the maximum (the derivative
 of the discrete maximum, exact wherever the maximum is unique). A pulse-wave velocity's feet
 are differentiated likewise at their samples (the steepest upstroke and the diastolic
-minimum), and its path length by the lengths of the vessels on the path. Here the names are
-checked against the model and the user's targets read.
+minimum), and its path length by the lengths of the vessels on the path. The core also finds
+the signals each name reads, checked against the model
+(:func:`oxyline._core.target_signals`); here the user's targets are read.
 """
 
 from __future__ import annotations
@@ -58,12 +59,10 @@ import numpy as np
 from oxyline import _core
 from oxyline.errors import ModelError
 
-VARIABLES = ("pressure_in", "pressure_out", "flow_in", "flow_out")
 #: a vessel's oxygen signals (the core's species tangent)
 O2_VARIABLES = ("po2_out", "saturation_out", "wall_uptake")
 #: the network's oxygen consumption signal (vessel "")
 O2_NETWORK = ("", "consumption")
-STATISTICS = ("min", "max", "mean", "pulse", "series")
 
 
 class CalibrationError(ModelError):
@@ -88,102 +87,29 @@ class Target:
         return len(np.atleast_1d(self.value))
 
 
-def _fail(what: str, why: str, error: type[ModelError]) -> ModelError:
-    return error(f"output '{what}': {why}")
-
-
 def signals_of(output: str, model: Any, error: type[ModelError] = ModelError
                ) -> list[tuple[str, str]]:
     """The (vessel, variable) signals ``output`` reads; an error naming it if the vessel,
     variable or statistic does not exist in ``model`` (a :class:`~oxyline.Model`)."""
-    names = set(model.vessel_names) | set(_heart_valves(model))
-    parts = output.split(".")
-    if parts[0] in ("SvO2", "VO2") or (len(parts) == 3 and parts[1] in O2_VARIABLES):
-        return _oxygen_signals(output, parts, model, error)
-    if output == "cardiac_output":
-        inlets = _inlet_vessels(model)
-        if not inlets:  # a closed loop: the flow through its heart blocks' aortic valves
-            inlets = [v for v in _heart_valves(model) if v.endswith(":aortic")]
-        if not inlets:
-            raise _fail(output, "the model has no flow condition or heart block", error)
-        return [(v, "flow_in") for v in inlets]
-    if parts[0] == "pwv":
-        if len(parts) != 3:
-            raise _fail(output, "expected pwv.<proximal vessel>.<distal vessel>", error)
-        pwv_path(output, model, error)
-        return [(parts[1], "pressure_in"), (parts[2], "pressure_out")]
-    if parts[0] in ("amplification", "augmentation_index"):
-        return _shape_signals(output, parts, names, model.name, error)
-    if parts[0] == "flow_split":
-        if len(parts) != 3:
-            raise _fail(output, "expected flow_split.<vessel>.<parent>", error)
-        for v in parts[1:]:
-            if v not in names:
-                raise _fail(output, f"no vessel named {v!r} in model '{model.name}'", error)
-        return [(parts[1], "flow_in"), (parts[2], "flow_in")]
-    if len(parts) != 3:
-        raise _fail(output, "expected <vessel>.<variable>.<statistic>, flow_split.<vessel>."
-                    "<parent>, pwv.<proximal>.<distal>, amplification.<central>.<peripheral>, "
-                    "augmentation_index.<vessel> or cardiac_output", error)
-    vessel, variable, stat = parts
-    if vessel not in names:
-        raise _fail(output, f"no vessel named {vessel!r} in model '{model.name}'", error)
-    if variable not in VARIABLES:
-        raise _fail(output, f"unknown variable {variable!r} (one of "
-                    f"{', '.join(VARIABLES + O2_VARIABLES)})", error)
-    if stat not in STATISTICS:
-        raise _fail(output, f"unknown statistic {stat!r} (one of {', '.join(STATISTICS)})",
-                    error)
-    return [(vessel, variable)]
+    return signals_for([output], model, error)[0]
 
 
-def _shape_signals(output: str, parts: list[str], names: set[str], model_name: str,
-                   error: type[ModelError]) -> list[tuple[str, str]]:
-    """The pressures of ``amplification.<central>.<peripheral>`` (the inlet of ``central``,
-    the outlet of ``peripheral``) or ``augmentation_index.<vessel>`` (its inlet)."""
-    amplification = parts[0] == "amplification"
-    if len(parts) != (3 if amplification else 2):
-        raise _fail(output, "expected amplification.<central vessel>.<peripheral vessel>"
-                    if amplification else "expected augmentation_index.<vessel>", error)
-    for v in parts[1:]:
-        if v not in names:
-            raise _fail(output, f"no vessel named {v!r} in model '{model_name}'", error)
-    if amplification:
-        return [(parts[1], "pressure_in"), (parts[2], "pressure_out")]
-    return [(parts[1], "pressure_in")]
+def signals_for(outputs: Sequence[str], model: Any, error: type[ModelError] = ModelError
+                ) -> list[list[tuple[str, str]]]:
+    """The signals of each of ``outputs``, found by the core against ``model`` in one read of
+    it (``oxyline_core::sensitivity::target_signals``: its vessels, heart valves, flow inlets
+    and oxygen section); the first output that does not fit raises ``error`` naming it."""
+    return [_signals(found, error) for found in _core.target_signals(model.canonical,
+                                                                     list(outputs))]
 
 
-def _heart_valves(model: Any) -> list[str]:
-    """A heart block's valves ``<vessel>:<tricuspid|pulmonary|mitral|aortic>``: outputs read
-    the pressures behind (``pressure_in``) and in front (``pressure_out``) of each and its
-    flow, so ``<vessel>:aortic.pressure_in.max`` is the left ventricle's peak pressure."""
-    if not any("heart_pulmonary" in v for v in model.canonical.get("vessels", ())):
-        return []
-    return [str(v[0]) for v in model.network.unknown_layout().get("valves", ())
-            if ":" in str(v[0])]
-
-
-def _oxygen_signals(output: str, parts: list[str], model: Any, error: type[ModelError]
-                    ) -> list[tuple[str, str]]:
-    """The signals of an oxygen output (``SvO2.<vessel>``, ``VO2[.<vessel>...]``,
-    ``<vessel>.<oxygen variable>.<statistic>``)."""
-    if not (model.canonical.get("transport") or {}).get("species"):
-        raise _fail(output, f"model '{model.name}' has no oxygen section", error)
-    names = set(model.vessel_names)
-    vessels = parts[1:] if parts[0] in ("SvO2", "VO2") else parts[:1]
-    for v in vessels:
-        if v not in names:
-            raise _fail(output, f"no vessel named {v!r} in model '{model.name}'", error)
-    if parts[0] == "SvO2":
-        if len(parts) != 2:
-            raise _fail(output, "expected SvO2.<vessel>", error)
-        return [(parts[1], "saturation_out"), (parts[1], "flow_out")]
-    if parts[0] == "VO2":
-        return [(v, "wall_uptake") for v in parts[1:]] or [O2_NETWORK]
-    if parts[2] not in STATISTICS:
-        raise _fail(output, f"unknown statistic {parts[2]!r} (one of {', '.join(STATISTICS)})",
-                    error)
-    return [(parts[0], parts[1])]
+def _signals(found: tuple[Any, str | None], error: type[ModelError]
+             ) -> list[tuple[str, str]]:
+    """The signals of one of :func:`oxyline._core.target_signals`' answers, or its error."""
+    signals, why = found
+    if why is not None:
+        raise error(why)
+    return [(str(v), str(x)) for v, x in signals]
 
 
 def is_oxygen_signal(signal: tuple[str, str]) -> bool:
@@ -200,12 +126,6 @@ def pwv_path(output: str, model: Any, error: type[ModelError] = ModelError
         return _core.pulse_wave_path(json.dumps(model.canonical), output)
     except ModelError as e:
         raise error(str(e)) from None
-
-
-def _inlet_vessels(model: Any) -> list[str]:
-    bcs = model.source.get("boundary_conditions", {}) or {}
-    inflow = {n for n, bc in bcs.items() if str(bc.get("type", "")).lower() == "flow"}
-    return [str(v["name"]) for v in model.source["vessels"] if str(v.get("from")) in inflow]
 
 
 def evaluate(output: str, times: np.ndarray, values: np.ndarray, derivs: np.ndarray,
@@ -246,7 +166,9 @@ def parse_targets(targets: Any, model: Any) -> list[Target]:
         raise CalibrationError(f"targets: expected a mapping or a list, got {targets!r}")
     if not items:
         raise CalibrationError("targets: none given")
-    out = []
+    # every target's signals in one read of the model (an error is raised at its target)
+    found = _core.target_signals(model.canonical, [str(i.get("output", "?")) for i in items])
+    out: list[Target] = []
     for item in items:
         name = str(item.get("output", "?"))
         unknown = set(item) - {"output", "value", "sigma", "weight", "times"}
@@ -266,7 +188,7 @@ def parse_targets(targets: Any, model: Any) -> list[Target]:
                                        f"{value.size} values")
         sigma = _sigma(name, item, value)
         t = Target(name, value, sigma, times)
-        t.signals = signals_of(name, model, CalibrationError)
+        t.signals = _signals(found[len(out)], CalibrationError)
         out.append(t)
     return out
 

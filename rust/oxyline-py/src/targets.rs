@@ -1,11 +1,14 @@
 //! Calibration targets (`oxyline_core::sensitivity::targets`): an output's value and its
-//! derivatives from its signals over the periodic cycle, and the foot of a pressure wave.
+//! derivatives from its signals over the periodic cycle, the foot of a pressure wave, and
+//! the signals an output reads (`oxyline_core::sensitivity::target_signals`).
 
 use crate::errors::to_py;
+use crate::reader::model::canonical_spec;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1};
 use numpy::{PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods};
 use oxyline_core::error::Error;
 use oxyline_core::model::parse;
+use oxyline_core::sensitivity::target_signals::signals_of;
 use oxyline_core::sensitivity::targets::{self, CycleSignals, PathLength};
 use pyo3::prelude::*;
 
@@ -100,4 +103,25 @@ pub fn transit_time(
 pub fn pulse_wave_path(model_json: &str, output: &str) -> PyResult<Vec<(String, f64)>> {
     let spec = parse(model_json).map_err(to_py)?;
     targets::pulse_wave_path(&spec, output).map_err(to_py)
+}
+
+/// Each output's answer of [`target_signals`]: its (vessel, variable) signals, or the
+/// message of the error naming it.
+type Found = (Vec<(String, String)>, Option<String>);
+
+/// The (vessel, variable) signals each of `outputs` reads in the canonical model `model`
+/// (its dicts, read in place), found by the core (`sensitivity::target_signals`) in one read
+/// of the model; an output that does not fit gets the message of the `ModelError` naming it
+/// instead, for the caller to raise in its own error type where it reads that output.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn target_signals(model: Bound<'_, PyAny>, outputs: Vec<String>) -> PyResult<Vec<Found>> {
+    let spec = canonical_spec(&model)?;
+    Ok(outputs
+        .iter()
+        .map(|output| match signals_of(&spec, output) {
+            Ok(signals) => (signals, None),
+            Err(e) => (Vec::new(), Some(e.to_string())),
+        })
+        .collect())
 }

@@ -3,12 +3,14 @@
 //! tangent-linear generalized-α run to the periodic state ([`tangent`]), and its adjoint
 //! (reverse) sweep for many parameters and few functionals ([`adjoint`]). A closed loop's
 //! conserved blood volume closes its periodic problem ([`volume`]). Calibration targets (an
-//! output by name, its value and derivatives from the signals' tangents) in [`targets`].
+//! output by name, its value and derivatives from the signals' tangents) in [`targets`], the
+//! signals each output name reads in [`target_signals`].
 
 pub mod krylov;
 pub mod parameter;
 pub mod species;
 pub mod tangent;
+pub mod target_signals;
 pub mod targets;
 pub mod volume;
 

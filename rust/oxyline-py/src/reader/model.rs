@@ -2,24 +2,21 @@
 //! (top level, vessels, boundary conditions, periods, simulation keys, species transport) with
 //! the core's schema (`oxyline_core::model`) in one call; the network is then built from what
 //! it read (`Network.from_parts`) without a second crossing. [`canonical_model`] writes the
-//! full canonical description (for display and ensembles) from the same readers.
+//! full canonical description (for display and ensembles) with the core's own
+//! `model::native::canonical`, whose pieces `read_model` shares.
 
 use super::de;
 use super::native::NativeParts;
 use super::node::{PyNode, to_python};
-use super::schema::{transport, transport_context};
+use super::schema::{transport, warn_facilitation};
 use crate::errors::to_py;
 use oxyline_core::Error;
 use oxyline_core::NetworkSpec;
 use oxyline_core::model::native;
-use oxyline_core::model::node::{Fields, Node};
-use oxyline_core::model::units::Units;
+use oxyline_core::model::node::Node;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
-use serde_json::{Map, Value};
-
-/// Periods of the elements that repeat, with the element.
-type Periods = Vec<(f64, String)>;
+use serde_json::Value;
 
 /// What `read_model` returns: the parts, name, period, canonical transport section (None
 /// without species) and transport facts.
@@ -31,45 +28,20 @@ type Read<'py> = (
     Bound<'py, PyDict>,
 );
 
-/// Canonical conditions of `bcs` (all of them, or the nodes `only`) and their periods.
-fn conditions<'py>(
-    bcs: &PyNode<'py>,
-    only: Option<&[Bound<'py, PyAny>]>,
-    units: Units,
-) -> PyResult<(Map<String, Value>, Periods)> {
-    native::check_conditions(bcs).map_err(to_py)?;
-    let mut out = Map::new();
-    let mut periods = Vec::new();
-    let entries: Vec<(String, PyNode<'py>)> = match only {
-        None => Node::entries(bcs),
-        Some(nodes) => nodes
-            .iter()
-            .map(|n| Ok((n.str()?.to_string(), PyNode(bcs.0.get_item(n)?))))
-            .collect::<PyResult<_>>()?,
-    };
-    for (node, bc) in entries {
-        let el = format!("boundary condition '{node}'");
-        let c = native::boundary_condition(&Fields::new(bc), units, &el).map_err(to_py)?;
-        periods.extend(native::condition_periods(&c, &el));
-        out.insert(node, c);
-    }
-    Ok((out, periods))
+/// The conditions of the nodes `only` among the mapping `bcs`, as entries.
+fn entries_of<'py>(
+    bcs: &Bound<'py, PyAny>,
+    only: &[Bound<'py, PyAny>],
+) -> PyResult<Vec<(String, PyNode<'py>)>> {
+    only.iter()
+        .map(|n| Ok((n.str()?.to_string(), PyNode(bcs.get_item(n)?))))
+        .collect()
 }
 
 /// The model's `boundary_conditions` (an empty mapping when missing).
 fn conditions_node<'py>(data: &PyNode<'py>) -> PyNode<'py> {
     data.get("boundary_conditions")
         .unwrap_or_else(|| PyNode(PyDict::new(data.0.py()).into_any()))
-}
-
-/// The model period checked against every element's, and the simulation section's keys.
-fn period_and_simulation(data: &PyNode<'_>, periods: &Periods) -> PyResult<Option<f64>> {
-    let period = native::period(data).map_err(to_py)?;
-    let period = native::check_periods(period, periods).map_err(to_py)?;
-    if let Some(sim) = data.get("simulation").filter(Node::truthy) {
-        native::simulation(&sim).map_err(to_py)?;
-    }
-    Ok(period)
 }
 
 /// Read a native model dict: (the parts the network is built from, name, period, canonical
@@ -87,19 +59,20 @@ pub(crate) fn read_model<'py>(py: Python<'py>, data: Bound<'py, PyAny>) -> PyRes
     let mut parts = NativeParts::read(vessels, units)?;
     let vessel_periods = parts.read_rest(vessels, units)?;
     let bcs = conditions_node(&node);
-    let (slow, mut periods) = match bcs.0.cast::<PyDict>() {
+    let entries = match bcs.0.cast::<PyDict>() {
         Ok(d) if d.is_exact_instance_of::<PyDict>() => {
             let slow = parts.read_outlets(d, units);
-            conditions(&bcs, Some(&slow), units)?
+            entries_of(&bcs.0, &slow)?
         }
-        _ => conditions(&bcs, None, units)?,
+        _ => native::condition_entries(&node).map_err(to_py)?,
     };
+    let (slow, mut periods) = native::conditions(entries, units).map_err(to_py)?;
     periods.extend(vessel_periods);
-    let period = period_and_simulation(&node, &periods)?;
+    let period = native::period_and_simulation(&node, &periods).map_err(to_py)?;
     let mut rest = header.canonical;
     rest.insert("vessels".into(), Value::Array(Vec::new()));
     rest.insert("boundary_conditions".into(), Value::Object(slow));
-    let ctx = transport_context(&node, &rest["blood"], units, period);
+    let ctx = native::transport_context(&node, &rest["blood"], units, period);
     let (section, info) = transport(py, &node, &ctx)?;
     let section = match section {
         Some(s) => {
@@ -114,35 +87,17 @@ pub(crate) fn read_model<'py>(py: Python<'py>, data: Bound<'py, PyAny>) -> PyRes
 }
 
 /// The full canonical SI description of a native model dict (every vessel and condition as
-/// its canonical dict), as `read_model` reads it.
+/// its canonical dict), read by the core's `canonical` over the Python objects; a wall that
+/// needs it warns (`oxyline.HemoglobinFacilitationWarning`).
 #[oxyline_py_guard::guard]
 #[pyfunction]
 pub(crate) fn canonical_model<'py>(
     py: Python<'py>,
     data: Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let node = PyNode(data);
-    let header = native::header(&node).map_err(to_py)?;
-    let units = header.units;
-    let mut canon = header.canonical;
-    let vessels = node
-        .get("vessels")
-        .and_then(|v| v.items())
-        .unwrap_or_default();
-    let mut list = Vec::with_capacity(vessels.len());
-    for (i, v) in vessels.into_iter().enumerate() {
-        list.push(native::vessel(&Fields::new(v), i, units).map_err(to_py)?);
-    }
-    let (bcs, mut periods) = conditions(&conditions_node(&node), None, units)?;
-    periods.extend(native::element_periods(&list));
-    let period = period_and_simulation(&node, &periods)?;
-    canon.insert("vessels".into(), Value::Array(list));
-    canon.insert("boundary_conditions".into(), Value::Object(bcs));
-    let ctx = transport_context(&node, &canon["blood"], units, period);
-    if let (Some(section), _) = transport(py, &node, &ctx)? {
-        canon.insert("transport".into(), section);
-    }
-    to_python(py, &Value::Object(canon))
+    let (canon, warnings) = native::canonical(&PyNode(data)).map_err(to_py)?;
+    warn_facilitation(py, &warnings)?;
+    to_python(py, &canon)
 }
 
 /// The highest significant frequency (Hz) of a native model dict's forcing and the
@@ -180,7 +135,9 @@ pub(crate) fn forcing_frequency(data: Bound<'_, PyAny>, rtol: Option<f64>) -> Py
         })
         .map(|(n, _)| pyo3::types::PyString::new(all.0.py(), &n).into_any())
         .collect();
-    let (bcs, _) = conditions(&all, Some(&forcing), header.units)?;
+    native::check_conditions(&all).map_err(to_py)?;
+    let (bcs, _) =
+        native::conditions(entries_of(&all.0, &forcing)?, header.units).map_err(to_py)?;
     let specs = bcs
         .into_iter()
         .map(|(n, v)| {

@@ -6,7 +6,7 @@ use super::node::{PyNode, to_python};
 use crate::errors::to_py;
 use oxyline_core::Error;
 use oxyline_core::model::node::{Fields, Node};
-use oxyline_core::model::units::{Quantity, Units};
+use oxyline_core::model::units::Units;
 use oxyline_core::model::{native, species};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -108,30 +108,13 @@ pub(crate) fn read_transport<'py>(
 ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyDict>)> {
     let node = PyNode(data);
     let header = native::header(&node).map_err(to_py)?;
-    let ctx = transport_context(&node, &header.canonical["blood"], header.units, period);
+    let ctx = native::transport_context(&node, &header.canonical["blood"], header.units, period);
     let (section, info) = transport(py, &node, &ctx)?;
     let section = match section {
         Some(s) => to_python(py, &s)?,
         None => py.None().into_bound(py),
     };
     Ok((section, info))
-}
-
-/// What the transport sections of a model are read against: its pressure unit, period, run
-/// duration and blood (canonical, SI).
-pub(crate) fn transport_context<N: Node>(
-    data: &N,
-    blood: &serde_json::Value,
-    units: Units,
-    period: Option<f64>,
-) -> species::Context {
-    let (mu, rho) = (blood["viscosity"].as_f64(), blood["density"].as_f64());
-    species::Context {
-        pressure_factor: units.factor(Quantity::Pressure),
-        period,
-        duration: duration(data, period),
-        kinematic_viscosity: mu.zip(rho).map(|(mu, rho)| mu / rho),
-    }
 }
 
 /// The transport sections of `data` alone (no blood: a `graetz` wall without its kinematic
@@ -170,23 +153,27 @@ pub(crate) fn transport<'py>(
     let Some(tr) = species::read(node, ctx).map_err(to_py)? else {
         return Ok((None, info));
     };
-    if !tr.warnings.is_empty() {
-        let category = py
-            .import("oxyline.transport")?
-            .getattr("HemoglobinFacilitationWarning")?;
-        for w in &tr.warnings {
-            let text = std::ffi::CString::new(w.as_str()).unwrap_or_default();
-            PyErr::warn(py, &category, &text, 2)?;
-        }
-    }
+    warn_facilitation(py, &tr.warnings)?;
     info.set_item("species", &tr.species)?;
     info.set_item("oxygen", tr.oxygen.as_ref().map(|o| o.0.clone()))?;
     info.set_item("solubility", tr.oxygen.as_ref().map(|o| o.1))?;
     Ok((Some(tr.section), info))
 }
 
-/// The run's duration a callable wall flux and a bolus are sampled over (the core's).
-pub(crate) use oxyline_core::model::native::duration;
+/// The transport section's `warnings` as `oxyline.HemoglobinFacilitationWarning`s.
+pub(crate) fn warn_facilitation(py: Python<'_>, warnings: &[String]) -> PyResult<()> {
+    if warnings.is_empty() {
+        return Ok(());
+    }
+    let category = py
+        .import("oxyline.transport")?
+        .getattr("HemoglobinFacilitationWarning")?;
+    for w in warnings {
+        let text = std::ffi::CString::new(w.as_str()).unwrap_or_default();
+        PyErr::warn(py, &category, &text, 2)?;
+    }
+    Ok(())
+}
 
 /// The keys of a model's `simulation` section and its method.
 #[oxyline_py_guard::guard]

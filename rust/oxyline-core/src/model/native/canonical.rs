@@ -1,6 +1,9 @@
-//! A whole native model read into its canonical SI description inside the core (a model the
-//! core builds itself, e.g. the closed loop's circulation): the same readers, in the same
-//! order, as the binding's `canonical_model` applies to a Python dict.
+//! A whole native model read into its canonical SI description, over any front end's values
+//! ([`Node`]: a JSON value the core built itself, e.g. the closed loop's circulation, or the
+//! user's Python dicts through the binding): header, vessels, boundary conditions, the period
+//! checked against every element's, the simulation keys and the transport section, in that
+//! order. The pieces are public so that the binding's fast reader (plain vessels straight into
+//! the network's parts) checks the same things in the same order.
 
 use super::{
     boundary_condition, check_conditions, check_periods, condition_periods, element_periods,
@@ -9,8 +12,11 @@ use super::{
 use crate::error::Result;
 use crate::model::node::{Fields, Kind, Node};
 use crate::model::species;
-use crate::model::units::Quantity;
+use crate::model::units::{Quantity, Units};
 use serde_json::{Map, Value};
+
+/// Periods of the elements that repeat (s), each with the element it comes from.
+pub type Periods = Vec<(f64, String)>;
 
 /// The run's duration (s) a callable wall flux and a bolus are sampled over: the model period
 /// (1 s when none) times the file's `cycles` (`max_cycles` when `until_periodic`); None when
@@ -35,10 +41,66 @@ pub fn duration<N: Node>(data: &N, period: Option<f64>) -> Option<f64> {
     cycles.map(|c| period.unwrap_or(1.0) * c)
 }
 
+/// The model's `boundary_conditions` as (node, condition) entries, checked to be a mapping
+/// (none when the key is missing).
+pub fn condition_entries<N: Node>(data: &N) -> Result<Vec<(String, N)>> {
+    match data.get("boundary_conditions") {
+        None => Ok(Vec::new()),
+        Some(bcs) => {
+            check_conditions(&bcs)?;
+            Ok(bcs.entries())
+        }
+    }
+}
+
+/// The canonical conditions of `entries` (node, condition) by node, and their waveforms'
+/// periods with the element.
+pub fn conditions<N: Node + Clone>(
+    entries: Vec<(String, N)>,
+    units: Units,
+) -> Result<(Map<String, Value>, Periods)> {
+    let mut out = Map::new();
+    let mut periods = Vec::new();
+    for (node, bc) in entries {
+        let el = format!("boundary condition '{node}'");
+        let c = boundary_condition(&Fields::new(bc), units, &el)?;
+        periods.extend(condition_periods(&c, &el));
+        out.insert(node, c);
+    }
+    Ok((out, periods))
+}
+
+/// The model period checked against every element's `periods`, then the simulation
+/// section's keys.
+pub fn period_and_simulation<N: Node>(data: &N, periods: &[(f64, String)]) -> Result<Option<f64>> {
+    let period = check_periods(period(data)?, periods)?;
+    if let Some(sim) = data.get("simulation").filter(Node::truthy) {
+        simulation(&sim)?;
+    }
+    Ok(period)
+}
+
+/// What the transport sections of a model are read against: its pressure unit, period, run
+/// duration and blood (canonical, SI).
+pub fn transport_context<N: Node>(
+    data: &N,
+    blood: &Value,
+    units: Units,
+    period: Option<f64>,
+) -> species::Context {
+    let (mu, rho) = (blood["viscosity"].as_f64(), blood["density"].as_f64());
+    species::Context {
+        pressure_factor: units.factor(Quantity::Pressure),
+        period,
+        duration: duration(data, period),
+        kinematic_viscosity: mu.zip(rho).map(|(mu, rho)| mu / rho),
+    }
+}
+
 /// The canonical SI description of the native model `data` (every vessel and condition as
 /// its canonical dict, the transport section when it has species) and the transport
 /// section's warnings for the user.
-pub fn canonical(data: &Value) -> Result<(Value, Vec<String>)> {
+pub fn canonical<N: Node + Clone>(data: &N) -> Result<(Value, Vec<String>)> {
     let head = header(data)?;
     let units = head.units;
     let mut canon = head.canonical;
@@ -50,34 +112,12 @@ pub fn canonical(data: &Value) -> Result<(Value, Vec<String>)> {
     for (i, v) in vessels.into_iter().enumerate() {
         list.push(vessel(&Fields::new(v), i, units)?);
     }
-    let bcs = data
-        .get("boundary_conditions")
-        .cloned()
-        .unwrap_or_else(|| Value::Object(Map::new()));
-    check_conditions(&bcs)?;
-    let mut conditions = Map::new();
-    let mut periods = Vec::new();
-    for (node, bc) in bcs.entries() {
-        let el = format!("boundary condition '{node}'");
-        let c = boundary_condition(&Fields::new(bc), units, &el)?;
-        periods.extend(condition_periods(&c, &el));
-        conditions.insert(node, c);
-    }
+    let (bcs, mut periods) = conditions(condition_entries(data)?, units)?;
     periods.extend(element_periods(&list));
-    let period = check_periods(period(data)?, &periods)?;
-    if let Some(sim) = data.get("simulation").filter(|s| s.truthy()) {
-        simulation(sim)?;
-    }
+    let period = period_and_simulation(data, &periods)?;
     canon.insert("vessels".into(), Value::Array(list));
-    canon.insert("boundary_conditions".into(), Value::Object(conditions));
-    let blood = &canon["blood"];
-    let (mu, rho) = (blood["viscosity"].as_f64(), blood["density"].as_f64());
-    let ctx = species::Context {
-        pressure_factor: units.factor(Quantity::Pressure),
-        period,
-        duration: duration(data, period),
-        kinematic_viscosity: mu.zip(rho).map(|(mu, rho)| mu / rho),
-    };
+    canon.insert("boundary_conditions".into(), Value::Object(bcs));
+    let ctx = transport_context(data, &canon["blood"], units, period);
     let mut warnings = Vec::new();
     if let Some(tr) = species::read(data, &ctx)? {
         canon.insert("transport".into(), tr.section);

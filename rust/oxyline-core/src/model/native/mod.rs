@@ -17,7 +17,10 @@ pub mod plain;
 pub mod vessel;
 
 pub use boundary::{boundary_condition, condition_periods};
-pub use canonical::{canonical, duration};
+pub use canonical::{
+    Periods, canonical, condition_entries, conditions, duration, period_and_simulation,
+    transport_context,
+};
 pub use vessel::{element_periods, vessel};
 
 pub const TOP_KEYS: &[&str] = &[
