@@ -8,7 +8,8 @@
 * The adjoint against the forward tangents (1e-8).
 * The microvascular resistance and the intramyocardial pressure's factor recovered from
   synthetic data (noise-free: 1e-6).
-* A varying microvascular resistance (``CORONARY_VAR_RES``) is refused by name.
+* Through a varying microvascular resistance (``CORONARY_VAR_RES``): the bed's other values
+  against central differences and the adjoint; the varying resistance's own are refused.
 """
 
 from __future__ import annotations
@@ -124,10 +125,21 @@ def test_coronary_parameters_are_recovered_from_synthetic_data() -> None:
         0.8 * pim["mean"], rel=1e-6)
 
 
-def test_a_varying_microvascular_resistance_is_refused_naming_it() -> None:
+def test_through_a_varying_microvascular_resistance() -> None:
+    """svZeroDSolver's pulsatileFlow_R_coronary_varres: the bed's microvascular resistance
+    follows the contraction law R(t) (R_min 50 to R_max 200), which joins each step's matrix
+    of the tangent and the adjoint. The other values of the bed and the vessel's, against
+    central differences and the adjoint; the varying resistance's own values are refused."""
     model, node, vessel = _svzerod_case("pulsatileFlow_R_coronary_varres.json")
-    with pytest.raises(ModelError, match="time-varying resistances"):
-        oxyline.sensitivities(model, [f"boundary_conditions.{node}.arterial_resistance"],
+    params = [f"boundary_conditions.{node}.{k}" for k in KEYS if k != "microvascular_resistance"]
+    params += [f"vessels.{vessel}.lumped.resistance"]
+    outputs = [f"{vessel}.pressure_in.max", f"{vessel}.pressure_in.min",
+               f"{vessel}.pressure_out.mean", f"{vessel}.pressure_out.pulse"]
+    exact = _check_central(model, params, outputs)
+    adj = oxyline.sensitivities(model, params, outputs, mode="adjoint")
+    assert_adjoint_is_forward(exact, adj)
+    with pytest.raises(ModelError, match="varying microvascular resistance"):
+        oxyline.sensitivities(model, [f"boundary_conditions.{node}.microvascular_resistance"],
                               [f"{vessel}.pressure_in.mean"])
 
 

@@ -128,6 +128,59 @@ pub fn segment_rlc(
     out
 }
 
+/// The slopes of a segment's R, L and C with respect to its end radii: (∂/∂r0, ∂/∂r1) of
+/// [`segment_rlc`] at (`r0`, `r1`), at a fixed wall thickness and modulus (the calibration's
+/// tapered radii). R = A (r0⁻¹r1⁻³ + r0⁻²r1⁻² + r0⁻³r1⁻¹), A = 8μ dx/(3π), and L ∝ 1/(r0 r1) in
+/// closed form; the thin-wall C term by term of the same Gauss sum, whose r³ it integrates
+/// exactly (∂r/∂r0 = 1 − s, ∂r/∂r1 = s at the node s = (ξ + 1)/2). The lumen volume is not
+/// needed by the flow and is left at 0. `None` for the thick wall, whose C the calibration
+/// does not differentiate by the radius.
+pub fn segment_rlc_radius_slopes(
+    dx: f64,
+    r0: f64,
+    r1: f64,
+    blood: Blood,
+    wall: Option<Wall>,
+    profile: InertanceProfile,
+) -> Option<[SegmentRlc; 2]> {
+    if wall.is_some_and(|w| w.model != WallModel::Thin) {
+        return None;
+    }
+    let pi = std::f64::consts::PI;
+    let a = 8.0 * blood.viscosity * dx / (3.0 * pi);
+    let inductance = segment_rlc(dx, r0, r1, blood, None, profile).inductance;
+    // ∂R/∂r0 = −A (r0⁻²r1⁻³ + 2 r0⁻³r1⁻² + 3 r0⁻⁴r1⁻¹), and r0 ↔ r1
+    let dr = |p: f64, q: f64| {
+        -a * (1.0 / (p * p * q.powi(3)) + 2.0 / (p.powi(3) * q * q) + 3.0 / (p.powi(4) * q))
+    };
+    let mut out = [
+        SegmentRlc {
+            resistance: dr(r0, r1),
+            inductance: -inductance / r0,
+            compliance: 0.0,
+            volume: 0.0,
+        },
+        SegmentRlc {
+            resistance: dr(r1, r0),
+            inductance: -inductance / r1,
+            compliance: 0.0,
+            volume: 0.0,
+        },
+    ];
+    if let Some(w) = wall {
+        let k =
+            2.0 * pi * (1.0 - w.poisson_ratio * w.poisson_ratio) / (w.youngs_modulus * w.thickness);
+        for (xi, wt) in GAUSS5 {
+            let s = 0.5 * (xi + 1.0);
+            let r = r0 + (r1 - r0) * s;
+            let dc = 0.5 * wt * dx * k * 3.0 * r * r;
+            out[0].compliance += dc * (1.0 - s);
+            out[1].compliance += dc * s;
+        }
+    }
+    Some(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -154,6 +207,49 @@ mod tests {
         assert!((s.resistance / 4.352e4 - 1.0).abs() < 1e-3);
         assert!((s.inductance / 1.0445e5 - 1.0).abs() < 1e-4);
         assert!((s.compliance / 4.722e-12 - 1.0).abs() < 1e-3);
+    }
+
+    /// The end-radius slopes against central differences of [`segment_rlc`] itself (relative
+    /// step 1e-6: truncation ~1e-12 and rounding ~1e-10 of each value, so 1e-7 relative tells
+    /// a wrong term from a right one).
+    #[test]
+    fn end_radius_slopes_are_the_segments_derivatives() {
+        let blood = Blood {
+            density: 1050.0,
+            viscosity: 3.5e-3,
+        };
+        let wall = Some(Wall {
+            thickness: 5e-4,
+            youngs_modulus: 6e5,
+            poisson_ratio: 0.5,
+            model: WallModel::Thin,
+        });
+        let (dx, r0, r1) = (0.03, 0.003, 0.0021);
+        let profile = InertanceProfile::Poiseuille;
+        let slopes = segment_rlc_radius_slopes(dx, r0, r1, blood, wall, profile).unwrap();
+        for end in 0..2 {
+            let h = 1e-6 * [r0, r1][end];
+            let at = |d: f64| {
+                let (a, b) = if end == 0 { (r0 + d, r1) } else { (r0, r1 + d) };
+                segment_rlc(dx, a, b, blood, wall, profile)
+            };
+            let (up, down) = (at(h), at(-h));
+            let close = |exact: f64, u: f64, d: f64| {
+                let fd = (u - d) / (2.0 * h);
+                assert!(
+                    (exact - fd).abs() <= 1e-7 * fd.abs(),
+                    "end {end}: {exact} vs {fd}"
+                );
+            };
+            close(slopes[end].resistance, up.resistance, down.resistance);
+            close(slopes[end].inductance, up.inductance, down.inductance);
+            close(slopes[end].compliance, up.compliance, down.compliance);
+        }
+        let thick = wall.map(|w| Wall {
+            model: WallModel::Thick,
+            ..w
+        });
+        assert!(segment_rlc_radius_slopes(dx, r0, r1, blood, thick, profile).is_none());
     }
 
     #[test]

@@ -16,7 +16,7 @@
 //!   element's value, set where the element holds it.
 //!
 //! Base values: a scale is 1, the radius of a vessel given by `radius_in`/`radius_out` is its
-//! `radius_in`, and a lumped vessel without a stenosis coefficient has 0. Every error names
+//! `radius_in` (and either end radius of a vessel given by `radius` that radius), and a lumped vessel without a stenosis coefficient has 0. Every error names
 //! the parameter path.
 
 use super::native::py_float;
@@ -75,6 +75,10 @@ pub fn base_value<N: Node>(source: &N, path: &str) -> Result<f64> {
             let (_, v) = vessel(source, name, path)?;
             match rest {
                 ["radius"] if !v.has("radius") => v.get("radius_in").and_then(|r| float_of(&r)),
+                // an end radius of a vessel given by one `radius` is that radius
+                [end @ ("radius_in" | "radius_out")] if !v.has(end) => {
+                    v.get("radius").and_then(|r| float_of(&r))
+                }
                 ["lumped", "stenosis_coefficient"]
                     if v.get("lumped").is_some_and(|l| l.is_map()) =>
                 {

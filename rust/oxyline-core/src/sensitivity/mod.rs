@@ -154,3 +154,7 @@ type Prepared = (Dae, Vec<DaeTangent>, Vec<usize>, Option<ConservedVolume>);
 
 #[cfg(test)]
 mod tests;
+
+#[cfg(test)]
+#[path = "kinds_tests.rs"]
+mod kinds_tests;

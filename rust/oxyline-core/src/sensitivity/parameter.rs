@@ -25,10 +25,12 @@ use crate::circuit::CircuitElement;
 use crate::circuit::{Circuit, Dae};
 use crate::error::{Error, Result};
 use crate::model::{
-    ActivationSpec, Arrangement, BoundarySpec, ChamberLawSpec, ChamberSpec, ChamberSphereSpec,
+    ActivationSpec, BoundarySpec, ChamberLawSpec, ChamberSpec, ChamberSphereSpec,
     HeartPulmonarySpec, NetworkSpec, ValveSpec,
 };
-use crate::segment::WallModel;
+use crate::segment::{
+    Blood, InertanceProfile, Wall, WallFriction, WallModel, segment_rlc_radius_slopes,
+};
 
 /// What a parameter path names.
 #[derive(Debug, Clone, PartialEq)]
@@ -42,6 +44,9 @@ pub enum Parameter {
     Length(usize),
     /// `vessels.<name>.radius` of a vessel of uniform radius.
     Radius(usize),
+    /// `vessels.<name>.radius_in` (`outlet` false) or `.radius_out` (true): one end radius of
+    /// a vessel's linear taper, the other held.
+    EndRadius { vessel: usize, outlet: bool },
     /// `vessels.<name>.youngs_modulus`
     YoungsModulus(usize),
     /// `vessels.<name>.lumped.<resistance|capacitance|inductance|stenosis_coefficient>`
@@ -351,6 +356,19 @@ fn condition(spec: &NetworkSpec, path: &str, node: &str, key: &str) -> Result<Pa
             format!("the condition at node '{node}' has no differentiable value '{key}'"),
         ));
     }
+    // a varying microvascular resistance R(t) follows R_min (its base) and R_max by its law,
+    // whose own derivative the tangent does not hold
+    if let (BoundarySpec::Coronary(c), "microvascular_resistance") = (bc, key)
+        && c.microvascular_resistance_max.is_some()
+    {
+        return Err(unknown(
+            path,
+            format!(
+                "the condition at node '{node}' has a varying microvascular resistance \
+                 (microvascular_resistance_max): its values are not differentiated"
+            ),
+        ));
+    }
     Ok(Parameter::Condition {
         node: node.to_owned(),
         key: key.to_owned(),
@@ -414,7 +432,9 @@ fn vessel(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<P
             )
         })?;
     let v = &spec.vessels[vi];
-    let arrangement = crate::assemble::arrangement(spec, v);
+    if let Some(why) = geometry_unsupported(spec, v, rest) {
+        return Err(unknown(path, why));
+    }
     let p = match (rest, &v.geometry, &v.lumped) {
         (["length"], Some(_), _) => Parameter::Length(vi),
         (["youngs_modulus"], Some(g), _) if g.youngs_modulus.is_some() => {
@@ -424,7 +444,8 @@ fn vessel(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<P
             if g.radius_in != g.radius_out {
                 return Err(unknown(
                     path,
-                    "the vessel is tapered: its radius is not one number",
+                    "the vessel is tapered: its radius is not one number (its end radii \
+                     radius_in and radius_out are parameters)",
                 ));
             }
             if g.wall_thickness.is_some() && spec.wall_model != WallModel::Thin {
@@ -432,15 +453,21 @@ fn vessel(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<P
             }
             Parameter::Radius(vi)
         }
+        ([end @ ("radius_in" | "radius_out")], Some(g), _) => {
+            if g.wall_thickness.is_some() && spec.wall_model != WallModel::Thin {
+                return Err(unknown(path, "radius derivatives need the thin wall model"));
+            }
+            Parameter::EndRadius {
+                vessel: vi,
+                outlet: *end == "radius_out",
+            }
+        }
         (["lumped", key], _, Some(_))
             if matches!(
                 *key,
                 "resistance" | "capacitance" | "inductance" | "stenosis_coefficient"
             ) =>
         {
-            if arrangement == Arrangement::Rcl {
-                return Err(unknown(path, "lumped RCL vessels are not supported"));
-            }
             Parameter::Lumped(vi, (*key).to_owned())
         }
         _ => {
@@ -456,13 +483,39 @@ fn vessel(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<P
     Ok(p)
 }
 
-/// Refuse what the tangent does not cover: time-varying resistances (a varying coronary
-/// microvascular resistance among them), the closed-loop heart block's coronary beds (their
+/// Why a geometric parameter (`rest` after the vessel's name) of vessel `v` is not
+/// differentiated, if it is not: Womersley friction cells and a viscoelastic wall take their
+/// values from the segment's R, L and C by laws the tangent does not differentiate.
+fn geometry_unsupported(
+    spec: &NetworkSpec,
+    v: &crate::model::VesselSpec,
+    rest: &[&str],
+) -> Option<&'static str> {
+    let g = v.geometry.as_ref()?;
+    let geometric = matches!(
+        rest,
+        ["length" | "radius" | "radius_in" | "radius_out" | "youngs_modulus"]
+    );
+    if !geometric {
+        return None;
+    }
+    if v.wall_friction.unwrap_or(spec.wall_friction) == WallFriction::Womersley {
+        return Some("the vessel has Womersley friction cells, which the tangent does not cover");
+    }
+    if g.wall_viscosity > 0.0 && g.youngs_modulus.is_some() {
+        return Some("the vessel has a viscoelastic wall, which the tangent does not cover");
+    }
+    None
+}
+
+/// Refuse what the tangent does not cover: the closed-loop heart block's coronary beds (their
 /// iteration matrix leaves out the ventricle coupling on purpose), and svZeroDSolver-form
 /// stenoses (chain-rule capacitor rows). Branch-form stenoses, chambers, spherical chambers,
 /// valves and the closed-loop heart block are covered (their terms are differentiated
 /// exactly; the block's reset flows by a zero tangent row, `super::tangent`), as are coronary
-/// outlets (constant circuit parts and forcing).
+/// outlets (constant circuit parts and forcing) and time-varying resistances (a varying
+/// coronary microvascular resistance: its D(t) joins each step's matrix, `super::tangent`;
+/// its own values are refused in [`Parameter::parse`]).
 pub fn check_supported(circuit: &Circuit, dae: &Dae) -> Result<()> {
     let other = circuit.elements.iter().find_map(|e| match e {
         CircuitElement::Valve { .. }
@@ -480,8 +533,6 @@ pub fn check_supported(circuit: &Circuit, dae: &Dae) -> Result<()> {
         Some(e)
     } else if !circuit.swapped_rows.is_empty() {
         Some("through_rc elements".to_owned())
-    } else if !dae.varying.is_empty() {
-        Some("time-varying resistances".to_owned())
     } else {
         None
     };
@@ -609,11 +660,37 @@ impl<'a> Stamps<'a> {
                 t = self.blank(path, value);
                 self.vessel_power_law(&mut t, &spec.vessels[*vi].name, k, value);
             }
+            Parameter::EndRadius { vessel, outlet } => {
+                let g = spec.vessels[*vessel]
+                    .geometry
+                    .as_ref()
+                    .ok_or_else(missing)?;
+                let value = if *outlet { g.radius_out } else { g.radius_in };
+                t = self.blank(path, value);
+                self.vessel_end_radius(&mut t, spec, *vessel, *outlet)
+                    .ok_or_else(missing)?;
+            }
             Parameter::Lumped(vi, key) => {
                 let l = spec.vessels[*vi].lumped.as_ref().ok_or_else(missing)?;
+                let name = &spec.vessels[*vi].name;
+                // an RCL vessel (svZeroDSolver's BloodVessel) holds its R and stenosis on a
+                // branch of their own, its C at its one interior point, its L on the segment's
+                if let (Some(b), "resistance" | "stenosis_coefficient") = (
+                    self.branch_named(&format!("vessel '{name}' resistance")),
+                    key.as_str(),
+                ) {
+                    if key == "resistance" {
+                        t = self.blank(path, l.resistance);
+                        t.df[self.branch_r[b]] = 1.0;
+                    } else {
+                        t = self.blank(path, l.stenosis_coefficient);
+                        t.dstenosis.push((nn + b, 1.0));
+                    }
+                    return Ok(t);
+                }
                 if key == "stenosis_coefficient" {
                     t = self.blank(path, l.stenosis_coefficient);
-                    self.vessel_stenosis(&mut t, &spec.vessels[*vi].name);
+                    self.vessel_stenosis(&mut t, name);
                     return Ok(t);
                 }
                 let (value, k) = match key.as_str() {
@@ -706,6 +783,60 @@ impl<'a> Stamps<'a> {
                 t.de[node] += k[2] * share * s.compliance / p;
             }
         }
+    }
+
+    /// d/d(end radius) of a tapered vessel `vi`: its segments cut the linear taper at k/n, so
+    /// segment k's ends move by (1 − k/n, 1 − (k+1)/n) of the inlet radius and (k/n, (k+1)/n)
+    /// of the outlet radius, and its R, L and C by the segment's own slopes
+    /// ([`segment_rlc_radius_slopes`], at the wall thickness and modulus held). None when the
+    /// vessel's wall is thick or its segments are not in the circuit.
+    fn vessel_end_radius(
+        &self,
+        t: &mut DaeTangent,
+        spec: &NetworkSpec,
+        vi: usize,
+        outlet: bool,
+    ) -> Option<()> {
+        let v = &spec.vessels[vi];
+        let g = v.geometry.as_ref()?;
+        let nn = self.circuit.nodes.len();
+        let n = self.segments_of(&v.name).count();
+        if n == 0 {
+            return None;
+        }
+        let blood = Blood {
+            density: spec.blood.density,
+            viscosity: spec.blood.viscosity,
+        };
+        let wall = match (g.wall_thickness, g.youngs_modulus) {
+            (Some(h), Some(e)) => Some(Wall {
+                thickness: h,
+                youngs_modulus: e,
+                poisson_ratio: g.poisson_ratio,
+                model: spec.wall_model,
+            }),
+            _ => None,
+        };
+        // the assembly's profile (a Womersley vessel is refused before this)
+        let profile: InertanceProfile = spec.inertance_profile;
+        let (dx, dr) = (g.length / n as f64, g.radius_out - g.radius_in);
+        for (k, s) in self.segments_of(&v.name).enumerate() {
+            let at = |j: usize| j as f64 / n as f64;
+            let (r0, r1) = (g.radius_in + dr * at(k), g.radius_in + dr * at(k + 1));
+            let [d0, d1] = segment_rlc_radius_slopes(dx, r0, r1, blood, wall, profile)?;
+            let (w0, w1) = if outlet {
+                (at(k), at(k + 1))
+            } else {
+                (1.0 - at(k), 1.0 - at(k + 1))
+            };
+            t.df[self.branch_r[s.branch]] += w0 * d0.resistance + w1 * d1.resistance;
+            t.de[nn + s.branch] += w0 * d0.inductance + w1 * d1.inductance;
+            let dc = w0 * d0.compliance + w1 * d1.compliance;
+            for &(node, share) in &s.nodes {
+                t.de[node] += share * dc;
+            }
+        }
+        Some(())
     }
 
     /// d/dvalue of a lumped vessel's total R, L or C split evenly over its segments.

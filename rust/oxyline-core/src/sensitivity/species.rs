@@ -302,7 +302,18 @@ fn parameters(spec: &NetworkSpec, sp: &SpeciesSpec, paths: &[String]) -> Result<
         .map(|path| {
             Ok(match oxygen_parameter(sp, path)? {
                 Some(p) => Param::Oxygen(p),
-                None => Param::Flow(Parameter::parse(spec, path)?, path.clone()),
+                None => match Parameter::parse(spec, path)? {
+                    // a taper's end radius moves each segment's lumen and wall by its own
+                    // share, which the transport's geometry tangent (whole-vessel factors)
+                    // does not hold
+                    Parameter::EndRadius { .. } => {
+                        return Err(Error::model(
+                            format!("parameter '{path}'"),
+                            "the oxygen sensitivities do not cover a tapered vessel's end radii",
+                        ));
+                    }
+                    p => Param::Flow(p, path.clone()),
+                },
             })
         })
         .collect()

@@ -306,6 +306,9 @@ struct Primal<'a> {
     next: (Vec<f64>, Vec<f64>),
     /// 2 S |Q_αf| of each `Dae::stenosis` entry at each recorded step (`record_slopes`).
     slopes: Vec<f64>,
+    /// D(t_αf) = R(t_αf) − R₀ of each `Dae::varying` entry (a time-varying resistance's
+    /// part beyond F) at each recorded step.
+    varying: Vec<f64>,
     /// ∂c_el/∂y at (y_αf, t_αf) of each recorded step, `Dae::element_pattern` order.
     element_jac: Vec<f64>,
     /// The elements' Jacobian entries (row, column).
@@ -328,7 +331,9 @@ impl<'a> Primal<'a> {
         let mut kvals = vec![0.0; stamps.len()];
         let a = scheme.af * scheme.gamma * scheme.dt;
         jacobian_values(dae, a, &am_e, &vec![0.0; n], 0.0, &mut kvals);
-        let newton = if dae.stenosis.is_empty() && dae.elements.is_empty() {
+        // (a time-varying resistance makes the step's matrix vary: the Newton step holds it)
+        let newton = if dae.stenosis.is_empty() && dae.elements.is_empty() && dae.varying.is_empty()
+        {
             lu.factor(&kvals).map_err(|m| singular(0.0, &m))?;
             None
         } else {
@@ -354,6 +359,7 @@ impl<'a> Primal<'a> {
             newton,
             next: (Vec::new(), Vec::new()),
             slopes: Vec::new(),
+            varying: Vec::new(),
             element_jac: Vec::new(),
             element_pattern: dae.element_pattern(),
             held_rows: Vec::new(),
@@ -385,6 +391,10 @@ impl<'a> Primal<'a> {
         for &(i, s) in &self.dae.stenosis {
             let q = self.y[i] + gdt * self.r[i];
             self.slopes.push(2.0 * s * q.abs());
+        }
+        let t_af = time + self.scheme.af * self.scheme.dt;
+        for (_, law) in &self.dae.varying {
+            self.varying.push(law.delta(t_af));
         }
         if !self.element_pattern.is_empty() {
             let y_af: Vec<f64> = (self.y.iter().zip(&self.r))
@@ -437,6 +447,14 @@ impl<'a> Primal<'a> {
         )
     }
 
+    /// Step k's time-varying resistances D(t_αf) beyond F, by `Dae::varying` entry: a
+    /// diagonal like the stenosis slopes (the law depends on time alone, so it adds no
+    /// source and its transpose is itself).
+    fn varying_at(&self, k: usize) -> &[f64] {
+        let m = self.dae.varying.len();
+        self.varying.get(k * m..(k + 1) * m).unwrap_or(&[])
+    }
+
     /// The iteration matrix's values of step k: `base` plus α_f γ Δt J_k.
     fn step_values(&self, base: &[f64], k: usize) -> Vec<f64> {
         let a = self.scheme.af * self.scheme.gamma * self.scheme.dt;
@@ -445,6 +463,9 @@ impl<'a> Primal<'a> {
         let mut vals = base.to_vec();
         for (&(i, _), slope) in self.dae.stenosis.iter().zip(slopes) {
             vals[nf + i] += a * slope;
+        }
+        for (&(i, _), d) in self.dae.varying.iter().zip(self.varying_at(k)) {
+            vals[nf + i] += a * d;
         }
         for (v, j) in vals[nf + n..].iter_mut().zip(jac) {
             *v += a * j;
@@ -457,6 +478,9 @@ impl<'a> Primal<'a> {
         let (slopes, jac) = self.local(k);
         for (&(i, _), slope) in self.dae.stenosis.iter().zip(slopes) {
             r[i] -= slope * x[i];
+        }
+        for (&(i, _), d) in self.dae.varying.iter().zip(self.varying_at(k)) {
+            r[i] -= d * x[i];
         }
         for (&(row, col), j) in self.element_pattern.iter().zip(jac) {
             if transposed {

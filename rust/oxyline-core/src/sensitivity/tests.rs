@@ -326,7 +326,7 @@ fn check_adjoint(base: &NetworkSpec, paths: &[&str]) {
     check_adjoint_of(base, paths, &SIGNALS);
 }
 
-fn check_adjoint_of(base: &NetworkSpec, paths: &[&str], signals: &[(&str, &str)]) {
+pub(super) fn check_adjoint_of(base: &NetworkSpec, paths: &[&str], signals: &[(&str, &str)]) {
     let ns = settings().steps_per_cycle;
     let nsig = signals.len();
     let mut w = vec![0.0; 2 * ns * nsig];

@@ -148,6 +148,30 @@ fn patch_paths_follow_the_patch_rules() {
     assert!(p.conditions.is_empty());
 }
 
+/// A taper's end radii: read and set one at a time; on a vessel given by one `radius` each
+/// end is that radius, and setting one end keeps the other at it (the patch rule).
+#[test]
+fn end_radii_are_read_and_set_one_at_a_time() {
+    let m = model();
+    let value = |path: &str| base_value(&m, path).expect(path);
+    assert_eq!(value("vessels.t.radius_in"), 0.003);
+    assert_eq!(value("vessels.t.radius_out"), 0.002);
+    assert_eq!(value("vessels.a.radius_in"), 0.004);
+    assert_eq!(value("vessels.a.radius_out"), 0.004);
+    let p = set(
+        &["vessels.t.radius_out", "vessels.a.radius_in"],
+        &[0.0021, 0.0041],
+    );
+    assert_eq!(vessel(&p, 1)["radius_in"], json!(0.003));
+    assert_eq!(vessel(&p, 1)["radius_out"], json!(0.0021));
+    let a = vessel(&p, 0);
+    assert_eq!(
+        (&a["radius_in"], &a["radius_out"]),
+        (&json!(0.0041), &json!(0.004))
+    );
+    assert!(a.get("radius").is_none());
+}
+
 #[test]
 fn a_scale_multiplies_the_values_set_explicitly() {
     // 2e8 set, then the resistance factor 1.5: 3e8 (and the distal one 1e9 · 1.5)

@@ -1,0 +1,199 @@
+//! Tangent sensitivities of a tapered vessel's end radii and of a lumped RCL vessel's values
+//! (svZeroDSolver's BloodVessel, with a stenosis) against central differences of whole
+//! periodic runs, and the adjoint against the tangents. The difference quotient's error is
+//! O(h²) truncation plus rounding of ~1e-16 × |signal| / (h p): with h = 1e-4 relative both
+//! are below 1e-8 of the derivative's scale, so agreement to 1e-6 relative tells a wrong
+//! tangent from a right one (as `super::tests`).
+
+use super::*;
+use crate::model::parse;
+
+/// An inflow into a uniform parent that splits into a tapered daughter (π arrangement, so
+/// each segment's C is shared by both its ends) ending in an RCR, and an RCL daughter with a
+/// stenosis (S Q² at its peak flow ~1.5× its linear drop) ending in a resistance. Its
+/// inertance (ωL ≈ R at the first harmonic) moves the pressures by far more than the
+/// difference quotient's rounding (with L = 1e5 the inductance's derivative was within 4×
+/// of that floor).
+const MODEL: &str = r#"{
+  "name": "kinds",
+  "vessels": [
+    {"name": "parent", "from": "in", "to": "j", "segments": 3,
+     "geometry": {"length": 0.1, "radius_in": 0.004, "radius_out": 0.004,
+                  "wall_thickness": 0.0006, "youngs_modulus": 4e5}},
+    {"name": "d1", "from": "j", "to": "o1", "segments": 3, "arrangement": "pi",
+     "geometry": {"length": 0.08, "radius_in": 0.003, "radius_out": 0.0022,
+                  "wall_thickness": 0.0005, "youngs_modulus": 6e5}},
+    {"name": "d2", "from": "j", "to": "o2", "arrangement": "RCL",
+     "lumped": {"resistance": 3e7, "inductance": 5e6, "capacitance": 2e-10,
+                "stenosis_coefficient": 1.2e13}}
+  ],
+  "boundary_conditions": {
+    "in": {"type": "flow", "flow": {"kind": "fourier", "period": 0.8, "mean": 5e-6,
+                                    "cos": [3e-6, -1e-6], "sin": [4e-6, 1e-6]}},
+    "o1": {"type": "rcr", "proximal_resistance": 1.5e8, "capacitance": 6e-9,
+           "distal_resistance": 1.2e9},
+    "o2": {"type": "resistance", "resistance": 1.6e9}
+  }
+}"#;
+
+const SIGNALS: [(&str, &str); 4] = [
+    ("parent", "pressure_in"),
+    ("d1", "flow_out"),
+    ("d2", "flow_in"),
+    ("d1", "pressure_out"),
+];
+
+fn settings() -> TangentSettings {
+    TangentSettings {
+        period: 0.8,
+        steps_per_cycle: 200,
+        rho_infty: 0.5,
+        max_cycles: 400,
+        tol: 1e-13,
+    }
+}
+
+fn run(spec: &NetworkSpec, paths: &[&str]) -> Sensitivities {
+    let paths: Vec<String> = paths.iter().map(|p| p.to_string()).collect();
+    let signals: Vec<(String, String)> = SIGNALS
+        .iter()
+        .map(|(a, b)| (a.to_string(), b.to_string()))
+        .collect();
+    sensitivities(spec, &paths, &signals, settings()).unwrap()
+}
+
+/// `s` with parameter `path` multiplied by `f`, written into the spec directly.
+fn scaled(mut s: NetworkSpec, path: &str, f: f64) -> NetworkSpec {
+    let parts: Vec<&str> = path.split('.').collect();
+    let v = s.vessels.iter_mut().find(|v| v.name == parts[1]).unwrap();
+    match parts[2..] {
+        ["radius_in"] => v.geometry.as_mut().unwrap().radius_in *= f,
+        ["radius_out"] => v.geometry.as_mut().unwrap().radius_out *= f,
+        ["lumped", key] => {
+            let l = v.lumped.as_mut().unwrap();
+            match key {
+                "resistance" => l.resistance *= f,
+                "inductance" => l.inductance *= f,
+                "capacitance" => l.capacitance *= f,
+                _ => l.stenosis_coefficient *= f,
+            }
+        }
+        _ => unreachable!("{path}"),
+    }
+    s
+}
+
+/// Largest |tangent − central difference| over the cycle and signals, relative to the
+/// derivative's scale per signal, must be within 1e-6 (see the module's documentation).
+fn check(path: &str) {
+    let base = parse(MODEL).unwrap();
+    let exact = run(&base, &[path]);
+    let h = 1e-4;
+    let up = run(&scaled(base.clone(), path, 1.0 + h), &[]);
+    let down = run(&scaled(base.clone(), path, 1.0 - h), &[]);
+    let p = exact.values[0];
+    let c = &exact.cycle;
+    assert!(c.periodic_change <= 1e-11, "{path}: not periodic");
+    let nsig = SIGNALS.len();
+    for (j, signal) in SIGNALS.iter().enumerate() {
+        let col = |v: &[f64]| -> Vec<f64> { v.iter().skip(j).step_by(nsig).copied().collect() };
+        let (d, u, w) = (
+            col(&c.derivs),
+            col(&up.cycle.values),
+            col(&down.cycle.values),
+        );
+        let scale = d.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        assert!(scale > 0.0, "{path}: zero derivative of {signal:?}");
+        let worst = d
+            .iter()
+            .zip(u.iter().zip(&w))
+            .map(|(dk, (uk, wk))| (dk - (uk - wk) / (2.0 * h * p)).abs())
+            .fold(0.0f64, f64::max);
+        assert!(
+            worst <= 1e-6 * scale,
+            "{path} {signal:?}: {worst:e} vs scale {scale:e}"
+        );
+    }
+}
+
+#[test]
+fn tapered_end_radii() {
+    check("vessels.d1.radius_in");
+    check("vessels.d1.radius_out");
+}
+
+#[test]
+fn rcl_vessel_values_through_its_stenosis() {
+    check("vessels.d2.lumped.resistance");
+    check("vessels.d2.lumped.inductance");
+    check("vessels.d2.lumped.capacitance");
+    check("vessels.d2.lumped.stenosis_coefficient");
+}
+
+/// A uniform vessel's two end radii move it as its radius does: d/dr = ∂/∂r_in + ∂/∂r_out,
+/// the taper's slopes summed against the uniform radius's power law (r⁻⁴, r⁻², r³). Both are
+/// exact derivatives of the same run, so they agree to the tangents' fixed-point tolerance.
+#[test]
+fn end_radii_of_a_uniform_vessel_sum_to_its_radius() {
+    let base = parse(MODEL).unwrap();
+    let s = run(
+        &base,
+        &[
+            "vessels.parent.radius",
+            "vessels.parent.radius_in",
+            "vessels.parent.radius_out",
+        ],
+    );
+    let n = s.cycle.derivs.len() / 3;
+    let (whole, ends) = s.cycle.derivs.split_at(n);
+    let scale = whole.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    for k in 0..n {
+        let sum = ends[k] + ends[n + k];
+        assert!(
+            (whole[k] - sum).abs() <= 1e-9 * scale,
+            "{} vs {sum}",
+            whole[k]
+        );
+    }
+}
+
+#[test]
+fn adjoint_gradients_are_the_tangents_of_the_new_kinds() {
+    super::tests::check_adjoint_of(
+        &parse(MODEL).unwrap(),
+        &[
+            "vessels.d1.radius_in",
+            "vessels.d1.radius_out",
+            "vessels.d2.lumped.resistance",
+            "vessels.d2.lumped.inductance",
+            "vessels.d2.lumped.capacitance",
+            "vessels.d2.lumped.stenosis_coefficient",
+        ],
+        &SIGNALS,
+    );
+}
+
+/// The kinds the tangent leaves out are refused naming the vessel's parameter.
+#[test]
+fn geometry_of_womersley_and_viscoelastic_vessels_is_refused() {
+    let mut base = parse(MODEL).unwrap();
+    base.vessels[0].wall_friction = Some(crate::segment::WallFriction::Womersley);
+    let err = sensitivities(&base, &["vessels.parent.radius".into()], &[], settings())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        err.contains("'vessels.parent.radius'") && err.contains("Womersley"),
+        "{err}"
+    );
+    let mut base = parse(MODEL).unwrap();
+    base.vessels[1].geometry.as_mut().unwrap().wall_viscosity = 3e3;
+    let err = sensitivities(&base, &["vessels.d1.radius_out".into()], &[], settings())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        err.contains("'vessels.d1.radius_out'") && err.contains("viscoelastic"),
+        "{err}"
+    );
+}

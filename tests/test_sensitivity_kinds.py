@@ -1,0 +1,147 @@
+"""Exact sensitivities of a tapered vessel's end radii (``vessels.<name>.radius_in``,
+``.radius_out``) and of lumped RCL vessels' values (svZeroDSolver's BloodVessel, as every
+imported svZeroDSolver model has them).
+
+* Against central differences of the same periodic runs, the models moved by the calibration's
+  own ``native_model`` (relative step 1e-4: the outputs are smooth in every parameter, so the
+  truncation O(h²) ≈ 1e-8 and the rounding of the periodic fixed points (1e-12 relative over
+  a step of 1e-4: 1e-8) stay well below the 1e-6 of each output's largest derivative that
+  tells a wrong derivative).
+* The adjoint against the forward tangents (1e-8, ``assert_adjoint_is_forward``).
+* A taper's outlet radius and an RCL vessel's resistance recovered from synthetic data
+  (noise-free: 1e-6).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+
+import oxyline
+from oxyline import ModelError
+from oxyline import svzerod as svz
+from oxyline.calibrate import _base_value, native_model
+from tests.conftest import assert_adjoint_is_forward, data_path
+
+pytest.importorskip("scipy")
+
+
+def _tapered() -> dict[str, Any]:
+    """A uniform parent into a tapered daughter (3 π segments) and a uniform one, RCR
+    outlets, a two-harmonic inflow; generalized-α at 200 steps a cycle."""
+    wall = {"wall_thickness": 5e-4, "youngs_modulus": 5e5}
+    rcr = {"type": "rcr", "proximal_resistance": 1.5e8, "capacitance": 6e-9,
+           "distal_resistance": 1.2e9}
+    return {
+        "name": "taper", "units": "SI", "period": 0.8,
+        "vessels": [
+            {"name": "parent", "from": "in", "to": "j", "length": 0.1, "radius": 0.004,
+             "segments": 3, **wall},
+            {"name": "d1", "from": "j", "to": "o1", "length": 0.08, "radius_in": 0.003,
+             "radius_out": 0.0022, "segments": 3, "arrangement": "pi", **wall},
+            {"name": "d2", "from": "j", "to": "o2", "length": 0.07, "radius": 0.0025,
+             "segments": 2, **wall},
+        ],
+        "boundary_conditions": {
+            "in": {"type": "flow", "fourier": {"mean": 5e-6, "cos": [3e-6, -1e-6],
+                                               "sin": [4e-6, 1e-6], "period": 0.8}},
+            "o1": dict(rcr), "o2": dict(rcr, distal_resistance=1.6e9),
+        },
+        "simulation": {"dt": 0.004, "method": "generalized-alpha"},
+    }
+
+
+def _svzerod_rcl() -> tuple[dict[str, Any], str]:
+    """svZeroDSolver's pulsatileFlow_R_RCR converted (an RCL BloodVessel into an RCR), its
+    vessel given a capacitance and an inductance so that all three values act."""
+    model = svz.to_oxyline_dict(str(data_path("svzerod", "cases", "pulsatileFlow_R_RCR.json")))
+    vessel = model["vessels"][0]
+    assert vessel["arrangement"] == "RCL"
+    vessel["lumped"].update(capacitance=2e-5, inductance=5.0)
+    return model, vessel["name"]
+
+
+def _check_central(model: dict[str, Any], params: list[str], outputs: list[str],
+                   h: float = 1e-4) -> Any:
+    exact = oxyline.sensitivities(model, params, outputs)
+    assert exact.periodic_change <= 1e-11
+    scale = np.abs(exact.jacobian * exact.parameter_values).max(axis=1)
+    assert (scale > 0).all()
+    for k, path in enumerate(params):
+        x0 = _base_value(model, path)  # in the model's units (the Jacobian's are SI)
+        up, down = (oxyline.sensitivities(native_model(model, [path], [x0 * f]), [],
+                                          outputs).values for f in (1 + h, 1 - h))
+        # d(output)/d(log parameter), the same in every unit system
+        err = np.abs(exact.jacobian[:, k] * exact.parameter_values[k] - (up - down) / (2 * h))
+        assert (err <= 1e-6 * scale).all(), (path, err / scale)
+    return exact
+
+
+TAPER_PARAMS = ["vessels.d1.radius_in", "vessels.d1.radius_out", "vessels.parent.radius_out"]
+TAPER_OUTPUTS = ["parent.pressure_in.max", "parent.pressure_in.min", "d1.flow_out.mean",
+                 "d1.pressure_out.pulse", "flow_split.d1.parent"]
+
+
+def test_taper_end_radii_match_central_differences() -> None:
+    exact = _check_central(_tapered(), TAPER_PARAMS, TAPER_OUTPUTS)
+    # a narrower outlet end raises the daughter's resistance: less of the flow goes there
+    split = exact.rows["flow_split.d1.parent"]
+    assert exact.jacobian[split, 1] > 0
+
+
+def test_taper_adjoint_is_the_forward_jacobian() -> None:
+    model = _tapered()
+    fwd = oxyline.sensitivities(model, TAPER_PARAMS, TAPER_OUTPUTS)
+    adj = oxyline.sensitivities(model, TAPER_PARAMS, TAPER_OUTPUTS, mode="adjoint")
+    assert_adjoint_is_forward(fwd, adj)
+
+
+def test_rcl_vessel_values_match_central_differences() -> None:
+    model, vessel = _svzerod_rcl()
+    params = [f"vessels.{vessel}.lumped.{k}" for k in ("resistance", "capacitance",
+                                                       "inductance")] + ["scale.resistance"]
+    outputs = [f"{vessel}.pressure_in.max", f"{vessel}.pressure_in.min",
+               f"{vessel}.pressure_out.mean", f"{vessel}.flow_out.pulse"]
+    exact = _check_central(model, params, outputs)
+    adj = oxyline.sensitivities(model, params, outputs, mode="adjoint")
+    assert_adjoint_is_forward(exact, adj)
+
+
+def test_taper_and_rcl_values_are_recovered_from_synthetic_data() -> None:
+    """The daughter's outlet radius 0.9× and the svZeroDSolver vessel's resistance 1.4× the
+    model's, fitted from the model's values (noise-free: exact)."""
+    model = _tapered()
+    path = "vessels.d1.radius_out"
+    truth = native_model(model, [path], [0.9 * 0.0022])
+    outputs = ["flow_split.d1.parent", "parent.pressure_in.max"]
+    measured = oxyline.sensitivities(truth, [], outputs).values
+    targets = {o: {"value": v, "sigma": 0.01 * abs(v)}
+               for o, v in zip(outputs, measured, strict=True)}
+    res = oxyline.calibrate(model, targets, [path], method="lm")
+    assert res.success, res.report
+    assert res.parameters[path] == pytest.approx(0.9 * 0.0022, rel=1e-6)
+    d1 = next(v for v in res.model["vessels"] if v["name"] == "d1")
+    assert (d1["radius_in"], d1["radius_out"]) == pytest.approx((0.003, 0.9 * 0.0022),
+                                                                rel=1e-6)
+
+    model, vessel = _svzerod_rcl()
+    path = f"vessels.{vessel}.lumped.resistance"
+    r0 = _base_value(model, path)
+    truth = native_model(model, [path], [1.4 * r0])
+    outputs = [f"{vessel}.pressure_in.mean"]
+    measured = oxyline.sensitivities(truth, [], outputs).values
+    targets = {outputs[0]: {"value": measured[0], "sigma": 0.01 * abs(measured[0])}}
+    res = oxyline.calibrate(model, targets, [path], method="lm")
+    assert res.success, res.report
+    assert res.parameters[path] == pytest.approx(1.4 * r0, rel=1e-6)
+
+
+def test_geometry_the_tangent_leaves_out_is_refused_naming_it() -> None:
+    model = _tapered()
+    model["vessels"][1]["wall_friction"] = "womersley"
+    with pytest.raises(ModelError, match="parameter 'vessels.d1.radius_out'.*Womersley"):
+        oxyline.sensitivities(model, ["vessels.d1.radius_out"], ["d1.flow_out.mean"])
+    with pytest.raises(ModelError, match="parameter 'vessels.d1.radius'.*radius_in"):
+        oxyline.sensitivities(_tapered(), ["vessels.d1.radius"], ["d1.flow_out.mean"])
