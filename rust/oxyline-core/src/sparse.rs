@@ -1028,7 +1028,7 @@ mod tests {
     #[test]
     fn solves_a_small_system_and_reuses_the_pattern() {
         // [[4,1,0],[1,3,1],[0,1,2]]
-        let stamps = [(0, 0), (0, 1), (1, 0), (1, 1), (1, 2), (2, 1), (2, 2)];
+        let stamps: [(usize, usize); 7] = [(0, 0), (0, 1), (1, 0), (1, 1), (1, 2), (2, 1), (2, 2)];
         let mut lu = SparseLu::analyse(3, &stamps).unwrap();
         lu.factor(&[4.0, 1.0, 1.0, 3.0, 1.0, 1.0, 2.0]).unwrap();
         let mut b = [5.0, 5.0, 3.0];
