@@ -57,6 +57,25 @@ impl Scalar for faer::c64 {
     }
 }
 
+/// A stamp's (row, column). A run's own iteration matrix gives 32-bit pairs (8 bytes a stamp:
+/// a million-segment circuit has ~8 million stamps, alive while its elimination is analysed,
+/// the setup's peak); the other callers' patterns are `usize` pairs.
+pub trait Stamp: Copy {
+    fn at(self) -> (usize, usize);
+}
+
+impl Stamp for (usize, usize) {
+    fn at(self) -> (usize, usize) {
+        self
+    }
+}
+
+impl Stamp for (u32, u32) {
+    fn at(self) -> (usize, usize) {
+        (self.0 as usize, self.1 as usize)
+    }
+}
+
 /// Which elimination a matrix pattern gets.
 // (one per run or per frequency: the tree's inline 232 bytes cost nothing, and the tree
 // elimination, the common path, is reached without an indirection)
@@ -72,7 +91,7 @@ impl<T: Scalar> SparseLu<T> {
     /// `stamps` are the (row, col) positions of the values later passed to `factor`, in order;
     /// duplicates are summed. A forest pattern gets the O(n) tree elimination; a pattern with
     /// loops gets it on its pendant trees and the general LU on its loop-carrying core alone.
-    pub fn analyse(n: usize, stamps: &[(usize, usize)]) -> Result<Self> {
+    pub fn analyse<S: Stamp>(n: usize, stamps: &[S]) -> Result<Self> {
         if let Some(t) = TreeLu::analyse(n, stamps) {
             return Ok(SparseLu::Tree(t));
         }
@@ -83,30 +102,37 @@ impl<T: Scalar> SparseLu<T> {
     }
 
     pub fn factor(&mut self, vals: &[T]) -> std::result::Result<(), String> {
-        match self {
+        // a (near-)zero pivot, e.g. an ideal wire eliminated first or a pendant junction
+        // without storage: fall back to the pivoting LU on the same pattern. Its symbolic
+        // analysis is the largest allocation of a run's setup (~350 B per segment with loops),
+        // so the elimination's values go first and the pattern is handed over as the one list
+        // the analysis reads (at 306 000 segments the elimination's values, the pattern and
+        // its copy beside the analysis were ~130 MB of the peak)
+        let (n, stamps) = match self {
             SparseLu::Tree(t) => {
                 if t.factor(vals) {
                     return Ok(());
                 }
-                // a (near-)zero pivot, e.g. an ideal wire eliminated first: fall back to
-                // pivoting LU on the same pattern
-                let mut g = GeneralLu::analyse(t.n, &t.stamps()).map_err(|e| e.to_string())?;
-                g.factor(vals)?;
-                *self = SparseLu::General(Box::new(g));
-                Ok(())
+                t.release_values();
+                (t.n, t.stamps())
             }
             SparseLu::Core(c) => {
                 if c.factor(vals)? {
                     return Ok(());
                 }
-                // a (near-)zero pivot in a pendant tree: as for a tree
-                let mut g = GeneralLu::analyse(c.n(), &c.stamps()).map_err(|e| e.to_string())?;
-                g.factor(vals)?;
-                *self = SparseLu::General(Box::new(g));
-                Ok(())
+                c.release_values();
+                (c.n(), c.stamps())
             }
-            SparseLu::General(g) => g.factor(vals),
-        }
+            SparseLu::General(g) => return g.factor(vals),
+        };
+        // (the same 16 bytes a stamp: collected in place)
+        let pairs = stamps.into_iter().map(|(r, c)| Pair::new(r, c)).collect();
+        let g = GeneralLu::from_pairs(n, pairs).map_err(|e| e.to_string())?;
+        *self = SparseLu::General(Box::new(g));
+        let SparseLu::General(g) = self else {
+            unreachable!("replaced by the general LU")
+        };
+        g.factor(vals)
     }
 
     /// Solve in place; returns false if the solution is not finite (singular matrix).
@@ -196,7 +222,7 @@ const BLOCK: usize = 2048;
 /// The edges and starts are u32 (a tree's `analyse` takes fewer than 2^30 vertices, so fewer
 /// than 2^31 edge ends): this runs while a run sets up, beside the stamps, and its 16-byte
 /// edges were ~80 bytes per segment of the setup's peak at a million segments.
-fn adjacency(n: usize, stamps: &[(usize, usize)]) -> Option<(Vec<u32>, Vec<u32>)> {
+fn adjacency<S: Stamp>(n: usize, stamps: &[S]) -> Option<(Vec<u32>, Vec<u32>)> {
     let edges = edges(stamps, |_, _| true);
     if edges.len() >= n {
         return None;
@@ -205,11 +231,12 @@ fn adjacency(n: usize, stamps: &[(usize, usize)]) -> Option<(Vec<u32>, Vec<u32>)
 }
 
 /// The distinct undirected off-diagonal edges (low, high) of the stamps that `keep` accepts.
-fn edges(stamps: &[(usize, usize)], keep: impl Fn(usize, usize) -> bool) -> Vec<(u32, u32)> {
+fn edges<S: Stamp>(stamps: &[S], keep: impl Fn(usize, usize) -> bool) -> Vec<(u32, u32)> {
     let mut edges: Vec<(u32, u32)> = stamps
         .iter()
-        .filter(|&&(r, c)| r != c && keep(r, c))
-        .map(|&(r, c)| (r.min(c) as u32, r.max(c) as u32))
+        .map(|s| s.at())
+        .filter(|&(r, c)| r != c && keep(r, c))
+        .map(|(r, c)| (r.min(c) as u32, r.max(c) as u32))
         .collect();
     edges.sort_unstable();
     edges.dedup();
@@ -326,7 +353,7 @@ fn post_order(n: usize, start: &[u32], adj: &[u32], roots: &[u32]) -> Option<(Ve
 }
 
 impl<T: Scalar> TreeLu<T> {
-    fn analyse(n: usize, stamps: &[(usize, usize)]) -> Option<Self> {
+    fn analyse<S: Stamp>(n: usize, stamps: &[S]) -> Option<Self> {
         // positions are packed with two tag bits into u32 slots
         if n >= (1 << 30) {
             return None;
@@ -338,9 +365,9 @@ impl<T: Scalar> TreeLu<T> {
     /// The elimination of the forest `(start, adj)` (the stamps' graph, or the part of it
     /// outside a loop-carrying core). With `core` (per vertex: in the core), the core's vertices
     /// are the forest's held roots and the stamps joining two of them are left out (`SKIP`).
-    fn analyse_forest(
+    fn analyse_forest<S: Stamp>(
         n: usize,
-        stamps: &[(usize, usize)],
+        stamps: &[S],
         (start, adj): (Vec<u32>, Vec<u32>),
         core: Option<&[bool]>,
     ) -> Option<Self> {
@@ -361,7 +388,8 @@ impl<T: Scalar> TreeLu<T> {
         let partition = Box::new(parallel::Partition::new(n, &blocks, &parent_pos));
         let slots = stamps
             .iter()
-            .map(|&(r, c)| {
+            .map(|s| {
+                let (r, c) = s.at();
                 if r == c {
                     pos[r] << 2 | DIAG
                 } else if in_core(r) && in_core(c) {
@@ -427,9 +455,11 @@ impl<T: Scalar> TreeLu<T> {
     /// The stamps summed and the elimination leaves-to-roots (pivots not yet inverted); false
     /// at a (near-)zero pivot.
     fn eliminate(&mut self, vals: &[T]) -> bool {
-        self.pivot.iter_mut().for_each(|x| *x = T::ZERO);
-        self.up.iter_mut().for_each(|x| *x = T::ZERO);
-        self.down.iter_mut().for_each(|x| *x = T::ZERO);
+        // (sized here: `release_values` may have dropped them)
+        for values in [&mut self.pivot, &mut self.up, &mut self.down] {
+            values.clear();
+            values.resize(self.n, T::ZERO);
+        }
         for (&slot, &v) in self.slots.iter().zip(vals) {
             let k = (slot >> 2) as usize;
             match slot & 3 {
@@ -501,6 +531,15 @@ impl<T: Scalar> TreeLu<T> {
             finite &= b[v].finite();
         }
         finite
+    }
+
+    /// Drop the factorisation's values (the analysis stays: the next `factor` sizes them
+    /// again), before the pivoting fallback builds its own.
+    fn release_values(&mut self) {
+        for values in [&mut self.pivot, &mut self.up, &mut self.down] {
+            *values = Vec::new();
+        }
+        self.magnitude = Vec::new();
     }
 
     /// The (row, col) stamps the slots were made from, in order (for the pivoting fallback).
@@ -667,10 +706,23 @@ impl<T: Scalar> Simplicial<T> {
 }
 
 impl<T: Scalar> GeneralLu<T> {
-    pub fn analyse(n: usize, stamps: &[(usize, usize)]) -> Result<Self> {
-        let pairs: Vec<Pair<usize, usize>> = stamps.iter().map(|&(r, c)| Pair::new(r, c)).collect();
+    pub fn analyse<S: Stamp>(n: usize, stamps: &[S]) -> Result<Self> {
+        let pairs = stamps
+            .iter()
+            .map(|s| {
+                let (r, c) = s.at();
+                Pair::new(r, c)
+            })
+            .collect();
+        Self::from_pairs(n, pairs)
+    }
+
+    /// [`GeneralLu::analyse`] of the stamps as faer's pairs, dropped once the pattern is built
+    /// (before the symbolic analysis, the largest allocation).
+    fn from_pairs(n: usize, pairs: Vec<Pair<usize, usize>>) -> Result<Self> {
         let (sym, order) = SymbolicSparseColMat::try_new_from_indices(n, n, &pairs)
             .map_err(|e| Error::solver(0.0, format!("sparse pattern: {e:?}")))?;
+        drop(pairs);
         // faer's own choice (`SymbolicLu::try_new`: default parameters); its simplicial
         // factorisation is the one whose numeric scratch is exactly the simplicial one (the
         // supernodal one also holds a transposed copy of the matrix)
@@ -976,7 +1028,7 @@ mod tests {
     #[test]
     fn solves_a_small_system_and_reuses_the_pattern() {
         // [[4,1,0],[1,3,1],[0,1,2]]
-        let stamps = [(0, 0), (0, 1), (1, 0), (1, 1), (1, 2), (2, 1), (2, 2)];
+        let stamps: [(usize, usize); 7] = [(0, 0), (0, 1), (1, 0), (1, 1), (1, 2), (2, 1), (2, 2)];
         let mut lu = SparseLu::analyse(3, &stamps).unwrap();
         lu.factor(&[4.0, 1.0, 1.0, 3.0, 1.0, 1.0, 2.0]).unwrap();
         let mut b = [5.0, 5.0, 3.0];

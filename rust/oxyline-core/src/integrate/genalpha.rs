@@ -6,7 +6,7 @@
 //! make it depend on the iterate.
 
 use super::leaves::Leaves;
-use super::newton::{self, Magnitude, NewtonProblem, jacobian_stamps, jacobian_values_of};
+use super::newton::{self, Magnitude, NewtonProblem, jacobian_pattern, jacobian_values_of};
 use crate::circuit::{Csr, Dae, JacobianKind, Regime};
 use crate::error::{Error, Result};
 use crate::sparse::SparseLu;
@@ -90,7 +90,7 @@ impl<'a> GenAlpha<'a> {
         let am = 0.5 * (3.0 - rho_inf) / (1.0 + rho_inf);
         let af = 1.0 / (1.0 + rho_inf);
         let gamma = 0.5 + am - af;
-        let stamps = jacobian_stamps(dae);
+        let stamps = jacobian_pattern(dae);
         // (the node row of a capacitor holds its R branch's flow: the incidence)
         let chain_flow_entry = dae
             .chain_rule

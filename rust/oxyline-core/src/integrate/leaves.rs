@@ -23,7 +23,7 @@
 //! up to rounding.
 
 use crate::circuit::{Csr, Dae};
-use crate::sparse::SparseLu;
+use crate::sparse::{SparseLu, Stamp};
 
 /// The trailing leaves of a DAE and the iteration matrix reduced to the other unknowns.
 pub struct Leaves {
@@ -71,7 +71,7 @@ impl Leaves {
     /// The trailing leaves of `dae` (mass diagonal `mass`: the integrator's regime's) with
     /// the reduced pattern of `stamps` (the full iteration matrix's,
     /// `newton::jacobian_stamps`) analysed in the returned LU; None if it has none.
-    pub fn find(dae: &Dae, mass: &[f64], stamps: &[(usize, usize)]) -> Option<(Self, SparseLu)> {
+    pub fn find<S: Stamp>(dae: &Dae, mass: &[f64], stamps: &[S]) -> Option<(Self, SparseLu)> {
         let n = dae.n;
         let start = leaf_start(dae);
         if start == n
@@ -123,13 +123,13 @@ impl Leaves {
         let mut reduced_slot = vec![NONE; stamps.len()];
         let mut leaf_stamps = Vec::with_capacity(4 * m);
         let mut diag = vec![NONE; start];
-        for (s, &(r, c)) in stamps.iter().enumerate() {
+        for (s, (r, c)) in stamps.iter().map(|s| s.at()).enumerate() {
             if r < start && c < start {
                 reduced_slot[s] = reduced.len() as u32;
                 if r == c && diag[r] == NONE {
                     diag[r] = reduced.len() as u32;
                 }
-                reduced.push((r, c));
+                reduced.push((r as u32, c as u32));
             } else {
                 let (leaf, kind) = if r == c {
                     (r, JJ)

@@ -6,6 +6,7 @@
 
 use crate::circuit::{Dae, JacobianKind};
 use crate::error::{Error, Result};
+use crate::sparse::Stamp;
 use std::cmp::Ordering;
 
 /// Newton stopping rule. `atol: Some(a)` reproduces svZeroDSolver (max |residual| < a,
@@ -217,14 +218,22 @@ pub fn solve<P: NewtonProblem>(
 /// diagonal slots, then the elements' Jacobian entries): the pattern of every iteration
 /// matrix a·(F + dc/dy) + diag(d) of the circuit.
 pub fn jacobian_stamps(dae: &Dae) -> Vec<(usize, usize)> {
-    let mut stamps = Vec::with_capacity(dae.f.val.len() + dae.n);
+    jacobian_pattern(dae).iter().map(|s| s.at()).collect()
+}
+
+/// [`jacobian_stamps`] as 32-bit pairs (the circuit has fewer than 2^32 unknowns), for the
+/// run's own analyses: 8 bytes a stamp instead of 16 (~8 stamps per segment, alive while the
+/// elimination is analysed, when a large run's memory peaks).
+pub fn jacobian_pattern(dae: &Dae) -> Vec<(u32, u32)> {
+    let elements = dae.element_pattern();
+    let mut stamps = Vec::with_capacity(dae.f.val.len() + dae.n + elements.len());
     for i in 0..dae.n {
         for k in dae.f.row(i) {
-            stamps.push((i, dae.f.col[k] as usize));
+            stamps.push((i as u32, dae.f.col[k]));
         }
     }
-    stamps.extend((0..dae.n).map(|i| (i, i)));
-    stamps.extend(dae.element_pattern());
+    stamps.extend((0..dae.n as u32).map(|i| (i, i)));
+    stamps.extend(elements.iter().map(|&(r, c)| (r as u32, c as u32)));
     stamps
 }
 

@@ -16,7 +16,7 @@
 //! LU's permutations and scattered triangular columns, and the factors take the tree's ~50 B
 //! per unknown.
 
-use super::{GeneralLu, SKIP, Scalar, TreeLu, csr, edges};
+use super::{GeneralLu, SKIP, Scalar, Stamp, TreeLu, csr, edges};
 use crate::error::Result;
 
 pub struct CoreLu<T: Scalar> {
@@ -71,7 +71,7 @@ pub(crate) fn two_core(
 impl<T: Scalar> CoreLu<T> {
     /// None if the pattern has no pendant vertex to eliminate (all of it is core) or is too
     /// large for the trees' 32-bit slots.
-    pub fn analyse(n: usize, stamps: &[(usize, usize)]) -> Result<Option<Self>> {
+    pub fn analyse<S: Stamp>(n: usize, stamps: &[S]) -> Result<Option<Self>> {
         if n >= (1 << 30) {
             return Ok(None);
         }
@@ -90,9 +90,10 @@ impl<T: Scalar> CoreLu<T> {
         }
         let core_stamps: Vec<(u32, (u32, u32))> = stamps
             .iter()
+            .map(|s| s.at())
             .enumerate()
-            .filter(|&(_, &(r, c))| r != c && in_core[r] && in_core[c])
-            .map(|(s, &(r, c))| (s as u32, (r as u32, c as u32)))
+            .filter(|&(_, (r, c))| r != c && in_core[r] && in_core[c])
+            .map(|(s, (r, c))| (s as u32, (r as u32, c as u32)))
             .collect();
         let mut pattern: Vec<(usize, usize)> = core_stamps
             .iter()
@@ -138,6 +139,12 @@ impl<T: Scalar> CoreLu<T> {
         self.tree.invert_pivots();
         self.lu.factor(&self.vals)?;
         Ok(true)
+    }
+
+    /// Drop the factorisation's values (see [`TreeLu::release_values`]); the core's own
+    /// factors are a few thousand unknowns' and stay.
+    pub fn release_values(&mut self) {
+        self.tree.release_values();
     }
 
     /// Solve in place; whether the solution is finite.
@@ -270,6 +277,45 @@ mod tests {
                 assert_eq!(from_stamps, want);
             }
         }
+    }
+
+    /// A zero pivot in a pendant tree (a leaf without storage, as at a steady start) sends
+    /// the factorisation to the general LU of the whole pattern, which solves the system (to
+    /// 1e-10: pivoting elimination, entries of order 1, |x| <= 1); the 32-bit stamps the run
+    /// analyses give the same elimination as `usize` ones (the same operations: the same bits).
+    #[test]
+    fn a_zero_pivot_in_a_pendant_tree_falls_back_to_the_general_lu() {
+        let n = 3 * BLOCK + 17;
+        let (stamps, mut vals, _, _) = looped_case(n, 0, 2, 99);
+        // the last vertex is a leaf (no vertex after it picks it as parent): no storage
+        vals[stamps.iter().position(|&s| s == (n - 1, n - 1)).unwrap()] = 0.0;
+        let x: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin()).collect();
+        let mut b = vec![0.0; n];
+        for (&(r, c), &v) in stamps.iter().zip(&vals) {
+            b[r] += v * x[c];
+        }
+        let narrow: Vec<(u32, u32)> = stamps.iter().map(|&(r, c)| (r as u32, c as u32)).collect();
+        let mut solved = Vec::new();
+        for mut lu in [
+            SparseLu::analyse(n, &stamps).unwrap(),
+            SparseLu::analyse(n, &narrow).unwrap(),
+        ] {
+            assert!(matches!(lu, SparseLu::Core(_)));
+            lu.factor(&vals).unwrap();
+            assert!(matches!(lu, SparseLu::General(_)), "fell back");
+            let mut out = b.clone();
+            assert!(lu.solve_in_place(&mut out));
+            for i in 0..n {
+                assert!((out[i] - x[i]).abs() < 1e-10, "{i}: {} vs {}", out[i], x[i]);
+            }
+            solved.push(out);
+        }
+        assert!(
+            solved[0]
+                .iter()
+                .zip(&solved[1])
+                .all(|(a, b)| a.to_bits() == b.to_bits())
+        );
     }
 
     fn c_stamps(stamps: &[(usize, usize)]) -> Vec<(usize, usize)> {
