@@ -16,7 +16,8 @@
 //!   f′ = σ c′ + ∂f/∂θ,   σ′ = (dσ/dC_t) c′ + ∂σ/∂θ,
 //!
 //! the same matrix A, so each parameter costs one more solve per step on the primal's tree
-//! elimination (or flow-order sweep); the inflow of a prescribed boundary carries the
+//! elimination (on a network with loops, its pendant trees' elimination around the loops'
+//! core, `core.rs`, or the flow-order sweep when it is all core); the inflow of a prescribed boundary carries the
 //! derivative of its total concentration (P50 changes the bound part of a given inlet PO2),
 //! a zero-gradient one the tangent of its neighbour. The free concentration and its slopes
 //! are those of the exact inversion of the binding (the primal's anchored series agrees with
@@ -396,6 +397,9 @@ impl Transport {
         let res = if plan.tree.is_some() {
             self.tree_solve(&mut xt);
             Ok(())
+        } else if let Some(core) = &plan.core {
+            // the primal's matrix with its pendant trees eliminated around the loops' core
+            self.core_solve(core, &mut xt)
         } else {
             let (den, num) = (self.sweep.den.clone(), self.sweep.num.clone());
             self.sweep_solve(&plan.domain, &den, &num, &mut xt)
