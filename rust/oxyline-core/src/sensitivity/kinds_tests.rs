@@ -5,6 +5,7 @@
 //! are below 1e-8 of the derivative's scale, so agreement to 1e-6 relative tells a wrong
 //! tangent from a right one (as `super::tests`).
 
+use super::tests::{SIGNALS, check_on, run, settings};
 use super::*;
 use crate::model::parse;
 
@@ -36,84 +37,10 @@ const MODEL: &str = r#"{
   }
 }"#;
 
-const SIGNALS: [(&str, &str); 4] = [
-    ("parent", "pressure_in"),
-    ("d1", "flow_out"),
-    ("d2", "flow_in"),
-    ("d1", "pressure_out"),
-];
-
-fn settings() -> TangentSettings {
-    TangentSettings {
-        period: 0.8,
-        steps_per_cycle: 200,
-        rho_infty: 0.5,
-        max_cycles: 400,
-        tol: 1e-13,
-    }
-}
-
-fn run(spec: &NetworkSpec, paths: &[&str]) -> Sensitivities {
-    let paths: Vec<String> = paths.iter().map(|p| p.to_string()).collect();
-    let signals: Vec<(String, String)> = SIGNALS
-        .iter()
-        .map(|(a, b)| (a.to_string(), b.to_string()))
-        .collect();
-    sensitivities(spec, &paths, &signals, settings()).unwrap()
-}
-
-/// `s` with parameter `path` multiplied by `f`, written into the spec directly.
-fn scaled(mut s: NetworkSpec, path: &str, f: f64) -> NetworkSpec {
-    let parts: Vec<&str> = path.split('.').collect();
-    let v = s.vessels.iter_mut().find(|v| v.name == parts[1]).unwrap();
-    match parts[2..] {
-        ["radius_in"] => v.geometry.as_mut().unwrap().radius_in *= f,
-        ["radius_out"] => v.geometry.as_mut().unwrap().radius_out *= f,
-        ["lumped", key] => {
-            let l = v.lumped.as_mut().unwrap();
-            match key {
-                "resistance" => l.resistance *= f,
-                "inductance" => l.inductance *= f,
-                "capacitance" => l.capacitance *= f,
-                _ => l.stenosis_coefficient *= f,
-            }
-        }
-        _ => unreachable!("{path}"),
-    }
-    s
-}
-
 /// Largest |tangent − central difference| over the cycle and signals, relative to the
 /// derivative's scale per signal, must be within 1e-6 (see the module's documentation).
 fn check(path: &str) {
-    let base = parse(MODEL).unwrap();
-    let exact = run(&base, &[path]);
-    let h = 1e-4;
-    let up = run(&scaled(base.clone(), path, 1.0 + h), &[]);
-    let down = run(&scaled(base.clone(), path, 1.0 - h), &[]);
-    let p = exact.values[0];
-    let c = &exact.cycle;
-    assert!(c.periodic_change <= 1e-11, "{path}: not periodic");
-    let nsig = SIGNALS.len();
-    for (j, signal) in SIGNALS.iter().enumerate() {
-        let col = |v: &[f64]| -> Vec<f64> { v.iter().skip(j).step_by(nsig).copied().collect() };
-        let (d, u, w) = (
-            col(&c.derivs),
-            col(&up.cycle.values),
-            col(&down.cycle.values),
-        );
-        let scale = d.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-        assert!(scale > 0.0, "{path}: zero derivative of {signal:?}");
-        let worst = d
-            .iter()
-            .zip(u.iter().zip(&w))
-            .map(|(dk, (uk, wk))| (dk - (uk - wk) / (2.0 * h * p)).abs())
-            .fold(0.0f64, f64::max);
-        assert!(
-            worst <= 1e-6 * scale,
-            "{path} {signal:?}: {worst:e} vs scale {scale:e}"
-        );
-    }
+    check_on(&parse(MODEL).unwrap(), path);
 }
 
 #[test]

@@ -30,14 +30,14 @@ const MODEL: &str = r#"{
   }
 }"#;
 
-const SIGNALS: [(&str, &str); 4] = [
+pub(super) const SIGNALS: [(&str, &str); 4] = [
     ("parent", "pressure_in"),
     ("d1", "flow_out"),
     ("d2", "flow_in"),
     ("d1", "pressure_out"),
 ];
 
-fn settings() -> TangentSettings {
+pub(super) fn settings() -> TangentSettings {
     TangentSettings {
         period: 0.8,
         steps_per_cycle: 200,
@@ -47,7 +47,7 @@ fn settings() -> TangentSettings {
     }
 }
 
-fn run(spec: &NetworkSpec, paths: &[&str]) -> Sensitivities {
+pub(super) fn run(spec: &NetworkSpec, paths: &[&str]) -> Sensitivities {
     let paths: Vec<String> = paths.iter().map(|p| p.to_string()).collect();
     let signals: Vec<(String, String)> = SIGNALS
         .iter()
@@ -80,6 +80,14 @@ pub(super) fn scaled_from(mut s: NetworkSpec, path: &str, f: f64) -> NetworkSpec
             g.radius_in *= f;
             g.radius_out *= f;
         }
+        ["vessels", n, "radius_in"] => {
+            let i = vi(&s, n);
+            s.vessels[i].geometry.as_mut().unwrap().radius_in *= f;
+        }
+        ["vessels", n, "radius_out"] => {
+            let i = vi(&s, n);
+            s.vessels[i].geometry.as_mut().unwrap().radius_out *= f;
+        }
         ["vessels", n, "youngs_modulus"] => {
             let i = vi(&s, n);
             *s.vessels[i]
@@ -93,6 +101,10 @@ pub(super) fn scaled_from(mut s: NetworkSpec, path: &str, f: f64) -> NetworkSpec
         ["vessels", n, "lumped", "capacitance"] => {
             let i = vi(&s, n);
             s.vessels[i].lumped.as_mut().unwrap().capacitance *= f;
+        }
+        ["vessels", n, "lumped", "inductance"] => {
+            let i = vi(&s, n);
+            s.vessels[i].lumped.as_mut().unwrap().inductance *= f;
         }
         ["vessels", n, "lumped", "resistance"] => {
             let i = vi(&s, n);
@@ -172,7 +184,7 @@ fn check(path: &str) {
     check_on(&parse(MODEL).unwrap(), path);
 }
 
-fn check_on(base: &NetworkSpec, path: &str) {
+pub(super) fn check_on(base: &NetworkSpec, path: &str) {
     let exact = run(base, &[path]);
     let h = 1e-4;
     let up = run(&scaled_from(base.clone(), path, 1.0 + h), &[]);

@@ -126,42 +126,7 @@ pub(super) fn tree_backward(sw: &Sweep, links: &[Link], x: &mut [f64]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_common::{build, lcg};
-
-    /// A ring a → b → c → d → a fed at a by a parent of four segments, drained at b and d
-    /// and through a pendant vessel of three segments at c, dissolved oxygen with a
-    /// constant-k wall: a core (the ring) with pendant trees (the parent, the outlets).
-    const RING: &str = r#"{
-      "vessels": [
-        {"name": "p", "from": "in", "to": "a", "segments": 4,
-         "geometry": {"length": 0.05, "radius_in": 0.003, "radius_out": 0.003}},
-        {"name": "ab", "from": "a", "to": "b", "segments": 2,
-         "geometry": {"length": 0.05, "radius_in": 0.002, "radius_out": 0.002}},
-        {"name": "bc", "from": "b", "to": "c", "segments": 1,
-         "geometry": {"length": 0.05, "radius_in": 0.002, "radius_out": 0.002}},
-        {"name": "cd", "from": "c", "to": "d", "segments": 2,
-         "geometry": {"length": 0.05, "radius_in": 0.002, "radius_out": 0.002}},
-        {"name": "da", "from": "d", "to": "a", "segments": 1,
-         "geometry": {"length": 0.05, "radius_in": 0.002, "radius_out": 0.002}},
-        {"name": "bo", "from": "b", "to": "o1", "segments": 1,
-         "geometry": {"length": 0.05, "radius_in": 0.002, "radius_out": 0.002}},
-        {"name": "co", "from": "c", "to": "o2", "segments": 3,
-         "geometry": {"length": 0.05, "radius_in": 0.002, "radius_out": 0.002}},
-        {"name": "do", "from": "d", "to": "o3", "segments": 1,
-         "geometry": {"length": 0.05, "radius_in": 0.002, "radius_out": 0.002}}
-      ],
-      "boundary_conditions": {
-        "in": {"type": "flow", "flow": {"kind": "constant", "value": 3e-6}},
-        "o1": {"type": "resistance", "resistance": 1e9},
-        "o2": {"type": "resistance", "resistance": 1e9},
-        "o3": {"type": "resistance", "resistance": 1e9}
-      },
-      "transport": {"species": [{
-        "name": "o2", "diffusivity": 1.5e-9,
-        "inlet": {"kind": "constant", "value": 0.119},
-        "wall": {"model": "mass-transfer", "k": 1e-4, "wall_concentration": 0.05}
-      }]}
-    }"#;
+    use crate::test_common::{RING, build, lcg};
 
     /// The core solve (pendant trees eliminated, the sweep on the core alone; the primal's
     /// row-by-row step and the tangent's solve) against the flow-order sweep over the whole
