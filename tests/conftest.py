@@ -138,6 +138,31 @@ def assert_adjoint_is_forward(fwd: Any, adj: Any, where: object = None) -> None:
     assert (err <= 1e-8 * scale[:, None]).all(), (where, err / scale[:, None])
 
 
+def assert_sensitivities_are_central_differences(model: dict[str, Any], params: list[str],
+                                                 outputs: list[str], h: float = 1e-4) -> Any:
+    """The forward tangents of ``outputs`` by ``params`` against central differences of
+    whole periodic runs (relative step ``h``): each derivative to 1e-6 of its output's largest
+    response to a 100 % change (the differences' truncation and rounding sit near 1e-8 at
+    h = 1e-4). Returns the exact sensitivities."""
+    import numpy as np
+
+    import oxyline
+    from oxyline.calibrate import _base_value, native_model
+
+    exact = oxyline.sensitivities(model, params, outputs)
+    assert exact.periodic_change <= 1e-11
+    scale = np.abs(exact.jacobian * exact.parameter_values).max(axis=1)
+    assert (scale > 0).all()
+    for k, path in enumerate(params):
+        x0 = _base_value(model, path)  # in the model's units (the Jacobian's are SI)
+        up, down = (oxyline.sensitivities(native_model(model, [path], [x0 * f]), [],
+                                          outputs).values for f in (1 + h, 1 - h))
+        # d(output)/d(log parameter), the same in every unit system
+        err = np.abs(exact.jacobian[:, k] * exact.parameter_values[k] - (up - down) / (2 * h))
+        assert (err <= 1e-6 * scale).all(), (path, err / scale)
+    return exact
+
+
 def stenosed_inductor(coefficient: float) -> dict[str, Any]:
     """A compliant vessel into a lumped RLC element with a stenosis S |Q| Q of coefficient
     ``coefficient`` in series with its inertance, a steady inflow of 1e-5 m³/s and an outlet

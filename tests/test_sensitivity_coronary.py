@@ -18,15 +18,18 @@ import copy
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pytest
 import yaml
 
 import oxyline
 from oxyline import ModelError
 from oxyline import svzerod as svz
-from oxyline.calibrate import _base_value, native_model
-from tests.conftest import assert_adjoint_is_forward, data_path
+from oxyline.calibrate import native_model
+from tests.conftest import (
+    assert_adjoint_is_forward,
+    assert_sensitivities_are_central_differences,
+    data_path,
+)
 
 pytest.importorskip("scipy")
 
@@ -52,21 +55,6 @@ def _curved_coronary() -> dict[str, Any]:
     return model
 
 
-def _check_central(model: dict[str, Any], params: list[str], outputs: list[str],
-                   h: float = 1e-4) -> Any:
-    exact = oxyline.sensitivities(model, params, outputs)
-    assert exact.periodic_change <= 1e-11
-    scale = np.abs(exact.jacobian * exact.parameter_values).max(axis=1)
-    assert (scale > 0).all()
-    for k, path in enumerate(params):
-        x0 = _base_value(model, path)  # in the model's units (the Jacobian's are SI)
-        up, down = (oxyline.sensitivities(native_model(model, [path], [x0 * f]), [],
-                                          outputs).values for f in (1 + h, 1 - h))
-        # d(output)/d(log parameter), the same in every unit system
-        err = np.abs(exact.jacobian[:, k] * exact.parameter_values[k] - (up - down) / (2 * h))
-        assert (err <= 1e-6 * scale).all(), (path, err / scale)
-    return exact
-
 
 def test_svzerod_coronary_jacobian_matches_central_differences() -> None:
     model, node, vessel = _svzerod_case("pulsatileFlow_R_coronary.json")
@@ -74,7 +62,7 @@ def test_svzerod_coronary_jacobian_matches_central_differences() -> None:
                                                                    "scale.compliance"]
     outputs = [f"{vessel}.pressure_in.max", f"{vessel}.pressure_in.min",
                f"{vessel}.pressure_out.mean", f"{vessel}.pressure_out.pulse"]
-    exact = _check_central(model, params, outputs)
+    exact = assert_sensitivities_are_central_differences(model, params, outputs)
     # the mean pressure is the inflow's mean through R_a + R_am + R_v: each adds to it
     mean = exact.rows[f"{vessel}.pressure_out.mean"]
     assert (exact.jacobian[mean, :3] > 0).all()
@@ -87,7 +75,7 @@ def test_intramyocardial_pressure_factor_matches_central_differences() -> None:
               "boundary_conditions.outlet.intramyocardial_capacitance"]
     outputs = ["coronary.flow_out.max", "coronary.flow_out.min", "coronary.flow_in.mean",
                "coronary.pressure_out.pulse"]
-    exact = _check_central(model, params, outputs)
+    exact = assert_sensitivities_are_central_differences(model, params, outputs)
     # squeezing harder lowers the systolic outflow of the bed's inlet vessel
     assert exact.jacobian[exact.rows["coronary.flow_out.min"], 0][0] < 0
 
@@ -135,7 +123,7 @@ def test_through_a_varying_microvascular_resistance() -> None:
     params += [f"vessels.{vessel}.lumped.resistance"]
     outputs = [f"{vessel}.pressure_in.max", f"{vessel}.pressure_in.min",
                f"{vessel}.pressure_out.mean", f"{vessel}.pressure_out.pulse"]
-    exact = _check_central(model, params, outputs)
+    exact = assert_sensitivities_are_central_differences(model, params, outputs)
     adj = oxyline.sensitivities(model, params, outputs, mode="adjoint")
     assert_adjoint_is_forward(exact, adj)
     with pytest.raises(ModelError, match="varying microvascular resistance"):

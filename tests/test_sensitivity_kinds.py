@@ -16,14 +16,17 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
 import pytest
 
 import oxyline
 from oxyline import ModelError
 from oxyline import svzerod as svz
 from oxyline.calibrate import _base_value, native_model
-from tests.conftest import assert_adjoint_is_forward, data_path
+from tests.conftest import (
+    assert_adjoint_is_forward,
+    assert_sensitivities_are_central_differences,
+    data_path,
+)
 
 pytest.importorskip("scipy")
 
@@ -63,21 +66,6 @@ def _svzerod_rcl() -> tuple[dict[str, Any], str]:
     return model, vessel["name"]
 
 
-def _check_central(model: dict[str, Any], params: list[str], outputs: list[str],
-                   h: float = 1e-4) -> Any:
-    exact = oxyline.sensitivities(model, params, outputs)
-    assert exact.periodic_change <= 1e-11
-    scale = np.abs(exact.jacobian * exact.parameter_values).max(axis=1)
-    assert (scale > 0).all()
-    for k, path in enumerate(params):
-        x0 = _base_value(model, path)  # in the model's units (the Jacobian's are SI)
-        up, down = (oxyline.sensitivities(native_model(model, [path], [x0 * f]), [],
-                                          outputs).values for f in (1 + h, 1 - h))
-        # d(output)/d(log parameter), the same in every unit system
-        err = np.abs(exact.jacobian[:, k] * exact.parameter_values[k] - (up - down) / (2 * h))
-        assert (err <= 1e-6 * scale).all(), (path, err / scale)
-    return exact
-
 
 TAPER_PARAMS = ["vessels.d1.radius_in", "vessels.d1.radius_out", "vessels.parent.radius_out"]
 TAPER_OUTPUTS = ["parent.pressure_in.max", "parent.pressure_in.min", "d1.flow_out.mean",
@@ -85,7 +73,7 @@ TAPER_OUTPUTS = ["parent.pressure_in.max", "parent.pressure_in.min", "d1.flow_ou
 
 
 def test_taper_end_radii_match_central_differences() -> None:
-    exact = _check_central(_tapered(), TAPER_PARAMS, TAPER_OUTPUTS)
+    exact = assert_sensitivities_are_central_differences(_tapered(), TAPER_PARAMS, TAPER_OUTPUTS)
     # a narrower outlet end raises the daughter's resistance: less of the flow goes there
     split = exact.rows["flow_split.d1.parent"]
     assert exact.jacobian[split, 1] > 0
@@ -104,7 +92,7 @@ def test_rcl_vessel_values_match_central_differences() -> None:
                                                        "inductance")] + ["scale.resistance"]
     outputs = [f"{vessel}.pressure_in.max", f"{vessel}.pressure_in.min",
                f"{vessel}.pressure_out.mean", f"{vessel}.flow_out.pulse"]
-    exact = _check_central(model, params, outputs)
+    exact = assert_sensitivities_are_central_differences(model, params, outputs)
     adj = oxyline.sensitivities(model, params, outputs, mode="adjoint")
     assert_adjoint_is_forward(exact, adj)
 
