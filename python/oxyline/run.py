@@ -617,8 +617,9 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
         result.chamber_volume, result.valve_status = _heart_outputs(heart, extra)
     result.valve_events = [(float(t), str(v), bool(o)) for t, v, o in raw.get("valve_events", ())]
     if "last_cycle_steps" in raw:  # error control: the last cycle's accepted steps
-        result.step_sizes = np.asarray(raw["last_cycle_steps"], dtype=float)
-        result.step_times = np.concatenate(([0.0], np.cumsum(result.step_sizes)[:-1]))
+        from oxyline.io.results import step_history
+
+        result.step_times, result.step_sizes = step_history(raw["last_cycle_steps"])
     _raise_run_error(raw, result)
     if space:  # one refinement of every vessel: the inlet impedance's change
         from oxyline.convergence import inlet_space_error
@@ -931,7 +932,7 @@ def _close_store(store: Any, raw: dict[str, Any],
     import xarray as xr
 
     try:
-        store.finish(final_attrs(raw))
+        store.finish(final_attrs(raw), raw.get("last_cycle_steps"))
     except (OSError, RuntimeError, ValueError) as exc:  # e.g. the disk just filled up
         if "error" not in raw:
             raw = {**raw, "error": OutputError(f"{store.path}: cannot write the run's final "

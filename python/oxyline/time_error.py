@@ -38,7 +38,15 @@ SAFETY = 0.5
 @dataclass(frozen=True)
 class TimeErrorEstimate:
     """The estimated time-integration error of ``result`` (the run at ``rtol``), per vessel
-    against its own scale, from the run at ``rtol/factor`` (``finer``)."""
+    against its own scale, from the run at ``rtol/factor`` (``finer``).
+
+    >>> import oxyline
+    >>> est = oxyline.estimate_time_error("bifurcation", rtol=1e-2, cycles=2)
+    >>> est.factor, len(est.per_vessel["flow"]) == len(est.result.vessels)
+    (4.0, True)
+    >>> est.rtol_to_meet() <= 1e-2
+    True
+    """
 
     rtol: float
     factor: float

@@ -33,14 +33,28 @@ def dataset(result: Result) -> Any:
     ds.attrs["units_system"] = "SI (each variable's units in its 'units' attribute)"
     ds.attrs["source"] = "oxyline"
     if result.step_sizes.size:
-        # the last cycle's step-size history, over its own dimension (not the output's times)
-        ds = ds.assign_coords(step_time=("step_time", result.step_times, {"units": "s"}))
-        ds["step_size"] = (("step_time",), result.step_sizes, {
-            "units": "s", "description": "accepted steps of the last cycle (error control), "
-            "at their start time into that cycle"})
+        ds = with_step_history(ds, result.step_times, result.step_sizes)
     for name in ds.variables:
         if ds[name].dtype == object:  # vessel names: plain strings for netCDF/zarr readers
             ds[name] = ds[name].astype(str)
+    return ds
+
+
+def step_history(step_sizes: Any) -> tuple[Any, Any]:
+    """(start times into the cycle, sizes) of an error-controlled run's accepted steps."""
+    import numpy as np
+
+    sizes = np.asarray(step_sizes, dtype=float)
+    return np.concatenate(([0.0], np.cumsum(sizes)[:-1])), sizes
+
+
+def with_step_history(ds: Any, step_times: Any, step_sizes: Any) -> Any:
+    """``ds`` with the last cycle's step-size history of an error-controlled run: the
+    variable ``step_size`` over its own dimension ``step_time`` (not the output's times)."""
+    ds = ds.assign_coords(step_time=("step_time", step_times, {"units": "s"}))
+    ds["step_size"] = (("step_time",), step_sizes, {
+        "units": "s", "description": "accepted steps of the last cycle (error control), "
+        "at their start time into that cycle"})
     return ds
 
 
@@ -306,15 +320,32 @@ class ZarrAppender:
                     arr.resize((self.rows, *arr.shape[1:]))
             self._consolidate()
 
-    def finish(self, attrs: dict[str, Any]) -> None:
-        """Replace the store's attributes (e.g. with the run's facts once it has ended), and
-        let other writers have the store."""
+    def finish(self, attrs: dict[str, Any], step_sizes: Any = None) -> None:
+        """Replace the store's attributes (e.g. with the run's facts once it has ended), add
+        an error-controlled run's step-size history (``step_sizes``, the last cycle's accepted
+        steps: the variables :func:`dataset` writes), and let other writers have the store."""
         try:
             with deferred_signals():
+                if step_sizes is not None and len(step_sizes):
+                    self._write_step_history(step_sizes)
                 self._group.attrs.put(dict(attrs))
                 self._consolidate()
         finally:
             self._lock.release()
+
+    def _write_step_history(self, step_sizes: Any) -> None:
+        import warnings
+
+        import xarray as xr
+
+        history = with_step_history(xr.Dataset(), *step_history(step_sizes))
+        kwargs: dict[str, Any] = {}
+        if int(self._zarr.__version__.split(".")[0]) >= 3:
+            kwargs["zarr_format"] = 2  # the store's format (see _write_zarr)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            # the group's attributes are put right after (finish), whatever this leaves there
+            history.to_zarr(self.path, mode="a", consolidated=False, **kwargs)
 
     def remove(self) -> None:
         with deferred_signals():
