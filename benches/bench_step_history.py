@@ -29,7 +29,7 @@ import bench_accuracy as ba
 #: fixed steps per cycle of the equal-error sweep, per model (the coarsest of
 #: paper-bifurcated's is coarser than the controlled run's ceiling T/32)
 SWEEPS = {
-    "adan56": (400, 800, 1600, 3200, 6400, 12800),
+    "adan56": (100, 200, 400, 800, 1600, 3200, 6400, 12800),
     "paper-bifurcated": (16, 25, 32, 50, 100, 200, 400, 800, 1600, 3200),
 }
 DEFAULT_SWEEP = (50, 100, 200, 400, 800, 1600, 3200, 6400)
