@@ -67,7 +67,7 @@ def test_the_estimate_goes_to_the_file_and_the_summary(adan56_runs, tmp_path, ca
     assert back.error_estimate == pytest.approx(res.error_estimate, rel=1e-12)
     assert back.local_error_estimate == pytest.approx(res.local_error_estimate, rel=1e-12)
     assert back.settings["time_error_vessel_flow"] == res.settings["time_error_vessel_flow"]
-    main(["run", "bifurcation", "--cycles", "1", "--quiet", "--rtol", "1e-2",
+    main(["run", "bifurcation", "--cycles", "1", "--rtol", "1e-2",
           "--estimate-time-error"])
     out = capsys.readouterr().out
     assert "accumulated error (worst vessel)" in out and "time error: worst vessel" in out
