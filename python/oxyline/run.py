@@ -671,22 +671,25 @@ def _meet_rtol(model: Model, overrides: Mapping[str, Any], target: float | None)
     the tolerance that estimate asks (:meth:`oxyline.TimeErrorEstimate.rtol_to_meet`'s rule),
     at most :data:`MEET_RTOL_RUNS` runs. The result is the last run's, its estimate included;
     ``settings["meet_rtol"]`` is the target, ``meet_rtol_runs`` and ``meet_rtol_steps`` what
-    it took (every run's steps and second integrations)."""
+    it took (every run's steps and second integrations), ``meet_rtol_history`` each run's rtol
+    and worst estimate."""
     if target is None:
         raise ModelError("simulate: meet_rtol needs error control (rtol, no dt)")
     kw = {**overrides, "meet_rtol": False, "estimate_time_error": True}
-    rtol, steps = target, 0
+    rtol, steps, history = target, 0, []
     for runs in range(1, MEET_RTOL_RUNS + 1):
         result = _simulate(model, {**kw, "rtol": rtol})
         s = result.settings
         steps += int(s["steps"]) + int(s["rejected_steps"]) + int(s["time_error_steps"])
         worst = max(v for k, v in result.error_estimate.items() if k != "space")
+        history.append(f"rtol {rtol:.3g}: worst {worst:.3g}")
         if worst <= target or runs == MEET_RTOL_RUNS:
             break
         # the achieved error is nearly proportional to rtol (oxyline.time_error); the run
         # after this one measures its own, so a milder margin than rtol_to_meet's will do
         rtol = min(rtol, MEET_RTOL_SAFETY * rtol * target / worst)
-    s.update(meet_rtol=target, meet_rtol_runs=runs, meet_rtol_steps=steps)
+    s.update(meet_rtol=target, meet_rtol_runs=runs, meet_rtol_steps=steps,
+             meet_rtol_history="; ".join(history))
     return result
 
 
