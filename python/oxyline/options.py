@@ -75,6 +75,9 @@ class SimulateOptions(TypedDict, total=False):
     #: estimate the accumulated time-integration error of every vessel (the last cycle again
     #: at rtol/4): ``result.error_estimate`` then holds it, ``result.time_error`` per vessel
     estimate_time_error: bool
+    #: run again at the tolerance the accumulated-error estimate asks until every vessel
+    #: meets ``rtol`` (at most 3 runs; the result is the last one's)
+    meet_rtol: bool
 
 
 def output_names(value: Any, key: str) -> list[str] | None:

@@ -213,7 +213,10 @@ fn finer_dict<'py>(
     d.set_item("steps", f.steps)?;
     d.set_item("rejected_steps", f.rejected)?;
     d.set_item("times", f.times.clone().into_pyarray(py))?;
-    d.set_item("data", f.data.clone().into_pyarray(py).reshape([nt, n_probes])?)?;
+    d.set_item(
+        "data",
+        f.data.clone().into_pyarray(py).reshape([nt, n_probes])?,
+    )?;
     if !f.transport.is_empty() {
         let cols = f.transport.len() / nt.max(1);
         let rows = f.transport.clone().into_pyarray(py).reshape([nt, cols])?;

@@ -136,8 +136,13 @@ impl RunSettings {
         if let Some(p) = self.probes.iter().find(|&&p| p >= dae.n) {
             return bad(format!("output index {p} out of range"));
         }
-        if let Some(f) = self.finer_last_cycle.filter(|f| !(f.is_finite() && *f > 1.0)) {
-            return bad(format!("the time error's tolerance factor must be > 1, got {f}"));
+        if let Some(f) = self
+            .finer_last_cycle
+            .filter(|f| !(f.is_finite() && *f > 1.0))
+        {
+            return bad(format!(
+                "the time error's tolerance factor must be > 1, got {f}"
+            ));
         }
         if !self.svzerod.is_empty() && self.adaptive().is_some() {
             return bad("svZeroDSolver's output conventions need a fixed step (dt)".into());

@@ -58,8 +58,7 @@ impl Cycles<'_, '_> {
         st.yd.copy_from_slice(&p.yd);
         st.dt = p.dt;
         st.flow.integrator().restore_carried(&p.integrator)?;
-        if let (Some(sp), Some((z, prev_cycle_z, transport))) = (st.species.as_mut(), &p.species)
-        {
+        if let (Some(sp), Some((z, prev_cycle_z, transport))) = (st.species.as_mut(), &p.species) {
             sp.restore(&Snapshot {
                 z: z.clone(),
                 prev_cycle_z: prev_cycle_z.clone(),
