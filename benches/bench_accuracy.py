@@ -263,6 +263,8 @@ def in_run_table(name: str, cycles: int, rtols: tuple[float, ...], ref_steps: in
     in units of rtol, each vessel's estimate over its achieved error (vessels within 0.3x of
     the worst), the steps and the CPU of the run with the estimate over the run alone; then
     ``meet_rtol`` (``--in-run``)."""
+    import pandas  # noqa: F401  (Result.time_error's import, outside the timings)
+
     model = load(name)
     period = model.period or 1.0
     rows = REF_ROWS if ref_steps % REF_ROWS == 0 else ref_steps

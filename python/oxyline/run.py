@@ -685,8 +685,8 @@ def _meet_rtol(model: Model, overrides: Mapping[str, Any], target: float | None)
         history.append(f"rtol {rtol:.3g}: worst {worst:.3g}")
         if worst <= target or runs == MEET_RTOL_RUNS:
             break
-        # the achieved error is nearly proportional to rtol (oxyline.time_error); the run
-        # after this one measures its own, so a milder margin than rtol_to_meet's will do
+        # the achieved error nearly proportional to rtol (oxyline.time_error; a power law
+        # through the last two runs was measured worse: the worst kind changes with rtol)
         rtol = min(rtol, MEET_RTOL_SAFETY * rtol * target / worst)
     s.update(meet_rtol=target, meet_rtol_runs=runs, meet_rtol_steps=steps,
              meet_rtol_history="; ".join(history))
