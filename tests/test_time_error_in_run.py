@@ -31,8 +31,13 @@ def adan56_runs() -> tuple[oxyline.Result, oxyline.Result, oxyline.Result, float
     # integration does not see (it starts from the run's own state). Reference: generalized-
     # alpha at T/8000 (second order; its own error ~1e-3 of the achieved one)
     model = oxyline.load_model("adan56")
-    kw = {"cycles": 2, "until_periodic": None, "output_every": 1e-3, "progress": False,
-          "method": "generalized-alpha"}
+    kw = {
+        "cycles": 2,
+        "until_periodic": None,
+        "output_every": 1e-3,
+        "progress": False,
+        "method": "generalized-alpha",
+    }
     rtol = 1e-2
     plain = oxyline.simulate(model, rtol=rtol, **kw)
     res = oxyline.simulate(model, rtol=rtol, estimate_time_error=True, **kw)
@@ -67,8 +72,7 @@ def test_the_estimate_goes_to_the_file_and_the_summary(adan56_runs, tmp_path, ca
     assert back.error_estimate == pytest.approx(res.error_estimate, rel=1e-12)
     assert back.local_error_estimate == pytest.approx(res.local_error_estimate, rel=1e-12)
     assert back.settings["time_error_vessel_flow"] == res.settings["time_error_vessel_flow"]
-    main(["run", "bifurcation", "--cycles", "1", "--rtol", "1e-2",
-          "--estimate-time-error"])
+    main(["run", "bifurcation", "--cycles", "1", "--rtol", "1e-2", "--estimate-time-error"])
     out = capsys.readouterr().out
     assert "accumulated error (worst vessel)" in out and "time error: worst vessel" in out
 
@@ -77,8 +81,13 @@ def test_paper_bifurcated_with_oxygen_reports_po2_too() -> None:
     # the species' second integration runs beside the flow's: PO2's accumulated error is
     # reported (far within rtol here); flow and pressure within 2x of the achieved ones
     model = oxyline.load_model("paper-bifurcated")
-    kw = {"cycles": 2, "until_periodic": None, "output_every": 1e-3, "progress": False,
-          "method": "generalized-alpha"}
+    kw = {
+        "cycles": 2,
+        "until_periodic": None,
+        "output_every": 1e-3,
+        "progress": False,
+        "method": "generalized-alpha",
+    }
     rtol = 1e-3
     res = oxyline.simulate(model, rtol=rtol, estimate_time_error=True, **kw)
     ref = oxyline.simulate(model, dt=model.period / 8000, **kw)
@@ -95,8 +104,9 @@ def test_bad_requests_are_model_errors_naming_the_setting(tmp_path) -> None:
     with pytest.raises(oxyline.ModelError, match="estimate_time_error"):
         oxyline.simulate("bifurcation", cycles=1, estimate_time_error="yes")
     with pytest.raises(oxyline.ModelError, match="simulate_to_zarr: estimate_time_error"):
-        oxyline.simulate_to_zarr("bifurcation", tmp_path / "r.zarr", cycles=1,
-                                 estimate_time_error=True)
+        oxyline.simulate_to_zarr(
+            "bifurcation", tmp_path / "r.zarr", cycles=1, estimate_time_error=True
+        )
     with pytest.raises(oxyline.ModelError, match="meet_rtol needs error control"):
         oxyline.simulate("bifurcation", dt=1e-3, cycles=1, meet_rtol=True)
     # the model file's simulation section asks for it too
@@ -112,8 +122,13 @@ def test_meet_rtol_meets_rtol_in_every_vessel() -> None:
     # runs again at the tolerance its estimate asks and meets 2 rtol (the estimate's
     # allowance) in every vessel and kind against generalized-alpha at T/8000
     model = oxyline.load_model("adan56")
-    kw = {"cycles": 1, "until_periodic": None, "output_every": 1e-3, "progress": False,
-          "method": "generalized-alpha"}
+    kw = {
+        "cycles": 1,
+        "until_periodic": None,
+        "output_every": 1e-3,
+        "progress": False,
+        "method": "generalized-alpha",
+    }
     rtol = 1e-2
     met = oxyline.simulate(model, rtol=rtol, meet_rtol=True, **kw)
     ref = oxyline.simulate(model, dt=model.period / 8000, **kw)

@@ -116,13 +116,16 @@ def per_vessel_table(per_vessel: Mapping[str, np.ndarray], vessels: list[str]) -
     each vessel's error against its own scale as in :attr:`TimeErrorEstimate.per_vessel`)."""
     import pandas as pd
 
-    table = pd.DataFrame({k: np.asarray(v, dtype=float) for k, v in per_vessel.items()},
-                         index=pd.Index(list(vessels), name="vessel"))
+    table = pd.DataFrame(
+        {k: np.asarray(v, dtype=float) for k, v in per_vessel.items()},
+        index=pd.Index(list(vessels), name="vessel"),
+    )
     return table
 
 
-def record_estimate(result: Result, per_vessel: Mapping[str, np.ndarray], source: str,
-                    extra_steps: int) -> None:
+def record_estimate(
+    result: Result, per_vessel: Mapping[str, np.ndarray], source: str, extra_steps: int
+) -> None:
     """Put the accumulated estimate into ``result``: ``settings["error_estimate_<kind>"]``
     becomes the worst vessel's accumulated error of each kind (the step control's local
     estimates move to ``local_error_estimate_<kind>``), with that vessel's name in

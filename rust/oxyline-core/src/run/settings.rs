@@ -271,5 +271,9 @@ mod tests {
             bad(|s| s.probes = vec![0, 7]),
             "simulation: output index 7 out of range"
         );
+        assert_eq!(
+            bad(|s| s.finer_last_cycle = Some(1.0)),
+            "simulation: the time error's tolerance factor must be > 1, got 1"
+        );
     }
 }
