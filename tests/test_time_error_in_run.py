@@ -109,6 +109,8 @@ def test_bad_requests_are_model_errors_naming_the_setting(tmp_path) -> None:
         )
     with pytest.raises(oxyline.ModelError, match="meet_rtol needs error control"):
         oxyline.simulate("bifurcation", dt=1e-3, cycles=1, meet_rtol=True)
+    with pytest.raises(oxyline.ModelError, match="simulate_ensemble: estimate_time_error"):
+        oxyline.simulate_ensemble("bifurcation", [{}], estimate_time_error=True, cycles=1)
     # the model file's simulation section asks for it too
     m = oxyline.load_model("bifurcation").to_dict()
     m["simulation"] = {**m.get("simulation", {}), "estimate_time_error": True, "cycles": 1}
