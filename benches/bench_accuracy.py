@@ -256,6 +256,56 @@ def time_error_table(name: str, cycles: int, rtols: tuple[float, ...], ref_steps
               f"{max(cpu_both - cpu, 0.0):.2f} s |")
 
 
+def in_run_table(name: str, cycles: int, rtols: tuple[float, ...], ref_steps: int,
+                 method: str) -> None:
+    """``simulate(..., estimate_time_error=True)`` (the last cycle again at rtol/4) against
+    the achieved error and ``estimate_time_error``'s two whole runs, per kind's worst vessel
+    in units of rtol, each vessel's estimate over its achieved error (vessels within 0.3x of
+    the worst), the steps and the CPU of the run with the estimate over the run alone; then
+    ``meet_rtol`` (``--in-run``)."""
+    import pandas  # noqa: F401  (Result.time_error's import, outside the timings)
+
+    model = load(name)
+    period = model.period or 1.0
+    rows = REF_ROWS if ref_steps % REF_ROWS == 0 else ref_steps
+    ref, _ = run(model, cycles=cycles, dt=period / ref_steps, method="generalized-alpha",
+                 output_every=period / rows)
+    kw = {"cycles": cycles, "method": method, "output_every": 1e-3}
+    print(f"\n### {name}: the accumulated error within one run ({cycles} cycles, {method}; "
+          f"reference generalized-α dt = T/{ref_steps}), in units of rtol\n")
+    print("| rtol | flow: achieved / in the run / two runs | per vessel | pressure: the three | "
+          "pulse pressure: the three | PO2: the three | steps: run / second | CPU ratio | "
+          "meet_rtol: runs, rtol run, steps ratio, CPU ratio, achieved worst |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for rtol in rtols:
+        plain, cpu = run(model, rtol=rtol, **kw)
+        res, cpu_est = run(model, rtol=rtol, estimate_time_error=True, **kw)
+        two = oxyline.estimate_time_error(model, rtol=rtol, until_periodic=None,
+                                          progress=False, **kw)
+        met, cpu_met = run(model, rtol=rtol, meet_rtol=True, **kw)
+        e, em = per_vessel(res, ref), per_vessel(met, ref)
+        cells = []
+        for kind, key in (("flow", "flow"), ("pressure", "pressure"),
+                          ("pulse_pressure", "pulse"), ("po2", "po2")):
+            if key not in e:
+                cells.append("—")
+                continue
+            cells.append(f"{np.max(e[key]) / rtol:.3g} / {res.error_estimate[kind] / rtol:.3g}"
+                         f" / {two.worst[kind][0] / rtol:.3g}")
+        big = e["flow"] > 0.3 * np.max(e["flow"])
+        ratio = res.time_error["flow"].to_numpy()[big] / e["flow"][big]
+        worst_met = max(float(np.max(em[k])) for k in ("flow", "pressure", "pulse", "po2")
+                        if k in em)
+        ms = met.settings
+        print(f"| {rtol:g} | {cells[0]} | {ratio.min():.2f}–{ratio.max():.2f} | {cells[1]} | "
+              f"{cells[2]} | {cells[3]} | {res.settings['steps']} / "
+              f"{res.settings['time_error_steps']} | {cpu_est / cpu:.2f} | "
+              f"{ms['meet_rtol_runs']}, {ms['rtol']:.2g}, "
+              f"{ms['meet_rtol_steps'] / plain.settings['steps']:.1f}, {cpu_met / cpu:.1f}, "
+              f"{worst_met / rtol:.2f} |")
+        assert np.array_equal(plain.data, res.data)  # the estimate leaves the run as it was
+
+
 def fmt(e: float) -> str:
     return "—" if np.isnan(e) else f"{100 * e:.3g} %"
 
@@ -437,6 +487,9 @@ def main() -> None:
     ap.add_argument("--vessel-table", action="store_true",
                     help="only the worst vessel's error per kind against its own scale, in "
                          "units of rtol (the first of --methods)")
+    ap.add_argument("--in-run", action="store_true",
+                    help="only simulate(..., estimate_time_error=True) and meet_rtol against "
+                         "the achieved error and estimate_time_error's (the first of --methods)")
     ap.add_argument("--time-error", action="store_true",
                     help="only the achieved error against the step control's estimate and "
                          "estimate_time_error's, in units of rtol (the first of --methods)")
@@ -449,6 +502,11 @@ def main() -> None:
     if a.vessel_table:
         for name in a.models:
             vessel_table(name, a.cycles, tuple(a.rtols), a.ref_factor * max(a.sweep),
+                         a.methods[0])
+        return
+    if a.in_run:
+        for name in a.models:
+            in_run_table(name, a.cycles, tuple(a.rtols), a.ref_factor * max(a.sweep),
                          a.methods[0])
         return
     if a.time_error:

@@ -147,6 +147,17 @@ def _tolerance_or_none(text: str) -> float | str:
         raise argparse.ArgumentTypeError(f"a number or 'none', got {text!r}") from None
 
 
+def _time_error_line(s: Mapping[str, Any]) -> str:
+    """The summary's line on the accumulated-error estimate: the worst vessel of each kind
+    and how it was measured."""
+    kinds = [k.removeprefix("time_error_vessel_") for k in s if k.startswith("time_error_vessel_")]
+    worst = ", ".join(f"{k} {s['time_error_vessel_' + k]}" for k in kinds)
+    local = ", ".join(f"{k.removeprefix('local_error_estimate_')} {float(v):.1e}"
+                      for k, v in s.items() if k.startswith("local_error_estimate_"))
+    return (f"time error: worst vessel {worst}; measured by the {s['time_error_from']} "
+            f"({s['time_error_steps']} steps); the step control's local estimate {local}")
+
+
 def _run_options(args: argparse.Namespace) -> dict[str, object]:
     """The simulate() options of the command line (checkpoints included)."""
     overrides: dict[str, object] = {"progress": not args.quiet}
@@ -165,12 +176,14 @@ def _run_options(args: argparse.Namespace) -> dict[str, object]:
         overrides["output_every"] = args.output_every
     if getattr(args, "estimate_space_error", False):
         overrides["estimate_space_error"] = True
+    if getattr(args, "estimate_time_error", False):
+        overrides["estimate_time_error"] = True
     if args.method is not None:
         overrides["method"] = args.method
     if args.resume and len(overrides) > 1:
         raise InputError(f"{args.resume}: a resumed run keeps its checkpoint's settings (no "
                          "--cycles, --dt, --rtol, --until-periodic, --max-cycles, --output-every, "
-                         "--estimate-space-error or --method)")
+                         "--estimate-space-error, --estimate-time-error or --method)")
     if args.threads is not None:
         overrides["threads"] = args.threads
     if args.checkpoint:
@@ -262,6 +275,9 @@ def _run_and_write(args: argparse.Namespace, stop: _Stop) -> int:
     stream = bool(args.output) and Path(args.output).suffix.lower() == ".zarr"
     if stream and overrides.get("estimate_space_error"):
         raise InputError(f"{args.output}: --estimate-space-error writes .nc or .csv, not a "
+                         "streamed .zarr store")
+    if stream and overrides.get("estimate_time_error"):
+        raise InputError(f"{args.output}: --estimate-time-error writes .nc or .csv, not a "
                          "streamed .zarr store")
     if stream and args.resume:
         raise InputError(f"{args.output}: a resumed run writes .nc or .csv, not a streamed "
@@ -373,8 +389,12 @@ def _print_table(model: Any, res: Any, stream: bool, rows: int = 20) -> None:
     if s.get("steps") is not None:
         est = ", ".join(f"{k.removeprefix('error_estimate_')} {v:.1e}" for k, v in s.items()
                         if k.startswith("error_estimate_") and k != "error_estimate_space")
+        what = "accumulated error (worst vessel)" if s.get("time_error_from") is not None \
+            else "estimated error"
         print(f"error control: rtol {s['rtol']:g}, {s['steps']} steps ({s['rejected_steps']} "
-              f"rejected), dt {s['dt_min']:.2e} to {s['dt_max']:.2e} s; estimated error {est}")
+              f"rejected), dt {s['dt_min']:.2e} to {s['dt_max']:.2e} s; {what} {est}")
+        if s.get("time_error_from") is not None:
+            print(_time_error_line(s))
     elif s.get("step_control") is not None:
         print(f"step control: {s['step_control']}: no error estimate")
     if s.get("segments_total") is not None:
@@ -623,6 +643,10 @@ def _add_run(p: argparse.ArgumentParser) -> None:
                    help="also estimate the spatial error: the inlet impedance's change over the "
                         "forcing's significant harmonics when every vessel's segments are "
                         "doubled (in the summary and the result's attributes)")
+    p.add_argument("--estimate-time-error", action="store_true",
+                   help="also estimate the accumulated time-integration error of every vessel "
+                        "(the last cycle again at rtol/4; in the summary and the result's "
+                        "attributes)")
     p.add_argument("--max-cycles", type=int, metavar="N",
                    help="most cycles a run --until-periodic takes (default: the model's, else "
                         "max(cycles, 100))")

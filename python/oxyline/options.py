@@ -72,6 +72,12 @@ class SimulateOptions(TypedDict, total=False):
     #: add a spatial error estimate (one refinement of every vessel's segments) to
     #: ``result.error_estimate["space"]``
     estimate_space_error: bool
+    #: estimate the accumulated time-integration error of every vessel (the last cycle again
+    #: at rtol/4): ``result.error_estimate`` then holds it, ``result.time_error`` per vessel
+    estimate_time_error: bool
+    #: run again at the tolerance the accumulated-error estimate asks until every vessel
+    #: meets ``rtol`` (at most 3 runs; the result is the last one's)
+    meet_rtol: bool
 
 
 def output_names(value: Any, key: str) -> list[str] | None:

@@ -240,6 +240,13 @@ class Result:
     #: dimension ``step_time`` (:meth:`to_xarray` leaves them out: its dims are the output's).
     step_times: np.ndarray = field(default_factory=lambda: np.zeros(0))
     step_sizes: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: with ``simulate(..., estimate_time_error=True)``: every vessel's accumulated
+    #: time-integration error (docs/solvers.md, "The accumulated error") as a
+    #: ``pandas.DataFrame`` (index ``vessel``; columns ``flow``, ``pressure``,
+    #: ``pulse_pressure`` and, with oxygen, ``po2``: each against the vessel's own scale, as
+    #: :class:`oxyline.TimeErrorEstimate.per_vessel`); None otherwise. Files keep its worst
+    #: vessel per kind (``error_estimate``), not the table.
+    time_error: Any = None
     #: the model it was run from, as JSON in the native schema (SI), so that a result file
     #: rebuilds its model (``oxyline plot`` needs no ``--model``); None above
     #: :data:`MAX_MODEL_JSON` characters (a whole tree), where only the name is kept
@@ -268,10 +275,35 @@ class Result:
         ``simulate(..., estimate_space_error=True)`` also ``space``: the largest relative
         change of the inlet impedance over the forcing's significant harmonics under one
         doubling of every vessel's segments (docs/solvers.md, "Space"). Stored in the file
-        attributes as ``solver_error_estimate_<kind>``."""
+        attributes as ``solver_error_estimate_<kind>``.
+
+        With ``simulate(..., estimate_time_error=True)`` the kinds are instead the
+        *accumulated* error the output carries, the worst vessel's against its own scale
+        (``flow``, ``pressure``, ``pulse_pressure``, ``po2``; that vessel in
+        ``settings["time_error_vessel_<kind>"]``, every vessel's in :attr:`time_error`),
+        and the step control's local estimates are :attr:`local_error_estimate`
+        (docs/solvers.md, "The accumulated error")."""
         pre = "error_estimate_"
         return {k.removeprefix(pre): float(v) for k, v in self.settings.items()
                 if k.startswith(pre)}
+
+    @property
+    def local_error_estimate(self) -> dict[str, float]:
+        """The step control's largest *local* error estimate per kind of unknown (relative to
+        atol/rtol + |y|, at most ``rtol`` where it met its tolerance): what
+        :attr:`error_estimate` holds unless the run estimated its accumulated error
+        (``estimate_time_error=True``). Empty for a fixed-step run.
+
+        >>> import oxyline
+        >>> res = oxyline.simulate("bifurcation", cycles=1, rtol=1e-2)
+        >>> res.local_error_estimate["flow"] <= 1e-2
+        True
+        """
+        pre = "local_error_estimate_"
+        if any(k.startswith(pre) for k in self.settings):
+            return {k.removeprefix(pre): float(v) for k, v in self.settings.items()
+                    if k.startswith(pre)}
+        return {k: v for k, v in self.error_estimate.items() if k != "space"}
 
     def __getattr__(self, key: str) -> Any:
         # species variables: {name}_concentration_in, {name}_flux_out, wall_{name}_flux,

@@ -42,6 +42,13 @@ from oxyline.result import (
     TissueResult,
     model_json,
 )
+from oxyline.time_error import (
+    FACTOR,
+    FROM_LAST_CYCLE,
+    FROM_WHOLE_RUN,
+    differences,
+    record_estimate,
+)
 
 if TYPE_CHECKING:  # Unpack is typing's from Python 3.11
     from typing_extensions import Unpack
@@ -63,13 +70,19 @@ def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
     return _resolve(model, overrides)[0]
 
 
-def _resolve(model: Model, overrides: Mapping[str, Any]) -> tuple[dict[str, Any], bool, bool]:
+def _resolve(model: Model, overrides: Mapping[str, Any]
+             ) -> tuple[dict[str, Any], bool, bool, bool | str]:
     """:func:`_settings`, whether its ``rtol`` is the default one (neither ``rtol`` nor a
-    fixed ``dt`` given: the default run is error-controlled) and ``estimate_space_error`` (a
-    refinement after the run, not a setting of the core's run)."""
+    fixed ``dt`` given: the default run is error-controlled), ``estimate_space_error`` (a
+    refinement after the run, not a setting of the core's run) and ``estimate_time_error``
+    (the core's second integration of the last cycle, asked by :func:`simulate`; ``"meet"``
+    with ``meet_rtol``)."""
     s = _core.resolve_settings(model.simulation, dict(overrides), model.period)
     default = bool(s.pop("rtol_default"))
     space = bool(s.pop("estimate_space_error"))
+    timed = bool(s.pop("estimate_time_error"))
+    if s.pop("meet_rtol"):
+        timed = "meet"  # (the estimate, then the runs it asks for: `_meet_rtol`)
     out = dict(model.simulation.get("output", {}) or {})
     progress = overrides.get("progress")
     if progress is not None and not isinstance(progress, (bool, np.bool_)) \
@@ -78,7 +91,7 @@ def _resolve(model: Model, overrides: Mapping[str, Any]) -> tuple[dict[str, Any]
                          f"got {progress!r}")
     s["variables"] = output_names(overrides.get("variables", out.get("variables")), "variables")
     s["vessels"] = _vessels(model, overrides.get("vessels", out.get("vessels")))
-    return s, default, space
+    return s, default, space, timed
 
 
 #: ``settings["step_control"]`` of a checkpointed run that gives no ``dt`` (see
@@ -583,7 +596,9 @@ def _refuse_checkpoint_on_input(model: Any, checkpoint: Any) -> None:
 def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
               resume_path: Any = None) -> Result:
     """`simulate` of a loaded model; ``resume``: the core state of a checkpoint."""
-    s, default, space = _resolve(model, overrides)
+    s, default, space, timed = _resolve(model, overrides)
+    if timed == "meet":
+        return _meet_rtol(model, overrides, s["rtol"])
     _fixed_for_checkpoints(s, default, overrides, resume)
     summarize = _large_model_output(model, s, overrides)
     core = _checkpoints(model, overrides)
@@ -592,6 +607,9 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     heart = _heart_layout(model)
     if heart[2]:
         core["extra_columns"] = heart[2]
+    if timed:  # the core runs the last cycle again at rtol/FACTOR after the run
+        _check_time_error(s, summarize, core)
+        core["finer_last_cycle"] = FACTOR
     stream, s_out = None, s
     if summarize and not core:  # (a checkpointed run keeps its rows: resume rebuilds them)
         stream = _summary_stream(model, s, len(heart[2]))
@@ -621,6 +639,8 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
 
         result.step_times, result.step_sizes = step_history(raw["last_cycle_steps"])
     _raise_run_error(raw, result)
+    if timed:
+        _fill_time_error(model, s_out, raw, result, overrides)
     if space:  # one refinement of every vessel: the inlet impedance's change
         from oxyline.convergence import inlet_space_error
 
@@ -634,6 +654,98 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     # physical bounds and mass balance of the recorded species output (warnings only)
     check_result(result, model.transport_spec)
     return result
+
+
+#: most runs ``meet_rtol`` takes (the run at rtol, then the tighter ones its estimates ask)
+MEET_RTOL_RUNS = 3
+
+#: the share of rtol the next run of ``meet_rtol`` aims at (the ratio of achieved error to
+#: rtol drifts by up to ~1.4x between rtol 1e-2 and 1e-4 on adan56; a run still above rtol is
+#: followed by another)
+MEET_RTOL_SAFETY = 0.7
+
+
+def _meet_rtol(model: Model, overrides: Mapping[str, Any], target: float | None) -> Result:
+    """``simulate(..., meet_rtol=True)``: the run at ``rtol`` with its accumulated-error
+    estimate, then, while the worst vessel's estimate of any kind is above ``rtol``, the run at
+    the tolerance that estimate asks (:meth:`oxyline.TimeErrorEstimate.rtol_to_meet`'s rule),
+    at most :data:`MEET_RTOL_RUNS` runs. The result is the last run's, its estimate included;
+    ``settings["meet_rtol"]`` is the target, ``meet_rtol_runs`` and ``meet_rtol_steps`` what
+    it took (every run's steps and second integrations), ``meet_rtol_history`` each run's rtol
+    and worst estimate."""
+    if target is None:
+        raise ModelError("simulate: meet_rtol needs error control (rtol, no dt)")
+    kw = {**overrides, "meet_rtol": False, "estimate_time_error": True}
+    rtol, steps, history = target, 0, []
+    for runs in range(1, MEET_RTOL_RUNS + 1):
+        result = _simulate(model, {**kw, "rtol": rtol})
+        s = result.settings
+        steps += int(s["steps"]) + int(s["rejected_steps"]) + int(s["time_error_steps"])
+        worst = max(v for k, v in result.error_estimate.items() if k != "space")
+        history.append(f"rtol {rtol:.3g}: worst {worst:.3g}")
+        if worst <= target or runs == MEET_RTOL_RUNS:
+            break
+        # the achieved error nearly proportional to rtol (oxyline.time_error; a power law
+        # through the last two runs was measured worse: the worst kind changes with rtol)
+        rtol = min(rtol, MEET_RTOL_SAFETY * rtol * target / worst)
+    s.update(meet_rtol=target, meet_rtol_runs=runs, meet_rtol_steps=steps,
+             meet_rtol_history="; ".join(history))
+    return result
+
+
+def _check_time_error(s: Mapping[str, Any], summarize: bool, core: Mapping[str, Any]) -> None:
+    """``estimate_time_error`` is refused for a fixed step (no tolerance to tighten; checkpoints
+    need one), and for a large model's reduced default output (give ``variables``)."""
+    if s["rtol"] is None or "resume" in core or "checkpoint_sink" in core:
+        raise ModelError("simulate: estimate_time_error needs error control (rtol, no dt, no "
+                         "checkpoint): a fixed step has no tolerance to tighten; "
+                         "oxyline.convergence measures a fixed step's error")
+    if summarize:
+        raise ModelError("simulate: estimate_time_error compares the output of every vessel: "
+                         "give variables (e.g. ['pressure_in', 'flow_in']) for this large model")
+
+
+def _fill_time_error(model: Model, s: Mapping[str, Any], raw: dict[str, Any], result: Result,
+                     overrides: Mapping[str, Any]) -> None:
+    """``result``'s accumulated-error estimate (:func:`oxyline.time_error.record_estimate`):
+    from the core's second integration of the last cycle, or, where the core did not make one
+    (the explicit pair, valves), from a second whole run at rtol/FACTOR."""
+    finer = raw.get("finer_last_cycle")
+    if finer is not None:
+        coarse, fine = _last_cycle_results(model, s, raw, finer)
+        source, steps = FROM_LAST_CYCLE, int(finer["steps"]) + int(finer["rejected_steps"])
+    else:
+        kw = {k: v for k, v in overrides.items()
+              if k not in ("estimate_time_error", "meet_rtol", "rtol")}
+        kw.update(progress=False, cycles=int(result.settings["cycles_run"]),
+                  until_periodic=None, estimate_space_error=False)
+        coarse, fine = result, simulate(model, rtol=s["rtol"] / FACTOR, **kw)
+        source = FROM_WHOLE_RUN
+        steps = int(fine.settings["steps"]) + int(fine.settings["rejected_steps"])
+    scale = 1.0 / (1.0 - 1.0 / FACTOR)
+    per_vessel = {k: v * scale for k, v in differences(coarse, fine).items()}
+    record_estimate(result, per_vessel, source.format(factor=FACTOR), steps)
+
+
+def _last_cycle_results(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
+                        finer: Mapping[str, Any]) -> tuple[Result, Result]:
+    """The run's rows at the output times of the core's second integration of the last cycle
+    (``finer``), and that integration's rows, as two results of the same layout."""
+    n = len(finer["times"])
+    ncol = raw["data"].shape[1]  # (without the chambers' and valves' extra columns)
+
+    def rows(times: np.ndarray, data: np.ndarray, species: Any) -> dict[str, Any]:
+        out = {**raw, "times": times, "data": data}
+        if raw.get("transport") is not None:
+            out["transport"] = {**raw["transport"], "data": species}
+        return out
+
+    tr = raw.get("transport")
+    run = rows(raw["times"][-n:], raw["data"][-n:],
+               None if tr is None else tr["data"][-n:])
+    again = rows(np.asarray(finer["times"]), np.asarray(finer["data"])[:, :ncol],
+                 finer.get("transport"))
+    return (_result(model, s, run, {}, True), _result(model, s, again, {}, True))
 
 
 def _heart_layout(model: Model) -> tuple[list[Any], list[Any], list[int]]:
@@ -914,7 +1026,11 @@ def _zarr_settings(model: Model, path: str | os.PathLike[str], overrides: Mappin
     if "checkpoint" in overrides or "checkpoint_every" in overrides:
         raise ModelError("simulate_to_zarr: checkpoints are not supported with a streamed "
                          "store; use simulate(..., checkpoint=...)")
-    s, _default, space = _resolve(model, overrides)
+    s, _default, space, timed = _resolve(model, overrides)
+    if timed:
+        raise ModelError("simulate_to_zarr: estimate_time_error compares the run's last cycle "
+                         "in memory: use simulate(..., estimate_time_error=True) and "
+                         "result.to_zarr")
     need, rows, cols = _output_size(model, s)
     if need > _memory.WARN_BYTES:  # memory stays bounded, the store does not
         warnings.warn(f"{path}: the output ({rows} rows x {cols} columns) takes about "

@@ -11,6 +11,12 @@ difference of the two runs per vessel. The achieved error of an error-controlled
 proportional to rtol (measured: adan56 27–47 rtol over rtol 1e-2 … 1e-4), so the difference is
 ``(1 − 1/factor)`` of the coarser run's error, and the estimate is the difference over that.
 Cost: one more run at rtol/factor (about factor^½ times the steps).
+
+``simulate(..., estimate_time_error=True)`` measures the same within the one run, cheaper
+(:func:`fill_time_error`): once the run has ended, the core integrates its *last cycle* again
+from that cycle's start state at ``rtol/factor`` (docs/solvers.md, "The accumulated error"),
+and the difference of the two last cycles, over ``(1 − 1/factor)``, is the error that cycle
+accumulated from its start.
 """
 
 from __future__ import annotations
@@ -84,7 +90,7 @@ class TimeErrorEstimate:
         }
 
 
-def _differences(a: Result, b: Result) -> dict[str, np.ndarray]:
+def differences(a: Result, b: Result) -> dict[str, np.ndarray]:
     """Every vessel's difference of ``a`` from ``b`` against ``b``'s own scale (the kinds of
     :attr:`TimeErrorEstimate.per_vessel`); the runs share their output times."""
     p, pb = a.pressure_in, b.pressure_in
@@ -98,6 +104,47 @@ def _differences(a: Result, b: Result) -> dict[str, np.ndarray]:
         o, ob = a.po2_out, b.po2_out
         out["po2"] = np.max(np.abs(o - ob), 0) / np.max(np.abs(ob), 0)
     return out
+
+
+#: what ``settings["time_error_from"]`` says of each way of measuring the estimate
+FROM_LAST_CYCLE = "last cycle again at rtol/{factor:g}"
+FROM_WHOLE_RUN = "whole run again at rtol/{factor:g}"
+
+
+def per_vessel_table(per_vessel: Mapping[str, np.ndarray], vessels: list[str]) -> Any:
+    """The per-vessel estimate as a ``pandas.DataFrame`` (index ``vessel``, a column per kind,
+    each vessel's error against its own scale as in :attr:`TimeErrorEstimate.per_vessel`)."""
+    import pandas as pd
+
+    table = pd.DataFrame(
+        {k: np.asarray(v, dtype=float) for k, v in per_vessel.items()},
+        index=pd.Index(list(vessels), name="vessel"),
+    )
+    return table
+
+
+def record_estimate(
+    result: Result, per_vessel: Mapping[str, np.ndarray], source: str, extra_steps: int
+) -> None:
+    """Put the accumulated estimate into ``result``: ``settings["error_estimate_<kind>"]``
+    becomes the worst vessel's accumulated error of each kind (the step control's local
+    estimates move to ``local_error_estimate_<kind>``), with that vessel's name in
+    ``time_error_vessel_<kind>``, how it was measured in ``time_error_from`` and the second
+    integration's steps in ``time_error_steps``; the per-vessel table is
+    ``result.time_error``."""
+    s = result.settings
+    pre = "error_estimate_"
+    for key in [k for k in s if k.startswith(pre) and k != pre + "space"]:
+        s["local_" + key] = s.pop(key)
+    names = result.vessels
+    for kind, e in per_vessel.items():
+        if e.size:
+            worst = int(np.nanargmax(e))
+            s[pre + kind] = float(e[worst])
+            s[f"time_error_vessel_{kind}"] = names[worst]
+    s["time_error_from"] = source
+    s["time_error_steps"] = int(extra_steps)
+    result.time_error = per_vessel_table(per_vessel, names)
 
 
 def estimate_time_error(
@@ -133,7 +180,7 @@ def estimate_time_error(
     if coarse.time.shape != finer.time.shape or not np.allclose(coarse.time, finer.time):
         raise ModelError("estimate_time_error: the two runs recorded different output times")
     scale = 1.0 / (1.0 - 1.0 / factor)
-    diff = {k: v * scale for k, v in _differences(coarse, finer).items()}
+    diff = {k: v * scale for k, v in differences(coarse, finer).items()}
     return TimeErrorEstimate(
         rtol=rtol, factor=float(factor), result=coarse, finer=finer, per_vessel=diff
     )

@@ -73,6 +73,10 @@ def simulate_ensemble(model: Model | str | os.PathLike[str] | Mapping[str, Any],
         raise ModelError("simulate_ensemble: estimate_space_error is an estimate of one model's "
                          "segmentation, not computed per variant; call "
                          "oxyline.estimate_space_error on the variants of interest")
+    for key in ("estimate_time_error", "meet_rtol"):
+        if overrides.get(key):  # the variants' runs do not compute it: refused, not ignored
+            raise ModelError(f"simulate_ensemble: {key} is not computed per variant; call "
+                             f"oxyline.simulate(..., {key}=True) on the variants of interest")
     workers = _workers(workers)
     control = _control(cancel, variant_timeout, client)
     model = load_model(model)

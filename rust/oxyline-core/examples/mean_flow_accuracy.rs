@@ -94,6 +94,7 @@ fn main() {
             species_columns: None,
             tolerances: None,
             svzerod: Default::default(),
+            finer_last_cycle: None,
         };
         let out = simulate_with_transport(&dae, None, &s, &mut |_, _| true).expect("flow run");
         let (abs, fwd) = means(&out.data, n, out.times.len());

@@ -191,6 +191,7 @@ fn main() {
         species_columns: transport.as_ref().map(|_| sel.species_columns(&counts)),
         tolerances: None,
         svzerod: Default::default(),
+        finer_last_cycle: None,
     };
     let mut species = transport.as_ref().map(Transport::new_run);
     mark("settings + transport run copy", segs);

@@ -604,7 +604,7 @@ impl Network {
         progress = None,
         chunk_sink = None, chunk_rows = 1024, keep_current_cycle = true, checkpoint_sink = None,
         checkpoint_every_cycles = None, checkpoint_every_seconds = None, resume = None,
-        svzerod = None, **settings))]
+        svzerod = None, finer_last_cycle = None, **settings))]
     #[allow(clippy::too_many_arguments)]
     fn simulate<'py>(
         &self,
@@ -622,6 +622,7 @@ impl Network {
         checkpoint_every_seconds: Option<f64>,
         resume: Option<Bound<'py, PyDict>>,
         svzerod: Option<Bound<'py, PyDict>>,
+        finer_last_cycle: Option<f64>,
         settings: Option<Bound<'py, PyDict>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let mut shared = settings::Shared::from_kwargs(settings.as_ref())?;
@@ -641,6 +642,8 @@ impl Network {
         if let Some(d) = &svzerod {
             settings.svzerod = crate::svzerod::rules(d, &self.inner.0.probes)?;
         }
+        // the accumulated-error estimate: the last cycle again at rtol / this factor
+        settings.finer_last_cycle = finer_last_cycle;
         let inner = self.inner.clone();
         let mut species = if transport_on {
             self.transport.as_deref().map(Transport::new_run)

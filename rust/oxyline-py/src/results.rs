@@ -184,6 +184,9 @@ pub(crate) fn outcome_dict(py: Python<'_>, out: Outcome) -> PyResult<Bound<'_, P
             "last_cycle_steps",
             ec.last_cycle_steps.clone().into_pyarray(py),
         )?;
+        if let Some(f) = &ec.finer {
+            d.set_item("finer_last_cycle", finer_dict(py, f, out.n_probes)?)?;
+        }
     }
     if let Some(lim) = &out.stability {
         d.set_item("rk4_dt_max", lim.dt_max)?;
@@ -193,6 +196,31 @@ pub(crate) fn outcome_dict(py: Python<'_>, out: Outcome) -> PyResult<Bound<'_, P
     if let (Some(td), Some((final_state, mean_abs_flow))) = (td, species_state) {
         td.set_item("final_state", final_state.into_pyarray(py))?;
         td.set_item("mean_abs_flow", mean_abs_flow.into_pyarray(py))?;
+    }
+    Ok(d)
+}
+
+/// The last cycle at the tighter tolerance (`FinerCycle`): `factor`, `steps`,
+/// `rejected_steps`, `times`, `data` (n, n_probes) and, with species, `transport` (n, columns).
+fn finer_dict<'py>(
+    py: Python<'py>,
+    f: &oxyline_core::run::FinerCycle,
+    n_probes: usize,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    let nt = f.times.len();
+    d.set_item("factor", f.factor)?;
+    d.set_item("steps", f.steps)?;
+    d.set_item("rejected_steps", f.rejected)?;
+    d.set_item("times", f.times.clone().into_pyarray(py))?;
+    d.set_item(
+        "data",
+        f.data.clone().into_pyarray(py).reshape([nt, n_probes])?,
+    )?;
+    if !f.transport.is_empty() {
+        let cols = f.transport.len() / nt.max(1);
+        let rows = f.transport.clone().into_pyarray(py).reshape([nt, cols])?;
+        d.set_item("transport", rows)?;
     }
     Ok(d)
 }

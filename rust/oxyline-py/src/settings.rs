@@ -173,6 +173,7 @@ impl Shared {
             species_columns: None,
             tolerances: self.tolerances()?,
             svzerod: Default::default(),
+            finer_last_cycle: None,
         })
     }
 

@@ -34,6 +34,11 @@ pub const OPTIONS: &[&str] = &[
     "threads",
     // an impedance refinement after the run (the Python run), checked with the settings
     "estimate_space_error",
+    // the accumulated time-integration error (the Python run: the core's second integration
+    // of the last cycle), checked with the settings
+    "estimate_time_error",
+    // run again at the tolerance the estimate says meets rtol in every vessel (the Python run)
+    "meet_rtol",
 ];
 /// How a run starts.
 pub const STARTS: &[&str] = &[
@@ -76,6 +81,12 @@ pub struct Settings {
     /// Estimate the spatial error after the run (the Python run refines every vessel once and
     /// compares the inlet impedance); not a setting of the core's run.
     pub estimate_space_error: bool,
+    /// Estimate the accumulated time-integration error (docs/solvers.md, "The accumulated
+    /// error"): the keyword or the file's `simulation: {estimate_time_error: true}`.
+    pub estimate_time_error: bool,
+    /// Meet rtol in every vessel: after the estimate, run again at the tolerance it asks
+    /// (the keyword or the file's `simulation: {meet_rtol: true}`).
+    pub meet_rtol: bool,
 }
 
 /// A setting's value: given (by the caller or the file) or the default.
@@ -270,6 +281,15 @@ pub fn resolve<N: Node>(sim: &N, overrides: &N, period: Option<f64>) -> Result<S
     // read by the Python run (one impedance refinement after it), checked here with the rest
     let (e, w) = get("estimate_space_error", None, "", Val::Flag(false));
     let estimate_space_error = flag(&e, &w)?;
+    let (e, w) = get(
+        "estimate_time_error",
+        Some(sim),
+        "estimate_time_error",
+        Val::Flag(false),
+    );
+    let estimate_time_error = flag(&e, &w)?;
+    let (e, w) = get("meet_rtol", Some(sim), "meet_rtol", Val::Flag(false));
+    let meet_rtol = flag(&e, &w)?;
     let (th, w) = get("threads", Some(sim), "threads", Val::Null);
     let threads = match th.kind() {
         Kind::Null => None,
@@ -295,6 +315,8 @@ pub fn resolve<N: Node>(sim: &N, overrides: &N, period: Option<f64>) -> Result<S
         atol,
         threads,
         estimate_space_error,
+        estimate_time_error,
+        meet_rtol,
     })
 }
 

@@ -16,6 +16,8 @@ use crate::error::{Error, Result};
 use crate::integrate::newton::scaled_increment;
 use crate::integrate::stability::growth;
 
+mod finer; // the accumulated-error estimate: the last cycle again at a tighter tolerance
+
 /// The running loop. A failed or interrupted run keeps everything recorded so far.
 pub(super) struct Cycles<'r, 'f> {
     pub(super) s: &'r RunSettings,
@@ -52,6 +54,11 @@ pub(super) struct Cycles<'r, 'f> {
     cycle_means: Option<CycleMeans>,
     /// (y, ẏ) of an RK4 output row's rates (`record_rates`).
     rate_scratch: (Vec<f64>, Vec<f64>),
+    /// The start of the cycle being run, kept when `RunSettings::finer_last_cycle` asks
+    /// for the last cycle again (`finer`).
+    last_start: Option<finer::CycleStart>,
+    /// The last cycle's rows at the tighter tolerance, once run.
+    pub finer: Option<super::outcome::FinerCycle>,
 }
 
 /// What the rows of one cycle are for.
@@ -135,6 +142,8 @@ impl<'r, 'f> Cycles<'r, 'f> {
             derived: None,
             cycle_means: None,
             rate_scratch: Default::default(),
+            last_start: None,
+            finer: None,
         }
     }
 
@@ -188,6 +197,9 @@ impl<'r, 'f> Cycles<'r, 'f> {
                     break;
                 }
             }
+        }
+        if error.is_none() {
+            error = self.finer_last_cycle(progress).err();
         }
         self.rec.align();
         if !self.rec.flush(true) && error.is_none() {
@@ -328,7 +340,11 @@ impl<'r, 'f> Cycles<'r, 'f> {
             let done = self.explicit_cycle(&mut ex, &rows, progress);
             self.explicit = Some(ex);
             done?;
-        } else if let Some(mut ad) = self.adaptive.take() {
+        } else if self.adaptive.is_some() {
+            if self.keeps_cycle_start() {
+                self.last_start = Some(self.cycle_start_state(rows.t0));
+            }
+            let mut ad = self.adaptive.take().expect("error control");
             let done = self.adaptive_cycle(&mut ad, &rows, progress);
             self.adaptive = Some(ad);
             done?;

@@ -40,7 +40,7 @@ mod two_pass;
 pub use checkpoint::{CHECKPOINT_VERSION, Checkpoints, Every, Snapshot};
 pub use events::Event;
 pub use heap::release_free_pages;
-pub use outcome::{ErrorControlOutcome, Outcome, TransportOutcome};
+pub use outcome::{ErrorControlOutcome, FinerCycle, Outcome, TransportOutcome};
 pub use recorder::{Chunk, OutputSink};
 pub use resolve::{Refinement, rk4_step_refinement};
 pub use settings::{Method, RunSettings, Start};

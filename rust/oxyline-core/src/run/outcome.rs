@@ -48,6 +48,25 @@ pub struct ErrorControlOutcome {
     /// where the ones before it end (a run stopped early: the steps of its last cycle so far).
     pub last_cycle_start: f64,
     pub last_cycle_steps: Vec<f64>,
+    /// The last cycle run again at rtol / factor (`RunSettings::finer_last_cycle`; None when
+    /// not asked, or not done: the explicit pair, valves, a failed second integration).
+    pub finer: Option<FinerCycle>,
+}
+
+/// The last cycle of an error-controlled run integrated again from its start state at
+/// rtol / `factor` (docs/solvers.md, "The accumulated error"): its output rows at the
+/// run's output times after the cycle's first, in the layout of [`Outcome`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct FinerCycle {
+    pub factor: f64,
+    pub times: Vec<f64>,
+    /// Row-major (time, probe).
+    pub data: Vec<f64>,
+    /// Row-major (time, species × columns); empty for flow-only runs.
+    pub transport: Vec<f64>,
+    /// The second integration's accepted and rejected steps.
+    pub steps: usize,
+    pub rejected: usize,
 }
 
 /// Species outputs, recorded at the same times as the flow probes.
@@ -135,6 +154,7 @@ impl Outcome {
             events: events.clone(),
             last_cycle_start,
             last_cycle_steps: last_cycle_steps.clone(),
+            finer: None,
         });
         let error_control = cycles
             .adaptive
@@ -147,6 +167,7 @@ impl Outcome {
                 events,
                 last_cycle_start,
                 last_cycle_steps,
+                finer: cycles.finer,
             })
             .or(explicit);
         // an error-controlled run reports its mean step

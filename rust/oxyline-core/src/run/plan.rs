@@ -402,6 +402,7 @@ mod tests {
             species_columns: None,
             tolerances: None,
             svzerod: Default::default(),
+            finer_last_cycle: None,
         }
     }
 

@@ -75,6 +75,11 @@ pub struct RunSettings {
     /// svZeroDSolver's output and stop conventions (derived columns, rates, its
     /// cycle-to-cycle rule) asked by the drop-in; empty by default.
     pub svzerod: super::svzerod::SvZeroDRules,
+    /// An error-controlled run's accumulated-error estimate (docs/solvers.md, "The
+    /// accumulated error"): the last cycle is run again from its start at rtol over this
+    /// factor and its output rows returned beside the run's (`ErrorControlOutcome::finer`).
+    /// None: no second integration (the run is unchanged either way).
+    pub finer_last_cycle: Option<f64>,
 }
 
 impl RunSettings {
@@ -98,6 +103,7 @@ impl RunSettings {
             species_columns: None,
             tolerances: None,
             svzerod: Default::default(),
+            finer_last_cycle: None,
         }
     }
 
@@ -129,6 +135,14 @@ impl RunSettings {
         }
         if let Some(p) = self.probes.iter().find(|&&p| p >= dae.n) {
             return bad(format!("output index {p} out of range"));
+        }
+        if let Some(f) = self
+            .finer_last_cycle
+            .filter(|f| !(f.is_finite() && *f > 1.0))
+        {
+            return bad(format!(
+                "the time error's tolerance factor must be > 1, got {f}"
+            ));
         }
         if !self.svzerod.is_empty() && self.adaptive().is_some() {
             return bad("svZeroDSolver's output conventions need a fixed step (dt)".into());
@@ -220,6 +234,7 @@ mod tests {
             species_columns: None,
             tolerances: None,
             svzerod: Default::default(),
+            finer_last_cycle: None,
         };
         assert!(ok.validate(&dae).is_ok());
         let message = |s: RunSettings| match s.validate(&dae) {
@@ -255,6 +270,10 @@ mod tests {
         assert_eq!(
             bad(|s| s.probes = vec![0, 7]),
             "simulation: output index 7 out of range"
+        );
+        assert_eq!(
+            bad(|s| s.finer_last_cycle = Some(1.0)),
+            "simulation: the time error's tolerance factor must be > 1, got 1"
         );
     }
 }

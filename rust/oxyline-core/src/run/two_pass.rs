@@ -145,6 +145,7 @@ fn mean_flow_pass(s: &RunSettings) -> RunSettings {
     let mut first = RunSettings {
         probes: Vec::new(),
         svzerod: Default::default(),
+        finer_last_cycle: None,
         ..s.clone()
     };
     if s.adaptive().is_some() {

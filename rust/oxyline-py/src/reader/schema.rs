@@ -214,6 +214,8 @@ pub(crate) fn resolve_settings<'py>(
     d.set_item("rtol_default", s.rtol_default)?;
     d.set_item("threads", s.threads)?;
     d.set_item("estimate_space_error", s.estimate_space_error)?;
+    d.set_item("estimate_time_error", s.estimate_time_error)?;
+    d.set_item("meet_rtol", s.meet_rtol)?;
     match s.atol {
         Some(atol) => {
             let a = PyDict::new(py);

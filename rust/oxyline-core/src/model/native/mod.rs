@@ -54,6 +54,8 @@ pub const SIM_KEYS: &[&str] = &[
     "rtol",
     "atol",
     "threads",
+    "estimate_time_error",
+    "meet_rtol",
 ];
 pub const OUTPUT_KEYS: &[&str] = &["cycles", "every", "segments", "variables", "vessels"];
 /// Run methods a model's `simulation: method` may name.

@@ -1,0 +1,139 @@
+"""The accumulated time-integration error measured within one run
+(`simulate(..., estimate_time_error=True)`: the last cycle again at rtol/4 from its start)
+against an independent truth, a converged fixed-step run (docs/solvers.md, "The accumulated
+error"); the option's settings, files, refusals and `meet_rtol`."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import oxyline
+from oxyline.cli import main
+
+
+def _achieved(res: oxyline.Result, ref: oxyline.Result) -> dict[str, np.ndarray]:
+    """Every vessel's error of `res` against the reference `ref` (the same output times),
+    each against the vessel's own scale (flow amplitude, pressure peak, pulse pressure)."""
+    p, pr = res.pressure_in, ref.pressure_in
+    return {
+        "flow": np.max(np.abs(res.flow_in - ref.flow_in), 0) / np.max(np.abs(ref.flow_in), 0),
+        "pressure": np.max(np.abs(p - pr), 0) / np.max(np.abs(pr), 0),
+        "pulse_pressure": np.abs(np.ptp(p, 0) - np.ptp(pr, 0)) / np.ptp(pr, 0),
+    }
+
+
+@pytest.fixture(scope="module")
+def adan56_runs() -> tuple[oxyline.Result, oxyline.Result, oxyline.Result, float]:
+    # adan56, two cycles from the steady start at rtol 1e-2: the small vessels' flows miss
+    # rtol of their own amplitude by ~40x while every step's local estimate meets it; the
+    # second cycle starts with the first one's error, which the last cycle's second
+    # integration does not see (it starts from the run's own state). Reference: generalized-
+    # alpha at T/8000 (second order; its own error ~1e-3 of the achieved one)
+    model = oxyline.load_model("adan56")
+    kw = {
+        "cycles": 2,
+        "until_periodic": None,
+        "output_every": 1e-3,
+        "progress": False,
+        "method": "generalized-alpha",
+    }
+    rtol = 1e-2
+    plain = oxyline.simulate(model, rtol=rtol, **kw)
+    res = oxyline.simulate(model, rtol=rtol, estimate_time_error=True, **kw)
+    ref = oxyline.simulate(model, dt=model.period / 8000, **kw)
+    return plain, res, ref, rtol
+
+
+def test_the_estimate_within_the_run_is_within_2x_of_the_achieved_error(adan56_runs) -> None:
+    plain, res, ref, rtol = adan56_runs
+    got = _achieved(res, ref)
+    for kind in ("flow", "pressure", "pulse_pressure"):
+        worst, estimated = float(np.max(got[kind])), res.error_estimate[kind]
+        assert 0.5 * worst <= estimated <= 2.0 * worst, (kind, worst, estimated)
+    # per vessel: within 2x wherever the achieved flow error is above rtol
+    big = got["flow"] > rtol
+    ratio = res.time_error["flow"].to_numpy()[big] / got["flow"][big]
+    assert big.sum() > 10 and np.all((ratio >= 0.5) & (ratio <= 2.0)), np.sort(ratio)
+    assert float(np.max(got["flow"])) > 10 * rtol  # (what the local estimate does not say)
+    assert max(res.local_error_estimate.values()) <= rtol * (1 + 1e-9)
+    worst_vessel = res.vessels[int(np.argmax(got["flow"]))]
+    assert res.settings["time_error_vessel_flow"] == worst_vessel
+    # the estimate leaves the run as it was: the same steps, the same arithmetic
+    assert np.array_equal(plain.data, res.data)
+    assert plain.settings["steps"] == res.settings["steps"]
+    assert plain.local_error_estimate == res.local_error_estimate
+    assert 0 < res.settings["time_error_steps"]
+
+
+def test_the_estimate_goes_to_the_file_and_the_summary(adan56_runs, tmp_path, capsys) -> None:
+    _, res, _, _ = adan56_runs
+    back = oxyline.open_result(res.to_netcdf(tmp_path / "run.nc"))
+    assert back.error_estimate == pytest.approx(res.error_estimate, rel=1e-12)
+    assert back.local_error_estimate == pytest.approx(res.local_error_estimate, rel=1e-12)
+    assert back.settings["time_error_vessel_flow"] == res.settings["time_error_vessel_flow"]
+    main(["run", "bifurcation", "--cycles", "1", "--rtol", "1e-2", "--estimate-time-error"])
+    out = capsys.readouterr().out
+    assert "accumulated error (worst vessel)" in out and "time error: worst vessel" in out
+
+
+def test_paper_bifurcated_with_oxygen_reports_po2_too() -> None:
+    # the species' second integration runs beside the flow's: PO2's accumulated error is
+    # reported (far within rtol here); flow and pressure within 2x of the achieved ones
+    model = oxyline.load_model("paper-bifurcated")
+    kw = {
+        "cycles": 2,
+        "until_periodic": None,
+        "output_every": 1e-3,
+        "progress": False,
+        "method": "generalized-alpha",
+    }
+    rtol = 1e-3
+    res = oxyline.simulate(model, rtol=rtol, estimate_time_error=True, **kw)
+    ref = oxyline.simulate(model, dt=model.period / 8000, **kw)
+    got = _achieved(res, ref)
+    for kind in ("flow", "pulse_pressure"):
+        worst, estimated = float(np.max(got[kind])), res.error_estimate[kind]
+        assert 0.5 * worst <= estimated <= 2.0 * worst, (kind, worst, estimated)
+    assert 0 <= res.error_estimate["po2"] < rtol
+
+
+def test_bad_requests_are_model_errors_naming_the_setting(tmp_path) -> None:
+    with pytest.raises(oxyline.ModelError, match="estimate_time_error needs error control"):
+        oxyline.simulate("bifurcation", dt=1e-3, cycles=1, estimate_time_error=True)
+    with pytest.raises(oxyline.ModelError, match="estimate_time_error"):
+        oxyline.simulate("bifurcation", cycles=1, estimate_time_error="yes")
+    with pytest.raises(oxyline.ModelError, match="simulate_to_zarr: estimate_time_error"):
+        oxyline.simulate_to_zarr(
+            "bifurcation", tmp_path / "r.zarr", cycles=1, estimate_time_error=True
+        )
+    with pytest.raises(oxyline.ModelError, match="meet_rtol needs error control"):
+        oxyline.simulate("bifurcation", dt=1e-3, cycles=1, meet_rtol=True)
+    with pytest.raises(oxyline.ModelError, match="simulate_ensemble: estimate_time_error"):
+        oxyline.simulate_ensemble("bifurcation", [{}], estimate_time_error=True, cycles=1)
+    # the model file's simulation section asks for it too
+    m = oxyline.load_model("bifurcation").to_dict()
+    m["simulation"] = {**m.get("simulation", {}), "estimate_time_error": True, "cycles": 1}
+    res = oxyline.simulate(m, rtol=1e-2, progress=False)
+    assert res.time_error is not None and "flow" in res.error_estimate
+
+
+@pytest.mark.slow
+def test_meet_rtol_meets_rtol_in_every_vessel() -> None:
+    # adan56 at rtol 1e-2: the run at rtol misses it ~40x in its small vessels; meet_rtol
+    # runs again at the tolerance its estimate asks and meets 2 rtol (the estimate's
+    # allowance) in every vessel and kind against generalized-alpha at T/8000
+    model = oxyline.load_model("adan56")
+    kw = {
+        "cycles": 1,
+        "until_periodic": None,
+        "output_every": 1e-3,
+        "progress": False,
+        "method": "generalized-alpha",
+    }
+    rtol = 1e-2
+    met = oxyline.simulate(model, rtol=rtol, meet_rtol=True, **kw)
+    ref = oxyline.simulate(model, dt=model.period / 8000, **kw)
+    for kind, e in _achieved(met, ref).items():
+        assert float(np.max(e)) <= 2 * rtol, (kind, float(np.max(e)), met.settings["rtol"])
+    assert met.settings["meet_rtol"] == rtol and met.settings["meet_rtol_runs"] >= 2
