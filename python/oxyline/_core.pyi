@@ -239,12 +239,17 @@ def read_conditions(bcs: Any, units: str
                     ) -> tuple[dict[str, Any], list[tuple[float, str]]]: ...
 def check_periods(data: Any, periods: list[tuple[float, str]],
                   vessels: list[Any] | None = None) -> float | None: ...
-def read_variant(data: Any, base: dict[str, Any] | None = None, vessels: list[int] = ...,
-                 nodes: list[str] = ...
-                 ) -> tuple[str, dict[str, Any], float | None, dict[str, Any]]:
-    """(name, canonical description, period, transport facts) of a native model read in the
-    core's one order; ``base``'s canonical vessels and conditions are reused except those at
-    ``vessels`` (indices) and ``nodes``. A ModelError about one of them has ``element``."""
+class VariantReader:
+    """The reader of an ensemble's variants: ``base``'s canonical vessels and conditions (a
+    canonical model dict; None: every element is read) and its conditions' periods."""
+
+    def __init__(self, base: dict[str, Any] | None = None) -> None: ...
+    def read(self, data: Any, vessels: list[int] = ..., nodes: list[str] = ...
+             ) -> tuple[str, dict[str, Any], float | None, dict[str, Any]]:
+        """(name, canonical description, period, transport facts) of a native model read in
+        the core's one order; the base's canonical vessels and conditions are reused except
+        those at ``vessels`` (indices) and ``nodes``. A ModelError about one of them has
+        ``element``."""
 def resolve_settings(sim: Any, overrides: Any, period: float | None) -> dict[str, Any]: ...
 def forcing_frequency(data: Any, rtol: float | None = None) -> tuple[float, float]:
     """The highest significant frequency (Hz) of a native model's flow and pressure

@@ -211,15 +211,16 @@ def flatten(patch: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
     return out
 
 
-def variant_model(data: dict[str, Any], base: Mapping[str, Any] | None = None,
-                  vessels: Iterable[int] = (), nodes: Iterable[str] = ()) -> Model:
+def variant_model(data: dict[str, Any], reader: Any = None, vessels: Iterable[int] = (),
+                  nodes: Iterable[str] = ()) -> Model:
     """The model of ``data`` with its canonical description, read by the core in its one order
-    and not assembled (an ensemble's variant). The canonical vessels and conditions of
-    ``base`` (a canonical model dict) are reused, except the vessels at the indices
-    ``vessels`` and the conditions of the nodes ``nodes``, which are read. A
-    :class:`ModelError` about one element has the attribute ``element``: ``("vessel", i)`` or
-    ``("condition", node)`` (None: the other sections)."""
-    name, canon, period, info = _core.read_variant(data, base, sorted(vessels), list(nodes))
+    and not assembled (an ensemble's variant). ``reader``: a ``_core.VariantReader`` of the
+    base model, whose canonical vessels and conditions are reused, except the vessels at the
+    indices ``vessels`` and the conditions of the nodes ``nodes``, which are read (None: every
+    element is read). A :class:`ModelError` about one element has the attribute ``element``:
+    ``("vessel", i)`` or ``("condition", node)`` (None: the other sections)."""
+    reader = _core.VariantReader() if reader is None else reader
+    name, canon, period, info = reader.read(data, sorted(vessels), list(nodes))
     sim = data.get("simulation", {}) or {}
     return Model(name=name, simulation=dict(sim), period=period, _source=data, transport=info,
                  _canonical=canon)
@@ -257,7 +258,7 @@ class Patcher:
         #: the value route (None: every patch takes the full path)
         self.scaler = table if table.targets else None
         #: the base's canonical elements, which a variant shares where its patch leaves them
-        self._canonical = base.canonical
+        self._reader = _core.VariantReader(base.canonical)
 
     def _parse(self, patch: Any, k: int) -> Any:
         return None if self.scaler is None else self.scaler.parse(patch, k)
@@ -296,7 +297,7 @@ class Patcher:
         element it is about."""
         assert merged.data is not None
         try:
-            return variant_model(merged.data, self._canonical, merged.vessels, merged.nodes)
+            return variant_model(merged.data, self._reader, merged.vessels, merged.nodes)
         except ModelError as e:
             element = getattr(e, "element", None)
             if element is not None:  # a vessel or condition the patch changed

@@ -143,7 +143,7 @@ mod _core {
         reader::schema::{
             check_periods, read_conditions, read_vessels, resolve_settings, transport_section,
         },
-        reader::variant::read_variant,
+        reader::variant::VariantReader,
         waveform_values,
     };
 

@@ -122,7 +122,8 @@ pub struct Read<V> {
 /// `vessel_of(i, vessel, units)` and `condition_of(node, condition, units)` give each
 /// element's canonical form: read from the model by the schema ([`vessel`],
 /// [`boundary_condition`]), or a canonical element the caller already holds and knows to be
-/// unchanged (an ensemble's variant reuses its base model's).
+/// unchanged (an ensemble's variant reuses its base model's). A condition comes with its
+/// waveforms' periods when the caller knows them (None: found here, [`condition_periods`]).
 pub fn read_in_order<N, V, FV, FC>(
     data: &N,
     mut vessel_of: FV,
@@ -132,7 +133,7 @@ where
     N: Node + Clone,
     V: Node,
     FV: FnMut(usize, N, Units) -> Result<V>,
-    FC: FnMut(&str, N, Units) -> Result<V>,
+    FC: FnMut(&str, N, Units) -> Result<(V, Option<Periods>)>,
 {
     let head = header(data)?;
     let units = head.units;
@@ -147,8 +148,11 @@ where
     let mut conditions = Vec::new();
     let mut periods = Vec::new();
     for (node, bc) in condition_entries(data)? {
-        let c = condition_of(&node, bc, units)?;
-        periods.extend(condition_periods(&c, &condition_element(&node)));
+        let (c, known) = condition_of(&node, bc, units)?;
+        match known {
+            Some(p) => periods.extend(p),
+            None => periods.extend(condition_periods(&c, &condition_element(&node))),
+        }
         conditions.push((node, c));
     }
     periods.extend(element_periods(&vessels));
@@ -171,7 +175,10 @@ pub fn canonical<N: Node + Clone>(data: &N) -> Result<(Value, Vec<String>)> {
     let read = read_in_order(
         data,
         |i, v, units| vessel(&Fields::new(v), i, units),
-        |node, bc, units| boundary_condition(&Fields::new(bc), units, &condition_element(node)),
+        |node, bc, units| {
+            let c = boundary_condition(&Fields::new(bc), units, &condition_element(node))?;
+            Ok((c, None))
+        },
     )?;
     let mut canon = read.header.canonical;
     canon.insert("vessels".into(), Value::Array(read.vessels));
