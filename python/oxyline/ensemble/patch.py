@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -211,24 +211,17 @@ def flatten(patch: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
     return out
 
 
-def variant_model(data: dict[str, Any],
-                  convert_vessels: Callable[..., Any] = _core.read_vessels,
-                  convert_boundary_conditions: Callable[..., Any] = _core.read_conditions
-                  ) -> Model:
-    """The model of ``data`` with its canonical description, not assembled (an ensemble's
-    variant): ``convert_vessels(vessels, units)`` and ``convert_boundary_conditions(conditions,
-    units)`` may reuse the base model's canonical elements the variant leaves as they are."""
-    name, canon = _core.read_header(data)
-    units = str(data.get("units", "SI"))
-    canon["vessels"] = convert_vessels(data["vessels"], units)
-    canon["boundary_conditions"], periods = convert_boundary_conditions(
-        data.get("boundary_conditions", {}), units)
-    period = _core.check_periods(data, periods, canon["vessels"])
+def variant_model(data: dict[str, Any], reader: Any = None, vessels: Iterable[int] = (),
+                  nodes: Iterable[str] = ()) -> Model:
+    """The model of ``data`` with its canonical description, read by the core in its one order
+    and not assembled (an ensemble's variant). ``reader``: a ``_core.VariantReader`` of the
+    base model, whose canonical vessels and conditions are reused, except the vessels at the
+    indices ``vessels`` and the conditions of the nodes ``nodes``, which are read (None: every
+    element is read). A :class:`ModelError` about one element has the attribute ``element``:
+    ``("vessel", i)`` or ``("condition", node)`` (None: the other sections)."""
+    reader = _core.VariantReader() if reader is None else reader
+    name, canon, period, info = reader.read(data, sorted(vessels), list(nodes))
     sim = data.get("simulation", {}) or {}
-    _core.check_simulation(sim)
-    tr, info = _core.read_transport(data, period)
-    if tr is not None:
-        canon["transport"] = tr
     return Model(name=name, simulation=dict(sim), period=period, _source=data, transport=info,
                  _canonical=canon)
 
@@ -264,21 +257,8 @@ class Patcher:
         table = ValueTable(base)
         #: the value route (None: every patch takes the full path)
         self.scaler = table if table.targets else None
-        canon = base.canonical
-        self._vessels = canon["vessels"]
-        self._bcs = canon["boundary_conditions"]
-
-    @property
-    def _periods(self) -> dict[str, list[tuple[float, str]]]:
-        """Each condition's waveform periods, to check a variant's period as a model load
-        does (computed once, when a patch first needs them)."""
-        periods = self.__dict__.get("_periods_cache")
-        if periods is None:
-            units = str(self.base.source.get("units", "SI"))
-            bcs = self.base.source.get("boundary_conditions", {})
-            periods = self.__dict__["_periods_cache"] = {
-                node: _core.read_conditions({node: bc}, units)[1] for node, bc in bcs.items()}
-        return periods
+        #: the base's canonical elements, which a variant shares where its patch leaves them
+        self._reader = _core.VariantReader(base.canonical)
 
     def _parse(self, patch: Any, k: int) -> Any:
         return None if self.scaler is None else self.scaler.parse(patch, k)
@@ -316,38 +296,16 @@ class Patcher:
         (the others are the base model's); an error names the patch paths that changed the
         element it is about."""
         assert merged.data is not None
-
-        def convert_vessels(items: list[Any], units: str) -> list[Any]:
-            out = list(self._vessels)
-            for i in sorted(merged.vessels):
-                try:
-                    out[i] = _core.read_vessels([items[i]], units)[0]
-                except ModelError as e:
-                    raise ModelError(traced(k, merged.paths.get(("vessel", i)), e)) from None
-            return out
-
-        def convert_conditions(items: Mapping[str, Any], units: str
-                               ) -> tuple[dict[str, Any], list[Any]]:
-            out, periods = dict(self._bcs), []
-            for node, bc in items.items():
-                if node not in merged.nodes:
-                    periods += self._periods[node]
-                    continue
-                try:
-                    canon, p = _core.read_conditions({node: bc}, units)
-                except ModelError as e:
-                    raise ModelError(traced(k, merged.paths.get(("condition", node)),
-                                            e)) from None
-                out[node] = canon[node]
-                periods += p
-            return out, periods
-
         try:
-            return variant_model(merged.data, convert_vessels, convert_conditions)
-        except ModelError as e:  # blood, oxygen, transport, period: the other sections
-            others = {key: value for key, value in patch.items()
-                      if key not in ("vessels", "boundary_conditions", "scale")}
-            raise ModelError(traced(k, patch_paths(others), e)) from None
+            return variant_model(merged.data, self._reader, merged.vessels, merged.nodes)
+        except ModelError as e:
+            element = getattr(e, "element", None)
+            if element is not None:  # a vessel or condition the patch changed
+                paths = merged.paths.get(element)
+            else:  # blood, oxygen, transport, period: the other sections
+                paths = patch_paths({key: value for key, value in patch.items()
+                                     if key not in ("vessels", "boundary_conditions", "scale")})
+            raise ModelError(traced(k, paths, e)) from None
 
     def variant(self, patch: Mapping[str, Any], k: int, row: Any = None) -> Variant:
         """Variant ``k``. Unknown names raise :class:`ModelError`; a value the patch or the

@@ -33,6 +33,7 @@ import numpy as np
 
 from oxyline import _core
 from oxyline.ensemble.scale import scale_terms
+from oxyline.errors import ModelError
 from oxyline.model import Model
 from oxyline.units import factor
 
@@ -316,14 +317,12 @@ class ValueTable:
             self._periods = {node: _core.read_conditions({node: bc}, units)[1] for node, bc in
                              self.base.source.get("boundary_conditions", {}).items()}
         new = {self.targets[t][1]: float(time[-1] - time[0]) for t, time, _ in tables}
-        period = self.base.source.get("period")
-        period = None if period is None else float(period)
-        for node, periods in self._periods.items():
-            for p in ([new[node]] if node in new else [q for q, _ in periods]):
-                if period is None:
-                    period = p
-                elif abs(p - period) > 1e-9 * period:
-                    return False
+        periods = [pe for node, ps in self._periods.items()
+                   for pe in ([(new[node], node)] if node in new else ps)]
+        try:  # the core's rule: the model's period, else the first waveform's; all agree
+            period = _core.check_periods(self.base.source, periods)
+        except ModelError:  # a mismatch: the full path fails the variant with its message
+            return False
         if period != self.base.period and self.base.transport_spec is not None:
             return False
         return period if period is not None else False

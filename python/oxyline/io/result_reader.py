@@ -106,7 +106,9 @@ def open_result(source: PathLike | Any) -> Result:
             ds.close()
 
 
-def _result_from_dataset(ds: Any, label: str) -> Result:
+def _needer(ds: Any, label: str) -> Any:
+    """``need(name, dims=None)``: the array of variable ``name`` of ``ds``, checked to exist
+    (else the file is not an oxyline result) and, when ``dims`` is given, to have those dims."""
     import numpy as np
 
     def need(name: str, dims: tuple[str, ...] | None = None) -> Any:
@@ -119,28 +121,35 @@ def _result_from_dataset(ds: Any, label: str) -> Result:
             raise ValueError(f"{label}: variable '{name}' has dims {var.dims}, expected {dims}")
         return np.asarray(var.values)
 
-    for name in REQUIRED:
-        need(name)
-    time = need("time").astype(np.float64)
-    vessels = [str(v) for v in need("vessel")]
-    nt, nv = len(time), len(vessels)
-    seg = "segment_vessel" in ds.variables
-    segment_count: list[int] = []
-    positions = np.zeros(0, dtype=np.float64)
-    ns = 0
-    if seg:
-        seg_vessel = [str(v) for v in need("segment_vessel")]
-        index = {n: i for i, n in enumerate(vessels)}
-        try:
-            owner = np.array([index[n] for n in seg_vessel], dtype=np.int64)
-        except KeyError as exc:
-            raise ValueError(f"{label}: segment of unknown vessel {exc.args[0]!r}") from None
-        # the core numbers segments vessel by vessel; anything else has no Result layout
-        if np.any(np.diff(owner) < 0):
-            raise ValueError(f"{label}: segments are not grouped by vessel in vessel order")
-        segment_count = np.bincount(owner, minlength=nv).tolist()
-        positions = need("segment_position").astype(np.float64)
-        ns = len(seg_vessel)
+    return need
+
+
+def _segment_layout(ds: Any, need: Any, vessels: list[str], label: str
+                    ) -> tuple[list[int], Any, int]:
+    """(segments per vessel, segment positions, segment count) of the file; none without
+    segments."""
+    import numpy as np
+
+    if "segment_vessel" not in ds.variables:
+        return [], np.zeros(0, dtype=np.float64), 0
+    seg_vessel = [str(v) for v in need("segment_vessel")]
+    index = {n: i for i, n in enumerate(vessels)}
+    try:
+        owner = np.array([index[n] for n in seg_vessel], dtype=np.int64)
+    except KeyError as exc:
+        raise ValueError(f"{label}: segment of unknown vessel {exc.args[0]!r}") from None
+    # the core numbers segments vessel by vessel; anything else has no Result layout
+    if np.any(np.diff(owner) < 0):
+        raise ValueError(f"{label}: segments are not grouped by vessel in vessel order")
+    segment_count = np.bincount(owner, minlength=len(vessels)).tolist()
+    positions = need("segment_position").astype(np.float64)
+    return segment_count, positions, len(seg_vessel)
+
+
+def _flow_data(ds: Any, need: Any, nt: int, nv: int, ns: int, seg: bool
+               ) -> tuple[Any, tuple[str, ...], tuple[str, ...]]:
+    """(the core's (time, column) data, vessel variables, segment variables) of the flow."""
+    import numpy as np
 
     # the core's (time, column) layout: the vessel variables of each vessel, then the segment
     # variables of each segment, interleaved; an output selection wrote fewer of them
@@ -156,9 +165,13 @@ def _result_from_dataset(ds: Any, label: str) -> Result:
         data[:, k:kv * nv:kv] = need(name, ("time", "vessel"))
     for k, name in enumerate(svars if seg else ()):
         data[:, kv * nv + k::ks] = need(name, ("time", "segment"))
+    return data, vvars, svars
 
-    attrs = {k: _plain(v) for k, v in ds.attrs.items()}
-    species = _species_from_dataset(ds, attrs, need, nt, nv, ns, label)
+
+def _oxygen_of(ds: Any, attrs: dict[str, Any], need: Any, species: dict[str, Any]) -> Any:
+    """The oxygen species' name (None without one); sets its PO2-per-concentration factor."""
+    import numpy as np
+
     oxygen = attrs.get("oxygen_species")
     if oxygen is None and "po2_in" in ds.variables:  # written before the attribute existed
         oxygen = next(iter(species), None)
@@ -171,6 +184,25 @@ def _result_from_dataset(ds: Any, label: str) -> Result:
             ok = np.isfinite(c) & np.isfinite(p) & (c != 0)
             scale = float(np.median(p[ok] / c[ok])) if ok.any() else None
         species[oxygen].po2_per_concentration = None if scale is None else float(_plain(scale))
+    return oxygen
+
+
+def _result_from_dataset(ds: Any, label: str) -> Result:
+    import numpy as np
+
+    need = _needer(ds, label)
+    for name in REQUIRED:
+        need(name)
+    time = need("time").astype(np.float64)
+    vessels = [str(v) for v in need("vessel")]
+    nt, nv = len(time), len(vessels)
+    seg = "segment_vessel" in ds.variables
+    segment_count, positions, ns = _segment_layout(ds, need, vessels, label)
+    data, vvars, svars = _flow_data(ds, need, nt, nv, ns, seg)
+
+    attrs = {k: _plain(v) for k, v in ds.attrs.items()}
+    species = _species_from_dataset(ds, attrs, need, nt, nv, ns, label)
+    oxygen = _oxygen_of(ds, attrs, need, species)
     settings = {k[len("solver_"):]: v for k, v in attrs.items() if k.startswith("solver_")}
     result = Result(model_name=str(attrs.get("model", Path(label).stem)), vessels=vessels,
                     time=time, data=data, segment_count=segment_count,

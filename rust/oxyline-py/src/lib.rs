@@ -141,9 +141,9 @@ mod _core {
         reader::formats::{openbf_mean_pressures, svzerod_periodic_table},
         reader::model::{canonical_model, forcing_frequency, read_model},
         reader::schema::{
-            check_periods, check_simulation, read_conditions, read_header, read_transport,
-            read_vessels, resolve_settings, transport_section,
+            check_periods, read_conditions, read_vessels, resolve_settings, transport_section,
         },
+        reader::variant::VariantReader,
         waveform_values,
     };
 

@@ -1,6 +1,6 @@
 //! The core's schema reader (`oxyline_core::model::native`) called on the user's Python
-//! objects: the model's top level, its vessels and boundary conditions, the period check and
-//! the simulation section. Each returns the canonical SI description as Python objects.
+//! objects: vessels and boundary conditions on their own, the transport sections and the run
+//! settings. Each returns the canonical SI description as Python objects.
 
 use super::node::{PyNode, to_python};
 use crate::errors::to_py;
@@ -22,18 +22,6 @@ pub(crate) fn units(units: &str) -> PyResult<Units> {
             format!("units must be 'SI' or 'cgs', got '{units}'"),
         ))
     })
-}
-
-/// (name, canonical top-level sections) of a native model dict.
-#[oxyline_py_guard::guard]
-#[pyfunction]
-pub(crate) fn read_header<'py>(
-    py: Python<'py>,
-    data: Bound<'py, PyAny>,
-) -> PyResult<(String, Bound<'py, PyAny>)> {
-    let header = native::header(&PyNode(data)).map_err(to_py)?;
-    let canon = to_python(py, &serde_json::Value::Object(header.canonical))?;
-    Ok((header.name, canon))
 }
 
 /// The canonical dicts of the native `vessels` (a list), in order.
@@ -95,28 +83,6 @@ pub(crate) fn check_periods(
     native::check_periods(period, &periods).map_err(to_py)
 }
 
-/// The canonical transport section of a native model (None without `oxygen` or `species`)
-/// and its facts for results (species names, the oxygen species and its solubility per mmHg),
-/// read by the core (`oxyline_core::model::species`); `period`: the model's. The sections are
-/// read against the model's units, blood and run duration.
-#[oxyline_py_guard::guard]
-#[pyfunction]
-pub(crate) fn read_transport<'py>(
-    py: Python<'py>,
-    data: Bound<'py, PyAny>,
-    period: Option<f64>,
-) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyDict>)> {
-    let node = PyNode(data);
-    let header = native::header(&node).map_err(to_py)?;
-    let ctx = native::transport_context(&node, &header.canonical["blood"], header.units, period);
-    let (section, info) = transport(py, &node, &ctx)?;
-    let section = match section {
-        Some(s) => to_python(py, &s)?,
-        None => py.None().into_bound(py),
-    };
-    Ok((section, info))
-}
-
 /// The transport sections of `data` alone (no blood: a `graetz` wall without its kinematic
 /// viscosity), read against a pressure unit factor, a period and a run duration.
 #[oxyline_py_guard::guard]
@@ -149,8 +115,18 @@ pub(crate) fn transport<'py>(
     node: &PyNode<'py>,
     ctx: &species::Context,
 ) -> PyResult<(Option<serde_json::Value>, Bound<'py, PyDict>)> {
+    transport_facts(py, species::read(node, ctx).map_err(to_py)?)
+}
+
+/// A transport section read by the core as (canonical section or None, facts for results:
+/// species names, the oxygen species and its solubility per mmHg); its warnings are emitted
+/// (`oxyline.HemoglobinFacilitationWarning`).
+pub(crate) fn transport_facts(
+    py: Python<'_>,
+    tr: Option<species::Transport>,
+) -> PyResult<(Option<serde_json::Value>, Bound<'_, PyDict>)> {
     let info = PyDict::new(py);
-    let Some(tr) = species::read(node, ctx).map_err(to_py)? else {
+    let Some(tr) = tr else {
         return Ok((None, info));
     };
     warn_facilitation(py, &tr.warnings)?;
@@ -173,13 +149,6 @@ pub(crate) fn warn_facilitation(py: Python<'_>, warnings: &[String]) -> PyResult
         PyErr::warn(py, &category, &text, 2)?;
     }
     Ok(())
-}
-
-/// The keys of a model's `simulation` section and its method.
-#[oxyline_py_guard::guard]
-#[pyfunction]
-pub(crate) fn check_simulation(sim: Bound<'_, PyAny>) -> PyResult<()> {
-    native::simulation(&PyNode(sim)).map_err(to_py)
 }
 
 /// The run settings of a model's `simulation` section with `simulate`'s keyword overrides,

@@ -308,28 +308,29 @@ fn coronary<N: Node>(bc: &N, units: Units, el: &str) -> Result<Value> {
 }
 
 /// The periods of a canonical condition's waveforms (a table's span, a Fourier period) and of
-/// a coronary's varying resistance, with the element they come from.
-pub fn condition_periods(cb: &Value, el: &str) -> Vec<(f64, String)> {
+/// a coronary's varying resistance, with the element they come from; `cb` in any front end's
+/// values (a canonical condition already read, such as an ensemble base's Python dict).
+pub fn condition_periods<N: Node>(cb: &N, el: &str) -> Vec<(f64, String)> {
     let mut out = Vec::new();
     for key in ["flow", "pressure", "intramyocardial_pressure"] {
         let Some(w) = cb.get(key) else { continue };
-        match w.get("kind").and_then(Value::as_str) {
+        match w.get("kind").and_then(|k| k.text()).as_deref() {
             Some("table") => {
-                let t = w.get("time").and_then(Value::as_array);
+                let t = w.get("time").and_then(|t| t.items());
                 if let Some(t) = t.filter(|t| t.len() > 1) {
-                    let (a, b) = (t[0].as_f64(), t[t.len() - 1].as_f64());
+                    let (a, b) = (t[0].number(), t[t.len() - 1].number());
                     out.push((b.unwrap_or(0.0) - a.unwrap_or(0.0), el.to_owned()));
                 }
             }
             Some("fourier") => {
-                if let Some(p) = w.get("period").and_then(Value::as_f64) {
+                if let Some(p) = w.get("period").and_then(|p| p.number()) {
                     out.push((p, el.to_owned()));
                 }
             }
             _ => {}
         }
     }
-    if let Some(p) = cb.get("cycle_period").and_then(Value::as_f64) {
+    if let Some(p) = cb.get("cycle_period").and_then(|p| p.number()) {
         out.push((p, format!("{el} cycle_period")));
     }
     out

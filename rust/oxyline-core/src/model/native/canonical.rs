@@ -2,12 +2,14 @@
 //! ([`Node`]: a JSON value the core built itself, e.g. the closed loop's circulation, or the
 //! user's Python dicts through the binding): header, vessels, boundary conditions, the period
 //! checked against every element's, the simulation keys and the transport section, in that
-//! order. The pieces are public so that the binding's fast reader (plain vessels straight into
-//! the network's parts) checks the same things in the same order.
+//! order ([`read_in_order`], the one place that order is written; an ensemble's variant reads
+//! through it too, reusing its base's canonical elements). The pieces are public so that the
+//! binding's fast reader (plain vessels straight into the network's parts) checks the same
+//! things in the same order.
 
 use super::{
-    boundary_condition, check_conditions, check_periods, condition_periods, element_periods,
-    header, period, simulation, vessel,
+    Header, boundary_condition, check_conditions, check_periods, condition_periods,
+    element_periods, header, period, simulation, vessel,
 };
 use crate::error::Result;
 use crate::model::node::{Fields, Kind, Node};
@@ -62,7 +64,7 @@ pub fn conditions<N: Node + Clone>(
     let mut out = Map::new();
     let mut periods = Vec::new();
     for (node, bc) in entries {
-        let el = format!("boundary condition '{node}'");
+        let el = condition_element(&node);
         let c = boundary_condition(&Fields::new(bc), units, &el)?;
         periods.extend(condition_periods(&c, &el));
         out.insert(node, c);
@@ -97,29 +99,93 @@ pub fn transport_context<N: Node>(
     }
 }
 
+/// How an error and a period name the condition at `node`.
+pub fn condition_element(node: &str) -> String {
+    format!("boundary condition '{node}'")
+}
+
+/// A native model read in the canonical order, its elements in the caller's form `V`.
+pub struct Read<V> {
+    /// Name, unit system and the canonical top-level sections.
+    pub header: Header,
+    pub vessels: Vec<V>,
+    /// The conditions by node, in the model's order.
+    pub conditions: Vec<(String, V)>,
+    /// The model period, checked against every element's (None: no element repeats).
+    pub period: Option<f64>,
+    /// The transport section (None without `oxygen` or `species`).
+    pub transport: Option<species::Transport>,
+}
+
+/// The one order a native model is read in: header, vessels, boundary conditions, the period
+/// checked against every element's, the simulation keys, the transport section.
+/// `vessel_of(i, vessel, units)` and `condition_of(node, condition, units)` give each
+/// element's canonical form: read from the model by the schema ([`vessel`],
+/// [`boundary_condition`]), or a canonical element the caller already holds and knows to be
+/// unchanged (an ensemble's variant reuses its base model's). A condition comes with its
+/// waveforms' periods when the caller knows them (None: found here, [`condition_periods`]).
+pub fn read_in_order<N, V, FV, FC>(
+    data: &N,
+    mut vessel_of: FV,
+    mut condition_of: FC,
+) -> Result<Read<V>>
+where
+    N: Node + Clone,
+    V: Node,
+    FV: FnMut(usize, N, Units) -> Result<V>,
+    FC: FnMut(&str, N, Units) -> Result<(V, Option<Periods>)>,
+{
+    let head = header(data)?;
+    let units = head.units;
+    let items = data
+        .get("vessels")
+        .and_then(|v| v.items())
+        .unwrap_or_default();
+    let mut vessels = Vec::with_capacity(items.len());
+    for (i, v) in items.into_iter().enumerate() {
+        vessels.push(vessel_of(i, v, units)?);
+    }
+    let mut conditions = Vec::new();
+    let mut periods = Vec::new();
+    for (node, bc) in condition_entries(data)? {
+        let (c, known) = condition_of(&node, bc, units)?;
+        match known {
+            Some(p) => periods.extend(p),
+            None => periods.extend(condition_periods(&c, &condition_element(&node))),
+        }
+        conditions.push((node, c));
+    }
+    periods.extend(element_periods(&vessels));
+    let period = period_and_simulation(data, &periods)?;
+    let ctx = transport_context(data, &head.canonical["blood"], units, period);
+    let transport = species::read(data, &ctx)?;
+    Ok(Read {
+        header: head,
+        vessels,
+        conditions,
+        period,
+        transport,
+    })
+}
+
 /// The canonical SI description of the native model `data` (every vessel and condition as
 /// its canonical dict, the transport section when it has species) and the transport
 /// section's warnings for the user.
 pub fn canonical<N: Node + Clone>(data: &N) -> Result<(Value, Vec<String>)> {
-    let head = header(data)?;
-    let units = head.units;
-    let mut canon = head.canonical;
-    let vessels = data
-        .get("vessels")
-        .and_then(|v| v.items())
-        .unwrap_or_default();
-    let mut list = Vec::with_capacity(vessels.len());
-    for (i, v) in vessels.into_iter().enumerate() {
-        list.push(vessel(&Fields::new(v), i, units)?);
-    }
-    let (bcs, mut periods) = conditions(condition_entries(data)?, units)?;
-    periods.extend(element_periods(&list));
-    let period = period_and_simulation(data, &periods)?;
-    canon.insert("vessels".into(), Value::Array(list));
+    let read = read_in_order(
+        data,
+        |i, v, units| vessel(&Fields::new(v), i, units),
+        |node, bc, units| {
+            let c = boundary_condition(&Fields::new(bc), units, &condition_element(node))?;
+            Ok((c, None))
+        },
+    )?;
+    let mut canon = read.header.canonical;
+    canon.insert("vessels".into(), Value::Array(read.vessels));
+    let bcs: Map<String, Value> = read.conditions.into_iter().collect();
     canon.insert("boundary_conditions".into(), Value::Object(bcs));
-    let ctx = transport_context(data, &canon["blood"], units, period);
     let mut warnings = Vec::new();
-    if let Some(tr) = species::read(data, &ctx)? {
+    if let Some(tr) = read.transport {
         canon.insert("transport".into(), tr.section);
         warnings = tr.warnings;
     }

@@ -18,8 +18,8 @@ pub mod vessel;
 
 pub use boundary::{boundary_condition, condition_periods};
 pub use canonical::{
-    Periods, canonical, condition_entries, conditions, duration, period_and_simulation,
-    transport_context,
+    Periods, Read, canonical, condition_element, condition_entries, conditions, duration,
+    period_and_simulation, read_in_order, transport_context,
 };
 pub use vessel::{element_periods, vessel};
 
