@@ -333,3 +333,12 @@ def test_windkessel_replacement_names_the_outlet_key_and_value() -> None:
     p_tree, p_wk = (dict(zip(s["nodes"], s["node_pressure"]))["in"]
                     for s in (oxyline.load_model(d).network.steady_state() for d in (data, wk)))
     assert abs(p_tree / p_wk - 1.0) < 1e-8
+
+
+def test_an_ensemble_of_a_model_with_tree_outlets_is_refused_naming_the_outlet() -> None:
+    # a variant shares the base's canonical elements by position, and a grown tree's vessels
+    # are not the file's: refused by name before any tree is grown, never a raw error
+    m = tree_model(4e-4)
+    with pytest.raises(oxyline.ModelError,
+                       match=r"boundary condition 'out' \(structured-tree\): an ensemble"):
+        oxyline.simulate_ensemble(m, [{"scale": {"resistance": 1.1}}], progress=False)

@@ -36,6 +36,7 @@ from oxyline.ensemble.scale import where as _where
 from oxyline.ensemble.values import ValueTable
 from oxyline.errors import ModelError
 from oxyline.model import Model
+from oxyline.structured_tree import TYPE as STRUCTURED_TREE
 
 
 @dataclass
@@ -247,12 +248,26 @@ class Variant:
     tables: list[tuple[int, np.ndarray, np.ndarray]] | None = None
 
 
+def _refuse_structured_trees(base: Model) -> None:
+    """Raise :class:`ModelError` naming the first structured-tree outlet of ``base``: a
+    variant shares the base model's canonical elements by position, and the vessels of a
+    grown tree are not elements of the file (each variant would have to grow its trees)."""
+    bcs = base.source.get("boundary_conditions")
+    for node, bc in (bcs.items() if isinstance(bcs, Mapping) else ()):
+        if isinstance(bc, Mapping) and bc.get("type") == STRUCTURED_TREE:
+            raise ModelError(
+                f"boundary condition '{node}' ({STRUCTURED_TREE}): an ensemble cannot vary a "
+                "model with structured-tree outlets; run each variant with simulate(), or "
+                "give the outlet a Windkessel (rcr) condition")
+
+
 class Patcher:
     """Turns patches into :class:`Variant` s. The canonical form of the base model's elements
     is computed once; a variant converts only the vessels and conditions its patch changed,
     or takes the value route (:mod:`oxyline.ensemble.values`)."""
 
     def __init__(self, base: Model) -> None:
+        _refuse_structured_trees(base)
         self.base = base
         table = ValueTable(base)
         #: the value route (None: every patch takes the full path)
