@@ -316,7 +316,7 @@ impl<'a> Rk4<'a> {
             f: vec![0.0; n],
             // the first stage's slot only: a generalized-α run builds this integrator just to
             // make its start consistent (`derivative`), and the other stages' five state-sized
-            // vectors (~80 B per segment) would sit on top of the run's setup peak for nothing;
+            // vectors (~100 B per segment) would sit on top of the run's setup for nothing;
             // `step_coupled` sizes them at the first step (the same zeros)
             st: CoupledStages {
                 k: [vec![0.0; n], Vec::new(), Vec::new(), Vec::new()],
