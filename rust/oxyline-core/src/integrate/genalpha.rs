@@ -6,7 +6,7 @@
 //! make it depend on the iterate.
 
 use super::leaves::Leaves;
-use super::newton::{self, Magnitude, NewtonProblem, jacobian_pattern, jacobian_values_of};
+use super::newton::{self, Magnitude, NewtonProblem, jacobian_pattern, jacobian_values_scaled};
 use crate::circuit::{Csr, Dae, JacobianKind, Regime};
 use crate::error::{Error, Result};
 use crate::sparse::SparseLu;
@@ -51,11 +51,11 @@ pub struct GenAlpha<'a> {
     magnitude: Magnitude,
     /// The unfiltered estimate of `filter_error` (empty until an error-controlled run).
     filter_scratch: Vec<f64>,
-    /// The iteration matrix's values and α_m E of the last factorisation, kept for the next
-    /// once the step has changed (an error-controlled run refactorises at nearly every step:
-    /// fresh vectors of a million-segment circuit's ~7 million values were pages to fault in
-    /// and zero at each); empty while the step stays fixed (one factorisation).
-    factor_scratch: (Vec<f64>, Vec<f64>),
+    /// The iteration matrix's values of the last factorisation, kept for the next once the
+    /// step has changed (an error-controlled run refactorises at nearly every step: fresh
+    /// vectors of a million-segment circuit's ~7 million values were pages to fault in and
+    /// zero at each); empty while the step stays fixed (one factorisation).
+    factor_scratch: Vec<f64>,
     /// The step has changed since the start (see `factor_scratch`).
     dt_changed: bool,
     /// Newton with the natural-monotonicity line search (see `newton::solve`): set by an
@@ -171,9 +171,7 @@ impl<'a> GenAlpha<'a> {
     /// −α_f γ Δt (1 + 2CS sgn(Q) ẏ_Q) at the flow (see `Iterate::solve` for the right side).
     fn factor(&mut self, time: f64, y_af: &[f64], yd_am: &[f64]) -> Result<()> {
         let c = self.af * self.gamma * self.dt;
-        let (mut kvals, mut am_e) = std::mem::take(&mut self.factor_scratch);
-        am_e.clear();
-        am_e.extend(self.e.iter().map(|e| self.am * e));
+        let mut kvals = std::mem::take(&mut self.factor_scratch);
         // (the values before the elements' are all written below: only the elements' are
         // zeroed, as a fresh vector's)
         let nf = self.dae.f.val.len();
@@ -188,7 +186,15 @@ impl<'a> GenAlpha<'a> {
         } else {
             JacobianKind::Exact
         };
-        jacobian_values_of(self.dae, (c, &am_e), y_af, time, kind, &mut kvals);
+        // (α_m E written into the diagonal's values directly: no state-sized copy of it)
+        jacobian_values_scaled(
+            self.dae,
+            (c, (self.am, &*self.e)),
+            y_af,
+            time,
+            kind,
+            &mut kvals,
+        );
         for (cr, &k) in self.dae.chain_rule.iter().zip(&self.chain_flow_entry) {
             let q = y_af[cr.flow];
             let sign = f64::from(i8::from(q > 0.0) - i8::from(q < 0.0));
@@ -204,10 +210,20 @@ impl<'a> GenAlpha<'a> {
             None => self.lu.factor(&kvals),
         };
         if self.dt_changed {
-            self.factor_scratch = (kvals, am_e);
+            self.factor_scratch = kvals;
         }
         factored.map_err(|m| singular(time, &m))?;
         self.factored = true;
+        Ok(())
+    }
+
+    /// The factorisation the first linear step from (`time`, `y`) makes, made now (see
+    /// `Integrator::factor_ahead`): the same call with the same arguments; nothing for a
+    /// nonlinear or time-varying circuit (it factorises in its Newton iterations).
+    pub fn factor_ahead(&mut self, time: f64, y: &[f64]) -> Result<()> {
+        if self.dae.is_linear() && self.dae.is_constant(self.regime) && !self.factored {
+            self.factor(time + self.af * self.dt, y, &[])?;
+        }
         Ok(())
     }
 

@@ -255,10 +255,42 @@ pub fn jacobian_values_of(
     vals: &mut [f64],
 ) {
     let nf = dae.f.val.len();
+    vals[nf..nf + dae.n].copy_from_slice(diag);
+    jacobian_values_around_diagonal(dae, a, y, t, kind, vals);
+}
+
+/// [`jacobian_values_of`] with the diagonal d = m·e written from its factor and vector (the
+/// same products as a vector m·e built first, without that state-sized vector beside the
+/// values: generalized-α's first factorisation is where a large run's memory peaks).
+pub fn jacobian_values_scaled(
+    dae: &Dae,
+    (a, (m, e)): (f64, (f64, &[f64])),
+    y: &[f64],
+    t: f64,
+    kind: JacobianKind,
+    vals: &mut [f64],
+) {
+    let nf = dae.f.val.len();
+    for (v, ei) in vals[nf..nf + dae.n].iter_mut().zip(e) {
+        *v = m * ei;
+    }
+    jacobian_values_around_diagonal(dae, a, y, t, kind, vals);
+}
+
+/// The values of [`jacobian_values_of`] but the diagonal's own d, already in place: a·F,
+/// the stenoses' slopes added to the diagonal, the elements' Jacobian.
+fn jacobian_values_around_diagonal(
+    dae: &Dae,
+    a: f64,
+    y: &[f64],
+    t: f64,
+    kind: JacobianKind,
+    vals: &mut [f64],
+) {
+    let nf = dae.f.val.len();
     for (v, fv) in vals[..nf].iter_mut().zip(&dae.f.val) {
         *v = a * fv;
     }
-    vals[nf..nf + dae.n].copy_from_slice(diag);
     for &(i, s) in &dae.stenosis {
         vals[nf + i] += a * 2.0 * s * y[i].abs();
     }

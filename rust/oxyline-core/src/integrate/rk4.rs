@@ -251,7 +251,8 @@ pub struct Rk4<'a> {
     lin_state: Vec<f64>,
     /// The elements' state in `linear_operator`: stiffest (valves open) or valves closed.
     lin_kind: JacobianKind,
-    /// E of the index reduction with every stiff branch differential.
+    /// E of the index reduction with every stiff branch differential (empty without stiff
+    /// branches: no other mode is ever built).
     base_e: Vec<f64>,
     /// Valves behind inductors (see `stiff`), and which of them are algebraic now (bit i).
     stiff: Vec<StiffBranch>,
@@ -293,12 +294,19 @@ impl<'a> Rk4<'a> {
             }
         }
         let Mode { e, diff, alg, .. } = Self::mode(dae, regime, &e, &[], 0)?;
+        let stiff = stiff::find(dae, &e);
+        // (read only to build another stiff branches' mode: none without stiff branches)
+        let base_e = if stiff.is_empty() {
+            Vec::new()
+        } else {
+            e.clone()
+        };
         Ok(Rk4 {
             dae,
             regime,
             dt,
-            stiff: stiff::find(dae, &e),
-            base_e: e.clone(),
+            stiff,
+            base_e,
             mask: 0,
             parked: Vec::new(),
             diff,
@@ -306,7 +314,15 @@ impl<'a> Rk4<'a> {
             rate,
             alg,
             f: vec![0.0; n],
-            st: CoupledStages::new(n),
+            // the first stage's slot only: a generalized-α run builds this integrator just to
+            // make its start consistent (`derivative`), and the other stages' five state-sized
+            // vectors (~100 B per segment) would sit on top of the run's setup for nothing;
+            // `step_coupled` sizes them at the first step (the same zeros)
+            st: CoupledStages {
+                k: [vec![0.0; n], Vec::new(), Vec::new(), Vec::new()],
+                stage: Vec::new(),
+                acc: Vec::new(),
+            },
             lin_stenosis: Vec::new(),
             lin_time: 0.0,
             lin_state: Vec::new(),
@@ -654,6 +670,18 @@ impl<'a> Rk4<'a> {
         Ok(())
     }
 
+    /// The stages after the first, sized at the first step (see `Rk4::new`); the flow's
+    /// running sum `acc` is never used (its stages are combined by `rk4_combine`).
+    fn size_stages(&mut self) {
+        let n = self.dae.n;
+        if self.st.stage.len() != n {
+            for k in &mut self.st.k[1..] {
+                *k = vec![0.0; n];
+            }
+            self.st.stage = vec![0.0; n];
+        }
+    }
+
     pub fn step(&mut self, time: f64, y: &mut [f64]) -> Result<()> {
         self.step_coupled(
             time,
@@ -681,6 +709,7 @@ impl<'a> Rk4<'a> {
             self.forcing(time);
             self.select_mode(y)?;
         }
+        self.size_stages();
         let mut stage = std::mem::take(&mut self.st.stage);
         stage.copy_from_slice(y);
         self.rhs(time, &mut stage, 0)?;
