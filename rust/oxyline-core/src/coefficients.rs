@@ -89,6 +89,37 @@ impl ResistanceLaw {
         }
     }
 
+    /// ∂R(t)/∂R_min, or ∂R(t)/∂R_max with `of_max` (the law's values above zero): by
+    /// √R = √R_min + (√R_max − √R_min) e, 2√R ∂√R = … gives √R (1 − e)/√R_min and √R e/√R_max.
+    pub fn slope(&self, of_max: bool, t: f64) -> f64 {
+        match *self {
+            ResistanceLaw::Contraction {
+                min,
+                max,
+                contraction,
+                relaxation,
+                period,
+            } => {
+                let tau = t.rem_euclid(period);
+                let pi = std::f64::consts::PI;
+                let e = if tau <= contraction {
+                    0.5 * (1.0 - (pi * tau / contraction).cos())
+                } else if tau <= contraction + relaxation {
+                    0.5 * (1.0 + (pi * (tau - contraction) / relaxation).cos())
+                } else {
+                    // at rest R = R_min exactly (`value`)
+                    return if of_max { 0.0 } else { 1.0 };
+                };
+                let r = min.sqrt() + (max.sqrt() - min.sqrt()) * e;
+                if of_max {
+                    r * e / max.sqrt()
+                } else {
+                    r * (1.0 - e) / min.sqrt()
+                }
+            }
+        }
+    }
+
     /// The value kept in the constant matrix and used by the steady regimes.
     pub fn base(&self) -> f64 {
         match *self {
