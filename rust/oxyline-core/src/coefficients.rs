@@ -174,4 +174,30 @@ mod tests {
         assert_eq!(law.delta(0.8), 0.0);
         assert!(ResistanceLaw::contraction("c", 50.0, 200.0, 0.0, 0.4, 1.0).is_err());
     }
+
+    /// The slopes by R_min and R_max against central differences of the law's values over
+    /// its phases (relative step 1e-6: truncation and rounding near 1e-10 of R).
+    #[test]
+    fn contraction_law_slopes_are_its_differences() {
+        let at = |min: f64, max: f64| ResistanceLaw::contraction("c", min, max, 0.3, 0.4, 1.0);
+        let law = at(50.0, 200.0).unwrap();
+        for t in [0.05, 0.2, 0.3, 0.45, 0.69, 0.9] {
+            for (of_max, h) in [(false, 50e-6), (true, 200e-6)] {
+                let moved = |d: f64| {
+                    let (min, max) = if of_max {
+                        (50.0, 200.0 + d)
+                    } else {
+                        (50.0 + d, 200.0)
+                    };
+                    at(min, max).unwrap().value(t)
+                };
+                let diff = (moved(h) - moved(-h)) / (2.0 * h);
+                let slope = law.slope(of_max, t);
+                assert!(
+                    (slope - diff).abs() <= 1e-7,
+                    "t {t} max {of_max}: {slope} vs {diff}"
+                );
+            }
+        }
+    }
 }

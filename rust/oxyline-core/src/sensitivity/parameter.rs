@@ -133,7 +133,7 @@ impl Parameter {
             ["vessels", name, rest @ ..] if !rest.is_empty() => vessel(spec, path, name, rest),
             _ => Err(unknown(
                 path,
-                "not a parameter path (vessels.<name>.<length|radius|youngs_modulus|lumped.resistance|lumped.capacitance|lumped.inductance|lumped.stenosis_coefficient|chamber.<key>|valve.<key>|chamber_sphere.<key>|heart_pulmonary.<key>>, boundary_conditions.<node>.<resistance|proximal_resistance|distal_resistance|capacitance|arterial_resistance|microvascular_resistance|venous_resistance|arterial_capacitance|intramyocardial_capacitance|intramyocardial_pressure.scale>, scale.<resistance|compliance|inflow>)",
+                "not a parameter path (vessels.<name>.<length|radius|youngs_modulus|lumped.resistance|lumped.capacitance|lumped.inductance|lumped.stenosis_coefficient|chamber.<key>|valve.<key>|chamber_sphere.<key>|heart_pulmonary.<key>>, boundary_conditions.<node>.<resistance|proximal_resistance|distal_resistance|capacitance|arterial_resistance|microvascular_resistance|microvascular_resistance_max|venous_resistance|arterial_capacitance|intramyocardial_capacitance|intramyocardial_pressure.scale>, scale.<resistance|compliance|inflow>)",
             )),
         }
     }
