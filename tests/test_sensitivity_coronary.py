@@ -8,8 +8,9 @@
 * The adjoint against the forward tangents (1e-8).
 * The microvascular resistance and the intramyocardial pressure's factor recovered from
   synthetic data (noise-free: 1e-6).
-* Through a varying microvascular resistance (``CORONARY_VAR_RES``): the bed's other values
-  against central differences and the adjoint; the varying resistance's own are refused.
+* Through a varying microvascular resistance (``CORONARY_VAR_RES``): the bed's values, the
+  varying resistance's own R_min and R_max included, against central differences and the
+  adjoint; a law with a zero end is refused naming the parameter.
 """
 
 from __future__ import annotations
@@ -116,19 +117,22 @@ def test_coronary_parameters_are_recovered_from_synthetic_data() -> None:
 def test_through_a_varying_microvascular_resistance() -> None:
     """svZeroDSolver's pulsatileFlow_R_coronary_varres: the bed's microvascular resistance
     follows the contraction law R(t) (R_min 50 to R_max 200), which joins each step's matrix
-    of the tangent and the adjoint. The other values of the bed and the vessel's, against
-    central differences and the adjoint; the varying resistance's own values are refused."""
+    of the tangent and the adjoint; R_min and R_max move R(t) by the law's slopes at each
+    step. The bed's values and the vessel's, against central differences and the adjoint; a
+    law with a zero end (whose square roots have no derivative there) is refused."""
     model, node, vessel = _svzerod_case("pulsatileFlow_R_coronary_varres.json")
-    params = [f"boundary_conditions.{node}.{k}" for k in KEYS if k != "microvascular_resistance"]
-    params += [f"vessels.{vessel}.lumped.resistance"]
+    params = [f"boundary_conditions.{node}.{k}" for k in KEYS]
+    params += [f"boundary_conditions.{node}.microvascular_resistance_max",
+               f"vessels.{vessel}.lumped.resistance"]
     outputs = [f"{vessel}.pressure_in.max", f"{vessel}.pressure_in.min",
                f"{vessel}.pressure_out.mean", f"{vessel}.pressure_out.pulse"]
     exact = assert_sensitivities_are_central_differences(model, params, outputs)
     adj = oxyline.sensitivities(model, params, outputs, mode="adjoint")
     assert_adjoint_is_forward(exact, adj)
-    with pytest.raises(ModelError, match="varying microvascular resistance"):
-        oxyline.sensitivities(model, [f"boundary_conditions.{node}.microvascular_resistance"],
-                              [f"{vessel}.pressure_in.mean"])
+    model["boundary_conditions"][node]["microvascular_resistance"] = 0.0
+    path = f"boundary_conditions.{node}.microvascular_resistance_max"
+    with pytest.raises(ModelError, match=f"parameter '{path}'.*varying microvascular resistance"):
+        oxyline.sensitivities(model, [path], [f"{vessel}.pressure_in.mean"])
 
 
 @pytest.mark.parametrize(("key", "words"), [

@@ -133,3 +133,19 @@ def test_geometry_the_tangent_leaves_out_is_refused_naming_it() -> None:
         oxyline.sensitivities(model, ["vessels.d1.radius_out"], ["d1.flow_out.mean"])
     with pytest.raises(ModelError, match="parameter 'vessels.d1.radius'.*radius_in"):
         oxyline.sensitivities(_tapered(), ["vessels.d1.radius"], ["d1.flow_out.mean"])
+
+
+def test_scales_on_viscoelastic_walls_and_womersley_vessels() -> None:
+    """``scale.compliance`` divides a viscoelastic wall's E by the factor (its capacitance,
+    held at the wall's elastic pressure, and its relaxation time η/E move alike; R_v = τ/C
+    stays); neither scale touches the friction cells of a vessel given by its geometry."""
+    model = _tapered()
+    for v, eta in zip(model["vessels"], (1e3, 3e3, 2e3), strict=True):
+        v["wall_viscosity"] = eta
+    outputs = ["parent.pressure_in.max", "parent.pressure_in.min", "d1.flow_out.pulse"]
+    assert_sensitivities_are_central_differences(model, ["scale.compliance",
+                                                         "scale.resistance"], outputs)
+    model = _tapered()
+    model["wall_friction"] = "womersley"
+    assert_sensitivities_are_central_differences(model, ["scale.compliance",
+                                                         "scale.resistance"], outputs)

@@ -89,6 +89,37 @@ impl ResistanceLaw {
         }
     }
 
+    /// ∂R(t)/∂R_min, or ∂R(t)/∂R_max with `of_max` (the law's values above zero): by
+    /// √R = √R_min + (√R_max − √R_min) e, 2√R ∂√R = … gives √R (1 − e)/√R_min and √R e/√R_max.
+    pub fn slope(&self, of_max: bool, t: f64) -> f64 {
+        match *self {
+            ResistanceLaw::Contraction {
+                min,
+                max,
+                contraction,
+                relaxation,
+                period,
+            } => {
+                let tau = t.rem_euclid(period);
+                let pi = std::f64::consts::PI;
+                let e = if tau <= contraction {
+                    0.5 * (1.0 - (pi * tau / contraction).cos())
+                } else if tau <= contraction + relaxation {
+                    0.5 * (1.0 + (pi * (tau - contraction) / relaxation).cos())
+                } else {
+                    // at rest R = R_min exactly (`value`)
+                    return if of_max { 0.0 } else { 1.0 };
+                };
+                let r = min.sqrt() + (max.sqrt() - min.sqrt()) * e;
+                if of_max {
+                    r * e / max.sqrt()
+                } else {
+                    r * (1.0 - e) / min.sqrt()
+                }
+            }
+        }
+    }
+
     /// The value kept in the constant matrix and used by the steady regimes.
     pub fn base(&self) -> f64 {
         match *self {
@@ -142,5 +173,31 @@ mod tests {
         assert!((law.value(3.15) - 112.5).abs() < 1e-9);
         assert_eq!(law.delta(0.8), 0.0);
         assert!(ResistanceLaw::contraction("c", 50.0, 200.0, 0.0, 0.4, 1.0).is_err());
+    }
+
+    /// The slopes by R_min and R_max against central differences of the law's values over
+    /// its phases (relative step 1e-6: truncation and rounding near 1e-10 of R).
+    #[test]
+    fn contraction_law_slopes_are_its_differences() {
+        let at = |min: f64, max: f64| ResistanceLaw::contraction("c", min, max, 0.3, 0.4, 1.0);
+        let law = at(50.0, 200.0).unwrap();
+        for t in [0.05, 0.2, 0.3, 0.45, 0.69, 0.9] {
+            for (of_max, h) in [(false, 50e-6), (true, 200e-6)] {
+                let moved = |d: f64| {
+                    let (min, max) = if of_max {
+                        (50.0, 200.0 + d)
+                    } else {
+                        (50.0 + d, 200.0)
+                    };
+                    at(min, max).unwrap().value(t)
+                };
+                let diff = (moved(h) - moved(-h)) / (2.0 * h);
+                let slope = law.slope(of_max, t);
+                assert!(
+                    (slope - diff).abs() <= 1e-7,
+                    "t {t} max {of_max}: {slope} vs {diff}"
+                );
+            }
+        }
     }
 }

@@ -366,6 +366,7 @@ fn backward_cycle(
         if !kt.at(pr, k)?.solve_in_place(&mut u) {
             return Err(singular(k as f64 * sc.dt, "non-finite adjoint"));
         }
+        pr.chain_uncombine(&mut u);
         for (g, src) in grad.iter_mut().zip(sources) {
             *g += src.dot(k, &u);
         }
@@ -379,6 +380,7 @@ fn backward_cycle(
         for ((bi, ui), ei) in b.iter_mut().zip(&u).zip(&dae.e) {
             *bi = pred * *bi - pr.c * ei * ui;
         }
+        pr.chain_adjoint(k, &u, a, b);
     }
     Ok(())
 }

@@ -124,3 +124,121 @@ fn geometry_of_womersley_and_viscoelastic_vessels_is_refused() {
         "{err}"
     );
 }
+
+/// [`MODEL`] with the RCL daughter's stenosis in svZeroDSolver's form: its capacitor row is
+/// written by the chain rule on the inlet pressure (`super::tangent::chain_rule`).
+fn svzerod_form() -> crate::model::NetworkSpec {
+    let mut s = parse(MODEL).unwrap();
+    let d2 = s.vessels.iter_mut().find(|v| v.name == "d2").unwrap();
+    d2.lumped.as_mut().unwrap().stenosis_form = crate::model::StenosisForm::SvZeroD;
+    s
+}
+
+#[test]
+fn svzerod_form_stenosis_and_its_vessel_values() {
+    let base = svzerod_form();
+    for key in [
+        "stenosis_coefficient",
+        "resistance",
+        "capacitance",
+        "inductance",
+    ] {
+        check_on(&base, &format!("vessels.d2.lumped.{key}"));
+    }
+    // the other values reach the capacitor row through its pressures and flows alone
+    check_on(&base, "boundary_conditions.o2.resistance");
+    check_on(&base, "vessels.d1.radius_out");
+    check_on(&base, "scale.compliance");
+    check_on(&base, "scale.resistance");
+}
+
+#[test]
+fn svzerod_form_adjoint_gradients_are_the_tangents() {
+    super::tests::check_adjoint_of(
+        &svzerod_form(),
+        &[
+            "vessels.d2.lumped.stenosis_coefficient",
+            "vessels.d2.lumped.resistance",
+            "vessels.d2.lumped.capacitance",
+            "vessels.d2.lumped.inductance",
+            "boundary_conditions.o2.resistance",
+            "scale.compliance",
+            "scale.resistance",
+        ],
+        &SIGNALS,
+    );
+}
+
+/// Where the svZeroDSolver form's capacitor row switches form (a zero stenosis coefficient
+/// or capacitance), its derivative is refused naming the parameter.
+#[test]
+fn svzerod_form_at_its_switch_is_refused() {
+    let mut base = svzerod_form();
+    let refused = |s: &crate::model::NetworkSpec, path: &str| {
+        let err = sensitivities(s, &[path.into()], &[], settings())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            err.contains(&format!("'{path}'")) && err.contains("svzerod"),
+            "{err}"
+        );
+    };
+    let l = base.vessels[2].lumped.as_mut().unwrap();
+    l.stenosis_coefficient = 0.0;
+    refused(&base, "vessels.d2.lumped.stenosis_coefficient");
+    let l = base.vessels[2].lumped.as_mut().unwrap();
+    (l.stenosis_coefficient, l.capacitance) = (1.2e13, 0.0);
+    refused(&base, "vessels.d2.lumped.capacitance");
+}
+
+/// `scale.compliance` on a viscoelastic wall moves its capacitance (now at the wall's elastic
+/// pressure) and leaves R_v = τ/C (the patch's E/s scales τ = η/E as C); neither scale touches
+/// the friction cells of a vessel given by its geometry (their law reads its R and L, which
+/// `scale.compliance` leaves and `scale.resistance` does not scale).
+#[test]
+fn scales_on_viscoelastic_walls_and_womersley_vessels() {
+    let mut base = parse(MODEL).unwrap();
+    base.vessels[1].geometry.as_mut().unwrap().wall_viscosity = 3e3;
+    base.vessels[0].geometry.as_mut().unwrap().wall_viscosity = 1e3;
+    check_on(&base, "scale.compliance");
+    check_on(&base, "scale.resistance");
+    let mut base = parse(MODEL).unwrap();
+    base.vessels[0].wall_friction = Some(crate::segment::WallFriction::Womersley);
+    base.vessels[1].wall_friction = Some(crate::segment::WallFriction::Womersley);
+    check_on(&base, "scale.compliance");
+    check_on(&base, "scale.resistance");
+}
+
+/// A lumped vessel's friction cells follow its R and L by the Womersley law, which the
+/// tangent does not differentiate: its R, L and `scale.resistance` are refused naming it.
+#[test]
+fn lumped_womersley_resistance_is_refused_naming_the_vessel() {
+    let mut base = parse(MODEL).unwrap();
+    let lumped = crate::model::LumpedSpec {
+        resistance: 3e7,
+        inductance: 5e6,
+        capacitance: 2e-10,
+        stenosis_coefficient: 0.0,
+        stenosis_form: Default::default(),
+    };
+    let d2 = &mut base.vessels[2];
+    d2.arrangement = None;
+    d2.lumped = Some(lumped);
+    d2.wall_friction = Some(crate::segment::WallFriction::Womersley);
+    for (path, says) in [
+        ("scale.resistance", "vessel 'd2'"),
+        ("vessels.d2.lumped.resistance", "Womersley"),
+        ("vessels.d2.lumped.inductance", "Womersley"),
+    ] {
+        let err = sensitivities(&base, &[path.into()], &[], settings())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            err.contains(&format!("'{path}'")) && err.contains(says),
+            "{err}"
+        );
+    }
+    check_on(&base, "vessels.d2.lumped.capacitance");
+}

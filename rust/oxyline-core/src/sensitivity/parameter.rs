@@ -25,8 +25,8 @@ use crate::circuit::CircuitElement;
 use crate::circuit::{Circuit, Dae};
 use crate::error::{Error, Result};
 use crate::model::{
-    ActivationSpec, BoundarySpec, ChamberLawSpec, ChamberSpec, ChamberSphereSpec,
-    HeartPulmonarySpec, NetworkSpec, ValveSpec,
+    ActivationSpec, Arrangement, BoundarySpec, ChamberLawSpec, ChamberSpec, ChamberSphereSpec,
+    HeartPulmonarySpec, NetworkSpec, StenosisForm, ValveSpec,
 };
 use crate::segment::{
     Blood, InertanceProfile, Wall, WallFriction, WallModel, segment_rlc_radius_slopes,
@@ -88,6 +88,9 @@ pub struct DaeTangent {
     pub dstenosis: Vec<(usize, f64)>,
     /// (index into `Dae::elements`, key): ∂c_el/∂p is the element's derivative by its key.
     pub delements: Vec<(usize, String)>,
+    /// (index into `Dae::varying`, of its maximum): a time-varying resistance's R(t) moves by
+    /// its law's ∂R/∂R_min (∂R/∂R_max with `true`) at each step's α_f time.
+    pub dvarying: Vec<(usize, bool)>,
 }
 
 fn unknown(path: &str, why: impl Into<String>) -> Error {
@@ -99,7 +102,19 @@ impl Parameter {
     pub fn parse(spec: &NetworkSpec, path: &str) -> Result<Parameter> {
         let parts: Vec<&str> = path.split('.').collect();
         match parts.as_slice() {
-            ["scale", "resistance"] => Ok(Parameter::ResistanceScale),
+            ["scale", "resistance"] => {
+                match spec.vessels.iter().find(|v| friction_cells(spec, v)) {
+                    Some(v) => Err(unknown(
+                        path,
+                        format!(
+                            "vessel '{}' is lumped with Womersley friction cells, whose values \
+                         follow its resistance by a law the tangent does not differentiate",
+                            v.name
+                        ),
+                    )),
+                    None => Ok(Parameter::ResistanceScale),
+                }
+            }
             ["scale", "compliance"] => Ok(Parameter::ComplianceScale),
             ["scale", "inflow"] => Ok(Parameter::InflowScale),
             ["boundary_conditions", node, key] => condition(spec, path, node, key),
@@ -118,7 +133,7 @@ impl Parameter {
             ["vessels", name, rest @ ..] if !rest.is_empty() => vessel(spec, path, name, rest),
             _ => Err(unknown(
                 path,
-                "not a parameter path (vessels.<name>.<length|radius|youngs_modulus|lumped.resistance|lumped.capacitance|lumped.inductance|lumped.stenosis_coefficient|chamber.<key>|valve.<key>|chamber_sphere.<key>|heart_pulmonary.<key>>, boundary_conditions.<node>.<resistance|proximal_resistance|distal_resistance|capacitance|arterial_resistance|microvascular_resistance|venous_resistance|arterial_capacitance|intramyocardial_capacitance|intramyocardial_pressure.scale>, scale.<resistance|compliance|inflow>)",
+                "not a parameter path (vessels.<name>.<length|radius|youngs_modulus|lumped.resistance|lumped.capacitance|lumped.inductance|lumped.stenosis_coefficient|chamber.<key>|valve.<key>|chamber_sphere.<key>|heart_pulmonary.<key>>, boundary_conditions.<node>.<resistance|proximal_resistance|distal_resistance|capacitance|arterial_resistance|microvascular_resistance|microvascular_resistance_max|venous_resistance|arterial_capacitance|intramyocardial_capacitance|intramyocardial_pressure.scale>, scale.<resistance|compliance|inflow>)",
             )),
         }
     }
@@ -356,16 +371,20 @@ fn condition(spec: &NetworkSpec, path: &str, node: &str, key: &str) -> Result<Pa
             format!("the condition at node '{node}' has no differentiable value '{key}'"),
         ));
     }
-    // a varying microvascular resistance R(t) follows R_min (its base) and R_max by its law,
-    // whose own derivative the tangent does not hold
-    if let (BoundarySpec::Coronary(c), "microvascular_resistance") = (bc, key)
-        && c.microvascular_resistance_max.is_some()
+    // a varying microvascular resistance R(t) follows R_min and R_max through their square
+    // roots (`ResistanceLaw::slope`), which have no derivative at zero
+    if let (BoundarySpec::Coronary(c), "microvascular_resistance" | "microvascular_resistance_max") =
+        (bc, key)
+        && let Some(max) = c.microvascular_resistance_max
+        && (c.microvascular_resistance <= 0.0 || max <= 0.0)
     {
         return Err(unknown(
             path,
             format!(
-                "the condition at node '{node}' has a varying microvascular resistance \
-                 (microvascular_resistance_max): its values are not differentiated"
+                "the condition at node '{node}' has a varying microvascular resistance with a \
+                 zero end (microvascular_resistance {}, microvascular_resistance_max {max}): \
+                 its law has no derivative there",
+                c.microvascular_resistance
             ),
         ));
     }
@@ -403,6 +422,9 @@ fn condition_value(bc: &BoundarySpec, key: &str) -> Option<(f64, Option<&'static
         (BoundarySpec::Coronary(c), _) => match key {
             "arterial_resistance" => r(c.arterial_resistance, "proximal resistance"),
             "microvascular_resistance" => r(c.microvascular_resistance, "microvascular resistance"),
+            "microvascular_resistance_max" => {
+                r(c.microvascular_resistance_max?, "microvascular resistance")
+            }
             "venous_resistance" => r(c.venous_resistance, "distal resistance"),
             "arterial_capacitance" => r(c.arterial_capacitance, "capacitor"),
             "intramyocardial_capacitance" => {
@@ -462,12 +484,22 @@ fn vessel(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<P
                 outlet: *end == "radius_out",
             }
         }
-        (["lumped", key], _, Some(_))
+        (["lumped", key], _, Some(l))
             if matches!(
                 *key,
                 "resistance" | "capacitance" | "inductance" | "stenosis_coefficient"
             ) =>
         {
+            if let Some(why) = form_switch(spec, v, l, key) {
+                return Err(unknown(path, why));
+            }
+            if matches!(*key, "resistance" | "inductance") && friction_cells(spec, v) {
+                return Err(unknown(
+                    path,
+                    "the vessel has Womersley friction cells, whose values follow its \
+                     resistance and inductance by a law the tangent does not differentiate",
+                ));
+            }
             Parameter::Lumped(vi, (*key).to_owned())
         }
         _ => {
@@ -481,6 +513,42 @@ fn vessel(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<P
         }
     };
     Ok(p)
+}
+
+/// Whether lumped vessel `v` carries Womersley friction cells, whose values follow its R and
+/// L (`assemble::vessel`; a vessel given by its geometry is refused in `geometry_unsupported`).
+fn friction_cells(spec: &NetworkSpec, v: &crate::model::VesselSpec) -> bool {
+    v.lumped.is_some()
+        && v.wall_friction.unwrap_or(spec.wall_friction) == WallFriction::Womersley
+        && crate::assemble::segments::arrangement(spec, v) != Arrangement::Rcl
+}
+
+/// Why an RCL vessel's lumped value `key` has no derivative, if it has none: with
+/// `stenosis_form: svzerod` its capacitor row takes the chain-rule form only while both its
+/// stenosis coefficient and its capacitance are non-zero (`assemble::vessel`), so the run's
+/// discrete equations switch form where either leaves zero, and the difference quotient there
+/// is not the derivative of one scheme.
+fn form_switch(
+    spec: &NetworkSpec,
+    v: &crate::model::VesselSpec,
+    l: &crate::model::LumpedSpec,
+    key: &str,
+) -> Option<&'static str> {
+    let rcl = crate::assemble::segments::arrangement(spec, v) == Arrangement::Rcl;
+    if !rcl || l.stenosis_form != StenosisForm::SvZeroD {
+        return None;
+    }
+    match key {
+        "stenosis_coefficient" if l.stenosis_coefficient == 0.0 && l.capacitance > 0.0 => Some(
+            "its svZeroDSolver-form stenosis (stenosis_form: svzerod) is zero, where the \
+             capacitor's discrete form switches: start from a non-zero coefficient",
+        ),
+        "capacitance" if l.capacitance == 0.0 && l.stenosis_coefficient != 0.0 => Some(
+            "its capacitance is zero, where the svZeroDSolver-form stenosis's (stenosis_form: \
+             svzerod) capacitor form switches: start from a non-zero capacitance",
+        ),
+        _ => None,
+    }
 }
 
 /// Why a geometric parameter (`rest` after the vessel's name) of vessel `v` is not
@@ -509,14 +577,14 @@ fn geometry_unsupported(
 }
 
 /// Refuse what the tangent does not cover: the closed-loop heart block's coronary beds (their
-/// iteration matrix leaves out the ventricle coupling on purpose), and svZeroDSolver-form
-/// stenoses (chain-rule capacitor rows). Branch-form stenoses, chambers, spherical chambers,
+/// iteration matrix leaves out the ventricle coupling on purpose) and through_rc elements.
+/// Stenoses of both forms (svZeroDSolver's: chain-rule capacitor rows, `super::tangent`), chambers, spherical chambers,
 /// valves and the closed-loop heart block are covered (their terms are differentiated
 /// exactly; the block's reset flows by a zero tangent row, `super::tangent`), as are coronary
 /// outlets (constant circuit parts and forcing) and time-varying resistances (a varying
 /// coronary microvascular resistance: its D(t) joins each step's matrix, `super::tangent`;
 /// its own values are refused in [`Parameter::parse`]).
-pub fn check_supported(circuit: &Circuit, dae: &Dae) -> Result<()> {
+pub fn check_supported(circuit: &Circuit, _dae: &Dae) -> Result<()> {
     let other = circuit.elements.iter().find_map(|e| match e {
         CircuitElement::Valve { .. }
         | CircuitElement::Chamber { .. }
@@ -527,9 +595,7 @@ pub fn check_supported(circuit: &Circuit, dae: &Dae) -> Result<()> {
              the bed's leaves out its coupling to the ventricle pressure on purpose)"
         )),
     });
-    let why = if !dae.chain_rule.is_empty() {
-        Some("svZeroDSolver-form stenoses (stenosis_form: svzerod)".to_owned())
-    } else if let Some(e) = other {
+    let why = if let Some(e) = other {
         Some(e)
     } else if !circuit.swapped_rows.is_empty() {
         Some("through_rc elements".to_owned())
@@ -601,6 +667,7 @@ impl<'a> Stamps<'a> {
             dforcing: Vec::new(),
             dstenosis: Vec::new(),
             delements: Vec::new(),
+            dvarying: Vec::new(),
         }
     }
 
@@ -634,7 +701,11 @@ impl<'a> Stamps<'a> {
                     }
                     Some(l) => {
                         let b = self.branch_named(&name(l)).ok_or_else(missing)?;
-                        t.df[self.branch_r[b]] = 1.0;
+                        // a varying resistance moves by its law's slope, step by step
+                        match self.dae.varying.iter().position(|(i, _)| *i == nn + b) {
+                            Some(law) => t.dvarying.push((law, key.ends_with("_max"))),
+                            None => t.df[self.branch_r[b]] = 1.0,
+                        }
                     }
                     // P_im is the series source of the microvascular and venous branches
                     None => {
@@ -710,6 +781,11 @@ impl<'a> Stamps<'a> {
                 t = self.blank(path, 1.0);
                 for i in 0..nn {
                     t.de[i] = self.node_c(i);
+                }
+                // a viscoelastic wall holds its node's capacitance at its elastic pressure;
+                // its R_v = τ/C stays, as the patch's E/s moves τ = η/E and C alike
+                for &(_, wall) in &self.dae.walls {
+                    t.de[wall] = self.dae.e[wall];
                 }
                 // the patch leaves a coronary bed's capacitors as they are
                 for (node, bc) in &spec.boundary_conditions {

@@ -41,6 +41,8 @@
 
 #[path = "adjoint.rs"]
 mod adjoint;
+#[path = "chain_rule.rs"]
+mod chain_rule;
 pub use adjoint::{PeriodicAdjoint, periodic_adjoint, periodic_adjoint_in, periodic_adjoint_with};
 
 use super::krylov::Subspace;
@@ -162,6 +164,10 @@ struct Source {
     sten: Vec<(usize, usize, f64)>,
     /// (element index, key, position in `rows` of each of its rows)
     elem: Vec<(usize, String, Vec<usize>)>,
+    /// svZeroDSolver-form stenoses' capacitor rows (`chain_rule`)
+    chain: chain_rule::ChainSource,
+    /// (position in `rows`, index into `Dae::varying`, of its maximum): −∂R(t_αf) Q_αf
+    varying: Vec<(usize, usize, bool)>,
     /// step k's values on `rows` at k·rows.len()
     vals: Vec<f64>,
     /// steps captured
@@ -178,6 +184,8 @@ impl Source {
             forcing: Vec::new(),
             sten: Vec::new(),
             elem: Vec::new(),
+            chain: chain_rule::ChainSource { terms: Vec::new() },
+            varying: Vec::new(),
             vals: Vec::new(),
             steps,
         }
@@ -217,6 +225,10 @@ impl Source {
                 (*el, key.clone(), pos)
             })
             .collect();
+        let chain = chain_rule::ChainSource::of(dae, t, &mut at);
+        let varying = (t.dvarying.iter())
+            .map(|&(law, of_max)| (at(dae.varying[law].0), law, of_max))
+            .collect();
         let vals = Vec::with_capacity(steps * rows.len());
         Source {
             rows,
@@ -225,6 +237,8 @@ impl Source {
             forcing,
             sten,
             elem,
+            chain,
+            varying,
             vals,
             steps: 0,
         }
@@ -266,6 +280,12 @@ impl Source {
                     v[at] -= d;
                 }
             }
+        }
+        self.chain.capture(pr, v);
+        let t_af = time + s.af * s.dt;
+        for &(at, law, of_max) in &self.varying {
+            let (i, law) = &pr.dae.varying[law];
+            v[at] -= law.slope(of_max, t_af) * (y[*i] + gdt * delta[*i]);
         }
     }
 
@@ -309,6 +329,10 @@ struct Primal<'a> {
     /// D(t_αf) = R(t_αf) − R₀ of each `Dae::varying` entry (a time-varying resistance's
     /// part beyond F) at each recorded step.
     varying: Vec<f64>,
+    /// (σ, g) of each `Dae::chain_rule` capacitor at each recorded step (`chain_rule`).
+    chain: Vec<[f64; 2]>,
+    /// The index in `dae.f` of each capacitor's (node, inflow) entry.
+    chain_entry: Vec<usize>,
     /// ∂c_el/∂y at (y_αf, t_αf) of each recorded step, `Dae::element_pattern` order.
     element_jac: Vec<f64>,
     /// The elements' Jacobian entries (row, column).
@@ -360,6 +384,8 @@ impl<'a> Primal<'a> {
             next: (Vec::new(), Vec::new()),
             slopes: Vec::new(),
             varying: Vec::new(),
+            chain: Vec::new(),
+            chain_entry: Self::chain_entries(dae),
             element_jac: Vec::new(),
             element_pattern: dae.element_pattern(),
             held_rows: Vec::new(),
@@ -396,6 +422,7 @@ impl<'a> Primal<'a> {
         for (_, law) in &self.dae.varying {
             self.varying.push(law.delta(t_af));
         }
+        self.record_chain();
         if !self.element_pattern.is_empty() {
             let y_af: Vec<f64> = (self.y.iter().zip(&self.r))
                 .map(|(a, d)| a + gdt * d)
@@ -470,6 +497,7 @@ impl<'a> Primal<'a> {
         for (v, j) in vals[nf + n..].iter_mut().zip(jac) {
             *v += a * j;
         }
+        self.chain_values(k, &mut vals);
         vals
     }
 
@@ -593,6 +621,7 @@ fn tangent_cycles(
             // −J_k s: the stenosis slopes and element Jacobian at this step
             pr.local_apply(k, s, &mut rs, false);
             sources[*p].add(k, &mut rs);
+            pr.chain_tangent(k, s, sd, &mut rs);
             if !lu.solve_in_place(&mut rs) {
                 return Err(singular(k as f64 * pr.scheme.dt, "non-finite tangent"));
             }
