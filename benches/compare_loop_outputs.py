@@ -74,9 +74,13 @@ def main() -> None:
     ap.add_argument("path")
     ap.add_argument("--rtol", type=float, default=1e-10)
     ap.add_argument("--rtol-tl", type=float, default=1e-8)
-    ap.add_argument("--cases", nargs="+", metavar="CASE",
-                    help="only these cases (a model's name, '+o2' for its oxygen run: "
-                         "e.g. whole-body-140-st+o2)")
+    ap.add_argument(
+        "--cases",
+        nargs="+",
+        metavar="CASE",
+        help="only these cases (a model's name, '+o2' for its oxygen run: "
+        "e.g. whole-body-140-st+o2)",
+    )
     a = ap.parse_args()
     got: dict[str, np.ndarray] = {}
     for name, o2 in CASES:
