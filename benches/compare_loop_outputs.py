@@ -18,6 +18,7 @@ on circle-of-willis with O2, with its flows within 3e-15.
 
     python benches/compare_loop_outputs.py save /tmp/loops-before.npz     # old build
     python benches/compare_loop_outputs.py check /tmp/loops-before.npz    # new build
+    python benches/compare_loop_outputs.py save /tmp/b.npz --cases whole-body-140-st+o2
 """
 
 from __future__ import annotations
@@ -73,9 +74,18 @@ def main() -> None:
     ap.add_argument("path")
     ap.add_argument("--rtol", type=float, default=1e-10)
     ap.add_argument("--rtol-tl", type=float, default=1e-8)
+    ap.add_argument(
+        "--cases",
+        nargs="+",
+        metavar="CASE",
+        help="only these cases (a model's name, '+o2' for its oxygen run: "
+        "e.g. whole-body-140-st+o2)",
+    )
     a = ap.parse_args()
     got: dict[str, np.ndarray] = {}
     for name, o2 in CASES:
+        if a.cases and f"{name}{'+o2' if o2 else ''}" not in a.cases:
+            continue
         source = with_oxygen(name) if o2 else name
         got.update(arrays(f"{name}{'-o2' if o2 else ''}", source, OPTIONS))
         print(f"{name}{' + O2' if o2 else ''}: done", flush=True)

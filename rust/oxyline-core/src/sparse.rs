@@ -102,6 +102,17 @@ impl<T: Scalar> SparseLu<T> {
     }
 
     pub fn factor(&mut self, vals: &[T]) -> std::result::Result<(), String> {
+        self.factor_naming(vals, &|i| format!("unknown {i}"))
+    }
+
+    /// `factor`, naming the unknowns by `name` in the report of a zero pivot that sends the
+    /// elimination to the pivoting LU (written to stderr when `OXYLINE_REPORT_PIVOT` is set:
+    /// a diagnosis of which row of a network breaks the O(n) elimination, not an output).
+    pub fn factor_naming(
+        &mut self,
+        vals: &[T],
+        name: &dyn Fn(usize) -> String,
+    ) -> std::result::Result<(), String> {
         // a (near-)zero pivot, e.g. an ideal wire eliminated first or a pendant junction
         // without storage: fall back to the pivoting LU on the same pattern. Its symbolic
         // analysis is the largest allocation of a run's setup (~350 B per segment with loops),
@@ -113,11 +124,30 @@ impl<T: Scalar> SparseLu<T> {
                 if t.factor(vals) {
                     return Ok(());
                 }
+                if pivot_report_wanted() {
+                    report_zero_pivots(&t.zero_pivots(vals), name);
+                }
                 t.release_values();
                 (t.n, t.stamps())
             }
             SparseLu::Core(c) => {
                 if c.factor(vals)? {
+                    return Ok(());
+                }
+                let zeros = c.tree_mut().zero_pivots(vals);
+                report_zero_pivots(&zeros, name);
+                if let Some(held) = c.holding(&zeros, vals)? {
+                    if pivot_report_wanted() {
+                        eprintln!(
+                            "zero pivot: {} row(s) held in the core, which grows from {} to {} \
+                             unknowns (of {})",
+                            zeros.len(),
+                            c.core_len(),
+                            held.core_len(),
+                            held.n()
+                        );
+                    }
+                    *self = SparseLu::Core(Box::new(held));
                     return Ok(());
                 }
                 c.release_values();
@@ -147,6 +177,54 @@ impl<T: Scalar> SparseLu<T> {
     pub fn is_tree(&self) -> bool {
         matches!(self, SparseLu::Tree(_))
     }
+}
+
+/// Whether a zero pivot's report is asked for (`OXYLINE_REPORT_PIVOT` set; read once).
+fn pivot_report_wanted() -> bool {
+    static WANTED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *WANTED.get_or_init(|| std::env::var_os("OXYLINE_REPORT_PIVOT").is_some())
+}
+
+/// The report of the zero pivots that failed an elimination, if asked for: each unknown,
+/// its pivot against the terms that formed it, its own diagonal, its parent and children in
+/// the elimination.
+fn report_zero_pivots(zeros: &[ZeroPivot], name: &dyn Fn(usize) -> String) {
+    if !pivot_report_wanted() {
+        return;
+    }
+    for z in zeros.iter().take(10) {
+        let parent = match z.parent {
+            Some(p) => name(p),
+            None => "none (a root)".to_owned(),
+        };
+        let children: Vec<String> = z.children.iter().map(|&c| name(c)).collect();
+        eprintln!(
+            "zero pivot: {} (unknown {}): pivot {:e} against its row scale {:e} (own \
+             diagonal {:e}); eliminated into {}; its children in the elimination: [{}]",
+            name(z.unknown),
+            z.unknown,
+            z.pivot,
+            z.scale,
+            z.diagonal,
+            parent,
+            children.join("; ")
+        );
+    }
+    if zeros.len() > 10 {
+        eprintln!("zero pivot: and {} more", zeros.len() - 10);
+    }
+}
+
+/// Where the tree elimination met a (near-)zero pivot (see [`TreeLu::zero_pivots`]).
+pub(crate) struct ZeroPivot {
+    pub unknown: usize,
+    /// |pivot| after its children's updates, and the sum of the magnitudes that formed it.
+    pub pivot: f64,
+    pub scale: f64,
+    /// |diagonal| before any update.
+    pub diagonal: f64,
+    pub parent: Option<usize>,
+    pub children: Vec<usize>,
 }
 
 /// Where a stamped value goes in the tree factorisation, packed into 32 bits (a million-
@@ -452,10 +530,9 @@ impl<T: Scalar> TreeLu<T> {
         true
     }
 
-    /// The stamps summed and the elimination leaves-to-roots (pivots not yet inverted); false
-    /// at a (near-)zero pivot.
-    fn eliminate(&mut self, vals: &[T]) -> bool {
-        // (sized here: `release_values` may have dropped them)
+    /// The stamps summed into the diagonal and the couplings (sized here: `release_values`
+    /// may have dropped them).
+    fn load(&mut self, vals: &[T]) {
         for values in [&mut self.pivot, &mut self.up, &mut self.down] {
             values.clear();
             values.resize(self.n, T::ZERO);
@@ -469,6 +546,39 @@ impl<T: Scalar> TreeLu<T> {
                 _ => {}
             }
         }
+    }
+
+    /// Every vertex whose pivot `eliminate` judges (near-)zero, in the elimination order: a
+    /// serial elimination of `vals` (the same operations as the parallel one: the same set on
+    /// any number of threads) in which such a vertex is left out of its parent's pivot, as a
+    /// held root is. A diagnosis after a failed factorisation, not a step's work.
+    fn zero_pivots(&mut self, vals: &[T]) -> Vec<ZeroPivot> {
+        self.load(vals);
+        let diagonal: Vec<f64> = self.pivot.iter().map(|d| d.modulus()).collect();
+        let mut magnitude = diagonal.clone();
+        let failed: Vec<usize> = (0..self.n)
+            .filter(|&k| !self.eliminate_into_parent(k, &mut magnitude, true))
+            .collect();
+        failed
+            .into_iter()
+            .map(|k| ZeroPivot {
+                unknown: self.vertex[k] as usize,
+                pivot: self.pivot[k].modulus(),
+                scale: magnitude[k],
+                diagonal: diagonal[k],
+                parent: (self.parent[k] != NONE).then_some(self.parent[k] as usize),
+                children: (0..k)
+                    .filter(|&j| self.parent_pos[j] == k as u32)
+                    .map(|j| self.vertex[j] as usize)
+                    .collect(),
+            })
+            .collect()
+    }
+
+    /// The stamps summed and the elimination leaves-to-roots (pivots not yet inverted); false
+    /// at a (near-)zero pivot.
+    fn eliminate(&mut self, vals: &[T]) -> bool {
+        self.load(vals);
         // per-vertex magnitude: the units of pressure and flow rows differ by many decades, so a
         // pivot is judged against the terms that formed it, not a global scale
         let mut magnitude = std::mem::take(&mut self.magnitude);

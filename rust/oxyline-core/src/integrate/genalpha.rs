@@ -205,9 +205,10 @@ impl<'a> GenAlpha<'a> {
             .varying_jacobian(c, time, self.regime, &mut kvals[nf..nf + self.dae.n]);
         // (ẏ's weight in a linear step's residual, `step_linear`)
         let c_am = 1.0 + self.am * ((self.gamma - 1.0) / self.gamma - 1.0);
+        let name = |i: usize| self.dae.names.unknown(i);
         let factored = match &mut self.leaves {
-            Some(leaves) => leaves.factor(&mut self.lu, &kvals, (self.am, c, c_am)),
-            None => self.lu.factor(&kvals),
+            Some(leaves) => leaves.factor(&mut self.lu, &kvals, (self.am, c, c_am), &name),
+            None => self.lu.factor_naming(&kvals, &name),
         };
         if self.dt_changed {
             self.factor_scratch = kvals;

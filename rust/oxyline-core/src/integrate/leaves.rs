@@ -172,6 +172,7 @@ impl Leaves {
         lu: &mut SparseLu,
         kvals: &[f64],
         (am, c, c_am): (f64, f64, f64),
+        name: &dyn Fn(usize) -> String,
     ) -> std::result::Result<(), String> {
         let m = self.parent.len();
         let mut vals = std::mem::take(&mut self.vals);
@@ -201,7 +202,8 @@ impl Leaves {
         }
         (self.am, self.c, self.c_am) = (am, c, c_am);
         self.entries = entries;
-        let done = lu.factor(&vals);
+        // (the reduced system's unknowns are the circuit's first `start`: the same names)
+        let done = lu.factor_naming(&vals, name);
         self.vals = vals;
         done
     }
@@ -418,7 +420,9 @@ mod tests {
         let mut kvals = vec![0.0; stamps.len()];
         let am_e: Vec<f64> = dae.e.iter().map(|e| 0.9 * e).collect();
         crate::integrate::newton::jacobian_values(&dae, c, &am_e, &[], 0.0, &mut kvals);
-        leaves.factor(&mut lu, &kvals, (0.9, c, 1.0)).unwrap();
+        leaves
+            .factor(&mut lu, &kvals, (0.9, c, 1.0), &|i| i.to_string())
+            .unwrap();
         let b: Vec<f64> = (0..dae.n)
             .map(|i| ((i * 7919) % 113) as f64 - 56.0)
             .collect();

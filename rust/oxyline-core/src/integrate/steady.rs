@@ -40,7 +40,10 @@ impl NewtonProblem for Steady<'_> {
         // (the first iterate is y = 0, where the stenosis term's slope 2S|Q| vanishes: the first
         // step is that of the circuit without stenoses)
         jacobian_values(self.dae, 1.0, &self.zero, &self.y, 0.0, &mut self.vals);
-        self.lu.factor(&self.vals).map_err(|_| no_steady_state())
+        let name = |i: usize| self.dae.names.unknown(i);
+        self.lu
+            .factor_naming(&self.vals, &name)
+            .map_err(|_| no_steady_state())
     }
     fn solve(&mut self, r: &mut [f64]) -> Result<()> {
         if self.lu.solve_in_place(r) {
