@@ -23,6 +23,13 @@ def _achieved(res: oxyline.Result, ref: oxyline.Result) -> dict[str, np.ndarray]
     }
 
 
+def _cycles(n: int) -> dict[str, object]:
+    """Exactly ``n`` cycles from the steady start with generalized-alpha, rows every 1 ms
+    (the controlled run and its fixed-step reference on the same output times)."""
+    return {"cycles": n, "until_periodic": None, "output_every": 1e-3, "progress": False,
+            "method": "generalized-alpha"}
+
+
 @pytest.fixture(scope="module")
 def adan56_runs() -> tuple[oxyline.Result, oxyline.Result, oxyline.Result, float]:
     # adan56, two cycles from the steady start at rtol 1e-2: the small vessels' flows miss
@@ -31,13 +38,7 @@ def adan56_runs() -> tuple[oxyline.Result, oxyline.Result, oxyline.Result, float
     # integration does not see (it starts from the run's own state). Reference: generalized-
     # alpha at T/8000 (second order; its own error ~1e-3 of the achieved one)
     model = oxyline.load_model("adan56")
-    kw = {
-        "cycles": 2,
-        "until_periodic": None,
-        "output_every": 1e-3,
-        "progress": False,
-        "method": "generalized-alpha",
-    }
+    kw = _cycles(2)
     rtol = 1e-2
     plain = oxyline.simulate(model, rtol=rtol, **kw)
     res = oxyline.simulate(model, rtol=rtol, estimate_time_error=True, **kw)
@@ -81,13 +82,7 @@ def test_paper_bifurcated_with_oxygen_reports_po2_too() -> None:
     # the species' second integration runs beside the flow's: PO2's accumulated error is
     # reported (far within rtol here); flow and pressure within 2x of the achieved ones
     model = oxyline.load_model("paper-bifurcated")
-    kw = {
-        "cycles": 2,
-        "until_periodic": None,
-        "output_every": 1e-3,
-        "progress": False,
-        "method": "generalized-alpha",
-    }
+    kw = _cycles(2)
     rtol = 1e-3
     res = oxyline.simulate(model, rtol=rtol, estimate_time_error=True, **kw)
     ref = oxyline.simulate(model, dt=model.period / 8000, **kw)
@@ -124,13 +119,7 @@ def test_meet_rtol_meets_rtol_in_every_vessel() -> None:
     # runs again at the tolerance its estimate asks and meets 2 rtol (the estimate's
     # allowance) in every vessel and kind against generalized-alpha at T/8000
     model = oxyline.load_model("adan56")
-    kw = {
-        "cycles": 1,
-        "until_periodic": None,
-        "output_every": 1e-3,
-        "progress": False,
-        "method": "generalized-alpha",
-    }
+    kw = _cycles(1)
     rtol = 1e-2
     met = oxyline.simulate(model, rtol=rtol, meet_rtol=True, **kw)
     ref = oxyline.simulate(model, dt=model.period / 8000, **kw)

@@ -64,52 +64,24 @@ impl ResistanceLaw {
 
     /// R(t).
     pub fn value(&self, t: f64) -> f64 {
-        match *self {
-            ResistanceLaw::Contraction {
-                min,
-                max,
-                contraction,
-                relaxation,
-                period,
-            } => {
-                let tau = t.rem_euclid(period);
-                let pi = std::f64::consts::PI;
-                let e = if tau <= contraction {
-                    0.5 * (1.0 - (pi * tau / contraction).cos())
-                } else if tau <= contraction + relaxation {
-                    0.5 * (1.0 + (pi * (tau - contraction) / relaxation).cos())
-                } else {
-                    // at rest exactly R_min (the square of its square root can differ by
-                    // an ulp): the time-varying term then vanishes
-                    return min;
-                };
+        let ResistanceLaw::Contraction { min, max, .. } = *self;
+        match self.activation(t) {
+            Some(e) => {
                 let r = min.sqrt() + (max.sqrt() - min.sqrt()) * e;
                 r * r
             }
+            // at rest exactly R_min (the square of its square root can differ by an ulp):
+            // the time-varying term then vanishes
+            None => min,
         }
     }
 
     /// ∂R(t)/∂R_min, or ∂R(t)/∂R_max with `of_max` (the law's values above zero): by
     /// √R = √R_min + (√R_max − √R_min) e, 2√R ∂√R = … gives √R (1 − e)/√R_min and √R e/√R_max.
     pub fn slope(&self, of_max: bool, t: f64) -> f64 {
-        match *self {
-            ResistanceLaw::Contraction {
-                min,
-                max,
-                contraction,
-                relaxation,
-                period,
-            } => {
-                let tau = t.rem_euclid(period);
-                let pi = std::f64::consts::PI;
-                let e = if tau <= contraction {
-                    0.5 * (1.0 - (pi * tau / contraction).cos())
-                } else if tau <= contraction + relaxation {
-                    0.5 * (1.0 + (pi * (tau - contraction) / relaxation).cos())
-                } else {
-                    // at rest R = R_min exactly (`value`)
-                    return if of_max { 0.0 } else { 1.0 };
-                };
+        let ResistanceLaw::Contraction { min, max, .. } = *self;
+        match self.activation(t) {
+            Some(e) => {
                 let r = min.sqrt() + (max.sqrt() - min.sqrt()) * e;
                 if of_max {
                     r * e / max.sqrt()
@@ -117,6 +89,34 @@ impl ResistanceLaw {
                     r * (1.0 - e) / min.sqrt()
                 }
             }
+            // at rest R = R_min exactly (`value`)
+            None => {
+                if of_max {
+                    0.0
+                } else {
+                    1.0
+                }
+            }
+        }
+    }
+
+    /// The contraction's activation e(t) in [0, 1] (a raised cosine up over the contraction,
+    /// down over the relaxation); None at rest, where R is R_min exactly.
+    fn activation(&self, t: f64) -> Option<f64> {
+        let ResistanceLaw::Contraction {
+            contraction,
+            relaxation,
+            period,
+            ..
+        } = *self;
+        let tau = t.rem_euclid(period);
+        let pi = std::f64::consts::PI;
+        if tau <= contraction {
+            Some(0.5 * (1.0 - (pi * tau / contraction).cos()))
+        } else if tau <= contraction + relaxation {
+            Some(0.5 * (1.0 + (pi * (tau - contraction) / relaxation).cos()))
+        } else {
+            None
         }
     }
 

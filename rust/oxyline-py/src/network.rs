@@ -42,33 +42,9 @@ fn assemble(
         }
     }
     let warnings = plausibility::check(&spec);
-    let (assembled, dae, transport) = build_consuming(spec)?;
-    Ok(((assembled, dae), transport, warnings))
-}
-
-/// `spec → circuit → DAE → transport`, as `ensemble::Member::build`, with the spec's vessels
-/// and conditions dropped once the circuit is assembled: the DAE and the transport plan are
-/// built from the circuit alone, and the spec (~100 B per segment of a large tree: names,
-/// geometry, one outlet condition per leaf) would otherwise sit under the load's peak.
-fn build_consuming(
-    mut spec: oxyline_core::NetworkSpec,
-) -> Result<(Assembled, Dae, Option<Transport>), Error> {
-    let mut assembled = spec.assemble()?;
-    let transport_spec = spec.transport.take();
-    drop(spec);
-    let dae = assembled.circuit.assemble()?;
-    let transport = match &transport_spec {
-        Some(t) => Some(Transport::build(
-            t,
-            &assembled.circuit,
-            &dae,
-            &assembled.probes,
-        )?),
-        None => None,
-    };
-    // (read only by the plan's build, which keeps its own compact copy)
-    assembled.circuit.segments = Vec::new();
-    Ok((assembled, dae, transport))
+    // the spec dropped once the circuit is assembled (a large tree's load peak)
+    let member = oxyline_core::ensemble::Member::build_owned(spec)?;
+    Ok(((member.assembled, member.dae), member.transport, warnings))
 }
 
 /// An assembled network: built once from the canonical SI JSON model, run many times.

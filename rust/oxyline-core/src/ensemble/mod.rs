@@ -316,9 +316,26 @@ impl Member {
     /// plan's build, which keeps its own compact copy: it is released here (88 B per segment;
     /// the scale targets), the segment table (`Assembled::segments`) stays.
     pub fn build(spec: &NetworkSpec) -> Result<Member> {
-        let mut assembled = spec.assemble()?;
+        Self::from_assembled(spec.assemble()?, spec.transport.as_ref())
+    }
+
+    /// As [`Member::build`], with the spec's vessels and conditions dropped once the circuit
+    /// is assembled: the DAE and the transport plan are built from the circuit alone, and the
+    /// spec (~100 B per segment of a large tree: names, geometry, one outlet condition per
+    /// leaf) would otherwise sit under a large model's load peak.
+    pub fn build_owned(mut spec: NetworkSpec) -> Result<Member> {
+        let assembled = spec.assemble()?;
+        let transport = spec.transport.take();
+        drop(spec);
+        Self::from_assembled(assembled, transport.as_ref())
+    }
+
+    fn from_assembled(
+        mut assembled: Assembled,
+        transport: Option<&TransportSpec>,
+    ) -> Result<Member> {
         let dae = assembled.circuit.assemble()?;
-        let transport = match &spec.transport {
+        let transport = match transport {
             Some(t) => Some(Transport::build(
                 t,
                 &assembled.circuit,
