@@ -427,9 +427,9 @@ class Result:
         self._kv, self._ks = len(self.vessel_variables), max(1, len(self.segment_variables))
         self._vessel_block = self.data[:, : self._kv * nv]
         self._segment_block = self.data[:, self._kv * nv :]
-        self._index = {name: i for i, name in enumerate(self.vessels)}
-        self._seg_start = np.concatenate([[0], np.cumsum(self.segment_count)]).astype(int) \
-            if self.segment_count else np.zeros(1, dtype=int)
+        # built at the first look-up (`_index`, `_seg_start`)
+        self._vessel_index: dict[str, int] | None = None
+        self._segment_starts: np.ndarray | None = None
 
     def _vessel_var(self, name: str) -> np.ndarray:
         if name not in self.vessel_variables:
@@ -449,6 +449,22 @@ class Result:
     segment_pressure_in = _column("_segment_var", "segment_pressure_in")
     segment_pressure_out = _column("_segment_var", "segment_pressure_out")
     segment_flow = _column("_segment_var", "segment_flow")
+
+    @property
+    def _index(self) -> dict[str, int]:
+        """Vessel name -> column. Built at the first look-up: a large run's summary makes a
+        result of every chunk of rows (262 k names at 1e6 segments) and looks none up."""
+        if self._vessel_index is None:
+            self._vessel_index = {name: i for i, name in enumerate(self.vessels)}
+        return self._vessel_index
+
+    @property
+    def _seg_start(self) -> np.ndarray:
+        """Each vessel's first segment column (and the end), built at the first use."""
+        if self._segment_starts is None:
+            self._segment_starts = np.concatenate([[0], np.cumsum(self.segment_count)]) \
+                .astype(int) if self.segment_count else np.zeros(1, dtype=int)
+        return self._segment_starts
 
     @property
     def has_segments(self) -> bool:
