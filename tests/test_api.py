@@ -56,6 +56,20 @@ def test_xarray_dataset_has_dims_units_and_segments(result: oxyline.Result) -> N
     np.testing.assert_array_equal(v.segment_flow[:, -1], v.flow_out)
 
 
+
+def test_a_vessel_is_found_by_name_also_after_pickling(result: oxyline.Result) -> None:
+    # the name -> column table is built at the first look-up: an unknown name is named, and
+    # a pickled result (which does not carry the table) finds each vessel's own segments: a
+    # vessel's first segment carries its inlet flow, its last its outlet flow
+    with pytest.raises(KeyError, match="vessel 'nope' has no output"):
+        result.vessel("nope")
+    back = pickle.loads(pickle.dumps(result))
+    for name in ("daughter2", "parent"):
+        v = back.vessel(name)
+        assert v.segment_flow is not None and v.segment_flow.shape == (1001, 10)
+        np.testing.assert_array_equal(v.segment_flow[:, 0], v.flow_in)
+        np.testing.assert_array_equal(v.segment_flow[:, -1], v.flow_out)
+
 def test_pandas_table_has_svzerod_columns(result: oxyline.Result) -> None:
     df = result.to_pandas()
     assert list(df.columns) == ["name", "time", "flow_in", "flow_out", "pressure_in", "pressure_out"]
