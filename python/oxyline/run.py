@@ -46,7 +46,8 @@ from oxyline.time_error import (
     FACTOR,
     FROM_LAST_CYCLE,
     FROM_WHOLE_RUN,
-    differences,
+    TimeErrorEstimate,
+    accumulated,
     record_estimate,
 )
 
@@ -715,16 +716,53 @@ def _fill_time_error(model: Model, s: Mapping[str, Any], raw: dict[str, Any], re
         coarse, fine = _last_cycle_results(model, s, raw, finer)
         source, steps = FROM_LAST_CYCLE, int(finer["steps"]) + int(finer["rejected_steps"])
     else:
-        kw = {k: v for k, v in overrides.items()
-              if k not in ("estimate_time_error", "meet_rtol", "rtol")}
-        kw.update(progress=False, cycles=int(result.settings["cycles_run"]),
-                  until_periodic=None, estimate_space_error=False)
-        coarse, fine = result, simulate(model, rtol=s["rtol"] / FACTOR, **kw)
+        coarse, fine = result, _again_finer(model, result, s["rtol"] / FACTOR, overrides)
         source = FROM_WHOLE_RUN
         steps = int(fine.settings["steps"]) + int(fine.settings["rejected_steps"])
-    scale = 1.0 / (1.0 - 1.0 / FACTOR)
-    per_vessel = {k: v * scale for k, v in differences(coarse, fine).items()}
-    record_estimate(result, per_vessel, source.format(factor=FACTOR), steps)
+    record_estimate(result, accumulated(coarse, fine), source.format(factor=FACTOR), steps)
+
+
+def _again_finer(model: Model, coarse: Result, rtol: float, overrides: Mapping[str, Any]
+                 ) -> Result:
+    """The run of ``coarse`` (with ``overrides``) again at the tighter ``rtol``: the same
+    cycles from the same start, without a progress bar or estimates of its own."""
+    kw = {k: v for k, v in overrides.items()
+          if k not in ("estimate_time_error", "meet_rtol", "rtol")}
+    kw.update(progress=False, cycles=int(coarse.settings["cycles_run"]), until_periodic=None,
+              estimate_space_error=False)
+    return simulate(model, rtol=rtol, **kw)
+
+
+def estimate_time_error(
+    model: Model | str | os.PathLike[str] | Mapping[str, Any],
+    rtol: float = 1e-3,
+    factor: float = FACTOR,
+    **overrides: Any,
+) -> TimeErrorEstimate:
+    """Run ``model`` at ``rtol`` (error control, ``overrides`` as for
+    :func:`oxyline.simulate`, no ``dt``) and again at ``rtol/factor``, and estimate the first
+    run's error per vessel against each vessel's own scale (:mod:`oxyline.time_error`).
+
+    >>> import oxyline
+    >>> est = oxyline.estimate_time_error("bifurcation", rtol=1e-2, cycles=2)
+    >>> sorted(est.worst)
+    ['flow', 'pressure', 'pulse_pressure']
+    """
+    if not (isinstance(factor, (int, float)) and factor > 1 and np.isfinite(factor)):
+        raise ModelError(f"estimate_time_error: factor must be a number > 1, got {factor!r}")
+    if overrides.get("dt") not in (None, "auto"):
+        raise ModelError(
+            f"estimate_time_error: dt = {overrides['dt']!r} is a fixed step; "
+            "the estimate is of an error-controlled run (no dt)"
+        )
+    m = load_model(model)
+    kw = {"progress": False, **overrides, "dt": "auto"}
+    coarse = simulate(m, rtol=rtol, **kw)
+    finer = _again_finer(m, coarse, rtol / factor, kw)  # exactly the first's cycles
+    if coarse.time.shape != finer.time.shape or not np.allclose(coarse.time, finer.time):
+        raise ModelError("estimate_time_error: the two runs recorded different output times")
+    return TimeErrorEstimate(rtol=rtol, factor=float(factor), result=coarse, finer=finer,
+                             per_vessel=accumulated(coarse, finer, factor))
 
 
 def _last_cycle_results(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
