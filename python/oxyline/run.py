@@ -183,7 +183,7 @@ def _large_model_output(model: Model, s: dict[str, Any], overrides: Mapping[str,
     return summarize
 
 
-def _summary_stream(model: Model, s: Mapping[str, Any], extra: int) -> Any:
+def _summary_stream(model: Model, s: Mapping[str, Any], heart: _Heart) -> Any:
     """The chunk sink of a summarized large-model run (:mod:`oxyline.large_output`)."""
     from oxyline.large_output import SummaryStream
 
@@ -192,10 +192,10 @@ def _summary_stream(model: Model, s: Mapping[str, Any], extra: int) -> Any:
         layout.pop("transport", None)
 
     def result_of(rows: dict[str, Any]) -> Result:
-        _split_heart_columns(rows, extra)
+        heart.split(rows)
         return _result(model, s, rows, {}, False, layout=dict(layout))
 
-    return SummaryStream(model, layout, extra, result_of)
+    return SummaryStream(model, layout, len(heart.columns), result_of)
 
 
 def _selection(s: Mapping[str, Any]) -> dict[str, Any]:
@@ -605,15 +605,14 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     core = _checkpoints(model, overrides)
     if resume is not None:
         core["resume"] = resume
-    heart = _heart_layout(model)
-    if heart[2]:
-        core["extra_columns"] = heart[2]
+    heart = _Heart(model)
+    core.update(heart.core)
     if timed:  # the core runs the last cycle again at rtol/FACTOR after the run
         _check_time_error(s, summarize, core)
         core["finer_last_cycle"] = FACTOR
     stream, s_out = None, s
     if summarize and not core:  # (a checkpointed run keeps its rows: resume rebuilds them)
-        stream = _summary_stream(model, s, len(heart[2]))
+        stream = _summary_stream(model, s, heart)
         core.update(chunk_sink=stream.add, chunk_rows=stream.rows)
         s_out = {**s, "vessels": stream.inlets}  # the time series kept
     _check_output_memory(model, s_out, overrides, stream.bytes() if stream is not None else 0.0)
@@ -626,14 +625,13 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
         raise
     if stream is not None:
         raw = stream.raw(raw)
-    extra = _split_heart_columns(raw, len(heart[2]))
+    extra = heart.split(raw)
     result = _result(model, s_out, raw,
-                     {**_run_settings(s, raw, bool(heart[1])), **segmentation_facts(model)},
+                     {**_run_settings(s, raw, bool(heart.valves)), **segmentation_facts(model)},
                      complete="error" not in raw)
     if stream is not None:
         result.vessel_summary = stream.summary(model.name)
-    if extra is not None:
-        result.chamber_volume, result.valve_status = _heart_outputs(heart, extra)
+    heart.put(result, extra)
     result.valve_events = [(float(t), str(v), bool(o)) for t, v, o in raw.get("valve_events", ())]
     if "last_cycle_steps" in raw:  # error control: the last cycle's accepted steps
         from oxyline.io.results import step_history
@@ -786,54 +784,53 @@ def _last_cycle_results(model: Model, s: Mapping[str, Any], raw: Mapping[str, An
     return (_result(model, s, run, {}, True), _result(model, s, again, {}, True))
 
 
-def _heart_layout(model: Model) -> tuple[list[Any], list[Any], list[int]]:
+class _Heart:
     """The chambers (name, volume unknown) and valves (name, [pressure behind, pressure in
-    front, flow], on/off rule) of the model, and the unknowns to record for them."""
-    lay = model.network.unknown_layout()
-    chambers, valves = list(lay["chamber_volumes"]), list(lay.get("valves", ()))
-    cols = [int(i) for _, i in chambers] + [int(c) for _, u, _ in valves for c in u]
-    return chambers, valves, cols
+    front, flow], on/off rule) of a model: a run records their unknowns after the selected
+    columns (``core``: the run's keyword that asks for them), and :meth:`split` and
+    :meth:`put` turn them into ``result.chamber_volume`` and ``result.valve_status``."""
 
+    def __init__(self, model: Model) -> None:
+        lay = model.network.unknown_layout()
+        self.chambers, self.valves = list(lay["chamber_volumes"]), list(lay.get("valves", ()))
+        self.columns = [int(i) for _, i in self.chambers] \
+            + [int(c) for _, u, _ in self.valves for c in u]
+        self.core = {"extra_columns": self.columns} if self.columns else {}
+        #: each on/off valve's last status, carried from one chunk of a streamed run to the
+        #: next (``put(..., carry=True)``), so that chunks give the statuses of the whole run
+        self.open: dict[str, bool] = {}
 
-def _split_heart_columns(raw: dict[str, Any], n: int) -> np.ndarray | None:
-    """Take the `n` extra columns (recorded after the selected ones) out of ``raw["data"]``."""
-    if n == 0:
-        return None
-    data = raw["data"]
-    raw["data"] = data[:, : data.shape[1] - n]
-    return data[:, data.shape[1] - n:]
+    def split(self, raw: dict[str, Any]) -> np.ndarray | None:
+        """Take the extra columns (recorded after the selected ones) out of ``raw["data"]``."""
+        n = len(self.columns)
+        if n == 0:
+            return None
+        data = raw["data"]
+        raw["data"] = data[:, : data.shape[1] - n]
+        return data[:, data.shape[1] - n:]
 
+    def put(self, result: Result, extra: np.ndarray | None, carry: bool = False) -> None:
+        """``result``'s chamber volumes and valve status of the extra columns ``extra`` (of
+        :meth:`split`; nothing when None); ``carry``: a chunk of a streamed run."""
+        if extra is not None:
+            result.chamber_volume, result.valve_status = self.outputs(extra, carry)
 
-def _heart_outputs(heart: tuple[list[Any], list[Any], list[int]], extra: np.ndarray,
-                   state: dict[str, bool] | None = None
-                   ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-    """Chamber volumes and valve status (1 open, 0 closed) from the extra columns: a valve is
-    open while the pressure behind it exceeds the pressure in front; a heart block's valve
-    (docs/physics.md §1.10) also stays open while its flow is still forward after the pressure
-    difference reversed (the inertial end of ejection), until the flow reverses. Once closed,
-    only the pressure difference reopens it: with generalized-α a closed valve keeps the small
-    flow of the last Newton correction (~1e-3 of the peak, of either sign; svZeroDSolver's
-    reset), which must not read as open. With RK4 a closed valve's flow is exactly zero.
-    ``state``: each on/off valve's last status, carried from one chunk of a streamed run to
-    the next (updated here), so that chunks give the statuses of the whole run."""
-    chambers, valves, _ = heart
-    state = {} if state is None else state
-    volume = {name: extra[:, k].copy() for k, (name, _) in enumerate(chambers)}
-    status = {}
-    for k, (name, _, on_off) in enumerate(valves):
-        up, down, q = (extra[:, len(chambers) + 3 * k + j] for j in range(3))
-        pushed = up > down
-        if not on_off:
-            status[name] = pushed.astype(np.int8)
-            continue
-        open_ = np.zeros(len(q), dtype=np.int8)
-        was_open = state.get(name, False)
-        for i in range(len(q)):  # hysteresis: a sequence, not an elementwise rule
-            was_open = bool(pushed[i]) or (was_open and q[i] > 0.0)
-            open_[i] = was_open
-        state[name] = was_open
-        status[name] = open_
-    return volume, status
+    def outputs(self, extra: np.ndarray, carry: bool = False
+                ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+        """Chamber volumes and valve status (1 open, 0 closed) from the extra columns, each
+        valve's by the core's rule (``oxyline_core::output::valve_status``: a valve is open
+        while the pressure behind it exceeds the pressure in front; a heart block's valve also
+        while its flow is still forward, docs/physics.md §1.10). ``carry``: start from (and
+        update) :attr:`open`, the last chunk's."""
+        state = self.open if carry else {}
+        n = len(self.chambers)
+        volume = {name: extra[:, k].copy() for k, (name, _) in enumerate(self.chambers)}
+        status = {}
+        for k, (name, _, on_off) in enumerate(self.valves):
+            up, down, q = (extra[:, n + 3 * k + j] for j in range(3))
+            status[name], state[name] = _core.valve_status(up, down, q, bool(on_off),
+                                                           state.get(name, False))
+        return volume, status
 
 
 def resume(path: str | os.PathLike[str], **overrides: Any) -> Result:
@@ -901,18 +898,12 @@ def _checkpoints(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
     core = _checkpoint.parse_every(every)
     _checkpoint.check_writable(path)
     meta = {"model": model.to_dict(), "settings": _checkpoint.stored_settings(overrides),
-            "checkpoint_every": every, "oxyline": _core_version()}
+            "checkpoint_every": every, "oxyline": str(_core.__version__)}
 
     def save(state: dict[str, Any]) -> None:
         _checkpoint.write(path, meta, state)
 
     return {"checkpoint_sink": save, **core}
-
-
-def _core_version() -> str:
-    from oxyline import _core
-
-    return str(_core.__version__)
 
 
 def _check_output_memory(model: Model, s: Mapping[str, Any],
@@ -998,19 +989,17 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     s, space = _zarr_settings(model, path, overrides)
     empty = _empty_rows(model, s)
     # chamber volumes and valve status, as in simulate(): extra core columns per chunk
-    heart = _heart_layout(model)
-    valves, valves_open = bool(heart[1]), {}
-    core = {"extra_columns": heart[2]} if heart[2] else {}
+    heart = _Heart(model)
+    valves = bool(heart.valves)
 
     def result_of(rows: dict[str, Any], settings: dict[str, Any], complete: bool) -> Result:
         # (``rows``' data loses the extra columns: a copy of the dict of rows)
-        extra = _split_heart_columns(rows, len(heart[2]))
+        extra = heart.split(rows)
         res = _result(model, s, rows, settings, complete)
-        if extra is not None:
-            res.chamber_volume, res.valve_status = _heart_outputs(heart, extra, valves_open)
+        heart.put(res, extra, carry=True)
         return res
 
-    template = dict(empty, data=np.zeros((0, empty["data"].shape[1] + len(heart[2]))))
+    template = dict(empty, data=np.zeros((0, empty["data"].shape[1] + len(heart.columns))))
     head = result_of(dict(template), _run_settings(s, None, valves), False)
     store = ZarrAppender(path, dataset(head), time_chunk, overwrite=overwrite,
                          space_chunk=segment_chunk)
@@ -1025,7 +1014,7 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
 
     try:
         raw = _run(model, s, overrides.get("progress"), _cancel(overrides), chunk_sink=write,
-                   chunk_rows=time_chunk, **core)
+                   chunk_rows=time_chunk, **heart.core)
     except BaseException:
         store.remove()  # refused before the first step (e.g. an unstable dt): no output at all
         raise
@@ -1104,8 +1093,6 @@ def _close_store(store: Any, raw: dict[str, Any],
 
 def _empty_rows(model: Model, s: Mapping[str, Any]) -> dict[str, Any]:
     """Zero output rows in the core's layout: the template of a store's variables."""
-    import numpy as np
-
     lay = _output_layout(model, s)
     raw: dict[str, Any] = {"times": np.zeros(0), "data": np.zeros((0, lay["n_columns"]))}
     tl = lay.get("transport") if s["transport"] else None

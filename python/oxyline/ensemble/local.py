@@ -23,14 +23,7 @@ from oxyline.ensemble.patch import Patcher, Variant, patch_paths, traced
 from oxyline.errors import ModelError, ResourceError, core_errors
 from oxyline.model import Model
 from oxyline.monitor import Monitor
-from oxyline.run import (
-    _heart_layout,
-    _heart_outputs,
-    _result,
-    _run_settings,
-    _settings,
-    _split_heart_columns,
-)
+from oxyline.run import _Heart, _result, _run_settings, _settings
 
 
 def run_settings(model: Model, output: Output, overrides: Mapping[str, Any]) -> dict[str, Any]:
@@ -154,12 +147,13 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
     base_settings = feed.base_settings
     # chamber volumes and valve status, as in simulate(): their unknowns are recorded after
     # the output columns (a patch changes values, not the model's structure)
-    heart = _heart_layout(model)
-    collector.heart = {"chamber": [n for n, _ in heart[0]], "valve": [n for n, _, _ in heart[1]]}
+    heart = _Heart(model)
+    collector.heart = {"chamber": [n for n, _ in heart.chambers],
+                       "valve": [n for n, _, _ in heart.valves]}
     # summaries go to the collector in one pass at the end, unless a store writes each
     # variant as it finishes (it reads the collector's row) or it has heart outputs
     batch = StatsBatch(collector) if output == "summary" and on_variant is None \
-        and not heart[2] else None
+        and not heart.columns else None
 
     def done(i: int, raw: dict[str, Any] | None, layout: dict[str, Any] | None,
              kind: str | None, message: str | None) -> None:
@@ -200,7 +194,7 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
 
             # a summary's statistics are computed on the worker threads (see summary_values)
             return ensemble.run(feed.next, on_done=done, workers=workers,
-                                summary=output == "summary", heart=bool(heart[2]), poll=poll,
+                                summary=output == "summary", heart=bool(heart.columns), poll=poll,
                                 variant_timeout=variant_timeout,
                                 max_memory=feed.memory_limit, **core)
     finally:
@@ -209,9 +203,8 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
         close()
 
 
-def _record(collector: Collector, i: int, output: Output,
-            heart: tuple[list[Any], list[Any], list[int]], model: Model, s: dict[str, Any],
-            raw: dict[str, Any], layout: dict[str, Any]) -> None:
+def _record(collector: Collector, i: int, output: Output, heart: _Heart, model: Model,
+            s: dict[str, Any], raw: dict[str, Any], layout: dict[str, Any]) -> None:
     """Put the outputs of finished variant ``i`` (its run ``raw``) into ``collector``."""
     hearts = _variant_heart(heart, raw)
     # a summary without species is read from the core's column statistics; the bounds
@@ -228,17 +221,17 @@ def _record(collector: Collector, i: int, output: Output,
     collector.put(i, values)
 
 
-def _variant_heart(heart: tuple[list[Any], list[Any], list[int]], raw: dict[str, Any]
+def _variant_heart(heart: _Heart, raw: dict[str, Any]
                    ) -> tuple[dict[str, Any], dict[str, Any]] | None:
     """A variant's chamber volumes and valve status from the heart columns the core recorded
     after its output columns (taken off ``raw``'s data and column statistics), or None."""
-    n = len(heart[2])
-    extra = _split_heart_columns(raw, n)
+    extra = heart.split(raw)
     if extra is None:
         return None
     if raw.get("column_stats") is not None:
+        n = len(heart.columns)
         raw["column_stats"] = tuple(a[: len(a) - n] for a in raw["column_stats"])
-    return _heart_outputs(heart, extra)
+    return heart.outputs(extra)
 
 
 def bounds_findings(model: Model, result: Any) -> list[str]:
