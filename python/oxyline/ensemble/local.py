@@ -20,10 +20,10 @@ from oxyline.ensemble.collect import (
     stats_summary,
 )
 from oxyline.ensemble.patch import Patcher, Variant, patch_paths, traced
-from oxyline.errors import ModelError, ResourceError, core_errors
+from oxyline.errors import ModelError, ResourceError, SimulationCancelled, core_errors
 from oxyline.model import Model
 from oxyline.monitor import Monitor
-from oxyline.run import _Heart, _result, _run_settings, _settings
+from oxyline.run import _Heart, _result, _run_settings, _settings, cancellable, tqdm_class
 
 
 def run_settings(model: Model, output: Output, overrides: Mapping[str, Any]) -> dict[str, Any]:
@@ -181,9 +181,6 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
     ensemble = base.ensemble
     # Ctrl-C in the main thread sets every active run's event (oxyline.run): an ensemble in a
     # worker thread stops too; `poll` raises once it is set (checked ~10 times a second)
-    from oxyline.errors import SimulationCancelled
-    from oxyline.run import cancellable
-
     try:
         with cancellable(cancel) as event, _old_objects_frozen(), \
                 core_errors("simulate_ensemble"):
@@ -271,8 +268,6 @@ def _progress(enabled: Any, total: int) -> tuple[Callable[[], None], Callable[[]
         return tick, lambda: None
     if not enabled:
         return (lambda: None), (lambda: None)
-    from oxyline.run import tqdm_class
-
     tqdm = tqdm_class()  # the text bar in a notebook without ipywidgets (no TqdmWarning)
     if tqdm is None:
         return (lambda: None), (lambda: None)
