@@ -27,6 +27,9 @@ from oxyline.errors import (
     SimulationInterrupted,
     core_errors,
 )
+from oxyline.io.atomic import same_file
+from oxyline.io.results import ZarrAppender, dataset, step_history
+from oxyline.large_output import SummaryStream
 from oxyline.loader import load_model
 from oxyline.model import Model
 from oxyline.monitor import Monitor, check_result
@@ -185,8 +188,6 @@ def _large_model_output(model: Model, s: dict[str, Any], overrides: Mapping[str,
 
 def _summary_stream(model: Model, s: Mapping[str, Any], heart: _Heart) -> Any:
     """The chunk sink of a summarized large-model run (:mod:`oxyline.large_output`)."""
-    from oxyline.large_output import SummaryStream
-
     layout = _output_layout(model, s)  # once: 262 k names at 1e6
     if not s["transport"]:
         layout.pop("transport", None)
@@ -586,8 +587,6 @@ def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any],
 
 def _refuse_checkpoint_on_input(model: Any, checkpoint: Any) -> None:
     """A checkpoint file that is the model file itself would overwrite the model."""
-    from oxyline.io.atomic import same_file
-
     if isinstance(model, (str, os.PathLike)) and isinstance(checkpoint, (str, os.PathLike)) \
             and os.path.exists(model) and same_file(model, checkpoint):
         raise ModelError(f"simulate: checkpoint {os.fspath(checkpoint)!r} is the model file "
@@ -634,8 +633,6 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     heart.put(result, extra)
     result.valve_events = [(float(t), str(v), bool(o)) for t, v, o in raw.get("valve_events", ())]
     if "last_cycle_steps" in raw:  # error control: the last cycle's accepted steps
-        from oxyline.io.results import step_history
-
         result.step_times, result.step_sizes = step_history(raw["last_cycle_steps"])
     _raise_run_error(raw, result)
     if timed:
@@ -981,8 +978,6 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     ...     print(ds.sizes["time"], ds.attrs["complete"])
     2001 1
     """
-    from oxyline.io.results import ZarrAppender, dataset
-
     _check_chunk("time_chunk", time_chunk)
     _check_chunk("segment_chunk", segment_chunk)
     model = load_model(model)
