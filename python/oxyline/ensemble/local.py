@@ -11,6 +11,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Any
 
 from oxyline import _core
+from oxyline import memory as _memory
 from oxyline.ensemble.collect import (
     ERROR_CHARS,
     Collector,
@@ -60,8 +61,6 @@ class Feed:
         self.collector, self.numbers, self.on_skip = collector, numbers, on_skip
         self.prepared: dict[int, tuple[Variant, dict[str, Any]]] = {}
         self._next = 0
-        from oxyline import memory as _memory
-
         #: the memory a variant may take (max_memory, else the default share of the free):
         #: the core checks each variant's model against it as it assembles it
         self.memory_limit = _memory.limit(overrides.get("max_memory",
