@@ -22,9 +22,9 @@ from oxyline.loader import load_model
 from oxyline.model import Model
 from oxyline.monitor import PhysicalBoundsWarning
 from oxyline.result import Result, VesselResult
-from oxyline.run import resume, simulate, simulate_to_zarr
+from oxyline.run import estimate_time_error, resume, simulate, simulate_to_zarr
 from oxyline.structured_tree import structured_tree
-from oxyline.time_error import TimeErrorEstimate, estimate_time_error
+from oxyline.time_error import TimeErrorEstimate
 from oxyline.transport import HemoglobinFacilitationWarning
 
 __version__: str = _core.__version__

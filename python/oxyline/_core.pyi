@@ -251,6 +251,10 @@ class VariantReader:
         those at ``vessels`` (indices) and ``nodes``. A ModelError about one of them has
         ``element``."""
 def resolve_settings(sim: Any, overrides: Any, period: float | None) -> dict[str, Any]: ...
+def valve_status(behind: np.ndarray, front: np.ndarray, flow: np.ndarray, on_off: bool,
+                 open: bool = False) -> tuple[np.ndarray, bool]:
+    """One valve's status at each recorded row (int8, 1 open, 0 closed) by the core's rule,
+    and its status after the last row; ``open``: an on/off valve's before the first."""
 def forcing_frequency(data: Any, rtol: float | None = None) -> tuple[float, float]:
     """The highest significant frequency (Hz) of a native model's flow and pressure
     waveforms and the tolerance it was found at (the `segments: auto` rule)."""

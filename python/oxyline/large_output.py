@@ -19,6 +19,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from oxyline.result import UNITS
+
 if TYPE_CHECKING:
     from oxyline.model import Model
     from oxyline.result import Result
@@ -47,8 +49,6 @@ def vessel_arrays(res: Result) -> list[tuple[str, Any, str]]:
     """(name, (time, vessel) array, units) of every per-vessel variable of ``res``: the
     variables ``res.to_xarray()`` gives dims (time, vessel), without building the dataset
     (its vessel index, 262 k names at 1e6 segments, for every chunk)."""
-    from oxyline.result import UNITS
-
     out = [(name, getattr(res, name), UNITS[name]) for name in res.vessel_variables]
     out += [(name, arr, unit) for name, (kind, arr, unit) in res.species_variables().items()
             if kind == "vessel"]

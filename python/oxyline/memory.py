@@ -30,7 +30,7 @@ import re
 from collections.abc import Iterator, Mapping
 from typing import Any
 
-from oxyline.errors import ModelError
+from oxyline.errors import ModelError, ResourceError
 
 #: share of the available memory a run may take by default
 DEFAULT_FRACTION = 0.8
@@ -133,8 +133,6 @@ def output_estimate(layout: dict[str, Any], period: float, every: float, cycles:
     species columns, 8 bytes each."""
     ratio = period / every if every > 0 else math.inf
     if not ratio <= MAX_ROWS_PER_CYCLE:
-        from oxyline.errors import ResourceError
-
         raise ResourceError(f"simulate: output_every = {every:g} s gives {ratio:.3g} output rows "
                             f"per cycle of {period:g} s, more than {MAX_ROWS_PER_CYCLE:.0e}; "
                             "choose a longer output_every")

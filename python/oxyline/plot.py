@@ -28,7 +28,7 @@ import numpy as np
 
 from oxyline import plot_oxygen
 from oxyline.io.results import stats as time_stats
-from oxyline.plot_style import STYLES, peak_magnitude, prefixed, same_curves
+from oxyline.plot_style import STYLES, peak_magnitude, prefixed, pyplot, same_curves
 from oxyline.units import MMHG
 
 if TYPE_CHECKING:
@@ -49,16 +49,6 @@ LABELS = {
     "wall_o2_flux": "wall O$_2$ flux", "o2_concentration": "O$_2$ concentration",
     "radius": "radius",
 }
-
-
-def _plt() -> Any:
-    import matplotlib
-
-    if os.environ.get("DISPLAY", "") == "" and os.environ.get("MPLBACKEND") is None:
-        matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def _model(model: Model | str | os.PathLike[str] | Mapping[str, Any]) -> Model:
@@ -153,7 +143,7 @@ def waveforms(result: Result, vessels: Sequence[str] | str | None = None,
     >>> [ax.get_ylabel() for ax in fig.axes]
     ['pressure [mmHg]', 'flow [mL/s]']
     """
-    plt = _plt()
+    plt = pyplot()
     ds = result.to_xarray()
     if isinstance(vessels, str):
         vessels = [vessels]
@@ -440,7 +430,7 @@ def profile(result: Result, model: Model | str, outlet: str,
     >>> fig.axes[-1].get_xlabel()
     'distance from the inlet [cm]'
     """
-    plt = _plt()
+    plt = pyplot()
     m = _model(model)
     quantities = [quantity] if isinstance(quantity, str) else list(quantity)
     fig, axes = plt.subplots(len(quantities), 1, sharex=True, squeeze=False,
@@ -610,7 +600,7 @@ def network_map(model: Model | str | os.PathLike[str], values: Any = None,
     >>> fig.axes[-1].get_ylabel()
     'time-mean pressure [mmHg]'
     """
-    plt = _plt()
+    plt = pyplot()
     from matplotlib import colors as mcolors
     from matplotlib.collections import LineCollection
 
@@ -700,7 +690,7 @@ def save_figures(result: Result, model: Model | str | os.PathLike[str],
     ...     sorted(p.name for p in plot.save_figures(res, "bifurcation", out, formats=("png",)))
     ['network_map.png', 'profile.png', 'waveforms.png']
     """
-    plt = _plt()
+    plt = pyplot()
     m = _model(model)
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
@@ -747,7 +737,7 @@ def impedance(frequencies: Any, z: Any, label: str | None = None,
     >>> fig.axes[0].get_ylabel()
     '|Z| [Pa·s/m³]'
     """
-    plt = _plt()
+    plt = pyplot()
     if ax is None:
         fig, ax = plt.subplots(2, 1, sharex=True, figsize=(6.0, 5.0), layout="constrained")
         ax[0].set_ylabel("|Z| [Pa·s/m³]")

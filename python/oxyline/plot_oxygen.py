@@ -17,18 +17,8 @@ from typing import Any
 import numpy as np
 
 from oxyline.model import Model
-from oxyline.plot_style import STYLES, prefixed, same_curves
+from oxyline.plot_style import STYLES, prefixed, pyplot, same_curves
 from oxyline.result import Result
-
-
-def _plt() -> Any:
-    import matplotlib
-
-    if os.environ.get("DISPLAY", "") == "" and os.environ.get("MPLBACKEND") is None:
-        matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def _note(model: Model | None) -> str:
@@ -67,7 +57,7 @@ def outlet_flux(result: Result, model: Model | None = None) -> Any:
     >>> [ax.get_ylabel() for ax in fig.axes]
     ['J$_{out}$ [µmol/s]', 'wall uptake [µmol/s]']
     """
-    plt = _plt()
+    plt = pyplot()
     if result.oxygen is None:
         raise ValueError("this result has no oxygen section")
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
@@ -101,7 +91,7 @@ def wall_uptake(result: Result, model: Model | None = None) -> Any:
     >>> plot_oxygen.wall_uptake(res).axes[0].get_xlabel()
     'distance from the vessel inlet [mm]'
     """
-    plt = _plt()
+    plt = pyplot()
     if result.oxygen is None or not result.has_segments:
         raise ValueError("needs an oxygen result with segment output")
     fig, ax = plt.subplots(figsize=(7, 4))
@@ -138,7 +128,7 @@ def save_oxygen_figures(result: Result, model: Model | None, outdir: str | os.Pa
     ...     [p.name for p in plot_oxygen.save_oxygen_figures(res, None, out, formats=("png",))]
     ['o2_outlet_flux.png', 'o2_wall_uptake.png']
     """
-    plt = _plt()
+    plt = pyplot()
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     figs = {"o2_outlet_flux": outlet_flux(result, model)}
@@ -188,7 +178,7 @@ def coronary_impediment(result: Result, rigid: Result, vessel: str | None = None
     >>> fig.axes[1].get_ylabel()
     'wall O$_2$ uptake [nmol/s]'
     """
-    plt = _plt()
+    plt = pyplot()
     name = vessel or result.vessels[0]
     i = list(result.vessels).index(name)
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)

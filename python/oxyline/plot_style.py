@@ -3,6 +3,7 @@ curves (:mod:`oxyline.plot` and :mod:`oxyline.plot_oxygen` both draw with them).
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from typing import Any
 
@@ -11,6 +12,18 @@ import numpy as np
 #: SI prefixes (power of ten, symbol), largest first: a quantity shown with the prefix that puts its largest
 #: magnitude in [1, 1000) (no "nmol/s" values in the millions)
 PREFIXES = ((3, "k"), (0, ""), (-3, "m"), (-6, "µ"), (-9, "n"), (-12, "p"), (-15, "f"))
+
+
+def pyplot() -> Any:
+    """``matplotlib.pyplot``, on the file backend (Agg) where there is no display and no
+    ``MPLBACKEND`` says otherwise."""
+    import matplotlib
+
+    if os.environ.get("DISPLAY", "") == "" and os.environ.get("MPLBACKEND") is None:
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
 
 
 def peak_magnitude(values: Any) -> float:

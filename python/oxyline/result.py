@@ -491,8 +491,6 @@ class Result:
         :func:`oxyline.open_result` is its inverse (also for the files written from it)."""
         import xarray as xr
 
-        from oxyline._core import __version__
-
         coords: dict[str, Any] = {"time": ("time", self.time, {"units": "s"}),
                                   "vessel": ("vessel", np.array(self.vessels, dtype=object))}
         data_vars: dict[str, Any] = {
@@ -535,7 +533,7 @@ class Result:
             data_vars["valve_status"] = (
                 ("time", "valve"), np.column_stack(list(self.valve_status.values())),
                 {"units": "1", "description": "1 open, 0 closed"})
-        attrs: dict[str, Any] = {"model": self.model_name, "oxyline_version": __version__,
+        attrs: dict[str, Any] = {"model": self.model_name, "oxyline_version": _core.__version__,
                                  "complete": int(self.complete)}
         if self.model_json is not None:
             attrs["model_json"] = self.model_json

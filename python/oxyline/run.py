@@ -27,6 +27,9 @@ from oxyline.errors import (
     SimulationInterrupted,
     core_errors,
 )
+from oxyline.io.atomic import same_file
+from oxyline.io.results import ZarrAppender, dataset, step_history
+from oxyline.large_output import SummaryStream
 from oxyline.loader import load_model
 from oxyline.model import Model
 from oxyline.monitor import Monitor, check_result
@@ -46,7 +49,8 @@ from oxyline.time_error import (
     FACTOR,
     FROM_LAST_CYCLE,
     FROM_WHOLE_RUN,
-    differences,
+    TimeErrorEstimate,
+    accumulated,
     record_estimate,
 )
 
@@ -182,19 +186,17 @@ def _large_model_output(model: Model, s: dict[str, Any], overrides: Mapping[str,
     return summarize
 
 
-def _summary_stream(model: Model, s: Mapping[str, Any], extra: int) -> Any:
+def _summary_stream(model: Model, s: Mapping[str, Any], heart: _Heart) -> Any:
     """The chunk sink of a summarized large-model run (:mod:`oxyline.large_output`)."""
-    from oxyline.large_output import SummaryStream
-
     layout = _output_layout(model, s)  # once: 262 k names at 1e6
     if not s["transport"]:
         layout.pop("transport", None)
 
     def result_of(rows: dict[str, Any]) -> Result:
-        _split_heart_columns(rows, extra)
+        heart.split(rows)
         return _result(model, s, rows, {}, False, layout=dict(layout))
 
-    return SummaryStream(model, layout, extra, result_of)
+    return SummaryStream(model, layout, len(heart.columns), result_of)
 
 
 def _selection(s: Mapping[str, Any]) -> dict[str, Any]:
@@ -585,8 +587,6 @@ def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any],
 
 def _refuse_checkpoint_on_input(model: Any, checkpoint: Any) -> None:
     """A checkpoint file that is the model file itself would overwrite the model."""
-    from oxyline.io.atomic import same_file
-
     if isinstance(model, (str, os.PathLike)) and isinstance(checkpoint, (str, os.PathLike)) \
             and os.path.exists(model) and same_file(model, checkpoint):
         raise ModelError(f"simulate: checkpoint {os.fspath(checkpoint)!r} is the model file "
@@ -604,15 +604,14 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     core = _checkpoints(model, overrides)
     if resume is not None:
         core["resume"] = resume
-    heart = _heart_layout(model)
-    if heart[2]:
-        core["extra_columns"] = heart[2]
+    heart = _Heart(model)
+    core.update(heart.core)
     if timed:  # the core runs the last cycle again at rtol/FACTOR after the run
         _check_time_error(s, summarize, core)
         core["finer_last_cycle"] = FACTOR
     stream, s_out = None, s
     if summarize and not core:  # (a checkpointed run keeps its rows: resume rebuilds them)
-        stream = _summary_stream(model, s, len(heart[2]))
+        stream = _summary_stream(model, s, heart)
         core.update(chunk_sink=stream.add, chunk_rows=stream.rows)
         s_out = {**s, "vessels": stream.inlets}  # the time series kept
     _check_output_memory(model, s_out, overrides, stream.bytes() if stream is not None else 0.0)
@@ -625,18 +624,15 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
         raise
     if stream is not None:
         raw = stream.raw(raw)
-    extra = _split_heart_columns(raw, len(heart[2]))
+    extra = heart.split(raw)
     result = _result(model, s_out, raw,
-                     {**_run_settings(s, raw, bool(heart[1])), **segmentation_facts(model)},
+                     {**_run_settings(s, raw, bool(heart.valves)), **segmentation_facts(model)},
                      complete="error" not in raw)
     if stream is not None:
         result.vessel_summary = stream.summary(model.name)
-    if extra is not None:
-        result.chamber_volume, result.valve_status = _heart_outputs(heart, extra)
+    heart.put(result, extra)
     result.valve_events = [(float(t), str(v), bool(o)) for t, v, o in raw.get("valve_events", ())]
     if "last_cycle_steps" in raw:  # error control: the last cycle's accepted steps
-        from oxyline.io.results import step_history
-
         result.step_times, result.step_sizes = step_history(raw["last_cycle_steps"])
     _raise_run_error(raw, result)
     if timed:
@@ -715,16 +711,53 @@ def _fill_time_error(model: Model, s: Mapping[str, Any], raw: dict[str, Any], re
         coarse, fine = _last_cycle_results(model, s, raw, finer)
         source, steps = FROM_LAST_CYCLE, int(finer["steps"]) + int(finer["rejected_steps"])
     else:
-        kw = {k: v for k, v in overrides.items()
-              if k not in ("estimate_time_error", "meet_rtol", "rtol")}
-        kw.update(progress=False, cycles=int(result.settings["cycles_run"]),
-                  until_periodic=None, estimate_space_error=False)
-        coarse, fine = result, simulate(model, rtol=s["rtol"] / FACTOR, **kw)
+        coarse, fine = result, _again_finer(model, result, s["rtol"] / FACTOR, overrides)
         source = FROM_WHOLE_RUN
         steps = int(fine.settings["steps"]) + int(fine.settings["rejected_steps"])
-    scale = 1.0 / (1.0 - 1.0 / FACTOR)
-    per_vessel = {k: v * scale for k, v in differences(coarse, fine).items()}
-    record_estimate(result, per_vessel, source.format(factor=FACTOR), steps)
+    record_estimate(result, accumulated(coarse, fine), source.format(factor=FACTOR), steps)
+
+
+def _again_finer(model: Model, coarse: Result, rtol: float, overrides: Mapping[str, Any]
+                 ) -> Result:
+    """The run of ``coarse`` (with ``overrides``) again at the tighter ``rtol``: the same
+    cycles from the same start, without a progress bar or estimates of its own."""
+    kw = {k: v for k, v in overrides.items()
+          if k not in ("estimate_time_error", "meet_rtol", "rtol")}
+    kw.update(progress=False, cycles=int(coarse.settings["cycles_run"]), until_periodic=None,
+              estimate_space_error=False)
+    return simulate(model, rtol=rtol, **kw)
+
+
+def estimate_time_error(
+    model: Model | str | os.PathLike[str] | Mapping[str, Any],
+    rtol: float = 1e-3,
+    factor: float = FACTOR,
+    **overrides: Any,
+) -> TimeErrorEstimate:
+    """Run ``model`` at ``rtol`` (error control, ``overrides`` as for
+    :func:`oxyline.simulate`, no ``dt``) and again at ``rtol/factor``, and estimate the first
+    run's error per vessel against each vessel's own scale (:mod:`oxyline.time_error`).
+
+    >>> import oxyline
+    >>> est = oxyline.estimate_time_error("bifurcation", rtol=1e-2, cycles=2)
+    >>> sorted(est.worst)
+    ['flow', 'pressure', 'pulse_pressure']
+    """
+    if not (isinstance(factor, (int, float)) and factor > 1 and np.isfinite(factor)):
+        raise ModelError(f"estimate_time_error: factor must be a number > 1, got {factor!r}")
+    if overrides.get("dt") not in (None, "auto"):
+        raise ModelError(
+            f"estimate_time_error: dt = {overrides['dt']!r} is a fixed step; "
+            "the estimate is of an error-controlled run (no dt)"
+        )
+    m = load_model(model)
+    kw = {"progress": False, **overrides, "dt": "auto"}
+    coarse = simulate(m, rtol=rtol, **kw)
+    finer = _again_finer(m, coarse, rtol / factor, kw)  # exactly the first's cycles
+    if coarse.time.shape != finer.time.shape or not np.allclose(coarse.time, finer.time):
+        raise ModelError("estimate_time_error: the two runs recorded different output times")
+    return TimeErrorEstimate(rtol=rtol, factor=float(factor), result=coarse, finer=finer,
+                             per_vessel=accumulated(coarse, finer, factor))
 
 
 def _last_cycle_results(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
@@ -748,54 +781,53 @@ def _last_cycle_results(model: Model, s: Mapping[str, Any], raw: Mapping[str, An
     return (_result(model, s, run, {}, True), _result(model, s, again, {}, True))
 
 
-def _heart_layout(model: Model) -> tuple[list[Any], list[Any], list[int]]:
+class _Heart:
     """The chambers (name, volume unknown) and valves (name, [pressure behind, pressure in
-    front, flow], on/off rule) of the model, and the unknowns to record for them."""
-    lay = model.network.unknown_layout()
-    chambers, valves = list(lay["chamber_volumes"]), list(lay.get("valves", ()))
-    cols = [int(i) for _, i in chambers] + [int(c) for _, u, _ in valves for c in u]
-    return chambers, valves, cols
+    front, flow], on/off rule) of a model: a run records their unknowns after the selected
+    columns (``core``: the run's keyword that asks for them), and :meth:`split` and
+    :meth:`put` turn them into ``result.chamber_volume`` and ``result.valve_status``."""
 
+    def __init__(self, model: Model) -> None:
+        lay = model.network.unknown_layout()
+        self.chambers, self.valves = list(lay["chamber_volumes"]), list(lay.get("valves", ()))
+        self.columns = [int(i) for _, i in self.chambers] \
+            + [int(c) for _, u, _ in self.valves for c in u]
+        self.core = {"extra_columns": self.columns} if self.columns else {}
+        #: each on/off valve's last status, carried from one chunk of a streamed run to the
+        #: next (``put(..., carry=True)``), so that chunks give the statuses of the whole run
+        self.open: dict[str, bool] = {}
 
-def _split_heart_columns(raw: dict[str, Any], n: int) -> np.ndarray | None:
-    """Take the `n` extra columns (recorded after the selected ones) out of ``raw["data"]``."""
-    if n == 0:
-        return None
-    data = raw["data"]
-    raw["data"] = data[:, : data.shape[1] - n]
-    return data[:, data.shape[1] - n:]
+    def split(self, raw: dict[str, Any]) -> np.ndarray | None:
+        """Take the extra columns (recorded after the selected ones) out of ``raw["data"]``."""
+        n = len(self.columns)
+        if n == 0:
+            return None
+        data = raw["data"]
+        raw["data"] = data[:, : data.shape[1] - n]
+        return data[:, data.shape[1] - n:]
 
+    def put(self, result: Result, extra: np.ndarray | None, carry: bool = False) -> None:
+        """``result``'s chamber volumes and valve status of the extra columns ``extra`` (of
+        :meth:`split`; nothing when None); ``carry``: a chunk of a streamed run."""
+        if extra is not None:
+            result.chamber_volume, result.valve_status = self.outputs(extra, carry)
 
-def _heart_outputs(heart: tuple[list[Any], list[Any], list[int]], extra: np.ndarray,
-                   state: dict[str, bool] | None = None
-                   ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-    """Chamber volumes and valve status (1 open, 0 closed) from the extra columns: a valve is
-    open while the pressure behind it exceeds the pressure in front; a heart block's valve
-    (docs/physics.md §1.10) also stays open while its flow is still forward after the pressure
-    difference reversed (the inertial end of ejection), until the flow reverses. Once closed,
-    only the pressure difference reopens it: with generalized-α a closed valve keeps the small
-    flow of the last Newton correction (~1e-3 of the peak, of either sign; svZeroDSolver's
-    reset), which must not read as open. With RK4 a closed valve's flow is exactly zero.
-    ``state``: each on/off valve's last status, carried from one chunk of a streamed run to
-    the next (updated here), so that chunks give the statuses of the whole run."""
-    chambers, valves, _ = heart
-    state = {} if state is None else state
-    volume = {name: extra[:, k].copy() for k, (name, _) in enumerate(chambers)}
-    status = {}
-    for k, (name, _, on_off) in enumerate(valves):
-        up, down, q = (extra[:, len(chambers) + 3 * k + j] for j in range(3))
-        pushed = up > down
-        if not on_off:
-            status[name] = pushed.astype(np.int8)
-            continue
-        open_ = np.zeros(len(q), dtype=np.int8)
-        was_open = state.get(name, False)
-        for i in range(len(q)):  # hysteresis: a sequence, not an elementwise rule
-            was_open = bool(pushed[i]) or (was_open and q[i] > 0.0)
-            open_[i] = was_open
-        state[name] = was_open
-        status[name] = open_
-    return volume, status
+    def outputs(self, extra: np.ndarray, carry: bool = False
+                ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+        """Chamber volumes and valve status (1 open, 0 closed) from the extra columns, each
+        valve's by the core's rule (``oxyline_core::output::valve_status``: a valve is open
+        while the pressure behind it exceeds the pressure in front; a heart block's valve also
+        while its flow is still forward, docs/physics.md §1.10). ``carry``: start from (and
+        update) :attr:`open`, the last chunk's."""
+        state = self.open if carry else {}
+        n = len(self.chambers)
+        volume = {name: extra[:, k].copy() for k, (name, _) in enumerate(self.chambers)}
+        status = {}
+        for k, (name, _, on_off) in enumerate(self.valves):
+            up, down, q = (extra[:, n + 3 * k + j] for j in range(3))
+            status[name], state[name] = _core.valve_status(up, down, q, bool(on_off),
+                                                           state.get(name, False))
+        return volume, status
 
 
 def resume(path: str | os.PathLike[str], **overrides: Any) -> Result:
@@ -863,18 +895,12 @@ def _checkpoints(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
     core = _checkpoint.parse_every(every)
     _checkpoint.check_writable(path)
     meta = {"model": model.to_dict(), "settings": _checkpoint.stored_settings(overrides),
-            "checkpoint_every": every, "oxyline": _core_version()}
+            "checkpoint_every": every, "oxyline": str(_core.__version__)}
 
     def save(state: dict[str, Any]) -> None:
         _checkpoint.write(path, meta, state)
 
     return {"checkpoint_sink": save, **core}
-
-
-def _core_version() -> str:
-    from oxyline import _core
-
-    return str(_core.__version__)
 
 
 def _check_output_memory(model: Model, s: Mapping[str, Any],
@@ -952,27 +978,23 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     ...     print(ds.sizes["time"], ds.attrs["complete"])
     2001 1
     """
-    from oxyline.io.results import ZarrAppender, dataset
-
     _check_chunk("time_chunk", time_chunk)
     _check_chunk("segment_chunk", segment_chunk)
     model = load_model(model)
     s, space = _zarr_settings(model, path, overrides)
     empty = _empty_rows(model, s)
     # chamber volumes and valve status, as in simulate(): extra core columns per chunk
-    heart = _heart_layout(model)
-    valves, valves_open = bool(heart[1]), {}
-    core = {"extra_columns": heart[2]} if heart[2] else {}
+    heart = _Heart(model)
+    valves = bool(heart.valves)
 
     def result_of(rows: dict[str, Any], settings: dict[str, Any], complete: bool) -> Result:
         # (``rows``' data loses the extra columns: a copy of the dict of rows)
-        extra = _split_heart_columns(rows, len(heart[2]))
+        extra = heart.split(rows)
         res = _result(model, s, rows, settings, complete)
-        if extra is not None:
-            res.chamber_volume, res.valve_status = _heart_outputs(heart, extra, valves_open)
+        heart.put(res, extra, carry=True)
         return res
 
-    template = dict(empty, data=np.zeros((0, empty["data"].shape[1] + len(heart[2]))))
+    template = dict(empty, data=np.zeros((0, empty["data"].shape[1] + len(heart.columns))))
     head = result_of(dict(template), _run_settings(s, None, valves), False)
     store = ZarrAppender(path, dataset(head), time_chunk, overwrite=overwrite,
                          space_chunk=segment_chunk)
@@ -987,7 +1009,7 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
 
     try:
         raw = _run(model, s, overrides.get("progress"), _cancel(overrides), chunk_sink=write,
-                   chunk_rows=time_chunk, **core)
+                   chunk_rows=time_chunk, **heart.core)
     except BaseException:
         store.remove()  # refused before the first step (e.g. an unstable dt): no output at all
         raise
@@ -1066,8 +1088,6 @@ def _close_store(store: Any, raw: dict[str, Any],
 
 def _empty_rows(model: Model, s: Mapping[str, Any]) -> dict[str, Any]:
     """Zero output rows in the core's layout: the template of a store's variables."""
-    import numpy as np
-
     lay = _output_layout(model, s)
     raw: dict[str, Any] = {"times": np.zeros(0), "data": np.zeros((0, lay["n_columns"]))}
     tl = lay.get("transport") if s["transport"] else None

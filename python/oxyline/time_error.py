@@ -6,22 +6,24 @@ The step control holds each unknown's *local* error per unit step within rtol of
 of the large vessels' flows accumulate through the pressures into the small vessels' flows,
 which then miss rtol of their own amplitude by far more (adan56 at rtol 1e-3: 27 rtol, the left
 gastric's flow, while no step's estimate exceeded rtol). That accumulated (global) error is what
-:func:`estimate_time_error` measures: it runs the model again at ``rtol/factor`` and takes the
-difference of the two runs per vessel. The achieved error of an error-controlled run is
-proportional to rtol (measured: adan56 27–47 rtol over rtol 1e-2 … 1e-4), so the difference is
-``(1 − 1/factor)`` of the coarser run's error, and the estimate is the difference over that.
-Cost: one more run at rtol/factor (about factor^½ times the steps).
+:func:`oxyline.run.estimate_time_error` measures: it runs the model again at ``rtol/factor``
+and takes the difference of the two runs per vessel. The achieved error of an error-controlled
+run is proportional to rtol (measured: adan56 27–47 rtol over rtol 1e-2 … 1e-4), so the
+difference is ``(1 − 1/factor)`` of the coarser run's error, and the estimate is the difference
+over that (:func:`accumulated`). Cost: one more run at rtol/factor (about factor^½ times the
+steps).
 
-``simulate(..., estimate_time_error=True)`` measures the same within the one run, cheaper
-(:func:`fill_time_error`): once the run has ended, the core integrates its *last cycle* again
-from that cycle's start state at ``rtol/factor`` (docs/solvers.md, "The accumulated error"),
-and the difference of the two last cycles, over ``(1 − 1/factor)``, is the error that cycle
-accumulated from its start.
+``simulate(..., estimate_time_error=True)`` measures the same within the one run, cheaper: once
+the run has ended, the core integrates its *last cycle* again from that cycle's start state at
+``rtol/factor`` (docs/solvers.md, "The accumulated error"), and the difference of the two last
+cycles, over ``(1 − 1/factor)``, is the error that cycle accumulated from its start.
+
+The runs themselves are :mod:`oxyline.run`'s (it imports this module, never the reverse): this
+module holds what both the whole-run pair and the in-run estimate read and record.
 """
 
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -29,8 +31,6 @@ from typing import Any
 import numpy as np
 
 from oxyline.errors import ModelError
-from oxyline.loader import load_model
-from oxyline.model import Model
 from oxyline.result import Result
 
 #: the tolerance of the second run is rtol over this
@@ -106,6 +106,14 @@ def differences(a: Result, b: Result) -> dict[str, np.ndarray]:
     return out
 
 
+def accumulated(coarse: Result, finer: Result, factor: float = FACTOR) -> dict[str, np.ndarray]:
+    """The accumulated error per vessel of ``coarse`` (the run at rtol), from ``finer`` (the
+    same at ``rtol/factor``): their :func:`differences` over ``(1 − 1/factor)`` (module
+    text)."""
+    scale = 1.0 / (1.0 - 1.0 / factor)
+    return {k: v * scale for k, v in differences(coarse, finer).items()}
+
+
 #: what ``settings["time_error_from"]`` says of each way of measuring the estimate
 FROM_LAST_CYCLE = "last cycle again at rtol/{factor:g}"
 FROM_WHOLE_RUN = "whole run again at rtol/{factor:g}"
@@ -145,42 +153,3 @@ def record_estimate(
     s["time_error_from"] = source
     s["time_error_steps"] = int(extra_steps)
     result.time_error = per_vessel_table(per_vessel, names)
-
-
-def estimate_time_error(
-    model: Model | str | os.PathLike[str] | Mapping[str, Any],
-    rtol: float = 1e-3,
-    factor: float = FACTOR,
-    **overrides: Any,
-) -> TimeErrorEstimate:
-    """Run ``model`` at ``rtol`` (error control, ``overrides`` as for
-    :func:`oxyline.simulate`, no ``dt``) and again at ``rtol/factor``, and estimate the first
-    run's error per vessel against each vessel's own scale (module text).
-
-    >>> import oxyline
-    >>> est = oxyline.estimate_time_error("bifurcation", rtol=1e-2, cycles=2)
-    >>> sorted(est.worst)
-    ['flow', 'pressure', 'pulse_pressure']
-    """
-    from oxyline.run import simulate
-
-    if not (isinstance(factor, (int, float)) and factor > 1 and np.isfinite(factor)):
-        raise ModelError(f"estimate_time_error: factor must be a number > 1, got {factor!r}")
-    if overrides.get("dt") not in (None, "auto"):
-        raise ModelError(
-            f"estimate_time_error: dt = {overrides['dt']!r} is a fixed step; "
-            "the estimate is of an error-controlled run (no dt)"
-        )
-    m = load_model(model)
-    kw = {"progress": False, **overrides, "dt": "auto"}
-    coarse = simulate(m, rtol=rtol, **kw)
-    # the same cycles from the same start: the second run takes exactly the first's cycles
-    kw.update(cycles=int(coarse.settings["cycles_run"]), until_periodic=None)
-    finer = simulate(m, rtol=rtol / factor, **kw)
-    if coarse.time.shape != finer.time.shape or not np.allclose(coarse.time, finer.time):
-        raise ModelError("estimate_time_error: the two runs recorded different output times")
-    scale = 1.0 / (1.0 - 1.0 / factor)
-    diff = {k: v * scale for k, v in differences(coarse, finer).items()}
-    return TimeErrorEstimate(
-        rtol=rtol, factor=float(factor), result=coarse, finer=finer, per_vessel=diff
-    )

@@ -15,6 +15,7 @@ import os
 from collections.abc import Mapping
 from typing import Any
 
+from oxyline import memory as _memory
 from oxyline.ensemble.collect import (
     STATUS,
     Collector,
@@ -23,10 +24,12 @@ from oxyline.ensemble.collect import (
     dataset_attrs,
     finish,
 )
+from oxyline.ensemble.local import run_local, run_settings
 from oxyline.ensemble.patch import apply_patch, as_patches
-from oxyline.errors import ModelError
+from oxyline.errors import ModelError, ResourceError
 from oxyline.loader import load_model
 from oxyline.model import Model
+from oxyline.run import _output_size
 
 __all__ = ["STATUS", "apply_patch", "simulate_ensemble"]
 
@@ -122,11 +125,6 @@ def _check_full_output(model: Model, n: int, overrides: Mapping[str, Any]) -> No
     """Before any variant runs: the full output of ``n`` variants (each the size of the base
     model's; a patch changes values, not the columns) must fit into the memory allowed, else
     :class:`~oxyline.ResourceError` with the estimate and what to change."""
-    from oxyline import memory as _memory
-    from oxyline.ensemble.local import run_settings
-    from oxyline.errors import ResourceError
-    from oxyline.run import _output_size
-
     need, rows, cols = _output_size(model, run_settings(model, "full", overrides))
     where = "simulate_ensemble: max_memory"
     limit = _memory.limit(overrides.get("max_memory", model.simulation.get("max_memory")), where)
@@ -159,8 +157,6 @@ def _workers(workers: Any) -> int | None:
 def _local(model: Model, patches: list[dict[str, Any]], index: Any, *, workers: int | None,
            output: Output, store: Any, progress: Any, overrides: Mapping[str, Any],
            control: Mapping[str, Any]) -> Any:
-    from oxyline.ensemble.local import run_local
-
     collector = Collector(len(patches), output, model.vessel_names)
     writer = None
     on_variant = None

@@ -15,6 +15,7 @@ from typing import Any
 
 from oxyline.ensemble.collect import FACTS, Collector, Output, dataset_attrs, finish
 from oxyline.ensemble.patch import Patcher
+from oxyline.errors import ModelError
 from oxyline.model import Model
 
 #: tasks per worker thread of an ensemble that Dask balances (see :func:`_chunks`): the run
@@ -129,8 +130,6 @@ def _check_sendable(output: Output) -> None:
     """An output callable must reach the workers (pickled with cloudpickle, as Dask does)."""
     if not callable(output):
         return
-    from oxyline.errors import ModelError
-
     try:
         import cloudpickle
 

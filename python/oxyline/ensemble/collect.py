@@ -25,7 +25,13 @@ import numpy as np
 
 from oxyline._core import __version__
 from oxyline.ensemble.patch import flatten
-from oxyline.errors import ModelError, SimulationCancelled, SimulationInterrupted
+from oxyline.errors import (
+    ModelError,
+    OutputError,
+    SimulationCancelled,
+    SimulationInterrupted,
+)
+from oxyline.io.results import STATS, dataset, stats
 from oxyline.model import Model
 from oxyline.monitor import warn
 from oxyline.result import Result
@@ -33,7 +39,6 @@ from oxyline.result import Result
 #: ``status`` of a variant: 0 finished; the others say why it has no output
 STATUS = {"ok": 0, "model": 1, "unstable": 2, "solver": 3, "output": 4, "interrupted": 5,
           "resource": 6, "worker": 7, "not run": -1}
-STATS = ("mean", "min", "max")
 #: the heart outputs' summary variables and their dim besides ``variant``
 HEART_DIMS = {"chamber_volume": "chamber", "valve_status": "valve"}
 #: the per-variant facts every ensemble dataset has besides its outputs
@@ -57,8 +62,6 @@ def summary_values(result: Result, column_stats: Sequence[np.ndarray] | None = N
     (mean, min, max) per output column that the core computed on the worker thread, with
     numpy's arithmetic for arrays of two or more vessels (``column_stats`` in the core's
     ``ensemble`` module); the flow variables are then taken from them."""
-    from oxyline.io.results import STATS, stats
-
     t = np.asarray(result.time, dtype=float)
     flow = _flow_stats(result, column_stats)
     arrays = [(name, None if flow else getattr(result, name))
@@ -91,8 +94,6 @@ def heart_summary(chamber_volume: Mapping[str, np.ndarray], valve_status: Mappin
     """``chamber_volume_<stat>`` and ``valve_status_<stat>`` (one value per chamber or valve)
     of a result's heart outputs over its output times, as :func:`summary_values` takes the
     vessels' (time averages by the trapezoidal rule)."""
-    from oxyline.io.results import stats
-
     out = {}
     for var, parts in (("chamber_volume", chamber_volume), ("valve_status", valve_status)):
         if parts:
@@ -260,8 +261,6 @@ class Collector:
         if self.output == "summary":
             return summary_values(result, column_stats)
         if self.output == "full":
-            from oxyline.io.results import dataset
-
             return {"": dataset(result)}
         return callable_values(self.output, result)  # type: ignore[arg-type]
 
@@ -357,8 +356,6 @@ def finish(model: Model, patches: list[dict[str, Any]], index: Any, collector: C
     if writer is not None:
         writer.close(complete=finished)
         if writer.failure is not None:  # disk full: say what the store holds, lose nothing
-            from oxyline.errors import OutputError
-
             _warn_bounds(collector)
             raise OutputError(writer.failure_message(),
                               collector.dataset(patches, dataset_attrs(model, output), index))

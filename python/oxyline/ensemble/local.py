@@ -11,6 +11,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Any
 
 from oxyline import _core
+from oxyline import memory as _memory
 from oxyline.ensemble.collect import (
     ERROR_CHARS,
     Collector,
@@ -20,17 +21,10 @@ from oxyline.ensemble.collect import (
     stats_summary,
 )
 from oxyline.ensemble.patch import Patcher, Variant, patch_paths, traced
-from oxyline.errors import ModelError, ResourceError, core_errors
+from oxyline.errors import ModelError, ResourceError, SimulationCancelled, core_errors
 from oxyline.model import Model
 from oxyline.monitor import Monitor
-from oxyline.run import (
-    _heart_layout,
-    _heart_outputs,
-    _result,
-    _run_settings,
-    _settings,
-    _split_heart_columns,
-)
+from oxyline.run import _Heart, _result, _run_settings, _settings, cancellable, tqdm_class
 
 
 def run_settings(model: Model, output: Output, overrides: Mapping[str, Any]) -> dict[str, Any]:
@@ -67,8 +61,6 @@ class Feed:
         self.collector, self.numbers, self.on_skip = collector, numbers, on_skip
         self.prepared: dict[int, tuple[Variant, dict[str, Any]]] = {}
         self._next = 0
-        from oxyline import memory as _memory
-
         #: the memory a variant may take (max_memory, else the default share of the free):
         #: the core checks each variant's model against it as it assembles it
         self.memory_limit = _memory.limit(overrides.get("max_memory",
@@ -154,12 +146,13 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
     base_settings = feed.base_settings
     # chamber volumes and valve status, as in simulate(): their unknowns are recorded after
     # the output columns (a patch changes values, not the model's structure)
-    heart = _heart_layout(model)
-    collector.heart = {"chamber": [n for n, _ in heart[0]], "valve": [n for n, _, _ in heart[1]]}
+    heart = _Heart(model)
+    collector.heart = {"chamber": [n for n, _ in heart.chambers],
+                       "valve": [n for n, _, _ in heart.valves]}
     # summaries go to the collector in one pass at the end, unless a store writes each
     # variant as it finishes (it reads the collector's row) or it has heart outputs
     batch = StatsBatch(collector) if output == "summary" and on_variant is None \
-        and not heart[2] else None
+        and not heart.columns else None
 
     def done(i: int, raw: dict[str, Any] | None, layout: dict[str, Any] | None,
              kind: str | None, message: str | None) -> None:
@@ -187,9 +180,6 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
     ensemble = base.ensemble
     # Ctrl-C in the main thread sets every active run's event (oxyline.run): an ensemble in a
     # worker thread stops too; `poll` raises once it is set (checked ~10 times a second)
-    from oxyline.errors import SimulationCancelled
-    from oxyline.run import cancellable
-
     try:
         with cancellable(cancel) as event, _old_objects_frozen(), \
                 core_errors("simulate_ensemble"):
@@ -200,7 +190,7 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
 
             # a summary's statistics are computed on the worker threads (see summary_values)
             return ensemble.run(feed.next, on_done=done, workers=workers,
-                                summary=output == "summary", heart=bool(heart[2]), poll=poll,
+                                summary=output == "summary", heart=bool(heart.columns), poll=poll,
                                 variant_timeout=variant_timeout,
                                 max_memory=feed.memory_limit, **core)
     finally:
@@ -209,9 +199,8 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
         close()
 
 
-def _record(collector: Collector, i: int, output: Output,
-            heart: tuple[list[Any], list[Any], list[int]], model: Model, s: dict[str, Any],
-            raw: dict[str, Any], layout: dict[str, Any]) -> None:
+def _record(collector: Collector, i: int, output: Output, heart: _Heart, model: Model,
+            s: dict[str, Any], raw: dict[str, Any], layout: dict[str, Any]) -> None:
     """Put the outputs of finished variant ``i`` (its run ``raw``) into ``collector``."""
     hearts = _variant_heart(heart, raw)
     # a summary without species is read from the core's column statistics; the bounds
@@ -228,17 +217,17 @@ def _record(collector: Collector, i: int, output: Output,
     collector.put(i, values)
 
 
-def _variant_heart(heart: tuple[list[Any], list[Any], list[int]], raw: dict[str, Any]
+def _variant_heart(heart: _Heart, raw: dict[str, Any]
                    ) -> tuple[dict[str, Any], dict[str, Any]] | None:
     """A variant's chamber volumes and valve status from the heart columns the core recorded
     after its output columns (taken off ``raw``'s data and column statistics), or None."""
-    n = len(heart[2])
-    extra = _split_heart_columns(raw, n)
+    extra = heart.split(raw)
     if extra is None:
         return None
     if raw.get("column_stats") is not None:
+        n = len(heart.columns)
         raw["column_stats"] = tuple(a[: len(a) - n] for a in raw["column_stats"])
-    return _heart_outputs(heart, extra)
+    return heart.outputs(extra)
 
 
 def bounds_findings(model: Model, result: Any) -> list[str]:
@@ -278,8 +267,6 @@ def _progress(enabled: Any, total: int) -> tuple[Callable[[], None], Callable[[]
         return tick, lambda: None
     if not enabled:
         return (lambda: None), (lambda: None)
-    from oxyline.run import tqdm_class
-
     tqdm = tqdm_class()  # the text bar in a notebook without ipywidgets (no TqdmWarning)
     if tqdm is None:
         return (lambda: None), (lambda: None)

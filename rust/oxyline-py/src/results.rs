@@ -253,3 +253,36 @@ pub(crate) fn finished_run(
     }
     Ok(d)
 }
+
+/// One valve's status at each recorded row (1 open, 0 closed) from its recorded pressure
+/// behind, pressure in front and flow (`oxyline_core::output::valve_status`, the rule of
+/// docs/physics.md §1.8, §1.10); `open`: an on/off valve's status before the first row.
+/// Returns the statuses (int8) and the status after the last row.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+#[pyo3(signature = (behind, front, flow, on_off, open = false))]
+pub(crate) fn valve_status<'py>(
+    py: Python<'py>,
+    behind: numpy::PyReadonlyArray1<'py, f64>,
+    front: numpy::PyReadonlyArray1<'py, f64>,
+    flow: numpy::PyReadonlyArray1<'py, f64>,
+    on_off: bool,
+    open: bool,
+) -> PyResult<(Bound<'py, PyArray1<i8>>, bool)> {
+    // (columns of the recorded rows: strided views, copied once)
+    let (b, f, q) = (
+        behind.as_array().to_vec(),
+        front.as_array().to_vec(),
+        flow.as_array().to_vec(),
+    );
+    if b.len() != f.len() || b.len() != q.len() {
+        return Err(pyo3::exceptions::PyValueError::new_err(format!(
+            "valve_status: behind, front and flow differ in length ({}, {}, {})",
+            b.len(),
+            f.len(),
+            q.len()
+        )));
+    }
+    let (status, last) = oxyline_core::output::valve_status(on_off, &b, &f, &q, open);
+    Ok((status.into_pyarray(py), last))
+}
