@@ -258,3 +258,22 @@ def test_baseline_fit_brings_amplification_to_the_in_vivo_mean() -> None:
         0.5 * abs(out["before"][amp] - out["target"][amp])
     assert out["factors"]["arm_stiffness"] > 1.1
     assert out["after"]["co"] == pytest.approx(out["target"]["co"], rel=0.01)
+
+
+def test_a_high_pulse_pressure_subject_is_resampled_inside_the_ranges() -> None:
+    """A real run: the 75-y subject at +1 SD stroke volume and stiffness and -1 SD diameter
+    (the factorial's high-pulse-pressure corner, outside McEniery 2005's 99 % range of the
+    pulse pressure) is moved towards the baseline until its simulated characteristics are
+    inside every range; the move kept is the first of :data:`SHRINK` that is, so the one
+    before it (if any) was outside."""
+    table = P.parameters((75,), 3)
+    levels = [f"{p}_sd" for p in P.VARIED]      # hr, sv, lvet, pwv, dia, mbp
+    i = int(np.flatnonzero((table[levels].values == [0, 1, 0, 1, -1, 0]).all(axis=1))[0])
+    pop = F.population((75,), subjects=[i], resample=True)
+    assert set(pop.excluded["subject"]) == {i}
+    assert any("pp" in c for c in pop.excluded["characteristic"])
+    fraction = float(pop.resampled["fraction"].iloc[0])
+    assert 0.0 <= fraction < 1.0
+    summary = pop.summaries.iloc[0].to_dict()
+    assert not F.implausible(75, summary)
+    assert pop.table.loc[i, "sv"] < table.loc[i, "sv"]
