@@ -2,8 +2,9 @@
 in-vivo data"): :func:`calibrate_baseline` fits a decade's baseline subject of
 :mod:`oxyline.populations` to McEniery 2005 (:func:`oxyline.populations.in_vivo`) and its
 cf-PWV target with the core's exact sensitivities, :func:`apply_factors` carries the factors
-to any subject, and :func:`population` runs subjects and applies PWDB's exclusion rule (the
-subjects outside the 99 % plausibility ranges listed with the value that failed).
+to any subject, and :func:`population` runs subjects and lists those outside PWDB's 99 %
+plausibility ranges with the value that failed, then either resamples each towards its
+decade's baseline until it is inside (:func:`shrunk_row`) or applies PWDB's exclusion rule.
 
 >>> from oxyline import population_fit, populations
 >>> f = {"distal_resistance": 1.1, "proximal_resistance": 1.0, "capacitance": 0.8,
