@@ -118,7 +118,9 @@ def calibrated_decades(ages: list[float], subset: int) -> None:
     before, after; and what moves the PP amplification: d characteristic / d log factor at
     the start), then ``subset`` subjects spread over the population without and with their
     decade's factors: how many fall outside PWDB's 99 % plausibility ranges, each listed
-    with the characteristic and value that failed (PWDB's exclusion rule)."""
+    with the characteristic and value that failed, by decade and by characteristic; with
+    the factors, each subject outside is resampled towards its decade's baseline
+    (``population(..., resample=True)``) and the final table checked again."""
     factors, rows, sens = {}, [], []
     print("\nbaseline subjects fitted to McEniery 2005 (men and women pooled); mmHg, m/s, L/min")
     for age in ages:
@@ -144,24 +146,41 @@ def calibrated_decades(ages: list[float], subset: int) -> None:
         return
     picks = np.linspace(0, len(P.parameters(tuple(ages))) - 1, subset).round().astype(int)
     counts = {}
-    arms = {a: {"arm_stiffness": f["arm_stiffness"]} for a, f in factors.items()}
-    for label, fac in (("population's own", None), ("decade's factors", factors),
-                       ("arm stiffness factor alone", arms)):
+    # with the factors, the subjects outside are listed as generated and then resampled
+    for label, fac, resample in (("population's own", None, False),
+                                 ("decade's factors, resampled", factors, True)):
         c0 = time.process_time()
-        pop = F.population(tuple(ages), subjects=picks, factors=fac)
-        ex = pop.excluded
-        counts[label] = ex["subject"].nunique()
-        print(f"\n{label}: {subset} subjects, {counts[label]} outside PWDB's 99 % ranges "
-              f"({time.process_time() - c0:.0f} s CPU)")
-        for (i, age), grp in ex.groupby(["subject", "age"]):
-            print(f"  subject {i} (age {age:g}): " + ", ".join(
-                f"{r.characteristic} {r.value:.2f} ({r.low:.2f}-{r.high:.2f})"
-                for r in grp.itertuples()))
-        by_age = ex.groupby("age")["subject"].nunique()
-        print("  outside by decade: " + ", ".join(f"{a:g} y {int(by_age.get(a, 0))}"
-                                                  for a in ages))
-    print(f"\n{subset} subjects: outside PWDB's 99 % ranges "
+        pop = F.population(tuple(ages), subjects=picks, factors=fac, resample=resample)
+        counts[label] = outside_table(label, pop, ages, subset, time.process_time() - c0)
+    print(f"\n{subset} subjects: outside PWDB's 99 % ranges in the final table "
           + ", ".join(f"{k} {v}" for k, v in counts.items()))
+
+
+def outside_table(label: str, pop, ages: list[float], subset: int, cpu: float) -> int:
+    """Print the subjects outside PWDB's 99 % ranges (as generated, each with what failed),
+    the counts by decade and by characteristic, and the resampled subjects; return how
+    many of the final table are outside."""
+    ex = pop.excluded
+    print(f"\n{label}: {subset} subjects, {ex['subject'].nunique()} outside PWDB's 99 % "
+          f"ranges as generated ({cpu:.0f} s CPU)")
+    for (i, age), grp in ex.groupby(["subject", "age"]):
+        print(f"  subject {i} (age {age:g}): " + ", ".join(
+            f"{r.characteristic} {r.value:.2f} ({r.low:.2f}-{r.high:.2f})"
+            for r in grp.itertuples()))
+    by_age = ex.groupby("age")["subject"].nunique()
+    print("  outside by decade: " + ", ".join(f"{a:g} y {int(by_age.get(a, 0))}"
+                                              for a in ages))
+    by_char = ex.groupby("characteristic")["subject"].nunique()
+    print("  outside by characteristic: " + (", ".join(f"{k} {int(v)}" for k, v in
+                                                       by_char.items()) or "none"))
+    final = sum(bool(F.implausible(float(pop.table.loc[i, "age"]), s))
+                for i, s in zip(pop.table.index, pop.summaries.to_dict("records"),
+                                strict=True))
+    if pop.resampled is not None and len(pop.resampled):
+        print("  resampled (fraction of the SD levels kept): " + ", ".join(
+            f"{r.subject} ({r.age:g} y) {r.fraction:.1f}" for r in pop.resampled.itertuples()))
+        print(f"  table: {len(pop.table)} subjects, {final} outside after resampling")
+    return final
 
 
 def main() -> None:

@@ -187,6 +187,63 @@ def test_population_excludes_the_implausible_and_lists_them() -> None:
         F.population((45,), subjects=[729], run=stand_in())
 
 
+def test_a_shrunk_subject_is_the_factorial_subject_at_those_levels() -> None:
+    """A 45-y subject at +-1 SD (3 levels) with its levels halved is the 5-level factorial's
+    subject at +-0.5 SD (HR, SV, MBP, diameter, cf-PWV target, CO: 1e-12, the same formulas
+    in another order); at 0 it is the decade's baseline, at 1 itself (LVET included: PWDB
+    normalises LVET over the factorial, so in between it is interpolated, not compared)."""
+    three, five = P.parameters((45,), 3), P.parameters((45,), 5)
+    levels = [f"{p}_sd" for p in P.VARIED]
+    row = three.iloc[int(np.flatnonzero((three[levels].values == [1, -1, 1, 1, -1, 1])
+                                        .all(axis=1))[0])].to_dict()
+    half = five[(five[levels].values == [0.5, -0.5, 0.5, 0.5, -0.5, 0.5]).all(axis=1)]
+    moved = F.shrunk_row(row, 0.5)
+    for k in ("hr", "sv", "mbp", "dia", "pwv", "co", *levels):
+        assert moved[k] == pytest.approx(float(half[k].iloc[0]), rel=1e-12, abs=1e-12), k
+    base = three[(three[levels] == 0).all(axis=1)].iloc[0]
+    for k in ("hr", "sv", "mbp", "dia", "pwv", "co", "lvet"):
+        assert F.shrunk_row(row, 0.0)[k] == pytest.approx(float(base[k]), rel=1e-12), k
+        assert F.shrunk_row(row, 1.0)[k] == pytest.approx(float(row[k]), rel=1e-12), k
+    assert min(base["lvet"], row["lvet"]) < moved["lvet"] < max(base["lvet"], row["lvet"])
+    with pytest.raises(ModelError, match="fraction 1.5"):
+        F.shrunk_row(row, 1.5)
+
+
+def test_population_resamples_the_implausible_towards_the_baseline() -> None:
+    """A stand-in run (no simulation) that reads each subject's stroke volume from its inflow
+    and gives it an implausible amplification above a volume: the subjects above are moved
+    towards the baseline by the first fraction of :data:`SHRINK` whose volume is below it,
+    listed in ``excluded`` (as generated) and ``resampled``; the table keeps every subject,
+    with the moved values; none of its summaries is outside a range."""
+    table = P.parameters((45,), 3)
+    picks = [0, 364, 728]          # all levels -1, the baseline, all +1
+    sv = table["sv"].iloc[picks].to_numpy()
+    limit = sv[1] + 0.35 * (sv[2] - sv[1])   # the +1-SD subject above, down to fraction 0.3
+
+    def run(model: dict) -> dict[str, float]:
+        bc = model["boundary_conditions"]["n1"]
+        volume = np.trapezoid(bc["flow"], bc["time"]) * 1e6
+        return _summary(2.0 if volume > limit else 1.35)
+
+    pop = F.population((45,), subjects=picks, resample=True, run=run)
+    assert list(pop.table.index) == picks
+    assert list(pop.resampled["subject"]) == [728]
+    assert pop.resampled["fraction"].iloc[0] == pytest.approx(0.3)
+    assert set(pop.excluded["subject"]) == {728}
+    assert pop.table.loc[728, "sv"] == pytest.approx(sv[1] + 0.3 * (sv[2] - sv[1]), rel=1e-12)
+    assert list(pop.table["fraction"]) == [1.0, 1.0, 0.3]
+    for i, s in zip(pop.table.index, pop.summaries.to_dict("records"), strict=True):
+        assert not F.implausible(45, s), i
+
+    # a subject whose baseline too is outside leaves the table and stays listed
+    def never(model: dict) -> dict[str, float]:
+        return _summary(2.0)
+
+    out = F.population((45,), subjects=[728], resample=True, run=never)
+    assert len(out.table) == 0 and len(out.resampled) == 0
+    assert set(out.excluded["subject"]) == {728}
+
+
 @pytest.mark.slow
 def test_baseline_fit_brings_amplification_to_the_in_vivo_mean() -> None:
     """45 y (the baseline's amplification 1.53 against McEniery's 1.34 ± 0.16): after the
@@ -201,3 +258,22 @@ def test_baseline_fit_brings_amplification_to_the_in_vivo_mean() -> None:
         0.5 * abs(out["before"][amp] - out["target"][amp])
     assert out["factors"]["arm_stiffness"] > 1.1
     assert out["after"]["co"] == pytest.approx(out["target"]["co"], rel=0.01)
+
+
+def test_a_high_pulse_pressure_subject_is_resampled_inside_the_ranges() -> None:
+    """A real run: the 75-y subject at +1 SD stroke volume and stiffness and -1 SD diameter
+    (the factorial's high-pulse-pressure corner, outside McEniery 2005's 99 % range of the
+    pulse pressure) is moved towards the baseline until its simulated characteristics are
+    inside every range; the move kept is the first of :data:`SHRINK` that is, so the one
+    before it (if any) was outside."""
+    table = P.parameters((75,), 3)
+    levels = [f"{p}_sd" for p in P.VARIED]      # hr, sv, lvet, pwv, dia, mbp
+    i = int(np.flatnonzero((table[levels].values == [0, 1, 0, 1, -1, 0]).all(axis=1))[0])
+    pop = F.population((75,), subjects=[i], resample=True)
+    assert set(pop.excluded["subject"]) == {i}
+    assert any("pp" in c for c in pop.excluded["characteristic"])
+    fraction = float(pop.resampled["fraction"].iloc[0])
+    assert 0.0 <= fraction < 1.0
+    summary = pop.summaries.iloc[0].to_dict()
+    assert not F.implausible(75, summary)
+    assert pop.table.loc[i, "sv"] < table.loc[i, "sv"]

@@ -10,7 +10,8 @@
   synthetic data (noise-free: 1e-6).
 * Through a varying microvascular resistance (``CORONARY_VAR_RES``): the bed's values, the
   varying resistance's own R_min and R_max included, against central differences and the
-  adjoint; a law with a zero end is refused naming the parameter.
+  adjoint; a law with a zero end is refused naming the parameter. The law's contraction
+  and relaxation times likewise; its cycle period is refused by name.
 """
 
 from __future__ import annotations
@@ -132,6 +133,25 @@ def test_through_a_varying_microvascular_resistance() -> None:
     model["boundary_conditions"][node]["microvascular_resistance"] = 0.0
     path = f"boundary_conditions.{node}.microvascular_resistance_max"
     with pytest.raises(ModelError, match=f"parameter '{path}'.*varying microvascular resistance"):
+        oxyline.sensitivities(model, [path], [f"{vessel}.pressure_in.mean"])
+
+
+def test_through_the_contraction_laws_times() -> None:
+    """The same case's contraction and relaxation times (T_vc, T_vr): R(t) moves by the law's
+    slope by each time at every step (zero at the phase ends, so the periodic outputs are
+    smooth in them), against central differences and the adjoint; the law's cycle_period
+    (which must repeat with the model's cycle) is refused naming it."""
+    model, node, vessel = _svzerod_case("pulsatileFlow_R_coronary_varres.json")
+    params = [f"boundary_conditions.{node}.{k}" for k in ("contraction_time",
+                                                           "relaxation_time")]
+    outputs = [f"{vessel}.pressure_in.max", f"{vessel}.pressure_in.min",
+               f"{vessel}.pressure_out.mean", f"{vessel}.pressure_out.pulse"]
+    exact = assert_sensitivities_are_central_differences(model, params, outputs)
+    adj = oxyline.sensitivities(model, params, outputs, mode="adjoint")
+    assert_adjoint_is_forward(exact, adj)
+    model["boundary_conditions"][node]["cycle_period"] = model["period"]
+    path = f"boundary_conditions.{node}.cycle_period"
+    with pytest.raises(ModelError, match=f"parameter '{path}'.*cycle_period is not"):
         oxyline.sensitivities(model, [path], [f"{vessel}.pressure_in.mean"])
 
 

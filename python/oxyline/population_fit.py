@@ -2,8 +2,9 @@
 in-vivo data"): :func:`calibrate_baseline` fits a decade's baseline subject of
 :mod:`oxyline.populations` to McEniery 2005 (:func:`oxyline.populations.in_vivo`) and its
 cf-PWV target with the core's exact sensitivities, :func:`apply_factors` carries the factors
-to any subject, and :func:`population` runs subjects and applies PWDB's exclusion rule (the
-subjects outside the 99 % plausibility ranges listed with the value that failed).
+to any subject, and :func:`population` runs subjects and lists those outside PWDB's 99 %
+plausibility ranges with the value that failed, then either resamples each towards its
+decade's baseline until it is inside (:func:`shrunk_row`) or applies PWDB's exclusion rule.
 
 >>> from oxyline import population_fit, populations
 >>> f = {"distal_resistance": 1.1, "proximal_resistance": 1.0, "capacitance": 0.8,
@@ -19,6 +20,7 @@ from __future__ import annotations
 import copy
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -29,6 +31,7 @@ from oxyline.calibrate import sensitivities as exact
 from oxyline.populations import (
     VARIED,
     _base,
+    age_statistics,
     base_model,
     cf_pwv,
     in_vivo,
@@ -281,34 +284,100 @@ def implausible(age: float, summary: Mapping[str, float]) -> list[dict[str, Any]
             for k, (lo, hi) in plausible_ranges(age).items() if not lo <= c[k] <= hi]
 
 
+#: the fractions of its SD levels a subject outside the 99 % ranges is tried at, in this
+#: order (:func:`shrunk_row`): the first plausible one is kept. 0 is the decade's baseline,
+#: which the calibration puts within a fraction of an in-vivo SD of every target
+SHRINK = (0.9, 0.8, 0.7, 0.6, 0.5, 0.4, 0.3, 0.2, 0.1, 0.0)
+
+
+def shrunk_row(row: Mapping[str, float], fraction: float) -> dict[str, float]:
+    """The subject ``row`` (of :func:`~oxyline.populations.parameters`) moved towards its
+    decade's baseline: every SD level times ``fraction`` (1: the subject, 0: the baseline),
+    the values re-derived as :func:`~oxyline.populations.parameters` derives them (HR, SV,
+    MBP and diameter at mean + level x SD; the cf-PWV target the wall law's at the new MBP
+    and level; LVET, which PWDB normalises over the whole factorial, on the line from the
+    baseline's to the subject's). ``fraction`` is kept in the row as ``fraction``."""
+    if not 0.0 <= fraction <= 1.0:
+        raise CalibrationError(f"shrunk_row: fraction {fraction!r} is not in [0, 1]")
+    age = float(row["age"])
+    st = age_statistics(age)
+    out = dict(row)
+    for p in VARIED:
+        out[f"{p}_sd"] = float(row[f"{p}_sd"]) * fraction
+    for p in ("hr", "sv", "mbp"):
+        out[p] = st[p][0] + out[f"{p}_sd"] * st[p][1]
+    out["dia"] = (st["dia"][0] + out["dia_sd"] * st["dia"][1]) / 100
+    out["pwv"] = cf_pwv(age, float(out["mbp"]), float(out["pwv_sd"]))
+    base = _baseline_lvet(age)
+    out["lvet"] = base + fraction * (float(row["lvet"]) - base)
+    out["co"] = out["hr"] * out["sv"] / 1000
+    out["fraction"] = float(fraction)
+    return out
+
+
+@lru_cache(maxsize=16)
+def _baseline_lvet(age: float) -> float:
+    table = parameters((age,), 3)
+    return float(table[(table[[f"{p}_sd" for p in VARIED]] == 0).all(axis=1)]["lvet"].iloc[0])
+
+
 @dataclass
 class Population:
     """Subjects run and screened: ``table`` (their :func:`~oxyline.populations.parameters`
-    rows, kept ones only when screened), ``summaries`` (one
-    :func:`~oxyline.populations.subject_summary` per row of ``table``), ``patches``, and
-    ``excluded``: one row per failed characteristic of every excluded subject (``subject``,
-    ``age``, ``characteristic``, ``value``, ``low``, ``high``)."""
+    rows, kept ones only when screened; resampled ones with their moved values, every row
+    with the ``fraction`` of its SD levels kept), ``summaries`` (one
+    :func:`~oxyline.populations.subject_summary` per row of ``table``), ``patches``,
+    ``excluded``: one row per failed characteristic of every subject outside the ranges as
+    generated (``subject``, ``age``, ``characteristic``, ``value``, ``low``, ``high``), and
+    ``resampled``: one row per subject moved inside (``subject``, ``age``, ``fraction``)."""
 
     table: Any
     summaries: Any
     patches: list[dict[str, Any]]
     excluded: Any
+    resampled: Any = None
+
+
+def _subject(row: Mapping[str, float], factors: Mapping[str, float] | None,
+             run: Callable[[dict[str, Any]], Mapping[str, float]]
+             ) -> tuple[dict[str, Any], dict[str, float]]:
+    """A subject's patch (with its decade's ``factors``) and its run's summary."""
+    patch = subject_patch(row)
+    if factors is not None:
+        patch = apply_factors(patch, factors)
+    return patch, dict(run(patched(base_model(), patch)))
+
+
+def _resample(row: Mapping[str, float], factors: Mapping[str, float] | None,
+              run: Callable[[dict[str, Any]], Mapping[str, float]]
+              ) -> tuple[dict[str, float], dict[str, Any], dict[str, float]] | None:
+    """The first of :data:`SHRINK`'s moved subjects (:func:`shrunk_row`) inside every 99 %
+    range: its row, patch and summary; None if none is (not even the baseline)."""
+    for fraction in SHRINK:
+        moved = shrunk_row(row, fraction)
+        patch, summary = _subject(moved, factors, run)
+        if not implausible(float(row["age"]), summary):
+            return moved, patch, summary
+    return None
 
 
 def population(ages: Sequence[float] = (25, 35, 45, 55, 65, 75), levels: int = 3, *,
                subjects: Sequence[int] | None = None,
                factors: Mapping[float, Mapping[str, float]] | None = None,
-               plausible_only: bool = False,
+               plausible_only: bool = False, resample: bool = False,
                run: Callable[[dict[str, Any]], Mapping[str, float]] | None = None
                ) -> Population:
     """Run the PWDB-like subjects of ``ages`` (``subjects``: their row numbers in
     :func:`~oxyline.populations.parameters`, default all), with each age's calibrated
     ``factors`` ({age: factors of :func:`calibrate_baseline`}) if given, and summarise each.
-    ``plausible_only``: PWDB's rule (Charlton et al. 2019), the subjects with a
-    characteristic outside McEniery 2005's 99 % range are excluded from ``table``; whether
-    or not, ``excluded`` lists every subject outside with each characteristic and value that
-    failed. ``run``: model dict -> summary (default: :func:`oxyline.simulate` to periodicity
-    1e-4 and :func:`~oxyline.populations.subject_summary`)."""
+    ``excluded`` lists every subject outside McEniery 2005's 99 % ranges as generated, with
+    each characteristic and value that failed. Then ``resample``: such a subject is replaced
+    by the first of its moves towards the decade's baseline (:data:`SHRINK`,
+    :func:`shrunk_row`) inside every range, listed in ``resampled`` (the population keeps
+    its size, every subject plausible; a subject whose baseline too is outside stays out of
+    ``table``); else ``plausible_only``: PWDB's rule (Charlton et al. 2019), such subjects
+    leave ``table``. ``run``: model dict -> summary (default: :func:`oxyline.simulate` to
+    periodicity 1e-4 and :func:`~oxyline.populations.subject_summary`)."""
     import pandas as pd
 
     table = parameters(tuple(ages), levels)
@@ -318,27 +387,35 @@ def population(ages: Sequence[float] = (25, 35, 45, 55, 65, 75), levels: int = 3
         raise CalibrationError(f"population: subject {bad_pick[0]} is not one of the "
                                f"{len(table)} subjects of ages {list(ages)}")
     run = run or _simulate
-    kept, summaries, used, failed = [], [], [], []
+    kept, rows, summaries, used, failed, moved = [], [], [], [], [], []
     for i in picks:
-        age = float(table.iloc[i]["age"])
-        patch = subject_patch(table.iloc[i])
-        if factors is not None:
-            if age not in factors:
-                raise CalibrationError(f"population: no calibrated factors for age {age:g} "
-                                       f"(have {sorted(factors)})")
-            patch = apply_factors(patch, factors[age])
-        summary = dict(run(patched(base_model(), patch)))
+        row = {**table.iloc[i].to_dict(), "fraction": 1.0}
+        age = float(row["age"])
+        if factors is not None and age not in factors:
+            raise CalibrationError(f"population: no calibrated factors for age {age:g} "
+                                   f"(have {sorted(factors)})")
+        fac = None if factors is None else factors[age]
+        patch, summary = _subject(row, fac, run)
         bad = implausible(age, summary)
         failed += [{"subject": i, "age": age, **b} for b in bad]
-        if plausible_only and bad:
+        if bad and resample:
+            found = _resample(row, fac, run)
+            if found is None:
+                continue
+            row, patch, summary = found
+            moved.append({"subject": i, "age": age, "fraction": row["fraction"]})
+        elif bad and plausible_only:
             continue
         kept.append(i)
+        rows.append(row)
         summaries.append(summary)
         used.append(patch)
+    index = table.index[kept]
     excluded = pd.DataFrame(failed, columns=["subject", "age", "characteristic", "value",
                                              "low", "high"])
-    return Population(table.iloc[kept], pd.DataFrame(summaries, index=table.index[kept]),
-                      used, excluded)
+    return Population(pd.DataFrame(rows, index=index, columns=[*table.columns, "fraction"]),
+                      pd.DataFrame(summaries, index=index), used, excluded,
+                      pd.DataFrame(moved, columns=["subject", "age", "fraction"]))
 
 
 def _simulate(model: dict[str, Any]) -> Mapping[str, float]:

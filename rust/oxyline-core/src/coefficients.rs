@@ -100,6 +100,42 @@ impl ResistanceLaw {
         }
     }
 
+    /// ∂R(t)/∂T_c, or ∂R(t)/∂T_r with `of_relaxation`: ∂R/∂e = 2√R (√R_max − √R_min) times
+    /// the activation's slope by the time, −½ sin(πτ/T_c) πτ/T_c² over the contraction and
+    /// ½ sin(u) π/T_r (by T_c) or ½ sin(u) π(τ − T_c)/T_r² (by T_r), u = π(τ − T_c)/T_r, over
+    /// the relaxation; 0 at rest. Both vanish at the phase ends, so R(t) is differentiable in
+    /// the times at every t.
+    pub fn timing_slope(&self, of_relaxation: bool, t: f64) -> f64 {
+        let ResistanceLaw::Contraction {
+            min,
+            max,
+            contraction,
+            relaxation,
+            period,
+        } = *self;
+        let tau = t.rem_euclid(period);
+        let pi = std::f64::consts::PI;
+        let de = if tau <= contraction {
+            if of_relaxation {
+                0.0
+            } else {
+                -0.5 * (pi * tau / contraction).sin() * pi * tau / (contraction * contraction)
+            }
+        } else if tau <= contraction + relaxation {
+            let u = pi * (tau - contraction) / relaxation;
+            if of_relaxation {
+                0.5 * u.sin() * pi * (tau - contraction) / (relaxation * relaxation)
+            } else {
+                0.5 * u.sin() * pi / relaxation
+            }
+        } else {
+            return 0.0;
+        };
+        let e = self.activation(t).unwrap_or(0.0);
+        let span = max.sqrt() - min.sqrt();
+        2.0 * (min.sqrt() + span * e) * span * de
+    }
+
     /// The contraction's activation e(t) in [0, 1] (a raised cosine up over the contraction,
     /// down over the relaxation); None at rest, where R is R_min exactly.
     fn activation(&self, t: f64) -> Option<f64> {
@@ -199,5 +235,35 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn contraction_law_timing_slopes_are_its_differences() {
+        // T_c 0.3, T_r 0.4 in a 1 s cycle: times in the contraction, the relaxation, at rest
+        // and in the next cycle; central differences with a step of 1e-6 of the times
+        // (truncation ~1e-12 · the third derivative, rounding ~1e-16 · 200 / 1e-6 ~ 2e-8)
+        let at = |tc: f64, tr: f64| ResistanceLaw::contraction("c", 50.0, 200.0, tc, tr, 1.0);
+        let law = at(0.3, 0.4).unwrap();
+        for t in [0.05, 0.2, 0.29, 0.45, 0.69, 0.9, 1.2] {
+            for (of_relaxation, h) in [(false, 0.3e-6), (true, 0.4e-6)] {
+                let moved = |d: f64| {
+                    let (tc, tr) = if of_relaxation {
+                        (0.3, 0.4 + d)
+                    } else {
+                        (0.3 + d, 0.4)
+                    };
+                    at(tc, tr).unwrap().value(t)
+                };
+                let diff = (moved(h) - moved(-h)) / (2.0 * h);
+                let slope = law.timing_slope(of_relaxation, t);
+                assert!(
+                    (slope - diff).abs() <= 1e-5 * (1.0 + slope.abs()),
+                    "t {t} relaxation {of_relaxation}: {slope} vs {diff}"
+                );
+            }
+        }
+        // inside a phase the slope is not zero (the check can fail)
+        assert!(law.timing_slope(false, 0.2).abs() > 1.0);
+        assert!(law.timing_slope(true, 0.45).abs() > 1.0);
     }
 }

@@ -23,6 +23,7 @@
 
 use crate::circuit::CircuitElement;
 use crate::circuit::{Circuit, Dae};
+use crate::coefficients::ResistanceLaw;
 use crate::error::{Error, Result};
 use crate::model::{
     ActivationSpec, Arrangement, BoundarySpec, ChamberLawSpec, ChamberSpec, ChamberSphereSpec,
@@ -88,9 +89,44 @@ pub struct DaeTangent {
     pub dstenosis: Vec<(usize, f64)>,
     /// (index into `Dae::elements`, key): ∂c_el/∂p is the element's derivative by its key.
     pub delements: Vec<(usize, String)>,
-    /// (index into `Dae::varying`, of its maximum): a time-varying resistance's R(t) moves by
-    /// its law's ∂R/∂R_min (∂R/∂R_max with `true`) at each step's α_f time.
-    pub dvarying: Vec<(usize, bool)>,
+    /// (index into `Dae::varying`, which of its law's values): a time-varying resistance's
+    /// R(t) moves by its law's slope by that value at each step's α_f time.
+    pub dvarying: Vec<(usize, LawValue)>,
+}
+
+/// A varying resistance's law value a parameter is (`ResistanceLaw::Contraction`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LawValue {
+    /// R_min (`microvascular_resistance`)
+    Min,
+    /// R_max (`microvascular_resistance_max`)
+    Max,
+    /// the contraction time T_c (`contraction_time`)
+    Contraction,
+    /// the relaxation time T_r (`relaxation_time`)
+    Relaxation,
+}
+
+impl LawValue {
+    fn of_key(key: &str) -> Option<Self> {
+        match key {
+            "microvascular_resistance" => Some(LawValue::Min),
+            "microvascular_resistance_max" => Some(LawValue::Max),
+            "contraction_time" => Some(LawValue::Contraction),
+            "relaxation_time" => Some(LawValue::Relaxation),
+            _ => None,
+        }
+    }
+
+    /// ∂R(t)/∂(this value) of `law`.
+    pub fn slope(self, law: &ResistanceLaw, t: f64) -> f64 {
+        match self {
+            LawValue::Min => law.slope(false, t),
+            LawValue::Max => law.slope(true, t),
+            LawValue::Contraction => law.timing_slope(false, t),
+            LawValue::Relaxation => law.timing_slope(true, t),
+        }
+    }
 }
 
 fn unknown(path: &str, why: impl Into<String>) -> Error {
@@ -133,7 +169,7 @@ impl Parameter {
             ["vessels", name, rest @ ..] if !rest.is_empty() => vessel(spec, path, name, rest),
             _ => Err(unknown(
                 path,
-                "not a parameter path (vessels.<name>.<length|radius|youngs_modulus|lumped.resistance|lumped.capacitance|lumped.inductance|lumped.stenosis_coefficient|chamber.<key>|valve.<key>|chamber_sphere.<key>|heart_pulmonary.<key>>, boundary_conditions.<node>.<resistance|proximal_resistance|distal_resistance|capacitance|arterial_resistance|microvascular_resistance|microvascular_resistance_max|venous_resistance|arterial_capacitance|intramyocardial_capacitance|intramyocardial_pressure.scale>, scale.<resistance|compliance|inflow>)",
+                "not a parameter path (vessels.<name>.<length|radius|youngs_modulus|lumped.resistance|lumped.capacitance|lumped.inductance|lumped.stenosis_coefficient|chamber.<key>|valve.<key>|chamber_sphere.<key>|heart_pulmonary.<key>>, boundary_conditions.<node>.<resistance|proximal_resistance|distal_resistance|capacitance|arterial_resistance|microvascular_resistance|microvascular_resistance_max|contraction_time|relaxation_time|venous_resistance|arterial_capacitance|intramyocardial_capacitance|intramyocardial_pressure.scale>, scale.<resistance|compliance|inflow>)",
             )),
         }
     }
@@ -365,6 +401,20 @@ fn condition(spec: &NetworkSpec, path: &str, node: &str, key: &str) -> Result<Pa
             ),
         )
     })?;
+    // the law's period sets when R(t) repeats, and the periodic solution is that of the
+    // model's cycle: a period moved alone has no periodic solution to differentiate
+    if let (BoundarySpec::Coronary(c), "cycle_period") = (bc, key)
+        && c.microvascular_resistance_max.is_some()
+    {
+        return Err(unknown(
+            path,
+            format!(
+                "the varying microvascular resistance at node '{node}' repeats with the \
+                 cycle: its cycle_period is not differentiable (the periodic solution needs \
+                 the model's period)"
+            ),
+        ));
+    }
     if condition_value(bc, key).is_none() {
         return Err(unknown(
             path,
@@ -424,6 +474,13 @@ fn condition_value(bc: &BoundarySpec, key: &str) -> Option<(f64, Option<&'static
             "microvascular_resistance" => r(c.microvascular_resistance, "microvascular resistance"),
             "microvascular_resistance_max" => {
                 r(c.microvascular_resistance_max?, "microvascular resistance")
+            }
+            // the law's times (only with a law: R_max given)
+            "contraction_time" if c.microvascular_resistance_max.is_some() => {
+                r(c.contraction_time?, "microvascular resistance")
+            }
+            "relaxation_time" if c.microvascular_resistance_max.is_some() => {
+                r(c.relaxation_time?, "microvascular resistance")
             }
             "venous_resistance" => r(c.venous_resistance, "distal resistance"),
             "arterial_capacitance" => r(c.arterial_capacitance, "capacitor"),
@@ -702,9 +759,11 @@ impl<'a> Stamps<'a> {
                     Some(l) => {
                         let b = self.branch_named(&name(l)).ok_or_else(missing)?;
                         // a varying resistance moves by its law's slope, step by step
-                        match self.dae.varying.iter().position(|(i, _)| *i == nn + b) {
-                            Some(law) => t.dvarying.push((law, key.ends_with("_max"))),
-                            None => t.df[self.branch_r[b]] = 1.0,
+                        let law = self.dae.varying.iter().position(|(i, _)| *i == nn + b);
+                        match (law, LawValue::of_key(key)) {
+                            (Some(law), Some(which)) => t.dvarying.push((law, which)),
+                            (None, None | Some(LawValue::Min)) => t.df[self.branch_r[b]] = 1.0,
+                            _ => return Err(missing()),
                         }
                     }
                     // P_im is the series source of the microvascular and venous branches

@@ -46,7 +46,7 @@ mod chain_rule;
 pub use adjoint::{PeriodicAdjoint, periodic_adjoint, periodic_adjoint_in, periodic_adjoint_with};
 
 use super::krylov::Subspace;
-use super::parameter::DaeTangent;
+use super::parameter::{DaeTangent, LawValue};
 use super::volume::ConservedVolume;
 use crate::circuit::{Dae, Regime};
 use crate::error::{Error, Result};
@@ -166,8 +166,8 @@ struct Source {
     elem: Vec<(usize, String, Vec<usize>)>,
     /// svZeroDSolver-form stenoses' capacitor rows (`chain_rule`)
     chain: chain_rule::ChainSource,
-    /// (position in `rows`, index into `Dae::varying`, of its maximum): −∂R(t_αf) Q_αf
-    varying: Vec<(usize, usize, bool)>,
+    /// (position in `rows`, index into `Dae::varying`, which law value): −∂R(t_αf) Q_αf
+    varying: Vec<(usize, usize, LawValue)>,
     /// step k's values on `rows` at k·rows.len()
     vals: Vec<f64>,
     /// steps captured
@@ -227,7 +227,7 @@ impl Source {
             .collect();
         let chain = chain_rule::ChainSource::of(dae, t, &mut at);
         let varying = (t.dvarying.iter())
-            .map(|&(law, of_max)| (at(dae.varying[law].0), law, of_max))
+            .map(|&(law, which)| (at(dae.varying[law].0), law, which))
             .collect();
         let vals = Vec::with_capacity(steps * rows.len());
         Source {
@@ -283,9 +283,9 @@ impl Source {
         }
         self.chain.capture(pr, v);
         let t_af = time + s.af * s.dt;
-        for &(at, law, of_max) in &self.varying {
+        for &(at, law, which) in &self.varying {
             let (i, law) = &pr.dae.varying[law];
-            v[at] -= law.slope(of_max, t_af) * (y[*i] + gdt * delta[*i]);
+            v[at] -= which.slope(law, t_af) * (y[*i] + gdt * delta[*i]);
         }
     }
 
