@@ -77,12 +77,13 @@ class Model:
         self._source, self._packed = data, None
         self._pack_source()
 
-    def _pack_source(self) -> None:
+    def _pack_source(self, segments: int | None = None) -> None:
         """Keep ``source`` packed when the assembled network has more than
-        :data:`PACKED_SOURCE_SEGMENTS` segments and the dict pickles (anything else: as is)."""
-        if self._source is None or self._network is None:
-            return
-        if int(self._network.summary()["segments"]) <= PACKED_SOURCE_SEGMENTS:
+        :data:`PACKED_SOURCE_SEGMENTS` segments (``segments``: a count known before the
+        network is built) and the dict pickles (anything else: as is)."""
+        if segments is None and self._network is not None:
+            segments = int(self._network.summary()["segments"])
+        if self._source is None or segments is None or segments <= PACKED_SOURCE_SEGMENTS:
             return
         try:
             # level 1: the vessels' repeated keys and values compress ~10x at a fraction of
@@ -150,12 +151,38 @@ class Model:
         self.__dict__.update(state)
 
 
-def _network(canonical: dict[str, Any], max_memory: Any = None) -> _core.Network:
+def stated_segments(data: dict[str, Any]) -> int:
+    """The segments ``data``'s vessels state (a vessel without a count: one): a lower bound of
+    the network's (``max_length`` and the automatic counts cut more), known before it is
+    built."""
+    vessels = data.get("vessels")
+    if not isinstance(vessels, list):
+        return 0
+    n = 0
+    for v in vessels:
+        k = v.get("segments") if isinstance(v, dict) else None
+        n += k if isinstance(k, int) and not isinstance(k, bool) and k > 0 else 1
+    return n
+
+
+def _network(canonical: dict[str, Any], max_memory: Any = None, *,
+             keep_circuit: bool | None = None) -> _core.Network:
     """The core network of a canonical model (an ensemble's variant, an unpickled model): its
-    dicts are read by the core's serde types in place, no text written in between."""
+    dicts are read by the core's serde types in place, no text written in between.
+    ``keep_circuit``: keep the circuit's tables (the circuit's diagnostics, the impedance) or
+    drop them once the run's matrices are built (None: drop them for a large network; a run
+    reads only its matrices)."""
     limit = _memory.limit(max_memory, "simulation: max_memory")
     with core_errors(f"model '{canonical.get('name', '?')}'"):
-        return _core.Network(canonical, limit)
+        return _core.Network(canonical, limit, keep_circuit)
+
+
+def circuit_network(model: Model) -> _core.Network:
+    """A network of ``model`` that keeps its circuit's tables: its own, or for a large model
+    (whose network dropped them once built) the model assembled anew."""
+    if model.network.circuit_kept():
+        return model.network
+    return _network(model.canonical, model.simulation.get("max_memory"), keep_circuit=True)
 
 
 def build_model(data: dict[str, Any]) -> Model:
@@ -186,6 +213,9 @@ def _build_native(data: dict[str, Any], grow: Callable[[Any], Any] | None = None
     model = Model(name=name, simulation=sim, period=period, _source=data, transport=info,
                   _names=parts.names(), _transport_spec=tr)
     limit = _memory.limit(sim.get("max_memory"), "simulation: max_memory")
+    # a model stated above the packing threshold is packed before the core builds its network:
+    # its dicts (~200 B per segment) would otherwise sit under the build's peak
+    model._pack_source(stated_segments(data))
     with core_errors(f"model '{name}'"):
         model._network = _core.Network.from_parts(parts, limit)
     model._pack_source()
