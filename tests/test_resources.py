@@ -77,7 +77,7 @@ def test_huge_models_and_outputs_are_refused_before_allocating() -> None:
     out = {line.split(" ", 1)[0]: line.split(" ", 1)[1] for line in lines}
     limit = "above max_memory = "
     assert out["segments"].startswith("ResourceError model 'network' (1000000000 segments): "
-                                      "needs about 842.000 GB of memory (estimate), " + limit)
+                                      "needs about 752.000 GB of memory (estimate), " + limit)
     assert "segmentation max_length" in out["segments"] and "OXYLINE_MAX_MEMORY" in out["segments"]
     # 0.1 m / 1 nm = 1e8 segments
     assert out["max_length"].startswith("ResourceError model 'network' (100000000 segments)")
