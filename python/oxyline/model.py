@@ -77,13 +77,12 @@ class Model:
         self._source, self._packed = data, None
         self._pack_source()
 
-    def _pack_source(self, segments: int | None = None) -> None:
+    def _pack_source(self) -> None:
         """Keep ``source`` packed when the assembled network has more than
-        :data:`PACKED_SOURCE_SEGMENTS` segments (``segments``: a count known before the
-        network is built) and the dict pickles (anything else: as is)."""
-        if segments is None and self._network is not None:
-            segments = int(self._network.summary()["segments"])
-        if self._source is None or segments is None or segments <= PACKED_SOURCE_SEGMENTS:
+        :data:`PACKED_SOURCE_SEGMENTS` segments and the dict pickles (anything else: as is)."""
+        if self._source is None or self._network is None:
+            return
+        if int(self._network.summary()["segments"]) <= PACKED_SOURCE_SEGMENTS:
             return
         try:
             # level 1: the vessels' repeated keys and values compress ~10x at a fraction of
@@ -151,20 +150,6 @@ class Model:
         self.__dict__.update(state)
 
 
-def stated_segments(data: dict[str, Any]) -> int:
-    """The segments ``data``'s vessels state (a vessel without a count: one): a lower bound of
-    the network's (``max_length`` and the automatic counts cut more), known before it is
-    built."""
-    vessels = data.get("vessels")
-    if not isinstance(vessels, list):
-        return 0
-    n = 0
-    for v in vessels:
-        k = v.get("segments") if isinstance(v, dict) else None
-        n += k if isinstance(k, int) and not isinstance(k, bool) and k > 0 else 1
-    return n
-
-
 def _network(canonical: dict[str, Any], max_memory: Any = None, *,
              keep_circuit: bool | None = None) -> _core.Network:
     """The core network of a canonical model (an ensemble's variant, an unpickled model): its
@@ -213,9 +198,6 @@ def _build_native(data: dict[str, Any], grow: Callable[[Any], Any] | None = None
     model = Model(name=name, simulation=sim, period=period, _source=data, transport=info,
                   _names=parts.names(), _transport_spec=tr)
     limit = _memory.limit(sim.get("max_memory"), "simulation: max_memory")
-    # a model stated above the packing threshold is packed before the core builds its network:
-    # its dicts (~200 B per segment) would otherwise sit under the build's peak
-    model._pack_source(stated_segments(data))
     with core_errors(f"model '{name}'"):
         model._network = _core.Network.from_parts(parts, limit)
     model._pack_source()
