@@ -77,7 +77,7 @@ def test_huge_models_and_outputs_are_refused_before_allocating() -> None:
     out = {line.split(" ", 1)[0]: line.split(" ", 1)[1] for line in lines}
     limit = "above max_memory = "
     assert out["segments"].startswith("ResourceError model 'network' (1000000000 segments): "
-                                      "needs about 842.000 GB of memory (estimate), " + limit)
+                                      "needs about 752.000 GB of memory (estimate), " + limit)
     assert "segmentation max_length" in out["segments"] and "OXYLINE_MAX_MEMORY" in out["segments"]
     # 0.1 m / 1 nm = 1e8 segments
     assert out["max_length"].startswith("ResourceError model 'network' (100000000 segments)")
@@ -194,8 +194,8 @@ def test_the_core_constants_are_exported() -> None:
 
 
 @pytest.mark.parametrize(("segments", "vessels", "outlets", "peak"), [
-    # benches/profile_memory.py --depth 18 --config o2-k: 4 segments a vessel, VmHWM 1 386 MB
-    (1_048_572, 262_143, 131_072, 1_386e6),
+    # benches/profile_memory.py --depth 18 --config o2-k: 4 segments a vessel, VmHWM 1 280 MB
+    (1_048_572, 262_143, 131_072, 1_280e6),
     # benches/bench_scale.py --depths 21 --per-vessel 5 --configs o2-k: peak 11 748 MB
     (10_485_755, 2_097_151, 1_048_576, 11_748e6),
 ])

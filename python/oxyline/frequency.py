@@ -13,7 +13,7 @@ import numpy as np
 
 from oxyline.errors import ModelError, core_errors
 from oxyline.loader import load_model
-from oxyline.model import Model
+from oxyline.model import Model, circuit_network
 
 #: The views of :func:`impedance`: into the branches leaving the node (``"downstream"``), into
 #: those entering it (``"upstream"``), or into every branch at the node (``"both"``).
@@ -50,7 +50,7 @@ def impedance(model: Model | str | os.PathLike[str] | Mapping[str, Any], node: s
     # one symbolic analysis, then O(n) per frequency in the core with the GIL released (the
     # core checks the frequencies)
     with core_errors("impedance"):
-        re, im = m.network.input_impedances(str(node), f.ravel().tolist(), direction)
+        re, im = circuit_network(m).input_impedances(str(node), f.ravel().tolist(), direction)
     return (re + 1j * im).reshape(f.shape)
 
 

@@ -150,12 +150,24 @@ class Model:
         self.__dict__.update(state)
 
 
-def _network(canonical: dict[str, Any], max_memory: Any = None) -> _core.Network:
+def _network(canonical: dict[str, Any], max_memory: Any = None, *,
+             keep_circuit: bool | None = None) -> _core.Network:
     """The core network of a canonical model (an ensemble's variant, an unpickled model): its
-    dicts are read by the core's serde types in place, no text written in between."""
+    dicts are read by the core's serde types in place, no text written in between.
+    ``keep_circuit``: keep the circuit's tables (the circuit's diagnostics, the impedance) or
+    drop them once the run's matrices are built (None: drop them for a large network; a run
+    reads only its matrices)."""
     limit = _memory.limit(max_memory, "simulation: max_memory")
     with core_errors(f"model '{canonical.get('name', '?')}'"):
-        return _core.Network(canonical, limit)
+        return _core.Network(canonical, limit, keep_circuit)
+
+
+def circuit_network(model: Model) -> _core.Network:
+    """A network of ``model`` that keeps its circuit's tables: its own, or for a large model
+    (whose network dropped them once built) the model assembled anew."""
+    if model.network.circuit_kept():
+        return model.network
+    return _network(model.canonical, model.simulation.get("max_memory"), keep_circuit=True)
 
 
 def build_model(data: dict[str, Any]) -> Model:

@@ -77,6 +77,18 @@ fn cap<T>(v: &[T], capacity: usize) -> usize {
     capacity * std::mem::size_of::<T>()
 }
 
+/// Heap bytes of a waveform's tables.
+fn wave_heap(w: &oxyline_core::waveform::Waveform) -> usize {
+    use oxyline_core::waveform::Waveform;
+    match w {
+        Waveform::Constant(_) => 0,
+        Waveform::Table { t, v, m, .. } => {
+            8 * (t.capacity() + v.capacity() + m.as_ref().map_or(0, Vec::capacity))
+        }
+        Waveform::Fourier { cos, sin, .. } => 8 * (cos.capacity() + sin.capacity()),
+    }
+}
+
 /// Heap bytes per segment of the circuit, the segment table, the probes and the DAE, by field.
 fn report(a: &oxyline_core::assemble::Assembled, dae: &oxyline_core::circuit::Dae, segs: f64) {
     let c = &a.circuit;
@@ -86,6 +98,38 @@ fn report(a: &oxyline_core::assemble::Assembled, dae: &oxyline_core::circuit::Da
         ("circuit.branches", cap(&c.branches, c.branches.capacity())),
         ("circuit.segments", cap(&c.segments, c.segments.capacity())),
         ("circuit.names", c.names.heap_bytes()),
+        (
+            "circuit.conditions",
+            cap(&c.sources, c.sources.capacity())
+                + cap(&c.fixed_pressures, c.fixed_pressures.capacity())
+                + cap(&c.branch_sources, c.branch_sources.capacity())
+                + c.fixed_pressures
+                    .iter()
+                    .chain(&c.sources)
+                    .map(|(_, w)| wave_heap(w))
+                    .sum::<usize>(),
+        ),
+        (
+            "circuit.boundaries",
+            cap(&c.boundaries, c.boundaries.capacity())
+                + c.boundaries
+                    .iter()
+                    .map(|b| b.name.capacity())
+                    .sum::<usize>()
+                + cap(&c.source_boundary, c.source_boundary.capacity()),
+        ),
+        (
+            "circuit.end_capacitors",
+            cap(&c.end_capacitors, c.end_capacitors.capacity()),
+        ),
+        (
+            "circuit.start_values",
+            cap(&c.start_values, c.start_values.capacity()),
+        ),
+        (
+            "arrangements",
+            cap(&a.arrangements, a.arrangements.capacity()),
+        ),
         ("segment table", a.segments.heap_bytes()),
         (
             "probes",

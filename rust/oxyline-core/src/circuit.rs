@@ -501,7 +501,15 @@ pub struct Circuit {
     pub vessel_names: Vec<String>,
     /// Node and branch names (shared with the assembled DAE).
     pub names: Arc<Names>,
+    /// The per-node and per-branch tables were dropped once the DAE and the transport plan
+    /// were built from them (`release_tables`): what a run reads is in those.
+    released: bool,
 }
+
+/// Why a released circuit (`Circuit::release_tables`) cannot serve a read of its tables.
+pub const RELEASED: &str = "its node and branch tables are not kept for a model this large \
+(they were dropped once the run's matrices were built): load the model anew with the circuit \
+kept to read them";
 
 /// Which forcing and capacitances to use: the real ones, or the steady (mean) ones.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -553,6 +561,66 @@ impl Circuit {
         let names = Arc::make_mut(&mut self.names);
         names.nodes.shrink_to_fit();
         names.branches.shrink_to_fit();
+    }
+    /// Drop the per-node, per-branch and per-segment tables (and the elements and boundary
+    /// rows), keeping the names, the vessel names and the inflow sources. A run reads the DAE
+    /// and the transport plan only, which hold their own copies of what they need; the
+    /// tables are read again only by the circuit's diagnostics and the impedance, which then
+    /// need the model assembled anew. A million-segment tree's tables are ~150 B per segment
+    /// of its running peak.
+    pub fn release_tables(&mut self) {
+        let Circuit {
+            nodes,
+            branches,
+            fixed_pressures,
+            branch_sources,
+            resistance_laws,
+            boundaries,
+            source_boundary,
+            segments,
+            end_capacitors,
+            chain_rule,
+            extras,
+            moved_rows,
+            elements,
+            initial_extras,
+            start_values,
+            swapped_rows,
+            friction_cells,
+            pending_cells,
+            viscous_walls,
+            viscous_wall_of,
+            released,
+            // kept: what the output, the segment table and `source_flows` read
+            sources: _,
+            vessel_names: _,
+            names: _,
+        } = self;
+        *nodes = Vec::new();
+        *branches = Vec::new();
+        *fixed_pressures = Vec::new();
+        *branch_sources = Vec::new();
+        *resistance_laws = Vec::new();
+        *boundaries = Vec::new();
+        *source_boundary = Vec::new();
+        *segments = Vec::new();
+        *end_capacitors = Vec::new();
+        *chain_rule = Vec::new();
+        *extras = Vec::new();
+        *moved_rows = Vec::new();
+        *elements = Vec::new();
+        *initial_extras = Vec::new();
+        *start_values = Vec::new();
+        *swapped_rows = Vec::new();
+        *friction_cells = Vec::new();
+        *pending_cells = Vec::new();
+        *viscous_walls = Vec::new();
+        *viscous_wall_of = Default::default();
+        *released = true;
+    }
+    /// Whether the per-node and per-branch tables were dropped (`release_tables`).
+    pub fn is_released(&self) -> bool {
+        self.released
     }
     fn label(&mut self, name: NameOf) -> Label {
         match name {
@@ -692,6 +760,9 @@ impl Circuit {
     /// Assemble the DAE (linear in the network size): which row holds each node's equation,
     /// the node–branch incidences, then the flow matrix F, the mass diagonal E and the forcing.
     pub fn assemble(&self) -> Result<Dae> {
+        if self.released {
+            return Err(Error::model("circuit", RELEASED));
+        }
         let n = self.n_unknowns();
         if u32::try_from(n).is_err() {
             return Err(Error::model(
@@ -1375,6 +1446,34 @@ mod tests {
         assert!(matches!(e, Error::Model { .. }), "{e}");
         assert!(
             e.to_string().contains("4294967296 flow-matrix entries"),
+            "{e}"
+        );
+    }
+
+    /// A released circuit keeps the names and the inflow sources a run's output and
+    /// `source_flows` read, and refuses to assemble again (its tables are gone) with a typed
+    /// error saying why, instead of an empty system.
+    #[test]
+    fn a_released_circuit_keeps_its_names_and_refuses_to_assemble() {
+        let mut k = Circuit::default();
+        let p = k.add_node("p", 1e-9, 1e-6);
+        let out = k.add_node("out", 0.0, 0.0);
+        k.add_branch("drain", p, out, 1e8, 0.0, 0.0);
+        k.sources.push((p, Waveform::constant(1e-6)));
+        k.fixed_pressures.push((out, Waveform::constant(0.0)));
+        let dae = k.assemble().unwrap();
+        k.release_tables();
+        assert!(k.is_released());
+        assert!(k.nodes.is_empty() && k.branches.is_empty() && k.fixed_pressures.is_empty());
+        assert_eq!(
+            (k.names.node(p), dae.names.node(out)),
+            ("p".into(), "out".into())
+        );
+        assert_eq!(k.sources.len(), 1);
+        let e = k.assemble().unwrap_err();
+        assert!(matches!(e, Error::Model { .. }), "{e}");
+        assert!(
+            e.to_string().contains("not kept for a model this large"),
             "{e}"
         );
     }

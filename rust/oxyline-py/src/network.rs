@@ -8,6 +8,7 @@ use oxyline_core::model::parse;
 use oxyline_core::model::plausibility::{self, Warning};
 use oxyline_core::output::VESSEL_VARIABLES;
 use oxyline_core::run::checkpoint::{Checkpoints, Every, Snapshot};
+use oxyline_core::run::memory::RELEASED_CIRCUIT_SEGMENTS;
 use oxyline_core::{Assembled, Chunk, Dae, Error, OutputSink, Selection, Transport};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -22,10 +23,14 @@ use std::time::{Duration, Instant};
 type Built = ((Assembled, Dae), Option<Transport>, Vec<Warning>);
 
 /// `spec` with the outlets' conditions added (each node once), assembled as every ensemble
-/// member is (spec → circuit → DAE → transport), with its plausibility findings.
+/// member is (spec → circuit → DAE → transport), with its plausibility findings. Above
+/// `RELEASED_CIRCUIT_SEGMENTS` segments the circuit's node and branch tables are dropped once
+/// the DAE and the transport plan are built (a run reads those only); `keep_circuit` decides
+/// it instead when given.
 fn assemble(
     mut spec: oxyline_core::NetworkSpec,
     outlets: Vec<(String, oxyline_core::model::BoundarySpec)>,
+    keep_circuit: Option<bool>,
 ) -> Result<Built, Error> {
     use std::collections::btree_map::Entry;
     for (node, bc) in outlets {
@@ -43,7 +48,11 @@ fn assemble(
     }
     let warnings = plausibility::check(&spec);
     // the spec dropped once the circuit is assembled (a large tree's load peak)
-    let member = oxyline_core::ensemble::Member::build_owned(spec)?;
+    let mut member = oxyline_core::ensemble::Member::build_owned(spec)?;
+    let large = member.assembled.summary.segments > RELEASED_CIRCUIT_SEGMENTS;
+    if !keep_circuit.unwrap_or(!large) {
+        member.assembled.circuit.release_tables();
+    }
     Ok(((member.assembled, member.dae), member.transport, warnings))
 }
 
@@ -90,9 +99,16 @@ impl Network {
     /// The network of a canonical SI model: its JSON text, or its dicts read in place by the
     /// core's serde types (`reader::de`; an error names the vessel or condition and the key).
     /// `max_memory`: the memory limit in bytes (None: the model's own, if any).
+    /// `keep_circuit`: keep the circuit's tables (`circuit()`, the impedance) or drop them
+    /// once the run's matrices are built (None: drop them for a large model; see `assemble`).
     #[new]
-    #[pyo3(signature = (model, max_memory = None))]
-    fn new(py: Python<'_>, model: Bound<'_, PyAny>, max_memory: Option<f64>) -> PyResult<Self> {
+    #[pyo3(signature = (model, max_memory = None, keep_circuit = None))]
+    fn new(
+        py: Python<'_>,
+        model: Bound<'_, PyAny>,
+        max_memory: Option<f64>,
+        keep_circuit: Option<bool>,
+    ) -> PyResult<Self> {
         let spec = match model.cast::<PyString>() {
             // the text is parsed where Python holds it (no copy)
             Ok(text) => {
@@ -105,7 +121,7 @@ impl Network {
         let built = py.detach(move || {
             let mut spec = spec;
             spec.max_memory = max_memory.or(spec.max_memory);
-            assemble(spec, Vec::new())
+            assemble(spec, Vec::new(), keep_circuit)
         });
         Ok(Network::from_built(built.map_err(to_py)?))
     }
@@ -137,7 +153,7 @@ impl Network {
                     .map_err(|e| Error::model("model", e.to_string()))?;
             spec.vessels = vessels;
             spec.max_memory = max_memory;
-            assemble(spec, outlets)
+            assemble(spec, outlets, None)
         });
         Ok(Network::from_built(built.map_err(to_py)?))
     }
@@ -388,6 +404,12 @@ impl Network {
         Ok(Some(d))
     }
 
+    /// Whether the circuit's node and branch tables are kept (`circuit()`, the impedance):
+    /// a large network drops them once built (see `assemble`).
+    fn circuit_kept(&self) -> bool {
+        !self.inner.0.circuit.is_released()
+    }
+
     /// Names of all circuit unknowns (for diagnostics).
     fn unknown_names(&self) -> Vec<String> {
         self.inner.1.names.unknowns()
@@ -398,6 +420,12 @@ impl Network {
     fn circuit<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let (a, dae) = &*self.inner;
         let c = &a.circuit;
+        if c.is_released() {
+            return Err(ModelError::new_err(format!(
+                "circuit: {}",
+                oxyline_core::circuit::RELEASED
+            )));
+        }
         let d = PyDict::new(py);
         d.set_item("names", dae.names.unknowns())?;
         d.set_item("mass", dae.e.clone().into_pyarray(py))?;
@@ -535,12 +563,8 @@ impl Network {
     /// Input impedance (Pa·s/m³) seen from the graph node `node` at angular frequency `omega`.
     fn input_impedance(&self, node: &str, omega: f64) -> PyResult<(f64, f64)> {
         let (a, dae) = &*self.inner;
-        let idx = a
-            .circuit
-            .nodes
-            .iter()
-            .enumerate()
-            .position(|(i, _)| a.circuit.names.node(i) == node)
+        let idx = (0..dae.n_nodes)
+            .position(|i| a.circuit.names.node(i) == node)
             .ok_or_else(|| ModelError::new_err(format!("node '{node}': not in the network")))?;
         let z = oxyline_core::frequency::input_impedance(dae, idx, omega).map_err(to_py)?;
         Ok((z.re, z.im))
@@ -561,6 +585,12 @@ impl Network {
         use oxyline_core::impedance::{Direction, input_impedances_at_hz};
         let direction = Direction::parse(direction).map_err(to_py)?;
         let circuit = &self.inner.0.circuit;
+        if circuit.is_released() {
+            return Err(ModelError::new_err(format!(
+                "impedance: {}",
+                oxyline_core::circuit::RELEASED
+            )));
+        }
         let idx = (0..circuit.nodes.len())
             .position(|i| circuit.names.node(i) == node)
             .ok_or_else(|| ModelError::new_err(format!("node '{node}': not in the network")))?;

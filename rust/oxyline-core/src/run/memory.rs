@@ -16,6 +16,9 @@ use crate::error::{Error, Result};
 /// Circuit per flow segment: its node (40 bytes), its branch (~50) and their labels (~60),
 /// kept beside the DAE for the impedance and `circuit()` reads.
 pub const CIRCUIT_PER_SEGMENT: f64 = 150.0;
+/// The same above [`RELEASED_CIRCUIT_SEGMENTS`] segments, whose node and branch tables are
+/// dropped once the DAE and the transport plan are built: the labels (shared with the DAE).
+pub const RELEASED_CIRCUIT_PER_SEGMENT: f64 = 60.0;
 /// DAE per flow segment: the mass diagonal (~23 bytes) and the flow matrix F in CSR (~87,
 /// with 32-bit row starts).
 pub const DAE_PER_SEGMENT: f64 = 110.0;
@@ -44,6 +47,10 @@ pub const LOAD_PER_ELEMENT: f64 = 400.0;
 pub const DESCRIPTION_PER_ELEMENT: f64 = 1500.0;
 /// Models above this many segments keep their description packed (`oxyline.model`).
 pub const PACKED_DESCRIPTION_SEGMENTS: usize = 500_000;
+/// Networks above this many segments drop their circuit's node and branch tables once the
+/// DAE and the transport plan are built (`Circuit::release_tables`): a run reads neither, and
+/// the circuit's diagnostics and the impedance assemble the model anew.
+pub const RELEASED_CIRCUIT_SEGMENTS: usize = 500_000;
 /// Resident bytes per segment beyond the layout at a whole run's peak: the load's freed pages
 /// (the parsed model, the assembly's rows, the JSON text) stay resident under the run's state,
 /// and the run's setup (steady start, factors, first steps) peaks on top of it. Measured:
@@ -77,7 +84,12 @@ pub fn model_bytes(segments: usize, elements: usize, cells: f64, species: usize)
     } else {
         BYTES_PER_ELEMENT
     };
-    s * FLOW_BYTES_PER_SEGMENT
+    let released = if segments > RELEASED_CIRCUIT_SEGMENTS {
+        CIRCUIT_PER_SEGMENT - RELEASED_CIRCUIT_PER_SEGMENT
+    } else {
+        0.0
+    };
+    s * (FLOW_BYTES_PER_SEGMENT - released)
         + s * cells * species as f64 * TRANSPORT_BYTES_PER_CELL
         + elements as f64 * per_element
 }
@@ -245,8 +257,10 @@ mod tests {
     fn a_billion_segments_is_refused_with_the_estimate_and_the_setting() {
         let e = check_model("big", 1_000_000_000, 3, None, Some(8e9)).unwrap_err();
         let msg = e.to_string();
-        // a packed description above 500 000 segments: the core's bytes per element only
-        let need = 1e9 * FLOW_BYTES_PER_SEGMENT + 3.0 * (CORE_PER_ELEMENT + LOAD_PER_ELEMENT);
+        // a packed description and a released circuit above 500 000 segments: the core's bytes
+        // per element only, the circuit's labels only
+        let flow = FLOW_BYTES_PER_SEGMENT - CIRCUIT_PER_SEGMENT + RELEASED_CIRCUIT_PER_SEGMENT;
+        let need = 1e9 * flow + 3.0 * (CORE_PER_ELEMENT + LOAD_PER_ELEMENT);
         assert!(matches!(e, Error::Resource { bytes, .. } if bytes == need as u64));
         let told = format!("needs about {}", crate::error::human_bytes(need));
         assert!(msg.starts_with(&format!("model 'big' (1000000000 segments): {told}")));

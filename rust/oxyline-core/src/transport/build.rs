@@ -195,7 +195,7 @@ impl Transport {
         end_cells(&mut out_vessels, &out_segments, &segments, &kind);
         drop(face_of_unknown);
         let nn = kind.len();
-        let (node_ptr, node_faces, source_ptr, source_list) = incidence(nn, &faces, &sources)?;
+        let (node_ptr, node_faces, source_nodes, source_list) = incidence(nn, &faces, &sources)?;
         // the identity without refinement: left empty (see `Plan::last_sub`)
         let last_sub = if refined.chains.is_empty() {
             Vec::new()
@@ -215,7 +215,7 @@ impl Transport {
             boundary_inlet: circuit.boundaries.iter().map(|b| b.inlet).collect(),
             node_ptr,
             node_faces,
-            source_ptr,
+            source_nodes,
             source_list,
             segments,
             n_flow_faces,
@@ -816,20 +816,14 @@ fn incidence(
             }
         }
     }
-    let mut source_ptr = vec![0u32; nn + 1];
-    for (n, _, _) in sources {
-        source_ptr[n + 1] += 1;
-    }
-    for i in 0..nn {
-        source_ptr[i + 1] += source_ptr[i];
-    }
-    let mut source_list = vec![0u32; sources.len()];
-    let mut fill = source_ptr.clone();
-    for (k, (n, _, _)) in sources.iter().enumerate() {
-        source_list[fill[*n] as usize] = k as u32;
-        fill[*n] += 1;
-    }
-    Ok((node_ptr, node_faces, source_ptr, source_list))
+    // (node, source) by node, each node's sources in source order (as a per-node CSR lists
+    // them): a model has a few sources, and a row start per node cost 4 bytes per node
+    let mut by_node: Vec<(u32, u32)> = (sources.iter().enumerate())
+        .map(|(k, (n, _, _))| (*n as u32, k as u32))
+        .collect();
+    by_node.sort_unstable();
+    let (source_nodes, source_list) = by_node.into_iter().unzip();
+    Ok((node_ptr, node_faces, source_nodes, source_list))
 }
 
 impl Plan {

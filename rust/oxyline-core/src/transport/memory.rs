@@ -69,7 +69,10 @@ impl Plan {
             ("mixing", self.mixing.heap()),
             ("node_ptr", self.node_ptr.heap()),
             ("node_faces", self.node_faces.heap()),
-            ("sources", self.source_ptr.heap() + self.source_list.heap()),
+            (
+                "sources",
+                self.source_nodes.heap() + self.source_list.heap(),
+            ),
             ("segments", self.segments.heap()),
             ("face_unknowns", self.face_unknowns.heap()),
             (

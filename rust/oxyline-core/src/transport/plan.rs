@@ -266,11 +266,13 @@ pub struct Plan {
     pub(super) sources: Vec<(usize, Waveform, usize)>,
     pub(super) boundary_inlet: Vec<bool>,
     pub(super) mixing: Vec<usize>,
-    /// CSR node → incident faces, and node → flow sources (u32: a plan of 2^32 faces is
-    /// refused when built).
+    /// CSR node → incident faces (u32: a plan of 2^32 faces is refused when built).
     pub(super) node_ptr: Vec<u32>,
     pub(super) node_faces: Vec<u32>,
-    pub(super) source_ptr: Vec<u32>,
+    /// The flow sources by node: `source_list[k]` is a source of node `source_nodes[k]`,
+    /// sorted by node (a node's sources in source order). A model has a few sources: a row
+    /// start per node was 4 bytes per node for them.
+    pub(super) source_nodes: Vec<u32>,
     pub(super) source_list: Vec<u32>,
     pub(super) segments: Vec<Segment>,
     /// Faces 0..n_flow_faces carry a flow unknown; the rest are interior faces of `chains`.
@@ -355,7 +357,10 @@ impl Plan {
     /// Flow sources of node `n`.
     #[inline]
     pub(super) fn node_sources(&self, n: usize) -> &[u32] {
-        &self.source_list[self.source_ptr[n] as usize..self.source_ptr[n + 1] as usize]
+        let n = n as u32;
+        let start = self.source_nodes.partition_point(|&m| m < n);
+        let end = start + self.source_nodes[start..].partition_point(|&m| m == n);
+        &self.source_list[start..end]
     }
 
     /// The wall of piece `pc` (see [`piece_wall`]).
