@@ -92,3 +92,28 @@ def test_an_ensemble_refuses_the_model_files_estimate_by_name(key) -> None:
     # the keyword False runs the variants without it, as simulate would without the option
     ds = oxyline.simulate_ensemble(m, variants, progress=False, **{key: False})
     assert ds.status.values.tolist() == [0, 0]
+
+
+def test_the_explicit_pair_measures_a_stability_limited_run() -> None:
+    # bifurcation with the explicit pair at rtol 1e-2: RK4's stability bound, not the
+    # tolerance, sets its steps (the same steps at rtol/4: a second run at a tighter rtol
+    # measured 0). The last cycle again with the step ceiling over 4^(1/5) measures it.
+    # Reference: RK4 at T/32000 (fourth order; its own error ~5e-9 of the flow's amplitude,
+    # from its change against T/16000, ~1/400 of the pair's ~2e-6)
+    model = oxyline.load_model("bifurcation")
+    kw = {"cycles": 2, "until_periodic": None, "output_every": 1e-3, "progress": False}
+    plain = oxyline.simulate(model, rtol=1e-2, method="dopri5", **kw)
+    res = oxyline.simulate(model, rtol=1e-2, method="dopri5", estimate_time_error=True, **kw)
+    ref = oxyline.simulate(model, dt=model.period / 32000, method="rk4", **kw)
+    assert res.settings["method"] == "dopri5"
+    assert "step ceiling" in res.settings["time_error_from"]
+    got = _achieved(res, ref)
+    for kind in ("flow", "pressure", "pulse_pressure"):
+        worst, estimated = float(np.max(got[kind])), res.error_estimate[kind]
+        assert 0.5 * worst <= estimated <= 2.0 * worst, (kind, worst, estimated)
+        ratio = res.time_error[kind].to_numpy() / got[kind]
+        assert np.all((ratio >= 0.5) & (ratio <= 2.0)), (kind, np.sort(ratio))
+    assert float(np.max(got["flow"])) < 1e-2  # far within rtol: the estimate says how far
+    # the run itself is unchanged by it (the same solver path: exact equality intended)
+    assert np.array_equal(plain.data, res.data)
+    assert plain.settings["steps"] == res.settings["steps"]

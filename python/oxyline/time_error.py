@@ -109,7 +109,8 @@ def differences(a: Result, b: Result) -> dict[str, np.ndarray]:
 #: what ``settings["time_error_from"]`` says of each way of measuring the estimate
 FROM_LAST_CYCLE = "last cycle again at rtol/{factor:g}"
 FROM_LAST_CYCLE_EXPLICIT = (
-    "last cycle again at rtol/{factor:g}, the explicit pair's step ceiling over {factor:g}^(1/5)"
+    "every cycle again at rtol/{factor:g}, the explicit pair's step ceiling over "
+    "{factor:g}^(1/5)"
 )
 FROM_WHOLE_RUN = "whole run again at rtol/{factor:g}"
 #: added to :data:`FROM_WHOLE_RUN` when the explicit pair took the same steps at rtol/factor:
