@@ -23,8 +23,8 @@ use crate::error::{Error, Result};
 
 /// The controller of the second integration: the run's method at the tighter tolerance.
 enum Fine {
-    Implicit(Adaptive),
-    Explicit(Explicit),
+    Implicit(Box<Adaptive>),
+    Explicit(Box<Explicit>),
 }
 
 /// The state a cycle starts from (what `Cycles::snapshot` keeps of the flow and species,
@@ -111,14 +111,14 @@ impl Cycles<'_, '_> {
             .as_ref()
             .map(|ex| ex.tighter(self.state.dae, s, factor));
         let mut fine = match tighter {
-            Some(ex) => Fine::Explicit(ex),
-            None => Fine::Implicit(Adaptive::new(
+            Some(ex) => Fine::Explicit(Box::new(ex)),
+            None => Fine::Implicit(Box::new(Adaptive::new(
                 self.state.dae,
                 tol,
                 s.method.rho_inf(),
                 s.period,
                 s.output_every,
-            )),
+            ))),
         };
         let end = self.cycle_start_state(self.cycle_start + s.period);
         // the cycles from the kept start to the run's end (one for generalized-α)
