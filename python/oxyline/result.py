@@ -244,8 +244,9 @@ class Result:
     #: time-integration error (docs/solvers.md, "The accumulated error") as a
     #: ``pandas.DataFrame`` (index ``vessel``; columns ``flow``, ``pressure``,
     #: ``pulse_pressure`` and, with oxygen, ``po2``: each against the vessel's own scale, as
-    #: :class:`oxyline.TimeErrorEstimate.per_vessel`); None otherwise. Files keep its worst
-    #: vessel per kind (``error_estimate``), not the table.
+    #: :class:`oxyline.TimeErrorEstimate.per_vessel`); None otherwise. NetCDF/Zarr files
+    #: keep it as the variables ``time_error_<kind>`` over ``vessel`` (:meth:`to_xarray`
+    #: leaves them out), read back by :func:`oxyline.open_result`.
     time_error: Any = None
     #: the model it was run from, as JSON in the native schema (SI), so that a result file
     #: rebuilds its model (``oxyline plot`` needs no ``--model``); None above

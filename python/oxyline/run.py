@@ -48,7 +48,9 @@ from oxyline.result import (
 from oxyline.time_error import (
     FACTOR,
     FROM_LAST_CYCLE,
+    FROM_LAST_CYCLE_EXPLICIT,
     FROM_WHOLE_RUN,
+    SAME_STEPS,
     TimeErrorEstimate,
     accumulated,
     record_estimate,
@@ -707,12 +709,16 @@ def _fill_time_error(model: Model, s: Mapping[str, Any], raw: dict[str, Any], re
     from the core's second integration of the last cycle, or, where the core did not make one
     (the explicit pair, valves), from a second whole run at rtol/FACTOR."""
     finer = raw.get("finer_last_cycle")
-    if finer is not None:
+    explicit = result.settings.get("method") == "dopri5"
+    if finer is not None:  # (the explicit pair's with its step ceiling lowered too)
         coarse, fine = _last_cycle_results(model, s, raw, finer)
-        source, steps = FROM_LAST_CYCLE, int(finer["steps"]) + int(finer["rejected_steps"])
+        source = FROM_LAST_CYCLE_EXPLICIT if explicit else FROM_LAST_CYCLE
+        steps = int(finer["steps"]) + int(finer["rejected_steps"])
     else:
         coarse, fine = result, _again_finer(model, result, s["rtol"] / FACTOR, overrides)
         source = FROM_WHOLE_RUN
+        if explicit and fine.settings["steps"] == result.settings["steps"]:
+            source += SAME_STEPS  # (a tighter rtol did not change the pair's steps)
         steps = int(fine.settings["steps"]) + int(fine.settings["rejected_steps"])
     record_estimate(result, accumulated(coarse, fine), source.format(factor=FACTOR), steps)
 

@@ -116,7 +116,14 @@ def accumulated(coarse: Result, finer: Result, factor: float = FACTOR) -> dict[s
 
 #: what ``settings["time_error_from"]`` says of each way of measuring the estimate
 FROM_LAST_CYCLE = "last cycle again at rtol/{factor:g}"
+FROM_LAST_CYCLE_EXPLICIT = (
+    "every cycle again at rtol/{factor:g}, the explicit pair's step ceiling over "
+    "{factor:g}^(1/5)"
+)
 FROM_WHOLE_RUN = "whole run again at rtol/{factor:g}"
+#: added to :data:`FROM_WHOLE_RUN` when the explicit pair took the same steps at rtol/factor:
+#: the stability bound, not the tolerance, set them, and the difference understates the error
+SAME_STEPS = "; the same steps there (set by the stability bound): a lower bound"
 
 
 def per_vessel_table(per_vessel: Mapping[str, np.ndarray], vessels: list[str]) -> Any:
@@ -129,6 +136,45 @@ def per_vessel_table(per_vessel: Mapping[str, np.ndarray], vessels: list[str]) -
         index=pd.Index(list(vessels), name="vessel"),
     )
     return table
+
+
+#: the file variables of :attr:`oxyline.Result.time_error` (one per kind, over ``vessel``)
+FILE_PREFIX = "time_error_"
+
+#: what each kind's file variable holds (its ``description`` attribute)
+FILE_DESCRIPTION = {
+    "flow": "accumulated time-integration error of flow_in: max_t |dQ| / max_t |Q|",
+    "pressure": "accumulated time-integration error of pressure_in: max_t |dP| / max_t |P|",
+    "pulse_pressure": "accumulated time-integration error of the pulse pressure of "
+    "pressure_in: |dPP| / PP",
+    "po2": "accumulated time-integration error of po2_out: max_t |dPO2| / max_t PO2",
+}
+
+
+def table_variables(table: Any, vessels: list[str]) -> dict[str, Any]:
+    """The per-vessel table (:attr:`oxyline.Result.time_error`) as dataset variables over the
+    dimension ``vessel`` (in ``vessels``' order), one per kind: ``time_error_flow``, …, each a
+    dimensionless error against the vessel's own scale."""
+    rows = table.reindex(list(vessels))
+    return {
+        FILE_PREFIX + kind: (
+            ("vessel",),
+            rows[kind].to_numpy(dtype=float),
+            {"units": "1", "description": FILE_DESCRIPTION.get(kind, kind)},
+        )
+        for kind in table.columns
+    }
+
+
+def table_from_dataset(ds: Any, vessels: list[str]) -> Any:
+    """The per-vessel table written by :func:`table_variables` (None when ``ds`` has none)."""
+    names = [
+        str(n) for n in ds.data_vars if str(n).startswith(FILE_PREFIX) and ds[n].dims == ("vessel",)
+    ]
+    if not names:
+        return None
+    per_vessel = {n[len(FILE_PREFIX) :]: np.asarray(ds[n].values, dtype=float) for n in names}
+    return per_vessel_table(per_vessel, vessels)
 
 
 def record_estimate(

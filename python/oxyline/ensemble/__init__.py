@@ -83,6 +83,7 @@ def simulate_ensemble(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     workers = _workers(workers)
     control = _control(cancel, variant_timeout, client)
     model = load_model(model)
+    _refuse_model_estimates(model, overrides)
     patches, index = as_patches(variants, model)
     if output == "full" and store is None:
         _check_full_output(model, len(patches), overrides)
@@ -94,6 +95,21 @@ def simulate_ensemble(model: Model | str | os.PathLike[str] | Mapping[str, Any],
                              cancel=control["cancel"])
     return _local(model, patches, index, workers=workers, output=output, store=store,
                   progress=progress, overrides=overrides, control=control)
+
+
+def _refuse_model_estimates(model: Model, overrides: Mapping[str, Any]) -> None:
+    """The time-error estimates a model file asks for (``simulation: {estimate_time_error:
+    true}`` or ``meet_rtol``) are estimates of one run, not computed per variant: refused by
+    name instead of silently left out; the keyword ``False`` runs the variants without."""
+    from oxyline.run import _resolve
+
+    timed = _resolve(model, overrides)[3]
+    asked = {"estimate_time_error": bool(timed) and timed != "meet", "meet_rtol": timed == "meet"}
+    for key in (k for k, on in asked.items() if on):
+        raise ModelError(f"simulate_ensemble: {key} (asked by the model's simulation section) "
+                         "is not computed per variant; pass "
+                         f"{key}=False to run the variants without it, and call "
+                         f"oxyline.simulate(..., {key}=True) on the variants of interest")
 
 
 def _control(cancel: Any, variant_timeout: Any, client: Any) -> dict[str, Any]:

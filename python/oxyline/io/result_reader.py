@@ -220,6 +220,10 @@ def _result_from_dataset(ds: Any, label: str) -> Result:
     if "step_size" in ds.variables:  # an error-controlled run's step-size history
         result.step_sizes = need("step_size", ("step_time",)).astype(np.float64)
         result.step_times = need("step_time").astype(np.float64)
+    # the accumulated-error estimate of every vessel (simulate(..., estimate_time_error=True))
+    from oxyline.time_error import table_from_dataset
+
+    result.time_error = table_from_dataset(ds, vessels)
     return result
 
 

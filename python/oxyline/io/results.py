@@ -34,6 +34,10 @@ def dataset(result: Result) -> Any:
     ds.attrs["source"] = "oxyline"
     if result.step_sizes.size:
         ds = with_step_history(ds, result.step_times, result.step_sizes)
+    if result.time_error is not None:  # the accumulated error of every vessel, per kind
+        from oxyline.time_error import table_variables
+
+        ds = ds.assign(table_variables(result.time_error, result.vessels))
     for name in ds.variables:
         if ds[name].dtype == object:  # vessel names: plain strings for netCDF/zarr readers
             ds[name] = ds[name].astype(str)

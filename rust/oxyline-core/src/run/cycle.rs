@@ -336,14 +336,14 @@ impl<'r, 'f> Cycles<'r, 'f> {
             let t = rows.output_time(rows.t0, s.output_all_cycles);
             self.output_row(t, rows.t0, true, committed)?;
         }
+        if self.keeps_cycle_start() {
+            self.last_start = Some(self.cycle_start_state(rows.t0));
+        }
         if let Some(mut ex) = self.explicit.take() {
             let done = self.explicit_cycle(&mut ex, &rows, progress);
             self.explicit = Some(ex);
             done?;
         } else if self.adaptive.is_some() {
-            if self.keeps_cycle_start() {
-                self.last_start = Some(self.cycle_start_state(rows.t0));
-            }
             let mut ad = self.adaptive.take().expect("error control");
             let done = self.adaptive_cycle(&mut ad, &rows, progress);
             self.adaptive = Some(ad);

@@ -260,6 +260,21 @@ impl Explicit {
         }
     }
 
+    /// A fresh controller for the accumulated-error estimate's second integration of a cycle
+    /// (`Cycles::finer_last_cycle`): rtol / `factor`, and the step ceiling over
+    /// `factor`^(1/5). Where the stability bound, not the tolerance, sets the run's steps, a
+    /// tighter rtol alone takes the same steps and measures nothing (an estimate of 0); the
+    /// pair's fifth-order error falls by 1/`factor` when its steps shrink by `factor`^(1/5),
+    /// so the second integration's error is about 1/`factor` of the run's whichever limit
+    /// holds, as the estimate assumes.
+    pub(super) fn tighter(&self, dae: &Dae, s: &RunSettings, factor: f64) -> Explicit {
+        let tol = Tolerances {
+            rtol: self.tol.rtol / factor,
+            ..self.tol
+        };
+        Explicit::new(dae, tol, s, self.h_max * factor.powf(-0.2))
+    }
+
     /// The weights from the start state (first call only).
     fn start(&mut self, st: &State<'_, '_>) {
         if !self.peak.is_empty() {

@@ -145,6 +145,8 @@ impl Outcome {
         let events = cycles.events.map(|ev| ev.log).unwrap_or_default();
         let (last_cycle_start, last_cycle_steps) =
             (cycles.cycle_start, cycles.periodic_steps.taken().to_vec());
+        // (the last cycle's second integration of either controller, when asked)
+        let mut finer = cycles.finer;
         let explicit = cycles.explicit.map(|ex| ErrorControlOutcome {
             estimate: ex.estimate,
             steps: ex.steps,
@@ -154,7 +156,7 @@ impl Outcome {
             events: events.clone(),
             last_cycle_start,
             last_cycle_steps: last_cycle_steps.clone(),
-            finer: None,
+            finer: finer.take(),
         });
         let error_control = cycles
             .adaptive
@@ -167,7 +169,7 @@ impl Outcome {
                 events,
                 last_cycle_start,
                 last_cycle_steps,
-                finer: cycles.finer,
+                finer,
             })
             .or(explicit);
         // an error-controlled run reports its mean step
