@@ -26,12 +26,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from oxyline.errors import ModelError
-from oxyline.result import Result
+
+if TYPE_CHECKING:  # (annotations only: the result's writers import this module)
+    from oxyline.result import Result
 
 #: the tolerance of the second run is rtol over this
 FACTOR = 4.0
