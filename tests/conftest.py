@@ -219,6 +219,20 @@ def model_differences(actual: Any, expected: Any, rel: float, where: str = "mode
 # process goes through these helpers, which restore the default SIGINT disposition in the child
 # (Python then installs its KeyboardInterrupt handler) and kill and reap it whatever happens.
 
+def vessel_time_errors(res: Any, ref: Any) -> dict[str, Any]:
+    """Every vessel's error of the run `res` against the reference run `ref` (the same output
+    times), each against the vessel's own scale (flow amplitude, pressure peak, pulse
+    pressure): the achieved error a time-error estimate is checked against."""
+    import numpy as np
+
+    p, pr = res.pressure_in, ref.pressure_in
+    return {
+        "flow": np.max(np.abs(res.flow_in - ref.flow_in), 0) / np.max(np.abs(ref.flow_in), 0),
+        "pressure": np.max(np.abs(p - pr), 0) / np.max(np.abs(pr), 0),
+        "pulse_pressure": np.abs(np.ptp(p, 0) - np.ptp(pr, 0)) / np.ptp(pr, 0),
+    }
+
+
 def _default_sigint() -> None:  # runs in the child between fork and exec
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 

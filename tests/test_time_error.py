@@ -7,18 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import vessel_time_errors
 
 import oxyline
-
-
-def _achieved(res: oxyline.Result, ref: oxyline.Result) -> dict[str, np.ndarray]:
-    """Every vessel's error of `res` against the reference `ref` (the same output times)."""
-    p, pr = res.pressure_in, ref.pressure_in
-    return {
-        "flow": np.max(np.abs(res.flow_in - ref.flow_in), 0) / np.max(np.abs(ref.flow_in), 0),
-        "pressure": np.max(np.abs(p - pr), 0) / np.max(np.abs(pr), 0),
-        "pulse_pressure": np.abs(np.ptp(p, 0) - np.ptp(pr, 0)) / np.ptp(pr, 0),
-    }
 
 
 def test_the_time_error_estimate_sees_the_small_vessels_accumulated_flow_error() -> None:
@@ -33,7 +24,7 @@ def test_the_time_error_estimate_sees_the_small_vessels_accumulated_flow_error()
     rtol = 1e-2
     est = oxyline.estimate_time_error(model, rtol=rtol, method="generalized-alpha", **kw)
     ref = oxyline.simulate(model, dt=model.period / 8000, method="generalized-alpha", **kw)
-    got = _achieved(est.result, ref)
+    got = vessel_time_errors(est.result, ref)
     for kind in ("flow", "pressure", "pulse_pressure"):
         worst, estimated = float(np.max(got[kind])), est.worst[kind][0]
         assert 0.5 * worst <= estimated <= 2.0 * worst, (kind, worst, estimated)
@@ -48,7 +39,7 @@ def test_the_time_error_estimate_sees_the_small_vessels_accumulated_flow_error()
     # the run at the rtol estimated to meet rtol meets it (2x: the estimate's allowance) in
     # every vessel and kind, where the run at rtol itself missed it by ~40x
     met = oxyline.simulate(model, rtol=est.rtol_to_meet(), method="generalized-alpha", **kw)
-    for kind, e in _achieved(met, ref).items():
+    for kind, e in vessel_time_errors(met, ref).items():
         assert float(np.max(e)) <= 2 * rtol, (kind, float(np.max(e)), est.rtol_to_meet())
 
 

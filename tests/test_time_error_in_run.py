@@ -7,20 +7,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import vessel_time_errors
 
 import oxyline
 from oxyline.cli import main
-
-
-def _achieved(res: oxyline.Result, ref: oxyline.Result) -> dict[str, np.ndarray]:
-    """Every vessel's error of `res` against the reference `ref` (the same output times),
-    each against the vessel's own scale (flow amplitude, pressure peak, pulse pressure)."""
-    p, pr = res.pressure_in, ref.pressure_in
-    return {
-        "flow": np.max(np.abs(res.flow_in - ref.flow_in), 0) / np.max(np.abs(ref.flow_in), 0),
-        "pressure": np.max(np.abs(p - pr), 0) / np.max(np.abs(pr), 0),
-        "pulse_pressure": np.abs(np.ptp(p, 0) - np.ptp(pr, 0)) / np.ptp(pr, 0),
-    }
 
 
 def _cycles(n: int) -> dict[str, object]:
@@ -48,7 +38,7 @@ def adan56_runs() -> tuple[oxyline.Result, oxyline.Result, oxyline.Result, float
 
 def test_the_estimate_within_the_run_is_within_2x_of_the_achieved_error(adan56_runs) -> None:
     plain, res, ref, rtol = adan56_runs
-    got = _achieved(res, ref)
+    got = vessel_time_errors(res, ref)
     for kind in ("flow", "pressure", "pulse_pressure"):
         worst, estimated = float(np.max(got[kind])), res.error_estimate[kind]
         assert 0.5 * worst <= estimated <= 2.0 * worst, (kind, worst, estimated)
@@ -86,7 +76,7 @@ def test_paper_bifurcated_with_oxygen_reports_po2_too() -> None:
     rtol = 1e-3
     res = oxyline.simulate(model, rtol=rtol, estimate_time_error=True, **kw)
     ref = oxyline.simulate(model, dt=model.period / 8000, **kw)
-    got = _achieved(res, ref)
+    got = vessel_time_errors(res, ref)
     for kind in ("flow", "pulse_pressure"):
         worst, estimated = float(np.max(got[kind])), res.error_estimate[kind]
         assert 0.5 * worst <= estimated <= 2.0 * worst, (kind, worst, estimated)
@@ -123,6 +113,6 @@ def test_meet_rtol_meets_rtol_in_every_vessel() -> None:
     rtol = 1e-2
     met = oxyline.simulate(model, rtol=rtol, meet_rtol=True, **kw)
     ref = oxyline.simulate(model, dt=model.period / 8000, **kw)
-    for kind, e in _achieved(met, ref).items():
+    for kind, e in vessel_time_errors(met, ref).items():
         assert float(np.max(e)) <= 2 * rtol, (kind, float(np.max(e)), met.settings["rtol"])
     assert met.settings["meet_rtol"] == rtol and met.settings["meet_rtol_runs"] >= 2

@@ -7,19 +7,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import vessel_time_errors
 
 import oxyline
-
-
-def _achieved(res: oxyline.Result, ref: oxyline.Result) -> dict[str, np.ndarray]:
-    """Every vessel's error of `res` against the reference `ref` (the same output times),
-    each against the vessel's own scale (flow amplitude, pressure peak, pulse pressure)."""
-    p, pr = res.pressure_in, ref.pressure_in
-    return {
-        "flow": np.max(np.abs(res.flow_in - ref.flow_in), 0) / np.max(np.abs(ref.flow_in), 0),
-        "pressure": np.max(np.abs(p - pr), 0) / np.max(np.abs(pr), 0),
-        "pulse_pressure": np.abs(np.ptp(p, 0) - np.ptp(pr, 0)) / np.ptp(pr, 0),
-    }
 
 
 @pytest.fixture(scope="module")
@@ -62,7 +52,7 @@ def test_every_vessels_estimate_is_written_and_read_back(paper_runs, tmp_path, s
     # and the file's table is an honest estimate: within 2x of the error achieved against
     # the fixed-step reference, in every vessel whose error is not lost in the reference's
     # own (above 1 % of the worst)
-    got = _achieved(back, ref)
+    got = vessel_time_errors(back, ref)
     for kind in ("flow", "pressure", "pulse_pressure"):
         big = got[kind] > 0.01 * np.max(got[kind])
         ratio = table[kind].to_numpy()[big] / got[kind][big]
@@ -107,7 +97,7 @@ def test_the_explicit_pair_measures_a_stability_limited_run() -> None:
     ref = oxyline.simulate(model, dt=model.period / 32000, method="rk4", **kw)
     assert res.settings["method"] == "dopri5"
     assert "step ceiling" in res.settings["time_error_from"]
-    got = _achieved(res, ref)
+    got = vessel_time_errors(res, ref)
     for kind in ("flow", "pressure", "pulse_pressure"):
         worst, estimated = float(np.max(got[kind])), res.error_estimate[kind]
         assert 0.5 * worst <= estimated <= 2.0 * worst, (kind, worst, estimated)
