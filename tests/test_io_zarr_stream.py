@@ -205,3 +205,32 @@ def test_streamed_heart_outputs_equal_the_in_memory_result(tmp_path: Path, chunk
         np.testing.assert_array_equal(back.chamber_volume[name], v)
     for name, v in res.valve_status.items():
         np.testing.assert_array_equal(back.valve_status[name], v)
+
+
+def test_a_finished_store_is_read_back_before_another_writer_may_have_it(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A writer starting between a run's last write and its read-back of the store is refused
+    (the lock is held until the store is opened), so the run returns its own complete store,
+    never the newcomer's overwrite in progress (attribute complete = 0)."""
+    import xarray as xr
+
+    from oxyline.errors import OutputError
+
+    path = tmp_path / "run.zarr"
+    newcomer: list[str] = []
+    real_open = xr.open_zarr
+
+    def open_after_a_newcomer(p: Any, *args: Any, **kwargs: Any) -> Any:
+        if not newcomer:  # the newcomer starts right before the finished run reads its store
+            try:
+                oxyline.simulate_to_zarr("bifurcation", path, cycles=1, overwrite=True,
+                                         progress=False)
+                newcomer.append("wrote")
+            except OutputError as exc:
+                newcomer.append(str(exc))
+        return real_open(p, *args, **kwargs)
+
+    monkeypatch.setattr(xr, "open_zarr", open_after_a_newcomer)
+    ds = oxyline.simulate_to_zarr("bifurcation", path, cycles=2, overwrite=True, progress=False)
+    assert newcomer and "another process is writing this store" in newcomer[0], newcomer
+    assert int(ds.attrs["complete"]) == 1

@@ -1075,8 +1075,10 @@ def _close_store(store: Any, raw: dict[str, Any],
     failing disk left it unreadable after an error)."""
     import xarray as xr
 
+    # the store is read back before another writer may have it: one starting right after
+    # this run's last write would otherwise overwrite it before it is opened
     try:
-        store.finish(final_attrs(raw), raw.get("last_cycle_steps"))
+        store.finish(final_attrs(raw), raw.get("last_cycle_steps"), release=False)
     except (OSError, RuntimeError, ValueError) as exc:  # e.g. the disk just filled up
         if "error" not in raw:
             raw = {**raw, "error": OutputError(f"{store.path}: cannot write the run's final "
@@ -1089,6 +1091,8 @@ def _close_store(store: Any, raw: dict[str, Any],
         if "error" not in raw:
             raise
         opened = None
+    finally:
+        store.release()
     return raw, opened
 
 

@@ -324,10 +324,13 @@ class ZarrAppender:
                     arr.resize((self.rows, *arr.shape[1:]))
             self._consolidate()
 
-    def finish(self, attrs: dict[str, Any], step_sizes: Any = None) -> None:
+    def finish(self, attrs: dict[str, Any], step_sizes: Any = None, *,
+               release: bool = True) -> None:
         """Replace the store's attributes (e.g. with the run's facts once it has ended), add
         an error-controlled run's step-size history (``step_sizes``, the last cycle's accepted
-        steps: the variables :func:`dataset` writes), and let other writers have the store."""
+        steps: the variables :func:`dataset` writes), and let other writers have the store
+        (``release=False``: not yet, :meth:`release` does; e.g. until this writer has read
+        the store back, which a writer starting now would otherwise overwrite first)."""
         try:
             with deferred_signals():
                 if step_sizes is not None and len(step_sizes):
@@ -335,7 +338,12 @@ class ZarrAppender:
                 self._group.attrs.put(dict(attrs))
                 self._consolidate()
         finally:
-            self._lock.release()
+            if release:
+                self._lock.release()
+
+    def release(self) -> None:
+        """Let other writers have the store (after ``finish(..., release=False)``)."""
+        self._lock.release()
 
     def _write_step_history(self, step_sizes: Any) -> None:
         import warnings
