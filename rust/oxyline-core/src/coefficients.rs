@@ -211,30 +211,48 @@ mod tests {
         assert!(ResistanceLaw::contraction("c", 50.0, 200.0, 0.0, 0.4, 1.0).is_err());
     }
 
+    /// The slope of the law's value at each of `times` by each of its two parameters
+    /// (`slope(law, second, t)`) against central differences of the law built at `base`
+    /// moved by ±`step[k]` in parameter k (`at(p0, p1)`), within `tol(slope)`.
+    fn assert_slopes_are_differences(
+        at: impl Fn(f64, f64) -> ResistanceLaw,
+        base: [f64; 2],
+        step: [f64; 2],
+        times: &[f64],
+        slope: impl Fn(&ResistanceLaw, bool, f64) -> f64,
+        tol: impl Fn(f64) -> f64,
+    ) {
+        let law = at(base[0], base[1]);
+        for &t in times {
+            for (k, second) in [(0, false), (1, true)] {
+                let moved = |d: f64| {
+                    let mut p = base;
+                    p[k] += d;
+                    at(p[0], p[1]).value(t)
+                };
+                let h = step[k];
+                let diff = (moved(h) - moved(-h)) / (2.0 * h);
+                let got = slope(&law, second, t);
+                assert!(
+                    (got - diff).abs() <= tol(got),
+                    "t {t} parameter {k}: {got} vs {diff}"
+                );
+            }
+        }
+    }
+
     /// The slopes by R_min and R_max against central differences of the law's values over
     /// its phases (relative step 1e-6: truncation and rounding near 1e-10 of R).
     #[test]
     fn contraction_law_slopes_are_its_differences() {
-        let at = |min: f64, max: f64| ResistanceLaw::contraction("c", min, max, 0.3, 0.4, 1.0);
-        let law = at(50.0, 200.0).unwrap();
-        for t in [0.05, 0.2, 0.3, 0.45, 0.69, 0.9] {
-            for (of_max, h) in [(false, 50e-6), (true, 200e-6)] {
-                let moved = |d: f64| {
-                    let (min, max) = if of_max {
-                        (50.0, 200.0 + d)
-                    } else {
-                        (50.0 + d, 200.0)
-                    };
-                    at(min, max).unwrap().value(t)
-                };
-                let diff = (moved(h) - moved(-h)) / (2.0 * h);
-                let slope = law.slope(of_max, t);
-                assert!(
-                    (slope - diff).abs() <= 1e-7,
-                    "t {t} max {of_max}: {slope} vs {diff}"
-                );
-            }
-        }
+        assert_slopes_are_differences(
+            |min, max| ResistanceLaw::contraction("c", min, max, 0.3, 0.4, 1.0).unwrap(),
+            [50.0, 200.0],
+            [50e-6, 200e-6],
+            &[0.05, 0.2, 0.3, 0.45, 0.69, 0.9],
+            |law, of_max, t| law.slope(of_max, t),
+            |_| 1e-7,
+        );
     }
 
     #[test]
@@ -243,25 +261,15 @@ mod tests {
         // and in the next cycle; central differences with a step of 1e-6 of the times
         // (truncation ~1e-12 · the third derivative, rounding ~1e-16 · 200 / 1e-6 ~ 2e-8)
         let at = |tc: f64, tr: f64| ResistanceLaw::contraction("c", 50.0, 200.0, tc, tr, 1.0);
+        assert_slopes_are_differences(
+            |tc, tr| at(tc, tr).unwrap(),
+            [0.3, 0.4],
+            [0.3e-6, 0.4e-6],
+            &[0.05, 0.2, 0.29, 0.45, 0.69, 0.9, 1.2],
+            |law, of_relaxation, t| law.timing_slope(of_relaxation, t),
+            |slope| 1e-5 * (1.0 + slope.abs()),
+        );
         let law = at(0.3, 0.4).unwrap();
-        for t in [0.05, 0.2, 0.29, 0.45, 0.69, 0.9, 1.2] {
-            for (of_relaxation, h) in [(false, 0.3e-6), (true, 0.4e-6)] {
-                let moved = |d: f64| {
-                    let (tc, tr) = if of_relaxation {
-                        (0.3, 0.4 + d)
-                    } else {
-                        (0.3 + d, 0.4)
-                    };
-                    at(tc, tr).unwrap().value(t)
-                };
-                let diff = (moved(h) - moved(-h)) / (2.0 * h);
-                let slope = law.timing_slope(of_relaxation, t);
-                assert!(
-                    (slope - diff).abs() <= 1e-5 * (1.0 + slope.abs()),
-                    "t {t} relaxation {of_relaxation}: {slope} vs {diff}"
-                );
-            }
-        }
         // inside a phase the slope is not zero (the check can fail)
         assert!(law.timing_slope(false, 0.2).abs() > 1.0);
         assert!(law.timing_slope(true, 0.45).abs() > 1.0);
