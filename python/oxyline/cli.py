@@ -158,28 +158,21 @@ def _time_error_line(s: Mapping[str, Any]) -> str:
             f"({s['time_error_steps']} steps); the step control's local estimate {local}")
 
 
+#: the `run` options passed to simulate() as they are (when given), and the flags that ask for
+#: an estimate; a resumed run keeps its checkpoint's settings, so takes none of them
+_RUN_SETTINGS = ("cycles", "dt", "until_periodic", "max_cycles", "rtol", "output_every",
+                 "method")
+_RUN_FLAGS = ("estimate_space_error", "estimate_time_error")
+
+
 def _run_options(args: argparse.Namespace) -> dict[str, object]:
     """The simulate() options of the command line (checkpoints included)."""
     overrides: dict[str, object] = {"progress": not args.quiet}
-    if args.cycles is not None:
-        overrides["cycles"] = args.cycles
-    if args.dt is not None:
-        overrides["dt"] = args.dt
-    if args.until_periodic is not None:
-        overrides["until_periodic"] = None if args.until_periodic == "none" \
-            else args.until_periodic
-    if args.max_cycles is not None:
-        overrides["max_cycles"] = args.max_cycles
-    if args.rtol is not None:
-        overrides["rtol"] = args.rtol
-    if args.output_every is not None:
-        overrides["output_every"] = args.output_every
-    if getattr(args, "estimate_space_error", False):
-        overrides["estimate_space_error"] = True
-    if getattr(args, "estimate_time_error", False):
-        overrides["estimate_time_error"] = True
-    if args.method is not None:
-        overrides["method"] = args.method
+    overrides.update({k: getattr(args, k) for k in _RUN_SETTINGS
+                      if getattr(args, k) is not None})
+    if overrides.get("until_periodic") == "none":
+        overrides["until_periodic"] = None
+    overrides.update({k: True for k in _RUN_FLAGS if getattr(args, k, False)})
     if args.resume and len(overrides) > 1:
         raise InputError(f"{args.resume}: a resumed run keeps its checkpoint's settings (no "
                          "--cycles, --dt, --rtol, --until-periodic, --max-cycles, --output-every, "
@@ -214,8 +207,6 @@ def _run_closed_loop(args: argparse.Namespace) -> int:
     """`oxyline run closed-loop-o2[-tree]`: O2 around the closed loop to its periodic steady
     state (:func:`oxyline.closed_loop.simulate_o2`); prints its summary, ``-o x.json`` writes
     it (docs/oxygen.md "Oxygen around a closed loop")."""
-    import json
-
     from oxyline import closed_loop
 
     used = [k for k, v in vars(args).items() if v not in (None, False)
@@ -273,15 +264,12 @@ def _run_and_write(args: argparse.Namespace, stop: _Stop) -> int:
     # a .zarr output is written during the run (memory bounded by one chunk); --plot then
     # reads the finished store back (oxyline.open_result) instead of keeping a second copy
     stream = bool(args.output) and Path(args.output).suffix.lower() == ".zarr"
-    if stream and overrides.get("estimate_space_error"):
-        raise InputError(f"{args.output}: --estimate-space-error writes .nc or .csv, not a "
-                         "streamed .zarr store")
-    if stream and overrides.get("estimate_time_error"):
-        raise InputError(f"{args.output}: --estimate-time-error writes .nc or .csv, not a "
-                         "streamed .zarr store")
-    if stream and args.resume:
-        raise InputError(f"{args.output}: a resumed run writes .nc or .csv, not a streamed "
-                         ".zarr store")
+    for what, asked in (("--estimate-space-error", overrides.get("estimate_space_error")),
+                        ("--estimate-time-error", overrides.get("estimate_time_error")),
+                        ("a resumed run", args.resume)):
+        if stream and asked:
+            raise InputError(f"{args.output}: {what} writes .nc or .csv, not a streamed .zarr "
+                             "store")
     # from here on a signal cancels the run and its result is still written
     overrides["cancel"] = stop.event
     stop.armed = True
@@ -319,15 +307,13 @@ def _simulate(args: argparse.Namespace, model: Any, overrides: dict[str, Any], s
             print(f"{'terminated' if terminated else 'interrupted'}; partial result written "
                   f"to {args.output}", file=sys.stderr)
         return 143 if terminated else 130
-    except oxyline.OutputError as exc:  # e.g. a checkpoint the full disk refused: keep -o
+    except (oxyline.OutputError, oxyline.SolverError) as exc:
+        # the rows up to the failure are kept (an output failure, e.g. a checkpoint the full
+        # disk refused, keeps a whole Result written to -o, never into a streamed store)
         result = getattr(exc, "result", None)
-        if args.output and not stream and isinstance(result, oxyline.Result):
-            _write(result, args.output, args.overwrite)
-            print(f"partial result (up to the failure) written to {args.output}",
-                  file=sys.stderr)
-        raise
-    except oxyline.SolverError as exc:  # the rows up to the failure are kept too
-        result = getattr(exc, "result", None)
+        if isinstance(exc, oxyline.OutputError) and (
+                stream or not isinstance(result, oxyline.Result)):
+            raise
         if args.output and result is not None:
             if not stream:
                 _write(result, args.output, args.overwrite)
@@ -586,8 +572,6 @@ def _cmd_models(args: argparse.Namespace) -> int:
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
-    import os
-
     import oxyline
     from oxyline import _core
 
@@ -597,135 +581,132 @@ def _cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
-def _version() -> str:
-    from oxyline import __version__
-
-    return __version__
-
-
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from oxyline.calibrate import main_cli  # scipy is imported only for this command
 
     return main_cli(args.model, args.targets, args.output, args.quiet)
 
 
-def _add_run(p: argparse.ArgumentParser) -> None:
-    """The options of ``oxyline run``."""
-    p.add_argument("model", nargs="?", help="built-in name, or a .yaml/.json/.csv model "
-                   "(native, svZeroDSolver, openBF, tables); omitted with --resume")
-    p.add_argument("-o", "--output", help="result file: .nc (NetCDF), .zarr (written during the "
-                   "run, memory bounded), or .csv (waveforms)")
-    p.add_argument("--summary", help="per-vessel mean/min/max table: .csv, .tsv or .parquet")
-    p.add_argument("--plot", metavar="DIR", help="write waveform, profile and map figures "
-                                                 "(PNG + SVG) into DIR")
-    p.add_argument("--overwrite", action="store_true",
-                   help="replace an existing .zarr store (a .nc/.csv file is always replaced, "
-                        "once the new one is complete)")
-    p.add_argument("--cycles", type=int, help="cardiac cycles to run (default: the model's "
-                                              "simulation.cycles, else 10)")
-    p.add_argument("--dt", type=float,
-                   help="a fixed time step in s (default: the model's, else error control at "
-                        "--rtol)")
-    p.add_argument("--method", choices=["auto", "rk4", "generalized-alpha", "dopri5"],
-                   help="time integrator (default: the model's, else auto)")
-    p.add_argument("--until-periodic", type=_tolerance_or_none, metavar="TOL",
-                   help="run until the cycle-to-cycle change is below TOL (relative), at least "
-                        "--cycles and at most --max-cycles cycles; 'none' runs exactly --cycles "
-                        "even if the model asks for periodicity")
-    p.add_argument("--threads", type=int, metavar="N",
-                   help="threads of the run (default: every core; 1: serial); the results are "
-                        "the same on any number of threads")
-    p.add_argument("--rtol", type=float, metavar="TOL",
-                   help="error control: a variable step keeping the estimated error of every "
-                        "unknown within TOL (relative; default 1e-3 where no dt is given); "
-                        "excludes --dt")
-    p.add_argument("--estimate-space-error", action="store_true",
-                   help="also estimate the spatial error: the inlet impedance's change over the "
-                        "forcing's significant harmonics when every vessel's segments are "
-                        "doubled (in the summary and the result's attributes)")
-    p.add_argument("--estimate-time-error", action="store_true",
-                   help="also estimate the accumulated time-integration error of every vessel "
-                        "(the last cycle again at rtol/4; in the summary and the result's "
-                        "attributes)")
-    p.add_argument("--max-cycles", type=int, metavar="N",
-                   help="most cycles a run --until-periodic takes (default: the model's, else "
-                        "max(cycles, 100))")
-    p.add_argument("--output-every", type=float, metavar="SECONDS",
-                   help="output interval in s (default: the model's, else period/1000)")
-    p.add_argument("--checkpoint", metavar="FILE",
-                   help="write the run's state to FILE at cycle ends (atomically), to continue "
-                        "it later with --resume FILE")
-    p.add_argument("--checkpoint-every", metavar="EVERY",
-                   help="how often to checkpoint: seconds of wall time (e.g. 600) or 'N cycles' "
-                        "(default 300 s)")
-    p.add_argument("--resume", metavar="FILE",
-                   help="continue the run of checkpoint FILE (its model and settings; results "
-                        "bit-identical to an uninterrupted run); it goes on checkpointing into "
-                        "FILE")
-    p.add_argument("--quiet", action="store_true", help="no progress bar and no table")
-    p.set_defaults(func=_cmd_run)
+#: shared arguments of the subcommands, by name
+_MODEL = (("model",), {"help": "built-in name, or a model file (any supported format)"})
+_QUIET = (("--quiet",), {"action": "store_true", "help": "print nothing but errors"})
+#: the options of ``oxyline run``: (flags, add_argument keywords)
+_RUN_ARGUMENTS: tuple[tuple[tuple[str, ...], dict[str, Any]], ...] = (
+    (("model",), {"nargs": "?", "help": "built-in name, or a .yaml/.json/.csv model (native, "
+                  "svZeroDSolver, openBF, tables); omitted with --resume"}),
+    (("-o", "--output"), {"help": "result file: .nc (NetCDF), .zarr (written during the run, "
+                          "memory bounded), or .csv (waveforms)"}),
+    (("--summary",), {"help": "per-vessel mean/min/max table: .csv, .tsv or .parquet"}),
+    (("--plot",), {"metavar": "DIR", "help": "write waveform, profile and map figures (PNG + "
+                   "SVG) into DIR"}),
+    (("--overwrite",), {"action": "store_true", "help": "replace an existing .zarr store (a "
+                        ".nc/.csv file is always replaced, once the new one is complete)"}),
+    (("--cycles",), {"type": int, "help": "cardiac cycles to run (default: the model's "
+                     "simulation.cycles, else 10)"}),
+    (("--dt",), {"type": float, "help": "a fixed time step in s (default: the model's, else "
+                 "error control at --rtol)"}),
+    (("--method",), {"choices": ["auto", "rk4", "generalized-alpha", "dopri5"],
+                     "help": "time integrator (default: the model's, else auto)"}),
+    (("--until-periodic",), {"type": _tolerance_or_none, "metavar": "TOL", "help": "run until "
+                             "the cycle-to-cycle change is below TOL (relative), at least "
+                             "--cycles and at most --max-cycles cycles; 'none' runs exactly "
+                             "--cycles even if the model asks for periodicity"}),
+    (("--threads",), {"type": int, "metavar": "N", "help": "threads of the run (default: every "
+                      "core; 1: serial); the results are the same on any number of threads"}),
+    (("--rtol",), {"type": float, "metavar": "TOL", "help": "error control: a variable step "
+                   "keeping the estimated error of every unknown within TOL (relative; default "
+                   "1e-3 where no dt is given); excludes --dt"}),
+    (("--estimate-space-error",), {"action": "store_true", "help": "also estimate the spatial "
+                                   "error: the inlet impedance's change over the forcing's "
+                                   "significant harmonics when every vessel's segments are "
+                                   "doubled (in the summary and the result's attributes)"}),
+    (("--estimate-time-error",), {"action": "store_true", "help": "also estimate the "
+                                  "accumulated time-integration error of every vessel (the "
+                                  "last cycle again at rtol/4; in the summary and the result's "
+                                  "attributes)"}),
+    (("--max-cycles",), {"type": int, "metavar": "N", "help": "most cycles a run "
+                         "--until-periodic takes (default: the model's, else max(cycles, "
+                         "100))"}),
+    (("--output-every",), {"type": float, "metavar": "SECONDS", "help": "output interval in s "
+                           "(default: the model's, else period/1000)"}),
+    (("--checkpoint",), {"metavar": "FILE", "help": "write the run's state to FILE at cycle "
+                         "ends (atomically), to continue it later with --resume FILE"}),
+    (("--checkpoint-every",), {"metavar": "EVERY", "help": "how often to checkpoint: seconds "
+                               "of wall time (e.g. 600) or 'N cycles' (default 300 s)"}),
+    (("--resume",), {"metavar": "FILE", "help": "continue the run of checkpoint FILE (its "
+                     "model and settings; results bit-identical to an uninterrupted run); it "
+                     "goes on checkpointing into FILE"}),
+    (("--quiet",), {"action": "store_true", "help": "no progress bar and no table"}),
+)
+#: the subcommands: name -> (handler, add_parser keywords, arguments)
+_COMMANDS: dict[str, tuple[Any, dict[str, str], tuple[Any, ...]]] = {
+    "run": (_cmd_run, {"help": "run a model file or built-in model"}, _RUN_ARGUMENTS),
+    "plot": (_cmd_plot, {
+        "help": "write the figures of a saved result (.nc/.zarr)",
+        "description": "Write the figures of `run --plot` (PNG + SVG) from a result file "
+                       "written by `run -o` or Result.to_netcdf/to_zarr."}, (
+        (("result",), {"metavar": "RESULT", "help": "result file: .nc (NetCDF) or .zarr"}),
+        (("--plot", "-o"), {"dest": "plot", "metavar": "DIR", "required": True,
+                            "help": "directory for the figures (PNG + SVG)"}),
+        (("--model",), {"help": "the model the result was run from (built-in name or model "
+                        "file; default: the built-in model the file names)"}),
+        (("--quiet",), {"action": "store_true", "help": "print nothing"}))),
+    "validate": (_cmd_validate, {"help": "check a model and print a summary"}, (_MODEL,)),
+    "impedance": (_cmd_impedance, {
+        "help": "input impedance Z(f) seen from a node",
+        "description": "Write Z(f) = P/Q (Pa s/m^3) seen from NODE into the network downstream "
+                       "of it, for f = 0, df, ..., fmax: a CSV on stdout, or with --plot a CSV "
+                       "and a modulus/phase figure in DIR."}, (
+        _MODEL,
+        (("--node",), {"required": True, "help": "graph node (e.g. the inlet)"}),
+        (("--fmax",), {"type": float, "default": 20.0, "help": "highest frequency, Hz (20)"}),
+        (("--df",), {"type": float, "default": 0.25, "help": "frequency step, Hz (0.25)"}),
+        (("--direction",), {"choices": ("downstream", "upstream", "both"),
+                            "default": "downstream", "help": "the side of NODE to look into "
+                            "(downstream; both: every branch)"}),
+        (("--plot",), {"metavar": "DIR", "help": "write impedance.csv and impedance.png/.svg"}),
+        _QUIET)),
+    "convert": (_cmd_convert, {
+        "help": "convert a model between formats",
+        "description": "Convert IN to OUT. Formats: native (.yaml/.yml/.json), svzerod "
+                       "(svZeroDSolver JSON; read when detected, write with --to svzerod), "
+                       "tables (.csv/.tsv vessel table + <stem>_bcs table), openbf (read "
+                       "only)."}, (
+        (("input",), {"metavar": "IN", "help": "model file or built-in name"}),
+        (("output",), {"metavar": "OUT", "help": "file to write"}),
+        (("--from",), {"dest": "from_format", "choices": ["native", "svzerod", "tables", "openbf"],
+                       "help": "input format (default: detected)"}),
+        (("--to",), {"dest": "to_format", "choices": ["native", "svzerod", "tables"],
+                     "help": "output format (default: from the suffix)"}),
+        (("--units",), {"choices": ["cgs", "SI"], "default": "cgs", "help": "units of an "
+                        "svZeroDSolver output file (default cgs: cm, dyn/cm^2, mL/s)"}))),
+    "models": (_cmd_models, {"help": "list built-in models"}, ()),
+    "calibrate": (_cmd_calibrate, {"help": "fit model parameters to targets "
+                                   "(docs/calibration.md)"}, (
+        _MODEL,
+        (("targets",), {"help": "YAML/JSON file: parameters, targets, method"}),
+        (("-o", "--output"), {"required": True, "help": "calibrated model file (.yaml/.json)"}),
+        _QUIET)),
+    "info": (_cmd_info, {"help": "version and build; with MODEL, the model's summary"}, (
+        (("model",), {"nargs": "?", "help": "built-in name, or a model file (any format)"}),)),
+}
 
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="oxyline", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--version", action="version", version=f"oxyline {_version()}")
+    from oxyline import __version__
+
+    parser.add_argument("--version", action="version", version=f"oxyline {__version__}")
     parser.add_argument("--no-plausibility", action="store_true",
                         help="do not warn about model values outside their physiological "
                              "ranges (PlausibilityWarning: likely unit mix-ups)")
     sub = parser.add_subparsers(dest="command", required=True)
-    _add_run(sub.add_parser("run", help="run a model file or built-in model"))
-    p = sub.add_parser("plot", help="write the figures of a saved result (.nc/.zarr)",
-                       description="Write the figures of `run --plot` (PNG + SVG) from a result "
-                       "file written by `run -o` or Result.to_netcdf/to_zarr.")
-    p.add_argument("result", metavar="RESULT", help="result file: .nc (NetCDF) or .zarr")
-    p.add_argument("--plot", "-o", dest="plot", metavar="DIR", required=True,
-                   help="directory for the figures (PNG + SVG)")
-    p.add_argument("--model", help="the model the result was run from (built-in name or model "
-                                   "file; default: the built-in model the file names)")
-    p.add_argument("--quiet", action="store_true", help="print nothing")
-    p.set_defaults(func=_cmd_plot)
-    p = sub.add_parser("validate", help="check a model and print a summary")
-    p.add_argument("model", help="built-in name, or a model file (any supported format)")
-    p.set_defaults(func=_cmd_validate)
-    p = sub.add_parser("impedance", help="input impedance Z(f) seen from a node",
-                       description="Write Z(f) = P/Q (Pa s/m^3) seen from NODE into the network "
-                       "downstream of it, for f = 0, df, ..., fmax: a CSV on stdout, or with "
-                       "--plot a CSV and a modulus/phase figure in DIR.")
-    p.add_argument("model", help="built-in name, or a model file (any supported format)")
-    p.add_argument("--node", required=True, help="graph node (e.g. the inlet)")
-    p.add_argument("--fmax", type=float, default=20.0, help="highest frequency, Hz (20)")
-    p.add_argument("--df", type=float, default=0.25, help="frequency step, Hz (0.25)")
-    p.add_argument("--direction", choices=("downstream", "upstream", "both"),
-                   default="downstream",
-                   help="the side of NODE to look into (downstream; both: every branch)")
-    p.add_argument("--plot", metavar="DIR", help="write impedance.csv and impedance.png/.svg")
-    p.add_argument("--quiet", action="store_true", help="print nothing but errors")
-    p.set_defaults(func=_cmd_impedance)
-    p = sub.add_parser("convert", help="convert a model between formats",
-                       description="Convert IN to OUT. Formats: native (.yaml/.yml/.json), "
-                       "svzerod (svZeroDSolver JSON; read when detected, write with --to "
-                       "svzerod), tables (.csv/.tsv vessel table + <stem>_bcs table), openbf "
-                       "(read only).")
-    p.add_argument("input", metavar="IN", help="model file or built-in name")
-    p.add_argument("output", metavar="OUT", help="file to write")
-    p.add_argument("--from", dest="from_format", choices=["native", "svzerod", "tables", "openbf"],
-                   help="input format (default: detected)")
-    p.add_argument("--to", dest="to_format", choices=["native", "svzerod", "tables"],
-                   help="output format (default: from the suffix)")
-    p.add_argument("--units", choices=["cgs", "SI"], default="cgs",
-                   help="units of an svZeroDSolver output file (default cgs: cm, dyn/cm^2, mL/s)")
-    p.set_defaults(func=_cmd_convert)
-    sub.add_parser("models", help="list built-in models").set_defaults(func=_cmd_models)
-    p = sub.add_parser("calibrate", help="fit model parameters to targets (docs/calibration.md)")
-    p.add_argument("model", help="built-in name, or a model file (any supported format)")
-    p.add_argument("targets", help="YAML/JSON file: parameters, targets, method")
-    p.add_argument("-o", "--output", required=True, help="calibrated model file (.yaml/.json)")
-    p.add_argument("--quiet", action="store_true", help="print nothing but errors")
-    p.set_defaults(func=_cmd_calibrate)
-    p = sub.add_parser("info", help="version and build; with MODEL, the model's summary")
-    p.add_argument("model", nargs="?", help="built-in name, or a model file (any format)")
-    p.set_defaults(func=_cmd_info)
+    for name, (func, about, arguments) in _COMMANDS.items():
+        p = sub.add_parser(name, **about)
+        for flags, options in arguments:
+            p.add_argument(*flags, **options)
+        p.set_defaults(func=func)
     return parser
 
 

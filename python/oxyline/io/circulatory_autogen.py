@@ -477,19 +477,18 @@ def _with_wall_viscosity(vessels: list[dict[str, Any]], bcs: dict[str, dict[str,
         r, length = v["radius"], v["length"]
         C = _core.thin_wall_compliance(r, length, v["youngs_modulus"], v["wall_thickness"],
                                        v["poisson_ratio"])  # the vessel's own C
+        # one rigid tube, or the two halves of a pp module: R/2, I/2 - C - R/2, I/2
+        whole = v["arrangement"] != "pi" or v.get("segments", 1) == 1
+        mid = v["to"] if whole else f"{v['name']}.mid"
+        out.append({**rigid(v["name"], v["from"], mid, v, 1.0 if whole else 0.5), **desc})
         if v["arrangement"] == "L":
-            out.append({**rigid(v["name"], v["from"], v["to"], v, 1.0), **desc})
             wall(v["to"], C)
         elif v["arrangement"] == "inverted-L":
-            out.append({**rigid(v["name"], v["from"], v["to"], v, 1.0), **desc})
             wall(v["from"], C, f"_{v['name']}")
-        elif v.get("segments", 1) == 1:                    # pi: C/2 - R-I - C/2
-            out.append({**rigid(v["name"], v["from"], v["to"], v, 1.0), **desc})
+        elif whole:                                        # pi: C/2 - R-I - C/2
             wall(v["from"], C / 2, f"_in_{v['name']}")
             wall(v["to"], C / 2, f"_out_{v['name']}")
-        else:                                              # pp: R/2, I/2 - C - R/2, I/2
-            mid = f"{v['name']}.mid"
-            out.append({**rigid(v["name"], v["from"], mid, v, 0.5), **desc})
+        else:
             out.append(rigid(f"{v['name']}.distal_half", mid, v["to"], v, 0.5))
             wall(mid, C)
     return out, new_bcs

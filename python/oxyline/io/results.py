@@ -139,9 +139,8 @@ def to_netcdf(result: Result, path: PathLike) -> Path:
     except OutputError:
         raise
     except (OSError, RuntimeError) as exc:
-        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-        raise OutputError(f"{p}: cannot write the NetCDF file: {why}; nothing was written (the "
-                          "result is still in memory: exc.result)", result) from exc
+        raise OutputError(f"{p}: cannot write the NetCDF file: {_why(exc)}; nothing was written "
+                          "(the result is still in memory: exc.result)", result) from exc
     return p
 
 
@@ -152,6 +151,22 @@ def _zarr() -> Any:
         raise ImportError("writing Zarr needs the zarr package: pip install 'oxyline[zarr]'") \
             from None
     return zarr
+
+
+def _format2(zarr: Any) -> dict[str, Any]:
+    """``to_zarr``'s option for a Zarr format 2 store: fixed-width strings have no Zarr v3
+    spec yet, and v2 reads anywhere."""
+    return {"zarr_format": 2} if int(zarr.__version__.split(".")[0]) >= 3 else {}
+
+
+@contextlib.contextmanager
+def _quiet() -> Any:
+    """zarr's warnings silenced (consolidated metadata is not part of the v2 spec)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        yield
 
 
 #: the dims a store may chunk besides ``time`` (``space_chunk`` entries per chunk)
@@ -168,15 +183,9 @@ def _write_zarr(ds: Any, path: Path, time_chunk: int, space_chunk: int | None = 
         if "time" in var.dims or (space_chunk and set(var.dims) & set(SPACE_DIMS)):
             encoding[name] = {"chunks": tuple(max(1, _chunk(d, n, time_chunk, space_chunk))
                                               for d, n in zip(var.dims, var.shape))}
-    import warnings
-
-    kwargs: dict[str, Any] = {}
-    if int(zarr.__version__.split(".")[0]) >= 3:
-        kwargs["zarr_format"] = 2  # fixed-width strings have no Zarr v3 spec yet; v2 reads anywhere
     path.parent.mkdir(parents=True, exist_ok=True)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        ds.to_zarr(path, mode="w", encoding=encoding, **kwargs)
+    with _quiet():
+        ds.to_zarr(path, mode="w", encoding=encoding, **_format2(zarr))
 
 
 def _chunk(dim: str, n: int, time_chunk: int, space_chunk: int | None) -> int:
@@ -346,18 +355,12 @@ class ZarrAppender:
         self._lock.release()
 
     def _write_step_history(self, step_sizes: Any) -> None:
-        import warnings
-
         import xarray as xr
 
         history = with_step_history(xr.Dataset(), *step_history(step_sizes))
-        kwargs: dict[str, Any] = {}
-        if int(self._zarr.__version__.split(".")[0]) >= 3:
-            kwargs["zarr_format"] = 2  # the store's format (see _write_zarr)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with _quiet():
             # the group's attributes are put right after (finish), whatever this leaves there
-            history.to_zarr(self.path, mode="a", consolidated=False, **kwargs)
+            history.to_zarr(self.path, mode="a", consolidated=False, **_format2(self._zarr))
 
     def remove(self) -> None:
         with deferred_signals():
@@ -365,10 +368,7 @@ class ZarrAppender:
             self._lock.release()
 
     def _consolidate(self) -> None:
-        import warnings
-
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # consolidated metadata is not part of the v2 spec
+        with _quiet():
             self._zarr.consolidate_metadata(self.path, zarr_format=2)
 
 

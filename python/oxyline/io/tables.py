@@ -185,30 +185,27 @@ def _bcs_from_frame(df: Any, where: str, base: Path | None) -> dict[str, dict[st
         cell = {k: v for k, v in row.items() if not is_missing(v)}
         if kind in ("flow", "pressure"):
             q = kind
-            if isinstance(cell.get("time"), (list, tuple)):  # DataFrame with list cells
-                bc["time"] = [_number(x, el, "time") for x in cell["time"]]
-                bc[q] = [_number(x, el, q) for x in cell.get(q, [])]
-                for k in ("interpolation", "steady"):
-                    if k in cell:
-                        bc[k] = cell[k] if k == "interpolation" else _number(cell[k], el, k)
-            elif "waveform" in cell:
-                wp = Path(str(cell["waveform"]).strip())
-                if not wp.is_absolute() and base is not None:
-                    wp = base / wp
-                t, v = _read_waveform_file(wp, el)
-                bc["time"], bc[q] = t, v
-                if "interpolation" in cell:
-                    bc["interpolation"] = str(cell["interpolation"]).strip()
+            lists = isinstance(cell.get("time"), (list, tuple))  # DataFrame with list cells
+            if lists or "waveform" in cell:
+                if lists:
+                    bc["time"] = [_number(x, el, "time") for x in cell["time"]]
+                    bc[q] = [_number(x, el, q) for x in cell.get(q, [])]
+                else:
+                    wp = Path(str(cell["waveform"]).strip())
+                    bc["time"], bc[q] = _read_waveform_file(
+                        base / wp if not wp.is_absolute() and base is not None else wp, el)
+                if "interpolation" in cell:  # a list-cell frame's as it is, a file's stripped
+                    i = cell["interpolation"]
+                    bc["interpolation"] = i if lists else str(i).strip()
                 if "steady" in cell:
                     bc["steady"] = _number(cell["steady"], el, "steady")
-            elif "fourier_mean" in cell or "fourier_cos" in cell or "fourier_sin" in cell:
-                f: dict[str, Any] = {}
-                if "fourier_period" in cell:
-                    f["period"] = _number(cell["fourier_period"], el, "fourier_period")
+            elif any(f"fourier_{k}" in cell for k in ("mean", "cos", "sin")):
+                f: dict[str, Any] = {"period": _number(cell["fourier_period"], el,
+                                                       "fourier_period")} \
+                    if "fourier_period" in cell else {}
                 f["mean"] = _number(cell.get("fourier_mean", 0.0), el, "fourier_mean")
-                for k in ("cos", "sin"):
-                    if f"fourier_{k}" in cell:
-                        f[k] = _coefficients(cell[f"fourier_{k}"], el, f"fourier_{k}")
+                f.update({k: _coefficients(cell[f"fourier_{k}"], el, f"fourier_{k}")
+                          for k in ("cos", "sin") if f"fourier_{k}" in cell})
                 bc["fourier"] = f
             elif "value" in cell or q in cell:
                 key = "value" if "value" in cell else q
@@ -304,38 +301,29 @@ def to_tables(model: Model, waveform_dir: PathLike | None = None) -> tuple[Any, 
         if kind in ("flow", "pressure"):
             if "fourier" in bc:
                 f = bc["fourier"]
-                for k in ("period", "mean"):
-                    if k in f:
-                        row[f"fourier_{k}"] = f[k]
-                for k in ("cos", "sin"):
-                    if k in f:
-                        row[f"fourier_{k}"] = " ".join(repr(float(x)) for x in f[k])
+                row.update({f"fourier_{k}": f[k] if k in ("period", "mean")
+                            else " ".join(repr(float(x)) for x in f[k])
+                            for k in ("period", "mean", "cos", "sin") if k in f})
+            elif "time" in bc and wdir is None:
+                row["time"], row[kind] = list(bc["time"]), list(bc[kind])
             elif "time" in bc:
-                if wdir is None:
-                    row["time"], row[kind] = list(bc["time"]), list(bc[kind])
-                    for k in ("interpolation", "steady"):
-                        if k in bc:
-                            row[k] = bc[k]
-                    brows.append(row)
-                    continue
                 wdir.mkdir(parents=True, exist_ok=True)
                 wp = confined_file(wdir, node, ".csv", f"{el}: node")
                 lines = [f"time,{kind}"] + [f"{float(t)!r},{float(x)!r}"
                                             for t, x in zip(bc["time"], bc[kind])]
                 wp.write_text("\n".join(lines) + "\n")
                 row["waveform"] = str(wp)
-                for k in ("interpolation", "steady"):
-                    if k in bc:
-                        row[k] = bc[k]
             else:
                 row["value"] = bc.get("value", bc.get(kind))
+            if "time" in bc:
+                row.update({k: bc[k] for k in ("interpolation", "steady") if k in bc})
         else:
             for k in ("resistance", "proximal_resistance", "capacitance", "distal_resistance",
                       "pressure"):
+                if isinstance(bc.get(k), Mapping):
+                    raise ModelError(f"{el}: a time-varying '{k}' cannot be written as a "
+                                     "table cell")
                 if k in bc:
-                    if isinstance(bc[k], Mapping):
-                        raise ModelError(f"{el}: a time-varying '{k}' cannot be written as a "
-                                         "table cell")
                     row[k] = bc[k]
         brows.append(row)
     bcols = [c for c in (*BC_COLUMNS, "time", "flow") if any(c in r for r in brows)]

@@ -13,10 +13,11 @@ Numbers stay the file's, as in :mod:`oxyline.io.svzerod`.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from typing import Any
 
 from oxyline.errors import ModelError, UnsupportedElement
+from oxyline.io.svzerod.values import mapped, number
 
 HEART = "CLH"
 HEART_INLET = "J_heart_inlet"
@@ -59,22 +60,17 @@ VARIABLES = (("V_RA", "right_atrium"), ("Q_RA", ("tricuspid", 2)), ("P_RV", ("tr
              ("Q_LV", ("aortic", 2)))
 BLOCK_KEYS = {"outlet_blocks", "closed_loop_type", "cardiac_cycle_period", "parameters"}
 
-Num = Callable[[Any, str, str], float]
-
 
 def handles_initial(key: str) -> bool:
     """Whether an ``initial_condition`` entry is the heart block's (read here)."""
     return key.endswith(f":{HEART}")
 
 
-def boundary_condition(kind: str, vals: Mapping[str, Any], el: str, num: Num) -> dict[str, Any]:
+def boundary_condition(kind: str, vals: Mapping[str, Any], el: str) -> dict[str, Any]:
     """The parameters of a closed-loop boundary condition (placed as elements by
     :func:`add_blocks`, not as a native boundary condition)."""
-    out: dict[str, Any] = {"type": kind}
-    for key in sorted(BC_PARAMS[kind] - {"closed_loop_outlet"}):
-        if key not in vals:
-            raise ModelError(f"{el}: missing '{key}'")
-        out[key] = num(vals[key], el, key)
+    keys = sorted(BC_PARAMS[kind] - {"closed_loop_outlet"})
+    out: dict[str, Any] = {"type": kind, **mapped(vals, el, {k: k for k in keys})}
     if kind == "ClosedLoopRCR" and vals.get("closed_loop_outlet") is not True:
         raise UnsupportedElement(f"{el}: a ClosedLoopRCR without closed_loop_outlet = true "
                                  "(its outlet joined to another block) is not supported")
@@ -94,7 +90,7 @@ def heart_period(cfg: Mapping[str, Any]) -> float | None:
     return None
 
 
-def _heart(block: Mapping[str, Any], period: float, initial: Mapping[str, Any], num: Num
+def _heart(block: Mapping[str, Any], period: float, initial: Mapping[str, Any]
            ) -> tuple[dict[str, Any], dict[str, float]]:
     """The native ``heart_pulmonary`` element and the intramyocardial factors by ventricle."""
     el = "closed-loop block 'ClosedLoopHeartAndPulmonary'"
@@ -107,12 +103,9 @@ def _heart(block: Mapping[str, Any], period: float, initial: Mapping[str, Any], 
     for k in params:
         if k not in HEART_PARAMS and k not in FACTORS and not k.startswith("_"):
             raise UnsupportedElement(f"{el}: unknown parameter '{k}'")
-    native: dict[str, Any] = {"period": period}
-    for k, nat in HEART_PARAMS.items():
-        if k not in params:
-            raise ModelError(f"{el}: missing parameter '{k}'")
-        native[nat] = num(params[k], el, k)
-    factors = {side: num(params.get(k, 0.0), el, k) for k, side in FACTORS.items()}
+    native: dict[str, Any] = {"period": period, **mapped(params, el, HEART_PARAMS,
+                                                          what="parameter ")}
+    factors = {side: number(params.get(k, 0.0), el, k) for k, side in FACTORS.items()}
     for key, value in initial.items():
         if not handles_initial(key):
             continue
@@ -120,13 +113,13 @@ def _heart(block: Mapping[str, Any], period: float, initial: Mapping[str, Any], 
         if var not in INITIAL:
             raise UnsupportedElement(f"model: 'initial_condition' entry '{key}' is not supported "
                                      f"(of the heart block only {', '.join(INITIAL)} are)")
-        native[INITIAL[var]] = num(value, "initial_condition", key)
+        native[INITIAL[var]] = number(value, "initial_condition", key)
     return native, factors
 
 
 def add_blocks(cfg: Mapping[str, Any], period: float, vessels: list[dict[str, Any]],
-               bcs: Mapping[str, tuple[str, dict[str, Any]]], attach: Any, names: set[str],
-               num: Num) -> None:
+               bcs: Mapping[str, tuple[str, dict[str, Any]]], attach: Any, names: set[str]
+               ) -> None:
     """Append the heart block, the closed-loop boundary conditions' elements and the heart's
     outlet connections to ``vessels`` (joined with ``attach`` as the importer joins vessels).
     ``bcs`` are the file's boundary conditions: each closed-loop one's node is already the
@@ -156,8 +149,7 @@ def add_blocks(cfg: Mapping[str, Any], period: float, vessels: list[dict[str, An
             raise ModelError(f"block '{n}': name already used (svZeroDSolver reserves it for "
                              "the closed-loop heart)")
     initial = cfg.get("initial_condition") or {}
-    heart, factors = _heart(hearts[0], period, initial if isinstance(initial, Mapping) else {},
-                            num)
+    heart, factors = _heart(hearts[0], period, initial if isinstance(initial, Mapping) else {})
     vessels.append({"name": HEART, "heart_pulmonary": heart, "output": False,
                     "description": "svZeroDSolver ClosedLoopHeartAndPulmonary"})
     attach(HEART, "in", HEART_INLET, "the heart block")

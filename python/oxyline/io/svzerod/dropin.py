@@ -330,25 +330,6 @@ def _check_output_memory(s: RunSettings, shape: tuple[int, int]) -> None:
             "number_of_cardiac_cycles (with output_all_cycles), or raise output_interval")
 
 
-def _wanted(s: RunSettings) -> tuple[np.ndarray, int]:
-    """Global step indices svZeroDSolver outputs, and the first one."""
-    steps = s.points_per_cycle - 1
-    first = 0 if s.output_all_cycles else steps * (s.cycles - 1)
-    return np.arange(first, steps * s.cycles + 1, s.output_interval), first
-
-
-def _output_times(s: RunSettings, wanted: np.ndarray, first: int) -> np.ndarray:
-    times = s.dt * wanted.astype(float)
-    if not s.output_all_cycles:
-        times = times - s.dt * float(first)
-    return times
-
-
-def _check_times(s: RunSettings, got: np.ndarray, times: np.ndarray) -> None:
-    if np.max(np.abs(got - times), initial=0.0) > 1e-9 * s.period * max(1, s.cycles):
-        raise ModelError("internal error: output times of the core do not match svZeroDSolver's")
-
-
 def _simulate(model: Model, kw: Mapping[str, Any], rules: Mapping[str, Any],
               **stream: Any) -> Mapping[str, Any]:
     """One core run of the drop-in; its error raised."""
@@ -368,7 +349,10 @@ def _run(model: Model, native: Mapping[str, Any], s: RunSettings, method: str,
     if "cycle_mean_stop" in rules:
         return _run_cycle_error(model, native, s, method, columns, shape, rules)
     k = s.output_interval
-    wanted, first = _wanted(s)
+    # the global step indices svZeroDSolver outputs, from the first one
+    steps = s.points_per_cycle - 1
+    first = 0 if s.output_all_cycles else steps * (s.cycles - 1)
+    wanted = np.arange(first, steps * s.cycles + 1, k)
     # the core records every `stride`-th global step (and the start of the last cycle)
     if method == "generalized-alpha" and (s.output_all_cycles or first % k == 0):
         stride = k
@@ -409,8 +393,12 @@ def _run(model: Model, native: Mapping[str, Any], s: RunSettings, method: str,
     if count["out"] != wanted.size:
         raise ModelError(f"internal error: {count['out']} output rows from the core, "
                          f"expected {wanted.size}")
-    times = _output_times(s, wanted, first)
-    _check_times(s, np.concatenate(core_times) if core_times else np.empty(0), times)
+    times = s.dt * wanted.astype(float)
+    if not s.output_all_cycles:
+        times = times - s.dt * float(first)
+    got = np.concatenate(core_times) if core_times else np.empty(0)
+    if np.max(np.abs(got - times), initial=0.0) > 1e-9 * s.period * max(1, s.cycles):
+        raise ModelError("internal error: output times of the core do not match svZeroDSolver's")
     return times, values, derivs
 
 

@@ -8,10 +8,12 @@ into oxyline's native ``coronary`` condition (docs/physics.md §1.7, docs/svzero
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection, Mapping
+from collections.abc import Collection, Mapping
 from typing import Any
 
+from oxyline import _core
 from oxyline.errors import ModelError, UnsupportedElement
+from oxyline.io.svzerod.values import mapped, number, numbers, required
 
 #: svZeroDSolver's parameters of each supported condition type
 BC_PARAMS = {
@@ -25,37 +27,26 @@ _COMMON = {"Ra1": "arterial_resistance", "Ca": "arterial_capacitance",
 _VAR_RES = {"Ra2_min": "microvascular_resistance", "Ra2_max": "microvascular_resistance_max",
             "T_vc": "contraction_time", "T_vr": "relaxation_time"}
 
-Num = Callable[[Any, str, str], float]
-NumList = Callable[[Any, str, str], list[float]]
-Table = Callable[[list[float], list[float], str], tuple[list[float], list[float]]]
-
-
-def boundary_condition(kind: str, vals: Mapping[str, Any], el: str, num: Num, numlist: NumList,
-                       table: Table) -> tuple[dict[str, Any], float | None]:
+def boundary_condition(kind: str, vals: Mapping[str, Any], el: str
+                       ) -> tuple[dict[str, Any], float | None]:
     """The native ``coronary`` condition of a ``CORONARY``/``CORONARY_VAR_RES`` entry, and the
-    period of its intramyocardial pressure table (None when constant). ``num``, ``numlist`` and
-    ``table`` are the importer's checked readers (number, list of numbers, periodic table)."""
+    period of its intramyocardial pressure table (None when constant)."""
     names = dict(_COMMON, **(_VAR_RES if kind == "CORONARY_VAR_RES" else {"Ra2": "microvascular_resistance"}))
-    native: dict[str, Any] = {"type": "coronary"}
-    for key, nat in names.items():
-        if key not in vals:
-            raise ModelError(f"{el}: missing '{key}'")
-        native[nat] = num(vals[key], el, key)
-    native["pressure"] = num(vals.get("P_v", 0.0), el, "P_v")
-    if "Pim" not in vals:
-        raise ModelError(f"{el}: missing 'Pim'")
-    raw = vals["Pim"]
-    pim = [num(raw, el, "Pim")] if not isinstance(raw, (list, tuple)) else numlist(raw, el, "Pim")
+    native: dict[str, Any] = {"type": "coronary", **mapped(vals, el, names),
+                              "pressure": number(vals.get("P_v", 0.0), el, "P_v")}
+    raw = required(vals, "Pim", el)
+    pim = [number(raw, el, "Pim")] if not isinstance(raw, (list, tuple)) \
+        else numbers(raw, el, "Pim")
     if not pim:
         raise ModelError(f"{el}: 'Pim' is empty")
     period = None
     if len(pim) == 1:
         native["intramyocardial_pressure"] = pim[0]
     else:
-        t = numlist(vals.get("t"), el, "t")
+        t = numbers(vals.get("t"), el, "t")
         if len(t) != len(pim):
             raise ModelError(f"{el}: 't' has {len(t)} entries but 'Pim' has {len(pim)}")
-        tt, yy = table(t, pim, el)
+        tt, yy = _core.svzerod_periodic_table(t, pim, el)  # as the reader's FLOW tables
         period = t[-1] - t[0]
         # svZeroDSolver's steady start uses the arithmetic mean of the samples
         native["intramyocardial_pressure"] = {"time": tt, "pressure": yy,
@@ -77,12 +68,19 @@ def finish(bcs: Mapping[str, tuple[str, dict[str, Any]]], period: float) -> None
 VALVE_TYPES = {"ValveTanh": "tanh", "PiecewiseValve": "piecewise"}
 VALVE_PARAMS = {"ValveTanh": {"Rmax", "Rmin", "Steepness", "upstream_block", "downstream_block"},
                 "PiecewiseValve": {"Rmax", "Rmin", "upstream_block", "downstream_block"}}
-CHAMBER_TYPES = {"ChamberElastanceInductor", "LinearElastanceChamber",
-                 "ChamberElastanceInductorExponential"}
-CHAMBER_PARAMS = {"ChamberElastanceInductor": {"Emax", "Emin", "Vrd", "Vrs", "Impedance"},
-                  "LinearElastanceChamber": {"Emax", "Epass", "Vrest"},
-                  "ChamberElastanceInductorExponential": {"Emax", "Impedance", "Kxp", "Kxv",
-                                                          "Vaso"}}
+#: svZeroDSolver chamber type -> (native law, its parameter -> native key); every parameter is
+#: required but the ChamberElastanceInductor's ``Impedance`` (0 when absent)
+CHAMBER_LAWS = {
+    "ChamberElastanceInductor": ("elastance-inductor", {
+        "Emax": "max_elastance", "Emin": "min_elastance", "Vrd": "rest_volume_diastole",
+        "Vrs": "rest_volume_systole", "Impedance": "inductance"}),
+    "ChamberElastanceInductorExponential": ("exponential", {
+        "Emax": "max_elastance", "Kxp": "passive_pressure",
+        "Kxv": "passive_volume_coefficient", "Vaso": "rest_volume", "Impedance": "inductance"}),
+    "LinearElastanceChamber": ("linear", {
+        "Emax": "max_elastance", "Epass": "passive_elastance", "Vrest": "rest_volume"}),
+}
+CHAMBER_PARAMS = {kind: set(keys) for kind, (_, keys) in CHAMBER_LAWS.items()}
 #: svZeroDSolver activation function -> (native kind, its parameters)
 ACTIVATIONS = {
     "half_cosine": ("half-cosine", ("t_active", "t_twitch")),
@@ -120,34 +118,18 @@ def _known_entry(entry: Mapping[str, Any], what: str, types: Collection[str],
     return kind, el, vals
 
 
-def chamber(c: Mapping[str, Any], period: float, initial: Mapping[str, Any], num: Num
-            ) -> dict[str, Any]:
+def chamber(c: Mapping[str, Any], period: float, initial: Mapping[str, Any]) -> dict[str, Any]:
     """The native ``chamber`` element of one svZeroDSolver chamber entry (without its ends)."""
     name = c["name"]
-    kind, el, vals = _known_entry(c, "chamber", CHAMBER_TYPES, CHAMBER_PARAMS, "values")
-    missing = [k for k in CHAMBER_PARAMS[kind] - {"Impedance"} if k not in vals]
-    if missing:
-        raise ModelError(f"{el}: missing '{missing[0]}'")
+    kind, el, vals = _known_entry(c, "chamber", CHAMBER_LAWS, CHAMBER_PARAMS, "values")
+    native_law, keys = CHAMBER_LAWS[kind]
+    optional = {"Impedance": 0.0} if kind == "ChamberElastanceInductor" else {}
+    law: dict[str, Any] = {"law": native_law, **mapped(vals, el, keys, optional)}
     act = c.get("activation_function")
     if kind == "ChamberElastanceInductor":
         # its own half-cosine when no activation function is given
         act = act or {"type": "half_cosine", **{k: c["values"][k] for k in ("t_active", "t_twitch")
                                                   if k in c["values"]}}
-        law = {"law": "elastance-inductor", "max_elastance": num(vals["Emax"], el, "Emax"),
-               "min_elastance": num(vals["Emin"], el, "Emin"),
-               "rest_volume_diastole": num(vals["Vrd"], el, "Vrd"),
-               "rest_volume_systole": num(vals["Vrs"], el, "Vrs"),
-               "inductance": num(vals.get("Impedance", 0.0), el, "Impedance")}
-    elif kind == "ChamberElastanceInductorExponential":
-        law = {"law": "exponential", "max_elastance": num(vals["Emax"], el, "Emax"),
-               "passive_pressure": num(vals["Kxp"], el, "Kxp"),
-               "passive_volume_coefficient": num(vals["Kxv"], el, "Kxv"),
-               "rest_volume": num(vals["Vaso"], el, "Vaso"),
-               "inductance": num(vals["Impedance"], el, "Impedance")}
-    else:
-        law = {"law": "linear", "max_elastance": num(vals["Emax"], el, "Emax"),
-               "passive_elastance": num(vals["Epass"], el, "Epass"),
-               "rest_volume": num(vals["Vrest"], el, "Vrest")}
     if not isinstance(act, Mapping) or act.get("type") not in ACTIVATIONS:
         raise UnsupportedElement(f"{el}: activation_function must be one of "
                                  f"{sorted(ACTIVATIONS)}, got {act!r}")
@@ -156,25 +138,25 @@ def chamber(c: Mapping[str, Any], period: float, initial: Mapping[str, Any], num
         if k not in act:
             raise ModelError(f"{el}: activation_function needs '{k}'")
     law["activation"] = {"kind": native_kind,
-                         **{ACTIVATION_KEYS.get(k, k): num(act[k], el, k) for k in keys}}
+                         **{ACTIVATION_KEYS.get(k, k): number(act[k], el, k) for k in keys}}
     law["period"] = period
     v0 = initial.get(f"Vc:{name}")
     if v0 is not None:
-        law["initial_volume"] = num(v0, el, f"initial_condition Vc:{name}")
+        law["initial_volume"] = number(v0, el, f"initial_condition Vc:{name}")
     return law
 
 
-def valve(v: Mapping[str, Any], num: Num) -> tuple[dict[str, Any], str, str]:
+def valve(v: Mapping[str, Any]) -> tuple[dict[str, Any], str, str]:
     """The native ``valve`` element of one svZeroDSolver valve entry and its (upstream,
     downstream) block names."""
     kind, el, p = _known_entry(v, "valve", VALVE_TYPES, VALVE_PARAMS, "params")
     for k in VALVE_PARAMS[kind]:
         if k not in p:
             raise ModelError(f"{el}: missing '{k}'")
-    native = {"law": VALVE_TYPES[kind], "min_resistance": num(p["Rmin"], el, "Rmin"),
-              "max_resistance": num(p["Rmax"], el, "Rmax")}
+    native = {"law": VALVE_TYPES[kind], "min_resistance": number(p["Rmin"], el, "Rmin"),
+              "max_resistance": number(p["Rmax"], el, "Rmax")}
     if kind == "ValveTanh":
-        native["steepness"] = num(p["Steepness"], el, "Steepness")
+        native["steepness"] = number(p["Steepness"], el, "Steepness")
     return native, str(p["upstream_block"]), str(p["downstream_block"])
 
 
@@ -191,14 +173,8 @@ SPHERE_KEYS = {"rho": "density", "thick0": "wall_thickness", "radius0": "referen
 SPHERE_VARIABLES = ("radius", "velo", "stress", "tau", "volume")
 
 
-def chamber_sphere(vals: Mapping[str, Any], el: str, period: float, num: Num) -> dict[str, Any]:
+def chamber_sphere(vals: Mapping[str, Any], el: str, period: float) -> dict[str, Any]:
     """The native ``chamber_sphere`` element of a ChamberSphere vessel's
     ``zero_d_element_values`` (every parameter is required, as svZeroDSolver requires it)."""
-    out: dict[str, Any] = {}
-    for key, nat in SPHERE_KEYS.items():
-        if key not in vals:
-            raise ModelError(f"{el}: missing '{key}'")
-        out[nat] = num(vals[key], el, key)
     # svZeroDSolver evaluates the activation on the time within the model's cardiac period
-    out["period"] = period
-    return out
+    return {**mapped(vals, el, SPHERE_KEYS), "period": period}

@@ -16,6 +16,7 @@ from typing import Any
 
 from oxyline.errors import UnsupportedElement
 from oxyline.io.svzerod import closed_loop as svzerod_closed_loop
+from oxyline.io.svzerod.values import is_comment, number
 
 #: blocks whose unknowns svZeroDSolver's node values fix (checked against svzerod 3.2, round-off
 #: agreement): a coronary's compartment pressure at the start (P_Cim_0) and a
@@ -25,10 +26,6 @@ SUPPORTED_JUNCTIONS = {"NORMAL_JUNCTION", "internal_junction"}
 #: svZeroDSolver's node variables and chamber volumes; other prefixed names are internal
 #: variables of a block (an RCR's ``pressure_c``), which are not set here
 NODE_PREFIXES = {"pressure", "flow", "Vc"}
-
-
-def _is_comment(key: str) -> bool:
-    return key.startswith("_")
 
 
 def _defaults(section: Mapping[str, Any]) -> dict[str, float]:
@@ -55,23 +52,23 @@ def _check_blocks(cfg: Mapping[str, Any], key: str) -> None:
 
 
 def _node_values(section: Mapping[str, Any], connections: list[tuple[str, str]],
-                 el: str, num: Any) -> dict[tuple[str, str], tuple[float, float]] | None:
+                 el: str) -> dict[tuple[str, str], tuple[float, float]] | None:
     """(pressure, flow) of every svZeroDSolver node, or None when the section names none."""
     names = {f"{q}:{a}:{b}" for a, b in connections for q in ("pressure", "flow")}
     given = [k for k in section if k in names]
     defaults = _defaults(section)
     if not given and not defaults:
         return None
-    return {(a, b): (num(section.get(f"pressure:{a}:{b}", defaults.get("pressure", 0.0)), el,
-                         f"pressure:{a}:{b}"),
-                     num(section.get(f"flow:{a}:{b}", defaults.get("flow", 0.0)), el,
-                         f"flow:{a}:{b}"))
+    return {(a, b): (number(section.get(f"pressure:{a}:{b}", defaults.get("pressure", 0.0)), el,
+                            f"pressure:{a}:{b}"),
+                     number(section.get(f"flow:{a}:{b}", defaults.get("flow", 0.0)), el,
+                            f"flow:{a}:{b}"))
             for a, b in connections}
 
 
 def apply(cfg: Mapping[str, Any], vessels: list[dict[str, Any]],
           ends: list[tuple[str, str, str]], connections: list[tuple[str, str]],
-          crl: list[tuple[dict[str, Any], dict[str, Any]]], num: Any) -> None:
+          crl: list[tuple[dict[str, Any], dict[str, Any]]]) -> None:
     """Write the native ``initial``/``initial_rate`` of ``vessels`` (dicts by name) from the
     file's sections. ``ends``: svZeroDSolver block -> (native vessel at its inlet, at its
     outlet); ``connections``: svZeroDSolver's nodes (upstream block, downstream block)."""
@@ -90,13 +87,13 @@ def apply(cfg: Mapping[str, Any], vessels: list[dict[str, Any]],
                 raise UnsupportedElement(f"model: 'initial_condition_d' entry '{vc[0]}' (a "
                                          "chamber volume's rate) is not supported")
         # the heart block's own entries (V_RA:CLH, ...) are read by svzerod_closed_loop
-        internal = [k for k in section if not _is_comment(k) and ":" in k
+        internal = [k for k in section if not is_comment(k) and ":" in k
                     and k.split(":", 1)[0] not in NODE_PREFIXES
                     and not svzerod_closed_loop.handles_initial(k)]
         if internal:
             raise UnsupportedElement(f"model: '{key}' entry '{internal[0]}' (an internal "
                                      "variable of a block) is not supported")
-        values = _node_values(section, connections, key, num)
+        values = _node_values(section, connections, key)
         if values is None:
             continue
         _check_blocks(cfg, key)

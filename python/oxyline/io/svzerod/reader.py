@@ -11,9 +11,10 @@ against svZeroDSolver: docs/svzerod.md ("What is supported", "Peer cases"); the 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -25,6 +26,7 @@ from oxyline.io.svzerod import closed_loop as svzerod_closed_loop
 from oxyline.io.svzerod import coupling as svzerod_coupling
 from oxyline.io.svzerod import heart as svzerod_heart
 from oxyline.io.svzerod import initial as svzerod_initial
+from oxyline.io.svzerod.values import is_comment, mapped, number, numbers, required
 from oxyline.model import Model, _build
 
 COLUMNS = ("name", "time", "flow_in", "flow_out", "pressure_in", "pressure_out")
@@ -47,7 +49,6 @@ FRAME_UNITS = {
 # `description` is free text; the calibrator's observations and settings do not change a forward
 # simulation, and svZeroDSolver ignores them too
 TOP_IGNORED = {"description", "calibration_parameters", "y", "dy"}
-TOP_UNSUPPORTED: dict[str, str] = {}
 SIM_KEYS = {
     "number_of_cardiac_cycles", "number_of_time_pts_per_cardiac_cycle", "absolute_tolerance",
     "maximum_nonlinear_iterations", "steady_initial", "rho_infty", "output_variable_based",
@@ -69,18 +70,20 @@ BC_ENTRY_KEYS = {"bc_name", "bc_type", "bc_values"}
 VESSEL_TYPES = {"BloodVessel", "BloodVesselCRL", "BloodVesselRC", "ChamberSphere"}
 NORMAL_JUNCTIONS = {"NORMAL_JUNCTION", "internal_junction"}
 JUNCTION_TYPES = NORMAL_JUNCTIONS | {"BloodVesselJunction", "resistive_junction"}
-# block types this importer knows and cannot translate, with the reason (other unknown types
-# are refused with the list of supported ones)
-UNSUPPORTED_TYPES: dict[str, str] = {}
-BLOOD_VESSEL_PARAMS = {"R_poiseuille", "C", "L", "stenosis_coefficient"}
-#: BloodVesselRC's parameters (a native ``through_rc`` element, docs/physics.md §1.8)
-RC_VESSEL_PARAMS = {"Rpd", "Cp"}
 BVJ_PARAMS = ("R_poiseuille", "L", "stenosis_coefficient")
+#: svZeroDSolver's parameter -> the native key, of a BloodVessel, a BloodVesselRC (a native
+#: ``through_rc`` element, docs/physics.md §1.8) and the RESISTANCE and RCR conditions
+LUMPED_KEYS = {"R_poiseuille": "resistance", "C": "capacitance", "L": "inductance",
+               "stenosis_coefficient": "stenosis_coefficient"}
+RC_KEYS = {"Rpd": "resistance", "Cp": "capacitance"}
+RESISTANCE_KEYS = {"R": "resistance", "Pd": "pressure"}
+RCR_KEYS = {"Rp": "proximal_resistance", "C": "capacitance", "Rd": "distal_resistance",
+            "Pd": "pressure"}
 BC_PARAMS = {
     "FLOW": {"Q", "t"},
     "PRESSURE": {"P", "t"},
-    "RESISTANCE": {"R", "Pd"},
-    "RCR": {"Rp", "C", "Rd", "Pd"},
+    "RESISTANCE": set(RESISTANCE_KEYS),
+    "RCR": set(RCR_KEYS),
     **svzerod_heart.BC_PARAMS,
     **svzerod_closed_loop.BC_PARAMS,
 }
@@ -151,70 +154,37 @@ def _read_config(config: Mapping[str, Any] | str | os.PathLike[str]) -> dict[str
     return read_mapping(config)
 
 
-def _is_comment(key: str) -> bool:
-    return isinstance(key, str) and key.startswith("_")
-
-
 def _mapping(d: Any, element: str) -> Mapping[str, Any]:
     if not isinstance(d, Mapping):
         raise ModelError(f"{element}: expected a JSON object, got {type(d).__name__}")
     return d
 
 
-def _check_params(d: Any, allowed: set[str] | tuple[str, ...], element: str) -> Mapping[str, Any]:
+def _check_params(d: Any, allowed: Collection[str], element: str) -> Mapping[str, Any]:
     d = _mapping(d, element)
     for k in d:
-        if not _is_comment(k) and k not in allowed:
+        if not is_comment(k) and k not in allowed:
             raise UnsupportedElement(
                 f"{element}: unknown parameter '{k}' (supported: {', '.join(sorted(allowed))})")
     return d
 
 
-def _num(v: Any, element: str, key: str) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise ModelError(f"{element}: '{key}' must be a number, got {v!r}")
-    try:
-        x = float(v)
-    except OverflowError:  # an integer beyond any float
-        x = math.inf
-    if not math.isfinite(x):
-        got = x if isinstance(v, float) else f"an integer of {v.bit_length()} bits"
-        raise ModelError(f"{element}: '{key}' must be finite, got {got}")
-    return x
-
-
-def _numlist(v: Any, element: str, key: str) -> list[float]:
-    if not isinstance(v, (list, tuple)):
-        raise ModelError(f"{element}: '{key}' must be a list of numbers (svZeroDSolver reads "
-                         f"it as an array), got {v!r}")
-    return [_num(x, element, f"{key}[{i}]") for i, x in enumerate(v)]
-
-
 def _entry(raw: Any, where: str, name_key: str, label: str, allowed: Any, type_key: str,
            types: Any) -> tuple[Mapping[str, Any], str, str, str]:
     """Check one entry of a section list (vessel, junction, boundary condition): a mapping with a
-    name, only known keys and a supported type (an unsupported one is refused with the reason
-    from ``UNSUPPORTED_TYPES`` when it has one). Returns (entry, name, type, element label)."""
+    name, only known keys and a supported type (another is refused with the list of supported
+    ones). Returns (entry, name, type, element label)."""
     entry = _mapping(raw, where)
-    name = str(_required(entry, name_key, where))
+    name = str(required(entry, name_key, where))
     el = f"{label} '{name}'"
     for k in entry:
-        if k not in allowed and not _is_comment(k):
+        if k not in allowed and not is_comment(k):
             raise UnsupportedElement(f"{el}: unknown key '{k}'")
-    kind = _required(entry, type_key, el)
-    if isinstance(kind, str) and kind in UNSUPPORTED_TYPES:
-        raise UnsupportedElement(f"{el}: {type_key} '{kind}' is not supported: "
-                                 f"{UNSUPPORTED_TYPES[kind]}")
+    kind = required(entry, type_key, el)
     if not isinstance(kind, str) or kind not in types:
         raise UnsupportedElement(f"{el}: {type_key} '{kind}' is not supported (supported: "
                                  f"{', '.join(sorted(types))})")
     return entry, name, kind, el
-
-
-def _required(d: Mapping[str, Any], key: str, element: str) -> Any:
-    if key not in d:
-        raise ModelError(f"{element}: missing '{key}'")
-    return d[key]
 
 
 def _flag(sim: Mapping[str, Any], key: str, default: bool) -> bool:
@@ -227,7 +197,7 @@ def _flag(sim: Mapping[str, Any], key: str, default: bool) -> bool:
 def _int(sim: Mapping[str, Any], key: str, default: int | None, minimum: int) -> int:
     if key not in sim and default is not None:
         return default
-    v = _required(sim, key, "simulation_parameters")
+    v = required(sim, key, "simulation_parameters")
     if isinstance(v, float) and v.is_integer():  # JSON 10.0, read as an integer by svZeroDSolver
         v = int(v)
     if isinstance(v, bool) or not isinstance(v, int) or not minimum <= v <= MAX_COUNT:
@@ -252,17 +222,6 @@ def _check_steps(cycles: int, pts: int, where: str) -> None:
                             f"steps per cycle = {steps:.3g} time steps, more than the "
                             f"{MAX_TIME_STEPS:.0e} a run may plan (number_of_cardiac_cycles, "
                             "number_of_time_pts_per_cardiac_cycle)")
-
-
-# ------------------------------------------------------------------------------------------
-# time tables
-
-
-def _periodic_table(t: list[float], v: list[float], element: str) -> tuple[list[float], list[float]]:
-    """Time table over [0, P] that reproduces svZeroDSolver's lookup ``fmod(time, P)`` with
-    P = t[-1] - t[0] (linear extrapolation of the first segment below t[0]): the core's
-    (``oxyline_core::waveform::fmod_table``), which also checks that ``t`` increases."""
-    return _core.svzerod_periodic_table(t, v, element)
 
 
 # ------------------------------------------------------------------------------------------
@@ -364,8 +323,8 @@ def _resistive_junction(j: Mapping[str, Any], jname: str, el: str, inlets: list[
     """P_in,i - P_c = R_i Q_in,i and P_c - P_out,k = R_k Q_out,k around a centre node
     (svZeroDSolver's ResistiveJunction): one hidden R vessel per port, R listed for the
     inlets, then the outlets."""
-    vals = _check_params(_required(j, "junction_values", el), {"R"}, el)
-    r = _numlist(_required(vals, "R", el), el, "R")
+    vals = _check_params(required(j, "junction_values", el), {"R"}, el)
+    r = numbers(required(vals, "R", el), el, "R")
     if len(r) != len(inlets) + len(outlets):
         raise ModelError(f"{el}: 'R' has {len(r)} entries for {len(inlets)} inlets and "
                          f"{len(outlets)} outlets")
@@ -385,13 +344,13 @@ def _blood_vessel_junction(j: Mapping[str, Any], jname: str, el: str, inlets: li
                            outlets: list[str], attach: Any,
                            hidden: list[dict[str, Any]]) -> None:
     """BloodVesselJunction: one inlet, an R(+S)-L branch (no C) to every outlet."""
-    vals = _check_params(_required(j, "junction_values", el), BVJ_PARAMS, el)
+    vals = _check_params(required(j, "junction_values", el), BVJ_PARAMS, el)
     if len(inlets) != 1:
         raise UnsupportedElement(f"{el}: {len(inlets)} inlets; a BloodVesselJunction has "
                                  "exactly one")
     lists = {}
     for key in BVJ_PARAMS:
-        lists[key] = _numlist(_required(vals, key, el), el, key)
+        lists[key] = numbers(required(vals, key, el), el, key)
         if len(lists[key]) != len(outlets):
             raise ModelError(f"{el}: '{key}' has {len(lists[key])} entries for "
                              f"{len(outlets)} outlets")
@@ -458,7 +417,7 @@ def _heart_elements(cfg: Mapping[str, Any], period: float, vessels: list[dict[st
     for c in svzerod_heart._entries(cfg.get("chambers", []), "chambers"):
         if c["name"] in names or c["name"] in bcs:
             raise ModelError(f"chamber '{c['name']}': name already used by another block")
-        native = svzerod_heart.chamber(c, period, initial, _num)
+        native = svzerod_heart.chamber(c, period, initial)
         vessels.append({"name": c["name"], "chamber": native,
                         "description": f"svZeroDSolver {c.get('type')}"})
         layout.vessels.append((c["name"], c["name"], c["name"]))
@@ -470,7 +429,7 @@ def _heart_elements(cfg: Mapping[str, Any], period: float, vessels: list[dict[st
             raise ModelError(f"valve '{v['name']}': name already used by another block")
         names.add(v["name"])
     for v in valves:
-        native, up, down = svzerod_heart.valve(v, _num)
+        native, up, down = svzerod_heart.valve(v)
         name = v["name"]
         vessels.append({"name": name, "valve": native,
                         "description": f"svZeroDSolver {v.get('type')}"})
@@ -541,56 +500,39 @@ def _check_top(cfg: Mapping[str, Any]) -> None:
     # svZeroDSolver rejects an inconsistent period while loading, before anything else fails
     _check_period(cfg, _mapping(cfg["simulation_parameters"], "simulation_parameters"))
     for k in cfg:
-        if k in TOP_KEYS or k in TOP_IGNORED or _is_comment(k):
-            continue
-        if k in TOP_UNSUPPORTED:
-            if cfg[k]:
-                raise UnsupportedElement(f"model: '{k}' ({TOP_UNSUPPORTED[k]}) is not supported")
-            continue
-        raise UnsupportedElement(f"model: unknown top-level key '{k}'")
+        if k not in TOP_KEYS and k not in TOP_IGNORED and not is_comment(k):
+            raise UnsupportedElement(f"model: unknown top-level key '{k}'")
 
 
-@dataclass
-class _Simulation:
-    """The ``simulation_parameters`` section, checked."""
-
-    raw: Mapping[str, Any]
-    cycles: int
-    points: int
-    interval: int
-    max_iterations: int
-    absolute_tolerance: float
-    rho: float
-    cycle_error: bool
-    percent: float
-    period: float
-
-
-def _simulation(cfg: Mapping[str, Any]) -> _Simulation:
+def _simulation(cfg: Mapping[str, Any]) -> tuple[RunSettings, bool, float]:
+    """The ``simulation_parameters`` section, checked: its run settings (``period`` the
+    file's ``cardiac_period``, -1 without one, and ``dt`` not yet resolved), whether
+    ``use_cycle_to_cycle_error`` is on, and ``sim_cycle_to_cycle_percent_error``."""
     sim = _mapping(cfg["simulation_parameters"], "simulation_parameters")
     for k in sim:
-        if _is_comment(k) or k in SIM_IGNORED:
-            continue
-        if k not in SIM_KEYS:
+        if k not in SIM_KEYS and k not in SIM_IGNORED and not is_comment(k):
             raise UnsupportedElement(f"simulation_parameters: unknown key '{k}'")
     for k, what in SIM_UNSUPPORTED_FLAGS.items():
         if _flag(sim, k, False):
             raise UnsupportedElement(f"simulation_parameters: '{k}' ({what}) is not supported")
     where = "simulation_parameters"
-    return _Simulation(
-        raw=sim,
+    settings = RunSettings(
         cycles=_int(sim, "number_of_cardiac_cycles", None, 1),
-        points=_int(sim, "number_of_time_pts_per_cardiac_cycle", None, 2),
-        interval=_int(sim, "output_interval", 1, 1),
+        points_per_cycle=_int(sim, "number_of_time_pts_per_cardiac_cycle", None, 2),
+        output_interval=_int(sim, "output_interval", 1, 1),
         max_iterations=_int(sim, "maximum_nonlinear_iterations", 30, 1),
-        absolute_tolerance=_num(sim.get("absolute_tolerance", 1e-8), where,
+        absolute_tolerance=number(sim.get("absolute_tolerance", 1e-8), where,
                                 "absolute_tolerance"),
-        rho=_num(sim.get("rho_infty", 0.5), where, "rho_infty"),
-        cycle_error=_flag(sim, "use_cycle_to_cycle_error", False),
-        percent=_num(sim.get("sim_cycle_to_cycle_percent_error", 1.0), where,
-                     "sim_cycle_to_cycle_percent_error"),
-        period=_num(sim.get("cardiac_period", -1.0), where, "cardiac_period"),
-    )
+        rho_infty=number(sim.get("rho_infty", 0.5), where, "rho_infty"), dt=math.nan,
+        period=number(sim.get("cardiac_period", -1.0), where, "cardiac_period"),
+        output_all_cycles=_flag(sim, "output_all_cycles", False),
+        output_mean_only=_flag(sim, "output_mean_only", False),
+        steady_initial=_flag(sim, "steady_initial", True),
+        output_variable_based=_flag(sim, "output_variable_based", False),
+        output_derivative=_flag(sim, "output_derivative", False))
+    return settings, _flag(sim, "use_cycle_to_cycle_error", False), number(
+        sim.get("sim_cycle_to_cycle_percent_error", 1.0), where,
+        "sim_cycle_to_cycle_percent_error")
 
 
 def _same_period(el: str, p: float | None, model_period: float) -> float:
@@ -609,8 +551,8 @@ def _condition(kind: str, vals: Mapping[str, Any], el: str, model_period: float
     """One boundary condition as a native condition, and the period its table fixes."""
     if kind in ("FLOW", "PRESSURE"):
         key = "Q" if kind == "FLOW" else "P"
-        y = _numlist(_required(vals, key, el), el, key)
-        t = _numlist(_required(vals, "t", el), el, "t")
+        y = numbers(required(vals, key, el), el, key)
+        t = numbers(required(vals, "t", el), el, "t")
         q = "flow" if kind == "FLOW" else "pressure"
         if not y:
             raise ModelError(f"{el}: '{key}' is empty")
@@ -619,23 +561,19 @@ def _condition(kind: str, vals: Mapping[str, Any], el: str, model_period: float
         if len(t) != len(y):
             raise ModelError(f"{el}: 't' has {len(t)} entries but '{key}' has {len(y)}")
         model_period = _same_period(el, t[-1] - t[0], model_period)
-        tt, yy = _periodic_table(t, y, el)
+        # over [0, P], P = t[-1] - t[0]: svZeroDSolver's lookup fmod(time, P), linear below
+        # t[0]; the core's (``oxyline_core::waveform::fmod_table``, also checking t increases)
+        tt, yy = _core.svzerod_periodic_table(t, y, el)
         # svZeroDSolver's steady start uses the arithmetic mean of the samples
         return {"type": q, "time": tt, q: yy, "steady": sum(y) / len(y)}, model_period
     if kind in svzerod_heart.BC_PARAMS:
-        native, p = svzerod_heart.boundary_condition(kind, vals, el, _num, _numlist,
-                                                     _periodic_table)
+        native, p = svzerod_heart.boundary_condition(kind, vals, el)
         return native, _same_period(el, p, model_period)
     if kind in svzerod_closed_loop.BC_PARAMS:
-        return svzerod_closed_loop.boundary_condition(kind, vals, el, _num), model_period
+        return svzerod_closed_loop.boundary_condition(kind, vals, el), model_period
     if kind == "RESISTANCE":
-        return {"type": "resistance", "resistance": _num(_required(vals, "R", el), el, "R"),
-                "pressure": _num(_required(vals, "Pd", el), el, "Pd")}, model_period
-    return {"type": "rcr",
-            "proximal_resistance": _num(_required(vals, "Rp", el), el, "Rp"),
-            "capacitance": _num(_required(vals, "C", el), el, "C"),
-            "distal_resistance": _num(_required(vals, "Rd", el), el, "Rd"),
-            "pressure": _num(vals.get("Pd", 0.0), el, "Pd")}, model_period
+        return {"type": "resistance", **mapped(vals, el, RESISTANCE_KEYS)}, model_period
+    return {"type": "rcr", **mapped(vals, el, RCR_KEYS, {"Pd": 0.0})}, model_period
 
 
 def _conditions(cfg: Mapping[str, Any], layout: _Layout
@@ -653,7 +591,7 @@ def _conditions(cfg: Mapping[str, Any], layout: _Layout
         b, name, kind, el = _entry(b, f"boundary_conditions[{i}]", "bc_name",
                                    "boundary condition", BC_ENTRY_KEYS, "bc_type", BC_PARAMS)
         el = f"{kind} boundary condition '{name}'"
-        vals = _check_params(_required(b, "bc_values", el), BC_PARAMS[kind], el)
+        vals = _check_params(required(b, "bc_values", el), BC_PARAMS[kind], el)
         if name in bcs:
             raise ModelError(f"{el}: bc_name used twice")
         native, model_period = _condition(kind, vals, el, model_period)
@@ -729,13 +667,8 @@ def _lumped(kind: str, vals: Mapping[str, Any], el: str) -> dict[str, Any]:
     """The lumped R-L-C (and stenosis) of a BloodVessel-class block."""
     if kind in ("BloodVesselRC", "ChamberSphere"):
         return {}
-    lumped = {
-        "resistance": _num(_required(vals, "R_poiseuille", el), el, "R_poiseuille"),
-        "capacitance": _num(vals.get("C", 0.0), el, "C"),
-        "inductance": _num(vals.get("L", 0.0), el, "L"),
-        "stenosis_coefficient": _num(vals.get("stenosis_coefficient", 0.0), el,
-                                     "stenosis_coefficient"),
-    }
+    lumped: dict[str, Any] = mapped(vals, el, LUMPED_KEYS,
+                                    {"C": 0.0, "L": 0.0, "stenosis_coefficient": 0.0})
     if kind == "BloodVessel" and lumped["stenosis_coefficient"] != 0.0 \
             and lumped["capacitance"] != 0.0:
         # svZeroDSolver's own discretisation of the stenosis next to the capacitor
@@ -754,13 +687,12 @@ def _vessel(name: str, kind: str, vals: Mapping[str, Any], lumped: dict[str, Any
         layout.vessels.append((name, name, name))
         layout.spheres.append(name)
         return {"name": name, "description": "svZeroDSolver ChamberSphere",
-                "chamber_sphere": svzerod_heart.chamber_sphere(vals, el, period, _num)}
+                "chamber_sphere": svzerod_heart.chamber_sphere(vals, el, period)}
     if kind == "BloodVesselRC":
         layout.vessels.append((name, name, name))
         layout.not_vessels.add(name)
         return {"name": name, "description": "svZeroDSolver BloodVesselRC",
-                "through_rc": {"resistance": _num(_required(vals, "Rpd", el), el, "Rpd"),
-                               "capacitance": _num(_required(vals, "Cp", el), el, "Cp")}}
+                "through_rc": mapped(vals, el, RC_KEYS)}
     if kind == "BloodVesselCRL":
         front, back = _crl_vessels(name, lumped)
         crl.append((front, back))
@@ -777,7 +709,7 @@ def _vessel_conditions(v: Mapping[str, Any], name: str, el: str,
     """Attach a vessel's ``boundary_conditions`` (inlet, outlet) to its ends."""
     vbc = _mapping(v.get("boundary_conditions", {}), f"{el} boundary_conditions")
     for side, bc_name in vbc.items():
-        if _is_comment(side):
+        if is_comment(side):
             continue
         if side not in ("inlet", "outlet"):
             raise UnsupportedElement(f"{el}: unknown boundary_conditions key '{side}'")
@@ -820,11 +752,11 @@ def _vessels(vessels_in: Any, period: float, bcs: dict[str, tuple[str, dict[str,
                                    "zero_d_element_type", VESSEL_TYPES)
         out.names.add(name)  # a name used twice: the schema names it
         el = f"{kind} '{name}'"
-        params = {"BloodVesselRC": RC_VESSEL_PARAMS,
-                  "ChamberSphere": set(svzerod_heart.SPHERE_KEYS)}.get(kind, BLOOD_VESSEL_PARAMS)
-        vals = _check_params(_required(v, "zero_d_element_values", el), params, el)
+        params = {"BloodVesselRC": RC_KEYS,
+                  "ChamberSphere": svzerod_heart.SPHERE_KEYS}.get(kind, LUMPED_KEYS)
+        vals = _check_params(required(v, "zero_d_element_values", el), params, el)
         lumped = _lumped(kind, vals, el)
-        vid = _required(v, "vessel_id", el)
+        vid = required(v, "vessel_id", el)
         if isinstance(vid, bool) or not isinstance(vid, (int, str)):
             raise ModelError(f"{el}: vessel_id must be an integer or a name, got {vid!r}")
         if vid in out.ids:
@@ -894,18 +826,18 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
     layout = _Layout()
     system = file_units(cfg, units)
     _check_top(cfg)
-    sim = _simulation(cfg)
+    sim, cycle_error, percent = _simulation(cfg)
     bcs, model_period = _conditions(cfg, layout)
     period = _period(cfg, model_period, sim.period)
     svzerod_heart.finish(bcs, period)
     cycles = sim.cycles
-    if sim.cycle_error and not 0.0 < sim.percent < 100.0:
+    if cycle_error and not 0.0 < percent < 100.0:
         raise ModelError(f"simulation_parameters: 'sim_cycle_to_cycle_percent_error' must be "
                          f"between 0 and 100 (exclusive) with use_cycle_to_cycle_error, got "
-                         f"{sim.percent:g}")
-    if sim.cycle_error and any(kind == "RCR" for kind, _ in bcs.values()):
-        cycles = _rcr_cycles(bcs, period, sim.percent)
-    _check_steps(cycles, sim.points, "use_cycle_to_cycle_error" if sim.cycle_error else
+                         f"{percent:g}")
+    if cycle_error and any(kind == "RCR" for kind, _ in bcs.values()):
+        cycles = _rcr_cycles(bcs, period, percent)
+    _check_steps(cycles, sim.points_per_cycle, "use_cycle_to_cycle_error" if cycle_error else
                  "number_of_cardiac_cycles")
     # without an RCR, svZeroDSolver runs extra cycles until the caps' means converge
     # (`_cycle_error_caps`); the rule needs every step, so the core applies it in its run
@@ -913,7 +845,7 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
     ends, used_bcs = _Ends(), {}
     vessels_in = cfg.get("vessels", [])
     vs = _vessels(vessels_in, period, bcs, used_bcs, ends, layout)
-    svzerod_closed_loop.add_blocks(cfg, period, vs.vessels, bcs, ends.attach, vs.names, _num)
+    svzerod_closed_loop.add_blocks(cfg, period, vs.vessels, bcs, ends.attach, vs.names)
     heart_nodes = _closed_loop_layout(cfg, vs.vessels, bcs, layout)
     first_element_node = len(layout.connections)
     _heart_elements(cfg, period, vs.vessels, layout, bcs, used_bcs, ends.attach)
@@ -933,28 +865,20 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
     closed = {a for a, _ in heart_nodes}
     svzerod_initial.apply(cfg, vs.vessels + hidden,
                           [e for e in layout.vessels if e[0] not in closed],
-                          layout.connections, vs.crl, _num)
+                          layout.connections, vs.crl)
 
-    raw = sim.raw
-    settings = RunSettings(
-        period=period, cycles=cycles, points_per_cycle=sim.points,
-        dt=period / (float(sim.points) - 1.0), output_interval=sim.interval,
-        output_all_cycles=_flag(raw, "output_all_cycles", False),
-        output_mean_only=_flag(raw, "output_mean_only", False),
-        steady_initial=_flag(raw, "steady_initial", True), rho_infty=sim.rho,
-        absolute_tolerance=sim.absolute_tolerance, max_iterations=sim.max_iterations,
-        units=system, output_variable_based=_flag(raw, "output_variable_based", False),
-        output_derivative=_flag(raw, "output_derivative", False),
-    )
+    settings = dataclasses.replace(sim, period=period, cycles=cycles, units=system,
+                                   dt=period / (float(sim.points_per_cycle) - 1.0))
     svzerod_initial.zero_start_coronaries(bcs, settings.steady_initial)
-    if sim.cycle_error and not any(kind == "RCR" for kind, _ in bcs.values()):
-        settings.cycle_error = sim.percent / 100.0
+    if cycle_error and not any(kind == "RCR" for kind, _ in bcs.values()):
+        settings.cycle_error = percent / 100.0
         settings.caps = _cycle_error_caps(
             [v for v in vessels_in if isinstance(v, Mapping)])
     native = _native(system, period, vs.vessels + hidden, bcs, settings)
     # svZeroDSolver's own name for the model (VMR files carry it) names the results
-    if isinstance(raw.get("model_name"), str) and raw["model_name"].strip():
-        native["name"] = raw["model_name"].strip()
+    model_name = cfg["simulation_parameters"].get("model_name")
+    if isinstance(model_name, str) and model_name.strip():
+        native["name"] = model_name.strip()
     return native, settings, layout
 
 

@@ -212,14 +212,10 @@ def _bc(node: str, bc_name: str, bc: Mapping[str, Any], period: float, samples: 
                                      f"{kind.upper()} equivalent")
         return float(w["value"])
 
-    if kind == "flow":
-        t, q = _sample(bc["flow"], period, samples, el)
-        return {"bc_name": bc_name, "bc_type": "FLOW",
-                "bc_values": {"Q": [x * f("flow") for x in q], "t": t}}
-    if kind == "pressure":
-        t, p = _sample(bc["pressure"], period, samples, el)
-        return {"bc_name": bc_name, "bc_type": "PRESSURE",
-                "bc_values": {"P": [x * f("pressure") for x in p], "t": t}}
+    if kind in ("flow", "pressure"):  # a table of Q or P
+        t, y = _sample(bc[kind], period, samples, el)
+        return {"bc_name": bc_name, "bc_type": kind.upper(),
+                "bc_values": {"Q" if kind == "flow" else "P": [x * f(kind) for x in y], "t": t}}
     if kind == "resistance":
         return {"bc_name": bc_name, "bc_type": "RESISTANCE",
                 "bc_values": {"R": bc["resistance"] * f("resistance"),
