@@ -329,8 +329,11 @@ def _write_and_report(args: argparse.Namespace, model: Any, res: Any, stream: bo
 
     if args.output and not stream:
         _write(res, args.output, args.overwrite)
-    if args.summary:
-        _write_summary(res, args.summary)
+    if args.summary:  # per-vessel, of a Result or of a streamed store's dataset
+        from oxyline.io import results
+
+        parquet = Path(args.summary).suffix.lower() == ".parquet"
+        (results.to_parquet if parquet else results.to_csv)(res, args.summary)
     if stop.signum is not None:  # stopped once the run had ended: its whole result is kept
         print(f"{'terminated' if stop.terminated else 'interrupted'} after the run"
               + (f"; result written to {args.output}" if args.output else ""), file=sys.stderr)
@@ -460,16 +463,6 @@ def _write(res: Any, path: str, overwrite: bool = False) -> None:
                               "was written", res) from exc
     else:
         res.to_netcdf(p)
-
-
-def _write_summary(res: Any, path: str) -> None:
-    """Per-vessel summary of a Result or of a streamed store's dataset."""
-    from oxyline.io import results
-
-    if Path(path).suffix.lower() == ".parquet":
-        results.to_parquet(res, path)
-    else:
-        results.to_csv(res, path)
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:

@@ -105,13 +105,6 @@ def netcdf4_in_memory() -> bool:
         return False
 
 
-def _netcdf4_bytes(ds: Any) -> memoryview | None:
-    """``ds`` encoded as NetCDF-4 in memory (h5py cannot fail half-way through a full disk
-    there), or None where the installed xarray cannot do that: the caller then writes the
-    file directly, after a free-space check."""
-    return _encode_in_memory(ds) if netcdf4_in_memory() else None
-
-
 def to_netcdf(result: Result, path: PathLike) -> Path:
     """Write NetCDF-4 (h5netcdf engine): dims ``time``, ``vessel``, ``segment``; coordinates
     vessel names and segment positions; attrs with units, model name, solver settings and the
@@ -126,7 +119,10 @@ def to_netcdf(result: Result, path: PathLike) -> Path:
     ds = dataset(result)
 
     def write(tmp: Path) -> None:
-        data = _netcdf4_bytes(ds) if ds.nbytes <= NETCDF_IN_MEMORY_BYTES else None
+        # encoded in memory (h5py cannot fail half-way through a full disk there) where the
+        # installed xarray can, else written directly after a free-space check
+        small = ds.nbytes <= NETCDF_IN_MEMORY_BYTES and netcdf4_in_memory()
+        data = _encode_in_memory(ds) if small else None
         if data is not None:
             with open(tmp, "wb") as fh:
                 fh.write(data)

@@ -279,10 +279,7 @@ def to_tables(model: Model, waveform_dir: PathLike | None = None) -> tuple[Any, 
         if extra:  # never drop a key silently
             raise ModelError(f"vessel '{v.get('name')}': key(s) {', '.join(sorted(extra))} "
                              "cannot be written to a vessel table")
-        row = {k: v[k] for k in VESSEL_COLUMNS if k in v}
-        for k, val in (v.get("lumped") or {}).items():
-            row[k] = val
-        rows.append(row)
+        rows.append({**{k: v[k] for k in VESSEL_COLUMNS if k in v}, **(v.get("lumped") or {})})
     cols = [c for c in (*VESSEL_COLUMNS, *LUMPED_COLUMNS) if any(c in r for r in rows)]
     vdf = pd.DataFrame(rows, columns=cols)
     if "segments" in vdf:

@@ -91,10 +91,6 @@ class _Problem:
         return tuple(out)
 
 
-def _node(pressure_or_flow: str, node: str) -> str:
-    return f"{pressure_or_flow}:{node}"
-
-
 def _fitted(block: Mapping[str, Any], names: tuple[str, ...], settings: Mapping[str, Any],
             where: str) -> set[str]:
     """The names of `block`'s values to fit (see the module docstring)."""
@@ -204,8 +200,7 @@ def _read_blocks(cfg: Mapping[str, Any], settings: Mapping[str, Any]) -> _Proble
         if len(ins) != 1 or len(outs) != 1:
             raise ModelError(f"{where}: needs one inlet and one outlet connection, has "
                              f"{len(ins)} and {len(outs)}")
-        nodes = (_node("pressure", ins[0]), _node("flow", ins[0]),
-                 _node("pressure", outs[0]), _node("flow", outs[0]))
+        nodes = (f"pressure:{ins[0]}", f"flow:{ins[0]}", f"pressure:{outs[0]}", f"flow:{outs[0]}")
         fitted = _fitted(v, VESSEL_VALUES, settings, where)
         values = dict(v.get("zero_d_element_values", {}))
         if not lists and not stenosis:
@@ -233,7 +228,7 @@ def _read_blocks(cfg: Mapping[str, Any], settings: Mapping[str, Any]) -> _Proble
             if not lists and not stenosis:
                 values["stenosis_coefficient"] = 0.0
             slots = pb.slots(values, BRANCH_VALUES, fitted, f"{where} outlet {i}")
-            nodes = (_node("pressure", ins[0]), _node("pressure", out), _node("flow", out))
+            nodes = (f"pressure:{ins[0]}", f"pressure:{out}", f"flow:{out}")
             pb.branches.append((f"{name}:{out.split(':', 1)[1]}",
                                 tuple(pb.variable(n) for n in nodes), slots))
             pb.junction_slots[name].append(slots)

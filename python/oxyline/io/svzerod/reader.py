@@ -406,6 +406,17 @@ def _junctions(junctions: Any, ids: Mapping[Any, str], bcs: Mapping[str, Any],
     return hidden
 
 
+def _attach_condition(bc: str, vessel: str, end: str, what: str, used_bcs: dict[str, str],
+                      attach: Any) -> None:
+    """Connect boundary condition ``bc`` to the ``end`` of ``vessel`` (the block ``what``); a
+    condition is connected once."""
+    if bc in used_bcs:
+        raise ModelError(f"boundary condition '{bc}': connected to both {used_bcs[bc]} and "
+                         f"{what}")
+    used_bcs[bc] = what
+    attach(vessel, end, bc, f"boundary condition '{bc}'")
+
+
 def _heart_elements(cfg: Mapping[str, Any], period: float, vessels: list[dict[str, Any]],
                     layout: _Layout, bcs: Mapping[str, Any], used_bcs: dict[str, str],
                     attach: Any) -> None:
@@ -440,11 +451,7 @@ def _heart_elements(cfg: Mapping[str, Any], period: float, vessels: list[dict[st
         for block, end, other_end in ((up, "in", "out"), (down, "out", "in")):
             what = f"valve '{name}'"
             if block in bcs:
-                if block in used_bcs:
-                    raise ModelError(f"boundary condition '{block}': connected to both "
-                                     f"{used_bcs[block]} and {what}")
-                used_bcs[block] = what
-                attach(name, end, block, f"boundary condition '{block}'")
+                _attach_condition(block, name, end, what, used_bcs, attach)
             elif block in names:
                 node = f"{up}:{name}" if end == "in" else f"{name}:{down}"
                 attach(name, end, node, what)
@@ -535,17 +542,6 @@ def _simulation(cfg: Mapping[str, Any]) -> tuple[RunSettings, bool, float]:
         "sim_cycle_to_cycle_percent_error")
 
 
-def _same_period(el: str, p: float | None, model_period: float) -> float:
-    """The period a condition's table fixes: the first table's, which every other must match
-    exactly (svZeroDSolver's rule)."""
-    if p is None:
-        return model_period
-    if model_period > 0.0 and p != model_period:
-        raise ModelError(f"{el}: Inconsistent cardiac cycle period defined in parameters (its "
-                         f"table spans {p}, an earlier one {model_period})")
-    return p
-
-
 def _condition(kind: str, vals: Mapping[str, Any], el: str, model_period: float
                ) -> tuple[dict[str, Any], float]:
     """One boundary condition as a native condition, and the period its table fixes."""
@@ -560,7 +556,7 @@ def _condition(kind: str, vals: Mapping[str, Any], el: str, model_period: float
             return {"type": q, q: y[0]}, model_period
         if len(t) != len(y):
             raise ModelError(f"{el}: 't' has {len(t)} entries but '{key}' has {len(y)}")
-        model_period = _same_period(el, t[-1] - t[0], model_period)
+        model_period = t[-1] - t[0]  # every table spans the same (_check_period)
         # over [0, P], P = t[-1] - t[0]: svZeroDSolver's lookup fmod(time, P), linear below
         # t[0]; the core's (``oxyline_core::waveform::fmod_table``, also checking t increases)
         tt, yy = _core.svzerod_periodic_table(t, y, el)
@@ -568,7 +564,7 @@ def _condition(kind: str, vals: Mapping[str, Any], el: str, model_period: float
         return {"type": q, "time": tt, q: yy, "steady": sum(y) / len(y)}, model_period
     if kind in svzerod_heart.BC_PARAMS:
         native, p = svzerod_heart.boundary_condition(kind, vals, el)
-        return native, _same_period(el, p, model_period)
+        return native, model_period if p is None else p
     if kind in svzerod_closed_loop.BC_PARAMS:
         return svzerod_closed_loop.boundary_condition(kind, vals, el), model_period
     if kind == "RESISTANCE":
@@ -608,21 +604,11 @@ def _conditions(cfg: Mapping[str, Any], layout: _Layout
 
 
 def _period(cfg: Mapping[str, Any], model_period: float, sim_period: float) -> float:
-    """The cardiac period: the heart block's, else the tables', else ``cardiac_period``, else
-    1 (svZeroDSolver's rule); the tables and ``cardiac_period`` must agree."""
-    heart_period = svzerod_closed_loop.heart_period(cfg)
-    if heart_period is not None:  # svZeroDSolver takes the heart block's period
-        model_period = heart_period
-    if model_period < 0.0 and sim_period < 0.0:
-        period = 1.0
-    elif model_period >= 0.0:
-        if sim_period >= 0.0 and model_period != sim_period:
-            raise ModelError(f"simulation_parameters: Inconsistent cardiac cycle period defined "
-                             f"in parameters (cardiac_period = {sim_period}, boundary "
-                             f"condition tables span {model_period})")
-        period = model_period
-    else:
-        period = sim_period
+    """The cardiac period: the heart block's, else the tables' (-1: none), else
+    ``cardiac_period`` (-1: none), else 1 (svZeroDSolver's rule; :func:`_check_period` has
+    checked that they agree)."""
+    period = next((p for p in (svzerod_closed_loop.heart_period(cfg), model_period, sim_period)
+                   if p is not None and p >= 0.0), 1.0)
     if not period > 0.0:
         raise ModelError(f"simulation_parameters: the cardiac period must be > 0, got {period}")
     return period
@@ -720,12 +706,8 @@ def _vessel_conditions(v: Mapping[str, Any], name: str, el: str,
             # svZeroDSolver applies its outlet equations with Q along the vessel:
             # P_in = Pd + R Q (native `svzerod-inlet`, docs/svzerod.md)
             bcs[bc_name] = (kind_bc, dict(bcs[bc_name][1], type="svzerod-inlet"))
-        if bc_name in used_bcs:
-            raise ModelError(f"boundary condition '{bc_name}': connected to both "
-                             f"{used_bcs[bc_name]} and {el}")
-        used_bcs[bc_name] = el
-        ends.attach(name, "in" if side == "inlet" else "out", bc_name,
-                    f"boundary condition '{bc_name}'")
+        _attach_condition(bc_name, name, "in" if side == "inlet" else "out", el, used_bcs,
+                          ends.attach)
     # svZeroDSolver's nodes of this vessel's boundary conditions, inlet first
     layout.connections += [(vbc["inlet"], name)] if "inlet" in vbc else []
     layout.connections += [(name, vbc["outlet"])] if "outlet" in vbc else []
