@@ -306,3 +306,24 @@ def test_native_closed_loop_pumps_forward(method: str) -> None:
     av = df[df["name"] == "aortic_valve"]["flow_in"].to_numpy()[last]
     assert av.max() > 1e-5  # m³/s: the heart ejects
     assert av.min() > -0.02 * av.max()
+
+
+@pytest.mark.parametrize(("chamber", "key", "optional"), [
+    ("RA", "Impedance", False),  # ChamberElastanceInductorExponential: required
+    ("RA", "Kxv", False),
+    ("RV", "Impedance", True),   # ChamberElastanceInductor: 0 when absent
+    ("RV", "Vrs", False),
+])
+def test_missing_chamber_parameter_is_named(chamber: str, key: str, optional: bool) -> None:
+    """A chamber without one of its parameters is refused naming the chamber and the key,
+    unless svZeroDSolver gives it a default (the ChamberElastanceInductor's Impedance)."""
+    cfg = json.loads(case("closedLoopHeart_singleVessel_decomposed").read_text())
+    entry = next(c for c in cfg["chambers"] if c["name"] == chamber)
+    del entry["values"][key]
+    if optional:
+        law = next(v["chamber"] for v in svz.to_oxyline_dict(cfg)["vessels"]
+                   if v["name"] == chamber)
+        assert law["inductance"] == 0.0
+        return
+    with pytest.raises(oxyline.ModelError, match=rf"{entry['type']} '{chamber}': missing '{key}'"):
+        svz.to_oxyline_dict(cfg)
