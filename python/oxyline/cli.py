@@ -117,17 +117,12 @@ def _check_clashes(args: argparse.Namespace) -> None:
     the checkpoint and the summary must all be different files."""
     from oxyline.io.atomic import same_file
 
-    roles: list[tuple[str, str]] = []
     model = getattr(args, "model", None)
-    if model and Path(model).exists():
-        roles.append(("the input model", model))
-    if getattr(args, "resume", None):
-        roles.append(("the resumed checkpoint", args.resume))
-    for name, key in (("-o", "output"), ("--checkpoint", "checkpoint"),
-                      ("--summary", "summary")):
-        value = getattr(args, key, None)
-        if value:
-            roles.append((name, value))
+    roles = [(role, value) for role, value in (
+        ("the input model", model if model and Path(model).exists() else None),
+        ("the resumed checkpoint", getattr(args, "resume", None)),
+        ("-o", getattr(args, "output", None)), ("--checkpoint", getattr(args, "checkpoint", None)),
+        ("--summary", getattr(args, "summary", None))) if value]
     for i, (role_a, a) in enumerate(roles):
         for role_b, b in roles[i + 1:]:
             if role_b == "--checkpoint" and role_a == "the resumed checkpoint":
@@ -367,12 +362,8 @@ def _print_table(model: Any, res: Any, stream: bool, rows: int = 20) -> None:
         s, vessels = res.settings, res.vessels
     internal = internal_vessels(model)
     shown = [i for i, v in enumerate(vessels) if v not in internal][:rows]
-    if stream:
-        p_in = res["pressure_in"].isel(vessel=shown).mean("time").values
-        q_in = res["flow_in"].isel(vessel=shown).mean("time").values
-    else:
-        p_in = res.pressure_in[:, shown].mean(axis=0)
-        q_in = res.flow_in[:, shown].mean(axis=0)
+    p_in, q_in = (res[k].isel(vessel=shown).mean("time").values if stream
+                  else getattr(res, k)[:, shown].mean(axis=0) for k in ("pressure_in", "flow_in"))
     print(f"{model.name}: {len(vessels)} vessels, method {s['method']}, dt {s['dt']:.3e} s, "
           f"{s['cycles_run']} cycles, cycle-to-cycle change {s['periodic_error']:.2e}")
     if s.get("steps") is not None:
