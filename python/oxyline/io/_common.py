@@ -50,11 +50,8 @@ def plain(value: Any, key: str | None = None) -> Any:
 
 def is_missing(value: Any) -> bool:
     """True for None, NaN and empty strings (empty table cells)."""
-    if value is None:
-        return True
-    if isinstance(value, float) and math.isnan(value):
-        return True
-    if isinstance(value, str) and not value.strip():
+    if value is None or (isinstance(value, float) and math.isnan(value)) \
+            or (isinstance(value, str) and not value.strip()):
         return True
     try:
         import pandas as pd

@@ -84,10 +84,6 @@ def _read_openbf(p: Path) -> tuple[dict[str, Any], str]:
     return openbf.to_native_dict(p), str(p)
 
 
-def _read_tables(p: Path) -> tuple[dict[str, Any], str]:
-    return tables.native_dict(p)
-
-
 def _as_native(data: dict[str, Any]) -> dict[str, Any]:
     return data
 
@@ -97,8 +93,7 @@ FORMATS: dict[str, Format] = {
     "svzerod": Format("svzerod", (), _mapping_reader(svzerod.to_oxyline_dict), _write_svzerod,
                       svzerod.to_oxyline_dict,
                       ("units", "samples", "points_per_cycle", "cycles")),
-    "tables": Format("tables", (".csv", ".tsv", ".txt"), _read_tables,
-                     lambda model, p: tables.write_tables(model, p)),
+    "tables": Format("tables", (".csv", ".tsv", ".txt"), tables.native_dict, tables.write_tables),
     "openbf": Format("openbf", (), _read_openbf, None),
 }
 

@@ -52,10 +52,8 @@ def to_networkx(model: Model) -> Any:
     G.graph["vessel_order"] = [str(v["name"]) for v in src["vessels"]]
     for v in src["vessels"]:
         attrs = {k: val for k, val in v.items() if k not in ("from", "to")}
-        if multi:
-            G.add_edge(str(v["from"]), str(v["to"]), key=str(v["name"]), **attrs)
-        else:
-            G.add_edge(str(v["from"]), str(v["to"]), **attrs)
+        G.add_edge(str(v["from"]), str(v["to"]), **({"key": str(v["name"])} if multi else {}),
+                   **attrs)
     for node, bc in (src.get("boundary_conditions") or {}).items():
         G.add_node(str(node), boundary_condition=bc)
     return G
@@ -85,10 +83,8 @@ def from_networkx(G: Any, boundary_conditions: Mapping[str, Any] | None = None,
     """
     known = set(VESSEL_COLUMNS) | {"lumped"}
     vessels = []
-    if G.is_multigraph():
-        edges = ((u, v, k, d) for u, v, k, d in G.edges(keys=True, data=True))
-    else:
-        edges = ((u, v, None, d) for u, v, d in G.edges(data=True))
+    edges = G.edges(keys=True, data=True) if G.is_multigraph() \
+        else ((u, v, None, d) for u, v, d in G.edges(data=True))
     for u, v, key, d in edges:
         name = d.get("name", key if key is not None and not isinstance(key, int) else f"{u}-{v}")
         el = f"graph edge ({u!r}, {v!r}) (vessel '{name}')"

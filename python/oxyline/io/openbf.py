@@ -191,14 +191,6 @@ class _Vessel:
             raise ModelError(f"{where}: 'visco-elastic' must be true or false, got {ve!r}")
         self.viscoelastic = ve
 
-    def R0(self, x: np.ndarray) -> np.ndarray:
-        return self.r0[0] + (self.r0[1] - self.r0[0]) * x / self.length
-
-    def h0(self, x: np.ndarray) -> np.ndarray:
-        if self.h0_given is not None:
-            return np.full_like(np.asarray(x, dtype=float), self.h0_given)
-        return np.asarray(adan_wall_thickness(self.R0(x)))
-
     def _wall(self) -> tuple[float, float, float, float, float | None]:
         return self.length, self.r0[0], self.r0[1], self.E, self.h0_given
 
@@ -424,7 +416,7 @@ def _native_vessel(v: _Vessel, p_in: float, p_out: float,
     if v.h0_given is not None:
         h_file = f"h0 {v.h0_given:.4g} m"
     else:
-        ha, hb = v.h0(np.array([0.0, v.length])).tolist()
+        ha, hb = adan_wall_thickness(np.array(v.r0)).tolist()  # at both ends
         h_file = f"h0 from the ADAN law ({ha:.4g}-{hb:.4g} m)"
     desc = (f"openBF: Rp {v.rp_file:.6g} m, Rd {v.rd_file:.6g} m, {h_file}, E {v.E:.6g} Pa, "
             f"Pext {v.pext:.6g} Pa, gamma_profile {v.gamma:g}; linearised at "

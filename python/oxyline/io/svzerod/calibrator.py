@@ -378,8 +378,7 @@ def calibrate(config: Mapping[str, Any]) -> dict[str, Any]:
     except KeyError as e:
         raise ModelError(f"svZeroDCalibrator input: a vessel or junction has no {e}") from None
     y, dy = _observations(config, pb.variables)
-    problem = _core.CalibrationProblem(
-        [(n, v, s) for n, v, s in pb.vessels], [(n, v, s) for n, v, s in pb.branches],
-        np.ascontiguousarray(y).ravel(), np.ascontiguousarray(dy).ravel(), y.shape[1])
+    problem = _core.CalibrationProblem(pb.vessels, pb.branches, np.ascontiguousarray(y).ravel(),
+                                       np.ascontiguousarray(dy).ravel(), y.shape[1])
     alpha = _fit(problem, pb, settings)
     return _write(config, pb, alpha, settings)

@@ -128,13 +128,12 @@ def add_blocks(cfg: Mapping[str, Any], period: float, vessels: list[dict[str, An
     if not isinstance(blocks, list):
         raise ModelError("closed_loop_blocks: must be a list")
     closed = {n: nat for n, (kind, nat) in bcs.items() if kind in BC_PARAMS}
-    hearts = [b for b in blocks if isinstance(b, Mapping)
-              and b.get("closed_loop_type") == "ClosedLoopHeartAndPulmonary"]
     for b in blocks:
         kind = b.get("closed_loop_type") if isinstance(b, Mapping) else None
         if kind != "ClosedLoopHeartAndPulmonary":
             raise UnsupportedElement(f"closed_loop_blocks: closed_loop_type {kind!r} is not "
                                      "supported (supported: ClosedLoopHeartAndPulmonary)")
+    hearts = blocks  # every block is the heart block (the one supported type)
     if len(hearts) > 1:
         raise ModelError("closed_loop_blocks: Only one ClosedLoopHeartAndPulmonary can be "
                          "included")

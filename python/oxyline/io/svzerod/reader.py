@@ -267,11 +267,9 @@ def _check_period(cfg: Mapping[str, Any], sim: Mapping[str, Any]) -> None:
         if isinstance(c, Mapping) and isinstance(c.get("cardiac_cycle_period"), (int, float)):
             where = f"closed-loop block '{c.get('closed_loop_type')}'"
             found.append((float(c["cardiac_cycle_period"]), where))
-    ref = None
-    for p, where in found:
-        if ref is None:
-            ref = (p, where)
-        elif p != ref[0]:
+    ref = found[0] if found else None  # the first period found, which the others must equal
+    for p, where in found[1:]:
+        if p != ref[0]:
             raise ModelError(f"{where}: Inconsistent cardiac cycle period defined in parameters "
                              f"({p}, but {ref[1]} has {ref[0]})")
     sim_period = sim.get("cardiac_period", -1.0)
@@ -719,7 +717,6 @@ class _Vessels:
 
     vessels: list[dict[str, Any]] = field(default_factory=list)
     ids: dict[Any, str] = field(default_factory=dict)
-    names: set[str] = field(default_factory=set)
     #: the (front, back) parts of each BloodVesselCRL
     crl: list[tuple[dict[str, Any], dict[str, Any]]] = field(default_factory=list)
 
@@ -732,7 +729,6 @@ def _vessels(vessels_in: Any, period: float, bcs: dict[str, tuple[str, dict[str,
     for i, v in enumerate(vessels_in):
         v, name, kind, el = _entry(v, f"vessels[{i}]", "vessel_name", "vessel", VESSEL_KEYS,
                                    "zero_d_element_type", VESSEL_TYPES)
-        out.names.add(name)  # a name used twice: the schema names it
         el = f"{kind} '{name}'"
         params = {"BloodVesselRC": RC_KEYS,
                   "ChamberSphere": svzerod_heart.SPHERE_KEYS}.get(kind, LUMPED_KEYS)
@@ -827,7 +823,8 @@ def _convert(config: Mapping[str, Any] | str | os.PathLike[str], units: str | No
     ends, used_bcs = _Ends(), {}
     vessels_in = cfg.get("vessels", [])
     vs = _vessels(vessels_in, period, bcs, used_bcs, ends, layout)
-    svzerod_closed_loop.add_blocks(cfg, period, vs.vessels, bcs, ends.attach, vs.names)
+    svzerod_closed_loop.add_blocks(cfg, period, vs.vessels, bcs, ends.attach,
+                                   {v["name"] for v in vs.vessels})
     heart_nodes = _closed_loop_layout(cfg, vs.vessels, bcs, layout)
     first_element_node = len(layout.connections)
     _heart_elements(cfg, period, vs.vessels, layout, bcs, used_bcs, ends.attach)
