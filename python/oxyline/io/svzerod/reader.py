@@ -666,23 +666,21 @@ def _vessel(name: str, kind: str, vals: Mapping[str, Any], lumped: dict[str, Any
             ) -> dict[str, Any]:
     """The native vessel of one svZeroDSolver vessel block (the front part of a
     BloodVesselCRL, whose back part goes to ``crl``); its output rows go to ``layout``."""
-    if kind == "ChamberSphere":
-        # a vessel-class block upstream: in the vessel table with its inflow and outflow
-        layout.vessels.append((name, name, name))
-        layout.spheres.append(name)
-        return {"name": name, "description": "svZeroDSolver ChamberSphere",
-                "chamber_sphere": svzerod_heart.chamber_sphere(vals, el, period)}
-    if kind == "BloodVesselRC":
-        layout.vessels.append((name, name, name))
-        layout.not_vessels.add(name)
-        return {"name": name, "description": "svZeroDSolver BloodVesselRC",
-                "through_rc": mapped(vals, el, RC_KEYS)}
     if kind == "BloodVesselCRL":
         front, back = _crl_vessels(name, lumped)
         crl.append((front, back))
         layout.vessels.append((name, name, back["name"]))
         return front
     layout.vessels.append((name, name, name))
+    if kind == "ChamberSphere":
+        # a vessel-class block upstream: in the vessel table with its inflow and outflow
+        layout.spheres.append(name)
+        return {"name": name, "description": "svZeroDSolver ChamberSphere",
+                "chamber_sphere": svzerod_heart.chamber_sphere(vals, el, period)}
+    if kind == "BloodVesselRC":
+        layout.not_vessels.add(name)
+        return {"name": name, "description": "svZeroDSolver BloodVesselRC",
+                "through_rc": mapped(vals, el, RC_KEYS)}
     return {"name": name, "arrangement": "RCL", "lumped": lumped,
             "description": "svZeroDSolver BloodVessel"}
 
