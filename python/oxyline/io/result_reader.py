@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from oxyline.io._common import PathLike
-from oxyline.io.results import _zarr
+from oxyline.io.results import _quiet, _zarr
 from oxyline.result import (
     BALANCE,
     SEGMENT_VARIABLES,
@@ -56,8 +56,6 @@ def _source(source: Any) -> tuple[Any, str, bool]:
             raise TypeError("open_result: expected a path to a .nc/.zarr file or an "
                             f"xarray.Dataset, got {type(source).__name__}")
         return source, "dataset", False
-    import warnings
-
     import xarray as xr
 
     p = Path(source)
@@ -65,8 +63,7 @@ def _source(source: Any) -> tuple[Any, str, bool]:
         raise FileNotFoundError(f"{p}: no such file or directory")
     if p.suffix.lower() == ".zarr" or (p.is_dir() and (p / ".zgroup").exists()):
         _zarr()
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # consolidated metadata is not part of the v2 spec
+        with _quiet():
             return xr.open_zarr(p), str(p), True
     try:
         return xr.open_dataset(p), str(p), True
