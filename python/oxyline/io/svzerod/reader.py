@@ -544,10 +544,9 @@ def _condition(kind: str, vals: Mapping[str, Any], el: str, model_period: float
                ) -> tuple[dict[str, Any], float]:
     """One boundary condition as a native condition, and the period its table fixes."""
     if kind in ("FLOW", "PRESSURE"):
-        key = "Q" if kind == "FLOW" else "P"
+        key, q = ("Q", "flow") if kind == "FLOW" else ("P", "pressure")
         y = numbers(required(vals, key, el), el, key)
         t = numbers(required(vals, "t", el), el, "t")
-        q = "flow" if kind == "FLOW" else "pressure"
         if not y:
             raise ModelError(f"{el}: '{key}' is empty")
         if len(y) == 1:
