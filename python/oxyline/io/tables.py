@@ -94,11 +94,8 @@ def _canonical_column(col: str) -> str:
     """Column name in the schema: aliases resolved, case-insensitive, '-'/' ' read as '_'."""
     c = col.strip()
     low = c.lower().replace("-", "_").replace(" ", "_")
-    if c in ALIASES:
-        return ALIASES[c]
-    if low in ALIASES:
-        return ALIASES[low]
-    return low if low in set(VESSEL_COLUMNS) | set(LUMPED_COLUMNS) else c
+    return ALIASES.get(c) or ALIASES.get(low) or (
+        low if low in set(VESSEL_COLUMNS) | set(LUMPED_COLUMNS) else c)
 
 
 def _vessels_from_frame(df: Any, where: str) -> list[dict[str, Any]]:
