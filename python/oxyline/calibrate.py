@@ -89,12 +89,17 @@ def _count(name: str, value: Any) -> int:
     return int(value)
 
 
+def _fraction(name: str, value: Any) -> None:
+    """A number in (0, 1) (a tolerance), else an error naming it."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)) \
+            or not 0.0 < float(value) < 1.0:
+        raise CalibrationError(f"{name}: expected a number in (0, 1), got {value!r}")
+
+
 def _check_controls(parameters: Sequence[str], signals: Sequence[Any], steps: int, tol: Any,
                     max_cycles: Any) -> None:
     """The tangent run's controls, and its stored derivatives against the memory allowed."""
-    if isinstance(tol, bool) or not isinstance(tol, (int, float, np.floating)) \
-            or not 0.0 < float(tol) < 1.0:
-        raise CalibrationError(f"tol: expected a number in (0, 1), got {tol!r}")
+    _fraction("tol", tol)
     _count("max_cycles", max_cycles)
     need = 8.0 * steps * max(len(signals), 1) * (len(parameters) + 1)
     limit = memory.limit(None, "sensitivities: max_memory")
@@ -125,6 +130,14 @@ def _involves_oxygen(parameters: Sequence[str], signals: Sequence[tuple[str, str
     return any(map(_is_oxygen_path, parameters)) or any(map(is_oxygen_signal, signals))
 
 
+def _oxygen_split(parameters: Sequence[str], signals: Sequence[tuple[str, str]]
+                  ) -> tuple[list[int], list[int], list[int]]:
+    """The positions of the oxygen signals, of the flow signals and of the flow parameters."""
+    o2 = [k for k, s in enumerate(signals) if is_oxygen_signal(s)]
+    return (o2, [k for k in range(len(signals)) if k not in o2],
+            [k for k, p in enumerate(parameters) if not _is_oxygen_path(p)])
+
+
 def _with_oxygen(model: Model, parameters: Sequence[str], signals: list[tuple[str, str]],
                  args: tuple[Any, ...]) -> dict[str, Any]:
     """The raw tangent of signals and parameters that involve oxygen: the oxygen signals by
@@ -132,10 +145,8 @@ def _with_oxygen(model: Model, parameters: Sequence[str], signals: list[tuple[st
     reaches the oxygen through the flow's own tangent), the flow signals by the flow tangent
     (by flow parameters; oxygen parameters do not change the flow: their rows are 0)."""
     text = json.dumps(model.canonical)
-    o2_cols = [k for k, s in enumerate(signals) if is_oxygen_signal(s)]
-    flow_cols = [k for k in range(len(signals)) if k not in o2_cols]
-    o2_rows = [k for k, p in enumerate(parameters) if _is_oxygen_path(p)]
-    flow_rows = [k for k in range(len(parameters)) if k not in o2_rows]
+    o2_cols, flow_cols, flow_rows = _oxygen_split(parameters, signals)
+    o2_rows = [k for k in range(len(parameters)) if k not in flow_rows]
     # with oxygen signals the species tangent takes every parameter, else the oxygen ones
     # (for their values; their flow rows are 0)
     rows = list(range(len(parameters))) if o2_cols else o2_rows
@@ -164,20 +175,23 @@ def _with_oxygen(model: Model, parameters: Sequence[str], signals: list[tuple[st
 
 
 def _evaluate(model: Model, parameters: Sequence[str], targets: Sequence[Target],
-              steps_per_cycle: int | None, tol: float, max_cycles: int
-              ) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
-    """Every target's value(s) and Jacobian rows (d/d SI parameter) at ``model``."""
+              steps_per_cycle: int | None, tol: float, max_cycles: int,
+              series_at_steps: bool = False
+              ) -> tuple[list[np.ndarray], list[np.ndarray], dict[str, Any]]:
+    """Every target's value(s) and Jacobian rows (d/d SI parameter) at ``model`` by the
+    tangents; ``series_at_steps`` as :func:`_adjoint`'s."""
     signals = sorted({s for t in targets for s in t.signals})
     raw = _tangent(model, parameters, signals, steps_per_cycle, tol, max_cycles)
     values, jac = [], []
     for t in targets:
         cols = [signals.index(s) for s in t.signals]
         v, j = evaluate(t.output, raw["times"], raw["signals"][:, cols],
-                       raw["derivatives"][:, :, cols], t.times,
+                       raw["derivatives"][:, :, cols],
+                       raw["times"] if series_at_steps else t.times,
                        path_of(t.output, model, parameters))
         values.append(v)
         jac.append(j.reshape(len(v), len(parameters)))
-    return np.concatenate(values), np.concatenate(jac), raw
+    return values, jac, raw
 
 
 def _oxygen_adjoint(m: Model, parameters: Sequence[str], signals: list[tuple[str, str]],
@@ -189,13 +203,11 @@ def _oxygen_adjoint(m: Model, parameters: Sequence[str], signals: list[tuple[str
     species transport's adjoint backward). Flow signals (an SvO2's outflow) are read from
     the flow's periodic cycle with their tangents by the flow parameters, for the weights
     and for their own terms of the gradients (oxygen parameters do not change the flow)."""
-    o2 = [k for k, s in enumerate(signals) if is_oxygen_signal(s)]
+    o2, rest, flow_rows = _oxygen_split(parameters, signals)
     if not o2:
         raise CalibrationError("mode 'adjoint': oxygen parameters do not change the flow "
                                f"outputs {', '.join(f'{v}.{n}' for v, n in signals)} (use "
                                "mode='forward' for their zero rows)")
-    rest = [k for k in range(len(signals)) if k not in o2]
-    flow_rows = [k for k, p in enumerate(parameters) if not _is_oxygen_path(p)]
     flow: dict[str, Any] = {}
     if rest:
         flow = _core.tangent_sensitivities(json.dumps(m.canonical),
@@ -312,29 +324,11 @@ def sensitivities(model: Model | Mapping[str, Any] | str, parameters: Sequence[s
         raise CalibrationError(f"mode: expected 'forward' or 'adjoint', got {mode!r}")
     targets = [Target(o, None, signals=s)
                for o, s in zip(outputs, signals_for(outputs, m), strict=True)]
-    if mode == "adjoint":
-        values, jac, raw = _adjoint(m, parameters, targets, steps_per_cycle, tol, max_cycles,
-                                    series_at_steps=True)
-        rows, start = {}, 0
-        for t, v in zip(targets, values, strict=True):
-            rows[t.output] = slice(start, start + len(v))
-            start += len(v)
-        return Sensitivities(list(outputs), list(parameters), np.asarray(raw["values"]),
-                             np.concatenate(values), np.concatenate(jac),
-                             int(raw["cycles"]), float(raw["periodic_change"]), rows,
-                             int(raw["tangent_cycles"]))
-    signals = sorted({s for t in targets for s in t.signals})
-    raw = _tangent(m, parameters, signals, steps_per_cycle, tol, max_cycles)
-    values, jac, rows, start = [], [], {}, 0
-    for t in targets:
-        cols = [signals.index(s) for s in t.signals]
-        v, j = evaluate(t.output, raw["times"], raw["signals"][:, cols],
-                       raw["derivatives"][:, :, cols], raw["times"],
-                       path_of(t.output, m, parameters))
-        values.append(v)
-        jac.append(j.reshape(len(v), len(parameters)))
-        rows[t.output] = slice(start, start + len(v))
-        start += len(v)
+    run = _adjoint if mode == "adjoint" else _evaluate
+    values, jac, raw = run(m, parameters, targets, steps_per_cycle, tol, max_cycles,
+                           series_at_steps=True)
+    ends = np.cumsum([len(v) for v in values]).tolist()
+    rows = {t.output: slice(e - len(v), e) for t, v, e in zip(targets, values, ends, strict=True)}
     return Sensitivities(list(outputs), list(parameters), np.asarray(raw["values"]),
                          np.concatenate(values), np.concatenate(jac), int(raw["cycles"]),
                          float(raw["periodic_change"]), rows, int(raw["tangent_cycles"]))
@@ -462,12 +456,11 @@ class _Problem:
 
     def _outputs(self, m: Model) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
         """The targets' values and their Jacobian by the model's paths (SI) at ``m``."""
-        if self.exact and self.gradient == "adjoint":
-            v, j, raw = _adjoint(m, self.paths, self.targets, series_at_steps=False,
-                                 **self.options)
-            return np.concatenate(v), np.concatenate(j), raw
+        run = _adjoint if self.exact and self.gradient == "adjoint" else _evaluate
         # without the exact Jacobian the core runs the primal only
-        return _evaluate(m, self.paths if self.exact else [], self.targets, **self.options)
+        v, j, raw = run(m, self.paths if self.exact else [], self.targets,
+                        series_at_steps=False, **self.options)
+        return np.concatenate(v), np.concatenate(j), raw
 
     def _eval(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         key = theta.tobytes()
@@ -540,27 +533,34 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
     >>> bool(fit.success), round(fit.parameters[path] / 3.5e9, 6)
     (True, 1.0)
     """
-    from scipy.optimize import least_squares
-
     if method not in ("lm", "trf", "bayes"):
         raise CalibrationError(f"method: expected 'lm', 'trf' or 'bayes', got {method!r}")
     _count("max_evaluations", max_evaluations)
-    for key, value in (("xtol", xtol), ("ftol", ftol)):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                or not 0.0 < value < 1.0:
-            raise CalibrationError(f"{key}: expected a number in (0, 1), got {value!r}")
+    _fraction("xtol", xtol)
+    _fraction("ftol", ftol)
+    # ``bayes`` starts its sampler around the gradient-based fit
+    fit_method = ("trf" if bounds else "lm") if method == "bayes" else method
     if method == "bayes":
-        return _bayes(model, targets, parameters, bounds, max_evaluations, xtol, jacobian,
-                      steps_per_cycle, tol, max_cycles, posterior, gradient, groups)
+        emcee, opts = _emcee(posterior, len(parameters) + len(groups or {}))
     if jacobian not in ("exact", "2-point"):
         raise CalibrationError(f"jacobian: expected 'exact' or '2-point', got {jacobian!r}")
-    problem, (lo, hi) = _problem(model, targets, parameters, bounds, method, jacobian,
+    problem, (lo, hi) = _problem(model, targets, parameters, bounds, fit_method, jacobian,
                                  {"steps_per_cycle": steps_per_cycle, "tol": tol,
                                   "max_cycles": max_cycles}, gradient, groups)
-    params = problem.parameters
+    fit = _least_squares(problem, lo, hi, fit_method, max_evaluations, xtol, ftol)
+    if method == "bayes":
+        _sample(fit, problem, lo, hi, emcee, opts)
+    return fit
+
+
+def _least_squares(problem: _Problem, lo: np.ndarray, hi: np.ndarray, method: str,
+                   max_evaluations: int, xtol: float, ftol: float) -> CalibrationResult:
+    """The fit of ``problem`` by ``scipy.optimize.least_squares`` from the start (θ = 0)."""
+    from scipy.optimize import least_squares
+
     report: dict[str, Any] = {"method": method, "gradient": problem.gradient}
     try:
-        fit = least_squares(problem.fun, np.zeros(len(params)),
+        fit = least_squares(problem.fun, np.zeros(len(problem.parameters)),
                             jac=problem.jac if problem.exact else "2-point",
                             bounds=(lo, hi) if method == "trf" else (-np.inf, np.inf),
                             method=method, x_scale=1.0, xtol=xtol, ftol=ftol, gtol=1e-12,
@@ -737,34 +737,28 @@ def main_cli(model: str, problem_file: str, output: str, quiet: bool = False) ->
     return 0 if res.success else 1
 
 
-def _bayes(model: Any, targets: Any, parameters: Sequence[str], bounds: Any,
-           max_evaluations: int, xtol: float, jacobian: str, steps_per_cycle: int | None,
-           tol: float, max_cycles: int, posterior: Mapping[str, Any] | None,
-           gradient: str = "auto", groups: Any = None) -> CalibrationResult:
-    """``method="bayes"``: the gradient fit, then emcee from around it (see :func:`calibrate`)."""
+def _emcee(posterior: Mapping[str, Any] | None, n: int) -> tuple[Any, dict[str, Any]]:
+    """emcee and the sampler's options of ``method="bayes"`` for ``n`` fitted variables."""
     try:
         import emcee
     except ImportError:
         raise CalibrationError("method 'bayes' needs emcee: pip install oxyline[bayes]"
                                ) from None
-    opts = {"walkers": max(8, 4 * (len(parameters) + len(groups or {}))), "steps": 500, "burn": None, "seed": 0,
+    opts = {"walkers": max(8, 4 * n), "steps": 500, "burn": None, "seed": 0,
             **(posterior or {})}
     unknown = set(opts) - {"walkers", "steps", "burn", "seed"}
     if unknown:
         raise CalibrationError(f"posterior: unknown options {sorted(unknown)}")
-    fit = calibrate(model, targets, parameters, bounds=bounds,
-                    method="trf" if bounds else "lm", max_evaluations=max_evaluations,
-                    xtol=xtol, jacobian=jacobian, steps_per_cycle=steps_per_cycle, tol=tol,
-                    max_cycles=max_cycles, gradient=gradient, groups=groups)
-    grouped = _groups(parameters, groups)
-    params = list(parameters) + list(grouped)
-    start = np.array([fit.start[p] for p in params])
-    lo, hi = _bounds(params, start, bounds)
-    base = load_model(model)
-    problem = _Problem(copy.deepcopy(base.source), params, start,
-                       parse_targets(targets, base),
-                       {"steps_per_cycle": steps_per_cycle, "tol": tol,
-                        "max_cycles": max_cycles}, exact=False, groups=grouped)
+    return emcee, opts
+
+
+def _sample(fit: CalibrationResult, problem: _Problem, lo: np.ndarray, hi: np.ndarray,
+            emcee: Any, opts: Mapping[str, Any]) -> None:
+    """``method="bayes"``: emcee from around the gradient fit ``fit`` of ``problem`` (see
+    :func:`calibrate`), its samples and report put into ``fit``."""
+    params, start = problem.parameters, problem.start
+    # the likelihood needs the residuals only, each trial point's evaluations counted anew
+    problem.exact, problem.cache, problem.evaluations = False, None, 0
 
     def log_prob(theta: np.ndarray) -> float:
         if (theta < lo).any() or (theta > hi).any():
@@ -789,7 +783,6 @@ def _bayes(model: Any, targets: Any, parameters: Sequence[str], bounds: Any,
     sampler.run_mcmc(p0, steps, progress=False)
     chain = sampler.get_chain(discard=burn, flat=True)
     fit.samples = start * np.exp(chain)
-    fit.report.update(method="bayes", fit_method="trf" if bounds else "lm",
+    fit.report.update(method="bayes", fit_method=fit.report["method"],
                       acceptance=float(np.mean(sampler.acceptance_fraction)),
                       posterior_evaluations=problem.evaluations)
-    return fit

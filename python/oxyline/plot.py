@@ -18,6 +18,7 @@ decade; a colour bar spanning a narrow range says so in the title.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -28,7 +29,7 @@ import numpy as np
 
 from oxyline import plot_oxygen
 from oxyline.io.results import stats as time_stats
-from oxyline.plot_style import STYLES, peak_magnitude, prefixed, pyplot, same_curves
+from oxyline.plot_style import STYLES, peak_magnitude, prefixed, pyplot, same_curves, write_figures
 from oxyline.units import MMHG
 
 if TYPE_CHECKING:
@@ -208,6 +209,12 @@ def _graph(model: Model) -> tuple[dict[str, list[tuple[str, str]]], dict[str, di
     return adj, vessels
 
 
+def _ends(model: Model) -> tuple[set[str], set[str]]:
+    """The nodes where vessels start, and those where they end."""
+    vessels = model.canonical["vessels"]
+    return {v["from"] for v in vessels}, {v["to"] for v in vessels}
+
+
 def inlets(model: Model) -> list[str]:
     """Nodes with a flow or pressure condition at the start of a vessel.
 
@@ -215,11 +222,9 @@ def inlets(model: Model) -> list[str]:
     >>> plot.inlets(oxyline.load_model("bifurcation"))
     ['inlet']
     """
-    starts = {v["from"] for v in model.canonical["vessels"]}
-    ends = {v["to"] for v in model.canonical["vessels"]}
-    bcs = model.canonical["boundary_conditions"]
-    found = [n for n, bc in bcs.items() if n in starts and n not in ends
-             and bc["type"] in ("flow", "pressure")]
+    starts, ends = _ends(model)
+    found = [n for n, bc in model.canonical["boundary_conditions"].items()
+             if n in starts and n not in ends and bc["type"] in ("flow", "pressure")]
     return found or [n for n in starts if n not in ends]
 
 
@@ -230,8 +235,7 @@ def outlets(model: Model) -> list[str]:
     >>> plot.outlets(oxyline.load_model("bifurcation"))
     ['ica_out', 'eca_out']
     """
-    ends = {v["to"] for v in model.canonical["vessels"]}
-    starts = {v["from"] for v in model.canonical["vessels"]}
+    starts, ends = _ends(model)
     return [n for n in model.canonical["boundary_conditions"] if n in ends and n not in starts]
 
 
@@ -360,15 +364,9 @@ def profile_data(result: Result, model: Model | str, outlet: str, quantity: str 
     if not names:
         raise ValueError(f"no vessel on the path to '{outlet}' has output (recorded vessels: "
                          f"{', '.join(result.vessels[:10])})")
-    seg_in = seg_out = seg_mid = None
-    for cand in (f"segment_{quantity}_in", f"segment_{quantity}"):
-        if cand in ds.data_vars:
-            seg_in = cand
-            break
-    if f"segment_{quantity}_out" in ds.data_vars:
-        seg_out = f"segment_{quantity}_out"
-    if seg_in == f"segment_{quantity}":
-        seg_mid, seg_in = seg_in, None
+    seg_in, seg_out, seg_mid = (f"segment_{quantity}{end}" for end in ("_in", "_out", ""))
+    seg_in, seg_out = (v if v in ds.data_vars else None for v in (seg_in, seg_out))
+    seg_mid = seg_mid if seg_in is None and seg_mid in ds.data_vars else None
     xs: list[float] = []
     series: list[np.ndarray] = []
     x0 = 0.0
@@ -514,10 +512,9 @@ def _tree_layout(model: Model) -> dict[str, tuple[float, float]]:
 
 
 def _has_loop(model: Model) -> bool:
-    nodes = {v["from"] for v in model.canonical["vessels"]} | {v["to"] for v in
-                                                               model.canonical["vessels"]}
+    starts, ends = _ends(model)
     # a connected graph is a tree iff edges = nodes - 1 (per component; checked globally)
-    return len(model.canonical["vessels"]) > len(nodes) - 1
+    return len(model.canonical["vessels"]) > len(starts | ends) - 1
 
 
 def _layout(model: Model, layout: str) -> dict[str, tuple[float, float]]:
@@ -542,6 +539,12 @@ def _layout(model: Model, layout: str) -> dict[str, tuple[float, float]]:
     return {str(k): (float(v[0]), float(v[1])) for k, v in p.items()}
 
 
+def _mean_radii(model: Model) -> np.ndarray:
+    """Each vessel's mean radius (m; NaN for a lumped vessel), in model order."""
+    return np.array([0.5 * (v["geometry"]["radius_in"] + v["geometry"]["radius_out"])
+                     if "geometry" in v else math.nan for v in model.canonical["vessels"]])
+
+
 def _values(model: Model, values: Any, result: Result | None, label: str | None,
             units: str | None) -> tuple[np.ndarray, str, str, str]:
     """Per-vessel values in model order, colour-bar label and units, and a title note."""
@@ -549,11 +552,7 @@ def _values(model: Model, values: Any, result: Result | None, label: str | None,
     if values is None and result is not None:
         values = "pressure"
     if values is None:
-        r = []
-        for v in model.canonical["vessels"]:
-            g = v.get("geometry")
-            r.append(0.5 * (g["radius_in"] + g["radius_out"]) if g else math.nan)
-        return np.array(r) * 1000, label or "mean radius", units or "mm", ""
+        return _mean_radii(model) * 1000, label or "mean radius", units or "mm", ""
     if isinstance(values, str):
         if result is None:
             raise ValueError(f"values={values!r} names a result variable: pass result=")
@@ -609,8 +608,7 @@ def network_map(model: Model | str | os.PathLike[str], values: Any = None,
     vals, label, units, note = _values(m, values, result, label, units)
     vessels = m.canonical["vessels"]
     segs = [[pos[v["from"]], pos[v["to"]]] for v in vessels]
-    radii = np.array([0.5 * (v["geometry"]["radius_in"] + v["geometry"]["radius_out"])
-                      if "geometry" in v else math.nan for v in vessels])
+    radii = _mean_radii(m)
     if np.all(np.isnan(radii)):
         widths = np.full(len(vessels), 2.0)
     else:
@@ -638,10 +636,9 @@ def network_map(model: Model | str | os.PathLike[str], values: Any = None,
         if node in pos:
             marker = ">" if node in starts else "s"
             ax.scatter(*pos[node], marker=marker, s=28, color="k", zorder=4)
-    pad = 0.05 * max(1e-9, float(np.ptp(xy[:, 0])) or 1.0)
-    ax.set_xlim(xy[:, 0].min() - pad, xy[:, 0].max() + pad)
-    ypad = 0.05 * max(1e-9, float(np.ptp(xy[:, 1])) or 1.0)
-    ax.set_ylim(xy[:, 1].min() - ypad, xy[:, 1].max() + ypad)
+    for c, limits in enumerate((ax.set_xlim, ax.set_ylim)):
+        pad = 0.05 * max(1e-9, float(np.ptp(xy[:, c])) or 1.0)
+        limits(xy[:, c].min() - pad, xy[:, c].max() + pad)
     ax.set_axis_off()
     sm = plt.cm.ScalarMappable(norm=norm, cmap=cm)
     cb = fig.colorbar(sm, ax=ax, shrink=0.8, pad=0.02)
@@ -690,19 +687,13 @@ def save_figures(result: Result, model: Model | str | os.PathLike[str],
     ...     sorted(p.name for p in plot.save_figures(res, "bifurcation", out, formats=("png",)))
     ['network_map.png', 'profile.png', 'waveforms.png']
     """
-    plt = pyplot()
     m = _model(model)
-    out = Path(outdir)
-    out.mkdir(parents=True, exist_ok=True)
     ds = result.to_xarray()
     quantities = [q for q in ("pressure", "flow", "po2") if _has(ds, q)]
-    outs = [o for o in outlets(m)]
     paths = {}
-    for o in outs:
-        try:
+    for o in outlets(m):
+        with contextlib.suppress(KeyError):
             paths[o] = path(m, o)
-        except KeyError:
-            continue
     _, vessels = _graph(m)
     figures = {"waveforms": waveforms(result, representative_vessels(result, m), quantities)}
     if paths:
@@ -715,14 +706,7 @@ def save_figures(result: Result, model: Model | str | os.PathLike[str],
         figures["o2_outlet_flux"] = plot_oxygen.outlet_flux(result, m)
         if result.has_segments:
             figures["o2_wall_uptake"] = plot_oxygen.wall_uptake(result, m)
-    written = []
-    for name, fig in figures.items():
-        for fmt in formats:
-            p = out / f"{name}.{fmt}"
-            fig.savefig(p, dpi=dpi)
-            written.append(p)
-        plt.close(fig)
-    return written
+    return write_figures(figures, outdir, formats, dpi)
 
 
 def impedance(frequencies: Any, z: Any, label: str | None = None,

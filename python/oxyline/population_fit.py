@@ -33,6 +33,7 @@ from oxyline.populations import (
     _base,
     age_statistics,
     base_model,
+    baseline_row,
     cf_pwv,
     in_vivo,
     parameters,
@@ -124,8 +125,7 @@ def _characteristics_jacobian(values: np.ndarray, lengths: np.ndarray) -> np.nda
 def baseline_subject(age: float) -> tuple[dict[str, float], dict[str, Any]]:
     """The baseline subject of ``age`` (every varied parameter at the age's mean) and its
     model dict (``pwdb-116`` with the subject's patch)."""
-    table = parameters((age,), 3)
-    row = table[(table[[f"{p}_sd" for p in VARIED]] == 0).all(axis=1)].iloc[0].to_dict()
+    row = baseline_row(age)
     return row, patched(base_model(), subject_patch(row))
 
 
@@ -183,11 +183,7 @@ class _Fit:
         s = exact(model, paths, list(_outputs().values()), mode="adjoint", **self.options)
         lengths = _path_lengths(model)
         # d output / d log(path) = d output / d path · path, summed over each group
-        members = np.zeros((len(paths), len(VARIABLES)))
-        start = 0
-        for k, g in enumerate(VARIABLES):
-            members[start:start + len(groups[g]), k] = 1.0
-            start += len(groups[g])
+        members = np.repeat(np.eye(len(VARIABLES)), [len(groups[g]) for g in VARIABLES], axis=0)
         jp = s.jacobian * s.parameter_values[None, :]
         jac = _characteristics_jacobian(s.values, lengths) @ (jp @ members)
         self.cache = {key: (characteristics(s.values, lengths).real, jac)}
@@ -317,8 +313,7 @@ def shrunk_row(row: Mapping[str, float], fraction: float) -> dict[str, float]:
 
 @lru_cache(maxsize=16)
 def _baseline_lvet(age: float) -> float:
-    table = parameters((age,), 3)
-    return float(table[(table[[f"{p}_sd" for p in VARIED]] == 0).all(axis=1)]["lvet"].iloc[0])
+    return float(baseline_row(age)["lvet"])
 
 
 @dataclass

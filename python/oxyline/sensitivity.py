@@ -42,12 +42,13 @@ def _salib() -> tuple[Any, Any]:
 
 
 def _named(quantity: Any) -> list[tuple[str, str]] | None:
-    """Summary variables ``"var[vessel]"`` or ``(var, vessel)`` (one or a list), else None."""
+    """Summary variables ``"var[vessel]"`` or ``(var, vessel)`` (one or a list), or None for
+    a callable; anything else raises, naming it."""
     items = [quantity] if isinstance(quantity, (str, tuple)) else quantity
-    if callable(items) or not isinstance(items, Sequence):
+    if callable(items):
         return None
     out = []
-    for q in items:
+    for q in items if isinstance(items, Sequence) else [items]:
         if isinstance(q, tuple) and len(q) == 2:
             out.append((str(q[0]), str(q[1])))
             continue
@@ -127,13 +128,7 @@ def _check_n(n: Any) -> int:
 def _check_quantity(quantity: Any, model: Model) -> None:
     """A callable, or summary variables of vessels the model has (checked before the
     ensemble runs)."""
-    named = _named(quantity)
-    if named is None:
-        if not callable(quantity):
-            raise ModelError(f"sobol: a quantity is a callable f(result), a summary variable "
-                             f"'var[vessel]' or (var, vessel), got {quantity!r}")
-        return
-    for var, vessel in named:
+    for var, vessel in _named(quantity) or ():
         if vessel not in model.vessel_names:
             raise ModelError(f"sobol: quantity '{var}[{vessel}]': no vessel named {vessel!r} in "
                              f"model '{model.name}'")

@@ -246,29 +246,29 @@ class _ClientRun:
 
     def submit_all(self) -> None:
         """Every chunk, placed by :func:`_plan`."""
-        output, workers, overrides = self.args
         chunks, where = _plan(len(self.patches), self.client.nthreads())
         self.sent_with = dict.fromkeys(chunks, self.scatters)
-        parts = [[self.patches[i] for i in c] for c in chunks]
-        k = len(chunks)
         if where is None:  # one graph: the scheduler queues the tasks and hands them out
-            futures = self.client.map(run_chunk, [self.shared] * k, parts, chunks,
+            output, workers, overrides = self.args
+            k = len(chunks)
+            futures = self.client.map(run_chunk, [self.shared] * k,
+                                      [[self.patches[i] for i in c] for c in chunks], chunks,
                                       [output] * k, [workers] * k, [dict(overrides)] * k,
                                       pure=False, retries=RETRIES)
             self.futures = dict(zip(futures, chunks, strict=True))
         else:
-            self.futures = {
-                self.client.submit(run_chunk, self.shared, part, c, output, workers,
-                                   dict(overrides), pure=False,
-                                   workers=None if w is None else [w],
-                                   allow_other_workers=w is not None, retries=RETRIES): c
-                for part, c, w in zip(parts, chunks, where, strict=True)}
+            self.futures = {self._submit(c, w): c for c, w in zip(chunks, where, strict=True)}
+
+    def _submit(self, rows: range, worker: str | None = None) -> Any:
+        """The task of the variants ``rows``, pinned loosely to ``worker`` if given."""
+        output, workers, overrides = self.args
+        return self.client.submit(run_chunk, self.shared, [self.patches[i] for i in rows],
+                                  rows, output, workers, dict(overrides), pure=False,
+                                  workers=None if worker is None else [worker],
+                                  allow_other_workers=worker is not None, retries=RETRIES)
 
     def send(self, rows: range) -> None:
-        output, workers, overrides = self.args
-        again = self.client.submit(run_chunk, self.shared, [self.patches[i] for i in rows],
-                                   rows, output, workers, dict(overrides), pure=False,
-                                   retries=RETRIES)
+        again = self._submit(rows)
         self.futures[again] = rows
         self.sent_with[rows] = self.scatters
         self.pending.add(again)

@@ -83,8 +83,7 @@ class Feed:
             except ModelError as e:
                 # the patch's names were checked before the run (they raise); a value the
                 # patch or the model refuses fails only this variant
-                text = str(e) if str(e).startswith(f"variant {k}: ") else f"variant {k}: {e}"
-                self.collector.fail(i, "model", text[:ERROR_CHARS])
+                self.collector.fail(i, "model", traced(k, None, e)[:ERROR_CHARS])
                 self.on_skip(i)
                 continue
             self.prepared[i] = (v, s)

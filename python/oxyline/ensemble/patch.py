@@ -65,15 +65,14 @@ def merge(source: Mapping[str, Any], patch: Any, k: int = 0) -> Merged:
     return Merged(data, set(vessels), set(nodes), paths, refused)
 
 
-def merge_patch(source: Mapping[str, Any], patch: Mapping[str, Any], k: int = 0,
-                ) -> tuple[dict[str, Any], set[int], set[str]]:
-    """The native model ``source`` with ``patch`` (variant ``k``) applied, sharing every
-    element the patch leaves alone, and the indices of the vessels and the nodes of the
-    conditions it changed. Raises :class:`ModelError` for unknown names and refused values."""
+def merge_patch(source: Mapping[str, Any], patch: Mapping[str, Any], k: int = 0) -> Merged:
+    """:func:`merge`, its ``data`` the native model ``source`` with ``patch`` (variant ``k``)
+    applied, sharing every element the patch leaves alone. Raises :class:`ModelError` for
+    unknown names and refused values."""
     m = merge(source, patch, k)
     if m.data is None:
         raise ModelError(m.refused)
-    return m.data, m.vessels, m.nodes
+    return m
 
 
 def patch_paths(patch: Mapping[str, Any]) -> list[str]:
@@ -106,7 +105,7 @@ def apply_patch(model: Model | Mapping[str, Any] | str, patch: Mapping[str, Any]
     from oxyline.loader import load_model
 
     base = load_model(model)
-    return copy_description(merge_patch(base.source, patch)[0])
+    return copy_description(merge_patch(base.source, patch).data)
 
 
 def _column_path(column: Any, names: Mapping[str, set[str]], k: int) -> list[str]:
@@ -336,9 +335,7 @@ class Patcher:
             assert self.scaler is not None
             return Variant(None, self.scaler.model_with_period(row.period), values=row.values,
                            tables=row.tables)
-        merged = merge(self.base.source, patch, k)
-        if merged.data is None:
-            raise ModelError(merged.refused)
+        merged = merge_patch(self.base.source, patch, k)
         model = self._read(merged, patch, k)
         vessels, nodes = merged.vessels, merged.nodes
         canon, base = model.canonical, self.base.canonical
