@@ -382,17 +382,13 @@ def profile_data(result: Result, model: Model | str, outlet: str, quantity: str 
                 pos = np.asarray(v.segment_position, dtype=float)
                 if not np.all(np.isfinite(pos)):
                     pos = np.full(nseg, length / 2)
-                for j, i in enumerate(sel):
-                    xs.append(x0 + pos[j])
-                    series.append(ds[seg_mid].values[:, i])
-            else:
-                for j, i in enumerate(sel):
-                    xs.append(x0 + length * j / nseg)
-                    series.append(ds[seg_in].values[:, i])
-                last = ds[seg_out].values[:, sel[-1]] if seg_out else None
-                if last is not None:
-                    xs.append(x0 + length)
-                    series.append(last)
+                xs += [x0 + pos[j] for j in range(nseg)]
+            else:  # the segments' inlets, then the last one's outlet
+                xs += [x0 + length * j / nseg for j in range(nseg)]
+            series += [ds[seg_mid or seg_in].values[:, i] for i in sel]
+            if seg_out and not seg_mid:
+                xs.append(x0 + length)
+                series.append(ds[seg_out].values[:, sel[-1]])
         else:
             var_in = _vessel_variable(ds, quantity, "in")
             var_out = var_in[:-3] + "_out" if var_in.endswith("_in") else None

@@ -338,9 +338,7 @@ def run_on_client(client: Any, model: Model, patches: list[dict[str, Any]], inde
                   overrides: Mapping[str, Any], cancel: Any = None) -> Any:
     from oxyline.ensemble.local import _progress, run_settings
 
-    patcher = Patcher(model)
-    for k, patch in enumerate(patches):  # unknown names fail here, before any task starts
-        patcher.check(patch, k)
+    Patcher(model).check_all(patches)  # unknown names fail here, before any task starts
     run_settings(model, output, overrides)  # so do unknown settings
     _check_sendable(output)
     collector = Collector(len(patches), output, model.vessel_names)

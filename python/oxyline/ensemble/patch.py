@@ -277,18 +277,13 @@ class Patcher:
     def _parse(self, patch: Any, k: int) -> Any:
         return None if self.scaler is None else self.scaler.parse(patch, k)
 
-    def check(self, patch: Any, k: int) -> None:
-        """Raise :class:`ModelError` for unknown names in ``patch`` (variant ``k``), as
-        :meth:`variant` would; a patch on the value route is checked without merging it. A
-        value the patch cannot apply is not raised here: it fails only its variant."""
-        if self._parse(patch, k) is None:
-            merge(self.base.source, patch, k)
-
     def check_all(self, patches: Sequence[Any], numbers: range | None = None) -> dict[int, Any]:
-        """:meth:`check` every patch (variant ``numbers[i]``, default ``i``) and return the
-        value-route rows of those that take it, by position in ``patches`` (see
-        :meth:`~oxyline.ensemble.values.ValueTable.rows`): the parse serves both, and the
-        values of the whole ensemble are one numpy pass."""
+        """Raise :class:`ModelError` for unknown names in every patch (variant ``numbers[i]``,
+        default ``i``), as :meth:`variant` would (a patch on the value route is checked
+        without merging it; a value the patch cannot apply is not raised here: it fails only
+        its variant), and return the value-route rows of those that take it, by position in
+        ``patches`` (see :meth:`~oxyline.ensemble.values.ValueTable.rows`): the parse serves
+        both, and the values of the whole ensemble are one numpy pass."""
         numbers = range(len(patches)) if numbers is None else numbers
         fast: list[int] = []
         parsed = []
