@@ -705,13 +705,9 @@ def read_problem(path: str) -> dict[str, Any]:
         raise CalibrationError(f"{path}: needs 'parameters' and 'targets' (and optionally "
                                f"'method', 'groups', 'gradient'); unknown keys "
                                f"{sorted(unknown)}")
-    params = data["parameters"]
-    bounds: dict[str, Any] = {}
-    if isinstance(params, Mapping):
-        for p, opts in params.items():
-            if isinstance(opts, Mapping) and "bounds" in opts:
-                bounds[p] = opts["bounds"]
-        params = list(params)
+    params = data["parameters"]  # a mapping's keys are the paths
+    bounds = {p: o["bounds"] for p, o in params.items() if isinstance(o, Mapping)
+              and "bounds" in o} if isinstance(params, Mapping) else {}
     method = str(data.get("method", "trf" if bounds else "lm"))
     return {"parameters": list(params), "targets": data["targets"],
             "bounds": bounds or None, "method": method, "groups": data.get("groups"),

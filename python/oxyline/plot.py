@@ -89,11 +89,8 @@ def _vessel_variable(ds: Any, quantity: str, end: str = "in") -> str:
 
 
 def _has(ds: Any, quantity: str) -> bool:
-    try:
-        _vessel_variable(ds, quantity)
-        return True
-    except ValueError:
-        return False
+    return any(n in ds.data_vars and ds[n].dims == ("time", "vessel")
+               for n in (quantity, f"{quantity}_in"))
 
 
 def _declutter(fig: Any, texts: Sequence[Any]) -> None:

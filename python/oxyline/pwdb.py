@@ -105,14 +105,11 @@ def _rows(geo: list[dict[str, Any]]) -> list[tuple[int, int, float, float, float
             for g in geo]
 
 
-def _paths() -> tuple[tuple[tuple[int, ...], int], tuple[tuple[int, ...], int]]:
-    return (AORTA_FEMORAL, FEMORAL_SEGMENT), (AORTA_CAROTID, CAROTID_SEGMENT)
-
-
 def fit_k3(geo: list[dict[str, Any]], target_pwv: float) -> float:
     """The wall-law k3 [g s^-2 cm^-1] giving ``target_pwv`` (cf-PWV, m/s) on ``geo`` (the
     core's bisection, to 1e-12 relative)."""
-    return _core.pwdb_fit_k3(_rows(geo), *_paths(), target_pwv)
+    return _core.pwdb_fit_k3(_rows(geo), (AORTA_FEMORAL, FEMORAL_SEGMENT),
+                             (AORTA_CAROTID, CAROTID_SEGMENT), target_pwv)
 
 
 # ---------------------------------------------------------------- inflow
