@@ -470,13 +470,11 @@ def _tree_layout(model: Model) -> dict[str, tuple[float, float]]:
     roots = inlets(model) or list(adj)[:1]
     depth: dict[str, int] = {}
     children: dict[str, list[str]] = {n: [] for n in adj}
-    order: list[str] = []
     for r in roots + list(adj):
         if r in depth:
             continue
         depth[r] = 0
         queue = [r]
-        order.append(r)
         while queue:
             n = queue.pop(0)
             for c in und[n]:
@@ -499,7 +497,7 @@ def _tree_layout(model: Model) -> dict[str, tuple[float, float]]:
     import sys
 
     sys.setrecursionlimit(max(1000, 4 * len(adj) + 100))
-    for r in order:
+    for r in [n for n, d in depth.items() if d == 0]:  # the roots, in the order they were found
         place(r)
     return pos
 

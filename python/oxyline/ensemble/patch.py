@@ -149,9 +149,8 @@ def _cell(value: Any) -> tuple[bool, Any]:
             value = value.item()  # a numpy scalar (or 0-d array): the Python value
         except (ValueError, TypeError):
             pass
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return False, None
-    if type(value).__name__ in ("NAType", "NaTType"):  # pandas' missing values
+    if value is None or (isinstance(value, float) and math.isnan(value)) \
+            or type(value).__name__ in ("NAType", "NaTType"):  # pandas' missing values
         return False, None
     return True, value
 
