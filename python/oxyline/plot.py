@@ -21,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -275,10 +276,7 @@ def internal_vessels(model: Model) -> set[str]:
     >>> plot.internal_vessels(oxyline.load_model("bifurcation"))
     set()
     """
-    count: dict[str, int] = {}
-    for v in model.canonical["vessels"]:
-        for end in (v["from"], v["to"]):
-            count[end] = count.get(end, 0) + 1
+    count = Counter(end for v in model.canonical["vessels"] for end in (v["from"], v["to"]))
     bcs = model.canonical["boundary_conditions"]
 
     def closed(node: str) -> bool:  # no condition, or a zero inflow: nothing passes there
@@ -635,14 +633,12 @@ def network_map(model: Model | str | os.PathLike[str], values: Any = None,
     cb = fig.colorbar(sm, ax=ax, shrink=0.8, pad=0.02)
     cb.set_label(f"{label} [{units}]" if units else label)
     cb.ax.yaxis.get_major_formatter().set_useOffset(False)  # full values, no hidden offset
-    texts = []
-    if labels or (labels is None and len(vessels) <= 150):
-        for v, s in zip(vessels, segs):
-            (x0, y0), (x1, y1) = s
-            texts.append(ax.text(0.5 * (x0 + x1), 0.5 * (y0 + y1), v["name"], fontsize=7,
-                                 ha="center", va="bottom", color="0.1", zorder=3.5,
-                                 bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none",
-                                       "alpha": 0.7}))
+    shown = labels or (labels is None and len(vessels) <= 150)
+    texts = [ax.text(0.5 * (x0 + x1), 0.5 * (y0 + y1), v["name"], fontsize=7, ha="center",
+                     va="bottom", color="0.1", zorder=3.5,
+                     bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none",
+                           "alpha": 0.7})
+             for v, ((x0, y0), (x1, y1)) in zip(vessels, segs)] if shown else []
     ax.set_title(f"{m.name}: {label}{note}{narrow_range_note(vmin, vmax, units)}", fontsize=11)
     _declutter(fig, texts)
     return fig

@@ -358,18 +358,14 @@ def model_dict(geometry: list[dict[str, Any]], row: Mapping[str, float] | None =
     patch = subject_patch(row, geometry)
     geo = pwdb.subject_geometry(geometry, row["dia"], row["length"])
     props = pwdb.vessel_properties(geometry, geo, 0.0)   # lengths, radii, thickness
-    vessels = []
-    for g, p in zip(geometry, props, strict=True):
-        v = {"name": g["name"], "from": pwdb.node(g["inlet"]), "to": pwdb.node(g["outlet"]),
-             "length": p["length"], "radius_in": p["radius_in"], "radius_out": p["radius_out"],
-             "wall_thickness": p["wall_thickness"],
-             "youngs_modulus": patch["vessels"][g["name"]]["youngs_modulus"],
-             "poisson_ratio": pwdb.POISSON}
-        vessels.append(v)
-    bcs: dict[str, dict[str, Any]] = {}
-    for n, bc in patch["boundary_conditions"].items():
-        bcs[n] = ({"type": "flow", **bc, "interpolation": "linear"} if n == pwdb.INLET_NODE
-                  else {"type": "rcr", **bc, "pressure": pwdb.P_OUT})
+    vessels = [{"name": g["name"], "from": pwdb.node(g["inlet"]), "to": pwdb.node(g["outlet"]),
+                "length": p["length"], "radius_in": p["radius_in"],
+                "radius_out": p["radius_out"], "wall_thickness": p["wall_thickness"],
+                "youngs_modulus": patch["vessels"][g["name"]]["youngs_modulus"],
+                "poisson_ratio": pwdb.POISSON} for g, p in zip(geometry, props, strict=True)]
+    bcs = {n: {"type": "flow", **bc, "interpolation": "linear"} if n == pwdb.INLET_NODE
+           else {"type": "rcr", **bc, "pressure": pwdb.P_OUT}
+           for n, bc in patch["boundary_conditions"].items()}
     return {"name": name, "description": _describe(row), "units": "SI",
             "blood": {"density": pwdb.RHO, "viscosity": pwdb.MU}, "arrangement": "inverted-L",
             "segmentation": {"max_length": MAX_SEGMENT_LENGTH}, "vessels": vessels,

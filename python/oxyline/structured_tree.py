@@ -154,10 +154,8 @@ def build_with_trees(data: dict[str, Any], build_native: Callable[..., Any],
     grown = _core.StructuredTrees(trees, factor(units, "length"), factor(units, "modulus"),
                                   memory_limit, len(data.get("vessels") or []))
     # each terminal condition converted once (any outlet condition), copied per leaf
-    terminals = []
-    for node, bc, _ in trees:
-        canon, _ = convert_conditions({node: _terminal(node, bc)}, units)
-        terminals.append(json.dumps(canon[node]))
+    terminals = [json.dumps(convert_conditions({node: _terminal(node, bc)}, units)[0][node])
+                 for node, bc, _ in trees]
     model = build_native({**data, "boundary_conditions": rest},
                          lambda parts: grown.move_into(parts, terminals))
     model.source = data  # ``canonical`` is written from it, trees grown, when asked for
