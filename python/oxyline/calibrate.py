@@ -64,18 +64,6 @@ class Sensitivities:
     tangent_cycles: int = 0
 
 
-def _settings(model: Model, steps_per_cycle: int | None) -> tuple[float, int, float]:
-    period = model.period
-    if period is None:
-        raise CalibrationError(f"model '{model.name}': sensitivities need a periodic model "
-                               "(a period or periodic waveforms)")
-    # the model's dt and rho_infty with the core's defaults (the run's own settings)
-    s = _core.resolve_settings(model.simulation, {}, period)
-    if steps_per_cycle is None:  # a fixed dt's steps, else ("auto"): 400 steps a cycle
-        steps_per_cycle = round(period / s["dt"]) if s["dt"] is not None else 400
-    return float(period), _count("steps_per_cycle", steps_per_cycle), float(s["rho_infty"])
-
-
 #: Most steps per cycle or cycles a tangent run may plan (as many as a run: `simulate`'s plan).
 _MOST = 10**9
 
@@ -96,9 +84,20 @@ def _fraction(name: str, value: Any) -> None:
         raise CalibrationError(f"{name}: expected a number in (0, 1), got {value!r}")
 
 
-def _check_controls(parameters: Sequence[str], signals: Sequence[Any], steps: int, tol: Any,
-                    max_cycles: Any) -> None:
-    """The tangent run's controls, and its stored derivatives against the memory allowed."""
+def _run_args(model: Model, parameters: Sequence[str], signals: Sequence[Any],
+              steps_per_cycle: int | None, tol: Any, max_cycles: Any
+              ) -> tuple[float, int, float, int, float]:
+    """(period, steps, rho_infty, max_cycles, tol) of a tangent or adjoint run of ``model``,
+    its controls checked, and its stored derivatives against the memory allowed."""
+    period = model.period
+    if period is None:
+        raise CalibrationError(f"model '{model.name}': sensitivities need a periodic model "
+                               "(a period or periodic waveforms)")
+    # the model's dt and rho_infty with the core's defaults (the run's own settings)
+    s = _core.resolve_settings(model.simulation, {}, period)
+    if steps_per_cycle is None:  # a fixed dt's steps, else ("auto"): 400 steps a cycle
+        steps_per_cycle = round(period / s["dt"]) if s["dt"] is not None else 400
+    steps = _count("steps_per_cycle", steps_per_cycle)
     _fraction("tol", tol)
     _count("max_cycles", max_cycles)
     need = 8.0 * steps * max(len(signals), 1) * (len(parameters) + 1)
@@ -108,13 +107,12 @@ def _check_controls(parameters: Sequence[str], signals: Sequence[Any], steps: in
             f"steps_per_cycle = {steps}: the derivatives of {len(signals)} signal(s) by "
             f"{len(parameters)} parameter(s) at every step need about {memory.human(need)} "
             f"(estimate), above the {memory.human(limit)} allowed; use fewer steps_per_cycle")
+    return float(period), steps, float(s["rho_infty"]), max_cycles, tol
 
 
 def _tangent(model: Model, parameters: Sequence[str], signals: list[tuple[str, str]],
              steps_per_cycle: int | None, tol: float, max_cycles: int) -> dict[str, Any]:
-    period, steps, rho = _settings(model, steps_per_cycle)
-    _check_controls(parameters, signals, steps, tol, max_cycles)
-    args = (period, steps, rho, max_cycles, tol)
+    args = _run_args(model, parameters, signals, steps_per_cycle, tol, max_cycles)
     with core_errors(f"model '{model.name}'"):
         if not _involves_oxygen(parameters, signals):
             return _core.tangent_sensitivities(json.dumps(model.canonical), list(parameters),
@@ -245,8 +243,7 @@ def _adjoint(m: Model, parameters: Sequence[str], targets: Sequence[Target],
     its gradient for every parameter. ``series_at_steps``: a series is read at the cycle's
     steps (:func:`sensitivities`), else at its target's times (:func:`calibrate`)."""
     signals = sorted({s for t in targets for s in t.signals})
-    period, steps, rho = _settings(m, steps_per_cycle)
-    _check_controls([], signals, steps, tol, max_cycles)
+    args = _run_args(m, [], signals, steps_per_cycle, tol, max_cycles)
     values: list[np.ndarray] = []
     paths: list[Any] = []
 
@@ -275,9 +272,9 @@ def _adjoint(m: Model, parameters: Sequence[str], targets: Sequence[Target],
     with core_errors(f"model '{m.name}'"):
         if _involves_oxygen(parameters, signals):
             core, core_signals, weights, complete = _oxygen_adjoint(
-                m, parameters, signals, weights_of, (period, steps, rho, max_cycles, tol))
+                m, parameters, signals, weights_of, args)
         out = complete(core(json.dumps(m.canonical), list(parameters), core_signals, weights,
-                            period, steps, rho, max_cycles, tol))
+                            *args))
     jac, start = [], 0
     for path, v in zip(paths, values, strict=True):
         j = np.asarray(out["gradients"][start:start + len(v)])
