@@ -313,10 +313,9 @@ def representative_vessels(result: Result, model: Model, n: int = 5) -> list[str
             first = p[0]
     if not paths:
         return named[:n] or list(result.vessels[:n])
-    flow = {v: 0.0 for v in paths}
-    if "flow_in" in result.vessel_variables:
-        flow = {v: abs(float(np.mean(result.flow_in[:, result.vessels.index(v)])))
-                for v in paths}
+    flowing = "flow_in" in result.vessel_variables
+    flow = {v: abs(float(np.mean(result.flow_in[:, result.vessels.index(v)]))) if flowing
+            else 0.0 for v in paths}
     chosen = [first] if first in result.vessels else []
     taken = [paths[first]] if first in paths else [{first}]
 

@@ -76,14 +76,11 @@ class Feed:
                 v = self.patcher.variant(self.patches[i], k, self.values.pop(i, None))
                 s = (self.base_settings if v.model is self.patcher.base else
                      run_settings(v.model, self.output, self.overrides))
-            except ResourceError as e:
-                self.collector.fail(i, "resource", f"variant {k}: {e}"[:ERROR_CHARS])
-                self.on_skip(i)
-                continue
-            except ModelError as e:
+            except ModelError as e:  # a ResourceError too
                 # the patch's names were checked before the run (they raise); a value the
-                # patch or the model refuses fails only this variant
-                self.collector.fail(i, "model", traced(k, None, e)[:ERROR_CHARS])
+                # patch or the model refuses, or the memory it needs, fails only this variant
+                kind = "resource" if isinstance(e, ResourceError) else "model"
+                self.collector.fail(i, kind, traced(k, None, e)[:ERROR_CHARS])
                 self.on_skip(i)
                 continue
             self.prepared[i] = (v, s)

@@ -331,14 +331,9 @@ class Patcher:
                            tables=row.tables)
         merged = merge_patch(self.base.source, patch, k)
         model = self._read(merged, patch, k)
-        vessels, nodes = merged.vessels, merged.nodes
         canon, base = model.canonical, self.base.canonical
-        core: dict[str, Any] = {}
-        handed = {i: canon["vessels"][i] for i in sorted(vessels)}
-        outlets = {n: canon["boundary_conditions"][n] for n in nodes}
-        if canon["blood"] != base["blood"]:
-            core["blood"] = canon["blood"]
-        if canon.get("transport") != base.get("transport"):
-            core["transport"] = canon["transport"]
+        core = {k: canon[k] for k in ("blood", "transport") if canon.get(k) != base.get(k)}
+        handed = {i: canon["vessels"][i] for i in sorted(merged.vessels)}
+        outlets = {n: canon["boundary_conditions"][n] for n in merged.nodes}
         return Variant(json.dumps(core, separators=(",", ":")), model, handed or None,
                        outlets or None)
