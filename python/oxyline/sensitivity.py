@@ -114,9 +114,7 @@ def _check_problem(problem: Any) -> dict[str, Any]:
 def _check_n(n: Any) -> int:
     """The base sample size: a power of 2 (the balance of Sobol' points)."""
     try:
-        if isinstance(n, bool):
-            raise TypeError
-        m = operator.index(n)
+        m = 0 if isinstance(n, bool) else operator.index(n)
     except TypeError:
         m = 0
     if m < 1 or m & (m - 1):

@@ -180,9 +180,7 @@ def parse_targets(targets: Any, model: Any) -> list[Target]:
                 raise CalibrationError(f"target '{name}': {times.size} times for "
                                        f"{value.size} values")
         sigma = _sigma(name, item, value)
-        t = Target(name, value, sigma, times)
-        t.signals = _signals(found[len(out)], CalibrationError)
-        out.append(t)
+        out.append(Target(name, value, sigma, times, _signals(found[len(out)], CalibrationError)))
     return out
 
 

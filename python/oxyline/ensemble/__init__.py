@@ -154,12 +154,10 @@ def _workers(workers: Any) -> int | None:
     if workers is None:
         return None
     try:
-        if isinstance(workers, bool):
-            raise TypeError
-        n = operator.index(workers)
+        n = 0 if isinstance(workers, bool) else operator.index(workers)
     except TypeError:
-        n = None
-    if n is None or n < 1:
+        n = 0
+    if n < 1:
         raise ModelError(f"simulate_ensemble: workers must be None (every core, or "
                          f"OXYLINE_NUM_THREADS) or a whole number >= 1, got {workers!r}")
     return n

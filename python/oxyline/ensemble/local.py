@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import itertools
 import json
 import weakref
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -255,15 +256,11 @@ def _old_objects_frozen() -> Iterator[None]:
 def _progress(enabled: Any, total: int) -> tuple[Callable[[], None], Callable[[], None]]:
     """(tick, close): one tick per finished variant; ``enabled`` may be a callback
     ``f(done, total)``."""
-    count = [0]
     if callable(enabled):
-        def tick() -> None:
-            count[0] += 1
-            enabled(count[0], total)
-        return tick, lambda: None
-    if not enabled:
-        return (lambda: None), (lambda: None)
-    tqdm = tqdm_class()  # the text bar in a notebook without ipywidgets (no TqdmWarning)
+        done = itertools.count(1)
+        return (lambda: enabled(next(done), total)), (lambda: None)
+    # the text bar in a notebook without ipywidgets (no TqdmWarning)
+    tqdm = tqdm_class() if enabled else None
     if tqdm is None:
         return (lambda: None), (lambda: None)
     bar = tqdm(total=total, unit="variant", delay=1.0)
