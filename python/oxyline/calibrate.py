@@ -110,16 +110,6 @@ def _run_args(model: Model, parameters: Sequence[str], signals: Sequence[Any],
     return float(period), steps, float(s["rho_infty"]), max_cycles, tol
 
 
-def _tangent(model: Model, parameters: Sequence[str], signals: list[tuple[str, str]],
-             steps_per_cycle: int | None, tol: float, max_cycles: int) -> dict[str, Any]:
-    args = _run_args(model, parameters, signals, steps_per_cycle, tol, max_cycles)
-    with core_errors(f"model '{model.name}'"):
-        if not _involves_oxygen(parameters, signals):
-            return _core.tangent_sensitivities(json.dumps(model.canonical), list(parameters),
-                                               signals, *args)
-        return _with_oxygen(model, parameters, signals, args)
-
-
 def _is_oxygen_path(path: str) -> bool:
     return path.split(".")[0] == "oxygen"
 
@@ -179,7 +169,11 @@ def _evaluate(model: Model, parameters: Sequence[str], targets: Sequence[Target]
     """Every target's value(s) and Jacobian rows (d/d SI parameter) at ``model`` by the
     tangents; ``series_at_steps`` as :func:`_adjoint`'s."""
     signals = sorted({s for t in targets for s in t.signals})
-    raw = _tangent(model, parameters, signals, steps_per_cycle, tol, max_cycles)
+    args = _run_args(model, parameters, signals, steps_per_cycle, tol, max_cycles)
+    with core_errors(f"model '{model.name}'"):
+        raw = _with_oxygen(model, parameters, signals, args) \
+            if _involves_oxygen(parameters, signals) else _core.tangent_sensitivities(
+                json.dumps(model.canonical), list(parameters), signals, *args)
     values, jac = [], []
     for t in targets:
         cols = [signals.index(s) for s in t.signals]

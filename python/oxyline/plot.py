@@ -499,14 +499,11 @@ def _tree_layout(model: Model) -> dict[str, tuple[float, float]]:
     return pos
 
 
-def _has_loop(model: Model) -> bool:
+def _layout(model: Model, layout: str) -> dict[str, tuple[float, float]]:
     starts, ends = _ends(model)
     # a connected graph is a tree iff edges = nodes - 1 (per component; checked globally)
-    return len(model.canonical["vessels"]) > len(starts | ends) - 1
-
-
-def _layout(model: Model, layout: str) -> dict[str, tuple[float, float]]:
-    if layout == "tree" or (layout == "auto" and not _has_loop(model)):
+    loop = len(model.canonical["vessels"]) > len(starts | ends) - 1
+    if layout == "tree" or (layout == "auto" and not loop):
         return _tree_layout(model)
     try:
         import networkx as nx

@@ -123,15 +123,6 @@ def _check_n(n: Any) -> int:
     return m
 
 
-def _check_quantity(quantity: Any, model: Model) -> None:
-    """A callable, or summary variables of vessels the model has (checked before the
-    ensemble runs)."""
-    for var, vessel in _named(quantity) or ():
-        if vessel not in model.vessel_names:
-            raise ModelError(f"sobol: quantity '{var}[{vessel}]': no vessel named {vessel!r} in "
-                             f"model '{model.name}'")
-
-
 def _check_values(name: str, y: np.ndarray, x: np.ndarray, names: Sequence[str]) -> None:
     """Every sample's quantity must be a finite number: a NaN would turn every index into
     a meaningless number."""
@@ -222,7 +213,10 @@ def sobol(model: Model | str | os.PathLike[str] | Mapping[str, Any], problem: Ma
     names = problem["names"]
     n = _check_n(n)
     model = load_model(model)
-    _check_quantity(quantity, model)
+    for var, vessel in _named(quantity) or ():  # checked before the ensemble runs
+        if vessel not in model.vessel_names:
+            raise ModelError(f"sobol: quantity '{var}[{vessel}]': no vessel named {vessel!r} in "
+                             f"model '{model.name}'")
     try:
         x = sample.sample(problem, n, calc_second_order=calc_second_order, seed=seed)
     except ValueError as e:  # e.g. an unknown distribution name: SALib's message names them

@@ -187,12 +187,6 @@ def _watch(cancel: Any, client: Any, futures: Mapping[Any, range]) -> Any:
     return over
 
 
-def _lost(shared: Any) -> bool:
-    """Whether the scattered model is gone from the cluster (every worker that held it died):
-    the chunks that need it are cancelled by Dask, not failed by their variants."""
-    return shared.status != "finished"
-
-
 def _cancelled(exc: BaseException) -> bool:
     """A chunk cancelled by Dask (its scattered model lost with the workers), not failed."""
     from concurrent.futures import CancelledError
@@ -277,7 +271,7 @@ class _ClientRun:
         """Handle a chunk whose task failed; True when its variants are recorded as failed
         (False: they were sent again or set aside)."""
         stale = _cancelled(exc) and self.sent_with.get(rows) == self.scatters
-        if _lost(self.shared) or stale:
+        if self.shared.status != "finished" or stale:
             # every worker that held the model died: scatter again. A chunk cancelled by Dask
             # on the current copy says so too, and may arrive before the client has heard
             # that the model is lost (its future still "finished"): sent again on that stale

@@ -183,15 +183,6 @@ class StatsBatch:
         self.rows, self.stats = [], []
 
 
-def callable_values(output: Callable[[Result], Mapping[str, float]], result: Result
-                    ) -> dict[str, float]:
-    values = output(result)
-    if not isinstance(values, Mapping):
-        raise TypeError(f"output callable must return a mapping {{name: float}}, got "
-                        f"{type(values).__name__}")
-    return {str(k): float(v) for k, v in values.items()}
-
-
 def patch_coords(patches: Sequence[Mapping[str, Any]]) -> dict[str, np.ndarray]:
     """The scalar patch values by dotted path, one entry per variant (NaN/'' where a variant
     does not set it). One pass over the patches collects each path's (variant, value) pairs
@@ -263,7 +254,11 @@ class Collector:
             return summary_values(result, column_stats)
         if self.output == "full":
             return {"": dataset(result)}
-        return callable_values(self.output, result)  # type: ignore[arg-type]
+        values = self.output(result)  # type: ignore[operator]
+        if not isinstance(values, Mapping):
+            raise TypeError(f"output callable must return a mapping {{name: float}}, got "
+                            f"{type(values).__name__}")
+        return {str(k): float(v) for k, v in values.items()}
 
     def put(self, i: int, values: Mapping[str, Any]) -> None:
         """Store the outputs of finished variant ``i``."""

@@ -155,13 +155,6 @@ def _cell(value: Any) -> tuple[bool, Any]:
     return True, value
 
 
-def _put(patch: dict[str, Any], path: Sequence[str], value: Any) -> None:
-    node: dict[str, Any] = patch
-    for key in path[:-1]:
-        node = node.setdefault(key, {})
-    node[path[-1]] = value
-
-
 def frame_patches(frame: Any, vessel_names: Iterable[str], nodes: Iterable[str]
                   ) -> list[dict[str, Any]]:
     """The patches of a DataFrame's rows of dotted-path columns (``vessels.CCA.radius``,
@@ -181,7 +174,10 @@ def frame_patches(frame: Any, vessel_names: Iterable[str], nodes: Iterable[str]
             if keep:
                 if path is None:
                     path = _column_path(column, names, k)
-                _put(patch, path, value)
+                node = patch
+                for key in path[:-1]:
+                    node = node.setdefault(key, {})
+                node[path[-1]] = value
     return patches
 
 
