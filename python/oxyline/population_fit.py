@@ -92,9 +92,8 @@ def _path_lengths(model: Mapping[str, Any]) -> np.ndarray:
     """Lengths [m] from the aortic root to the four pulse-wave sites of :func:`_outputs`."""
     length = {str(v["name"]): float(v["length"]) for v in model["vessels"]}
     af, ac = pwdb.AORTA_FEMORAL, pwdb.AORTA_CAROTID
-    to = [sum(length[_seg(s)] for s in path) for path in
-          (ac, (*ac, pwdb.CAROTID_SEGMENT), af, (*af, pwdb.FEMORAL_SEGMENT))]
-    return np.array(to)
+    return np.array([sum(length[_seg(s)] for s in path) for path in
+                     (ac, (*ac, pwdb.CAROTID_SEGMENT), af, (*af, pwdb.FEMORAL_SEGMENT))])
 
 
 def characteristics(values: np.ndarray, lengths: np.ndarray) -> np.ndarray:

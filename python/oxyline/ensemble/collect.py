@@ -69,12 +69,9 @@ def summary_values(result: Result, column_stats: Sequence[np.ndarray] | None = N
               for name in result.vessel_variables]
     arrays += [(name, arr) for name, (kind, arr, _) in result.species_variables().items()
                if kind == "vessel"]
-    out = {}
-    for name, arr in arrays:
-        values = flow[name] if arr is None else stats(np.asarray(arr, dtype=float), t)
-        for stat, val in zip(STATS, values):
-            out[f"{name}_{stat}"] = val
-    return out
+    return {f"{name}_{stat}": val for name, arr in arrays
+            for stat, val in zip(STATS, flow[name] if arr is None
+                                 else stats(np.asarray(arr, dtype=float), t))}
 
 
 def _flow_stats(nv: int, variables: Sequence[str], columns: int,
