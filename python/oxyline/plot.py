@@ -424,8 +424,7 @@ def profile(result: Result, model: Model | str, outlet: str,
     fig, axes = plt.subplots(len(quantities), 1, sharex=True, squeeze=False,
                              figsize=(7.5, 2.6 * len(quantities) + 1.2), layout="constrained")
     texts = []
-    for row, q in enumerate(quantities):
-        ax = axes[row, 0]
+    for row, (ax, q) in enumerate(zip(axes[:, 0], quantities)):
         d = profile_data(result, m, outlet, q, inlet)
         units, k = display(str(d["units"]), np.concatenate([d["min"], d["max"]]))
         xk = 1.0 if str(d["distance_units"]) == "vessel" else 100.0
@@ -439,12 +438,11 @@ def profile(result: Result, model: Model | str, outlet: str,
         for xb in d["vessel_start"][1:-1] * xk:
             ax.axvline(xb, color="0.6", lw=0.7, ls=":")
         if row == 0:
-            starts = d["vessel_start"] * xk
-            for i, n in enumerate(d["vessels"]):
-                mid = 0.5 * (starts[i] + starts[i + 1])
-                texts.append(ax.annotate(str(n), (mid, 1.0), xycoords=("data", "axes fraction"),
-                                         xytext=(0, 3), textcoords="offset points", ha="center",
-                                         va="bottom", fontsize=7, rotation=0))
+            starts = d["vessel_start"] * xk  # each vessel's name above its middle
+            texts += [ax.annotate(str(n), (0.5 * (a + b), 1.0), xycoords=("data", "axes fraction"),
+                                  xytext=(0, 3), textcoords="offset points", ha="center",
+                                  va="bottom", fontsize=7, rotation=0)
+                      for n, a, b in zip(d["vessels"], starts[:-1], starts[1:])]
             ax.legend(loc="best", fontsize=8)
     axes[-1, 0].set_xlabel("distance from the inlet [cm]" if xk == 100.0 else
                            "lumped vessels along the path (no length) [vessel]")
@@ -610,23 +608,18 @@ def network_map(model: Model | str | os.PathLike[str], values: Any = None,
     cm = plt.get_cmap(cmap)
     cols = [cm(norm(x)) if np.isfinite(x) else (0.6, 0.6, 0.6, 1.0) for x in vals]
     styles = ["--" if "lumped" in v else "-" for v in vessels]
-    lc = LineCollection(segs, colors=cols, linewidths=widths, linestyles=styles,
-                        capstyle="round")
-    ax.add_collection(lc)
+    ax.add_collection(LineCollection(segs, colors=cols, linewidths=widths, linestyles=styles,
+                                     capstyle="round"))
     xy = np.array(list(pos.values()))
     ax.scatter(xy[:, 0], xy[:, 1], s=6, color="0.25", zorder=3)
-    bcs = m.canonical["boundary_conditions"]
     starts = inlets(m)
-    for node in bcs:
-        if node in pos:
-            marker = ">" if node in starts else "s"
-            ax.scatter(*pos[node], marker=marker, s=28, color="k", zorder=4)
+    for node in (n for n in m.canonical["boundary_conditions"] if n in pos):
+        ax.scatter(*pos[node], marker=">" if node in starts else "s", s=28, color="k", zorder=4)
     for c, limits in enumerate((ax.set_xlim, ax.set_ylim)):
         pad = 0.05 * max(1e-9, float(np.ptp(xy[:, c])) or 1.0)
         limits(xy[:, c].min() - pad, xy[:, c].max() + pad)
     ax.set_axis_off()
-    sm = plt.cm.ScalarMappable(norm=norm, cmap=cm)
-    cb = fig.colorbar(sm, ax=ax, shrink=0.8, pad=0.02)
+    cb = fig.colorbar(plt.cm.ScalarMappable(norm=norm, cmap=cm), ax=ax, shrink=0.8, pad=0.02)
     cb.set_label(f"{label} [{units}]" if units else label)
     cb.ax.yaxis.get_major_formatter().set_useOffset(False)  # full values, no hidden offset
     shown = labels or (labels is None and len(vessels) <= 150)
