@@ -134,32 +134,29 @@ def _with_oxygen(model: Model, parameters: Sequence[str], signals: list[tuple[st
     (by flow parameters; oxygen parameters do not change the flow: their rows are 0)."""
     text = json.dumps(model.canonical)
     o2_cols, flow_cols, flow_rows = _oxygen_split(parameters, signals)
-    o2_rows = [k for k in range(len(parameters)) if k not in flow_rows]
     # with oxygen signals the species tangent takes every parameter, else the oxygen ones
     # (for their values; their flow rows are 0)
-    rows = list(range(len(parameters))) if o2_cols else o2_rows
+    rows = [k for k in range(len(parameters)) if o2_cols or k not in flow_rows]
     species = _core.species_sensitivities(
         text, [parameters[k] for k in rows], [signals[k] for k in o2_cols], *args)
+    parts = [(species, rows, o2_cols)]
+    if flow_cols:  # the flow tangent's values of the flow parameters replace the species'
+        parts.append((_core.tangent_sensitivities(text, [parameters[k] for k in flow_rows],
+                                                  [signals[k] for k in flow_cols], *args),
+                      flow_rows, flow_cols))
     times = species["times"]
     values = np.zeros(len(parameters))
-    values[rows] = species["values"]
     sig = np.zeros((len(times), len(signals)))
     der = np.zeros((len(parameters), len(times), len(signals)))
-    sig[:, o2_cols] = species["signals"]
-    if o2_cols:
-        der[np.ix_(rows, range(len(times)), o2_cols)] = species["derivatives"]
-    out = {"times": times, "values": values, "cycles": species["cycles"],
-           "tangent_cycles": species["tangent_cycles"],
-           "periodic_change": species["periodic_change"]}
-    if flow_cols:
-        flow = _core.tangent_sensitivities(text, [parameters[k] for k in flow_rows],
-                                           [signals[k] for k in flow_cols], *args)
-        sig[:, flow_cols] = flow["signals"]
-        der[np.ix_(flow_rows, range(len(times)), flow_cols)] = flow["derivatives"]
-        values[flow_rows] = flow["values"]
-        out["tangent_cycles"] = max(out["tangent_cycles"], flow["tangent_cycles"])
-        out["periodic_change"] = max(out["periodic_change"], flow["periodic_change"])
-    return {**out, "signals": sig, "derivatives": der}
+    for part, prows, cols in parts:
+        values[prows] = part["values"]
+        sig[:, cols] = part["signals"]
+        if cols:
+            der[np.ix_(prows, range(len(times)), cols)] = part["derivatives"]
+    return {"times": times, "values": values, "cycles": species["cycles"],
+            "tangent_cycles": max(p["tangent_cycles"] for p, _, _ in parts),
+            "periodic_change": max(p["periodic_change"] for p, _, _ in parts),
+            "signals": sig, "derivatives": der}
 
 
 def _evaluate(model: Model, parameters: Sequence[str], targets: Sequence[Target],
