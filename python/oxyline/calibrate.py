@@ -64,18 +64,6 @@ class Sensitivities:
     tangent_cycles: int = 0
 
 
-def _settings(model: Model, steps_per_cycle: int | None) -> tuple[float, int, float]:
-    period = model.period
-    if period is None:
-        raise CalibrationError(f"model '{model.name}': sensitivities need a periodic model "
-                               "(a period or periodic waveforms)")
-    # the model's dt and rho_infty with the core's defaults (the run's own settings)
-    s = _core.resolve_settings(model.simulation, {}, period)
-    if steps_per_cycle is None:  # a fixed dt's steps, else ("auto"): 400 steps a cycle
-        steps_per_cycle = round(period / s["dt"]) if s["dt"] is not None else 400
-    return float(period), _count("steps_per_cycle", steps_per_cycle), float(s["rho_infty"])
-
-
 #: Most steps per cycle or cycles a tangent run may plan (as many as a run: `simulate`'s plan).
 _MOST = 10**9
 
@@ -89,12 +77,28 @@ def _count(name: str, value: Any) -> int:
     return int(value)
 
 
-def _check_controls(parameters: Sequence[str], signals: Sequence[Any], steps: int, tol: Any,
-                    max_cycles: Any) -> None:
-    """The tangent run's controls, and its stored derivatives against the memory allowed."""
-    if isinstance(tol, bool) or not isinstance(tol, (int, float, np.floating)) \
-            or not 0.0 < float(tol) < 1.0:
-        raise CalibrationError(f"tol: expected a number in (0, 1), got {tol!r}")
+def _fraction(name: str, value: Any) -> None:
+    """A number in (0, 1) (a tolerance), else an error naming it."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)) \
+            or not 0.0 < float(value) < 1.0:
+        raise CalibrationError(f"{name}: expected a number in (0, 1), got {value!r}")
+
+
+def _run_args(model: Model, parameters: Sequence[str], signals: Sequence[Any],
+              steps_per_cycle: int | None, tol: Any, max_cycles: Any
+              ) -> tuple[float, int, float, int, float]:
+    """(period, steps, rho_infty, max_cycles, tol) of a tangent or adjoint run of ``model``,
+    its controls checked, and its stored derivatives against the memory allowed."""
+    period = model.period
+    if period is None:
+        raise CalibrationError(f"model '{model.name}': sensitivities need a periodic model "
+                               "(a period or periodic waveforms)")
+    # the model's dt and rho_infty with the core's defaults (the run's own settings)
+    s = _core.resolve_settings(model.simulation, {}, period)
+    if steps_per_cycle is None:  # a fixed dt's steps, else ("auto"): 400 steps a cycle
+        steps_per_cycle = round(period / s["dt"]) if s["dt"] is not None else 400
+    steps = _count("steps_per_cycle", steps_per_cycle)
+    _fraction("tol", tol)
     _count("max_cycles", max_cycles)
     need = 8.0 * steps * max(len(signals), 1) * (len(parameters) + 1)
     limit = memory.limit(None, "sensitivities: max_memory")
@@ -103,18 +107,7 @@ def _check_controls(parameters: Sequence[str], signals: Sequence[Any], steps: in
             f"steps_per_cycle = {steps}: the derivatives of {len(signals)} signal(s) by "
             f"{len(parameters)} parameter(s) at every step need about {memory.human(need)} "
             f"(estimate), above the {memory.human(limit)} allowed; use fewer steps_per_cycle")
-
-
-def _tangent(model: Model, parameters: Sequence[str], signals: list[tuple[str, str]],
-             steps_per_cycle: int | None, tol: float, max_cycles: int) -> dict[str, Any]:
-    period, steps, rho = _settings(model, steps_per_cycle)
-    _check_controls(parameters, signals, steps, tol, max_cycles)
-    args = (period, steps, rho, max_cycles, tol)
-    with core_errors(f"model '{model.name}'"):
-        if not _involves_oxygen(parameters, signals):
-            return _core.tangent_sensitivities(json.dumps(model.canonical), list(parameters),
-                                               signals, *args)
-        return _with_oxygen(model, parameters, signals, args)
+    return float(period), steps, float(s["rho_infty"]), max_cycles, tol
 
 
 def _is_oxygen_path(path: str) -> bool:
@@ -125,6 +118,14 @@ def _involves_oxygen(parameters: Sequence[str], signals: Sequence[tuple[str, str
     return any(map(_is_oxygen_path, parameters)) or any(map(is_oxygen_signal, signals))
 
 
+def _oxygen_split(parameters: Sequence[str], signals: Sequence[tuple[str, str]]
+                  ) -> tuple[list[int], list[int], list[int]]:
+    """The positions of the oxygen signals, of the flow signals and of the flow parameters."""
+    o2 = [k for k, s in enumerate(signals) if is_oxygen_signal(s)]
+    return (o2, [k for k in range(len(signals)) if k not in o2],
+            [k for k, p in enumerate(parameters) if not _is_oxygen_path(p)])
+
+
 def _with_oxygen(model: Model, parameters: Sequence[str], signals: list[tuple[str, str]],
                  args: tuple[Any, ...]) -> dict[str, Any]:
     """The raw tangent of signals and parameters that involve oxygen: the oxygen signals by
@@ -132,52 +133,54 @@ def _with_oxygen(model: Model, parameters: Sequence[str], signals: list[tuple[st
     reaches the oxygen through the flow's own tangent), the flow signals by the flow tangent
     (by flow parameters; oxygen parameters do not change the flow: their rows are 0)."""
     text = json.dumps(model.canonical)
-    o2_cols = [k for k, s in enumerate(signals) if is_oxygen_signal(s)]
-    flow_cols = [k for k in range(len(signals)) if k not in o2_cols]
-    o2_rows = [k for k, p in enumerate(parameters) if _is_oxygen_path(p)]
-    flow_rows = [k for k in range(len(parameters)) if k not in o2_rows]
+    o2_cols, flow_cols, flow_rows = _oxygen_split(parameters, signals)
     # with oxygen signals the species tangent takes every parameter, else the oxygen ones
     # (for their values; their flow rows are 0)
-    rows = list(range(len(parameters))) if o2_cols else o2_rows
+    rows = [k for k in range(len(parameters)) if o2_cols or k not in flow_rows]
     species = _core.species_sensitivities(
         text, [parameters[k] for k in rows], [signals[k] for k in o2_cols], *args)
+    parts = [(species, rows, o2_cols)]
+    if flow_cols:  # the flow tangent's values of the flow parameters replace the species'
+        parts.append((_core.tangent_sensitivities(text, [parameters[k] for k in flow_rows],
+                                                  [signals[k] for k in flow_cols], *args),
+                      flow_rows, flow_cols))
     times = species["times"]
     values = np.zeros(len(parameters))
-    values[rows] = species["values"]
     sig = np.zeros((len(times), len(signals)))
     der = np.zeros((len(parameters), len(times), len(signals)))
-    sig[:, o2_cols] = species["signals"]
-    if o2_cols:
-        der[np.ix_(rows, range(len(times)), o2_cols)] = species["derivatives"]
-    out = {"times": times, "values": values, "cycles": species["cycles"],
-           "tangent_cycles": species["tangent_cycles"],
-           "periodic_change": species["periodic_change"]}
-    if flow_cols:
-        flow = _core.tangent_sensitivities(text, [parameters[k] for k in flow_rows],
-                                           [signals[k] for k in flow_cols], *args)
-        sig[:, flow_cols] = flow["signals"]
-        der[np.ix_(flow_rows, range(len(times)), flow_cols)] = flow["derivatives"]
-        values[flow_rows] = flow["values"]
-        out["tangent_cycles"] = max(out["tangent_cycles"], flow["tangent_cycles"])
-        out["periodic_change"] = max(out["periodic_change"], flow["periodic_change"])
-    return {**out, "signals": sig, "derivatives": der}
+    for part, prows, cols in parts:
+        values[prows] = part["values"]
+        sig[:, cols] = part["signals"]
+        if cols:
+            der[np.ix_(prows, range(len(times)), cols)] = part["derivatives"]
+    return {"times": times, "values": values, "cycles": species["cycles"],
+            "tangent_cycles": max(p["tangent_cycles"] for p, _, _ in parts),
+            "periodic_change": max(p["periodic_change"] for p, _, _ in parts),
+            "signals": sig, "derivatives": der}
 
 
 def _evaluate(model: Model, parameters: Sequence[str], targets: Sequence[Target],
-              steps_per_cycle: int | None, tol: float, max_cycles: int
-              ) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
-    """Every target's value(s) and Jacobian rows (d/d SI parameter) at ``model``."""
+              steps_per_cycle: int | None, tol: float, max_cycles: int,
+              series_at_steps: bool = False
+              ) -> tuple[list[np.ndarray], list[np.ndarray], dict[str, Any]]:
+    """Every target's value(s) and Jacobian rows (d/d SI parameter) at ``model`` by the
+    tangents; ``series_at_steps`` as :func:`_adjoint`'s."""
     signals = sorted({s for t in targets for s in t.signals})
-    raw = _tangent(model, parameters, signals, steps_per_cycle, tol, max_cycles)
+    args = _run_args(model, parameters, signals, steps_per_cycle, tol, max_cycles)
+    with core_errors(f"model '{model.name}'"):
+        raw = _with_oxygen(model, parameters, signals, args) \
+            if _involves_oxygen(parameters, signals) else _core.tangent_sensitivities(
+                json.dumps(model.canonical), list(parameters), signals, *args)
     values, jac = [], []
     for t in targets:
         cols = [signals.index(s) for s in t.signals]
         v, j = evaluate(t.output, raw["times"], raw["signals"][:, cols],
-                       raw["derivatives"][:, :, cols], t.times,
+                       raw["derivatives"][:, :, cols],
+                       raw["times"] if series_at_steps else t.times,
                        path_of(t.output, model, parameters))
         values.append(v)
         jac.append(j.reshape(len(v), len(parameters)))
-    return np.concatenate(values), np.concatenate(jac), raw
+    return values, jac, raw
 
 
 def _oxygen_adjoint(m: Model, parameters: Sequence[str], signals: list[tuple[str, str]],
@@ -189,13 +192,11 @@ def _oxygen_adjoint(m: Model, parameters: Sequence[str], signals: list[tuple[str
     species transport's adjoint backward). Flow signals (an SvO2's outflow) are read from
     the flow's periodic cycle with their tangents by the flow parameters, for the weights
     and for their own terms of the gradients (oxygen parameters do not change the flow)."""
-    o2 = [k for k, s in enumerate(signals) if is_oxygen_signal(s)]
+    o2, rest, flow_rows = _oxygen_split(parameters, signals)
     if not o2:
         raise CalibrationError("mode 'adjoint': oxygen parameters do not change the flow "
                                f"outputs {', '.join(f'{v}.{n}' for v, n in signals)} (use "
                                "mode='forward' for their zero rows)")
-    rest = [k for k in range(len(signals)) if k not in o2]
-    flow_rows = [k for k, p in enumerate(parameters) if not _is_oxygen_path(p)]
     flow: dict[str, Any] = {}
     if rest:
         flow = _core.tangent_sensitivities(json.dumps(m.canonical),
@@ -233,8 +234,7 @@ def _adjoint(m: Model, parameters: Sequence[str], targets: Sequence[Target],
     its gradient for every parameter. ``series_at_steps``: a series is read at the cycle's
     steps (:func:`sensitivities`), else at its target's times (:func:`calibrate`)."""
     signals = sorted({s for t in targets for s in t.signals})
-    period, steps, rho = _settings(m, steps_per_cycle)
-    _check_controls([], signals, steps, tol, max_cycles)
+    args = _run_args(m, [], signals, steps_per_cycle, tol, max_cycles)
     values: list[np.ndarray] = []
     paths: list[Any] = []
 
@@ -263,9 +263,9 @@ def _adjoint(m: Model, parameters: Sequence[str], targets: Sequence[Target],
     with core_errors(f"model '{m.name}'"):
         if _involves_oxygen(parameters, signals):
             core, core_signals, weights, complete = _oxygen_adjoint(
-                m, parameters, signals, weights_of, (period, steps, rho, max_cycles, tol))
+                m, parameters, signals, weights_of, args)
         out = complete(core(json.dumps(m.canonical), list(parameters), core_signals, weights,
-                            period, steps, rho, max_cycles, tol))
+                            *args))
     jac, start = [], 0
     for path, v in zip(paths, values, strict=True):
         j = np.asarray(out["gradients"][start:start + len(v)])
@@ -312,29 +312,11 @@ def sensitivities(model: Model | Mapping[str, Any] | str, parameters: Sequence[s
         raise CalibrationError(f"mode: expected 'forward' or 'adjoint', got {mode!r}")
     targets = [Target(o, None, signals=s)
                for o, s in zip(outputs, signals_for(outputs, m), strict=True)]
-    if mode == "adjoint":
-        values, jac, raw = _adjoint(m, parameters, targets, steps_per_cycle, tol, max_cycles,
-                                    series_at_steps=True)
-        rows, start = {}, 0
-        for t, v in zip(targets, values, strict=True):
-            rows[t.output] = slice(start, start + len(v))
-            start += len(v)
-        return Sensitivities(list(outputs), list(parameters), np.asarray(raw["values"]),
-                             np.concatenate(values), np.concatenate(jac),
-                             int(raw["cycles"]), float(raw["periodic_change"]), rows,
-                             int(raw["tangent_cycles"]))
-    signals = sorted({s for t in targets for s in t.signals})
-    raw = _tangent(m, parameters, signals, steps_per_cycle, tol, max_cycles)
-    values, jac, rows, start = [], [], {}, 0
-    for t in targets:
-        cols = [signals.index(s) for s in t.signals]
-        v, j = evaluate(t.output, raw["times"], raw["signals"][:, cols],
-                       raw["derivatives"][:, :, cols], raw["times"],
-                       path_of(t.output, m, parameters))
-        values.append(v)
-        jac.append(j.reshape(len(v), len(parameters)))
-        rows[t.output] = slice(start, start + len(v))
-        start += len(v)
+    run = _adjoint if mode == "adjoint" else _evaluate
+    values, jac, raw = run(m, parameters, targets, steps_per_cycle, tol, max_cycles,
+                           series_at_steps=True)
+    ends = np.cumsum([len(v) for v in values]).tolist()
+    rows = {t.output: slice(e - len(v), e) for t, v, e in zip(targets, values, ends, strict=True)}
     return Sensitivities(list(outputs), list(parameters), np.asarray(raw["values"]),
                          np.concatenate(values), np.concatenate(jac), int(raw["cycles"]),
                          float(raw["periodic_change"]), rows, int(raw["tangent_cycles"]))
@@ -462,12 +444,11 @@ class _Problem:
 
     def _outputs(self, m: Model) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
         """The targets' values and their Jacobian by the model's paths (SI) at ``m``."""
-        if self.exact and self.gradient == "adjoint":
-            v, j, raw = _adjoint(m, self.paths, self.targets, series_at_steps=False,
-                                 **self.options)
-            return np.concatenate(v), np.concatenate(j), raw
+        run = _adjoint if self.exact and self.gradient == "adjoint" else _evaluate
         # without the exact Jacobian the core runs the primal only
-        return _evaluate(m, self.paths if self.exact else [], self.targets, **self.options)
+        v, j, raw = run(m, self.paths if self.exact else [], self.targets,
+                        series_at_steps=False, **self.options)
+        return np.concatenate(v), np.concatenate(j), raw
 
     def _eval(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         key = theta.tobytes()
@@ -540,27 +521,34 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
     >>> bool(fit.success), round(fit.parameters[path] / 3.5e9, 6)
     (True, 1.0)
     """
-    from scipy.optimize import least_squares
-
     if method not in ("lm", "trf", "bayes"):
         raise CalibrationError(f"method: expected 'lm', 'trf' or 'bayes', got {method!r}")
     _count("max_evaluations", max_evaluations)
-    for key, value in (("xtol", xtol), ("ftol", ftol)):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                or not 0.0 < value < 1.0:
-            raise CalibrationError(f"{key}: expected a number in (0, 1), got {value!r}")
+    _fraction("xtol", xtol)
+    _fraction("ftol", ftol)
+    # ``bayes`` starts its sampler around the gradient-based fit
+    fit_method = ("trf" if bounds else "lm") if method == "bayes" else method
     if method == "bayes":
-        return _bayes(model, targets, parameters, bounds, max_evaluations, xtol, jacobian,
-                      steps_per_cycle, tol, max_cycles, posterior, gradient, groups)
+        emcee, opts = _emcee(posterior, len(parameters) + len(groups or {}))
     if jacobian not in ("exact", "2-point"):
         raise CalibrationError(f"jacobian: expected 'exact' or '2-point', got {jacobian!r}")
-    problem, (lo, hi) = _problem(model, targets, parameters, bounds, method, jacobian,
+    problem, (lo, hi) = _problem(model, targets, parameters, bounds, fit_method, jacobian,
                                  {"steps_per_cycle": steps_per_cycle, "tol": tol,
                                   "max_cycles": max_cycles}, gradient, groups)
-    params = problem.parameters
+    fit = _least_squares(problem, lo, hi, fit_method, max_evaluations, xtol, ftol)
+    if method == "bayes":
+        _sample(fit, problem, lo, hi, emcee, opts)
+    return fit
+
+
+def _least_squares(problem: _Problem, lo: np.ndarray, hi: np.ndarray, method: str,
+                   max_evaluations: int, xtol: float, ftol: float) -> CalibrationResult:
+    """The fit of ``problem`` by ``scipy.optimize.least_squares`` from the start (θ = 0)."""
+    from scipy.optimize import least_squares
+
     report: dict[str, Any] = {"method": method, "gradient": problem.gradient}
     try:
-        fit = least_squares(problem.fun, np.zeros(len(params)),
+        fit = least_squares(problem.fun, np.zeros(len(problem.parameters)),
                             jac=problem.jac if problem.exact else "2-point",
                             bounds=(lo, hi) if method == "trf" else (-np.inf, np.inf),
                             method=method, x_scale=1.0, xtol=xtol, ftol=ftol, gtol=1e-12,
@@ -705,13 +693,9 @@ def read_problem(path: str) -> dict[str, Any]:
         raise CalibrationError(f"{path}: needs 'parameters' and 'targets' (and optionally "
                                f"'method', 'groups', 'gradient'); unknown keys "
                                f"{sorted(unknown)}")
-    params = data["parameters"]
-    bounds: dict[str, Any] = {}
-    if isinstance(params, Mapping):
-        for p, opts in params.items():
-            if isinstance(opts, Mapping) and "bounds" in opts:
-                bounds[p] = opts["bounds"]
-        params = list(params)
+    params = data["parameters"]  # a mapping's keys are the paths
+    bounds = {p: o["bounds"] for p, o in params.items() if isinstance(o, Mapping)
+              and "bounds" in o} if isinstance(params, Mapping) else {}
     method = str(data.get("method", "trf" if bounds else "lm"))
     return {"parameters": list(params), "targets": data["targets"],
             "bounds": bounds or None, "method": method, "groups": data.get("groups"),
@@ -737,34 +721,28 @@ def main_cli(model: str, problem_file: str, output: str, quiet: bool = False) ->
     return 0 if res.success else 1
 
 
-def _bayes(model: Any, targets: Any, parameters: Sequence[str], bounds: Any,
-           max_evaluations: int, xtol: float, jacobian: str, steps_per_cycle: int | None,
-           tol: float, max_cycles: int, posterior: Mapping[str, Any] | None,
-           gradient: str = "auto", groups: Any = None) -> CalibrationResult:
-    """``method="bayes"``: the gradient fit, then emcee from around it (see :func:`calibrate`)."""
+def _emcee(posterior: Mapping[str, Any] | None, n: int) -> tuple[Any, dict[str, Any]]:
+    """emcee and the sampler's options of ``method="bayes"`` for ``n`` fitted variables."""
     try:
         import emcee
     except ImportError:
         raise CalibrationError("method 'bayes' needs emcee: pip install oxyline[bayes]"
                                ) from None
-    opts = {"walkers": max(8, 4 * (len(parameters) + len(groups or {}))), "steps": 500, "burn": None, "seed": 0,
+    opts = {"walkers": max(8, 4 * n), "steps": 500, "burn": None, "seed": 0,
             **(posterior or {})}
     unknown = set(opts) - {"walkers", "steps", "burn", "seed"}
     if unknown:
         raise CalibrationError(f"posterior: unknown options {sorted(unknown)}")
-    fit = calibrate(model, targets, parameters, bounds=bounds,
-                    method="trf" if bounds else "lm", max_evaluations=max_evaluations,
-                    xtol=xtol, jacobian=jacobian, steps_per_cycle=steps_per_cycle, tol=tol,
-                    max_cycles=max_cycles, gradient=gradient, groups=groups)
-    grouped = _groups(parameters, groups)
-    params = list(parameters) + list(grouped)
-    start = np.array([fit.start[p] for p in params])
-    lo, hi = _bounds(params, start, bounds)
-    base = load_model(model)
-    problem = _Problem(copy.deepcopy(base.source), params, start,
-                       parse_targets(targets, base),
-                       {"steps_per_cycle": steps_per_cycle, "tol": tol,
-                        "max_cycles": max_cycles}, exact=False, groups=grouped)
+    return emcee, opts
+
+
+def _sample(fit: CalibrationResult, problem: _Problem, lo: np.ndarray, hi: np.ndarray,
+            emcee: Any, opts: Mapping[str, Any]) -> None:
+    """``method="bayes"``: emcee from around the gradient fit ``fit`` of ``problem`` (see
+    :func:`calibrate`), its samples and report put into ``fit``."""
+    params, start = problem.parameters, problem.start
+    # the likelihood needs the residuals only, each trial point's evaluations counted anew
+    problem.exact, problem.cache, problem.evaluations = False, None, 0
 
     def log_prob(theta: np.ndarray) -> float:
         if (theta < lo).any() or (theta > hi).any():
@@ -789,7 +767,6 @@ def _bayes(model: Any, targets: Any, parameters: Sequence[str], bounds: Any,
     sampler.run_mcmc(p0, steps, progress=False)
     chain = sampler.get_chain(discard=burn, flat=True)
     fit.samples = start * np.exp(chain)
-    fit.report.update(method="bayes", fit_method="trf" if bounds else "lm",
+    fit.report.update(method="bayes", fit_method=fit.report["method"],
                       acceptance=float(np.mean(sampler.acceptance_fraction)),
                       posterior_evaluations=problem.evaluations)
-    return fit

@@ -69,7 +69,7 @@ def _layout(p: dict[str, Any], table: bool = False) -> tuple[dict[str, Any], np.
     order), ``solubility_per_mmhg`` and ``cardiac_output`` (m³/s); with ``table`` also the
     prescribed flow table (:func:`flow_table`)."""
     with core_errors("closed-loop layout"):
-        text, flows = _core.closed_loop_layout(_json(p), table)
+        text, flows = _core.closed_loop_layout(json.dumps(_with_block(p)), table)
     return json.loads(text), flows
 
 
@@ -82,9 +82,9 @@ def flow_table(p: dict[str, Any]) -> np.ndarray:
     return np.asarray(_layout(p, table=True)[1])
 
 
-def _json(p: dict[str, Any]) -> str:
+def _with_block(p: dict[str, Any]) -> dict[str, Any]:
     """The parameter set as the core reads it: its own heart block, else `SVZEROD_HEART`."""
-    return json.dumps(p if "heart_block" in p else {**p, "heart_block": SVZEROD_HEART})
+    return p if "heart_block" in p else {**p, "heart_block": SVZEROD_HEART}
 
 
 def heart_model(p: dict[str, Any]) -> dict[str, Any]:
@@ -101,7 +101,7 @@ def heart_model(p: dict[str, Any]) -> dict[str, Any]:
     `flow_fraction` at a mean arterial pressure of 93 mmHg, and the systemic veins (100
     mL/mmHg); SI units. Measured: see docs/oxygen.md "Oxygen around a closed loop"."""
     with core_errors("closed-loop heart model"):
-        return _core.closed_loop_heart_model(_json(p))
+        return _core.closed_loop_heart_model(json.dumps(_with_block(p)))
 
 
 def heart_run_options(p: dict[str, Any]) -> dict[str, Any]:
@@ -268,9 +268,7 @@ def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int 
     the heart's aortic outflow and drains through the organ beds to the venous pressure of that
     run; the balance holds the tree's own flows as they are. Its confirming cycles stop at a
     tolerance of at least 1e-10 (its warm-started Hill inversions repeat to ~1e-11)."""
-    p = load(model) if isinstance(model, str) else model
-    if "heart_block" not in p:
-        p = {**p, "heart_block": SVZEROD_HEART}
+    p = _with_block(load(model) if isinstance(model, str) else model)
     with core_errors("closed-loop O2 run"):
         out = _core.closed_loop_run(p, flows, max_cycles, tol, shooting)
     return _result(p, out, len(out["time"]))

@@ -18,8 +18,10 @@ decade; a colour bar spanning a narrow range says so in the title.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -28,7 +30,7 @@ import numpy as np
 
 from oxyline import plot_oxygen
 from oxyline.io.results import stats as time_stats
-from oxyline.plot_style import STYLES, peak_magnitude, prefixed, pyplot, same_curves
+from oxyline.plot_style import STYLES, peak_magnitude, prefixed, pyplot, same_curves, write_figures
 from oxyline.units import MMHG
 
 if TYPE_CHECKING:
@@ -88,11 +90,8 @@ def _vessel_variable(ds: Any, quantity: str, end: str = "in") -> str:
 
 
 def _has(ds: Any, quantity: str) -> bool:
-    try:
-        _vessel_variable(ds, quantity)
-        return True
-    except ValueError:
-        return False
+    return any(n in ds.data_vars and ds[n].dims == ("time", "vessel")
+               for n in (quantity, f"{quantity}_in"))
 
 
 def _declutter(fig: Any, texts: Sequence[Any]) -> None:
@@ -208,6 +207,12 @@ def _graph(model: Model) -> tuple[dict[str, list[tuple[str, str]]], dict[str, di
     return adj, vessels
 
 
+def _ends(model: Model) -> tuple[set[str], set[str]]:
+    """The nodes where vessels start, and those where they end."""
+    vessels = model.canonical["vessels"]
+    return {v["from"] for v in vessels}, {v["to"] for v in vessels}
+
+
 def inlets(model: Model) -> list[str]:
     """Nodes with a flow or pressure condition at the start of a vessel.
 
@@ -215,11 +220,9 @@ def inlets(model: Model) -> list[str]:
     >>> plot.inlets(oxyline.load_model("bifurcation"))
     ['inlet']
     """
-    starts = {v["from"] for v in model.canonical["vessels"]}
-    ends = {v["to"] for v in model.canonical["vessels"]}
-    bcs = model.canonical["boundary_conditions"]
-    found = [n for n, bc in bcs.items() if n in starts and n not in ends
-             and bc["type"] in ("flow", "pressure")]
+    starts, ends = _ends(model)
+    found = [n for n, bc in model.canonical["boundary_conditions"].items()
+             if n in starts and n not in ends and bc["type"] in ("flow", "pressure")]
     return found or [n for n in starts if n not in ends]
 
 
@@ -230,8 +233,7 @@ def outlets(model: Model) -> list[str]:
     >>> plot.outlets(oxyline.load_model("bifurcation"))
     ['ica_out', 'eca_out']
     """
-    ends = {v["to"] for v in model.canonical["vessels"]}
-    starts = {v["from"] for v in model.canonical["vessels"]}
+    starts, ends = _ends(model)
     return [n for n in model.canonical["boundary_conditions"] if n in ends and n not in starts]
 
 
@@ -274,10 +276,7 @@ def internal_vessels(model: Model) -> set[str]:
     >>> plot.internal_vessels(oxyline.load_model("bifurcation"))
     set()
     """
-    count: dict[str, int] = {}
-    for v in model.canonical["vessels"]:
-        for end in (v["from"], v["to"]):
-            count[end] = count.get(end, 0) + 1
+    count = Counter(end for v in model.canonical["vessels"] for end in (v["from"], v["to"]))
     bcs = model.canonical["boundary_conditions"]
 
     def closed(node: str) -> bool:  # no condition, or a zero inflow: nothing passes there
@@ -314,10 +313,9 @@ def representative_vessels(result: Result, model: Model, n: int = 5) -> list[str
             first = p[0]
     if not paths:
         return named[:n] or list(result.vessels[:n])
-    flow = {v: 0.0 for v in paths}
-    if "flow_in" in result.vessel_variables:
-        flow = {v: abs(float(np.mean(result.flow_in[:, result.vessels.index(v)])))
-                for v in paths}
+    flowing = "flow_in" in result.vessel_variables
+    flow = {v: abs(float(np.mean(result.flow_in[:, result.vessels.index(v)]))) if flowing
+            else 0.0 for v in paths}
     chosen = [first] if first in result.vessels else []
     taken = [paths[first]] if first in paths else [{first}]
 
@@ -360,15 +358,9 @@ def profile_data(result: Result, model: Model | str, outlet: str, quantity: str 
     if not names:
         raise ValueError(f"no vessel on the path to '{outlet}' has output (recorded vessels: "
                          f"{', '.join(result.vessels[:10])})")
-    seg_in = seg_out = seg_mid = None
-    for cand in (f"segment_{quantity}_in", f"segment_{quantity}"):
-        if cand in ds.data_vars:
-            seg_in = cand
-            break
-    if f"segment_{quantity}_out" in ds.data_vars:
-        seg_out = f"segment_{quantity}_out"
-    if seg_in == f"segment_{quantity}":
-        seg_mid, seg_in = seg_in, None
+    seg_in, seg_out, seg_mid = (f"segment_{quantity}{end}" for end in ("_in", "_out", ""))
+    seg_in, seg_out = (v if v in ds.data_vars else None for v in (seg_in, seg_out))
+    seg_mid = seg_mid if seg_in is None and seg_mid in ds.data_vars else None
     xs: list[float] = []
     series: list[np.ndarray] = []
     x0 = 0.0
@@ -384,17 +376,13 @@ def profile_data(result: Result, model: Model | str, outlet: str, quantity: str 
                 pos = np.asarray(v.segment_position, dtype=float)
                 if not np.all(np.isfinite(pos)):
                     pos = np.full(nseg, length / 2)
-                for j, i in enumerate(sel):
-                    xs.append(x0 + pos[j])
-                    series.append(ds[seg_mid].values[:, i])
-            else:
-                for j, i in enumerate(sel):
-                    xs.append(x0 + length * j / nseg)
-                    series.append(ds[seg_in].values[:, i])
-                last = ds[seg_out].values[:, sel[-1]] if seg_out else None
-                if last is not None:
-                    xs.append(x0 + length)
-                    series.append(last)
+                xs += [x0 + pos[j] for j in range(nseg)]
+            else:  # the segments' inlets, then the last one's outlet
+                xs += [x0 + length * j / nseg for j in range(nseg)]
+            series += [ds[seg_mid or seg_in].values[:, i] for i in sel]
+            if seg_out and not seg_mid:
+                xs.append(x0 + length)
+                series.append(ds[seg_out].values[:, sel[-1]])
         else:
             var_in = _vessel_variable(ds, quantity, "in")
             var_out = var_in[:-3] + "_out" if var_in.endswith("_in") else None
@@ -436,8 +424,7 @@ def profile(result: Result, model: Model | str, outlet: str,
     fig, axes = plt.subplots(len(quantities), 1, sharex=True, squeeze=False,
                              figsize=(7.5, 2.6 * len(quantities) + 1.2), layout="constrained")
     texts = []
-    for row, q in enumerate(quantities):
-        ax = axes[row, 0]
+    for row, (ax, q) in enumerate(zip(axes[:, 0], quantities)):
         d = profile_data(result, m, outlet, q, inlet)
         units, k = display(str(d["units"]), np.concatenate([d["min"], d["max"]]))
         xk = 1.0 if str(d["distance_units"]) == "vessel" else 100.0
@@ -451,12 +438,11 @@ def profile(result: Result, model: Model | str, outlet: str,
         for xb in d["vessel_start"][1:-1] * xk:
             ax.axvline(xb, color="0.6", lw=0.7, ls=":")
         if row == 0:
-            starts = d["vessel_start"] * xk
-            for i, n in enumerate(d["vessels"]):
-                mid = 0.5 * (starts[i] + starts[i + 1])
-                texts.append(ax.annotate(str(n), (mid, 1.0), xycoords=("data", "axes fraction"),
-                                         xytext=(0, 3), textcoords="offset points", ha="center",
-                                         va="bottom", fontsize=7, rotation=0))
+            starts = d["vessel_start"] * xk  # each vessel's name above its middle
+            texts += [ax.annotate(str(n), (0.5 * (a + b), 1.0), xycoords=("data", "axes fraction"),
+                                  xytext=(0, 3), textcoords="offset points", ha="center",
+                                  va="bottom", fontsize=7, rotation=0)
+                      for n, a, b in zip(d["vessels"], starts[:-1], starts[1:])]
             ax.legend(loc="best", fontsize=8)
     axes[-1, 0].set_xlabel("distance from the inlet [cm]" if xk == 100.0 else
                            "lumped vessels along the path (no length) [vessel]")
@@ -479,13 +465,11 @@ def _tree_layout(model: Model) -> dict[str, tuple[float, float]]:
     roots = inlets(model) or list(adj)[:1]
     depth: dict[str, int] = {}
     children: dict[str, list[str]] = {n: [] for n in adj}
-    order: list[str] = []
     for r in roots + list(adj):
         if r in depth:
             continue
         depth[r] = 0
         queue = [r]
-        order.append(r)
         while queue:
             n = queue.pop(0)
             for c in und[n]:
@@ -508,20 +492,16 @@ def _tree_layout(model: Model) -> dict[str, tuple[float, float]]:
     import sys
 
     sys.setrecursionlimit(max(1000, 4 * len(adj) + 100))
-    for r in order:
+    for r in [n for n, d in depth.items() if d == 0]:  # the roots, in the order they were found
         place(r)
     return pos
 
 
-def _has_loop(model: Model) -> bool:
-    nodes = {v["from"] for v in model.canonical["vessels"]} | {v["to"] for v in
-                                                               model.canonical["vessels"]}
-    # a connected graph is a tree iff edges = nodes - 1 (per component; checked globally)
-    return len(model.canonical["vessels"]) > len(nodes) - 1
-
-
 def _layout(model: Model, layout: str) -> dict[str, tuple[float, float]]:
-    if layout == "tree" or (layout == "auto" and not _has_loop(model)):
+    starts, ends = _ends(model)
+    # a connected graph is a tree iff edges = nodes - 1 (per component; checked globally)
+    loop = len(model.canonical["vessels"]) > len(starts | ends) - 1
+    if layout == "tree" or (layout == "auto" and not loop):
         return _tree_layout(model)
     try:
         import networkx as nx
@@ -542,6 +522,12 @@ def _layout(model: Model, layout: str) -> dict[str, tuple[float, float]]:
     return {str(k): (float(v[0]), float(v[1])) for k, v in p.items()}
 
 
+def _mean_radii(model: Model) -> np.ndarray:
+    """Each vessel's mean radius (m; NaN for a lumped vessel), in model order."""
+    return np.array([0.5 * (v["geometry"]["radius_in"] + v["geometry"]["radius_out"])
+                     if "geometry" in v else math.nan for v in model.canonical["vessels"]])
+
+
 def _values(model: Model, values: Any, result: Result | None, label: str | None,
             units: str | None) -> tuple[np.ndarray, str, str, str]:
     """Per-vessel values in model order, colour-bar label and units, and a title note."""
@@ -549,11 +535,7 @@ def _values(model: Model, values: Any, result: Result | None, label: str | None,
     if values is None and result is not None:
         values = "pressure"
     if values is None:
-        r = []
-        for v in model.canonical["vessels"]:
-            g = v.get("geometry")
-            r.append(0.5 * (g["radius_in"] + g["radius_out"]) if g else math.nan)
-        return np.array(r) * 1000, label or "mean radius", units or "mm", ""
+        return _mean_radii(model) * 1000, label or "mean radius", units or "mm", ""
     if isinstance(values, str):
         if result is None:
             raise ValueError(f"values={values!r} names a result variable: pass result=")
@@ -609,8 +591,7 @@ def network_map(model: Model | str | os.PathLike[str], values: Any = None,
     vals, label, units, note = _values(m, values, result, label, units)
     vessels = m.canonical["vessels"]
     segs = [[pos[v["from"]], pos[v["to"]]] for v in vessels]
-    radii = np.array([0.5 * (v["geometry"]["radius_in"] + v["geometry"]["radius_out"])
-                      if "geometry" in v else math.nan for v in vessels])
+    radii = _mean_radii(m)
     if np.all(np.isnan(radii)):
         widths = np.full(len(vessels), 2.0)
     else:
@@ -627,34 +608,26 @@ def network_map(model: Model | str | os.PathLike[str], values: Any = None,
     cm = plt.get_cmap(cmap)
     cols = [cm(norm(x)) if np.isfinite(x) else (0.6, 0.6, 0.6, 1.0) for x in vals]
     styles = ["--" if "lumped" in v else "-" for v in vessels]
-    lc = LineCollection(segs, colors=cols, linewidths=widths, linestyles=styles,
-                        capstyle="round")
-    ax.add_collection(lc)
+    ax.add_collection(LineCollection(segs, colors=cols, linewidths=widths, linestyles=styles,
+                                     capstyle="round"))
     xy = np.array(list(pos.values()))
     ax.scatter(xy[:, 0], xy[:, 1], s=6, color="0.25", zorder=3)
-    bcs = m.canonical["boundary_conditions"]
     starts = inlets(m)
-    for node in bcs:
-        if node in pos:
-            marker = ">" if node in starts else "s"
-            ax.scatter(*pos[node], marker=marker, s=28, color="k", zorder=4)
-    pad = 0.05 * max(1e-9, float(np.ptp(xy[:, 0])) or 1.0)
-    ax.set_xlim(xy[:, 0].min() - pad, xy[:, 0].max() + pad)
-    ypad = 0.05 * max(1e-9, float(np.ptp(xy[:, 1])) or 1.0)
-    ax.set_ylim(xy[:, 1].min() - ypad, xy[:, 1].max() + ypad)
+    for node in (n for n in m.canonical["boundary_conditions"] if n in pos):
+        ax.scatter(*pos[node], marker=">" if node in starts else "s", s=28, color="k", zorder=4)
+    for c, limits in enumerate((ax.set_xlim, ax.set_ylim)):
+        pad = 0.05 * max(1e-9, float(np.ptp(xy[:, c])) or 1.0)
+        limits(xy[:, c].min() - pad, xy[:, c].max() + pad)
     ax.set_axis_off()
-    sm = plt.cm.ScalarMappable(norm=norm, cmap=cm)
-    cb = fig.colorbar(sm, ax=ax, shrink=0.8, pad=0.02)
+    cb = fig.colorbar(plt.cm.ScalarMappable(norm=norm, cmap=cm), ax=ax, shrink=0.8, pad=0.02)
     cb.set_label(f"{label} [{units}]" if units else label)
     cb.ax.yaxis.get_major_formatter().set_useOffset(False)  # full values, no hidden offset
-    texts = []
-    if labels or (labels is None and len(vessels) <= 150):
-        for v, s in zip(vessels, segs):
-            (x0, y0), (x1, y1) = s
-            texts.append(ax.text(0.5 * (x0 + x1), 0.5 * (y0 + y1), v["name"], fontsize=7,
-                                 ha="center", va="bottom", color="0.1", zorder=3.5,
-                                 bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none",
-                                       "alpha": 0.7}))
+    shown = labels or (labels is None and len(vessels) <= 150)
+    texts = [ax.text(0.5 * (x0 + x1), 0.5 * (y0 + y1), v["name"], fontsize=7, ha="center",
+                     va="bottom", color="0.1", zorder=3.5,
+                     bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none",
+                           "alpha": 0.7})
+             for v, ((x0, y0), (x1, y1)) in zip(vessels, segs)] if shown else []
     ax.set_title(f"{m.name}: {label}{note}{narrow_range_note(vmin, vmax, units)}", fontsize=11)
     _declutter(fig, texts)
     return fig
@@ -690,19 +663,13 @@ def save_figures(result: Result, model: Model | str | os.PathLike[str],
     ...     sorted(p.name for p in plot.save_figures(res, "bifurcation", out, formats=("png",)))
     ['network_map.png', 'profile.png', 'waveforms.png']
     """
-    plt = pyplot()
     m = _model(model)
-    out = Path(outdir)
-    out.mkdir(parents=True, exist_ok=True)
     ds = result.to_xarray()
     quantities = [q for q in ("pressure", "flow", "po2") if _has(ds, q)]
-    outs = [o for o in outlets(m)]
     paths = {}
-    for o in outs:
-        try:
+    for o in outlets(m):
+        with contextlib.suppress(KeyError):
             paths[o] = path(m, o)
-        except KeyError:
-            continue
     _, vessels = _graph(m)
     figures = {"waveforms": waveforms(result, representative_vessels(result, m), quantities)}
     if paths:
@@ -715,14 +682,7 @@ def save_figures(result: Result, model: Model | str | os.PathLike[str],
         figures["o2_outlet_flux"] = plot_oxygen.outlet_flux(result, m)
         if result.has_segments:
             figures["o2_wall_uptake"] = plot_oxygen.wall_uptake(result, m)
-    written = []
-    for name, fig in figures.items():
-        for fmt in formats:
-            p = out / f"{name}.{fmt}"
-            fig.savefig(p, dpi=dpi)
-            written.append(p)
-        plt.close(fig)
-    return written
+    return write_figures(figures, outdir, formats, dpi)
 
 
 def impedance(frequencies: Any, z: Any, label: str | None = None,

@@ -17,13 +17,21 @@ from typing import Any
 import numpy as np
 
 from oxyline.model import Model
-from oxyline.plot_style import STYLES, prefixed, pyplot, same_curves
+from oxyline.plot_style import STYLES, prefixed, pyplot, same_curves, write_figures
 from oxyline.result import Result
 
 
 def _note(model: Model | None) -> str:
     desc = (model.source.get("description", "") if model is not None else "") or ""
     return "\n(radii and inflow waveform assumed, not the paper's)" if "assum" in desc else ""
+
+
+def _titled(fig: Any, ax: Any, title: str) -> Any:
+    """``fig`` with the legend and ``title`` on its top axes ``ax``, laid out."""
+    ax.legend(fontsize=8)
+    ax.set_title(title, fontsize=10)
+    fig.tight_layout()
+    return fig
 
 
 # vessels whose curves coincide (the daughters of a symmetric bifurcation) are drawn once and
@@ -74,11 +82,8 @@ def outlet_flux(result: Result, model: Model | None = None) -> Any:
         ax.set_ylabel(f"{what} [{unit}]")
         _honest_axis(ax, np.asarray(data) * k, unit)
     a2.set_xlabel("time in cycle [s]")
-    a1.legend(fontsize=8)
-    a1.set_title(f"{result.model_name}: convective O$_2$ flux at the vessel outlets{_note(model)}",
-                 fontsize=10)
-    fig.tight_layout()
-    return fig
+    return _titled(fig, a1, f"{result.model_name}: convective O$_2$ flux at the vessel "
+                   f"outlets{_note(model)}")
 
 
 def wall_uptake(result: Result, model: Model | None = None) -> Any:
@@ -110,11 +115,8 @@ def wall_uptake(result: Result, model: Model | None = None) -> Any:
         ax.plot(x, y * k, "o" + STYLES[i % len(STYLES)], color=f"C{i % 10}", label=name)
     ax.set_xlabel("distance from the vessel inlet [mm]")
     ax.set_ylabel(f"wall O$_2$ uptake [{unit}]")
-    ax.legend(fontsize=8)
-    ax.set_title(f"{result.model_name}: cycle-mean wall uptake along each vessel{_note(model)}",
-                 fontsize=10)
-    fig.tight_layout()
-    return fig
+    return _titled(fig, ax, f"{result.model_name}: cycle-mean wall uptake along each "
+                   f"vessel{_note(model)}")
 
 
 def save_oxygen_figures(result: Result, model: Model | None, outdir: str | os.PathLike[str],
@@ -128,20 +130,10 @@ def save_oxygen_figures(result: Result, model: Model | None, outdir: str | os.Pa
     ...     [p.name for p in plot_oxygen.save_oxygen_figures(res, None, out, formats=("png",))]
     ['o2_outlet_flux.png', 'o2_wall_uptake.png']
     """
-    plt = pyplot()
-    out = Path(outdir)
-    out.mkdir(parents=True, exist_ok=True)
     figs = {"o2_outlet_flux": outlet_flux(result, model)}
     if result.has_segments:
         figs["o2_wall_uptake"] = wall_uptake(result, model)
-    written = []
-    for name, fig in figs.items():
-        for fmt in formats:
-            p = out / f"{name}.{fmt}"
-            fig.savefig(p, dpi=150)
-            written.append(p)
-        plt.close(fig)
-    return written
+    return write_figures(figs, outdir, formats, 150)
 
 
 def without_intramyocardial_pressure(model: Model) -> dict[str, Any]:
@@ -200,12 +192,9 @@ def coronary_impediment(result: Result, rigid: Result, vessel: str | None = None
     _honest_axis(a2, np.concatenate([result.wall_o2_flux[:, i], rigid.wall_o2_flux[:, i]]) * 1e9,
                  "nmol/s")
     a2.set_xlabel("time in cycle [s]; grey: systole")
-    a1.legend(fontsize=8)
     a2.legend(fontsize=8, loc="lower right")
-    a1.set_title(f"{result.model_name}: systolic flow impediment by intramyocardial pressure",
-                 fontsize=10)
-    fig.tight_layout()
-    return fig
+    return _titled(fig, a1, f"{result.model_name}: systolic flow impediment by "
+                   "intramyocardial pressure")
 
 
 def _main(argv: list[str]) -> int:

@@ -4,7 +4,8 @@ curves (:mod:`oxyline.plot` and :mod:`oxyline.plot_oxygen` both draw with them).
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -71,3 +72,19 @@ def same_curves(series: Mapping[str, np.ndarray]) -> list[tuple[list[str], np.nd
         else:
             groups.append(([name], np.asarray(y)))
     return groups
+
+
+def write_figures(figures: Mapping[str, Any], outdir: str | os.PathLike[str],
+                  formats: Sequence[str], dpi: int) -> list[Path]:
+    """Write each figure of ``figures`` (name -> Figure) as ``outdir/<name>.<format>`` and
+    close it; returns the files written."""
+    plt = pyplot()
+    out = Path(outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    for name, fig in figures.items():
+        for fmt in formats:
+            written.append(out / f"{name}.{fmt}")
+            fig.savefig(written[-1], dpi=dpi)
+        plt.close(fig)
+    return written

@@ -33,6 +33,7 @@ from oxyline.populations import (
     _base,
     age_statistics,
     base_model,
+    baseline_row,
     cf_pwv,
     in_vivo,
     parameters,
@@ -91,9 +92,8 @@ def _path_lengths(model: Mapping[str, Any]) -> np.ndarray:
     """Lengths [m] from the aortic root to the four pulse-wave sites of :func:`_outputs`."""
     length = {str(v["name"]): float(v["length"]) for v in model["vessels"]}
     af, ac = pwdb.AORTA_FEMORAL, pwdb.AORTA_CAROTID
-    to = [sum(length[_seg(s)] for s in path) for path in
-          (ac, (*ac, pwdb.CAROTID_SEGMENT), af, (*af, pwdb.FEMORAL_SEGMENT))]
-    return np.array(to)
+    return np.array([sum(length[_seg(s)] for s in path) for path in
+                     (ac, (*ac, pwdb.CAROTID_SEGMENT), af, (*af, pwdb.FEMORAL_SEGMENT))])
 
 
 def characteristics(values: np.ndarray, lengths: np.ndarray) -> np.ndarray:
@@ -124,8 +124,7 @@ def _characteristics_jacobian(values: np.ndarray, lengths: np.ndarray) -> np.nda
 def baseline_subject(age: float) -> tuple[dict[str, float], dict[str, Any]]:
     """The baseline subject of ``age`` (every varied parameter at the age's mean) and its
     model dict (``pwdb-116`` with the subject's patch)."""
-    table = parameters((age,), 3)
-    row = table[(table[[f"{p}_sd" for p in VARIED]] == 0).all(axis=1)].iloc[0].to_dict()
+    row = baseline_row(age)
     return row, patched(base_model(), subject_patch(row))
 
 
@@ -183,11 +182,7 @@ class _Fit:
         s = exact(model, paths, list(_outputs().values()), mode="adjoint", **self.options)
         lengths = _path_lengths(model)
         # d output / d log(path) = d output / d path · path, summed over each group
-        members = np.zeros((len(paths), len(VARIABLES)))
-        start = 0
-        for k, g in enumerate(VARIABLES):
-            members[start:start + len(groups[g]), k] = 1.0
-            start += len(groups[g])
+        members = np.repeat(np.eye(len(VARIABLES)), [len(groups[g]) for g in VARIABLES], axis=0)
         jp = s.jacobian * s.parameter_values[None, :]
         jac = _characteristics_jacobian(s.values, lengths) @ (jp @ members)
         self.cache = {key: (characteristics(s.values, lengths).real, jac)}
@@ -317,8 +312,7 @@ def shrunk_row(row: Mapping[str, float], fraction: float) -> dict[str, float]:
 
 @lru_cache(maxsize=16)
 def _baseline_lvet(age: float) -> float:
-    table = parameters((age,), 3)
-    return float(table[(table[[f"{p}_sd" for p in VARIED]] == 0).all(axis=1)]["lvet"].iloc[0])
+    return float(baseline_row(age)["lvet"])
 
 
 @dataclass

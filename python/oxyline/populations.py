@@ -102,18 +102,20 @@ def _pooled_sd(means: Sequence[float], sds: Sequence[float], ns: Sequence[int]) 
     return math.sqrt(ss / (n - 1))
 
 
-_HICKSON_AGES = (24, 34, 45, 57, 63, 73)
+#: the literature data of the age-dependent inputs (``models_data/pwdb-inputs.yaml``)
+_INPUTS = shipped_data("pwdb-inputs.yaml")
+_HICKSON = _INPUTS["hickson2010"]
 #: aortic diameters [mm] read off Hickson 2010 Fig. 4 by PWDB (ascending, descending thoracic,
 #: abdominal) and carotid diameters of Hansen 1995 (ages 14..71)
-_DIA = {"asc": 10 + 25 * np.array([35.5, 38.5, 41.75, 42.0, 44.0, 44.5]) / 47,
-        "desc_thor": 10 + 25 * np.array([48, 53.5, 58.5, 58, 65, 64.5]) / 108,
-        "abd": 10 + 25 * np.array([29.5, 35, 38, 37, 42.5, 44]) / 108}
-_CAROTID = ((14, 25, 46, 60, 71), (6.9, 7.7, 8.3, 8.2, 9.0))
-_DIA_SD_RATIO = float(np.mean([2.4 / 25.7, 2.3 / 26.5, 2.1 / 28.8, 3.1 / 29.0]))  # Agmon 2003
+_DIA = {"asc": 10 + 25 * np.array(_HICKSON["ascending"]) / 47,
+        "desc_thor": 10 + 25 * np.array(_HICKSON["descending_thoracic"]) / 108,
+        "abd": 10 + 25 * np.array(_HICKSON["abdominal"]) / 108}
+_CAROTID = (_INPUTS["hansen1995"]["ages"], _INPUTS["hansen1995"]["diameter"])
+_DIA_SD_RATIO = float(np.mean([sd / m for sd, m in _INPUTS["agmon2003"]]))  # Agmon 2003
 
 
 def _dia_percent(age: float) -> float:
-    vals = [_poly1(_HICKSON_AGES, v, age) / _poly1(_HICKSON_AGES, v, BASELINE_AGE)
+    vals = [_poly1(_HICKSON["ages"], v, age) / _poly1(_HICKSON["ages"], v, BASELINE_AGE)
             for v in _DIA.values()]
     vals.append(_poly1(*_CAROTID, age) / _poly1(*_CAROTID, BASELINE_AGE))
     return 100.0 * float(np.mean(vals))
@@ -127,30 +129,26 @@ def age_statistics(age: float) -> dict[str, tuple[float, float]]:
         raise ModelError(f"age {age}: PWDB's parameters cover 25-75 years")
     ages = np.arange(20, 81)
     sv_u, sv_l = 102.35 - 0.3856 * ages, 42.94 - 0.1193 * ages        # Poppe 2015, 90 % range
-    yashin = 66 + 12 * (np.array([80, 95, 97.5, 96, 94, 93, 90, 84, 76, 66, 57, 51, 51]) - 5) / 94
-    mce_ages = np.arange(15.5, 86, 10)                                  # McEniery 2005, men
-    length = (90, 100, 100, 108, 118, 128)                              # Hickson 2010 [mm]
+    yashin = 66 + 12 * (np.array(_INPUTS["yashin"]) - 5) / 94
+    mce_ages, mbp = np.arange(15.5, 86, 10), _MCENIERY["characteristics"]["brachial_map"]
+    hickson, petersen = _INPUTS["hickson2010"], _INPUTS["petersen2017"]
     pvc = (0.113 - 0.001 * age) / (0.113 - 0.001 * BASELINE_AGE)       # McVeigh 1999
     dia = _dia_percent(age)
     return {
         "hr": (float(pchip(np.arange(32.5, 93, 5), yashin, age)),
-               _pooled_sd((67, 69, 70), (10, 12, 11), (240, 333, 231))),   # Petersen 2017
+               _pooled_sd(petersen["mean"], petersen["sd"], petersen["n"])),
         "sv": (_poly1(ages, (sv_u + sv_l) / 2, age), _poly1(ages, (sv_u - sv_l) / (2 * Z90), age)),
-        "mbp": (float(pchip(mce_ages, (88, 89, 92, 95, 95, 94, 93, 92), age)),
-                _poly1(mce_ages, (8, 8, 8, 7, 7, 7, 7, 8), age)),
+        # McEniery 2005, men
+        "mbp": (float(pchip(mce_ages, mbp["men_mean"], age)), _poly1(mce_ages, mbp["men_sd"], age)),
         "dia": (dia, _DIA_SD_RATIO * dia),
-        "len": (_poly1(_HICKSON_AGES, length, age) / _poly1(_HICKSON_AGES, length, BASELINE_AGE),
-                0.0),
+        "len": (_poly1(hickson["ages"], hickson["length"], age)
+                / _poly1(hickson["ages"], hickson["length"], BASELINE_AGE), 0.0),
         "pvc": (pvc, 0.0),
     }
 
 
 # Weissler 1961: heart rate [1/min], stroke volume [mL], LVET [ms] of 22 subjects
-_WEISSLER = np.array([
-    (68, 82, 270), (68, 81, 275), (85, 62, 235), (72, 95, 265), (49, 98, 290), (120, 44, 200),
-    (56, 106, 315), (60, 102, 320), (66, 96, 310), (65, 82, 285), (56, 92, 305), (72, 74, 260),
-    (62, 107, 300), (68, 93, 270), (57, 101, 305), (65, 109, 285), (80, 79, 250), (93, 49, 200),
-    (84, 71, 235), (80, 59, 240), (74, 76, 240), (100, 43, 190)], float)
+_WEISSLER = np.array(_INPUTS["weissler1961"], float)
 
 
 def lvet_values(hr: np.ndarray, sv: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -171,17 +169,8 @@ def lvet_values(hr: np.ndarray, sv: np.ndarray, z: np.ndarray) -> np.ndarray:
 
 # Mattace-Raso 2010 (Reference Values for Arterial Stiffness' Collaboration) Table 6:
 # cf-PWV = A age + B age^2 + C per blood-pressure category, and Table 5 percentiles (10/50/90)
-_MR_A = (0.0, 0.0, 0.0, 0.0, 0.044)
-_MR_B = (0.83e-3, 0.99e-3, 1.05e-3, 1.18e-3, 0.85e-3)
-_MR_C = (5.55, 5.69, 5.91, 6.17, 5.73)
-_MR_SBP, _MR_DBP = (115, 125, 135, 150, 170), (77.5, 82.5, 87.5, 95, 105)
-_MR_P10 = ((5.2, 5.7, 5.8, 5.7, 5.9), (5.4, 5.3, 5.5, 5.5, 5.8), (5.8, 6.2, 6.5, 6.8, 7.1),
-           (6.2, 6.7, 7.0, 7.2, 7.4), (7.0, 7.6, 7.9, 8.4, 8.5), (7.6, 8.6, 8.6, 9.3, 10.3))
-_MR_P50 = ((6.0, 6.4, 6.7, 7.2, 7.6), (6.5, 6.7, 7.0, 7.2, 7.6), (6.8, 7.4, 7.7, 8.1, 9.2),
-           (7.5, 8.1, 8.4, 9.2, 9.7), (8.7, 9.3, 9.8, 10.7, 12.0), (10.1, 11.1, 11.2, 12.7, 13.5))
-_MR_P90 = ((7.0, 7.5, 7.9, 9.3, 9.9), (7.9, 8.2, 8.8, 9.3, 11.2), (8.5, 9.0, 9.5, 10.8, 13.2),
-           (9.2, 10.4, 11.3, 12.5, 14.9), (11.4, 12.2, 13.2, 14.1, 16.5),
-           (13.8, 15.5, 15.8, 16.7, 18.2))
+_MR = _INPUTS["mattace_raso2010"]
+_MR_SBP, _MR_DBP = _MR["sbp"], _MR["dbp"]
 
 
 def _extend(v: Sequence[float]) -> np.ndarray:
@@ -201,10 +190,10 @@ def cf_pwv(age: float, mbp: float, z: float) -> float:
     sbp, dbp = _extend(_MR_SBP), _extend(_MR_DBP)
     mbps = dbp + 0.4 * (sbp - dbp)
     a = round(age)
-    pwv = _extend(_MR_A) * a + _extend(_MR_B) * a * a + _extend(_MR_C)
+    pwv = _extend(_MR["a"]) * a + _extend(_MR["b"]) * a * a + _extend(_MR["c"])
     ind = float(np.interp(mbp, mbps, np.arange(1, 14)))   # = PWDB's extrapolate + clip
     v = float(np.interp(ind, np.arange(1, 14), pwv))
-    p10, p50, p90 = (np.asarray(t, float) for t in (_MR_P10, _MR_P50, _MR_P90))
+    p10, p50, p90 = (np.asarray(_MR[t], float) for t in ("p10", "p50", "p90"))
     row = np.clip((age - 25) / 10, 0, 5)
     lo_i, w = int(min(math.floor(row), 4)), row - min(math.floor(row), 4)
     lower = 100 / Z80 * ((p50 - p10) / p50)
@@ -351,10 +340,10 @@ SIMULATION = {"cycles": 2, "until_periodic": 1e-4, "max_cycles": 60,
               "method": "generalized-alpha", "dt": 1e-3, "output": {"cycles": "last", "every": 1e-3}}
 
 
-def baseline_row() -> dict[str, float]:
-    """The PWDB baseline subject: 25 years, every parameter at its mean (LVET as normalised in
-    the 729-subject age group, as PWDB does)."""
-    table = parameters((BASELINE_AGE,), 3)
+def baseline_row(age: float = BASELINE_AGE) -> dict[str, float]:
+    """The PWDB baseline subject of ``age`` (default 25 years): every parameter at its mean
+    (LVET as normalised in the 729-subject age group, as PWDB does)."""
+    table = parameters((age,), 3)
     zero = (table[[f"{p}_sd" for p in VARIED]] == 0).all(axis=1)
     return table[zero].iloc[0].to_dict()
 
@@ -369,18 +358,14 @@ def model_dict(geometry: list[dict[str, Any]], row: Mapping[str, float] | None =
     patch = subject_patch(row, geometry)
     geo = pwdb.subject_geometry(geometry, row["dia"], row["length"])
     props = pwdb.vessel_properties(geometry, geo, 0.0)   # lengths, radii, thickness
-    vessels = []
-    for g, p in zip(geometry, props, strict=True):
-        v = {"name": g["name"], "from": pwdb.node(g["inlet"]), "to": pwdb.node(g["outlet"]),
-             "length": p["length"], "radius_in": p["radius_in"], "radius_out": p["radius_out"],
-             "wall_thickness": p["wall_thickness"],
-             "youngs_modulus": patch["vessels"][g["name"]]["youngs_modulus"],
-             "poisson_ratio": pwdb.POISSON}
-        vessels.append(v)
-    bcs: dict[str, dict[str, Any]] = {}
-    for n, bc in patch["boundary_conditions"].items():
-        bcs[n] = ({"type": "flow", **bc, "interpolation": "linear"} if n == pwdb.INLET_NODE
-                  else {"type": "rcr", **bc, "pressure": pwdb.P_OUT})
+    vessels = [{"name": g["name"], "from": pwdb.node(g["inlet"]), "to": pwdb.node(g["outlet"]),
+                "length": p["length"], "radius_in": p["radius_in"],
+                "radius_out": p["radius_out"], "wall_thickness": p["wall_thickness"],
+                "youngs_modulus": patch["vessels"][g["name"]]["youngs_modulus"],
+                "poisson_ratio": pwdb.POISSON} for g, p in zip(geometry, props, strict=True)]
+    bcs = {n: {"type": "flow", **bc, "interpolation": "linear"} if n == pwdb.INLET_NODE
+           else {"type": "rcr", **bc, "pressure": pwdb.P_OUT}
+           for n, bc in patch["boundary_conditions"].items()}
     return {"name": name, "description": _describe(row), "units": "SI",
             "blood": {"density": pwdb.RHO, "viscosity": pwdb.MU}, "arrangement": "inverted-L",
             "segmentation": {"max_length": MAX_SEGMENT_LENGTH}, "vessels": vessels,

@@ -76,14 +76,12 @@ def read_geometry(path: Any) -> list[dict[str, Any]]:
     ``{seg, inlet, outlet, length, radius_in, radius_out, name}`` (SI), in file order."""
     import csv
 
-    out = []
     with open(path, newline="") as f:
-        for row in csv.DictReader(f, delimiter="\t"):
-            out.append({"seg": int(row["Segment No"]), "inlet": int(row["Inlet node"]),
-                        "outlet": int(row["Outlet node"]), "length": float(row["Length [m]"]),
-                        "radius_in": float(row["Inlet Radius [m]"]),
-                        "radius_out": float(row["Outlet Radius [m]"]),
-                        "name": slug(row["Name"])})
+        out = [{"seg": int(row["Segment No"]), "inlet": int(row["Inlet node"]),
+                "outlet": int(row["Outlet node"]), "length": float(row["Length [m]"]),
+                "radius_in": float(row["Inlet Radius [m]"]),
+                "radius_out": float(row["Outlet Radius [m]"]), "name": slug(row["Name"])}
+               for row in csv.DictReader(f, delimiter="\t")]
     if [g["seg"] for g in out] != list(range(1, len(out) + 1)):
         raise ModelError(f"{path}: segments must be numbered 1..N in order")
     return out
@@ -91,12 +89,10 @@ def read_geometry(path: Any) -> list[dict[str, Any]]:
 
 def geometry_of(model: dict[str, Any]) -> list[dict[str, Any]]:
     """The segment table of a ``pwdb-116``-like native dict (the i-th vessel is segment i)."""
-    out = []
-    for i, v in enumerate(model["vessels"], start=1):
-        out.append({"seg": i, "inlet": int(v["from"][1:]), "outlet": int(v["to"][1:]),
-                    "length": float(v["length"]), "radius_in": float(v["radius_in"]),
-                    "radius_out": float(v["radius_out"]), "name": v["name"]})
-    return out
+    return [{"seg": i, "inlet": int(v["from"][1:]), "outlet": int(v["to"][1:]),
+             "length": float(v["length"]), "radius_in": float(v["radius_in"]),
+             "radius_out": float(v["radius_out"]), "name": v["name"]}
+            for i, v in enumerate(model["vessels"], start=1)]
 
 
 def _rows(geo: list[dict[str, Any]]) -> list[tuple[int, int, float, float, float]]:
@@ -105,14 +101,11 @@ def _rows(geo: list[dict[str, Any]]) -> list[tuple[int, int, float, float, float
             for g in geo]
 
 
-def _paths() -> tuple[tuple[tuple[int, ...], int], tuple[tuple[int, ...], int]]:
-    return (AORTA_FEMORAL, FEMORAL_SEGMENT), (AORTA_CAROTID, CAROTID_SEGMENT)
-
-
 def fit_k3(geo: list[dict[str, Any]], target_pwv: float) -> float:
     """The wall-law k3 [g s^-2 cm^-1] giving ``target_pwv`` (cf-PWV, m/s) on ``geo`` (the
     core's bisection, to 1e-12 relative)."""
-    return _core.pwdb_fit_k3(_rows(geo), *_paths(), target_pwv)
+    return _core.pwdb_fit_k3(_rows(geo), (AORTA_FEMORAL, FEMORAL_SEGMENT),
+                             (AORTA_CAROTID, CAROTID_SEGMENT), target_pwv)
 
 
 # ---------------------------------------------------------------- inflow
@@ -179,9 +172,6 @@ def outlet_conditions(geo: list[dict[str, Any]], k3_cgs: float, pvc: float, q_me
     (node -> condition, s)."""
     inlet = int(INLET_NODE[1:])
     rows, s = _core.pwdb_outlets(_rows(geo), k3_cgs, pvc, inlet, q_mean, mbp)
-    out = {}
-    for seg, z, r2, c in rows:
-        out[node(geo[seg - 1]["outlet"])] = {
-            "type": "rcr", "proximal_resistance": z, "capacitance": c,
-            "distal_resistance": r2, "pressure": P_OUT}
-    return out, s
+    return {node(geo[seg - 1]["outlet"]): {
+        "type": "rcr", "proximal_resistance": z, "capacitance": c, "distal_resistance": r2,
+        "pressure": P_OUT} for seg, z, r2, c in rows}, s

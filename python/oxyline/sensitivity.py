@@ -42,12 +42,13 @@ def _salib() -> tuple[Any, Any]:
 
 
 def _named(quantity: Any) -> list[tuple[str, str]] | None:
-    """Summary variables ``"var[vessel]"`` or ``(var, vessel)`` (one or a list), else None."""
+    """Summary variables ``"var[vessel]"`` or ``(var, vessel)`` (one or a list), or None for
+    a callable; anything else raises, naming it."""
     items = [quantity] if isinstance(quantity, (str, tuple)) else quantity
-    if callable(items) or not isinstance(items, Sequence):
+    if callable(items):
         return None
     out = []
-    for q in items:
+    for q in items if isinstance(items, Sequence) else [items]:
         if isinstance(q, tuple) and len(q) == 2:
             out.append((str(q[0]), str(q[1])))
             continue
@@ -113,30 +114,13 @@ def _check_problem(problem: Any) -> dict[str, Any]:
 def _check_n(n: Any) -> int:
     """The base sample size: a power of 2 (the balance of Sobol' points)."""
     try:
-        if isinstance(n, bool):
-            raise TypeError
-        m = operator.index(n)
+        m = 0 if isinstance(n, bool) else operator.index(n)
     except TypeError:
         m = 0
     if m < 1 or m & (m - 1):
         raise ModelError(f"sobol: n must be a power of 2 (the base sample size of Saltelli's "
                          f"scheme on Sobol' points), got {n!r}")
     return m
-
-
-def _check_quantity(quantity: Any, model: Model) -> None:
-    """A callable, or summary variables of vessels the model has (checked before the
-    ensemble runs)."""
-    named = _named(quantity)
-    if named is None:
-        if not callable(quantity):
-            raise ModelError(f"sobol: a quantity is a callable f(result), a summary variable "
-                             f"'var[vessel]' or (var, vessel), got {quantity!r}")
-        return
-    for var, vessel in named:
-        if vessel not in model.vessel_names:
-            raise ModelError(f"sobol: quantity '{var}[{vessel}]': no vessel named {vessel!r} in "
-                             f"model '{model.name}'")
 
 
 def _check_values(name: str, y: np.ndarray, x: np.ndarray, names: Sequence[str]) -> None:
@@ -229,7 +213,10 @@ def sobol(model: Model | str | os.PathLike[str] | Mapping[str, Any], problem: Ma
     names = problem["names"]
     n = _check_n(n)
     model = load_model(model)
-    _check_quantity(quantity, model)
+    for var, vessel in _named(quantity) or ():  # checked before the ensemble runs
+        if vessel not in model.vessel_names:
+            raise ModelError(f"sobol: quantity '{var}[{vessel}]': no vessel named {vessel!r} in "
+                             f"model '{model.name}'")
     try:
         x = sample.sample(problem, n, calc_second_order=calc_second_order, seed=seed)
     except ValueError as e:  # e.g. an unknown distribution name: SALib's message names them

@@ -125,12 +125,9 @@ def expand(data: Mapping[str, Any]) -> tuple[dict[str, Any], set[str]]:
         grown, leaves = _grow(node, bc, root, units)
         terminal = _terminal(node, bc)
         tree.update(v["name"] for v in grown)
-        for leaf in leaves:
-            bcs[leaf] = dict(terminal)
+        bcs.update((leaf, dict(terminal)) for leaf in leaves)
         vessels.extend(grown)
-    out = dict(data)
-    out["vessels"], out["boundary_conditions"] = vessels, bcs
-    return out, tree
+    return {**data, "vessels": vessels, "boundary_conditions": bcs}, tree
 
 
 def expanded(data: dict[str, Any]) -> dict[str, Any]:
@@ -154,10 +151,8 @@ def build_with_trees(data: dict[str, Any], build_native: Callable[..., Any],
     grown = _core.StructuredTrees(trees, factor(units, "length"), factor(units, "modulus"),
                                   memory_limit, len(data.get("vessels") or []))
     # each terminal condition converted once (any outlet condition), copied per leaf
-    terminals = []
-    for node, bc, _ in trees:
-        canon, _ = convert_conditions({node: _terminal(node, bc)}, units)
-        terminals.append(json.dumps(canon[node]))
+    terminals = [json.dumps(convert_conditions({node: _terminal(node, bc)}, units)[0][node])
+                 for node, bc, _ in trees]
     model = build_native({**data, "boundary_conditions": rest},
                          lambda parts: grown.move_into(parts, terminals))
     model.source = data  # ``canonical`` is written from it, trees grown, when asked for
@@ -194,8 +189,7 @@ def replace_windkessels(data: Mapping[str, Any], min_radius: float = 1.0e-4,
     bisection; the core's ``model/structured_tree/windkessel.rs``). ``tree`` overrides the
     other structured-tree parameters."""
     mu = float((data.get("blood") or {}).get("viscosity", 3.5e-3))
-    out = dict(data)
-    bcs = dict(out["boundary_conditions"])
+    bcs = dict(data["boundary_conditions"])
     for node, bc in bcs.items():
         if not (isinstance(bc, Mapping) and bc.get("type") == "rcr"):
             continue
@@ -203,8 +197,7 @@ def replace_windkessels(data: Mapping[str, Any], min_radius: float = 1.0e-4,
             str(node), bc, _root_radius(data, str(node)), mu, min_radius, tree_fraction,
             *_shape(tree))
         bcs[node] = _tree_condition(matched, bc.get("pressure", 0.0), tree)
-    out["boundary_conditions"] = bcs
-    return out
+    return {**data, "boundary_conditions": bcs}
 
 
 def replace_terminal_vessels(data: Mapping[str, Any], root_radii: Mapping[str, float],
@@ -221,8 +214,7 @@ def replace_terminal_vessels(data: Mapping[str, Any], root_radii: Mapping[str, f
     the root vessel are the core's (``model/structured_tree/terminal.rs``)."""
     mu = float((data.get("blood") or {}).get("viscosity", 3.5e-3))
     vessels = {str(v["name"]): v for v in data["vessels"]}
-    out = dict(data)
-    bcs = dict(out["boundary_conditions"])
+    bcs = dict(data["boundary_conditions"])
     drop: set[str] = set()
     roots: dict[str, dict[str, Any]] = {}
     for name, r0 in root_radii.items():
@@ -246,10 +238,9 @@ def replace_terminal_vessels(data: Mapping[str, Any], root_radii: Mapping[str, f
         matched = _core.match_structured_tree(node, r0, total - r_root, mu, min_radius,
                                               tree_fraction, *_shape(tree))
         bcs[node] = _tree_condition(matched, pressure, tree)
-    out["vessels"] = [roots.get(v["name"], v) for v in data["vessels"]
-                      if v["name"] not in drop or v["name"] in roots]
-    out["boundary_conditions"] = bcs
-    return out
+    return {**data, "vessels": [roots.get(v["name"], v) for v in data["vessels"]
+                                if v["name"] not in drop or v["name"] in roots],
+            "boundary_conditions": bcs}
 
 
 def murray_root_radii(data: Mapping[str, Any], steady: Mapping[str, Any],

@@ -87,13 +87,6 @@ class Target:
         return len(np.atleast_1d(self.value))
 
 
-def signals_of(output: str, model: Any, error: type[ModelError] = ModelError
-               ) -> list[tuple[str, str]]:
-    """The (vessel, variable) signals ``output`` reads; an error naming it if the vessel,
-    variable or statistic does not exist in ``model`` (a :class:`~oxyline.Model`)."""
-    return signals_for([output], model, error)[0]
-
-
 def signals_for(outputs: Sequence[str], model: Any, error: type[ModelError] = ModelError
                 ) -> list[list[tuple[str, str]]]:
     """The signals of each of ``outputs``, found by the core against ``model`` in one read of
@@ -187,9 +180,7 @@ def parse_targets(targets: Any, model: Any) -> list[Target]:
                 raise CalibrationError(f"target '{name}': {times.size} times for "
                                        f"{value.size} values")
         sigma = _sigma(name, item, value)
-        t = Target(name, value, sigma, times)
-        t.signals = _signals(found[len(out)], CalibrationError)
-        out.append(t)
+        out.append(Target(name, value, sigma, times, _signals(found[len(out)], CalibrationError)))
     return out
 
 

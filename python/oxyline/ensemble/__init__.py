@@ -115,8 +115,6 @@ def _refuse_model_estimates(model: Model, overrides: Mapping[str, Any]) -> None:
 def _control(cancel: Any, variant_timeout: Any, client: Any) -> dict[str, Any]:
     """``cancel`` and ``variant_timeout`` checked (``variant_timeout`` for ensembles on this
     machine; a Dask ensemble's cancel cancels its tasks)."""
-    import math
-
     if client is not None and variant_timeout is not None:
         raise ModelError("simulate_ensemble: variant_timeout is for ensembles on this machine; "
                          "give the Dask workers their own limits (e.g. the nanny's memory "
@@ -125,12 +123,9 @@ def _control(cancel: Any, variant_timeout: Any, client: Any) -> dict[str, Any]:
         raise ModelError(f"simulate_ensemble: cancel must be a threading.Event (anything with "
                          f"is_set()), got {cancel!r:.60}")
     if variant_timeout is not None:
-        ok = isinstance(variant_timeout, (int, float)) and not isinstance(variant_timeout, bool)
-        try:
-            ok = ok and math.isfinite(variant_timeout) and 0 < variant_timeout <= 1e9
-        except OverflowError:
-            ok = False
-        if not ok:
+        # (0, 1e9] holds no NaN, no infinity and no integer beyond a float
+        if isinstance(variant_timeout, bool) or not isinstance(variant_timeout, (int, float)) \
+                or not 0 < variant_timeout <= 1e9:
             raise ModelError(f"simulate_ensemble: variant_timeout must be seconds of wall time "
                              f"(a number > 0 and <= 1e9), got {variant_timeout!r:.40}")
         variant_timeout = float(variant_timeout)
@@ -159,12 +154,10 @@ def _workers(workers: Any) -> int | None:
     if workers is None:
         return None
     try:
-        if isinstance(workers, bool):
-            raise TypeError
-        n = operator.index(workers)
+        n = 0 if isinstance(workers, bool) else operator.index(workers)
     except TypeError:
-        n = None
-    if n is None or n < 1:
+        n = 0
+    if n < 1:
         raise ModelError(f"simulate_ensemble: workers must be None (every core, or "
                          f"OXYLINE_NUM_THREADS) or a whole number >= 1, got {workers!r}")
     return n

@@ -187,12 +187,6 @@ def _watch(cancel: Any, client: Any, futures: Mapping[Any, range]) -> Any:
     return over
 
 
-def _lost(shared: Any) -> bool:
-    """Whether the scattered model is gone from the cluster (every worker that held it died):
-    the chunks that need it are cancelled by Dask, not failed by their variants."""
-    return shared.status != "finished"
-
-
 def _cancelled(exc: BaseException) -> bool:
     """A chunk cancelled by Dask (its scattered model lost with the workers), not failed."""
     from concurrent.futures import CancelledError
@@ -246,29 +240,29 @@ class _ClientRun:
 
     def submit_all(self) -> None:
         """Every chunk, placed by :func:`_plan`."""
-        output, workers, overrides = self.args
         chunks, where = _plan(len(self.patches), self.client.nthreads())
         self.sent_with = dict.fromkeys(chunks, self.scatters)
-        parts = [[self.patches[i] for i in c] for c in chunks]
-        k = len(chunks)
         if where is None:  # one graph: the scheduler queues the tasks and hands them out
-            futures = self.client.map(run_chunk, [self.shared] * k, parts, chunks,
+            output, workers, overrides = self.args
+            k = len(chunks)
+            futures = self.client.map(run_chunk, [self.shared] * k,
+                                      [[self.patches[i] for i in c] for c in chunks], chunks,
                                       [output] * k, [workers] * k, [dict(overrides)] * k,
                                       pure=False, retries=RETRIES)
             self.futures = dict(zip(futures, chunks, strict=True))
         else:
-            self.futures = {
-                self.client.submit(run_chunk, self.shared, part, c, output, workers,
-                                   dict(overrides), pure=False,
-                                   workers=None if w is None else [w],
-                                   allow_other_workers=w is not None, retries=RETRIES): c
-                for part, c, w in zip(parts, chunks, where, strict=True)}
+            self.futures = {self._submit(c, w): c for c, w in zip(chunks, where, strict=True)}
+
+    def _submit(self, rows: range, worker: str | None = None) -> Any:
+        """The task of the variants ``rows``, pinned loosely to ``worker`` if given."""
+        output, workers, overrides = self.args
+        return self.client.submit(run_chunk, self.shared, [self.patches[i] for i in rows],
+                                  rows, output, workers, dict(overrides), pure=False,
+                                  workers=None if worker is None else [worker],
+                                  allow_other_workers=worker is not None, retries=RETRIES)
 
     def send(self, rows: range) -> None:
-        output, workers, overrides = self.args
-        again = self.client.submit(run_chunk, self.shared, [self.patches[i] for i in rows],
-                                   rows, output, workers, dict(overrides), pure=False,
-                                   retries=RETRIES)
+        again = self._submit(rows)
         self.futures[again] = rows
         self.sent_with[rows] = self.scatters
         self.pending.add(again)
@@ -277,7 +271,7 @@ class _ClientRun:
         """Handle a chunk whose task failed; True when its variants are recorded as failed
         (False: they were sent again or set aside)."""
         stale = _cancelled(exc) and self.sent_with.get(rows) == self.scatters
-        if _lost(self.shared) or stale:
+        if self.shared.status != "finished" or stale:
             # every worker that held the model died: scatter again. A chunk cancelled by Dask
             # on the current copy says so too, and may arrive before the client has heard
             # that the model is lost (its future still "finished"): sent again on that stale
@@ -338,9 +332,7 @@ def run_on_client(client: Any, model: Model, patches: list[dict[str, Any]], inde
                   overrides: Mapping[str, Any], cancel: Any = None) -> Any:
     from oxyline.ensemble.local import _progress, run_settings
 
-    patcher = Patcher(model)
-    for k, patch in enumerate(patches):  # unknown names fail here, before any task starts
-        patcher.check(patch, k)
+    Patcher(model).check_all(patches)  # unknown names fail here, before any task starts
     run_settings(model, output, overrides)  # so do unknown settings
     _check_sendable(output)
     collector = Collector(len(patches), output, model.vessel_names)

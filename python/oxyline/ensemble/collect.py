@@ -19,7 +19,7 @@ dotted paths).
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 
@@ -63,30 +63,29 @@ def summary_values(result: Result, column_stats: Sequence[np.ndarray] | None = N
     numpy's arithmetic for arrays of two or more vessels (``column_stats`` in the core's
     ``ensemble`` module); the flow variables are then taken from them."""
     t = np.asarray(result.time, dtype=float)
-    flow = _flow_stats(result, column_stats)
+    flow = _flow_stats(len(result.vessels), result.vessel_variables, result.data.shape[1],
+                       column_stats)
     arrays = [(name, None if flow else getattr(result, name))
               for name in result.vessel_variables]
     arrays += [(name, arr) for name, (kind, arr, _) in result.species_variables().items()
                if kind == "vessel"]
-    out = {}
-    for name, arr in arrays:
-        values = flow[name] if arr is None else stats(np.asarray(arr, dtype=float), t)
-        for stat, val in zip(STATS, values):
-            out[f"{name}_{stat}"] = val
-    return out
+    return {f"{name}_{stat}": val for name, arr in arrays
+            for stat, val in zip(STATS, flow[name] if arr is None
+                                 else stats(np.asarray(arr, dtype=float), t))}
 
 
-def _flow_stats(result: Result, column_stats: Sequence[np.ndarray] | None
+def _flow_stats(nv: int, variables: Sequence[str], columns: int,
+                column_stats: Sequence[np.ndarray] | None
                 ) -> dict[str, tuple[np.ndarray, ...]] | None:
-    """The (mean, min, max) per vessel of each flow variable from the core's per-column
-    statistics, or None where numpy would compute them otherwise (one vessel: numpy sums a
-    single column pairwise; one time: plain means) or none were computed."""
-    nv, kv = len(result.vessels), len(result.vessel_variables)
-    if column_stats is None or nv < 2 or len(column_stats[0]) != result.data.shape[1]:
+    """The (mean, min, max) per vessel of each flow variable (``variables`` of ``nv`` vessels,
+    ``columns`` output columns) from the core's per-column statistics, or None where numpy
+    would compute them otherwise (one vessel: numpy sums a single column pairwise; one time:
+    plain means) or none were computed."""
+    kv = len(variables)
+    if column_stats is None or nv < 2 or len(column_stats[0]) != columns:
         return None
     block = [np.asarray(s)[: kv * nv] for s in column_stats]
-    return {name: tuple(s[k::kv] for s in block)
-            for k, name in enumerate(result.vessel_variables)}
+    return {name: tuple(s[k::kv] for s in block) for k, name in enumerate(variables)}
 
 
 def heart_summary(chamber_volume: Mapping[str, np.ndarray], valve_status: Mapping[str, Any],
@@ -103,14 +102,6 @@ def heart_summary(chamber_volume: Mapping[str, np.ndarray], valve_status: Mappin
     return out
 
 
-class _Columns(NamedTuple):
-    """What :func:`_flow_stats` reads of a result, taken from a run's layout and rows."""
-
-    vessels: list[str]
-    vessel_variables: tuple[str, ...]
-    data: np.ndarray
-
-
 def stats_summary(raw: Mapping[str, Any], layout: Mapping[str, Any]
                   ) -> dict[str, np.ndarray] | None:
     """:func:`summary_values` of a finished variant read straight from the core's per-column
@@ -118,16 +109,24 @@ def stats_summary(raw: Mapping[str, Any], layout: Mapping[str, Any]
     thread's per-variant work), or None where that takes the result: species outputs (their
     statistics are numpy's, from the result's arrays) or no usable column statistics. The
     same arrays and names in the same order as :func:`summary_values`."""
-    stats = raw.get("column_stats")
-    data = raw.get("data")
-    if "transport" in raw or stats is None or getattr(data, "ndim", 0) != 2:
-        return None
-    flow = _flow_stats(_Columns(list(layout["vessels"]), tuple(layout["vessel_variables"]),
-                                data), stats)  # type: ignore[arg-type]
+    stats = _column_stats(raw)
+    flow = None if stats is None else _flow_stats(
+        len(layout["vessels"]), layout["vessel_variables"], raw["data"].shape[1], stats)
     if flow is None:
         return None
     return {f"{name}_{stat}": val for name, values in flow.items()
             for stat, val in zip(STATS, values)}
+
+
+def _column_stats(raw: Mapping[str, Any]) -> Sequence[np.ndarray] | None:
+    """The core's per-column statistics of a finished variant's run ``raw``, or None where
+    its summary takes the result: species outputs (their statistics are numpy's) or no
+    statistics of every output column."""
+    stats, data = raw.get("column_stats"), raw.get("data")
+    if "transport" in raw or stats is None or getattr(data, "ndim", 0) != 2 \
+            or len(stats[0]) != data.shape[1]:
+        return None
+    return stats
 
 
 class StatsBatch:
@@ -147,9 +146,8 @@ class StatsBatch:
         self.stats: list[Sequence[np.ndarray]] = []
 
     def add(self, i: int, raw: Mapping[str, Any], layout: Mapping[str, Any]) -> bool:
-        stats, data = raw.get("column_stats"), raw.get("data")
-        if "transport" in raw or stats is None or getattr(data, "ndim", 0) != 2 \
-                or len(stats[0]) != data.shape[1]:
+        stats = _column_stats(raw)
+        if stats is None:
             return False
         key = (list(layout["vessels"]), list(layout["vessel_variables"]))
         if self.key is None:
@@ -180,15 +178,6 @@ class StatsBatch:
                 arr[rows] = block[:, k::kv]
         c.status[rows] = STATUS["ok"]
         self.rows, self.stats = [], []
-
-
-def callable_values(output: Callable[[Result], Mapping[str, float]], result: Result
-                    ) -> dict[str, float]:
-    values = output(result)
-    if not isinstance(values, Mapping):
-        raise TypeError(f"output callable must return a mapping {{name: float}}, got "
-                        f"{type(values).__name__}")
-    return {str(k): float(v) for k, v in values.items()}
 
 
 def patch_coords(patches: Sequence[Mapping[str, Any]]) -> dict[str, np.ndarray]:
@@ -262,7 +251,11 @@ class Collector:
             return summary_values(result, column_stats)
         if self.output == "full":
             return {"": dataset(result)}
-        return callable_values(self.output, result)  # type: ignore[arg-type]
+        values = self.output(result)  # type: ignore[operator]
+        if not isinstance(values, Mapping):
+            raise TypeError(f"output callable must return a mapping {{name: float}}, got "
+                            f"{type(values).__name__}")
+        return {str(k): float(v) for k, v in values.items()}
 
     def put(self, i: int, values: Mapping[str, Any]) -> None:
         """Store the outputs of finished variant ``i``."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import itertools
 import json
 import weakref
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -76,15 +77,11 @@ class Feed:
                 v = self.patcher.variant(self.patches[i], k, self.values.pop(i, None))
                 s = (self.base_settings if v.model is self.patcher.base else
                      run_settings(v.model, self.output, self.overrides))
-            except ResourceError as e:
-                self.collector.fail(i, "resource", f"variant {k}: {e}"[:ERROR_CHARS])
-                self.on_skip(i)
-                continue
-            except ModelError as e:
+            except ModelError as e:  # a ResourceError too
                 # the patch's names were checked before the run (they raise); a value the
-                # patch or the model refuses fails only this variant
-                text = str(e) if str(e).startswith(f"variant {k}: ") else f"variant {k}: {e}"
-                self.collector.fail(i, "model", text[:ERROR_CHARS])
+                # patch or the model refuses, or the memory it needs, fails only this variant
+                kind = "resource" if isinstance(e, ResourceError) else "model"
+                self.collector.fail(i, kind, traced(k, None, e)[:ERROR_CHARS])
                 self.on_skip(i)
                 continue
             self.prepared[i] = (v, s)
@@ -259,15 +256,11 @@ def _old_objects_frozen() -> Iterator[None]:
 def _progress(enabled: Any, total: int) -> tuple[Callable[[], None], Callable[[], None]]:
     """(tick, close): one tick per finished variant; ``enabled`` may be a callback
     ``f(done, total)``."""
-    count = [0]
     if callable(enabled):
-        def tick() -> None:
-            count[0] += 1
-            enabled(count[0], total)
-        return tick, lambda: None
-    if not enabled:
-        return (lambda: None), (lambda: None)
-    tqdm = tqdm_class()  # the text bar in a notebook without ipywidgets (no TqdmWarning)
+        done = itertools.count(1)
+        return (lambda: enabled(next(done), total)), (lambda: None)
+    # the text bar in a notebook without ipywidgets (no TqdmWarning)
+    tqdm = tqdm_class() if enabled else None
     if tqdm is None:
         return (lambda: None), (lambda: None)
     bar = tqdm(total=total, unit="variant", delay=1.0)

@@ -65,15 +65,14 @@ def merge(source: Mapping[str, Any], patch: Any, k: int = 0) -> Merged:
     return Merged(data, set(vessels), set(nodes), paths, refused)
 
 
-def merge_patch(source: Mapping[str, Any], patch: Mapping[str, Any], k: int = 0,
-                ) -> tuple[dict[str, Any], set[int], set[str]]:
-    """The native model ``source`` with ``patch`` (variant ``k``) applied, sharing every
-    element the patch leaves alone, and the indices of the vessels and the nodes of the
-    conditions it changed. Raises :class:`ModelError` for unknown names and refused values."""
+def merge_patch(source: Mapping[str, Any], patch: Mapping[str, Any], k: int = 0) -> Merged:
+    """:func:`merge`, its ``data`` the native model ``source`` with ``patch`` (variant ``k``)
+    applied, sharing every element the patch leaves alone. Raises :class:`ModelError` for
+    unknown names and refused values."""
     m = merge(source, patch, k)
     if m.data is None:
         raise ModelError(m.refused)
-    return m.data, m.vessels, m.nodes
+    return m
 
 
 def patch_paths(patch: Mapping[str, Any]) -> list[str]:
@@ -106,7 +105,7 @@ def apply_patch(model: Model | Mapping[str, Any] | str, patch: Mapping[str, Any]
     from oxyline.loader import load_model
 
     base = load_model(model)
-    return copy_description(merge_patch(base.source, patch)[0])
+    return copy_description(merge_patch(base.source, patch).data)
 
 
 def _column_path(column: Any, names: Mapping[str, set[str]], k: int) -> list[str]:
@@ -150,18 +149,10 @@ def _cell(value: Any) -> tuple[bool, Any]:
             value = value.item()  # a numpy scalar (or 0-d array): the Python value
         except (ValueError, TypeError):
             pass
-    if value is None or (isinstance(value, float) and math.isnan(value)):
-        return False, None
-    if type(value).__name__ in ("NAType", "NaTType"):  # pandas' missing values
+    if value is None or (isinstance(value, float) and math.isnan(value)) \
+            or type(value).__name__ in ("NAType", "NaTType"):  # pandas' missing values
         return False, None
     return True, value
-
-
-def _put(patch: dict[str, Any], path: Sequence[str], value: Any) -> None:
-    node: dict[str, Any] = patch
-    for key in path[:-1]:
-        node = node.setdefault(key, {})
-    node[path[-1]] = value
 
 
 def frame_patches(frame: Any, vessel_names: Iterable[str], nodes: Iterable[str]
@@ -183,7 +174,10 @@ def frame_patches(frame: Any, vessel_names: Iterable[str], nodes: Iterable[str]
             if keep:
                 if path is None:
                     path = _column_path(column, names, k)
-                _put(patch, path, value)
+                node = patch
+                for key in path[:-1]:
+                    node = node.setdefault(key, {})
+                node[path[-1]] = value
     return patches
 
 
@@ -278,18 +272,13 @@ class Patcher:
     def _parse(self, patch: Any, k: int) -> Any:
         return None if self.scaler is None else self.scaler.parse(patch, k)
 
-    def check(self, patch: Any, k: int) -> None:
-        """Raise :class:`ModelError` for unknown names in ``patch`` (variant ``k``), as
-        :meth:`variant` would; a patch on the value route is checked without merging it. A
-        value the patch cannot apply is not raised here: it fails only its variant."""
-        if self._parse(patch, k) is None:
-            merge(self.base.source, patch, k)
-
     def check_all(self, patches: Sequence[Any], numbers: range | None = None) -> dict[int, Any]:
-        """:meth:`check` every patch (variant ``numbers[i]``, default ``i``) and return the
-        value-route rows of those that take it, by position in ``patches`` (see
-        :meth:`~oxyline.ensemble.values.ValueTable.rows`): the parse serves both, and the
-        values of the whole ensemble are one numpy pass."""
+        """Raise :class:`ModelError` for unknown names in every patch (variant ``numbers[i]``,
+        default ``i``), as :meth:`variant` would (a patch on the value route is checked
+        without merging it; a value the patch cannot apply is not raised here: it fails only
+        its variant), and return the value-route rows of those that take it, by position in
+        ``patches`` (see :meth:`~oxyline.ensemble.values.ValueTable.rows`): the parse serves
+        both, and the values of the whole ensemble are one numpy pass."""
         numbers = range(len(patches)) if numbers is None else numbers
         fast: list[int] = []
         parsed = []
@@ -336,18 +325,11 @@ class Patcher:
             assert self.scaler is not None
             return Variant(None, self.scaler.model_with_period(row.period), values=row.values,
                            tables=row.tables)
-        merged = merge(self.base.source, patch, k)
-        if merged.data is None:
-            raise ModelError(merged.refused)
+        merged = merge_patch(self.base.source, patch, k)
         model = self._read(merged, patch, k)
-        vessels, nodes = merged.vessels, merged.nodes
         canon, base = model.canonical, self.base.canonical
-        core: dict[str, Any] = {}
-        handed = {i: canon["vessels"][i] for i in sorted(vessels)}
-        outlets = {n: canon["boundary_conditions"][n] for n in nodes}
-        if canon["blood"] != base["blood"]:
-            core["blood"] = canon["blood"]
-        if canon.get("transport") != base.get("transport"):
-            core["transport"] = canon["transport"]
+        core = {k: canon[k] for k in ("blood", "transport") if canon.get(k) != base.get(k)}
+        handed = {i: canon["vessels"][i] for i in sorted(merged.vessels)}
+        outlets = {n: canon["boundary_conditions"][n] for n in merged.nodes}
         return Variant(json.dumps(core, separators=(",", ":")), model, handed or None,
                        outlets or None)

@@ -79,12 +79,9 @@ def _factors_plain(scale: Any) -> bool:
 def _table(value: Any) -> np.ndarray | None:
     """A list/tuple/array of plain numbers as float64, or None."""
     if isinstance(value, np.ndarray):
-        if value.ndim != 1 or value.dtype.kind not in "fi":
-            return None
-        return value.astype(float)
-    if not isinstance(value, (list, tuple)) or not all(type(x) in _REAL for x in value):
-        return None
-    return np.array(value, dtype=float)
+        return value.astype(float) if value.ndim == 1 and value.dtype.kind in "fi" else None
+    plain = isinstance(value, (list, tuple)) and all(type(x) in _REAL for x in value)
+    return np.array(value, dtype=float) if plain else None
 
 
 @dataclass
@@ -193,14 +190,10 @@ class ValueTable:
         tables: list[tuple[int, np.ndarray, np.ndarray]] = []
         vessels = patch.get("vessels", {})
         bcs = patch.get("boundary_conditions", {})
-        if not isinstance(vessels, Mapping) or not isinstance(bcs, Mapping):
+        if not isinstance(vessels, Mapping) or not isinstance(bcs, Mapping) \
+                or not all(self._vessel(n, p, entries) for n, p in vessels.items()) \
+                or not all(self._condition(n, p, entries, tables) for n, p in bcs.items()):
             return None
-        for name, props in vessels.items():
-            if not self._vessel(name, props, entries):
-                return None
-        for node, props in bcs.items():
-            if not self._condition(node, props, entries, tables):
-                return None
         scale = None
         if "scale" in patch:
             if not self.usable or not _factors_plain(patch["scale"]):
