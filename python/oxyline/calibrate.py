@@ -764,7 +764,9 @@ class _LoopProblem(_Problem):
     def _outputs(self, m: Any) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
         raw = closed_loop.o2_sensitivities(m, self.parameters if self.exact else [],
                                            [t.output for t in self.targets], **self.options)
-        return np.asarray(raw["values"]), np.asarray(raw["jacobian"]), raw
+        # ``values`` of the raw result are the parameters' SI values (as the model's tangent)
+        return np.asarray(raw["values"]), np.asarray(raw["jacobian"]), \
+            {**raw, "values": raw["parameter_values"]}
 
 
 def _loop_problem(model: Any, targets: Any, parameters: Sequence[str], bounds: Any,
