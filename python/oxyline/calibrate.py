@@ -557,21 +557,14 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
         if isinstance(value, bool) or not isinstance(value, (int, float)) \
                 or not 0.0 < value < 1.0:
             raise CalibrationError(f"{key}: expected a number in (0, 1), got {value!r}")
-    if method == "bayes" and _is_loop(model):
-        raise CalibrationError("method 'bayes' is not available for a closed loop's oxygen: "
-                               "use 'lm' or 'trf'")
     if method == "bayes":
         return _bayes(model, targets, parameters, bounds, max_evaluations, xtol, jacobian,
                       steps_per_cycle, tol, max_cycles, posterior, gradient, groups)
     if jacobian not in ("exact", "2-point"):
         raise CalibrationError(f"jacobian: expected 'exact' or '2-point', got {jacobian!r}")
-    if _is_loop(model):
-        problem, (lo, hi) = _loop_problem(model, targets, parameters, bounds, method,
-                                          jacobian, {"tol": tol, "max_cycles": max_cycles})
-    else:
-        problem, (lo, hi) = _problem(model, targets, parameters, bounds, method, jacobian,
-                                     {"steps_per_cycle": steps_per_cycle, "tol": tol,
-                                      "max_cycles": max_cycles}, gradient, groups)
+    problem, (lo, hi) = _problem(model, targets, parameters, bounds, method, jacobian,
+                                 {"steps_per_cycle": steps_per_cycle, "tol": tol,
+                                  "max_cycles": max_cycles}, gradient, groups)
     params = problem.parameters
     report: dict[str, Any] = {"method": method, "gradient": problem.gradient}
     try:
@@ -634,7 +627,11 @@ def _problem(model: Model | Mapping[str, Any] | str, targets: Any, parameters: S
              options: dict[str, Any], gradient: str = "auto", groups: Any = None
              ) -> tuple[_Problem, tuple[np.ndarray, np.ndarray]]:
     """The least-squares problem of :func:`calibrate` and its bounds in log space, every input
-    checked (paths, targets, start, bounds, sizes) before the fit starts."""
+    checked (paths, targets, start, bounds, sizes) before the fit starts; a closed loop's
+    oxygen is :func:`_loop_problem`'s."""
+    if _is_loop(model):
+        return _loop_problem(model, targets, parameters, bounds, method, jacobian,
+                             {"tol": options["tol"], "max_cycles": options["max_cycles"]})
     base = load_model(model)
     grouped = _groups(parameters, groups)
     params = list(parameters) + list(grouped)
@@ -860,6 +857,9 @@ def _bayes(model: Any, targets: Any, parameters: Sequence[str], bounds: Any,
            tol: float, max_cycles: int, posterior: Mapping[str, Any] | None,
            gradient: str = "auto", groups: Any = None) -> CalibrationResult:
     """``method="bayes"``: the gradient fit, then emcee from around it (see :func:`calibrate`)."""
+    if _is_loop(model):
+        raise CalibrationError("method 'bayes' is not available for a closed loop's oxygen: "
+                               "use 'lm' or 'trf'")
     try:
         import emcee
     except ImportError:
