@@ -135,3 +135,27 @@ def test_calibration_bad_targets_and_parameters_are_named():
         oxyline.calibrate(_set(), {"SvO3": 0.7}, ["km"])
     with pytest.raises(oxyline.CalibrationError, match="organs.liver.vo2"):
         oxyline.calibrate(_set(), {"SvO2": 0.7}, ["organs.liver.vo2"])
+
+
+def test_calibration_with_noisy_data_brackets_the_truth_in_its_intervals():
+    # 0.5 % noise on each target (its sigma): the linearised 95 % intervals of the
+    # Gauss–Newton covariance hold the true values (a fixed draw)
+    truth = _set()
+    truth["organs"]["muscle"]["vo2"] = 80.0
+    truth["lungs"]["diffusing_capacity"] = 6.0
+    truth["cardiac_output"] = 5.6
+    s = closed_loop.simulate_o2(truth, tol=TOL).summary()
+    exact = {"SvO2": s["SvO2"], "SaO2": s["SaO2"],
+             "cardiac_output": s["cardiac_output"] * 1e-3 / 60.0}
+    rng = np.random.default_rng(1)
+    targets = {o: {"value": v * (1 + 0.005 * rng.standard_normal()), "sigma": 0.005 * v}
+               for o, v in exact.items()}
+    bounds = {"organs.muscle.vo2": (10.0, 200.0), "lungs.diffusing_capacity": (3.0, 40.0),
+              "cardiac_output": (2.0, 10.0)}
+    fit = oxyline.calibrate(_set(), targets, list(bounds), method="trf", bounds=bounds,
+                            tol=1e-13)
+    assert fit.success, fit.report
+    for path, want in zip(bounds, [80.0, 6.0, 5.6], strict=True):
+        lo, hi = fit.intervals[path]
+        assert lo < want < hi, (path, lo, hi)
+        assert fit.parameters[path] != pytest.approx(want, rel=1e-3)  # the noise moved it
