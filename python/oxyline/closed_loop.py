@@ -316,7 +316,8 @@ def o2_sensitivities(model: str | dict[str, Any], parameters: list[str], outputs
     the set, by the core (``oxyline_core::transport::closed_loop_sensitivity``: the tangent of
     every step, the implicit function theorem on the periodic fixed point; docs/calibration.md
     "A closed loop's oxygen"). `parameters`: ``organs.<organ>.vo2``, ``km``,
-    ``lungs.diffusing_capacity``, ``blood.p50``, ``blood.hemoglobin`` and, with the prescribed
+    ``lungs.diffusing_capacity``, ``lungs.alveolar_po2``, ``blood.p50``, ``blood.hemoglobin``
+    and, with the prescribed
     flow table (``flows: table``), ``cardiac_output``; `outputs`: ``SaO2``, ``SvO2``,
     ``PaO2``, ``PvO2``, ``VO2``, ``VO2.<organ>``, ``cardiac_output``. SI throughout: a dict of
     ``parameter_values``, ``values``, ``jacobian`` (outputs × parameters), ``cycles`` and

@@ -5,7 +5,8 @@
 //! (`closed_loop::tangent`). Values and derivatives are in SI.
 //!
 //! Parameters: `organs.<organ>.vo2` (the organ's Michaelis–Menten vmax, mol/s), `km` (every
-//! organ's, Pa), `lungs.diffusing_capacity` (mol s⁻¹ Pa⁻¹), `blood.p50` (Pa),
+//! organ's, Pa), `lungs.diffusing_capacity` (mol s⁻¹ Pa⁻¹), `lungs.alveolar_po2` (Pa),
+//! `blood.p50` (Pa),
 //! `blood.hemoglobin` (kg/m³ = g/L), and with the prescribed flow table `cardiac_output`
 //! (m³/s: the table is proportional to it). Outputs: `SaO2`, `SvO2` (flow-weighted
 //! saturations of the left and right hearts' ejections), `PaO2`, `PvO2` (Pa), `VO2` (the
@@ -33,8 +34,9 @@ pub struct LoopSensitivities {
 const WHAT: &str = "closed-loop sensitivities";
 
 /// The parameter keys the tangent covers (for the error that names an unknown one).
-const KEYS: &str = "organs.<organ>.vo2, km, lungs.diffusing_capacity, blood.p50, \
-                    blood.hemoglobin, cardiac_output (with the prescribed flow table)";
+const KEYS: &str = "organs.<organ>.vo2, km, lungs.diffusing_capacity, lungs.alveolar_po2, \
+                    blood.p50, blood.hemoglobin, cardiac_output (with the prescribed flow \
+                    table)";
 
 /// A parameter key of the set: the core's parameter, its SI value, and the factor from the
 /// core's derivative to the derivative by that value.
@@ -69,6 +71,7 @@ fn parameter(p: &LoopParams, path: &str, prescribed: bool) -> Result<(LoopParame
             p.lungs.diffusing_capacity / 60.0 * ML_O2 / MMHG,
             1.0,
         ),
+        "lungs.alveolar_po2" => (LoopParameter::AlveolarPo2, p.lungs.alveolar_po2 * MMHG, 1.0),
         "blood.p50" => (LoopParameter::P50, b.p50 * MMHG, 1.0),
         "blood.hemoglobin" => (
             LoopParameter::Capacity,

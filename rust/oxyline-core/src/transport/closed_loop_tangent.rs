@@ -35,6 +35,8 @@ pub enum LoopParameter {
     Km,
     /// The diffusing capacity (mol s⁻¹ Pa⁻¹) of every lung branch at once.
     DiffusingCapacity,
+    /// The alveolar PO2 (Pa) of every lung branch at once.
+    AlveolarPo2,
     /// Haemoglobin's P50 (Pa).
     P50,
     /// Haemoglobin's O2 capacity (mol/m³).
@@ -144,6 +146,9 @@ impl ClosedLoop {
             .iter()
             .map(|&p| match p {
                 LoopParameter::DiffusingCapacity => y_out / q,
+                // Bohr's integral by P_A at fixed ends: −∫ C'(P)/(P_A − P)² dP = I_A, so
+                // dP_out/dP_A = −I_A/K_out and dC_out/dP_A = C'(P_out) dP_out/dP_A
+                LoopParameter::AlveolarPo2 => -bohr_by_alveolar(h, pa, y_in, y_out) * y_out,
                 LoopParameter::P50 | LoopParameter::Capacity => {
                     // Bohr's integral ∫ C'(P)/(P_A − P) dP from P_in to P_out is D_L/Q
                     let (k_in, k_out) = (slope(h, p_in) / y_in, slope(h, p_out) / y_out);
@@ -177,6 +182,21 @@ fn bohr_by(param: LoopParameter, h: (f64, f64, f64, f64), pa: f64, y_in: f64, y_
         sum += if k % 2 == 1 { 4.0 } else { 2.0 } * f(u0 + du * k as f64);
     }
     -sum * du / 3.0
+}
+
+/// −∫ C'(P)/(P_A − P)² dP from P_in to P_out, as sign ∫ C'(P_A − sign e^u) e^{−u} du over u
+/// from ln|y_in| to ln|y_out| (Simpson).
+fn bohr_by_alveolar(h: (f64, f64, f64, f64), pa: f64, y_in: f64, y_out: f64) -> f64 {
+    let sign = y_in.signum();
+    let (u0, u1) = (y_in.abs().ln(), y_out.abs().max(1e-300).ln());
+    let n = BOHR_INTERVALS;
+    let du = (u1 - u0) / n as f64;
+    let f = |u: f64| slope(h, (pa - sign * u.exp()).max(0.0)) * (-u).exp();
+    let mut sum = f(u0) + f(u1);
+    for k in 1..n {
+        sum += if k % 2 == 1 { 4.0 } else { 2.0 } * f(u0 + du * k as f64);
+    }
+    sign * sum * du / 3.0
 }
 
 /// A compartment's consumption linearised at its end-of-step content: dVO2/dC_t, and
@@ -560,7 +580,7 @@ mod tests {
     const MMHG: f64 = 133.322368;
 
     /// A two-compartment loop through the lungs with Hill binding (haemoglobin's numbers).
-    fn lung_loop(p50: f64, capacity: f64, dl: f64) -> ClosedLoop {
+    fn lung_loop(p50: f64, capacity: f64, dl: f64, pa: f64) -> ClosedLoop {
         let spec = ClosedLoopSpec::from_json(&format!(
             r#"{{"compartments": [{{"name": "venous", "volume": 1e-3, "initial_po2": 5000}},
                  {{"name": "arterial", "volume": 1e-3, "initial_po2": 13000}}],
@@ -569,7 +589,6 @@ mod tests {
                            {{"name": "back", "from": 1, "to": 0}}],
               "binding": {{"kind": "hill", "solubility": {a}, "p50": {p50}, "n": 2.7,
                           "capacity": {capacity}}}}}"#,
-            pa = 100.0 * MMHG,
             a = 1.34e-3 / MMHG,
         ))
         .unwrap();
@@ -586,17 +605,20 @@ mod tests {
             LoopParameter::DiffusingCapacity,
             LoopParameter::P50,
             LoopParameter::Capacity,
+            LoopParameter::AlveolarPo2,
         ];
+        let pa = 100.0 * MMHG;
         let (q, c_in) = (8e-5, 6.5);
-        let lp = lung_loop(p50, cap, dl);
+        let lp = lung_loop(p50, cap, dl, 100.0 * MMHG);
         let lin = lp.lung_linear(0, q, c_in, &params);
-        let end = |p50: f64, cap: f64, dl: f64, q: f64, c: f64| {
-            let l = lung_loop(p50, cap, dl);
+        let end_at = |p50: f64, cap: f64, dl: f64, pa: f64, q: f64, c: f64| {
+            let l = lung_loop(p50, cap, dl, pa);
             l.lungs[0]
                 .as_ref()
                 .unwrap()
                 .end_capillary(&l.binding, l.alpha, c, q)
         };
+        let end = |p50: f64, cap: f64, dl: f64, q: f64, c: f64| end_at(p50, cap, dl, pa, q, c);
         let h = 1e-4;
         let fd =
             |f: &dyn Fn(f64) -> f64, x: f64| (f(x * (1.0 + h)) - f(x * (1.0 - h))) / (2.0 * h * x);
@@ -606,6 +628,10 @@ mod tests {
             (lin.by_param[0], fd(&|d| end(p50, cap, d, q, c_in), dl)),
             (lin.by_param[1], fd(&|p| end(p, cap, dl, q, c_in), p50)),
             (lin.by_param[2], fd(&|k| end(p50, k, dl, q, c_in), cap)),
+            (
+                lin.by_param[3],
+                fd(&|a| end_at(p50, cap, dl, a, q, c_in), pa),
+            ),
         ];
         for (k, (exact, diff)) in checks.iter().enumerate() {
             assert!(
