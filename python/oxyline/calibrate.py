@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from oxyline import _core, memory
+from oxyline import _core, closed_loop, memory
 from oxyline.description import copy_description
 from oxyline.errors import ModelError, ResourceError, core_errors
 from oxyline.io import dump_native
@@ -30,6 +30,8 @@ from oxyline.model import Model, build_model
 from oxyline.targets import (
     CalibrationError,
     Target,
+    _finite,
+    _sigma,
     evaluate,
     is_oxygen_signal,
     parse_targets,
@@ -305,9 +307,11 @@ def sensitivities(model: Model | Mapping[str, Any] | str, parameters: Sequence[s
     >>> bool(s.jacobian[0, 0] > 0)
     True
     """
-    m = load_model(model)
     if isinstance(outputs, str) or isinstance(parameters, str):
         raise CalibrationError("parameters and outputs: expected lists of names")
+    if _is_loop(model):
+        return _loop_sensitivities(model, parameters, outputs, tol, max_cycles)
+    m = load_model(model)
     if mode not in ("forward", "adjoint"):
         raise CalibrationError(f"mode: expected 'forward' or 'adjoint', got {mode!r}")
     targets = [Target(o, None, signals=s)
@@ -442,6 +446,10 @@ class _Problem:
         return native_model(self.source, self.paths,
                             self.path_start * np.exp(self.members @ theta))
 
+    def _at(self, theta: np.ndarray) -> Any:
+        """What :meth:`_outputs` evaluates: the model at ``theta``."""
+        return build_model(self.model(theta))
+
     def _outputs(self, m: Model) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
         """The targets' values and their Jacobian by the model's paths (SI) at ``m``."""
         run = _adjoint if self.exact and self.gradient == "adjoint" else _evaluate
@@ -454,7 +462,7 @@ class _Problem:
         key = theta.tobytes()
         if self.cache is None or self.cache[0] != key:
             try:
-                v, j_si, raw = self._outputs(build_model(self.model(theta)))
+                v, j_si, raw = self._outputs(self._at(theta))
             except Exception as e:
                 self.error = f"{type(e).__name__}: {e}"
                 raise _Stop from e
@@ -529,6 +537,9 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
     # ``bayes`` starts its sampler around the gradient-based fit
     fit_method = ("trf" if bounds else "lm") if method == "bayes" else method
     if method == "bayes":
+        if _is_loop(model):
+            raise CalibrationError("method 'bayes' is not available for a closed loop's "
+                                   "oxygen: use 'lm' or 'trf'")
         emcee, opts = _emcee(posterior, len(parameters) + len(groups or {}))
     if jacobian not in ("exact", "2-point"):
         raise CalibrationError(f"jacobian: expected 'exact' or '2-point', got {jacobian!r}")
@@ -607,7 +618,11 @@ def _problem(model: Model | Mapping[str, Any] | str, targets: Any, parameters: S
              options: dict[str, Any], gradient: str = "auto", groups: Any = None
              ) -> tuple[_Problem, tuple[np.ndarray, np.ndarray]]:
     """The least-squares problem of :func:`calibrate` and its bounds in log space, every input
-    checked (paths, targets, start, bounds, sizes) before the fit starts."""
+    checked (paths, targets, start, bounds, sizes) before the fit starts; a closed loop's
+    oxygen is :func:`_loop_problem`'s."""
+    if _is_loop(model):
+        return _loop_problem(model, targets, parameters, bounds, method, jacobian,
+                             {"tol": options["tol"], "max_cycles": options["max_cycles"]})
     base = load_model(model)
     grouped = _groups(parameters, groups)
     params = list(parameters) + list(grouped)
@@ -671,6 +686,109 @@ def _result(problem: _Problem, theta: np.ndarray, r: np.ndarray, j: np.ndarray,
         start=dict(zip(params, map(float, problem.start), strict=True)), residuals=r,
         cost=0.5 * float(r @ r), covariance=cov, intervals=intervals, success=success,
         report=report)
+
+
+# ---- a closed loop's oxygen (oxyline.closed_loop) -------------------------------------------
+
+def _is_loop(model: Any) -> bool:
+    """Whether ``model`` names or is a closed-loop O2 parameter set (:mod:`oxyline.closed_loop`;
+    its targets and parameters are the core's ``closed_loop_sensitivity`` names)."""
+    if isinstance(model, str):
+        return model in closed_loop.BUILTINS
+    return isinstance(model, Mapping) and "organs" in model and "pools" in model
+
+
+def _loop_sensitivities(model: Any, parameters: Sequence[str], outputs: Sequence[str],
+                        tol: float, max_cycles: int) -> Sensitivities:
+    """:func:`sensitivities` of a closed loop's O2 outputs (SvO2, VO2.<organ>, ...) at its
+    periodic state, by the core's tangent and the implicit function theorem on the fixed
+    point (:func:`oxyline.closed_loop.o2_sensitivities`)."""
+    raw = closed_loop.o2_sensitivities(model, list(parameters), list(outputs),
+                                       max_cycles=max_cycles, tol=tol)
+    rows = {o: slice(i, i + 1) for i, o in enumerate(outputs)}
+    return Sensitivities(list(outputs), list(parameters), np.asarray(raw["parameter_values"]),
+                         np.asarray(raw["values"]), np.asarray(raw["jacobian"]),
+                         int(raw["cycles"]), float(raw["periodic_error"]), rows)
+
+
+def _loop_key(source: Mapping[str, Any], path: str) -> tuple[dict[str, Any], str]:
+    """The dict holding ``path``'s number in the parameter set, and its key."""
+    *head, last = path.split(".")
+    node: Any = source
+    for k in head:
+        node = node.get(k) if isinstance(node, Mapping) else None
+    if not isinstance(node, Mapping) or not isinstance(node.get(last), (int, float)):
+        raise CalibrationError(f"parameter '{path}': not a number of the closed loop's "
+                               "parameter set")
+    return node, last  # type: ignore[return-value]
+
+
+class _LoopProblem(_Problem):
+    """:class:`_Problem` of a closed loop's O2: its parameter set's numbers by key, its
+    outputs by name (one value each), the exact Jacobian of the core's loop tangent."""
+
+    def __init__(self, source: dict[str, Any], parameters: list[str], targets: list[Target],
+                 options: dict[str, Any]) -> None:
+        start = np.array([float(node[k]) for node, k in
+                          (_loop_key(source, q) for q in parameters)])
+        self.source, self.parameters, self.paths, self.start = source, parameters, parameters, \
+            start
+        self.path_start, self.members = start, np.eye(len(parameters))
+        self.exact, self.gradient, self.targets, self.options = True, "forward", targets, options
+        self.data = np.concatenate([t.value for t in targets])
+        self.sigma = np.concatenate([t.sigma for t in targets])
+        self.cache, self.best, self.error, self.evaluations = None, None, None, 0
+
+    def model(self, theta: np.ndarray) -> dict[str, Any]:
+        p = copy.deepcopy(self.source)
+        for q, v in zip(self.parameters, self.start * np.exp(theta), strict=True):
+            node, k = _loop_key(p, q)
+            node[k] = float(v)
+        return p
+
+    def _at(self, theta: np.ndarray) -> Any:
+        return self.model(theta)
+
+    def _outputs(self, m: Any) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+        raw = closed_loop.o2_sensitivities(m, self.parameters if self.exact else [],
+                                           [t.output for t in self.targets], **self.options)
+        # ``values`` of the raw result are the parameters' SI values (as the model's tangent)
+        return np.asarray(raw["values"]), np.asarray(raw["jacobian"]), \
+            {**raw, "values": raw["parameter_values"]}
+
+
+def _loop_problem(model: Any, targets: Any, parameters: Sequence[str], bounds: Any,
+                  method: str, jacobian: str, options: dict[str, Any]
+                  ) -> tuple[_Problem, tuple[np.ndarray, np.ndarray]]:
+    """:func:`_problem` of a closed loop's O2: targets ``{output: value | {value, sigma |
+    weight}}``, every input checked (the core names an unknown output or parameter) before
+    the fit starts."""
+    source = closed_loop.load(model) if isinstance(model, str) else copy.deepcopy(dict(model))
+    _groups(parameters, None)  # a string is refused
+    params = [str(p) for p in parameters]
+    if not params or len(set(params)) != len(params):
+        raise CalibrationError(f"parameters: expected distinct parameter keys, got {params}")
+    if not isinstance(targets, Mapping) or not targets:
+        raise CalibrationError("targets: expected a mapping {output: value} for a closed loop")
+    tlist = []
+    for name, item in targets.items():
+        item = dict(item) if isinstance(item, Mapping) else {"value": item}
+        value = _finite(str(name), "value", item.get("value"), False)
+        tlist.append(Target(str(name), value, _sigma(str(name), item, value)))
+    problem = _LoopProblem(source, params, tlist, options)
+    if not (problem.start > 0).all():
+        raise CalibrationError(f"parameter '{params[int(np.argmin(problem.start > 0))]}': the "
+                               "start must be positive (fitted in log space)")
+    lo, hi = _bounds(params, problem.start, bounds)
+    if method == "lm" and (np.isfinite(lo).any() or np.isfinite(hi).any()):
+        raise CalibrationError("method 'lm' takes no bounds: use method='trf'")
+    try:  # outputs and parameters are checked by the core here, before the fit
+        problem.jac(np.zeros(len(params)))
+    except _Stop as e:
+        raise CalibrationError(str(e.__cause__)) from None
+    if jacobian != "exact":
+        problem.exact, problem.cache = False, None
+    return problem, (lo, hi)
 
 
 # ---- command line ---------------------------------------------------------------------------

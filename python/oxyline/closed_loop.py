@@ -304,3 +304,25 @@ def _result(p: dict[str, Any], out: dict[str, Any], steps: int) -> ClosedLoopO2R
         heart=HeartRun(np.asarray(out["heart_time"]),
                        {k: np.asarray(v) for k, v in out["heart_series"].items()})
         if out["heart_series"] else None)
+
+
+def o2_sensitivities(model: str | dict[str, Any], parameters: list[str], outputs: list[str],
+                     max_cycles: int = 400, tol: float = 1e-13,
+                     flows: np.ndarray | str | None = None,
+                     shooting: str = "anderson") -> dict[str, Any]:
+    """The loop's outputs at its periodic state and their exact derivatives by parameters of
+    the set, by the core (``oxyline_core::transport::closed_loop_sensitivity``: the tangent of
+    every step, the implicit function theorem on the periodic fixed point; docs/calibration.md
+    "A closed loop's oxygen"). `parameters`: ``organs.<organ>.vo2``, ``km``,
+    ``lungs.diffusing_capacity``, ``lungs.alveolar_po2``, ``blood.p50``, ``blood.hemoglobin``
+    and, with the prescribed
+    flow table (``flows: table``), ``cardiac_output``; `outputs`: ``SaO2``, ``SvO2``,
+    ``PaO2``, ``PvO2``, ``VO2``, ``VO2.<organ>``, ``cardiac_output``. SI throughout: a dict of
+    ``parameter_values``, ``values``, ``jacobian`` (outputs × parameters), ``cycles`` and
+    ``periodic_error``; a ModelError names an unknown parameter or output."""
+    p = load(model) if isinstance(model, str) else model
+    if "heart_block" not in p:
+        p = {**p, "heart_block": SVZEROD_HEART}
+    with core_errors("closed-loop sensitivities"):
+        return _core.closed_loop_sensitivities(p, flows, max_cycles, tol, shooting,
+                                               list(parameters), list(outputs))

@@ -6,11 +6,12 @@
 
 use crate::errors::to_py;
 use crate::reader::node::{PyNode, to_python};
-use numpy::{PyArray1, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use oxyline_core::transport::closed_loop::ClosedLoopRun;
 use oxyline_core::transport::closed_loop_run::{
     Flows, RunSettings, check_times, heart_model_of, simulate,
 };
+use oxyline_core::transport::closed_loop_sensitivity::sensitivities;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString};
 
@@ -67,6 +68,50 @@ pub fn closed_loop_run<'py>(
     let d = record(py, &out.run)?;
     d.set_item("compartments", &out.compartments)?;
     d.set_item("branches", &out.branches)?;
+    Ok(d)
+}
+
+/// The loop's outputs at its periodic state and their exact derivatives by the parameters
+/// (keys of the set; `oxyline_core::transport::closed_loop_sensitivity`), SI: a dict of
+/// `parameter_values`, `values`, `jacobian` (outputs × parameters), `cycles`,
+/// `periodic_error`.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+#[pyo3(signature = (params, flows, max_cycles, tol, shooting, parameters, outputs))]
+#[allow(clippy::too_many_arguments)]
+pub fn closed_loop_sensitivities<'py>(
+    py: Python<'py>,
+    params: Bound<'py, PyAny>,
+    flows: Bound<'py, PyAny>,
+    max_cycles: Bound<'py, PyAny>,
+    tol: Bound<'py, PyAny>,
+    shooting: Bound<'py, PyAny>,
+    parameters: Vec<String>,
+    outputs: Vec<String>,
+) -> PyResult<Bound<'py, PyDict>> {
+    check_times(&PyNode(params.clone())).map_err(to_py)?;
+    let settings =
+        RunSettings::read(&PyNode(max_cycles), &PyNode(tol), &PyNode(shooting)).map_err(to_py)?;
+    let flows = flows_of(py, &flows)?;
+    let json: String = py
+        .import("json")?
+        .call_method1("dumps", (&params,))?
+        .extract()?;
+    let out = py
+        .detach(move || sensitivities(&json, flows, &settings, &parameters, &outputs))
+        .map_err(to_py)?;
+    let d = PyDict::new(py);
+    let rows = out.values.len();
+    let jac =
+        PyArray1::from_slice(py, &out.jacobian).reshape([rows, out.parameter_values.len()])?;
+    d.set_item(
+        "parameter_values",
+        PyArray1::from_slice(py, &out.parameter_values),
+    )?;
+    d.set_item("values", PyArray1::from_slice(py, &out.values))?;
+    d.set_item("jacobian", jac)?;
+    d.set_item("cycles", out.cycles)?;
+    d.set_item("periodic_error", out.periodic_error)?;
     Ok(d)
 }
 

@@ -116,7 +116,7 @@ mod _core {
     #[pymodule_export]
     use super::calibration::CalibrationProblem;
     #[pymodule_export]
-    use super::closed_loop::{closed_loop_heart_model, closed_loop_run};
+    use super::closed_loop::{closed_loop_heart_model, closed_loop_run, closed_loop_sensitivities};
     #[pymodule_export]
     use super::closed_loop_params::closed_loop_layout;
     #[pymodule_export]

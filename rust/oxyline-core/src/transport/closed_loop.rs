@@ -1114,3 +1114,7 @@ fn confirm(
     out.cycles = cycles;
     Ok(())
 }
+
+/// Exact derivatives of the periodic O2 state (a child module: it linearises the step).
+#[path = "closed_loop_tangent.rs"]
+pub mod tangent;
