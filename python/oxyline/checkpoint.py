@@ -33,7 +33,6 @@ FORMAT = "oxyline-checkpoint"
 #: layout of the file (meta keys and arrays)
 FILE_VERSION = 1
 _SCALARS = ("version", "cycles_run", "steps", "dt", "periodic_error")
-#: settings of a run that control it, not its results: not stored, may change on resume
 #: the longest wall time between checkpoints (~32 years): any longer means never
 MAX_EVERY_SECONDS = 1e9
 #: settings a resumed run may change: they change how it runs, not its results (``threads``:

@@ -164,8 +164,3 @@ class SummaryStream:
                 else np.zeros((0, self._species_cols.size))
             raw["transport"] = tr
         return raw
-
-
-def attach(result: Result, stream: SummaryStream) -> None:
-    """Give ``result`` (the inlets' time series) the whole run's per-vessel summary."""
-    result.vessel_summary = stream.summary(result.model_name)

@@ -301,17 +301,6 @@ class Monitor:
         return found
 
 
-def check_result(result: Any, transport: Mapping[str, Any] | None, stacklevel: int = 3) -> None:
-    """All checks of a run's recorded output against its canonical transport section; each
-    finding is a :class:`PhysicalBoundsWarning` pointing at the caller of the caller (the
-    user's ``simulate``)."""
-    if not transport or not result.species:
-        return
-    m = Monitor(transport)
-    m.update(result)
-    warn(m.messages(), stacklevel=stacklevel + 1)
-
-
 def warn(messages: Iterable[str], stacklevel: int = 2) -> None:
     """Each message as a :class:`PhysicalBoundsWarning`."""
     for msg in messages:
