@@ -174,19 +174,6 @@ def _large_model_output(model: Model, s: dict[str, Any], overrides: Mapping[str,
     return summarize
 
 
-def _summary_stream(model: Model, s: Mapping[str, Any], heart: _Heart) -> Any:
-    """The chunk sink of a summarized large-model run (:mod:`oxyline.large_output`)."""
-    layout = _output_layout(model, s)  # once: 262 k names at 1e6
-    if not s["transport"]:
-        layout.pop("transport", None)
-
-    def result_of(rows: dict[str, Any]) -> Result:
-        heart.split(rows)
-        return _result(model, s, rows, {}, False, layout=dict(layout))
-
-    return SummaryStream(model, layout, len(heart.columns), result_of)
-
-
 def _output_layout(model: Model, s: Mapping[str, Any]) -> dict[str, Any]:
     """``model.network.output_layout`` of the selection of settings ``s`` (a fresh top-level
     dict: callers pop and set keys). The core resolves a selection against every vessel's
@@ -310,20 +297,25 @@ def _species_results(model: Model, raw: Mapping[str, Any], layout: Mapping[str, 
     out: dict[str, SpeciesResult] = {}
     ox = model.transport.get("oxygen")
     for k, name in enumerate(tr["species"]):
-        block = data[:, k * cols:(k + 1) * cols]
-        vcols, scols = nv * kv, ns * ks
+        vessel, segment, balance, tail = _blocks(data[:, k * cols:(k + 1) * cols], nv, kv, ns,
+                                                 ks, len(BALANCE))
         out[name] = SpeciesResult(
-            name=name,
-            vessel_data=block[:, :vcols].reshape(nt, nv, kv),
-            segment_data=block[:, vcols:vcols + scols].reshape(nt, ns, ks),
-            balance_data=block[:, vcols + scols:vcols + scols + len(BALANCE)],
-            tissue=_tissue_views(block[:, vcols + scols + len(BALANCE):], lay),
-            initial_stored=float(tr["initial_stored"][k]),
+            name=name, vessel_data=vessel, segment_data=segment, balance_data=balance,
+            tissue=_tissue_views(tail, lay), initial_stored=float(tr["initial_stored"][k]),
             po2_per_concentration=(1.0 / model.transport["solubility"]) if name == ox else None,
-            vessel_variables=tuple(lay["vessel_variables"]),
-            segment_variables=seg_vars,
-        )
+            vessel_variables=tuple(lay["vessel_variables"]), segment_variables=seg_vars)
     return out
+
+
+def _blocks(columns: np.ndarray, nv: int, kv: int, ns: int, ks: int, nb: int | None = None
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Views of a (time, column) block laid out as the core writes a species' (or its tissue
+    wall's) columns: (time, vessel, kv), (time, segment, ks), the next ``nb`` columns (the
+    balance; all the rest when None) and the columns after them."""
+    nt, a, b = columns.shape[0], nv * kv, nv * kv + ns * ks
+    c = columns.shape[1] if nb is None else b + nb
+    return (columns[:, :a].reshape(nt, nv, kv), columns[:, a:b].reshape(nt, ns, ks),
+            columns[:, b:c], columns[:, c:])
 
 
 def _tissue_views(tail: np.ndarray, lay: Mapping[str, Any]) -> TissueResult | None:
@@ -331,14 +323,12 @@ def _tissue_views(tail: np.ndarray, lay: Mapping[str, Any]) -> TissueResult | No
     (or for a species without one: its columns are NaN)."""
     if not lay.get("tissue_columns") or np.isnan(tail[:, -4:]).all():
         return None
-    nt, nv = tail.shape[0], len(lay["tissue_vessels"])
-    ns = int(sum(lay["tissue_segment_count"]))
-    kv, ks = 4, 4
-    return TissueResult(
-        vessels=list(lay["tissue_vessels"]), segment_count=list(lay["tissue_segment_count"]),
-        vessel_data=tail[:, :nv * kv].reshape(nt, nv, kv),
-        segment_data=tail[:, nv * kv:nv * kv + ns * ks].reshape(nt, ns, ks),
-        balance_data=tail[:, nv * kv + ns * ks:])
+    # four variables per vessel and per segment (TISSUE_VESSEL, TISSUE_SEGMENT)
+    vessel, segment, balance, _ = _blocks(tail, len(lay["tissue_vessels"]), 4,
+                                          int(sum(lay["tissue_segment_count"])), 4)
+    return TissueResult(vessels=list(lay["tissue_vessels"]),
+                        segment_count=list(lay["tissue_segment_count"]),
+                        vessel_data=vessel, segment_data=segment, balance_data=balance)
 
 
 def _result(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
@@ -608,7 +598,11 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
         sink = _ZarrSink(model, s, heart, monitor, store)
         core.update(chunk_sink=sink.add, chunk_rows=store["time_chunk"])
     elif summarize and not core:  # (a checkpointed run keeps its rows: resume rebuilds them)
-        sink = _summary_stream(model, s, heart)
+        layout = _output_layout(model, s)
+        if not s["transport"]:
+            layout.pop("transport", None)
+        sink = SummaryStream(model, layout, len(heart.columns),
+                             lambda rows: _assemble(model, s, heart, rows, {}, False))
         core.update(chunk_sink=sink.add, chunk_rows=sink.rows)
         s_out = {**s, "vessels": sink.inlets}  # the time series kept
     if store is None:
