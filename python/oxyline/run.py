@@ -4,6 +4,7 @@ arrays in a :class:`~oxyline.result.Result`."""
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import signal
 import threading
@@ -43,7 +44,6 @@ from oxyline.result import (
     Result,
     SpeciesResult,
     TissueResult,
-    model_json,
 )
 from oxyline.time_error import (
     FACTOR,
@@ -358,14 +358,22 @@ def _result(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
 
 
 def _model_json(model: Model) -> str | None:
-    """The model's description for the result (:func:`oxyline.result.model_json`). A model of
-    more vessels than that description may hold is not read: a large model's ``source`` is
-    unpacked anew on each read (:data:`oxyline.model.PACKED_SOURCE_SEGMENTS`)."""
+    """The model's native description (SI) as compact JSON for the result, or None when it is
+    longer than :data:`~oxyline.result.MAX_MODEL_JSON` characters or not JSON (numpy arrays
+    are written as lists). A model of more vessels than that may hold (> 50 characters a
+    vessel) is not read: a large model's ``source`` is unpacked anew on each read
+    (:data:`oxyline.model.PACKED_SOURCE_SEGMENTS`)."""
     names = model._names
     if names is not None and len(names) > MAX_MODEL_JSON // 50:
         return None
     source = model.source
-    return model_json(source) if source else None
+    if not source or len(source.get("vessels", ())) > MAX_MODEL_JSON // 50:
+        return None
+    try:
+        text = json.dumps(source, separators=(",", ":"), default=_checkpoint.json_default)
+    except (TypeError, ValueError):
+        return None
+    return text if len(text) <= MAX_MODEL_JSON else None
 
 
 def segmentation_facts(model: Model) -> dict[str, Any]:
