@@ -478,8 +478,7 @@ class Result:
         }
         if self.segment_count:  # flow or species segment variables (their coordinates)
             seg_vessel = np.repeat(np.array(self.vessels, dtype=object), self.segment_count)
-            seg_index = np.concatenate([np.arange(n) for n in self.segment_count]) \
-                if self.segment_count else np.zeros(0, dtype=int)
+            seg_index = np.concatenate([np.arange(n) for n in self.segment_count])
             coords["segment_vessel"] = ("segment", seg_vessel)
             coords["segment_index"] = ("segment", seg_index)
             coords["segment_position"] = ("segment", self.segment_position, {"units": "m"})

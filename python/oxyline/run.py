@@ -64,9 +64,8 @@ if TYPE_CHECKING:  # Unpack is typing's from Python 3.11
 ProgressCallback = Callable[[float, float], None]
 
 
-#: the keywords of :func:`simulate` and how a run starts (the core's run-settings schema)
+#: the keywords of :func:`simulate` (the core's run-settings schema)
 OPTIONS = frozenset(_core.OPTIONS)
-STARTS = tuple(_core.STARTS)
 
 
 def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
@@ -96,7 +95,9 @@ def _resolve(model: Model, overrides: Mapping[str, Any]
         raise ModelError(f"simulate: progress must be true, false or a callback f(t, t_end), "
                          f"got {progress!r}")
     s["variables"] = output_names(overrides.get("variables", out.get("variables")), "variables")
-    s["vessels"] = _vessels(model, overrides.get("vessels", out.get("vessels")))
+    # no selection: the model's default (every vessel but structured-tree ones); "all": all
+    vessels = overrides.get("vessels", out.get("vessels"))
+    s["vessels"] = model.default_output_vessels if vessels is None else output_vessels(vessels)
     return s, default, space, timed
 
 
@@ -115,14 +116,6 @@ def _step_control(s: Mapping[str, Any], valves: bool = False) -> str:
         return "fixed step (method rk4 has no error estimate; dopri5 is its error-controlled pair)"
     # a checkpointed run at the default tolerance (see `_simulate`)
     return "fixed step (checkpoints need a fixed step: give dt to choose it)"
-
-
-def _vessels(model: Model, selection: Any) -> list[str] | None:
-    """The output vessels: the model's default (every vessel but structured-tree ones) when
-    none are selected, else the selection (``all`` really selects all)."""
-    if selection is None:
-        return model.default_output_vessels
-    return output_vessels(selection)
 
 
 #: Above this many segments an in-memory run without a ``variables`` selection records the
@@ -609,8 +602,9 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
         layout = _output_layout(model, s)
         if not s["transport"]:
             layout.pop("transport", None)
+        # (the layout resolved once: the kept rows' selection replaces it in the model's cache)
         sink = SummaryStream(model, layout, len(heart.columns),
-                             lambda rows: _assemble(model, s, heart, rows, {}, False))
+                             lambda rows: _result(model, s, rows, {}, False, layout=dict(layout)))
         core.update(chunk_sink=sink.add, chunk_rows=sink.rows)
         s_out = {**s, "vessels": sink.inlets}  # the time series kept
     if store is None:
