@@ -1030,9 +1030,15 @@ class _ZarrSink:
     def __init__(self, model: Model, s: Mapping[str, Any], heart: _Heart, monitor: Monitor,
                  store: Mapping[str, Any]) -> None:
         self.model, self.s, self.heart = model, s, heart
-        empty = _empty_rows(model, s)  # with the chambers' and valves' columns (none yet)
-        self._empty = dict(empty, data=np.zeros((0, empty["data"].shape[1]
-                                                 + len(heart.columns))))
+        # zero rows in the core's layout, with the chambers' and valves' columns
+        lay = _output_layout(model, s)
+        self._empty: dict[str, Any] = {"times": np.zeros(0), "data": np.zeros(
+            (0, lay["n_columns"] + len(heart.columns)))}
+        tl = lay.get("transport") if s["transport"] else None
+        if tl is not None:
+            n = len(tl["species"])
+            self._empty["transport"] = {"species": list(tl["species"]), "initial_stored": [0.0] * n,
+                                        "data": np.zeros((0, n * tl["columns_per_species"]))}
         head = _assemble(model, s, heart, self.template(),
                          _run_settings(s, None, bool(heart.valves)), False, carry=True)
         self.store = ZarrAppender(store["path"], dataset(head), store["time_chunk"],
@@ -1084,19 +1090,6 @@ def _close_store(store: Any, raw: dict[str, Any], attrs: dict[str, Any]
     finally:
         store.release()
     return raw, opened
-
-
-def _empty_rows(model: Model, s: Mapping[str, Any]) -> dict[str, Any]:
-    """Zero output rows in the core's layout: the template of a store's variables."""
-    lay = _output_layout(model, s)
-    raw: dict[str, Any] = {"times": np.zeros(0), "data": np.zeros((0, lay["n_columns"]))}
-    tl = lay.get("transport") if s["transport"] else None
-    if tl is not None:
-        n = len(tl["species"])
-        raw["transport"] = {"species": list(tl["species"]),
-                            "data": np.zeros((0, n * tl["columns_per_species"])),
-                            "initial_stored": [0.0] * n}
-    return raw
 
 
 # installed when oxyline is imported (normally in the main thread): a run started in a worker
