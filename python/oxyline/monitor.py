@@ -156,10 +156,10 @@ class Monitor:
     without holding its output. Fed the whole output at once it finds exactly what it finds
     fed the same rows in chunks. ``transport``: the model's canonical transport section."""
 
-    def __init__(self, transport: Mapping[str, Any] | None, bounds: bool = True) -> None:
+    def __init__(self, transport: Mapping[str, Any] | None) -> None:
         transport = transport or {}
         self.specs = {sp["name"]: sp for sp in transport.get("species", [])}
-        self.bounds = {n: species_bounds(sp) for n, sp in self.specs.items()} if bounds else {}
+        self.bounds = {n: species_bounds(sp) for n, sp in self.specs.items()}
         self.quasisteady = transport.get("formulation") == "tl-quasisteady"
         self.worst: dict[str, tuple[float, str, float, float]] = {}
         self.units: dict[str, Any] = {}
