@@ -79,7 +79,7 @@ def long_functions(tree: ast.Module, mod: str, limit: int = 80):
 
 #: the package's modules by role (first matching prefix; the rest is "orchestration")
 ROLES = (
-    ("validation", ("oxyline.model", "oxyline.transport", "oxyline.units", "oxyline.errors",
+    ("validation", ("oxyline.model", "oxyline.units", "oxyline.errors",
                     "oxyline.memory", "oxyline.options", "oxyline.description")),
     ("results/plots", ("oxyline.result", "oxyline.io.results", "oxyline.io.result_reader",
                        "oxyline.checkpoint", "oxyline.plot", "oxyline.monitor")),

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import oxyline
+from oxyline._core import transport_section as canonical  # the core reads the section
 from oxyline.errors import ModelError
-from oxyline.transport import canonical
 
 ALPHA = 1.40e-3  # blood O2 solubility, mol m^-3 mmHg^-1
 TISSUE = {"model": "tissue", "thickness": 1e-4, "diffusivity": 1.5e-9, "solubility": 1.3e-3,

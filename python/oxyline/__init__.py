@@ -25,13 +25,11 @@ from oxyline.result import Result, VesselResult
 from oxyline.run import estimate_time_error, resume, simulate, simulate_to_zarr
 from oxyline.structured_tree import structured_tree
 from oxyline.time_error import TimeErrorEstimate
-from oxyline.transport import HemoglobinFacilitationWarning
 
 __version__: str = _core.__version__
 
 __all__ = [
     "CalibrationError",
-    "HemoglobinFacilitationWarning",
     "Model",
     "PhysicalBoundsWarning",
     "Result",

@@ -33,7 +33,6 @@ FORMAT = "oxyline-checkpoint"
 #: layout of the file (meta keys and arrays)
 FILE_VERSION = 1
 _SCALARS = ("version", "cycles_run", "steps", "dt", "periodic_error")
-#: settings of a run that control it, not its results: not stored, may change on resume
 #: the longest wall time between checkpoints (~32 years): any longer means never
 MAX_EVERY_SECONDS = 1e9
 #: settings a resumed run may change: they change how it runs, not its results (``threads``:
@@ -74,7 +73,8 @@ def _finite(value: Any) -> bool:
         return False
 
 
-def _json_default(obj: Any) -> Any:
+def json_default(obj: Any) -> Any:
+    """A numpy number or array as JSON (its Python value, a list); TypeError for anything else."""
     if isinstance(obj, np.generic):
         return obj.item()
     if isinstance(obj, np.ndarray):
@@ -87,7 +87,7 @@ def stored_settings(overrides: Mapping[str, Any]) -> dict[str, Any]:
     JSON-able."""
     settings = {k: v for k, v in overrides.items() if k not in RUN_CONTROL}
     try:
-        json.dumps(settings, default=_json_default)
+        json.dumps(settings, default=json_default)
     except (TypeError, ValueError) as exc:
         raise ModelError(f"simulate: with checkpoint, every setting must be a plain value: "
                          f"{exc}") from None
@@ -117,7 +117,7 @@ def write(path: str | os.PathLike[str], meta: Mapping[str, Any],
     path = Path(path)
     full = dict(meta, format=FORMAT, version=FILE_VERSION,
                 state={k: state[k] for k in _SCALARS})
-    text = json.dumps(full, default=_json_default).encode()
+    text = json.dumps(full, default=json_default).encode()
     arrays = {k: np.asarray(v, dtype=np.float64) for k, v in state.items() if k not in _SCALARS}
 
     def write_archive(tmp: Path) -> None:

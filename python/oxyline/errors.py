@@ -49,6 +49,13 @@ class CheckpointError(ModelError):
     written for another model or settings. The message names the file and what differs."""
 
 
+class HemoglobinFacilitationWarning(UserWarning):
+    """``hemoglobin: hill`` (or ``linearized``) with a boundary-layer wall closure whose
+    haemoglobin facilitation is switched off: the wall flux then comes from the dissolved O2
+    only and under-predicts the uptake 2.6–3.1× (docs/physics.md §3.4). The core raises it
+    while it reads the ``oxygen`` section."""
+
+
 class OutputSizeWarning(UserWarning):
     """The requested output is large (many GB): said before it is computed and written."""
 
@@ -160,6 +167,7 @@ def warn_implausible(found: list[dict[str, object]]) -> None:
 
 __all__ = [
     "CheckpointError",
+    "HemoglobinFacilitationWarning",
     "ModelError",
     "OutputError",
     "OutputSizeWarning",

@@ -3,10 +3,10 @@
 Above :data:`oxyline.run.LARGE_MODEL_SEGMENTS` a run without an output selection no longer
 keeps every vessel's time series in memory (at ~1e6 segments five vessel variables every
 10 ms alone are ~1 kB per segment, as much as the network and the solver together). The core
-hands its rows over a few at a time (the same chunked path as ``simulate_to_zarr``); each chunk
-updates, per vessel and variable, the time integral (trapezoidal rule, also across chunk
-boundaries), the minimum and the maximum, and only the rows of the inlet vessels (those
-starting at a flow or pressure inlet) are kept as time series. The result's ``summary()`` is
+hands its rows over a few at a time (the same chunked path as ``simulate_to_zarr``); the core
+folds each chunk into every output column's time integral (trapezoidal rule, also across chunk
+boundaries), minimum and maximum (``_core.ColumnStatsFold``), and only the rows of the inlet
+vessels (those starting at a flow or pressure inlet) are kept as time series. The result's ``summary()`` is
 then the table :func:`oxyline.io.results.summary` computes from a complete output: same index,
 columns (``<variable>_<stat>``), units and values (the mean to rounding: the sum runs chunk by
 chunk), at ~40 B per vessel and variable instead of 8 B per output time.
@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from oxyline import _core
 from oxyline.result import UNITS
 
 if TYPE_CHECKING:
@@ -48,7 +49,7 @@ def inlet_vessels(model: Model, vessels: list[str]) -> list[str]:
 def vessel_arrays(res: Result) -> list[tuple[str, Any, str]]:
     """(name, (time, vessel) array, units) of every per-vessel variable of ``res``: the
     variables ``res.to_xarray()`` gives dims (time, vessel), without building the dataset
-    (its vessel index, 262 k names at 1e6 segments, for every chunk)."""
+    (its vessel index: 262 k names at 1e6 segments)."""
     out = [(name, getattr(res, name), UNITS[name]) for name in res.vessel_variables]
     out += [(name, arr, unit) for name, (kind, arr, unit) in res.species_variables().items()
             if kind == "vessel"]
@@ -56,8 +57,9 @@ def vessel_arrays(res: Result) -> list[tuple[str, Any, str]]:
 
 
 class SummaryStream:
-    """The chunk sink of a summarized run: reduces each chunk of rows (core layout of the
-    settings ``s``: every default vessel, no segments) to per-vessel statistics and keeps the
+    """The chunk sink of a summarized run: has the core fold each chunk of rows (core layout
+    of the settings ``s``: every default vessel, no segments) into per-column statistics (read
+    back as per-vessel ones by :meth:`summary`) and keeps the
     inlet vessels' columns (and ``extra`` trailing core columns) of every row. ``layout``:
     the core's output layout of ``s`` (the caller resolves it once per run), without its
     ``transport`` part when the run has no transport."""
@@ -92,9 +94,12 @@ class SummaryStream:
         self._species: list[np.ndarray] = []
         self._species_names: list[str] = []
         self._initial: list[float] = []
-        self._stats: dict[str, list[Any]] = {}  # name -> [integral, min, max, last row]
-        self._units: dict[str, str] = {}
-        self._t: list[float] = []  # first and last time
+        # every core column's time mean, min and max, folded by the core chunk by chunk (the
+        # flow rows with the chambers' and valves' columns, the species rows), and the first
+        # rows (the summary of a run of one row)
+        self._folds = [_core.ColumnStatsFold(width + extra),
+                       _core.ColumnStatsFold(species_width)]
+        self._first: list[np.ndarray] = []
 
     def bytes(self) -> float:
         """Estimated bytes beside the kept rows: the chunk in flight (twice: the core's rows
@@ -111,40 +116,34 @@ class SummaryStream:
         self._times.append(t.copy())
         self._flow.append(rows["data"][:, self._flow_cols])
         tr = rows.get("transport")
+        blocks = [rows["data"], tr["data"] if tr is not None else np.zeros((t.size, 0))]
         if tr is not None and self._species_cols is not None:
             self._species.append(tr["data"][:, self._species_cols])
             self._species_names = list(tr["species"])
             self._initial = [float(x) for x in tr["initial_stored"]]
-        for name, a, units in vessel_arrays(self._result_of(dict(rows))):
-            self._update(name, np.asarray(a, dtype=float), t, units)
-        self._t = [self._t[0] if self._t else float(t[0]), float(t[-1])]
-
-    def _update(self, name: str, a: np.ndarray, t: np.ndarray, units: str) -> None:
-        area = np.trapezoid(a, t, axis=0) if len(t) > 1 else np.zeros(a.shape[1])
-        acc = self._stats.get(name)
-        if acc is None:
-            self._stats[name] = [area, a.min(axis=0), a.max(axis=0), a[-1].copy(), a[0].copy(),
-                                 float(t[-1])]
-            self._units[name] = units
-            return
-        # the strip between the previous chunk's last row and this chunk's first
-        acc[0] = acc[0] + area + 0.5 * (t[0] - acc[5]) * (acc[3] + a[0])
-        np.minimum(acc[1], a.min(axis=0), out=acc[1])
-        np.maximum(acc[2], a.max(axis=0), out=acc[2])
-        acc[3], acc[5] = a[-1].copy(), float(t[-1])
+        for fold, block in zip(self._folds, blocks, strict=True):
+            fold.push(t, np.ascontiguousarray(block, dtype=float))
+        if not self._first:
+            self._first = [b[0].copy() for b in blocks]
 
     def summary(self, model_name: str) -> Any:
-        """The per-vessel table of :func:`oxyline.io.results.summary` (mean, min, max)."""
+        """The per-vessel table of :func:`oxyline.io.results.summary` (mean, min, max): the
+        folded statistics as three rows of the run's layout, read as a result."""
         import pandas as pd
 
         cols: dict[str, Any] = {}
         units: dict[str, str] = {}
-        span = self._t[1] - self._t[0] if self._t else 0.0
-        for name, (area, lo, hi, _last, first, _) in self._stats.items():
-            mean = area / span if span > 0.0 else first
-            for stat, val in (("mean", mean), ("min", lo), ("max", hi)):
-                cols[f"{name}_{stat}"] = val
-                units[f"{name}_{stat}"] = self._units[name]
+        if self._first:
+            stats = [f.finish() or (first,) * 3 for f, first in zip(self._folds, self._first,
+                                                                    strict=True)]
+            rows: dict[str, Any] = {"times": np.arange(3.0), "data": np.stack(stats[0])}
+            if self._species_cols is not None:
+                rows["transport"] = {"species": self._species_names, "data": np.stack(stats[1]),
+                                     "initial_stored": self._initial}
+            for name, a, unit in vessel_arrays(self._result_of(rows)):
+                for k, stat in enumerate(("mean", "min", "max")):
+                    cols[f"{name}_{stat}"] = np.asarray(a[k], dtype=float)
+                    units[f"{name}_{stat}"] = unit
         df = pd.DataFrame(cols, index=pd.Index(self.vessels, name="vessel"))
         df.attrs["units"] = units
         df.attrs["model"] = model_name
@@ -164,8 +163,3 @@ class SummaryStream:
                 else np.zeros((0, self._species_cols.size))
             raw["transport"] = tr
         return raw
-
-
-def attach(result: Result, stream: SummaryStream) -> None:
-    """Give ``result`` (the inlets' time series) the whole run's per-vessel summary."""
-    result.vessel_summary = stream.summary(result.model_name)

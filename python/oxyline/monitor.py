@@ -156,10 +156,10 @@ class Monitor:
     without holding its output. Fed the whole output at once it finds exactly what it finds
     fed the same rows in chunks. ``transport``: the model's canonical transport section."""
 
-    def __init__(self, transport: Mapping[str, Any] | None, bounds: bool = True) -> None:
+    def __init__(self, transport: Mapping[str, Any] | None) -> None:
         transport = transport or {}
         self.specs = {sp["name"]: sp for sp in transport.get("species", [])}
-        self.bounds = {n: species_bounds(sp) for n, sp in self.specs.items()} if bounds else {}
+        self.bounds = {n: species_bounds(sp) for n, sp in self.specs.items()}
         self.quasisteady = transport.get("formulation") == "tl-quasisteady"
         self.worst: dict[str, tuple[float, str, float, float]] = {}
         self.units: dict[str, Any] = {}
@@ -299,17 +299,6 @@ class Monitor:
                              f"its validity range: {why}. Use the default conservative "
                              "formulation for predictions (docs/physics.md §2.7).")
         return found
-
-
-def check_result(result: Any, transport: Mapping[str, Any] | None, stacklevel: int = 3) -> None:
-    """All checks of a run's recorded output against its canonical transport section; each
-    finding is a :class:`PhysicalBoundsWarning` pointing at the caller of the caller (the
-    user's ``simulate``)."""
-    if not transport or not result.species:
-        return
-    m = Monitor(transport)
-    m.update(result)
-    warn(m.messages(), stacklevel=stacklevel + 1)
 
 
 def warn(messages: Iterable[str], stacklevel: int = 2) -> None:

@@ -166,28 +166,6 @@ class SpeciesResult:
 MAX_MODEL_JSON = 60_000
 
 
-def model_json(description: Any) -> str | None:
-    """``description`` (a model's native dict) as compact JSON, or None when it is longer than
-    :data:`MAX_MODEL_JSON` or not JSON (numpy arrays are written as lists)."""
-    import json
-
-    def plain(o: Any) -> Any:
-        if isinstance(o, np.ndarray):
-            return o.tolist()
-        if isinstance(o, np.generic):
-            return o.item()
-        raise TypeError(type(o).__name__)
-
-    vessels = description.get("vessels", ()) if isinstance(description, dict) else ()
-    if len(vessels) > MAX_MODEL_JSON // 50:  # > 50 characters a vessel: too long, not dumped
-        return None
-    try:
-        text = json.dumps(description, separators=(",", ":"), default=plain)
-    except (TypeError, ValueError):
-        return None
-    return text if len(text) <= MAX_MODEL_JSON else None
-
-
 @dataclass
 class Result:
     """Output of :func:`oxyline.simulate`.
@@ -500,8 +478,7 @@ class Result:
         }
         if self.segment_count:  # flow or species segment variables (their coordinates)
             seg_vessel = np.repeat(np.array(self.vessels, dtype=object), self.segment_count)
-            seg_index = np.concatenate([np.arange(n) for n in self.segment_count]) \
-                if self.segment_count else np.zeros(0, dtype=int)
+            seg_index = np.concatenate([np.arange(n) for n in self.segment_count])
             coords["segment_vessel"] = ("segment", seg_vessel)
             coords["segment_index"] = ("segment", seg_index)
             coords["segment_position"] = ("segment", self.segment_position, {"units": "m"})

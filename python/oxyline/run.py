@@ -4,6 +4,7 @@ arrays in a :class:`~oxyline.result.Result`."""
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import signal
 import threading
@@ -32,7 +33,7 @@ from oxyline.io.results import ZarrAppender, dataset, step_history
 from oxyline.large_output import SummaryStream
 from oxyline.loader import load_model
 from oxyline.model import Model
-from oxyline.monitor import Monitor, check_result
+from oxyline.monitor import Monitor
 from oxyline.monitor import warn as _warn_bounds
 from oxyline.options import output_names, output_vessels
 from oxyline.result import (
@@ -43,7 +44,6 @@ from oxyline.result import (
     Result,
     SpeciesResult,
     TissueResult,
-    model_json,
 )
 from oxyline.time_error import (
     FACTOR,
@@ -64,9 +64,8 @@ if TYPE_CHECKING:  # Unpack is typing's from Python 3.11
 ProgressCallback = Callable[[float, float], None]
 
 
-#: the keywords of :func:`simulate` and how a run starts (the core's run-settings schema)
+#: the keywords of :func:`simulate` (the core's run-settings schema)
 OPTIONS = frozenset(_core.OPTIONS)
-STARTS = tuple(_core.STARTS)
 
 
 def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
@@ -96,13 +95,10 @@ def _resolve(model: Model, overrides: Mapping[str, Any]
         raise ModelError(f"simulate: progress must be true, false or a callback f(t, t_end), "
                          f"got {progress!r}")
     s["variables"] = output_names(overrides.get("variables", out.get("variables")), "variables")
-    s["vessels"] = _vessels(model, overrides.get("vessels", out.get("vessels")))
+    # no selection: the model's default (every vessel but structured-tree ones); "all": all
+    vessels = overrides.get("vessels", out.get("vessels"))
+    s["vessels"] = model.default_output_vessels if vessels is None else output_vessels(vessels)
     return s, default, space, timed
-
-
-#: ``settings["step_control"]`` of a checkpointed run that gives no ``dt`` (see
-#: :func:`_fixed_for_checkpoints`).
-CHECKPOINT_STEP = "fixed step (checkpoints need a fixed step: give dt to choose it)"
 
 
 def _step_control(s: Mapping[str, Any], valves: bool = False) -> str:
@@ -112,31 +108,14 @@ def _step_control(s: Mapping[str, Any], valves: bool = False) -> str:
     locate (the controller cuts the step by rejections; the achieved error there can exceed
     the estimate: docs/physics.md §10, "The default run")."""
     if s["rtol"] is not None:
-        note = "; valve switches located as events" if valves else ""
-        return f"error control (rtol {s['rtol']:g}){note}"
+        return f"error control (rtol {s['rtol']:g})" + ("; valve switches located as events"
+                                                        if valves else "")
     if s["dt"] is not None:
         return "fixed step (dt)"
     if s["method"] == "rk4":
         return "fixed step (method rk4 has no error estimate; dopri5 is its error-controlled pair)"
-    return CHECKPOINT_STEP
-
-
-def _fixed_for_checkpoints(s: dict[str, Any], default: bool, overrides: Mapping[str, Any],
-                           resume: Any) -> None:
-    """A checkpointed (or resumed) run at the default tolerance takes the automatic fixed step
-    instead: a checkpoint does not carry the error control's state (step history, peaks). An
-    ``rtol`` or ``atol`` the user gave is left to the core to refuse, naming it."""
-    checkpointed = overrides.get("checkpoint") is not None or resume is not None
-    if checkpointed and default and s["atol"] is None:
-        s["rtol"] = None
-
-
-def _vessels(model: Model, selection: Any) -> list[str] | None:
-    """The output vessels: the model's default (every vessel but structured-tree ones) when
-    none are selected, else the selection (``all`` really selects all)."""
-    if selection is None:
-        return model.default_output_vessels
-    return output_vessels(selection)
+    # a checkpointed run at the default tolerance (see `_simulate`)
+    return "fixed step (checkpoints need a fixed step: give dt to choose it)"
 
 
 #: Above this many segments an in-memory run without a ``variables`` selection records the
@@ -188,24 +167,6 @@ def _large_model_output(model: Model, s: dict[str, Any], overrides: Mapping[str,
     return summarize
 
 
-def _summary_stream(model: Model, s: Mapping[str, Any], heart: _Heart) -> Any:
-    """The chunk sink of a summarized large-model run (:mod:`oxyline.large_output`)."""
-    layout = _output_layout(model, s)  # once: 262 k names at 1e6
-    if not s["transport"]:
-        layout.pop("transport", None)
-
-    def result_of(rows: dict[str, Any]) -> Result:
-        heart.split(rows)
-        return _result(model, s, rows, {}, False, layout=dict(layout))
-
-    return SummaryStream(model, layout, len(heart.columns), result_of)
-
-
-def _selection(s: Mapping[str, Any]) -> dict[str, Any]:
-    """The core's output-selection keywords of settings ``s``."""
-    return {"variables": s["variables"], "vessels": s["vessels"], "segments": s["segments"]}
-
-
 def _output_layout(model: Model, s: Mapping[str, Any]) -> dict[str, Any]:
     """``model.network.output_layout`` of the selection of settings ``s`` (a fresh top-level
     dict: callers pop and set keys). The core resolves a selection against every vessel's
@@ -213,7 +174,7 @@ def _output_layout(model: Model, s: Mapping[str, Any]) -> dict[str, Any]:
     large-model default, the output's size, the summary stream, the result), so the last
     selection's layout is kept on the model. The layout lists the output vessels only (a
     structured tree's vessels are not output by default), so it is small beside the model."""
-    sel = _selection(s)
+    sel = {k: s[k] for k in ("variables", "vessels", "segments")}  # the core's keywords
     key = tuple((k, tuple(v) if isinstance(v, (list, tuple)) else v) for k, v in sel.items())
     network = model.network
     cached = model.__dict__.get("_layout_cache")
@@ -329,20 +290,25 @@ def _species_results(model: Model, raw: Mapping[str, Any], layout: Mapping[str, 
     out: dict[str, SpeciesResult] = {}
     ox = model.transport.get("oxygen")
     for k, name in enumerate(tr["species"]):
-        block = data[:, k * cols:(k + 1) * cols]
-        vcols, scols = nv * kv, ns * ks
+        vessel, segment, balance, tail = _blocks(data[:, k * cols:(k + 1) * cols], nv, kv, ns,
+                                                 ks, len(BALANCE))
         out[name] = SpeciesResult(
-            name=name,
-            vessel_data=block[:, :vcols].reshape(nt, nv, kv),
-            segment_data=block[:, vcols:vcols + scols].reshape(nt, ns, ks),
-            balance_data=block[:, vcols + scols:vcols + scols + len(BALANCE)],
-            tissue=_tissue_views(block[:, vcols + scols + len(BALANCE):], lay),
-            initial_stored=float(tr["initial_stored"][k]),
+            name=name, vessel_data=vessel, segment_data=segment, balance_data=balance,
+            tissue=_tissue_views(tail, lay), initial_stored=float(tr["initial_stored"][k]),
             po2_per_concentration=(1.0 / model.transport["solubility"]) if name == ox else None,
-            vessel_variables=tuple(lay["vessel_variables"]),
-            segment_variables=seg_vars,
-        )
+            vessel_variables=tuple(lay["vessel_variables"]), segment_variables=seg_vars)
     return out
+
+
+def _blocks(columns: np.ndarray, nv: int, kv: int, ns: int, ks: int, nb: int | None = None
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Views of a (time, column) block laid out as the core writes a species' (or its tissue
+    wall's) columns: (time, vessel, kv), (time, segment, ks), the next ``nb`` columns (the
+    balance; all the rest when None) and the columns after them."""
+    nt, a, b = columns.shape[0], nv * kv, nv * kv + ns * ks
+    c = columns.shape[1] if nb is None else b + nb
+    return (columns[:, :a].reshape(nt, nv, kv), columns[:, a:b].reshape(nt, ns, ks),
+            columns[:, b:c], columns[:, c:])
 
 
 def _tissue_views(tail: np.ndarray, lay: Mapping[str, Any]) -> TissueResult | None:
@@ -350,14 +316,12 @@ def _tissue_views(tail: np.ndarray, lay: Mapping[str, Any]) -> TissueResult | No
     (or for a species without one: its columns are NaN)."""
     if not lay.get("tissue_columns") or np.isnan(tail[:, -4:]).all():
         return None
-    nt, nv = tail.shape[0], len(lay["tissue_vessels"])
-    ns = int(sum(lay["tissue_segment_count"]))
-    kv, ks = 4, 4
-    return TissueResult(
-        vessels=list(lay["tissue_vessels"]), segment_count=list(lay["tissue_segment_count"]),
-        vessel_data=tail[:, :nv * kv].reshape(nt, nv, kv),
-        segment_data=tail[:, nv * kv:nv * kv + ns * ks].reshape(nt, ns, ks),
-        balance_data=tail[:, nv * kv + ns * ks:])
+    # four variables per vessel and per segment (TISSUE_VESSEL, TISSUE_SEGMENT)
+    vessel, segment, balance, _ = _blocks(tail, len(lay["tissue_vessels"]), 4,
+                                          int(sum(lay["tissue_segment_count"])), 4)
+    return TissueResult(vessels=list(lay["tissue_vessels"]),
+                        segment_count=list(lay["tissue_segment_count"]),
+                        vessel_data=vessel, segment_data=segment, balance_data=balance)
 
 
 def _result(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
@@ -387,14 +351,22 @@ def _result(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
 
 
 def _model_json(model: Model) -> str | None:
-    """The model's description for the result (:func:`oxyline.result.model_json`). A model of
-    more vessels than that description may hold is not read: a large model's ``source`` is
-    unpacked anew on each read (:data:`oxyline.model.PACKED_SOURCE_SEGMENTS`)."""
+    """The model's native description (SI) as compact JSON for the result, or None when it is
+    longer than :data:`~oxyline.result.MAX_MODEL_JSON` characters or not JSON (numpy arrays
+    are written as lists). A model of more vessels than that may hold (> 50 characters a
+    vessel) is not read: a large model's ``source`` is unpacked anew on each read
+    (:data:`oxyline.model.PACKED_SOURCE_SEGMENTS`)."""
     names = model._names
     if names is not None and len(names) > MAX_MODEL_JSON // 50:
         return None
     source = model.source
-    return model_json(source) if source else None
+    if not source or len(source.get("vessels", ())) > MAX_MODEL_JSON // 50:
+        return None
+    try:
+        text = json.dumps(source, separators=(",", ":"), default=_checkpoint.json_default)
+    except (TypeError, ValueError):
+        return None
+    return text if len(text) <= MAX_MODEL_JSON else None
 
 
 def segmentation_facts(model: Model) -> dict[str, Any]:
@@ -596,61 +568,115 @@ def _refuse_checkpoint_on_input(model: Any, checkpoint: Any) -> None:
 
 
 def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
-              resume_path: Any = None) -> Result:
-    """`simulate` of a loaded model; ``resume``: the core state of a checkpoint."""
+              resume_path: Any = None, store: dict[str, Any] | None = None) -> Any:
+    """`simulate` of a loaded model; ``resume``: the core state of a checkpoint. ``store``
+    (``simulate_to_zarr``): the Zarr store's keywords; the rows go there as the core hands
+    them over, and the store, opened, is returned."""
     s, default, space, timed = _resolve(model, overrides)
+    if timed and store is not None:
+        raise ModelError("simulate_to_zarr: estimate_time_error compares the run's last cycle "
+                         "in memory: use simulate(..., estimate_time_error=True) and "
+                         "result.to_zarr")
     if timed == "meet":
         return _meet_rtol(model, overrides, s["rtol"])
-    _fixed_for_checkpoints(s, default, overrides, resume)
-    summarize = _large_model_output(model, s, overrides)
-    core = _checkpoints(model, overrides)
+    if default and s["atol"] is None and (overrides.get("checkpoint") is not None
+                                          or resume is not None):
+        # a checkpoint does not carry the error control's state (step history, peaks): the
+        # automatic fixed step instead; an rtol or atol given is left to the core to refuse
+        s["rtol"] = None
+    summarize = store is None and _large_model_output(model, s, overrides)
+    heart, monitor = _Heart(model), Monitor(model.transport_spec)
+    core = {**_checkpoints(model, overrides), **heart.core}
     if resume is not None:
         core["resume"] = resume
-    heart = _Heart(model)
-    core.update(heart.core)
     if timed:  # the core runs the last cycle again at rtol/FACTOR after the run
         _check_time_error(s, summarize, core)
         core["finer_last_cycle"] = FACTOR
-    stream, s_out = None, s
-    if summarize and not core:  # (a checkpointed run keeps its rows: resume rebuilds them)
-        stream = _summary_stream(model, s, heart)
-        core.update(chunk_sink=stream.add, chunk_rows=stream.rows)
-        s_out = {**s, "vessels": stream.inlets}  # the time series kept
-    _check_output_memory(model, s_out, overrides, stream.bytes() if stream is not None else 0.0)
+    sink: Any = None
+    s_out = s  # the selection of the rows kept
+    if store is not None:
+        _check_output_size(model, s, overrides, where=store["path"])
+        sink = _ZarrSink(model, s, heart, monitor, store)
+        core.update(chunk_sink=sink.add, chunk_rows=store["time_chunk"])
+    elif summarize and not core:  # (a checkpointed run keeps its rows: resume rebuilds them)
+        layout = _output_layout(model, s)
+        if not s["transport"]:
+            layout.pop("transport", None)
+        # (the layout resolved once: the kept rows' selection replaces it in the model's cache)
+        sink = SummaryStream(model, layout, len(heart.columns),
+                             lambda rows: _result(model, s, rows, {}, False, layout=dict(layout)))
+        core.update(chunk_sink=sink.add, chunk_rows=sink.rows)
+        s_out = {**s, "vessels": sink.inlets}  # the time series kept
+    if store is None:
+        _check_output_size(model, s_out, overrides, sink.bytes() if sink is not None else 0.0)
     try:
         raw = _run(model, s, overrides.get("progress"), _cancel(overrides), **core)
-    except ModelError as exc:
-        if resume_path is not None and str(exc).startswith("checkpoint:"):
+    except BaseException as exc:
+        if store is not None:  # refused before the first step (e.g. an unstable dt)
+            sink.store.remove()
+        if resume_path is not None and isinstance(exc, ModelError) \
+                and str(exc).startswith("checkpoint:"):
             raise CheckpointError(f"{resume_path}: {str(exc).removeprefix('checkpoint: ')}") \
                 from None
         raise
-    if stream is not None:
-        raw = stream.raw(raw)
-    extra = heart.split(raw)
-    result = _result(model, s_out, raw,
-                     {**_run_settings(s, raw, bool(heart.valves)), **segmentation_facts(model)},
-                     complete="error" not in raw)
-    if stream is not None:
-        result.vessel_summary = stream.summary(model.name)
-    heart.put(result, extra)
+    settings = {**_run_settings(s, raw, bool(heart.valves)), **segmentation_facts(model)}
+    if store is not None:  # the final attributes: of a result of no rows
+        final = _assemble(model, s, heart, sink.template(), settings, "error" not in raw,
+                          carry=True)
+        out = sink.close(raw, final, space)
+    else:
+        if sink is not None:  # the summary stream's kept rows
+            raw = sink.raw(raw)
+        final = out = _in_memory(model, s_out, heart, raw, settings, sink)
+        if timed:
+            _fill_time_error(model, s_out, raw, final, overrides)
+        if space:
+            _add_space_error(model, final)
+        if final.species:
+            monitor.update(final)
+    _warn_not_periodic(model.name, final.settings, final.complete)
+    # physical bounds and mass balance of the recorded species output (warnings only)
+    _warn_bounds(monitor.messages(), stacklevel=3)
+    return out
+
+
+def _in_memory(model: Model, s: Mapping[str, Any], heart: _Heart, raw: dict[str, Any],
+               settings: dict[str, Any], summary: Any) -> Result:
+    """The result of a run's rows ``raw`` (``summary``: the summary stream of a summarized
+    run, else None), with the run's valve events and step history; the run's error raised
+    with it attached."""
+    result = _assemble(model, s, heart, raw, settings, "error" not in raw)
+    if summary is not None:
+        result.vessel_summary = summary.summary(model.name)
     result.valve_events = [(float(t), str(v), bool(o)) for t, v, o in raw.get("valve_events", ())]
     if "last_cycle_steps" in raw:  # error control: the last cycle's accepted steps
         result.step_times, result.step_sizes = step_history(raw["last_cycle_steps"])
     _raise_run_error(raw, result)
-    if timed:
-        _fill_time_error(model, s_out, raw, result, overrides)
-    if space:  # one refinement of every vessel: the inlet impedance's change
-        from oxyline.convergence import inlet_space_error
+    return result
 
-        try:
-            result.settings["error_estimate_space"] = inlet_space_error(model)
-        except KeyboardInterrupt:  # the run is whole: keep it, without the estimate
-            raise SimulationInterrupted("interrupted during the spatial error estimate, after "
-                                        "the run; exc.result is the whole run's result "
-                                        "(without error_estimate space)", result) from None
-    _warn_not_periodic(result.model_name, result.settings, result.complete)
-    # physical bounds and mass balance of the recorded species output (warnings only)
-    check_result(result, model.transport_spec)
+
+def _add_space_error(model: Model, result: Result) -> None:
+    """One refinement of every vessel: the inlet impedance's change, as
+    ``error_estimate["space"]`` (:func:`oxyline.convergence.inlet_space_error`)."""
+    from oxyline.convergence import inlet_space_error
+
+    try:
+        result.settings["error_estimate_space"] = inlet_space_error(model)
+    except KeyboardInterrupt:  # the run is whole: keep it, without the estimate
+        raise SimulationInterrupted("interrupted during the spatial error estimate, after "
+                                    "the run; exc.result is the whole run's result "
+                                    "(without error_estimate space)", result) from None
+
+
+def _assemble(model: Model, s: Mapping[str, Any], heart: _Heart, raw: dict[str, Any],
+              settings: dict[str, Any], complete: bool, carry: bool = False) -> Result:
+    """:func:`_result` of the core's rows ``raw`` with the chambers' and valves' columns
+    (recorded after the selected ones: taken out of ``raw``) as their outputs; ``carry``:
+    rows of a streamed run (see :meth:`_Heart.outputs`)."""
+    extra = heart.split(raw)
+    result = _result(model, s, raw, settings, complete)
+    if extra is not None:
+        result.chamber_volume, result.valve_status = heart.outputs(extra, carry)
     return result
 
 
@@ -791,7 +817,7 @@ class _Heart:
     """The chambers (name, volume unknown) and valves (name, [pressure behind, pressure in
     front, flow], on/off rule) of a model: a run records their unknowns after the selected
     columns (``core``: the run's keyword that asks for them), and :meth:`split` and
-    :meth:`put` turn them into ``result.chamber_volume`` and ``result.valve_status``."""
+    :meth:`outputs` turn them into ``result.chamber_volume`` and ``result.valve_status``."""
 
     def __init__(self, model: Model) -> None:
         lay = model.network.unknown_layout()
@@ -800,7 +826,7 @@ class _Heart:
             + [int(c) for _, u, _ in self.valves for c in u]
         self.core = {"extra_columns": self.columns} if self.columns else {}
         #: each on/off valve's last status, carried from one chunk of a streamed run to the
-        #: next (``put(..., carry=True)``), so that chunks give the statuses of the whole run
+        #: next (``outputs(..., carry=True)``), so that chunks give the statuses of the whole run
         self.open: dict[str, bool] = {}
 
     def split(self, raw: dict[str, Any]) -> np.ndarray | None:
@@ -811,12 +837,6 @@ class _Heart:
         data = raw["data"]
         raw["data"] = data[:, : data.shape[1] - n]
         return data[:, data.shape[1] - n:]
-
-    def put(self, result: Result, extra: np.ndarray | None, carry: bool = False) -> None:
-        """``result``'s chamber volumes and valve status of the extra columns ``extra`` (of
-        :meth:`split`; nothing when None); ``carry``: a chunk of a streamed run."""
-        if extra is not None:
-            result.chamber_volume, result.valve_status = self.outputs(extra, carry)
 
     def outputs(self, extra: np.ndarray, carry: bool = False
                 ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
@@ -909,23 +929,30 @@ def _checkpoints(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
     return {"checkpoint_sink": save, **core}
 
 
-def _check_output_memory(model: Model, s: Mapping[str, Any],
-                         overrides: Mapping[str, Any], reduced: float = 0.0) -> None:
+def _check_output_size(model: Model, s: Mapping[str, Any], overrides: Mapping[str, Any],
+                       reduced: float = 0.0, where: Any = None) -> None:
     """Refuse an output the memory allowed cannot hold (:class:`ResourceError` with the
     estimate and the settings to change), and announce a large one
     (:class:`OutputSizeWarning`), before the run starts. ``reduced``: the bytes of a
-    summarized run's reductions and chunk in flight, beside the rows it keeps (``s``)."""
+    summarized run's reductions and chunk in flight, beside the rows it keeps (``s``).
+    ``where``: the path of a streamed store, whose memory stays bounded (its size on disk is
+    announced)."""
     need, rows, cols = _output_size(model, s)
     need += reduced
-    where = f"{'simulate' if 'max_memory' in overrides else 'simulation'}: max_memory"
-    limit = _memory.limit(overrides.get("max_memory", model.simulation.get("max_memory")), where)
+    size = f"the output ({rows} rows x {cols} columns)"
+    if where is not None:
+        if need > _memory.WARN_BYTES:
+            warnings.warn(f"{where}: {size} takes about {_memory.human(need)} on disk (before "
+                          "compression)", OutputSizeWarning, stacklevel=4)
+        return
+    key = f"{'simulate' if 'max_memory' in overrides else 'simulation'}: max_memory"
+    limit = _memory.limit(overrides.get("max_memory", model.simulation.get("max_memory")), key)
     if limit is not None and need > limit:
         raise ResourceError(
-            f"simulate: the output ({rows} rows x {cols} columns) needs about "
-            f"{_memory.human(need)} of memory (estimate), above max_memory = "
-            f"{_memory.human(limit)}; output fewer rows (output_every, output_cycles='last', "
-            "fewer cycles) or columns (variables, vessels, segments=False), stream it to disk "
-            "with simulate_to_zarr, or raise max_memory")
+            f"simulate: {size} needs about {_memory.human(need)} of memory (estimate), above "
+            f"max_memory = {_memory.human(limit)}; output fewer rows (output_every, "
+            "output_cycles='last', fewer cycles) or columns (variables, vessels, "
+            "segments=False), stream it to disk with simulate_to_zarr, or raise max_memory")
     if limit is not None and "max_memory" in overrides:
         # a max_memory given to this run bounds the whole run: the model's state too (the
         # model was assembled under its own file's limit)
@@ -937,9 +964,8 @@ def _check_output_memory(model: Model, s: Mapping[str, Any],
                 f"{_memory.human(need)}), above max_memory = {_memory.human(limit)}; output "
                 "fewer rows or columns, a coarser segmentation, or raise max_memory")
     if need > _memory.WARN_BYTES:
-        warnings.warn(f"the output ({rows} rows x {cols} columns) takes about "
-                      f"{_memory.human(need)} in memory, and as much when written to a file",
-                      OutputSizeWarning, stacklevel=4)
+        warnings.warn(f"{size} takes about {_memory.human(need)} in memory, and as much when "
+                      "written to a file", OutputSizeWarning, stacklevel=4)
 
 
 def _output_size(model: Model, s: Mapping[str, Any]) -> tuple[float, int, int]:
@@ -984,91 +1010,61 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     ...     print(ds.sizes["time"], ds.attrs["complete"])
     2001 1
     """
-    _check_chunk("time_chunk", time_chunk)
-    _check_chunk("segment_chunk", segment_chunk)
+    for name, value in (("time_chunk", time_chunk), ("segment_chunk", segment_chunk)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ModelError(f"simulate_to_zarr: {name} must be an integer >= 1, got {value!r}")
     model = load_model(model)
-    s, space = _zarr_settings(model, path, overrides)
-    empty = _empty_rows(model, s)
-    # chamber volumes and valve status, as in simulate(): extra core columns per chunk
-    heart = _Heart(model)
-    valves = bool(heart.valves)
-
-    def result_of(rows: dict[str, Any], settings: dict[str, Any], complete: bool) -> Result:
-        # (``rows``' data loses the extra columns: a copy of the dict of rows)
-        extra = heart.split(rows)
-        res = _result(model, s, rows, settings, complete)
-        heart.put(res, extra, carry=True)
-        return res
-
-    template = dict(empty, data=np.zeros((0, empty["data"].shape[1] + len(heart.columns))))
-    head = result_of(dict(template), _run_settings(s, None, valves), False)
-    store = ZarrAppender(path, dataset(head), time_chunk, overwrite=overwrite,
-                         space_chunk=segment_chunk)
-
-    # the bounds monitor checks each chunk as it passes (docs/physics.md §2.8)
-    monitor = Monitor(model.transport_spec)
-
-    def write(rows: dict[str, Any]) -> None:
-        chunk = result_of(dict(rows), {}, False)
-        monitor.update(chunk)
-        store.append(dataset(chunk))
-
-    try:
-        raw = _run(model, s, overrides.get("progress"), _cancel(overrides), chunk_sink=write,
-                   chunk_rows=time_chunk, **heart.core)
-    except BaseException:
-        store.remove()  # refused before the first step (e.g. an unstable dt): no output at all
-        raise
-    facts = _store_facts(model, space and "error" not in raw)
-    raw, opened = _close_store(
-        store, raw, lambda raw: dataset(result_of(dict(template),
-                                                  {**_run_settings(s, raw, valves), **facts},
-                                                  "error" not in raw)).attrs)
-    _raise_run_error(raw, opened)
-    _warn_not_periodic(model.name, _run_settings(s, raw), True)
-    _warn_bounds(monitor.messages())
-    return opened
-
-
-def _check_chunk(name: str, value: Any) -> None:
-    """A store's chunk length: an integer >= 1 (a bool is not one)."""
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ModelError(f"simulate_to_zarr: {name} must be an integer >= 1, got {value!r}")
-
-
-def _store_facts(model: Model, space: bool) -> dict[str, Any]:
-    """The segmentation facts of a streamed run, with the spatial error estimate when asked
-    (a store attribute, as in a NetCDF file)."""
-    facts: dict[str, Any] = segmentation_facts(model)
-    if space:
-        from oxyline.convergence import inlet_space_error
-
-        facts["error_estimate_space"] = inlet_space_error(model)
-    return facts
-
-
-def _zarr_settings(model: Model, path: str | os.PathLike[str], overrides: Mapping[str, Any]
-                   ) -> tuple[dict[str, Any], bool]:
-    """The settings of a streamed run (no checkpoints), warning when the store will be large,
-    and ``estimate_space_error``."""
     if "checkpoint" in overrides or "checkpoint_every" in overrides:
         raise ModelError("simulate_to_zarr: checkpoints are not supported with a streamed "
                          "store; use simulate(..., checkpoint=...)")
-    s, _default, space, timed = _resolve(model, overrides)
-    if timed:
-        raise ModelError("simulate_to_zarr: estimate_time_error compares the run's last cycle "
-                         "in memory: use simulate(..., estimate_time_error=True) and "
-                         "result.to_zarr")
-    need, rows, cols = _output_size(model, s)
-    if need > _memory.WARN_BYTES:  # memory stays bounded, the store does not
-        warnings.warn(f"{path}: the output ({rows} rows x {cols} columns) takes about "
-                      f"{_memory.human(need)} on disk (before compression)", OutputSizeWarning,
-                      stacklevel=3)
-    return s, space
+    return _simulate(model, overrides, store={"path": path, "time_chunk": time_chunk,
+                                              "space_chunk": segment_chunk,
+                                              "overwrite": overwrite})
 
 
-def _close_store(store: Any, raw: dict[str, Any],
-                 final_attrs: Callable[[dict[str, Any]], dict[str, Any]]
+class _ZarrSink:
+    """The chunk sink of ``simulate_to_zarr``: the store (created with the variables of a
+    result of no rows before the run), each chunk appended as a result of its rows, the bounds
+    monitor fed each chunk as it passes (docs/physics.md §2.8)."""
+
+    def __init__(self, model: Model, s: Mapping[str, Any], heart: _Heart, monitor: Monitor,
+                 store: Mapping[str, Any]) -> None:
+        self.model, self.s, self.heart = model, s, heart
+        # zero rows in the core's layout, with the chambers' and valves' columns
+        lay = _output_layout(model, s)
+        self._empty: dict[str, Any] = {"times": np.zeros(0), "data": np.zeros(
+            (0, lay["n_columns"] + len(heart.columns)))}
+        tl = lay.get("transport") if s["transport"] else None
+        if tl is not None:
+            n = len(tl["species"])
+            self._empty["transport"] = {"species": list(tl["species"]), "initial_stored": [0.0] * n,
+                                        "data": np.zeros((0, n * tl["columns_per_species"]))}
+        head = _assemble(model, s, heart, self.template(),
+                         _run_settings(s, None, bool(heart.valves)), False, carry=True)
+        self.store = ZarrAppender(store["path"], dataset(head), store["time_chunk"],
+                                  overwrite=store["overwrite"], space_chunk=store["space_chunk"])
+        self.monitor = monitor
+
+    def template(self) -> dict[str, Any]:
+        """Zero rows in the core's layout (a fresh dict: the assembly takes columns out)."""
+        return dict(self._empty)
+
+    def add(self, rows: dict[str, Any]) -> None:
+        chunk = _assemble(self.model, self.s, self.heart, dict(rows), {}, False, carry=True)
+        self.monitor.update(chunk)
+        self.store.append(dataset(chunk))
+
+    def close(self, raw: dict[str, Any], final: Result, space: bool) -> Any:
+        """Write the final attributes (``final``'s, with the spatial error estimate when
+        asked), open the store, and raise the run's error with the store attached."""
+        if space and "error" not in raw:
+            _add_space_error(self.model, final)
+        raw, opened = _close_store(self.store, raw, dataset(final).attrs)
+        _raise_run_error(raw, opened)
+        return opened
+
+
+def _close_store(store: Any, raw: dict[str, Any], attrs: dict[str, Any]
                  ) -> tuple[dict[str, Any], Any]:
     """Write the run's final attributes and open the store: (the run's outcome, with an
     ``OutputError`` when the attributes cannot be written, and the opened store, None when a
@@ -1078,7 +1074,7 @@ def _close_store(store: Any, raw: dict[str, Any],
     # the store is read back before another writer may have it: one starting right after
     # this run's last write would otherwise overwrite it before it is opened
     try:
-        store.finish(final_attrs(raw), raw.get("last_cycle_steps"), release=False)
+        store.finish(attrs, raw.get("last_cycle_steps"), release=False)
     except (OSError, RuntimeError, ValueError) as exc:  # e.g. the disk just filled up
         if "error" not in raw:
             raw = {**raw, "error": OutputError(f"{store.path}: cannot write the run's final "
@@ -1094,19 +1090,6 @@ def _close_store(store: Any, raw: dict[str, Any],
     finally:
         store.release()
     return raw, opened
-
-
-def _empty_rows(model: Model, s: Mapping[str, Any]) -> dict[str, Any]:
-    """Zero output rows in the core's layout: the template of a store's variables."""
-    lay = _output_layout(model, s)
-    raw: dict[str, Any] = {"times": np.zeros(0), "data": np.zeros((0, lay["n_columns"]))}
-    tl = lay.get("transport") if s["transport"] else None
-    if tl is not None:
-        n = len(tl["species"])
-        raw["transport"] = {"species": list(tl["species"]),
-                            "data": np.zeros((0, n * tl["columns_per_species"])),
-                            "initial_stored": [0.0] * n}
-    return raw
 
 
 # installed when oxyline is imported (normally in the main thread): a run started in a worker

@@ -133,11 +133,8 @@ def per_vessel_table(per_vessel: Mapping[str, np.ndarray], vessels: list[str]) -
     each vessel's error against its own scale as in :attr:`TimeErrorEstimate.per_vessel`)."""
     import pandas as pd
 
-    table = pd.DataFrame(
-        {k: np.asarray(v, dtype=float) for k, v in per_vessel.items()},
-        index=pd.Index(list(vessels), name="vessel"),
-    )
-    return table
+    return pd.DataFrame({k: np.asarray(v, dtype=float) for k, v in per_vessel.items()},
+                        index=pd.Index(list(vessels), name="vessel"))
 
 
 #: the file variables of :attr:`oxyline.Result.time_error` (one per kind, over ``vessel``)

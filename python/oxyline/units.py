@@ -20,16 +20,6 @@ CGS_TO_SI: dict[str, float] = {
     "none": 1.0,
 }
 
-UNITS_SI: dict[str, str] = {
-    "pressure": "Pa",
-    "flow": "m^3/s",
-    "length": "m",
-    "resistance": "Pa s m^-3",
-    "capacitance": "m^3 Pa^-1",
-    "inductance": "Pa s^2 m^-3",
-    "time": "s",
-}
-
 
 def factor(units: str, quantity: str) -> float:
     """Multiplier from ``units`` ("SI" or "cgs") to SI for ``quantity``."""

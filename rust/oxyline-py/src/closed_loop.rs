@@ -58,7 +58,7 @@ pub fn closed_loop_run<'py>(
         .map_err(to_py)?;
     if !out.warnings.is_empty() {
         let category = py
-            .import("oxyline.transport")?
+            .import("oxyline.errors")?
             .getattr("HemoglobinFacilitationWarning")?;
         for w in &out.warnings {
             let text = std::ffi::CString::new(w.as_str()).unwrap_or_default();

@@ -144,7 +144,7 @@ mod _core {
             check_periods, read_conditions, read_vessels, resolve_settings, transport_section,
         },
         reader::variant::VariantReader,
-        results::valve_status,
+        results::{ColumnStatsFold, valve_status},
         waveform_values,
     };
 

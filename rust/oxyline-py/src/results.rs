@@ -286,3 +286,61 @@ pub(crate) fn valve_status<'py>(
     let (status, last) = oxyline_core::output::valve_status(on_off, &b, &f, &q, open);
     Ok((status.into_pyarray(py), last))
 }
+
+/// `oxyline_core::ensemble::StatsFold` for Python: each column's time mean (trapezoidal rule,
+/// numpy's arithmetic), minimum and maximum, folded over output rows as a run hands them over
+/// in chunks, without holding them (a large model's summarized run, `oxyline.large_output`).
+#[pyclass(module = "oxyline._core")]
+pub struct ColumnStatsFold {
+    fold: oxyline_core::ensemble::StatsFold,
+    n_cols: usize,
+}
+
+#[oxyline_py_guard::guard]
+#[pymethods]
+impl ColumnStatsFold {
+    #[new]
+    fn new(n_cols: usize) -> Self {
+        ColumnStatsFold {
+            fold: oxyline_core::ensemble::StatsFold::new(n_cols),
+            n_cols,
+        }
+    }
+
+    /// Add the rows of C-contiguous (time, column) `data` at `times` (after those added).
+    fn push(
+        &mut self,
+        times: numpy::PyReadonlyArray1<'_, f64>,
+        data: numpy::PyReadonlyArray2<'_, f64>,
+    ) -> PyResult<()> {
+        let shape = data.shape();
+        if shape[1] != self.n_cols || shape[0] != times.len() {
+            return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                "ColumnStatsFold.push: data of shape {shape:?}, expected ({}, {})",
+                times.len(),
+                self.n_cols
+            )));
+        }
+        self.fold.push(times.as_slice()?, data.as_slice()?);
+        Ok(())
+    }
+
+    /// (mean, min, max) of every column over the rows added; None without two rows over a
+    /// positive time span.
+    fn finish<'py>(&self, py: Python<'py>) -> Option<ArrayTriple<'py>> {
+        self.fold.clone().finish().map(|s| {
+            (
+                s.mean.into_pyarray(py),
+                s.min.into_pyarray(py),
+                s.max.into_pyarray(py),
+            )
+        })
+    }
+}
+
+/// Three numpy arrays (a column statistic each).
+type ArrayTriple<'py> = (
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+);

@@ -142,7 +142,7 @@ pub(crate) fn warn_facilitation(py: Python<'_>, warnings: &[String]) -> PyResult
         return Ok(());
     }
     let category = py
-        .import("oxyline.transport")?
+        .import("oxyline.errors")?
         .getattr("HemoglobinFacilitationWarning")?;
     for w in warnings {
         let text = std::ffi::CString::new(w.as_str()).unwrap_or_default();
