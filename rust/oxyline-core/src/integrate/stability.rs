@@ -296,14 +296,14 @@ pub fn rk4_reach() -> f64 {
     ray_reach(rk4_step_limit)
 }
 
-/// The largest |z| of a stability region (`limit(λ)·|λ|`) over 181 rays of the left
-/// half-plane, 1 % above the sampled maximum.
-pub fn ray_reach(limit: impl Fn(Complex<f64>) -> f64) -> f64 {
+/// The largest value of `on_ray(λ)` over 181 unit λ on the rays of the left half-plane, 1 %
+/// above the sampled maximum: with a step limit, its region's largest |z| (`limit(λ)·|λ|`).
+pub fn ray_reach(on_ray: impl Fn(Complex<f64>) -> f64) -> f64 {
     let rays = 180;
     let most = (0..=rays)
         .map(|k| {
             let theta = std::f64::consts::FRAC_PI_2 * (1.0 + k as f64 / rays as f64);
-            limit(Complex::from_polar(1.0, theta))
+            on_ray(Complex::from_polar(1.0, theta))
         })
         .fold(0.0, f64::max);
     1.01 * most

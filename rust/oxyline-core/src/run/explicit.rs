@@ -20,8 +20,8 @@ use crate::integrate::adaptive::{SAFETY, Tolerances, local_error_constant};
 use crate::integrate::explicit_pair::{self, Dopri5, dp5_step_limit};
 use crate::integrate::rk4::{Rk4, Uncoupled};
 use crate::integrate::stability::{
-    SpectrumMethod, StabilityLimit, growth, ray_reach, rk4_limit_probed, rk4_reach,
-    rk4_step_ceiling,
+    SpectrumMethod, StabilityLimit, growth, ray_reach, rk4_limit_probed, rk4_step_ceiling,
+    rk4_step_limit,
 };
 use crate::integrate::steady::SteadyCache;
 use nalgebra::Complex;
@@ -111,7 +111,7 @@ pub(super) fn choose(
     let (re, im) = stability.eigenvalue;
     let lambda = Complex::new(re, im);
     // RK4's limit moved to the pair's along the limiting eigenvalue's ray
-    let ratio = dp5_step_limit(lambda) / crate::integrate::stability::rk4_step_limit(lambda);
+    let ratio = dp5_step_limit(lambda) / rk4_step_limit(lambda);
     let ceiling = (STABILITY_SAFETY * stability.dt_max * ratio).min(transport_dt);
     let take = asked || pays(ceiling);
     Ok(take.then_some(ExplicitPlan { ceiling, stability }))
@@ -156,9 +156,10 @@ fn implicit_wins_at_most(
         return Ok(false);
     }
     let rk4_ceiling = rk4_step_ceiling(rk, go)?;
-    // the pair's reach over RK4's on any ray bounds their limits' ratio on the limiting one
-    let reach = ray_reach(dp5_step_limit) / rk4_reach();
-    let ceiling = (STABILITY_SAFETY * rk4_ceiling * reach).min(transport_dt);
+    // the probe's ceiling is RK4's limit (at most `rk4_ceiling`) times the pair's limit over
+    // RK4's on the limiting eigenvalue's ray, whichever ray that is (not the largest |λ|'s)
+    let ratio = ray_reach(|l| dp5_step_limit(l) / rk4_step_limit(l));
+    let ceiling = (STABILITY_SAFETY * rk4_ceiling * ratio).min(transport_dt);
     Ok(!pays(ceiling))
 }
 
