@@ -257,6 +257,11 @@ def child(spec: dict[str, Any]) -> dict[str, Any]:
             # the run pool's threads: their CPU and sleeps during this run
             out["pool_cpu"] = sum(c - p1.get(t, (0.0, 0))[0] for t, (c, _) in p2.items())
             out["pool_sleeps"] = sum(n - p1.get(t, (0.0, 0))[1] for t, (_, n) in p2.items())
+        # the run's start before its first step: the steady start and `auto`'s choice of
+        # method (its stability probe reports progress at t = 0)
+        at_start = [c for t, c, _ in marks if t == 0.0]
+        if at_start:
+            out["start_cpu"], out["start_marks"] = at_start[-1] - c1, len(at_start)
         if settings.get("steps"):  # an error-controlled run: its accepted steps
             out["steps"] = int(settings["steps"])
             out["ran"] = f"{settings['method']}, {settings.get('step_control', '')}"
@@ -608,6 +613,10 @@ def main() -> None:
                           + thread_cells(r, first, copy), flush=True)
                     if "ran" in r:
                         print(f"|   ran: {r['ran']} |", flush=True)
+                    if "start_cpu" in r:
+                        print(f"|   to the last progress mark at t = 0 (load excluded: steady "
+                              f"start, `auto`'s choice): {r['start_cpu']:.1f} CPU s, "
+                              f"{r['start_marks']} marks |", flush=True)
                     steps = r.get("steps", round(PERIOD / r["dt"])) if r.get("dt") else 1
                     if threads != 1 and r.get("sleeps") is not None:
                         print(f"|   calling thread: {r['sleeps'] / steps:.1f} sleeps per step "

@@ -121,6 +121,27 @@ def test_krylov_limit_matches_dense_eigenvalues_large(case: Any) -> None:
     check(case())
 
 
+@pytest.mark.parametrize("case", [
+    pytest.param(lambda: chain(30), id="chain-120"),
+    pytest.param(lambda: chain(200, wiggle=False), id="chain-800"),
+    pytest.param(lambda: tree(6), id="tree-221"),
+    pytest.param(lambda: tree(8), id="tree-1020"),
+    pytest.param(lambda: oxyline.catalogue.load_dict("circle-of-willis"), id="circle-of-willis"),
+    pytest.param(lambda: oxyline.catalogue.load_dict("matthys37"), id="matthys37"),
+])
+def test_the_cheap_step_ceiling_is_above_the_dense_limit(case: Any) -> None:
+    """`method: auto` skips the spectrum probe of a large circuit where even an upper bound of
+    the stable step leaves the explicit pair dearer: that bound (a few power iterations, no
+    eigen-iteration) must lie above the largest stable RK4 step of the dense eigenvalues
+    (LAPACK, independent of the core), or `auto` could refuse the pair where it wins, and
+    within 8x of it to be of use (its margin for a non-normal operator is 2, the power
+    iteration's estimate of the spectral radius a little below it)."""
+    model = oxyline.load_model(copy.deepcopy(case()))
+    exact, n = dense_limit(model)
+    ceiling = model.network.rk4_step_ceiling()
+    assert exact <= ceiling <= 8.0 * exact, (n, ceiling, exact)
+
+
 def test_adding_vessels_to_a_chain_keeps_the_limit() -> None:
     """The limit is set by the stiffest segments: 10 more vessels of the same kind leave it
     nearly unchanged (the taper makes the last vessels a little narrower). 145 vessels (580

@@ -518,6 +518,19 @@ impl Network {
         .map_err(to_py)
     }
 
+    /// An upper bound of the largest stable RK4 step from a few power iterations (no
+    /// eigen-iteration over the whole circuit): what `method: auto` weighs before it probes
+    /// the spectrum of a large circuit. For checking against the dense eigenvalues.
+    fn rk4_step_ceiling(&self, py: Python<'_>) -> PyResult<f64> {
+        let inner = self.inner.clone();
+        py.detach(move || {
+            let dae = &inner.1;
+            let mut rk = oxyline_core::rk4::Rk4::new(dae, oxyline_core::Regime::Transient, 1.0)?;
+            oxyline_core::stability::rk4_step_ceiling(&mut rk, &mut || true)
+        })
+        .map_err(to_py)
+    }
+
     /// The factor by which to divide the RK4 step of a run with these settings so that its
     /// first cycle is within `tol` of the converged solution (step doubling; 1 without valves
     /// or chambers): (factor, estimated error, converged). See `run::rk4_step_refinement`.

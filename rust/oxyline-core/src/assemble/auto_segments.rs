@@ -148,15 +148,21 @@ fn harmonic_powers(w: &Waveform, period: f64) -> Vec<f64> {
     let x: Vec<f64> = (0..SAMPLES)
         .map(|i| w.eval(t0 + period * i as f64 / SAMPLES as f64))
         .collect();
+    // the SAMPLES phases' cosines and sines, once: a harmonic's phase (k i) mod SAMPLES (which
+    // keeps the angle exact for large k) is one of them, the same value as computed in place
+    let (cos, sin): (Vec<f64>, Vec<f64>) = (0..SAMPLES)
+        .map(|m| {
+            let phase = 2.0 * std::f64::consts::PI * m as f64 / SAMPLES as f64;
+            (phase.cos(), phase.sin())
+        })
+        .unzip();
     (1..SAMPLES / 2)
         .map(|k| {
             let (mut re, mut im) = (0.0, 0.0);
             for (i, xi) in x.iter().enumerate() {
-                // (k i) mod SAMPLES keeps the angle exact for large k
-                let phase =
-                    2.0 * std::f64::consts::PI * ((k * i) % SAMPLES) as f64 / SAMPLES as f64;
-                re += xi * phase.cos();
-                im -= xi * phase.sin();
+                let m = (k * i) % SAMPLES;
+                re += xi * cos[m];
+                im -= xi * sin[m];
             }
             re * re + im * im
         })

@@ -275,6 +275,86 @@ fn rk4_limit_frozen(
     })
 }
 
+/// Matrix-vector products of [`rk4_step_ceiling`]'s power iteration: each is one operator
+/// application (O(n)); the estimate only has to be within [`NON_NORMAL_MARGIN`] of the
+/// spectral radius, and on a tree the stiffest level holds half the segments.
+const CEILING_PRODUCTS: usize = 8;
+
+/// How far below ‖A v‖ (v a unit vector) the spectral radius of the energy-scaled operator
+/// is taken to lie at most. For a normal operator ρ(A) = ‖A‖ ≥ ‖A v‖; the energy-scaled
+/// passive circuit is a skew part (L–C coupling) minus a positive semidefinite one
+/// (resistances), close to normal but not exactly (the resistances sit on the flows only), so
+/// ‖A v‖ may exceed ρ by a little: 2 is a margin, checked against dense eigenvalues of chains,
+/// trees and built-in models (tests/test_stability.py).
+const NON_NORMAL_MARGIN: f64 = 2.0;
+
+/// The largest |z| of RK4's stability region in the closed left half-plane, over its rays
+/// (z = h λ, `rk4_step_limit(λ)·|λ|`): about 2.96 near 98° (2√2 on the imaginary axis, 2.785
+/// on the real one), sampled on 181 rays and rounded up by 1 % for what the sampling misses
+/// between them.
+pub fn rk4_reach() -> f64 {
+    ray_reach(rk4_step_limit)
+}
+
+/// The largest value of `on_ray(λ)` over 181 unit λ on the rays of the left half-plane, 1 %
+/// above the sampled maximum: with a step limit, its region's largest |z| (`limit(λ)·|λ|`).
+pub fn ray_reach(on_ray: impl Fn(Complex<f64>) -> f64) -> f64 {
+    let rays = 180;
+    let most = (0..=rays)
+        .map(|k| {
+            let theta = std::f64::consts::FRAC_PI_2 * (1.0 + k as f64 / rays as f64);
+            on_ray(Complex::from_polar(1.0, theta))
+        })
+        .fold(0.0, f64::max);
+    1.01 * most
+}
+
+/// An upper bound of RK4's stable step on `rk`'s operator as it is set (coefficients frozen,
+/// valves as set) that needs no eigen-iteration over the whole circuit: a few power
+/// iterations give ‖A v‖ ≤ ~ρ(A) of the energy-scaled operator, and no eigenvalue of modulus
+/// ρ lets RK4 step further than [`rk4_reach`]/ρ along its ray, whatever its direction. With
+/// [`NON_NORMAL_MARGIN`] on ρ. O(n) per product, no Krylov basis: for deciding that a large
+/// circuit is not worth the explicit pair without the probe ([`rk4_limit_probed`]).
+/// Infinite without differential unknowns.
+pub fn rk4_step_ceiling(rk: &mut Rk4<'_>, go: &mut KeepGoing<'_>) -> Result<f64> {
+    let nd = rk.diff.len();
+    if nd == 0 {
+        return Ok(f64::INFINITY);
+    }
+    let scale = energy_scale(rk);
+    // the Krylov estimate's deterministic, non-smooth start
+    let mut v: Vec<f64> = (0..nd)
+        .map(|i| {
+            let h = (i as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 11;
+            h as f64 / (1u64 << 53) as f64 - 0.5
+        })
+        .collect();
+    let (mut x, mut out) = (vec![0.0; nd], vec![0.0; nd]);
+    let mut radius: f64 = 0.0;
+    for _ in 0..CEILING_PRODUCTS {
+        if !go() {
+            return Err(interrupted());
+        }
+        let nv = v.iter().map(|a| a * a).sum::<f64>().sqrt();
+        if !(nv > 0.0 && nv.is_finite()) {
+            break;
+        }
+        for ((xi, vi), s) in x.iter_mut().zip(&v).zip(&scale) {
+            *xi = vi / (nv * s);
+        }
+        rk.linear_operator(&x, &mut out)?;
+        out.iter_mut().zip(&scale).for_each(|(o, s)| *o *= s);
+        let grown = out.iter().map(|a| a * a).sum::<f64>().sqrt();
+        radius = radius.max(grown);
+        std::mem::swap(&mut v, &mut out);
+    }
+    Ok(if radius > 0.0 && radius.is_finite() {
+        rk4_reach() * NON_NORMAL_MARGIN / radius
+    } else {
+        f64::INFINITY
+    })
+}
+
 /// Energy scaling √E_ii of the differential unknowns: x̃ = √E x is a similarity (eigenvalues
 /// unchanged) under which the passive circuit's operator is a skew part (the L–C coupling) minus
 /// a positive semidefinite part (the resistances), hence close to normal. Unscaled, capacitances
@@ -402,5 +482,18 @@ mod tests {
         assert!((h - 2.785293563405282).abs() < 1e-9, "{h}");
         let h = rk4_step_limit(Complex::new(-1e-12, 1.0));
         assert!((h - 2.0 * 2f64.sqrt()).abs() < 1e-5, "{h}");
+    }
+
+    #[test]
+    fn the_reach_bounds_every_ray_of_the_left_half_plane() {
+        // the region's largest |z| lies off both axes (~2.96 near 98°, where the real axis
+        // gives 2.785 and the imaginary one 2√2): a finer scan of the rays stays below it
+        let reach = rk4_reach();
+        assert!(reach > 2.0 * 2f64.sqrt() && reach < 3.1, "{reach}");
+        for k in 0..=2000 {
+            let theta = std::f64::consts::FRAC_PI_2 * (1.0 + k as f64 / 2000.0);
+            let h = rk4_step_limit(Complex::from_polar(1.0, theta));
+            assert!(h <= reach, "{theta}: {h} > {reach}");
+        }
     }
 }

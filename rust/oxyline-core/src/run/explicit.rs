@@ -19,10 +19,13 @@ use crate::error::{Error, Result};
 use crate::integrate::adaptive::{SAFETY, Tolerances, local_error_constant};
 use crate::integrate::explicit_pair::{self, Dopri5, dp5_step_limit};
 use crate::integrate::rk4::{Rk4, Uncoupled};
-use crate::integrate::stability::{SpectrumMethod, StabilityLimit, growth, rk4_limit_probed};
+use crate::integrate::stability::{
+    SpectrumMethod, StabilityLimit, growth, ray_reach, rk4_limit_probed, rk4_step_ceiling,
+    rk4_step_limit,
+};
 use crate::integrate::steady::SteadyCache;
 use nalgebra::Complex;
-use std::cell::RefCell;
+use std::cell::{OnceCell, RefCell};
 
 /// The largest step of the pair as a fraction of the period: its six stages sample the
 /// forcing 24 times a cycle at the least, and its fifth order needs no finer ceiling (the
@@ -74,8 +77,26 @@ pub(super) fn choose(
     if let Err(e) = supported {
         return if asked { Err(e) } else { Ok(None) };
     }
-    let (stability, by_newton) = match probe(dae, steady, go) {
-        Ok(found) => found,
+    // the forcing's highest significant frequency (a transform of each waveform), once
+    let omega = OnceCell::new();
+    let pays =
+        |ceiling: f64| explicit_pays(s, *omega.get_or_init(|| forcing_omega(dae, s)), ceiling);
+    let probed = operator(dae, steady).and_then(|mut rk| {
+        // without a growing mode to refuse, `auto` skips the probe where the implicit
+        // method wins whatever it would find: a Newton iteration in the stages, or a
+        // stability ceiling (bounded from above cheaply) below the implicit step's worth
+        let certain = !asked
+            && !growth::may_grow(dae)
+            && (rk.eliminates_by_newton()
+                || implicit_wins_at_most(&mut rk, transport_dt, &pays, go)?);
+        if certain {
+            return Ok(None);
+        }
+        probe(rk, dae, go).map(Some)
+    });
+    let (stability, by_newton) = match probed {
+        Ok(Some(found)) => found,
+        Ok(None) => return Ok(None),
         // a growing mode: no method runs the circuit
         Err(e) if asked || growth::is_growing_mode(&e) => return Err(e),
         Err(_) => return Ok(None),
@@ -90,15 +111,56 @@ pub(super) fn choose(
     let (re, im) = stability.eigenvalue;
     let lambda = Complex::new(re, im);
     // RK4's limit moved to the pair's along the limiting eigenvalue's ray
-    let ratio = dp5_step_limit(lambda) / crate::integrate::stability::rk4_step_limit(lambda);
+    let ratio = dp5_step_limit(lambda) / rk4_step_limit(lambda);
     let ceiling = (STABILITY_SAFETY * stability.dt_max * ratio).min(transport_dt);
-    let take = asked || {
-        let rtol = s.adaptive().map_or(1e-3, |t| t.rtol);
-        let omega = 2.0 * std::f64::consts::PI * forcing_frequency(dae, rtol);
-        let h_max = [MAX_STEP_PER_PERIOD, IMPLICIT_MAX_STEP_PER_PERIOD].map(|f| f * s.period);
-        explicit_is_cheaper(rtol, omega, ceiling, h_max, s.method.rho_inf())
-    };
+    let take = asked || pays(ceiling);
     Ok(take.then_some(ExplicitPlan { ceiling, stability }))
+}
+
+/// The run's tolerance (rtol 1e-3 without one).
+fn run_rtol(s: &RunSettings) -> f64 {
+    s.adaptive().map_or(1e-3, |t| t.rtol)
+}
+
+/// The forcing's highest significant angular frequency at the run's rtol (rad/s).
+fn forcing_omega(dae: &Dae, s: &RunSettings) -> f64 {
+    2.0 * std::f64::consts::PI * forcing_frequency(dae, run_rtol(s))
+}
+
+/// The cost rule of `auto` ([`explicit_is_cheaper`]) at the run's tolerance and the forcing's
+/// angular frequency `omega`, for the pair's stability ceiling `ceiling`.
+fn explicit_pays(s: &RunSettings, omega: f64, ceiling: f64) -> bool {
+    let rtol = run_rtol(s);
+    let h_max = [MAX_STEP_PER_PERIOD, IMPLICIT_MAX_STEP_PER_PERIOD].map(|f| f * s.period);
+    explicit_is_cheaper(rtol, omega, ceiling, h_max, s.method.rho_inf())
+}
+
+/// Circuits above the dense spectrum's size whose Krylov probe [`auto`'s choice] may skip:
+/// below it the probe is the exact dense spectrum and cheap.
+const PROBE_SKIP_UNKNOWNS: usize = 600;
+
+/// Whether the implicit method wins the cost rule even at an upper bound of the pair's
+/// stability ceiling (`stability::rk4_step_ceiling`: a few O(n) products, no Krylov basis),
+/// so that the probe cannot change the choice. Only for a large circuit in one operator
+/// state (no valves' closed states, stiff branches or time-varying coefficients, where the
+/// probe's limit is the smallest over several operators, each of which this bound does not
+/// see): otherwise false, and the probe decides as before.
+fn implicit_wins_at_most(
+    rk: &mut Rk4<'_>,
+    transport_dt: f64,
+    pays: &dyn Fn(f64) -> bool,
+    go: &mut dyn FnMut() -> bool,
+) -> Result<bool> {
+    let one_state = !rk.has_closed_states() && rk.stiff_branches() == 0 && !rk.is_time_varying();
+    if !one_state || rk.diff.len() <= PROBE_SKIP_UNKNOWNS {
+        return Ok(false);
+    }
+    let rk4_ceiling = rk4_step_ceiling(rk, go)?;
+    // the probe's ceiling is RK4's limit (at most `rk4_ceiling`) times the pair's limit over
+    // RK4's on the limiting eigenvalue's ray, whichever ray that is (not the largest |λ|'s)
+    let ratio = ray_reach(|l| dp5_step_limit(l) / rk4_step_limit(l));
+    let ceiling = (STABILITY_SAFETY * rk4_ceiling * ratio).min(transport_dt);
+    Ok(!pays(ceiling))
 }
 
 fn quasi_refused(quasi: bool) -> Result<()> {
@@ -115,19 +177,23 @@ fn quasi_refused(quasi: bool) -> Result<()> {
     Ok(())
 }
 
-/// RK4's stability limit (the stenoses linearised at the steady state), and whether the
-/// stages eliminate the algebraic unknowns by Newton.
-fn probe(
-    dae: &Dae,
-    steady: &SteadyCache<'_>,
-    go: &mut dyn FnMut() -> bool,
-) -> Result<(StabilityLimit, bool)> {
+/// RK4's operator of the circuit, its stenoses linearised at the steady state.
+fn operator<'a>(dae: &'a Dae, steady: &SteadyCache<'_>) -> Result<Rk4<'a>> {
     let mut rk = Rk4::new(dae, Regime::Transient, 1.0)?;
     if !dae.is_linear() {
         if let Ok(ys) = steady.get() {
             rk.set_linearization(ys)?;
         }
     }
+    Ok(rk)
+}
+
+/// RK4's stability limit, and whether the stages eliminate the algebraic unknowns by Newton.
+fn probe(
+    mut rk: Rk4<'_>,
+    dae: &Dae,
+    go: &mut dyn FnMut() -> bool,
+) -> Result<(StabilityLimit, bool)> {
     let by_newton = rk.eliminates_by_newton();
     let limit = rk4_limit_probed(&mut rk, &dae.names, SpectrumMethod::Auto, go)?;
     Ok((limit, by_newton))
