@@ -1016,7 +1016,10 @@ mod segment_tests {
             assert_eq!(s.nodes, [j as u32, j as u32 + 1]);
             assert_eq!(s.shares, [0.25, 0.75]);
             assert_eq!(s.wall.radius, 1e-3 * (j + 1) as f64);
-            assert_eq!((s.wall.x0, s.wall.x1), (0.01 * j as f64, 0.01 * (j + 1) as f64));
+            assert_eq!(
+                (s.wall.x0, s.wall.x1),
+                (0.01 * j as f64, 0.01 * (j + 1) as f64)
+            );
             assert_eq!((s.volume, s.compliance), (2.0 * j as f64, 3.0 * j as f64));
         }
     }
