@@ -82,6 +82,42 @@ def test_a_large_models_packed_description_reads_back_as_given(monkeypatch: Any)
     assert oxyline.load_model(d)._packed is None
 
 
+def test_a_description_large_by_its_own_count_is_packed_without_a_copy(monkeypatch: Any) -> None:
+    """A description whose vessels' own ``segments`` already pass the packing threshold is
+    read by the core from the caller's dict and packed as read, never copied as dicts (the
+    copy would sit under the network build's peak); one that passes it only once segmented
+    (``segmentation``) is copied and packed after the build, as before. Either way the
+    model's description is the dict as handed over, untouched by later edits of it."""
+    from oxyline import model as model_module
+
+    copied: list[Any] = []
+    copy = model_module.copy_description
+
+    def recording_copy(data: Any) -> Any:
+        if isinstance(data, dict) and "vessels" in data:
+            copied.append(data)
+        return copy(data)
+
+    monkeypatch.setattr(model_module, "copy_description", recording_copy)
+    monkeypatch.setattr(model_module, "PACKED_SOURCE_SEGMENTS", 3)
+    bcs = {"in": {"type": "flow", "value": 1e-6}, "o": {"type": "resistance", "resistance": 1e9}}
+    # a: 1 (no count), b: 3 -> 4 segments by the description itself
+    d = {"name": "t", "period": 1.0, "vessels": [dict(v) for v in VESSELS],
+         "boundary_conditions": bcs}
+    m = oxyline.load_model(d)
+    assert copied == [] and m._packed is not None and m._source is None
+    as_given = json.loads(json.dumps(d))
+    d["vessels"][0]["radius"] = 1.0  # the caller's dict is the caller's
+    assert m.source == as_given
+    # 1 + 1 segments by the description, 20 mm segments give more than 3
+    d = {"name": "t", "period": 1.0, "segmentation": {"max_length": 0.02},
+         "vessels": [{k: v for k, v in dict(w).items() if k != "segments"} for w in VESSELS],
+         "boundary_conditions": bcs}
+    m = oxyline.load_model(d)
+    assert m.summary()["segments"] > 3
+    assert len(copied) == 1 and m._packed is not None and m.source == d
+
+
 OUTLETS: list[dict[str, Any]] = [
     {"type": "rcr", "proximal_resistance": 1e8, "capacitance": 1e-10, "distal_resistance": 9e8},
     {"type": "rcr", "proximal_resistance": 1, "capacitance": 1e-10, "distal_resistance": 9,

@@ -84,13 +84,9 @@ class Model:
             return
         if int(self._network.summary()["segments"]) <= PACKED_SOURCE_SEGMENTS:
             return
-        try:
-            # level 1: the vessels' repeated keys and values compress ~10x at a fraction of
-            # the pickling's cost
-            packed = zlib.compress(pickle.dumps(self._source, protocol=5), 1)
-        except (pickle.PicklingError, TypeError, AttributeError):
-            return
-        self._source, self._packed = None, packed
+        packed = _packed(self._source)
+        if packed is not None:
+            self._source, self._packed = None, packed
 
     @property
     def canonical(self) -> dict[str, Any]:
@@ -171,8 +167,41 @@ def circuit_network(model: Model) -> _core.Network:
 
 
 def build_model(data: dict[str, Any]) -> Model:
-    """Validate a native model dict (the README schema) and assemble it."""
-    return _build(copy_description(dict(data)))
+    """Validate a native model dict (the README schema) and assemble it. A description that
+    counts more than :data:`PACKED_SOURCE_SEGMENTS` segments by itself (its vessels'
+    ``segments``) is not copied: the core reads the caller's dict and the model keeps it
+    packed before the network is built (a copy's dicts, ~100 B per segment, would sit under
+    the build's peak)."""
+    data = dict(data)
+    if _segments_at_least(data) > PACKED_SOURCE_SEGMENTS and not has_trees(data):
+        packed = _packed(data)  # the snapshot the model keeps, taken as the core reads it
+        if packed is not None:
+            return _build_native(data, packed=packed)
+    return _build(copy_description(data))
+
+
+def _segments_at_least(data: dict[str, Any]) -> int:
+    """A lower bound of the segments of a native description: its vessels' own ``segments``
+    (1 for a vessel without an integer count; segmentation settings only add segments)."""
+    vessels = data.get("vessels")
+    if not isinstance(vessels, list):
+        return 0
+    n = 0
+    for v in vessels:
+        k = v.get("segments") if isinstance(v, dict) else None
+        n += k if type(k) is int and k > 1 else 1
+    return n
+
+
+def _packed(data: dict[str, Any]) -> bytes | None:
+    """``data`` pickled and compressed (None if it does not pickle): a copy of a few bytes
+    per segment."""
+    try:
+        # level 1: the vessels' repeated keys and values compress ~10x at a fraction of the
+        # pickling's cost
+        return zlib.compress(pickle.dumps(data, protocol=5), 1)
+    except (pickle.PicklingError, TypeError, AttributeError):
+        return None
 
 
 def _build(data: dict[str, Any], *, plausibility: bool = True) -> Model:
@@ -187,15 +216,17 @@ def _build(data: dict[str, Any], *, plausibility: bool = True) -> Model:
 
 
 def _build_native(data: dict[str, Any], grow: Callable[[Any], Any] | None = None, *,
-                  plausibility: bool = True) -> Model:
+                  plausibility: bool = True, packed: bytes | None = None) -> Model:
     """:func:`_build` of a model without structured-tree conditions: the core reads ``data``
     once and builds the network from what it read; ``grow`` adds the structured trees to those
-    parts first (:func:`oxyline.structured_tree.build_with_trees`)."""
+    parts first (:func:`oxyline.structured_tree.build_with_trees`). ``packed``: ``data``
+    is the caller's own dict and this its packed copy, which the model keeps instead."""
     parts, name, period, tr, info = _core.read_model(data)
     if grow is not None:
         grow(parts)
-    sim = dict(data.get("simulation") or {})
-    model = Model(name=name, simulation=sim, period=period, _source=data, transport=info,
+    sim = copy_description(dict(data.get("simulation") or {}))
+    model = Model(name=name, simulation=sim, period=period,
+                  _source=None if packed is not None else data, _packed=packed, transport=info,
                   _names=parts.names(), _transport_spec=tr)
     limit = _memory.limit(sim.get("max_memory"), "simulation: max_memory")
     with core_errors(f"model '{name}'"):

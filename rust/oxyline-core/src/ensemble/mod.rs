@@ -334,17 +334,21 @@ impl Member {
         mut assembled: Assembled,
         transport: Option<&TransportSpec>,
     ) -> Result<Member> {
+        // the segments' geometry is read by the transport plan alone, which takes it over
+        // (a flow-only network drops it before its matrices are built)
+        if transport.is_none() {
+            assembled.circuit.segments = Vec::new();
+        }
         let dae = assembled.circuit.assemble()?;
         let transport = match transport {
-            Some(t) => Some(Transport::build(
+            Some(t) => Some(Transport::build_taking_segments(
                 t,
-                &assembled.circuit,
+                &mut assembled.circuit,
                 &dae,
                 &assembled.probes,
             )?),
             None => None,
         };
-        assembled.circuit.segments = Vec::new();
         Ok(Member {
             assembled,
             dae,

@@ -3,6 +3,7 @@
 
 #[allow(unused_imports)]
 use super::*;
+use crate::circuit::SegmentGeom;
 
 /// Largest accepted `cells_per_segment` (a guard against typos that would allocate millions
 /// of cells per segment).
@@ -22,7 +23,11 @@ pub(super) fn cells_per_segment(v: f64, element: &str, key: &str) -> Result<usiz
 impl SpeciesPlan {
     /// Validate one species of the transport section against the circuit: binding, boundary
     /// values of every boundary condition, walls per vessel, initial value.
-    pub(super) fn build(sp: &SpeciesSpec, circuit: &Circuit) -> Result<Self> {
+    pub(super) fn build(
+        sp: &SpeciesSpec,
+        circuit: &Circuit,
+        segment_vessels: &[u32],
+    ) -> Result<Self> {
         let el = format!("species '{}'", sp.name);
         for (key, v) in [("decay", sp.decay), ("diffusivity", sp.diffusivity)] {
             if !(v.is_finite() && v >= 0.0) {
@@ -54,7 +59,7 @@ impl SpeciesPlan {
                 .filter(|&k| matches!(boundary[k], BoundaryValue::Wave(_)))
                 .collect(),
             boundary,
-            walls: vessel_walls(sp, circuit, &el)?,
+            walls: vessel_walls(sp, circuit, segment_vessels, &el)?,
             initial_free,
         })
     }
@@ -95,12 +100,17 @@ fn boundary_values(
 }
 
 /// The wall of every vessel for species `sp`: its `wall`, or the vessel's `per_vessel` entry.
-fn vessel_walls(sp: &SpeciesSpec, circuit: &Circuit, el: &str) -> Result<Vec<WallSpec>> {
+fn vessel_walls(
+    sp: &SpeciesSpec,
+    circuit: &Circuit,
+    segment_vessels: &[u32],
+    el: &str,
+) -> Result<Vec<WallSpec>> {
     sp.wall.validate(&format!("{el} wall"))?;
     let mut walls = vec![sp.wall.clone(); circuit.vessel_names.len()];
     let mut segments = vec![0usize; circuit.vessel_names.len()];
-    for s in &circuit.segments {
-        segments[s.vessel] += 1;
+    for &v in segment_vessels {
+        segments[v as usize] += 1;
     }
     for (vname, w) in &sp.per_vessel {
         let Some(vi) = circuit.vessel_names.iter().position(|n| n == vname) else {
@@ -130,7 +140,11 @@ fn vessel_walls(sp: &SpeciesSpec, circuit: &Circuit, el: &str) -> Result<Vec<Wal
 }
 
 /// The species of the section, with unique non-empty names.
-fn species_plans(spec: &TransportSpec, circuit: &Circuit) -> Result<Vec<SpeciesPlan>> {
+fn species_plans(
+    spec: &TransportSpec,
+    circuit: &Circuit,
+    segment_vessels: &[u32],
+) -> Result<Vec<SpeciesPlan>> {
     let mut seen = std::collections::HashSet::new();
     spec.species
         .iter()
@@ -139,7 +153,7 @@ fn species_plans(spec: &TransportSpec, circuit: &Circuit) -> Result<Vec<SpeciesP
                 let el = format!("species '{}'", sp.name);
                 return Err(bad(&el, "needs a unique, non-empty name".into()));
             }
-            SpeciesPlan::build(sp, circuit)
+            SpeciesPlan::build(sp, circuit, segment_vessels)
         })
         .collect()
 }
@@ -153,14 +167,38 @@ impl Transport {
         dae: &Dae,
         probes: &Probes,
     ) -> Result<Self> {
+        Self::build_from(spec, circuit, circuit.segments.clone(), dae, probes)
+    }
+
+    /// [`Transport::build`] taking the circuit's segment geometry (`circuit.segments` is left
+    /// empty): the plan's segments are written over it in place, so a large network never
+    /// holds both (88 + 72 bytes per segment at the load's peak). The circuit's other tables
+    /// are untouched.
+    pub fn build_taking_segments(
+        spec: &TransportSpec,
+        circuit: &mut Circuit,
+        dae: &Dae,
+        probes: &Probes,
+    ) -> Result<Self> {
+        let geoms = std::mem::take(&mut circuit.segments);
+        Self::build_from(spec, circuit, geoms, dae, probes)
+    }
+
+    fn build_from(
+        spec: &TransportSpec,
+        circuit: &Circuit,
+        mut geoms: Vec<SegmentGeom>,
+        dae: &Dae,
+        probes: &Probes,
+    ) -> Result<Self> {
         check_settings(spec, circuit)?;
         // (a face's ends are 31-bit node and boundary indices, its unknown a u32)
         if dae.n >= Face::BOUNDARY as usize {
             return Err(bad("transport", "network too large".into()));
         }
         let mut kind = exterior_nodes(circuit);
-        let shares = segment_shares(circuit, &kind)?;
-        let volume = node_volumes(circuit, &shares);
+        // the shares are written into the segments' own node list (no second table of them)
+        let volume = move_shares(circuit, &mut geoms, &kind)?;
         classify_nodes(circuit, dae, &volume, &mut kind)?;
         let (mut faces, sources) = flow_faces(circuit, &kind)?;
         contract_boundary_points(circuit, &mut kind, &mut faces);
@@ -168,20 +206,22 @@ impl Transport {
         for (fi, f) in faces.iter().enumerate() {
             face_of_unknown[f.unknown()] = fi as u32;
         }
-        let m_node = refinement(spec, circuit, &kind, &shares)?;
+        let m_node = refinement(spec, circuit, &kind, &geoms)?;
         // (refined sub-cells are nodes too: their indices must fit a face's 31 bits)
-        let sub_cells: usize = m_node.iter().map(|&m| m - 1).sum();
+        let sub_cells: usize = m_node.iter().map(|&m| m as usize - 1).sum();
         if kind.len() + sub_cells >= Face::BOUNDARY as usize {
             return Err(bad("transport", "network too large".into()));
         }
         let n_flow_faces = faces.len();
         let refined = Refined::new(&mut kind, &mut faces, &sources, &m_node);
         let layout = CellLayout::new(&volume, dae, &kind, &m_node, &refined.first_extra);
-        let segments = segments(circuit, &face_of_unknown, &shares);
+        drop(volume);
+        let segment_vessels: Vec<u32> = geoms.iter().map(|s| s.vessel as u32).collect();
+        let segments = segments(geoms, circuit.nodes.len(), &face_of_unknown);
         let (pieces, seg_pieces, sub_walls) =
             wall_pieces(&segments, &m_node, &layout.node_cell, &refined.first_extra);
-        let species = species_plans(spec, circuit)?;
-        let segment_vessels: Vec<u32> = circuit.segments.iter().map(|s| s.vessel as u32).collect();
+        drop(m_node);
+        let species = species_plans(spec, circuit, &segment_vessels)?;
         // tissue hook: a radial wall column behind every wall piece of a tissue wall
         let tissue = tissue::plans(
             spec,
@@ -191,7 +231,8 @@ impl Transport {
             &segment_vessels,
             (&pieces, &seg_pieces, &sub_walls),
         )?;
-        let (mut out_vessels, out_segments) = output_layout(circuit, probes, &face_of_unknown);
+        let (mut out_vessels, out_segments) =
+            output_layout(circuit, probes, &face_of_unknown, &segment_vessels);
         end_cells(&mut out_vessels, &out_segments, &segments, &kind);
         drop(face_of_unknown);
         let nn = kind.len();
@@ -202,6 +243,7 @@ impl Transport {
         } else {
             refined.last_sub
         };
+        drop(refined.first_extra);
         let mut p = Plan {
             mixing: (0..nn).filter(|&i| kind[i] == Kind::Mixing).collect(),
             kind,
@@ -265,7 +307,8 @@ fn exterior_nodes(circuit: &Circuit) -> Vec<Kind> {
     kind
 }
 
-/// Every segment's (node, share) of its lumen volume and wall as transport holds them. The
+/// Every segment's (node, share) of its lumen volume and wall as transport holds them,
+/// written into `geoms` in place, and the lumen volume per circuit node that follows. The
 /// arrangement puts a segment's capacitor, volume and wall at its end nodes; where an end is a
 /// prescribed-pressure node (a `pressure` condition: the first segment of an inverted-L vessel
 /// fed by an inlet pressure, half of it for π, the last of an L vessel at an outlet pressure)
@@ -274,54 +317,53 @@ fn exterior_nodes(circuit: &Circuit) -> Vec<Kind> {
 /// dynamics of the network); the moved volume is rigid in its new cell, whose volume changes
 /// by the net inflow exactly as before. A segment with both ends outside the domain (one
 /// segment between two prescribed pressures) has no cell for its volume: an error.
-fn segment_shares(circuit: &Circuit, kind: &[Kind]) -> Result<Vec<[(usize, f64); 2]>> {
-    circuit
-        .segments
-        .iter()
-        .enumerate()
-        .map(|(j, s)| {
-            let [(a, sa), (b, sb)] = s.nodes;
-            let (ea, eb) = (kind[a] == Kind::Exterior, kind[b] == Kind::Exterior);
-            match (ea && sa > 0.0, eb && sb > 0.0) {
-                (false, false) => Ok(s.nodes),
-                _ if ea && eb && (s.volume > 0.0 || s.radius > 0.0) => Err(bad(
-                    &format!("vessel '{}'", circuit.vessel_names[s.vessel]),
-                    format!(
-                        "segment {} joins two prescribed-pressure nodes, so transport has no \
-                         cell for its volume and wall; give the vessel at least 2 segments",
-                        segment_number(circuit, j)
-                    ),
-                )),
-                _ if ea && eb => Ok(s.nodes),
-                (true, _) => Ok([(a, 0.0), (b, sa + sb)]),
-                (false, true) => Ok([(a, sa + sb), (b, 0.0)]),
-            }
-        })
-        .collect()
-}
-
-/// 1-based position of segment `j` within its vessel (for messages).
-fn segment_number(circuit: &Circuit, j: usize) -> usize {
-    let v = circuit.segments[j].vessel;
-    circuit.segments[..j]
-        .iter()
-        .filter(|s| s.vessel == v)
-        .count()
-        + 1
-}
-
-/// Lumen volume per circuit node at the reference pressure with the transport's shares: the
-/// circuit's, with the shares `segment_shares` moved off prescribed-pressure nodes.
-fn node_volumes(circuit: &Circuit, shares: &[[(usize, f64); 2]]) -> Vec<f64> {
+fn move_shares(circuit: &Circuit, geoms: &mut [SegmentGeom], kind: &[Kind]) -> Result<Vec<f64>> {
+    // the circuit's node volumes, with the moved shares' volume added in segment order
     let mut volume: Vec<f64> = circuit.nodes.iter().map(|n| n.volume).collect();
-    for (s, moved) in circuit.segments.iter().zip(shares) {
-        for (&(n, before), &(_, after)) in s.nodes.iter().zip(moved) {
+    for j in 0..geoms.len() {
+        let moved = moved_shares(circuit, geoms, j, kind)?;
+        let s = &mut geoms[j];
+        for (&(n, before), &(_, after)) in s.nodes.iter().zip(&moved) {
             if before != after {
                 volume[n] += (after - before) * s.volume;
             }
         }
+        s.nodes = moved;
     }
-    volume
+    Ok(volume)
+}
+
+/// Segment `j`'s (node, share) pair with the shares on prescribed-pressure ends moved (see
+/// [`move_shares`]).
+fn moved_shares(
+    circuit: &Circuit,
+    geoms: &[SegmentGeom],
+    j: usize,
+    kind: &[Kind],
+) -> Result<[(usize, f64); 2]> {
+    let s = &geoms[j];
+    let [(a, sa), (b, sb)] = s.nodes;
+    let (ea, eb) = (kind[a] == Kind::Exterior, kind[b] == Kind::Exterior);
+    match (ea && sa > 0.0, eb && sb > 0.0) {
+        (false, false) => Ok(s.nodes),
+        _ if ea && eb && (s.volume > 0.0 || s.radius > 0.0) => Err(bad(
+            &format!("vessel '{}'", circuit.vessel_names[s.vessel]),
+            format!(
+                "segment {} joins two prescribed-pressure nodes, so transport has no \
+                 cell for its volume and wall; give the vessel at least 2 segments",
+                segment_number(geoms, j)
+            ),
+        )),
+        _ if ea && eb => Ok(s.nodes),
+        (true, _) => Ok([(a, 0.0), (b, sa + sb)]),
+        (false, true) => Ok([(a, sa + sb), (b, 0.0)]),
+    }
+}
+
+/// 1-based position of segment `j` within its vessel (for messages).
+fn segment_number(geoms: &[SegmentGeom], j: usize) -> usize {
+    let v = geoms[j].vessel;
+    geoms[..j].iter().filter(|s| s.vessel == v).count() + 1
 }
 
 /// Cells among the domain nodes: those holding lumen volume. A compliant node without lumen
@@ -448,8 +490,8 @@ fn refinement(
     spec: &TransportSpec,
     circuit: &Circuit,
     kind: &[Kind],
-    shares: &[[(usize, f64); 2]],
-) -> Result<Vec<usize>> {
+    geoms: &[SegmentGeom],
+) -> Result<Vec<u32>> {
     let m_default = cells_per_segment(spec.cells_per_segment, "transport", "cells_per_segment")?;
     let mut m_vessel = vec![m_default; circuit.vessel_names.len()];
     for (name, &v) in &spec.cells_per_vessel {
@@ -461,11 +503,12 @@ fn refinement(
         };
         m_vessel[vi] = cells_per_segment(v, &format!("vessel '{name}'"), "cells_per_segment")?;
     }
-    let mut m_node = vec![1usize; circuit.nodes.len()];
-    for (sg, nodes) in circuit.segments.iter().zip(shares) {
-        for &(n, share) in nodes {
+    // (m <= MAX_CELLS_PER_SEGMENT: a u32)
+    let mut m_node = vec![1u32; circuit.nodes.len()];
+    for sg in geoms {
+        for &(n, share) in &sg.nodes {
             if share > 0.0 && kind[n] == Kind::Cell {
-                m_node[n] = m_node[n].max(m_vessel[sg.vessel]);
+                m_node[n] = m_node[n].max(m_vessel[sg.vessel] as u32);
             }
         }
     }
@@ -476,7 +519,8 @@ fn refinement(
 /// sub-cells. Sub-cell 0 is the node itself; the others are new transport nodes nn.., so the
 /// face, upwind and sweep machinery works unchanged on the refined graph.
 struct Refined {
-    /// Per circuit node: its first extra sub-cell (`usize::MAX`: not refined).
+    /// Per circuit node: its first extra sub-cell (`usize::MAX`: not refined; empty when no
+    /// node is refined).
     first_extra: Vec<usize>,
     last_sub: Vec<usize>,
     chains: Vec<Chain>,
@@ -487,17 +531,22 @@ impl Refined {
         kind: &mut Vec<Kind>,
         faces: &mut Vec<Face>,
         sources: &[(usize, Waveform, usize)],
-        m_node: &[usize],
+        m_node: &[u32],
     ) -> Refined {
         let nn = kind.len();
+        if m_node.iter().all(|&m| m == 1) {
+            // nothing refined: no per-node tables (read only for nodes with m > 1)
+            return Refined {
+                first_extra: Vec::new(),
+                last_sub: Vec::new(),
+                chains: Vec::new(),
+            };
+        }
         let mut r = Refined {
             first_extra: vec![usize::MAX; nn],
             last_sub: (0..nn).collect(),
             chains: Vec::new(),
         };
-        if m_node.iter().all(|&m| m == 1) {
-            return r;
-        }
         let (mut ins, mut outs) = (vec![Vec::new(); nn], vec![Vec::new(); nn]);
         for (fi, f) in faces.iter().enumerate() {
             if let End::Node(n) = f.head() {
@@ -512,7 +561,7 @@ impl Refined {
             node_src[*n].push(k);
         }
         for n in (0..nn).filter(|&n| m_node[n] > 1) {
-            let m = m_node[n];
+            let m = m_node[n] as usize;
             r.first_extra[n] = kind.len();
             kind.extend(std::iter::repeat_n(Kind::Cell, m - 1));
             let sub = |k: usize| if k == 0 { n } else { r.first_extra[n] + k - 1 };
@@ -554,7 +603,7 @@ impl CellLayout {
         volume: &[f64],
         dae: &Dae,
         kind: &[Kind],
-        m_node: &[usize],
+        m_node: &[u32],
         first_extra: &[usize],
     ) -> CellLayout {
         let mut l = CellLayout {
@@ -568,7 +617,7 @@ impl CellLayout {
         // a viscoelastic wall's volume follows its elastic pressure (`Dae::walls`)
         let walls: std::collections::HashMap<usize, usize> = dae.walls.iter().copied().collect();
         for n in (0..volume.len()).filter(|&n| kind[n] == Kind::Cell) {
-            let m = m_node[n];
+            let m = m_node[n] as usize;
             let u = walls.get(&n).copied().unwrap_or(n);
             for k in 0..m {
                 let c = if k == 0 { n } else { first_extra[n] + k - 1 };
@@ -588,22 +637,17 @@ impl CellLayout {
 }
 
 /// The flow segments as the transport sees them (branch unknown and face, nodes and their
-/// shares as `segment_shares` placed them, wall).
-fn segments(
-    circuit: &Circuit,
-    face_of_unknown: &[u32],
-    shares: &[[(usize, f64); 2]],
-) -> Vec<Segment> {
-    let nc_nodes = circuit.nodes.len();
-    circuit
-        .segments
-        .iter()
-        .zip(shares)
-        .map(|(s, nodes)| Segment {
+/// shares as `move_shares` placed them, wall), written over the circuit's segment geometry
+/// in place (a `Segment` is smaller than a `SegmentGeom` of the same alignment, so the
+/// collect reuses the buffer) and trimmed to their size.
+fn segments(geoms: Vec<SegmentGeom>, nc_nodes: usize, face_of_unknown: &[u32]) -> Vec<Segment> {
+    let mut segments: Vec<Segment> = geoms
+        .into_iter()
+        .map(|s| Segment {
             branch_unknown: (nc_nodes + s.branch) as u32,
             face: face_of_unknown[nc_nodes + s.branch],
-            nodes: nodes.map(|(n, _)| n as u32),
-            shares: nodes.map(|(_, share)| share),
+            nodes: s.nodes.map(|(n, _)| n as u32),
+            shares: s.nodes.map(|(_, share)| share),
             wall: SegmentWall {
                 radius: s.radius,
                 x0: s.x0,
@@ -612,7 +656,9 @@ fn segments(
             volume: s.volume,
             compliance: s.compliance,
         })
-        .collect()
+        .collect();
+    segments.shrink_to_fit();
+    segments
 }
 
 /// The output vessels of the flow probes (first and last face, segment range) and their
@@ -621,6 +667,7 @@ fn output_layout(
     circuit: &Circuit,
     probes: &Probes,
     face_of_unknown: &[u32],
+    segment_vessels: &[u32],
 ) -> (Vec<OutVessel>, Vec<u32>) {
     let vessel_index: std::collections::HashMap<&str, usize> = circuit
         .vessel_names
@@ -629,8 +676,8 @@ fn output_layout(
         .map(|(i, n)| (n.as_str(), i))
         .collect();
     let mut segs_of_vessel: Vec<Vec<usize>> = vec![Vec::new(); circuit.vessel_names.len()];
-    for (j, sg) in circuit.segments.iter().enumerate() {
-        if let Some(v) = segs_of_vessel.get_mut(sg.vessel) {
+    for (j, &vessel) in segment_vessels.iter().enumerate() {
+        if let Some(v) = segs_of_vessel.get_mut(vessel as usize) {
             v.push(j);
         }
     }
@@ -688,7 +735,7 @@ fn end_cells(
 /// walls of the refined pieces (the others read their segment's: `Piece::sub`).
 fn wall_pieces(
     segments: &[Segment],
-    m_node: &[usize],
+    m_node: &[u32],
     node_cell: &[u32],
     first_extra: &[usize],
 ) -> (Vec<Piece>, Vec<u32>, Vec<SegmentWall>) {
@@ -701,7 +748,7 @@ fn wall_pieces(
             if share <= 0.0 || node_cell[n] == u32::MAX {
                 continue;
             }
-            let m = m_node[n];
+            let m = m_node[n] as usize;
             let piece = |c: usize, share: f64, sub: u32| Piece {
                 seg: j as u32,
                 node: c as u32,
@@ -932,5 +979,48 @@ impl Plan {
         let laws = Laws::evaluate_all(self, mean, false)?;
         self.base_laws = laws.into_iter().map(Arc::new).collect();
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod segment_tests {
+    use super::*;
+
+    /// The plan's segments are written over the circuit's segment geometry: the same buffer
+    /// (never both tables at once), each segment's branch unknown, face, shared nodes and wall
+    /// as the geometry gave them.
+    #[test]
+    fn plan_segments_take_the_geometry_buffer_over() {
+        let nc_nodes = 7;
+        let geoms: Vec<SegmentGeom> = (0..1000)
+            .map(|j| SegmentGeom {
+                vessel: j / 4,
+                branch: j,
+                nodes: [(j, 0.25), (j + 1, 0.75)],
+                radius: 1e-3 * (j + 1) as f64,
+                x0: 0.01 * j as f64,
+                x1: 0.01 * (j + 1) as f64,
+                volume: 2.0 * j as f64,
+                compliance: 3.0 * j as f64,
+            })
+            .collect();
+        let buffer = geoms.as_ptr() as usize;
+        let face_of_unknown: Vec<u32> = (0..nc_nodes + 1000).map(|u| 10 * u as u32).collect();
+        let segs = segments(geoms, nc_nodes, &face_of_unknown);
+        assert_eq!(segs.as_ptr() as usize, buffer);
+        assert_eq!(segs.len(), 1000);
+        assert_eq!(segs.capacity(), 1000);
+        for (j, s) in segs.iter().enumerate() {
+            assert_eq!(s.branch_unknown as usize, nc_nodes + j);
+            assert_eq!(s.face as usize, 10 * (nc_nodes + j));
+            assert_eq!(s.nodes, [j as u32, j as u32 + 1]);
+            assert_eq!(s.shares, [0.25, 0.75]);
+            assert_eq!(s.wall.radius, 1e-3 * (j + 1) as f64);
+            assert_eq!(
+                (s.wall.x0, s.wall.x1),
+                (0.01 * j as f64, 0.01 * (j + 1) as f64)
+            );
+            assert_eq!((s.volume, s.compliance), (2.0 * j as f64, 3.0 * j as f64));
+        }
     }
 }
