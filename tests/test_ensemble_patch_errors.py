@@ -28,8 +28,8 @@ def _others_are_plain_runs(ds: Any, model: Any, patches: list[dict[str, Any]],
             np.testing.assert_array_equal(ds[name].values[k], values, err_msg=f"{k} {name}")
 
 
-# TUBE_CGS takes the value route for scale-only patches; TUBE with a blood patch beside the
-# scale takes the full route: both must name the patch path
+# a scale-only patch of a model in CGS units, and one with a blood patch beside the scale:
+# both must name the patch path
 @pytest.mark.parametrize(("model", "extra"), [(TUBE_CGS, {}), (TUBE, {"blood": {"viscosity": 4e-3}})])
 def test_a_compliance_factor_zero_fails_its_variant_naming_the_path(model: Any,
                                                                     extra: dict[str, Any]

@@ -53,9 +53,7 @@ class Feed:
                  on_skip: Callable[[int], None]) -> None:
         model = patcher.base
         self.patcher = patcher
-        # unknown names raise before anything runs; the scale-only patches' target values
-        # come out of the same pass (one numpy table for the whole ensemble)
-        self.values = patcher.check_all(patches, numbers)
+        patcher.check_all(patches, numbers)  # unknown names raise before anything runs
         self.patches, self.output, self.overrides = patches, output, overrides
         #: the run settings of the variants that keep the base model's (most of them)
         self.base_settings = run_settings(model, output, overrides)
@@ -68,13 +66,13 @@ class Feed:
                                                         model.simulation.get("max_memory")),
                                           "simulate_ensemble: max_memory")
 
-    def next(self) -> tuple[int, str | None, float, float, Any, Any, Any, Any] | None:
+    def next(self) -> tuple[int, str | None, float, float, Any, Any] | None:
         while self._next < len(self.patches):
             i = self._next
             self._next += 1
             k = self.numbers[i]
             try:
-                v = self.patcher.variant(self.patches[i], k, self.values.pop(i, None))
+                v = self.patcher.variant(self.patches[i], k)
                 s = (self.base_settings if v.model is self.patcher.base else
                      run_settings(v.model, self.output, self.overrides))
             except ModelError as e:  # a ResourceError too
@@ -85,20 +83,17 @@ class Feed:
                 self.on_skip(i)
                 continue
             self.prepared[i] = (v, s)
-            return (i, v.patch_json, s["period"], s["output_every"], v.vessels, v.outlets,
-                    v.values, v.tables)
+            return i, v.patch_json, s["period"], s["output_every"], v.vessels, v.outlets
         return None
 
 
 class Base:
     """What every variant of one base model shares: its :class:`Patcher` and the core's
-    parsed :class:`oxyline._core.Ensemble` (with the targets of scale patches)."""
+    parsed :class:`oxyline._core.Ensemble`."""
 
     def __init__(self, model: Model) -> None:
         self.patcher = Patcher(model)
-        scaler = self.patcher.scaler
-        self.ensemble = _core.Ensemble(json.dumps(model.canonical, separators=(",", ":")),
-                                       targets=scaler.targets if scaler is not None else None)
+        self.ensemble = _core.Ensemble(json.dumps(model.canonical, separators=(",", ":")))
 
 
 #: the :class:`Base` of the models this process has seen as a cluster worker, by id(model)

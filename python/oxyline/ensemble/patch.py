@@ -27,16 +27,22 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
 from oxyline import _core
 from oxyline.description import copy_description
-from oxyline.ensemble.scale import mapping as _mapping
-from oxyline.ensemble.scale import where as _where
-from oxyline.ensemble.values import ValueTable
 from oxyline.errors import ModelError
 from oxyline.model import Model
 from oxyline.structured_tree import TYPE as STRUCTURED_TREE
+
+
+def _where(k: int, path: str) -> str:
+    """The prefix of every patch error: the variant and the patch path."""
+    return f"variant {k}: {path}"
+
+
+def _mapping(value: Any, k: int, path: str) -> Mapping[str, Any]:
+    if not isinstance(value, Mapping):
+        raise ModelError(f"{_where(k, path)}: expected a mapping, got {value!r}")
+    return value
 
 
 @dataclass
@@ -228,18 +234,12 @@ class Variant:
     patch's vessels (by index) and conditions (by node) are handed to the core as the
     canonical dicts themselves (``vessels``, ``outlets``), read there by the core's serde
     types; the rest as JSON text (the text of a variant that rescales every vessel cost the
-    thread that feeds the workers more than the rest of its work). A patch on
-    the value route (:mod:`oxyline.ensemble.values`) has ``values`` and ``tables`` instead."""
+    thread that feeds the workers more than the rest of its work)."""
 
     patch_json: str | None
     model: Model
     vessels: dict[int, Any] | None = None
     outlets: dict[str, Any] | None = None
-    #: one SI value per target of :class:`~oxyline.ensemble.values.ValueTable` (NaN: the
-    #: base value), or None
-    values: np.ndarray | None = None
-    #: the replaced waveform tables ``(target, time, value)`` in SI, or None
-    tables: list[tuple[int, np.ndarray, np.ndarray]] | None = None
 
 
 def _refuse_structured_trees(base: Model) -> None:
@@ -256,44 +256,24 @@ def _refuse_structured_trees(base: Model) -> None:
 
 
 class Patcher:
-    """Turns patches into :class:`Variant` s. The canonical form of the base model's elements
-    is computed once; a variant converts only the vessels and conditions its patch changed,
-    or takes the value route (:mod:`oxyline.ensemble.values`)."""
+    """Turns patches into :class:`Variant` s: the core applies each patch
+    (``oxyline_core::model::patch``) and reads the vessels and conditions it changed; the
+    canonical form of the base model's other elements is computed once and shared."""
 
     def __init__(self, base: Model) -> None:
         _refuse_structured_trees(base)
         self.base = base
-        table = ValueTable(base)
-        #: the value route (None: every patch takes the full path)
-        self.scaler = table if table.targets else None
         #: the base's canonical elements, which a variant shares where its patch leaves them
         self._reader = _core.VariantReader(base.canonical)
 
-    def _parse(self, patch: Any, k: int) -> Any:
-        return None if self.scaler is None else self.scaler.parse(patch, k)
-
-    def check_all(self, patches: Sequence[Any], numbers: range | None = None) -> dict[int, Any]:
+    def check_all(self, patches: Sequence[Any], numbers: range | None = None) -> None:
         """Raise :class:`ModelError` for unknown names in every patch (variant ``numbers[i]``,
-        default ``i``), as :meth:`variant` would (a patch on the value route is checked
-        without merging it; a value the patch cannot apply is not raised here: it fails only
-        its variant), and return the value-route rows of those that take it, by position in
-        ``patches`` (see :meth:`~oxyline.ensemble.values.ValueTable.rows`): the parse serves
-        both, and the values of the whole ensemble are one numpy pass."""
+        default ``i``), as :meth:`variant` would; a value the patch cannot apply is not
+        raised here: it fails only its variant."""
         numbers = range(len(patches)) if numbers is None else numbers
-        fast: list[int] = []
-        parsed = []
         for i, patch in enumerate(patches):
-            p = self._parse(patch, numbers[i]) if patch else None
-            if p is None:
+            if patch:
                 merge(self.base.source, patch, numbers[i])
-            else:
-                parsed.append(p)
-                fast.append(i)
-        if not parsed:
-            return {}
-        assert self.scaler is not None
-        rows = self.scaler.rows(parsed)
-        return {i: row for i, row in zip(fast, rows, strict=True) if row is not None}
 
     def _read(self, merged: Merged, patch: Mapping[str, Any], k: int) -> Model:
         """The model of a merged variant: the elements it changed read by the core's schema
@@ -311,20 +291,12 @@ class Patcher:
                                      if key not in ("vessels", "boundary_conditions", "scale")})
             raise ModelError(traced(k, paths, e)) from None
 
-    def variant(self, patch: Mapping[str, Any], k: int, row: Any = None) -> Variant:
+    def variant(self, patch: Mapping[str, Any], k: int) -> Variant:
         """Variant ``k``. Unknown names raise :class:`ModelError`; a value the patch or the
         model refuses raises it too, naming the variant and the patch paths, which the
-        caller records as that variant's failure. ``row``: the value-route row of the patch
-        from :meth:`check_all`, if computed there."""
+        caller records as that variant's failure."""
         if not patch:
             return Variant(None, self.base)
-        if row is None and self.scaler is not None:
-            parsed = self.scaler.parse(patch, k)
-            row = None if parsed is None else self.scaler.rows([parsed])[0]
-        if row is not None:
-            assert self.scaler is not None
-            return Variant(None, self.scaler.model_with_period(row.period), values=row.values,
-                           tables=row.tables)
         merged = merge_patch(self.base.source, patch, k)
         model = self._read(merged, patch, k)
         canon, base = model.canonical, self.base.canonical

@@ -8,10 +8,9 @@ use crate::reader::model::vessel_name;
 use crate::reader::node::PyNode;
 use crate::results::{layout_dict, outcome_dict, recorded_columns};
 use crate::settings::Shared;
-use numpy::{IntoPyArray, PyReadonlyArray1};
+use numpy::IntoPyArray;
 use oxyline_core::ensemble::{
-    ColumnStats, ConditionValue, Member, SpecPatch, StatsFold, TableValues, Target, Targets,
-    column_stats, run_fed, worker_count,
+    ColumnStats, Member, SpecPatch, StatsFold, column_stats, run_fed, worker_count,
 };
 use oxyline_core::model::patch::{self, Merged, PatchError, Patched};
 use oxyline_core::model::{BoundarySpec, NetworkSpec, VesselSpec, parse};
@@ -40,10 +39,6 @@ struct Input {
     handed: Result<Handed, Error>,
     period: f64,
     output_every: f64,
-    /// One value per target of the ensemble (NaN: the base value), or none.
-    values: Option<Vec<f64>>,
-    /// The waveform tables of the variant's table targets.
-    tables: Vec<TableValues>,
 }
 
 /// Vessels (by index) and conditions of a patch read from their canonical dicts (by the
@@ -78,17 +73,10 @@ fn handed_over(
     Ok(h)
 }
 
-/// The base model with a variant's patch (JSON text, handed-over elements, target values and
-/// tables; none of them: the base itself), assembled.
-fn member_of(
-    base: &NetworkSpec,
-    patch: Option<&str>,
-    handed: Handed,
-    targets: &Targets,
-    values: Option<&[f64]>,
-    tables: &[TableValues],
-) -> Result<Member, Error> {
-    if handed.vessels.is_empty() && handed.outlets.is_empty() && values.is_none() {
+/// The base model with a variant's patch (JSON text and handed-over elements; none of them:
+/// the base itself), assembled.
+fn member_of(base: &NetworkSpec, patch: Option<&str>, handed: Handed) -> Result<Member, Error> {
+    if handed.vessels.is_empty() && handed.outlets.is_empty() {
         return Member::of_patch(base, patch);
     }
     let mut p = match patch {
@@ -97,51 +85,7 @@ fn member_of(
     };
     p.vessels.extend(handed.vessels);
     p.boundary_conditions.extend(handed.outlets);
-    let mut spec = p.apply(base)?;
-    if let Some(values) = values {
-        targets.write(&mut spec, values, tables)?;
-    }
-    Member::build(&spec)
-}
-
-/// The targets of `Ensemble(targets=...)`: `(kind, key)` pairs, `kind` one of
-/// `lumped.resistance`, `lumped.capacitance`, `youngs_modulus`, `length`, `radius_in`,
-/// `radius_out`, `wall_thickness` (key: the vessel's index), `resistance`,
-/// `proximal_resistance`, `capacitance`, `distal_resistance` (key: the node of a resistance
-/// or RCR condition) or `table` (key: the node of a flow or pressure condition).
-fn targets_of(list: &Bound<'_, PyAny>) -> PyResult<Vec<Target>> {
-    let mut out = Vec::new();
-    for item in list.try_iter()? {
-        let (kind, key): (String, Bound<'_, PyAny>) = item?.extract()?;
-        let node = |v: ConditionValue| key.extract::<String>().map(|n| Target::Condition(n, v));
-        let t = match kind.as_str() {
-            "lumped.resistance" => key.extract().map(Target::LumpedResistance),
-            "lumped.capacitance" => key.extract().map(Target::LumpedCapacitance),
-            "youngs_modulus" => key.extract().map(Target::YoungsModulus),
-            "length" => key.extract().map(Target::Length),
-            "radius_in" => key.extract().map(Target::RadiusIn),
-            "radius_out" => key.extract().map(Target::RadiusOut),
-            "wall_thickness" => key.extract().map(Target::WallThickness),
-            "table" => key.extract::<String>().map(Target::Table),
-            "resistance" => node(ConditionValue::Resistance),
-            "proximal_resistance" => node(ConditionValue::ProximalResistance),
-            "capacitance" => node(ConditionValue::Capacitance),
-            "distal_resistance" => node(ConditionValue::DistalResistance),
-            _ => {
-                return Err(to_py(Error::model(
-                    "ensemble targets",
-                    format!("unknown target kind '{kind}'"),
-                )));
-            }
-        };
-        out.push(t.map_err(|_| {
-            to_py(Error::model(
-                "ensemble targets",
-                format!("bad key {key} for a '{kind}' target"),
-            ))
-        })?);
-    }
-    Ok(out)
+    Member::build(&p.apply(base)?)
 }
 
 /// The output selection of a run (the names `Network.simulate` takes).
@@ -203,29 +147,13 @@ fn name_timeout(
 /// One variant: patch, assemble, select, run; `template` holds the shared settings.
 fn run_variant(
     base: &NetworkSpec,
-    targets: &Targets,
     input: Input,
     template: &RunSettings,
     output: &Output,
     cancelled: &AtomicBool,
 ) -> Finished {
-    let Input {
-        patch,
-        handed,
-        values,
-        tables,
-        ..
-    } = input;
-    let built = handed.and_then(|h| {
-        member_of(
-            base,
-            patch.as_deref(),
-            h,
-            targets,
-            values.as_deref(),
-            &tables,
-        )
-    });
+    let Input { patch, handed, .. } = input;
+    let built = handed.and_then(|h| member_of(base, patch.as_deref(), h));
     let member = match built {
         Ok(m) => m,
         Err(e) => {
@@ -377,13 +305,6 @@ fn deliver(py: Python<'_>, on_done: &Py<PyAny>, i: usize, f: Finished) -> PyResu
     Ok(())
 }
 
-/// A waveform table as `feed()` hands it over: `(target, time, value)`.
-type FedTable<'py> = (
-    usize,
-    PyReadonlyArray1<'py, f64>,
-    PyReadonlyArray1<'py, f64>,
-);
-
 /// What `feed()` returns for a variant (see `Ensemble.run`).
 type Fed<'py> = (
     usize,
@@ -392,52 +313,32 @@ type Fed<'py> = (
     f64,
     Option<Bound<'py, PyDict>>,
     Option<Bound<'py, PyDict>>,
-    Option<PyReadonlyArray1<'py, f64>>,
-    Option<Vec<FedTable<'py>>>,
 );
 
 /// A parsed base model whose variants run in parallel.
 #[pyclass(frozen, module = "oxyline._core")]
 pub struct Ensemble {
     base: Arc<NetworkSpec>,
-    targets: Arc<Targets>,
 }
 
 #[oxyline_py_guard::guard]
 #[pymethods]
 impl Ensemble {
-    /// Parse the canonical SI JSON of the base model (once for every variant). `targets`:
-    /// the numbers of the base model that a variant may replace by value (see `targets_of`),
-    /// checked here once.
+    /// Parse the canonical SI JSON of the base model (once for every variant).
     #[new]
-    #[pyo3(signature = (model_json, targets = None))]
-    fn new(py: Python<'_>, model_json: &str, targets: Option<Bound<'_, PyAny>>) -> PyResult<Self> {
-        let targets = match &targets {
-            Some(list) => targets_of(list)?,
-            None => Vec::new(),
-        };
+    fn new(py: Python<'_>, model_json: &str) -> PyResult<Self> {
         let json = model_json.to_owned();
-        let (spec, targets) = py
-            .detach(move || {
-                let spec = parse(&json)?;
-                let targets = Targets::new(&spec, targets)?;
-                Ok::<_, Error>((spec, targets))
-            })
-            .map_err(to_py)?;
+        let spec = py.detach(move || parse(&json)).map_err(to_py)?;
         Ok(Ensemble {
             base: Arc::new(spec),
-            targets: Arc::new(targets),
         })
     }
 
     /// Run variants as `feed()` hands them over: it returns `(i, patch, period,
-    /// output_every, vessels, outlets, values, tables)` for the next variant (`patch` its
-    /// canonical JSON, None for the base model; `vessels` {index: canonical vessel dict} and
-    /// `outlets` {node: canonical condition dict}: elements of the patch handed over as
-    /// objects, or None; `values`: a float64 array of one SI value per target, NaN for the
-    /// base value, or None; `tables`: `[(target, time, value)]` float64 arrays of the new
-    /// linear tables of `table` targets, or None)
-    /// or None when there are no more, and is called on this thread while the workers
+    /// output_every, vessels, outlets)` for the next variant (`patch` its canonical JSON,
+    /// None for the base model; `vessels` {index: canonical vessel dict} and `outlets`
+    /// {node: canonical condition dict}: elements of the patch handed over as objects, or
+    /// None) or None when there are no more, and is called on this thread while the workers
     /// run (so preparing a variant overlaps the runs). `settings`: the run settings shared
     /// with `Network.simulate` (`settings::KEYS`), the same for every variant. `on_done(i, raw, layout, error_kind, error)` is called
     /// on this thread as each variant finishes; a failed variant has `error_kind` set
@@ -501,14 +402,13 @@ impl Ensemble {
             }),
             None => self.base.clone(),
         };
-        let targets = self.targets.clone();
         let job = |_: usize, input: Input, cancelled: &AtomicBool| {
             let s = RunSettings {
                 period: input.period,
                 output_every: input.output_every,
                 ..template.clone()
             };
-            run_variant(&base, &targets, input, &s, &output, cancelled)
+            run_variant(&base, input, &s, &output, cancelled)
         };
         py.detach(|| {
             // the first Python error (Ctrl-C, or one raised by `feed` or `on_done`) cancels
@@ -528,26 +428,17 @@ impl Ensemble {
                         .call0(py)
                         .and_then(|v| v.extract::<Option<Fed<'_>>>(py));
                     match item {
-                        Ok(item) => item.map(
-                            |(i, patch, period, output_every, vessels, outlets, values, tables)| {
-                                let tables = tables
-                                    .unwrap_or_default()
-                                    .into_iter()
-                                    .map(|(k, t, v)| {
-                                        (k, t.as_array().to_vec(), v.as_array().to_vec())
-                                    })
-                                    .collect();
+                        Ok(item) => {
+                            item.map(|(i, patch, period, output_every, vessels, outlets)| {
                                 let input = Input {
                                     patch,
                                     handed: handed_over(vessels, outlets),
                                     period,
                                     output_every,
-                                    values: values.map(|a| a.as_array().to_vec()),
-                                    tables,
                                 };
                                 (i, input)
-                            },
-                        ),
+                            })
+                        }
                         Err(e) => {
                             keep(Err(e));
                             None

@@ -140,9 +140,7 @@ mod _core {
         reader::NativeParts,
         reader::formats::{openbf_mean_pressures, svzerod_periodic_table},
         reader::model::{canonical_model, forcing_frequency, read_model},
-        reader::schema::{
-            check_periods, read_conditions, read_vessels, resolve_settings, transport_section,
-        },
+        reader::schema::{read_conditions, read_vessels, resolve_settings, transport_section},
         reader::variant::VariantReader,
         results::{ColumnStatsFold, valve_status},
         waveform_values,

@@ -66,23 +66,6 @@ pub(crate) fn read_conditions<'py>(
     Ok((out, periods))
 }
 
-/// The model period: the model's `period` (None: not given) checked against every
-/// element's: `periods` (a waveform's, with the element) and the cardiac periods of the heart
-/// elements among the canonical `vessels` (see `native::element_periods`).
-#[oxyline_py_guard::guard]
-#[pyfunction]
-#[pyo3(signature = (data, periods, vessels = None))]
-pub(crate) fn check_periods(
-    data: Bound<'_, PyAny>,
-    mut periods: Periods,
-    vessels: Option<Bound<'_, PyList>>,
-) -> PyResult<Option<f64>> {
-    let vessels: Vec<PyNode<'_>> = vessels.iter().flat_map(|l| l.iter()).map(PyNode).collect();
-    periods.extend(native::element_periods(&vessels));
-    let period = native::period(&PyNode(data)).map_err(to_py)?;
-    native::check_periods(period, &periods).map_err(to_py)
-}
-
 /// The transport sections of `data` alone (no blood: a `graetz` wall without its kinematic
 /// viscosity), read against a pressure unit factor, a period and a run duration.
 #[oxyline_py_guard::guard]
