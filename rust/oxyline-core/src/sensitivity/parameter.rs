@@ -701,6 +701,8 @@ pub struct Stamps<'a> {
     dae: &'a Dae,
     /// The index into `dae.f.val` of each branch's resistance (its row's diagonal).
     branch_r: Vec<usize>,
+    /// Node → its viscoelastic wall (index into `circuit.viscous_walls`).
+    wall_of: std::collections::HashMap<usize, usize>,
 }
 
 impl<'a> Stamps<'a> {
@@ -715,10 +717,14 @@ impl<'a> Stamps<'a> {
                     .expect("a branch row holds its resistance")
             })
             .collect();
+        let wall_of = (circuit.viscous_walls.iter().enumerate())
+            .map(|(k, w)| (w.node, k))
+            .collect();
         Stamps {
             circuit,
             dae,
             branch_r,
+            wall_of,
         }
     }
 
@@ -958,7 +964,11 @@ impl<'a> Stamps<'a> {
             if dc == 0.0 && own_share.is_none() {
                 continue;
             }
-            let Some(w) = self.circuit.viscous_walls.iter().find(|w| w.node == node) else {
+            let Some(w) = self
+                .wall_of
+                .get(&node)
+                .map(|&k| &self.circuit.viscous_walls[k])
+            else {
                 continue;
             };
             let (c, s, tt) = (self.dae.e[u], w.capacitance, w.capacitance_time);
