@@ -617,11 +617,11 @@ fn geometry_unsupported(
     v: &crate::model::VesselSpec,
     rest: &[&str],
 ) -> Option<&'static str> {
-    let g = v.geometry.as_ref()?;
-    let geometric = matches!(
-        rest,
-        ["length" | "radius" | "radius_in" | "radius_out" | "youngs_modulus"]
-    );
+    let geometric = v.geometry.is_some()
+        && matches!(
+            rest,
+            ["length" | "radius" | "radius_in" | "radius_out" | "youngs_modulus"]
+        );
     if !geometric {
         return None;
     }
