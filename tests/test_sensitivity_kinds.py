@@ -163,6 +163,22 @@ def test_viscoelastic_geometry_matches_central_differences() -> None:
     assert_adjoint_is_forward(exact, adj)
 
 
+def test_viscoelastic_openbf_model_geometry_matches_central_differences() -> None:
+    """openBF's bifurcation (Boileau 2015) read with openBF's viscoelastic wall on every
+    vessel (a tapered parent): its end radii and stiffness and a daughter's length and
+    stiffness, against central differences."""
+    from oxyline.io.openbf import to_native_dict
+
+    model = to_native_dict(data_path("openbf", "models", "boileau2015", "ibif", "ibif.yaml"),
+                           viscoelastic=True)
+    assert all(v["wall_viscosity"] > 0 for v in model["vessels"])
+    params = ["vessels.parent.radius_in", "vessels.parent.radius_out",
+              "vessels.parent.youngs_modulus", "vessels.d1.length", "vessels.d1.youngs_modulus"]
+    outputs = ["parent.pressure_in.max", "parent.pressure_in.min", "d1.flow_out.pulse",
+               "d1.pressure_out.pulse"]
+    assert_sensitivities_are_central_differences(model, params, outputs)
+
+
 def test_scales_on_viscoelastic_walls_and_womersley_vessels() -> None:
     """``scale.compliance`` divides a viscoelastic wall's E by the factor (its capacitance,
     held at the wall's elastic pressure, and its relaxation time η/E move alike; R_v = τ/C
