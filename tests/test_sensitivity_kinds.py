@@ -142,11 +142,12 @@ VISCOELASTIC_PARAMS = ["vessels.parent.radius", "vessels.parent.youngs_modulus",
 
 
 def _viscoelastic() -> dict[str, Any]:
-    """``_tapered`` with Kelvin-Voigt walls on the parent (η/E = 2 ms) and the tapered daughter
-    (6 ms), the other daughter elastic: the junction's wall mixes the parent's and d1's
-    relaxation times and holds d2's capacitance share too."""
+    """``_tapered`` with Kelvin-Voigt walls on the parent (η/E = 2 ms, π arrangement) and the
+    tapered daughter (6 ms, π), the other daughter elastic: the junction's wall mixes the
+    parent's and d1's relaxation times and holds d2's capacitance share too."""
     model = _tapered()
     model["vessels"][0]["wall_viscosity"] = 1e3
+    model["vessels"][0]["arrangement"] = "pi"
     model["vessels"][1]["wall_viscosity"] = 3e3
     return model
 

@@ -7,7 +7,7 @@
 
 use super::tests::{SIGNALS, check_on, run, settings};
 use super::*;
-use crate::model::parse;
+use crate::model::{Arrangement, parse};
 
 /// An inflow into a uniform parent that splits into a tapered daughter (π arrangement, so
 /// each segment's C is shared by both its ends) ending in an RCR, and an RCL daughter with a
@@ -119,14 +119,16 @@ fn geometry_of_womersley_vessels_is_refused() {
 }
 
 /// [`MODEL`] with Kelvin–Voigt walls of different relaxation times η/E on the parent
-/// (0.5 ms) and the tapered daughter (5 ms): their junction's wall mixes both (R_v = τ̄/C,
-/// τ̄ the capacitance-weighted mean), so a vessel's parameter moves the wall's capacitance,
-/// its own share and, by the modulus, the relaxation time. ωτ at the first harmonic is
+/// (0.5 ms) and the tapered daughter (5 ms), both in the π arrangement (half of each end
+/// segment's C at the junction): their junction's wall mixes both (R_v = τ̄/C, τ̄ the
+/// capacitance-weighted mean), so a vessel's parameter moves the wall's capacitance, its own
+/// share and, by the modulus, the relaxation time. ωτ at the first harmonic is
 /// 0.004–0.04, so the walls move the pressures by far more than the difference quotient's
 /// rounding.
 fn viscoelastic() -> crate::model::NetworkSpec {
     let mut s = parse(MODEL).unwrap();
     s.vessels[0].geometry.as_mut().unwrap().wall_viscosity = 2e2;
+    s.vessels[0].arrangement = Some(Arrangement::Pi);
     s.vessels[1].geometry.as_mut().unwrap().wall_viscosity = 3e3;
     s
 }
@@ -149,8 +151,9 @@ fn geometry_of_viscoelastic_vessels() {
 
 /// An elastic vessel's geometry and a lumped vessel's capacitance at a viscoelastic
 /// neighbour's junction: their capacitance shares join the wall's C (behind the neighbour's
-/// R_v = τ/C, which moves with it). The lumped daughter is given two segments of the default
-/// arrangement (a share of its C at the junction) in place of its RCL form.
+/// R_v = τ/C, which moves with it). The parent keeps its π arrangement (half its last
+/// segment's C at the junction); the lumped daughter is given two segments of the default
+/// (inverted-L) arrangement (its first segment's C at the junction) in place of its RCL form.
 #[test]
 fn elastic_values_at_a_viscoelastic_junction() {
     let mut base = viscoelastic();
