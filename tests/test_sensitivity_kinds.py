@@ -1,6 +1,7 @@
 """Exact sensitivities of a tapered vessel's end radii (``vessels.<name>.radius_in``,
-``.radius_out``) and of lumped RCL vessels' values (svZeroDSolver's BloodVessel, as every
-imported svZeroDSolver model has them).
+``.radius_out``), of the geometry of vessels with a viscoelastic wall (openBF's, as imported
+openBF models have them) and of lumped RCL vessels' values (svZeroDSolver's BloodVessel, as
+every imported svZeroDSolver model has them).
 
 * Against central differences of the same periodic runs, the models moved by the calibration's
   own ``native_model`` (relative step 1e-4: the outputs are smooth in every parameter, so the
@@ -133,6 +134,50 @@ def test_geometry_the_tangent_leaves_out_is_refused_naming_it() -> None:
         oxyline.sensitivities(model, ["vessels.d1.radius_out"], ["d1.flow_out.mean"])
     with pytest.raises(ModelError, match="parameter 'vessels.d1.radius'.*radius_in"):
         oxyline.sensitivities(_tapered(), ["vessels.d1.radius"], ["d1.flow_out.mean"])
+
+
+VISCOELASTIC_PARAMS = ["vessels.parent.radius", "vessels.parent.youngs_modulus",
+                       "vessels.d1.radius_out", "vessels.d1.length", "vessels.d2.radius",
+                       "vessels.d2.youngs_modulus"]
+
+
+def _viscoelastic() -> dict[str, Any]:
+    """``_tapered`` with Kelvin-Voigt walls on the parent (η/E = 2 ms, π arrangement) and the
+    tapered daughter (6 ms, π), the other daughter elastic: the junction's wall mixes the
+    parent's and d1's relaxation times and holds d2's capacitance share too."""
+    model = _tapered()
+    model["vessels"][0]["wall_viscosity"] = 1e3
+    model["vessels"][0]["arrangement"] = "pi"
+    model["vessels"][1]["wall_viscosity"] = 3e3
+    return model
+
+
+def test_viscoelastic_geometry_matches_central_differences() -> None:
+    """The radius, taper end, length and stiffness of vessels with a viscoelastic wall (a
+    capacitance at the wall's elastic pressure behind R_v = τ/C, both moving with the
+    parameter) and of an elastic vessel at their junction, against central differences; the
+    adjoint against the forward tangents."""
+    model = _viscoelastic()
+    exact = assert_sensitivities_are_central_differences(model, VISCOELASTIC_PARAMS,
+                                                         TAPER_OUTPUTS)
+    adj = oxyline.sensitivities(model, VISCOELASTIC_PARAMS, TAPER_OUTPUTS, mode="adjoint")
+    assert_adjoint_is_forward(exact, adj)
+
+
+def test_viscoelastic_openbf_model_geometry_matches_central_differences() -> None:
+    """openBF's bifurcation (Boileau 2015) read with openBF's viscoelastic wall on every
+    vessel (a tapered parent): its end radii and stiffness and a daughter's length and
+    stiffness, against central differences."""
+    from oxyline.io.openbf import to_native_dict
+
+    model = to_native_dict(data_path("openbf", "models", "boileau2015", "ibif", "ibif.yaml"),
+                           viscoelastic=True)
+    assert all(v["wall_viscosity"] > 0 for v in model["vessels"])
+    params = ["vessels.parent.radius_in", "vessels.parent.radius_out",
+              "vessels.parent.youngs_modulus", "vessels.d1.length", "vessels.d1.youngs_modulus"]
+    outputs = ["parent.pressure_in.max", "parent.pressure_in.min", "d1.flow_out.pulse",
+               "d1.pressure_out.pulse"]
+    assert_sensitivities_are_central_differences(model, params, outputs)
 
 
 def test_scales_on_viscoelastic_walls_and_womersley_vessels() -> None:

@@ -7,7 +7,7 @@
 
 use super::tests::{SIGNALS, check_on, run, settings};
 use super::*;
-use crate::model::parse;
+use crate::model::{Arrangement, parse};
 
 /// An inflow into a uniform parent that splits into a tapered daughter (π arrangement, so
 /// each segment's C is shared by both its ends) ending in an RCR, and an RCL daughter with a
@@ -100,28 +100,90 @@ fn adjoint_gradients_are_the_tangents_of_the_new_kinds() {
     );
 }
 
-/// The kinds the tangent leaves out are refused naming the vessel's parameter.
+/// The kind the tangent leaves out is refused naming the vessel's parameter: the geometry of
+/// a vessel with Womersley friction cells (their law follows its R and L).
 #[test]
-fn geometry_of_womersley_and_viscoelastic_vessels_is_refused() {
+fn geometry_of_womersley_vessels_is_refused() {
     let mut base = parse(MODEL).unwrap();
     base.vessels[0].wall_friction = Some(crate::segment::WallFriction::Womersley);
-    let err = sensitivities(&base, &["vessels.parent.radius".into()], &[], settings())
-        .err()
-        .unwrap()
-        .to_string();
-    assert!(
-        err.contains("'vessels.parent.radius'") && err.contains("Womersley"),
-        "{err}"
-    );
-    let mut base = parse(MODEL).unwrap();
-    base.vessels[1].geometry.as_mut().unwrap().wall_viscosity = 3e3;
-    let err = sensitivities(&base, &["vessels.d1.radius_out".into()], &[], settings())
-        .err()
-        .unwrap()
-        .to_string();
-    assert!(
-        err.contains("'vessels.d1.radius_out'") && err.contains("viscoelastic"),
-        "{err}"
+    for path in ["vessels.parent.radius", "vessels.parent.youngs_modulus"] {
+        let err = sensitivities(&base, &[path.into()], &[], settings())
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            err.contains(&format!("'{path}'")) && err.contains("Womersley"),
+            "{err}"
+        );
+    }
+}
+
+/// [`MODEL`] with Kelvin–Voigt walls of different relaxation times η/E on the parent
+/// (0.5 ms) and the tapered daughter (5 ms), both in the π arrangement (half of each end
+/// segment's C at the junction): their junction's wall mixes both (R_v = τ̄/C, τ̄ the
+/// capacitance-weighted mean), so a vessel's parameter moves the wall's capacitance, its own
+/// share and, by the modulus, the relaxation time. ωτ at the first harmonic is
+/// 0.004–0.04, so the walls move the pressures by far more than the difference quotient's
+/// rounding.
+fn viscoelastic() -> crate::model::NetworkSpec {
+    let mut s = parse(MODEL).unwrap();
+    s.vessels[0].geometry.as_mut().unwrap().wall_viscosity = 2e2;
+    s.vessels[0].arrangement = Some(Arrangement::Pi);
+    s.vessels[1].geometry.as_mut().unwrap().wall_viscosity = 3e3;
+    s
+}
+
+#[test]
+fn geometry_of_viscoelastic_vessels() {
+    let base = viscoelastic();
+    for path in [
+        "vessels.parent.radius",
+        "vessels.parent.length",
+        "vessels.parent.youngs_modulus",
+        "vessels.d1.radius_in",
+        "vessels.d1.radius_out",
+        "vessels.d1.length",
+        "vessels.d1.youngs_modulus",
+    ] {
+        check_on(&base, path);
+    }
+}
+
+/// An elastic vessel's geometry and a lumped vessel's capacitance at a viscoelastic
+/// neighbour's junction: their capacitance shares join the wall's C (behind the neighbour's
+/// R_v = τ/C, which moves with it). The parent keeps its π arrangement (half its last
+/// segment's C at the junction); the lumped daughter is given two segments of the default
+/// (inverted-L) arrangement (its first segment's C at the junction) in place of its RCL form.
+#[test]
+fn elastic_values_at_a_viscoelastic_junction() {
+    let mut base = viscoelastic();
+    base.vessels[0].geometry.as_mut().unwrap().wall_viscosity = 0.0;
+    let d2 = &mut base.vessels[2];
+    (d2.arrangement, d2.segments) = (None, Some(2));
+    for path in [
+        "vessels.parent.radius",
+        "vessels.parent.youngs_modulus",
+        "vessels.parent.length",
+        "vessels.d2.lumped.capacitance",
+    ] {
+        check_on(&base, path);
+    }
+}
+
+#[test]
+fn adjoint_gradients_of_viscoelastic_geometry_are_the_tangents() {
+    super::tests::check_adjoint_of(
+        &viscoelastic(),
+        &[
+            "vessels.parent.radius",
+            "vessels.parent.length",
+            "vessels.parent.youngs_modulus",
+            "vessels.d1.radius_in",
+            "vessels.d1.radius_out",
+            "vessels.d1.youngs_modulus",
+            "scale.compliance",
+        ],
+        &SIGNALS,
     );
 }
 

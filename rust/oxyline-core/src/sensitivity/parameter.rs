@@ -609,26 +609,24 @@ fn form_switch(
 }
 
 /// Why a geometric parameter (`rest` after the vessel's name) of vessel `v` is not
-/// differentiated, if it is not: Womersley friction cells and a viscoelastic wall take their
-/// values from the segment's R, L and C by laws the tangent does not differentiate.
+/// differentiated, if it is not: Womersley friction cells take their values from the
+/// segment's R and L by a law the tangent does not differentiate. (A viscoelastic wall's
+/// conductance follows its capacitance and relaxation time: [`Stamps::onto_viscous_walls`].)
 fn geometry_unsupported(
     spec: &NetworkSpec,
     v: &crate::model::VesselSpec,
     rest: &[&str],
 ) -> Option<&'static str> {
-    let g = v.geometry.as_ref()?;
-    let geometric = matches!(
-        rest,
-        ["length" | "radius" | "radius_in" | "radius_out" | "youngs_modulus"]
-    );
+    let geometric = v.geometry.is_some()
+        && matches!(
+            rest,
+            ["length" | "radius" | "radius_in" | "radius_out" | "youngs_modulus"]
+        );
     if !geometric {
         return None;
     }
     if v.wall_friction.unwrap_or(spec.wall_friction) == WallFriction::Womersley {
         return Some("the vessel has Womersley friction cells, which the tangent does not cover");
-    }
-    if g.wall_viscosity > 0.0 && g.youngs_modulus.is_some() {
-        return Some("the vessel has a viscoelastic wall, which the tangent does not cover");
     }
     None
 }
@@ -688,12 +686,23 @@ pub fn check_closed_loop(spec: &NetworkSpec, conserved: bool) -> Result<()> {
     }
 }
 
+/// A viscoelastic vessel's wall as a parameter moves it ([`Stamps::onto_viscous_walls`]).
+struct OwnWall {
+    /// Its relaxation time η/E (s) and that time's derivative by the parameter.
+    tau: f64,
+    dtau: f64,
+    /// Its capacitance share (m³/Pa) by node.
+    shares: std::collections::HashMap<usize, f64>,
+}
+
 /// Where a circuit's element values sit in the DAE.
 pub struct Stamps<'a> {
     circuit: &'a Circuit,
     dae: &'a Dae,
     /// The index into `dae.f.val` of each branch's resistance (its row's diagonal).
     branch_r: Vec<usize>,
+    /// Node → its viscoelastic wall (index into `circuit.viscous_walls`).
+    wall_of: std::collections::HashMap<usize, usize>,
 }
 
 impl<'a> Stamps<'a> {
@@ -708,10 +717,14 @@ impl<'a> Stamps<'a> {
                     .expect("a branch row holds its resistance")
             })
             .collect();
+        let wall_of = (circuit.viscous_walls.iter().enumerate())
+            .map(|(k, w)| (w.node, k))
+            .collect();
         Stamps {
             circuit,
             dae,
             branch_r,
+            wall_of,
         }
     }
 
@@ -893,7 +906,95 @@ impl<'a> Stamps<'a> {
                 }
             }
         }
+        // a vessel's capacitance at a viscoelastic wall's node sits at the wall's elastic
+        // pressure, behind a conductance that follows it (`scale.compliance` places its own)
+        if let Parameter::Length(vi)
+        | Parameter::Radius(vi)
+        | Parameter::YoungsModulus(vi)
+        | Parameter::EndRadius { vessel: vi, .. }
+        | Parameter::Lumped(vi, _) = p
+            && !self.dae.walls.is_empty()
+        {
+            let own = self.own_relaxation(spec, *vi, matches!(p, Parameter::YoungsModulus(_)));
+            self.onto_viscous_walls(&mut t, own);
+        }
         Ok(t)
+    }
+
+    /// The relaxation time τ = η/E of viscoelastic vessel `vi` and its derivative by the
+    /// parameter (−τ/E by the Young's modulus, 0 by its geometry), with the vessel's own
+    /// capacitance share at each of its nodes; None for an elastic or lumped vessel.
+    fn own_relaxation(&self, spec: &NetworkSpec, vi: usize, by_modulus: bool) -> Option<OwnWall> {
+        let v = &spec.vessels[vi];
+        let g = v.geometry.as_ref()?;
+        let e = g.youngs_modulus?;
+        if g.wall_viscosity <= 0.0
+            || crate::assemble::segments::arrangement(spec, v) == Arrangement::Rcl
+        {
+            return None;
+        }
+        let tau = g.wall_viscosity / e;
+        let mut shares = std::collections::HashMap::new();
+        for s in self.segments_of(&v.name) {
+            for &(node, share) in &s.nodes {
+                *shares.entry(node).or_insert(0.0) += share * s.compliance;
+            }
+        }
+        Some(OwnWall {
+            tau,
+            dtau: if by_modulus { -tau / e } else { 0.0 },
+            shares,
+        })
+    }
+
+    /// Move the node capacitance derivatives of `t` onto the viscoelastic walls that hold
+    /// them (`Circuit::active_walls`): a wall keeps its node's capacitance C at its elastic
+    /// pressure's unknown behind the conductance g = 1/R_v = C S/T, S = Σ c_i and
+    /// T = Σ c_i τ_i over the node's viscoelastic shares. So dC moves from the node's E entry
+    /// to the wall's, and g moves by dg = dC S/T + C (dS T − S dT)/T² on the wall's four F
+    /// entries (+g, −g on the node's row, −g, +g on the wall's). The parameter's own
+    /// viscoelastic vessel moves S by its shares' dc (the node's whole dC: a vessel
+    /// parameter moves no other vessel's share) and T by dc τ + c dτ.
+    fn onto_viscous_walls(&self, t: &mut DaeTangent, own: Option<OwnWall>) {
+        for &(node, u) in &self.dae.walls {
+            let dc = t.de[node];
+            let own_share = own
+                .as_ref()
+                .and_then(|o| o.shares.get(&node).map(|&c| (o, c)));
+            if dc == 0.0 && own_share.is_none() {
+                continue;
+            }
+            let Some(w) = self
+                .wall_of
+                .get(&node)
+                .map(|&k| &self.circuit.viscous_walls[k])
+            else {
+                continue;
+            };
+            let (c, s, tt) = (self.dae.e[u], w.capacitance, w.capacitance_time);
+            let (ds, dt) = match own_share {
+                Some((o, share)) => (dc, dc * o.tau + share * o.dtau),
+                None => (0.0, 0.0),
+            };
+            let dg = dc * s / tt + c * (ds * tt - s * dt) / (tt * tt);
+            t.de[node] = 0.0;
+            t.de[u] += dc;
+            for (row, col, sign) in [
+                (node, node, 1.0),
+                (node, u, -1.0),
+                (u, node, -1.0),
+                (u, u, 1.0),
+            ] {
+                if let Some(k) = self
+                    .dae
+                    .f
+                    .row(row)
+                    .find(|&k| self.dae.f.col[k] as usize == col)
+                {
+                    t.df[k] += sign * dg;
+                }
+            }
+        }
     }
 
     /// The segments of vessel `name`: (branch, node shares, compliance).

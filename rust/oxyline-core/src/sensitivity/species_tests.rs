@@ -301,3 +301,29 @@ fn flow_parameter_difference_quotients_converge_as_h_squared() {
         assert!((3.0..5.0).contains(&ratio), "ratio {ratio}: {errors:?}");
     }
 }
+
+/// The oxygen outputs by the geometry of viscoelastic vessels (Kelvin–Voigt walls of
+/// relaxation times 0.5 ms on the parent, in the π arrangement, and 5 ms on d1, mixed at
+/// their junction with the elastic d2's share): a
+/// capacitance behind a wall sits at its elastic pressure, whose unknown sets the cell's
+/// transport volume, and the wall's conductance moves with it. Against central differences
+/// (relative step 1e-4, as above), and the adjoint against the forward tangents (1e-8).
+#[test]
+fn viscoelastic_geometry_against_central_differences() {
+    let mut spec = parse(MODEL).unwrap();
+    spec.vessels[0].geometry.as_mut().unwrap().wall_viscosity = 2e2;
+    spec.vessels[0].arrangement = Some(crate::model::Arrangement::Pi);
+    spec.vessels[1].geometry.as_mut().unwrap().wall_viscosity = 3e3;
+    let paths = [
+        "vessels.parent.radius",
+        "vessels.d1.youngs_modulus",
+        "vessels.d1.length",
+        "vessels.d2.radius",
+    ];
+    for path in paths {
+        assert!(check(&spec, path) < 1e-6, "{path}");
+    }
+    let worst = super::adjoint::tests::mean_and_series_adjoint_worst(&spec, &paths, &signals());
+    eprintln!("viscoelastic geometry: adjoint against forward {worst:.2e}");
+    assert!(worst < 1e-8, "{worst:.2e}");
+}
