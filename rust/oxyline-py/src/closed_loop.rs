@@ -33,6 +33,28 @@ fn flows_of<'py>(py: Python<'py>, flows: &Bound<'py, PyAny>) -> PyResult<Flows> 
     })
 }
 
+/// The parameter set as JSON, the caller's flows and the run controls, each checked by the
+/// core; the set's values are checked as the caller wrote them (a NaN period is named, not
+/// lost to JSON).
+fn inputs<'py>(
+    py: Python<'py>,
+    params: &Bound<'py, PyAny>,
+    flows: &Bound<'py, PyAny>,
+    max_cycles: Bound<'py, PyAny>,
+    tol: Bound<'py, PyAny>,
+    shooting: Bound<'py, PyAny>,
+) -> PyResult<(String, Flows, RunSettings)> {
+    check_times(&PyNode(params.clone())).map_err(to_py)?;
+    let settings =
+        RunSettings::read(&PyNode(max_cycles), &PyNode(tol), &PyNode(shooting)).map_err(to_py)?;
+    let flows = flows_of(py, flows)?;
+    let json: String = py
+        .import("json")?
+        .call_method1("dumps", (params,))?
+        .extract()?;
+    Ok((json, flows, settings))
+}
+
 #[oxyline_py_guard::guard]
 #[pyfunction]
 #[pyo3(signature = (params, flows, max_cycles, tol, shooting))]
@@ -44,15 +66,7 @@ pub fn closed_loop_run<'py>(
     tol: Bound<'py, PyAny>,
     shooting: Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    // the values as the caller wrote them (a NaN period is named, not lost to JSON)
-    check_times(&PyNode(params.clone())).map_err(to_py)?;
-    let settings =
-        RunSettings::read(&PyNode(max_cycles), &PyNode(tol), &PyNode(shooting)).map_err(to_py)?;
-    let flows = flows_of(py, &flows)?;
-    let json: String = py
-        .import("json")?
-        .call_method1("dumps", (&params,))?
-        .extract()?;
+    let (json, flows, settings) = inputs(py, &params, &flows, max_cycles, tol, shooting)?;
     let out = py
         .detach(move || simulate(&json, flows, &settings))
         .map_err(to_py)?;
@@ -89,14 +103,7 @@ pub fn closed_loop_sensitivities<'py>(
     parameters: Vec<String>,
     outputs: Vec<String>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    check_times(&PyNode(params.clone())).map_err(to_py)?;
-    let settings =
-        RunSettings::read(&PyNode(max_cycles), &PyNode(tol), &PyNode(shooting)).map_err(to_py)?;
-    let flows = flows_of(py, &flows)?;
-    let json: String = py
-        .import("json")?
-        .call_method1("dumps", (&params,))?
-        .extract()?;
+    let (json, flows, settings) = inputs(py, &params, &flows, max_cycles, tol, shooting)?;
     let out = py
         .detach(move || sensitivities(&json, flows, &settings, &parameters, &outputs))
         .map_err(to_py)?;
