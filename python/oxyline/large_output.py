@@ -60,12 +60,11 @@ class SummaryStream:
     """The chunk sink of a summarized run: has the core fold each chunk of rows (core layout
     of the settings ``s``: every default vessel, no segments) into per-column statistics (read
     back as per-vessel ones by :meth:`summary`) and keeps the
-    inlet vessels' columns (and ``extra`` trailing core columns) of every row. ``layout``:
+    inlet vessels' columns of every row. ``layout``:
     the core's output layout of ``s`` (the caller resolves it once per run), without its
     ``transport`` part when the run has no transport."""
 
-    def __init__(self, model: Model, layout: Mapping[str, Any], extra: int,
-                 result_of: Any) -> None:
+    def __init__(self, model: Model, layout: Mapping[str, Any], result_of: Any) -> None:
         self._result_of = result_of  # rows (core layout of s) -> Result
         lay = layout
         self.vessels = [str(v) for v in lay["vessels"]]
@@ -74,7 +73,7 @@ class SummaryStream:
         kv, nv = len(lay["vessel_variables"]), len(self.vessels)
         width = int(lay["n_columns"])
         keep = [i * kv + j for v in self.inlets for j in range(kv) for i in (index[v],)]
-        self._flow_cols = np.array(keep + list(range(width, width + extra)), dtype=np.intp)
+        self._flow_cols = np.array(keep, dtype=np.intp)
         tl = lay.get("transport")
         self._species_cols = None
         species_width = 0
@@ -85,8 +84,8 @@ class SummaryStream:
             self._species_cols = np.array([k * cols + c for k in range(len(tl["species"]))
                                            for c in per], dtype=np.intp)
             species_width = cols * len(tl["species"])
-        self.rows = max(1, CHUNK_BYTES // (8 * (width + extra + species_width)))
-        self._row_bytes = 8 * (width + extra + species_width)
+        self.rows = max(1, CHUNK_BYTES // (8 * (width + species_width)))
+        self._row_bytes = 8 * (width + species_width)
         self._reduced = len(lay["vessel_variables"]) + (
             (len(tl["vessel_variables"]) + 1) * len(tl["species"]) if tl is not None else 0)
         self._times: list[np.ndarray] = []
@@ -95,9 +94,8 @@ class SummaryStream:
         self._species_names: list[str] = []
         self._initial: list[float] = []
         # every core column's time mean, min and max, folded by the core chunk by chunk (the
-        # flow rows with the chambers' and valves' columns, the species rows), and the first
-        # rows (the summary of a run of one row)
-        self._folds = [_core.ColumnStatsFold(width + extra),
+        # flow rows, the species rows), and the first rows (the summary of a run of one row)
+        self._folds = [_core.ColumnStatsFold(width),
                        _core.ColumnStatsFold(species_width)]
         self._first: list[np.ndarray] = []
 

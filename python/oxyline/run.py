@@ -347,6 +347,9 @@ def _result(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
         vessel_variables=tuple(layout["vessel_variables"]),
         segment_variables=tuple(layout["segment_variables"]),
         model_json=_model_json(model),
+        # the heart outputs the core returned beside the columns (run with ``heart``)
+        chamber_volume=dict(raw.get("chamber_volume", {})),
+        valve_status=dict(raw.get("valve_status", {})),
     )
 
 
@@ -585,8 +588,9 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
         # automatic fixed step instead; an rtol or atol given is left to the core to refuse
         s["rtol"] = None
     summarize = store is None and _large_model_output(model, s, overrides)
-    heart, monitor = _Heart(model), Monitor(model.transport_spec)
-    core = {**_checkpoints(model, overrides), **heart.core}
+    monitor = Monitor(model.transport_spec)
+    heart = _heart_outputs(model, s)
+    core = {**_checkpoints(model, overrides), **({"heart": True} if heart else {})}
     if resume is not None:
         core["resume"] = resume
     if timed:  # the core runs the last cycle again at rtol/FACTOR after the run
@@ -596,14 +600,14 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     s_out = s  # the selection of the rows kept
     if store is not None:
         _check_output_size(model, s, overrides, where=store["path"])
-        sink = _ZarrSink(model, s, heart, monitor, store)
+        sink = _ZarrSink(model, s, monitor, store)
         core.update(chunk_sink=sink.add, chunk_rows=store["time_chunk"])
     elif summarize and not core:  # (a checkpointed run keeps its rows: resume rebuilds them)
         layout = _output_layout(model, s)
         if not s["transport"]:
             layout.pop("transport", None)
         # (the layout resolved once: the kept rows' selection replaces it in the model's cache)
-        sink = SummaryStream(model, layout, len(heart.columns),
+        sink = SummaryStream(model, layout,
                              lambda rows: _result(model, s, rows, {}, False, layout=dict(layout)))
         core.update(chunk_sink=sink.add, chunk_rows=sink.rows)
         s_out = {**s, "vessels": sink.inlets}  # the time series kept
@@ -619,15 +623,15 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
             raise CheckpointError(f"{resume_path}: {str(exc).removeprefix('checkpoint: ')}") \
                 from None
         raise
-    settings = {**_run_settings(s, raw, bool(heart.valves)), **segmentation_facts(model)}
+    settings = {**_run_settings(s, raw, bool(heart.get("valves"))),
+                **segmentation_facts(model)}
     if store is not None:  # the final attributes: of a result of no rows
-        final = _assemble(model, s, heart, sink.template(), settings, "error" not in raw,
-                          carry=True)
+        final = _result(model, s, sink.template(), settings, "error" not in raw)
         out = sink.close(raw, final, space)
     else:
         if sink is not None:  # the summary stream's kept rows
             raw = sink.raw(raw)
-        final = out = _in_memory(model, s_out, heart, raw, settings, sink)
+        final = out = _in_memory(model, s_out, raw, settings, sink)
         if timed:
             _fill_time_error(model, s_out, raw, final, overrides)
         if space:
@@ -640,12 +644,12 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     return out
 
 
-def _in_memory(model: Model, s: Mapping[str, Any], heart: _Heart, raw: dict[str, Any],
+def _in_memory(model: Model, s: Mapping[str, Any], raw: dict[str, Any],
                settings: dict[str, Any], summary: Any) -> Result:
     """The result of a run's rows ``raw`` (``summary``: the summary stream of a summarized
     run, else None), with the run's valve events and step history; the run's error raised
     with it attached."""
-    result = _assemble(model, s, heart, raw, settings, "error" not in raw)
+    result = _result(model, s, raw, settings, "error" not in raw)
     if summary is not None:
         result.vessel_summary = summary.summary(model.name)
     result.valve_events = [(float(t), str(v), bool(o)) for t, v, o in raw.get("valve_events", ())]
@@ -668,16 +672,12 @@ def _add_space_error(model: Model, result: Result) -> None:
                                     "(without error_estimate space)", result) from None
 
 
-def _assemble(model: Model, s: Mapping[str, Any], heart: _Heart, raw: dict[str, Any],
-              settings: dict[str, Any], complete: bool, carry: bool = False) -> Result:
-    """:func:`_result` of the core's rows ``raw`` with the chambers' and valves' columns
-    (recorded after the selected ones: taken out of ``raw``) as their outputs; ``carry``:
-    rows of a streamed run (see :meth:`_Heart.outputs`)."""
-    extra = heart.split(raw)
-    result = _result(model, s, raw, settings, complete)
-    if extra is not None:
-        result.chamber_volume, result.valve_status = heart.outputs(extra, carry)
-    return result
+def _heart_outputs(model: Model, s: Mapping[str, Any]) -> dict[str, list[str]]:
+    """The model's chambers and valves (``{"chambers": [...], "valves": [...]}``, empty when
+    it has neither): a run of them asks the core for their volumes and statuses (``heart``),
+    which it returns beside the selected columns as ``chamber_volume`` and ``valve_status``."""
+    lay = _output_layout(model, s)
+    return {k: list(lay[k]) for k in ("chambers", "valves") if lay[k]}
 
 
 #: most runs ``meet_rtol`` takes (the run at rtol, then the tighter ones its estimates ask)
@@ -797,10 +797,10 @@ def _last_cycle_results(model: Model, s: Mapping[str, Any], raw: Mapping[str, An
     """The run's rows at the output times of the core's second integration of the last cycle
     (``finer``), and that integration's rows, as two results of the same layout."""
     n = len(finer["times"])
-    ncol = raw["data"].shape[1]  # (without the chambers' and valves' extra columns)
+    ncol = raw["data"].shape[1]  # (the finer rows keep svZeroDSolver's derived columns)
 
     def rows(times: np.ndarray, data: np.ndarray, species: Any) -> dict[str, Any]:
-        out = {**raw, "times": times, "data": data}
+        out: dict[str, Any] = {"times": times, "data": data}
         if raw.get("transport") is not None:
             out["transport"] = {**raw["transport"], "data": species}
         return out
@@ -811,49 +811,6 @@ def _last_cycle_results(model: Model, s: Mapping[str, Any], raw: Mapping[str, An
     again = rows(np.asarray(finer["times"]), np.asarray(finer["data"])[:, :ncol],
                  finer.get("transport"))
     return (_result(model, s, run, {}, True), _result(model, s, again, {}, True))
-
-
-class _Heart:
-    """The chambers (name, volume unknown) and valves (name, [pressure behind, pressure in
-    front, flow], on/off rule) of a model: a run records their unknowns after the selected
-    columns (``core``: the run's keyword that asks for them), and :meth:`split` and
-    :meth:`outputs` turn them into ``result.chamber_volume`` and ``result.valve_status``."""
-
-    def __init__(self, model: Model) -> None:
-        lay = model.network.unknown_layout()
-        self.chambers, self.valves = list(lay["chamber_volumes"]), list(lay.get("valves", ()))
-        self.columns = [int(i) for _, i in self.chambers] \
-            + [int(c) for _, u, _ in self.valves for c in u]
-        self.core = {"extra_columns": self.columns} if self.columns else {}
-        #: each on/off valve's last status, carried from one chunk of a streamed run to the
-        #: next (``outputs(..., carry=True)``), so that chunks give the statuses of the whole run
-        self.open: dict[str, bool] = {}
-
-    def split(self, raw: dict[str, Any]) -> np.ndarray | None:
-        """Take the extra columns (recorded after the selected ones) out of ``raw["data"]``."""
-        n = len(self.columns)
-        if n == 0:
-            return None
-        data = raw["data"]
-        raw["data"] = data[:, : data.shape[1] - n]
-        return data[:, data.shape[1] - n:]
-
-    def outputs(self, extra: np.ndarray, carry: bool = False
-                ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-        """Chamber volumes and valve status (1 open, 0 closed) from the extra columns, each
-        valve's by the core's rule (``oxyline_core::output::valve_status``: a valve is open
-        while the pressure behind it exceeds the pressure in front; a heart block's valve also
-        while its flow is still forward, docs/physics.md §1.10). ``carry``: start from (and
-        update) :attr:`open`, the last chunk's."""
-        state = self.open if carry else {}
-        n = len(self.chambers)
-        volume = {name: extra[:, k].copy() for k, (name, _) in enumerate(self.chambers)}
-        status = {}
-        for k, (name, _, on_off) in enumerate(self.valves):
-            up, down, q = (extra[:, n + 3 * k + j] for j in range(3))
-            status[name], state[name] = _core.valve_status(up, down, q, bool(on_off),
-                                                           state.get(name, False))
-        return volume, status
 
 
 def resume(path: str | os.PathLike[str], **overrides: Any) -> Result:
@@ -1027,30 +984,32 @@ class _ZarrSink:
     result of no rows before the run), each chunk appended as a result of its rows, the bounds
     monitor fed each chunk as it passes (docs/physics.md §2.8)."""
 
-    def __init__(self, model: Model, s: Mapping[str, Any], heart: _Heart, monitor: Monitor,
+    def __init__(self, model: Model, s: Mapping[str, Any], monitor: Monitor,
                  store: Mapping[str, Any]) -> None:
-        self.model, self.s, self.heart = model, s, heart
-        # zero rows in the core's layout, with the chambers' and valves' columns
+        self.model, self.s = model, s
+        # zero rows in the core's layout, with the chambers' and valves' outputs
         lay = _output_layout(model, s)
-        self._empty: dict[str, Any] = {"times": np.zeros(0), "data": np.zeros(
-            (0, lay["n_columns"] + len(heart.columns)))}
+        self._empty: dict[str, Any] = {
+            "times": np.zeros(0), "data": np.zeros((0, lay["n_columns"])),
+            "chamber_volume": {name: np.zeros(0) for name in lay["chambers"]},
+            "valve_status": {name: np.zeros(0, dtype=np.int8) for name in lay["valves"]}}
         tl = lay.get("transport") if s["transport"] else None
         if tl is not None:
             n = len(tl["species"])
             self._empty["transport"] = {"species": list(tl["species"]), "initial_stored": [0.0] * n,
                                         "data": np.zeros((0, n * tl["columns_per_species"]))}
-        head = _assemble(model, s, heart, self.template(),
-                         _run_settings(s, None, bool(heart.valves)), False, carry=True)
+        head = _result(model, s, self.template(),
+                       _run_settings(s, None, bool(lay["valves"])), False)
         self.store = ZarrAppender(store["path"], dataset(head), store["time_chunk"],
                                   overwrite=store["overwrite"], space_chunk=store["space_chunk"])
         self.monitor = monitor
 
     def template(self) -> dict[str, Any]:
-        """Zero rows in the core's layout (a fresh dict: the assembly takes columns out)."""
+        """Zero rows in the core's layout (a fresh dict)."""
         return dict(self._empty)
 
     def add(self, rows: dict[str, Any]) -> None:
-        chunk = _assemble(self.model, self.s, self.heart, dict(rows), {}, False, carry=True)
+        chunk = _result(self.model, self.s, rows, {}, False)
         self.monitor.update(chunk)
         self.store.append(dataset(chunk))
 

@@ -25,7 +25,7 @@ from oxyline.ensemble.patch import Patcher, Variant, patch_paths, traced
 from oxyline.errors import ModelError, ResourceError, SimulationCancelled, core_errors
 from oxyline.model import Model
 from oxyline.monitor import Monitor
-from oxyline.run import _Heart, _result, _run_settings, _settings, cancellable, tqdm_class
+from oxyline.run import _heart_outputs, _result, _run_settings, _settings, cancellable, tqdm_class
 
 
 def run_settings(model: Model, output: Output, overrides: Mapping[str, Any]) -> dict[str, Any]:
@@ -136,15 +136,14 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
 
     feed = Feed(base.patcher, patches, output, overrides, collector, numbers, recorded)
     base_settings = feed.base_settings
-    # chamber volumes and valve status, as in simulate(): their unknowns are recorded after
-    # the output columns (a patch changes values, not the model's structure)
-    heart = _Heart(model)
-    collector.heart = {"chamber": [n for n, _ in heart.chambers],
-                       "valve": [n for n, _, _ in heart.valves]}
+    # chamber volumes and valve status, as in simulate(): the core returns them beside the
+    # output columns (a patch changes values, not the model's structure)
+    heart = _heart_outputs(model, base_settings)
+    collector.heart = {"chamber": heart.get("chambers", []), "valve": heart.get("valves", [])}
     # summaries go to the collector in one pass at the end, unless a store writes each
     # variant as it finishes (it reads the collector's row) or it has heart outputs
     batch = StatsBatch(collector) if output == "summary" and on_variant is None \
-        and not heart.columns else None
+        and not heart else None
 
     def done(i: int, raw: dict[str, Any] | None, layout: dict[str, Any] | None,
              kind: str | None, message: str | None) -> None:
@@ -160,7 +159,7 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
                 if batch is not None and batch.add(i, raw, layout):
                     recorded(i)
                     return
-                _record(collector, i, output, heart, v.model, s, raw, layout)
+                _record(collector, i, output, v.model, s, raw, layout)
             except Exception as e:  # noqa: BLE001 - a user's output function fails its variant
                 collector.fail(i, "output", f"variant {numbers[i]}: {type(e).__name__}: {e}"
                                [:ERROR_CHARS])
@@ -182,7 +181,7 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
 
             # a summary's statistics are computed on the worker threads (see summary_values)
             return ensemble.run(feed.next, on_done=done, workers=workers,
-                                summary=output == "summary", heart=bool(heart.columns), poll=poll,
+                                summary=output == "summary", heart=bool(heart), poll=poll,
                                 variant_timeout=variant_timeout,
                                 max_memory=feed.memory_limit, **core)
     finally:
@@ -191,35 +190,20 @@ def run_local(model: Model, patches: Sequence[Mapping[str, Any]], collector: Col
         close()
 
 
-def _record(collector: Collector, i: int, output: Output, heart: _Heart, model: Model,
+def _record(collector: Collector, i: int, output: Output, model: Model,
             s: dict[str, Any], raw: dict[str, Any], layout: dict[str, Any]) -> None:
     """Put the outputs of finished variant ``i`` (its run ``raw``) into ``collector``."""
-    hearts = _variant_heart(heart, raw)
     # a summary without species is read from the core's column statistics; the bounds
     # monitor only concerns species, so it needs the Result only then
     values = stats_summary(raw, layout) if output == "summary" else None
     if values is None:
         result = _result(model, s, raw, _run_settings(s, raw), True, layout)
-        if hearts is not None:
-            result.chamber_volume, result.valve_status = hearts
         values = collector.outputs(result, raw.get("column_stats"))
         collector.warn(i, bounds_findings(model, result))
-    if output == "summary" and hearts is not None:
-        values = {**values, **heart_summary(*hearts, raw["times"])}
+    if output == "summary" and "chamber_volume" in raw:
+        values = {**values, **heart_summary(raw["chamber_volume"], raw["valve_status"],
+                                            raw["times"])}
     collector.put(i, values)
-
-
-def _variant_heart(heart: _Heart, raw: dict[str, Any]
-                   ) -> tuple[dict[str, Any], dict[str, Any]] | None:
-    """A variant's chamber volumes and valve status from the heart columns the core recorded
-    after its output columns (taken off ``raw``'s data and column statistics), or None."""
-    extra = heart.split(raw)
-    if extra is None:
-        return None
-    if raw.get("column_stats") is not None:
-        n = len(heart.columns)
-        raw["column_stats"] = tuple(a[: len(a) - n] for a in raw["column_stats"])
-    return heart.outputs(extra)
 
 
 def bounds_findings(model: Model, result: Any) -> list[str]:

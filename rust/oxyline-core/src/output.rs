@@ -9,6 +9,9 @@
 use crate::error::{Error, Result};
 use std::collections::HashMap;
 
+mod heart;
+pub use heart::{HeartColumns, HeartRows, valve_status};
+
 /// Flow variables of a vessel, in the order of `Probes::vessel_unknowns`.
 pub const VESSEL_VARIABLES: [&str; 4] = ["pressure_in", "pressure_out", "flow_in", "flow_out"];
 /// Flow variables of a segment, in the order of `Probes::segment_unknowns`.
@@ -105,35 +108,6 @@ pub struct ValveProbe {
     /// A `valve` element's law (its `closure` is svZeroDSolver's `valve_status`); None for
     /// the heart block's on/off valves.
     pub law: Option<crate::element::valve::ValveLaw>,
-}
-
-/// A valve's status at each recorded row (1 open, 0 closed) from its pressure behind, its
-/// pressure in front and its flow there (docs/physics.md §1.8, §1.10). A `valve` element
-/// (`on_off` false) is open while the pressure behind exceeds the pressure in front. The heart
-/// block's valve (`on_off`) also stays open while its flow is still forward after the pressure
-/// difference reversed (the inertial end of ejection), until the flow reverses; once closed,
-/// only the pressure difference reopens it: with generalized-α a closed valve keeps the small
-/// flow of the last Newton correction (~1e-3 of the peak, of either sign; svZeroDSolver's
-/// reset), which must not read as open (with RK4 a closed valve's flow is exactly zero).
-/// `open`: the on/off valve's status before the first row (a chunk of a streamed run goes on
-/// from the last chunk's). Returns the statuses and the status after the last row.
-pub fn valve_status(
-    on_off: bool,
-    behind: &[f64],
-    front: &[f64],
-    flow: &[f64],
-    mut open: bool,
-) -> (Vec<i8>, bool) {
-    let rows = behind.iter().zip(front).zip(flow);
-    let status = rows
-        .map(|((&up, &down), &q)| {
-            let pushed = up > down;
-            // a sequence, not an elementwise rule: the on/off valve's hysteresis
-            open = pushed || (on_off && open && q > 0.0);
-            i8::from(open)
-        })
-        .collect();
-    (status, open)
 }
 
 impl Probes {
@@ -445,26 +419,6 @@ impl Selection {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn a_heart_valve_stays_open_while_its_flow_is_forward_and_reopens_only_when_pushed() {
-        // rows: pushed open; pressure reversed with forward flow (inertial end of ejection);
-        // flow reversed (closes); a small forward flow while closed (a Newton residue); pushed
-        let behind = [2.0, 1.0, 1.0, 1.0, 3.0];
-        let front = [1.0, 2.0, 2.0, 2.0, 1.0];
-        let flow = [5.0, 1.0, -0.1, 1e-3, 4.0];
-        let (heart, last) = valve_status(true, &behind, &front, &flow, false);
-        assert_eq!(heart, vec![1, 1, 0, 0, 1]);
-        assert!(last);
-        // a `valve` element reads the pressures alone
-        let (element, _) = valve_status(false, &behind, &front, &flow, false);
-        assert_eq!(element, vec![1, 0, 0, 0, 1]);
-        // a chunk goes on from the last one's status: open and flow forward stays open
-        let (cont, last) = valve_status(true, &[1.0], &[2.0], &[0.5], true);
-        assert_eq!((cont, last), (vec![1], true));
-        let (fresh, _) = valve_status(true, &[1.0], &[2.0], &[0.5], false);
-        assert_eq!(fresh, vec![0]);
-    }
 
     fn probes() -> Probes {
         Probes {

@@ -6,7 +6,7 @@ use crate::errors::{error_kind, to_py};
 use crate::reader::de;
 use crate::reader::model::vessel_name;
 use crate::reader::node::PyNode;
-use crate::results::{layout_dict, outcome_dict, recorded_columns};
+use crate::results::{layout_dict, outcome_dict, put_heart, recorded_columns};
 use crate::settings::Shared;
 use numpy::IntoPyArray;
 use oxyline_core::ensemble::{
@@ -14,6 +14,7 @@ use oxyline_core::ensemble::{
 };
 use oxyline_core::model::patch::{self, Merged, PatchError, Patched};
 use oxyline_core::model::{BoundarySpec, NetworkSpec, VesselSpec, parse};
+use oxyline_core::output::{HeartColumns, HeartRows};
 use oxyline_core::{Chunk, Error, Outcome, OutputSink, RunSettings, Selection, Transport};
 use pyo3::exceptions::PyKeyboardInterrupt;
 use pyo3::prelude::*;
@@ -30,6 +31,8 @@ struct Finished {
     outcome: Result<Outcome, Error>,
     /// The per-column statistics of the output rows (summary output only).
     stats: Option<ColumnStats>,
+    /// The chamber volumes and valve statuses of the rows (see `Output::heart`).
+    heart: Option<(HeartColumns, HeartRows)>,
 }
 
 /// What the calling thread hands a worker: a variant's patch and its own settings.
@@ -96,9 +99,9 @@ struct Output {
     transport: bool,
     /// Summary output: compute [`ColumnStats`] here, on the worker thread.
     summary: bool,
-    /// Record the heart outputs' unknowns after the selected columns (each chamber's
-    /// volume, then each valve's [pressure behind, pressure in front, flow], as
-    /// `Network.unknown_layout` lists them); the rows are then kept (no streamed summary).
+    /// Return the heart outputs (`chamber_volume`, `valve_status`: their unknowns recorded
+    /// after the selected columns and taken out of the rows after the run); the rows are
+    /// then kept (no streamed summary).
     heart: bool,
     /// Wall time a variant may run: it is stopped at its next progress check after that and
     /// fails with a solver error naming `variant_timeout` (the others run on).
@@ -161,6 +164,7 @@ fn run_variant(
                 member: None,
                 outcome: Err(e),
                 stats: None,
+                heart: None,
             };
         }
     };
@@ -178,6 +182,7 @@ fn run_variant(
                 member: None,
                 outcome: Err(e),
                 stats: None,
+                heart: None,
             };
         }
     };
@@ -189,11 +194,13 @@ fn run_variant(
         selected,
         output.segments,
     );
-    if output.heart {
-        let p = &member.assembled.probes;
-        probes.extend(p.chamber_volumes.iter().map(|&(_, u)| u));
-        probes.extend(p.valves.iter().flat_map(|v| v.unknowns));
-    }
+    let mut heart = if output.heart {
+        HeartColumns::of(&member.assembled.probes)
+    } else {
+        HeartColumns::default()
+    };
+    let heart_at = probes.len();
+    probes.extend_from_slice(heart.unknowns());
     let settings = RunSettings {
         probes,
         species_columns,
@@ -237,6 +244,7 @@ fn run_variant(
                 member: Some((member, sel)),
                 outcome,
                 stats,
+                heart: None,
             };
         }
     }
@@ -251,7 +259,11 @@ fn run_variant(
         &settings,
         &mut keep_going,
     );
-    let outcome = name_timeout(outcome, output.timeout, started, cancelled);
+    let mut outcome = name_timeout(outcome, output.timeout, started, cancelled);
+    let hearts = match &mut outcome {
+        Ok(out) if !heart.is_empty() => Some(out.take_heart(&mut heart, heart_at)),
+        _ => None,
+    };
     let stats = match &outcome {
         Ok(out) if output.summary && out.error.is_none() => {
             column_stats(&out.times, &out.data, out.n_probes)
@@ -262,6 +274,7 @@ fn run_variant(
         member: Some((member, sel)),
         outcome,
         stats,
+        heart: hearts.map(|rows| (heart, rows)),
     }
 }
 
@@ -292,6 +305,9 @@ fn deliver(py: Python<'_>, on_done: &Py<PyAny>, i: usize, f: Finished) -> PyResu
                     s.max.into_pyarray(py),
                 );
                 raw.set_item("column_stats", arrays)?;
+            }
+            if let Some((heart, rows)) = f.heart {
+                put_heart(&raw, &heart, Some(rows))?;
             }
             (Some(raw), error)
         }
@@ -346,8 +362,8 @@ impl Ensemble {
     /// False if Ctrl-C stopped the ensemble (the variants finished until then were handed
     /// over, running ones as "interrupted"; the rest were never fed). `summary`: each
     /// finished variant's `raw` also has `column_stats`, the (mean, min, max) arrays of
-    /// `oxyline_core::ensemble::column_stats` over its output columns. `heart`: record the
-    /// chamber volumes' and valves' unknowns after the output columns (see `Output::heart`).
+    /// `oxyline_core::ensemble::column_stats` over its output columns. `heart`: each finished
+    /// variant's `raw` also has `chamber_volume` and `valve_status` (see `Output::heart`).
     /// `poll()` (if given) is called on this thread a few times a second: an exception it
     /// raises stops the ensemble as Ctrl-C does (a `cancel` event). `variant_timeout`: the
     /// wall time (s) each variant may run (see `Output::timeout`). `max_memory` (bytes; None:

@@ -142,7 +142,7 @@ mod _core {
         reader::model::{canonical_model, forcing_frequency, read_model},
         reader::schema::{read_conditions, read_vessels, resolve_settings, transport_section},
         reader::variant::VariantReader,
-        results::{ColumnStatsFold, valve_status},
+        results::ColumnStatsFold,
         waveform_values,
     };
 

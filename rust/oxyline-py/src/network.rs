@@ -1,12 +1,14 @@
 //! `_core.Network`: an assembled network, built once from the model and run many times.
 
 use crate::errors::{ModelError, to_py};
-use crate::results::{ArrayPair, finished_run, layout_dict, put_rows, recorded_columns};
+use crate::results::{
+    ArrayPair, finished_run, layout_dict, put_heart, put_rows, recorded_columns,
+};
 use crate::{checkpoint, reader, settings};
 use numpy::{IntoPyArray, PyArray1};
 use oxyline_core::model::parse;
 use oxyline_core::model::plausibility::{self, Warning};
-use oxyline_core::output::VESSEL_VARIABLES;
+use oxyline_core::output::{HeartColumns, HeartRows, VESSEL_VARIABLES};
 use oxyline_core::run::checkpoint::{Checkpoints, Every, Snapshot};
 use oxyline_core::run::memory::RELEASED_CIRCUIT_SEGMENTS;
 use oxyline_core::{Assembled, Chunk, Dae, Error, OutputSink, Selection, Transport};
@@ -637,6 +639,11 @@ impl Network {
     /// `resume` (such a dict), the run continues from that state, bit-identical to the run
     /// that saved it.
     ///
+    /// `heart`: the dict (and every streamed chunk) also has `chamber_volume` {chamber:
+    /// volume (m³) per row} and `valve_status` {valve: status (int8, 1 open, 0 closed) per
+    /// row; a chunk's valves go on from the last chunk's}: the heart outputs of the model's
+    /// chambers and valves (`oxyline_core::output::HeartColumns`), none when it has neither.
+    ///
     /// `svzerod`: svZeroDSolver's output and stop conventions for the drop-in (derived
     /// columns, rates, the cycle-to-cycle rule; see `svzerod.rs`), recorded after the columns.
     ///
@@ -644,7 +651,7 @@ impl Network {
     /// method, dt, ..., the output selection). The step control defaults as in
     /// `oxyline.simulate` ([`settings::Shared::default_step_control`]): error control at rtol
     /// 1e-3 without `rtol`, `dt` or checkpoints; `rtol = None` keeps the fixed step.
-    #[pyo3(signature = (*, period, output_every, all_unknowns = false, extra_columns = None,
+    #[pyo3(signature = (*, period, output_every, all_unknowns = false, heart = false,
         progress = None,
         chunk_sink = None, chunk_rows = 1024, keep_current_cycle = true, checkpoint_sink = None,
         checkpoint_every_cycles = None, checkpoint_every_seconds = None, resume = None,
@@ -656,7 +663,7 @@ impl Network {
         period: f64,
         output_every: f64,
         all_unknowns: bool,
-        extra_columns: Option<Vec<usize>>,
+        heart: bool,
         progress: Option<Py<PyAny>>,
         chunk_sink: Option<Py<PyAny>>,
         chunk_rows: usize,
@@ -680,7 +687,16 @@ impl Network {
         let transport_on = shared.transport;
         let mut settings = shared.run_settings(period, output_every, keep_current_cycle)?;
         let threads = shared.threads;
-        let (probes, species_columns) = self.columns(shared, all_unknowns, extra_columns)?;
+        let (mut probes, species_columns) = self.columns(shared, all_unknowns)?;
+        // the heart outputs' unknowns, recorded after the selected columns (taken out again
+        // as chamber volumes and valve statuses when the rows are handed over)
+        let mut heart = if heart {
+            HeartColumns::of(&self.inner.0.probes)
+        } else {
+            HeartColumns::default()
+        };
+        let heart_at = probes.len();
+        probes.extend_from_slice(heart.unknowns());
         settings.probes = probes;
         settings.species_columns = species_columns;
         if let Some(d) = &svzerod {
@@ -700,6 +716,7 @@ impl Network {
             .unwrap_or_default();
         let n_probes =
             settings.probes.len() + settings.svzerod.extra_columns(settings.probes.len());
+        let mut streamed_heart = heart.clone();
         let (outcome, pending) = py.detach(|| {
             // the first Python error of a callback (progress, Ctrl-C or the sink) stops the run
             // and is reported instead of the core's Interrupted
@@ -723,6 +740,8 @@ impl Network {
                 };
                 Python::attach(|py| {
                     let d = PyDict::new(py);
+                    let (data, hearts) =
+                        chunk_heart(py, &mut streamed_heart, c.data, n_probes, heart_at);
                     let species = (!species_names.is_empty()).then(|| {
                         (
                             species_names.as_slice(),
@@ -733,11 +752,12 @@ impl Network {
                     let r = put_rows(
                         &d,
                         PyArray1::from_slice(py, c.times),
-                        PyArray1::from_slice(py, c.data),
-                        n_probes,
+                        data.unwrap_or_else(|| PyArray1::from_slice(py, c.data)),
+                        n_probes - streamed_heart.width(),
                         species,
                     )
-                    .and_then(|_| f.call1(py, (d,)).map(drop));
+                    .and_then(|_| put_heart(&d, &streamed_heart, hearts))
+                    .and_then(|()| f.call1(py, (d,)).map(drop));
                     r.map_err(|e| pending.set(Some(e))).is_ok()
                 })
             };
@@ -793,24 +813,33 @@ impl Network {
         drop(species);
         drop(settings);
         oxyline_core::run::release_free_pages(inner.1.n);
-        finished_run(py, outcome, pending)
+        let mut hearts = None;
+        let outcome = outcome.map(|mut out| {
+            if !heart.is_empty() {
+                hearts = Some(out.take_heart(&mut heart, heart_at));
+            }
+            out
+        });
+        let d = finished_run(py, outcome, pending)?;
+        if let Some(rows) = hearts {
+            put_heart(&d, &heart, Some(rows))?;
+        }
+        Ok(d)
     }
 }
 
 impl Network {
-    /// The unknowns a run records: the selected output columns (or every unknown), then the
-    /// `extra_columns` (chamber volumes, valve pressures and flows: `unknown_layout`),
-    /// bounds-checked here; and the species columns of the selection.
+    /// The unknowns a run records: the selected output columns (or every unknown), and the
+    /// species columns of the selection.
     fn columns(
         &self,
         shared: settings::Shared,
         all_unknowns: bool,
-        extra_columns: Option<Vec<usize>>,
     ) -> PyResult<(Vec<usize>, Option<Vec<usize>>)> {
         let segments = shared.segments;
         let selected = shared.variables.is_some() || shared.vessels.is_some();
         let sel = self.selection(shared.variables, shared.vessels, segments)?;
-        let (mut cols, species_columns) = if all_unknowns {
+        let (cols, species_columns) = if all_unknowns {
             ((0..self.inner.1.n).collect(), None)
         } else {
             recorded_columns(
@@ -821,17 +850,26 @@ impl Network {
                 segments,
             )
         };
-        if let Some(extra) = extra_columns {
-            if let Some(&bad) = extra.iter().find(|&&c| c >= self.inner.1.n) {
-                return Err(ModelError::new_err(format!(
-                    "simulation: extra column {bad} is not an unknown (the circuit has {})",
-                    self.inner.1.n
-                )));
-            }
-            cols.extend(extra);
-        }
         Ok((cols, species_columns))
     }
+}
+
+/// A streamed chunk's rows (`n_cols` wide) without the heart columns at `at`, and its
+/// chamber volumes and valve statuses, each valve going on from the last chunk's status
+/// (None, None without heart outputs: the rows go over as they are).
+fn chunk_heart<'py>(
+    py: Python<'py>,
+    heart: &mut HeartColumns,
+    data: &[f64],
+    n_cols: usize,
+    at: usize,
+) -> (Option<Bound<'py, PyArray1<f64>>>, Option<HeartRows>) {
+    if heart.is_empty() {
+        return (None, None);
+    }
+    let mut kept = data.to_vec();
+    let rows = heart.split(&mut kept, n_cols, at);
+    (Some(kept.into_pyarray(py)), Some(rows))
 }
 
 /// When the run's progress callback reaches Python: at most once per 100 ms, plus the first

@@ -4,7 +4,7 @@
 use crate::errors::{error_kind, to_py};
 use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyUntypedArrayMethods};
 use oxyline_core::output::{
-    SEGMENT_VARIABLES, SPECIES_SEGMENT_VARIABLES, SPECIES_VESSEL_VARIABLES, VESSEL_VARIABLES,
+    HeartColumns, HeartRows, SEGMENT_VARIABLES, SPECIES_SEGMENT_VARIABLES, SPECIES_VESSEL_VARIABLES, VESSEL_VARIABLES,
 };
 use oxyline_core::{Error, Outcome, Selection, Transport};
 use pyo3::prelude::*;
@@ -107,6 +107,11 @@ pub(crate) fn layout_dict<'py>(
         names(&SEGMENT_VARIABLES, &sel.segment_variables),
     )?;
     d.set_item("n_columns", sel.flow_columns(p).len())?;
+    // the heart outputs (`Result.chamber_volume`, `Result.valve_status`): every chamber and
+    // valve, whatever the selection
+    let heart = HeartColumns::of(p);
+    d.set_item("chambers", heart.chambers)?;
+    d.set_item("valves", heart.valves)?;
     if let Some(t) = transport {
         let counts = t.out_segment_counts();
         let td = PyDict::new(py);
@@ -254,37 +259,28 @@ pub(crate) fn finished_run(
     Ok(d)
 }
 
-/// One valve's status at each recorded row (1 open, 0 closed) from its recorded pressure
-/// behind, pressure in front and flow (`oxyline_core::output::valve_status`, the rule of
-/// docs/physics.md §1.8, §1.10); `open`: an on/off valve's status before the first row.
-/// Returns the statuses (int8) and the status after the last row.
-#[oxyline_py_guard::guard]
-#[pyfunction]
-#[pyo3(signature = (behind, front, flow, on_off, open = false))]
-pub(crate) fn valve_status<'py>(
-    py: Python<'py>,
-    behind: numpy::PyReadonlyArray1<'py, f64>,
-    front: numpy::PyReadonlyArray1<'py, f64>,
-    flow: numpy::PyReadonlyArray1<'py, f64>,
-    on_off: bool,
-    open: bool,
-) -> PyResult<(Bound<'py, PyArray1<i8>>, bool)> {
-    // (columns of the recorded rows: strided views, copied once)
-    let (b, f, q) = (
-        behind.as_array().to_vec(),
-        front.as_array().to_vec(),
-        flow.as_array().to_vec(),
-    );
-    if b.len() != f.len() || b.len() != q.len() {
-        return Err(pyo3::exceptions::PyValueError::new_err(format!(
-            "valve_status: behind, front and flow differ in length ({}, {}, {})",
-            b.len(),
-            f.len(),
-            q.len()
-        )));
+/// Put a run's heart outputs into its rows' dict `d`: `chamber_volume` {chamber: volumes
+/// (m³)} and `valve_status` {valve: statuses (int8, 1 open, 0 closed)}, one value per row
+/// (see `oxyline_core::output::HeartColumns`). Nothing when `rows` is None.
+pub(crate) fn put_heart(
+    d: &Bound<'_, PyDict>,
+    heart: &HeartColumns,
+    rows: Option<HeartRows>,
+) -> PyResult<()> {
+    let Some(rows) = rows else {
+        return Ok(());
+    };
+    let py = d.py();
+    let volume = PyDict::new(py);
+    for (name, v) in heart.chambers.iter().zip(rows.volume) {
+        volume.set_item(name, v.into_pyarray(py))?;
     }
-    let (status, last) = oxyline_core::output::valve_status(on_off, &b, &f, &q, open);
-    Ok((status.into_pyarray(py), last))
+    let status = PyDict::new(py);
+    for (name, s) in heart.valves.iter().zip(rows.status) {
+        status.set_item(name, s.into_pyarray(py))?;
+    }
+    d.set_item("chamber_volume", volume)?;
+    d.set_item("valve_status", status)
 }
 
 /// `oxyline_core::ensemble::StatsFold` for Python: each column's time mean (trapezoidal rule,

@@ -4,6 +4,7 @@ use super::cycle::Cycles;
 use super::settings::{Method, RunSettings};
 use crate::error::Error;
 use crate::integrate::stability::StabilityLimit;
+use crate::output::{HeartColumns, HeartRows};
 use crate::transport::Transport;
 
 #[derive(Debug, Clone)]
@@ -85,6 +86,20 @@ pub struct TransportOutcome {
 }
 
 impl Outcome {
+    /// Take the heart outputs (recorded as columns `at..at + heart.width()` of every row,
+    /// after the selected columns) out of the rows, and out of the last cycle's second
+    /// integration's rows (whose own heart outputs are not reported): the rows keep the
+    /// selected (and svZeroDSolver's derived) columns, `n_probes` shrinks to them.
+    pub fn take_heart(&mut self, heart: &mut HeartColumns, at: usize) -> HeartRows {
+        let n = self.n_probes;
+        let rows = heart.split(&mut self.data, n, at);
+        if let Some(f) = self.error_control.as_mut().and_then(|ec| ec.finer.as_mut()) {
+            heart.clone().split(&mut f.data, n, at);
+        }
+        self.n_probes -= heart.width();
+        rows
+    }
+
     /// The outcome of a run stopped (`error`) before its recording pass started: during the
     /// step estimate or a transport run's flow-only mean-flow pass. No row was recorded, so
     /// its tables are empty but of the run's layout (the columns of `s` and, for a transport
