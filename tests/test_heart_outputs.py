@@ -149,9 +149,10 @@ def test_streamed_chamber_volume_follows_its_flow_balance(tmp_path) -> None:
 
 
 def test_ensemble_chamber_volume_follows_its_flow_balance() -> None:
-    """Each ensemble variant's chamber volume (the core's, per variant) against the integral
-    of that variant's own recorded flows: two systemic resistances, two stroke volumes, each
-    volume within the quadrature gap of its flow balance."""
+    """Each ensemble variant's chamber volume (the core's, per variant; ``output="full"``)
+    against the integral of that variant's own recorded flows: two systemic resistances, two
+    stroke volumes, each volume within the quadrature gap of its flow balance; the full output
+    holds the valve statuses too, on the chamber and valve coordinates."""
     model = copy.deepcopy(CLOSED_LOOP)
     patches = [{}, {"vessels": {"systemic": {"lumped": {"resistance": 1.0e8}}}}]
     ds = oxyline.simulate_ensemble(model, patches, output="full", cycles=4,
@@ -162,7 +163,10 @@ def test_ensemble_chamber_volume_follows_its_flow_balance() -> None:
         v = ds["chamber_volume"].sel(chamber="lv").values[i]
         q_in = ds["flow_in"].sel(vessel="lv").values[i]
         q_out = ds["flow_out"].sel(vessel="lv").values[i]
-        stroke, err = _flow_balance_error(v, q_in, q_out, ds["time"].values)
+        stroke, err = _flow_balance_error(v, q_in, q_out, ds["time"].values[i])
         assert stroke > 1e-5 and err < 1e-3, (i, stroke, err)
         strokes.append(stroke)
+        for valve in ("aortic_valve", "mitral_valve"):  # each opens and closes every beat
+            status = ds["valve_status"].sel(valve=valve).values[i]
+            assert set(np.unique(status)) == {0.0, 1.0}, (i, valve)
     assert strokes[1] > strokes[0]  # the lower resistance moves more blood per beat

@@ -320,9 +320,10 @@ def _stack_full(datasets: Mapping[int, Any], n: int) -> Any:
         if name in first.dims and name != "time":
             continue  # index coordinates (vessel) go below
         shape = (n, *(sizes[d] for d in var.dims))
-        dtype = var.dtype if var.dtype.kind in "fc" else None
+        dtype = var.dtype if var.dtype.kind in "fciu" else None
         if dtype is None:
             continue  # string coordinates (segment_vessel): taken from the first variant
+        # (an integer variable, valve_status, becomes float: NaN for a failed variant)
         arr = np.full(shape, np.nan, dtype=np.result_type(dtype, np.float64))
         for i, ds in datasets.items():
             v = ds.variables[name]
@@ -337,6 +338,8 @@ def _stack_full(datasets: Mapping[int, Any], n: int) -> Any:
         if name not in ds.variables and name != "vessel" and "segment" in first[name].dims \
                 and sizes.get("segment", 0) == first.sizes.get("segment", 0):
             ds = ds.assign_coords({name: first[name]})
+    # the chambers and valves (a patch changes values, not the model's structure)
+    ds = ds.assign_coords({d: first[d].values for d in HEART_DIMS.values() if d in first.coords})
     ds.attrs.update({k: v for k, v in first.attrs.items() if not k.startswith("solver_")})
     return ds
 
