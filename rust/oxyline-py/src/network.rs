@@ -1,9 +1,7 @@
 //! `_core.Network`: an assembled network, built once from the model and run many times.
 
 use crate::errors::{ModelError, to_py};
-use crate::results::{
-    ArrayPair, finished_run, layout_dict, put_heart, put_rows, recorded_columns,
-};
+use crate::results::{ArrayPair, finished_run, layout_dict, put_heart, put_rows, recorded_columns};
 use crate::{checkpoint, reader, settings};
 use numpy::{IntoPyArray, PyArray1};
 use oxyline_core::model::parse;

@@ -4,7 +4,8 @@
 use crate::errors::{error_kind, to_py};
 use numpy::{IntoPyArray, PyArray1, PyArrayMethods, PyUntypedArrayMethods};
 use oxyline_core::output::{
-    HeartColumns, HeartRows, SEGMENT_VARIABLES, SPECIES_SEGMENT_VARIABLES, SPECIES_VESSEL_VARIABLES, VESSEL_VARIABLES,
+    HeartColumns, HeartRows, SEGMENT_VARIABLES, SPECIES_SEGMENT_VARIABLES,
+    SPECIES_VESSEL_VARIABLES, VESSEL_VARIABLES,
 };
 use oxyline_core::{Error, Outcome, Selection, Transport};
 use pyo3::prelude::*;

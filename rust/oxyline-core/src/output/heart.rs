@@ -69,7 +69,8 @@ impl HeartColumns {
     pub fn split(&mut self, data: &mut Vec<f64>, n_cols: usize, at: usize) -> HeartRows {
         let w = self.width();
         let nt = if n_cols == 0 { 0 } else { data.len() / n_cols };
-        let column = |c: usize| -> Vec<f64> { (0..nt).map(|r| data[r * n_cols + at + c]).collect() };
+        let column =
+            |c: usize| -> Vec<f64> { (0..nt).map(|r| data[r * n_cols + at + c]).collect() };
         let nc = self.chambers.len();
         let volume = (0..nc).map(column).collect();
         let mut status = Vec::with_capacity(self.valves.len());
