@@ -68,7 +68,7 @@ impl HeartColumns {
     /// volumes and valve statuses. Each valve goes on from its status after the last call.
     pub fn split(&mut self, data: &mut Vec<f64>, n_cols: usize, at: usize) -> HeartRows {
         let w = self.width();
-        let nt = if n_cols == 0 { 0 } else { data.len() / n_cols };
+        let nt = data.len().checked_div(n_cols).unwrap_or(0);
         let column =
             |c: usize| -> Vec<f64> { (0..nt).map(|r| data[r * n_cols + at + c]).collect() };
         let nc = self.chambers.len();
