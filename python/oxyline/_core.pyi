@@ -119,7 +119,7 @@ class Network:
         period: float,
         output_every: float,
         all_unknowns: bool = False,
-        extra_columns: list[int] | None = None,
+        heart: bool = False,
         progress: Callable[[float, float], None] | None = None,
         chunk_sink: Callable[[dict[str, Any]], None] | None = None,
         chunk_rows: int = 1024,
@@ -137,7 +137,9 @@ class Network:
         returned. An exception from ``chunk_sink`` stops the run and is returned as ``error``;
         ``max_buffered_rows`` is the most output rows the core held at once. With last-cycle
         output, ``keep_current_cycle=False`` records nothing before the last cycle (a streaming
-        run then holds at most one chunk; a run stopped earlier returns no rows).
+        run then holds at most one chunk; a run stopped earlier returns no rows). ``heart``:
+        the dict and every chunk also have ``chamber_volume`` {chamber: m^3 per row} and
+        ``valve_status`` {valve: int8 per row, 1 open}; a chunk's valves go on from the last's.
 
         The step control defaults as in ``oxyline.simulate``: without ``rtol``, ``dt`` and
         checkpoints and with a method other than ``rk4`` the run is error-controlled at rtol
@@ -259,10 +261,6 @@ class ColumnStatsFold:
     def __init__(self, n_cols: int) -> None: ...
     def push(self, times: np.ndarray, data: np.ndarray) -> None: ...
     def finish(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None: ...
-def valve_status(behind: np.ndarray, front: np.ndarray, flow: np.ndarray, on_off: bool,
-                 open: bool = False) -> tuple[np.ndarray, bool]:
-    """One valve's status at each recorded row (int8, 1 open, 0 closed) by the core's rule,
-    and its status after the last row; ``open``: an on/off valve's before the first."""
 def forcing_frequency(data: Any, rtol: float | None = None) -> tuple[float, float]:
     """The highest significant frequency (Hz) of a native model's flow and pressure
     waveforms and the tolerance it was found at (the `segments: auto` rule)."""
