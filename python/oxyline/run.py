@@ -595,9 +595,11 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     sink: Any = None
     s_out = s  # the selection of the rows kept
     if store is not None:
-        _check_output_size(model, s, overrides, where=store["path"])
+        store = {**store, **_stream_plan(model, s, store["time_chunk"])}
+        _check_output_size(model, s, overrides, where=store["path"], held=store["held"])
         sink = _ZarrSink(model, s, heart, monitor, store)
-        core.update(chunk_sink=sink.add, chunk_rows=store["time_chunk"])
+        core.update(chunk_sink=sink.add, chunk_rows=store["time_chunk"],
+                    keep_current_cycle=store["keep_current_cycle"])
     elif summarize and not core:  # (a checkpointed run keeps its rows: resume rebuilds them)
         layout = _output_layout(model, s)
         if not s["transport"]:
@@ -930,29 +932,32 @@ def _checkpoints(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _check_output_size(model: Model, s: Mapping[str, Any], overrides: Mapping[str, Any],
-                       reduced: float = 0.0, where: Any = None) -> None:
+                       reduced: float = 0.0, where: Any = None, held: float = 0.0) -> None:
     """Refuse an output the memory allowed cannot hold (:class:`ResourceError` with the
     estimate and the settings to change), and announce a large one
     (:class:`OutputSizeWarning`), before the run starts. ``reduced``: the bytes of a
     summarized run's reductions and chunk in flight, beside the rows it keeps (``s``).
-    ``where``: the path of a streamed store, whose memory stays bounded (its size on disk is
-    announced)."""
+    ``where``: the path of a streamed store (its size on disk is announced), whose memory is
+    the rows it holds at once, ``held`` bytes (:func:`_stream_plan`)."""
     need, rows, cols = _output_size(model, s)
     need += reduced
     size = f"the output ({rows} rows x {cols} columns)"
+    todo = ("output fewer rows (output_every, output_cycles='last', fewer cycles) or columns "
+            "(variables, vessels, segments=False), stream it to disk with simulate_to_zarr, "
+            "or raise max_memory")
     if where is not None:
         if need > _memory.WARN_BYTES:
             warnings.warn(f"{where}: {size} takes about {_memory.human(need)} on disk (before "
                           "compression)", OutputSizeWarning, stacklevel=4)
-        return
+        need, size = held, f"the streamed output's rows held at once ({cols} columns)"
+        todo = ("give a smaller time_chunk or fewer columns (variables, vessels, "
+                "segments=False), or raise max_memory")
     key = f"{'simulate' if 'max_memory' in overrides else 'simulation'}: max_memory"
     limit = _memory.limit(overrides.get("max_memory", model.simulation.get("max_memory")), key)
     if limit is not None and need > limit:
         raise ResourceError(
             f"simulate: {size} needs about {_memory.human(need)} of memory (estimate), above "
-            f"max_memory = {_memory.human(limit)}; output fewer rows (output_every, "
-            "output_cycles='last', fewer cycles) or columns (variables, vessels, "
-            "segments=False), stream it to disk with simulate_to_zarr, or raise max_memory")
+            f"max_memory = {_memory.human(limit)}; {todo}")
     if limit is not None and "max_memory" in overrides:
         # a max_memory given to this run bounds the whole run: the model's state too (the
         # model was assembled under its own file's limit)
@@ -963,15 +968,13 @@ def _check_output_size(model: Model, s: Mapping[str, Any], overrides: Mapping[st
                 f"(estimate: the model's state {_memory.human(state)}, its output "
                 f"{_memory.human(need)}), above max_memory = {_memory.human(limit)}; output "
                 "fewer rows or columns, a coarser segmentation, or raise max_memory")
-    if need > _memory.WARN_BYTES:
+    if need > _memory.WARN_BYTES and where is None:
         warnings.warn(f"{size} takes about {_memory.human(need)} in memory, and as much when "
                       "written to a file", OutputSizeWarning, stacklevel=4)
 
 
 def _output_size(model: Model, s: Mapping[str, Any]) -> tuple[float, int, int]:
-    layout = _output_layout(model, s)
-    if not s["transport"]:
-        layout.pop("transport", None)
+    layout = _output_layout_sized(model, s)
     cycles = s["max_cycles"] if s["until_periodic"] is not None else s["cycles"]
     return _memory.output_estimate(layout, s["period"], s["output_every"], cycles,
                                    s["output_all_cycles"])
@@ -981,8 +984,34 @@ def _output_size(model: Model, s: Mapping[str, Any]) -> tuple[float, int, int]:
 SEGMENT_CHUNK = 65536
 
 
+def _stream_plan(model: Model, s: Mapping[str, Any], time_chunk: int | None) -> dict[str, Any]:
+    """How a streamed store's run holds its rows: ``time_chunk`` (given, else the most rows
+    whose copies in flight stay within ``memory.STREAM_BUDGET``: :func:`memory.stream_rows`),
+    ``keep_current_cycle`` (last-cycle output: the cycles before the last are recorded, so
+    that a run stopped early stores its partial cycle, only while a cycle's rows fit the
+    budget; a run until periodic keeps them anyway, not knowing its last cycle) and ``held``,
+    the bytes of rows it holds at once (:func:`memory.stream_estimate`)."""
+    _, cycle_rows, cols = _memory.output_estimate(_output_layout_sized(model, s), s["period"],
+                                                  s["output_every"], 1, False)
+    chunk = time_chunk if time_chunk is not None else _memory.stream_rows(cols)
+    keep, kept = True, 0
+    if not s["output_all_cycles"]:
+        cycle = 8.0 * _memory.table_rows(cycle_rows, chunk) * cols
+        keep = s["until_periodic"] is not None or cycle <= _memory.STREAM_BUDGET
+        kept = cycle_rows if keep else 0
+    return {"time_chunk": chunk, "keep_current_cycle": keep,
+            "held": _memory.stream_estimate(chunk, cols, kept)}
+
+
+def _output_layout_sized(model: Model, s: Mapping[str, Any]) -> dict[str, Any]:
+    layout = _output_layout(model, s)
+    if not s["transport"]:
+        layout.pop("transport", None)
+    return layout
+
+
 def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
-                     path: str | os.PathLike[str], *, time_chunk: int = 1024,
+                     path: str | os.PathLike[str], *, time_chunk: int | None = None,
                      segment_chunk: int = SEGMENT_CHUNK, overwrite: bool = False,
                      **overrides: Unpack[SimulateOptions]) -> Any:
     """Run a network, writing its output to a Zarr store *during* the run, and return the store
@@ -992,9 +1021,15 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     variables, dims, coordinates, units and attributes, Zarr format 2), but the core hands its
     output over every ``time_chunk`` rows, each chunk is appended along ``time`` at once, and
     neither the core nor Python keep more than one chunk: memory stays bounded however many
-    cycles are output (``output_cycles="all"``). Every array is also chunked along ``vessel``
+    cycles are output (``output_cycles="all"``). Without ``time_chunk``, the rows per chunk
+    are the most (up to 1024; above 64 a power of two) whose copies in flight, three of 8
+    bytes per stored column, stay within ``oxyline.memory.STREAM_BUDGET`` (256 MiB): at ten
+    million stored columns, 1 row. Every array is also chunked along ``vessel``
     and ``segment``, ``segment_chunk`` vessels or segments per chunk (default 65 536), so a
-    lazy read of one region (``xr.open_zarr(path, chunks={})``) reads only its chunks. The store is created before the run starts
+    lazy read of one region (``xr.open_zarr(path, chunks={})``) reads only its chunks
+    (:func:`oxyline.io.regions.region_sum` sums a segment variable by region, chunk by
+    chunk). The rows held at once are counted in the memory check before the run
+    (``max_memory``: :class:`~oxyline.ResourceError`). The store is created before the run starts
     and is a valid store after every chunk; its attribute ``complete`` is 1 once the run has
     finished. If the run stops early (Ctrl-C, a solver failure), the rows computed until then
     are written and the exception is raised with the opened store as ``exc.result``
@@ -1011,6 +1046,8 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     2001 1
     """
     for name, value in (("time_chunk", time_chunk), ("segment_chunk", segment_chunk)):
+        if value is None and name == "time_chunk":
+            continue  # chosen from the memory budget
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise ModelError(f"simulate_to_zarr: {name} must be an integer >= 1, got {value!r}")
     model = load_model(model)
@@ -1052,7 +1089,7 @@ class _ZarrSink:
     def add(self, rows: dict[str, Any]) -> None:
         chunk = _assemble(self.model, self.s, self.heart, dict(rows), {}, False, carry=True)
         self.monitor.update(chunk)
-        self.store.append(dataset(chunk))
+        self.store.append(chunk.to_xarray(coordinates=False))
 
     def close(self, raw: dict[str, Any], final: Result, space: bool) -> Any:
         """Write the final attributes (``final``'s, with the spatial error estimate when
