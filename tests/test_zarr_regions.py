@@ -142,9 +142,10 @@ def test_delivery_by_region_codes_is_conserved_and_meets_each_regions_balance(st
     """The lazy reduction by integer region codes (`oxyline.io.regions.region_sum`): the
     regions' delivery sums to the whole tree's wall uptake, both as the sum over the segment
     axis without any grouping (to rounding: 1e-12) and as the core's own record of the O2
-    taken through the walls over the cycle, integrated over every step (the trapezoidal mean
-    of the 1 ms output rows approximates it: 1e-4); and each region's delivery meets its
-    mass balance, as the grouping by name above."""
+    taken through the walls over the cycle, integrated by the transport scheme over every
+    step, which the trapezoidal mean of the 1 ms output rows approximates (measured 8e-5;
+    tolerance 3e-4, the two quadratures of the same flux); and each region's delivery meets
+    its mass balance, as the grouping by name above."""
     from oxyline.io.regions import region_sum
 
     ds = xr.open_zarr(store, chunks={})
@@ -161,7 +162,7 @@ def test_delivery_by_region_codes_is_conserved_and_meets_each_regions_balance(st
     total = float(delivery.sum())
     print(f"regions {total:.9e}, segments {whole:.9e}, balance record {recorded:.9e} mol/s")
     assert total == pytest.approx(whole, rel=1e-12)
-    assert total == pytest.approx(recorded, rel=1e-4)
+    assert total == pytest.approx(recorded, rel=3e-4)
     # each region against its own mass balance (tolerance as above: the stored-O2 drift)
     stored = ds["o2_mass_stored"].values
     tol = abs(stored[-1] - stored[0]) / period / total + 1e-3
@@ -175,26 +176,36 @@ def test_delivery_by_region_codes_is_conserved_and_meets_each_regions_balance(st
 
 
 def test_region_sum_reads_each_chunk_once_and_only_those_needed(store: Path) -> None:
-    """The graph of the reduction reads every stored chunk of the variable once (a chunk at a
-    time: the memory is bounded by chunks), and a time window only its own time chunks."""
-    import dask
+    """The graph of the reduction reads every stored chunk of the variable, each by one task
+    (its block's sums: a chunk is freed once reduced, memory bounded by chunks), and a time
+    window only its own time chunks."""
+    from dask.core import flatten, get_dependencies
 
     from oxyline.io.regions import region_sum
 
     ds = xr.open_zarr(store, chunks={})
     codes, names = _region_codes(ds["vessel"].values)
 
-    def chunks_read(arr: Any) -> list[tuple[int, ...]]:
-        (culled,) = dask.optimize(arr)
-        graph = dict(culled.__dask_graph__())
-        return [k[1:] for k in graph if isinstance(k, tuple)
-                and str(k[0]).startswith("open_dataset-segment_wall_o2_flux")]
+    def readers(arr: Any) -> dict[tuple[int, ...], int]:
+        """Stored chunk (time, segment block) -> the number of tasks reading it."""
+        graph = dict(arr.__dask_graph__().cull(set(flatten(arr.__dask_keys__()))))
+        out = {k[1:]: 0 for k in graph if isinstance(k, tuple)
+               and str(k[0]).startswith("open_dataset-segment_wall_o2_flux")}
+        for key in graph:
+            for dep in get_dependencies(graph, key):
+                if isinstance(dep, tuple) and dep[1:] in out and str(dep[0]).startswith(
+                        "open_dataset-segment_wall_o2_flux"):
+                    out[dep[1:]] += 1
+        return out
 
-    full = chunks_read(region_sum(ds, "segment_wall_o2_flux", codes, names).data)
+    per_region = region_sum(ds, "segment_wall_o2_flux", codes, names)
     n_t, n_s = (len(c) for c in ds["segment_wall_o2_flux"].data.chunks)
+    assert n_t > 1 and n_s > 1
+    full = readers(per_region.data)
     assert sorted(full) == [(i, j) for i in range(n_t) for j in range(n_s)]
-    window = region_sum(ds, "segment_wall_o2_flux", codes, names).isel(time=slice(0, 150))
-    assert sorted(chunks_read(window.data)) == [(0, j) for j in range(n_s)]
+    assert set(full.values()) == {1}
+    window = readers(per_region.isel(time=slice(0, 150)).data)  # the first of 200-row chunks
+    assert sorted(window) == [(0, j) for j in range(n_s)]
 
 
 def test_region_sum_refuses_codes_not_one_per_vessel(store: Path) -> None:

@@ -535,7 +535,9 @@ class Result:
     def _segment_coordinates(self) -> dict[str, Any]:
         """Each segment's vessel name, index in its vessel and position (m)."""
         seg_vessel = np.repeat(np.array(self.vessels, dtype=object), self.segment_count)
-        seg_index = np.concatenate([np.arange(n) for n in self.segment_count])
+        counts = np.asarray(self.segment_count, dtype=np.int64)
+        # each segment's index in its vessel, without an arange per vessel (2 M at 1e7)
+        seg_index = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
         return {"segment_vessel": ("segment", seg_vessel),
                 "segment_index": ("segment", seg_index),
                 "segment_position": ("segment", self.segment_position, {"units": "m"})}
