@@ -73,17 +73,19 @@ def test_last_cycle_output_above_the_budget_streams_only_the_last_cycle(
 
 
 def test_the_memory_check_counts_the_rows_held(tmp_path: Path) -> None:
+    """3 cycles of 1001 rows of 254 columns in one chunk: the core's table of 4096 rows, three
+    copies, 25 MB, refused under max_memory = 10 MB before the store is created; the budget's
+    chunk of 1024 rows (6.2 MB) runs."""
     path = tmp_path / "big.zarr"
+    run = {"cycles": 3, "output_cycles": "all", "variables": VARIABLES, "segments": True,
+           "max_memory": "10 MB"}
     with pytest.raises(oxyline.ResourceError, match="time_chunk") as info:
-        oxyline.simulate_to_zarr(_tree(), path, cycles=1, variables=VARIABLES, segments=True,
-                                 time_chunk=100_000, max_memory="10 MB")
+        oxyline.simulate_to_zarr(_tree(), path, time_chunk=100_000, **run)
     print(info.value)
     assert "streamed output's rows held at once" in str(info.value)
     assert not path.exists()
-    # the same run with the budget's chunk fits
-    ds = oxyline.simulate_to_zarr(_tree(), path, cycles=1, variables=VARIABLES, segments=True,
-                                  max_memory="10 MB")
-    assert ds.attrs["complete"] == 1
+    ds = oxyline.simulate_to_zarr(_tree(), path, **run)
+    assert ds.attrs["complete"] == 1 and ds.sizes["time"] == 3001
 
 
 def test_the_chunk_rule() -> None:

@@ -181,11 +181,14 @@ def table_rows(rows: int, chunk: int) -> int:
     return held
 
 
-def stream_estimate(chunk: int, columns: int, cycle_rows: int = 0) -> float:
+def stream_estimate(chunk: int, columns: int, cycle_rows: int = 0,
+                    rows: int | None = None) -> float:
     """Bytes of a streamed run's output held in memory: ``STREAM_COPIES`` copies of a chunk of
-    ``chunk`` rows of ``columns`` values, plus the core's table of a whole cycle of
-    ``cycle_rows`` rows when the run keeps its current cycle (last-cycle output)."""
-    per_chunk = STREAM_COPIES * 8.0 * table_rows(chunk, chunk) * columns
+    ``chunk`` rows (or of all the output's ``rows``, if fewer) of ``columns`` values, plus the
+    core's table of a whole cycle of ``cycle_rows`` rows when the run keeps its current cycle
+    before the last (last-cycle output)."""
+    in_flight = chunk if rows is None else max(1, min(chunk, rows))
+    per_chunk = STREAM_COPIES * 8.0 * table_rows(in_flight, chunk) * columns
     cycle = 8.0 * table_rows(cycle_rows, chunk) * columns if cycle_rows else 0.0
     return per_chunk + cycle
 

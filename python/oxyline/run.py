@@ -993,14 +993,16 @@ def _stream_plan(model: Model, s: Mapping[str, Any], time_chunk: int | None) -> 
     the bytes of rows it holds at once (:func:`memory.stream_estimate`)."""
     _, cycle_rows, cols = _memory.output_estimate(_output_layout_sized(model, s), s["period"],
                                                   s["output_every"], 1, False)
+    _, rows, _ = _output_size(model, s)
     chunk = time_chunk if time_chunk is not None else _memory.stream_rows(cols)
+    open_ended = s["until_periodic"] is not None
     keep, kept = True, 0
-    if not s["output_all_cycles"]:
+    if not s["output_all_cycles"] and (open_ended or s["cycles"] > 1):  # cycles before the last
         cycle = 8.0 * _memory.table_rows(cycle_rows, chunk) * cols
-        keep = s["until_periodic"] is not None or cycle <= _memory.STREAM_BUDGET
+        keep = open_ended or cycle <= _memory.STREAM_BUDGET
         kept = cycle_rows if keep else 0
     return {"time_chunk": chunk, "keep_current_cycle": keep,
-            "held": _memory.stream_estimate(chunk, cols, kept)}
+            "held": _memory.stream_estimate(chunk, cols, kept, rows)}
 
 
 def _output_layout_sized(model: Model, s: Mapping[str, Any]) -> dict[str, Any]:
@@ -1096,7 +1098,8 @@ class _ZarrSink:
         asked), open the store, and raise the run's error with the store attached."""
         if space and "error" not in raw:
             _add_space_error(self.model, final)
-        raw, opened = _close_store(self.store, raw, dataset(final).attrs)
+        # (the attributes only: the store has the coordinates, ten million at that size)
+        raw, opened = _close_store(self.store, raw, dataset(final, coordinates=False).attrs)
         _raise_run_error(raw, opened)
         return opened
 
