@@ -101,3 +101,11 @@ def test_the_chunk_rule() -> None:
     # the core's table of a chunk: exactly the chunk at these sizes (64 doubled to 256)
     assert memory.table_rows(256, 256) == 256 and memory.table_rows(5, 5) == 5
     assert memory.table_rows(200, 200) == 256  # a chunk given by hand: 64, 128, 256
+
+
+def test_a_chunk_is_never_longer_than_the_output(tmp_path: Path) -> None:
+    """zarr holds a chunk whole (padded to its rows) while it encodes it: a time_chunk above
+    the output's rows (two cycles every 10 ms: 201 rows) is cut to them."""
+    ds = oxyline.simulate_to_zarr("bifurcation", tmp_path / "b.zarr", cycles=2,
+                                  output_cycles="all", output_every=0.01, time_chunk=5000)
+    assert ds.sizes["time"] == 201 and ds["pressure_in"].encoding["chunks"][0] == 201
