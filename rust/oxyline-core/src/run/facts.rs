@@ -5,8 +5,8 @@
 //! cycle-to-cycle change and, under error control, its steps, rejections, step range and
 //! largest error estimates). One schema for `simulate`, `simulate_to_zarr` and the ensembles.
 
-use crate::model::node::py_g;
 use crate::integrate::adaptive::KINDS;
+use crate::model::node::py_g;
 
 /// A recorded value, typed as the front end keeps it.
 #[derive(Debug, Clone, PartialEq)]
@@ -236,7 +236,10 @@ mod tests {
         // pressure and flow always; volume (0: no chambers) left out; species kept
         assert_eq!(get(&facts, "error_estimate_flow"), Some(&Fact::Real(0.0)));
         assert_eq!(get(&facts, "error_estimate_volume"), None);
-        assert_eq!(get(&facts, "error_estimate_species"), Some(&Fact::Real(0.7)));
+        assert_eq!(
+            get(&facts, "error_estimate_species"),
+            Some(&Fact::Real(0.7))
+        );
         assert_eq!(get(&facts, "periodic_reached"), Some(&Fact::Flag(true)));
         let not = Ran {
             periodic_error: f64::NAN,

@@ -185,7 +185,9 @@ pub fn check<N: Node>(meta: &N, file: &str) -> Result<()> {
         ));
     }
     let version = meta.get("version");
-    if version.as_ref().and_then(|v| v.integer().filter(|_| v.kind() == Kind::Int))
+    if version
+        .as_ref()
+        .and_then(|v| v.integer().filter(|_| v.kind() == Kind::Int))
         != Some(FILE_VERSION)
     {
         return bad(format!(
@@ -274,7 +276,11 @@ mod tests {
             (json!(true), "True"),
             (json!([1]), "[1]"),
         ] {
-            assert_eq!(every(value.clone()), Err(format!("{head}{shown}")), "{value}");
+            assert_eq!(
+                every(value.clone()),
+                Err(format!("{head}{shown}")),
+                "{value}"
+            );
         }
         // a long value is quoted to 80 characters
         let long = every(json!("x".repeat(200))).unwrap_err();
@@ -288,7 +294,10 @@ mod tests {
             parse_every(&json!(10), false).unwrap_err().to_string(),
             "simulate: checkpoint_every needs checkpoint (the file to write)"
         );
-        assert_eq!(check_resumed(&["progress", "threads", "checkpoint"]), Ok(()));
+        assert_eq!(
+            check_resumed(&["progress", "threads", "checkpoint"]),
+            Ok(())
+        );
         assert_eq!(
             check_resumed(&["dt", "progress", "cycles", "dt"])
                 .unwrap_err()
@@ -317,7 +326,10 @@ mod tests {
     fn checkpoint_metadata_of_this_layout_passes() {
         assert_eq!(check_with(|_| {}), Ok(()));
         assert_eq!(check_with(|m| m["checkpoint_every"] = json!(300.5)), Ok(()));
-        assert_eq!(check_with(|m| m["state"]["periodic_error"] = json!(0.5)), Ok(()));
+        assert_eq!(
+            check_with(|m| m["state"]["periodic_error"] = json!(0.5)),
+            Ok(())
+        );
     }
 
     #[test]
