@@ -264,10 +264,13 @@ def resolve_settings(sim: Any, overrides: Any, period: float | None) -> dict[str
 def run_facts(settings: dict[str, Any], run: dict[str, Any] | None = None,
               valves: bool = False) -> dict[str, Any]:
     """The settings and facts a run records with its result (oxyline_core::run::facts)."""
+def segmentation_facts(summary: dict[str, Any]) -> dict[str, Any]:
+    """How the model's vessels were cut, from ``Network.summary()``."""
 def checkpoint_interval(value: Any, file: bool = True) -> dict[str, Any]:
     """``checkpoint_every`` as ``Network.simulate``'s keywords; ModelError if bad."""
-def check_checkpoint_meta(file: str, meta: Any) -> None:
-    """CheckpointError naming ``file`` and the field unless ``meta`` fits the schema."""
+def check_checkpoint_meta(file: str, meta: Any, arrays: dict[str, np.ndarray]) -> None:
+    """CheckpointError naming ``file`` and the field unless ``meta`` and ``arrays`` fit the
+    schema."""
 def check_resumed(keys: list[str]) -> None:
     """ModelError naming the settings a resumed run cannot change."""
 class ColumnStatsFold:

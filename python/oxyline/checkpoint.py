@@ -120,14 +120,8 @@ def read(path: str | os.PathLike[str]) -> tuple[dict[str, Any], dict[str, Any]]:
     except (Exception, MemoryError) as exc:  # noqa: BLE001 - any damage: zip, zlib, npy, JSON
         raise CheckpointError(f"{path}: not an oxyline checkpoint or damaged "
                               f"({type(exc).__name__}: {str(exc)[:200]})") from None
-    # every field present and of its type, and both versions, before any is used
-    _core.check_checkpoint_meta(str(path), meta)
+    # every field present and of its type, both versions and the arrays, before any is used
+    _core.check_checkpoint_meta(str(path), meta, arrays)
     state = dict(meta["state"])
-    for key, a in arrays.items():
-        if a.dtype != np.float64 or a.ndim != 1:
-            raise CheckpointError(f"{path}: field '{key}' must be a 1-D float64 array, got "
-                                  f"{a.ndim}-D {a.dtype}")
-        if key in state:
-            raise CheckpointError(f"{path}: field '{key}' is both a number and an array")
     state.update(arrays)
     return meta, state

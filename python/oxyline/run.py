@@ -353,11 +353,7 @@ def segmentation_facts(model: Model) -> dict[str, Any]:
     default where a vessel states no ``segments`` and the model no ``max_length``),
     ``segmentation`` ("auto", "explicit" or "auto+explicit") and the rule's
     ``segmentation_rtol`` (None when no vessel is cut by it)."""
-    s = model.network.summary()
-    total, auto = int(s["segments"]), int(s["auto_segments"])
-    how = "explicit" if auto == 0 else "auto" if auto == total else "auto+explicit"
-    return {"segments_total": total, "segments_auto": auto, "segmentation": how,
-            "segmentation_rtol": s["auto_rtol"]}
+    return _core.segmentation_facts(model.network.summary())
 
 
 def _run_settings(s: Mapping[str, Any], raw: Mapping[str, Any] | None,

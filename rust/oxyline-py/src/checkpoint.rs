@@ -113,16 +113,29 @@ pub(crate) fn checkpoint_interval<'py>(
     Ok(d)
 }
 
-/// A checkpoint file's metadata (its JSON record as Python values) checked by the core's
-/// schema before any field is used: `oxyline.CheckpointError` naming `file` and the field.
+/// A checkpoint file's metadata (its JSON record as Python values) and its arrays (name →
+/// numpy array) checked by the core's schema before any field is used:
+/// `oxyline.CheckpointError` naming `file` and the field.
 #[oxyline_py_guard::guard]
 #[pyfunction]
 pub(crate) fn check_checkpoint_meta<'py>(
     py: Python<'py>,
     file: &str,
     meta: Bound<'py, PyAny>,
+    arrays: Bound<'py, PyDict>,
 ) -> PyResult<()> {
-    if let Err(e) = meta::check(&PyNode(meta), file) {
+    let shapes = arrays
+        .iter()
+        .map(|(name, a)| {
+            let ndim: usize = a.getattr("ndim")?.extract()?;
+            Ok((
+                name.extract()?,
+                ndim,
+                a.getattr("dtype")?.str()?.to_string(),
+            ))
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    if let Err(e) = meta::check(&PyNode(meta), file, &shapes) {
         let class = py.import("oxyline.errors")?.getattr("CheckpointError")?;
         return Err(PyErr::from_value(class.call1((e.to_string(),))?));
     }

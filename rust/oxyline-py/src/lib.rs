@@ -145,7 +145,7 @@ mod _core {
         reader::schema::{read_conditions, read_vessels, resolve_settings, transport_section},
         reader::variant::VariantReader,
         results::{ColumnStatsFold, valve_status},
-        settings::run_facts,
+        settings::{run_facts, segmentation_facts},
         waveform_values,
     };
 

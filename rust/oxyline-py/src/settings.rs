@@ -6,7 +6,7 @@ use crate::errors::ModelError;
 use oxyline_core::RunSettings;
 use oxyline_core::genalpha::NewtonControl;
 use oxyline_core::integrate::adaptive::{Atol, KINDS, Tolerances};
-use oxyline_core::run::facts::{Controlled, Fact, Ran, Requested, recorded};
+use oxyline_core::run::facts::{Controlled, Fact, Ran, Requested, recorded, segmentation};
 use oxyline_core::{Method, Start};
 use pyo3::conversion::FromPyObjectOwned;
 use pyo3::exceptions::PyTypeError;
@@ -320,8 +320,29 @@ pub(crate) fn run_facts<'py>(
         dt: field(&settings, "dt")?,
     };
     let ran = run.as_ref().map(ran).transpose()?;
+    facts_dict(py, recorded(&asked, ran.as_ref(), valves))
+}
+
+/// How the model's vessels were cut (`oxyline_core::run::facts::segmentation`), from the
+/// network's `summary()`: recorded with a result, printed by the CLI.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub(crate) fn segmentation_facts<'py>(
+    py: Python<'py>,
+    summary: Bound<'py, PyDict>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let facts = segmentation(
+        field(&summary, "segments")?,
+        field(&summary, "auto_segments")?,
+        field(&summary, "auto_rtol")?,
+    );
+    facts_dict(py, facts)
+}
+
+/// Recorded facts as a dict, in their order (an absent one as None).
+fn facts_dict(py: Python<'_>, facts: Vec<(String, Fact)>) -> PyResult<Bound<'_, PyDict>> {
     let d = PyDict::new(py);
-    for (key, fact) in recorded(&asked, ran.as_ref(), valves) {
+    for (key, fact) in facts {
         match fact {
             Fact::Real(x) => d.set_item(key, x)?,
             Fact::Count(n) => d.set_item(key, n)?,

@@ -143,6 +143,25 @@ pub fn recorded(s: &Requested, ran: Option<&Ran>, valves: bool) -> Vec<(String, 
     facts
 }
 
+/// How a model's vessels were cut, recorded with a result and printed by the CLI:
+/// `segments_total`, `segments_auto` (those of vessels cut by the `auto` rule, the default
+/// where a vessel states no `segments` and the model no `max_length`), `segmentation`
+/// (`auto`, `explicit` or `auto+explicit`) and the rule's `segmentation_rtol` (absent when no
+/// vessel is cut by it).
+pub fn segmentation(total: i64, auto: i64, auto_rtol: Option<f64>) -> Vec<(String, Fact)> {
+    let how = match auto {
+        0 => "explicit",
+        a if a == total => "auto",
+        _ => "auto+explicit",
+    };
+    vec![
+        ("segments_total".into(), Fact::Count(total)),
+        ("segments_auto".into(), Fact::Count(auto)),
+        ("segmentation".into(), Fact::Text(how.into())),
+        ("segmentation_rtol".into(), auto_rtol.into()),
+    ]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -180,6 +199,15 @@ mod tests {
         assert!(step_control(&s, false).starts_with("fixed step (method rk4 has no error"));
         s.method = "generalized-alpha".into();
         assert!(step_control(&s, false).starts_with("fixed step (checkpoints need"));
+    }
+
+    #[test]
+    fn segmentation_says_which_rule_cut_the_vessels() {
+        let how = |total, auto| segmentation(total, auto, Some(0.01))[2].1.clone();
+        assert_eq!(how(100, 0), Fact::Text("explicit".into()));
+        assert_eq!(how(100, 100), Fact::Text("auto".into()));
+        assert_eq!(how(100, 40), Fact::Text("auto+explicit".into()));
+        assert_eq!(segmentation(5, 0, None)[3].1, Fact::Absent);
     }
 
     #[test]

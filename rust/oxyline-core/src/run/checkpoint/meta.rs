@@ -173,10 +173,15 @@ fn state_fields<N: Node>() -> [FieldRule<N>; 4] {
     ]
 }
 
-/// Every field of a checkpoint's metadata `meta` present and of its type, and the versions
-/// of the file layout and of the run state this core reads, before any field is used. An
-/// error names `file` and the field (`state/dt`) and quotes the value.
-pub fn check<N: Node>(meta: &N, file: &str) -> Result<()> {
+/// One array of a checkpoint file: its name, number of dimensions and dtype (as the front
+/// end writes it: `float64`).
+pub type ArrayShape = (String, usize, String);
+
+/// Every field of a checkpoint's metadata `meta` present and of its type, the versions of the
+/// file layout and of the run state this core reads, and every array of the file
+/// (`arrays`) one-dimensional float64 and not also a number of the state, before any field
+/// is used. An error names `file` and the field (`state/dt`) and quotes the value.
+pub fn check<N: Node>(meta: &N, file: &str, arrays: &[ArrayShape]) -> Result<()> {
     let bad = |message: String| Err(Error::model(file, message));
     let format = meta.get("format").and_then(|f| f.text());
     if !meta.is_map() || format.as_deref() != Some(FORMAT) {
@@ -210,6 +215,16 @@ pub fn check<N: Node>(meta: &N, file: &str) -> Result<()> {
                 v.map_or_else(|| "None".into(), |v| v.repr()),
                 env!("CARGO_PKG_VERSION")
             ));
+        }
+        for (key, ndim, dtype) in arrays {
+            if dtype != "float64" || *ndim != 1 {
+                return bad(format!(
+                    "field '{key}' must be a 1-D float64 array, got {ndim}-D {dtype}"
+                ));
+            }
+            if state.has(key) {
+                return bad(format!("field '{key}' is both a number and an array"));
+            }
         }
     }
     Ok(())
@@ -319,7 +334,7 @@ mod tests {
     fn check_with(change: impl FnOnce(&mut Value)) -> std::result::Result<(), String> {
         let mut meta = good();
         change(&mut meta);
-        check(&meta, "run.ckpt").map_err(|e| e.to_string())
+        check(&meta, "run.ckpt", &[]).map_err(|e| e.to_string())
     }
 
     #[test]
@@ -333,6 +348,39 @@ mod tests {
     }
 
     #[test]
+    fn the_arrays_are_one_dimensional_float64_and_not_numbers_too() {
+        let arrays = |list: &[(&str, usize, &str)]| -> Vec<ArrayShape> {
+            list.iter()
+                .map(|(k, n, d)| (k.to_string(), *n, d.to_string()))
+                .collect()
+        };
+        let meta = good();
+        assert_eq!(
+            check(
+                &meta,
+                "f",
+                &arrays(&[("y", 1, "float64"), ("data", 1, "float64")])
+            ),
+            Ok(())
+        );
+        let e = |list: &[(&str, usize, &str)]| {
+            check(&meta, "f", &arrays(list)).unwrap_err().to_string()
+        };
+        assert_eq!(
+            e(&[("y", 2, "float64")]),
+            "f: field 'y' must be a 1-D float64 array, got 2-D float64"
+        );
+        assert_eq!(
+            e(&[("y", 1, "int64")]),
+            "f: field 'y' must be a 1-D float64 array, got 1-D int64"
+        );
+        assert_eq!(
+            e(&[("dt", 1, "float64")]),
+            "f: field 'dt' is both a number and an array"
+        );
+    }
+
+    #[test]
     fn a_bad_field_is_named_with_the_file_and_its_value() {
         let e = |change: fn(&mut Value)| check_with(change).unwrap_err();
         assert_eq!(
@@ -340,7 +388,7 @@ mod tests {
             "run.ckpt: not an oxyline checkpoint (field 'format' is not 'oxyline-checkpoint')"
         );
         assert!(
-            check(&json!([1, 2]), "f")
+            check(&json!([1, 2]), "f", &[])
                 .unwrap_err()
                 .to_string()
                 .contains("field 'format'")
