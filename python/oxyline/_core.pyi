@@ -24,6 +24,13 @@ RUN_SETTINGS: list[str]
 # the run-settings schema (oxyline_core::model::settings)
 STARTS: list[str]
 OPTIONS: list[str]
+# a checkpoint file's schema (oxyline_core::run::checkpoint::meta)
+CHECKPOINT_FORMAT: str
+CHECKPOINT_FILE_VERSION: int
+CHECKPOINT_STATE_SCALARS: list[str]
+CHECKPOINT_MAX_EVERY_SECONDS: float
+#: the settings a resumed run may change
+RUN_CONTROL: list[str]
 
 class RunOptions(TypedDict, total=False):
     """The run settings ``Network.simulate`` and ``Ensemble.run`` share (``**settings``)."""
@@ -254,6 +261,18 @@ class VariantReader:
         those at ``vessels`` (indices) and ``nodes``. A ModelError about one of them has
         ``element``."""
 def resolve_settings(sim: Any, overrides: Any, period: float | None) -> dict[str, Any]: ...
+def run_facts(settings: dict[str, Any], run: dict[str, Any] | None = None,
+              valves: bool = False) -> dict[str, Any]:
+    """The settings and facts a run records with its result (oxyline_core::run::facts)."""
+def segmentation_facts(summary: dict[str, Any]) -> dict[str, Any]:
+    """How the model's vessels were cut, from ``Network.summary()``."""
+def checkpoint_interval(value: Any, file: bool = True) -> dict[str, Any]:
+    """``checkpoint_every`` as ``Network.simulate``'s keywords; ModelError if bad."""
+def check_checkpoint_meta(file: str, meta: Any, arrays: dict[str, np.ndarray]) -> None:
+    """CheckpointError naming ``file`` and the field unless ``meta`` and ``arrays`` fit the
+    schema."""
+def check_resumed(keys: list[str]) -> None:
+    """ModelError naming the settings a resumed run cannot change."""
 class ColumnStatsFold:
     """Each column's time mean (trapezoidal), min and max over rows added chunk by chunk."""
     def __init__(self, n_cols: int) -> None: ...

@@ -71,7 +71,7 @@ OPTIONS = frozenset(_core.OPTIONS)
 def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
     """The run settings of ``model`` with ``overrides``, each checked like the model itself by
     the core's schema: a :class:`ModelError` names the setting, where it came from and the
-    value. The output selection and the progress callback are Python's."""
+    value (``progress`` too: a flag or a callback). The output selection is Python's."""
     return _resolve(model, overrides)[0]
 
 
@@ -89,33 +89,11 @@ def _resolve(model: Model, overrides: Mapping[str, Any]
     if s.pop("meet_rtol"):
         timed = "meet"  # (the estimate, then the runs it asks for: `_meet_rtol`)
     out = dict(model.simulation.get("output", {}) or {})
-    progress = overrides.get("progress")
-    if progress is not None and not isinstance(progress, (bool, np.bool_)) \
-            and not callable(progress):
-        raise ModelError(f"simulate: progress must be true, false or a callback f(t, t_end), "
-                         f"got {progress!r}")
     s["variables"] = output_names(overrides.get("variables", out.get("variables")), "variables")
     # no selection: the model's default (every vessel but structured-tree ones); "all": all
     vessels = overrides.get("vessels", out.get("vessels"))
     s["vessels"] = model.default_output_vessels if vessels is None else output_vessels(vessels)
     return s, default, space, timed
-
-
-def _step_control(s: Mapping[str, Any], valves: bool = False) -> str:
-    """How the run of settings ``s`` chose its steps, as recorded in ``result.settings``
-    (and the NetCDF attribute ``solver_step_control``): error control, or a fixed step and
-    why. ``valves``: the circuit has valves, whose switches an error-controlled step does not
-    locate (the controller cuts the step by rejections; the achieved error there can exceed
-    the estimate: docs/physics.md §10, "The default run")."""
-    if s["rtol"] is not None:
-        return f"error control (rtol {s['rtol']:g})" + ("; valve switches located as events"
-                                                        if valves else "")
-    if s["dt"] is not None:
-        return "fixed step (dt)"
-    if s["method"] == "rk4":
-        return "fixed step (method rk4 has no error estimate; dopri5 is its error-controlled pair)"
-    # a checkpointed run at the default tolerance (see `_simulate`)
-    return "fixed step (checkpoints need a fixed step: give dt to choose it)"
 
 
 #: Above this many segments an in-memory run without a ``variables`` selection records the
@@ -375,32 +353,16 @@ def segmentation_facts(model: Model) -> dict[str, Any]:
     default where a vessel states no ``segments`` and the model no ``max_length``),
     ``segmentation`` ("auto", "explicit" or "auto+explicit") and the rule's
     ``segmentation_rtol`` (None when no vessel is cut by it)."""
-    s = model.network.summary()
-    total, auto = int(s["segments"]), int(s["auto_segments"])
-    how = "explicit" if auto == 0 else "auto" if auto == total else "auto+explicit"
-    return {"segments_total": total, "segments_auto": auto, "segmentation": how,
-            "segmentation_rtol": s["auto_rtol"]}
+    return _core.segmentation_facts(model.network.summary())
 
 
 def _run_settings(s: Mapping[str, Any], raw: Mapping[str, Any] | None,
                   valves: bool = False) -> dict[str, Any]:
-    """The settings recorded with a result: the requested ones and, after the run, its facts
-    (``valves``: the circuit has valves, see :func:`_step_control`)."""
-    settings = {k: s[k] for k in ("period", "cycles", "method", "output_every", "rho_infty",
-                                  "until_periodic", "rtol")}
-    settings["step_control"] = _step_control(s, valves)
-    if raw is not None:
-        settings.update(method=raw["method"], dt=raw["dt"], cycles_run=raw["cycles_run"],
-                        periodic_error=raw["periodic_error"], rk4_dt_max=raw.get("rk4_dt_max"))
-        if "error_estimate" in raw:  # error control: its steps and estimates (dt: the mean)
-            settings.update({k: raw[k] for k in ("steps", "rejected_steps", "dt_min", "dt_max")})
-            settings.update({f"error_estimate_{kind}": float(v)
-                             for kind, v in raw["error_estimate"].items()
-                             if v > 0.0 or kind in ("pressure", "flow")})
-        if s["until_periodic"] is not None:
-            # the stopping rule's own test (the core stops on change < tolerance)
-            settings["periodic_reached"] = bool(raw["periodic_error"] < s["until_periodic"])
-    return settings
+    """The settings recorded with a result (the core's schema, ``oxyline_core::run::facts``):
+    the requested ones and how the steps were chosen (``step_control``, also the NetCDF
+    attribute ``solver_step_control``) and, after the run (``raw``), its facts; ``valves``: the
+    circuit has valves, whose switches an error-controlled run locates as events."""
+    return _core.run_facts(s, raw, valves)
 
 
 def _warn_not_periodic(name: str, s: Mapping[str, Any], complete: bool) -> None:
@@ -883,10 +845,7 @@ def resume(path: str | os.PathLike[str], **overrides: Any) -> Result:
     (False, True, 3)
     """
     meta, state = _checkpoint.read(path)
-    changed = set(overrides) - _checkpoint.RUN_CONTROL
-    if changed:
-        raise ModelError(f"resume: {', '.join(sorted(changed))} cannot change in a resumed run "
-                         "(it continues with the checkpoint's model and settings)")
+    _core.check_resumed(list(overrides))  # only the run control may change
     try:
         model = load_model(meta["model"])
     except ModelError as exc:
@@ -914,13 +873,11 @@ def _checkpoints(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
     """The core's checkpoint keywords: a sink writing the file, and how often."""
     path = overrides.get("checkpoint")
     every = overrides.get("checkpoint_every")
-    if path is None:
-        if every is not None:
-            raise ModelError("simulate: checkpoint_every needs checkpoint (the file to write)")
-        return {}
-    if not isinstance(path, (str, os.PathLike)):
+    if path is not None and not isinstance(path, (str, os.PathLike)):
         raise ModelError(f"simulate: checkpoint must be a file path, got {path!r}")
-    core = _checkpoint.parse_every(every)
+    core = _core.checkpoint_interval(every, path is not None)  # (the core's schema)
+    if path is None:
+        return {}
     _checkpoint.check_writable(path)
     meta = {"model": model.to_dict(), "settings": _checkpoint.stored_settings(overrides),
             "checkpoint_every": every, "oxyline": str(_core.__version__)}

@@ -132,7 +132,9 @@ mod _core {
     use super::windkessel_trees::{outlet_root_radius, windkessel_tree_match};
     #[pymodule_export]
     use super::{
-        chamber_elastance, controlled_bytes,
+        chamber_elastance,
+        checkpoint::{check_checkpoint_meta, check_resumed, checkpoint_interval},
+        controlled_bytes,
         ensemble::{Ensemble, merge_patch},
         errors::{_panic_probe, ModelError, ResourceError, SolverError, UnstableTimeStep},
         model_bytes,
@@ -143,6 +145,7 @@ mod _core {
         reader::schema::{read_conditions, read_vessels, resolve_settings, transport_section},
         reader::variant::VariantReader,
         results::{ColumnStatsFold, valve_status},
+        settings::{run_facts, segmentation_facts},
         waveform_values,
     };
 
@@ -203,6 +206,15 @@ mod _core {
             "CHECKPOINT_VERSION",
             oxyline_core::run::checkpoint::CHECKPOINT_VERSION,
         )?;
+        {
+            use oxyline_core::run::checkpoint::meta;
+            m.add("CHECKPOINT_FORMAT", meta::FORMAT)?;
+            m.add("CHECKPOINT_FILE_VERSION", meta::FILE_VERSION)?;
+            m.add("CHECKPOINT_STATE_SCALARS", meta::STATE_SCALARS.to_vec())?;
+            m.add("CHECKPOINT_MAX_EVERY_SECONDS", meta::MAX_EVERY_SECONDS)?;
+            // the settings a resumed run may change (a checkpoint stores the others)
+            m.add("RUN_CONTROL", meta::RUN_CONTROL.to_vec())?;
+        }
         {
             use oxyline_core::run::memory as mem;
             m.add("FLOW_BYTES_PER_SEGMENT", mem::FLOW_BYTES_PER_SEGMENT)?;
