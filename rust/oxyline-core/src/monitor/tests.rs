@@ -113,3 +113,56 @@ fn fed_in_chunks_the_monitor_finds_what_it_finds_fed_whole() {
     assert!(found[1].contains("the mass balance is off by 0.001 of the throughput"));
     assert_eq!(chunked.messages(), found);
 }
+
+#[test]
+fn tl_quasisteady_reports_the_first_reversal_then_storage() {
+    let tl = r#"{"formulation": "tl-quasisteady", "species": []}"#;
+    let vessels = ["a".to_string(), "b".to_string()];
+    let time = [0.0, 0.5, 1.0];
+    // vessel a: forward flow that stops at t = 1 (mean > 0: a zero row is a low row);
+    // vessel b: forward, storing 2 % of its flow
+    let qi = [1e-6, 2e-6, 2e-6, 2e-6, 0.0, 2e-6];
+    let qo = [1e-6, 1.96e-6, 2e-6, 1.96e-6, 0.0, 1.96e-6];
+    let chunk = |flows| Chunk {
+        time: &time,
+        vessels: &vessels,
+        segment_count: &[0, 0],
+        species: vec![],
+        flows,
+        oxygen: None,
+    };
+    let (qi, qo) = (
+        RowMajor {
+            data: &qi,
+            columns: 2,
+        },
+        RowMajor {
+            data: &qo,
+            columns: 2,
+        },
+    );
+    let mut m = Monitor::new(&transport(tl)).unwrap();
+    m.update(&chunk(Some((&qi, &qo))));
+    let found = m.messages();
+    assert_eq!(found.len(), 1);
+    assert!(
+        found[0].contains("criterion 1 (forward flow): vessel 'a' has flow 0 → 0 m^3/s at t = 1 s"),
+        "{found:?}"
+    );
+    // without the reversal: the storage |Q_in − Q_out|/|Q| = 0.02 of vessel b
+    let qi2 = [1e-6, 2e-6, 2e-6, 2e-6, 1e-6, 2e-6];
+    let qo2 = [1e-6, 1.96e-6, 2e-6, 1.96e-6, 1e-6, 1.96e-6];
+    let (qi2, qo2) = (
+        RowMajor {
+            data: &qi2,
+            columns: 2,
+        },
+        RowMajor {
+            data: &qo2,
+            columns: 2,
+        },
+    );
+    let mut m = Monitor::new(&transport(tl)).unwrap();
+    m.update(&chunk(Some((&qi2, &qo2))));
+    assert!(m.messages()[0].contains("criterion 2 (no storage): vessel 'b' stores |Q_in − Q_out|/|Q| = 0.02 of its flow at t = 0 s (> 0.001;"), "{:?}", m.messages());
+}
