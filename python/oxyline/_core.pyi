@@ -278,6 +278,19 @@ class ColumnStatsFold:
     def __init__(self, n_cols: int) -> None: ...
     def push(self, times: np.ndarray, data: np.ndarray) -> None: ...
     def finish(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None: ...
+class BoundsMonitor:
+    """The physical-bounds monitor of one run (docs/physics.md §2.8): each species' range
+    computed once from the canonical transport section (None: no species), the recorded rows
+    fed chunk by chunk and read in place."""
+    def __init__(self, transport: Mapping[str, Any] | None) -> None: ...
+    def update(self, time: np.ndarray, vessels: list[str], segment_count: list[int],
+               species: list[tuple[str, np.ndarray, list[str], np.ndarray, list[str],
+                                   np.ndarray, float, float | None]],
+               flows: tuple[np.ndarray, np.ndarray] | None, oxygen: str | None) -> None: ...
+    def messages(self) -> list[str]: ...
+def species_bounds(species: Mapping[str, Any]) -> tuple[float, float] | None:
+    """[min, max] of a species' inlet, backflow, initial and wall values (mol/m^3), None for a
+    species with a prescribed source."""
 def valve_status(behind: np.ndarray, front: np.ndarray, flow: np.ndarray, on_off: bool,
                  open: bool = False) -> tuple[np.ndarray, bool]:
     """One valve's status at each recorded row (int8, 1 open, 0 closed) by the core's rule,

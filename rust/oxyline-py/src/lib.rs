@@ -16,6 +16,7 @@ mod closed_loop;
 mod closed_loop_params;
 mod ensemble;
 mod errors;
+mod monitor;
 mod network;
 mod reader;
 mod results;
@@ -57,7 +58,7 @@ fn chamber_elastance<'py>(
 }
 
 /// A canonical waveform spec (JSON text) of `element` evaluated by the core at `times`: the
-/// transport monitor reads a Fourier inlet's range from it (no second evaluator in Python).
+/// svZeroDSolver writer samples a waveform with it (no second evaluator in Python).
 #[oxyline_py_guard::guard]
 #[pyfunction]
 fn waveform_values<'py>(
@@ -138,6 +139,7 @@ mod _core {
         ensemble::{Ensemble, merge_patch},
         errors::{_panic_probe, ModelError, ResourceError, SolverError, UnstableTimeStep},
         model_bytes,
+        monitor::{BoundsMonitor, species_bounds},
         network::Network,
         reader::NativeParts,
         reader::formats::{openbf_mean_pressures, svzerod_periodic_table},
