@@ -170,7 +170,11 @@ struct Part<'a> {
 impl SignalSensitivities {
     /// `part`'s parameters at the rows `rows` and its signals at the columns `cols`.
     fn place(&mut self, part: &Part<'_>, rows: &[usize], cols: &[usize]) {
-        let (nt, nsig, nc) = (self.times.len(), self.signals.len() / self.times.len().max(1), cols.len());
+        let (nt, nsig, nc) = (
+            self.times.len(),
+            self.signals.len() / self.times.len().max(1),
+            cols.len(),
+        );
         for (i, &p) in rows.iter().enumerate() {
             self.values[p] = part.values[i];
         }
@@ -228,14 +232,16 @@ where
             ),
         ));
     }
-    let flow = match split.flow.is_empty() {
-        true => None,
-        false => Some(sensitivities(
+    let flow = if split.flow.is_empty() {
+        None
+    } else {
+        let flow_paths = pick(paths, &split.flow_params);
+        Some(sensitivities(
             spec,
-            &pick(paths, &split.flow_params),
+            &flow_paths,
             &pick(signals, &split.flow),
             settings,
-        )?),
+        )?)
     };
     let nsig = signals.len();
     let mut flow_weights: Vec<f64> = Vec::new();
@@ -250,15 +256,20 @@ where
         flow_weights = gather(&w, &split.flow, nsig);
         Ok(gather(&w, &split.oxygen, nsig))
     };
-    let (values, out) =
-        species_adjoint_with(spec, paths, &pick(signals, &split.oxygen), oxygen_weights, settings)?;
-    let mut gradients = out.gradients;
+    let (values, out) = species_adjoint_with(
+        spec,
+        paths,
+        &pick(signals, &split.oxygen),
+        oxygen_weights,
+        settings,
+    )?;
+    let (mut functionals, mut gradients) = (out.functionals, out.gradients);
     if let Some(f) = &flow {
-        add_flow_terms(&mut gradients, paths.len(), &flow_weights, f, &split);
+        add_flow_terms(&mut functionals, &mut gradients, &flow_weights, f, &split);
     }
     Ok(SignalAdjoint {
         values,
-        functionals: out.functionals,
+        functionals,
         gradients,
         cycles: out.cycles,
         transport_cycles: out.transport_cycles,
@@ -286,25 +297,32 @@ fn gather(full: &[f64], cols: &[usize], nsig: usize) -> Vec<f64> {
         .collect()
 }
 
-/// The flow signals' terms Σ_kj w[f, k, j] dQ_j(k)/dθ_p of the flow parameters' gradients
-/// (n_functionals × `np`): `weights` n_functionals × n_steps × flow signals, the flow
-/// tangent's derivatives flow parameters × n_steps × flow signals.
+/// The flow signals' terms of the functionals, Σ_kj w[f, k, j] Q_j(k), and of the flow
+/// parameters' gradients (n_functionals × n_params), Σ_kj w[f, k, j] dQ_j(k)/dθ_p:
+/// `weights` n_functionals × n_steps × flow signals, the flow tangent's signals n_steps ×
+/// flow signals and derivatives flow parameters × n_steps × flow signals.
 fn add_flow_terms(
+    functionals: &mut [f64],
     gradients: &mut [f64],
-    np: usize,
     weights: &[f64],
     flow: &Sensitivities,
     split: &Split,
 ) {
-    let derivs = &flow.cycle.derivs;
+    let (values, derivs) = (&flow.cycle.values, &flow.cycle.derivs);
     let per = flow.cycle.times.len() * split.flow.len();
-    if per == 0 || np == 0 {
+    if per == 0 {
         return;
     }
+    let np = gradients.len() / functionals.len().max(1);
     for (f, w) in weights.chunks(per).enumerate() {
+        functionals[f] += w.iter().zip(values).map(|(a, b)| a * b).sum::<f64>();
         for (i, &p) in split.flow_params.iter().enumerate() {
             let d = &derivs[i * per..(i + 1) * per];
             gradients[f * np + p] += w.iter().zip(d).map(|(a, b)| a * b).sum::<f64>();
         }
     }
 }
+
+#[cfg(test)]
+#[path = "outputs_tests.rs"]
+mod tests;
