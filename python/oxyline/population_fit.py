@@ -156,7 +156,7 @@ def targets_of(age: float, row: Mapping[str, float]) -> tuple[np.ndarray, np.nda
     return np.array(mean), np.array(sd)
 
 
-def _problem(age: float, tol: float) -> Any:
+def _problem(age: float, tol: float) -> _Problem:
     """:func:`calibrate_baseline`'s fit as calibrate's least-squares problem
     (:class:`oxyline.calibrate._Problem`): the baseline subject's model, one group factor per
     :data:`VARIABLES` on the paths it moves (:func:`_group_paths`), the outputs of
