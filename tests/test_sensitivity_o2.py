@@ -144,7 +144,7 @@ def test_consumption_balances_inflow_minus_outflow() -> None:
     from oxyline import _core
     from oxyline.model import build_model
 
-    raw = _core.species_sensitivities(
+    raw = _core.tangent_sensitivities(
         json.dumps(build_model(Y).canonical), ["oxygen.wall.k", "oxygen.hill.p50"],
         [("", "consumption"), ("", "inflow"), ("", "outflow")], T, 160, 0.5, 2000, 1e-13)
     d = raw["derivatives"].mean(axis=1)  # (parameter, signal)

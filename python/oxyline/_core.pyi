@@ -213,22 +213,18 @@ def chamber_elastance(name: str, chamber_json: str, times: list[float]
 def tangent_sensitivities(model_json: str, paths: list[str], signals: list[tuple[str, str]],
                           period: float, steps_per_cycle: int, rho_infty: float = 0.5,
                           max_cycles: int = 2000, tol: float = 1e-12) -> dict[str, Any]:
-    """The (vessel, variable) signals over the periodic cycle of a canonical model and their
-    exact derivatives with respect to the parameter ``paths`` (oxyline.calibrate)."""
-def species_sensitivities(model_json: str, paths: list[str], signals: list[tuple[str, str]],
-                          period: float, steps_per_cycle: int, rho_infty: float = 0.5,
-                          max_cycles: int = 2000, tol: float = 1e-12) -> dict[str, Any]:
-    """The oxygen signals (vessel, name; vessel "" for the network's balance fluxes) over
-    the periodic cycle of a canonical model and their exact derivatives with respect to the
-    oxygen parameter ``paths`` (oxyline.calibrate)."""
-
-def species_adjoint_gradients(model_json: str, paths: list[str],
-                              signals: list[tuple[str, str]], weights_of: Any, period: float,
-                              steps_per_cycle: int, rho_infty: float = 0.5,
-                              max_cycles: int = 2000, tol: float = 1e-12) -> dict[str, Any]:
-    """The gradients of functionals of the oxygen signals by the oxygen parameter ``paths``
-    by the species transport's adjoint (one backward sweep per functional;
-    oxyline.sensitivities with ``mode="adjoint"``)."""
+    """The signals over the periodic cycle of a canonical model, flow (vessel, variable) and
+    oxygen (vessel, name; vessel "" for the network's balance fluxes) alike, and their exact
+    derivatives with respect to the parameter ``paths``, flow and oxygen alike
+    (oxyline.calibrate)."""
+def adjoint_gradients(model_json: str, paths: list[str], signals: list[tuple[str, str]],
+                      weights_of: Any, period: float, steps_per_cycle: int,
+                      rho_infty: float = 0.5, max_cycles: int = 2000, tol: float = 1e-12
+                      ) -> dict[str, Any]:
+    """The gradients of functionals of the signals (flow and oxygen alike) by the parameter
+    ``paths`` by the adjoint: one backward sweep per functional; ``weights_of(times,
+    signals)`` chooses the weights from the one primal cycle (oxyline.sensitivities with
+    ``mode="adjoint"``)."""
 
 class CalibrationProblem:
     """svZeroDSolver's calibration residual (oxyline_core::calibration): RCL vessels

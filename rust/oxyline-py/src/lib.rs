@@ -111,8 +111,7 @@ mod _core {
     };
     #[pymodule_export]
     use super::calibrate::{
-        adjoint_gradients, parameter_value, set_parameters, species_adjoint_gradients,
-        species_sensitivities, tangent_sensitivities,
+        adjoint_gradients, parameter_value, set_parameters, tangent_sensitivities,
     };
     #[pymodule_export]
     use super::calibration::CalibrationProblem;
