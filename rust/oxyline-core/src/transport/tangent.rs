@@ -381,6 +381,7 @@ impl Transport {
         forcing: Option<FlowForcing>,
     ) -> Result<()> {
         let plan = Arc::clone(&self.plan);
+        self.sweep.size_rows(plan.kind.len());
         let mut wall = self.tangent_rows(s, dt, primal, d, t, forcing.as_ref());
         for &m in &plan.mixing {
             let sw = &mut self.sweep;

@@ -379,7 +379,7 @@ impl Transport {
     fn net_inflow_tangent(&self, dq: &[f64], dqs: &[f64]) -> Vec<f64> {
         let p = &*self.plan;
         let mut dnet = vec![0.0; p.kind.len()];
-        let faces = p.internal.iter().map(|e| e[0] as usize);
+        let faces = p.internal().map(|e| e[0] as usize);
         for fi in faces.chain(p.boundary_faces.iter().copied()) {
             let face = &p.faces[fi];
             if let End::Node(n) = face.tail() {
@@ -413,7 +413,7 @@ impl Transport {
             (End::Boundary(b), End::Node(n)) => inflow_value(self.bval[b], x_old[n]),
             (End::Boundary(b), End::Boundary(_)) => inflow_value(self.bval[b], 0.0),
         };
-        let faces = p.internal.iter().map(|e| e[0] as usize);
+        let faces = p.internal().map(|e| e[0] as usize);
         for fi in faces.chain(p.boundary_faces.iter().copied()) {
             let (q, up, down) = oriented(&p.faces, &self.qf, fi);
             let flux = if q >= 0.0 { dq[fi] } else { -dq[fi] } * carried(up, down);
