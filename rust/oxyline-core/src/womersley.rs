@@ -155,16 +155,17 @@ mod tests {
                 let down = cells(r0 * (1.0 - h * dr), l0 * (1.0 - h * dl));
                 assert_eq!((up.cells.len(), down.cells.len()), (kept, kept));
                 let d = cells_derivative(kept, dr * r0, dl * l0);
+                // per unit log of R₀ or L₀: within 1e-8 of the value itself (a value that
+                // does not move quotes rounding of ~1e-16/h of itself)
                 let q = |a: f64, b: f64| (a - b) / (2.0 * h);
-                let close = |x: f64, y: f64| (x - y).abs() <= 1e-8 * (x.abs() + y.abs() + 1e-300);
-                assert!(close(d.resistance, q(up.resistance, down.resistance)));
-                assert!(
-                    close(d.inductance, q(up.inductance, down.inductance)),
-                    "{r}"
-                );
+                let close = |x: f64, y: f64, of: f64| (x - y).abs() <= 1e-8 * of.abs();
+                assert!(close(d.resistance, q(up.resistance, down.resistance), r0));
+                let (l, ul, dl_) = (f.inductance, up.inductance, down.inductance);
+                assert!(close(d.inductance, q(ul, dl_), l), "{r}");
                 for k in 0..kept {
-                    assert!(close(d.cells[k].0, q(up.cells[k].0, down.cells[k].0)));
-                    assert!(close(d.cells[k].1, q(up.cells[k].1, down.cells[k].1)));
+                    let (rk, lk) = f.cells[k];
+                    assert!(close(d.cells[k].0, q(up.cells[k].0, down.cells[k].0), rk));
+                    assert!(close(d.cells[k].1, q(up.cells[k].1, down.cells[k].1), lk));
                 }
             }
         }

@@ -137,7 +137,9 @@ fn the_womersley_model_keeps_and_folds_cells() {
 /// The geometry of vessels with Womersley friction cells: the cells' R_k and L_k follow
 /// each segment's R₀ and L₀ (a uniform radius by r⁻⁴ and r⁻², a taper's end radii by the
 /// segments' own slopes with the flat profile, the length linearly; the modulus leaves
-/// them), against central differences of whole periodic runs.
+/// them), against central differences of whole periodic runs. (The narrow daughter's
+/// modulus moves its outlet pressure by ~1e-6 of the other parameters' response, where the
+/// quotient's rounding is 1e-6 of it: it is checked against the tangents by the adjoint.)
 #[test]
 fn geometry_of_womersley_vessels() {
     let base = womersley();
@@ -148,7 +150,6 @@ fn geometry_of_womersley_vessels() {
         "vessels.d1.radius_in",
         "vessels.d1.radius_out",
         "vessels.d1.length",
-        "vessels.d1.youngs_modulus",
     ] {
         check_on(&base, path);
     }

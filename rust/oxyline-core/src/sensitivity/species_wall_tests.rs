@@ -158,26 +158,27 @@ fn relaxed_shear_is_refused() {
     assert!(m.contains("shear-dependent"), "{m}");
 }
 
-/// A taper's end radii under the cycle-mean walls: d1 (3 → 2.5 mm) with the Graetz wall of
-/// the forward-flow mean, and with a cycle-mean Lévêque wall in its place, whose law reads
-/// each segment's own radius (its slope by ln r taken at the segment's share,
-/// `FlowGeometry::at`). Against central differences and the adjoint against the forward
-/// tangents. The inlet renewal's Graetz law (one radius per vessel for its Womersley
-/// numbers) stays refused naming the parameter and the vessel.
+/// A taper's end radii under the cycle-mean walls, with a cycle-mean Lévêque wall on d1
+/// (3 → 2.5 mm) in place of its Graetz one: each segment's mean flow and wall move by its
+/// own share (`FlowGeometry::at`). Neither law reads the radius beyond the flow (Graetz not
+/// at all, Lévêque's r (Q/r³)^{1/3} not), so an end radius moves these signals by less than
+/// the quotients' rounding (as the parent's radius above): the adjoint is checked against
+/// the forward tangents here, and the end radii against central differences under the
+/// mass-transfer wall and a consumption flux (`super::tests`). The inlet renewal's Graetz
+/// law (one radius per vessel for its Womersley numbers) stays refused naming the
+/// parameter and the vessel.
 #[test]
 fn taper_end_radii_under_cycle_mean_walls() {
     let spec = parse(&model()).unwrap();
-    for path in ["vessels.d1.radius_in", "vessels.d1.radius_out"] {
-        assert!(check(&spec, path) < 1e-6, "{path}");
-    }
     let mut leveque = spec.clone();
     let sp = &mut leveque.transport.as_mut().unwrap().species[0];
     let d2 = sp.per_vessel["d2"].clone();
     sp.per_vessel.insert("d1".into(), d2);
-    let paths = ["vessels.d1.radius_in", "vessels.d1.radius_out"];
-    for path in paths {
-        assert!(check(&leveque, path) < 1e-6, "{path}");
-    }
+    let paths = [
+        "vessels.d1.radius_in",
+        "vessels.d1.radius_out",
+        "scale.inflow",
+    ];
     let worst = super::adjoint::tests::mean_and_series_adjoint_worst(&leveque, &paths, &signals());
     eprintln!("taper under a cycle-mean Lévêque wall: adjoint against forward {worst:.2e}");
     assert!(worst < 1e-8, "{worst:e}");
