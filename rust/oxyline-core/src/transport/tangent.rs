@@ -36,7 +36,7 @@ pub use adjoint::{AdjointSums, SignalRow, SpeciesAdjointState, SpeciesStepRecord
 #[path = "tangent_flow.rs"]
 mod flow;
 use flow::{CellPrimal, FlowDerivative, FlowForcing};
-pub use flow::{FlowEffect, FlowGeometry, FlowStep, MeanFlowTangent};
+pub use flow::{FlowEffect, FlowGeometry, FlowStep, MeanFlowTangent, TaperEnd};
 
 /// What an oxygen parameter changes in the step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
