@@ -137,7 +137,11 @@ class Model:
         return copy_description(self._source)
 
     def __getstate__(self) -> dict[str, Any]:
-        return dict(self.__dict__, _network=None)
+        # the core's network (and the output layout cached beside it) cannot be pickled: a
+        # model sent to a Dask worker builds its own there
+        state = dict(self.__dict__, _network=None)
+        state.pop("_layout_cache", None)
+        return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         # a model pickled before ``source`` could be packed kept it as a plain attribute
