@@ -96,6 +96,15 @@ def test_model_pickles_and_rebuilds() -> None:
     np.testing.assert_array_equal(r1.data, r2.data)
 
 
+def test_a_model_that_has_run_still_pickles() -> None:
+    # a run caches the core's network and its output layout on the model; neither can be
+    # pickled, so a model sent to a Dask worker after a run must leave both behind
+    m = oxyline.load_model("bifurcation")
+    r1 = oxyline.simulate(m, cycles=1)
+    m2 = pickle.loads(pickle.dumps(m))
+    np.testing.assert_array_equal(r1.data, oxyline.simulate(m2, cycles=1).data)
+
+
 def test_interruption_keeps_the_partial_result() -> None:
     calls = []
 

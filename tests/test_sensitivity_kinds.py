@@ -1,7 +1,7 @@
 """Exact sensitivities of a tapered vessel's end radii (``vessels.<name>.radius_in``,
 ``.radius_out``), of the geometry of vessels with a viscoelastic wall (openBF's, as imported
-openBF models have them) and of lumped RCL vessels' values (svZeroDSolver's BloodVessel, as
-every imported svZeroDSolver model has them).
+openBF models have them) or with Womersley friction cells, and of lumped RCL vessels'
+values (svZeroDSolver's BloodVessel, as every imported svZeroDSolver model has them).
 
 * Against central differences of the same periodic runs, the models moved by the calibration's
   own ``native_model`` (relative step 1e-4: the outputs are smooth in every parameter, so the
@@ -128,12 +128,72 @@ def test_taper_and_rcl_values_are_recovered_from_synthetic_data() -> None:
 
 
 def test_geometry_the_tangent_leaves_out_is_refused_naming_it() -> None:
-    model = _tapered()
-    model["vessels"][1]["wall_friction"] = "womersley"
-    with pytest.raises(ModelError, match="parameter 'vessels.d1.radius_out'.*Womersley"):
-        oxyline.sensitivities(model, ["vessels.d1.radius_out"], ["d1.flow_out.mean"])
+    """A tapered vessel's one radius, and a radius with the thick wall model (also on a
+    vessel with Womersley friction cells, whose geometry is otherwise covered)."""
     with pytest.raises(ModelError, match="parameter 'vessels.d1.radius'.*radius_in"):
         oxyline.sensitivities(_tapered(), ["vessels.d1.radius"], ["d1.flow_out.mean"])
+    model = _womersley()
+    model["wall_model"] = "thick"
+    with pytest.raises(ModelError, match="parameter 'vessels.d1.radius_out'.*thin wall"):
+        oxyline.sensitivities(model, ["vessels.d1.radius_out"], ["d1.flow_out.mean"])
+
+
+def _womersley() -> dict[str, Any]:
+    """``_tapered`` with Womersley friction cells on every vessel (the model's
+    ``wall_friction``): three R‖L cells in series with each segment's flow, their values
+    following the segment's Poiseuille R₀ and flat-profile L₀ (at these radii no cell's pole
+    is folded into the series inertance; the core's tests cover folded cells)."""
+    model = _tapered()
+    model["wall_friction"] = "womersley"
+    return model
+
+
+WOMERSLEY_PARAMS = ["vessels.parent.radius", "vessels.parent.length",
+                    "vessels.d1.radius_in", "vessels.d1.radius_out",
+                    "vessels.d1.youngs_modulus", "vessels.d2.radius", "vessels.d2.length"]
+
+
+def test_womersley_geometry_matches_central_differences() -> None:
+    """The radius, end radii, length and stiffness of vessels with Womersley friction
+    cells against central differences of whole periodic runs; the adjoint against the
+    forward tangents."""
+    model = _womersley()
+    exact = assert_sensitivities_are_central_differences(model, WOMERSLEY_PARAMS,
+                                                         TAPER_OUTPUTS)
+    adj = oxyline.sensitivities(model, WOMERSLEY_PARAMS, TAPER_OUTPUTS, mode="adjoint")
+    assert_adjoint_is_forward(exact, adj)
+
+
+def test_lumped_womersley_values_match_central_differences() -> None:
+    """A lumped daughter in two segments under the model's ``wall_friction: womersley``
+    carries cells that follow its R and L (each segment's R/2 and L/2): its R and L and
+    ``scale.resistance``, against central differences and the adjoint."""
+    model = _womersley()
+    model["vessels"][2] = {"name": "d2", "from": "j", "to": "o2", "segments": 2,
+                           "lumped": {"resistance": 3e7, "inductance": 5e6,
+                                      "capacitance": 2e-10}}
+    params = ["vessels.d2.lumped.resistance", "vessels.d2.lumped.inductance",
+              "scale.resistance"]
+    outputs = ["parent.pressure_in.max", "d2.flow_in.pulse", "d2.pressure_out.min",
+               "flow_split.d1.parent"]
+    exact = assert_sensitivities_are_central_differences(model, params, outputs)
+    adj = oxyline.sensitivities(model, params, outputs, mode="adjoint")
+    assert_adjoint_is_forward(exact, adj)
+
+
+def test_womersley_radius_is_recovered_from_synthetic_data() -> None:
+    """The Womersley daughter's outlet radius 0.9× the model's, fitted from the model's
+    values (noise-free: exact)."""
+    model = _womersley()
+    path = "vessels.d1.radius_out"
+    truth = native_model(model, [path], [0.9 * 0.0022])
+    outputs = ["flow_split.d1.parent", "parent.pressure_in.max"]
+    measured = oxyline.sensitivities(truth, [], outputs).values
+    targets = {o: {"value": v, "sigma": 0.01 * abs(v)}
+               for o, v in zip(outputs, measured, strict=True)}
+    res = oxyline.calibrate(model, targets, [path], method="lm")
+    assert res.success, res.report
+    assert res.parameters[path] == pytest.approx(0.9 * 0.0022, rel=1e-6)
 
 
 VISCOELASTIC_PARAMS = ["vessels.parent.radius", "vessels.parent.youngs_modulus",

@@ -129,6 +129,32 @@ def test_oxygen_outputs_by_flow_parameters_against_central_differences(path: str
     check_against_central_differences(Y, path, OUTPUTS)
 
 
+def tapered(friction: str = "poiseuille") -> dict[str, Any]:
+    """:data:`Y` with d1 tapered 3 → 2.5 mm (its radius given by its two ends), the
+    model's ``wall_friction`` ``friction``."""
+    m = copy.deepcopy(Y)
+    d1 = m["vessels"][1]
+    del d1["radius"]
+    d1.update(radius_in=0.003, radius_out=0.0025)
+    m["wall_friction"] = friction
+    return m
+
+
+@pytest.mark.parametrize(("model", "path", "mode"), [
+    (tapered(), "vessels.d1.radius_in", "forward"),
+    (tapered(), "vessels.d1.radius_out", "adjoint"),
+    (tapered("womersley"), "vessels.d1.radius_out", "forward"),
+    (tapered("womersley"), "vessels.parent.radius", "adjoint"),
+    (tapered("womersley"), "vessels.d2.length", "forward"),
+])
+def test_taper_end_radii_and_womersley_geometry_against_central_differences(
+        model: dict[str, Any], path: str, mode: str) -> None:
+    """A taper's end radius moves each segment's lumen volume and wall area by its own
+    share; Womersley friction cells follow each segment's R and L, and the oxygen the
+    flows they shape. Forward and adjoint against central differences, judged as above."""
+    check_against_central_differences(model, path, OUTPUTS, mode=mode)
+
+
 def test_windkessel_resistance_recovered_from_po2_and_svo2() -> None:
     path = "boundary_conditions.o1.distal_resistance"
     truth = native_model(Y, [path], [1.5e9])
@@ -144,7 +170,7 @@ def test_consumption_balances_inflow_minus_outflow() -> None:
     from oxyline import _core
     from oxyline.model import build_model
 
-    raw = _core.species_sensitivities(
+    raw = _core.tangent_sensitivities(
         json.dumps(build_model(Y).canonical), ["oxygen.wall.k", "oxygen.hill.p50"],
         [("", "consumption"), ("", "inflow"), ("", "outflow")], T, 160, 0.5, 2000, 1e-13)
     d = raw["derivatives"].mean(axis=1)  # (parameter, signal)

@@ -24,6 +24,13 @@ RUN_SETTINGS: list[str]
 # the run-settings schema (oxyline_core::model::settings)
 STARTS: list[str]
 OPTIONS: list[str]
+# a checkpoint file's schema (oxyline_core::run::checkpoint::meta)
+CHECKPOINT_FORMAT: str
+CHECKPOINT_FILE_VERSION: int
+CHECKPOINT_STATE_SCALARS: list[str]
+CHECKPOINT_MAX_EVERY_SECONDS: float
+#: the settings a resumed run may change
+RUN_CONTROL: list[str]
 
 class RunOptions(TypedDict, total=False):
     """The run settings ``Network.simulate`` and ``Ensemble.run`` share (``**settings``)."""
@@ -208,22 +215,18 @@ def chamber_elastance(name: str, chamber_json: str, times: list[float]
 def tangent_sensitivities(model_json: str, paths: list[str], signals: list[tuple[str, str]],
                           period: float, steps_per_cycle: int, rho_infty: float = 0.5,
                           max_cycles: int = 2000, tol: float = 1e-12) -> dict[str, Any]:
-    """The (vessel, variable) signals over the periodic cycle of a canonical model and their
-    exact derivatives with respect to the parameter ``paths`` (oxyline.calibrate)."""
-def species_sensitivities(model_json: str, paths: list[str], signals: list[tuple[str, str]],
-                          period: float, steps_per_cycle: int, rho_infty: float = 0.5,
-                          max_cycles: int = 2000, tol: float = 1e-12) -> dict[str, Any]:
-    """The oxygen signals (vessel, name; vessel "" for the network's balance fluxes) over
-    the periodic cycle of a canonical model and their exact derivatives with respect to the
-    oxygen parameter ``paths`` (oxyline.calibrate)."""
-
-def species_adjoint_gradients(model_json: str, paths: list[str],
-                              signals: list[tuple[str, str]], weights_of: Any, period: float,
-                              steps_per_cycle: int, rho_infty: float = 0.5,
-                              max_cycles: int = 2000, tol: float = 1e-12) -> dict[str, Any]:
-    """The gradients of functionals of the oxygen signals by the oxygen parameter ``paths``
-    by the species transport's adjoint (one backward sweep per functional;
-    oxyline.sensitivities with ``mode="adjoint"``)."""
+    """The signals over the periodic cycle of a canonical model, flow (vessel, variable) and
+    oxygen (vessel, name; vessel "" for the network's balance fluxes) alike, and their exact
+    derivatives with respect to the parameter ``paths``, flow and oxygen alike
+    (oxyline.calibrate)."""
+def adjoint_gradients(model_json: str, paths: list[str], signals: list[tuple[str, str]],
+                      weights_of: Any, period: float, steps_per_cycle: int,
+                      rho_infty: float = 0.5, max_cycles: int = 2000, tol: float = 1e-12
+                      ) -> dict[str, Any]:
+    """The gradients of functionals of the signals (flow and oxygen alike) by the parameter
+    ``paths`` by the adjoint: one backward sweep per functional; ``weights_of(times,
+    signals)`` chooses the weights from the one primal cycle (oxyline.sensitivities with
+    ``mode="adjoint"``)."""
 
 class CalibrationProblem:
     """svZeroDSolver's calibration residual (oxyline_core::calibration): RCL vessels
@@ -256,11 +259,36 @@ class VariantReader:
         those at ``vessels`` (indices) and ``nodes``. A ModelError about one of them has
         ``element``."""
 def resolve_settings(sim: Any, overrides: Any, period: float | None) -> dict[str, Any]: ...
+def run_facts(settings: dict[str, Any], run: dict[str, Any] | None = None,
+              valves: bool = False) -> dict[str, Any]:
+    """The settings and facts a run records with its result (oxyline_core::run::facts)."""
+def segmentation_facts(summary: dict[str, Any]) -> dict[str, Any]:
+    """How the model's vessels were cut, from ``Network.summary()``."""
+def checkpoint_interval(value: Any, file: bool = True) -> dict[str, Any]:
+    """``checkpoint_every`` as ``Network.simulate``'s keywords; ModelError if bad."""
+def check_checkpoint_meta(file: str, meta: Any, arrays: dict[str, np.ndarray]) -> None:
+    """CheckpointError naming ``file`` and the field unless ``meta`` and ``arrays`` fit the
+    schema."""
+def check_resumed(keys: list[str]) -> None:
+    """ModelError naming the settings a resumed run cannot change."""
 class ColumnStatsFold:
     """Each column's time mean (trapezoidal), min and max over rows added chunk by chunk."""
     def __init__(self, n_cols: int) -> None: ...
     def push(self, times: np.ndarray, data: np.ndarray) -> None: ...
     def finish(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None: ...
+class BoundsMonitor:
+    """The physical-bounds monitor of one run (docs/physics.md §2.8): each species' range
+    computed once from the canonical transport section (None: no species), the recorded rows
+    fed chunk by chunk and read in place."""
+    def __init__(self, transport: Mapping[str, Any] | None) -> None: ...
+    def update(self, time: np.ndarray, vessels: list[str], segment_count: list[int],
+               species: list[tuple[str, np.ndarray, list[str], np.ndarray, list[str],
+                                   np.ndarray, float, float | None]],
+               flows: tuple[np.ndarray, np.ndarray] | None, oxygen: str | None) -> None: ...
+    def messages(self) -> list[str]: ...
+def species_bounds(species: Mapping[str, Any]) -> tuple[float, float] | None:
+    """[min, max] of a species' inlet, backflow, initial and wall values (mol/m^3), None for a
+    species with a prescribed source."""
 def forcing_frequency(data: Any, rtol: float | None = None) -> tuple[float, float]:
     """The highest significant frequency (Hz) of a native model's flow and pressure
     waveforms and the tolerance it was found at (the `segments: auto` rule)."""

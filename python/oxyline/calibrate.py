@@ -33,7 +33,6 @@ from oxyline.targets import (
     _finite,
     _sigma,
     evaluate,
-    is_oxygen_signal,
     parse_targets,
     path_of,
     signals_for,
@@ -112,55 +111,6 @@ def _run_args(model: Model, parameters: Sequence[str], signals: Sequence[Any],
     return float(period), steps, float(s["rho_infty"]), max_cycles, tol
 
 
-def _is_oxygen_path(path: str) -> bool:
-    return path.split(".")[0] == "oxygen"
-
-
-def _involves_oxygen(parameters: Sequence[str], signals: Sequence[tuple[str, str]]) -> bool:
-    return any(map(_is_oxygen_path, parameters)) or any(map(is_oxygen_signal, signals))
-
-
-def _oxygen_split(parameters: Sequence[str], signals: Sequence[tuple[str, str]]
-                  ) -> tuple[list[int], list[int], list[int]]:
-    """The positions of the oxygen signals, of the flow signals and of the flow parameters."""
-    o2 = [k for k, s in enumerate(signals) if is_oxygen_signal(s)]
-    return (o2, [k for k in range(len(signals)) if k not in o2],
-            [k for k, p in enumerate(parameters) if not _is_oxygen_path(p)])
-
-
-def _with_oxygen(model: Model, parameters: Sequence[str], signals: list[tuple[str, str]],
-                 args: tuple[Any, ...]) -> dict[str, Any]:
-    """The raw tangent of signals and parameters that involve oxygen: the oxygen signals by
-    the core's species tangent (by oxygen and flow parameters alike: a flow parameter
-    reaches the oxygen through the flow's own tangent), the flow signals by the flow tangent
-    (by flow parameters; oxygen parameters do not change the flow: their rows are 0)."""
-    text = json.dumps(model.canonical)
-    o2_cols, flow_cols, flow_rows = _oxygen_split(parameters, signals)
-    # with oxygen signals the species tangent takes every parameter, else the oxygen ones
-    # (for their values; their flow rows are 0)
-    rows = [k for k in range(len(parameters)) if o2_cols or k not in flow_rows]
-    species = _core.species_sensitivities(
-        text, [parameters[k] for k in rows], [signals[k] for k in o2_cols], *args)
-    parts = [(species, rows, o2_cols)]
-    if flow_cols:  # the flow tangent's values of the flow parameters replace the species'
-        parts.append((_core.tangent_sensitivities(text, [parameters[k] for k in flow_rows],
-                                                  [signals[k] for k in flow_cols], *args),
-                      flow_rows, flow_cols))
-    times = species["times"]
-    values = np.zeros(len(parameters))
-    sig = np.zeros((len(times), len(signals)))
-    der = np.zeros((len(parameters), len(times), len(signals)))
-    for part, prows, cols in parts:
-        values[prows] = part["values"]
-        sig[:, cols] = part["signals"]
-        if cols:
-            der[np.ix_(prows, range(len(times)), cols)] = part["derivatives"]
-    return {"times": times, "values": values, "cycles": species["cycles"],
-            "tangent_cycles": max(p["tangent_cycles"] for p, _, _ in parts),
-            "periodic_change": max(p["periodic_change"] for p, _, _ in parts),
-            "signals": sig, "derivatives": der}
-
-
 def _evaluate(model: Model, parameters: Sequence[str], targets: Sequence[Target],
               steps_per_cycle: int | None, tol: float, max_cycles: int,
               series_at_steps: bool = False
@@ -169,10 +119,9 @@ def _evaluate(model: Model, parameters: Sequence[str], targets: Sequence[Target]
     tangents; ``series_at_steps`` as :func:`_adjoint`'s."""
     signals = sorted({s for t in targets for s in t.signals})
     args = _run_args(model, parameters, signals, steps_per_cycle, tol, max_cycles)
-    with core_errors(f"model '{model.name}'"):
-        raw = _with_oxygen(model, parameters, signals, args) \
-            if _involves_oxygen(parameters, signals) else _core.tangent_sensitivities(
-                json.dumps(model.canonical), list(parameters), signals, *args)
+    with core_errors(f"model '{model.name}'"):  # flow and oxygen signals alike
+        raw = _core.tangent_sensitivities(json.dumps(model.canonical), list(parameters),
+                                          signals, *args)
     values, jac = [], []
     for t in targets:
         cols = [signals.index(s) for s in t.signals]
@@ -183,47 +132,6 @@ def _evaluate(model: Model, parameters: Sequence[str], targets: Sequence[Target]
         values.append(v)
         jac.append(j.reshape(len(v), len(parameters)))
     return values, jac, raw
-
-
-def _oxygen_adjoint(m: Model, parameters: Sequence[str], signals: list[tuple[str, str]],
-                    weights_of: Callable[[np.ndarray, np.ndarray], np.ndarray],
-                    args: tuple[Any, ...]
-                    ) -> tuple[Any, list[tuple[str, str]], Any, Callable[[Any], Any]]:
-    """The core's oxygen adjoint, its signals, weights and the gradients' completion: oxygen
-    outputs by oxygen and flow parameters (a flow parameter's flow tangent forward, the
-    species transport's adjoint backward). Flow signals (an SvO2's outflow) are read from
-    the flow's periodic cycle with their tangents by the flow parameters, for the weights
-    and for their own terms of the gradients (oxygen parameters do not change the flow)."""
-    o2, rest, flow_rows = _oxygen_split(parameters, signals)
-    if not o2:
-        raise CalibrationError("mode 'adjoint': oxygen parameters do not change the flow "
-                               f"outputs {', '.join(f'{v}.{n}' for v, n in signals)} (use "
-                               "mode='forward' for their zero rows)")
-    flow: dict[str, Any] = {}
-    if rest:
-        flow = _core.tangent_sensitivities(json.dumps(m.canonical),
-                                           [parameters[k] for k in flow_rows],
-                                           [signals[k] for k in rest], *args)
-    rest_weights: list[np.ndarray] = []
-
-    def weights(times: np.ndarray, sig: np.ndarray) -> np.ndarray:
-        full = np.zeros((len(times), len(signals)))
-        full[:, o2] = sig
-        if rest:
-            full[:, rest] = flow["signals"]
-        w = np.asarray(weights_of(times, full)).reshape(-1, len(times), len(signals))
-        rest_weights.append(w[:, :, rest])
-        return np.ascontiguousarray(w[:, :, o2].ravel(), dtype=float)
-
-    def complete(out: Any) -> Any:
-        """The flow signals' terms Σ w dQ/dθ of the flow parameters' gradients."""
-        if not (rest and flow_rows):
-            return out
-        grad = np.array(out["gradients"], dtype=float)
-        dflow = np.asarray(flow["derivatives"])  # flow params × steps × flow signals
-        grad[:, flow_rows] += np.einsum("fkj,pkj->fp", rest_weights[0], dflow)
-        return {**out, "gradients": grad}
-    return _core.species_adjoint_gradients, [signals[k] for k in o2], weights, complete
 
 
 def _adjoint(m: Model, parameters: Sequence[str], targets: Sequence[Target],
@@ -260,14 +168,9 @@ def _adjoint(m: Model, parameters: Sequence[str], targets: Sequence[Target],
             paths.append(path)
         return np.ascontiguousarray(np.concatenate(weights).ravel(), dtype=float)
 
-    core, core_signals, weights = _core.adjoint_gradients, signals, weights_of
-    complete: Callable[[Any], Any] = lambda out: out
-    with core_errors(f"model '{m.name}'"):
-        if _involves_oxygen(parameters, signals):
-            core, core_signals, weights, complete = _oxygen_adjoint(
-                m, parameters, signals, weights_of, args)
-        out = complete(core(json.dumps(m.canonical), list(parameters), core_signals, weights,
-                            *args))
+    with core_errors(f"model '{m.name}'"):  # flow and oxygen signals alike
+        out = _core.adjoint_gradients(json.dumps(m.canonical), list(parameters), signals,
+                                      weights_of, *args)
     jac, start = [], 0
     for path, v in zip(paths, values, strict=True):
         j = np.asarray(out["gradients"][start:start + len(v)])
@@ -411,18 +314,34 @@ class _Stop(Exception):
     """An evaluation failed at a trial point: the fit stops at the best point so far."""
 
 
+@dataclass
+class Derived:
+    """Quantities fitted in place of the targets' own outputs (e.g. a population's
+    characteristics made of pressures and pulse-wave velocities): ``of(values)`` gives them
+    and their derivatives by the outputs (m × n_outputs) from the outputs' values (SI, the
+    targets' order), compared with ``data`` weighed by ``1/sigma``."""
+
+    of: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+    data: np.ndarray
+    sigma: np.ndarray
+
+
 class _Problem:
     """The weighted residuals and their Jacobian in the log factors, cached per point (scipy
     asks for them separately) and the best point reached. A fit variable is a path, or a
-    group's name: one factor on every path of the group (their ratios kept)."""
+    group's name: one factor on every path of the group (their ratios kept). ``derived``:
+    quantities of the outputs fitted in their place; ``prior``: the SD of a Gaussian prior
+    on every log factor around the start (one more residual each, θ/prior)."""
 
     def __init__(self, source: dict[str, Any], parameters: list[str], start: np.ndarray,
                  targets: list[Target], options: dict[str, Any], exact: bool = True,
                  groups: Mapping[str, Sequence[str]] | None = None,
-                 gradient: str = "forward") -> None:
+                 gradient: str = "forward", derived: Derived | None = None,
+                 prior: float | None = None) -> None:
         self.source, self.parameters, self.start = source, parameters, start
         self.exact, self.gradient = exact, gradient
         self.targets, self.options = targets, options
+        self.derived, self.prior = derived, prior
         groups = groups or {}
         # the model's paths the variables move, and which variable moves each
         self.paths = [p for p in parameters if p not in groups] + \
@@ -432,12 +351,18 @@ class _Problem:
             for q in groups.get(name, [name]):
                 self.members[self.paths.index(q), k] = 1.0
         self.path_start = np.array([_base_value(source, q) for q in self.paths])
-        self.data = np.concatenate([t.value for t in targets])
-        self.sigma = np.concatenate([t.sigma for t in targets])
-        self.cache: tuple[bytes, np.ndarray, np.ndarray] | None = None
+        if derived is None:
+            self.data = np.concatenate([t.value for t in targets])
+            self.sigma = np.concatenate([t.sigma for t in targets])
+        else:
+            self.data, self.sigma = derived.data, derived.sigma
+        #: (point, residuals, their Jacobian, the fitted quantities' values)
+        self.cache: tuple[bytes, np.ndarray, np.ndarray, np.ndarray] | None = None
         self.best: tuple[float, np.ndarray, np.ndarray, np.ndarray] | None = None
         self.error: str | None = None
         self.evaluations = 0
+        #: the fit's end point (θ), once :func:`_least_squares` has one
+        self.end: np.ndarray | None = None
 
     def values(self, theta: np.ndarray) -> np.ndarray:
         return self.start * np.exp(theta)
@@ -467,15 +392,29 @@ class _Problem:
                 self.error = f"{type(e).__name__}: {e}"
                 raise _Stop from e
             self.evaluations += 1
+            if self.derived is not None:  # the chain rule through the derived quantities
+                v, dv = self.derived.of(v)
+                j_si = dv @ j_si
             r = (v - self.data) / self.sigma
             # d r / d log(p) = d r / d p · p (p in SI: the core's values), then by variable
             j = (j_si * np.asarray(raw["values"])[None, :] / self.sigma[:, None]) \
                 @ self.members if self.exact else np.zeros((len(r), 0))
-            self.cache = (key, r, j)
+            if self.prior is not None:
+                r = np.concatenate([r, theta / self.prior])
+                j = np.vstack([j, np.eye(len(theta)) / self.prior]) if self.exact else \
+                    np.zeros((len(r), 0))
+            self.cache = (key, r, j, v)
             cost = 0.5 * float(r @ r)
             if self.best is None or cost < self.best[0]:
                 self.best = (cost, theta.copy(), r, j)
         return self.cache[1], self.cache[2]
+
+    def fitted(self, theta: np.ndarray) -> np.ndarray:
+        """The fitted quantities' values at ``theta`` (the targets' outputs, or the derived
+        quantities)."""
+        self._eval(theta)
+        assert self.cache is not None
+        return self.cache[3]
 
     def fun(self, theta: np.ndarray) -> np.ndarray:
         return self._eval(theta)[0]
@@ -553,7 +492,8 @@ def calibrate(model: Model | Mapping[str, Any] | str, targets: Any,
 
 
 def _least_squares(problem: _Problem, lo: np.ndarray, hi: np.ndarray, method: str,
-                   max_evaluations: int, xtol: float, ftol: float) -> CalibrationResult:
+                   max_evaluations: int, xtol: float, ftol: float, gtol: float = 1e-12
+                   ) -> CalibrationResult:
     """The fit of ``problem`` by ``scipy.optimize.least_squares`` from the start (θ = 0)."""
     from scipy.optimize import least_squares
 
@@ -562,7 +502,7 @@ def _least_squares(problem: _Problem, lo: np.ndarray, hi: np.ndarray, method: st
         fit = least_squares(problem.fun, np.zeros(len(problem.parameters)),
                             jac=problem.jac if problem.exact else "2-point",
                             bounds=(lo, hi) if method == "trf" else (-np.inf, np.inf),
-                            method=method, x_scale=1.0, xtol=xtol, ftol=ftol, gtol=1e-12,
+                            method=method, x_scale=1.0, xtol=xtol, ftol=ftol, gtol=gtol,
                             max_nfev=max_evaluations)
         theta, success = fit.x, bool(fit.success)
         report.update(status=int(fit.status), message=str(fit.message), nfev=int(fit.nfev),
@@ -572,6 +512,7 @@ def _least_squares(problem: _Problem, lo: np.ndarray, hi: np.ndarray, method: st
         theta, success = problem.best[1], False
         report.update(status=-1, message="an evaluation failed; the best point reached is "
                       "returned", error=problem.error)
+    problem.end = theta
     r, j = _end_point(problem, theta)
     return _result(problem, theta, r, j, success, report)
 
@@ -586,7 +527,8 @@ def _end_point(problem: _Problem, theta: np.ndarray) -> tuple[np.ndarray, np.nda
     try:
         return problem._eval(theta)
     except _Stop:
-        r = best[2] if best is not None else np.full(len(problem.data), np.nan)
+        rows = len(problem.data) + (len(theta) if problem.prior is not None else 0)
+        r = best[2] if best is not None else np.full(rows, np.nan)
         return r, np.full((len(r), len(problem.parameters)), np.nan)
 
 
@@ -738,6 +680,7 @@ class _LoopProblem(_Problem):
         self.data = np.concatenate([t.value for t in targets])
         self.sigma = np.concatenate([t.sigma for t in targets])
         self.cache, self.best, self.error, self.evaluations = None, None, None, 0
+        self.derived, self.prior, self.end = None, None, None
 
     def model(self, theta: np.ndarray) -> dict[str, Any]:
         p = copy.deepcopy(self.source)

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -29,48 +28,14 @@ from oxyline import _core
 from oxyline.errors import CheckpointError, ModelError, OutputError
 from oxyline.io.atomic import replace_atomically
 
-FORMAT = "oxyline-checkpoint"
-#: layout of the file (meta keys and arrays)
-FILE_VERSION = 1
-_SCALARS = ("version", "cycles_run", "steps", "dt", "periodic_error")
-#: the longest wall time between checkpoints (~32 years): any longer means never
-MAX_EVERY_SECONDS = 1e9
+#: the file's schema is the core's (``oxyline_core::run::checkpoint::meta``): its format name,
+#: layout version (meta keys and arrays) and the run state's numbers kept in the metadata
+FORMAT = _core.CHECKPOINT_FORMAT
+FILE_VERSION = _core.CHECKPOINT_FILE_VERSION
+_SCALARS = tuple(_core.CHECKPOINT_STATE_SCALARS)
 #: settings a resumed run may change: they change how it runs, not its results (``threads``:
 #: the same bits on any number of threads)
-RUN_CONTROL = frozenset({"progress", "cancel", "checkpoint", "checkpoint_every", "max_memory",
-                         "threads"})
-
-
-def parse_every(value: Any) -> dict[str, Any]:
-    """The core's keywords of ``checkpoint_every``: seconds of wall time (a number, or a
-    string ``"90 s"``), or ``"N cycles"``; None: every 300 s."""
-    import numbers
-
-    if value is None:
-        return {}
-    if isinstance(value, str):
-        m = re.fullmatch(r"\s*(\d{1,12})\s*cycles?\s*", value)
-        if m and int(m.group(1)) >= 1:
-            return {"checkpoint_every_cycles": int(m.group(1))}
-        m = re.fullmatch(r"\s*([0-9.]+)\s*(s|sec|seconds?)\s*", value)
-        if m:
-            try:
-                value = float(m.group(1))
-            except ValueError:
-                pass
-    if isinstance(value, numbers.Real) and not isinstance(value, bool) \
-            and _finite(value) and 0 <= float(value) <= MAX_EVERY_SECONDS:
-        return {"checkpoint_every_seconds": float(value)}
-    raise ModelError(f"simulate: checkpoint_every must be seconds of wall time (a number from 0 "
-                     f"to {MAX_EVERY_SECONDS:g}) or 'N cycles' (N from 1 to 10**12), got "
-                     f"{value!r:.80}")
-
-
-def _finite(value: Any) -> bool:
-    try:
-        return bool(np.isfinite(float(value)))
-    except (OverflowError, ValueError):  # an integer beyond any float
-        return False
+RUN_CONTROL = frozenset(_core.RUN_CONTROL)
 
 
 def json_default(obj: Any) -> Any:
@@ -155,60 +120,8 @@ def read(path: str | os.PathLike[str]) -> tuple[dict[str, Any], dict[str, Any]]:
     except (Exception, MemoryError) as exc:  # noqa: BLE001 - any damage: zip, zlib, npy, JSON
         raise CheckpointError(f"{path}: not an oxyline checkpoint or damaged "
                               f"({type(exc).__name__}: {str(exc)[:200]})") from None
-    _check_meta(path, meta)
+    # every field present and of its type, both versions and the arrays, before any is used
+    _core.check_checkpoint_meta(str(path), meta, arrays)
     state = dict(meta["state"])
-    if state.get("version") != _core.CHECKPOINT_VERSION:
-        raise CheckpointError(f"{path}: run state version {state.get('version')!r}, this "
-                              f"oxyline ({_core.__version__}) reads version "
-                              f"{_core.CHECKPOINT_VERSION}")
-    for key, a in arrays.items():
-        if a.dtype != np.float64 or a.ndim != 1:
-            raise CheckpointError(f"{path}: field '{key}' must be a 1-D float64 array, got "
-                                  f"{a.ndim}-D {a.dtype}")
-        if key in state:
-            raise CheckpointError(f"{path}: field '{key}' is both a number and an array")
     state.update(arrays)
     return meta, state
-
-
-def _is_int(x: Any) -> bool:
-    return isinstance(x, int) and not isinstance(x, bool)
-
-
-def _is_real(x: Any) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x)
-
-
-#: the checks of the file's fields: (field, test, what it must be)
-_META_FIELDS: tuple[tuple[str, Any, str], ...] = (
-    ("model", lambda x: isinstance(x, dict), "a mapping (the model)"),
-    ("settings", lambda x: isinstance(x, dict), "a mapping (the run settings)"),
-    ("state", lambda x: isinstance(x, dict), "a mapping (the run state's numbers)"),
-    ("checkpoint_every", lambda x: x is None or isinstance(x, str) or _is_real(x),
-     "seconds, 'N cycles' or null"),
-)
-_STATE_FIELDS: tuple[tuple[str, Any, str], ...] = (
-    ("cycles_run", lambda x: _is_int(x) and 0 <= x < 2**63, "an integer >= 0"),
-    ("steps", lambda x: _is_int(x) and 0 <= x < 2**63, "an integer >= 0"),
-    ("dt", lambda x: _is_real(x) and x > 0, "a finite number > 0"),
-    ("periodic_error", lambda x: x is None or isinstance(x, (int, float))
-     and not isinstance(x, bool), "a number"),
-)
-
-
-def _check_meta(path: Path, meta: Any) -> None:
-    """Every field of a checkpoint's metadata present and of its type, before any is used."""
-    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-        raise CheckpointError(f"{path}: not an oxyline checkpoint (field 'format' is not "
-                              f"{FORMAT!r})")
-    if not _is_int(meta.get("version")) or meta["version"] != FILE_VERSION:
-        raise CheckpointError(f"{path}: checkpoint file version {meta.get('version')!r}, this "
-                              f"oxyline ({_core.__version__}) reads version {FILE_VERSION}")
-    for fields, record, where in ((_META_FIELDS, meta, ""), (_STATE_FIELDS, None, "state/")):
-        record = meta["state"] if record is None else record
-        for key, ok, what in fields:
-            if key not in record:
-                raise CheckpointError(f"{path}: field '{where}{key}' is missing")
-            if not ok(record[key]):
-                raise CheckpointError(f"{path}: field '{where}{key}' must be {what}, got "
-                                      f"{record[key]!r:.80}")

@@ -145,6 +145,54 @@ def output_estimate(layout: dict[str, Any], period: float, every: float, cycles:
     return 8.0 * rows * cols, rows, cols
 
 
+#: the memory a streamed store's chunk of output rows may take while it is written
+#: (``simulate_to_zarr`` without ``time_chunk``): the rows per chunk are chosen to stay under it
+STREAM_BUDGET = 256 * 2**20
+#: copies of a chunk of rows alive at once while it is written: the core's buffer, the rows
+#: handed over to Python, and the arrays the chunk's dataset writes from (measured with
+#: ``benches/bench_zarr_scale.py``: docs/performance.md)
+STREAM_COPIES = 3
+#: rows per chunk at most when chosen from the budget (the former fixed default)
+STREAM_MAX_ROWS = 1024
+#: a streaming run's output table first makes room for this many rows (or its chunk's, if
+#: fewer), then doubles
+_FIRST_ROWS = 64
+
+
+def stream_rows(columns: int, budget: float | None = None) -> int:
+    """Rows per chunk of a streamed store of ``columns`` values per row (time included): as
+    many as keep ``STREAM_COPIES`` copies of the chunk (8 bytes a value) within ``budget``,
+    at least 1, at most ``STREAM_MAX_ROWS``; above 64 a power of two, so that the core's
+    table, which grows by doubling from 64 rows, holds exactly one chunk."""
+    budget = STREAM_BUDGET if budget is None else budget
+    rows = int(budget // (STREAM_COPIES * 8.0 * max(1, columns)))
+    rows = max(1, min(STREAM_MAX_ROWS, rows))
+    if rows > _FIRST_ROWS:
+        rows = 1 << (rows.bit_length() - 1)
+    return rows
+
+
+def table_rows(rows: int, chunk: int) -> int:
+    """Rows a streaming run's output table makes room for to hold ``rows`` rows: from
+    ``min(chunk, 64)`` rows, doubled until they fit."""
+    held = max(1, min(chunk, _FIRST_ROWS))
+    while held < rows:
+        held *= 2
+    return held
+
+
+def stream_estimate(chunk: int, columns: int, cycle_rows: int = 0,
+                    rows: int | None = None) -> float:
+    """Bytes of a streamed run's output held in memory: ``STREAM_COPIES`` copies of a chunk of
+    ``chunk`` rows (or of all the output's ``rows``, if fewer) of ``columns`` values, plus the
+    core's table of a whole cycle of ``cycle_rows`` rows when the run keeps its current cycle
+    before the last (last-cycle output)."""
+    in_flight = chunk if rows is None else max(1, min(chunk, rows))
+    per_chunk = STREAM_COPIES * 8.0 * table_rows(in_flight, chunk) * columns
+    cycle = 8.0 * table_rows(cycle_rows, chunk) * columns if cycle_rows else 0.0
+    return per_chunk + cycle
+
+
 @contextlib.contextmanager
 def gc_paused() -> Iterator[None]:
     """Pause the cyclic garbage collector while a model is copied and checked: a 1e6-segment

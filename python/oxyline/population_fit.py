@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
 
@@ -27,7 +27,8 @@ import numpy as np
 
 import oxyline
 from oxyline import pwdb
-from oxyline.calibrate import sensitivities as exact
+from oxyline.calibrate import Derived, _least_squares, _Problem
+from oxyline.model import build_model
 from oxyline.populations import (
     VARIED,
     _base,
@@ -43,7 +44,7 @@ from oxyline.populations import (
     subject_summary,
     summary_vessels,
 )
-from oxyline.targets import CalibrationError
+from oxyline.targets import CalibrationError, Target, signals_for
 
 #: the fitted characteristics, in this order: McEniery 2005's aortic SBP and PP, brachial SBP
 #: and DBP and PP amplification [mmHg, ratio], the subject's cf-PWV [m/s] (the wall law's
@@ -155,47 +156,29 @@ def targets_of(age: float, row: Mapping[str, float]) -> tuple[np.ndarray, np.nda
     return np.array(mean), np.array(sd)
 
 
-@dataclass
-class _Fit:
-    """Residuals and their Jacobian in the log factors, cached per point. Both come from one
-    run (the primal and the adjoint sweeps): Levenberg-Marquardt accepts nearly every trial
-    point here and then asks for its Jacobian, so a primal-only trial run would be repeated
-    (measured: 47 runs instead of 24 at 25 y, 20 % more CPU time)."""
+def _problem(age: float, tol: float) -> _Problem:
+    """:func:`calibrate_baseline`'s fit as calibrate's least-squares problem
+    (:class:`oxyline.calibrate._Problem`): the baseline subject's model, one group factor per
+    :data:`VARIABLES` on the paths it moves (:func:`_group_paths`), the outputs of
+    :func:`_outputs` reduced to the :data:`CHARACTERISTICS` (:class:`~oxyline.calibrate.
+    Derived`) against :func:`targets_of`, the prior :data:`PRIOR_SIGMA` on each log factor,
+    and the core's adjoint Jacobian (many paths, nine outputs: one backward sweep per output,
+    in the same run as the primal, so a trial point's Jacobian costs no second run)."""
+    row, model = baseline_subject(age)
+    target, sigma = targets_of(age, row)
+    lengths = _path_lengths(model)
+    outputs = list(_outputs().values())
+    signals = signals_for(outputs, build_model(model), CalibrationError)
+    targets = [Target(o, None, signals=sig) for o, sig in zip(outputs, signals, strict=True)]
 
-    row: dict[str, float]
-    target: np.ndarray
-    sigma: np.ndarray
-    options: dict[str, Any]
-    evaluations: int = 0
-    cache: dict[bytes, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    def of(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return characteristics(values, lengths).real, \
+            _characteristics_jacobian(values, lengths)
 
-    def evaluate(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The characteristics at ``theta`` and their Jacobian by the log factors."""
-        key = theta.tobytes()
-        if key in self.cache:
-            return self.cache[key]
-        factors = dict(zip(VARIABLES, np.exp(theta), strict=True))
-        model = patched(base_model(), apply_factors(subject_patch(self.row), factors))
-        groups = _group_paths(model)
-        paths = [p for g in VARIABLES for p in groups[g]]
-        # many paths, nine outputs: one backward sweep per output
-        s = exact(model, paths, list(_outputs().values()), mode="adjoint", **self.options)
-        lengths = _path_lengths(model)
-        # d output / d log(path) = d output / d path · path, summed over each group
-        members = np.repeat(np.eye(len(VARIABLES)), [len(groups[g]) for g in VARIABLES], axis=0)
-        jp = s.jacobian * s.parameter_values[None, :]
-        jac = _characteristics_jacobian(s.values, lengths) @ (jp @ members)
-        self.cache = {key: (characteristics(s.values, lengths).real, jac)}
-        self.evaluations += 1
-        return self.cache[key]
-
-    def fun(self, theta: np.ndarray) -> np.ndarray:
-        return np.concatenate([(self.evaluate(theta)[0] - self.target) / self.sigma,
-                               theta / PRIOR_SIGMA])
-
-    def jac(self, theta: np.ndarray) -> np.ndarray:
-        return np.vstack([self.evaluate(theta)[1] / self.sigma[:, None],
-                          np.eye(len(theta)) / PRIOR_SIGMA])
+    return _Problem(model, list(VARIABLES), np.ones(len(VARIABLES)), targets,
+                    {"steps_per_cycle": None, "tol": tol, "max_cycles": 2000},
+                    groups=_group_paths(model), gradient="adjoint",
+                    derived=Derived(of, target, sigma), prior=PRIOR_SIGMA)
 
 
 def calibrate_baseline(age: float, tol: float = 1e-8, xtol: float = 1e-6,
@@ -207,30 +190,30 @@ def calibrate_baseline(age: float, tol: float = 1e-8, xtol: float = 1e-6,
     the Young's modulus of the arm and one of the aortic vessels (:data:`STIFFNESS`):
     Levenberg-Marquardt on the log factors with the core's exact adjoint Jacobian and a
     prior on each log factor (:data:`PRIOR_SIGMA`; the default xtol of 1e-6: the data are
-    known to a few per cent). Returns the ``target``,
-    ``sigma``, ``before`` and ``after`` characteristics (dicts by name), the ``factors``,
-    the ``jacobian`` (d characteristic / d log factor at the start) and the ``report``."""
-    from scipy.optimize import least_squares
-
-    row, _model = baseline_subject(age)
-    target, sigma = targets_of(age, row)
-    fit = _Fit(row, target, sigma, {"tol": tol})
+    known to a few per cent), as :func:`oxyline.calibrate` fits (:func:`_problem`). Returns
+    the ``target``, ``sigma``, ``before`` and ``after`` characteristics (dicts by name), the
+    ``factors``, the ``jacobian`` (d characteristic / d log factor at the start) and the
+    ``report``."""
+    problem = _problem(age, tol)
+    data, sigma = problem.data, problem.sigma
     start = np.zeros(len(VARIABLES))
-    before, jac0 = fit.evaluate(start)
-    res = least_squares(fit.fun, start, jac=fit.jac, method="lm", x_scale=1.0, xtol=xtol,
-                        ftol=1e-10, gtol=1e-10, max_nfev=max_evaluations)
-    after = fit.evaluate(res.x)[0]
+    before = problem.fitted(start)
+    jac0 = problem.jac(start)[:len(data)] * sigma[:, None]
+    fit = _least_squares(problem, np.full(len(start), -np.inf), np.full(len(start), np.inf),
+                         "lm", max_evaluations, xtol, 1e-10, gtol=1e-10)
+    assert problem.end is not None
+    after = problem.fitted(problem.end)
 
     def named(v: np.ndarray) -> dict[str, float]:
         return dict(zip(CHARACTERISTICS, map(float, v), strict=True))
 
-    return {"age": age, "target": named(target), "sigma": named(sigma),
+    return {"age": age, "target": named(data), "sigma": named(sigma),
             "before": named(before), "after": named(after),
-            "factors": dict(zip(VARIABLES, map(float, np.exp(res.x)), strict=True)),
+            "factors": {k: float(v) for k, v in fit.parameters.items()},
             "jacobian": {c: dict(zip(VARIABLES, map(float, jac0[i]), strict=True))
                          for i, c in enumerate(CHARACTERISTICS)},
-            "report": {"success": bool(res.success), "message": str(res.message),
-                       "evaluations": fit.evaluations, "cost": float(res.cost)}}
+            "report": {"success": fit.success, "message": str(fit.report.get("message")),
+                       "evaluations": problem.evaluations, "cost": fit.cost}}
 
 
 def apply_factors(patch: Mapping[str, Any], factors: Mapping[str, float]) -> dict[str, Any]:

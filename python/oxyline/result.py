@@ -465,23 +465,24 @@ class Result:
             out.segment_position = self.segment_position[a:b]
         return out
 
-    def to_xarray(self) -> Any:
+    def to_xarray(self, *, coordinates: bool = True) -> Any:
         """xarray Dataset with dims ``time``, ``vessel`` (and ``segment``), SI units in attrs.
-        :func:`oxyline.open_result` is its inverse (also for the files written from it)."""
+        :func:`oxyline.open_result` is its inverse (also for the files written from it).
+        ``coordinates=False``: without the vessel and segment coordinates (the rows of a
+        streamed chunk, whose store has them: ten million segments' names are not built
+        again for every chunk)."""
         import xarray as xr
 
-        coords: dict[str, Any] = {"time": ("time", self.time, {"units": "s"}),
-                                  "vessel": ("vessel", np.array(self.vessels, dtype=object))}
+        coords: dict[str, Any] = {"time": ("time", self.time, {"units": "s"})}
+        if coordinates:
+            coords["vessel"] = ("vessel", np.array(self.vessels, dtype=object))
         data_vars: dict[str, Any] = {
             name: (("time", "vessel"), getattr(self, name), {"units": UNITS[name]})
             for name in self.vessel_variables
         }
         if self.segment_count:  # flow or species segment variables (their coordinates)
-            seg_vessel = np.repeat(np.array(self.vessels, dtype=object), self.segment_count)
-            seg_index = np.concatenate([np.arange(n) for n in self.segment_count])
-            coords["segment_vessel"] = ("segment", seg_vessel)
-            coords["segment_index"] = ("segment", seg_index)
-            coords["segment_position"] = ("segment", self.segment_position, {"units": "m"})
+            if coordinates:
+                coords.update(self._segment_coordinates())
             for name in self.segment_variables:
                 data_vars[name] = (("time", "segment"), getattr(self, name), {"units": UNITS[name]})
         n_segments = int(sum(self.segment_count))
@@ -530,6 +531,16 @@ class Result:
                                       if isinstance(v, (int, float, str)) else str(v))
                       for k, v in self.settings.items() if v is not None})
         return xr.Dataset(data_vars, coords=coords, attrs=attrs)
+
+    def _segment_coordinates(self) -> dict[str, Any]:
+        """Each segment's vessel name, index in its vessel and position (m)."""
+        seg_vessel = np.repeat(np.array(self.vessels, dtype=object), self.segment_count)
+        counts = np.asarray(self.segment_count, dtype=np.int64)
+        # each segment's index in its vessel, without an arange per vessel (2 M at 1e7)
+        seg_index = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
+        return {"segment_vessel": ("segment", seg_vessel),
+                "segment_index": ("segment", seg_index),
+                "segment_position": ("segment", self.segment_position, {"units": "m"})}
 
     # files and summaries (implemented in oxyline.io.results)
     def to_netcdf(self, path: str | os.PathLike[str]) -> Path:

@@ -71,7 +71,7 @@ OPTIONS = frozenset(_core.OPTIONS)
 def _settings(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
     """The run settings of ``model`` with ``overrides``, each checked like the model itself by
     the core's schema: a :class:`ModelError` names the setting, where it came from and the
-    value. The output selection and the progress callback are Python's."""
+    value (``progress`` too: a flag or a callback). The output selection is Python's."""
     return _resolve(model, overrides)[0]
 
 
@@ -89,33 +89,11 @@ def _resolve(model: Model, overrides: Mapping[str, Any]
     if s.pop("meet_rtol"):
         timed = "meet"  # (the estimate, then the runs it asks for: `_meet_rtol`)
     out = dict(model.simulation.get("output", {}) or {})
-    progress = overrides.get("progress")
-    if progress is not None and not isinstance(progress, (bool, np.bool_)) \
-            and not callable(progress):
-        raise ModelError(f"simulate: progress must be true, false or a callback f(t, t_end), "
-                         f"got {progress!r}")
     s["variables"] = output_names(overrides.get("variables", out.get("variables")), "variables")
     # no selection: the model's default (every vessel but structured-tree ones); "all": all
     vessels = overrides.get("vessels", out.get("vessels"))
     s["vessels"] = model.default_output_vessels if vessels is None else output_vessels(vessels)
     return s, default, space, timed
-
-
-def _step_control(s: Mapping[str, Any], valves: bool = False) -> str:
-    """How the run of settings ``s`` chose its steps, as recorded in ``result.settings``
-    (and the NetCDF attribute ``solver_step_control``): error control, or a fixed step and
-    why. ``valves``: the circuit has valves, whose switches an error-controlled step does not
-    locate (the controller cuts the step by rejections; the achieved error there can exceed
-    the estimate: docs/physics.md §10, "The default run")."""
-    if s["rtol"] is not None:
-        return f"error control (rtol {s['rtol']:g})" + ("; valve switches located as events"
-                                                        if valves else "")
-    if s["dt"] is not None:
-        return "fixed step (dt)"
-    if s["method"] == "rk4":
-        return "fixed step (method rk4 has no error estimate; dopri5 is its error-controlled pair)"
-    # a checkpointed run at the default tolerance (see `_simulate`)
-    return "fixed step (checkpoints need a fixed step: give dt to choose it)"
 
 
 #: Above this many segments an in-memory run without a ``variables`` selection records the
@@ -378,32 +356,16 @@ def segmentation_facts(model: Model) -> dict[str, Any]:
     default where a vessel states no ``segments`` and the model no ``max_length``),
     ``segmentation`` ("auto", "explicit" or "auto+explicit") and the rule's
     ``segmentation_rtol`` (None when no vessel is cut by it)."""
-    s = model.network.summary()
-    total, auto = int(s["segments"]), int(s["auto_segments"])
-    how = "explicit" if auto == 0 else "auto" if auto == total else "auto+explicit"
-    return {"segments_total": total, "segments_auto": auto, "segmentation": how,
-            "segmentation_rtol": s["auto_rtol"]}
+    return _core.segmentation_facts(model.network.summary())
 
 
 def _run_settings(s: Mapping[str, Any], raw: Mapping[str, Any] | None,
                   valves: bool = False) -> dict[str, Any]:
-    """The settings recorded with a result: the requested ones and, after the run, its facts
-    (``valves``: the circuit has valves, see :func:`_step_control`)."""
-    settings = {k: s[k] for k in ("period", "cycles", "method", "output_every", "rho_infty",
-                                  "until_periodic", "rtol")}
-    settings["step_control"] = _step_control(s, valves)
-    if raw is not None:
-        settings.update(method=raw["method"], dt=raw["dt"], cycles_run=raw["cycles_run"],
-                        periodic_error=raw["periodic_error"], rk4_dt_max=raw.get("rk4_dt_max"))
-        if "error_estimate" in raw:  # error control: its steps and estimates (dt: the mean)
-            settings.update({k: raw[k] for k in ("steps", "rejected_steps", "dt_min", "dt_max")})
-            settings.update({f"error_estimate_{kind}": float(v)
-                             for kind, v in raw["error_estimate"].items()
-                             if v > 0.0 or kind in ("pressure", "flow")})
-        if s["until_periodic"] is not None:
-            # the stopping rule's own test (the core stops on change < tolerance)
-            settings["periodic_reached"] = bool(raw["periodic_error"] < s["until_periodic"])
-    return settings
+    """The settings recorded with a result (the core's schema, ``oxyline_core::run::facts``):
+    the requested ones and how the steps were chosen (``step_control``, also the NetCDF
+    attribute ``solver_step_control``) and, after the run (``raw``), its facts; ``valves``: the
+    circuit has valves, whose switches an error-controlled run locates as events."""
+    return _core.run_facts(s, raw, valves)
 
 
 def _warn_not_periodic(name: str, s: Mapping[str, Any], complete: bool) -> None:
@@ -599,9 +561,11 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     sink: Any = None
     s_out = s  # the selection of the rows kept
     if store is not None:
-        _check_output_size(model, s, overrides, where=store["path"])
+        store = {**store, **_stream_plan(model, s, store["time_chunk"])}
+        _check_output_size(model, s, overrides, where=store["path"], held=store["held"])
         sink = _ZarrSink(model, s, monitor, store)
-        core.update(chunk_sink=sink.add, chunk_rows=store["time_chunk"])
+        core.update(chunk_sink=sink.add, chunk_rows=store["time_chunk"],
+                    keep_current_cycle=store["keep_current_cycle"])
     elif summarize and not core:  # (a checkpointed run keeps its rows: resume rebuilds them)
         layout = _output_layout(model, s)
         if not s["transport"]:
@@ -838,10 +802,7 @@ def resume(path: str | os.PathLike[str], **overrides: Any) -> Result:
     (False, True, 3)
     """
     meta, state = _checkpoint.read(path)
-    changed = set(overrides) - _checkpoint.RUN_CONTROL
-    if changed:
-        raise ModelError(f"resume: {', '.join(sorted(changed))} cannot change in a resumed run "
-                         "(it continues with the checkpoint's model and settings)")
+    _core.check_resumed(list(overrides))  # only the run control may change
     try:
         model = load_model(meta["model"])
     except ModelError as exc:
@@ -869,13 +830,11 @@ def _checkpoints(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
     """The core's checkpoint keywords: a sink writing the file, and how often."""
     path = overrides.get("checkpoint")
     every = overrides.get("checkpoint_every")
-    if path is None:
-        if every is not None:
-            raise ModelError("simulate: checkpoint_every needs checkpoint (the file to write)")
-        return {}
-    if not isinstance(path, (str, os.PathLike)):
+    if path is not None and not isinstance(path, (str, os.PathLike)):
         raise ModelError(f"simulate: checkpoint must be a file path, got {path!r}")
-    core = _checkpoint.parse_every(every)
+    core = _core.checkpoint_interval(every, path is not None)  # (the core's schema)
+    if path is None:
+        return {}
     _checkpoint.check_writable(path)
     meta = {"model": model.to_dict(), "settings": _checkpoint.stored_settings(overrides),
             "checkpoint_every": every, "oxyline": str(_core.__version__)}
@@ -887,29 +846,32 @@ def _checkpoints(model: Model, overrides: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _check_output_size(model: Model, s: Mapping[str, Any], overrides: Mapping[str, Any],
-                       reduced: float = 0.0, where: Any = None) -> None:
+                       reduced: float = 0.0, where: Any = None, held: float = 0.0) -> None:
     """Refuse an output the memory allowed cannot hold (:class:`ResourceError` with the
     estimate and the settings to change), and announce a large one
     (:class:`OutputSizeWarning`), before the run starts. ``reduced``: the bytes of a
     summarized run's reductions and chunk in flight, beside the rows it keeps (``s``).
-    ``where``: the path of a streamed store, whose memory stays bounded (its size on disk is
-    announced)."""
+    ``where``: the path of a streamed store (its size on disk is announced), whose memory is
+    the rows it holds at once, ``held`` bytes (:func:`_stream_plan`)."""
     need, rows, cols = _output_size(model, s)
     need += reduced
     size = f"the output ({rows} rows x {cols} columns)"
+    todo = ("output fewer rows (output_every, output_cycles='last', fewer cycles) or columns "
+            "(variables, vessels, segments=False), stream it to disk with simulate_to_zarr, "
+            "or raise max_memory")
     if where is not None:
         if need > _memory.WARN_BYTES:
             warnings.warn(f"{where}: {size} takes about {_memory.human(need)} on disk (before "
                           "compression)", OutputSizeWarning, stacklevel=4)
-        return
+        need, size = held, f"the streamed output's rows held at once ({cols} columns)"
+        todo = ("give a smaller time_chunk or fewer columns (variables, vessels, "
+                "segments=False), or raise max_memory")
     key = f"{'simulate' if 'max_memory' in overrides else 'simulation'}: max_memory"
     limit = _memory.limit(overrides.get("max_memory", model.simulation.get("max_memory")), key)
     if limit is not None and need > limit:
         raise ResourceError(
             f"simulate: {size} needs about {_memory.human(need)} of memory (estimate), above "
-            f"max_memory = {_memory.human(limit)}; output fewer rows (output_every, "
-            "output_cycles='last', fewer cycles) or columns (variables, vessels, "
-            "segments=False), stream it to disk with simulate_to_zarr, or raise max_memory")
+            f"max_memory = {_memory.human(limit)}; {todo}")
     if limit is not None and "max_memory" in overrides:
         # a max_memory given to this run bounds the whole run: the model's state too (the
         # model was assembled under its own file's limit)
@@ -920,15 +882,13 @@ def _check_output_size(model: Model, s: Mapping[str, Any], overrides: Mapping[st
                 f"(estimate: the model's state {_memory.human(state)}, its output "
                 f"{_memory.human(need)}), above max_memory = {_memory.human(limit)}; output "
                 "fewer rows or columns, a coarser segmentation, or raise max_memory")
-    if need > _memory.WARN_BYTES:
+    if need > _memory.WARN_BYTES and where is None:
         warnings.warn(f"{size} takes about {_memory.human(need)} in memory, and as much when "
                       "written to a file", OutputSizeWarning, stacklevel=4)
 
 
 def _output_size(model: Model, s: Mapping[str, Any]) -> tuple[float, int, int]:
-    layout = _output_layout(model, s)
-    if not s["transport"]:
-        layout.pop("transport", None)
+    layout = _output_layout_sized(model, s)
     cycles = s["max_cycles"] if s["until_periodic"] is not None else s["cycles"]
     return _memory.output_estimate(layout, s["period"], s["output_every"], cycles,
                                    s["output_all_cycles"])
@@ -938,8 +898,39 @@ def _output_size(model: Model, s: Mapping[str, Any]) -> tuple[float, int, int]:
 SEGMENT_CHUNK = 65536
 
 
+def _stream_plan(model: Model, s: Mapping[str, Any], time_chunk: int | None) -> dict[str, Any]:
+    """How a streamed store's run holds its rows: ``time_chunk`` (given, else the most rows
+    whose copies in flight stay within ``memory.STREAM_BUDGET``: :func:`memory.stream_rows`;
+    at most the output's rows),
+    ``keep_current_cycle`` (last-cycle output: the cycles before the last are recorded, so
+    that a run stopped early stores its partial cycle, only while a cycle's rows fit the
+    budget; a run until periodic keeps them anyway, not knowing its last cycle) and ``held``,
+    the bytes of rows it holds at once (:func:`memory.stream_estimate`)."""
+    _, cycle_rows, cols = _memory.output_estimate(_output_layout_sized(model, s), s["period"],
+                                                  s["output_every"], 1, False)
+    _, rows, _ = _output_size(model, s)
+    # never more rows than the output has: zarr writes (and holds while encoding) every chunk
+    # whole, padded to its rows (1024 rows of a 101-row run at 1.05 M segments: 8.5 GB peak)
+    chunk = min(rows, time_chunk if time_chunk is not None else _memory.stream_rows(cols))
+    open_ended = s["until_periodic"] is not None
+    keep, kept = True, 0
+    if not s["output_all_cycles"] and (open_ended or s["cycles"] > 1):  # cycles before the last
+        cycle = 8.0 * _memory.table_rows(cycle_rows, chunk) * cols
+        keep = open_ended or cycle <= _memory.STREAM_BUDGET
+        kept = cycle_rows if keep else 0
+    return {"time_chunk": chunk, "keep_current_cycle": keep,
+            "held": _memory.stream_estimate(chunk, cols, kept, rows)}
+
+
+def _output_layout_sized(model: Model, s: Mapping[str, Any]) -> dict[str, Any]:
+    layout = _output_layout(model, s)
+    if not s["transport"]:
+        layout.pop("transport", None)
+    return layout
+
+
 def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
-                     path: str | os.PathLike[str], *, time_chunk: int = 1024,
+                     path: str | os.PathLike[str], *, time_chunk: int | None = None,
                      segment_chunk: int = SEGMENT_CHUNK, overwrite: bool = False,
                      **overrides: Unpack[SimulateOptions]) -> Any:
     """Run a network, writing its output to a Zarr store *during* the run, and return the store
@@ -949,9 +940,15 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     variables, dims, coordinates, units and attributes, Zarr format 2), but the core hands its
     output over every ``time_chunk`` rows, each chunk is appended along ``time`` at once, and
     neither the core nor Python keep more than one chunk: memory stays bounded however many
-    cycles are output (``output_cycles="all"``). Every array is also chunked along ``vessel``
+    cycles are output (``output_cycles="all"``). Without ``time_chunk``, the rows per chunk
+    are the most (up to 1024; above 64 a power of two) whose copies in flight, three of 8
+    bytes per stored column, stay within ``oxyline.memory.STREAM_BUDGET`` (256 MiB): at ten
+    million stored columns, 1 row. Every array is also chunked along ``vessel``
     and ``segment``, ``segment_chunk`` vessels or segments per chunk (default 65 536), so a
-    lazy read of one region (``xr.open_zarr(path, chunks={})``) reads only its chunks. The store is created before the run starts
+    lazy read of one region (``xr.open_zarr(path, chunks={})``) reads only its chunks
+    (:func:`oxyline.io.regions.region_sum` sums a segment variable by region, chunk by
+    chunk). The rows held at once are counted in the memory check before the run
+    (``max_memory``: :class:`~oxyline.ResourceError`). The store is created before the run starts
     and is a valid store after every chunk; its attribute ``complete`` is 1 once the run has
     finished. If the run stops early (Ctrl-C, a solver failure), the rows computed until then
     are written and the exception is raised with the opened store as ``exc.result``
@@ -968,6 +965,8 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     2001 1
     """
     for name, value in (("time_chunk", time_chunk), ("segment_chunk", segment_chunk)):
+        if value is None and name == "time_chunk":
+            continue  # chosen from the memory budget
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise ModelError(f"simulate_to_zarr: {name} must be an integer >= 1, got {value!r}")
     model = load_model(model)
@@ -1011,14 +1010,15 @@ class _ZarrSink:
     def add(self, rows: dict[str, Any]) -> None:
         chunk = _result(self.model, self.s, rows, {}, False)
         self.monitor.update(chunk)
-        self.store.append(dataset(chunk))
+        self.store.append(chunk.to_xarray(coordinates=False))
 
     def close(self, raw: dict[str, Any], final: Result, space: bool) -> Any:
         """Write the final attributes (``final``'s, with the spatial error estimate when
         asked), open the store, and raise the run's error with the store attached."""
         if space and "error" not in raw:
             _add_space_error(self.model, final)
-        raw, opened = _close_store(self.store, raw, dataset(final).attrs)
+        # (the attributes only: the store has the coordinates, ten million at that size)
+        raw, opened = _close_store(self.store, raw, dataset(final, coordinates=False).attrs)
         _raise_run_error(raw, opened)
         return opened
 

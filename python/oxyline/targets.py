@@ -25,7 +25,8 @@ An output names a quantity of the periodic cycle:
   times (targets only).
 
 Oxygen outputs (a model with an ``oxygen`` section; derivatives by the oxygen parameters
-and by the flow parameters, :func:`oxyline._core.species_sensitivities`):
+and by the flow parameters, the core's species tangent in the same
+:func:`oxyline._core.tangent_sensitivities` call):
 
 * ``"<vessel>.<variable>.<statistic>"`` with ``variable`` one of ``po2_out`` (Pa),
   ``saturation_out`` (haemoglobin saturation, 0–1) and ``wall_uptake`` (mol/s through the
@@ -58,11 +59,6 @@ import numpy as np
 
 from oxyline import _core
 from oxyline.errors import ModelError
-
-#: a vessel's oxygen signals (the core's species tangent)
-O2_VARIABLES = ("po2_out", "saturation_out", "wall_uptake")
-#: the network's oxygen consumption signal (vessel "")
-O2_NETWORK = ("", "consumption")
 
 
 class CalibrationError(ModelError):
@@ -103,11 +99,6 @@ def _signals(found: tuple[Any, str | None], error: type[ModelError]
     if why is not None:
         raise error(why)
     return [(str(v), str(x)) for v, x in signals]
-
-
-def is_oxygen_signal(signal: tuple[str, str]) -> bool:
-    """Whether the core's species tangent gives ``signal`` (else the flow tangent)."""
-    return signal[1] in O2_VARIABLES or signal == O2_NETWORK
 
 
 def pwv_path(output: str, model: Any, error: type[ModelError] = ModelError

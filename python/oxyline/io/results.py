@@ -26,9 +26,10 @@ if TYPE_CHECKING:
 STATS = ("mean", "min", "max")
 
 
-def dataset(result: Result) -> Any:
-    """``result.to_xarray()`` with file-level attributes (conventions, units system, creator)."""
-    ds = result.to_xarray()
+def dataset(result: Result, *, coordinates: bool = True) -> Any:
+    """``result.to_xarray()`` with file-level attributes (conventions, units system, creator);
+    ``coordinates=False``: without the vessel and segment coordinates (for its attributes)."""
+    ds = result.to_xarray(coordinates=coordinates)
     ds.attrs.setdefault("title", f"oxyline results for model '{result.model_name}'")
     ds.attrs["units_system"] = "SI (each variable's units in its 'units' attribute)"
     ds.attrs["source"] = "oxyline"

@@ -15,6 +15,7 @@ pub mod hemoglobin;
 pub mod impedance;
 pub mod integrate;
 pub mod model;
+pub mod monitor;
 pub mod output;
 pub mod run;
 pub mod segment;

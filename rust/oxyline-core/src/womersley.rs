@@ -68,6 +68,39 @@ pub fn cells(resistance: f64, inductance: f64) -> FrictionCells {
     out
 }
 
+/// The derivative of [`cells`]' values by the segment's Poiseuille resistance and
+/// flat-profile inertance, (dR₀, dL₀), with the first `kept` cells unfolded as [`cells`] kept
+/// them. R_k = ρ_k R₀ and L_k = R_k/p_k = 8 ρ_k L₀/β_k, so the cells move as R₀ and L₀ do, and
+/// a folded cell's 8 ρ_k L₀/β_k moves with the series inertance. The fold is held: it is a
+/// step in ν/r² (a pole crossing [`FOLD_ABOVE`]), and the derivative is that of the discrete
+/// circuit between its steps. Cells keep a prefix of the ladder (the poles β_k ν/r² grow
+/// with k at one ν/r²).
+pub fn cells_derivative(kept: usize, d_resistance: f64, d_inductance: f64) -> FrictionCells {
+    let mut out = FrictionCells {
+        resistance: d_resistance,
+        inductance: d_inductance,
+        cells: Vec::with_capacity(kept),
+    };
+    for (k, (rho, beta)) in RHO.iter().zip(BETA).enumerate() {
+        let dl = 8.0 * rho / beta * d_inductance;
+        if k < kept {
+            out.cells.push((rho * d_resistance, dl));
+        } else {
+            out.inductance += dl;
+        }
+    }
+    out
+}
+
+/// The flat-profile inertance L₀ of a segment whose series inertance, with the cells past the
+/// first `kept` folded into it by [`cells`], is `series`.
+pub fn flat_inductance(series: f64, kept: usize) -> f64 {
+    let folded: f64 = (RHO.iter().zip(BETA).skip(kept))
+        .map(|(rho, beta)| 8.0 * rho / beta)
+        .sum();
+    series / (1.0 + folded)
+}
+
 /// Z(iω) of the representation (for checks; the circuit's DAE is what the solvers use).
 pub fn impedance(f: &FrictionCells, omega: f64) -> faer::c64 {
     let s = faer::c64::new(0.0, omega);
@@ -102,6 +135,39 @@ mod tests {
                 (l_low / (4.0 / 3.0 * l0) - 1.0).abs() < 2e-3,
                 "{r}: {l_low}"
             );
+        }
+    }
+
+    /// The derivative against central differences of [`cells`] by R₀ and by L₀ separately,
+    /// on tubes that keep every cell, fold some, and fold all; and L₀ recovered from the
+    /// series inertance. The values are linear in R₀ and L₀ at a held fold, so the quotient
+    /// is exact to rounding.
+    #[test]
+    fn cell_derivatives_are_the_difference_quotients() {
+        for r in [1.2e-2, 8e-4, 5e-5] {
+            let (r0, l0) = tube(r);
+            let f = cells(r0, l0);
+            let kept = f.cells.len();
+            assert!((flat_inductance(f.inductance, kept) / l0 - 1.0).abs() < 1e-14);
+            let h = 1e-6;
+            for (dr, dl) in [(1.0, 0.0), (0.0, 1.0)] {
+                let up = cells(r0 * (1.0 + h * dr), l0 * (1.0 + h * dl));
+                let down = cells(r0 * (1.0 - h * dr), l0 * (1.0 - h * dl));
+                assert_eq!((up.cells.len(), down.cells.len()), (kept, kept));
+                let d = cells_derivative(kept, dr * r0, dl * l0);
+                // per unit log of R₀ or L₀: within 1e-8 of the value itself (a value that
+                // does not move quotes rounding of ~1e-16/h of itself)
+                let q = |a: f64, b: f64| (a - b) / (2.0 * h);
+                let close = |x: f64, y: f64, of: f64| (x - y).abs() <= 1e-8 * of.abs();
+                assert!(close(d.resistance, q(up.resistance, down.resistance), r0));
+                let (l, ul, dl_) = (f.inductance, up.inductance, down.inductance);
+                assert!(close(d.inductance, q(ul, dl_), l), "{r}");
+                for k in 0..kept {
+                    let (rk, lk) = f.cells[k];
+                    assert!(close(d.cells[k].0, q(up.cells[k].0, down.cells[k].0), rk));
+                    assert!(close(d.cells[k].1, q(up.cells[k].1, down.cells[k].1), lk));
+                }
+            }
         }
     }
 

@@ -7,18 +7,17 @@ use crate::reader::node::PyNode;
 use numpy::{IntoPyArray, PyArrayMethods, PyReadonlyArray1};
 use oxyline_core::error::Error;
 use oxyline_core::model::{NetworkSpec, parameters, parse};
-use oxyline_core::sensitivity::{
-    TangentSettings, adjoint_with, sensitivities, species_adjoint_with,
-    species_sensitivities as species,
-};
+use oxyline_core::sensitivity::{TangentSettings, signal_adjoint_with, signal_sensitivities};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-/// The signals (vessel, variable) over the periodic cycle of the canonical model
-/// `model_json` and their derivatives with respect to the parameters `paths`: a dict of
-/// `values` (SI value of each parameter), `times` (n_steps), `signals` (n_steps × n_signals),
-/// `derivatives` (n_params × n_steps × n_signals), `cycles` (the forward run's, the
-/// recorded one included), `tangent_cycles` and `periodic_change`.
+/// The signals over the periodic cycle of the canonical model `model_json` and their
+/// derivatives with respect to the parameters `paths`, flow and oxygen alike
+/// (`oxyline_core::sensitivity::signal_sensitivities`: a flow signal by the flow tangent, an
+/// oxygen signal by the species tangent; an oxygen parameter's rows of a flow signal are 0):
+/// a dict of `values` (SI value of each parameter), `times` (n_steps), `signals` (n_steps ×
+/// n_signals), `derivatives` (n_params × n_steps × n_signals), `cycles` (the forward run's,
+/// the recorded one included), `tangent_cycles` and `periodic_change`.
 #[oxyline_py_guard::guard]
 #[pyfunction]
 #[pyo3(signature = (model_json, paths, signals, period, steps_per_cycle, rho_infty = 0.5,
@@ -36,25 +35,23 @@ pub fn tangent_sensitivities<'py>(
     tol: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
     let settings = cycle_settings(period, steps_per_cycle, rho_infty, max_cycles, tol);
-    tangent_cycle(
-        py,
-        model_json,
-        paths,
-        signals,
-        move |spec, paths, signals| {
-            let out = sensitivities(spec, paths, signals, settings)?;
-            let c = out.cycle;
-            Ok(Cycle {
-                values: out.values,
-                times: c.times,
-                signals: c.values,
-                derivs: c.derivs,
-                cycles: c.cycles,
-                tangent_cycles: c.tangent_cycles,
-                periodic_change: c.periodic_change,
-            })
-        },
-    )
+    let (np, nsig) = (paths.len(), signals.len());
+    let c = py
+        .detach(move || signal_sensitivities(&parse(model_json)?, &paths, &signals, settings))
+        .map_err(to_py)?;
+    let nt = c.times.len();
+    let d = PyDict::new(py);
+    d.set_item("values", c.values.into_pyarray(py))?;
+    d.set_item("times", c.times.into_pyarray(py))?;
+    d.set_item("signals", c.signals.into_pyarray(py).reshape([nt, nsig])?)?;
+    d.set_item(
+        "derivatives",
+        c.derivs.into_pyarray(py).reshape([np, nt, nsig])?,
+    )?;
+    d.set_item("cycles", c.cycles)?;
+    d.set_item("periodic_change", c.periodic_change)?;
+    d.set_item("tangent_cycles", c.tangent_cycles)?;
+    Ok(d)
 }
 
 /// The bindings' keyword arguments of the periodic cycle, as the core's settings.
@@ -74,100 +71,16 @@ fn cycle_settings(
     }
 }
 
-/// Parse `model_json` and run `solve` on it (without the GIL); its cycle as `cycle_dict`.
-fn tangent_cycle<'py>(
-    py: Python<'py>,
-    model_json: &str,
-    paths: Vec<String>,
-    signals: Vec<(String, String)>,
-    solve: impl FnOnce(&NetworkSpec, &[String], &[(String, String)]) -> Result<Cycle, Error> + Send,
-) -> PyResult<Bound<'py, PyDict>> {
-    let (np, nsig) = (paths.len(), signals.len());
-    let cycle = py
-        .detach(move || solve(&parse(model_json)?, &paths, &signals))
-        .map_err(to_py)?;
-    cycle_dict(py, cycle, np, nsig)
-}
-
-/// The periodic cycle's signals and their derivatives, as both tangent bindings return them.
-struct Cycle {
-    values: Vec<f64>,
-    times: Vec<f64>,
-    signals: Vec<f64>,
-    derivs: Vec<f64>,
-    cycles: usize,
-    tangent_cycles: usize,
-    periodic_change: f64,
-}
-
-/// `c` as the dict of the tangent bindings (signals n_steps × n_signals, derivatives
-/// n_params × n_steps × n_signals).
-fn cycle_dict(py: Python<'_>, c: Cycle, np: usize, nsig: usize) -> PyResult<Bound<'_, PyDict>> {
-    let nt = c.times.len();
-    let d = PyDict::new(py);
-    d.set_item("values", c.values.into_pyarray(py))?;
-    d.set_item("times", c.times.into_pyarray(py))?;
-    d.set_item("signals", c.signals.into_pyarray(py).reshape([nt, nsig])?)?;
-    d.set_item(
-        "derivatives",
-        c.derivs.into_pyarray(py).reshape([np, nt, nsig])?,
-    )?;
-    d.set_item("cycles", c.cycles)?;
-    d.set_item("periodic_change", c.periodic_change)?;
-    d.set_item("tangent_cycles", c.tangent_cycles)?;
-    Ok(d)
-}
-
-/// The oxygen signals (vessel, name) over the periodic cycle of `model_json` and their
-/// derivatives by the oxygen parameters `paths` (`oxyline_core::sensitivity::species`): a
-/// dict of `values`, `times`, `signals` (n_steps × n_signals), `derivatives` (n_params ×
-/// n_steps × n_signals), `cycles` (the flow's), `tangent_cycles` (the transport's, with its
-/// tangents) and `periodic_change`.
-#[oxyline_py_guard::guard]
-#[pyfunction]
-#[pyo3(signature = (model_json, paths, signals, period, steps_per_cycle, rho_infty = 0.5,
-                    max_cycles = 2000, tol = 1e-12))]
-#[allow(clippy::too_many_arguments)]
-pub fn species_sensitivities<'py>(
-    py: Python<'py>,
-    model_json: &str,
-    paths: Vec<String>,
-    signals: Vec<(String, String)>,
-    period: f64,
-    steps_per_cycle: usize,
-    rho_infty: f64,
-    max_cycles: usize,
-    tol: f64,
-) -> PyResult<Bound<'py, PyDict>> {
-    let settings = cycle_settings(period, steps_per_cycle, rho_infty, max_cycles, tol);
-    tangent_cycle(
-        py,
-        model_json,
-        paths,
-        signals,
-        move |spec, paths, signals| {
-            let out = species(spec, paths, signals, settings)?;
-            Ok(Cycle {
-                values: out.values,
-                times: out.times,
-                signals: out.signals,
-                derivs: out.derivs,
-                cycles: out.cycles,
-                tangent_cycles: out.transport_cycles,
-                periodic_change: out.periodic_change,
-            })
-        },
-    )
-}
-
 /// The gradients of functionals J_f = Σ_kj weights[f, k, j] · signal j after step k of the
 /// periodic cycle of `model_json` by the adjoint (one backward sweep per functional, whatever
-/// the number of parameters). `weights_of(times, signals)` is called once with the step end
-/// times (n_steps) and the signals (n_steps × n_signals) of the one primal run and returns
-/// the weights, flat n_functionals × n_steps × n_signals (chosen from the cycle: no second
-/// forward run). A dict of `values` (SI value of each parameter), `functionals` (J_f),
-/// `gradients` (n_functionals × n_params), `cycles`, `adjoint_cycles` (per functional) and
-/// `periodic_change`; an exception of `weights_of` is raised as it is.
+/// the number of parameters), flow and oxygen signals by flow and oxygen parameters alike
+/// (`oxyline_core::sensitivity::signal_adjoint_with`). `weights_of(times, signals)` is called
+/// once with the step end times (n_steps) and every signal (n_steps × n_signals) of the one
+/// primal run and returns the weights, flat n_functionals × n_steps × n_signals (chosen from
+/// the cycle: no second forward run). A dict of `values` (SI value of each parameter),
+/// `functionals` (J_f), `gradients` (n_functionals × n_params), `cycles`, `tangent_cycles`
+/// (the species transport's, 0 without oxygen signals), `adjoint_cycles` (per functional)
+/// and `periodic_change`; an exception of `weights_of` is raised as it is.
 #[oxyline_py_guard::guard]
 #[pyfunction]
 #[pyo3(signature = (model_json, paths, signals, weights_of, period, steps_per_cycle,
@@ -187,44 +100,10 @@ pub fn adjoint_gradients<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let settings = cycle_settings(period, steps_per_cycle, rho_infty, max_cycles, tol);
     let (np, nsig) = (paths.len(), signals.len());
-    let (values, out) = detach_with_weights(py, model_json, &weights_of, nsig, |spec, w| {
-        adjoint_with(spec, &paths, &signals, w, settings)
+    let out = detach_with_weights(py, model_json, &weights_of, nsig, |spec, w| {
+        signal_adjoint_with(spec, &paths, &signals, w, settings)
     })?;
-    let d = adjoint_dict(py, values, out.values, out.gradients, np)?;
-    d.set_item("cycles", out.cycles)?;
-    d.set_item("adjoint_cycles", out.adjoint_cycles)?;
-    d.set_item("periodic_change", out.periodic_change)?;
-    Ok(d)
-}
-
-/// [`adjoint_gradients`] of oxygen signals (vessel, name; vessel "" for the network's
-/// balance fluxes) by oxygen and flow parameters
-/// (`oxyline_core::sensitivity::species_adjoint_with`): one backward sweep of the species
-/// transport per functional (a flow parameter's flow tangent forward beside the flow). The same dict, with
-/// `tangent_cycles` (the transport's cycles to its periodic state).
-#[oxyline_py_guard::guard]
-#[pyfunction]
-#[pyo3(signature = (model_json, paths, signals, weights_of, period, steps_per_cycle,
-                    rho_infty = 0.5, max_cycles = 2000, tol = 1e-12))]
-#[allow(clippy::too_many_arguments)]
-pub fn species_adjoint_gradients<'py>(
-    py: Python<'py>,
-    model_json: &str,
-    paths: Vec<String>,
-    signals: Vec<(String, String)>,
-    weights_of: Py<PyAny>,
-    period: f64,
-    steps_per_cycle: usize,
-    rho_infty: f64,
-    max_cycles: usize,
-    tol: f64,
-) -> PyResult<Bound<'py, PyDict>> {
-    let settings = cycle_settings(period, steps_per_cycle, rho_infty, max_cycles, tol);
-    let (np, nsig) = (paths.len(), signals.len());
-    let (values, out) = detach_with_weights(py, model_json, &weights_of, nsig, |spec, w| {
-        species_adjoint_with(spec, &paths, &signals, w, settings)
-    })?;
-    let d = adjoint_dict(py, values, out.functionals, out.gradients, np)?;
+    let d = adjoint_dict(py, out.values, out.functionals, out.gradients, np)?;
     d.set_item("cycles", out.cycles)?;
     d.set_item("tangent_cycles", out.transport_cycles)?;
     d.set_item("adjoint_cycles", out.adjoint_cycles)?;

@@ -1,12 +1,15 @@
 //! Checkpoint snapshots (`oxyline_core::run::checkpoint`) as Python dicts of numbers and
-//! float64 arrays: the Python side writes them to a versioned file and reads them back.
+//! float64 arrays: the Python side writes them to a versioned file and reads them back; the
+//! file's metadata and `checkpoint_every` read by the core's schema.
 
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1};
+use oxyline_core::run::checkpoint::meta::{self, Interval};
 use oxyline_core::run::checkpoint::{CHECKPOINT_VERSION, Snapshot};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::errors::ModelError;
+use crate::errors::{ModelError, to_py};
+use crate::reader::node::{PyNode, PySetting};
 
 /// The snapshot's arrays and their dict keys, in one place for both directions:
 /// `arrays!(s, &)` borrows them for writing, `arrays!(s, &mut)` for reading into.
@@ -87,4 +90,62 @@ pub fn from_dict(d: &Bound<'_, PyDict>) -> PyResult<Snapshot> {
         *v = array(d, key)?;
     }
     Ok(s)
+}
+
+/// `checkpoint_every` as the run's keywords (`oxyline_core::run::checkpoint::meta`):
+/// `checkpoint_every_cycles` or `checkpoint_every_seconds`, none when not given; a
+/// `ModelError` naming the setting and the value otherwise, or when no `checkpoint` file is
+/// given (`file` false).
+#[oxyline_py_guard::guard]
+#[pyfunction]
+#[pyo3(signature = (value, file = true))]
+pub(crate) fn checkpoint_interval<'py>(
+    py: Python<'py>,
+    value: Bound<'py, PyAny>,
+    file: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    match meta::parse_every(&PySetting(value), file).map_err(to_py)? {
+        None => {}
+        Some(Interval::Cycles(n)) => d.set_item("checkpoint_every_cycles", n)?,
+        Some(Interval::Seconds(x)) => d.set_item("checkpoint_every_seconds", x)?,
+    }
+    Ok(d)
+}
+
+/// A checkpoint file's metadata (its JSON record as Python values) and its arrays (name →
+/// numpy array) checked by the core's schema before any field is used:
+/// `oxyline.CheckpointError` naming `file` and the field.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub(crate) fn check_checkpoint_meta<'py>(
+    py: Python<'py>,
+    file: &str,
+    meta: Bound<'py, PyAny>,
+    arrays: Bound<'py, PyDict>,
+) -> PyResult<()> {
+    let shapes = arrays
+        .iter()
+        .map(|(name, a)| {
+            let ndim: usize = a.getattr("ndim")?.extract()?;
+            Ok((
+                name.extract()?,
+                ndim,
+                a.getattr("dtype")?.str()?.to_string(),
+            ))
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    if let Err(e) = meta::check(&PyNode(meta), file, &shapes) {
+        let class = py.import("oxyline.errors")?.getattr("CheckpointError")?;
+        return Err(PyErr::from_value(class.call1((e.to_string(),))?));
+    }
+    Ok(())
+}
+
+/// The settings given to a resumed run (`keys`): only the run control
+/// (`_core.RUN_CONTROL`) may change; a `ModelError` names the others.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub(crate) fn check_resumed(keys: Vec<String>) -> PyResult<()> {
+    meta::check_resumed(&keys).map_err(to_py)
 }

@@ -16,6 +16,7 @@ mod closed_loop;
 mod closed_loop_params;
 mod ensemble;
 mod errors;
+mod monitor;
 mod network;
 mod reader;
 mod results;
@@ -57,7 +58,7 @@ fn chamber_elastance<'py>(
 }
 
 /// A canonical waveform spec (JSON text) of `element` evaluated by the core at `times`: the
-/// transport monitor reads a Fourier inlet's range from it (no second evaluator in Python).
+/// svZeroDSolver writer samples a waveform with it (no second evaluator in Python).
 #[oxyline_py_guard::guard]
 #[pyfunction]
 fn waveform_values<'py>(
@@ -110,8 +111,7 @@ mod _core {
     };
     #[pymodule_export]
     use super::calibrate::{
-        adjoint_gradients, parameter_value, set_parameters, species_adjoint_gradients,
-        species_sensitivities, tangent_sensitivities,
+        adjoint_gradients, parameter_value, set_parameters, tangent_sensitivities,
     };
     #[pymodule_export]
     use super::calibration::CalibrationProblem;
@@ -132,10 +132,13 @@ mod _core {
     use super::windkessel_trees::{outlet_root_radius, windkessel_tree_match};
     #[pymodule_export]
     use super::{
-        chamber_elastance, controlled_bytes,
+        chamber_elastance,
+        checkpoint::{check_checkpoint_meta, check_resumed, checkpoint_interval},
+        controlled_bytes,
         ensemble::{Ensemble, merge_patch},
         errors::{_panic_probe, ModelError, ResourceError, SolverError, UnstableTimeStep},
         model_bytes,
+        monitor::{BoundsMonitor, species_bounds},
         network::Network,
         reader::NativeParts,
         reader::formats::{openbf_mean_pressures, svzerod_periodic_table},
@@ -143,6 +146,7 @@ mod _core {
         reader::schema::{read_conditions, read_vessels, resolve_settings, transport_section},
         reader::variant::VariantReader,
         results::ColumnStatsFold,
+        settings::{run_facts, segmentation_facts},
         waveform_values,
     };
 
@@ -203,6 +207,15 @@ mod _core {
             "CHECKPOINT_VERSION",
             oxyline_core::run::checkpoint::CHECKPOINT_VERSION,
         )?;
+        {
+            use oxyline_core::run::checkpoint::meta;
+            m.add("CHECKPOINT_FORMAT", meta::FORMAT)?;
+            m.add("CHECKPOINT_FILE_VERSION", meta::FILE_VERSION)?;
+            m.add("CHECKPOINT_STATE_SCALARS", meta::STATE_SCALARS.to_vec())?;
+            m.add("CHECKPOINT_MAX_EVERY_SECONDS", meta::MAX_EVERY_SECONDS)?;
+            // the settings a resumed run may change (a checkpoint stores the others)
+            m.add("RUN_CONTROL", meta::RUN_CONTROL.to_vec())?;
+        }
         {
             use oxyline_core::run::memory as mem;
             m.add("FLOW_BYTES_PER_SEGMENT", mem::FLOW_BYTES_PER_SEGMENT)?;

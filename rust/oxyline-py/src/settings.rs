@@ -6,6 +6,7 @@ use crate::errors::ModelError;
 use oxyline_core::RunSettings;
 use oxyline_core::genalpha::NewtonControl;
 use oxyline_core::integrate::adaptive::{Atol, KINDS, Tolerances};
+use oxyline_core::run::facts::{Controlled, Fact, Ran, Requested, recorded, segmentation};
 use oxyline_core::{Method, Start};
 use pyo3::conversion::FromPyObjectOwned;
 use pyo3::exceptions::PyTypeError;
@@ -257,4 +258,98 @@ pub(crate) fn parse_start(start: &str, rho_infty: f64) -> PyResult<Start> {
             )));
         }
     })
+}
+
+/// A field of a dict of settings or of a run's outcome, as `T` (a `KeyError` when missing).
+fn field<'py, T: FromPyObjectOwned<'py>>(d: &Bound<'py, PyDict>, key: &str) -> PyResult<T> {
+    let value = d
+        .get_item(key)?
+        .ok_or_else(|| pyo3::exceptions::PyKeyError::new_err(key.to_owned()))?;
+    arg(key, &value)
+}
+
+/// What a run did, read from its outcome dict (`results::outcome_dict`).
+fn ran(r: &Bound<'_, PyDict>) -> PyResult<Ran> {
+    let control = match r.get_item("error_estimate")? {
+        None => None,
+        Some(est) => Some(Controlled {
+            steps: field(r, "steps")?,
+            rejected_steps: field(r, "rejected_steps")?,
+            dt_min: field(r, "dt_min")?,
+            dt_max: field(r, "dt_max")?,
+            error_estimate: est
+                .cast::<PyDict>()?
+                .iter()
+                .map(|(kind, v)| Ok((kind.extract()?, v.extract()?)))
+                .collect::<PyResult<_>>()?,
+        }),
+    };
+    Ok(Ran {
+        method: field(r, "method")?,
+        dt: field(r, "dt")?,
+        cycles_run: field(r, "cycles_run")?,
+        periodic_error: field(r, "periodic_error")?,
+        rk4_dt_max: match r.get_item("rk4_dt_max")? {
+            Some(v) => arg("rk4_dt_max", &v)?,
+            None => None,
+        },
+        control,
+    })
+}
+
+/// The settings and facts a run records with its result (`oxyline_core::run::facts`), in
+/// the order shown: of the resolved `settings` (`resolve_settings`'s dict) and, after the
+/// run, of its outcome `run`; `valves`: the circuit has valves.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+#[pyo3(signature = (settings, run = None, valves = false))]
+pub(crate) fn run_facts<'py>(
+    py: Python<'py>,
+    settings: Bound<'py, PyDict>,
+    run: Option<Bound<'py, PyDict>>,
+    valves: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let asked = Requested {
+        period: field(&settings, "period")?,
+        cycles: field(&settings, "cycles")?,
+        method: field(&settings, "method")?,
+        output_every: field(&settings, "output_every")?,
+        rho_infty: field(&settings, "rho_infty")?,
+        until_periodic: field(&settings, "until_periodic")?,
+        rtol: field(&settings, "rtol")?,
+        dt: field(&settings, "dt")?,
+    };
+    let ran = run.as_ref().map(ran).transpose()?;
+    facts_dict(py, recorded(&asked, ran.as_ref(), valves))
+}
+
+/// How the model's vessels were cut (`oxyline_core::run::facts::segmentation`), from the
+/// network's `summary()`: recorded with a result, printed by the CLI.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub(crate) fn segmentation_facts<'py>(
+    py: Python<'py>,
+    summary: Bound<'py, PyDict>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let facts = segmentation(
+        field(&summary, "segments")?,
+        field(&summary, "auto_segments")?,
+        field(&summary, "auto_rtol")?,
+    );
+    facts_dict(py, facts)
+}
+
+/// Recorded facts as a dict, in their order (an absent one as None).
+fn facts_dict(py: Python<'_>, facts: Vec<(String, Fact)>) -> PyResult<Bound<'_, PyDict>> {
+    let d = PyDict::new(py);
+    for (key, fact) in facts {
+        match fact {
+            Fact::Real(x) => d.set_item(key, x)?,
+            Fact::Count(n) => d.set_item(key, n)?,
+            Fact::Text(t) => d.set_item(key, t)?,
+            Fact::Flag(b) => d.set_item(key, b)?,
+            Fact::Absent => d.set_item(key, py.None())?,
+        }
+    }
+    Ok(d)
 }

@@ -58,6 +58,9 @@ pub struct GenAlpha<'a> {
     factor_scratch: Vec<f64>,
     /// The step has changed since the start (see `factor_scratch`).
     dt_changed: bool,
+    /// The LU's map from the stamps to its values was dropped after a fixed step's one
+    /// factorisation (`factor_ahead`); made again from the DAE's pattern before another.
+    slots_released: bool,
     /// Newton with the natural-monotonicity line search (see `newton::solve`): set by an
     /// error-controlled run after a Newton failure (plain Newton cycles around a steep valve
     /// law's switch whatever the step, as the algebraic rows do not shrink with it).
@@ -155,6 +158,7 @@ impl<'a> GenAlpha<'a> {
             filter_scratch: Vec::new(),
             factor_scratch: Default::default(),
             dt_changed: false,
+            slots_released: false,
             damped: false,
         })
     }
@@ -170,6 +174,9 @@ impl<'a> GenAlpha<'a> {
     /// α_m C (R + 2S|Q|) terms cancel, leaving α_m C on the diagonal and
     /// −α_f γ Δt (1 + 2CS sgn(Q) ẏ_Q) at the flow (see `Iterate::solve` for the right side).
     fn factor(&mut self, time: f64, y_af: &[f64], yd_am: &[f64]) -> Result<()> {
+        if self.slots_released {
+            self.restore_slots();
+        }
         let c = self.af * self.gamma * self.dt;
         let mut kvals = std::mem::take(&mut self.factor_scratch);
         // (the values before the elements' are all written below: only the elements' are
@@ -221,11 +228,29 @@ impl<'a> GenAlpha<'a> {
     /// The factorisation the first linear step from (`time`, `y`) makes, made now (see
     /// `Integrator::factor_ahead`): the same call with the same arguments; nothing for a
     /// nonlinear or time-varying circuit (it factorises in its Newton iterations).
+    ///
+    /// Only a fixed-step run asks for it, so its factors serve the whole run: the LU's map
+    /// from the stamps to its values (4 bytes a stamp) is dropped then, and made again only if
+    /// the step changes after all.
     pub fn factor_ahead(&mut self, time: f64, y: &[f64]) -> Result<()> {
         if self.dae.is_linear() && self.dae.is_constant(self.regime) && !self.factored {
             self.factor(time + self.af * self.dt, y, &[])?;
+            self.slots_released = self.lu.release_slots();
         }
         Ok(())
+    }
+
+    /// The LU's map that `factor_ahead` dropped, made again from the pattern it was analysed
+    /// with: the DAE's stamps (the reduced system's alone when leaves are condensed: in order,
+    /// those between two of its unknowns, as `Leaves::find` lists them).
+    fn restore_slots(&mut self) {
+        let mut stamps = jacobian_pattern(self.dae);
+        if let Some(leaves) = &self.leaves {
+            let start = leaves.start as u32;
+            stamps.retain(|&(r, c)| r < start && c < start);
+        }
+        self.lu.restore_slots(&stamps);
+        self.slots_released = false;
     }
 
     /// Change the step (error-controlled runs): the iteration matrix depends on it, so a

@@ -295,6 +295,7 @@ pub fn resolve<N: Node>(sim: &N, overrides: &N, period: Option<f64>) -> Result<S
         Kind::Null => None,
         _ => Some(integer(&th, &w, 1)?),
     };
+    progress(overrides)?;
     Ok(Settings {
         period,
         cycles,
@@ -318,6 +319,21 @@ pub fn resolve<N: Node>(sim: &N, overrides: &N, period: Option<f64>) -> Result<S
         estimate_time_error,
         meet_rtol,
     })
+}
+
+/// `progress` (a keyword only): true, false (or None) or a callback `f(t, t_end)`; the
+/// front end shows or calls it.
+fn progress<N: Node>(overrides: &N) -> Result<()> {
+    match overrides.get("progress") {
+        Some(p) if !matches!(p.kind(), Kind::Null | Kind::Bool) && !p.callable() => Err(err(
+            "simulate",
+            format!(
+                "progress must be true, false or a callback f(t, t_end), got {}",
+                p.repr()
+            ),
+        )),
+        _ => Ok(()),
+    }
 }
 
 /// The relative tolerance of a run that gives neither `rtol` nor a fixed `dt`: the default
@@ -552,6 +568,18 @@ mod tests {
             e(json!({}), json!({"segmnts": true, "a": 1})),
             "simulate: unknown option(s) a, segmnts"
         );
+    }
+
+    #[test]
+    fn progress_is_a_flag_or_a_callback() {
+        let r = |o: serde_json::Value| resolve(&json!({}), &o, None).map_err(|e| e.to_string());
+        assert!(r(json!({"progress": true})).is_ok());
+        assert!(r(json!({"progress": null})).is_ok());
+        assert_eq!(
+            r(json!({"progress": "yes"})).unwrap_err(),
+            "simulate: progress must be true, false or a callback f(t, t_end), got 'yes'"
+        );
+        assert!(r(json!({"progress": 1})).unwrap_err().contains("got 1"));
     }
 
     #[test]

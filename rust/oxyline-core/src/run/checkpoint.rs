@@ -4,7 +4,9 @@
 //! cycle-mean |Q| of a two-pass run and the output recorded so far — to a caller's `save`.
 //! A run started from a snapshot continues exactly as the uninterrupted run would: same
 //! steps, same arithmetic, bit-identical output. Writing the snapshot to a file (atomically,
-//! versioned) is the caller's part.
+//! versioned) is the caller's part; the file's metadata schema is [`meta`]'s.
+
+pub mod meta;
 
 use std::time::{Duration, Instant};
 

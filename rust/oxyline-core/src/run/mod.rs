@@ -10,7 +10,7 @@
 //! * `pass` — one pass: settings → plan → initial state → cycle loop → outcome;
 //! * `two_pass` — the flow-only first pass that measures the cycle-mean |Q| for the closures
 //!   (accumulated by `mean_flow`), then the coupled pass;
-//! * `outcome` — what the run returns ([`Outcome`]);
+//! * `outcome` — what the run returns ([`Outcome`]); `facts` — what a result records of it;
 //! * `resolve` — RK4's step for circuits with valves and chambers, by step doubling.
 //!
 //! A failed or interrupted run still returns everything recorded so far.
@@ -21,6 +21,7 @@ mod coupling;
 mod cycle;
 mod events; // valve events of the error-controlled runs (docs/physics.md §10.5)
 mod explicit; // error control with the explicit pair (docs/physics.md §10.4)
+pub mod facts; // the settings and facts a run records with its result
 pub(crate) mod flow_harmonics; // inlet renewal: the first pass's flow harmonics (and their tangents)
 mod heap; // freed pages back to the OS before a large pass's cycle loop
 mod mean_flow;

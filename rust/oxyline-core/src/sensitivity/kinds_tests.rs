@@ -100,22 +100,94 @@ fn adjoint_gradients_are_the_tangents_of_the_new_kinds() {
     );
 }
 
-/// The kind the tangent leaves out is refused naming the vessel's parameter: the geometry of
-/// a vessel with Womersley friction cells (their law follows its R and L).
+/// [`MODEL`] with Womersley friction cells (`crate::womersley`) on the parent (4 mm: all
+/// three cells kept, the first one's pole at 6 rad/s, between the inflow's two harmonics)
+/// and on the tapered daughter narrowed to 1.1 → 0.7 mm (a thinner wall, 0.2 mm), whose
+/// first segment keeps its three cells and whose other two fold the top cell into their
+/// series inertance (its pole β₃ ν/r² at 4.9e3, 6.5e3 and 9.3e3 rad/s against the fold at
+/// 6.28e3: 4 % or more from it, far beyond the difference quotient's 1e-4). The RCL daughter
+/// carries no cells.
+fn womersley() -> crate::model::NetworkSpec {
+    let mut s = parse(MODEL).unwrap();
+    s.vessels[0].wall_friction = Some(crate::segment::WallFriction::Womersley);
+    s.vessels[1].wall_friction = Some(crate::segment::WallFriction::Womersley);
+    let g = s.vessels[1].geometry.as_mut().unwrap();
+    (g.radius_in, g.radius_out, g.wall_thickness) = (1.1e-3, 0.7e-3, Some(2e-4));
+    s
+}
+
+/// The cells the Womersley model holds: 3 on each of the parent's segments, 3 + 2 + 2 on
+/// the daughter's (so the tests below cover kept and folded cells alike).
 #[test]
-fn geometry_of_womersley_vessels_is_refused() {
-    let mut base = parse(MODEL).unwrap();
-    base.vessels[0].wall_friction = Some(crate::segment::WallFriction::Womersley);
-    for path in ["vessels.parent.radius", "vessels.parent.youngs_modulus"] {
+fn the_womersley_model_keeps_and_folds_cells() {
+    let a = womersley().assemble().unwrap();
+    let per_branch = |b: usize| {
+        (a.circuit.friction_cells.iter())
+            .filter(|c| c.branch == b)
+            .count()
+    };
+    let counts: Vec<usize> = (a.circuit.segments.iter())
+        .filter(|s| s.vessel == 1)
+        .map(|s| per_branch(s.branch))
+        .collect();
+    assert_eq!(counts, [3, 2, 2]);
+    assert_eq!(a.circuit.friction_cells.len(), 16);
+}
+
+/// The geometry of vessels with Womersley friction cells: the cells' R_k and L_k follow
+/// each segment's R₀ and L₀ (a uniform radius by r⁻⁴ and r⁻², a taper's end radii by the
+/// segments' own slopes with the flat profile, the length linearly; the modulus leaves
+/// them), against central differences of whole periodic runs. (The narrow daughter's
+/// modulus moves its outlet pressure by ~1e-6 of the other parameters' response, where the
+/// quotient's rounding is 1e-6 of it: it is checked against the tangents by the adjoint.)
+#[test]
+fn geometry_of_womersley_vessels() {
+    let base = womersley();
+    for path in [
+        "vessels.parent.radius",
+        "vessels.parent.length",
+        "vessels.parent.youngs_modulus",
+        "vessels.d1.radius_in",
+        "vessels.d1.radius_out",
+        "vessels.d1.length",
+    ] {
+        check_on(&base, path);
+    }
+}
+
+#[test]
+fn adjoint_gradients_of_womersley_geometry_are_the_tangents() {
+    super::tests::check_adjoint_of(
+        &womersley(),
+        &[
+            "vessels.parent.radius",
+            "vessels.parent.length",
+            "vessels.d1.radius_in",
+            "vessels.d1.radius_out",
+            "vessels.d1.length",
+            "vessels.d1.youngs_modulus",
+        ],
+        &SIGNALS,
+    );
+}
+
+/// What stays refused on a Womersley vessel is what is refused on any: a radius with the
+/// thick wall model, naming the parameter.
+#[test]
+fn thick_wall_radius_of_a_womersley_vessel_stays_refused() {
+    let mut base = womersley();
+    base.wall_model = crate::segment::WallModel::Thick;
+    for path in ["vessels.parent.radius", "vessels.d1.radius_in"] {
         let err = sensitivities(&base, &[path.into()], &[], settings())
             .err()
             .unwrap()
             .to_string();
         assert!(
-            err.contains(&format!("'{path}'")) && err.contains("Womersley"),
+            err.contains(&format!("'{path}'")) && err.contains("thin wall"),
             "{err}"
         );
     }
+    check_on(&base, "vessels.parent.length");
 }
 
 /// [`MODEL`] with Kelvin–Voigt walls of different relaxation times η/E on the parent
@@ -272,10 +344,11 @@ fn scales_on_viscoelastic_walls_and_womersley_vessels() {
     check_on(&base, "scale.resistance");
 }
 
-/// A lumped vessel's friction cells follow its R and L by the Womersley law, which the
-/// tangent does not differentiate: its R, L and `scale.resistance` are refused naming it.
-#[test]
-fn lumped_womersley_resistance_is_refused_naming_the_vessel() {
+/// [`MODEL`] with its daughter d2 lumped in two inverted-L segments with Womersley friction
+/// cells (as a model-wide `wall_friction: womersley` gives a lumped vessel): each
+/// segment's R₀ = R/2 and L₀ = L/2 set its cells (poles 23, 118 and 1.2e3 rad/s), so the
+/// vessel's R and L move them, and `scale.resistance` with R.
+fn lumped_womersley() -> crate::model::NetworkSpec {
     let mut base = parse(MODEL).unwrap();
     let lumped = crate::model::LumpedSpec {
         resistance: 3e7,
@@ -285,22 +358,31 @@ fn lumped_womersley_resistance_is_refused_naming_the_vessel() {
         stenosis_form: Default::default(),
     };
     let d2 = &mut base.vessels[2];
-    d2.arrangement = None;
+    (d2.arrangement, d2.segments) = (None, Some(2));
     d2.lumped = Some(lumped);
     d2.wall_friction = Some(crate::segment::WallFriction::Womersley);
-    for (path, says) in [
-        ("scale.resistance", "vessel 'd2'"),
-        ("vessels.d2.lumped.resistance", "Womersley"),
-        ("vessels.d2.lumped.inductance", "Womersley"),
+    base
+}
+
+#[test]
+fn lumped_womersley_values_and_the_resistance_scale() {
+    let base = lumped_womersley();
+    assert_eq!(base.assemble().unwrap().circuit.friction_cells.len(), 6);
+    for path in [
+        "vessels.d2.lumped.resistance",
+        "vessels.d2.lumped.inductance",
+        "vessels.d2.lumped.capacitance",
+        "scale.resistance",
     ] {
-        let err = sensitivities(&base, &[path.into()], &[], settings())
-            .err()
-            .unwrap()
-            .to_string();
-        assert!(
-            err.contains(&format!("'{path}'")) && err.contains(says),
-            "{err}"
-        );
+        check_on(&base, path);
     }
-    check_on(&base, "vessels.d2.lumped.capacitance");
+    super::tests::check_adjoint_of(
+        &base,
+        &[
+            "vessels.d2.lumped.resistance",
+            "vessels.d2.lumped.inductance",
+            "scale.resistance",
+        ],
+        &SIGNALS,
+    );
 }

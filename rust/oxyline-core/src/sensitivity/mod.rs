@@ -4,9 +4,11 @@
 //! (reverse) sweep for many parameters and few functionals ([`adjoint`]). A closed loop's
 //! conserved blood volume closes its periodic problem ([`volume`]). Calibration targets (an
 //! output by name, its value and derivatives from the signals' tangents) in [`targets`], the
-//! signals each output name reads in [`target_signals`].
+//! signals each output name reads in [`target_signals`]. Flow and oxygen signals by flow and
+//! oxygen parameters together, as the bindings ask for them, in [`outputs`].
 
 pub mod krylov;
+pub mod outputs;
 pub mod parameter;
 pub mod species;
 pub mod tangent;
@@ -18,6 +20,7 @@ use crate::circuit::Dae;
 use crate::error::{Error, Result};
 use crate::model::NetworkSpec;
 use crate::output::VESSEL_VARIABLES;
+pub use outputs::{SignalAdjoint, SignalSensitivities, signal_adjoint_with, signal_sensitivities};
 pub use parameter::{DaeTangent, Parameter};
 pub use species::{
     SpeciesAdjoint, SpeciesSensitivities, species_adjoint_with, species_sensitivities,

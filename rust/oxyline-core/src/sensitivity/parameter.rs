@@ -9,7 +9,10 @@
 //! §1.1): a segment's R, L and C are proportional to its length; its C to 1/E (thin and thick
 //! walls alike); for a uniform radius r its R ∝ r⁻⁴, L ∝ r⁻², and thin-wall C ∝ r³ at a fixed
 //! wall thickness; boundary and lumped values enter as themselves. The derivative of a power
-//! law x = a pᵏ is k x / p: analytic, no differencing.
+//! law x = a pᵏ is k x / p: analytic, no differencing. A Womersley segment's friction cells
+//! (`crate::womersley`) are linear in its Poiseuille R₀ and flat-profile L₀ (R_k = ρ_k R₀,
+//! L_k = 8 ρ_k L₀/β_k), so they move with the segment's own derivatives, stamped on the
+//! branch row, the cells' rows and their inertances ([`Stamps::segment_rl`]).
 //!
 //! A stenosis adds the nonlinear term c_i(y) = S |Q| Q to its branch row (S split evenly
 //! over a lumped vessel's segments); its derivative with respect to S is |Q| Q at the step's
@@ -27,7 +30,7 @@ use crate::coefficients::ResistanceLaw;
 use crate::error::{Error, Result};
 use crate::model::{
     ActivationSpec, Arrangement, BoundarySpec, ChamberLawSpec, ChamberSpec, ChamberSphereSpec,
-    HeartPulmonarySpec, NetworkSpec, StenosisForm, ValveSpec,
+    HeartPulmonarySpec, NetworkSpec, StenosisForm, ValveSpec, VesselSpec,
 };
 use crate::segment::{
     Blood, InertanceProfile, Wall, WallFriction, WallModel, segment_rlc_radius_slopes,
@@ -138,19 +141,7 @@ impl Parameter {
     pub fn parse(spec: &NetworkSpec, path: &str) -> Result<Parameter> {
         let parts: Vec<&str> = path.split('.').collect();
         match parts.as_slice() {
-            ["scale", "resistance"] => {
-                match spec.vessels.iter().find(|v| friction_cells(spec, v)) {
-                    Some(v) => Err(unknown(
-                        path,
-                        format!(
-                            "vessel '{}' is lumped with Womersley friction cells, whose values \
-                         follow its resistance by a law the tangent does not differentiate",
-                            v.name
-                        ),
-                    )),
-                    None => Ok(Parameter::ResistanceScale),
-                }
-            }
+            ["scale", "resistance"] => Ok(Parameter::ResistanceScale),
             ["scale", "compliance"] => Ok(Parameter::ComplianceScale),
             ["scale", "inflow"] => Ok(Parameter::InflowScale),
             ["boundary_conditions", node, key] => condition(spec, path, node, key),
@@ -511,9 +502,6 @@ fn vessel(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<P
             )
         })?;
     let v = &spec.vessels[vi];
-    if let Some(why) = geometry_unsupported(spec, v, rest) {
-        return Err(unknown(path, why));
-    }
     let p = match (rest, &v.geometry, &v.lumped) {
         (["length"], Some(_), _) => Parameter::Length(vi),
         (["youngs_modulus"], Some(g), _) if g.youngs_modulus.is_some() => {
@@ -550,13 +538,6 @@ fn vessel(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<P
             if let Some(why) = form_switch(spec, v, l, key) {
                 return Err(unknown(path, why));
             }
-            if matches!(*key, "resistance" | "inductance") && friction_cells(spec, v) {
-                return Err(unknown(
-                    path,
-                    "the vessel has Womersley friction cells, whose values follow its \
-                     resistance and inductance by a law the tangent does not differentiate",
-                ));
-            }
             Parameter::Lumped(vi, (*key).to_owned())
         }
         _ => {
@@ -572,11 +553,10 @@ fn vessel(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<P
     Ok(p)
 }
 
-/// Whether lumped vessel `v` carries Womersley friction cells, whose values follow its R and
-/// L (`assemble::vessel`; a vessel given by its geometry is refused in `geometry_unsupported`).
-fn friction_cells(spec: &NetworkSpec, v: &crate::model::VesselSpec) -> bool {
-    v.lumped.is_some()
-        && v.wall_friction.unwrap_or(spec.wall_friction) == WallFriction::Womersley
+/// Whether vessel `v`'s segments carry Womersley friction cells, whose values follow each
+/// segment's R₀ and L₀ (`assemble::vessel`, [`Stamps::segment_rl`]).
+fn friction_cells(spec: &NetworkSpec, v: &VesselSpec) -> bool {
+    v.wall_friction.unwrap_or(spec.wall_friction) == WallFriction::Womersley
         && crate::assemble::segments::arrangement(spec, v) != Arrangement::Rcl
 }
 
@@ -606,29 +586,6 @@ fn form_switch(
         ),
         _ => None,
     }
-}
-
-/// Why a geometric parameter (`rest` after the vessel's name) of vessel `v` is not
-/// differentiated, if it is not: Womersley friction cells take their values from the
-/// segment's R and L by a law the tangent does not differentiate. (A viscoelastic wall's
-/// conductance follows its capacitance and relaxation time: [`Stamps::onto_viscous_walls`].)
-fn geometry_unsupported(
-    spec: &NetworkSpec,
-    v: &crate::model::VesselSpec,
-    rest: &[&str],
-) -> Option<&'static str> {
-    let geometric = v.geometry.is_some()
-        && matches!(
-            rest,
-            ["length" | "radius" | "radius_in" | "radius_out" | "youngs_modulus"]
-        );
-    if !geometric {
-        return None;
-    }
-    if v.wall_friction.unwrap_or(spec.wall_friction) == WallFriction::Womersley {
-        return Some("the vessel has Womersley friction cells, which the tangent does not cover");
-    }
-    None
 }
 
 /// Refuse what the tangent does not cover: the closed-loop heart block's coronary beds (their
@@ -703,6 +660,9 @@ pub struct Stamps<'a> {
     branch_r: Vec<usize>,
     /// Node → its viscoelastic wall (index into `circuit.viscous_walls`).
     wall_of: std::collections::HashMap<usize, usize>,
+    /// Per branch, its Womersley friction cells (a range of `circuit.friction_cells`, which
+    /// holds each branch's cells together); empty for a circuit without cells.
+    cells_of: Vec<std::ops::Range<usize>>,
 }
 
 impl<'a> Stamps<'a> {
@@ -720,11 +680,23 @@ impl<'a> Stamps<'a> {
         let wall_of = (circuit.viscous_walls.iter().enumerate())
             .map(|(k, w)| (w.node, k))
             .collect();
+        let mut cells_of = Vec::new();
+        if !circuit.friction_cells.is_empty() {
+            cells_of = vec![0..0; circuit.branches.len()];
+            for (k, c) in circuit.friction_cells.iter().enumerate() {
+                let r = &mut cells_of[c.branch];
+                if r.start == r.end {
+                    r.start = k;
+                }
+                r.end = k + 1;
+            }
+        }
         Stamps {
             circuit,
             dae,
             branch_r,
             wall_of,
+            cells_of,
         }
     }
 
@@ -801,7 +773,8 @@ impl<'a> Stamps<'a> {
                     _ => (g.youngs_modulus.unwrap_or(f64::NAN), [0.0, 0.0, -1.0]),
                 };
                 t = self.blank(path, value);
-                self.vessel_power_law(&mut t, &spec.vessels[*vi].name, k, value);
+                let v = &spec.vessels[*vi];
+                self.vessel_power_law(&mut t, v, friction_cells(spec, v), k, value);
             }
             Parameter::EndRadius { vessel, outlet } => {
                 let g = spec.vessels[*vessel]
@@ -843,7 +816,8 @@ impl<'a> Stamps<'a> {
                 };
                 t = self.blank(path, value);
                 // split evenly over the segments: each value is value/n, d/dvalue = 1/n
-                self.vessel_linear(&mut t, &spec.vessels[*vi].name, k);
+                let v = &spec.vessels[*vi];
+                self.vessel_linear(&mut t, v, friction_cells(spec, v), k);
             }
             Parameter::ResistanceScale => {
                 t = self.blank(path, 1.0);
@@ -1008,13 +982,13 @@ impl<'a> Stamps<'a> {
             .filter(move |s| self.circuit.vessel_names[s.vessel] == name)
     }
 
-    /// d/dp of a vessel whose segment values are power laws x ∝ p^k, k for (R, L, C).
-    fn vessel_power_law(&self, t: &mut DaeTangent, name: &str, k: [f64; 3], p: f64) {
-        let nn = self.circuit.nodes.len();
-        for s in self.segments_of(name) {
+    /// d/dp of a vessel whose segment values are power laws x ∝ p^k, k for (R, L, C) (a
+    /// Womersley segment's cells follow its R₀ and L₀: [`Stamps::segment_rl`]).
+    fn vessel_power_law(&self, t: &mut DaeTangent, v: &VesselSpec, w: bool, k: [f64; 3], p: f64) {
+        for s in self.segments_of(&v.name) {
             let b = &self.circuit.branches[s.branch];
-            t.df[self.branch_r[s.branch]] += k[0] * b.resistance / p;
-            t.de[nn + s.branch] += k[1] * b.inductance / p;
+            let l0 = self.flat_inductance(s.branch, w);
+            self.segment_rl(t, s.branch, w, k[0] * b.resistance / p, k[1] * l0 / p);
             for &(node, share) in &s.nodes {
                 t.de[node] += k[2] * share * s.compliance / p;
             }
@@ -1035,7 +1009,6 @@ impl<'a> Stamps<'a> {
     ) -> Option<()> {
         let v = &spec.vessels[vi];
         let g = v.geometry.as_ref()?;
-        let nn = self.circuit.nodes.len();
         let n = self.segments_of(&v.name).count();
         if n == 0 {
             return None;
@@ -1053,8 +1026,12 @@ impl<'a> Stamps<'a> {
             }),
             _ => None,
         };
-        // the assembly's profile (a Womersley vessel is refused before this)
-        let profile: InertanceProfile = spec.inertance_profile;
+        // the assembly's profile: a Womersley segment's series inertance is the flat one's
+        let cells = friction_cells(spec, v);
+        let profile = match cells {
+            true => InertanceProfile::Flat,
+            false => spec.inertance_profile,
+        };
         let (dx, dr) = (g.length / n as f64, g.radius_out - g.radius_in);
         for (k, s) in self.segments_of(&v.name).enumerate() {
             let at = |j: usize| j as f64 / n as f64;
@@ -1065,8 +1042,9 @@ impl<'a> Stamps<'a> {
             } else {
                 (1.0 - at(k), 1.0 - at(k + 1))
             };
-            t.df[self.branch_r[s.branch]] += w0 * d0.resistance + w1 * d1.resistance;
-            t.de[nn + s.branch] += w0 * d0.inductance + w1 * d1.inductance;
+            let dr = w0 * d0.resistance + w1 * d1.resistance;
+            let dl = w0 * d0.inductance + w1 * d1.inductance;
+            self.segment_rl(t, s.branch, cells, dr, dl);
             let dc = w0 * d0.compliance + w1 * d1.compliance;
             for &(node, share) in &s.nodes {
                 t.de[node] += share * dc;
@@ -1076,16 +1054,65 @@ impl<'a> Stamps<'a> {
     }
 
     /// d/dvalue of a lumped vessel's total R, L or C split evenly over its segments.
-    fn vessel_linear(&self, t: &mut DaeTangent, name: &str, which: [f64; 3]) {
-        let nn = self.circuit.nodes.len();
-        let n = self.segments_of(name).count() as f64;
-        for s in self.segments_of(name) {
-            t.df[self.branch_r[s.branch]] += which[0] / n;
-            t.de[nn + s.branch] += which[1] / n;
+    fn vessel_linear(&self, t: &mut DaeTangent, v: &VesselSpec, w: bool, which: [f64; 3]) {
+        let n = self.segments_of(&v.name).count() as f64;
+        for s in self.segments_of(&v.name) {
+            self.segment_rl(t, s.branch, w, which[0] / n, which[1] / n);
             for &(node, share) in &s.nodes {
                 t.de[node] += which[2] * share / n;
             }
         }
+    }
+
+    /// Stamp the derivative (dR₀, dL₀) of a segment's Poiseuille resistance and series
+    /// inertance on its branch `b`. Without friction cells they are the branch row's
+    /// resistance and inductance. With cells (`crate::womersley`) the branch row holds
+    /// (R₀ + Σ R_k) Q − Σ R_k i_k and the series inertance L₀ plus the folded cells', and
+    /// each cell's row L_k di_k/dt + R_k i_k − R_k Q: every R_k and L_k follows R₀ and L₀
+    /// ([`crate::womersley::cells_derivative`]), on the branch row, the cell's row and its E.
+    /// `womersley`: whether the segment's vessel has cells (a segment whose every cell is
+    /// folded has none in the circuit, and its inertance still holds theirs).
+    fn segment_rl(&self, t: &mut DaeTangent, b: usize, womersley: bool, dr: f64, dl: f64) {
+        let (nn, nb) = (self.circuit.nodes.len(), self.circuit.branches.len());
+        if !womersley {
+            t.df[self.branch_r[b]] += dr;
+            t.de[nn + b] += dl;
+            return;
+        }
+        let cells = self.cells_of.get(b).cloned().unwrap_or(0..0);
+        let d = crate::womersley::cells_derivative(cells.len(), dr, dl);
+        let r_cells: f64 = d.cells.iter().map(|c| c.0).sum();
+        t.df[self.branch_r[b]] += d.resistance + r_cells;
+        t.de[nn + b] += d.inductance;
+        let row = nn + b;
+        for (c, &(dr_k, dl_k)) in self.circuit.friction_cells[cells].iter().zip(&d.cells) {
+            let x = nn + nb + c.extra;
+            // −R_k on the branch row at i_k; −R_k at Q and +R_k at i_k on the cell's row
+            for (r, col, sign) in [(row, x, -1.0), (x, row, -1.0), (x, x, 1.0)] {
+                let k = self.f_entry(r, col);
+                t.df[k] += sign * dr_k;
+            }
+            t.de[x] += dl_k;
+        }
+    }
+
+    /// The index into `dae.f.val` of entry (row, col), which the pattern holds.
+    fn f_entry(&self, row: usize, col: usize) -> usize {
+        let f = &self.dae.f;
+        f.row(row)
+            .find(|&k| f.col[k] as usize == col)
+            .expect("a friction cell's entries are in the flow matrix's pattern")
+    }
+
+    /// Branch `b`'s flat-profile inertance L₀ before its folded cells (its inductance
+    /// without cells: `womersley` false).
+    fn flat_inductance(&self, b: usize, womersley: bool) -> f64 {
+        let l = self.circuit.branches[b].inductance;
+        if !womersley {
+            return l;
+        }
+        let kept = self.cells_of.get(b).map_or(0, |c| c.len());
+        crate::womersley::flat_inductance(l, kept)
     }
 
     /// d/dS of a lumped vessel's stenosis coefficient split evenly over its segments' branches.
@@ -1113,8 +1140,10 @@ impl<'a> Stamps<'a> {
             }
         }
         for v in spec.vessels.iter().filter(|v| v.lumped.is_some()) {
+            let cells = friction_cells(spec, v);
             for s in self.segments_of(&v.name) {
-                t.df[self.branch_r[s.branch]] += self.circuit.branches[s.branch].resistance;
+                let r0 = self.circuit.branches[s.branch].resistance;
+                self.segment_rl(t, s.branch, cells, r0, 0.0);
             }
             // an RCL vessel holds its R on a branch of its own (its segment's is the L)
             if let Some(b) = self.branch_named(&format!("vessel '{}' resistance", v.name)) {

@@ -25,7 +25,7 @@ use crate::model::NetworkSpec;
 use crate::run::flow_harmonics::FlowHarmonics;
 use crate::transport::tangent::{
     FlowEffect, FlowGeometry, FlowStep, MeanFlowTangent, SpeciesDerivative, SpeciesParameterKind,
-    SpeciesTangent, VesselSpeciesSignal,
+    SpeciesTangent, TaperEnd, VesselSpeciesSignal,
 };
 use crate::transport::{SpeciesSpec, Transport};
 use facilitation::By;
@@ -303,20 +303,37 @@ fn parameters(spec: &NetworkSpec, sp: &SpeciesSpec, paths: &[String]) -> Result<
             Ok(match oxygen_parameter(sp, path)? {
                 Some(p) => Param::Oxygen(p),
                 None => match Parameter::parse(spec, path)? {
-                    // a taper's end radius moves each segment's lumen and wall by its own
-                    // share, which the transport's geometry tangent (whole-vessel factors)
-                    // does not hold
-                    Parameter::EndRadius { .. } => {
-                        return Err(Error::model(
-                            format!("parameter '{path}'"),
-                            "the oxygen sensitivities do not cover a tapered vessel's end radii",
-                        ));
+                    p @ Parameter::EndRadius { vessel, .. } => {
+                        renewal_free(spec, sp, vessel, path)?;
+                        Param::Flow(p, path.clone())
                     }
                     p => Param::Flow(p, path.clone()),
                 },
             })
         })
         .collect()
+}
+
+/// Refuse a taper's end radius (`path`) on vessel `vi` whose wall's Graetz law reads the
+/// inlet renewal: the renewal's tangent takes one radius for the whole vessel (its
+/// Womersley numbers, `closure::renewal::tangent`), which an end radius does not move
+/// alike along a taper. Each segment's own wall and lumen are followed otherwise
+/// (`FlowGeometry::at`).
+fn renewal_free(spec: &NetworkSpec, sp: &SpeciesSpec, vi: usize, path: &str) -> Result<()> {
+    let name = &spec.vessels[vi].name;
+    let wall = sp.per_vessel.get(name).unwrap_or(&sp.wall);
+    if wall.needs_mean_flow() && wall.mean_flow() == crate::closure::MeanFlow::InletRenewal {
+        return Err(Error::model(
+            format!("parameter '{path}'"),
+            format!(
+                "the oxygen sensitivities do not cover a tapered vessel's end radius where its \
+                 wall's Graetz law reads the inlet renewal (vessel '{name}'; the renewal's \
+                 Womersley numbers take one radius per vessel): use flow: forward-mean or \
+                 cycle-mean, or the vessel's radius"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// The derivative of the DAE by each flow parameter (the oxygen parameters' entries None),
@@ -377,6 +394,25 @@ fn flow_effect<'a>(
                 volume: k / t.value,
                 radius: if radius { 1.0 / t.value } else { 0.0 },
                 length: if radius { 0.0 } else { 1.0 / t.value },
+                taper: None,
+            })
+        }
+        Parameter::EndRadius { vessel: vi, outlet } => {
+            let v = &spec.vessels[*vi];
+            let vessel = circuit.vessel_names.iter().position(|n| *n == v.name);
+            let g = v.geometry.as_ref();
+            vessel.zip(g).map(|(vessel, g)| FlowGeometry {
+                vessel,
+                area: 0.0,
+                volume: 0.0,
+                radius: 0.0,
+                length: 0.0,
+                taper: Some(TaperEnd {
+                    radius_in: g.radius_in,
+                    radius_out: g.radius_out,
+                    length: g.length,
+                    outlet: *outlet,
+                }),
             })
         }
         _ => None,

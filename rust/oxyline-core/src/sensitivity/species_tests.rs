@@ -327,3 +327,53 @@ fn viscoelastic_geometry_against_central_differences() {
     eprintln!("viscoelastic geometry: adjoint against forward {worst:.2e}");
     assert!(worst < 1e-8, "{worst:.2e}");
 }
+
+/// The oxygen outputs by the geometry of vessels with Womersley friction cells (the model's
+/// `wall_friction: womersley`: cells on every segment, kept at these radii): the cells
+/// follow each segment's R₀ and L₀, and the flows they shape carry the oxygen. Against
+/// central differences (relative step 1e-4, as above), and the adjoint against the forward
+/// tangents (1e-8).
+#[test]
+fn womersley_geometry_against_central_differences() {
+    let mut spec = parse(MODEL).unwrap();
+    spec.wall_friction = crate::segment::WallFriction::Womersley;
+    let paths = [
+        "vessels.parent.radius",
+        "vessels.parent.length",
+        "vessels.d1.youngs_modulus",
+        "vessels.d1.length",
+        "vessels.d2.radius",
+    ];
+    for path in paths {
+        assert!(check(&spec, path) < 1e-6, "{path}");
+    }
+    let worst = super::adjoint::tests::mean_and_series_adjoint_worst(&spec, &paths, &signals());
+    eprintln!("Womersley geometry: adjoint against forward {worst:.2e}");
+    assert!(worst < 1e-8, "{worst:.2e}");
+}
+
+/// A taper's end radii (d1: 3 → 2.5 mm in four segments): each segment's lumen volume and
+/// wall area move by its own share of the end radius (`FlowGeometry::at`), under the
+/// mass-transfer wall (g ∝ area) and a prescribed consumption flux (q ∝ area). Against
+/// central differences (relative step 1e-4, as above), and the adjoint against the forward
+/// tangents (1e-8).
+#[test]
+fn taper_end_radii_against_central_differences() {
+    let paths = ["vessels.d1.radius_in", "vessels.d1.radius_out"];
+    for spec in [parse(MODEL).unwrap(), consuming()] {
+        for path in paths {
+            assert!(check(&spec, path) < 1e-6, "{path}");
+        }
+    }
+    let worst = super::adjoint::tests::mean_and_series_adjoint_worst(
+        &consuming(),
+        &[
+            "vessels.d1.radius_in",
+            "vessels.d1.radius_out",
+            "vessels.parent.radius",
+        ],
+        &signals(),
+    );
+    eprintln!("taper end radii: adjoint against forward {worst:.2e}");
+    assert!(worst < 1e-8, "{worst:.2e}");
+}

@@ -157,3 +157,42 @@ fn relaxed_shear_is_refused() {
         .to_string();
     assert!(m.contains("shear-dependent"), "{m}");
 }
+
+/// A taper's end radii under the cycle-mean walls, with a cycle-mean Lévêque wall on d1
+/// (3 → 2.5 mm) in place of its Graetz one: each segment's mean flow and wall move by its
+/// own share (`FlowGeometry::at`). Neither law reads the radius beyond the flow (Graetz not
+/// at all, Lévêque's r (Q/r³)^{1/3} not), so an end radius moves these signals by less than
+/// the quotients' rounding (as the parent's radius above): the adjoint is checked against
+/// the forward tangents here, and the end radii against central differences under the
+/// mass-transfer wall and a consumption flux (`super::tests`). The inlet renewal's Graetz
+/// law (one radius per vessel for its Womersley numbers) stays refused naming the
+/// parameter and the vessel.
+#[test]
+fn taper_end_radii_under_cycle_mean_walls() {
+    let spec = parse(&model()).unwrap();
+    let mut leveque = spec.clone();
+    let sp = &mut leveque.transport.as_mut().unwrap().species[0];
+    let d2 = sp.per_vessel["d2"].clone();
+    sp.per_vessel.insert("d1".into(), d2);
+    let paths = [
+        "vessels.d1.radius_in",
+        "vessels.d1.radius_out",
+        "scale.inflow",
+    ];
+    let worst = super::adjoint::tests::mean_and_series_adjoint_worst(&leveque, &paths, &signals());
+    eprintln!("taper under a cycle-mean Lévêque wall: adjoint against forward {worst:.2e}");
+    assert!(worst < 1e-8, "{worst:e}");
+    let mut renewal = spec.clone();
+    let sp = &mut renewal.transport.as_mut().unwrap().species[0];
+    if let WallSpec::Graetz { flow, .. } = &mut sp.wall {
+        *flow = crate::closure::MeanFlow::InletRenewal;
+    }
+    let path = "vessels.d1.radius_out";
+    let m = species_sensitivities(&renewal, &[path.to_string()], &signals(), settings())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        m.contains(&format!("'{path}'")) && m.contains("vessel 'd1'") && m.contains("renewal"),
+        "{m}"
+    );
+}

@@ -276,7 +276,7 @@ impl Transport {
             segment_vessels,
             node_names: circuit.names.clone(),
             domain: Vec::new(),
-            internal: Vec::new(),
+            n_internal: 0,
             boundary_faces: Vec::new(),
             boundary_links: Vec::new(),
             simple_mixing: Vec::new(),
@@ -914,12 +914,13 @@ impl Plan {
         if most >= u32::MAX as usize {
             return Err(bad("transport", "network too large".into()));
         }
-        // nearly every face is internal: one allocation at the bound, no doubling copies
-        self.internal.reserve_exact(self.faces.len());
+        // the internal faces' list for the orders below, dropped after them (the solvers read
+        // them from the faces, `Plan::internal`)
+        let internal: Vec<[u32; 3]> = internal_faces(&self.faces).collect();
+        self.n_internal = internal.len();
         for (fi, f) in self.faces.iter().enumerate() {
-            match (f.tail(), f.head()) {
-                (End::Node(a), End::Node(b)) => self.internal.push([fi as u32, a as u32, b as u32]),
-                _ => self.boundary_faces.push(fi),
+            if !matches!((f.tail(), f.head()), (End::Node(_), End::Node(_))) {
+                self.boundary_faces.push(fi);
             }
             match (f.tail(), f.head()) {
                 (End::Boundary(b), End::Node(n)) | (End::Node(n), End::Boundary(b)) => {
@@ -951,10 +952,11 @@ impl Plan {
                 self.general_mixing.push(m);
             }
         }
-        self.tree = tree_order(nn, &self.domain, &self.internal);
+        self.tree = tree_order(nn, &self.domain, &internal);
         if self.tree.is_none() {
-            self.core = CoreOrder::of(nn, &self.domain, &self.internal);
+            self.core = CoreOrder::of(nn, &self.domain, &internal);
         }
+        drop(internal);
         if self.tree.is_some() {
             // a forest is solved in `tree` order; the domain list is read only by the
             // flow-order sweep of a network with loops (8 bytes per cell kept for nothing)

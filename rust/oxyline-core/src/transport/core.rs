@@ -54,6 +54,7 @@ impl Transport {
     /// eliminated around the core (see the module doc). On entry `sweep.den`, `sweep.num` hold
     /// d and b, and `x` the previous values, as for `tree_solve`.
     pub(super) fn core_solve(&mut self, core: &CoreOrder, x: &mut [f64]) -> Result<()> {
+        self.sweep.size_rows(self.plan.kind.len());
         // the core's own rows: the sweep adds their faces' and sources' terms itself
         let rows: Vec<(f64, f64)> = core
             .nodes

@@ -600,7 +600,7 @@ impl Transport {
         self.species.len() == 1
             && p.chains.is_empty()
             && p.faces.len() == p.n_flow_faces
-            && p.internal.len() + p.boundary_links.len() == p.n_flow_faces
+            && p.n_internal + p.boundary_links.len() == p.n_flow_faces
             && self.fused_applies()
     }
 

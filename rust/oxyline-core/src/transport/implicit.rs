@@ -180,7 +180,7 @@ impl Transport {
         net.clear();
         net.resize(self.plan.kind.len(), 0.0);
         let qf = &self.qf[..];
-        for &[fi, a, b] in &self.plan.internal {
+        for [fi, a, b] in self.plan.internal() {
             let q = qf[fi as usize];
             net[a as usize] -= q;
             net[b as usize] += q;
@@ -210,6 +210,7 @@ impl Transport {
         z: &mut [f64],
     ) -> Result<()> {
         let nc = self.plan.cells.len();
+        self.sweep.size_rows(self.plan.kind.len());
         let (mut wconst, mut wlin) = (
             std::mem::take(&mut self.sweep.wconst),
             std::mem::take(&mut self.sweep.wlin),
@@ -558,6 +559,7 @@ impl Transport {
         if self.plan.tree.is_none() {
             return;
         }
+        self.sweep.size_rows(self.plan.kind.len());
         self.boundary_rows(x);
         let Some(tree) = self.plan.tree.as_deref() else {
             return;
@@ -605,6 +607,7 @@ impl Transport {
         b: &[f64],
         x: &mut [f64],
     ) -> Result<()> {
+        self.sweep.size_rows(self.plan.kind.len());
         for &n in unknowns {
             (self.sweep.num[n], self.sweep.den[n]) = (b[n], d[n]);
         }
@@ -613,6 +616,7 @@ impl Transport {
 
     /// `sweep_solve` with d and b of the unknowns already in `sweep.den` and `sweep.num`.
     pub(super) fn sweep_solve_loaded(&mut self, unknowns: &[usize], x: &mut [f64]) -> Result<()> {
+        self.sweep.size_rows(self.plan.kind.len());
         self.sweep_rows(unknowns, x);
         let solved = self.kahn(unknowns, x);
         let result = if solved < unknowns.len() {
@@ -789,10 +793,18 @@ pub(super) struct Sweep {
 impl Sweep {
     pub(super) fn new(nn: usize) -> Self {
         Sweep {
-            num: vec![0.0; nn],
-            den: vec![0.0; nn],
             lag: vec![0.0; nn],
             ..Sweep::default()
+        }
+    }
+
+    /// The rows' `num` and `den` of `nn` nodes, zero, sized on first use: the row-by-row
+    /// passes and the flow-order sweep read them, the fused tree step never does (16 bytes
+    /// per node of a large tree's run held for nothing).
+    pub(super) fn size_rows(&mut self, nn: usize) {
+        if self.num.len() != nn {
+            self.num = vec![0.0; nn];
+            self.den = vec![0.0; nn];
         }
     }
 }

@@ -90,8 +90,8 @@ impl Plan {
             ),
             ("domain", self.domain.heap()),
             (
-                "internal",
-                self.internal.heap() + self.boundary_faces.heap() + self.boundary_links.heap(),
+                "boundary faces",
+                self.boundary_faces.heap() + self.boundary_links.heap(),
             ),
             (
                 "mixing lists",

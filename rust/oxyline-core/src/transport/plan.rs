@@ -230,6 +230,25 @@ pub(super) fn tree_order_held(
     Some(order)
 }
 
+/// The faces between two nodes as [face, from node, to node], in face order: read from the
+/// faces themselves (a list of them beside the faces was 12 bytes a face for the network's
+/// life).
+pub(super) fn internal_faces(faces: &[Face]) -> impl Iterator<Item = [u32; 3]> + '_ {
+    faces
+        .iter()
+        .enumerate()
+        .filter(|(_, f)| (f.from | f.to) & Face::BOUNDARY == 0)
+        .map(|(fi, f)| [fi as u32, f.from, f.to])
+}
+
+impl Plan {
+    /// The faces between two nodes as [face, from node, to node], in face order (see
+    /// [`internal_faces`]).
+    pub(super) fn internal(&self) -> impl Iterator<Item = [u32; 3]> + '_ {
+        internal_faces(&self.faces)
+    }
+}
+
 /// `from` node of internal face `f` (faces are listed in `internal` in face order, so a binary
 /// search finds it).
 pub(super) fn internal_from(internal: &[[u32; 3]], f: u32) -> u32 {
@@ -306,8 +325,8 @@ pub struct Plan {
     /// Nodes solved by the implicit sweep (cells and mixing points); empty when `tree` is
     /// set (a forest is solved in that order).
     pub(super) domain: Vec<usize>,
-    /// Faces between two domain nodes as [face, from node, to node], and the other faces.
-    pub(super) internal: Vec<[u32; 3]>,
+    /// The number of faces between two nodes (listed by [`Plan::internal`]); the other faces:
+    pub(super) n_internal: usize,
     pub(super) boundary_faces: Vec<usize>,
     /// The boundary faces in the same order, as (face, node, boundary, direction).
     pub(super) boundary_links: Vec<BoundaryLink>,

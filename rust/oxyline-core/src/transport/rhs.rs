@@ -156,7 +156,7 @@ impl Transport {
         // node-to-node faces: the bulk of the work, branch-free apart from the upwind pick;
         // fluxes into mixing points and out of them cancel there (they hold no amount)
         let conc = &self.conc;
-        for &[fi, a, b] in &self.plan.internal {
+        for [fi, a, b] in self.plan.internal() {
             let q = self.qf[fi as usize];
             let (a, b) = (a as usize, b as usize);
             let flux = q * if q >= 0.0 { conc[a] } else { conc[b] };

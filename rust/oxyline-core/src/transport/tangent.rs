@@ -36,7 +36,7 @@ pub use adjoint::{AdjointSums, SignalRow, SpeciesAdjointState, SpeciesStepRecord
 #[path = "tangent_flow.rs"]
 mod flow;
 use flow::{CellPrimal, FlowDerivative, FlowForcing};
-pub use flow::{FlowEffect, FlowGeometry, FlowStep, MeanFlowTangent};
+pub use flow::{FlowEffect, FlowGeometry, FlowStep, MeanFlowTangent, TaperEnd};
 
 /// What an oxygen parameter changes in the step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -381,6 +381,7 @@ impl Transport {
         forcing: Option<FlowForcing>,
     ) -> Result<()> {
         let plan = Arc::clone(&self.plan);
+        self.sweep.size_rows(plan.kind.len());
         let mut wall = self.tangent_rows(s, dt, primal, d, t, forcing.as_ref());
         for &m in &plan.mixing {
             let sw = &mut self.sweep;

@@ -35,7 +35,9 @@ pub struct FlowEffect<'a> {
 }
 
 /// The logarithmic derivatives by the parameter of a vessel's wall area and lumen volume,
-/// and of its segments' radius and distances from the inlet (the cycle-mean laws').
+/// and of its segments' radius and distances from the inlet (the cycle-mean laws'): the same
+/// for every segment of a uniform vessel's radius or length, or each segment's own for an
+/// end radius of a taper (`taper`; [`FlowGeometry::at`]).
 #[derive(Debug, Clone, Copy)]
 pub struct FlowGeometry {
     pub vessel: usize,
@@ -43,6 +45,60 @@ pub struct FlowGeometry {
     pub volume: f64,
     pub radius: f64,
     pub length: f64,
+    pub taper: Option<TaperEnd>,
+}
+
+/// One end radius of a vessel's linear taper r(x) = r_in + (r_out − r_in) x/L as the
+/// parameter (the other end and the length held): r(x) moves by x/L (`outlet`) or 1 − x/L.
+#[derive(Debug, Clone, Copy)]
+pub struct TaperEnd {
+    pub radius_in: f64,
+    pub radius_out: f64,
+    pub length: f64,
+    pub outlet: bool,
+}
+
+/// d ln/dθ of a wall piece's (or segment's) area, lumen volume, mean radius and length.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct PieceLogs {
+    pub(crate) area: f64,
+    pub(crate) volume: f64,
+    pub(crate) radius: f64,
+    pub(crate) length: f64,
+}
+
+impl FlowGeometry {
+    /// The logarithmic derivatives of the piece of wall `w` (its ends x0, x1 from the
+    /// vessel's inlet). On a taper the piece runs from r₀ = r(x0) to r₁ = r(x1), which move
+    /// by w₀ and w₁ per unit of the end radius: its area 2π (r₀ + r₁)/2 Δx and mean radius
+    /// by (w₀ + w₁)/(r₀ + r₁), its frustum volume π Δx (r₀² + r₀r₁ + r₁²)/3 by
+    /// (w₀ (2r₀ + r₁) + w₁ (r₀ + 2r₁))/(r₀² + r₀r₁ + r₁²), its length not at all.
+    pub(crate) fn at(&self, w: &SegmentWall) -> PieceLogs {
+        let Some(t) = self.taper else {
+            return PieceLogs {
+                area: self.area,
+                volume: self.volume,
+                radius: self.radius,
+                length: self.length,
+            };
+        };
+        let r = |x: f64| t.radius_in + (t.radius_out - t.radius_in) * x / t.length;
+        let by = |x: f64| {
+            if t.outlet {
+                x / t.length
+            } else {
+                1.0 - x / t.length
+            }
+        };
+        let (r0, r1, w0, w1) = (r(w.x0), r(w.x1), by(w.x0), by(w.x1));
+        let mean = (w0 + w1) / (r0 + r1);
+        PieceLogs {
+            area: mean,
+            volume: (w0 * (2.0 * r0 + r1) + w1 * (r0 + 2.0 * r1)) / (r0 * r0 + r0 * r1 + r1 * r1),
+            radius: mean,
+            length: 0.0,
+        }
+    }
 }
 
 /// Per segment: the cycle means of |Q| and of the forward flow (`laws::MeanFlows`) and
@@ -150,7 +206,10 @@ impl Transport {
             let d = match self.mean_flow_law_derivative(s, p, e, own) {
                 Some(dg) => [dg, dg * cw, 0.0],
                 None => match own {
-                    Some(g) => [gl * g.area, gl * cw * g.area, q * g.area],
+                    Some(g) => {
+                        let a = g.at(&plan.piece_wall(pc)).area;
+                        [gl * a, gl * cw * a, q * a]
+                    }
                     None => continue,
                 },
             };
@@ -163,7 +222,7 @@ impl Transport {
             let of = |seg: usize| plan.segment_vessels[seg] as usize == g.vessel;
             for (_, seg) in plan.segments.iter().enumerate().filter(|(j, _)| of(*j)) {
                 for (n, share) in seg.node_shares() {
-                    dvol[n] += share * seg.volume * g.volume;
+                    dvol[n] += share * seg.volume * g.at(&seg.wall).volume;
                 }
             }
         }
@@ -231,7 +290,10 @@ impl Transport {
             .and_then(|d| d.get(j))
             .copied()
             .unwrap_or(0.0);
-        let (dr, dl) = own.map_or((0.0, 0.0), |g| (g.radius, g.length));
+        let (dr, dl) = own.map_or((0.0, 0.0), |g| {
+            let l = g.at(&plan.piece_wall(pc));
+            (l.radius, l.length)
+        });
         Some(
             slopes.mean_flow * d_mean
                 + slopes.ln_radius * dr
@@ -379,7 +441,7 @@ impl Transport {
     fn net_inflow_tangent(&self, dq: &[f64], dqs: &[f64]) -> Vec<f64> {
         let p = &*self.plan;
         let mut dnet = vec![0.0; p.kind.len()];
-        let faces = p.internal.iter().map(|e| e[0] as usize);
+        let faces = p.internal().map(|e| e[0] as usize);
         for fi in faces.chain(p.boundary_faces.iter().copied()) {
             let face = &p.faces[fi];
             if let End::Node(n) = face.tail() {
@@ -413,7 +475,7 @@ impl Transport {
             (End::Boundary(b), End::Node(n)) => inflow_value(self.bval[b], x_old[n]),
             (End::Boundary(b), End::Boundary(_)) => inflow_value(self.bval[b], 0.0),
         };
-        let faces = p.internal.iter().map(|e| e[0] as usize);
+        let faces = p.internal().map(|e| e[0] as usize);
         for fi in faces.chain(p.boundary_faces.iter().copied()) {
             let (q, up, down) = oriented(&p.faces, &self.qf, fi);
             let flux = if q >= 0.0 { dq[fi] } else { -dq[fi] } * carried(up, down);

@@ -221,4 +221,7 @@ impl<'py> Node for PySetting<'py> {
     fn truthy(&self) -> bool {
         self.node().truthy()
     }
+    fn callable(&self) -> bool {
+        self.0.is_callable()
+    }
 }
