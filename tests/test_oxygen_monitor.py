@@ -72,13 +72,26 @@ def test_tl_quasisteady_in_steady_flow_through_a_rigid_tube_is_silent() -> None:
 
 def test_bounds_come_from_inlet_initial_wall_and_backflow_values() -> None:
     sp = {"name": "x", "inlet": {"kind": "table", "time": [0, 1], "value": [2.0, 3.0]},
-          "initial": 1.5, "wall": {"model": "permeability", "tissue_concentration": 0.5},
+          "initial": 1.5,
+          "wall": {"model": "permeability", "permeability": 1e-6, "tissue_concentration": 0.5},
           "backflow": {"out": {"kind": "constant", "value": 4.0}}}
     assert species_bounds(sp) == (0.5, 4.0)
     # a prescribed flux is a source: no maximum principle
     assert species_bounds(dict(sp, wall={"model": "flux", "flux": 1e-6})) is None
     # decay pulls towards zero
     assert species_bounds(dict(sp, decay=0.1)) == (0.0, 4.0)
+
+
+def test_bounds_read_a_species_as_the_model_reads_it() -> None:
+    # a permeability wall needs its permeability in the canonical transport section: the
+    # bounds read the species with the model's own types and name the missing key
+    sp = {"name": "x", "inlet": {"kind": "constant", "value": 2.0},
+          "wall": {"model": "permeability", "tissue_concentration": 0.5}}
+    with pytest.raises(oxyline.ModelError, match="transport species.*permeability"):
+        species_bounds(sp)
+    # the canonical section of a model with oxygen gives each species' bounds
+    model = oxyline.load_model(_with_formulation("paper-straight", "conservative"))
+    assert all(species_bounds(s) is not None for s in model.transport_spec["species"])
 
 
 def test_bounds_of_a_fourier_inlet_are_its_extremes() -> None:

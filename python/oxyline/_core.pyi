@@ -288,7 +288,7 @@ class BoundsMonitor:
     def messages(self) -> list[str]: ...
 def species_bounds(species: Mapping[str, Any]) -> tuple[float, float] | None:
     """[min, max] of a species' inlet, backflow, initial and wall values (mol/m^3), None for a
-    species with a prescribed source."""
+    species with a prescribed source; ``species`` read as the model's own species."""
 def forcing_frequency(data: Any, rtol: float | None = None) -> tuple[float, float]:
     """The highest significant frequency (Hz) of a native model's flow and pressure
     waveforms and the tolerance it was found at (the `segments: auto` rule)."""

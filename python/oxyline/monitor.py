@@ -22,7 +22,9 @@ class PhysicalBoundsWarning(UserWarning):
 
 def species_bounds(sp: Mapping[str, Any]) -> tuple[float, float] | None:
     """[min, max] of a species' boundary, initial and wall values (the maximum-principle range,
-    computed by the core), or None for a species with a prescribed source (a ``flux`` wall)."""
+    computed by the core), or None for a species with a prescribed source (a ``flux`` wall).
+    ``sp``: a species as the model's canonical transport section holds it (read as the core
+    reads the model's species: a ``ModelError`` naming the key when it is not one)."""
     return _core.species_bounds(sp)
 
 

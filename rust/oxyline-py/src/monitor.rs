@@ -4,6 +4,7 @@
 use crate::errors::to_py;
 use numpy::ndarray::{ArrayView2, ArrayView3};
 use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
+use oxyline_core::model::transport::{SpeciesSpec, TransportSpec};
 use oxyline_core::monitor::{self, Chunk, SpeciesRows, Table};
 use pyo3::prelude::*;
 
@@ -102,9 +103,10 @@ impl<'a> SpeciesPlanes<'a> {
 #[pyclass(module = "oxyline._core")]
 pub struct BoundsMonitor(monitor::Monitor);
 
-fn transport_values(transport: &Bound<'_, PyAny>) -> PyResult<monitor::TransportValues> {
+/// The model's transport section read as the core reads it (None: no species).
+fn transport_spec(transport: &Bound<'_, PyAny>) -> PyResult<Option<TransportSpec>> {
     if transport.is_none() {
-        return Ok(monitor::TransportValues::default());
+        return Ok(None);
     }
     crate::reader::de::read(transport, || "transport".into()).map_err(to_py)
 }
@@ -114,9 +116,9 @@ fn transport_values(transport: &Bound<'_, PyAny>) -> PyResult<monitor::Transport
 impl BoundsMonitor {
     #[new]
     fn new(transport: &Bound<'_, PyAny>) -> PyResult<Self> {
-        let values = transport_values(transport)?;
+        let spec = transport_spec(transport)?;
         Ok(BoundsMonitor(
-            monitor::Monitor::new(&values).map_err(to_py)?,
+            monitor::Monitor::new(spec.as_ref()).map_err(to_py)?,
         ))
     }
 
@@ -162,7 +164,7 @@ impl BoundsMonitor {
 #[oxyline_py_guard::guard]
 #[pyfunction]
 pub fn species_bounds(species: &Bound<'_, PyAny>) -> PyResult<Option<(f64, f64)>> {
-    let sp: monitor::SpeciesValues =
+    let sp: SpeciesSpec =
         crate::reader::de::read(species, || "transport species".into()).map_err(to_py)?;
     monitor::species_bounds(&sp).map_err(to_py)
 }

@@ -1,56 +1,14 @@
 //! The maximum-principle range of every species, computed once from the model's transport
 //! section (docs/physics.md §2.8): [min, max] of its inlet, backflow, initial and wall values.
 
+use crate::closure::WallSpec;
 use crate::error::Result;
-use crate::model::transport::Formulation;
+use crate::model::transport::SpeciesSpec;
 use crate::waveform::{Waveform, WaveformSpec};
-use serde::Deserialize;
-use std::collections::BTreeMap;
 
 /// Samples of one period of a Fourier inlet whose extremes stand for the waveform's: the
 /// sampled extremes are within ~1e-7 of the true ones, far inside the monitor's tolerance.
 pub const FOURIER_SAMPLES: usize = 4097;
-
-/// What the monitor reads of the canonical transport section (the core validated it when the
-/// model was read; unknown keys are other parts of the section and are passed over).
-#[derive(Debug, Clone, Default, Deserialize)]
-pub struct TransportValues {
-    #[serde(default)]
-    pub formulation: Formulation,
-    #[serde(default)]
-    pub species: Vec<SpeciesValues>,
-}
-
-/// The values of one species that bound its free concentration.
-#[derive(Debug, Clone, Deserialize)]
-pub struct SpeciesValues {
-    pub name: String,
-    pub inlet: WaveformSpec,
-    #[serde(default)]
-    pub inlets: BTreeMap<String, WaveformSpec>,
-    #[serde(default)]
-    pub backflow: BTreeMap<String, WaveformSpec>,
-    #[serde(default)]
-    pub initial: Option<f64>,
-    #[serde(default)]
-    pub decay: f64,
-    #[serde(default)]
-    pub wall: Option<WallValues>,
-    #[serde(default)]
-    pub per_vessel: BTreeMap<String, WallValues>,
-}
-
-/// The values of a wall closure that bound a concentration: its wall (or tissue)
-/// concentration, and whether it is a prescribed source (a `flux` wall).
-#[derive(Debug, Clone, Default, Deserialize)]
-pub struct WallValues {
-    #[serde(default)]
-    pub model: String,
-    #[serde(default)]
-    pub wall_concentration: Option<f64>,
-    #[serde(default)]
-    pub tissue_concentration: Option<f64>,
-}
 
 /// [min, max] of a waveform over time: a constant's value, a table's extreme values (linear
 /// or periodic-spline tables stay inside them at the knots the core evaluates), a Fourier
@@ -91,19 +49,27 @@ fn extremes(values: impl Iterator<Item = f64>) -> (f64, f64) {
 /// [min, max] of a species' boundary, initial and wall values (the maximum-principle range of
 /// its free concentration, mol/m³), or None for a species with a prescribed source (a `flux`
 /// wall: no maximum principle) or with no finite value. Decay pulls towards zero.
-pub fn species_bounds(sp: &SpeciesValues) -> Result<Option<(f64, f64)>> {
-    let none = WallValues {
-        model: "none".into(),
-        ..WallValues::default()
-    };
-    let walls = std::iter::once(sp.wall.as_ref().unwrap_or(&none)).chain(sp.per_vessel.values());
+pub fn species_bounds(sp: &SpeciesSpec) -> Result<Option<(f64, f64)>> {
     let mut vals = Vec::new();
-    for w in walls {
-        if w.model == "flux" {
-            return Ok(None);
+    for wall in std::iter::once(&sp.wall).chain(sp.per_vessel.values()) {
+        match wall {
+            // a prescribed flux is a source: no maximum principle
+            WallSpec::Flux { .. } => return Ok(None),
+            WallSpec::None => {}
+            WallSpec::MassTransfer {
+                wall_concentration, ..
+            }
+            | WallSpec::Leveque {
+                wall_concentration, ..
+            }
+            | WallSpec::Graetz {
+                wall_concentration, ..
+            } => vals.push(*wall_concentration),
+            WallSpec::Permeability {
+                tissue_concentration,
+                ..
+            } => vals.push(*tissue_concentration),
         }
-        vals.extend(w.wall_concentration);
-        vals.extend(w.tissue_concentration);
     }
     let waves = std::iter::once(&sp.inlet)
         .chain(sp.inlets.values())
@@ -126,7 +92,9 @@ pub fn species_bounds(sp: &SpeciesValues) -> Result<Option<(f64, f64)>> {
 mod tests {
     use super::*;
 
-    fn species(json: &str) -> SpeciesValues {
+    use crate::closure::FluxSpec;
+
+    fn species(json: &str) -> SpeciesSpec {
         serde_json::from_str(json).unwrap()
     }
 
@@ -176,11 +144,12 @@ mod tests {
     fn bounds_take_tables_initial_backflow_tissue_and_decay() {
         let sp = species(
             r#"{"name": "x", "inlet": {"kind": "table", "time": [0, 1], "value": [2.0, 3.0]},
-                "initial": 1.5, "wall": {"model": "permeability", "tissue_concentration": 0.5},
+                "initial": 1.5, "wall": {"model": "permeability", "permeability": 1e-6,
+                "tissue_concentration": 0.5},
                 "backflow": {"out": {"kind": "constant", "value": 4.0}}}"#,
         );
         assert_eq!(species_bounds(&sp).unwrap(), Some((0.5, 4.0)));
-        let decaying = SpeciesValues {
+        let decaying = SpeciesSpec {
             decay: 0.1,
             ..sp.clone()
         };
@@ -188,9 +157,8 @@ mod tests {
         let mut source = sp;
         source.per_vessel.insert(
             "a".into(),
-            WallValues {
-                model: "flux".into(),
-                ..WallValues::default()
+            WallSpec::Flux {
+                flux: FluxSpec::Constant(1e-6),
             },
         );
         assert_eq!(species_bounds(&source).unwrap(), None);

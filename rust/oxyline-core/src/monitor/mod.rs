@@ -18,11 +18,11 @@ pub mod bounds;
 pub mod scan;
 pub mod text;
 
-pub use bounds::{SpeciesValues, TransportValues, WallValues, species_bounds, waveform_range};
+pub use bounds::{species_bounds, waveform_range};
 pub use scan::{RowMajor, Table};
 
 use crate::error::Result;
-use crate::model::transport::Formulation;
+use crate::model::transport::{Formulation, TransportSpec};
 use text::format_g;
 
 /// Tolerance of the maximum-principle check, relative to the largest bound magnitude: the
@@ -124,8 +124,12 @@ pub struct Monitor {
 mod feed;
 
 impl Monitor {
-    /// The monitor of a model's transport section: every species' range computed once.
-    pub fn new(transport: &TransportValues) -> Result<Self> {
+    /// The monitor of a model's transport section (None: no species): every species' range
+    /// computed once.
+    pub fn new(transport: Option<&TransportSpec>) -> Result<Self> {
+        let Some(transport) = transport else {
+            return Ok(Monitor::default());
+        };
         let species = transport
             .species
             .iter()

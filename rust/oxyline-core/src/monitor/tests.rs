@@ -1,6 +1,6 @@
 use super::*;
 
-fn transport(json: &str) -> TransportValues {
+fn transport(json: &str) -> TransportSpec {
     serde_json::from_str(json).unwrap()
 }
 
@@ -73,7 +73,7 @@ fn a_line_between_inlet_and_wall_values_is_silent() {
     let values: Vec<f64> = (0..20)
         .map(|i| 0.48 + 0.37 * (-(i as f64) / 5.0).exp())
         .collect();
-    let mut m = Monitor::new(&transport(LINE)).unwrap();
+    let mut m = Monitor::new(Some(&transport(LINE))).unwrap();
     feed(&mut m, &run(&values, 0.0), 0..20, &["v".into()]);
     assert_eq!(m.bounds("oxygen"), Some((0.48, 0.85)));
     assert!(m.messages().is_empty(), "{:?}", m.messages());
@@ -83,7 +83,7 @@ fn a_line_between_inlet_and_wall_values_is_silent() {
 fn a_value_above_the_inlet_is_reported_with_its_vessel_time_and_po2() {
     let mut values = vec![0.6; 10];
     values[3] = 0.974; // 97.4 mmHg above an 85 mmHg inlet
-    let mut m = Monitor::new(&transport(LINE)).unwrap();
+    let mut m = Monitor::new(Some(&transport(LINE))).unwrap();
     feed(&mut m, &run(&values, 0.0), 0..10, &["coronary".into()]);
     assert_eq!(
         m.messages(),
@@ -102,9 +102,9 @@ fn fed_in_chunks_the_monitor_finds_what_it_finds_fed_whole() {
         .collect();
     let r = run(&values, 1e-3);
     let vessels = ["v".to_string()];
-    let mut whole = Monitor::new(&transport(LINE)).unwrap();
+    let mut whole = Monitor::new(Some(&transport(LINE))).unwrap();
     feed(&mut whole, &r, 0..30, &vessels);
-    let mut chunked = Monitor::new(&transport(LINE)).unwrap();
+    let mut chunked = Monitor::new(Some(&transport(LINE))).unwrap();
     for start in (0..30).step_by(7) {
         feed(&mut chunked, &r, start..(start + 7).min(30), &vessels);
     }
@@ -141,7 +141,7 @@ fn tl_quasisteady_reports_the_first_reversal_then_storage() {
             columns: 2,
         },
     );
-    let mut m = Monitor::new(&transport(tl)).unwrap();
+    let mut m = Monitor::new(Some(&transport(tl))).unwrap();
     m.update(&chunk(Some((&qi, &qo))));
     let found = m.messages();
     assert_eq!(found.len(), 1);
@@ -162,7 +162,7 @@ fn tl_quasisteady_reports_the_first_reversal_then_storage() {
             columns: 2,
         },
     );
-    let mut m = Monitor::new(&transport(tl)).unwrap();
+    let mut m = Monitor::new(Some(&transport(tl))).unwrap();
     m.update(&chunk(Some((&qi2, &qo2))));
     assert!(m.messages()[0].contains("criterion 2 (no storage): vessel 'b' stores |Q_in − Q_out|/|Q| = 0.02 of its flow at t = 0 s (> 0.001;"), "{:?}", m.messages());
 }
