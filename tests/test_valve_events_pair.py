@@ -87,7 +87,8 @@ def switches(res: oxyline.Result, after: float) -> dict[str, list[tuple[float, b
 #: per rtol: the largest event-time error (s) and the pressure / flow error relative to each
 #: vessel's range. Measured against T/20000: events 5.1e-4, 4.2e-4, 5.1e-5 s at rtol 1e-3,
 #: 1e-4, 1e-6 (the aortic valve's closing, where the flow's error over its slow reversal is
-#: a long time; at 1e-6 the reference's own timing, 4e-5 s from T/80000's, is the floor);
+#: a long time; at 1e-6 the reference's own timing, up to 4e-5 s from T/80000's, is the
+#: floor);
 #: pressure 8.2e-5 and flow 1.1e-4 of the ranges at every rtol (the fine step's first-order
 #: valve timing sets that floor). The state is held per step to rtol: 2 rtol allowed at
 #: 1e-3, the reference's floor with 5x margin below that.
