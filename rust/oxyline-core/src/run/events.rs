@@ -412,7 +412,15 @@ fn illinois(g: impl Fn(f64) -> f64, a: (f64, f64), b: (f64, f64), tol: f64) -> f
         if xb - xa <= tol {
             break;
         }
-        let x = (xb - gb * (xb - xa) / (gb - ga)).clamp(xa, xb);
+        // a state the continuous extension could not give (its algebraic unknowns not
+        // solved there) reads as switched with a NaN function value: the secant through it
+        // is no point, and the bracket is halved instead
+        let secant = xb - gb * (xb - xa) / (gb - ga);
+        let x = if secant.is_finite() {
+            secant.clamp(xa, xb)
+        } else {
+            0.5 * (xa + xb)
+        };
         // a secant point on a bracket end (round-off) is moved in by the tolerance
         let x = x.clamp(xa + 0.5 * tol, xb - 0.5 * tol);
         let gx = g(x);
@@ -466,6 +474,17 @@ mod tests {
         for tol in [1e-3, 1e-6, 1e-10] {
             let x = illinois(g, (0.0, g(0.0)), (1.0, g(1.0)), tol);
             assert!(x >= root && x - root <= tol, "{tol}: {x} vs {root}");
+        }
+    }
+
+    #[test]
+    fn illinois_bisects_where_the_function_has_no_value() {
+        // g = 0.5 − θ, but no state (NaN, read as switched) beyond θ = 0.7: the root is
+        // still bracketed to the tolerance, never a NaN
+        let g = |x: f64| if x > 0.7 { f64::NAN } else { 0.5 - x };
+        for tol in [1e-3, 1e-8] {
+            let x = illinois(g, (0.0, g(0.0)), (1.0, g(1.0)), tol);
+            assert!(x >= 0.5 && x - 0.5 <= tol, "{tol}: {x}");
         }
     }
 
