@@ -68,5 +68,7 @@ def test_a_refused_value_names_the_variant_and_the_patch_path() -> None:
     with pytest.raises(oxyline.ModelError,
                        match=r"^variant 2: vessels\.a\.b\.radius = -0\.001: vessel 'a\.b'"):
         patcher.variant({"vessels": {"a.b": {"radius": -0.001}}}, 2)
-    with pytest.raises(oxyline.ModelError, match=r"^variant 1: blood\.viscosity = -1\.0: "):
-        patcher.variant({"blood": {"viscosity": -1.0}}, 1)
+    # a section's value (no element): the patch's scalar leaves outside the elements
+    with pytest.raises(oxyline.ModelError,
+                       match=r"^variant 1: period = -1\.0: model: period must be > 0"):
+        patcher.variant({"period": -1.0, "scale": {"resistance": 2.0}}, 1)
