@@ -867,7 +867,10 @@ pub fn column_keys(
         return Err(fail("empty key in the column's dotted path"));
     };
     let mut keys = vec![section.clone()];
-    let known = names.iter().find(|(s, _)| *s == section.as_str()).map(|(_, n)| *n);
+    let known = names
+        .iter()
+        .find(|(s, _)| *s == section.as_str())
+        .map(|(_, n)| *n);
     match known.filter(|_| dotted) {
         Some(known) => {
             let is_name = |cut: usize| known.iter().any(|n| *n == rest[..cut].join("."));

@@ -118,8 +118,8 @@ impl VariantReader {
         k: usize,
     ) -> PyResult<Prepared<'py>> {
         let base = PyNode(source.clone().into_any());
-        let patched = patch::merge(&base, &PyNode(patch.clone()), k)
-            .map_err(|e| to_py(e.error().clone()))?;
+        let patched =
+            patch::merge(&base, &PyNode(patch.clone()), k).map_err(|e| to_py(e.error().clone()))?;
         let data = patched_model(py, &source, &patched)?;
         let vessels: Vec<usize> = patched.vessels.iter().map(|(i, _)| *i).collect();
         let nodes: Vec<String> = patched.conditions.iter().map(|(n, _)| n.clone()).collect();
@@ -335,7 +335,10 @@ fn scalar_leaves(value: &PyNode<'_>, path: &str, out: &mut Vec<String>) {
         for (key, v) in value.entries() {
             scalar_leaves(&v, &format!("{path}.{key}"), out);
         }
-    } else if matches!(value.kind(), Kind::Bool | Kind::Int | Kind::Float | Kind::Str) {
+    } else if matches!(
+        value.kind(),
+        Kind::Bool | Kind::Int | Kind::Float | Kind::Str
+    ) {
         out.push(format!("{path} = {}", value.repr()));
     }
 }

@@ -239,8 +239,14 @@ fn column_keys_split_dotted_names_by_the_longest_known_name() {
         let parts: Vec<String> = label.split('.').map(str::to_owned).collect();
         column_keys(&parts, true, &names, 3).map_err(|e| e.to_string())
     };
-    assert_eq!(keys("vessels.a.b.radius").unwrap(), ["vessels", "a.b", "radius"]);
-    assert_eq!(keys("vessels.a.radius").unwrap(), ["vessels", "a", "radius"]);
+    assert_eq!(
+        keys("vessels.a.b.radius").unwrap(),
+        ["vessels", "a.b", "radius"]
+    );
+    assert_eq!(
+        keys("vessels.a.radius").unwrap(),
+        ["vessels", "a", "radius"]
+    );
     assert_eq!(
         keys("vessels.a.b.lumped.resistance").unwrap(),
         ["vessels", "a.b", "lumped", "resistance"]
@@ -253,10 +259,25 @@ fn column_keys_split_dotted_names_by_the_longest_known_name() {
     assert_eq!(keys("oxygen.wall.po2").unwrap(), ["oxygen", "wall", "po2"]);
     let err = keys("vessels.zz.radius").unwrap_err();
     assert!(err.contains("variant 3: vessels.zz.radius"), "{err}");
-    assert!(err.contains("no vessel or node of the model starts this path"), "{err}");
-    assert!(keys("vessels.a.b").unwrap_err().contains("expected vessels.NAME.PROPERTY"));
-    assert!(keys("vessels.zz").unwrap_err().contains("expected vessels.NAME.PROPERTY"));
-    assert!(keys("vessels.a.b.radius.").unwrap_err().contains("empty key"));
+    assert!(
+        err.contains("no vessel or node of the model starts this path"),
+        "{err}"
+    );
+    assert!(
+        keys("vessels.a.b")
+            .unwrap_err()
+            .contains("expected vessels.NAME.PROPERTY")
+    );
+    assert!(
+        keys("vessels.zz")
+            .unwrap_err()
+            .contains("expected vessels.NAME.PROPERTY")
+    );
+    assert!(
+        keys("vessels.a.b.radius.")
+            .unwrap_err()
+            .contains("empty key")
+    );
     assert!(keys("blood..viscosity").unwrap_err().contains("empty key"));
     // levels of a multi-level column: no splitting, trailing empty levels dropped
     let levels = ["vessels", "a.b", "radius", "", ""].map(str::to_owned);
