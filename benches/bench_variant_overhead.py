@@ -4,6 +4,7 @@ the process CPU of a small ensemble per variant.
 
     python benches/bench_variant_overhead.py                      # 200 variants, 5 rounds
     python benches/bench_variant_overhead.py --variants 1000 --rounds 3
+    python benches/bench_variant_overhead.py --parts prepare --rounds 20
 
 Model: ``paper-bifurcated`` (3 vessels, 30 segments, oxygen). Variant k changes the CCA
 radius, the ICA outlet's resistance, ``scale.resistance`` and the wall PO2 (``oxygen.wall.po2``)
@@ -69,14 +70,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--variants", type=int, default=200)
     ap.add_argument("--rounds", type=int, default=5)
     ap.add_argument("--label", default="this build")
+    ap.add_argument("--parts", default="prepare,ensemble", help="which figures to measure")
     args = ap.parse_args(argv)
     model = oxyline.load_model(MODEL)
     ps = patches(args.variants)
     prepare(model, ps[:2])  # warm-up: imports, first reads
-    times: dict[str, list[float]] = {"prepare": [], "ensemble": []}
+    parts = {"prepare": prepare, "ensemble": ensemble}
+    times: dict[str, list[float]] = {p: [] for p in args.parts.split(",")}
     for _ in range(args.rounds):
-        times["prepare"].append(prepare(model, ps))
-        times["ensemble"].append(ensemble(model, ps))
+        for part, ts in times.items():
+            ts.append(parts[part](model, ps))
     n = args.variants
     print(f"\n{MODEL}, {n} variants, {args.rounds} rounds ({args.label}); process CPU per "
           "variant\n")
