@@ -264,10 +264,12 @@ fn column_keys_split_dotted_names_by_the_longest_known_name() {
         "{err}"
     );
     assert!(
-        keys("vessels.a.b")
+        keys("vessels.c")
             .unwrap_err()
             .contains("expected vessels.NAME.PROPERTY")
     );
+    // a known name then a key: the merge, not the column, judges the property
+    assert_eq!(keys("vessels.a.b").unwrap(), ["vessels", "a", "b"]);
     assert!(
         keys("vessels.zz")
             .unwrap_err()
