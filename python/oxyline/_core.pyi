@@ -258,6 +258,20 @@ class VariantReader:
         the core's one order; the base's canonical vessels and conditions are reused except
         those at ``vessels`` (indices) and ``nodes``. A ModelError about one of them has
         ``element``."""
+    def check(self, source: dict[str, Any], patches: list[Any], numbers: list[int]) -> None:
+        """Raise ModelError for the first patch (variant ``numbers[i]``) with a path that
+        names nothing of the native model ``source``."""
+    def prepare(self, source: dict[str, Any], patch: Any, k: int
+                ) -> tuple[str, dict[int, Any] | None, dict[str, Any] | None,
+                           tuple[str, dict[str, Any], float | None, dict[str, Any]],
+                           dict[str, Any]]:
+        """Variant ``k``: ``patch`` merged into ``source`` by the core and its changed elements
+        read: (changed blood/transport sections as JSON, changed canonical vessels by index,
+        changed canonical conditions by node, ``read``'s tuple, the native model dict).
+        ModelError names the variant and the patch paths."""
+def column_keys(parts: list[str], dotted: bool, vessels: list[str], nodes: list[str],
+                variant: int) -> list[str]:
+    """The keys of a patch table's column (dotted pieces, or a multi-level column's levels)."""
 def resolve_settings(sim: Any, overrides: Any, period: float | None) -> dict[str, Any]: ...
 def run_facts(settings: dict[str, Any], run: dict[str, Any] | None = None,
               valves: bool = False) -> dict[str, Any]:

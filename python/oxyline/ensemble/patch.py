@@ -21,7 +21,6 @@ patch path and the value.
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -45,42 +44,6 @@ def _mapping(value: Any, k: int, path: str) -> Mapping[str, Any]:
     return value
 
 
-@dataclass
-class Merged:
-    """A patch applied by the core (``oxyline_core::model::patch``): the variant's native
-    model dict (None if ``refused``), the indices of the vessels and the nodes of the
-    conditions it changed, the patch paths (``path = value``) that changed each of them
-    (keys ``("vessel", i)``, ``("condition", node)``), and the message of a value the patch
-    cannot apply (a compliance factor 0, a factor that is not a number), which fails only
-    its variant."""
-
-    data: dict[str, Any] | None
-    vessels: set[int]
-    nodes: set[str]
-    paths: dict[tuple[str, Any], list[str]]
-    refused: str | None
-
-
-def merge(source: Mapping[str, Any], patch: Any, k: int = 0) -> Merged:
-    """``patch`` (variant ``k``) applied to the native model ``source`` by the core. A path
-    that names nothing of the model raises :class:`ModelError` naming the variant and the
-    path; a value the patch cannot apply is returned as ``refused``."""
-    # the core shares the patch's objects in the model: a copy, so that the variant's model
-    # never aliases the caller's lists
-    data, vessels, nodes, paths, refused = _core.merge_patch(dict(source), copy_description(patch), k)
-    return Merged(data, set(vessels), set(nodes), paths, refused)
-
-
-def merge_patch(source: Mapping[str, Any], patch: Mapping[str, Any], k: int = 0) -> Merged:
-    """:func:`merge`, its ``data`` the native model ``source`` with ``patch`` (variant ``k``)
-    applied, sharing every element the patch leaves alone. Raises :class:`ModelError` for
-    unknown names and refused values."""
-    m = merge(source, patch, k)
-    if m.data is None:
-        raise ModelError(m.refused)
-    return m
-
-
 def patch_paths(patch: Mapping[str, Any]) -> list[str]:
     """The scalar leaves of a patch as ``path = value`` (what an error of its variant that the
     core finds while it assembles the variant is traced to)."""
@@ -99,8 +62,9 @@ def traced(k: int, paths: Sequence[str] | None, error: Exception | str) -> str:
 def apply_patch(model: Model | Mapping[str, Any] | str, patch: Mapping[str, Any]
                 ) -> dict[str, Any]:
     """The native model dict of one variant: ``patch`` deep-merged into ``model`` (a
-    :class:`~oxyline.Model`, a native dict or anything :func:`oxyline.load_model` reads).
-    ``oxyline.simulate(apply_patch(model, patch))`` is that variant run on its own.
+    :class:`~oxyline.Model`, a native dict or anything :func:`oxyline.load_model` reads) by the
+    core. ``oxyline.simulate(apply_patch(model, patch))`` is that variant run on its own.
+    Raises :class:`ModelError` for unknown names and refused values.
 
     >>> import oxyline
     >>> from oxyline.ensemble import apply_patch
@@ -110,39 +74,22 @@ def apply_patch(model: Model | Mapping[str, Any] | str, patch: Mapping[str, Any]
     """
     from oxyline.loader import load_model
 
-    base = load_model(model)
-    return copy_description(merge_patch(base.source, patch).data)
+    data, _, _, _, refused = _core.merge_patch(dict(load_model(model).source), patch, 0)
+    if data is None:
+        raise ModelError(refused)
+    # a copy: the result is the caller's, sharing nothing with the model or the patch
+    return copy_description(data)
 
 
-def _column_path(column: Any, names: Mapping[str, set[str]], k: int) -> list[str]:
+def _column_path(column: Any, names: tuple[list[str], list[str]], k: int) -> list[str]:
     """The keys of a dotted-path column (``vessels.CCA.radius`` -> ``["vessels", "CCA",
-    "radius"]``); a vessel or node name may itself contain dots: the longest known name wins.
-    A tuple (a MultiIndex column) is the keys themselves (trailing empty levels dropped).
-    Unknown names and empty keys raise :class:`ModelError` naming variant ``k`` and the
-    column."""
+    "radius"]``), resolved by the core (``oxyline_core::model::patch::column_keys``: a vessel
+    or node name may itself contain dots, the longest known name wins); a tuple (a MultiIndex
+    column) is the keys themselves. ``names``: the model's vessel names and nodes. Unknown
+    names and empty keys raise :class:`ModelError` naming variant ``k`` and the column."""
     if isinstance(column, tuple):
-        parts = [str(p) for p in column]
-        while len(parts) > 1 and parts[-1] == "":
-            parts.pop()
-        label = ".".join(parts)
-    else:
-        label = str(column)
-        parts = label.split(".")
-    section, rest = parts[0], parts[1:]
-    if section in names and not isinstance(column, tuple):
-        for cut in range(len(rest) - 1, 0, -1):
-            if ".".join(rest[:cut]) in names[section]:
-                rest = [".".join(rest[:cut]), *rest[cut:]]
-                break
-        else:
-            no_property = len(rest) <= 1 or ".".join(rest) in names[section]
-            raise ModelError(f"{_where(k, label)}: expected {section}.NAME.PROPERTY"
-                             if no_property else
-                             f"{_where(k, label)}: no vessel or node of the model starts "
-                             "this path")
-    if "" in (section, *rest):
-        raise ModelError(f"{_where(k, label)}: empty key in the column's dotted path")
-    return [section, *rest]
+        return _core.column_keys([str(p) for p in column], False, *names, k)
+    return _core.column_keys(str(column).split("."), True, *names, k)
 
 
 def _cell(value: Any) -> tuple[bool, Any]:
@@ -169,7 +116,7 @@ def frame_patches(frame: Any, vessel_names: Iterable[str], nodes: Iterable[str]
     base model's value): each column's path is resolved once (not once per cell) and its
     values read as one list, so a wide frame of many rows (a sensitivity design, a population
     table) costs the calling thread a dict insertion per cell; keys in the columns' order."""
-    names = {"vessels": set(vessel_names), "boundary_conditions": set(nodes)}
+    names = ([str(n) for n in vessel_names], [str(n) for n in nodes])
     patches: list[dict[str, Any]] = [{} for _ in range(len(frame))]
     for c, column in enumerate(frame.columns):
         path = None  # resolved at the column's first value: an empty column names nothing
@@ -229,12 +176,11 @@ def variant_model(data: dict[str, Any], reader: Any = None, vessels: Iterable[in
 
 @dataclass
 class Variant:
-    """A variant ready to run: its canonical patch for the core (None: the base model), its
-    model (canonical description, period and transport facts; never assembled here). The
-    patch's vessels (by index) and conditions (by node) are handed to the core as the
-    canonical dicts themselves (``vessels``, ``outlets``), read there by the core's serde
-    types; the rest as JSON text (the text of a variant that rescales every vessel cost the
-    thread that feeds the workers more than the rest of its work)."""
+    """A variant ready to run: the sections besides its elements that differ from the base
+    model's, as canonical JSON for the core (None: the base model), its model (canonical
+    description, period and transport facts; never assembled here), and the elements its
+    patch changed as canonical dicts, vessels by index and conditions by node (read there by
+    the core's serde types)."""
 
     patch_json: str | None
     model: Model
@@ -256,9 +202,10 @@ def _refuse_structured_trees(base: Model) -> None:
 
 
 class Patcher:
-    """Turns patches into :class:`Variant` s: the core applies each patch
-    (``oxyline_core::model::patch``) and reads the vessels and conditions it changed; the
-    canonical form of the base model's other elements is computed once and shared."""
+    """Turns patches into :class:`Variant` s, one core call each
+    (``_core.VariantReader.prepare``: the patch merged by ``oxyline_core::model::patch``, the
+    elements it changed read, errors traced to the patch paths); the canonical form of the
+    base model's other elements is computed once and shared."""
 
     def __init__(self, base: Model) -> None:
         _refuse_structured_trees(base)
@@ -268,28 +215,10 @@ class Patcher:
 
     def check_all(self, patches: Sequence[Any], numbers: range | None = None) -> None:
         """Raise :class:`ModelError` for unknown names in every patch (variant ``numbers[i]``,
-        default ``i``), as :meth:`variant` would; a value the patch cannot apply is not
+        default ``i``), checked by the core in one call; a value the patch cannot apply is not
         raised here: it fails only its variant."""
         numbers = range(len(patches)) if numbers is None else numbers
-        for i, patch in enumerate(patches):
-            if patch:
-                merge(self.base.source, patch, numbers[i])
-
-    def _read(self, merged: Merged, patch: Mapping[str, Any], k: int) -> Model:
-        """The model of a merged variant: the elements it changed read by the core's schema
-        (the others are the base model's); an error names the patch paths that changed the
-        element it is about."""
-        assert merged.data is not None
-        try:
-            return variant_model(merged.data, self._reader, merged.vessels, merged.nodes)
-        except ModelError as e:
-            element = getattr(e, "element", None)
-            if element is not None:  # a vessel or condition the patch changed
-                paths = merged.paths.get(element)
-            else:  # blood, oxygen, transport, period: the other sections
-                paths = patch_paths({key: value for key, value in patch.items()
-                                     if key not in ("vessels", "boundary_conditions", "scale")})
-            raise ModelError(traced(k, paths, e)) from None
+        self._reader.check(self.base.source, list(patches), list(numbers))
 
     def variant(self, patch: Mapping[str, Any], k: int) -> Variant:
         """Variant ``k``. Unknown names raise :class:`ModelError`; a value the patch or the
@@ -297,11 +226,9 @@ class Patcher:
         caller records as that variant's failure."""
         if not patch:
             return Variant(None, self.base)
-        merged = merge_patch(self.base.source, patch, k)
-        model = self._read(merged, patch, k)
-        canon, base = model.canonical, self.base.canonical
-        core = {k: canon[k] for k in ("blood", "transport") if canon.get(k) != base.get(k)}
-        handed = {i: canon["vessels"][i] for i in sorted(merged.vessels)}
-        outlets = {n: canon["boundary_conditions"][n] for n in merged.nodes}
-        return Variant(json.dumps(core, separators=(",", ":")), model, handed or None,
-                       outlets or None)
+        sections, vessels, outlets, (name, canon, period, info), data = \
+            self._reader.prepare(self.base.source, patch, k)
+        sim = data.get("simulation", {}) or {}
+        model = Model(name=name, simulation=dict(sim), period=period, _source=data,
+                      transport=info, _canonical=canon)
+        return Variant(sections, model, vessels, outlets)

@@ -591,3 +591,20 @@ pub(crate) fn merge_patch<'py>(
     let nodes = patched.conditions.iter().map(|(n, _)| n.clone()).collect();
     Ok((Some(data), vessels, nodes, paths, None))
 }
+
+/// `column_keys(parts, dotted, vessels, nodes, variant)`: the keys of a patch table's column
+/// (`oxyline_core::model::patch::column_keys`): `parts` its dot-separated pieces (`dotted`)
+/// or the levels of a multi-level column, resolved against the model's vessel names and
+/// condition nodes. Raises `ModelError` naming the variant and the column.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub(crate) fn column_keys(
+    parts: Vec<String>,
+    dotted: bool,
+    vessels: Vec<String>,
+    nodes: Vec<String>,
+    variant: usize,
+) -> PyResult<Vec<String>> {
+    let names: [(&str, &[String]); 2] = [("vessels", &vessels), ("boundary_conditions", &nodes)];
+    patch::column_keys(&parts, dotted, &names, variant).map_err(to_py)
+}

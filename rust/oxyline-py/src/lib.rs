@@ -135,7 +135,7 @@ mod _core {
         chamber_elastance,
         checkpoint::{check_checkpoint_meta, check_resumed, checkpoint_interval},
         controlled_bytes,
-        ensemble::{Ensemble, merge_patch},
+        ensemble::{Ensemble, column_keys, merge_patch},
         errors::{_panic_probe, ModelError, ResourceError, SolverError, UnstableTimeStep},
         model_bytes,
         monitor::{BoundsMonitor, species_bounds},

@@ -845,5 +845,53 @@ fn sections<N: Node + Clone>(source: &N, patch: &N, k: usize) -> Res<Vec<(String
     Ok(out)
 }
 
+/// The keys of a table column's path (`vessels.CCA.radius` -> `vessels`, `CCA`, `radius`):
+/// `parts` are its dot-separated pieces, or the levels of a multi-level column (`dotted`
+/// false: each level is one key, trailing empty levels dropped). A vessel or node name may
+/// itself hold dots: under `vessels` / `boundary_conditions` (`names`: the model's vessel
+/// names and nodes) the longest known name wins. A column of variant `k` that names no vessel or node, or has
+/// an empty key, is an error naming the variant and the column.
+pub fn column_keys(
+    parts: &[String],
+    dotted: bool,
+    names: &[(&str, &[String])],
+    k: usize,
+) -> std::result::Result<Vec<String>, Error> {
+    let mut parts = parts;
+    while !dotted && parts.len() > 1 && parts.last().is_some_and(String::is_empty) {
+        parts = &parts[..parts.len() - 1];
+    }
+    let label = parts.join(".");
+    let fail = |message: &str| Error::model(at(k, &label), message.to_owned());
+    let Some((section, rest)) = parts.split_first() else {
+        return Err(fail("empty key in the column's dotted path"));
+    };
+    let mut keys = vec![section.clone()];
+    let known = names
+        .iter()
+        .find(|(s, _)| *s == section.as_str())
+        .map(|(_, n)| *n);
+    match known.filter(|_| dotted) {
+        Some(known) => {
+            let is_name = |cut: usize| known.iter().any(|n| *n == rest[..cut].join("."));
+            let Some(cut) = (1..rest.len()).rev().find(|&cut| is_name(cut)) else {
+                let no_property = rest.len() <= 1 || is_name(rest.len());
+                return Err(fail(&if no_property {
+                    format!("expected {section}.NAME.PROPERTY")
+                } else {
+                    "no vessel or node of the model starts this path".to_owned()
+                }));
+            };
+            keys.push(rest[..cut].join("."));
+            keys.extend(rest[cut..].iter().cloned());
+        }
+        None => keys.extend(rest.iter().cloned()),
+    }
+    if keys.iter().any(String::is_empty) {
+        return Err(fail("empty key in the column's dotted path"));
+    }
+    Ok(keys)
+}
+
 #[cfg(test)]
 mod tests;

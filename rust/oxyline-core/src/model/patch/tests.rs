@@ -226,3 +226,65 @@ fn another_wall_closure_replaces_the_wall() {
         json!({"model": "graetz", "po2": 50.0})
     );
 }
+
+/// Column keys: each expectation written out from the documented rule (the longest known
+/// vessel or node name wins; a multi-level column's levels are the keys).
+#[test]
+fn column_keys_split_dotted_names_by_the_longest_known_name() {
+    use super::column_keys;
+    let vessels = vec!["a".to_owned(), "a.b".to_owned(), "c".to_owned()];
+    let nodes = vec!["out.1".to_owned()];
+    let names: [(&str, &[String]); 2] = [("vessels", &vessels), ("boundary_conditions", &nodes)];
+    let keys = |label: &str| {
+        let parts: Vec<String> = label.split('.').map(str::to_owned).collect();
+        column_keys(&parts, true, &names, 3).map_err(|e| e.to_string())
+    };
+    assert_eq!(
+        keys("vessels.a.b.radius").unwrap(),
+        ["vessels", "a.b", "radius"]
+    );
+    assert_eq!(
+        keys("vessels.a.radius").unwrap(),
+        ["vessels", "a", "radius"]
+    );
+    assert_eq!(
+        keys("vessels.a.b.lumped.resistance").unwrap(),
+        ["vessels", "a.b", "lumped", "resistance"]
+    );
+    assert_eq!(
+        keys("boundary_conditions.out.1.resistance").unwrap(),
+        ["boundary_conditions", "out.1", "resistance"]
+    );
+    assert_eq!(keys("blood.viscosity").unwrap(), ["blood", "viscosity"]);
+    assert_eq!(keys("oxygen.wall.po2").unwrap(), ["oxygen", "wall", "po2"]);
+    let err = keys("vessels.zz.radius").unwrap_err();
+    assert!(err.contains("variant 3: vessels.zz.radius"), "{err}");
+    assert!(
+        err.contains("no vessel or node of the model starts this path"),
+        "{err}"
+    );
+    assert!(
+        keys("vessels.c")
+            .unwrap_err()
+            .contains("expected vessels.NAME.PROPERTY")
+    );
+    // a known name then a key: the merge, not the column, judges the property
+    assert_eq!(keys("vessels.a.b").unwrap(), ["vessels", "a", "b"]);
+    assert!(
+        keys("vessels.zz")
+            .unwrap_err()
+            .contains("expected vessels.NAME.PROPERTY")
+    );
+    assert!(
+        keys("vessels.a.b.radius.")
+            .unwrap_err()
+            .contains("empty key")
+    );
+    assert!(keys("blood..viscosity").unwrap_err().contains("empty key"));
+    // levels of a multi-level column: no splitting, trailing empty levels dropped
+    let levels = ["vessels", "a.b", "radius", "", ""].map(str::to_owned);
+    assert_eq!(
+        column_keys(&levels, false, &names, 0).unwrap(),
+        ["vessels", "a.b", "radius"]
+    );
+}
