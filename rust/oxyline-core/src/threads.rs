@@ -123,6 +123,25 @@ pub fn in_pool<R>(f: impl FnOnce() -> R) -> R {
     out.0
 }
 
+/// The least work of a step (unknowns, or transport cells times species) for which
+/// [`in_pool_for`] crosses to a pool thread: the smallest splits of a step's passes (the tree
+/// elimination's and the transport's, `PARALLEL_MIN`; the element-wise passes' at 2 `CHUNK`)
+/// start at 2^14 elements, so below it every pass of the step runs serially wherever it is
+/// called from, and a crossing only wakes a pool thread, puts the calling thread to sleep and
+/// leaves the woken thread spinning for work afterwards (rayon's idle rounds), all process
+/// CPU and none of it work: an error-controlled step crosses three times.
+pub const CROSSING_MIN: usize = 1 << 14;
+
+/// [`in_pool`] for a step of `work` elements (see [`CROSSING_MIN`]): below it `f` runs on the
+/// calling thread, with the run's pool still set for any pass inside that would split. The
+/// same passes with the same partitions either way: the same bits.
+pub fn in_pool_for<R>(work: usize, f: impl FnOnce() -> R) -> R {
+    if work < CROSSING_MIN {
+        return f();
+    }
+    in_pool(f)
+}
+
 /// Puts a thread's previous run pool back when dropped (also when the run panics: the
 /// binding turns a panic into an error and goes on).
 struct Restore(Option<Option<Arc<ThreadPool>>>);
@@ -239,6 +258,20 @@ mod tests {
             let nested = in_pool(|| in_pool(rayon::current_thread_index));
             assert!(nested.is_some());
             assert!(pool().is_some());
+        })
+        .unwrap();
+    }
+
+    #[test]
+    fn a_small_steps_phase_stays_on_the_calling_thread_and_a_large_ones_crosses() {
+        with_threads(Some(2), || {
+            let here = std::thread::current().id();
+            let small = in_pool_for(CROSSING_MIN - 1, || {
+                (std::thread::current().id(), pool().is_some())
+            });
+            assert_eq!(small, (here, true), "serial here, the pool still set");
+            let large = in_pool_for(CROSSING_MIN, || std::thread::current().id());
+            assert_ne!(large, here);
         })
         .unwrap();
     }

@@ -180,6 +180,13 @@ pub(super) struct State<'d, 't> {
 }
 
 impl State<'_, '_> {
+    /// The elements a step's passes go over: the unknowns, or the species' cell amounts if
+    /// more (see `threads::in_pool_for`).
+    pub fn work(&self) -> usize {
+        let cells = self.species.as_ref().map_or(0, |sp| sp.z.len());
+        self.y.len().max(cells)
+    }
+
     /// One step from `t` to `t + dt`, flow and species.
     pub fn advance(&mut self, t: f64) -> Result<()> {
         let (y, yd) = (&mut self.y, &mut self.yd);

@@ -367,7 +367,8 @@ impl<'r, 'f> Cycles<'r, 'f> {
         let dt = self.state.dt;
         // the flow and species passes of the step in one entry of the run's pool
         let t = self.steps as f64 * dt;
-        let done = crate::threads::in_pool(|| self.state.advance(t));
+        let work = self.state.work();
+        let done = crate::threads::in_pool_for(work, || self.state.advance(t));
         self.steps += 1;
         let t_new = self.steps as f64 * dt;
         done?;
@@ -428,6 +429,8 @@ impl<'r, 'f> Cycles<'r, 'f> {
         if self.events.is_none() {
             ad.scout(&mut self.state, t0, period);
         }
+        // (a small circuit's step stays on this thread: `threads::in_pool_for`)
+        let work = self.state.work();
         // a step taken again to end on a valve event
         let mut cut: Option<Cut> = None;
         let mut retry = Retry::default();
@@ -443,7 +446,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
             };
             let replayed = self.periodic_steps.replaying();
             // the flow step and its estimate in one entry of the run's pool
-            let stepped = crate::threads::in_pool(|| {
+            let stepped = crate::threads::in_pool_for(work, || {
                 ad.save_start(&mut self.state);
                 let stepped = self.state.advance_flow(t, h, ad.start());
                 stepped.map(|()| ad.judge_flow(&mut self.state, h))
@@ -521,7 +524,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
             {
                 ad.keep_species_start(&self.state);
             }
-            crate::threads::in_pool(|| {
+            crate::threads::in_pool_for(work, || {
                 self.state.advance_species(t, h)?;
                 ad.after_species(&self.state, h);
                 Ok::<(), Error>(())
@@ -530,7 +533,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
                 self.dense_row(ad, rows, (tau - t) / h, h, tau)?;
             }
             // the estimates and the next step's size in one entry of the run's pool
-            crate::threads::in_pool(|| ad.accept(&self.state, h, err, kinds));
+            crate::threads::in_pool_for(work, || ad.accept(&self.state, h, err, kinds));
             if leap {
                 // the solution jumped within the leap: the estimates start again after it
                 ad.restart(ad.h.min(h));
