@@ -848,20 +848,25 @@ impl Adaptive {
             ap: &self.accel_peak[r.clone()],
         };
         let n = r.len();
-        #[cfg(target_arch = "x86_64")]
-        {
-            let (m, grows, done) = v.pairs(c);
-            let mut m = (m, grows);
-            for j in done..n {
-                let (e, g) = v.term(j, c);
-                m = (larger(e, m.0), m.1 | g);
+        let whole = n - n % LANES;
+        let (mut m, mut grows) = ([0.0f64; LANES], [false; LANES]);
+        for j in (0..whole).step_by(LANES) {
+            // (a group's own slices, of `LANES` values: its values are read without a bounds
+            // check each, 9 a value before)
+            let group = v.sub(j..j + LANES);
+            for k in 0..LANES {
+                let (e, g) = group.term(k, c);
+                m[k] = larger(e, m[k]);
+                grows[k] |= g;
             }
-            m
         }
-        #[cfg(not(target_arch = "x86_64"))]
-        {
-            v.lanes(c)
+        for j in whole..n {
+            let (e, g) = v.term(j, c);
+            m[0] = larger(e, m[0]);
+            grows[0] |= g;
         }
+        let m = m.iter().fold(0.0f64, |a, &b| larger(b, a));
+        (m, grows.iter().any(|&g| g))
     }
 
     /// The algebraic unknowns' errors into `kinds` (see `flow_error`; none at the first step),
@@ -1343,7 +1348,6 @@ struct Fused {
 }
 
 /// Unknowns per group of the estimate's pass (see `Adaptive::fused_range`).
-#[cfg(not(target_arch = "x86_64"))]
 const LANES: usize = 4;
 
 /// Unknowns per block of the record of where a step grows a peak (see
@@ -1378,91 +1382,7 @@ struct FusedSlices<'a> {
 }
 
 impl FusedSlices<'_> {
-    /// The estimate's pass over the slices in groups of `LANES` (see `Adaptive::fused_range`).
-    #[cfg(not(target_arch = "x86_64"))]
-    fn lanes(&self, c: &Fused) -> (f64, bool) {
-        let v = self;
-        let n = v.y.len();
-        let whole = n - n % LANES;
-        let (mut m, mut grows) = ([0.0f64; LANES], [false; LANES]);
-        for j in (0..whole).step_by(LANES) {
-            // (a group's own slices, of `LANES` values: its values are read without a bounds
-            // check each, 9 a value before)
-            let group = v.sub(j..j + LANES);
-            for k in 0..LANES {
-                let (e, g) = group.term(k, c);
-                m[k] = larger(e, m[k]);
-                grows[k] |= g;
-            }
-        }
-        for j in whole..n {
-            let (e, g) = v.term(j, c);
-            m[0] = larger(e, m[0]);
-            grows[0] |= g;
-        }
-        let m = m.iter().fold(0.0f64, |a, &b| larger(b, a));
-        (m, grows.iter().any(|&g| g))
-    }
-
-    /// The estimate's pass over the slices two unknowns at a time in SSE2 registers (part of
-    /// every x86-64 processor): each unknown's value by the operations of [`FusedSlices::term`]
-    /// in the same order, the running maximum and the weight's a `maxpd` (a > b ? a : b, as
-    /// `larger`), the growth test three `cmppd` (false on NaN, as `>`), so the same numbers
-    /// as the scalar pass, whose compiled form shuffled the growth flags between registers
-    /// (adan56 at rtol 1e-3, 3 cycles: the pass 305 M → 284 M instructions, ~29 an unknown
-    /// with its blocks' bookkeeping). The unknowns from the returned index on (an odd last
-    /// one) are left to the caller.
-    #[cfg(target_arch = "x86_64")]
-    fn pairs(&self, c: &Fused) -> (f64, bool, usize) {
-        use std::arch::x86_64::{
-            __m128d, _mm_add_pd, _mm_andnot_pd, _mm_cmpgt_pd, _mm_loadu_pd, _mm_max_pd,
-            _mm_movemask_pd, _mm_mul_pd, _mm_or_pd, _mm_set1_pd, _mm_setzero_pd, _mm_storeu_pd,
-            _mm_sub_pd,
-        };
-        let whole = self.y.len() & !1;
-        for s in [
-            self.ym2, self.ym1, self.y0, self.wu, self.ws, self.pk, self.rp, self.ap,
-        ] {
-            assert!(s.len() >= whole);
-        }
-        // SAFETY: SSE2 is part of the x86-64 baseline; every load reads two values at j < whole
-        // − 1 of slices of at least `whole` values (asserted above), unaligned loads
-        unsafe {
-            let ([la, lb, lc], f) = (c.l, c.f);
-            let (la, lb, lc, f) = (
-                _mm_set1_pd(la),
-                _mm_set1_pd(lb),
-                _mm_set1_pd(lc),
-                _mm_set1_pd(f),
-            );
-            let (ih, ih1) = (_mm_set1_pd(c.inv_h), _mm_set1_pd(c.inv_h1));
-            let span = _mm_set1_pd(c.inv_span);
-            let sign = _mm_set1_pd(-0.0);
-            let abs = |x: __m128d| _mm_andnot_pd(sign, x);
-            let at = |s: &[f64], j: usize| _mm_loadu_pd(s.as_ptr().add(j));
-            let (mut m, mut g) = (_mm_setzero_pd(), _mm_setzero_pd());
-            for j in (0..whole).step_by(2) {
-                let (y1, y0, ym) = (at(self.y, j), at(self.y0, j), at(self.ym1, j));
-                let past = _mm_add_pd(_mm_mul_pd(la, at(self.ym2, j)), _mm_mul_pd(lb, ym));
-                let e = _mm_mul_pd(f, _mm_sub_pd(y1, _mm_add_pd(past, _mm_mul_pd(lc, y0))));
-                let w = _mm_max_pd(_mm_mul_pd(at(self.wu, j), ih), at(self.ws, j));
-                m = _mm_max_pd(_mm_mul_pd(abs(e), w), m);
-                let s1 = _mm_mul_pd(_mm_sub_pd(y1, y0), ih);
-                let s0 = _mm_mul_pd(_mm_sub_pd(y0, ym), ih1);
-                let accel = abs(_mm_mul_pd(_mm_sub_pd(s1, s0), span));
-                let g1 = _mm_cmpgt_pd(abs(y1), at(self.pk, j));
-                let g2 = _mm_cmpgt_pd(abs(s1), at(self.rp, j));
-                let g3 = _mm_cmpgt_pd(accel, at(self.ap, j));
-                g = _mm_or_pd(g, _mm_or_pd(g1, _mm_or_pd(g2, g3)));
-            }
-            let mut lanes = [0.0f64; 2];
-            _mm_storeu_pd(lanes.as_mut_ptr(), m);
-            (larger(lanes[1], lanes[0]), _mm_movemask_pd(g) != 0, whole)
-        }
-    }
-
     /// The unknowns `r` of the range.
-    #[cfg(not(target_arch = "x86_64"))]
     #[inline(always)]
     fn sub(&self, r: Range<usize>) -> FusedSlices<'_> {
         FusedSlices {
