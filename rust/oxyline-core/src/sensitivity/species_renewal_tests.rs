@@ -91,6 +91,25 @@ fn inlet_renewal_by_flow_parameters_against_central_differences() {
     }
 }
 
+/// A taper's end radii (d1, 3 → 2.5 mm in four segments, its Graetz wall renewing): each
+/// segment's radius moves by its own share, the inlet segment's carrying the renewal
+/// conductance's Womersley numbers and R^{5/2} (`closure::renewal::tangent`), each
+/// segment's its cap. The inlet radius against central differences (the outlet radius
+/// moves the inlet segment by an eighth as much: its signals lie near the quotients'
+/// rounding), both in the adjoint against the forward tangents.
+#[test]
+fn inlet_renewal_by_taper_end_radii() {
+    let spec = renewal_model();
+    let path = "vessels.d1.radius_in";
+    let worst = check(&spec, path);
+    eprintln!("{path}: {worst:.2e}");
+    assert!(worst < 1e-6, "{path}: {worst:e}");
+    let paths = ["vessels.d1.radius_in", "vessels.d1.radius_out"];
+    let worst = super::adjoint::tests::mean_and_series_adjoint_worst(&spec, &paths, &signals());
+    eprintln!("taper under the inlet renewal: adjoint against forward {worst:.2e}");
+    assert!(worst < 1e-8, "{worst:e}");
+}
+
 /// The wall's own parameters on renewed laws (the factor does not read them).
 #[test]
 fn inlet_renewal_by_oxygen_parameters_against_central_differences() {
