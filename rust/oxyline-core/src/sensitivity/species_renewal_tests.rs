@@ -101,7 +101,11 @@ fn inlet_renewal_by_flow_parameters_against_central_differences() {
 #[test]
 fn inlet_renewal_by_taper_end_radii() {
     let mut spec = renewal_model();
-    let parent = spec.vessels.iter_mut().find(|v| v.name == "parent").unwrap();
+    let parent = spec
+        .vessels
+        .iter_mut()
+        .find(|v| v.name == "parent")
+        .unwrap();
     parent.geometry.as_mut().unwrap().radius_out = 0.0036;
     for path in ["vessels.parent.radius_in", "vessels.parent.radius_out"] {
         let worst = check(&spec, path);
