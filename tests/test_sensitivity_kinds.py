@@ -128,14 +128,24 @@ def test_taper_and_rcl_values_are_recovered_from_synthetic_data() -> None:
 
 
 def test_geometry_the_tangent_leaves_out_is_refused_naming_it() -> None:
-    """A tapered vessel's one radius, and a radius with the thick wall model (also on a
-    vessel with Womersley friction cells, whose geometry is otherwise covered)."""
+    """A tapered vessel's one radius (its end radii are the parameters)."""
     with pytest.raises(ModelError, match="parameter 'vessels.d1.radius'.*radius_in"):
         oxyline.sensitivities(_tapered(), ["vessels.d1.radius"], ["d1.flow_out.mean"])
-    model = _womersley()
+
+
+@pytest.mark.parametrize("friction", ["poiseuille", "womersley"])
+def test_thick_wall_radii_match_central_differences(friction: str) -> None:
+    """The thick (Lamé) wall model: its compliance is no power law of the radius, so a
+    radius and the end radii take each segment's quadrature's own slopes (with and without
+    Womersley friction cells); against central differences and the adjoint."""
+    model = _tapered()
     model["wall_model"] = "thick"
-    with pytest.raises(ModelError, match="parameter 'vessels.d1.radius_out'.*thin wall"):
-        oxyline.sensitivities(model, ["vessels.d1.radius_out"], ["d1.flow_out.mean"])
+    model["wall_friction"] = friction
+    params = ["vessels.parent.radius", "vessels.d1.radius_in", "vessels.d1.radius_out",
+              "vessels.d2.radius"]
+    exact = assert_sensitivities_are_central_differences(model, params, TAPER_OUTPUTS)
+    adj = oxyline.sensitivities(model, params, TAPER_OUTPUTS, mode="adjoint")
+    assert_adjoint_is_forward(exact, adj)
 
 
 def _womersley() -> dict[str, Any]:

@@ -129,6 +129,18 @@ def test_oxygen_outputs_by_flow_parameters_against_central_differences(path: str
     check_against_central_differences(Y, path, OUTPUTS)
 
 
+@pytest.mark.parametrize("mode", ["forward", "adjoint"])
+@pytest.mark.parametrize("path", ["oxygen.wall.k", "oxygen.wall.po2", "vessels.parent.radius"])
+def test_mass_transfer_wall_behind_a_permeability_against_central_differences(
+    path: str, mode: str
+) -> None:
+    """A wall permeability in series equal to k: g = 1/(1/(k A) + 1/(P A)) moves by half of
+    k's relative change (the blood side's share 1 − g/(P A)), by the wall area in full."""
+    m = copy.deepcopy(Y)
+    m["oxygen"]["wall"]["permeability"] = 5e-3
+    check_against_central_differences(m, path, OUTPUTS, mode=mode)
+
+
 def tapered(friction: str = "poiseuille") -> dict[str, Any]:
     """:data:`Y` with d1 tapered 3 → 2.5 mm (its radius given by its two ends), the
     model's ``wall_friction`` ``friction``."""

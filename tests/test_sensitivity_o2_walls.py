@@ -15,8 +15,9 @@ not with the wall area alone.
   factor reads the inlet flow's harmonics, by the same parameters and the ICA's outlet
   resistance, forward and adjoint, against central differences likewise; the adjoint
   against the forward tangents.
-* A facilitated wall's PO2 and P50 with a permeability in series stay refused by name
-  (without one: test_sensitivity_o2_facilitation.py).
+* A facilitated Graetz wall behind a permeability in series (the Y network): its PO2, P50
+  and the inflow scale against central differences likewise, forward and adjoint (without
+  one: test_sensitivity_o2_facilitation.py).
 """
 
 from __future__ import annotations
@@ -29,7 +30,6 @@ from test_sensitivity_o2 import Y, check_against_central_differences
 from test_sensitivity_o2_adjoint import check_adjoint_equals_forward
 
 import oxyline
-from oxyline import ModelError
 
 pytest.importorskip("scipy")
 
@@ -142,14 +142,19 @@ def test_inlet_renewal_is_at_work_in_the_renewing_model() -> None:
     assert renewed[2] / plain[2] > 1.01, (renewed, plain)
 
 
-def test_facilitated_wall_with_a_permeability_is_refused_by_name() -> None:
+@pytest.mark.parametrize("mode", ["forward", "adjoint"])
+@pytest.mark.parametrize("path", ["oxygen.wall.po2", "oxygen.hill.p50", "scale.inflow"])
+def test_facilitated_wall_behind_a_permeability_against_central_differences(
+    path: str, mode: str
+) -> None:
+    """E_Hb moves the layer's conductance, and the series g = 1/(1/G + 1/G_p) takes the
+    share 1 − g/G_p of it; the inflow moves the layer's mean flow likewise."""
     m = copy.deepcopy(Y)
     m["oxygen"]["wall"] = {
         "model": "graetz",
         "po2": 40.0,
         "flow": "forward-mean",
+        "enhancement": 8.0,
         "permeability": 1e-4,
     }
-    for path in ["oxygen.wall.po2", "oxygen.hill.p50"]:
-        with pytest.raises(ModelError, match=path.replace(".", r"\.")):
-            oxyline.sensitivities(m, [path], ["VO2"])
+    check_against_central_differences(m, path, ["VO2", "d1.po2_out.mean", "SvO2.d1"], mode=mode)

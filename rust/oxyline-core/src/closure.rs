@@ -488,6 +488,30 @@ impl WallSpec {
 }
 
 impl WallSpec {
+    /// The permeability in series with the blood side's conductance (mass-transfer, Lévêque
+    /// and Graetz walls; None for the others or without one).
+    pub fn series_permeability(&self) -> Option<f64> {
+        match self {
+            WallSpec::MassTransfer { permeability, .. }
+            | WallSpec::Leveque { permeability, .. }
+            | WallSpec::Graetz { permeability, .. } => *permeability,
+            _ => None,
+        }
+    }
+
+    /// d ln g/d ln G of a segment's conductance g = 1/(1/G + 1/G_p) by its blood side's G
+    /// (G_p = P × the wall area `area`): g/G = 1 − g/G_p, 1 without a permeability in series.
+    /// A factor of G (its coefficient k or enhancement, a facilitation E_Hb) moves g by
+    /// this share of its own relative change.
+    pub fn blood_side_share(&self, g: f64, area: f64) -> f64 {
+        match self.series_permeability() {
+            Some(p) if p * area > 0.0 => 1.0 - g / (p * area),
+            _ => 1.0,
+        }
+    }
+}
+
+impl WallSpec {
     /// [`LawSlopes`] of the law [`WallSpec::segment_law_scaled`] gives a cycle-mean Lévêque
     /// or a Graetz wall at the same arguments (the inlet renewal's factor `renewal` held;
     /// its own derivative is `renewal::tangent`'s, taken by `ln_renewal`). None for every

@@ -132,9 +132,10 @@ pub fn segment_rlc(
 /// [`segment_rlc`] at (`r0`, `r1`), at a fixed wall thickness and modulus (the calibration's
 /// tapered radii). R = A (r0⁻¹r1⁻³ + r0⁻²r1⁻² + r0⁻³r1⁻¹), A = 8μ dx/(3π), and L ∝ 1/(r0 r1) in
 /// closed form; the thin-wall C term by term of the same Gauss sum, whose r³ it integrates
-/// exactly (∂r/∂r0 = 1 − s, ∂r/∂r1 = s at the node s = (ξ + 1)/2). The lumen volume is not
-/// needed by the flow and is left at 0. `None` for the thick wall, whose C the calibration
-/// does not differentiate by the radius.
+/// exactly (∂r/∂r0 = 1 − s, ∂r/∂r1 = s at the node s = (ξ + 1)/2); the thick wall's C the
+/// same way, each node's Lamé term differentiated in closed form ([`thick_wall_slope`]; the
+/// derivative of the quadrature the run sums). The lumen volume is not needed by the flow
+/// and is left at 0.
 pub fn segment_rlc_radius_slopes(
     dx: f64,
     r0: f64,
@@ -143,9 +144,6 @@ pub fn segment_rlc_radius_slopes(
     wall: Option<Wall>,
     profile: InertanceProfile,
 ) -> Option<[SegmentRlc; 2]> {
-    if wall.is_some_and(|w| w.model != WallModel::Thin) {
-        return None;
-    }
     let pi = std::f64::consts::PI;
     let a = 8.0 * blood.viscosity * dx / (3.0 * pi);
     let inductance = segment_rlc(dx, r0, r1, blood, None, profile).inductance;
@@ -173,12 +171,31 @@ pub fn segment_rlc_radius_slopes(
         for (xi, wt) in GAUSS5 {
             let s = 0.5 * (xi + 1.0);
             let r = r0 + (r1 - r0) * s;
-            let dc = 0.5 * wt * dx * k * 3.0 * r * r;
+            let per_length = match w.model {
+                WallModel::Thin => k * 3.0 * r * r,
+                WallModel::Thick => thick_wall_slope(r, w),
+            };
+            let dc = 0.5 * wt * dx * per_length;
             out[0].compliance += dc * (1.0 - s);
             out[1].compliance += dc * s;
         }
     }
     Some(out)
+}
+
+/// d/da of the thick (Lamé, plane strain) wall's compliance per length at lumen radius a,
+/// c(a) = K a² ((1 − 2ν) a² + b²)/(b² − a²), K = 2π (1 + ν)/E, b = a + h at the wall
+/// thickness h held: with N = a² ((1 − 2ν) a² + b²) and D = b² − a² = h (2a + h),
+/// N′ = 2a ((1 − 2ν) a² + b²) + a² (2 (1 − 2ν) a + 2b), D′ = 2h, c′ = K (N′D − N D′)/D².
+fn thick_wall_slope(a: f64, w: Wall) -> f64 {
+    let (e, h, nu) = (w.youngs_modulus, w.thickness, w.poisson_ratio);
+    let k = 2.0 * std::f64::consts::PI * (1.0 + nu) / e;
+    let b = a + h;
+    let inner = (1.0 - 2.0 * nu) * a * a + b * b;
+    let n = a * a * inner;
+    let dn = 2.0 * a * inner + a * a * (2.0 * (1.0 - 2.0 * nu) * a + 2.0 * b);
+    let d = h * (2.0 * a + h);
+    k * (dn * d - n * 2.0 * h) / (d * d)
 }
 
 #[cfg(test)]
@@ -245,11 +262,41 @@ mod tests {
             close(slopes[end].inductance, up.inductance, down.inductance);
             close(slopes[end].compliance, up.compliance, down.compliance);
         }
-        let thick = wall.map(|w| Wall {
-            model: WallModel::Thick,
-            ..w
-        });
-        assert!(segment_rlc_radius_slopes(dx, r0, r1, blood, thick, profile).is_none());
+    }
+
+    /// The thick wall's end-radius slopes against central differences of [`segment_rlc`]
+    /// (as above), at ν = 0.5 and 0.45 (the (1 − 2ν) term) and a wall thick against the
+    /// lumen (h/r ≈ 0.3–0.5, where the Lamé form departs from the thin wall's r³).
+    #[test]
+    fn thick_wall_end_radius_slopes_are_the_segments_derivatives() {
+        let blood = Blood {
+            density: 1050.0,
+            viscosity: 3.5e-3,
+        };
+        for nu in [0.5, 0.45] {
+            let wall = Some(Wall {
+                thickness: 1e-3,
+                youngs_modulus: 6e5,
+                poisson_ratio: nu,
+                model: WallModel::Thick,
+            });
+            let (dx, r0, r1) = (0.03, 0.003, 0.0021);
+            let profile = InertanceProfile::Flat;
+            let slopes = segment_rlc_radius_slopes(dx, r0, r1, blood, wall, profile).unwrap();
+            for end in 0..2 {
+                let h = 1e-6 * [r0, r1][end];
+                let at = |d: f64| {
+                    let (a, b) = if end == 0 { (r0 + d, r1) } else { (r0, r1 + d) };
+                    segment_rlc(dx, a, b, blood, wall, profile).compliance
+                };
+                let fd = (at(h) - at(-h)) / (2.0 * h);
+                let exact = slopes[end].compliance;
+                assert!(
+                    (exact - fd).abs() <= 1e-7 * fd.abs(),
+                    "ν {nu} end {end}: {exact} vs {fd}"
+                );
+            }
+        }
     }
 
     #[test]

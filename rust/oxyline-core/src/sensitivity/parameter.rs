@@ -515,20 +515,12 @@ fn vessel(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<P
                      radius_in and radius_out are parameters)",
                 ));
             }
-            if g.wall_thickness.is_some() && spec.wall_model != WallModel::Thin {
-                return Err(unknown(path, "radius derivatives need the thin wall model"));
-            }
             Parameter::Radius(vi)
         }
-        ([end @ ("radius_in" | "radius_out")], Some(g), _) => {
-            if g.wall_thickness.is_some() && spec.wall_model != WallModel::Thin {
-                return Err(unknown(path, "radius derivatives need the thin wall model"));
-            }
-            Parameter::EndRadius {
-                vessel: vi,
-                outlet: *end == "radius_out",
-            }
-        }
+        ([end @ ("radius_in" | "radius_out")], Some(_), _) => Parameter::EndRadius {
+            vessel: vi,
+            outlet: *end == "radius_out",
+        },
         (["lumped", key], _, Some(l))
             if matches!(
                 *key,
@@ -551,6 +543,20 @@ fn vessel(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<P
         }
     };
     Ok(p)
+}
+
+/// Which end radii of a vessel a radius parameter moves (by one per unit).
+#[derive(Debug, Clone, Copy)]
+enum RadiusEnds {
+    Inlet,
+    Outlet,
+    Both,
+}
+
+/// Whether vessel `vi` has a wall whose compliance follows the thick (Lamé) wall model.
+fn thick_wall(spec: &NetworkSpec, vi: usize) -> bool {
+    let g = spec.vessels[vi].geometry.as_ref();
+    spec.wall_model == WallModel::Thick && g.is_some_and(|g| g.wall_thickness.is_some())
 }
 
 /// Whether vessel `v`'s segments carry Womersley friction cells, whose values follow each
@@ -764,6 +770,13 @@ impl<'a> Stamps<'a> {
                     }
                 }
             }
+            // a thick wall's C is no power law of the radius: both end radii's slopes
+            Parameter::Radius(vi) if thick_wall(spec, *vi) => {
+                let g = spec.vessels[*vi].geometry.as_ref().ok_or_else(missing)?;
+                t = self.blank(path, g.radius_in);
+                self.vessel_end_radius(&mut t, spec, *vi, RadiusEnds::Both)
+                    .ok_or_else(missing)?;
+            }
             Parameter::Length(vi) | Parameter::Radius(vi) | Parameter::YoungsModulus(vi) => {
                 let g = spec.vessels[*vi].geometry.as_ref().ok_or_else(missing)?;
                 // exponents of (R, L, C) in the parameter
@@ -783,7 +796,11 @@ impl<'a> Stamps<'a> {
                     .ok_or_else(missing)?;
                 let value = if *outlet { g.radius_out } else { g.radius_in };
                 t = self.blank(path, value);
-                self.vessel_end_radius(&mut t, spec, *vessel, *outlet)
+                let ends = match outlet {
+                    true => RadiusEnds::Outlet,
+                    false => RadiusEnds::Inlet,
+                };
+                self.vessel_end_radius(&mut t, spec, *vessel, ends)
                     .ok_or_else(missing)?;
             }
             Parameter::Lumped(vi, key) => {
@@ -998,14 +1015,15 @@ impl<'a> Stamps<'a> {
     /// d/d(end radius) of a tapered vessel `vi`: its segments cut the linear taper at k/n, so
     /// segment k's ends move by (1 − k/n, 1 − (k+1)/n) of the inlet radius and (k/n, (k+1)/n)
     /// of the outlet radius, and its R, L and C by the segment's own slopes
-    /// ([`segment_rlc_radius_slopes`], at the wall thickness and modulus held). None when the
-    /// vessel's wall is thick or its segments are not in the circuit.
+    /// ([`segment_rlc_radius_slopes`], at the wall thickness and modulus held; both ends by
+    /// one for a uniform radius under the thick wall, whose C is no power law of it). None
+    /// when the vessel's segments are not in the circuit.
     fn vessel_end_radius(
         &self,
         t: &mut DaeTangent,
         spec: &NetworkSpec,
         vi: usize,
-        outlet: bool,
+        ends: RadiusEnds,
     ) -> Option<()> {
         let v = &spec.vessels[vi];
         let g = v.geometry.as_ref()?;
@@ -1037,10 +1055,10 @@ impl<'a> Stamps<'a> {
             let at = |j: usize| j as f64 / n as f64;
             let (r0, r1) = (g.radius_in + dr * at(k), g.radius_in + dr * at(k + 1));
             let [d0, d1] = segment_rlc_radius_slopes(dx, r0, r1, blood, wall, profile)?;
-            let (w0, w1) = if outlet {
-                (at(k), at(k + 1))
-            } else {
-                (1.0 - at(k), 1.0 - at(k + 1))
+            let (w0, w1) = match ends {
+                RadiusEnds::Outlet => (at(k), at(k + 1)),
+                RadiusEnds::Inlet => (1.0 - at(k), 1.0 - at(k + 1)),
+                RadiusEnds::Both => (1.0, 1.0),
             };
             let dr = w0 * d0.resistance + w1 * d1.resistance;
             let dl = w0 * d0.inductance + w1 * d1.inductance;

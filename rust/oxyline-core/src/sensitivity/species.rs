@@ -132,15 +132,9 @@ pub fn oxygen_parameter(sp: &SpeciesSpec, path: &str) -> Result<Option<OxygenPar
     };
     let mut ln_conductance = Vec::new();
     let (kind, value) = match (parts.as_slice(), wall, &sp.binding) {
-        (
-            ["oxygen", "wall", "k"],
-            WallSpec::MassTransfer {
-                k,
-                permeability: None,
-                ..
-            },
-            _,
-        ) => (SpeciesParameterKind::Conductance, nonzero(*k)?),
+        (["oxygen", "wall", "k"], WallSpec::MassTransfer { k, .. }, _) => {
+            (SpeciesParameterKind::Conductance, nonzero(*k)?)
+        }
         (
             ["oxygen", "wall", key @ ("po2" | "concentration")],
             WallSpec::MassTransfer {
@@ -190,7 +184,7 @@ pub fn oxygen_parameter(sp: &SpeciesSpec, path: &str) -> Result<Option<OxygenPar
         (["oxygen", "wall", key], w, _) => {
             return Err(fail(format!(
                 "the wall ({}) has no differentiable '{key}' (mass-transfer: k, po2, \
-                 concentration without permeability; flux: a constant flux)",
+                 concentration; flux: a constant flux)",
                 wall_name(w)
             )));
         }
@@ -218,7 +212,8 @@ pub fn oxygen_parameter(sp: &SpeciesSpec, path: &str) -> Result<Option<OxygenPar
 
 /// A Lévêque or Graetz wall's parameter `key`: its concentration or PO2 (g c_w ∝ it; with
 /// haemoglobin facilitation g moves too, by the slope returned) or the enhancement it was
-/// given (g ∝ it without a permeability in series): the kind, SI value and d ln g/dθ.
+/// given (the blood side's conductance ∝ it): the kind, SI value and d ln G/dθ of the blood
+/// side (a permeability in series takes its share, `Transport::add_conductance_slopes`).
 fn boundary_layer_parameter(
     sp: &SpeciesSpec,
     key: &str,
@@ -228,13 +223,11 @@ fn boundary_layer_parameter(
     let (WallSpec::Leveque {
         wall_concentration,
         enhancement,
-        permeability,
         ..
     }
     | WallSpec::Graetz {
         wall_concentration,
         enhancement,
-        permeability,
         ..
     }) = wall
     else {
@@ -249,16 +242,13 @@ fn boundary_layer_parameter(
                 slope,
             ))
         }
-        ("enhancement", _) if permeability.is_none() => Ok((
+        // (behind a permeability in series g moves by its blood side's share of the change:
+        // `Transport::species_derivative`)
+        ("enhancement", _) => Ok((
             SpeciesParameterKind::Conductance,
             facilitation::given_enhancement(wall, *enhancement),
             None,
         )),
-        ("enhancement", _) => Err(
-            "the enhancement of a wall with a permeability in series (the \
-                              conductance is not proportional to it)"
-                .into(),
-        ),
         (_, BindingSpec::Hill { solubility, .. }) => {
             let slope = facilitation::ln_conductance_slope(sp, wall, By::WallPo2)?;
             Ok((
@@ -302,34 +292,44 @@ fn parameters(spec: &NetworkSpec, sp: &SpeciesSpec, paths: &[String]) -> Result<
         .map(|path| {
             Ok(match oxygen_parameter(sp, path)? {
                 Some(p) => Param::Oxygen(p),
-                None => match Parameter::parse(spec, path)? {
-                    p @ Parameter::EndRadius { vessel, .. } => {
-                        renewal_free(spec, sp, vessel, path)?;
-                        Param::Flow(p, path.clone())
-                    }
-                    p => Param::Flow(p, path.clone()),
-                },
+                None => Param::Flow(Parameter::parse(spec, path)?, path.clone()),
             })
         })
         .collect()
 }
 
-/// Refuse a taper's end radius (`path`) on vessel `vi` whose wall's Graetz law reads the
-/// inlet renewal: the renewal's tangent takes one radius for the whole vessel (its
-/// Womersley numbers, `closure::renewal::tangent`), which an end radius does not move
-/// alike along a taper. Each segment's own wall and lumen are followed otherwise
-/// (`FlowGeometry::at`).
-fn renewal_free(spec: &NetworkSpec, sp: &SpeciesSpec, vi: usize, path: &str) -> Result<()> {
-    let name = &spec.vessels[vi].name;
-    let wall = sp.per_vessel.get(name).unwrap_or(&sp.wall);
-    if wall.needs_mean_flow() && wall.mean_flow() == crate::closure::MeanFlow::InletRenewal {
+/// Refuse a model with a Lévêque wall of the relaxed or instantaneous shear, naming the
+/// parameters `paths`, the vessel and the shear: that wall's conductance follows the wall
+/// shear step by step (the relaxed one through a state of its own, dQ̃/dt = (|Q| − Q̃)/τ),
+/// which neither the tangent nor the adjoint carries.
+fn shear_free(spec: &NetworkSpec, sp: &SpeciesSpec, paths: &[String]) -> Result<()> {
+    use crate::closure::Shear;
+    for v in &spec.vessels {
+        let wall = sp.per_vessel.get(&v.name).unwrap_or(&sp.wall);
+        let name = match wall {
+            WallSpec::Leveque {
+                shear: Shear::Relaxed,
+                ..
+            } => "relaxed",
+            WallSpec::Leveque {
+                shear: Shear::Instantaneous,
+                ..
+            } => "instantaneous",
+            _ => continue,
+        };
+        let quoted: Vec<String> = paths.iter().map(|p| format!("'{p}'")).collect();
+        let element = match quoted.len() {
+            0 => "sensitivities".to_owned(),
+            1 => format!("parameter {}", quoted[0]),
+            _ => format!("parameters {}", quoted.join(", ")),
+        };
         return Err(Error::model(
-            format!("parameter '{path}'"),
+            element,
             format!(
-                "the oxygen sensitivities do not cover a tapered vessel's end radius where its \
-                 wall's Graetz law reads the inlet renewal (vessel '{name}'; the renewal's \
-                 Womersley numbers take one radius per vessel): use flow: forward-mean or \
-                 cycle-mean, or the vessel's radius"
+                "the oxygen sensitivities do not follow vessel '{}''s Lévêque wall with \
+                 shear: {name} yet (its conductance follows the wall shear step by step, a \
+                 state the tangent and the adjoint do not carry): use shear: cycle-mean",
+                v.name
             ),
         ));
     }
@@ -573,6 +573,7 @@ impl Setup {
         }
         let sp = oxygen_species(&spec)?;
         let params = parameters(&spec, &sp, paths)?;
+        shear_free(&spec, &sp, paths)?;
         let tspec = spec.transport.clone().expect("checked by oxygen_species");
         let assembled = spec.assemble()?;
         let dae = assembled.circuit.assemble()?;

@@ -1,9 +1,11 @@
 //! The haemoglobin facilitation of Lévêque and Graetz walls in the oxygen sensitivities: the
 //! wall's conductance carries E_Hb (docs/physics.md §3.4), which reads the wall PO2 and the
 //! Hill law, so a wall's PO2 or concentration and P50 move the conductance by
-//! d ln g/dθ = d ln E_Hb/dθ ([`crate::model::facilitation`]'s exact derivatives; g ∝ E_Hb
-//! without a permeability in series). The given enhancement is the wall's enhancement over
-//! E_Hb.
+//! d ln G/dθ = d ln E_Hb/dθ of the blood side's conductance G ∝ E_Hb
+//! ([`crate::model::facilitation`]'s exact derivatives); behind a permeability in series,
+//! g = 1/(1/G + 1/G_p) moves by d ln g = (1 − g/G_p) d ln G
+//! (`Transport::add_conductance_slopes`). The given enhancement is the wall's enhancement
+//! over E_Hb.
 
 use crate::closure::{Facilitation, WallSpec};
 use crate::hemoglobin::BindingSpec;
@@ -23,22 +25,20 @@ pub(super) enum By {
     P50,
 }
 
-/// A Lévêque or Graetz wall's facilitation record and permeability (None for any other
-/// wall, or one without facilitation).
-fn facilitated(wall: &WallSpec) -> Option<(&Facilitation, f64, Option<f64>)> {
+/// A Lévêque or Graetz wall's facilitation record and wall concentration (None for any
+/// other wall, or one without facilitation).
+fn facilitated(wall: &WallSpec) -> Option<(&Facilitation, f64)> {
     match wall {
         WallSpec::Leveque {
             facilitation: Some(f),
             wall_concentration,
-            permeability,
             ..
         }
         | WallSpec::Graetz {
             facilitation: Some(f),
             wall_concentration,
-            permeability,
             ..
-        } => Some((f, *wall_concentration, *permeability)),
+        } => Some((f, *wall_concentration)),
         _ => None,
     }
 }
@@ -92,24 +92,17 @@ fn derivatives(
     })
 }
 
-/// d ln g/dθ of `wall`'s conductance through its facilitation (None: not facilitated);
-/// refused with a permeability in series (g is then not proportional to E_Hb) and, by P50,
-/// with linearised haemoglobin (whose binding P50 also sets).
+/// d ln G/dθ of `wall`'s blood-side conductance G ∝ E_Hb through its facilitation (None:
+/// not facilitated; a permeability in series takes its share where the slope is applied);
+/// refused by P50 with linearised haemoglobin (whose binding P50 also sets).
 pub(super) fn ln_conductance_slope(
     sp: &SpeciesSpec,
     wall: &WallSpec,
     by: By,
 ) -> Result<Option<f64>, String> {
-    let Some((f, cw, permeability)) = facilitated(wall) else {
+    let Some((f, cw)) = facilitated(wall) else {
         return Ok(None);
     };
-    if permeability.is_some() {
-        return Err(
-            "a facilitated wall with a permeability in series (its conductance is \
-                    not proportional to the facilitation factor) is not differentiated yet"
-                .into(),
-        );
-    }
     let d = derivatives(sp, f, cw)?;
     let alpha = match sp.binding {
         BindingSpec::Hill { solubility, .. } => solubility,

@@ -91,6 +91,38 @@ fn inlet_renewal_by_flow_parameters_against_central_differences() {
     }
 }
 
+/// A taper's end radii under renewing Graetz walls: each segment's radius moves by its own
+/// share, the inlet segment's carrying the renewal conductance's Womersley numbers and
+/// R^{5/2} (`closure::renewal::tangent`), each segment's its cap. The parent tapered 4 →
+/// 3.6 mm (three segments; its renewal moves the network's uptake well above the
+/// quotients' rounding): both end radii against central differences; d1 (3 → 2.5 mm, whose
+/// renewal moves only its own wall above that rounding) and the parent's, the adjoint
+/// against the forward tangents.
+#[test]
+fn inlet_renewal_by_taper_end_radii() {
+    let mut spec = renewal_model();
+    let parent = spec
+        .vessels
+        .iter_mut()
+        .find(|v| v.name == "parent")
+        .unwrap();
+    parent.geometry.as_mut().unwrap().radius_out = 0.0036;
+    for path in ["vessels.parent.radius_in", "vessels.parent.radius_out"] {
+        let worst = check(&spec, path);
+        eprintln!("{path}: {worst:.2e}");
+        assert!(worst < 1e-6, "{path}: {worst:e}");
+    }
+    let paths = [
+        "vessels.parent.radius_in",
+        "vessels.parent.radius_out",
+        "vessels.d1.radius_in",
+        "vessels.d1.radius_out",
+    ];
+    let worst = super::adjoint::tests::mean_and_series_adjoint_worst(&spec, &paths, &signals());
+    eprintln!("tapers under the inlet renewal: adjoint against forward {worst:.2e}");
+    assert!(worst < 1e-8, "{worst:e}");
+}
+
 /// The wall's own parameters on renewed laws (the factor does not read them).
 #[test]
 fn inlet_renewal_by_oxygen_parameters_against_central_differences() {

@@ -175,6 +175,24 @@ fn wall_conductance_against_central_differences() {
     assert!(check(&parse(MODEL).unwrap(), "oxygen.wall.k") < 1e-6);
 }
 
+/// A mass-transfer wall behind a permeability in series equal to k (the blood side's
+/// share of d ln g is 1/2): k, the wall PO2 and a radius (the wall's area moves both
+/// conductances) against central differences, and the adjoint against the tangents.
+#[test]
+fn wall_conductance_behind_a_permeability() {
+    let mut spec = parse(MODEL).unwrap();
+    if let WallSpec::MassTransfer { permeability, .. } = &mut oxygen(&mut spec).wall {
+        *permeability = Some(5e-3);
+    }
+    for path in ["oxygen.wall.k", "oxygen.wall.po2", "vessels.d1.radius_out"] {
+        assert!(check(&spec, path) < 1e-6, "{path}");
+    }
+    let paths = ["oxygen.wall.k", "oxygen.wall.po2", "oxygen.hill.p50"];
+    let worst = super::adjoint::tests::mean_and_series_adjoint_worst(&spec, &paths, &signals());
+    eprintln!("mass transfer behind a permeability: adjoint against forward {worst:.2e}");
+    assert!(worst < 1e-8, "{worst:e}");
+}
+
 #[test]
 fn wall_po2_against_central_differences() {
     assert!(check(&parse(MODEL).unwrap(), "oxygen.wall.po2") < 1e-6);

@@ -142,20 +142,33 @@ fn cycle_mean_walls_adjoint_equals_forward() {
     assert!(worst < 1e-8, "{worst:e}");
 }
 
-/// What stays refused, by name: a relaxed Lévêque shear (the facilitated walls' refusals:
-/// `species_facilitation_tests.rs`).
+/// What stays refused, by name: a Lévêque wall of the relaxed or instantaneous shear (its
+/// conductance follows the shear step by step), naming the parameters, the vessel and the
+/// shear (the facilitated walls' refusals: `species_facilitation_tests.rs`).
 #[test]
 fn relaxed_shear_is_refused() {
     let sig = signals();
-    let mut spec = parse(&model()).unwrap();
-    let sp = &mut spec.transport.as_mut().unwrap().species[0];
-    if let Some(WallSpec::Leveque { shear, .. }) = sp.per_vessel.get_mut("d2") {
-        *shear = crate::closure::Shear::Relaxed;
+    for (law, name) in [
+        (crate::closure::Shear::Relaxed, "relaxed"),
+        (crate::closure::Shear::Instantaneous, "instantaneous"),
+    ] {
+        let mut spec = parse(&model()).unwrap();
+        let sp = &mut spec.transport.as_mut().unwrap().species[0];
+        if let Some(WallSpec::Leveque { shear, .. }) = sp.per_vessel.get_mut("d2") {
+            *shear = law;
+        }
+        let paths = ["scale.inflow".to_string(), "oxygen.wall.enhancement".into()];
+        let m = species_sensitivities(&spec, &paths, &sig, settings())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            m.contains("'scale.inflow'")
+                && m.contains("'oxygen.wall.enhancement'")
+                && m.contains("vessel 'd2'")
+                && m.contains(&format!("shear: {name}")),
+            "{m}"
+        );
     }
-    let m = species_sensitivities(&spec, &["scale.inflow".to_string()], &sig, settings())
-        .unwrap_err()
-        .to_string();
-    assert!(m.contains("shear-dependent"), "{m}");
 }
 
 /// A taper's end radii under the cycle-mean walls, with a cycle-mean Lévêque wall on d1
@@ -164,9 +177,8 @@ fn relaxed_shear_is_refused() {
 /// at all, Lévêque's r (Q/r³)^{1/3} not), so an end radius moves these signals by less than
 /// the quotients' rounding (as the parent's radius above): the adjoint is checked against
 /// the forward tangents here, and the end radii against central differences under the
-/// mass-transfer wall and a consumption flux (`super::tests`). The inlet renewal's Graetz
-/// law (one radius per vessel for its Womersley numbers) stays refused naming the
-/// parameter and the vessel.
+/// mass-transfer wall and a consumption flux (`super::tests`), and under the inlet
+/// renewal's Graetz law in `species_renewal_tests`.
 #[test]
 fn taper_end_radii_under_cycle_mean_walls() {
     let spec = parse(&model()).unwrap();
@@ -182,17 +194,4 @@ fn taper_end_radii_under_cycle_mean_walls() {
     let worst = super::adjoint::tests::mean_and_series_adjoint_worst(&leveque, &paths, &signals());
     eprintln!("taper under a cycle-mean Lévêque wall: adjoint against forward {worst:.2e}");
     assert!(worst < 1e-8, "{worst:e}");
-    let mut renewal = spec.clone();
-    let sp = &mut renewal.transport.as_mut().unwrap().species[0];
-    if let WallSpec::Graetz { flow, .. } = &mut sp.wall {
-        *flow = crate::closure::MeanFlow::InletRenewal;
-    }
-    let path = "vessels.d1.radius_out";
-    let m = species_sensitivities(&renewal, &[path.to_string()], &signals(), settings())
-        .unwrap_err()
-        .to_string();
-    assert!(
-        m.contains(&format!("'{path}'")) && m.contains("vessel 'd1'") && m.contains("renewal"),
-        "{m}"
-    );
 }

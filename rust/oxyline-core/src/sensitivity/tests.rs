@@ -212,6 +212,7 @@ pub(super) fn check_on(base: &NetworkSpec, path: &str) {
             .zip(u.iter().zip(&w))
             .map(|(dk, (uk, wk))| (dk - (uk - wk) / (2.0 * h * p)).abs())
             .fold(0.0f64, f64::max);
+        eprintln!("{path} {signal:?}: {:.2e} of the scale", worst / scale);
         assert!(
             worst <= 1e-6 * scale,
             "{path} {signal:?}: {worst:e} vs scale {scale:e}"

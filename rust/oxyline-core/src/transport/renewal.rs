@@ -190,13 +190,15 @@ impl Transport {
                 let abs: Vec<f64> = js.iter().map(|&j| means.abs[j]).collect();
                 let d_abs: Vec<f64> = js.iter().map(|&j| means.d_abs[j]).collect();
                 let dflow = dflows.flow(i, period);
-                let own = geometry.filter(|g| g.vessel == vessel).map_or(
-                    GeometryTangent::default(),
-                    |g| GeometryTangent {
-                        ln_radius: g.radius,
-                        ln_length: g.length,
-                    },
-                );
+                // each segment's own d ln r (a taper's end radius moves them unalike)
+                let own_geometry = geometry.filter(|g| g.vessel == vessel);
+                let ln_radius: Vec<f64> = own_geometry
+                    .map(|g| walls.iter().map(|w| g.at(w).radius).collect())
+                    .unwrap_or_default();
+                let own = own_geometry.map_or(GeometryTangent::default(), |g| GeometryTangent {
+                    ln_radius: &ln_radius,
+                    ln_length: g.length,
+                });
                 let seg_means = SegmentMeans {
                     net: &net,
                     abs: &abs,

@@ -203,8 +203,9 @@ impl Transport {
     /// The derivative of the wall laws of species `s` by a parameter of `kind` and SI value
     /// `value` that scales every fixed law's coefficient it names (conductance: g, g c_w;
     /// wall concentration: g c_w; flux: q; the laws are linear in them, so the derivative is
-    /// the coefficient over `value`) on the pieces of the vessels `on` (by circuit vessel
-    /// index: those whose wall the parameter is). P50 leaves the laws alone.
+    /// the coefficient over `value`; a conductance factor behind a permeability in series
+    /// moves g by its blood side's share, 1 − g/G_p) on the pieces of the vessels `on` (by
+    /// circuit vessel index: those whose wall the parameter is). P50 leaves the laws alone.
     pub fn species_derivative(
         &self,
         s: usize,
@@ -225,7 +226,11 @@ impl Transport {
                 continue;
             }
             let d = match kind {
-                SpeciesParameterKind::Conductance => [g / value, g * cw / value, 0.0],
+                SpeciesParameterKind::Conductance => {
+                    // a permeability in series takes its share of the relative change
+                    let dg = self.blood_side_share(s, p, g) * g / value;
+                    [dg, dg * cw, 0.0]
+                }
                 SpeciesParameterKind::WallConcentration => [0.0, g * cw / value, 0.0],
                 SpeciesParameterKind::Flux => [0.0, 0.0, q / value],
                 SpeciesParameterKind::P50 | SpeciesParameterKind::Flow => [0.0; 3],
@@ -243,10 +248,19 @@ impl Transport {
         }
     }
 
-    /// Add to `d` the derivative of the fixed laws whose conductance the parameter moves in
-    /// proportion: on the pieces of vessel v (by circuit index), with a = `ln_slope[v]` =
-    /// d ln g/dθ (a boundary layer's haemoglobin facilitation), dg = a g and d(g c_w) =
-    /// a g c_w.
+    /// d ln g/d ln G of wall piece `p` of species `s` (law conductance `g`) by its blood
+    /// side's conductance G ([`WallSpec::blood_side_share`]: 1 without a permeability in
+    /// series).
+    fn blood_side_share(&self, s: usize, p: usize, g: f64) -> f64 {
+        let pc = &self.plan.pieces[p];
+        let vessel = self.plan.segment_vessels[pc.seg as usize] as usize;
+        self.plan.species[s].walls[vessel].blood_side_share(g, self.plan.piece_wall(pc).area())
+    }
+
+    /// Add to `d` the derivative of the fixed laws whose blood-side conductance the parameter
+    /// moves in proportion: on the pieces of vessel v (by circuit index), with a =
+    /// `ln_slope[v]` = d ln G/dθ (a boundary layer's haemoglobin facilitation), dg = a b g and
+    /// d(g c_w) = a b g c_w, b = d ln g/d ln G (1 without a permeability in series).
     pub fn add_conductance_slopes(&self, s: usize, d: &mut SpeciesDerivative, ln_slope: &[f64]) {
         let laws = &self.species[s].laws;
         for (p, (law, pc)) in laws.laws.iter().zip(&self.plan.pieces).enumerate() {
@@ -258,7 +272,8 @@ impl Transport {
             if a == 0.0 {
                 continue;
             }
-            let add = [a * g, a * g * cw, 0.0];
+            let dg = a * self.blood_side_share(s, p, g) * g;
+            let add = [dg, dg * cw, 0.0];
             for (k, v) in add.iter().enumerate() {
                 d.piece[p][k] += v;
                 d.cell[pc.cell as usize][k] += pc.share * v;

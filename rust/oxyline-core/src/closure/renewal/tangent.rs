@@ -12,7 +12,9 @@
 //!   where it binds the cap (complete renewal ∝ the wall area, or the law of ⟨|Q|⟩).
 //!
 //! A vessel's radius and length move every segment's radius and distances from the inlet in
-//! proportion (d ln r, d ln x).
+//! proportion (d ln r, d ln x); a taper's end radius moves each segment's (mean) radius by
+//! its own share, so d ln r is given per segment (the inlet segment's for G_r, each
+//! segment's for its cap).
 
 use super::{
     BackwardShear, INLET_RENEWAL_A, PeriodicFlow, backward_arcs, net_mean, womersley_wall_slope,
@@ -29,12 +31,20 @@ pub struct PeriodicFlowTangent<'a> {
     pub harmonics: &'a [Complex<f64>],
 }
 
-/// The derivatives by one parameter of the geometry every segment of a vessel shares:
-/// d ln r and d ln x (0 for a parameter that does not set the vessel).
+/// The derivatives by one parameter of a vessel's geometry: d ln r of each segment's radius
+/// (empty: 0) and d ln x of the distances from the inlet, which every segment shares (0 for
+/// a parameter that does not set the vessel).
 #[derive(Debug, Clone, Copy, Default)]
-pub struct GeometryTangent {
-    pub ln_radius: f64,
+pub struct GeometryTangent<'a> {
+    pub ln_radius: &'a [f64],
     pub ln_length: f64,
+}
+
+impl GeometryTangent<'_> {
+    /// d ln r of segment `k`.
+    fn ln_radius_of(&self, k: usize) -> f64 {
+        self.ln_radius.get(k).copied().unwrap_or(0.0)
+    }
 }
 
 /// α dW/dα of [`womersley_wall_slope`] W at α (see the module doc).
@@ -132,7 +142,7 @@ pub fn segment_factor_tangents_into(
     means: SegmentMeans<'_>,
     flow: &PeriodicFlow,
     dflow: &PeriodicFlowTangent,
-    geometry: GeometryTangent,
+    geometry: GeometryTangent<'_>,
     nu: f64,
     d: f64,
     out: &mut Vec<f64>,
@@ -147,15 +157,15 @@ pub fn segment_factor_tangents_into(
         .map(|((s, &q), &dq)| law(s, q, dq))
         .collect();
     let (total, d_total) = g.iter().fold((0.0, 0.0), |(t, dt), (a, b)| (t + a, dt + b));
-    let inlet = if flow.mean < 0.0 {
-        segs.last()
+    let at = if flow.mean < 0.0 {
+        segs.len().saturating_sub(1)
     } else {
-        segs.first()
+        0
     };
-    let (ratio, d_ratio) = match inlet {
+    let (ratio, d_ratio) = match segs.get(at) {
         Some(s) if flow.mean != 0.0 && total > 0.0 => {
-            let (gr, dgr) =
-                renewal_conductance_tangent(flow, dflow, s.radius, geometry.ln_radius, nu, d);
+            let d_ln_r = geometry.ln_radius_of(at);
+            let (gr, dgr) = renewal_conductance_tangent(flow, dflow, s.radius, d_ln_r, nu, d);
             let ratio = gr / total;
             (ratio, (dgr - ratio * d_total) / total)
         }
@@ -173,7 +183,7 @@ pub fn segment_factor_tangents_into(
         // wall area 2π r Δx, the net-mean law itself, or the law of ⟨|Q|⟩
         let area = k_renewed * s.area();
         let (mut cap, mut d_cap) = if area >= gj {
-            (area, area * (geometry.ln_radius + dl))
+            (area, area * (geometry.ln_radius_of(k) + dl))
         } else {
             (gj, dgj)
         };
@@ -287,21 +297,21 @@ mod tests {
         let d_abs: Vec<f64> = (0..n)
             .map(|j| -0.2 * abs[j] * (1.0 + 0.05 * j as f64))
             .collect();
+        // a taper: each segment's radius its own, moved by its own share
+        let ln_radius: [f64; 10] = std::array::from_fn(|j| 0.7 - 0.05 * j as f64);
         let (dmean, geometry) = (
             0.4 * mean,
             GeometryTangent {
-                ln_radius: 0.7,
+                ln_radius: &ln_radius,
                 ln_length: -0.6,
             },
         );
         let segs_at = |e: f64| -> Vec<SegmentWall> {
-            let (rr, ll) = (
-                r * (geometry.ln_radius * e).exp(),
-                length * (geometry.ln_length * e).exp(),
-            );
+            let ll = length * (geometry.ln_length * e).exp();
+            let rr = |i: usize| r * (1.0 - 0.02 * i as f64) * (geometry.ln_radius[i] * e).exp();
             (0..n)
                 .map(|i| SegmentWall {
-                    radius: rr,
+                    radius: rr(i),
                     x0: ll * i as f64 / n as f64,
                     x1: ll * (i + 1) as f64 / n as f64,
                 })
