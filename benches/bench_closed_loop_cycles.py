@@ -68,7 +68,7 @@ def main() -> None:
     print("| heart run | CPU s | steps (rejected) | valve events | cardiac output per cycle "
           "(L/min) | change at each cycle's end |")
     print("|---|---:|---:|---:|---|---|")
-    run(model, f"default (rtol {a.rtol:g})", a.cycles, period, rtol=a.rtol,
+    run(model, f"default (rtol {a.rtol:g})", a.cycles, period, rtol=a.rtol, dt="auto",
         **closed_loop.heart_run_options(p))
     run(model, "generalized-α, dt 1 ms (the O2 loop's heart step)", a.cycles, period,
         dt=1e-3, method="generalized-alpha", **closed_loop.heart_run_options(p))
