@@ -50,11 +50,13 @@ from oxyline.time_error import (
     FROM_LAST_CYCLE,
     FROM_LAST_CYCLE_EXPLICIT,
     FROM_WHOLE_RUN,
-    FILE_PREFIX as TIME_ERROR_PREFIX,
     SAME_STEPS,
     TimeErrorEstimate,
     accumulated,
     record_estimate,
+)
+from oxyline.time_error import (
+    FILE_PREFIX as TIME_ERROR_PREFIX,
 )
 
 if TYPE_CHECKING:  # Unpack is typing's from Python 3.11

@@ -521,11 +521,20 @@ mod tests {
         };
         let to_periodic = json!({"cycles": 2, "until_periodic": 1e-4});
         assert_eq!(start(to_periodic.clone(), json!({})), "periodic");
-        assert_eq!(start(to_periodic.clone(), json!({"rtol": 1e-4})), "periodic");
+        assert_eq!(
+            start(to_periodic.clone(), json!({"rtol": 1e-4})),
+            "periodic"
+        );
         // a fixed step, or exactly `cycles`, keeps the steady start (and its outputs)
         assert_eq!(start(to_periodic.clone(), json!({"dt": 1e-3})), "steady");
-        assert_eq!(start(to_periodic.clone(), json!({"method": "rk4"})), "steady");
-        assert_eq!(start(to_periodic.clone(), json!({"until_periodic": null})), "steady");
+        assert_eq!(
+            start(to_periodic.clone(), json!({"method": "rk4"})),
+            "steady"
+        );
+        assert_eq!(
+            start(to_periodic.clone(), json!({"until_periodic": null})),
+            "steady"
+        );
         assert_eq!(start(json!({"cycles": 2}), json!({})), "steady");
         // a start given wins, from the file or the keyword
         let file_steady = json!({"cycles": 2, "until_periodic": 1e-4, "start": "steady"});
