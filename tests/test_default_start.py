@@ -50,6 +50,7 @@ def test_its_last_cycle_is_the_steady_starts_converged_cycle(runs) -> None:
         assert err <= 5 * UNTIL, (name, err)
 
 
+@pytest.mark.filterwarnings("ignore::oxyline.PeriodicityWarning")  # (runs cut at max_cycles)
 def test_a_fixed_step_a_run_of_exactly_cycles_and_a_start_given_keep_theirs() -> None:
     fixed = oxyline.simulate(MODEL, dt=1e-3, cycles=1, until_periodic=UNTIL, max_cycles=3,
                              output_every=1e-2)

@@ -1029,7 +1029,13 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     (:class:`~oxyline.SimulationInterrupted` for Ctrl-C). A chunk that cannot be written (disk
     full) stops the run with :class:`~oxyline.OutputError`, whose ``result`` is the store with
     the rows written before it. An existing store at ``path`` is replaced only with
-    ``overwrite=True``. Needs ``zarr`` and ``xarray``.
+    ``overwrite=True``. ``estimate_time_error=True`` records the run's accumulated-error
+    estimate in the store as :func:`simulate` gives it (the attributes
+    ``solver_error_estimate_<kind>``, ``solver_time_error_*`` and the variables
+    ``time_error_<kind>`` over ``vessel``): the last cycle's rows are kept as they pass (one
+    cycle and one chunk more held) and compared with the core's second integration of that
+    cycle; a circuit with valves (whose estimate runs the whole run again in memory) and
+    ``meet_rtol`` are refused with :class:`~oxyline.ModelError`. Needs ``zarr`` and ``xarray``.
 
     >>> import oxyline, tempfile, os
     >>> with tempfile.TemporaryDirectory() as d:
