@@ -565,7 +565,7 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     sink: Any = None
     s_out = s  # the selection of the rows kept
     if store is not None:
-        store = {**store, **_stream_plan(model, s, store["time_chunk"])}
+        store = {**store, **_stream_plan(model, s, store["time_chunk"], bool(timed))}
         _check_output_size(model, s, overrides, where=store["path"], held=store["held"])
         sink = _ZarrSink(model, s, heart, monitor, store, keep_last_cycle=bool(timed))
         core.update(chunk_sink=sink.add, chunk_rows=store["time_chunk"],
@@ -972,14 +972,17 @@ def _output_size(model: Model, s: Mapping[str, Any]) -> tuple[float, int, int]:
 SEGMENT_CHUNK = 65536
 
 
-def _stream_plan(model: Model, s: Mapping[str, Any], time_chunk: int | None) -> dict[str, Any]:
+def _stream_plan(model: Model, s: Mapping[str, Any], time_chunk: int | None,
+                 timed: bool = False) -> dict[str, Any]:
     """How a streamed store's run holds its rows: ``time_chunk`` (given, else the most rows
     whose copies in flight stay within ``memory.STREAM_BUDGET``: :func:`memory.stream_rows`;
     at most the output's rows),
     ``keep_current_cycle`` (last-cycle output: the cycles before the last are recorded, so
     that a run stopped early stores its partial cycle, only while a cycle's rows fit the
     budget; a run until periodic keeps them anyway, not knowing its last cycle) and ``held``,
-    the bytes of rows it holds at once (:func:`memory.stream_estimate`)."""
+    the bytes of rows it holds at once (:func:`memory.stream_estimate`; with ``timed``, the
+    accumulated-error estimate, also the last cycle's rows twice: the sink's kept copy, with a
+    chunk more, and the core's second integration of that cycle)."""
     _, cycle_rows, cols = _memory.output_estimate(_output_layout_sized(model, s), s["period"],
                                                   s["output_every"], 1, False)
     _, rows, _ = _output_size(model, s)
@@ -992,8 +995,10 @@ def _stream_plan(model: Model, s: Mapping[str, Any], time_chunk: int | None) -> 
         cycle = 8.0 * _memory.table_rows(cycle_rows, chunk) * cols
         keep = open_ended or cycle <= _memory.STREAM_BUDGET
         kept = cycle_rows if keep else 0
-    return {"time_chunk": chunk, "keep_current_cycle": keep,
-            "held": _memory.stream_estimate(chunk, cols, kept, rows)}
+    held = _memory.stream_estimate(chunk, cols, kept, rows)
+    if timed:
+        held += 8.0 * (2 * cycle_rows + chunk) * cols
+    return {"time_chunk": chunk, "keep_current_cycle": keep, "held": held}
 
 
 def _output_layout_sized(model: Model, s: Mapping[str, Any]) -> dict[str, Any]:
