@@ -229,6 +229,7 @@ mod tests {
                 "rho_infty",
                 "until_periodic",
                 "rtol",
+                "start",
                 "step_control"
             ]
         );
