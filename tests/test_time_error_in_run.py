@@ -88,10 +88,8 @@ def test_bad_requests_are_model_errors_naming_the_setting(tmp_path) -> None:
         oxyline.simulate("bifurcation", dt=1e-3, cycles=1, estimate_time_error=True)
     with pytest.raises(oxyline.ModelError, match="estimate_time_error"):
         oxyline.simulate("bifurcation", cycles=1, estimate_time_error="yes")
-    with pytest.raises(oxyline.ModelError, match="simulate_to_zarr: estimate_time_error"):
-        oxyline.simulate_to_zarr(
-            "bifurcation", tmp_path / "r.zarr", cycles=1, estimate_time_error=True
-        )
+    with pytest.raises(oxyline.ModelError, match="simulate_to_zarr: meet_rtol"):
+        oxyline.simulate_to_zarr("bifurcation", tmp_path / "r.zarr", cycles=1, meet_rtol=True)
     with pytest.raises(oxyline.ModelError, match="meet_rtol needs error control"):
         oxyline.simulate("bifurcation", dt=1e-3, cycles=1, meet_rtol=True)
     with pytest.raises(oxyline.ModelError, match="simulate_ensemble: estimate_time_error"):
@@ -116,3 +114,45 @@ def test_meet_rtol_meets_rtol_in_every_vessel() -> None:
     for kind, e in vessel_time_errors(met, ref).items():
         assert float(np.max(e)) <= 2 * rtol, (kind, float(np.max(e)), met.settings["rtol"])
     assert met.settings["meet_rtol"] == rtol and met.settings["meet_rtol_runs"] >= 2
+
+
+@pytest.mark.parametrize(("name", "rtol"), [("bifurcation", 1e-2), ("paper-bifurcated", 1e-3)])
+def test_the_streamed_run_records_the_estimate_of_the_same_run_in_memory(
+        name: str, rtol: float, tmp_path) -> None:
+    # simulate_to_zarr keeps the last cycle's rows as they pass (chunks of 64 rows here, so the
+    # cycle spans several) and compares them with the core's second integration of that cycle,
+    # as simulate does from its rows in memory: the same run, the same steps and rows, so the
+    # same estimate (to 1e-12: the same arithmetic in another order at most), in the store's
+    # attributes and its per-vessel variables; paper-bifurcated carries O2 (its PO2 estimate)
+    xr = pytest.importorskip("xarray")
+    pytest.importorskip("zarr")
+    kw = {**_cycles(2), "rtol": rtol, "estimate_time_error": True}
+    res = oxyline.simulate(name, **kw)
+    ds = oxyline.simulate_to_zarr(name, tmp_path / "run.zarr", time_chunk=64, **kw)
+    back = oxyline.open_result(tmp_path / "run.zarr")
+    assert set(back.error_estimate) == set(res.error_estimate)
+    assert back.error_estimate == pytest.approx(res.error_estimate, rel=1e-12)
+    assert back.local_error_estimate == pytest.approx(res.local_error_estimate, rel=1e-12)
+    assert back.settings["time_error_steps"] == res.settings["time_error_steps"] > 0
+    assert back.settings["time_error_vessel_flow"] == res.settings["time_error_vessel_flow"]
+    for kind in res.time_error.columns:
+        np.testing.assert_allclose(ds[f"time_error_{kind}"].values,
+                                   res.time_error[kind].to_numpy(), rtol=1e-12, atol=0)
+    if name == "paper-bifurcated":
+        assert "po2" in back.error_estimate
+    # the estimate is of the run that went to the store: its rows are the in-memory run's
+    assert np.array_equal(back.data, res.data)
+    assert isinstance(ds, xr.Dataset) and ds.attrs["complete"] == 1
+
+
+def test_the_streamed_estimate_of_a_circuit_with_valves_is_refused(tmp_path) -> None:
+    # valves: the core makes no second integration of the last cycle (the whole run again,
+    # in memory, gives the estimate): the store names the valves and points to simulate
+    from oxyline import closed_loop
+
+    model = oxyline.load_model(closed_loop.heart_model(closed_loop.load("closed-loop-o2")))
+    with pytest.raises(oxyline.ModelError,
+                       match=r"simulate_to_zarr: estimate_time_error of a circuit with valves"):
+        oxyline.simulate_to_zarr(model, tmp_path / "v.zarr", cycles=1, dt="auto", rtol=1e-2,
+                                 estimate_time_error=True)
+    assert not (tmp_path / "v.zarr").exists()

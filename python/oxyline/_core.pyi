@@ -42,7 +42,7 @@ class RunOptions(TypedDict, total=False):
     until_periodic: float | None
     max_cycles: int  # 100
     output_all_cycles: bool
-    start: str  # "steady", "zero", "svzerod-steady" or "svzerod-zero"
+    start: str  # "steady", "periodic", "zero", "svzerod-steady" or "svzerod-zero"
     newton_atol: float | None
     max_iterations: int  # 30
     segments: bool  # True

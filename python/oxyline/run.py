@@ -55,6 +55,9 @@ from oxyline.time_error import (
     accumulated,
     record_estimate,
 )
+from oxyline.time_error import (
+    FILE_PREFIX as TIME_ERROR_PREFIX,
+)
 
 if TYPE_CHECKING:  # Unpack is typing's from Python 3.11
     from typing_extensions import Unpack
@@ -476,7 +479,8 @@ def simulate(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     ``"auto"``), ``method`` (``"auto"``, ``"rk4"``, ``"generalized-alpha"``, ``"dopri5"``), ``output_every``
     (s), ``output_cycles`` (``"last"``/``"all"``), ``until_periodic`` (relative tolerance),
     ``max_cycles``, ``rho_infty``, ``start`` (``"steady"``, ``"periodic"``,
-    ``"zero"``), ``segments`` (bool),
+    ``"zero"``; default ``"periodic"`` for an error-controlled run to periodicity, else
+    ``"steady"``: docs/physics.md §10 "The default start"), ``segments`` (bool),
     ``progress`` (bool or callback ``f(t, t_end)``), ``threads`` (default: every core; ``1``
     serial; large trees split their elimination over them, with the same bits for any number).
 
@@ -538,10 +542,9 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
     (``simulate_to_zarr``): the Zarr store's keywords; the rows go there as the core hands
     them over, and the store, opened, is returned."""
     s, default, space, timed = _resolve(model, overrides)
-    if timed and store is not None:
-        raise ModelError("simulate_to_zarr: estimate_time_error compares the run's last cycle "
-                         "in memory: use simulate(..., estimate_time_error=True) and "
-                         "result.to_zarr")
+    if timed == "meet" and store is not None:
+        raise ModelError("simulate_to_zarr: meet_rtol runs the model again until its estimate "
+                         "meets rtol: use simulate(..., meet_rtol=True) and result.to_zarr")
     if timed == "meet":
         return _meet_rtol(model, overrides, s["rtol"])
     if default and s["atol"] is None and (overrides.get("checkpoint") is not None
@@ -557,13 +560,18 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
         core["resume"] = resume
     if timed:  # the core runs the last cycle again at rtol/FACTOR after the run
         _check_time_error(s, summarize, core)
+        if store is not None and heart.get("valves"):
+            raise ModelError("simulate_to_zarr: estimate_time_error of a circuit with valves "
+                             f"({', '.join(heart['valves'])}) runs the whole run "
+                             "again in memory: use simulate(..., estimate_time_error=True) "
+                             "and result.to_zarr")
         core["finer_last_cycle"] = FACTOR
     sink: Any = None
     s_out = s  # the selection of the rows kept
     if store is not None:
-        store = {**store, **_stream_plan(model, s, store["time_chunk"])}
+        store = {**store, **_stream_plan(model, s, store["time_chunk"], bool(timed))}
         _check_output_size(model, s, overrides, where=store["path"], held=store["held"])
-        sink = _ZarrSink(model, s, monitor, store)
+        sink = _ZarrSink(model, s, monitor, store, keep_last_cycle=bool(timed))
         core.update(chunk_sink=sink.add, chunk_rows=store["time_chunk"],
                     keep_current_cycle=store["keep_current_cycle"])
     elif summarize and not core:  # (a checkpointed run keeps its rows: resume rebuilds them)
@@ -591,6 +599,8 @@ def _simulate(model: Model, overrides: Mapping[str, Any], resume: Any = None,
                 **segmentation_facts(model)}
     if store is not None:  # the final attributes: of a result of no rows
         final = _result(model, s, sink.template(), settings, "error" not in raw)
+        if timed and "error" not in raw:
+            _fill_time_error_streamed(model, s, raw, final, sink.last_cycle())
         out = sink.close(raw, final, space)
     else:
         if sink is not None:  # the summary stream's kept rows
@@ -713,14 +723,35 @@ def _fill_time_error(model: Model, s: Mapping[str, Any], raw: dict[str, Any], re
     record_estimate(result, accumulated(coarse, fine), source.format(factor=FACTOR), steps)
 
 
+def _fill_time_error_streamed(model: Model, s: Mapping[str, Any], raw: Mapping[str, Any],
+                              final: Result, last: dict[str, Any] | None) -> None:
+    """``simulate_to_zarr``'s accumulated-error estimate, into ``final`` (whose attributes the
+    store gets): the core's second integration of the last cycle against the last cycle's rows
+    the sink kept (``last``), as :func:`_fill_time_error` does in memory."""
+    finer = raw.get("finer_last_cycle")
+    if finer is None or last is None or len(last["times"]) < len(finer["times"]):
+        raise ModelError("simulate_to_zarr: estimate_time_error found no second integration "
+                         "of the last cycle to compare (e.g. a run of fewer output rows than "
+                         "a cycle): use simulate(..., estimate_time_error=True)")
+    rows = {**raw, "times": last["times"], "data": last["data"]}
+    if raw.get("transport") is not None and "species" in last:
+        rows["transport"] = {**raw["transport"], "data": last["species"]}
+    coarse, fine = _last_cycle_results(model, s, rows, finer)
+    explicit = final.settings.get("method") == "dopri5"
+    source = FROM_LAST_CYCLE_EXPLICIT if explicit else FROM_LAST_CYCLE
+    steps = int(finer["steps"]) + int(finer["rejected_steps"])
+    record_estimate(final, accumulated(coarse, fine), source.format(factor=FACTOR), steps)
+
+
 def _again_finer(model: Model, coarse: Result, rtol: float, overrides: Mapping[str, Any]
                  ) -> Result:
     """The run of ``coarse`` (with ``overrides``) again at the tighter ``rtol``: the same
     cycles from the same start, without a progress bar or estimates of its own."""
     kw = {k: v for k, v in overrides.items()
           if k not in ("estimate_time_error", "meet_rtol", "rtol")}
+    # (the same start too: without until_periodic the default start would be another)
     kw.update(progress=False, cycles=int(coarse.settings["cycles_run"]), until_periodic=None,
-              estimate_space_error=False)
+              start=coarse.settings["start"], estimate_space_error=False)
     return simulate(model, rtol=rtol, **kw)
 
 
@@ -898,14 +929,17 @@ def _output_size(model: Model, s: Mapping[str, Any]) -> tuple[float, int, int]:
 SEGMENT_CHUNK = 65536
 
 
-def _stream_plan(model: Model, s: Mapping[str, Any], time_chunk: int | None) -> dict[str, Any]:
+def _stream_plan(model: Model, s: Mapping[str, Any], time_chunk: int | None,
+                 timed: bool = False) -> dict[str, Any]:
     """How a streamed store's run holds its rows: ``time_chunk`` (given, else the most rows
     whose copies in flight stay within ``memory.STREAM_BUDGET``: :func:`memory.stream_rows`;
     at most the output's rows),
     ``keep_current_cycle`` (last-cycle output: the cycles before the last are recorded, so
     that a run stopped early stores its partial cycle, only while a cycle's rows fit the
     budget; a run until periodic keeps them anyway, not knowing its last cycle) and ``held``,
-    the bytes of rows it holds at once (:func:`memory.stream_estimate`)."""
+    the bytes of rows it holds at once (:func:`memory.stream_estimate`; with ``timed``, the
+    accumulated-error estimate, also the last cycle's rows twice: the sink's kept copy, with a
+    chunk more, and the core's second integration of that cycle)."""
     _, cycle_rows, cols = _memory.output_estimate(_output_layout_sized(model, s), s["period"],
                                                   s["output_every"], 1, False)
     _, rows, _ = _output_size(model, s)
@@ -918,8 +952,10 @@ def _stream_plan(model: Model, s: Mapping[str, Any], time_chunk: int | None) -> 
         cycle = 8.0 * _memory.table_rows(cycle_rows, chunk) * cols
         keep = open_ended or cycle <= _memory.STREAM_BUDGET
         kept = cycle_rows if keep else 0
-    return {"time_chunk": chunk, "keep_current_cycle": keep,
-            "held": _memory.stream_estimate(chunk, cols, kept, rows)}
+    held = _memory.stream_estimate(chunk, cols, kept, rows)
+    if timed:
+        held += 8.0 * (2 * cycle_rows + chunk) * cols
+    return {"time_chunk": chunk, "keep_current_cycle": keep, "held": held}
 
 
 def _output_layout_sized(model: Model, s: Mapping[str, Any]) -> dict[str, Any]:
@@ -955,7 +991,13 @@ def simulate_to_zarr(model: Model | str | os.PathLike[str] | Mapping[str, Any],
     (:class:`~oxyline.SimulationInterrupted` for Ctrl-C). A chunk that cannot be written (disk
     full) stops the run with :class:`~oxyline.OutputError`, whose ``result`` is the store with
     the rows written before it. An existing store at ``path`` is replaced only with
-    ``overwrite=True``. Needs ``zarr`` and ``xarray``.
+    ``overwrite=True``. ``estimate_time_error=True`` records the run's accumulated-error
+    estimate in the store as :func:`simulate` gives it (the attributes
+    ``solver_error_estimate_<kind>``, ``solver_time_error_*`` and the variables
+    ``time_error_<kind>`` over ``vessel``): the last cycle's rows are kept as they pass (one
+    cycle and one chunk more held) and compared with the core's second integration of that
+    cycle; a circuit with valves (whose estimate runs the whole run again in memory) and
+    ``meet_rtol`` are refused with :class:`~oxyline.ModelError`. Needs ``zarr`` and ``xarray``.
 
     >>> import oxyline, tempfile, os
     >>> with tempfile.TemporaryDirectory() as d:
@@ -984,8 +1026,14 @@ class _ZarrSink:
     monitor fed each chunk as it passes (docs/physics.md §2.8)."""
 
     def __init__(self, model: Model, s: Mapping[str, Any], monitor: Monitor,
-                 store: Mapping[str, Any]) -> None:
+                 store: Mapping[str, Any], keep_last_cycle: bool = False) -> None:
         self.model, self.s = model, s
+        #: the rows of the last cycle and one chunk more, kept as they pass when the run's
+        #: accumulated error is estimated (its last cycle against the core's second integration
+        #: of it); 0: none kept
+        self.tail_rows = (int(np.ceil(s["period"] / s["output_every"])) + 2
+                          if keep_last_cycle else 0)
+        self.tail: list[dict[str, Any]] = []
         # zero rows in the core's layout, with the chambers' and valves' outputs
         lay = _output_layout(model, s)
         self._empty: dict[str, Any] = {
@@ -1008,9 +1056,33 @@ class _ZarrSink:
         return dict(self._empty)
 
     def add(self, rows: dict[str, Any]) -> None:
+        if self.tail_rows:
+            self._keep(rows)
         chunk = _result(self.model, self.s, rows, {}, False)
         self.monitor.update(chunk)
         self.store.append(chunk.to_xarray(coordinates=False))
+
+    def _keep(self, rows: Mapping[str, Any]) -> None:
+        """Keep ``rows`` (the core's columns), dropping the oldest kept chunk while the others
+        still hold a cycle's rows."""
+        tr = rows.get("transport")
+        self.tail.append({"times": np.array(rows["times"]),
+                          "data": np.array(rows["data"]),
+                          "species": None if tr is None else np.array(tr["data"])})
+        held = sum(len(c["times"]) for c in self.tail)
+        while held - len(self.tail[0]["times"]) >= self.tail_rows:
+            held -= len(self.tail.pop(0)["times"])
+
+    def last_cycle(self) -> dict[str, Any] | None:
+        """The kept rows as a run's rows (``times``, ``data``, the species' ``data``), None
+        when none were kept."""
+        if not self.tail:
+            return None
+        out: dict[str, Any] = {k: np.concatenate([c[k] for c in self.tail])
+                               for k in ("times", "data")}
+        if self.tail[0]["species"] is not None:
+            out["species"] = np.concatenate([c["species"] for c in self.tail])
+        return out
 
     def close(self, raw: dict[str, Any], final: Result, space: bool) -> Any:
         """Write the final attributes (``final``'s, with the spatial error estimate when
@@ -1018,13 +1090,16 @@ class _ZarrSink:
         if space and "error" not in raw:
             _add_space_error(self.model, final)
         # (the attributes only: the store has the coordinates, ten million at that size)
-        raw, opened = _close_store(self.store, raw, dataset(final, coordinates=False).attrs)
+        ds = dataset(final, coordinates=False)
+        # (the per-vessel accumulated-error table, when estimated: its variables over vessel)
+        table = {k: v for k, v in ds.data_vars.items() if k.startswith(TIME_ERROR_PREFIX)}
+        raw, opened = _close_store(self.store, raw, ds.attrs, table)
         _raise_run_error(raw, opened)
         return opened
 
 
-def _close_store(store: Any, raw: dict[str, Any], attrs: dict[str, Any]
-                 ) -> tuple[dict[str, Any], Any]:
+def _close_store(store: Any, raw: dict[str, Any], attrs: dict[str, Any],
+                 variables: Mapping[str, Any] | None = None) -> tuple[dict[str, Any], Any]:
     """Write the run's final attributes and open the store: (the run's outcome, with an
     ``OutputError`` when the attributes cannot be written, and the opened store, None when a
     failing disk left it unreadable after an error)."""
@@ -1033,7 +1108,7 @@ def _close_store(store: Any, raw: dict[str, Any], attrs: dict[str, Any]
     # the store is read back before another writer may have it: one starting right after
     # this run's last write would otherwise overwrite it before it is opened
     try:
-        store.finish(attrs, raw.get("last_cycle_steps"), release=False)
+        store.finish(attrs, raw.get("last_cycle_steps"), release=False, variables=variables)
     except (OSError, RuntimeError, ValueError) as exc:  # e.g. the disk just filled up
         if "error" not in raw:
             raw = {**raw, "error": OutputError(f"{store.path}: cannot write the run's final "

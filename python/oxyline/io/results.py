@@ -331,16 +331,20 @@ class ZarrAppender:
             self._consolidate()
 
     def finish(self, attrs: dict[str, Any], step_sizes: Any = None, *,
-               release: bool = True) -> None:
+               release: bool = True, variables: Any = None) -> None:
         """Replace the store's attributes (e.g. with the run's facts once it has ended), add
         an error-controlled run's step-size history (``step_sizes``, the last cycle's accepted
         steps: the variables :func:`dataset` writes), and let other writers have the store
         (``release=False``: not yet, :meth:`release` does; e.g. until this writer has read
-        the store back, which a writer starting now would otherwise overwrite first)."""
+        the store back, which a writer starting now would otherwise overwrite first).
+        ``variables``: data variables known only after the run (e.g. the per-vessel
+        accumulated-error table over ``vessel``), added as they are."""
         try:
             with deferred_signals():
                 if step_sizes is not None and len(step_sizes):
                     self._write_step_history(step_sizes)
+                if variables:
+                    self._write_variables(variables)
                 self._group.attrs.put(dict(attrs))
                 self._consolidate()
         finally:
@@ -358,6 +362,13 @@ class ZarrAppender:
         with _quiet():
             # the group's attributes are put right after (finish), whatever this leaves there
             history.to_zarr(self.path, mode="a", consolidated=False, **_format2(self._zarr))
+
+    def _write_variables(self, variables: Any) -> None:
+        import xarray as xr
+
+        with _quiet():
+            xr.Dataset(dict(variables)).to_zarr(self.path, mode="a", consolidated=False,
+                                                **_format2(self._zarr))
 
     def remove(self) -> None:
         with deferred_signals():

@@ -318,6 +318,7 @@ pub(crate) fn run_facts<'py>(
         until_periodic: field(&settings, "until_periodic")?,
         rtol: field(&settings, "rtol")?,
         dt: field(&settings, "dt")?,
+        start: field(&settings, "start")?,
     };
     let ran = run.as_ref().map(ran).transpose()?;
     facts_dict(py, recorded(&asked, ran.as_ref(), valves))

@@ -49,6 +49,20 @@ pub const STARTS: &[&str] = &[
     "periodic",
 ];
 
+/// The start of a run that names none: `periodic` (the core's estimate of the periodic state,
+/// `integrate::periodic`) for an error-controlled run to periodicity, which it brings to its
+/// tolerance in fewer cycles and steps than the steady start (docs/physics.md §10, "The default
+/// start"); `steady` otherwise, so that a fixed step (a given `dt`, `rk4`) and a run of exactly
+/// `cycles` keep their outputs bit for bit. A circuit the harmonic solve does not apply to
+/// (nonlinear, time-varying, chambers) starts steady either way.
+pub fn default_start(until_periodic: bool, error_controlled: bool) -> &'static str {
+    if until_periodic && error_controlled {
+        "periodic"
+    } else {
+        "steady"
+    }
+}
+
 /// The resolved run settings (defaults: `oxyline.simulate`'s documentation).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Settings {
@@ -250,16 +264,6 @@ pub fn resolve<N: Node>(sim: &N, overrides: &N, period: Option<f64>) -> Result<S
             m
         }
     };
-    let (s, w) = get("start", Some(sim), "start", Val::Text("steady"));
-    let start = s
-        .text()
-        .filter(|t| STARTS.contains(&t.as_str()))
-        .ok_or_else(|| {
-            setting(
-                &w,
-                format!("must be one of {}, got {}", STARTS.join(", "), s.repr()),
-            )
-        })?;
     let (atol, atol_where) = get("newton_atol", None, "", Val::Null);
     let (r, w) = get("rho_infty", Some(sim), "rho_infty", Val::Float(0.5));
     let rho_infty = real(&r, &w, 0.0, 1.0, false)?;
@@ -278,6 +282,21 @@ pub fn resolve<N: Node>(sim: &N, overrides: &N, period: Option<f64>) -> Result<S
     let (given, atol) = tolerances(&rtol, &atol, dt.is_none() && method != "rk4")?;
     let rtol_default = given.is_none() && dt.is_none() && method != "rk4";
     let rtol = given.or(Some(DEFAULT_RTOL).filter(|_| rtol_default));
+    let (s, w) = get(
+        "start",
+        Some(sim),
+        "start",
+        Val::Text(default_start(until.is_some(), rtol.is_some())),
+    );
+    let start = s
+        .text()
+        .filter(|t| STARTS.contains(&t.as_str()))
+        .ok_or_else(|| {
+            setting(
+                &w,
+                format!("must be one of {}, got {}", STARTS.join(", "), s.repr()),
+            )
+        })?;
     // read by the Python run (one impedance refinement after it), checked here with the rest
     let (e, w) = get("estimate_space_error", None, "", Val::Flag(false));
     let estimate_space_error = flag(&e, &w)?;
@@ -493,6 +512,34 @@ mod tests {
         assert_eq!(s.output_every, 0.8 / 1000.0);
         assert_eq!((s.method.as_str(), s.start.as_str()), ("auto", "steady"));
         assert!(s.segments && s.transport && !s.output_all_cycles);
+    }
+
+    #[test]
+    fn the_default_start_is_periodic_only_for_an_error_controlled_run_to_periodicity() {
+        let start = |sim: serde_json::Value, o: serde_json::Value| {
+            resolve(&sim, &o, Some(0.8)).unwrap().start
+        };
+        let to_periodic = json!({"cycles": 2, "until_periodic": 1e-4});
+        assert_eq!(start(to_periodic.clone(), json!({})), "periodic");
+        assert_eq!(
+            start(to_periodic.clone(), json!({"rtol": 1e-4})),
+            "periodic"
+        );
+        // a fixed step, or exactly `cycles`, keeps the steady start (and its outputs)
+        assert_eq!(start(to_periodic.clone(), json!({"dt": 1e-3})), "steady");
+        assert_eq!(
+            start(to_periodic.clone(), json!({"method": "rk4"})),
+            "steady"
+        );
+        assert_eq!(
+            start(to_periodic.clone(), json!({"until_periodic": null})),
+            "steady"
+        );
+        assert_eq!(start(json!({"cycles": 2}), json!({})), "steady");
+        // a start given wins, from the file or the keyword
+        let file_steady = json!({"cycles": 2, "until_periodic": 1e-4, "start": "steady"});
+        assert_eq!(start(file_steady, json!({})), "steady");
+        assert_eq!(start(to_periodic, json!({"start": "zero"})), "zero");
     }
 
     #[test]

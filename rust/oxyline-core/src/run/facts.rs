@@ -39,6 +39,9 @@ pub struct Requested {
     pub rtol: Option<f64>,
     /// The fixed step given (None: automatic).
     pub dt: Option<f64>,
+    /// How the run starts (`model::settings::STARTS`; the default's rule:
+    /// `model::settings::default_start`).
+    pub start: String,
 }
 
 /// What a finished (or stopped) run did.
@@ -107,6 +110,7 @@ pub fn recorded(s: &Requested, ran: Option<&Ran>, valves: bool) -> Vec<(String, 
         ("rho_infty".into(), Fact::Real(s.rho_infty)),
         ("until_periodic".into(), s.until_periodic.into()),
         ("rtol".into(), s.rtol.into()),
+        ("start".into(), Fact::Text(s.start.clone())),
         ("step_control".into(), Fact::Text(step_control(s, valves))),
     ];
     let Some(ran) = ran else {
@@ -176,6 +180,7 @@ mod tests {
             until_periodic: None,
             rtol: Some(1e-3),
             dt: None,
+            start: "steady".into(),
         }
     }
 
@@ -224,6 +229,7 @@ mod tests {
                 "rho_infty",
                 "until_periodic",
                 "rtol",
+                "start",
                 "step_control"
             ]
         );
