@@ -15,6 +15,12 @@
 //! first steps' scratch (16 instead of 41 MiB at 262 k segments), calling it again later
 //! released nothing more.
 //!
+//! A large run's peak resident set is reached while it sets up, before that first row (at
+//! 1.05 M segments with O2: ~1,190 B per segment against ~1,050 through the steps): the load's
+//! freed pages, then the steady start's factors, then the one factorisation's values are
+//! still resident while the next stage allocates. The pass therefore also hands them back at
+//! its start, after the steady start and after the factorisation (`run::pass`).
+//!
 //! It is made only for circuits of at least [`RELEASE_MIN_UNKNOWNS`] unknowns: it walks the
 //! allocator's heaps under their locks, which a small run (thousands of them in an ensemble's
 //! threads) should not pay for what it would not gain.
