@@ -94,9 +94,13 @@ class SummaryStream:
         self._species_names: list[str] = []
         self._initial: list[float] = []
         # every core column's time mean, min and max, folded by the core chunk by chunk (the
-        # flow rows, the species rows), and the first rows (the summary of a run of one row)
+        # flow rows, the species rows), and the first rows (the summary of a run of one row),
+        # held only until a later time arrives: the output times increase, so the folds'
+        # statistics then exist (a row of a 1e6-segment tree's summary is ~12 B per segment,
+        # held through the whole run before)
         self._folds = [_core.ColumnStatsFold(width),
                        _core.ColumnStatsFold(species_width)]
+        self._t_first: float | None = None
         self._first: list[np.ndarray] = []
 
     def bytes(self) -> float:
@@ -121,8 +125,11 @@ class SummaryStream:
             self._initial = [float(x) for x in tr["initial_stored"]]
         for fold, block in zip(self._folds, blocks, strict=True):
             fold.push(t, np.ascontiguousarray(block, dtype=float))
-        if not self._first:
+        if self._t_first is None:
+            self._t_first = float(t[0])
             self._first = [b[0].copy() for b in blocks]
+        if self._first and float(t[-1]) > self._t_first:
+            self._first = []  # two rows over a positive span: the folds' statistics exist
 
     def summary(self, model_name: str) -> Any:
         """The per-vessel table of :func:`oxyline.io.results.summary` (mean, min, max): the
@@ -131,8 +138,9 @@ class SummaryStream:
 
         cols: dict[str, Any] = {}
         units: dict[str, str] = {}
-        if self._first:
-            stats = [f.finish() or (first,) * 3 for f, first in zip(self._folds, self._first,
+        if self._t_first is not None:
+            firsts = self._first or [None] * len(self._folds)
+            stats = [f.finish() or (first,) * 3 for f, first in zip(self._folds, firsts,
                                                                     strict=True)]
             rows: dict[str, Any] = {"times": np.arange(3.0), "data": np.stack(stats[0])}
             if self._species_cols is not None:

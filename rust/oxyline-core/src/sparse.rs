@@ -280,20 +280,20 @@ const SKIP: u32 = 3;
 pub struct TreeLu<T: Scalar = f64> {
     n: usize,
     /// Packed slot (`k << 2 | kind`, k the position in the elimination order) of every stamp;
-    /// the stamps themselves follow from the slots, `vertex` and `parent` (see `stamps`).
+    /// the stamps themselves follow from the slots, `vertex` and `parent_pos` (see `stamps`).
     slots: Vec<u32>,
     /// The vertex (unknown) at each position of the elimination order (every vertex after all
     /// of its children).
     vertex: Vec<u32>,
-    /// The parent vertex of the vertex at each position (NONE for a root).
-    parent: Vec<u32>,
     up: Vec<T>,
     /// K[parent(v), v], divided by the pivot after `factor`
     down: Vec<T>,
     /// The diagonal while `factor` sums the stamps, then the pivots, stored as reciprocals
     /// (one array: the diagonal is not needed after the elimination).
     pivot: Vec<T>,
-    /// The position of each vertex's parent in the elimination order (NONE for a root).
+    /// The position of each vertex's parent in the elimination order (NONE for a root); the
+    /// parent vertex is `vertex[parent_pos[k]]` (`parent_vertex`: a table of parent vertices
+    /// beside it was 4 bytes per unknown for the run's life).
     parent_pos: Vec<u32>,
     /// The blocks solved in parallel and the top tree solved serially (see `parallel`).
     partition: Box<parallel::Partition>,
@@ -505,10 +505,12 @@ impl<T: Scalar> TreeLu<T> {
         for (k, &v) in vertex.iter().enumerate() {
             pos[v as usize] = k as u32;
         }
-        let parent: Vec<u32> = vertex.iter().map(|&v| parent_of[v as usize]).collect();
-        let parent_pos: Vec<u32> = parent
+        let parent_pos: Vec<u32> = vertex
             .iter()
-            .map(|&p| if p == NONE { NONE } else { pos[p as usize] })
+            .map(|&v| match parent_of[v as usize] {
+                NONE => NONE,
+                p => pos[p as usize],
+            })
             .collect();
         let partition = Box::new(parallel::Partition::new(n, &blocks, &parent_pos));
         let slots = stamps
@@ -521,7 +523,6 @@ impl<T: Scalar> TreeLu<T> {
             n,
             slots,
             vertex,
-            parent,
             up: vec![T::ZERO; n],
             down: vec![T::ZERO; n],
             pivot: vec![T::ZERO; n],
@@ -531,6 +532,15 @@ impl<T: Scalar> TreeLu<T> {
             refactored: false,
             held,
         })
+    }
+
+    /// The parent vertex of the vertex at position `k` (NONE for a root).
+    #[inline]
+    fn parent_vertex(&self, k: usize) -> u32 {
+        match self.parent_pos[k] {
+            NONE => NONE,
+            p => self.vertex[p as usize],
+        }
     }
 
     /// Whether the root at position `k` is held for a core's LU.
@@ -607,7 +617,9 @@ impl<T: Scalar> TreeLu<T> {
                 pivot: self.pivot[k].modulus(),
                 scale: magnitude[k],
                 diagonal: diagonal[k],
-                parent: (self.parent[k] != NONE).then_some(self.parent[k] as usize),
+                parent: Some(self.parent_vertex(k))
+                    .filter(|&p| p != NONE)
+                    .map(|p| p as usize),
                 children: (0..k)
                     .filter(|&j| self.parent_pos[j] == k as u32)
                     .map(|j| self.vertex[j] as usize)
@@ -657,9 +669,10 @@ impl<T: Scalar> TreeLu<T> {
 
     /// The forward pass of a serial solve: every vertex's right side folded into its parent's.
     fn forward(&self, b: &mut [T]) {
-        for ((&v, &p), &down) in self.vertex.iter().zip(&self.parent).zip(&self.down) {
-            if p != NONE {
-                b[p as usize] -= down * b[v as usize];
+        let vertex = &self.vertex;
+        for ((&v, &pp), &down) in vertex.iter().zip(&self.parent_pos).zip(&self.down) {
+            if pp != NONE {
+                b[vertex[pp as usize] as usize] -= down * b[v as usize];
             }
         }
     }
@@ -667,17 +680,17 @@ impl<T: Scalar> TreeLu<T> {
     /// The back substitution of a serial solve, roots to leaves; whether it is finite.
     fn backward(&self, b: &mut [T]) -> bool {
         let mut finite = true;
-        for (((&v, &p), &up), &pivot) in self
-            .vertex
+        let vertex = &self.vertex;
+        for (((&v, &pp), &up), &pivot) in vertex
             .iter()
-            .zip(&self.parent)
+            .zip(&self.parent_pos)
             .zip(&self.up)
             .zip(&self.pivot)
             .rev()
         {
             let v = v as usize;
-            let up = if p != NONE {
-                up * b[p as usize]
+            let up = if pp != NONE {
+                up * b[vertex[pp as usize] as usize]
             } else {
                 T::ZERO
             };
@@ -704,11 +717,11 @@ impl<T: Scalar> TreeLu<T> {
         for (k, &v) in self.vertex.iter().enumerate() {
             pos[v as usize] = k as u32;
         }
-        let (parent, held) = (&self.parent, &self.held);
+        let held = &self.held;
         let slots = stamps
             .iter()
             .map(|s| {
-                let parent_of = |v: usize| parent[pos[v] as usize];
+                let parent_of = |v: usize| self.parent_vertex(pos[v] as usize);
                 let in_core = |v: usize| is_held(held, pos[v] as usize);
                 slot_of(s.at(), &pos, parent_of, in_core)
             })
@@ -724,7 +737,7 @@ impl<T: Scalar> TreeLu<T> {
     /// The (row, col) of a tree slot (not a `SKIP` one).
     fn stamp_of(&self, slot: u32) -> (usize, usize) {
         let k = (slot >> 2) as usize;
-        let (v, p) = (self.vertex[k] as usize, self.parent[k] as usize);
+        let (v, p) = (self.vertex[k] as usize, self.parent_vertex(k) as usize);
         match slot & 3 {
             DIAG => (v, v),
             UP => (v, p),

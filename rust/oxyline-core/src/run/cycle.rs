@@ -18,6 +18,10 @@ use crate::integrate::stability::growth;
 
 mod finer; // the accumulated-error estimate: the last cycle again at a tighter tolerance
 
+/// Observation rows of at least this many values are freed between output rows (see
+/// `Cycles::push_observed`): 2 MB, a row of ~60 000 output vessels with oxygen.
+const OBSERVATION_KEPT_MAX: usize = 1 << 18;
+
 /// The running loop. A failed or interrupted run keeps everything recorded so far.
 pub(super) struct Cycles<'r, 'f> {
     pub(super) s: &'r RunSettings,
@@ -35,7 +39,10 @@ pub(super) struct Cycles<'r, 'f> {
     /// Cycle-to-cycle change of the state at the end of the last cycle run (relative).
     pub periodic_error: f64,
     prev_cycle_end: Vec<f64>,
+    /// The species observation of the row being recorded (every species column of every
+    /// output vessel, before the recorder's selection), and its length the last time.
     obs_row: Vec<f64>,
+    obs_len: usize,
     /// The allocator's free pages were handed back after the pass's first output row.
     released: bool,
     /// Error control (None: the fixed step).
@@ -133,6 +140,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
             cycles_run: 0,
             periodic_error: f64::NAN,
             obs_row: Vec::new(),
+            obs_len: 0,
             released: false,
             adaptive: None,
             periodic_steps: PeriodicSteps::default(),
@@ -611,13 +619,13 @@ impl<'r, 'f> Cycles<'r, 'f> {
         })?;
         if rows.species && self.state.species.is_some() {
             // the interpolation and the observation in one entry of the run's pool
+            self.obs_row.reserve_exact(self.obs_len);
             let (state, row) = (&mut self.state, &mut self.obs_row);
             crate::threads::in_pool(|| {
                 let (yi, ydi, zi, vi) = ad.interpolate_all(theta, h, state);
                 state.observe_at(time, yi, ydi, zi, vi, row)
             })?;
-            self.obs_row.shrink_to_fit();
-            self.rec.push_species(&self.obs_row);
+            self.push_observed();
         }
         if rows.committed && !self.rec.flush(false) {
             return Err(Error::Interrupted { time });
@@ -637,17 +645,31 @@ impl<'r, 'f> Cycles<'r, 'f> {
         }
         if species && self.state.species.is_some() {
             // the row's observation passes in one entry of the run's pool
+            self.obs_row.reserve_exact(self.obs_len);
             let (state, row) = (&mut self.state, &mut self.obs_row);
             crate::threads::in_pool(|| state.observe(time, row))?;
-            // the first row grew the buffer by doubling: keep only its length (a row holds
-            // every species column of every output vessel and segment, ~50 B per segment)
-            self.obs_row.shrink_to_fit();
-            self.rec.push_species(&self.obs_row);
+            self.push_observed();
         }
         if committed && !self.rec.flush(false) {
             return Err(Error::Interrupted { time });
         }
         Ok(())
+    }
+
+    /// The recorder's species columns of the observation just made. A large observation row
+    /// is then freed, not kept between rows: it holds every species column of every output
+    /// vessel (and segment, when recorded), ~12 bytes per segment of a 1e6-segment tree's
+    /// large-model output, beside the recorder's own selection, through every step of the
+    /// run; the next row allocates its remembered length at once (no growth by doubling).
+    /// A small one keeps its length only (the first row grew it by doubling).
+    fn push_observed(&mut self) {
+        self.rec.push_species(&self.obs_row);
+        self.obs_len = self.obs_row.len();
+        if self.obs_len >= OBSERVATION_KEPT_MAX {
+            self.obs_row = Vec::new();
+        } else {
+            self.obs_row.shrink_to_fit();
+        }
     }
 
     /// The rates of the probes and derived columns (svZeroDSolver's `output_derivative`):

@@ -15,6 +15,14 @@
 //! first steps' scratch (16 instead of 41 MiB at 262 k segments), calling it again later
 //! released nothing more.
 //!
+//! A large run's peak resident set is reached while it sets up, before that first row (at
+//! 1.05 M segments with O2: ~1,190 B per segment against ~1,020–1,050 through the steps), and
+//! ~70 B per segment of it are freed pages (glibc told to map every block of 1 MiB or more
+//! on its own peaks that much lower). The pass also hands the free pages back at its start,
+//! after the steady start and after its one factorisation (`run::pass`); measured, that did
+//! not lower the 1.05 M-segment peak (1,186 against 1,187 B per segment): the pages that
+//! count are freed and allocated again inside one stage, not between them.
+//!
 //! It is made only for circuits of at least [`RELEASE_MIN_UNKNOWNS`] unknowns: it walks the
 //! allocator's heaps under their locks, which a small run (thousands of them in an ensemble's
 //! threads) should not pay for what it would not gain.

@@ -46,6 +46,10 @@ pub(super) fn run(
             "svZeroDSolver's output conventions (svzerod) cannot be checkpointed",
         ));
     }
+    // the load's freed pages (the parsed model, the assembly's rows) handed back before the
+    // setup's transients (steady start, factorisation) are allocated on top of them: a large
+    // run's peak resident set is its setup's, not its steps' (see `heap`)
+    super::heap::release_free_pages(dae.n);
     let mut plan = Plan::new(dae, steady, s, transport.as_deref_mut(), progress)?;
 
     let resume = checkpoints.as_deref_mut().and_then(|c| c.resume.take());
@@ -56,6 +60,8 @@ pub(super) fn run(
     if mean.is_none() {
         // the last pass (a first pass's coupled run starts from the same state) has its start
         steady.release();
+        // (its factors handed back before the integrator's are made)
+        super::heap::release_free_pages(dae.n);
     }
     let quasi = transport
         .as_deref()
@@ -76,6 +82,9 @@ pub(super) fn run(
         // are allocated, instead of adding to them at the first step (a large tree's peak)
         flow.integrator().factor_ahead(0.0, &y)?;
     }
+    // the steady start's and the factorisation's freed values handed back before the species'
+    // state, the cycle loop and the output's rows are allocated
+    super::heap::release_free_pages(dae.n);
     let (species, initial_stored) = match transport {
         Some(tr) => {
             // per-segment species columns nobody records are not computed

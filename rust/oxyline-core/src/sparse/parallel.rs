@@ -184,7 +184,7 @@ impl<T: Scalar> TreeLu<T> {
         });
         for &item in &part.serial {
             let k = (item & !ROOT) as usize;
-            let p = self.parent[k];
+            let p = self.parent_vertex(k);
             if p != NONE {
                 b[p as usize] -= self.down[k] * b[self.vertex[k] as usize];
             }
@@ -219,7 +219,7 @@ impl<T: Scalar> TreeLu<T> {
 
     /// One position's back substitution (as in `solve_in_place`); whether the value is finite.
     fn back_substitute(&self, k: usize, b: &mut [T]) -> bool {
-        let (v, p) = (self.vertex[k] as usize, self.parent[k]);
+        let (v, p) = (self.vertex[k] as usize, self.parent_vertex(k));
         let up = if p != NONE {
             self.up[k] * b[p as usize]
         } else {
@@ -236,8 +236,9 @@ impl<T: Scalar> TreeLu<T> {
     /// `b` points at the right side; no other thread touches the vertices of these blocks.
     unsafe fn forward_blocks(&self, a: usize, e: usize, b: *mut T) {
         for k in a..e {
-            if (self.parent_pos[k] as usize) < e {
-                let (v, p) = (self.vertex[k] as usize, self.parent[k] as usize);
+            let pp = self.parent_pos[k] as usize;
+            if pp < e {
+                let (v, p) = (self.vertex[k] as usize, self.vertex[pp] as usize);
                 // SAFETY: v and p are vertices of these blocks (see the caller)
                 unsafe { *b.add(p) -= self.down[k] * *b.add(v) };
             }
@@ -251,7 +252,7 @@ impl<T: Scalar> TreeLu<T> {
     unsafe fn backward_blocks(&self, a: usize, e: usize, b: *mut T) -> bool {
         let mut finite = true;
         for k in (a..e).rev() {
-            let (v, p) = (self.vertex[k] as usize, self.parent[k]);
+            let (v, p) = (self.vertex[k] as usize, self.parent_vertex(k));
             // SAFETY: v is a vertex of these blocks, p its parent (in them or the top tree)
             unsafe {
                 let up = if p != NONE {
