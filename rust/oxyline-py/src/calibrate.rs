@@ -121,7 +121,10 @@ pub fn target_gradients<'py>(
     let d = PyDict::new(py);
     d.set_item("values", out.run.values.into_pyarray(py))?;
     d.set_item("outputs", list)?;
-    d.set_item("gradients", out.gradients.into_pyarray(py).reshape([rows, np])?)?;
+    d.set_item(
+        "gradients",
+        out.gradients.into_pyarray(py).reshape([rows, np])?,
+    )?;
     d.set_item("cycles", out.run.cycles)?;
     d.set_item("tangent_cycles", out.run.transport_cycles)?;
     d.set_item("adjoint_cycles", out.run.adjoint_cycles)?;

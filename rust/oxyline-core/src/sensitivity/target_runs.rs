@@ -91,7 +91,12 @@ pub fn target_values(
                 length: *length,
                 dlength,
             });
-            targets::evaluate(&t.output, &own, Some(t.at.as_deref().unwrap_or(cycle.times)), path)
+            targets::evaluate(
+                &t.output,
+                &own,
+                Some(t.at.as_deref().unwrap_or(cycle.times)),
+                path,
+            )
         })
         .collect()
 }
@@ -135,7 +140,12 @@ fn weights_of_target(
             length,
             dlength: &zeros,
         });
-        let tv = targets::evaluate(&t.output, &cycle, Some(t.at.as_deref().unwrap_or(times)), path)?;
+        let tv = targets::evaluate(
+            &t.output,
+            &cycle,
+            Some(t.at.as_deref().unwrap_or(times)),
+            path,
+        )?;
         let nv = tv.values.len();
         if full.is_empty() {
             full = vec![0.0; nv * ns * n_signals];

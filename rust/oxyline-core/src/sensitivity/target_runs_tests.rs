@@ -56,15 +56,19 @@ fn output_weights_are_the_closed_forms() {
         assert!((at(1, 1) + 0.25 * q / (p * p)).abs() < 1e-15);
         // a signal read twice: both reads add up
         assert_eq!([at(2, 0), at(2, 1), at(2, 2)], [0.5, 0.0, 0.0]);
-        let sample = |row: usize, step: usize| if k == step { 1.0 } else { 0.0 };
-        assert_eq!([at(3, 2), at(4, 2)], [sample(3, 1), sample(4, 3)]);
+        let sample = |step: usize| if k == step { 1.0 } else { 0.0 };
+        // 0.5 s is step 1's end; 1.0 s is the cycle's start, the last step's sample
+        assert_eq!([at(3, 2), at(4, 2)], [sample(1), sample(3)]);
     }
 }
 
 #[test]
 fn output_weights_in_chunks_are_the_whole_basis() {
     let (times, sig) = cycle();
-    for (output, cols) in [("flow_split.d.p", &[0, 1][..]), ("p.pressure_in.pulse", &[2])] {
+    for (output, cols) in [
+        ("flow_split.d.p", &[0, 1][..]),
+        ("p.pressure_in.pulse", &[2]),
+    ] {
         let t = read(output, cols, None);
         let whole = weights_of_target(&t, &times, &sig, 3, None, BASIS_ENTRIES).unwrap();
         for most in [1, 3, 5] {
@@ -113,11 +117,20 @@ fn owned(x: &[&str]) -> Vec<String> {
 #[test]
 fn a_pulse_wave_path_length_is_its_vessels() {
     let spec = parse(MODEL).unwrap();
-    let paths = owned(&["vessels.d1.length", "vessels.d2.length", "vessels.parent.length"]);
-    let (l, dl) = path_length(&spec, "pwv.parent.d1", &paths).unwrap().unwrap();
+    let paths = owned(&[
+        "vessels.d1.length",
+        "vessels.d2.length",
+        "vessels.parent.length",
+    ]);
+    let (l, dl) = path_length(&spec, "pwv.parent.d1", &paths)
+        .unwrap()
+        .unwrap();
     assert!((l - 0.35).abs() < 1e-15);
     assert_eq!(dl, vec![1.0, 0.0, 1.0]);
-    assert_eq!(path_length(&spec, "parent.pressure_in.mean", &paths).unwrap(), None);
+    assert_eq!(
+        path_length(&spec, "parent.pressure_in.mean", &paths).unwrap(),
+        None
+    );
     let err = path_length(&spec, "pwv.d2.d1", &paths).unwrap_err();
     assert!(err.to_string().contains("pwv.d2.d1"), "{err}");
 }
@@ -132,7 +145,10 @@ fn target_adjoint_is_the_tangent() {
         max_cycles: 2000,
         tol: 1e-13,
     };
-    let paths = owned(&["vessels.parent.length", "boundary_conditions.o1.distal_resistance"]);
+    let paths = owned(&[
+        "vessels.parent.length",
+        "boundary_conditions.o1.distal_resistance",
+    ]);
     let signals: Vec<(String, String)> = [
         ("d1", "flow_in"),
         ("d1", "pressure_out"),
@@ -164,7 +180,9 @@ fn target_adjoint_is_the_tangent() {
         for i in 0..v.len() {
             let g = &adj.gradients[(row + i) * 2..(row + i + 1) * 2];
             // by the SI parameter: compare d value / d log parameter
-            let scale = (0..2).fold(0.0f64, |m, p| m.max((tv.jacobian[i * 2 + p] * fwd.values[p]).abs()));
+            let scale = (0..2).fold(0.0f64, |m, p| {
+                m.max((tv.jacobian[i * 2 + p] * fwd.values[p]).abs())
+            });
             assert!(scale > 0.0, "{}", t.output);
             for p in 0..2 {
                 let err = (g[p] - tv.jacobian[i * 2 + p]).abs() * fwd.values[p];
