@@ -227,6 +227,21 @@ def adjoint_gradients(model_json: str, paths: list[str], signals: list[tuple[str
     ``paths`` by the adjoint: one backward sweep per functional; ``weights_of(times,
     signals)`` chooses the weights from the one primal cycle (oxyline.sensitivities with
     ``mode="adjoint"``)."""
+def target_tangents(model_json: str, paths: list[str], signals: list[tuple[str, str]],
+                    targets: list[tuple[str, list[int], list[float] | None]], period: float,
+                    steps_per_cycle: int, rho_infty: float = 0.5, max_cycles: int = 2000,
+                    tol: float = 1e-12) -> dict[str, Any]:
+    """Every target's (values, jacobian by ``paths``) at the periodic state by one tangent
+    run of ``signals``: a target is (output, its signals' columns, a series' times or None
+    for the cycle's steps); a pulse-wave velocity's path length from the model
+    (oxyline.calibrate)."""
+def target_gradients(model_json: str, paths: list[str], signals: list[tuple[str, str]],
+                     targets: list[tuple[str, list[int], list[float] | None]], period: float,
+                     steps_per_cycle: int, rho_infty: float = 0.5, max_cycles: int = 2000,
+                     tol: float = 1e-12) -> dict[str, Any]:
+    """:func:`target_tangents` by the adjoint: the targets' output weights built by the core
+    from the one primal cycle, one backward sweep per target value; ``outputs`` (each
+    target's values) and ``gradients`` (the targets' rows × parameters)."""
 
 class CalibrationProblem:
     """svZeroDSolver's calibration residual (oxyline_core::calibration): RCL vessels

@@ -32,9 +32,7 @@ from oxyline.targets import (
     Target,
     _finite,
     _sigma,
-    evaluate,
     parse_targets,
-    path_of,
     signals_for,
 )
 
@@ -111,26 +109,32 @@ def _run_args(model: Model, parameters: Sequence[str], signals: Sequence[Any],
     return float(period), steps, float(s["rho_infty"]), max_cycles, tol
 
 
+def _reads(targets: Sequence[Target], series_at_steps: bool
+           ) -> tuple[list[tuple[str, str]], list[tuple[str, list[int], Any]]]:
+    """The signals a run records (each once) and each target as the core reads it: its
+    output, its signals' columns and a series' times (None: the cycle's steps, as
+    :func:`sensitivities` reads a series; else its data's times, as :func:`calibrate`)."""
+    signals = sorted({s for t in targets for s in t.signals})
+    return signals, [(t.output, [signals.index(s) for s in t.signals],
+                      None if series_at_steps or t.times is None
+                      else np.asarray(t.times, dtype=float).tolist())
+                     for t in targets]
+
+
 def _evaluate(model: Model, parameters: Sequence[str], targets: Sequence[Target],
               steps_per_cycle: int | None, tol: float, max_cycles: int,
               series_at_steps: bool = False
               ) -> tuple[list[np.ndarray], list[np.ndarray], dict[str, Any]]:
     """Every target's value(s) and Jacobian rows (d/d SI parameter) at ``model`` by the
-    tangents; ``series_at_steps`` as :func:`_adjoint`'s."""
-    signals = sorted({s for t in targets for s in t.signals})
+    tangents, reduced by the core (:func:`oxyline._core.target_tangents`,
+    ``oxyline_core::sensitivity::target_runs``); ``series_at_steps`` as :func:`_reads`."""
+    signals, reads = _reads(targets, series_at_steps)
     args = _run_args(model, parameters, signals, steps_per_cycle, tol, max_cycles)
     with core_errors(f"model '{model.name}'"):  # flow and oxygen signals alike
-        raw = _core.tangent_sensitivities(json.dumps(model.canonical), list(parameters),
-                                          signals, *args)
-    values, jac = [], []
-    for t in targets:
-        cols = [signals.index(s) for s in t.signals]
-        v, j = evaluate(t.output, raw["times"], raw["signals"][:, cols],
-                       raw["derivatives"][:, :, cols],
-                       raw["times"] if series_at_steps else t.times,
-                       path_of(t.output, model, parameters))
-        values.append(v)
-        jac.append(j.reshape(len(v), len(parameters)))
+        raw = _core.target_tangents(json.dumps(model.canonical), list(parameters), signals,
+                                    reads, *args)
+    values = [v for v, _ in raw["outputs"]]
+    jac = [j.reshape(len(v), len(parameters)) for v, j in raw["outputs"]]
     return values, jac, raw
 
 
@@ -138,46 +142,18 @@ def _adjoint(m: Model, parameters: Sequence[str], targets: Sequence[Target],
              steps_per_cycle: int | None, tol: float, max_cycles: int, series_at_steps: bool
              ) -> tuple[list[np.ndarray], list[np.ndarray], dict[str, Any]]:
     """The outputs and their Jacobian rows by the core's adjoint, in one primal run: the core
-    hands the periodic cycle's signals to ``weights_of``, where each output's derivative is a
-    fixed linear functional of the signals' derivatives (:func:`~oxyline.targets.evaluate`
-    applied to a unit basis gives its weights), and one backward sweep per output row gives
-    its gradient for every parameter. ``series_at_steps``: a series is read at the cycle's
-    steps (:func:`sensitivities`), else at its target's times (:func:`calibrate`)."""
-    signals = sorted({s for t in targets for s in t.signals})
+    builds each output's weights on the periodic cycle's signals (its derivative is a fixed
+    linear functional of theirs) and runs one backward sweep per output row
+    (:func:`oxyline._core.target_gradients`, ``oxyline_core::sensitivity::target_runs``);
+    ``series_at_steps`` as :func:`_reads`."""
+    signals, reads = _reads(targets, series_at_steps)
     args = _run_args(m, [], signals, steps_per_cycle, tol, max_cycles)
-    values: list[np.ndarray] = []
-    paths: list[Any] = []
-
-    def weights_of(times: np.ndarray, sig: np.ndarray) -> np.ndarray:
-        ns, nsig = sig.shape
-        weights = []
-        for t in targets:
-            cols = [signals.index(s) for s in t.signals]
-            # the unit basis over this output's own signals only (its rows elsewhere are 0)
-            k = len(cols)
-            basis = np.eye(ns * k).reshape(ns * k, ns, k)
-            path = path_of(t.output, m, parameters)
-            at = times if series_at_steps or t.times is None else t.times
-            v, w = evaluate(t.output, times, sig[:, cols], basis, at,
-                           None if path is None else (path[0], np.zeros(ns * k)))
-            full = np.zeros((len(v), ns, nsig))
-            for i, c in enumerate(cols):  # (a signal read twice adds up)
-                full[:, :, c] += w.reshape(len(v), ns, k)[:, :, i]
-            values.append(v)
-            weights.append(full.reshape(len(v), ns * nsig))
-            paths.append(path)
-        return np.ascontiguousarray(np.concatenate(weights).ravel(), dtype=float)
-
     with core_errors(f"model '{m.name}'"):  # flow and oxygen signals alike
-        out = _core.adjoint_gradients(json.dumps(m.canonical), list(parameters), signals,
-                                      weights_of, *args)
-    jac, start = [], 0
-    for path, v in zip(paths, values, strict=True):
-        j = np.asarray(out["gradients"][start:start + len(v)])
-        if path is not None:  # a pulse-wave velocity L/τ: its path length's own term, v/L
-            j = j + (v / path[0])[:, None] * path[1][None, :]
-        jac.append(j)
-        start += len(v)
+        out = _core.target_gradients(json.dumps(m.canonical), list(parameters), signals,
+                                     reads, *args)
+    values = list(out["outputs"])
+    ends = np.cumsum([len(v) for v in values])
+    jac = [out["gradients"][e - len(v):e] for v, e in zip(values, ends, strict=True)]
     raw = {"values": out["values"], "cycles": out["cycles"],
            "tangent_cycles": max(out["adjoint_cycles"], default=0),
            "periodic_change": float(out["periodic_change"])}
@@ -684,7 +660,7 @@ class _LoopProblem(_Problem):
 
     def model(self, theta: np.ndarray) -> dict[str, Any]:
         p = copy.deepcopy(self.source)
-        for q, v in zip(self.parameters, self.start * np.exp(theta), strict=True):
+        for q, v in zip(self.parameters, self.values(theta), strict=True):
             node, k = _loop_key(p, q)
             node[k] = float(v)
         return p
@@ -827,7 +803,7 @@ def _sample(fit: CalibrationResult, problem: _Problem, lo: np.ndarray, hi: np.nd
     burn = steps // 2 if opts["burn"] is None else int(opts["burn"])
     sampler.run_mcmc(p0, steps, progress=False)
     chain = sampler.get_chain(discard=burn, flat=True)
-    fit.samples = start * np.exp(chain)
+    fit.samples = problem.values(chain)  # each row's factors of the start
     fit.report.update(method="bayes", fit_method=fit.report["method"],
                       acceptance=float(np.mean(sampler.acceptance_fraction)),
                       posterior_evaluations=problem.evaluations)

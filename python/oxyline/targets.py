@@ -36,20 +36,20 @@ and by the flow parameters, the core's species tangent in the same
 * ``"VO2"``: the network's oxygen consumption, the cycle mean of its total wall uptake
   (mol/s); ``"VO2.<vessel>[.<vessel>...]"``: that of the named vessels (an organ or region).
 
-The core (:func:`oxyline._core.tangent_sensitivities`) gives the signals over the periodic
-cycle and their exact derivatives, and reduces them to each output's value and derivatives
-(:func:`oxyline._core.target_value`, ``oxyline_core::sensitivity::targets``): a mean is the
+The core gives the signals over the periodic cycle and their exact derivatives, and reduces
+them to each output's value and derivatives (:func:`oxyline._core.target_tangents`,
+``oxyline_core::sensitivity::targets`` and ``target_runs``), or builds each output's weights
+on the signals for its adjoint (:func:`oxyline._core.target_gradients`): a mean is the
 mean of the derivatives, a maximum the derivative at the step of the maximum (the derivative
 of the discrete maximum, exact wherever the maximum is unique). A pulse-wave velocity's feet
 are differentiated likewise at their samples (the steepest upstroke and the diastolic
-minimum), and its path length by the lengths of the vessels on the path. The core also finds
-the signals each name reads, checked against the model
-(:func:`oxyline._core.target_signals`); here the user's targets are read.
+minimum), and its path length (found by the core in the model) by the lengths of the
+vessels on the path. The core also finds the signals each name reads, checked against the
+model (:func:`oxyline._core.target_signals`); here the user's targets are read.
 """
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -99,43 +99,6 @@ def _signals(found: tuple[Any, str | None], error: type[ModelError]
     if why is not None:
         raise error(why)
     return [(str(v), str(x)) for v, x in signals]
-
-
-def pwv_path(output: str, model: Any, error: type[ModelError] = ModelError
-             ) -> list[tuple[str, float]]:
-    """The vessels from the inlet of ``pwv.<proximal>.<distal>``'s proximal vessel to the
-    outlet of its distal one, with their lengths (m), by the core
-    (:func:`oxyline._core.pulse_wave_path`); an error naming the output if there is none."""
-    try:
-        return _core.pulse_wave_path(json.dumps(model.canonical), output)
-    except ModelError as e:
-        raise error(str(e)) from None
-
-
-def evaluate(output: str, times: np.ndarray, values: np.ndarray, derivs: np.ndarray,
-             at: Any = None, path: tuple[float, np.ndarray] | None = None
-             ) -> tuple[np.ndarray, np.ndarray]:
-    """The output's value(s) and derivatives from its signals over the cycle, by the core
-    (:func:`oxyline._core.target_value`): ``values`` (n_steps × n_signals), ``derivs``
-    (n_params × n_steps × n_signals); ``at``, a series' times; ``path``, a pulse-wave
-    velocity's length and its derivatives. Returns (value (m,), jacobian (m × n_params))."""
-    return _core.target_value(
-        output, np.ascontiguousarray(times, dtype=float),
-        np.ascontiguousarray(values, dtype=float), np.ascontiguousarray(derivs, dtype=float),
-        None if at is None else np.ascontiguousarray(np.atleast_1d(at), dtype=float),
-        None if path is None else (float(path[0]), np.ascontiguousarray(path[1], dtype=float)))
-
-
-def path_of(output: str, model: Any, parameters: Sequence[str]
-            ) -> tuple[float, np.ndarray] | None:
-    """A pulse-wave velocity's path length and its derivative by parameter (1 for the length
-    of a vessel on the path), else None."""
-    if not output.startswith("pwv."):
-        return None
-    path = pwv_path(output, model)
-    on = {f"vessels.{name}.length" for name, _ in path}
-    return (sum(length for _, length in path),
-            np.array([1.0 if p in on else 0.0 for p in parameters]))
 
 
 def parse_targets(targets: Any, model: Any) -> list[Target]:

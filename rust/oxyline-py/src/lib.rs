@@ -112,6 +112,7 @@ mod _core {
     #[pymodule_export]
     use super::calibrate::{
         adjoint_gradients, parameter_value, set_parameters, tangent_sensitivities,
+        target_gradients, target_tangents,
     };
     #[pymodule_export]
     use super::calibration::CalibrationProblem;

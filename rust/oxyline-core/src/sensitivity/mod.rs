@@ -4,14 +4,16 @@
 //! (reverse) sweep for many parameters and few functionals ([`adjoint`]). A closed loop's
 //! conserved blood volume closes its periodic problem ([`volume`]). Calibration targets (an
 //! output by name, its value and derivatives from the signals' tangents) in [`targets`], the
-//! signals each output name reads in [`target_signals`]. Flow and oxygen signals by flow and
-//! oxygen parameters together, as the bindings ask for them, in [`outputs`].
+//! signals each output name reads in [`target_signals`], every target of one tangent or
+//! adjoint run (the adjoint's output weights) in [`target_runs`]. Flow and oxygen signals by
+//! flow and oxygen parameters together, as the bindings ask for them, in [`outputs`].
 
 pub mod krylov;
 pub mod outputs;
 pub mod parameter;
 pub mod species;
 pub mod tangent;
+pub mod target_runs;
 pub mod target_signals;
 pub mod targets;
 pub mod volume;
