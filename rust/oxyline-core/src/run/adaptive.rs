@@ -47,6 +47,9 @@ pub(super) struct Adaptive {
     c_local: f64,
     /// ρ∞/(2(1 + ρ∞)²): an algebraic unknown's error per h² y''.
     c_algebraic: f64,
+    /// α_f = 1/(1 + ρ∞): where in a step generalized-α meets its algebraic rows (see
+    /// [`Dense::polynomial`]).
+    alpha_f: f64,
     delta: f64,
     /// Unknowns without a rate in the DAE (E = 0), and their indices.
     algebraic: Vec<bool>,
@@ -170,9 +173,10 @@ pub(super) struct Dense<'s> {
     inv_span: f64,
     /// A value's weights of (y₀, y₁, ẏ₀, ẏ₁) with the rate shifts folded in (see `value`).
     w: [f64; 4],
-    /// Whether algebraic unknowns take their quadratic (the step has an accepted step before
-    /// it on the same side of every event), else their chord.
-    quadratic: bool,
+    /// Whether algebraic unknowns take the line through this step's and the step before's
+    /// α_f-level values (the step has an accepted step before it on the same side of every
+    /// event), else their chord (see [`Dense::polynomial`]).
+    level_before: bool,
 }
 
 impl Dense<'_> {
@@ -284,26 +288,34 @@ impl Dense<'_> {
         }
     }
 
-    /// An algebraic unknown's carried rate follows the spurious root (−ρ∞ per step): the
-    /// quadratic through its last three values instead (value and rate), or the chord of the
-    /// step where it has no step before it on the same side of an event (the run's first
-    /// step, the first after an event or a leap: the carried rate there, garbage on the
-    /// spurious root, had bent the cubic to 29× a valve's peak flow between the step's ends,
-    /// measured on the minimal closed loop at rtol 1e-3). The chord's error, h² y''/8, is the
-    /// size the error control holds an algebraic unknown's own error to (ρ∞/(2(1 + ρ∞)²) h²
-    /// y'', 1/9 at ρ∞ = 0.5).
+    /// An algebraic unknown's value and rate between the step's ends. Generalized-α meets an
+    /// algebraic row at the α_f level, at y_αf = y₀ + α_f (y₁ − y₀) and t₀ + α_f h: that
+    /// value solves the circuit's constraint; the step-end value y₁ is its extrapolation by
+    /// 1/α_f, which oscillates by −ρ∞ per step (the spurious root) after any disturbance. The
+    /// row takes the line through the step before's α_f-level value (at t₀ − (1 − α_f) h₁) and
+    /// this step's: within the step it interpolates, past t₀ + α_f h it extrapolates by at most
+    /// ρ∞ times the span (the two levels are at least α_f h apart), so a row never leaves the
+    /// accepted steps' constrained values by more than that share of their difference, and
+    /// its error is the line's, O(h² y''), which the error control holds. Where the step has no
+    /// step before it on the same side of an event (the run's first step, the first after an
+    /// event or a leap) the line through y₀ and this step's α_f-level value: the chord.
+    /// (The former quadratic through the last three step-end values, divided by the step
+    /// before's h₁, read the heart block's inflow, an index-2 unknown, 44× its range off
+    /// after the 10 ns step that followed a valve's opening, at rtol 1e-3.)
     fn polynomial(&self, i: usize) -> (f64, f64) {
         let ad = self.ad;
         let (b, c) = (ad.y0[i], self.y[i]);
-        let (x, h, h1) = (self.x, self.h, ad.h1);
-        let s12 = (c - b) / h;
-        if !self.quadratic {
-            // (no state before the run's first step)
-            return (b + x * s12, s12);
-        }
-        let s01 = (b - ad.ym1[i]) / h1;
-        let curv = (s12 - s01) / (h + h1);
-        (b + x * (s01 + curv * (x + h1)), s01 + curv * (2.0 * x + h1))
+        let (x, h, af) = (self.x, self.h, ad.alpha_f);
+        let level = b + af * (c - b);
+        let (x_before, before) = if self.level_before {
+            let a = ad.ym1[i];
+            (-(1.0 - af) * ad.h1, a + af * (b - a))
+        } else {
+            // (y₀ on this step's chord: no state before the run's first step)
+            (0.0, b)
+        };
+        let slope = (level - before) / (af * h - x_before);
+        (level + (x - af * h) * slope, slope)
     }
 }
 
@@ -383,6 +395,7 @@ impl Adaptive {
             omega: 2.0 * std::f64::consts::PI / (ACCUMULATION * period),
             c_local: local_error_constant(rho_inf),
             c_algebraic: rho_inf / (2.0 * (1.0 + rho_inf).powi(2)),
+            alpha_f: 1.0 / (1.0 + rho_inf),
             algebraic: dae.e.iter().map(|&e| e == 0.0).collect(),
             algebraic_index: (0..dae.n)
                 .filter(|&i| dae.e[i] == 0.0)
@@ -1222,7 +1235,7 @@ impl Adaptive {
             s1,
             inv_span,
             w: [b[0], b[2], h * b[1] - k, h * b[3] + k],
-            quadratic: self.history > 0,
+            level_before: self.history > 0,
         }
     }
 
