@@ -173,10 +173,10 @@ pub(super) struct Dense<'s> {
     inv_span: f64,
     /// A value's weights of (y₀, y₁, ẏ₀, ẏ₁) with the rate shifts folded in (see `value`).
     w: [f64; 4],
-    /// Whether algebraic unknowns take the line through this step's and the step before's
-    /// α_f-level values (the step has an accepted step before it on the same side of every
-    /// event), else their chord (see [`Dense::polynomial`]).
-    level_before: bool,
+    /// Whether algebraic unknowns may take their quadratic or α_f-level line (the step has an
+    /// accepted step before it on the same side of every event), else their chord (see
+    /// [`Dense::polynomial`]).
+    quadratic: bool,
 }
 
 impl Dense<'_> {
@@ -291,33 +291,59 @@ impl Dense<'_> {
     /// An algebraic unknown's value and rate between the step's ends. Generalized-α meets an
     /// algebraic row at the α_f level, at y_αf = y₀ + α_f (y₁ − y₀) and t₀ + α_f h: that
     /// value solves the circuit's constraint; the step-end value y₁ is its extrapolation by
-    /// 1/α_f, which oscillates by −ρ∞ per step (the spurious root) after any disturbance. The
-    /// row takes the line through the step before's α_f-level value (at t₀ − (1 − α_f) h₁) and
-    /// this step's: within the step it interpolates, past t₀ + α_f h it extrapolates by at most
-    /// ρ∞ times the span (the two levels are at least α_f h apart), so a row never leaves the
-    /// accepted steps' constrained values by more than that share of their difference, and
-    /// its error is the line's, O(h² y''), which the error control holds. Where the step has no
-    /// step before it on the same side of an event (the run's first step, the first after an
-    /// event or a leap) the line through y₀ and this step's α_f-level value: the chord.
-    /// (The former quadratic through the last three step-end values, divided by the step
-    /// before's h₁, read the heart block's inflow, an index-2 unknown, 44× its range off
-    /// after the 10 ns step that followed a valve's opening, at rtol 1e-3.)
+    /// 1/α_f, which oscillates by −ρ∞ per step (the spurious root) after any disturbance.
+    /// The row takes the quadratic through the last three step-end values (third order where
+    /// they are smooth: a prescribed pressure's, which the valve events' root finding reads)
+    /// where the step before is at least `QUADRATIC_SPACING` of this one and the quadratic
+    /// stays within `QUADRATIC_AGREEMENT` of the line through the last two steps' α_f-level
+    /// values (in their difference); else that line (second order; within the step it interpolates, past
+    /// t₀ + α_f h it extrapolates by at most ρ∞ of the two levels' spacing, so a row stays
+    /// within the accepted steps' constrained values). With no step before it on the same
+    /// side of an event (the run's first step, the first after an event or a leap): the
+    /// chord. (The quadratic alone, divided by a 10 ns step before, read the heart block's
+    /// inflow, an index-2 unknown whose step-end values oscillate after a valve's opening,
+    /// 44× its range off at rtol 1e-3.)
     fn polynomial(&self, i: usize) -> (f64, f64) {
         let ad = self.ad;
         let (b, c) = (ad.y0[i], self.y[i]);
-        let (x, h, af) = (self.x, self.h, ad.alpha_f);
+        let (x, h, h1, af) = (self.x, self.h, ad.h1, ad.alpha_f);
+        let s12 = (c - b) / h;
+        if !self.quadratic {
+            // (no state before the run's first step)
+            return (b + x * s12, s12);
+        }
+        let a = ad.ym1[i];
+        // the line through the α_f levels at −(1 − α_f) h₁ and α_f h
+        let (x1, v1, x2) = (-(1.0 - af) * h1, a + af * (b - a), af * h);
         let level = b + af * (c - b);
-        let (x_before, before) = if self.level_before {
-            let a = ad.ym1[i];
-            (-(1.0 - af) * ad.h1, a + af * (b - a))
+        let slope = (level - v1) / (x2 - x1);
+        let line = (level + (x - x2) * slope, slope);
+        if h1 < QUADRATIC_SPACING * h {
+            return line;
+        }
+        let s01 = (b - a) / h1;
+        let curv = (s12 - s01) / (h + h1);
+        let quad = (b + x * (s01 + curv * (x + h1)), s01 + curv * (2.0 * x + h1));
+        if (quad.0 - line.0).abs() <= QUADRATIC_AGREEMENT * (level - v1).abs() {
+            quad
         } else {
-            // (y₀ on this step's chord: no state before the run's first step)
-            (0.0, b)
-        };
-        let slope = (level - before) / (af * h - x_before);
-        (level + (x - af * h) * slope, slope)
+            line
+        }
     }
 }
+
+/// The least ratio of the step before to the step for an algebraic unknown's quadratic (see
+/// [`Dense::polynomial`]): a shorter step before would set its curvature by a difference of
+/// two values over a short span (its weights reach 1 at this ratio).
+const QUADRATIC_SPACING: f64 = 0.25;
+
+/// The largest difference between an algebraic unknown's quadratic and the line through its
+/// α_f levels, in the change of the α_f levels across the line, for the quadratic to be read
+/// (see [`Dense::polynomial`]): a smooth unknown's curvature term over a step (~h² y''/4) is
+/// below its change (~h y') except near its turning points, where both are small; step-end
+/// values oscillating on the spurious root part the two by several times the levels' change.
+/// (Not the unknown's tolerance: its scale follows its peaks, which the oscillation raises.)
+const QUADRATIC_AGREEMENT: f64 = 2.0;
 
 /// The scout pass of an error-controlled run taken from another pass's fixed steps over the
 /// same first cycle from the same start: a transport run's flow-only first pass (the cycle-mean
@@ -1235,7 +1261,7 @@ impl Adaptive {
             s1,
             inv_span,
             w: [b[0], b[2], h * b[1] - k, h * b[3] + k],
-            level_before: self.history > 0,
+            quadratic: self.history > 0,
         }
     }
 
