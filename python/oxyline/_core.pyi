@@ -189,9 +189,14 @@ def closed_loop_run(params: dict[str, Any], flows: Any, max_cycles: Any, tol: An
     """The closed loop of a parameter set (published units) run in one call: settings checked,
     circulation built, heart run when it gives the flows (None: the set's `flows`; "table",
     "heart" or a steps x branches table), O2 to the periodic state; flat arrays out, with the
-    compartments' and branches' names."""
+    compartments' and branches' names, the cycle's ``summary`` (the keys of
+    ``ClosedLoopO2Result.summary()``) and its flow-weighted means (``weighted``: per recorded
+    compartment variable, branches x compartments)."""
 def closed_loop_heart_model(params_json: str) -> dict[str, Any]:
     """The native model dict of a parameter set's closed-loop heart circulation."""
+def closed_loop_heart_run_options(params_json: str) -> dict[str, Any]:
+    """The run options of a parameter set's closed-loop heart as the loop runs it
+    (``newton_atol`` for svZeroDSolver's block)."""
 def closed_loop_layout(params_json: str, table: bool) -> tuple[str, np.ndarray | None]:
     """The closed loop's SI layout (JSON: compartments, branches, binding, organ_resistances,
     solubility_per_mmhg, cardiac_output) of a parameter set in its published units and, with

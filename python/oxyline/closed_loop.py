@@ -6,10 +6,11 @@ state) lives in the core (``oxyline_core::transport::closed_loop``); this module
 built-in parameter sets ``closed-loop-o2`` and ``closed-loop-o2-tree`` (the data file
 ``models_data/closed-loop-o2.yaml``), has the core convert
 them to SI (``oxyline_core::transport::closed_loop_params``: compartments, branches, binding,
-organ resistances, the prescribed flow table) and summarises the result. The core builds the
+organ resistances, the prescribed flow table) and presents the result. The core builds the
 circulation (``oxyline_core::transport::closed_loop_circulation``: the heart, the arterial pool
-or tree, the organ beds, the veins), checks the run settings and runs the heart and the O2 loop
-in one call (``oxyline_core::transport::closed_loop_run``).
+or tree, the organ beds, the veins), checks the run settings, runs the heart and the O2 loop
+and summarises the recorded cycle in one call (``oxyline_core::transport::closed_loop_run``,
+``closed_loop_summary``).
 
     from oxyline import closed_loop
     res = closed_loop.simulate_o2("closed-loop-o2")
@@ -25,7 +26,7 @@ from __future__ import annotations
 
 import copy
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -108,7 +109,8 @@ def heart_run_options(p: dict[str, Any]) -> dict[str, Any]:
     """Run options of :func:`heart_model`'s model, as the core's loop runs it: svZeroDSolver's
     block needs an absolute Newton tolerance (its on/off valves, docs/physics.md §1.10); Pa,
     m³/s and m³ residuals here, 1e-10 is far below their discretisation error."""
-    return {"newton_atol": 1e-10} if p.get("heart", "two-ventricle") == "svzerod-block" else {}
+    with core_errors("closed-loop heart model"):
+        return _core.closed_loop_heart_run_options(json.dumps(p))
 
 
 @dataclass
@@ -172,77 +174,45 @@ class ClosedLoopO2Result:
     #: the closed-loop heart's last cycle when it gave the flows
     heart: HeartRun | None = None
 
-    def _c(self, name: str) -> int:
-        return self.compartments.index(name)
+    #: the core's summary of the cycle (:meth:`summary`)
+    summary_values: dict[str, Any] = field(default_factory=dict, repr=False)
+    #: the core's flow-weighted cycle means (:meth:`flow_weighted`): per recorded variable
+    #: (``volume``, ``total``, ``po2`` in mmHg, ``saturation``, ``vo2``), [branch, compartment]
+    weighted: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
-    def _b(self, name: str) -> int:
-        return self.branches.index(name)
-
-    def flow_weighted(self, var: np.ndarray, branch: str, compartment: str) -> float:
-        """Cycle mean of a compartment variable weighted by the flow leaving it by `branch`."""
-        q = self.flow[:, self._b(branch)]
-        return float(np.sum(q * var[:, self._c(compartment)]) / np.sum(q))
+    def flow_weighted(self, var: np.ndarray | str, branch: str, compartment: str) -> float:
+        """Cycle mean of a compartment variable weighted by the flow leaving it by `branch`, as
+        the core computed it: `var` is one of this result's ``volume``, ``total``, ``po2``,
+        ``saturation``, ``vo2`` arrays (or its name)."""
+        name = var if isinstance(var, str) else next(
+            (k for k in self.weighted if getattr(self, k) is var), None)
+        if name not in self.weighted:
+            raise ValueError(f"flow_weighted: var must be one of the result's "
+                             f"{', '.join(self.weighted)} (or its name), got {var!r:.60}")
+        table = self.weighted[name]
+        return float(table[self.branches.index(branch), self.compartments.index(compartment)])
 
     def arterial_flow(self) -> np.ndarray:
         """The left heart's ejection per step (m³/s): into the tree's root or the pool."""
         if self.tree is not None:
             return self.tree.inflow
-        return self.flow[:, self._b("ejection_left")]
-
-    def _arterial(self, var: np.ndarray) -> float:
-        q = self.arterial_flow()
-        return float(np.sum(q * var[:, self._c("left_heart")]) / np.sum(q))
-
-    def _arterial_content(self) -> float:
-        """CaO2 (mol/m³): the net O2 the left heart ejects per volume. Into the tree it is the
-        root's flux over its flow: a closing tanh valve leaks back a little blood, which
-        carries the root's content, not the left heart's (the left-heart-weighted content is
-        off by ~5e-8 of VO2 there)."""
-        if self.tree is not None:
-            return float(np.sum(self.tree.in_flux) / np.sum(self.tree.inflow))
-        return self._arterial(self.total)
+        return self.flow[:, self.branches.index("ejection_left")]
 
     def wall_uptake(self) -> np.ndarray:
         """The arterial tree's wall uptake per step (mol/s; zeros without a tree)."""
         return self.tree.wall if self.tree is not None else np.zeros(len(self.time))
 
     def summary(self) -> dict[str, Any]:
-        """Arterial (left-heart ejection) and mixed-venous (right-heart ejection) PO2 and
-        saturation, flow-weighted over the cycle; VO2 per organ and in total (mL/min; the
-        total includes the arterial tree's wall uptake, `VO2_tree_wall`); cardiac output
-        (L/min); Fick's residual |VO2 − CO (CaO2 − CvO2)| / VO2 and the largest per-step
-        mass-balance residual of the loop relative to its O2 amount."""
-        to_ml_min = 60.0 / ML_O2
-        vo2 = {n: float(self.vo2[:, i].mean()) * to_ml_min
-               for i, n in enumerate(self.compartments) if np.any(self.vo2[:, i])}
-        wall = self.wall_uptake()
-        total_vo2 = float(self.vo2.sum(axis=1).mean() + wall.mean())
-        co = float(self.arterial_flow().mean())
-        ca = self._arterial_content()
-        cv = self.flow_weighted(self.total, "ejection_right", "right_heart")
-        fick = abs(total_vo2 - co * (ca - cv)) / total_vo2
-        n = np.concatenate([[self.amount_start], self.amount])
-        rate = self.uptake.sum(axis=1) - self.vo2.sum(axis=1) - wall
-        mass = float(np.max(np.abs(np.diff(n) - self.dt * rate)) / np.max(n))
-        out = {
-            "SaO2": self._arterial(self.saturation),
-            "SvO2": self.flow_weighted(self.saturation, "ejection_right", "right_heart"),
-            "PaO2": self._arterial(self.po2),
-            "PvO2": self.flow_weighted(self.po2, "ejection_right", "right_heart"),
-            "CaO2": ca / ML_O2 * 1e-3, "CvO2": cv / ML_O2 * 1e-3,      # mL O2 per L blood
-            "VO2": total_vo2 * to_ml_min, "VO2_organs": vo2,
-            "VO2_tree_wall": float(wall.mean()) * to_ml_min,
-            "lung_uptake": float(self.uptake.sum(axis=1).mean()) * to_ml_min,
-            "cardiac_output": co * 6e4,
-            "fick_residual": fick, "mass_balance_residual": mass,
-            "cycles": self.cycles, "periodic_error": self.periodic_error,
-        }
-        if self.tree is not None:
-            # O2 delivered to each organ by its outlet, and the outlets' flow-weighted PO2
-            t = self.tree
-            out["DO2_organs"] = {k: float(t.out_flux[:, i].mean()) * to_ml_min
-                                 for i, k in enumerate(t.outlets)}
-        return out
+        """The core's summary of the cycle (``oxyline_core::transport::closed_loop_summary``):
+        arterial (left-heart ejection) and mixed-venous (right-heart ejection) PO2 (mmHg),
+        saturation and content (``CaO2``, ``CvO2``: mL O2 per L blood), flow-weighted over the
+        cycle (into a tree the arterial content is the root's flux over its flow); VO2 per
+        organ and in total (mL/min; the total includes the arterial tree's wall uptake,
+        `VO2_tree_wall`); the lungs' uptake (mL/min); cardiac output (L/min); Fick's residual
+        |VO2 − CO (CaO2 − CvO2)| / VO2 and the largest per-step mass-balance residual of the
+        loop relative to its O2 amount; ``cycles``, ``periodic_error``; with a tree the O2
+        each outlet delivers to its organ (``DO2_organs``, mL/min)."""
+        return copy.deepcopy(self.summary_values)
 
 
 def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int = 400,
@@ -301,6 +271,7 @@ def _result(p: dict[str, Any], out: dict[str, Any], steps: int) -> ClosedLoopO2R
         uptake=rows("uptake", nb), amount=np.asarray(out["amount"]),
         amount_start=float(out["amount_start"]), dt=float(p["dt"]), cycles=int(out["cycles"]),
         periodic_error=float(out["periodic_error"]), tree=tree,
+        summary_values=out["summary"], weighted=dict(out["weighted"]),
         heart=HeartRun(np.asarray(out["heart_time"]),
                        {k: np.asarray(v) for k, v in out["heart_series"].items()})
         if out["heart_series"] else None)
@@ -320,9 +291,7 @@ def o2_sensitivities(model: str | dict[str, Any], parameters: list[str], outputs
     ``PaO2``, ``PvO2``, ``VO2``, ``VO2.<organ>``, ``cardiac_output``. SI throughout: a dict of
     ``parameter_values``, ``values``, ``jacobian`` (outputs × parameters), ``cycles`` and
     ``periodic_error``; a ModelError names an unknown parameter or output."""
-    p = load(model) if isinstance(model, str) else model
-    if "heart_block" not in p:
-        p = {**p, "heart_block": SVZEROD_HEART}
+    p = _with_block(load(model) if isinstance(model, str) else model)
     with core_errors("closed-loop sensitivities"):
         return _core.closed_loop_sensitivities(p, flows, max_cycles, tol, shooting,
                                                list(parameters), list(outputs))

@@ -9,9 +9,10 @@ use crate::reader::node::{PyNode, to_python};
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use oxyline_core::transport::closed_loop::ClosedLoopRun;
 use oxyline_core::transport::closed_loop_run::{
-    Flows, RunSettings, check_times, heart_model_of, simulate,
+    Flows, LoopRun, RunSettings, check_times, heart_model_of, heart_newton_atol_of, simulate,
 };
 use oxyline_core::transport::closed_loop_sensitivity::sensitivities;
+use oxyline_core::transport::closed_loop_summary::{LoopSummary, WEIGHTED};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString};
 
@@ -82,6 +83,53 @@ pub fn closed_loop_run<'py>(
     let d = record(py, &out.run)?;
     d.set_item("compartments", &out.compartments)?;
     d.set_item("branches", &out.branches)?;
+    d.set_item("summary", summary(py, &out)?)?;
+    let shape = [out.branches.len(), out.compartments.len()];
+    let weighted = PyDict::new(py);
+    for (name, table) in WEIGHTED.iter().zip(&out.summary.weighted) {
+        weighted.set_item(*name, PyArray1::from_slice(py, table).reshape(shape)?)?;
+    }
+    d.set_item("weighted", weighted)?;
+    Ok(d)
+}
+
+/// The summary as `ClosedLoopO2Result.summary()` returns it (its keys, in its order).
+fn summary<'py>(py: Python<'py>, out: &LoopRun) -> PyResult<Bound<'py, PyDict>> {
+    let s: &LoopSummary = &out.summary;
+    let d = PyDict::new(py);
+    let by_name = |pairs: &[(String, f64)]| -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        for (k, v) in pairs {
+            d.set_item(k.as_str(), *v)?;
+        }
+        Ok(d)
+    };
+    for (k, v) in [
+        ("SaO2", s.sao2),
+        ("SvO2", s.svo2),
+        ("PaO2", s.pao2),
+        ("PvO2", s.pvo2),
+        ("CaO2", s.cao2),
+        ("CvO2", s.cvo2),
+        ("VO2", s.vo2),
+    ] {
+        d.set_item(k, v)?;
+    }
+    d.set_item("VO2_organs", by_name(&s.vo2_organs)?)?;
+    for (k, v) in [
+        ("VO2_tree_wall", s.vo2_tree_wall),
+        ("lung_uptake", s.lung_uptake),
+        ("cardiac_output", s.cardiac_output),
+        ("fick_residual", s.fick_residual),
+        ("mass_balance_residual", s.mass_balance_residual),
+    ] {
+        d.set_item(k, v)?;
+    }
+    d.set_item("cycles", out.run.cycles)?;
+    d.set_item("periodic_error", out.run.periodic_error)?;
+    if !s.do2_organs.is_empty() {
+        d.set_item("DO2_organs", by_name(&s.do2_organs)?)?;
+    }
     Ok(d)
 }
 
@@ -132,6 +180,21 @@ pub fn closed_loop_heart_model<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let model = heart_model_of(params_json).map_err(to_py)?;
     to_python(py, &model)
+}
+
+/// The run options of the set's closed-loop heart as the core's loop runs it
+/// (`newton_atol` for svZeroDSolver's block; none for the native heart).
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn closed_loop_heart_run_options<'py>(
+    py: Python<'py>,
+    params_json: &str,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    if let Some(atol) = heart_newton_atol_of(params_json).map_err(to_py)? {
+        d.set_item("newton_atol", atol)?;
+    }
+    Ok(d)
 }
 
 /// A run's record as a dict of flat arrays.

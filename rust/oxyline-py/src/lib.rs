@@ -117,7 +117,10 @@ mod _core {
     #[pymodule_export]
     use super::calibration::CalibrationProblem;
     #[pymodule_export]
-    use super::closed_loop::{closed_loop_heart_model, closed_loop_run, closed_loop_sensitivities};
+    use super::closed_loop::{
+        closed_loop_heart_model, closed_loop_heart_run_options, closed_loop_run,
+        closed_loop_sensitivities,
+    };
     #[pymodule_export]
     use super::closed_loop_params::closed_loop_layout;
     #[pymodule_export]

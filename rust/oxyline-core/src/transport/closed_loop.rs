@@ -571,6 +571,7 @@ impl ClosedLoop {
 }
 
 /// The recorded last cycle of a periodic closed-loop O2 run (row-major, one row per step end).
+#[derive(Debug, Clone, Default)]
 pub struct ClosedLoopRun {
     pub cycles: usize,
     /// max |ΔC_t| between the starts of the last two cycles, relative to max C_t.

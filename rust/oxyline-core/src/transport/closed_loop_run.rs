@@ -9,6 +9,7 @@ use super::closed_loop_circulation::{
 };
 use super::closed_loop_heart::HeartSpec;
 use super::closed_loop_params::{Layout, LoopParams};
+use super::closed_loop_summary::{LoopSummary, summarise};
 use crate::error::{Error, Result};
 use crate::model::native::canonical;
 use crate::model::node::{Kind, Node, py_g, py_g_digits, py_list, py_quote};
@@ -123,6 +124,8 @@ pub struct LoopRun {
     pub run: ClosedLoopRun,
     pub compartments: Vec<String>,
     pub branches: Vec<String>,
+    /// The recorded cycle's summary (`closed_loop_summary`).
+    pub summary: LoopSummary,
     /// For the user (a tree wall without haemoglobin facilitation).
     pub warnings: Vec<String>,
 }
@@ -170,10 +173,14 @@ pub fn simulate(params_json: &str, flows: Flows, settings: &RunSettings) -> Resu
     }
     let table = table.unwrap_or_default();
     let run = super::closed_loop::run_periodic(&spec, &table, params.dt, settings.max_cycles, tol)?;
+    let branches = names(&layout.branches);
+    let organs: Vec<String> = params.organs.iter().map(|(k, _)| k.clone()).collect();
+    let summary = summarise(&run, &compartments, &branches, &organs, params.dt)?;
     Ok(LoopRun {
         run,
         compartments,
-        branches: names(&layout.branches),
+        branches,
+        summary,
         warnings,
     })
 }
@@ -183,6 +190,13 @@ pub fn heart_model_of(params_json: &str) -> Result<Value> {
     let p: Value = serde_json::from_str(params_json).map_err(|e| err(e.to_string()))?;
     let params = LoopParams::from_json(params_json)?;
     heart_model(&p, &params, &params.layout())
+}
+
+/// The absolute Newton tolerance the set's closed-loop heart runs with (`heart_newton_atol`:
+/// svZeroDSolver's block needs one; None for the native heart).
+pub fn heart_newton_atol_of(params_json: &str) -> Result<Option<f64>> {
+    let p: Value = serde_json::from_str(params_json).map_err(|e| err(e.to_string()))?;
+    heart_newton_atol(&p)
 }
 
 /// A shape as Python prints a tuple: `(5,)`, `(200, 3)`.

@@ -39,6 +39,7 @@ pub mod closed_loop_heart_series; // what the loop reads from that run, by name
 pub mod closed_loop_params; // its parameter set in published units, to SI
 pub mod closed_loop_run; // the whole run in one call: settings, heart, O2
 pub mod closed_loop_sensitivity; // its periodic O2 state's exact derivatives
+pub mod closed_loop_summary; // its cycle's summary: SaO2, SvO2, VO2, Fick
 pub mod closed_loop_tree; // its segment-resolved arterial tree
 pub mod compartment;
 mod core; // the implicit solve of a domain with loops
