@@ -121,42 +121,23 @@ def test_bad_gradient_is_named() -> None:
         oxyline.calibrate(MODEL, _targets(0.0), PATHS, gradient="reverse")
 
 
-def test_the_adjoint_weights_come_from_the_one_primal_run() -> None:
-    """The core calls ``weights_of`` once with the periodic cycle's step times and signals
-    (the same cycle the forward tangents record), raises what it raises, and names a weight
-    vector of the wrong size."""
-    import json
-
-    from oxyline import ModelError, _core
-
+def test_the_adjoint_reads_the_one_primal_cycle() -> None:
+    """The adjoint (``sensitivities(..., mode="adjoint")``, the core building each output's
+    weights on its one primal cycle) reduces the same periodic cycle as the forward tangents:
+    a cycle mean is the mean of the forward run's series over its steps (the step end times
+    Δt … T, each weighted 1/n), to the periodic tolerance (1e-12; 1e-9 allows its spread over
+    the cycle), and its gradient by the inflow scale is the tangents' (one backward sweep
+    against one tangent run: the same derivative to that tolerance). The inflow scale moves a
+    linear network's pressure about its own level (p(s) = s p(1) with no outlet pressure), so
+    the mean's derivative by it is the mean itself: an independent check of both."""
     model = oxyline.load_model(MODEL)
-    signals = [("parent", "pressure_in")]
-    fwd = oxyline.sensitivities(model, [], ["parent.pressure_in.series"])
-    seen = []
-
-    def weights_of(times: np.ndarray, sig: np.ndarray) -> np.ndarray:
-        seen.append((times.copy(), sig.copy()))
-        return np.full(sig.size, 1.0 / sig.size)
-
-    period = model.period
-    steps = len(fwd.values)
-    out = _core.adjoint_gradients(json.dumps(model.canonical), ["scale.inflow"], signals,
-                                  weights_of, period, steps)
-    assert len(seen) == 1
-    times, sig = seen[0]
-    np.testing.assert_allclose(times, np.arange(1, steps + 1) * (period / steps), rtol=1e-14)
-    # the same periodic cycle as the tangents' run, to the periodic tolerance (1e-12)
-    np.testing.assert_allclose(sig[:, 0], fwd.values, rtol=1e-9)
-    assert out["functionals"][0] == pytest.approx(fwd.values.mean(), rel=1e-9)
-
-    def raises(times: np.ndarray, sig: np.ndarray) -> np.ndarray:
-        raise ValueError("no weights here")
-
-    with pytest.raises(ValueError, match="no weights here"):
-        _core.adjoint_gradients(json.dumps(model.canonical), [], signals, raises, period, steps)
-    with pytest.raises(ModelError, match="weights"):
-        _core.adjoint_gradients(json.dumps(model.canonical), [], signals,
-                                lambda t, s: np.ones(3), period, steps)
+    series = oxyline.sensitivities(model, [], ["parent.pressure_in.series"])
+    mean = ["parent.pressure_in.mean"]
+    fwd = oxyline.sensitivities(model, ["scale.inflow"], mean)
+    adj = oxyline.sensitivities(model, ["scale.inflow"], mean, mode="adjoint")
+    assert adj.values[0] == pytest.approx(series.values.mean(), rel=1e-9)
+    assert adj.jacobian[0, 0] == pytest.approx(fwd.jacobian[0, 0], rel=1e-9)
+    assert adj.jacobian[0, 0] == pytest.approx(adj.values[0], rel=1e-9)
 
 
 def test_a_problem_file_reads_groups_and_gradient(tmp_path) -> None:

@@ -224,14 +224,6 @@ def tangent_sensitivities(model_json: str, paths: list[str], signals: list[tuple
     oxygen (vessel, name; vessel "" for the network's balance fluxes) alike, and their exact
     derivatives with respect to the parameter ``paths``, flow and oxygen alike
     (oxyline.calibrate)."""
-def adjoint_gradients(model_json: str, paths: list[str], signals: list[tuple[str, str]],
-                      weights_of: Any, period: float, steps_per_cycle: int,
-                      rho_infty: float = 0.5, max_cycles: int = 2000, tol: float = 1e-12
-                      ) -> dict[str, Any]:
-    """The gradients of functionals of the signals (flow and oxygen alike) by the parameter
-    ``paths`` by the adjoint: one backward sweep per functional; ``weights_of(times,
-    signals)`` chooses the weights from the one primal cycle (oxyline.sensitivities with
-    ``mode="adjoint"``)."""
 def target_tangents(model_json: str, paths: list[str], signals: list[tuple[str, str]],
                     targets: list[tuple[str, list[int], list[float] | None]], period: float,
                     steps_per_cycle: int, rho_infty: float = 0.5, max_cycles: int = 2000,

@@ -83,7 +83,7 @@ def apply_patch(model: Model | Mapping[str, Any] | str, patch: Mapping[str, Any]
 
 def _column_path(column: Any, names: tuple[list[str], list[str]], k: int) -> list[str]:
     """The keys of a dotted-path column (``vessels.CCA.radius`` -> ``["vessels", "CCA",
-    "radius"]``), resolved by the core (``oxyline_core::model::patch::column_keys``: a vessel
+    "radius"]``), resolved by the core (``oxyline_core::model::path::column_keys``: a vessel
     or node name may itself contain dots, the longest known name wins); a tuple (a MultiIndex
     column) is the keys themselves. ``names``: the model's vessel names and nodes. Unknown
     names and empty keys raise :class:`ModelError` naming variant ``k`` and the column."""

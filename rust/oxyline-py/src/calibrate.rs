@@ -4,12 +4,12 @@
 use crate::ensemble::patched_model;
 use crate::errors::to_py;
 use crate::reader::node::PyNode;
-use numpy::{IntoPyArray, PyArrayMethods, PyReadonlyArray1};
+use numpy::{IntoPyArray, PyArrayMethods};
 use oxyline_core::error::Error;
-use oxyline_core::model::{NetworkSpec, parameters, parse};
+use oxyline_core::model::{parameters, parse};
 use oxyline_core::sensitivity::target_runs::{TargetRead, target_adjoint, target_values};
 use oxyline_core::sensitivity::targets::CycleSignals;
-use oxyline_core::sensitivity::{TangentSettings, signal_adjoint_with, signal_sensitivities};
+use oxyline_core::sensitivity::{TangentSettings, signal_sensitivities};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
@@ -190,114 +190,6 @@ fn cycle_settings(
         max_cycles,
         tol,
     }
-}
-
-/// The gradients of functionals J_f = Σ_kj weights[f, k, j] · signal j after step k of the
-/// periodic cycle of `model_json` by the adjoint (one backward sweep per functional, whatever
-/// the number of parameters), flow and oxygen signals by flow and oxygen parameters alike
-/// (`oxyline_core::sensitivity::signal_adjoint_with`). `weights_of(times, signals)` is called
-/// once with the step end times (n_steps) and every signal (n_steps × n_signals) of the one
-/// primal run and returns the weights, flat n_functionals × n_steps × n_signals (chosen from
-/// the cycle: no second forward run). A dict of `values` (SI value of each parameter),
-/// `functionals` (J_f), `gradients` (n_functionals × n_params), `cycles`, `tangent_cycles`
-/// (the species transport's, 0 without oxygen signals), `adjoint_cycles` (per functional)
-/// and `periodic_change`; an exception of `weights_of` is raised as it is.
-#[oxyline_py_guard::guard]
-#[pyfunction]
-#[pyo3(signature = (model_json, paths, signals, weights_of, period, steps_per_cycle,
-                    rho_infty = 0.5, max_cycles = 2000, tol = 1e-12))]
-#[allow(clippy::too_many_arguments)]
-pub fn adjoint_gradients<'py>(
-    py: Python<'py>,
-    model_json: &str,
-    paths: Vec<String>,
-    signals: Vec<(String, String)>,
-    weights_of: Py<PyAny>,
-    period: f64,
-    steps_per_cycle: usize,
-    rho_infty: f64,
-    max_cycles: usize,
-    tol: f64,
-) -> PyResult<Bound<'py, PyDict>> {
-    let settings = cycle_settings(period, steps_per_cycle, rho_infty, max_cycles, tol);
-    let (np, nsig) = (paths.len(), signals.len());
-    let out = detach_with_weights(py, model_json, &weights_of, nsig, |spec, w| {
-        signal_adjoint_with(spec, &paths, &signals, w, settings)
-    })?;
-    let d = adjoint_dict(py, out.values, out.functionals, out.gradients, np)?;
-    d.set_item("cycles", out.cycles)?;
-    d.set_item("tangent_cycles", out.transport_cycles)?;
-    d.set_item("adjoint_cycles", out.adjoint_cycles)?;
-    d.set_item("periodic_change", out.periodic_change)?;
-    Ok(d)
-}
-
-/// An adjoint's dict: the parameters' SI `values`, the `functionals` and their `gradients`
-/// (n_functionals × `np`); the caller adds its cycle counts.
-fn adjoint_dict<'py>(
-    py: Python<'py>,
-    values: Vec<f64>,
-    functionals: Vec<f64>,
-    gradients: Vec<f64>,
-    np: usize,
-) -> PyResult<Bound<'py, PyDict>> {
-    let nf = functionals.len();
-    let d = PyDict::new(py);
-    d.set_item("values", values.into_pyarray(py))?;
-    d.set_item("functionals", functionals.into_pyarray(py))?;
-    d.set_item("gradients", gradients.into_pyarray(py).reshape([nf, np])?)?;
-    Ok(d)
-}
-
-/// The weights callback an adjoint sweep calls once with its signals' series.
-type Weights<'a> = Box<dyn FnOnce(&[f64], &[f64]) -> oxyline_core::error::Result<Vec<f64>> + 'a>;
-
-/// Parses the model and runs an adjoint (`run`) without the GIL, handing it the Python
-/// `weights_of` callback; an exception the callback raised is returned as itself.
-fn detach_with_weights<T, R>(
-    py: Python<'_>,
-    model_json: &str,
-    weights_of: &Py<PyAny>,
-    nsig: usize,
-    run: R,
-) -> PyResult<T>
-where
-    T: Send,
-    R: for<'a> FnOnce(&NetworkSpec, Weights<'a>) -> oxyline_core::error::Result<T> + Send,
-{
-    let mut raised: Option<PyErr> = None;
-    let result = py.detach(|| {
-        let spec = parse(model_json)?;
-        let weights: Weights<'_> = Box::new(|times: &[f64], values: &[f64]| {
-            Python::attach(|py| call_weights(py, weights_of, times, values, nsig)).map_err(|e| {
-                raised = Some(e);
-                Error::model("adjoint", "weights_of raised")
-            })
-        });
-        run(&spec, weights)
-    });
-    if let Some(e) = raised {
-        return Err(e);
-    }
-    result.map_err(to_py)
-}
-
-/// `weights_of(times, signals)`: the weights as a flat float64 vector.
-fn call_weights(
-    py: Python<'_>,
-    weights_of: &Py<PyAny>,
-    times: &[f64],
-    values: &[f64],
-    nsig: usize,
-) -> PyResult<Vec<f64>> {
-    let times = times.to_vec().into_pyarray(py);
-    let sig = values
-        .to_vec()
-        .into_pyarray(py)
-        .reshape([values.len() / nsig.max(1), nsig])?;
-    let w = weights_of.call1(py, (times, sig))?;
-    let w: PyReadonlyArray1<f64> = w.bind(py).extract()?;
-    Ok(w.as_slice()?.to_vec())
 }
 
 /// `parameter_value(source, path)`: the number the parameter path names in the native model

@@ -13,6 +13,7 @@ use oxyline_core::ensemble::{
     ColumnStats, Member, SpecPatch, StatsFold, column_stats, run_fed, worker_count,
 };
 use oxyline_core::model::patch::{self, Merged, PatchError, Patched};
+use oxyline_core::model::path;
 use oxyline_core::model::{BoundarySpec, NetworkSpec, VesselSpec, parse};
 use oxyline_core::output::{HeartColumns, HeartRows};
 use oxyline_core::{Chunk, Error, Outcome, OutputSink, RunSettings, Selection, Transport};
@@ -593,7 +594,7 @@ pub(crate) fn merge_patch<'py>(
 }
 
 /// `column_keys(parts, dotted, vessels, nodes, variant)`: the keys of a patch table's column
-/// (`oxyline_core::model::patch::column_keys`): `parts` its dot-separated pieces (`dotted`)
+/// (`oxyline_core::model::path::column_keys`, the model's path resolver): `parts` its dot-separated pieces (`dotted`)
 /// or the levels of a multi-level column, resolved against the model's vessel names and
 /// condition nodes. Raises `ModelError` naming the variant and the column.
 #[oxyline_py_guard::guard]
@@ -606,5 +607,5 @@ pub(crate) fn column_keys(
     variant: usize,
 ) -> PyResult<Vec<String>> {
     let names: [(&str, &[String]); 2] = [("vessels", &vessels), ("boundary_conditions", &nodes)];
-    patch::column_keys(&parts, dotted, &names, variant).map_err(to_py)
+    path::column_keys(&parts, dotted, &names, variant).map_err(to_py)
 }

@@ -111,8 +111,7 @@ mod _core {
     };
     #[pymodule_export]
     use super::calibrate::{
-        adjoint_gradients, parameter_value, set_parameters, tangent_sensitivities,
-        target_gradients, target_tangents,
+        parameter_value, set_parameters, tangent_sensitivities, target_gradients, target_tangents,
     };
     #[pymodule_export]
     use super::calibration::CalibrationProblem;
@@ -126,7 +125,7 @@ mod _core {
     #[pymodule_export]
     use super::svzerod_rows::{svzerod_output_rows, svzerod_rcr_cycles};
     #[pymodule_export]
-    use super::targets::{foot_time, pulse_wave_path, target_signals, target_value, transit_time};
+    use super::targets::{foot_time, pulse_wave_path, target_signals, transit_time};
     #[pymodule_export]
     use super::trees::{
         StructuredTrees, facilitation_factor, grow_structured_tree, linear_facilitation_factor,

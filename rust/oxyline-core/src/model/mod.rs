@@ -20,6 +20,7 @@ pub mod node;
 pub mod openbf;
 pub mod parameters;
 pub mod patch;
+pub mod path;
 pub mod plausibility;
 pub mod pwdb;
 pub mod settings;

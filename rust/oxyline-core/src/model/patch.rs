@@ -23,26 +23,13 @@
 //! compliance factor 0) fails only its variant. Every message names the variant, the patch
 //! path and the value.
 
-use super::native::boundary::BC_KEYS;
 use super::native::py_float;
-use super::native::vessel::{LUMPED_KEYS, VESSEL_KEYS};
+use super::native::vessel::LUMPED_KEYS;
 use super::node::{Kind, Node, py_repr};
-use super::species::{OXYGEN_KEYS, TRANSPORT_KEYS, WALL_KEYS};
+use super::path::{BLOOD_KEYS, Scope, at};
 use crate::error::Error;
 use std::collections::BTreeSet;
 
-/// The sections a patch may have.
-pub const SECTIONS: &[&str] = &[
-    "vessels",
-    "boundary_conditions",
-    "blood",
-    "oxygen",
-    "transport",
-    "period",
-    "scale",
-];
-pub const BLOOD_KEYS: &[&str] = &["density", "viscosity"];
-pub const SCALE_KEYS: &[&str] = &["resistance", "compliance", "vessels"];
 /// Vessel properties that hold one number: a mapping there is a dotted path gone too deep.
 const VESSEL_SCALARS: &[&str] = &[
     "length",
@@ -177,23 +164,15 @@ pub struct Patched<N> {
     pub has_conditions: bool,
 }
 
-/// The prefix of every message: the variant and the patch path.
-fn at(k: usize, path: &str) -> String {
-    format!("variant {k}: {path}")
-}
-
 fn name_error(k: usize, path: &str, message: impl Into<String>) -> PatchError {
     PatchError::Name(Error::model(at(k, path), message))
 }
 
-fn unknown(k: usize, path: &str, what: &str, allowed: &[&str]) -> PatchError {
-    let mut names: Vec<&str> = allowed.to_vec();
-    names.sort_unstable();
-    name_error(
-        k,
-        path,
-        format!("unknown {what} (allowed: {})", names.join(", ")),
-    )
+/// `key` (at `path`) checked against `scope` by the path resolver (`super::path`).
+fn known(k: usize, path: &str, scope: Scope<'_>, key: &str) -> Res<()> {
+    scope
+        .check(key)
+        .map_err(|message| name_error(k, path, message))
 }
 
 fn mapping<N: Node>(value: &N, k: usize, path: &str) -> Res<()> {
@@ -252,33 +231,14 @@ fn patch_vessel<N: Node + Clone>(
                 "a variant cannot change the network's topology",
             ));
         }
-        if !VESSEL_KEYS.contains(&key.as_str()) {
-            let allowed: Vec<&str> = VESSEL_KEYS
-                .iter()
-                .copied()
-                .filter(|p| !["name", "from", "to"].contains(p))
-                .collect();
-            return Err(unknown(
-                k,
-                &format!("{path}.{key}"),
-                "vessel property",
-                &allowed,
-            ));
-        }
+        known(k, &format!("{path}.{key}"), Scope::Vessel, &key)?;
     }
     scalars(props, VESSEL_SCALARS, k, path)?;
     if let Some(lumped) = props.get("lumped") {
         let lpath = format!("{path}.lumped");
         mapping(&lumped, k, &lpath)?;
         for (key, _) in lumped.entries() {
-            if !LUMPED_KEYS.contains(&key.as_str()) {
-                return Err(unknown(
-                    k,
-                    &format!("{lpath}.{key}"),
-                    "lumped property",
-                    LUMPED_KEYS,
-                ));
-            }
+            known(k, &format!("{lpath}.{key}"), Scope::Lumped, &key)?;
         }
         scalars(&lumped, LUMPED_KEYS, k, &lpath)?;
     }
@@ -315,15 +275,8 @@ fn patch_condition<N: Node + Clone>(
         .get("type")
         .map_or_else(|| old_type.clone(), |t| t.show())
         .to_lowercase();
-    let allowed: &[&str] = BC_KEYS
-        .iter()
-        .find(|(name, _)| *name == kind)
-        .map_or(&[], |(_, keys)| keys);
     for (key, _) in props.entries() {
-        if !allowed.contains(&key.as_str()) {
-            let what = format!("property of a {kind} condition");
-            return Err(unknown(k, &format!("{path}.{key}"), &what, allowed));
-        }
+        known(k, &format!("{path}.{key}"), Scope::Condition(&kind), &key)?;
     }
     scalars(props, CONDITION_SCALARS, k, path)?;
     if props.has("type") && kind != old_type.to_lowercase() {
@@ -352,16 +305,13 @@ fn wall_model<N: Node>(wall: Option<N>) -> String {
 
 /// Unknown keys of an `oxygen` or `transport` patch and of its `oxygen.wall`.
 fn check_transport<N: Node>(source: &N, section: &str, patch: &N, k: usize) -> Res<()> {
-    let allowed = if section == "oxygen" {
-        OXYGEN_KEYS
+    let scope = if section == "oxygen" {
+        Scope::Oxygen
     } else {
-        TRANSPORT_KEYS
+        Scope::Transport
     };
     for (key, _) in patch.entries() {
-        if !allowed.contains(&key.as_str()) {
-            let what = format!("{section} property");
-            return Err(unknown(k, &format!("{section}.{key}"), &what, allowed));
-        }
+        known(k, &format!("{section}.{key}"), scope, &key)?;
     }
     let Some(wall) = patch
         .get("wall")
@@ -373,14 +323,8 @@ fn check_transport<N: Node>(source: &N, section: &str, patch: &N, k: usize) -> R
         || wall_model(source.get(section).and_then(|s| s.get("wall"))),
         |m| m.show(),
     );
-    let Some((_, keys)) = WALL_KEYS.iter().find(|(name, _)| *name == model) else {
-        return Ok(());
-    };
     for (key, _) in wall.entries() {
-        if !keys.contains(&key.as_str()) {
-            let what = format!("property of a {model} wall");
-            return Err(unknown(k, &format!("oxygen.wall.{key}"), &what, keys));
-        }
+        known(k, &format!("oxygen.wall.{key}"), Scope::Wall(&model), &key)?;
     }
     Ok(())
 }
@@ -394,9 +338,7 @@ struct Scale {
 fn scale_terms<N: Node>(scale: &N, names: &[String], k: usize) -> Res<Scale> {
     mapping(scale, k, "scale")?;
     for (key, _) in scale.entries() {
-        if !SCALE_KEYS.contains(&key.as_str()) {
-            return Err(unknown(k, &format!("scale.{key}"), "scale key", SCALE_KEYS));
-        }
+        known(k, &format!("scale.{key}"), Scope::Scale, &key)?;
     }
     let mut selected = None;
     if let Some(chosen) = scale
@@ -751,9 +693,7 @@ impl<N: Node + Clone> Work<'_, N> {
 pub fn merge<N: Node + Clone>(source: &N, patch: &N, k: usize) -> Res<Patched<N>> {
     mapping(patch, k, "patch")?;
     for (key, _) in patch.entries() {
-        if !SECTIONS.contains(&key.as_str()) {
-            return Err(unknown(k, &key, "patch section", SECTIONS));
-        }
+        known(k, &key, Scope::PatchSection, &key)?;
     }
     let base_vessels = source
         .get("vessels")
@@ -800,14 +740,7 @@ fn sections<N: Node + Clone>(source: &N, patch: &N, k: usize) -> Res<Vec<(String
     if let Some(blood) = patch.get("blood") {
         mapping(&blood, k, "blood")?;
         for (key, _) in blood.entries() {
-            if !BLOOD_KEYS.contains(&key.as_str()) {
-                return Err(unknown(
-                    k,
-                    &format!("blood.{key}"),
-                    "blood property",
-                    BLOOD_KEYS,
-                ));
-            }
+            known(k, &format!("blood.{key}"), Scope::Blood, &key)?;
         }
         scalars(&blood, BLOOD_KEYS, k, "blood")?;
         let base = source
@@ -843,54 +776,6 @@ fn sections<N: Node + Clone>(source: &N, patch: &N, k: usize) -> Res<Vec<(String
         out.push(("period".to_owned(), Merged::Node(p)));
     }
     Ok(out)
-}
-
-/// The keys of a table column's path (`vessels.CCA.radius` -> `vessels`, `CCA`, `radius`):
-/// `parts` are its dot-separated pieces, or the levels of a multi-level column (`dotted`
-/// false: each level is one key, trailing empty levels dropped). A vessel or node name may
-/// itself hold dots: under `vessels` / `boundary_conditions` (`names`: the model's vessel
-/// names and nodes) the longest known name wins. A column of variant `k` that names no vessel or node, or has
-/// an empty key, is an error naming the variant and the column.
-pub fn column_keys(
-    parts: &[String],
-    dotted: bool,
-    names: &[(&str, &[String])],
-    k: usize,
-) -> std::result::Result<Vec<String>, Error> {
-    let mut parts = parts;
-    while !dotted && parts.len() > 1 && parts.last().is_some_and(String::is_empty) {
-        parts = &parts[..parts.len() - 1];
-    }
-    let label = parts.join(".");
-    let fail = |message: &str| Error::model(at(k, &label), message.to_owned());
-    let Some((section, rest)) = parts.split_first() else {
-        return Err(fail("empty key in the column's dotted path"));
-    };
-    let mut keys = vec![section.clone()];
-    let known = names
-        .iter()
-        .find(|(s, _)| *s == section.as_str())
-        .map(|(_, n)| *n);
-    match known.filter(|_| dotted) {
-        Some(known) => {
-            let is_name = |cut: usize| known.iter().any(|n| *n == rest[..cut].join("."));
-            let Some(cut) = (1..rest.len()).rev().find(|&cut| is_name(cut)) else {
-                let no_property = rest.len() <= 1 || is_name(rest.len());
-                return Err(fail(&if no_property {
-                    format!("expected {section}.NAME.PROPERTY")
-                } else {
-                    "no vessel or node of the model starts this path".to_owned()
-                }));
-            };
-            keys.push(rest[..cut].join("."));
-            keys.extend(rest[cut..].iter().cloned());
-        }
-        None => keys.extend(rest.iter().cloned()),
-    }
-    if keys.iter().any(String::is_empty) {
-        return Err(fail("empty key in the column's dotted path"));
-    }
-    Ok(keys)
 }
 
 #[cfg(test)]

@@ -28,6 +28,7 @@ use crate::circuit::CircuitElement;
 use crate::circuit::{Circuit, Dae};
 use crate::coefficients::ResistanceLaw;
 use crate::error::{Error, Result};
+use crate::model::path::{self, Scope};
 use crate::model::{
     ActivationSpec, Arrangement, BoundarySpec, ChamberLawSpec, ChamberSpec, ChamberSphereSpec,
     HeartPulmonarySpec, NetworkSpec, StenosisForm, ValveSpec, VesselSpec,
@@ -138,19 +139,18 @@ fn unknown(path: &str, why: impl Into<String>) -> Error {
 
 impl Parameter {
     /// Resolve `path` against `spec`: the vessel or condition must exist and hold the number.
+    /// The path's shape and keys are read by the model's path resolver
+    /// (`crate::model::path`), which words an unknown key the same way as the patch merge.
     pub fn parse(spec: &NetworkSpec, path: &str) -> Result<Parameter> {
         let parts: Vec<&str> = path.split('.').collect();
         match parts.as_slice() {
             ["scale", "resistance"] => Ok(Parameter::ResistanceScale),
             ["scale", "compliance"] => Ok(Parameter::ComplianceScale),
             ["scale", "inflow"] => Ok(Parameter::InflowScale),
-            ["boundary_conditions", node, key] => condition(spec, path, node, key),
-            [
-                "boundary_conditions",
-                node,
-                "intramyocardial_pressure",
-                "scale",
-            ] => condition(spec, path, node, PIM_SCALE),
+            // a coronary outlet's `intramyocardial_pressure.scale` is its one dotted key
+            ["boundary_conditions", node, rest @ ..] if !rest.is_empty() => {
+                condition(spec, path, node, &rest.join("."))
+            }
             [
                 "vessels",
                 name,
@@ -158,10 +158,7 @@ impl Parameter {
                 ..,
             ] => heart_element(spec, path, name, &parts[2..]),
             ["vessels", name, rest @ ..] if !rest.is_empty() => vessel(spec, path, name, rest),
-            _ => Err(unknown(
-                path,
-                "not a parameter path (vessels.<name>.<length|radius|youngs_modulus|lumped.resistance|lumped.capacitance|lumped.inductance|lumped.stenosis_coefficient|chamber.<key>|valve.<key>|chamber_sphere.<key>|heart_pulmonary.<key>>, boundary_conditions.<node>.<resistance|proximal_resistance|distal_resistance|capacitance|arterial_resistance|microvascular_resistance|microvascular_resistance_max|contraction_time|relaxation_time|venous_resistance|arterial_capacitance|intramyocardial_capacitance|intramyocardial_pressure.scale>, scale.<resistance|compliance|inflow>)",
-            )),
+            _ => Err(unknown(path, path::parameter_shape(&parts))),
         }
     }
 }
@@ -407,10 +404,7 @@ fn condition(spec: &NetworkSpec, path: &str, node: &str, key: &str) -> Result<Pa
         ));
     }
     if condition_value(bc, key).is_none() {
-        return Err(unknown(
-            path,
-            format!("the condition at node '{node}' has no differentiable value '{key}'"),
-        ));
+        return Err(unknown(path, no_condition_value(bc, node, key)));
     }
     // a varying microvascular resistance R(t) follows R_min and R_max through their square
     // roots (`ResistanceLaw::slope`), which have no derivative at zero
@@ -485,6 +479,45 @@ fn condition_value(bc: &BoundarySpec, key: &str) -> Option<(f64, Option<&'static
     }
 }
 
+/// Every key a condition may hold a differentiable value under ([`condition_value`]).
+const CONDITION_KEYS: &[&str] = &[
+    "resistance",
+    "proximal_resistance",
+    "distal_resistance",
+    "capacitance",
+    "arterial_resistance",
+    "microvascular_resistance",
+    "microvascular_resistance_max",
+    "contraction_time",
+    "relaxation_time",
+    "venous_resistance",
+    "arterial_capacitance",
+    "intramyocardial_capacitance",
+    PIM_SCALE,
+];
+
+/// Why the condition at `node` has no differentiable value `key`: the values it has, and
+/// the nearest of them (`crate::model::path::nearest`).
+fn no_condition_value(bc: &BoundarySpec, node: &str, key: &str) -> String {
+    let has: Vec<&str> = CONDITION_KEYS
+        .iter()
+        .copied()
+        .filter(|k| condition_value(bc, k).is_some())
+        .collect();
+    let mut message = format!("the condition at node '{node}' has no differentiable value '{key}'");
+    if has.is_empty() {
+        message.push_str(" (it has none)");
+        return message;
+    }
+    message.push_str(&format!(" (differentiable: {}", has.join(", ")));
+    let near = path::nearest(key, &has);
+    if !near.is_empty() {
+        message.push_str(&format!("; nearest: {}", near.join(", ")));
+    }
+    message.push(')');
+    message
+}
+
 /// Whether a condition's part label names a node (a capacitor) rather than a branch.
 fn is_node_label(label: &str) -> bool {
     matches!(label, "capacitor" | "intramyocardial compartment")
@@ -532,17 +565,26 @@ fn vessel(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<P
             }
             Parameter::Lumped(vi, (*key).to_owned())
         }
-        _ => {
-            return Err(unknown(
-                path,
-                format!(
-                    "vessel '{name}' has no differentiable value '{}'",
-                    rest.join(".")
-                ),
-            ));
-        }
+        _ => return Err(unknown(path, no_vessel_value(name, rest))),
     };
     Ok(p)
+}
+
+/// Why `rest` (after `vessels.<name>.`) names no differentiable value of the vessel: a key
+/// the schema does not have (named by the path resolver, with the nearest), else a value
+/// the vessel lacks or that has no derivative.
+fn no_vessel_value(name: &str, rest: &[&str]) -> String {
+    let known = match rest {
+        [key] => Scope::Vessel.check(key),
+        ["lumped", key] => Scope::Lumped.check(key),
+        _ => Ok(()),
+    };
+    known.err().unwrap_or_else(|| {
+        format!(
+            "vessel '{name}' has no differentiable value '{}'",
+            rest.join(".")
+        )
+    })
 }
 
 /// Which end radii of a vessel a radius parameter moves (by one per unit).

@@ -323,6 +323,36 @@ fn bad_paths_name_themselves() {
     assert!(err("boundary_conditions.zz.resistance").contains("node 'zz'"));
     assert!(err("blood.viscosity").contains("parameter 'blood.viscosity'"));
     assert!(err("vessels.parent.lumped.stenosis_coefficient").contains("no differentiable"));
+    // the shape and keys through the model's path resolver: the scope's keys, the nearest
+    let e = err("scale.inflw");
+    assert!(
+        e.ends_with(
+            "parameter 'scale.inflw': unknown scale key (allowed: compliance, inflow, \
+             resistance; nearest: inflow)"
+        ),
+        "{e}"
+    );
+    let e = err("vesels.parent.length");
+    assert!(
+        e.ends_with(
+            "parameter 'vesels.parent.length': unknown parameter section (allowed: \
+             boundary_conditions, scale, vessels; nearest: vessels)"
+        ),
+        "{e}"
+    );
+    let e = err("vessels.parent.lenght");
+    assert!(e.contains("unknown vessel property (allowed: "), "{e}");
+    assert!(e.ends_with("; nearest: length)"), "{e}");
+    assert!(err("vessels.parent").ends_with("expected vessels.NAME.PROPERTY"));
+    // a key the schema has that the condition lacks: its differentiable values named
+    let e = err("boundary_conditions.o2.resistanse");
+    assert!(
+        e.ends_with(
+            "the condition at node 'o2' has no differentiable value 'resistanse' \
+             (differentiable: resistance; nearest: resistance)"
+        ),
+        "{e}"
+    );
     let signal = sensitivities(&base, &[], &[("parent".into(), "speed".into())], settings())
         .err()
         .unwrap()

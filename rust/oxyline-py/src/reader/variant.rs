@@ -4,9 +4,10 @@
 //! with the periods of the base's conditions found once.
 //!
 //! [`VariantReader::prepare`] is a variant's whole preparation in one call: its patch merged
-//! into the base model by the core (`oxyline_core::model::patch`, the resolver of every patch
-//! and parameter path), the elements it changed read, and what the ensemble's workers need
-//! (the changed elements and sections), an error traced to the patch paths that caused it.
+//! into the base model by the core (`oxyline_core::model::patch`, its keys checked by the
+//! model's path resolver `oxyline_core::model::path`), the elements it changed read, and
+//! what the ensemble's workers need (the changed elements and sections), an error traced to
+//! the patch paths that caused it.
 
 use super::node::{PyNode, to_python};
 use super::schema::transport_facts;
