@@ -16,7 +16,6 @@ mod closed_loop;
 mod closed_loop_params;
 mod ensemble;
 mod errors;
-mod large_blocks;
 mod monitor;
 mod network;
 mod reader;
@@ -32,9 +31,10 @@ use errors::to_py;
 use results::ArrayPair;
 
 // the core's multi-MB vectors on their own mappings, handed back when freed (see
-// `large_blocks`): a large run's setup leaves no freed pages resident under its later blocks
+// `oxyline_core::run::large_blocks`): a large run's setup leaves no freed pages resident under its later blocks
 #[global_allocator]
-static ALLOCATOR: large_blocks::LargeBlocksMapped = large_blocks::LargeBlocksMapped;
+static ALLOCATOR: oxyline_core::run::large_blocks::LargeBlocksMapped =
+    oxyline_core::run::large_blocks::LargeBlocksMapped;
 
 // the schema names the columns `Transport::observe` writes, one name per column
 const _: () = assert!(oxyline_core::transport::VESSEL_COLUMNS == SPECIES_VESSEL_VARIABLES.len());
