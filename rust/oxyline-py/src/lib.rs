@@ -30,6 +30,12 @@ mod windkessel_trees;
 use errors::to_py;
 use results::ArrayPair;
 
+// the core's multi-MB vectors on their own mappings, handed back when freed (see
+// `oxyline_core::run::large_blocks`): a large run's setup leaves no freed pages resident under its later blocks
+#[global_allocator]
+static ALLOCATOR: oxyline_core::run::large_blocks::LargeBlocksMapped =
+    oxyline_core::run::large_blocks::LargeBlocksMapped;
+
 // the schema names the columns `Transport::observe` writes, one name per column
 const _: () = assert!(oxyline_core::transport::VESSEL_COLUMNS == SPECIES_VESSEL_VARIABLES.len());
 const _: () = assert!(oxyline_core::transport::SEGMENT_COLUMNS == SPECIES_SEGMENT_VARIABLES.len());

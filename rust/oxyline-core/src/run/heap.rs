@@ -21,7 +21,10 @@
 //! on its own peaks that much lower). The pass also hands the free pages back at its start,
 //! after the steady start and after its one factorisation (`run::pass`); measured, that did
 //! not lower the 1.05 M-segment peak (1,186 against 1,187 B per segment): the pages that
-//! count are freed and allocated again inside one stage, not between them.
+//! count are freed and allocated again inside one stage, not between them. The Python
+//! extension's allocator (`run::large_blocks`) now maps each block of 1 MiB or more
+//! on its own and unmaps it when freed, which removed them (peak 1,109 B per segment); the
+//! trims still serve the smaller blocks and other hosts of the core.
 //!
 //! It is made only for circuits of at least [`RELEASE_MIN_UNKNOWNS`] unknowns: it walks the
 //! allocator's heaps under their locks, which a small run (thousands of them in an ensemble's

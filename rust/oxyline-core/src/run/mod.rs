@@ -24,6 +24,7 @@ mod explicit; // error control with the explicit pair (docs/physics.md §10.4)
 pub mod facts; // the settings and facts a run records with its result
 pub(crate) mod flow_harmonics; // inlet renewal: the first pass's flow harmonics (and their tangents)
 mod heap; // freed pages back to the OS before a large pass's cycle loop
+pub mod large_blocks; // the Python extension's allocator: blocks ≥ 1 MiB mapped on their own
 mod mean_flow;
 pub mod memory;
 mod outcome;
