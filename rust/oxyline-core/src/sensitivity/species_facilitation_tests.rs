@@ -283,3 +283,30 @@ fn taper_end_radii_with_haemoglobin_adjoint_equals_forward() {
     eprintln!("taper with haemoglobin: adjoint against forward {worst:.2e}");
     assert!(worst < 2e-7, "{worst:e}");
 }
+
+/// [`model`] with d2's facilitated Lévêque wall on the relaxed or instantaneous shear: P50
+/// and its wall PO2 move the step's conductance through E_Hb (the same relative change of
+/// the blood side as at a fixed shear). Against central differences (judged as above) and
+/// the adjoint against the forward tangents.
+#[test]
+fn facilitated_shear_dependent_walls() {
+    for law in [
+        crate::closure::Shear::Relaxed,
+        crate::closure::Shear::Instantaneous,
+    ] {
+        let mut spec = model();
+        let sp = &mut spec.transport.as_mut().unwrap().species[0];
+        if let Some(WallSpec::Leveque { shear, .. }) = sp.per_vessel.get_mut("d2") {
+            *shear = law;
+        }
+        let paths = ["oxygen.hill.p50", "oxygen.per_vessel.d2.wall.po2"];
+        for path in paths {
+            let worst = check(&spec, path);
+            eprintln!("{law:?} shear, {path}: {worst:.2e}");
+            assert!(worst < 1e-6, "{law:?}: {path}");
+        }
+        let worst = super::adjoint::tests::mean_and_series_adjoint_worst(&spec, &paths, &signals());
+        eprintln!("{law:?} shear, facilitated: adjoint against forward {worst:.2e}");
+        assert!(worst < 1e-8, "{law:?}: {worst:e}");
+    }
+}
