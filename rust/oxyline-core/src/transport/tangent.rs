@@ -396,7 +396,7 @@ impl Transport {
             let laws = &sp.laws;
             for (k, &(j, tau, _)) in laws.relax.iter().enumerate() {
                 let e = (-dt / tau).exp();
-                if !(e < 1.0) {
+                if e.is_nan() || e >= 1.0 {
                     continue; // no mean flow: the layer keeps its start
                 }
                 let u = self.plan.segments[j].branch_unknown as usize;
