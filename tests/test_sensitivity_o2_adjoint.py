@@ -16,9 +16,11 @@ mode="adjoint")``): one backward sweep of the species transport per output row.
   1e-4; 1e-6 of the quotient plus the outputs' rounding over h).
 * ``calibrate(gradient="adjoint")`` with oxygen targets and flow parameters uses the
   adjoint (no forward tangent runs).
+* A shear-dependent (Lévêque, instantaneous or relaxed) wall by oxygen parameters,
+  forward and adjoint against central differences.
 * What the oxygen adjoint does not follow is refused by name: a path that does not
-  resolve, a shear-dependent (Lévêque) wall; flow outputs beside oxygen parameters get
-  zero rows.
+  resolve, a flow parameter on a shear-dependent (Lévêque) wall; flow outputs beside
+  oxygen parameters get zero rows.
 """
 
 from __future__ import annotations
@@ -158,10 +160,35 @@ def test_flow_outputs_beside_oxygen_get_zero_rows() -> None:
     np.testing.assert_allclose(adj.jacobian[1], fwd.jacobian[1], rtol=1e-8)
 
 
-def test_a_shear_dependent_wall_is_refused_by_name() -> None:
-    leveque = {"wall": {"model": "leveque", "po2": 40.0, "shear": "instantaneous"}}
-    m = {**Y, "oxygen": {**Y["oxygen"], "per_vessel": {"d2": leveque}}}
+def sheared(shear: str) -> dict[str, Any]:
+    """:data:`Y` with a Lévêque wall of the shear ``shear`` on d2 (the section's
+    mass-transfer wall on the others)."""
+    leveque = {"wall": {"model": "leveque", "po2": 40.0, "shear": shear}}
+    return {**Y, "oxygen": {**Y["oxygen"], "per_vessel": {"d2": leveque}}}
+
+
+SHEARED_OUTPUTS = ["d2.po2_out.mean", "d2.saturation_out.min", "VO2", "SvO2.d1",
+                   "d1.po2_out.mean"]
+
+
+@pytest.mark.parametrize(("shear", "path", "mode"), [
+    ("instantaneous", "oxygen.wall.k", "forward"),
+    ("instantaneous", "oxygen.per_vessel.d2.wall.po2", "adjoint"),
+    ("relaxed", "oxygen.per_vessel.d2.wall.po2", "forward"),
+    ("relaxed", "oxygen.hill.p50", "adjoint"),
+])
+def test_shear_dependent_wall_by_oxygen_parameters(shear: str, path: str, mode: str) -> None:
+    """A Lévêque wall whose conductance follows the shear step by step (instantaneous, or
+    relaxed through its own state): an oxygen parameter scales each step's conductance, so
+    forward and adjoint follow it; against central differences, judged as above."""
+    check_against_central_differences(sheared(shear), path, SHEARED_OUTPUTS, mode=mode)
+
+
+def test_a_shear_dependent_wall_refuses_flow_parameters_by_name() -> None:
+    m = sheared("instantaneous")
     for mode in ["forward", "adjoint"]:
         with pytest.raises(ModelError,
-                           match=r"parameter 'oxygen\.wall\.k'.*vessel 'd2'.*shear: instantaneous"):
-            oxyline.sensitivities(m, ["oxygen.wall.k"], ["SvO2.d1"], mode=mode)
+                           match=r"parameter 'vessels\.d1\.length'.*vessel 'd2'.*"
+                                 r"shear: instantaneous"):
+            oxyline.sensitivities(m, ["vessels.d1.length", "oxygen.wall.k"], ["SvO2.d1"],
+                                  mode=mode)

@@ -146,6 +146,7 @@ fn primal_to_periodic(
     let (ns, nc) = (set.steps_per_cycle, tr.n_cells());
     let dt = set.period / ns as f64;
     let mut z = tr.initial_state(&flow.ys[0])?;
+    tr.set_periodic_relaxed_shears(&flow.ys, dt, set.alpha_f(), &mut z);
     let mut last = f64::INFINITY;
     for cycle in 1..=set.max_cycles {
         let z0 = z[s * nc..(s + 1) * nc].to_vec();

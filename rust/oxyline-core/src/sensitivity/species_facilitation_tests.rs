@@ -256,3 +256,57 @@ fn given_enhancement_and_refusals() {
     }
     assert!(one(&wrong, "oxygen.wall.po2").is_err());
 }
+
+/// [`model`] (Hill's law) with the parent tapered 4 → 3.6 mm (d1 is tapered 3 → 2.5 mm
+/// already): its end radii barely move the exchange under these boundary-layer walls (the
+/// Graetz law does not read a radius, the Lévêque one only through the flow), so the
+/// network's mean outflow moves by ~1e-7 of itself per unit log, while the amounts the
+/// transport tangent's periodicity is judged against are mostly bound oxygen. The forward
+/// tangent stopped at the tolerance there still stored ~1e-13 of the largest amount per
+/// cycle, which the mean outflow read as flux: 6.5e-7 of its derivative off the adjoint's
+/// (whose mean outflow balances the consumption, as a periodic state's must). It now goes
+/// on while its change still falls (`still_settling`), to the amounts' rounding floor:
+/// 9.8e-8 measured (the mean outflow's derivative by the inlet radius, ~1e-16 of the
+/// amounts over a cycle; d1's mean PO2 1.4e-9). Judged at 2e-7: that floor with 2× room;
+/// the stop at the tolerance fails it by 3×.
+#[test]
+fn taper_end_radii_with_haemoglobin_adjoint_equals_forward() {
+    let mut spec = model();
+    let parent = spec
+        .vessels
+        .iter_mut()
+        .find(|v| v.name == "parent")
+        .unwrap();
+    parent.geometry.as_mut().unwrap().radius_out = 0.0036;
+    let paths = ["vessels.parent.radius_in", "vessels.parent.radius_out"];
+    let worst = super::adjoint::tests::mean_and_series_adjoint_worst(&spec, &paths, &signals());
+    eprintln!("taper with haemoglobin: adjoint against forward {worst:.2e}");
+    assert!(worst < 2e-7, "{worst:e}");
+}
+
+/// [`model`] with d2's facilitated Lévêque wall on the relaxed or instantaneous shear: P50
+/// and its wall PO2 move the step's conductance through E_Hb (the same relative change of
+/// the blood side as at a fixed shear). Against central differences (judged as above) and
+/// the adjoint against the forward tangents.
+#[test]
+fn facilitated_shear_dependent_walls() {
+    for law in [
+        crate::closure::Shear::Relaxed,
+        crate::closure::Shear::Instantaneous,
+    ] {
+        let mut spec = model();
+        let sp = &mut spec.transport.as_mut().unwrap().species[0];
+        if let Some(WallSpec::Leveque { shear, .. }) = sp.per_vessel.get_mut("d2") {
+            *shear = law;
+        }
+        let paths = ["oxygen.hill.p50", "oxygen.per_vessel.d2.wall.po2"];
+        for path in paths {
+            let worst = check(&spec, path);
+            eprintln!("{law:?} shear, {path}: {worst:.2e}");
+            assert!(worst < 1e-6, "{law:?}: {path}");
+        }
+        let worst = super::adjoint::tests::mean_and_series_adjoint_worst(&spec, &paths, &signals());
+        eprintln!("{law:?} shear, facilitated: adjoint against forward {worst:.2e}");
+        assert!(worst < 1e-8, "{law:?}: {worst:e}");
+    }
+}

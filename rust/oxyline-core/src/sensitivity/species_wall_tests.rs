@@ -142,28 +142,73 @@ fn cycle_mean_walls_adjoint_equals_forward() {
     assert!(worst < 1e-8, "{worst:e}");
 }
 
-/// What stays refused, by name: a Lévêque wall of the relaxed or instantaneous shear (its
-/// conductance follows the shear step by step), naming the parameters, the vessel and the
-/// shear (the facilitated walls' refusals: `species_facilitation_tests.rs`).
+/// [`model`] with d2's Lévêque wall on the shear `law` (relaxed or instantaneous).
+pub(super) fn sheared(law: crate::closure::Shear) -> NetworkSpec {
+    let mut spec = parse(&model()).unwrap();
+    let sp = &mut spec.transport.as_mut().unwrap().species[0];
+    if let Some(WallSpec::Leveque { shear, .. }) = sp.per_vessel.get_mut("d2") {
+        *shear = law;
+    }
+    spec
+}
+
+const SHEARS: [crate::closure::Shear; 2] = [
+    crate::closure::Shear::Relaxed,
+    crate::closure::Shear::Instantaneous,
+];
+
+/// A Lévêque wall of the relaxed or instantaneous shear on d2: its conductance follows the
+/// shear step by step, and the oxygen parameters scale that step's g (the enhancement) or
+/// g c_w (the wall concentration). Against central differences of whole periodic runs,
+/// judged as above.
 #[test]
-fn relaxed_shear_is_refused() {
-    let sig = signals();
-    for (law, name) in [
-        (crate::closure::Shear::Relaxed, "relaxed"),
-        (crate::closure::Shear::Instantaneous, "instantaneous"),
-    ] {
-        let mut spec = parse(&model()).unwrap();
-        let sp = &mut spec.transport.as_mut().unwrap().species[0];
-        if let Some(WallSpec::Leveque { shear, .. }) = sp.per_vessel.get_mut("d2") {
-            *shear = law;
+fn shear_dependent_walls_by_oxygen_parameters_against_central_differences() {
+    for law in SHEARS {
+        let spec = sheared(law);
+        for path in [
+            "oxygen.per_vessel.d2.wall.concentration",
+            "oxygen.per_vessel.d2.wall.enhancement",
+            "oxygen.wall.enhancement",
+        ] {
+            let worst = check(&spec, path);
+            eprintln!("{law:?} shear, {path}: {worst:.2e}");
+            assert!(worst < 1e-6, "{law:?}: {path}");
         }
+    }
+}
+
+/// The same walls' step-by-step terms in the adjoint (two sums per shear-dependent piece)
+/// against the forward tangents.
+#[test]
+fn shear_dependent_walls_adjoint_equals_forward() {
+    let paths = [
+        "oxygen.per_vessel.d2.wall.concentration",
+        "oxygen.per_vessel.d2.wall.enhancement",
+        "oxygen.wall.enhancement",
+    ];
+    for law in SHEARS {
+        let worst =
+            super::adjoint::tests::mean_and_series_adjoint_worst(&sheared(law), &paths, &signals());
+        eprintln!("{law:?} shear: adjoint against forward {worst:.2e}");
+        assert!(worst < 1e-8, "{law:?}: {worst:e}");
+    }
+}
+
+/// What stays refused, by name: a flow parameter on a model with a Lévêque wall of the
+/// relaxed or instantaneous shear (the shear it moves is not carried yet), naming the flow
+/// parameters (not the oxygen ones, which are followed), the vessel and the shear.
+#[test]
+fn shear_dependent_walls_refuse_flow_parameters() {
+    let sig = signals();
+    for (law, name) in SHEARS.into_iter().zip(["relaxed", "instantaneous"]) {
+        let spec = sheared(law);
         let paths = ["scale.inflow".to_string(), "oxygen.wall.enhancement".into()];
         let m = species_sensitivities(&spec, &paths, &sig, settings())
             .unwrap_err()
             .to_string();
         assert!(
             m.contains("'scale.inflow'")
-                && m.contains("'oxygen.wall.enhancement'")
+                && !m.contains("'oxygen.wall.enhancement'")
                 && m.contains("vessel 'd2'")
                 && m.contains(&format!("shear: {name}")),
             "{m}"

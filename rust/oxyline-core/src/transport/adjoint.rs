@@ -40,6 +40,9 @@ pub struct SpeciesStepRecord {
     c: Vec<f64>,
     point: Vec<BindingPoint>,
     x: Vec<f64>,
+    /// The step's wall conductance per cell and each shear-dependent piece's own.
+    g: Vec<f64>,
+    dyn_g: Vec<f64>,
     /// Every node's total concentration before and after the step (a flow parameter's
     /// forcing reads them; empty without flow parameters).
     nodes_old: Vec<f64>,
@@ -76,15 +79,20 @@ pub struct SignalRow {
     pub face: Option<usize>,
 }
 
-/// The parameters' terms of the adjoint steps, summed over a cycle: the wall laws'
+/// The parameters' terms of the adjoint steps, summed over a cycle: the fixed laws'
 /// coefficients are fixed in time, so a parameter's derivative is Σ_i dg_i a_i +
 /// (dq_i − d(g c_w)_i) e_i over the cells, plus `p50` for Hill's P50 (its binding's partial
-/// derivatives and the inlets' total concentration).
+/// derivatives and the inlets' total concentration). A shear-dependent piece's g follows
+/// the shear step by step, but a parameter moves it by fixed logarithmic rates (of its
+/// blood side and of c_w), so it keeps two sums per piece: `dyn_g`, Σ_k b g (a − c_w e)
+/// (b its blood side's share), and `dyn_cw`, −Σ_k g c_w e, each over the steps.
 #[derive(Debug, Clone)]
 pub struct AdjointSums {
     pub a: Vec<f64>,
     pub e: Vec<f64>,
     pub p50: f64,
+    pub dyn_g: Vec<f64>,
+    pub dyn_cw: Vec<f64>,
 }
 
 impl AdjointSums {
@@ -93,6 +101,8 @@ impl AdjointSums {
             a: vec![0.0; nc],
             e: vec![0.0; nc],
             p50: 0.0,
+            dyn_g: Vec::new(),
+            dyn_cw: Vec::new(),
         }
     }
 
@@ -102,7 +112,11 @@ impl AdjointSums {
         let cells = (d.cell.iter().zip(&self.a).zip(&self.e))
             .map(|((&[dg, dgcw, dq], a), e)| dg * a + (dq - dgcw) * e)
             .sum::<f64>();
+        let dynamic = (d.dynamic.iter().zip(&self.dyn_g).zip(&self.dyn_cw))
+            .map(|((&[ln_g, ln_cw], g), cw)| ln_g * g + ln_cw * cw)
+            .sum::<f64>();
         cells
+            + dynamic
             + if d.kind == SpeciesParameterKind::P50 {
                 self.p50
             } else {
@@ -159,7 +173,10 @@ impl Transport {
             c.push(ci);
             x.push(z[s * nc + i] / self.wvol[i]);
         }
+        let dyn_g = self.dynamic_conductances(s);
         SpeciesStepRecord {
+            g: self.step_cell_conductance(s, &dyn_g),
+            dyn_g,
             t_af,
             qf: self.qf.clone(),
             qs: self.qs.clone(),
@@ -207,7 +224,6 @@ impl Transport {
                 row.face = (v.last < self.plan.faces.len()).then_some(v.last);
             }
             VesselSpeciesSignal::WallUptake => {
-                let laws = &self.species[s].laws;
                 let v = &self.plan.out_vessels[k];
                 for j in self.plan.out_segments[v.segs.clone()]
                     .iter()
@@ -215,15 +231,19 @@ impl Transport {
                 {
                     for p in self.plan.seg_pieces(j) {
                         let pc = &self.plan.pieces[p];
-                        let SegmentLaw::Fixed { g, cw, q } = laws.laws[p] else {
-                            continue;
-                        };
+                        let (g, cw, q, dynamic) = self.piece_law_at_step(s, p);
                         let n = pc.node as usize;
                         let (pt, _) = self.node_state(s, n, z, &[]);
                         row.value += pc.share * (g * (pt.f - cw) + q);
                         row.nodes.push((n, pc.share * g * pt.sigma));
                         for (dr, d) in row.direct.iter_mut().zip(derivs) {
-                            let [dg, dgcw, dq] = d.piece[p];
+                            let [dg, dgcw, dq] = match dynamic {
+                                Some(k) => {
+                                    let (dg, dgcw) = self.dynamic_piece_derivative(s, d, k, g);
+                                    [dg, dgcw, 0.0]
+                                }
+                                None => d.piece[p],
+                            };
                             let fd = if p50(d) { pt.f_p50 } else { 0.0 };
                             *dr += pc.share * (dg * pt.f + g * fd - dgcw + dq);
                         }
@@ -284,7 +304,6 @@ impl Transport {
         self.qs.copy_from_slice(&rec.qs);
         self.load_boundary(s, rec.t_af);
         let plan = Arc::clone(&self.plan);
-        let laws = Arc::clone(&self.species[s].laws);
         let lambda = plan.species[s].decay;
         let rate = 1.0 / dt + lambda;
         let nn = plan.kind.len();
@@ -297,7 +316,7 @@ impl Transport {
         }
         let mut den = vec![0.0; nn];
         for (i, n) in plan.cells.iter().map(|&n| n as usize).enumerate() {
-            let wl = laws.cell_g[i] * rec.point[i].sigma;
+            let wl = rec.g[i] * rec.point[i].sigma;
             lx[n] += rec.w_new[i] * lam.dz[i] + net[2] * wl;
             den[n] = rec.w_new[i] * rate + wl;
         }
@@ -315,9 +334,10 @@ impl Transport {
             du.ldc.resize(plan.cells.len(), 0.0);
             du.net = net;
         }
-        // the rows (`tangent_rows`), transposed
+        // the rows (`tangent_rows`), transposed; per cell the weights of dg and d(g c_w)
+        let mut weights = vec![(0.0, 0.0); plan.cells.len()];
         for (i, n) in plan.cells.iter().map(|&n| n as usize).enumerate() {
-            let g = laws.cell_g[i];
+            let g = rec.g[i];
             let pt = &rec.point[i];
             let (c, x) = (rec.c[i], rec.x[i]);
             let wl = g * pt.sigma;
@@ -332,14 +352,43 @@ impl Transport {
             // w_l′ ∋ dg σ + g ∂σ/∂P50, w_c′ ∋ dg f + g ∂f/∂P50 − d(g c_w) + dq
             sums.a[i] += ldwl * pt.sigma + e * pt.f;
             sums.e[i] += e;
+            weights[i] = (ldwl * pt.sigma + e * pt.f, e);
             sums.p50 += g * (ldwl * pt.sigma_p50 + e * pt.f_p50);
         }
+        self.dynamic_sums(s, rec, &weights, sums);
         for (n, l) in lam.xt.iter_mut().enumerate() {
             let cell = plan.node_cell.get(n).is_some_and(|&i| i != u32::MAX);
             *l = if cell { 0.0 } else { lprior[n] };
         }
         if let Some(du) = duals {
             du.lnum = lnum;
+        }
+    }
+
+    /// The shear-dependent pieces' terms of one adjoint step ([`AdjointSums`]): `weights`
+    /// per cell (the weight of dg, that of dq − d(g c_w)).
+    fn dynamic_sums(
+        &self,
+        s: usize,
+        rec: &SpeciesStepRecord,
+        weights: &[(f64, f64)],
+        sums: &mut AdjointSums,
+    ) {
+        let laws = &self.species[s].laws;
+        if laws.dynamic.is_empty() {
+            return;
+        }
+        sums.dyn_g.resize(laws.dynamic.len(), 0.0);
+        sums.dyn_cw.resize(laws.dynamic.len(), 0.0);
+        for (k, (&p, &g)) in laws.dynamic.iter().zip(&rec.dyn_g).enumerate() {
+            let pc = &self.plan.pieces[p];
+            let SegmentLaw::Instantaneous { cw, .. } = laws.laws[p] else {
+                continue;
+            };
+            let (a, e) = weights[pc.cell as usize];
+            let b = self.blood_side_share(s, p, g);
+            sums.dyn_g[k] += pc.share * b * g * (a - cw * e);
+            sums.dyn_cw[k] -= pc.share * g * cw * e;
         }
     }
 

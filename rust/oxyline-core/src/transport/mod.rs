@@ -496,6 +496,17 @@ impl Transport {
         self.plan.out_vessels.iter().map(|v| v.segs.len()).collect()
     }
 
+    /// The branch-flow unknowns of the segments whose wall law reads the step's shear
+    /// (instantaneous or relaxed Lévêque walls), species by species.
+    pub fn shear_unknowns(&self) -> Vec<usize> {
+        let segs = self
+            .species
+            .iter()
+            .flat_map(|sp| sp.laws.dynamic_segs.iter());
+        segs.map(|&j| self.plan.segments[j].branch_unknown as usize)
+            .collect()
+    }
+
     /// Flow unknowns whose cycle-mean |Q| the closures need (empty: single pass).
     pub fn mean_flow_unknowns(&self) -> Vec<usize> {
         if self

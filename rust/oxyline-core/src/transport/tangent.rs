@@ -136,6 +136,9 @@ pub struct SpeciesDerivative {
     pub kind: SpeciesParameterKind,
     piece: Vec<[f64; 3]>,
     cell: Vec<[f64; 3]>,
+    /// Per shear-dependent piece (`Laws::dynamic`): d ln g/dθ of its blood side and
+    /// d ln c_w/dθ, which scale the step's own g and g c_w (the law follows the shear).
+    dynamic: Vec<[f64; 2]>,
     /// A flow parameter's volumes and sources (None for an oxygen parameter).
     flow: Option<FlowDerivative>,
 }
@@ -157,6 +160,10 @@ pub struct SpeciesTangent {
 struct StepPrimal {
     /// old volume, old total concentration and its binding, new total concentration, per cell
     w: Vec<f64>,
+    /// the step's wall conductance per cell (fixed laws and shear-dependent pieces) and
+    /// each shear-dependent piece's own
+    g: Vec<f64>,
+    dyn_g: Vec<f64>,
     c: Vec<f64>,
     point: Vec<BindingPoint>,
     x: Vec<f64>,
@@ -171,9 +178,6 @@ impl Transport {
             Some("the tl-quasisteady formulation")
         } else if !self.plan.tissue.is_empty() {
             Some("a tissue wall")
-        } else if !self.species[s].laws.dynamic.is_empty() || !self.species[s].laws.relax.is_empty()
-        {
-            Some("a shear-dependent (instantaneous or relaxed) wall")
         } else if self.species[s].laws.flux_tables.is_some() {
             Some("a wall flux tabulated in time")
         } else if self.inflow_override.is_some() {
@@ -240,12 +244,95 @@ impl Transport {
                 *c += pc.share * dk;
             }
         }
+        // a shear-dependent piece's g and g c_w scale with the enhancement and c_w alike
+        let dynamic = (laws.dynamic.iter())
+            .map(|&p| {
+                let seg = self.plan.pieces[p].seg as usize;
+                let vessel = self.plan.segment_vessels[seg] as usize;
+                match kind {
+                    _ if !on.get(vessel).copied().unwrap_or(false) => [0.0; 2],
+                    SpeciesParameterKind::Conductance => [1.0 / value, 0.0],
+                    SpeciesParameterKind::WallConcentration => [0.0, 1.0 / value],
+                    _ => [0.0; 2],
+                }
+            })
+            .collect();
         SpeciesDerivative {
             kind,
             piece,
             cell,
+            dynamic,
             flow: None,
         }
+    }
+
+    /// The conductance of every shear-dependent piece of species `s` at the step just
+    /// taken (its shear loaded), in the order of `Laws::dynamic`.
+    pub(super) fn dynamic_conductances(&self, s: usize) -> Vec<f64> {
+        let sp = &self.species[s];
+        (sp.laws.dynamic.iter())
+            .map(|&p| {
+                let seg = self.plan.pieces[p].seg as usize;
+                sp.laws.laws[p].eval_cbrt(sp.shear_cbrt[seg]).0
+            })
+            .collect()
+    }
+
+    /// (dg, d(g c_w)) of shear-dependent piece `k` (of `Laws::dynamic`, piece `p`) by the
+    /// parameter of `d` at the step's conductance `g` (a permeability in series takes its
+    /// share of the blood side's relative change).
+    pub(super) fn dynamic_piece_derivative(
+        &self,
+        s: usize,
+        d: &SpeciesDerivative,
+        k: usize,
+        g: f64,
+    ) -> (f64, f64) {
+        let [ln_g, ln_cw] = d.dynamic.get(k).copied().unwrap_or([0.0; 2]);
+        if ln_g == 0.0 && ln_cw == 0.0 {
+            return (0.0, 0.0);
+        }
+        let p = self.species[s].laws.dynamic[k];
+        let SegmentLaw::Instantaneous { cw, .. } = self.species[s].laws.laws[p] else {
+            return (0.0, 0.0);
+        };
+        let dg = ln_g * self.blood_side_share(s, p, g) * g;
+        (dg, (dg + ln_cw * g) * cw)
+    }
+
+    /// Per cell: the step's (dg, d(g c_w)) of the shear-dependent pieces by the parameter of
+    /// `d` (`dyn_g`: their conductances at the step); empty without such pieces.
+    fn dynamic_cell_derivative(
+        &self,
+        s: usize,
+        d: &SpeciesDerivative,
+        dyn_g: &[f64],
+    ) -> Vec<[f64; 2]> {
+        let laws = &self.species[s].laws;
+        if laws.dynamic.is_empty() {
+            return Vec::new();
+        }
+        let mut out = vec![[0.0; 2]; self.plan.cells.len()];
+        for (k, (&p, &g)) in laws.dynamic.iter().zip(dyn_g).enumerate() {
+            let pc = &self.plan.pieces[p];
+            let (dg, dgcw) = self.dynamic_piece_derivative(s, d, k, g);
+            let c = &mut out[pc.cell as usize];
+            c[0] += pc.share * dg;
+            c[1] += pc.share * dgcw;
+        }
+        out
+    }
+
+    /// The step's wall conductance per cell of species `s`: the fixed laws' and the
+    /// shear-dependent pieces' at their conductances `dyn_g`.
+    pub(super) fn step_cell_conductance(&self, s: usize, dyn_g: &[f64]) -> Vec<f64> {
+        let laws = &self.species[s].laws;
+        let mut g = laws.cell_g.clone();
+        for (&p, &gp) in laws.dynamic.iter().zip(dyn_g) {
+            let pc = &self.plan.pieces[p];
+            g[pc.cell as usize] += pc.share * gp;
+        }
+        g
     }
 
     /// d ln g/d ln G of wall piece `p` of species `s` (law conductance `g`) by its blood
@@ -277,6 +364,48 @@ impl Transport {
             for (k, v) in add.iter().enumerate() {
                 d.piece[p][k] += v;
                 d.cell[pc.cell as usize][k] += pc.share * v;
+            }
+        }
+        // a shear-dependent piece: the same relative change of its step's blood side
+        for (k, &p) in laws.dynamic.iter().enumerate() {
+            let seg = self.plan.pieces[p].seg as usize;
+            let a = ln_slope
+                .get(self.plan.segment_vessels[seg] as usize)
+                .copied()
+                .unwrap_or(0.0);
+            if let Some(x) = d.dynamic.get_mut(k) {
+                x[0] += a;
+            }
+        }
+    }
+
+    /// Set the relaxed shears' states in `z` to their periodic values over the flow cycle
+    /// `ys` (n_steps + 1 flow states, steps of `dt` read at level `alpha_f`, as
+    /// `relax_shears` reads them): over a cycle Q̃ → E Q̃ + b (E = e^n, e = exp(−Δt/τ_BL)),
+    /// so Q̃* = b/(1 − E) from one pass of the recursion from zero. The layer relaxes over
+    /// ~τ_BL, often many cycles, so the oxygen field would meet its own tolerance long before
+    /// the shear it reads repeats; the sensitivities need the periodic state of both.
+    pub fn set_periodic_relaxed_shears(
+        &self,
+        ys: &[Vec<f64>],
+        dt: f64,
+        alpha_f: f64,
+        z: &mut [f64],
+    ) {
+        for sp in &self.species {
+            let laws = &sp.laws;
+            for (k, &(j, tau, _)) in laws.relax.iter().enumerate() {
+                let e = (-dt / tau).exp();
+                if e.is_nan() || e >= 1.0 {
+                    continue; // no mean flow: the layer keeps its start
+                }
+                let u = self.plan.segments[j].branch_unknown as usize;
+                let mut v = 0.0;
+                for w in ys.windows(2) {
+                    let q = (w[0][u] + alpha_f * (w[1][u] - w[0][u])).abs();
+                    v = q + (v - q) * e;
+                }
+                z[laws.relax_offset + k] = v / (1.0 - e.powi((ys.len() - 1) as i32));
             }
         }
     }
@@ -328,8 +457,11 @@ impl Transport {
         if anchors.len() != self.plan.kind.len() {
             anchors.resize(self.plan.kind.len(), HillAnchor::default());
         }
+        let dyn_g = self.dynamic_conductances(s);
         let mut primal = StepPrimal {
             w: w_old[..nc].to_vec(),
+            g: self.step_cell_conductance(s, &dyn_g),
+            dyn_g,
             c: Vec::with_capacity(nc),
             point: Vec::with_capacity(nc),
             x: Vec::with_capacity(nc),
@@ -426,11 +558,10 @@ impl Transport {
         std::mem::swap(&mut self.conc, &mut xt);
         std::mem::swap(&mut self.bval, &mut bval);
         res?;
-        let laws = Arc::clone(&self.species[s].laws);
         let lambda = self.plan.species[s].decay;
         let mut decay = 0.0;
         for (i, n) in plan.cells.iter().map(|&n| n as usize).enumerate() {
-            let wl = laws.cell_g[i] * primal.point[i].sigma;
+            let wl = primal.g[i] * primal.point[i].sigma;
             wall += wl * xt[n];
             // z′ = W' x′ + W'′ x
             let dz = self.wvol[i] * xt[n] + forcing.as_ref().map_or(0.0, |f| f.dz[i]);
@@ -462,14 +593,17 @@ impl Transport {
         t: &mut SpeciesTangent,
         forcing: Option<&FlowForcing>,
     ) -> f64 {
-        let laws = Arc::clone(&self.species[s].laws);
         let rate = 1.0 / dt + self.plan.species[s].decay;
         let p50 = d.kind == SpeciesParameterKind::P50;
         let mut wall = 0.0;
         let plan = Arc::clone(&self.plan);
+        let dynamic = self.dynamic_cell_derivative(s, d, &primal.dyn_g);
         for (i, n) in plan.cells.iter().map(|&n| n as usize).enumerate() {
-            let g = laws.cell_g[i];
-            let [dg, dgcw, dq] = d.cell[i];
+            let g = primal.g[i];
+            let [mut dg, mut dgcw, dq] = d.cell[i];
+            if let Some([a, b]) = dynamic.get(i) {
+                (dg, dgcw) = (dg + a, dgcw + b);
+            }
             let pt = &primal.point[i];
             // c′ = z′/W − c W′/W
             let dc = t.dz[i] / primal.w[i] + forcing.map_or(0.0, |f| f.dc[i]);
@@ -622,7 +756,6 @@ impl Transport {
         derivs: &[SpeciesDerivative],
         tangents: &[SpeciesTangent],
     ) -> (f64, Vec<f64>) {
-        let laws = &self.species[s].laws;
         let v = &self.plan.out_vessels[k];
         let (mut w, mut dw) = (0.0, vec![0.0; derivs.len()]);
         for j in self.plan.out_segments[v.segs.clone()]
@@ -631,14 +764,18 @@ impl Transport {
         {
             for p in self.plan.seg_pieces(j) {
                 let pc = &self.plan.pieces[p];
-                let SegmentLaw::Fixed { g, cw, q } = laws.laws[p] else {
-                    continue;
-                };
+                let (g, cw, q, k) = self.piece_law_at_step(s, p);
                 let n = pc.node as usize;
                 let (pt, xt) = self.node_state(s, n, z, tangents);
                 w += pc.share * (g * (pt.f - cw) + q);
                 for ((dw, d), x) in dw.iter_mut().zip(derivs).zip(&xt) {
-                    let [dg, dgcw, dq] = d.piece[p];
+                    let [dg, dgcw, dq] = match k {
+                        Some(k) => {
+                            let (dg, dgcw) = self.dynamic_piece_derivative(s, d, k, g);
+                            [dg, dgcw, 0.0]
+                        }
+                        None => d.piece[p],
+                    };
                     let p50 = if d.kind == SpeciesParameterKind::P50 {
                         pt.f_p50
                     } else {
@@ -654,6 +791,20 @@ impl Transport {
 }
 
 impl Transport {
+    /// Wall piece `p`'s law of species `s` at the step just taken, (g, c_w, q), and its
+    /// index among the shear-dependent pieces (None: a fixed law).
+    pub(super) fn piece_law_at_step(&self, s: usize, p: usize) -> (f64, f64, f64, Option<usize>) {
+        let sp = &self.species[s];
+        match sp.laws.laws[p] {
+            SegmentLaw::Fixed { g, cw, q } => (g, cw, q, None),
+            law => {
+                let seg = self.plan.pieces[p].seg as usize;
+                let (g, cw, q) = law.eval_cbrt(sp.shear_cbrt[seg]);
+                (g, cw, q, sp.laws.dynamic.binary_search(&p).ok())
+            }
+        }
+    }
+
     /// The transport volumes W of the cells (m³) after the last implicit step.
     pub fn cell_volumes(&self) -> &[f64] {
         &self.wvol

@@ -246,6 +246,8 @@ impl Transport {
             kind: SpeciesParameterKind::Flow,
             piece,
             cell,
+            // (the sensitivities refuse a flow parameter on a shear-dependent wall)
+            dynamic: vec![[0.0; 2]; laws.dynamic.len()],
             flow: Some(FlowDerivative { dv0, dcap, source }),
         }
     }
