@@ -132,7 +132,10 @@ impl<'r, 'f> Cycles<'r, 'f> {
         steps_per_cycle: usize,
         stride: usize,
     ) -> Self {
-        let step_ends = StepEnds::new(state.dae, state.flow.integrator().alpha_f());
+        // (not in svZeroDSolver's drop-in, whose rows keep its arithmetic)
+        let step_ends = (!s.svzerod.drop_in)
+            .then(|| StepEnds::new(state.dae, state.flow.integrator().alpha_f()))
+            .flatten();
         Cycles {
             step_ends,
             s,
