@@ -12,7 +12,10 @@ use pyo3::types::PyDict;
 /// `("from_start", unknown, scale)`), `rates` (bool) and `cycle_mean_stop` (a dict of `caps`,
 /// unknown indices, `tolerance` and `max_extra`).
 pub(crate) fn rules(d: &Bound<'_, PyDict>, probes: &Probes) -> PyResult<SvZeroDRules> {
-    let mut out = SvZeroDRules::default();
+    let mut out = SvZeroDRules {
+        drop_in: true,
+        ..Default::default()
+    };
     for (k, v) in d.iter() {
         let key: String = k.extract()?;
         match key.as_str() {

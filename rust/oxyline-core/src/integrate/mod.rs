@@ -11,6 +11,8 @@
 //! * [`stability`] — the largest stable RK4 step and the element that sets it;
 //! * [`adaptive`] — error control for generalized-α: tolerances, local error estimate,
 //!   step-size controller, dense output;
+//! * [`index2`] — the index-2 algebraic unknowns and their values consistent with the
+//!   constraint (reported in place of generalized-α's own);
 //! * [`explicit_pair`] — Dormand–Prince 5(4) with its continuous extension, for error-controlled
 //!   runs of non-stiff circuits.
 //!
@@ -20,6 +22,7 @@ pub mod adaptive;
 mod algebraic;
 pub mod explicit_pair;
 pub mod genalpha;
+pub mod index2;
 mod leaves;
 pub mod newton;
 pub mod periodic;

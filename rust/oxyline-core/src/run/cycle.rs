@@ -13,6 +13,7 @@ use super::retry::{OnFailure, Retry, given_up};
 use super::settings::RunSettings;
 use super::svzerod::{CycleMeans, DerivedState};
 use crate::error::{Error, Result};
+use crate::integrate::index2::StepEnds;
 use crate::integrate::newton::scaled_increment;
 use crate::integrate::stability::growth;
 
@@ -66,6 +67,10 @@ pub(super) struct Cycles<'r, 'f> {
     last_start: Option<finer::CycleStart>,
     /// The last cycle's rows at the tighter tolerance, once run.
     pub finer: Option<super::outcome::FinerCycle>,
+    /// The index-2 unknowns' values consistent with the constraint at the step ends, which a
+    /// row recorded from the state reports (None: the circuit has none, or the integrator
+    /// meets its algebraic rows at the step's end).
+    step_ends: Option<StepEnds>,
 }
 
 /// What the rows of one cycle are for.
@@ -121,13 +126,18 @@ pub(super) fn toward_end(h: f64, rem: f64) -> f64 {
 impl<'r, 'f> Cycles<'r, 'f> {
     pub fn new(
         s: &'r RunSettings,
-        state: State<'r, 'r>,
+        mut state: State<'r, 'r>,
         rec: Recorder<'r, 'r, 'f>,
         mean: Option<&'r mut MeanAbs>,
         steps_per_cycle: usize,
         stride: usize,
     ) -> Self {
+        // (not in svZeroDSolver's drop-in, whose rows keep its arithmetic)
+        let step_ends = (!s.svzerod.drop_in)
+            .then(|| StepEnds::new(state.dae, state.flow.integrator().alpha_f()))
+            .flatten();
         Cycles {
+            step_ends,
             s,
             prev_cycle_end: state.y.clone(),
             state,
@@ -340,6 +350,9 @@ impl<'r, 'f> Cycles<'r, 'f> {
                 scout.start(&st.y, &st.yd, st.dt, self.steps_per_cycle);
             }
         }
+        if let Some(se) = self.step_ends.as_mut().filter(|se| !se.started()) {
+            se.start(rows.t0, &self.state.y);
+        }
         if rows.recorded && (!s.output_all_cycles || cycle == 0) {
             let t = rows.output_time(rows.t0, s.output_all_cycles);
             self.output_row(t, rows.t0, true, committed)?;
@@ -380,6 +393,9 @@ impl<'r, 'f> Cycles<'r, 'f> {
         self.steps += 1;
         let t_new = self.steps as f64 * dt;
         done?;
+        if let Some(se) = self.step_ends.as_mut() {
+            se.stepped(t, dt, &self.state.y);
+        }
         if let Some(m) = self.mean.as_deref_mut() {
             m.accumulate(&self.state.y);
         }
@@ -542,6 +558,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
             }
             // the estimates and the next step's size in one entry of the run's pool
             crate::threads::in_pool_for(work, || ad.accept(&self.state, h, err, kinds));
+            let restarted = leap || matches!(next, Next::Switch(..));
             if leap {
                 // the solution jumped within the leap: the estimates start again after it
                 ad.restart(ad.h.min(h));
@@ -558,6 +575,12 @@ impl<'r, 'f> Cycles<'r, 'f> {
                     self.settle_events();
                 }
                 _ => self.settle_events(),
+            }
+            if let Some(se) = self.step_ends.as_mut() {
+                se.stepped(t, h, &self.state.y);
+                if restarted {
+                    se.start(t_new, &self.state.y);
+                }
             }
             self.steps += 1;
             t = t_new;
@@ -636,7 +659,15 @@ impl<'r, 'f> Cycles<'r, 'f> {
     /// Record the state at `time` as the row at output time `t`, with its species outputs when
     /// `species`; a `committed` row goes on to the sink once a chunk is full.
     fn output_row(&mut self, t: f64, time: f64, species: bool, committed: bool) -> Result<()> {
-        self.rec.record(t, &self.state.y)?;
+        // (the index-2 unknowns' consistent values in the row, the run's own back after it)
+        if let Some(se) = self.step_ends.as_mut() {
+            se.substitute(time, &mut self.state.y);
+        }
+        let recorded = self.rec.record(t, &self.state.y);
+        if let Some(se) = self.step_ends.as_ref() {
+            se.restore(&mut self.state.y);
+        }
+        recorded?;
         if let Some(d) = &self.derived {
             self.rec.record_extra(d.value.iter().copied());
         }

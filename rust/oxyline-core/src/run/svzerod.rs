@@ -64,6 +64,10 @@ pub struct SvZeroDRules {
     /// and the derived columns' from it.
     pub rates: bool,
     pub cycle_mean_stop: Option<CycleMeanStop>,
+    /// The run is svZeroDSolver's drop-in: its rows keep svZeroDSolver's arithmetic (an
+    /// index-2 unknown's step-end value as the method leaves it, not the consistent one of
+    /// `integrate::index2`).
+    pub drop_in: bool,
 }
 
 impl SvZeroDRules {
