@@ -61,13 +61,22 @@ pub(super) struct Adaptive {
     /// those values change fast: closed-loop-o2's heart inflow rows 0.11 of its range off at
     /// rtol 1e-3 and the other vessels' flows 3.4e-3, against 1.4e-3 judged).
     index2: Index2,
-    /// The largest |ẏ_i| and |ÿ_i| so far: their ratio is the unknown's signal frequency ω_i,
-    /// over which its local errors accumulate (see `Adaptive::flow_error`).
+    /// The largest |ẏ_i| and |ÿ_i| over the previous cycle and the current one so far: their
+    /// ratio is the unknown's signal frequency ω_i, over which its local errors accumulate
+    /// (see `Adaptive::flow_error`).
     rate_peak: Vec<f64>,
     accel_peak: Vec<f64>,
-    /// The largest |y_i| so far: rtol is relative to it (a pulsatile flow is judged against
-    /// its peak, not against its zero crossings).
+    /// The largest |y_i| over the previous cycle and the current one so far: rtol is relative
+    /// to it (a pulsatile flow is judged against its peak, not against its zero crossings).
+    /// Not over the whole run: a start-up transient (the Windkessels charging from the
+    /// steady start) would hold every later cycle to a tolerance looser than asked (see
+    /// [`Adaptive::start_cycle`]).
     peak: Vec<f64>,
+    /// The largest |y_i|, |ẏ_i| and |ÿ_i| over the current cycle so far (each at most the
+    /// matching peak above): at a cycle's start they become the previous cycle's.
+    cycle_peak: Vec<f64>,
+    cycle_rate: Vec<f64>,
+    cycle_accel: Vec<f64>,
     /// Each flow unknown's vessel (`NO_VESSEL` for a boundary condition's or an element's
     /// own branch): a vessel's flow is judged against its vessel's amplitude, so a small
     /// vessel's flow meets rtol of its own amplitude (and atol scaled by its share of the
@@ -78,6 +87,8 @@ pub(super) struct Adaptive {
     /// last set (see `track_flow_peaks`).
     group_peak: Vec<f64>,
     group_set: Vec<f64>,
+    /// The largest |Q| per group over the current cycle so far (see `cycle_peak`).
+    group_cycle: Vec<f64>,
     /// The largest scale per kind (pressure, flow, volume) when the absolute tolerances were
     /// last set: a kind's default atol is its largest unknown's (at most rtol of it), every
     /// other unknown's is scaled by its share (`Tolerances::atol_of`), renewed when the
@@ -135,8 +146,10 @@ pub(super) struct Adaptive {
     cm1: Vec<f64>,
     /// The concentrations at the end of the step just taken.
     c1: Vec<f64>,
-    /// The largest |c| so far per cell and species.
+    /// The largest |c| per cell and species over the previous cycle and the current one so
+    /// far, and over the current cycle so far (see `peak`, `cycle_peak`).
     c_peak: Vec<f64>,
+    c_cycle: Vec<f64>,
     /// Largest scaled error per kind over the run (pressure, flow, volume, species), × rtol.
     pub estimate: [f64; 4],
     pub steps: usize,
@@ -472,9 +485,13 @@ impl Adaptive {
             peak: Vec::new(),
             rate_peak: Vec::new(),
             accel_peak: Vec::new(),
+            cycle_peak: Vec::new(),
+            cycle_rate: Vec::new(),
+            cycle_accel: Vec::new(),
             flow_group: flow_groups(dae),
             group_peak: Vec::new(),
             group_set: Vec::new(),
+            group_cycle: Vec::new(),
             kind_set: [0.0; 3],
             species_largest: Vec::new(),
             species_step_error: 0.0,
@@ -502,6 +519,7 @@ impl Adaptive {
             cm1: Vec::new(),
             c1: Vec::new(),
             c_peak: Vec::new(),
+            c_cycle: Vec::new(),
             estimate: [0.0; 4],
             steps: 0,
             rejected: 0,
@@ -613,6 +631,9 @@ impl Adaptive {
         self.peak = y.iter().map(|v| v.abs()).collect();
         self.rate_peak = vec![0.0; n];
         self.accel_peak = vec![0.0; n];
+        self.cycle_peak.clone_from(&self.peak);
+        self.cycle_rate = vec![0.0; n];
+        self.cycle_accel = vec![0.0; n];
         self.inv_weight = vec![0.0; n];
         self.w_step = vec![0.0; n];
         self.w_unit = vec![0.0; n];
@@ -702,6 +723,7 @@ impl Adaptive {
             if self.c0.is_empty() {
                 concentrations(st, &mut self.c0);
                 self.c_peak = self.c0.iter().map(|c| c.abs()).collect();
+                self.c_cycle.clone_from(&self.c_peak);
                 self.species_largest = vec![0.0; sp.tr.species_names().len()];
                 self.renew_species_largest();
             }
@@ -924,9 +946,9 @@ impl Adaptive {
             y0: &self.y0[r.clone()],
             wu: &self.w_unit[r.clone()],
             ws: &self.w_step[r.clone()],
-            pk: &self.peak[r.clone()],
-            rp: &self.rate_peak[r.clone()],
-            ap: &self.accel_peak[r.clone()],
+            pk: &self.cycle_peak[r.clone()],
+            rp: &self.cycle_rate[r.clone()],
+            ap: &self.cycle_accel[r.clone()],
         };
         let n = r.len();
         let whole = n - n % LANES;
@@ -1014,9 +1036,10 @@ impl Adaptive {
         let (rtol, tol) = (self.tol.rtol, &self.tol);
         let (r, f) = (h / self.h1, h / (2.0 * h + self.h1));
         let per_step = self.omega * h;
-        let (mut c1, mut c_peak) = (
+        let (mut c1, mut c_peak, mut c_cycle) = (
             std::mem::take(&mut self.c1),
             std::mem::take(&mut self.c_peak),
+            std::mem::take(&mut self.c_cycle),
         );
         let mut worst = 0.0f64;
         for (s, largest) in self.species_largest.iter_mut().enumerate() {
@@ -1024,12 +1047,21 @@ impl Adaptive {
             let (z, c0, cm1) = (&sp.z[cells.clone()], &self.c0[cells.clone()], &self.cm1[..]);
             let cm1 = if judged { &cm1[cells.clone()] } else { &[][..] };
             let old_largest = *largest;
-            let mut tasks = chunk_tasks(0, [&mut c1[cells.clone()], &mut c_peak[cells]]);
-            let (e, l) = fold_tasks(&mut tasks, |(first, [c1, pk])| {
+            let mut tasks = chunk_tasks(
+                0,
+                [
+                    &mut c1[cells.clone()],
+                    &mut c_peak[cells.clone()],
+                    &mut c_cycle[cells],
+                ],
+            );
+            let (e, l) = fold_tasks(&mut tasks, |(first, [c1, pk, cc])| {
                 let (mut e, mut l) = (0.0f64, 0.0f64);
                 let k = *first..*first + c1.len();
-                for (j, (c, p)) in k.clone().zip(c1.iter_mut().zip(pk.iter_mut())) {
+                let cells = c1.iter_mut().zip(pk.iter_mut().zip(cc.iter_mut()));
+                for (j, (c, (p, cc))) in k.clone().zip(cells) {
                     *c = z[j] / vol[j];
+                    *cc = cc.max(c.abs());
                     // (the same expressions as when the error and the peaks were passes of
                     // their own: `species_error`)
                     let s = p.max(c.abs());
@@ -1047,7 +1079,7 @@ impl Adaptive {
             worst = worst.max(e);
             *largest = l;
         }
-        (self.c1, self.c_peak) = (c1, c_peak);
+        (self.c1, self.c_peak, self.c_cycle) = (c1, c_peak, c_cycle);
         self.species_step_error = worst;
     }
 
@@ -1102,12 +1134,13 @@ impl Adaptive {
             let groups = vessels.map(|&g| g as usize + 1).max();
             self.group_peak = vec![0.0; groups.unwrap_or(0)];
             self.group_set = vec![-1.0; self.group_peak.len()];
+            self.group_cycle = vec![0.0; self.group_peak.len()];
         }
         let (groups, q) = (&self.flow_group, &y[n0..n1]);
-        let peaks = &self.group_peak;
-        // a flow above its group's amplitude is above its own peak too (which the group's
-        // amplitude bounds): where the estimate's pass recorded the blocks in which a peak
-        // grows, only the flows of those blocks are read
+        let peaks = &self.group_cycle;
+        // a flow above its group's amplitude over the cycle is above its own largest |Q| over
+        // the cycle too (which the group's bounds): where the estimate's pass recorded the
+        // blocks in which such a maximum grows, only the flows of those blocks are read
         let this = &*self;
         let visit = |b: usize| !this.blocks_known || this.grow_blocks[b].load(Ordering::Relaxed);
         let raised = map_chunks(groups.len(), |r| {
@@ -1123,7 +1156,9 @@ impl Adaptive {
         });
         let mut renew = false;
         for (g, v) in raised.into_iter().flatten() {
-            let (p, set) = (&mut self.group_peak[g as usize], self.group_set[g as usize]);
+            let g = g as usize;
+            self.group_cycle[g] = self.group_cycle[g].max(v);
+            let (p, set) = (&mut self.group_peak[g], self.group_set[g]);
             if v > *p {
                 *p = v;
                 renew |= *p > set * (1.0 + RESCALE);
@@ -1195,12 +1230,12 @@ impl Adaptive {
     }
 
     /// One pass after an accepted step (in chunks on the run's threads, each unknown its own):
-    /// every unknown's peak |y| (and its weight, for all but the vessels' flows, which
-    /// `track_flow_peaks` sets; every weight when a kind's largest scale grew:
-    /// `renew_kind_scales`), and from the divided differences of the last three accepted
-    /// states (not from the carried rates, which follow the damped spurious root at a start)
-    /// the running peaks of |ẏ| and |ÿ|, hence the signal frequency. True when some peak |y|
-    /// grew.
+    /// every unknown's largest |y| over the cycle so far and its peak (and its weight, for all
+    /// but the vessels' flows, which `track_flow_peaks` sets; every weight when a kind's
+    /// largest scale grew: `renew_kind_scales`), and from the divided differences of the last
+    /// three accepted states (not from the carried rates, which follow the damped spurious
+    /// root at a start) the largest |ẏ| and |ÿ| over the cycle so far and their peaks, hence
+    /// the signal frequency. True when some largest |y| over the cycle grew.
     // (one index into several slices of the same length)
     #[allow(clippy::needless_range_loop)]
     fn track_peaks(&mut self, y: &[f64], h: f64) -> bool {
@@ -1212,64 +1247,124 @@ impl Adaptive {
             std::mem::take(&mut self.peak),
             std::mem::take(&mut self.rate_peak),
             std::mem::take(&mut self.accel_peak),
+            std::mem::take(&mut self.cycle_peak),
+            std::mem::take(&mut self.cycle_rate),
+            std::mem::take(&mut self.cycle_accel),
             std::mem::take(&mut self.inv_weight),
             std::mem::take(&mut self.w_step),
             std::mem::take(&mut self.w_unit),
         ];
         let this = &*self;
-        // a block where the step's estimate pass saw no peak grow changes nothing here (the
-        // same comparisons): only the others are visited
+        // a block where the step's estimate pass saw no maximum over the cycle grow changes
+        // nothing here (the same comparisons): only the others are visited
         let visit = |b: usize| !this.blocks_known || this.grow_blocks[b].load(Ordering::Relaxed);
-        let [pk, rp, ap, iw, ws, wu] = &mut v;
-        let mut tasks = chunk_tasks(0, [&mut pk[..], rp, ap, iw, ws, wu]);
-        let grown = for_tasks(&mut tasks, |(first, [pk, rp, ap, iw, ws, wu])| {
-            let mut grown = false;
-            // (a task's first unknown is a multiple of `CHUNK`, itself one of `BLOCK`)
-            let len = pk.len();
-            let blocks = (0..len)
-                .step_by(BLOCK)
-                .filter(|&b| visit((*first + b) / BLOCK));
-            for j in blocks.flat_map(|b| b..(b + BLOCK).min(len)) {
-                let i = *first + j;
-                let yi = y[i];
-                let mut reweigh = false;
-                if yi.abs() > pk[j] {
-                    pk[j] = yi.abs();
-                    grown = true;
-                    if pk[j] > this.kind_set[this.kind_of(i)] * (1.0 + RESCALE) {
-                        renew.store(true, Ordering::Relaxed);
+        let [pk, rp, ap, cp, cr, ca, iw, ws, wu] = &mut v;
+        let mut tasks = chunk_tasks(0, [&mut pk[..], rp, ap, cp, cr, ca, iw, ws, wu]);
+        let grown = for_tasks(
+            &mut tasks,
+            |(first, [pk, rp, ap, cp, cr, ca, iw, ws, wu])| {
+                let mut grown = false;
+                // (a task's first unknown is a multiple of `CHUNK`, itself one of `BLOCK`)
+                let len = pk.len();
+                let blocks = (0..len)
+                    .step_by(BLOCK)
+                    .filter(|&b| visit((*first + b) / BLOCK));
+                for j in blocks.flat_map(|b| b..(b + BLOCK).min(len)) {
+                    let i = *first + j;
+                    let a = y[i].abs();
+                    let mut reweigh = false;
+                    if a > cp[j] {
+                        cp[j] = a;
+                        grown = true;
+                        if a > pk[j] {
+                            pk[j] = a;
+                            if a > this.kind_set[this.kind_of(i)] * (1.0 + RESCALE) {
+                                renew.store(true, Ordering::Relaxed);
+                            }
+                            if !this.is_vessel_flow(i) {
+                                iw[j] = this.own_weight(i, a);
+                                reweigh = true;
+                            }
+                        }
                     }
-                    if !this.is_vessel_flow(i) {
-                        iw[j] = this.own_weight(i, pk[j]);
-                        reweigh = true;
+                    if rates {
+                        let (s1, s0) = (
+                            (y[i] - this.y0[i]) * inv_h,
+                            (this.y0[i] - this.ym1[i]) * inv_h1,
+                        );
+                        let (r, acc) = (s1.abs(), ((s1 - s0) * inv_span).abs());
+                        if r > cr[j] || acc > ca[j] {
+                            cr[j] = cr[j].max(r);
+                            ca[j] = ca[j].max(acc);
+                            if r > rp[j] || acc > ap[j] {
+                                rp[j] = rp[j].max(r);
+                                ap[j] = ap[j].max(acc);
+                                reweigh = true;
+                            }
+                        }
+                    }
+                    if reweigh {
+                        (ws[j], wu[j]) = this.weights_from(i, iw[j], rp[j], ap[j]);
                     }
                 }
-                if rates {
-                    let (s1, s0) = (
-                        (yi - this.y0[i]) * inv_h,
-                        (this.y0[i] - this.ym1[i]) * inv_h1,
-                    );
-                    let (r, a) = (s1.abs(), ((s1 - s0) * inv_span).abs());
-                    if r > rp[j] || a > ap[j] {
-                        rp[j] = rp[j].max(r);
-                        ap[j] = ap[j].max(a);
-                        reweigh = true;
-                    }
-                }
-                if reweigh {
-                    (ws[j], wu[j]) = this.weights_from(i, iw[j], rp[j], ap[j]);
-                }
-            }
-            grown
-        });
+                grown
+            },
+        );
         drop(tasks);
-        let [pk, rp, ap, iw, ws, wu] = v;
+        let [pk, rp, ap, cp, cr, ca, iw, ws, wu] = v;
         (self.peak, self.rate_peak, self.accel_peak) = (pk, rp, ap);
+        (self.cycle_peak, self.cycle_rate, self.cycle_accel) = (cp, cr, ca);
         (self.inv_weight, self.w_step, self.w_unit) = (iw, ws, wu);
         if renew.into_inner() {
             self.renew_kind_scales();
         }
         grown
+    }
+
+    /// At the start of a cycle after the first (or of the first, after its scout pass): the
+    /// scales become the largest values over the cycle just ended, and the current cycle's
+    /// start again from the state `y` (|ẏ|, |ÿ| from the next steps), so that a scale is the
+    /// largest |y| (|ẏ|, |ÿ|; a vessel's amplitude; a cell's |c|) over the previous cycle and
+    /// the current one so far; every kind's largest scale, atol and weight follow. A periodic
+    /// solution keeps its scales (its cycles' maxima are the same); a start-up transient
+    /// leaves them two cycles after it ends, where over the whole run it loosened every later
+    /// cycle's tolerance by its peak over the periodic one's (docs/physics.md §10,
+    /// "Settings"). Nothing before the scales are first set (a run with valves sets them at
+    /// its first step).
+    pub fn start_cycle(&mut self, y: &[f64]) {
+        if self.peak.is_empty() {
+            return;
+        }
+        let (n0, n1) = (self.kind_end[0], self.kind_end[1]);
+        std::mem::swap(&mut self.peak, &mut self.cycle_peak);
+        std::mem::swap(&mut self.rate_peak, &mut self.cycle_rate);
+        std::mem::swap(&mut self.accel_peak, &mut self.cycle_accel);
+        copy_into(&mut self.cycle_peak, y);
+        crate::threads::for_chunks(&mut self.cycle_peak, |_, c| {
+            c.iter_mut().for_each(|v| *v = v.abs());
+        });
+        crate::threads::for_chunks(&mut self.cycle_rate, |_, c| c.fill(0.0));
+        crate::threads::for_chunks(&mut self.cycle_accel, |_, c| c.fill(0.0));
+        if !self.group_peak.is_empty() {
+            std::mem::swap(&mut self.group_peak, &mut self.group_cycle);
+            self.group_cycle.fill(0.0);
+            for (&g, q) in self.flow_group.iter().zip(&y[n0..n1]) {
+                if g != NO_VESSEL {
+                    let c = &mut self.group_cycle[g as usize];
+                    *c = c.max(q.abs());
+                }
+            }
+        }
+        if !self.c_peak.is_empty() {
+            std::mem::swap(&mut self.c_peak, &mut self.c_cycle);
+            copy_into(&mut self.c_cycle, &self.c0);
+            crate::threads::for_chunks(&mut self.c_cycle, |_, c| {
+                c.iter_mut().for_each(|v| *v = v.abs());
+            });
+            self.renew_species_largest();
+        }
+        self.blocks_known = false;
+        self.renew_kind_scales();
     }
 
     /// The rate shifts (s₀, s₁) of the carried ẏ at the two ends of a step of `h` that starts

@@ -453,6 +453,8 @@ impl<'r, 'f> Cycles<'r, 'f> {
         if self.events.is_none() {
             ad.scout(&mut self.state, t0, period);
         }
+        // the error control's scales: the previous cycle's and this one's largest values
+        ad.start_cycle(&self.state.y);
         // (a small circuit's step stays on this thread: `threads::in_pool_for`)
         let work = self.state.work();
         // a step taken again to end on a valve event

@@ -255,14 +255,23 @@ pub(super) struct Explicit {
     pub out_per_cycle: usize,
     kind_end: [usize; 2],
     diff: Vec<bool>,
+    /// The largest |y|, |ẏ|, |ÿ| over the previous cycle and the current one so far (the
+    /// implicit control's rule: `adaptive::Adaptive::start_cycle`), and over the current
+    /// cycle so far.
     peak: Vec<f64>,
     rate_peak: Vec<f64>,
     accel_peak: Vec<f64>,
+    cycle_peak: Vec<f64>,
+    cycle_rate: Vec<f64>,
+    cycle_accel: Vec<f64>,
     inv_omega: Vec<f64>,
     atol: Vec<f64>,
     scale: Vec<f64>,
     flow_group: Vec<u32>,
+    /// Each vessel's flow amplitude over the previous cycle and the current one so far, and
+    /// over the current cycle so far.
     group_peak: Vec<f64>,
+    group_cycle: Vec<f64>,
     /// The largest scale per kind (pressure, flow, volume): a kind's default atol is its
     /// largest unknown's, the others' scaled by their share (`Tolerances::atol_of`).
     kind_largest: [f64; 3],
@@ -272,6 +281,7 @@ pub(super) struct Explicit {
     z_atol: Vec<f64>,
     z_volume: Vec<f64>,
     z_peak: Vec<f64>,
+    z_cycle: Vec<f64>,
     n_species: usize,
     /// A step was just rejected: the next may not grow.
     rejected_last: bool,
@@ -303,15 +313,20 @@ impl Explicit {
             peak: Vec::new(),
             rate_peak: Vec::new(),
             accel_peak: Vec::new(),
+            cycle_peak: Vec::new(),
+            cycle_rate: Vec::new(),
+            cycle_accel: Vec::new(),
             inv_omega: Vec::new(),
             atol: Vec::new(),
             scale: Vec::new(),
             flow_group: flow_groups(dae),
             group_peak: Vec::new(),
+            group_cycle: Vec::new(),
             kind_largest: [0.0; 3],
             z_atol: Vec::new(),
             z_volume: Vec::new(),
             z_peak: Vec::new(),
+            z_cycle: Vec::new(),
             n_species: 0,
             rejected_last: false,
             estimate: [0.0; 4],
@@ -341,15 +356,20 @@ impl Explicit {
         Explicit::new(dae, tol, s, self.h_max * factor.powf(-0.2))
     }
 
-    /// The weights from the start state (first call only).
+    /// The weights from the start state (the first cycle), or from the largest values over
+    /// the cycle just ended (every later cycle: `start_cycle`).
     fn start(&mut self, st: &State<'_, '_>) {
         if !self.peak.is_empty() {
+            self.start_cycle(st);
             return;
         }
         let n = st.y.len();
         self.peak = st.y.iter().map(|v| v.abs()).collect();
         self.rate_peak = vec![0.0; n];
         self.accel_peak = vec![0.0; n];
+        self.cycle_peak.clone_from(&self.peak);
+        self.cycle_rate = vec![0.0; n];
+        self.cycle_accel = vec![0.0; n];
         self.inv_omega = vec![1.0 / self.omega; n];
         self.atol = vec![0.0; n];
         self.scale.clone_from(&self.peak);
@@ -361,6 +381,48 @@ impl Explicit {
             self.z_volume = (0..cells).map(|k| vol[k % vol.len()]).collect();
             self.z_atol = vec![0.0; cells];
             self.z_peak = sp.z[..cells].iter().map(|z| z.abs()).collect();
+            self.z_cycle.clone_from(&self.z_peak);
+            self.species_tolerances();
+        }
+    }
+
+    /// At a later cycle's start: the scales become the largest values over the cycle just
+    /// ended, and the current cycle's start again from the state (as the implicit control's,
+    /// `adaptive::Adaptive::start_cycle`): every scale, signal frequency and tolerance follows.
+    fn start_cycle(&mut self, st: &State<'_, '_>) {
+        std::mem::swap(&mut self.peak, &mut self.cycle_peak);
+        std::mem::swap(&mut self.rate_peak, &mut self.cycle_rate);
+        std::mem::swap(&mut self.accel_peak, &mut self.cycle_accel);
+        for (c, y) in self.cycle_peak.iter_mut().zip(&st.y) {
+            *c = y.abs();
+        }
+        self.cycle_rate.fill(0.0);
+        self.cycle_accel.fill(0.0);
+        for (i, w) in self.inv_omega.iter_mut().enumerate() {
+            let (rp, ap) = (self.rate_peak[i], self.accel_peak[i]);
+            *w = if rp > 0.0 {
+                1.0 / (ap / rp / ACCUMULATION).max(self.omega)
+            } else {
+                1.0 / self.omega
+            };
+        }
+        std::mem::swap(&mut self.group_peak, &mut self.group_cycle);
+        self.group_cycle.fill(0.0);
+        let (n0, n1) = (self.kind_end[0], self.kind_end[1]);
+        for (&g, q) in self.flow_group.iter().zip(&st.y[n0..n1]) {
+            if g != NO_VESSEL {
+                let a = &mut self.group_cycle[g as usize];
+                *a = a.max(q.abs());
+            }
+        }
+        // (the vessels' amplitudes from the state, with every scale and tolerance)
+        self.set_tolerances(&st.y);
+        if let Some(sp) = st.species.as_ref() {
+            std::mem::swap(&mut self.z_peak, &mut self.z_cycle);
+            let cells = self.z_cycle.len();
+            for (c, z) in self.z_cycle.iter_mut().zip(&sp.z[..cells]) {
+                *c = z.abs();
+            }
             self.species_tolerances();
         }
     }
@@ -430,6 +492,15 @@ impl Explicit {
         let (n0, n1) = (self.kind_end[0], self.kind_end[1]);
         let mut grown = false;
         for (i, (&yi, (&r0, &r1))) in y.iter().zip(rates.0.iter().zip(rates.1)).enumerate() {
+            let c = &mut self.cycle_peak[i];
+            *c = c.max(yi.abs());
+            if (n0..n1).contains(&i) {
+                let g = self.flow_group[i - n0];
+                if g != NO_VESSEL && !self.group_cycle.is_empty() {
+                    let a = &mut self.group_cycle[g as usize];
+                    *a = a.max(yi.abs());
+                }
+            }
             if yi.abs() > self.peak[i] {
                 self.peak[i] = yi.abs();
                 grown = true;
@@ -440,9 +511,12 @@ impl Explicit {
             if !self.diff[i] {
                 continue;
             }
+            let (r, a) = (r0.abs().max(r1.abs()), (r1 - r0).abs() / h);
+            let (cr, ca) = (&mut self.cycle_rate[i], &mut self.cycle_accel[i]);
+            (*cr, *ca) = (cr.max(r), ca.max(a));
             let (rp, ap) = (&mut self.rate_peak[i], &mut self.accel_peak[i]);
-            *rp = rp.max(r0.abs()).max(r1.abs());
-            *ap = ap.max((r1 - r0).abs() / h);
+            *rp = rp.max(r);
+            *ap = ap.max(a);
             if *rp > 0.0 {
                 self.inv_omega[i] = 1.0 / (*ap / *rp / ACCUMULATION).max(self.omega);
             }
@@ -450,8 +524,9 @@ impl Explicit {
         if grown {
             self.set_tolerances(y);
         }
-        for (p, zk) in self.z_peak.iter_mut().zip(z) {
+        for ((p, c), zk) in self.z_peak.iter_mut().zip(&mut self.z_cycle).zip(z) {
             *p = p.max(zk.abs());
+            *c = c.max(zk.abs());
         }
         self.species_tolerances();
         self.h = self.next_step(h, err);
@@ -479,6 +554,7 @@ impl Explicit {
             let vessels = self.flow_group.iter().filter(|&&g| g != NO_VESSEL);
             let groups = vessels.map(|&g| g as usize + 1).max().unwrap_or(0);
             self.group_peak = vec![0.0; groups];
+            self.group_cycle = vec![0.0; groups];
         }
         for (&g, q) in self.flow_group.iter().zip(&y[n0..n1]) {
             if g != NO_VESSEL {
