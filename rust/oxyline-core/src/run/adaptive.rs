@@ -215,6 +215,8 @@ impl Dense<'_> {
         let cubic = |a: f64, b: f64, c: f64, d: f64| w[0] * a + w[1] * b + w[2] * c + w[3] * d;
         if probes.len() * WHOLE_STATE_SHARE >= n {
             cubic_all(w, [y0, y1, d0, d1], state);
+            // (from a slice: a vector's length would be read again at every probe)
+            let state = &state[..];
             out.extend(probes.iter().map(|&i| state[i]));
         } else {
             out.extend(probes.iter().map(|&i| cubic(y0[i], y1[i], d0[i], d1[i])));
@@ -1108,12 +1110,12 @@ impl Adaptive {
         let this = &*self;
         let raised = map_chunks(groups.len(), |r| {
             let mut up = Vec::new();
-            for i in this.to_visit(n0 + r.start..n0 + r.end) {
+            this.visit(n0 + r.start..n0 + r.end, |i| {
                 let (g, q) = (groups[i - n0], q[i - n0].abs());
                 if g != NO_VESSEL && q > peaks[g as usize] {
                     up.push((g, q));
                 }
-            }
+            });
             up
         });
         let mut renew = false;
@@ -1213,12 +1215,12 @@ impl Adaptive {
         ];
         let this = &*self;
         // an unknown in which the step's estimate pass saw no peak grow changes nothing here
-        // (the same comparisons): only the others are visited (`to_visit`)
+        // (the same comparisons): only the others are visited (`visit`)
         let [pk, rp, ap, iw, ws, wu] = &mut v;
         let mut tasks = chunk_tasks(0, [&mut pk[..], rp, ap, iw, ws, wu]);
         let grown = for_tasks(&mut tasks, |(first, [pk, rp, ap, iw, ws, wu])| {
             let mut grown = false;
-            for i in this.to_visit(*first..*first + pk.len()) {
+            this.visit(*first..*first + pk.len(), |i| {
                 let j = i - *first;
                 let yi = y[i];
                 let mut reweigh = false;
@@ -1248,7 +1250,7 @@ impl Adaptive {
                 if reweigh {
                     (ws[j], wu[j]) = this.weights_from(i, iw[j], rp[j], ap[j]);
                 }
-            }
+            });
             grown
         });
         drop(tasks);
@@ -1261,29 +1263,25 @@ impl Adaptive {
         grown
     }
 
-    /// The unknowns of `r`, in order, that the tracking after an accepted step visits: those
-    /// in which the step's estimate pass saw a peak grow while its record holds
+    /// `f` of the unknowns of `r`, in order, that the tracking after an accepted step visits:
+    /// those in which the step's estimate pass saw a peak grow while its record holds
     /// (`blocks_known`), else all of them.
-    fn to_visit(&self, r: Range<usize>) -> impl Iterator<Item = usize> + '_ {
-        let (all, marked) = if self.blocks_known {
-            (0..0, r)
-        } else {
-            (r, 0..0)
-        };
-        let marked = blocks_of(marked).flat_map(move |b| {
+    #[inline]
+    fn visit(&self, r: Range<usize>, mut f: impl FnMut(usize)) {
+        if !self.blocks_known {
+            r.for_each(f);
+            return;
+        }
+        for b in blocks_of(r) {
             let base = b.start / BLOCK * BLOCK;
             // (the block's bits of the unknowns within `b`)
             let within = ((1u64 << (b.end - base)) - (1u64 << (b.start - base))) as u32;
             let mut bits = self.grow_blocks[base / BLOCK].load(Ordering::Relaxed) & within;
-            std::iter::from_fn(move || {
-                (bits != 0).then(|| {
-                    let k = bits.trailing_zeros() as usize;
-                    bits &= bits - 1;
-                    base + k
-                })
-            })
-        });
-        all.chain(marked)
+            while bits != 0 {
+                f(base + bits.trailing_zeros() as usize);
+                bits &= bits - 1;
+            }
+        }
     }
 
     /// The rate shifts (s₀, s₁) of the carried ẏ at the two ends of a step of `h` that starts
@@ -1510,6 +1508,8 @@ impl FusedSlices<'_> {
 
     /// The block's largest scaled error and its unknowns that grow a peak (bit k: its k-th),
     /// in groups of `LANES` (see `Adaptive::fused_range`).
+    // (one lane index into the group and its maximum)
+    #[allow(clippy::needless_range_loop)]
     #[inline(always)]
     fn block(&self, c: &Fused) -> (f64, u32) {
         let n = self.y.len();
