@@ -12,7 +12,7 @@ use crate::integrate::adaptive::{
 use crate::integrate::index2::{Balance, Index2, slope_at};
 use crate::threads::CHUNK;
 use std::ops::Range;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
 /// The local errors of a forced periodic response's harmonic at ω accumulate over 1/ω
 /// (|iω − λ| ≥ ω) for a normal, non-resonant circuit; coupled circuits amplify them more (the
@@ -115,10 +115,11 @@ pub(super) struct Adaptive {
     /// Whether the step just judged may grow a peak (of |y|, |ẏ| or |ÿ|): the estimate's
     /// pass finds out, and an accepted step that grows none skips the tracking pass.
     may_grow: bool,
-    /// Per block of `BLOCK` unknowns, whether the estimate's pass of the step just judged saw
-    /// a peak grow in it; `blocks_known` while that pass's record holds for the state the
-    /// step is accepted with (the tracking pass then visits those blocks only).
-    grow_blocks: Vec<AtomicBool>,
+    /// Per block of `BLOCK` unknowns, the unknowns in which the estimate's pass of the step
+    /// just judged saw a peak grow (bit k: the block's k-th unknown); `blocks_known` while
+    /// that pass's record holds for the state the step is accepted with (the tracking pass
+    /// then visits those unknowns only).
+    grow_blocks: Vec<AtomicU32>,
     blocks_known: bool,
     /// The differential unknowns' local error estimate of the current step (scratch).
     le: Vec<f64>,
@@ -233,9 +234,9 @@ impl Dense<'_> {
         // (the same sum, in the same order, as `cubic`)
         let cubic = |a: f64, b: f64, c: f64, d: f64| w[0] * a + w[1] * b + w[2] * c + w[3] * d;
         if probes.len() * WHOLE_STATE_SHARE >= n {
-            state.clear();
-            let ends = y0.iter().zip(y1).zip(d0.iter().zip(d1));
-            state.extend(ends.map(|((&a, &b), (&c, &d))| cubic(a, b, c, d)));
+            cubic_all(w, [y0, y1, d0, d1], state);
+            // (from a slice: a vector's length would be read again at every probe)
+            let state = &state[..];
             out.extend(probes.iter().map(|&i| state[i]));
         } else {
             out.extend(probes.iter().map(|&i| cubic(y0[i], y1[i], d0[i], d1[i])));
@@ -383,6 +384,47 @@ impl Dense<'_> {
             line
         }
     }
+}
+
+/// `state` = the Hermite cubic w₀y₀ + w₁y₁ + w₂d₀ + w₃d₁ of every unknown from the vectors
+/// `[y0, y1, d0, d1]` (of one length): the sum of `Dense::cubic` in its order, so the same
+/// bits; four unknowns to an AVX2 vector where the CPU has them (as the estimate's pass,
+/// `simd_block`).
+fn cubic_all(w: [f64; 4], ends: [&[f64]; 4], state: &mut Vec<f64>) {
+    let [y0, y1, d0, d1] = ends;
+    let n = y0.len();
+    let cubic = |a: f64, b: f64, c: f64, d: f64| w[0] * a + w[1] * b + w[2] * c + w[3] * d;
+    #[cfg(target_arch = "x86_64")]
+    if let Some(simd) = pulp::x86::V3::try_new() {
+        use pulp::cast;
+        if state.len() != n {
+            // (every value is written below)
+            state.clear();
+            state.resize(n, 0.0);
+        }
+        simd.vectorize(|| {
+            let (out, _) = pulp::as_arrays_mut::<LANES, f64>(&mut state[..]);
+            let g = out.len();
+            let groups = |x| &groups_of(x, n)[..g];
+            let (a, b, c, d) = (groups(y0), groups(y1), groups(d0), groups(d1));
+            let [w0, w1, w2, w3] = w.map(|x| simd.splat_f64x4(x));
+            for k in 0..g {
+                let ab = simd.add_f64x4(
+                    simd.mul_f64x4(w0, cast(a[k])),
+                    simd.mul_f64x4(w1, cast(b[k])),
+                );
+                let abc = simd.add_f64x4(ab, simd.mul_f64x4(w2, cast(c[k])));
+                out[k] = cast(simd.add_f64x4(abc, simd.mul_f64x4(w3, cast(d[k]))));
+            }
+            for j in LANES * g..n {
+                state[j] = cubic(y0[j], y1[j], d0[j], d1[j]);
+            }
+        });
+        return;
+    }
+    state.clear();
+    let ends = y0.iter().zip(y1).zip(d0.iter().zip(d1));
+    state.extend(ends.map(|((&a, &b), (&c, &d))| cubic(a, b, c, d)));
 }
 
 /// The least ratio of the step before to the step for an algebraic unknown's quadratic (see
@@ -890,13 +932,9 @@ impl Adaptive {
         let mut kinds = [0.0f64; 3];
         let grows = AtomicBool::new(false);
         if self.grow_blocks.len() == n.div_ceil(BLOCK) {
-            self.grow_blocks
-                .iter_mut()
-                .for_each(|b| *b.get_mut() = false);
+            self.grow_blocks.iter_mut().for_each(|b| *b.get_mut() = 0);
         } else {
-            self.grow_blocks = (0..n.div_ceil(BLOCK))
-                .map(|_| AtomicBool::new(false))
-                .collect();
+            self.grow_blocks = (0..n.div_ceil(BLOCK)).map(|_| AtomicU32::new(0)).collect();
         }
         let ends = [0, self.kind_end[0], self.kind_end[1], n];
         for (k, worst) in kinds.iter_mut().enumerate() {
@@ -917,29 +955,52 @@ impl Adaptive {
         }
     }
 
-    /// `fused_errors` over the unknowns `r`: the largest scaled error, and whether a peak grows.
-    /// In groups of `LANES` unknowns, each lane its own maximum and growth flag (one chain of
-    /// dependent maxima through every unknown otherwise), the maxima as compare-and-select
-    /// (`f64::max` also orders NaNs: no NaN comes here but through a NaN state, which the run
-    /// refuses at its check); a maximum is the same in any grouping, so the result is the same
-    /// number as one running maximum's.
+    /// `fused_errors` over the unknowns `r`: the largest scaled error, and whether a peak grows
+    /// (the unknowns where one does recorded in `grow_blocks`). Block by block, each in groups
+    /// of `LANES` unknowns, each lane its own maximum (one chain of dependent maxima through
+    /// every unknown otherwise), the maxima as compare-and-select (`f64::max` also orders NaNs:
+    /// no NaN comes here but through a NaN state, which the run refuses at its check); a
+    /// maximum is the same in any grouping, so the result is the same number as one running
+    /// maximum's. On x86-64 with AVX2 (detected at run time) a group is one 4-lane vector
+    /// per operation (`simd_block`): the same operations on the same values, so the same
+    /// numbers (no fused multiply-add).
     fn fused_range(&self, r: Range<usize>, y: &[f64], c: &Fused) -> (f64, bool) {
+        #[cfg(target_arch = "x86_64")]
+        if let Some(simd) = pulp::x86::V3::try_new() {
+            return simd.vectorize(|| self.fused_blocks(r, y, |v| simd_block(simd, v, c)));
+        }
+        self.fused_blocks(r, y, |v| v.block(c))
+    }
+
+    /// The unknowns `r` block by block (see `fused_range`): `block` gives a block's largest
+    /// scaled error and its unknowns that grow a peak (bit k: its k-th).
+    #[inline(always)]
+    fn fused_blocks(
+        &self,
+        r: Range<usize>,
+        y: &[f64],
+        block: impl Fn(&FusedSlices<'_>) -> (f64, u32),
+    ) -> (f64, bool) {
         let (mut m, mut grows, mut at) = (0.0f64, false, r.start);
         while at < r.end {
             let end = ((at / BLOCK + 1) * BLOCK).min(r.end);
-            let (block_max, block_grows) = self.fused_block(at..end, y, c);
-            if block_grows {
-                self.grow_blocks[at / BLOCK].store(true, Ordering::Relaxed);
+            let (block_max, mask) = block(&self.fused_slices(at..end, y));
+            if mask != 0 {
+                // (a range's blocks are its own but at its ends, which a kind's boundary may
+                // share with the next range)
+                let bits = mask << (at % BLOCK);
+                self.grow_blocks[at / BLOCK].fetch_or(bits, Ordering::Relaxed);
             }
-            (m, grows) = (larger(block_max, m), grows | block_grows);
+            (m, grows) = (larger(block_max, m), grows | (mask != 0));
             at = end;
         }
         (m, grows)
     }
 
-    /// `fused_range` over the unknowns `r` within one block of `BLOCK`.
-    fn fused_block(&self, r: Range<usize>, y: &[f64], c: &Fused) -> (f64, bool) {
-        let v = FusedSlices {
+    /// The vectors of the estimate's pass over the unknowns `r`.
+    #[inline(always)]
+    fn fused_slices<'a>(&'a self, r: Range<usize>, y: &'a [f64]) -> FusedSlices<'a> {
+        FusedSlices {
             y: &y[r.clone()],
             ym2: &self.ym2[r.clone()],
             ym1: &self.ym1[r.clone()],
@@ -948,28 +1009,8 @@ impl Adaptive {
             ws: &self.w_step[r.clone()],
             pk: &self.cycle_peak[r.clone()],
             rp: &self.cycle_rate[r.clone()],
-            ap: &self.cycle_accel[r.clone()],
-        };
-        let n = r.len();
-        let whole = n - n % LANES;
-        let (mut m, mut grows) = ([0.0f64; LANES], [false; LANES]);
-        for j in (0..whole).step_by(LANES) {
-            // (a group's own slices, of `LANES` values: its values are read without a bounds
-            // check each, 9 a value before)
-            let group = v.sub(j..j + LANES);
-            for k in 0..LANES {
-                let (e, g) = group.term(k, c);
-                m[k] = larger(e, m[k]);
-                grows[k] |= g;
-            }
+            ap: &self.cycle_accel[r],
         }
-        for j in whole..n {
-            let (e, g) = v.term(j, c);
-            m[0] = larger(e, m[0]);
-            grows[0] |= g;
-        }
-        let m = m.iter().fold(0.0f64, |a, &b| larger(b, a));
-        (m, grows.iter().any(|&g| g))
     }
 
     /// The algebraic unknowns' errors into `kinds` (see `flow_error`; none at the first step),
@@ -1140,18 +1181,16 @@ impl Adaptive {
         let peaks = &self.group_cycle;
         // a flow above its group's amplitude over the cycle is above its own largest |Q| over
         // the cycle too (which the group's bounds): where the estimate's pass recorded the
-        // blocks in which such a maximum grows, only the flows of those blocks are read
+        // unknowns in which such a maximum grows, only those flows are read
         let this = &*self;
-        let visit = |b: usize| !this.blocks_known || this.grow_blocks[b].load(Ordering::Relaxed);
         let raised = map_chunks(groups.len(), |r| {
             let mut up = Vec::new();
-            for b in blocks_of(n0 + r.start..n0 + r.end).filter(|b| visit(b.start / BLOCK)) {
-                let b = b.start - n0..b.end - n0;
-                let members = groups[b.clone()].iter().zip(&q[b]);
-                let members =
-                    members.filter(|&(&g, q)| g != NO_VESSEL && q.abs() > peaks[g as usize]);
-                up.extend(members.map(|(&g, q)| (g, q.abs())));
-            }
+            this.visit(n0 + r.start..n0 + r.end, |i| {
+                let (g, q) = (groups[i - n0], q[i - n0].abs());
+                if g != NO_VESSEL && q > peaks[g as usize] {
+                    up.push((g, q));
+                }
+            });
             up
         });
         let mut renew = false;
@@ -1255,22 +1294,16 @@ impl Adaptive {
             std::mem::take(&mut self.w_unit),
         ];
         let this = &*self;
-        // a block where the step's estimate pass saw no maximum over the cycle grow changes
-        // nothing here (the same comparisons): only the others are visited
-        let visit = |b: usize| !this.blocks_known || this.grow_blocks[b].load(Ordering::Relaxed);
+        // an unknown in which the step's estimate pass saw no maximum over the cycle grow
+        // changes nothing here (the same comparisons): only the others are visited (`visit`)
         let [pk, rp, ap, cp, cr, ca, iw, ws, wu] = &mut v;
         let mut tasks = chunk_tasks(0, [&mut pk[..], rp, ap, cp, cr, ca, iw, ws, wu]);
         let grown = for_tasks(
             &mut tasks,
             |(first, [pk, rp, ap, cp, cr, ca, iw, ws, wu])| {
                 let mut grown = false;
-                // (a task's first unknown is a multiple of `CHUNK`, itself one of `BLOCK`)
-                let len = pk.len();
-                let blocks = (0..len)
-                    .step_by(BLOCK)
-                    .filter(|&b| visit((*first + b) / BLOCK));
-                for j in blocks.flat_map(|b| b..(b + BLOCK).min(len)) {
-                    let i = *first + j;
+                this.visit(*first..*first + pk.len(), |i| {
+                    let j = i - *first;
                     let a = y[i].abs();
                     let mut reweigh = false;
                     if a > cp[j] {
@@ -1306,7 +1339,7 @@ impl Adaptive {
                     if reweigh {
                         (ws[j], wu[j]) = this.weights_from(i, iw[j], rp[j], ap[j]);
                     }
-                }
+                });
                 grown
             },
         );
@@ -1365,6 +1398,27 @@ impl Adaptive {
         }
         self.blocks_known = false;
         self.renew_kind_scales();
+    }
+
+    /// `f` of the unknowns of `r`, in order, that the tracking after an accepted step visits:
+    /// those in which the step's estimate pass saw a peak grow while its record holds
+    /// (`blocks_known`), else all of them.
+    #[inline]
+    fn visit(&self, r: Range<usize>, mut f: impl FnMut(usize)) {
+        if !self.blocks_known {
+            r.for_each(f);
+            return;
+        }
+        for b in blocks_of(r) {
+            let base = b.start / BLOCK * BLOCK;
+            // (the block's bits of the unknowns within `b`)
+            let within = ((1u64 << (b.end - base)) - (1u64 << (b.start - base))) as u32;
+            let mut bits = self.grow_blocks[base / BLOCK].load(Ordering::Relaxed) & within;
+            while bits != 0 {
+                f(base + bits.trailing_zeros() as usize);
+                bits &= bits - 1;
+            }
+        }
     }
 
     /// The rate shifts (s₀, s₁) of the carried ẏ at the two ends of a step of `h` that starts
@@ -1588,6 +1642,92 @@ impl FusedSlices<'_> {
         let grows = (y1.abs() > self.pk[j]) | (s1.abs() > self.rp[j]) | (accel > self.ap[j]);
         (scaled, grows)
     }
+
+    /// The block's largest scaled error and its unknowns that grow a peak (bit k: its k-th),
+    /// in groups of `LANES` (see `Adaptive::fused_range`).
+    // (one lane index into the group and its maximum)
+    #[allow(clippy::needless_range_loop)]
+    #[inline(always)]
+    fn block(&self, c: &Fused) -> (f64, u32) {
+        let n = self.y.len();
+        let whole = n - n % LANES;
+        let (mut m, mut mask) = ([0.0f64; LANES], 0u32);
+        for j in (0..whole).step_by(LANES) {
+            // (a group's own slices, of `LANES` values: its values are read without a bounds
+            // check each, 9 a value before)
+            let group = self.sub(j..j + LANES);
+            for k in 0..LANES {
+                let (e, g) = group.term(k, c);
+                m[k] = larger(e, m[k]);
+                mask |= u32::from(g) << (j + k);
+            }
+        }
+        for j in whole..n {
+            let (e, g) = self.term(j, c);
+            m[0] = larger(e, m[0]);
+            mask |= u32::from(g) << j;
+        }
+        (m.iter().fold(0.0f64, |a, &b| larger(b, a)), mask)
+    }
+}
+
+/// `FusedSlices::block` with each group of `LANES` unknowns in one AVX2 vector per operation:
+/// `FusedSlices::term`'s operations in its order on every unknown (the running maximum as
+/// `vmaxpd`, which is `larger`), so the same numbers and the same growth bits, at a quarter of
+/// the instructions. (The portable block, compiled for any x86-64, runs it in scalar or
+/// two-lane registers: ~30 instructions an unknown on adan56.)
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn simd_block(simd: pulp::x86::V3, v: &FusedSlices<'_>, c: &Fused) -> (f64, u32) {
+    use pulp::{cast, f64x4};
+    let n = v.y.len();
+    let groups = |x| groups_of(x, n);
+    let y1s = groups(v.y);
+    let g = y1s.len();
+    let (y0s, yms, ym2s) = (&groups(v.y0)[..g], &groups(v.ym1)[..g], &groups(v.ym2)[..g]);
+    let (wus, wss) = (&groups(v.wu)[..g], &groups(v.ws)[..g]);
+    let (pks, rps, aps) = (&groups(v.pk)[..g], &groups(v.rp)[..g], &groups(v.ap)[..g]);
+    let splat = |x: f64| simd.splat_f64x4(x);
+    let ([la, lb, lc], f) = (c.l.map(splat), splat(c.f));
+    let (inv_h, inv_h1, inv_span) = (splat(c.inv_h), splat(c.inv_h1), splat(c.inv_span));
+    let (mut m, mut mask) = (splat(0.0), 0u32);
+    for k in 0..g {
+        let at = |x: &[[f64; LANES]]| -> f64x4 { cast(x[k]) };
+        let (y1, y0, ym) = (at(y1s), at(y0s), at(yms));
+        let past = simd.add_f64x4(
+            simd.add_f64x4(simd.mul_f64x4(la, at(ym2s)), simd.mul_f64x4(lb, ym)),
+            simd.mul_f64x4(lc, y0),
+        );
+        let e = simd.mul_f64x4(f, simd.sub_f64x4(y1, past));
+        let weight = simd.max_f64x4(simd.mul_f64x4(at(wus), inv_h), at(wss));
+        m = simd.max_f64x4(simd.mul_f64x4(simd.abs_f64x4(e), weight), m);
+        let s1 = simd.mul_f64x4(simd.sub_f64x4(y1, y0), inv_h);
+        let s0 = simd.mul_f64x4(simd.sub_f64x4(y0, ym), inv_h1);
+        let accel = simd.abs_f64x4(simd.mul_f64x4(simd.sub_f64x4(s1, s0), inv_span));
+        let grows = simd.or_m64x4(
+            simd.or_m64x4(
+                simd.cmp_gt_f64x4(simd.abs_f64x4(y1), at(pks)),
+                simd.cmp_gt_f64x4(simd.abs_f64x4(s1), at(rps)),
+            ),
+            simd.cmp_gt_f64x4(accel, at(aps)),
+        );
+        let bits = simd.avx._mm256_movemask_pd(cast(grows)) as u32;
+        mask |= bits << (LANES * k);
+    }
+    let lanes: [f64; LANES] = cast(m);
+    let mut m = lanes.iter().fold(0.0f64, |a, &b| larger(b, a));
+    for j in LANES * g..n {
+        let (e, grows) = v.term(j, c);
+        m = larger(e, m);
+        mask |= u32::from(grows) << j;
+    }
+    (m, mask)
+}
+
+/// The first `n` values of `x` in whole groups of `LANES` (the rest left out).
+#[inline(always)]
+fn groups_of(x: &[f64], n: usize) -> &[[f64; LANES]] {
+    pulp::as_arrays::<LANES, f64>(&x[..n]).0
 }
 
 /// The larger of `a` and `b`, `b` when they are unordered (a NaN `a` leaves a running maximum
@@ -1667,5 +1807,105 @@ fn for_tasks<T: Send>(tasks: &mut [T], f: impl Fn(&mut T) -> bool + Sync + Send)
     match crate::threads::pool().filter(|_| tasks.len() > 1) {
         Some(pool) => pool.install(|| tasks.par_iter_mut().map(f).reduce(|| false, |a, b| a | b)),
         None => tasks.iter_mut().map(f).fold(false, |a, b| a | b),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Values of mixed sign and magnitude (a fixed linear congruential sequence).
+    fn values(n: usize, seed: u64) -> Vec<f64> {
+        let mut x = seed;
+        (0..n)
+            .map(|_| {
+                x = x
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                let u = (x >> 11) as f64 / (1u64 << 53) as f64;
+                (u - 0.4) * 10f64.powi((x % 7) as i32 - 3)
+            })
+            .collect()
+    }
+
+    /// Each unknown's scaled error and growth from `FusedSlices::term` (the formula, one
+    /// unknown at a time): the block's largest error and its growth bits.
+    fn one_by_one(v: &FusedSlices<'_>, c: &Fused) -> (f64, u32) {
+        (0..v.y.len()).fold((0.0f64, 0u32), |(m, mask), j| {
+            let (e, g) = v.term(j, c);
+            (m.max(e), mask | (u32::from(g) << j))
+        })
+    }
+
+    #[test]
+    fn a_blocks_estimate_and_growth_bits_are_each_unknowns_own_in_every_grouping() {
+        let c = Fused {
+            l: [0.3, -1.1, 1.8],
+            f: 0.04,
+            inv_h: 1.6e3,
+            inv_h1: 1.5e3,
+            inv_span: 1.55e3,
+        };
+        for n in 1..=BLOCK {
+            let v: Vec<Vec<f64>> = (0..9).map(|k| values(n, 17 * n as u64 + k)).collect();
+            // peaks and weights are magnitudes; a third of the peaks so large nothing grows
+            let pos = |k: usize, big: f64| -> Vec<f64> {
+                (v[k].iter().enumerate())
+                    .map(|(j, x)| x.abs() * if j % 3 == 0 { big } else { 1.0 })
+                    .collect()
+            };
+            let (wu, ws, pk, rp, ap) = (
+                pos(4, 1.0),
+                pos(5, 1.0),
+                pos(6, 1e9),
+                pos(7, 1e9),
+                pos(8, 1e12),
+            );
+            let s = FusedSlices {
+                y: &v[0],
+                ym2: &v[1],
+                ym1: &v[2],
+                y0: &v[3],
+                wu: &wu,
+                ws: &ws,
+                pk: &pk,
+                rp: &rp,
+                ap: &ap,
+            };
+            let (m, mask) = one_by_one(&s, &c);
+            assert!(
+                mask != 0 && mask.count_ones() < n as u32 || n < 3,
+                "n {n}: {mask:b}"
+            );
+            let (pm, pmask) = s.block(&c);
+            assert_eq!(
+                (pm.to_bits(), pmask),
+                (m.to_bits(), mask),
+                "portable, n {n}"
+            );
+            #[cfg(target_arch = "x86_64")]
+            if let Some(simd) = pulp::x86::V3::try_new() {
+                let (vm, vmask) = simd.vectorize(|| simd_block(simd, &s, &c));
+                assert_eq!((vm.to_bits(), vmask), (m.to_bits(), mask), "AVX2, n {n}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_whole_states_cubic_is_each_unknowns_own_sum() {
+        let w = [0.2, 0.8, 1.3e-4, -0.7e-4];
+        for n in 0..41 {
+            let v: Vec<Vec<f64>> = (0..4).map(|k| values(n, 5 * n as u64 + k)).collect();
+            let mut state = vec![7.0; n % 5];
+            cubic_all(w, [&v[0], &v[1], &v[2], &v[3]], &mut state);
+            let own =
+                (0..n).map(|i| w[0] * v[0][i] + w[1] * v[1][i] + w[2] * v[2][i] + w[3] * v[3][i]);
+            let own: Vec<u64> = own.map(f64::to_bits).collect();
+            assert_eq!(
+                state.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+                own,
+                "n {n}"
+            );
+        }
     }
 }
