@@ -21,6 +21,8 @@ An output names a quantity of the periodic cycle:
 * ``"augmentation_index.<vessel>"``: the augmentation index at the inlet of ``vessel``,
   (P_sys − P_i)/PP with P_i the pressure at the inflection of the systolic upstroke
   (the first local minimum of its slope after the diastolic minimum, found by the core);
+  a type C wave (no such inflection: the reflection arrives after the peak) reads its
+  shoulder after the peak instead, (P_i − P_sys)/PP < 0;
 * ``"<vessel>.<variable>.series"``: the signal over the cycle, compared with data at given
   times (targets only).
 

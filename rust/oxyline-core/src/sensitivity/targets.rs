@@ -8,7 +8,8 @@
 //! output, VO2), a flow-weighted outflow saturation (SvO2 = Σ Q S / Σ Q) or a pulse-wave
 //! velocity (path length over the foot-to-foot transit time), a pulse-pressure
 //! amplification (the pulse at a peripheral site over that at a central one) or an
-//! augmentation index ((P_sys − P_i)/PP, P_i at the inflection of the systolic upstroke). A
+//! augmentation index ((P_sys − P_i)/PP, P_i at the inflection of the systolic upstroke, or
+//! (P_i − P_sys)/PP with P_i at the shoulder after the peak of a type C wave). A
 //! mean's derivative is the
 //! mean of the derivatives; a maximum's the derivative at the step of the maximum (the
 //! derivative of the discrete maximum, exact wherever the maximum is unique); a foot's is
@@ -44,7 +45,8 @@ pub enum Reduction {
     /// pressure
     Amplification,
     /// (P_sys − P_i)/(P_sys − P_dia) of signal 0, P_i the pressure at the inflection of the
-    /// systolic upstroke ([`inflection`])
+    /// systolic upstroke, or (P_i − P_sys)/(P_sys − P_dia) with P_i at the shoulder after
+    /// the peak of a type C wave ([`inflection`])
     AugmentationIndex,
 }
 
@@ -276,8 +278,9 @@ fn amplification(cycle: &CycleSignals) -> std::result::Result<TargetValue, Strin
     Ok(TargetValue::one(value, rows))
 }
 
-/// The inflection of a periodic wave's systolic upstroke, between samples `step` and
-/// `step + 1` (indices modulo the cycle's length).
+/// The inflection of a periodic wave's systolic upstroke (a type A or B wave) or its shoulder
+/// after the peak (type C), between samples `step` and `step + 1` (indices modulo the
+/// cycle's length).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Inflection {
     /// the sample before the inflection
@@ -288,6 +291,9 @@ pub struct Inflection {
     pub peak: usize,
     /// the diastolic minimum's sample
     pub minimum: usize,
+    /// a type C wave: the inflection is the shoulder after the peak (the reflection arrives
+    /// after it), the augmentation index negative
+    pub after_peak: bool,
 }
 
 /// The second difference x[i+1] − 2 x[i] + x[i−1] of the periodic samples `x` at `i` (any
@@ -297,37 +303,61 @@ fn curvature(x: &[f64], i: usize) -> f64 {
     x[(i + 1) % n] - 2.0 * x[i % n] + x[(i + n - 1) % n]
 }
 
-/// The inflection point of the systolic upstroke of one cycle of periodic uniform samples
-/// `x` (the shoulder of a wave whose reflection arrives before its peak): the first local
-/// minimum of the slope after the diastolic minimum (the lowest sample), where the second
-/// difference changes sign from negative to non-negative, before the systolic peak (the
-/// highest sample); the zero crossing is interpolated linearly between its two samples
-/// (the pressure's own curvature is zero there, so a chord reads the pressure to second
-/// order). None if the slope has no such minimum (a wave rising convexly, then concavely,
-/// straight to its peak: its shoulder, if any, comes after the peak).
+/// The first step j in `from..to` (unwrapped indices) where the second difference of `x`
+/// changes sign from `sign` (strictly) to the opposite or zero, and where between j and
+/// j + 1 the linear interpolation puts its zero.
+fn sign_change(x: &[f64], from: usize, to: usize, sign: f64) -> Option<(usize, f64)> {
+    (from..to).find_map(|j| {
+        let (c0, c1) = (curvature(x, j), curvature(x, j + 1));
+        (sign * c0 > 0.0 && sign * c1 <= 0.0).then(|| (j % x.len(), c0 / (c0 - c1)))
+    })
+}
+
+/// The inflection point of one cycle of periodic uniform samples `x` that an augmentation
+/// index reads. A type A or B wave (its reflection arrives before the peak): the shoulder of
+/// its systolic upstroke, the first local minimum of the slope after the diastolic minimum
+/// (the lowest sample), where the second difference changes sign from negative to
+/// non-negative, before the systolic peak (the highest sample). Failing that, a type C wave
+/// (the reflection arrives after the peak): the shoulder on its fall, the first local
+/// maximum of the slope after the peak, where the second difference changes sign from
+/// positive to non-positive, while the pressure is above its diastolic minimum by a quarter
+/// of the pulse. The zero crossing is
+/// interpolated linearly between its two samples (the pressure's own curvature is zero
+/// there, so a chord reads the pressure to second order). None if the slope has neither
+/// (a sinusoid: its slope falls from the steepest rise straight to the steepest fall).
 pub fn inflection(x: &[f64]) -> Option<Inflection> {
     let n = x.len();
     if n < 4 {
         return None;
     }
     let (peak, minimum) = (extreme(x, 1.0), extreme(x, -1.0));
-    // the peak's index unwrapped to follow the minimum
+    // the peak's index unwrapped to follow the minimum, and the minimum's to follow the peak
     let top = if peak > minimum { peak } else { peak + n };
-    (minimum + 1..top.saturating_sub(1)).find_map(|j| {
-        let (c0, c1) = (curvature(x, j), curvature(x, j + 1));
-        (c0 < 0.0 && c1 >= 0.0).then(|| Inflection {
-            step: j % n,
-            fraction: c0 / (c0 - c1),
-            peak,
-            minimum,
-        })
-    })
+    // a type C shoulder is looked for while the pressure stays above a quarter of the pulse
+    // (AIx > −3/4; in vivo it is −0.3 … 0): below, the diastolic decay's ripples and a
+    // valve's notch are not a reflection's shoulder
+    let floor = x[minimum] + 0.25 * (x[peak] - x[minimum]);
+    let fall = (peak + 1..peak + n)
+        .find(|&k| x[k % n] <= floor)
+        .unwrap_or(peak + n);
+    let found = |(step, fraction), after_peak| Inflection {
+        step,
+        fraction,
+        peak,
+        minimum,
+        after_peak,
+    };
+    if let Some(at) = sign_change(x, minimum + 1, top.saturating_sub(1), -1.0) {
+        return Some(found(at, false));
+    }
+    sign_change(x, peak + 1, fall.saturating_sub(1), 1.0).map(|at| found(at, true))
 }
 
-/// The augmentation index (P_sys − P_i)/(P_sys − P_dia) of signal 0, P_i the pressure at
-/// the inflection of its systolic upstroke ([`inflection`]), and its derivatives through
-/// the samples of the peak, the minimum and the inflection's crossing; the reason if there
-/// is no pulse or no inflection.
+/// The augmentation index of signal 0 and its derivatives through the samples of the peak,
+/// the minimum and the inflection's crossing; the reason if there is no pulse or no
+/// inflection. P_i the pressure at the inflection ([`inflection`]): (P_sys − P_i)/(P_sys −
+/// P_dia) ≥ 0 for a shoulder before the peak (type A or B), (P_i − P_sys)/(P_sys − P_dia) < 0
+/// for one after it (type C: the late shoulder is the augmentation, below the peak).
 fn augmentation_index(cycle: &CycleSignals) -> std::result::Result<TargetValue, String> {
     let x = cycle.signal(0);
     let n = x.len();
@@ -339,23 +369,25 @@ fn augmentation_index(cycle: &CycleSignals) -> std::result::Result<TargetValue, 
     }
     let Some(at) = inflection(&x) else {
         return Err(
-            "no inflection on the systolic upstroke (the slope has no local minimum \
-                    between the diastolic minimum and the systolic peak)"
+            "no inflection on the systolic upstroke nor after the peak (the slope has no \
+             local minimum between the diastolic minimum and the systolic peak and no local \
+             maximum after the peak while the pressure is above a quarter of the pulse)"
                 .into(),
         );
     };
     let (j, w, hi, lo) = (at.step, at.fraction, at.peak, at.minimum);
+    let sign = if at.after_peak { -1.0 } else { 1.0 };
     let (c0, c1) = (curvature(&x, j), curvature(&x, j + 1));
     let (p0, p1) = (x[j], x[(j + 1) % n]);
     let shoulder = p0 + w * (p1 - p0);
-    let value = (x[hi] - shoulder) / pulse;
+    let value = sign * (x[hi] - shoulder) / pulse;
     let rows = (0..cycle.n_params())
         .map(|p| {
             let d = cycle.deriv(p, 0);
             let (dc0, dc1) = (curvature(&d, j), curvature(&d, j + 1));
             let dw = (c0 * dc1 - c1 * dc0) / ((c0 - c1) * (c0 - c1));
             let dshoulder = d[j] + w * (d[(j + 1) % n] - d[j]) + dw * (p1 - p0);
-            ((d[hi] - dshoulder) - value * (d[hi] - d[lo])) / pulse
+            (sign * (d[hi] - dshoulder) - value * (d[hi] - d[lo])) / pulse
         })
         .collect();
     Ok(TargetValue::one(value, rows))

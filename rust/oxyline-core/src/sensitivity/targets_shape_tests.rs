@@ -1,6 +1,7 @@
 //! The waveform-shape targets against closed forms: the pulse-pressure amplification of two
-//! sinusoids, and the inflection and augmentation index of a two-harmonic pressure, with
-//! their derivatives by the waves' own parameters.
+//! sinusoids, and the inflection and augmentation index of a two-harmonic pressure (type A:
+//! the shoulder on the upstroke) and of that pressure in a warped phase (type C: the shoulder
+//! after the peak), with their derivatives by the waves' own parameters.
 
 use super::*;
 use std::f64::consts::PI;
@@ -76,13 +77,25 @@ const SCALE: f64 = 2.0e3;
 /// The two-harmonic pressure over `steps` steps, its samples off the peak, minimum and
 /// inflection by θ₀ (0.37 step); `eps` its cos 2θ part.
 fn two_harmonic(steps: usize, eps: f64) -> (Vec<f64>, (Vec<f64>, Vec<f64>)) {
+    warped_two_harmonic(steps, eps, BETA, 0.0)
+}
+
+/// P = p0 + s (f(φ) + ε cos 2φ), f = −cos φ + β cos 3φ, in the warped phase
+/// φ = θ + α (1 + sin θ)² (α = 0: the two-harmonic pressure above), θ = ωt + θ₀.
+fn warped_two_harmonic(
+    steps: usize,
+    eps: f64,
+    beta: f64,
+    alpha: f64,
+) -> (Vec<f64>, (Vec<f64>, Vec<f64>)) {
     let w = 2.0 * PI / PERIOD;
     let theta0 = 0.37 * 2.0 * PI / steps as f64;
     let t = times(steps, PERIOD);
     let s = sample(&t, |t| {
         let th = w * t + theta0;
-        let f = -th.cos() + BETA * (3.0 * th).cos();
-        let e = (2.0 * th).cos();
+        let phi = th + alpha * (1.0 + th.sin()).powi(2);
+        let f = -phi.cos() + beta * (3.0 * phi).cos();
+        let e = (2.0 * phi).cos();
         (
             vec![P0 + SCALE * (f + eps * e)],
             vec![vec![f + eps * e], vec![SCALE * e]],
@@ -165,4 +178,70 @@ fn a_wave_without_an_inflection_or_a_pulse_is_an_error_naming_the_output() {
     // one signal for two
     let e = eval("amplification.aorta.radial", &t, 1, &sine).unwrap_err();
     assert!(e.to_string().contains("reads 2"), "{e}");
+}
+
+// A type C wave: the two-harmonic pressure f(φ) (β = −0.05) in the warped phase
+// φ = θ + α (1 + sin θ)², α = 0.2. The warp is monotone (φ' ≥ 1 − 2α·1.3 > 0) and keeps f's
+// range, so P_sys = f(π) and P_dia = f(0) are as before; it steepens the upstroke so that its
+// slope has no local minimum (f's inflection at φ = π/2 is gone), and at θ = 3π/2 it is the
+// identity to fourth order ((1 + sin θ)² ~ (θ − 3π/2)⁴/4): there P'' = f''(3π/2) = 0 and
+// P''' = f'''(3π/2) = 1 + 27β < 0, the slope's local maximum after the peak, where f = 0.
+// AIx = (f(3π/2) − f(π))/(f(π) − f(0)) = −1/2 for every β and such α.
+const BETA_C: f64 = -0.05;
+const ALPHA_C: f64 = 0.2;
+
+#[test]
+fn a_type_c_waves_shoulder_after_the_peak_and_negative_index_are_the_closed_forms() {
+    let steps = 4000;
+    let (t, s) = warped_two_harmonic(steps, 0.0, BETA_C, ALPHA_C);
+    let at = inflection(&s.0).unwrap();
+    assert!(at.after_peak, "{at:?}");
+    let w = 2.0 * PI / PERIOD;
+    let theta0 = 0.37 * 2.0 * PI / steps as f64;
+    let dt = PERIOD / steps as f64;
+    let theta_i = w * (t[at.step] + at.fraction * dt) + theta0;
+    let dtheta = 2.0 * PI / steps as f64;
+    assert!(
+        (theta_i - 1.5 * PI).abs() <= dtheta * dtheta,
+        "{theta_i} vs {}",
+        1.5 * PI
+    );
+    let out = eval("augmentation_index.aorta", &t, 1, &s).unwrap();
+    // as for the type A wave: the samples' extremes and the chord are O(Δθ²) off
+    assert!((out.values[0] + 0.5).abs() <= 1e-5, "{:?}", out.values);
+    assert!(out.jacobian[0].abs() <= 1e-12, "{:?}", out.jacobian);
+    // d AIx / d ε, e = cos 2φ: at θ = 3π/2 (φ' = 1, φ'' = φ''' = 0) the shoulder moves by
+    // dθ = −e''/f''' and P_i by f' dθ + e; P_sys and P_dia by e(π) = e(0) = 1 (envelope):
+    // (e(3π/2) − f'(3π/2) e''(3π/2)/f'''(3π/2) − e(π)) / PP
+    let b = BETA_C;
+    let (fp, fppp) = (-1.0 - 3.0 * b, 1.0 + 27.0 * b);
+    let pp = 2.0 * (1.0 - b);
+    let exact = (-1.0 - fp * 4.0 / fppp - 1.0) / pp;
+    let rel = (out.jacobian[1] - exact).abs() / exact.abs();
+    assert!(rel <= 1e-3, "{} vs {exact} ({rel})", out.jacobian[1]);
+}
+
+#[test]
+fn a_type_c_indexs_derivative_is_that_of_its_samples() {
+    // five-point differences of the index of the perturbed samples at h = 1e-5 of ε: the
+    // shoulder's f''' is 5× smaller than the type A wave's, so the crossing moves 5× faster,
+    // and the index's rounding (~2e-12, from second differences of samples ~1e4) over h is
+    // ~3e-7 of the derivative (5.6) at h = 1e-6; at 1e-5 that floor is ~5e-8 and the
+    // truncation O(h⁴). 1e-6 relative tells a wrong derivative (a dropped term is O(1))
+    let steps = 400;
+    let (t, s) = warped_two_harmonic(steps, 0.0, BETA_C, ALPHA_C);
+    let out = eval("augmentation_index.aorta", &t, 1, &s).unwrap();
+    let h = 1e-5;
+    let at = |eps: f64| {
+        let (t, s) = warped_two_harmonic(steps, eps, BETA_C, ALPHA_C);
+        eval("augmentation_index.aorta", &t, 1, &s).unwrap().values[0]
+    };
+    let fd = (at(-2.0 * h) - 8.0 * at(-h) + 8.0 * at(h) - at(2.0 * h)) / (12.0 * h);
+    let rel = (out.jacobian[1] - fd).abs() / fd.abs();
+    eprintln!(
+        "type C AIx derivative {} vs {fd} ({rel:e})",
+        out.jacobian[1]
+    );
+    assert!(out.values[0] < 0.0, "{:?}", out.values);
+    assert!(rel <= 1e-6, "{} vs {fd} ({rel})", out.jacobian[1]);
 }

@@ -180,6 +180,7 @@ pub fn sensitivities(
         volume: &run.volume,
         total: &run.total,
         start_volume: &lp.volume,
+        flow_tangents: &[],
     };
     let kinds: Vec<LoopParameter> = chosen.iter().map(|c| c.0).collect();
     let tangent = lp.cycle_tangent(&cycle, &kinds)?;

@@ -1,6 +1,7 @@
 //! Exact derivatives of the closed loop's periodic O2 state (docs/calibration.md "A closed
 //! loop's oxygen"): by the organs' Michaelis–Menten vmax and km, the lungs' diffusing
-//! capacity, haemoglobin's P50 and capacity, and a scale of the whole flow table.
+//! capacity, haemoglobin's P50 and capacity, a scale of the whole flow table, and any
+//! direction of the flow table (a heart run's flow parameter through the heart's tangent).
 //!
 //! Each backward-Euler step solves, for every compartment n (`compartment::step`, the
 //! Gauss–Seidel sweeps converged),
@@ -43,22 +44,38 @@ pub enum LoopParameter {
     Capacity,
     /// A factor on every flow of the table (the derivative is by the factor, at 1).
     FlowScale,
+    /// A direction of the flow table: every step's branch flows move by
+    /// `Cycle::flow_tangents[k]` (m³/s per unit of the parameter; a heart run's flow
+    /// parameter through the heart's own tangent).
+    Flow(usize),
 }
 
 /// The recorded periodic cycle the tangent linearises: per step its flows (steps ×
 /// branches), end volumes and end total contents (steps × compartments), and the cycle
-/// start's volumes.
+/// start's volumes; the flow table's directions [`LoopParameter::Flow`] reads (each steps ×
+/// branches, every compartment's cycle-mean net inflow zero, as the balanced table's).
 pub struct Cycle<'a> {
     pub dt: f64,
     pub flow: &'a [f64],
     pub volume: &'a [f64],
     pub total: &'a [f64],
     pub start_volume: &'a [f64],
+    pub flow_tangents: &'a [Vec<f64>],
 }
 
 impl Cycle<'_> {
     pub fn steps(&self, nc: usize) -> usize {
         self.total.len() / nc
+    }
+
+    /// d q_b / dθ at step `s` by parameter `param` (the table's own flow for the scale).
+    fn flow_by(&self, param: LoopParameter, s: usize, b: usize) -> f64 {
+        let nb = self.flow.len() / self.steps(self.start_volume.len());
+        match param {
+            LoopParameter::FlowScale => self.flow[s * nb + b],
+            LoopParameter::Flow(k) => self.flow_tangents[k][s * nb + b],
+            _ => 0.0,
+        }
     }
 }
 
@@ -266,10 +283,10 @@ impl ClosedLoop {
         for (b, &qb) in q.iter().enumerate() {
             let up = if qb >= 0.0 { self.from[b] } else { self.to[b] };
             q_out[up] += qb.abs();
-            for (j, p) in params.iter().enumerate() {
-                if *p == LoopParameter::FlowScale {
-                    dq[first + j][b] = qb.abs();
-                }
+            // d|q| = sign(q) dq; at q = 0 (a closed valve, whose tangent is zero too) the
+            // upstream side does not change
+            for (j, &p) in params.iter().enumerate() {
+                dq[first + j][b] = qb.signum() * cycle.flow_by(p, s, b) * f64::from(qb != 0.0);
             }
         }
         for n in 0..nc {
@@ -482,13 +499,6 @@ impl ClosedLoop {
         };
         let branch = |name: &str| self.index_of(&self.branch_names, name, "branch");
         let compartment = |name: &str| self.index_of(&self.names, name, "compartment");
-        let scale = |j: usize| {
-            if params[j] == LoopParameter::FlowScale {
-                1.0
-            } else {
-                0.0
-            }
-        };
         let weighted = |b: usize, n: usize, pick: fn(&Linearised) -> (f64, f64)| {
             let q: Vec<f64> = (0..steps).map(|s| cycle.flow[s * nb + b]).collect();
             let sq: f64 = q.iter().sum();
@@ -498,12 +508,12 @@ impl ClosedLoop {
                 / sq;
             let derivs = (0..np)
                 .map(|j| {
-                    // with the flow scale every weight moves with its flow: d(Σ q x/Σ q)
-                    // = Σ (dq x + q dx)/Σ q − value Σ dq/Σ q, here dq = q
+                    // a flow parameter moves the weights: d(Σ q x/Σ q)
+                    // = Σ (dq x + q dx)/Σ q − value Σ dq/Σ q
                     (0..steps)
                         .map(|s| {
                             let (x, dx) = pick(&state(s, n, j));
-                            q[s] * (scale(j) * (x - value) + dx)
+                            cycle.flow_by(params[j], s, b) * (x - value) + q[s] * dx
                         })
                         .sum::<f64>()
                         / sq
@@ -551,7 +561,13 @@ impl ClosedLoop {
             LoopOutput::CardiacOutput => {
                 let b = branch("ejection_left")?;
                 let mean = (0..steps).map(|s| cycle.flow[s * nb + b]).sum::<f64>() / steps as f64;
-                (mean, (0..np).map(|j| scale(j) * mean).collect())
+                let dmean = |j: usize| {
+                    (0..steps)
+                        .map(|s| cycle.flow_by(params[j], s, b))
+                        .sum::<f64>()
+                        / steps as f64
+                };
+                (mean, (0..np).map(dmean).collect())
             }
         })
     }
@@ -641,3 +657,7 @@ mod tests {
         }
     }
 }
+
+#[cfg(test)]
+#[path = "closed_loop_flow_tests.rs"]
+mod flow_tests;
