@@ -28,6 +28,7 @@ macro_rules! arrays {
             ("times", $($borrow)+ $s.times),
             ("data", $($borrow)+ $s.data),
             ("transport_rows", $($borrow)+ $s.transport_rows),
+            ("step_ends", $($borrow)+ $s.step_ends),
         ]
     };
 }

@@ -201,6 +201,9 @@ fn is_tie(row: &[(usize, f64)], algebraic: &impl Fn(usize) -> bool) -> bool {
     matches!(row, [a, b] if algebraic(a.0) && algebraic(b.0))
 }
 
+/// Values per balance in a checkpoint (see [`StepEnds::carried`]).
+const CARRIED_PER_BALANCE: usize = 8;
+
 /// The slope at `t` of the line through two points or the quadratic through three (t, v),
 /// distinct in t; 0 with fewer.
 pub fn slope_at(points: &[(f64, f64)], t: f64) -> f64 {
@@ -302,6 +305,37 @@ impl StepEnds {
         }
     }
 
+    /// What a checkpoint carries so that a resumed run reports the same rows: per balance,
+    /// the rate unknown's last step-end value, the number of points and the points (padded
+    /// to three).
+    pub fn carried(&self) -> Vec<f64> {
+        let mut out = Vec::with_capacity(CARRIED_PER_BALANCE * self.points.len());
+        for (last, pts) in self.last.iter().zip(&self.points) {
+            out.extend([*last, pts.len() as f64]);
+            for k in 0..3 {
+                let (t, v) = pts.get(k).copied().unwrap_or((0.0, 0.0));
+                out.extend([t, v]);
+            }
+        }
+        out
+    }
+
+    /// Continue from a checkpoint's [`StepEnds::carried`]; false when it is not of this
+    /// circuit's balances (another count).
+    pub fn restore_carried(&mut self, carried: &[f64]) -> bool {
+        if carried.len() != CARRIED_PER_BALANCE * self.points.len() {
+            return false;
+        }
+        let chunks = carried.chunks_exact(CARRIED_PER_BALANCE);
+        for ((c, last), pts) in chunks.zip(&mut self.last).zip(&mut self.points) {
+            *last = c[0];
+            pts.clear();
+            let n = (c[1] as usize).min(3);
+            pts.extend((0..n).map(|k| (c[2 + 2 * k], c[3 + 2 * k])));
+        }
+        true
+    }
+
     /// The run's own values of the index-2 unknowns back into `y` (after `substitute`).
     pub fn restore(&self, y: &mut [f64]) {
         for (b, &v) in self.index2.balances.iter().zip(&self.saved) {
@@ -355,5 +389,49 @@ mod tests {
                 assert!((q - (2e-9 * rate + qd)).abs() < 1e-18, "{q}");
             }
         }
+    }
+
+    /// A rigid tube between a `flow` and a `resistance` condition: its pressures follow the
+    /// inflow's rate (index 2). A checkpoint's carried points give a resumed run the same
+    /// consistent values as the run that wrote it, and another circuit's are refused.
+    #[test]
+    fn the_carried_points_give_the_same_rows_after_a_resume() {
+        // (the file as a user writes it, through the native reader's canonical form)
+        let file: serde_json::Value = serde_json::from_str(
+            r#"{"period": 1.0,
+                "vessels": [{"name": "tube", "from": "in", "to": "out", "segments": 10,
+                             "length": 0.1, "radius": 0.01}],
+                "boundary_conditions": {
+                  "in": {"type": "flow", "fourier": {"period": 1.0, "mean": 1e-5,
+                                                     "cos": [0.0], "sin": [3e-5]}},
+                  "out": {"type": "resistance", "resistance": 1e7}}}"#,
+        )
+        .unwrap();
+        let (canonical, _) = crate::model::native::canonical::canonical(&file).unwrap();
+        let spec = crate::model::parse(&canonical.to_string()).unwrap();
+        let dae = spec.assemble().unwrap().circuit.assemble().unwrap();
+        let mut ends = StepEnds::new(&dae, 0.6).expect("the rigid tube's pressures are index 2");
+        let state = |t: f64| -> Vec<f64> {
+            (0..dae.n)
+                .map(|i| (i as f64 + 1.0) * (1.0 + t * t))
+                .collect()
+        };
+        ends.start(0.0, &state(0.0));
+        for k in 0..4 {
+            let t = k as f64 * 1e-3;
+            ends.stepped(t, 1e-3, &state(t + 1e-3));
+        }
+        let mut resumed = StepEnds::new(&dae, 0.6).unwrap();
+        assert!(resumed.restore_carried(&ends.carried()));
+        let (mut a, mut b) = (state(4e-3), state(4e-3));
+        ends.substitute(4e-3, &mut a);
+        resumed.substitute(4e-3, &mut b);
+        assert_eq!(a, b);
+        assert_ne!(
+            a,
+            state(4e-3),
+            "the consistent values differ from the state's"
+        );
+        assert!(!resumed.restore_carried(&[0.0; 3]));
     }
 }

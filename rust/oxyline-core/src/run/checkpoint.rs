@@ -11,7 +11,7 @@ pub mod meta;
 use std::time::{Duration, Instant};
 
 /// Layout version of [`Snapshot`]; a file of another version is refused.
-pub const CHECKPOINT_VERSION: u32 = 1;
+pub const CHECKPOINT_VERSION: u32 = 2;
 
 /// The state of a run at the end of cycle `cycles_run`.
 #[derive(Debug, Clone, Default)]
@@ -40,6 +40,8 @@ pub struct Snapshot {
     pub times: Vec<f64>,
     pub data: Vec<f64>,
     pub transport_rows: Vec<f64>,
+    /// See `StepEnds::carried` (empty without index-2 unknowns).
+    pub step_ends: Vec<f64>,
 }
 
 /// When to write a checkpoint.

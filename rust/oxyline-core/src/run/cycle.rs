@@ -270,6 +270,11 @@ impl<'r, 'f> Cycles<'r, 'f> {
             times: self.rec.times.clone(),
             data: self.rec.data.clone(),
             transport_rows: self.rec.transport.clone(),
+            step_ends: self
+                .step_ends
+                .as_ref()
+                .map(StepEnds::carried)
+                .unwrap_or_default(),
         }
     }
 
@@ -300,6 +305,17 @@ impl<'r, 'f> Cycles<'r, 'f> {
                 return bad("it has species, this run has none".into());
             }
             None => {}
+        }
+        // (the rows' consistent values of index-2 unknowns go on from the same points)
+        let step_ends = match self.step_ends.as_mut() {
+            Some(se) => se.restore_carried(&snap.step_ends),
+            None => snap.step_ends.is_empty(),
+        };
+        if !step_ends {
+            return bad(
+                "its index-2 unknowns are not this model's: the checkpoint is of another model"
+                    .into(),
+            );
         }
         self.steps = snap.steps;
         self.cycles_run = snap.cycles_run;
