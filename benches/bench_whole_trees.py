@@ -1,7 +1,7 @@
 """One cycle of the built-in whole trees (``adan56-st``, ``whole-body-140-st``) through the
 command line, flow only and with oxygen, each in a fresh ``oxyline run`` process measured by
 ``/usr/bin/time -v`` (wall, CPU = user + system, peak RSS). The model runs with its own
-settings (``WHOLE_TREE_SIMULATION``: one cycle of generalized-alpha at dt = 1 ms, vessel
+settings (their files' ``simulation``: one cycle of generalized-alpha at dt = 1 ms, vessel
 output of the named arteries every 10 ms) and, for oxygen, an ``oxygen`` section with the
 default Lévêque closure (inlet 95 mmHg, wall 60 mmHg). The scale budget: 1e6 segments with
 O2 in < 180 s and < 3 GB. Prints a markdown table for benches/results.md.

@@ -6,13 +6,16 @@ template of ``tests/data/pwdb``, MIT; terminal resistances calibrated to the sou
 observed mean aortic pressure, wall viscosity kept: :data:`WHOLE_BODY_OPTIONS`), and ``pwdb-116``
 from PWDB's ``116_artery_model.txt`` with :func:`oxyline.populations.model_dict` (the file is
 not in the repository, see docs/populations.md: pass its path, or it is read from a ``shared/``
-reference folder beside the repository; skipped when absent).
+reference folder beside the repository; skipped when absent), and the whole trees
+``adan56-st`` and ``whole-body-140-st`` from those built-ins (:func:`whole_trees`).
 
     python benches/make_models_data.py [--pwdb-geometry PATH/116_artery_model.txt]
+    python benches/make_models_data.py --whole-trees-only
 """
 
 from __future__ import annotations
 
+import re
 import shutil
 import warnings
 from pathlib import Path
@@ -85,6 +88,7 @@ def main() -> None:
         print(name, len(d["vessels"]), "vessels")
     shutil.copy(OPENBF / "LICENSE", OUT / "LICENSE")
     whole_body()
+    whole_trees()
     pwdb_116()
 
 
@@ -170,6 +174,147 @@ def whole_body() -> None:
     shutil.copy(PWDB / "LICENSE", OUT / "LICENSE-pwdb")
 
 
+#: the whole trees' run settings: the budgeted run of a whole tree (one cycle of
+#: generalized-alpha at 1 ms, vessel output every 10 ms); more cycles with
+#: ``cycles=``/``--cycles`` or ``until_periodic``
+WHOLE_TREE_SIMULATION = {"cycles": 1, "dt": 1.0e-3, "method": "generalized-alpha",
+                         "output": {"cycles": "last", "every": 0.01}}
+
+
+def adan56_st() -> dict:
+    """``adan56-st``: adan56 with every terminal Windkessel replaced by a structured tree of
+    the same steady resistance (:func:`oxyline.structured_tree.replace_windkessels`,
+    docs/structured-tree.md)."""
+    from oxyline import catalogue
+    from oxyline.structured_tree import replace_windkessels
+
+    data = replace_windkessels(catalogue.load_dict("adan56"))
+    data["name"] = "adan56-st"
+    data["simulation"] = dict(WHOLE_TREE_SIMULATION)
+    return data
+
+
+def terminal_compartments(data: dict) -> list[str]:
+    """The first lumped vessel of each lumped terminal compartment of ``data``: from every
+    pressure outlet, up through lumped vessels to the one that starts where a geometric vessel
+    ends (whole-body-140: the 95 ``*_T`` terminals; not the ``.wall`` dead ends)."""
+    arriving = {v["to"]: v for v in data["vessels"]}
+    out = []
+    for node, bc in data["boundary_conditions"].items():
+        if not (isinstance(bc, dict) and bc.get("type") == "pressure" and node in arriving):
+            continue
+        v = arriving[node]
+        while "lumped" in v and "lumped" in arriving.get(v["from"], {}):
+            v = arriving[v["from"]]
+        if "lumped" in v:
+            out.append(v["name"])
+    return out
+
+
+#: E and h(r_0) in a whole-body-140 vessel description (io.circulatory_autogen writes them)
+_WALL_LAW = re.compile(r"E ([-+.\deE]+) Pa, h\(r_0\) ([-+.\deE]+) m")
+
+
+def _wall_branch_owner(name: str, ends: dict[str, dict]) -> tuple[str, str]:
+    """(vessel, arrangement) whose capacitor the dead-end wall branch ``name`` holds, by the
+    naming of io.circulatory_autogen's wall-viscosity form: ``<node>.wall_in_<v>`` and
+    ``.wall_out_<v>`` (pi), ``<node>.wall_<v>`` (inverted-L), ``<v>.mid.wall`` (the pi x 2 of
+    a T), ``<node>.wall`` (L: the vessel ending at node)."""
+    node, _, tag = name.rpartition(".wall")
+    for prefix, arrangement in (("_in_", "pi"), ("_out_", "pi"), ("_", "inverted-L")):
+        if tag.startswith(prefix):
+            return tag[len(prefix):], arrangement
+    if node.endswith(".mid"):
+        return node[:-len(".mid")], "pi x 2"
+    return ends[node]["name"], "L"
+
+
+def compliant_arteries(data: dict) -> dict:
+    """``data`` (whole-body-140) with each dead-end wall branch (R_v = 0.01 s/C in series
+    with C, to a zero-flow end: the source's wall viscosity) folded back into the vessel whose
+    capacitor it is: the vessel gets the source's E and h(r_0) (Poisson ratio 0) and
+    arrangement, so that every compliance holds lumen volume, which transport needs (a
+    capacitor without volume stores blood but no solute). The wall viscosity is dropped; the
+    steady state is unchanged (wall branches carry no steady flow)."""
+    from oxyline import _core
+    from oxyline.errors import ModelError
+
+    bcs = dict(data["boundary_conditions"])
+    vessels = {v["name"]: dict(v) for v in data["vessels"]}
+    ends = {v["to"]: v for v in data["vessels"] if "lumped" not in v}
+    walls: dict[str, tuple[str, float]] = {}  # vessel -> (arrangement, its capacitance)
+    for v in data["vessels"]:
+        if ".wall" in v["name"] and bcs.get(v["to"]) == {"type": "flow", "value": 0.0}:
+            owner, arrangement = _wall_branch_owner(v["name"], ends)
+            walls[owner] = (arrangement, walls.get(owner, ("", 0.0))[1]
+                            + v["lumped"]["capacitance"])
+            del vessels[v["name"]], bcs[v["to"]]
+    for name, (arrangement, c) in walls.items():
+        v = vessels[name]
+        law = _WALL_LAW.search(v.get("description", ""))
+        if law is None:
+            raise ModelError(f"whole-body-140 vessel '{name}': no E and h(r_0) in its "
+                             f"description")
+        e, h = float(law.group(1)), float(law.group(2))
+        if arrangement == "pi x 2":  # the two rigid halves around the T's capacitor
+            half = vessels.pop(f"{name}.distal_half")
+            v.update({"to": half["to"], "segments": 2, "length": v["length"] + half["length"]})
+            arrangement = "pi"
+        # the branches hold the source's C (its wall law, Poisson ratio 0): E from C keeps C
+        # exact; the description's E (6 digits) only checks that it is this vessel's
+        exact = _core.circulatory_autogen_youngs_modulus(v["radius"], v["length"], c, h)
+        if abs(exact / e - 1.0) > 1e-5:
+            raise ModelError(f"whole-body-140 vessel '{name}': its wall branches give "
+                             f"E = {exact:g} Pa, its description {e:g} Pa")
+        v.update({"arrangement": arrangement, "youngs_modulus": exact, "wall_thickness": h,
+                  "poisson_ratio": 0.0})
+    return {**data, "vessels": list(vessels.values()), "boundary_conditions": bcs}
+
+
+def whole_body_trees(min_radius: float = 1.0e-4) -> dict:
+    """``whole-body-140-st``: whole-body-140 with each lumped terminal compartment (R_T/2,
+    C_T with its wall viscosity, R_T/2) replaced by a structured tree of steady resistance
+    R_T, rooted in a vessel whose radius follows Murray's law from the base model's steady
+    flows; tree vessels cut at 1 cm like adan56's; the named arteries compliant again (their
+    wall branches folded back, so oxygen can run; docs/structured-tree.md). ``min_radius``:
+    coarser variants for the tests."""
+    from oxyline import catalogue
+    from oxyline.structured_tree import murray_root_radii, replace_terminal_vessels
+
+    base = catalogue.load_dict("whole-body-140")
+    terminals = terminal_compartments(base)
+    steady = catalogue.build(base).network.steady_state()
+    radii = murray_root_radii(base, steady, terminals)
+    data = compliant_arteries(
+        replace_terminal_vessels(base, radii, min_radius=min_radius, max_length=0.01))
+    data["name"] = "whole-body-140-st"
+    data["simulation"] = dict(WHOLE_TREE_SIMULATION)
+    return data
+
+
+def whole_trees() -> None:
+    """``adan56-st`` and ``whole-body-140-st``: the compact dicts (their structured trees as
+    ``structured-tree`` conditions, grown when the model loads)."""
+    notes = {
+        "adan56-st": ["adan56 with each of its 31 terminal Windkessels replaced by a structured",
+                      "tree of the same steady resistance (structured_tree.replace_windkessels)."],
+        "whole-body-140-st": ["whole-body-140 with each of its 95 lumped terminal compartments",
+                              "replaced by a Murray root vessel and a structured tree of the same",
+                              "steady resistance, the named arteries' wall branches folded back",
+                              "(docs/structured-tree.md, \"Built-in whole tree\")."],
+    }
+    for name, build in (("adan56-st", adan56_st), ("whole-body-140-st", whole_body_trees)):
+        d = build()
+        header = [f"# oxyline built-in model '{name}':", *(f"# {n}" for n in notes[name]),
+                  "# The trees grow on load. Regenerate: "
+                  + "benches/make_models_data.py --whole-trees-only."]
+        text = "\n".join(header) + "\n" + dump(d)
+        if yaml.safe_load(text) != d:
+            raise SystemExit(f"{name}: YAML round trip changed the model")
+        (OUT / f"{name}.yaml").write_text(text)
+        print(name, len(d["vessels"]), "vessels,", len(d["boundary_conditions"]), "conditions")
+
+
 PWDB_GEOMETRY = REPO.parent / "shared" / "networks" / "pwdb" / "116_artery_model.txt"
 
 
@@ -221,7 +366,9 @@ def pwdb_116(geometry: Path | None = None) -> None:
 if __name__ == "__main__":
     import sys
 
-    if "--pwdb-geometry" in sys.argv or "--pwdb-only" in sys.argv:
+    if "--whole-trees-only" in sys.argv:
+        whole_trees()
+    elif "--pwdb-geometry" in sys.argv or "--pwdb-only" in sys.argv:
         if "--pwdb-only" in sys.argv:
             sys.argv.remove("--pwdb-only")
         pwdb_116()

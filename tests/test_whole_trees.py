@@ -7,6 +7,8 @@ exact steady pressures of the Windkessel version."""
 from __future__ import annotations
 
 import math
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -17,6 +19,10 @@ from oxyline.structured_tree import (
     murray_root_radii,
     replace_terminal_vessels,
 )
+
+# the whole trees' recipes (the built-in files are their output)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benches"))
+import make_models_data
 
 N_TERMINALS = 95  # whole-body-140's terminal R-C-R compartments (names ending in _T)
 
@@ -107,7 +113,7 @@ def test_whole_body_140_st_keeps_the_steady_pressures(base) -> None:
     node of the named arteries it equals the Windkessel version's (which also keeps the wall
     viscosity branches: no steady flow). Trees grown to 0.5 mm here (14 k segments); the
     built-in 0.1 mm model: test below (slow) and docs."""
-    data = catalogue._whole_body_trees(min_radius=5e-4)
+    data = make_models_data.whole_body_trees(min_radius=5e-4)
     p_wk = oxyline.load_model(base).network.steady_state()
     p_st = oxyline.load_model(data).network.steady_state()
     assert_named_pressures_agree(base, p_wk, p_st)
@@ -179,7 +185,7 @@ def test_whole_body_140_st_carries_oxygen() -> None:
     model takes an oxygen section (whole-body-140 itself is refused) and conserves O2 over
     its default one-cycle run. Trees grown only to 1 mm (capped at alpha·r0: 3.8 k segments;
     ~0.7 s CPU; residual measured 9e-14 of the inflow)."""
-    data = catalogue._whole_body_trees(min_radius=1e-3)
+    data = make_models_data.whole_body_trees(min_radius=1e-3)
     data["oxygen"] = {"inlet": {"po2": 95.0}, "wall": {"model": "leveque", "po2": 60.0}}
     res = oxyline.simulate(oxyline.load_model(data), segments=False)
     mb = res.o2_mass_balance

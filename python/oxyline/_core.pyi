@@ -252,6 +252,11 @@ class CalibrationProblem:
     def normal_equations(self, alpha: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
         """(Σr², Jᵀr by slot, the blocks of JᵀJ concatenated row-major: vessels, then
         branches) at ``alpha``."""
+    def fit(self, start: np.ndarray, active: list[bool], max_iterations: int,
+            initial_damping: float, tolerance_gradient: float, tolerance_increment: float
+            ) -> tuple[np.ndarray, int, bool]:
+        """svZeroDSolver's Levenberg–Marquardt fit from ``start`` of the slots marked in
+        ``active``: (values, iterations, converged); ``SolverError`` for a singular step."""
 
 # the core's model schema (oxyline_core::model::native) on native model dicts
 def read_vessels(vessels: list[Any], units: str) -> list[dict[str, Any]]: ...

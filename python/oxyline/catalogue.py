@@ -26,7 +26,10 @@ library is Apache-2.0, see ``models_data/LICENSE`` and ``models_data/NOTICE`` fo
   Mynard & Smolich 2015) for PWDB's 25-year baseline subject: PWDB's wall law, its 16 vascular
   beds as 46 RCR outlets calibrated to the subject's mean aortic root pressure, the Mynard
   aortic inflow scaled to its heart rate, stroke volume and ejection time; the base of the
-  virtual populations of :mod:`oxyline.populations` (``docs/populations.md``).
+  virtual populations of :mod:`oxyline.populations` (``docs/populations.md``);
+* ``adan56-st`` and ``whole-body-140-st`` — whole trees: adan56's Windkessels and
+  whole-body-140's terminal compartments replaced by structured trees (grown on load,
+  ``docs/structured-tree.md``).
 
 They were converted with :func:`oxyline.io.openbf.to_native_dict` (default options; script
 ``benches/make_models_data.py``). Every example network of ``oxyline/examples/`` (e.g.
@@ -41,15 +44,10 @@ from collections.abc import Callable
 from importlib import resources
 from typing import Any
 
-from oxyline import _core, examples
+from oxyline import examples
 from oxyline.errors import ModelError
 from oxyline.memory import gc_paused
 from oxyline.model import Model, build_model
-from oxyline.structured_tree import (
-    murray_root_radii,
-    replace_terminal_vessels,
-    replace_windkessels,
-)
 
 _DATA = "oxyline.models_data"
 
@@ -69,6 +67,12 @@ BUILTIN: dict[str, tuple[str, str]] = {
     "pwdb-116": ("pwdb-116.yaml",
                  ("PWDB 116-artery network (Charlton 2019), 25-y baseline subject, 46 RCR "
                   "calibrated to its mean pressure, Mynard aortic inflow")),
+    "adan56-st": ("adan56-st.yaml", ("ADAN56 with 31 structured trees (min radius 0.1 mm) "
+                                     "instead of WK3: 262,512 vessels, 314,489 segments")),
+    "whole-body-140-st": ("whole-body-140-st.yaml",
+                          ("whole-body-140 with 95 structured trees (min radius 0.1 mm, Murray "
+                           "root radii) instead of its terminal R-C-R: 256,368 vessels, 305,949 "
+                           "segments")),
 }
 ALIASES: dict[str, str] = {
     "ibif": "aortic-bifurcation",
@@ -84,127 +88,11 @@ ALIASES: dict[str, str] = {
 _registered: dict[str, tuple[Callable[[], Any], str]] = {}
 
 
-def _with_structured_trees(base: str) -> Callable[[], Any]:
-    def build() -> Any:
-        data = replace_windkessels(load_dict(base))
-        data["name"] = f"{base}-st"
-        data["simulation"] = dict(WHOLE_TREE_SIMULATION)
-        return data
-
-    return build
-
-
-def terminal_compartments(data: dict[str, Any]) -> builtins.list[str]:
-    """The first lumped vessel of each lumped terminal compartment of ``data``: from every
-    pressure outlet, up through lumped vessels to the one that starts where a geometric vessel
-    ends (whole-body-140: the 95 ``*_T`` terminals; not the ``.wall`` dead ends).
-
-    >>> import oxyline
-    >>> d = oxyline.catalogue.load_dict("whole-body-140")
-    >>> len(oxyline.catalogue.terminal_compartments(d))
-    95
-    """
-    arriving = {v["to"]: v for v in data["vessels"]}
-    out = []
-    for node, bc in data["boundary_conditions"].items():
-        if not (isinstance(bc, dict) and bc.get("type") == "pressure" and node in arriving):
-            continue
-        v = arriving[node]
-        while "lumped" in v and "lumped" in arriving.get(v["from"], {}):
-            v = arriving[v["from"]]
-        if "lumped" in v:
-            out.append(v["name"])
-    return out
-
-
-#: E and h(r_0) in a whole-body-140 vessel description (io.circulatory_autogen writes them)
-_WALL_LAW = re.compile(r"E ([-+.\deE]+) Pa, h\(r_0\) ([-+.\deE]+) m")
-
-
-def _wall_branch_owner(name: str, ends: dict[str, dict[str, Any]]) -> tuple[str, str]:
-    """(vessel, arrangement) whose capacitor the dead-end wall branch ``name`` holds, by the
-    naming of io.circulatory_autogen's wall-viscosity form: ``<node>.wall_in_<v>`` and
-    ``.wall_out_<v>`` (pi), ``<node>.wall_<v>`` (inverted-L), ``<v>.mid.wall`` (the pi x 2 of
-    a T), ``<node>.wall`` (L: the vessel ending at node)."""
-    node, _, tag = name.rpartition(".wall")
-    for prefix, arrangement in (("_in_", "pi"), ("_out_", "pi"), ("_", "inverted-L")):
-        if tag.startswith(prefix):
-            return tag[len(prefix):], arrangement
-    if node.endswith(".mid"):
-        return node[:-len(".mid")], "pi x 2"
-    return ends[node]["name"], "L"
-
-
-def _compliant_arteries(data: dict[str, Any]) -> dict[str, Any]:
-    """``data`` (whole-body-140) with each dead-end wall branch (R_v = 0.01 s/C in series
-    with C, to a zero-flow end: the source's wall viscosity) folded back into the vessel whose
-    capacitor it is: the vessel gets the source's E and h(r_0) (Poisson ratio 0) and
-    arrangement, so that every compliance holds lumen volume, which transport needs (a
-    capacitor without volume stores blood but no solute). The wall viscosity is dropped; the
-    steady state is unchanged (wall branches carry no steady flow)."""
-    bcs = dict(data["boundary_conditions"])
-    vessels = {v["name"]: dict(v) for v in data["vessels"]}
-    ends = {v["to"]: v for v in data["vessels"] if "lumped" not in v}
-    walls: dict[str, tuple[str, float]] = {}  # vessel -> (arrangement, its capacitance)
-    for v in data["vessels"]:
-        if ".wall" in v["name"] and bcs.get(v["to"]) == {"type": "flow", "value": 0.0}:
-            owner, arrangement = _wall_branch_owner(v["name"], ends)
-            walls[owner] = (arrangement, walls.get(owner, ("", 0.0))[1]
-                            + v["lumped"]["capacitance"])
-            del vessels[v["name"]], bcs[v["to"]]
-    for name, (arrangement, c) in walls.items():
-        v = vessels[name]
-        law = _WALL_LAW.search(v.get("description", ""))
-        if law is None:
-            raise ModelError(f"whole-body-140 vessel '{name}': no E and h(r_0) in its "
-                             f"description")
-        e, h = float(law.group(1)), float(law.group(2))
-        if arrangement == "pi x 2":  # the two rigid halves around the T's capacitor
-            half = vessels.pop(f"{name}.distal_half")
-            v.update({"to": half["to"], "segments": 2, "length": v["length"] + half["length"]})
-            arrangement = "pi"
-        # the branches hold the source's C (its wall law, Poisson ratio 0): E from C keeps C
-        # exact; the description's E (6 digits) only checks that it is this vessel's
-        exact = _core.circulatory_autogen_youngs_modulus(v["radius"], v["length"], c, h)
-        if abs(exact / e - 1.0) > 1e-5:
-            raise ModelError(f"whole-body-140 vessel '{name}': its wall branches give "
-                             f"E = {exact:g} Pa, its description {e:g} Pa")
-        v.update({"arrangement": arrangement, "youngs_modulus": exact, "wall_thickness": h,
-                  "poisson_ratio": 0.0})
-    return {**data, "vessels": builtins.list(vessels.values()), "boundary_conditions": bcs}
-
-
-def _whole_body_trees(min_radius: float = 1.0e-4) -> dict[str, Any]:
-    """whole-body-140 with each lumped terminal compartment (R_T/2, C_T with its wall
-    viscosity, R_T/2) replaced by a structured tree of steady resistance R_T, rooted in a
-    vessel whose radius follows Murray's law from the base model's steady flows; tree vessels
-    cut at 1 cm like adan56's; the named arteries compliant again (their wall branches folded
-    back, so oxygen can run; docs/structured-tree.md)."""
-    base = load_dict("whole-body-140")
-    terminals = terminal_compartments(base)
-    radii = murray_root_radii(base, build(base).network.steady_state(), terminals)
-    data = _compliant_arteries(
-        replace_terminal_vessels(base, radii, min_radius=min_radius, max_length=0.01))
-    data["name"] = "whole-body-140-st"
-    data["simulation"] = dict(WHOLE_TREE_SIMULATION)
-    return data
-
-
-#: built-in whole trees (1e5-1e6 segments: seconds to a minute to load)
+#: built-in whole trees (1e5-1e6 segments: seconds to a minute to load); their files hold the
+#: compact dict (the trees as ``structured-tree`` conditions, grown on load) and the budgeted
+#: run of a whole tree as their ``simulation`` (one cycle of generalized-alpha at 1 ms,
+#: vessel output every 10 ms); the recipes: ``benches/make_models_data.py``
 WHOLE_TREES = ("adan56-st", "whole-body-140-st")
-#: their run settings: the issue-9 budget run (one cycle of generalized-alpha at 1 ms, vessel
-#: output every 10 ms); more cycles with ``cycles=``/``--cycles`` or ``until_periodic``
-WHOLE_TREE_SIMULATION = {"cycles": 1, "dt": 1.0e-3, "method": "generalized-alpha",
-                         "output": {"cycles": "last", "every": 0.01}}
-#: whole trees: every terminal Windkessel replaced by a structured tree of the same steady
-#: resistance (rule: :func:`oxyline.structured_tree.replace_windkessels`, docs/structured-tree.md)
-_registered["adan56-st"] = (_with_structured_trees("adan56"),
-                            ("ADAN56 with 31 structured trees (min radius 0.1 mm) instead of "
-                             "WK3: 262,512 vessels, 314,489 segments"))
-_registered["whole-body-140-st"] = (_whole_body_trees,
-                                    ("whole-body-140 with 95 structured trees (min radius 0.1 mm, "
-                                     "Murray root radii) instead of its terminal R-C-R: "
-                                     "256,368 vessels, 305,949 segments"))
 
 
 def register(name: str, loader: Callable[[], Any], description: str = "") -> None:
@@ -317,8 +205,6 @@ def load_dict(name: str) -> dict[str, Any]:
     >>> d["vessels"][0]["name"]
     'common_carotid_artery'
     """
-    if _canonical(name) in WHOLE_TREES:
-        return _registered[_canonical(name)][0]()
     data = _shipped_yaml(path(name).read_text())
     if not isinstance(data, dict):
         raise ModelError(f"built-in model '{name}': corrupted file")

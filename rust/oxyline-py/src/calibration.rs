@@ -1,9 +1,10 @@
 //! The calibration residual of observed states (`oxyline_core::calibration`): the binding of
 //! `oxyline.svzerod.calibrate`'s Gauss–Newton quantities.
 
-use crate::errors::{ModelError, to_py};
+use crate::errors::{ModelError, SolverError, to_py};
 use numpy::{IntoPyArray, PyArray1, PyReadonlyArray1};
-use oxyline_core::calibration::{Block, Observations, normal_equations};
+use oxyline_core::Error;
+use oxyline_core::calibration::{Block, FitSettings, Observations, fit, normal_equations};
 use pyo3::prelude::*;
 
 /// A calibration problem: the blocks (RCL vessels and junction branches) and the observations
@@ -85,5 +86,46 @@ impl CalibrationProblem {
             ne.gradient.into_pyarray(py),
             ne.gram.into_pyarray(py),
         ))
+    }
+
+    /// svZeroDSolver's Levenberg–Marquardt fit from `start`, fitting the slots of `active`
+    /// (`oxyline_core::calibration::fit`): (values, iterations, converged). A singular step
+    /// is a `SolverError` naming its block.
+    #[allow(clippy::too_many_arguments)]
+    fn fit<'py>(
+        &self,
+        py: Python<'py>,
+        start: PyReadonlyArray1<'_, f64>,
+        active: Vec<bool>,
+        max_iterations: usize,
+        initial_damping: f64,
+        tolerance_gradient: f64,
+        tolerance_increment: f64,
+    ) -> PyResult<(Bound<'py, PyArray1<f64>>, usize, bool)> {
+        let start = start.as_slice()?;
+        if active.len() != start.len() {
+            return Err(ModelError::new_err(format!(
+                "calibration: {} fitted flags for {} values",
+                active.len(),
+                start.len()
+            )));
+        }
+        let obs = Observations {
+            y: &self.y,
+            dy: &self.dy,
+            n_obs: self.n_obs,
+        };
+        let settings = FitSettings {
+            max_iterations,
+            initial_damping,
+            tolerance_gradient,
+            tolerance_increment,
+        };
+        let out = fit(&self.blocks, &obs, start, &active, &settings).map_err(|e| match e {
+            // the calibration's own wording, without the time stepping's "at t = 0"
+            Error::Solver { message, .. } => SolverError::new_err(message),
+            e => to_py(e),
+        })?;
+        Ok((out.alpha.into_pyarray(py), out.iterations, out.converged))
     }
 }

@@ -7,9 +7,10 @@ The element values α (each BloodVessel's R, C, L and stenosis coefficient, each
 outlet's R, L and stenosis coefficient) are fitted by least squares on the DAE residual
 E(α) ẏ + F(α) y + c(α, y) at the observed states: no forward simulation. The residual and
 its derivatives come from the core (:class:`oxyline._core.CalibrationProblem`); this module
-reads and writes the JSON and runs svZeroDSolver's own Levenberg–Marquardt iteration
-(the damping scaled by the ratio of successive gradient norms, every step taken, a stop when
-both the gradient and the step are below their tolerances or after ``maximum_iterations``).
+reads and writes the JSON; the core also runs svZeroDSolver's own Levenberg–Marquardt
+iteration (``CalibrationProblem.fit``: the damping scaled by the ratio of successive gradient
+norms, every step taken, a stop when both the gradient and the step are below their
+tolerances or after ``maximum_iterations``).
 The same iteration, not another optimiser, because the calibrator's files stop it early
 (``maximum_iterations: 20`` in the VMR cases): the answer to reproduce is that iterate, not
 the least-squares minimum. Values are fitted in the file's units, as svZeroDSolver does (the
@@ -38,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from oxyline import _core
-from oxyline.errors import ModelError, SolverError
+from oxyline.errors import ModelError
 
 __all__ = ["calibrate"]
 
@@ -267,65 +268,15 @@ def _observations(cfg: Mapping[str, Any], variables: list[str]) -> tuple[np.ndar
     return np.stack(rows["y"]), np.stack(rows["dy"])
 
 
-def _step(gram: np.ndarray, grad: np.ndarray, active: np.ndarray, damping: float,
-          names: list[str]) -> np.ndarray:
-    """The damped Gauss–Newton step of every block, (H + λ diag H) δ = g, on the fitted
-    values the data determine (a value whose column of J is zero, e.g. L under steady data,
-    and a value not fitted take no step: their row of the block is the identity's)."""
-    if gram.shape[0] == 0:
-        return np.zeros(grad.shape)
-    k = gram.shape[-1]
-    diag = np.einsum("bii->bi", gram)
-    free = active & (diag > 0.0)
-    m = gram + damping * diag[:, :, None] * np.eye(k)
-    fixed = ~free
-    m[fixed[:, :, None] | fixed[:, None, :]] = 0.0
-    block, slot = np.nonzero(fixed)
-    m[block, slot, slot] = 1.0
-    rhs = np.where(free, grad, 0.0)
-    try:
-        delta = np.linalg.solve(m, rhs[:, :, None])[:, :, 0]
-    except np.linalg.LinAlgError:
-        delta = np.full_like(rhs, np.nan)
-    bad = ~np.isfinite(delta).all(axis=1)
-    if bad.any():
-        raise SolverError(f"svZeroD calibration: the step of '{names[int(np.argmax(bad))]}' "
-                          "is singular (its values are not determined by the observations)")
-    return delta
-
-
 def _fit(problem: Any, pb: _Problem, settings: Mapping[str, Any]) -> np.ndarray:
-    """svZeroDSolver's Levenberg–Marquardt iteration from the start values."""
-    alpha = np.array(pb.start, dtype=np.float64)
-    active = np.array(pb.active)
-    nv, nb = len(pb.vessels), len(pb.branches)
-    split = 4 * nv
-    act_v, act_b = active[:split].reshape(nv, 4), active[split:].reshape(nb, 3)
-    names_v = [v[0] for v in pb.vessels]
-    names_b = [b[0] for b in pb.branches]
-    damping = float(settings["initial_damping_factor"])
-    norm_old = math.nan
-    for it in range(settings["maximum_iterations"]):
-        _, grad, gram = problem.normal_equations(alpha)
-        norm_grad = float(np.linalg.norm(grad[active]))
-        if norm_grad == 0.0:
-            break  # the observations hold exactly: no step to take
-        if it > 0:
-            damping *= norm_grad / norm_old
-        norm_old = norm_grad
-        dv = _step(gram[:16 * nv].reshape(nv, 4, 4), grad[:split].reshape(nv, 4), act_v,
-                   damping, names_v)
-        db = _step(gram[16 * nv:].reshape(nb, 3, 3), grad[split:].reshape(nb, 3), act_b,
-                   damping, names_b)
-        delta = np.concatenate([dv.ravel(), db.ravel()])
-        alpha -= delta
-        norm_inc = float(np.linalg.norm(delta))
-        log.debug("iteration %d | lambda %.1e | norm inc %.1e | norm grad %.1e", it + 1,
-                  damping, norm_inc, norm_grad)
-        if norm_grad < settings["tolerance_gradient"] and norm_inc < \
-                settings["tolerance_increment"]:
-            break
-    else:
+    """svZeroDSolver's Levenberg–Marquardt iteration from the start values, run by the core
+    (``oxyline_core::calibration::fit``)."""
+    alpha, iterations, converged = problem.fit(
+        np.asarray(pb.start, dtype=np.float64), [bool(a) for a in pb.active],
+        settings["maximum_iterations"], float(settings["initial_damping_factor"]),
+        float(settings["tolerance_gradient"]), float(settings["tolerance_increment"]))
+    log.debug("svZeroD calibration: %d iterations", iterations)
+    if not converged:
         log.info("svZeroD calibration: maximum_iterations (%d) reached",
                  settings["maximum_iterations"])
     return alpha

@@ -252,3 +252,160 @@ pub fn normal_equations(
     }
     Ok(out)
 }
+
+/// svZeroDSolver's Levenberg–Marquardt settings (its `calibration_parameters`).
+#[derive(Debug, Clone, Copy)]
+pub struct FitSettings {
+    pub max_iterations: usize,
+    pub initial_damping: f64,
+    pub tolerance_gradient: f64,
+    pub tolerance_increment: f64,
+}
+
+/// Where a fit ended: the values, the iterations taken and whether both tolerances were met
+/// (or the observations held exactly) before `max_iterations`.
+#[derive(Debug, Clone)]
+pub struct Fit {
+    pub alpha: Vec<f64>,
+    pub iterations: usize,
+    pub converged: bool,
+}
+
+/// svZeroDSolver's Levenberg–Marquardt iteration from `start`, fitting the slots marked in
+/// `active`: every step taken, the damping scaled by the ratio of successive gradient norms
+/// (over the fitted slots), a stop when the gradient norm and the step norm are both below
+/// their tolerances. The same iteration, not another optimiser, because the calibrator's
+/// files stop it early (`maximum_iterations: 20` in the VMR cases): the answer to reproduce
+/// is that iterate. A step the data do not determine is a solver error naming the block.
+pub fn fit(
+    blocks: &[Block],
+    obs: &Observations,
+    start: &[f64],
+    active: &[bool],
+    s: &FitSettings,
+) -> Result<Fit> {
+    let mut alpha = start.to_vec();
+    let mut damping = s.initial_damping;
+    let mut norm_old = f64::NAN;
+    for it in 0..s.max_iterations {
+        let ne = normal_equations(blocks, obs, &alpha)?;
+        let norm_grad = (ne.gradient.iter().zip(active))
+            .filter(|&(_, &a)| a)
+            .map(|(g, _)| g * g)
+            .sum::<f64>()
+            .sqrt();
+        if norm_grad == 0.0 {
+            // the observations hold exactly: no step to take
+            return Ok(Fit {
+                alpha,
+                iterations: it,
+                converged: true,
+            });
+        }
+        if it > 0 {
+            damping *= norm_grad / norm_old;
+        }
+        norm_old = norm_grad;
+        let mut inc2 = 0.0;
+        let mut offset = 0;
+        for b in blocks {
+            let slots = b.params();
+            let k = slots.len();
+            let gram = &ne.gram[offset..offset + k * k];
+            offset += k * k;
+            for (&p, d) in slots
+                .iter()
+                .zip(block_step(b, gram, &ne.gradient, active, damping)?)
+            {
+                alpha[p] -= d;
+                inc2 += d * d;
+            }
+        }
+        if norm_grad < s.tolerance_gradient && inc2.sqrt() < s.tolerance_increment {
+            return Ok(Fit {
+                alpha,
+                iterations: it + 1,
+                converged: true,
+            });
+        }
+    }
+    Ok(Fit {
+        alpha,
+        iterations: s.max_iterations,
+        converged: false,
+    })
+}
+
+/// The damped Gauss–Newton step of one block, (H + λ diag H) δ = g, on the slots the data
+/// determine (fitted, and a non-zero column of J: L under steady data has none); the other
+/// slots take no step (their rows of the system are the identity's).
+fn block_step(
+    b: &Block,
+    gram: &[f64],
+    gradient: &[f64],
+    active: &[bool],
+    damping: f64,
+) -> Result<Vec<f64>> {
+    let slots = b.params();
+    let k = slots.len();
+    let free: Vec<bool> = (0..k)
+        .map(|i| active[slots[i]] && gram[i * k + i] > 0.0)
+        .collect();
+    let mut m = vec![0.0; k * k];
+    let mut rhs = vec![0.0; k];
+    for i in 0..k {
+        if !free[i] {
+            m[i * k + i] = 1.0;
+            continue;
+        }
+        rhs[i] = gradient[slots[i]];
+        for j in (0..k).filter(|&j| free[j]) {
+            m[i * k + j] = gram[i * k + j]
+                + if i == j {
+                    damping * gram[i * k + i]
+                } else {
+                    0.0
+                };
+        }
+    }
+    match solve_dense(&mut m, &mut rhs, k) {
+        Some(()) if rhs.iter().all(|d| d.is_finite()) => Ok(rhs),
+        _ => Err(Error::solver(
+            0.0,
+            format!(
+                "svZeroD calibration: the step of '{}' is singular (its values are not \
+                 determined by the observations)",
+                b.name()
+            ),
+        )),
+    }
+}
+
+/// Solve the dense k×k system `m x = rhs` in place (row-major `m`, `x` into `rhs`) by
+/// Gaussian elimination with partial pivoting; None when a pivot is zero.
+fn solve_dense(m: &mut [f64], rhs: &mut [f64], k: usize) -> Option<()> {
+    for c in 0..k {
+        let p = (c..k).max_by(|&a, &b| m[a * k + c].abs().total_cmp(&m[b * k + c].abs()))?;
+        if m[p * k + c] == 0.0 {
+            return None;
+        }
+        if p != c {
+            for j in 0..k {
+                m.swap(p * k + j, c * k + j);
+            }
+            rhs.swap(p, c);
+        }
+        for r in c + 1..k {
+            let f = m[r * k + c] / m[c * k + c];
+            for j in c..k {
+                m[r * k + j] -= f * m[c * k + j];
+            }
+            rhs[r] -= f * rhs[c];
+        }
+    }
+    for c in (0..k).rev() {
+        let s: f64 = (c + 1..k).map(|j| m[c * k + j] * rhs[j]).sum();
+        rhs[c] = (rhs[c] - s) / m[c * k + c];
+    }
+    Some(())
+}

@@ -228,3 +228,87 @@ fn bad_input_names_the_block() {
     let e = normal_equations(&vessel(), &obs, &ALPHA[..5]).unwrap_err();
     assert!(e.to_string().contains("out of range"), "{e}");
 }
+
+/// Observations made to satisfy the vessel rows exactly at `alpha` (several samples, flows of
+/// both signs, a varying outflow so that L is determined).
+fn exact_data(alpha: [f64; 4]) -> (Vec<f64>, Vec<f64>) {
+    let [r, c, l, s] = alpha;
+    let p_in: [f64; 6] = [1.3e4, 1.1e4, 0.9e4, 1.2e4, 1.0e4, 1.15e4];
+    let q: [f64; 6] = [12.0, -3.0, 40.0, 25.0, 5.0, -8.0];
+    let dp_in: [f64; 6] = [3e4, -2e4, 1e4, -5e3, 8e3, 2e4];
+    let dq: [f64; 6] = [200.0, -150.0, 90.0, -40.0, 60.0, 10.0];
+    let dq_out: [f64; 6] = [120.0, -60.0, 30.0, 15.0, -25.0, 70.0];
+    let q_out: Vec<f64> = (0..6)
+        .map(|k| q[k] - c * (dp_in[k] - (r + 2.0 * s * q[k].abs()) * dq[k]))
+        .collect();
+    let p_out: Vec<f64> = (0..6)
+        .map(|k| p_in[k] - (r + s * q[k].abs()) * q[k] - l * dq_out[k])
+        .collect();
+    let y = [p_in.to_vec(), q.to_vec(), p_out, q_out].concat();
+    let dy = [dp_in.to_vec(), dq.to_vec(), vec![0.0; 6], dq_out.to_vec()].concat();
+    (y, dy)
+}
+
+const FIT: FitSettings = FitSettings {
+    max_iterations: 200,
+    initial_damping: 1.0,
+    tolerance_gradient: 1e-12,
+    tolerance_increment: 1e-14,
+};
+
+#[test]
+fn fit_recovers_the_values_that_made_the_data() {
+    let truth = [80.0, 2e-4, 1.5, -0.7];
+    let (y, dy) = exact_data(truth);
+    let obs = Observations {
+        y: &y,
+        dy: &dy,
+        n_obs: 6,
+    };
+    let start = [104.0, 1.4e-4, 1.8, -0.56];
+    let out = fit(&vessel()[..1], &obs, &start, &[true; 4], &FIT).unwrap();
+    assert!(out.iterations > 1);
+    for (got, want) in out.alpha.iter().zip(truth) {
+        assert!((got / want - 1.0).abs() < 1e-8, "{got} vs {want} ({out:?})");
+    }
+    // a slot not fitted keeps its start value; the others still fit the data's values
+    let start = [104.0, 1.4e-4, 1.5, -0.56];
+    let out = fit(
+        &vessel()[..1],
+        &obs,
+        &start,
+        &[true, true, false, true],
+        &FIT,
+    )
+    .unwrap();
+    assert_eq!(out.alpha[2], 1.5);
+    assert!((out.alpha[0] / 80.0 - 1.0).abs() < 1e-8, "{out:?}");
+    // from the values themselves (a gradient of rounding only) the fit stays there
+    let out = fit(&vessel()[..1], &obs, &truth, &[true; 4], &FIT).unwrap();
+    for (got, want) in out.alpha.iter().zip(truth) {
+        assert!((got / want - 1.0).abs() < 1e-8, "{got} vs {want} ({out:?})");
+    }
+}
+
+#[test]
+fn fit_stops_at_max_iterations_unconverged() {
+    let (y, dy) = exact_data([80.0, 2e-4, 1.5, -0.7]);
+    let obs = Observations {
+        y: &y,
+        dy: &dy,
+        n_obs: 6,
+    };
+    let s = FitSettings {
+        max_iterations: 1,
+        ..FIT
+    };
+    let out = fit(
+        &vessel()[..1],
+        &obs,
+        &[104.0, 1.4e-4, 1.8, -0.56],
+        &[true; 4],
+        &s,
+    )
+    .unwrap();
+    assert_eq!((out.iterations, out.converged), (1, false));
+}
