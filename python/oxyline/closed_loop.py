@@ -192,6 +192,12 @@ class ClosedLoopO2Result:
         table = self.weighted[name]
         return float(table[self.branches.index(branch), self.compartments.index(compartment)])
 
+    def arterial_flow(self) -> np.ndarray:
+        """The left heart's ejection per step (m³/s): into the tree's root or the pool."""
+        if self.tree is not None:
+            return self.tree.inflow
+        return self.flow[:, self.branches.index("ejection_left")]
+
     def wall_uptake(self) -> np.ndarray:
         """The arterial tree's wall uptake per step (mol/s; zeros without a tree)."""
         return self.tree.wall if self.tree is not None else np.zeros(len(self.time))
