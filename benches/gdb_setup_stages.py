@@ -8,7 +8,8 @@ extension's symbols, no change to the product):
 At each breakpoint it prints VmRSS and the high-water mark since the previous one (VmHWM,
 reset through ``/proc/PID/clear_refs``), in bytes per segment (``SEGMENTS``). With
 ``STOP_AT_SPECIES=1`` the process is killed when the species' state starts (the setup only).
-The high-water mark ``profile_memory.py`` prints is then per stage, not the run's.
+The high-water mark ``profile_memory.py`` prints is then per stage, not the run's. (After the
+kill, gdb's own Python may print a traceback as it exits: harmless.)
 """
 
 import os
