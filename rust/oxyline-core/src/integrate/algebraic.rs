@@ -41,38 +41,39 @@ pub(super) fn reduce_prescribed_inductors(dae: &Dae, regime: Regime) -> Reductio
     {
         nonlinear[i] = true;
     }
-    let mut row_forcing: Vec<Vec<usize>> = vec![Vec::new(); n];
-    for (k, (row, _)) in dae.forcing.iter().enumerate() {
-        row_forcing[*row].push(k);
-    }
+    // (the work lists are flat and 32-bit: a list per unknown, as this reduction held them,
+    // was ~290 B per segment on top of a large run's setup, its peak; see `ColumnRows`)
+    let row_forcing = RowForcing::new(dae);
     let entries = |r: usize| {
         dae.f
             .row(r)
             .map(|k| (dae.f.col[k] as usize, dae.f.val[k]))
             .filter(|&(_, v)| v != 0.0)
     };
-    let mut col_rows: Vec<Vec<usize>> = vec![Vec::new(); n];
-    for r in 0..n {
-        for (c, _) in entries(r) {
-            col_rows[c].push(r);
-        }
-    }
-    // known[j]: y_j as Σ coefficient · (forcing entry k)
-    let mut known: Vec<Option<Vec<(usize, f64)>>> = vec![None; n];
+    let col_rows = ColumnRows::new(n, entries);
+    // known[j]: y_j as Σ coefficient · (forcing entry k), the expression `exprs[known[j]]`
+    // (NONE: not known; few unknowns are)
+    let mut known: Vec<u32> = vec![NONE; n];
+    let mut exprs: Vec<Vec<(usize, f64)>> = Vec::new();
     let mut used = vec![false; n];
     let mut rate = Vec::new();
-    let mut work: Vec<usize> = (0..n).rev().collect();
+    let mut work: Vec<u32> = (0..n as u32).rev().collect();
     while let Some(r) = work.pop() {
+        let r = r as usize;
         if used[r] || e[r] != 0.0 || nonlinear[r] {
             continue;
         }
-        let mut free = entries(r).filter(|&(c, _)| known[c].is_none());
+        let mut free = entries(r).filter(|&(c, _)| known[c] == NONE);
         let (Some((j, a)), None) = (free.next(), free.next()) else {
             continue;
         };
-        let mut expr: Vec<(usize, f64)> = row_forcing[r].iter().map(|&k| (k, 1.0 / a)).collect();
+        let mut expr: Vec<(usize, f64)> = row_forcing.of(r).map(|k| (k, 1.0 / a)).collect();
         for (c, v) in entries(r).filter(|&(c, _)| c != j) {
-            for &(k, s) in known[c].as_deref().unwrap_or_default() {
+            let known_c: &[(usize, f64)] = match known[c] {
+                NONE => &[],
+                x => &exprs[x as usize],
+            };
+            for &(k, s) in known_c {
                 match expr.iter_mut().find(|(kk, _)| *kk == k) {
                     Some(term) => term.1 -= v * s / a,
                     None => expr.push((k, -v * s / a)),
@@ -83,12 +84,75 @@ pub(super) fn reduce_prescribed_inductors(dae: &Dae, regime: Regime) -> Reductio
         if e[j] != 0.0 {
             rate.extend(expr.iter().map(|&(k, s)| (j, -e[j] * s, k)));
             e[j] = 0.0;
-            work.push(j); // the inductor's row is now algebraic
+            work.push(j as u32); // the inductor's row is now algebraic
         }
-        known[j] = Some(expr);
-        work.extend(col_rows[j].iter().copied());
+        known[j] = u32::try_from(exprs.len()).expect("fewer known unknowns than unknowns");
+        exprs.push(expr);
+        work.extend_from_slice(col_rows.rows(j));
     }
     Reduction { e, rate }
+}
+
+/// "None" in the reduction's 32-bit index lists.
+const NONE: u32 = u32::MAX;
+
+/// The forcing entries of each row, in entry order: (row, entry) sorted by row (a circuit has
+/// few forcing entries; a list per unknown was 24 B per unknown for them).
+struct RowForcing(Vec<(usize, usize)>);
+
+impl RowForcing {
+    fn new(dae: &Dae) -> Self {
+        let mut v: Vec<(usize, usize)> = (dae.forcing.iter().enumerate())
+            .map(|(k, (row, _))| (*row, k))
+            .collect();
+        // stable: a row's entries keep their order
+        v.sort_by_key(|&(row, _)| row);
+        RowForcing(v)
+    }
+
+    /// The forcing entries of row `r`, in entry order.
+    fn of(&self, r: usize) -> impl Iterator<Item = usize> + '_ {
+        let start = self.0.partition_point(|&(row, _)| row < r);
+        self.0[start..]
+            .iter()
+            .take_while(move |&&(row, _)| row == r)
+            .map(|&(_, k)| k)
+    }
+}
+
+/// Per column of F, the rows with an entry in it, in row order (a row once per entry), as
+/// compressed 32-bit lists (F's entries number below 2^32: its row starts are 32-bit).
+struct ColumnRows {
+    ptr: Vec<u32>,
+    rows: Vec<u32>,
+}
+
+impl ColumnRows {
+    fn new<I: Iterator<Item = (usize, f64)>>(n: usize, entries: impl Fn(usize) -> I) -> Self {
+        let mut ptr = vec![0u32; n + 1];
+        for r in 0..n {
+            for (c, _) in entries(r) {
+                ptr[c + 1] += 1;
+            }
+        }
+        for c in 0..n {
+            ptr[c + 1] += ptr[c];
+        }
+        let mut fill = ptr.clone();
+        let mut rows = vec![0u32; ptr[n] as usize];
+        for r in 0..n {
+            for (c, _) in entries(r) {
+                rows[fill[c] as usize] = r as u32;
+                fill[c] += 1;
+            }
+        }
+        ColumnRows { ptr, rows }
+    }
+
+    /// The rows with an entry in column `c`.
+    fn rows(&self, c: usize) -> &[u32] {
+        &self.rows[self.ptr[c] as usize..self.ptr[c + 1] as usize]
+    }
 }
 
 /// The algebraic rows of the circuit and their elimination: a sparse LU of F restricted to the
