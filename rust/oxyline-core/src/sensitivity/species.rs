@@ -678,7 +678,10 @@ fn flow_and_derivatives(
     flow.shear = (d.geometry.iter().enumerate())
         .map(|(p, g)| {
             let mean = means.as_ref().map(|m| m.tangent(p, &[]));
-            let steps = (settings.period / settings.steps_per_cycle as f64, settings.alpha_f());
+            let steps = (
+                settings.period / settings.steps_per_cycle as f64,
+                settings.alpha_f(),
+            );
             let dys = flow.tangents(p);
             tr.shear_tangents(s, &flow.ys, &dys, &unknowns, steps, mean.as_ref(), *g)
         })

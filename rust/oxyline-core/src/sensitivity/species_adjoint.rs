@@ -214,7 +214,8 @@ fn record(
                     None
                 }
                 Signal::Vessel(v, kind) => {
-                    let r = tr.species_signal_row(s, v, &names[j].0, kind, z, (derivs, &shears[..]))?;
+                    let r =
+                        tr.species_signal_row(s, v, &names[j].0, kind, z, (derivs, &shears[..]))?;
                     rec.values[k * nsig + j] = r.value;
                     Some(r)
                 }

@@ -243,7 +243,11 @@ fn shear_dependent_walls_by_flow_parameters_adjoint_equals_forward() {
     let sp = &mut taper.transport.as_mut().unwrap().species[0];
     let d2 = sp.per_vessel["d2"].clone();
     sp.per_vessel.insert("d1".into(), d2);
-    let paths = ["vessels.d1.radius_in", "vessels.d1.radius_out", "vessels.d1.length"];
+    let paths = [
+        "vessels.d1.radius_in",
+        "vessels.d1.radius_out",
+        "vessels.d1.length",
+    ];
     let worst = super::adjoint::tests::mean_and_series_adjoint_worst(&taper, &paths, &signals());
     eprintln!("taper under a relaxed wall: adjoint against forward {worst:.2e}");
     assert!(worst < 1e-8, "{worst:e}");

@@ -821,8 +821,7 @@ impl Transport {
                         Some(k) => {
                             let shear = shears.get(pi).copied().unwrap_or(&[]);
                             let cbrt = cbrt.copied().unwrap_or(0.0);
-                            let (dg, dgcw) =
-                                self.dynamic_piece_derivative(s, d, k, g, cbrt, shear);
+                            let (dg, dgcw) = self.dynamic_piece_derivative(s, d, k, g, cbrt, shear);
                             [dg, dgcw, 0.0]
                         }
                         None => d.piece[p],
