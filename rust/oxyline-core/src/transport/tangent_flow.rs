@@ -356,9 +356,9 @@ impl Transport {
                 (qt, dqt) = step(k, qt, dqt);
             }
             (qt, dqt) = (start, dqt / (1.0 - big_e));
-            for k in 0..n {
+            for (k, v) in per_seg[m].iter_mut().enumerate() {
                 (qt, dqt) = step(k, qt, dqt);
-                per_seg[m][k] = if qt > 0.0 { dqt / qt } else { 0.0 };
+                *v = if qt > 0.0 { dqt / qt } else { 0.0 };
             }
         }
         let nd = laws.dynamic.len();
@@ -368,8 +368,8 @@ impl Transport {
             let Some(m) = laws.dynamic_segs.iter().position(|&x| x == j) else {
                 continue;
             };
-            for k in 0..n {
-                out[k * nd + kk] = per_seg[m][k];
+            for (k, v) in per_seg[m].iter().enumerate() {
+                out[k * nd + kk] = *v;
             }
         }
         Ok(out)
