@@ -16,11 +16,10 @@ mode="adjoint")``): one backward sweep of the species transport per output row.
   1e-4; 1e-6 of the quotient plus the outputs' rounding over h).
 * ``calibrate(gradient="adjoint")`` with oxygen targets and flow parameters uses the
   adjoint (no forward tangent runs).
-* A shear-dependent (Lévêque, instantaneous or relaxed) wall by oxygen parameters,
-  forward and adjoint against central differences.
+* A shear-dependent (Lévêque, instantaneous or relaxed) wall by oxygen and by flow
+  parameters, forward and adjoint against central differences.
 * What the oxygen adjoint does not follow is refused by name: a path that does not
-  resolve, a flow parameter on a shear-dependent (Lévêque) wall; flow outputs beside
-  oxygen parameters get zero rows.
+  resolve; flow outputs beside oxygen parameters get zero rows.
 """
 
 from __future__ import annotations
@@ -184,11 +183,15 @@ def test_shear_dependent_wall_by_oxygen_parameters(shear: str, path: str, mode: 
     check_against_central_differences(sheared(shear), path, SHEARED_OUTPUTS, mode=mode)
 
 
-def test_a_shear_dependent_wall_refuses_flow_parameters_by_name() -> None:
-    m = sheared("instantaneous")
-    for mode in ["forward", "adjoint"]:
-        with pytest.raises(ModelError,
-                           match=r"parameter 'vessels\.d1\.length'.*vessel 'd2'.*"
-                                 r"shear: instantaneous"):
-            oxyline.sensitivities(m, ["vessels.d1.length", "oxygen.wall.k"], ["SvO2.d1"],
-                                  mode=mode)
+@pytest.mark.parametrize(("shear", "path", "mode"), [
+    ("instantaneous", "vessels.d2.radius", "forward"),
+    ("instantaneous", "scale.inflow", "adjoint"),
+    ("relaxed", "vessels.d2.length", "adjoint"),
+    ("relaxed", "boundary_conditions.o1.distal_resistance", "forward"),
+])
+def test_shear_dependent_wall_by_flow_parameters(shear: str, path: str, mode: str) -> None:
+    """A flow parameter moves the shear such a wall reads each step (the relaxed one
+    through its own state, whose relaxation time the mean flow and the geometry set) and a
+    radius or length the wall law's coefficients: forward and adjoint against central
+    differences of whole periodic runs, judged as above."""
+    check_against_central_differences(sheared(shear), path, SHEARED_OUTPUTS, mode=mode)

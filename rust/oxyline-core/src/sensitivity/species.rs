@@ -298,56 +298,6 @@ fn parameters(spec: &NetworkSpec, sp: &SpeciesSpec, paths: &[String]) -> Result<
         .collect()
 }
 
-/// Refuse a flow parameter on a model with a Lévêque wall of the relaxed or instantaneous
-/// shear, naming the flow parameters, the vessel and the shear: that wall's conductance
-/// follows the wall shear step by step (the relaxed one through a state of its own, dQ̃/dt =
-/// (|Q| − Q̃)/τ), which a flow parameter moves and the tangent does not carry yet. Oxygen
-/// parameters do not move the flow, so they scale the step's own conductance and are
-/// followed (`Transport::dynamic_piece_derivative`).
-fn shear_free(spec: &NetworkSpec, sp: &SpeciesSpec, params: &[Param]) -> Result<()> {
-    use crate::closure::Shear;
-    let paths: Vec<&String> = (params.iter())
-        .filter_map(|p| match p {
-            Param::Flow(_, path) => Some(path),
-            Param::Oxygen(_) => None,
-        })
-        .collect();
-    if paths.is_empty() {
-        return Ok(());
-    }
-    for v in &spec.vessels {
-        let wall = sp.per_vessel.get(&v.name).unwrap_or(&sp.wall);
-        let name = match wall {
-            WallSpec::Leveque {
-                shear: Shear::Relaxed,
-                ..
-            } => "relaxed",
-            WallSpec::Leveque {
-                shear: Shear::Instantaneous,
-                ..
-            } => "instantaneous",
-            _ => continue,
-        };
-        let quoted: Vec<String> = paths.iter().map(|p| format!("'{p}'")).collect();
-        let element = match quoted.len() {
-            0 => "sensitivities".to_owned(),
-            1 => format!("parameter {}", quoted[0]),
-            _ => format!("parameters {}", quoted.join(", ")),
-        };
-        return Err(Error::model(
-            element,
-            format!(
-                "the oxygen sensitivities by a flow parameter do not follow vessel '{}''s \
-                 Lévêque wall with shear: {name} yet (its conductance follows the wall shear \
-                 step by step, which a flow parameter moves; the oxygen parameters are \
-                 followed): use shear: cycle-mean",
-                v.name
-            ),
-        ));
-    }
-    Ok(())
-}
-
 /// The derivative of the DAE by each flow parameter (the oxygen parameters' entries None),
 /// after the circuit is checked against what the flow tangent covers.
 fn flow_tangents(
@@ -503,6 +453,9 @@ struct FlowCycle {
     nu: usize,
     cycles: usize,
     change: f64,
+    /// Per flow parameter, per step (n_steps × shear-dependent pieces): d ln of the flow
+    /// magnitude each shear-dependent wall law reads ([`Transport::shear_tangents`]).
+    shear: Vec<Vec<f64>>,
 }
 
 impl FlowCycle {
@@ -542,7 +495,27 @@ impl FlowCycle {
             nu,
             cycles: flow.cycles,
             change: flow.periodic_change,
+            shear: Vec::new(),
         })
+    }
+
+    /// Flow parameter `p`'s d ln of the shear-dependent laws' flows over step `k` (from the
+    /// end of step k to that of k + 1, as [`FlowCycle::tangent`] counts; empty without
+    /// such laws).
+    fn shear(&self, p: usize, k: usize) -> &[f64] {
+        let ns = self.ys.len() - 1;
+        match self.shear.get(p) {
+            Some(t) if !t.is_empty() => {
+                let nd = t.len() / ns;
+                &t[k * nd..(k + 1) * nd]
+            }
+            _ => &[],
+        }
+    }
+
+    /// Flow parameter `p`'s tangents of the recorded unknowns at every step end (n + 1).
+    fn tangents(&self, p: usize) -> Vec<&[f64]> {
+        (0..self.ys.len()).map(|k| self.tangent(p, k)).collect()
     }
 
     /// Flow parameter `p`'s tangent of the unknowns at the end of step `k` (k = 0..n_steps;
@@ -585,7 +558,6 @@ impl Setup {
         }
         let sp = oxygen_species(&spec)?;
         let params = parameters(&spec, &sp, paths)?;
-        shear_free(&spec, &sp, &params)?;
         let tspec = spec.transport.clone().expect("checked by oxygen_species");
         let assembled = spec.assemble()?;
         let dae = assembled.circuit.assemble()?;
@@ -647,6 +619,8 @@ struct Derivatives {
     flow_params: Vec<DaeTangent>,
     derivs: Vec<SpeciesDerivative>,
     values: Vec<f64>,
+    /// Per flow parameter: the vessel whose geometry it sets (for the shears' tangents).
+    geometry: Vec<Option<FlowGeometry>>,
 }
 
 /// The flow's periodic cycle and the parameters' derivatives: the flow and its tangents by
@@ -673,9 +647,9 @@ fn flow_and_derivatives(
     let inlets = tr.renewal_inlets();
     let inlets_from = unknowns.len();
     unknowns.extend(inlets.iter().map(|i| i.1));
-    // the branch flows the shear-dependent walls read (recorded, not differentiated)
+    // the branch flows the shear-dependent walls read
     unknowns.extend(tr.shear_unknowns());
-    let flow = FlowCycle::run(dae, &flow_params, &unknowns, settings)?;
+    let mut flow = FlowCycle::run(dae, &flow_params, &unknowns, settings)?;
     let mut means =
         (!mean_unknowns.is_empty()).then(|| CycleMeans::of(&flow, read, &mean_unknowns));
     let renewal = (!inlets.is_empty()).then(|| InletHarmonics::of(&flow, inlets_from, &inlets));
@@ -689,7 +663,7 @@ fn flow_and_derivatives(
         }
         tr.check_species_tangent(s, "sensitivities")?;
     }
-    let d = Derivatives::new(
+    let mut d = Derivatives::new(
         spec,
         sp,
         params,
@@ -701,6 +675,18 @@ fn flow_and_derivatives(
             .as_ref()
             .map(|m| (m, renewal.as_ref(), settings.period)),
     )?;
+    flow.shear = (d.geometry.iter().enumerate())
+        .map(|(p, g)| {
+            let mean = means.as_ref().map(|m| m.tangent(p, &[]));
+            let steps = (
+                settings.period / settings.steps_per_cycle as f64,
+                settings.alpha_f(),
+            );
+            let dys = flow.tangents(p);
+            tr.shear_tangents(s, &flow.ys, &dys, &unknowns, steps, mean.as_ref(), *g)
+        })
+        .collect::<Result<_>>()?;
+    d.geometry.clear();
     Ok((flow, d))
 }
 
@@ -832,6 +818,7 @@ impl Derivatives {
         let names = &assembled.circuit.vessel_names;
         let mut derivs = Vec::with_capacity(params.len());
         let mut sources = Vec::new();
+        let mut geometry = Vec::new();
         let mut next_flow = 0;
         for (p, t) in params.iter().zip(&dae_tangents) {
             derivs.push(match (p, t) {
@@ -841,6 +828,7 @@ impl Derivatives {
                         .map(|m| renewal_tangent(tr, m, next_flow, e.geometry))
                         .unwrap_or_default();
                     e.mean_flows = means.map(|m| m.0.tangent(next_flow, &d_ln_renewal));
+                    geometry.push(e.geometry);
                     next_flow += 1;
                     tr.species_flow_derivative(s, &e)
                 }
@@ -865,6 +853,7 @@ impl Derivatives {
             flow_params: dae_tangents.into_iter().flatten().collect(),
             derivs,
             values,
+            geometry,
         })
     }
 }
@@ -1058,6 +1047,7 @@ impl<'t> TransportRun<'t> {
                         start: flow.tangent(p, k),
                         end: flow.tangent(p, k + 1),
                         alpha_f: af,
+                        shear: flow.shear(p, k),
                     })
                 })
                 .collect();
@@ -1076,6 +1066,9 @@ impl<'t> TransportRun<'t> {
                     &mut self.anchors,
                 )?;
             }
+            let shears: Vec<&[f64]> = (self.flow_index.iter())
+                .map(|f| f.map_or(&[][..], |p| flow.shear(p, k)))
+                .collect();
             for (j, sig) in sigs.iter().enumerate() {
                 let (v, d) = match *sig {
                     Signal::Network(a) => (
@@ -1093,7 +1086,7 @@ impl<'t> TransportRun<'t> {
                         kind,
                         &self.z,
                         &self.derivs,
-                        &self.tangents,
+                        (&self.tangents[..], &shears[..]),
                     )?,
                 };
                 values[k * nsig + j] = v;

@@ -79,6 +79,7 @@ where
             flow_params,
             derivs,
             values,
+            ..
         },
     ) = flow_and_derivatives(&spec, &sp, &params, &assembled, &dae, &mut tr, s, &settings)?;
     tr.check_species_adjoint(s, "sensitivities")?;
@@ -185,6 +186,7 @@ fn record(
     let dt = set.period / ns as f64;
     let af = set.alpha_f();
     let acc = tr.species_names().len() * nc + 4 * s;
+    let index = flow_indices(derivs);
     let mut rec = Recorded {
         steps: Vec::with_capacity(ns),
         rows: Vec::with_capacity(ns * nsig),
@@ -202,6 +204,9 @@ fn record(
         tr.implicit_step(t, dt, af, &flow.ys[k], &flow.ys[k + 1], z)?;
         rec.steps
             .push(tr.species_step_record(s, t + af * dt, &z_old, &w_old, z, x_old));
+        let shears: Vec<&[f64]> = (index.iter())
+            .map(|f| f.map_or(&[][..], |p| flow.shear(p, k)))
+            .collect();
         for (j, sig) in sigs.iter().enumerate() {
             let row = match *sig {
                 Signal::Network(a) => {
@@ -209,7 +214,8 @@ fn record(
                     None
                 }
                 Signal::Vessel(v, kind) => {
-                    let r = tr.species_signal_row(s, v, &names[j].0, kind, z, derivs)?;
+                    let r =
+                        tr.species_signal_row(s, v, &names[j].0, kind, z, (derivs, &shears[..]))?;
                     rec.values[k * nsig + j] = r.value;
                     Some(r)
                 }
@@ -341,6 +347,7 @@ impl Backward<'_> {
                     start: fl.flow.tangent(i, k),
                     end: fl.flow.tangent(i, k + 1),
                     alpha_f: fl.alpha_f,
+                    shear: fl.flow.shear(i, k),
                 };
                 let d = &self.derivs[p];
                 terms.flow[p] += tr.species_flow_adjoint_step(

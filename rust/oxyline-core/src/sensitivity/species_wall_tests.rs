@@ -6,7 +6,7 @@
 //! sensitivities: 1e-6 of the quotient's largest value over the cycle, or its rounding
 //! floor), and the adjoint against the forward tangents (~1e-11; 1e-8 tells a wrong term).
 
-use super::tests::{compare, run_with, settings};
+use super::tests::{compare, run_with};
 use super::*;
 use crate::model::parse;
 
@@ -194,26 +194,63 @@ fn shear_dependent_walls_adjoint_equals_forward() {
     }
 }
 
-/// What stays refused, by name: a flow parameter on a model with a Lévêque wall of the
-/// relaxed or instantaneous shear (the shear it moves is not carried yet), naming the flow
-/// parameters (not the oxygen ones, which are followed), the vessel and the shear.
+/// Flow parameters on the same walls: a flow parameter moves the shear each step's law
+/// reads (the branch flow's tangent; the relaxed shear through its own state's tangent,
+/// Q̃′ ← (1 − e) sgn(Q) Q′ + e Q̃′ + (Q̃ − |Q|) e′, with the relaxation time's change by the
+/// mean flow and the geometry) and d2's radius and length its law's coefficients. Against
+/// central differences of whole periodic runs (the relaxed shear starting at its periodic
+/// state in both), judged as above.
 #[test]
-fn shear_dependent_walls_refuse_flow_parameters() {
-    let sig = signals();
-    for (law, name) in SHEARS.into_iter().zip(["relaxed", "instantaneous"]) {
+fn shear_dependent_walls_by_flow_parameters_against_central_differences() {
+    for law in SHEARS {
         let spec = sheared(law);
-        let paths = ["scale.inflow".to_string(), "oxygen.wall.enhancement".into()];
-        let m = species_sensitivities(&spec, &paths, &sig, settings())
-            .unwrap_err()
-            .to_string();
-        assert!(
-            m.contains("'scale.inflow'")
-                && !m.contains("'oxygen.wall.enhancement'")
-                && m.contains("vessel 'd2'")
-                && m.contains(&format!("shear: {name}")),
-            "{m}"
-        );
+        for path in [
+            "vessels.d2.radius",
+            "vessels.d2.length",
+            "vessels.parent.length",
+            "boundary_conditions.o1.distal_resistance",
+            "scale.inflow",
+        ] {
+            let worst = check(&spec, path);
+            eprintln!("{law:?} shear, {path}: {worst:.2e}");
+            assert!(worst < 1e-6, "{law:?}: {path}");
+        }
     }
+}
+
+/// The flow parameters' step-by-step terms of the shear-dependent pieces in the adjoint
+/// (contracted with each step's weights of dg and d(g c_w)) against the forward tangents,
+/// beside an oxygen parameter (a wall stiffness too, which moves these signals by less
+/// than the difference quotients' rounding); and a taper's end radii under a relaxed wall
+/// on d1.
+#[test]
+fn shear_dependent_walls_by_flow_parameters_adjoint_equals_forward() {
+    let paths = [
+        "vessels.d2.radius",
+        "vessels.d2.length",
+        "vessels.d2.youngs_modulus",
+        "boundary_conditions.o1.distal_resistance",
+        "scale.inflow",
+        "oxygen.per_vessel.d2.wall.enhancement",
+    ];
+    for law in SHEARS {
+        let worst =
+            super::adjoint::tests::mean_and_series_adjoint_worst(&sheared(law), &paths, &signals());
+        eprintln!("{law:?} shear, flow parameters: adjoint against forward {worst:.2e}");
+        assert!(worst < 1e-8, "{law:?}: {worst:e}");
+    }
+    let mut taper = sheared(crate::closure::Shear::Relaxed);
+    let sp = &mut taper.transport.as_mut().unwrap().species[0];
+    let d2 = sp.per_vessel["d2"].clone();
+    sp.per_vessel.insert("d1".into(), d2);
+    let paths = [
+        "vessels.d1.radius_in",
+        "vessels.d1.radius_out",
+        "vessels.d1.length",
+    ];
+    let worst = super::adjoint::tests::mean_and_series_adjoint_worst(&taper, &paths, &signals());
+    eprintln!("taper under a relaxed wall: adjoint against forward {worst:.2e}");
+    assert!(worst < 1e-8, "{worst:e}");
 }
 
 /// A taper's end radii under the cycle-mean walls, with a cycle-mean Lévêque wall on d1

@@ -43,6 +43,8 @@ pub struct SpeciesStepRecord {
     /// The step's wall conductance per cell and each shear-dependent piece's own.
     g: Vec<f64>,
     dyn_g: Vec<f64>,
+    /// The cube root of the flow magnitude each shear-dependent piece's law read.
+    dyn_cbrt: Vec<f64>,
     /// Every node's total concentration before and after the step (a flow parameter's
     /// forcing reads them; empty without flow parameters).
     nodes_old: Vec<f64>,
@@ -51,13 +53,15 @@ pub struct SpeciesStepRecord {
 
 /// The adjoint of one step's pieces a flow parameter's forcing enters: of the rows' right
 /// side (per node), of the old concentrations c′ (per cell), of the new amounts z′ (per
-/// cell), and the network fluxes' weights (inflow, outflow, wall).
+/// cell), the network fluxes' weights (inflow, outflow, wall), and per cell the weights of
+/// the step's dg and d(g c_w) (a shear-dependent piece's g moves step by step).
 #[derive(Debug, Clone, Default)]
 pub struct StepDuals {
     lnum: Vec<f64>,
     ldc: Vec<f64>,
     ldz: Vec<f64>,
     net: [f64; 3],
+    weights: Vec<(f64, f64)>,
 }
 
 /// The adjoint of the carried tangent: of the cells' amounts (per cell) and of the lagged
@@ -177,6 +181,7 @@ impl Transport {
         SpeciesStepRecord {
             g: self.step_cell_conductance(s, &dyn_g),
             dyn_g,
+            dyn_cbrt: self.dynamic_cbrts(s),
             t_af,
             qf: self.qf.clone(),
             qs: self.qs.clone(),
@@ -197,7 +202,8 @@ impl Transport {
     /// Signal `signal` of output vessel `k` (named `name`) of species `s` after the step
     /// just taken (amounts `z`), linearised in the new total concentrations (see
     /// [`SignalRow`]); the value and derivatives agree with
-    /// [`Transport::species_vessel_signal`].
+    /// [`Transport::species_vessel_signal`] (`shears` as there).
+    #[allow(clippy::too_many_arguments)]
     pub fn species_signal_row(
         &self,
         s: usize,
@@ -205,7 +211,7 @@ impl Transport {
         name: &str,
         signal: VesselSpeciesSignal,
         z: &[f64],
-        derivs: &[SpeciesDerivative],
+        (derivs, shears): (&[SpeciesDerivative], &[&[f64]]),
     ) -> Result<SignalRow> {
         let np = derivs.len();
         let p50 = |d: &SpeciesDerivative| d.kind == SpeciesParameterKind::P50;
@@ -236,10 +242,14 @@ impl Transport {
                         let (pt, _) = self.node_state(s, n, z, &[]);
                         row.value += pc.share * (g * (pt.f - cw) + q);
                         row.nodes.push((n, pc.share * g * pt.sigma));
-                        for (dr, d) in row.direct.iter_mut().zip(derivs) {
+                        let cbrt = self.species[s].shear_cbrt.get(pc.seg as usize);
+                        for (pi, (dr, d)) in row.direct.iter_mut().zip(derivs).enumerate() {
                             let [dg, dgcw, dq] = match dynamic {
                                 Some(k) => {
-                                    let (dg, dgcw) = self.dynamic_piece_derivative(s, d, k, g);
+                                    let shear = shears.get(pi).copied().unwrap_or(&[]);
+                                    let cbrt = cbrt.copied().unwrap_or(0.0);
+                                    let (dg, dgcw) =
+                                        self.dynamic_piece_derivative(s, d, k, g, cbrt, shear);
                                     [dg, dgcw, 0.0]
                                 }
                                 None => d.piece[p],
@@ -356,6 +366,9 @@ impl Transport {
             sums.p50 += g * (ldwl * pt.sigma_p50 + e * pt.f_p50);
         }
         self.dynamic_sums(s, rec, &weights, sums);
+        if let Some(du) = duals.as_deref_mut() {
+            du.weights = weights;
+        }
         for (n, l) in lam.xt.iter_mut().enumerate() {
             let cell = plan.node_cell.get(n).is_some_and(|&i| i != u32::MAX);
             *l = if cell { 0.0 } else { lprior[n] };
@@ -422,7 +435,14 @@ impl Transport {
         };
         let fc = self.flow_forcing(s, dt, f, step, &rec.nodes_old, cells, dw);
         let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-        dot(&duals.ldc, &fc.dc)
+        // the shear-dependent pieces' dg of this step, weighted as `dynamic_sums` weighs them
+        let at = (&rec.dyn_g[..], &rec.dyn_cbrt[..]);
+        let dynamic = (self.dynamic_cell_derivative(s, d, at, step.shear).iter())
+            .zip(&duals.weights)
+            .map(|(&[dg, dgcw], &(a, e))| dg * a - dgcw * e)
+            .sum::<f64>();
+        dynamic
+            + dot(&duals.ldc, &fc.dc)
             + dot(&duals.lnum, &fc.num)
             + dot(&duals.ldz, &fc.dz)
             + duals.net[0] * fc.d_in

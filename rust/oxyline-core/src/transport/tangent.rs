@@ -139,6 +139,10 @@ pub struct SpeciesDerivative {
     /// Per shear-dependent piece (`Laws::dynamic`): d ln g/dθ of its blood side and
     /// d ln c_w/dθ, which scale the step's own g and g c_w (the law follows the shear).
     dynamic: Vec<[f64; 2]>,
+    /// A flow parameter's per shear-dependent piece: d ln/dθ of its Lévêque coefficient, of
+    /// its Graetz floor and of its permeability's conductance (its vessel's geometry); the
+    /// shear's own change comes per step ([`FlowStep::shear`]). Empty for an oxygen one.
+    flow_dynamic: Vec<[f64; 3]>,
     /// A flow parameter's volumes and sources (None for an oxygen parameter).
     flow: Option<FlowDerivative>,
 }
@@ -164,6 +168,8 @@ struct StepPrimal {
     /// each shear-dependent piece's own
     g: Vec<f64>,
     dyn_g: Vec<f64>,
+    /// the cube root of the flow magnitude each shear-dependent piece's law read
+    dyn_cbrt: Vec<f64>,
     c: Vec<f64>,
     point: Vec<BindingPoint>,
     x: Vec<f64>,
@@ -262,6 +268,7 @@ impl Transport {
             piece,
             cell,
             dynamic,
+            flow_dynamic: Vec::new(),
             flow: None,
         }
     }
@@ -278,44 +285,77 @@ impl Transport {
             .collect()
     }
 
+    /// The cube root of the flow magnitude (|Q| or Q̃) each shear-dependent piece of
+    /// species `s` read at the step just taken, in the order of `Laws::dynamic`.
+    pub(super) fn dynamic_cbrts(&self, s: usize) -> Vec<f64> {
+        let sp = &self.species[s];
+        (sp.laws.dynamic.iter())
+            .map(|&p| sp.shear_cbrt[self.plan.pieces[p].seg as usize])
+            .collect()
+    }
+
     /// (dg, d(g c_w)) of shear-dependent piece `k` (of `Laws::dynamic`, piece `p`) by the
-    /// parameter of `d` at the step's conductance `g` (a permeability in series takes its
-    /// share of the blood side's relative change).
+    /// parameter of `d` at the step's conductance `g`, the law having read a flow magnitude
+    /// of cube root `cbrt`: an oxygen parameter by its fixed rates (a permeability in series
+    /// takes its share of the blood side's relative change); a flow parameter by its
+    /// geometry's and by the step's d ln|Q| (or d ln Q̃) of the shear, `shear[k]`
+    /// ([`FlowStep::shear`]): with G = max(coef |Q|^{1/3}, floor) and g = 1/(1/G + 1/G_p),
+    /// d ln g = b d ln G + (1 − b) d ln G_p, b = 1 − g/G_p.
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn dynamic_piece_derivative(
         &self,
         s: usize,
         d: &SpeciesDerivative,
         k: usize,
         g: f64,
+        cbrt: f64,
+        shear: &[f64],
     ) -> (f64, f64) {
         let [ln_g, ln_cw] = d.dynamic.get(k).copied().unwrap_or([0.0; 2]);
-        if ln_g == 0.0 && ln_cw == 0.0 {
+        let flow = d.flow_dynamic.get(k).copied();
+        if ln_g == 0.0 && ln_cw == 0.0 && flow.is_none() {
             return (0.0, 0.0);
         }
         let p = self.species[s].laws.dynamic[k];
-        let SegmentLaw::Instantaneous { cw, .. } = self.species[s].laws.laws[p] else {
+        let SegmentLaw::Instantaneous {
+            coef, floor, cw, ..
+        } = self.species[s].laws.laws[p]
+        else {
             return (0.0, 0.0);
         };
-        let dg = ln_g * self.blood_side_share(s, p, g) * g;
+        let b = self.blood_side_share(s, p, g);
+        let mut dg = ln_g * b * g;
+        if let Some([ln_coef, ln_floor, ln_gp]) = flow {
+            // the branch of the max the law took at this step
+            let ln_blood = if coef * cbrt > floor {
+                ln_coef + shear.get(k).copied().unwrap_or(0.0) / 3.0
+            } else {
+                ln_floor
+            };
+            dg += g * (b * ln_blood + (1.0 - b) * ln_gp);
+        }
         (dg, (dg + ln_cw * g) * cw)
     }
 
     /// Per cell: the step's (dg, d(g c_w)) of the shear-dependent pieces by the parameter of
-    /// `d` (`dyn_g`: their conductances at the step); empty without such pieces.
+    /// `d` (`dyn_g`, `dyn_cbrt`: their conductances and the cube roots of the flows their
+    /// laws read at the step; `shear`: a flow parameter's d ln of those flows); empty without
+    /// such pieces.
     fn dynamic_cell_derivative(
         &self,
         s: usize,
         d: &SpeciesDerivative,
-        dyn_g: &[f64],
+        (dyn_g, dyn_cbrt): (&[f64], &[f64]),
+        shear: &[f64],
     ) -> Vec<[f64; 2]> {
         let laws = &self.species[s].laws;
         if laws.dynamic.is_empty() {
             return Vec::new();
         }
         let mut out = vec![[0.0; 2]; self.plan.cells.len()];
-        for (k, (&p, &g)) in laws.dynamic.iter().zip(dyn_g).enumerate() {
+        for (k, ((&p, &g), &cbrt)) in laws.dynamic.iter().zip(dyn_g).zip(dyn_cbrt).enumerate() {
             let pc = &self.plan.pieces[p];
-            let (dg, dgcw) = self.dynamic_piece_derivative(s, d, k, g);
+            let (dg, dgcw) = self.dynamic_piece_derivative(s, d, k, g, cbrt, shear);
             let c = &mut out[pc.cell as usize];
             c[0] += pc.share * dg;
             c[1] += pc.share * dgcw;
@@ -462,6 +502,7 @@ impl Transport {
             w: w_old[..nc].to_vec(),
             g: self.step_cell_conductance(s, &dyn_g),
             dyn_g,
+            dyn_cbrt: self.dynamic_cbrts(s),
             c: Vec::with_capacity(nc),
             point: Vec::with_capacity(nc),
             x: Vec::with_capacity(nc),
@@ -477,7 +518,9 @@ impl Transport {
         }
         self.load_boundary(s, t_af);
         for (k, (d, t)) in derivs.iter().zip(tangents.iter_mut()).enumerate() {
-            let forcing = match (&d.flow, flows.get(k).copied().flatten()) {
+            let step = flows.get(k).copied().flatten();
+            let shear = step.map_or(&[][..], |f| f.shear);
+            let forcing = match (&d.flow, step) {
                 (Some(f), Some(step)) => {
                     let cells = CellPrimal {
                         w: &primal.w,
@@ -488,7 +531,7 @@ impl Transport {
                 }
                 _ => None,
             };
-            self.tangent_solve(s, dt, &primal, d, t, forcing)?;
+            self.tangent_solve(s, dt, &primal, (d, shear), t, forcing)?;
         }
         Ok(())
     }
@@ -523,13 +566,13 @@ impl Transport {
         s: usize,
         dt: f64,
         primal: &StepPrimal,
-        d: &SpeciesDerivative,
+        (d, shear): (&SpeciesDerivative, &[f64]),
         t: &mut SpeciesTangent,
         forcing: Option<FlowForcing>,
     ) -> Result<()> {
         let plan = Arc::clone(&self.plan);
         self.sweep.size_rows(plan.kind.len());
-        let mut wall = self.tangent_rows(s, dt, primal, d, t, forcing.as_ref());
+        let mut wall = self.tangent_rows(s, dt, primal, (d, shear), t, forcing.as_ref());
         for &m in &plan.mixing {
             let sw = &mut self.sweep;
             (sw.den[m], sw.num[m], sw.lag[m]) = (0.0, 0.0, t.xt[m]);
@@ -589,7 +632,7 @@ impl Transport {
         s: usize,
         dt: f64,
         primal: &StepPrimal,
-        d: &SpeciesDerivative,
+        (d, shear): (&SpeciesDerivative, &[f64]),
         t: &mut SpeciesTangent,
         forcing: Option<&FlowForcing>,
     ) -> f64 {
@@ -597,7 +640,8 @@ impl Transport {
         let p50 = d.kind == SpeciesParameterKind::P50;
         let mut wall = 0.0;
         let plan = Arc::clone(&self.plan);
-        let dynamic = self.dynamic_cell_derivative(s, d, &primal.dyn_g);
+        let at = (&primal.dyn_g[..], &primal.dyn_cbrt[..]);
+        let dynamic = self.dynamic_cell_derivative(s, d, at, shear);
         for (i, n) in plan.cells.iter().map(|&n| n as usize).enumerate() {
             let g = primal.g[i];
             let [mut dg, mut dgcw, dq] = d.cell[i];
@@ -691,7 +735,8 @@ impl Transport {
     }
 
     /// The value of `signal` of output vessel `k` (named `name`) of species `s` after the
-    /// step the tangents just took, and its derivative by each parameter.
+    /// step the tangents just took, and its derivative by each parameter (`shears`: per
+    /// parameter, a flow parameter's [`FlowStep::shear`] of the step, else empty).
     #[allow(clippy::too_many_arguments)]
     pub fn species_vessel_signal(
         &self,
@@ -701,7 +746,7 @@ impl Transport {
         signal: VesselSpeciesSignal,
         z: &[f64],
         derivs: &[SpeciesDerivative],
-        tangents: &[SpeciesTangent],
+        (tangents, shears): (&[SpeciesTangent], &[&[f64]]),
     ) -> Result<(f64, Vec<f64>)> {
         let binding = self.plan.species[s].binding;
         let p50 = |d: &SpeciesDerivative| d.kind == SpeciesParameterKind::P50;
@@ -712,7 +757,9 @@ impl Transport {
                 let dq = |t: &SpeciesTangent| t.dq.get(v.last).copied().unwrap_or(0.0);
                 Ok((q, tangents.iter().map(dq).collect()))
             }
-            VesselSpeciesSignal::WallUptake => Ok(self.vessel_uptake(s, k, z, derivs, tangents)),
+            VesselSpeciesSignal::WallUptake => {
+                Ok(self.vessel_uptake(s, k, z, derivs, (tangents, shears)))
+            }
             _ => {
                 let n = self.outlet_node(k, name)?;
                 let (pt, xt) = self.node_state(s, n, z, tangents);
@@ -754,7 +801,7 @@ impl Transport {
         k: usize,
         z: &[f64],
         derivs: &[SpeciesDerivative],
-        tangents: &[SpeciesTangent],
+        (tangents, shears): (&[SpeciesTangent], &[&[f64]]),
     ) -> (f64, Vec<f64>) {
         let v = &self.plan.out_vessels[k];
         let (mut w, mut dw) = (0.0, vec![0.0; derivs.len()]);
@@ -768,10 +815,13 @@ impl Transport {
                 let n = pc.node as usize;
                 let (pt, xt) = self.node_state(s, n, z, tangents);
                 w += pc.share * (g * (pt.f - cw) + q);
-                for ((dw, d), x) in dw.iter_mut().zip(derivs).zip(&xt) {
+                let cbrt = self.species[s].shear_cbrt.get(pc.seg as usize);
+                for (pi, (d, x)) in derivs.iter().zip(&xt).enumerate() {
                     let [dg, dgcw, dq] = match k {
                         Some(k) => {
-                            let (dg, dgcw) = self.dynamic_piece_derivative(s, d, k, g);
+                            let shear = shears.get(pi).copied().unwrap_or(&[]);
+                            let cbrt = cbrt.copied().unwrap_or(0.0);
+                            let (dg, dgcw) = self.dynamic_piece_derivative(s, d, k, g, cbrt, shear);
                             [dg, dgcw, 0.0]
                         }
                         None => d.piece[p],
@@ -782,7 +832,7 @@ impl Transport {
                         0.0
                     };
                     let df = pt.sigma * x + p50;
-                    *dw += pc.share * (dg * pt.f + g * df - dgcw + dq);
+                    dw[pi] += pc.share * (dg * pt.f + g * df - dgcw + dq);
                 }
             }
         }

@@ -126,13 +126,16 @@ pub(crate) struct FlowDerivative {
 }
 
 /// One step of the flow's tangent for one parameter: the derivatives of the flow unknowns
-/// [`Transport::flow_tangent_unknowns`] at the step's start and end, and the level α_f the
-/// step reads its face flows at.
+/// [`Transport::flow_tangent_unknowns`] at the step's start and end, the level α_f the
+/// step reads its face flows at, and per shear-dependent piece the d ln/dθ of the flow
+/// magnitude its law reads at the step (|Q| or the relaxed Q̃: one step of
+/// [`Transport::shear_tangents`]; empty without such pieces).
 #[derive(Debug, Clone, Copy)]
 pub struct FlowStep<'a> {
     pub start: &'a [f64],
     pub end: &'a [f64],
     pub alpha_f: f64,
+    pub shear: &'a [f64],
 }
 
 /// A flow parameter's terms in one step: face flows' derivatives (every face), the nodes'
@@ -246,10 +249,130 @@ impl Transport {
             kind: SpeciesParameterKind::Flow,
             piece,
             cell,
-            // (the sensitivities refuse a flow parameter on a shear-dependent wall)
             dynamic: vec![[0.0; 2]; laws.dynamic.len()],
+            flow_dynamic: self.shear_law_geometry(s, e.geometry),
             flow: Some(FlowDerivative { dv0, dcap, source }),
         }
+    }
+
+    /// Per shear-dependent piece of species `s`: d ln/dθ of its Lévêque coefficient, Graetz
+    /// floor and permeability conductance when the parameter sets its vessel's geometry
+    /// (`geometry`). coef ∝ r (|Q|/r³)^{1/3} (x1^{2/3} − x0^{2/3}) is free of r, the floor
+    /// Sh π D Δx too; G_p ∝ the wall area.
+    fn shear_law_geometry(&self, s: usize, geometry: Option<FlowGeometry>) -> Vec<[f64; 3]> {
+        let plan = &*self.plan;
+        (self.species[s].laws.dynamic.iter())
+            .map(|&p| {
+                let pc = &plan.pieces[p];
+                match geometry {
+                    Some(g) if plan.segment_vessels[pc.seg as usize] as usize == g.vessel => {
+                        let l = g.at(&plan.piece_wall(pc));
+                        [2.0 * l.length / 3.0, l.length, l.area]
+                    }
+                    _ => [0.0; 3],
+                }
+            })
+            .collect()
+    }
+
+    /// Per step of the flow's periodic cycle (`ys`: its n + 1 states, steps of `dt` read at
+    /// level `alpha_f`), per shear-dependent piece of species `s`: d ln/dθ of the flow
+    /// magnitude its law reads, by a flow parameter whose tangent of the recorded unknowns
+    /// at each step end is `dys` (n + 1, as `ys`) over the flow unknowns `recorded` (which
+    /// hold the branch flows the walls read: [`Transport::shear_unknowns`], or every
+    /// segment's for the walls that read the mean flow); `mean` the cycle means' tangent (the
+    /// relaxation times read ⟨|Q|⟩), `geometry` the vessel whose geometry it sets.
+    ///
+    /// Instantaneous shear: |Q_a| at the step's α_f level, d ln |Q_a| = Q_a′/Q_a. Relaxed:
+    /// Q̃ ← |Q_a| + (Q̃ − |Q_a|) e, e = exp(−Δt/τ) (`relax_shears`), so
+    /// Q̃′ ← (1 − e) sgn(Q_a) Q_a′ + e Q̃′ + (Q̃ − |Q_a|) e′, e′ = e (Δt/τ) d ln τ, with
+    /// τ ∝ (x r³/⟨|Q|⟩)^{2/3} (`closure::relaxation_time`); the tangent starts at its
+    /// periodic value Q̃′* = B′/(1 − e^n) (B′ one pass from zero), as the primal does.
+    #[allow(clippy::too_many_arguments)]
+    pub fn shear_tangents(
+        &self,
+        s: usize,
+        ys: &[Vec<f64>],
+        dys: &[&[f64]],
+        recorded: &[usize],
+        (dt, alpha_f): (f64, f64),
+        mean: Option<&MeanFlowTangent<'_>>,
+        geometry: Option<FlowGeometry>,
+    ) -> Result<Vec<f64>> {
+        let laws = &self.species[s].laws;
+        let n = ys.len().saturating_sub(1);
+        let mut per_seg = vec![vec![0.0; n]; laws.dynamic_segs.len()];
+        for (m, &j) in laws.dynamic_segs.iter().enumerate() {
+            let u = self.plan.segments[j].branch_unknown as usize;
+            let Some(at) = recorded.iter().position(|&r| r == u) else {
+                return Err(Error::model(
+                    "sensitivities",
+                    format!("the flow cycle does not hold segment {j}'s branch flow"),
+                ));
+            };
+            let q = |k: usize| ys[k][u] + alpha_f * (ys[k + 1][u] - ys[k][u]);
+            let dq = |k: usize| dys[k][at] + alpha_f * (dys[k + 1][at] - dys[k][at]);
+            let relaxed = (laws.relax_of_seg.get(j).copied()).filter(|&r| r != u32::MAX);
+            let Some(r) = relaxed else {
+                for (k, v) in per_seg[m].iter_mut().enumerate() {
+                    let qa = q(k);
+                    *v = if qa != 0.0 { dq(k) / qa } else { 0.0 };
+                }
+                continue;
+            };
+            let (_, tau, _) = laws.relax[r as usize];
+            let e = (-dt / tau).exp();
+            if e.is_nan() || e >= 1.0 {
+                continue; // no mean flow: the layer keeps its start
+            }
+            let seg = &self.plan.segments[j];
+            let (ln_r, ln_x) = geometry
+                .filter(|g| self.plan.segment_vessels[j] as usize == g.vessel)
+                .map_or((0.0, 0.0), |g| {
+                    let l = g.at(&seg.wall);
+                    (l.radius, l.length)
+                });
+            let ln_mean = mean
+                .filter(|m| m.abs[j] > 0.0)
+                .map_or(0.0, |m| m.d_abs[j] / m.abs[j]);
+            let de = e * (dt / tau) * (2.0 / 3.0) * (ln_x + 3.0 * ln_r - ln_mean);
+            let big_e = e.powi(n as i32);
+            // the primal's periodic start (`set_periodic_relaxed_shears`)
+            let mut v = 0.0;
+            for k in 0..n {
+                let qa = q(k).abs();
+                v = qa + (v - qa) * e;
+            }
+            let start = v / (1.0 - big_e);
+            // one step of the tangent's recursion from (Q̃, Q̃′)
+            let step = |k: usize, qt: f64, dqt: f64| {
+                let qa = q(k);
+                let sgn = if qa < 0.0 { -1.0 } else { 1.0 };
+                let dnew = (1.0 - e) * sgn * dq(k) + e * dqt + (qt - qa.abs()) * de;
+                (qa.abs() + (qt - qa.abs()) * e, dnew)
+            };
+            let (mut qt, mut dqt) = (start, 0.0);
+            for k in 0..n {
+                (qt, dqt) = step(k, qt, dqt);
+            }
+            (qt, dqt) = (start, dqt / (1.0 - big_e));
+            for (k, v) in per_seg[m].iter_mut().enumerate() {
+                (qt, dqt) = step(k, qt, dqt);
+                *v = if qt > 0.0 { dqt / qt } else { 0.0 };
+            }
+        }
+        let nd = laws.dynamic.len();
+        let mut out = vec![0.0; n * nd];
+        for (kk, &p) in laws.dynamic.iter().enumerate() {
+            let j = self.plan.pieces[p].seg as usize;
+            let Some(m) = laws.dynamic_segs.iter().position(|&x| x == j) else {
+                continue;
+            };
+            for (k, v) in per_seg[m].iter().enumerate() {
+                out[k * nd + kk] = *v;
+            }
+        }
+        Ok(out)
     }
 
     /// The derivative of wall piece `p`'s conductance (species `s`) when its law reads the
