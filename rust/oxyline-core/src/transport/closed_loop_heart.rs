@@ -216,7 +216,9 @@ pub fn heart_flows(
         .iter()
         .map(|(name, s)| Ok((name.clone(), rec.eval(s)?)))
         .collect::<Result<Vec<_>>>()?;
-    let periodic = spec.until_periodic.is_none_or(|tol| rec.periodic_error < tol);
+    let periodic = spec
+        .until_periodic
+        .is_none_or(|tol| rec.periodic_error < tol);
     Ok(HeartFlows {
         table,
         time,

@@ -130,10 +130,19 @@ mod tests {
             valve: Some(("behind".into(), "front".into())),
         };
         // closed: behind ≤ front and q ≤ 0
-        assert_eq!(branch_tangent(&s, &column, &[-1.0, 1.0, 2.0], &[4.0, 1.0, 1.0]), 0.0);
+        assert_eq!(
+            branch_tangent(&s, &column, &[-1.0, 1.0, 2.0], &[4.0, 1.0, 1.0]),
+            0.0
+        );
         // open by the pressures, or by a forward flow
-        assert_eq!(branch_tangent(&s, &column, &[-1.0, 3.0, 2.0], &[4.0, 1.0, 1.0]), 2.0);
-        assert_eq!(branch_tangent(&s, &column, &[1.0, 1.0, 2.0], &[4.0, 1.0, 1.0]), 2.0);
+        assert_eq!(
+            branch_tangent(&s, &column, &[-1.0, 3.0, 2.0], &[4.0, 1.0, 1.0]),
+            2.0
+        );
+        assert_eq!(
+            branch_tangent(&s, &column, &[1.0, 1.0, 2.0], &[4.0, 1.0, 1.0]),
+            2.0
+        );
         assert_eq!(unknowns_of(&[s.clone(), s]), names.to_vec());
     }
 }

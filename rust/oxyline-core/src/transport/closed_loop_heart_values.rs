@@ -91,7 +91,12 @@ pub fn number_at<'m>(model: &'m mut Value, path: &str) -> Result<&'m mut Value> 
 }
 
 /// The vessel `vessel` of the heart model, by name.
-fn vessel_of<'m>(model: &'m mut Value, path: &str, vessel: &str, name: &str) -> Result<&'m mut Value> {
+fn vessel_of<'m>(
+    model: &'m mut Value,
+    path: &str,
+    vessel: &str,
+    name: &str,
+) -> Result<&'m mut Value> {
     let list = model
         .get_mut("vessels")
         .and_then(Value::as_array_mut)
@@ -100,7 +105,10 @@ fn vessel_of<'m>(model: &'m mut Value, path: &str, vessel: &str, name: &str) -> 
         .iter()
         .filter_map(|v| v.get("name")?.as_str().map(str::to_owned))
         .collect();
-    match list.iter().position(|v| v.get("name").and_then(Value::as_str) == Some(vessel)) {
+    match list
+        .iter()
+        .position(|v| v.get("name").and_then(Value::as_str) == Some(vessel))
+    {
         Some(i) => Ok(&mut list[i]),
         None => Err(missing(path, "vessel", vessel, &names, name)),
     }
@@ -139,8 +147,11 @@ mod tests {
     #[test]
     fn a_value_is_written_over_the_built_one() {
         let mut m = model();
-        apply(&mut m, &json!({"heart_values": {"vessels.lv.chamber.max_elastance": 3.0e8}}))
-            .unwrap();
+        apply(
+            &mut m,
+            &json!({"heart_values": {"vessels.lv.chamber.max_elastance": 3.0e8}}),
+        )
+        .unwrap();
         assert_eq!(m["vessels"][0]["chamber"]["max_elastance"], 3.0e8);
     }
 
@@ -152,18 +163,33 @@ mod tests {
         };
         let m = e("vessels.lv.chamber.max_elastanse");
         assert!(
-            m.contains("heart parameter 'vessels.lv.chamber.max_elastanse': no key \
-                        'max_elastanse' in model 'closed-loop-heart' (nearest: max_elastance)"),
+            m.contains(
+                "heart parameter 'vessels.lv.chamber.max_elastanse': no key \
+                        'max_elastanse' in model 'closed-loop-heart' (nearest: max_elastance)"
+            ),
             "{m}"
         );
         let m = e("vessels.vl.chamber.max_elastance");
-        assert!(m.contains("no vessel 'vl'") && m.contains("nearest: lv"), "{m}");
+        assert!(
+            m.contains("no vessel 'vl'") && m.contains("nearest: lv"),
+            "{m}"
+        );
         let m = e("boundary_conditions.inlet.flow");
-        assert!(m.contains("no boundary condition 'inlet'") && m.contains("it has none"), "{m}");
+        assert!(
+            m.contains("no boundary condition 'inlet'") && m.contains("it has none"),
+            "{m}"
+        );
         let m = e("vessels.lv.chamber.activation");
         assert!(m.contains("not a number"), "{m}");
         let mut m = model();
-        let bad = apply(&mut m, &json!({"heart_values": {"vessels.lv.chamber.max_elastance": "x"}}));
-        assert!(bad.unwrap_err().to_string().contains("must be a finite number, got 'x'"));
+        let bad = apply(
+            &mut m,
+            &json!({"heart_values": {"vessels.lv.chamber.max_elastance": "x"}}),
+        );
+        assert!(
+            bad.unwrap_err()
+                .to_string()
+                .contains("must be a finite number, got 'x'")
+        );
     }
 }

@@ -18,8 +18,10 @@
 
 use super::closed_loop::tangent::{Cycle, LoopOutput, LoopParameter};
 use super::closed_loop::{ClosedLoop, ClosedLoopSpec};
-use super::closed_loop_params::{LoopParams, ML_O2};
+use super::closed_loop_circulation::heart_model;
 use super::closed_loop_heart_tangent::heart_tangent;
+use super::closed_loop_heart_values::number_at;
+use super::closed_loop_params::{LoopParams, ML_O2};
 use super::closed_loop_run::{Flows, RunSettings, heart_spec, simulate};
 use crate::error::{Error, Result};
 use crate::model::units::MMHG;
@@ -188,11 +190,15 @@ fn heart_paths(
     }
     let p: Value =
         serde_json::from_str(params_json).map_err(|e| Error::model(WHAT, e.to_string()))?;
+    let mut native = heart_model(&p, params, &params.layout())?;
     let spec = heart_spec(&p, params, &params.layout())?;
     let model: crate::model::NetworkSpec = serde_json::from_value(spec.model)
         .map_err(|e| Error::model("closed-loop heart", e.to_string()))?;
     for &i in &chosen {
         let path = &paths[i];
+        // a number of the heart model as built (named with the nearest key when it is not
+        // one), then one the tangent covers
+        number_at(&mut native, path)?;
         crate::sensitivity::Parameter::parse(&model, path)?;
         // the block's lungs' flow is read through R_pd itself (closed_loop_heart_series)
         if path.ends_with(".pulmonary_resistance") && path.contains(".heart_pulmonary.") {
@@ -232,11 +238,13 @@ pub fn sensitivities(
     let heart_list: Vec<String> = hearts.iter().map(|&i| paths[i].clone()).collect();
     let mut chosen = paths
         .iter()
-        .map(|path| match hearts.iter().position(|&i| paths[i] == *path) {
-            // its value is the heart model's, known after the heart's tangent run
-            Some(j) => Ok((LoopParameter::Flow(j), f64::NAN, 1.0)),
-            None => parameter(&params, path, table),
-        })
+        .map(
+            |path| match hearts.iter().position(|&i| paths[i] == *path) {
+                // its value is the heart model's, known after the heart's tangent run
+                Some(j) => Ok((LoopParameter::Flow(j), f64::NAN, 1.0)),
+                None => parameter(&params, path, table),
+            },
+        )
         .collect::<Result<Vec<_>>>()?;
     let layout = params.layout();
     let spec: ClosedLoopSpec = serde_json::from_value(json!({
