@@ -228,10 +228,11 @@ def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int 
     acceleration of the cycle map, or with ``shooting="newton"`` the earlier finite-difference
     Newton shooting; then plain cycles until the start-of-cycle contents repeat to `tol`).
     `flows`: ``"heart"`` takes them from a run of the model's closed-loop heart
-    (:func:`heart_model`, run to its periodic state: at least 30 cycles, on until the
-    cycle-to-cycle change of its state is below 1e-10, at most 2,000 cycles, else a
-    :class:`~oxyline.errors.PeriodicityWarning` and ``result.heart.periodic`` False; its last
-    cycle read by unknown name: `heart`: svZeroDSolver's
+    (:func:`heart_model`, 30 cycles; the native ``two-ventricle`` heart on to its periodic
+    state: until the cycle-to-cycle change of its state is below 1e-10, at most 500 cycles or
+    the set's ``heart_max_cycles``, else a :class:`~oxyline.errors.PeriodicityWarning` and
+    ``result.heart.periodic`` False; the set's ``heart_values`` written over the heart's
+    values; its last cycle read by unknown name: `heart`: svZeroDSolver's
     block by default; the core runs it, then the O2 loop, in one call; its last cycle is
     ``result.heart``), ``"table"`` is the prescribed table (:func:`flow_table`), None the
     model's own choice (`flows`); a table (steps × branches, m³/s, one row per step of `dt`,
