@@ -194,6 +194,9 @@ def closed_loop_run(params: dict[str, Any], flows: Any, max_cycles: Any, tol: An
     compartment variable, branches x compartments)."""
 def closed_loop_heart_model(params_json: str) -> dict[str, Any]:
     """The native model dict of a parameter set's closed-loop heart circulation."""
+def closed_loop_heart_value(params_json: str, path: str) -> float:
+    """The number at ``path`` (``vessels.<name>.<key>...``) of a parameter set's closed-loop
+    heart model, in the model's own units (its ``heart_values`` written over the built ones)."""
 def closed_loop_heart_run_options(params_json: str) -> dict[str, Any]:
     """The run options of a parameter set's closed-loop heart as the loop runs it
     (``newton_atol`` for svZeroDSolver's block)."""

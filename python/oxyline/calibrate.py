@@ -629,8 +629,22 @@ def _loop_sensitivities(model: Any, parameters: Sequence[str], outputs: Sequence
                          int(raw["cycles"]), float(raw["periodic_error"]), rows)
 
 
-def _loop_key(source: Mapping[str, Any], path: str) -> tuple[dict[str, Any], str]:
-    """The dict holding ``path``'s number in the parameter set, and its key."""
+def _is_heart(path: str) -> bool:
+    """Whether ``path`` names a value of the loop's heart model (kept in ``heart_values``)."""
+    return path.startswith(("vessels.", "boundary_conditions."))
+
+
+def _loop_key(source: dict[str, Any], path: str) -> tuple[dict[str, Any], str]:
+    """The dict holding ``path``'s number in the parameter set, and its key: a heart model's
+    value is the set's ``heart_values[path]``, taken from the model the core builds
+    (:func:`oxyline.closed_loop.heart_model`) when the set does not give it yet."""
+    if _is_heart(path):
+        values = source.setdefault("heart_values", {})
+        if path not in values:
+            with core_errors("closed-loop heart model"):
+                values[path] = float(_core.closed_loop_heart_value(
+                    json.dumps(closed_loop._with_block(source)), path))
+        return values, path
     *head, last = path.split(".")
     node: Any = source
     for k in head:

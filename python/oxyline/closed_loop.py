@@ -119,10 +119,16 @@ class HeartRun:
     recorded times (s, from 0) and, by name, what the O2 loop reads: the flows (m³/s)
     ``aortic`` (ejection through the aortic valve), ``aortic_outflow`` (into the arteries or
     the tree's root), ``tricuspid``, ``pulmonary`` (the right ventricle's ejection), ``lungs``,
-    ``mitral``, every organ's, and the pressure ``veins`` (Pa) at the systemic veins' inlet."""
+    ``mitral``, every organ's, and the pressure ``veins`` (Pa) at the systemic veins' inlet;
+    the run's ``cycles``, its last cycle-to-cycle change ``periodic_error`` and whether that
+    met its periodicity tolerance (``periodic``; the run stops at its most cycles otherwise,
+    with a :class:`~oxyline.errors.PeriodicityWarning`)."""
 
     time: np.ndarray
     series: dict[str, np.ndarray]
+    cycles: int = 0
+    periodic_error: float = 0.0
+    periodic: bool = True
 
 
 @dataclass
@@ -222,7 +228,11 @@ def simulate_o2(model: str | dict[str, Any] = "closed-loop-o2", max_cycles: int 
     acceleration of the cycle map, or with ``shooting="newton"`` the earlier finite-difference
     Newton shooting; then plain cycles until the start-of-cycle contents repeat to `tol`).
     `flows`: ``"heart"`` takes them from a run of the model's closed-loop heart
-    (:func:`heart_model`, 30 cycles, its last one read by unknown name: `heart`: svZeroDSolver's
+    (:func:`heart_model`, 30 cycles; the native ``two-ventricle`` heart on to its periodic
+    state: until the cycle-to-cycle change of its state is below 1e-10, at most 500 cycles or
+    the set's ``heart_max_cycles``, else a :class:`~oxyline.errors.PeriodicityWarning` and
+    ``result.heart.periodic`` False; the set's ``heart_values`` written over the heart's
+    values; its last cycle read by unknown name: `heart`: svZeroDSolver's
     block by default; the core runs it, then the O2 loop, in one call; its last cycle is
     ``result.heart``), ``"table"`` is the prescribed table (:func:`flow_table`), None the
     model's own choice (`flows`); a table (steps × branches, m³/s, one row per step of `dt`,
@@ -273,7 +283,9 @@ def _result(p: dict[str, Any], out: dict[str, Any], steps: int) -> ClosedLoopO2R
         periodic_error=float(out["periodic_error"]), tree=tree,
         summary_values=out["summary"], weighted=dict(out["weighted"]),
         heart=HeartRun(np.asarray(out["heart_time"]),
-                       {k: np.asarray(v) for k, v in out["heart_series"].items()})
+                       {k: np.asarray(v) for k, v in out["heart_series"].items()},
+                       int(out["heart_cycles"]), float(out["heart_periodic_error"]),
+                       bool(out["heart_periodic"]))
         if out["heart_series"] else None)
 
 
@@ -287,10 +299,18 @@ def o2_sensitivities(model: str | dict[str, Any], parameters: list[str], outputs
     "A closed loop's oxygen"). `parameters`: ``organs.<organ>.vo2``, ``km``,
     ``lungs.diffusing_capacity``, ``lungs.alveolar_po2``, ``blood.p50``, ``blood.hemoglobin``
     and, with the prescribed
-    flow table (``flows: table``), ``cardiac_output``; `outputs`: ``SaO2``, ``SvO2``,
-    ``PaO2``, ``PvO2``, ``VO2``, ``VO2.<organ>``, ``cardiac_output``. SI throughout: a dict of
-    ``parameter_values``, ``values``, ``jacobian`` (outputs × parameters), ``cycles`` and
-    ``periodic_error``; a ModelError names an unknown parameter or output."""
+    flow table (``flows: table``), ``cardiac_output``; with the heart run's flows
+    (``flows="heart"``) the heart model's parameters by their paths in :func:`heart_model`
+    (``vessels.lv.chamber.max_elastance``, ``vessels.aortic_valve.valve.min_resistance``,
+    ``vessels.lungs.lumped.resistance``, ``vessels.heart_pulmonary.heart_pulmonary.<key>``
+    ...; their values are the set's ``heart_values`` where it gives them): the heart run's
+    exact flow tangent at its periodic state, through its valves at their states in that
+    run, into the loop's flow table (docs/calibration.md "A closed loop's oxygen");
+    `outputs`: ``SaO2``, ``SvO2``, ``PaO2``, ``PvO2``, ``VO2``, ``VO2.<organ>``,
+    ``cardiac_output``. SI throughout: a dict of ``parameter_values``, ``values``,
+    ``jacobian`` (outputs × parameters), ``cycles``, ``periodic_error``, ``heart_cycles`` and
+    ``heart_periodic``; a ModelError names an unknown parameter (with the nearest key of the
+    heart model) or output."""
     p = _with_block(load(model) if isinstance(model, str) else model)
     with core_errors("closed-loop sensitivities"):
         return _core.closed_loop_sensitivities(p, flows, max_cycles, tol, shooting,

@@ -80,6 +80,16 @@ pub fn closed_loop_run<'py>(
             PyErr::warn(py, &category, &text, 2)?;
         }
     }
+    if !out.run.heart_periodic {
+        let category = py.import("oxyline.errors")?.getattr("PeriodicityWarning")?;
+        let text = format!(
+            "the closed-loop heart run stopped at its most cycles ({}) with a cycle-to-cycle \
+             change of {:.3e}, above its periodicity tolerance: its flows are not periodic",
+            out.run.heart_cycles, out.run.heart_periodic_error
+        );
+        let text = std::ffi::CString::new(text).unwrap_or_default();
+        PyErr::warn(py, &category, &text, 2)?;
+    }
     let d = record(py, &out.run)?;
     d.set_item("compartments", &out.compartments)?;
     d.set_item("branches", &out.branches)?;
@@ -167,6 +177,8 @@ pub fn closed_loop_sensitivities<'py>(
     d.set_item("jacobian", jac)?;
     d.set_item("cycles", out.cycles)?;
     d.set_item("periodic_error", out.periodic_error)?;
+    d.set_item("heart_cycles", out.heart_cycles)?;
+    d.set_item("heart_periodic", out.heart_periodic)?;
     Ok(d)
 }
 
@@ -180,6 +192,18 @@ pub fn closed_loop_heart_model<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let model = heart_model_of(params_json).map_err(to_py)?;
     to_python(py, &model)
+}
+
+/// The number at `path` (`vessels.<name>.<key>...`) of the set's closed-loop heart model, in
+/// the model's own units (the set's `heart_values` written over the built values); a path
+/// naming nothing is a ModelError naming it and the nearest key.
+#[oxyline_py_guard::guard]
+#[pyfunction]
+pub fn closed_loop_heart_value(params_json: &str, path: &str) -> PyResult<f64> {
+    let mut model = heart_model_of(params_json).map_err(to_py)?;
+    let x = oxyline_core::transport::closed_loop_heart_values::number_at(&mut model, path)
+        .map_err(to_py)?;
+    Ok(x.as_f64().unwrap_or(f64::NAN))
 }
 
 /// The run options of the set's closed-loop heart as the core's loop runs it
@@ -210,6 +234,9 @@ fn record<'py>(py: Python<'py>, run: &ClosedLoopRun) -> PyResult<Bound<'py, PyDi
         heart.set_item(name, PyArray1::from_slice(py, v))?;
     }
     d.set_item("heart_series", heart)?;
+    d.set_item("heart_cycles", run.heart_cycles)?;
+    d.set_item("heart_periodic_error", run.heart_periodic_error)?;
+    d.set_item("heart_periodic", run.heart_periodic)?;
     for (k, v) in [
         ("time", &run.time),
         ("volume", &run.volume),

@@ -123,8 +123,8 @@ mod _core {
     use super::calibration::CalibrationProblem;
     #[pymodule_export]
     use super::closed_loop::{
-        closed_loop_heart_model, closed_loop_heart_run_options, closed_loop_run,
-        closed_loop_sensitivities,
+        closed_loop_heart_model, closed_loop_heart_run_options, closed_loop_heart_value,
+        closed_loop_run, closed_loop_sensitivities,
     };
     #[pymodule_export]
     use super::closed_loop_params::closed_loop_layout;

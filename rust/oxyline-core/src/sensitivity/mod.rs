@@ -95,10 +95,42 @@ where
     Ok((tangents.iter().map(|t| t.value).collect(), out))
 }
 
-/// The DAE of `spec`, the derivative of it by each parameter, the unknowns of the signals,
-/// and a closed loop's conserved volume; an error naming a path, vessel or variable that does
+/// d(unknown)/d(parameter) over the periodic cycle of `spec`, the unknowns by their circuit
+/// names (`Circuit::unknown_name`, e.g. "flow in vessel 'lv'"): what a caller reading a run's
+/// unknowns by name (the closed loop's heart) needs of the same run's tangent. An error names
+/// a path that does not resolve or a name that is not one of the model's unknowns.
+pub fn unknown_sensitivities(
+    spec: &NetworkSpec,
+    paths: &[String],
+    unknowns: &[String],
+    settings: TangentSettings,
+) -> Result<Sensitivities> {
+    let (assembled, dae, tangents, volume) = differentiated(spec, paths)?;
+    let circuit = &assembled.circuit;
+    let index: std::collections::HashMap<String, usize> =
+        (0..dae.n).map(|i| (circuit.unknown_name(i), i)).collect();
+    let columns = unknowns
+        .iter()
+        .map(|name| {
+            index.get(name).copied().ok_or_else(|| {
+                Error::model(
+                    format!("model '{}'", spec.name),
+                    format!("'{name}' is not one of its unknowns"),
+                )
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let cycle = periodic_tangent_in(&dae, &tangents, &columns, settings, volume.as_ref())?;
+    Ok(Sensitivities {
+        values: tangents.iter().map(|t| t.value).collect(),
+        cycle,
+    })
+}
+
+/// The assembled model of `spec` (every vessel recorded), its DAE, the derivative of the DAE
+/// by each parameter and a closed loop's conserved volume; an error naming a path that does
 /// not resolve.
-fn prepare(spec: &NetworkSpec, paths: &[String], signals: &[(String, String)]) -> Result<Prepared> {
+fn differentiated(spec: &NetworkSpec, paths: &[String]) -> Result<Differentiated> {
     let mut spec = spec.clone();
     for v in &mut spec.vessels {
         v.output = true;
@@ -123,6 +155,22 @@ fn prepare(spec: &NetworkSpec, paths: &[String], signals: &[(String, String)]) -
         }
         tangents.push(t);
     }
+    Ok((assembled, dae, tangents, volume))
+}
+
+/// [`differentiated`]'s result.
+type Differentiated = (
+    crate::assemble::Assembled,
+    Dae,
+    Vec<DaeTangent>,
+    Option<ConservedVolume>,
+);
+
+/// The DAE of `spec`, the derivative of it by each parameter, the unknowns of the signals,
+/// and a closed loop's conserved volume; an error naming a path, vessel or variable that does
+/// not resolve.
+fn prepare(spec: &NetworkSpec, paths: &[String], signals: &[(String, String)]) -> Result<Prepared> {
+    let (assembled, dae, tangents, volume) = differentiated(spec, paths)?;
     let probes = &assembled.probes;
     let unknowns = signals
         .iter()

@@ -604,6 +604,11 @@ pub struct ClosedLoopRun {
     /// With a heart: its recorded times (from 0) and named series over the last flow cycle.
     pub heart_time: Vec<f64>,
     pub heart_series: Vec<(String, Vec<f64>)>,
+    /// With a heart: its run's cycles, last cycle-to-cycle change and whether that met the
+    /// run's periodicity (a run stopped at its most cycles did not; true without a heart).
+    pub heart_cycles: usize,
+    pub heart_periodic_error: f64,
+    pub heart_periodic: bool,
 }
 
 /// One cycle of the flow table from the loop's current state; records into `out` if given.
@@ -956,8 +961,21 @@ pub fn run_periodic(
     if let Some(h) = heart {
         out.heart_time = h.time;
         out.heart_series = h.record;
+        out.heart_cycles = h.cycles;
+        out.heart_periodic_error = h.periodic_error;
+        out.heart_periodic = h.periodic;
     }
     Ok(out)
+}
+
+impl ClosedLoop {
+    /// The derivative of [`balance_flows`](super::closed_loop_balance::balance_flows) along
+    /// `dflows` (a direction of the flow table, steps × branches): the balance is linear in
+    /// the table, so its derivative is the balance of the direction with nothing held fixed.
+    pub fn balance_direction(&self, dflows: &mut [f64]) -> Result<()> {
+        let fixed = vec![0.0; self.volume.len()];
+        super::closed_loop_balance::balance_flows(dflows, &self.from, &self.to, &fixed)
+    }
 }
 
 /// [`balance_flows`](super::closed_loop_balance::balance_flows) of the loop's table, the
@@ -1065,6 +1083,9 @@ impl ClosedLoopRun {
             flow: Vec::new(),
             heart_time: Vec::new(),
             heart_series: Vec::new(),
+            heart_cycles: 0,
+            heart_periodic_error: 0.0,
+            heart_periodic: true,
         }
     }
 

@@ -18,8 +18,19 @@ const DEFAULT_HEART: &str = "two-ventricle";
 const BLOCK: &str = "svzerod-block";
 /// The heart run's flow step (s) when the set gives no `flow_dt`.
 const FLOW_DT: f64 = 1e-3;
-/// Cycles of the heart run (its last one is read).
+/// The heart run's least cycles (its last one is read): the native heart runs on until the
+/// cycle-to-cycle change of its state is below `HEART_TOL`, at most `HEART_MAX_CYCLES` cycles
+/// (`heart_until_periodic`).
 pub const HEART_CYCLES: usize = 30;
+/// The heart run's periodicity (the relative change of its state over a cycle, as a run's
+/// `until_periodic`): its flows' derivatives by heart parameters are those of the periodic
+/// state (`closed_loop_heart_tangent`), so the run that gives the flows must be periodic to
+/// well below the 1e-6 those derivatives are checked to.
+pub const HEART_TOL: f64 = 1e-10;
+/// The heart run's most cycles by default (the set's `heart_max_cycles` sets its own); a run
+/// that stops there without meeting `HEART_TOL` says so (the O2 run's `heart_periodic`, a
+/// warning).
+pub const HEART_MAX_CYCLES: usize = 500;
 /// svZeroDSolver's block needs an absolute Newton tolerance (its on/off valves, docs/physics.md
 /// §1.10); Pa, m³/s and m³ residuals here, 1e-10 is far below their discretisation error.
 pub const BLOCK_NEWTON_ATOL: f64 = 1e-10;
@@ -73,8 +84,10 @@ fn with_blood(mut m: Value) -> Value {
 /// between the venous return (node `venous_return`) and the aorta (`aorta_in`), the systemic
 /// arteries (a pool of 1.5 mL/mmHg, or the tree with `arteries: "tree"`), the organs as
 /// parallel resistances sharing the cardiac output by `flow_fraction` at a mean arterial
-/// pressure of 93 mmHg, and the systemic veins (100 mL/mmHg); run with generalized-α for
-/// `HEART_CYCLES` cycles at `flow_dt`, the last cycle recorded.
+/// pressure of 93 mmHg, and the systemic veins (100 mL/mmHg); run with generalized-α at
+/// `flow_dt` (`HEART_CYCLES` cycles; the native heart on to its periodic state,
+/// `heart_until_periodic`), the last cycle recorded. The set's `heart_values` are written over the built values
+/// (`closed_loop_heart_values`).
 pub fn heart_model(p: &Value, params: &LoopParams, layout: &Layout) -> Result<Value> {
     let heart = if heart_kind(p)? == BLOCK {
         block_heart(p)?
@@ -84,12 +97,46 @@ pub fn heart_model(p: &Value, params: &LoopParams, layout: &Layout) -> Result<Va
     let mut vessels = systemic(p, params, layout)?;
     vessels.extend(heart);
     let fdt = flow_dt(p);
-    Ok(with_blood(json!({
+    let mut simulation = json!({"cycles": HEART_CYCLES, "dt": fdt,
+                                "method": "generalized-alpha",
+                                "output": {"cycles": "last", "every": fdt}});
+    if let Some(tol) = heart_until_periodic(p)? {
+        simulation["until_periodic"] = json!(tol);
+        simulation["max_cycles"] = json!(heart_max_cycles(p)?);
+    }
+    let mut model = with_blood(json!({
         "name": "closed-loop-heart", "units": "SI", "period": field(p, "period")?,
-        "vessels": vessels, "boundary_conditions": {},
-        "simulation": {"cycles": HEART_CYCLES, "dt": fdt, "method": "generalized-alpha",
-                       "output": {"cycles": "last", "every": fdt}}
-    })))
+        "vessels": vessels, "boundary_conditions": {}, "simulation": simulation
+    }));
+    super::closed_loop_heart_values::apply(&mut model, p)?;
+    Ok(model)
+}
+
+/// The heart run's periodicity tolerance: `HEART_TOL` for the native two-ventricle heart
+/// (smooth: 51 cycles reach it on `closed-loop-o2`); None (a fixed `HEART_CYCLES` cycles) for
+/// svZeroDSolver's block, whose on/off valves hold its cycle-to-cycle change at ~2e-6
+/// (2.5e-6 after 2,000 cycles on `closed-loop-o2`, 2.6e-5 with the arterial tree).
+pub fn heart_until_periodic(p: &Value) -> Result<Option<f64>> {
+    Ok((heart_kind(p)? != BLOCK).then_some(HEART_TOL))
+}
+
+/// The heart run's most cycles (`heart_max_cycles`, `HEART_MAX_CYCLES` by default), at least
+/// `HEART_CYCLES`.
+pub fn heart_max_cycles(p: &Value) -> Result<usize> {
+    match p.get("heart_max_cycles") {
+        None => Ok(HEART_MAX_CYCLES),
+        Some(v) => v
+            .as_u64()
+            .filter(|&n| n as usize >= HEART_CYCLES && n as f64 <= 1e9)
+            .map(|n| n as usize)
+            .ok_or_else(|| {
+                err(format!(
+                    "heart_max_cycles must be a whole number from {HEART_CYCLES} to 1e+09, \
+                     got {}",
+                    v.repr()
+                ))
+            }),
+    }
 }
 
 /// The heart run's Newton tolerance (None: the default control).

@@ -36,7 +36,14 @@ pub struct HeartSpec {
     pub model: Value,
     /// Flow step and output interval (s).
     pub dt: f64,
+    /// Cycles to run (the least, with `until_periodic`).
     pub cycles: usize,
+    /// Run on until the relative cycle-to-cycle change of the state is below this, at most
+    /// `max_cycles` cycles (None: exactly `cycles`).
+    #[serde(default)]
+    pub until_periodic: Option<f64>,
+    #[serde(default)]
+    pub max_cycles: Option<usize>,
     /// generalized-α's ρ∞ and Newton's absolute tolerance (None: the default control).
     #[serde(default = "default_rho")]
     pub rho_infty: f64,
@@ -70,6 +77,11 @@ pub struct HeartFlows {
     pub table: Vec<f64>,
     pub time: Vec<f64>,
     pub record: Vec<(String, Vec<f64>)>,
+    /// The heart run's cycles, its last cycle-to-cycle change and whether that met its
+    /// `until_periodic` (true without one).
+    pub cycles: usize,
+    pub periodic_error: f64,
+    pub periodic: bool,
 }
 
 /// The last cycle of the heart model (every unknown, by name).
@@ -78,6 +90,8 @@ struct Recorded {
     data: Vec<f64>,
     n: usize,
     index: HashMap<String, usize>,
+    cycles: usize,
+    periodic_error: f64,
 }
 
 impl Recorded {
@@ -114,7 +128,8 @@ impl Recorded {
     }
 }
 
-/// Runs the heart model for `spec.cycles` cycles of `period` and records its last cycle.
+/// Runs the heart model for `spec.cycles` cycles of `period` (on to its periodic state with
+/// `until_periodic`) and records its last cycle.
 fn run(spec: &HeartSpec, period: f64) -> Result<Recorded> {
     let model: crate::model::NetworkSpec = serde_json::from_value(spec.model.clone())
         .map_err(|e| Error::model("closed-loop heart", e.to_string()))?;
@@ -129,7 +144,8 @@ fn run(spec: &HeartSpec, period: f64) -> Result<Recorded> {
     );
     s.period = period;
     s.cycles = spec.cycles;
-    s.max_cycles = spec.cycles;
+    s.until_periodic = spec.until_periodic;
+    s.max_cycles = spec.max_cycles.unwrap_or(spec.cycles).max(spec.cycles);
     s.output_every = spec.dt;
     s.start = Start::Steady;
     if let Some(atol) = spec.newton_atol {
@@ -147,6 +163,8 @@ fn run(spec: &HeartSpec, period: f64) -> Result<Recorded> {
         data: out.data,
         n: dae.n,
         index,
+        cycles: out.cycles_run,
+        periodic_error: out.periodic_error,
     })
 }
 
@@ -198,10 +216,16 @@ pub fn heart_flows(
         .iter()
         .map(|(name, s)| Ok((name.clone(), rec.eval(s)?)))
         .collect::<Result<Vec<_>>>()?;
+    let periodic = spec
+        .until_periodic
+        .is_none_or(|tol| rec.periodic_error < tol);
     Ok(HeartFlows {
         table,
         time,
         record,
+        cycles: rec.cycles,
+        periodic_error: rec.periodic_error,
+        periodic,
     })
 }
 
@@ -268,6 +292,8 @@ mod tests {
                 .enumerate()
                 .map(|(i, n)| (n.to_string(), i))
                 .collect(),
+            cycles: 1,
+            periodic_error: 0.0,
         }
     }
 

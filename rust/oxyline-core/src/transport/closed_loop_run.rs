@@ -5,7 +5,8 @@
 
 use super::closed_loop::{ClosedLoopRun, ClosedLoopSpec, Shooting, TreeOutlet, TreeSpec};
 use super::closed_loop_circulation::{
-    HEART_CYCLES, err, field, flow_dt, heart_kind, heart_model, heart_newton_atol, tree_model,
+    HEART_CYCLES, err, field, flow_dt, heart_kind, heart_max_cycles, heart_model,
+    heart_newton_atol, heart_until_periodic, tree_model,
 };
 use super::closed_loop_heart::HeartSpec;
 use super::closed_loop_params::{Layout, LoopParams};
@@ -273,15 +274,17 @@ fn chosen_table(
     }
 }
 
-/// The core's closed-loop heart run (`heart_model`, `HEART_CYCLES` cycles, every unknown of
-/// the last one recorded); the O2 loop's branch flows are read from it by unknown name
+/// The core's closed-loop heart run (`heart_model`, `HEART_CYCLES` cycles, the native heart
+/// on to its periodic state, `heart_until_periodic`; every unknown of the last one
+/// recorded); the O2 loop's branch flows are read from it by unknown name
 /// (`closed_loop_heart_series`: on/off valves gated, the shunt taking `shunt_fraction` of
 /// the lungs' flow), each step's flow the mean of the recorded intervals it spans.
-fn heart_spec(p: &Value, params: &LoopParams, layout: &Layout) -> Result<HeartSpec> {
+pub(crate) fn heart_spec(p: &Value, params: &LoopParams, layout: &Layout) -> Result<HeartSpec> {
     let (model, _) = canonical(&heart_model(p, params, layout)?)?;
     let organs: Vec<&str> = params.organs.iter().map(|(k, _)| k.as_str()).collect();
     let mut heart: HeartSpec = serde_json::from_value(json!({
         "model": model, "dt": flow_dt(p), "cycles": HEART_CYCLES,
+        "until_periodic": heart_until_periodic(p)?, "max_cycles": heart_max_cycles(p)?,
         "newton_atol": heart_newton_atol(p)?,
         "series_of": {"heart": heart_kind(p)?, "organs": organs,
                       "shunt_fraction": params.lungs.shunt_fraction, "tree": params.has_tree()}

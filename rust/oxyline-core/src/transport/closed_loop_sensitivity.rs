@@ -8,14 +8,21 @@
 //! organ's, Pa), `lungs.diffusing_capacity` (mol s⁻¹ Pa⁻¹), `lungs.alveolar_po2` (Pa),
 //! `blood.p50` (Pa),
 //! `blood.hemoglobin` (kg/m³ = g/L), and with the prescribed flow table `cardiac_output`
-//! (m³/s: the table is proportional to it). Outputs: `SaO2`, `SvO2` (flow-weighted
+//! (m³/s: the table is proportional to it); with the heart run's flows (`flows: heart`) the
+//! heart model's parameters `vessels.<name>.<element>.<key>` and
+//! `boundary_conditions.<node>.<key>` (their SI values, read from `heart_model_of`, the set's
+//! `heart_values` written over its built ones), through the heart run's flow tangent
+//! (`closed_loop_heart_tangent`). Outputs: `SaO2`, `SvO2` (flow-weighted
 //! saturations of the left and right hearts' ejections), `PaO2`, `PvO2` (Pa), `VO2` (the
 //! loop's cycle-mean consumption, mol/s), `VO2.<organ>`, `cardiac_output` (m³/s).
 
 use super::closed_loop::tangent::{Cycle, LoopOutput, LoopParameter};
 use super::closed_loop::{ClosedLoop, ClosedLoopSpec};
+use super::closed_loop_circulation::heart_model;
+use super::closed_loop_heart_tangent::heart_tangent;
+use super::closed_loop_heart_values::number_at;
 use super::closed_loop_params::{LoopParams, ML_O2};
-use super::closed_loop_run::{Flows, RunSettings, simulate};
+use super::closed_loop_run::{Flows, RunSettings, heart_spec, simulate};
 use crate::error::{Error, Result};
 use crate::model::units::MMHG;
 use serde_json::{Value, json};
@@ -29,6 +36,9 @@ pub struct LoopSensitivities {
     pub jacobian: Vec<f64>,
     pub cycles: usize,
     pub periodic_error: f64,
+    /// With the heart run's flows: its cycles and whether it met its periodicity.
+    pub heart_cycles: usize,
+    pub heart_periodic: bool,
 }
 
 const WHAT: &str = "closed-loop sensitivities";
@@ -36,7 +46,13 @@ const WHAT: &str = "closed-loop sensitivities";
 /// The parameter keys the tangent covers (for the error that names an unknown one).
 const KEYS: &str = "organs.<organ>.vo2, km, lungs.diffusing_capacity, lungs.alveolar_po2, \
                     blood.p50, blood.hemoglobin, cardiac_output (with the prescribed flow \
-                    table)";
+                    table), vessels.<name>.<element>.<key> and \
+                    boundary_conditions.<node>.<key> of the heart model (with flows='heart')";
+
+/// Whether `path` names a parameter of the heart model (its patch paths).
+fn is_heart(path: &str) -> bool {
+    path.starts_with("vessels.") || path.starts_with("boundary_conditions.")
+}
 
 /// A parameter key of the set: the core's parameter, its SI value, and the factor from the
 /// core's derivative to the derivative by that value.
@@ -86,7 +102,8 @@ fn parameter(p: &LoopParams, path: &str, prescribed: bool) -> Result<(LoopParame
             return Err(Error::model(
                 WHAT,
                 "parameter 'cardiac_output': covered with the prescribed flow table only \
-                 (flows='table'); a heart run's flows are not differentiated",
+                 (flows='table'); a heart run's output follows from its heart model's \
+                 parameters (vessels.<name>.<element>.<key>)",
             ));
         }
         _ => {
@@ -139,6 +156,64 @@ fn prescribed(p: &Value, flows: &Flows) -> bool {
     }
 }
 
+/// Whether the run's flows are those of the heart run.
+fn from_heart(p: &Value, flows: &Flows) -> bool {
+    match flows {
+        Flows::Named(s) => s == "heart",
+        Flows::Default => p.get("flows").is_some_and(|f| f == "heart"),
+        Flows::Table { .. } => false,
+    }
+}
+
+/// The heart parameters among `paths` (their positions), checked against the heart model
+/// before any run: they need the heart run's flows, and resolve in its model (a path naming
+/// nothing is named with the nearest key, `sensitivity::Parameter`).
+fn heart_paths(
+    params_json: &str,
+    params: &LoopParams,
+    heart: bool,
+    paths: &[String],
+) -> Result<Vec<usize>> {
+    let chosen: Vec<usize> = (0..paths.len()).filter(|&i| is_heart(&paths[i])).collect();
+    let Some(&first) = chosen.first() else {
+        return Ok(chosen);
+    };
+    if !heart {
+        return Err(Error::model(
+            WHAT,
+            format!(
+                "parameter '{}': a heart model's parameter needs the heart run's flows \
+                 (flows='heart')",
+                paths[first]
+            ),
+        ));
+    }
+    let p: Value =
+        serde_json::from_str(params_json).map_err(|e| Error::model(WHAT, e.to_string()))?;
+    let mut native = heart_model(&p, params, &params.layout())?;
+    let spec = heart_spec(&p, params, &params.layout())?;
+    let model: crate::model::NetworkSpec = serde_json::from_value(spec.model)
+        .map_err(|e| Error::model("closed-loop heart", e.to_string()))?;
+    for &i in &chosen {
+        let path = &paths[i];
+        // a number of the heart model as built (named with the nearest key when it is not
+        // one), then one the tangent covers
+        number_at(&mut native, path)?;
+        crate::sensitivity::Parameter::parse(&model, path)?;
+        // the block's lungs' flow is read through R_pd itself (closed_loop_heart_series)
+        if path.ends_with(".pulmonary_resistance") && path.contains(".heart_pulmonary.") {
+            return Err(Error::model(
+                WHAT,
+                format!(
+                    "parameter '{path}': the lungs' flow is read through it; not covered \
+                     (the block's other values are)"
+                ),
+            ));
+        }
+    }
+    Ok(chosen)
+}
+
 /// The outputs `outputs` of the loop of `params_json` at its periodic state and their exact
 /// derivatives by the parameters `paths`; an error naming an unknown parameter or output
 /// (both checked before the run), or a loop with an arterial tree.
@@ -159,9 +234,17 @@ pub fn sensitivities(
         ));
     }
     let table = prescribed(&p, &flows);
-    let chosen = paths
+    let hearts = heart_paths(params_json, &params, from_heart(&p, &flows), paths)?;
+    let heart_list: Vec<String> = hearts.iter().map(|&i| paths[i].clone()).collect();
+    let mut chosen = paths
         .iter()
-        .map(|path| parameter(&params, path, table))
+        .map(
+            |path| match hearts.iter().position(|&i| paths[i] == *path) {
+                // its value is the heart model's, known after the heart's tangent run
+                Some(j) => Ok((LoopParameter::Flow(j), f64::NAN, 1.0)),
+                None => parameter(&params, path, table),
+            },
+        )
         .collect::<Result<Vec<_>>>()?;
     let layout = params.layout();
     let spec: ClosedLoopSpec = serde_json::from_value(json!({
@@ -174,13 +257,25 @@ pub fn sensitivities(
         .map(|o| output(&lp, o))
         .collect::<Result<Vec<_>>>()?;
     let run = simulate(params_json, flows, settings)?.run;
+    let mut flow_tangents = Vec::new();
+    if !heart_list.is_empty() {
+        let spec = heart_spec(&p, &params, &layout)?;
+        let ht = heart_tangent(&spec, &heart_list, params.dt, params.period)?;
+        for (j, &i) in hearts.iter().enumerate() {
+            chosen[i].1 = ht.values[j];
+        }
+        flow_tangents = ht.tables;
+        for t in &mut flow_tangents {
+            lp.balance_direction(t)?;
+        }
+    }
     let cycle = Cycle {
         dt: params.dt,
         flow: &run.flow,
         volume: &run.volume,
         total: &run.total,
         start_volume: &lp.volume,
-        flow_tangents: &[],
+        flow_tangents: &flow_tangents,
     };
     let kinds: Vec<LoopParameter> = chosen.iter().map(|c| c.0).collect();
     let tangent = lp.cycle_tangent(&cycle, &kinds)?;
@@ -197,5 +292,7 @@ pub fn sensitivities(
         jacobian,
         cycles: run.cycles,
         periodic_error: run.periodic_error,
+        heart_cycles: run.heart_cycles,
+        heart_periodic: run.heart_periodic,
     })
 }

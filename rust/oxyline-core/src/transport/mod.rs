@@ -36,6 +36,8 @@ pub mod closed_loop_balance; // its flow table's periodic volumes
 pub mod closed_loop_circulation; // its circulation, built from the parameter set
 pub mod closed_loop_heart; // the heart run that drives its flows
 pub mod closed_loop_heart_series; // what the loop reads from that run, by name
+pub mod closed_loop_heart_tangent; // that run's flow table's derivative by heart parameters
+pub mod closed_loop_heart_values; // the set's own values of its heart model
 pub mod closed_loop_params; // its parameter set in published units, to SI
 pub mod closed_loop_run; // the whole run in one call: settings, heart, O2
 pub mod closed_loop_sensitivity; // its periodic O2 state's exact derivatives
