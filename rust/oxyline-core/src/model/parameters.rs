@@ -68,7 +68,10 @@ fn keys_of<'p, N: Node>(source: &N, path: &'p str) -> Vec<&'p str> {
         .get("boundary_conditions")
         .map(|b| b.entries().into_iter().map(|(node, _)| node).collect())
         .unwrap_or_default();
-    parameter_keys(path, &[("vessels", &vessels), ("boundary_conditions", &nodes)])
+    parameter_keys(
+        path,
+        &[("vessels", &vessels), ("boundary_conditions", &nodes)],
+    )
 }
 
 /// The value under `keys` of nested mappings.

@@ -900,7 +900,6 @@ fn a_heart_key_typo_names_the_elements_keys_and_the_nearest() {
          nearest: steepness)"
     );
     assert!(
-        err("vessels.lv.chamber.activation.t_twich")
-            .ends_with("; nearest: activation.t_twitch)")
+        err("vessels.lv.chamber.activation.t_twich").ends_with("; nearest: activation.t_twitch)")
     );
 }

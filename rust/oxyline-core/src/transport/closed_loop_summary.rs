@@ -405,7 +405,10 @@ mod tests {
         let s = summarise(&run, &comps, &branches, &[], 0.25).unwrap();
         assert_eq!(s.po2_along.len(), 2);
         let (a, b) = (&s.po2_along[0], &s.po2_along[1]);
-        assert_eq!((a.0.as_str(), a.1.len(), b.0.as_str(), b.1.len()), ("a", 2, "b", 1));
+        assert_eq!(
+            (a.0.as_str(), a.1.len(), b.0.as_str(), b.1.len()),
+            ("a", 2, "b", 1)
+        );
         // a constant profile's mean is the constant, to the rounding of the mmHg conversion
         for x in &a.1 {
             assert!((x - 80.0).abs() < 1e-12, "{x}");

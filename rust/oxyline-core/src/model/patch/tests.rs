@@ -268,6 +268,9 @@ fn a_heart_elements_unknown_key_is_a_naming_mistake_with_the_nearest() {
     // a valve's key by the law the patch gives
     let patch = json!({"vessels": {"c": {"valve": {"law": "tanh", "steepnes": 1.0}}}});
     let (name, text) = message(merge(&model, &patch, 2));
-    assert!(name && text.contains("unknown property of a tanh valve"), "{text}");
+    assert!(
+        name && text.contains("unknown property of a tanh valve"),
+        "{text}"
+    );
     assert!(text.ends_with("; nearest: steepness)"), "{text}");
 }
