@@ -248,11 +248,11 @@ pub fn parameter_keys<'p>(path: &'p str, names: &[(&str, &[String])]) -> Vec<&'p
     let Some(known) = names.iter().find(|(s, _)| *s == section).map(|(_, n)| *n) else {
         return plain();
     };
+    // the last dot that ends a known name: the longest name
     let cut = rest
-        .match_indices('.')
+        .rmatch_indices('.')
         .map(|(i, _)| i)
-        .filter(|&i| known.iter().any(|n| *n == rest[..i]))
-        .last();
+        .find(|&i| known.iter().any(|n| *n == rest[..i]));
     match cut {
         Some(i) => {
             let mut keys = vec![section, &rest[..i]];
