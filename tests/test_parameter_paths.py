@@ -19,6 +19,7 @@ import pytest
 import oxyline
 from oxyline import ModelError
 from oxyline.calibrate import _base_value
+from tests.test_sensitivity_heart import HEART
 
 Q, R_AB, R_C, R_OUT = 1e-6, 2e8, 3e8, 1e9
 
@@ -57,35 +58,12 @@ def test_a_dotted_vessel_name_in_calibrations_base_values() -> None:
 
 
 def test_a_name_of_no_vessel_names_the_path_and_the_nearest() -> None:
+    """``x.b`` is one edit from ``a.b``; the path starts with no name of the model."""
     with pytest.raises(ModelError) as err:
-        oxyline.sensitivities(CHAIN, ["vessels.a.c.lumped.resistance"], OUT)
+        oxyline.sensitivities(CHAIN, ["vessels.x.b.lumped.resistance"], OUT)
     text = str(err.value)
-    assert "parameter 'vessels.a.c.lumped.resistance'" in text, text
+    assert "parameter 'vessels.x.b.lumped.resistance'" in text, text
     assert "(nearest: a.b)" in text, text
-
-
-HEART = {
-    "name": "left-heart", "period": 0.8,
-    "vessels": [
-        {"name": "mitral", "from": "ven", "to": "mv_out",
-         "valve": {"law": "tanh", "min_resistance": 2e6, "max_resistance": 1e10,
-                   "steepness": 5e-3}},
-        {"name": "lv", "from": "mv_out", "to": "lv_out",
-         "chamber": {"law": "elastance-inductor", "max_elastance": 3.0e8,
-                     "min_elastance": 1.3e7, "rest_volume_diastole": 2e-5,
-                     "rest_volume_systole": 1e-5,
-                     "activation": {"kind": "half-cosine", "t_active": 0.1, "t_twitch": 0.35},
-                     "period": 0.8, "inductance": 1e5, "initial_volume": 1.2e-4}},
-        {"name": "aortic", "from": "lv_out", "to": "ao",
-         "valve": {"law": "tanh", "min_resistance": 3e6, "max_resistance": 1e10,
-                   "steepness": 5e-3}},
-        {"name": "aorta", "from": "ao", "to": "out",
-         "lumped": {"resistance": 5e6, "inductance": 1e5, "capacitance": 3e-9}}],
-    "boundary_conditions": {
-        "ven": {"type": "pressure", "pressure": 1200.0},
-        "out": {"type": "rcr", "proximal_resistance": 1e7, "capacitance": 1.2e-8,
-                "distal_resistance": 1.3e8}},
-}
 
 
 @pytest.mark.parametrize(("path", "nearest"), [
