@@ -283,6 +283,24 @@ def test_tree_resting_physiology_and_po2_along_the_tree(
         assert s["DO2_organs"][k] == pytest.approx(o["flow_fraction"] * co * ca, rel=0.03)
 
 
+def test_po2_along_is_the_recorded_segments_cycle_mean(
+        tree_rest: closed_loop.ClosedLoopO2Result) -> None:
+    """The core's cycle means against numpy's mean of the recorded [step, segment] PO2, grouped
+    by the segments' vessel names: the same additions in the same order (1e-12 relative allows
+    any other summation order); every vessel of the tree once, its segments in flow order;
+    ``vessels`` selects."""
+    t = tree_rest.tree
+    mean = t.po2.mean(axis=0)
+    vessels = list(dict.fromkeys(s.rsplit(":", 1)[0] for s in t.segments))
+    along = t.po2_along()
+    assert list(along) == vessels
+    for name in vessels:
+        cols = [k for k, s in enumerate(t.segments) if s.rsplit(":", 1)[0] == name]
+        assert np.allclose(along[name], mean[cols], rtol=1e-12, atol=0)
+    assert list(t.po2_along(["iliac", "aortic_root"])) == ["aortic_root", "iliac"]
+    assert t.po2_along(["nowhere"]) == {}
+
+
 def test_zero_wall_tree_matches_the_pool_on_the_same_flows() -> None:
     """Limit: a tree whose wall takes up nothing, with fixed organ VO2 (vanishing km), against
     the pool model driven by the same flows (root inflow → the pool's ejection, outlet flows →

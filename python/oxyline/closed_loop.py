@@ -146,14 +146,13 @@ class ArterialTreeO2:
     amount: np.ndarray         # mol in the tree at each step end
     po2: np.ndarray            # mmHg per segment
     flow_periodic_error: float
+    #: the core's cycle-mean PO2 (mmHg) of every segment, by vessel (:meth:`po2_along`)
+    along: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     def po2_along(self, vessels: list[str] | None = None) -> dict[str, np.ndarray]:
-        """Cycle-mean PO2 (mmHg) of every segment, per vessel (in flow order)."""
-        mean = self.po2.mean(axis=0)
-        out: dict[str, list[float]] = {}
-        for name, v in zip(self.segments, mean):
-            out.setdefault(name.rsplit(":", 1)[0], []).append(float(v))
-        return {k: np.asarray(v) for k, v in out.items() if vessels is None or k in vessels}
+        """Cycle-mean PO2 (mmHg) of every segment, per vessel (in flow order), as the core
+        computed it; ``vessels`` selects some of them."""
+        return {k: v.copy() for k, v in self.along.items() if vessels is None or k in vessels}
 
 
 @dataclass
@@ -271,7 +270,8 @@ def _result(p: dict[str, Any], out: dict[str, Any], steps: int) -> ClosedLoopO2R
             out_flux=rows("tree_out_flux", len(p["organs"])),
             wall=np.asarray(out["tree_wall"]), amount=np.asarray(out["tree_amount"]),
             po2=rows("tree_po2", len(segs), MMHG),
-            flow_periodic_error=float(out["tree_flow_periodic_error"]))
+            flow_periodic_error=float(out["tree_flow_periodic_error"]),
+            along=dict(out["tree_po2_along"]))
     nc, nb = len(comps), len(branches)
     return ClosedLoopO2Result(
         compartments=comps, branches=branches,

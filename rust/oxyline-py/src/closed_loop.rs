@@ -100,6 +100,11 @@ pub fn closed_loop_run<'py>(
         weighted.set_item(*name, PyArray1::from_slice(py, table).reshape(shape)?)?;
     }
     d.set_item("weighted", weighted)?;
+    let along = PyDict::new(py);
+    for (vessel, means) in &out.summary.po2_along {
+        along.set_item(vessel, PyArray1::from_slice(py, means))?;
+    }
+    d.set_item("tree_po2_along", along)?;
     Ok(d)
 }
 

@@ -22,6 +22,7 @@
 use super::native::py_float;
 use super::node::{Kind, Node, py_dict, py_list, py_quote, py_repr};
 use super::patch::{Merged, PatchError, Patched, merge, set, set_at};
+use super::path::{heart_paths, nearest, parameter_keys};
 use crate::error::{Error, Result};
 
 #[cfg(test)]
@@ -48,6 +49,31 @@ fn float_of<N: Node>(n: &N) -> Option<f64> {
     }
 }
 
+/// The keys of `path` in the native model `source`: a vessel or node name may itself hold
+/// dots, the longest name of the model wins (`super::path::parameter_keys`). Only a path of
+/// four pieces or more can hold a dotted name before its property: the model's names are
+/// read for those alone.
+fn keys_of<'p, N: Node>(source: &N, path: &'p str) -> Vec<&'p str> {
+    if path.matches('.').count() < 3 {
+        return path.split('.').collect();
+    }
+    let vessels: Vec<String> = source
+        .get("vessels")
+        .and_then(|v| v.items())
+        .unwrap_or_default()
+        .iter()
+        .filter_map(|v| v.get("name").and_then(|n| n.text()))
+        .collect();
+    let nodes: Vec<String> = source
+        .get("boundary_conditions")
+        .map(|b| b.entries().into_iter().map(|(node, _)| node).collect())
+        .unwrap_or_default();
+    parameter_keys(
+        path,
+        &[("vessels", &vessels), ("boundary_conditions", &nodes)],
+    )
+}
+
 /// The value under `keys` of nested mappings.
 fn walk<N: Node>(node: N, keys: &[&str]) -> Option<N> {
     keys.iter().try_fold(node, |n, key| n.get(key))
@@ -68,7 +94,7 @@ fn vessel<N: Node>(source: &N, name: &str, path: &str) -> Result<(usize, N)> {
 /// The number `path` names in the native model `source`, in the model's units (1 for a
 /// scale; see the module's documentation).
 pub fn base_value<N: Node>(source: &N, path: &str) -> Result<f64> {
-    let parts: Vec<&str> = path.split('.').collect();
+    let parts = keys_of(source, path);
     let value = match parts.as_slice() {
         ["scale", ..] => return Ok(1.0),
         ["vessels", name, rest @ ..] => {
@@ -101,7 +127,57 @@ pub fn base_value<N: Node>(source: &N, path: &str) -> Result<f64> {
             .and_then(|x| float_of(&x)),
         _ => None,
     };
-    value.ok_or_else(|| error(path, "no such number in the model"))
+    value.ok_or_else(|| {
+        let hint = heart_hint(source, &parts);
+        error(path, format!("no such number in the model{hint}"))
+    })
+}
+
+/// Whether `node` holds the dotted `keys` (`activation.t_active`).
+fn holds<N: Node>(node: &N, keys: &str) -> bool {
+    let mut parts = keys.split('.');
+    let Some(mut at) = parts.next().and_then(|k| node.get(k)) else {
+        return false;
+    };
+    for key in parts {
+        match at.get(key) {
+            Some(next) => at = next,
+            None => return false,
+        }
+    }
+    true
+}
+
+/// ` (nearest: <keys>)` for a heart element's key (`vessels.<name>.<kind>.<key>`) that the
+/// element does not hold but holds a key a typo away ([`nearest`] of the keys the schema
+/// knows for the element, `super::path::heart_paths`); else nothing.
+fn heart_hint<N: Node>(source: &N, parts: &[&str]) -> String {
+    let ["vessels", name, kind, key @ ..] = parts else {
+        return String::new();
+    };
+    let section = source
+        .get("vessels")
+        .and_then(|v| v.items())
+        .unwrap_or_default()
+        .into_iter()
+        .find(|v| v.get("name").and_then(|n| n.text()).as_deref() == Some(*name))
+        .and_then(|v| v.get(kind))
+        .filter(Node::is_map);
+    let (Some(section), false) = (section, key.is_empty()) else {
+        return String::new();
+    };
+    let candidates = heart_paths(kind);
+    let held: Vec<&str> = candidates
+        .iter()
+        .map(String::as_str)
+        .filter(|k| holds(&section, k))
+        .collect();
+    let near = nearest(&key.join("."), &held);
+    if near.is_empty() {
+        String::new()
+    } else {
+        format!(" (nearest: {})", near.join(", "))
+    }
 }
 
 /// The model `source` with each of `paths` set to its value (the model's units; a scale to
@@ -126,7 +202,7 @@ pub fn set_values<N: Node + Clone>(
     let mut squeeze: Vec<(String, (f64, String))> = Vec::new();
     let mut heart: Vec<(String, f64)> = Vec::new();
     for (path, &x) in paths.iter().zip(values) {
-        let parts: Vec<&str> = path.split('.').collect();
+        let parts = keys_of(source, path);
         match parts.as_slice() {
             ["scale", "inflow"] => inflow = Some(x),
             ["boundary_conditions", node, rest @ ..] if rest == PIM_SCALE => {
@@ -187,7 +263,7 @@ fn patched<N: Node + Clone>(
     }
     let mut entries = Vec::new();
     for (path, x) in patch {
-        put(&mut entries, &path.split('.').collect::<Vec<_>>(), *x);
+        put(&mut entries, &keys_of(source, path), *x);
     }
     let p = merge(&Merged::Node(source.clone()), &Merged::Map(entries), 0)?;
     Ok(Patched {
@@ -419,7 +495,7 @@ fn set_nested<N: Node + Clone>(node: Merged<N>, keys: &[&str], x: f64) -> Option
 
 /// A heart element's value, set where the element holds it.
 fn set_heart<N: Node + Clone>(source: &N, p: &mut Patched<N>, path: &str, x: f64) -> Result<()> {
-    let parts: Vec<&str> = path.split('.').collect();
+    let parts = keys_of(source, path);
     let (i, v) = vessel(source, parts[1], path)?;
     let current = match p.vessels.iter().find(|(j, _)| *j == i) {
         Some((_, m)) => m.clone(),

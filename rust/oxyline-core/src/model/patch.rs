@@ -26,7 +26,7 @@
 use super::native::py_float;
 use super::native::vessel::LUMPED_KEYS;
 use super::node::{Kind, Node, py_repr};
-use super::path::{BLOOD_KEYS, Scope, at};
+use super::path::{BLOOD_KEYS, HEART_SECTIONS, Scope, at};
 use crate::error::Error;
 use std::collections::BTreeSet;
 
@@ -242,6 +242,7 @@ fn patch_vessel<N: Node + Clone>(
         }
         scalars(&lumped, LUMPED_KEYS, k, &lpath)?;
     }
+    check_heart(&vessel, props, k, path)?;
     let mut base = vessel.into_entries().unwrap_or_default();
     if props.has("radius") {
         remove(&mut base, "radius_in");
@@ -253,6 +254,44 @@ fn patch_vessel<N: Node + Clone>(
         }
     }
     Ok(deep_merge(Some(Merged::Map(base)), props))
+}
+
+/// The text at `key` of a patch's section, else of the base model's (empty: neither has it).
+fn given<N: Node + Clone>(patch: &N, base: Option<&Merged<N>>, key: &str) -> String {
+    match patch.get(key) {
+        Some(x) => x.show(),
+        None => base
+            .and_then(|b| b.get(key))
+            .map(|x| text_of(&x))
+            .unwrap_or_default(),
+    }
+}
+
+/// Unknown keys of a patch's heart element sections (`chamber`, `valve`, …: the element's
+/// law, the patch's else the base vessel's) and of a chamber's `activation` (its kind),
+/// checked by the path resolver: a typo raises before anything runs, with the nearest key.
+fn check_heart<N: Node + Clone>(vessel: &Merged<N>, props: &N, k: usize, path: &str) -> Res<()> {
+    for kind in HEART_SECTIONS {
+        let Some(section) = props.get(kind).filter(Node::is_map) else {
+            continue;
+        };
+        let base = vessel.get(kind);
+        let law = given(&section, base.as_ref(), "law");
+        let spath = format!("{path}.{kind}");
+        for (key, _) in section.entries() {
+            known(k, &format!("{spath}.{key}"), Scope::Heart(kind, &law), &key)?;
+        }
+        let Some(act) = section.get("activation").filter(Node::is_map) else {
+            continue;
+        };
+        let base_act = base.as_ref().and_then(|b| b.get("activation"));
+        let act_kind = given(&act, base_act.as_ref(), "kind");
+        for (key, _) in act.entries() {
+            let apath = format!("{spath}.activation.{key}");
+            known(k, &apath, Scope::Activation(&act_kind), &key)?;
+        }
+    }
+    Ok(())
 }
 
 fn text_of<N: Node>(m: &Merged<N>) -> String {

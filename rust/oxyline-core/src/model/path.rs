@@ -1,10 +1,12 @@
 //! The one resolver of a dotted path into a native model: `vessels.<name>.<key>`,
 //! `vessels.<name>.lumped.<key>`, `boundary_conditions.<node>.<key>`, `blood.<key>`,
-//! `oxygen.<key>`, `oxygen.wall.<key>`, `transport.<key>`, `period`, `scale.<key>`.
+//! `oxygen.<key>`, `oxygen.wall.<key>`, `transport.<key>`, `period`, `scale.<key>`, and a
+//! heart element's `vessels.<name>.<chamber|valve|…>.<key>` (by its law).
 //!
 //! It knows the schema's addressable keys by [`Scope`] (the lists the schema reader itself
 //! checks a model against: `super::native`, `super::species`), splits a table column's path
-//! into its keys ([`column_keys`]), and words a key its scope does not have in one way
+//! and a parameter path into their keys (a vessel or node name may hold dots: [`column_keys`],
+//! [`parameter_keys`]), and words a key its scope does not have in one way
 //! ([`unknown_key`]: the scope, its keys, the nearest of them). The ensemble's patch merge
 //! (`super::patch`, and through it the calibration's parameter paths in
 //! `super::parameters`) and the sensitivities' SI parameters
@@ -13,7 +15,9 @@
 //! <path>` or `parameter '<path>'`).
 
 use super::native::boundary::BC_KEYS;
-use super::native::vessel::{LUMPED_KEYS, VESSEL_KEYS};
+use super::native::vessel::{
+    LUMPED_KEYS, VESSEL_KEYS, activation_keys, heart_key_paths, heart_keys,
+};
 use super::species::{OXYGEN_KEYS, TRANSPORT_KEYS, WALL_KEYS};
 use crate::error::Error;
 
@@ -64,7 +68,22 @@ pub enum Scope<'a> {
     Transport,
     /// An `oxygen.wall` of the given closure (`model`).
     Wall(&'a str),
+    /// A heart element's section: its kind (`chamber`, `valve`, `chamber_sphere`,
+    /// `heart_pulmonary`, `coronary_bed`, `through_rc`) and law (a chamber's or valve's).
+    Heart(&'a str, &'a str),
+    /// A chamber's `activation` of the given kind.
+    Activation(&'a str),
 }
+
+/// The vessel keys that hold a heart element's section ([`Scope::Heart`]).
+pub const HEART_SECTIONS: &[&str] = &[
+    "chamber",
+    "valve",
+    "chamber_sphere",
+    "heart_pulmonary",
+    "coronary_bed",
+    "through_rc",
+];
 
 impl Scope<'_> {
     /// The keys the scope has, as the schema lists them (None: a wall closure the schema
@@ -93,6 +112,8 @@ impl Scope<'_> {
                 .find(|(name, _)| *name == model)?
                 .1
                 .to_vec(),
+            Scope::Heart(kind, law) => heart_keys(kind, law)?,
+            Scope::Activation(kind) => activation_keys(kind)?,
         };
         Some(keys)
     }
@@ -110,6 +131,11 @@ impl Scope<'_> {
             Scope::Oxygen => "oxygen property".to_owned(),
             Scope::Transport => "transport property".to_owned(),
             Scope::Wall(model) => format!("property of a {model} wall"),
+            Scope::Heart(kind @ ("chamber" | "valve"), law) => {
+                format!("property of a {law} {kind}")
+            }
+            Scope::Heart(kind, _) => format!("{kind} property"),
+            Scope::Activation(kind) => format!("property of a {kind} activation"),
         }
     }
 
@@ -206,6 +232,82 @@ pub fn parameter_shape(parts: &[&str]) -> String {
         [section, ..] => format!("expected {section}.NAME.PROPERTY"),
         [] => "empty path".to_owned(),
     }
+}
+
+/// The keys of a parameter path (`vessels.a.b.radius` -> `vessels`, `a.b`, `radius`): its
+/// dot-separated pieces, except that a vessel or node name may itself hold dots: under
+/// `vessels` / `boundary_conditions` (`names`: the model's vessel names and nodes) the
+/// longest known name the pieces after the section start with is one key, at least one piece
+/// left for the property. A path that starts with no known name is split at every dot (its
+/// reader then names the first piece as unknown, with [`nearest_name`]).
+pub fn parameter_keys<'p>(path: &'p str, names: &[(&str, &[String])]) -> Vec<&'p str> {
+    let plain = || path.split('.').collect();
+    let Some((section, rest)) = path.split_once('.') else {
+        return plain();
+    };
+    let Some(known) = names.iter().find(|(s, _)| *s == section).map(|(_, n)| *n) else {
+        return plain();
+    };
+    // the last dot that ends a known name: the longest name
+    let cut = rest
+        .rmatch_indices('.')
+        .map(|(i, _)| i)
+        .find(|&i| known.iter().any(|n| *n == rest[..i]));
+    match cut {
+        Some(i) => {
+            let mut keys = vec![section, &rest[..i]];
+            keys.extend(rest[i + 1..].split('.'));
+            keys
+        }
+        None => plain(),
+    }
+}
+
+/// The names of `known` nearest the name a path's pieces after its section (`rest`) start
+/// with, when they start with none: the longest start that has near names wins (a dotted
+/// name's typo, `a.c.radius` -> `a.b`; else the first piece's, `rv.chamber.max_elastance`
+/// -> `lv`). Empty when no start is a typo away ([`nearest`]).
+pub fn nearest_name<'k>(rest: &[&str], known: &'k [String]) -> Vec<&'k str> {
+    let known: Vec<&'k str> = known.iter().map(String::as_str).collect();
+    let longest = rest.len().saturating_sub(1).max(1).min(rest.len());
+    (1..=longest)
+        .rev()
+        .map(|cut| nearest(&rest[..cut].join("."), &known))
+        .find(|near| !near.is_empty())
+        .unwrap_or_default()
+}
+
+/// ` (nearest: a, b)`, or nothing when `near` is empty: the hint an unknown name's message
+/// ends with.
+pub fn nearest_hint(near: &[&str]) -> String {
+    if near.is_empty() {
+        String::new()
+    } else {
+        format!(" (nearest: {})", near.join(", "))
+    }
+}
+
+/// Why a heart element has no value `key` among the keys of `has` (the element's own, of
+/// [`heart_paths`]): `(<has>; nearest: <keys>)`, the nearest clause left out when no key is a
+/// typo away ([`nearest`]); ` (it has none)` for an element without any.
+pub fn heart_key_hint(key: &str, has: &[&str]) -> String {
+    if has.is_empty() {
+        return " (it has none)".to_owned();
+    }
+    let near = nearest(key, has);
+    let near = if near.is_empty() {
+        String::new()
+    } else {
+        format!("; nearest: {}", near.join(", "))
+    };
+    format!(" (differentiable: {}{near})", has.join(", "))
+}
+
+/// The keys a parameter path may name after a heart element of `kind` (`chamber`, `valve`,
+/// `chamber_sphere`, `heart_pulmonary`, …): every law's, a chamber's activation keys as
+/// `activation.<key>`; the schema's lists (`super::native::vessel`).
+pub fn heart_paths(kind: &str) -> Vec<String> {
+    heart_key_paths(kind)
 }
 
 /// The prefix of a patch message: the variant and the patch path.

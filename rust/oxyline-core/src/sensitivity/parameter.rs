@@ -141,8 +141,14 @@ impl Parameter {
     /// Resolve `path` against `spec`: the vessel or condition must exist and hold the number.
     /// The path's shape and keys are read by the model's path resolver
     /// (`crate::model::path`), which words an unknown key the same way as the patch merge.
+    /// A vessel or node name may itself hold dots: the longest name of the model that the
+    /// path starts with wins (`crate::model::path::parameter_keys`).
     pub fn parse(spec: &NetworkSpec, path: &str) -> Result<Parameter> {
-        let parts: Vec<&str> = path.split('.').collect();
+        let vessels: Vec<String> = spec.vessels.iter().map(|v| v.name.clone()).collect();
+        let nodes: Vec<String> = spec.boundary_conditions.keys().cloned().collect();
+        let names: [(&str, &[String]); 2] =
+            [("vessels", &vessels), ("boundary_conditions", &nodes)];
+        let parts = path::parameter_keys(path, &names);
         match parts.as_slice() {
             ["scale", "resistance"] => Ok(Parameter::ResistanceScale),
             ["scale", "compliance"] => Ok(Parameter::ComplianceScale),
@@ -166,16 +172,7 @@ impl Parameter {
 /// `vessels.<name>.chamber.<key>` or `vessels.<name>.valve.<key>` (`rest` after the name):
 /// the element's SI value of a key its law has.
 fn heart_element(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<Parameter> {
-    let v = spec
-        .vessels
-        .iter()
-        .find(|v| v.name == name)
-        .ok_or_else(|| {
-            unknown(
-                path,
-                format!("no vessel named '{name}' in model '{}'", spec.name),
-            )
-        })?;
+    let v = &spec.vessels[vessel_index(spec, path, name, rest)?];
     let key = rest[1..].join(".");
     let mut mass = None;
     let value = match (rest[0], &v.chamber, &v.valve, &v.chamber_sphere) {
@@ -200,11 +197,19 @@ fn heart_element(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> R
         }
     };
     let value = value.ok_or_else(|| {
+        // the keys this element has a value for, named with the nearest of them
+        let candidates = path::heart_paths(rest[0]);
+        let has: Vec<&str> = candidates
+            .iter()
+            .map(String::as_str)
+            .filter(|k| element_value(v, rest[0], k).is_some())
+            .collect();
         unknown(
             path,
             format!(
-                "the {} '{name}' has no differentiable value '{key}'",
-                rest[0]
+                "the {} '{name}' has no differentiable value '{key}'{}",
+                rest[0],
+                path::heart_key_hint(&key, &has)
             ),
         )
     })?;
@@ -214,6 +219,18 @@ fn heart_element(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> R
         value,
         mass,
     })
+}
+
+/// The value of heart element `kind`'s `key` of vessel `v` (None: not such an element, or
+/// no value there).
+fn element_value(v: &VesselSpec, kind: &str, key: &str) -> Option<f64> {
+    match kind {
+        "chamber" => chamber_value(v.chamber.as_ref()?, key),
+        "valve" => valve_value(v.valve.as_ref()?, key),
+        "chamber_sphere" => sphere_value(v.chamber_sphere.as_ref()?, key),
+        "heart_pulmonary" => heart_value(v.heart_pulmonary.as_deref()?, key),
+        _ => None,
+    }
 }
 
 /// A chamber's value by key: its law's elastances and volumes, and its activation's timing
@@ -381,10 +398,13 @@ fn valve_value(law: &ValveSpec, key: &str) -> Option<f64> {
 
 fn condition(spec: &NetworkSpec, path: &str, node: &str, key: &str) -> Result<Parameter> {
     let bc = spec.boundary_conditions.get(node).ok_or_else(|| {
+        let known: Vec<String> = spec.boundary_conditions.keys().cloned().collect();
+        let pieces: Vec<&str> = std::iter::once(node).chain(key.split('.')).collect();
+        let near = path::nearest_hint(&path::nearest_name(&pieces, &known));
         unknown(
             path,
             format!(
-                "no boundary condition at node '{node}' in model '{}'",
+                "no boundary condition at node '{node}' in model '{}'{near}",
                 spec.name
             ),
         )
@@ -523,17 +543,25 @@ fn is_node_label(label: &str) -> bool {
     matches!(label, "capacitor" | "intramyocardial compartment")
 }
 
-fn vessel(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<Parameter> {
-    let vi = spec
-        .vessels
+/// The index of the vessel named `name` (`rest`: the path's pieces after it); for none, an
+/// error naming the path, the name and the model's nearest vessel names.
+fn vessel_index(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<usize> {
+    spec.vessels
         .iter()
         .position(|v| v.name == name)
         .ok_or_else(|| {
+            let known: Vec<String> = spec.vessels.iter().map(|v| v.name.clone()).collect();
+            let pieces: Vec<&str> = std::iter::once(name).chain(rest.iter().copied()).collect();
+            let near = path::nearest_hint(&path::nearest_name(&pieces, &known));
             unknown(
                 path,
-                format!("no vessel named '{name}' in model '{}'", spec.name),
+                format!("no vessel named '{name}' in model '{}'{near}", spec.name),
             )
-        })?;
+        })
+}
+
+fn vessel(spec: &NetworkSpec, path: &str, name: &str, rest: &[&str]) -> Result<Parameter> {
+    let vi = vessel_index(spec, path, name, rest)?;
     let v = &spec.vessels[vi];
     let p = match (rest, &v.geometry, &v.lumped) {
         (["length"], Some(_), _) => Parameter::Length(vi),

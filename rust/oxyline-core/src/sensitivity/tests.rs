@@ -842,3 +842,64 @@ fn an_open_model_conserves_no_volume() {
         assert!(ConservedVolume::of(&assembled.circuit, &dae).is_none());
     }
 }
+
+/// A vessel or node whose name holds dots is addressed by it (the longest name of the model
+/// wins), and a name of no vessel or node is named with the model's nearest: the indices and
+/// names are those of the model as written.
+#[test]
+fn dotted_names_resolve_to_their_vessel_and_a_near_miss_names_the_nearest() {
+    let mut spec = parse(MODEL).unwrap();
+    spec.vessels[0].name = "p.a".into();
+    spec.vessels[2].name = "p".into();
+    let o2 = spec.boundary_conditions.remove("o2").unwrap();
+    spec.boundary_conditions.insert("o.2".into(), o2);
+    assert_eq!(
+        Parameter::parse(&spec, "vessels.p.a.radius").unwrap(),
+        Parameter::Radius(0)
+    );
+    assert_eq!(
+        Parameter::parse(&spec, "vessels.p.lumped.resistance").unwrap(),
+        Parameter::Lumped(2, "resistance".into())
+    );
+    assert_eq!(
+        Parameter::parse(&spec, "boundary_conditions.o.2.resistance").unwrap(),
+        Parameter::Condition {
+            node: "o.2".into(),
+            key: "resistance".into()
+        }
+    );
+    let err = |p: &str| Parameter::parse(&spec, p).unwrap_err().to_string();
+    assert_eq!(
+        err("vessels.q.a.radius"),
+        "parameter 'vessels.q.a.radius': no vessel named 'q' in model 'y' (nearest: p.a)"
+    );
+    assert_eq!(
+        err("boundary_conditions.o.3.resistance"),
+        "parameter 'boundary_conditions.o.3.resistance': no boundary condition at node 'o' \
+         in model 'y' (nearest: o.2)"
+    );
+}
+
+/// A heart element's key it has no value for names the keys it has (its law's, written out
+/// from the schema's tables) and the nearest of them.
+#[test]
+fn a_heart_key_typo_names_the_elements_keys_and_the_nearest() {
+    let base = parse(HEART).unwrap();
+    let err = |p: &str| Parameter::parse(&base, p).unwrap_err().to_string();
+    assert_eq!(
+        err("vessels.lv.chamber.max_elastanse"),
+        "parameter 'vessels.lv.chamber.max_elastanse': the chamber 'lv' has no \
+         differentiable value 'max_elastanse' (differentiable: max_elastance, min_elastance, \
+         rest_volume_diastole, rest_volume_systole, activation.t_active, activation.t_twitch; \
+         nearest: max_elastance)"
+    );
+    assert_eq!(
+        err("vessels.mitral.valve.steepnes"),
+        "parameter 'vessels.mitral.valve.steepnes': the valve 'mitral' has no differentiable \
+         value 'steepnes' (differentiable: min_resistance, max_resistance, steepness; \
+         nearest: steepness)"
+    );
+    assert!(
+        err("vessels.lv.chamber.activation.t_twich").ends_with("; nearest: activation.t_twitch)")
+    );
+}

@@ -45,6 +45,9 @@ pub struct LoopSummary {
     pub mass_balance_residual: f64,
     /// With a tree: the O2 each outlet delivers to its organ (mL/min), in organ order.
     pub do2_organs: Vec<(String, f64)>,
+    /// With a tree: the cycle-mean PO2 (mmHg) of every segment, by vessel (in the order the
+    /// tree's segments first name it; its segments in flow order).
+    pub po2_along: Vec<(String, Vec<f64>)>,
     /// Per variable of [`WEIGHTED`] (PO2 in mmHg): the cycle mean of every compartment's value
     /// weighted by every branch's flow, row-major branches × compartments.
     pub weighted: Vec<Vec<f64>>,
@@ -209,6 +212,33 @@ fn organ_delivery(run: &ClosedLoopRun, organs: &[String], to_ml_min: f64) -> Vec
         .collect()
 }
 
+/// The cycle-mean PO2 (mmHg) of every tree segment (named `vessel:k`), grouped by vessel
+/// (none without a tree). The recorded rows are added in step order and the sums divided by
+/// the steps: numpy's `mean(axis=0)` of the [step, segment] table in mmHg, bit for bit.
+fn po2_along(run: &ClosedLoopRun, steps: usize) -> Vec<(String, Vec<f64>)> {
+    let n = run.tree_segments.len();
+    if n == 0 || steps == 0 {
+        return Vec::new();
+    }
+    let mut sums = vec![0.0; n];
+    for row in run.tree_po2.chunks_exact(n) {
+        for (sum, p) in sums.iter_mut().zip(row) {
+            *sum += p / MMHG;
+        }
+    }
+    let mut out: Vec<(String, Vec<f64>)> = Vec::new();
+    let mut at: std::collections::HashMap<&str, usize> = std::collections::HashMap::new();
+    for (name, sum) in run.tree_segments.iter().zip(sums) {
+        let vessel = name.rsplit_once(':').map_or(name.as_str(), |(v, _)| v);
+        let k = *at.entry(vessel).or_insert_with(|| {
+            out.push((vessel.to_owned(), Vec::new()));
+            out.len() - 1
+        });
+        out[k].1.push(sum / steps as f64);
+    }
+    out
+}
+
 /// The summary of the recorded cycle `run` of a loop with these compartments, branches and
 /// organs (the tree's outlets, in order), stepped at `dt` (s).
 pub fn summarise(
@@ -256,6 +286,7 @@ pub fn summarise(
         fick_residual: (vo2 - co * (ca - cv)).abs() / vo2,
         mass_balance_residual: rates.mass_balance_residual(run, dt),
         do2_organs: organ_delivery(run, organs, to_ml_min),
+        po2_along: po2_along(run, shape.steps),
         weighted,
     })
 }
@@ -359,6 +390,34 @@ mod tests {
         let s = summarise(&run, &comps, &branches, &[], 0.25).unwrap();
         let want = 1e-9 / (1e-3 + 1e-9);
         assert!((s.mass_balance_residual - want).abs() < 1e-6 * want);
+    }
+
+    #[test]
+    fn po2_along_is_every_segments_cycle_mean_grouped_by_vessel() {
+        let (mut run, comps, branches) = record();
+        // two vessels over the four steps: 'a' constant 80 mmHg in both its segments,
+        // 'b' a ramp 10, 20, 30, 40 mmHg (mean 25) in its one segment
+        run.tree_segments = vec!["a:0".into(), "a:1".into(), "b:0".into()];
+        run.tree_po2 = (1..=4)
+            .flat_map(|s| [80.0, 80.0, 10.0 * f64::from(s)])
+            .map(|p| p * MMHG)
+            .collect();
+        let s = summarise(&run, &comps, &branches, &[], 0.25).unwrap();
+        assert_eq!(s.po2_along.len(), 2);
+        let (a, b) = (&s.po2_along[0], &s.po2_along[1]);
+        assert_eq!(
+            (a.0.as_str(), a.1.len(), b.0.as_str(), b.1.len()),
+            ("a", 2, "b", 1)
+        );
+        // a constant profile's mean is the constant, to the rounding of the mmHg conversion
+        for x in &a.1 {
+            assert!((x - 80.0).abs() < 1e-12, "{x}");
+        }
+        assert!((b.1[0] - 25.0).abs() < 1e-12, "{}", b.1[0]);
+        // without a tree there is nothing along it
+        let (run, ..) = record();
+        let s = summarise(&run, &comps, &branches, &[], 0.25).unwrap();
+        assert!(s.po2_along.is_empty());
     }
 
     #[test]

@@ -188,6 +188,74 @@ fn names<'a>(table: &[(&'a str, Quantity)]) -> Vec<&'a str> {
     table.iter().map(|(k, _)| *k).collect()
 }
 
+/// The keys a heart element's section may hold, as [`vessel`] checks them: a `chamber` or
+/// `valve` of law `law` (None for a law the schema does not know: its reader names the law),
+/// a `chamber_sphere`, a `heart_pulmonary` block, a `coronary_bed`, a `through_rc`.
+pub fn heart_keys(kind: &str, law: &str) -> Option<Vec<&'static str>> {
+    let keys = match kind {
+        "chamber" | "valve" => {
+            let chamber = kind == "chamber";
+            let laws = if chamber { CHAMBER_LAWS } else { VALVE_LAWS };
+            let (_, table) = laws.iter().find(|(name, _)| *name == law)?;
+            let mut keys = names(table);
+            keys.push("law");
+            if chamber {
+                keys.extend(names(CHAMBER_COMMON));
+                keys.push("activation");
+            }
+            keys
+        }
+        "chamber_sphere" => names(CHAMBER_SPHERE_KEYS),
+        "heart_pulmonary" => {
+            let mut keys = names(HEART_PULMONARY_KEYS);
+            keys.extend(names(HEART_PULMONARY_START));
+            keys.push("units");
+            keys
+        }
+        "coronary_bed" => {
+            let mut keys = names(CORONARY_BED_KEYS);
+            keys.extend(["units", "heart", "ventricle"]);
+            keys
+        }
+        "through_rc" => names(THROUGH_RC_KEYS),
+        _ => return None,
+    };
+    Some(keys)
+}
+
+/// Every key a heart element's section of `kind` holds under any of its laws, a chamber's
+/// activation keys (of every kind) as `activation.<key>`: the keys a parameter path may name
+/// after the element, each law's own picked by its reader.
+pub fn heart_key_paths(kind: &str) -> Vec<String> {
+    let laws: &[(&str, Table)] = match kind {
+        "chamber" => CHAMBER_LAWS,
+        "valve" => VALVE_LAWS,
+        _ => &[],
+    };
+    let mut keys: Vec<String> = laws
+        .iter()
+        .flat_map(|(law, _)| heart_keys(kind, law).unwrap_or_default())
+        .chain(heart_keys(kind, "").unwrap_or_default())
+        .map(str::to_owned)
+        .collect();
+    if kind == "chamber" {
+        let timing = ACTIVATIONS.iter().flat_map(|(_, keys)| keys.iter());
+        keys.extend(timing.map(|k| format!("activation.{k}")));
+    }
+    let mut seen = std::collections::HashSet::new();
+    keys.retain(|k| seen.insert(k.clone()));
+    keys
+}
+
+/// The keys of a chamber's `activation` of kind `kind` (None for a kind the schema does not
+/// know), as [`vessel`] checks them.
+pub fn activation_keys(kind: &str) -> Option<Vec<&'static str>> {
+    let (_, keys) = ACTIVATIONS.iter().find(|(name, _)| *name == kind)?;
+    let mut keys = keys.to_vec();
+    keys.push("kind");
+    Some(keys)
+}
+
 /// The canonical form of vessel `i` (0-based), checking every key and value.
 pub fn vessel<N: Node>(v: &N, i: usize, units: Units) -> Result<Value> {
     let el = match v

@@ -226,3 +226,51 @@ fn another_wall_closure_replaces_the_wall() {
         json!({"model": "graetz", "po2": 50.0})
     );
 }
+
+/// A heart element's key is checked against its law (the patch's, else the base vessel's)
+/// and a chamber's activation against its kind: a typo is a naming mistake, raised before
+/// anything runs, with the schema's nearest key; the keys the law has pass.
+#[test]
+fn a_heart_elements_unknown_key_is_a_naming_mistake_with_the_nearest() {
+    let mut model = tube();
+    model["vessels"][1] = json!({"name": "c", "from": "j", "to": "out1",
+        "chamber": {"law": "linear", "max_elastance": 2e8, "passive_elastance": 1e7,
+                    "rest_volume": 1e-5,
+                    "activation": {"kind": "half-cosine", "t_active": 0.2, "t_twitch": 0.3}}});
+    let patch = json!({"vessels": {"c": {"chamber": {"max_elastanse": 1.0}}}});
+    let (name, text) = message(merge(&model, &patch, 2));
+    assert!(name, "{text}");
+    assert!(
+        text.starts_with(
+            "variant 2: vessels.c.chamber.max_elastanse: unknown property of a linear chamber \
+             (allowed: activation, inductance, initial_volume, law, max_elastance, \
+             passive_elastance, period, rest_volume; nearest: max_elastance)"
+        ),
+        "{text}"
+    );
+    let patch = json!({"vessels": {"c": {"chamber": {"activation": {"t_twich": 0.3}}}}});
+    let (name, text) = message(merge(&model, &patch, 2));
+    assert!(name, "{text}");
+    assert!(
+        text.starts_with(
+            "variant 2: vessels.c.chamber.activation.t_twich: unknown property of a \
+             half-cosine activation (allowed: kind, t_active, t_twitch; nearest: t_twitch)"
+        ),
+        "{text}"
+    );
+    // another law in the patch: its keys
+    let patch = json!({"vessels": {"c": {"chamber": {"law": "exponential",
+                                                     "passive_pressure": 1.0}}}});
+    assert!(merge(&model, &patch, 2).is_ok());
+    let patch = json!({"vessels": {"c": {"chamber": {"max_elastance": 3e8,
+                                          "activation": {"t_active": 0.25}}}}});
+    assert!(merge(&model, &patch, 2).is_ok());
+    // a valve's key by the law the patch gives
+    let patch = json!({"vessels": {"c": {"valve": {"law": "tanh", "steepnes": 1.0}}}});
+    let (name, text) = message(merge(&model, &patch, 2));
+    assert!(
+        name && text.contains("unknown property of a tanh valve"),
+        "{text}"
+    );
+    assert!(text.ends_with("; nearest: steepness)"), "{text}");
+}

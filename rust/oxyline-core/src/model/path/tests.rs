@@ -144,3 +144,40 @@ fn column_keys_split_dotted_names_by_the_longest_known_name() {
         ["vessels", "a.b", "radius"]
     );
 }
+
+/// Parameter keys: the longest known vessel or node name wins, at least one piece left for
+/// the property; a path that starts with no known name splits at every dot.
+#[test]
+fn parameter_keys_split_dotted_names_by_the_longest_known_name() {
+    use super::{nearest_name, parameter_keys};
+    let vessels = vec!["a".to_owned(), "a.b".to_owned(), "lv".to_owned()];
+    let nodes = vec!["out.1".to_owned()];
+    let names: [(&str, &[String]); 2] = [("vessels", &vessels), ("boundary_conditions", &nodes)];
+    let keys = |path: &'static str| parameter_keys(path, &names);
+    assert_eq!(keys("vessels.a.b.radius"), ["vessels", "a.b", "radius"]);
+    assert_eq!(keys("vessels.a.radius"), ["vessels", "a", "radius"]);
+    assert_eq!(
+        keys("vessels.a.b.lumped.resistance"),
+        ["vessels", "a.b", "lumped", "resistance"]
+    );
+    assert_eq!(
+        keys("vessels.lv.chamber.activation.t_active"),
+        ["vessels", "lv", "chamber", "activation", "t_active"]
+    );
+    assert_eq!(
+        keys("boundary_conditions.out.1.resistance"),
+        ["boundary_conditions", "out.1", "resistance"]
+    );
+    // a name alone is not a property: the name keeps one piece after it
+    assert_eq!(keys("vessels.a.b"), ["vessels", "a", "b"]);
+    assert_eq!(keys("vessels.zz.radius"), ["vessels", "zz", "radius"]);
+    assert_eq!(keys("scale.resistance"), ["scale", "resistance"]);
+    // the nearest names: a dotted name's typo, else the first piece's
+    assert_eq!(nearest_name(&["a", "c", "radius"], &vessels), ["a.b"]);
+    assert_eq!(
+        nearest_name(&["rv", "chamber", "max_elastance"], &vessels),
+        ["lv"]
+    );
+    assert!(nearest_name(&["zzz", "radius"], &vessels).is_empty());
+    assert_eq!(nearest_name(&["out", "2", "resistance"], &nodes), ["out.1"]);
+}
