@@ -432,6 +432,13 @@ fn cubic_all(w: [f64; 4], ends: [&[f64]; 4], state: &mut Vec<f64>) {
     state.extend(ends.map(|((&a, &b), (&c, &d))| cubic(a, b, c, d)));
 }
 
+/// The judgements of one step that may refuse it for its index-2 error (a refused step is
+/// judged twice, by the estimate's pass and after the filter: two refusals); then that error
+/// lets it pass. Near a kink of the constrained unknown's rate (a time law's) the quadratic
+/// through the last levels straddles the kink whatever the step, until three steps have
+/// passed it: refused without end, the steps would fall to the smallest.
+const INDEX2_REJECTIONS: u32 = 4;
+
 /// The least ratio of the step before to the step for an algebraic unknown's quadratic (see
 /// [`Dense::polynomial`]): a shorter step before would set its curvature by a difference of
 /// two values over a short span (its weights reach 1 at this ratio).
@@ -1960,10 +1967,3 @@ mod tests {
         }
     }
 }
-
-/// The judgements of one step that may refuse it for its index-2 error (a refused step is
-/// judged twice, by the estimate's pass and after the filter: two refusals); then that error
-/// lets it pass. Near a kink of the constrained unknown's rate (a time law's) the quadratic
-/// through the last levels straddles the kink whatever the step, until three steps have
-/// passed it: refused without end, the steps would fall to the smallest.
-const INDEX2_REJECTIONS: u32 = 4;
