@@ -173,14 +173,20 @@ impl Index2 {
         self.balances.is_empty()
     }
 
-    /// The balance of unknown `i`, if it is one of the index-2 unknowns.
+    /// The balance of unknown `i` and its position, if it is one of the index-2 unknowns.
     #[inline]
-    pub fn balance(&self, i: usize) -> Option<&Balance> {
+    pub fn balance_at(&self, i: usize) -> Option<(usize, &Balance)> {
         if self.balances.is_empty() {
             return None;
         }
         let k = self.balances.binary_search_by_key(&i, |b| b.unknown);
-        k.ok().map(|k| &self.balances[k])
+        k.ok().map(|k| (k, &self.balances[k]))
+    }
+
+    /// The balance of unknown `i`, if it is one of the index-2 unknowns.
+    #[inline]
+    pub fn balance(&self, i: usize) -> Option<&Balance> {
+        self.balance_at(i).map(|(_, b)| b)
     }
 
     pub fn contains(&self, i: usize) -> bool {
@@ -215,7 +221,86 @@ pub fn slope_at(points: &[(f64, f64)], t: f64) -> f64 {
             let lc = ((t - a) + (t - b)) / ((c - a) * (c - b));
             la * ya + lb * yb + lc * yc
         }
+        [p0, p1, p2, p3] => {
+            // the quadratic's slope through the last three plus the cubic term's
+            let (b, c, d) = (p1.0, p2.0, p3.0);
+            let dd = |(s, u): (f64, f64), (t, v): (f64, f64)| (v - u) / (t - s);
+            let (ab, bc, cd) = (dd(p0, p1), dd(p1, p2), dd(p2, p3));
+            let third = ((cd - bc) / (d - b) - (bc - ab) / (c - p0.0)) / (d - p0.0);
+            let w = (t - c) * (t - d) + (t - b) * (t - d) + (t - b) * (t - c);
+            slope_at(&points[1..], t) + third * w
+        }
         _ => 0.0,
+    }
+}
+
+/// The error, over a step of `h` (0 ≤ x ≤ h from its start), of the slope the quadratic
+/// through the last three of four points (t, v) gives, distinct in t, oldest first: the slope
+/// of the cubic through all four less the quadratic's, the cubic term
+/// f[t₀, t₁, t₂, t₃]·(x − t₁)(x − t₂)(x − t₃) differentiated, at the larger of its values at
+/// the step's ends (the derivative of that product is a quadratic in x whose extreme over the
+/// step lies at an end unless its vertex falls within; the vertex is taken too).
+pub fn quadratic_slope_error(points: &[(f64, f64); 4], h: f64) -> f64 {
+    let [(a, ya), (b, yb), (c, yc), (d, yd)] = *points;
+    let f1 = |(s, u): (f64, f64), (t, v): (f64, f64)| (v - u) / (t - s);
+    let (ab, bc, cd) = (
+        f1((a, ya), (b, yb)),
+        f1((b, yb), (c, yc)),
+        f1((c, yc), (d, yd)),
+    );
+    let (abc, bcd) = ((bc - ab) / (c - a), (cd - bc) / (d - b));
+    let third = (bcd - abc) / (d - a);
+    // d/dx (x − b)(x − c)(x − d) = 3x² − 2(b + c + d)x + (bc + bd + cd)
+    let (s1, s2) = (b + c + d, b * c + b * d + c * d);
+    let w = |x: f64| 3.0 * x * x - 2.0 * s1 * x + s2;
+    let vertex = (s1 / 3.0).clamp(0.0, h);
+    let worst = w(0.0).abs().max(w(h).abs()).max(w(vertex).abs());
+    third.abs() * worst
+}
+
+/// The α_f-level values of each index-2 balance's rate unknown over the last three accepted
+/// steps of an error-controlled run, oldest first, at times from the current step's start:
+/// with the step's own level, the four points [`quadratic_slope_error`] judges the step's
+/// consistent values by.
+#[derive(Debug, Clone, Default)]
+pub struct Levels {
+    points: Vec<[(f64, f64); 3]>,
+}
+
+impl Levels {
+    /// A step of `h` from `y0` to `y` was accepted: its levels join, the times move to the
+    /// next step's start.
+    pub fn accepted(&mut self, index2: &Index2, alpha_f: f64, h: f64, y0: &[f64], y: &[f64]) {
+        self.points.resize(index2.balances.len(), [(0.0, 0.0); 3]);
+        for (b, pts) in index2.balances.iter().zip(&mut self.points) {
+            let r = b.rate_unknown;
+            let level = y0[r] + alpha_f * (y[r] - y0[r]);
+            *pts = [
+                (pts[1].0 - h, pts[1].1),
+                (pts[2].0 - h, pts[2].1),
+                ((alpha_f - 1.0) * h, level),
+            ];
+        }
+    }
+
+    /// The four points of balance `k` for the step of `h` from `y0` to `y` (its level last):
+    /// valid once three steps were accepted since the last restart.
+    pub fn with_step(
+        &self,
+        k: usize,
+        r: usize,
+        alpha_f: f64,
+        h: f64,
+        y0: &[f64],
+        y: &[f64],
+    ) -> [(f64, f64); 4] {
+        let p = self.points[k];
+        [
+            p[0],
+            p[1],
+            p[2],
+            (alpha_f * h, y0[r] + alpha_f * (y[r] - y0[r])),
+        ]
     }
 }
 
@@ -358,6 +443,67 @@ mod tests {
             assert!((slope_at(&pts, t) - (-2.0 + 6.0 * t)).abs() < 1e-12);
         }
         assert!((slope_at(&pts[..2], 7.0) - (q(0.4) - q(0.1)) / 0.3).abs() < 1e-12);
+    }
+
+    /// The quadratic's slope error is the cubic's slope less the quadratic's, exactly for a
+    /// cubic and at its worst over the step; the four-point slope is the cubic's.
+    #[test]
+    fn the_slope_error_of_the_quadratic_is_its_miss_of_a_cubic() {
+        let y = |t: f64| 0.3 - t + 2.0 * t * t - 5.0 * t * t * t;
+        let dy = |t: f64| -1.0 + 4.0 * t - 15.0 * t * t;
+        // levels at uneven spacing, the last inside the step [0, h]
+        let h = 0.2;
+        let ts = [-0.55, -0.3, -0.12, 0.13];
+        let pts = ts.map(|t| (t, y(t)));
+        let mut worst = 0.0f64;
+        for k in 0..=200 {
+            let x = h * k as f64 / 200.0;
+            assert!((slope_at(&pts, x) - dy(x)).abs() < 1e-12);
+            worst = worst.max((slope_at(&pts[1..], x) - dy(x)).abs());
+        }
+        let est = quadratic_slope_error(&pts, h);
+        // (the samples may miss an interior extreme by a little)
+        assert!(
+            est >= worst * (1.0 - 1e-12) && est <= worst * (1.0 + 1e-4),
+            "{est} vs {worst}"
+        );
+        // a quadratic has none
+        let q = |t: f64| 1.0 + t - 3.0 * t * t;
+        assert!(quadratic_slope_error(&ts.map(|t| (t, q(t))), h) < 1e-12);
+    }
+
+    /// The levels of three accepted steps, with the step's own, at times from its start.
+    #[test]
+    fn the_levels_move_with_the_accepted_steps() {
+        let index2 = Index2 {
+            balances: vec![Balance {
+                unknown: 1,
+                rate_unknown: 0,
+                e: 2.0,
+                coefficient: -1.0,
+                terms: Vec::new(),
+            }],
+        };
+        let af = 2.0 / 3.0;
+        let (mut levels, mut t) = (Levels::default(), 0.0);
+        let p = |t: f64| [t * t, f64::NAN];
+        for h in [0.3, 0.6, 0.15] {
+            levels.accepted(&index2, af, h, &p(t), &p(t + h));
+            t += h;
+        }
+        let h = 0.45;
+        let pts = levels.with_step(0, 0, af, h, &p(t), &p(t + h));
+        // each level at its step's α_f time, relative to the step's start t = 1.05
+        let want = [
+            (-1.05 + 0.2, 0.0, 0.3),
+            (-0.75 + 0.4, 0.3, 0.9),
+            (-0.15 + 0.1, 0.9, 1.05),
+        ];
+        for (k, (x, a, b)) in want.into_iter().enumerate() {
+            let level = a * a + af * (b * b - a * a);
+            assert!((pts[k].0 - x).abs() < 1e-12 && (pts[k].1 - level).abs() < 1e-12);
+        }
+        assert!((pts[3].0 - af * h).abs() < 1e-15);
     }
 
     /// Two capacitors tied by a wire (its flow is index 2: only the two nodes' balances hold
