@@ -282,11 +282,8 @@ impl Waveform {
         if jump || (slope(1) - slope(n - 1)).abs() > share {
             kinks.push(t[0]);
         }
-        for k in 1..n - 1 {
-            if (slope(k + 1) - slope(k)).abs() > share {
-                kinks.push(t[k]);
-            }
-        }
+        let inner = (1..n - 1).filter(|&k| (slope(k + 1) - slope(k)).abs() > share);
+        kinks.extend(inner.map(|k| t[k]));
         kinks
     }
 
