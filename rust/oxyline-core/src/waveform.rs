@@ -4,6 +4,13 @@
 use crate::error::{Error, Result};
 use serde::Deserialize;
 
+/// A linear table's sample is a corner of its forcing (a breakpoint an error-controlled step
+/// ends on, [`Waveform::kinks`]) where the slope changes by more than this share of the table's
+/// largest |slope|: a sampled smooth curve's slope changes by ~2π/N of it per sample (N
+/// samples a period), so tables of more than ~25 samples a period have none but their true
+/// corners, and a coarse table is all corners.
+pub const KINK_SHARE: f64 = 0.25;
+
 #[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq, Default)]
 #[serde(rename_all = "kebab-case")]
 pub enum Interpolation {
@@ -253,6 +260,33 @@ impl Waveform {
         }
     }
 
+    /// The times within one period of a linear table (from its first time, before its last)
+    /// where its slope changes by at least [`KINK_SHARE`] of the table's largest |slope|, or
+    /// its value jumps (at the wrap, where the last value is not the first): the corners an
+    /// error-controlled run ends a step on (docs/physics.md §10, "Breakpoints"). A sampled
+    /// smooth curve's corners, each ~ its slope's change over one sample spacing, lie below
+    /// the share (a half-sine of 201 samples: 5 % of its largest slope at the most, its two
+    /// ends 100 %). None for a constant, a Fourier series or a cubic spline (C²).
+    pub fn kinks(&self) -> Vec<f64> {
+        let Waveform::Table { t, v, m: None, .. } = self else {
+            return Vec::new();
+        };
+        let n = t.len();
+        let slope = |k: usize| (v[k] - v[k - 1]) / (t[k] - t[k - 1]);
+        let largest = (1..n).map(|k| slope(k).abs()).fold(0.0f64, f64::max);
+        let range = v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let share = KINK_SHARE * largest;
+        let mut kinks = Vec::new();
+        // the wrap: the last segment goes on into the first (or the value jumps there)
+        let jump = (v[n - 1] - v[0]).abs() > 1e-12 * range;
+        if jump || (slope(1) - slope(n - 1)).abs() > share {
+            kinks.push(t[0]);
+        }
+        let inner = (1..n - 1).filter(|&k| (slope(k + 1) - slope(k)).abs() > share);
+        kinks.extend(inner.map(|k| t[k]));
+        kinks
+    }
+
     pub fn eval(&self, time: f64) -> f64 {
         match self {
             Waveform::Constant(v) => *v,
@@ -481,6 +515,49 @@ mod tests {
             }
         }
         assert_eq!(Waveform::constant(2.0).slope(0.3), 0.0);
+    }
+
+    #[test]
+    fn a_tables_corners_are_its_sharp_slope_changes_only() {
+        // a half-sine systole over 0.3 s and a zero diastole, 201 samples: the corners are the
+        // systole's start (the wrap) and end, not the sampled sine's own small bends
+        let time: Vec<f64> = (0..=200).map(|i| f64::from(i) / 200.0).collect();
+        let value: Vec<f64> = time
+            .iter()
+            .map(|&t| {
+                if t < 0.3 {
+                    (std::f64::consts::PI * t / 0.3).sin()
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let w = table(time.clone(), value, Interpolation::Linear, "in").unwrap();
+        let kinks = w.kinks();
+        assert_eq!(kinks.len(), 2, "{kinks:?}");
+        assert_eq!(kinks[0], 0.0);
+        assert!((kinks[1] - 0.3).abs() < 1e-12, "{kinks:?}");
+        // a coarse table is all corners; a value that jumps at the wrap is one there
+        let w = table(
+            vec![0.0, 0.3, 0.55, 1.0],
+            vec![1.0, 4.0, 1.5, 1.0],
+            Interpolation::Linear,
+            "in",
+        );
+        assert_eq!(w.unwrap().kinks(), vec![0.0, 0.3, 0.55]);
+        let w = table(
+            vec![0.0, 0.5, 1.0],
+            vec![0.0, 1.0, 2.0],
+            Interpolation::Linear,
+            "in",
+        );
+        assert_eq!(w.unwrap().kinks(), vec![0.0]);
+        // a cubic spline (C²), a Fourier series and a constant have none
+        let mut v: Vec<f64> = time.iter().map(|&t| (6.0 * t).sin() + 2.0).collect();
+        v[200] = v[0];
+        let w = table(time, v, Interpolation::PeriodicCubic, "in").unwrap();
+        assert!(w.kinks().is_empty());
+        assert!(Waveform::constant(1.0).kinks().is_empty());
     }
 
     #[test]

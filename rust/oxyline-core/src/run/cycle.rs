@@ -3,6 +3,7 @@
 //! pass has settled), interrupted, or failed.
 
 use super::adaptive::Adaptive;
+use super::breakpoints::{Breakpoints, toward_corner};
 use super::checkpoint::{Checkpoints, Snapshot};
 use super::coupling::State;
 use super::events::{Cut, Next, decide};
@@ -71,6 +72,8 @@ pub(super) struct Cycles<'r, 'f> {
     /// row recorded from the state reports (None: the circuit has none, or the integrator
     /// meets its algebraic rows at the step's end).
     step_ends: Option<StepEnds>,
+    /// The forcing's corners, each of which an error-controlled step ends on.
+    breakpoints: Breakpoints,
 }
 
 /// What the rows of one cycle are for.
@@ -136,8 +139,10 @@ impl<'r, 'f> Cycles<'r, 'f> {
         let step_ends = (!s.svzerod.drop_in)
             .then(|| StepEnds::new(state.dae, state.flow.integrator().alpha_f()))
             .flatten();
+        let breakpoints = Breakpoints::of(state.dae, s.period);
         Cycles {
             step_ends,
+            breakpoints,
             s,
             prev_cycle_end: state.y.clone(),
             state,
@@ -471,6 +476,7 @@ impl<'r, 'f> Cycles<'r, 'f> {
         }
         // the error control's scales: the previous cycle's and this one's largest values
         ad.start_cycle(&self.state.y);
+        self.breakpoints.start_cycle(t0, t_end);
         // (a small circuit's step stays on this thread: `threads::in_pool_for`)
         let work = self.state.work();
         // a step taken again to end on a valve event
@@ -478,13 +484,16 @@ impl<'r, 'f> Cycles<'r, 'f> {
         let mut retry = Retry::default();
         while t < t_end {
             let rem = t_end - t;
-            // the last step ends on the cycle's end; a remainder under two steps is halved
+            // the last step ends on the cycle's end, and a step on each corner of the forcing;
+            // a remainder under two steps is halved
+            let corner = self.breakpoints.next_after(t);
+            let to_corner = corner.map_or(rem, |c| c - t);
             let h = if let Some(c) = cut {
                 c.h
             } else if let Some(h) = self.periodic_steps.step(rem) {
-                h
+                toward_corner(h, to_corner, true)
             } else {
-                toward_end(ad.h, rem)
+                toward_corner(ad.h, to_corner, false)
             };
             let replayed = self.periodic_steps.replaying();
             // the flow step and its estimate in one entry of the run's pool
@@ -559,6 +568,9 @@ impl<'r, 'f> Cycles<'r, 'f> {
             }
             self.periodic_steps.accepted(h);
             let t_new = if h == rem { t_end } else { t + h };
+            // (a step that ends on a corner ends on it exactly)
+            let at_corner = corner.filter(|_| h == to_corner);
+            let t_new = at_corner.unwrap_or(t_new);
             let mut peek = next_out;
             if rows.recorded
                 && rows.species
@@ -576,10 +588,15 @@ impl<'r, 'f> Cycles<'r, 'f> {
             }
             // the estimates and the next step's size in one entry of the run's pool
             crate::threads::in_pool_for(work, || ad.accept(&self.state, h, err, kinds));
-            let restarted = leap || matches!(next, Next::Switch(..));
+            let restarted = leap || matches!(next, Next::Switch(..)) || at_corner.is_some();
             if leap {
                 // the solution jumped within the leap: the estimates start again after it
                 ad.restart(ad.h.min(h));
+            }
+            if at_corner.is_some() {
+                // the extrapolation through the last states would straddle the corner: the
+                // estimates start again from it, at the step the controller proposed
+                ad.restart(ad.h);
             }
             match next {
                 Next::Switch(k, proposed) => {

@@ -16,6 +16,7 @@
 //! A failed or interrupted run still returns everything recorded so far.
 
 mod adaptive; // error control: variable step, dense output (docs/physics.md §10)
+mod breakpoints; // the forcing's corners, each of which a controlled step ends on
 pub mod checkpoint;
 mod coupling;
 mod cycle;
