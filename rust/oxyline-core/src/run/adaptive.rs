@@ -82,6 +82,16 @@ pub(super) struct Adaptive {
     cycle_peak: Vec<f64>,
     cycle_rate: Vec<f64>,
     cycle_accel: Vec<f64>,
+    /// The three maxima over the current cycle with the step just judged (the estimate's
+    /// pass writes them, in its vectors, while it reads every unknown anyway): an accepted
+    /// step whose pass's record holds (`blocks_known`) takes them as the cycle's, and the
+    /// tracking pass then visits only the unknowns whose peak (over the previous cycle and
+    /// this one) grows. Recording the cycle's maxima unknown by unknown in the tracking pass
+    /// visited most unknowns in every step of a systole (each cycle's maxima start again from
+    /// the state, |ẏ| and |ÿ| from 0): 12 % of adan56's default run.
+    next_peak: Vec<f64>,
+    next_rate: Vec<f64>,
+    next_accel: Vec<f64>,
     /// Each flow unknown's vessel (`NO_VESSEL` for a boundary condition's or an element's
     /// own branch): a vessel's flow is judged against its vessel's amplitude, so a small
     /// vessel's flow meets rtol of its own amplitude (and atol scaled by its share of the
@@ -92,8 +102,6 @@ pub(super) struct Adaptive {
     /// last set (see `track_flow_peaks`).
     group_peak: Vec<f64>,
     group_set: Vec<f64>,
-    /// The largest |Q| per group over the current cycle so far (see `cycle_peak`).
-    group_cycle: Vec<f64>,
     /// The largest scale per kind (pressure, flow, volume) when the absolute tolerances were
     /// last set: a kind's default atol is its largest unknown's (at most rtol of it), every
     /// other unknown's is scaled by its share (`Tolerances::atol_of`), renewed when the
@@ -117,8 +125,9 @@ pub(super) struct Adaptive {
     /// step, see `inv_omega`).
     w_step: Vec<f64>,
     w_unit: Vec<f64>,
-    /// Whether the step just judged may grow a peak (of |y|, |ẏ| or |ÿ|): the estimate's
-    /// pass finds out, and an accepted step that grows none skips the tracking pass.
+    /// Whether the step just judged may grow a peak (of |y|, |ẏ| or |ÿ| over the previous
+    /// cycle and the current one): the estimate's pass finds out, and an accepted step that
+    /// grows none skips the tracking pass.
     may_grow: bool,
     /// Per block of `BLOCK` unknowns, the unknowns in which the estimate's pass of the step
     /// just judged saw a peak grow (bit k: the block's k-th unknown); `blocks_known` while
@@ -544,10 +553,12 @@ impl Adaptive {
             cycle_peak: Vec::new(),
             cycle_rate: Vec::new(),
             cycle_accel: Vec::new(),
+            next_peak: Vec::new(),
+            next_rate: Vec::new(),
+            next_accel: Vec::new(),
             flow_group: flow_groups(dae),
             group_peak: Vec::new(),
             group_set: Vec::new(),
-            group_cycle: Vec::new(),
             kind_set: [0.0; 3],
             species_largest: Vec::new(),
             species_step_error: 0.0,
@@ -943,25 +954,41 @@ impl Adaptive {
             inv_h1: 1.0 / self.h1,
             inv_span: 2.0 / (h + self.h1),
         };
-        let mut kinds = [0.0f64; 3];
-        let grows = AtomicBool::new(false);
         if self.grow_blocks.len() == n.div_ceil(BLOCK) {
             self.grow_blocks.iter_mut().for_each(|b| *b.get_mut() = 0);
         } else {
             self.grow_blocks = (0..n.div_ceil(BLOCK)).map(|_| AtomicU32::new(0)).collect();
         }
+        let mut next = [
+            std::mem::take(&mut self.next_peak),
+            std::mem::take(&mut self.next_rate),
+            std::mem::take(&mut self.next_accel),
+        ];
+        // (every value is written below: a buffer of the right length is not cleared first)
+        next.iter_mut().for_each(|v| v.resize(n, 0.0));
         let ends = [0, self.kind_end[0], self.kind_end[1], n];
-        for (k, worst) in kinds.iter_mut().enumerate() {
-            let first = ends[k];
-            *worst = crate::threads::max_over(ends[k + 1] - first, |r| {
-                let (m, g) = self.fused_range(first + r.start..first + r.end, y, &c);
-                if g {
-                    grows.store(true, Ordering::Relaxed);
+        let this = &*self;
+        let [np, nr, na] = &mut next;
+        let mut tasks = chunk_tasks(0, [&mut np[..], nr, na]);
+        // (in chunks on the run's threads, each its own part of every kind: a maximum and an
+        // "any" are the same in any grouping)
+        let (mut kinds, grows) = kind_maxima(&mut tasks, |(first, out)| {
+            let (mut worst, mut grows) = ([0.0f64; 3], false);
+            for (k, w) in worst.iter_mut().enumerate() {
+                let at = ends[k].max(*first)..ends[k + 1].min(*first + out[0].len());
+                if at.start < at.end {
+                    let local = at.start - *first..at.end - *first;
+                    let [p, r, a] = out;
+                    let out = [&mut p[local.clone()], &mut r[local.clone()], &mut a[local]];
+                    let (m, g) = this.fused_range(at, y, &c, out);
+                    (*w, grows) = (m, grows | g);
                 }
-                m
-            });
-        }
-        (self.may_grow, self.blocks_known) = (grows.into_inner(), true);
+            }
+            (worst, grows)
+        });
+        drop(tasks);
+        [self.next_peak, self.next_rate, self.next_accel] = next;
+        (self.may_grow, self.blocks_known) = (grows, true);
         self.algebraic_errors(y, h, &mut kinds);
         FlowError {
             max: kinds.iter().fold(0.0f64, |m, &e| m.max(e)),
@@ -970,7 +997,8 @@ impl Adaptive {
     }
 
     /// `fused_errors` over the unknowns `r`: the largest scaled error, and whether a peak grows
-    /// (the unknowns where one does recorded in `grow_blocks`). Block by block, each in groups
+    /// (the unknowns where one does recorded in `grow_blocks`), the maxima over the cycle with
+    /// the step into `out` (|y|, |ẏ|, |ÿ|: `next_peak` ..., of `r`). Block by block, each in groups
     /// of `LANES` unknowns, each lane its own maximum (one chain of dependent maxima through
     /// every unknown otherwise), the maxima as compare-and-select (`f64::max` also orders NaNs:
     /// no NaN comes here but through a NaN state, which the run refuses at its check); a
@@ -978,27 +1006,39 @@ impl Adaptive {
     /// maximum's. On x86-64 with AVX2 (detected at run time) a group is one 4-lane vector
     /// per operation (`simd_block`): the same operations on the same values, so the same
     /// numbers (no fused multiply-add).
-    fn fused_range(&self, r: Range<usize>, y: &[f64], c: &Fused) -> (f64, bool) {
+    fn fused_range(
+        &self,
+        r: Range<usize>,
+        y: &[f64],
+        c: &Fused,
+        out: [&mut [f64]; 3],
+    ) -> (f64, bool) {
         #[cfg(target_arch = "x86_64")]
         if let Some(simd) = pulp::x86::V3::try_new() {
-            return simd.vectorize(|| self.fused_blocks(r, y, |v| simd_block(simd, v, c)));
+            return simd
+                .vectorize(|| self.fused_blocks(r, y, out, |v, o| simd_block(simd, v, c, o)));
         }
-        self.fused_blocks(r, y, |v| v.block(c))
+        self.fused_blocks(r, y, out, |v, o| v.block(c, o))
     }
 
     /// The unknowns `r` block by block (see `fused_range`): `block` gives a block's largest
-    /// scaled error and its unknowns that grow a peak (bit k: its k-th).
+    /// scaled error and its unknowns that grow a peak (bit k: its k-th), and writes its
+    /// maxima over the cycle into the block's part of `out`.
     #[inline(always)]
     fn fused_blocks(
         &self,
         r: Range<usize>,
         y: &[f64],
-        block: impl Fn(&FusedSlices<'_>) -> (f64, u32),
+        out: [&mut [f64]; 3],
+        block: impl Fn(&FusedSlices<'_>, [&mut [f64]; 3]) -> (f64, u32),
     ) -> (f64, bool) {
         let (mut m, mut grows, mut at) = (0.0f64, false, r.start);
+        let [op, or, oa] = out;
         while at < r.end {
             let end = ((at / BLOCK + 1) * BLOCK).min(r.end);
-            let (block_max, mask) = block(&self.fused_slices(at..end, y));
+            let o = at - r.start..end - r.start;
+            let o = [&mut op[o.clone()], &mut or[o.clone()], &mut oa[o]];
+            let (block_max, mask) = block(&self.fused_slices(at..end, y), o);
             if mask != 0 {
                 // (a range's blocks are its own but at its ends, which a kind's boundary may
                 // share with the next range)
@@ -1021,9 +1061,12 @@ impl Adaptive {
             y0: &self.y0[r.clone()],
             wu: &self.w_unit[r.clone()],
             ws: &self.w_step[r.clone()],
-            pk: &self.cycle_peak[r.clone()],
-            rp: &self.cycle_rate[r.clone()],
-            ap: &self.cycle_accel[r],
+            pk: &self.peak[r.clone()],
+            rp: &self.rate_peak[r.clone()],
+            ap: &self.accel_peak[r.clone()],
+            cp: &self.cycle_peak[r.clone()],
+            cr: &self.cycle_rate[r.clone()],
+            ca: &self.cycle_accel[r],
         }
     }
 
@@ -1189,6 +1232,12 @@ impl Adaptive {
         for (e, k) in self.estimate.iter_mut().zip(kinds.iter().chain([&species])) {
             *e = e.max(k * rtol);
         }
+        if self.blocks_known {
+            // the maxima over the cycle with this step, from its estimate's pass
+            std::mem::swap(&mut self.cycle_peak, &mut self.next_peak);
+            std::mem::swap(&mut self.cycle_rate, &mut self.next_rate);
+            std::mem::swap(&mut self.cycle_accel, &mut self.next_accel);
+        }
         // (a step that grows no peak leaves the peaks, scales and weights as they are)
         let grown = self.may_grow && self.track_peaks(&st.y, h);
         self.track_flow_peaks(&st.y, grown);
@@ -1233,13 +1282,13 @@ impl Adaptive {
             let groups = vessels.map(|&g| g as usize + 1).max();
             self.group_peak = vec![0.0; groups.unwrap_or(0)];
             self.group_set = vec![-1.0; self.group_peak.len()];
-            self.group_cycle = vec![0.0; self.group_peak.len()];
         }
         let (groups, q) = (&self.flow_group, &y[n0..n1]);
-        let peaks = &self.group_cycle;
-        // a flow above its group's amplitude over the cycle is above its own largest |Q| over
-        // the cycle too (which the group's bounds): where the estimate's pass recorded the
-        // unknowns in which such a maximum grows, only those flows are read
+        let peaks = &self.group_peak;
+        // a flow above its group's amplitude is above its own peak |Q| too (which the group's
+        // bounds): where the estimate's pass recorded the unknowns whose peak grows, only
+        // those flows are read (the group's maximum over the cycle alone is its flows' own,
+        // taken at the cycle's end: `start_cycle`)
         let this = &*self;
         let raised = map_chunks(groups.len(), |r| {
             let mut up = Vec::new();
@@ -1254,7 +1303,6 @@ impl Adaptive {
         let mut renew = false;
         for (g, v) in raised.into_iter().flatten() {
             let g = g as usize;
-            self.group_cycle[g] = self.group_cycle[g].max(v);
             let (p, set) = (&mut self.group_peak[g], self.group_set[g]);
             if v > *p {
                 *p = v;
@@ -1352,8 +1400,9 @@ impl Adaptive {
             std::mem::take(&mut self.w_unit),
         ];
         let this = &*self;
-        // an unknown in which the step's estimate pass saw no maximum over the cycle grow
-        // changes nothing here (the same comparisons): only the others are visited (`visit`)
+        // an unknown in which the step's estimate pass saw no peak grow changes nothing here
+        // (the same comparisons; its maxima over the cycle that pass took): only the others
+        // are visited (`visit`)
         let [pk, rp, ap, cp, cr, ca, iw, ws, wu] = &mut v;
         let mut tasks = chunk_tasks(0, [&mut pk[..], rp, ap, cp, cr, ca, iw, ws, wu]);
         let grown = for_tasks(
@@ -1364,18 +1413,21 @@ impl Adaptive {
                     let j = i - *first;
                     let a = y[i].abs();
                     let mut reweigh = false;
+                    // (a peak is at least the cycle's maximum: what grows the peak grows the
+                    // cycle's maximum, which the estimate's pass may have taken already)
                     if a > cp[j] {
                         cp[j] = a;
                         grown = true;
-                        if a > pk[j] {
-                            pk[j] = a;
-                            if a > this.kind_set[this.kind_of(i)] * (1.0 + RESCALE) {
-                                renew.store(true, Ordering::Relaxed);
-                            }
-                            if !this.is_vessel_flow(i) {
-                                iw[j] = this.own_weight(i, a);
-                                reweigh = true;
-                            }
+                    }
+                    if a > pk[j] {
+                        pk[j] = a;
+                        grown = true;
+                        if a > this.kind_set[this.kind_of(i)] * (1.0 + RESCALE) {
+                            renew.store(true, Ordering::Relaxed);
+                        }
+                        if !this.is_vessel_flow(i) {
+                            iw[j] = this.own_weight(i, a);
+                            reweigh = true;
                         }
                     }
                     if rates {
@@ -1387,11 +1439,11 @@ impl Adaptive {
                         if r > cr[j] || acc > ca[j] {
                             cr[j] = cr[j].max(r);
                             ca[j] = ca[j].max(acc);
-                            if r > rp[j] || acc > ap[j] {
-                                rp[j] = rp[j].max(r);
-                                ap[j] = ap[j].max(acc);
-                                reweigh = true;
-                            }
+                        }
+                        if r > rp[j] || acc > ap[j] {
+                            rp[j] = rp[j].max(r);
+                            ap[j] = ap[j].max(acc);
+                            reweigh = true;
                         }
                     }
                     if reweigh {
@@ -1427,6 +1479,16 @@ impl Adaptive {
             return;
         }
         let (n0, n1) = (self.kind_end[0], self.kind_end[1]);
+        if !self.group_peak.is_empty() {
+            // each group's amplitude over the cycle just ended: its flows' largest maximum
+            self.group_peak.fill(0.0);
+            for (&g, p) in self.flow_group.iter().zip(&self.cycle_peak[n0..n1]) {
+                if g != NO_VESSEL {
+                    let c = &mut self.group_peak[g as usize];
+                    *c = c.max(*p);
+                }
+            }
+        }
         std::mem::swap(&mut self.peak, &mut self.cycle_peak);
         std::mem::swap(&mut self.rate_peak, &mut self.cycle_rate);
         std::mem::swap(&mut self.accel_peak, &mut self.cycle_accel);
@@ -1436,16 +1498,6 @@ impl Adaptive {
         });
         crate::threads::for_chunks(&mut self.cycle_rate, |_, c| c.fill(0.0));
         crate::threads::for_chunks(&mut self.cycle_accel, |_, c| c.fill(0.0));
-        if !self.group_peak.is_empty() {
-            std::mem::swap(&mut self.group_peak, &mut self.group_cycle);
-            self.group_cycle.fill(0.0);
-            for (&g, q) in self.flow_group.iter().zip(&y[n0..n1]) {
-                if g != NO_VESSEL {
-                    let c = &mut self.group_cycle[g as usize];
-                    *c = c.max(q.abs());
-                }
-            }
-        }
         if !self.c_peak.is_empty() {
             std::mem::swap(&mut self.c_peak, &mut self.c_cycle);
             copy_into(&mut self.c_cycle, &self.c0);
@@ -1656,7 +1708,9 @@ fn blocks_of(r: Range<usize>) -> impl Iterator<Item = Range<usize>> {
 }
 
 /// The vectors of one range of unknowns that the estimate's pass reads (see
-/// `Adaptive::fused_range`), each the range's own slice.
+/// `Adaptive::fused_range`), each the range's own slice: the states, the weights, the peaks
+/// of |y|, |ẏ|, |ÿ| over the previous cycle and the current one (`pk`, `rp`, `ap`: a step
+/// above one grows it) and over the current cycle (`cp`, `cr`, `ca`).
 struct FusedSlices<'a> {
     y: &'a [f64],
     ym2: &'a [f64],
@@ -1667,6 +1721,9 @@ struct FusedSlices<'a> {
     pk: &'a [f64],
     rp: &'a [f64],
     ap: &'a [f64],
+    cp: &'a [f64],
+    cr: &'a [f64],
+    ca: &'a [f64],
 }
 
 impl FusedSlices<'_> {
@@ -1682,48 +1739,66 @@ impl FusedSlices<'_> {
             ws: &self.ws[r.clone()],
             pk: &self.pk[r.clone()],
             rp: &self.rp[r.clone()],
-            ap: &self.ap[r],
+            ap: &self.ap[r.clone()],
+            cp: &self.cp[r.clone()],
+            cr: &self.cr[r.clone()],
+            ca: &self.ca[r],
         }
     }
 
     /// Unknown `j`'s scaled local error (Milne's device on the last three states, per unit
-    /// step or per step, the larger) and whether it grows one of the peaks `track_peaks`
-    /// follows (the same comparisons).
+    /// step or per step, the larger), whether it grows one of the peaks `track_peaks`
+    /// follows (the same comparisons), and its maxima of |y|, |ẏ|, |ÿ| over the cycle with
+    /// the step (`track_peaks`'s values: the rates from the same divided differences).
     #[inline(always)]
-    fn term(&self, j: usize, c: &Fused) -> (f64, bool) {
+    fn term(&self, j: usize, c: &Fused) -> (f64, bool, [f64; 3]) {
         let ([la, lb, lc], f) = (c.l, c.f);
         let (y1, y0, ym) = (self.y[j], self.y0[j], self.ym1[j]);
         let e = f * (y1 - (la * self.ym2[j] + lb * ym + lc * y0));
         let scaled = e.abs() * larger(self.wu[j] * c.inv_h, self.ws[j]);
         let (s1, s0) = ((y1 - y0) * c.inv_h, (y0 - ym) * c.inv_h1);
-        let accel = ((s1 - s0) * c.inv_span).abs();
-        let grows = (y1.abs() > self.pk[j]) | (s1.abs() > self.rp[j]) | (accel > self.ap[j]);
-        (scaled, grows)
+        let (a, r, accel) = (y1.abs(), s1.abs(), ((s1 - s0) * c.inv_span).abs());
+        let grows = (a > self.pk[j]) | (r > self.rp[j]) | (accel > self.ap[j]);
+        let cycle = [
+            larger(a, self.cp[j]),
+            larger(r, self.cr[j]),
+            larger(accel, self.ca[j]),
+        ];
+        (scaled, grows, cycle)
     }
 
     /// The block's largest scaled error and its unknowns that grow a peak (bit k: its k-th),
-    /// in groups of `LANES` (see `Adaptive::fused_range`).
+    /// in groups of `LANES` (see `Adaptive::fused_range`), its maxima over the cycle with the
+    /// step into `out`.
     // (one lane index into the group and its maximum)
     #[allow(clippy::needless_range_loop)]
     #[inline(always)]
-    fn block(&self, c: &Fused) -> (f64, u32) {
+    fn block(&self, c: &Fused, out: [&mut [f64]; 3]) -> (f64, u32) {
         let n = self.y.len();
         let whole = n - n % LANES;
         let (mut m, mut mask) = ([0.0f64; LANES], 0u32);
+        let [op, or, oa] = out;
         for j in (0..whole).step_by(LANES) {
             // (a group's own slices, of `LANES` values: its values are read without a bounds
             // check each, 9 a value before)
             let group = self.sub(j..j + LANES);
+            let (gp, gr, ga) = (
+                &mut op[j..j + LANES],
+                &mut or[j..j + LANES],
+                &mut oa[j..j + LANES],
+            );
             for k in 0..LANES {
-                let (e, g) = group.term(k, c);
+                let (e, g, cycle) = group.term(k, c);
                 m[k] = larger(e, m[k]);
                 mask |= u32::from(g) << (j + k);
+                [gp[k], gr[k], ga[k]] = cycle;
             }
         }
         for j in whole..n {
-            let (e, g) = self.term(j, c);
+            let (e, g, cycle) = self.term(j, c);
             m[0] = larger(e, m[0]);
             mask |= u32::from(g) << j;
+            [op[j], or[j], oa[j]] = cycle;
         }
         (m.iter().fold(0.0f64, |a, &b| larger(b, a)), mask)
     }
@@ -1736,7 +1811,12 @@ impl FusedSlices<'_> {
 /// two-lane registers: ~30 instructions an unknown on adan56.)
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-fn simd_block(simd: pulp::x86::V3, v: &FusedSlices<'_>, c: &Fused) -> (f64, u32) {
+fn simd_block(
+    simd: pulp::x86::V3,
+    v: &FusedSlices<'_>,
+    c: &Fused,
+    out: [&mut [f64]; 3],
+) -> (f64, u32) {
     use pulp::{cast, f64x4};
     let n = v.y.len();
     let groups = |x| groups_of(x, n);
@@ -1745,6 +1825,13 @@ fn simd_block(simd: pulp::x86::V3, v: &FusedSlices<'_>, c: &Fused) -> (f64, u32)
     let (y0s, yms, ym2s) = (&groups(v.y0)[..g], &groups(v.ym1)[..g], &groups(v.ym2)[..g]);
     let (wus, wss) = (&groups(v.wu)[..g], &groups(v.ws)[..g]);
     let (pks, rps, aps) = (&groups(v.pk)[..g], &groups(v.rp)[..g], &groups(v.ap)[..g]);
+    let (cps, crs, cas) = (&groups(v.cp)[..g], &groups(v.cr)[..g], &groups(v.ca)[..g]);
+    let [op, or, oa] = out;
+    let (ops, ors, oas) = (
+        &mut groups_of_mut(op, n)[..g],
+        &mut groups_of_mut(or, n)[..g],
+        &mut groups_of_mut(oa, n)[..g],
+    );
     let splat = |x: f64| simd.splat_f64x4(x);
     let ([la, lb, lc], f) = (c.l.map(splat), splat(c.f));
     let (inv_h, inv_h1, inv_span) = (splat(c.inv_h), splat(c.inv_h1), splat(c.inv_span));
@@ -1762,22 +1849,25 @@ fn simd_block(simd: pulp::x86::V3, v: &FusedSlices<'_>, c: &Fused) -> (f64, u32)
         let s1 = simd.mul_f64x4(simd.sub_f64x4(y1, y0), inv_h);
         let s0 = simd.mul_f64x4(simd.sub_f64x4(y0, ym), inv_h1);
         let accel = simd.abs_f64x4(simd.mul_f64x4(simd.sub_f64x4(s1, s0), inv_span));
+        let (a, r) = (simd.abs_f64x4(y1), simd.abs_f64x4(s1));
         let grows = simd.or_m64x4(
-            simd.or_m64x4(
-                simd.cmp_gt_f64x4(simd.abs_f64x4(y1), at(pks)),
-                simd.cmp_gt_f64x4(simd.abs_f64x4(s1), at(rps)),
-            ),
+            simd.or_m64x4(simd.cmp_gt_f64x4(a, at(pks)), simd.cmp_gt_f64x4(r, at(rps))),
             simd.cmp_gt_f64x4(accel, at(aps)),
         );
         let bits = simd.avx._mm256_movemask_pd(cast(grows)) as u32;
         mask |= bits << (LANES * k);
+        // (`vmaxpd(x, c)` is `larger(x, c)`: x where x > c, else c)
+        ops[k] = cast(simd.max_f64x4(a, at(cps)));
+        ors[k] = cast(simd.max_f64x4(r, at(crs)));
+        oas[k] = cast(simd.max_f64x4(accel, at(cas)));
     }
     let lanes: [f64; LANES] = cast(m);
     let mut m = lanes.iter().fold(0.0f64, |a, &b| larger(b, a));
     for j in LANES * g..n {
-        let (e, grows) = v.term(j, c);
+        let (e, grows, cycle) = v.term(j, c);
         m = larger(e, m);
         mask |= u32::from(grows) << j;
+        [op[j], or[j], oa[j]] = cycle;
     }
     (m, mask)
 }
@@ -1786,6 +1876,12 @@ fn simd_block(simd: pulp::x86::V3, v: &FusedSlices<'_>, c: &Fused) -> (f64, u32)
 #[inline(always)]
 fn groups_of(x: &[f64], n: usize) -> &[[f64; LANES]] {
     pulp::as_arrays::<LANES, f64>(&x[..n]).0
+}
+
+/// The first `n` values of `x` in whole groups of `LANES`, to write (the rest left out).
+#[inline(always)]
+fn groups_of_mut(x: &mut [f64], n: usize) -> &mut [[f64; LANES]] {
+    pulp::as_arrays_mut::<LANES, f64>(&mut x[..n]).0
 }
 
 /// The larger of `a` and `b`, `b` when they are unordered (a NaN `a` leaves a running maximum
@@ -1858,6 +1954,25 @@ fn fold_tasks<T: Send>(
     }
 }
 
+/// The largest of each kind's maximum `f` returns for every task, and whether any returned
+/// true (on the run's threads when there are several, each task writing only its own chunks;
+/// maxima: the same in any grouping).
+fn kind_maxima<T: Send>(
+    tasks: &mut [T],
+    f: impl Fn(&mut T) -> ([f64; 3], bool) + Sync + Send,
+) -> ([f64; 3], bool) {
+    use rayon::prelude::*;
+    let join = |a: ([f64; 3], bool), b: ([f64; 3], bool)| {
+        let k = |i: usize| a.0[i].max(b.0[i]);
+        ([k(0), k(1), k(2)], a.1 | b.1)
+    };
+    let none = ([0.0f64; 3], false);
+    match crate::threads::pool().filter(|_| tasks.len() > 1) {
+        Some(pool) => pool.install(|| tasks.par_iter_mut().map(f).reduce(|| none, join)),
+        None => tasks.iter_mut().map(f).fold(none, join),
+    }
+}
+
 /// `f` of every task (on the run's threads when there are several, each task writing only its
 /// own chunks): whether any returned true (every task runs).
 fn for_tasks<T: Send>(tasks: &mut [T], f: impl Fn(&mut T) -> bool + Sync + Send) -> bool {
@@ -1886,13 +2001,36 @@ mod tests {
             .collect()
     }
 
-    /// Each unknown's scaled error and growth from `FusedSlices::term` (the formula, one
-    /// unknown at a time): the block's largest error and its growth bits.
-    fn one_by_one(v: &FusedSlices<'_>, c: &Fused) -> (f64, u32) {
-        (0..v.y.len()).fold((0.0f64, 0u32), |(m, mask), j| {
-            let (e, g) = v.term(j, c);
+    /// Each unknown's scaled error, growth and maxima over the cycle from
+    /// `FusedSlices::term` (the formula, one unknown at a time): the block's largest error,
+    /// its growth bits and its maxima (|y|, |ẏ|, |ÿ|) as bits.
+    fn one_by_one(v: &FusedSlices<'_>, c: &Fused) -> (f64, u32, Vec<[u64; 3]>) {
+        let mut cycle = Vec::new();
+        let (m, mask) = (0..v.y.len()).fold((0.0f64, 0u32), |(m, mask), j| {
+            let (e, g, cy) = v.term(j, c);
+            cycle.push(cy.map(f64::to_bits));
             (m.max(e), mask | (u32::from(g) << j))
-        })
+        });
+        (m, mask, cycle)
+    }
+
+    /// The maxima a block wrote, unknown by unknown, as bits.
+    fn written(out: &[Vec<f64>; 3]) -> Vec<[u64; 3]> {
+        (0..out[0].len())
+            .map(|j| [0, 1, 2].map(|k| out[k][j].to_bits()))
+            .collect()
+    }
+
+    /// Unknown `j`'s maxima over the cycle as the tracking pass takes them (`track_peaks`).
+    fn tracked(s: &FusedSlices<'_>, c: &Fused, j: usize) -> [u64; 3] {
+        let (s1, s0) = (
+            (s.y[j] - s.y0[j]) * c.inv_h,
+            (s.y0[j] - s.ym1[j]) * c.inv_h1,
+        );
+        let (r, acc) = (s1.abs(), ((s1 - s0) * c.inv_span).abs());
+        let a = s.y[j].abs();
+        let p = if a > s.cp[j] { a } else { s.cp[j] };
+        [p, s.cr[j].max(r), s.ca[j].max(acc)].map(f64::to_bits)
     }
 
     #[test]
@@ -1905,7 +2043,7 @@ mod tests {
             inv_span: 1.55e3,
         };
         for n in 1..=BLOCK {
-            let v: Vec<Vec<f64>> = (0..9).map(|k| values(n, 17 * n as u64 + k)).collect();
+            let v: Vec<Vec<f64>> = (0..12).map(|k| values(n, 17 * n as u64 + k)).collect();
             // peaks and weights are magnitudes; a third of the peaks so large nothing grows
             let pos = |k: usize, big: f64| -> Vec<f64> {
                 (v[k].iter().enumerate())
@@ -1919,6 +2057,13 @@ mod tests {
                 pos(7, 1e9),
                 pos(8, 1e12),
             );
+            // the cycle's maxima: at most the peaks, some above the step's values, some below
+            let below = |k: usize, peak: &[f64]| -> Vec<f64> {
+                (v[k].iter().zip(peak))
+                    .map(|(x, p)| x.abs().min(*p))
+                    .collect()
+            };
+            let (cp, cr, ca) = (below(9, &pk), below(10, &rp), below(11, &ap));
             let s = FusedSlices {
                 y: &v[0],
                 ym2: &v[1],
@@ -1929,22 +2074,41 @@ mod tests {
                 pk: &pk,
                 rp: &rp,
                 ap: &ap,
+                cp: &cp,
+                cr: &cr,
+                ca: &ca,
             };
-            let (m, mask) = one_by_one(&s, &c);
+            let (m, mask, cycle) = one_by_one(&s, &c);
             assert!(
                 mask != 0 && mask.count_ones() < n as u32 || n < 3,
                 "n {n}: {mask:b}"
             );
-            let (pm, pmask) = s.block(&c);
+            let own: Vec<[u64; 3]> = (0..n).map(|j| tracked(&s, &c, j)).collect();
+            assert_eq!(cycle, own, "the formula's maxima, n {n}");
+            let grew = (0..n).filter(|&j| cycle[j][0] != cp[j].to_bits()).count();
+            assert!(grew > 0 && grew < n || n < 3, "n {n}: {grew} maxima grew");
+            let mut out: [Vec<f64>; 3] = std::array::from_fn(|_| vec![f64::NAN; n]);
+            let (pm, pmask) = {
+                let [a, b, d] = &mut out;
+                s.block(&c, [a, b, d])
+            };
             assert_eq!(
-                (pm.to_bits(), pmask),
-                (m.to_bits(), mask),
+                (pm.to_bits(), pmask, written(&out)),
+                (m.to_bits(), mask, own.clone()),
                 "portable, n {n}"
             );
             #[cfg(target_arch = "x86_64")]
             if let Some(simd) = pulp::x86::V3::try_new() {
-                let (vm, vmask) = simd.vectorize(|| simd_block(simd, &s, &c));
-                assert_eq!((vm.to_bits(), vmask), (m.to_bits(), mask), "AVX2, n {n}");
+                let mut out: [Vec<f64>; 3] = std::array::from_fn(|_| vec![f64::NAN; n]);
+                let (vm, vmask) = {
+                    let [a, b, d] = &mut out;
+                    simd.vectorize(|| simd_block(simd, &s, &c, [a, b, d]))
+                };
+                assert_eq!(
+                    (vm.to_bits(), vmask, written(&out)),
+                    (m.to_bits(), mask, own),
+                    "AVX2, n {n}"
+                );
             }
         }
     }
