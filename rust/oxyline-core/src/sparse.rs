@@ -1001,6 +1001,22 @@ impl<T: Scalar> GeneralLu<T> {
     }
 }
 
+/// Solves the small dense system a · x = b (row-major n × n) in place by nalgebra's LU with
+/// partial pivoting; false (b untouched) when a pivot is at most `tiny` in magnitude.
+pub fn lu_solve(a: &[f64], b: &mut [f64], n: usize, tiny: f64) -> bool {
+    let lu = nalgebra::DMatrix::from_row_slice(n, n, a).lu();
+    if lu.u().diagonal().iter().any(|p| p.abs() <= tiny) {
+        return false;
+    }
+    match lu.solve(&nalgebra::DVector::from_column_slice(b)) {
+        Some(x) if x.iter().all(|v| v.is_finite()) => {
+            b.copy_from_slice(x.as_slice());
+            true
+        }
+        _ => false,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -368,44 +368,16 @@ fn block_step(
                 };
         }
     }
-    match solve_dense(&mut m, &mut rhs, k) {
-        Some(()) if rhs.iter().all(|d| d.is_finite()) => Ok(rhs),
-        _ => Err(Error::solver(
-            0.0,
-            format!(
-                "svZeroD calibration: the step of '{}' is singular (its values are not \
-                 determined by the observations)",
-                b.name()
-            ),
-        )),
+    // (LU with partial pivoting: a zero pivot or a non-finite step is a singular block)
+    if crate::sparse::lu_solve(&m, &mut rhs, k, 0.0) {
+        return Ok(rhs);
     }
-}
-
-/// Solve the dense k×k system `m x = rhs` in place (row-major `m`, `x` into `rhs`) by
-/// Gaussian elimination with partial pivoting; None when a pivot is zero.
-fn solve_dense(m: &mut [f64], rhs: &mut [f64], k: usize) -> Option<()> {
-    for c in 0..k {
-        let p = (c..k).max_by(|&a, &b| m[a * k + c].abs().total_cmp(&m[b * k + c].abs()))?;
-        if m[p * k + c] == 0.0 {
-            return None;
-        }
-        if p != c {
-            for j in 0..k {
-                m.swap(p * k + j, c * k + j);
-            }
-            rhs.swap(p, c);
-        }
-        for r in c + 1..k {
-            let f = m[r * k + c] / m[c * k + c];
-            for j in c..k {
-                m[r * k + j] -= f * m[c * k + j];
-            }
-            rhs[r] -= f * rhs[c];
-        }
-    }
-    for c in (0..k).rev() {
-        let s: f64 = (c + 1..k).map(|j| m[c * k + j] * rhs[j]).sum();
-        rhs[c] = (rhs[c] - s) / m[c * k + c];
-    }
-    Some(())
+    Err(Error::solver(
+        0.0,
+        format!(
+            "svZeroD calibration: the step of '{}' is singular (its values are not \
+             determined by the observations)",
+            b.name()
+        ),
+    ))
 }

@@ -890,7 +890,7 @@ fn shoot_newton(
             }
         }
         let mut delta: Vec<f64> = fx.iter().map(|f| -f).collect();
-        if !super::closed_loop_balance::lu_solve(&jac, &mut delta, n, 0.0) {
+        if !crate::sparse::lu_solve(&jac, &mut delta, n, 0.0) {
             break;
         }
         for (xi, d) in x.iter_mut().zip(&delta) {

@@ -62,7 +62,7 @@ pub fn balance_flows(
 /// a singular matrix (compartments the branches do not connect) is a model error.
 fn solve_dense(a: &[f64], b: &mut [f64], m: usize) -> Result<()> {
     let scale = a.iter().fold(0.0f64, |s, x| s.max(x.abs()));
-    if !lu_solve(a, b, m, 1e-12 * scale) {
+    if !crate::sparse::lu_solve(a, b, m, 1e-12 * scale) {
         return Err(Error::model(
             "closed loop",
             "the branches do not connect every compartment: no flow correction closes \
@@ -70,22 +70,6 @@ fn solve_dense(a: &[f64], b: &mut [f64], m: usize) -> Result<()> {
         ));
     }
     Ok(())
-}
-
-/// Solves the small dense system a · x = b (row-major n × n) in place by nalgebra's LU with
-/// partial pivoting; false (b untouched) when a pivot is at most `tiny` in magnitude.
-pub(super) fn lu_solve(a: &[f64], b: &mut [f64], n: usize, tiny: f64) -> bool {
-    let lu = nalgebra::DMatrix::from_row_slice(n, n, a).lu();
-    if lu.u().diagonal().iter().any(|p| p.abs() <= tiny) {
-        return false;
-    }
-    match lu.solve(&nalgebra::DVector::from_column_slice(b)) {
-        Some(x) if x.iter().all(|v| v.is_finite()) => {
-            b.copy_from_slice(x.as_slice());
-            true
-        }
-        _ => false,
-    }
 }
 
 #[cfg(test)]
